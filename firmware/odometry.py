@@ -29,7 +29,16 @@ from __future__ import annotations
 
 from firmware.config import TWO_PI_Q60, Integrator, OdomConstants
 from firmware.errors import ErrorFlag, ErrorMask
-from firmware.fixmath import I64_MAX, I64_MIN, U32_MAX, U64_MAX, sat_i64, wrap_i64, wrap_signed
+from firmware.fixmath import (
+    I64_MAX,
+    I64_MIN,
+    U32_MAX,
+    U64_MAX,
+    sat_i64,
+    wrap_i32,
+    wrap_i64,
+    wrap_signed,
+)
 from firmware.trig import sincos_q30
 
 ONE_Q62 = 1 << 62
@@ -54,6 +63,7 @@ class Odometry:
         "_right_prev",
         "distance_q40_m",
         "heading_bam64",
+        "heading_turns",
         "last_dheading_bam64",
         "last_ds_q49_m",
         "x_q40_m",
@@ -69,6 +79,7 @@ class Odometry:
         self.x_q40_m = 0
         self.y_q40_m = 0
         self.heading_bam64 = 0
+        self.heading_turns = 0  # i32: whole turns of the unwrapped heading (carries of the BAM64)
         self.distance_q40_m = 0
         self.last_ds_q49_m = 0  # i64, dS of the last step (for the twist)
         self.last_dheading_bam64 = 0  # i64, signed dtheta of the last step (for the twist)
@@ -87,6 +98,7 @@ class Odometry:
         self.x_q40_m = x_q40_m
         self.y_q40_m = y_q40_m
         self.heading_bam64 = heading_bam64 & U64_MAX
+        self.heading_turns = 0
 
     def unprime(self) -> None:
         """Forget the last counters: the next ``step_counts`` only re-primes (after a gap)."""
@@ -119,7 +131,10 @@ class Odometry:
         )
         dheading = wrap_i64(d_right * c.bam64_per_count_right - d_left * c.bam64_per_count_left)
         heading_old = self.heading_bam64
-        self.heading_bam64 = (heading_old + dheading) & U64_MAX
+        heading_sum = heading_old + dheading
+        self.heading_bam64 = heading_sum & U64_MAX
+        if heading_sum != self.heading_bam64:  # C: the unsigned add's carry or borrow
+            self.heading_turns = wrap_i32(self.heading_turns + (heading_sum >> 64))
         self.last_ds_q49_m = ds_q49_m
         self.last_dheading_bam64 = dheading
         if ds_q49_m == 0:

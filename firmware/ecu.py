@@ -1,0 +1,416 @@
+"""The odometry ECU's main loop: a receive ISR, a bounded mailbox and a periodic tick.
+
+Sample, then compute. ``isr_can_rx`` only copies a frame into the mailbox (overflows counted).
+``tick`` runs every ``TICK_PERIOD_US``, in this fixed order:
+
+1. drain the mailbox, in arrival order;
+2. E2E check of each frame (Profile 2; a frame that fails never changes state);
+3. odometry on every accepted WHEEL_ENCODERS frame; staged ODOM_SET_POSE / ODOM_CONFIG writes,
+   each answered by ODOM_ACK;
+4. (controllers: navigation, a later issue);
+5. scheduled transmissions at the DBC's cycle times: ODOM_POSE_X/Y and ODOM_TWIST every 20 ms,
+   ODOM_STATUS every 100 ms (the summary page, then one rotating page of counts);
+6. the watchdog: no accepted WHEEL_ENCODERS for ``WATCHDOG_TICKS`` periods -> DEGRADED (integration
+   paused, ENCODER_TIMEOUT set); ``RECOVERY_FRAMES`` accepted frames in a row -> OK again. The
+   counters are absolute, so the first frame after a gap carries the distance driven meanwhile.
+"""
+
+from __future__ import annotations
+
+from firmware import frames as fr
+from firmware.config import (
+    TWO_PI_Q60,
+    ConfigReason,
+    RobotParams,
+    derive_constants,
+    validate,
+)
+from firmware.e2e import COUNTER_MASK, E2EReceiver, E2EStatus
+from firmware.errors import ErrorFlag, ErrorMask, State
+from firmware.fixmath import (
+    U32_MAX,
+    U64_MAX,
+    div_round_i64,
+    mul_shr_round_i64,
+    wrap_signed,
+    wrap_u32,
+)
+from firmware.hal import MAILBOX_SLOTS, TICK_PERIOD_US, CanTx
+from firmware.odometry import Odometry
+
+ENCODER_PERIOD_US = 10_000  # WHEEL_ENCODERS GenMsgCycleTime
+POSE_PERIOD_TICKS = 2  # ODOM_POSE_X/Y, ODOM_TWIST: 20 ms
+STATUS_PERIOD_TICKS = 10  # ODOM_STATUS: 100 ms
+WATCHDOG_TICKS = 10  # 10 encoder periods without a fresh frame -> DEGRADED
+RECOVERY_FRAMES = 5  # accepted encoder frames in a row to leave DEGRADED
+TICKS_PER_SECOND = 1_000_000 // TICK_PERIOD_US
+WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+_ROTATING_PAGES = (
+    fr.StatusPage.FRAME_TOTALS,
+    fr.StatusPage.E2E_WHEEL_ENCODERS,
+    fr.StatusPage.E2E_ODOM_SET_POSE,
+    fr.StatusPage.E2E_ODOM_CONFIG,
+)
+_CONFIG_FIELDS = {
+    fr.ConfigParam.COUNTS_PER_REV: "counts_per_rev",
+    fr.ConfigParam.WHEEL_RADIUS_LEFT: "wheel_radius_left_nm",
+    fr.ConfigParam.WHEEL_RADIUS_RIGHT: "wheel_radius_right_nm",
+    fr.ConfigParam.WHEELBASE: "wheelbase_nm",
+    fr.ConfigParam.COUNTER_BITS: "counter_bits",
+    fr.ConfigParam.INTEGRATOR: "integrator",
+}
+
+
+class Mailbox:
+    """A fixed-size ring of received frames (``MAILBOX_SLOTS``); a full mailbox drops and counts."""
+
+    __slots__ = ("_count", "_data", "_head", "_ids", "overflows")
+
+    def __init__(self) -> None:
+        self._ids = [0] * MAILBOX_SLOTS
+        self._data = [b""] * MAILBOX_SLOTS
+        self._head = 0
+        self._count = 0
+        self.overflows = 0  # u32, wrapping
+
+    def put(self, can_id: int, data: bytes) -> bool:
+        """ISR context: store one frame, or count an overflow. No allocation."""
+        if self._count == MAILBOX_SLOTS:
+            self.overflows = wrap_u32(self.overflows + 1)
+            return False
+        slot = (self._head + self._count) % MAILBOX_SLOTS
+        self._ids[slot] = can_id
+        self._data[slot] = data
+        self._count += 1
+        return True
+
+    def get(self) -> tuple[int, bytes] | None:
+        """Thread context: the oldest frame, or None when empty."""
+        if self._count == 0:
+            return None
+        slot = self._head
+        self._head = (slot + 1) % MAILBOX_SLOTS
+        self._count -= 1
+        return self._ids[slot], self._data[slot]
+
+
+class OdomEcu:
+    """The odometry ECU (node ``ODOM_MCU``)."""
+
+    def __init__(self, hal: CanTx, params: RobotParams) -> None:
+        self._hal = hal
+        self.errors = ErrorMask()
+        self.state = State.INIT
+        if validate(params) is not ConfigReason.OK:
+            self.errors.set(ErrorFlag.CONFIG_INVALID)
+            self.state = State.FAULT
+        self.params = params
+        self.odometry = Odometry(derive_constants(params, self.errors), self.errors)
+        self.mailbox = Mailbox()
+        self.rx_encoders = E2EReceiver(fr.WHEEL_ENCODERS_DATA_IDS)
+        self.rx_set_pose = E2EReceiver(fr.ODOM_SET_POSE_DATA_IDS, max_delta_counter_init=15)
+        self.rx_config = E2EReceiver(fr.ODOM_CONFIG_DATA_IDS, max_delta_counter_init=15)
+        self.ticks = 0  # u32 uptime in ticks
+        self.frames_filtered = 0  # u32: IDs this node does not listen to
+        self.frames_bad_length = 0  # u32: not 8 bytes (rejected before the E2E check)
+        self.tx_dropped = 0  # u32: the driver refused a frame
+        self._tx_counters: dict[int, int] = {}
+        self._enc_counter = 0  # COUNTER of the last accepted WHEEL_ENCODERS frame
+        self._enc_prev_counter: int | None = None
+        self._wire_prev: tuple[int, int] | None = None
+        self._counts_u32 = (0, 0)
+        self._ticks_since_encoder = 0
+        self._good_in_a_row = 0
+        self._twist_mm_s = 0
+        self._twist_mrad_s = 0
+        self._page_index = 0
+        self._staged_pose: dict[int, int] = {}
+        self._staged_config: dict[int, int] = {}
+
+    # --- ISR context -------------------------------------------------------------------------
+
+    def isr_can_rx(self, can_id: int, data: bytes) -> None:
+        """CAN receive interrupt: copy the frame into the mailbox (or count the overflow)."""
+        if not self.mailbox.put(can_id, data):
+            self.errors.set(ErrorFlag.MAILBOX_OVERFLOW)
+
+    def isr_bus_state(self, bus_off: bool) -> None:
+        """CAN controller status interrupt: bus-off entered (True) or recovered (False)."""
+        if bus_off:
+            self.errors.set(ErrorFlag.BUS_OFF)
+
+    # --- the periodic tick -------------------------------------------------------------------
+
+    def tick(self) -> None:
+        """One period of the main loop, in the fixed order of the module docstring."""
+        self.ticks = wrap_u32(self.ticks + 1)
+        encoder_seen = False
+        frame = self.mailbox.get()
+        while frame is not None:
+            can_id, data = frame
+            if can_id == fr.WHEEL_ENCODERS_ID:
+                encoder_seen = True
+                self._on_wheel_encoders(data)
+            elif can_id == fr.ODOM_SET_POSE_ID:
+                self._on_set_pose(data)
+            elif can_id == fr.ODOM_CONFIG_ID:
+                self._on_config(data)
+            else:
+                self.frames_filtered = wrap_u32(self.frames_filtered + 1)
+            frame = self.mailbox.get()
+        if not encoder_seen:
+            self.rx_encoders.check(None)
+        self._transmit_scheduled()
+        self._watchdog()
+
+    # --- step 2-3: received frames -----------------------------------------------------------
+
+    def _e2e(self, receiver: E2EReceiver, data: bytes) -> bool:
+        """The Profile 2 check; True when the frame may be used (OK or OKSOMELOST)."""
+        if len(data) != 8:
+            self.frames_bad_length = wrap_u32(self.frames_bad_length + 1)
+            self.errors.set(ErrorFlag.E2E_ERROR)
+            return False
+        status = receiver.check(data)
+        if status is E2EStatus.OK or status is E2EStatus.OKSOMELOST:
+            return True
+        if status is not E2EStatus.REPEATED:
+            self.errors.set(ErrorFlag.E2E_ERROR)
+        return False
+
+    def _on_wheel_encoders(self, data: bytes) -> None:
+        if not self._e2e(self.rx_encoders, data):
+            return
+        frame = fr.unpack_wheel_encoders(data)
+        left, right = self._extend_counters(frame.left_count, frame.right_count)
+        if self.state is not State.FAULT and self.odometry.step_counts(left, right):
+            self._update_twist(frame.counter)
+        self._enc_prev_counter = frame.counter
+        self._enc_counter = frame.counter
+        self._ticks_since_encoder = 0
+        if self._good_in_a_row < RECOVERY_FRAMES:
+            self._good_in_a_row += 1
+        if self.state is State.INIT:
+            self.state = State.OK
+
+    def _extend_counters(self, left_wire: int, right_wire: int) -> tuple[int, int]:
+        """The hardware counters from their low 24 bits on the wire.
+
+        A 16-bit counter fits the wire as it is. A 32-bit one is rebuilt by adding the wire's
+        wrap-safe 24-bit delta (C: ``prev += (int32_t)((wire - prev_wire) << 8) >> 8``).
+        """
+        if self.odometry.consts.counter_bits <= WIRE_COUNTER_BITS:
+            return left_wire, right_wire
+        if self._wire_prev is None:
+            self._counts_u32 = (left_wire, right_wire)
+        else:
+            d_left = wrap_signed(left_wire - self._wire_prev[0], WIRE_COUNTER_BITS)
+            d_right = wrap_signed(right_wire - self._wire_prev[1], WIRE_COUNTER_BITS)
+            self._counts_u32 = (
+                (self._counts_u32[0] + d_left) & U32_MAX,
+                (self._counts_u32[1] + d_right) & U32_MAX,
+            )
+        self._wire_prev = (left_wire, right_wire)
+        return self._counts_u32
+
+    def _update_twist(self, counter: int) -> None:
+        """Speeds over the last step: dt from the encoder counter's advance (lost frames count)."""
+        prev = self._enc_prev_counter
+        periods = 1 if prev is None else ((counter - prev) & COUNTER_MASK) or 1
+        dt_us = periods * ENCODER_PERIOD_US
+        ds_q20_m = self.odometry.last_ds_q49_m >> 29
+        self._twist_mm_s = div_round_i64(ds_q20_m * 1_000_000_000, dt_us << 20)
+        dheading_q30_rad = mul_shr_round_i64(
+            self.odometry.last_dheading_bam64, TWO_PI_Q60, 94, self.errors
+        )
+        self._twist_mrad_s = div_round_i64(dheading_q30_rad * 1_000_000_000, dt_us << 30)
+
+    def _on_set_pose(self, data: bytes) -> None:
+        if not self._e2e(self.rx_set_pose, data):
+            return
+        frame = fr.unpack_odom_set_pose(data)
+        field = frame.field
+        if field == fr.SetPoseField.APPLY:
+            x_q40, y_q40, heading = self._pose_with(self._staged_pose)
+            self.odometry.set_pose(x_q40, y_q40, heading)
+            self._staged_pose.clear()
+        elif field in (fr.SetPoseField.X, fr.SetPoseField.Y, fr.SetPoseField.HEADING):
+            self._staged_pose[field] = frame.value
+        else:
+            self._ack(fr.ODOM_SET_POSE_ID, frame, fr.AckResult.NACK, fr.AckReason.UNKNOWN_FIELD)
+            return
+        self._ack(fr.ODOM_SET_POSE_ID, frame, fr.AckResult.ACK, fr.AckReason.OK)
+
+    def _pose_with(self, staged: dict[int, int]) -> tuple[int, int, int]:
+        """The current pose overwritten by the staged fields (X/Y in 0.1 mm, heading in BAM16)."""
+        odo = self.odometry
+        x_q40 = odo.x_q40_m
+        y_q40 = odo.y_q40_m
+        heading = odo.heading_bam64
+        if fr.SetPoseField.X in staged:
+            x_q40 = _q40_from_100um(staged[fr.SetPoseField.X])
+        if fr.SetPoseField.Y in staged:
+            y_q40 = _q40_from_100um(staged[fr.SetPoseField.Y])
+        if fr.SetPoseField.HEADING in staged:
+            heading = (staged[fr.SetPoseField.HEADING] << 48) & U64_MAX
+        return x_q40, y_q40, heading
+
+    def _on_config(self, data: bytes) -> None:
+        if not self._e2e(self.rx_config, data):
+            return
+        frame = fr.unpack_odom_config(data)
+        if frame.param == fr.ConfigParam.APPLY:
+            self._apply_config(frame)
+        elif frame.param in _CONFIG_FIELDS:
+            self._staged_config[frame.param] = frame.value
+            self._ack(fr.ODOM_CONFIG_ID, frame, fr.AckResult.ACK, fr.AckReason.OK)
+        else:
+            self._ack(fr.ODOM_CONFIG_ID, frame, fr.AckResult.NACK, fr.AckReason.UNKNOWN_FIELD)
+
+    def _apply_config(self, frame: fr.OdomConfig) -> None:
+        """Validate the current parameters overwritten by the staged ones; commit all or nothing."""
+        values = {name: getattr(self.params, name) for name in _CONFIG_FIELDS.values()}
+        for param, value in self._staged_config.items():
+            values[_CONFIG_FIELDS[fr.ConfigParam(param)]] = value
+        self._staged_config.clear()
+        candidate = RobotParams(**values)
+        reason = validate(candidate)
+        if reason is not ConfigReason.OK:
+            self.errors.set(ErrorFlag.CONFIG_INVALID)
+            ack_reason = (
+                fr.AckReason.INCONSISTENT
+                if reason is ConfigReason.GEOMETRY_ABSURD
+                else fr.AckReason.OUT_OF_RANGE
+            )
+            self._ack(fr.ODOM_CONFIG_ID, frame, fr.AckResult.NACK, ack_reason)
+            return
+        if candidate.counter_bits != self.params.counter_bits:
+            self.odometry.unprime()
+            self._wire_prev = None
+        self.params = candidate
+        self.odometry.reconfigure(derive_constants(candidate, self.errors))
+        if self.state is State.FAULT:
+            self.state = State.INIT
+        self._ack(fr.ODOM_CONFIG_ID, frame, fr.AckResult.ACK, fr.AckReason.OK)
+
+    def _ack(
+        self,
+        request_id: int,
+        frame: fr.OdomSetPose | fr.OdomConfig,
+        result: fr.AckResult,
+        reason: fr.AckReason,
+    ) -> None:
+        data = fr.pack_odom_ack(
+            self._next_counter(fr.ODOM_ACK_ID),
+            frame.counter,
+            request_id,
+            frame.field if isinstance(frame, fr.OdomSetPose) else frame.param,
+            result,
+            reason,
+            self.errors,
+        )
+        self._send(fr.ODOM_ACK_ID, data)
+
+    # --- step 5: scheduled transmissions -----------------------------------------------------
+
+    def _transmit_scheduled(self) -> None:
+        if self.ticks % POSE_PERIOD_TICKS == 0 and self.state is not State.INIT:
+            self._send_pose_and_twist()
+        if self.ticks % STATUS_PERIOD_TICKS == 0:
+            self._send_status()
+
+    def _send_pose_and_twist(self) -> None:
+        odo = self.odometry
+        enc = self._enc_counter
+        x_100um = mul_shr_round_i64(odo.x_q40_m, 10_000, 40, self.errors)
+        y_100um = mul_shr_round_i64(odo.y_q40_m, 10_000, 40, self.errors)
+        heading_bam16 = ((odo.heading_bam64 + (1 << 47)) >> 48) & 0xFFFF
+        distance_mm = (odo.distance_q40_m * 1000 + (1 << 39)) >> 40
+        e = self.errors
+        counter = self._next_counter
+        self._send(
+            fr.ODOM_POSE_X_ID,
+            fr.pack_odom_pose_x(counter(fr.ODOM_POSE_X_ID), enc, x_100um, heading_bam16, e),
+        )
+        self._send(
+            fr.ODOM_POSE_Y_ID,
+            fr.pack_odom_pose_y(counter(fr.ODOM_POSE_Y_ID), enc, y_100um, odo.heading_turns, e),
+        )
+        twist = fr.pack_odom_twist(
+            counter(fr.ODOM_TWIST_ID), enc, self._twist_mm_s, self._twist_mrad_s, distance_mm, e
+        )
+        self._send(fr.ODOM_TWIST_ID, twist)
+
+    def _send_status(self) -> None:
+        summary = fr.pack_odom_status_summary(
+            self._next_counter(fr.ODOM_STATUS_ID),
+            self.state,
+            self.odometry.consts.integrator,
+            self.errors.bits,
+            self.ticks // TICKS_PER_SECOND,
+            self.errors,
+        )
+        self._send(fr.ODOM_STATUS_ID, summary)
+        page = _ROTATING_PAGES[self._page_index]
+        self._page_index = (self._page_index + 1) % len(_ROTATING_PAGES)
+        self._send(fr.ODOM_STATUS_ID, self._status_page(page))
+
+    def _status_page(self, page: fr.StatusPage) -> bytes:
+        counter = self._next_counter(fr.ODOM_STATUS_ID)
+        if page is fr.StatusPage.FRAME_TOTALS:
+            return fr.pack_odom_status_frame_totals(
+                counter, self.rx_encoders.lost_frames, self.frames_rejected, self.mailbox.overflows
+            )
+        rx = {
+            fr.StatusPage.E2E_WHEEL_ENCODERS: self.rx_encoders,
+            fr.StatusPage.E2E_ODOM_SET_POSE: self.rx_set_pose,
+            fr.StatusPage.E2E_ODOM_CONFIG: self.rx_config,
+        }[page]
+        return fr.pack_odom_status_e2e(
+            counter,
+            page,
+            rx.accepted(),
+            rx.lost_frames,
+            rx.count_repeated,
+            rx.count_error,
+            rx.count_wrongsequence,
+        )
+
+    @property
+    def frames_rejected(self) -> int:
+        """Frames refused by the E2E check or for their length (u32, wrapping)."""
+        total = self.frames_bad_length
+        for rx in (self.rx_encoders, self.rx_set_pose, self.rx_config):
+            total += rx.count_error + rx.count_wrongsequence + rx.count_repeated
+        return wrap_u32(total)
+
+    def _next_counter(self, can_id: int) -> int:
+        counter = self._tx_counters.get(can_id, -1)
+        counter = (counter + 1) & COUNTER_MASK
+        self._tx_counters[can_id] = counter
+        return counter
+
+    def _send(self, can_id: int, data: bytes) -> None:
+        if not self._hal.transmit(can_id, data):
+            self.tx_dropped = wrap_u32(self.tx_dropped + 1)
+
+    # --- step 6: the watchdog ----------------------------------------------------------------
+
+    def _watchdog(self) -> None:
+        if self.state is State.INIT or self.state is State.FAULT:
+            return
+        if self._ticks_since_encoder >= WATCHDOG_TICKS:
+            if self.state is not State.DEGRADED:
+                self.state = State.DEGRADED
+                self.errors.set(ErrorFlag.ENCODER_TIMEOUT)
+            self._good_in_a_row = 0
+        elif self.state is State.DEGRADED and self._good_in_a_row >= RECOVERY_FRAMES:
+            self.state = State.OK
+        self._ticks_since_encoder += 1
+
+
+def _q40_from_100um(value_100um: int) -> int:
+    """0.1 mm units (i32) to Q40 metres (i64), exactly rounded without a 72-bit intermediate:
+    whole metres shifted, plus the remainder (< 10^4, so ``r << 40`` < 2^54) divided."""
+    metres, remainder_100um = divmod(value_100um, 10_000)  # floor semantics, remainder >= 0
+    return (metres << 40) + div_round_i64(remainder_100um << 40, 10_000)

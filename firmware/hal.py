@@ -1,0 +1,26 @@
+"""The firmware's hardware abstraction layer: all it knows of the world.
+
+The firmware never reads a clock or a bus itself. A board support package (``sim.ecu`` in this
+project; a CAN driver and a timer on a real MCU) implements ``CanTx`` and calls into the firmware:
+
+* ``OdomEcu.isr_can_rx(can_id, data)`` from the CAN receive interrupt: copies the frame into a
+  bounded mailbox and returns (ISR context: no allocation beyond the slot, no processing);
+* ``OdomEcu.tick()`` from a periodic timer every ``TICK_PERIOD_US`` microseconds (thread context);
+* ``OdomEcu.isr_bus_state(bus_off)`` when the CAN controller enters or leaves bus-off.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+TICK_PERIOD_US = 10_000  # the periodic tick: 100 Hz, the WHEEL_ENCODERS cycle
+MAILBOX_SLOTS = 32  # receive mailbox depth (frames)
+
+
+class CanTx(Protocol):
+    """Transmit side of the CAN driver."""
+
+    def transmit(self, can_id: int, data: bytes) -> bool:
+        """Queue one classic CAN data frame (11-bit ID, 8 bytes). False when the TX queue is full
+        or the controller is bus-off: the frame is dropped and the firmware counts it."""
+        ...
