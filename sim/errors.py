@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from sim.exceptions import ConfigurationError
 from sim.robot import RobotProfile
 
 _ED_RANGE = (0.5, 2.0)
@@ -29,7 +30,7 @@ _EB_RANGE = (0.5, 2.0)
 _SLIP_RANGE = (0.0, 0.5)
 
 
-class ErrorModelError(ValueError):
+class ErrorModelError(ConfigurationError):
     """An error-model specification is invalid (one-line message)."""
 
 

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sim.exceptions import ConfigurationError
+
 ROBOTS_DIR = Path(__file__).parent / "robots"
 NM_PER_M = 1_000_000_000
 
@@ -37,7 +39,7 @@ _REQUIRED_KEYS = frozenset(_FLOAT_KEYS + _INT_KEYS)
 _OPTIONAL_KEYS = frozenset({"name"})
 
 
-class ProfileError(ValueError):
+class ProfileError(ConfigurationError):
     """A robot profile could not be found, parsed or validated (one-line message)."""
 
 

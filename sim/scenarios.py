@@ -27,12 +27,13 @@ from typing import Protocol
 
 import numpy as np
 
+from sim.exceptions import ConfigurationError
 from sim.robot import RobotProfile
 
 REST_S = 1.0  # standstill at the end of every scenario
 
 
-class ScenarioError(ValueError):
+class ScenarioError(ConfigurationError):
     """An unknown scenario name (one-line message listing the known ones)."""
 
 

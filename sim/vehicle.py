@@ -17,6 +17,7 @@ import numpy as np
 
 from sim.drivetrain import Drivetrain, MotorConfig
 from sim.errors import ErrorModel
+from sim.exceptions import ConfigurationError
 from sim.robot import RobotProfile
 from sim.truth import GroundTruth, Pose, TruthTrace
 
@@ -24,7 +25,7 @@ _MAX_PENDING = 1 << 16  # substeps held before the ground truth is brought up to
 _TIME_EPS = 1e-6  # in substeps
 
 
-class VehicleError(ValueError):
+class VehicleError(ConfigurationError):
     """A vehicle was misconfigured or driven backwards in time."""
 
 
