@@ -1,0 +1,70 @@
+"""Bus options the python-can way: ``-i/--interface``, ``-c/--channel``, ``-b/--bitrate``.
+
+Anything not given on the command line comes from python-can's own configuration (``~/.canrc``,
+``can.ini``, ``CAN_INTERFACE``/``CAN_CHANNEL`` environment variables), exactly as ``can.Bus()``
+reads it.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+import can
+
+from sim.exceptions import BusSetupError
+
+
+def add_bus_arguments(parser: argparse.ArgumentParser, *, required: bool = False) -> None:
+    """Add python-can's bus options to ``parser``."""
+    group = parser.add_argument_group("bus (python-can; unset values come from its config file)")
+    group.add_argument(
+        "-i",
+        "--interface",
+        required=required,
+        help="python-can interface: virtual, udp_multicast, socketcan, ...",
+    )
+    group.add_argument(
+        "-c", "--channel", help="channel: e.g. vcan0 (socketcan), 239.74.163.2 (udp_multicast)"
+    )
+    group.add_argument("-b", "--bitrate", type=int, help="bitrate in bit/s")
+    group.add_argument(
+        "--bus-arg",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="extra keyword for can.Bus (repeatable), e.g. receive_own_messages=1",
+    )
+
+
+def open_bus(args: argparse.Namespace, **overrides: Any) -> can.BusABC:
+    """Open the bus the options describe; one-line ``BusSetupError`` when it cannot be opened."""
+    kwargs: dict[str, Any] = {}
+    for key in ("interface", "channel", "bitrate"):
+        value = getattr(args, key, None)
+        if value is not None:
+            kwargs[key] = value
+    for item in getattr(args, "bus_arg", []):
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise BusSetupError(f"--bus-arg expects KEY=VALUE, got {item!r}")
+        kwargs[key] = _auto_type(value)
+    kwargs.update(overrides)
+    try:
+        return can.Bus(**kwargs)
+    except (can.CanError, ValueError, OSError, ImportError, TypeError) as exc:
+        described = ", ".join(f"{k}={v}" for k, v in kwargs.items()) or "python-can defaults"
+        raise BusSetupError(f"cannot open CAN bus ({described}): {exc}") from exc
+
+
+def _auto_type(text: str) -> Any:
+    lowered = text.lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    try:
+        return int(text, 0)
+    except ValueError:
+        try:
+            return float(text)
+        except ValueError:
+            return text

@@ -1,0 +1,61 @@
+"""The firmware's board: its HAL implemented on a python-can bus and a clock.
+
+The bus plays the MCU's CAN controller (11-bit data frames only: error, remote and extended frames
+never reach the firmware's mailbox, as a hardware acceptance filter would drop them); the caller's
+periodic loop plays its timer and calls ``run_tick`` every ``TICK_PERIOD_US``.
+"""
+
+from __future__ import annotations
+
+import can
+
+from firmware.config import RobotParams
+from firmware.ecu import OdomEcu
+from firmware.hal import TICK_PERIOD_US
+from sim.clock import Clock
+
+TICK_S = TICK_PERIOD_US / 1e6
+TX_LATENCY_S = 0.001  # the firmware's frames leave 1 ms after the tick that made them
+
+
+class FirmwareBoard:
+    """An ``OdomEcu`` on a python-can bus: receive ISR from ``recv``, transmit with ``send``."""
+
+    def __init__(self, bus: can.BusABC, params: RobotParams, clock: Clock) -> None:
+        self.bus = bus
+        self.clock = clock
+        self.ecu = OdomEcu(self, params)
+        self.frames_dropped_by_filter = 0
+        self.tx_errors = 0
+
+    def transmit(self, can_id: int, data: bytes) -> bool:
+        """The HAL's transmit (``firmware.hal.CanTx``)."""
+        msg = can.Message(
+            timestamp=self.clock.now_s() + TX_LATENCY_S,
+            arbitration_id=can_id,
+            is_extended_id=False,
+            data=data,
+        )
+        try:
+            self.bus.send(msg)
+        except can.CanError:
+            self.tx_errors += 1
+            return False
+        return True
+
+    def service_rx(self) -> None:
+        """Deliver every frame waiting on the bus to the firmware's receive ISR."""
+        recv = self.bus.recv
+        isr = self.ecu.isr_can_rx
+        msg = recv(0)
+        while msg is not None:
+            if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+                self.frames_dropped_by_filter += 1
+            else:
+                isr(msg.arbitration_id, bytes(msg.data))
+            msg = recv(0)
+
+    def run_tick(self) -> None:
+        """One timer period: the pending receive interrupts, then the firmware's tick."""
+        self.service_rx()
+        self.ecu.tick()

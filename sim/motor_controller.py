@@ -1,0 +1,136 @@
+"""The simulated nodes around the firmware: motor controller, ground truth, scenario driver.
+
+* ``MotorController`` (node MOTOR_CTRL): follows E2E-checked ``MOTOR_CMD`` frames and sends
+  ``WHEEL_ENCODERS`` every cycle (the low 24 bits of each wrapping hardware counter).
+* ``TruthSender`` (node SIM): ``SIM_TRUTH`` (X, Y, HEADING parts) of the vehicle's ground truth at
+  the instant of an encoder frame, echoing its COUNTER.
+* ``ScenarioDriver`` (a HOST role): sends an open-loop scenario's wheel speeds as ``MOTOR_CMD``.
+
+They share one bus handle in the sim process. A CAN controller hears its own frames only when asked
+to, so the driver's commands reach the motor controller by ``deliver`` as well as on the bus.
+"""
+
+from __future__ import annotations
+
+import math
+
+import can
+
+from firmware import frames as fr
+from firmware.e2e import E2EReceiver, E2EStatus
+from firmware.errors import ErrorMask
+from sim.clock import Clock
+from sim.scenarios import Scenario
+from sim.vehicle import Vehicle
+
+_U24 = 0xFF_FFFF
+_BAM16_PER_RAD = 65536 / (2 * math.pi)
+
+
+def _send(bus: can.BusABC, clock: Clock, can_id: int, data: bytes) -> bool:
+    try:
+        bus.send(
+            can.Message(
+                timestamp=clock.now_s(), arbitration_id=can_id, is_extended_id=False, data=data
+            )
+        )
+    except can.CanError:
+        return False
+    return True
+
+
+class MotorController:
+    """Node MOTOR_CTRL: two wheel motors and their encoders, driven over CAN."""
+
+    def __init__(self, bus: can.BusABC, vehicle: Vehicle, clock: Clock) -> None:
+        self.bus = bus
+        self.vehicle = vehicle
+        self.clock = clock
+        self.rx_motor_cmd = E2EReceiver(fr.MOTOR_CMD_DATA_IDS, max_delta_counter_init=15)
+        self.errors = ErrorMask()
+        self.counter = -1
+        self.commands_applied = 0
+
+    def deliver(self, data: bytes) -> None:
+        """One received ``MOTOR_CMD`` payload: applied when its E2E check passes."""
+        status = self.rx_motor_cmd.check(data)
+        if status is E2EStatus.OK or status is E2EStatus.OKSOMELOST:
+            cmd = fr.unpack_motor_cmd(data)
+            self.vehicle.command(
+                cmd.left_speed_mm_s / 1000.0, cmd.right_speed_mm_s / 1000.0, self.clock.now_s()
+            )
+            self.commands_applied += 1
+
+    def service_rx(self) -> None:
+        """Apply every MOTOR_CMD waiting on the bus (other frames are not for this node)."""
+        msg = self.bus.recv(0)
+        while msg is not None:
+            if msg.arbitration_id == fr.MOTOR_CMD_ID and not msg.is_extended_id:
+                self.deliver(bytes(msg.data))
+            msg = self.bus.recv(0)
+
+    def sample_and_send(self) -> int:
+        """Advance the motors to now, send WHEEL_ENCODERS; returns the frame's COUNTER."""
+        self.vehicle.advance_to(self.clock.now_s())
+        left, right = self.vehicle.encoder_counts()
+        self.counter = (self.counter + 1) & 0xF
+        _send(
+            self.bus,
+            self.clock,
+            fr.WHEEL_ENCODERS_ID,
+            fr.pack_wheel_encoders(self.counter, left & _U24, right & _U24),
+        )
+        return self.counter
+
+
+class TruthSender:
+    """Node SIM: the ground truth as SIM_TRUTH (0.1 mm, BAM16), aligned to an encoder frame."""
+
+    def __init__(self, bus: can.BusABC, vehicle: Vehicle, clock: Clock) -> None:
+        self.bus = bus
+        self.vehicle = vehicle
+        self.clock = clock
+        self.errors = ErrorMask()
+        self.counter = -1
+
+    def send(self, enc_counter: int) -> None:
+        """Send the three SIM_TRUTH parts of the truth now."""
+        pose = self.vehicle.truth()
+        parts = (
+            (fr.SimTruthPart.X, round(pose.x_m * 1e4)),
+            (fr.SimTruthPart.Y, round(pose.y_m * 1e4)),
+            (fr.SimTruthPart.HEADING, round(pose.heading_rad * _BAM16_PER_RAD) & 0xFFFF),
+        )
+        for part, value in parts:
+            self.counter = (self.counter + 1) & 0xF
+            data = fr.pack_sim_truth(self.counter, part, enc_counter, value, self.errors)
+            _send(self.bus, self.clock, fr.SIM_TRUTH_ID, data)
+
+
+class ScenarioDriver:
+    """A HOST role: an open-loop scenario's wheel speeds as MOTOR_CMD frames."""
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        scenario: Scenario,
+        clock: Clock,
+        motor_controller: MotorController | None = None,
+    ) -> None:
+        self.bus = bus
+        self.scenario = scenario
+        self.clock = clock
+        self.local = motor_controller
+        self.errors = ErrorMask()
+        self.counter = -1
+
+    def send(self) -> None:
+        """Send the scenario's command for now (and deliver it locally)."""
+        left_mps, right_mps = self.scenario.command_at(self.clock.now_s())
+        self.counter = (self.counter + 1) & 0xF
+        data = fr.pack_motor_cmd(
+            self.counter, round(left_mps * 1000), round(right_mps * 1000), self.errors
+        )
+        _send(self.bus, self.clock, fr.MOTOR_CMD_ID, data)
+        if self.local is not None:
+            self.local.deliver(data)
