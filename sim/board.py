@@ -1,7 +1,8 @@
 """The firmware's board: its HAL implemented on a python-can bus and a clock.
 
 The bus plays the MCU's CAN controller (11-bit data frames only: error, remote and extended frames
-never reach the firmware's mailbox, as a hardware acceptance filter would drop them); the caller's
+never reach the firmware's mailbox, as a hardware acceptance filter would drop them, nor frames
+outside ``accept_ids`` when it is given); the caller's
 periodic loop plays its timer and calls ``run_tick`` every ``TICK_PERIOD_US``.
 """
 
@@ -21,11 +22,20 @@ TX_LATENCY_S = 0.001  # the firmware's frames leave 1 ms after the tick that mad
 class FirmwareBoard:
     """An ``OdomEcu`` on a python-can bus: receive ISR from ``recv``, transmit with ``send``."""
 
-    def __init__(self, bus: can.BusABC, params: RobotParams, clock: Clock) -> None:
+    def __init__(
+        self,
+        bus: can.BusABC,
+        params: RobotParams,
+        clock: Clock,
+        accept_ids: frozenset[int] | None = None,
+    ) -> None:
+        """``accept_ids``: the acceptance filter's IDs (None: every 11-bit data frame)."""
         self.bus = bus
         self.clock = clock
+        self.accept_ids = accept_ids
         self.ecu = OdomEcu(self, params)
         self.frames_dropped_by_filter = 0
+        self.frames_sent = 0
         self.tx_errors = 0
 
     def transmit(self, can_id: int, data: bytes) -> bool:
@@ -41,15 +51,22 @@ class FirmwareBoard:
         except can.CanError:
             self.tx_errors += 1
             return False
+        self.frames_sent += 1
         return True
 
     def service_rx(self) -> None:
         """Deliver every frame waiting on the bus to the firmware's receive ISR."""
         recv = self.bus.recv
         isr = self.ecu.isr_can_rx
+        accept = self.accept_ids
         msg = recv(0)
         while msg is not None:
-            if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+            if (
+                msg.is_error_frame
+                or msg.is_remote_frame
+                or msg.is_extended_id
+                or (accept is not None and msg.arbitration_id not in accept)
+            ):
                 self.frames_dropped_by_filter += 1
             else:
                 isr(msg.arbitration_id, bytes(msg.data))

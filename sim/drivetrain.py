@@ -124,12 +124,18 @@ class Drivetrain:
         substep_hz: int = 1000,
         quadrature: bool = False,
         config: MotorConfig | None = None,
+        counter_offset: tuple[int, int] = (0, 0),
     ) -> None:
-        """Motors at rest, wheel angles 0, no command yet (setpoint 0)."""
+        """Motors at rest, wheel angles 0, no command yet (setpoint 0).
+
+        ``counter_offset``: (left, right) counts the free-running counters read at angle 0 (a
+        counter powers up anywhere; tests start them near a wrap).
+        """
         self.profile = profile
         self.config = config or MotorConfig()
         self.substep_hz = substep_hz
         self.quadrature = quadrature
+        self.counter_offset = counter_offset
         self.nominal_radii_m = (profile.wheel_radius_left_m, profile.wheel_radius_right_m)
         self.actual_radii_m = actual_radii_m
         self._alpha = np.array([self.config.accel_limit_mps2 / r for r in self.nominal_radii_m])
@@ -204,9 +210,10 @@ class Drivetrain:
     def encoder_counts(self) -> tuple[int, int]:
         """Raw (left, right) encoder counters, wrapped to ``profile.counter_bits`` (unsigned)."""
         cpr, bits = self.profile.counts_per_rev, self.profile.counter_bits
+        left0, right0 = self.counter_offset
         return (
-            wrap_counter(encoder_count(self.angle[0], cpr, self.quadrature), bits),
-            wrap_counter(encoder_count(self.angle[1], cpr, self.quadrature), bits),
+            wrap_counter(left0 + encoder_count(self.angle[0], cpr, self.quadrature), bits),
+            wrap_counter(right0 + encoder_count(self.angle[1], cpr, self.quadrature), bits),
         )
 
     def wheel_speeds_mps(self) -> tuple[float, float]:

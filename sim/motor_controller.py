@@ -27,25 +27,35 @@ _U24 = 0xFF_FFFF
 _BAM16_PER_RAD = 65536 / (2 * math.pi)
 
 
-def _send(bus: can.BusABC, clock: Clock, can_id: int, data: bytes) -> bool:
-    try:
-        bus.send(
-            can.Message(
-                timestamp=clock.now_s(), arbitration_id=can_id, is_extended_id=False, data=data
-            )
+class _Node:
+    """What the sim nodes share: a bus handle, a clock, and counts of the frames they sent."""
+
+    def __init__(self, bus: can.BusABC, clock: Clock) -> None:
+        self.bus = bus
+        self.clock = clock
+        self.frames_sent = 0
+        self.tx_errors = 0  # frames the bus refused (CanError)
+
+    def _send(self, can_id: int, data: bytes) -> bool:
+        """Send one classic data frame stamped with the clock; False (and counted) on CanError."""
+        msg = can.Message(
+            timestamp=self.clock.now_s(), arbitration_id=can_id, is_extended_id=False, data=data
         )
-    except can.CanError:
-        return False
-    return True
+        try:
+            self.bus.send(msg)
+        except can.CanError:
+            self.tx_errors += 1
+            return False
+        self.frames_sent += 1
+        return True
 
 
-class MotorController:
+class MotorController(_Node):
     """Node MOTOR_CTRL: two wheel motors and their encoders, driven over CAN."""
 
     def __init__(self, bus: can.BusABC, vehicle: Vehicle, clock: Clock) -> None:
-        self.bus = bus
+        super().__init__(bus, clock)
         self.vehicle = vehicle
-        self.clock = clock
         self.rx_motor_cmd = E2EReceiver(fr.MOTOR_CMD_DATA_IDS, max_delta_counter_init=15)
         self.errors = ErrorMask()
         self.counter = -1
@@ -74,22 +84,18 @@ class MotorController:
         self.vehicle.advance_to(self.clock.now_s())
         left, right = self.vehicle.encoder_counts()
         self.counter = (self.counter + 1) & 0xF
-        _send(
-            self.bus,
-            self.clock,
-            fr.WHEEL_ENCODERS_ID,
-            fr.pack_wheel_encoders(self.counter, left & _U24, right & _U24),
+        self._send(
+            fr.WHEEL_ENCODERS_ID, fr.pack_wheel_encoders(self.counter, left & _U24, right & _U24)
         )
         return self.counter
 
 
-class TruthSender:
+class TruthSender(_Node):
     """Node SIM: the ground truth as SIM_TRUTH (0.1 mm, BAM16), aligned to an encoder frame."""
 
     def __init__(self, bus: can.BusABC, vehicle: Vehicle, clock: Clock) -> None:
-        self.bus = bus
+        super().__init__(bus, clock)
         self.vehicle = vehicle
-        self.clock = clock
         self.errors = ErrorMask()
         self.counter = -1
 
@@ -104,10 +110,10 @@ class TruthSender:
         for part, value in parts:
             self.counter = (self.counter + 1) & 0xF
             data = fr.pack_sim_truth(self.counter, part, enc_counter, value, self.errors)
-            _send(self.bus, self.clock, fr.SIM_TRUTH_ID, data)
+            self._send(fr.SIM_TRUTH_ID, data)
 
 
-class ScenarioDriver:
+class ScenarioDriver(_Node):
     """A HOST role: an open-loop scenario's wheel speeds as MOTOR_CMD frames."""
 
     def __init__(
@@ -117,9 +123,8 @@ class ScenarioDriver:
         clock: Clock,
         motor_controller: MotorController | None = None,
     ) -> None:
-        self.bus = bus
+        super().__init__(bus, clock)
         self.scenario = scenario
-        self.clock = clock
         self.local = motor_controller
         self.errors = ErrorMask()
         self.counter = -1
@@ -131,6 +136,6 @@ class ScenarioDriver:
         data = fr.pack_motor_cmd(
             self.counter, round(left_mps * 1000), round(right_mps * 1000), self.errors
         )
-        _send(self.bus, self.clock, fr.MOTOR_CMD_ID, data)
+        self._send(fr.MOTOR_CMD_ID, data)
         if self.local is not None:
             self.local.deliver(data)

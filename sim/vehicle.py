@@ -40,6 +40,7 @@ class Vehicle:
         quadrature: x4 quadrature decoding (effective counts per rev = 4 * counts_per_rev).
         motor: motor controller parameters (default ``MotorConfig()``).
         trace_hz: also record the true pose at this rate (0 = off); must divide ``substep_hz``.
+        counter_offset: (left, right) encoder counter values at start (default 0, 0).
     """
 
     def __init__(
@@ -51,6 +52,7 @@ class Vehicle:
         quadrature: bool = False,
         motor: MotorConfig | None = None,
         trace_hz: int = 0,
+        counter_offset: tuple[int, int] = (0, 0),
     ) -> None:
         """Robot at rest at the origin, heading 0, counters 0, t = 0."""
         if isinstance(substep_hz, bool) or not isinstance(substep_hz, int) or substep_hz < 1000:
@@ -62,7 +64,9 @@ class Vehicle:
         self.substep_hz = substep_hz
         self._rng = np.random.default_rng(seed)
         radii = self.errors.actual_radii_m(profile)
-        self.drivetrain = Drivetrain(profile, radii, substep_hz, quadrature, motor)
+        self.drivetrain = Drivetrain(
+            profile, radii, substep_hz, quadrature, motor, counter_offset
+        )
         self._truth = GroundTruth(
             self.errors.actual_wheelbase_m(profile),
             substep_hz,

@@ -1,0 +1,207 @@
+"""Real-time nodes: a periodic loop with deadline accounting, and the sim node it paces.
+
+Each real-time node is its own process on any python-can bus (``odocan sim``, ``odocan firmware``).
+``PeriodicLoop`` calls ``tick(k)`` at the release times ``start + k * period`` of a
+``RealTimeClock``, sleeping in between, and counts:
+
+* a **late tick**: one that starts more than ``late_after_s`` after its release (default: half a
+  period). ``deadline_miss_ratio`` = late ticks / ticks run;
+* a **skipped release**: when a tick starts a whole period or more after its release, the releases
+  already passed are dropped (a timer interrupt that came while the CPU was busy is lost, not
+  queued): the loop never runs a burst of ticks to catch up, so frames keep their spacing.
+
+``stop_on_signals`` turns SIGINT (Ctrl-C) and SIGTERM into a request to stop after the current
+tick, so a node closes its bus and exits cleanly; a second signal interrupts at once.
+
+``SimNode`` is the sim side of the lockstep rig (sim.rig, steps 1-4) on one bus handle: the motor
+controller, the SIM truth and the scenario driver, the same node classes, one tick at a time.
+"""
+
+from __future__ import annotations
+
+import signal
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from types import FrameType
+
+import can
+
+from sim.board import TICK_S
+from sim.clock import Clock, RealTimeClock
+from sim.contract import cycle_ticks, database
+from sim.errors import ErrorModel
+from sim.motor_controller import MotorController, ScenarioDriver, TruthSender
+from sim.robot import RobotProfile
+from sim.scenarios import get_scenario
+from sim.vehicle import Vehicle
+
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@dataclass
+class DeadlineStats:
+    """Deadline accounting of a periodic loop (times in seconds)."""
+
+    period_s: float
+    late_after_s: float
+    ticks: int = 0
+    late_ticks: int = 0
+    skipped_releases: int = 0
+    max_lateness_s: float = 0.0
+
+    def record(self, lateness_s: float) -> None:
+        """Account one tick that started ``lateness_s`` after its release."""
+        self.ticks += 1
+        if lateness_s > self.late_after_s:
+            self.late_ticks += 1
+        self.max_lateness_s = max(self.max_lateness_s, lateness_s)
+
+    @property
+    def deadline_miss_ratio(self) -> float:
+        """Late ticks / ticks run (0.0 before the first tick)."""
+        return self.late_ticks / self.ticks if self.ticks else 0.0
+
+    def summary(self) -> str:
+        """One line: ticks, late ticks, the miss ratio, worst lateness (ms), skipped releases."""
+        return (
+            f"{self.ticks} ticks, {self.late_ticks} late "
+            f"(deadline_miss_ratio {self.deadline_miss_ratio:.4f}, "
+            f"worst {self.max_lateness_s * 1e3:.1f} ms), "
+            f"{self.skipped_releases} releases skipped"
+        )
+
+
+class PeriodicLoop:
+    """Runs ``tick(k)`` every ``period_s`` of a real-time clock until stopped or a duration ends."""
+
+    def __init__(
+        self,
+        period_s: float = TICK_S,
+        clock: RealTimeClock | None = None,
+        *,
+        late_after_s: float | None = None,
+    ) -> None:
+        """``late_after_s``: a tick starting later than this after its release is late
+        (default: half a period)."""
+        if period_s <= 0:
+            raise ValueError(f"period must be positive, got {period_s} s")
+        self.period_s = period_s
+        self.clock = clock or RealTimeClock()
+        self.stats = DeadlineStats(period_s, period_s / 2 if late_after_s is None else late_after_s)
+        self._stop_requested = False
+
+    def request_stop(self) -> None:
+        """Stop after the tick under way (safe from a signal handler)."""
+        self._stop_requested = True
+
+    @property
+    def stop_requested(self) -> bool:
+        """True once a stop was requested."""
+        return self._stop_requested
+
+    def run(self, tick: Callable[[int], None], duration_s: float | None = None) -> DeadlineStats:
+        """Call ``tick(k)`` at each release ``k`` (k = 0, 1, ...; skipped releases skip k).
+
+        Release 0 is the clock's time when ``run`` is called; releases run until ``duration_s``
+        after it (None: until stopped).
+        """
+        period = self.period_s
+        clock = self.clock
+        stats = self.stats
+        start = clock.now_s()
+        k = 0
+        while not self._stop_requested:
+            if duration_s is not None and k * period >= duration_s - 1e-9:
+                break
+            release = start + k * period
+            lateness = clock.sleep_until(release)
+            if self._stop_requested:
+                break
+            lateness = max(lateness, clock.now_s() - release)
+            if lateness >= period:
+                missed = int(lateness / period)
+                stats.skipped_releases += missed
+                k += missed
+            stats.record(lateness)
+            tick(k)
+            k += 1
+        return stats
+
+
+@contextmanager
+def stop_on_signals(loop: PeriodicLoop) -> Iterator[None]:
+    """While inside: SIGINT and SIGTERM ask ``loop`` to stop; a second one raises
+    ``KeyboardInterrupt``. The previous handlers are restored on exit (main thread only)."""
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        if loop.stop_requested:
+            raise KeyboardInterrupt
+        loop.request_stop()
+
+    previous = {sig: signal.signal(sig, handler) for sig in _STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def accepted_ids(node: str) -> frozenset[int]:
+    """IDs of the frames ``node`` receives in the DBC: what its CAN controller's acceptance
+    filter would pass (``sim.board.FirmwareBoard``'s ``accept_ids``).
+
+    Not python-can's ``can_filters``: where they are applied in software (``udp_multicast``,
+    ``virtual``), ``recv(0)`` returns None at the first frame they reject, so a node draining
+    its bus with ``recv(0)`` would leave frames queued."""
+    return frozenset(
+        msg.frame_id
+        for msg in database().messages
+        if any(node in sig.receivers for sig in msg.signals)
+    )
+
+
+class SimNode:
+    """MOTOR_CTRL, SIM and the scenario driver on one bus handle: the sim side of the rig."""
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        robot: RobotProfile,
+        clock: Clock,
+        *,
+        scenario: str = "random",
+        seed: int = 0,
+        errors: ErrorModel | None = None,
+        quadrature: bool = False,
+    ) -> None:
+        """A vehicle at rest at the origin, driven by ``scenario`` from the clock's zero."""
+        self.bus = bus
+        self.clock = clock
+        self.vehicle = Vehicle(robot, errors, seed=seed, quadrature=quadrature)
+        self.motor_controller = MotorController(bus, self.vehicle, clock)
+        self.truth = TruthSender(bus, self.vehicle, clock)
+        self.driver = ScenarioDriver(
+            bus, get_scenario(scenario, robot, seed), clock, self.motor_controller
+        )
+        self._driver_ticks = cycle_ticks("MOTOR_CMD", TICK_S)
+        self._truth_ticks = cycle_ticks("SIM_TRUTH", TICK_S)
+
+    def tick(self, k: int) -> None:
+        """Tick ``k`` (10 ms each): receive, drive, sample + send encoders, truth at its cycle."""
+        self.motor_controller.service_rx()
+        if k % self._driver_ticks == 0:
+            self.driver.send()
+        enc_counter = self.motor_controller.sample_and_send()
+        if k % self._truth_ticks == 0:
+            self.truth.send(enc_counter)
+
+    @property
+    def frames_sent(self) -> int:
+        """Frames the three nodes put on the bus."""
+        return self.motor_controller.frames_sent + self.truth.frames_sent + self.driver.frames_sent
+
+    @property
+    def tx_errors(self) -> int:
+        """Frames the bus refused."""
+        return self.motor_controller.tx_errors + self.truth.tx_errors + self.driver.tx_errors
