@@ -1,0 +1,174 @@
+"""The analysis of lockstep runs: on-board vs reference within one LSB, vs truth, exact alignment.
+
+Each test can fail: a pose moved by a few LSB fails the check; a DBC that does not match errors.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from functools import cache
+from pathlib import Path
+
+import cantools
+import numpy as np
+import pytest
+from cantools.database.can import Database
+
+from firmware.e2e import p02_protect
+from host.analysis import HEADING_LSB_RAD, POSITION_LSB_M, AnalysisError, Tolerance, analyze
+from host.logio import FrameArrays, FrameCollector
+from sim.contract import DBC_PATH, database
+from sim.errors import ErrorModel
+from sim.exceptions import OdocanError
+from sim.rig import INTEGRATORS, LockstepRig, RigConfig
+from sim.robot import load
+
+PMIR = load("pmir")
+KOBUKI = load("kobuki")
+SECONDS = 20.0
+ERRORS = ErrorModel(ed=1.01, eb=1.02)
+NO_ERRORS = ErrorModel()
+REPORT_KEYS = {
+    "robot", "integrator", "scenario", "seed", "sim_seconds", "wall_seconds", "realtime_factor",
+    "frames", "onboard_vs_reference", "onboard_vs_truth", "final_onboard_pose", "e2e", "passed",
+    "tolerance",
+}
+
+
+@cache
+def run(integrator: str, errors: ErrorModel = NO_ERRORS, robot: str = "pmir") -> FrameArrays:
+    """Every frame of a 20 s ``random`` run."""
+    collector = FrameCollector()
+    config = RigConfig(load(robot), integrator, "random", 5, errors)
+    with LockstepRig(config, [collector]) as rig:
+        rig.run(SECONDS)
+    return collector.arrays()
+
+
+def by_id(frames: FrameArrays, can_id: int) -> np.ndarray:
+    return np.flatnonzero(frames.can_id == can_id)
+
+
+@pytest.mark.parametrize("integrator", INTEGRATORS)
+def test_onboard_matches_reference_within_one_lsb(integrator: str) -> None:
+    analysis = analyze(run(integrator), PMIR, scenario="random", seed=5, wall_seconds=0.5)
+    report = analysis.report
+    assert set(report) >= REPORT_KEYS
+    json.dumps(report)
+    assert analysis.passed and report["passed"]
+    assert report["integrator"] == integrator  # read from ODOM_STATUS
+    ref = report["onboard_vs_reference"]
+    assert ref["max_position_error_m"] <= POSITION_LSB_M
+    assert ref["max_heading_error_rad"] <= HEADING_LSB_RAD
+    assert report["samples"]["onboard"] == round(SECONDS / 0.02)  # every pose aligned
+    assert report["samples"]["unmatched_poses"] == 0
+    assert report["e2e"]["WHEEL_ENCODERS"]["ok"] == round(SECONDS / 0.01)
+    assert report["realtime_factor"] == pytest.approx(report["sim_seconds"] / 0.5)
+    n = report["samples"]["onboard"]
+    for key in ("onboard_x_m", "reference_x_m", "distance_m", "position_error_m"):
+        assert len(analysis.series[key]) == n
+    assert report["onboard_vs_truth"]["distance_travelled_m"] > 1.0
+
+
+@pytest.mark.parametrize("integrator", INTEGRATORS)
+def test_truth_error_is_small_and_grows_with_systematic_errors(integrator: str) -> None:
+    clean = analyze(run(integrator), PMIR).report["onboard_vs_truth"]
+    skewed = analyze(run(integrator, ERRORS), PMIR).report["onboard_vs_truth"]
+    assert 0 < clean["max_position_error_m"] < 0.01
+    assert 0 < clean["max_heading_error_rad"] < 0.01
+    assert skewed["max_position_error_m"] > 5 * clean["max_position_error_m"]
+    assert skewed["max_heading_error_rad"] > 5 * clean["max_heading_error_rad"]
+
+
+def test_truth_sample_count() -> None:
+    report = analyze(run("exact"), PMIR).report
+    # SIM_TRUTH every 100 ms; the on-board pose is carried to it from the next on-board sample
+    assert report["samples"]["truth"] == round(SECONDS / 0.1)
+    assert report["samples"]["truth_compared"] >= report["samples"]["truth"] - 1
+
+
+@pytest.mark.parametrize(
+    ("integrator", "robot"), [(i, r) for i in INTEGRATORS for r in ("pmir", "kobuki")]
+)
+def test_dropping_every_7th_encoder_frame_still_aligns(integrator: str, robot: str) -> None:
+    frames = run(integrator, robot=robot)
+    keep = np.ones(len(frames), dtype=bool)
+    keep[by_id(frames, 0x100)[6::7]] = False
+    analysis = analyze(frames.select(keep), load(robot))
+    report = analysis.report
+    assert analysis.passed, report["onboard_vs_reference"]
+    assert report["e2e"]["WHEEL_ENCODERS"]["lost"] == len(by_id(frames, 0x100)[6::7])
+    # the poses naming a dropped frame are left out, never paired with an older frame
+    assert report["samples"]["unmatched_poses"] > 0
+    assert report["samples"]["onboard"] + report["samples"]["unmatched_poses"] // 2 == round(
+        SECONDS / 0.02
+    )
+
+
+@pytest.mark.parametrize("integrator", INTEGRATORS)
+def test_a_log_starting_mid_drive_passes(integrator: str) -> None:
+    frames = run(integrator)
+    late = frames.select(np.flatnonzero(frames.timestamp_s >= 7.337))
+    analysis = analyze(late, PMIR)
+    assert analysis.passed, analysis.report["onboard_vs_reference"]
+    assert abs(analysis.series["onboard_x_m"][0]) + abs(analysis.series["onboard_y_m"][0]) > 0.1
+
+
+def reprotect(frames: FrameArrays, position: int, data_ids: tuple[int, ...]) -> None:
+    buf = bytearray(frames.data[position].tobytes())
+    p02_protect(buf, buf[1] & 0xF, data_ids)
+    frames.data[position] = np.frombuffer(bytes(buf), dtype=np.uint8)
+
+
+def test_a_wrong_onboard_pose_fails() -> None:
+    frames = run("exact")
+    frames = frames.select(np.arange(len(frames)))  # a copy
+    poses = by_id(frames, 0x200)
+    target = int(poses[len(poses) // 2])
+    x = int.from_bytes(frames.data[target, 2:6].tobytes(), "little", signed=True) + 3
+    frames.data[target, 2:6] = np.frombuffer(x.to_bytes(4, "little", signed=True), np.uint8)
+    ids = database().get_message_by_name("ODOM_POSE_X").dbc.attributes["E2EDataIDs"].value
+    reprotect(frames, target, tuple(int(v) for v in ids.split(",")))
+    analysis = analyze(frames, PMIR)
+    assert not analysis.passed
+    assert analysis.report["onboard_vs_reference"]["max_position_error_m"] > 2 * POSITION_LSB_M
+    assert analyze(frames, PMIR, tolerance=Tolerance(position_m=1e-3)).passed
+
+
+def test_wrong_integrator_fails() -> None:
+    analysis = analyze(run("euler"), PMIR, "exact")
+    assert analysis.report["integrator_source"] == "argument"
+    assert not analysis.passed
+
+
+def dbc_variant(tmp_path: Path, old: str, new: str) -> Database:
+    text = DBC_PATH.read_text().replace(old, new)
+    db = cantools.database.load_string(text, database_format="dbc")
+    assert isinstance(db, Database)
+    return db
+
+
+def test_dbc_mismatch_errors(tmp_path: Path) -> None:
+    frames = run("exact")
+    moved = dbc_variant(tmp_path, "BO_ 256 WHEEL_ENCODERS", "BO_ 1000 WHEEL_ENCODERS")
+    with pytest.raises(AnalysisError, match=r"no WHEEL_ENCODERS frame .* does not match"):
+        analyze(frames, PMIR, db=moved)
+    other_ids = dbc_variant(
+        tmp_path, '"16,17,18,19,20,21,22,23,24,25,26,27,28,29,30,31"',
+        '"32,33,34,35,36,37,38,39,40,41,42,43,44,45,46,47"',
+    )
+    with pytest.raises(AnalysisError, match="E2E check: the DBC does not match"):
+        analyze(frames, PMIR, db=other_ids)
+    renamed = dbc_variant(tmp_path, "ODOM_POSE_Y", "ODOM_POSE_Z")
+    with pytest.raises(OdocanError, match="ODOM_POSE_Y"):
+        analyze(frames, PMIR, db=renamed)
+
+
+def test_integrator_must_be_known_or_logged() -> None:
+    frames = run("rk2")
+    no_status = frames.select(np.flatnonzero(frames.can_id != 0x380))
+    with pytest.raises(AnalysisError, match="integrator"):
+        analyze(no_status, PMIR)
+    assert analyze(no_status, PMIR, "rk2").passed
+    assert math.isfinite(analyze(no_status, PMIR, "rk2").report["final_onboard_pose"]["x_m"])
