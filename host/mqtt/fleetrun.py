@@ -1,0 +1,119 @@
+"""A fleet in real time, bridged to MQTT: what ``odocan fleet`` and ``bench/fleet.py`` run.
+
+``run_fleet`` starts N robots (``sim.fleet``), optionally the bridge (one ``RobotLink`` per robot,
+the fleet's frames offered to it each tick), runs for ``duration_s`` and returns the report:
+
+```
+{"robots": N, "duration_s": ..., "period_s": 0.01, "deadline_miss_ratio": ...,
+ "ticks": ..., "late_ticks": ..., "skipped_releases": ..., "max_lateness_ms": ...,
+ "broker": "mqtt://127.0.0.1:PORT" | null, "embedded_broker": bool,
+ "bridge": {"frames_in": ..., "frames_dropped": ..., "telemetry_dropped": ...} | null,
+ "per_robot": {"robot001": {"seed": ..., "frames": {"WHEEL_ENCODERS": ..., ...},
+                            "frames_total": ..., "commands_accepted": ...,
+                            "commands_rejected": ...}, ...}}
+```
+
+``deadline_miss_ratio`` is the share of 10 ms encoder cycles that started more than half a period
+late (``sim.realtime.DeadlineStats``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+from dataclasses import dataclass
+from typing import Any
+
+from host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
+from host.mqtt.broker import BrokerURL
+from host.mqtt.options import broker_for
+from host.reference import Geometry
+from sim.fleet import Fleet, FleetConfig, run_realtime
+from sim.realtime import DeadlineStats
+
+
+@dataclass(frozen=True)
+class FleetRun:
+    """What to run: the fleet, for how long, and whether (and where) to bridge it."""
+
+    fleet: FleetConfig
+    duration_s: float
+    bridge: bool = True
+    broker: BrokerURL | None = None  # None: an embedded amqtt broker
+    publish_hz: float = 10.0
+    client_prefix: str = "odocan-bridge"
+
+
+async def run_fleet(run: FleetRun) -> dict[str, Any]:
+    """Run the fleet in real time (bridged when ``run.bridge``); returns the report."""
+    with Fleet(run.fleet) as fleet:
+        if not run.bridge:
+            stats = await _paced(fleet, run.duration_s, None)
+            return _report(run, fleet, stats, None, None, False)
+        async with broker_for(run.broker) as (url, embedded):
+            bridge = Bridge(_endpoints(fleet, run), config=BridgeConfig(
+                broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix))
+            stop = asyncio.Event()
+            async with asyncio.TaskGroup() as tg:
+                tg.create_task(bridge.run(stop=stop), name="bridge")
+                await _all_connected(bridge)
+                stats = await _paced(fleet, run.duration_s, bridge.offer)
+                stop.set()
+            return _report(run, fleet, stats, bridge, url, embedded)
+
+
+async def _paced(fleet: Fleet, duration_s: float, on_batch: Any) -> DeadlineStats:
+    gc.collect()
+    gc.freeze()  # the long-lived set-up objects leave the collector's generations
+    try:
+        return await run_realtime(fleet, duration_s=duration_s, on_batch=on_batch)
+    finally:
+        gc.unfreeze()
+
+
+async def _all_connected(bridge: Bridge, timeout_s: float = 10.0) -> None:
+    """Start the clock once every link is up (telemetry from tick 0 reaches the broker)."""
+    async with asyncio.timeout(timeout_s):
+        for link in bridge.links:
+            await link.connected.wait()
+
+
+def _endpoints(fleet: Fleet, run: FleetRun) -> list[RobotEndpoint]:
+    p = run.fleet.robot
+    geometry = Geometry(p.counts_per_rev, p.wheel_radius_left_m, p.wheel_radius_right_m,
+                        p.wheelbase_m)
+    return [RobotEndpoint(name, fleet.host_bus(i), geometry, run.fleet.integrator, p.counter_bits)
+            for i, name in enumerate(fleet.names)]
+
+
+def _report(
+    run: FleetRun, fleet: Fleet, stats: DeadlineStats, bridge: Bridge | None,
+    url: BrokerURL | None, embedded: bool,
+) -> dict[str, Any]:
+    per_robot = {}
+    for i, name in enumerate(fleet.names):
+        frames = fleet.frame_counts(i)
+        entry: dict[str, Any] = {"seed": run.fleet.seed + i, "frames": frames,
+                                 "frames_total": sum(frames.values())}
+        if bridge is not None:
+            entry["commands_accepted"] = bridge.robots[i].commands_sent
+            entry["commands_rejected"] = bridge.robots[i].commands_rejected
+        per_robot[name] = entry
+    return {
+        "robots": run.fleet.robots,
+        "duration_s": run.duration_s,
+        "period_s": stats.period_s,
+        "deadline_miss_ratio": stats.deadline_miss_ratio,
+        "ticks": stats.ticks,
+        "late_ticks": stats.late_ticks,
+        "skipped_releases": stats.skipped_releases,
+        "max_lateness_ms": round(stats.max_lateness_s * 1e3, 3),
+        "broker": str(url) if url is not None else None,
+        "embedded_broker": embedded,
+        "bridge": None if bridge is None else {
+            "frames_in": bridge.frames_in,
+            "frames_dropped": bridge.frames_dropped,
+            "telemetry_dropped": sum(link.telemetry_dropped for link in bridge.links),
+        },
+        "per_robot": per_robot,
+    }

@@ -1,0 +1,296 @@
+"""One robot's frames -> the telemetry the bridge publishes (synchronous, no I/O).
+
+``RobotTelemetry.feed(msg)`` takes every frame of one robot's bus in bus order and returns the
+publications it makes due, as ``(leaf, payload)`` pairs (``host.mqtt.topics``):
+
+* every frame is E2E-checked (``host.e2e.E2EMonitor``: the DBC's E2EDataIDs, Profile 2 CRC and
+  sequence) and decoded with cantools; frames the check rejects are counted, never used;
+* ``WHEEL_ENCODERS`` steps the float64 reference (``host.reference.ReferenceOdometry``, 24-bit
+  wrapping counts); the reference pose after each frame is kept by the frame's E2E ``COUNTER``;
+* ``ODOM_POSE_X`` + ``ODOM_POSE_Y`` with the same ``ENC_COUNTER`` make the on-board pose, compared
+  with the reference of that very encoder frame: ``pose``, ``reference`` and ``error`` at most
+  ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic);
+* ``SIM_TRUTH``'s three parts of one encoder frame make ``truth``, compared with the reference of
+  that frame (``error.reference_vs_truth``, the latest: what odometry itself cannot know);
+* ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result``.
+
+``periodic(now_s)`` returns ``status`` and ``rates`` (frames per second per message over the last
+window). Times: ``t_s`` is the frame's bus timestamp (s), ``unix_s`` the wall clock at publication.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, NamedTuple
+
+import can
+from cantools.database.can import Database
+
+from host.e2e import E2EMonitor
+from host.mqtt.topics import RESULT_LEAF, stamp, status_payload
+from host.reference import Geometry, ReferenceOdometry, wrap_angle
+from sim.contract import database
+
+Publication = tuple[str, dict[str, Any]]
+ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
+BUS_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT: the low 24 bits of each hardware counter
+_RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
+_TURN = 2.0 * math.pi
+
+
+class Pose(NamedTuple):
+    """A pose at one encoder frame (``seq``: index of that frame as the bridge saw it)."""
+
+    seq: int
+    x_m: float
+    y_m: float
+    heading_rad: float  # unwrapped
+
+
+@dataclass
+class PendingAck:
+    """A command frame sent, waiting for its ODOM_ACK."""
+
+    cmd_id: Any
+    command: str
+    final: bool  # the APPLY / GO frame: its ACK completes the command
+
+
+@dataclass
+class _Window:
+    """Frame counts since the last ``rates`` publication."""
+
+    start_s: float
+    counts: Counter[str] = field(default_factory=Counter)
+
+
+class RobotTelemetry:
+    """The bridge's view of one robot, built only from its bus."""
+
+    def __init__(
+        self,
+        name: str,
+        geometry: Geometry,
+        integrator: str,
+        *,
+        counter_bits: int = 32,
+        publish_hz: float = 10.0,
+        db: Database | None = None,
+        now_s: float = 0.0,
+    ) -> None:
+        """``geometry``/``integrator``/``counter_bits``: the robot's parameters for the float64
+        reference (a 16-bit hardware counter wraps at 16 bits within the 24 on the bus)."""
+        self.name = name
+        self.db = db if db is not None else database()
+        self._by_id = {m.frame_id: m for m in self.db.messages}
+        self.e2e = E2EMonitor(self.db)
+        self.geometry, self.integrator = geometry, integrator
+        self.counter_bits = counter_bits
+        self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
+        self.frames: Counter[str] = Counter()
+        self.rejected: Counter[str] = Counter()
+        self._window = _Window(now_s)
+        self._enc_seq = -1
+        self._reference: ReferenceOdometry | None = None
+        self._reseed = False
+        self._refs: list[Pose | None] = [None] * _RING
+        self._truth_parts: dict[int, tuple[int, float]] = {}
+        self._pose_x: tuple[int, float, float, int] | None = None  # enc, x, heading, counter
+        self._twist: dict[str, float] = {}
+        self._last_pub_t = -math.inf
+        self._truth_error: dict[str, Any] | None = None
+        self.firmware: dict[str, Any] = {}
+        self.pending: dict[tuple[int, int], PendingAck] = {}
+        self.status_seq = 0
+
+    # --- frames ---
+    def feed(self, msg: can.Message) -> list[Publication]:
+        """One frame of this robot's bus; returns the publications it makes due."""
+        if msg.is_error_frame or msg.is_remote_frame:
+            self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
+            return []
+        can_id, data = msg.arbitration_id, bytes(msg.data)
+        message = self._by_id.get(can_id)
+        status = self.e2e.check(can_id, data, extended=msg.is_extended_id)
+        if message is None or status not in ACCEPTED_E2E:
+            self.rejected[message.name if message else hex(can_id)] += 1
+            return []
+        self.frames[message.name] += 1
+        self._window.counts[message.name] += 1
+        handler = self._handlers.get(message.name)
+        if handler is None:
+            return []
+        signals = message.decode(data, decode_choices=False)
+        assert isinstance(signals, dict)
+        publications: list[Publication] = handler(self, signals, msg.timestamp)
+        return publications
+
+    def _on_encoders(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        self._enc_seq += 1
+        ref = self._reference
+        if ref is None:  # the bridge saw the run from its start: the firmware's origin
+            ref = self._reference = self._new_reference(0.0, 0.0, 0.0)
+        ref.step_counts(int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
+        self._refs[int(s["COUNTER"])] = Pose(self._enc_seq, ref.x_m, ref.y_m, ref.heading_rad)
+        return []
+
+    def _new_reference(self, x_m: float, y_m: float, heading_rad: float) -> ReferenceOdometry:
+        return ReferenceOdometry(
+            self.geometry,
+            self.integrator,
+            min(self.counter_bits, BUS_COUNTER_BITS),
+            x_m=x_m,
+            y_m=y_m,
+            heading_rad=heading_rad,
+        )
+
+    def _on_pose_x(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        self._pose_x = (int(s["ENC_COUNTER"]), s["X"], s["HEADING"], int(s["COUNTER"]))
+        return []
+
+    def _on_twist(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        self._twist = {
+            "linear_vel_m_s": s["LINEAR_VEL"],
+            "angular_vel_rad_s": s["ANGULAR_VEL"],
+            "distance_m": s["DISTANCE"],
+        }
+        return []
+
+    def _on_pose_y(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        enc = int(s["ENC_COUNTER"])
+        if self._pose_x is None or self._pose_x[0] != enc:
+            return []
+        _, x_m, heading_rad, counter = self._pose_x
+        self._pose_x = None
+        ref = self._refs[enc]
+        seq = ref.seq if ref is not None else -1
+        pose = Pose(seq, x_m, s["Y"], int(s["TURNS"]) * _TURN + heading_rad)
+        if self._reseed:
+            self._reseed_at(pose)
+        if t_s - self._last_pub_t < self.publish_period_s - 1e-6:
+            return []
+        self._last_pub_t = t_s
+        return self._pose_publications(pose, ref, enc, counter, t_s)
+
+    def _reseed_at(self, pose: Pose) -> None:
+        """After a set-pose or config command took effect: restart the reference at ``pose``."""
+        self._reseed = False
+        self._reference = self._new_reference(pose.x_m, pose.y_m, pose.heading_rad)
+        self._refs = [None] * _RING
+
+    def _pose_publications(
+        self, pose: Pose, ref: Pose | None, enc: int, counter: int, t_s: float
+    ) -> list[Publication]:
+        head = {"t_s": t_s, "counter": counter, "enc_counter": enc, "enc_seq": pose.seq}
+        pubs: list[Publication] = [("pose", stamp({**head, **_pose_dict(pose), **self._twist}))]
+        if ref is None or ref.seq != pose.seq:
+            return pubs
+        pubs.append(("reference", stamp({**head, **_pose_dict(ref)})))
+        error: dict[str, Any] = {**head, "pose_vs_reference": _difference(pose, ref)}
+        if self._truth_error is not None:
+            error["reference_vs_truth"] = self._truth_error
+        pubs.append(("error", stamp(error)))
+        return pubs
+
+    def _on_truth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        enc, part = int(s["ENC_COUNTER"]), int(s["PART"])
+        value = s.get({0: "X", 1: "Y", 2: "HEADING"}.get(part, ""), 0.0)
+        self._truth_parts[part] = (enc, float(value))
+        parts = self._truth_parts
+        if len(parts) < 3 or len({p[0] for p in parts.values()}) != 1:
+            return []
+        self._truth_parts = {}
+        ref = self._refs[enc]
+        truth = Pose(ref.seq if ref else -1, parts[0][1], parts[1][1], parts[2][1])
+        if ref is not None:  # the truth was sampled at that very encoder frame
+            self._truth_error = {"enc_seq": ref.seq, **_difference(ref, truth)}
+        payload = {"t_s": t_s, "counter": int(s["COUNTER"]), "enc_counter": enc,
+                   "enc_seq": truth.seq, **_pose_dict(truth)}
+        return [("truth", stamp(payload))]
+
+    def _on_status(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        page = int(s["PAGE"])
+        fields = {k.lower(): v for k, v in s.items() if k not in ("CHECKSUM", "COUNTER", "PAGE")}
+        self.firmware[_page_name(self.db, page)] = fields
+        return []
+
+    def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        key = (int(s["REQUEST_ID"]), int(s["REQUEST_COUNTER"]))
+        pending = self.pending.pop(key, None)
+        if pending is None:
+            return []
+        nack = int(s["RESULT"]) != 0
+        if not nack and not pending.final:
+            return []
+        if nack:  # forget the rest of this command: one answer per command
+            self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
+        elif pending.command in ("set_pose", "config"):
+            self._reseed = True
+        reason = _choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
+        payload = {"id": pending.cmd_id, "command": pending.command,
+                   "result": "nacked" if nack else "acked", "reason": reason, "t_s": t_s}
+        return [(RESULT_LEAF, stamp(payload))]
+
+    def expect_ack(self, can_id: int, counter: int, ack: PendingAck) -> None:
+        """A command frame was sent: its ODOM_ACK will answer the command."""
+        self.pending[(can_id, counter)] = ack
+
+    def set_geometry(self, geometry: Geometry, integrator: str, counter_bits: int) -> None:
+        """New robot parameters (a config command): the reference restarts at the next pose."""
+        self.geometry, self.integrator = geometry, integrator
+        self.counter_bits = counter_bits
+
+    _handlers: ClassVar[dict[str, Any]] = {
+        "WHEEL_ENCODERS": _on_encoders,
+        "ODOM_POSE_X": _on_pose_x,
+        "ODOM_POSE_Y": _on_pose_y,
+        "ODOM_TWIST": _on_twist,
+        "SIM_TRUTH": _on_truth,
+        "ODOM_STATUS": _on_status,
+        "ODOM_ACK": _on_ack,
+    }
+
+    # --- periodic ---
+    def rates(self, now_s: float) -> Publication:
+        """``rates``: frames/s per message since the previous call (wall clock ``now_s``)."""
+        window = self._window
+        span = max(now_s - window.start_s, 1e-9)
+        self._window = _Window(now_s)
+        payload = {
+            "window_s": round(span, 6),
+            "hz": {name: round(n / span, 3) for name, n in sorted(window.counts.items())},
+            "frames": dict(sorted(self.frames.items())),
+            "rejected": dict(sorted(self.rejected.items())),
+            "e2e": self.e2e.counts(),
+        }
+        return ("rates", stamp(payload))
+
+    def status(self, state: str = "online") -> Publication:
+        """``status`` (retained): online, the firmware's last ODOM_STATUS pages, a sequence."""
+        self.status_seq += 1
+        return ("status", status_payload(
+            self.name, state, seq=self.status_seq, firmware=self.firmware,
+            frames_total=sum(self.frames.values()),
+        ))
+
+
+def _pose_dict(pose: Pose) -> dict[str, float]:
+    return {"x_m": pose.x_m, "y_m": pose.y_m, "heading_rad": pose.heading_rad}
+
+
+def _difference(a: Pose, b: Pose) -> dict[str, float]:
+    """a - b: position (m), distance (m) and heading wrapped to [-pi, pi) (rad)."""
+    dx, dy = a.x_m - b.x_m, a.y_m - b.y_m
+    return {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy),
+            "dheading_rad": wrap_angle(a.heading_rad - b.heading_rad)}
+
+
+def _choice(db: Database, message: str, signal: str, value: int) -> str:
+    choices = db.get_message_by_name(message).get_signal_by_name(signal).choices
+    return str(choices.get(value, value)) if choices else str(value)
+
+
+def _page_name(db: Database, page: int) -> str:
+    return _choice(db, "ODOM_STATUS", "PAGE", page).lower()

@@ -1,0 +1,253 @@
+"""The MQTT bridge against real brokers: mosquitto (users, ACL, restart) and the embedded amqtt.
+
+Each command test listens on the robot's virtual CAN channel: what the bridge sends is what
+reaches the bus, and nothing invalid does.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from itertools import count
+from pathlib import Path
+from typing import Any
+
+import aiomqtt
+import can
+import pytest
+
+from firmware import frames as fr
+from host.mqtt import topics
+from host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
+from host.mqtt.broker import BrokerURL
+from host.mqtt.fleetrun import FleetRun, run_fleet
+from host.reference import Geometry
+from sim import robot
+from sim.fleet import FleetConfig
+from tests.conftest_mqtt import Mosquitto, broker_of, client, collect, mosquitto  # noqa: F401
+
+BROKERS = ("mosquitto", "amqtt")
+ROBOT = "robot001"
+_channels = count()
+PMIR = robot.load("pmir")
+GEOMETRY = Geometry(PMIR.counts_per_rev, PMIR.wheel_radius_left_m, PMIR.wheel_radius_right_m,
+                    PMIR.wheelbase_m)
+
+
+@asynccontextmanager
+async def running_bridge(
+    url: BrokerURL, **config: Any
+) -> AsyncIterator[tuple[Bridge, can.BusABC]]:
+    """A bridge for ROBOT on a fresh virtual channel, and a listener on that channel."""
+    channel = f"test-mqtt-{os.getpid()}-{next(_channels)}"
+    send_bus = can.Bus(interface="virtual", channel=channel)
+    listener = can.Bus(interface="virtual", channel=channel)
+    bridge = Bridge([RobotEndpoint(ROBOT, send_bus, GEOMETRY)],
+                    config=BridgeConfig(broker=url, client_prefix=f"test-{channel}", **config))
+    stop = asyncio.Event()
+    task = asyncio.create_task(bridge.run(stop=stop), name="bridge")
+    try:
+        async with asyncio.timeout(10):
+            await bridge.links[0].connected.wait()
+        yield bridge, listener
+    finally:
+        stop.set()
+        await asyncio.wait_for(task, 10)
+        send_bus.shutdown()
+        listener.shutdown()
+
+
+def bus_frames(bus: can.BusABC) -> list[can.Message]:
+    """Every frame waiting on ``bus``."""
+    frames = []
+    while (msg := bus.recv(0)) is not None:
+        frames.append(msg)
+    return frames
+
+
+async def command_results(
+    url: BrokerURL, commands: list[tuple[str, bytes]], expected: int
+) -> list[dict[str, Any]]:
+    """Publish ``commands`` (QoS 1) as ``url``'s user; the first ``expected`` results."""
+    async with client(url) as sub:
+        await sub.subscribe(topics.topic(ROBOT, topics.RESULT_LEAF), qos=1)
+        for name, payload in commands:
+            await sub.publish(topics.topic(ROBOT, f"cmd/{name}"), payload, qos=1)
+        got = await collect(sub, lambda g: len(g) >= expected)
+    return [payload for _, payload in got]
+
+
+BAD_COMMANDS = [
+    ("set_pose", b"{not json", "malformed JSON"),
+    ("set_pose", b"[1, 2]", "must be a JSON object"),
+    ("set_pose", b'{"id": "m", "x_m": 1.0, "y_m": 2.0}', "missing field 'heading_rad'"),
+    ("set_pose", b'{"id": "u", "x_m": 1, "y_m": 2, "heading_rad": 0, "z_m": 3}',
+     "unknown field 'z_m'"),
+    ("set_pose", b'{"id": "r", "x_m": 300000.0, "y_m": 0, "heading_rad": 0}', "out of range"),
+    ("set_pose", b'{"id": "t", "x_m": "1", "y_m": 0, "heading_rad": 0}', "must be a number"),
+    ("config", b'{"id": "c", "counts_per_rev": 4096, "wheel_radius_left_m": 5.0, '
+     b'"wheel_radius_right_m": 0.05, "wheelbase_m": 0.3, "counter_bits": 32, '
+     b'"integrator": "exact"}', "wheel_radius_left_m=5.0 out of range"),
+    ("config", b'{"id": "i", "counts_per_rev": 4096, "wheel_radius_left_m": 0.05, '
+     b'"wheel_radius_right_m": 0.05, "wheelbase_m": 0.3, "counter_bits": 32, '
+     b'"integrator": "simpson"}', "integrator='simpson' is not one of"),
+    ("nav_goal", b'{"id": "n", "x_m": 1.0, "y_m": 2.0, "goal_id": 300}', "goal_id=300"),
+    ("teleport", b'{"id": "x"}', "unknown command 'teleport'"),
+]
+
+
+@pytest.mark.parametrize("kind", BROKERS)
+def test_invalid_commands_are_rejected_and_never_reach_the_bus(kind: str, tmp_path: Path) -> None:
+    async def scenario() -> None:
+        async with broker_of(kind, tmp_path) as brokers, running_bridge(brokers.bridge) as (
+            bridge, listener
+        ):
+            commands = [(name, payload) for name, payload, _ in BAD_COMMANDS]
+            results = await command_results(brokers.operator, commands, len(commands))
+            assert bus_frames(listener) == []
+            for (_, _, reason), result in zip(BAD_COMMANDS, results, strict=True):
+                assert result["result"] == "rejected"
+                assert reason in result["reason"], result
+            assert bridge.robots[0].commands_rejected == len(BAD_COMMANDS)
+            # the listener does hear a valid command: 4 frames, values as commanded
+            good = b'{"id": "ok", "x_m": 1.5, "y_m": -2.0, "heading_rad": -0.5}'
+            (result,) = await command_results(brokers.operator, [("set_pose", good)], 1)
+            assert (result["id"], result["result"], result["frames"]) == ("ok", "accepted", 4)
+            await asyncio.sleep(0.05)
+            frames = [fr.unpack_odom_set_pose(m.data) for m in bus_frames(listener)]
+            assert [(f.field, f.value) for f in frames] == [
+                (fr.SetPoseField.X, 15000), (fr.SetPoseField.Y, -20000),
+                (fr.SetPoseField.HEADING, 60321), (fr.SetPoseField.APPLY, 0),
+            ]
+
+    asyncio.run(scenario())
+
+
+@pytest.mark.parametrize("kind", BROKERS)
+def test_fleet_telemetry_and_retained_status(kind: str, tmp_path: Path) -> None:
+    """One real-time robot through the bridge: pose vs reference on the broker, status retained."""
+
+    async def scenario() -> tuple[list[tuple[str, dict[str, Any]]], dict[str, Any]]:
+        async with broker_of(kind, tmp_path) as brokers, client(brokers.operator) as sub:
+            await sub.subscribe(f"odocan/{ROBOT}/#", qos=1)
+            run = FleetRun(fleet=FleetConfig(robots=1, robot=PMIR, seed=3), duration_s=1.5,
+                           broker=brokers.bridge, client_prefix=f"test-fleet-{kind}")
+            report = await run_fleet(run)
+            got = await collect(sub, lambda g: g[-1][1].get("state") == "offline")
+            return got, report
+
+    got, report = asyncio.run(scenario())
+    by_leaf: dict[str, list[dict[str, Any]]] = {}
+    for topic_name, payload in got:
+        by_leaf.setdefault(topic_name.split("/", 2)[2], []).append(payload)
+    assert {"pose", "reference", "error", "status"} <= set(by_leaf)
+    assert by_leaf["status"][0]["state"] == "online"
+    assert by_leaf["status"][-1] == {**by_leaf["status"][-1], "state": "offline",
+                                     "reason": "bridge stopped"}
+    for error in by_leaf["error"]:
+        assert error["pose_vs_reference"]["dpos_m"] < 1e-3  # on-board vs float64: quantisation only
+    pose = by_leaf["pose"][-1]
+    assert {"x_m", "y_m", "heading_rad", "t_s", "unix_s", "counter", "enc_counter"} <= set(pose)
+    frames = report["per_robot"][ROBOT]["frames"]
+    assert frames["WHEEL_ENCODERS"] == report["ticks"]  # one encoder frame per tick run
+    assert report["bridge"]["frames_in"] == report["per_robot"][ROBOT]["frames_total"]
+
+
+def test_anonymous_clients_are_refused(mosquitto: Mosquitto) -> None:  # noqa: F811
+    async def scenario() -> None:
+        with pytest.raises(aiomqtt.MqttCodeError, match=r"[Nn]ot authori[sz]ed"):
+            async with client(mosquitto.url(None)):
+                pass
+
+    asyncio.run(scenario())
+
+
+def test_a_robot_cannot_command_another_robot(mosquitto: Mosquitto) -> None:  # noqa: F811
+    async def scenario() -> list[dict[str, Any]]:
+        async with running_bridge(mosquitto.url("bridge")) as (_, listener):
+            async with client(mosquitto.url("robot002")) as intruder:
+                await intruder.publish(  # acknowledged by the broker, delivered to no one
+                    topics.topic(ROBOT, "cmd/set_pose"),
+                    b'{"id": "intruder", "x_m": 9, "y_m": 9, "heading_rad": 0}', qos=1)
+            good = b'{"id": "owner", "x_m": 1, "y_m": 1, "heading_rad": 0}'
+            results = await command_results(mosquitto.url(ROBOT), [("set_pose", good)], 1)
+            await asyncio.sleep(0.3)  # a late intruder result would show up in the frames
+            values = [fr.unpack_odom_set_pose(m.data).value for m in bus_frames(listener)]
+            assert values == [10000, 10000, 0, 0]
+            return results
+
+    assert [r["id"] for r in asyncio.run(scenario())] == ["owner"]
+
+
+def test_no_qos1_message_lost_across_a_broker_restart(mosquitto: Mosquitto) -> None:  # noqa: F811
+    """Status (QoS 1, seq) is published every 50 ms; the broker is down for 1 s meanwhile."""
+
+    async def scenario() -> tuple[list[int], int, int]:
+        url = mosquitto.url("bridge")
+        seqs: list[int] = []
+
+        async def listen(until_seq: int | None, timeout_s: float) -> None:
+            async with client(url, identifier="test-restart-sub", clean_session=False) as sub:
+                await sub.subscribe(topics.topic(ROBOT, "status"), qos=1)
+                try:
+                    async with asyncio.timeout(timeout_s):
+                        async for message in sub.messages:
+                            payload = json.loads(message.payload)  # type: ignore[arg-type]
+                            if payload["state"] == "online":
+                                seqs.append(payload["seq"])
+                            if until_seq is not None and seqs and seqs[-1] >= until_seq:
+                                return
+                except TimeoutError:
+                    pass
+
+        async with running_bridge(url, status_period_s=0.05) as (bridge, _):
+            await listen(None, 0.5)  # the session exists; messages queue for it from now on
+            before = max(seqs)
+            mosquitto.stop()
+            await asyncio.sleep(1.0)  # the bridge keeps producing status into its buffer
+            produced = bridge.robots[0].telemetry.status_seq
+            mosquitto.start()
+            async with asyncio.timeout(15):
+                while bridge.links[0].connects < 2:
+                    await asyncio.sleep(0.05)
+            await listen(produced + 5, 10.0)
+            assert bridge.links[0].connects >= 2
+        return seqs, before, produced
+
+    received, before, produced = asyncio.run(scenario())
+    seqs = sorted(set(received))
+    assert seqs == list(range(seqs[0], seqs[-1] + 1)), "a QoS-1 status was lost"
+    assert seqs[0] <= before < produced < seqs[-1]  # the outage's statuses are all there
+
+
+@pytest.mark.parametrize("kind", BROKERS)
+def test_last_will_marks_a_killed_bridge_offline(kind: str, tmp_path: Path) -> None:
+    async def scenario() -> list[dict[str, Any]]:
+        async with broker_of(kind, tmp_path) as brokers, client(brokers.operator) as sub:
+            await sub.subscribe(topics.topic(ROBOT, "status"), qos=1)
+            b = brokers.bridge
+            creds = f"{b.username}:{b.password}@" if b.username else ""
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "host.subparsers.bridge", "--name", ROBOT,
+                 "--broker", f"mqtt://{creds}{b.host}:{b.port}", "-i", "virtual",
+                 "-c", f"test-will-{os.getpid()}"],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            )
+            try:
+                got = await collect(sub, lambda g: g[-1][1]["state"] == "online", 20)
+                proc.send_signal(signal.SIGKILL)
+                got += await collect(sub, lambda g: g[-1][1]["state"] == "offline", 20)
+            finally:
+                proc.kill()
+                proc.wait()
+            return [payload for _, payload in got]
+
+    statuses = asyncio.run(scenario())
+    assert statuses[-1]["state"] == "offline"
+    assert statuses[-1]["reason"] == "connection lost"

@@ -1,0 +1,153 @@
+"""The bridge's parts without a broker: command validation, telemetry, broker URLs, the fleet."""
+
+from __future__ import annotations
+
+import can
+import cantools
+import pytest
+
+from host.e2e import E2EMonitor
+from host.mqtt.broker import BrokerURL
+from host.mqtt.commands import CommandEncoder, CommandRejected
+from host.mqtt.telemetry import RobotTelemetry
+from host.reference import Geometry
+from sim import robot
+from sim.contract import DBC_PATH, database
+from sim.fleet import Fleet, FleetConfig
+from sim.rig import LockstepRig, RigConfig
+
+PMIR = robot.load("pmir")
+GEOMETRY = Geometry(PMIR.counts_per_rev, PMIR.wheel_radius_left_m, PMIR.wheel_radius_right_m,
+                    PMIR.wheelbase_m)
+
+
+def test_set_pose_frames_pass_the_e2e_check_and_carry_the_values() -> None:
+    command = CommandEncoder().encode(
+        "set_pose", b'{"id": 7, "x_m": -1.25, "y_m": 3.5, "heading_rad": 6.5}')
+    monitor = E2EMonitor()
+    message = database().get_message_by_name("ODOM_SET_POSE")
+    decoded = []
+    for frame in command.frames:
+        assert monitor.check(frame.can_id, frame.data) == "ok"
+        decoded.append(message.decode(frame.data, decode_choices=False))
+    assert [d["FIELD"] for d in decoded] == [0, 1, 2, 15]
+    assert decoded[0]["X"] == pytest.approx(-1.25)
+    assert decoded[1]["Y"] == pytest.approx(3.5)
+    assert decoded[2]["HEADING"] == pytest.approx(6.5 - 2 * 3.141592653589793, abs=1e-4)
+    assert [f.final for f in command.frames] == [False, False, False, True]
+    assert command.cmd_id == 7
+
+
+def test_nav_goal_is_unsupported_by_a_dbc_without_nav_goal() -> None:
+    db = cantools.database.load_file(DBC_PATH, strict=True)
+    assert isinstance(db, cantools.database.can.Database)
+    db.messages[:] = [m for m in db.messages if m.name != "NAV_GOAL"]
+    db.refresh()
+    with pytest.raises(CommandRejected, match="unsupported by this DBC") as info:
+        CommandEncoder(db).encode("nav_goal", b'{"id": "g", "x_m": 1, "y_m": 2}')
+    assert info.value.cmd_id == "g"
+
+
+def test_nav_goal_frames_when_the_dbc_has_it() -> None:
+    if "NAV_GOAL" not in {m.name for m in database().messages}:
+        pytest.skip("this DBC has no NAV_GOAL yet")
+    command = CommandEncoder().encode("nav_goal", b'{"x_m": 1, "y_m": 2, "goal_id": 9}')
+    message = database().get_message_by_name("NAV_GOAL")
+    go = message.decode(command.frames[-1].data, decode_choices=False)
+    assert len(command.frames) == 3  # X, Y, GO: no HEADING frame without heading_rad
+    assert (go["GOAL_ID"], go["NO_FINAL_HEADING"], go["APPEND"]) == (9, 1, 0)
+
+
+@pytest.mark.parametrize(("payload", "reason"), [
+    (b'{"x_m": 1, "y_m": 2, "heading_rad": 0, "id": true}', "id must be"),
+    (b'{"x_m": 1e300, "y_m": 2, "heading_rad": 0}', "out of range"),
+    (b'{"x_m": 1, "y_m": -214748.5, "heading_rad": 0}', "y_m=-214748.5 out of range"),
+    (b'{"x_m": 1, "y_m": 2, "heading_rad": Infinity}', "heading_rad must be finite"),
+    (b'{"x_m": 1, "y_m": 2, "heading_rad": 0}' + b" " * 5000, "payload too large"),
+    (b"\xff\xfe", "malformed JSON"),
+])
+def test_set_pose_rejections(payload: bytes, reason: str) -> None:
+    with pytest.raises(CommandRejected, match=reason):
+        CommandEncoder().encode("set_pose", payload)
+
+
+def test_a_rejected_command_does_not_use_an_e2e_counter() -> None:
+    encoder = CommandEncoder()
+    with pytest.raises(CommandRejected):
+        encoder.encode("set_pose", b'{"x_m": 1, "y_m": 2, "heading_rad": "north"}')
+    command = encoder.encode("set_pose", b'{"x_m": 1, "y_m": 2, "heading_rad": 0}')
+    assert [f.counter for f in command.frames] == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize(("url", "expected"), [
+    ("mqtt://127.0.0.1", ("127.0.0.1", 1883, False, None, None)),
+    ("mqtt://u:p%40ss@127.0.0.1:1884", ("127.0.0.1", 1884, False, "u", "p@ss")),
+    ("mqtts://127.0.0.1", ("127.0.0.1", 8883, True, None, None)),
+])
+def test_broker_urls(url: str, expected: tuple[object, ...]) -> None:
+    b = BrokerURL.parse(url)
+    assert (b.host, b.port, b.tls, b.username, b.password) == expected
+    assert "p%40ss" not in str(b) and "p@ss" not in str(b)
+
+
+@pytest.mark.parametrize("url", ["http://x", "mqtt://", "mqtt://h:99999", "mqtt://h/topic"])
+def test_bad_broker_urls(url: str) -> None:
+    with pytest.raises(ValueError, match="--broker"):
+        BrokerURL.parse(url)
+
+
+def test_tls_files_need_mqtts(tmp_path: object) -> None:
+    with pytest.raises(ValueError, match="mqtts"):
+        BrokerURL.parse("mqtt://h", ca=__file__)  # type: ignore[arg-type]
+
+
+def test_telemetry_of_a_lockstep_run_matches_the_reference() -> None:
+    telemetry = RobotTelemetry("r", GEOMETRY, "exact", counter_bits=PMIR.counter_bits,
+                               publish_hz=5)
+    out = []
+
+    class Feed(can.Listener):
+        def on_message_received(self, msg: can.Message) -> None:
+            out.extend(telemetry.feed(msg))
+
+    with LockstepRig(RigConfig(robot=PMIR, seed=5, channel="test-mqtt-telemetry"),
+                     [Feed()]) as rig:
+        rig.run(5.0)
+    errors = [p for leaf, p in out if leaf == "error"]
+    assert len(errors) == 25  # 5 Hz for 5 s
+    assert max(e["pose_vs_reference"]["dpos_m"] for e in errors) < 2e-4  # 0.1 mm LSB on the bus
+    assert "reference_vs_truth" in errors[-1]
+    assert sum(1 for leaf, _ in out if leaf == "truth") == 50  # SIM_TRUTH every 100 ms
+    assert telemetry.rejected == {}
+    hz = telemetry.rates(5.0)[1]["hz"]
+    assert hz["WHEEL_ENCODERS"] == pytest.approx(100.0)  # 500 frames over the 5 s "window"
+
+
+def test_a_fleet_robot_sends_the_lockstep_rigs_frames() -> None:
+    """Robot i of a fleet is the lockstep rig with seed seed + i, byte for byte."""
+    with Fleet(FleetConfig(robots=2, robot=PMIR, seed=10)) as fleet:
+        fleet_frames: list[bytes] = []
+        for k in range(120):
+            fleet.step(k)
+            fleet_frames += [bytes(m.data) for i, m in fleet.take_batch() if i == 1]
+    rig_frames: list[bytes] = []
+
+    class Keep(can.Listener):
+        def on_message_received(self, msg: can.Message) -> None:
+            rig_frames.append(bytes(msg.data))
+
+    with LockstepRig(RigConfig(robot=PMIR, seed=11, channel="test-mqtt-fleet-rig"),
+                     [Keep()]) as rig:
+        rig.run(1.2)
+    assert fleet_frames == rig_frames
+
+
+def test_fleet_view_folds_messages_into_a_table() -> None:
+    from host.mqtt.fleetview import RobotState, apply
+
+    table: dict[str, RobotState] = {}
+    assert apply(table, "odocan/robot002/status", b'{"state": "online", "seq": 1}')
+    assert apply(table, "odocan/robot002/pose", b'{"x_m": 1.5}')
+    assert not apply(table, "odocan/robot002/pose", b"not json")
+    assert not apply(table, "elsewhere/robot002/pose", b"{}")
+    assert table["robot002"].online and table["robot002"].pose == {"x_m": 1.5}
