@@ -16,7 +16,17 @@ import can
 from sim.exceptions import OdocanError
 
 # Each module has add_subparser(subparsers) that sets func=_do_<cmd>(args) -> int.
-SUBCOMMANDS = ("run", "analyze", "replay", "monitor", "sim", "firmware")
+SUBCOMMANDS = (
+    "run",
+    "analyze",
+    "replay",
+    "monitor",
+    "sim",
+    "firmware",
+    "vectors",
+    "bridge",
+    "fleet",
+)
 VERSION = "0.1.0"
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 

@@ -1,0 +1,61 @@
+"""Golden vectors: written by `odocan vectors`, re-read from CSV and JSON, reproduced exactly."""
+
+from __future__ import annotations
+
+import itertools
+import json
+from pathlib import Path
+
+import pytest
+
+from firmware.config import RobotParams, derive_constants
+from firmware.errors import ErrorMask
+from host import vectors
+from host.cli import main
+
+
+@pytest.mark.parametrize("integrator", ["euler", "rk2", "exact"])
+def test_vectors_round_trip_and_reproduce(integrator: str, tmp_path: Path, capsys) -> None:
+    out = tmp_path / integrator
+    assert main(["vectors", "--integrator", integrator, "--duration", "3", "--out", str(out)]) == 0
+    assert "wrote 6 files" in capsys.readouterr().out
+    data = vectors.read_json(out / "vectors.json")
+    assert data["integrator"] == integrator
+    params = RobotParams(**data["params"])
+    constants = derive_constants(params, ErrorMask())
+    assert data["constants"]["m_per_count_left_q48_m"] == constants.m_per_count_left_q48_m
+    assert data["constants"]["bam64_per_count_right"] == constants.bam64_per_count_right
+    for case in data["cases"]:
+        assert vectors.read_csv(out / f"{case['name']}.csv") == case["rows"]
+        assert case["rows"][-1]["distance_q40_m"] > 0 or case["name"] == "spin_in_place"
+    assert vectors.verify(data) == []
+    assert main(["vectors", "--out", str(out), "--check"]) == 0
+
+
+def test_a_single_changed_integer_is_caught(tmp_path: Path, capsys) -> None:
+    assert main(["vectors", "--duration", "1", "--out", str(tmp_path)]) == 0
+    path = tmp_path / "vectors.json"
+    data = json.loads(path.read_text())
+    data["cases"][1]["rows"][5]["y_q40_m"] += 1
+    path.write_text(json.dumps(data))
+    assert vectors.verify(vectors.read_json(path)) == [data["cases"][1]["name"]]
+    assert main(["vectors", "--out", str(tmp_path), "--check"]) == 1
+    assert "mismatch in: counter_wrap" in capsys.readouterr().out
+
+
+def test_the_cases_cover_wraps_and_both_special_cases() -> None:
+    cases = {c.name: c for c in vectors.edge_cases(16)}
+    wrap = cases["counter_wrap"].counts
+    assert any(b[0] < a[0] for a, b in itertools.pairwise(wrap)), "the left counter wraps"
+    rows = vectors.run_case(
+        RobotParams(500, 75_000_000, 75_000_000, 300_000_000, 16, 2), cases["spin_in_place"]
+    )
+    assert rows[-1]["x_q40_m"] == rows[-1]["y_q40_m"] == 0 and rows[-1]["heading_bam64"] != 0
+
+
+def test_bad_input_is_one_line(tmp_path: Path, capsys) -> None:
+    assert main(["vectors", "--duration", "-1", "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.startswith("error: --duration must be positive")
+    assert main(["vectors", "--out", str(tmp_path / "missing"), "--check"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1
