@@ -34,6 +34,7 @@ class FirmwareBoard:
         self.clock = clock
         self.accept_ids = accept_ids
         self.ecu = OdomEcu(self, params)
+        self._bus_off = False
         self.frames_dropped_by_filter = 0
         self.frames_sent = 0
         self.tx_errors = 0
@@ -73,6 +74,14 @@ class FirmwareBoard:
             msg = recv(0)
 
     def run_tick(self) -> None:
-        """One timer period: the pending receive interrupts, then the firmware's tick."""
+        """One timer period: the pending interrupts (status, receive), then the firmware's tick."""
+        self._service_bus_state()
         self.service_rx()
         self.ecu.tick()
+
+    def _service_bus_state(self) -> None:
+        """The controller's status interrupt: report entering and leaving bus-off."""
+        bus_off = self.bus.state is can.BusState.ERROR
+        if bus_off != self._bus_off:
+            self._bus_off = bus_off
+            self.ecu.isr_bus_state(bus_off)

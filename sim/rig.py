@@ -29,6 +29,7 @@ from sim.clock import LockstepClock
 from sim.contract import cycle_ticks
 from sim.errors import ErrorModel
 from sim.exceptions import ConfigurationError
+from sim.faults import FaultInjectingBus, FaultSpec
 from sim.motor_controller import MotorController, ScenarioDriver, TruthSender
 from sim.robot import RobotProfile
 from sim.scenarios import get_scenario
@@ -57,6 +58,8 @@ class RigConfig:
     errors: ErrorModel = field(default_factory=ErrorModel)
     channel: str = "vcan0"
     quadrature: bool = False
+    faults: FaultSpec | None = None  # on the sim's handle: what MOTOR_CTRL and SIM send
+    fw_faults: FaultSpec | None = None  # on the firmware's handle: what ODOM_MCU sends
 
 
 class LockstepRig:
@@ -70,7 +73,10 @@ class LockstepRig:
         self.vehicle = Vehicle(
             config.robot, config.errors, seed=config.seed, quadrature=config.quadrature
         )
-        self._buses = [self._open_bus() for _ in range(3)]
+        self._buses: list[can.BusABC] = [self._open_bus() for _ in range(3)]
+        for index, spec in ((0, config.faults), (1, config.fw_faults)):
+            if spec is not None and spec.active:
+                self._buses[index] = FaultInjectingBus(self._buses[index], spec)
         sim_bus, fw_bus, self.host_bus = self._buses
         self.motor_controller = MotorController(sim_bus, self.vehicle, self.clock)
         self.truth = TruthSender(sim_bus, self.vehicle, self.clock)

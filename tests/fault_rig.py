@@ -1,0 +1,394 @@
+"""Test helpers for the fault tests: a lockstep harness with fault-injecting bus handles, a pose
+audit against the float64 reference, the catalogue of every protected frame, a binomial bound.
+
+``FaultRig`` is ``sim.rig.LockstepRig`` rebuilt from the same classes in the same tick order, with
+a ``FaultInjectingBus`` around the sim handle and/or the firmware handle (the change proposed for
+``RigConfig.faults``). Each tick's host frames go to the rig's observers.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import uuid
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+
+import can
+import numpy as np
+
+from firmware import frames as fr
+from firmware.config import Integrator, RobotParams
+from firmware.e2e import E2EReceiver, E2EStatus, p02_crc
+from firmware.ecu import OdomEcu
+from firmware.errors import ErrorMask
+from host.reference import Geometry, deltas_from_counts, integrate
+from sim.board import TICK_S, FirmwareBoard
+from sim.clock import LockstepClock
+from sim.contract import cycle_ticks, database
+from sim.faults import FaultInjectingBus, FaultSpec
+from sim.motor_controller import MotorController, ScenarioDriver, TruthSender
+from sim.robot import RobotProfile, load
+from sim.scenarios import RandomScenario, Scenario
+from sim.vehicle import Vehicle
+
+Observer = Callable[[int, list[can.Message]], None]
+Hook = Callable[[int], None]
+
+
+def open_virtual(channel: str) -> can.BusABC:
+    """A handle on a python-can virtual channel, keeping the senders' simulated timestamps."""
+    return can.Bus(
+        interface="virtual", channel=channel, preserve_timestamps=True, receive_own_messages=False
+    )
+
+
+def unique_channel(prefix: str = "odocan-faults") -> str:
+    """A virtual channel no other test shares."""
+    return f"{prefix}-{uuid.uuid4().hex}"
+
+
+def robot_params(profile: RobotProfile, integrator: str) -> RobotParams:
+    """The firmware's integers for ``profile`` (as ``sim.rig.firmware_params``)."""
+    return RobotParams(**profile.firmware_params(), integrator=int(Integrator[integrator.upper()]))
+
+
+class FaultRig:
+    """Motor controller, truth, scenario driver, firmware board and host observer in lockstep."""
+
+    def __init__(
+        self,
+        *,
+        sim_faults: FaultSpec | None = None,
+        fw_faults: FaultSpec | None = None,
+        scenario: Scenario | None = None,
+        robot: str = "pmir",
+        integrator: str = "exact",
+        seed: int = 0,
+    ) -> None:
+        self.channel = unique_channel()
+        self.clock = LockstepClock()
+        self.profile = load(robot)
+        self.params = robot_params(self.profile, integrator)
+        self.integrator = integrator
+        self.vehicle = Vehicle(self.profile, seed=seed)
+        self._raw = [open_virtual(self.channel) for _ in range(3)]
+        sim_raw, fw_raw, self.host_bus = self._raw
+        self.sim_bus = FaultInjectingBus(sim_raw, sim_faults) if sim_faults else sim_raw
+        self.fw_bus = FaultInjectingBus(fw_raw, fw_faults) if fw_faults else fw_raw
+        self.motor_controller = MotorController(self.sim_bus, self.vehicle, self.clock)
+        self.truth = TruthSender(self.sim_bus, self.vehicle, self.clock)
+        self.driver = ScenarioDriver(
+            self.sim_bus, scenario or RandomScenario(seed), self.clock, self.motor_controller
+        )
+        self.board = FirmwareBoard(self.fw_bus, self.params, self.clock)
+        self.observers: list[Observer] = []
+        self.before_board: list[Hook] = []
+        self.ticks = 0
+        self._driver_ticks = cycle_ticks("MOTOR_CMD", TICK_S)
+        self._truth_ticks = cycle_ticks("SIM_TRUTH", TICK_S)
+
+    @property
+    def ecu(self) -> OdomEcu:
+        """The firmware."""
+        return self.board.ecu
+
+    def step(self) -> None:
+        """One 10 ms tick in ``LockstepRig.step``'s order (hooks run just before the board)."""
+        k = self.ticks
+        self.clock.advance_to(k * TICK_S)
+        self.motor_controller.service_rx()
+        if k % self._driver_ticks == 0:
+            self.driver.send()
+        enc_counter = self.motor_controller.sample_and_send()
+        if k % self._truth_ticks == 0:
+            self.truth.send(enc_counter)
+        for hook in self.before_board:
+            hook(k)
+        self.board.run_tick()
+        frames = list(_drain(self.host_bus))
+        for observer in self.observers:
+            observer(k, frames)
+        self.ticks = k + 1
+
+    def run(self, duration_s: float) -> None:
+        """``duration_s`` of simulated time."""
+        for _ in range(round(duration_s / TICK_S)):
+            self.step()
+
+    def close(self) -> None:
+        """Release every bus handle (the wrappers shut their wrapped bus down)."""
+        for bus in (self.sim_bus, self.fw_bus, self.host_bus):
+            bus.shutdown()
+
+    def __enter__(self) -> FaultRig:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _drain(bus: can.BusABC) -> Iterator[can.Message]:
+    msg = bus.recv(0)
+    while msg is not None:
+        yield msg
+        msg = bus.recv(0)
+
+
+@dataclass
+class PoseAudit:
+    """The on-board pose, as the host sees it, against the float64 reference.
+
+    Replays the firmware's WHEEL_ENCODERS acceptance on the host's copy of the bus (same filter,
+    same Profile 2 check, ``check(None)`` in a tick without an encoder frame), integrates the
+    accepted counts with ``host.reference.integrate`` and compares every ODOM_POSE_X/Y (those with
+    a valid CRC: a babbling node may send on their IDs) with the reference after the frames
+    accepted before it. Errors are in LSBs of the pose signals.
+    """
+
+    params: RobotParams
+    integrator: str
+    rx: E2EReceiver = field(default_factory=lambda: E2EReceiver(fr.WHEEL_ENCODERS_DATA_IDS))
+    counts: list[tuple[int, int]] = field(default_factory=list)
+    pose_x: list[tuple[int, int, int]] = field(default_factory=list)  # (accepted, X, HEADING)
+    pose_y: list[tuple[int, int]] = field(default_factory=list)  # (accepted, Y)
+
+    def __call__(self, tick: int, frames: list[can.Message]) -> None:
+        encoder_seen = False
+        for msg in frames:
+            if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+                continue
+            data = bytes(msg.data)
+            if msg.arbitration_id == fr.WHEEL_ENCODERS_ID:
+                encoder_seen = True
+                self._encoder(data)
+            elif msg.arbitration_id == fr.ODOM_POSE_X_ID and _crc_ok(data, fr.ODOM_POSE_X_DATA_IDS):
+                pose = fr.unpack_odom_pose_x(data)
+                self.pose_x.append((len(self.counts), pose.x_100um, pose.heading_bam16))
+            elif msg.arbitration_id == fr.ODOM_POSE_Y_ID and _crc_ok(data, fr.ODOM_POSE_Y_DATA_IDS):
+                self.pose_y.append((len(self.counts), fr.unpack_odom_pose_y(data).y_100um))
+        if not encoder_seen:
+            self.rx.check(None)
+
+    def _encoder(self, data: bytes) -> None:
+        if len(data) != 8:
+            return
+        status = self.rx.check(data)
+        if status is E2EStatus.OK or status is E2EStatus.OKSOMELOST:
+            frame = fr.unpack_wheel_encoders(data)
+            self.counts.append((frame.left_count, frame.right_count))
+
+    def max_errors_lsb(self) -> tuple[float, float, float, int]:
+        """(max |X err|, max |Y err|, max |HEADING err|, poses compared); X, Y in 0.1 mm LSBs,
+        HEADING in BAM16 LSBs."""
+        ref_x, ref_y, ref_h = self._reference()
+        ex = eh = ey = 0.0
+        for n, x, heading in self.pose_x:
+            ex = max(ex, abs(x - ref_x[n]))
+            d = (heading - ref_h[n]) % 65536.0
+            eh = max(eh, min(d, 65536.0 - d))
+        for n, y in self.pose_y:
+            ey = max(ey, abs(y - ref_y[n]))
+        return ex, ey, eh, len(self.pose_x) + len(self.pose_y)
+
+    def _reference(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Reference pose after n accepted frames (n = 0, 1: the origin), in signal LSBs."""
+        bits = min(self.params.counter_bits, 24)
+        counts = np.array(self.counts, dtype=np.int64).reshape(-1, 2)
+        poses = integrate(
+            deltas_from_counts(counts[:, 0], bits),
+            deltas_from_counts(counts[:, 1], bits),
+            _geometry(self.params),
+            self.integrator,
+        )
+        zero = np.zeros(2)
+        return (
+            np.concatenate((zero, poses.x_m * 1e4)),
+            np.concatenate((zero, poses.y_m * 1e4)),
+            np.concatenate((zero, poses.heading_rad * (65536 / (2 * math.pi)))),
+        )
+
+
+def _crc_ok(data: bytes, data_ids: tuple[int, ...]) -> bool:
+    """The host's check of a received pose frame (a babbling node may use the ID too)."""
+    return len(data) == 8 and data[0] == p02_crc(data, data_ids[data[1] & 0xF])
+
+
+def _geometry(p: RobotParams) -> Geometry:
+    return Geometry(
+        counts_per_rev=p.counts_per_rev,
+        wheel_radius_left_m=p.wheel_radius_left_nm * 1e-9,
+        wheel_radius_right_m=p.wheel_radius_right_nm * 1e-9,
+        wheelbase_m=p.wheelbase_nm * 1e-9,
+    )
+
+
+# --- every protected frame of the DBC ----------------------------------------------------------
+def _firmware_packers() -> dict[tuple[str, int | None], Callable[[int], bytes]]:
+    """Frames packed by ``firmware.frames`` with typical values, by (message, mux value)."""
+    e = ErrorMask()
+    packers: dict[tuple[str, int | None], Callable[[int], bytes]] = {
+        ("WHEEL_ENCODERS", None): lambda c: fr.pack_wheel_encoders(c, 0x12_3456, 0xAB_CDEF),
+        ("MOTOR_CMD", None): lambda c: fr.pack_motor_cmd(c, 512, -300, e),
+        ("ODOM_POSE_X", None): lambda c: fr.pack_odom_pose_x(c, 5, 123_456, 0x4000, e),
+        ("ODOM_POSE_Y", None): lambda c: fr.pack_odom_pose_y(c, 6, -98_765, -2, e),
+        ("ODOM_TWIST", None): lambda c: fr.pack_odom_twist(c, 7, 450, -120, 54_321, e),
+        ("ODOM_ACK", None): lambda c: fr.pack_odom_ack(c, 3, fr.ODOM_CONFIG_ID, 2, 1, 1, e),
+    }
+    for f in fr.SetPoseField:
+        packers["ODOM_SET_POSE", int(f)] = lambda c, f=f: fr.pack_odom_set_pose(c, f, 7_654, e)
+    for p in fr.ConfigParam:
+        value = (
+            32 if p == fr.ConfigParam.COUNTER_BITS else 2 if p == fr.ConfigParam.INTEGRATOR else 75
+        )
+        packers["ODOM_CONFIG", int(p)] = lambda c, p=p, v=value: fr.pack_odom_config(c, p, v, e)
+    packers["ODOM_STATUS", 0] = lambda c: fr.pack_odom_status_summary(c, 1, 2, 0x0102, 3600, e)
+    packers["ODOM_STATUS", 1] = lambda c: fr.pack_odom_status_frame_totals(c, 5, 6, 7)
+    for page in range(2, 16):
+        packers["ODOM_STATUS", page] = lambda c, g=page: fr.pack_odom_status_e2e(
+            c, g, 1000, 1, 2, 3, 4
+        )
+    for part in fr.SimTruthPart:
+        packers["SIM_TRUTH", int(part)] = lambda c, t=part: fr.pack_sim_truth(c, t, 9, -4321, e)
+    return packers
+
+
+def dbc_frame_types() -> list[tuple[str, int | None]]:
+    """Every (message, multiplexer value) of the DBC (None for a plain message); a multiplexer's
+    values are those its signals use and those its VAL_ table names."""
+    types: list[tuple[str, int | None]] = []
+    for msg in database().messages:
+        mux = next((s for s in msg.signals if s.is_multiplexer), None)
+        if mux is None:
+            types.append((msg.name, None))
+            continue
+        values = {v for s in msg.signals for v in (s.multiplexer_ids or ())}
+        values |= {int(v) for v in (mux.choices or {})}  # pages without signals (APPLY)
+        types.extend((msg.name, v) for v in sorted(values))
+    return types
+
+
+def protected_frames(counter: int) -> dict[tuple[str, int | None], tuple[int, bytes]]:
+    """One valid frame (CAN ID, 8 bytes) of every DBC frame type with E2E ``counter``.
+
+    Packed by ``firmware.frames`` where it has a packer; a message or page it does not pack yet
+    is encoded by cantools from the DBC and sealed with the DBC's E2EDataIDs (so a page added to
+    the DBC is covered at once).
+    """
+    packers = _firmware_packers()
+    out: dict[tuple[str, int | None], tuple[int, bytes]] = {}
+    for name, mux in dbc_frame_types():
+        msg = database().get_message_by_name(name)
+        packer = packers.get((name, mux))
+        data = packer(counter) if packer else _cantools_frame(name, mux, counter)
+        out[name, mux] = (msg.frame_id, data)
+    return out
+
+
+def dbc_data_ids(frame_id: int) -> tuple[int, ...]:
+    """The message's Profile 2 DataIDList from the DBC's ``E2EDataIDs`` attribute."""
+    attr = database().get_message_by_frame_id(frame_id).dbc.attributes["E2EDataIDs"].value
+    return tuple(int(v) for v in attr.split(","))
+
+
+def _cantools_frame(name: str, mux: int | None, counter: int) -> bytes:
+    msg = database().get_message_by_name(name)
+    values: dict[str, int | None] = {}
+    for s in msg.signals:
+        if mux is not None and s.multiplexer_ids and mux not in s.multiplexer_ids:
+            continue
+        raw = 0xA5A5_A5A5_A5A5_A5A5 & ((1 << s.length) - 1)  # a pattern, raw
+        if s.is_signed and raw >> (s.length - 1):
+            raw -= 1 << s.length
+        values[s.name] = raw
+    values["COUNTER"] = counter
+    values["CHECKSUM"] = 0
+    mux_signal = next((s for s in msg.signals if s.is_multiplexer), None)
+    if mux_signal is not None:
+        values[mux_signal.name] = mux
+    data = bytearray(msg.encode(values, scaling=False, strict=False))
+    data[0] = p02_crc(data, dbc_data_ids(msg.frame_id)[counter])
+    return bytes(data)
+
+
+# --- fuzzing -----------------------------------------------------------------------------------
+SEALED_SHARE = 0.25  # fuzzed frames sealed with a valid CRC for an ID with a data-ID list
+
+
+class CountingHal:
+    """A CAN driver that only counts (no growing record)."""
+
+    def __init__(self) -> None:
+        self.sent = 0
+
+    def transmit(self, can_id: int, data: bytes) -> bool:
+        self.sent += 1
+        return True
+
+
+def random_frame(rng: random.Random) -> tuple[int, bool, bytes]:
+    """(ID, extended, data): any ID and DLC, or (SEALED_SHARE) a CRC-valid frame of the DBC."""
+    if rng.random() < SEALED_SHARE:
+        can_id, ids = rng.choice(list(fr.DATA_IDS_BY_FRAME_ID.items()))
+        data = bytearray(rng.randbytes(8))
+        data[0] = p02_crc(data, ids[data[1] & 0xF])
+        return can_id, False, bytes(data)
+    extended = rng.random() < 0.4
+    return rng.getrandbits(29 if extended else 11), extended, rng.randbytes(rng.randint(0, 8))
+
+
+def burst_sizes(rng: random.Random, total: int) -> Iterator[int]:
+    """Frames per tick adding up to ``total``: mostly a few, now and then a flood (overflow)."""
+    left = total
+    while left:
+        n = rng.randint(40, 80) if rng.random() < 0.05 else rng.randint(0, 8)
+        n = min(n, left)
+        left -= n
+        yield n
+
+
+def random_message(rng: random.Random, t_s: float) -> can.Message:
+    """A data frame of ``random_frame``, or (10% each) an error frame or a remote frame."""
+    u = rng.random()
+    can_id, extended, data = random_frame(rng)
+    if u < 0.1:
+        return can.Message(timestamp=t_s, arbitration_id=can_id, is_error_frame=True, data=data)
+    if u < 0.2:
+        return can.Message(
+            timestamp=t_s,
+            arbitration_id=can_id,
+            is_extended_id=extended,
+            is_remote_frame=True,
+            dlc=len(data),
+        )
+    return can.Message(timestamp=t_s, arbitration_id=can_id, is_extended_id=extended, data=data)
+
+
+# --- statistics ---------------------------------------------------------------------------------
+def binomial_upper_bound(k: int, n: int, confidence: float = 0.95) -> float:
+    """Clopper-Pearson one-sided upper bound of a binomial rate after ``k`` events in ``n``."""
+    alpha = 1.0 - confidence
+    lo, hi = k / n, 1.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if _binomial_cdf(k, n, mid) > alpha:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def _binomial_cdf(k: int, n: int, p: float) -> float:
+    """P(X <= k), X ~ Binomial(n, p), summed in log space (k up to a few 10^4)."""
+    if p <= 0.0:
+        return 1.0
+    if p >= 1.0:
+        return 0.0 if k < n else 1.0
+    log_p, log_q = math.log(p), math.log1p(-p)
+    lgn = math.lgamma(n + 1)
+    terms = [
+        lgn - math.lgamma(i + 1) - math.lgamma(n - i + 1) + i * log_p + (n - i) * log_q
+        for i in range(k + 1)
+    ]
+    top = max(terms)
+    return math.exp(top) * sum(math.exp(t - top) for t in terms)
