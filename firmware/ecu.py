@@ -5,11 +5,12 @@ Sample, then compute. ``isr_can_rx`` only copies a frame into the mailbox (overf
 
 1. drain the mailbox, in arrival order;
 2. E2E check of each frame (Profile 2; a frame that fails never changes state);
-3. odometry on every accepted WHEEL_ENCODERS frame; staged ODOM_SET_POSE / ODOM_CONFIG writes,
-   each answered by ODOM_ACK;
-4. (controllers: navigation, a later issue);
+3. odometry on every accepted WHEEL_ENCODERS frame; staged ODOM_SET_POSE / ODOM_CONFIG /
+   NAV_GOAL writes, each answered by ODOM_ACK;
+4. controllers: navigation (``firmware.nav``) every 20 ms, from the on-board pose;
 5. scheduled transmissions at the DBC's cycle times: ODOM_POSE_X/Y and ODOM_TWIST every 20 ms,
-   ODOM_STATUS every 100 ms (the summary page, then one rotating page of counts);
+   ODOM_STATUS every 100 ms (the summary page, then one rotating page of counts), MOTOR_CMD
+   every 20 ms while navigating, NAV_STATUS every 100 ms and in the tick STATE or GOAL_ID changes;
 6. the watchdog: no accepted WHEEL_ENCODERS for ``WATCHDOG_TICKS`` periods -> DEGRADED (integration
    paused, ENCODER_TIMEOUT set); ``RECOVERY_FRAMES`` accepted frames in a row -> OK again. The
    counters are absolute, so the first frame after a gap carries the distance driven meanwhile.
@@ -28,14 +29,18 @@ from firmware.config import (
 from firmware.e2e import COUNTER_MASK, E2EReceiver, E2EStatus
 from firmware.errors import ErrorFlag, ErrorMask, State
 from firmware.fixmath import (
+    U16_MAX,
     U32_MAX,
     U64_MAX,
     div_round_i64,
     mul_shr_round_i64,
+    wrap_i16,
+    wrap_i32,
     wrap_signed,
     wrap_u32,
 )
 from firmware.hal import MAILBOX_SLOTS, TICK_PERIOD_US, CanTx
+from firmware.nav import NAV_PERIOD_TICKS, Navigator
 from firmware.odometry import Odometry
 
 ENCODER_PERIOD_US = 10_000  # WHEEL_ENCODERS GenMsgCycleTime
@@ -50,6 +55,7 @@ _ROTATING_PAGES = (
     fr.StatusPage.E2E_WHEEL_ENCODERS,
     fr.StatusPage.E2E_ODOM_SET_POSE,
     fr.StatusPage.E2E_ODOM_CONFIG,
+    fr.StatusPage.E2E_NAV_GOAL,
 )
 _CONFIG_FIELDS = {
     fr.ConfigParam.COUNTS_PER_REV: "counts_per_rev",
@@ -110,6 +116,9 @@ class OdomEcu:
         self.rx_encoders = E2EReceiver(fr.WHEEL_ENCODERS_DATA_IDS)
         self.rx_set_pose = E2EReceiver(fr.ODOM_SET_POSE_DATA_IDS, max_delta_counter_init=15)
         self.rx_config = E2EReceiver(fr.ODOM_CONFIG_DATA_IDS, max_delta_counter_init=15)
+        self.rx_nav_goal = E2EReceiver(fr.NAV_GOAL_DATA_IDS, max_delta_counter_init=15)
+        self.nav = Navigator(self.errors)
+        self._motor_cmd_due = False
         self.ticks = 0  # u32 uptime in ticks
         self.frames_filtered = 0  # u32: IDs this node does not listen to
         self.frames_bad_length = 0  # u32: not 8 bytes (rejected before the E2E check)
@@ -143,7 +152,6 @@ class OdomEcu:
 
     def tick(self) -> None:
         """One period of the main loop, in the fixed order of the module docstring."""
-        self.ticks = wrap_u32(self.ticks + 1)
         encoder_seen = False
         frame = self.mailbox.get()
         while frame is not None:
@@ -155,13 +163,17 @@ class OdomEcu:
                 self._on_set_pose(data)
             elif can_id == fr.ODOM_CONFIG_ID:
                 self._on_config(data)
+            elif can_id == fr.NAV_GOAL_ID:
+                self._on_nav_goal(data)
             else:
                 self.frames_filtered = wrap_u32(self.frames_filtered + 1)
             frame = self.mailbox.get()
         if not encoder_seen:
             self.rx_encoders.check(None)
+        self._navigate()
         self._transmit_scheduled()
         self._watchdog()
+        self.ticks = wrap_u32(self.ticks + 1)
 
     # --- step 2-3: received frames -----------------------------------------------------------
 
@@ -293,10 +305,18 @@ class OdomEcu:
             self.state = State.INIT
         self._ack(fr.ODOM_CONFIG_ID, frame, fr.AckResult.ACK, fr.AckReason.OK)
 
+    def _on_nav_goal(self, data: bytes) -> None:
+        if not self._e2e(self.rx_nav_goal, data):
+            return
+        frame = fr.unpack_nav_goal(data)
+        reason = self.nav.request(frame, self.state is State.OK)
+        result = fr.AckResult.ACK if reason is fr.AckReason.OK else fr.AckResult.NACK
+        self._ack(fr.NAV_GOAL_ID, frame, result, reason)
+
     def _ack(
         self,
         request_id: int,
-        frame: fr.OdomSetPose | fr.OdomConfig,
+        frame: fr.OdomSetPose | fr.OdomConfig | fr.NavGoal,
         result: fr.AckResult,
         reason: fr.AckReason,
     ) -> None:
@@ -304,27 +324,69 @@ class OdomEcu:
             self._next_counter(fr.ODOM_ACK_ID),
             frame.counter,
             request_id,
-            frame.field if isinstance(frame, fr.OdomSetPose) else frame.param,
+            frame.param if isinstance(frame, fr.OdomConfig) else frame.field,
             result,
             reason,
             self.errors,
         )
         self._send(fr.ODOM_ACK_ID, data)
 
+    # --- step 4: controllers -----------------------------------------------------------------
+
+    def _navigate(self) -> None:
+        """Navigation every NAV_PERIOD_TICKS, from the on-board pose; it decides MOTOR_CMD."""
+        self._motor_cmd_due = False
+        if self.ticks % NAV_PERIOD_TICKS == 0:
+            odo = self.odometry
+            self._motor_cmd_due = self.nav.step(
+                odo.x_q40_m,
+                odo.y_q40_m,
+                odo.heading_bam64,
+                self.params.wheelbase_nm,
+                self.state is State.OK,
+            )
+
     # --- step 5: scheduled transmissions -----------------------------------------------------
 
     def _transmit_scheduled(self) -> None:
+        if self._motor_cmd_due:
+            nav = self.nav
+            cmd = fr.pack_motor_cmd(
+                self._next_counter(fr.MOTOR_CMD_ID), nav.left_mm_s, nav.right_mm_s, self.errors
+            )
+            self._send(fr.MOTOR_CMD_ID, cmd)
         if self.ticks % POSE_PERIOD_TICKS == 0 and self.state is not State.INIT:
             self._send_pose_and_twist()
         if self.ticks % STATUS_PERIOD_TICKS == 0:
             self._send_status()
+        if self.nav.changed or self.ticks % STATUS_PERIOD_TICKS == 0:
+            self._send_nav_status()
+
+    def _send_nav_status(self) -> None:
+        """NAV_STATUS; DISTANCE is clamped to its 65.535 m range here (a display limit)."""
+        nav = self.nav
+        nav.changed = False
+        distance_mm = min(div_round_i64(nav.distance_um, 1000), U16_MAX)
+        heading_error_bam16 = wrap_i16((nav.heading_error_bam32 + (1 << 15)) >> 16)
+        data = fr.pack_nav_status(
+            self._next_counter(fr.NAV_STATUS_ID),
+            nav.state,
+            nav.goal_id,
+            nav.depth,
+            distance_mm,
+            heading_error_bam16,
+            self.errors,
+        )
+        self._send(fr.NAV_STATUS_ID, data)
 
     def _send_pose_and_twist(self) -> None:
         odo = self.odometry
         enc = self._enc_counter
         x_100um = mul_shr_round_i64(odo.x_q40_m, 10_000, 40, self.errors)
         y_100um = mul_shr_round_i64(odo.y_q40_m, 10_000, 40, self.errors)
-        heading_bam16 = ((odo.heading_bam64 + (1 << 47)) >> 48) & 0xFFFF
+        heading_rounded = odo.heading_bam64 + (1 << 47)  # u64 add: its carry is a whole turn
+        heading_bam16 = (heading_rounded >> 48) & 0xFFFF
+        turns = wrap_i32(odo.heading_turns + (heading_rounded >> 64))  # TURNS of the rounded value
         distance_mm = (odo.distance_q40_m * 1000 + (1 << 39)) >> 40
         e = self.errors
         counter = self._next_counter
@@ -334,7 +396,7 @@ class OdomEcu:
         )
         self._send(
             fr.ODOM_POSE_Y_ID,
-            fr.pack_odom_pose_y(counter(fr.ODOM_POSE_Y_ID), enc, y_100um, odo.heading_turns, e),
+            fr.pack_odom_pose_y(counter(fr.ODOM_POSE_Y_ID), enc, y_100um, turns, e),
         )
         twist = fr.pack_odom_twist(
             counter(fr.ODOM_TWIST_ID), enc, self._twist_mm_s, self._twist_mrad_s, distance_mm, e
@@ -365,6 +427,7 @@ class OdomEcu:
             fr.StatusPage.E2E_WHEEL_ENCODERS: self.rx_encoders,
             fr.StatusPage.E2E_ODOM_SET_POSE: self.rx_set_pose,
             fr.StatusPage.E2E_ODOM_CONFIG: self.rx_config,
+            fr.StatusPage.E2E_NAV_GOAL: self.rx_nav_goal,
         }[page]
         return fr.pack_odom_status_e2e(
             counter,
@@ -380,7 +443,7 @@ class OdomEcu:
     def frames_rejected(self) -> int:
         """Frames refused by the E2E check or for their length (u32, wrapping)."""
         total = self.frames_bad_length
-        for rx in (self.rx_encoders, self.rx_set_pose, self.rx_config):
+        for rx in (self.rx_encoders, self.rx_set_pose, self.rx_config, self.rx_nav_goal):
             total += rx.count_error + rx.count_wrongsequence + rx.count_repeated
         return wrap_u32(total)
 

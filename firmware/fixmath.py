@@ -13,6 +13,7 @@ for on a 32-bit two's-complement MCU with a 64-bit multiply (Cortex-M3/M4: ``SMU
   in C the 128-bit intermediate is built from 32x32->64 partial products.
 * ``muldiv_round_u64``: round(a*b/c) for u64 a, b, c with a 128-bit intermediate, as Linux's
   ``mul_u64_u64_div_u64`` (plus rounding). Configuration time only, never in the loop.
+* ``isqrt_u64``: floor(sqrt(n)) of a u64 by Newton's method (navigation distances).
 """
 
 from __future__ import annotations
@@ -144,3 +145,22 @@ def div_round_i64(numerator: i64, denominator: i64) -> i64:
     if numerator >= 0:
         return (numerator + half) // denominator
     return -((-numerator + half) // denominator)
+
+
+def isqrt_u64(n: u64) -> u32:
+    """``floor(sqrt(n))`` of a u64 (result u32), by Newton's method on integers.
+
+    The start ``x0 = 2^ceil(bits(n)/2)`` (C: from ``64 - __builtin_clzll(n)``) is >= sqrt(n);
+    each step ``x <- (x + n/x) / 2`` (u64 division, truncating) stays >= floor(sqrt(n)) and
+    decreases strictly until it reaches it: at most 6 steps for a u64 (quadratic convergence
+    from a start within a factor 2). ``n`` outside [0, 2^64) is reduced to its low 64 bits.
+    """
+    n &= U64_MAX
+    if n < 2:
+        return n
+    x = 1 << ((n.bit_length() + 1) >> 1)  # u64 <= 2^32
+    y = (x + n // x) >> 1
+    while y < x:
+        x = y
+        y = (x + n // x) >> 1
+    return x

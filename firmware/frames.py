@@ -12,7 +12,8 @@ E2E Profile 2 header (firmware.e2e): CHECKSUM in bits 0-7, COUNTER in bits 8-11.
 * ``unpack_<msg>(data) -> record``: the raw fields. The CRC and counter are not checked here: run
   the message's ``firmware.e2e.E2EReceiver`` first and unpack only what it accepts.
 
-Multiplexed messages (ODOM_SET_POSE, ODOM_CONFIG, ODOM_STATUS, SIM_TRUTH) carry their multiplexer
+Multiplexed messages (NAV_GOAL, ODOM_SET_POSE, ODOM_CONFIG, ODOM_STATUS, SIM_TRUTH) carry their
+multiplexer
 in byte 1's high nibble.
 """
 
@@ -47,14 +48,17 @@ from firmware.fixmath import (
 U4_MAX: Final = 0xF
 U24_MAX: Final = 0xFF_FFFF
 CAN_ID_MAX: Final = 0x7FF  # 11-bit identifiers
+NAV_QUEUE_DEPTH_MAX: Final = 16  # NAV_STATUS QUEUE_DEPTH: the path's capacity (firmware.nav)
 
 
-# --- message IDs (lower = higher priority; 0x280-0x2FF reserved for NAV_GOAL / NAV_STATUS) ---
+# --- message IDs (lower = higher priority; 0x280-0x2FF navigation) ---
 WHEEL_ENCODERS_ID: Final = 0x100
 MOTOR_CMD_ID: Final = 0x110
 ODOM_POSE_X_ID: Final = 0x200
 ODOM_POSE_Y_ID: Final = 0x201
 ODOM_TWIST_ID: Final = 0x202
+NAV_GOAL_ID: Final = 0x280
+NAV_STATUS_ID: Final = 0x281
 ODOM_SET_POSE_ID: Final = 0x300
 ODOM_CONFIG_ID: Final = 0x301
 ODOM_ACK_ID: Final = 0x302
@@ -67,7 +71,7 @@ def _data_ids(slot: int) -> tuple[u8, ...]:
     return tuple((slot << 4) | counter for counter in range(DATA_ID_COUNT))
 
 
-# --- E2E Profile 2 data-ID lists (the DBC's E2EDataIDs attribute; slots 10, 11 for NAV_*) ---
+# --- E2E Profile 2 data-ID lists (the DBC's E2EDataIDs attribute) ---
 WHEEL_ENCODERS_DATA_IDS: Final = _data_ids(1)
 MOTOR_CMD_DATA_IDS: Final = _data_ids(2)
 ODOM_POSE_X_DATA_IDS: Final = _data_ids(3)
@@ -77,6 +81,8 @@ ODOM_SET_POSE_DATA_IDS: Final = _data_ids(6)
 ODOM_CONFIG_DATA_IDS: Final = _data_ids(7)
 ODOM_ACK_DATA_IDS: Final = _data_ids(8)
 ODOM_STATUS_DATA_IDS: Final = _data_ids(9)
+NAV_GOAL_DATA_IDS: Final = _data_ids(10)
+NAV_STATUS_DATA_IDS: Final = _data_ids(11)
 SIM_TRUTH_DATA_IDS: Final = _data_ids(15)
 
 DATA_IDS_BY_FRAME_ID: Final[dict[int, tuple[u8, ...]]] = {
@@ -89,6 +95,8 @@ DATA_IDS_BY_FRAME_ID: Final[dict[int, tuple[u8, ...]]] = {
     ODOM_CONFIG_ID: ODOM_CONFIG_DATA_IDS,
     ODOM_ACK_ID: ODOM_ACK_DATA_IDS,
     ODOM_STATUS_ID: ODOM_STATUS_DATA_IDS,
+    NAV_GOAL_ID: NAV_GOAL_DATA_IDS,
+    NAV_STATUS_ID: NAV_STATUS_DATA_IDS,
     SIM_TRUTH_ID: SIM_TRUTH_DATA_IDS,
 }
 
@@ -131,6 +139,7 @@ class AckReason(IntEnum):
     INCOMPLETE = 3  # APPLY before every field was staged
     BUSY = 4  # cannot take the request now
     INCONSISTENT = 5  # each field valid, the set is not (APPLY)
+    QUEUE_FULL = 6  # NAV_GOAL GO: the path already holds NAV_QUEUE_SLOTS goals
 
 
 class StatusPage(IntEnum):
@@ -141,6 +150,50 @@ class StatusPage(IntEnum):
     E2E_WHEEL_ENCODERS = 2
     E2E_ODOM_SET_POSE = 3
     E2E_ODOM_CONFIG = 4
+    E2E_NAV_GOAL = 5
+
+
+class NavGoalField(IntEnum):
+    """NAV_GOAL multiplexer ``FIELD``."""
+
+    X = 0
+    Y = 1
+    HEADING = 2
+    STOP = 14
+    GO = 15
+
+
+class NavMode(IntEnum):
+    """NAV_GOAL ``MODE``: the controller driving to a goal."""
+
+    TURN_GO_TURN = 0
+    GO_TO_GOAL = 1
+
+
+class NavAppend(IntEnum):
+    """NAV_GOAL ``APPEND``."""
+
+    REPLACE = 0
+    APPEND = 1
+
+
+class NavFinalHeading(IntEnum):
+    """NAV_GOAL ``NO_FINAL_HEADING``."""
+
+    TURN_TO_HEADING = 0
+    ANY_HEADING = 1
+
+
+class NavState(IntEnum):
+    """NAV_STATUS ``STATE``."""
+
+    IDLE = 0  # no goal since reset
+    TURNING = 1  # turn-go-turn: rotating in place toward the goal
+    DRIVING = 2  # driving to the goal position (either mode)
+    FINAL_TURN = 3  # rotating in place to the goal's heading
+    REACHED = 4  # the goal is reached (within tolerance); the motors are commanded to 0
+    STOPPED = 5  # the host sent STOP: path cleared, motors commanded to 0
+    ABORTED = 6  # the odometry stopped (encoders silent, fault): path cleared, motors to 0
 
 
 class SimTruthPart(IntEnum):
@@ -230,6 +283,25 @@ class OdomStatusE2E(NamedTuple):
     repeated: u8
     crc_error: u8
     wrong_sequence: u8
+
+
+class NavGoal(NamedTuple):
+    counter: int
+    field: int  # NavGoalField
+    value: int  # i32 for X/Y (0.1 mm), u16 bam16 for HEADING, 0 for STOP/GO, raw u32 otherwise
+    mode: int  # u4 NavMode (GO only, else 0)
+    append: int  # u1 NavAppend (GO only, else 0)
+    no_final_heading: int  # u1 NavFinalHeading (GO only, else 0)
+    goal_id: u8  # GO only, else 0
+
+
+class NavStatus(NamedTuple):
+    counter: int
+    state: int  # NavState
+    goal_id: u8
+    queue_depth: u8
+    distance_mm: u16
+    heading_error_bam16: i16  # 2*pi/65536 rad, [-pi, pi)
 
 
 class SimTruth(NamedTuple):
@@ -437,6 +509,94 @@ def unpack_odom_config(data: bytes | bytearray) -> OdomConfig:
     return OdomConfig((w >> 8) & U4_MAX, param, value)
 
 
+# --- NAV_GOAL (HOST -> ODOM_MCU; event; multiplexed by FIELD) ---
+def pack_nav_goal(counter: int, field: int, value: int, errors: ErrorMask) -> bytes:
+    """NAV_GOAL X, Y, HEADING or STOP: X/Y saturate to i32 (0.1 mm), HEADING wraps to u16, STOP
+    carries nothing; GO goes through ``pack_nav_goal_go``; any other ``field`` (GO included)
+    sends ``value`` as raw u32 (tests)."""
+    field &= U4_MAX
+    if field in (NavGoalField.X, NavGoalField.Y):
+        raw = _i32_field(value, errors)
+    elif field == NavGoalField.HEADING:
+        raw = wrap_u16(value)
+    elif field == NavGoalField.STOP:
+        raw = 0
+    else:
+        raw = wrap_u32(value)
+    return _seal(_head(counter, field) | (raw << 16), NAV_GOAL_DATA_IDS)
+
+
+def pack_nav_goal_go(
+    counter: int, mode: int, append: int, no_final_heading: int, goal_id: int, errors: ErrorMask
+) -> bytes:
+    """NAV_GOAL GO: commit the staged goal. MODE saturates to [0, 1], the flags to one bit,
+    GOAL_ID to u8."""
+    word = (
+        _head(counter, NavGoalField.GO)
+        | (sat_range(mode, NavMode.TURN_GO_TURN, NavMode.GO_TO_GOAL, errors) << 16)
+        | (sat_range(append, 0, 1, errors) << 20)
+        | (sat_range(no_final_heading, 0, 1, errors) << 21)
+        | (sat_range(goal_id, 0, 0xFF, errors) << 24)
+    )
+    return _seal(word, NAV_GOAL_DATA_IDS)
+
+
+def unpack_nav_goal(data: bytes | bytearray) -> NavGoal:
+    """NAV_GOAL: the record with ``value`` read per field and GO's fields (raw: MODE is not
+    range-checked here; the receiver answers OUT_OF_RANGE)."""
+    w = _word(data)
+    field = (w >> 12) & U4_MAX
+    raw = (w >> 16) & U32_MAX
+    counter = (w >> 8) & U4_MAX
+    if field == NavGoalField.GO:
+        goal_id = (raw >> 8) & 0xFF
+        return NavGoal(counter, field, 0, raw & U4_MAX, (raw >> 4) & 1, (raw >> 5) & 1, goal_id)
+    if field in (NavGoalField.X, NavGoalField.Y):
+        value = wrap_i32(raw)
+    elif field == NavGoalField.HEADING:
+        value = raw & U16_MAX
+    elif field == NavGoalField.STOP:
+        value = 0
+    else:
+        value = raw
+    return NavGoal(counter, field, value, 0, 0, 0, 0)
+
+
+# --- NAV_STATUS (ODOM_MCU -> HOST; 100 ms and on every change of STATE or GOAL_ID) ---
+def pack_nav_status(
+    counter: int,
+    state: int,
+    goal_id: int,
+    queue_depth: int,
+    distance_mm: int,
+    heading_error_bam16: int,
+    errors: ErrorMask,
+) -> bytes:
+    """NAV_STATUS: STATE, GOAL_ID, QUEUE_DEPTH, DISTANCE saturate to their DBC ranges; the heading
+    error is an angle and wraps to i16."""
+    word = (
+        _head(counter, sat_range(state, NavState.IDLE, NavState.ABORTED, errors))
+        | (sat_range(goal_id, 0, 0xFF, errors) << 16)
+        | (sat_range(queue_depth, 0, NAV_QUEUE_DEPTH_MAX, errors) << 24)
+        | (sat_range(distance_mm, 0, U16_MAX, errors) << 32)
+        | (wrap_u16(heading_error_bam16) << 48)
+    )
+    return _seal(word, NAV_STATUS_DATA_IDS)
+
+
+def unpack_nav_status(data: bytes | bytearray) -> NavStatus:
+    """NAV_STATUS: state, goal, queue depth, distance in mm, heading error in BAM16."""
+    w = _word(data)
+    return NavStatus(
+        (w >> 8) & U4_MAX,
+        (w >> 12) & U4_MAX,
+        (w >> 16) & 0xFF,
+        (w >> 24) & 0xFF,
+        (w >> 32) & U16_MAX,
+        wrap_i16(w >> 48),
+    )
+
+
 # --- ODOM_ACK (ODOM_MCU -> HOST; event) ---
 def pack_odom_ack(
     counter: int,
@@ -453,7 +613,7 @@ def pack_odom_ack(
         | (sat_range(request_id, 0, CAN_ID_MAX, errors) << 16)
         | ((request_field & U4_MAX) << 32)
         | (sat_range(result, AckResult.ACK, AckResult.NACK, errors) << 36)
-        | (sat_range(reason, AckReason.OK, AckReason.INCONSISTENT, errors) << 40)
+        | (sat_range(reason, AckReason.OK, AckReason.QUEUE_FULL, errors) << 40)
     )
     return _seal(word, ODOM_ACK_DATA_IDS)
 

@@ -23,8 +23,8 @@ NODES = {"MOTOR_CTRL", "ODOM_MCU", "HOST", "SIM"}
 UPPER_SNAKE = re.compile(r"^[A-Z][A-Z0-9]*(_[A-Z0-9]+)*$")
 RAW_FORMAT = re.compile(r"\b[ui]\d{1,2}\b")  # u4, u16, i32 ... in a signal comment
 CYCLIC_SEND_TYPES = {"Cyclic", "CyclicIfActive"}
-NAV_RESERVED_IDS = range(0x280, 0x300)
-NAV_RESERVED_SLOTS = {10, 11}
+NAV_BLOCK = range(0x280, 0x300)  # navigation: only NAV_* messages live here
+NAV_SLOTS = {"NAV_GOAL": 10, "NAV_STATUS": 11}  # the E2E slots kept for them from the start
 
 
 @pytest.fixture(scope="module")
@@ -76,6 +76,8 @@ def test_loads_in_cantools_strict(db: cantools.database.can.Database) -> None:
         "ODOM_ACK",
         "ODOM_STATUS",
         "SIM_TRUTH",
+        "NAV_GOAL",
+        "NAV_STATUS",
     }
     assert {n.name for n in db.nodes} == NODES
 
@@ -97,7 +99,7 @@ def test_loads_in_canmatrix_without_any_warning(
     matrix, records, printed = load_canmatrix(DBC_PATH, caplog, capsys)
     assert [r.getMessage() for r in records] == []
     assert printed == ""
-    assert len(matrix.frames) == 10
+    assert len(matrix.frames) == 12
 
 
 @pytest.mark.parametrize(
@@ -165,7 +167,8 @@ def test_names_nodes_and_frame_format(db: cantools.database.can.Database) -> Non
     for message in db.messages:
         assert UPPER_SNAKE.match(message.name)
         assert message.length == 8 and not message.is_extended_frame and not message.is_fd
-        assert message.frame_id <= 0x7FF and message.frame_id not in NAV_RESERVED_IDS
+        assert message.frame_id <= 0x7FF
+        assert (message.frame_id in NAV_BLOCK) == message.name.startswith("NAV_")
         assert set(message.senders) <= NODES and message.senders
         assert message.comment
         for signal in message.signals:
@@ -198,6 +201,7 @@ def test_cyclic_messages_have_a_cycle_time_and_events_none(
     assert cycles["WHEEL_ENCODERS"] == 10 and cycles["ODOM_STATUS"] == 100
     assert cycles["MOTOR_CMD"] == cycles["ODOM_POSE_X"] == 20
     assert cycles["SIM_TRUTH"] == 100  # 10 Hz truth, as a motion-capture reference gives
+    assert cycles["NAV_STATUS"] == 100 and send_type(db.get_message_by_name("NAV_GOAL")) == "Event"
 
 
 def test_every_message_has_checksum_and_counter_at_the_profile2_bits(
@@ -217,6 +221,7 @@ def test_byte1_high_nibble_is_the_mux_or_the_echoed_counter(
     """Multiplexers sit in byte 1's high nibble; pose and twist echo ENC_COUNTER there."""
     mux_names = {"ODOM_SET_POSE": "FIELD", "ODOM_CONFIG": "PARAM", "ODOM_STATUS": "PAGE"}
     mux_names["SIM_TRUTH"] = "PART"
+    mux_names["NAV_GOAL"] = "FIELD"
     for message in db.messages:
         muxers = [s for s in message.signals if s.is_multiplexer]
         if message.name in mux_names:
@@ -258,6 +263,13 @@ def test_enums_have_value_tables(db: cantools.database.can.Database) -> None:
         "UNKNOWN_FIELD",
         "INCOMPLETE",
         "BUSY",
+        "QUEUE_FULL",
+    }
+    request_id = db.get_message_by_name("ODOM_ACK").get_signal_by_name("REQUEST_ID")
+    assert {int(k): str(v) for k, v in request_id.choices.items()} == {
+        frames.NAV_GOAL_ID: "NAV_GOAL",
+        frames.ODOM_SET_POSE_ID: "ODOM_SET_POSE",
+        frames.ODOM_CONFIG_ID: "ODOM_CONFIG",
     }
 
 
@@ -271,6 +283,11 @@ def test_firmware_enums_match_the_value_tables(db: cantools.database.can.Databas
         ("ODOM_STATUS", "PAGE", frames.StatusPage),
         ("ODOM_STATUS", "STATE", State),
         ("SIM_TRUTH", "PART", frames.SimTruthPart),
+        ("NAV_GOAL", "FIELD", frames.NavGoalField),
+        ("NAV_GOAL", "MODE", frames.NavMode),
+        ("NAV_GOAL", "APPEND", frames.NavAppend),
+        ("NAV_GOAL", "NO_FINAL_HEADING", frames.NavFinalHeading),
+        ("NAV_STATUS", "STATE", frames.NavState),
     ]
     for message_name, signal_name, enum in pairs:
         signal = db.get_message_by_name(message_name).get_signal_by_name(signal_name)
@@ -290,7 +307,9 @@ def test_data_id_lists_follow_the_slot_scheme_and_are_unique(
         ids = data_ids(message)
         slot = ids[0] >> 4
         assert ids == tuple((slot << 4) | c for c in range(16)), message.name
-        assert 1 <= slot <= 15 and slot not in NAV_RESERVED_SLOTS
+        assert 1 <= slot <= 15
+        assert (slot in NAV_SLOTS.values()) == message.name.startswith("NAV_")
+        assert NAV_SLOTS.get(message.name, slot) == slot
         assert f"E2E slot {slot} " in message.comment
         assert not seen & set(ids)
         seen |= set(ids)

@@ -68,11 +68,11 @@ class Rig:
 
 def test_pose_frames_echo_the_encoder_counter_and_carry_the_odometry() -> None:
     rig = Rig()
-    rig.drive(100)  # the last tick sends a pose, so it includes the last frame
+    rig.drive(101)  # poses on ticks 0, 2, ..., 100: the last one includes the last frame
     odo = rig.ecu.odometry
     pose_x = rig.hal.decoded("ODOM_POSE_X")
     pose_y = rig.hal.decoded("ODOM_POSE_Y")
-    assert len(pose_x) == len(pose_y) == 50  # every 20 ms after the first frame
+    assert len(pose_x) == len(pose_y) == 51  # every 20 ms, from the first frame on
     assert pose_x[-1]["ENC_COUNTER"] == pose_y[-1]["ENC_COUNTER"] == (rig.counter - 1) % 16
     assert pose_x[-1]["X"] == round(odo.x_q40_m / 2**40 * 1e4)
     assert pose_y[-1]["Y"] == round(odo.y_q40_m / 2**40 * 1e4)

@@ -101,6 +101,31 @@ def sim_truth_kind(part: int, signal: str) -> Kind:
     return Kind("SIM_TRUTH", part, do_pack, do_unpack)
 
 
+NAV_GO_SIGNALS = {"mode": "MODE", "append": "APPEND", "no_final_heading": "NO_FINAL_HEADING"}
+NAV_GO_SIGNALS["goal_id"] = "GOAL_ID"
+
+
+def nav_goal_kind(field: int, signal: str | None) -> Kind:
+    """A NAV_GOAL page: X/Y/HEADING carry ``signal``, STOP nothing, GO its four fields."""
+
+    def do_pack(c: int, v: Values, e: ErrorMask) -> bytes:
+        if field == f.NavGoalField.GO:
+            return f.pack_nav_goal_go(c, **{k: v[s] for k, s in NAV_GO_SIGNALS.items()}, errors=e)
+        return f.pack_nav_goal(c, field, v[signal] if signal else 0, e)
+
+    def do_unpack(data: bytes) -> Values:
+        r = f.unpack_nav_goal(data)
+        got = {"COUNTER": r.counter, "FIELD": r.field}
+        go = {s: getattr(r, k) for k, s in NAV_GO_SIGNALS.items()}
+        if field == f.NavGoalField.GO:
+            assert r.value == 0
+            return got | go
+        assert set(go.values()) == {0}
+        return got | ({signal: r.value} if signal else {})
+
+    return Kind("NAV_GOAL", field, do_pack, do_unpack)
+
+
 STATUS_E2E_NAMES = {"ok": "OK", "lost": "LOST", "repeated": "REPEATED", "crc_error": "CRC_ERROR"}
 STATUS_E2E_NAMES["wrong_sequence"] = "WRONG_SEQ"
 
@@ -224,6 +249,28 @@ KINDS = [
     status_e2e_kind(2, "ENC"),
     status_e2e_kind(3, "SET_POSE"),
     status_e2e_kind(4, "CONFIG"),
+    status_e2e_kind(5, "NAV_GOAL"),
+    *(
+        nav_goal_kind(int(field), field.name if field <= f.NavGoalField.HEADING else None)
+        for field in f.NavGoalField
+    ),
+    Kind(
+        "NAV_STATUS",
+        None,
+        lambda c, v, e: f.pack_nav_status(
+            c,
+            v["STATE"],
+            v["GOAL_ID"],
+            v["QUEUE_DEPTH"],
+            v["DISTANCE"],
+            v["HEADING_ERROR"],
+            e,
+        ),
+        lambda d: as_signals(
+            f.unpack_nav_status(d),
+            {"distance_mm": "DISTANCE", "heading_error_bam16": "HEADING_ERROR"},
+        ),
+    ),
     sim_truth_kind(0, "X"),
     sim_truth_kind(1, "Y"),
     sim_truth_kind(2, "HEADING"),
@@ -321,8 +368,8 @@ SATURATING = [
     for s in payload_signals(k)
     if s.name not in ("ENC_COUNTER", "REQUEST_COUNTER", "REQUEST_FIELD", "TURNS", "ERROR_MASK")
     and not (k.message == "ODOM_STATUS" and k.mux != 0)
-    and s.name not in ("LEFT_COUNT", "RIGHT_COUNT", "DISTANCE", "HEADING")
-]
+    and s.name not in ("LEFT_COUNT", "RIGHT_COUNT", "DISTANCE", "HEADING", "HEADING_ERROR")
+] + [(k, "DISTANCE") for k in KINDS if k.message == "NAV_STATUS"]  # NAV_STATUS's saturates
 
 
 def mid_values(kind: Kind) -> Values:
@@ -358,6 +405,9 @@ WRAPPING = [
     ("ODOM_STATUS", 2, "ENC_E2E_OK", 16),
     ("ODOM_STATUS", 3, "SET_POSE_E2E_LOST", 8),
     ("SIM_TRUTH", 2, "HEADING", 16),
+    ("NAV_GOAL", 2, "HEADING", 16),
+    ("NAV_STATUS", None, "HEADING_ERROR", 16),
+    ("ODOM_STATUS", 5, "NAV_GOAL_E2E_WRONG_SEQ", 8),
 ]
 
 
@@ -390,3 +440,18 @@ def test_unknown_pages_are_sent_raw_and_read_back() -> None:
     assert (config.param, config.value) == (9, 123_456)
     pose = f.unpack_odom_set_pose(f.pack_odom_set_pose(2, 7, 0xDEADBEEF, errors))
     assert (pose.field, pose.value) == (7, 0xDEADBEEF) and errors.bits == 0
+    goal = f.unpack_nav_goal(f.pack_nav_goal(2, 9, 0xDEADBEEF, errors))
+    assert (goal.field, goal.value) == (9, 0xDEADBEEF) and errors.bits == 0
+
+
+def test_nav_goal_go_reads_an_unknown_mode_raw() -> None:
+    """MODE outside the DBC range reaches the firmware (which NACKs it OUT_OF_RANGE)."""
+    frame = f.pack_nav_goal(0, f.NavGoalField.GO, 0x2A07, ErrorMask())  # raw bits, not GO's packer
+    goal = f.unpack_nav_goal(frame)
+    assert (goal.field, goal.mode, goal.append, goal.no_final_heading, goal.goal_id) == (
+        f.NavGoalField.GO,
+        7,
+        0,
+        0,
+        0x2A,
+    )
