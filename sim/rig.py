@@ -11,6 +11,10 @@ frame to python-can ``Listener``s such as ``can.Logger``). Each 10 ms tick runs,
 5. the firmware's board runs its receive ISR and its tick (frames stamped 1 ms later);
 6. the host observer drains its bus into the listeners.
 
+Without a scenario (``RigConfig(scenario=None)``) the loop is closed: the host ``send``s NAV_GOAL
+(or ODOM_CONFIG, ODOM_SET_POSE) frames and the firmware drives the motors from its own odometry;
+``run_until`` steps until a condition on what the listeners heard holds.
+
 One thread, a simulated clock stamping every frame (``preserve_timestamps``): the same seed gives
 the same frames, byte for byte.
 """
@@ -53,7 +57,7 @@ class RigConfig:
 
     robot: RobotProfile
     integrator: str = "exact"
-    scenario: str = "random"
+    scenario: str | None = "random"  # None: closed loop, the firmware drives (NAV_GOAL)
     seed: int = 0
     errors: ErrorModel = field(default_factory=ErrorModel)
     channel: str = "vcan0"
@@ -68,19 +72,31 @@ class LockstepRig:
     def __init__(self, config: RigConfig, listeners: Sequence[can.Listener] = ()) -> None:
         self.config = config
         self.clock = LockstepClock()
-        scenario = get_scenario(config.scenario, config.robot, config.seed)
-        self.default_duration_s = scenario.default_duration_s
+        scenario = (
+            None
+            if config.scenario is None
+            else get_scenario(config.scenario, config.robot, config.seed)
+        )
+        self.default_duration_s = 60.0 if scenario is None else scenario.default_duration_s
         self.vehicle = Vehicle(
             config.robot, config.errors, seed=config.seed, quadrature=config.quadrature
         )
-        self._buses: list[can.BusABC] = [self._open_bus() for _ in range(3)]
+        self._buses: list[can.BusABC] = [
+            self._open_bus(),
+            self._open_bus(),
+            self._open_bus(own=True),
+        ]
         for index, spec in ((0, config.faults), (1, config.fw_faults)):
             if spec is not None and spec.active:
                 self._buses[index] = FaultInjectingBus(self._buses[index], spec)
         sim_bus, fw_bus, self.host_bus = self._buses
         self.motor_controller = MotorController(sim_bus, self.vehicle, self.clock)
         self.truth = TruthSender(sim_bus, self.vehicle, self.clock)
-        self.driver = ScenarioDriver(sim_bus, scenario, self.clock, self.motor_controller)
+        self.driver = (
+            None
+            if scenario is None
+            else ScenarioDriver(sim_bus, scenario, self.clock, self.motor_controller)
+        )
         self.board = FirmwareBoard(
             fw_bus, firmware_params(config.robot, config.integrator), self.clock
         )
@@ -89,12 +105,21 @@ class LockstepRig:
         self._driver_ticks = cycle_ticks("MOTOR_CMD", TICK_S)
         self._truth_ticks = cycle_ticks("SIM_TRUTH", TICK_S)
 
-    def _open_bus(self) -> can.BusABC:
+    def _open_bus(self, *, own: bool = False) -> can.BusABC:
         return can.Bus(
             interface="virtual",
             channel=self.config.channel,
             preserve_timestamps=True,
-            receive_own_messages=False,
+            receive_own_messages=own,
+        )
+
+    def send(self, can_id: int, data: bytes) -> None:
+        """Send a frame as the HOST (e.g. NAV_GOAL, ODOM_CONFIG), stamped now; the firmware
+        takes it at its next tick and the listeners hear it like any other frame."""
+        self.host_bus.send(
+            can.Message(
+                timestamp=self.clock.now_s(), arbitration_id=can_id, is_extended_id=False, data=data
+            )
         )
 
     def step(self) -> None:
@@ -102,7 +127,7 @@ class LockstepRig:
         k = self.ticks
         self.clock.advance_to(k * TICK_S)
         self.motor_controller.service_rx()
-        if k % self._driver_ticks == 0:
+        if self.driver is not None and k % self._driver_ticks == 0:
             self.driver.send()
         enc_counter = self.motor_controller.sample_and_send()
         if k % self._truth_ticks == 0:
@@ -135,6 +160,16 @@ class LockstepRig:
                 progress(k + 1, total)
         if progress is not None:
             progress(total, total)
+
+    def run_until(self, done: Callable[[], bool], timeout_s: float) -> bool:
+        """Step until ``done()`` (checked after every tick) or ``timeout_s`` of simulated time
+        has passed; True when ``done()`` was reached."""
+        end = self.ticks + round(timeout_s / TICK_S)
+        while self.ticks < end:
+            self.step()
+            if done():
+                return True
+        return False
 
     def close(self) -> None:
         """Stop the listeners and release the virtual buses."""
