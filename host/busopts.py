@@ -13,6 +13,7 @@ from typing import Any
 import can
 
 from sim.exceptions import BusSetupError
+from sim.faults import FaultInjectingBus, FaultSpec
 
 
 def add_bus_arguments(parser: argparse.ArgumentParser, *, required: bool = False) -> None:
@@ -37,8 +38,32 @@ def add_bus_arguments(parser: argparse.ArgumentParser, *, required: bool = False
     )
 
 
+def add_fault_argument(parser: argparse.ArgumentParser) -> None:
+    """``--faults SPEC``: inject faults on what this node sends (``sim.faults``)."""
+    parser.add_argument(
+        "--faults",
+        default="",
+        metavar="SPEC",
+        help="faults on this node's sends: drop=P,burst=P:LEN,dup=P,delay=P:MS,flip=P,"
+        "babble=RATE,busoff=T:DUR,seed=N (see README, 'Faults on the bus')",
+    )
+
+
+def parse_faults(args: argparse.Namespace) -> FaultSpec | None:
+    """The ``--faults`` option as a spec (None when absent or empty); one-line errors."""
+    text = getattr(args, "faults", "") or ""
+    return FaultSpec.parse(text) if text else None
+
+
 def open_bus(args: argparse.Namespace, **overrides: Any) -> can.BusABC:
-    """Open the bus the options describe; one-line ``BusSetupError`` when it cannot be opened."""
+    """Open the bus the options describe, wrapped in a fault injector when ``--faults`` asks;
+    one-line ``BusSetupError`` when it cannot be opened."""
+    spec = parse_faults(args)
+    bus = _open_raw_bus(args, **overrides)
+    return FaultInjectingBus(bus, spec) if spec is not None and spec.active else bus
+
+
+def _open_raw_bus(args: argparse.Namespace, **overrides: Any) -> can.BusABC:
     kwargs: dict[str, Any] = {}
     for key in ("interface", "channel", "bitrate"):
         value = getattr(args, key, None)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from host.busopts import add_bus_arguments, open_bus
+from host.busopts import add_bus_arguments, add_fault_argument, open_bus
 from host.subparsers.sim import add_duration_argument, add_robot_argument, check_duration
 from sim import robot
 from sim.board import FirmwareBoard
@@ -38,6 +38,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     )
     add_duration_argument(parser)
     add_bus_arguments(parser)
+    add_fault_argument(parser)
     parser.set_defaults(func=_do_firmware)
 
 

@@ -16,7 +16,7 @@ import argparse
 import math
 import sys
 
-from host.busopts import add_bus_arguments, open_bus
+from host.busopts import add_bus_arguments, add_fault_argument, open_bus
 from sim import errors, robot
 from sim.exceptions import ConfigurationError
 from sim.realtime import PeriodicLoop, SimNode, stop_on_signals
@@ -44,6 +44,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     )
     add_duration_argument(parser)
     add_bus_arguments(parser)
+    add_fault_argument(parser)
     parser.set_defaults(func=_do_sim)
 
 
