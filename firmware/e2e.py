@@ -118,7 +118,7 @@ _WRONGSEQUENCE: Final = E2EStatus.WRONGSEQUENCE
 class E2EReceiver:
     """Profile 2 receiver check state of one message (``E2E_P02CheckStateType`` plus counts).
 
-    ``max_delta_counter_init`` (AUTOSAR ``MaxDeltaCounterInit``, 1..14): the window
+    ``max_delta_counter_init`` (AUTOSAR ``MaxDeltaCounterInit``, 0..14): the window
     ``max_delta_counter`` restarts from it at each accepted frame and grows by one at every check
     call (up to 15) before the counter is judged, so the next frame may jump by up to init + 1
     (AUTOSAR's example: init 1 accepts +1 and +2). Call ``check(None)`` once per receive period
@@ -127,6 +127,13 @@ class E2EReceiver:
     jumped is accepted again when its counter comes round to the reference + 1: at most 15 frames.
     Counts are u32 and wrap; ``lost_frames`` sums the frames skipped by OKSOMELOST. Per frame: no
     allocation, one CRC (about 0.6 us in CPython 3.11 for the whole check).
+
+    ``window_per_period=True`` ties the window to time instead of to check calls: it widens only
+    in ``new_period()``, called once at the start of every receive period, so duplicates or
+    replays arriving within one period cannot widen it. With ``max_delta_counter_init=0`` a frame
+    may then jump the counter by at most the number of periods since the last accepted one (+1
+    is always accepted), which refuses a stale frame whose counter came round (a replay 14 or 15
+    periods old) while a lost frame still comes through as OKSOMELOST.
     """
 
     __slots__ = (
@@ -144,11 +151,19 @@ class E2EReceiver:
         "max_delta_counter_init",
         "status",
         "wait_for_first_data",
+        "window_per_period",
     )
 
-    def __init__(self, data_ids: tuple[u8, ...], max_delta_counter_init: int = 1) -> None:
+    def __init__(
+        self,
+        data_ids: tuple[u8, ...],
+        max_delta_counter_init: int = 1,
+        *,
+        window_per_period: bool = False,
+    ) -> None:
         self.data_ids: tuple[u8, ...] = data_ids
         self.max_delta_counter_init: int = max_delta_counter_init
+        self.window_per_period: bool = window_per_period
         self.count_ok: u32 = 0
         self.count_oksomelost: u32 = 0
         self.count_repeated: u32 = 0
@@ -171,12 +186,17 @@ class E2EReceiver:
         self.wait_for_first_data = True
         self.status = _NONEWDATA
 
+    def new_period(self) -> None:
+        """Start a receive period: the window widens by one (up to 15)."""
+        if self.max_delta_counter < MAX_DELTA_COUNTER_LIMIT:
+            self.max_delta_counter += 1
+
     def check(self, frame: bytes | bytearray | None) -> E2EStatus:
         """Check one received frame (``None``: the period ended with none); count and return.
 
         Use the frame's data only when the result is OK or OKSOMELOST.
         """
-        if self.max_delta_counter < MAX_DELTA_COUNTER_LIMIT:
+        if not self.window_per_period and self.max_delta_counter < MAX_DELTA_COUNTER_LIMIT:
             self.max_delta_counter += 1
         if frame is None:
             self.count_nonewdata = wrap_u32(self.count_nonewdata + 1)

@@ -113,7 +113,10 @@ class OdomEcu:
         self.params = params
         self.odometry = Odometry(derive_constants(params, self.errors), self.errors)
         self.mailbox = Mailbox()
-        self.rx_encoders = E2EReceiver(fr.WHEEL_ENCODERS_DATA_IDS)
+        # The window widens once per tick (not per frame): a replay cannot widen it.
+        self.rx_encoders = E2EReceiver(
+            fr.WHEEL_ENCODERS_DATA_IDS, max_delta_counter_init=0, window_per_period=True
+        )
         self.rx_set_pose = E2EReceiver(fr.ODOM_SET_POSE_DATA_IDS, max_delta_counter_init=15)
         self.rx_config = E2EReceiver(fr.ODOM_CONFIG_DATA_IDS, max_delta_counter_init=15)
         self.rx_nav_goal = E2EReceiver(fr.NAV_GOAL_DATA_IDS, max_delta_counter_init=15)
@@ -152,6 +155,7 @@ class OdomEcu:
 
     def tick(self) -> None:
         """One period of the main loop, in the fixed order of the module docstring."""
+        self.rx_encoders.new_period()
         encoder_seen = False
         frame = self.mailbox.get()
         while frame is not None:

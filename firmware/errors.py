@@ -14,7 +14,6 @@ class ErrorFlag(IntFlag):
     ENCODER_TIMEOUT = 1 << 2  # no fresh WHEEL_ENCODERS for the watchdog period
     MAILBOX_OVERFLOW = 1 << 3  # the receive mailbox was full: a frame was dropped
     E2E_ERROR = 1 << 4  # a frame failed its CRC or sequence check
-    ENCODER_JUMP = 1 << 5  # a counter delta beyond the plausible per-step range was rejected
     BUS_OFF = 1 << 6  # the CAN controller reported bus-off
 
 
