@@ -142,9 +142,9 @@ def analyze(
         "integrator_source": source,
         "scenario": scenario,
         "seed": seed,
-        "sim_seconds": _span(frames),
+        "sim_seconds": _covered_s(frames, db),
         "wall_seconds": wall_seconds,
-        "realtime_factor": _realtime(_span(frames), wall_seconds),
+        "realtime_factor": _realtime(_covered_s(frames, db), wall_seconds),
         "frames": _frame_counts(frames, decoder),
         "samples": {
             "onboard": len(onboard.enc),
@@ -539,6 +539,16 @@ def _robot_dict(robot: RobotProfile) -> dict[str, Any]:
         "wheelbase_m": robot.wheelbase_m,
         "counter_bits": robot.counter_bits,
     }
+
+
+def _covered_s(frames: FrameArrays, db: cantools.database.can.Database) -> float:
+    """Seconds of bus time the log covers: its encoder periods (first to last encoder frame,
+    plus one cycle), or the plain frame span when it has no encoder frame."""
+    message = db.get_message_by_name("WHEEL_ENCODERS")
+    stamps = frames.timestamp_s[frames.can_id == message.frame_id]
+    if len(stamps) == 0 or not message.cycle_time:
+        return _span(frames)
+    return float(stamps[-1] - stamps[0]) + message.cycle_time / 1000.0
 
 
 def _span(frames: FrameArrays) -> float:

@@ -55,10 +55,10 @@ def parse_faults(args: argparse.Namespace) -> FaultSpec | None:
     return FaultSpec.parse(text) if text else None
 
 
-def open_bus(args: argparse.Namespace, **overrides: Any) -> can.BusABC:
-    """Open the bus the options describe, wrapped in a fault injector when ``--faults`` asks;
-    one-line ``BusSetupError`` when it cannot be opened."""
-    spec = parse_faults(args)
+def open_bus(args: argparse.Namespace, *, with_faults: bool = True, **overrides: Any) -> can.BusABC:
+    """Open the bus the options describe, wrapped in a fault injector when ``--faults`` asks
+    (and ``with_faults``); one-line ``BusSetupError`` when it cannot be opened."""
+    spec = parse_faults(args) if with_faults else None
     bus = _open_raw_bus(args, **overrides)
     return FaultInjectingBus(bus, spec) if spec is not None and spec.active else bus
 

@@ -64,6 +64,7 @@ class RigConfig:
     quadrature: bool = False
     faults: FaultSpec | None = None  # on the sim's handle: what MOTOR_CTRL and SIM send
     fw_faults: FaultSpec | None = None  # on the firmware's handle: what ODOM_MCU sends
+    duration_s: float | None = None  # the run's length (default: the scenario's own)
 
 
 class LockstepRig:
@@ -75,9 +76,15 @@ class LockstepRig:
         scenario = (
             None
             if config.scenario is None
-            else get_scenario(config.scenario, config.robot, config.seed)
+            else get_scenario(config.scenario, config.robot, config.seed, config.duration_s)
         )
-        self.default_duration_s = 60.0 if scenario is None else scenario.default_duration_s
+        self.default_duration_s = (
+            config.duration_s
+            if config.duration_s is not None
+            else 60.0
+            if scenario is None
+            else scenario.default_duration_s
+        )
         self.vehicle = Vehicle(
             config.robot, config.errors, seed=config.seed, quadrature=config.quadrature
         )

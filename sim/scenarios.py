@@ -148,8 +148,14 @@ class RandomScenario:
 SCENARIOS: tuple[str, ...] = ("straight", "spin", "circle", "square", "figure8", "random")
 
 
-def get_scenario(name: str, profile: RobotProfile, seed: int = 0) -> Scenario:
-    """The scenario ``name`` for ``profile`` (``seed`` is used by ``random`` only)."""
+def get_scenario(
+    name: str, profile: RobotProfile, seed: int = 0, duration_s: float | None = None
+) -> Scenario:
+    """The scenario ``name`` for ``profile`` (``seed`` is used by ``random`` only).
+
+    ``duration_s``: how long the run will last; ``random`` then drives until ``REST_S`` before
+    its end (the others are fixed programs and come to rest when done).
+    """
     builders = {
         "straight": straight,
         "spin": spin,
@@ -158,6 +164,8 @@ def get_scenario(name: str, profile: RobotProfile, seed: int = 0) -> Scenario:
         "figure8": figure8,
     }
     if name == "random":
+        if duration_s is not None and duration_s > REST_S:
+            return RandomScenario(seed, duration_s=duration_s - REST_S)
         return RandomScenario(seed)
     if name not in builders:
         raise ScenarioError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")

@@ -1,0 +1,295 @@
+"""``odocan monitor``: the live model on a real-time bus, its JSON, the screen, bad input, MQTT.
+
+The source is the lockstep rig's set of nodes stepped every 10 ms of the wall clock in a thread
+of the test process, every frame it makes forwarded to a python-can ``virtual`` channel that the
+monitor listens to, with garbage frames mixed in. The source starts once the monitor's bus is
+open and sends a known number of ticks, so every count is exact; rates are checked loosely.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import json
+import os
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+import pytest
+
+from host.busopts import open_bus
+from host.cli import build_parser, main
+from host.monitor import error_names
+from host.subparsers import monitor as monitor_cmd
+from sim import robot
+from sim.rig import LockstepRig, RigConfig
+from tests.test_cli_run import assert_usage_error, run_cli
+
+TICKS = 100  # 1 s of real time
+GARBAGE_EVERY = 25  # ticks: one of each garbage kind
+_channels = itertools.count()
+
+
+@dataclass
+class Source:
+    """A rig paced to the wall clock on its own channel, forwarding every frame to ``channel``."""
+
+    channel: str
+    ticks: int = TICKS
+    garbage: bool = True
+    injected: int = 0  # rounds of garbage sent
+    done: threading.Event = field(default_factory=threading.Event)
+
+    def run(self, start: threading.Event) -> None:
+        """Wait for ``start`` (the monitor's bus is open), then send ``ticks`` ticks."""
+        out = can.Bus(interface="virtual", channel=self.channel)
+        config = RigConfig(robot=robot.load("pmir"), seed=2, channel=f"{self.channel}-rig")
+        last_pose_y: list[can.Message] = []
+        forward = _Forward(out, last_pose_y)
+        try:
+            with LockstepRig(config, listeners=[forward]) as rig:
+                if not start.wait(20):
+                    return
+                t0 = time.monotonic()
+                for k in range(self.ticks):
+                    rig.step()
+                    if self.garbage and k % GARBAGE_EVERY == GARBAGE_EVERY - 1:
+                        self._send_garbage(out, last_pose_y[-1])
+                    time.sleep(max(0.0, t0 + (k + 1) * 0.01 - time.monotonic()))
+        finally:
+            out.shutdown()
+            self.done.set()
+
+    def _send_garbage(self, out: can.BusABC, pose_y: can.Message) -> None:
+        """An unknown ID, a WHEEL_ENCODERS of 4 bytes, a remote frame, an error frame and an
+        ODOM_POSE_Y with one payload bit flipped (bad CRC)."""
+        corrupted = bytearray(pose_y.data)
+        corrupted[3] ^= 0x10
+        for msg in (
+            can.Message(arbitration_id=0x123, data=b"\x01\x02\x03", is_extended_id=False),
+            can.Message(arbitration_id=0x100, data=b"\x00\x01\x02\x03", is_extended_id=False),
+            can.Message(arbitration_id=0x300, is_remote_frame=True, dlc=8, is_extended_id=False),
+            can.Message(is_error_frame=True),
+            can.Message(arbitration_id=0x201, data=bytes(corrupted), is_extended_id=False),
+        ):
+            out.send(msg)
+        self.injected += 1
+
+
+class _Forward(can.Listener):
+    """Send every frame of the rig's host bus to ``out`` (keeping the last ODOM_POSE_Y)."""
+
+    def __init__(self, out: can.BusABC, last_pose_y: list[can.Message]) -> None:
+        self.out, self.last_pose_y = out, last_pose_y
+
+    def on_message_received(self, msg: can.Message) -> None:
+        if msg.arbitration_id == 0x201:
+            self.last_pose_y[:] = [msg]
+        self.out.send(msg)
+
+
+@pytest.fixture
+def source(monkeypatch: pytest.MonkeyPatch) -> Iterator[Source]:
+    """A Source on a fresh channel that starts when ``odocan monitor`` opens its bus."""
+    build_parser()  # every subcommand imported before the clock starts
+    src = Source(f"odocan-test-monitor-{os.getpid()}-{next(_channels)}")
+    opened = threading.Event()
+
+    def open_and_start(args: Any, **overrides: Any) -> can.BusABC:
+        bus = open_bus(args, **overrides)
+        opened.set()
+        return bus
+
+    monkeypatch.setattr(monitor_cmd, "open_bus", open_and_start)
+    thread = threading.Thread(target=src.run, args=(opened,), name="source")
+    thread.start()
+    yield src
+    opened.set()
+    thread.join(30)
+
+
+def monitor_json(capsys: pytest.CaptureFixture[str], *argv: str) -> dict[str, Any]:
+    code, out, err = run_cli(capsys, "monitor", *argv, "--json")
+    assert (code, err) == (0, ""), err
+    result: dict[str, Any] = json.loads(out)
+    return result
+
+
+def test_monitor_json_on_a_live_bus(source: Source, capsys: pytest.CaptureFixture[str]) -> None:
+    model = monitor_json(capsys, "-i", "virtual", "-c", source.channel, "--duration", "2")
+    assert source.done.is_set()  # the whole drive was heard
+    rounds = source.injected
+    assert rounds == TICKS // GARBAGE_EVERY
+    messages = model["messages"]
+    enc = messages["WHEEL_ENCODERS"]
+    assert enc["id"] == "0x100"
+    assert enc["count"] == TICKS
+    assert enc["e2e"] == {"ok": TICKS, "lost": 0, "repeated": 0, "crc_errors": 0,
+                          "wrong_sequence": 0}
+    assert 50 < enc["rate_hz"] < 200  # about 100 Hz: a loose sanity check, not a timing test
+    assert enc["jitter_ms"] >= 0
+    assert set(enc["last"]) == {"LEFT_COUNT", "RIGHT_COUNT"}
+    assert enc["units"] == {"LEFT_COUNT": "count", "RIGHT_COUNT": "count"}
+    pose_y = messages["ODOM_POSE_Y"]
+    assert pose_y["count"] == TICKS // 2 + rounds
+    assert pose_y["e2e"]["crc_errors"] == rounds
+    assert pose_y["e2e"]["ok"] == TICKS // 2
+    assert messages["ODOM_POSE_X"]["last"]["X"] == pytest.approx(model["pose"]["x_m"])
+    assert model["unknown"] == {"unknown_id": rounds, "wrong_dlc": rounds,
+                                "error_frames": rounds, "remote_frames": rounds,
+                                "unprotected": 0, "ids": {"0x123": rounds}, "undecodable": 0}
+    assert model["frames_total"] == sum(m["count"] for m in messages.values()) + 4 * rounds
+
+
+def test_monitor_follows_the_firmware_and_its_pose(
+    source: Source, capsys: pytest.CaptureFixture[str]
+) -> None:
+    model = monitor_json(capsys, "-i", "virtual", "-c", source.channel, "--duration", "2")
+    status = model["status"]
+    assert (status["state"], status["integrator"], status["error_mask"], status["errors"]) == (
+        "OK", "EXACT", 0, [])
+    assert status["uptime_s"] in (0, 1)
+    assert model["reference"]["integrator"] == "exact"  # as ODOM_STATUS reports it
+    assert model["reference"]["starts"] == 1
+    vs_ref = model["error"]["pose_vs_reference"]
+    assert vs_ref["samples"] >= TICKS // 2 - 35  # from the first pose after the first summary
+    assert vs_ref["max_dpos_m"] < 2e-4  # quantisation of the start pose only
+    assert vs_ref["max_dheading_rad"] < 2e-4
+    vs_truth = model["error"]["pose_vs_truth"]
+    assert vs_truth["samples"] >= 5
+    assert vs_truth["max_dpos_m"] < 5e-3
+    assert set(model["truth"]) == {"x_m", "y_m", "heading_rad"}
+
+
+def test_monitor_integrator_given(source: Source, capsys: pytest.CaptureFixture[str]) -> None:
+    """With --integrator the reference starts at the first pose, whatever ODOM_STATUS says;
+    another integrator than the firmware's still agrees to about the quantisation."""
+    source.garbage = False
+    model = monitor_json(capsys, "-i", "virtual", "-c", source.channel, "--duration", "2",
+                         "--integrator", "rk2")
+    assert model["reference"]["integrator"] == "rk2"
+    assert model["error"]["pose_vs_reference"]["samples"] == TICKS // 2
+    assert model["unknown"]["unknown_id"] == 0
+
+
+def test_monitor_screen(source: Source, capsys: pytest.CaptureFixture[str]) -> None:
+    """Without --json: the rich screen (its last frame, as stdout is not a terminal)."""
+    code, out, err = run_cli(capsys, "monitor", "-i", "virtual", "-c", source.channel,
+                             "--duration", "2")
+    assert (code, err) == (0, "")
+    assert f"odocan monitor virtual:{source.channel}" in out
+    assert "firmware OK   integrator EXACT   errors 0x0000 (none)" in out
+    for name in ("WHEEL_ENCODERS", "ODOM_POSE_X", "SIM_TRUTH", "reference exact, started 1x"):
+        assert name in out
+    assert f"not checked: unknown id {TICKS // GARBAGE_EVERY}" in out
+
+
+class _InterruptingBus(can.BusABC):
+    """A bus that hears a few frames and then gets Ctrl-C."""
+
+    def __init__(self, frames: int) -> None:
+        self.left = frames
+        super().__init__(channel="interrupting")
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self.left == 0:
+            raise KeyboardInterrupt
+        self.left -= 1
+        return can.Message(arbitration_id=0x7FF, data=b"\x00", timestamp=time.time()), False
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        raise NotImplementedError
+
+
+@pytest.mark.parametrize("json_mode", [True, False])
+def test_monitor_ctrl_c_exits_cleanly(
+    json_mode: bool, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(monitor_cmd, "open_bus", lambda args: _InterruptingBus(7))
+    code, out, err = run_cli(capsys, "monitor", "-i", "virtual", *(["--json"] * json_mode))
+    assert (code, err) == (0, "")
+    if json_mode:
+        model = json.loads(out)
+        assert model["frames_total"] == 7
+        assert model["unknown"]["ids"] == {"0x7FF": 7}
+    else:
+        assert "not checked: unknown id 7 (IDs 0x7FF×7)" in out
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["--duration", "0"], ["--duration"]),
+        (["--duration", "nan"], ["--duration"]),
+        (["-i", "nosuchinterface"], ["nosuchinterface"]),
+        (["--integrator", "midpoint"], ["midpoint"]),
+        (["--robot", "nosuchbot"], ["nosuchbot"]),
+        (["--dbc", "/nonexistent/x.dbc"], ["/nonexistent/x.dbc"]),
+        (["--mqtt", "http://example.org"], ["http://example.org"]),
+        (["--mqtt", "mqtt://127.0.0.1:1", "-i", "virtual"], ["--mqtt", "-i"]),
+    ],
+)
+def test_monitor_bad_input_is_one_line(
+    argv: list[str], words: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert_usage_error(capsys, main(["monitor", *argv]), *words)
+
+
+def test_monitor_mqtt_unreachable_broker(capsys: pytest.CaptureFixture[str]) -> None:
+    from host.mqtt.broker import free_loopback_port
+
+    url = f"mqtt://127.0.0.1:{free_loopback_port()}"
+    code = main(["monitor", "--mqtt", url, "--duration", "0.5", "--json"])
+    assert_usage_error(capsys, code, "cannot reach the MQTT broker", url)
+
+
+def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
+    """Two real-time robots bridged to the embedded amqtt broker; the monitor's fleet table."""
+    from host.mqtt.broker import EmbeddedBroker
+    from host.mqtt.fleetrun import FleetRun, run_fleet
+    from sim.fleet import FleetConfig
+
+    ready, reports = threading.Event(), []
+
+    async def fleet() -> None:
+        async with EmbeddedBroker() as broker:
+            urls.append(str(broker.url))
+            ready.set()
+            run = FleetRun(fleet=FleetConfig(robots=2, robot=robot.load("pmir"), seed=1),
+                           duration_s=3.5, broker=broker.url, client_prefix="test-monitor")
+            reports.append(await run_fleet(run))
+
+    urls: list[str] = []
+    thread = threading.Thread(target=lambda: asyncio.run(fleet()), name="fleet")
+    thread.start()
+    assert ready.wait(20)
+    try:
+        model = monitor_json(capsys, "--mqtt", urls[0], "--duration", "2")
+    finally:
+        thread.join(30)
+    assert reports, "the fleet did not finish"
+    assert model["broker"] == urls[0]
+    robots = model["robots"]
+    assert set(robots) == {"robot001", "robot002"}
+    for row in robots.values():
+        assert row["online"] is True
+        assert set(row["pose"]) == {"x_m", "y_m", "heading_rad"}
+        assert row["error"]["dpos_m"] < 1e-3  # on-board vs float64: quantisation only
+        assert row["status"]["state"] == "OK"
+        # The bits are named as the mask says.
+        assert row["status"]["errors"] == error_names(row["status"]["error_mask"])
+        assert row["encoder_hz"] > 0
+
+
+def test_error_names() -> None:
+    from firmware.errors import ErrorFlag
+
+    assert error_names(0) == []
+    assert error_names(int(ErrorFlag.SATURATION | ErrorFlag.BUS_OFF)) == ["SATURATION", "BUS_OFF"]
+    named = {int(flag) for flag in ErrorFlag}
+    unnamed = next(bit for bit in range(16) if 1 << bit not in named)
+    assert error_names(1 << unnamed | 1) == ["SATURATION", f"BIT{unnamed}"]

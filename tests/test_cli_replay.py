@@ -1,0 +1,264 @@
+"""``odocan replay LOG``: a recorded drive re-run against the current firmware, and the player.
+
+The logs come from ``odocan run --log`` (a short seeded run); replaying one with the same firmware
+must give back the run's very on-board poses, frame for frame.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import threading
+from pathlib import Path
+
+import can
+import pytest
+
+from host.cli import main
+from tests.test_cli_run import assert_usage_error, run_cli
+
+POSE_IDS = {0x200, 0x201, 0x202}
+SAME_AS_RUN = (
+    "robot",
+    "integrator",
+    "onboard_vs_reference",
+    "onboard_vs_truth",
+    "final_onboard_pose",
+    "samples",
+    "passed",
+)
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A 6 s random drive (seed 5, exact integrator): its log and its report."""
+    folder = tmp_path_factory.mktemp("replay")
+    paths = {"log": folder / "run.log", "report": folder / "run.json"}
+    argv = ["run", "--duration", "6", "--seed", "5", "--log", str(paths["log"]),
+            "--report", str(paths["report"])]
+    assert main(argv) == 0
+    return paths
+
+
+def frames_of(path: Path, ids: set[int] | None = None) -> list[tuple[float, int, bytes]]:
+    """(timestamp, ID, payload) of every frame of a log (of ``ids`` only, when given)."""
+    return [(round(m.timestamp, 6), m.arbitration_id, bytes(m.data)) for m in can.LogReader(path)
+            if ids is None or m.arbitration_id in ids]
+
+
+def test_replay_reproduces_the_run(
+    recorded: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    report_path, log_out = tmp_path / "replay.json", tmp_path / "replay.log"
+    code, out, err = run_cli(capsys, "replay", str(recorded["log"]), "--report",
+                             str(report_path), "--log", str(log_out))
+    assert (code, err) == (0, "")
+    run, replay = json.loads(recorded["report"].read_text()), json.loads(report_path.read_text())
+    assert set(replay) >= set(run)  # the same report contract, plus the replay section
+    for key in SAME_AS_RUN:
+        assert replay[key] == run[key], key
+    section = replay["replay"]
+    assert section["encoder_frames_fed"] == section["ticks"] == 600
+    assert section["ticks_without_frame"] == 0
+    assert section["onboard_vs_log"] == {
+        "samples": 300, "identical": 300, "max_position_diff_m": 0.0, "max_heading_diff_rad": 0.0
+    }
+    # Bit-identical pose and twist frames, at the same times; the log's truth frames kept.
+    assert frames_of(log_out, POSE_IDS) == frames_of(recorded["log"], POSE_IDS)
+    assert frames_of(log_out, {0x700}) == frames_of(recorded["log"], {0x700})
+    assert replay["frames"] == {k: v for k, v in run["frames"].items() if k != "MOTOR_CMD"}
+    lines = out.splitlines()
+    assert lines[0] == ("replay: 600 encoder frames fed in 600 ticks; on-board vs the log's at "
+                        "300 encoder frames: 300 identical, max difference 0.0000 mm, 0.0000 mrad")
+    assert lines[1] == f"odocan replay: {recorded['log']} on pmir, exact integrator"
+    assert lines[-1].startswith("PASS: ")
+
+
+@pytest.mark.parametrize("integrator", ["euler", "rk2"])
+def test_replay_with_another_integrator(
+    integrator: str, recorded: dict[str, Path], tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    report_path = tmp_path / "replay.json"
+    code, _, err = run_cli(capsys, "replay", str(recorded["log"]), "--integrator", integrator,
+                           "--report", str(report_path))
+    assert (code, err) == (0, "")
+    report = json.loads(report_path.read_text())
+    assert (report["integrator"], report["integrator_source"]) == (integrator, "argument")
+    vs_log = report["replay"]["onboard_vs_log"]
+    assert vs_log["samples"] == 300
+    assert vs_log["identical"] < vs_log["samples"]  # another integrator: other poses ...
+    assert vs_log["max_heading_diff_rad"] == 0.0  # ... but the heading is integrator-free
+    errors = report["onboard_vs_reference"]  # and within tolerance of its own reference
+    assert errors["max_position_error_m"] <= report["tolerance"]["position_m"]
+    assert errors["max_heading_error_rad"] <= report["tolerance"]["heading_rad"]
+
+
+def test_replay_keeps_gaps_as_ticks_without_a_frame(
+    recorded: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    lines = recorded["log"].read_text().splitlines()
+    dropped = [i for i, line in enumerate(lines) if " 100#" in line][200:230]
+    gap_log = tmp_path / "gap.log"
+    gap_log.write_text("\n".join(ln for i, ln in enumerate(lines) if i not in set(dropped)) + "\n")
+    report_path = tmp_path / "replay.json"
+    code, _, err = run_cli(capsys, "replay", str(gap_log), "--report", str(report_path))
+    assert (code, err) == (0, "")
+    section = json.loads(report_path.read_text())["replay"]
+    assert (section["encoder_frames_fed"], section["ticks"]) == (570, 600)
+    assert section["ticks_without_frame"] == 30
+    vs_log = section["onboard_vs_log"]
+    assert vs_log["identical"] == 100  # every pose before the gap
+    assert vs_log["max_heading_diff_rad"] == 0.0  # the heading is exact across the gap
+
+
+def test_replay_feeds_only_frames_that_pass_e2e(
+    recorded: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    lines = recorded["log"].read_text().splitlines()
+    encoders = [i for i, line in enumerate(lines) if " 100#" in line]
+    for i in encoders[100:103]:  # flip a payload bit: the CRC no longer matches
+        head, data = lines[i].split("#")
+        lines[i] = f"{head}#{data[:4]}{int(data[4], 16) ^ 1:X}{data[5:]}"
+    bad = tmp_path / "crc.log"
+    bad.write_text("\n".join(lines) + "\n")
+    report_path = tmp_path / "replay.json"
+    code, _, err = run_cli(capsys, "replay", str(bad), "--report", str(report_path))
+    assert (code, err) == (0, "")
+    section = json.loads(report_path.read_text())["replay"]
+    assert (section["encoder_frames_fed"], section["encoder_frames_rejected"]) == (597, 3)
+    assert section["ticks_without_frame"] == 3
+
+
+def test_replay_plot(
+    recorded: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    plot = tmp_path / "replay.svg"
+    code, _, err = run_cli(capsys, "replay", str(recorded["log"]), "--plot", str(plot))
+    assert (code, err) == (0, "")
+    assert plot.read_text().lstrip().startswith("<?xml")
+
+
+def test_replay_fails_with_an_absurd_tolerance(
+    recorded: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, _ = run_cli(capsys, "replay", str(recorded["log"]), "--tolerance", "1e-9")
+    assert code == 1
+    assert out.splitlines()[-1].startswith("FAIL: ")
+
+
+def test_replay_interrupted_checks_what_ran(
+    recorded: dict[str, Path], monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from sim.board import FirmwareBoard
+
+    run_tick = FirmwareBoard.run_tick
+    ticks = [0]
+
+    def tick_until_ctrl_c(board: FirmwareBoard) -> None:
+        if ticks[0] == 150:
+            raise KeyboardInterrupt
+        ticks[0] += 1
+        run_tick(board)
+
+    monkeypatch.setattr(FirmwareBoard, "run_tick", tick_until_ctrl_c)
+    code, out, err = run_cli(capsys, "replay", str(recorded["log"]))
+    assert (code, err) == (0, "interrupted after 1.5 s of the log\n")
+    assert "on-board vs the log's at 75 encoder frames: 75 identical" in out
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["/nonexistent/drive.log"], ["/nonexistent/drive.log", "no such log file"]),
+        (["{garbage}"], ["garbage.log:2:"]),
+        (["{no_encoders}"], ["no WHEEL_ENCODERS frame"]),
+        (["{log}", "--robot", "nosuchbot"], ["nosuchbot"]),
+        (["{log}", "--integrator", "midpoint"], ["midpoint"]),
+        (["{log}", "--log", "out.txt"], ["out.txt", ".log"]),
+        (["{log}", "--plot", "out.pdf"], ["out.pdf", ".png"]),
+        (["{log}", "--report", "/nonexistent/dir/r.json"], ["/nonexistent/dir"]),
+        (["{log}", "-i", "virtual"], ["-i/--interface", "only with --realtime"]),
+        (["{log}", "--speed", "2"], ["--speed", "only with --realtime"]),
+        (["{log}", "--realtime", "-i", "nosuchinterface"], ["nosuchinterface"]),
+        (["{log}", "--realtime", "-i", "virtual", "--speed", "0"], ["--speed"]),
+        (["{log}", "--realtime", "-i", "virtual", "--report", "r.json"], ["--report"]),
+        (["{log}", "--realtime", "-i", "virtual", "--only", "NOPE"], ["--only", "NOPE"]),
+        ([], ["LOG"]),
+    ],
+)
+def test_replay_bad_input_is_one_line(
+    argv: list[str], words: list[str], recorded: dict[str, Path], tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    garbage = tmp_path / "garbage.log"
+    garbage.write_text("(0.000000) vcan0 100#8F00000000000000\nthis is not candump\n")
+    no_encoders = tmp_path / "no_encoders.log"
+    no_encoders.write_text("".join(ln + "\n" for ln in recorded["log"].read_text().splitlines()
+                                   if " 700#" in ln))
+    paths = {"log": recorded["log"], "garbage": garbage, "no_encoders": no_encoders}
+    argv = [a.format(**paths) if a.startswith("{") else a for a in argv]
+    assert_usage_error(capsys, main(["replay", *argv]), *words)
+
+
+def test_replay_realtime_plays_the_log_onto_a_bus(
+    recorded: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    short = tmp_path / "short.log"  # the first half second
+    short.write_text("".join(ln + "\n" for ln in recorded["log"].read_text().splitlines()
+                             if float(ln[1:ln.index(")")]) < 0.5))
+    expected = frames_of(short)
+    heard: list[can.Message] = []
+    with can.Bus(interface="virtual", channel="odocan-test-replay-rt") as listener:
+        def listen() -> None:
+            while len(heard) < len(expected) and (msg := listener.recv(5.0)) is not None:
+                heard.append(msg)
+
+        thread = threading.Thread(target=listen, name="listener")
+        thread.start()
+        code, out, err = run_cli(capsys, "replay", str(short), "--realtime", "-i", "virtual",
+                                 "-c", "odocan-test-replay-rt", "--speed", "10")
+        thread.join(10)
+    assert (code, err) == (0, "")
+    assert re.fullmatch(rf"replay: {len(expected)} of {len(expected)} frames played in "
+                        r"\d+\.\d\d s \(10x the recorded timing\)\n", out), out
+    assert [(m.arbitration_id, bytes(m.data)) for m in heard] == [f[1:] for f in expected]
+    # Timing, loosely: the last frame comes after the first (the log spans 0.49 s).
+    assert heard[-1].timestamp > heard[0].timestamp
+
+
+def test_replay_realtime_only_some_messages(
+    recorded: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    short = tmp_path / "short.log"
+    short.write_text("".join(ln + "\n" for ln in recorded["log"].read_text().splitlines()[:100]))
+    with can.Bus(interface="virtual", channel="odocan-test-replay-only") as listener:
+        code, out, err = run_cli(capsys, "replay", str(short), "--realtime", "-i", "virtual",
+                                 "-c", "odocan-test-replay-only", "--speed", "50",
+                                 "--only", "WHEEL_ENCODERS,SIM_TRUTH")
+        heard = []
+        while (msg := listener.recv(0)) is not None:
+            heard.append(msg)
+    assert (code, err) == (0, "")
+    expected = frames_of(short, {0x100, 0x700})
+    assert [(m.arbitration_id, bytes(m.data)) for m in heard] == [f[1:] for f in expected]
+    assert out.startswith(f"replay: {len(expected)} of {len(expected)} frames played")
+
+
+def test_replay_a_log_without_firmware_frames(
+    recorded: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A recording of the motor controller alone (encoders and truth): the firmware runs on it
+    for the first time; the integrator is then the default, exact."""
+    only = tmp_path / "motor_controller.log"
+    only.write_text("".join(ln + "\n" for ln in recorded["log"].read_text().splitlines()
+                            if " 100#" in ln or " 700#" in ln))
+    report_path = tmp_path / "replay.json"
+    code, out, err = run_cli(capsys, "replay", str(only), "--report", str(report_path))
+    assert (code, err) == (0, "")
+    assert out.splitlines()[0] == "replay: the log has no on-board pose to compare with"
+    report, run = json.loads(report_path.read_text()), json.loads(recorded["report"].read_text())
+    assert report["integrator"] == "exact"
+    assert report["final_onboard_pose"] == run["final_onboard_pose"]
+    assert report["replay"]["onboard_vs_log"]["samples"] == 0
