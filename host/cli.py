@@ -26,6 +26,9 @@ SUBCOMMANDS = (
     "vectors",
     "bridge",
     "fleet",
+    "experiment",
+    "umbmark",
+    "calibrate",
 )
 VERSION = "0.1.0"
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2

@@ -1,0 +1,42 @@
+"""Command-line options shared by ``odocan experiment``, ``umbmark`` and ``calibrate``.
+
+Values are checked in ``_do_<cmd>`` (not by argparse ``type=``) so that a bad value gives the
+error model's or the profile's own one-line message, ``error: ...`` and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from sim import robot
+from sim.exceptions import ConfigurationError
+
+
+def add_common_arguments(parser: argparse.ArgumentParser, default_errors: str, runs: int) -> None:
+    """``--robot``, ``--errors``, ``--seed``, ``--runs`` and ``--report``."""
+    parser.add_argument(
+        "--robot", default="pmir",
+        help=f"profile name ({', '.join(robot.list_profiles())}) or TOML path (default: pmir)",
+    )
+    parser.add_argument(
+        "--errors", default=default_errors, metavar="ed=..,eb=..,slip=..",
+        help=f"the real robot's errors: E_d, E_b, slip std; keys left out are 0 error "
+        f"(default: {default_errors})",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="random seed, >= 0 (default: 0)")
+    parser.add_argument("--runs", type=int, default=runs, help=f"runs (default: {runs})")
+    parser.add_argument("--report", type=Path, metavar="PATH", help="write the JSON report here")
+
+
+def check_report_path(path: Path | None) -> None:
+    """Refuse a ``--report`` whose directory does not exist, before a long run."""
+    if path is not None and not path.parent.is_dir():
+        raise ConfigurationError(f"--report: directory {path.parent} does not exist")
+
+
+def write_report(path: Path | None, report: dict[str, object]) -> None:
+    """Write ``report`` as indented JSON (nothing without ``--report``)."""
+    if path is not None:
+        path.write_text(json.dumps(report, indent=2) + "\n")
