@@ -143,8 +143,15 @@ def _clamp(value: int, limit: int) -> int:
 
 
 def turn_rate_mrad_s(error_bam32: i32, gain_milli_per_s: int, errors: ErrorMask) -> i32:
-    """omega = K e in mrad/s, clamped to +-OMEGA_MAX (e: i32 BAM32; K in 1/1000 per second)."""
-    omega = div_round_i64(angle_urad(error_bam32, errors) * gain_milli_per_s, MICRO_PER_UNIT)
+    """omega = K e in mrad/s, clamped to +-OMEGA_MAX (e: i32 BAM32; K in 1/1000 per second).
+
+    From the BAM32 directly, not from the rounded µrad: e K (< 2^43) times µrad per turn (Q20)
+    in the 128-bit product gives omega in nrad/s, then one division by 10^6 (error <= 0.5 +
+    5e-7 mrad/s)."""
+    nrad_s = mul_shr_round_i64(
+        wrap_i32(error_bam32) * gain_milli_per_s, URAD_PER_TURN_Q20, 52, errors
+    )
+    omega = div_round_i64(nrad_s, MICRO_PER_UNIT)
     return _clamp(omega, OMEGA_MAX_MRAD_S)
 
 

@@ -14,12 +14,13 @@ from firmware.config import RobotParams
 from firmware.ecu import OdomEcu
 from firmware.hal import TICK_PERIOD_US
 from sim.clock import Clock
+from sim.node import BusNode
 
 TICK_S = TICK_PERIOD_US / 1e6
 TX_LATENCY_S = 0.001  # the firmware's frames leave 1 ms after the tick that made them
 
 
-class FirmwareBoard:
+class FirmwareBoard(BusNode):
     """An ``OdomEcu`` on a python-can bus: receive ISR from ``recv``, transmit with ``send``."""
 
     def __init__(
@@ -30,30 +31,17 @@ class FirmwareBoard:
         accept_ids: frozenset[int] | None = None,
     ) -> None:
         """``accept_ids``: the acceptance filter's IDs (None: every 11-bit data frame)."""
-        self.bus = bus
-        self.clock = clock
+        super().__init__(bus, clock)
         self.accept_ids = accept_ids
         self.ecu = OdomEcu(self, params)
         self._bus_off = False
         self.frames_dropped_by_filter = 0
-        self.frames_sent = 0
-        self.tx_errors = 0
+
+    tx_latency_s = TX_LATENCY_S
 
     def transmit(self, can_id: int, data: bytes) -> bool:
         """The HAL's transmit (``firmware.hal.CanTx``)."""
-        msg = can.Message(
-            timestamp=self.clock.now_s() + TX_LATENCY_S,
-            arbitration_id=can_id,
-            is_extended_id=False,
-            data=data,
-        )
-        try:
-            self.bus.send(msg)
-        except can.CanError:
-            self.tx_errors += 1
-            return False
-        self.frames_sent += 1
-        return True
+        return self.send_frame(can_id, data)
 
     def service_rx(self) -> None:
         """Deliver every frame waiting on the bus to the firmware's receive ISR."""

@@ -21,12 +21,12 @@ import asyncio
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
-from types import TracebackType
 
 import can
 
 from sim.board import TICK_S
 from sim.clock import RealTimeClock
+from sim.closing import Closing
 from sim.contract import database
 from sim.realtime import DeadlineStats
 from sim.rig import LockstepRig, RigConfig
@@ -65,7 +65,7 @@ class _Collector(can.Listener):
         self.batch.append((self.index, msg))
 
 
-class Fleet:
+class Fleet(Closing):
     """N lockstep rigs stepped together (see the module docstring)."""
 
     def __init__(self, config: FleetConfig) -> None:
@@ -78,9 +78,13 @@ class Fleet:
         prefix = f"odocan-fleet-{next(_fleet_ids)}"
         self.rigs = [
             LockstepRig(
-                RigConfig(robot=config.robot, integrator=config.integrator,
-                          scenario=config.scenario, seed=config.seed + i,
-                          channel=f"{prefix}-{i}"),
+                RigConfig(
+                    robot=config.robot,
+                    integrator=config.integrator,
+                    scenario=config.scenario,
+                    seed=config.seed + i,
+                    channel=f"{prefix}-{i}",
+                ),
                 listeners=[self._collectors[i]],
             )
             for i in range(config.robots)
@@ -112,17 +116,6 @@ class Fleet:
         """Release every robot's buses."""
         for rig in self.rigs:
             rig.close()
-
-    def __enter__(self) -> Fleet:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 async def run_realtime(

@@ -20,6 +20,7 @@ from firmware import frames as fr
 from firmware.e2e import E2EReceiver, E2EStatus
 from firmware.errors import ErrorMask
 from sim.clock import Clock
+from sim.node import BusNode
 from sim.scenarios import Scenario
 from sim.vehicle import Vehicle
 
@@ -27,30 +28,7 @@ _U24 = 0xFF_FFFF
 _BAM16_PER_RAD = 65536 / (2 * math.pi)
 
 
-class _Node:
-    """What the sim nodes share: a bus handle, a clock, and counts of the frames they sent."""
-
-    def __init__(self, bus: can.BusABC, clock: Clock) -> None:
-        self.bus = bus
-        self.clock = clock
-        self.frames_sent = 0
-        self.tx_errors = 0  # frames the bus refused (CanError)
-
-    def _send(self, can_id: int, data: bytes) -> bool:
-        """Send one classic data frame stamped with the clock; False (and counted) on CanError."""
-        msg = can.Message(
-            timestamp=self.clock.now_s(), arbitration_id=can_id, is_extended_id=False, data=data
-        )
-        try:
-            self.bus.send(msg)
-        except can.CanError:
-            self.tx_errors += 1
-            return False
-        self.frames_sent += 1
-        return True
-
-
-class MotorController(_Node):
+class MotorController(BusNode):
     """Node MOTOR_CTRL: two wheel motors and their encoders, driven over CAN."""
 
     def __init__(self, bus: can.BusABC, vehicle: Vehicle, clock: Clock) -> None:
@@ -84,13 +62,13 @@ class MotorController(_Node):
         self.vehicle.advance_to(self.clock.now_s())
         left, right = self.vehicle.encoder_counts()
         self.counter = (self.counter + 1) & 0xF
-        self._send(
+        self.send_frame(
             fr.WHEEL_ENCODERS_ID, fr.pack_wheel_encoders(self.counter, left & _U24, right & _U24)
         )
         return self.counter
 
 
-class TruthSender(_Node):
+class TruthSender(BusNode):
     """Node SIM: the ground truth as SIM_TRUTH (0.1 mm, BAM16), aligned to an encoder frame."""
 
     def __init__(self, bus: can.BusABC, vehicle: Vehicle, clock: Clock) -> None:
@@ -110,10 +88,10 @@ class TruthSender(_Node):
         for part, value in parts:
             self.counter = (self.counter + 1) & 0xF
             data = fr.pack_sim_truth(self.counter, part, enc_counter, value, self.errors)
-            self._send(fr.SIM_TRUTH_ID, data)
+            self.send_frame(fr.SIM_TRUTH_ID, data)
 
 
-class ScenarioDriver(_Node):
+class ScenarioDriver(BusNode):
     """A HOST role: an open-loop scenario's wheel speeds as MOTOR_CMD frames."""
 
     def __init__(
@@ -136,6 +114,6 @@ class ScenarioDriver(_Node):
         data = fr.pack_motor_cmd(
             self.counter, round(left_mps * 1000), round(right_mps * 1000), self.errors
         )
-        self._send(fr.MOTOR_CMD_ID, data)
+        self.send_frame(fr.MOTOR_CMD_ID, data)
         if self.local is not None:
             self.local.deliver(data)

@@ -23,13 +23,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from types import TracebackType
 
 import can
 
 from firmware.config import Integrator, RobotParams
 from sim.board import TICK_S, FirmwareBoard
 from sim.clock import LockstepClock
+from sim.closing import Closing
 from sim.contract import cycle_ticks
 from sim.errors import ErrorModel
 from sim.exceptions import ConfigurationError
@@ -67,7 +67,7 @@ class RigConfig:
     duration_s: float | None = None  # the run's length (default: the scenario's own)
 
 
-class LockstepRig:
+class LockstepRig(Closing):
     """Motor controller, ground truth, scenario driver, firmware and host observer in lockstep."""
 
     def __init__(self, config: RigConfig, listeners: Sequence[can.Listener] = ()) -> None:
@@ -184,14 +184,3 @@ class LockstepRig:
             listener.stop()
         for bus in self._buses:
             bus.shutdown()
-
-    def __enter__(self) -> LockstepRig:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

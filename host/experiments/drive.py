@@ -24,7 +24,6 @@ import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from types import TracebackType
 from typing import Any
 
 import can
@@ -37,6 +36,7 @@ from host.decode import BulkDecoder
 from host.logio import FrameCollector
 from host.mqtt.commands import CommandEncoder, CommandRejected
 from sim.board import TICK_S
+from sim.closing import Closing
 from sim.contract import database
 from sim.errors import ErrorModel
 from sim.exceptions import OdocanError
@@ -147,7 +147,7 @@ def _signals(message: Message, data: bytes | bytearray, choices: bool = True) ->
     return {k: str(v) if isinstance(v, NamedSignalValue) else v for k, v in signals.items()}
 
 
-class NavSession:
+class NavSession(Closing):
     """The robot powered on in the closed-loop rig; the host drives it over CAN.
 
     Args:
@@ -170,8 +170,14 @@ class NavSession:
         self.integrator = integrator
         self.listener = _NavListener()
         self.frames = FrameCollector()
-        config = RigConfig(robot=robot, integrator=integrator, scenario=None, seed=seed,
-                           errors=errors, channel=channel)
+        config = RigConfig(
+            robot=robot,
+            integrator=integrator,
+            scenario=None,
+            seed=seed,
+            errors=errors,
+            channel=channel,
+        )
         self.rig = LockstepRig(config, [self.listener, self.frames])
         self.encoder = CommandEncoder()
         self.marks: list[Mark] = []
@@ -181,17 +187,6 @@ class NavSession:
     def close(self) -> None:
         """Release the rig's buses."""
         self.rig.close()
-
-    def __enter__(self) -> NavSession:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def _send_command(self, name: str, values: dict[str, Any]) -> int:
         """Encode one command (JSON, as an MQTT client would) and send its frames now; the E2E
@@ -221,9 +216,7 @@ class NavSession:
                 raise ExperimentError(f"{what}: NACK ({self.listener.reason_name(ack)})")
         self.listener.acks.clear()
 
-    def configure(
-        self, radius_left_m: float, radius_right_m: float, wheelbase_m: float
-    ) -> None:
+    def configure(self, radius_left_m: float, radius_right_m: float, wheelbase_m: float) -> None:
         """Write the wheel radii and the wheelbase (m, sent as whole nanometres) over CAN:
         ODOM_CONFIG staged writes + APPLY, waiting for the APPLY's ODOM_ACK."""
         values = {
@@ -247,8 +240,13 @@ class NavSession:
         self._last_goal = len(path)
         self._finished = False
         for goal_id, point in enumerate(path, start=1):
-            values: dict[str, Any] = {"x_m": point.x_m, "y_m": point.y_m, "mode": "turn_go_turn",
-                                      "append": goal_id > 1, "goal_id": goal_id}
+            values: dict[str, Any] = {
+                "x_m": point.x_m,
+                "y_m": point.y_m,
+                "mode": "turn_go_turn",
+                "append": goal_id > 1,
+                "goal_id": goal_id,
+            }
             if point.heading_rad is not None:
                 values["heading_rad"] = point.heading_rad
             counter = self._send_command("nav_goal", values)

@@ -10,18 +10,17 @@ import argparse
 import json
 from pathlib import Path
 
-from sim import robot
+from host.options import add_robot_argument
 from sim.exceptions import ConfigurationError
 
 
 def add_common_arguments(parser: argparse.ArgumentParser, default_errors: str, runs: int) -> None:
     """``--robot``, ``--errors``, ``--seed``, ``--runs`` and ``--report``."""
+    add_robot_argument(parser)
     parser.add_argument(
-        "--robot", default="pmir",
-        help=f"profile name ({', '.join(robot.list_profiles())}) or TOML path (default: pmir)",
-    )
-    parser.add_argument(
-        "--errors", default=default_errors, metavar="ed=..,eb=..,slip=..",
+        "--errors",
+        default=default_errors,
+        metavar="ed=..,eb=..,slip=..",
         help=f"the real robot's errors: E_d, E_b, slip std; keys left out are 0 error "
         f"(default: {default_errors})",
     )

@@ -22,6 +22,7 @@ import cantools
 
 from host.analysis import analyze
 from host.logio import read_log
+from host.options import add_robot_argument
 from host.summary import add_check_arguments, check_output_paths, finish
 from sim import robot
 from sim.exceptions import ConfigurationError
@@ -38,11 +39,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "within tolerance, 1 not, 2 on bad usage or input.",
     )
     parser.add_argument("log", type=Path, metavar="LOG", help="CAN log: .log (candump), .asc, .blf")
-    parser.add_argument(
-        "--robot",
-        default="pmir",
-        help=f"profile name ({', '.join(robot.list_profiles())}) or TOML path (default: pmir)",
-    )
+    add_robot_argument(parser)
     parser.add_argument(
         "--integrator",
         choices=INTEGRATORS,

@@ -30,7 +30,8 @@ from sim.rig import INTEGRATORS
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``odocan bridge``."""
     parser = subparsers.add_parser(
-        "bridge", help="bridge one robot's CAN bus to MQTT",
+        "bridge",
+        help="bridge one robot's CAN bus to MQTT",
         description="Publish a robot's telemetry (pose, float64 reference, truth, error, status, "
         "rates) to MQTT and send validated commands from MQTT to its bus.",
     )
@@ -41,10 +42,18 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--name", default="robot001", help="robot name in the topics")
     parser.add_argument("--robot", default="pmir", help="profile (for the reference)")
-    parser.add_argument("--integrator", choices=INTEGRATORS, default="exact",
-                        help="the firmware's integrator (for the reference; default: exact)")
-    parser.add_argument("--duration", type=float, metavar="SECONDS",
-                        help="stop after this many seconds (default: until Ctrl-C)")
+    parser.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        default="exact",
+        help="the firmware's integrator (for the reference; default: exact)",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        metavar="SECONDS",
+        help="stop after this many seconds (default: until Ctrl-C)",
+    )
     add_mqtt_arguments(parser)
     add_bus_arguments(parser)
 
@@ -56,8 +65,12 @@ def _do_bridge(args: argparse.Namespace) -> int:
         raise ConfigurationError(str(exc)) from None
     url = broker_url(args)
     profile = robot.load(args.robot)
-    geometry = Geometry(profile.counts_per_rev, profile.wheel_radius_left_m,
-                        profile.wheel_radius_right_m, profile.wheelbase_m)
+    geometry = Geometry(
+        profile.counts_per_rev,
+        profile.wheel_radius_left_m,
+        profile.wheel_radius_right_m,
+        profile.wheelbase_m,
+    )
     bus = open_bus(args)
     try:
         asyncio.run(_bridge(args, name, url, bus, geometry, profile.counter_bits))
@@ -66,12 +79,19 @@ def _do_bridge(args: argparse.Namespace) -> int:
     return 0
 
 
-async def _bridge(args: argparse.Namespace, name: str, url: BrokerURL | None, bus: can.BusABC,
-                  geometry: Geometry, counter_bits: int) -> None:
+async def _bridge(
+    args: argparse.Namespace,
+    name: str,
+    url: BrokerURL | None,
+    bus: can.BusABC,
+    geometry: Geometry,
+    counter_bits: int,
+) -> None:
     async with broker_for(url) as (broker, embedded):
         print(f"bridge {name}: {broker}{' (embedded)' if embedded else ''}", file=sys.stderr)
-        config = BridgeConfig(broker=broker, publish_hz=args.publish_hz,
-                              client_prefix=args.client_prefix)
+        config = BridgeConfig(
+            broker=broker, publish_hz=args.publish_hz, client_prefix=args.client_prefix
+        )
         endpoint = RobotEndpoint(name, bus, geometry, args.integrator, counter_bits)
         bridge = Bridge([endpoint], config=config)
         stop = asyncio.Event()

@@ -22,7 +22,8 @@ from sim import errors, robot
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``odocan calibrate``."""
     parser = subparsers.add_parser(
-        "calibrate", help="UMBmark, estimate E_d and E_b, correct the firmware over CAN, re-run",
+        "calibrate",
+        help="UMBmark, estimate E_d and E_b, correct the firmware over CAN, re-run",
         description="Run UMBmark, estimate E_d and E_b (Borenstein & Feng from the centres of "
         "gravity, and a model fit of the logged encoder counts), write the corrected wheel "
         "radii and wheelbase into the firmware over CAN (ODOM_CONFIG + APPLY, ODOM_ACK awaited) "
@@ -34,15 +35,25 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     add_arguments(parser)
-    parser.add_argument("--method", choices=umbmark.METHODS, default="model",
-                        help="the estimate written to the firmware (default: model)")
+    parser.add_argument(
+        "--method",
+        choices=umbmark.METHODS,
+        default="model",
+        help="the estimate written to the firmware (default: model)",
+    )
 
 
 def _do_calibrate(args: argparse.Namespace) -> int:
     check_report_path(args.report)
     profile, model = robot.load(args.robot), errors.parse(args.errors)
-    cal = umbmark.calibrate(profile, model, args.seed, side_m=args.side,
-                            runs_per_direction=args.runs, method=args.method)
+    cal = umbmark.calibrate(
+        profile,
+        model,
+        args.seed,
+        side_m=args.side,
+        runs_per_direction=args.runs,
+        method=args.method,
+    )
     print(header(args, model, "calibrate"))
     render.show(
         render.umbmark_table(cal.before, "Before"),

@@ -14,7 +14,7 @@ import argparse
 import sys
 
 from host.busopts import add_bus_arguments, add_fault_argument, open_bus
-from host.subparsers.sim import add_duration_argument, add_robot_argument, check_duration
+from host.options import add_duration_argument, add_robot_argument, check_duration
 from sim import robot
 from sim.board import FirmwareBoard
 from sim.realtime import PeriodicLoop, accepted_ids, stop_on_signals

@@ -27,7 +27,8 @@ from sim.scenarios import SCENARIOS
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``odocan fleet``."""
     parser = subparsers.add_parser(
-        "fleet", help="run N robots in real time, bridged to MQTT",
+        "fleet",
+        help="run N robots in real time, bridged to MQTT",
         description="Run N independent robots (motor controller, truth, scenario, firmware on "
         "their own virtual CAN channels) in real time in one process, bridged to MQTT.",
     )
@@ -37,15 +38,24 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robots", type=int, default=3, metavar="N", help="robots (default: 3)")
-    parser.add_argument("--duration", type=float, default=10.0, metavar="SECONDS",
-                        help="wall-clock seconds to run (default: 10)")
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=10.0,
+        metavar="SECONDS",
+        help="wall-clock seconds to run (default: 10)",
+    )
     parser.add_argument("--report", type=Path, metavar="PATH", help="write the JSON report")
     parser.add_argument("--robot", default="pmir", help="profile of every robot (default: pmir)")
     parser.add_argument("--integrator", choices=INTEGRATORS, default="exact")
     parser.add_argument("--scenario", choices=SCENARIOS, default="random")
     parser.add_argument("--seed", type=int, default=0, help="robot i drives with seed SEED + i")
-    parser.add_argument("--max-miss-ratio", type=float, default=0.001,
-                        help="exit 1 above this deadline_miss_ratio (default: 0.001)")
+    parser.add_argument(
+        "--max-miss-ratio",
+        type=float,
+        default=0.001,
+        help="exit 1 above this deadline_miss_ratio (default: 0.001)",
+    )
     add_mqtt_arguments(parser)
 
 
@@ -55,18 +65,27 @@ def _do_fleet(args: argparse.Namespace) -> int:
     if args.duration <= 0:
         raise ConfigurationError(f"--duration must be positive, got {args.duration}")
     run = FleetRun(
-        fleet=FleetConfig(robots=args.robots, robot=robot.load(args.robot),
-                          integrator=args.integrator, scenario=args.scenario, seed=args.seed),
-        duration_s=args.duration, broker=broker_url(args), publish_hz=args.publish_hz,
+        fleet=FleetConfig(
+            robots=args.robots,
+            robot=robot.load(args.robot),
+            integrator=args.integrator,
+            scenario=args.scenario,
+            seed=args.seed,
+        ),
+        duration_s=args.duration,
+        broker=broker_url(args),
+        publish_hz=args.publish_hz,
         client_prefix=args.client_prefix,
     )
     report = asyncio.run(run_fleet(run))
     text = json.dumps(report, indent=2)
     if args.report is not None:
         args.report.write_text(text + "\n")
-    print(f"fleet: {report['robots']} robots, {report['ticks']} ticks, "
-          f"deadline_miss_ratio {report['deadline_miss_ratio']:.4f} "
-          f"(worst {report['max_lateness_ms']:.1f} ms), broker {report['broker']}")
+    print(
+        f"fleet: {report['robots']} robots, {report['ticks']} ticks, "
+        f"deadline_miss_ratio {report['deadline_miss_ratio']:.4f} "
+        f"(worst {report['max_lateness_ms']:.1f} ms), broker {report['broker']}"
+    )
     return 0 if report["deadline_miss_ratio"] <= args.max_miss_ratio else 1
 
 

@@ -31,6 +31,7 @@ from host.busopts import add_bus_arguments, open_bus
 from host.monitor import BusMonitor, fleet_snapshot, render, render_fleet, to_json
 from host.mqtt.broker import BrokerURL
 from host.mqtt.fleetview import RobotState, fleet_states
+from host.options import add_robot_argument
 from host.subparsers.analyze import load_dbc
 from sim import robot
 from sim.exceptions import ConfigurationError, OdocanError
@@ -57,21 +58,31 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "odocan monitor -i virtual -c vcan0 --duration 5 --json; "
         "odocan monitor --mqtt mqtt://127.0.0.1:1883",
     )
-    parser.add_argument("--duration", type=float, metavar="SECONDS",
-                        help="stop after this many seconds (default: until Ctrl-C)")
-    parser.add_argument("--json", action="store_true",
-                        help="no live view: print one JSON object of the model at the end")
     parser.add_argument(
-        "--robot", default="pmir",
-        help=f"profile for the reference ({', '.join(robot.list_profiles())}) or TOML path "
-        "(default: pmir)",
+        "--duration",
+        type=float,
+        metavar="SECONDS",
+        help="stop after this many seconds (default: until Ctrl-C)",
     )
-    parser.add_argument("--integrator", choices=INTEGRATORS,
-                        help="reference integrator (default: the one ODOM_STATUS reports)")
-    parser.add_argument("--dbc", type=Path, metavar="PATH",
-                        help="DBC to decode with (default: dbc/odocan.dbc)")
     parser.add_argument(
-        "--mqtt", nargs="?", const=DEFAULT_BROKER, metavar="BROKER_URL",
+        "--json",
+        action="store_true",
+        help="no live view: print one JSON object of the model at the end",
+    )
+    add_robot_argument(parser, role="profile for the reference")
+    parser.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        help="reference integrator (default: the one ODOM_STATUS reports)",
+    )
+    parser.add_argument(
+        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: dbc/odocan.dbc)"
+    )
+    parser.add_argument(
+        "--mqtt",
+        nargs="?",
+        const=DEFAULT_BROKER,
+        metavar="BROKER_URL",
         help=f"show the fleet published on this MQTT broker instead (default: {DEFAULT_BROKER})",
     )
     add_bus_arguments(parser)
@@ -86,8 +97,11 @@ def _do_monitor(args: argparse.Namespace) -> int:
         if args.interface is not None or args.channel is not None:
             raise ConfigurationError("--mqtt watches a broker: give no -i/--interface or -c")
         return _watch_fleet(BrokerURL.parse(args.mqtt), args)
-    model = BusMonitor(robot.load(args.robot), args.integrator,
-                       load_dbc(args.dbc) if args.dbc is not None else None)
+    model = BusMonitor(
+        robot.load(args.robot),
+        args.integrator,
+        load_dbc(args.dbc) if args.dbc is not None else None,
+    )
     bus = open_bus(args)
     try:
         _watch_bus(bus, model, args, _source(args))
@@ -197,11 +211,18 @@ class _FleetWatch:
 
     def snapshot(self) -> dict[str, Any]:
         """``broker``, ``duration_s`` and ``robots`` (``host.monitor.fleet_snapshot``)."""
-        return {"broker": str(self.url), "duration_s": time.monotonic() - self.started,
-                "robots": fleet_snapshot(self.table)}
+        return {
+            "broker": str(self.url),
+            "duration_s": time.monotonic() - self.started,
+            "robots": fleet_snapshot(self.table),
+        }
 
     def render(self) -> Any:
         """The screen (with the connection problem, if any)."""
         note = f"broker: {self.last_error} (reconnecting)" if self.last_error else ""
-        return render_fleet(fleet_snapshot(self.table), source=str(self.url),
-                            elapsed_s=time.monotonic() - self.started, note=note)
+        return render_fleet(
+            fleet_snapshot(self.table),
+            source=str(self.url),
+            elapsed_s=time.monotonic() - self.started,
+            note=note,
+        )

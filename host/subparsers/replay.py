@@ -49,6 +49,7 @@ from host.logio import (
     FrameCollector,
     read_log,
 )
+from host.options import add_robot_argument, check_log_path
 from host.summary import add_check_arguments, check_output_paths, finish
 from sim import contract, robot
 from sim.board import TICK_S, FirmwareBoard
@@ -57,7 +58,6 @@ from sim.exceptions import ConfigurationError, OdocanError
 from sim.rig import INTEGRATORS, firmware_params
 from sim.robot import RobotProfile
 
-LOG_SUFFIXES = (".log", ".asc", ".blf")
 MAX_GAP_TICKS = 6000  # a gap in the log longer than 60 s is replayed as 60 s
 POSITION_LSB_M = 1e-4
 HEADING_LSB_RAD = 2 * math.pi / 65536
@@ -80,10 +80,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "odocan replay drive.log --realtime -i socketcan -c vcan0 --speed 2",
     )
     parser.add_argument("log", type=Path, metavar="LOG", help="CAN log: .log (candump), .asc, .blf")
-    parser.add_argument(
-        "--robot", default="pmir",
-        help=f"profile name ({', '.join(robot.list_profiles())}) or TOML path (default: pmir)",
-    )
+    add_robot_argument(parser)
     parser.add_argument(
         "--integrator", choices=INTEGRATORS,
         help="on-board integrator (default: the one the log's ODOM_STATUS reports, else exact)",
@@ -108,7 +105,7 @@ def _do_replay(args: argparse.Namespace) -> int:
         return _play_realtime(read_log(args.log), args)
     profile = robot.load(args.robot)
     check_output_paths(args)
-    _check_log_out(args.log_out)
+    check_log_path(args.log_out)
     frames = read_log(args.log)
     feed = ReplayInput.from_log(frames)
     integrator = args.integrator or logged_integrator(frames, feed.accepted) or "exact"
@@ -134,18 +131,6 @@ def _check_options(args: argparse.Namespace) -> None:
         given.append("--speed")
     if given:
         raise ConfigurationError(f"{', '.join(given)}: only with --realtime")
-
-
-def _check_log_out(path: Path | None) -> None:
-    if path is None:
-        return
-    if path.suffix.lower() not in LOG_SUFFIXES:
-        raise ConfigurationError(
-            f"--log {path}: unknown format {path.suffix or '(none)'!r} "
-            f"(use {', '.join(LOG_SUFFIXES)})"
-        )
-    if not path.parent.is_dir():
-        raise ConfigurationError(f"--log {path}: directory {path.parent} does not exist")
 
 
 # --- what is fed -------------------------------------------------------------------------------

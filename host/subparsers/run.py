@@ -15,7 +15,6 @@ to that bus, paced to the wall clock so the copy keeps the DBC's cycle times (e.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -28,14 +27,13 @@ import can
 from host.analysis import Analysis, analyze
 from host.busopts import add_bus_arguments, add_fault_argument, open_bus, parse_faults
 from host.logio import FrameCollector
+from host.options import add_robot_argument, check_duration, check_log_path
 from host.summary import add_check_arguments, check_output_paths, finish
 from sim import errors, robot
 from sim.board import TICK_S
-from sim.exceptions import ConfigurationError
 from sim.rig import INTEGRATORS, LockstepRig, RigConfig
 from sim.scenarios import SCENARIOS
 
-LOG_SUFFIXES = (".log", ".asc", ".blf")
 PROGRESS_MIN_S = 300.0  # simulated seconds from which a progress bar is worth showing
 
 
@@ -54,11 +52,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     parser.add_argument(
         "--scenario", choices=SCENARIOS, default="random", help="driving scenario (default: random)"
     )
-    parser.add_argument(
-        "--robot",
-        default="pmir",
-        help=f"profile name ({', '.join(robot.list_profiles())}) or TOML path (default: pmir)",
-    )
+    add_robot_argument(parser)
     parser.add_argument(
         "--integrator",
         choices=INTEGRATORS,
@@ -89,7 +83,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 
 
 def _do_run(args: argparse.Namespace) -> int:
-    _check_duration(args.duration)
+    check_duration(args.duration)
     faults = parse_faults(args)
     config = RigConfig(
         robot=robot.load(args.robot),
@@ -101,30 +95,11 @@ def _do_run(args: argparse.Namespace) -> int:
         fw_faults=None if faults is None else replace(faults, seed=faults.seed + 1),
         duration_s=args.duration,
     )
-    _check_log_path(args.log)
+    check_log_path(args.log)
     check_output_paths(args)
     analysis = _run_and_analyze(config, args)
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
     return finish(analysis, args, title=title)
-
-
-def _check_duration(duration_s: float | None) -> None:
-    if duration_s is not None and not (math.isfinite(duration_s) and duration_s > 0):
-        raise ConfigurationError(
-            f"--duration must be a positive number of seconds, got {duration_s}"
-        )
-
-
-def _check_log_path(path: Path | None) -> None:
-    if path is None:
-        return
-    if path.suffix.lower() not in LOG_SUFFIXES:
-        raise ConfigurationError(
-            f"--log {path}: unknown format {path.suffix or '(none)'!r} "
-            f"(use {', '.join(LOG_SUFFIXES)})"
-        )
-    if not path.parent.is_dir():
-        raise ConfigurationError(f"--log {path}: directory {path.parent} does not exist")
 
 
 def _run_and_analyze(config: RigConfig, args: argparse.Namespace) -> Analysis:

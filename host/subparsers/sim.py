@@ -13,12 +13,11 @@ summary on stderr and exits 0.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 
 from host.busopts import add_bus_arguments, add_fault_argument, open_bus
+from host.options import add_duration_argument, add_robot_argument, check_duration
 from sim import errors, robot
-from sim.exceptions import ConfigurationError
 from sim.realtime import PeriodicLoop, SimNode, stop_on_signals
 from sim.scenarios import SCENARIOS
 
@@ -46,33 +45,6 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     add_bus_arguments(parser)
     add_fault_argument(parser)
     parser.set_defaults(func=_do_sim)
-
-
-def add_robot_argument(parser: argparse.ArgumentParser) -> None:
-    """``--robot NAME|PATH`` (shared with ``odocan firmware``)."""
-    parser.add_argument(
-        "--robot",
-        default="pmir",
-        help=f"profile name ({', '.join(robot.list_profiles())}) or TOML path (default: pmir)",
-    )
-
-
-def add_duration_argument(parser: argparse.ArgumentParser) -> None:
-    """``--duration S`` (shared with ``odocan firmware``)."""
-    parser.add_argument(
-        "--duration",
-        type=float,
-        metavar="SECONDS",
-        help="wall-clock seconds to run (default: until Ctrl-C or SIGTERM)",
-    )
-
-
-def check_duration(duration_s: float | None) -> None:
-    """Refuse a duration that is not a positive, finite number of seconds."""
-    if duration_s is not None and not (math.isfinite(duration_s) and duration_s > 0):
-        raise ConfigurationError(
-            f"--duration must be a positive number of seconds, got {duration_s}"
-        )
 
 
 def _do_sim(args: argparse.Namespace) -> int:

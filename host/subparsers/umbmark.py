@@ -21,7 +21,8 @@ DEFAULT_ERRORS = "ed=1.002,eb=1.01,slip=0.005"
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``odocan umbmark``."""
     parser = subparsers.add_parser(
-        "umbmark", help="UMBmark: the bidirectional square test of systematic odometry errors",
+        "umbmark",
+        help="UMBmark: the bidirectional square test of systematic odometry errors",
         description="Borenstein & Feng's UMBmark: the firmware drives the square (turn-go-turn, "
         "from its own odometry) RUNS times clockwise and RUNS times counter-clockwise; the "
         "return errors (true end - on-board end, start frame), their centres of gravity and "
@@ -34,15 +35,22 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``umbmark`` (``calibrate`` shares them)."""
     add_common_arguments(parser, DEFAULT_ERRORS, umbmark.RUNS_PER_DIRECTION)
-    parser.add_argument("--side", type=float, default=umbmark.SIDE_M, metavar="METRES",
-                        help=f"side of the square (default: {umbmark.SIDE_M:g})")
+    parser.add_argument(
+        "--side",
+        type=float,
+        default=umbmark.SIDE_M,
+        metavar="METRES",
+        help=f"side of the square (default: {umbmark.SIDE_M:g})",
+    )
 
 
 def header(args: argparse.Namespace, model: errors.ErrorModel, name: str) -> str:
     """The line printed before the tables."""
-    return (f"{name}: {args.runs} x CW + {args.runs} x CCW, {args.side:g} m square, robot "
-            f"{args.robot}, errors ed={model.ed:g}, eb={model.eb:g}, slip={model.slip:g}, "
-            f"seed {args.seed}")
+    return (
+        f"{name}: {args.runs} x CW + {args.runs} x CCW, {args.side:g} m square, robot "
+        f"{args.robot}, errors ed={model.ed:g}, eb={model.eb:g}, slip={model.slip:g}, "
+        f"seed {args.seed}"
+    )
 
 
 def _do_umbmark(args: argparse.Namespace) -> int:
@@ -53,9 +61,12 @@ def _do_umbmark(args: argparse.Namespace) -> int:
     )
     print(header(args, model, "UMBmark"))
     render.show(render.umbmark_table(result))
-    report = {"robot": profile.name, "seed": args.seed,
-              "error_model": {"ed": model.ed, "eb": model.eb, "slip": model.slip},
-              **umbmark.umbmark_report(result)}
+    report = {
+        "robot": profile.name,
+        "seed": args.seed,
+        "error_model": {"ed": model.ed, "eb": model.eb, "slip": model.slip},
+        **umbmark.umbmark_report(result),
+    }
     write_report(args.report, report)
     return 0
 
