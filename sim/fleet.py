@@ -27,7 +27,7 @@ import can
 from sim.board import TICK_S
 from sim.clock import RealTimeClock
 from sim.closing import Closing
-from sim.contract import database
+from sim.contract import cycle_ticks, database
 from sim.realtime import DeadlineStats
 from sim.rig import LockstepRig, RigConfig
 from sim.robot import RobotProfile
@@ -84,6 +84,7 @@ class Fleet(Closing):
                     scenario=config.scenario,
                     seed=config.seed + i,
                     channel=f"{prefix}-{i}",
+                    truth_phase_ticks=_truth_phase(i),
                 ),
                 listeners=[self._collectors[i]],
             )
@@ -92,9 +93,11 @@ class Fleet(Closing):
 
     def step(self, k: int) -> None:
         """Tick ``k`` of every robot (simulated time ``k * TICK_S``)."""
-        for rig in self.rigs:
-            rig.ticks = k
-            rig.step()
+        for index, rig in enumerate(self.rigs):
+            own_k = k - _tick_offset(index)
+            if own_k >= 0:
+                rig.ticks = own_k
+                rig.step()
 
     def take_batch(self) -> Batch:
         """The frames the host observers saw since the last call, in bus order per robot."""
@@ -116,6 +119,20 @@ class Fleet(Closing):
         """Release every robot's buses."""
         for rig in self.rigs:
             rig.close()
+
+
+def _tick_offset(index: int) -> int:
+    """Robot ``index`` starts this many fleet ticks late: every other robot runs one tick out of
+    phase, so the pose, twist and MOTOR_CMD frames (every 2nd tick) of half the fleet fall on
+    the other ticks. Each robot's own timeline is an ordinary rig's."""
+    return index % 2
+
+
+def _truth_phase(index: int) -> int:
+    """Robot ``index``'s SIM_TRUTH tick in its own timeline: pairs of robots take turns (the
+    truth is the costly part of a step), on even ticks so it stays aligned with the pose frames."""
+    cycle = cycle_ticks("SIM_TRUTH", TICK_S)
+    return (2 * (index // 2)) % cycle if cycle > 1 else 0
 
 
 async def run_realtime(

@@ -65,6 +65,7 @@ class RigConfig:
     faults: FaultSpec | None = None  # on the sim's handle: what MOTOR_CTRL and SIM send
     fw_faults: FaultSpec | None = None  # on the firmware's handle: what ODOM_MCU sends
     duration_s: float | None = None  # the run's length (default: the scenario's own)
+    truth_phase_ticks: int = 0  # SIM_TRUTH on ticks k = phase (mod its cycle); keep it even
 
 
 class LockstepRig(Closing):
@@ -137,7 +138,7 @@ class LockstepRig(Closing):
         if self.driver is not None and k % self._driver_ticks == 0:
             self.driver.send()
         enc_counter = self.motor_controller.sample_and_send()
-        if k % self._truth_ticks == 0:
+        if (k - self.config.truth_phase_ticks) % self._truth_ticks == 0:
             self.truth.send(enc_counter)
         self.board.run_tick()
         self._drain_host()

@@ -123,23 +123,29 @@ def test_telemetry_of_a_lockstep_run_matches_the_reference() -> None:
     assert hz["WHEEL_ENCODERS"] == pytest.approx(100.0)  # 500 frames over the 5 s "window"
 
 
-def test_a_fleet_robot_sends_the_lockstep_rigs_frames() -> None:
-    """Robot i of a fleet is the lockstep rig with seed seed + i, byte for byte."""
-    with Fleet(FleetConfig(robots=2, robot=PMIR, seed=10)) as fleet:
+@pytest.mark.parametrize(("index", "start_tick", "truth_phase"), [(1, 1, 0), (2, 0, 2)])
+def test_a_fleet_robot_sends_the_lockstep_rigs_frames(
+    index: int, start_tick: int, truth_phase: int
+) -> None:
+    """Robot i of a fleet is the lockstep rig with seed seed + i, byte for byte: odd robots start
+    one fleet tick late and pairs of robots take turns for SIM_TRUTH (spreading the load)."""
+    with Fleet(FleetConfig(robots=3, robot=PMIR, seed=10)) as fleet:
         fleet_frames: list[bytes] = []
-        for k in range(120):
+        for k in range(120 + start_tick):
             fleet.step(k)
-            fleet_frames += [bytes(m.data) for i, m in fleet.take_batch() if i == 1]
+            fleet_frames += [bytes(m.data) for i, m in fleet.take_batch() if i == index]
     rig_frames: list[bytes] = []
 
     class Keep(can.Listener):
         def on_message_received(self, msg: can.Message) -> None:
             rig_frames.append(bytes(msg.data))
 
-    with LockstepRig(RigConfig(robot=PMIR, seed=11, channel="test-mqtt-fleet-rig"),
-                     [Keep()]) as rig:
+    config = RigConfig(robot=PMIR, seed=10 + index, channel="test-mqtt-fleet-rig",
+                       truth_phase_ticks=truth_phase)
+    with LockstepRig(config, [Keep()]) as rig:
         rig.run(1.2)
     assert fleet_frames == rig_frames
+    assert any(frame for frame in rig_frames)
 
 
 def test_fleet_view_folds_messages_into_a_table() -> None:
