@@ -16,8 +16,8 @@ Two backends run the same API:
   python-can ``virtual`` channel of its own): ``step`` computes, deterministic for a seed.
 * ``ExternalBackend``: ANY firmware that speaks the DBC, already running on a real bus
   (``udp_multicast``, ``socketcan``, ...). The backend plays the rest of the robot in real time in a
-  thread (the motor controller, the SIM truth and the scenario driver, the order of
-  ``sim.realtime.SimNode``, every 10 ms of the wall clock) and a host handle hears every frame:
+  thread (``sim.motor_controller.SimNode``: the motor controller, the SIM truth and the scenario
+  driver, every 10 ms of the wall clock) and a host handle hears every frame:
   ``step`` sleeps. On attaching, the rig configures the firmware for the robot and integrator over
   ODOM_CONFIG, puts its pose at the origin with ODOM_SET_POSE (where the new simulated robot
   stands), waits for STATE OK, and only then starts recording.
@@ -49,12 +49,11 @@ from host.mqtt.commands import Command, CommandEncoder
 from sim import contract
 from sim.board import TICK_S
 from sim.clock import RealTimeClock
-from sim.contract import cycle_ticks
 from sim.errors import ErrorModel
 from sim.errors import parse as parse_errors
 from sim.exceptions import BusSetupError, OdocanError
 from sim.faults import FaultInjectingBus, FaultSpec
-from sim.motor_controller import MotorController, ScenarioDriver, TruthSender
+from sim.motor_controller import SimNode
 from sim.realtime import PeriodicLoop
 from sim.rig import LockstepRig, RigConfig
 from sim.robot import RobotProfile
@@ -292,15 +291,7 @@ class LockstepBackend:
 
     def set_scenario(self, scenario: Scenario | None) -> None:
         """A scenario driver on the sim's handle from the next tick on (None: none)."""
-        rig = self.rig
-        rig.driver = (
-            None
-            if scenario is None
-            else ScenarioDriver(
-                rig.motor_controller.bus, _Shifted(scenario, self.now_s()), rig.clock,
-                rig.motor_controller,
-            )
-        )
+        self.rig.sim.set_scenario(None if scenario is None else _Shifted(scenario, self.now_s()))
 
     def truth(self) -> Pose:
         """The vehicle's true pose (float64)."""
@@ -368,15 +359,10 @@ class ExternalBackend:
         if spec is not None:
             sim_bus = FaultInjectingBus(sim_bus, spec, clock=self.clock.now_s)
         self._host_bus = host_bus
-        self.vehicle = Vehicle(options.profile(), options.error_model(), seed=options.seed)
-        self.motor_controller = MotorController(sim_bus, self.vehicle, self.clock)
-        self.truth_sender = TruthSender(sim_bus, self.vehicle, self.clock)
-        self.driver: ScenarioDriver | None = None
-        self._sim_bus = sim_bus
+        vehicle = Vehicle(options.profile(), options.error_model(), seed=options.seed)
+        self.sim = SimNode(sim_bus, vehicle, self.clock, None)
         self._outbox: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
         self._lock = threading.Lock()  # the vehicle and the driver
-        self._driver_ticks = cycle_ticks("MOTOR_CMD", TICK_S)
-        self._truth_ticks = cycle_ticks("SIM_TRUTH", TICK_S)
         self._loop = PeriodicLoop(TICK_S, self.clock)
         self._failure: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="odocan-sim", daemon=True)
@@ -395,16 +381,9 @@ class ExternalBackend:
                 can_id, data = self._outbox.get_nowait()
             except queue.Empty:
                 break
-            self._host_bus.send(
-                can.Message(arbitration_id=can_id, is_extended_id=False, data=data)
-            )
+            self._host_bus.send(can.Message(arbitration_id=can_id, is_extended_id=False, data=data))
         with self._lock:
-            self.motor_controller.service_rx()
-            if self.driver is not None and k % self._driver_ticks == 0:
-                self.driver.send()
-            enc_counter = self.motor_controller.sample_and_send()
-            if k % self._truth_ticks == 0:
-                self.truth_sender.send(enc_counter)
+            self.sim.tick(k)
         msg = self._host_bus.recv(0)
         while msg is not None:
             self.recorder.on_message_received(msg)
@@ -441,19 +420,14 @@ class ExternalBackend:
     def set_scenario(self, scenario: Scenario | None) -> None:
         """A scenario driver on the sim's handle from now on (None: none)."""
         with self._lock:
-            self.driver = (
-                None
-                if scenario is None
-                else ScenarioDriver(
-                    self._sim_bus, _Shifted(scenario, self.clock.now_s()), self.clock,
-                    self.motor_controller,
-                )
+            self.sim.set_scenario(
+                None if scenario is None else _Shifted(scenario, self.clock.now_s())
             )
 
     def truth(self) -> Pose:
         """The vehicle's true pose now."""
         with self._lock:
-            return _pose_of(self.vehicle.truth())
+            return _pose_of(self.sim.vehicle.truth())
 
     def buses(self) -> tuple[can.BusABC, ...]:
         """The host's and the sim's handles."""
@@ -512,19 +486,29 @@ class OdocanRig:
                 "this bus?"
             )
         p = self.robot
-        self.command("config", {
-            "counts_per_rev": p.counts_per_rev, "wheel_radius_left_m": p.wheel_radius_left_m,
-            "wheel_radius_right_m": p.wheel_radius_right_m, "wheelbase_m": p.wheelbase_m,
-            "counter_bits": p.counter_bits, "integrator": self.integrator,
-        })
+        self.command(
+            "config",
+            {
+                "counts_per_rev": p.counts_per_rev,
+                "wheel_radius_left_m": p.wheel_radius_left_m,
+                "wheel_radius_right_m": p.wheel_radius_right_m,
+                "wheelbase_m": p.wheelbase_m,
+                "counter_bits": p.counter_bits,
+                "integrator": self.integrator,
+            },
+        )
         if not self.backend.advance_until(self._tracks_our_encoders, timeout_s):
-            raise TestkitError(f"the firmware's poses do not follow our WHEEL_ENCODERS within "
-                               f"{timeout_s:g} s (latest ODOM_STATUS: {self.odom_status})")
+            raise TestkitError(
+                f"the firmware's poses do not follow our WHEEL_ENCODERS within "
+                f"{timeout_s:g} s (latest ODOM_STATUS: {self.odom_status})"
+            )
         acked = self.set_pose(0.0, 0.0, 0.0)
         settled = self.backend.advance_until(lambda: self._at_origin_since(acked), timeout_s)
         if not settled:
-            raise TestkitError(f"the firmware is not OK at the origin {timeout_s:g} s after "
-                               f"ODOM_SET_POSE (latest ODOM_STATUS: {self.odom_status})")
+            raise TestkitError(
+                f"the firmware is not OK at the origin {timeout_s:g} s after "
+                f"ODOM_SET_POSE (latest ODOM_STATUS: {self.odom_status})"
+            )
         self._t0 = self.backend.now_s()
         self.backend.recorder.reset(self._t0)
 
@@ -610,8 +594,13 @@ class OdocanRig:
         self._next_goal_id = goal_id % 255 + 1
         self._last_goal_id = goal_id
         self.wait_ready()
-        payload: dict[str, Any] = {"x_m": x_m, "y_m": y_m, "mode": mode, "append": append,
-                                   "goal_id": goal_id}
+        payload: dict[str, Any] = {
+            "x_m": x_m,
+            "y_m": y_m,
+            "mode": mode,
+            "append": append,
+            "goal_id": goal_id,
+        }
         if heading_rad is not None:
             payload["heading_rad"] = heading_rad
         self._goal_acked_at[goal_id] = self.command("nav_goal", payload)
@@ -642,9 +631,7 @@ class OdocanRig:
     def _goal_states(self, goal_id: int) -> list[dict[str, Any]]:
         """NAV_STATUS frames of ``goal_id`` heard since its ACK."""
         since = self._goal_acked_at.get(goal_id, -math.inf)
-        return [
-            f for f in self.frames("NAV_STATUS", GOAL_ID=goal_id) if f["timestamp_s"] >= since
-        ]
+        return [f for f in self.frames("NAV_STATUS", GOAL_ID=goal_id) if f["timestamp_s"] >= since]
 
     def _goal_ended(self, goal_id: int) -> bool:
         states = {f["STATE"] for f in self._goal_states(goal_id)}
@@ -675,8 +662,9 @@ class OdocanRig:
         seen = len(self.frames("ODOM_ACK"))
         for frame in cmd.frames:
             self.backend.send(frame.can_id, frame.data)
-        self.backend.advance_until(lambda: self._answer(cmd, seen) is not None,
-                                   self.backend.ack_timeout_s)
+        self.backend.advance_until(
+            lambda: self._answer(cmd, seen) is not None, self.backend.ack_timeout_s
+        )
         answers = self.frames("ODOM_ACK")[seen:]
         nacks = [a for a in answers if a["RESULT"] == "NACK"]
         final = self._answer(cmd, seen)
@@ -756,8 +744,10 @@ class OdocanRig:
         heard = len(self.backend.recorder)
         if self._analysis is None or self._analysis[0] != heard:
             frames = self.backend.recorder.arrays()
-            self._analysis = (heard, analyze(frames, self.robot, self.integrator,
-                                             seed=self.options.seed))
+            self._analysis = (
+                heard,
+                analyze(frames, self.robot, self.integrator, seed=self.options.seed),
+            )
         return self._analysis[1]
 
     def report(self) -> dict[str, Any]:
@@ -774,8 +764,10 @@ class OdocanRig:
         __tracebackhide__ = True
         report = self.report()
         errors = report["onboard_vs_reference"]
-        where = (f"on-board pose vs float64 reference ({self.integrator}, "
-                 f"{report['samples']['onboard']} samples over {report['sim_seconds']:.2f} s)")
+        where = (
+            f"on-board pose vs float64 reference ({self.integrator}, "
+            f"{report['samples']['onboard']} samples over {report['sim_seconds']:.2f} s)"
+        )
         _check_limits(where, errors, position_m, heading_rad)
 
     def assert_near_truth(self, position_m: float, heading_rad: float | None = None) -> None:
@@ -785,8 +777,10 @@ class OdocanRig:
         report = self.report()
         errors = report["onboard_vs_truth"]
         compared = report["samples"]["truth_compared"]
-        where = (f"on-board pose vs ground truth ({compared} samples over "
-                 f"{errors['distance_travelled_m']:.3f} m, errors {self.options.errors or 'none'})")
+        where = (
+            f"on-board pose vs ground truth ({compared} samples over "
+            f"{errors['distance_travelled_m']:.3f} m, errors {self.options.errors or 'none'})"
+        )
         if compared == 0:
             raise AssertionError(f"{where}: no SIM_TRUTH sample to compare with")
         _check_limits(where, errors, position_m, heading_rad)
@@ -830,12 +824,16 @@ def _check_limits(
     if position is None:
         raise AssertionError(f"{where}: no sample to compare")
     if position > position_m:
-        failures.append(f"max position error {_fmt(position)} m > {_fmt(position_m)} m "
-                        f"(final {_fmt(errors['final_position_error_m'])} m)")
+        failures.append(
+            f"max position error {_fmt(position)} m > {_fmt(position_m)} m "
+            f"(final {_fmt(errors['final_position_error_m'])} m)"
+        )
     heading = errors["max_heading_error_rad"]
     if heading_rad is not None and heading > heading_rad:
-        failures.append(f"max heading error {_fmt(heading)} rad > {_fmt(heading_rad)} rad "
-                        f"(final {_fmt(errors['final_heading_error_rad'])} rad)")
+        failures.append(
+            f"max heading error {_fmt(heading)} rad > {_fmt(heading_rad)} rad "
+            f"(final {_fmt(errors['final_heading_error_rad'])} rad)"
+        )
     if failures:
         raise AssertionError(f"{where}: " + "; ".join(failures))
 

@@ -19,9 +19,13 @@ import can
 from firmware import frames as fr
 from firmware.e2e import E2EReceiver, E2EStatus
 from firmware.errors import ErrorMask
+from sim.board import TICK_S
 from sim.clock import Clock
+from sim.contract import cycle_ticks
+from sim.errors import ErrorModel
 from sim.node import BusNode
-from sim.scenarios import Scenario
+from sim.robot import RobotProfile
+from sim.scenarios import Scenario, get_scenario
 from sim.vehicle import Vehicle
 
 _U24 = 0xFF_FFFF
@@ -117,3 +121,80 @@ class ScenarioDriver(BusNode):
         self.send_frame(fr.MOTOR_CMD_ID, data)
         if self.local is not None:
             self.local.deliver(data)
+
+
+class SimNode:
+    """MOTOR_CTRL, SIM and an optional scenario driver on one bus handle: the sim side of every
+    rig (lockstep, real time, the pytest plugin's external backend). Each 10 ms tick ``k``: take
+    MOTOR_CMD, the driver's command (every 20 ms), sample and send WHEEL_ENCODERS, SIM_TRUTH at
+    its cycle (on ticks ``k = truth_phase_ticks`` modulo it)."""
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        vehicle: Vehicle,
+        clock: Clock,
+        scenario: Scenario | None,
+        *,
+        truth_phase_ticks: int = 0,
+    ) -> None:
+        self.bus = bus
+        self.clock = clock
+        self.vehicle = vehicle
+        self.motor_controller = MotorController(bus, vehicle, clock)
+        self.truth = TruthSender(bus, vehicle, clock)
+        self.driver: ScenarioDriver | None = None
+        self.set_scenario(scenario)
+        self.truth_phase_ticks = truth_phase_ticks
+        self._driver_ticks = cycle_ticks("MOTOR_CMD", TICK_S)
+        self._truth_ticks = cycle_ticks("SIM_TRUTH", TICK_S)
+
+    @classmethod
+    def build(
+        cls,
+        bus: can.BusABC,
+        robot: RobotProfile,
+        clock: Clock,
+        *,
+        scenario: str | None = "random",
+        seed: int = 0,
+        errors: ErrorModel | None = None,
+        quadrature: bool = False,
+        duration_s: float | None = None,
+        truth_phase_ticks: int = 0,
+    ) -> SimNode:
+        """A vehicle at rest at the origin, driven by the scenario named (None: no driver)."""
+        vehicle = Vehicle(robot, errors, seed=seed, quadrature=quadrature)
+        program = None if scenario is None else get_scenario(scenario, robot, seed, duration_s)
+        return cls(bus, vehicle, clock, program, truth_phase_ticks=truth_phase_ticks)
+
+    def set_scenario(self, scenario: Scenario | None) -> None:
+        """Drive ``scenario`` from now on (None: no driver, e.g. the firmware navigates)."""
+        self.driver = (
+            None
+            if scenario is None
+            else ScenarioDriver(self.bus, scenario, self.clock, self.motor_controller)
+        )
+
+    def tick(self, k: int) -> None:
+        """Tick ``k`` (10 ms each), in the order of the class docstring."""
+        self.motor_controller.service_rx()
+        if self.driver is not None and k % self._driver_ticks == 0:
+            self.driver.send()
+        enc_counter = self.motor_controller.sample_and_send()
+        if (k - self.truth_phase_ticks) % self._truth_ticks == 0:
+            self.truth.send(enc_counter)
+
+    def _nodes(self) -> list[BusNode]:
+        nodes: list[BusNode] = [self.motor_controller, self.truth]
+        return nodes if self.driver is None else [*nodes, self.driver]
+
+    @property
+    def frames_sent(self) -> int:
+        """Frames the nodes put on the bus."""
+        return sum(node.frames_sent for node in self._nodes())
+
+    @property
+    def tx_errors(self) -> int:
+        """Frames the bus refused."""
+        return sum(node.tx_errors for node in self._nodes())

@@ -13,8 +13,8 @@ Each real-time node is its own process on any python-can bus (``odocan sim``, ``
 ``stop_on_signals`` turns SIGINT (Ctrl-C) and SIGTERM into a request to stop after the current
 tick, so a node closes its bus and exits cleanly; a second signal interrupts at once.
 
-``SimNode`` is the sim side of the lockstep rig (sim.rig, steps 1-4) on one bus handle: the motor
-controller, the SIM truth and the scenario driver, the same node classes, one tick at a time.
+``sim.motor_controller.SimNode``, the sim side of every rig, runs here on one bus handle:
+the motor controller, the SIM truth and the scenario driver, one tick at a time.
 """
 
 from __future__ import annotations
@@ -25,16 +25,9 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from types import FrameType
 
-import can
-
 from sim.board import TICK_S
-from sim.clock import Clock, RealTimeClock
-from sim.contract import cycle_ticks, database
-from sim.errors import ErrorModel
-from sim.motor_controller import MotorController, ScenarioDriver, TruthSender
-from sim.robot import RobotProfile
-from sim.scenarios import get_scenario
-from sim.vehicle import Vehicle
+from sim.clock import RealTimeClock
+from sim.contract import database
 
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -159,49 +152,3 @@ def accepted_ids(node: str) -> frozenset[int]:
         for msg in database().messages
         if any(node in sig.receivers for sig in msg.signals)
     )
-
-
-class SimNode:
-    """MOTOR_CTRL, SIM and the scenario driver on one bus handle: the sim side of the rig."""
-
-    def __init__(
-        self,
-        bus: can.BusABC,
-        robot: RobotProfile,
-        clock: Clock,
-        *,
-        scenario: str = "random",
-        seed: int = 0,
-        errors: ErrorModel | None = None,
-        quadrature: bool = False,
-    ) -> None:
-        """A vehicle at rest at the origin, driven by ``scenario`` from the clock's zero."""
-        self.bus = bus
-        self.clock = clock
-        self.vehicle = Vehicle(robot, errors, seed=seed, quadrature=quadrature)
-        self.motor_controller = MotorController(bus, self.vehicle, clock)
-        self.truth = TruthSender(bus, self.vehicle, clock)
-        self.driver = ScenarioDriver(
-            bus, get_scenario(scenario, robot, seed), clock, self.motor_controller
-        )
-        self._driver_ticks = cycle_ticks("MOTOR_CMD", TICK_S)
-        self._truth_ticks = cycle_ticks("SIM_TRUTH", TICK_S)
-
-    def tick(self, k: int) -> None:
-        """Tick ``k`` (10 ms each): receive, drive, sample + send encoders, truth at its cycle."""
-        self.motor_controller.service_rx()
-        if k % self._driver_ticks == 0:
-            self.driver.send()
-        enc_counter = self.motor_controller.sample_and_send()
-        if k % self._truth_ticks == 0:
-            self.truth.send(enc_counter)
-
-    @property
-    def frames_sent(self) -> int:
-        """Frames the three nodes put on the bus."""
-        return self.motor_controller.frames_sent + self.truth.frames_sent + self.driver.frames_sent
-
-    @property
-    def tx_errors(self) -> int:
-        """Frames the bus refused."""
-        return self.motor_controller.tx_errors + self.truth.tx_errors + self.driver.tx_errors

@@ -30,11 +30,10 @@ from firmware.config import Integrator, RobotParams
 from sim.board import TICK_S, FirmwareBoard
 from sim.clock import LockstepClock
 from sim.closing import Closing
-from sim.contract import cycle_ticks
 from sim.errors import ErrorModel
 from sim.exceptions import ConfigurationError
 from sim.faults import FaultInjectingBus, FaultSpec
-from sim.motor_controller import MotorController, ScenarioDriver, TruthSender
+from sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
 from sim.robot import RobotProfile
 from sim.scenarios import get_scenario
 from sim.vehicle import Vehicle
@@ -74,20 +73,19 @@ class LockstepRig(Closing):
     def __init__(self, config: RigConfig, listeners: Sequence[can.Listener] = ()) -> None:
         self.config = config
         self.clock = LockstepClock()
+        # Everything that can refuse the configuration runs before a bus is opened.
         scenario = (
             None
             if config.scenario is None
             else get_scenario(config.scenario, config.robot, config.seed, config.duration_s)
         )
+        params = firmware_params(config.robot, config.integrator)
         self.default_duration_s = (
             config.duration_s
             if config.duration_s is not None
             else 60.0
             if scenario is None
             else scenario.default_duration_s
-        )
-        self.vehicle = Vehicle(
-            config.robot, config.errors, seed=config.seed, quadrature=config.quadrature
         )
         self._buses: list[can.BusABC] = [
             self._open_bus(),
@@ -98,20 +96,35 @@ class LockstepRig(Closing):
             if spec is not None and spec.active:
                 self._buses[index] = FaultInjectingBus(self._buses[index], spec)
         sim_bus, fw_bus, self.host_bus = self._buses
-        self.motor_controller = MotorController(sim_bus, self.vehicle, self.clock)
-        self.truth = TruthSender(sim_bus, self.vehicle, self.clock)
-        self.driver = (
-            None
-            if scenario is None
-            else ScenarioDriver(sim_bus, scenario, self.clock, self.motor_controller)
+        vehicle = Vehicle(
+            config.robot, config.errors, seed=config.seed, quadrature=config.quadrature
         )
-        self.board = FirmwareBoard(
-            fw_bus, firmware_params(config.robot, config.integrator), self.clock
+        self.sim = SimNode(
+            sim_bus, vehicle, self.clock, scenario, truth_phase_ticks=config.truth_phase_ticks
         )
+        self.board = FirmwareBoard(fw_bus, params, self.clock)
         self.listeners = list(listeners)
         self.ticks = 0
-        self._driver_ticks = cycle_ticks("MOTOR_CMD", TICK_S)
-        self._truth_ticks = cycle_ticks("SIM_TRUTH", TICK_S)
+
+    @property
+    def vehicle(self) -> Vehicle:
+        """The simulated robot."""
+        return self.sim.vehicle
+
+    @property
+    def motor_controller(self) -> MotorController:
+        """Node MOTOR_CTRL."""
+        return self.sim.motor_controller
+
+    @property
+    def truth(self) -> TruthSender:
+        """Node SIM."""
+        return self.sim.truth
+
+    @property
+    def driver(self) -> ScenarioDriver | None:
+        """The scenario driver (None in closed loop); ``sim.set_scenario`` replaces it."""
+        return self.sim.driver
 
     def _open_bus(self, *, own: bool = False) -> can.BusABC:
         return can.Bus(
@@ -134,12 +147,7 @@ class LockstepRig(Closing):
         """One 10 ms tick, in the order of the module docstring."""
         k = self.ticks
         self.clock.advance_to(k * TICK_S)
-        self.motor_controller.service_rx()
-        if self.driver is not None and k % self._driver_ticks == 0:
-            self.driver.send()
-        enc_counter = self.motor_controller.sample_and_send()
-        if (k - self.config.truth_phase_ticks) % self._truth_ticks == 0:
-            self.truth.send(enc_counter)
+        self.sim.tick(k)
         self.board.run_tick()
         self._drain_host()
         self.ticks = k + 1

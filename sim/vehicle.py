@@ -64,9 +64,7 @@ class Vehicle:
         self.substep_hz = substep_hz
         self._rng = np.random.default_rng(seed)
         radii = self.errors.actual_radii_m(profile)
-        self.drivetrain = Drivetrain(
-            profile, radii, substep_hz, quadrature, motor, counter_offset
-        )
+        self.drivetrain = Drivetrain(profile, radii, substep_hz, quadrature, motor, counter_offset)
         self._truth = GroundTruth(
             self.errors.actual_wheelbase_m(profile),
             substep_hz,

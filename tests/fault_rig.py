@@ -25,9 +25,9 @@ from firmware.errors import ErrorMask
 from host.reference import Geometry, deltas_from_counts, integrate
 from sim.board import TICK_S, FirmwareBoard
 from sim.clock import LockstepClock
-from sim.contract import cycle_ticks, database
+from sim.contract import database
 from sim.faults import FaultInjectingBus, FaultSpec
-from sim.motor_controller import MotorController, ScenarioDriver, TruthSender
+from sim.motor_controller import SimNode
 from sim.robot import RobotProfile, load
 from sim.scenarios import RandomScenario, Scenario
 from sim.vehicle import Vehicle
@@ -76,17 +76,11 @@ class FaultRig:
         sim_raw, fw_raw, self.host_bus = self._raw
         self.sim_bus = FaultInjectingBus(sim_raw, sim_faults) if sim_faults else sim_raw
         self.fw_bus = FaultInjectingBus(fw_raw, fw_faults) if fw_faults else fw_raw
-        self.motor_controller = MotorController(self.sim_bus, self.vehicle, self.clock)
-        self.truth = TruthSender(self.sim_bus, self.vehicle, self.clock)
-        self.driver = ScenarioDriver(
-            self.sim_bus, scenario or RandomScenario(seed), self.clock, self.motor_controller
-        )
+        self.sim = SimNode(self.sim_bus, self.vehicle, self.clock, scenario or RandomScenario(seed))
         self.board = FirmwareBoard(self.fw_bus, self.params, self.clock)
         self.observers: list[Observer] = []
         self.before_board: list[Hook] = []
         self.ticks = 0
-        self._driver_ticks = cycle_ticks("MOTOR_CMD", TICK_S)
-        self._truth_ticks = cycle_ticks("SIM_TRUTH", TICK_S)
 
     @property
     def ecu(self) -> OdomEcu:
@@ -97,12 +91,7 @@ class FaultRig:
         """One 10 ms tick in ``LockstepRig.step``'s order (hooks run just before the board)."""
         k = self.ticks
         self.clock.advance_to(k * TICK_S)
-        self.motor_controller.service_rx()
-        if k % self._driver_ticks == 0:
-            self.driver.send()
-        enc_counter = self.motor_controller.sample_and_send()
-        if k % self._truth_ticks == 0:
-            self.truth.send(enc_counter)
+        self.sim.tick(k)
         for hook in self.before_board:
             hook(k)
         self.board.run_tick()

@@ -25,13 +25,10 @@ from firmware import nav
 from firmware.errors import ErrorMask
 from firmware.fixmath import I64_MAX, I64_MIN, isqrt_u64
 from firmware.frames import AckReason, NavGoalField, NavMode, NavState
-from sim.board import TICK_S, FirmwareBoard
-from sim.clock import LockstepClock
+from sim.board import TICK_S
 from sim.errors import ErrorModel
-from sim.motor_controller import MotorController, TruthSender
-from sim.rig import firmware_params
+from sim.rig import LockstepRig, RigConfig
 from sim.robot import load
-from sim.vehicle import Vehicle
 
 
 def _load_dbc() -> cantools.database.can.Database:
@@ -332,66 +329,67 @@ def test_odometry_loss_aborts_the_path() -> None:
 # --- the ECU: frames in, frames out, decoded by cantools ---------------------------------------
 
 
+class _Heard(can.Listener):
+    def __init__(self, owner: LockstepNav) -> None:
+        self.owner = owner
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self.owner.heard(msg)
+
+
 class LockstepNav:
-    """Motor controller, truth, firmware board and a host in lockstep on a private virtual bus."""
+    """The closed-loop lockstep rig (no scenario driver) on a private channel, with every frame
+    the host hears decoded by cantools and the truth taken when a goal shows REACHED."""
 
     _channels = itertools.count()
 
     def __init__(self, errors: ErrorModel | None = None, robot: str = "pmir") -> None:
-        channel = f"test_nav_{next(self._channels)}"
-        self.buses = [
-            can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
-            for _ in range(3)
-        ]
-        sim_bus, fw_bus, self.host = self.buses
-        self.clock = LockstepClock()
-        profile = load(robot)
-        self.vehicle = Vehicle(profile, errors or ErrorModel())
-        self.motor_controller = MotorController(sim_bus, self.vehicle, self.clock)
-        self.truth_sender = TruthSender(sim_bus, self.vehicle, self.clock)
-        self.board = FirmwareBoard(fw_bus, firmware_params(profile, "exact"), self.clock)
-        self.ticks = 0
+        config = RigConfig(
+            load(robot),
+            "exact",
+            None,
+            errors=errors or ErrorModel(),
+            channel=f"test_nav_{next(self._channels)}",
+        )
+        self.rig = LockstepRig(config, [_Heard(self)])
+        self.board = self.rig.board
+        self.vehicle = self.rig.vehicle
+        self.clock = self.rig.clock
         self.frames: list[tuple[int, str, dict[str, Any]]] = []  # (tick, message, signals)
         self.truth_at_reached: dict[int, tuple[float, float, float]] = {}
         self._counter = itertools.count()
         self._scratch = ErrorMask()
 
+    @property
+    def ticks(self) -> int:
+        return self.rig.ticks
+
+    @ticks.setter
+    def ticks(self, value: int) -> None:
+        self.rig.ticks = value
+
     def close(self) -> None:
-        for bus in self.buses:
-            bus.shutdown()
+        self.rig.close()
 
     def step(self) -> None:
-        """One 10 ms tick in the rig's order (no scenario driver)."""
-        self.clock.advance_to(self.ticks * TICK_S)
-        self.motor_controller.service_rx()
-        enc_counter = self.motor_controller.sample_and_send()
-        if self.ticks % 10 == 0:
-            self.truth_sender.send(enc_counter)
-        self.board.run_tick()
-        msg = self.host.recv(0)
-        while msg is not None:
-            name = DB.get_message_by_frame_id(msg.arbitration_id).name
-            decoded = DB.decode_message(msg.arbitration_id, bytes(msg.data), decode_choices=False)
-            signals: dict[str, Any] = dict(decoded)  # type: ignore[arg-type]
-            self.frames.append((self.ticks, name, signals))
-            if name == "NAV_STATUS" and signals["STATE"] == NavState.REACHED:
-                pose = self.vehicle.truth()
-                self.truth_at_reached[signals["GOAL_ID"]] = (pose.x_m, pose.y_m, pose.heading_rad)
-            msg = self.host.recv(0)
-        self.ticks += 1
+        """One 10 ms tick of the rig."""
+        self.rig.step()
+
+    def heard(self, msg: can.Message) -> None:
+        """A frame on the host's bus: decoded and kept."""
+        name = DB.get_message_by_frame_id(msg.arbitration_id).name
+        decoded = DB.decode_message(msg.arbitration_id, bytes(msg.data), decode_choices=False)
+        signals: dict[str, Any] = dict(decoded)  # type: ignore[arg-type]
+        self.frames.append((self.ticks, name, signals))
+        if name == "NAV_STATUS" and signals["STATE"] == NavState.REACHED:
+            pose = self.vehicle.truth()
+            self.truth_at_reached[signals["GOAL_ID"]] = (pose.x_m, pose.y_m, pose.heading_rad)
 
     def run(self, seconds: float) -> None:
-        for _ in range(round(seconds / TICK_S)):
-            self.step()
+        self.rig.run(seconds)
 
     def send(self, data: bytes) -> None:
-        msg = can.Message(
-            timestamp=self.clock.now_s(),
-            arbitration_id=fr.NAV_GOAL_ID,
-            is_extended_id=False,
-            data=data,
-        )
-        self.host.send(msg)
+        self.rig.send(fr.NAV_GOAL_ID, data)
 
     def goal(self, x_m: float, y_m: float, heading_deg: float | None, **kw: Any) -> None:
         """Stage and commit one goal (four frames, or three without a heading), then one tick."""

@@ -18,7 +18,8 @@ import sys
 from host.busopts import add_bus_arguments, add_fault_argument, open_bus
 from host.options import add_duration_argument, add_robot_argument, check_duration
 from sim import errors, robot
-from sim.realtime import PeriodicLoop, SimNode, stop_on_signals
+from sim.motor_controller import SimNode
+from sim.realtime import PeriodicLoop, stop_on_signals
 from sim.scenarios import SCENARIOS
 
 
@@ -54,7 +55,7 @@ def _do_sim(args: argparse.Namespace) -> int:
     bus = open_bus(args)
     try:
         loop = PeriodicLoop()
-        node = SimNode(
+        node = SimNode.build(
             bus, profile, loop.clock, scenario=args.scenario, seed=args.seed, errors=error_model
         )
         with stop_on_signals(loop):
