@@ -27,6 +27,7 @@ from rich.padding import Padding
 from rich.table import Table
 
 from host.analysis import Analysis, Tolerance
+from host.jsonutil import finite
 from sim.exceptions import ConfigurationError
 
 PLOT_SUFFIXES = (".png", ".svg")
@@ -95,19 +96,8 @@ def check_output_paths(args: argparse.Namespace) -> None:
 
 def write_report(report: dict[str, Any], path: Path) -> None:
     """Write ``report`` as strict, indented JSON (numpy scalars become numbers, NaN null)."""
-    text = json.dumps(_finite(report), indent=2, default=_json_default, allow_nan=False)
+    text = json.dumps(finite(report), indent=2, default=_json_default, allow_nan=False)
     path.write_text(text + "\n", encoding="utf-8")
-
-
-def _finite(value: Any) -> Any:
-    """``value`` with every non-finite float (NaN: nothing to compare) replaced by None."""
-    if isinstance(value, dict):
-        return {key: _finite(item) for key, item in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(item) for item in value]
-    if isinstance(value, float | np.floating) and not math.isfinite(value):
-        return None
-    return value
 
 
 def _json_default(value: object) -> object:

@@ -23,30 +23,19 @@ from __future__ import annotations
 import math
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, ClassVar
 
 import can
 from cantools.database.can import Database
 
 from host.e2e import E2EMonitor
 from host.mqtt.topics import RESULT_LEAF, stamp, status_payload
-from host.reference import Geometry, ReferenceOdometry, wrap_angle
+from host.reference import Geometry
+from host.tracking import Pose, PoseTracker, difference
 from sim.contract import database
 
 Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
-BUS_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT: the low 24 bits of each hardware counter
-_RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
-_TURN = 2.0 * math.pi
-
-
-class Pose(NamedTuple):
-    """A pose at one encoder frame (``seq``: index of that frame as the bridge saw it)."""
-
-    seq: int
-    x_m: float
-    y_m: float
-    heading_rad: float  # unwrapped
 
 
 @dataclass
@@ -86,18 +75,12 @@ class RobotTelemetry:
         self.db = db if db is not None else database()
         self._by_id = {m.frame_id: m for m in self.db.messages}
         self.e2e = E2EMonitor(self.db)
-        self.geometry, self.integrator = geometry, integrator
-        self.counter_bits = counter_bits
+        self.tracker = PoseTracker(geometry, counter_bits, integrator)
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
         self.frames: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self._window = _Window(now_s)
-        self._enc_seq = -1
-        self._reference: ReferenceOdometry | None = None
-        self._reseed = False
-        self._refs: list[Pose | None] = [None] * _RING
-        self._truth_parts: dict[int, tuple[int, float]] = {}
-        self._pose_x: tuple[int, float, float, int] | None = None  # enc, x, heading, counter
+        self._pose_x_counter = 0  # E2E COUNTER of the last ODOM_POSE_X
         self._twist: dict[str, float] = {}
         self._last_pub_t = -math.inf
         self._truth_error: dict[str, Any] | None = None
@@ -128,26 +111,12 @@ class RobotTelemetry:
         return publications
 
     def _on_encoders(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        self._enc_seq += 1
-        ref = self._reference
-        if ref is None:  # the bridge saw the run from its start: the firmware's origin
-            ref = self._reference = self._new_reference(0.0, 0.0, 0.0)
-        ref.step_counts(int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
-        self._refs[int(s["COUNTER"])] = Pose(self._enc_seq, ref.x_m, ref.y_m, ref.heading_rad)
+        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
         return []
 
-    def _new_reference(self, x_m: float, y_m: float, heading_rad: float) -> ReferenceOdometry:
-        return ReferenceOdometry(
-            self.geometry,
-            self.integrator,
-            min(self.counter_bits, BUS_COUNTER_BITS),
-            x_m=x_m,
-            y_m=y_m,
-            heading_rad=heading_rad,
-        )
-
     def _on_pose_x(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        self._pose_x = (int(s["ENC_COUNTER"]), s["X"], s["HEADING"], int(s["COUNTER"]))
+        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), s["X"], s["HEADING"])
+        self._pose_x_counter = int(s["COUNTER"])
         return []
 
     def _on_twist(self, s: dict[str, Any], t_s: float) -> list[Publication]:
@@ -160,25 +129,11 @@ class RobotTelemetry:
 
     def _on_pose_y(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         enc = int(s["ENC_COUNTER"])
-        if self._pose_x is None or self._pose_x[0] != enc:
-            return []
-        _, x_m, heading_rad, counter = self._pose_x
-        self._pose_x = None
-        ref = self._refs[enc]
-        seq = ref.seq if ref is not None else -1
-        pose = Pose(seq, x_m, s["Y"], int(s["TURNS"]) * _TURN + heading_rad)
-        if self._reseed:
-            self._reseed_at(pose)
-        if t_s - self._last_pub_t < self.publish_period_s - 1e-6:
+        sample = self.tracker.on_pose_y(enc, s["Y"], int(s["TURNS"]))
+        if sample is None or t_s - self._last_pub_t < self.publish_period_s - 1e-6:
             return []
         self._last_pub_t = t_s
-        return self._pose_publications(pose, ref, enc, counter, t_s)
-
-    def _reseed_at(self, pose: Pose) -> None:
-        """After a set-pose or config command took effect: restart the reference at ``pose``."""
-        self._reseed = False
-        self._reference = self._new_reference(pose.x_m, pose.y_m, pose.heading_rad)
-        self._refs = [None] * _RING
+        return self._pose_publications(*sample, enc, self._pose_x_counter, t_s)
 
     def _pose_publications(
         self, pose: Pose, ref: Pose | None, enc: int, counter: int, t_s: float
@@ -188,7 +143,7 @@ class RobotTelemetry:
         if ref is None or ref.seq != pose.seq:
             return pubs
         pubs.append(("reference", stamp({**head, **_pose_dict(ref)})))
-        error: dict[str, Any] = {**head, "pose_vs_reference": _difference(pose, ref)}
+        error: dict[str, Any] = {**head, "pose_vs_reference": difference(pose, ref)}
         if self._truth_error is not None:
             error["reference_vs_truth"] = self._truth_error
         pubs.append(("error", stamp(error)))
@@ -197,15 +152,12 @@ class RobotTelemetry:
     def _on_truth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         enc, part = int(s["ENC_COUNTER"]), int(s["PART"])
         value = s.get({0: "X", 1: "Y", 2: "HEADING"}.get(part, ""), 0.0)
-        self._truth_parts[part] = (enc, float(value))
-        parts = self._truth_parts
-        if len(parts) < 3 or len({p[0] for p in parts.values()}) != 1:
+        sample = self.tracker.on_truth(part, enc, float(value))
+        if sample is None:
             return []
-        self._truth_parts = {}
-        ref = self._refs[enc]
-        truth = Pose(ref.seq if ref else -1, parts[0][1], parts[1][1], parts[2][1])
+        truth, ref = sample
         if ref is not None:  # the truth was sampled at that very encoder frame
-            self._truth_error = {"enc_seq": ref.seq, **_difference(ref, truth)}
+            self._truth_error = {"enc_seq": ref.seq, **difference(ref, truth)}
         payload = {"t_s": t_s, "counter": int(s["COUNTER"]), "enc_counter": enc,
                    "enc_seq": truth.seq, **_pose_dict(truth)}
         return [("truth", stamp(payload))]
@@ -227,7 +179,7 @@ class RobotTelemetry:
         if nack:  # forget the rest of this command: one answer per command
             self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
         elif pending.command in ("set_pose", "config"):
-            self._reseed = True
+            self.tracker.restart_reference()
         reason = _choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
         payload = {"id": pending.cmd_id, "command": pending.command,
                    "result": "nacked" if nack else "acked", "reason": reason, "t_s": t_s}
@@ -239,8 +191,8 @@ class RobotTelemetry:
 
     def set_geometry(self, geometry: Geometry, integrator: str, counter_bits: int) -> None:
         """New robot parameters (a config command): the reference restarts at the next pose."""
-        self.geometry, self.integrator = geometry, integrator
-        self.counter_bits = counter_bits
+        self.tracker.integrator = integrator
+        self.tracker.set_geometry(geometry, counter_bits)
 
     _handlers: ClassVar[dict[str, Any]] = {
         "WHEEL_ENCODERS": _on_encoders,
@@ -278,13 +230,6 @@ class RobotTelemetry:
 
 def _pose_dict(pose: Pose) -> dict[str, float]:
     return {"x_m": pose.x_m, "y_m": pose.y_m, "heading_rad": pose.heading_rad}
-
-
-def _difference(a: Pose, b: Pose) -> dict[str, float]:
-    """a - b: position (m), distance (m) and heading wrapped to [-pi, pi) (rad)."""
-    dx, dy = a.x_m - b.x_m, a.y_m - b.y_m
-    return {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy),
-            "dheading_rad": wrap_angle(a.heading_rad - b.heading_rad)}
 
 
 def _choice(db: Database, message: str, signal: str, value: int) -> str:

@@ -24,10 +24,11 @@ QoS 1 (at least once, buffered by the bridge while the broker is away).
 from __future__ import annotations
 
 import json
-import math
 import re
 import time
 from typing import Any, Final
+
+from host.jsonutil import finite
 
 PREFIX: Final = "odocan"
 TELEMETRY_LEAVES: Final = ("pose", "reference", "truth", "error", "rates")
@@ -77,17 +78,7 @@ def check_robot_name(name: str) -> str:
 
 def dumps(payload: dict[str, Any]) -> bytes:
     """Compact JSON; non-finite floats become null (JSON has no NaN)."""
-    return json.dumps(_finite(payload), separators=(",", ":")).encode()
-
-
-def _finite(value: Any) -> Any:
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {str(k): _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
+    return json.dumps(finite(payload), separators=(",", ":")).encode()
 
 
 def stamp(payload: dict[str, Any]) -> dict[str, Any]:
