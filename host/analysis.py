@@ -43,7 +43,7 @@ import numpy.typing as npt
 from host.decode import BulkDecoder, DecodeError
 from host.e2e import UNKNOWN, check_frames
 from host.logio import FrameArrays
-from host.reference import INTEGRATORS, Geometry, integrate
+from host.reference import INTEGRATORS, Geometry, integrate, wrap_delta
 from sim import contract
 from sim.exceptions import OdocanError
 from sim.robot import RobotProfile
@@ -377,8 +377,8 @@ def _reference(enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator:
     """Integrate the encoder deltas from the first on-board sample on."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     e0 = int(onboard.enc[0])
-    d_left = _wrap(np.diff(enc.left[e0:]), bits)
-    d_right = _wrap(np.diff(enc.right[e0:]), bits)
+    d_left = wrap_delta(np.diff(enc.left[e0:]), bits)
+    d_right = wrap_delta(np.diff(enc.right[e0:]), bits)
     geometry = Geometry(
         robot.counts_per_rev, robot.wheel_radius_left_m, robot.wheel_radius_right_m,
         robot.wheelbase_m,
@@ -425,12 +425,6 @@ def _segment_offsets(segment: IntArray, at: IntArray, error: FloatArray) -> Floa
     filled = np.maximum.accumulate(np.where(np.isnan(offsets), 0, np.arange(n_segments)))
     result: FloatArray = offsets[filled][segment]
     return result
-
-
-def _wrap(delta: IntArray, bits: int) -> IntArray:
-    """Signed count deltas of ``bits``-bit wrapping counters."""
-    half = 1 << (bits - 1)
-    return ((delta + half) % (1 << bits)) - half
 
 
 def _start_pose(

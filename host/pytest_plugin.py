@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import pytest
 
 if TYPE_CHECKING:  # the rig's modules (cantools, numpy, the sim) load with the first rig only
-    from host.mqtt.commands import CommandEncoder
+    from host.commands import CommandEncoder
     from host.testkit import OdocanRig
 
 _INI = {
@@ -125,7 +125,7 @@ def _defaults(request: pytest.FixtureRequest) -> dict[str, Any]:
 def _encoder(config: pytest.Config) -> CommandEncoder:
     """One HOST command encoder per session: an external firmware lives on between tests and
     its E2E receivers expect the host's counters to go on."""
-    from host.mqtt.commands import CommandEncoder
+    from host.commands import CommandEncoder
 
     if _ENCODER not in config.stash:
         config.stash[_ENCODER] = CommandEncoder()

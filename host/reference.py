@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -27,6 +28,7 @@ import numpy.typing as npt
 INTEGRATORS = ("euler", "rk2", "exact")
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+D = TypeVar("D", int, IntArray)
 
 
 @dataclass(frozen=True)
@@ -110,8 +112,8 @@ class ReferenceOdometry:
         if self._prev is None:
             self._prev = (left_count, right_count)
             return False
-        d_left = _wrap_delta(left_count - self._prev[0], self.counter_bits)
-        d_right = _wrap_delta(right_count - self._prev[1], self.counter_bits)
+        d_left = wrap_delta(left_count - self._prev[0], self.counter_bits)
+        d_right = wrap_delta(right_count - self._prev[1], self.counter_bits)
         self._prev = (left_count, right_count)
         self.step_deltas(d_left, d_right)
         return True
@@ -176,14 +178,11 @@ def integrate(
 def deltas_from_counts(counts: npt.ArrayLike, counter_bits: int) -> IntArray:
     """Wrap-safe per-step deltas of a raw wrapping counter sequence (length n -> n - 1)."""
     c = np.asarray(counts, dtype=np.int64)
-    return _wrap_delta_array(np.diff(c), counter_bits)
+    return wrap_delta(np.diff(c), counter_bits)
 
 
-def _wrap_delta(delta: int, bits: int) -> int:
-    half = 1 << (bits - 1)
-    return ((delta + half) % (1 << bits)) - half
-
-
-def _wrap_delta_array(delta: IntArray, bits: int) -> IntArray:
+def wrap_delta(delta: D, bits: int) -> D:
+    """A counter difference (int or int64 array) read back as the signed delta of a ``bits``-wide
+    wrapping counter: exact while the true delta is below half the range."""
     half = 1 << (bits - 1)
     return ((delta + half) % (1 << bits)) - half

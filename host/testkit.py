@@ -43,9 +43,9 @@ import cantools
 from cantools.database.namedsignalvalue import NamedSignalValue
 
 from host.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Analysis, analyze
+from host.commands import Command, CommandEncoder
 from host.e2e import OK, OKSOMELOST, UNPROTECTED, E2EMonitor
 from host.logio import FrameArrays, FrameCollector
-from host.mqtt.commands import Command, CommandEncoder
 from sim import contract
 from sim.board import TICK_S
 from sim.clock import RealTimeClock
@@ -655,7 +655,7 @@ class OdocanRig:
         return self.command("set_pose", {"x_m": x_m, "y_m": y_m, "heading_rad": heading_rad})
 
     def command(self, name: str, values: dict[str, Any]) -> float:
-        """Send a validated command (``host.mqtt.commands``: nav_goal, set_pose, config) and
+        """Send a validated command (``host.commands``: nav_goal, set_pose, config) and
         wait for the ACK of its last frame; returns the ACK's time (``CommandRefused`` on NACK)."""
         __tracebackhide__ = True
         cmd = self._encoder.encode(name, json.dumps(values).encode())

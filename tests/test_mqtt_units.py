@@ -6,9 +6,9 @@ import can
 import cantools
 import pytest
 
+from host.commands import CommandEncoder, CommandRejected
 from host.e2e import E2EMonitor
 from host.mqtt.broker import BrokerURL
-from host.mqtt.commands import CommandEncoder, CommandRejected
 from host.mqtt.telemetry import RobotTelemetry
 from host.reference import Geometry
 from sim import robot

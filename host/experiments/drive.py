@@ -5,7 +5,7 @@ None)``): the vehicle at rest at the origin of its start frame (x forward, y to 
 headings counter-clockwise positive), the firmware configured with the robot's nominal geometry.
 The host may first write new geometry over CAN (``configure``: ODOM_CONFIG staged writes + APPLY,
 each frame answered by ODOM_ACK), then ``drive`` a path: each goal is staged and committed by
-NAV_GOAL frames built by ``host.mqtt.commands.CommandEncoder`` (E2E-protected, checked against the
+NAV_GOAL frames built by ``host.commands.CommandEncoder`` (E2E-protected, checked against the
 DBC), the first one REPLACE, the others APPEND; the firmware drives turn-go-turn from its own
 odometry while the host listens:
 
@@ -32,9 +32,9 @@ import numpy.typing as npt
 from cantools.database.can import Message
 from cantools.database.namedsignalvalue import NamedSignalValue
 
+from host.commands import CommandEncoder, CommandRejected
 from host.decode import BulkDecoder
 from host.logio import FrameCollector
-from host.mqtt.commands import CommandEncoder, CommandRejected
 from sim.board import TICK_S
 from sim.closing import Closing
 from sim.contract import database

@@ -26,9 +26,9 @@ from typing import Any
 
 import can
 
+from host.commands import Command, CommandEncoder, CommandRejected
 from host.mqtt import topics
 from host.mqtt.broker import BrokerURL
-from host.mqtt.commands import Command, CommandEncoder, CommandRejected
 from host.mqtt.link import RobotLink
 from host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
 from host.reference import Geometry

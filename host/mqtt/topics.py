@@ -38,7 +38,6 @@ RESULT_LEAF: Final = "cmd/result"
 QOS_TELEMETRY: Final = 0
 QOS_RELIABLE: Final = 1  # status, commands, results
 ROBOT_NAME: Final = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
-MAX_COMMAND_BYTES: Final = 4096
 
 
 def topic(robot: str, leaf: str) -> str:

@@ -34,8 +34,9 @@ import cantools
 import cantools.autosar
 from cantools.database.can import Database, Message, Signal
 
-from host.mqtt.topics import MAX_COMMAND_BYTES
 from sim.contract import database
+
+MAX_COMMAND_BYTES: Final = 4096  # a command's JSON payload, at most
 
 Kind = Literal["float", "angle", "int", "enum", "bool", "absent"]
 _TURN = 2.0 * math.pi
