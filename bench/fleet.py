@@ -94,8 +94,7 @@ def cpu_cost_us(n: int = 10, ticks: int = 300) -> tuple[float, float]:
     from sim.fleet import Fleet
 
     p = robot.load("pmir")
-    geometry = Geometry(p.counts_per_rev, p.wheel_radius_left_m, p.wheel_radius_right_m,
-                        p.wheelbase_m)
+    geometry = Geometry.of(p)
     with Fleet(FleetConfig(robots=n, robot=p)) as fleet:
         telemetry = [RobotTelemetry(name, geometry, "exact", counter_bits=p.counter_bits)
                      for name in fleet.names]

@@ -379,10 +379,7 @@ def _reference(enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator:
     e0 = int(onboard.enc[0])
     d_left = wrap_delta(np.diff(enc.left[e0:]), bits)
     d_right = wrap_delta(np.diff(enc.right[e0:]), bits)
-    geometry = Geometry(
-        robot.counts_per_rev, robot.wheel_radius_left_m, robot.wheel_radius_right_m,
-        robot.wheelbase_m,
-    )
+    geometry = Geometry.of(robot)
     rel = integrate(d_left, d_right, geometry, integrator)
     zero = np.zeros(1)
     rel_x, rel_y = np.concatenate((zero, rel.x_m)), np.concatenate((zero, rel.y_m))

@@ -48,7 +48,8 @@ from host.decode import frame_key
 from host.e2e import E2E_KEYS, UNKNOWN, E2EMonitor
 from host.jsonutil import finite
 from host.mqtt.fleetview import RobotState
-from host.tracking import PoseTracker, geometry_of
+from host.reference import Geometry
+from host.tracking import PoseTracker
 from sim.contract import database
 from sim.robot import RobotProfile
 
@@ -99,7 +100,7 @@ class BusMonitor:
         self.db = db if db is not None else database()
         self._by_key = {frame_key(m.frame_id, m.is_extended_frame): m for m in self.db.messages}
         self.e2e = E2EMonitor(self.db)
-        self.tracker = PoseTracker(geometry_of(robot), robot.counter_bits, integrator)
+        self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
         self.messages: dict[str, MessageStats] = {}
         self.unknown_ids: Counter[str] = Counter()
         self.status: dict[str, Any] = {}

@@ -25,6 +25,8 @@ from typing import TypeVar
 import numpy as np
 import numpy.typing as npt
 
+from sim.robot import RobotProfile
+
 INTEGRATORS = ("euler", "rk2", "exact")
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -39,6 +41,12 @@ class Geometry:
     wheel_radius_left_m: float
     wheel_radius_right_m: float
     wheelbase_m: float
+
+    @classmethod
+    def of(cls, robot: RobotProfile) -> Geometry:
+        """The float parameters of a robot profile."""
+        return cls(robot.counts_per_rev, robot.wheel_radius_left_m,
+                   robot.wheel_radius_right_m, robot.wheelbase_m)
 
     @property
     def m_per_count_left(self) -> float:

@@ -12,17 +12,10 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 from host.reference import Geometry, ReferenceOdometry, wrap_angle
-from sim.robot import RobotProfile
 
 WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
 _RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
 _TURN = 2.0 * math.pi
-
-
-def geometry_of(robot: RobotProfile) -> Geometry:
-    """The float parameters of a robot profile."""
-    return Geometry(robot.counts_per_rev, robot.wheel_radius_left_m,
-                    robot.wheel_radius_right_m, robot.wheelbase_m)
 
 
 def difference(a: Pose, b: Pose) -> dict[str, float]:

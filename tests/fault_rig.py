@@ -22,7 +22,7 @@ from firmware.config import Integrator, RobotParams
 from firmware.e2e import E2EReceiver, E2EStatus, p02_crc
 from firmware.ecu import OdomEcu
 from firmware.errors import ErrorMask
-from host.reference import Geometry, deltas_from_counts, integrate
+from host.reference import deltas_from_counts, integrate
 from sim.board import TICK_S, FirmwareBoard
 from sim.clock import LockstepClock
 from sim.contract import database
@@ -31,6 +31,7 @@ from sim.motor_controller import SimNode
 from sim.robot import RobotProfile, load
 from sim.scenarios import RandomScenario, Scenario
 from sim.vehicle import Vehicle
+from tests.odo_helpers import geometry
 
 Observer = Callable[[int, list[can.Message]], None]
 Hook = Callable[[int], None]
@@ -187,7 +188,7 @@ class PoseAudit:
         poses = integrate(
             deltas_from_counts(counts[:, 0], bits),
             deltas_from_counts(counts[:, 1], bits),
-            _geometry(self.params),
+            geometry(self.params),
             self.integrator,
         )
         zero = np.zeros(2)
@@ -201,15 +202,6 @@ class PoseAudit:
 def _crc_ok(data: bytes, data_ids: tuple[int, ...]) -> bool:
     """The host's check of a received pose frame (a babbling node may use the ID too)."""
     return len(data) == 8 and data[0] == p02_crc(data, data_ids[data[1] & 0xF])
-
-
-def _geometry(p: RobotParams) -> Geometry:
-    return Geometry(
-        counts_per_rev=p.counts_per_rev,
-        wheel_radius_left_m=p.wheel_radius_left_nm * 1e-9,
-        wheel_radius_right_m=p.wheel_radius_right_nm * 1e-9,
-        wheelbase_m=p.wheelbase_nm * 1e-9,
-    )
 
 
 # --- every protected frame of the DBC ----------------------------------------------------------

@@ -36,8 +36,7 @@ BROKERS = ("mosquitto", "amqtt")
 ROBOT = "robot001"
 _channels = count()
 PMIR = robot.load("pmir")
-GEOMETRY = Geometry(PMIR.counts_per_rev, PMIR.wheel_radius_left_m, PMIR.wheel_radius_right_m,
-                    PMIR.wheelbase_m)
+GEOMETRY = Geometry.of(PMIR)
 
 
 @asynccontextmanager

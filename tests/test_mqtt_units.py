@@ -17,8 +17,7 @@ from sim.fleet import Fleet, FleetConfig
 from sim.rig import LockstepRig, RigConfig
 
 PMIR = robot.load("pmir")
-GEOMETRY = Geometry(PMIR.counts_per_rev, PMIR.wheel_radius_left_m, PMIR.wheel_radius_right_m,
-                    PMIR.wheelbase_m)
+GEOMETRY = Geometry.of(PMIR)
 
 
 def test_set_pose_frames_pass_the_e2e_check_and_carry_the_values() -> None:

@@ -80,8 +80,7 @@ async def _all_connected(bridge: Bridge, timeout_s: float = 10.0) -> None:
 
 def _endpoints(fleet: Fleet, run: FleetRun) -> list[RobotEndpoint]:
     p = run.fleet.robot
-    geometry = Geometry(p.counts_per_rev, p.wheel_radius_left_m, p.wheel_radius_right_m,
-                        p.wheelbase_m)
+    geometry = Geometry.of(p)
     return [RobotEndpoint(name, fleet.host_bus(i), geometry, run.fleet.integrator, p.counter_bits)
             for i, name in enumerate(fleet.names)]
 

@@ -65,12 +65,7 @@ def _do_bridge(args: argparse.Namespace) -> int:
         raise ConfigurationError(str(exc)) from None
     url = broker_url(args)
     profile = robot.load(args.robot)
-    geometry = Geometry(
-        profile.counts_per_rev,
-        profile.wheel_radius_left_m,
-        profile.wheel_radius_right_m,
-        profile.wheelbase_m,
-    )
+    geometry = Geometry.of(profile)
     bus = open_bus(args)
     try:
         asyncio.run(_bridge(args, name, url, bus, geometry, profile.counter_bits))
