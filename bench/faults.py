@@ -12,7 +12,6 @@ import argparse
 import random
 import sys
 import time
-import tracemalloc
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -21,22 +20,19 @@ import can
 
 from firmware import frames as fr
 from firmware.e2e import E2EReceiver, E2EStatus
-from firmware.ecu import OdomEcu
-from firmware.hal import MAILBOX_SLOTS
 from sim.board import FirmwareBoard
 from sim.clock import LockstepClock
 from sim.faults import FaultInjectingBus, FaultSpec
 from sim.scenarios import RandomScenario
 from tests.fault_rig import (
-    CountingHal,
     FaultRig,
     PoseAudit,
     binomial_upper_bound,
     burst_sizes,
     dbc_data_ids,
+    fuzz_ecu,
     open_virtual,
     protected_frames,
-    random_frame,
     random_message,
     unique_channel,
 )
@@ -98,29 +94,15 @@ def bench_corruption(n: int) -> None:
 
 def bench_fuzz_ecu(n: int) -> None:
     """``n`` random frames into ``OdomEcu.isr_can_rx`` + ``tick``."""
-    rng = random.Random(6)
-    ecu = OdomEcu(CountingHal(), params("exact"))
-    expected = 0
-    tracemalloc.start()
     start = time.perf_counter()
-    baseline = None
-    done = 0
-    for burst in burst_sizes(rng, n):
-        for _ in range(burst):
-            can_id, _, data = random_frame(rng)
-            ecu.isr_can_rx(can_id, data)
-        expected += max(0, burst - MAILBOX_SLOTS)
-        ecu.tick()
-        done += burst
-        if baseline is None and done >= n // 10:
-            baseline = tracemalloc.get_traced_memory()[0]
+    fuzz = fuzz_ecu(n, seed=6)
     elapsed = time.perf_counter() - start
-    grown = tracemalloc.get_traced_memory()[0] - (baseline or 0)
-    tracemalloc.stop()
+    ecu = fuzz.ecu
     print(
         f"fuzz, OdomEcu.isr_can_rx + tick: {n} frames in {elapsed:.1f} s (tracemalloc on), no "
-        f"exception; overflows {ecu.mailbox.overflows} (expected {expected}), filtered "
-        f"{ecu.frames_filtered}, rejected {ecu.frames_rejected}, memory {grown:+d} B after 10%"
+        f"exception; overflows {ecu.mailbox.overflows} (expected {fuzz.expected_overflows}), "
+        f"filtered {ecu.frames_filtered}, rejected {ecu.frames_rejected}, "
+        f"memory {fuzz.grown_bytes:+d} B after 10%"
     )
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import random
+import tracemalloc
 import uuid
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -22,6 +23,7 @@ from firmware.config import Integrator, RobotParams
 from firmware.e2e import E2EReceiver, E2EStatus, p02_crc
 from firmware.ecu import OdomEcu
 from firmware.errors import ErrorMask
+from firmware.hal import MAILBOX_SLOTS
 from host.reference import deltas_from_counts, integrate
 from sim.board import TICK_S, FirmwareBoard
 from sim.clock import LockstepClock
@@ -31,7 +33,7 @@ from sim.motor_controller import SimNode
 from sim.robot import RobotProfile, load
 from sim.scenarios import RandomScenario, Scenario
 from sim.vehicle import Vehicle
-from tests.odo_helpers import geometry
+from tests.odo_helpers import geometry, params
 
 Observer = Callable[[int, list[can.Message]], None]
 Hook = Callable[[int], None]
@@ -326,6 +328,42 @@ def burst_sizes(rng: random.Random, total: int) -> Iterator[int]:
         n = min(n, left)
         left -= n
         yield n
+
+
+@dataclass
+class EcuFuzz:
+    """What ``fuzz_ecu`` did: the ECU, the mailbox overflows expected, memory grown (bytes)."""
+
+    ecu: OdomEcu
+    hal: CountingHal
+    expected_overflows: int
+    grown_bytes: int
+
+
+def fuzz_ecu(n: int, seed: int) -> EcuFuzz:
+    """``n`` random frames into ``OdomEcu.isr_can_rx`` in bursts, ``tick`` after each burst;
+    the memory traced after the first 10 % of the frames is the baseline."""
+    rng = random.Random(seed)
+    hal = CountingHal()
+    ecu = OdomEcu(hal, params("exact"))
+    expected = 0
+    tracemalloc.start()
+    try:
+        baseline = None
+        done = 0
+        for burst in burst_sizes(rng, n):
+            for _ in range(burst):
+                can_id, _, data = random_frame(rng)
+                ecu.isr_can_rx(can_id, data)
+            expected += max(0, burst - MAILBOX_SLOTS)
+            ecu.tick()
+            done += burst
+            if baseline is None and done >= n // 10:
+                baseline = tracemalloc.get_traced_memory()[0]
+        grown = tracemalloc.get_traced_memory()[0] - (baseline or 0)
+    finally:
+        tracemalloc.stop()
+    return EcuFuzz(ecu, hal, expected, grown)
 
 
 def random_message(rng: random.Random, t_s: float) -> can.Message:

@@ -10,10 +10,8 @@ APPLY with arbitrary values. The host decoder's fuzzing is for later (issue #6).
 from __future__ import annotations
 
 import random
-import tracemalloc
 
 from firmware import frames as fr
-from firmware.ecu import OdomEcu
 from firmware.errors import ErrorFlag, State
 from firmware.hal import MAILBOX_SLOTS
 from sim.board import FirmwareBoard
@@ -21,12 +19,11 @@ from sim.clock import LockstepClock
 from sim.faults import FaultInjectingBus, FaultSpec
 from sim.scenarios import RandomScenario
 from tests.fault_rig import (
-    CountingHal,
     FaultRig,
     PoseAudit,
     burst_sizes,
+    fuzz_ecu,
     open_virtual,
-    random_frame,
     random_message,
     unique_channel,
 )
@@ -36,33 +33,15 @@ N_FRAMES = 100_000
 
 
 def test_fuzzed_frames_into_the_isr_and_tick_never_raise_and_never_grow() -> None:
-    rng = random.Random(6)
-    hal = CountingHal()
-    ecu = OdomEcu(hal, params("exact"))
-    expected_overflows = 0
-    tracemalloc.start()
-    try:
-        baseline = None
-        done = 0
-        for n in burst_sizes(rng, N_FRAMES):
-            for _ in range(n):
-                can_id, _, data = random_frame(rng)
-                ecu.isr_can_rx(can_id, data)
-            expected_overflows += max(0, n - MAILBOX_SLOTS)
-            ecu.tick()
-            done += n
-            if baseline is None and done >= N_FRAMES // 10:
-                baseline = tracemalloc.get_traced_memory()[0]
-        grown = tracemalloc.get_traced_memory()[0] - (baseline or 0)
-    finally:
-        tracemalloc.stop()
+    fuzz = fuzz_ecu(N_FRAMES, seed=6)
+    ecu, grown = fuzz.ecu, fuzz.grown_bytes
     rejected = ecu.frames_rejected
     print(
         f"\n{N_FRAMES} fuzzed frames into OdomEcu: {ecu.mailbox.overflows} mailbox overflows, "
-        f"{ecu.frames_filtered} filtered, {rejected} rejected, {hal.sent} frames sent, state "
+        f"{ecu.frames_filtered} filtered, {rejected} rejected, {fuzz.hal.sent} frames sent, state "
         f"{State(ecu.state).name}, memory {grown:+d} B over the last 90%"
     )
-    assert ecu.mailbox.overflows == expected_overflows > 0
+    assert ecu.mailbox.overflows == fuzz.expected_overflows > 0
     assert ecu.errors.has(ErrorFlag.MAILBOX_OVERFLOW)
     assert ecu.frames_filtered > 0 and rejected > 0
     assert grown < 64 * 1024
