@@ -26,11 +26,11 @@ sys.path.insert(0, str(ROOT))
 
 import can  # noqa: E402
 
-from host.analysis import analyze  # noqa: E402
-from host.logio import FrameArrays, read_log  # noqa: E402
-from sim.contract import DBC_PATH, database  # noqa: E402
-from sim.rig import LockstepRig, RigConfig  # noqa: E402
-from sim.robot import load  # noqa: E402
+from odocan.host.io.logs import FrameArrays, read_log  # noqa: E402
+from odocan.host.judge.analysis import analyze  # noqa: E402
+from odocan.sim.contract import DBC_PATH, database  # noqa: E402
+from odocan.sim.rig import LockstepRig, RigConfig  # noqa: E402
+from odocan.sim.robot import load  # noqa: E402
 
 FRAMES_PER_SIM_SECOND = 360  # the rig's bus load: 100 + 50 + 3 * 50 + 20 + 30 + 10 frames/s
 ROBOT = "pmir"

@@ -18,12 +18,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import can
 
-from firmware import frames as fr
-from firmware.e2e import E2EReceiver, E2EStatus
-from sim.board import FirmwareBoard
-from sim.clock import LockstepClock
-from sim.faults import FaultInjectingBus, FaultSpec
-from sim.scenarios import RandomScenario
+from odocan.firmware import frames as fr
+from odocan.firmware.e2e import E2EReceiver, E2EStatus
+from odocan.sim.board import FirmwareBoard
+from odocan.sim.clock import LockstepClock
+from odocan.sim.faults import FaultInjectingBus, FaultSpec
+from odocan.sim.scenarios import RandomScenario
 from tests.fault_rig import (
     FaultRig,
     PoseAudit,

@@ -22,10 +22,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from host.mqtt.broker import LOOPBACK, BrokerURL, free_loopback_port
-from host.mqtt.fleetrun import FleetRun, run_fleet
-from sim import robot
-from sim.fleet import FleetConfig
+from odocan.host.mqtt.broker import LOOPBACK, BrokerURL, free_loopback_port
+from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
+from odocan.sim import robot
+from odocan.sim.fleet import FleetConfig
 
 LIMIT = 0.001
 
@@ -89,9 +89,9 @@ def start_mosquitto(workdir: Path) -> tuple[subprocess.Popen[bytes], BrokerURL] 
 def cpu_cost_us(n: int = 10, ticks: int = 300) -> tuple[float, float]:
     """CPU time (process time, so other processes do not count) per robot and tick: the fleet
     step alone, and the bridge's frame handling (E2E, decode, reference) on top (us)."""
-    from host.mqtt.telemetry import RobotTelemetry
-    from host.reference import Geometry
-    from sim.fleet import Fleet
+    from odocan.host.judge.reference import Geometry
+    from odocan.host.mqtt.telemetry import RobotTelemetry
+    from odocan.sim.fleet import Fleet
 
     p = robot.load("pmir")
     geometry = Geometry.of(p)

@@ -14,10 +14,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from firmware.config import Integrator, RobotParams, derive_constants
-from firmware.errors import ErrorMask
-from firmware.odometry import Odometry
-from host.reference import Geometry, ReferenceOdometry, integrate
+from odocan.firmware.config import Integrator, RobotParams, derive_constants
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.odometry import Odometry
+from odocan.host.judge.reference import Geometry, ReferenceOdometry, integrate
 from tests.odo_helpers import smooth_random_counts
 
 PMIR = RobotParams(500, 75_000_000, 75_000_000, 300_000_000, 16, 0)

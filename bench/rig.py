@@ -27,11 +27,11 @@ import can
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from firmware import frames as fr
-from sim.board import TICK_S
-from sim.rig import LockstepRig, RigConfig
-from sim.robot import load
-from sim.scenarios import RandomScenario
+from odocan.firmware import frames as fr
+from odocan.sim.board import TICK_S
+from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.robot import load
+from odocan.sim.scenarios import RandomScenario
 
 SIM_IDS = frozenset({fr.WHEEL_ENCODERS_ID, fr.MOTOR_CMD_ID, fr.SIM_TRUTH_ID})
 RTF_TARGET = 360.0

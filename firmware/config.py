@@ -17,8 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
-from firmware.errors import ErrorMask
-from firmware.fixmath import muldiv_round_u64
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.fixmath import muldiv_round_u64
 
 # 2*pi in Q60 (i64), correctly rounded: round(2*pi * 2^60).
 TWO_PI_Q60 = 7244019458077122842

@@ -25,7 +25,7 @@ from __future__ import annotations
 from enum import IntEnum
 from typing import Final
 
-from firmware.fixmath import U8_MAX, u8, u32, wrap_u32
+from odocan.firmware.fixmath import U8_MAX, u8, u32, wrap_u32
 
 CRC8H2F_POLY: Final = 0x2F
 CRC8H2F_INIT: Final = 0xFF

@@ -18,17 +18,17 @@ Sample, then compute. ``isr_can_rx`` only copies a frame into the mailbox (overf
 
 from __future__ import annotations
 
-from firmware import frames as fr
-from firmware.config import (
+from odocan.firmware import frames as fr
+from odocan.firmware.config import (
     TWO_PI_Q60,
     ConfigReason,
     RobotParams,
     derive_constants,
     validate,
 )
-from firmware.e2e import COUNTER_MASK, E2EReceiver, E2EStatus
-from firmware.errors import ErrorFlag, ErrorMask, State
-from firmware.fixmath import (
+from odocan.firmware.e2e import COUNTER_MASK, E2EReceiver, E2EStatus
+from odocan.firmware.errors import ErrorFlag, ErrorMask, State
+from odocan.firmware.fixmath import (
     U16_MAX,
     U32_MAX,
     U64_MAX,
@@ -39,9 +39,9 @@ from firmware.fixmath import (
     wrap_signed,
     wrap_u32,
 )
-from firmware.hal import MAILBOX_SLOTS, TICK_PERIOD_US, CanTx
-from firmware.nav import NAV_PERIOD_TICKS, Navigator
-from firmware.odometry import Odometry
+from odocan.firmware.hal import MAILBOX_SLOTS, TICK_PERIOD_US, CanTx
+from odocan.firmware.nav import NAV_PERIOD_TICKS, Navigator
+from odocan.firmware.odometry import Odometry
 
 ENCODER_PERIOD_US = 10_000  # WHEEL_ENCODERS GenMsgCycleTime
 POSE_PERIOD_TICKS = 2  # ODOM_POSE_X/Y, ODOM_TWIST: 20 ms

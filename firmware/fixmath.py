@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from typing import TypeAlias
 
-from firmware.errors import ErrorFlag, ErrorMask
+from odocan.firmware.errors import ErrorFlag, ErrorMask
 
 u8: TypeAlias = int
 u16: TypeAlias = int

@@ -22,10 +22,10 @@ from __future__ import annotations
 from enum import IntEnum
 from typing import Final, NamedTuple
 
-from firmware.config import Integrator
-from firmware.e2e import COUNTER_MASK, DATA_ID_COUNT, p02_crc
-from firmware.errors import ErrorMask
-from firmware.fixmath import (
+from odocan.firmware.config import Integrator
+from odocan.firmware.e2e import COUNTER_MASK, DATA_ID_COUNT, p02_crc
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.fixmath import (
     I16_MAX,
     I16_MIN,
     I32_MAX,

@@ -41,9 +41,9 @@ Fixed-point formats: positions Q40 m (i64), distances µm (i64), angles BAM32 (i
 
 from __future__ import annotations
 
-from firmware.config import TWO_PI_Q60
-from firmware.errors import ErrorMask
-from firmware.fixmath import (
+from odocan.firmware.config import TWO_PI_Q60
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.fixmath import (
     U32_MAX,
     div_round_i64,
     i32,
@@ -56,8 +56,8 @@ from firmware.fixmath import (
     u64,
     wrap_i32,
 )
-from firmware.frames import AckReason, NavGoal, NavGoalField, NavMode, NavState
-from firmware.trig import atan2_bam32, cos_q30
+from odocan.firmware.frames import AckReason, NavGoal, NavGoalField, NavMode, NavState
+from odocan.firmware.trig import atan2_bam32, cos_q30
 
 NAV_PERIOD_TICKS = 2  # 20 ms at the 10 ms tick: the MOTOR_CMD cycle
 NAV_PERIOD_MS = 20

@@ -27,9 +27,9 @@ Per step, with dS_L, dS_R the wheel travels (Q48 m, exact products of counts and
 
 from __future__ import annotations
 
-from firmware.config import TWO_PI_Q60, Integrator, OdomConstants
-from firmware.errors import ErrorFlag, ErrorMask
-from firmware.fixmath import (
+from odocan.firmware.config import TWO_PI_Q60, Integrator, OdomConstants
+from odocan.firmware.errors import ErrorFlag, ErrorMask
+from odocan.firmware.fixmath import (
     I64_MAX,
     I64_MIN,
     U32_MAX,
@@ -39,7 +39,7 @@ from firmware.fixmath import (
     wrap_i64,
     wrap_signed,
 )
-from firmware.trig import sincos_q30
+from odocan.firmware.trig import sincos_q30
 
 ONE_Q62 = 1 << 62
 ONE_Q60 = 1 << 60

@@ -24,8 +24,8 @@ atan2(-y, x) == -atan2(y, x) except where the result is -2^31 (+-pi).
 
 from __future__ import annotations
 
-from firmware.fixmath import i32, i64, u32
-from firmware.trig_tables import (
+from odocan.firmware.fixmath import i32, i64, u32
+from odocan.firmware.trig_tables import (
     ATAN_BAM48,
     ATAN_K1,
     ATAN_K1_SHIFT,

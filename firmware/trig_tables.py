@@ -1,6 +1,6 @@
 """Integer constants of ``firmware/trig.py``: GENERATED, do not edit.
 
-Written by ``python -m host.gen_trig_tables`` (host/gen_trig_tables.py), which evaluates
+Written by ``python tools/gen_trig_tables.py``, which evaluates
 every constant with ``decimal`` at 100 digits and rounds it to the nearest
 integer (correctly rounded: the generator checks the distance to each rounding boundary).
 In C these are ``static const`` arrays in flash.

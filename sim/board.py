@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import can
 
-from firmware.config import RobotParams
-from firmware.ecu import OdomEcu
-from firmware.hal import TICK_PERIOD_US
-from sim.clock import Clock
-from sim.node import BusNode
+from odocan.firmware.config import RobotParams
+from odocan.firmware.ecu import OdomEcu
+from odocan.firmware.hal import TICK_PERIOD_US
+from odocan.sim.clock import Clock
+from odocan.sim.node import BusNode
 
 TICK_S = TICK_PERIOD_US / 1e6
 TX_LATENCY_S = 0.001  # the firmware's frames leave 1 ms after the tick that made them

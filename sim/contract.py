@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import os
 from functools import cache
+from importlib import resources
 from pathlib import Path
 
 import cantools
 from cantools.database.can import Database, Message
 
-_DEFAULT_DBC = Path(__file__).resolve().parent.parent / "dbc" / "odocan.dbc"
+# Package data: dbc/ ships inside the odocan package (an installed wheel unpacks it to files).
+_DEFAULT_DBC = Path(str(resources.files("odocan").joinpath("dbc", "odocan.dbc")))
 DBC_PATH = Path(os.environ.get("ODOCAN_DBC", _DEFAULT_DBC))
 
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from sim.robot import RobotProfile
+from odocan.sim.robot import RobotProfile
 
 FloatArray = npt.NDArray[np.float64]
 TAU_RAD = 2.0 * math.pi

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from sim.exceptions import ConfigurationError
-from sim.robot import RobotProfile
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.robot import RobotProfile
 
 _ED_RANGE = (0.5, 2.0)
 _EB_RANGE = (0.5, 2.0)

@@ -53,7 +53,7 @@ from typing import Any
 import can
 from can import BusABC, BusState
 
-from sim.exceptions import ConfigurationError
+from odocan.sim.exceptions import ConfigurationError
 
 LOG = logging.getLogger("odocan.faults")
 

@@ -24,13 +24,13 @@ from dataclasses import dataclass
 
 import can
 
-from sim.board import TICK_S
-from sim.clock import RealTimeClock
-from sim.closing import Closing
-from sim.contract import cycle_ticks, database
-from sim.realtime import DeadlineStats
-from sim.rig import LockstepRig, RigConfig
-from sim.robot import RobotProfile
+from odocan.sim.board import TICK_S
+from odocan.sim.clock import RealTimeClock
+from odocan.sim.closing import Closing
+from odocan.sim.contract import cycle_ticks, database
+from odocan.sim.realtime import DeadlineStats
+from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.robot import RobotProfile
 
 Batch = list[tuple[int, can.Message]]
 _fleet_ids = iter(range(1 << 62))

@@ -16,17 +16,17 @@ import math
 
 import can
 
-from firmware import frames as fr
-from firmware.e2e import E2EReceiver, E2EStatus
-from firmware.errors import ErrorMask
-from sim.board import TICK_S
-from sim.clock import Clock
-from sim.contract import cycle_ticks
-from sim.errors import ErrorModel
-from sim.node import BusNode
-from sim.robot import RobotProfile
-from sim.scenarios import Scenario, get_scenario
-from sim.vehicle import Vehicle
+from odocan.firmware import frames as fr
+from odocan.firmware.e2e import E2EReceiver, E2EStatus
+from odocan.firmware.errors import ErrorMask
+from odocan.sim.board import TICK_S
+from odocan.sim.clock import Clock
+from odocan.sim.contract import cycle_ticks
+from odocan.sim.errors import ErrorModel
+from odocan.sim.node import BusNode
+from odocan.sim.robot import RobotProfile
+from odocan.sim.scenarios import Scenario, get_scenario
+from odocan.sim.vehicle import Vehicle
 
 _U24 = 0xFF_FFFF
 _BAM16_PER_RAD = 65536 / (2 * math.pi)

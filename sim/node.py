@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import can
 
-from sim.clock import Clock
+from odocan.sim.clock import Clock
 
 
 class BusNode:

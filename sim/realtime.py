@@ -25,9 +25,9 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from types import FrameType
 
-from sim.board import TICK_S
-from sim.clock import RealTimeClock
-from sim.contract import database
+from odocan.sim.board import TICK_S
+from odocan.sim.clock import RealTimeClock
+from odocan.sim.contract import database
 
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 

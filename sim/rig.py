@@ -26,17 +26,17 @@ from dataclasses import dataclass, field
 
 import can
 
-from firmware.config import Integrator, RobotParams
-from sim.board import TICK_S, FirmwareBoard
-from sim.clock import LockstepClock
-from sim.closing import Closing
-from sim.errors import ErrorModel
-from sim.exceptions import ConfigurationError
-from sim.faults import FaultInjectingBus, FaultSpec
-from sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
-from sim.robot import RobotProfile
-from sim.scenarios import get_scenario
-from sim.vehicle import Vehicle
+from odocan.firmware.config import Integrator, RobotParams
+from odocan.sim.board import TICK_S, FirmwareBoard
+from odocan.sim.clock import LockstepClock
+from odocan.sim.closing import Closing
+from odocan.sim.errors import ErrorModel
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.faults import FaultInjectingBus, FaultSpec
+from odocan.sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
+from odocan.sim.robot import RobotProfile
+from odocan.sim.scenarios import get_scenario
+from odocan.sim.vehicle import Vehicle
 
 INTEGRATORS = tuple(i.name.lower() for i in Integrator)
 

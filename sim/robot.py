@@ -21,12 +21,13 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from sim.exceptions import ConfigurationError
+from odocan.sim.exceptions import ConfigurationError
 
-ROBOTS_DIR = Path(__file__).parent / "robots"
+ROBOTS_DIR = Path(str(resources.files("odocan.sim").joinpath("robots")))
 NM_PER_M = 1_000_000_000
 
 _RADIUS_RANGE_M = (0.001, 2.0)

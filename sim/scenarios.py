@@ -27,8 +27,8 @@ from typing import Protocol
 
 import numpy as np
 
-from sim.exceptions import ConfigurationError
-from sim.robot import RobotProfile
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.robot import RobotProfile
 
 REST_S = 1.0  # standstill at the end of every scenario
 

@@ -15,11 +15,11 @@ import math
 
 import numpy as np
 
-from sim.drivetrain import Drivetrain, MotorConfig
-from sim.errors import ErrorModel
-from sim.exceptions import ConfigurationError
-from sim.robot import RobotProfile
-from sim.truth import GroundTruth, Pose, TruthTrace
+from odocan.sim.drivetrain import Drivetrain, MotorConfig
+from odocan.sim.errors import ErrorModel
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.robot import RobotProfile
+from odocan.sim.truth import GroundTruth, Pose, TruthTrace
 
 _MAX_PENDING = 1 << 16  # substeps held before the ground truth is brought up to date
 _TIME_EPS = 1e-6  # in substeps

@@ -23,7 +23,7 @@ from typing import Any
 import aiomqtt
 import pytest
 
-from host.mqtt.broker import LOOPBACK, BrokerURL, EmbeddedBroker, free_loopback_port
+from odocan.host.mqtt.broker import LOOPBACK, BrokerURL, EmbeddedBroker, free_loopback_port
 
 MOSQUITTO = shutil.which("mosquitto") or (
     "/usr/sbin/mosquitto" if Path("/usr/sbin/mosquitto").exists() else None

@@ -18,21 +18,21 @@ from dataclasses import dataclass, field
 import can
 import numpy as np
 
-from firmware import frames as fr
-from firmware.config import Integrator, RobotParams
-from firmware.e2e import E2EReceiver, E2EStatus, p02_crc
-from firmware.ecu import OdomEcu
-from firmware.errors import ErrorMask
-from firmware.hal import MAILBOX_SLOTS
-from host.reference import deltas_from_counts, integrate
-from sim.board import TICK_S, FirmwareBoard
-from sim.clock import LockstepClock
-from sim.contract import database
-from sim.faults import FaultInjectingBus, FaultSpec
-from sim.motor_controller import SimNode
-from sim.robot import RobotProfile, load
-from sim.scenarios import RandomScenario, Scenario
-from sim.vehicle import Vehicle
+from odocan.firmware import frames as fr
+from odocan.firmware.config import Integrator, RobotParams
+from odocan.firmware.e2e import E2EReceiver, E2EStatus, p02_crc
+from odocan.firmware.ecu import OdomEcu
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.hal import MAILBOX_SLOTS
+from odocan.host.judge.reference import deltas_from_counts, integrate
+from odocan.sim.board import TICK_S, FirmwareBoard
+from odocan.sim.clock import LockstepClock
+from odocan.sim.contract import database
+from odocan.sim.faults import FaultInjectingBus, FaultSpec
+from odocan.sim.motor_controller import SimNode
+from odocan.sim.robot import RobotProfile, load
+from odocan.sim.scenarios import RandomScenario, Scenario
+from odocan.sim.vehicle import Vehicle
 from tests.odo_helpers import geometry, params
 
 Observer = Callable[[int, list[can.Message]], None]

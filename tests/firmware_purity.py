@@ -19,9 +19,9 @@ ALLOWED_IMPORTS = frozenset(
         "functools",
         "itertools",
         "array",
-        "firmware",
     }
 )
+FIRMWARE_PACKAGE = "odocan.firmware"
 FORBIDDEN_CALLS = frozenset({"float", "round", "complex", "eval", "exec", "__import__"})
 
 
@@ -75,7 +75,8 @@ class _Scanner(ast.NodeVisitor):
             self._check_module(node, node.module)
 
     def _check_module(self, node: ast.AST, module: str) -> None:
-        if module.split(".")[0] not in ALLOWED_IMPORTS:
+        own = module == FIRMWARE_PACKAGE or module.startswith(FIRMWARE_PACKAGE + ".")
+        if not own and module.split(".")[0] not in ALLOWED_IMPORTS:
             self._flag(node, f"import of {module!r} (not standard-library-allowed nor firmware)")
 
 

@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 
-from firmware.config import Integrator, RobotParams, derive_constants, validate
-from firmware.errors import ErrorMask
-from firmware.odometry import Odometry
-from host.reference import Geometry
+from odocan.firmware.config import Integrator, RobotParams, derive_constants, validate
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.odometry import Odometry
+from odocan.host.judge.reference import Geometry
 
 INTEGRATOR_NAMES = {"euler": Integrator.EULER, "rk2": Integrator.RK2, "exact": Integrator.EXACT}
 # Seed 002's robot (pmir): 0.15 m wheels, 500 counts/rev, wheelbase 0.30 m.

@@ -15,14 +15,20 @@ import numpy as np
 import pytest
 from cantools.database.can import Database
 
-from firmware.e2e import p02_protect
-from host.analysis import HEADING_LSB_RAD, POSITION_LSB_M, AnalysisError, Tolerance, analyze
-from host.logio import FrameArrays, FrameCollector
-from sim.contract import DBC_PATH, database
-from sim.errors import ErrorModel
-from sim.exceptions import OdocanError
-from sim.rig import INTEGRATORS, LockstepRig, RigConfig
-from sim.robot import load
+from odocan.firmware.e2e import p02_protect
+from odocan.host.io.logs import FrameArrays, FrameCollector
+from odocan.host.judge.analysis import (
+    HEADING_LSB_RAD,
+    POSITION_LSB_M,
+    AnalysisError,
+    Tolerance,
+    analyze,
+)
+from odocan.sim.contract import DBC_PATH, database
+from odocan.sim.errors import ErrorModel
+from odocan.sim.exceptions import OdocanError
+from odocan.sim.rig import INTEGRATORS, LockstepRig, RigConfig
+from odocan.sim.robot import load
 
 PMIR = load("pmir")
 KOBUKI = load("kobuki")

@@ -13,7 +13,7 @@ from pathlib import Path
 import cantools
 import pytest
 
-from host.cli import main
+from odocan.host.cli.app import main
 from tests.test_cli_run import assert_usage_error, run_cli
 
 DBC = Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc"

@@ -21,12 +21,12 @@ from typing import Any
 import can
 import pytest
 
-from host.busopts import open_bus
-from host.cli import build_parser, main
-from host.monitor import error_names
-from host.subparsers import monitor as monitor_cmd
-from sim import robot
-from sim.rig import LockstepRig, RigConfig
+from odocan.host.cli.app import build_parser, main
+from odocan.host.cli.subparsers import monitor as monitor_cmd
+from odocan.host.io.buses import open_bus
+from odocan.host.judge.monitor import error_names
+from odocan.sim import robot
+from odocan.sim.rig import LockstepRig, RigConfig
 from tests.test_cli_run import assert_usage_error, run_cli
 
 TICKS = 100  # 1 s of real time
@@ -240,7 +240,7 @@ def test_monitor_bad_input_is_one_line(
 
 
 def test_monitor_mqtt_unreachable_broker(capsys: pytest.CaptureFixture[str]) -> None:
-    from host.mqtt.broker import free_loopback_port
+    from odocan.host.mqtt.broker import free_loopback_port
 
     url = f"mqtt://127.0.0.1:{free_loopback_port()}"
     code = main(["monitor", "--mqtt", url, "--duration", "0.5", "--json"])
@@ -249,9 +249,9 @@ def test_monitor_mqtt_unreachable_broker(capsys: pytest.CaptureFixture[str]) -> 
 
 def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
     """Two real-time robots bridged to the embedded amqtt broker; the monitor's fleet table."""
-    from host.mqtt.broker import EmbeddedBroker
-    from host.mqtt.fleetrun import FleetRun, run_fleet
-    from sim.fleet import FleetConfig
+    from odocan.host.mqtt.broker import EmbeddedBroker
+    from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
+    from odocan.sim.fleet import FleetConfig
 
     ready, reports = threading.Event(), []
 
@@ -286,7 +286,7 @@ def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_error_names() -> None:
-    from firmware.errors import ErrorFlag
+    from odocan.firmware.errors import ErrorFlag
 
     assert error_names(0) == []
     assert error_names(int(ErrorFlag.SATURATION | ErrorFlag.BUS_OFF)) == ["SATURATION", "BUS_OFF"]

@@ -14,7 +14,7 @@ from pathlib import Path
 import can
 import pytest
 
-from host.cli import main
+from odocan.host.cli.app import main
 from tests.test_cli_run import assert_usage_error, run_cli
 
 POSE_IDS = {0x200, 0x201, 0x202}
@@ -151,7 +151,7 @@ def test_replay_interrupted_checks_what_ran(
     recorded: dict[str, Path], monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    from sim.board import FirmwareBoard
+    from odocan.sim.board import FirmwareBoard
 
     run_tick = FirmwareBoard.run_tick
     ticks = [0]

@@ -16,7 +16,7 @@ from pathlib import Path
 import can
 import pytest
 
-from host.cli import main
+from odocan.host.cli.app import main
 
 LSB_POSITION_M = 1e-4
 LSB_HEADING_RAD = 2 * math.pi / 65536
@@ -249,7 +249,7 @@ def test_run_bad_input_is_one_line(
 
 
 def test_run_bad_input_traceback_with_debug(capsys: pytest.CaptureFixture[str]) -> None:
-    from sim.exceptions import ConfigurationError
+    from odocan.sim.exceptions import ConfigurationError
 
     with pytest.raises(ConfigurationError, match="nosuchbot"):
         main(["--debug", "run", "--robot", "nosuchbot"])
@@ -272,7 +272,7 @@ def test_run_from_a_profile_file(tmp_path: Path, capsys: pytest.CaptureFixture[s
 def test_run_interrupted_checks_what_ran(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from sim.rig import LockstepRig
+    from odocan.sim.rig import LockstepRig
 
     step = LockstepRig.step
 
@@ -308,7 +308,7 @@ def test_run_random_drives_for_a_longer_duration(
 def test_report_is_strict_json(tmp_path: Path) -> None:
     import numpy as np
 
-    from host.summary import write_report
+    from odocan.host.report.summary import write_report
 
     path = tmp_path / "r.json"
     write_report({"a": np.float64(np.nan), "b": [np.int64(3), math.inf], "c": {"d": 1.5}}, path)

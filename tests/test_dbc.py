@@ -12,9 +12,9 @@ import pytest
 from cantools.database.can import Message
 from cantools.subparsers.dump.formatting import layout_string
 
-from firmware import frames
-from firmware.config import Integrator
-from firmware.errors import State
+from odocan.firmware import frames
+from odocan.firmware.config import Integrator
+from odocan.firmware.errors import State
 
 ROOT = Path(__file__).resolve().parents[1]
 DBC_PATH = ROOT / "dbc" / "odocan.dbc"

@@ -21,11 +21,11 @@ from cantools.database.can import Database, Message
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from host.decode import BulkDecoder
-from host.logio import FrameArrays, FrameCollector, LogFormatError, parse_candump, read_log
-from sim.contract import database
-from sim.rig import LockstepRig, RigConfig
-from sim.robot import load
+from odocan.host.io.logs import FrameArrays, FrameCollector, LogFormatError, parse_candump, read_log
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.sim.contract import database
+from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.robot import load
 
 DB = database()
 DECODER = BulkDecoder(DB)

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from firmware.e2e import (
+from odocan.firmware.e2e import (
     CRC8H2F_CHECK,
     CRC8H2F_TABLE,
     E2EReceiver,

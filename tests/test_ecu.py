@@ -8,10 +8,10 @@ from typing import Any
 import cantools
 import pytest
 
-from firmware import frames as fr
-from firmware.config import RobotParams
-from firmware.ecu import MAILBOX_SLOTS, RECOVERY_FRAMES, WATCHDOG_TICKS, OdomEcu
-from firmware.errors import ErrorFlag, ErrorMask, State
+from odocan.firmware import frames as fr
+from odocan.firmware.config import RobotParams
+from odocan.firmware.ecu import MAILBOX_SLOTS, RECOVERY_FRAMES, WATCHDOG_TICKS, OdomEcu
+from odocan.firmware.errors import ErrorFlag, ErrorMask, State
 from tests.odo_helpers import geometry, params
 
 DB = cantools.database.load_file(

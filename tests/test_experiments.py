@@ -22,10 +22,10 @@ from typing import Any
 
 import pytest
 
-from host import cli
-from host.experiments import seed002
-from sim.errors import ErrorModel
-from sim.robot import load
+from odocan.host.cli import app as cli
+from odocan.host.experiments import seed002
+from odocan.sim.errors import ErrorModel
+from odocan.sim.robot import load
 
 PMIR = load("pmir")
 OUR_COMMANDS = ("experiment", "umbmark", "calibrate")

@@ -21,7 +21,7 @@ import can
 import cantools
 import pytest
 
-from host.cli import main
+from odocan.host.cli.app import main
 
 ROOT = Path(__file__).resolve().parents[1]
 DBC = ROOT / "dbc" / "odocan.dbc"

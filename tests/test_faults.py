@@ -19,13 +19,13 @@ import random
 import can
 import pytest
 
-from firmware import frames as fr
-from firmware.e2e import E2EReceiver, E2EStatus
-from firmware.errors import ErrorFlag, State
-from sim.contract import database
-from sim.exceptions import ConfigurationError
-from sim.faults import FAULT_KINDS, BusOff, ErrorCounters, FaultInjectingBus, FaultSpec
-from sim.scenarios import RandomScenario
+from odocan.firmware import frames as fr
+from odocan.firmware.e2e import E2EReceiver, E2EStatus
+from odocan.firmware.errors import ErrorFlag, State
+from odocan.sim.contract import database
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.faults import FAULT_KINDS, BusOff, ErrorCounters, FaultInjectingBus, FaultSpec
+from odocan.sim.scenarios import RandomScenario
 from tests.fault_rig import (
     FaultRig,
     PoseAudit,

@@ -22,9 +22,9 @@ from cantools.database.can.formats.arxml.message_specifics import AutosarMessage
 from hypothesis import given
 from hypothesis import strategies as st
 
-from firmware import frames as f
-from firmware.e2e import E2EReceiver, E2EStatus
-from firmware.errors import ErrorFlag, ErrorMask
+from odocan.firmware import frames as f
+from odocan.firmware.e2e import E2EReceiver, E2EStatus
+from odocan.firmware.errors import ErrorFlag, ErrorMask
 
 DBC_PATH = Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc"
 DB = cantools.database.load_file(DBC_PATH, strict=True)

@@ -17,8 +17,9 @@ from cantools.database.can.formats.arxml.message_specifics import AutosarMessage
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware.e2e import E2EReceiver, E2EStatus, p02_protect
-from host.e2e import (
+from odocan.firmware.e2e import E2EReceiver, E2EStatus, p02_protect
+from odocan.host.io.logs import FrameArrays, FrameCollector
+from odocan.host.protocol.e2e import (
     CRC8H2F_TABLE,
     E2E_KEYS,
     UNKNOWN,
@@ -27,8 +28,7 @@ from host.e2e import (
     crc8h2f_p02,
     crc8h2f_p02_one,
 )
-from host.logio import FrameArrays, FrameCollector
-from sim.contract import database
+from odocan.sim.contract import database
 
 DB = database()
 ENC = DB.get_message_by_name("WHEEL_ENCODERS")

@@ -11,14 +11,14 @@ from pathlib import Path
 import can
 import pytest
 
-from host.analysis import analyze
-from host.decode import BulkDecoder
-from host.e2e import E2EMonitor, check_frames
-from host.logio import FrameCollector, read_log
-from host.monitor import BusMonitor
-from sim.contract import database
-from sim.exceptions import OdocanError
-from sim.robot import load
+from odocan.host.io.logs import FrameCollector, read_log
+from odocan.host.judge.analysis import analyze
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.e2e import E2EMonitor, check_frames
+from odocan.sim.contract import database
+from odocan.sim.exceptions import OdocanError
+from odocan.sim.robot import load
 from tests.fault_rig import random_message
 
 FRAMES = 100_000

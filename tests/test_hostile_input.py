@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import random
 
-from firmware import frames as fr
-from firmware.errors import ErrorFlag, State
-from firmware.hal import MAILBOX_SLOTS
-from sim.board import FirmwareBoard
-from sim.clock import LockstepClock
-from sim.faults import FaultInjectingBus, FaultSpec
-from sim.scenarios import RandomScenario
+from odocan.firmware import frames as fr
+from odocan.firmware.errors import ErrorFlag, State
+from odocan.firmware.hal import MAILBOX_SLOTS
+from odocan.sim.board import FirmwareBoard
+from odocan.sim.clock import LockstepClock
+from odocan.sim.faults import FaultInjectingBus, FaultSpec
+from odocan.sim.scenarios import RandomScenario
 from tests.fault_rig import (
     FaultRig,
     PoseAudit,

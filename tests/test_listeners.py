@@ -7,7 +7,7 @@ import time
 import can
 import pytest
 
-from host.listeners import Isolated, isolate
+from odocan.host.io.listeners import Isolated, isolate
 
 
 class Counting(can.Listener):

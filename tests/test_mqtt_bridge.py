@@ -22,14 +22,14 @@ import aiomqtt
 import can
 import pytest
 
-from firmware import frames as fr
-from host.mqtt import topics
-from host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
-from host.mqtt.broker import BrokerURL
-from host.mqtt.fleetrun import FleetRun, run_fleet
-from host.reference import Geometry
-from sim import robot
-from sim.fleet import FleetConfig
+from odocan.firmware import frames as fr
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt import topics
+from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
+from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
+from odocan.sim import robot
+from odocan.sim.fleet import FleetConfig
 from tests.conftest_mqtt import Mosquitto, broker_of, client, collect, mosquitto  # noqa: F401
 
 BROKERS = ("mosquitto", "amqtt")
@@ -233,7 +233,7 @@ def test_last_will_marks_a_killed_bridge_offline(kind: str, tmp_path: Path) -> N
             b = brokers.bridge
             creds = f"{b.username}:{b.password}@" if b.username else ""
             proc = subprocess.Popen(
-                [sys.executable, "-m", "host.subparsers.bridge", "--name", ROBOT,
+                [sys.executable, "-m", "odocan.host.cli.subparsers.bridge", "--name", ROBOT,
                  "--broker", f"mqtt://{creds}{b.host}:{b.port}", "-i", "virtual",
                  "-c", f"test-will-{os.getpid()}"],
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,

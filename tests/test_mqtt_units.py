@@ -6,15 +6,15 @@ import can
 import cantools
 import pytest
 
-from host.commands import CommandEncoder, CommandRejected
-from host.e2e import E2EMonitor
-from host.mqtt.broker import BrokerURL
-from host.mqtt.telemetry import RobotTelemetry
-from host.reference import Geometry
-from sim import robot
-from sim.contract import DBC_PATH, database
-from sim.fleet import Fleet, FleetConfig
-from sim.rig import LockstepRig, RigConfig
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.host.protocol.commands import CommandEncoder, CommandRejected
+from odocan.host.protocol.e2e import E2EMonitor
+from odocan.sim import robot
+from odocan.sim.contract import DBC_PATH, database
+from odocan.sim.fleet import Fleet, FleetConfig
+from odocan.sim.rig import LockstepRig, RigConfig
 
 PMIR = robot.load("pmir")
 GEOMETRY = Geometry.of(PMIR)
@@ -148,7 +148,7 @@ def test_a_fleet_robot_sends_the_lockstep_rigs_frames(
 
 
 def test_fleet_view_folds_messages_into_a_table() -> None:
-    from host.mqtt.fleetview import RobotState, apply
+    from odocan.host.mqtt.fleetview import RobotState, apply
 
     table: dict[str, RobotState] = {}
     assert apply(table, "odocan/robot002/status", b'{"state": "online", "seq": 1}')

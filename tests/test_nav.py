@@ -20,15 +20,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from firmware import frames as fr
-from firmware import nav
-from firmware.errors import ErrorMask
-from firmware.fixmath import I64_MAX, I64_MIN, isqrt_u64
-from firmware.frames import AckReason, NavGoalField, NavMode, NavState
-from sim.board import TICK_S
-from sim.errors import ErrorModel
-from sim.rig import LockstepRig, RigConfig
-from sim.robot import load
+from odocan.firmware import frames as fr
+from odocan.firmware import nav
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.fixmath import I64_MAX, I64_MIN, isqrt_u64
+from odocan.firmware.frames import AckReason, NavGoalField, NavMode, NavState
+from odocan.sim.board import TICK_S
+from odocan.sim.errors import ErrorModel
+from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.robot import load
 
 
 def _load_dbc() -> cantools.database.can.Database:

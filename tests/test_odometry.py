@@ -9,16 +9,21 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware.config import (
+from odocan.firmware.config import (
     ConfigReason,
     Integrator,
     RobotParams,
     derive_constants,
     validate,
 )
-from firmware.errors import ErrorFlag, ErrorMask
-from firmware.odometry import chord_factor_q62
-from host.reference import ReferenceOdometry, chord_factor, deltas_from_counts, integrate
+from odocan.firmware.errors import ErrorFlag, ErrorMask
+from odocan.firmware.odometry import chord_factor_q62
+from odocan.host.judge.reference import (
+    ReferenceOdometry,
+    chord_factor,
+    deltas_from_counts,
+    integrate,
+)
 from tests.odo_helpers import (
     angle_error,
     firmware,

@@ -18,8 +18,8 @@ from typing import Any
 import can
 import pytest
 
-from host.testkit import parse_bus_spec
-from sim.exceptions import BusSetupError
+from odocan.host.testkit.rig import parse_bus_spec
+from odocan.sim.exceptions import BusSetupError
 
 pytest_plugins = ["pytester"]
 
@@ -28,9 +28,10 @@ EXAMPLE = ROOT / "examples" / "test_my_robot.py"
 
 
 def plugin_args() -> list[str]:
-    """``-p host.pytest_plugin`` unless the package's pytest11 entry point already loads it."""
-    installed = any(ep.value == "host.pytest_plugin" for ep in entry_points(group="pytest11"))
-    return [] if installed else ["-p", "host.pytest_plugin"]
+    """``-p odocan.host.testkit.plugin`` unless the package's pytest11 entry point loads it."""
+    plugin = "odocan.host.testkit.plugin"
+    installed = any(ep.value == plugin for ep in entry_points(group="pytest11"))
+    return [] if installed else ["-p", plugin]
 
 
 def run(pytester: pytest.Pytester, *args: str) -> pytest.RunResult:
@@ -233,7 +234,7 @@ def udp_bus() -> Iterator[str]:
 def _start_firmware(spec: str) -> subprocess.Popen[str]:
     """``odocan firmware`` (default integrator exact) on the channel of ``spec``."""
     kwargs = parse_bus_spec(spec)
-    argv = [sys.executable, "-m", "host.cli", "firmware", "-i", "udp_multicast",
+    argv = [sys.executable, "-m", "odocan.host.cli.app", "firmware", "-i", "udp_multicast",
             "-c", kwargs["channel"], "--bus-arg", f"port={kwargs['port']}",
             "--bus-arg", "hop_limit=0"]
     return subprocess.Popen(argv, cwd=ROOT, stderr=subprocess.PIPE, text=True)

@@ -24,12 +24,12 @@ from typing import Any
 import can
 import pytest
 
-from firmware import frames as fr
-from sim.contract import database
-from sim.realtime import DeadlineStats, PeriodicLoop, accepted_ids, stop_on_signals
+from odocan.firmware import frames as fr
+from odocan.sim.contract import database
+from odocan.sim.realtime import DeadlineStats, PeriodicLoop, accepted_ids, stop_on_signals
 
 ROOT = Path(__file__).resolve().parent.parent
-CLI = [sys.executable, "-m", "host.cli"]
+CLI = [sys.executable, "-m", "odocan.host.cli.app"]
 RUN_S = 3.0
 START_TIMEOUT_S = 20.0  # imports on a loaded 2-core machine
 

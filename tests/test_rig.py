@@ -16,21 +16,21 @@ from typing import Any
 import can
 import pytest
 
-from firmware import frames as fr
-from firmware.ecu import (
+from odocan.firmware import frames as fr
+from odocan.firmware.ecu import (
     ENCODER_PERIOD_US,
     POSE_PERIOD_TICKS,
     RECOVERY_FRAMES,
     STATUS_PERIOD_TICKS,
     WATCHDOG_TICKS,
 )
-from firmware.hal import TICK_PERIOD_US
-from sim.board import TICK_S, TX_LATENCY_S
-from sim.contract import cycle_time_s, database, message
-from sim.errors import ErrorModel
-from sim.rig import LockstepRig, RigConfig
-from sim.robot import RobotProfile, load
-from sim.scenarios import get_scenario
+from odocan.firmware.hal import TICK_PERIOD_US
+from odocan.sim.board import TICK_S, TX_LATENCY_S
+from odocan.sim.contract import cycle_time_s, database, message
+from odocan.sim.errors import ErrorModel
+from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.robot import RobotProfile, load
+from odocan.sim.scenarios import get_scenario
 
 PMIR = load("pmir")
 EPS_S = 1e-6

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from host.cli import main
-from sim.rig import INTEGRATORS
+from odocan.host.cli.app import main
+from odocan.sim.rig import INTEGRATORS
 
 HOUR_S = 3600
 LSB_POSITION_M = 1e-4

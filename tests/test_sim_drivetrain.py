@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware.fixmath import wrap_i16
-from sim.drivetrain import (
+from odocan.firmware.fixmath import wrap_i16
+from odocan.sim.drivetrain import (
     Drivetrain,
     MotorConfig,
     angle_travelled,
@@ -18,7 +18,7 @@ from sim.drivetrain import (
     evolve,
     wrap_counter,
 )
-from sim.robot import RobotProfile, load
+from odocan.sim.robot import RobotProfile, load
 
 TAU = 0.05
 ACCEL = 2.0

@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sim.errors import ErrorModel, ErrorModelError, parse
-from sim.robot import load
-from sim.vehicle import Vehicle
+from odocan.sim.errors import ErrorModel, ErrorModelError, parse
+from odocan.sim.robot import load
+from odocan.sim.vehicle import Vehicle
 
 TAU = 0.05
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from sim.robot import ProfileError, RobotProfile, list_profiles, load
+from odocan.sim.robot import ProfileError, RobotProfile, list_profiles, load
 
 VALID = {
     "counts_per_rev": "500",

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from sim.robot import RobotProfile, load
-from sim.scenarios import SCENARIOS, PhaseScenario, ScenarioError, get_scenario
-from sim.truth import Pose, wrap_angle
-from sim.vehicle import Vehicle
+from odocan.sim.robot import RobotProfile, load
+from odocan.sim.scenarios import SCENARIOS, PhaseScenario, ScenarioError, get_scenario
+from odocan.sim.truth import Pose, wrap_angle
+from odocan.sim.vehicle import Vehicle
 
 PROFILES = ["pmir", "kobuki"]
 

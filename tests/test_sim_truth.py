@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim.truth import GroundTruth, chord_factor, wrap_angle
+from odocan.sim.truth import GroundTruth, chord_factor, wrap_angle
 
 HZ = 1000
 

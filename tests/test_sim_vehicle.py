@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from sim.errors import ErrorModel
-from sim.robot import load
-from sim.scenarios import get_scenario
-from sim.vehicle import Vehicle, VehicleError
+from odocan.sim.errors import ErrorModel
+from odocan.sim.robot import load
+from odocan.sim.scenarios import get_scenario
+from odocan.sim.vehicle import Vehicle, VehicleError
 
 TAU = 0.05
 

@@ -1,4 +1,4 @@
-"""firmware.trig against float64 ``math``, exact identities and closed forms.
+"""odocan.firmware.trig against float64 ``math``, exact identities and closed forms.
 
 The error bounds asserted here are the ones documented in ``firmware/trig.py``: the requirement
 (``*_SPEC``) and the tighter design bound (``*_DESIGN``: the final rounding plus the internal error
@@ -17,10 +17,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware import trig_tables
-from firmware.fixmath import I64_MAX, I64_MIN, U32_MAX
-from firmware.trig import atan2_bam32, cos_q30, sin_q30, sincos_q30
-from host import gen_trig_tables
+from odocan.firmware import trig_tables
+from odocan.firmware.fixmath import I64_MAX, I64_MIN, U32_MAX
+from odocan.firmware.trig import atan2_bam32, cos_q30, sin_q30, sincos_q30
+from tools import gen_trig_tables
 
 LSB_Q30 = 2.0**-30
 RAD_PER_BAM32 = math.tau / 2**32

@@ -16,12 +16,12 @@ from typing import Any
 
 import pytest
 
-from host import cli
-from host.experiments import umbmark
-from host.experiments.drive import ExperimentError, NavSession
-from host.experiments.umbmark import CentreOfGravity, Correction
-from sim.errors import ErrorModel
-from sim.robot import load
+from odocan.host.cli import app as cli
+from odocan.host.experiments import umbmark
+from odocan.host.experiments.drive import ExperimentError, NavSession
+from odocan.host.experiments.umbmark import CentreOfGravity, Correction
+from odocan.sim.errors import ErrorModel
+from odocan.sim.robot import load
 
 PMIR = load("pmir")
 OUR_COMMANDS = ("experiment", "umbmark", "calibrate")

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from firmware.config import RobotParams, derive_constants
-from firmware.errors import ErrorMask
-from host import vectors
-from host.cli import main
+from odocan.firmware.config import RobotParams, derive_constants
+from odocan.firmware.errors import ErrorMask
+from odocan.host.cli.app import main
+from odocan.host.judge import vectors
 
 
 @pytest.mark.parametrize("integrator", ["euler", "rk2", "exact"])

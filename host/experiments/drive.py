@@ -32,17 +32,17 @@ import numpy.typing as npt
 from cantools.database.can import Message
 from cantools.database.namedsignalvalue import NamedSignalValue
 
-from host.commands import CommandEncoder, CommandRejected
-from host.decode import BulkDecoder
-from host.logio import FrameCollector
-from sim.board import TICK_S
-from sim.closing import Closing
-from sim.contract import database
-from sim.errors import ErrorModel
-from sim.exceptions import OdocanError
-from sim.rig import LockstepRig, RigConfig
-from sim.robot import RobotProfile
-from sim.truth import Pose
+from odocan.host.io.logs import FrameCollector
+from odocan.host.protocol.commands import CommandEncoder, CommandRejected
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.sim.board import TICK_S
+from odocan.sim.closing import Closing
+from odocan.sim.contract import database
+from odocan.sim.errors import ErrorModel
+from odocan.sim.exceptions import OdocanError
+from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.robot import RobotProfile
+from odocan.sim.truth import Pose
 
 BOOT_S = 0.2  # the odometry is OK (first encoder frames) before the first goal is sent
 SETTLE_S = 1.0  # after the last REACHED: the zero commands, then the motors' tail

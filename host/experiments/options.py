@@ -10,8 +10,8 @@ import argparse
 import json
 from pathlib import Path
 
-from host.options import add_robot_argument
-from sim.exceptions import ConfigurationError
+from odocan.host.cli.options import add_robot_argument
+from odocan.sim.exceptions import ConfigurationError
 
 
 def add_common_arguments(parser: argparse.ArgumentParser, default_errors: str, runs: int) -> None:

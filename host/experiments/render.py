@@ -14,9 +14,9 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from host.experiments.seed002 import Seed002Result
-from host.experiments.umbmark import DIRECTIONS, Calibration, UmbmarkResult
-from sim.errors import ErrorModel
+from odocan.host.experiments.seed002 import Seed002Result
+from odocan.host.experiments.umbmark import DIRECTIONS, Calibration, UmbmarkResult
+from odocan.sim.errors import ErrorModel
 
 
 def _table(title: str, *columns: str) -> Table:

@@ -36,11 +36,11 @@ import itertools
 import math
 from dataclasses import dataclass
 
-from host.experiments.drive import DriveResult, NavSession, Waypoint, wrap_pi
-from host.experiments.seeding import run_rng, run_seed
-from sim.errors import ErrorModel
-from sim.exceptions import ConfigurationError
-from sim.robot import RobotProfile
+from odocan.host.experiments.drive import DriveResult, NavSession, Waypoint, wrap_pi
+from odocan.host.experiments.seeding import run_rng, run_seed
+from odocan.sim.errors import ErrorModel
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.robot import RobotProfile
 
 STRAIGHT_M = 1.0
 SQUARE_SIDE_M = 0.8

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.exceptions import ConfigurationError
+from odocan.sim.exceptions import ConfigurationError
 
 
 def _sequence(seed: int, code: int, index: int) -> np.random.SeedSequence:

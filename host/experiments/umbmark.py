@@ -46,12 +46,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from host.experiments.drive import DriveResult, NavSession, Waypoint
-from host.experiments.seeding import run_seed
-from host.reference import Geometry, deltas_from_counts, integrate
-from sim.errors import ErrorModel
-from sim.exceptions import ConfigurationError
-from sim.robot import RobotProfile
+from odocan.host.experiments.drive import DriveResult, NavSession, Waypoint
+from odocan.host.experiments.seeding import run_seed
+from odocan.host.judge.reference import Geometry, deltas_from_counts, integrate
+from odocan.sim.errors import ErrorModel
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.robot import RobotProfile
 
 DIRECTIONS = ("cw", "ccw")
 SIDE_M = 4.0

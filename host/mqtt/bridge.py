@@ -26,12 +26,12 @@ from typing import Any
 
 import can
 
-from host.commands import Command, CommandEncoder, CommandRejected
-from host.mqtt import topics
-from host.mqtt.broker import BrokerURL
-from host.mqtt.link import RobotLink
-from host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
-from host.reference import Geometry
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt import topics
+from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.link import RobotLink
+from odocan.host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
+from odocan.host.protocol.commands import Command, CommandEncoder, CommandRejected
 
 log = logging.getLogger(__name__)
 Batch = list[tuple[int, can.Message]]

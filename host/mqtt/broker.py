@@ -19,7 +19,7 @@ from urllib.parse import unquote, urlsplit
 
 import aiomqtt
 
-from sim.exceptions import ConfigurationError
+from odocan.sim.exceptions import ConfigurationError
 
 LOOPBACK = "127.0.0.1"
 _DEFAULT_PORTS = {"mqtt": 1883, "mqtts": 8883}

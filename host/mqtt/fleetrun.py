@@ -24,12 +24,12 @@ import gc
 from dataclasses import dataclass
 from typing import Any
 
-from host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
-from host.mqtt.broker import BrokerURL
-from host.mqtt.options import broker_for
-from host.reference import Geometry
-from sim.fleet import Fleet, FleetConfig, run_realtime
-from sim.realtime import DeadlineStats
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
+from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.options import broker_for
+from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
+from odocan.sim.realtime import DeadlineStats
 
 
 @dataclass(frozen=True)

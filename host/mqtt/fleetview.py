@@ -20,8 +20,8 @@ from typing import Any
 
 import aiomqtt
 
-from host.mqtt import topics
-from host.mqtt.broker import BrokerURL
+from odocan.host.mqtt import topics
+from odocan.host.mqtt.broker import BrokerURL
 
 
 @dataclass

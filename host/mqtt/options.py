@@ -7,8 +7,8 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
 
-from host.mqtt.broker import BrokerURL, EmbeddedBroker
-from sim.exceptions import ConfigurationError
+from odocan.host.mqtt.broker import BrokerURL, EmbeddedBroker
+from odocan.sim.exceptions import ConfigurationError
 
 
 def add_mqtt_arguments(parser: argparse.ArgumentParser) -> None:

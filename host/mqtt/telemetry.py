@@ -28,11 +28,11 @@ from typing import Any, ClassVar
 import can
 from cantools.database.can import Database
 
-from host.e2e import E2EMonitor
-from host.mqtt.topics import RESULT_LEAF, stamp, status_payload
-from host.reference import Geometry
-from host.tracking import Pose, PoseTracker, difference
-from sim.contract import database
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.tracking import Pose, PoseTracker, difference
+from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
+from odocan.host.protocol.e2e import E2EMonitor
+from odocan.sim.contract import database
 
 Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})

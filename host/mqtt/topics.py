@@ -28,7 +28,7 @@ import re
 import time
 from typing import Any, Final
 
-from host.jsonutil import finite
+from odocan.host.report.jsonutil import finite
 
 PREFIX: Final = "odocan"
 TELEMETRY_LEAVES: Final = ("pose", "reference", "truth", "error", "rates")

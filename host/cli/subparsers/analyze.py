@@ -1,0 +1,79 @@
+"""``odocan analyze LOG``: the same check as ``odocan run``, offline, on a log file.
+
+The log (``.log`` candump, ``.asc``, ``.blf``, as ``odocan run --log`` or any python-can or
+can-utils tool writes them) is read with ``host.logio.read_log``, decoded with the DBC and the
+on-board pose compared with the float64 reference computed from the logged encoder counts, and
+with the ground truth when ``SIM_TRUTH`` frames are present. The integrator defaults to the one
+the firmware reports in ``ODOM_STATUS``; the robot cannot be read from the bus and defaults to
+pmir. Same ``--report``, ``--plot``, ``--tolerance``, summary and exit codes as ``odocan run``.
+
+A ``--dbc`` that does not match the log (a message the analysis needs is missing, or none of its
+frames is in the log under the DBC's ID, or none passes its E2E check with the DBC's data IDs)
+is a one-line error. Frames the DBC does not know are counted (``unknown_frames`` in the report,
+a row of the summary) but are no error: a real bus carries other traffic too.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import cantools
+
+from odocan.host.cli.options import add_robot_argument
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import analyze
+from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
+from odocan.sim import robot
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.rig import INTEGRATORS
+
+
+def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``odocan analyze``."""
+    parser = subparsers.add_parser(
+        "analyze",
+        help="check the odometry recorded in a CAN log",
+        description="Decode a CAN log with the DBC and compare the on-board pose with the "
+        "float64 reference (and the ground truth when SIM_TRUTH frames are logged). Exit 0 "
+        "within tolerance, 1 not, 2 on bad usage or input.",
+    )
+    parser.add_argument("log", type=Path, metavar="LOG", help="CAN log: .log (candump), .asc, .blf")
+    add_robot_argument(parser)
+    parser.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        help="reference integrator (default: the one ODOM_STATUS reports)",
+    )
+    parser.add_argument(
+        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: dbc/odocan.dbc)"
+    )
+    add_check_arguments(parser)
+    parser.set_defaults(func=_do_analyze)
+
+
+def _do_analyze(args: argparse.Namespace) -> int:
+    profile = robot.load(args.robot)
+    check_output_paths(args)
+    db = load_dbc(args.dbc) if args.dbc is not None else None
+    frames = read_log(args.log)
+    analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance, db=db)
+    return finish(analysis, args, title=f"odocan analyze: {args.log}")
+
+
+def load_dbc(path: Path) -> cantools.database.can.Database:
+    """Load a DBC strictly; any problem is a one-line ``ConfigurationError``."""
+    try:
+        db = cantools.database.load_file(path, database_format="dbc", strict=True)
+    except OSError as exc:
+        raise ConfigurationError(f"cannot read DBC {path}: {exc.strerror or exc}") from None
+    except Exception as exc:  # cantools raises ParseError, UnsupportedDatabaseFormatError, ...
+        raise ConfigurationError(f"malformed DBC {path}: {_first_line(exc)}") from None
+    if not isinstance(db, cantools.database.can.Database):
+        raise ConfigurationError(f"{path} is not a CAN database")
+    return db
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip() or type(exc).__name__
+    return text.splitlines()[0]

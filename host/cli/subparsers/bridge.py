@@ -1,0 +1,117 @@
+"""``odocan bridge``: one robot's CAN bus <-> MQTT (telemetry out, validated commands in).
+
+The bus (python-can's ``-i/-c/-b`` options) is read in a thread; frames are E2E-checked, decoded
+with the DBC, compared with the float64 reference and published under ``odocan/<name>/`` (see
+``host.mqtt.topics``); ``odocan/<name>/cmd/*`` commands are validated against the DBC before a
+frame is sent. Without ``--broker`` an embedded amqtt broker is started on a free loopback port.
+Runs until Ctrl-C (or ``--duration``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import signal
+import sys
+
+import can
+
+from odocan.host.io.buses import add_bus_arguments, open_bus
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt.bridge import Bridge, BridgeConfig, BusReader, RobotEndpoint
+from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.options import add_mqtt_arguments, broker_for, broker_url
+from odocan.host.mqtt.topics import check_robot_name
+from odocan.sim import robot
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.rig import INTEGRATORS
+
+
+def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``odocan bridge``."""
+    parser = subparsers.add_parser(
+        "bridge",
+        help="bridge one robot's CAN bus to MQTT",
+        description="Publish a robot's telemetry (pose, float64 reference, truth, error, status, "
+        "rates) to MQTT and send validated commands from MQTT to its bus.",
+    )
+    _add_arguments(parser)
+    parser.set_defaults(func=_do_bridge)
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--name", default="robot001", help="robot name in the topics")
+    parser.add_argument("--robot", default="pmir", help="profile (for the reference)")
+    parser.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        default="exact",
+        help="the firmware's integrator (for the reference; default: exact)",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        metavar="SECONDS",
+        help="stop after this many seconds (default: until Ctrl-C)",
+    )
+    add_mqtt_arguments(parser)
+    add_bus_arguments(parser)
+
+
+def _do_bridge(args: argparse.Namespace) -> int:
+    try:
+        name = check_robot_name(args.name)
+    except ValueError as exc:
+        raise ConfigurationError(str(exc)) from None
+    url = broker_url(args)
+    profile = robot.load(args.robot)
+    geometry = Geometry.of(profile)
+    bus = open_bus(args)
+    try:
+        asyncio.run(_bridge(args, name, url, bus, geometry, profile.counter_bits))
+    finally:
+        bus.shutdown()
+    return 0
+
+
+async def _bridge(
+    args: argparse.Namespace,
+    name: str,
+    url: BrokerURL | None,
+    bus: can.BusABC,
+    geometry: Geometry,
+    counter_bits: int,
+) -> None:
+    async with broker_for(url) as (broker, embedded):
+        print(f"bridge {name}: {broker}{' (embedded)' if embedded else ''}", file=sys.stderr)
+        config = BridgeConfig(
+            broker=broker, publish_hz=args.publish_hz, client_prefix=args.client_prefix
+        )
+        endpoint = RobotEndpoint(name, bus, geometry, args.integrator, counter_bits)
+        bridge = Bridge([endpoint], config=config)
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        reader = BusReader(bus, bridge, loop)
+        reader.start()
+        try:
+            async with asyncio.TaskGroup() as tg:
+                tg.create_task(bridge.run(stop=stop), name="bridge")
+                if args.duration is not None:
+                    loop.call_later(args.duration, stop.set)
+        finally:
+            reader.stop()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``odocan bridge`` on its own (until the subcommand is registered in host.cli)."""
+    from odocan.host.cli.app import _Parser
+
+    parser = _Parser(prog="odocan bridge")
+    _add_arguments(parser)
+    return _do_bridge(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

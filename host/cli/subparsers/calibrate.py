@@ -1,0 +1,80 @@
+"""``odocan calibrate``: UMBmark, E_d and E_b estimated, the firmware corrected over CAN, UMBmark
+again.
+
+Borenstein & Feng's estimate from the centres of gravity and a model-based one (the logged
+encoder counts dead-reckoned to the true end positions) are both computed
+(``host.experiments.umbmark``); ``--method`` picks the one applied (default: model, the more
+accurate). The corrected radii and wheelbase are written at each power-up of the second UMBmark
+with ODOM_CONFIG staged writes + APPLY, waiting for ODOM_ACK. Exit 0, or 2 on bad usage.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from odocan.host.cli.subparsers.umbmark import add_arguments, header
+from odocan.host.experiments import render, umbmark
+from odocan.host.experiments.options import check_report_path, write_report
+from odocan.sim import errors, robot
+
+
+def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``odocan calibrate``."""
+    parser = subparsers.add_parser(
+        "calibrate",
+        help="UMBmark, estimate E_d and E_b, correct the firmware over CAN, re-run",
+        description="Run UMBmark, estimate E_d and E_b (Borenstein & Feng from the centres of "
+        "gravity, and a model fit of the logged encoder counts), write the corrected wheel "
+        "radii and wheelbase into the firmware over CAN (ODOM_CONFIG + APPLY, ODOM_ACK awaited) "
+        "and run UMBmark again.",
+    )
+    _add_arguments(parser)
+    parser.set_defaults(func=_do_calibrate)
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_arguments(parser)
+    parser.add_argument(
+        "--method",
+        choices=umbmark.METHODS,
+        default="model",
+        help="the estimate written to the firmware (default: model)",
+    )
+
+
+def _do_calibrate(args: argparse.Namespace) -> int:
+    check_report_path(args.report)
+    profile, model = robot.load(args.robot), errors.parse(args.errors)
+    cal = umbmark.calibrate(
+        profile,
+        model,
+        args.seed,
+        side_m=args.side,
+        runs_per_direction=args.runs,
+        method=args.method,
+    )
+    print(header(args, model, "calibrate"))
+    render.show(
+        render.umbmark_table(cal.before, "Before"),
+        render.calibration_table(cal, model),
+        render.geometry_table(cal),
+        render.umbmark_table(cal.after, "After"),
+        render.improvement_line(cal),
+    )
+    report = {"robot": profile.name, "seed": args.seed, **umbmark.calibration_report(cal, model)}
+    write_report(args.report, report)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``odocan calibrate`` on its own (until the subcommand is registered in host.cli)."""
+    from odocan.host.cli.app import _Parser
+
+    parser = _Parser(prog="odocan calibrate")
+    _add_arguments(parser)
+    return _do_calibrate(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,228 @@
+"""``odocan monitor``: a live terminal view of a CAN bus, or of a fleet over MQTT.
+
+On any python-can bus (``-i/-c/-b``, or python-can's configuration) every frame is fed to
+``host.monitor.BusMonitor``: decoded signals per message with units, rate and period jitter, E2E
+counts, the firmware's status, and the on-board pose against the float64 reference (and SIM_TRUTH
+when present). A ``rich.live.Live`` screen redraws it a few times a second until Ctrl-C (exit 0)
+or ``--duration``. With ``--json`` there is no screen: at the end (``--duration`` or Ctrl-C) the
+model is printed as one JSON object, for scripts.
+
+``--mqtt [URL]`` shows the fleet instead: one row per robot that ``odocan bridge``/``odocan
+fleet`` publish (``host.mqtt.fleetview.fleet_states``), reconnecting when the broker goes away.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import math
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import aiomqtt
+import can
+from rich.console import Console
+from rich.live import Live
+
+from odocan.host.cli.options import add_robot_argument
+from odocan.host.cli.subparsers.analyze import load_dbc
+from odocan.host.io.buses import add_bus_arguments, open_bus
+from odocan.host.judge.monitor import BusMonitor, fleet_snapshot, render, render_fleet, to_json
+from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.fleetview import RobotState, fleet_states
+from odocan.sim import robot
+from odocan.sim.exceptions import ConfigurationError, OdocanError
+from odocan.sim.rig import INTEGRATORS
+
+DEFAULT_BROKER = "mqtt://127.0.0.1:1883"
+REFRESH_S = 0.25  # screen redraws
+RECONNECT_S = 1.0  # wait before reconnecting to the broker
+
+
+class BrokerUnreachable(OdocanError):
+    """The MQTT broker could not be reached during the whole watch."""
+
+
+def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``odocan monitor``."""
+    parser = subparsers.add_parser(
+        "monitor",
+        help="watch a live CAN bus (or an MQTT fleet) in the terminal",
+        description="Decode a live CAN bus with the DBC: per message the latest signal values, "
+        "rate, period jitter and E2E counts; the firmware's status; the on-board pose against "
+        "the float64 reference and the ground truth. Ctrl-C quits (exit 0).",
+        epilog="Example: odocan monitor -i socketcan -c vcan0; "
+        "odocan monitor -i virtual -c vcan0 --duration 5 --json; "
+        "odocan monitor --mqtt mqtt://127.0.0.1:1883",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        metavar="SECONDS",
+        help="stop after this many seconds (default: until Ctrl-C)",
+    )
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="no live view: print one JSON object of the model at the end",
+    )
+    add_robot_argument(parser, role="profile for the reference")
+    parser.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        help="reference integrator (default: the one ODOM_STATUS reports)",
+    )
+    parser.add_argument(
+        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: dbc/odocan.dbc)"
+    )
+    parser.add_argument(
+        "--mqtt",
+        nargs="?",
+        const=DEFAULT_BROKER,
+        metavar="BROKER_URL",
+        help=f"show the fleet published on this MQTT broker instead (default: {DEFAULT_BROKER})",
+    )
+    add_bus_arguments(parser)
+    parser.set_defaults(func=_do_monitor)
+
+
+def _do_monitor(args: argparse.Namespace) -> int:
+    duration = args.duration
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise ConfigurationError(f"--duration must be a positive number of seconds, got {duration}")
+    if args.mqtt is not None:
+        if args.interface is not None or args.channel is not None:
+            raise ConfigurationError("--mqtt watches a broker: give no -i/--interface or -c")
+        return _watch_fleet(BrokerURL.parse(args.mqtt), args)
+    model = BusMonitor(
+        robot.load(args.robot),
+        args.integrator,
+        load_dbc(args.dbc) if args.dbc is not None else None,
+    )
+    bus = open_bus(args)
+    try:
+        _watch_bus(bus, model, args, _source(args))
+    finally:
+        bus.shutdown()
+    if args.json:
+        print(to_json(model.snapshot()))
+    return 0
+
+
+def _source(args: argparse.Namespace) -> str:
+    return ":".join(str(v) for v in (args.interface or "python-can default", args.channel) if v)
+
+
+def _deadline(duration_s: float | None) -> float:
+    return math.inf if duration_s is None else time.monotonic() + duration_s
+
+
+def _watch_bus(bus: can.BusABC, model: BusMonitor, args: argparse.Namespace, source: str) -> None:
+    """Feed the model until the deadline or Ctrl-C, redrawing the screen unless ``--json``."""
+    deadline = _deadline(args.duration)
+    if args.json:
+        _receive(bus, model, deadline, None)
+        return
+    console = Console(file=sys.stdout)
+    with Live(console=console, auto_refresh=False, redirect_stderr=False) as live:
+
+        def redraw() -> None:
+            now = time.monotonic()
+            heard = {n: now - s.heard_monotonic_s for n, s in model.messages.items()}
+            live.update(render(model.snapshot(), source=source, heard=heard), refresh=True)
+
+        _receive(bus, model, deadline, redraw)
+
+
+def _receive(
+    bus: can.BusABC, model: BusMonitor, deadline: float, redraw: Callable[[], None] | None
+) -> None:
+    """Receive and feed frames; ``redraw`` every ``REFRESH_S``; Ctrl-C ends it quietly."""
+    next_draw = 0.0
+    try:
+        while (now := time.monotonic()) < deadline:
+            if redraw is not None and now >= next_draw:
+                redraw()
+                next_draw = now + REFRESH_S
+            msg = bus.recv(timeout=max(0.0, min(REFRESH_S, deadline - now)))
+            if msg is not None:
+                model.feed(msg)
+    except KeyboardInterrupt:
+        pass
+    if redraw is not None:
+        redraw()
+
+
+# --- the fleet over MQTT ----------------------------------------------------------------------
+
+
+def _watch_fleet(url: BrokerURL, args: argparse.Namespace) -> int:
+    """The fleet table until the deadline or Ctrl-C; ``--json``: one object at the end."""
+    watch = _FleetWatch(url, args.duration)
+    try:
+        if args.json:
+            asyncio.run(watch.run(None))
+        else:
+            with Live(console=Console(file=sys.stdout), auto_refresh=False) as live:
+                asyncio.run(watch.run(lambda: live.update(watch.render(), refresh=True)))
+    except KeyboardInterrupt:
+        pass
+    if not watch.connected_once:
+        raise BrokerUnreachable(f"cannot reach the MQTT broker {url}: {watch.last_error}")
+    if args.json:
+        print(to_json(watch.snapshot()))
+    return 0
+
+
+class _FleetWatch:
+    """The latest fleet table, kept across reconnections."""
+
+    def __init__(self, url: BrokerURL, duration_s: float | None) -> None:
+        self.url, self.duration_s = url, duration_s
+        self.table: dict[str, RobotState] = {}
+        self.connected_once = False
+        self.last_error = ""
+        self.started = time.monotonic()
+
+    async def run(self, redraw: Callable[[], None] | None) -> None:
+        """Follow the broker until the duration has passed (forever without one)."""
+        try:
+            async with asyncio.timeout(self.duration_s):
+                await self._follow(redraw)
+        except TimeoutError:
+            pass
+
+    async def _follow(self, redraw: Callable[[], None] | None) -> None:
+        while True:
+            if redraw is not None:
+                redraw()
+            try:
+                async for table in fleet_states(broker=self.url, min_interval_s=REFRESH_S):
+                    self.connected_once, self.last_error = True, ""
+                    self.table = table
+                    if redraw is not None:
+                        redraw()
+            except aiomqtt.MqttError as exc:
+                self.last_error = str(exc) or type(exc).__name__
+            await asyncio.sleep(RECONNECT_S)
+
+    def snapshot(self) -> dict[str, Any]:
+        """``broker``, ``duration_s`` and ``robots`` (``host.monitor.fleet_snapshot``)."""
+        return {
+            "broker": str(self.url),
+            "duration_s": time.monotonic() - self.started,
+            "robots": fleet_snapshot(self.table),
+        }
+
+    def render(self) -> Any:
+        """The screen (with the connection problem, if any)."""
+        note = f"broker: {self.last_error} (reconnecting)" if self.last_error else ""
+        return render_fleet(
+            fleet_snapshot(self.table),
+            source=str(self.url),
+            elapsed_s=time.monotonic() - self.started,
+            note=note,
+        )

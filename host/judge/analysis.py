@@ -1,0 +1,566 @@
+"""The host's check of a drive: on-board pose vs float64 reference vs ground truth, from frames.
+
+Everything comes from the bus (``FrameArrays``, live or from a log), decoded with the DBC:
+
+1. **E2E** (``host.e2e.check_frames``): only accepted frames count.
+2. **Encoder sequence**: the accepted WHEEL_ENCODERS frames, each with its place in the sender's
+   sequence (the COUNTER unwrapped: counter differences mod 16, widened by 16 when the timestamps
+   say that many periods passed).
+3. **Alignment, exact** (never by nearest time): a pose frame's ENC_COUNTER names the encoder frame
+   the firmware had integrated last. It is resolved against the latest accepted encoder frame
+   before the pose frame, L: the named frame is ``seq(L) + wrap_i4(ENC_COUNTER - COUNTER(L))``
+   (-8..+7 frames from L; normally 0). When that frame is accepted in the log, the pose belongs
+   to it; when it is not (the log missed a frame the firmware had), the pose is left out rather
+   than paired with a frame 16 counts older. ODOM_POSE_X and ODOM_POSE_Y naming the same encoder
+   frame make one on-board sample (the first of each, if the pose was sent again). SIM_TRUTH's
+   three parts (X, Y, HEADING) naming one encoder frame make one truth sample.
+4. **Reference**: ``host.reference.integrate`` over the count deltas of the accepted encoder frames
+   (mod 2^min(counter_bits, 24), what the wire carries), started at the first on-board sample.
+   The start pose is that sample's, to below its resolution: the on-board values are rounded to
+   0.1 mm and 2 pi/65536 rad, so the start is chosen inside the first sample's rounding interval
+   where the intervals of the following samples (minus the reference's own increments) overlap.
+   That keeps a log starting mid-drive within half an LSB of the firmware instead of carrying the
+   start's rounding (up to 4.8e-5 rad of heading, 0.5 mm after 10 m) along the whole drive.
+5. **Errors**: position errors are Euclidean distances (m), heading errors wrapped to [-pi, pi).
+   On-board vs reference at every on-board sample; on-board vs truth at every truth sample that
+   has an on-board sample of the same encoder frame.
+
+The on-board pose is the decoded signals: X, Y * 1e-4 m, HEADING * 2 pi/65536 rad
+(``TURNS * 2 pi + HEADING`` unwrapped). ODOM_SET_POSE jumps are not followed (the reference would
+have to restart there).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import cantools
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.reference import INTEGRATORS, Geometry, integrate, wrap_delta
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.e2e import UNKNOWN, check_frames
+from odocan.sim import contract
+from odocan.sim.exceptions import OdocanError
+from odocan.sim.robot import RobotProfile
+
+POSITION_LSB_M = 1e-4  # X, Y: 0.1 mm
+HEADING_LSB_RAD = 2 * math.pi / 65536  # HEADING: BAM16
+WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+START_FIT_SAMPLES = 256  # on-board samples used to place the reference start (5 s at 50 Hz)
+REQUIRED = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y")
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+class AnalysisError(OdocanError):
+    """The frames cannot be analysed: DBC and log do not match, nothing to compare, ..."""
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """Pass limits of on-board vs reference (position as a distance, heading wrapped)."""
+
+    position_m: float = POSITION_LSB_M  # one LSB of the pose position signals
+    heading_rad: float = HEADING_LSB_RAD  # one LSB of HEADING
+
+
+@dataclass
+class Analysis:
+    """The result: the JSON report, the series for plots, and the verdict."""
+
+    report: dict[str, Any]
+    series: dict[str, np.ndarray] = field(default_factory=dict)
+    passed: bool = False
+
+
+@dataclass(frozen=True)
+class _Encoders:
+    """The accepted WHEEL_ENCODERS frames, in bus order."""
+
+    index: IntArray  # position in the frames
+    counter: IntArray  # E2E COUNTER
+    seq: IntArray  # the sender's sequence number (COUNTER unwrapped), strictly increasing
+    left: IntArray  # LEFT_COUNT (wire, 24 bits)
+    right: IntArray
+
+
+@dataclass(frozen=True)
+class _Poses:
+    """Samples of a pose (on-board or truth), one per encoder frame, sorted by it."""
+
+    enc: IntArray  # index into _Encoders
+    x_m: FloatArray
+    y_m: FloatArray
+    heading_rad: FloatArray  # on-board: TURNS * 2 pi + HEADING; truth: HEADING (wrapped)
+    heading_raw: IntArray  # HEADING, BAM16
+
+
+def analyze(
+    frames: FrameArrays,
+    robot: RobotProfile,
+    integrator: str | None = None,
+    *,
+    tolerance: Tolerance = Tolerance(),
+    db: cantools.database.can.Database | None = None,
+    scenario: str | None = None,
+    seed: int | None = None,
+    wall_seconds: float | None = None,
+) -> Analysis:
+    """Check the on-board odometry in ``frames`` (see the module docstring).
+
+    ``integrator`` None: the one ODOM_STATUS reports. ``scenario``, ``seed``, ``wall_seconds``
+    (the wall-clock time the run took) only go into the report. Raises ``AnalysisError`` when the
+    DBC does not match the frames or there is nothing to compare.
+    """
+    db = db if db is not None else contract.database()
+    decoder = BulkDecoder(db)
+    _require_messages(decoder)
+    e2e, accepted = check_frames(frames, db)
+    integrator, source = _pick_integrator(frames, accepted, decoder, integrator)
+    enc = _encoders(frames, accepted, decoder)
+    onboard, unmatched = _onboard_samples(frames, accepted, decoder, enc)
+    truth = _truth_samples(frames, accepted, decoder, enc)
+    ref_all = _reference(enc, onboard, robot, integrator)
+    ref = ref_all.at(onboard.enc)
+    pos_err, head_err = _errors(onboard, ref)
+    vs_ref = _summary(pos_err, head_err)
+    vs_truth, truth_series = _versus_truth(onboard, truth, ref_all)
+    vs_truth["distance_travelled_m"] = float(ref.distance_m[-1])
+    passed = bool(
+        vs_ref["max_position_error_m"] <= tolerance.position_m
+        and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
+    )
+    report = {
+        "robot": _robot_dict(robot),
+        "integrator": integrator,
+        "integrator_source": source,
+        "scenario": scenario,
+        "seed": seed,
+        "sim_seconds": _covered_s(frames, db),
+        "wall_seconds": wall_seconds,
+        "realtime_factor": _realtime(_covered_s(frames, db), wall_seconds),
+        "frames": _frame_counts(frames, decoder),
+        "samples": {
+            "onboard": len(onboard.enc),
+            "truth": len(truth.enc),
+            "truth_compared": len(truth_series["truth_x_m"]),
+            "unmatched_poses": unmatched,
+            "encoder_frames": len(enc.index),
+            "reference_restarts": ref_all.restarts,
+        },
+        "onboard_vs_reference": vs_ref,
+        "onboard_vs_truth": vs_truth,
+        "final_onboard_pose": {
+            "x_m": float(onboard.x_m[-1]),
+            "y_m": float(onboard.y_m[-1]),
+            "heading_rad": float(onboard.heading_rad[-1]),
+        },
+        "e2e": {name: c for name, c in e2e.items() if name != UNKNOWN},
+        "unknown_frames": e2e[UNKNOWN],
+        "tolerance": {"position_m": tolerance.position_m, "heading_rad": tolerance.heading_rad},
+        "passed": passed,
+    }
+    series = {
+        "onboard_x_m": onboard.x_m,
+        "onboard_y_m": onboard.y_m,
+        "reference_x_m": ref.x_m,
+        "reference_y_m": ref.y_m,
+        "distance_m": ref.distance_m,
+        "position_error_m": pos_err,
+        "heading_error_rad": head_err,
+        **truth_series,
+    }
+    return Analysis(report=report, series=series, passed=passed)
+
+
+# --- inputs ---------------------------------------------------------------------------------
+
+
+def _require_messages(decoder: BulkDecoder) -> None:
+    """The DBC must define the messages the analysis reads."""
+    missing = []
+    for name in REQUIRED:
+        try:
+            decoder.message(name)
+        except DecodeError:
+            missing.append(name)
+    if missing:
+        raise AnalysisError(f"the DBC does not define {', '.join(missing)}: not the odocan DBC?")
+
+
+def _accepted(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, name: str
+) -> dict[str, np.ndarray]:
+    """The decoded frames of ``name`` that passed E2E; an error when there are none."""
+    decoded = decoder.decode(frames, name)
+    keep = accepted[decoded["index"]]
+    if not keep.any():
+        message = decoder.message(name)
+        if len(keep) == 0:
+            raise AnalysisError(
+                f"no {name} frame (ID 0x{message.frame_id:03X}, {message.length} bytes) in the "
+                "log: the DBC does not match the log"
+            )
+        raise AnalysisError(
+            f"none of the {len(keep)} {name} frames passes its E2E check: "
+            "the DBC does not match the log"
+        )
+    return {key: value[keep] for key, value in decoded.items()}
+
+
+def _pick_integrator(
+    frames: FrameArrays,
+    accepted: npt.NDArray[np.bool_],
+    decoder: BulkDecoder,
+    integrator: str | None,
+) -> tuple[str, str]:
+    """The integrator given, or the last one ODOM_STATUS's summary page reports."""
+    if integrator is not None:
+        if integrator not in INTEGRATORS:
+            raise AnalysisError(
+                f"unknown integrator {integrator!r} (known: {', '.join(INTEGRATORS)})"
+            )
+        return integrator, "argument"
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
+        signal = decoder.message("ODOM_STATUS").get_signal_by_name("INTEGRATOR")
+    except (DecodeError, KeyError):
+        page, signal = {}, None
+    values = page["INTEGRATOR"][accepted[page["index"]]] if page else np.zeros(0)
+    if signal is None or len(values) == 0:
+        raise AnalysisError("no ODOM_STATUS summary in the log to tell the integrator: give it")
+    choices: dict[Any, Any] = dict(signal.choices or {})
+    name = str(choices.get(int(values[-1]), "")).lower()
+    if name not in INTEGRATORS:
+        raise AnalysisError(f"ODOM_STATUS reports an unknown integrator ({int(values[-1])})")
+    return name, "ODOM_STATUS"
+
+
+def _encoders(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
+) -> _Encoders:
+    """The accepted encoder frames and their sender sequence numbers."""
+    enc = _accepted(frames, accepted, decoder, "WHEEL_ENCODERS")
+    counter = enc["COUNTER"].astype(np.int64)
+    step = (np.diff(counter) & 0xF).astype(np.int64)
+    cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS")
+    if cycle_s is not None and len(step):
+        periods = np.rint(np.diff(enc["timestamp_s"]) / cycle_s).astype(np.int64)
+        step = step + 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
+    seq = np.concatenate(([0], np.cumsum(step))).astype(np.int64)
+    return _Encoders(
+        index=enc["index"], counter=counter, seq=seq,
+        left=enc["LEFT_COUNT"].astype(np.int64), right=enc["RIGHT_COUNT"].astype(np.int64),
+    )
+
+
+def contract_cycle_s(decoder: BulkDecoder, name: str) -> float | None:
+    """A message's cycle time in seconds (None when it has none)."""
+    cycle_ms = decoder.message(name).cycle_time
+    return cycle_ms / 1000.0 if cycle_ms else None
+
+
+def match_encoder(enc: _Encoders, index: IntArray, enc_counter: IntArray) -> IntArray:
+    """For frames at ``index`` naming ``enc_counter``: the encoder frame named (index into
+    ``enc``), -1 where it is not among the accepted encoder frames (module docstring, step 3)."""
+    latest = np.searchsorted(enc.index, index) - 1
+    result = np.full(len(index), -1, dtype=np.int64)
+    has = latest >= 0
+    latest = latest[has]
+    offset = ((enc_counter[has] - enc.counter[latest] + 8) & 0xF) - 8
+    target = enc.seq[latest] + offset
+    found = np.minimum(np.searchsorted(enc.seq, target), len(enc.seq) - 1)
+    result[np.flatnonzero(has)] = np.where(enc.seq[found] == target, found, -1)
+    return result
+
+
+def _first_per_encoder(enc_idx: IntArray) -> tuple[IntArray, IntArray]:
+    """Encoder frames named (sorted, unique) and the first position naming each."""
+    named = enc_idx >= 0
+    uniq, first = np.unique(enc_idx[named], return_index=True)
+    return uniq, np.flatnonzero(named)[first]
+
+
+def _onboard_samples(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: _Encoders
+) -> tuple[_Poses, int]:
+    """On-board samples (X and Y frames of one encoder frame); and the poses left unmatched."""
+    px = _accepted(frames, accepted, decoder, "ODOM_POSE_X")
+    py = _accepted(frames, accepted, decoder, "ODOM_POSE_Y")
+    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"])
+    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"])
+    unmatched = int(np.count_nonzero(ex < 0) + np.count_nonzero(ey < 0))
+    ux, fx = _first_per_encoder(ex)
+    uy, fy = _first_per_encoder(ey)
+    both, ix, iy = np.intersect1d(ux, uy, assume_unique=True, return_indices=True)
+    if len(both) == 0:
+        raise AnalysisError(
+            "no ODOM_POSE_X/ODOM_POSE_Y pair names an encoder frame of the log: nothing to compare"
+        )
+    sx, sy = fx[ix], fy[iy]
+    heading_raw = px["HEADING"][sx].astype(np.int64)
+    turns = py["TURNS"][sy].astype(np.float64)
+    poses = _Poses(
+        enc=both.astype(np.int64),
+        x_m=px["X"][sx] * POSITION_LSB_M,
+        y_m=py["Y"][sy] * POSITION_LSB_M,
+        heading_rad=turns * 2 * math.pi + heading_raw * HEADING_LSB_RAD,
+        heading_raw=heading_raw,
+    )
+    return poses, unmatched
+
+
+def _truth_samples(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: _Encoders
+) -> _Poses:
+    """Truth samples (X, Y and HEADING parts naming one encoder frame); empty without SIM_TRUTH."""
+    try:
+        parts = [decoder.decode_page(frames, "SIM_TRUTH", part) for part in (0, 1, 2)]
+    except DecodeError:
+        parts = []
+    if not parts or any(len(p["index"]) == 0 for p in parts):
+        return _empty_poses()
+    found = []
+    for p in parts:
+        keep = accepted[p["index"]]
+        named = match_encoder(enc, p["index"][keep], p["ENC_COUNTER"][keep])
+        uniq, first = _first_per_encoder(named)
+        found.append((uniq, np.flatnonzero(keep)[first]))
+    common = np.intersect1d(np.intersect1d(found[0][0], found[1][0]), found[2][0])
+    pick = [f[1][np.searchsorted(f[0], common)] for f in found]
+    heading_raw = parts[2]["HEADING"][pick[2]].astype(np.int64)
+    return _Poses(
+        enc=common.astype(np.int64),
+        x_m=parts[0]["X"][pick[0]] * POSITION_LSB_M,
+        y_m=parts[1]["Y"][pick[1]] * POSITION_LSB_M,
+        heading_rad=heading_raw.astype(np.float64) * HEADING_LSB_RAD,
+        heading_raw=heading_raw,
+    )
+
+
+def _empty_poses() -> _Poses:
+    empty_f, empty_i = np.zeros(0), np.zeros(0, dtype=np.int64)
+    return _Poses(empty_i, empty_f, empty_f, empty_f, empty_i)
+
+
+# --- the reference --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Reference:
+    """The reference pose at every accepted encoder frame from the first on-board sample's on
+    (element k: encoder frame ``start + k``)."""
+
+    start: int  # index into _Encoders of the first on-board sample
+    x_m: FloatArray
+    y_m: FloatArray
+    heading_rad: FloatArray
+    distance_m: FloatArray
+    restarts: int = 0  # gaps in the encoder sequence where the position was placed again
+
+    def at(self, enc: IntArray) -> _Reference:
+        """The reference at the encoder frames ``enc`` (all >= start)."""
+        k = enc - self.start
+        return _Reference(
+            self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
+            self.restarts,
+        )
+
+
+def _reference(enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator: str) -> _Reference:
+    """Integrate the encoder deltas from the first on-board sample on."""
+    bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
+    e0 = int(onboard.enc[0])
+    d_left = wrap_delta(np.diff(enc.left[e0:]), bits)
+    d_right = wrap_delta(np.diff(enc.right[e0:]), bits)
+    geometry = Geometry.of(robot)
+    rel = integrate(d_left, d_right, geometry, integrator)
+    zero = np.zeros(1)
+    rel_x, rel_y = np.concatenate((zero, rel.x_m)), np.concatenate((zero, rel.y_m))
+    rel_h = np.concatenate((zero, rel.heading_rad))
+    at = onboard.enc - e0
+    segment = np.concatenate(([0], np.cumsum(np.diff(enc.seq[e0:]) > 1)))
+    in_first = int(np.searchsorted(segment[at], 1))  # samples before the first gap
+    x0, y0, h0 = _start_pose(onboard, rel_x[at], rel_y[at], rel_h[at], in_first)
+    cos0, sin0 = math.cos(h0), math.sin(h0)
+    x_m = x0 + cos0 * rel_x - sin0 * rel_y
+    y_m = y0 + sin0 * rel_x + cos0 * rel_y
+    x_m += _segment_offsets(segment, at, onboard.x_m - x_m[at])
+    y_m += _segment_offsets(segment, at, onboard.y_m - y_m[at])
+    return _Reference(
+        start=e0,
+        x_m=x_m,
+        y_m=y_m,
+        heading_rad=h0 + rel_h,
+        distance_m=np.concatenate((zero, rel.distance_m)),
+        restarts=int(segment[-1]),
+    )
+
+
+def _segment_offsets(segment: IntArray, at: IntArray, error: FloatArray) -> FloatArray:
+    """Position corrections per encoder frame after gaps in the encoder sequence.
+
+    Across a gap the firmware may have integrated frames the log does not hold (a logger that
+    missed them): the heading stays exact (a function of the absolute counts) but the position's
+    path over the gap is unknown. Each segment after a gap is therefore placed like the start:
+    the middle of the overlap of its on-board samples' rounding intervals (a segment without a
+    sample keeps the previous correction). Segment 0 (the start) is not moved.
+    """
+    n_segments = int(segment[-1]) + 1
+    offsets = np.full(n_segments, np.nan)
+    offsets[0] = 0.0
+    seg_of_sample = segment[at]
+    bounds = np.searchsorted(seg_of_sample, np.arange(n_segments + 1))
+    for k in np.flatnonzero(bounds[2:] > bounds[1:-1]) + 1:
+        offsets[k] = _overlap_mid(error[bounds[k] : bounds[k + 1]], POSITION_LSB_M, base=True)
+    filled = np.maximum.accumulate(np.where(np.isnan(offsets), 0, np.arange(n_segments)))
+    result: FloatArray = offsets[filled][segment]
+    return result
+
+
+def _start_pose(
+    onboard: _Poses, rel_x: FloatArray, rel_y: FloatArray, rel_h: FloatArray, in_first: int
+) -> tuple[float, float, float]:
+    """The first on-board pose, de-rounded: inside its rounding interval, where the intervals of
+    the first ``START_FIT_SAMPLES`` samples (less the reference's increments) overlap. The
+    position uses only the ``in_first`` samples before the first gap of the encoder sequence
+    (the heading, exact across gaps, uses them all)."""
+    n = min(START_FIT_SAMPLES, len(onboard.enc))
+    h_first = onboard.heading_raw[0] * HEADING_LSB_RAD
+    offsets = _wrap_pi(onboard.heading_raw[:n] * HEADING_LSB_RAD - rel_h[:n] - h_first)
+    h0 = h_first + _overlap_mid(offsets, HEADING_LSB_RAD)
+    n = max(1, min(n, in_first))
+    cos0, sin0 = math.cos(h0), math.sin(h0)
+    px = cos0 * rel_x[:n] - sin0 * rel_y[:n]
+    py = sin0 * rel_x[:n] + cos0 * rel_y[:n]
+    x0 = onboard.x_m[0] + _overlap_mid(onboard.x_m[:n] - px - onboard.x_m[0], POSITION_LSB_M)
+    y0 = onboard.y_m[0] + _overlap_mid(onboard.y_m[:n] - py - onboard.y_m[0], POSITION_LSB_M)
+    turns = math.floor((onboard.heading_rad[0] - h_first) / (2 * math.pi) + 0.5)
+    return float(x0), float(y0), float(h0 + turns * 2 * math.pi)
+
+
+def _overlap_mid(offsets: FloatArray, lsb: float, *, base: bool = False) -> float:
+    """Middle of the overlap of [o - lsb/2, o + lsb/2] over ``offsets``, kept within the first
+    interval (around 0, or around ``offsets[0]`` with ``base``)."""
+    first = float(offsets[0]) if base else 0.0
+    lo = float(np.max(offsets)) - 0.5 * lsb
+    hi = float(np.min(offsets)) + 0.5 * lsb
+    return min(max(0.5 * (lo + hi), first - 0.5 * lsb), first + 0.5 * lsb)
+
+
+def _wrap_pi(angle: FloatArray) -> FloatArray:
+    """Wrap to [-pi, pi)."""
+    wrapped: FloatArray = (angle + math.pi) % (2 * math.pi) - math.pi
+    return wrapped
+
+
+# --- errors and the report --------------------------------------------------------------------
+
+
+def _errors(onboard: _Poses, ref: _Reference) -> tuple[FloatArray, FloatArray]:
+    """Position (m) and wrapped heading (rad) errors, on-board minus reference (at the same
+    encoder frames), per sample."""
+    position = np.hypot(onboard.x_m - ref.x_m, onboard.y_m - ref.y_m)
+    heading = _wrap_pi(onboard.heading_raw * HEADING_LSB_RAD - ref.heading_rad)
+    return position, heading
+
+
+def _summary(position: FloatArray, heading: FloatArray) -> dict[str, Any]:
+    """Max and final errors (None when there is no sample)."""
+    if len(position) == 0:
+        return dict.fromkeys(
+            ("max_position_error_m", "max_heading_error_rad", "final_position_error_m",
+             "final_heading_error_rad"),
+        )
+    return {
+        "max_position_error_m": float(np.max(position)),
+        "max_heading_error_rad": float(np.max(np.abs(heading))),
+        "final_position_error_m": float(position[-1]),
+        "final_heading_error_rad": float(heading[-1]),
+    }
+
+
+def _versus_truth(
+    onboard: _Poses, truth: _Poses, ref: _Reference
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """On-board vs truth at every truth sample with an on-board sample at or after it."""
+    estimate, keep = onboard_at(onboard, ref, truth.enc)
+    position = np.hypot(estimate.x_m - truth.x_m[keep], estimate.y_m - truth.y_m[keep])
+    heading = _wrap_pi(estimate.heading_rad - truth.heading_rad[keep])
+    series = {"truth_x_m": truth.x_m[keep], "truth_y_m": truth.y_m[keep]}
+    return _summary(position, heading), series
+
+
+def onboard_at(onboard: _Poses, ref: _Reference, enc: IntArray) -> tuple[_Poses, IntArray]:
+    """The on-board pose at encoder frames ``enc``: the on-board sample there, or else the
+    reference there plus (on-board - reference) at the nearest following on-board sample.
+
+    The firmware sends its pose every other encoder frame (ODOM_POSE_* every 20 ms), so a truth
+    sample may fall between two; the reference carries the on-board pose back by the one encoder
+    step, exactly as the firmware integrated it (within the on-board vs reference tolerance).
+    Returns the poses and the positions in ``enc`` that have one.
+    """
+    following = np.searchsorted(onboard.enc, enc)
+    keep = np.flatnonzero((following < len(onboard.enc)) & (enc >= ref.start))
+    s = following[keep]
+    here, there = ref.at(enc[keep]), ref.at(onboard.enc[s])
+    heading = onboard.heading_raw[s] * HEADING_LSB_RAD
+    poses = _Poses(
+        enc=enc[keep],
+        x_m=onboard.x_m[s] - there.x_m + here.x_m,
+        y_m=onboard.y_m[s] - there.y_m + here.y_m,
+        heading_rad=np.asarray(heading - there.heading_rad + here.heading_rad, dtype=np.float64),
+        heading_raw=onboard.heading_raw[s],
+    )
+    return poses, keep
+
+
+def _robot_dict(robot: RobotProfile) -> dict[str, Any]:
+    return {
+        "name": robot.name,
+        "counts_per_rev": robot.counts_per_rev,
+        "wheel_radius_left_m": robot.wheel_radius_left_m,
+        "wheel_radius_right_m": robot.wheel_radius_right_m,
+        "wheelbase_m": robot.wheelbase_m,
+        "counter_bits": robot.counter_bits,
+    }
+
+
+def _covered_s(frames: FrameArrays, db: cantools.database.can.Database) -> float:
+    """Seconds of bus time the log covers: its encoder periods (first to last encoder frame,
+    plus one cycle), or the plain frame span when it has no encoder frame."""
+    message = db.get_message_by_name("WHEEL_ENCODERS")
+    stamps = frames.timestamp_s[frames.can_id == message.frame_id]
+    if len(stamps) == 0 or not message.cycle_time:
+        return _span(frames)
+    return float(stamps[-1] - stamps[0]) + message.cycle_time / 1000.0
+
+
+def _span(frames: FrameArrays) -> float:
+    """Seconds from the first to the last frame."""
+    if len(frames) == 0:
+        return 0.0
+    return float(frames.timestamp_s[-1] - frames.timestamp_s[0])
+
+
+def _realtime(sim_s: float, wall_s: float | None) -> float | None:
+    """Simulated seconds per wall-clock second."""
+    if wall_s is None or wall_s <= 0:
+        return None
+    return sim_s / wall_s
+
+
+def _frame_counts(frames: FrameArrays, decoder: BulkDecoder) -> dict[str, int]:
+    """Frames per DBC message in the log (whatever their E2E status)."""
+    counts = {}
+    for message in decoder.db.messages:
+        n = len(decoder.select(frames, message.name))
+        if n:
+            counts[message.name] = n
+    return counts

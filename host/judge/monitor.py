@@ -1,0 +1,431 @@
+"""The live view of a CAN bus (``odocan monitor``): a state model fed frame by frame, and its
+rich rendering.
+
+``BusMonitor.feed(msg)`` takes every frame heard, in bus order, and never raises on what a bus
+carries: frames of unknown IDs, of the wrong DLC, error and remote frames are counted (the
+``unknown`` section of ``host.e2e.E2EMonitor``, plus the unknown IDs themselves), frames that
+cantools cannot decode are counted as ``undecodable``. Per DBC message it keeps:
+
+* ``count``, ``rate_hz`` and ``jitter_ms``: frames heard, and the rate and the standard deviation of
+  the inter-frame period over the last ``RATE_WINDOW`` frames (bus timestamps, ``msg.timestamp``);
+* ``e2e``: the Profile 2 counts (``ok``, ``lost``, ``repeated``, ``crc_errors``,
+  ``wrong_sequence``), judged as the firmware judges them (``E2EMonitor``, time-widened window);
+* ``last``: the latest value of every signal (physical units, enum names), from accepted frames
+  only; a multiplexed message keeps the latest value of each page's signals (and
+  ``last_frame``, the signals of its latest frame alone, is what the screen shows).
+
+From the decoded frames it follows the firmware: ``status`` (ODOM_STATUS: STATE, INTEGRATOR,
+ERROR_MASK with the bits named after ``firmware.errors.ErrorFlag``, UPTIME, frame totals) and the
+pose (``PoseTracker``): the on-board pose (ODOM_POSE_X + ODOM_POSE_Y naming one encoder frame)
+against a float64 ``ReferenceOdometry`` fed WHEEL_ENCODERS, compared at the very encoder frame the
+pose names (ENC_COUNTER), and against SIM_TRUTH when the bus carries it.
+
+``snapshot()`` is the whole model as JSON-ready data (``odocan monitor --json``); ``render()``
+draws it for ``rich.live.Live``. ``render_fleet`` draws the MQTT fleet table
+(``odocan monitor --mqtt``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+import time
+from collections import Counter, deque
+from dataclasses import dataclass, field
+from itertools import pairwise
+from typing import Any
+
+import can
+from cantools.database.can import Database, Message
+from rich import box
+from rich.console import Group, RenderableType
+from rich.table import Table
+from rich.text import Text
+
+from odocan.firmware.errors import ErrorFlag
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.fleetview import RobotState
+from odocan.host.protocol.decode import frame_key
+from odocan.host.protocol.e2e import E2E_KEYS, UNKNOWN, E2EMonitor
+from odocan.host.report.jsonutil import finite
+from odocan.sim.contract import database
+from odocan.sim.robot import RobotProfile
+
+RATE_WINDOW = 128  # frames per message for rate and jitter (1.28 s of WHEEL_ENCODERS)
+STALE_S = 1.0  # a message not heard for this long is shown dimmed
+ACCEPTED = frozenset({"ok", "oksomelost", "unprotected"})
+MAX_UNKNOWN_IDS = 32  # distinct unknown identifiers listed (all are counted)
+_HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
+
+
+@dataclass
+class MessageStats:
+    """What the monitor knows of one DBC message."""
+
+    name: str
+    frame_id: int
+    count: int = 0
+    times: deque[float] = field(default_factory=lambda: deque(maxlen=RATE_WINDOW))
+    last: dict[str, Any] = field(default_factory=dict)  # every signal's latest value
+    last_frame: dict[str, Any] = field(default_factory=dict)  # the latest frame's signals
+    heard_monotonic_s: float = 0.0
+
+    def heard(self, timestamp_s: float, now_s: float) -> None:
+        """Count one frame of this message (bus timestamp, local monotonic time)."""
+        self.count += 1
+        self.times.append(timestamp_s)
+        self.heard_monotonic_s = now_s
+
+    def rate_hz(self) -> float | None:
+        """Frames per second over the window (None before two frames)."""
+        if len(self.times) < 2 or self.times[-1] <= self.times[0]:
+            return None
+        return (len(self.times) - 1) / (self.times[-1] - self.times[0])
+
+    def jitter_ms(self) -> float | None:
+        """Standard deviation of the inter-frame period over the window (ms)."""
+        if len(self.times) < 3:
+            return None
+        return 1e3 * statistics.pstdev(b - a for a, b in pairwise(self.times))
+
+
+class BusMonitor:
+    """The state model of ``odocan monitor`` (see the module docstring)."""
+
+    def __init__(
+        self, robot: RobotProfile, integrator: str | None = None, db: Database | None = None
+    ) -> None:
+        self.db = db if db is not None else database()
+        self._by_key = {frame_key(m.frame_id, m.is_extended_frame): m for m in self.db.messages}
+        self.e2e = E2EMonitor(self.db)
+        self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
+        self.messages: dict[str, MessageStats] = {}
+        self.unknown_ids: Counter[str] = Counter()
+        self.status: dict[str, Any] = {}
+        self.frames_total = 0
+        self.undecodable = 0
+        self.started_monotonic_s = time.monotonic()
+
+    def feed(self, msg: can.Message, now_s: float | None = None) -> None:
+        """One frame heard on the bus (``now_s``: local monotonic time, default now)."""
+        now_s = time.monotonic() if now_s is None else now_s
+        self.frames_total += 1
+        if msg.is_error_frame or msg.is_remote_frame:
+            self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
+            return
+        data = bytes(msg.data)
+        timestamp_s = msg.timestamp
+        status = self.e2e.check(msg.arbitration_id, data, extended=msg.is_extended_id,
+                                timestamp_s=timestamp_s)
+        message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
+        if message is None:
+            self._count_unknown_id(msg.arbitration_id)
+            return
+        if len(data) != message.length:
+            return  # counted by E2EMonitor as wrong_dlc
+        stats = self.messages.get(message.name)
+        if stats is None:
+            stats = self.messages[message.name] = MessageStats(message.name, message.frame_id)
+        stats.heard(timestamp_s, now_s)
+        if status in ACCEPTED:
+            self._use(message, stats, data)
+
+    def _count_unknown_id(self, can_id: int) -> None:
+        key = f"0x{can_id:03X}"
+        if key in self.unknown_ids or len(self.unknown_ids) < MAX_UNKNOWN_IDS:
+            self.unknown_ids[key] += 1
+
+    def _use(self, message: Message, stats: MessageStats, data: bytes) -> None:
+        """Decode an accepted frame, keep its values and follow the firmware."""
+        try:
+            signals = message.decode(data, decode_choices=False)
+        except Exception:  # cantools: unknown multiplexer value, ... (never fatal)
+            self.undecodable += 1
+            return
+        assert isinstance(signals, dict)
+        shown = {name: _shown(message, name, value) for name, value in signals.items()
+                 if name not in _HIDDEN}
+        stats.last.update(shown)
+        stats.last_frame = shown
+        handler = _HANDLERS.get(message.name)
+        if handler is not None:
+            try:
+                handler(self, signals, shown)
+            except (KeyError, TypeError, ValueError):  # a --dbc without the signals it needs
+                self.undecodable += 1
+
+    def _on_encoders(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
+
+    def _on_pose_x(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]))
+
+    def _on_pose_y(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        self.tracker.on_pose_y(int(s["ENC_COUNTER"]), float(s["Y"]), int(s["TURNS"]))
+
+    def _on_truth(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        part = int(s["PART"])
+        value = s.get({0: "X", 1: "Y", 2: "HEADING"}.get(part, ""))
+        if value is not None:
+            self.tracker.on_truth(part, int(s["ENC_COUNTER"]), float(value))
+
+    def _on_status(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        page = str(shown.get("PAGE", s.get("PAGE")))
+        if page == "SUMMARY":
+            mask = int(s["ERROR_MASK"])
+            self.status.update(
+                state=shown["STATE"], integrator=shown["INTEGRATOR"], error_mask=mask,
+                errors=error_names(mask), uptime_s=int(s["UPTIME"]),
+            )
+            integrator = str(shown["INTEGRATOR"]).lower()
+            if integrator in ("euler", "rk2", "exact"):
+                self.tracker.on_integrator(integrator)
+        elif page == "FRAME_TOTALS":
+            self.status.update({k.lower(): int(v) for k, v in s.items() if k.endswith("_FRAMES")})
+
+    def snapshot(self) -> dict[str, Any]:
+        """The whole model as JSON-ready data (``odocan monitor --json``)."""
+        e2e = self.e2e.counts()
+        messages = {}
+        for name in sorted(self.messages, key=lambda n: self.messages[n].frame_id):
+            stats = self.messages[name]
+            message = self.db.get_message_by_name(name)
+            messages[name] = {
+                "id": f"0x{stats.frame_id:03X}",
+                "count": stats.count,
+                "rate_hz": stats.rate_hz(),
+                "jitter_ms": stats.jitter_ms(),
+                "e2e": e2e.get(name, {}),
+                "last": dict(stats.last),
+                "units": {sig: _unit(message, sig) for sig in stats.last},
+            }
+            if message.is_multiplexed():  # the latest page alone
+                messages[name]["last_frame"] = dict(stats.last_frame)
+        return {
+            "duration_s": time.monotonic() - self.started_monotonic_s,
+            "frames_total": self.frames_total,
+            "messages": messages,
+            "status": dict(self.status) or None,
+            **self.tracker.snapshot(),
+            "unknown": {**e2e[UNKNOWN], "ids": dict(self.unknown_ids),
+                        "undecodable": self.undecodable},
+        }
+
+
+_HANDLERS = {
+    "WHEEL_ENCODERS": BusMonitor._on_encoders,
+    "ODOM_POSE_X": BusMonitor._on_pose_x,
+    "ODOM_POSE_Y": BusMonitor._on_pose_y,
+    "SIM_TRUTH": BusMonitor._on_truth,
+    "ODOM_STATUS": BusMonitor._on_status,
+}
+
+
+def to_json(snapshot: dict[str, Any]) -> str:
+    """Indented JSON of a snapshot; non-finite floats become null (JSON has no NaN)."""
+    return json.dumps(finite(snapshot), indent=2, default=str)
+
+
+def error_names(mask: int) -> list[str]:
+    """The ``ErrorFlag`` names of the bits set in ``mask`` (``BIT<n>`` for an unnamed bit)."""
+    named = {int(flag).bit_length() - 1: str(flag.name) for flag in ErrorFlag if flag}
+    return [named.get(bit, f"BIT{bit}") for bit in range(mask.bit_length()) if mask >> bit & 1]
+
+
+def _shown(message: Message, name: str, value: Any) -> Any:
+    """A signal's value as shown: the enum name when it has one, else the number."""
+    choices = message.get_signal_by_name(name).choices
+    if choices and int(value) in choices:
+        return str(choices[int(value)])
+    return value
+
+
+def _unit(message: Message, name: str) -> str:
+    unit = message.get_signal_by_name(name).unit
+    return "" if unit in (None, "-") else str(unit)
+
+
+# --- rendering ------------------------------------------------------------------------------
+
+
+def render(snapshot: dict[str, Any], *, source: str,
+           heard: dict[str, float] | None = None) -> RenderableType:
+    """The live screen (fits 80 columns): header, per-message statistics, latest signal values,
+    firmware status, pose comparison, frames not checked.
+
+    ``heard``: message name -> seconds since last heard (rows not heard for ``STALE_S`` dimmed).
+    """
+    header = Text.assemble(
+        ("odocan monitor ", "bold"), (source, "cyan"),
+        f"   {snapshot['duration_s']:.1f} s   {snapshot['frames_total']} frames   Ctrl-C quits",
+    )
+    heard = heard or {}
+    return Group(
+        header, _messages_table(snapshot, heard), _signals_table(snapshot, heard),
+        _status_line(snapshot.get("status")), _pose_table(snapshot), _pose_note(snapshot),
+        _unknown_line(snapshot["unknown"]),
+    )
+
+
+def _table(*columns: str) -> Table:
+    """A compact table; the first column left-aligned, the others right-aligned."""
+    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False,
+                  padding=(0, 1, 0, 0))
+    for i, column in enumerate(columns):
+        table.add_column(column, justify="left" if i == 0 else "right", no_wrap=True)
+    return table
+
+
+def _messages_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
+    table = _table("message", "ID", "frames", "Hz", "jitter ms", "E2E ok", "lost", "rep",
+                   "crc", "seq")
+    for name, m in snapshot["messages"].items():
+        e2e = m["e2e"]
+        table.add_row(
+            name, m["id"], str(m["count"]), _num(m["rate_hz"], ".1f"),
+            _num(m["jitter_ms"], ".2f"), *(_num(e2e.get(k), "d") for k in E2E_KEYS),
+            style="dim" if heard.get(name, 0.0) > STALE_S else None,
+        )
+    return table
+
+
+def _signals_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
+    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
+    table.add_column("message", no_wrap=True)
+    table.add_column("latest values", overflow="fold", ratio=1)
+    for name, m in snapshot["messages"].items():
+        table.add_row(name, _values(m.get("last_frame", m["last"]), m["units"]),
+                      style="dim" if heard.get(name, 0.0) > STALE_S else None)
+    return table
+
+
+def _values(last: dict[str, Any], units: dict[str, str]) -> str:
+    items = []
+    for name, value in last.items():
+        text = f"{value:.4f}".rstrip("0").rstrip(".") if isinstance(value, float) else str(value)
+        unit = units.get(name, "")
+        items.append(f"{name} {text}{' ' + unit if unit else ''}")
+    return ", ".join(items)
+
+
+def _status_line(status: dict[str, Any] | None) -> Text:
+    if not status:
+        return Text("firmware: no ODOM_STATUS summary yet", style="dim")
+    state = str(status.get("state"))
+    colour = {"OK": "green", "DEGRADED": "yellow", "FAULT": "bold red"}.get(state, "")
+    errors = ", ".join(status.get("errors") or []) or "none"
+    totals = ", ".join(f"{k.removesuffix('_frames')} {v}" for k, v in status.items()
+                       if k.endswith("_frames"))
+    return Text.assemble(
+        ("firmware ", "bold"), (state, colour),
+        f"   integrator {status.get('integrator')}   errors 0x{status.get('error_mask', 0):04X}"
+        f" ({errors})   uptime {status.get('uptime_s')} s"
+        + (f"   frames {totals}" if totals else ""),
+    )
+
+
+def _pose_table(snapshot: dict[str, Any]) -> Table:
+    """On-board, reference and truth poses; on-board minus each (latest and max)."""
+    table = _table("pose", "x m", "y m", "hdg rad", "Δ mm", "Δ mrad", "max mm", "max mrad")
+    errors = snapshot["error"]
+    rows = (("on-board", snapshot["pose"], None),
+            ("reference", snapshot["reference"], errors["pose_vs_reference"]),
+            ("truth", snapshot["truth"], errors["pose_vs_truth"]))
+    for label, pose, error in rows:
+        pose, error = pose or {}, error or {}
+        table.add_row(
+            label, _num(pose.get("x_m"), ".4f"), _num(pose.get("y_m"), ".4f"),
+            _num(pose.get("heading_rad"), ".4f"), _scaled(error.get("dpos_m")),
+            _scaled(error.get("dheading_rad")), _scaled(error.get("max_dpos_m")),
+            _scaled(error.get("max_dheading_rad")),
+        )
+    return table
+
+
+def _pose_note(snapshot: dict[str, Any]) -> Text:
+    ref, errors = snapshot["reference"], snapshot["error"]
+    samples = [(errors[key] or {}).get("samples", 0) for key in ("pose_vs_reference",
+                                                                  "pose_vs_truth")]
+    return Text(f"Δ: on-board minus the row; reference {ref.get('integrator') or '(integrator?)'}"
+                f", started {ref.get('starts', 0)}x; compared {samples[0]} poses, {samples[1]} "
+                "truth", style="dim")
+
+
+def _unknown_line(unknown: dict[str, Any]) -> Text:
+    counts = {k: v for k, v in unknown.items() if k != "ids" and v}
+    if not counts:
+        return Text("not checked: none", style="dim")
+    text = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in counts.items())
+    ids = ", ".join(f"{k}×{v}" for k, v in list(unknown.get("ids", {}).items())[:8])
+    return Text(f"not checked: {text}" + (f" (IDs {ids})" if ids else ""), style="yellow")
+
+
+def _num(value: Any, spec: str) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    return format(value, spec)
+
+
+def _scaled(value: float | None) -> str:
+    """Metres as mm, radians as mrad."""
+    return "-" if value is None else f"{value * 1e3:.4f}"
+
+
+# --- the MQTT fleet -------------------------------------------------------------------------
+
+
+def fleet_snapshot(table: dict[str, RobotState], db: Database | None = None) -> dict[str, Any]:
+    """Per robot: online, pose, error vs reference, firmware status, frame rates."""
+    db = db if db is not None else database()
+    return {name: _robot_row(table[name], db) for name in sorted(table)}
+
+
+def _robot_row(state: RobotState, db: Database) -> dict[str, Any]:
+    summary = (state.status.get("firmware") or {}).get("summary") or {}
+    status_msg = db.get_message_by_name("ODOM_STATUS")
+    firmware = None
+    if summary:
+        mask = int(summary.get("error_mask", 0))
+        firmware = {"state": _shown(status_msg, "STATE", summary.get("state", 0)),
+                    "integrator": _shown(status_msg, "INTEGRATOR", summary.get("integrator", 0)),
+                    "error_mask": mask, "errors": error_names(mask),
+                    "uptime_s": summary.get("uptime")}
+    hz = state.rates.get("hz") or {}
+    pose = {k: state.pose.get(k) for k in ("x_m", "y_m", "heading_rad")} if state.pose else None
+    return {
+        "online": state.online,
+        "pose": pose,
+        "error": state.error.get("pose_vs_reference"),
+        "status": firmware,
+        "rate_hz": round(sum(hz.values()), 3) if hz else None,
+        "encoder_hz": hz.get("WHEEL_ENCODERS"),
+        "updated_unix_s": state.updated_unix_s,
+    }
+
+
+def render_fleet(snapshot: dict[str, Any], *, source: str, elapsed_s: float,
+                 note: str = "") -> RenderableType:
+    """The fleet table of ``odocan monitor --mqtt``."""
+    header = Text.assemble(("odocan monitor --mqtt ", "bold"), (source, "cyan"),
+                           f"   {elapsed_s:.1f} s   {len(snapshot)} robots   Ctrl-C quits")
+    table = _table("robot", "x m", "y m", "hdg rad", "Δ mm", "Δ mrad", "state", "errors",
+                   "fr/s")
+    for column in table.columns[6:8]:
+        column.justify = "left"
+    table.columns[7].no_wrap, table.columns[7].min_width = False, 12  # names wrap at spaces
+    for name, row in snapshot.items():
+        pose, error, status = row["pose"] or {}, row["error"] or {}, row["status"] or {}
+        table.add_row(
+            name, _num(pose.get("x_m"), ".4f"), _num(pose.get("y_m"), ".4f"),
+            _num(pose.get("heading_rad"), ".4f"), _scaled(error.get("dpos_m")),
+            _scaled(error.get("dheading_rad")),
+            str(status.get("state", "-")) if row["online"] else "offline",
+            " ".join(status.get("errors") or []) or "-", _num(row["rate_hz"], ".1f"),
+            style=None if row["online"] else "dim",
+        )
+    parts: list[RenderableType] = [header, table]
+    if note:
+        parts.append(Text(note, style="yellow"))
+    return Group(*parts)

@@ -1,0 +1,217 @@
+"""Live alignment of what a robot's bus says: the on-board pose against a float64 reference and
+the ground truth, each paired at the very encoder frame it names (ENC_COUNTER), never by time.
+
+Used by ``odocan monitor`` and the MQTT bridge. The offline, bulk version of the same rule is
+``host.analysis``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+from odocan.host.judge.reference import Geometry, ReferenceOdometry, wrap_angle
+
+WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
+_RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
+_TURN = 2.0 * math.pi
+
+
+def difference(a: Pose, b: Pose) -> dict[str, float]:
+    """a - b: position (m), distance (m) and heading wrapped to [-pi, pi) (rad)."""
+    dx, dy = a.x_m - b.x_m, a.y_m - b.y_m
+    return {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy),
+            "dheading_rad": wrap_angle(a.heading_rad - b.heading_rad)}
+
+
+class Pose(NamedTuple):
+    """A pose at one encoder frame (``seq``: the how-many-th encoder frame the monitor heard)."""
+
+    seq: int
+    x_m: float
+    y_m: float
+    heading_rad: float
+
+
+@dataclass
+class ErrorStats:
+    """A - B for a stream of pose pairs: the latest difference and the largest so far."""
+
+    samples: int = 0
+    latest: dict[str, float] = field(default_factory=dict)
+    max_dpos_m: float = 0.0
+    max_dheading_rad: float = 0.0
+
+    def add(self, a: Pose, b: Pose) -> None:
+        """Record ``a - b`` (position in m, heading wrapped to [-pi, pi) in rad)."""
+        self.latest = difference(a, b)
+        self.samples += 1
+        self.max_dpos_m = max(self.max_dpos_m, self.latest["dpos_m"])
+        self.max_dheading_rad = max(self.max_dheading_rad, abs(self.latest["dheading_rad"]))
+
+    def as_dict(self) -> dict[str, Any] | None:
+        """JSON form; None before the first sample."""
+        if not self.samples:
+            return None
+        return {**self.latest, "max_dpos_m": self.max_dpos_m,
+                "max_dheading_rad": self.max_dheading_rad, "samples": self.samples}
+
+
+class PoseTracker:
+    """On-board pose vs the float64 reference (aligned by ENC_COUNTER) and vs SIM_TRUTH.
+
+    The reference starts at the first on-board pose once the integrator is known (``integrator``
+    given, or the one ODOM_STATUS reports), primed with the counts of the encoder frame that pose
+    names and stepped with every accepted WHEEL_ENCODERS frame after it; it starts again when
+    ODOM_STATUS reports another integrator. The start inherits the pose signals' rounding (0.1 mm,
+    2 pi/65536 rad), so the difference stays within about one LSB over a short watch.
+    """
+
+    def __init__(
+        self, geometry: Geometry, counter_bits: int, integrator: str | None = None
+    ) -> None:
+        """``counter_bits``: the robot's hardware counter width (16 wraps within the 24 on the
+        bus); ``integrator`` None: the one ODOM_STATUS reports."""
+        self.geometry = geometry
+        self.counter_bits = min(counter_bits, WIRE_COUNTER_BITS)
+        self.forced = integrator is not None
+        self.integrator = integrator
+        self.enc_seq = -1
+        self._counts: list[tuple[int, int, int] | None] = [None] * _RING  # seq, left, right
+        self._refs: list[Pose | None] = [None] * _RING
+        self._ref: ReferenceOdometry | None = None
+        self._pose_x: tuple[int, float, float] | None = None  # enc counter, x, heading
+        self._truth_parts: dict[int, tuple[int, float]] = {}
+        self._last_pair: tuple[Pose, Pose] | None = None  # on-board, reference
+        self.pose: Pose | None = None
+        self.reference: Pose | None = None
+        self.truth: Pose | None = None
+        self.reference_starts = 0
+        self.vs_reference = ErrorStats()
+        self.vs_truth = ErrorStats()
+        self.reference_vs_truth = ErrorStats()
+
+    def on_encoders(self, counter: int, left: int, right: int) -> None:
+        """An accepted WHEEL_ENCODERS frame (raw 24-bit counts)."""
+        self.enc_seq += 1
+        self._counts[counter] = (self.enc_seq, left, right)
+        ref = self._ref
+        if ref is not None:
+            ref.step_counts(left, right)
+            self._refs[counter] = Pose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad)
+
+    def on_integrator(self, name: str) -> None:
+        """ODOM_STATUS reports the firmware's integrator; a change restarts the reference."""
+        if self.forced or name == self.integrator:
+            return
+        self.integrator = name
+        self.restart_reference()
+
+    def restart_reference(self) -> None:
+        """Start the reference again at the next on-board pose (after a set-pose or config)."""
+        self._ref = None
+        self._refs = [None] * _RING
+
+    def set_geometry(self, geometry: Geometry, counter_bits: int) -> None:
+        """New robot parameters (a config command); the reference restarts at the next pose."""
+        self.geometry = geometry
+        self.counter_bits = min(counter_bits, WIRE_COUNTER_BITS)
+        self.restart_reference()
+
+    def on_pose_x(self, enc_counter: int, x_m: float, heading_rad: float) -> None:
+        """ODOM_POSE_X (X in m, HEADING in rad within the turn)."""
+        self._pose_x = (enc_counter, x_m, heading_rad)
+
+    def on_pose_y(
+        self, enc_counter: int, y_m: float, turns: int
+    ) -> tuple[Pose, Pose | None] | None:
+        """ODOM_POSE_Y: with the ODOM_POSE_X of the same encoder frame, one on-board sample.
+
+        Returns (on-board pose, reference at that encoder frame or None), None when unpaired.
+        """
+        if self._pose_x is None or self._pose_x[0] != enc_counter:
+            return None
+        _, x_m, heading_rad = self._pose_x
+        self._pose_x = None
+        named = self._named(self._counts[enc_counter])
+        seq = named[0] if named is not None else -1
+        pose = self.pose = Pose(seq, x_m, y_m, turns * _TURN + heading_rad)
+        if self._ref is None and named is not None and self.integrator is not None:
+            self._start_reference(pose, enc_counter)
+        ref = self._named(self._refs[enc_counter])
+        if ref is None or seq < 0:
+            return pose, None
+        self.reference = ref
+        self._last_pair = (pose, ref)
+        self.vs_reference.add(pose, ref)
+        return pose, ref
+
+    def on_truth(
+        self, part: int, enc_counter: int, value: float
+    ) -> tuple[Pose, Pose | None] | None:
+        """A SIM_TRUTH part (0 X m, 1 Y m, 2 HEADING rad); three of one encoder frame: a sample.
+
+        Returns (truth, reference at that encoder frame or None) once the sample is complete.
+        """
+        self._truth_parts[part] = (enc_counter, value)
+        parts = self._truth_parts
+        if len(parts) < 3 or len({p[0] for p in parts.values()}) != 1:
+            return None
+        self._truth_parts = {}
+        ref = self._named(self._refs[enc_counter])
+        truth = self.truth = Pose(ref.seq if ref else -1, parts[0][1], parts[1][1], parts[2][1])
+        if ref is None:
+            return truth, None
+        self.reference_vs_truth.add(ref, truth)
+        if self._last_pair is not None:  # the on-board pose carried to this frame
+            pose, at = self._last_pair
+            estimate = Pose(ref.seq, pose.x_m - at.x_m + ref.x_m, pose.y_m - at.y_m + ref.y_m,
+                            pose.heading_rad - at.heading_rad + ref.heading_rad)
+            self.vs_truth.add(estimate, truth)
+        return truth, ref
+
+    def _named(self, entry: Any) -> Any:
+        """A ring entry if it is one of the last 8 encoder frames (not one 16 frames older)."""
+        if entry is None or self.enc_seq - entry[0] >= _RING // 2:
+            return None
+        return entry
+
+    def _start_reference(self, pose: Pose, enc_counter: int) -> None:
+        """Start the reference at ``pose``, at the encoder frame it names, and catch up."""
+        assert self.integrator is not None
+        ref = self._ref = ReferenceOdometry(
+            self.geometry, self.integrator, self.counter_bits,
+            x_m=pose.x_m, y_m=pose.y_m, heading_rad=pose.heading_rad,
+        )
+        self.reference_starts += 1
+        self._refs = [None] * _RING
+        start = self._counts[enc_counter]
+        assert start is not None
+        ref.step_counts(start[1], start[2])
+        self._refs[enc_counter] = Pose(start[0], pose.x_m, pose.y_m, pose.heading_rad)
+        later = sorted((c[0], c[1], c[2], i) for i, c in enumerate(self._counts)
+                       if c is not None and c[0] > start[0])
+        for seq, left, right, counter in later:
+            ref.step_counts(left, right)
+            self._refs[counter] = Pose(seq, ref.x_m, ref.y_m, ref.heading_rad)
+
+    def snapshot(self) -> dict[str, Any]:
+        """``pose``, ``reference``, ``truth`` (None until known) and ``error``."""
+        return {
+            "pose": _pose_dict(self.pose),
+            "reference": {**(_pose_dict(self.reference) or {}), "integrator": self.integrator,
+                          "starts": self.reference_starts},
+            "truth": _pose_dict(self.truth),
+            "error": {
+                "pose_vs_reference": self.vs_reference.as_dict(),
+                "pose_vs_truth": self.vs_truth.as_dict(),
+                "reference_vs_truth": self.reference_vs_truth.as_dict(),
+            },
+        }
+
+
+def _pose_dict(pose: Pose | None) -> dict[str, float] | None:
+    if pose is None:
+        return None
+    return {"x_m": pose.x_m, "y_m": pose.y_m, "heading_rad": pose.heading_rad}

@@ -1,0 +1,242 @@
+"""What ``odocan run``, ``analyze`` and ``replay`` share after the analysis: options and outputs.
+
+* ``add_check_arguments(parser)`` adds ``--tolerance``, ``--report`` and ``--plot``;
+  ``check_output_paths(args)`` refuses a bad ``--plot``/``--report`` path *before* a long run.
+* ``finish(analysis, args, title=...)`` writes the JSON report and the plot, prints the summary
+  table (rich, to stdout) and returns the exit code: 0 when the on-board pose is within tolerance
+  of the float64 reference, 1 when it is not.
+
+``--tolerance`` is either one number, the position tolerance in metres (the heading keeps its
+default of one LSB of the pose signal, 2*pi/65536 rad), or ``pos=METRES,heading=RADIANS`` (any
+subset, any order). The default, ``pos=1e-4,heading=9.587e-5``, is one LSB of ``ODOM_POSE_X/Y``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich import box
+from rich.console import Console
+from rich.padding import Padding
+from rich.table import Table
+
+from odocan.host.judge.analysis import Analysis, Tolerance
+from odocan.host.report.jsonutil import finite
+from odocan.sim.exceptions import ConfigurationError
+
+PLOT_SUFFIXES = (".png", ".svg")
+_E2E_COLUMNS = {
+    "ok": "E2E ok",
+    "lost": "lost",
+    "repeated": "repeated",
+    "crc_errors": "CRC err",
+    "wrong_sequence": "wrong seq",
+}
+_TOLERANCE_KEYS = {"pos": "position_m", "heading": "heading_rad"}
+
+
+def parse_tolerance(text: str) -> Tolerance:
+    """``"1e-4"`` (position, metres) or ``"pos=1e-4,heading=1e-4"``; argparse type function."""
+    values: dict[str, float] = {}
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if len(items) == 1 and "=" not in items[0]:
+        items = [f"pos={items[0]}"]
+    for item in items:
+        key, sep, raw = (part.strip() for part in item.partition("="))
+        if not sep or key not in _TOLERANCE_KEYS:
+            raise argparse.ArgumentTypeError(
+                f"expected METRES or pos=METRES,heading=RADIANS, got {text!r}"
+            )
+        try:
+            value = float(raw)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise argparse.ArgumentTypeError(f"{key}={raw!r} must be a positive number")
+        values[_TOLERANCE_KEYS[key]] = value
+    if not values:
+        raise argparse.ArgumentTypeError("empty tolerance")
+    return Tolerance(**values)
+
+
+def add_check_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--tolerance``, ``--report`` and ``--plot`` to ``parser``."""
+    group = parser.add_argument_group("check and outputs")
+    group.add_argument(
+        "--tolerance",
+        type=parse_tolerance,
+        default=Tolerance(),
+        metavar="SPEC",
+        help="on-board vs reference tolerance: METRES, or pos=METRES,heading=RADIANS "
+        "(default: one LSB of the pose signals, pos=1e-4,heading=9.587e-5)",
+    )
+    group.add_argument("--report", type=Path, metavar="PATH", help="write the JSON report here")
+    group.add_argument(
+        "--plot", type=Path, metavar="PATH", help="write the trajectory and error plot (.png, .svg)"
+    )
+
+
+def check_output_paths(args: argparse.Namespace) -> None:
+    """Refuse a ``--plot`` of unknown format or an output in a missing directory, up front."""
+    plot: Path | None = args.plot
+    if plot is not None and plot.suffix.lower() not in PLOT_SUFFIXES:
+        raise ConfigurationError(
+            f"--plot {plot}: unknown format {plot.suffix or '(none)'!r} (use .png or .svg)"
+        )
+    for option, path in (("--plot", plot), ("--report", args.report)):
+        if path is not None and not path.parent.is_dir():
+            raise ConfigurationError(f"{option} {path}: directory {path.parent} does not exist")
+
+
+def write_report(report: dict[str, Any], path: Path) -> None:
+    """Write ``report`` as strict, indented JSON (numpy scalars become numbers, NaN null)."""
+    text = json.dumps(finite(report), indent=2, default=_json_default, allow_nan=False)
+    path.write_text(text + "\n", encoding="utf-8")
+
+
+def _json_default(value: object) -> object:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serializable: {type(value).__name__}")
+
+
+def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
+    """Write ``--report`` and ``--plot``, print the summary; 0 when passed, 1 when not."""
+    if args.report is not None:
+        write_report(analysis.report, args.report)
+    if args.plot is not None:
+        from odocan.host.report.plots import (
+            plot_analysis,  # matplotlib only when a plot is asked for
+        )
+
+        plot_analysis(analysis, args.plot, tolerance=args.tolerance)
+    console = Console(file=sys.stdout, highlight=False)
+    print_summary(analysis.report, args.tolerance, console, title=title)
+    return 0 if analysis.passed else 1
+
+
+def print_summary(
+    report: dict[str, Any], tolerance: Tolerance, console: Console, *, title: str
+) -> None:
+    """The run in a few lines, the comparison table and the verdict (fits 80 columns)."""
+    console.print(f"[bold]{title}[/bold]", soft_wrap=True)
+    for label, text in _facts(report):
+        console.print(f"  {label:<10} {text}", soft_wrap=True, highlight=False)
+    for table in (frames_table(report), comparison_table(report)):
+        console.print()
+        console.print(Padding(table, (0, 0, 0, 2), expand=False))
+    console.print()
+    verdict, style = ("PASS", "green") if report["passed"] else ("FAIL", "bold red")
+    console.print(
+        f"[{style}]{verdict}[/{style}]: on-board vs reference within "
+        f"{tolerance.position_m * 1e3:.4g} mm and {tolerance.heading_rad * 1e3:.4g} mrad"
+        + ("" if report["passed"] else ": not met"),
+        soft_wrap=True,
+    )
+
+
+def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
+    """(label, text) lines: robot, geometry, run, time, distance, frames not checked, pose."""
+    robot = report["robot"]
+    pose = report["final_onboard_pose"]
+    truth = report.get("onboard_vs_truth") or {}
+    facts = [
+        (
+            "robot",
+            f"{robot['name']}, {robot['counts_per_rev']} counts/rev, "
+            f"{robot['counter_bits']}-bit counters",
+        ),
+        (
+            "geometry",
+            f"wheel radii {robot['wheel_radius_left_m']:g}/"
+            f"{robot['wheel_radius_right_m']:g} m, wheelbase {robot['wheelbase_m']:g} m",
+        ),
+        (
+            "run",
+            f"integrator {report['integrator']}, scenario {report.get('scenario') or '-'}, "
+            f"seed {_or_dash(report.get('seed'))}",
+        ),
+        ("time", _time_text(report)),
+    ]
+    if truth.get("distance_travelled_m") is not None:
+        facts.append(("distance", f"{truth['distance_travelled_m']:.3f} m travelled"))
+    unchecked = {k: v for k, v in (report.get("unknown_frames") or {}).items() if v}
+    if unchecked:
+        facts.append(
+            (
+                "unchecked",
+                f"{sum(unchecked.values())} frames: "
+                + ", ".join(f"{k} {v}" for k, v in unchecked.items()),
+            )
+        )
+    facts.append(
+        (
+            "final pose",
+            f"x {pose['x_m']:.4f} m, y {pose['y_m']:.4f} m, heading "
+            f"{pose['heading_rad']:.4f} rad ({math.degrees(pose['heading_rad']):.2f} deg)",
+        )
+    )
+    return facts
+
+
+def frames_table(report: dict[str, Any]) -> Table:
+    """Frames per message and their E2E check counts (a dash where a message has none)."""
+    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
+    table.add_column("message")
+    for column in ("frames", *_E2E_COLUMNS.values()):
+        table.add_column(column, justify="right")
+    frames: dict[str, int] = report.get("frames", {})
+    e2e: dict[str, dict[str, Any]] = report.get("e2e", {})
+    for name, count in frames.items():
+        counts = e2e.get(name, {})
+        table.add_row(name, str(count), *(_or_dash(counts.get(key)) for key in _E2E_COLUMNS))
+    table.add_row("total", str(sum(frames.values())), *("" for _ in _E2E_COLUMNS), style="bold")
+    return table
+
+
+def _time_text(report: dict[str, Any]) -> str:
+    text = f"{report['sim_seconds']:.2f} s simulated"
+    if report.get("wall_seconds") is not None:
+        text += f" in {report['wall_seconds']:.2f} s"
+    if report.get("realtime_factor") is not None:
+        text += f" ({report['realtime_factor']:.0f}x real time)"
+    return text
+
+
+def comparison_table(report: dict[str, Any]) -> Table:
+    """Max and final position/heading errors of the on-board pose, vs reference and vs truth."""
+    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
+    table.add_column("on-board vs")
+    for column in ("max position", "final position", "max heading", "final heading"):
+        table.add_column(column, justify="right")
+    rows = (("reference", "onboard_vs_reference"), ("truth", "onboard_vs_truth"))
+    for label, key in rows:
+        errors = report.get(key) or {}
+        table.add_row(
+            label,
+            _mm(errors.get("max_position_error_m")),
+            _mm(errors.get("final_position_error_m")),
+            _mrad(errors.get("max_heading_error_rad")),
+            _mrad(errors.get("final_heading_error_rad")),
+        )
+    return table
+
+
+def _mm(value: float | None) -> str:
+    return "-" if value is None or not math.isfinite(value) else f"{value * 1e3:.4f} mm"
+
+
+def _mrad(value: float | None) -> str:
+    return "-" if value is None or not math.isfinite(value) else f"{value * 1e3:.4f} mrad"
+
+
+def _or_dash(value: object) -> str:
+    return "-" if value is None else str(value)
