@@ -41,7 +41,8 @@ def test_the_scan_catches_each_forbidden_construct(source: str, what: str) -> No
 
 def test_the_scan_allows_integer_code() -> None:
     source = (
-        "from __future__ import annotations\nimport struct\nfrom odocan.firmware.fixmath import wrap_u32\n"
+        "from __future__ import annotations\nimport struct\n"
+        "from odocan.firmware.fixmath import wrap_u32\n"
         "x = (7 // 2) << 3 >> 1\ny = 2 ** 10\nz = divmod(7, 2)\n"
     )
     assert scan_source(source) == []

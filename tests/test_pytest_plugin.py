@@ -234,7 +234,7 @@ def udp_bus() -> Iterator[str]:
 def _start_firmware(spec: str) -> subprocess.Popen[str]:
     """``odocan firmware`` (default integrator exact) on the channel of ``spec``."""
     kwargs = parse_bus_spec(spec)
-    argv = [sys.executable, "-m", "odocan.host.cli.app", "firmware", "-i", "udp_multicast",
+    argv = [sys.executable, "-m", "odocan", "firmware", "-i", "udp_multicast",
             "-c", kwargs["channel"], "--bus-arg", f"port={kwargs['port']}",
             "--bus-arg", "hop_limit=0"]
     return subprocess.Popen(argv, cwd=ROOT, stderr=subprocess.PIPE, text=True)
