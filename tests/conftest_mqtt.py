@@ -24,6 +24,7 @@ import aiomqtt
 import pytest
 
 from odocan.host.mqtt.broker import LOOPBACK, BrokerURL, EmbeddedBroker, free_loopback_port
+from tests.requires import require_executables
 
 MOSQUITTO = shutil.which("mosquitto") or (
     "/usr/sbin/mosquitto" if Path("/usr/sbin/mosquitto").exists() else None
@@ -102,8 +103,7 @@ class Mosquitto:
 @pytest.fixture
 def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
     """A running mosquitto with users and ACL (skips when not installed)."""
-    if MOSQUITTO is None or MOSQUITTO_PASSWD is None:
-        pytest.skip("mosquitto and mosquitto_passwd are not installed (apt-get install mosquitto)")
+    require_executables("mosquitto", "mosquitto_passwd", install="apt-get install mosquitto")
     broker = Mosquitto(tmp_path)
     broker.start()
     try:
@@ -126,8 +126,7 @@ async def broker_of(kind: str, tmp_path: Path) -> AsyncIterator[Brokers]:
         async with EmbeddedBroker() as embedded:
             yield Brokers(kind, embedded.url, embedded.url)
         return
-    if MOSQUITTO is None or MOSQUITTO_PASSWD is None:
-        pytest.skip("mosquitto and mosquitto_passwd are not installed (apt-get install mosquitto)")
+    require_executables("mosquitto", "mosquitto_passwd", install="apt-get install mosquitto")
     broker = Mosquitto(tmp_path)
     broker.start()
     try:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -22,6 +21,7 @@ import cantools
 import pytest
 
 from odocan.host.cli.app import main
+from tests.requires import require_executables
 
 ROOT = Path(__file__).resolve().parents[1]
 DBC = ROOT / "dbc" / "odocan.dbc"
@@ -107,8 +107,8 @@ def test_cantools_decode_knows_every_frame(run_logs: dict[str, Path]) -> None:
     assert "Unknown frame id" not in result.stdout.decode()
 
 
-@pytest.mark.skipif(shutil.which("log2asc") is None, reason="can-utils' log2asc is not installed")
 def test_log2asc_converts_the_log(run_logs: dict[str, Path], tmp_path: Path) -> None:
+    require_executables("log2asc", install="apt-get install can-utils")
     converted = tmp_path / "log2asc.asc"
     subprocess.run(
         ["log2asc", "-I", str(run_logs[".log"]), "-O", str(converted), "vcan0"],
