@@ -137,7 +137,9 @@ def test_run_report_has_the_contract_keys(
     assert report["robot"]["name"] == "pmir"
     assert (report["integrator"], report["scenario"], report["seed"]) == ("rk2", "circle", 3)
     assert report["sim_seconds"] == pytest.approx(4.0, abs=0.02)
-    assert report["wall_seconds"] > 0 and report["realtime_factor"] > 0
+    assert report["realtime_factor"] == pytest.approx(
+        report["sim_seconds"] / report["wall_seconds"], rel=1e-6
+    )
     assert report["frames"]["WHEEL_ENCODERS"] == 400
     assert all(isinstance(n, int) and n > 0 for n in report["frames"].values())
     reference, truth = report["onboard_vs_reference"], report["onboard_vs_truth"]

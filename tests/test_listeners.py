@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 import time
 
 import can
@@ -68,6 +69,10 @@ def test_without_isolation_python_can_starves_the_next_listener() -> None:
         notifier = can.Notifier(rx, [flaky, counting], timeout=0.01)
         for i in range(30):
             tx.send(can.Message(arbitration_id=0x100, is_extended_id=False, data=[i]))
-        time.sleep(0.5)
+        (reader,) = notifier._readers  # the Notifier's one thread for this bus
+        assert isinstance(reader, threading.Thread)
+        reader.join(10)  # it dies with the listener's exception: an event, not a delay
+        assert not reader.is_alive()
         notifier.stop()
-    assert counting.count < 30
+    assert flaky.seen == 3  # the third frame raised ...
+    assert counting.count == 2  # ... and nothing after it reached the next listener

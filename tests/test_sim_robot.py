@@ -164,4 +164,5 @@ def test_out_of_range(tmp_path: Path, key: str, value: str, expected: str) -> No
     ],
 )
 def test_range_limits_are_inclusive(tmp_path: Path, key: str, value: str) -> None:
-    load(write_profile(tmp_path, **{key: value}))
+    profile = load(write_profile(tmp_path, **{key: value}))
+    assert getattr(profile, key) == type(getattr(profile, key))(value)
