@@ -69,11 +69,6 @@ class PoseArrays:
     distance_m: FloatArray
 
 
-def wrap_angle(angle_rad: float) -> float:
-    """Wrap to [-pi, pi)."""
-    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
-
-
 def chord_factor(dheading_rad: float) -> float:
     """sin(u)/u with u = dtheta/2: the exact-arc chord over the arc length (1 at dtheta = 0)."""
     u = 0.5 * dheading_rad

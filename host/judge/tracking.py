@@ -11,7 +11,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from odocan.host.judge.reference import Geometry, ReferenceOdometry, wrap_angle
+from odocan.host.judge.reference import Geometry, ReferenceOdometry
+from odocan.sim.truth import wrap_angle
 
 WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
 _RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
@@ -44,7 +45,7 @@ class ErrorStats:
     max_dheading_rad: float = 0.0
 
     def add(self, a: Pose, b: Pose) -> None:
-        """Record ``a - b`` (position in m, heading wrapped to [-pi, pi) in rad)."""
+        """Record ``a - b`` (position in m, heading wrapped to (-pi, pi] in rad)."""
         self.latest = difference(a, b)
         self.samples += 1
         self.max_dpos_m = max(self.max_dpos_m, self.latest["dpos_m"])

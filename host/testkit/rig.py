@@ -36,7 +36,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple, Protocol
+from typing import Any, Protocol
 
 import can
 import cantools
@@ -46,6 +46,7 @@ from odocan.host.io.logs import FrameArrays, FrameCollector
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Analysis, analyze
 from odocan.host.protocol.commands import Command, CommandEncoder
 from odocan.host.protocol.e2e import OK, OKSOMELOST, UNPROTECTED, E2EMonitor
+from odocan.host.protocol.pose import Pose, latest_pose
 from odocan.sim import contract
 from odocan.sim.board import TICK_S
 from odocan.sim.clock import RealTimeClock
@@ -78,14 +79,6 @@ class TestkitError(OdocanError):
 
 class CommandRefused(AssertionError):
     """The firmware answered a command with ODOM_ACK NACK (or not at all)."""
-
-
-class Pose(NamedTuple):
-    """A pose in the odometry frame: metres and radians (heading unwrapped where it is known)."""
-
-    x_m: float
-    y_m: float
-    heading_rad: float
 
 
 @dataclass(frozen=True)
@@ -716,13 +709,12 @@ class OdocanRig:
     def pose(self) -> Pose:
         """The latest on-board pose: ODOM_POSE_X and ODOM_POSE_Y of one encoder frame
         (heading ``TURNS * 2 pi + HEADING``, to 0.1 mm and 2 pi / 65536 rad)."""
-        ys = self.frames("ODOM_POSE_Y")
-        xs = self.frames("ODOM_POSE_X")
-        for y in reversed(ys):
-            for x in reversed(xs):
-                if x["ENC_COUNTER"] == y["ENC_COUNTER"] and x["timestamp_s"] <= y["timestamp_s"]:
-                    return Pose(x["X"], y["Y"], y["TURNS"] * 2 * math.pi + x["HEADING"])
-        raise TestkitError("no ODOM_POSE_X/ODOM_POSE_Y pair heard yet: step the rig first")
+        halves = [(name, f) for name in ("ODOM_POSE_X", "ODOM_POSE_Y") for f in self.frames(name)]
+        halves.sort(key=lambda half: (half[1]["timestamp_s"], half[0]))  # X first within a tick
+        pose = latest_pose(halves)
+        if pose is None:
+            raise TestkitError("no ODOM_POSE_X/ODOM_POSE_Y pair heard yet: step the rig first")
+        return pose
 
     @property
     def truth(self) -> Pose:

@@ -1,0 +1,66 @@
+"""The on-board pose as the bus carries it: ODOM_POSE_X and ODOM_POSE_Y of one encoder frame.
+
+The pose does not fit one frame (dbc/README.md): ``ODOM_POSE_X`` = {X, HEADING} and ``ODOM_POSE_Y``
+= {Y, TURNS}, each naming the WHEEL_ENCODERS frame it describes by ``ENC_COUNTER``. The firmware
+sends X before Y in the same tick. A pose is an X and a Y frame naming the same encoder frame, X
+heard first; the unwrapped heading is ``TURNS * 2 pi + HEADING``. Pairing by time (the latest X
+with the latest Y) mixes two ticks' halves whenever a frame is lost; this is the one pairing every
+consumer (the analysis, the live tracker, replay, the experiments, the pytest kit) uses.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any, NamedTuple
+
+COUNTER_VALUES = 16  # ENC_COUNTER is the 4-bit E2E counter of the encoder frame named
+
+
+class Pose(NamedTuple):
+    """A pose in SI units: metres and the unwrapped heading in radians (counter-clockwise)."""
+
+    x_m: float
+    y_m: float
+    heading_rad: float
+
+
+def pose_of(x_frame: Mapping[str, Any], y_frame: Mapping[str, Any]) -> Pose:
+    """The pose of decoded (scaled) ODOM_POSE_X and ODOM_POSE_Y signals of one encoder frame."""
+    heading_rad = float(y_frame["TURNS"]) * 2.0 * math.pi + float(x_frame["HEADING"])
+    return Pose(float(x_frame["X"]), float(y_frame["Y"]), heading_rad)
+
+
+class PosePairer:
+    """Pairs decoded pose frames as they are heard: ``on_x`` keeps the X half of each encoder
+    frame (one slot per ENC_COUNTER value), ``on_y`` completes it; a Y whose X was not heard, or
+    was already used, gives nothing."""
+
+    def __init__(self) -> None:
+        self._x: list[Mapping[str, Any] | None] = [None] * COUNTER_VALUES
+
+    def on_x(self, x_frame: Mapping[str, Any]) -> None:
+        """An accepted ODOM_POSE_X (decoded signals)."""
+        self._x[int(x_frame["ENC_COUNTER"]) % COUNTER_VALUES] = x_frame
+
+    def on_y(self, y_frame: Mapping[str, Any]) -> Pose | None:
+        """An accepted ODOM_POSE_Y: the pose it completes, None when its X half is missing."""
+        slot = int(y_frame["ENC_COUNTER"]) % COUNTER_VALUES
+        x_frame, self._x[slot] = self._x[slot], None
+        return None if x_frame is None else pose_of(x_frame, y_frame)
+
+    def feed(self, name: str, signals: Mapping[str, Any]) -> Pose | None:
+        """Either half by message name; other messages are ignored."""
+        if name == "ODOM_POSE_X":
+            self.on_x(signals)
+        elif name == "ODOM_POSE_Y":
+            return self.on_y(signals)
+        return None
+
+
+def latest_pose(frames: Iterable[tuple[str, Mapping[str, Any]]]) -> Pose | None:
+    """The last complete pose of ``(message name, decoded signals)`` in the order heard."""
+    pairer, latest = PosePairer(), None
+    for name, signals in frames:
+        latest = pairer.feed(name, signals) or latest
+    return latest
