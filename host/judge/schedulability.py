@@ -218,11 +218,16 @@ def jitter_ns(message: BusMessage, ticks_ns: dict[str, int], queue_jitter_ns: in
 
 
 def default_ticks_ns(messages: list[BusMessage]) -> dict[str, int]:
-    """Each sender's tick period: the shortest period among the messages it sends."""
+    """Each sender's tick period: the shortest cycle among its cyclic messages.
+
+    A sender of sporadic messages only gets the shortest of their inter-arrival times (its tick
+    does not enter their jitter).
+    """
     ticks: dict[str, int] = {}
-    for message in messages:
+    for message in sorted(messages, key=lambda m: not m.cyclic):  # cyclic ones first
         for sender in message.senders:
-            ticks[sender] = min(ticks.get(sender, message.period_ns), message.period_ns)
+            if sender not in ticks or message.cyclic:
+                ticks[sender] = min(ticks.get(sender, message.period_ns), message.period_ns)
     return ticks
 
 
@@ -348,14 +353,16 @@ DEADLINE_ATTRIBUTE = "GenMsgDeadlineTime"  # ms; odocan's convention, default: t
 DELAY_ATTRIBUTE = "GenMsgDelayTime"  # ms; Vector's minimum time between two sends
 
 
-def ms_to_ns(value_ms: str | float | int, what: str) -> int:
-    """A positive time in ms (text or number) as whole ns; anything else is a one-line error."""
+def ms_to_ns(value_ms: str | float | int, what: str, *, allow_zero: bool = False) -> int:
+    """A positive (or zero) time in ms, text or number, as whole ns; else a one-line error."""
     try:
         ns = Decimal(str(value_ms).strip()) * NS_PER_MS
     except InvalidOperation:
         raise ConfigurationError(f"{what}: {value_ms!r} is not a number of ms") from None
-    if not ns.is_finite() or ns <= 0 or ns != ns.to_integral_value():
-        raise ConfigurationError(f"{what}: {value_ms!r} must be a positive time in ms (1 ns steps)")
+    low = 0 if allow_zero else 1
+    if not ns.is_finite() or ns < low or ns != ns.to_integral_value():
+        kind = "a time" if allow_zero else "a positive time"
+        raise ConfigurationError(f"{what}: {value_ms!r} must be {kind} in ms, in whole ns")
     return int(ns)
 
 
