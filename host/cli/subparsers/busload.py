@@ -2,14 +2,14 @@
 
 Every message of the DBC (``--dbc``, default dbc/odocan.dbc) and every
 ``--add NAME:ID:DLC:CYCLE_MS`` is analysed at ``--bitrate`` by the revised analysis of Davis,
-Burns, Bril & Lukkien (2007) (``host.judge.schedulability``): worst-case frame length with bit stuffing, queuing jitter J from
-the sender's tick, blocking B by one lower-priority frame, the worst response R over every instance
-in the busy period, the deadline D (the cycle time unless the DBC's ``GenMsgDeadlineTime`` says
-otherwise) and the slack D - R.
+Burns, Bril & Lukkien (2007) (``host.judge.schedulability``): worst-case frame length with bit
+stuffing, queuing jitter J from the sender's tick, blocking B by one lower-priority frame, the
+worst response R over every instance in the busy period, the deadline D (the cycle time unless
+the DBC's ``GenMsgDeadlineTime`` says otherwise) and the slack D - R.
 
 Assumptions, printed under the table and written to the report:
 
-* A sender's tick is the shortest period among its messages unless ``--tick-ms NODE=MS`` says
+* A sender's tick is the shortest cycle among its messages unless ``--tick-ms NODE=MS`` says
   otherwise (odocan's firmware ticks every 10 ms: ``--tick-ms ODOM_MCU=10``). A cyclic frame is
   queued at the first tick at or after it falls due: J = tick - gcd(cycle, tick), 0 when the cycle
   is a multiple of the tick; ``--queue-jitter-ms`` adds the spread of the moment in a tick at which
