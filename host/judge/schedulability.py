@@ -395,10 +395,10 @@ def _bus_message(message: Message, fallback_ns: int, source: str) -> BusMessage:
         period_ns = ms_to_ns(cycle_ms, f"{message.name} GenMsgCycleTime")
     elif DELAY_ATTRIBUTE in attributes and attributes[DELAY_ATTRIBUTE].value:
         period_ns = ms_to_ns(attributes[DELAY_ATTRIBUTE].value, f"{message.name} {DELAY_ATTRIBUTE}")
-        assumption = f"no cycle time: sporadic, min inter-arrival {DELAY_ATTRIBUTE}"
+        assumption = f"no cycle time: sporadic, min inter-arrival = its {DELAY_ATTRIBUTE}"
     elif fallback_ns:
         period_ns = fallback_ns
-        assumption = f"no cycle time: sporadic, min inter-arrival {source}"
+        assumption = f"no cycle time: sporadic, min inter-arrival = {source}"
     else:
         raise ConfigurationError(
             f"{message.name} has no cycle time and the DBC none to assume: give --sporadic-ms"

@@ -48,8 +48,6 @@ from odocan.host.report.summary import write_report
 from odocan.sim.contract import database
 from odocan.sim.exceptions import ConfigurationError
 
-ADDED_SENDER = "(added)"
-
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``odocan busload``."""
@@ -126,12 +124,17 @@ def _do_busload(args: argparse.Namespace) -> int:
     report["added"] = list(args.add)
     if args.report is not None:
         write_report(report, args.report)
-    print_busload(load, Console(file=sys.stdout, highlight=False, width=120))
+    console = Console(file=sys.stdout, highlight=False, width=120)
+    print_busload(load, console, title=f"odocan busload: {report['dbc']}")
     return 0 if load.schedulable else 1
 
 
 def parse_added(text: str) -> BusMessage:
-    """``NAME:ID:DLC:CYCLE_MS[:SENDER]`` as a cyclic message; malformed text is a one-line error."""
+    """``NAME:ID:DLC:CYCLE_MS[:SENDER]`` as a cyclic message; malformed text is a one-line error.
+
+    Without SENDER the message has a node of its own, ``(NAME)``, ticking at its cycle (J = 0).
+    An ID above 0x7FF is a 29-bit ID.
+    """
     what = f"--add {text!r}"
     fields = [field.strip() for field in text.split(":")]
     if len(fields) not in (4, 5) or not all(fields):
@@ -151,7 +154,7 @@ def parse_added(text: str) -> BusMessage:
         can_id=can_id,
         extended=can_id > 0x7FF,
         dlc=dlc,
-        senders=(fields[4] if len(fields) == 5 else ADDED_SENDER,),
+        senders=(fields[4] if len(fields) == 5 else f"({name})",),
         period_ns=period_ns,
         deadline_ns=period_ns,
         assumption="added with --add",
@@ -203,7 +206,7 @@ def busload_table(load: BusLoad) -> Table:
         slack = _ms(response.slack_ns)
         style = "" if response.meets_deadline else "bold red"
         table.add_row(
-            f"{message.can_id:#x}",
+            f"{message.can_id:#010x}" if message.extended else f"{message.can_id:#05x}",
             message.name + ("" if message.cyclic else " *"),
             ",".join(message.senders),
             str(message.dlc),
@@ -219,10 +222,14 @@ def busload_table(load: BusLoad) -> Table:
     return table
 
 
-def print_busload(load: BusLoad, console: Console) -> None:
+def print_busload(load: BusLoad, console: Console, *, title: str) -> None:
     """The table, the utilization, the assumptions and the verdict."""
     report = load.as_dict()
-    console.print(f"[bold]odocan busload[/bold] at {load.bitrate} bit/s (times in ms)")
+    console.print(f"[bold]{title}[/bold] at {load.bitrate} bit/s (Davis et al. 2007 analysis)")
+    console.print(
+        "times in ms: T period, D deadline, C frame, J queuing jitter, B blocking, "
+        "R worst response; * sporadic"
+    )
     console.print(busload_table(load))
     console.print(
         f"utilization {report['utilization']:.1%} "
@@ -234,7 +241,7 @@ def print_busload(load: BusLoad, console: Console) -> None:
     for message in load.messages:
         if message.assumption:
             console.print(
-                f"* {message.name}: {message.assumption}, {message.period_ns / NS_PER_MS:g} ms"
+                f"- {message.name}: {message.assumption} ({message.period_ns / NS_PER_MS:g} ms)"
             )
     name, slack_ns = load.worst_slack()
     if load.schedulable:
