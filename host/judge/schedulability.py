@@ -51,9 +51,11 @@ STUFFED_BITS_STANDARD = 34  # g: SOF 1, ID 11, RTR 1, IDE 1, r0 1, DLC 4, CRC 15
 STUFFED_BITS_EXTENDED = 54  # g: SOF 1, ID 11, SRR 1, IDE 1, ID 18, RTR 1, r1 1, r0 1, DLC 4, CRC 15
 UNSTUFFED_BITS = 13  # CRC delimiter 1, ACK slot 1, ACK delimiter 1, EOF 7, interframe space 3
 MAX_DLC = 8
-# Past this much bus time a busy period or a response is called unbounded (utilization at or
-# near 100 %): the message is reported as one that can miss its deadline.
+# A fixed point past this much bus time, or not reached in this many steps, is called unbounded
+# and its message reported as one that can miss its deadline. Below 100 % utilization every busy
+# period ends; at exactly 100 % one with blocking never does, and the analysis gives no bound.
 HORIZON_NS = 60 * NS_PER_S
+MAX_STEPS = 100_000
 
 
 def bit_time_ns(bitrate: int) -> int:
@@ -128,27 +130,29 @@ def _interference_ns(window_ns: int, flows: list[Flow], tau_ns: int) -> int:
 
 
 def busy_period_ns(flow: Flow, hep: list[Flow], b_ns: int) -> int | None:
-    """t_m: the longest priority level-m busy period (§4), None past ``HORIZON_NS``."""
+    """t_m: the longest priority level-m busy period (§4); None when unbounded (``HORIZON_NS``)."""
     t_ns = flow.c_ns
-    while True:
+    for _ in range(MAX_STEPS):
         nxt = b_ns + _interference_ns(t_ns, hep, 0)
         if nxt == t_ns:
             return t_ns
         if nxt > HORIZON_NS:
             return None
         t_ns = nxt
+    return None
 
 
 def queuing_delay_ns(flow: Flow, hp: list[Flow], b_ns: int, q: int, tau_ns: int) -> int | None:
     """w_m(q): from the critical instant to the start of instance q of m (§4); None if unbounded."""
     w_ns = b_ns + q * flow.c_ns + sum(k.c_ns for k in hp)
-    while True:
+    for _ in range(MAX_STEPS):
         nxt = b_ns + q * flow.c_ns + _interference_ns(w_ns, hp, tau_ns)
         if nxt == w_ns:
             return w_ns
         if nxt > HORIZON_NS:
             return None
         w_ns = nxt
+    return None
 
 
 def response_times(flows: list[Flow], tau_ns: int) -> list[Response]:
