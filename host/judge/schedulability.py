@@ -3,7 +3,9 @@
 R. I. Davis, A. Burns, R. J. Bril, J. J. Lukkien, "Controller Area Network (CAN) schedulability
 analysis: refuted, revisited and revised", Real-Time Systems 35(3):239-272, 2007. §2 gives the
 model and the frame lengths, §3 Tindell's original analysis and the three-message set on which it
-is optimistic, §4 the revised analysis implemented here.
+is optimistic, §4 the revised analysis implemented here. (The section numbers are cited from
+memory of the paper, not checked against a copy; the formulas below do not rest on them: the tests
+prove them against field widths, an exhaustive stuffing search and a simulation of arbitration.)
 
 **The model (§2).** Fixed priorities: the lower identifier wins arbitration (a standard frame beats
 an extended one with the same 11-bit base). A frame, once started, is not preempted. Every message
