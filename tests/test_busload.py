@@ -283,8 +283,10 @@ def tindell_1994_ns(flows: list[Flow], tau_ns: int) -> list[int]:
     return result
 
 
-# Davis et al. 2007 §3, the example message set: three messages of 125 bits (1 ms at 125 kbit/s),
-# A: T = D = 2.5 ms; B and C: T = 3.5 ms, D = 3.25 ms; no jitter.
+# Davis et al. 2007 §3, the example message set as we recall it (not checked against a copy of the
+# paper): three messages of 125 bits (1 ms at 125 kbit/s), A: T = D = 2.5 ms; B and C: T = 3.5 ms,
+# D = 3.25 ms; no jitter. The paper's point holds here independently of the recollection: the
+# simulation below shows C's second instance answering in 3.5 ms, which Tindell's analysis misses.
 DAVIS_TAU_NS = sched.bit_time_ns(125_000)
 DAVIS_SET = [
     Flow("A", 1, 1 * MS, 2500 * US, 2500 * US),
