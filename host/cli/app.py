@@ -29,6 +29,7 @@ SUBCOMMANDS = (
     "experiment",
     "umbmark",
     "calibrate",
+    "busload",
 )
 VERSION = "0.1.0"
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
