@@ -18,7 +18,7 @@ from typing import Any
 import can
 import pytest
 
-from odocan.host.testkit.rig import parse_bus_spec
+from odocan.host.testkit.backends import parse_bus_spec
 from odocan.sim.exceptions import BusSetupError
 
 pytest_plugins = ["pytester"]

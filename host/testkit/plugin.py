@@ -90,7 +90,7 @@ def pytest_configure(config: pytest.Config) -> None:
 
 def bus_kwargs(config: pytest.Config) -> dict[str, Any] | None:
     """The external bus (``--odocan-bus``, else ini ``odocan_bus``), None for lockstep."""
-    from odocan.host.testkit.rig import parse_bus_spec
+    from odocan.host.testkit.backends import parse_bus_spec
 
     text = config.getoption("--odocan-bus") or str(config.getini("odocan_bus"))
     return parse_bus_spec(text) if text.strip() else None
@@ -135,7 +135,8 @@ def _encoder(config: pytest.Config) -> CommandEncoder:
 @pytest.fixture
 def odocan_rig(request: pytest.FixtureRequest) -> Iterator[RigFactory]:
     """A factory of rigs (``host.testkit.OdocanRig``), each closed when the test ends."""
-    from odocan.host.testkit.rig import RigOptions, make_rig
+    from odocan.host.testkit.options import RigOptions
+    from odocan.host.testkit.rig import make_rig
 
     defaults = _defaults(request)
     bus = bus_kwargs(request.config)
