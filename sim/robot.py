@@ -18,6 +18,8 @@ Shipped profiles live in ``sim/robots/<name>.toml``::
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import tomllib
 from dataclasses import dataclass
@@ -88,6 +90,26 @@ class RobotProfile:
             "wheelbase_nm": _nm(self.wheelbase_m),
             "counter_bits": self.counter_bits,
         }
+
+
+def to_toml(profile: RobotProfile) -> str:
+    """The profile as a TOML file that ``load`` reads back to the very same profile (every float
+    written as its shortest round-trip repr, so the nanometre grid is kept)."""
+    return (
+        f"name = {json.dumps(profile.name)}\n"
+        f"counts_per_rev = {profile.counts_per_rev}\n"
+        f"wheel_radius_left_m = {profile.wheel_radius_left_m!r}\n"
+        f"wheel_radius_right_m = {profile.wheel_radius_right_m!r}\n"
+        f"wheelbase_m = {profile.wheelbase_m!r}\n"
+        f"counter_bits = {profile.counter_bits}\n"
+    )
+
+
+def profile_sha256(profile: RobotProfile) -> str:
+    """A fingerprint of the geometry the firmware is configured with (the integers it receives,
+    not the file's spelling): two profiles with the same hash configure the same firmware."""
+    params = json.dumps(profile.firmware_params(), sort_keys=True).encode()
+    return hashlib.sha256(params).hexdigest()
 
 
 def list_profiles() -> list[str]:
