@@ -134,9 +134,10 @@ class Recorder:
             if type(operand) is not int or _fits(operand):
                 continue
             operands_fit = False
-            if _fits_carry(operand) and not (op == ">>" and index == 0):
-                if self._made_wide.get(id(operand)) is not operand:
-                    self._flag(where, op, "operand", operand)  # a carry used as a number
+            carry_shifted = op == ">>" and index == 0
+            made_here = self._made_wide.get(id(operand)) is operand
+            if _fits_carry(operand) and not carry_shifted and not made_here:
+                self._flag(where, op, "operand", operand)  # a carry used as a number
         if _fits(result):
             return result
         if op in "+-" and operands_fit and _fits_carry(result):
@@ -256,7 +257,7 @@ class _Loader(importlib.abc.Loader):
         code = compile(instrument(source, path, exempt), self.origin, "exec")
         module.__dict__[CHECK_NAME] = self.recorder.binop
         module.__dict__[NEG_NAME] = self.recorder.neg
-        exec(code, module.__dict__)  # noqa: S102 - the firmware's own source, rewritten
+        exec(code, module.__dict__)  # the firmware's own source, rewritten
 
 
 class _Finder(importlib.abc.MetaPathFinder):
@@ -338,23 +339,19 @@ def _closed_loop_drive(goal_s: float) -> None:
     robot = importlib.import_module("odocan.sim.robot")
     scratch = errors_mod.ErrorMask()
     counters = {fr.NAV_GOAL_ID: 0, fr.ODOM_CONFIG_ID: 0, fr.ODOM_SET_POSE_ID: 0}
-
-    def counter(frame_id: int) -> int:
-        counters[frame_id] += 1
-        return counters[frame_id] - 1
-
     config = rig_mod.RigConfig(robot.load("pmir"), "rk2", None, channel="width_nav")
     with contextlib.closing(rig_mod.LockstepRig(config)) as rig:
 
+        def send(frame_id: int, pack: Callable[..., bytes], *fields: int) -> None:
+            """One host frame, with the next E2E counter of its frame id."""
+            counters[frame_id] += 1
+            rig.send(frame_id, pack(counters[frame_id] - 1, *fields, scratch))
+
         def goal(x_m: int, y_m: int, heading_bam16: int, mode: int, goal_id: int) -> None:
-            for field_id, value in ((fr.NavGoalField.X, x_m), (fr.NavGoalField.Y, y_m)):
-                rig.send(fr.NAV_GOAL_ID, fr.pack_nav_goal(counter(fr.NAV_GOAL_ID), field_id, value, scratch))
-            rig.send(
-                fr.NAV_GOAL_ID,
-                fr.pack_nav_goal(counter(fr.NAV_GOAL_ID), fr.NavGoalField.HEADING, heading_bam16, scratch),
-            )
-            go = fr.pack_nav_goal_go(counter(fr.NAV_GOAL_ID), mode, 1, 0, goal_id, scratch)
-            rig.send(fr.NAV_GOAL_ID, go)
+            send(fr.NAV_GOAL_ID, fr.pack_nav_goal, fr.NavGoalField.X, x_m)
+            send(fr.NAV_GOAL_ID, fr.pack_nav_goal, fr.NavGoalField.Y, y_m)
+            send(fr.NAV_GOAL_ID, fr.pack_nav_goal, fr.NavGoalField.HEADING, heading_bam16)
+            send(fr.NAV_GOAL_ID, fr.pack_nav_goal_go, mode, 1, 0, goal_id)
 
         goal(10_000, 5_000, 0x4000, fr.NavMode.TURN_GO_TURN, 1)  # 1 m, 0.5 m, 90 degrees
         goal(-5_000, -5_000, 0xC000, fr.NavMode.GO_TO_GOAL, 2)
@@ -367,7 +364,7 @@ def _closed_loop_drive(goal_s: float) -> None:
             (fr.ConfigParam.WHEELBASE, 301_000_000),
             (fr.ConfigParam.APPLY, 0),
         ):
-            rig.send(fr.ODOM_CONFIG_ID, fr.pack_odom_config(counter(fr.ODOM_CONFIG_ID), param, value, scratch))
+            send(fr.ODOM_CONFIG_ID, fr.pack_odom_config, param, value)
             rig.step()
         for field_id, value in (
             (fr.SetPoseField.X, -2_000_000_000),
@@ -375,9 +372,7 @@ def _closed_loop_drive(goal_s: float) -> None:
             (fr.SetPoseField.HEADING, 0x8001),
             (fr.SetPoseField.APPLY, 0),
         ):
-            rig.send(
-                fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(counter(fr.ODOM_SET_POSE_ID), field_id, value, scratch)
-            )
+            send(fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose, field_id, value)
             rig.step()
         rig.send(fr.NAV_GOAL_ID, bytes(8))  # a corrupted frame: E2E rejects it
         goal(0, 0, 0, fr.NavMode.TURN_GO_TURN, 3)
@@ -385,7 +380,7 @@ def _closed_loop_drive(goal_s: float) -> None:
 
 
 def _vector_cases() -> None:
-    """The golden-vector edge cases (counter wraps, big steps, spin, straight) on every integrator."""
+    """The golden vectors' edge cases (wraps, big steps, spin, straight), every integrator."""
     vectors = importlib.import_module("odocan.host.judge.vectors")
     config = importlib.import_module("odocan.firmware.config")
     for integrator in (0, 1, 2):
