@@ -9,7 +9,7 @@ for on a 32-bit two's-complement MCU with a 64-bit multiply (Cortex-M3/M4: ``SMU
 * ``sat_*``: clamp to the type's range; on clamping, the SATURATION bit is set in the error mask
   that the caller passes in. The loop never raises.
 * ``shr_round``: arithmetic shift right rounding half up, ``(v + (1 << (n-1))) >> n`` in C.
-* ``mul_wrap_u64``: the low 64 bits of a product (C's ``uint64_t`` multiply, exact mod 2^64).
+* ``mul_sub_wrap_i64``: ``a*b - c*d`` mod 2^64 (C's ``uint64_t`` multiply and subtract).
 * ``mul_shr_i64``, ``mul_round_i64``: the exact 128-bit product of two i64, shifted right
   (floor, or rounded half up), read back as an i64.
 * ``mul_add_hi_i64``: the high 64 bits of ``a*b + c*d`` (a 2x2 rotation's rows in Q126).
@@ -61,7 +61,6 @@ I32_MIN = -0x8000_0000
 I32_MAX = 0x7FFF_FFFF
 I64_MIN = -0x8000_0000_0000_0000
 I64_MAX = 0x7FFF_FFFF_FFFF_FFFF
-_I64_BIAS = 0x8000_0000_0000_0000  # wrap to i64: add, mask to u64, subtract
 
 
 def wrap_u16(value: int) -> u16:
@@ -147,13 +146,13 @@ def shr_round(value: int, shift: int) -> int:
     return (value + (1 << (shift - 1))) >> shift
 
 
-def mul_wrap_u64(a: i64, b: i64) -> u64:
-    """``a * b`` mod 2^64, for u64 or i64 operands (a heading step: BAM64 is exact mod 2^64).
+def mul_sub_wrap_i64(a: i64, b: i64, c: i64, d: i64) -> i64:
+    """``a * b - c * d`` mod 2^64 read as i64, for u64 or i64 operands (a BAM64 heading step).
 
-    C: ``(uint64_t)a * (uint64_t)b``; on a 32-bit MCU ``a0*b0`` (``UMULL``) plus
-    ``(a0*b1 + a1*b0) << 32`` (two ``MLA``), the high partial product dropped.
+    C: ``(int64_t)((uint64_t)a * (uint64_t)b - (uint64_t)c * (uint64_t)d)``; on a 32-bit MCU each
+    product mod 2^64 is ``a0*b0`` (``UMULL``) plus ``(a0*b1 + a1*b0) << 32`` (two ``MLA``).
     """
-    return (a * b) & U64_MAX
+    return wrap_i64(a * b - c * d)
 
 
 def mul_shr_i64(a: i64, b: i64, shift: int) -> i64:
@@ -163,7 +162,8 @@ def mul_shr_i64(a: i64, b: i64, shift: int) -> i64:
     C: ``smul_128(a, b, &hi, &lo)``, then the arithmetic right shift of (hi, lo) by ``shift``, its
     low word read as ``int64_t`` (module docstring).
     """
-    return ((((a * b) >> shift) + _I64_BIAS) & U64_MAX) - _I64_BIAS
+    result = (a * b) >> shift
+    return result if I64_MIN <= result <= I64_MAX else wrap_i64(result)
 
 
 def mul_round_i64(a: i64, b: i64, shift: int) -> i64:
@@ -176,7 +176,8 @@ def mul_round_i64(a: i64, b: i64, shift: int) -> i64:
     2^127 for ``shift <= 126``), then the arithmetic right shift by ``shift``, its low word read as
     ``int64_t``.
     """
-    return ((((a * b + (1 << (shift - 1))) >> shift) + _I64_BIAS) & U64_MAX) - _I64_BIAS
+    result = (a * b + (1 << (shift - 1))) >> shift
+    return result if I64_MIN <= result <= I64_MAX else wrap_i64(result)
 
 
 def mul_add_hi_i64(a: i64, b: i64, c: i64, d: i64) -> i64:
@@ -186,7 +187,8 @@ def mul_add_hi_i64(a: i64, b: i64, c: i64, d: i64) -> i64:
     C: ``smul_128(a, b, &h1, &l1); smul_128(c, d, &h2, &l2); lo = l1 + l2;``
     ``return (int64_t)(h1 + h2 + (lo < l1));``
     """
-    return ((((a * b + c * d) >> 64) + _I64_BIAS) & U64_MAX) - _I64_BIAS
+    result = (a * b + c * d) >> 64
+    return result if I64_MIN <= result <= I64_MAX else wrap_i64(result)
 
 
 def mul_shr_round_i64(a: i64, b: i64, shift: int, errors: ErrorMask) -> i64:

@@ -36,10 +36,9 @@ from odocan.firmware.fixmath import (
     U64_MAX,
     mul_round_i64,
     mul_shr_i64,
-    mul_wrap_u64,
+    mul_sub_wrap_i64,
     sat_i64,
     wrap_i32,
-    wrap_i64,
     wrap_signed,
 )
 from odocan.firmware.trig import sincos_q30
@@ -132,9 +131,8 @@ class Odometry:
             + _sat(d_right * c.m_per_count_right_q48_m, self._errors),
             self._errors,
         )
-        dheading = wrap_i64(  # u64 products mod 2^64, their difference read as i64
-            mul_wrap_u64(d_right, c.bam64_per_count_right)
-            - mul_wrap_u64(d_left, c.bam64_per_count_left)
+        dheading = mul_sub_wrap_i64(  # exact mod 2^64, read as i64
+            d_right, c.bam64_per_count_right, d_left, c.bam64_per_count_left
         )
         heading_old = self.heading_bam64
         heading_sum = heading_old + dheading
