@@ -13,7 +13,7 @@ for on a 32-bit two's-complement MCU with a 64-bit multiply (Cortex-M3/M4: ``SMU
 * ``mul_shr_i64``, ``mul_round_i64``: the exact 128-bit product of two i64, shifted right
   (floor, or rounded half up), read back as an i64.
 * ``mul_add_hi_i64``: the high 64 bits of ``a*b + c*d`` (a 2x2 rotation's rows in Q126).
-* ``mul_shr_round_i64``: as ``mul_round_i64``, saturated to i64.
+* ``mul_sat_i64``, ``mul_shr_round_i64``: the product, or its rounded shift, saturated to i64.
 * ``muldiv_round_u64``: round(a*b/c) for u64 a, b, c with a 128-bit intermediate, as Linux's
   ``mul_u64_u64_div_u64`` (plus rounding). Configuration time only, never in the loop.
 * ``isqrt_u64``: floor(sqrt(n)) of a u64 by Newton's method (navigation distances).
@@ -189,6 +189,16 @@ def mul_add_hi_i64(a: i64, b: i64, c: i64, d: i64) -> i64:
     """
     result = (a * b + c * d) >> 64
     return result if I64_MIN <= result <= I64_MAX else wrap_i64(result)
+
+
+def mul_sat_i64(a: i64, b: i64, errors: ErrorMask) -> i64:
+    """``sat_i64(a * b)``: the exact 128-bit product clamped to i64 (SATURATION set if clamped).
+
+    C: ``smul_128(a, b, &hi, &lo)``; it fits when ``hi == (uint64_t)((int64_t)lo >> 63)``, else
+    it clamps by the sign of ``hi`` (INT64_MIN if ``(int64_t)hi < 0``, else INT64_MAX).
+    """
+    product = a * b
+    return product if I64_MIN <= product <= I64_MAX else sat_i64(product, errors)
 
 
 def mul_shr_round_i64(a: i64, b: i64, shift: int, errors: ErrorMask) -> i64:

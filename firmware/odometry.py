@@ -35,6 +35,7 @@ from odocan.firmware.fixmath import (
     U32_MAX,
     U64_MAX,
     mul_round_i64,
+    mul_sat_i64,
     mul_shr_i64,
     mul_sub_wrap_i64,
     sat_i64,
@@ -126,9 +127,9 @@ class Odometry:
     def step_deltas(self, d_left: int, d_right: int) -> None:
         """Integrate one step of count deltas (i32 each) with the configured integrator."""
         c = self._consts
-        ds_q49_m = _sat(
-            _sat(d_left * c.m_per_count_left_q48_m, self._errors)
-            + _sat(d_right * c.m_per_count_right_q48_m, self._errors),
+        ds_q49_m = _sat(  # i32 x i64 products (up to 2^83 for a wild 32-bit step), saturated
+            mul_sat_i64(d_left, c.m_per_count_left_q48_m, self._errors)
+            + mul_sat_i64(d_right, c.m_per_count_right_q48_m, self._errors),
             self._errors,
         )
         dheading = mul_sub_wrap_i64(  # exact mod 2^64, read as i64

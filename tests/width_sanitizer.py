@@ -36,13 +36,16 @@ import importlib
 import importlib.abc
 import importlib.machinery
 import importlib.util
+import itertools
 import operator
 import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import Any, NamedTuple
+
+import can
 
 FIRMWARE_PACKAGE = "odocan.firmware"
 FIRMWARE_DIR = Path(__file__).resolve().parent.parent / "firmware"
@@ -109,6 +112,7 @@ class Recorder:
 
     sites: dict[tuple[str, int, int, str, str], Site] = field(default_factory=dict)
     checks: int = 0  # how many checked operations ran (proof that the drives exercised the code)
+    seen: set[tuple[str, int, int]] = field(default_factory=set)  # the sites that ran
     # the wide results reported already, by id: not reported again when they are used
     _made_wide: dict[int, int] = field(default_factory=dict, repr=False)
 
@@ -126,6 +130,7 @@ class Recorder:
     def binop(self, where: tuple[str, int, int], op: str, left: Any, right: Any) -> Any:
         """``left op right``, checked against the rule of the module docstring."""
         result = _BY_SYMBOL[op](left, right)
+        self.seen.add(where)
         if type(result) is not int:
             return result
         self.checks += 1
@@ -155,6 +160,7 @@ class Recorder:
         result = -operand
         if type(result) is int:
             self.checks += 1
+            self.seen.add(where)
             if not _fits(operand):
                 if _fits_carry(operand):
                     self._flag(where, "-x", "operand", operand)
@@ -176,6 +182,47 @@ def audited_helpers(tree: ast.Module) -> frozenset[str]:
             if any(line.strip().startswith("C:") for line in doc.splitlines()):
                 names.add(node.name)
     return frozenset(names)
+
+
+class Place(NamedTuple):
+    """Where a checked operation is, and in which function (``<module>`` at module level)."""
+
+    path: str
+    line: int
+    col: int
+    function: str
+
+
+def arithmetic_sites(source: str, path: str, exempt: frozenset[str] = frozenset()) -> set[Place]:
+    """Every place the rewrite checks in ``source``."""
+    found: set[Place] = set()
+
+    def visit(node: ast.AST, function: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            name = function
+            if isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef):
+                if child.name in exempt:
+                    continue
+                name = child.name
+            checked = (isinstance(child, ast.BinOp | ast.AugAssign) and type(child.op) in _OPS) or (
+                isinstance(child, ast.UnaryOp) and isinstance(child.op, ast.USub)
+            )
+            if checked:
+                found.add(Place(path, child.lineno, child.col_offset, name))  # type: ignore[attr-defined]
+            visit(child, name)
+
+    visit(ast.parse(source, filename=path), "<module>")
+    return found
+
+
+def firmware_sites() -> set[Place]:
+    """Every checked place of every firmware module (fixmath's audited helpers excepted)."""
+    sites: set[Place] = set()
+    for module in sorted(FIRMWARE_DIR.glob("*.py")):
+        source = module.read_text(encoding="utf-8")
+        exempt = audited_helpers(ast.parse(source)) if module.name == "fixmath.py" else frozenset()
+        sites |= arithmetic_sites(source, f"firmware/{module.name}", exempt)
+    return sites
 
 
 def _load_ctx(node: ast.expr) -> ast.expr:
@@ -313,26 +360,68 @@ def instrumented_firmware(recorder: Recorder) -> Iterator[None]:
 # --- the drives --------------------------------------------------------------------------------
 
 
-def _lockstep_drives(duration_s: float) -> None:
-    """Random drives of every integrator on both shipped robots, through the whole rig."""
+class _Unpacker(can.Listener):
+    """The host's ears: every frame heard is unpacked by the firmware's own ``unpack_*`` (so the
+    decoders run instrumented too) and counted by frame id; the ODOM_ACK records are kept."""
+
+    def __init__(self) -> None:
+        self.fr = importlib.import_module(FIRMWARE_PACKAGE + ".frames")
+        self.unpack: dict[int, Callable[[bytes], Any]] = {
+            getattr(self.fr, f"{name.upper()}_ID"): getattr(self.fr, f"unpack_{name}")
+            for name in [
+                "wheel_encoders",
+                "motor_cmd",
+                "odom_pose_x",
+                "odom_pose_y",
+                "odom_twist",
+                "odom_set_pose",
+                "odom_config",
+                "nav_goal",
+                "nav_status",
+                "odom_ack",
+                "odom_status",
+                "sim_truth",
+            ]
+        }
+        self.heard: dict[int, int] = {}
+        self.acks: list[Any] = []
+
+    def on_message_received(self, msg: can.Message) -> None:
+        record = self.unpack[msg.arbitration_id](bytes(msg.data))
+        self.heard[msg.arbitration_id] = self.heard.get(msg.arbitration_id, 0) + 1
+        if msg.arbitration_id == self.fr.ODOM_ACK_ID:
+            self.acks.append(record)
+
+
+def _lockstep_drives(duration_s: float, ears: _Unpacker) -> None:
+    """Random drives of every integrator on both shipped robots, through the whole rig; on pmir
+    a second round with dropped, duplicated and bit-flipped frames (E2E, gaps)."""
     rig_mod = importlib.import_module("odocan.sim.rig")
     robot = importlib.import_module("odocan.sim.robot")
-    for robot_name in ("pmir", "kobuki"):
+    faults = importlib.import_module("odocan.sim.faults")
+    hostile = faults.FaultSpec(drop=0.03, dup=0.03, flip=0.03, seed=5)
+    bus_off = faults.FaultSpec(busoff=faults.BusOff(at_s=1.0, duration_s=0.5))
+    runs = [("pmir", None, None), ("kobuki", None, None), ("pmir", hostile, bus_off)]
+    for index, (robot_name, spec, fw_spec) in enumerate(runs):
         for seed, integrator in enumerate(rig_mod.INTEGRATORS):
             config = rig_mod.RigConfig(
                 robot.load(robot_name),
                 integrator,
                 "random",
                 seed=seed,
-                channel=f"width_{robot_name}_{integrator}",
+                channel=f"width_{index}_{integrator}",
+                faults=spec,
+                fw_faults=fw_spec,
                 duration_s=duration_s,
             )
-            with contextlib.closing(rig_mod.LockstepRig(config)) as rig:
+            with contextlib.closing(rig_mod.LockstepRig(config, [ears])) as rig:
                 rig.run()
+                rig.listeners = []  # closing the rig must not stop the shared listener
 
 
-def _closed_loop_drive(goal_s: float) -> None:
-    """Navigation, configuration, set-pose and E2E on one closed-loop rig (the host sends)."""
+def _closed_loop_drive(goal_s: float, ears: _Unpacker) -> None:
+    """Navigation, configuration (32-bit counters included), set-pose and E2E on one
+    closed-loop rig: the host sends, the firmware drives."""
     fr = importlib.import_module("odocan.firmware.frames")
     errors_mod = importlib.import_module("odocan.firmware.errors")
     rig_mod = importlib.import_module("odocan.sim.rig")
@@ -341,6 +430,7 @@ def _closed_loop_drive(goal_s: float) -> None:
     counters = {fr.NAV_GOAL_ID: 0, fr.ODOM_CONFIG_ID: 0, fr.ODOM_SET_POSE_ID: 0}
     config = rig_mod.RigConfig(robot.load("pmir"), "rk2", None, channel="width_nav")
     with contextlib.closing(rig_mod.LockstepRig(config)) as rig:
+        rig.listeners = [ears]
 
         def send(frame_id: int, pack: Callable[..., bytes], *fields: int) -> None:
             """One host frame, with the next E2E counter of its frame id."""
@@ -353,8 +443,9 @@ def _closed_loop_drive(goal_s: float) -> None:
             send(fr.NAV_GOAL_ID, fr.pack_nav_goal, fr.NavGoalField.HEADING, heading_bam16)
             send(fr.NAV_GOAL_ID, fr.pack_nav_goal_go, mode, 1, 0, goal_id)
 
-        goal(10_000, 5_000, 0x4000, fr.NavMode.TURN_GO_TURN, 1)  # 1 m, 0.5 m, 90 degrees
-        goal(-5_000, -5_000, 0xC000, fr.NavMode.GO_TO_GOAL, 2)
+        rig.run(0.5)  # odometry running: before that a GO is refused (BUSY)
+        goal(6_000, 3_000, 0x4000, fr.NavMode.TURN_GO_TURN, 1)  # 0.6 m, 0.3 m, 90 degrees
+        goal(-3_000, -3_000, 0xC000, fr.NavMode.GO_TO_GOAL, 2)
         rig.run(goal_s)
         for param, value in (
             (fr.ConfigParam.WHEEL_RADIUS_LEFT, 75_150_000),
@@ -362,12 +453,13 @@ def _closed_loop_drive(goal_s: float) -> None:
             (fr.ConfigParam.WHEELBASE, 5),  # out of range: nacked
             (fr.ConfigParam.APPLY, 0),
             (fr.ConfigParam.WHEELBASE, 301_000_000),
+            (fr.ConfigParam.COUNTER_BITS, 32),  # the 24-bit wire counts extended on board
             (fr.ConfigParam.APPLY, 0),
         ):
             send(fr.ODOM_CONFIG_ID, fr.pack_odom_config, param, value)
             rig.step()
         for field_id, value in (
-            (fr.SetPoseField.X, -2_000_000_000),
+            (fr.SetPoseField.X, -2_000_000_000),  # -200 km: far goals, distance shifts
             (fr.SetPoseField.Y, 2_000_000_000),
             (fr.SetPoseField.HEADING, 0x8001),
             (fr.SetPoseField.APPLY, 0),
@@ -375,8 +467,14 @@ def _closed_loop_drive(goal_s: float) -> None:
             send(fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose, field_id, value)
             rig.step()
         rig.send(fr.NAV_GOAL_ID, bytes(8))  # a corrupted frame: E2E rejects it
+        rig.send(fr.NAV_GOAL_ID, bytes(7))  # a frame of the wrong length
+        for _ in range(40):  # more frames in one tick than the mailbox holds
+            rig.send(fr.SIM_TRUTH_ID, bytes(8))
         goal(0, 0, 0, fr.NavMode.TURN_GO_TURN, 3)
-        rig.run(goal_s)
+        rig.run(goal_s / 4)
+        send(fr.NAV_GOAL_ID, fr.pack_nav_goal, fr.NavGoalField.STOP, 0)
+        rig.run(goal_s / 4)
+        rig.listeners = []
 
 
 def _vector_cases() -> None:
@@ -392,12 +490,71 @@ def _vector_cases() -> None:
                 vectors.run_case(params, case)
 
 
-def standard_drives(recorder: Recorder, duration_s: float = 20.0) -> None:
+def _i64_edges() -> list[int]:
+    points = [0, 1 << 31, 1 << 32, 1 << 47, 1 << 62, 1 << 63]
+    return sorted({sign * p + k for p in points for sign in (1, -1) for k in (-1, 0, 1)})
+
+
+def _edge_sweep() -> None:
+    """The pure functions on the edges of their declared C types (i64, i32, u32 BAM angles):
+    widths a drive rarely reaches (I64_MIN, a 2^31-count step, a half-turn step)."""
+    fw = {
+        name: importlib.import_module(f"{FIRMWARE_PACKAGE}.{name}")
+        for name in ("trig", "odometry", "nav", "config", "errors")
+    }
+    trig, odometry, nav = fw["trig"], fw["odometry"], fw["nav"]
+    errors = fw["errors"].ErrorMask()
+    i64 = [v for v in _i64_edges() if -(1 << 63) <= v < 1 << 63]
+    i32 = [v for v in i64 if -(1 << 31) <= v < 1 << 31]
+    for quadrant, knot, offset in itertools.product(range(4), range(0, 257, 8), range(-3, 4)):
+        for tie in (0, 1 << 21):
+            trig.sincos_q30(((quadrant << 30) + (knot << 22) + tie + offset) & 0xFFFF_FFFF)
+    for y, x in itertools.product(i64, repeat=2):
+        trig.atan2_bam32(y, x)
+        nav.distance_um(x, y, errors)
+    for d in i64:
+        odometry.chord_factor_q62(d)
+    for e in i32:
+        nav.angle_urad(e, errors)
+        nav.go_to_goal_law(1 << 43, e, errors)
+        nav.drive_straight_law(1 << 43, e, errors)
+        nav.wheel_speeds_mm_s(e, e, 4_000_000_000)
+    e2e = importlib.import_module(f"{FIRMWARE_PACKAGE}.e2e")
+    data_ids = tuple(range(16))
+    receiver = e2e.E2EReceiver(data_ids, max_delta_counter_init=0, window_per_period=True)
+    counter = 0
+    for jump in (1, 1, 0, 5, 1):  # OK, OK, REPEATED, WRONGSEQUENCE, OK
+        counter = e2e.p02_next_counter(counter + jump - 1)
+        frame = bytearray(8)
+        e2e.p02_protect(frame, counter, data_ids)
+        receiver.check(bytes(frame))
+    for integrator, bits in itertools.product(range(3), (16, 32)):
+        config = fw["config"]
+        # the most travel per count the ranges allow: 2 m wheels, 16 counts per turn
+        params = config.RobotParams(16, 2_000_000_000, 1_000_000, 4_000_000_000, bits, integrator)
+        assert config.validate(params) == 0, config.validate(params)
+        odo = odometry.Odometry(config.derive_constants(params, errors), errors)
+        for d_left, d_right in itertools.product(i32, repeat=2):
+            odo.step_deltas(d_left, d_right)
+
+
+@dataclass
+class DriveLog:
+    """What the host heard during the drives (frame id -> count) and the ODOM_ACKs."""
+
+    heard: dict[int, int]
+    acks: list[Any]
+
+
+def standard_drives(recorder: Recorder, duration_s: float = 20.0) -> DriveLog:
     """Every drive above, through the instrumented firmware."""
     with instrumented_firmware(recorder):
-        _lockstep_drives(duration_s)
-        _closed_loop_drive(duration_s)
+        ears = _Unpacker()
+        _lockstep_drives(duration_s, ears)
+        _closed_loop_drive(duration_s, ears)
         _vector_cases()
+        _edge_sweep()
+    return DriveLog(ears.heard, ears.acks)
 
 
 if __name__ == "__main__":
@@ -405,4 +562,9 @@ if __name__ == "__main__":
     standard_drives(found, float(sys.argv[1]) if len(sys.argv) > 1 else 20.0)
     for site in found.report():
         print(site)
+    places = firmware_sites()
+    missed = sorted(p for p in places if (p.path, p.line, p.col) not in found.seen)
+    for place in missed:
+        print(f"not reached: {place.path}:{place.line}:{place.col} in {place.function}")
     print(f"{len(found.sites)} site(s), {found.checks} checked operations")
+    print(f"{len(places) - len(missed)} of {len(places)} arithmetic places reached")
