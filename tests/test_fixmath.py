@@ -24,6 +24,7 @@ from odocan.firmware.fixmath import (
     U64_MAX,
     mul_add_hi_i64,
     mul_round_i64,
+    mul_sat_i64,
     mul_shr_i64,
     mul_shr_round_i64,
     mul_sub_wrap_i64,
@@ -108,6 +109,14 @@ def c_mul_round_i64(a: int, b: int, shift: int) -> int:
 def c_mul_shr_round_i64(a: int, b: int, shift: int) -> tuple[int, bool]:
     """The rounded shift, saturated: (value, saturated)."""
     hi, lo = sar_128(add_128(smul_128(a, b), pow2_128(shift - 1)), shift)
+    if hi == _u64(_as_i64(lo) >> 63):
+        return _as_i64(lo), False
+    return (I64_MIN, True) if hi >> 63 else (I64_MAX, True)
+
+
+def c_mul_sat_i64(a: int, b: int) -> tuple[int, bool]:
+    """The product, saturated: (value, saturated)."""
+    hi, lo = smul_128(a, b)
     if hi == _u64(_as_i64(lo) >> 63):
         return _as_i64(lo), False
     return (I64_MIN, True) if hi >> 63 else (I64_MAX, True)
@@ -198,6 +207,14 @@ def test_mul_shr_round_i64_edges_saturate_as_the_c() -> None:
         assert errors.has(ErrorFlag.SATURATION) == saturated
 
 
+def test_mul_sat_i64_edges() -> None:
+    for a, b in _pairs():
+        errors = ErrorMask()
+        value, saturated = c_mul_sat_i64(a, b)
+        assert mul_sat_i64(a, b, errors) == value, (a, b)
+        assert errors.has(ErrorFlag.SATURATION) == saturated
+
+
 def test_mul_add_hi_and_mul_sub_wrap_edges() -> None:
     for a, b, c, d in itertools.product(EDGES_I64[::2], repeat=4):
         assert mul_add_hi_i64(a, b, c, d) == c_mul_add_hi_i64(a, b, c, d), (a, b, c, d)
@@ -231,6 +248,15 @@ def test_mul_round_i64_property(a: int, b: int, shift: int) -> None:
     assert mul_round_i64(a, b, shift) == c_mul_round_i64(a, b, shift)
     errors = ErrorMask()
     assert mul_shr_round_i64(a, b, shift, errors) == c_mul_shr_round_i64(a, b, shift)[0]
+
+
+@settings(max_examples=3000)
+@given(I64, I64)
+def test_mul_sat_i64_property(a: int, b: int) -> None:
+    errors = ErrorMask()
+    value, saturated = c_mul_sat_i64(a, b)
+    assert mul_sat_i64(a, b, errors) == value
+    assert errors.has(ErrorFlag.SATURATION) == saturated
 
 
 @settings(max_examples=3000)

@@ -538,6 +538,9 @@ def _edge_sweep() -> None:
             odo.step_deltas(d_left, d_right)
 
 
+CLOSED_LOOP_MIN_S = 10.0  # the first two goals are reached (NAV_STATUS REACHED) within it
+
+
 @dataclass
 class DriveLog:
     """What the host heard during the drives (frame id -> count) and the ODOM_ACKs."""
@@ -551,7 +554,7 @@ def standard_drives(recorder: Recorder, duration_s: float = 20.0) -> DriveLog:
     with instrumented_firmware(recorder):
         ears = _Unpacker()
         _lockstep_drives(duration_s, ears)
-        _closed_loop_drive(duration_s, ears)
+        _closed_loop_drive(max(duration_s, CLOSED_LOOP_MIN_S), ears)
         _vector_cases()
         _edge_sweep()
     return DriveLog(ears.heard, ears.acks)
