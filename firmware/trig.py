@@ -68,7 +68,7 @@ def sincos_q30(angle_bam32: u32) -> tuple[i32, i32]:
        up) to Q30: ``sin = (s*2^64 + Z + 2^95) >> 96`` with ``Z = c*sin_t - s*om``, i.e. exactly
        ``(s + 2^31 + floor(Z / 2^64)) >> 32`` (nested floors), where ``floor(Z / 2^64)`` (i64,
        |.| < 2^55) is ``mul_add_hi_i64(c, sin_t, -s, om)``; likewise cos with
-       ``Z = -c*om - s*sin_t``. Each sum is i64 < 2^62 + 2^56; the results are 0..2^30.
+       ``Z = -c*om - s*sin_t``. Each sum is an i64 below 2^63; the results are 0..2^30.
     5. The quadrant permutes and negates (sin, cos) exactly.
     """
     r = angle_bam32 & 0x3FFF_FFFF

@@ -15,16 +15,25 @@ The rule (exact):
   discards it (the ``wrap_*``/``& U64_MAX`` that follows) or reads it as the carry flag. Such a
   65-bit value may then only be wrapped, masked, compared, passed to a helper, or shifted right
   (``sum >> 64`` is the carry): as an operand of any other checked operation it is a violation
-  (reported as ``operand``). A wider operand is not reported again: it is the result of a site
-  reported already (or came from outside the firmware), so each wide value is counted once,
-  where it is made.
+  (reported as ``operand``). A value reported where it was made is not reported again where it
+  is used (a wider operand always was, or came from outside the firmware): each wide value counts
+  once, at its site.
+* ``-x`` of I64_MIN is 2^63, a u64 (C: ``0u - (uint64_t)x``): it fits.
 * Not checked: ``& | ^ ~`` (they cannot widen 64-bit operands) and comparisons.
 * Exempt: the bodies of the audited primitives, the functions of ``firmware/fixmath.py`` whose
   docstring gives their C form on a line starting with ``C:`` (``audited_helpers``). Their
   arguments are still checked where they are computed, at the call site.
 
 Only integer values are checked (``bytes + bytes`` or a tuple concatenation is not arithmetic).
-Run ``python -m tests.width_sanitizer`` to print the sites of the standard drives.
+
+``standard_drives`` runs, through the instrumented firmware: lockstep random drives of every
+integrator on both shipped robots, once more under dropped/duplicated/bit-flipped frames and a
+bus-off; a closed-loop rig taking NAV_GOALs (both modes), ODOM_CONFIGs (a NACK, 32-bit counters),
+ODOM_SET_POSE (200 km away), corrupt, short and overflowing frames; the golden vectors' edge cases;
+and a sweep of the pure functions (sincos, atan2, chord factor, navigation laws, E2E sequence,
+odometry steps of +-2^31 counts) over the edges of their C types. ``Recorder.seen`` tells which
+arithmetic places ran (``firmware_sites`` lists them all). Run ``python -m tests.width_sanitizer
+[seconds]`` to print the sites and the places not reached.
 """
 
 from __future__ import annotations
@@ -239,7 +248,7 @@ class _Rewriter(ast.NodeTransformer):
         self.path = path
         self.exempt = exempt
 
-    def _where(self, node: ast.AST) -> ast.Tuple:
+    def _where(self, node: ast.expr | ast.stmt) -> ast.Tuple:
         return ast.Tuple(
             [ast.Constant(self.path), ast.Constant(node.lineno), ast.Constant(node.col_offset)],
             ast.Load(),
@@ -276,8 +285,8 @@ class _Rewriter(ast.NodeTransformer):
 
 def instrument(source: str, path: str, exempt: frozenset[str] = frozenset()) -> ast.Module:
     """The module's AST with every checked operation routed through the recorder."""
-    tree = ast.parse(source, filename=path)
-    tree = _Rewriter(path, exempt).visit(tree)
+    tree = _Rewriter(path, exempt).visit(ast.parse(source, filename=path))
+    assert isinstance(tree, ast.Module)
     return ast.fix_missing_locations(tree)
 
 
