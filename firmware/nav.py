@@ -49,9 +49,9 @@ from odocan.firmware.fixmath import (
     i32,
     i64,
     isqrt_u64,
+    mul_round_i64,
     mul_shr_round_i64,
     sat_i64,
-    shr_round,
     u32,
     u64,
     wrap_i32,
@@ -80,7 +80,7 @@ K2_MILLI_PER_S = 1000  # go-to-goal (seed 003): v = K2 d
 
 MILLI_PER_UNIT = 1000
 MICRO_PER_UNIT = 1_000_000
-URAD_PER_TURN_Q20 = shr_round(TWO_PI_Q60 * MICRO_PER_UNIT, 40)  # 2*pi*1e6 in Q20 (< 2^43)
+URAD_PER_TURN_Q20 = mul_round_i64(TWO_PI_Q60, MICRO_PER_UNIT, 40)  # 2*pi*1e6 in Q20 (< 2^43)
 HALF_WHEEL_DIVISOR = 2_000_000_000  # omega[mrad/s] * b[nm] / 2e9 = omega b/2 in mm/s
 
 _ACTIVE = (NavState.TURNING, NavState.DRIVING, NavState.FINAL_TURN)

@@ -34,9 +34,12 @@ from odocan.firmware.fixmath import (
     I64_MIN,
     U32_MAX,
     U64_MAX,
+    mul_round_i64,
+    mul_sat_i64,
+    mul_shr_i64,
+    mul_sub_wrap_i64,
     sat_i64,
     wrap_i32,
-    wrap_i64,
     wrap_signed,
 )
 from odocan.firmware.trig import sincos_q30
@@ -124,12 +127,14 @@ class Odometry:
     def step_deltas(self, d_left: int, d_right: int) -> None:
         """Integrate one step of count deltas (i32 each) with the configured integrator."""
         c = self._consts
-        ds_q49_m = _sat(
-            _sat(d_left * c.m_per_count_left_q48_m, self._errors)
-            + _sat(d_right * c.m_per_count_right_q48_m, self._errors),
+        ds_q49_m = _sat(  # i32 x i64 products (up to 2^83 for a wild 32-bit step), saturated
+            mul_sat_i64(d_left, c.m_per_count_left_q48_m, self._errors)
+            + mul_sat_i64(d_right, c.m_per_count_right_q48_m, self._errors),
             self._errors,
         )
-        dheading = wrap_i64(d_right * c.bam64_per_count_right - d_left * c.bam64_per_count_left)
+        dheading = mul_sub_wrap_i64(  # exact mod 2^64, read as i64
+            d_right, c.bam64_per_count_right, d_left, c.bam64_per_count_left
+        )
         heading_old = self.heading_bam64
         heading_sum = heading_old + dheading
         self.heading_bam64 = heading_sum & U64_MAX
@@ -153,14 +158,17 @@ class Odometry:
         self._advance(ds_q49_m, midpoint_bam64)
 
     def _advance(self, ds_q49_m: int, direction_bam64: int) -> None:
-        """x += dS cos(direction), y += dS sin(direction); direction rounded to BAM32 for sincos."""
+        """x += dS cos(direction), y += dS sin(direction); direction rounded to BAM32 for sincos.
+
+        dS (i64, Q49) times cos (i32, Q30) is a 94-bit Q79 product: ``mul_round_i64`` rounds it to
+        Q40 (|.| < 2^55); the sum with x is then saturated to i64.
+        """
         sin_q30, cos_q30 = sincos_q30(((direction_bam64 + (1 << 31)) >> 32) & U32_MAX)
-        half = 1 << (DS_COS_TO_Q40_SHIFT - 1)
         self.x_q40_m = _sat(
-            self.x_q40_m + ((ds_q49_m * cos_q30 + half) >> DS_COS_TO_Q40_SHIFT), self._errors
+            self.x_q40_m + mul_round_i64(ds_q49_m, cos_q30, DS_COS_TO_Q40_SHIFT), self._errors
         )
         self.y_q40_m = _sat(
-            self.y_q40_m + ((ds_q49_m * sin_q30 + half) >> DS_COS_TO_Q40_SHIFT), self._errors
+            self.y_q40_m + mul_round_i64(ds_q49_m, sin_q30, DS_COS_TO_Q40_SHIFT), self._errors
         )
 
 
@@ -171,23 +179,26 @@ def chord_factor_q62(dheading_bam64: int) -> int:
     1 - u^2/6 (1 - u^2/20 (1 - u^2/42 (...))) in Q60 (u^2 <= (pi/2)^2 fits i64 there): three
     terms while |u| <= 1/8 rad (truncation < u^8/9! < 2^-42), eight terms up to |u| = pi/2, the
     largest half-step a signed BAM64 can hold (truncation < (pi/2)^18/19! < 2^-44).
+    Widths: u = dtheta * 2pi / 2^65 is an i64 x i64 product (126 bits) rounded to Q60 (< 2^61);
+    u^2 and u^2 * acc (122 bits) are kept from bit 60 by ``mul_round_i64``/``mul_shr_i64``.
     """
-    u_q60 = abs((dheading_bam64 * TWO_PI_Q60 + (1 << 64)) >> 65)
+    u_q60 = abs(mul_round_i64(dheading_bam64, TWO_PI_Q60, 65))
     if u_q60 < STRAIGHT_LIMIT_Q60:
         return ONE_Q62
-    u2_q60 = (u_q60 * u_q60 + (1 << 59)) >> 60
+    u2_q60 = mul_round_i64(u_q60, u_q60, 60)
     terms = 3 if u_q60 <= SERIES_SHORT_LIMIT_Q60 else len(SINC_DENOMINATORS)
     acc_q60 = ONE_Q60
     for denominator in SINC_DENOMINATORS[terms - 1 :: -1]:
-        acc_q60 = ONE_Q60 - ((u2_q60 * acc_q60) >> 60) // denominator
+        acc_q60 = ONE_Q60 - mul_shr_i64(u2_q60, acc_q60, 60) // denominator
     return acc_q60 << 2
 
 
 def _scale_q62(value: int, factor_q62: int) -> int:
-    """``value * factor`` for a Q62 factor in [0, 1]: rounds, never leaves the width of value."""
+    """``value * factor`` for a Q62 factor in [0, 1]: rounds, never leaves the width of value
+    (the 126-bit product is ``mul_round_i64``'s)."""
     if factor_q62 == ONE_Q62:
         return value
-    return (value * factor_q62 + (1 << 61)) >> 62
+    return mul_round_i64(value, factor_q62, 62)
 
 
 def _sat(value: int, errors: ErrorMask) -> int:

@@ -6,9 +6,10 @@ Results of sine and cosine are i32 in Q30 (1.0 == 1 << 30, exactly representable
 
 Both functions are straight-line integer code with no loop, written for speed in a pure-Python
 odometry step (one ``if`` chain picks the quadrant or octant). The comments give the C type of every
-intermediate. Products wider than 64 bits (the sin/cos recombination, u64 x u32 coefficient
-products) are the 128-bit products of ``fixmath.mul_shr_round_i64``: in C they are built from
-32x32->64 partial products (``UMULL``/``SMULL``) and only their high bits are kept.
+intermediate. Every product wider than 64 bits (the u64 x u32 coefficient products, the sin/cos
+recombination) goes through a ``fixmath`` helper (``mul_shr_i64``, ``mul_add_hi_i64``): in C a
+128-bit product built from 32x32->64 partial products (``UMULL``), of which only the bits kept
+are read. No value outside its C type exists in between (``tests/width_sanitizer.py``).
 
 Error bounds (proven by ``tests/test_trig.py`` against float64 ``math``):
 
@@ -24,7 +25,7 @@ atan2(-y, x) == -atan2(y, x) except where the result is -2^31 (+-pi).
 
 from __future__ import annotations
 
-from odocan.firmware.fixmath import i32, i64, u32
+from odocan.firmware.fixmath import i32, i64, mul_add_hi_i64, mul_shr_i64, u32
 from odocan.firmware.trig_tables import (
     ATAN_BAM48,
     ATAN_K1,
@@ -44,8 +45,7 @@ ONE_Q30 = 1 << 30
 QUARTER_BAM32 = 1 << 30
 HALF_BAM32 = 1 << 31
 
-_ONE_Q64 = 1 << 64  # 1.0 in Q64 (a u65: only ever the left factor of an i128 product)
-_ROUND_Q126_TO_Q30 = 1 << 95  # half an LSB of the Q30 result, in Q126
+_HALF_Q30_IN_Q62 = 1 << 31  # half an LSB of the Q30 result, in Q62
 
 
 def sincos_q30(angle_bam32: u32) -> tuple[i32, i32]:
@@ -60,24 +60,27 @@ def sincos_q30(angle_bam32: u32) -> tuple[i32, i32]:
        |d| <= 2^21), the small angle theta = d * 2*pi/2^32, |theta| <= pi/1024.
     3. Taylor terms in Q64 from ``d2 = d*d`` (u64 <= 2^42): ``sin_t`` = theta - theta^3/6
        (i64, |.| < 2^56) and ``om`` = 1 - cos(theta) = theta^2/2 - theta^4/24 (u64 < 2^47); the
-       products with the u32 coefficients are u96, shifted back below 2^64. Dropped terms:
-       theta^5/120 < 2^-48, theta^6/720 < 2^-59. ``cos_t = 2^64 - om`` is cos(theta) in Q64:
-       a u65 that C never materialises (it computes ``s * cos_t`` as ``(s << 64) - s * om``).
+       products with the u32 coefficients are 74-bit, ``mul_shr_i64`` keeps their bits from the
+       shift up (< 2^47). Dropped terms: theta^5/120 < 2^-48, theta^6/720 < 2^-59.
+       cos(theta) = 1 - om is never formed (in Q64 it would be a u65).
     4. Angle addition with the Q62 table values s = sin(A), c = cos(A) = SIN_Q62[256 - i] (i64):
-       sin = s*cos_t + c*sin_t and cos = c*cos_t - s*sin_t, each an i128 sum of Q126 products
-       (0 <= sum < 2^126 + 2^86), rounded once (half up) to Q30 by ``>> 96``: 0..2^30.
+       sin = s*(1 - om) + c*sin_t and cos = c*(1 - om) - s*sin_t in Q126, rounded once (half
+       up) to Q30: ``sin = (s*2^64 + Z + 2^95) >> 96`` with ``Z = c*sin_t - s*om``, i.e. exactly
+       ``(s + 2^31 + floor(Z / 2^64)) >> 32`` (nested floors), where ``floor(Z / 2^64)`` (i64,
+       |.| < 2^55) is ``mul_add_hi_i64(c, sin_t, -s, om)``; likewise cos with
+       ``Z = -c*om - s*sin_t``. Each sum is an i64 below 2^63; the results are 0..2^30.
     5. The quadrant permutes and negates (sin, cos) exactly.
     """
     r = angle_bam32 & 0x3FFF_FFFF
     i = (r + 0x1F_FFFF + ((r >> 22) & 1)) >> 22
     d = r - (i << 22)
     d2 = d * d
-    sin_t = d * (SIN_STEP_Q64 - ((d2 * SIN_K3) >> SIN_K3_SHIFT))
-    cos_t = _ONE_Q64 - ((d2 * (SIN_K2 - ((d2 * SIN_K4) >> SIN_K4_SHIFT))) >> SIN_K2_SHIFT)
+    sin_t = d * (SIN_STEP_Q64 - mul_shr_i64(d2, SIN_K3, SIN_K3_SHIFT))
+    om = mul_shr_i64(d2, SIN_K2 - mul_shr_i64(d2, SIN_K4, SIN_K4_SHIFT), SIN_K2_SHIFT)
     s = SIN_Q62[i]
     c = SIN_Q62[256 - i]
-    sin_r = (s * cos_t + c * sin_t + _ROUND_Q126_TO_Q30) >> 96
-    cos_r = (c * cos_t - s * sin_t + _ROUND_Q126_TO_Q30) >> 96
+    sin_r = (s + _HALF_Q30_IN_Q62 + mul_add_hi_i64(c, sin_t, -s, om)) >> 32
+    cos_r = (c + _HALF_Q30_IN_Q62 + mul_add_hi_i64(-c, om, -s, sin_t)) >> 32
     q = (angle_bam32 >> 30) & 3
     if q == 0:
         return sin_r, cos_r
