@@ -9,6 +9,7 @@ import can
 import cantools
 import cantools.autosar
 import pytest
+from cantools.subparsers.dump.formatting import layout_string
 
 from odocan.firmware import secoc as fw
 from odocan.firmware.cmac import cmac, cmac_key
@@ -343,3 +344,31 @@ def test_only_secured_ids_are_signed() -> None:
     with pytest.raises(OdocanError, match="0x100 is not a secured command"):
         signer.sign(0x100, bytes(8))
     assert signer.secure([(0x100, bytes(8))]) == [(0x100, bytes(8))]
+
+
+DOC = Path(__file__).resolve().parent.parent / "docs" / "secoc.md"
+
+
+def test_the_doc_draws_both_draft_frames() -> None:
+    doc = DOC.read_text(encoding="utf-8")
+    for message in cantools.database.load_file(DRAFT, strict=True).messages:
+        assert layout_string(message) in doc, f"docs/secoc.md: layout of {message.name} is stale"
+
+
+def test_the_doc_vectors_for_the_c_port() -> None:
+    """Each row of the doc's table: the firmware and the host give the same tag and frame."""
+    key = bytes.fromhex("2b7e151628aed2a6abf7158809cf4f3c")
+    rows = [
+        line.split("|")[1:6]
+        for line in DOC.read_text(encoding="utf-8").splitlines()
+        if line.startswith("| 0x")
+    ]
+    assert len(rows) == 3
+    for data_id, pdu, fv, tag, auth in (tuple(c.strip(" `") for c in row) for row in rows):
+        can_id, pdu_b, fv_i = int(data_id, 16), bytes.fromhex(pdu), int(fv, 16)
+        block = fw.authenticator_input(can_id, pdu_b, fv_i)
+        assert cmac(cmac_key(key), block).hex() == tag
+        mac = fw.authenticator(cmac_key(key), can_id, pdu_b, fv_i)
+        assert host.SecocSigner(key).mac(can_id, pdu_b, fv_i) == mac
+        request = fw.SECURED_IDS.index(can_id)
+        assert fw.pack_odom_auth(3, request, fv_i & 0xFFFF, mac).hex() == auth
