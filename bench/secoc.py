@@ -250,7 +250,9 @@ def print_bus(samples: int) -> None:
             f"  {name:<9} ({frames} frames): +{frames * mean_auth:5.0f} bits "
             f"= +{frames * mean_auth * bit_us / 1000:5.2f} ms of bus time per command"
         )
-    fresh = classic_frame_bits(fw.ODOM_FRESHNESS_ID, receiver.freshness_frame(0, 1))
+    fresh = classic_frame_bits(
+        fw.ODOM_FRESHNESS_ID, receiver.freshness_frame(0, fw.FreshnessCause.PERIODIC)
+    )
     print(f"  ODOM_FRESHNESS 1 Hz:   {fresh} bits/s = {fresh / BITRATE * 100:.4f} % of the bus")
     tick_share = mean_auth * bit_us / TICK_US
     print(

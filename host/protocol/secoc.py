@@ -20,6 +20,7 @@ message names the path. The key is never printed, logged or put in an exception.
 from __future__ import annotations
 
 import string
+from functools import cache
 from importlib import resources
 from pathlib import Path
 from typing import Final
@@ -61,18 +62,16 @@ def load_secoc_key(path: str | Path) -> bytes:
 
 def secoc_messages(db: Database | None = None) -> tuple[Message, Message]:
     """``(ODOM_AUTH, ODOM_FRESHNESS)`` from ``db`` (default: the contract, else the draft)."""
-    for candidate in (db or contract.database(), _draft()):
-        try:
-            return (
-                candidate.get_message_by_name("ODOM_AUTH"),
-                candidate.get_message_by_name("ODOM_FRESHNESS"),
-            )
-        except KeyError:
-            continue
-    raise OdocanError("the DBC has no ODOM_AUTH / ODOM_FRESHNESS messages")
+    source = db or contract.database()
+    names = {message.name for message in source.messages}
+    if not {"ODOM_AUTH", "ODOM_FRESHNESS"} <= names:
+        source = _draft()
+    return source.get_message_by_name("ODOM_AUTH"), source.get_message_by_name("ODOM_FRESHNESS")
 
 
+@cache
 def _draft() -> Database:
+    """dbc/secoc_draft.dbc, loaded once (strict)."""
     db = cantools.database.load_file(_DRAFT_DBC, strict=True)
     assert isinstance(db, Database)
     return db
