@@ -372,3 +372,18 @@ def test_the_doc_vectors_for_the_c_port() -> None:
         assert host.SecocSigner(key).mac(can_id, pdu_b, fv_i) == mac
         request = fw.SECURED_IDS.index(can_id)
         assert fw.pack_odom_auth(3, request, fv_i & 0xFFFF, mac).hex() == auth
+
+
+def test_hostile_frames_never_raise_nor_verify() -> None:
+    """10^4 random ODOM_AUTH payloads (any length) and held frames: no exception, nothing OK."""
+    rng = random.Random(8)
+    receiver = fw.SecocReceiver(KEY, MemoryNvm())
+    gate = fw.SecuredCommands(receiver)
+    signer = host.SecocSigner(KEY)
+    for tick in range(10_000):
+        gate.hold(fw.AuthRequest(rng.randrange(3)), rng.randbytes(8), tick)
+        verdict = gate.authenticate(fw.unpack_odom_auth(rng.randbytes(rng.randrange(9))))
+        assert verdict is None or verdict[0] is not fw.AuthStatus.OK
+        gate.expire(tick)
+        signer.on_freshness(rng.randbytes(rng.randrange(10)))
+    assert receiver.count_ok == 0 and receiver.last_fv == 1 << fw.COUNT_BITS
