@@ -48,6 +48,7 @@ from odocan.firmware.aes import AES128_KEY_BYTES, AES_BLOCK_BYTES, encrypt_words
 from odocan.firmware.cmac import CmacKey, cmac_key
 from odocan.firmware.e2e import COUNTER_MASK, DATA_ID_COUNT, p02_protect
 from odocan.firmware.fixmath import U16_MAX, U32_MAX, u8, u16, u32, u64, wrap_u32
+from odocan.firmware.frames import NAV_GOAL_ID, ODOM_CONFIG_ID, ODOM_SET_POSE_ID
 
 # --- the profile ---
 MAC_BITS: Final = 32  # truncated authenticator on the wire
@@ -80,7 +81,8 @@ class AuthRequest(IntEnum):
     ODOM_CONFIG = 2
 
 
-SECURED_IDS: Final[tuple[int, ...]] = (0x280, 0x300, 0x301)  # indexed by AuthRequest
+# The secured messages' CAN IDs (their SecOC DataIDs), indexed by AuthRequest.
+SECURED_IDS: Final[tuple[int, ...]] = (NAV_GOAL_ID, ODOM_SET_POSE_ID, ODOM_CONFIG_ID)
 
 
 class AuthStatus(IntEnum):
