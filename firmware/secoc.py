@@ -222,7 +222,7 @@ class SecocReceiver:
         """
         if self._key is None or self.epoch == 0:
             return AuthStatus.UNAVAILABLE
-        delta = (freshness - self.last_fv) & FRESHNESS_TX_MASK
+        delta = (freshness - self.last_fv) & FRESHNESS_TX_MASK  # C: (uint16_t)(fresh - last)
         fv = self.last_fv + delta  # u64: < 2^48 + 2^16
         if delta == 0 or delta > FRESHNESS_WINDOW or (fv >> COUNT_BITS) != self.epoch:
             self.count_freshness = wrap_u32(self.count_freshness + 1)
@@ -237,6 +237,18 @@ class SecocReceiver:
         if (fv & COUNT_MASK) > ROLLOVER_COUNT:
             self._advance_epoch(self.epoch, FreshnessCause.ROLLOVER)
         return AuthStatus.OK
+
+    def take_freshness_frame(self, counter: int) -> bytes | None:
+        """The ODOM_FRESHNESS due now (boot, refusal, rollover, unavailable), once; else None.
+
+        The ECU calls it every tick, and ``freshness_frame(counter, PERIODIC)`` every
+        ``FRESHNESS_PERIOD_TICKS``.
+        """
+        cause = self.sync_cause
+        if cause is None:
+            return None
+        self.sync_cause = None
+        return self.freshness_frame(counter, cause)
 
     def freshness_frame(self, counter: int, cause: FreshnessCause) -> bytes:
         """ODOM_FRESHNESS carrying ``last_fv`` (0 when unavailable) and ``cause``."""

@@ -185,6 +185,11 @@ def test_freshness_window_is_one_to_4096_ahead() -> None:
     signer.next_fv = receiver.last_fv + fw.FRESHNESS_WINDOW  # exactly 4096 ahead: accepted
     assert deliver(receiver, SET_POSE, pdu, signer.sign(SET_POSE, pdu)) is fw.AuthStatus.OK
     assert receiver.sync_cause is fw.FreshnessCause.REFUSED  # the refusal asked for a resync
+    frame = receiver.take_freshness_frame(5)
+    assert frame is not None and fw.unpack_odom_freshness(frame) == fw.OdomFreshness(
+        5, fw.FreshnessCause.REFUSED, receiver.last_fv
+    )
+    assert receiver.take_freshness_frame(6) is None  # sent once
     assert host.FRESHNESS_WINDOW == fw.FRESHNESS_WINDOW
 
 
