@@ -310,7 +310,26 @@ def test_key_file_raw_or_hex(tmp_path: Path) -> None:
     raw.write_bytes(KEY)
     hexed = tmp_path / "hex.key"
     hexed.write_text(KEY.hex() + "\n")
+    raw.chmod(0o600)
+    hexed.chmod(0o600)
     assert host.load_secoc_key(raw) == host.load_secoc_key(hexed) == KEY
+
+
+def test_a_key_file_open_to_others_loads_with_a_warning(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    path = tmp_path / "shared.key"
+    path.write_bytes(KEY)
+    path.chmod(0o600)
+    with caplog.at_level("WARNING", logger="odocan.host.protocol.secoc"):
+        host.load_secoc_key(path)
+        assert caplog.records == []
+        path.chmod(0o644)
+        assert host.load_secoc_key(path) == KEY
+    assert [r.getMessage() for r in caplog.records] == [
+        f"SecOC key {path} is open to other users (mode 644): chmod 600 it"
+    ]
+    assert KEY.hex() not in caplog.text
 
 
 @pytest.mark.parametrize(

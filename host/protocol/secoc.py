@@ -14,11 +14,14 @@ sign before it has seen one (the firmware sends it at boot, every second and aft
 
 The key (``--secoc-key PATH``) is a file of exactly 16 raw bytes, or 32 hex digits (whitespace
 around them allowed); anything else, or an unreadable file, is an ``OdocanError`` whose one-line
-message names the path. The key is never printed, logged or put in an exception.
+message names the path; a file that group or others may access is loaded with a warning. The key
+is never printed, logged or put in an exception.
 """
 
 from __future__ import annotations
 
+import logging
+import stat
 import string
 from functools import cache
 from importlib import resources
@@ -37,6 +40,7 @@ from odocan.sim.exceptions import OdocanError
 KEY_BYTES: Final = 16  # AES-128
 SECURED_MESSAGES: Final = ("NAV_GOAL", "ODOM_SET_POSE", "ODOM_CONFIG")  # ODOM_AUTH REQUEST VAL_s
 FRESHNESS_WINDOW: Final = 4096  # the firmware accepts FV up to last + 4096 (docs/secoc.md)
+log = logging.getLogger(__name__)
 _DRAFT_DBC = Path(str(resources.files("odocan").joinpath("dbc", "secoc_draft.dbc")))
 
 
@@ -48,8 +52,15 @@ def load_secoc_key(path: str | Path) -> bytes:
     """The 16-byte AES-128 key in ``path`` (16 raw bytes, or 32 hex digits)."""
     try:
         raw = Path(path).read_bytes()
+        mode = Path(path).stat().st_mode
     except OSError as exc:
         raise OdocanError(f"cannot read SecOC key {path}: {exc.strerror or exc}") from None
+    if mode & (stat.S_IRWXG | stat.S_IRWXO):
+        log.warning(
+            "SecOC key %s is open to other users (mode %03o): chmod 600 it",
+            path,
+            stat.S_IMODE(mode),
+        )
     if len(raw) == KEY_BYTES:
         return raw
     text = raw.strip()
