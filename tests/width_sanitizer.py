@@ -547,6 +547,64 @@ def _edge_sweep() -> None:
             odo.step_deltas(d_left, d_right)
 
 
+class _Nvm:
+    """An in-memory NVM cell for the SecOC freshness epoch."""
+
+    def __init__(self, epoch: int = 0, works: bool = True) -> None:
+        self.epoch, self.works = epoch, works
+
+    def read_epoch(self) -> int:
+        return self.epoch
+
+    def write_epoch(self, epoch: int) -> bool:
+        if self.works:
+            self.epoch = epoch
+        return self.works
+
+
+def _secoc_drive() -> None:
+    """AES-128, CMAC on every tail length, and the SecOC receiver: genuine, forged, replayed,
+    out-of-window and post-reboot commands, held commands that authenticate or expire, the
+    ODOM_AUTH and ODOM_FRESHNESS codecs, and a receiver that cannot run (bad key, NVM, epoch)."""
+    cmac = importlib.import_module(f"{FIRMWARE_PACKAGE}.cmac")
+    secoc = importlib.import_module(f"{FIRMWARE_PACKAGE}.secoc")
+    key = bytes(range(0x2B, 0x3B))
+    mac_key = cmac.cmac_key(key)
+    cmac.aes128_encrypt(mac_key, bytes(16))
+    for length in range(0, 49):
+        cmac.cmac(mac_key, bytes((7 * k + length) & 0xFF for k in range(length)))
+    nvm = _Nvm()
+    for mac_bits in (8, 16, 24, 32):
+        receiver = secoc.SecocReceiver(key, nvm, mac_bits=mac_bits)
+        receiver.boot()
+        pdu = bytes(range(8))
+        for step in (1, 1, 0, 4096, 4097, 1):
+            fv = receiver.last_fv + step
+            tag = secoc.truncate(secoc.authenticator(mac_key, 0x300, pdu, fv), mac_bits)
+            receiver.verify(0x300, pdu, fv & 0xFFFF, tag)
+            receiver.verify(0x300, pdu, fv & 0xFFFF, tag ^ 1)
+        receiver.take_freshness_frame(3)
+        secoc.unpack_odom_freshness(receiver.freshness_frame(4, secoc.FreshnessCause.REFUSED))
+        commands = secoc.SecuredCommands(receiver)
+        for request in secoc.AuthRequest:
+            commands.hold(request, pdu, 10)
+            fv = receiver.last_fv + 1
+            tag = secoc.truncate(secoc.authenticator(mac_key, 0x300, pdu, fv), 32)
+            frame = secoc.pack_odom_auth(5, int(request), fv & 0xFFFF, tag)
+            commands.authenticate(secoc.unpack_odom_auth(frame))
+            commands.hold(request, pdu, 0xFFFF_FFF0)
+            commands.expire(0xFFFF_FFFF)
+            commands.expire(5)
+        commands.authenticate(secoc.OdomAuth(0, 0, 0, 0))  # nothing held: an orphan
+    receiver = secoc.SecocReceiver(key, _Nvm(epoch=secoc.EPOCH_MAX))
+    receiver.boot()
+    broken_nvm = _Nvm(works=False)
+    for broken in (secoc.SecocReceiver(key[:15], _Nvm()), secoc.SecocReceiver(key, broken_nvm)):
+        broken.boot()
+        broken.verify(0x300, bytes(8), 1, 0)
+        broken.freshness_frame(0, secoc.FreshnessCause.UNAVAILABLE)
+
+
 CLOSED_LOOP_MIN_S = 10.0  # the first two goals are reached (NAV_STATUS REACHED) within it
 
 
@@ -566,6 +624,7 @@ def standard_drives(recorder: Recorder, duration_s: float = 20.0) -> DriveLog:
         _closed_loop_drive(max(duration_s, CLOSED_LOOP_MIN_S), ears)
         _vector_cases()
         _edge_sweep()
+        _secoc_drive()
     return DriveLog(ears.heard, ears.acks)
 
 
