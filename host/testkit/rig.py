@@ -42,6 +42,7 @@ import can
 import cantools
 from cantools.database.namedsignalvalue import NamedSignalValue
 
+from odocan.host.io.buses import isolated_bus_kwargs
 from odocan.host.io.logs import FrameArrays, FrameCollector
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Analysis, analyze
 from odocan.host.protocol.commands import Command, CommandEncoder
@@ -335,7 +336,10 @@ def _auto_type(text: str) -> Any:
 
 
 def open_bus(kwargs: dict[str, Any]) -> can.BusABC:
-    """``can.Bus(**kwargs)``; a one-line ``BusSetupError`` when it cannot be opened."""
+    """``can.Bus(**kwargs)`` (a udp_multicast group on its own port, as every odocan node:
+    ``host.io.buses.isolated_bus_kwargs``); a one-line ``BusSetupError`` when it cannot be
+    opened."""
+    kwargs = isolated_bus_kwargs(kwargs)
     try:
         return can.Bus(**kwargs)
     except (can.CanError, ValueError, OSError, ImportError, TypeError) as exc:
