@@ -45,12 +45,21 @@ class UsageError(OdocanError):
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Every option's help shows its default, unless the text already says it."""
+    """Every option's help shows its default (``none`` when unset), unless the text already
+    says it; flags, required options and positionals are left as written."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = action.help or ""
-        if "default" in text or action.default in (None, False, argparse.SUPPRESS):
+        if (
+            "default" in text
+            or not action.option_strings
+            or action.required
+            or action.default is False
+            or action.default is argparse.SUPPRESS
+        ):
             return text
+        if action.default is None or action.default == "" or action.default == []:
+            return f"{text} (default: none)"
         return super()._get_help_string(action)
 
 

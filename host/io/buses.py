@@ -40,12 +40,18 @@ def add_bus_arguments(parser: argparse.ArgumentParser, *, required: bool = False
         "-i",
         "--interface",
         required=required,
-        help="python-can interface: virtual, udp_multicast, socketcan, ...",
+        help="python-can interface: virtual, udp_multicast, socketcan, ... "
+        "(default: python-can's config)",
     )
     group.add_argument(
-        "-c", "--channel", help="channel: e.g. vcan0 (socketcan), 239.74.163.2 (udp_multicast)"
+        "-c",
+        "--channel",
+        help="channel: e.g. vcan0 (socketcan), 239.74.163.2 (udp_multicast, on a UDP port "
+        "derived from the group unless --bus-arg port=N) (default: python-can's config)",
     )
-    group.add_argument("-b", "--bitrate", type=int, help="bitrate in bit/s")
+    group.add_argument(
+        "-b", "--bitrate", type=int, help="bitrate in bit/s (default: python-can's config)"
+    )
     group.add_argument(
         "--bus-arg",
         action="append",
