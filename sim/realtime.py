@@ -22,6 +22,7 @@ the motor controller, the SIM truth and the scenario driver, one tick at a time.
 from __future__ import annotations
 
 import signal
+import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -155,13 +156,17 @@ class PeriodicLoop:
 @contextmanager
 def stop_on_signals(loop: Stoppable) -> Iterator[None]:
     """While inside: SIGINT and SIGTERM ask ``loop`` to stop; a second one raises
-    ``KeyboardInterrupt``. The previous handlers are restored on exit (main thread only)."""
+    ``KeyboardInterrupt``. The previous handlers are restored on exit. Off the main thread
+    (where Python allows no handler) it does nothing."""
 
     def handler(signum: int, frame: FrameType | None) -> None:
         if loop.stop_requested:
             raise KeyboardInterrupt
         loop.request_stop()
 
+    if threading.current_thread() is not threading.main_thread():
+        yield  # only the main thread may install handlers: the caller's own stay in force
+        return
     previous = {sig: signal.signal(sig, handler) for sig in _STOP_SIGNALS}
     try:
         yield

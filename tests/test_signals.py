@@ -102,3 +102,63 @@ def test_sigterm_without_a_handler_would_leave_the_blf_header_empty(tmp_path: Pa
     proc.kill()
     proc.communicate(timeout=EXIT_TIMEOUT_S)
     assert can.BLFReader(log).object_count == 0
+
+
+def _udp_listener(group: str) -> can.BusABC:
+    import argparse
+
+    from odocan.host.io.buses import open_bus
+
+    args = argparse.Namespace(interface="udp_multicast", channel=group, bitrate=None,
+                              bus_arg=["hop_limit=0"], faults="")
+    try:
+        return open_bus(args)
+    except Exception as exc:
+        pytest.skip(f"udp_multicast unavailable: {exc}")
+
+
+def test_sigterm_stops_replay_realtime_cleanly(tmp_path: Path) -> None:
+    import secrets
+
+    from odocan.host.cli.app import main
+
+    log = tmp_path / "drive.log"
+    assert main(["run", "--duration", "30", "--log", str(log)]) == 0
+    group = f"239.255.{secrets.randbelow(250) + 1}.{secrets.randbelow(250) + 1}"
+    listener = _udp_listener(group)
+    try:
+        proc = _start("replay", str(log), "--realtime", "-i", "udp_multicast", "-c", group,
+                      "--bus-arg", "hop_limit=0")
+        for _ in range(20):  # well under way: the 30 s log holds 10 800 frames
+            if listener.recv(START_TIMEOUT_S) is None:
+                proc.kill()
+                pytest.skip("udp_multicast does not loop back on this machine")
+        code, out, err = _terminate(proc)
+    finally:
+        listener.shutdown()
+    assert (code, err) == (0, ""), err
+    assert out.startswith("replay: interrupted, "), out
+    played, total = (int(w) for w in out.split()[2:5:2])
+    assert 0 < played < total, out
+
+
+def _catches_sigterm(pid: int) -> bool:
+    status = Path(f"/proc/{pid}/status").read_text()
+    caught = int(next(x for x in status.splitlines() if x.startswith("SigCgt:")).split()[1], 16)
+    return bool(caught & (1 << (signal.SIGTERM - 1)))
+
+
+def test_sigterm_ends_monitor_with_its_json(tmp_path: Path) -> None:
+    import json
+
+    proc = _start("monitor", "-i", "virtual", "-c", f"sig-{os.getpid()}", "--json")
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while not _catches_sigterm(proc.pid):
+        if time.monotonic() > deadline or proc.poll() is not None:
+            proc.kill()
+            pytest.fail(f"monitor never handled SIGTERM: {proc.communicate()}")
+        time.sleep(0.05)
+    time.sleep(1.0)  # past parsing: the bus is open and the receive loop running
+    code, out, err = _terminate(proc)
+    assert (code, err) == (0, "")
+    assert isinstance(json.loads(out), dict)

@@ -56,9 +56,11 @@ from odocan.sim import contract, robot
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.clock import LockstepClock
 from odocan.sim.exceptions import ConfigurationError, OdocanError
+from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import INTEGRATORS, firmware_params
 from odocan.sim.robot import RobotProfile
 
+POLL_S = 0.1  # --realtime: a stop request is seen within this while waiting for a frame's time
 SPEED_MAX = 1000.0  # --speed: faster than that, the timing is no longer worth keeping
 MAX_GAP_TICKS = 6000  # a gap in the log longer than 60 s is replayed as 60 s
 POSITION_LSB_M = 1e-4
@@ -436,23 +438,29 @@ def play(
     bar: Progress | None = None,
 ) -> tuple[int, bool]:
     """Send ``frames[selection]`` on ``bus`` at their timestamps (relative to the first one)
-    divided by ``speed`` (error frames are skipped); returns (frames sent, interrupted by
-    Ctrl-C or SIGTERM). ``bar`` is told the frames played so far."""
+    divided by ``speed`` (error frames are skipped); returns (frames sent, interrupted).
+
+    Ctrl-C and SIGTERM stop it between two frames (within ``POLL_S`` while waiting), never in
+    the middle of a send; a second signal at once. ``bar`` is told the frames played so far."""
     sent = 0
     if len(selection) == 0:
         return sent, False
     t_first = float(frames.timestamp_s[selection[0]])
     start = time.monotonic()
+    stop = StopRequest()
     try:
-        for done, i in enumerate(selection.tolist()):
-            if bar is not None:
-                bar.update(done)
-            delay = start + (float(frames.timestamp_s[i]) - t_first) / speed - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
-            if not frames.flags[i] & FLAG_ERROR:
-                bus.send(to_message(frames, i))
-                sent += 1
+        with stop_on_signals(stop):
+            for done, i in enumerate(selection.tolist()):
+                if bar is not None:
+                    bar.update(done)
+                due = start + (float(frames.timestamp_s[i]) - t_first) / speed
+                while not stop.stop_requested and (delay := due - time.monotonic()) > 0:
+                    time.sleep(min(delay, POLL_S))
+                if stop.stop_requested:
+                    return sent, True
+                if not frames.flags[i] & FLAG_ERROR:
+                    bus.send(to_message(frames, i))
+                    sent += 1
     except KeyboardInterrupt:
         return sent, True
     return sent, False
