@@ -32,6 +32,7 @@ BAD: list[tuple[str, tuple[str, ...]]] = [
     ("run --duration nan", ("--duration", "nan")),
     ("run --duration inf", ("--duration",)),
     ("run --duration 1 --faults drop=1", ("no frame", "--faults drop=1")),
+    ("run --duration 1 --faults flip=1", ("no ODOM_POSE_X frame", "--faults flip=1")),
     ("run --faults drop=2", ("drop", "[0, 1]")),
     ("run --faults babble=1e9", ("babble", "10000")),
     ("run --faults delay=0.1:1e9", ("delay", "60000")),
@@ -53,6 +54,8 @@ BAD: list[tuple[str, tuple[str, ...]]] = [
     ("analyze /nonexistent/drive.log", ("/nonexistent/drive.log",)),
     ("analyze {foreign}", ("no WHEEL_ENCODERS frame", "none of them an odocan frame")),
     ("analyze {empty}", ("empty.log", "empty log")),
+    ("analyze {corrupt}", ("none of the 200 WHEEL_ENCODERS frames passes its E2E check",
+                           "corrupted")),
     ("analyze {text}", ("notes.txt",)),
     ("analyze {foreign} --report /dev/full", ("--report /dev/full",)),
     ("analyze {foreign} --dbc /nonexistent/x.dbc", ("/nonexistent/x.dbc",)),
@@ -145,7 +148,23 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     empty.write_text("")
     text = tmp / "notes.txt"
     text.write_text("not a log\n")
-    return {"tmp": str(tmp), "foreign": str(foreign), "empty": str(empty), "text": str(text)}
+    good, corrupt = tmp / "good.log", tmp / "corrupt.log"
+    assert main(["run", "--duration", "2", "--log", str(good)]) == 0
+    corrupt.write_text(_corrupt_encoder_checksums(good.read_text()))
+    return {"tmp": str(tmp), "foreign": str(foreign), "empty": str(empty), "text": str(text),
+            "corrupt": str(corrupt)}
+
+
+def _corrupt_encoder_checksums(candump: str) -> str:
+    """Every WHEEL_ENCODERS frame with its CHECKSUM byte inverted (all fail E2E)."""
+    lines = []
+    for line in candump.splitlines():
+        stamp, channel, frame, *rest = line.split()
+        can_id, data = frame.split("#")
+        if can_id == "100":
+            data = f"{int(data[:2], 16) ^ 0xFF:02X}{data[2:]}"
+        lines.append(" ".join([stamp, channel, f"{can_id}#{data}", *rest]))
+    return "\n".join(lines) + "\n"
 
 
 def test_the_table_covers_every_subcommand() -> None:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import cantools
 
-from odocan.host.cli.inputs import require_frames
+from odocan.host.cli.inputs import explained, require_frames
 from odocan.host.cli.options import add_robot_argument
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
@@ -60,9 +60,12 @@ def _do_analyze(args: argparse.Namespace) -> int:
     db = load_dbc(args.dbc) if args.dbc is not None else None
     with wall_clock_progress(f"analysing {args.log}", None):
         frames = read_log(args.log)
-        if db is None:  # odocan's DBC: say plainly when the log holds none of its frames
+        if db is not None:  # another DBC: its own checks say whether it matches the log
+            analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance, db=db)
+        else:  # odocan's DBC: say plainly when the log holds none of its frames
             require_frames(frames, str(args.log))
-        analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance, db=db)
+            with explained(lambda: frames, str(args.log)):
+                analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance)
     return finish(analysis, args, title=f"odocan analyze: {args.log}")
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import can
 
-from odocan.host.cli.inputs import require_frames
+from odocan.host.cli.inputs import explained, require_frames
 from odocan.host.cli.options import (
     SIM_DURATION_MAX_S,
     SIM_DURATION_MIN_S,
@@ -149,8 +149,9 @@ def _run_and_analyze(
         if mirror is not None:
             mirror.shutdown()
     frames = collector.arrays()
-    require_frames(frames, "the run", _why_no_frames(config.faults))
-    with progress(f"analysing {len(frames)} frames", None):
+    cause = _why_no_frames(config.faults)
+    require_frames(frames, "the run", cause)
+    with explained(lambda: frames, "the run", cause), progress(f"analysing {len(frames)}", None):
         analysis = analyze(
             frames,
             config.robot,
@@ -193,7 +194,7 @@ def _open_log(path: Path) -> can.Listener:
 
 def _why_no_frames(faults: FaultSpec | None) -> str:
     if faults is not None and faults.active:
-        return f"--faults {faults} lost them"
+        return f"under --faults {faults}"
     return "the rig sent none: a bug, please report it"
 
 
