@@ -50,6 +50,7 @@ from odocan.host.io.logs import (
 from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
+from odocan.host.report.outputs import OutputError
 from odocan.host.report.progress import Progress, progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import contract, robot
@@ -286,12 +287,17 @@ class LockstepReplay:
                 listener.on_message_received(msg)
 
     def close(self) -> None:
-        """Deliver what is left, stop the listeners, release the buses."""
-        self._drain()
-        for listener in self.listeners:
-            listener.stop()
-        for bus in self._buses:
-            bus.shutdown()
+        """Deliver what is left, stop the listeners, release the buses: every one, even when
+        a listener's ``stop()`` fails (the first error is raised once all are released)."""
+        first: BaseException | None = None
+        releases = [self._drain, *(li.stop for li in self.listeners)]
+        for release in [*releases, *(bus.shutdown for bus in self._buses)]:
+            try:
+                release()
+            except Exception as exc:
+                first = first or exc
+        if first is not None:
+            raise first
 
 
 def _events(encoders: IntArray, truth: IntArray) -> list[tuple[int, int]]:
@@ -334,7 +340,10 @@ def _replay_and_analyze(
     try:
         replay.run(frames, feed)
     finally:
-        replay.close()
+        try:
+            replay.close()
+        except OSError as exc:
+            raise OutputError(f"--log {args.log_out}: {exc.strerror or exc}") from None
     wall_s = time.perf_counter() - start
     replayed = collector.arrays()
     analysis = analyze(replayed, profile, integrator, tolerance=args.tolerance,
