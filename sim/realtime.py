@@ -11,7 +11,9 @@ Each real-time node is its own process on any python-can bus (``odocan sim``, ``
   queued): the loop never runs a burst of ticks to catch up, so frames keep their spacing.
 
 ``stop_on_signals`` turns SIGINT (Ctrl-C) and SIGTERM into a request to stop after the current
-tick, so a node closes its bus and exits cleanly; a second signal interrupts at once.
+tick, so a node closes its bus and exits cleanly; a second signal interrupts at once. It takes
+anything ``Stoppable``: a ``PeriodicLoop``, or a bare ``StopRequest`` that a lockstep loop polls
+between its ticks (``odocan run``), so a signal never lands in the middle of a log write.
 
 ``sim.motor_controller.SimNode``, the sim side of every rig, runs here on one bus handle:
 the motor controller, the SIM truth and the scenario driver, one tick at a time.
@@ -20,16 +22,45 @@ the motor controller, the SIM truth and the scenario driver, one tick at a time.
 from __future__ import annotations
 
 import signal
+import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from types import FrameType
+from typing import Protocol
 
 from odocan.sim.board import TICK_S
 from odocan.sim.clock import RealTimeClock
 from odocan.sim.contract import database
 
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class Stoppable(Protocol):
+    """What ``stop_on_signals`` asks to stop."""
+
+    def request_stop(self) -> None:
+        """Stop at the next safe point (called from a signal handler)."""
+
+    @property
+    def stop_requested(self) -> bool:
+        """True once a stop was requested."""
+
+
+class StopRequest:
+    """A stop flag for loops that poll it between steps (``Stoppable``)."""
+
+    def __init__(self) -> None:
+        self._requested = False
+
+    def request_stop(self) -> None:
+        """Ask the loop to stop (safe from a signal handler)."""
+        self._requested = True
+
+    @property
+    def stop_requested(self) -> bool:
+        """True once a stop was requested."""
+        return self._requested
 
 
 @dataclass
@@ -123,15 +154,19 @@ class PeriodicLoop:
 
 
 @contextmanager
-def stop_on_signals(loop: PeriodicLoop) -> Iterator[None]:
+def stop_on_signals(loop: Stoppable) -> Iterator[None]:
     """While inside: SIGINT and SIGTERM ask ``loop`` to stop; a second one raises
-    ``KeyboardInterrupt``. The previous handlers are restored on exit (main thread only)."""
+    ``KeyboardInterrupt``. The previous handlers are restored on exit. Off the main thread
+    (where Python allows no handler) it does nothing."""
 
     def handler(signum: int, frame: FrameType | None) -> None:
         if loop.stop_requested:
             raise KeyboardInterrupt
         loop.request_stop()
 
+    if threading.current_thread() is not threading.main_thread():
+        yield  # only the main thread may install handlers: the caller's own stay in force
+        return
     previous = {sig: signal.signal(sig, handler) for sig in _STOP_SIGNALS}
     try:
         yield

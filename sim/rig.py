@@ -188,8 +188,14 @@ class LockstepRig(Closing):
         return False
 
     def close(self) -> None:
-        """Stop the listeners and release the virtual buses."""
-        for listener in self.listeners:
-            listener.stop()
-        for bus in self._buses:
-            bus.shutdown()
+        """Stop the listeners and release the virtual buses: every one of them, even when a
+        listener's ``stop()`` or a bus's ``shutdown()`` fails (e.g. a log that cannot be
+        finished on a full disk); the first such error is raised once all are closed."""
+        first: BaseException | None = None
+        for release in [*(li.stop for li in self.listeners), *(b.shutdown for b in self._buses)]:
+            try:
+                release()
+            except Exception as exc:
+                first = first or exc
+        if first is not None:
+            raise first

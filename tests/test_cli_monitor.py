@@ -230,7 +230,7 @@ def test_monitor_ctrl_c_exits_cleanly(
         (["--robot", "nosuchbot"], ["nosuchbot"]),
         (["--dbc", "/nonexistent/x.dbc"], ["/nonexistent/x.dbc"]),
         (["--mqtt", "http://example.org"], ["http://example.org"]),
-        (["--mqtt", "mqtt://127.0.0.1:1", "-i", "virtual"], ["--mqtt", "-i"]),
+        (["--mqtt", "mqtt://127.0.0.1:1", "-i", "virtual"], ["--broker", "-i"]),
     ],
 )
 def test_monitor_bad_input_is_one_line(

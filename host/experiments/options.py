@@ -10,8 +10,10 @@ import argparse
 import json
 from pathlib import Path
 
-from odocan.host.cli.options import add_robot_argument
-from odocan.sim.exceptions import ConfigurationError
+from odocan.host.cli.options import add_robot_argument, add_seed_argument, int_in
+from odocan.host.report.outputs import check_writable, write_text
+
+RUNS_MAX = 1000  # runs of an experiment (about a second of CPU each)
 
 
 def add_common_arguments(parser: argparse.ArgumentParser, default_errors: str, runs: int) -> None:
@@ -24,18 +26,24 @@ def add_common_arguments(parser: argparse.ArgumentParser, default_errors: str, r
         help=f"the real robot's errors: E_d, E_b, slip std; keys left out are 0 error "
         f"(default: {default_errors})",
     )
-    parser.add_argument("--seed", type=int, default=0, help="random seed, >= 0 (default: 0)")
-    parser.add_argument("--runs", type=int, default=runs, help=f"runs (default: {runs})")
-    parser.add_argument("--report", type=Path, metavar="PATH", help="write the JSON report here")
+    add_seed_argument(parser)
+    parser.add_argument(
+        "--runs",
+        type=int_in(1, RUNS_MAX),
+        default=runs,
+        help=f"runs, 1 .. {RUNS_MAX} (default: {runs})",
+    )
+    parser.add_argument(
+        "--report", type=Path, metavar="PATH", help="write the JSON report here (default: none)"
+    )
 
 
 def check_report_path(path: Path | None) -> None:
-    """Refuse a ``--report`` whose directory does not exist, before a long run."""
-    if path is not None and not path.parent.is_dir():
-        raise ConfigurationError(f"--report: directory {path.parent} does not exist")
+    """Refuse a ``--report`` that cannot be written, before a long run."""
+    check_writable(path, "--report")
 
 
 def write_report(path: Path | None, report: dict[str, object]) -> None:
-    """Write ``report`` as indented JSON (nothing without ``--report``)."""
+    """Write ``report`` as indented JSON (nothing without ``--report``); an error names it."""
     if path is not None:
-        path.write_text(json.dumps(report, indent=2) + "\n")
+        write_text(path, json.dumps(report, indent=2) + "\n", "--report")

@@ -28,6 +28,7 @@ from rich.table import Table
 
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.report.jsonutil import finite
+from odocan.host.report.outputs import OutputError, check_writable
 from odocan.sim.exceptions import ConfigurationError
 
 PLOT_SUFFIXES = (".png", ".svg")
@@ -83,15 +84,14 @@ def add_check_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def check_output_paths(args: argparse.Namespace) -> None:
-    """Refuse a ``--plot`` of unknown format or an output in a missing directory, up front."""
+    """Refuse a ``--plot`` of unknown format or an output that cannot be written, up front."""
     plot: Path | None = args.plot
     if plot is not None and plot.suffix.lower() not in PLOT_SUFFIXES:
         raise ConfigurationError(
             f"--plot {plot}: unknown format {plot.suffix or '(none)'!r} (use .png or .svg)"
         )
     for option, path in (("--plot", plot), ("--report", args.report)):
-        if path is not None and not path.parent.is_dir():
-            raise ConfigurationError(f"{option} {path}: directory {path.parent} does not exist")
+        check_writable(path, option)
 
 
 def write_report(report: dict[str, Any], path: Path) -> None:
@@ -109,17 +109,25 @@ def _json_default(value: object) -> object:
 
 
 def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
-    """Write ``--report`` and ``--plot``, print the summary; 0 when passed, 1 when not."""
-    if args.report is not None:
-        write_report(analysis.report, args.report)
-    if args.plot is not None:
-        from odocan.host.report.plots import (
-            plot_analysis,  # matplotlib only when a plot is asked for
-        )
+    """Print the summary, then write ``--report`` and ``--plot``; 0 when passed, 1 when not.
 
-        plot_analysis(analysis, args.plot, tolerance=args.tolerance)
+    The summary comes first so that an output that cannot be written (an ``OutputError``
+    naming its path, exit 2) never loses the verdict."""
     console = Console(file=sys.stdout, highlight=False)
     print_summary(analysis.report, args.tolerance, console, title=title)
+    sys.stdout.flush()
+    for option, path in (("--report", args.report), ("--plot", args.plot)):
+        if path is None:
+            continue
+        try:
+            if option == "--report":
+                write_report(analysis.report, path)
+            else:
+                from odocan.host.report.plots import plot_analysis  # matplotlib only when asked
+
+                plot_analysis(analysis, path, tolerance=args.tolerance)
+        except OSError as exc:
+            raise OutputError(f"{option} {path}: {exc.strerror or exc}") from None
     return 0 if analysis.passed else 1
 
 

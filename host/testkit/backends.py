@@ -17,6 +17,7 @@ from typing import Any, Protocol
 
 import can
 
+from odocan.host.io.buses import auto_type, isolated_bus_kwargs
 from odocan.host.protocol.pose import Pose
 from odocan.host.testkit.options import RigOptions, TestkitError, fault_spec
 from odocan.host.testkit.recorder import Recorder
@@ -161,25 +162,17 @@ def parse_bus_spec(text: str) -> dict[str, Any]:
         key, sep, value = (s.strip() for s in item.partition("="))
         if not sep or not key:
             raise BusSetupError(f"odocan bus: expected KEY=VALUE, got {item!r}")
-        kwargs[key] = _auto_type(value)
+        kwargs[key] = auto_type(value)
     if not kwargs:
         raise BusSetupError("odocan bus: empty specification (e.g. interface=udp_multicast,...)")
     return kwargs
 
 
-def _auto_type(text: str) -> Any:
-    if text.lower() in ("true", "false"):
-        return text.lower() == "true"
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
 def open_bus(kwargs: dict[str, Any]) -> can.BusABC:
-    """``can.Bus(**kwargs)``; a one-line ``BusSetupError`` when it cannot be opened."""
+    """``can.Bus(**kwargs)`` (a udp_multicast group on its own port, as every odocan node:
+    ``host.io.buses.isolated_bus_kwargs``); a one-line ``BusSetupError`` when it cannot be
+    opened."""
+    kwargs = isolated_bus_kwargs(kwargs)
     try:
         return can.Bus(**kwargs)
     except (can.CanError, ValueError, OSError, ImportError, TypeError) as exc:

@@ -20,9 +20,11 @@ from pathlib import Path
 
 import cantools
 
+from odocan.host.cli.inputs import explained, require_frames
 from odocan.host.cli.options import add_robot_argument
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
+from odocan.host.report.progress import wall_clock_progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError
@@ -46,7 +48,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="reference integrator (default: the one ODOM_STATUS reports)",
     )
     parser.add_argument(
-        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: dbc/odocan.dbc)"
+        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: odocan's own)"
     )
     add_check_arguments(parser)
     parser.set_defaults(func=_do_analyze)
@@ -56,8 +58,14 @@ def _do_analyze(args: argparse.Namespace) -> int:
     profile = robot.load(args.robot)
     check_output_paths(args)
     db = load_dbc(args.dbc) if args.dbc is not None else None
-    frames = read_log(args.log)
-    analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance, db=db)
+    with wall_clock_progress(f"analysing {args.log}", None):
+        frames = read_log(args.log)
+        if db is not None:  # another DBC: its own checks say whether it matches the log
+            analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance, db=db)
+        else:  # odocan's DBC: say plainly when the log holds none of its frames
+            require_frames(frames, str(args.log))
+            with explained(lambda: frames, str(args.log)):
+                analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance)
     return finish(analysis, args, title=f"odocan analyze: {args.log}")
 
 

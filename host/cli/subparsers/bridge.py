@@ -16,6 +16,7 @@ import sys
 
 import can
 
+from odocan.host.cli.options import add_duration_argument, add_robot_argument
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, BusReader, RobotEndpoint
@@ -40,20 +41,17 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--name", default="robot001", help="robot name in the topics")
-    parser.add_argument("--robot", default="pmir", help="profile (for the reference)")
+    parser.add_argument(
+        "--name", default="robot001", help="robot name in the topics odocan/NAME/..."
+    )
+    add_robot_argument(parser, role="profile for the reference")
     parser.add_argument(
         "--integrator",
         choices=INTEGRATORS,
         default="exact",
         help="the firmware's integrator (for the reference; default: exact)",
     )
-    parser.add_argument(
-        "--duration",
-        type=float,
-        metavar="SECONDS",
-        help="stop after this many seconds (default: until Ctrl-C)",
-    )
+    add_duration_argument(parser)
     add_mqtt_arguments(parser)
     add_bus_arguments(parser)
 

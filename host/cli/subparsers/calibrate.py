@@ -16,6 +16,7 @@ import sys
 from odocan.host.cli.subparsers.umbmark import add_arguments, header
 from odocan.host.experiments import render, umbmark
 from odocan.host.experiments.options import check_report_path, write_report
+from odocan.host.report.progress import wall_clock_progress
 from odocan.sim import errors, robot
 
 
@@ -46,14 +47,15 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
 def _do_calibrate(args: argparse.Namespace) -> int:
     check_report_path(args.report)
     profile, model = robot.load(args.robot), errors.parse(args.errors)
-    cal = umbmark.calibrate(
-        profile,
-        model,
-        args.seed,
-        side_m=args.side,
-        runs_per_direction=args.runs,
-        method=args.method,
-    )
+    with wall_clock_progress(f"calibrate: 2 x UMBmark of 2 x {args.runs} squares", None):
+        cal = umbmark.calibrate(
+            profile,
+            model,
+            args.seed,
+            side_m=args.side,
+            runs_per_direction=args.runs,
+            method=args.method,
+        )
     print(header(args, model, "calibrate"))
     render.show(
         render.umbmark_table(cal.before, "Before"),

@@ -11,8 +11,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+from odocan.host.cli.options import float_in
 from odocan.host.experiments import render, seed002
 from odocan.host.experiments.options import add_common_arguments, check_report_path, write_report
+from odocan.host.report.progress import wall_clock_progress
 from odocan.sim import errors, robot
 
 EXPERIMENTS = ("seed002",)
@@ -36,7 +38,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     add_common_arguments(parser, seed002.DEFAULT_ERRORS, seed002.RUNS)
     parser.add_argument(
         "--misalign",
-        type=float,
+        type=float_in(0.0, 45.0),
         default=seed002.DEFAULT_MISALIGN_DEG,
         metavar="DEG",
         help="std of the random start misalignment, degrees, 0 .. 45 "
@@ -53,7 +55,8 @@ def _do_experiment(args: argparse.Namespace) -> int:
         seed=args.seed,
         runs=args.runs,
     )
-    result = seed002.run_seed002(config)
+    with wall_clock_progress(f"seed002: 2 x {config.runs} runs", None):
+        result = seed002.run_seed002(config)
     e = config.errors
     print(
         f"seed002 on {config.robot.name}: ed={e.ed:g}, eb={e.eb:g}, slip={e.slip:g}, start "

@@ -7,8 +7,9 @@ when present). A ``rich.live.Live`` screen redraws it a few times a second until
 or ``--duration``. With ``--json`` there is no screen: at the end (``--duration`` or Ctrl-C) the
 model is printed as one JSON object, for scripts.
 
-``--mqtt [URL]`` shows the fleet instead: one row per robot that ``odocan bridge``/``odocan
-fleet`` publish (``host.mqtt.fleetview.fleet_states``), reconnecting when the broker goes away.
+``--broker [URL]`` (alias ``--mqtt``, the name it had) shows the fleet instead: one row per
+robot that ``odocan bridge``/``odocan fleet`` publish (``host.mqtt.fleetview.fleet_states``),
+reconnecting when the broker goes away.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import can
 from rich.console import Console
 from rich.live import Live
 
-from odocan.host.cli.options import add_robot_argument
+from odocan.host.cli.options import add_duration_argument, add_robot_argument
 from odocan.host.cli.subparsers.analyze import load_dbc
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.judge.monitor import BusMonitor, fleet_snapshot, render, render_fleet, to_json
@@ -56,14 +57,9 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "the float64 reference and the ground truth. Ctrl-C quits (exit 0).",
         epilog="Example: odocan monitor -i socketcan -c vcan0; "
         "odocan monitor -i virtual -c vcan0 --duration 5 --json; "
-        "odocan monitor --mqtt mqtt://127.0.0.1:1883",
+        "odocan monitor --broker mqtt://127.0.0.1:1883",
     )
-    parser.add_argument(
-        "--duration",
-        type=float,
-        metavar="SECONDS",
-        help="stop after this many seconds (default: until Ctrl-C)",
-    )
+    add_duration_argument(parser)
     parser.add_argument(
         "--json",
         action="store_true",
@@ -76,26 +72,26 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="reference integrator (default: the one ODOM_STATUS reports)",
     )
     parser.add_argument(
-        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: dbc/odocan.dbc)"
+        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: odocan's own)"
     )
     parser.add_argument(
+        "--broker",
         "--mqtt",
+        dest="mqtt",
         nargs="?",
         const=DEFAULT_BROKER,
-        metavar="BROKER_URL",
-        help=f"show the fleet published on this MQTT broker instead (default: {DEFAULT_BROKER})",
+        metavar="URL",
+        help="show the fleet published on this MQTT broker instead of a CAN bus; without URL "
+        f"{DEFAULT_BROKER} (--mqtt: alias) (default: a CAN bus)",
     )
     add_bus_arguments(parser)
     parser.set_defaults(func=_do_monitor)
 
 
 def _do_monitor(args: argparse.Namespace) -> int:
-    duration = args.duration
-    if duration is not None and not (math.isfinite(duration) and duration > 0):
-        raise ConfigurationError(f"--duration must be a positive number of seconds, got {duration}")
     if args.mqtt is not None:
         if args.interface is not None or args.channel is not None:
-            raise ConfigurationError("--mqtt watches a broker: give no -i/--interface or -c")
+            raise ConfigurationError("--broker watches MQTT: give no -i/--interface or -c")
         return _watch_fleet(BrokerURL.parse(args.mqtt), args)
     model = BusMonitor(
         robot.load(args.robot),

@@ -36,7 +36,7 @@ import numpy.typing as npt
 from rich.console import Console
 
 from odocan.firmware.config import RobotParams
-from odocan.host.cli.options import add_robot_argument, check_log_path
+from odocan.host.cli.options import add_robot_argument, check_log_path, float_in
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.logs import (
     FLAG_ERROR,
@@ -50,14 +50,19 @@ from odocan.host.io.logs import (
 from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
+from odocan.host.report.outputs import OutputError
+from odocan.host.report.progress import Progress, progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import contract, robot
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.clock import LockstepClock
 from odocan.sim.exceptions import ConfigurationError, OdocanError
+from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import INTEGRATORS, firmware_params
 from odocan.sim.robot import RobotProfile
 
+POLL_S = 0.1  # --realtime: a stop request is seen within this while waiting for a frame's time
+SPEED_MAX = 1000.0  # --speed: faster than that, the timing is no longer worth keeping
 MAX_GAP_TICKS = 6000  # a gap in the log longer than 60 s is replayed as 60 s
 POSITION_LSB_M = 1e-4
 HEADING_LSB_RAD = 2 * math.pi / 65536
@@ -86,15 +91,17 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="on-board integrator (default: the one the log's ODOM_STATUS reports, else exact)",
     )
     parser.add_argument("--log", dest="log_out", type=Path, metavar="OUT",
-                        help="write the replayed bus (.log candump, .asc, .blf)")
+                        help="write the replayed bus (.log candump, .asc, .blf) (default: none)")
     add_check_arguments(parser)
     live = parser.add_argument_group("real time (--realtime)")
     live.add_argument("--realtime", action="store_true",
                       help="play the log onto the bus given by -i/-c/-b with its timing")
-    live.add_argument("--speed", type=float, default=1.0, metavar="X",
-                      help="play X times faster than recorded (default: 1)")
+    live.add_argument("--speed", type=float_in(0.0, SPEED_MAX, lo_open=True), default=1.0,
+                      metavar="X", help=f"play X times faster than recorded, at most "
+                      f"{SPEED_MAX:g} (default: 1)")
     live.add_argument("--only", metavar="NAME[,NAME]",
-                      help="play only these DBC messages (e.g. WHEEL_ENCODERS,SIM_TRUTH)")
+                      help="play only these DBC messages (e.g. WHEEL_ENCODERS,SIM_TRUTH) "
+                      "(default: every frame)")
     add_bus_arguments(parser)
     parser.set_defaults(func=_do_replay)
 
@@ -280,12 +287,17 @@ class LockstepReplay:
                 listener.on_message_received(msg)
 
     def close(self) -> None:
-        """Deliver what is left, stop the listeners, release the buses."""
-        self._drain()
-        for listener in self.listeners:
-            listener.stop()
-        for bus in self._buses:
-            bus.shutdown()
+        """Deliver what is left, stop the listeners, release the buses: every one, even when
+        a listener's ``stop()`` fails (the first error is raised once all are released)."""
+        first: BaseException | None = None
+        releases = [self._drain, *(li.stop for li in self.listeners)]
+        for release in [*releases, *(bus.shutdown for bus in self._buses)]:
+            try:
+                release()
+            except Exception as exc:
+                first = first or exc
+        if first is not None:
+            raise first
 
 
 def _events(encoders: IntArray, truth: IntArray) -> list[tuple[int, int]]:
@@ -328,7 +340,10 @@ def _replay_and_analyze(
     try:
         replay.run(frames, feed)
     finally:
-        replay.close()
+        try:
+            replay.close()
+        except OSError as exc:
+            raise OutputError(f"--log {args.log_out}: {exc.strerror or exc}") from None
     wall_s = time.perf_counter() - start
     replayed = collector.arrays()
     analysis = analyze(replayed, profile, integrator, tolerance=args.tolerance,
@@ -417,7 +432,8 @@ def _play_realtime(frames: FrameArrays, args: argparse.Namespace) -> int:
     bus = open_bus(args)
     start = time.monotonic()
     try:
-        sent, interrupted = play(bus, frames, selection, args.speed)
+        with progress(f"playing {len(selection)} frames", len(selection)) as bar:
+            sent, interrupted = play(bus, frames, selection, args.speed, bar)
     finally:
         bus.shutdown()
     wall_s = time.monotonic() - start
@@ -427,24 +443,33 @@ def _play_realtime(frames: FrameArrays, args: argparse.Namespace) -> int:
 
 
 def play(
-    bus: can.BusABC, frames: FrameArrays, selection: IntArray, speed: float
+    bus: can.BusABC, frames: FrameArrays, selection: IntArray, speed: float,
+    bar: Progress | None = None,
 ) -> tuple[int, bool]:
     """Send ``frames[selection]`` on ``bus`` at their timestamps (relative to the first one)
-    divided by ``speed`` (error frames are skipped); returns (frames sent, interrupted by
-    Ctrl-C)."""
+    divided by ``speed`` (error frames are skipped); returns (frames sent, interrupted).
+
+    Ctrl-C and SIGTERM stop it between two frames (within ``POLL_S`` while waiting), never in
+    the middle of a send; a second signal at once. ``bar`` is told the frames played so far."""
     sent = 0
     if len(selection) == 0:
         return sent, False
     t_first = float(frames.timestamp_s[selection[0]])
     start = time.monotonic()
+    stop = StopRequest()
     try:
-        for i in selection.tolist():
-            delay = start + (float(frames.timestamp_s[i]) - t_first) / speed - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
-            if not frames.flags[i] & FLAG_ERROR:
-                bus.send(to_message(frames, i))
-                sent += 1
+        with stop_on_signals(stop):
+            for done, i in enumerate(selection.tolist()):
+                if bar is not None:
+                    bar.update(done)
+                due = start + (float(frames.timestamp_s[i]) - t_first) / speed
+                while not stop.stop_requested and (delay := due - time.monotonic()) > 0:
+                    time.sleep(min(delay, POLL_S))
+                if stop.stop_requested:
+                    return sent, True
+                if not frames.flags[i] & FLAG_ERROR:
+                    bus.send(to_message(frames, i))
+                    sent += 1
     except KeyboardInterrupt:
         return sent, True
     return sent, False

@@ -4,8 +4,9 @@ The motor controller, the ground truth, the scenario driver and the firmware run
 time (about 100x faster than real time on one core); every frame goes to a ``FrameCollector``
 and, with ``--log``, to python-can's ``can.Logger`` (``.log`` candump, ``.asc``, ``.blf``). The
 on-board pose is then compared with the float64 reference and the ground truth
-(``host.analysis.analyze``); exit 0 within tolerance, 1 not, 2 on bad usage. Ctrl-C stops the
-rig early and checks what ran so far.
+(``host.analysis.analyze``); exit 0 within tolerance, 1 not, 2 on bad usage. Ctrl-C or SIGTERM
+stops the rig after the tick under way and checks what ran so far: the summary, the report and
+the log (``.asc`` footer, ``.blf`` header and object count) are all finished as after a full run.
 
 With ``-i/--interface`` or ``-c/--channel`` (python-can's bus options) every frame is also sent
 to that bus, paced to the wall clock so the copy keeps the DBC's cycle times (e.g.
@@ -17,24 +18,34 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
 import can
 
-from odocan.host.cli.options import add_robot_argument, check_duration, check_log_path
+from odocan.host.cli.inputs import explained, require_frames
+from odocan.host.cli.options import (
+    SIM_DURATION_MAX_S,
+    SIM_DURATION_MIN_S,
+    add_robot_argument,
+    add_seed_argument,
+    check_log_path,
+    float_in,
+)
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus, parse_faults
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.analysis import Analysis, analyze
+from odocan.host.report.outputs import OutputError
+from odocan.host.report.progress import progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
+from odocan.sim.faults import FaultSpec
+from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import INTEGRATORS, LockstepRig, RigConfig
 from odocan.sim.scenarios import SCENARIOS
 
-PROGRESS_MIN_S = 300.0  # simulated seconds from which a progress bar is worth showing
+PROGRESS_EVERY_TICKS = 100  # one simulated second
 
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -45,7 +56,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         description="Run the motor controller, ground truth, scenario driver and firmware in "
         "lockstep on python-can virtual buses, then compare the on-board pose (decoded from the "
         "bus) with the float64 reference and the ground truth. Exit 0 within tolerance, 1 not, "
-        "2 on bad usage.",
+        "2 on bad usage. Ctrl-C or SIGTERM stops early and checks what ran.",
         epilog="With -i/-c every frame is also sent to that bus, paced to the wall clock "
         "(e.g. -i socketcan -c vcan0, then candump vcan0).",
     )
@@ -61,12 +72,13 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     )
     parser.add_argument(
         "--duration",
-        type=float,
+        type=float_in(SIM_DURATION_MIN_S, SIM_DURATION_MAX_S),
         metavar="SECONDS",
-        help="simulated seconds (default: the scenario's own, 61 s for random; random drives "
-        "until 1 s before the end of a longer run)",
+        help=f"SIMULATED seconds, {SIM_DURATION_MIN_S:g} .. {SIM_DURATION_MAX_S:g} (default: "
+        "the scenario's own, 61 s for random; random drives until 1 s before the end of a "
+        "longer run)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    add_seed_argument(parser)
     parser.add_argument(
         "--errors",
         default="",
@@ -74,7 +86,10 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="the robot's real errors: E_d, E_b, slip std (default: none)",
     )
     parser.add_argument(
-        "--log", type=Path, metavar="PATH", help="log every frame (.log candump, .asc, .blf)"
+        "--log",
+        type=Path,
+        metavar="PATH",
+        help="log every frame (.log candump, .asc, .blf) (default: no log)",
     )
     add_check_arguments(parser)
     add_fault_argument(parser)
@@ -83,7 +98,6 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 
 
 def _do_run(args: argparse.Namespace) -> int:
-    check_duration(args.duration)
     faults = parse_faults(args)
     config = RigConfig(
         robot=robot.load(args.robot),
@@ -97,37 +111,48 @@ def _do_run(args: argparse.Namespace) -> int:
     )
     check_log_path(args.log)
     check_output_paths(args)
-    analysis = _run_and_analyze(config, args)
+    analysis, log_error = _run_and_analyze(config, args)
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
-    return finish(analysis, args, title=title)
+    code = finish(analysis, args, title=title)
+    if log_error is not None:
+        raise log_error
+    return code
 
 
-def _run_and_analyze(config: RigConfig, args: argparse.Namespace) -> Analysis:
-    """Run the rig with its listeners; the wall time is measured around the run only."""
+def _run_and_analyze(
+    config: RigConfig, args: argparse.Namespace
+) -> tuple[Analysis, OutputError | None]:
+    """Run the rig with its listeners (the wall time measured around the run only) and analyse
+    what the host heard. A log that could not be finished is returned, not raised, so that the
+    summary is still printed."""
     collector = FrameCollector()
     listeners: list[can.Listener] = [collector]
     wants_mirror = args.interface is not None or args.channel is not None
     mirror = open_bus(args, with_faults=False) if wants_mirror else None
-    if mirror is not None:
-        listeners.append(PacedRedirect(mirror))
-    if args.log is not None:
-        listeners.append(can.Logger(args.log))
+    log_error: OutputError | None = None
     try:
+        if args.log is not None:
+            listeners.append(_open_log(args.log))
         rig = LockstepRig(config, listeners=listeners)
-        duration_s = rig.default_duration_s
-        with rig, _progress(duration_s) as progress:
+        if mirror is not None:
+            rig.listeners.append(PacedRedirect(mirror))
+        try:
             start = time.perf_counter()
-            try:
-                rig.run(duration_s, progress=progress)
-            except KeyboardInterrupt:  # Ctrl-C: check what ran so far
-                print(f"interrupted after {rig.ticks * TICK_S:g} s simulated", file=sys.stderr)
+            _run(rig, rig.default_duration_s)
             wall_s = time.perf_counter() - start
+        finally:
+            try:
+                rig.close()
+            except OSError as exc:
+                log_error = OutputError(f"--log {args.log}: {exc.strerror or exc}")
     finally:
         if mirror is not None:
             mirror.shutdown()
     frames = collector.arrays()
-    with _status(f"analysing {len(frames)} frames"):
-        return analyze(
+    cause = _why_no_frames(config.faults)
+    require_frames(frames, "the run", cause)
+    with explained(lambda: frames, "the run", cause), progress(f"analysing {len(frames)}", None):
+        analysis = analyze(
             frames,
             config.robot,
             config.integrator,
@@ -136,6 +161,41 @@ def _run_and_analyze(config: RigConfig, args: argparse.Namespace) -> Analysis:
             seed=config.seed,
             wall_seconds=wall_s,
         )
+    return analysis, log_error
+
+
+def _run(rig: LockstepRig, duration_s: float) -> None:
+    """Step the rig for ``duration_s`` simulated seconds; SIGINT/SIGTERM stop it between two
+    ticks (a second signal, or any KeyboardInterrupt, at once), a progress line on a terminal."""
+    total = round(duration_s / TICK_S)
+    stop = StopRequest()
+    step = rig.step
+    with stop_on_signals(stop), progress(f"simulating {duration_s:g} s", total) as bar:
+        try:
+            for k in range(total):
+                step()
+                if k % PROGRESS_EVERY_TICKS == 0:
+                    if stop.stop_requested:
+                        break
+                    bar.update(k)
+        except KeyboardInterrupt:
+            pass
+    if rig.ticks < total:
+        print(f"interrupted after {rig.ticks * TICK_S:g} s simulated", file=sys.stderr)
+
+
+def _open_log(path: Path) -> can.Listener:
+    """python-can's writer for ``path`` (by extension); an error names the path."""
+    try:
+        return can.Logger(path)
+    except OSError as exc:
+        raise OutputError(f"--log {path}: {exc.strerror or exc}") from None
+
+
+def _why_no_frames(faults: FaultSpec | None) -> str:
+    if faults is not None and faults.active:
+        return f"under --faults {faults}"
+    return "the rig sent none: a bug, please report it"
 
 
 class PacedRedirect(can.Listener):
@@ -155,40 +215,3 @@ class PacedRedirect(can.Listener):
         if delay > 0:
             time.sleep(delay)
         self.bus.send(msg)
-
-
-@contextmanager
-def _progress(duration_s: float) -> Iterator[Callable[[int, int], None] | None]:
-    """A rich progress bar on stderr for long runs, only when stderr is a terminal."""
-    if duration_s < PROGRESS_MIN_S or not sys.stderr.isatty():
-        yield None
-        return
-    from rich.console import Console
-    from rich.progress import BarColumn, Progress, TimeRemainingColumn
-
-    with Progress(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        "[progress.percentage]{task.percentage:>3.0f}%",
-        TimeRemainingColumn(),
-        console=Console(stderr=True),
-        transient=True,
-    ) as bar:
-        task = bar.add_task(f"simulating {duration_s:g} s", total=round(duration_s / TICK_S))
-
-        def update(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
-
-        yield update
-
-
-@contextmanager
-def _status(text: str) -> Iterator[None]:
-    """A rich spinner on stderr while the analysis runs, only when stderr is a terminal."""
-    if not sys.stderr.isatty():
-        yield
-        return
-    from rich.console import Console
-
-    with Console(stderr=True).status(text):
-        yield

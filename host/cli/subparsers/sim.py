@@ -15,7 +15,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-from odocan.host.cli.options import add_duration_argument, add_robot_argument, check_duration
+from odocan.host.cli.options import (
+    add_duration_argument,
+    add_robot_argument,
+    add_seed_argument,
+    check_duration,
+)
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
 from odocan.sim import errors, robot
 from odocan.sim.motor_controller import SimNode
@@ -35,7 +40,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "--scenario", choices=SCENARIOS, default="random", help="driving scenario (default: random)"
     )
     add_robot_argument(parser)
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    add_seed_argument(parser)
     parser.add_argument(
         "--errors",
         default="",

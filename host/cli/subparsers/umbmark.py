@@ -11,11 +11,14 @@ from __future__ import annotations
 import argparse
 import sys
 
+from odocan.host.cli.options import float_in
 from odocan.host.experiments import render, umbmark
 from odocan.host.experiments.options import add_common_arguments, check_report_path, write_report
+from odocan.host.report.progress import wall_clock_progress
 from odocan.sim import errors, robot
 
 DEFAULT_ERRORS = "ed=1.002,eb=1.01,slip=0.005"
+SIDE_MIN_M, SIDE_MAX_M = 0.2, 20.0
 
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -37,10 +40,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_common_arguments(parser, DEFAULT_ERRORS, umbmark.RUNS_PER_DIRECTION)
     parser.add_argument(
         "--side",
-        type=float,
+        type=float_in(SIDE_MIN_M, SIDE_MAX_M),
         default=umbmark.SIDE_M,
         metavar="METRES",
-        help=f"side of the square (default: {umbmark.SIDE_M:g})",
+        help=f"side of the square, {SIDE_MIN_M:g} .. {SIDE_MAX_M:g} m "
+        f"(default: {umbmark.SIDE_M:g})",
     )
 
 
@@ -56,9 +60,10 @@ def header(args: argparse.Namespace, model: errors.ErrorModel, name: str) -> str
 def _do_umbmark(args: argparse.Namespace) -> int:
     check_report_path(args.report)
     profile, model = robot.load(args.robot), errors.parse(args.errors)
-    result = umbmark.run_umbmark(
-        profile, model, args.seed, side_m=args.side, runs_per_direction=args.runs
-    )
+    with wall_clock_progress(f"UMBmark: 2 x {args.runs} squares", None):
+        result = umbmark.run_umbmark(
+            profile, model, args.seed, side_m=args.side, runs_per_direction=args.runs
+        )
     print(header(args, model, "UMBmark"))
     render.show(render.umbmark_table(result))
     report = {

@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
+from odocan.host.cli.options import add_robot_argument, add_seed_argument, float_in
 from odocan.host.judge import vectors
+from odocan.host.report.outputs import OutputError
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import INTEGRATORS
 from odocan.sim.robot import load
 from odocan.sim.scenarios import SCENARIOS
+
+VECTORS_MAX_S = 3600.0  # scenario seconds: 360 000 rows, tens of MB of CSV
 
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -20,12 +25,23 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         description="Export encoder-count inputs and the firmware's exact integer outputs (JSON "
         "and one CSV per case), or --check a directory against the current firmware.",
     )
-    parser.add_argument("--integrator", choices=INTEGRATORS, default="exact")
-    parser.add_argument("--robot", default="pmir", help="profile name or TOML path")
-    parser.add_argument("--scenario", choices=SCENARIOS, default="random")
-    parser.add_argument("--duration", type=float, default=10.0, help="scenario seconds")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, required=True, help="output directory")
+    parser.add_argument(
+        "--integrator", choices=INTEGRATORS, default="exact", help="on-board integrator"
+    )
+    add_robot_argument(parser)
+    parser.add_argument("--scenario", choices=SCENARIOS, default="random", help="driving scenario")
+    parser.add_argument(
+        "--duration",
+        type=float_in(0.01, VECTORS_MAX_S),
+        default=10.0,
+        metavar="SECONDS",
+        help=f"SCENARIO seconds of the scenario case, 0.01 .. {VECTORS_MAX_S:g} "
+        "(default: %(default)s)",
+    )
+    add_seed_argument(parser)
+    parser.add_argument(
+        "--out", type=Path, required=True, metavar="DIR", help="output directory (required)"
+    )
     parser.add_argument(
         "--check", action="store_true", help="verify the vectors in --out instead of writing them"
     )
@@ -40,11 +56,26 @@ def _do_vectors(args: argparse.Namespace) -> int:
             return 1
         print(f"{args.out}: every case reproduced bit for bit")
         return 0
-    if args.duration <= 0:
-        raise ConfigurationError(f"--duration must be positive, got {args.duration}")
+    check_out_dir(args.out)
     robot = load(args.robot)
     cases = [vectors.scenario_case(robot, args.scenario, args.duration, args.seed)]
     cases += vectors.edge_cases(robot.counter_bits)
-    paths = vectors.write(vectors.build(robot, args.integrator, cases), args.out)
+    try:
+        paths = vectors.write(vectors.build(robot, args.integrator, cases), args.out)
+    except OSError as exc:
+        raise OutputError(f"--out {args.out}: {exc.strerror or exc}") from None
     print(f"wrote {len(paths)} files to {args.out} ({args.integrator}, {robot.name})")
     return 0
+
+
+def check_out_dir(out: Path) -> None:
+    """``--out``: a writable directory, or one that can be made in a writable parent."""
+    target = out
+    while not target.exists():
+        if target.parent == target:
+            break
+        target = target.parent
+    if not target.is_dir():
+        raise ConfigurationError(f"--out {out}: {target} is not a directory")
+    if not os.access(target, os.W_OK | os.X_OK):
+        raise ConfigurationError(f"--out {out}: {target} is not writable")

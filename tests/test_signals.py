@@ -1,0 +1,164 @@
+"""SIGTERM is handled as SIGINT: the run stops, checks what ran, and every log is finished.
+
+``python -m odocan run --duration 3600 --log X`` is started as a subprocess, killed with SIGTERM
+once its log has content, and the log read back with python-can's own readers: every frame is
+readable, an ``.asc`` ends with its footer, a ``.blf`` header counts exactly the objects that
+follow. The summary is on stdout and the exit code is the verdict's (0), not 143.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+START_TIMEOUT_S = 60.0
+EXIT_TIMEOUT_S = 60.0
+
+
+def _start(*argv: str) -> subprocess.Popen[str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen(
+        [sys.executable, "-m", "odocan", *argv],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _wait_for_content(proc: subprocess.Popen[str], path: Path, min_bytes: int) -> None:
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            pytest.fail(f"odocan ended early ({proc.returncode}): {proc.communicate()}")
+        if path.exists() and path.stat().st_size >= min_bytes:
+            return
+        time.sleep(0.05)
+    proc.kill()
+    pytest.fail(f"{path} stayed under {min_bytes} bytes for {START_TIMEOUT_S} s")
+
+
+def _terminate(proc: subprocess.Popen[str]) -> tuple[int, str, str]:
+    proc.send_signal(signal.SIGTERM)
+    try:
+        out, err = proc.communicate(timeout=EXIT_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        pytest.fail(f"no exit {EXIT_TIMEOUT_S} s after SIGTERM: {err}")
+    return proc.returncode, out, err
+
+
+def _simulated_s(err: str) -> float:
+    line = next(x for x in err.splitlines() if x.startswith("interrupted after"))
+    return float(line.split()[2])
+
+
+@pytest.mark.parametrize("suffix", [".log", ".asc", ".blf"])
+def test_sigterm_finishes_the_run_and_its_log(tmp_path: Path, suffix: str) -> None:
+    log = tmp_path / f"drive{suffix}"
+    report = tmp_path / "report.json"
+    proc = _start("run", "--duration", "3600", "--log", str(log), "--report", str(report))
+    _wait_for_content(proc, log, 200_000)
+    code, out, err = _terminate(proc)
+
+    assert code == 0, err
+    assert "Traceback" not in err
+    simulated_s = _simulated_s(err)
+    assert 0 < simulated_s < 3600
+    assert "PASS" in out and "WHEEL_ENCODERS" in out
+    assert report.is_file() and '"passed": true' in report.read_text()
+
+    frames = list(can.LogReader(log))
+    # 10 ms encoder frames: the log holds the whole interrupted run, up to the last tick
+    encoders = [m for m in frames if m.arbitration_id == 0x100]
+    assert abs(len(encoders) - simulated_s * 100) <= 1, (len(encoders), simulated_s)
+    assert abs(frames[-1].timestamp - simulated_s) < 0.02
+    if suffix == ".asc":
+        assert log.read_text().rstrip().endswith("End TriggerBlock")
+    if suffix == ".blf":
+        reader = can.BLFReader(log)
+        count = sum(1 for _ in reader)
+        # python-can counts one object per frame plus none for the container blocks it reads
+        assert reader.object_count == count == len(frames)
+        assert reader.file_size == log.stat().st_size
+
+
+def test_sigterm_without_a_handler_would_leave_the_blf_header_empty(tmp_path: Path) -> None:
+    """The control: SIGKILL (no handler can run) leaves the header at 0 objects, which is what
+    the test above proves does not happen on SIGTERM."""
+    log = tmp_path / "killed.blf"
+    proc = _start("run", "--duration", "3600", "--log", str(log))
+    _wait_for_content(proc, log, 200_000)
+    proc.kill()
+    proc.communicate(timeout=EXIT_TIMEOUT_S)
+    assert can.BLFReader(log).object_count == 0
+
+
+def _udp_listener(group: str) -> can.BusABC:
+    import argparse
+
+    from odocan.host.io.buses import open_bus
+
+    args = argparse.Namespace(interface="udp_multicast", channel=group, bitrate=None,
+                              bus_arg=["hop_limit=0"], faults="")
+    try:
+        return open_bus(args)
+    except Exception as exc:
+        pytest.skip(f"udp_multicast unavailable: {exc}")
+
+
+def test_sigterm_stops_replay_realtime_cleanly(tmp_path: Path) -> None:
+    import secrets
+
+    from odocan.host.cli.app import main
+
+    log = tmp_path / "drive.log"
+    assert main(["run", "--duration", "30", "--log", str(log)]) == 0
+    group = f"239.255.{secrets.randbelow(250) + 1}.{secrets.randbelow(250) + 1}"
+    listener = _udp_listener(group)
+    try:
+        proc = _start("replay", str(log), "--realtime", "-i", "udp_multicast", "-c", group,
+                      "--bus-arg", "hop_limit=0")
+        for _ in range(20):  # well under way: the 30 s log holds 10 800 frames
+            if listener.recv(START_TIMEOUT_S) is None:
+                proc.kill()
+                pytest.skip("udp_multicast does not loop back on this machine")
+        code, out, err = _terminate(proc)
+    finally:
+        listener.shutdown()
+    assert (code, err) == (0, ""), err
+    assert out.startswith("replay: interrupted, "), out
+    played, total = (int(w) for w in out.split()[2:5:2])
+    assert 0 < played < total, out
+
+
+def _catches_sigterm(pid: int) -> bool:
+    status = Path(f"/proc/{pid}/status").read_text()
+    caught = int(next(x for x in status.splitlines() if x.startswith("SigCgt:")).split()[1], 16)
+    return bool(caught & (1 << (signal.SIGTERM - 1)))
+
+
+def test_sigterm_ends_monitor_with_its_json(tmp_path: Path) -> None:
+    import json
+
+    proc = _start("monitor", "-i", "virtual", "-c", f"sig-{os.getpid()}", "--json")
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while not _catches_sigterm(proc.pid):
+        if time.monotonic() > deadline or proc.poll() is not None:
+            proc.kill()
+            pytest.fail(f"monitor never handled SIGTERM: {proc.communicate()}")
+        time.sleep(0.05)
+    time.sleep(1.0)  # past parsing: the bus is open and the receive loop running
+    code, out, err = _terminate(proc)
+    assert (code, err) == (0, "")
+    assert isinstance(json.loads(out), dict)
