@@ -96,6 +96,13 @@ BAD: list[tuple[str, tuple[str, ...]]] = [
     ("vectors", ("--out",)),
     ("vectors --out {tmp}/missing --check", ("missing",)),
     ("vectors --out /proc/x/v", ("--out /proc/x/v",)),
+    # busload
+    ("busload -b 123", ("123", "CAN bitrate")),
+    ("busload --add X:1:2", ("X:1:2",)),
+    ("busload --add HOG:0x050:9:10", ("HOG",)),
+    ("busload --dbc {tmp}/missing.dbc", ("missing.dbc",)),
+    ("busload -b 10000", ("100",)),
+    ("busload --report /proc/x/b.json", ("/proc/x/b.json",)),
     # bridge
     ("bridge --name bad/name", ("bad/name",)),
     ("bridge --duration 0", ("--duration",)),
