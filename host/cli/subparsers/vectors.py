@@ -25,6 +25,13 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     parser.add_argument("--scenario", choices=SCENARIOS, default="random")
     parser.add_argument("--duration", type=float, default=10.0, help="scenario seconds")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--random-steps",
+        type=int,
+        default=0,
+        metavar="N",
+        help="add a case of N random counter steps (a long set for a C port; default: none)",
+    )
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument(
         "--check", action="store_true", help="verify the vectors in --out instead of writing them"
@@ -42,9 +49,13 @@ def _do_vectors(args: argparse.Namespace) -> int:
         return 0
     if args.duration <= 0:
         raise ConfigurationError(f"--duration must be positive, got {args.duration}")
+    if args.random_steps < 0:
+        raise ConfigurationError(f"--random-steps must be >= 0, got {args.random_steps}")
     robot = load(args.robot)
     cases = [vectors.scenario_case(robot, args.scenario, args.duration, args.seed)]
     cases += vectors.edge_cases(robot.counter_bits)
+    if args.random_steps:
+        cases.append(vectors.random_case(robot.counter_bits, args.random_steps, args.seed))
     paths = vectors.write(vectors.build(robot, args.integrator, cases), args.out)
     print(f"wrote {len(paths)} files to {args.out} ({args.integrator}, {robot.name})")
     return 0
