@@ -1,24 +1,30 @@
 """The C port (firmware/c): bit-exact against the golden vectors, natively and on 32-bit ARM.
 
 ``make -C firmware/c check`` builds the port natively with UBSan + ASan and as a static 32-bit ARM
-Linux binary run under qemu-arm, and replays over 10^6 steps of vectors (both robot profiles, the
-three integrators, counter wraps) from the JSON and the CSV files. The tests skip with the reason
+Linux binary run under qemu-arm, and replays over 10^6 steps of vectors (both shipped robot
+profiles, the three integrators, counter wraps; plus a 32-bit-counter corner that saturates) from
+the JSON and the CSV files. The tests skip with the reason
 when a tool is missing, except under ``CI=true``, where a missing tool is a failure.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import os
+import random
 import re
 import shutil
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
-from odocan.firmware.fixmath import wrap_signed
+from odocan.firmware import config, e2e, fixmath, odometry, trig
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.fixmath import I64_MAX, I64_MIN, U32_MAX, U64_MAX, wrap_signed
 from odocan.host.cli.app import main
 from odocan.host.judge import vectors
 from tools import gen_trig_tables
@@ -70,10 +76,12 @@ def test_make_check_is_bit_exact_natively_and_on_arm32(tmp_path: Path) -> None:
             result.stdout,
             re.MULTILINE,
         )
+        robots = ("pmir", "kobuki", "extreme32")
         sets = {name for name, *_ in lines}
-        assert sets == {f"{r}_{i}" for r in ("pmir", "kobuki") for i in ("euler", "rk2", "exact")}
+        assert sets == {f"{r}_{i}" for r in robots for i in ("euler", "rk2", "exact")}
         assert all(json == csv and mismatches == "0" for _, json, csv, mismatches in lines)
-        assert sum(int(csv) for _, _, csv, _ in lines) >= 1_000_000
+        shipped = [int(csv) for name, _, csv, _ in lines if not name.startswith("extreme32")]
+        assert sum(shipped) >= 1_000_000
 
 
 def test_one_changed_integer_fails_the_c_check(tmp_path: Path) -> None:
@@ -138,3 +146,170 @@ def test_random_steps_option(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     assert len(vectors.read_csv(out / "random_steps_0.csv")) == 51
     assert main(["vectors", "--random-steps", "-1", "--out", str(out)]) == 2
     assert capsys.readouterr().err.startswith("error: --random-steps must be >= 0")
+
+
+# CRC8H2F test values of the AUTOSAR SWS CRC Library (an independent reference for both sides).
+AUTOSAR_CRC8H2F = {
+    "00000000": 0x12,
+    "F20183": 0xC2,
+    "0FAA0055": 0xC6,
+    "00FF5511": 0x77,
+    "332255AABBCCDDEEFF": 0x11,
+    "926B55": 0x33,
+    "FFFFFFFF": 0x6C,
+    "313233343536373839": 0xDF,  # "123456789": the check value
+}
+
+
+def _probe_script(seed: int) -> tuple[list[str], list[str]]:
+    """Probe commands and the Python firmware's answers (see firmware/c/probe.c)."""
+    rng = random.Random(seed)
+    cmds: list[str] = []
+    want: list[str] = []
+
+    def ask(cmd: str, *answer: object) -> None:
+        cmds.append(cmd)
+        want.append(" ".join(str(a) for a in answer))
+
+    angles = [(q << 30) + (k << 22) + o for q in range(4) for k in range(257) for o in (-3, 0, 3)]
+    angles += [(1 << 21) * k + t for k in range(2048) for t in (-1, 0, 1)]  # knot ties
+    angles += [rng.getrandbits(32) for _ in range(20_000)]
+    for a in angles:
+        ask(f"sincos {a & U32_MAX}", *trig.sincos_q30(a & U32_MAX))
+    specials = [0, 1, -1, I64_MIN, I64_MAX, 1 << 46, (1 << 47) - 1]
+    for _ in range(6_000):
+        bits = rng.randrange(1, 64)
+        y, x = (rng.randrange(-(1 << bits), 1 << bits) for _ in range(2))
+        ask(f"atan2 {y} {x}", trig.atan2_bam32(y, x))
+    for y, x in itertools.product(specials + [-s for s in specials[1:]], repeat=2):
+        ask(f"atan2 {y} {x}", trig.atan2_bam32(y, x))
+    limits = [1 << 39, 1 << 57]  # the chord factor's branch edges, as u_q60
+    dheads = [rng.randrange(I64_MIN, I64_MAX + 1) for _ in range(3_000)]
+    dheads += [rng.randrange(-(1 << 45), 1 << 45) for _ in range(1_000)]
+    dheads += [I64_MIN, I64_MAX, 0, 1, -1]
+    dheads += [((lim << 65) // odometry.TWO_PI_Q60) + d for lim in limits for d in range(-3, 4)]
+    for dh in dheads:
+        ask(f"chord {dh}", odometry.chord_factor_q62(dh))
+    for _ in range(3_000):
+        a, b, c = (rng.getrandbits(rng.randrange(1, 65)) for _ in range(3))
+        errors = ErrorMask()
+        ask(f"muldiv {a} {b} {c}", fixmath.muldiv_round_u64(a, b, c, errors), errors.bits)
+    for _ in range(3_000):
+        a, b = (rng.randrange(I64_MIN, I64_MAX + 1) >> rng.randrange(64) for _ in range(2))
+        shift = rng.randrange(1, 128)
+        errors = ErrorMask()
+        ask(f"mulshr {a} {b} {shift}", fixmath.mul_shr_round_i64(a, b, shift, errors), errors.bits)
+    for v in [rng.randrange(I64_MIN, I64_MAX + 1) for _ in range(2_000)] + [I64_MIN, I64_MAX]:
+        shift = rng.randrange(1, 64)
+        ask(f"shr_round {v} {shift}", fixmath.shr_round(v, shift))
+        d = rng.choice([1, 2, 3, 10, rng.randrange(1, I64_MAX)])
+        ask(f"div_round {v} {d}", fixmath.div_round_i64(v, d))
+    for n in [rng.getrandbits(rng.randrange(1, 65)) for _ in range(2_000)] + [0, 1, 2, U64_MAX]:
+        ask(f"isqrt {n}", fixmath.isqrt_u64(n))
+    for _ in range(2_000):
+        v, bits = rng.getrandbits(32), rng.choice((16, 32))
+        ask(f"wrap_signed {v} {bits}", fixmath.wrap_signed(v, bits))
+        s = rng.randrange(-(1 << 40), 1 << 40)
+        errors = ErrorMask()
+        ask(f"sat_i32 {s}", fixmath.sat_i32(s, errors), errors.bits)
+    for _ in range(1_500):
+        params = config.RobotParams(
+            rng.randrange(0, 1 << 25),
+            *(rng.randrange(0, 2_100_000_000) for _ in range(2)),
+            rng.randrange(0, U32_MAX),
+            rng.choice((16, 32, 8)),
+            rng.choice((0, 1, 2, 3)),
+        )
+        if rng.random() < 0.7:  # mostly in range, so that the constants are derived
+            params = dataclasses.replace(
+                params,
+                counts_per_rev=rng.randrange(1, 1 << 24),
+                wheel_radius_left_nm=rng.randrange(1_000_000, 2_000_000_001),
+                wheel_radius_right_nm=rng.randrange(1_000_000, 2_000_000_001),
+                wheelbase_nm=rng.randrange(10_000_000, 4_000_000_001),
+                counter_bits=rng.choice((16, 32)),
+                integrator=rng.choice((0, 1, 2)),
+            )
+        cmd = "config " + " ".join(str(v) for v in dataclasses.astuple(params))
+        reason = config.validate(params)
+        if reason != config.ConfigReason.OK:
+            ask(cmd, int(reason))
+            continue
+        errors = ErrorMask()
+        k = config.derive_constants(params, errors)
+        ask(
+            cmd,
+            0,
+            k.m_per_count_left_q48_m,
+            k.m_per_count_right_q48_m,
+            k.bam64_per_count_left,
+            k.bam64_per_count_right,
+            errors.bits,
+        )
+    for hex_bytes, crc in AUTOSAR_CRC8H2F.items():
+        assert e2e.crc8h2f(bytes.fromhex(hex_bytes)) == crc
+        ask(f"crc {hex_bytes}", crc)
+    for _ in range(500):
+        data = rng.randbytes(rng.randrange(1, 40))
+        ask(f"crc {data.hex()}", e2e.crc8h2f(data))
+    ask("table", *e2e.CRC8H2F_TABLE)
+    for _ in range(40):
+        _e2e_session(rng, ask)
+    return cmds, want
+
+
+def _e2e_session(rng: random.Random, ask: Callable[..., None]) -> None:
+    """A receiver fed protected frames with losses, repeats, jumps, corruption and silence."""
+    data_ids = bytes(rng.getrandbits(8) for _ in range(16))
+    init, per_period = rng.randrange(0, 15), rng.random() < 0.5
+    rx = e2e.E2EReceiver(tuple(data_ids), init, window_per_period=per_period)
+    ask(f"rx {data_ids.hex()} {init} {int(per_period)}", "ok")
+
+    def state(status: e2e.E2EStatus) -> tuple[int, ...]:
+        counts = (rx.count_ok, rx.count_oksomelost, rx.count_repeated, rx.count_wrongsequence)
+        counts += (rx.count_error, rx.count_nonewdata, rx.lost_frames)
+        window = (rx.last_valid_counter, rx.max_delta_counter, rx.lost_data, rx.accepted())
+        return (int(status), *counts, *window)
+
+    counter = rng.randrange(16)
+    for _ in range(300):
+        action = rng.randrange(100)
+        if action < 8:
+            rx.new_period()
+            ask("period", "ok")
+        elif action < 10:
+            rx.reset()
+            ask("reset", "ok")
+        elif action < 18:
+            ask("check -", *state(rx.check(None)))
+        else:
+            frame = bytearray(rng.randbytes(8))
+            counter = (counter + rng.choice((0, 1, 1, 1, 1, 2, 3, 7, 15))) & 15
+            e2e.p02_protect(frame, counter, tuple(data_ids))
+            ask(f"protect {frame.hex()} {counter}", frame.hex().upper())
+            if action < 24:
+                frame[rng.randrange(8)] ^= 1 << rng.randrange(8)
+            elif action < 27:
+                frame = frame[: rng.randrange(8)] or bytearray(b"\x00")
+            ask(f"check {frame.hex()}", *state(rx.check(frame)))
+
+
+@pytest.mark.parametrize("target", ["native", "arm32"])
+def test_every_function_answers_as_the_python_firmware(target: str, tmp_path: Path) -> None:
+    if target == "native":
+        _require("make", "gcc")
+        binary, runner = tmp_path / "probe", []
+    else:
+        _require("make", "arm-linux-gnueabihf-gcc", "qemu-arm")
+        binary, runner = tmp_path / "probe_arm", ["qemu-arm", "-L", "/usr/arm-linux-gnueabihf"]
+    built = _make(f"BUILD={tmp_path}", str(binary))
+    assert built.returncode == 0, built.stderr
+    cmds, want = _probe_script(seed=12)
+    result = subprocess.run(
+        [*runner, str(binary)], input="\n".join(cmds) + "\n", capture_output=True, text=True
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    got = result.stdout.splitlines()
+    assert len(got) == len(want)
+    wrong = [(c, w, g) for c, w, g in zip(cmds, want, got, strict=True) if w != g]
+    assert not wrong, f"{len(wrong)} of {len(cmds)} differ, first: {wrong[:3]}"

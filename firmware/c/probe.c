@@ -1,0 +1,183 @@
+/* A line-oriented probe of the C port's functions, for tests/test_c_port.py: one command a line on
+ * stdin, one answer a line on stdout, so a test can put the same inputs to the Python firmware
+ * and to the C port (natively and under qemu-arm) and compare every answer.
+ *
+ *   sincos A                 -> sin cos               (A: u32 BAM32)
+ *   atan2 Y X                -> angle                 (i64 each)
+ *   chord DH                 -> chord_factor_q62      (i64 BAM64 step)
+ *   muldiv A B C             -> quotient errors       (u64 each)
+ *   mulshr A B S             -> result errors         (i64, i64, shift)
+ *   shr_round V S            -> result
+ *   div_round N D            -> result
+ *   isqrt N                  -> result
+ *   wrap_signed V BITS       -> result                (V: u32)
+ *   sat_i32 V                -> result errors
+ *   config PPV RL RR B BITS I -> reason [m_l m_r k_l k_r errors]
+ *   crc HEX                  -> crc8h2f of the bytes ("-" for none)
+ *   table                    -> the 256 CRC8H2F table entries
+ *   rx IDS_HEX INIT WPP      -> ok                    (a new receiver: 16 data IDs)
+ *   period | reset           -> ok
+ *   check HEX|-              -> status ok oksomelost repeated wrongsequence error nonewdata
+ *                               lost_frames last_valid_counter max_delta_counter lost_data
+ *                               accepted
+ *   protect HEX COUNTER      -> the frame after p02_protect (with the receiver's data IDs)
+ */
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "config.h"
+#include "e2e.h"
+#include "fixmath.h"
+#include "odometry.h"
+#include "trig.h"
+
+#define MAX_BYTES 64
+
+static int64_t arg_i64(void)
+{
+    const char *tok = strtok(NULL, " \t\n");
+    return tok == NULL ? 0 : (int64_t)strtoll(tok, NULL, 10);
+}
+
+static uint64_t arg_u64(void)
+{
+    const char *tok = strtok(NULL, " \t\n");
+    return tok == NULL ? 0u : (uint64_t)strtoull(tok, NULL, 10);
+}
+
+/* Hex bytes into out; returns the count, or -1 for "-" (no frame) or a missing argument. */
+static long arg_bytes(uint8_t *out)
+{
+    const char *tok = strtok(NULL, " \t\n");
+    size_t n = 0u;
+    if (tok == NULL || strcmp(tok, "-") == 0) {
+        return -1;
+    }
+    while (tok[2u * n] != '\0' && tok[2u * n + 1u] != '\0' && n < MAX_BYTES) {
+        char pair[3] = {tok[2u * n], tok[2u * n + 1u], '\0'};
+        out[n] = (uint8_t)strtoul(pair, NULL, 16);
+        ++n;
+    }
+    return (long)n;
+}
+
+static void print_rx(const struct e2e_receiver *rx, enum e2e_status status)
+{
+    printf("%d %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32
+           " %u %u %u %" PRIu32 "\n",
+           (int)status, rx->count_ok, rx->count_oksomelost, rx->count_repeated,
+           rx->count_wrongsequence, rx->count_error, rx->count_nonewdata, rx->lost_frames,
+           (unsigned)rx->last_valid_counter, (unsigned)rx->max_delta_counter,
+           (unsigned)rx->lost_data, e2e_accepted(rx));
+}
+
+int main(void)
+{
+    static char line[1024];
+    static uint8_t data_ids[DATA_ID_COUNT];
+    static uint8_t bytes[MAX_BYTES];
+    struct e2e_receiver rx;
+    e2e_receiver_init(&rx, data_ids, 1u, false);
+    while (fgets(line, sizeof line, stdin) != NULL) {
+        const char *cmd = strtok(line, " \t\n");
+        uint32_t errors = 0u;
+        if (cmd == NULL) {
+            continue;
+        }
+        if (strcmp(cmd, "sincos") == 0) {
+            int32_t s;
+            int32_t c;
+            sincos_q30((uint32_t)arg_u64(), &s, &c);
+            printf("%" PRId32 " %" PRId32 "\n", s, c);
+        } else if (strcmp(cmd, "atan2") == 0) {
+            int64_t y = arg_i64();
+            printf("%" PRId32 "\n", atan2_bam32(y, arg_i64()));
+        } else if (strcmp(cmd, "chord") == 0) {
+            printf("%" PRId64 "\n", chord_factor_q62(arg_i64()));
+        } else if (strcmp(cmd, "muldiv") == 0) {
+            uint64_t a = arg_u64();
+            uint64_t b = arg_u64();
+            uint64_t q = muldiv_round_u64(a, b, arg_u64(), &errors);
+            printf("%" PRIu64 " %" PRIu32 "\n", q, errors);
+        } else if (strcmp(cmd, "mulshr") == 0) {
+            int64_t a = arg_i64();
+            int64_t b = arg_i64();
+            int64_t r = mul_shr_round_i64(a, b, (unsigned)arg_u64(), &errors);
+            printf("%" PRId64 " %" PRIu32 "\n", r, errors);
+        } else if (strcmp(cmd, "shr_round") == 0) {
+            int64_t v = arg_i64();
+            printf("%" PRId64 "\n", shr_round(v, (unsigned)arg_u64()));
+        } else if (strcmp(cmd, "div_round") == 0) {
+            int64_t n = arg_i64();
+            printf("%" PRId64 "\n", div_round_i64(n, arg_i64()));
+        } else if (strcmp(cmd, "isqrt") == 0) {
+            printf("%" PRIu32 "\n", isqrt_u64(arg_u64()));
+        } else if (strcmp(cmd, "wrap_signed") == 0) {
+            uint32_t v = (uint32_t)arg_u64();
+            printf("%" PRId32 "\n", wrap_signed(v, (unsigned)arg_u64()));
+        } else if (strcmp(cmd, "sat_i32") == 0) {
+            int32_t r = sat_i32(arg_i64(), &errors);
+            printf("%" PRId32 " %" PRIu32 "\n", r, errors);
+        } else if (strcmp(cmd, "config") == 0) {
+            struct robot_params p;
+            p.counts_per_rev = (uint32_t)arg_u64();
+            p.wheel_radius_left_nm = (uint32_t)arg_u64();
+            p.wheel_radius_right_nm = (uint32_t)arg_u64();
+            p.wheelbase_nm = (uint32_t)arg_u64();
+            p.counter_bits = (uint32_t)arg_u64();
+            p.integrator = (uint32_t)arg_u64();
+            enum config_reason reason = validate(&p);
+            if (reason != CONFIG_OK) {
+                printf("%d\n", (int)reason);
+                continue;
+            }
+            struct odom_constants k;
+            derive_constants(&p, &errors, &k);
+            printf("0 %" PRId64 " %" PRId64 " %" PRIu64 " %" PRIu64 " %" PRIu32 "\n",
+                   k.m_per_count_left_q48_m, k.m_per_count_right_q48_m, k.bam64_per_count_left,
+                   k.bam64_per_count_right, errors);
+        } else if (strcmp(cmd, "crc") == 0) {
+            long n = arg_bytes(bytes);
+            printf("%u\n", (unsigned)crc8h2f(bytes, n < 0 ? 0u : (size_t)n));
+        } else if (strcmp(cmd, "table") == 0) {
+            for (unsigned b = 0u; b < 256u; ++b) { /* each entry is crc8h2f's step of one byte */
+                uint8_t one = (uint8_t)(b ^ CRC8H2F_INIT);
+                uint8_t crc_of_byte = (uint8_t)(crc8h2f(&one, 1u) ^ CRC8H2F_XOR_OUT);
+                printf("%u%s", (unsigned)crc_of_byte, b == 255u ? "\n" : " ");
+            }
+        } else if (strcmp(cmd, "rx") == 0) {
+            memset(data_ids, 0, sizeof data_ids);
+            arg_bytes(bytes);
+            memcpy(data_ids, bytes, sizeof data_ids);
+            uint8_t init = (uint8_t)arg_u64();
+            e2e_receiver_init(&rx, data_ids, init, arg_u64() != 0u);
+            printf("ok\n");
+        } else if (strcmp(cmd, "period") == 0) {
+            e2e_new_period(&rx);
+            printf("ok\n");
+        } else if (strcmp(cmd, "reset") == 0) {
+            e2e_reset(&rx);
+            printf("ok\n");
+        } else if (strcmp(cmd, "check") == 0) {
+            long n = arg_bytes(bytes);
+            enum e2e_status status =
+                n < 0 ? e2e_check(&rx, NULL, 0u) : e2e_check(&rx, bytes, (size_t)n);
+            print_rx(&rx, status);
+        } else if (strcmp(cmd, "protect") == 0) {
+            long n = arg_bytes(bytes);
+            uint8_t counter = (uint8_t)arg_u64();
+            if (n == (long)FRAME_LEN) {
+                p02_protect(bytes, counter, data_ids);
+            }
+            for (long k = 0; k < n; ++k) {
+                printf("%02X", (unsigned)bytes[k]);
+            }
+            printf("\n");
+        } else {
+            printf("unknown %s\n", cmd);
+        }
+    }
+    return 0;
+}
