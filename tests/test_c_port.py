@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import os
 import random
 import re
@@ -22,9 +23,18 @@ from pathlib import Path
 
 import pytest
 
-from odocan.firmware import config, e2e, fixmath, odometry, trig
+from odocan.firmware import config, e2e, fixmath, nav, odometry, trig
 from odocan.firmware.errors import ErrorMask
-from odocan.firmware.fixmath import I64_MAX, I64_MIN, U32_MAX, U64_MAX, wrap_signed
+from odocan.firmware.fixmath import (
+    I32_MAX,
+    I32_MIN,
+    I64_MAX,
+    I64_MIN,
+    U32_MAX,
+    U64_MAX,
+    wrap_signed,
+)
+from odocan.firmware.frames import NavGoal, NavGoalField, NavState
 from odocan.host.cli.app import main
 from odocan.host.judge import vectors
 from tools import gen_trig_tables
@@ -255,7 +265,113 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
     ask("table", *e2e.CRC8H2F_TABLE)
     for _ in range(40):
         _e2e_session(rng, ask)
+    _nav_functions(rng, ask)
+    for _ in range(12):
+        _nav_session(rng, ask)
     return cmds, want
+
+
+def _nav_functions(rng: random.Random, ask: Callable[..., None]) -> None:
+    """Every pure function of firmware/nav.py on random and extreme inputs."""
+    big = [I64_MIN, I64_MAX, 0, -1, 1 << 51, -(1 << 51)]
+    pairs = [(rng.randrange(I64_MIN, I64_MAX + 1) >> rng.randrange(64), 0) for _ in range(2_000)]
+    pairs = [(dx, rng.randrange(I64_MIN, I64_MAX + 1) >> rng.randrange(64)) for dx, _ in pairs]
+    pairs += list(itertools.product(big, repeat=2))
+    for dx, dy in pairs:
+        errors = ErrorMask()
+        ask(f"dist {dx} {dy}", nav.distance_um(dx, dy, errors), errors.bits)
+        h = rng.getrandbits(32)
+        ask(f"bearing {dx} {dy} {h}", nav.bearing_error_bam32(dx, dy, h))
+    angles = [rng.randrange(I32_MIN, I32_MAX + 1) for _ in range(2_000)] + [I32_MIN, I32_MAX, 0]
+    for a in angles:
+        errors = ErrorMask()
+        ask(f"urad {a}", nav.angle_urad(a, errors), errors.bits)
+        k = rng.choice((nav.K_TURN_MILLI_PER_S, nav.K1_MILLI_PER_S, rng.randrange(0, 5000)))
+        errors = ErrorMask()
+        ask(f"turn {a} {k}", nav.turn_rate_mrad_s(a, k, errors), errors.bits)
+        d = rng.randrange(-(1 << 44), 1 << 44) >> rng.randrange(44)
+        ask(f"speed {d} {k}", nav.speed_mm_s(d, k))
+        for law in ("gtg", "straight"):
+            errors = ErrorMask()
+            fn = nav.go_to_goal_law if law == "gtg" else nav.drive_straight_law
+            ask(f"{law} {abs(d)} {a}", *fn(abs(d), a, errors), errors.bits)
+        v, w = rng.randrange(-600, 601), rng.randrange(-2500, 2501)
+        b = rng.randrange(10_000_000, 4_000_000_001)
+        ask(f"wheels {v} {w} {b}", *nav.wheel_speeds_mm_s(v, w, b))
+        t, p = rng.randrange(-3000, 3001), rng.randrange(-3000, 3001)
+        ask(f"rate {t} {p}", nav.rate_limit(t, p))
+        q = rng.randrange(I32_MIN, I32_MAX + 1) >> rng.randrange(32)
+        ask(f"q40 {q}", nav.q40_from_100um(q))
+    for q in (I32_MIN, I32_MAX, -1, -10_000, -10_001, 9_999, 10_000, 5_000, -5_000):
+        ask(f"q40 {q}", nav.q40_from_100um(q))
+
+
+def _nav_session(rng: random.Random, ask: Callable[..., None]) -> None:
+    """A navigator driving a simple kinematic robot through goals, stops, aborts and junk.
+
+    The test moves the robot from the setpoints (float kinematics, then quantised): both
+    firmwares get the same integer pose each period and must give the same answers."""
+    navigator = nav.Navigator(ErrorMask())
+    ask("nav_new", "ok")
+    x_m = y_m = th_rad = 0.0
+    b_nm = rng.choice((300_000_000, 230_000_000, rng.randrange(100_000_000, 1_000_000_000)))
+    running = True
+
+    def send(field: NavGoalField | int, value: int, go: tuple[int, int, int, int] = (0,) * 4):
+        frame = NavGoal(0, field, value, *go)
+        reason = navigator.request(frame, running)
+        ask(f"nav_req {int(field)} {value} {' '.join(map(str, go))} {int(running)}", int(reason))
+
+    def goal(append: bool) -> None:
+        fields = [(NavGoalField.X, rng.randrange(-10_000, 10_000))]
+        fields += [(NavGoalField.Y, rng.randrange(-10_000, 10_000))]
+        fields += [(NavGoalField.HEADING, rng.randrange(1 << 16))]
+        if rng.random() < 0.05:
+            fields.pop(rng.randrange(3))  # INCOMPLETE (or fine without a heading)
+        for field, value in fields:
+            send(field, value)
+        mode = rng.choice((0, 0, 0, 1, 1, 1, 2))  # 2: OUT_OF_RANGE
+        send(NavGoalField.GO, 0, (mode, int(append), int(rng.random() < 0.3), rng.randrange(256)))
+
+    for _ in range(1_500):
+        roll = rng.randrange(1000)
+        idle = navigator.state in (NavState.IDLE, NavState.STOPPED, NavState.ABORTED)
+        if (idle or (navigator.state == NavState.REACHED and not navigator.depth)) and roll < 200:
+            goal(append=rng.random() < 0.5)
+        elif roll < 8:
+            goal(append=True)
+        elif roll < 9:
+            for _ in range(17):  # a full path, then QUEUE_FULL
+                goal(append=True)
+        elif roll < 11:
+            send(rng.choice((NavGoalField.STOP, 7)), 0)
+        if running and roll >= 997:
+            running = False
+        elif not running and rng.random() < 0.1:
+            running = True
+        x, y = round(x_m * 2**40), round(y_m * 2**40)
+        h = round(th_rad / (2 * math.pi) * 2**64) % 2**64
+        sent = navigator.step(x, y, h, b_nm, running)
+        ask(
+            f"nav_step {x} {y} {h} {b_nm} {int(running)}",
+            int(sent),
+            navigator.left_mm_s,
+            navigator.right_mm_s,
+            int(navigator.state),
+            navigator.goal_id,
+            navigator.depth,
+            navigator.distance_um,
+            navigator.heading_error_bam32,
+            int(navigator.changed),
+            navigator._errors.bits,
+        )
+        navigator.changed = False
+        if running:  # 20 ms of the kinematic robot at the setpoints
+            v_m_s = (navigator.left_mm_s + navigator.right_mm_s) / 2000
+            w_rad_s = (navigator.right_mm_s - navigator.left_mm_s) / (b_nm / 1e6)
+            th_rad += w_rad_s * 0.02
+            x_m += v_m_s * 0.02 * math.cos(th_rad)
+            y_m += v_m_s * 0.02 * math.sin(th_rad)
 
 
 def _e2e_session(rng: random.Random, ask: Callable[..., None]) -> None:
@@ -292,6 +408,16 @@ def _e2e_session(rng: random.Random, ask: Callable[..., None]) -> None:
             elif action < 27:
                 frame = frame[: rng.randrange(8)] or bytearray(b"\x00")
             ask(f"check {frame.hex()}", *state(rx.check(frame)))
+
+
+def test_the_probe_script_reaches_every_state_and_reason() -> None:
+    cmds, want = _probe_script(seed=12)
+    steps = [w.split() for c, w in zip(cmds, want, strict=True) if c.startswith("nav_step")]
+    acks = {int(w) for c, w in zip(cmds, want, strict=True) if c.startswith("nav_req")}
+    assert {int(s[3]) for s in steps} == set(NavState)
+    assert acks >= {0, 1, 2, 3, 4, 6}  # every reason NAV_GOAL can get (INCONSISTENT is config's)
+    checks = {int(w.split()[0]) for c, w in zip(cmds, want, strict=True) if c.startswith("check")}
+    assert checks == {int(s) for s in e2e.E2EStatus}
 
 
 @pytest.mark.parametrize("target", ["native", "arm32"])

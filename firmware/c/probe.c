@@ -21,6 +21,12 @@
  *                               lost_frames last_valid_counter max_delta_counter lost_data
  *                               accepted
  *   protect HEX COUNTER      -> the frame after p02_protect (with the receiver's data IDs)
+ *   dist DX DY | bearing DX DY H32 | urad A | turn E K | speed D K | wheels V W B | gtg D E
+ *   | straight D E | rate T P | q40 V  -> the nav.c function's results (and errors)
+ *   nav_new                  -> ok                    (a new navigator)
+ *   nav_req FIELD VALUE MODE APPEND NO_FINAL GOAL_ID RUNNING -> ack reason
+ *   nav_step X Y H64 B RUNNING -> sent left right state goal_id depth distance_um
+ *                               heading_error changed errors   (then changed is cleared)
  */
 #include <inttypes.h>
 #include <stdio.h>
@@ -30,6 +36,7 @@
 #include "config.h"
 #include "e2e.h"
 #include "fixmath.h"
+#include "nav.h"
 #include "odometry.h"
 #include "trig.h"
 
@@ -80,6 +87,9 @@ int main(void)
     static uint8_t bytes[MAX_BYTES];
     struct e2e_receiver rx;
     e2e_receiver_init(&rx, data_ids, 1u, false);
+    static struct navigator nav;
+    static uint32_t nav_errors;
+    navigator_init(&nav, &nav_errors);
     while (fgets(line, sizeof line, stdin) != NULL) {
         const char *cmd = strtok(line, " \t\n");
         uint32_t errors = 0u;
@@ -175,6 +185,72 @@ int main(void)
                 printf("%02X", (unsigned)bytes[k]);
             }
             printf("\n");
+        } else if (strcmp(cmd, "dist") == 0) {
+            int64_t dx = arg_i64();
+            int64_t d = distance_um(dx, arg_i64(), &errors);
+            printf("%" PRId64 " %" PRIu32 "\n", d, errors);
+        } else if (strcmp(cmd, "bearing") == 0) {
+            int64_t dx = arg_i64();
+            int64_t dy = arg_i64();
+            printf("%" PRId32 "\n", bearing_error_bam32(dx, dy, (uint32_t)arg_u64()));
+        } else if (strcmp(cmd, "urad") == 0) {
+            int32_t r = angle_urad((int32_t)arg_i64(), &errors);
+            printf("%" PRId32 " %" PRIu32 "\n", r, errors);
+        } else if (strcmp(cmd, "turn") == 0) {
+            int32_t e = (int32_t)arg_i64();
+            int32_t w = turn_rate_mrad_s(e, (int32_t)arg_i64(), &errors);
+            printf("%" PRId32 " %" PRIu32 "\n", w, errors);
+        } else if (strcmp(cmd, "speed") == 0) {
+            int64_t d = arg_i64();
+            printf("%" PRId32 "\n", speed_mm_s(d, (int32_t)arg_i64()));
+        } else if (strcmp(cmd, "wheels") == 0) {
+            int32_t v = (int32_t)arg_i64();
+            int32_t w = (int32_t)arg_i64();
+            int32_t left;
+            int32_t right;
+            wheel_speeds_mm_s(v, w, (uint32_t)arg_u64(), &left, &right);
+            printf("%" PRId32 " %" PRId32 "\n", left, right);
+        } else if (strcmp(cmd, "gtg") == 0 || strcmp(cmd, "straight") == 0) {
+            bool gtg = strcmp(cmd, "gtg") == 0;
+            int64_t d = arg_i64();
+            int32_t e = (int32_t)arg_i64();
+            int32_t v;
+            int32_t w;
+            if (gtg) {
+                go_to_goal_law(d, e, &errors, &v, &w);
+            } else {
+                drive_straight_law(d, e, &errors, &v, &w);
+            }
+            printf("%" PRId32 " %" PRId32 " %" PRIu32 "\n", v, w, errors);
+        } else if (strcmp(cmd, "rate") == 0) {
+            int32_t t = (int32_t)arg_i64();
+            printf("%" PRId32 "\n", rate_limit(t, (int32_t)arg_i64()));
+        } else if (strcmp(cmd, "q40") == 0) {
+            printf("%" PRId64 "\n", q40_from_100um((int32_t)arg_i64()));
+        } else if (strcmp(cmd, "nav_new") == 0) {
+            nav_errors = 0u;
+            navigator_init(&nav, &nav_errors);
+            printf("ok\n");
+        } else if (strcmp(cmd, "nav_req") == 0) {
+            struct nav_goal_frame f;
+            f.field = (uint32_t)arg_u64();
+            f.value = arg_i64();
+            f.mode = (uint32_t)arg_u64();
+            f.append = (uint32_t)arg_u64();
+            f.no_final_heading = (uint32_t)arg_u64();
+            f.goal_id = (uint8_t)arg_u64();
+            printf("%d\n", (int)nav_request(&nav, &f, arg_u64() != 0u));
+        } else if (strcmp(cmd, "nav_step") == 0) {
+            int64_t x = arg_i64();
+            int64_t y = arg_i64();
+            uint64_t h = arg_u64();
+            uint32_t b = (uint32_t)arg_u64();
+            bool sent = nav_step(&nav, x, y, h, b, arg_u64() != 0u);
+            printf("%d %" PRId32 " %" PRId32 " %d %u %u %" PRId64 " %" PRId32 " %d %" PRIu32 "\n",
+                   (int)sent, nav.left_mm_s, nav.right_mm_s, (int)nav.state,
+                   (unsigned)nav.goal_id, nav.depth, nav.distance_um, nav.heading_error_bam32,
+                   (int)nav.changed, nav_errors);
+            nav.changed = false;
         } else {
             printf("unknown %s\n", cmd);
         }
