@@ -23,9 +23,11 @@ from pathlib import Path
 
 import pytest
 
-from odocan.firmware import config, e2e, fixmath, nav, odometry, trig
+from odocan.firmware import config, e2e, fixmath, frames, nav, odometry, trig
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.fixmath import (
+    I16_MAX,
+    I16_MIN,
     I32_MAX,
     I32_MIN,
     I64_MAX,
@@ -72,6 +74,32 @@ def test_the_c_trig_tables_are_generated_from_the_same_values() -> None:
     assert isinstance(sin_q62, list)
     assert f"INT64_C(0x{sin_q62[256]:X})" in header  # sin(pi/2) = 2^62, the last knot
     assert f"#define SIN_K3 UINT64_C(0x{values['SIN_K3']:X})" in header
+
+
+def test_the_c_frame_code_is_what_cantools_generates_from_the_dbc(tmp_path: Path) -> None:
+    _require("make", "awk", "sed", "diff")
+    result = _make("dbc-check", f"BUILD={tmp_path}")
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
+    for name in ("odocan.c", "odocan.h"):
+        committed = (C_DIR / "dbc" / name).read_text(encoding="utf-8")
+        assert "float" not in committed and "double" not in committed
+        assert "odocan_nav_goal_unpack" in committed
+
+
+def test_dbc_check_catches_a_stale_frame_file(tmp_path: Path) -> None:
+    _require("make", "awk", "sed", "diff")
+    stale = tmp_path / "c"
+    shutil.copytree(C_DIR, stale, ignore=shutil.ignore_patterns("build"))
+    header = stale / "dbc" / "odocan.h"
+    header.write_text(header.read_text().replace("(0x100u)", "(0x101u)", 1))
+    argv = ["make", "--no-print-directory", "-C", str(stale), f"PYTHON={sys.executable}"]
+    result = subprocess.run(
+        [*argv, f"REPO={ROOT}", "dbc-check", f"BUILD={tmp_path / 'b'}"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode != 0 and "0x101u" in result.stdout
 
 
 @pytest.mark.slow
@@ -268,7 +296,30 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
     _nav_functions(rng, ask)
     for _ in range(12):
         _nav_session(rng, ask)
+    _frames(rng, ask)
     return cmds, want
+
+
+def _frames(rng: random.Random, ask: Callable[..., None]) -> None:
+    """The cantools-generated C (dbc/odocan.c) against firmware/frames.py's own packers."""
+    for _ in range(2_000):
+        counter, left, right = rng.randrange(16), rng.getrandbits(32), rng.getrandbits(32)
+        frame = frames.pack_wheel_encoders(counter, left, right)
+        ask(f"enc_pack {counter} {left} {right}", frame.hex().upper())
+        junk = rng.randbytes(8)
+        for data in (frame, junk):
+            ask(f"enc_unpack {data.hex()}", *frames.unpack_wheel_encoders(data)[:3])
+        speeds = [rng.randrange(I16_MIN, I16_MAX + 1) for _ in range(2)]
+        motor = frames.pack_motor_cmd(counter, *speeds, ErrorMask())
+        ask(f"motor_pack {counter} {speeds[0]} {speeds[1]}", motor.hex().upper())
+        field = rng.choice((0, 1, 2, 14, 15, rng.randrange(16)))
+        if field == NavGoalField.GO:
+            go = (rng.randrange(2), rng.randrange(2), rng.randrange(2), rng.randrange(256))
+            goal = frames.pack_nav_goal_go(counter, *go, ErrorMask())
+        else:
+            value = rng.randrange(I32_MIN, I32_MAX + 1)
+            goal = frames.pack_nav_goal(counter, field, value, ErrorMask())
+        ask(f"goal_unpack {goal.hex()}", *frames.unpack_nav_goal(goal))
 
 
 def _nav_functions(rng: random.Random, ask: Callable[..., None]) -> None:

@@ -27,6 +27,9 @@
  *   nav_req FIELD VALUE MODE APPEND NO_FINAL GOAL_ID RUNNING -> ack reason
  *   nav_step X Y H64 B RUNNING -> sent left right state goal_id depth distance_um
  *                               heading_error changed errors   (then changed is cleared)
+ *   enc_unpack HEX           -> counter left right    (cantools-generated dbc/odocan.c)
+ *   enc_pack COUNTER L R | motor_pack COUNTER L R -> the sealed frame (generated pack + E2E)
+ *   goal_unpack HEX          -> counter field value mode append no_final_heading goal_id
  */
 #include <inttypes.h>
 #include <stdio.h>
@@ -34,6 +37,7 @@
 #include <string.h>
 
 #include "config.h"
+#include "dbc/odocan.h"
 #include "e2e.h"
 #include "fixmath.h"
 #include "nav.h"
@@ -68,6 +72,22 @@ static long arg_bytes(uint8_t *out)
         ++n;
     }
     return (long)n;
+}
+
+/* Profile 2 DataIDList of E2E slot `slot`: DataID[c] = (slot << 4) | c (firmware/frames.py). */
+static void data_ids_of_slot(unsigned slot, uint8_t ids[DATA_ID_COUNT])
+{
+    for (unsigned c = 0u; c < DATA_ID_COUNT; ++c) {
+        ids[c] = (uint8_t)((slot << 4) | c);
+    }
+}
+
+static void print_frame(const uint8_t frame[FRAME_LEN])
+{
+    for (unsigned k = 0u; k < FRAME_LEN; ++k) {
+        printf("%02X", (unsigned)frame[k]);
+    }
+    printf("\n");
 }
 
 static void print_rx(const struct e2e_receiver *rx, enum e2e_status status)
@@ -251,6 +271,64 @@ int main(void)
                    (unsigned)nav.goal_id, nav.depth, nav.distance_um, nav.heading_error_bam32,
                    (int)nav.changed, nav_errors);
             nav.changed = false;
+        } else if (strcmp(cmd, "enc_unpack") == 0) {
+            long n = arg_bytes(bytes);
+            struct odocan_wheel_encoders_t m;
+            odocan_wheel_encoders_unpack(&m, bytes, n < 0 ? 0u : (size_t)n);
+            printf("%u %" PRIu32 " %" PRIu32 "\n", (unsigned)m.counter, m.left_count,
+                   m.right_count);
+        } else if (strcmp(cmd, "enc_pack") == 0 || strcmp(cmd, "motor_pack") == 0) {
+            uint8_t frame[FRAME_LEN];
+            uint8_t ids[DATA_ID_COUNT];
+            uint8_t counter = (uint8_t)(arg_u64() & COUNTER_MASK);
+            int64_t left = arg_i64();
+            int64_t right = arg_i64();
+            if (cmd[0] == 'e') {
+                struct odocan_wheel_encoders_t m;
+                odocan_wheel_encoders_init(&m);
+                m.counter = counter;
+                m.left_count = (uint32_t)left & 0xFFFFFFu;
+                m.right_count = (uint32_t)right & 0xFFFFFFu;
+                odocan_wheel_encoders_pack(frame, &m, sizeof frame);
+                data_ids_of_slot(1u, ids);
+            } else {
+                struct odocan_motor_cmd_t m;
+                odocan_motor_cmd_init(&m);
+                m.counter = counter;
+                m.left_speed = (int16_t)left; /* the caller passes i16 values */
+                m.right_speed = (int16_t)right;
+                odocan_motor_cmd_pack(frame, &m, sizeof frame);
+                data_ids_of_slot(2u, ids);
+            }
+            p02_protect(frame, counter, ids);
+            print_frame(frame);
+        } else if (strcmp(cmd, "goal_unpack") == 0) {
+            long n = arg_bytes(bytes);
+            struct odocan_nav_goal_t m;
+            odocan_nav_goal_unpack(&m, bytes, n < 0 ? 0u : (size_t)n);
+            int64_t value = 0;
+            unsigned mode = 0u;
+            unsigned append = 0u;
+            unsigned no_final = 0u;
+            unsigned goal_id = 0u;
+            switch (m.field) {
+            case ODOCAN_NAV_GOAL_FIELD_X_CHOICE: value = m.x; break;
+            case ODOCAN_NAV_GOAL_FIELD_Y_CHOICE: value = m.y; break;
+            case ODOCAN_NAV_GOAL_FIELD_HEADING_CHOICE: value = m.heading; break;
+            case ODOCAN_NAV_GOAL_FIELD_STOP_CHOICE: break;
+            case ODOCAN_NAV_GOAL_FIELD_GO_CHOICE:
+                mode = m.mode;
+                append = m.append;
+                no_final = m.no_final_heading;
+                goal_id = m.goal_id;
+                break;
+            default: /* a field the DBC does not define: the raw u32 (firmware/frames.py) */
+                value = (int64_t)(((uint32_t)bytes[2] | ((uint32_t)bytes[3] << 8)
+                                   | ((uint32_t)bytes[4] << 16) | ((uint32_t)bytes[5] << 24)));
+                break;
+            }
+            printf("%u %u %" PRId64 " %u %u %u %u\n", (unsigned)m.counter, (unsigned)m.field, value,
+                   mode, append, no_final, goal_id);
         } else {
             printf("unknown %s\n", cmd);
         }
