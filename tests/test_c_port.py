@@ -24,7 +24,8 @@ from pathlib import Path
 import pytest
 
 from odocan.firmware import config, e2e, fixmath, frames, nav, odometry, trig
-from odocan.firmware.errors import ErrorMask
+from odocan.firmware.ecu import OdomEcu
+from odocan.firmware.errors import ErrorFlag, ErrorMask
 from odocan.firmware.fixmath import (
     I16_MAX,
     I16_MIN,
@@ -39,6 +40,8 @@ from odocan.firmware.fixmath import (
 from odocan.firmware.frames import NavGoal, NavGoalField, NavState
 from odocan.host.cli.app import main
 from odocan.host.judge import vectors
+from odocan.sim.rig import firmware_params
+from odocan.sim.robot import load
 from tools import gen_trig_tables
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -297,7 +300,123 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
     for _ in range(12):
         _nav_session(rng, ask)
     _frames(rng, ask)
+    for robot, integrator in (("pmir", "exact"), ("kobuki", "rk2"), ("pmir", "euler")):
+        _ecu_session(rng, ask, robot, integrator)
+    _ecu_session(rng, ask, "kobuki", "exact", counts_per_rev=0)  # FAULT until configured
     return cmds, want
+
+
+class _RecordingTx:
+    """The Python ECU's CAN driver in the ECU sessions: records, or refuses when full."""
+
+    def __init__(self) -> None:
+        self.sent: list[str] = []
+        self.full = False
+
+    def transmit(self, can_id: int, data: bytes) -> bool:
+        if self.full:
+            return False
+        self.sent.append(f"{can_id:X}:{data.hex().upper()}")
+        return True
+
+
+def _ecu_session(
+    rng: random.Random,
+    ask: Callable[..., None],
+    robot: str,
+    integrator: str,
+    counts_per_rev: int | None = None,
+) -> None:
+    """The whole ECU, tick by tick: encoder frames from a kinematic robot driven by the ECU's own
+    MOTOR_CMDs, navigation goals, pose and configuration writes, and faults (lost, repeated,
+    corrupt, short and foreign frames, silence, mailbox overflow, bus-off, a full TX queue)."""
+    params = firmware_params(load(robot), integrator)
+    if counts_per_rev is not None:
+        params = dataclasses.replace(params, counts_per_rev=counts_per_rev)
+    tx = _RecordingTx()
+    ecu = OdomEcu(tx, params)
+    ask(f"ecu_new {' '.join(str(v) for v in dataclasses.astuple(params))}", "ok")
+    m_per_count = 2 * math.pi * params.wheel_radius_left_nm * 1e-9 / (params.counts_per_rev or 500)
+    counts = [0.0, 0.0]
+    speeds = [0, 0]
+    enc_counter = 0
+    host_counters = {frames.NAV_GOAL_ID: 0, frames.ODOM_SET_POSE_ID: 0, frames.ODOM_CONFIG_ID: 0}
+
+    def rx(can_id: int, data: bytes) -> None:
+        ecu.isr_can_rx(can_id, data)
+        ask(f"ecu_rx {can_id} {data.hex() or '-'}", "ok")
+
+    def host(can_id: int, pack: Callable[[int], bytes]) -> None:
+        counter = host_counters[can_id] = (host_counters[can_id] + 1) & 15
+        rx(can_id, pack(counter))
+
+    def goal() -> None:
+        e = ErrorMask()
+        for field, value in ((0, rng.randrange(-3000, 3000)), (1, rng.randrange(-3000, 3000))):
+            host(frames.NAV_GOAL_ID, lambda c, f=field, v=value: frames.pack_nav_goal(c, f, v, e))
+        host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal(c, 2, rng.randrange(1 << 16), e))
+        go = (rng.randrange(2), rng.randrange(2), rng.randrange(2), rng.randrange(256))
+        host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal_go(c, *go, e))
+
+    for tick in range(3_000):
+        roll = rng.randrange(1000)
+        for side in range(2):  # 10 ms of the wheels at the last MOTOR_CMD
+            counts[side] += speeds[side] * 1e-5 / m_per_count
+        wire = [round(c) % (1 << 32) for c in counts]
+        silent = 1200 <= tick < 1220  # the watchdog: DEGRADED, then recovery
+        if not silent and roll >= 20:
+            enc_counter = (enc_counter + 1) & 15
+            frame = frames.pack_wheel_encoders(enc_counter, *wire)
+            if roll < 40:
+                frame = bytes([frame[0] ^ 1]) + frame[1:]  # corrupt
+            rx(frames.WHEEL_ENCODERS_ID, frame)
+            if roll < 50:
+                rx(frames.WHEEL_ENCODERS_ID, frame)  # repeated
+        if roll < 1 or tick % 500 == 1:
+            goal()
+        elif roll < 2 and tick % 3 == 0:
+            host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal(c, 14, 0, ErrorMask()))
+        elif roll < 5:
+            field = rng.choice((0, 1, 2, 15, 15, 7))
+            value = rng.randrange(-100_000, 100_000) if field < 2 else rng.randrange(1 << 16)
+            host(
+                frames.ODOM_SET_POSE_ID,
+                lambda c, f=field, v=value: frames.pack_odom_set_pose(c, f, v, ErrorMask()),
+            )
+        elif roll < 18:
+            param = rng.choice((0, 0, 1, 2, 3, 4, 5, 15, 15, 15, 9))
+            value = {
+                0: rng.choice((500, 2578, 0, 500)),
+                4: rng.choice((16, 32)),
+                5: rng.randrange(3),
+            }
+            value.update({1: 75_000_000, 2: rng.choice((75_000_000, 35_000_000)), 3: 300_000_000})
+            v = value.get(param, 0)
+            host(
+                frames.ODOM_CONFIG_ID,
+                lambda c, p=param, v=v: frames.pack_odom_config(c, p, v, ErrorMask()),
+            )
+        elif roll < 20:
+            rx(rng.choice((0x123, frames.ODOM_POSE_X_ID)), rng.randbytes(8))  # not for this node
+        elif roll < 21:
+            rx(frames.NAV_GOAL_ID, rng.randbytes(rng.randrange(8)))  # short
+        elif roll < 22:
+            for _ in range(40):  # a burst: the mailbox overflows
+                rx(0x555, bytes(8))
+        elif roll < 23:
+            ecu.isr_bus_state(rng.random() < 0.5)
+            ask(f"ecu_bus {int(ecu.errors.has(ErrorFlag.BUS_OFF))}", "ok")
+        elif roll < 25 or (tx.full and roll < 500):
+            tx.full = not tx.full  # a full TX queue for a tick or two
+            ask(f"ecu_txfull {int(tx.full)}", "ok")
+        tx.sent.clear()
+        ecu.tick()
+        ask("ecu_tick", int(ecu.state), ecu.errors.bits, ecu.tx_dropped, *tx.sent)
+        for entry in tx.sent:
+            can_id, data = entry.split(":")
+            if int(can_id, 16) == frames.MOTOR_CMD_ID:
+                cmd = frames.unpack_motor_cmd(bytes.fromhex(data))
+                speeds = [cmd.left_speed_mm_s, cmd.right_speed_mm_s]
 
 
 def _frames(rng: random.Random, ask: Callable[..., None]) -> None:
@@ -469,6 +588,11 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
     assert acks >= {0, 1, 2, 3, 4, 6}  # every reason NAV_GOAL can get (INCONSISTENT is config's)
     checks = {int(w.split()[0]) for c, w in zip(cmds, want, strict=True) if c.startswith("check")}
     assert checks == {int(s) for s in e2e.E2EStatus}
+    ticks = [w.split() for c, w in zip(cmds, want, strict=True) if c == "ecu_tick"]
+    assert {int(t[0]) for t in ticks} == {0, 1, 2, 3}  # INIT, OK, DEGRADED, FAULT
+    sent = {f.split(":")[0] for t in ticks for f in t[3:]}
+    assert sent == {"110", "200", "201", "202", "281", "302", "380"}
+    assert max(int(t[2]) for t in ticks) > 0, "the TX queue refused frames"
 
 
 @pytest.mark.parametrize("target", ["native", "arm32"])

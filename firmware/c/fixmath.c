@@ -5,6 +5,13 @@
  */
 #include "fixmath.h"
 
+/* (int16_t)(uint16_t)value: two's-complement reinterpretation of the low 16 bits. */
+int16_t wrap_i16(int64_t value)
+{
+    uint32_t bits = (uint32_t)((uint64_t)value & 0xFFFFu);
+    return (int16_t)(bits >= 0x8000u ? (int32_t)bits - 0x10000 : (int32_t)bits);
+}
+
 /* (int32_t)(uint32_t)value: two's-complement reinterpretation of the low 32 bits. */
 int32_t wrap_i32(int64_t value)
 {

@@ -172,6 +172,7 @@ static inline int64_t wide_sat_i64(wide128_t value, uint32_t *errors)
     return (value.hi >> 63) != 0u ? INT64_MIN : INT64_MAX;
 }
 
+int16_t wrap_i16(int64_t value);
 int32_t wrap_i32(int64_t value);
 int32_t wrap_signed(uint32_t value, unsigned bits);
 int32_t sat_i32(int64_t value, uint32_t *errors);

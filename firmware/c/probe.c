@@ -30,6 +30,10 @@
  *   enc_unpack HEX           -> counter left right    (cantools-generated dbc/odocan.c)
  *   enc_pack COUNTER L R | motor_pack COUNTER L R -> the sealed frame (generated pack + E2E)
  *   goal_unpack HEX          -> counter field value mode append no_final_heading goal_id
+ *   ecu_new PPV RL RR B BITS I -> ok                  (a new ECU)
+ *   ecu_rx ID HEX | ecu_bus OFF | ecu_txfull FULL -> ok (a frame into the ISR, bus state, the
+ *                                                        driver refusing frames or not)
+ *   ecu_tick                 -> state errors tx_dropped then every frame sent, ID:HEX
  */
 #include <inttypes.h>
 #include <stdio.h>
@@ -39,6 +43,7 @@
 #include "config.h"
 #include "dbc/odocan.h"
 #include "e2e.h"
+#include "ecu.h"
 #include "fixmath.h"
 #include "nav.h"
 #include "odometry.h"
@@ -90,6 +95,28 @@ static void print_frame(const uint8_t frame[FRAME_LEN])
     printf("\n");
 }
 
+/* The probe's CAN driver: collects the frames of one tick, or refuses them when full. */
+struct tx_log {
+    bool full;
+    char text[4096];
+    size_t used;
+};
+
+static bool probe_transmit(void *ctx, uint32_t can_id, const uint8_t data[8])
+{
+    struct tx_log *log = ctx;
+    if (log->full) {
+        return false;
+    }
+    int n = snprintf(log->text + log->used, sizeof log->text - log->used,
+                     " %" PRIX32 ":%02X%02X%02X%02X%02X%02X%02X%02X", can_id, data[0], data[1],
+                     data[2], data[3], data[4], data[5], data[6], data[7]);
+    if (n > 0 && log->used + (size_t)n < sizeof log->text) {
+        log->used += (size_t)n;
+    }
+    return true;
+}
+
 static void print_rx(const struct e2e_receiver *rx, enum e2e_status status)
 {
     printf("%d %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32
@@ -107,6 +134,10 @@ int main(void)
     static uint8_t bytes[MAX_BYTES];
     struct e2e_receiver rx;
     e2e_receiver_init(&rx, data_ids, 1u, false);
+    static struct odom_ecu ecu;
+    static struct tx_log tx_log;
+    static struct robot_params ecu_params = {500u, 75000000u, 75000000u, 300000000u, 16u, 2u};
+    ecu_init(&ecu, probe_transmit, &tx_log, &ecu_params);
     static struct navigator nav;
     static uint32_t nav_errors;
     navigator_init(&nav, &nav_errors);
@@ -329,6 +360,33 @@ int main(void)
             }
             printf("%u %u %" PRId64 " %u %u %u %u\n", (unsigned)m.counter, (unsigned)m.field, value,
                    mode, append, no_final, goal_id);
+        } else if (strcmp(cmd, "ecu_new") == 0) {
+            ecu_params.counts_per_rev = (uint32_t)arg_u64();
+            ecu_params.wheel_radius_left_nm = (uint32_t)arg_u64();
+            ecu_params.wheel_radius_right_nm = (uint32_t)arg_u64();
+            ecu_params.wheelbase_nm = (uint32_t)arg_u64();
+            ecu_params.counter_bits = (uint32_t)arg_u64();
+            ecu_params.integrator = (uint32_t)arg_u64();
+            tx_log.full = false;
+            ecu_init(&ecu, probe_transmit, &tx_log, &ecu_params);
+            printf("ok\n");
+        } else if (strcmp(cmd, "ecu_rx") == 0) {
+            uint32_t can_id = (uint32_t)arg_u64();
+            long n = arg_bytes(bytes);
+            ecu_isr_can_rx(&ecu, can_id, bytes, n < 0 ? 0u : (size_t)n);
+            printf("ok\n");
+        } else if (strcmp(cmd, "ecu_bus") == 0) {
+            ecu_isr_bus_state(&ecu, arg_u64() != 0u);
+            printf("ok\n");
+        } else if (strcmp(cmd, "ecu_txfull") == 0) {
+            tx_log.full = arg_u64() != 0u;
+            printf("ok\n");
+        } else if (strcmp(cmd, "ecu_tick") == 0) {
+            tx_log.used = 0u;
+            tx_log.text[0] = '\0';
+            ecu_tick(&ecu);
+            printf("%d %" PRIu32 " %" PRIu32 "%s\n", (int)ecu.state, ecu.errors, ecu.tx_dropped,
+                   tx_log.text);
         } else {
             printf("unknown %s\n", cmd);
         }
