@@ -30,7 +30,9 @@ static bool mailbox_put(struct mailbox *mb, uint32_t can_id, const uint8_t *data
     unsigned slot = (mb->head + mb->count) % MAILBOX_SLOTS;
     mb->ids[slot] = can_id;
     memset(mb->data[slot], 0, 8u);
-    memcpy(mb->data[slot], data, len < 8u ? len : 8u);
+    if (len > 0u) { /* memcpy from a NULL pointer is undefined even for 0 bytes */
+        memcpy(mb->data[slot], data, len < 8u ? len : 8u);
+    }
     mb->len[slot] = len;
     mb->count++;
     return true;
