@@ -1,9 +1,11 @@
 """Generate ``firmware/trig_tables.py``: the integer constants of ``firmware/trig.py``.
 
 A host-side build step: ``python tools/gen_trig_tables.py`` rewrites the file, ``--check`` only
-compares (exit 1 when it differs). Every constant is an exact rational function of pi, evaluated
-here with :mod:`decimal` at ``PREC_DIGITS`` significant digits (float64 holds 53 bits, too few
-for a Q62 table) and then rounded to the nearest integer. ``_round_checked`` refuses a value that
+compares (exit 1 when it differs). ``--c`` does the same for the C port's header,
+``firmware/c/trig_tables.h``, from the same values (``--c --check`` compares it). Every
+constant is an exact rational function of pi, evaluated here with :mod:`decimal` at
+``PREC_DIGITS`` significant digits (float64 holds 53 bits, too few for a Q62 table) and then
+rounded to the nearest integer. ``_round_checked`` refuses a value that
 lies within ``1e-40`` of a rounding boundary, so every entry is provably correctly rounded.
 """
 
@@ -17,6 +19,9 @@ from pathlib import Path
 
 PREC_DIGITS = 100
 TARGET = Path(__file__).resolve().parent.parent / "firmware" / "trig_tables.py"
+TARGET_C = Path(__file__).resolve().parent.parent / "firmware" / "c" / "trig_tables.h"
+# The C type of each table (the scalars are u64 constants, the shifts unsigned ints).
+_C_ARRAY_TYPES: dict[str, str] = {"SIN_Q62": "int64_t", "ATAN_BAM48": "uint64_t"}
 
 SIN_KNOTS = 256  # quarter wave in 256 steps: knot spacing 2^22 BAM32 LSB
 ATAN_KNOTS = 256  # atan(k / 256) for k = 0..256
@@ -163,13 +168,54 @@ def render(values_fn: Callable[[], dict[str, int | list[int]]] = compute) -> str
     return "\n".join(lines)
 
 
+def _c_lines(name: str, value: int | list[int]) -> Iterator[str]:
+    """The C lines that define ``name``: a ``#define`` or a ``static const`` array, 3 a line."""
+    yield f"/* {_DOCS[name]} */"
+    if isinstance(value, int):
+        literal = f"{value}u" if name.endswith("_SHIFT") else f"UINT64_C(0x{value:X})"
+        yield f"#define {name} {literal}"
+        return
+    c_type = _C_ARRAY_TYPES[name]
+    macro = c_type.upper()[:-2]  # int64_t -> INT64: the INT64_C / UINT64_C literal macro
+    yield f"static const {c_type} {name}[{len(value)}] = {{"
+    for start in range(0, len(value), 3):
+        yield "    " + " ".join(f"{macro}_C(0x{v:X})," for v in value[start : start + 3])
+    yield "};"
+
+
+def render_c(values_fn: Callable[[], dict[str, int | list[int]]] = compute) -> str:
+    """The whole text of ``firmware/c/trig_tables.h`` (the same values as ``render``)."""
+    lines = [
+        "/* Integer constants of firmware/c/trig.c: GENERATED, do not edit.",
+        " *",
+        " * Written by `python tools/gen_trig_tables.py --c` from the same values as",
+        " * firmware/trig_tables.py (decimal at "
+        f"{PREC_DIGITS} digits, every entry correctly rounded).",
+        " * static const: the tables live in flash. Included by trig.c only.",
+        " */",
+        "#ifndef ODOCAN_TRIG_TABLES_H",
+        "#define ODOCAN_TRIG_TABLES_H",
+        "",
+        "#include <stdint.h>",
+        "",
+    ]
+    for name, value in values_fn().items():
+        lines.extend(_c_lines(name, value))
+        lines.append("")
+    lines.append("#endif")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Write (or with ``--check`` compare) the generated module; returns the exit code."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--check", action="store_true", help="compare only; exit 1 if it differs")
-    parser.add_argument("--output", type=Path, default=TARGET, help="default: %(default)s")
+    parser.add_argument("--c", action="store_true", help="the C header firmware/c/trig_tables.h")
+    parser.add_argument("--output", type=Path, help=f"default: {TARGET} (with --c: {TARGET_C})")
     args = parser.parse_args(argv)
-    text = render()
+    text = render_c() if args.c else render()
+    if args.output is None:
+        args.output = TARGET_C if args.c else TARGET
     if args.check:
         same = args.output.exists() and args.output.read_text(encoding="utf-8") == text
         print(f"{args.output}: {'up to date' if same else 'DIFFERS'}")

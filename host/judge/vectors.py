@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import json
+import random
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -69,6 +70,43 @@ def edge_cases(counter_bits: int) -> list[Case]:
         Case("straight", "equal wheel steps", straight),
         Case("big_steps", "large per-step deltas (long chord-factor series)", big),
     ]
+
+
+def random_case(counter_bits: int, steps: int, seed: int) -> Case:
+    """``steps`` random counter-delta pairs after a random start: a long set for a C port.
+
+    Mostly driving (deltas up to 300 counts, the two wheels within 40 of each other), with fast
+    arbitrary curvature, exact straights and spins, standstill, and a few extreme deltas up to
+    half the counter range; the counters wrap at ``2^counter_bits`` many times.
+    """
+    rng = random.Random(seed)
+    top = 1 << counter_bits
+    extreme = (top >> 1) - 1
+    left, right = rng.randrange(top), rng.randrange(top)
+    counts = [(left, right)]
+    for _ in range(steps):
+        kind = rng.randrange(100)
+        if kind < 80:  # driving: both wheels alike
+            d_left = rng.randint(-300, 300)
+            d_right = d_left + rng.randint(-40, 40)
+        elif kind < 88:  # fast, any curvature
+            d_left, d_right = rng.randint(-3000, 3000), rng.randint(-3000, 3000)
+        elif kind < 92:  # straight
+            d_left = d_right = rng.randint(-500, 500)
+        elif kind < 96:  # spin in place
+            d_left = rng.randint(-500, 500)
+            d_right = -d_left
+        elif kind < 99:  # standstill or a single count
+            d_left, d_right = rng.randint(-1, 1), rng.randint(-1, 1)
+        else:  # extreme: up to half the counter range
+            d_left, d_right = rng.randint(-extreme, extreme), rng.randint(-extreme, extreme)
+        left, right = (left + d_left) % top, (right + d_right) % top
+        counts.append((left, right))
+    return Case(
+        f"random_steps_{seed}",
+        f"{steps} random counter steps, seed {seed} (wraps, straights, spins, extremes)",
+        counts,
+    )
 
 
 def run_case(params: RobotParams, case: Case) -> list[dict[str, int]]:

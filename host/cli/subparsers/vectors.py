@@ -6,7 +6,7 @@ import argparse
 import os
 from pathlib import Path
 
-from odocan.host.cli.options import add_robot_argument, add_seed_argument, float_in
+from odocan.host.cli.options import add_robot_argument, add_seed_argument, float_in, int_in
 from odocan.host.judge import vectors
 from odocan.host.report.outputs import OutputError
 from odocan.sim.exceptions import ConfigurationError
@@ -15,6 +15,7 @@ from odocan.sim.robot import load
 from odocan.sim.scenarios import SCENARIOS
 
 VECTORS_MAX_S = 3600.0  # scenario seconds: 360 000 rows, tens of MB of CSV
+RANDOM_STEPS_MAX = 10_000_000  # a long random case for a C port: about 1 GB of CSV at the top
 
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -40,6 +41,13 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     )
     add_seed_argument(parser)
     parser.add_argument(
+        "--random-steps",
+        type=int_in(0, RANDOM_STEPS_MAX),
+        default=0,
+        metavar="N",
+        help="add a case of N random counter steps (a long set for a C port; default: none)",
+    )
+    parser.add_argument(
         "--out", type=Path, required=True, metavar="DIR", help="output directory (required)"
     )
     parser.add_argument(
@@ -60,6 +68,8 @@ def _do_vectors(args: argparse.Namespace) -> int:
     robot = load(args.robot)
     cases = [vectors.scenario_case(robot, args.scenario, args.duration, args.seed)]
     cases += vectors.edge_cases(robot.counter_bits)
+    if args.random_steps:
+        cases.append(vectors.random_case(robot.counter_bits, args.random_steps, args.seed))
     try:
         paths = vectors.write(vectors.build(robot, args.integrator, cases), args.out)
     except OSError as exc:

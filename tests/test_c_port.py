@@ -1,0 +1,616 @@
+"""The C port (firmware/c): bit-exact against the golden vectors, natively and on 32-bit ARM.
+
+``make -C firmware/c check`` builds the port natively with UBSan + ASan and as a static 32-bit ARM
+Linux binary run under qemu-arm, and replays over 10^6 steps of vectors (both shipped robot
+profiles, the three integrators, counter wraps; plus a 32-bit-counter corner that saturates) from
+the JSON and the CSV files. The tests skip with the reason
+when a tool is missing, except under ``CI=true``, where a missing tool is a failure.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import os
+import random
+import re
+import shutil
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from odocan.firmware import config, e2e, fixmath, frames, nav, odometry, trig
+from odocan.firmware.ecu import OdomEcu
+from odocan.firmware.errors import ErrorFlag, ErrorMask
+from odocan.firmware.fixmath import (
+    I16_MAX,
+    I16_MIN,
+    I32_MAX,
+    I32_MIN,
+    I64_MAX,
+    I64_MIN,
+    U32_MAX,
+    U64_MAX,
+    wrap_signed,
+)
+from odocan.firmware.frames import NavGoal, NavGoalField, NavState
+from odocan.host.cli.app import main
+from odocan.host.judge import vectors
+from odocan.sim.rig import firmware_params
+from odocan.sim.robot import load
+from tools import gen_trig_tables
+
+ROOT = Path(__file__).resolve().parent.parent
+C_DIR = ROOT / "firmware" / "c"
+CROSS_PACKAGES = "gcc-arm-linux-gnueabihf libc6-dev-armhf-cross qemu-user"
+
+
+def _require(*tools: str) -> None:
+    """Skip (fail under CI=true) unless every tool is on PATH."""
+    missing = [tool for tool in tools if shutil.which(tool) is None]
+    if not missing:
+        return
+    reason = f"the C port needs {', '.join(missing)} (apt-get install gcc make {CROSS_PACKAGES})"
+    if os.environ.get("CI") == "true":
+        pytest.fail(f"CI=true: {reason}")
+    pytest.skip(reason)
+
+
+def _make(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        ["make", "--no-print-directory", "-C", str(C_DIR), f"PYTHON={sys.executable}", *args],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+
+
+def test_the_c_trig_tables_are_generated_from_the_same_values() -> None:
+    assert gen_trig_tables.render_c() == gen_trig_tables.TARGET_C.read_text(encoding="utf-8")
+    values = gen_trig_tables.compute()
+    header = gen_trig_tables.TARGET_C.read_text(encoding="utf-8")
+    sin_q62 = values["SIN_Q62"]
+    assert isinstance(sin_q62, list)
+    assert f"INT64_C(0x{sin_q62[256]:X})" in header  # sin(pi/2) = 2^62, the last knot
+    assert f"#define SIN_K3 UINT64_C(0x{values['SIN_K3']:X})" in header
+
+
+def test_the_c_frame_code_is_what_cantools_generates_from_the_dbc(tmp_path: Path) -> None:
+    _require("make", "awk", "sed", "diff")
+    result = _make("dbc-check", f"BUILD={tmp_path}")
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
+    for name in ("odocan.c", "odocan.h"):
+        committed = (C_DIR / "dbc" / name).read_text(encoding="utf-8")
+        assert "float" not in committed and "double" not in committed
+        assert "odocan_nav_goal_unpack" in committed
+
+
+def test_dbc_check_catches_a_stale_frame_file(tmp_path: Path) -> None:
+    _require("make", "awk", "sed", "diff")
+    stale = tmp_path / "c"
+    shutil.copytree(C_DIR, stale, ignore=shutil.ignore_patterns("build"))
+    header = stale / "dbc" / "odocan.h"
+    header.write_text(header.read_text().replace("(0x100u)", "(0x101u)", 1))
+    argv = ["make", "--no-print-directory", "-C", str(stale), f"PYTHON={sys.executable}"]
+    result = subprocess.run(
+        [*argv, f"REPO={ROOT}", "dbc-check", f"BUILD={tmp_path / 'b'}"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode != 0 and "0x101u" in result.stdout
+
+
+@pytest.mark.slow
+def test_make_check_is_bit_exact_natively_and_on_arm32(tmp_path: Path) -> None:
+    _require("make", "gcc", "arm-linux-gnueabihf-gcc", "qemu-arm")
+    result = _make("check", f"BUILD={tmp_path / 'build'}", f"VECTORS={tmp_path / 'vectors'}")
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    for target in ("native", "arm32"):
+        lines = re.findall(
+            rf"^{target} (\w+): vectors_check: (\d+) steps from JSON, (\d+) from CSV, "
+            r"(\d+) mismatches$",
+            result.stdout,
+            re.MULTILINE,
+        )
+        robots = ("pmir", "kobuki", "extreme32")
+        sets = {name for name, *_ in lines}
+        assert sets == {f"{r}_{i}" for r in robots for i in ("euler", "rk2", "exact")}
+        assert all(json == csv and mismatches == "0" for _, json, csv, mismatches in lines)
+        shipped = [int(csv) for name, _, csv, _ in lines if not name.startswith("extreme32")]
+        assert sum(shipped) >= 1_000_000
+
+
+def test_one_changed_integer_fails_the_c_check(tmp_path: Path) -> None:
+    _require("make", "gcc")
+    build = tmp_path / "build"
+    assert _make(f"BUILD={build}", f"{build}/vectors_check").returncode == 0
+    out = tmp_path / "v"
+    argv = [sys.executable, "-m", "odocan", "vectors", "--duration", "1", "--out", str(out)]
+    argv += ["--random-steps", "300", "--integrator", "rk2"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    subprocess.run(argv, check=True, capture_output=True, env=env)
+    checker = [str(build / "vectors_check"), str(out / "vectors.json")]
+    good = subprocess.run([*checker, str(out / "random_steps_0.csv")], capture_output=True)
+    assert good.returncode == 0, good.stderr
+
+    lines = (out / "random_steps_0.csv").read_text().splitlines()
+    fields = lines[150].split(",")
+    fields[5] = str(int(fields[5]) ^ 1)  # heading_bam64 of step 149, its lowest bit
+    lines[150] = ",".join(fields)
+    bad_csv = tmp_path / "bad.csv"
+    bad_csv.write_text("\n".join(lines) + "\n")
+    bad = subprocess.run([*checker, str(bad_csv)], capture_output=True, text=True)
+    assert bad.returncode == 1
+    assert "step 149: heading_bam64" in bad.stderr
+
+    text = (out / "vectors.json").read_text()
+    x = re.findall(r'"x_q40_m": (-?\d+)', text)[200]
+    bad_json = tmp_path / "bad.json"
+    bad_json.write_text(text.replace(f'"x_q40_m": {x},', f'"x_q40_m": {int(x) + 1},', 1))
+    bad = subprocess.run([str(build / "vectors_check"), str(bad_json)], capture_output=True)
+    assert bad.returncode == 1
+
+    wrong_radius = text.replace(
+        '"wheel_radius_left_nm": 75000000', '"wheel_radius_left_nm": 75000001'
+    )
+    bad_json.write_text(wrong_radius)
+    bad = subprocess.run(
+        [str(build / "vectors_check"), str(bad_json)], capture_output=True, text=True
+    )
+    assert bad.returncode == 1
+    assert "derive_constants differs" in bad.stderr
+
+
+def test_the_long_random_case_wraps_spins_and_is_deterministic() -> None:
+    case = vectors.random_case(16, 3000, seed=4)
+    assert case.counts == vectors.random_case(16, 3000, seed=4).counts
+    assert len(case.counts) == 3001 and all(0 <= c < 1 << 16 for pair in case.counts for c in pair)
+    deltas = [
+        (wrap_signed(b[0] - a[0], 16), wrap_signed(b[1] - a[1], 16))
+        for a, b in itertools.pairwise(case.counts)
+    ]
+    pairs = list(itertools.pairwise(case.counts))
+    assert any(b[0] < a[0] and dl > 0 for (a, b), (dl, _) in zip(pairs, deltas, strict=True))
+    assert any(dl == -dr != 0 for dl, dr in deltas), "a spin in place"
+    assert any(dl == dr != 0 for dl, dr in deltas), "a straight step"
+    assert max(abs(d) for pair in deltas for d in pair) > 10_000, "an extreme step"
+
+
+def test_random_steps_option(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "v"
+    assert main(["vectors", "--duration", "0.5", "--random-steps", "50", "--out", str(out)]) == 0
+    assert len(vectors.read_csv(out / "random_steps_0.csv")) == 51
+    assert main(["vectors", "--random-steps", "-1", "--out", str(out)]) == 2
+    assert capsys.readouterr().err.startswith("error: --random-steps must be >= 0")
+
+
+# CRC8H2F test values of the AUTOSAR SWS CRC Library (an independent reference for both sides).
+AUTOSAR_CRC8H2F = {
+    "00000000": 0x12,
+    "F20183": 0xC2,
+    "0FAA0055": 0xC6,
+    "00FF5511": 0x77,
+    "332255AABBCCDDEEFF": 0x11,
+    "926B55": 0x33,
+    "FFFFFFFF": 0x6C,
+    "313233343536373839": 0xDF,  # "123456789": the check value
+}
+
+
+def _probe_script(seed: int) -> tuple[list[str], list[str]]:
+    """Probe commands and the Python firmware's answers (see firmware/c/probe.c)."""
+    rng = random.Random(seed)
+    cmds: list[str] = []
+    want: list[str] = []
+
+    def ask(cmd: str, *answer: object) -> None:
+        cmds.append(cmd)
+        want.append(" ".join(str(a) for a in answer))
+
+    angles = [(q << 30) + (k << 22) + o for q in range(4) for k in range(257) for o in (-3, 0, 3)]
+    angles += [(1 << 21) * k + t for k in range(2048) for t in (-1, 0, 1)]  # knot ties
+    angles += [rng.getrandbits(32) for _ in range(20_000)]
+    for a in angles:
+        ask(f"sincos {a & U32_MAX}", *trig.sincos_q30(a & U32_MAX))
+    specials = [0, 1, -1, I64_MIN, I64_MAX, 1 << 46, (1 << 47) - 1]
+    for _ in range(6_000):
+        bits = rng.randrange(1, 64)
+        y, x = (rng.randrange(-(1 << bits), 1 << bits) for _ in range(2))
+        ask(f"atan2 {y} {x}", trig.atan2_bam32(y, x))
+    for y, x in itertools.product(specials + [-s for s in specials[1:]], repeat=2):
+        ask(f"atan2 {y} {x}", trig.atan2_bam32(y, x))
+    limits = [1 << 39, 1 << 57]  # the chord factor's branch edges, as u_q60
+    dheads = [rng.randrange(I64_MIN, I64_MAX + 1) for _ in range(3_000)]
+    dheads += [rng.randrange(-(1 << 45), 1 << 45) for _ in range(1_000)]
+    dheads += [I64_MIN, I64_MAX, 0, 1, -1]
+    dheads += [((lim << 65) // odometry.TWO_PI_Q60) + d for lim in limits for d in range(-3, 4)]
+    for dh in dheads:
+        ask(f"chord {dh}", odometry.chord_factor_q62(dh))
+    for _ in range(3_000):
+        a, b, c = (rng.getrandbits(rng.randrange(1, 65)) for _ in range(3))
+        errors = ErrorMask()
+        ask(f"muldiv {a} {b} {c}", fixmath.muldiv_round_u64(a, b, c, errors), errors.bits)
+    for _ in range(3_000):
+        a, b = (rng.randrange(I64_MIN, I64_MAX + 1) >> rng.randrange(64) for _ in range(2))
+        shift = rng.randrange(1, 128)
+        errors = ErrorMask()
+        ask(f"mulshr {a} {b} {shift}", fixmath.mul_shr_round_i64(a, b, shift, errors), errors.bits)
+    for v in [rng.randrange(I64_MIN, I64_MAX + 1) for _ in range(2_000)] + [I64_MIN, I64_MAX]:
+        shift = rng.randrange(1, 64)
+        ask(f"shr_round {v} {shift}", fixmath.shr_round(v, shift))
+        d = rng.choice([1, 2, 3, 10, rng.randrange(1, I64_MAX)])
+        ask(f"div_round {v} {d}", fixmath.div_round_i64(v, d))
+    for n in [rng.getrandbits(rng.randrange(1, 65)) for _ in range(2_000)] + [0, 1, 2, U64_MAX]:
+        ask(f"isqrt {n}", fixmath.isqrt_u64(n))
+    for _ in range(2_000):
+        v, bits = rng.getrandbits(32), rng.choice((16, 32))
+        ask(f"wrap_signed {v} {bits}", fixmath.wrap_signed(v, bits))
+        s = rng.randrange(-(1 << 40), 1 << 40)
+        errors = ErrorMask()
+        ask(f"sat_i32 {s}", fixmath.sat_i32(s, errors), errors.bits)
+    for _ in range(1_500):
+        params = config.RobotParams(
+            rng.randrange(0, 1 << 25),
+            *(rng.randrange(0, 2_100_000_000) for _ in range(2)),
+            rng.randrange(0, U32_MAX),
+            rng.choice((16, 32, 8)),
+            rng.choice((0, 1, 2, 3)),
+        )
+        if rng.random() < 0.7:  # mostly in range, so that the constants are derived
+            params = dataclasses.replace(
+                params,
+                counts_per_rev=rng.randrange(1, 1 << 24),
+                wheel_radius_left_nm=rng.randrange(1_000_000, 2_000_000_001),
+                wheel_radius_right_nm=rng.randrange(1_000_000, 2_000_000_001),
+                wheelbase_nm=rng.randrange(10_000_000, 4_000_000_001),
+                counter_bits=rng.choice((16, 32)),
+                integrator=rng.choice((0, 1, 2)),
+            )
+        cmd = "config " + " ".join(str(v) for v in dataclasses.astuple(params))
+        reason = config.validate(params)
+        if reason != config.ConfigReason.OK:
+            ask(cmd, int(reason))
+            continue
+        errors = ErrorMask()
+        k = config.derive_constants(params, errors)
+        ask(
+            cmd,
+            0,
+            k.m_per_count_left_q48_m,
+            k.m_per_count_right_q48_m,
+            k.bam64_per_count_left,
+            k.bam64_per_count_right,
+            errors.bits,
+        )
+    for hex_bytes, crc in AUTOSAR_CRC8H2F.items():
+        assert e2e.crc8h2f(bytes.fromhex(hex_bytes)) == crc
+        ask(f"crc {hex_bytes}", crc)
+    for _ in range(500):
+        data = rng.randbytes(rng.randrange(1, 40))
+        ask(f"crc {data.hex()}", e2e.crc8h2f(data))
+    ask("table", *e2e.CRC8H2F_TABLE)
+    for _ in range(40):
+        _e2e_session(rng, ask)
+    _nav_functions(rng, ask)
+    for _ in range(12):
+        _nav_session(rng, ask)
+    _frames(rng, ask)
+    for robot, integrator in (("pmir", "exact"), ("kobuki", "rk2"), ("pmir", "euler")):
+        _ecu_session(rng, ask, robot, integrator)
+    _ecu_session(rng, ask, "kobuki", "exact", counts_per_rev=0)  # FAULT until configured
+    return cmds, want
+
+
+class _RecordingTx:
+    """The Python ECU's CAN driver in the ECU sessions: records, or refuses when full."""
+
+    def __init__(self) -> None:
+        self.sent: list[str] = []
+        self.full = False
+
+    def transmit(self, can_id: int, data: bytes) -> bool:
+        if self.full:
+            return False
+        self.sent.append(f"{can_id:X}:{data.hex().upper()}")
+        return True
+
+
+def _ecu_session(
+    rng: random.Random,
+    ask: Callable[..., None],
+    robot: str,
+    integrator: str,
+    counts_per_rev: int | None = None,
+) -> None:
+    """The whole ECU, tick by tick: encoder frames from a kinematic robot driven by the ECU's own
+    MOTOR_CMDs, navigation goals, pose and configuration writes, and faults (lost, repeated,
+    corrupt, short and foreign frames, silence, mailbox overflow, bus-off, a full TX queue)."""
+    params = firmware_params(load(robot), integrator)
+    if counts_per_rev is not None:
+        params = dataclasses.replace(params, counts_per_rev=counts_per_rev)
+    tx = _RecordingTx()
+    ecu = OdomEcu(tx, params)
+    ask(f"ecu_new {' '.join(str(v) for v in dataclasses.astuple(params))}", "ok")
+    m_per_count = 2 * math.pi * params.wheel_radius_left_nm * 1e-9 / (params.counts_per_rev or 500)
+    counts = [0.0, 0.0]
+    speeds = [0, 0]
+    enc_counter = 0
+    host_counters = {frames.NAV_GOAL_ID: 0, frames.ODOM_SET_POSE_ID: 0, frames.ODOM_CONFIG_ID: 0}
+
+    def rx(can_id: int, data: bytes) -> None:
+        ecu.isr_can_rx(can_id, data)
+        ask(f"ecu_rx {can_id} {data.hex() or '-'}", "ok")
+
+    def host(can_id: int, pack: Callable[[int], bytes]) -> None:
+        counter = host_counters[can_id] = (host_counters[can_id] + 1) & 15
+        rx(can_id, pack(counter))
+
+    def goal() -> None:
+        e = ErrorMask()
+        for field, value in ((0, rng.randrange(-3000, 3000)), (1, rng.randrange(-3000, 3000))):
+            host(frames.NAV_GOAL_ID, lambda c, f=field, v=value: frames.pack_nav_goal(c, f, v, e))
+        host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal(c, 2, rng.randrange(1 << 16), e))
+        go = (rng.randrange(2), rng.randrange(2), rng.randrange(2), rng.randrange(256))
+        host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal_go(c, *go, e))
+
+    for tick in range(3_000):
+        roll = rng.randrange(1000)
+        for side in range(2):  # 10 ms of the wheels at the last MOTOR_CMD
+            counts[side] += speeds[side] * 1e-5 / m_per_count
+        wire = [round(c) % (1 << 32) for c in counts]
+        silent = 1200 <= tick < 1220  # the watchdog: DEGRADED, then recovery
+        if not silent and roll >= 20:
+            enc_counter = (enc_counter + 1) & 15
+            frame = frames.pack_wheel_encoders(enc_counter, *wire)
+            if roll < 40:
+                frame = bytes([frame[0] ^ 1]) + frame[1:]  # corrupt
+            rx(frames.WHEEL_ENCODERS_ID, frame)
+            if roll < 50:
+                rx(frames.WHEEL_ENCODERS_ID, frame)  # repeated
+        if roll < 1 or tick % 500 == 1:
+            goal()
+        elif roll < 2 and tick % 3 == 0:
+            host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal(c, 14, 0, ErrorMask()))
+        elif roll < 5:
+            field = rng.choice((0, 1, 2, 15, 15, 7))
+            value = rng.randrange(-100_000, 100_000) if field < 2 else rng.randrange(1 << 16)
+            host(
+                frames.ODOM_SET_POSE_ID,
+                lambda c, f=field, v=value: frames.pack_odom_set_pose(c, f, v, ErrorMask()),
+            )
+        elif roll < 18:
+            param = rng.choice((0, 0, 1, 2, 3, 4, 5, 15, 15, 15, 9))
+            value = {
+                0: rng.choice((500, 2578, 0, 500)),
+                4: rng.choice((16, 32)),
+                5: rng.randrange(3),
+            }
+            value.update({1: 75_000_000, 2: rng.choice((75_000_000, 35_000_000)), 3: 300_000_000})
+            v = value.get(param, 0)
+            host(
+                frames.ODOM_CONFIG_ID,
+                lambda c, p=param, v=v: frames.pack_odom_config(c, p, v, ErrorMask()),
+            )
+        elif roll < 20:
+            rx(rng.choice((0x123, frames.ODOM_POSE_X_ID)), rng.randbytes(8))  # not for this node
+        elif roll < 21:
+            rx(frames.NAV_GOAL_ID, rng.randbytes(rng.randrange(8)))  # short
+        elif roll < 22:
+            for _ in range(40):  # a burst: the mailbox overflows
+                rx(0x555, bytes(8))
+        elif roll < 23:
+            ecu.isr_bus_state(rng.random() < 0.5)
+            ask(f"ecu_bus {int(ecu.errors.has(ErrorFlag.BUS_OFF))}", "ok")
+        elif roll < 25 or (tx.full and roll < 500):
+            tx.full = not tx.full  # a full TX queue for a tick or two
+            ask(f"ecu_txfull {int(tx.full)}", "ok")
+        tx.sent.clear()
+        ecu.tick()
+        ask("ecu_tick", int(ecu.state), ecu.errors.bits, ecu.tx_dropped, *tx.sent)
+        for entry in tx.sent:
+            can_id, data = entry.split(":")
+            if int(can_id, 16) == frames.MOTOR_CMD_ID:
+                cmd = frames.unpack_motor_cmd(bytes.fromhex(data))
+                speeds = [cmd.left_speed_mm_s, cmd.right_speed_mm_s]
+
+
+def _frames(rng: random.Random, ask: Callable[..., None]) -> None:
+    """The cantools-generated C (dbc/odocan.c) against firmware/frames.py's own packers."""
+    for _ in range(2_000):
+        counter, left, right = rng.randrange(16), rng.getrandbits(32), rng.getrandbits(32)
+        frame = frames.pack_wheel_encoders(counter, left, right)
+        ask(f"enc_pack {counter} {left} {right}", frame.hex().upper())
+        junk = rng.randbytes(8)
+        for data in (frame, junk):
+            ask(f"enc_unpack {data.hex()}", *frames.unpack_wheel_encoders(data)[:3])
+        speeds = [rng.randrange(I16_MIN, I16_MAX + 1) for _ in range(2)]
+        motor = frames.pack_motor_cmd(counter, *speeds, ErrorMask())
+        ask(f"motor_pack {counter} {speeds[0]} {speeds[1]}", motor.hex().upper())
+        field = rng.choice((0, 1, 2, 14, 15, rng.randrange(16)))
+        if field == NavGoalField.GO:
+            go = (rng.randrange(2), rng.randrange(2), rng.randrange(2), rng.randrange(256))
+            goal = frames.pack_nav_goal_go(counter, *go, ErrorMask())
+        else:
+            value = rng.randrange(I32_MIN, I32_MAX + 1)
+            goal = frames.pack_nav_goal(counter, field, value, ErrorMask())
+        ask(f"goal_unpack {goal.hex()}", *frames.unpack_nav_goal(goal))
+
+
+def _nav_functions(rng: random.Random, ask: Callable[..., None]) -> None:
+    """Every pure function of firmware/nav.py on random and extreme inputs."""
+    big = [I64_MIN, I64_MAX, 0, -1, 1 << 51, -(1 << 51)]
+    pairs = [(rng.randrange(I64_MIN, I64_MAX + 1) >> rng.randrange(64), 0) for _ in range(2_000)]
+    pairs = [(dx, rng.randrange(I64_MIN, I64_MAX + 1) >> rng.randrange(64)) for dx, _ in pairs]
+    pairs += list(itertools.product(big, repeat=2))
+    for dx, dy in pairs:
+        errors = ErrorMask()
+        ask(f"dist {dx} {dy}", nav.distance_um(dx, dy, errors), errors.bits)
+        h = rng.getrandbits(32)
+        ask(f"bearing {dx} {dy} {h}", nav.bearing_error_bam32(dx, dy, h))
+    angles = [rng.randrange(I32_MIN, I32_MAX + 1) for _ in range(2_000)] + [I32_MIN, I32_MAX, 0]
+    for a in angles:
+        errors = ErrorMask()
+        ask(f"urad {a}", nav.angle_urad(a, errors), errors.bits)
+        k = rng.choice((nav.K_TURN_MILLI_PER_S, nav.K1_MILLI_PER_S, rng.randrange(0, 5000)))
+        errors = ErrorMask()
+        ask(f"turn {a} {k}", nav.turn_rate_mrad_s(a, k, errors), errors.bits)
+        d = rng.randrange(-(1 << 44), 1 << 44) >> rng.randrange(44)
+        ask(f"speed {d} {k}", nav.speed_mm_s(d, k))
+        for law in ("gtg", "straight"):
+            errors = ErrorMask()
+            fn = nav.go_to_goal_law if law == "gtg" else nav.drive_straight_law
+            ask(f"{law} {abs(d)} {a}", *fn(abs(d), a, errors), errors.bits)
+        v, w = rng.randrange(-600, 601), rng.randrange(-2500, 2501)
+        b = rng.randrange(10_000_000, 4_000_000_001)
+        ask(f"wheels {v} {w} {b}", *nav.wheel_speeds_mm_s(v, w, b))
+        t, p = rng.randrange(-3000, 3001), rng.randrange(-3000, 3001)
+        ask(f"rate {t} {p}", nav.rate_limit(t, p))
+        q = rng.randrange(I32_MIN, I32_MAX + 1) >> rng.randrange(32)
+        ask(f"q40 {q}", nav.q40_from_100um(q))
+    for q in (I32_MIN, I32_MAX, -1, -10_000, -10_001, 9_999, 10_000, 5_000, -5_000):
+        ask(f"q40 {q}", nav.q40_from_100um(q))
+
+
+def _nav_session(rng: random.Random, ask: Callable[..., None]) -> None:
+    """A navigator driving a simple kinematic robot through goals, stops, aborts and junk.
+
+    The test moves the robot from the setpoints (float kinematics, then quantised): both
+    firmwares get the same integer pose each period and must give the same answers."""
+    navigator = nav.Navigator(ErrorMask())
+    ask("nav_new", "ok")
+    x_m = y_m = th_rad = 0.0
+    b_nm = rng.choice((300_000_000, 230_000_000, rng.randrange(100_000_000, 1_000_000_000)))
+    running = True
+
+    def send(field: NavGoalField | int, value: int, go: tuple[int, int, int, int] = (0,) * 4):
+        frame = NavGoal(0, field, value, *go)
+        reason = navigator.request(frame, running)
+        ask(f"nav_req {int(field)} {value} {' '.join(map(str, go))} {int(running)}", int(reason))
+
+    def goal(append: bool) -> None:
+        fields = [(NavGoalField.X, rng.randrange(-10_000, 10_000))]
+        fields += [(NavGoalField.Y, rng.randrange(-10_000, 10_000))]
+        fields += [(NavGoalField.HEADING, rng.randrange(1 << 16))]
+        if rng.random() < 0.05:
+            fields.pop(rng.randrange(3))  # INCOMPLETE (or fine without a heading)
+        for field, value in fields:
+            send(field, value)
+        mode = rng.choice((0, 0, 0, 1, 1, 1, 2))  # 2: OUT_OF_RANGE
+        send(NavGoalField.GO, 0, (mode, int(append), int(rng.random() < 0.3), rng.randrange(256)))
+
+    for _ in range(1_500):
+        roll = rng.randrange(1000)
+        idle = navigator.state in (NavState.IDLE, NavState.STOPPED, NavState.ABORTED)
+        if (idle or (navigator.state == NavState.REACHED and not navigator.depth)) and roll < 200:
+            goal(append=rng.random() < 0.5)
+        elif roll < 8:
+            goal(append=True)
+        elif roll < 9:
+            for _ in range(17):  # a full path, then QUEUE_FULL
+                goal(append=True)
+        elif roll < 11:
+            send(rng.choice((NavGoalField.STOP, 7)), 0)
+        if running and roll >= 997:
+            running = False
+        elif not running and rng.random() < 0.1:
+            running = True
+        x, y = round(x_m * 2**40), round(y_m * 2**40)
+        h = round(th_rad / (2 * math.pi) * 2**64) % 2**64
+        sent = navigator.step(x, y, h, b_nm, running)
+        ask(
+            f"nav_step {x} {y} {h} {b_nm} {int(running)}",
+            int(sent),
+            navigator.left_mm_s,
+            navigator.right_mm_s,
+            int(navigator.state),
+            navigator.goal_id,
+            navigator.depth,
+            navigator.distance_um,
+            navigator.heading_error_bam32,
+            int(navigator.changed),
+            navigator._errors.bits,
+        )
+        navigator.changed = False
+        if running:  # 20 ms of the kinematic robot at the setpoints
+            v_m_s = (navigator.left_mm_s + navigator.right_mm_s) / 2000
+            w_rad_s = (navigator.right_mm_s - navigator.left_mm_s) / (b_nm / 1e6)
+            th_rad += w_rad_s * 0.02
+            x_m += v_m_s * 0.02 * math.cos(th_rad)
+            y_m += v_m_s * 0.02 * math.sin(th_rad)
+
+
+def _e2e_session(rng: random.Random, ask: Callable[..., None]) -> None:
+    """A receiver fed protected frames with losses, repeats, jumps, corruption and silence."""
+    data_ids = bytes(rng.getrandbits(8) for _ in range(16))
+    init, per_period = rng.randrange(0, 15), rng.random() < 0.5
+    rx = e2e.E2EReceiver(tuple(data_ids), init, window_per_period=per_period)
+    ask(f"rx {data_ids.hex()} {init} {int(per_period)}", "ok")
+
+    def state(status: e2e.E2EStatus) -> tuple[int, ...]:
+        counts = (rx.count_ok, rx.count_oksomelost, rx.count_repeated, rx.count_wrongsequence)
+        counts += (rx.count_error, rx.count_nonewdata, rx.lost_frames)
+        window = (rx.last_valid_counter, rx.max_delta_counter, rx.lost_data, rx.accepted())
+        return (int(status), *counts, *window)
+
+    counter = rng.randrange(16)
+    for _ in range(300):
+        action = rng.randrange(100)
+        if action < 8:
+            rx.new_period()
+            ask("period", "ok")
+        elif action < 10:
+            rx.reset()
+            ask("reset", "ok")
+        elif action < 18:
+            ask("check -", *state(rx.check(None)))
+        else:
+            frame = bytearray(rng.randbytes(8))
+            counter = (counter + rng.choice((0, 1, 1, 1, 1, 2, 3, 7, 15))) & 15
+            e2e.p02_protect(frame, counter, tuple(data_ids))
+            ask(f"protect {frame.hex()} {counter}", frame.hex().upper())
+            if action < 24:
+                frame[rng.randrange(8)] ^= 1 << rng.randrange(8)
+            elif action < 27:
+                frame = frame[: rng.randrange(8)] or bytearray(b"\x00")
+            ask(f"check {frame.hex()}", *state(rx.check(frame)))
+
+
+def test_the_probe_script_reaches_every_state_and_reason() -> None:
+    cmds, want = _probe_script(seed=12)
+    steps = [w.split() for c, w in zip(cmds, want, strict=True) if c.startswith("nav_step")]
+    acks = {int(w) for c, w in zip(cmds, want, strict=True) if c.startswith("nav_req")}
+    assert {int(s[3]) for s in steps} == set(NavState)
+    assert acks >= {0, 1, 2, 3, 4, 6}  # every reason NAV_GOAL can get (INCONSISTENT is config's)
+    checks = {int(w.split()[0]) for c, w in zip(cmds, want, strict=True) if c.startswith("check")}
+    assert checks == {int(s) for s in e2e.E2EStatus}
+    ticks = [w.split() for c, w in zip(cmds, want, strict=True) if c == "ecu_tick"]
+    assert {int(t[0]) for t in ticks} == {0, 1, 2, 3}  # INIT, OK, DEGRADED, FAULT
+    sent = {f.split(":")[0] for t in ticks for f in t[3:]}
+    assert sent == {"110", "200", "201", "202", "281", "302", "380"}
+    assert max(int(t[2]) for t in ticks) > 0, "the TX queue refused frames"
+
+
+@pytest.mark.parametrize("target", ["native", "arm32"])
+def test_every_function_answers_as_the_python_firmware(target: str, tmp_path: Path) -> None:
+    if target == "native":
+        _require("make", "gcc")
+        binary, runner = tmp_path / "probe", []
+    else:
+        _require("make", "arm-linux-gnueabihf-gcc", "qemu-arm")
+        binary, runner = tmp_path / "probe_arm", ["qemu-arm", "-L", "/usr/arm-linux-gnueabihf"]
+    built = _make(f"BUILD={tmp_path}", str(binary))
+    assert built.returncode == 0, built.stderr
+    cmds, want = _probe_script(seed=12)
+    result = subprocess.run(
+        [*runner, str(binary)], input="\n".join(cmds) + "\n", capture_output=True, text=True
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    got = result.stdout.splitlines()
+    assert len(got) == len(want)
+    wrong = [(c, w, g) for c, w, g in zip(cmds, want, got, strict=True) if w != g]
+    assert not wrong, f"{len(wrong)} of {len(cmds)} differ, first: {wrong[:3]}"
