@@ -642,8 +642,8 @@ def pack_odom_status_summary(
     errors: ErrorMask,
     reason: int = 0,
 ) -> bytes:
-    """ODOM_STATUS page 0: state, integrator, reason (saturated to the DBC range), the low 16 bits of the
-    error mask, uptime (s, saturated to u24)."""
+    """ODOM_STATUS page 0: state, integrator, reason (saturated to the DBC range), the low 16
+    bits of the error mask, uptime (s, saturated to u24)."""
     word = (
         _head(counter, StatusPage.SUMMARY)
         | (sat_range(state, 0, 3, errors) << 16)
