@@ -47,6 +47,7 @@ from odocan.firmware.fixmath import (
     div_round_i64,
     mul_shr_round_i64,
     muldiv_round_u64,
+    sat_range,
     wrap_i16,
     wrap_i32,
     wrap_signed,
@@ -66,6 +67,7 @@ LOST_TIME_PERIODS = WATCHDOG_TICKS  # a tick this many periods after the previou
 MAX_WHEEL_SPEED_MM_S = 4_000  # build-time maximum rim speed of either wheel (a #define)
 RESYNC_FRAMES = 3  # frames consistent with each other, not with the last one: counters restarted
 STEP_PERIODS_MAX = U16_MAX  # the twist's dt and the plausibility bound saturate here (655 s)
+TWIST_SUM_MAX = 1 << 32  # one tick's summed steps saturate at 4096 m (Q20) and 4 rad (Q30)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 _ROTATING_PAGES = (
     fr.StatusPage.FRAME_TOTALS,
@@ -168,6 +170,11 @@ class OdomEcu:
         self._resync_frames = 0
         self._ticks_since_encoder = 0  # periods (of firmware time) since the last accepted frame
         self._reason_tick = 0  # u32: the tick that set ``reason``
+        # This tick: the periods since the last tick that accepted a frame, the steps summed.
+        self._tick_budget = 0
+        self._tick_ds_q20_m = 0  # i64, saturated to +-2^32 (4096 m)
+        self._tick_dheading_q30_rad = 0  # i64, saturated to +-2^32 (4 rad)
+        self._tick_steps = 0
         self._good_in_a_row = 0
         self._twist_mm_s = 0
         self._twist_mrad_s = 0
@@ -198,6 +205,20 @@ class OdomEcu:
         self._check_overflows()
         for _ in range(min(periods, COUNTER_MASK)):  # the E2E window widens with time
             self.rx_encoders.new_period()
+        self._tick_budget = self._ticks_since_encoder
+        self._tick_ds_q20_m = 0
+        self._tick_dheading_q30_rad = 0
+        self._tick_steps = 0
+        self._drain_mailbox()
+        if self._tick_steps:
+            self._update_twist(max(self._tick_budget, 1))
+        self._navigate()
+        self._transmit_scheduled()
+        self._watchdog()
+        self.ticks = wrap_u32(self.ticks + 1)
+
+    def _drain_mailbox(self) -> None:
+        """Steps 1-3: every frame in arrival order, to its handler."""
         encoder_seen = False
         frame = self.mailbox.get()
         while frame is not None:
@@ -216,10 +237,6 @@ class OdomEcu:
             frame = self.mailbox.get()
         if not encoder_seen:
             self.rx_encoders.check(None)
-        self._navigate()
-        self._transmit_scheduled()
-        self._watchdog()
-        self.ticks = wrap_u32(self.ticks + 1)
 
     def _advance_time(self, now_us: int | None) -> int:
         """Firmware time: the periods elapsed on the timer since the previous tick (rounded),
@@ -274,20 +291,20 @@ class OdomEcu:
         frame = fr.unpack_wheel_encoders(data)
         wire = (frame.left_count, frame.right_count)
         counts = self._extend_counters(wire)
-        periods = self._step_periods(frame.counter)
+        periods = self._step_periods_max(frame.counter)
         if not self._plausible(self._counts_prev, counts, periods):
             self._on_implausible(frame.counter, wire, counts)
             return
         self._resync_first = None
-        self._accept_encoders(frame.counter, wire, counts, periods)
+        self._accept_encoders(frame.counter, wire, counts)
 
     def _accept_encoders(
-        self, counter: int, wire: tuple[int, int], counts: tuple[int, int], periods: int
+        self, counter: int, wire: tuple[int, int], counts: tuple[int, int]
     ) -> None:
         """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
         self._commit_counters(wire, counts)
         if self.state is not State.FAULT and self.odometry.step_counts(counts[0], counts[1]):
-            self._update_twist(periods)
+            self._sum_step()
         self._enc_prev_counter = counter
         self._enc_counter = counter
         self._ticks_since_encoder = 0
@@ -314,18 +331,19 @@ class OdomEcu:
         self._counts_u32 = counts
         self._counts_prev = counts
 
-    def _step_periods(self, counter: int) -> int:
-        """Encoder periods since the last accepted frame: the n = counter advance (mod 16)
-        nearest to the firmware time elapsed, so 16 or more lost frames count in full (frames
-        taken from the mailbox in one tick, e.g. after a stall, are one counter step apart)."""
+    def _step_periods_max(self, counter: int) -> int:
+        """The most encoder periods that can separate this frame's sample from the last accepted
+        one: n = the COUNTER advance (mod 16), plus whole counter cycles while n stays within the
+        periods since the tick that accepted the last frame (two samples taken at most that long
+        apart, less than a period of queueing on either side). Exact in a regular stream (1)."""
         prev = self._enc_prev_counter
         if prev is None:
             return 1
         advance = ((counter - prev) & COUNTER_MASK) or (COUNTER_MASK + 1)
-        elapsed = self._ticks_since_encoder  # <= STEP_PERIODS_MAX
-        if elapsed <= advance:
+        budget = self._tick_budget  # <= STEP_PERIODS_MAX
+        if budget <= advance:
             return advance
-        return min(advance + (((elapsed - advance + 8) >> 4) << 4), STEP_PERIODS_MAX)
+        return advance + (((budget - advance) >> 4) << 4)
 
     def _step_bounds(self) -> tuple[int, int]:
         """Per wheel, the most counts one encoder period can hold at ``max_wheel_speed_mm_s``:
@@ -387,18 +405,33 @@ class OdomEcu:
         self.odometry.unprime()
         self.odometry.step_counts(first[0], first[1])
         self._enc_prev_counter = None
-        periods = ((counter - first[2]) & COUNTER_MASK) or 1
-        self._accept_encoders(counter, wire, counts, periods)
+        self._accept_encoders(counter, wire, counts)
+
+    def _sum_step(self) -> None:
+        """Add the step just integrated to this tick's sums (Q20 m, Q30 rad; i64, saturated)."""
+        odo = self.odometry
+        dheading_q30_rad = mul_shr_round_i64(odo.last_dheading_bam64, TWO_PI_Q60, 94, self.errors)
+        self._tick_ds_q20_m = sat_range(
+            self._tick_ds_q20_m + (odo.last_ds_q49_m >> 29),
+            -TWIST_SUM_MAX,
+            TWIST_SUM_MAX,
+            self.errors,
+        )
+        self._tick_dheading_q30_rad = sat_range(
+            self._tick_dheading_q30_rad + dheading_q30_rad,
+            -TWIST_SUM_MAX,
+            TWIST_SUM_MAX,
+            self.errors,
+        )
+        self._tick_steps += 1
 
     def _update_twist(self, periods: int) -> None:
-        """Speeds over the last step of ``periods`` encoder periods (1 .. STEP_PERIODS_MAX)."""
+        """Speeds over this tick's steps, which cover the ``periods`` (1 .. STEP_PERIODS_MAX)
+        since the last tick that accepted a frame: firmware time, so lost frames, a burst after
+        a stall and a late frame all give the true mean speed. Products < 2^32 * 10^9 < 2^63."""
         dt_us = periods * ENCODER_PERIOD_US
-        ds_q20_m = self.odometry.last_ds_q49_m >> 29
-        self._twist_mm_s = div_round_i64(ds_q20_m * 1_000_000_000, dt_us << 20)
-        dheading_q30_rad = mul_shr_round_i64(
-            self.odometry.last_dheading_bam64, TWO_PI_Q60, 94, self.errors
-        )
-        self._twist_mrad_s = div_round_i64(dheading_q30_rad * 1_000_000_000, dt_us << 30)
+        self._twist_mm_s = div_round_i64(self._tick_ds_q20_m * 1_000_000_000, dt_us << 20)
+        self._twist_mrad_s = div_round_i64(self._tick_dheading_q30_rad * 1_000_000_000, dt_us << 30)
 
     def _on_set_pose(self, data: bytes) -> None:
         if not self._e2e(self.rx_set_pose, data):
