@@ -170,8 +170,13 @@ class OdomEcu:
         self._resync_frames = 0
         self._ticks_since_encoder = 0  # periods (of firmware time) since the last accepted frame
         self._reason_tick = 0  # u32: the tick that set ``reason``
-        # This tick: the periods since the last tick that accepted a frame, the steps summed.
-        self._tick_budget = 0
+        # Periods since the last accepted frame's sample is known to have been taken (frames
+        # taken in a tick that lost time were sampled at unknown times during the stall).
+        self._periods_since_sample = 0  # u16, saturated
+        self._time_lost_now = False  # this tick came WATCHDOG_TICKS periods or more late
+        self._samples_stale = False  # the last accepted frame was taken in a tick that lost time
+        self._tick_budget = 0  # _periods_since_sample at the start of this tick
+        # The steps since the last twist update (one tick; two after a tick that lost time).
         self._tick_ds_q20_m = 0  # i64, saturated to +-2^32 (4096 m)
         self._tick_dheading_q30_rad = 0  # i64, saturated to +-2^32 (4 rad)
         self._tick_steps = 0
@@ -189,6 +194,12 @@ class OdomEcu:
         if not self.mailbox.put(can_id, data):
             self.errors.set(ErrorFlag.MAILBOX_OVERFLOW)
 
+    def isr_rx_overrun(self) -> None:
+        """CAN controller overrun interrupt: its receive FIFO dropped frames (counted as one
+        mailbox overflow: the hardware flags the event, not the number)."""
+        self.mailbox.overflows = wrap_u32(self.mailbox.overflows + 1)
+        self.errors.set(ErrorFlag.MAILBOX_OVERFLOW)
+
     def isr_bus_state(self, bus_off: bool) -> None:
         """CAN controller status interrupt: bus-off entered (True) or recovered (False)."""
         if bus_off:
@@ -201,16 +212,15 @@ class OdomEcu:
 
         ``now_us``: the board's free-running u32 microsecond timer when the tick was released
         (None: no timer, one period has passed)."""
-        periods = self._advance_time(now_us)
         self._check_overflows()
-        for _ in range(min(periods, COUNTER_MASK)):  # the E2E window widens with time
+        periods = self._advance_time(now_us)  # after: a stall's overrun is TIME_LOST
+        # The E2E window widens with time; fully after frames of unknown age (a stall's backlog).
+        widen = COUNTER_MASK if self._samples_stale else min(periods, COUNTER_MASK)
+        for _ in range(widen):
             self.rx_encoders.new_period()
-        self._tick_budget = self._ticks_since_encoder
-        self._tick_ds_q20_m = 0
-        self._tick_dheading_q30_rad = 0
-        self._tick_steps = 0
+        self._tick_budget = self._periods_since_sample
         self._drain_mailbox()
-        if self._tick_steps:
+        if self._tick_steps and not self._time_lost_now:
             self._update_twist(max(self._tick_budget, 1))
         self._navigate()
         self._transmit_scheduled()
@@ -249,7 +259,9 @@ class OdomEcu:
             self._timer_prev_us = now_us & U32_MAX
         self.time_periods = wrap_u32(self.time_periods + periods)
         self._ticks_since_encoder = min(self._ticks_since_encoder + periods, STEP_PERIODS_MAX)
-        if periods >= LOST_TIME_PERIODS:
+        self._periods_since_sample = min(self._periods_since_sample + periods, STEP_PERIODS_MAX)
+        self._time_lost_now = periods >= LOST_TIME_PERIODS
+        if self._time_lost_now:
             self.periods_lost = wrap_u32(self.periods_lost + periods - 1)
             self.errors.set(ErrorFlag.TIME_LOST)
             self._degrade(Reason.TIME_LOST)
@@ -308,6 +320,9 @@ class OdomEcu:
         self._enc_prev_counter = counter
         self._enc_counter = counter
         self._ticks_since_encoder = 0
+        self._samples_stale = self._time_lost_now
+        if not self._time_lost_now:
+            self._periods_since_sample = 0
         if self._good_in_a_row < RECOVERY_FRAMES:
             self._good_in_a_row += 1
         if self.state is State.INIT:
@@ -334,8 +349,8 @@ class OdomEcu:
     def _step_periods_max(self, counter: int) -> int:
         """The most encoder periods that can separate this frame's sample from the last accepted
         one: n = the COUNTER advance (mod 16), plus whole counter cycles while n stays within the
-        periods since the tick that accepted the last frame (two samples taken at most that long
-        apart, less than a period of queueing on either side). Exact in a regular stream (1)."""
+        periods since that sample (less than a period of queueing on either side; after a tick
+        that lost time, since the last sample before it). Exact in a regular stream (1)."""
         prev = self._enc_prev_counter
         if prev is None:
             return 1
@@ -427,11 +442,15 @@ class OdomEcu:
 
     def _update_twist(self, periods: int) -> None:
         """Speeds over this tick's steps, which cover the ``periods`` (1 .. STEP_PERIODS_MAX)
-        since the last tick that accepted a frame: firmware time, so lost frames, a burst after
-        a stall and a late frame all give the true mean speed. Products < 2^32 * 10^9 < 2^63."""
+        since the last accepted sample: firmware time, so lost frames, a burst after a stall
+        (summed over two ticks) and a late frame all give the true mean speed. Products
+        < 2^32 * 10^9 < 2^63. The sums restart."""
         dt_us = periods * ENCODER_PERIOD_US
         self._twist_mm_s = div_round_i64(self._tick_ds_q20_m * 1_000_000_000, dt_us << 20)
         self._twist_mrad_s = div_round_i64(self._tick_dheading_q30_rad * 1_000_000_000, dt_us << 30)
+        self._tick_ds_q20_m = 0
+        self._tick_dheading_q30_rad = 0
+        self._tick_steps = 0
 
     def _on_set_pose(self, data: bytes) -> None:
         if not self._e2e(self.rx_set_pose, data):

@@ -81,21 +81,25 @@ def test_a_stalled_firmware_reports_lost_time_and_keeps_the_distance() -> None:
     for _ in range(20):
         rig.step()
     assert rig.ecu.state is State.OK
-    stall = 200  # a 2 s SIGSTOP: no tick runs, no ISR runs; the motors go on turning
-    for _ in range(stall - 1):
+    stall = 200  # a 2 s SIGSTOP: no tick and no ISR runs; the motors go on turning
+    held = [rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD) for _ in range(3)]
+    for _ in range(stall - 3):  # beyond the controller's 3-frame FIFO: overrun
         rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD)
-    rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD))
+    for data in held:  # the ISR runs on resume: the FIFO's oldest frames
+        rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, data)
     rig.tick(stall)
     assert rig.ecu.state is State.DEGRADED
     assert rig.ecu.reason is Reason.TIME_LOST
     assert rig.ecu.errors.has(ErrorFlag.TIME_LOST)
     assert rig.ecu.periods_lost == stall - 1
+    rig.step()  # the first fresh frame: 198 periods after the last held one
+    assert rig.ecu.frames_implausible == 0
     assert rig.ecu._twist_mm_s == _speed_mm_s(COUNTS_PER_PERIOD)
     g = geometry(rig.ecu.params)
     assert rig.ecu.odometry.x_q40_m / 2**40 == pytest.approx(
-        (19 + stall) * COUNTS_PER_PERIOD * g.m_per_count_left, abs=1e-9
+        (19 + stall + 1) * COUNTS_PER_PERIOD * g.m_per_count_left, abs=1e-9
     )
-    for _ in range(RECOVERY_FRAMES):
+    for _ in range(RECOVERY_FRAMES - 1):
         rig.step()
     assert rig.ecu.state is State.OK and rig.ecu.reason is Reason.NONE
     assert rig.ecu.errors.has(ErrorFlag.TIME_LOST)  # sticky
