@@ -603,7 +603,10 @@ def check_twist(
         twist = {"index": np.zeros(0, dtype=np.int64)}
     keep = accepted[twist["index"]] if len(twist["index"]) else np.zeros(0, dtype=bool)
     result: dict[str, Any] = {
-        "samples": 0, "max_linear_excess_mps": 0.0, "max_angular_excess_rad_s": 0.0, "passed": True
+        "samples": 0,
+        "max_linear_excess_mps": 0.0,
+        "max_angular_excess_rad_s": 0.0,
+        "passed": True,
     }
     if not keep.any():
         return result
@@ -649,9 +652,7 @@ def _step_speeds(
     return (v, w), (gap_v, gap_w)
 
 
-def _outside_band(
-    value: FloatArray, e: IntArray, step: FloatArray, gap: FloatArray
-) -> FloatArray:
+def _outside_band(value: FloatArray, e: IntArray, step: FloatArray, gap: FloatArray) -> FloatArray:
     """How far each ``value`` (at encoder frame ``e``) lies outside the band of ``step`` over
     (e two samples back, e], widened by the largest ``gap`` there: 0 inside, NaN where the
     window is empty."""
