@@ -25,7 +25,9 @@ DEGRADED always carries a ``Reason`` (ODOM_STATUS ``REASON``): ENCODER_TIMEOUT, 
 MAILBOX_OVERFLOW (a received frame was dropped), IMPLAUSIBLE_STEP (a step beyond
 ``max_wheel_speed_mm_s``, not integrated) or COUNTER_RESET (the encoder counters restarted: after
 ``RESYNC_FRAMES`` frames consistent with each other but not with the last accepted one, the
-odometry is re-primed on the first of them; the jump itself is never integrated).
+odometry is re-primed on the first of them; the jump itself is never integrated). The motion
+between the last frame before a counter restart and the first after it is unknowable, so
+COUNTER_RESET stays until the host sets the pose again (ODOM_SET_POSE APPLY).
 """
 
 from __future__ import annotations
@@ -461,6 +463,8 @@ class OdomEcu:
             x_q40, y_q40, heading = self._pose_with(self._staged_pose)
             self.odometry.set_pose(x_q40, y_q40, heading)
             self._staged_pose.clear()
+            if self.reason is Reason.COUNTER_RESET:  # a pose given again: recovery may proceed
+                self.reason = Reason.NONE
         elif field in (fr.SetPoseField.X, fr.SetPoseField.Y, fr.SetPoseField.HEADING):
             self._staged_pose[field] = frame.value
         else:
@@ -690,7 +694,11 @@ class OdomEcu:
             ):
                 self._degrade(Reason.ENCODER_TIMEOUT)
             self._good_in_a_row = 0
-        elif self.state is State.DEGRADED and self._good_in_a_row >= RECOVERY_FRAMES:
+        elif (
+            self.state is State.DEGRADED
+            and self._good_in_a_row >= RECOVERY_FRAMES
+            and self.reason is not Reason.COUNTER_RESET  # the pose lost its continuity
+        ):
             self.state = State.OK
             self.reason = Reason.NONE
 
