@@ -178,9 +178,9 @@ class BusMonitor:
         data = bytes(msg.data)
         timestamp_s = self._bus_time_s = msg.timestamp
         message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
-        rebooted = message is not None and self._is_reboot(message, data)
-        if rebooted:  # its counters restarted: not frames lost or out of sequence
-            self._restart_sequences(FIRMWARE_NODE)
+        summary = self._summary(message, data) if message is not None else None
+        if summary is not None:  # before its E2E check, which a reboot or a second source fails
+            self._watch_source(*summary)
         status = self.e2e.check(msg.arbitration_id, data, extended=msg.is_extended_id,
                                 timestamp_s=timestamp_s)
         if message is None:
@@ -238,7 +238,6 @@ class BusMonitor:
         page = str(shown.get("PAGE", s.get("PAGE")))
         if page == "SUMMARY":
             mask = int(s["ERROR_MASK"])
-            self._watch_source(int(s["UPTIME"]), str(shown["STATE"]))
             self.status.update(
                 state=shown["STATE"], integrator=shown["INTEGRATOR"], error_mask=mask,
                 errors=error_names(mask), uptime_s=int(s["UPTIME"]),
@@ -257,33 +256,35 @@ class BusMonitor:
         if kind is None:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
-        if kind == "reboot":
+        if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
             self.tracker.restart_reference()
+            self._restart_sequences(FIRMWARE_NODE)
             detail += ": reference restarted"
         elif kind == "two sources":
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
+            last = self.events[-1] if self.events else None
+            if last and last["kind"] == kind and self._bus_time_s - last["t_s"] < CONFLICT_HOLD_S:
+                last["t_s"] = self._bus_time_s  # one event while the conflict lasts
+                return
         self.events.append({"t_s": self._bus_time_s, "kind": kind, "detail": detail})
 
-    def _is_reboot(self, message: Message, data: bytes) -> bool:
-        """An ODOM_STATUS summary whose UPTIME went back or whose STATE is INIT again (read
-        before its E2E check, which the restarted counter would fail; the CRC must hold)."""
-        if message.name != "ODOM_STATUS" or self.sources.offset_s is None or len(data) != 8:
-            return False
+    def _summary(self, message: Message, data: bytes) -> tuple[int, str] | None:
+        """(UPTIME, STATE) of an ODOM_STATUS summary whose CRC holds, whatever its sequence."""
+        if message.name != "ODOM_STATUS" or len(data) != 8:
+            return None
         config = self._e2e_configs.get(frame_key(message.frame_id, message.is_extended_frame))
         ids = config.data_ids if config is not None else None
         if not ids or data[0] != crc8h2f_p02_one(data, ids[data[1] & 0xF]):
-            return False
+            return None
         try:
-            signals = message.decode(data, decode_choices=False)
+            signals = message.decode(data)
         except Exception:  # not decodable: the E2E check and _use count it
-            return False
+            return None
         assert isinstance(signals, dict)
         values: dict[str, Any] = dict(signals)
-        if values.get("PAGE") != 0:
-            return False
-        went_back = int(values["UPTIME"]) + UPTIME_MATCH_S < self.sources.last_uptime_s
-        init_again = int(values["STATE"]) == 0 and self.sources.last_state not in ("", "INIT")
-        return went_back or init_again
+        if str(values.get("PAGE")) != "SUMMARY":
+            return None
+        return int(values["UPTIME"]), str(values["STATE"])
 
     def _restart_sequences(self, node: str) -> None:
         """Forget the E2E sequence of every message ``node`` sends (a reboot restarts its
