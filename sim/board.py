@@ -9,8 +9,9 @@ MCU's free-running microsecond timer, passed to every tick.
 A stalled MCU (a debugger halt, a SIGSTOPped process, a tick loop that fell behind) runs no receive
 ISR: while it is halted its CAN controller keeps the first ``HW_RX_FIFO_FRAMES`` frames in its
 receive FIFO (FIFO-locked mode, as bxCAN) and overruns the rest. So when ``run_tick`` comes
-``HALT_AFTER_S`` or more after the previous one, only that many waiting frames reach the firmware;
-the others are dropped and the overrun interrupt tells the firmware, as would the hardware.
+``HALT_AFTER_S`` or more after the previous one (as long as the firmware calls lost time), only that
+many waiting frames reach the firmware; the others are dropped and the overrun interrupt tells the
+firmware, as would the hardware.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from __future__ import annotations
 import can
 
 from odocan.firmware.config import RobotParams
-from odocan.firmware.ecu import OdomEcu
+from odocan.firmware.ecu import LOST_TIME_PERIODS, OdomEcu
 from odocan.firmware.hal import TICK_PERIOD_US
 from odocan.sim.clock import Clock
 from odocan.sim.node import BusNode
@@ -26,7 +27,9 @@ from odocan.sim.node import BusNode
 TICK_S = TICK_PERIOD_US / 1e6
 TX_LATENCY_S = 0.001  # the firmware's frames leave 1 ms after the tick that made them
 HW_RX_FIFO_FRAMES = 3  # the CAN controller's receive FIFO depth (bxCAN: 3 per FIFO)
-HALT_AFTER_S = 1.5 * TICK_S  # a tick this long after the previous one: the MCU was halted
+# A tick this long after the previous one: the MCU was halted (the firmware's TIME_LOST). A
+# merely late tick is not: a real MCU's receive interrupt would have run meanwhile.
+HALT_AFTER_S = (LOST_TIME_PERIODS - 0.5) * TICK_S
 _U32 = 0xFFFF_FFFF
 
 

@@ -21,14 +21,18 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import can
+import pytest
 
 from odocan.firmware.ecu import RECOVERY_FRAMES
+from odocan.firmware.errors import ErrorFlag
+from odocan.firmware.hal import MAILBOX_SLOTS
 from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.board import TICK_S, TX_LATENCY_S, FirmwareBoard
+from odocan.sim.clock import LockstepClock
 from odocan.sim.contract import database
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
-from tests.fault_rig import FaultRig, open_virtual
+from tests.fault_rig import FaultRig, open_virtual, robot_params, unique_channel
 
 DB = database()
 STATUS = DB.get_message_by_name("ODOM_STATUS")
@@ -301,6 +305,36 @@ def figures() -> None:
         print(f"{name}: {result}; final verdict {watch.verdicts[-1][1]}")
     _, to_stale = run_silence()
     print(f"silence -> STALE: {to_stale:.3f} s")
+
+
+@pytest.mark.parametrize(
+    ("late_s", "overrun", "filtered", "overflows"), [(0.05, 0, MAILBOX_SLOTS, 8), (2.0, 37, 3, 1)]
+)
+def test_a_halted_board_keeps_only_its_controller_fifo(
+    late_s: float, overrun: int, filtered: int, overflows: int
+) -> None:
+    """40 frames wait. A tick 50 ms late delivers them all (the ISR would have run: the 32-slot
+    mailbox overflows by 8); after a 2 s halt only the receive FIFO's 3 oldest frames reach the
+    firmware, the rest are overrun and the overrun interrupt counts once."""
+    channel = unique_channel()
+    clock = LockstepClock()
+    sender, board_bus = open_virtual(channel), open_virtual(channel)
+    try:
+        board = FirmwareBoard(board_bus, robot_params(load("pmir"), "exact"), clock)
+        board.run_tick()
+        clock.advance_to(late_s)
+        for n in range(40):
+            sender.send(
+                can.Message(arbitration_id=0x555, data=bytes([n] * 8), is_extended_id=False)
+            )
+        board.run_tick()
+        assert board.frames_overrun == overrun
+        assert board.ecu.frames_filtered == filtered
+        assert board.ecu.mailbox.overflows == overflows
+        assert board.ecu.errors.has(ErrorFlag.TIME_LOST) == (overrun > 0)
+    finally:
+        sender.shutdown()
+        board_bus.shutdown()
 
 
 if __name__ == "__main__":
