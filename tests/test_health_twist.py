@@ -8,15 +8,18 @@ whose twist uses the old dt (the 4-bit COUNTER advance) must fail the judge.
 
 from __future__ import annotations
 
+import io
 import math
 from collections.abc import Callable
 
 import numpy as np
 import pytest
+from rich.console import Console
 
 from odocan.firmware.ecu import OdomEcu
 from odocan.host.io.logs import FrameArrays, FrameCollector
-from odocan.host.judge.analysis import analyze
+from odocan.host.judge.analysis import Tolerance, analyze
+from odocan.host.report.summary import print_summary
 from odocan.sim.contract import database
 from odocan.sim.faults import FaultSpec
 from odocan.sim.rig import LockstepRig, RigConfig
@@ -93,3 +96,13 @@ def test_the_judge_fails_a_twist_from_the_wrong_dt() -> None:
     assert twist["max_linear_excess_mps"] > 1.0
     assert not twist["passed"] and not result.passed
     assert result.report["onboard_vs_reference"]["max_position_error_m"] <= 1e-4  # pose right
+
+
+def test_the_verdict_line_names_the_twist() -> None:
+    frames = drive(1.01, _old_dt)
+    result = analyze(frames, PMIR)
+    console = Console(file=io.StringIO(), width=200)
+    print_summary(result.report, Tolerance(), console, title="t")
+    last = console.file.getvalue().strip().splitlines()[-1]  # type: ignore[attr-defined]
+    assert last.startswith("FAIL: on-board vs reference within 0.1 mm and 0.09587 mrad; ")
+    assert "ODOM_TWIST outside the reference's speeds by up to" in last
