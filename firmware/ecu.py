@@ -163,6 +163,7 @@ class OdomEcu:
         self._counts_prev: tuple[int, int] | None = None  # counters of the last accepted frame
         self.time_periods = 0  # u32: 10 ms periods since reset, by the timer (ticks run or not)
         self._timer_prev_us: int | None = None  # u32 timer value at the previous tick
+        self._timer_rest_us = 0  # i32, within +-TICK_PERIOD_US/2: time not yet counted
         self.periods_lost = 0  # u32: periods the firmware did not run (stalls)
         self.frames_implausible = 0  # u32: WHEEL_ENCODERS refused by the plausibility bound
         self._overflows_seen = 0
@@ -251,13 +252,15 @@ class OdomEcu:
             self.rx_encoders.check(None)
 
     def _advance_time(self, now_us: int | None) -> int:
-        """Firmware time: the periods elapsed on the timer since the previous tick (rounded),
-        returned."""
+        """Firmware time: the periods elapsed on the timer since the previous tick, returned;
+        rounded, the remainder carried to the next tick so jitter never drifts the clock
+        (u32 elapsed: the timer may wrap, every 71.6 min)."""
         periods = 1
         if now_us is not None:
             if self._timer_prev_us is not None:
-                elapsed_us = wrap_u32(now_us - self._timer_prev_us)
+                elapsed_us = wrap_u32(now_us - self._timer_prev_us) + self._timer_rest_us
                 periods = (elapsed_us + TICK_PERIOD_US // 2) // TICK_PERIOD_US
+                self._timer_rest_us = elapsed_us - periods * TICK_PERIOD_US
             self._timer_prev_us = now_us & U32_MAX
         self.time_periods = wrap_u32(self.time_periods + periods)
         self._ticks_since_encoder = min(self._ticks_since_encoder + periods, STEP_PERIODS_MAX)

@@ -229,3 +229,12 @@ def test_a_pose_set_after_a_counter_restart_lets_the_firmware_recover() -> None:
     for _ in range(RECOVERY_FRAMES):
         rig.step(5, 7)
     assert rig.ecu.state is State.OK and rig.ecu.reason is Reason.NONE
+
+
+def test_firmware_time_follows_a_jittery_timer_without_drift() -> None:
+    rig = TimedRig()
+    jitter_us = [0, 4_000, -4_900, 4_900, 3_000, -3_000] * 50  # ticks released early and late
+    for k, j in enumerate(jitter_us, 1):
+        rig.ecu.tick(k * TICK_PERIOD_US + j)
+    assert rig.ecu.time_periods == len(jitter_us)
+    assert not rig.ecu.errors.has(ErrorFlag.TIME_LOST)
