@@ -337,5 +337,24 @@ def test_a_halted_board_keeps_only_its_controller_fifo(
         board_bus.shutdown()
 
 
+def test_multiplexed_messages_have_per_page_rates_and_jitter() -> None:
+    """On a perfectly regular bus every page of ODOM_STATUS and SIM_TRUTH is regular: no period
+    jitter (the pages sent together are not one message's period)."""
+    with circle_rig() as rig:
+        watch = Watch(rig)
+        rig.run(4.0)
+        messages = watch.monitor.snapshot(4.0)["messages"]
+    status, truth = messages["ODOM_STATUS"], messages["SIM_TRUTH"]
+    assert status["jitter_ms"] is None and truth["jitter_ms"] is None
+    assert status["pages"]["SUMMARY"]["rate_hz"] == pytest.approx(10.0)
+    for page in ("FRAME_TOTALS", "E2E_WHEEL_ENCODERS", "E2E_NAV_GOAL"):
+        assert status["pages"][page]["rate_hz"] == pytest.approx(2.0)
+    for part in ("X", "Y", "HEADING"):
+        assert truth["pages"][part]["rate_hz"] == pytest.approx(10.0)
+    for pages in (status["pages"], truth["pages"]):
+        assert max(p["jitter_ms"] for p in pages.values()) < 1e-6
+    assert messages["WHEEL_ENCODERS"]["jitter_ms"] < 1e-6 and "pages" not in messages["ODOM_POSE_X"]
+
+
 if __name__ == "__main__":
     figures()

@@ -8,6 +8,8 @@ cantools cannot decode are counted as ``undecodable``. Per DBC message it keeps:
 
 * ``count``, ``rate_hz`` and ``jitter_ms``: frames heard, and the rate and the standard deviation of
   the inter-frame period over the last ``RATE_WINDOW`` frames (bus timestamps, ``msg.timestamp``);
+  for a multiplexed message the period jitter is per page (``pages``: count, rate and jitter of
+  each multiplexer value), as pages sent together have no common period;
 * ``e2e``: the Profile 2 counts (``ok``, ``lost``, ``repeated``, ``crc_errors``,
   ``wrong_sequence``), judged as the firmware judges them (``E2EMonitor``, time-widened window);
 * ``last``: the latest value of every signal (physical units, enum names), from accepted frames
@@ -127,12 +129,22 @@ class MessageStats:
     last: dict[str, Any] = field(default_factory=dict)  # every signal's latest value
     last_frame: dict[str, Any] = field(default_factory=dict)  # the latest frame's signals
     heard_monotonic_s: float = 0.0
+    pages: dict[str, MessageStats] = field(default_factory=dict)  # per multiplexer value
 
-    def heard(self, timestamp_s: float, now_s: float) -> None:
-        """Count one frame of this message (bus timestamp, local monotonic time)."""
+    def heard(self, timestamp_s: float, now_s: float, page: str | None = None) -> None:
+        """Count one frame of this message (bus timestamp, local monotonic time, its page)."""
         self.count += 1
         self.times.append(timestamp_s)
         self.heard_monotonic_s = now_s
+        if page is not None:
+            stats = self.pages.get(page)
+            if stats is None:
+                stats = self.pages[page] = MessageStats(page, self.frame_id)
+            stats.heard(timestamp_s, now_s)
+
+    def timing(self) -> dict[str, Any]:
+        """``count``, ``rate_hz``, ``jitter_ms``."""
+        return {"count": self.count, "rate_hz": self.rate_hz(), "jitter_ms": self.jitter_ms()}
 
     def rate_hz(self) -> float | None:
         """Frames per second over the window (None before two frames)."""
@@ -191,7 +203,7 @@ class BusMonitor:
         stats = self.messages.get(message.name)
         if stats is None:
             stats = self.messages[message.name] = MessageStats(message.name, message.frame_id)
-        stats.heard(timestamp_s, now_s)
+        stats.heard(timestamp_s, now_s, _page(message, data))
         if status in ACCEPTED:
             self._use(message, stats, data)
 
@@ -354,7 +366,7 @@ class BusMonitor:
                 "id": f"0x{stats.frame_id:03X}",
                 "count": stats.count,
                 "rate_hz": stats.rate_hz(),
-                "jitter_ms": stats.jitter_ms(),
+                "jitter_ms": None if stats.pages else stats.jitter_ms(),
                 "e2e": e2e.get(name, {}),
                 "age_s": now_s - stats.heard_monotonic_s,
                 "stale": _message_stale(message, now_s - stats.heard_monotonic_s),
@@ -363,6 +375,7 @@ class BusMonitor:
             }
             if message.is_multiplexed():  # the latest page alone
                 messages[name]["last_frame"] = dict(stats.last_frame)
+                messages[name]["pages"] = {k: v.timing() for k, v in stats.pages.items()}
         return {
             "duration_s": now_s - self.started_monotonic_s,
             "frames_total": self.frames_total,
@@ -382,6 +395,19 @@ _HANDLERS = {
     "SIM_TRUTH": BusMonitor._on_truth,
     "ODOM_STATUS": BusMonitor._on_status,
 }
+
+
+def _page(message: Message, data: bytes) -> str | None:
+    """The multiplexer value of a frame of a multiplexed message (its enum name when it has
+    one), read from the payload before any decoding; None for a plain message."""
+    if not message.is_multiplexed():
+        return None
+    mux = next((s for s in message.signals if s.is_multiplexer), None)
+    if mux is None or mux.byte_order != "little_endian":
+        return None
+    value = (int.from_bytes(data, "little") >> mux.start) & ((1 << mux.length) - 1)
+    choices: dict[Any, Any] = dict(mux.choices or {})
+    return str(choices[value]) if value in choices else str(value)
 
 
 def _message_stale(message: Message, age_s: float) -> bool:
@@ -450,11 +476,14 @@ def _messages_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
                    "crc", "seq")
     for name, m in snapshot["messages"].items():
         e2e = m["e2e"]
+        dim = "dim" if m.get("stale") or heard.get(name, 0.0) > STALE_S else None
         table.add_row(
             name, m["id"], str(m["count"]), _num(m["rate_hz"], ".1f"),
-            _num(m["jitter_ms"], ".2f"), *(_num(e2e.get(k), "d") for k in E2E_KEYS),
-            style="dim" if m.get("stale") or heard.get(name, 0.0) > STALE_S else None,
+            _num(m["jitter_ms"], ".2f"), *(_num(e2e.get(k), "d") for k in E2E_KEYS), style=dim,
         )
+        for page, t in m.get("pages", {}).items():
+            table.add_row(f"  {page}", "", str(t["count"]), _num(t["rate_hz"], ".1f"),
+                          _num(t["jitter_ms"], ".2f"), *("" for _ in E2E_KEYS), style=dim)
     return table
 
 
