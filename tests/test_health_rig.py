@@ -23,8 +23,9 @@ from typing import Any
 import can
 import pytest
 
+from odocan.firmware import frames as fr
 from odocan.firmware.ecu import RECOVERY_FRAMES
-from odocan.firmware.errors import ErrorFlag
+from odocan.firmware.errors import ErrorFlag, ErrorMask
 from odocan.firmware.hal import MAILBOX_SLOTS
 from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.board import TICK_S, TX_LATENCY_S, FirmwareBoard
@@ -194,17 +195,40 @@ def test_a_reboot_is_an_event_and_restarts_the_reference() -> None:
 
 
 def run_counter_reset() -> tuple[Watch, dict[str, Any]]:
-    """The motor controller reboots at 5 s: its counters and E2E counter restart from 0."""
+    """The motor controller reboots at 5 s: its counters and E2E counter restart from 0; at 8 s
+    a host tool accepts the on-board pose (ODOM_SET_POSE APPLY), at 9 s the run ends."""
     with circle_rig() as rig:
         watch = Watch(rig)
-        rig.before_board.append(lambda k: k == 499 and rig.sim.motor_controller.restart())
-        rig.run(8.0)
-        figures = {
-            "states": watch.states(),
-            "verdict": watch.verdicts[-1][1],
-            "pose_error_m": watch.pose_error_m(),
-            "implausible": rig.ecu.frames_implausible,
-        }
+        tool = open_virtual(rig.channel)
+
+        def host(k: int) -> None:
+            if k == 499:
+                rig.sim.motor_controller.restart()
+            if k == 800:
+                data = fr.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+                tool.send(
+                    can.Message(
+                        arbitration_id=fr.ODOM_SET_POSE_ID,
+                        data=data,
+                        is_extended_id=False,
+                        timestamp=k * TICK_S,
+                    )
+                )
+
+        rig.before_board.append(host)
+        try:
+            rig.run(8.0)
+            figures = {
+                "states": watch.states(),
+                "verdict": watch.verdicts[-1][1],
+                "pose_error_m": watch.pose_error_m(),
+                "implausible": rig.ecu.frames_implausible,
+            }
+            rig.run(1.0)
+        finally:
+            tool.shutdown()
+        figures["after_set_pose"] = (watch.states()[-1], watch.verdicts[-1][1])
+        figures["events"] = [e["kind"] for e in watch.monitor.events]
         return watch, figures
 
 
@@ -215,6 +239,8 @@ def test_a_counter_reset_is_not_integrated_and_never_called_ok() -> None:
     assert figures["verdict"] == "DEGRADED"
     assert "OK" not in verdicts_between(watch, 5.2, 8.0)
     assert figures["pose_error_m"] < 0.1  # the motion while the frames were refused, not 2 m
+    assert figures["after_set_pose"] == (("OK", "NONE"), "OK")  # the host took the pose
+    assert figures["events"] == ["set pose"]
 
 
 def run_duplicate() -> tuple[Watch, dict[str, Any]]:

@@ -231,6 +231,16 @@ class BusMonitor:
             except (KeyError, TypeError, ValueError):  # a --dbc without the signals it needs
                 self.undecodable += 1
 
+    def _on_pose_request(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        """ODOM_SET_POSE or ODOM_CONFIG APPLY: the on-board pose restarts from what the host
+        gave, so the reference restarts at the next on-board pose (an event)."""
+        if shown.get("FIELD", shown.get("PARAM")) != "APPLY":
+            return
+        self.tracker.restart_reference()
+        name = "set pose" if "FIELD" in shown else "config"
+        self.events.append({"t_s": self._bus_time_s, "kind": name,
+                            "detail": f"{name} applied: reference restarted"})
+
     def _on_encoders(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
 
@@ -389,6 +399,8 @@ class BusMonitor:
 
 
 _HANDLERS = {
+    "ODOM_SET_POSE": BusMonitor._on_pose_request,
+    "ODOM_CONFIG": BusMonitor._on_pose_request,
     "WHEEL_ENCODERS": BusMonitor._on_encoders,
     "ODOM_POSE_X": BusMonitor._on_pose_x,
     "ODOM_POSE_Y": BusMonitor._on_pose_y,
