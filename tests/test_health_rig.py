@@ -326,6 +326,7 @@ def figures() -> None:
         ("counter reset", run_counter_reset),
         ("duplicate", run_duplicate),
         ("forgery 8000/s", run_forgery),
+        ("forgery 800/s, 20 s", lambda: run_forgery(20.0, 8)),
     ):
         watch, result = run()
         print(f"{name}: {result}; final verdict {watch.verdicts[-1][1]}")
@@ -361,6 +362,15 @@ def test_a_halted_board_keeps_only_its_controller_fifo(
     finally:
         sender.shutdown()
         board_bus.shutdown()
+
+
+def test_forged_frames_that_pass_e2e_are_refused_as_implausible() -> None:
+    """800 frames/s: the mailbox holds them, about 1/256 pass the CRC and some the sequence
+    check; each is refused by the plausibility bound (DEGRADED) and the pose never moves."""
+    _, figures = run_forgery(seconds=20.0, per_tick=8)
+    assert figures["overflows"] == 0 and figures["implausible"] >= 1
+    assert ("DEGRADED", "IMPLAUSIBLE_STEP") in figures["states"]
+    assert figures["pose_error_m"] < 1e-4
 
 
 def test_multiplexed_messages_have_per_page_rates_and_jitter() -> None:
