@@ -14,6 +14,20 @@ Sample, then compute. ``isr_can_rx`` only copies a frame into the mailbox (overf
 6. the watchdog: no accepted WHEEL_ENCODERS for ``WATCHDOG_TICKS`` periods -> DEGRADED (integration
    paused, ENCODER_TIMEOUT set); ``RECOVERY_FRAMES`` accepted frames in a row -> OK again. The
    counters are absolute, so the first frame after a gap carries the distance driven meanwhile.
+
+Time. The firmware's clock is ``time_periods`` (u32, 10 ms periods since reset), advanced at the
+start of every tick by the periods elapsed on the board's free-running microsecond timer
+(``tick(now_us)``; without a timer, one period per tick). Ticks run and time passed differ when
+the MCU stalls: a tick released ``WATCHDOG_TICKS`` periods or more after the previous one sets
+TIME_LOST and goes DEGRADED. UPTIME, the watchdog and the twist's dt all use this time.
+
+DEGRADED always carries a ``Reason`` (ODOM_STATUS ``REASON``): ENCODER_TIMEOUT, TIME_LOST,
+MAILBOX_OVERFLOW (a received frame was dropped), IMPLAUSIBLE_STEP (a step beyond
+``max_wheel_speed_mm_s``, not integrated) or COUNTER_RESET (the encoder counters restarted: after
+``RESYNC_FRAMES`` frames consistent with each other but not with the last accepted one, the
+odometry is re-primed on the first of them; the jump itself is never integrated). The motion
+between the last frame before a counter restart and the first after it is unknowable, so
+COUNTER_RESET stays until the host sets the pose again (ODOM_SET_POSE APPLY).
 """
 
 from __future__ import annotations
@@ -27,13 +41,15 @@ from odocan.firmware.config import (
     validate,
 )
 from odocan.firmware.e2e import COUNTER_MASK, E2EReceiver, E2EStatus
-from odocan.firmware.errors import ErrorFlag, ErrorMask, State
+from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.fixmath import (
     U16_MAX,
     U32_MAX,
     U64_MAX,
     div_round_i64,
     mul_shr_round_i64,
+    muldiv_round_u64,
+    sat_range,
     wrap_i16,
     wrap_i32,
     wrap_signed,
@@ -49,6 +65,11 @@ STATUS_PERIOD_TICKS = 10  # ODOM_STATUS: 100 ms
 WATCHDOG_TICKS = 10  # 10 encoder periods without a fresh frame -> DEGRADED
 RECOVERY_FRAMES = 5  # accepted encoder frames in a row to leave DEGRADED
 TICKS_PER_SECOND = 1_000_000 // TICK_PERIOD_US
+LOST_TIME_PERIODS = WATCHDOG_TICKS  # a tick this many periods after the previous one: time lost
+MAX_WHEEL_SPEED_MM_S = 4_000  # build-time maximum rim speed of either wheel (a #define)
+RESYNC_FRAMES = 3  # frames consistent with each other, not with the last one: counters restarted
+STEP_PERIODS_MAX = U16_MAX  # the twist's dt and the plausibility bound saturate here (655 s)
+TWIST_SUM_MAX = 1 << 32  # one tick's summed steps saturate at 4096 m (Q20) and 4 rad (Q30)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 _ROTATING_PAGES = (
     fr.StatusPage.FRAME_TOTALS,
@@ -103,15 +124,23 @@ class Mailbox:
 class OdomEcu:
     """The odometry ECU (node ``ODOM_MCU``)."""
 
-    def __init__(self, hal: CanTx, params: RobotParams) -> None:
+    def __init__(
+        self, hal: CanTx, params: RobotParams, max_wheel_speed_mm_s: int = MAX_WHEEL_SPEED_MM_S
+    ) -> None:
+        """``max_wheel_speed_mm_s``: the fastest rim speed either wheel can reach (u16 mm/s); an
+        encoder step beyond it is refused as implausible."""
         self._hal = hal
         self.errors = ErrorMask()
         self.state = State.INIT
+        self.reason = Reason.NONE
         if validate(params) is not ConfigReason.OK:
             self.errors.set(ErrorFlag.CONFIG_INVALID)
             self.state = State.FAULT
+            self.reason = Reason.CONFIG_INVALID
         self.params = params
         self.odometry = Odometry(derive_constants(params, self.errors), self.errors)
+        self.max_wheel_speed_mm_s = max_wheel_speed_mm_s
+        self._max_counts_per_period = self._step_bounds()
         self.mailbox = Mailbox()
         # The window widens once per tick (not per frame): a replay cannot widen it.
         self.rx_encoders = E2EReceiver(
@@ -131,7 +160,29 @@ class OdomEcu:
         self._enc_prev_counter: int | None = None
         self._wire_prev: tuple[int, int] | None = None
         self._counts_u32 = (0, 0)
-        self._ticks_since_encoder = 0
+        self._counts_prev: tuple[int, int] | None = None  # counters of the last accepted frame
+        self.time_periods = 0  # u32: 10 ms periods since reset, by the timer (ticks run or not)
+        self._timer_prev_us: int | None = None  # u32 timer value at the previous tick
+        self._timer_rest_us = 0  # i32, within +-TICK_PERIOD_US/2: time not yet counted
+        self.periods_lost = 0  # u32: periods the firmware did not run (stalls)
+        self.frames_implausible = 0  # u32: WHEEL_ENCODERS refused by the plausibility bound
+        self._overflows_seen = 0
+        # Refused frames consistent among themselves: (left, right, COUNTER) of the first, last.
+        self._resync_first: tuple[int, int, int] | None = None
+        self._resync_last: tuple[int, int, int] = (0, 0, 0)
+        self._resync_frames = 0
+        self._ticks_since_encoder = 0  # periods (of firmware time) since the last accepted frame
+        self._reason_tick = 0  # u32: the tick that set ``reason``
+        # Periods since the last accepted frame's sample is known to have been taken (frames
+        # taken in a tick that lost time were sampled at unknown times during the stall).
+        self._periods_since_sample = 0  # u16, saturated
+        self._time_lost_now = False  # this tick came WATCHDOG_TICKS periods or more late
+        self._samples_stale = False  # the last accepted frame was taken in a tick that lost time
+        self._tick_budget = 0  # _periods_since_sample at the start of this tick
+        # The steps since the last twist update (one tick; two after a tick that lost time).
+        self._tick_ds_q20_m = 0  # i64, saturated to +-2^32 (4096 m)
+        self._tick_dheading_q30_rad = 0  # i64, saturated to +-2^32 (4 rad)
+        self._tick_steps = 0
         self._good_in_a_row = 0
         self._twist_mm_s = 0
         self._twist_mrad_s = 0
@@ -146,6 +197,12 @@ class OdomEcu:
         if not self.mailbox.put(can_id, data):
             self.errors.set(ErrorFlag.MAILBOX_OVERFLOW)
 
+    def isr_rx_overrun(self) -> None:
+        """CAN controller overrun interrupt: its receive FIFO dropped frames (counted as one
+        mailbox overflow: the hardware flags the event, not the number)."""
+        self.mailbox.overflows = wrap_u32(self.mailbox.overflows + 1)
+        self.errors.set(ErrorFlag.MAILBOX_OVERFLOW)
+
     def isr_bus_state(self, bus_off: bool) -> None:
         """CAN controller status interrupt: bus-off entered (True) or recovered (False)."""
         if bus_off:
@@ -153,9 +210,28 @@ class OdomEcu:
 
     # --- the periodic tick -------------------------------------------------------------------
 
-    def tick(self) -> None:
-        """One period of the main loop, in the fixed order of the module docstring."""
-        self.rx_encoders.new_period()
+    def tick(self, now_us: int | None = None) -> None:
+        """One period of the main loop, in the fixed order of the module docstring.
+
+        ``now_us``: the board's free-running u32 microsecond timer when the tick was released
+        (None: no timer, one period has passed)."""
+        self._check_overflows()
+        periods = self._advance_time(now_us)  # after: a stall's overrun is TIME_LOST
+        # The E2E window widens with time; fully after frames of unknown age (a stall's backlog).
+        widen = COUNTER_MASK if self._samples_stale else min(periods, COUNTER_MASK)
+        for _ in range(widen):
+            self.rx_encoders.new_period()
+        self._tick_budget = self._periods_since_sample
+        self._drain_mailbox()
+        if self._tick_steps and not self._time_lost_now:
+            self._update_twist(max(self._tick_budget, 1))
+        self._navigate()
+        self._transmit_scheduled()
+        self._watchdog()
+        self.ticks = wrap_u32(self.ticks + 1)
+
+    def _drain_mailbox(self) -> None:
+        """Steps 1-3: every frame in arrival order, to its handler."""
         encoder_seen = False
         frame = self.mailbox.get()
         while frame is not None:
@@ -174,10 +250,42 @@ class OdomEcu:
             frame = self.mailbox.get()
         if not encoder_seen:
             self.rx_encoders.check(None)
-        self._navigate()
-        self._transmit_scheduled()
-        self._watchdog()
-        self.ticks = wrap_u32(self.ticks + 1)
+
+    def _advance_time(self, now_us: int | None) -> int:
+        """Firmware time: the periods elapsed on the timer since the previous tick, returned;
+        rounded, the remainder carried to the next tick so jitter never drifts the clock
+        (u32 elapsed: the timer may wrap, every 71.6 min)."""
+        periods = 1
+        if now_us is not None:
+            if self._timer_prev_us is not None:
+                elapsed_us = wrap_u32(now_us - self._timer_prev_us) + self._timer_rest_us
+                periods = (elapsed_us + TICK_PERIOD_US // 2) // TICK_PERIOD_US
+                self._timer_rest_us = elapsed_us - periods * TICK_PERIOD_US
+            self._timer_prev_us = now_us & U32_MAX
+        self.time_periods = wrap_u32(self.time_periods + periods)
+        self._ticks_since_encoder = min(self._ticks_since_encoder + periods, STEP_PERIODS_MAX)
+        self._periods_since_sample = min(self._periods_since_sample + periods, STEP_PERIODS_MAX)
+        self._time_lost_now = periods >= LOST_TIME_PERIODS
+        if self._time_lost_now:
+            self.periods_lost = wrap_u32(self.periods_lost + periods - 1)
+            self.errors.set(ErrorFlag.TIME_LOST)
+            self._degrade(Reason.TIME_LOST)
+        return periods
+
+    def _check_overflows(self) -> None:
+        """Frames the receive ISR dropped since the previous tick: DEGRADED (MAILBOX_OVERFLOW)."""
+        overflows = self.mailbox.overflows
+        if overflows != self._overflows_seen:
+            self._overflows_seen = overflows
+            self._degrade(Reason.MAILBOX_OVERFLOW)
+
+    def _degrade(self, reason: Reason) -> None:
+        """OK or DEGRADED -> DEGRADED for ``reason`` (INIT and FAULT stay); recovery restarts."""
+        if self.state is State.OK or self.state is State.DEGRADED:
+            self.state = State.DEGRADED
+            self.reason = reason
+            self._good_in_a_row = 0
+            self._reason_tick = self.ticks
 
     # --- step 2-3: received frames -----------------------------------------------------------
 
@@ -198,48 +306,156 @@ class OdomEcu:
         if not self._e2e(self.rx_encoders, data):
             return
         frame = fr.unpack_wheel_encoders(data)
-        left, right = self._extend_counters(frame.left_count, frame.right_count)
-        if self.state is not State.FAULT and self.odometry.step_counts(left, right):
-            self._update_twist(frame.counter)
-        self._enc_prev_counter = frame.counter
-        self._enc_counter = frame.counter
+        wire = (frame.left_count, frame.right_count)
+        counts = self._extend_counters(wire)
+        periods = self._step_periods_max(frame.counter)
+        if not self._plausible(self._counts_prev, counts, periods):
+            self._on_implausible(frame.counter, wire, counts)
+            return
+        self._resync_first = None
+        self._accept_encoders(frame.counter, wire, counts)
+
+    def _accept_encoders(
+        self, counter: int, wire: tuple[int, int], counts: tuple[int, int]
+    ) -> None:
+        """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
+        self._commit_counters(wire, counts)
+        if self.state is not State.FAULT and self.odometry.step_counts(counts[0], counts[1]):
+            self._sum_step()
+        self._enc_prev_counter = counter
+        self._enc_counter = counter
         self._ticks_since_encoder = 0
+        self._samples_stale = self._time_lost_now
+        if not self._time_lost_now:
+            self._periods_since_sample = 0
         if self._good_in_a_row < RECOVERY_FRAMES:
             self._good_in_a_row += 1
         if self.state is State.INIT:
             self.state = State.OK
 
-    def _extend_counters(self, left_wire: int, right_wire: int) -> tuple[int, int]:
-        """The hardware counters from their low 24 bits on the wire.
+    def _extend_counters(self, wire: tuple[int, int]) -> tuple[int, int]:
+        """The hardware counters from their low 24 bits on the wire (nothing is stored).
 
         A 16-bit counter fits the wire as it is. A 32-bit one is rebuilt by adding the wire's
         wrap-safe 24-bit delta (C: ``prev += (int32_t)((wire - prev_wire) << 8) >> 8``).
         """
-        if self.odometry.consts.counter_bits <= WIRE_COUNTER_BITS:
-            return left_wire, right_wire
-        if self._wire_prev is None:
-            self._counts_u32 = (left_wire, right_wire)
-        else:
-            d_left = wrap_signed(left_wire - self._wire_prev[0], WIRE_COUNTER_BITS)
-            d_right = wrap_signed(right_wire - self._wire_prev[1], WIRE_COUNTER_BITS)
-            self._counts_u32 = (
-                (self._counts_u32[0] + d_left) & U32_MAX,
-                (self._counts_u32[1] + d_right) & U32_MAX,
-            )
-        self._wire_prev = (left_wire, right_wire)
-        return self._counts_u32
+        if self.odometry.consts.counter_bits <= WIRE_COUNTER_BITS or self._wire_prev is None:
+            return wire
+        d_left = wrap_signed(wire[0] - self._wire_prev[0], WIRE_COUNTER_BITS)
+        d_right = wrap_signed(wire[1] - self._wire_prev[1], WIRE_COUNTER_BITS)
+        return (self._counts_u32[0] + d_left) & U32_MAX, (self._counts_u32[1] + d_right) & U32_MAX
 
-    def _update_twist(self, counter: int) -> None:
-        """Speeds over the last step: dt from the encoder counter's advance (lost frames count)."""
+    def _commit_counters(self, wire: tuple[int, int], counts: tuple[int, int]) -> None:
+        """Take an accepted frame's counters as the base of the next deltas."""
+        self._wire_prev = wire
+        self._counts_u32 = counts
+        self._counts_prev = counts
+
+    def _step_periods_max(self, counter: int) -> int:
+        """The most encoder periods that can separate this frame's sample from the last accepted
+        one: n = the COUNTER advance (mod 16), plus whole counter cycles while n stays within the
+        periods since that sample (less than a period of queueing on either side; after a tick
+        that lost time, since the last sample before it). Exact in a regular stream (1)."""
         prev = self._enc_prev_counter
-        periods = 1 if prev is None else ((counter - prev) & COUNTER_MASK) or 1
-        dt_us = periods * ENCODER_PERIOD_US
-        ds_q20_m = self.odometry.last_ds_q49_m >> 29
-        self._twist_mm_s = div_round_i64(ds_q20_m * 1_000_000_000, dt_us << 20)
-        dheading_q30_rad = mul_shr_round_i64(
-            self.odometry.last_dheading_bam64, TWO_PI_Q60, 94, self.errors
+        if prev is None:
+            return 1
+        advance = ((counter - prev) & COUNTER_MASK) or (COUNTER_MASK + 1)
+        budget = self._tick_budget  # <= STEP_PERIODS_MAX
+        if budget <= advance:
+            return advance
+        return advance + (((budget - advance) >> 4) << 4)
+
+    def _step_bounds(self) -> tuple[int, int]:
+        """Per wheel, the most counts one encoder period can hold at ``max_wheel_speed_mm_s``:
+        ceil(v_max * T / travel per count) + 1 (a count edge may fall either side of a sample).
+        Configuration time: a 128-bit muldiv, then u64 division."""
+        c = self.odometry.consts
+        travel_q48_m = muldiv_round_u64(
+            self.max_wheel_speed_mm_s * ENCODER_PERIOD_US, 1 << 48, 1_000_000_000, self.errors
         )
-        self._twist_mrad_s = div_round_i64(dheading_q30_rad * 1_000_000_000, dt_us << 30)
+        return (
+            (travel_q48_m + c.m_per_count_left_q48_m - 1) // c.m_per_count_left_q48_m + 1,
+            (travel_q48_m + c.m_per_count_right_q48_m - 1) // c.m_per_count_right_q48_m + 1,
+        )
+
+    def _plausible(
+        self, prev: tuple[int, int] | None, counts: tuple[int, int], periods: int
+    ) -> bool:
+        """True when each wheel moved at most ``periods`` times its per-period bound (u64: at
+        most 2^16 * 2^32) since ``prev`` (None: nothing to compare, plausible)."""
+        if prev is None:
+            return True
+        bits = self.odometry.consts.counter_bits
+        left_max, right_max = self._max_counts_per_period
+        d_left = wrap_signed(counts[0] - prev[0], bits)
+        d_right = wrap_signed(counts[1] - prev[1], bits)
+        return abs(d_left) <= periods * left_max and abs(d_right) <= periods * right_max
+
+    def _on_implausible(self, counter: int, wire: tuple[int, int], counts: tuple[int, int]) -> None:
+        """Refuse the step (DEGRADED, IMPLAUSIBLE_STEP); ``RESYNC_FRAMES`` refused frames in a row
+        that are plausible among themselves are a counter restart (COUNTER_RESET): re-prime on
+        the first of them and integrate from there, never the jump."""
+        self.frames_implausible = wrap_u32(self.frames_implausible + 1)
+        self.errors.set(ErrorFlag.IMPLAUSIBLE_STEP)
+        self._degrade(Reason.IMPLAUSIBLE_STEP)
+        last = self._resync_last
+        if self._resync_first is not None and self._plausible(
+            (last[0], last[1]), counts, ((counter - last[2]) & COUNTER_MASK) or 1
+        ):
+            self._resync_frames += 1
+        else:
+            self._resync_first = (counts[0], counts[1], counter)
+            self._resync_frames = 1
+        self._resync_last = (counts[0], counts[1], counter)
+        if self._resync_frames >= RESYNC_FRAMES:
+            self._restart_counters(counter, wire, counts)
+
+    def _restart_counters(
+        self, counter: int, wire: tuple[int, int], counts: tuple[int, int]
+    ) -> None:
+        """The encoder counters restarted: prime on the first consistent frame, integrate from it
+        up to ``counts`` (its periods from the COUNTER advance)."""
+        first = self._resync_first
+        if first is None:
+            return
+        self.errors.set(ErrorFlag.COUNTER_RESET)
+        self._degrade(Reason.COUNTER_RESET)
+        self._resync_first = None
+        self._resync_frames = 0
+        self.odometry.unprime()
+        self.odometry.step_counts(first[0], first[1])
+        self._enc_prev_counter = None
+        self._accept_encoders(counter, wire, counts)
+
+    def _sum_step(self) -> None:
+        """Add the step just integrated to this tick's sums (Q20 m, Q30 rad; i64, saturated)."""
+        odo = self.odometry
+        dheading_q30_rad = mul_shr_round_i64(odo.last_dheading_bam64, TWO_PI_Q60, 94, self.errors)
+        self._tick_ds_q20_m = sat_range(
+            self._tick_ds_q20_m + (odo.last_ds_q49_m >> 29),
+            -TWIST_SUM_MAX,
+            TWIST_SUM_MAX,
+            self.errors,
+        )
+        self._tick_dheading_q30_rad = sat_range(
+            self._tick_dheading_q30_rad + dheading_q30_rad,
+            -TWIST_SUM_MAX,
+            TWIST_SUM_MAX,
+            self.errors,
+        )
+        self._tick_steps += 1
+
+    def _update_twist(self, periods: int) -> None:
+        """Speeds over this tick's steps, which cover the ``periods`` (1 .. STEP_PERIODS_MAX)
+        since the last accepted sample: firmware time, so lost frames, a burst after a stall
+        (summed over two ticks) and a late frame all give the true mean speed. Products
+        < 2^32 * 10^9 < 2^63. The sums restart."""
+        dt_us = periods * ENCODER_PERIOD_US
+        self._twist_mm_s = div_round_i64(self._tick_ds_q20_m * 1_000_000_000, dt_us << 20)
+        self._twist_mrad_s = div_round_i64(self._tick_dheading_q30_rad * 1_000_000_000, dt_us << 30)
+        self._tick_ds_q20_m = 0
+        self._tick_dheading_q30_rad = 0
+        self._tick_steps = 0
 
     def _on_set_pose(self, data: bytes) -> None:
         if not self._e2e(self.rx_set_pose, data):
@@ -250,6 +466,8 @@ class OdomEcu:
             x_q40, y_q40, heading = self._pose_with(self._staged_pose)
             self.odometry.set_pose(x_q40, y_q40, heading)
             self._staged_pose.clear()
+            if self.reason is Reason.COUNTER_RESET:  # a pose given again: recovery may proceed
+                self.reason = Reason.NONE
         elif field in (fr.SetPoseField.X, fr.SetPoseField.Y, fr.SetPoseField.HEADING):
             self._staged_pose[field] = frame.value
         else:
@@ -303,10 +521,13 @@ class OdomEcu:
         if candidate.counter_bits != self.params.counter_bits:
             self.odometry.unprime()
             self._wire_prev = None
+            self._counts_prev = None
         self.params = candidate
         self.odometry.reconfigure(derive_constants(candidate, self.errors))
+        self._max_counts_per_period = self._step_bounds()
         if self.state is State.FAULT:
             self.state = State.INIT
+            self.reason = Reason.NONE
         self._ack(fr.ODOM_CONFIG_ID, frame, fr.AckResult.ACK, fr.AckReason.OK)
 
     def _on_nav_goal(self, data: bytes) -> None:
@@ -413,8 +634,9 @@ class OdomEcu:
             self.state,
             self.odometry.consts.integrator,
             self.errors.bits,
-            self.ticks // TICKS_PER_SECOND,
+            self.time_periods // TICKS_PER_SECOND,
             self.errors,
+            self.reason,
         )
         self._send(fr.ODOM_STATUS_ID, summary)
         page = _ROTATING_PAGES[self._page_index]
@@ -445,8 +667,8 @@ class OdomEcu:
 
     @property
     def frames_rejected(self) -> int:
-        """Frames refused by the E2E check or for their length (u32, wrapping)."""
-        total = self.frames_bad_length
+        """Frames refused by the E2E check, for their length or as implausible (u32, wrapping)."""
+        total = self.frames_bad_length + self.frames_implausible
         for rx in (self.rx_encoders, self.rx_set_pose, self.rx_config, self.rx_nav_goal):
             total += rx.count_error + rx.count_wrongsequence + rx.count_repeated
         return wrap_u32(total)
@@ -464,16 +686,24 @@ class OdomEcu:
     # --- step 6: the watchdog ----------------------------------------------------------------
 
     def _watchdog(self) -> None:
+        """Encoders silent for WATCHDOG_TICKS periods of firmware time -> DEGRADED; back to OK
+        after RECOVERY_FRAMES accepted frames with no new cause."""
         if self.state is State.INIT or self.state is State.FAULT:
             return
         if self._ticks_since_encoder >= WATCHDOG_TICKS:
-            if self.state is not State.DEGRADED:
-                self.state = State.DEGRADED
-                self.errors.set(ErrorFlag.ENCODER_TIMEOUT)
+            self.errors.set(ErrorFlag.ENCODER_TIMEOUT)
+            if self.state is State.OK or (  # a cause raised in this very tick is kept
+                self.reason is not Reason.ENCODER_TIMEOUT and self._reason_tick != self.ticks
+            ):
+                self._degrade(Reason.ENCODER_TIMEOUT)
             self._good_in_a_row = 0
-        elif self.state is State.DEGRADED and self._good_in_a_row >= RECOVERY_FRAMES:
+        elif (
+            self.state is State.DEGRADED
+            and self._good_in_a_row >= RECOVERY_FRAMES
+            and self.reason is not Reason.COUNTER_RESET  # the pose lost its continuity
+        ):
             self.state = State.OK
-        self._ticks_since_encoder += 1
+            self.reason = Reason.NONE
 
 
 def _q40_from_100um(value_100um: int) -> int:

@@ -24,7 +24,7 @@ from typing import Final, NamedTuple
 
 from odocan.firmware.config import Integrator
 from odocan.firmware.e2e import COUNTER_MASK, DATA_ID_COUNT, p02_crc
-from odocan.firmware.errors import ErrorMask
+from odocan.firmware.errors import ErrorMask, Reason
 from odocan.firmware.fixmath import (
     I16_MAX,
     I16_MIN,
@@ -266,6 +266,7 @@ class OdomStatusSummary(NamedTuple):
     integrator: int  # Integrator
     error_mask: u16  # low 16 bits of the u32 error mask
     uptime_s: int  # u24
+    reason: int = 0  # u4 firmware.errors.Reason: why the state is not OK
 
 
 class OdomStatusFrameTotals(NamedTuple):
@@ -633,14 +634,21 @@ def unpack_odom_ack(data: bytes | bytearray) -> OdomAck:
 
 # --- ODOM_STATUS (ODOM_MCU -> HOST; 100 ms, one page per cycle; multiplexed by PAGE) ---
 def pack_odom_status_summary(
-    counter: int, state: int, integrator: int, error_mask: int, uptime_s: int, errors: ErrorMask
+    counter: int,
+    state: int,
+    integrator: int,
+    error_mask: int,
+    uptime_s: int,
+    errors: ErrorMask,
+    reason: int = 0,
 ) -> bytes:
-    """ODOM_STATUS page 0: state, integrator, the low 16 bits of the error mask, uptime (s,
-    saturated to u24)."""
+    """ODOM_STATUS page 0: state, integrator, reason (saturated to the DBC range), the low 16
+    bits of the error mask, uptime (s, saturated to u24)."""
     word = (
         _head(counter, StatusPage.SUMMARY)
         | (sat_range(state, 0, 3, errors) << 16)
         | (sat_range(integrator, Integrator.EULER, Integrator.EXACT, errors) << 18)
+        | (sat_range(reason, Reason.NONE, Reason.CONFIG_INVALID, errors) << 20)
         | (wrap_u16(error_mask) << 24)
         | (sat_range(uptime_s, 0, U24_MAX, errors) << 40)
     )
@@ -683,7 +691,12 @@ def unpack_odom_status(
     page = (w >> 12) & U4_MAX
     if page == StatusPage.SUMMARY:
         return OdomStatusSummary(
-            counter, (w >> 16) & 0x3, (w >> 18) & 0x3, (w >> 24) & U16_MAX, w >> 40
+            counter,
+            (w >> 16) & 0x3,
+            (w >> 18) & 0x3,
+            (w >> 24) & U16_MAX,
+            w >> 40,
+            (w >> 20) & U4_MAX,
         )
     if page == StatusPage.FRAME_TOTALS:
         return OdomStatusFrameTotals(counter, (w >> 16) & U16_MAX, (w >> 32) & U16_MAX, w >> 48)

@@ -5,7 +5,10 @@ project; a CAN driver and a timer on a real MCU) implements ``CanTx`` and calls 
 
 * ``OdomEcu.isr_can_rx(can_id, data)`` from the CAN receive interrupt: copies the frame into a
   bounded mailbox and returns (ISR context: no allocation beyond the slot, no processing);
-* ``OdomEcu.tick()`` from a periodic timer every ``TICK_PERIOD_US`` microseconds (thread context);
+* ``OdomEcu.tick(now_us)`` from a periodic timer every ``TICK_PERIOD_US`` microseconds (thread
+  context), ``now_us`` the free-running u32 microsecond timer at its release (the firmware's clock:
+  a late or stalled tick is lost time, not one period);
+* ``OdomEcu.isr_rx_overrun()`` when the CAN controller's receive FIFO overran;
 * ``OdomEcu.isr_bus_state(bus_off)`` when the CAN controller enters or leaves bus-off.
 """
 

@@ -3,7 +3,15 @@
 The bus plays the MCU's CAN controller (11-bit data frames only: error, remote and extended frames
 never reach the firmware's mailbox, as a hardware acceptance filter would drop them, nor frames
 outside ``accept_ids`` when it is given); the caller's
-periodic loop plays its timer and calls ``run_tick`` every ``TICK_PERIOD_US``.
+periodic loop plays its timer and calls ``run_tick`` every ``TICK_PERIOD_US``; the clock plays the
+MCU's free-running microsecond timer, passed to every tick.
+
+A stalled MCU (a debugger halt, a SIGSTOPped process, a tick loop that fell behind) runs no receive
+ISR: while it is halted its CAN controller keeps the first ``HW_RX_FIFO_FRAMES`` frames in its
+receive FIFO (FIFO-locked mode, as bxCAN) and overruns the rest. So when ``run_tick`` comes
+``HALT_AFTER_S`` or more after the previous one (as long as the firmware calls lost time), only that
+many waiting frames reach the firmware; the others are dropped and the overrun interrupt tells the
+firmware, as would the hardware.
 """
 
 from __future__ import annotations
@@ -11,13 +19,18 @@ from __future__ import annotations
 import can
 
 from odocan.firmware.config import RobotParams
-from odocan.firmware.ecu import OdomEcu
+from odocan.firmware.ecu import LOST_TIME_PERIODS, OdomEcu
 from odocan.firmware.hal import TICK_PERIOD_US
 from odocan.sim.clock import Clock
 from odocan.sim.node import BusNode
 
 TICK_S = TICK_PERIOD_US / 1e6
 TX_LATENCY_S = 0.001  # the firmware's frames leave 1 ms after the tick that made them
+HW_RX_FIFO_FRAMES = 3  # the CAN controller's receive FIFO depth (bxCAN: 3 per FIFO)
+# A tick this long after the previous one: the MCU was halted (the firmware's TIME_LOST). A
+# merely late tick is not: a real MCU's receive interrupt would have run meanwhile.
+HALT_AFTER_S = (LOST_TIME_PERIODS - 0.5) * TICK_S
+_U32 = 0xFFFF_FFFF
 
 
 class FirmwareBoard(BusNode):
@@ -36,6 +49,8 @@ class FirmwareBoard(BusNode):
         self.ecu = OdomEcu(self, params)
         self._bus_off = False
         self.frames_dropped_by_filter = 0
+        self.frames_overrun = 0  # frames the halted MCU's receive FIFO could not hold
+        self._last_run_s: float | None = None
 
     tx_latency_s = TX_LATENCY_S
 
@@ -43,11 +58,13 @@ class FirmwareBoard(BusNode):
         """The HAL's transmit (``firmware.hal.CanTx``)."""
         return self.send_frame(can_id, data)
 
-    def service_rx(self) -> None:
-        """Deliver every frame waiting on the bus to the firmware's receive ISR."""
+    def service_rx(self, fifo_frames: int | None = None) -> None:
+        """Deliver the frames waiting on the bus to the firmware's receive ISR: all of them, or
+        (after a halt) the first ``fifo_frames`` that pass the filter, the rest overrun."""
         recv = self.bus.recv
         isr = self.ecu.isr_can_rx
         accept = self.accept_ids
+        overrun = 0
         msg = recv(0)
         while msg is not None:
             if (
@@ -57,15 +74,26 @@ class FirmwareBoard(BusNode):
                 or (accept is not None and msg.arbitration_id not in accept)
             ):
                 self.frames_dropped_by_filter += 1
+            elif fifo_frames is not None and fifo_frames <= 0:
+                overrun += 1
             else:
                 isr(msg.arbitration_id, bytes(msg.data))
+                if fifo_frames is not None:
+                    fifo_frames -= 1
             msg = recv(0)
+        if overrun:
+            self.frames_overrun += overrun
+            self.ecu.isr_rx_overrun()
 
     def run_tick(self) -> None:
-        """One timer period: the pending interrupts (status, receive), then the firmware's tick."""
+        """One timer period: the pending interrupts (status, receive), then the firmware's tick
+        with the timer's microseconds (the clock's, wrapped to u32)."""
+        now_s = self.clock.now_s()
+        halted = self._last_run_s is not None and now_s - self._last_run_s >= HALT_AFTER_S
+        self._last_run_s = now_s
         self._service_bus_state()
-        self.service_rx()
-        self.ecu.tick()
+        self.service_rx(HW_RX_FIFO_FRAMES if halted else None)
+        self.ecu.tick(round(now_s * 1e6) & _U32)
 
     def _service_bus_state(self) -> None:
         """The controller's status interrupt: report entering and leaving bus-off."""

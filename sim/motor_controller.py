@@ -42,6 +42,7 @@ class MotorController(BusNode):
         self.errors = ErrorMask()
         self.counter = -1
         self.commands_applied = 0
+        self._count_offset = (0, 0)  # the vehicle's counts at the last restart
 
     def deliver(self, data: bytes) -> None:
         """One received ``MOTOR_CMD`` payload: applied when its E2E check passes."""
@@ -61,10 +62,21 @@ class MotorController(BusNode):
                 self.deliver(bytes(msg.data))
             msg = self.bus.recv(0)
 
+    def restart(self) -> None:
+        """A reboot of this node: the encoder counters and the E2E counter start again from 0
+        (the robot stays where it is)."""
+        self.vehicle.advance_to(self.clock.now_s())
+        self._count_offset = self.vehicle.encoder_counts()
+        self.counter = -1
+        self.rx_motor_cmd.reset()
+
     def sample_and_send(self) -> int:
         """Advance the motors to now, send WHEEL_ENCODERS; returns the frame's COUNTER."""
         self.vehicle.advance_to(self.clock.now_s())
+        mask = (1 << self.vehicle.profile.counter_bits) - 1
         left, right = self.vehicle.encoder_counts()
+        left = (left - self._count_offset[0]) & mask
+        right = (right - self._count_offset[1]) & mask
         self.counter = (self.counter + 1) & 0xF
         self.send_frame(
             fr.WHEEL_ENCODERS_ID, fr.pack_wheel_encoders(self.counter, left & _U24, right & _U24)

@@ -84,6 +84,7 @@ class FaultRig:
         self.observers: list[Observer] = []
         self.before_board: list[Hook] = []
         self.ticks = 0
+        self.halted: Callable[[int], bool] = lambda _k: False  # the MCU runs no tick (a stall)
 
     @property
     def ecu(self) -> OdomEcu:
@@ -91,13 +92,15 @@ class FaultRig:
         return self.board.ecu
 
     def step(self) -> None:
-        """One 10 ms tick in ``LockstepRig.step``'s order (hooks run just before the board)."""
+        """One 10 ms tick in ``LockstepRig.step``'s order (hooks run just before the board; the
+        board does not run in ticks where ``halted(k)``)."""
         k = self.ticks
         self.clock.advance_to(k * TICK_S)
         self.sim.tick(k)
         for hook in self.before_board:
             hook(k)
-        self.board.run_tick()
+        if not self.halted(k):
+            self.board.run_tick()
         frames = list(_drain(self.host_bus))
         for observer in self.observers:
             observer(k, frames)

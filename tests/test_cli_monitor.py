@@ -163,6 +163,14 @@ def test_monitor_follows_the_firmware_and_its_pose(
     assert vs_truth["samples"] >= 5
     assert vs_truth["max_dpos_m"] < 5e-3
     assert set(model["truth"]) == {"x_m", "y_m", "heading_rad"}
+    # the source stopped about 1 s before the monitor: the firmware is stale, whatever it said
+    health = model["health"]
+    firmware = health["nodes"]["ODOM_MCU"]
+    assert firmware["timeout_s"] == pytest.approx(0.2)  # 10 x ODOM_POSE_X's 20 ms
+    assert firmware["stale"] and firmware["age_s"] > 0.5
+    assert health["state"] == "STALE" and "ODOM_MCU silent for" in health["why"][0]
+    assert health["events"] == []
+    assert model["messages"]["ODOM_POSE_X"]["stale"]
 
 
 def test_monitor_integrator_given(source: Source, capsys: pytest.CaptureFixture[str]) -> None:
@@ -183,6 +191,7 @@ def test_monitor_screen(source: Source, capsys: pytest.CaptureFixture[str]) -> N
     assert (code, err) == (0, "")
     assert f"odocan monitor virtual:{source.channel}" in out
     assert "firmware OK   integrator EXACT   errors 0x0000 (none)" in out
+    assert "verdict STALE: ODOM_MCU silent for" in out  # the last frame: the source has stopped
     for name in ("WHEEL_ENCODERS", "ODOM_POSE_X", "SIM_TRUTH", "reference exact, started 1x"):
         assert name in out
     assert f"not checked: unknown id {TICKS // GARBAGE_EVERY}" in out

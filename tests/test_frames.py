@@ -224,7 +224,7 @@ KINDS = [
         "ODOM_STATUS",
         0,
         lambda c, v, e: f.pack_odom_status_summary(
-            c, v["STATE"], v["INTEGRATOR"], v["ERROR_MASK"], v["UPTIME"], e
+            c, v["STATE"], v["INTEGRATOR"], v["ERROR_MASK"], v["UPTIME"], e, v["REASON"]
         ),
         lambda d: as_signals(f.unpack_odom_status(d), {"uptime_s": "UPTIME"}) | {"PAGE": 0},
     ),

@@ -132,9 +132,11 @@ def analyze(
     vs_ref = _summary(pos_err, head_err)
     vs_truth, truth_series = _versus_truth(onboard, truth, ref_all)
     vs_truth["distance_travelled_m"] = float(ref.distance_m[-1])
+    twist = check_twist(frames, accepted, decoder, enc, robot)
     passed = bool(
         vs_ref["max_position_error_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
+        and twist["passed"]
     )
     report = {
         "robot": _robot_dict(robot),
@@ -156,6 +158,7 @@ def analyze(
         },
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,
+        "onboard_twist_vs_reference": twist,
         "final_onboard_pose": {
             "x_m": float(onboard.x_m[-1]),
             "y_m": float(onboard.y_m[-1]),
@@ -564,3 +567,111 @@ def _frame_counts(frames: FrameArrays, decoder: BulkDecoder) -> dict[str, int]:
         if n:
             counts[message.name] = n
     return counts
+
+
+# --- the twist: ODOM_TWIST against the reference's speeds ------------------------------------
+
+TWIST_LSB = 1e-3  # LINEAR_VEL 1 mm/s, ANGULAR_VEL 1 mrad/s
+TWIST_RELATIVE = 0.02  # the firmware's dt is its own tick time: a late frame may shift it a bit
+TWIST_RANGE = (-32.768, 32.767)  # both signals: i16 LSBs, saturated by the sender
+TWIST_GAP_ACCEL_MPS2 = 5.0  # rim acceleration bound inside a step the log holds only in part
+
+
+def check_twist(
+    frames: FrameArrays,
+    accepted: npt.NDArray[np.bool_],
+    decoder: BulkDecoder,
+    enc: _Encoders,
+    robot: RobotProfile,
+) -> dict[str, Any]:
+    """ODOM_TWIST (LINEAR_VEL, ANGULAR_VEL) against the reference's speeds.
+
+    The firmware reports the mean speed over its steps since its previous twist; a mean lies
+    between the smallest and largest per-period speed it averages. So each twist frame must lie
+    in the band of the reference's per-step speeds (step distance and heading change over its
+    encoder periods) over the encoder frames since the twist frame before the previous one
+    (twist frames come every other period), widened by one LSB plus ``TWIST_RELATIVE``. A
+    twist from a wrong dt (e.g. 17 x the speed after 16 lost frames) falls far outside. Where
+    the log lacks encoder frames the firmware may have had, a step of n periods only gives the
+    mean of its periods: the band widens there by one count per period (quantisation) and
+    ``TWIST_GAP_ACCEL_MPS2`` over the n - 1 periods. A log without ODOM_TWIST passes with 0
+    samples.
+    """
+    try:
+        twist = decoder.decode(frames, "ODOM_TWIST")
+    except DecodeError:
+        twist = {"index": np.zeros(0, dtype=np.int64)}
+    keep = accepted[twist["index"]] if len(twist["index"]) else np.zeros(0, dtype=bool)
+    result: dict[str, Any] = {
+        "samples": 0,
+        "max_linear_excess_mps": 0.0,
+        "max_angular_excess_rad_s": 0.0,
+        "passed": True,
+    }
+    if not keep.any():
+        return result
+    e = match_encoder(enc, twist["index"][keep], twist["ENC_COUNTER"][keep].astype(np.int64))
+    ok = (e >= 0) & (e >= np.maximum.accumulate(e))
+    e = e[ok]
+    linear = twist["LINEAR_VEL"][keep][ok] * TWIST_LSB
+    angular = twist["ANGULAR_VEL"][keep][ok] * TWIST_LSB
+    (v_ref, w_ref), (v_gap, w_gap) = _step_speeds(enc, robot, decoder)
+    excess_v = _outside_band(linear, e, v_ref, v_gap)
+    excess_w = _outside_band(angular, e, w_ref, w_gap)
+    judged = ~np.isnan(excess_v)
+    result["samples"] = int(np.count_nonzero(judged))
+    if result["samples"]:
+        result["max_linear_excess_mps"] = float(np.max(excess_v[judged]))
+        result["max_angular_excess_rad_s"] = float(np.max(excess_w[judged]))
+        result["passed"] = bool(
+            result["max_linear_excess_mps"] == 0.0 and result["max_angular_excess_rad_s"] == 0.0
+        )
+    return result
+
+
+def _step_speeds(
+    enc: _Encoders, robot: RobotProfile, decoder: BulkDecoder
+) -> tuple[tuple[FloatArray, FloatArray], tuple[FloatArray, FloatArray]]:
+    """Per accepted encoder frame j >= 1: the reference's linear (m/s) and angular (rad/s) speed
+    over the step from frame j - 1, spread over its periods (element 0: NaN); and how far a
+    single period inside a step of several may differ from that mean (0 for one period)."""
+    g = Geometry.of(robot)
+    bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
+    ds_left = wrap_delta(np.diff(enc.left), bits) * g.m_per_count_left
+    ds_right = wrap_delta(np.diff(enc.right), bits) * g.m_per_count_right
+    cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS") or 0.01
+    periods = np.diff(enc.seq)
+    dt_s = periods * cycle_s
+    nan = np.full(1, np.nan)
+    v = np.concatenate((nan, 0.5 * (ds_left + ds_right) / dt_s))
+    w = np.concatenate((nan, (ds_right - ds_left) / g.wheelbase_m / dt_s))
+    count_mps = max(g.m_per_count_left, g.m_per_count_right) / cycle_s
+    accel_mps = TWIST_GAP_ACCEL_MPS2 * (periods - 1) * cycle_s
+    gap_v = np.concatenate(([0.0], np.where(periods > 1, count_mps + accel_mps, 0.0)))
+    gap_w = gap_v * (2.0 / g.wheelbase_m)
+    return (v, w), (gap_v, gap_w)
+
+
+def _outside_band(value: FloatArray, e: IntArray, step: FloatArray, gap: FloatArray) -> FloatArray:
+    """How far each ``value`` (at encoder frame ``e``) lies outside the band of ``step`` over
+    (e two samples back, e], widened by the largest ``gap`` there: 0 inside, NaN where the
+    window is empty."""
+    out = np.full(len(value), np.nan)
+    if len(e) < 3:
+        return out
+    step, gap = step[: int(e[-1]) + 1], gap[: int(e[-1]) + 1]
+    starts = np.minimum(e[:-1] + 1, len(step) - 1)
+    empty = e[1:] < e[:-1] + 1  # segment k: steps (e[k], e[k + 1]]
+    seg_lo = np.where(empty, np.inf, np.minimum.reduceat(step, starts))
+    seg_hi = np.where(empty, -np.inf, np.maximum.reduceat(step, starts))
+    seg_gap = np.where(empty, 0.0, np.maximum.reduceat(gap, starts))
+    lo = np.minimum(seg_lo[:-1], seg_lo[1:])
+    hi = np.maximum(seg_hi[:-1], seg_hi[1:])
+    known = np.isfinite(lo) & np.isfinite(hi)  # the window holds a step
+    lo, hi = np.clip(lo, *TWIST_RANGE), np.clip(hi, *TWIST_RANGE)
+    slack = TWIST_LSB + TWIST_RELATIVE * np.maximum(np.abs(lo), np.abs(hi))
+    slack += np.maximum(seg_gap[:-1], seg_gap[1:])
+    v = value[2:]
+    excess = np.maximum(0.0, np.maximum(v - hi - slack, lo - slack - v))
+    out[2:] = np.where(known, excess, np.nan)
+    return out

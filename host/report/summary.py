@@ -143,11 +143,28 @@ def print_summary(
         console.print(Padding(table, (0, 0, 0, 2), expand=False))
     console.print()
     verdict, style = ("PASS", "green") if report["passed"] else ("FAIL", "bold red")
+    twist = report.get("onboard_twist_vs_reference") or {"passed": True}
+    pose_met = _pose_within(report, tolerance)
     console.print(
         f"[{style}]{verdict}[/{style}]: on-board vs reference within "
         f"{tolerance.position_m * 1e3:.4g} mm and {tolerance.heading_rad * 1e3:.4g} mrad"
-        + ("" if report["passed"] else ": not met"),
+        + ("" if pose_met else ": not met")
+        + (
+            ""
+            if twist["passed"]
+            else "; ODOM_TWIST outside the reference's speeds by up to "
+            f"{twist['max_linear_excess_mps']:.3f} m/s, "
+            f"{twist['max_angular_excess_rad_s']:.3f} rad/s"
+        ),
         soft_wrap=True,
+    )
+
+
+def _pose_within(report: dict[str, Any], tolerance: Tolerance) -> bool:
+    vs_ref = report["onboard_vs_reference"]
+    return bool(
+        vs_ref["max_position_error_m"] <= tolerance.position_m
+        and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
     )
 
 
