@@ -28,10 +28,10 @@ import can
 
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import topics
-from odocan.host.mqtt.broker import BrokerURL
-from odocan.host.mqtt.link import RobotLink
+from odocan.host.mqtt.broker import BrokerURL, first_error
+from odocan.host.mqtt.link import RobotLink, Verdict
 from odocan.host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
-from odocan.host.protocol.commands import Command, CommandEncoder, CommandRejected
+from odocan.host.protocol.commands import Command, CommandEncoder, CommandRejected, command_id
 
 log = logging.getLogger(__name__)
 Batch = list[tuple[int, can.Message]]
@@ -59,6 +59,10 @@ class BridgeConfig:
     keepalive_s: int = 5
     client_prefix: str = "odocan-bridge"
     queue_batches: int = 1024
+    connect_timeout_s: float = 5.0  # the first connection, else BrokerError
+    command_expiry_s: float = 5.0  # a command without its own MQTT v5 expiry, at most this old
+    telemetry_buffer: int = 1000  # QoS-0 publications per robot waiting for the socket
+    reliable_buffer: int = 1000  # QoS-1 publications per robot waiting for their PUBACK
 
 
 class _Robot:
@@ -75,17 +79,34 @@ class _Robot:
         self.link = RobotLink(
             robot=endpoint.name, broker=config.broker, on_command=self.on_command,
             client_prefix=config.client_prefix, keepalive_s=config.keepalive_s,
+            connect_timeout_s=config.connect_timeout_s,
+            command_expiry_s=config.command_expiry_s,
+            telemetry_buffer=config.telemetry_buffer, reliable_buffer=config.reliable_buffer,
         )
-        self.commands_sent = self.commands_rejected = 0
+        self.commands_sent = self.commands_rejected = self.commands_failed = 0
 
-    def on_command(self, name: str, payload: bytes) -> list[Publication]:
-        """Validate, then send; the answer for ``cmd/result``."""
+    def on_command(self, name: str, payload: bytes, verdict: Verdict = "run") -> list[Publication]:
+        """Validate, then send; always the one answer for ``cmd/result``, never an exception."""
+        name = name[:64]  # a topic level is up to 64 KiB: the answer echoes a bounded name
+        if verdict == "expired":
+            self.commands_rejected += 1
+            return [_result(command_id(payload), name, "expired",
+                            "older than its expiry: not run")]
+        if verdict == "busy":
+            self.commands_rejected += 1
+            return [_result(command_id(payload), name, "rejected", "bridge busy: not run")]
         try:
             command = self.encoder.encode(name, payload)
             self._send(command)
         except CommandRejected as exc:
             self.commands_rejected += 1
             return [_result(exc.cmd_id, name, "rejected", exc.reason)]
+        except Exception as exc:  # a defect must not stop the bridge: answer, log, go on
+            self.commands_failed += 1
+            log.warning("%s: command %s failed: %r", self.endpoint.name, name, exc,
+                        exc_info=log.isEnabledFor(logging.DEBUG))
+            return [_result(command_id(payload), name, "rejected",
+                            f"internal error ({type(exc).__name__})")]
         self.commands_sent += 1
         return [_result(command.cmd_id, name, "accepted", None, frames=len(command.frames))]
 
@@ -127,6 +148,7 @@ class Bridge:
         self.queue: asyncio.Queue[Batch] = asyncio.Queue(maxsize=config.queue_batches)
         self.frames_dropped = 0
         self.frames_in = 0
+        self.frames_failed = 0  # frames whose handling raised (a defect): counted, logged once
 
     @property
     def links(self) -> list[RobotLink]:
@@ -141,17 +163,40 @@ class Bridge:
             self.frames_dropped += len(batch)
 
     async def run(self, *, stop: asyncio.Event) -> None:
-        """Serve until ``stop`` is set; every link publishes ``offline`` and disconnects."""
-        async with asyncio.TaskGroup() as tg:
-            for robot in self.robots:
-                tg.create_task(robot.link.run(stop=stop), name=f"mqtt-link-{robot.link.robot}")
-            frames = tg.create_task(self._consume(), name="can-frames")
-            periodic = tg.create_task(self._periodic(), name="periodic")
-            await stop.wait()
-            await asyncio.sleep(0)
-            self._drain()
-            frames.cancel()
-            periodic.cancel()
+        """Serve until ``stop`` is set; every link publishes ``offline`` and disconnects.
+
+        ``BrokerError`` (not wrapped in a group) when a link's first connection fails."""
+        try:
+            async with asyncio.TaskGroup() as tg:
+                for robot in self.robots:
+                    tg.create_task(robot.link.run(stop=stop),
+                                   name=f"mqtt-link-{robot.link.robot}")
+                frames = tg.create_task(self._consume(), name="can-frames")
+                periodic = tg.create_task(self._periodic(), name="periodic")
+                await stop.wait()
+                await asyncio.sleep(0)
+                self._drain()
+                frames.cancel()
+                periodic.cancel()
+        except BaseExceptionGroup as group:
+            raise first_error(group) from None
+
+    def counters(self) -> dict[str, Any]:
+        """What was dropped, refused, expired or failed (the report's ``bridge`` entry)."""
+        links = self.links
+        return {
+            "frames_in": self.frames_in,
+            "frames_dropped": self.frames_dropped,
+            "frames_failed": self.frames_failed,
+            "telemetry_dropped": sum(link.telemetry_dropped for link in links),
+            "telemetry_offline": sum(link.telemetry_offline for link in links),
+            "reliable_dropped": sum(link.reliable_dropped for link in links),
+            "commands_expired": sum(link.commands_expired for link in links),
+            "commands_busy": sum(link.commands_busy for link in links),
+            "commands_failed": sum(r.commands_failed for r in self.robots),
+            "refused": sum(sum(link.refused.values()) for link in links),
+            "reconnects": sum(max(link.connects - 1, 0) for link in links),
+        }
 
     async def _consume(self) -> None:
         while True:
@@ -166,7 +211,15 @@ class Bridge:
         self.frames_in += len(batch)
         for index, msg in batch:
             robot = robots[index]
-            for leaf, payload in robot.telemetry.feed(msg):
+            try:
+                publications = robot.telemetry.feed(msg)
+            except Exception as exc:  # a defect must not stop the bridge: count, log once
+                if self.frames_failed == 0:
+                    log.warning("%s: frame %s failed: %r", robot.endpoint.name, msg, exc,
+                                exc_info=log.isEnabledFor(logging.DEBUG))
+                self.frames_failed += 1
+                continue
+            for leaf, payload in publications:
                 robot.link.publish(leaf, payload)
 
     async def _periodic(self) -> None:

@@ -4,7 +4,8 @@
 publications it makes due, as ``(leaf, payload)`` pairs (``host.mqtt.topics``):
 
 * every frame is E2E-checked (``host.e2e.E2EMonitor``: the DBC's E2EDataIDs, Profile 2 CRC and
-  sequence) and decoded with cantools; frames the check rejects are counted, never used;
+  sequence) and decoded with cantools; frames the check rejects, and E2E-valid frames cantools
+  cannot decode (an unknown multiplexer page), are counted in ``rejected``, never used;
 * ``WHEEL_ENCODERS`` steps the float64 reference (``host.reference.ReferenceOdometry``, 24-bit
   wrapping counts); the reference pose after each frame is kept by the frame's E2E ``COUNTER``;
 * ``ODOM_POSE_X`` + ``ODOM_POSE_Y`` with the same ``ENC_COUNTER`` make the on-board pose, compared
@@ -27,6 +28,7 @@ from typing import Any, ClassVar
 
 import can
 from cantools.database.can import Database
+from cantools.database.errors import DecodeError
 
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.tracking import Pose, PoseTracker, difference
@@ -105,7 +107,11 @@ class RobotTelemetry:
         handler = self._handlers.get(message.name)
         if handler is None:
             return []
-        signals = message.decode(data, decode_choices=False)
+        try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
+            signals = message.decode(data, decode_choices=False)
+        except DecodeError:
+            self.rejected[message.name] += 1
+            return []
         assert isinstance(signals, dict)
         publications: list[Publication] = handler(self, signals, msg.timestamp)
         return publications

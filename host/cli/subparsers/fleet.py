@@ -16,7 +16,12 @@ import sys
 from pathlib import Path
 
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
-from odocan.host.mqtt.options import add_mqtt_arguments, broker_url
+from odocan.host.mqtt.options import (
+    add_mqtt_arguments,
+    bridge_options,
+    broker_url,
+    configure_logging,
+)
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.fleet import FleetConfig
@@ -74,9 +79,9 @@ def _do_fleet(args: argparse.Namespace) -> int:
         ),
         duration_s=args.duration,
         broker=broker_url(args),
-        publish_hz=args.publish_hz,
-        client_prefix=args.client_prefix,
+        **bridge_options(args),
     )
+    configure_logging(getattr(args, "debug", False))
     report = asyncio.run(run_fleet(run))
     text = json.dumps(report, indent=2)
     if args.report is not None:
