@@ -132,8 +132,9 @@ _DNS_HINTS = ("name or service not known", "temporary failure in name resolution
               "nodename nor servname", "no address associated")
 
 
-def connect_failure(exc: BaseException, timeout_s: float) -> str:
-    """Why a connection attempt failed, in a few words: refused, not authorized, TLS, DNS ..."""
+def connect_failure(exc: BaseException, timeout_s: float, *, tls: bool = False) -> str:
+    """Why a connection attempt failed, in a few words: refused, not authorized, TLS, DNS ...
+    (``tls``: a reset or EOF during the handshake is most likely a port without TLS)."""
     if isinstance(exc, MqttConnectError):
         code = getattr(exc.rc, "value", exc.rc)
         what = "not authorized" if code in _NOT_AUTHORIZED else "refused by the broker"
@@ -148,6 +149,8 @@ def connect_failure(exc: BaseException, timeout_s: float) -> str:
         return f"DNS: the host name does not resolve ({text})"
     if "ssl" in low or "certificate" in low or "tls" in low:
         return f"TLS: {text}"
+    if tls and ("reset" in low or "eof" in low):
+        return f"TLS: the handshake failed; is this port TLS? ({text})"
     if "timed out" in low:
         return f"no answer within {timeout_s:g} s (--connect-timeout)"
     return text

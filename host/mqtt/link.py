@@ -251,7 +251,7 @@ class RobotLink:
                     log.info("%s: %s speaks MQTT 3.1.1 only: no reason codes, no message "
                              "expiry", self.robot, self.broker)
                     continue
-                reason = connect_failure(exc, self.connect_timeout_s)
+                reason = connect_failure(exc, self.connect_timeout_s, tls=self.broker.tls)
                 if self.connects == 0:
                     raise BrokerError(f"cannot connect to {self.broker}: {reason}") from None
                 log.warning("%s: reconnecting in %.1f s (%s)", self.robot, backoff, reason)
@@ -402,7 +402,7 @@ async def _probe_v5(broker: BrokerURL, timeout_s: float) -> bool:
         if protocol_unsupported(exc):
             log.info("%s speaks MQTT 3.1.1 only: no reason codes, no message expiry", broker)
             return False
-        reason = connect_failure(exc, timeout_s)
+        reason = connect_failure(exc, timeout_s, tls=broker.tls)
         raise BrokerError(f"cannot connect to {broker}: {reason}") from None
 
 

@@ -82,13 +82,26 @@ def bridge_options(args: argparse.Namespace) -> dict[str, Any]:
 LIBRARY_LOGGERS = ("aiomqtt", "mqtt", "paho", "amqtt", "transitions", "odocan.mqtt.client")
 
 
+class _StderrHandler(logging.StreamHandler):  # type: ignore[type-arg]
+    """The handler ``configure_logging`` installs (found again to be replaced); writes to the
+    ``sys.stderr`` of the moment (pytest's capture swaps it)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.setStream(sys.stderr)
+        super().emit(record)
+
+
 def configure_logging(debug: bool) -> None:
     """odocan's MQTT lines (connection lost / reconnecting / reconnected, refusals) on stderr,
     one line each; the libraries' (amqtt, aiomqtt, paho) only with ``--debug``."""
-    handler = logging.StreamHandler(sys.stderr)
+    handler = _StderrHandler()
     handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s" if debug
                                            else "mqtt %(message)s"))
     odocan = logging.getLogger("odocan")
+    for name in ("odocan", *LIBRARY_LOGGERS):  # once per process, even when called again
+        old = logging.getLogger(name)
+        for h in [h for h in old.handlers if isinstance(h, _StderrHandler)]:
+            old.removeHandler(h)
     odocan.addHandler(handler)
     odocan.setLevel(logging.DEBUG if debug else logging.INFO)
     odocan.propagate = False

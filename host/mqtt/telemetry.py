@@ -102,15 +102,17 @@ class RobotTelemetry:
         if message is None or status not in ACCEPTED_E2E:
             self.rejected[message.name if message else hex(can_id)] += 1
             return []
+        handler = self._handlers.get(message.name)
+        signals: Any = None
+        if handler is not None:
+            try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
+                signals = message.decode(data, decode_choices=False)
+            except DecodeError:
+                self.rejected[message.name] += 1
+                return []
         self.frames[message.name] += 1
         self._window.counts[message.name] += 1
-        handler = self._handlers.get(message.name)
         if handler is None:
-            return []
-        try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
-            signals = message.decode(data, decode_choices=False)
-        except DecodeError:
-            self.rejected[message.name] += 1
             return []
         assert isinstance(signals, dict)
         publications: list[Publication] = handler(self, signals, msg.timestamp)
@@ -136,6 +138,8 @@ class RobotTelemetry:
     def _on_pose_y(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         enc = int(s["ENC_COUNTER"])
         sample = self.tracker.on_pose_y(enc, s["Y"], int(s["TURNS"]))
+        if t_s < self._last_pub_t:  # the bus clock went back (a restart, a replay): follow it
+            self._last_pub_t = -math.inf
         if sample is None or t_s - self._last_pub_t < self.publish_period_s - 1e-6:
             return []
         self._last_pub_t = t_s
