@@ -11,7 +11,10 @@ A full queue drops the batch and counts it (``frames_dropped``): the bus never w
 The task ``can-frames`` feeds each robot's ``RobotTelemetry`` and queues its publications on the
 robot's ``RobotLink``; ``periodic`` publishes ``status`` and ``rates``; each link runs its own
 connection. Commands are validated by the robot's ``CommandEncoder`` and only then sent on the
-robot's bus; each one is answered on ``cmd/result``.
+robot's bus; each one is answered on ``cmd/result`` (accepted, rejected with the reason, expired).
+No frame and no command can stop the bridge: a handler that raises anyway is counted
+(``frames_failed``, ``commands_failed``) and logged once. ``rates`` carries each link's counters
+(``link``: telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import asyncio
 import logging
 import threading
 import time
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -183,20 +187,25 @@ class Bridge:
 
     def counters(self) -> dict[str, Any]:
         """What was dropped, refused, expired or failed (the report's ``bridge`` entry)."""
-        links = self.links
+        totals: Counter[str] = Counter()
+        for link in self.links:
+            totals.update(link.counters())
         return {
             "frames_in": self.frames_in,
             "frames_dropped": self.frames_dropped,
             "frames_failed": self.frames_failed,
-            "telemetry_dropped": sum(link.telemetry_dropped for link in links),
-            "telemetry_offline": sum(link.telemetry_offline for link in links),
-            "reliable_dropped": sum(link.reliable_dropped for link in links),
-            "commands_expired": sum(link.commands_expired for link in links),
-            "commands_busy": sum(link.commands_busy for link in links),
             "commands_failed": sum(r.commands_failed for r in self.robots),
-            "refused": sum(sum(link.refused.values()) for link in links),
-            "reconnects": sum(max(link.connects - 1, 0) for link in links),
+            **totals,
         }
+
+    def summary(self) -> str:
+        """One line of what was dropped, refused or expired (printed when the bridge stops)."""
+        c = self.counters()
+        return (f"{c['frames_in']} frames in ({c['frames_dropped']} dropped), telemetry "
+                f"dropped {c['telemetry_dropped']} (queue full) + {c['telemetry_offline']} "
+                f"(broker away), QoS-1 dropped {c['reliable_dropped']}, refused by the broker "
+                f"{c['refused']}, commands expired {c['commands_expired']}, "
+                f"{c['reconnects']} reconnects")
 
     async def _consume(self) -> None:
         while True:
@@ -234,7 +243,8 @@ class Bridge:
             if now >= next_rates + cfg.rates_period_s - 1e-3:
                 next_rates = now
                 for robot in self.robots:
-                    robot.link.publish(*robot.telemetry.rates(now))
+                    leaf, payload = robot.telemetry.rates(now)
+                    robot.link.publish(leaf, {**payload, "link": robot.link.counters()})
             if now >= next_status + cfg.status_period_s - 1e-3:
                 next_status = now
                 for robot in self.robots:

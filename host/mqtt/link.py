@@ -46,6 +46,7 @@ import aiomqtt
 import paho.mqtt.client as paho
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
+from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, connect_failure, protocol_unsupported
@@ -205,6 +206,19 @@ class RobotLink:
                         self.reliable_buffer)
         self.reliable_dropped += 1
 
+    def counters(self) -> dict[str, int]:
+        """What this link dropped, refused, expired (published in ``rates``, and reported)."""
+        return {
+            "telemetry_dropped": self.telemetry_dropped,
+            "telemetry_offline": self.telemetry_offline,
+            "reliable_dropped": self.reliable_dropped,
+            "reliable_queued": len(self.reliable),
+            "refused": sum(self.refused.values()),
+            "commands_expired": self.commands_expired,
+            "commands_busy": self.commands_busy,
+            "reconnects": max(self.connects - 1, 0),
+        }
+
     # --- the connection ---
     def _client(self) -> _Client:
         will = aiomqtt.Will(
@@ -264,7 +278,7 @@ class RobotLink:
                 log.warning("%s: reconnected to %s", self.robot, self.broker)
             try:
                 await self._session(client, stop)
-            except* aiomqtt.MqttError as group:
+            except* (aiomqtt.MqttError, OSError) as group:
                 log.warning("%s: connection lost (%s); reconnecting in %.1f s", self.robot,
                             group.exceptions[0], backoff)
                 await _sleep_or_stop(stop, backoff)
@@ -295,7 +309,12 @@ class RobotLink:
                 await client.__aexit__(None, None, None)
 
     async def _subscribe(self, client: _Client) -> None:
-        codes = await client.subscribe(topics.command_filter(self.robot), qos=1)
+        """``cmd/+`` at QoS 1; in v5 with no-local, so our own ``cmd/result`` is not echoed."""
+        if self.v5:
+            options = SubscribeOptions(qos=topics.QOS_RELIABLE, noLocal=True)
+            codes = await client.subscribe(topics.command_filter(self.robot), options=options)
+        else:
+            codes = await client.subscribe(topics.command_filter(self.robot), qos=1)
         for code in codes if isinstance(codes, list) else [codes]:
             if getattr(code, "is_failure", False) or code == 0x80:
                 log.warning("%s: the broker refused the subscription %s (%s): no command will "
@@ -346,12 +365,16 @@ class RobotLink:
                 self._reliable_wake.clear()
                 await self._reliable_wake.wait()
                 continue
-            window = list(islice(self.reliable, self.inflight))
-            await asyncio.gather(*(client.publish(p.topic, p.body, qos=topics.QOS_RELIABLE,
-                                                  retain=p.retain) for p in window))
-            for p in window:
-                with contextlib.suppress(ValueError):  # dropped meanwhile (buffer full)
-                    self.reliable.remove(p)
+            await self._publish_window(client)
+
+    async def _publish_window(self, client: _Client) -> None:
+        """The oldest ``inflight`` QoS-1 entries at once; each leaves once acknowledged."""
+        window = list(islice(self.reliable, self.inflight))
+        await asyncio.gather(*(client.publish(p.topic, p.body, qos=topics.QOS_RELIABLE,
+                                              retain=p.retain) for p in window))
+        for p in window:
+            with contextlib.suppress(ValueError):  # dropped meanwhile (buffer full)
+                self.reliable.remove(p)
 
     async def _goodbye(self, client: _Client, timeout_s: float = 2.0) -> None:
         """``offline`` (superseding queued statuses), then flush the QoS-1 buffer, if possible."""
@@ -362,10 +385,7 @@ class RobotLink:
         with contextlib.suppress(Exception):
             async with asyncio.timeout(timeout_s):
                 while self.reliable:
-                    p = self.reliable[0]
-                    await client.publish(p.topic, p.body, qos=topics.QOS_RELIABLE,
-                                         retain=p.retain)
-                    self.reliable.popleft()
+                    await self._publish_window(client)
 
 
 def _payload(message: aiomqtt.Message) -> bytes:

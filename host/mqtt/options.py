@@ -87,7 +87,7 @@ class _StderrHandler(logging.StreamHandler):  # type: ignore[type-arg]
     ``sys.stderr`` of the moment (pytest's capture swaps it)."""
 
     def emit(self, record: logging.LogRecord) -> None:
-        self.setStream(sys.stderr)
+        self.stream = sys.stderr  # not setStream: it would flush the old one, maybe closed
         super().emit(record)
 
 

@@ -106,6 +106,7 @@ async def _bridge(
             await bridge.run(stop=stop)
         finally:
             reader.stop()
+        print(f"bridge {name}: {bridge.summary()}", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:
