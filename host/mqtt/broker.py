@@ -144,7 +144,7 @@ def connect_failure(exc: BaseException, timeout_s: float, *, tls: bool = False) 
     text = str(exc) or type(exc).__name__
     low = text.lower()
     if "refused" in low:
-        return f"connection refused ({text})"
+        return "connection refused"
     if any(hint in low for hint in _DNS_HINTS) or isinstance(exc, socket.gaierror):
         return f"DNS: the host name does not resolve ({text})"
     if "ssl" in low or "certificate" in low or "tls" in low:

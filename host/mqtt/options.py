@@ -79,7 +79,9 @@ def bridge_options(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
-LIBRARY_LOGGERS = ("aiomqtt", "mqtt", "paho", "amqtt", "transitions", "odocan.mqtt.client")
+# asyncio too: aiomqtt's socket callbacks race a closing socket now and then ("Bad file descriptor")
+LIBRARY_LOGGERS = ("aiomqtt", "mqtt", "paho", "amqtt", "transitions", "asyncio",
+                   "odocan.mqtt.client")
 
 
 class _StderrHandler(logging.StreamHandler):  # type: ignore[type-arg]
