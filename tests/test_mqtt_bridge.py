@@ -475,3 +475,23 @@ def test_a_command_older_than_the_expiry_is_answered_expired(kind: str, tmp_path
 
     (result,) = asyncio.run(scenario())
     assert (result["id"], result["result"]) == ("old", "expired")
+
+
+@pytest.mark.parametrize("kind", BROKERS)
+def test_a_retained_command_is_not_run(kind: str, tmp_path: Path) -> None:
+    """A command someone published with retain would run at every reconnect, at any age."""
+
+    async def scenario() -> list[dict[str, Any]]:
+        async with broker_of(kind, tmp_path) as brokers, client(brokers.operator) as sub:
+            await sub.subscribe(topics.topic(ROBOT, topics.RESULT_LEAF), qos=1)
+            old = b'{"id": "kept", "x_m": 1, "y_m": 1, "heading_rad": 0}'
+            await sub.publish(topics.topic(ROBOT, "cmd/set_pose"), old, qos=1, retain=True)
+            async with running_bridge(brokers.bridge) as (_, listener):
+                got = await collect(sub, lambda g: len(g) >= 1)
+                await asyncio.sleep(0.2)  # a frame sent anyway would be on the listener by now
+                assert bus_frames(listener) == []
+            return [payload for _, payload in got]
+
+    (result,) = asyncio.run(scenario())
+    assert (result["id"], result["result"]) == ("kept", "rejected")
+    assert "retained" in result["reason"]

@@ -96,9 +96,11 @@ class _Robot:
             self.commands_rejected += 1
             return [_result(command_id(payload), name, "expired",
                             "older than its expiry: not run")]
-        if verdict == "busy":
+        if verdict in ("busy", "retained"):
             self.commands_rejected += 1
-            return [_result(command_id(payload), name, "rejected", "bridge busy: not run")]
+            reason = ("bridge busy: not run" if verdict == "busy" else
+                      "a retained command is not run (its age is unknown): publish without retain")
+            return [_result(command_id(payload), name, "rejected", reason)]
         try:
             command = self.encoder.encode(name, payload)
             self._send(command)

@@ -25,7 +25,9 @@
   verdict)``, which returns the publications that answer it (``cmd/result``). ``verdict`` is
   ``"run"``, or ``"expired"`` when the message is older than its MQTT v5 message expiry (the
   remaining interval the broker passed on) or, without one, than ``command_expiry_s`` since it
-  arrived, or ``"busy"`` when ``command_queue`` messages already wait (answered at once, not run).
+  arrived, or ``"busy"`` when ``command_queue`` messages already wait (answered at once, not run),
+  or ``"retained"`` for a command the broker kept as retained (its age is unknown, and it would
+  run again at every reconnect).
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ from odocan.host.mqtt.broker import BrokerError, BrokerURL, connect_failure, pro
 log = logging.getLogger("odocan.mqtt")
 CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
 Publication = tuple[str, dict[str, Any]]
-Verdict = Literal["run", "expired", "busy"]
+Verdict = Literal["run", "expired", "busy", "retained"]
 CommandHandler = Callable[[str, bytes, Verdict], list[Publication]]
 
 
@@ -331,6 +333,8 @@ class RobotLink:
 
     def _answer(self, name: str, message: _Arrived) -> list[Publication]:
         expiry_s = message.expiry_s if message.expiry_s is not None else self.command_expiry_s
+        if message.retain:  # kept by the broker from whenever: would run again each reconnect
+            return self.on_command(name, _payload(message), "retained")
         expired = time.monotonic() - message.arrival_s > expiry_s
         self.commands_expired += expired
         return self.on_command(name, _payload(message), "expired" if expired else "run")
