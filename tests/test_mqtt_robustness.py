@@ -252,3 +252,16 @@ def test_an_expired_or_busy_command_is_answered_with_its_id_and_not_sent() -> No
         assert robot_.commands_sent == 0
     assert (expired["id"], expired["result"]) == ("late", "expired")
     assert (busy["id"], busy["result"]) == ("late", "rejected") and "busy" in busy["reason"]
+
+
+def test_a_bus_of_random_ids_does_not_grow_the_rates_payload() -> None:
+    from odocan.host.mqtt.telemetry import MAX_UNKNOWN_IDS, RobotTelemetry
+
+    telemetry = RobotTelemetry("r", GEOMETRY, "exact")
+    rng = random.Random(5)
+    for k in range(20_000):
+        telemetry.feed(can.Message(arbitration_id=rng.getrandbits(29), is_extended_id=True,
+                                   data=rng.randbytes(8), timestamp=k * 1e-4))
+    assert sum(telemetry.rejected.values()) == 20_000
+    assert len(telemetry.rejected) == MAX_UNKNOWN_IDS + 1  # the first 32 IDs, then "other"
+    assert len(topics.dumps(telemetry.rates(2.0)[1])) < 4096

@@ -5,7 +5,8 @@ publications it makes due, as ``(leaf, payload)`` pairs (``host.mqtt.topics``):
 
 * every frame is E2E-checked (``host.e2e.E2EMonitor``: the DBC's E2EDataIDs, Profile 2 CRC and
   sequence) and decoded with cantools; frames the check rejects, and E2E-valid frames cantools
-  cannot decode (an unknown multiplexer page), are counted in ``rejected``, never used;
+  cannot decode (an unknown multiplexer page), are counted in ``rejected``, never used (foreign
+  IDs by hex up to ``MAX_UNKNOWN_IDS`` of them, then as ``other``);
 * ``WHEEL_ENCODERS`` steps the float64 reference (``host.reference.ReferenceOdometry``, 24-bit
   wrapping counts); the reference pose after each frame is kept by the frame's E2E ``COUNTER``;
 * ``ODOM_POSE_X`` + ``ODOM_POSE_Y`` with the same ``ENC_COUNTER`` make the on-board pose, compared
@@ -38,6 +39,7 @@ from odocan.sim.contract import database
 
 Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
+MAX_UNKNOWN_IDS = 32  # foreign CAN IDs counted by name in ``rejected``; the rest as ``other``
 
 
 @dataclass
@@ -81,6 +83,7 @@ class RobotTelemetry:
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
         self.frames: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
+        self._unknown_ids: set[str] = set()
         self._window = _Window(now_s)
         self._pose_x_counter = 0  # E2E COUNTER of the last ODOM_POSE_X
         self._twist: dict[str, float] = {}
@@ -100,7 +103,7 @@ class RobotTelemetry:
         message = self._by_id.get(can_id)
         status = self.e2e.check(can_id, data, extended=msg.is_extended_id)
         if message is None or status not in ACCEPTED_E2E:
-            self.rejected[message.name if message else hex(can_id)] += 1
+            self.rejected[message.name if message else self._unknown_key(can_id)] += 1
             return []
         handler = self._handlers.get(message.name)
         signals: Any = None
@@ -117,6 +120,15 @@ class RobotTelemetry:
         assert isinstance(signals, dict)
         publications: list[Publication] = handler(self, signals, msg.timestamp)
         return publications
+
+    def _unknown_key(self, can_id: int) -> str:
+        """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
+        random IDs must not grow ``rejected`` (and the ``rates`` payload) without bound."""
+        key = hex(can_id)
+        if key in self._unknown_ids or len(self._unknown_ids) < MAX_UNKNOWN_IDS:
+            self._unknown_ids.add(key)
+            return key
+        return "other"
 
     def _on_encoders(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))

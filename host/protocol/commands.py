@@ -270,7 +270,7 @@ def _check_schema(spec: CommandSpec, obj: dict[str, Any]) -> dict[str, Any]:
     """Keys and JSON types; returns the values given."""
     unknown = sorted(set(obj) - spec.keys)
     if unknown:
-        raise CommandRejected(f"unknown field {unknown[0]!r} (accepted: id, "
+        raise CommandRejected(f"unknown field {_short(repr(unknown[0]), 40)} (accepted: id, "
                               f"{', '.join(sorted(spec.keys))})")
     fields = {f.key: f for s in spec.steps for f in s.fields if f.kind != "absent"}
     for key, f in fields.items():
