@@ -6,7 +6,10 @@ One robot's lockstep frames are offered to the bridge at the bus's pace (100 fra
   poses received per second while their results were owed (10/s are due), the last result's delay;
 * ``outage`` (mosquitto only): the broker is stopped for 2 s and started again; printed: poses
   made during the outage that were published after it (stale: must be 0), poses not kept, time
-  from the broker's start to the bridge's next pose.
+  from the broker's start to the bridge's next pose;
+* ``restart``/``killed`` (mosquitto only): an operator with a persistent v5 session sends 40
+  commands, the broker is stopped (SIGTERM) or killed (SIGKILL) and started, 40 more: how many of
+  the commands the broker acknowledged were answered on ``cmd/result``.
 
     .venv/bin/python bench/bridge.py [--flood 1000]
 """
@@ -15,6 +18,8 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
+import getpass
 import json
 import logging
 import os
@@ -29,6 +34,8 @@ from pathlib import Path
 
 import aiomqtt
 import can
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -51,7 +58,8 @@ class Mosquitto:
         self.url = BrokerURL(host=LOOPBACK, port=free_loopback_port())
         self.conf = workdir / "bench.conf"
         self.conf.write_text(f"listener {self.url.port} {LOOPBACK}\nallow_anonymous true\n"
-                             f"persistence true\npersistence_location {workdir}/\nlog_dest none\n")
+                             f"persistence true\npersistence_location {workdir}/\nlog_dest none\n"
+                             f"user {getpass.getuser()}\n")  # as root: keep access to workdir
         self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self) -> None:
@@ -158,6 +166,65 @@ async def outage(broker: Mosquitto, ticks: list[list[can.Message]]) -> str:
                 f"{min(stamps) - t_up:.2f} s after the broker's start")
 
 
+def operator(url: BrokerURL, name: str) -> aiomqtt.Client:
+    """An operator with a persistent MQTT v5 session (results queue for it while it is away)."""
+    props = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
+    props.SessionExpiryInterval = 300
+    return aiomqtt.Client(**url.client_kwargs(), identifier=f"bench-{name}-{os.getpid()}",
+                          protocol=aiomqtt.ProtocolVersion.V5, clean_start=False,
+                          properties=props)
+
+
+async def answered(broker: Mosquitto, ticks: list[list[can.Message]], kill: bool) -> str:
+    """40 commands, the broker restarted (``kill``: SIGKILL), 40 more: how many of those the
+    broker acknowledged were answered within 10 s."""
+    answers: set[int] = set()
+    acked: list[int] = []
+
+    async def listen(sub: aiomqtt.Client) -> None:
+        with contextlib.suppress(aiomqtt.MqttError):
+            async for message in sub.messages:
+                answers.add(json.loads(message.payload)["id"])  # type: ignore[arg-type]
+        while not sub._queue.empty():  # received and acknowledged before the connection broke
+            answers.add(json.loads(sub._queue.get_nowait().payload)["id"])  # type: ignore[arg-type]
+
+    async def send(sub: aiomqtt.Client, ids: range) -> None:
+        with contextlib.suppress(aiomqtt.MqttError):
+            for k in ids:
+                body = json.dumps({"id": k, "x_m": 0, "y_m": 0, "heading_rad": 0}).encode()
+                await sub.publish(topics.topic(ROBOT, "cmd/set_pose"), body, qos=1)
+                acked.append(k)
+
+    async with bridged(broker.url, ticks) as bridge:
+        async with operator(broker.url, "killed" if kill else "restart") as sub:
+            await sub.subscribe(topics.topic(ROBOT, topics.RESULT_LEAF), qos=1)
+            reader = asyncio.create_task(listen(sub))
+            await send(sub, range(40))
+            if kill and broker.proc is not None:
+                broker.proc.kill()
+                broker.proc.wait()
+                broker.proc = None
+            else:
+                broker.stop()
+            await reader
+        broker.start()
+        async with asyncio.timeout(30):
+            while bridge.links[0].connects < 2:
+                await asyncio.sleep(0.05)
+        async with operator(broker.url, "killed" if kill else "restart") as sub:
+            await sub.subscribe(topics.topic(ROBOT, topics.RESULT_LEAF), qos=1)
+            reader = asyncio.create_task(listen(sub))
+            await send(sub, range(40, 80))
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(10):
+                    while not set(acked) <= answers:
+                        await asyncio.sleep(0.05)
+            reader.cancel()
+    lost = sorted(set(acked) - answers)
+    return f"{len(set(acked) & answers)} of {len(acked)} acknowledged commands answered " \
+           f"(unanswered: {lost[:10]}{' ...' if len(lost) > 10 else ''})"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--flood", type=int, default=1000)
@@ -172,6 +239,10 @@ def main() -> None:
             try:
                 print("mosquitto flood: " + asyncio.run(flood(mosquitto.url, ticks, args.flood)))
                 print("mosquitto outage: " + asyncio.run(outage(mosquitto, ticks)))
+                print("mosquitto restart (SIGTERM): "
+                      + asyncio.run(answered(mosquitto, ticks, kill=False)))
+                print("mosquitto killed (SIGKILL): "
+                      + asyncio.run(answered(mosquitto, ticks, kill=True)))
             finally:
                 mosquitto.stop()
 

@@ -305,6 +305,7 @@ class RobotLink:
         finally:
             self.connected.clear()
             self.telemetry.clear()
+            self._answer_waiting(client)
             if stop.is_set() or not client._disconnected.done():
                 await self._goodbye(client)
             with contextlib.suppress(Exception):
@@ -330,6 +331,17 @@ class RobotLink:
                 continue
             for leaf, payload in self._answer(name, message):
                 self.publish(leaf, payload)
+
+    def _answer_waiting(self, client: _Client) -> None:
+        """Answer the commands this client received but we did not handle yet: paho has
+        acknowledged them to the broker, so the broker will not send them again."""
+        prefix = topics.topic(self.robot, "cmd/")
+        while not client._queue.empty():
+            message = client._queue.get_nowait()
+            name = message.topic.value.removeprefix(prefix)
+            if name != "result" and isinstance(message, _Arrived):
+                for leaf, payload in self._answer(name, message):
+                    self.publish(leaf, payload)
 
     def _answer(self, name: str, message: _Arrived) -> list[Publication]:
         expiry_s = message.expiry_s if message.expiry_s is not None else self.command_expiry_s
