@@ -6,19 +6,24 @@ restart is "connection lost" / "reconnecting" / "reconnected", one line each, an
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import getpass
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import LOOPBACK, free_loopback_port
-from tests.conftest_mqtt import Mosquitto, client, collect, mosquitto  # noqa: F401
+from tests.conftest_mqtt import MOSQUITTO, Mosquitto, client, collect, mosquitto  # noqa: F401
 
 COMMANDS = {
     "bridge": ["bridge", "-i", "virtual", "-c", f"test-connect-{os.getpid()}", "--duration", "5"],
@@ -156,3 +161,60 @@ async def wait_status(url: object, state: str, *, fresh: bool = False) -> None:
             except Exception:  # the broker is not up yet
                 await asyncio.sleep(0.1)
 
+
+
+def _openssl(*args: str, cwd: Path) -> None:
+    subprocess.run(["openssl", *args], cwd=cwd, check=True, capture_output=True)
+
+
+def _ca(cwd: Path, name: str) -> None:
+    _openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", f"{name}.key",
+             "-out", f"{name}.pem", "-days", "2", "-subj", f"/CN=odocan test {name}", cwd=cwd)
+
+
+@pytest.fixture
+def tls_mosquitto(tmp_path: Path) -> Iterator[tuple[int, Path, Path]]:
+    """An anonymous mosquitto with a TLS listener: (port, its CA, another CA)."""
+    if MOSQUITTO is None or shutil.which("openssl") is None:
+        pytest.skip("mosquitto and openssl are needed (apt-get install mosquitto openssl)")
+    _ca(tmp_path, "ca")
+    _ca(tmp_path, "other")
+    (tmp_path / "ext").write_text("subjectAltName=IP:127.0.0.1\n")
+    _openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", "server.key", "-out",
+             "server.csr", "-subj", "/CN=127.0.0.1", cwd=tmp_path)
+    _openssl("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+             "-CAcreateserial", "-out", "server.pem", "-days", "2", "-extfile", "ext",
+             cwd=tmp_path)
+    port = free_loopback_port()
+    conf = tmp_path / "tls.conf"
+    conf.write_text(f"listener {port} {LOOPBACK}\nallow_anonymous true\n"
+                    f"cafile {tmp_path / 'ca.pem'}\ncertfile {tmp_path / 'server.pem'}\n"
+                    f"keyfile {tmp_path / 'server.key'}\nlog_dest none\n"
+                    f"user {getpass.getuser()}\n")
+    proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            with contextlib.suppress(OSError):
+                socket.create_connection((LOOPBACK, port), timeout=0.2).close()
+                break
+            time.sleep(0.02)
+        yield port, tmp_path / "ca.pem", tmp_path / "other.pem"
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+def test_tls_with_the_right_ca_connects_and_with_another_is_one_line(
+    tls_mosquitto: tuple[int, Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    port, ca, other = tls_mosquitto
+    argv = [*COMMANDS["bridge"][:-1], "1", "--broker", f"mqtts://127.0.0.1:{port}"]
+    code, lines = run_cli([*argv, "--ca", str(ca)], capsys)
+    assert code == 0, lines
+    assert lines[-1].startswith("bridge robot001: ") and "0 reconnects" in lines[-1]
+    code, lines = run_cli([*argv, "--ca", str(other)], capsys)
+    assert code == 2
+    assert (f"cannot connect to mqtts://127.0.0.1:{port}: TLS: [SSL: CERTIFICATE_VERIFY_FAILED]"
+            in the_error(lines))
