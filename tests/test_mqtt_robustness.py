@@ -276,3 +276,57 @@ def test_a_bus_of_random_ids_does_not_grow_the_rates_payload() -> None:
     assert sum(telemetry.rejected.values()) == 20_000
     assert len(telemetry.rejected) == MAX_UNKNOWN_IDS + 1  # the first 32 IDs, then "other"
     assert len(topics.dumps(telemetry.rates(2.0)[1])) < 4096
+
+
+class _FlakyBus(can.BusABC):
+    """A python-can virtual bus whose every third ``recv`` fails (a bus going up and down)."""
+
+    def __init__(self, channel: str) -> None:
+        self.inner = can.Bus(interface="virtual", channel=channel)
+        self.calls = 0
+        super().__init__(channel=channel)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        self.calls += 1
+        if self.calls % 3 == 0:
+            raise can.CanOperationError("bus-off")
+        return self.inner.recv(timeout), False
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.inner.send(msg, timeout)
+
+    def shutdown(self) -> None:
+        self.inner.shutdown()
+        super().shutdown()
+
+
+def _queued(bridge: Bridge) -> int:
+    """Frames waiting in the bridge's queue (batches of frames)."""
+    return sum(len(batch) for batch in list(bridge.queue._queue))  # type: ignore[attr-defined]
+
+
+def test_the_bus_reader_reads_on_after_bus_errors() -> None:
+    import asyncio
+
+    from odocan.host.mqtt.bridge import BusReader
+
+    channel = f"fuzz-flaky-{time.monotonic_ns()}"
+
+    async def scenario() -> tuple[int, int]:
+        with _FlakyBus(channel) as bus, can.Bus(interface="virtual", channel=channel) as tx:
+            bridge = _bridge(bus)
+            reader = BusReader(bus, bridge, asyncio.get_running_loop())
+            reader.start()
+            try:
+                for k in range(50):
+                    tx.send(can.Message(arbitration_id=0x7FF, data=bytes([k]),
+                                        is_extended_id=False))
+                async with asyncio.timeout(20):  # without the fix: the thread died at once
+                    while _queued(bridge) < 50:
+                        await asyncio.sleep(0.01)
+            finally:
+                reader.stop()
+            return _queued(bridge), reader.errors
+
+    frames, errors = asyncio.run(scenario())
+    assert frames == 50 and errors > 0

@@ -268,6 +268,7 @@ class BusReader:
         self.max_batch = max_batch
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="can-reader", daemon=True)
+        self.errors = 0  # bus errors while reading (counted, logged once)
 
     def start(self) -> None:
         """Start the reader thread."""
@@ -279,15 +280,27 @@ class BusReader:
         self._thread.join(timeout=2.0)
 
     def _run(self) -> None:
-        recv, index = self.bus.recv, self.robot_index
+        index = self.robot_index
         while not self._stop.is_set():
-            msg = recv(0.1)
+            msg = self._recv(0.1)
             if msg is None:
                 continue
             batch: Batch = [(index, msg)]
-            while len(batch) < self.max_batch and (msg := recv(0)) is not None:
+            while len(batch) < self.max_batch and (msg := self._recv(0)) is not None:
                 batch.append((index, msg))
             try:
                 self.loop.call_soon_threadsafe(self.bridge.offer, batch)
             except RuntimeError:  # the loop is closed: we are shutting down
                 return
+
+    def _recv(self, timeout_s: float) -> can.Message | None:
+        """One frame, or None; a bus error is counted and logged once, and the reader goes on
+        (after ``timeout_s`` or 0.1 s: a bus that is down must not spin a core)."""
+        try:
+            return self.bus.recv(timeout_s)
+        except (can.CanError, OSError, ValueError) as exc:
+            if self.errors == 0:
+                log.warning("CAN bus %s: %s (reading on)", self.bus.channel_info, exc)
+            self.errors += 1
+            self._stop.wait(max(timeout_s, 0.1))
+            return None
