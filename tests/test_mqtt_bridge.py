@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import os
 import random
 import signal
@@ -379,6 +380,7 @@ def test_every_command_the_broker_accepted_is_answered_across_a_broker_restart(
                             await asyncio.sleep(0.05)
                 reader.cancel()
         assert owed, "every answer came before the broker stopped: the restart proved nothing"
+        assert bridge.links[0].sessions_lost == 0  # mosquitto kept the sessions: nothing lost
         return accepted
 
     accepted = asyncio.run(scenario())
@@ -501,3 +503,29 @@ def test_a_retained_command_is_not_run(kind: str, tmp_path: Path) -> None:
     (result,) = asyncio.run(scenario())
     assert (result["id"], result["result"]) == ("kept", "rejected")
     assert "retained" in result["reason"]
+
+
+def test_a_broker_that_lost_its_state_is_reported(
+    mosquitto: Mosquitto, caplog: pytest.LogCaptureFixture  # noqa: F811
+) -> None:
+    """mosquitto killed with -9 before it ever saved: our session is gone when we are back."""
+
+    async def scenario() -> int:
+        async with running_bridge(mosquitto.url("bridge"), command_expiry_s=30) as (bridge, _):
+            assert mosquitto.proc is not None
+            mosquitto.proc.kill()
+            mosquitto.proc.wait()
+            mosquitto.proc = None
+            mosquitto.start()
+            async with asyncio.timeout(20):
+                while bridge.links[0].connects < 2:
+                    await asyncio.sleep(0.05)
+            return bridge.links[0].sessions_lost
+
+    logger = logging.getLogger("odocan.mqtt")  # its parent may not propagate (the CLI's setup)
+    logger.addHandler(caplog.handler)
+    try:
+        assert asyncio.run(scenario()) == 1
+    finally:
+        logger.removeHandler(caplog.handler)
+    assert any("the broker lost its session state" in r.getMessage() for r in caplog.records)

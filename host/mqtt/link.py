@@ -99,6 +99,7 @@ class _Client(aiomqtt.Client):
         self._on_refused, self._on_overflow = on_refused, on_overflow
         self._max_waiting = max_waiting
         self._qos1_topics: dict[int, str] = {}
+        self.session_present = False  # the CONNACK's flag: the broker still had our session
         paho_publish = self._client.publish
 
         def publish(topic: str, payload: Any = None, qos: int = 0, retain: bool = False,
@@ -116,6 +117,11 @@ class _Client(aiomqtt.Client):
         if topic is not None and getattr(reason_code, "is_failure", False):
             self._on_refused(topic, str(reason_code))
         super()._on_publish(client, userdata, mid, reason_code, properties)
+
+    def _on_connect(self, client: paho.Client, userdata: Any, flags: Any,
+                    reason_code: Any, properties: Any = None) -> None:
+        self.session_present = bool(getattr(flags, "session_present", False))
+        super()._on_connect(client, userdata, flags, reason_code, properties)
 
     def _on_disconnect(self, client: paho.Client, userdata: Any, flags: Any,
                        reason_code: Any, properties: Any = None) -> None:
@@ -177,6 +183,7 @@ class RobotLink:
         self.commands_expired = self.commands_busy = 0
         self.refused: Counter[str] = Counter()  # topic -> publications the broker refused
         self.connects = 0
+        self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
         self.connected = asyncio.Event()
         self._telemetry_wake = asyncio.Event()
         self._reliable_wake = asyncio.Event()
@@ -219,6 +226,7 @@ class RobotLink:
             "commands_expired": self.commands_expired,
             "commands_busy": self.commands_busy,
             "reconnects": max(self.connects - 1, 0),
+            "sessions_lost": self.sessions_lost,
         }
 
     # --- the connection ---
@@ -256,7 +264,7 @@ class RobotLink:
         """
         if self.v5:
             self.v5 = await speaks_v5(self.broker, self.connect_timeout_s)
-        backoff = self.backoff_s
+        backoff, lost_at = self.backoff_s, time.monotonic()
         while not stop.is_set():
             client = self._client()
             try:
@@ -278,12 +286,23 @@ class RobotLink:
             backoff = self.backoff_s
             if self.connects > 1:
                 log.warning("%s: reconnected to %s", self.robot, self.broker)
+                self._check_session(client, time.monotonic() - lost_at)
             try:
                 await self._session(client, stop)
             except* (aiomqtt.MqttError, OSError) as group:
+                lost_at = time.monotonic()
                 log.warning("%s: connection lost (%s); reconnecting in %.1f s", self.robot,
                             group.exceptions[0], backoff)
                 await _sleep_or_stop(stop, backoff)
+
+    def _check_session(self, client: _Client, away_s: float) -> None:
+        """A v5 broker without our session, though we were away for less than its expiry, has
+        lost its state (restarted without persistence, killed): commands it acknowledged but
+        had not delivered, and results it had not delivered, are gone. Say so (once a time)."""
+        if self.v5 and not client.session_present and away_s < self.command_expiry_s:
+            self.sessions_lost += 1
+            log.warning("%s: the broker lost its session state (restarted without its "
+                        "persistence?): commands and results it held may be lost", self.robot)
 
     async def _connect(self, client: _Client) -> None:
         """CONNECT within ``connect_timeout_s`` (TCP, TLS and CONNACK; DNS gets one more s)."""
