@@ -4,14 +4,18 @@
 
 * MQTT v5 (``paho`` via aiomqtt) so the broker's reason codes are seen: a CONNACK refusal is a
   ``BrokerError`` naming the reason; a PUBACK or SUBACK refusal (an ACL denial) is one warning line
-  per topic, counted in ``refused``. A broker that answers "unsupported protocol version" (amqtt)
-  is spoken to in MQTT 3.1.1 instead (no reason codes, no message expiry);
+  per topic, counted in ``refused``. A broker that answers "unsupported protocol version" to a
+  plain v5 CONNECT (``speaks_v5``, once per broker; amqtt) is spoken to in MQTT 3.1.1 instead (no
+  reason codes, no message expiry);
 * the first connection must succeed within ``connect_timeout_s``, else ``BrokerError`` (the
   CLI's exit 2); later losses are one line each: "connection lost", "reconnecting in N s",
   "reconnected" (exponential backoff from ``backoff_s`` up to ``max_backoff_s``);
 * client id ``<client_prefix>-<robot>``, clean start off: the broker keeps the ``cmd/+``
   subscription and queues commands while the bridge is away, for at most ``command_expiry_s``
-  (the session expiry), so no command older than that is queued for it;
+  (the session expiry), so no command older than that is queued for it. A broker that comes back
+  without that session although we were away for less is one warning line (``sessions_lost``:
+  it lost its state, and with it what it held). Commands paho received (and acknowledged) before
+  a connection broke are still answered;
 * last will: ``status`` = ``{"state": "offline", "reason": "connection lost"}``, QoS 1, retained;
   whenever ``run`` ends (stop, cancellation, an error) it publishes ``offline`` itself first;
 * telemetry never waits for acknowledgements: QoS-0 telemetry and QoS-1 publications (status,
