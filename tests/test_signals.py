@@ -162,3 +162,22 @@ def test_sigterm_ends_monitor_with_its_json(tmp_path: Path) -> None:
     code, out, err = _terminate(proc)
     assert (code, err) == (0, "")
     assert isinstance(json.loads(out), dict)
+
+
+def test_sigterm_ends_a_fleet_with_its_report(tmp_path: Path) -> None:
+    """``odocan fleet`` stopped by SIGTERM mid-run still prints its summary and writes its report."""
+    import json
+
+    report = tmp_path / "fleet.json"
+    proc = _start("fleet", "-n", "2", "--duration", "600", "--report", str(report))
+    assert proc.stderr is not None
+    deadline = time.monotonic() + START_TIMEOUT_S
+    line = proc.stderr.readline()  # the start line: the clock is running
+    while not line.startswith("fleet: ") and time.monotonic() < deadline and line:
+        line = proc.stderr.readline()
+    assert "robots running" in line, line
+    code, out, err = _terminate(proc)
+    assert code in (0, 1), err  # 1: the loaded machine missed deadlines; the run still reports
+    assert out.startswith("fleet: 2 robots, "), out
+    assert "Traceback" not in err
+    assert json.loads(report.read_text())["robots"] == 2

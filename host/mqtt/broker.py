@@ -1,9 +1,14 @@
 """Where the broker is: ``--broker`` URLs, TLS files, and the embedded amqtt broker.
 
 ``mqtt://user:pass@host:port`` (default port 1883) or ``mqtts://...`` (default 8883, with
-``--ca``/``--cert``/``--key``). Without ``--broker`` the commands start ``EmbeddedBroker``: an
+``--ca``/``--cert``/``--key``, loaded into an ``ssl.SSLContext`` up front so a bad file is one
+line before any connection). Without ``--broker`` the commands start ``EmbeddedBroker``: an
 in-process amqtt broker on a free loopback port (127.0.0.1 only), anonymous access, so ``odocan
-bridge`` and ``odocan fleet`` work on a fresh machine.
+bridge`` and ``odocan fleet`` work on a fresh machine. amqtt speaks MQTT 3.1.1 only, so its URL
+says ``v5=False``; any other broker is tried with MQTT v5 first (reason codes, message expiry).
+
+``BrokerError`` is a broker that cannot be used (``connect_failure`` names the reason: refused,
+not authorized, TLS, DNS, no answer); the CLI prints it as one line and exits 2.
 """
 
 from __future__ import annotations
@@ -11,15 +16,16 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+import ssl
 from dataclasses import dataclass, replace
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 from urllib.parse import unquote, urlsplit
 
-import aiomqtt
+from aiomqtt.exceptions import MqttConnectError
 
-from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.exceptions import ConfigurationError, OdocanError
 
 LOOPBACK = "127.0.0.1"
 _DEFAULT_PORTS = {"mqtt": 1883, "mqtts": 8883}
@@ -37,6 +43,7 @@ class BrokerURL:
     ca: Path | None = None
     cert: Path | None = None
     key: Path | None = None
+    v5: bool = True  # False: a broker known to speak MQTT 3.1.1 only (the embedded amqtt)
 
     @classmethod
     def parse(
@@ -88,17 +95,84 @@ class BrokerURL:
             "password": self.password,
         }
         if self.tls:
-            kwargs["tls_params"] = aiomqtt.TLSParameters(
-                ca_certs=str(self.ca) if self.ca else None,
-                certfile=str(self.cert) if self.cert else None,
-                keyfile=str(self.key) if self.key else None,
-            )
+            kwargs["tls_context"] = self.tls_context()
         return kwargs
+
+    def tls_context(self) -> ssl.SSLContext:
+        """The TLS context of ``--ca``/``--cert``/``--key``; ``ConfigurationError`` naming the
+        file that is not a usable PEM certificate or key."""
+        try:
+            context = ssl.create_default_context(cafile=str(self.ca) if self.ca else None)
+        except (ssl.SSLError, OSError) as exc:
+            raise ConfigurationError(
+                f"--ca {self.ca}: not a usable CA certificate ({exc})"
+            ) from None
+        if self.cert is not None:
+            try:
+                context.load_cert_chain(str(self.cert), str(self.key) if self.key else None)
+            except (ssl.SSLError, OSError) as exc:
+                raise ConfigurationError(
+                    f"--cert {self.cert} / --key {self.key}: not a usable certificate and key "
+                    f"({exc})"
+                ) from None
+        return context
 
     def __str__(self) -> str:
         """The URL without the password."""
         user = f"{self.username}@" if self.username else ""
         return f"{'mqtts' if self.tls else 'mqtt'}://{user}{self.host}:{self.port}"
+
+
+class BrokerError(OdocanError):
+    """The broker cannot be used: no connection, or it refused us (one line, password redacted)."""
+
+
+_NOT_AUTHORIZED = frozenset({4, 5, 0x86, 0x87})  # 3.1.1 and v5 CONNACK codes
+_DNS_HINTS = ("name or service not known", "temporary failure in name resolution",
+              "nodename nor servname", "no address associated")
+
+
+def connect_failure(exc: BaseException, timeout_s: float, *, tls: bool = False) -> str:
+    """Why a connection attempt failed, in a few words: refused, not authorized, TLS, DNS ...
+    (``tls``: a reset or EOF during the handshake is most likely a port without TLS)."""
+    if isinstance(exc, MqttConnectError):
+        code = getattr(exc.rc, "value", exc.rc)
+        what = "not authorized" if code in _NOT_AUTHORIZED else "refused by the broker"
+        return f"{what} ({exc.rc})"
+    if isinstance(exc, TimeoutError):
+        return f"no answer within {timeout_s:g} s (--connect-timeout)"
+    text = str(exc) or type(exc).__name__
+    low = text.lower()
+    if "refused" in low:
+        return "connection refused"
+    if any(hint in low for hint in _DNS_HINTS) or isinstance(exc, socket.gaierror):
+        return f"DNS: the host name does not resolve ({text})"
+    if "ssl" in low or "certificate" in low or "tls" in low:
+        return f"TLS: {text}"
+    if tls and ("reset" in low or "eof" in low):
+        return f"TLS: the handshake failed; is this port TLS? ({text})"
+    if "timed out" in low:
+        return f"no answer within {timeout_s:g} s (--connect-timeout)"
+    return text
+
+
+def protocol_unsupported(exc: BaseException) -> bool:
+    """A CONNACK saying the broker does not speak the MQTT version we asked for (e.g. v5)."""
+    if not isinstance(exc, MqttConnectError):
+        return False
+    return getattr(exc.rc, "value", exc.rc) in (1, 0x84)
+
+
+def first_error(group: BaseExceptionGroup[BaseException]) -> BaseException:
+    """The first ``OdocanError`` inside ``group`` (a TaskGroup's), else ``group`` itself."""
+    for exc in group.exceptions:
+        if isinstance(exc, BaseExceptionGroup):
+            inner = first_error(exc)
+            if inner is not exc:
+                return inner
+        elif isinstance(exc, OdocanError):
+            return exc
+    return group
 
 
 def free_loopback_port() -> int:
@@ -117,7 +191,7 @@ class EmbeddedBroker:
 
     def __init__(self, *, port: int | None = None) -> None:
         self.port = port or free_loopback_port()
-        self.url = BrokerURL(host=LOOPBACK, port=self.port)
+        self.url = BrokerURL(host=LOOPBACK, port=self.port, v5=False)  # amqtt: 3.1.1 only
         self._broker: Any = None
 
     def _config(self) -> dict[str, Any]:
@@ -133,7 +207,9 @@ class EmbeddedBroker:
         from amqtt.broker import Broker  # heavy import: only when the broker is wanted
 
         for name in ("amqtt", "transitions"):
-            logging.getLogger(name).setLevel(logging.WARNING)
+            logger = logging.getLogger(name)
+            if logger.level == logging.NOTSET:  # the CLI may have chosen (--debug)
+                logger.setLevel(logging.CRITICAL)
         self._broker = Broker(self._config())
         await self._broker.start()
 

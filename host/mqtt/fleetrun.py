@@ -7,11 +7,15 @@ the fleet's frames offered to it each tick), runs for ``duration_s`` and returns
 {"robots": N, "duration_s": ..., "period_s": 0.01, "deadline_miss_ratio": ...,
  "ticks": ..., "late_ticks": ..., "skipped_releases": ..., "max_lateness_ms": ...,
  "broker": "mqtt://127.0.0.1:PORT" | null, "embedded_broker": bool,
- "bridge": {"frames_in": ..., "frames_dropped": ..., "telemetry_dropped": ...} | null,
+ "bridge": {"frames_in": ..., "frames_dropped": ..., "telemetry_dropped": ..., ...} | null,
  "per_robot": {"robot001": {"seed": ..., "frames": {"WHEEL_ENCODERS": ..., ...},
                             "frames_total": ..., "commands_accepted": ...,
                             "commands_rejected": ...}, ...}}
 ```
+
+``bridge`` holds ``Bridge.counters()``: frames dropped or failed, telemetry dropped (buffer full)
+or not kept while offline, QoS-1 publications dropped or refused by the broker, commands expired,
+reconnects. A broker that cannot be reached at the start is a ``BrokerError`` (no traceback).
 
 ``deadline_miss_ratio`` is the share of 10 ms encoder cycles that started more than half a period
 late (``sim.realtime.DeadlineStats``).
@@ -21,12 +25,15 @@ from __future__ import annotations
 
 import asyncio
 import gc
+import signal
+import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
-from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
 from odocan.host.mqtt.options import broker_for
 from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
 from odocan.sim.realtime import DeadlineStats
@@ -42,40 +49,83 @@ class FleetRun:
     broker: BrokerURL | None = None  # None: an embedded amqtt broker
     publish_hz: float = 10.0
     client_prefix: str = "odocan-bridge"
+    connect_timeout_s: float = 5.0
+    command_expiry_s: float = 5.0
 
 
 async def run_fleet(run: FleetRun) -> dict[str, Any]:
     """Run the fleet in real time (bridged when ``run.bridge``); returns the report."""
     with Fleet(run.fleet) as fleet:
         if not run.bridge:
-            stats = await _paced(fleet, run.duration_s, None)
+            stats = await _paced(fleet, run.duration_s, None, None)
             return _report(run, fleet, stats, None, None, False)
         async with broker_for(run.broker) as (url, embedded):
             bridge = Bridge(_endpoints(fleet, run), config=BridgeConfig(
-                broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix))
+                broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix,
+                connect_timeout_s=run.connect_timeout_s, command_expiry_s=run.command_expiry_s))
             stop = asyncio.Event()
-            async with asyncio.TaskGroup() as tg:
-                tg.create_task(bridge.run(stop=stop), name="bridge")
-                await _all_connected(bridge)
-                stats = await _paced(fleet, run.duration_s, bridge.offer)
-                stop.set()
+            try:
+                async with asyncio.TaskGroup() as tg:
+                    tg.create_task(bridge.run(stop=stop), name="bridge")
+                    await _all_connected(bridge, run.connect_timeout_s + 5.0)
+                    stats = await _paced(fleet, run.duration_s, bridge.offer, url)
+                    stop.set()
+            except BaseExceptionGroup as group:
+                raise first_error(group) from None
             return _report(run, fleet, stats, bridge, url, embedded)
 
 
-async def _paced(fleet: Fleet, duration_s: float, on_batch: Any) -> DeadlineStats:
+def _say_started(fleet: Fleet, url: BrokerURL | None) -> None:
+    """One line on stderr when the clock starts: how many robots, and where to watch them
+    (``odocan monitor --broker URL``)."""
+    where = f", telemetry on {url}" if url is not None else ""
+    print(f"fleet: {len(fleet.names)} robots running{where}; Ctrl-C or SIGTERM stops and "
+          "reports", file=sys.stderr, flush=True)
+
+
+async def _paced(
+    fleet: Fleet, duration_s: float, on_batch: Any, url: BrokerURL | None
+) -> DeadlineStats:
+    """Run the fleet until ``duration_s`` or SIGINT/SIGTERM, whichever comes first: a signal ends
+    the run like its duration does, so the report is still written."""
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    handled = _on_stop_signals(loop, stop.set)
+    _say_started(fleet, url)
     gc.collect()
     gc.freeze()  # the long-lived set-up objects leave the collector's generations
     try:
-        return await run_realtime(fleet, duration_s=duration_s, on_batch=on_batch)
+        return await run_realtime(fleet, duration_s=duration_s, on_batch=on_batch, stop=stop)
     finally:
         gc.unfreeze()
+        for signum in handled:
+            loop.remove_signal_handler(signum)
 
 
-async def _all_connected(bridge: Bridge, timeout_s: float = 10.0) -> None:
+def _on_stop_signals(
+    loop: asyncio.AbstractEventLoop, callback: Callable[[], None]
+) -> list[signal.Signals]:
+    """SIGINT and SIGTERM call ``callback`` (main thread only; elsewhere nothing is installed)."""
+    handled: list[signal.Signals] = []
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(signum, callback)
+        except (RuntimeError, ValueError, NotImplementedError):
+            continue
+        handled.append(signum)
+    return handled
+
+
+async def _all_connected(bridge: Bridge, timeout_s: float) -> None:
     """Start the clock once every link is up (telemetry from tick 0 reaches the broker)."""
-    async with asyncio.timeout(timeout_s):
-        for link in bridge.links:
-            await link.connected.wait()
+    try:
+        async with asyncio.timeout(timeout_s):
+            for link in bridge.links:
+                await link.connected.wait()
+    except TimeoutError:
+        down = sum(not link.connected.is_set() for link in bridge.links)
+        raise BrokerError(f"{down} of {len(bridge.links)} robots not connected to "
+                          f"{bridge.config.broker} within {timeout_s:g} s") from None
 
 
 def _endpoints(fleet: Fleet, run: FleetRun) -> list[RobotEndpoint]:
@@ -109,10 +159,6 @@ def _report(
         "max_lateness_ms": round(stats.max_lateness_s * 1e3, 3),
         "broker": str(url) if url is not None else None,
         "embedded_broker": embedded,
-        "bridge": None if bridge is None else {
-            "frames_in": bridge.frames_in,
-            "frames_dropped": bridge.frames_dropped,
-            "telemetry_dropped": sum(link.telemetry_dropped for link in bridge.links),
-        },
+        "bridge": None if bridge is None else bridge.counters(),
         "per_robot": per_robot,
     }

@@ -4,7 +4,9 @@
 publications it makes due, as ``(leaf, payload)`` pairs (``host.mqtt.topics``):
 
 * every frame is E2E-checked (``host.e2e.E2EMonitor``: the DBC's E2EDataIDs, Profile 2 CRC and
-  sequence) and decoded with cantools; frames the check rejects are counted, never used;
+  sequence) and decoded with cantools; frames the check rejects, and E2E-valid frames cantools
+  cannot decode (an unknown multiplexer page), are counted in ``rejected``, never used (foreign
+  IDs by hex up to ``MAX_UNKNOWN_IDS`` of them, then as ``other``);
 * ``WHEEL_ENCODERS`` steps the float64 reference (``host.reference.ReferenceOdometry``, 24-bit
   wrapping counts); the reference pose after each frame is kept by the frame's E2E ``COUNTER``;
 * ``ODOM_POSE_X`` + ``ODOM_POSE_Y`` with the same ``ENC_COUNTER`` make the on-board pose, compared
@@ -27,6 +29,7 @@ from typing import Any, ClassVar
 
 import can
 from cantools.database.can import Database
+from cantools.database.errors import DecodeError
 
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.tracking import Pose, PoseTracker, difference
@@ -36,6 +39,7 @@ from odocan.sim.contract import database
 
 Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
+MAX_UNKNOWN_IDS = 32  # foreign CAN IDs counted by name in ``rejected``; the rest as ``other``
 
 
 @dataclass
@@ -79,6 +83,7 @@ class RobotTelemetry:
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
         self.frames: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
+        self._unknown_ids: set[str] = set()
         self._window = _Window(now_s)
         self._pose_x_counter = 0  # E2E COUNTER of the last ODOM_POSE_X
         self._twist: dict[str, float] = {}
@@ -98,17 +103,32 @@ class RobotTelemetry:
         message = self._by_id.get(can_id)
         status = self.e2e.check(can_id, data, extended=msg.is_extended_id)
         if message is None or status not in ACCEPTED_E2E:
-            self.rejected[message.name if message else hex(can_id)] += 1
+            self.rejected[message.name if message else self._unknown_key(can_id)] += 1
             return []
+        handler = self._handlers.get(message.name)
+        signals: Any = None
+        if handler is not None:
+            try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
+                signals = message.decode(data, decode_choices=False)
+            except DecodeError:
+                self.rejected[message.name] += 1
+                return []
         self.frames[message.name] += 1
         self._window.counts[message.name] += 1
-        handler = self._handlers.get(message.name)
         if handler is None:
             return []
-        signals = message.decode(data, decode_choices=False)
         assert isinstance(signals, dict)
         publications: list[Publication] = handler(self, signals, msg.timestamp)
         return publications
+
+    def _unknown_key(self, can_id: int) -> str:
+        """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
+        random IDs must not grow ``rejected`` (and the ``rates`` payload) without bound."""
+        key = hex(can_id)
+        if key in self._unknown_ids or len(self._unknown_ids) < MAX_UNKNOWN_IDS:
+            self._unknown_ids.add(key)
+            return key
+        return "other"
 
     def _on_encoders(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
@@ -130,6 +150,8 @@ class RobotTelemetry:
     def _on_pose_y(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         enc = int(s["ENC_COUNTER"])
         sample = self.tracker.on_pose_y(enc, s["Y"], int(s["TURNS"]))
+        if t_s < self._last_pub_t:  # the bus clock went back (a restart, a replay): follow it
+            self._last_pub_t = -math.inf
         if sample is None or t_s - self._last_pub_t < self.publish_period_s - 1e-6:
             return []
         self._last_pub_t = t_s

@@ -37,6 +37,9 @@ from cantools.database.can import Database, Message, Signal
 from odocan.sim.contract import database
 
 MAX_COMMAND_BYTES: Final = 4096  # a command's JSON payload, at most
+MAX_ID_CHARS: Final = 64  # a string id, at most
+MAX_ABS_INT_ID: Final = 2**63 - 1  # an integer id fits an int64 (every JSON peer can read it back)
+MAX_ABS_NUMBER: Final = 1e300  # an integer value beyond this is out of every signal's range
 
 Kind = Literal["float", "angle", "int", "enum", "bool", "absent"]
 _TURN = 2.0 * math.pi
@@ -152,11 +155,16 @@ class CommandEncoder:
         """``payload`` of ``cmd/<name>`` -> its frames; ``CommandRejected`` with the reason."""
         spec = SPECS.get(name)
         if spec is None:
-            raise CommandRejected(f"unknown command {name!r} (known: {', '.join(SPECS)})")
+            raise CommandRejected(
+                f"unknown command {_short(name)!r} (known: {', '.join(SPECS)})"
+            )
         obj = _parse(payload)
         cmd_id = obj.pop("id", None)
         if cmd_id is not None and not _valid_id(cmd_id):
-            raise CommandRejected("id must be a string of at most 64 characters or an integer")
+            raise CommandRejected(
+                f"id must be a string of at most {MAX_ID_CHARS} characters or an integer "
+                "within int64"
+            )
         try:
             values = _check_schema(spec, obj)
             message = self._message(spec)
@@ -211,6 +219,17 @@ class CommandEncoder:
         return Frame(message.frame_id, bytes(data), counter, final)
 
 
+def command_id(payload: bytes) -> Any:
+    """The ``"id"`` of a command that will not be run (expired, busy), None when there is no
+    valid one; never raises (the same checks as ``encode``)."""
+    try:
+        obj = _parse(payload)
+    except CommandRejected:
+        return None
+    cmd_id = obj.get("id")
+    return cmd_id if cmd_id is not None and _valid_id(cmd_id) else None
+
+
 def _data_ids(message: Message) -> list[int] | None:
     """The message's E2EDataIDs attribute (16 data IDs), None when absent or malformed."""
     attribute = message.dbc.attributes.get("E2EDataIDs") if message.dbc else None
@@ -225,24 +244,33 @@ def _parse(payload: bytes) -> dict[str, Any]:
         raise CommandRejected(f"payload too large ({len(payload)} > {MAX_COMMAND_BYTES} bytes)")
     try:
         obj = json.loads(payload)
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise CommandRejected(f"malformed JSON: {exc}") from None
+    except RecursionError:
+        raise CommandRejected("malformed JSON: nested too deeply") from None
+    except ValueError as exc:  # UnicodeDecodeError and over-long integers included
+        raise CommandRejected(f"malformed JSON: {_short(str(exc))}") from None
     if not isinstance(obj, dict):
         raise CommandRejected("payload must be a JSON object")
     return obj
 
 
+def _short(text: str, limit: int = 80) -> str:
+    """``text`` cut to ``limit`` characters (a reason stays one short line)."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def _valid_id(cmd_id: Any) -> bool:
     if isinstance(cmd_id, bool):
         return False
-    return isinstance(cmd_id, int) or (isinstance(cmd_id, str) and len(cmd_id) <= 64)
+    if isinstance(cmd_id, int):
+        return abs(cmd_id) <= MAX_ABS_INT_ID
+    return isinstance(cmd_id, str) and len(cmd_id) <= MAX_ID_CHARS
 
 
 def _check_schema(spec: CommandSpec, obj: dict[str, Any]) -> dict[str, Any]:
     """Keys and JSON types; returns the values given."""
     unknown = sorted(set(obj) - spec.keys)
     if unknown:
-        raise CommandRejected(f"unknown field {unknown[0]!r} (accepted: id, "
+        raise CommandRejected(f"unknown field {_short(repr(unknown[0]), 40)} (accepted: id, "
                               f"{', '.join(sorted(spec.keys))})")
     fields = {f.key: f for s in spec.steps for f in s.fields if f.kind != "absent"}
     for key, f in fields.items():
@@ -258,6 +286,8 @@ def _check_type(key: str, kind: Kind, value: Any) -> None:
     if kind in ("float", "angle"):
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise CommandRejected(f"{key} must be a number")
+        if isinstance(value, int) and abs(value) > MAX_ABS_NUMBER:  # float() would overflow
+            raise CommandRejected(f"{key} out of range ({len(str(abs(value)))}-digit integer)")
         if not math.isfinite(value):
             raise CommandRejected(f"{key} must be finite")
     elif kind == "int" and (isinstance(value, bool) or not isinstance(value, int)):
@@ -282,7 +312,8 @@ def _to_raw(signal: Signal, f: Field, value: Any, message: str) -> int:
     unit = f" {signal.unit}" if signal.unit and signal.unit != "-" else ""
     if (lo is not None and value < lo) or (hi is not None and value > hi):
         raise CommandRejected(
-            f"{f.key}={value} out of range [{lo}, {hi}]{unit} ({message}.{signal.name} in the DBC)"
+            f"{f.key}={_short(str(value), 24)} out of range [{lo}, {hi}]{unit} "
+            f"({message}.{signal.name} in the DBC)"
         )
     scaled: int = round((value - signal.offset) / signal.scale)
     return scaled
@@ -298,4 +329,4 @@ def _choice_value(signal: Signal, value: Any, message: str, *, key: str | None =
     if key is None:  # a multiplexer value the spec needs
         raise CommandRejected(f"unsupported by this DBC ({message}.{signal.name} lacks {value})")
     names = ", ".join(sorted(n.lower() for n in choices))
-    raise CommandRejected(f"{key}={value!r} is not one of {names}")
+    raise CommandRejected(f"{key}={_short(repr(value), 24)} is not one of {names}")

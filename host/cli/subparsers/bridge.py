@@ -21,7 +21,13 @@ from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, BusReader, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerURL
-from odocan.host.mqtt.options import add_mqtt_arguments, broker_for, broker_url
+from odocan.host.mqtt.options import (
+    add_mqtt_arguments,
+    bridge_options,
+    broker_for,
+    broker_url,
+    configure_logging,
+)
 from odocan.host.mqtt.topics import check_robot_name
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError
@@ -62,6 +68,7 @@ def _do_bridge(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ConfigurationError(str(exc)) from None
     url = broker_url(args)
+    configure_logging(getattr(args, "debug", False))
     profile = robot.load(args.robot)
     geometry = Geometry.of(profile)
     bus = open_bus(args)
@@ -82,9 +89,7 @@ async def _bridge(
 ) -> None:
     async with broker_for(url) as (broker, embedded):
         print(f"bridge {name}: {broker}{' (embedded)' if embedded else ''}", file=sys.stderr)
-        config = BridgeConfig(
-            broker=broker, publish_hz=args.publish_hz, client_prefix=args.client_prefix
-        )
+        config = BridgeConfig(broker=broker, **bridge_options(args))
         endpoint = RobotEndpoint(name, bus, geometry, args.integrator, counter_bits)
         bridge = Bridge([endpoint], config=config)
         stop = asyncio.Event()
@@ -93,13 +98,13 @@ async def _bridge(
             loop.add_signal_handler(sig, stop.set)
         reader = BusReader(bus, bridge, loop)
         reader.start()
+        if args.duration is not None:
+            loop.call_later(args.duration, stop.set)
         try:
-            async with asyncio.TaskGroup() as tg:
-                tg.create_task(bridge.run(stop=stop), name="bridge")
-                if args.duration is not None:
-                    loop.call_later(args.duration, stop.set)
+            await bridge.run(stop=stop)
         finally:
             reader.stop()
+        print(f"bridge {name}: {bridge.summary()}", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:

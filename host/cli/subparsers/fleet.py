@@ -18,7 +18,12 @@ from pathlib import Path
 
 from odocan.host.cli.options import SEED_LIMIT, add_seed_argument, float_in, int_in
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
-from odocan.host.mqtt.options import add_mqtt_arguments, broker_url
+from odocan.host.mqtt.options import (
+    add_mqtt_arguments,
+    bridge_options,
+    broker_url,
+    configure_logging,
+)
 from odocan.host.report.outputs import check_writable, write_text
 from odocan.host.report.progress import wall_clock_progress
 from odocan.sim import robot
@@ -99,9 +104,9 @@ def _do_fleet(args: argparse.Namespace) -> int:
         ),
         duration_s=args.duration,
         broker=broker_url(args),
-        publish_hz=args.publish_hz,
-        client_prefix=args.client_prefix,
+        **bridge_options(args),
     )
+    configure_logging(getattr(args, "debug", False))
     with wall_clock_progress(f"fleet of {args.count}", args.duration):
         report = asyncio.run(run_fleet(run))
     print(
