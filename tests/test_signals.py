@@ -165,7 +165,7 @@ def test_sigterm_ends_monitor_with_its_json(tmp_path: Path) -> None:
 
 
 def test_sigterm_ends_a_fleet_with_its_report(tmp_path: Path) -> None:
-    """``odocan fleet`` stopped by SIGTERM mid-run still prints its summary and writes its report."""
+    """``odocan fleet`` stopped by SIGTERM mid-run still prints its summary and its report."""
     import json
 
     report = tmp_path / "fleet.json"

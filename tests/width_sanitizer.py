@@ -605,6 +605,37 @@ def _secoc_drive() -> None:
         broken.freshness_frame(0, secoc.FreshnessCause.UNAVAILABLE)
 
 
+HEALTH_SCENARIOS = "tests.test_health_firmware"  # stalls, overflows, forgeries, restarts, gaps
+
+
+def _health_drive() -> None:
+    """The firmware-level health scenarios (lost time, FIFO overrun, mailbox overflow, forged and
+    implausible steps, counter restarts and their recovery, twist after 16/31/100-period gaps),
+    run from a fresh import of their test module so that it binds the instrumented firmware."""
+    saved = {name: sys.modules.pop(name) for name in (HEALTH_SCENARIOS, "tests.test_ecu")
+             if name in sys.modules}
+    try:
+        scenarios = importlib.import_module(HEALTH_SCENARIOS)
+        for name in sorted(dir(scenarios)):
+            test = getattr(scenarios, name)
+            if not name.startswith("test_") or not callable(test):
+                continue
+            if name == "test_twist_is_right_after_a_gap_of_lost_frames":
+                for lost in (16, 31, 100):
+                    test(lost)
+            else:
+                test()
+        rig = scenarios.TimedRig()
+        for _ in range(3):
+            rig.step()
+        rig.ecu.isr_rx_overrun()  # the board's CAN FIFO overrun interrupt
+        rig.ecu._step_periods_max(rig.ecu._enc_prev_counter)  # a whole 16-period counter cycle
+    finally:
+        for name in (HEALTH_SCENARIOS, "tests.test_ecu"):
+            sys.modules.pop(name, None)
+        sys.modules.update(saved)
+
+
 CLOSED_LOOP_MIN_S = 10.0  # the first two goals are reached (NAV_STATUS REACHED) within it
 
 
@@ -625,6 +656,7 @@ def standard_drives(recorder: Recorder, duration_s: float = 20.0) -> DriveLog:
         _vector_cases()
         _edge_sweep()
         _secoc_drive()
+        _health_drive()
     return DriveLog(ears.heard, ears.acks)
 
 
