@@ -76,11 +76,6 @@ class RobotProfile:
     wheelbase_m: float
     counter_bits: int
 
-    @property
-    def wheel_radius_m(self) -> float:
-        """Mean nominal wheel radius in metres."""
-        return 0.5 * (self.wheel_radius_left_m + self.wheel_radius_right_m)
-
     def firmware_params(self) -> dict[str, int]:
         """The integers the firmware is configured with (lengths in nanometres)."""
         return {

@@ -238,7 +238,7 @@ def test_last_will_marks_a_killed_bridge_offline(kind: str, tmp_path: Path) -> N
             b = brokers.bridge
             creds = f"{b.username}:{b.password}@" if b.username else ""
             proc = subprocess.Popen(
-                [sys.executable, "-m", "odocan.host.cli.subparsers.bridge", "--name", ROBOT,
+                [sys.executable, "-m", "odocan", "bridge", "--name", ROBOT,
                  "--broker", f"mqtt://{creds}{b.host}:{b.port}", "-i", "virtual",
                  "-c", f"test-will-{os.getpid()}"],
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,

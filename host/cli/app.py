@@ -38,7 +38,7 @@ SUBCOMMANDS = (
     "busload",
 )
 VERSION = "0.1.0"
-EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_USAGE = 0, 2
 
 
 class UsageError(OdocanError):
@@ -92,12 +92,26 @@ def build_parser() -> argparse.ArgumentParser:
     for name in SUBCOMMANDS:
         try:
             module = importlib.import_module(f"odocan.host.cli.subparsers.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"odocan.host.cli.subparsers.{name}":
-                raise
+        except ImportError as exc:  # e.g. an optional dependency missing: say so when it is used
+            _add_unavailable(subparsers, name, exc)
             continue
         module.add_subparser(subparsers)
     return parser
+
+
+def _add_unavailable(
+    subparsers: argparse._SubParsersAction[_Parser], name: str, exc: ImportError
+) -> None:
+    """Register ``name`` as a subcommand that explains why it cannot run (cantools does the same
+    for its plugins), instead of dropping it from the command line without a word."""
+    reason = f"odocan {name} is unavailable: {exc}"
+    parser = subparsers.add_parser(name, help=f"(unavailable: {exc})", add_help=False)
+    parser.add_argument("rest", nargs=argparse.REMAINDER)
+
+    def unavailable(args: argparse.Namespace) -> int:
+        raise UsageError(reason)
+
+    parser.set_defaults(func=unavailable)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -105,16 +105,3 @@ async def _bridge(
         finally:
             reader.stop()
         print(f"bridge {name}: {bridge.summary()}", file=sys.stderr)
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``odocan bridge`` on its own (until the subcommand is registered in host.cli)."""
-    from odocan.host.cli.app import _Parser
-
-    parser = _Parser(prog="odocan bridge")
-    _add_arguments(parser)
-    return _do_bridge(parser.parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

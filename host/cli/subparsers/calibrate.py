@@ -11,7 +11,6 @@ with ODOM_CONFIG staged writes + APPLY, waiting for ODOM_ACK. Exit 0, or 2 on ba
 from __future__ import annotations
 
 import argparse
-import sys
 
 from odocan.host.cli.subparsers.umbmark import add_arguments, header
 from odocan.host.experiments import render, umbmark
@@ -67,16 +66,3 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     report = {"robot": profile.name, "seed": args.seed, **umbmark.calibration_report(cal, model)}
     write_report(args.report, report)
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``odocan calibrate`` on its own (until the subcommand is registered in host.cli)."""
-    from odocan.host.cli.app import _Parser
-
-    parser = _Parser(prog="odocan calibrate")
-    _add_arguments(parser)
-    return _do_calibrate(parser.parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -9,7 +9,6 @@ on bad usage.
 from __future__ import annotations
 
 import argparse
-import sys
 
 from odocan.host.cli.options import float_in
 from odocan.host.experiments import render, seed002
@@ -66,16 +65,3 @@ def _do_experiment(args: argparse.Namespace) -> int:
     render.show(render.straight_table(result), render.square_table(result))
     write_report(args.report, seed002.report(result))
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``odocan experiment`` on its own (until the subcommand is registered in host.cli)."""
-    from odocan.host.cli.app import _Parser
-
-    parser = _Parser(prog="odocan experiment")
-    _add_arguments(parser)
-    return _do_experiment(parser.parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

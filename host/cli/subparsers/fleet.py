@@ -118,16 +118,3 @@ def _do_fleet(args: argparse.Namespace) -> int:
     if args.report is not None:
         write_text(args.report, json.dumps(report, indent=2) + "\n", "--report")
     return 0 if report["deadline_miss_ratio"] <= args.max_miss_ratio else 1
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``odocan fleet`` on its own (until the subcommand is registered in host.cli)."""
-    from odocan.host.cli.app import _Parser
-
-    parser = _Parser(prog="odocan fleet")
-    _add_arguments(parser)
-    return _do_fleet(parser.parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

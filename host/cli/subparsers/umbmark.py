@@ -9,7 +9,6 @@ usage.
 from __future__ import annotations
 
 import argparse
-import sys
 
 from odocan.host.cli.options import float_in
 from odocan.host.experiments import render, umbmark
@@ -74,16 +73,3 @@ def _do_umbmark(args: argparse.Namespace) -> int:
     }
     write_report(args.report, report)
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``odocan umbmark`` on its own (until the subcommand is registered in host.cli)."""
-    from odocan.host.cli.app import _Parser
-
-    parser = _Parser(prog="odocan umbmark")
-    add_arguments(parser)
-    return _do_umbmark(parser.parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())
