@@ -37,7 +37,7 @@ def render(snapshot: dict[str, Any], *, source: str,
     )
     heard = heard or {}
     return Group(
-        header, messages_table(snapshot, heard), _signals_table(snapshot, heard),
+        header, messages_table(snapshot, heard), signals_table(snapshot, heard),
         status_line(snapshot.get("status")), pose_table(snapshot), pose_note(snapshot),
         unknown_line(snapshot["unknown"]),
     )
@@ -65,7 +65,7 @@ def messages_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
     return table
 
 
-def _signals_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
+def signals_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
     table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
     table.add_column("message", no_wrap=True)
     table.add_column("latest values", overflow="fold", ratio=1)
