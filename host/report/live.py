@@ -70,12 +70,12 @@ def signals_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
     table.add_column("message", no_wrap=True)
     table.add_column("latest values", overflow="fold", ratio=1)
     for name, m in snapshot["messages"].items():
-        table.add_row(name, _values(m.get("last_frame", m["last"]), m["units"]),
+        table.add_row(name, values_text(m.get("last_frame", m["last"]), m["units"]),
                       style="dim" if heard.get(name, 0.0) > STALE_S else None)
     return table
 
 
-def _values(last: dict[str, Any], units: dict[str, str]) -> str:
+def values_text(last: dict[str, Any], units: dict[str, str]) -> str:
     items = []
     for name, value in last.items():
         text = f"{value:.4f}".rstrip("0").rstrip(".") if isinstance(value, float) else str(value)
@@ -196,7 +196,7 @@ def fleet_table() -> Table:
                         "fr/s")
     for column in out.columns[6:8]:
         column.justify = "left"
-    out.columns[7].no_wrap, out.columns[7].min_width = False, 12  # names wrap at spaces
+    out.columns[7].no_wrap, out.columns[7].min_width = False, 8  # names wrap at spaces
     return out
 
 

@@ -58,8 +58,8 @@ from odocan.host.report.live import (
     STALE_S,
     compact_table,
     num,
-    signals_table,
     unknown_line,
+    values_text,
 )
 from odocan.sim.exceptions import ConfigurationError
 
@@ -238,13 +238,13 @@ def screen(snapshot: dict[str, Any], trace: Trace, view: View, *, width: int = 8
     trace_view = _TraceView(trace)
     body_rows = max(2, height - TOP_ROWS - 1)
     rows_wanted = 1 + len(snapshot["messages"])
-    messages_width = min(100, width // 2) if width >= WIDE_COLUMNS else width
+    messages_width = min(110, width // 2) if width >= WIDE_COLUMNS else width
     messages = _Fit(messages_table(snapshot, trace.pages, view.heard_s, width=messages_width))
     if width >= WIDE_COLUMNS:
         body.split_row(Layout(messages, name="messages", size=messages_width),
                        Layout(trace_view, name="trace"))
     elif height >= TALL_ROWS:
-        values = signals_table(snapshot, view.heard_s)
+        values = values_table(snapshot, view.heard_s)
         body.split_column(
             Layout(messages, name="messages", size=min(rows_wanted, body_rows // 3)),
             Layout(_Fit(values), name="values", size=min(rows_wanted + 1, body_rows // 3)),
@@ -399,6 +399,18 @@ def messages_table(snapshot: dict[str, Any], pages: PageRates, heard_s: dict[str
     return table
 
 
+def values_table(snapshot: dict[str, Any], heard_s: dict[str, float]) -> Table:
+    """Per message its latest signal values, one row each (cut at the edge, never wrapped)."""
+    table = compact_table("message", "latest values")
+    table.box, table.show_edge, table.expand = None, False, True
+    table.columns[1].justify, table.columns[1].overflow, table.columns[1].ratio = (
+        "left", "ellipsis", 1)
+    for name, m in snapshot["messages"].items():
+        table.add_row(name, values_text(m.get("last_frame", m["last"]), m["units"]),
+                      style="dim" if heard_s.get(name, 0.0) > STALE_S else None)
+    return table
+
+
 def _e2e_text(e2e: dict[str, Any]) -> Text:
     bad = {k: v for k, v in e2e.items() if k != "ok" and v}
     if not e2e:
@@ -466,7 +478,7 @@ def _keys_line(trace: Trace, view: View) -> Text:
     line.append("  q ", style="bold")
     line.append("quit")
     if view.log_path is not None:
-        line.append(f"  log {view.log_path} ({view.logged} frames)", style="cyan")
+        line.append(f"  log {view.logged} frames to {view.log_path}", style="cyan")
     if view.log_error:
         line.append(f"  log stopped: {view.log_error}", style="bold red")
     return line
