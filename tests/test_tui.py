@@ -160,7 +160,7 @@ def test_degraded_screen_says_why(degraded: Fed) -> None:
 def test_stale_screen_warns_and_marks_the_firmware(healthy: Fed) -> None:
     rows = draw(healthy, healthy.view(silent_s=5.0))
     assert rows[1].startswith("firmware OK STALE  reason no error bits  age 5.1 s")
-    assert rows[6].startswith("nothing heard since for 5.0 s: the sender stopped")
+    assert rows[6].startswith("nothing heard for 5.0 s since the last frame: the sender stopped")
     assert [r.split()[0] for r in rows[3:6]] == ["on-board", "reference", "truth"]
 
 

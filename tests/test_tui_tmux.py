@@ -170,7 +170,7 @@ def test_monitor_in_tmux_at_80x24(udp: tuple[list[str], Any]) -> None:
         assert healthy_rows(rows)
 
         sender.halt()
-        rows = pane.wait_for(lambda r: r[6].startswith("nothing heard since"), 15)
+        rows = pane.wait_for(lambda r: "since the last frame: the sender stopped" in r[6], 15)
         assert "STALE" in rows[1]  # the status is older than 2 s
         assert [r.split()[0] for r in rows[3:6]] == ["on-board", "reference", "truth"]
 

@@ -345,8 +345,9 @@ def alert_line(snapshot: dict[str, Any], view: View) -> Text:
     silent_s = view.now_s - (view.last_frame_s if view.last_frame_s is not None
                              else view.started_s)
     if silent_s > SILENCE_S:
-        heard = "nothing heard" if view.last_frame_s is None else "nothing heard since"
-        text = f"{heard} for {silent_s:.1f} s: {silence_hint(view.interface, view.last_frame_s)}"
+        since = "" if view.last_frame_s is None else " since the last frame"
+        text = (f"nothing heard for {silent_s:.1f} s{since}: "
+                f"{silence_hint(view.interface, view.last_frame_s)}")
         return Text(text, style="bold red", no_wrap=True, overflow="ellipsis")
     if view.note:
         return Text(view.note, style="yellow", no_wrap=True, overflow="ellipsis")
