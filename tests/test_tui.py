@@ -21,6 +21,8 @@ from typing import Any
 
 import can
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from rich.console import Console
 
 from odocan.host.cli.subparsers import monitor as monitor_cmd
@@ -340,3 +342,24 @@ def test_fleet_view_redraws_on_a_timer_without_messages() -> None:
     asyncio.run(watch.run(lambda: draws.append(time.monotonic())))
     assert len(draws) >= 3
     assert not watch.connected_once
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(frames=st.lists(st.tuples(
+    st.sampled_from([0x100, 0x110, 0x200, 0x201, 0x380, 0x700, 0x123]) | st.integers(0, 0x7FF),
+    st.binary(min_size=0, max_size=8), st.booleans(), st.sampled_from(["", "error", "remote"])),
+    max_size=30))
+def test_no_frame_stops_the_trace_or_the_screen(
+        frames: list[tuple[int, bytes, bool, str]]) -> None:
+    """Any ID, length, ID kind, error or remote frame: decoded or shown raw, never raised."""
+    model = BusMonitor(robot.load("pmir"))
+    trace = Trace(model.db)
+    for k, (can_id, data, extended, kind) in enumerate(frames):
+        msg = can.Message(arbitration_id=can_id, data=data, is_extended_id=extended,
+                          is_error_frame=kind == "error", is_remote_frame=kind == "remote",
+                          timestamp=k * 0.01)
+        model.feed(msg, now_s=msg.timestamp)
+        trace.feed(msg)
+    assert len(trace.lines) == len(frames)
+    rows = draw(Fed(model, trace, len(frames) * 0.01), View(source="x"))
+    assert rows[1].startswith("firmware")

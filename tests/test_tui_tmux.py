@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import os
 import shlex
-import shutil
 import subprocess
 import sys
 import threading
@@ -31,6 +30,7 @@ import pytest
 from odocan.sim import robot
 from odocan.sim.faults import FaultSpec
 from odocan.sim.rig import LockstepRig, RigConfig
+from tests.requires import require_executables
 from tests.test_realtime import _open_udp_or_skip, _udp_channel
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -134,8 +134,7 @@ def monitor_command(bus_argv: list[str], *extra: str) -> str:
 @pytest.fixture
 def udp() -> Iterator[tuple[list[str], can.BusABC]]:
     """CLI options of a fresh loopback udp_multicast channel, and the sender's bus on it."""
-    if shutil.which("tmux") is None:
-        pytest.skip("tmux is not installed (apt-get install tmux)")
+    require_executables("tmux", install="apt-get install tmux")
     argv, kwargs = _udp_channel()
     bus = _open_udp_or_skip(kwargs)
     try:
