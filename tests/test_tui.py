@@ -191,23 +191,28 @@ def test_events_and_model_staleness_are_shown_when_the_model_gives_them(healthy:
 
 def test_page_rates_from_bus_time() -> None:
     pages = PageRates()
-    for k in range(40):
-        pages.heard("SIM_TRUTH", ("X", "Y", "HEADING")[k % 3], k * 0.025)  # 3 parts, 40 Hz
+    for k in range(40):  # 3 parts heard in the order 2, 0, 1 at 40 Hz in all
+        number = (2, 0, 1)[k % 3]
+        pages.heard("SIM_TRUTH", number, ("X", "Y", "HEADING")[number], k * 0.025)
     rates = pages.rates_hz("SIM_TRUTH")
-    assert list(rates) == ["X", "Y", "HEADING"]
-    for rate in rates.values():
-        assert rate == pytest.approx(40 / 3)
-    assert pages.rates_hz("ODOM_STATUS") == {}
+    assert [(p.number, p.name) for p in rates] == [(0, "X"), (1, "Y"), (2, "HEADING")]
+    for page in rates:
+        assert page.rate_hz == pytest.approx(40 / 3)
+    assert pages.rates_hz("ODOM_STATUS") == []
 
 
 def test_page_rates_add_up_to_the_message_rate(healthy: Fed) -> None:
     snapshot = healthy.model.snapshot()
     for name, pages in (("ODOM_STATUS", 6), ("SIM_TRUTH", 3)):
         rates = healthy.trace.pages.rates_hz(name)
-        assert len(rates) == pages
-        total = sum(r for r in rates.values() if r is not None)
+        assert [p.number for p in rates] == list(range(pages))
+        total = sum(p.rate_hz for p in rates if p.rate_hz is not None)
         assert total == pytest.approx(snapshot["messages"][name]["rate_hz"], rel=0.1)
-    assert healthy.trace.pages.rates_hz("SIM_TRUTH")["X"] == pytest.approx(10.0)
+    status = {p.name: p.number for p in healthy.trace.pages.rates_hz("ODOM_STATUS")}
+    assert status["SUMMARY"] == 0 and status["FRAME_TOTALS"] == 1  # the DBC's VAL_ table
+    assert healthy.trace.pages.rates_hz("SIM_TRUTH")[0].rate_hz == pytest.approx(10.0)
+    row = next(r for r in draw(healthy, healthy.view()) if r.startswith("ODOM_STATUS"))
+    assert "SUMMARY=10 p1=2 p2=2 p3=2" in row
 
 
 def test_filter_by_name_and_id(healthy: Fed) -> None:

@@ -40,10 +40,11 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import can
 from cantools.database.can import Database, Message
+from cantools.database.namedsignalvalue import NamedSignalValue
 from rich.console import Console, ConsoleOptions, Group, RenderableType, RenderResult
 from rich.layout import Layout
 from rich.live import Live
@@ -111,26 +112,37 @@ class FrameFilter:
         return arbitration_id in self.ids or (name is not None and name.upper() in self.names)
 
 
+class PageRate(NamedTuple):
+    """One page of a multiplexed message: its multiplexer value, name and rate (Hz)."""
+
+    number: int
+    name: str
+    rate_hz: float | None  # None before two frames
+
+
 @dataclass
 class PageRates:
     """Frame rate of each page of each multiplexed message, from bus timestamps."""
 
-    times: dict[tuple[str, str], deque[float]] = field(default_factory=dict)
+    times: dict[tuple[str, int], deque[float]] = field(default_factory=dict)
+    names: dict[tuple[str, int], str] = field(default_factory=dict)
 
-    def heard(self, message: str, page: str, timestamp_s: float) -> None:
-        """One frame of ``message``'s ``page`` at ``timestamp_s`` (bus time, s)."""
-        key = (message, page)
+    def heard(self, message: str, number: int, name: str, timestamp_s: float) -> None:
+        """One frame of ``message``'s page ``number`` (``name``) at ``timestamp_s`` (bus, s)."""
+        key = (message, number)
         if key not in self.times:
             self.times[key] = deque(maxlen=PAGE_WINDOW)
+            self.names[key] = name
         self.times[key].append(timestamp_s)
 
-    def rates_hz(self, message: str) -> dict[str, float | None]:
-        """Page -> frames per second over the window (None before two frames), page order."""
-        out: dict[str, float | None] = {}
-        for (name, page), times in self.times.items():
+    def rates_hz(self, message: str) -> list[PageRate]:
+        """The pages heard of ``message``, by multiplexer value, with their rates."""
+        out = []
+        for (name, number), times in sorted(self.times.items()):
             if name == message:
                 span_s = times[-1] - times[0]
-                out[page] = (len(times) - 1) / span_s if len(times) > 1 and span_s > 0 else None
+                rate_hz = (len(times) - 1) / span_s if len(times) > 1 and span_s > 0 else None
+                out.append(PageRate(number, self.names[(name, number)], rate_hz))
         return out
 
 
@@ -155,10 +167,13 @@ class Trace:
         self.pages = PageRates()
         self.paused = False
         self.hidden_while_paused = 0
+        self.first_s: float | None = None  # bus time of the first frame (the trace's zero)
         self._by_key = {frame_key(m.frame_id, m.is_extended_frame): m for m in db.messages}
 
     def feed(self, msg: can.Message) -> None:
         """Decode one frame: count its page, and keep it unless paused or filtered out."""
+        if self.first_s is None:
+            self.first_s = msg.timestamp
         if msg.is_error_frame or msg.is_remote_frame:
             self._keep(msg, "?", "error frame" if msg.is_error_frame else "remote frame")
             return
@@ -168,7 +183,7 @@ class Trace:
             return
         text, page = _decoded(message, bytes(msg.data))
         if page is not None:
-            self.pages.heard(message.name, page, msg.timestamp)
+            self.pages.heard(message.name, *page, msg.timestamp)
         self._keep(msg, message.name, text)
 
     def _keep(self, msg: can.Message, name: str, text: str) -> None:
@@ -185,17 +200,19 @@ class Trace:
         self.hidden_while_paused = 0
 
 
-def _decoded(message: Message, data: bytes) -> tuple[str, str | None]:
-    """The frame's signals as text, and its page name when the message is multiplexed."""
+def _decoded(message: Message, data: bytes) -> tuple[str, tuple[int, str] | None]:
+    """The frame's signals as text, and its page (number, name) when it is multiplexed."""
     try:
         signals = message.decode(data, decode_choices=True, allow_truncated=True)
     except Exception:  # cantools: wrong length, unknown page ... (never fatal)
         return f"undecodable {data.hex(' ')}", None
     assert isinstance(signals, dict)
     page = None
-    if message.is_multiplexed():
-        muxes = [s.name for s in message.signals if s.is_multiplexer]
-        page = str(signals.get(muxes[0])) if muxes else None
+    muxes = [s.name for s in message.signals if s.is_multiplexer]
+    if muxes and muxes[0] in signals:
+        value = signals[muxes[0]]
+        number = value.value if isinstance(value, NamedSignalValue) else value
+        page = (int(number), str(value))
     parts = []
     for name, value in signals.items():
         if name in _HIDDEN:
@@ -422,14 +439,12 @@ def _e2e_text(e2e: dict[str, Any]) -> Text:
     return Text(" ".join(f"{short.get(k, k)} {v}" for k, v in bad.items()), style="yellow")
 
 
-def _pages_text(rates: dict[str, float | None], *, wide: bool) -> str:
-    """``X=3.33 Y=3.33 HEADING=3.33`` (Hz); long page names become their number unless ``wide``."""
-    if not rates:
-        return ""
+def _pages_text(pages: list[PageRate], *, wide: bool) -> str:
+    """``X=3.33 Y=3.33 HEADING=3.33`` (Hz); a long page name is ``p<number>`` unless ``wide``."""
     parts = []
-    for index, (page, rate_hz) in enumerate(rates.items()):
-        label = page if wide or len(page) <= 7 else f"p{index}"
-        parts.append(f"{label}={num(rate_hz, '.3g')}")
+    for page in pages:
+        label = page.name if wide or len(page.name) <= 7 else f"p{page.number}"
+        parts.append(f"{label}={num(page.rate_hz, '.3g')}")
     return " ".join(parts)
 
 
@@ -455,15 +470,17 @@ class _TraceView:
 
     def __rich_console__(self, console: Console, options: ConsoleOptions) -> RenderResult:
         height = options.height or 10
-        title = Text("trace", style="bold")
+        title = Text("trace", style="bold", no_wrap=True, overflow="ellipsis")
+        zero_s = self.trace.first_s or 0.0
         if self.trace.paused:
             title.append(f" (paused, {self.trace.hidden_while_paused} not shown)", style="yellow")
         if self.trace.filter.text:
             title.append(f" filter {self.trace.filter.text}", style="magenta")
+        title.append("  (time: s since the first frame)", style="dim")
         yield title
         for line in list(self.trace.lines)[-(height - 1):] if height > 1 else []:
             yield Text.assemble(
-                f"{line.timestamp_s % 1000:8.3f} ", (f"{line.arbitration_id:03X} ", "cyan"),
+                f"{line.timestamp_s - zero_s:8.3f} ", (f"{line.arbitration_id:03X} ", "cyan"),
                 (f"{line.name:<14.14} ", "bold"), line.text, no_wrap=True, overflow="ellipsis",
             )
 
