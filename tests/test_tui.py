@@ -368,3 +368,21 @@ def test_no_frame_stops_the_trace_or_the_screen(
     assert len(trace.lines) == len(frames)
     rows = draw(Fed(model, trace, len(frames) * 0.01), View(source="x"))
     assert rows[1].startswith("firmware")
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full on this system")
+def test_cli_log_on_a_full_disk_is_one_line_naming_the_path(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Recording to a full device (a .log linked to /dev/full): the monitor goes on to the end,
+    then one ``error:`` line with the path and the frames written, exit 2."""
+    from tests.test_cli_monitor import _InterruptingBus
+
+    monkeypatch.setattr(monitor_cmd, "open_bus", lambda args: _InterruptingBus(3000))
+    path = tmp_path / "full.log"
+    path.symlink_to("/dev/full")
+    code, out, err = run_cli(capsys, "monitor", "-i", "virtual", "--log", str(path))
+    assert code == 2
+    assert err.startswith(f"error: --log {path}: recording stopped after ")
+    assert "No space left on device" in err and len(err.strip().splitlines()) == 1
+    assert "3000 frames" in out  # every frame was still heard and shown

@@ -52,7 +52,6 @@ from rich.segment import Segment
 from rich.table import Table
 from rich.text import Text
 
-from odocan.host.io.listeners import Isolated
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.protocol.decode import frame_key
 from odocan.host.report.live import (
@@ -62,7 +61,7 @@ from odocan.host.report.live import (
     unknown_line,
     values_text,
 )
-from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.exceptions import ConfigurationError, OdocanError
 
 SILENCE_S = 2.0  # nothing heard for this long: the warning line says so, and why it may be
 STATUS_STALE_S = 2.0  # an ODOM_STATUS older than this: the firmware line says STALE
@@ -505,42 +504,53 @@ def _keys_line(trace: Trace, view: View) -> Text:
 # --- the app ----------------------------------------------------------------------------------
 
 
-@dataclass
+class RecordingError(OdocanError):
+    """``--log``: the recording could not be written (disk full, file gone, ...)."""
+
+
 class Recorder:
     """``--log PATH``: every frame heard to python-can's ``can.Logger`` (.log/.asc/.blf).
 
-    A write error stops the recording (shown on the keys line), never the monitor.
+    A write error stops the recording (the keys line says so) but never the monitor; ``close()``
+    then raises ``RecordingError`` naming the path and the frames written, so the command ends
+    with one ``error:`` line and exit code 2 rather than a recording silently cut short.
     """
 
-    path: Path
-    count: int = 0
-
-    def __post_init__(self) -> None:
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.count = 0
+        self.failure: Exception | None = None
         try:
-            self._listener = Isolated(can.Logger(self.path), name=f"log {self.path}")
+            self._logger = can.Logger(path)
         except (OSError, ValueError) as exc:
-            raise ConfigurationError(f"--log {self.path}: {exc}") from exc
+            raise ConfigurationError(f"--log {path}: {exc}") from exc
 
     def record(self, msg: can.Message) -> None:
-        """Write one frame (counted when written)."""
-        if self._listener.errors:
+        """Write one frame (counted when written); after a failure, nothing more."""
+        if self.failure is not None:
             return
-        self._listener.on_message_received(msg)
-        if not self._listener.errors:
-            self.count += 1
+        try:
+            self._logger.on_message_received(msg)
+        except Exception as exc:  # any writer's error stops the recording, not the monitor
+            self.failure = exc
+            return
+        self.count += 1
 
     @property
     def error(self) -> str:
         """The write error that stopped the recording ("" while recording)."""
-        exc = self._listener.last_error
+        exc = self.failure
         return "" if exc is None else f"{type(exc).__name__}: {exc}"
 
     def close(self) -> None:
         """Finalise the file (a .blf's header and index are written here)."""
         try:
-            self._listener.stop()
-        except Exception as exc:  # reported once at the end
-            raise ConfigurationError(f"--log {self.path}: cannot finalise: {exc}") from exc
+            self._logger.stop()
+        except Exception as exc:
+            self.failure = self.failure or exc
+        if self.failure is not None:
+            raise RecordingError(f"--log {self.path}: recording stopped after {self.count} "
+                                 f"frames: {self.error}")
 
 
 class MonitorApp:
