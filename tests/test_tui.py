@@ -345,7 +345,7 @@ def test_fleet_view_redraws_on_a_timer_without_messages() -> None:
                                     1.2)
     draws: list[float] = []
     asyncio.run(watch.run(lambda: draws.append(time.monotonic())))
-    assert len(draws) >= 3
+    assert len(draws) >= 2  # the first draw, and at least one from the timer alone
     assert not watch.connected_once
 
 
