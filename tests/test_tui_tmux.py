@@ -178,3 +178,17 @@ def test_monitor_in_tmux_at_80x24(udp: tuple[list[str], Any]) -> None:
     finally:
         sender.halt()
         pane.close()
+
+
+def test_a_virtual_bus_in_a_process_of_its_own_says_why_it_hears_nothing() -> None:
+    """The issue's trap: ``-i virtual`` alone in its process hears nothing, and now says why."""
+    require_executables("tmux", install="apt-get install tmux")
+    pane = Pane(monitor_command(["-i", "virtual", "-c", f"vcan-alone-{os.getpid()}"]))
+    try:
+        rows = pane.wait_for(lambda r: r[6].startswith("nothing heard for"), START_TIMEOUT_S)
+        assert "virtual bus lives inside one process" in rows[6]
+        assert rows[1].startswith("firmware no ODOM_STATUS summary yet")
+        pane.keys("q")
+        pane.wait_for(lambda r: any(line.startswith("EXIT=0") for line in r), 15)
+    finally:
+        pane.close()
