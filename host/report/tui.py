@@ -624,19 +624,24 @@ class MonitorApp:
 
 
 def run_screen(app: MonitorApp, deadline_s: float, console: Console | None = None) -> None:
-    """Show the screen until the deadline, ``q`` or Ctrl-C (full screen on a terminal)."""
+    """Show the screen until the deadline, ``q`` or Ctrl-C.
+
+    On a terminal it takes the whole (alternate) screen, and its last state is printed once more
+    after it closes, so it stays in the scrollback; elsewhere only the last state is printed."""
     console = console or Console(file=sys.stdout)
+
+    def current(spare_rows: int = 0) -> Layout:
+        app.refresh_view()
+        width, height = console.size
+        return screen(app.model.snapshot(), app.trace, app.view, width=width,
+                      height=height - spare_rows)
+
     with _cbreak(), Live(console=console, auto_refresh=False, screen=console.is_terminal,
                          redirect_stderr=False) as live:
-
-        def redraw() -> None:
-            app.refresh_view()
-            width, height = console.size
-            live.update(screen(app.model.snapshot(), app.trace, app.view, width=width,
-                               height=height), refresh=True)
-
-        app.receive(deadline_s, redraw)
-        redraw()
+        app.receive(deadline_s, lambda: live.update(current(), refresh=True))
+        live.update(current(), refresh=True)
+    if console.is_terminal:
+        console.print(current(spare_rows=1), height=console.size.height - 1)  # + the prompt
 
 
 @contextmanager
