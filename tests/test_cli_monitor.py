@@ -190,9 +190,11 @@ def test_monitor_screen(source: Source, capsys: pytest.CaptureFixture[str]) -> N
                              "--duration", "2")
     assert (code, err) == (0, "")
     assert f"odocan monitor virtual:{source.channel}" in out
-    assert "firmware OK   integrator EXACT   errors 0x0000 (none)" in out
+    assert "firmware OK  reason no error bits" in out  # host.report.tui's screen, 80 columns
+    assert "EXACT  uptime" in out
     assert "verdict STALE: ODOM_MCU silent for" in out  # the last frame: the source has stopped
-    for name in ("WHEEL_ENCODERS", "ODOM_POSE_X", "SIM_TRUTH", "reference exact, started 1x"):
+    for name in ("WHEEL_ENCODERS", "ODOM_POSE_X", "SIM_TRUTH", "on-board ", "reference ",
+                 "truth "):
         assert name in out
     assert f"not checked: unknown id {TICKS // GARBAGE_EVERY}" in out
 

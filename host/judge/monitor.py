@@ -1,5 +1,5 @@
-"""The live view of a CAN bus (``odocan monitor``): a state model fed frame by frame, and its
-rich rendering.
+"""The live view of a CAN bus (``odocan monitor``): the state model fed frame by frame (its
+rendering is ``host.report.live`` and ``host.report.tui``).
 
 ``BusMonitor.feed(msg)`` takes every frame heard, in bus order, and never raises on what a bus
 carries: frames of unknown IDs, of the wrong DLC, error and remote frames are counted (the
@@ -32,9 +32,9 @@ order: NO FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (with 
 POSE WRONG (on-board vs reference beyond ``POSE_TOLERANCE_M`` / ``_RAD``), UNVERIFIED (nothing
 compared yet), OK.
 
-``snapshot()`` is the whole model as JSON-ready data (``odocan monitor --json``); ``render()``
-draws it for ``rich.live.Live``. ``render_fleet`` draws the MQTT fleet table
-(``odocan monitor --mqtt``).
+``snapshot()`` is the whole model as JSON-ready data (``odocan monitor --json``);
+``fleet_snapshot`` is the MQTT fleet's (``odocan monitor --mqtt``). ``render`` and
+``render_fleet`` are re-exported from ``host.report.live``, where they now live.
 """
 
 from __future__ import annotations
@@ -50,10 +50,6 @@ from typing import Any
 
 import can
 from cantools.database.can import Database, Message
-from rich import box
-from rich.console import Group, RenderableType
-from rich.table import Table
-from rich.text import Text
 
 from odocan.firmware.errors import ErrorFlag
 from odocan.host.judge.reference import Geometry
@@ -61,7 +57,6 @@ from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.fleetview import RobotState
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import (
-    E2E_KEYS,
     UNKNOWN,
     E2EMonitor,
     crc8h2f_p02_one,
@@ -452,152 +447,6 @@ def _unit(message: Message, name: str) -> str:
     return "" if unit in (None, "-") else str(unit)
 
 
-# --- rendering ------------------------------------------------------------------------------
-
-
-def render(snapshot: dict[str, Any], *, source: str,
-           heard: dict[str, float] | None = None) -> RenderableType:
-    """The live screen (fits 80 columns): header, per-message statistics, latest signal values,
-    firmware status, pose comparison, frames not checked.
-
-    ``heard``: message name -> seconds since last heard (rows not heard for ``STALE_S`` dimmed).
-    """
-    header = Text.assemble(
-        ("odocan monitor ", "bold"), (source, "cyan"),
-        f"   {snapshot['duration_s']:.1f} s   {snapshot['frames_total']} frames   Ctrl-C quits",
-    )
-    heard = heard or {}
-    return Group(
-        header, _messages_table(snapshot, heard), _signals_table(snapshot, heard),
-        _status_line(snapshot.get("status")), _health_line(snapshot.get("health")),
-        _pose_table(snapshot), _pose_note(snapshot), _unknown_line(snapshot["unknown"]),
-    )
-
-
-def _table(*columns: str) -> Table:
-    """A compact table; the first column left-aligned, the others right-aligned."""
-    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False,
-                  padding=(0, 1, 0, 0))
-    for i, column in enumerate(columns):
-        table.add_column(column, justify="left" if i == 0 else "right", no_wrap=True)
-    return table
-
-
-def _messages_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
-    table = _table("message", "ID", "frames", "Hz", "jitter ms", "E2E ok", "lost", "rep",
-                   "crc", "seq")
-    for name, m in snapshot["messages"].items():
-        e2e = m["e2e"]
-        dim = "dim" if m.get("stale") or heard.get(name, 0.0) > STALE_S else None
-        table.add_row(
-            name, m["id"], str(m["count"]), _num(m["rate_hz"], ".1f"),
-            _num(m["jitter_ms"], ".2f"), *(_num(e2e.get(k), "d") for k in E2E_KEYS), style=dim,
-        )
-        for page, t in m.get("pages", {}).items():
-            table.add_row(f"  {page}", "", str(t["count"]), _num(t["rate_hz"], ".1f"),
-                          _num(t["jitter_ms"], ".2f"), *("" for _ in E2E_KEYS), style=dim)
-    return table
-
-
-def _signals_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
-    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
-    table.add_column("message", no_wrap=True)
-    table.add_column("latest values", overflow="fold", ratio=1)
-    for name, m in snapshot["messages"].items():
-        table.add_row(name, _values(m.get("last_frame", m["last"]), m["units"]),
-                      style="dim" if heard.get(name, 0.0) > STALE_S else None)
-    return table
-
-
-def _values(last: dict[str, Any], units: dict[str, str]) -> str:
-    items = []
-    for name, value in last.items():
-        text = f"{value:.4f}".rstrip("0").rstrip(".") if isinstance(value, float) else str(value)
-        unit = units.get(name, "")
-        items.append(f"{name} {text}{' ' + unit if unit else ''}")
-    return ", ".join(items)
-
-
-def _status_line(status: dict[str, Any] | None) -> Text:
-    if not status:
-        return Text("firmware: no ODOM_STATUS summary yet", style="dim")
-    state = str(status.get("state"))
-    colour = {"OK": "green", "DEGRADED": "yellow", "FAULT": "bold red"}.get(state, "")
-    errors = ", ".join(status.get("errors") or []) or "none"
-    totals = ", ".join(f"{k.removesuffix('_frames')} {v}" for k, v in status.items()
-                       if k.endswith("_frames"))
-    return Text.assemble(
-        ("firmware ", "bold"), (state, colour),
-        f"   integrator {status.get('integrator')}   errors 0x{status.get('error_mask', 0):04X}"
-        f" ({errors})   uptime {status.get('uptime_s')} s"
-        + (f"   frames {totals}" if totals else ""),
-    )
-
-
-def _health_line(health: dict[str, Any] | None) -> Text:
-    """The verdict, why, the firmware's age and the latest event."""
-    if not health:
-        return Text("")
-    state = str(health["state"])
-    colour = "green" if state == "OK" else "bold red" if state in _BAD else "yellow"
-    firmware = health["nodes"].get(FIRMWARE_NODE)
-    age = f"   age {firmware['age_s']:.2f} s" if firmware else ""
-    why = f": {'; '.join(health['why'])}" if health["why"] else ""
-    events = health["events"]
-    last = f"   event: {events[-1]['kind']} ({events[-1]['detail']})" if events else ""
-    return Text.assemble(("verdict ", "bold"), (state, colour), why + age + last)
-
-
-_BAD = frozenset({"STALE", "CONFLICT", "POSE WRONG", "FAULT", "NO FIRMWARE"})
-
-
-def _pose_table(snapshot: dict[str, Any]) -> Table:
-    """On-board, reference and truth poses; on-board minus each (latest and max)."""
-    table = _table("pose", "x m", "y m", "hdg rad", "Δ mm", "Δ mrad", "max mm", "max mrad")
-    errors = snapshot["error"]
-    rows = (("on-board", snapshot["pose"], None),
-            ("reference", snapshot["reference"], errors["pose_vs_reference"]),
-            ("truth", snapshot["truth"], errors["pose_vs_truth"]))
-    for label, pose, error in rows:
-        pose, error = pose or {}, error or {}
-        table.add_row(
-            label, _num(pose.get("x_m"), ".4f"), _num(pose.get("y_m"), ".4f"),
-            _num(pose.get("heading_rad"), ".4f"), _scaled(error.get("dpos_m")),
-            _scaled(error.get("dheading_rad")), _scaled(error.get("max_dpos_m")),
-            _scaled(error.get("max_dheading_rad")),
-        )
-    return table
-
-
-def _pose_note(snapshot: dict[str, Any]) -> Text:
-    ref, errors = snapshot["reference"], snapshot["error"]
-    samples = [(errors[key] or {}).get("samples", 0) for key in ("pose_vs_reference",
-                                                                  "pose_vs_truth")]
-    return Text(f"Δ: on-board minus the row; reference {ref.get('integrator') or '(integrator?)'}"
-                f", started {ref.get('starts', 0)}x; compared {samples[0]} poses, {samples[1]} "
-                "truth", style="dim")
-
-
-def _unknown_line(unknown: dict[str, Any]) -> Text:
-    counts = {k: v for k, v in unknown.items() if k != "ids" and v}
-    if not counts:
-        return Text("not checked: none", style="dim")
-    text = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in counts.items())
-    ids = ", ".join(f"{k}×{v}" for k, v in list(unknown.get("ids", {}).items())[:8])
-    return Text(f"not checked: {text}" + (f" (IDs {ids})" if ids else ""), style="yellow")
-
-
-def _num(value: Any, spec: str) -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-"
-    return format(value, spec)
-
-
-def _scaled(value: float | None) -> str:
-    """Metres as mm, radians as mrad."""
-    return "-" if value is None else f"{value * 1e3:.4f}"
-
-
 # --- the MQTT fleet -------------------------------------------------------------------------
 
 
@@ -630,27 +479,8 @@ def _robot_row(state: RobotState, db: Database) -> dict[str, Any]:
     }
 
 
-def render_fleet(snapshot: dict[str, Any], *, source: str, elapsed_s: float,
-                 note: str = "") -> RenderableType:
-    """The fleet table of ``odocan monitor --mqtt``."""
-    header = Text.assemble(("odocan monitor --mqtt ", "bold"), (source, "cyan"),
-                           f"   {elapsed_s:.1f} s   {len(snapshot)} robots   Ctrl-C quits")
-    table = _table("robot", "x m", "y m", "hdg rad", "Δ mm", "Δ mrad", "state", "errors",
-                   "fr/s")
-    for column in table.columns[6:8]:
-        column.justify = "left"
-    table.columns[7].no_wrap, table.columns[7].min_width = False, 12  # names wrap at spaces
-    for name, row in snapshot.items():
-        pose, error, status = row["pose"] or {}, row["error"] or {}, row["status"] or {}
-        table.add_row(
-            name, _num(pose.get("x_m"), ".4f"), _num(pose.get("y_m"), ".4f"),
-            _num(pose.get("heading_rad"), ".4f"), _scaled(error.get("dpos_m")),
-            _scaled(error.get("dheading_rad")),
-            str(status.get("state", "-")) if row["online"] else "offline",
-            " ".join(status.get("errors") or []) or "-", _num(row["rate_hz"], ".1f"),
-            style=None if row["online"] else "dim",
-        )
-    parts: list[RenderableType] = [header, table]
-    if note:
-        parts.append(Text(note, style="yellow"))
-    return Group(*parts)
+# Rendering lives in host.report.live; these names stay importable from here.
+from odocan.host.report.live import render, render_fleet  # noqa: E402
+
+__all__ = ["BusMonitor", "MessageStats", "error_names", "fleet_snapshot", "render",
+           "render_fleet", "to_json"]

@@ -26,7 +26,6 @@ from __future__ import annotations
 import asyncio
 import gc
 import signal
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -53,11 +52,16 @@ class FleetRun:
     command_expiry_s: float = 5.0
 
 
-async def run_fleet(run: FleetRun) -> dict[str, Any]:
-    """Run the fleet in real time (bridged when ``run.bridge``); returns the report."""
+StartHook = Callable[[int, "BrokerURL | None"], None]
+
+
+async def run_fleet(run: FleetRun, *, on_start: StartHook | None = None) -> dict[str, Any]:
+    """Run the fleet in real time (bridged when ``run.bridge``); returns the report.
+    ``on_start(robots, telemetry broker)`` is called when the clock starts (signals handled)."""
     with Fleet(run.fleet) as fleet:
         if not run.bridge:
-            stats = await _paced(fleet, run.duration_s, None, None)
+            stats = await _paced(fleet, run.duration_s, None,
+                                 lambda: _started(on_start, fleet, None))
             return _report(run, fleet, stats, None, None, False)
         async with broker_for(run.broker) as (url, embedded):
             bridge = Bridge(_endpoints(fleet, run), config=BridgeConfig(
@@ -68,30 +72,28 @@ async def run_fleet(run: FleetRun) -> dict[str, Any]:
                 async with asyncio.TaskGroup() as tg:
                     tg.create_task(bridge.run(stop=stop), name="bridge")
                     await _all_connected(bridge, run.connect_timeout_s + 5.0)
-                    stats = await _paced(fleet, run.duration_s, bridge.offer, url)
+                    stats = await _paced(fleet, run.duration_s, bridge.offer,
+                                         lambda: _started(on_start, fleet, url))
                     stop.set()
             except BaseExceptionGroup as group:
                 raise first_error(group) from None
             return _report(run, fleet, stats, bridge, url, embedded)
 
 
-def _say_started(fleet: Fleet, url: BrokerURL | None) -> None:
-    """One line on stderr when the clock starts: how many robots, and where to watch them
-    (``odocan monitor --broker URL``)."""
-    where = f", telemetry on {url}" if url is not None else ""
-    print(f"fleet: {len(fleet.names)} robots running{where}; Ctrl-C or SIGTERM stops and "
-          "reports", file=sys.stderr, flush=True)
+def _started(on_start: StartHook | None, fleet: Fleet, url: BrokerURL | None) -> None:
+    if on_start is not None:
+        on_start(len(fleet.names), url)
 
 
 async def _paced(
-    fleet: Fleet, duration_s: float, on_batch: Any, url: BrokerURL | None
+    fleet: Fleet, duration_s: float, on_batch: Any, started: Callable[[], None]
 ) -> DeadlineStats:
     """Run the fleet until ``duration_s`` or SIGINT/SIGTERM, whichever comes first: a signal ends
     the run like its duration does, so the report is still written."""
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     handled = _on_stop_signals(loop, stop.set)
-    _say_started(fleet, url)
+    started()
     gc.collect()
     gc.freeze()  # the long-lived set-up objects leave the collector's generations
     try:

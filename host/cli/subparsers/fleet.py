@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from odocan.host.cli.options import SEED_LIMIT, add_seed_argument, float_in, int_in
+from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
 from odocan.host.mqtt.options import (
     add_mqtt_arguments,
@@ -108,7 +109,7 @@ def _do_fleet(args: argparse.Namespace) -> int:
     )
     configure_logging(getattr(args, "debug", False))
     with wall_clock_progress(f"fleet of {args.count}", args.duration):
-        report = asyncio.run(run_fleet(run))
+        report = asyncio.run(run_fleet(run, on_start=_say_started))
     print(
         f"fleet: {report['robots']} robots, {report['ticks']} ticks, "
         f"deadline_miss_ratio {report['deadline_miss_ratio']:.4f} "
@@ -118,3 +119,11 @@ def _do_fleet(args: argparse.Namespace) -> int:
     if args.report is not None:
         write_text(args.report, json.dumps(report, indent=2) + "\n", "--report")
     return 0 if report["deadline_miss_ratio"] <= args.max_miss_ratio else 1
+
+
+def _say_started(robots: int, url: BrokerURL | None) -> None:
+    """One line on stderr when the clock starts: how many robots, and where to watch them
+    (``odocan monitor --broker URL``)."""
+    where = f", telemetry on {url}" if url is not None else ""
+    print(f"fleet: {robots} robots running{where}; Ctrl-C or SIGTERM stops and reports",
+          file=sys.stderr, flush=True)

@@ -1,15 +1,18 @@
 """``odocan monitor``: a live terminal view of a CAN bus, or of a fleet over MQTT.
 
 On any python-can bus (``-i/-c/-b``, or python-can's configuration) every frame is fed to
-``host.monitor.BusMonitor``: decoded signals per message with units, rate and period jitter, E2E
-counts, the firmware's status, and the on-board pose against the float64 reference (and SIM_TRUTH
-when present). A ``rich.live.Live`` screen redraws it a few times a second until Ctrl-C (exit 0)
-or ``--duration``. With ``--json`` there is no screen: at the end (``--duration`` or Ctrl-C) the
+``host.judge.monitor.BusMonitor``: decoded signals per message with units, rate and period
+jitter, E2E counts, the firmware's status, and the on-board pose against the float64 reference
+(and SIM_TRUTH when present). The screen (``host.report.tui``, fits 80×24) redraws it a few times
+a second until Ctrl-C or ``q`` (exit 0) or ``--duration``, with a decoded trace (``--filter``,
+pause with space or ``p``); ``--log PATH`` records every frame heard.
+With ``--json`` there is no screen: at the end (``--duration`` or Ctrl-C) the
 model is printed as one JSON object, for scripts.
 
 ``--broker [URL]`` (alias ``--mqtt``, the name it had) shows the fleet instead: one row per
 robot that ``odocan bridge``/``odocan fleet`` publish (``host.mqtt.fleetview.fleet_states``),
-reconnecting when the broker goes away.
+reconnecting when the broker goes away, redrawn on a timer (stale robots marked, the worst error
+first).
 """
 
 from __future__ import annotations
@@ -24,16 +27,16 @@ from pathlib import Path
 from typing import Any
 
 import aiomqtt
-import can
 from rich.console import Console
 from rich.live import Live
 
-from odocan.host.cli.options import add_duration_argument, add_robot_argument
+from odocan.host.cli.options import add_duration_argument, add_robot_argument, check_log_path
 from odocan.host.cli.subparsers.analyze import load_dbc
 from odocan.host.io.buses import add_bus_arguments, open_bus
-from odocan.host.judge.monitor import BusMonitor, fleet_snapshot, render, render_fleet, to_json
+from odocan.host.judge.monitor import BusMonitor, fleet_snapshot, render_fleet, to_json
 from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.fleetview import RobotState, fleet_states
+from odocan.host.report.tui import FrameFilter, MonitorApp, Recorder, Trace, View, run_screen
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 from odocan.sim.rig import INTEGRATORS
@@ -64,6 +67,20 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "--json",
         action="store_true",
         help="no live view: print one JSON object of the model at the end",
+    )
+    parser.add_argument(
+        "--filter",
+        action="append",
+        default=[],
+        metavar="NAME|0xID",
+        help="trace only these messages (DBC name or CAN ID; repeatable, comma-separated); "
+        "'f' edits it live",
+    )
+    parser.add_argument(
+        "--log",
+        type=Path,
+        metavar="PATH",
+        help="record every frame heard while watching (.log candump, .asc, .blf)",
     )
     add_robot_argument(parser, role="profile for the reference")
     parser.add_argument(
@@ -98,11 +115,24 @@ def _do_monitor(args: argparse.Namespace) -> int:
         args.integrator,
         load_dbc(args.dbc) if args.dbc is not None else None,
     )
-    bus = open_bus(args)
+    trace = Trace(model.db, FrameFilter.parse(args.filter, model.db))
+    check_log_path(args.log)
+    recorder = Recorder(args.log) if args.log is not None else None
+    view = View(_source(args), interface=args.interface, log_path=args.log,
+                started_s=time.monotonic())
     try:
-        _watch_bus(bus, model, args, _source(args))
+        bus = open_bus(args)
+        try:
+            app = MonitorApp(bus, model, trace, view, recorder)
+            if args.json:
+                app.receive(_deadline(args.duration))
+            else:
+                run_screen(app, _deadline(args.duration))
+        finally:
+            bus.shutdown()
     finally:
-        bus.shutdown()
+        if recorder is not None:
+            recorder.close()
     if args.json:
         print(to_json(model.snapshot()))
     return 0
@@ -114,42 +144,6 @@ def _source(args: argparse.Namespace) -> str:
 
 def _deadline(duration_s: float | None) -> float:
     return math.inf if duration_s is None else time.monotonic() + duration_s
-
-
-def _watch_bus(bus: can.BusABC, model: BusMonitor, args: argparse.Namespace, source: str) -> None:
-    """Feed the model until the deadline or Ctrl-C, redrawing the screen unless ``--json``."""
-    deadline = _deadline(args.duration)
-    if args.json:
-        _receive(bus, model, deadline, None)
-        return
-    console = Console(file=sys.stdout)
-    with Live(console=console, auto_refresh=False, redirect_stderr=False) as live:
-
-        def redraw() -> None:
-            now = time.monotonic()
-            heard = {n: now - s.heard_monotonic_s for n, s in model.messages.items()}
-            live.update(render(model.snapshot(), source=source, heard=heard), refresh=True)
-
-        _receive(bus, model, deadline, redraw)
-
-
-def _receive(
-    bus: can.BusABC, model: BusMonitor, deadline: float, redraw: Callable[[], None] | None
-) -> None:
-    """Receive and feed frames; ``redraw`` every ``REFRESH_S``; Ctrl-C ends it quietly."""
-    next_draw = 0.0
-    try:
-        while (now := time.monotonic()) < deadline:
-            if redraw is not None and now >= next_draw:
-                redraw()
-                next_draw = now + REFRESH_S
-            msg = bus.recv(timeout=max(0.0, min(REFRESH_S, deadline - now)))
-            if msg is not None:
-                model.feed(msg)
-    except KeyboardInterrupt:
-        pass
-    if redraw is not None:
-        redraw()
 
 
 # --- the fleet over MQTT ----------------------------------------------------------------------
@@ -186,10 +180,18 @@ class _FleetWatch:
     async def run(self, redraw: Callable[[], None] | None) -> None:
         """Follow the broker until the duration has passed (forever without one)."""
         try:
-            async with asyncio.timeout(self.duration_s):
-                await self._follow(redraw)
+            async with asyncio.timeout(self.duration_s), asyncio.TaskGroup() as tasks:
+                tasks.create_task(self._follow(redraw), name="follow-broker")
+                if redraw is not None:  # the clock and staleness move without messages too
+                    tasks.create_task(self._tick(redraw), name="redraw")
         except TimeoutError:
             pass
+
+    @staticmethod
+    async def _tick(redraw: Callable[[], None]) -> None:
+        while True:
+            redraw()
+            await asyncio.sleep(REFRESH_S)
 
     async def _follow(self, redraw: Callable[[], None] | None) -> None:
         while True:
