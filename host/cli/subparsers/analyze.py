@@ -21,6 +21,7 @@ from pathlib import Path
 import cantools
 
 from odocan.host.cli.options import add_robot_argument
+from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
@@ -49,15 +50,18 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: dbc/odocan.dbc)"
     )
     add_check_arguments(parser)
+    add_export_arguments(parser)
     parser.set_defaults(func=_do_analyze)
 
 
 def _do_analyze(args: argparse.Namespace) -> int:
     profile = robot.load(args.robot)
     check_output_paths(args)
+    check_export_paths(args.parquet, args.mcap)
     db = load_dbc(args.dbc) if args.dbc is not None else None
     frames = read_log(args.log)
     analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance, db=db)
+    write_exports(args, frames, analysis, db)
     return finish(analysis, args, title=f"odocan analyze: {args.log}")
 
 

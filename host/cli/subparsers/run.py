@@ -26,6 +26,7 @@ import can
 
 from odocan.host.cli.options import add_robot_argument, check_duration, check_log_path
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus, parse_faults
+from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
@@ -77,6 +78,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "--log", type=Path, metavar="PATH", help="log every frame (.log candump, .asc, .blf)"
     )
     add_check_arguments(parser)
+    add_export_arguments(parser)
     add_fault_argument(parser)
     add_bus_arguments(parser)
     parser.set_defaults(func=_do_run)
@@ -97,6 +99,7 @@ def _do_run(args: argparse.Namespace) -> int:
     )
     check_log_path(args.log)
     check_output_paths(args)
+    check_export_paths(args.parquet, args.mcap)
     analysis = _run_and_analyze(config, args)
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
     return finish(analysis, args, title=title)
@@ -127,7 +130,7 @@ def _run_and_analyze(config: RigConfig, args: argparse.Namespace) -> Analysis:
             mirror.shutdown()
     frames = collector.arrays()
     with _status(f"analysing {len(frames)} frames"):
-        return analyze(
+        analysis = analyze(
             frames,
             config.robot,
             config.integrator,
@@ -136,6 +139,8 @@ def _run_and_analyze(config: RigConfig, args: argparse.Namespace) -> Analysis:
             seed=config.seed,
             wall_seconds=wall_s,
         )
+        write_exports(args, frames, analysis)
+    return analysis
 
 
 class PacedRedirect(can.Listener):

@@ -1,0 +1,141 @@
+"""An MCAP file of an analysed drive, for Foxglove (the ``mcap`` library).
+
+JSON messages with JSON schemas (Foxglove's well-known ``foxglove.PoseInFrame`` and
+``foxglove.FrameTransform`` field names, see ``host.io.export``), so any MCAP reader decodes it
+without generated code and Foxglove opens it as it is:
+
+==================  ==========================  ================================================
+topic               schema                      what
+==================  ==========================  ================================================
+/can/frames         odocan.CanFrame             every raw frame: id, flags, dlc, data bytes
+/can/<MESSAGE>      odocan.<MESSAGE>            its decoded signals, named as in the Parquet
+/pose/onboard       foxglove.PoseInFrame        the on-board pose decoded from the bus (odom)
+/pose/reference     foxglove.PoseInFrame        the float64 reference at the same samples
+/pose/truth         foxglove.PoseInFrame        the simulator's ground truth
+/tf                 foxglove.FrameTransform     odom -> base_link (on-board),
+                                                odom -> reference_link, odom -> truth_link
+/errors/reference   odocan.PoseError            on-board minus reference (m, rad)
+/errors/truth       odocan.PoseError            on-board minus truth (m, rad)
+==================  ==========================  ================================================
+
+Log times are the frames' timestamps in nanoseconds (simulated time for ``odocan run``); the JSON
+report is the file's metadata record ``odocan.report`` (key ``json``).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import cantools
+import numpy as np
+import pyarrow as pa
+from cantools.database.can import Message
+from mcap.writer import Writer
+
+from odocan.host.io.export import (
+    POSE_TOPICS,
+    SCHEMAS,
+    TIME_SCHEMA,
+    foxglove_time,
+    frame_transform,
+    json_schema,
+    pose_error,
+    pose_in_frame,
+    to_ns,
+)
+from odocan.host.io.logs import FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, FrameArrays
+from odocan.host.io.parquet import column_name, json_default, message_tables
+from odocan.host.judge.analysis import Analysis
+from odocan.host.report.jsonutil import finite
+from odocan.sim import contract
+
+Record = tuple[int, str, dict[str, Any]]  # (log time ns, topic, JSON message)
+
+
+
+def write_mcap(
+    path: Path,
+    frames: FrameArrays,
+    analysis: Analysis,
+    db: cantools.database.can.Database | None = None,
+) -> int:
+    """Write the MCAP file of the module docstring; returns the number of messages."""
+    db = db if db is not None else contract.database()
+    schemas = {name: json_schema(name) for name in SCHEMAS}
+    topics = {"/can/frames": "odocan.CanFrame", "/tf": "foxglove.FrameTransform",
+              "/errors/reference": "odocan.PoseError", "/errors/truth": "odocan.PoseError"}
+    topics.update({topic: "foxglove.PoseInFrame" for topic, _ in POSE_TOPICS.values()})
+    tables = message_tables(frames, db)
+    for name in tables:
+        schema = message_schema(db.get_message_by_name(name))
+        schemas[f"odocan.{name}"] = json.dumps(schema).encode()
+        topics[f"/can/{name}"] = f"odocan.{name}"
+    records = sorted(
+        [*_frame_records(frames), *_signal_records(tables), *analysis_records(analysis.series)],
+        key=lambda record: record[0],
+    )
+    with path.open("wb") as stream:
+        writer = Writer(stream)
+        writer.start(profile="", library="odocan")
+        schema_ids = {n: writer.register_schema(n, "jsonschema", s) for n, s in schemas.items()}
+        channels = {t: writer.register_channel(t, "json", schema_ids[s]) for t, s in topics.items()}
+        report = json.dumps(finite(analysis.report), default=json_default)
+        writer.add_metadata("odocan.report", {"json": report})
+        for sequence, (t_ns, topic, message) in enumerate(records):
+            data = json.dumps(message).encode()
+            writer.add_message(channels[topic], t_ns, data, t_ns, sequence)
+        writer.finish()  # type: ignore[no-untyped-call]
+    return len(records)
+
+
+def _frame_records(frames: FrameArrays) -> Iterator[Record]:
+    for t_s, can_id, dlc, data, flags in zip(
+        frames.timestamp_s.tolist(), frames.can_id.tolist(), frames.dlc.tolist(),
+        frames.data.tolist(), frames.flags.tolist(), strict=True,
+    ):
+        t_ns = to_ns(t_s)
+        yield t_ns, "/can/frames", {
+            "timestamp": foxglove_time(t_ns), "id": can_id,
+            "extended": bool(flags & FLAG_EXTENDED), "remote": bool(flags & FLAG_REMOTE),
+            "error": bool(flags & FLAG_ERROR), "dlc": dlc, "data": data[:dlc],
+        }
+
+
+def _signal_records(tables: dict[str, pa.Table]) -> Iterator[Record]:
+    for name, table in tables.items():
+        topic = f"/can/{name}"
+        signals = [c for c in table.column_names if c not in ("timestamp_s", "index", "e2e_ok")]
+        for row in table.select(["timestamp_s", *signals]).to_pylist():
+            t_ns = to_ns(row.pop("timestamp_s"))
+            values = {k: v for k, v in row.items() if v is not None}
+            yield t_ns, topic, {"timestamp": foxglove_time(t_ns), **values}
+
+
+def analysis_records(series: dict[str, np.ndarray]) -> Iterator[Record]:
+    """Poses, transforms and errors of ``Analysis.series`` as (log time, topic, message)."""
+    on_ns = [to_ns(t) for t in series["timestamp_s"].tolist()]
+    truth_ns = [to_ns(t) for t in series["truth_timestamp_s"].tolist()]
+    for prefix, (topic, child) in POSE_TOPICS.items():
+        times = truth_ns if prefix == "truth" else on_ns
+        xs, ys, hs = (series[f"{prefix}_{k}"].tolist() for k in ("x_m", "y_m", "heading_rad"))
+        for t_ns, x, y, h in zip(times, xs, ys, hs, strict=True):
+            yield t_ns, topic, pose_in_frame(t_ns, x, y, h)
+            yield t_ns, "/tf", frame_transform(t_ns, child, x, y, h)
+    for topic, times, prefix in (("/errors/reference", on_ns, ""), ("/errors/truth", truth_ns,
+                                                                     "truth_")):
+        pos = series[f"{prefix}position_error_m"].tolist()
+        head = series[f"{prefix}heading_error_rad"].tolist()
+        for t_ns, p, h in zip(times, pos, head, strict=True):
+            yield t_ns, topic, pose_error(t_ns, p, h)
+
+
+def message_schema(message: Message) -> dict[str, Any]:
+    """A JSON schema of ``odocan.<MESSAGE>``: timestamp and its signals' columns."""
+    props: dict[str, Any] = {"timestamp": TIME_SCHEMA}
+    for signal in message.signals:
+        integer = not signal.is_float and signal.scale == 1 and signal.offset == 0
+        props[column_name(signal)] = {"type": "integer" if integer else "number"}
+    return {"title": f"odocan.{message.name}", "type": "object", "properties": props}
