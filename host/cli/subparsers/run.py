@@ -29,6 +29,7 @@ from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.analysis import Analysis, analyze
+from odocan.host.report.foxglove import add_foxglove_arguments, serve_foxglove
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
@@ -79,6 +80,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     )
     add_check_arguments(parser)
     add_export_arguments(parser)
+    add_foxglove_arguments(parser)
     add_fault_argument(parser)
     add_bus_arguments(parser)
     parser.set_defaults(func=_do_run)
@@ -100,15 +102,19 @@ def _do_run(args: argparse.Namespace) -> int:
     check_log_path(args.log)
     check_output_paths(args)
     check_export_paths(args.parquet, args.mcap)
-    analysis = _run_and_analyze(config, args)
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
-    return finish(analysis, args, title=title)
+    with serve_foxglove(args, config.robot, config.integrator) as live:
+        analysis = _run_and_analyze(config, args, [] if live is None else [live])
+        return finish(analysis, args, title=title)
 
 
-def _run_and_analyze(config: RigConfig, args: argparse.Namespace) -> Analysis:
-    """Run the rig with its listeners; the wall time is measured around the run only."""
+def _run_and_analyze(
+    config: RigConfig, args: argparse.Namespace, extra: list[can.Listener]
+) -> Analysis:
+    """Run the rig with its listeners (and ``extra``); the wall time is measured around the run
+    only."""
     collector = FrameCollector()
-    listeners: list[can.Listener] = [collector]
+    listeners: list[can.Listener] = [collector, *extra]
     wants_mirror = args.interface is not None or args.channel is not None
     mirror = open_bus(args, with_faults=False) if wants_mirror else None
     if mirror is not None:
