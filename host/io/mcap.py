@@ -1,8 +1,11 @@
-"""An MCAP file of an analysed drive, for Foxglove (the ``mcap`` library).
+"""An MCAP file of an analysed drive, for Foxglove.
 
-JSON messages with JSON schemas (Foxglove's well-known ``foxglove.PoseInFrame`` and
-``foxglove.FrameTransform`` field names, see ``host.io.export``), so any MCAP reader decodes it
-without generated code and Foxglove opens it as it is:
+Written with foxglove-sdk's MCAP writer (the Rust ``mcap`` crate behind one Python call per
+message: about 10 us a message against about 60 us for the pure-Python ``mcap`` writer, which
+made a 10-minute drive's 600 000 messages take 36 s); read back in the tests with the ``mcap``
+library's reader. JSON messages with JSON schemas (Foxglove's well-known
+``foxglove.PoseInFrame`` and ``foxglove.FrameTransform`` field names, see ``host.io.export``), so
+any MCAP reader decodes it without generated code and Foxglove opens it as it is:
 
 ==================  ==========================  ================================================
 topic               schema                      what
@@ -30,15 +33,16 @@ from pathlib import Path
 from typing import Any
 
 import cantools
+import foxglove
 import numpy as np
 import pyarrow as pa
 from cantools.database.can import Message
-from mcap.writer import Writer
 
 from odocan.host.io.export import (
     POSE_TOPICS,
     SCHEMAS,
     TIME_SCHEMA,
+    column_name,
     foxglove_time,
     frame_transform,
     json_schema,
@@ -47,7 +51,7 @@ from odocan.host.io.export import (
     to_ns,
 )
 from odocan.host.io.logs import FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, FrameArrays
-from odocan.host.io.parquet import column_name, json_default, message_tables
+from odocan.host.io.parquet import json_default, message_tables
 from odocan.host.judge.analysis import Analysis
 from odocan.host.report.jsonutil import finite
 from odocan.sim import contract
@@ -77,17 +81,19 @@ def write_mcap(
         [*_frame_records(frames), *_signal_records(tables), *analysis_records(analysis.series)],
         key=lambda record: record[0],
     )
-    with path.open("wb") as stream:
-        writer = Writer(stream)
-        writer.start(profile="", library="odocan")
-        schema_ids = {n: writer.register_schema(n, "jsonschema", s) for n, s in schemas.items()}
-        channels = {t: writer.register_channel(t, "json", schema_ids[s]) for t, s in topics.items()}
-        report = json.dumps(finite(analysis.report), default=json_default)
-        writer.add_metadata("odocan.report", {"json": report})
-        for sequence, (t_ns, topic, message) in enumerate(records):
-            data = json.dumps(message).encode()
-            writer.add_message(channels[topic], t_ns, data, t_ns, sequence)
-        writer.finish()  # type: ignore[no-untyped-call]
+    context = foxglove.Context()
+    with foxglove.open_mcap(path, allow_overwrite=True, context=context) as writer:
+        channels = {
+            topic: foxglove.Channel(
+                topic, schema=foxglove.Schema(name=name, encoding="jsonschema", data=schemas[name]),
+                message_encoding="json", context=context,
+            )
+            for topic, name in topics.items()
+        }
+        writer.write_metadata("odocan.report", {"json": json.dumps(finite(analysis.report),
+                                                                   default=json_default)})
+        for t_ns, topic, message in records:
+            channels[topic].log(json.dumps(message).encode(), log_time=t_ns)
     return len(records)
 
 
