@@ -11,6 +11,7 @@ import argparse
 import json
 import math
 import os
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,6 +19,7 @@ from odocan.sim.exceptions import ConfigurationError
 
 if TYPE_CHECKING:
     import cantools
+    from cantools.database.can import Signal
 
     from odocan.host.io.logs import FrameArrays
     from odocan.host.judge.analysis import Analysis
@@ -90,6 +92,15 @@ def _check_writable_dir(option: str, path: Path, directory: Path) -> None:
 
 
 # --- Foxglove messages (JSON, field names of foxglove's schemas) ------------------------------
+
+
+def column_name(signal: Signal) -> str:
+    """``X`` in ``m`` -> ``X_m``; ``m/s`` -> ``_m_per_s``; no unit or ``-`` -> the bare name."""
+    unit = (signal.unit or "").strip()
+    if unit in ("", "-"):
+        return signal.name
+    unit = re.sub(r"[^0-9A-Za-z]+", "_", unit.replace("/", "_per_")).strip("_")
+    return f"{signal.name}_{unit}"
 
 
 def to_ns(timestamp_s: float) -> int:

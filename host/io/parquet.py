@@ -14,7 +14,6 @@ metadata of ``series.parquet`` (key ``odocan.report``).
 from __future__ import annotations
 
 import json
-import re
 from pathlib import Path
 
 import cantools
@@ -23,6 +22,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from cantools.database.can import Message, Signal
 
+from odocan.host.io.export import column_name
 from odocan.host.io.logs import FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, FrameArrays
 from odocan.host.judge.analysis import Analysis
 from odocan.host.protocol.decode import BulkDecoder
@@ -34,15 +34,6 @@ REPORT_KEY = b"odocan.report"
 
 
 # --- decoded signals -----------------------------------------------------------------------
-
-
-def column_name(signal: Signal) -> str:
-    """``X`` in ``m`` -> ``X_m``; ``m/s`` -> ``_m_per_s``; no unit or ``-`` -> the bare name."""
-    unit = (signal.unit or "").strip()
-    if unit in ("", "-"):
-        return signal.name
-    unit = re.sub(r"[^0-9A-Za-z]+", "_", unit.replace("/", "_per_")).strip("_")
-    return f"{signal.name}_{unit}"
 
 
 def message_tables(
