@@ -202,3 +202,32 @@ def test_bad_port_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["run", "--foxglove", "70000"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error:") and "70000" in err and err.count("\n") == 1
+
+
+def test_an_owned_monitor_is_published_not_fed_twice() -> None:
+    """``odocan monitor``'s way: its loop feeds its own BusMonitor, then ``publish``es."""
+    import can
+
+    from odocan.host.judge.monitor import BusMonitor
+
+    model = BusMonitor(PMIR)
+    with FoxgloveLive(PMIR, port=0, monitor=model) as live:
+
+        class Loop(can.Listener):
+            def on_message_received(self, msg: can.Message) -> None:
+                model.feed(msg)
+                live.publish(msg)
+
+        def drive() -> None:
+            assert live.wait_for_client(30)
+            with LockstepRig(RigConfig(PMIR, "exact", "random", 2), [Loop()]) as rig:
+                rig.run(2.0)
+
+        thread = threading.Thread(target=drive)
+        thread.start()
+        received, _ = collect(live.port)
+        thread.join(30)
+    assert model.frames_total == sum(len(v) for k, v in received.items() if k.startswith("/can/"))
+    assert len(received["/pose/onboard"]) == 100
+    assert model.tracker.pose is not None
+    assert received["/pose/onboard"][-1][1]["pose"]["position"]["x"] == model.tracker.pose.x_m

@@ -91,9 +91,13 @@ class FoxgloveLive(can.Listener):
         integrator: str | None = None,
         db: Database | None = None,
         realtime: bool = False,
+        monitor: BusMonitor | None = None,
     ) -> None:
-        """``port`` 0: any free port (see ``self.port``); ``integrator`` None: ODOM_STATUS's."""
-        self.monitor = BusMonitor(robot, integrator, db)
+        """``port`` 0: any free port (see ``self.port``); ``integrator`` None: ODOM_STATUS's.
+
+        ``monitor``: a ``BusMonitor`` that its owner feeds (``odocan monitor``), then calls
+        ``publish(msg)`` after each frame; None: this listener keeps and feeds its own."""
+        self.monitor = monitor if monitor is not None else BusMonitor(robot, integrator, db)
         self.realtime = realtime
         self.published = 0
         self._context = foxglove.Context()
@@ -159,6 +163,10 @@ class FoxgloveLive(can.Listener):
         if self.realtime:
             self._pace(msg.timestamp)
         self.monitor.feed(msg)
+        self.publish(msg)
+
+    def publish(self, msg: can.Message) -> None:
+        """Publish what the monitor made of ``msg`` (already fed to it)."""
         t_ns = to_ns(msg.timestamp)
         self._publish_signals(msg, t_ns)
         tracker = self.monitor.tracker
@@ -180,7 +188,7 @@ class FoxgloveLive(can.Listener):
         """The decoded signals of the frame, when the monitor accepted and decoded it."""
         name = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
         stats = self.monitor.messages.get(name) if name is not None else None
-        if name is None or stats is None or stats.last_frame is None:
+        if name is None or stats is None or not stats.last_frame:
             return
         if self._frames_shown.get(name) is stats.last_frame:
             return  # not accepted: the monitor kept the previous frame's values
