@@ -231,3 +231,32 @@ def test_an_owned_monitor_is_published_not_fed_twice() -> None:
     assert len(received["/pose/onboard"]) == 100
     assert model.tracker.pose is not None
     assert received["/pose/onboard"][-1][1]["pose"]["position"]["x"] == model.tracker.pose.x_m
+
+
+def test_realtime_without_foxglove_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["run", "--duration", "1", "--realtime"]) == 2
+    assert capsys.readouterr().err == (
+        "error: --realtime paces the drive for --foxglove: give --foxglove\n"
+    )
+
+
+def test_realtime_waits_for_each_frames_simulated_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pacing, on a fake clock: each frame waits until its timestamp after the first."""
+    import can
+
+
+    clock = [100.0]
+    sleeps: list[float] = []
+
+    def sleep(seconds: float) -> None:
+        sleeps.append(seconds)
+        clock[0] += seconds
+
+    monkeypatch.setattr("time.monotonic", lambda: clock[0])
+    monkeypatch.setattr("time.sleep", sleep)
+    with FoxgloveLive(PMIR, port=0, realtime=True) as live:
+        for timestamp_s, work_s in ((5.0, 0.1), (5.25, 0.3), (5.5, 0.0), (6.0, 0.0)):
+            live.on_message_received(can.Message(timestamp=timestamp_s, arbitration_id=0x7FF))
+            clock[0] += work_s
+    # 0.25 s on, less 0.1 s of work; the third frame is already late; the fourth 0.45 s early
+    assert sleeps == pytest.approx([0.15, 0.45])

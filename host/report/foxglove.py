@@ -49,7 +49,7 @@ from odocan.host.io.export import (
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.tracking import Pose
 from odocan.host.protocol.decode import frame_key
-from odocan.sim.exceptions import BusSetupError
+from odocan.sim.exceptions import BusSetupError, ConfigurationError
 from odocan.sim.robot import RobotProfile
 
 DEFAULT_PORT = 8765
@@ -274,6 +274,8 @@ def serve_foxglove(
     """With ``--foxglove``: serve, wait for a client, yield the listener; after the drive keep
     serving until the client leaves (or Ctrl-C). Without: yield None."""
     if args.foxglove is None:
+        if args.realtime:
+            raise ConfigurationError("--realtime paces the drive for --foxglove: give --foxglove")
         yield None
         return
     live = FoxgloveLive(robot, port=args.foxglove, integrator=integrator, realtime=args.realtime)
