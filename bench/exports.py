@@ -26,11 +26,18 @@ from odocan.sim.rig import LockstepRig, RigConfig  # noqa: E402
 from odocan.sim.robot import load  # noqa: E402
 
 
+def rss_mb() -> float:
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def timed(label: str, frames: int, func: object, *args: object) -> object:
     start = time.perf_counter()
     result = func(*args)  # type: ignore[operator]
     seconds = time.perf_counter() - start
-    print(f"{label:<34} {seconds:7.3f} s  {frames / seconds / 1e3:8.1f} k frames/s")
+    print(f"{label:<34} {seconds:7.3f} s  {frames / seconds / 1e3:8.1f} k frames/s  "
+          f"max RSS so far {rss_mb():.0f} MB")
     return result
 
 

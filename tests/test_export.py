@@ -316,3 +316,12 @@ def test_read_only_directory_is_refused(tmp_path: Path, monkeypatch: pytest.Monk
     monkeypatch.setattr("os.access", lambda path, mode: False)
     with pytest.raises(ConfigurationError, match="is not writable"):
         check_export_paths(None, tmp_path / "x.mcap")
+
+
+def test_mcap_is_written_in_log_time_order(run_outputs: tuple[dict[str, Any], Path, Path]) -> None:
+    """The streams (frames, each message, each pose and error series) are merged by time, so
+    the file plays without a reorder."""
+    with run_outputs[2].open("rb") as stream:
+        times = [m.log_time for _, _, m in make_reader(stream).iter_messages(log_time_order=False)]
+    assert len(times) > 5000
+    assert times == sorted(times)

@@ -27,6 +27,7 @@ report is the file's metadata record ``odocan.report`` (key ``json``).
 
 from __future__ import annotations
 
+import heapq
 import json
 from collections.abc import Iterator
 from pathlib import Path
@@ -57,6 +58,7 @@ from odocan.host.report.jsonutil import finite
 from odocan.sim import contract
 
 Record = tuple[int, str, dict[str, Any]]  # (log time ns, topic, JSON message)
+CHUNK = 65536  # frames or rows turned into Python objects at a time
 
 
 
@@ -77,10 +79,9 @@ def write_mcap(
         schema = message_schema(db.get_message_by_name(name))
         schemas[f"odocan.{name}"] = json.dumps(schema).encode()
         topics[f"/can/{name}"] = f"odocan.{name}"
-    records = sorted(
-        [*_frame_records(frames), *_signal_records(tables), *analysis_records(analysis.series)],
-        key=lambda record: record[0],
-    )
+    streams = [_frame_records(frames), *_signal_records(tables),
+               *analysis_records(analysis.series)]
+    records = heapq.merge(*streams, key=lambda record: record[0])  # each stream in time order
     context = foxglove.Context()
     with foxglove.open_mcap(path, allow_overwrite=True, context=context) as writer:
         channels = {
@@ -92,50 +93,71 @@ def write_mcap(
         }
         writer.write_metadata("odocan.report", {"json": json.dumps(finite(analysis.report),
                                                                    default=json_default)})
+        count = 0
         for t_ns, topic, message in records:
             channels[topic].log(json.dumps(message).encode(), log_time=t_ns)
-    return len(records)
+            count += 1
+    return count
 
 
 def _frame_records(frames: FrameArrays) -> Iterator[Record]:
-    for t_s, can_id, dlc, data, flags in zip(
-        frames.timestamp_s.tolist(), frames.can_id.tolist(), frames.dlc.tolist(),
-        frames.data.tolist(), frames.flags.tolist(), strict=True,
-    ):
-        t_ns = to_ns(t_s)
-        yield t_ns, "/can/frames", {
-            "timestamp": foxglove_time(t_ns), "id": can_id,
-            "extended": bool(flags & FLAG_EXTENDED), "remote": bool(flags & FLAG_REMOTE),
-            "error": bool(flags & FLAG_ERROR), "dlc": dlc, "data": data[:dlc],
-        }
+    """``/can/frames``, in bus order, converted ``CHUNK`` frames at a time."""
+    for start in range(0, len(frames), CHUNK):
+        part = frames.select(np.arange(start, min(start + CHUNK, len(frames))))
+        for t_s, can_id, dlc, data, flags in zip(
+            part.timestamp_s.tolist(), part.can_id.tolist(), part.dlc.tolist(),
+            part.data.tolist(), part.flags.tolist(), strict=True,
+        ):
+            t_ns = to_ns(t_s)
+            yield t_ns, "/can/frames", {
+                "timestamp": foxglove_time(t_ns), "id": can_id,
+                "extended": bool(flags & FLAG_EXTENDED), "remote": bool(flags & FLAG_REMOTE),
+                "error": bool(flags & FLAG_ERROR), "dlc": dlc, "data": data[:dlc],
+            }
 
 
-def _signal_records(tables: dict[str, pa.Table]) -> Iterator[Record]:
-    for name, table in tables.items():
-        topic = f"/can/{name}"
-        signals = [c for c in table.column_names if c not in ("timestamp_s", "index", "e2e_ok")]
-        for row in table.select(["timestamp_s", *signals]).to_pylist():
+def _signal_records(tables: dict[str, pa.Table]) -> list[Iterator[Record]]:
+    """One ``/can/<MESSAGE>`` stream per message table."""
+    return [_table_records(f"/can/{name}", table) for name, table in tables.items()]
+
+
+def _table_records(topic: str, table: pa.Table) -> Iterator[Record]:
+    signals = [c for c in table.column_names if c not in ("timestamp_s", "index", "e2e_ok")]
+    for batch in table.select(["timestamp_s", *signals]).to_batches(max_chunksize=CHUNK):
+        for row in batch.to_pylist():
             t_ns = to_ns(row.pop("timestamp_s"))
             values = {k: v for k, v in row.items() if v is not None}
             yield t_ns, topic, {"timestamp": foxglove_time(t_ns), **values}
 
 
-def analysis_records(series: dict[str, np.ndarray]) -> Iterator[Record]:
-    """Poses, transforms and errors of ``Analysis.series`` as (log time, topic, message)."""
-    on_ns = [to_ns(t) for t in series["timestamp_s"].tolist()]
-    truth_ns = [to_ns(t) for t in series["truth_timestamp_s"].tolist()]
-    for prefix, (topic, child) in POSE_TOPICS.items():
-        times = truth_ns if prefix == "truth" else on_ns
-        xs, ys, hs = (series[f"{prefix}_{k}"].tolist() for k in ("x_m", "y_m", "heading_rad"))
-        for t_ns, x, y, h in zip(times, xs, ys, hs, strict=True):
-            yield t_ns, topic, pose_in_frame(t_ns, x, y, h)
-            yield t_ns, "/tf", frame_transform(t_ns, child, x, y, h)
-    for topic, times, prefix in (("/errors/reference", on_ns, ""), ("/errors/truth", truth_ns,
-                                                                     "truth_")):
-        pos = series[f"{prefix}position_error_m"].tolist()
-        head = series[f"{prefix}heading_error_rad"].tolist()
-        for t_ns, p, h in zip(times, pos, head, strict=True):
-            yield t_ns, topic, pose_error(t_ns, p, h)
+def analysis_records(series: dict[str, np.ndarray]) -> list[Iterator[Record]]:
+    """Poses, transforms and errors of ``Analysis.series``: one (log time, topic, message)
+    stream per pose and per error series."""
+    streams = [_pose_records(series, prefix) for prefix in POSE_TOPICS]
+    streams.append(_error_records(series, "/errors/reference", "timestamp_s", ""))
+    streams.append(_error_records(series, "/errors/truth", "truth_timestamp_s", "truth_"))
+    return streams
+
+
+def _pose_records(series: dict[str, np.ndarray], prefix: str) -> Iterator[Record]:
+    topic, child = POSE_TOPICS[prefix]
+    times = series["truth_timestamp_s" if prefix == "truth" else "timestamp_s"].tolist()
+    xs, ys, hs = (series[f"{prefix}_{k}"].tolist() for k in ("x_m", "y_m", "heading_rad"))
+    for t_s, x, y, h in zip(times, xs, ys, hs, strict=True):
+        t_ns = to_ns(t_s)
+        yield t_ns, topic, pose_in_frame(t_ns, x, y, h)
+        yield t_ns, "/tf", frame_transform(t_ns, child, x, y, h)
+
+
+def _error_records(
+    series: dict[str, np.ndarray], topic: str, time_key: str, prefix: str
+) -> Iterator[Record]:
+    times = series[time_key].tolist()
+    pos = series[f"{prefix}position_error_m"].tolist()
+    head = series[f"{prefix}heading_error_rad"].tolist()
+    for t_s, p, h in zip(times, pos, head, strict=True):
+        t_ns = to_ns(t_s)
+        yield t_ns, topic, pose_error(t_ns, p, h)
 
 
 def message_schema(message: Message) -> dict[str, Any]:
