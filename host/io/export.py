@@ -145,6 +145,16 @@ def frame_transform(
     }
 
 
+def can_frame(
+    t_ns: int, can_id: int, data: bytes, *, extended: bool, remote: bool, error: bool
+) -> dict[str, Any]:
+    """An ``odocan.CanFrame``: one raw frame, its payload as a list of byte values."""
+    return {
+        "timestamp": foxglove_time(t_ns), "id": can_id, "extended": extended, "remote": remote,
+        "error": error, "dlc": len(data), "data": list(data),
+    }
+
+
 def pose_error(t_ns: int, position_error_m: float, heading_error_rad: float) -> dict[str, Any]:
     """An ``odocan.PoseError``: on-board minus reference or truth."""
     return {

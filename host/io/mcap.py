@@ -43,6 +43,7 @@ from odocan.host.io.export import (
     POSE_TOPICS,
     SCHEMAS,
     TIME_SCHEMA,
+    can_frame,
     column_name,
     foxglove_time,
     frame_transform,
@@ -109,11 +110,10 @@ def _frame_records(frames: FrameArrays) -> Iterator[Record]:
             part.data.tolist(), part.flags.tolist(), strict=True,
         ):
             t_ns = to_ns(t_s)
-            yield t_ns, "/can/frames", {
-                "timestamp": foxglove_time(t_ns), "id": can_id,
-                "extended": bool(flags & FLAG_EXTENDED), "remote": bool(flags & FLAG_REMOTE),
-                "error": bool(flags & FLAG_ERROR), "dlc": dlc, "data": data[:dlc],
-            }
+            yield t_ns, "/can/frames", can_frame(
+                t_ns, can_id, bytes(data[:dlc]), extended=bool(flags & FLAG_EXTENDED),
+                remote=bool(flags & FLAG_REMOTE), error=bool(flags & FLAG_ERROR),
+            )
 
 
 def _signal_records(tables: dict[str, pa.Table]) -> list[Iterator[Record]]:

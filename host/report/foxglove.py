@@ -10,8 +10,9 @@ pose names, vs ground truth), and what it yields is published on the topics of t
   truth_link), at every on-board sample (50 Hz) and every truth sample;
 * ``/errors/reference``, ``/errors/truth`` (``odocan.PoseError``: on-board minus reference or
   truth, m and rad);
-* ``/can/<MESSAGE>``: the decoded signals of every accepted frame, named as in the Parquet
-  export (``X_m``, ``LEFT_COUNT_count``), enum values by name.
+* ``/can/frames``: every frame heard, raw (``odocan.CanFrame``); ``/can/<MESSAGE>``: the decoded
+  signals of every accepted frame, named as in the Parquet export (``X_m``,
+  ``LEFT_COUNT_count``), enum values by name.
 
 Log times are the frames' timestamps (simulated time in the lockstep rig). The lockstep rig runs
 far faster than real time, so a run waits for a client's first subscription
@@ -38,6 +39,7 @@ from foxglove.websocket import ChannelView, Client, ServerListener
 from odocan.host.io.export import (
     POSE_TOPICS,
     TIME_SCHEMA,
+    can_frame,
     column_name,
     foxglove_time,
     frame_transform,
@@ -54,6 +56,7 @@ from odocan.sim.robot import RobotProfile
 
 DEFAULT_PORT = 8765
 HOST = "127.0.0.1"
+SETTLE_S = 0.3  # a client's subscriptions are complete after this long without a new one
 BACKLOG = 1 << 17  # messages buffered per client (a 61 s run at full speed is ~6e4)
 
 
@@ -62,11 +65,13 @@ class _Subscriptions(ServerListener):
 
     def __init__(self) -> None:
         self.count = 0
+        self.last_subscribe_s = 0.0  # time.monotonic() of the latest subscription
         self.changed = threading.Condition()
 
     def on_subscribe(self, client: Client, channel: ChannelView) -> None:
         with self.changed:
             self.count += 1
+            self.last_subscribe_s = time.monotonic()
             self.changed.notify_all()
 
     def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
@@ -131,8 +136,8 @@ class FoxgloveLive(can.Listener):
         return f"ws://localhost:{self.port}"
 
     def _open_channels(self) -> None:
-        topics = {"/tf": "foxglove.FrameTransform", "/errors/reference": "odocan.PoseError",
-                  "/errors/truth": "odocan.PoseError"}
+        topics = {"/can/frames": "odocan.CanFrame", "/tf": "foxglove.FrameTransform",
+                  "/errors/reference": "odocan.PoseError", "/errors/truth": "odocan.PoseError"}
         topics.update({topic: "foxglove.PoseInFrame" for topic, _ in POSE_TOPICS.values()})
         for topic, name in topics.items():
             self._channel(topic, name, json_schema(name))
@@ -150,9 +155,15 @@ class FoxgloveLive(can.Listener):
             message_encoding="json", context=self._context,
         )
 
-    def wait_for_client(self, timeout_s: float | None = None) -> bool:
-        """Block until a client subscribes to a topic; False when ``timeout_s`` passed first."""
-        return self._subscriptions.wait(True, timeout_s)
+    def wait_for_client(self, timeout_s: float | None = None, settle_s: float = SETTLE_S) -> bool:
+        """Block until a client subscribes to a topic and then ``settle_s`` passes without a new
+        subscription (a client subscribes channel by channel: what comes before the last
+        would be lost); False when ``timeout_s`` passed before the first."""
+        if not self._subscriptions.wait(True, timeout_s):
+            return False
+        while (quiet := time.monotonic() - self._subscriptions.last_subscribe_s) < settle_s:
+            time.sleep(settle_s - quiet)
+        return True
 
     def wait_for_clients_to_leave(self, timeout_s: float | None = None) -> bool:
         """Block until no topic is subscribed (clients gone); False on timeout."""
@@ -168,6 +179,10 @@ class FoxgloveLive(can.Listener):
     def publish(self, msg: can.Message) -> None:
         """Publish what the monitor made of ``msg`` (already fed to it)."""
         t_ns = to_ns(msg.timestamp)
+        self._log("/can/frames", t_ns, can_frame(
+            t_ns, msg.arbitration_id, bytes(msg.data), extended=msg.is_extended_id,
+            remote=msg.is_remote_frame, error=msg.is_error_frame,
+        ))
         self._publish_signals(msg, t_ns)
         tracker = self.monitor.tracker
         if tracker.pose is not self._last[0]:
