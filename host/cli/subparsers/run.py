@@ -27,6 +27,7 @@ import can
 from odocan.host.cli.options import add_robot_argument, check_duration, check_log_path
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus, parse_faults
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
+from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.report.foxglove import add_foxglove_arguments, serve_foxglove
@@ -104,7 +105,7 @@ def _do_run(args: argparse.Namespace) -> int:
     check_export_paths(args.parquet, args.mcap)
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
     with serve_foxglove(args, config.robot, config.integrator) as live:
-        analysis = _run_and_analyze(config, args, [] if live is None else [live])
+        analysis = _run_and_analyze(config, args, [] if live is None else [Isolated(live)])
         return finish(analysis, args, title=title)
 
 
