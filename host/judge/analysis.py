@@ -173,6 +173,7 @@ def analyze(
         "tolerance": {"position_m": tolerance.position_m, "heading_rad": tolerance.heading_rad},
         "passed": passed,
     }
+    truth_enc = truth_series.pop("truth_enc")
     series = {
         "timestamp_s": frames.timestamp_s[enc.index[onboard.enc]],  # of the encoder frame
         "onboard_x_m": onboard.x_m,
@@ -185,7 +186,7 @@ def analyze(
         "position_error_m": pos_err,
         "heading_error_rad": head_err,
         **truth_series,
-        "truth_timestamp_s": frames.timestamp_s[enc.index[truth_series.pop("truth_enc")]],
+        "truth_timestamp_s": frames.timestamp_s[enc.index[truth_enc]],
     }
     return Analysis(report=report, series=series, passed=passed)
 
