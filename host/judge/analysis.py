@@ -72,7 +72,14 @@ class Tolerance:
 
 @dataclass
 class Analysis:
-    """The result: the JSON report, the series for plots, and the verdict."""
+    """The result: the JSON report, the series for plots and exports, and the verdict.
+
+    ``series``: per on-board sample ``timestamp_s`` (its encoder frame's), ``onboard_*``,
+    ``reference_*`` (x_m, y_m, heading_rad), ``distance_m``, ``position_error_m``,
+    ``heading_error_rad`` (on-board minus reference); per compared truth sample
+    ``truth_timestamp_s``, ``truth_*`` and ``truth_position_error_m``/``truth_heading_error_rad``
+    (on-board minus truth).
+    """
 
     report: dict[str, Any]
     series: dict[str, np.ndarray] = field(default_factory=dict)
@@ -169,15 +176,20 @@ def analyze(
         "tolerance": {"position_m": tolerance.position_m, "heading_rad": tolerance.heading_rad},
         "passed": passed,
     }
+    truth_enc = truth_series.pop("truth_enc")
     series = {
+        "timestamp_s": frames.timestamp_s[enc.index[onboard.enc]],  # of the encoder frame
         "onboard_x_m": onboard.x_m,
         "onboard_y_m": onboard.y_m,
+        "onboard_heading_rad": onboard.heading_rad,
         "reference_x_m": ref.x_m,
         "reference_y_m": ref.y_m,
+        "reference_heading_rad": ref.heading_rad,
         "distance_m": ref.distance_m,
         "position_error_m": pos_err,
         "heading_error_rad": head_err,
         **truth_series,
+        "truth_timestamp_s": frames.timestamp_s[enc.index[truth_enc]],
     }
     return Analysis(report=report, series=series, passed=passed)
 
@@ -496,7 +508,14 @@ def _versus_truth(
     estimate, keep = onboard_at(onboard, ref, truth.enc)
     position = np.hypot(estimate.x_m - truth.x_m[keep], estimate.y_m - truth.y_m[keep])
     heading = _wrap_pi(estimate.heading_rad - truth.heading_rad[keep])
-    series = {"truth_x_m": truth.x_m[keep], "truth_y_m": truth.y_m[keep]}
+    series = {
+        "truth_enc": truth.enc[keep],
+        "truth_x_m": truth.x_m[keep],
+        "truth_y_m": truth.y_m[keep],
+        "truth_heading_rad": truth.heading_rad[keep],
+        "truth_position_error_m": position,
+        "truth_heading_error_rad": heading,
+    }
     return _summary(position, heading), series
 
 

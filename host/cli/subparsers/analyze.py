@@ -22,6 +22,7 @@ import cantools
 
 from odocan.host.cli.inputs import explained, require_frames
 from odocan.host.cli.options import add_robot_argument
+from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.report.progress import wall_clock_progress
@@ -51,12 +52,14 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: odocan's own)"
     )
     add_check_arguments(parser)
+    add_export_arguments(parser)
     parser.set_defaults(func=_do_analyze)
 
 
 def _do_analyze(args: argparse.Namespace) -> int:
     profile = robot.load(args.robot)
     check_output_paths(args)
+    check_export_paths(args.parquet, args.mcap)
     db = load_dbc(args.dbc) if args.dbc is not None else None
     with wall_clock_progress(f"analysing {args.log}", None):
         frames = read_log(args.log)
@@ -66,6 +69,7 @@ def _do_analyze(args: argparse.Namespace) -> int:
             require_frames(frames, str(args.log))
             with explained(lambda: frames, str(args.log)):
                 analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance)
+    write_exports(args, frames, analysis, db)
     return finish(analysis, args, title=f"odocan analyze: {args.log}")
 
 

@@ -33,8 +33,11 @@ from odocan.host.cli.options import (
     float_in,
 )
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus, parse_faults
+from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
+from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.analysis import Analysis, analyze
+from odocan.host.report.foxglove import add_foxglove_arguments, serve_foxglove
 from odocan.host.report.outputs import OutputError
 from odocan.host.report.progress import progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
@@ -92,6 +95,8 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="log every frame (.log candump, .asc, .blf) (default: no log)",
     )
     add_check_arguments(parser)
+    add_export_arguments(parser)
+    add_foxglove_arguments(parser)
     add_fault_argument(parser)
     add_bus_arguments(parser)
     parser.set_defaults(func=_do_run)
@@ -111,22 +116,25 @@ def _do_run(args: argparse.Namespace) -> int:
     )
     check_log_path(args.log)
     check_output_paths(args)
-    analysis, log_error = _run_and_analyze(config, args)
+    check_export_paths(args.parquet, args.mcap)
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
-    code = finish(analysis, args, title=title)
+    with serve_foxglove(args, config.robot, config.integrator) as live:
+        extra: list[can.Listener] = [] if live is None else [Isolated(live)]
+        analysis, log_error = _run_and_analyze(config, args, extra)
+        code = finish(analysis, args, title=title)
     if log_error is not None:
         raise log_error
     return code
 
 
 def _run_and_analyze(
-    config: RigConfig, args: argparse.Namespace
+    config: RigConfig, args: argparse.Namespace, extra: list[can.Listener]
 ) -> tuple[Analysis, OutputError | None]:
-    """Run the rig with its listeners (the wall time measured around the run only) and analyse
-    what the host heard. A log that could not be finished is returned, not raised, so that the
-    summary is still printed."""
+    """Run the rig with its listeners (and ``extra``; the wall time measured around the run
+    only) and analyse what the host heard. A log that could not be finished is returned, not
+    raised, so that the summary is still printed."""
     collector = FrameCollector()
-    listeners: list[can.Listener] = [collector]
+    listeners: list[can.Listener] = [collector, *extra]
     wants_mirror = args.interface is not None or args.channel is not None
     mirror = open_bus(args, with_faults=False) if wants_mirror else None
     log_error: OutputError | None = None
@@ -161,6 +169,7 @@ def _run_and_analyze(
             seed=config.seed,
             wall_seconds=wall_s,
         )
+        write_exports(args, frames, analysis)
     return analysis, log_error
 
 
