@@ -264,3 +264,45 @@ def _legend_of_marks(ax: Axes, series: Series) -> None:
                               label=f"reference restart ({restarts})"))
     if handles:
         ax.legend(handles=handles, loc="upper left", fontsize="x-small")
+
+
+# --- UMBmark: Borenstein's return-position scatter ----------------------------------------------
+
+_DIRECTION_STYLE = {"cw": ("tab:blue", "o", "CW"), "ccw": ("tab:red", "^", "CCW")}
+
+
+def plot_umbmark(panels: list[tuple[str, dict[str, Any]]], path: Path, *, heading: str) -> None:
+    """Borenstein & Feng's figure, one panel per benchmark (e.g. before and after calibration):
+    each run's return error (true end - on-board end, mm, start frame) for CW and CCW, their
+    centres of gravity joined to the origin, and the circle of radius E_max,syst. ``panels``:
+    (title, ``umbmark.umbmark_report`` dict); ``heading``: the figure's title."""
+    figure = plt.figure(figsize=(6.2 * len(panels), 6.4), layout="constrained")
+    for k, (name, report) in enumerate(panels):
+        _draw_scatter(figure.add_subplot(1, len(panels), k + 1), name, report)
+    figure.suptitle(heading, fontsize="medium")
+    save(figure, path)
+
+
+def _draw_scatter(ax: Axes, name: str, report: dict[str, Any]) -> None:
+    for direction, (colour, marker, label) in _DIRECTION_STYLE.items():
+        part = report[direction]
+        x = np.array([run["x_m"] for run in part["runs"]]) * 1e3
+        y = np.array([run["y_m"] for run in part["runs"]]) * 1e3
+        ax.plot(x, y, marker, color=colour, alpha=0.7, markersize=6,
+                label=f"{label} runs ({len(x)})")
+        cx, cy = part["cg"]["x_m"] * 1e3, part["cg"]["y_m"] * 1e3
+        ax.plot([0, cx], [0, cy], "-", color=colour, linewidth=1)
+        ax.plot(cx, cy, "X", markersize=14, markerfacecolor="none", markeredgecolor=colour,
+                markeredgewidth=1.8,
+                label=f"c.g. {label}: ({cx:.1f}, {cy:.1f}) mm, r = {part['r_cg_m'] * 1e3:.1f} mm")
+    emax_mm = report["emax_syst_m"] * 1e3
+    angle = np.linspace(0, 2 * math.pi, 181)
+    ax.plot(emax_mm * np.cos(angle), emax_mm * np.sin(angle), "--", color="0.5", linewidth=0.9,
+            label=f"E_max,syst = {emax_mm:.1f} mm")
+    ax.plot(0, 0, "+", color="black", markersize=12)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("return error x (mm)")
+    ax.set_ylabel("return error y (mm)")
+    ax.set_title(f"{name}: {report['side_m']:g} m square", fontsize="medium")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize="x-small", framealpha=0.85)
