@@ -176,7 +176,7 @@ def analyze(
         "heading_error_rad": head_err,
         **truth_series,
     }
-    series.update(plot_series(frames, enc, onboard, truth, ref_all, head_err))
+    series.update(plot_series(frames, enc, onboard, truth, ref_all))
     return Analysis(report=report, series=series, passed=passed)
 
 
@@ -571,21 +571,19 @@ def _frame_counts(frames: FrameArrays, decoder: BulkDecoder) -> dict[str, int]:
 
 
 def plot_series(
-    frames: FrameArrays,
-    enc: _Encoders,
-    onboard: _Poses,
-    truth: _Poses,
-    ref: _Reference,
-    head_err: FloatArray,
+    frames: FrameArrays, enc: _Encoders, onboard: _Poses, truth: _Poses, ref: _Reference
 ) -> dict[str, np.ndarray]:
     """What the plots need beyond the verdict's series (all times in s since the log's first
     frame, distances in m along the reference):
 
     * ``t_s``, ``onboard_seq``: time and encoder sequence number of each on-board sample;
-      ``heading_error_unwrapped_rad``: on-board minus reference, unwrapped (no +-pi sawtooth);
+      ``heading_error_unwrapped_rad``: on-board (TURNS * 2 pi + HEADING) minus the reference's
+      continuous heading: no +-pi sawtooth, exact across gaps too;
     * ``truth_t_s``, ``truth_seq``, ``truth_distance_m``, ``truth_position_error_m``,
-      ``truth_heading_error_rad`` (unwrapped), ``truth_dx_m``, ``truth_dy_m``: on-board minus
-      truth at each compared truth sample (the components as truth minus on-board);
+      ``truth_heading_error_rad``, ``truth_dx_m``, ``truth_dy_m``: on-board minus truth at each
+      compared truth sample (the components as truth minus on-board); SIM_TRUTH has no turn
+      count, so its heading error is unwrapped by continuity (exact while it changes by less
+      than pi between two compared samples);
     * ``gap_{start,end}_{t_s,distance_m}``: spans between consecutive on-board samples further
       apart in the encoder sequence than usual (dropped pose or encoder frames);
     * ``restart_t_s``, ``restart_distance_m``: where the reference was placed again after a gap
@@ -602,7 +600,7 @@ def plot_series(
     return {
         "t_s": enc_t[onboard.enc],
         "onboard_seq": enc.seq[onboard.enc],
-        "heading_error_unwrapped_rad": np.unwrap(head_err),
+        "heading_error_unwrapped_rad": onboard.heading_rad - ref.at(onboard.enc).heading_rad,
         "truth_t_s": enc_t[t_enc],
         "truth_seq": enc.seq[t_enc],
         "truth_distance_m": ref.at(t_enc).distance_m,
