@@ -305,4 +305,4 @@ def _draw_scatter(ax: Axes, name: str, report: dict[str, Any]) -> None:
     ax.set_ylabel("return error y (mm)")
     ax.set_title(f"{name}: {report['side_m']:g} m square", fontsize="medium")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize="x-small", framealpha=0.85)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize="x-small")
