@@ -53,9 +53,8 @@ def analysis_checks(report: dict[str, Any]) -> list[Check]:
         _within("onboard_vs_reference_heading", ref.get("max_heading_error_rad"),
                 tol["heading_rad"], "rad"),
     ]
-    truth = report.get("onboard_vs_truth") or {}
-    if truth.get("max_position_error_m") is not None:  # no limit: the figures, for the record
-        checks.append(Check("onboard_vs_truth_recorded", True, figures=dict(truth)))
+    # on-board vs truth has no limit (the robot's own errors are not the firmware's fault): it
+    # is no testcase, so a green CI page never stands for a pose far from the truth
     replay = report.get("replay")
     versus = replay.get("onboard_vs_log") if isinstance(replay, dict) else None
     if isinstance(versus, dict) and "passed" in versus:
