@@ -4,6 +4,7 @@ UMBmark scatter drawn from a report."""
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -213,3 +214,35 @@ def test_umbmark_scatter_draws_runs_and_centres(tmp_path: Path) -> None:
     png = tmp_path / "umb.png"
     plots.plot_umbmark([("UMBmark", before)], png, heading="UMBmark")
     assert png.read_bytes()[:8] == PNG_MAGIC
+
+
+def test_reading_the_truth_for_the_plot_does_not_change_the_run(tmp_path: Path) -> None:
+    """Same seed, same report, with and without --plot (which reads the sim state every tick)."""
+    from odocan.host.cli.app import main
+
+    reports = []
+    for extra in ([], ["--plot", str(tmp_path / "p.svg")]):
+        path = tmp_path / f"r{len(extra)}.json"
+        assert main(["run", "--duration", "4", "--seed", "6", "--errors", "ed=1.01,slip=0.01",
+                     "--report", str(path), *extra]) == 0
+        data = json.loads(path.read_text())
+        for key in ("wall_seconds", "realtime_factor"):
+            data.pop(key)
+        reports.append(data)
+    assert reports[0] == reports[1]
+
+
+def test_truth_trace_is_decimated_on_long_runs() -> None:
+    config = RigConfig(robot=robot.load("pmir"), seed=1)
+    rig = LockstepRig(config)
+    try:
+        trace = TruthTrace(rig, total_ticks=250_000)  # 2.5 x TRUTH_TRACE_MAX
+        for _ in range(300):
+            rig.step()
+            trace.record()
+    finally:
+        rig.close()
+    t = trace.series(0.0)["truth_full_t_s"]
+    assert trace.every == 3
+    assert len(t) == 100
+    assert np.diff(t) == pytest.approx(0.03)
