@@ -170,12 +170,12 @@ def test_run_plot_writes_a_valid_image(
     if suffix == ".png":
         assert data[:8] == b"\x89PNG\r\n\x1a\n"
         width, height = struct.unpack(">II", data[16:24])
-        assert (width, height) == (1950, 900)  # 13 x 6 inches at 150 dpi
+        assert (width, height) == (1700, 950)  # 17 x 9.5 inches at 100 dpi
     else:
         root = ET.fromstring(data)
         assert root.tag == "{http://www.w3.org/2000/svg}svg"
         text = data.decode()
-        for label in ("trajectory", "position error (mm)", "distance travelled (m)"):
+        for label in ("trajectory", "on-board - truth, position", "distance travelled (m)"):
             assert label in text or label.replace(" ", "") in text
 
 

@@ -191,6 +191,7 @@ def analyze(
         **truth_series,
         "truth_timestamp_s": frames.timestamp_s[enc.index[truth_enc]],
     }
+    series.update(plot_series(frames, enc, onboard, truth, ref_all))
     return Analysis(report=report, series=series, passed=passed)
 
 
@@ -694,3 +695,65 @@ def _outside_band(value: FloatArray, e: IntArray, step: FloatArray, gap: FloatAr
     excess = np.maximum(0.0, np.maximum(v - hi - slack, lo - slack - v))
     out[2:] = np.where(known, excess, np.nan)
     return out
+
+
+# --- series for the plots (time axis, unwrapped headings, truth errors, gaps) ------------------
+
+
+def plot_series(
+    frames: FrameArrays, enc: _Encoders, onboard: _Poses, truth: _Poses, ref: _Reference
+) -> dict[str, np.ndarray]:
+    """What the plots need beyond the verdict's series (all times in s since the log's first
+    frame, distances in m along the reference):
+
+    * ``t_s``, ``onboard_seq``: time and encoder sequence number of each on-board sample;
+      ``heading_error_unwrapped_rad``: on-board (TURNS * 2 pi + HEADING) minus the reference's
+      continuous heading: no +-pi sawtooth, exact across gaps too;
+    * ``truth_t_s``, ``truth_seq``, ``truth_distance_m``, ``truth_position_error_m``,
+      ``truth_heading_error_rad``, ``truth_dx_m``, ``truth_dy_m``: on-board minus truth at each
+      compared truth sample (the components as truth minus on-board); SIM_TRUTH has no turn
+      count, so its heading error is unwrapped by continuity (exact while it changes by less
+      than pi between two compared samples);
+    * ``gap_{start,end}_{t_s,distance_m}``: spans between consecutive on-board samples further
+      apart in the encoder sequence than usual (dropped pose or encoder frames);
+    * ``restart_t_s``, ``restart_distance_m``: where the reference was placed again after a gap
+      in the encoder sequence.
+    """
+    t_first = float(frames.timestamp_s[0]) if len(frames) else 0.0
+    enc_t = frames.timestamp_s[enc.index] - t_first
+    estimate, keep = onboard_at(onboard, ref, truth.enc)
+    t_enc = truth.enc[keep]
+    truth_heading = _wrap_pi(estimate.heading_rad - truth.heading_rad[keep])
+    gaps = _sample_gaps(enc.seq[onboard.enc])
+    distance = ref.at(onboard.enc).distance_m
+    restart_enc = ref.start + 1 + np.flatnonzero(np.diff(enc.seq[ref.start :]) > 1)
+    return {
+        "t_s": enc_t[onboard.enc],
+        "onboard_seq": enc.seq[onboard.enc],
+        "heading_error_unwrapped_rad": onboard.heading_rad - ref.at(onboard.enc).heading_rad,
+        "truth_t_s": enc_t[t_enc],
+        "truth_seq": enc.seq[t_enc],
+        "truth_distance_m": ref.at(t_enc).distance_m,
+        "truth_position_error_m": np.hypot(
+            estimate.x_m - truth.x_m[keep], estimate.y_m - truth.y_m[keep]
+        ),
+        "truth_heading_error_rad": np.unwrap(truth_heading),
+        "truth_dx_m": truth.x_m[keep] - estimate.x_m,
+        "truth_dy_m": truth.y_m[keep] - estimate.y_m,
+        "gap_start_t_s": enc_t[onboard.enc[gaps]],
+        "gap_end_t_s": enc_t[onboard.enc[gaps + 1]],
+        "gap_start_distance_m": distance[gaps],
+        "gap_end_distance_m": distance[gaps + 1],
+        "restart_t_s": enc_t[restart_enc],
+        "restart_distance_m": ref.at(restart_enc).distance_m,
+    }
+
+
+def _sample_gaps(seq: IntArray) -> IntArray:
+    """Positions i where samples i and i + 1 are further apart in the encoder sequence than the
+    usual (median) step: a frame was dropped between them."""
+    steps = np.diff(seq)
+    if len(steps) == 0:
+        return np.zeros(0, dtype=np.int64)
+    usual = max(1, int(np.median(steps)))
+    return np.flatnonzero(steps > usual).astype(np.int64)

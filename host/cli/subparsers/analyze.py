@@ -25,9 +25,17 @@ from odocan.host.cli.options import add_robot_argument
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
+from odocan.host.report import provenance
+from odocan.host.report.ci import (
+    add_junit_argument,
+    analysis_checks,
+    check_junit_path,
+    write_checks,
+)
 from odocan.host.report.progress import wall_clock_progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import robot
+from odocan.sim.contract import DBC_PATH
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import INTEGRATORS
 
@@ -53,6 +61,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     )
     add_check_arguments(parser)
     add_export_arguments(parser)
+    add_junit_argument(parser)
     parser.set_defaults(func=_do_analyze)
 
 
@@ -60,6 +69,7 @@ def _do_analyze(args: argparse.Namespace) -> int:
     profile = robot.load(args.robot)
     check_output_paths(args)
     check_export_paths(args.parquet, args.mcap)
+    check_junit_path(args)
     db = load_dbc(args.dbc) if args.dbc is not None else None
     with wall_clock_progress(f"analysing {args.log}", None):
         frames = read_log(args.log)
@@ -70,7 +80,22 @@ def _do_analyze(args: argparse.Namespace) -> int:
             with explained(lambda: frames, str(args.log)):
                 analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance)
     write_exports(args, frames, analysis, db)
-    return finish(analysis, args, title=f"odocan analyze: {args.log}")
+    analysis.report["inputs"] = log_inputs(args.log, profile, analysis.report["integrator"],
+                                           args.dbc)
+    code = finish(analysis, args, title=f"odocan analyze: {args.log}")
+    write_checks(args, "analyze", analysis_checks(analysis.report))
+    return code
+
+
+def log_inputs(
+    log: Path, profile: robot.RobotProfile, integrator: str, dbc: Path | None
+) -> dict[str, object]:
+    """The report's ``inputs`` for a log: the log itself (path, SHA-256) instead of seeds; the
+    errors and faults the robot had are unknown (None), not "none"."""
+    section = provenance.inputs(profile, integrator=integrator, dbc_path=dbc or DBC_PATH)
+    section.update(errors=None, faults=None,
+                   log={"path": str(log), "sha256": provenance.file_sha256(log)})
+    return section
 
 
 def load_dbc(path: Path) -> cantools.database.can.Database:

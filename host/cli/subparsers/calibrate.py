@@ -11,12 +11,23 @@ with ODOM_CONFIG staged writes + APPLY, waiting for ODOM_ACK. Exit 0, or 2 on ba
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from odocan.host.cli.subparsers.umbmark import add_arguments, header
 from odocan.host.experiments import render, umbmark
+from odocan.host.experiments.keep import (
+    check_robot_path,
+    corrected_profile,
+    ros2_multipliers,
+    ros2_yaml,
+    write_robot,
+)
 from odocan.host.experiments.options import check_report_path, write_report
+from odocan.host.experiments.outputs import check_outputs, experiment_inputs, write_scatter
+from odocan.host.report.ci import calibration_checks, write_checks
 from odocan.host.report.progress import wall_clock_progress
 from odocan.sim import errors, robot
+from odocan.sim.robot import profile_sha256
 
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -41,10 +52,17 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         default="model",
         help="the estimate written to the firmware (default: model)",
     )
+    parser.add_argument(
+        "--write-robot", type=Path, metavar="PATH",
+        help="write the corrected profile as TOML (.toml) that --robot PATH loads; the ROS 2 "
+        "diff_drive_controller multipliers are printed either way (default: none)",
+    )
 
 
 def _do_calibrate(args: argparse.Namespace) -> int:
     check_report_path(args.report)
+    check_outputs(args)
+    check_robot_path(args.write_robot)
     profile, model = robot.load(args.robot), errors.parse(args.errors)
     with wall_clock_progress(f"calibrate: 2 x UMBmark of 2 x {args.runs} squares", None):
         cal = umbmark.calibrate(
@@ -64,5 +82,18 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         render.improvement_line(cal),
     )
     report = {"robot": profile.name, "seed": args.seed, **umbmark.calibration_report(cal, model)}
+    kept = corrected_profile(profile, cal.corrected)
+    report["ros2_diff_drive"] = multipliers = ros2_multipliers(profile, kept)
+    report["inputs"] = experiment_inputs(profile, args)
+    print(f"\nROS 2 diff_drive_controller multipliers (corrected / nominal):\n"
+          f"{ros2_yaml(multipliers)}", end="")
+    if args.write_robot is not None:
+        write_robot(args.write_robot, kept)
+        print(f"corrected profile written to {args.write_robot} (sha256 "
+              f"{profile_sha256(kept)[:12]}): use --robot {args.write_robot}")
     write_report(args.report, report)
+    write_scatter(args, [("before calibration", report["before"]),
+                         ("after calibration", report["after"])],
+                  header(args, model, "calibrate"))
+    write_checks(args, "calibrate", calibration_checks(report))
     return 0

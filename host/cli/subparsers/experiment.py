@@ -13,6 +13,13 @@ import argparse
 from odocan.host.cli.options import float_in
 from odocan.host.experiments import render, seed002
 from odocan.host.experiments.options import add_common_arguments, check_report_path, write_report
+from odocan.host.experiments.outputs import experiment_inputs
+from odocan.host.report.ci import (
+    add_junit_argument,
+    check_junit_path,
+    experiment_checks,
+    write_checks,
+)
 from odocan.host.report.progress import wall_clock_progress
 from odocan.sim import errors, robot
 
@@ -43,10 +50,12 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         help="std of the random start misalignment, degrees, 0 .. 45 "
         f"(default: {seed002.DEFAULT_MISALIGN_DEG:g})",
     )
+    add_junit_argument(parser)
 
 
 def _do_experiment(args: argparse.Namespace) -> int:
     check_report_path(args.report)
+    check_junit_path(args)
     config = seed002.Seed002Config(
         robot=robot.load(args.robot),
         errors=errors.parse(args.errors),
@@ -63,5 +72,8 @@ def _do_experiment(args: argparse.Namespace) -> int:
         "ground truth, deviations positive to the left"
     )
     render.show(render.straight_table(result), render.square_table(result))
-    write_report(args.report, seed002.report(result))
+    report = {**seed002.report(result), "inputs": experiment_inputs(
+        config.robot, args, integrator=config.integrator)}
+    write_report(args.report, report)
+    write_checks(args, "experiment", experiment_checks(report))
     return 0

@@ -37,6 +37,7 @@ from rich.console import Console
 
 from odocan.firmware.config import RobotParams
 from odocan.host.cli.options import add_robot_argument, check_log_path, float_in
+from odocan.host.cli.subparsers.analyze import log_inputs
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.logs import (
     FLAG_ERROR,
@@ -50,6 +51,12 @@ from odocan.host.io.logs import (
 from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
+from odocan.host.report.ci import (
+    add_junit_argument,
+    analysis_checks,
+    check_junit_path,
+    write_checks,
+)
 from odocan.host.report.outputs import OutputError
 from odocan.host.report.progress import Progress, progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
@@ -103,6 +110,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
                       help="play only these DBC messages (e.g. WHEEL_ENCODERS,SIM_TRUTH) "
                       "(default: every frame)")
     add_bus_arguments(parser)
+    add_junit_argument(parser)
     parser.set_defaults(func=_do_replay)
 
 
@@ -112,21 +120,26 @@ def _do_replay(args: argparse.Namespace) -> int:
         return _play_realtime(read_log(args.log), args)
     profile = robot.load(args.robot)
     check_output_paths(args)
+    check_junit_path(args)
     check_log_path(args.log_out)
     frames = read_log(args.log)
     feed = ReplayInput.from_log(frames)
     integrator = args.integrator or logged_integrator(frames, feed.accepted) or "exact"
     analysis = _replay_and_analyze(frames, feed, profile, integrator, args)
     _print_versus_log(analysis.report["replay"])
+    analysis.report["inputs"] = log_inputs(args.log, profile, integrator, None)
     title = f"odocan replay: {args.log} on {profile.name}, {integrator} integrator"
-    return finish(analysis, args, title=title)
+    code = finish(analysis, args, title=title)
+    write_checks(args, "replay", analysis_checks(analysis.report))
+    return code
 
 
 def _check_options(args: argparse.Namespace) -> None:
     """Refuse options of the other mode, and a bad ``--speed``."""
     if args.realtime:
         given = [o for o, v in (("--report", args.report), ("--plot", args.plot),
-                                ("--log", args.log_out)) if v is not None]
+                                ("--log", args.log_out), ("--junit", args.junit))
+                 if v is not None]
         if given:
             raise ConfigurationError(f"{', '.join(given)}: not with --realtime (a player only)")
         if not (math.isfinite(args.speed) and args.speed > 0):

@@ -18,10 +18,12 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
 import can
+import numpy as np
 
 from odocan.host.cli.inputs import explained, require_frames
 from odocan.host.cli.options import (
@@ -37,6 +39,13 @@ from odocan.host.io.export import add_export_arguments, check_export_paths, writ
 from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.analysis import Analysis, analyze
+from odocan.host.report import provenance
+from odocan.host.report.ci import (
+    add_junit_argument,
+    analysis_checks,
+    check_junit_path,
+    write_checks,
+)
 from odocan.host.report.foxglove import add_foxglove_arguments, serve_foxglove
 from odocan.host.report.outputs import OutputError
 from odocan.host.report.progress import progress
@@ -49,6 +58,7 @@ from odocan.sim.rig import INTEGRATORS, LockstepRig, RigConfig
 from odocan.sim.scenarios import SCENARIOS
 
 PROGRESS_EVERY_TICKS = 100  # one simulated second
+TRUTH_TRACE_MAX = 100_000  # poses kept for the plot's truth (17 simulated minutes at 100 Hz)
 
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -97,6 +107,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     add_check_arguments(parser)
     add_export_arguments(parser)
     add_foxglove_arguments(parser)
+    add_junit_argument(parser)
     add_fault_argument(parser)
     add_bus_arguments(parser)
     parser.set_defaults(func=_do_run)
@@ -117,11 +128,14 @@ def _do_run(args: argparse.Namespace) -> int:
     check_log_path(args.log)
     check_output_paths(args)
     check_export_paths(args.parquet, args.mcap)
+    check_junit_path(args)
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
     with serve_foxglove(args, config.robot, config.integrator) as live:
         extra: list[can.Listener] = [] if live is None else [Isolated(live)]
         analysis, log_error = _run_and_analyze(config, args, extra)
+        analysis.report["inputs"] = run_inputs(config, args.errors)
         code = finish(analysis, args, title=title)
+    write_checks(args, "run", analysis_checks(analysis.report))
     if log_error is not None:
         raise log_error
     return code
@@ -142,11 +156,13 @@ def _run_and_analyze(
         if args.log is not None:
             listeners.append(_open_log(args.log))
         rig = LockstepRig(config, listeners=listeners)
+        total_ticks = round(rig.default_duration_s / TICK_S)
+        trace = TruthTrace(rig, total_ticks) if args.plot is not None else None
         if mirror is not None:
             rig.listeners.append(PacedRedirect(mirror))
         try:
             start = time.perf_counter()
-            _run(rig, rig.default_duration_s)
+            _run(rig, rig.default_duration_s, None if trace is None else trace.record)
             wall_s = time.perf_counter() - start
         finally:
             try:
@@ -169,11 +185,15 @@ def _run_and_analyze(
             seed=config.seed,
             wall_seconds=wall_s,
         )
-        write_exports(args, frames, analysis)
+    if trace is not None and len(frames):
+        analysis.series.update(trace.series(float(frames.timestamp_s[0])))
+    write_exports(args, frames, analysis)
     return analysis, log_error
 
 
-def _run(rig: LockstepRig, duration_s: float) -> None:
+def _run(
+    rig: LockstepRig, duration_s: float, on_tick: Callable[[], None] | None = None
+) -> None:
     """Step the rig for ``duration_s`` simulated seconds; SIGINT/SIGTERM stop it between two
     ticks (a second signal, or any KeyboardInterrupt, at once), a progress line on a terminal."""
     total = round(duration_s / TICK_S)
@@ -183,6 +203,8 @@ def _run(rig: LockstepRig, duration_s: float) -> None:
         try:
             for k in range(total):
                 step()
+                if on_tick is not None:
+                    on_tick()
                 if k % PROGRESS_EVERY_TICKS == 0:
                     if stop.stop_requested:
                         break
@@ -224,3 +246,43 @@ class PacedRedirect(can.Listener):
         if delay > 0:
             time.sleep(delay)
         self.bus.send(msg)
+
+
+def run_inputs(config: RigConfig, errors_text: str) -> dict[str, object]:
+    """The report's ``inputs``: profile (hash), integrator, errors, faults, seeds, version, DBC."""
+    faults = config.faults
+    seeds = {"rig": config.seed}
+    if faults is not None and faults.active:
+        seeds["faults"], seeds["firmware_faults"] = faults.seed, faults.seed + 1
+    return provenance.inputs(
+        config.robot, integrator=config.integrator, errors=errors_text,
+        faults=str(faults) if faults is not None and faults.active else "", seeds=seeds,
+    )
+
+
+class TruthTrace:
+    """The simulator's true pose after every tick (100 Hz), for a smooth truth in the plot; a
+    run longer than ``TRUTH_TRACE_MAX`` ticks is sampled every k-th tick so that at most that
+    many poses are kept (the legend then gives the lower rate). Reading the truth does not
+    change the run (same frames, same report)."""
+
+    def __init__(self, rig: LockstepRig, total_ticks: int = 0) -> None:
+        """Record from ``rig`` (its vehicle's ``truth()``, read-only) over ``total_ticks``."""
+        self.rig = rig
+        self.every = max(1, -(-total_ticks // TRUTH_TRACE_MAX))
+        self.rows: list[tuple[float, float, float]] = []
+        self._calls = 0
+
+    def record(self) -> None:
+        """Called after each tick: append the true (t s, x m, y m) on every ``every``-th."""
+        self._calls += 1
+        if self._calls % self.every:
+            return
+        pose = self.rig.vehicle.truth()
+        self.rows.append((pose.t_s, pose.x_m, pose.y_m))
+
+    def series(self, t_first_s: float) -> dict[str, np.ndarray]:
+        """``truth_full_{t_s,x_m,y_m}``, times since ``t_first_s`` (the log's first frame)."""
+        data = np.array(self.rows, dtype=np.float64).reshape(-1, 3)
+        return {"truth_full_t_s": data[:, 0] - t_first_s, "truth_full_x_m": data[:, 1],
+                "truth_full_y_m": data[:, 2]}

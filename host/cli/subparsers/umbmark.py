@@ -13,8 +13,17 @@ import argparse
 from odocan.host.cli.options import float_in
 from odocan.host.experiments import render, umbmark
 from odocan.host.experiments.options import add_common_arguments, check_report_path, write_report
+from odocan.host.experiments.outputs import (
+    add_plot_argument,
+    check_outputs,
+    experiment_inputs,
+    write_scatter,
+)
+from odocan.host.experiments.umbmark import Correction
+from odocan.host.report.ci import umbmark_checks, write_checks
 from odocan.host.report.progress import wall_clock_progress
 from odocan.sim import errors, robot
+from odocan.sim.exceptions import ConfigurationError
 
 DEFAULT_ERRORS = "ed=1.002,eb=1.01,slip=0.005"
 SIDE_MIN_M, SIDE_MAX_M = 0.2, 20.0
@@ -31,6 +40,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "E_max,syst.",
     )
     add_arguments(parser)
+    add_firmware_robot_argument(parser)
     parser.set_defaults(func=_do_umbmark)
 
 
@@ -45,6 +55,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"side of the square, {SIDE_MIN_M:g} .. {SIDE_MAX_M:g} m "
         f"(default: {umbmark.SIDE_M:g})",
     )
+    add_plot_argument(parser)
+
+
+def add_firmware_robot_argument(parser: argparse.ArgumentParser) -> None:
+    """``--firmware-robot``: the firmware's profile, when it is not the real robot's."""
+    parser.add_argument(
+        "--firmware-robot", metavar="NAME|PATH",
+        help="configure the firmware (over CAN, at every power-up) with this profile instead of "
+        "--robot, e.g. the one 'odocan calibrate --write-robot' wrote; the real robot stays "
+        "--robot with --errors (default: --robot)",
+    )
+
+
+def firmware_profile(
+    args: argparse.Namespace, real: robot.RobotProfile
+) -> robot.RobotProfile | None:
+    """The ``--firmware-robot`` profile (None without it); it must share the real robot's
+    encoders (counts per revolution, counter width)."""
+    if getattr(args, "firmware_robot", None) is None:
+        return None
+    profile = robot.load(args.firmware_robot)
+    if (profile.counts_per_rev, profile.counter_bits) != (real.counts_per_rev, real.counter_bits):
+        raise ConfigurationError(
+            f"--firmware-robot {args.firmware_robot}: {profile.counts_per_rev} counts/rev, "
+            f"{profile.counter_bits}-bit counters, but the robot has {real.counts_per_rev}, "
+            f"{real.counter_bits}-bit"
+        )
+    return profile
 
 
 def header(args: argparse.Namespace, model: errors.ErrorModel, name: str) -> str:
@@ -58,10 +96,14 @@ def header(args: argparse.Namespace, model: errors.ErrorModel, name: str) -> str
 
 def _do_umbmark(args: argparse.Namespace) -> int:
     check_report_path(args.report)
+    check_outputs(args)
     profile, model = robot.load(args.robot), errors.parse(args.errors)
+    firmware = firmware_profile(args, profile)
+    geometry = None if firmware is None else Correction.nominal(firmware)
     with wall_clock_progress(f"UMBmark: 2 x {args.runs} squares", None):
         result = umbmark.run_umbmark(
-            profile, model, args.seed, side_m=args.side, runs_per_direction=args.runs
+            profile, model, args.seed, side_m=args.side, runs_per_direction=args.runs,
+            geometry=geometry,
         )
     print(header(args, model, "UMBmark"))
     render.show(render.umbmark_table(result))
@@ -71,5 +113,9 @@ def _do_umbmark(args: argparse.Namespace) -> int:
         "error_model": {"ed": model.ed, "eb": model.eb, "slip": model.slip},
         **umbmark.umbmark_report(result),
     }
+    report["inputs"] = experiment_inputs(profile, args, firmware=firmware)
     write_report(args.report, report)
+    write_scatter(args, [("UMBmark", umbmark.umbmark_report(result))],
+                  header(args, model, "UMBmark"))
+    write_checks(args, "umbmark", umbmark_checks(report))
     return 0
