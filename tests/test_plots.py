@@ -69,7 +69,7 @@ def test_series_time_axis_and_lengths(drift: tuple[Analysis, dict[str, np.ndarra
     m = len(series["truth_t_s"])
     assert m == drift[0].report["samples"]["truth_compared"] > 150  # 10 Hz over 20 s
     for key in ("truth_seq", "truth_distance_m", "truth_position_error_m",
-                "truth_heading_error_rad", "truth_dx_m", "truth_dy_m"):
+                "truth_heading_error_unwrapped_rad", "truth_dx_m", "truth_dy_m"):
         assert len(series[key]) == m, key
     # the truth error series is the verdict's: same maximum as the report
     truth = drift[0].report["onboard_vs_truth"]

@@ -96,13 +96,34 @@ def frames_table(frames: FrameArrays) -> pa.Table:
 # --- the analysis series -------------------------------------------------------------------
 
 
-def series_tables(analysis: Analysis) -> tuple[pa.Table, pa.Table]:
-    """(per on-board sample, per compared truth sample) tables of ``analysis.series``."""
+EVENT_PREFIXES = ("gap_", "restart_")  # spans and instants, not per-sample columns
+
+
+def series_tables(analysis: Analysis) -> tuple[pa.Table, pa.Table, pa.Table]:
+    """(per on-board sample, per compared truth sample, gaps and reference restarts) tables of
+    ``analysis.series``: each column goes to the table whose rows it has."""
     series = analysis.series
+    events = {k: v for k, v in series.items() if k.startswith(EVENT_PREFIXES)}
     truth = {k: v for k, v in series.items() if k.startswith("truth_")}
-    onboard = {k: v for k, v in series.items() if not k.startswith("truth_")}
+    onboard = {k: v for k, v in series.items() if k not in truth and k not in events}
     truth_columns = {"timestamp_s": truth.pop("truth_timestamp_s"), **truth}
-    return _table(onboard), _table(truth_columns)
+    return _table(onboard), _table(truth_columns), _events_table(events)
+
+
+def _events_table(events: dict[str, np.ndarray]) -> pa.Table:
+    """One row per gap (``kind`` gap: start and end) or reference restart (start = end)."""
+    rows: dict[str, list[object]] = {"kind": [], "start_t_s": [], "end_t_s": [],
+                                     "start_distance_m": [], "end_distance_m": []}
+    spans = (("gap", "gap_start_", "gap_end_"), ("restart", "restart_", "restart_"))
+    for kind, start, end in spans:
+        if f"{start}t_s" not in events:
+            continue
+        rows["kind"] += [kind] * len(events[f"{start}t_s"])
+        for field, prefix in (("start", start), ("end", end)):
+            rows[f"{field}_t_s"] += np.asarray(events[f"{prefix}t_s"], dtype=float).tolist()
+            rows[f"{field}_distance_m"] += np.asarray(
+                events[f"{prefix}distance_m"], dtype=float).tolist()
+    return pa.table(rows)
 
 
 def _table(columns: dict[str, np.ndarray]) -> pa.Table:
@@ -118,11 +139,11 @@ def write_parquet(
     """Write the tables of the module docstring into ``directory`` (made if missing); returns
     the files written."""
     directory.mkdir(exist_ok=True)
-    series, truth = series_tables(analysis)
+    series, truth, events = series_tables(analysis)
     report = json.dumps(finite(analysis.report), default=json_default).encode()
     series = series.replace_schema_metadata({REPORT_KEY: report})
     tables = {**message_tables(frames, db), "frames": frames_table(frames),
-              "series": series, "truth": truth}
+              "series": series, "truth": truth, "events": events}
     written = []
     for name, table in tables.items():
         path = directory / f"{name}.parquet"

@@ -709,11 +709,11 @@ def plot_series(
     * ``t_s``, ``onboard_seq``: time and encoder sequence number of each on-board sample;
       ``heading_error_unwrapped_rad``: on-board (TURNS * 2 pi + HEADING) minus the reference's
       continuous heading: no +-pi sawtooth, exact across gaps too;
-    * ``truth_t_s``, ``truth_seq``, ``truth_distance_m``, ``truth_position_error_m``,
-      ``truth_heading_error_rad``, ``truth_dx_m``, ``truth_dy_m``: on-board minus truth at each
-      compared truth sample (the components as truth minus on-board); SIM_TRUTH has no turn
-      count, so its heading error is unwrapped by continuity (exact while it changes by less
-      than pi between two compared samples);
+    * ``truth_t_s``, ``truth_seq``, ``truth_distance_m``, ``truth_heading_error_unwrapped_rad``,
+      ``truth_dx_m``, ``truth_dy_m``: at each compared truth sample (the verdict's series has
+      ``truth_position_error_m`` and the wrapped ``truth_heading_error_rad``; the components are
+      truth minus on-board); SIM_TRUTH has no turn count, so its heading error is unwrapped by
+      continuity (exact while it changes by less than pi between two compared samples);
     * ``gap_{start,end}_{t_s,distance_m}``: spans between consecutive on-board samples further
       apart in the encoder sequence than usual (dropped pose or encoder frames);
     * ``restart_t_s``, ``restart_distance_m``: where the reference was placed again after a gap
@@ -734,10 +734,7 @@ def plot_series(
         "truth_t_s": enc_t[t_enc],
         "truth_seq": enc.seq[t_enc],
         "truth_distance_m": ref.at(t_enc).distance_m,
-        "truth_position_error_m": np.hypot(
-            estimate.x_m - truth.x_m[keep], estimate.y_m - truth.y_m[keep]
-        ),
-        "truth_heading_error_rad": np.unwrap(truth_heading),
+        "truth_heading_error_unwrapped_rad": np.unwrap(truth_heading),
         "truth_dx_m": truth.x_m[keep] - estimate.x_m,
         "truth_dy_m": truth.y_m[keep] - estimate.y_m,
         "gap_start_t_s": enc_t[onboard.enc[gaps]],
