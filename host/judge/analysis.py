@@ -16,11 +16,21 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    three parts (X, Y, HEADING) naming one encoder frame make one truth sample.
 4. **Reference**: ``host.reference.integrate`` over the count deltas of the accepted encoder frames
    (mod 2^min(counter_bits, 24), what the wire carries), started at the first on-board sample.
-   The start pose is that sample's, to below its resolution: the on-board values are rounded to
-   0.1 mm and 2 pi/65536 rad, so the start is chosen inside the first sample's rounding interval
-   where the intervals of the following samples (minus the reference's own increments) overlap.
-   That keeps a log starting mid-drive within half an LSB of the firmware instead of carrying the
-   start's rounding (up to 4.8e-5 rad of heading, 0.5 mm after 10 m) along the whole drive.
+   The start pose is exact when the log starts at power-up: the firmware starts at pose 0 on the
+   first encoder frame it accepts, so a log whose first on-board sample names its first accepted
+   encoder frame, reads exactly 0 (X, Y, HEADING, TURNS) and whose first ODOM_STATUS summary says
+   UPTIME 0 starts the reference at exactly (0, 0, 0) -- provided that start agrees with every
+   heading sample of the log (else it is fitted, as below). Any other log (mid-drive) has its
+   start fitted to below its resolution: the on-board values are rounded to 0.1 mm and
+   2 pi/65536 rad, so the start heading is the middle of the overlap of the heading intervals of
+   *every* sample of the log (less the reference's own increments): N samples at varied headings
+   pin it to about 2^-16 turn / N. The heading error rotates the whole reference about the start,
+   so on a drive with little heading variation (a long straight) the rotation is then taken from
+   the positions of the whole first segment (least squares), never leaving the heading overlap:
+   a rotation the heading samples allow is one the log cannot tell from a different start. The
+   start position is the middle of the overlap of the first samples' position intervals.
+   Without that, a start heading off by its residual (7e-8 rad) grows as residual x distance,
+   enough to fail a correct firmware after 600 m.
 5. **Errors**: position errors are Euclidean distances (m), heading errors wrapped to [-pi, pi).
    On-board vs reference at every on-board sample; on-board vs truth at every truth sample that
    has an on-board sample of the same encoder frame.
@@ -126,7 +136,8 @@ def analyze(
     enc = _encoders(frames, accepted, decoder)
     onboard, unmatched = _onboard_samples(frames, accepted, decoder, enc)
     truth = _truth_samples(frames, accepted, decoder, enc)
-    ref_all = _reference(enc, onboard, robot, integrator)
+    power_up = _starts_at_power_up(frames, accepted, decoder, onboard)
+    ref_all = _reference(enc, onboard, robot, integrator, power_up=power_up)
     ref = ref_all.at(onboard.enc)
     pos_err, head_err = _errors(onboard, ref)
     vs_ref = _summary(pos_err, head_err)
@@ -140,6 +151,7 @@ def analyze(
         "robot": _robot_dict(robot),
         "integrator": integrator,
         "integrator_source": source,
+        "reference_start": "power-up" if ref_all.exact_start else "fitted",
         "scenario": scenario,
         "seed": seed,
         "sim_seconds": _covered_s(frames, db),
@@ -363,17 +375,40 @@ class _Reference:
     heading_rad: FloatArray
     distance_m: FloatArray
     restarts: int = 0  # gaps in the encoder sequence where the position was placed again
+    exact_start: bool = False  # started at the power-up pose (0, 0, 0), not fitted
 
     def at(self, enc: IntArray) -> _Reference:
         """The reference at the encoder frames ``enc`` (all >= start)."""
         k = enc - self.start
         return _Reference(
             self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
-            self.restarts,
+            self.restarts, self.exact_start,
         )
 
 
-def _reference(enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator: str) -> _Reference:
+def _starts_at_power_up(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, onboard: _Poses
+) -> bool:
+    """The log starts at the firmware's power-up (module docstring, step 4): its first on-board
+    sample names the first accepted encoder frame and reads exactly 0, and the first accepted
+    ODOM_STATUS summary says UPTIME 0."""
+    if int(onboard.enc[0]) != 0 or int(onboard.heading_raw[0]) != 0:
+        return False
+    if onboard.x_m[0] != 0.0 or onboard.y_m[0] != 0.0 or onboard.heading_rad[0] != 0.0:
+        return False
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
+    except DecodeError:
+        return False
+    if "UPTIME" not in page:
+        return False
+    uptime = page["UPTIME"][accepted[page["index"]]]
+    return len(uptime) > 0 and int(uptime[0]) == 0
+
+
+def _reference(
+    enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator: str, *, power_up: bool
+) -> _Reference:
     """Integrate the encoder deltas from the first on-board sample on."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     e0 = int(onboard.enc[0])
@@ -387,7 +422,9 @@ def _reference(enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator:
     at = onboard.enc - e0
     segment = np.concatenate(([0], np.cumsum(np.diff(enc.seq[e0:]) > 1)))
     in_first = int(np.searchsorted(segment[at], 1))  # samples before the first gap
-    x0, y0, h0 = _start_pose(onboard, rel_x[at], rel_y[at], rel_h[at], in_first)
+    x0, y0, h0, exact = _start_pose(
+        onboard, _Relative(rel_x[at], rel_y[at], rel_h[at]), in_first, power_up=power_up
+    )
     cos0, sin0 = math.cos(h0), math.sin(h0)
     x_m = x0 + cos0 * rel_x - sin0 * rel_y
     y_m = y0 + sin0 * rel_x + cos0 * rel_y
@@ -400,6 +437,7 @@ def _reference(enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator:
         heading_rad=h0 + rel_h,
         distance_m=np.concatenate((zero, rel.distance_m)),
         restarts=int(segment[-1]),
+        exact_start=exact,
     )
 
 
@@ -424,25 +462,63 @@ def _segment_offsets(segment: IntArray, at: IntArray, error: FloatArray) -> Floa
     return result
 
 
+@dataclass(frozen=True)
+class _Relative:
+    """The reference's increments from the start to each on-board sample."""
+
+    x_m: FloatArray
+    y_m: FloatArray
+    heading_rad: FloatArray
+
+
 def _start_pose(
-    onboard: _Poses, rel_x: FloatArray, rel_y: FloatArray, rel_h: FloatArray, in_first: int
-) -> tuple[float, float, float]:
-    """The first on-board pose, de-rounded: inside its rounding interval, where the intervals of
-    the first ``START_FIT_SAMPLES`` samples (less the reference's increments) overlap. The
-    position uses only the ``in_first`` samples before the first gap of the encoder sequence
-    (the heading, exact across gaps, uses them all)."""
-    n = min(START_FIT_SAMPLES, len(onboard.enc))
+    onboard: _Poses, rel: _Relative, in_first: int, *, power_up: bool
+) -> tuple[float, float, float, bool]:
+    """The start pose (x m, y m, unwrapped heading rad) and whether it is the exact power-up pose
+    (module docstring, step 4). The position uses only the ``in_first`` samples before the first
+    gap of the encoder sequence (the heading, exact across gaps, uses them all)."""
+    n_first = max(1, min(len(onboard.enc), in_first))
     h_first = onboard.heading_raw[0] * HEADING_LSB_RAD
-    offsets = _wrap_pi(onboard.heading_raw[:n] * HEADING_LSB_RAD - rel_h[:n] - h_first)
-    h0 = h_first + _overlap_mid(offsets, HEADING_LSB_RAD)
-    n = max(1, min(n, in_first))
+    offsets = _wrap_pi(onboard.heading_raw * HEADING_LSB_RAD - rel.heading_rad - h_first)
+    lo = float(np.max(offsets)) - 0.5 * HEADING_LSB_RAD
+    hi = float(np.min(offsets)) + 0.5 * HEADING_LSB_RAD
+    slack = 1e-6 * HEADING_LSB_RAD  # the reference's own float error on the heading
+    if power_up and lo - slack <= 0.0 <= hi + slack:
+        return 0.0, 0.0, 0.0, True
+    if lo <= hi:  # consistent: the middle of the whole log's overlap, refined by the positions
+        dh = 0.5 * (lo + hi)
+        dh += _rotation_fit(onboard, rel, h_first + dh, n_first, (lo - dh, hi - dh))
+    else:  # the samples disagree (a wrong firmware): place it on the first samples only
+        dh = _overlap_mid(offsets[:START_FIT_SAMPLES], HEADING_LSB_RAD)
+    h0 = h_first + dh
+    n = min(START_FIT_SAMPLES, n_first)
     cos0, sin0 = math.cos(h0), math.sin(h0)
-    px = cos0 * rel_x[:n] - sin0 * rel_y[:n]
-    py = sin0 * rel_x[:n] + cos0 * rel_y[:n]
+    px = cos0 * rel.x_m[:n] - sin0 * rel.y_m[:n]
+    py = sin0 * rel.x_m[:n] + cos0 * rel.y_m[:n]
     x0 = onboard.x_m[0] + _overlap_mid(onboard.x_m[:n] - px - onboard.x_m[0], POSITION_LSB_M)
     y0 = onboard.y_m[0] + _overlap_mid(onboard.y_m[:n] - py - onboard.y_m[0], POSITION_LSB_M)
     turns = math.floor((onboard.heading_rad[0] - h_first) / (2 * math.pi) + 0.5)
-    return float(x0), float(y0), float(h0 + turns * 2 * math.pi)
+    return float(x0), float(y0), float(h0 + turns * 2 * math.pi), False
+
+
+def _rotation_fit(
+    onboard: _Poses, rel: _Relative, h0: float, n: int, bounds: tuple[float, float]
+) -> float:
+    """The small rotation (rad) of the reference about the start that best fits the on-board
+    positions of the first ``n`` samples (least squares, with the start position free), kept
+    within ``bounds``. Linearised: R(h0 + d) q = R(h0) q + d (-q_y, q_x)."""
+    cos0, sin0 = math.cos(h0), math.sin(h0)
+    qx = cos0 * rel.x_m[:n] - sin0 * rel.y_m[:n]
+    qy = sin0 * rel.x_m[:n] + cos0 * rel.y_m[:n]
+    bx = onboard.x_m[:n] - onboard.x_m[0] - qx
+    by = onboard.y_m[:n] - onboard.y_m[0] - qy
+    # normal equations of [1 0 -qy; 0 1 qx] (x0, y0, d) = (bx, by), x0 and y0 eliminated
+    qx_c, qy_c = qx - np.mean(qx), qy - np.mean(qy)
+    spread = float(np.dot(qx_c, qx_c) + np.dot(qy_c, qy_c))
+    if spread <= (POSITION_LSB_M * POSITION_LSB_M) * n:  # no lever arm: nothing to learn
+        return 0.0
+    d = float(np.dot(qx_c, by - np.mean(by)) - np.dot(qy_c, bx - np.mean(bx))) / spread
+    return min(max(d, bounds[0]), bounds[1])
 
 
 def _overlap_mid(offsets: FloatArray, lsb: float, *, base: bool = False) -> float:
