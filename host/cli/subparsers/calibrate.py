@@ -5,7 +5,9 @@ Borenstein & Feng's estimate from the centres of gravity and a model-based one (
 encoder counts dead-reckoned to the true end positions) are both computed
 (``host.experiments.umbmark``); ``--method`` picks the one applied (default: model, the more
 accurate). The corrected radii and wheelbase are written at each power-up of the second UMBmark
-with ODOM_CONFIG staged writes + APPLY, waiting for ODOM_ACK. Exit 0, or 2 on bad usage.
+with ODOM_CONFIG staged writes + APPLY, waiting for ODOM_ACK. Verdict: PASS when both benchmarks
+are valid, the estimate is plausible and E_max,syst falls at least ``--min-improvement`` times
+(``umbmark.calibration_faults``). Exit 0 PASS, 1 FAIL (the reasons printed), 2 on bad usage.
 """
 
 from __future__ import annotations
@@ -15,8 +17,9 @@ import sys
 
 from odocan.host.cli.subparsers.umbmark import add_arguments, header
 from odocan.host.experiments import render, umbmark
-from odocan.host.experiments.options import check_report_path, write_report
+from odocan.host.experiments.options import check_report_path, verdict, write_report
 from odocan.sim import errors, robot
+from odocan.sim.exceptions import ConfigurationError
 
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -41,10 +44,20 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         default="model",
         help="the estimate written to the firmware (default: model)",
     )
+    parser.add_argument(
+        "--min-improvement",
+        type=float,
+        default=umbmark.MIN_IMPROVEMENT,
+        metavar="FACTOR",
+        help="fail unless E_max,syst falls at least this many times, >= 1 "
+        f"(default: {umbmark.MIN_IMPROVEMENT:g})",
+    )
 
 
 def _do_calibrate(args: argparse.Namespace) -> int:
     check_report_path(args.report)
+    if not args.min_improvement >= 1.0:
+        raise ConfigurationError(f"--min-improvement must be >= 1, got {args.min_improvement}")
     profile, model = robot.load(args.robot), errors.parse(args.errors)
     cal = umbmark.calibrate(
         profile,
@@ -63,8 +76,10 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         render.improvement_line(cal),
     )
     report = {"robot": profile.name, "seed": args.seed, **umbmark.calibration_report(cal, model)}
+    reasons = umbmark.calibration_faults(cal, profile, args.min_improvement)
+    report.update(passed=not reasons, faults=reasons)
     write_report(args.report, report)
-    return 0
+    return verdict("calibrate", reasons)
 
 
 def main(argv: list[str] | None = None) -> int:

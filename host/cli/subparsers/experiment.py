@@ -2,8 +2,10 @@
 
 10 x 1 m straight and 10 laps of the 80 cm square (``host.experiments.seed002``), each run a
 fresh robot in the closed-loop lockstep rig under ``--errors`` and a seeded start misalignment
-(``--misalign``, the std in degrees); the tables are measured from the ground truth. Exit 0, or 2
-on bad usage.
+(``--misalign``, the std in degrees); the tables are measured from the ground truth. Verdict:
+PASS when every run is valid (``Seed002Result.faults``: the firmware at its goal by its own
+odometry, its on-board end = the float64 reference on the logged counts). Exit 0 PASS, 1 FAIL
+(the reasons printed), 2 on bad usage.
 """
 
 from __future__ import annotations
@@ -12,7 +14,12 @@ import argparse
 import sys
 
 from odocan.host.experiments import render, seed002
-from odocan.host.experiments.options import add_common_arguments, check_report_path, write_report
+from odocan.host.experiments.options import (
+    add_common_arguments,
+    check_report_path,
+    verdict,
+    write_report,
+)
 from odocan.sim import errors, robot
 
 EXPERIMENTS = ("seed002",)
@@ -61,8 +68,9 @@ def _do_experiment(args: argparse.Namespace) -> int:
         "ground truth, deviations positive to the left"
     )
     render.show(render.straight_table(result), render.square_table(result))
-    write_report(args.report, seed002.report(result))
-    return 0
+    reasons = result.faults()
+    write_report(args.report, {**seed002.report(result), "passed": not reasons, "faults": reasons})
+    return verdict("seed002", reasons)
 
 
 def main(argv: list[str] | None = None) -> int:
