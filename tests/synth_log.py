@@ -89,8 +89,11 @@ def synthesize(
     *,
     counts0: tuple[int, int] = (0, 0),
     t0_s: float = 0.0,
+    x_bias_100um: dict[int, int] | None = None,
 ) -> Synth:
-    """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames)."""
+    """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
+    ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB."""
+    bias = x_bias_100um or {}
     errors = ErrorMask()
     odo = Odometry(derive_constants(params_of(robot, integrator), errors), errors)
     bits = robot.counter_bits
@@ -107,7 +110,7 @@ def synthesize(
         group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
                        fr.pack_wheel_encoders(k, left & wire_mask, right & wire_mask))]
         if k % 2 == 0:
-            group += _pose_lines(odo, t_s + 0.001, pose_counter, k & 0xF, errors)
+            group += _pose_lines(odo, t_s + 0.001, pose_counter, k & 0xF, errors, bias.get(k, 0))
             pose_counter += 1
         if k % 10 == 0:
             uptime_s = int(k * ENCODER_PERIOD_S + t0_s)
@@ -125,9 +128,11 @@ def synthesize(
     return out
 
 
-def _pose_lines(odo: Odometry, t_s: float, counter: int, enc: int, errors: ErrorMask) -> list[str]:
-    """ODOM_POSE_X and ODOM_POSE_Y, rounded as the ECU rounds them."""
-    x_100um = mul_shr_round_i64(odo.x_q40_m, 10_000, 40, errors)
+def _pose_lines(
+    odo: Odometry, t_s: float, counter: int, enc: int, errors: ErrorMask, x_bias_100um: int = 0
+) -> list[str]:
+    """ODOM_POSE_X and ODOM_POSE_Y, rounded as the ECU rounds them (X off by ``x_bias_100um``)."""
+    x_100um = mul_shr_round_i64(odo.x_q40_m, 10_000, 40, errors) + x_bias_100um
     y_100um = mul_shr_round_i64(odo.y_q40_m, 10_000, 40, errors)
     heading_rounded = odo.heading_bam64 + (1 << 47)
     heading_bam16 = (heading_rounded >> 48) & 0xFFFF

@@ -226,3 +226,23 @@ def test_power_up_needs_uptime_zero(tmp_path: Path) -> None:
     analysis = analyze(read_log(synth.write(tmp_path / "late.log")), profile)
     assert analysis.report["reference_start"] == "fitted"
     assert analysis.passed
+
+
+def test_a_pose_after_16_lost_frames_is_not_paired_with_the_frame_16_older(tmp_path: Path) -> None:
+    """15 encoder frames lost after frame 100: frame 116 repeats frame 100's COUNTER, so E2E
+    refuses it, and the pose naming it would resolve to frame 100 (whose own pose is lost too):
+    16 periods of driving off. The latest encoder frame being 16 periods older than the pose,
+    it is left unmatched."""
+    profile = load("pmir")
+    d = np.full(300, 30)
+    synth = synthesize(profile, "exact", d, d + 1)
+    lines = [line for k, group in enumerate(synth.groups) if not 100 < k < 116
+             for line in group if not (k == 100 and " 100#" not in line)]
+    analysis = analyze(read_log(write_lines(tmp_path / "gap16.log", lines)), profile)
+    assert analysis.passed, analysis.report["onboard_vs_reference"]
+    assert analysis.report["samples"]["unmatched_poses"] == 2  # X and Y of frame 116
+
+
+def write_lines(path: Path, lines: list[str]) -> Path:
+    path.write_text("".join(lines))
+    return path

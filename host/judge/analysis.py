@@ -26,7 +26,8 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    *every* sample of the log (less the reference's own increments): N samples at varied headings
    pin it to about 2^-16 turn / N. The heading error rotates the whole reference about the start,
    so on a drive with little heading variation (a long straight) the rotation is then taken from
-   the positions of the whole first segment (least squares), never leaving the heading overlap:
+   the positions of all samples (least squares, each segment between gaps of the encoder
+   sequence with an offset of its own, see step 4's gaps below), never leaving the heading overlap:
    a rotation the heading samples allow is one the log cannot tell from a different start. The
    start position is the middle of the overlap of the first samples' position intervals.
    Without that, a start heading off by its residual (7e-8 rad) grows as residual x distance,
@@ -98,6 +99,8 @@ class _Encoders:
     seq: IntArray  # the sender's sequence number (COUNTER unwrapped), strictly increasing
     left: IntArray  # LEFT_COUNT (wire, 24 bits)
     right: IntArray
+    timestamp_s: FloatArray
+    cycle_s: float | None  # the DBC cycle time
 
 
 @dataclass(frozen=True)
@@ -269,6 +272,7 @@ def _encoders(
     return _Encoders(
         index=enc["index"], counter=counter, seq=seq,
         left=enc["LEFT_COUNT"].astype(np.int64), right=enc["RIGHT_COUNT"].astype(np.int64),
+        timestamp_s=enc["timestamp_s"], cycle_s=cycle_s,
     )
 
 
@@ -278,12 +282,20 @@ def contract_cycle_s(decoder: BulkDecoder, name: str) -> float | None:
     return cycle_ms / 1000.0 if cycle_ms else None
 
 
-def match_encoder(enc: _Encoders, index: IntArray, enc_counter: IntArray) -> IntArray:
-    """For frames at ``index`` naming ``enc_counter``: the encoder frame named (index into
-    ``enc``), -1 where it is not among the accepted encoder frames (module docstring, step 3)."""
+def match_encoder(
+    enc: _Encoders, index: IntArray, enc_counter: IntArray, timestamp_s: FloatArray
+) -> IntArray:
+    """For frames at ``index`` (sent at ``timestamp_s``) naming ``enc_counter``: the encoder
+    frame named (index into ``enc``), -1 where it is not among the accepted encoder frames
+    (module docstring, step 3). The latest accepted encoder frame must be less than 8 cycles
+    older than the naming frame: else the frame named (-8..+7 from it) cannot be told from one
+    16 cycles away (after a gap of 16 frames, E2E refuses the next as a repetition)."""
     latest = np.searchsorted(enc.index, index) - 1
     result = np.full(len(index), -1, dtype=np.int64)
     has = latest >= 0
+    if enc.cycle_s is not None:
+        age_s = timestamp_s - enc.timestamp_s[np.maximum(latest, 0)]
+        has &= age_s < 8 * enc.cycle_s
     latest = latest[has]
     offset = ((enc_counter[has] - enc.counter[latest] + 8) & 0xF) - 8
     target = enc.seq[latest] + offset
@@ -305,8 +317,8 @@ def _onboard_samples(
     """On-board samples (X and Y frames of one encoder frame); and the poses left unmatched."""
     px = _accepted(frames, accepted, decoder, "ODOM_POSE_X")
     py = _accepted(frames, accepted, decoder, "ODOM_POSE_Y")
-    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"])
-    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"])
+    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"], px["timestamp_s"])
+    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"], py["timestamp_s"])
     unmatched = int(np.count_nonzero(ex < 0) + np.count_nonzero(ey < 0))
     ux, fx = _first_per_encoder(ex)
     uy, fy = _first_per_encoder(ey)
@@ -341,7 +353,9 @@ def _truth_samples(
     found = []
     for p in parts:
         keep = accepted[p["index"]]
-        named = match_encoder(enc, p["index"][keep], p["ENC_COUNTER"][keep])
+        named = match_encoder(
+            enc, p["index"][keep], p["ENC_COUNTER"][keep], p["timestamp_s"][keep]
+        )
         uniq, first = _first_per_encoder(named)
         found.append((uniq, np.flatnonzero(keep)[first]))
     common = np.intersect1d(np.intersect1d(found[0][0], found[1][0]), found[2][0])
@@ -421,9 +435,8 @@ def _reference(
     rel_h = np.concatenate((zero, rel.heading_rad))
     at = onboard.enc - e0
     segment = np.concatenate(([0], np.cumsum(np.diff(enc.seq[e0:]) > 1)))
-    in_first = int(np.searchsorted(segment[at], 1))  # samples before the first gap
     x0, y0, h0, exact = _start_pose(
-        onboard, _Relative(rel_x[at], rel_y[at], rel_h[at]), in_first, power_up=power_up
+        onboard, _Relative(rel_x[at], rel_y[at], rel_h[at], segment[at]), power_up=power_up
     )
     cos0, sin0 = math.cos(h0), math.sin(h0)
     x_m = x0 + cos0 * rel_x - sin0 * rel_y
@@ -469,15 +482,16 @@ class _Relative:
     x_m: FloatArray
     y_m: FloatArray
     heading_rad: FloatArray
+    segment: IntArray  # gaps of the encoder sequence before the sample
 
 
 def _start_pose(
-    onboard: _Poses, rel: _Relative, in_first: int, *, power_up: bool
+    onboard: _Poses, rel: _Relative, *, power_up: bool
 ) -> tuple[float, float, float, bool]:
     """The start pose (x m, y m, unwrapped heading rad) and whether it is the exact power-up pose
-    (module docstring, step 4). The position uses only the ``in_first`` samples before the first
-    gap of the encoder sequence (the heading, exact across gaps, uses them all)."""
-    n_first = max(1, min(len(onboard.enc), in_first))
+    (module docstring, step 4). The position uses only the samples before the first gap of the
+    encoder sequence (the heading, exact across gaps, uses them all)."""
+    n_first = max(1, int(np.searchsorted(rel.segment, 1)))
     h_first = onboard.heading_raw[0] * HEADING_LSB_RAD
     offsets = _wrap_pi(onboard.heading_raw * HEADING_LSB_RAD - rel.heading_rad - h_first)
     lo = float(np.max(offsets)) - 0.5 * HEADING_LSB_RAD
@@ -487,7 +501,7 @@ def _start_pose(
         return 0.0, 0.0, 0.0, True
     if lo <= hi:  # consistent: the middle of the whole log's overlap, refined by the positions
         dh = 0.5 * (lo + hi)
-        dh += _rotation_fit(onboard, rel, h_first + dh, n_first, (lo - dh, hi - dh))
+        dh += _rotation_fit(onboard, rel, h_first + dh, (lo - dh, hi - dh))
     else:  # the samples disagree (a wrong firmware): place it on the first samples only
         dh = _overlap_mid(offsets[:START_FIT_SAMPLES], HEADING_LSB_RAD)
     h0 = h_first + dh
@@ -502,23 +516,32 @@ def _start_pose(
 
 
 def _rotation_fit(
-    onboard: _Poses, rel: _Relative, h0: float, n: int, bounds: tuple[float, float]
+    onboard: _Poses, rel: _Relative, h0: float, bounds: tuple[float, float]
 ) -> float:
     """The small rotation (rad) of the reference about the start that best fits the on-board
-    positions of the first ``n`` samples (least squares, with the start position free), kept
-    within ``bounds``. Linearised: R(h0 + d) q = R(h0) q + d (-q_y, q_x)."""
+    positions (least squares over every sample, each segment between gaps of the encoder
+    sequence with a position offset of its own), kept within ``bounds``. Linearised:
+    R(h0 + d) q = R(h0) q + d (-q_y, q_x)."""
     cos0, sin0 = math.cos(h0), math.sin(h0)
-    qx = cos0 * rel.x_m[:n] - sin0 * rel.y_m[:n]
-    qy = sin0 * rel.x_m[:n] + cos0 * rel.y_m[:n]
-    bx = onboard.x_m[:n] - onboard.x_m[0] - qx
-    by = onboard.y_m[:n] - onboard.y_m[0] - qy
-    # normal equations of [1 0 -qy; 0 1 qx] (x0, y0, d) = (bx, by), x0 and y0 eliminated
-    qx_c, qy_c = qx - np.mean(qx), qy - np.mean(qy)
+    qx = cos0 * rel.x_m - sin0 * rel.y_m
+    qy = sin0 * rel.x_m + cos0 * rel.y_m
+    bx = onboard.x_m - onboard.x_m[0] - qx
+    by = onboard.y_m - onboard.y_m[0] - qy
+    # normal equations of [1 0 -qy; 0 1 qx] (x_s, y_s, d) = (bx, by): offsets eliminated
+    qx_c, qy_c, bx_c, by_c = (_centred(v, rel.segment) for v in (qx, qy, bx, by))
     spread = float(np.dot(qx_c, qx_c) + np.dot(qy_c, qy_c))
-    if spread <= (POSITION_LSB_M * POSITION_LSB_M) * n:  # no lever arm: nothing to learn
+    if spread <= (POSITION_LSB_M * POSITION_LSB_M) * len(qx):  # no lever arm: nothing to learn
         return 0.0
-    d = float(np.dot(qx_c, by - np.mean(by)) - np.dot(qy_c, bx - np.mean(bx))) / spread
+    d = float(np.dot(qx_c, by_c) - np.dot(qy_c, bx_c)) / spread
     return min(max(d, bounds[0]), bounds[1])
+
+
+def _centred(values: FloatArray, segment: IntArray) -> FloatArray:
+    """``values`` less the mean of their segment."""
+    sums = np.bincount(segment, weights=values)
+    counts = np.maximum(np.bincount(segment), 1)
+    centred: FloatArray = values - (sums / counts)[segment]
+    return centred
 
 
 def _overlap_mid(offsets: FloatArray, lsb: float, *, base: bool = False) -> float:
