@@ -15,6 +15,9 @@ import can
 import pytest
 
 from odocan.host.cli.app import main
+from odocan.sim.robot import load
+from tests.independent_checker import Robot, check
+from tests.synth_log import ENCODER_PERIOD_S, synthesize, wandering_drive
 from tests.test_cli_run import assert_usage_error, run_cli
 
 POSE_IDS = {0x200, 0x201, 0x202}
@@ -314,3 +317,25 @@ def test_replay_on_a_custom_robot_names_the_shipped_one_that_fits(
     assert code == 1
     assert out.splitlines()[-1] == ("  - robot mismatch: the log's poses fit robot 'kobuki', not "
                                     "'odd' (--robot)")
+
+
+def test_replay_reproduces_a_log_written_with_the_firmwares_integers(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A log written directly (tests/synth_log.py: the firmware's Odometry and codec, the ECU's
+    rounding) is what the ECU itself sends: replayed, every pose is identical, and the
+    independent checker agrees; on another robot it departs and the right one is named."""
+    profile = load("pmir")
+    d_left, d_right = wandering_drive(profile, 1500, 0.01, seed=4)
+    synth = synthesize(profile, "rk2", d_left, d_right)
+    log = synth.write(tmp_path / "synth.log")
+    report_path = tmp_path / "replay.json"
+    code, _, err = run_cli(capsys, "replay", str(log), "--report", str(report_path))
+    assert (code, err) == (0, "")
+    vs_log = json.loads(report_path.read_text())["replay"]["onboard_vs_log"]
+    assert vs_log["samples"] == vs_log["identical"] == 751
+    assert check(log, Robot(**profile.firmware_params()), "rk2",
+                 lambda t_s: synth.state[round(t_s / ENCODER_PERIOD_S)].pose).passed
+    code, out, _ = run_cli(capsys, "replay", str(log), "--robot", "kobuki")
+    assert code == 1 and out.splitlines()[-1] == (
+        "  - robot mismatch: the log's poses fit robot 'pmir', not 'kobuki' (--robot)")
