@@ -7,7 +7,8 @@ the firmware codec (``firmware.frames``, E2E protected), rounding the pose exact
 
 * WHEEL_ENCODERS every 10 ms (the low min(counter_bits, 24) bits of each counter);
 * ODOM_POSE_X / ODOM_POSE_Y every other encoder frame, naming it (ENC_COUNTER), 1 ms after it;
-* ODOM_STATUS page 0 (STATE OK, the integrator, UPTIME) every 10th encoder frame.
+* ODOM_STATUS page 0 (STATE OK, the integrator, UPTIME) every 10th encoder frame, and the page
+  of WHEEL_ENCODERS E2E counts (ENC_E2E_OK: every frame so far) at frames 10, 60, 110, ...
 
 The firmware starts at pose 0 on the first frame (power-up). ``Synth.lines(start)`` cuts the log at
 an encoder frame to make a log that starts mid-drive; ``Synth.state[k]`` is the firmware's
@@ -118,6 +119,12 @@ def synthesize(
                 status_counter, State.OK, odo.consts.integrator, 0, uptime_s, errors
             )
             group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, status))
+            status_counter += 1
+        if k % 50 == 10:  # the firmware's E2E counts of the encoder frames: k + 1 accepted
+            page = fr.pack_odom_status_e2e(
+                status_counter, fr.StatusPage.E2E_WHEEL_ENCODERS, k + 1, 0, 0, 0, 0
+            )
+            group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, page))
             status_counter += 1
         out.groups.append(group)
         out.state.append(

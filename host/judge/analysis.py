@@ -19,11 +19,16 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    The start pose is exact when the log starts at power-up: the firmware starts at pose 0 on the
    first encoder frame it accepts, so a log whose first on-board sample names its first accepted
    encoder frame, reads exactly 0 (X, Y, HEADING, TURNS) and whose first ODOM_STATUS summary says
-   UPTIME 0 starts the reference at exactly (0, 0, 0) -- provided that start agrees with every
-   heading sample of the log (else it is fitted, as below). Any other log (mid-drive) has its
-   start fitted to below its resolution: the on-board values are rounded to 0.1 mm and
-   2 pi/65536 rad, so the start heading is the middle of the overlap of the heading intervals of
-   *every* sample of the log (less the reference's own increments): N samples at varied headings
+   UPTIME 0 starts the reference at exactly (0, 0, 0) -- provided, when the log has one, that the
+   first ODOM_STATUS page of encoder E2E counts says the firmware had accepted exactly the log's
+   encoder frames (it primed on the log's first: a recorder started late is not a power-up). The
+   exact start is not checked against the samples: a wrong firmware drifting from the start must
+   be judged from it, not from a start fitted to its drift. Without that page, a recorder
+   started in the firmware's first second after the robot moved less than half an LSB would be
+   taken for a power-up. Any other log (mid-drive) has its start fitted to below its resolution: the
+   on-board values are rounded to 0.1 mm and 2 pi/65536 rad, so the start heading is the middle
+   of the overlap of the heading intervals of *every* sample of the log (less the reference's
+   own increments): N samples at varied headings
    pin it to about 2^-16 turn / N. The heading error rotates the whole reference about the start,
    so on a drive with little heading variation (a long straight) the rotation is then taken from
    the positions of all samples (least squares, each segment between gaps of the encoder
@@ -63,6 +68,7 @@ POSITION_LSB_M = 1e-4  # X, Y: 0.1 mm
 HEADING_LSB_RAD = 2 * math.pi / 65536  # HEADING: BAM16
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 START_FIT_SAMPLES = 256  # on-board samples used to place the reference start (5 s at 50 Hz)
+ENC_E2E_PAGE = 2  # ODOM_STATUS page with the firmware's WHEEL_ENCODERS E2E counts
 REQUIRED = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y")
 
 FloatArray = npt.NDArray[np.float64]
@@ -417,7 +423,26 @@ def _starts_at_power_up(
     if "UPTIME" not in page:
         return False
     uptime = page["UPTIME"][accepted[page["index"]]]
-    return len(uptime) > 0 and int(uptime[0]) == 0
+    return len(uptime) > 0 and int(uptime[0]) == 0 and _saw_only_the_log(frames, accepted, decoder)
+
+
+def _saw_only_the_log(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
+) -> bool:
+    """Whether the firmware had accepted exactly the log's encoder frames when it sent its first
+    ODOM_STATUS page of WHEEL_ENCODERS E2E counts (ENC_E2E_OK): then it primed on the log's first
+    encoder frame. True when the log has no such page (other firmwares need not send it)."""
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+    except DecodeError:
+        return True
+    if "ENC_E2E_OK" not in page or not accepted[page["index"]].any():
+        return True
+    keep = accepted[page["index"]]
+    first, ok = int(page["index"][keep][0]), int(page["ENC_E2E_OK"][keep][0])
+    encoders = decoder.select(frames, "WHEEL_ENCODERS")
+    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < first)))
+    return ok == in_log & 0xFFFF
 
 
 def _reference(
@@ -496,8 +521,7 @@ def _start_pose(
     offsets = _wrap_pi(onboard.heading_raw * HEADING_LSB_RAD - rel.heading_rad - h_first)
     lo = float(np.max(offsets)) - 0.5 * HEADING_LSB_RAD
     hi = float(np.min(offsets)) + 0.5 * HEADING_LSB_RAD
-    slack = 1e-6 * HEADING_LSB_RAD  # the reference's own float error on the heading
-    if power_up and lo - slack <= 0.0 <= hi + slack:
+    if power_up:
         return 0.0, 0.0, 0.0, True
     if lo <= hi:  # consistent: the middle of the whole log's overlap, refined by the positions
         dh = 0.5 * (lo + hi)
