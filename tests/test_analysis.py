@@ -16,7 +16,7 @@ import pytest
 from cantools.database.can import Database
 
 from odocan.firmware.e2e import p02_protect
-from odocan.host.io.logs import FrameArrays, FrameCollector
+from odocan.host.io.logs import FrameArrays, FrameCollector, read_log
 from odocan.host.judge.analysis import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
@@ -24,11 +24,13 @@ from odocan.host.judge.analysis import (
     Tolerance,
     analyze,
 )
+from odocan.host.judge.reference import Geometry, integrate
 from odocan.sim.contract import DBC_PATH, database
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import OdocanError
 from odocan.sim.rig import INTEGRATORS, LockstepRig, RigConfig
 from odocan.sim.robot import load
+from tests.synth_log import Synth, synthesize, wandering_drive
 
 PMIR = load("pmir")
 KOBUKI = load("kobuki")
@@ -178,3 +180,83 @@ def test_integrator_must_be_known_or_logged() -> None:
         analyze(no_status, PMIR)
     assert analyze(no_status, PMIR, "rk2").passed
     assert math.isfinite(analyze(no_status, PMIR, "rk2").report["final_onboard_pose"]["x_m"])
+
+
+# --- the judge's own error on long drives (logs written directly, tests/synth_log.py) ----------
+
+LONG_STEPS = 56_100  # 2 m per 10 ms step: 112 km, over 100 km after the mid-drive cut
+MID_DRIVE_CUT = 6_000  # an even encoder frame: the log's first on-board sample names it
+
+
+@cache
+def long_drive(robot: str, integrator: str) -> tuple[Synth, np.ndarray, np.ndarray]:
+    profile = load(robot)
+    d_left, d_right = wandering_drive(profile, LONG_STEPS, 2.0, seed=11)
+    return synthesize(profile, integrator, d_left, d_right), d_left, d_right
+
+
+@pytest.mark.parametrize(("robot", "integrator"), [("kobuki", "exact"), ("pmir", "rk2")])
+@pytest.mark.parametrize("cut", [0, MID_DRIVE_CUT])
+def test_judge_own_error_after_100_km_is_below_a_twentieth_lsb(
+    tmp_path: Path, robot: str, integrator: str, cut: int
+) -> None:
+    """The reference the judge builds vs the same float64 odometry started at the firmware's true
+    internal pose (Q40, BAM64) of the log's first sample: only the start can differ."""
+    synth, d_left, d_right = long_drive(robot, integrator)
+    analysis = analyze(read_log(synth.write(tmp_path / "long.log", cut)), load(robot))
+    x0, y0, h0 = synth.state[cut].pose
+    exact = integrate(d_left[cut:], d_right[cut:], Geometry.of(load(robot)), integrator,
+                      x0_m=x0, y0_m=y0, heading0_rad=h0)
+    exact_x = np.concatenate(([x0], exact.x_m))[::2]  # the pose is sent every other frame
+    exact_y = np.concatenate(([y0], exact.y_m))[::2]
+    judge_x, judge_y = analysis.series["reference_x_m"], analysis.series["reference_y_m"]
+    assert len(judge_x) == len(exact_x)
+    own_error_m = float(np.max(np.hypot(judge_x - exact_x, judge_y - exact_y)))
+    assert analysis.series["distance_m"][-1] >= 100e3
+    assert own_error_m < 0.05 * POSITION_LSB_M
+    assert analysis.report["reference_start"] == ("power-up" if cut == 0 else "fitted")
+    assert analysis.passed, analysis.report["onboard_vs_reference"]
+
+
+def test_power_up_needs_uptime_zero(tmp_path: Path) -> None:
+    """A log whose first sample reads 0 but whose firmware has been up for a while is fitted."""
+    profile = load("pmir")
+    d = np.full(400, 40)
+    synth = synthesize(profile, "exact", d, d + (np.arange(400) % 3 == 0), t0_s=5.0)
+    analysis = analyze(read_log(synth.write(tmp_path / "late.log")), profile)
+    assert analysis.report["reference_start"] == "fitted"
+    assert analysis.passed
+
+
+def test_a_pose_after_16_lost_frames_is_not_paired_with_the_frame_16_older(tmp_path: Path) -> None:
+    """15 encoder frames lost after frame 100: frame 116 repeats frame 100's COUNTER, so E2E
+    refuses it, and the pose naming it would resolve to frame 100 (whose own pose is lost too):
+    16 periods of driving off. The latest encoder frame being 16 periods older than the pose,
+    it is left unmatched."""
+    profile = load("pmir")
+    d = np.full(300, 30)
+    synth = synthesize(profile, "exact", d, d + 1)
+    lines = [line for k, group in enumerate(synth.groups) if not 100 < k < 116
+             for line in group if not (k == 100 and " 100#" not in line)]
+    analysis = analyze(read_log(write_lines(tmp_path / "gap16.log", lines)), profile)
+    assert analysis.passed, analysis.report["onboard_vs_reference"]
+    assert analysis.report["samples"]["unmatched_poses"] == 2  # X and Y of frame 116
+
+
+def write_lines(path: Path, lines: list[str]) -> Path:
+    path.write_text("".join(lines))
+    return path
+
+
+def test_a_recorder_started_late_is_not_a_power_up(tmp_path: Path) -> None:
+    """The robot at rest for 0.3 s, the recorder started 40 ms after the firmware: the first
+    sample names the log's first encoder frame and reads 0, UPTIME 0, but ENC_E2E_OK (11 at
+    frame 10) counts frames the log lacks, so the start is fitted; the whole log is a power-up."""
+    profile = load("kobuki")
+    d = np.concatenate((np.zeros(30, dtype=np.int64), np.full(400, 90)))
+    synth = synthesize(profile, "exact", d, d + ((np.arange(430) % 4 == 0) & (d > 0)))
+    whole = analyze(read_log(synth.write(tmp_path / "whole.log")), profile)
+    late = analyze(read_log(synth.write(tmp_path / "late.log", 4)), profile)
+    assert (whole.report["reference_start"], late.report["reference_start"]) == (
+        "power-up", "fitted")
+    assert whole.passed and late.passed

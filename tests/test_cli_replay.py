@@ -15,6 +15,9 @@ import can
 import pytest
 
 from odocan.host.cli.app import main
+from odocan.sim.robot import load
+from tests.independent_checker import Robot, check
+from tests.synth_log import ENCODER_PERIOD_S, synthesize, wandering_drive
 from tests.test_cli_run import assert_usage_error, run_cli
 
 POSE_IDS = {0x200, 0x201, 0x202}
@@ -61,8 +64,10 @@ def test_replay_reproduces_the_run(
     assert section["encoder_frames_fed"] == section["ticks"] == 600
     assert section["ticks_without_frame"] == 0
     assert section["onboard_vs_log"] == {
-        "samples": 300, "identical": 300, "max_position_diff_m": 0.0, "max_heading_diff_rad": 0.0
+        "samples": 300, "identical": 300, "max_position_diff_m": 0.0, "max_heading_diff_rad": 0.0,
+        "before_first_gap": 300, "max_position_diff_before_gap_m": 0.0,
     }
+    assert (section["passed"], section["faults"]) == (True, [])
     # Bit-identical pose and twist frames, at the same times; the log's truth frames kept.
     assert frames_of(log_out, POSE_IDS) == frames_of(recorded["log"], POSE_IDS)
     assert frames_of(log_out, {0x700}) == frames_of(recorded["log"], {0x700})
@@ -79,12 +84,19 @@ def test_replay_with_another_integrator(
     integrator: str, recorded: dict[str, Path], tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
+    """Another integrator: other poses; beyond the tolerance it fails, naming the mismatch."""
     report_path = tmp_path / "replay.json"
-    code, _, err = run_cli(capsys, "replay", str(recorded["log"]), "--integrator", integrator,
-                           "--report", str(report_path))
-    assert (code, err) == (0, "")
+    code, out, err = run_cli(capsys, "replay", str(recorded["log"]), "--integrator", integrator,
+                             "--report", str(report_path))
     report = json.loads(report_path.read_text())
-    assert (report["integrator"], report["integrator_source"]) == (integrator, "argument")
+    departs = report["replay"]["onboard_vs_log"]["max_position_diff_m"] > 1e-4
+    assert (code, err) == (int(departs), "")
+    assert report["passed"] is report["replay"]["passed"] is (not departs)
+    if departs:
+        lines = out.splitlines()
+        assert "FAIL: the replayed firmware departs from the log's" in lines
+        assert lines[-1] == (f"  - integrator mismatch: the log's ODOM_STATUS reports exact, the "
+                             f"replay ran {integrator}")
     vs_log = report["replay"]["onboard_vs_log"]
     assert vs_log["samples"] == 300
     assert vs_log["identical"] < vs_log["samples"]  # another integrator: other poses ...
@@ -262,3 +274,68 @@ def test_replay_a_log_without_firmware_frames(
     assert report["integrator"] == "exact"
     assert report["final_onboard_pose"] == run["final_onboard_pose"]
     assert report["replay"]["onboard_vs_log"]["samples"] == 0
+
+
+@pytest.fixture(scope="module")
+def kobuki_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 6 s random drive of kobuki (seed 5)."""
+    path = tmp_path_factory.mktemp("kobuki") / "k.log"
+    assert main(["run", "--robot", "kobuki", "--duration", "6", "--seed", "5", "--log",
+                 str(path)]) == 0
+    return path
+
+
+def test_replay_on_the_wrong_robot_fails_and_names_the_right_one(
+    kobuki_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue #11: a kobuki log replayed on the default pmir used to print PASS, 14 m off."""
+    report_path = tmp_path / "replay.json"
+    code, out, err = run_cli(capsys, "replay", str(kobuki_log), "--report", str(report_path))
+    assert (code, err) == (1, "")
+    lines = out.splitlines()
+    at = lines.index("FAIL: the replayed firmware departs from the log's")
+    assert lines[at + 1].startswith("  - its position differs from the log's by up to ")
+    assert lines[at + 2].startswith("  - its heading differs from the log's by up to ")
+    assert lines[at + 3:] == ["  - robot mismatch: the log's poses fit robot 'kobuki', not "
+                              "'pmir' (--robot)"]
+    report = json.loads(report_path.read_text())
+    assert report["passed"] is False and report["replay"]["faults"] == [
+        line[4:] for line in lines[at + 1:]]
+    code, out, _ = run_cli(capsys, "replay", str(kobuki_log), "--robot", "kobuki")
+    assert code == 0 and "departs" not in out
+
+
+def test_replay_on_a_custom_robot_names_the_shipped_one_that_fits(
+    kobuki_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A custom profile the log was not recorded with: the shipped one that fits is named."""
+    custom = tmp_path / "odd.toml"
+    custom.write_text('name = "odd"\ncounts_per_rev = 4000\nwheel_radius_left_m = 0.04\n'
+                      'wheel_radius_right_m = 0.04\nwheelbase_m = 0.3\ncounter_bits = 32\n')
+    code, out, _ = run_cli(capsys, "replay", str(kobuki_log), "--robot", str(custom),
+                           "--integrator", "exact")
+    assert code == 1
+    assert out.splitlines()[-1] == ("  - robot mismatch: the log's poses fit robot 'kobuki', not "
+                                    "'odd' (--robot)")
+
+
+def test_replay_reproduces_a_log_written_with_the_firmwares_integers(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A log written directly (tests/synth_log.py: the firmware's Odometry and codec, the ECU's
+    rounding) is what the ECU itself sends: replayed, every pose is identical, and the
+    independent checker agrees; on another robot it departs and the right one is named."""
+    profile = load("pmir")
+    d_left, d_right = wandering_drive(profile, 1500, 0.01, seed=4)
+    synth = synthesize(profile, "rk2", d_left, d_right)
+    log = synth.write(tmp_path / "synth.log")
+    report_path = tmp_path / "replay.json"
+    code, _, err = run_cli(capsys, "replay", str(log), "--report", str(report_path))
+    assert (code, err) == (0, "")
+    vs_log = json.loads(report_path.read_text())["replay"]["onboard_vs_log"]
+    assert vs_log["samples"] == vs_log["identical"] == 751
+    assert check(log, Robot(**profile.firmware_params()), "rk2",
+                 lambda t_s: synth.state[round(t_s / ENCODER_PERIOD_S)].pose).passed
+    code, out, _ = run_cli(capsys, "replay", str(log), "--robot", "kobuki")
+    assert code == 1 and out.splitlines()[-1] == (
+        "  - robot mismatch: the log's poses fit robot 'pmir', not 'kobuki' (--robot)")

@@ -74,7 +74,7 @@ SUMMARY_TAIL = """\
 
   on-board vs   max position   final position   max heading   final heading
   ─────────────────────────────────────────────────────────────────────────
-  reference        0.0662 mm        0.0304 mm   0.0476 mrad     0.0169 mrad
+  reference        0.0665 mm        0.0298 mm   0.0476 mrad     0.0169 mrad
   truth            0.9000 mm        0.5000 mm   2.5886 mrad     1.8216 mrad
 
 PASS: on-board vs reference within 0.1 mm and 0.09587 mrad

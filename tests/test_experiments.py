@@ -65,8 +65,9 @@ def _mean(values: list[float]) -> float:
 
 
 def test_tables_are_laid_out_like_the_papers(seed002_run: tuple[int, str, dict[str, Any]]) -> None:
-    code, out, _ = seed002_run
-    assert code == 0
+    code, out, report = seed002_run
+    assert code == 0 and out.endswith("seed002: PASS\n")
+    assert report["passed"] is True and report["faults"] == []
     lines = out.splitlines()
     assert "ed=1.002, eb=1.01, slip=0.005" in lines[0] and "N(0, 1 deg)" in lines[0]
     t1 = next(i for i, line in enumerate(lines) if line.startswith("Table 1."))
@@ -166,3 +167,23 @@ def test_runs_option_sets_the_rows(capsys: pytest.CaptureFixture[str]) -> None:
     rows = [line.split()[0] for line in out.splitlines() if line.split()]
     assert rows.count("1") == 2 and rows.count("2") == 2 and "3" not in rows
     assert rows.count("Mean") == 2
+
+
+def test_every_run_is_judged_and_a_wrong_firmware_fails(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The runs are valid (the firmware at its goal, its on-board end = the float64 reference on
+    the logged counts); judged against another robot's geometry, the same drives are not, and
+    the command exits 1 with one reason per run."""
+    config = _config(ErrorModel(ed=1.002), runs=1)
+    assert seed002.run_seed002(config).faults() == []
+    kobuki = load("kobuki")
+    monkeypatch.setattr(seed002.Geometry, "of", classmethod(lambda cls, robot: cls(
+        kobuki.counts_per_rev, kobuki.wheel_radius_left_m, kobuki.wheel_radius_right_m,
+        kobuki.wheelbase_m)))
+    code = cli.main(["experiment", "seed002", "--runs", "1", "--errors", "", "--misalign", "0"])
+    out = capsys.readouterr().out
+    verdict = out[out.index("seed002: FAIL"):].splitlines()
+    assert code == 1 and len(verdict) == 3
+    assert verdict[1].startswith("  - straight run 1: the on-board end is ")
+    assert verdict[2].startswith("  - square run 1: the on-board end is ")

@@ -14,12 +14,14 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from odocan.host.cli import app as cli
 from odocan.host.experiments import umbmark
 from odocan.host.experiments.drive import ExperimentError, NavSession
 from odocan.host.experiments.umbmark import CentreOfGravity, Correction
+from odocan.host.judge.reference import Geometry
 from odocan.sim.errors import ErrorModel
 from odocan.sim.robot import load
 
@@ -190,3 +192,118 @@ def test_bad_options_are_one_line_exit_2(
     assert len(lines) == 1 and lines[0].startswith("error: "), err
     for word in words:
         assert word in lines[0], (word, lines[0])
+
+
+# --- issue #11: the counter width, the verdicts --------------------------------------------------
+
+
+@pytest.mark.parametrize("bits", [16, 32])
+def test_dead_reckoning_wraps_at_the_counter_width(bits: int) -> None:
+    """500 counts a frame on both wheels, from just below the wrap: the wire carries the low
+    min(bits, 24) bits, so the deltas must wrap there (a 16-bit counter at 2^16, not 2^24)."""
+    wire = 1 << min(bits, 24)
+    counts = (np.arange(200, dtype=np.int64) * 500 + wire - 20_000) % wire
+    geometry = Geometry.of(PMIR)
+    end = umbmark.dead_reckoned_end((counts, counts), geometry, bits)
+    assert end == pytest.approx([199 * 500 * geometry.m_per_count_left, 0.0], abs=1e-9)
+
+
+def profile_file(tmp_path: Path, name: str, counts_per_rev: int, bits: int) -> str:
+    path = tmp_path / f"{name}.toml"
+    path.write_text(
+        f'name = "{name}"\ncounts_per_rev = {counts_per_rev}\nwheel_radius_left_m = 0.05\n'
+        f"wheel_radius_right_m = 0.0502\nwheelbase_m = 0.41\ncounter_bits = {bits}\n"
+    )
+    return str(path)
+
+
+CALIBRATIONS = [  # robot, side (m): every shipped profile, past their 16-bit wraps, and custom
+    ("kobuki", "4"),
+    ("pmir", "16"),  # 64 m of wheel travel a square: past the 61.8 m wrap of its 16-bit counters
+    ("custom16", "8"),
+    ("custom32", "4"),  # 2^20 counts/rev: the 24 bits on the wire wrap every 5 m
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("robot", "side"), CALIBRATIONS)
+def test_calibration_recovers_the_errors_on_every_profile(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, robot: str, side: str
+) -> None:
+    """Issue #11: E_d, E_b within 10 % of their deviation from 1, E_max,syst at least 5x lower,
+    PASS (one run each way: without slip every run is the same)."""
+    if robot.startswith("custom"):
+        bits = int(robot[-2:])
+        robot = profile_file(tmp_path, robot, 4096 if bits == 16 else 1 << 20, bits)
+    out, report = run_cli(capsys, tmp_path, "calibrate", "--robot", robot, "--side", side,
+                          "--errors", "ed=1.002,eb=1.01", "--seed", "3", "--runs", "1")
+    estimated = report["estimated"]
+    assert abs(estimated["ed"] - 1.002) <= 0.1 * 0.002, estimated
+    assert abs(estimated["eb"] - 1.01) <= 0.1 * 0.01, estimated
+    assert report["emax_before_m"] >= 5 * report["emax_after_m"]
+    assert report["passed"] and report["faults"] == []
+    assert out.endswith("calibrate: PASS\n")
+
+
+@pytest.mark.slow
+def test_calibration_of_implausible_errors_fails_with_a_reason(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    path = tmp_path / "report.json"
+    code = cli.main(["calibrate", "--robot", "kobuki", "--errors", "ed=1.9,eb=1.9", "--seed", "3",
+                     "--runs", "1", "--report", str(path)])
+    out, err = capsys.readouterr()
+    assert code == 1 and err == ""
+    verdict = out[out.index("calibrate: FAIL\n"):].splitlines()
+    assert len(verdict) >= 2 and all(line.startswith("  - ") for line in verdict[1:])
+    assert "implausible estimate" in out
+    report = json.loads(path.read_text())
+    assert not report["passed"] and report["faults"] == [line[4:] for line in verdict[1:]]
+
+
+@pytest.fixture(scope="module")
+def small_square() -> umbmark.UmbmarkResult:
+    """One 1 m square each way on pmir with E_b = 1.01 (E_max,syst about 0.1 m)."""
+    return umbmark.run_umbmark(PMIR, ErrorModel(eb=1.01), 0, side_m=1.0, runs_per_direction=1)
+
+
+def test_a_valid_benchmark_has_no_faults_and_a_wrong_firmware_has(
+    small_square: umbmark.UmbmarkResult,
+) -> None:
+    assert umbmark.faults(small_square, PMIR) == []
+    # judged as if the firmware had kobuki's geometry: its on-board ends are not what that
+    # firmware would have computed from the same counts
+    wrong = umbmark.faults(small_square, load("kobuki"))
+    assert len(wrong) == 2 and all("float64 reference" in r for r in wrong)
+    assert wrong[0].startswith("CW run 1: ") and wrong[1].startswith("CCW run 1: ")
+
+
+def test_calibration_that_does_not_improve_fails(small_square: umbmark.UmbmarkResult) -> None:
+    nominal = Correction.nominal(PMIR)
+    cal = umbmark.Calibration(
+        small_square, umbmark.borenstein(small_square.cg("cw"), small_square.cg("ccw"), 1.0, 0.3),
+        (1.0, 1.0), "model", nominal, nominal, small_square,
+    )
+    assert umbmark.calibration_faults(cal, PMIR, 1.0) == []
+    reasons = umbmark.calibration_faults(cal, PMIR, 2.0)
+    assert len(reasons) == 1 and reasons[0].startswith("the correction does not cut E_max,syst 2x")
+    far = umbmark.Calibration(
+        small_square, cal.borenstein, (2.5, 1.0), "model", nominal, nominal, small_square,
+        fit_residual_m=1.0,
+    )
+    reasons = umbmark.calibration_faults(far, PMIR, 1.0)
+    assert reasons[0] == "implausible estimate E_d 2.5, E_b 1 (outside 0.5..2.0)"
+    assert reasons[1].startswith("implausible estimate: the model fit leaves 1000.0 mm RMS")
+
+
+@pytest.mark.parametrize(("limit", "code"), [("50", 0), ("40", 1)])
+def test_umbmark_fails_beyond_max_emax(
+    capsys: pytest.CaptureFixture[str], limit: str, code: int
+) -> None:
+    argv = ["umbmark", "--errors", "eb=1.01", "--side", "1", "--runs", "1", "--max-emax", limit]
+    assert cli.main(argv) == code
+    out = capsys.readouterr().out
+    if code:
+        assert out.endswith("UMBmark: FAIL\n  - E_max,syst 43.5 mm exceeds --max-emax 40 mm\n")
+    else:
+        assert out.endswith("UMBmark: PASS\n")

@@ -60,3 +60,31 @@ def test_bad_input_is_one_line(tmp_path: Path, capsys) -> None:
     assert main(["vectors", "--out", str(tmp_path / "missing"), "--check"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1
+
+
+@pytest.mark.parametrize(
+    ("row", "column", "delta"), [(2, "x_q40_m", 1), (3, "heading_bam64", -1), (1, "right_count", 1)]
+)
+def test_an_edited_integer_in_a_csv_fails_the_check(
+    tmp_path: Path, capsys, row: int, column: str, delta: int
+) -> None:
+    assert main(["vectors", "--duration", "1", "--out", str(tmp_path)]) == 0
+    path = tmp_path / "big_steps.csv"
+    rows = vectors.read_csv(path)
+    rows[row][column] += delta
+    lines = [",".join(vectors.CSV_COLUMNS)] + [",".join(str(r[c]) for c in vectors.CSV_COLUMNS)
+                                               for r in rows]
+    path.write_text("\n".join(lines) + "\n")
+    capsys.readouterr()
+    assert main(["vectors", "--out", str(tmp_path), "--check"]) == 1
+    assert capsys.readouterr().out == "mismatch in: big_steps.csv\n"
+
+
+def test_a_missing_or_truncated_csv_fails_the_check(tmp_path: Path, capsys) -> None:
+    assert main(["vectors", "--duration", "1", "--out", str(tmp_path)]) == 0
+    (tmp_path / "straight.csv").unlink()
+    spin = tmp_path / "spin_in_place.csv"
+    spin.write_text("".join(spin.read_text().splitlines(keepends=True)[:-1]))  # a step less
+    capsys.readouterr()
+    assert main(["vectors", "--out", str(tmp_path), "--check"]) == 1
+    assert capsys.readouterr().out == "mismatch in: spin_in_place.csv, straight.csv\n"

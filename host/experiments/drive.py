@@ -33,6 +33,7 @@ from cantools.database.can import Message
 from cantools.database.namedsignalvalue import NamedSignalValue
 
 from odocan.host.io.logs import FrameCollector
+from odocan.host.judge.reference import Geometry, deltas_from_counts, integrate
 from odocan.host.protocol.commands import CommandEncoder, CommandRejected
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.board import TICK_S
@@ -48,6 +49,9 @@ BOOT_S = 0.2  # the odometry is OK (first encoder frames) before the first goal 
 SETTLE_S = 1.0  # after the last REACHED: the zero commands, then the motors' tail
 ACK_TIMEOUT_S = 0.5
 IntArray = npt.NDArray[np.int64]
+WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+RETURN_TOLERANCE_M = 0.01  # the firmware stops within 5 mm of a goal (POSITION_TOL), with margin
+ONBOARD_TOLERANCE_M = 1e-3  # on-board end vs float64 dead reckoning (the pose LSB is 0.1 mm)
 _FAILED = frozenset({"STOPPED", "ABORTED"})
 
 
@@ -285,3 +289,40 @@ class NavSession(Closing):
 def wrap_pi(angle_rad: float) -> float:
     """``angle_rad`` wrapped to [-pi, pi)."""
     return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def dead_reckon(
+    counts: tuple[IntArray, IntArray], geometry: Geometry, counter_bits: int,
+    integrator: str = "exact",
+) -> tuple[float, float]:
+    """(x, y) m where the float64 reference ends on the logged raw counters of a
+    ``counter_bits``-wide encoder, from the power-up pose 0: the wire carries the low
+    min(counter_bits, 24) bits, so the deltas wrap there (a 16-bit counter at 2^16)."""
+    bits = min(counter_bits, WIRE_COUNTER_BITS)
+    d_left = deltas_from_counts(counts[0], bits)
+    d_right = deltas_from_counts(counts[1], bits)
+    if d_left.size == 0:
+        return 0.0, 0.0
+    poses = integrate(d_left, d_right, geometry, integrator)
+    return float(poses.x_m[-1]), float(poses.y_m[-1])
+
+
+def drive_faults(
+    drive: DriveResult, goal: Waypoint, geometry: Geometry, counter_bits: int, integrator: str
+) -> list[str]:
+    """Why a drive's measurement cannot be trusted (empty: it can): the firmware did not end at
+    its last ``goal`` by its own odometry, or its on-board end departs from the float64
+    reference dead-reckoning the same logged counts with the firmware's ``geometry`` (then the
+    truth measures a wrong firmware, not the robot)."""
+    reasons = []
+    x_m, y_m = drive.onboard_end[0], drive.onboard_end[1]
+    away_m = math.hypot(x_m - goal.x_m, y_m - goal.y_m)
+    if away_m > RETURN_TOLERANCE_M:
+        reasons.append(f"the firmware stopped {away_m * 1e3:.1f} mm from its goal by its own "
+                       "odometry")
+    ref_x, ref_y = dead_reckon(drive.encoder_counts, geometry, counter_bits, integrator)
+    off_m = math.hypot(x_m - ref_x, y_m - ref_y)
+    if off_m > ONBOARD_TOLERANCE_M:
+        reasons.append(f"the on-board end is {off_m * 1e3:.1f} mm from the float64 reference on "
+                       "the same encoder counts (a wrong firmware)")
+    return reasons

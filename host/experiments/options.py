@@ -47,3 +47,15 @@ def write_report(path: Path | None, report: dict[str, object]) -> None:
     """Write ``report`` as indented JSON (nothing without ``--report``); an error names it."""
     if path is not None:
         write_text(path, json.dumps(report, indent=2) + "\n", "--report")
+
+
+def verdict(name: str, reasons: list[str]) -> int:
+    """Print the verdict (``NAME: PASS``, or ``NAME: FAIL`` and one ``  - reason`` line each) and
+    return the exit code: 0 PASS, 1 FAIL."""
+    if not reasons:
+        print(f"{name}: PASS")
+        return 0
+    print(f"{name}: FAIL")
+    for reason in reasons:
+        print(f"  - {reason}")
+    return 1

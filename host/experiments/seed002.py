@@ -28,16 +28,28 @@ floor frame (x along the marked line, y to its left, angles counter-clockwise po
   angle of the traced square's corner as it is measured on the floor (90 = a perfect left turn);
 * square, per run: ``side_m``, ``deviation_deg`` and ``turn_deg`` are the means over its four
   sides and three corners (each side and corner is also in the report).
+
+**Verdict** (``faults``): the tables measure the robot only if the firmware did its part, so the
+experiment passes when every run is valid (``drive.drive_faults``): the firmware ended at its
+last goal by its own odometry, and its on-board end agrees with the float64 reference
+dead-reckoning the run's logged encoder counts with the robot's nominal geometry.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-from odocan.host.experiments.drive import DriveResult, NavSession, Waypoint, wrap_pi
+from odocan.host.experiments.drive import (
+    DriveResult,
+    NavSession,
+    Waypoint,
+    drive_faults,
+    wrap_pi,
+)
 from odocan.host.experiments.seeding import run_rng, run_seed
+from odocan.host.judge.reference import Geometry
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.robot import RobotProfile
@@ -70,6 +82,7 @@ class StraightRun:
     distance_m: float
     deviation_deg: float
     misalignment_deg: float
+    faults: tuple[str, ...] = ()  # why the run cannot be trusted (empty: valid)
 
 
 @dataclass(frozen=True)
@@ -83,6 +96,7 @@ class SquareRun:
     sides_m: tuple[float, ...]
     deviations_deg: tuple[float, ...]
     turns_deg: tuple[float, ...]
+    faults: tuple[str, ...] = ()  # why the run cannot be trusted (empty: valid)
 
 
 @dataclass(frozen=True)
@@ -92,6 +106,12 @@ class Seed002Result:
     config: Seed002Config
     straight: tuple[StraightRun, ...]
     square: tuple[SquareRun, ...]
+
+    def faults(self) -> list[str]:
+        """Why the tables cannot be trusted: every invalid run's reasons (empty: PASS)."""
+        faults = [(k, "straight", run.faults) for k, run in enumerate(self.straight, start=1)]
+        faults += [(k, "square", run.faults) for k, run in enumerate(self.square, start=1)]
+        return [f"{table} run {k}: {reason}" for k, table, why in faults for reason in why]
 
 
 def straight_path() -> list[Waypoint]:
@@ -160,17 +180,24 @@ def run_seed002(config: Seed002Config) -> Seed002Result:
         raise ConfigurationError(f"--runs must be at least 1, got {config.runs}")
     if not (math.isfinite(config.misalign_deg) and 0.0 <= config.misalign_deg <= 45.0):
         raise ConfigurationError(f"--misalign must be 0 .. 45 degrees, got {config.misalign_deg}")
-    straight = tuple(
-        measure_straight(_drive(config, _STRAIGHT_CODE, i, straight_path()),
-                         _misalignment_rad(config, _STRAIGHT_CODE, i))
-        for i in range(config.runs)
-    )
-    square = tuple(
-        measure_square(_drive(config, _SQUARE_CODE, i, square_path()),
-                       _misalignment_rad(config, _SQUARE_CODE, i))
-        for i in range(config.runs)
-    )
-    return Seed002Result(config, straight, square)
+    straight = []
+    for i in range(config.runs):
+        drive = _drive(config, _STRAIGHT_CODE, i, straight_path())
+        run = measure_straight(drive, _misalignment_rad(config, _STRAIGHT_CODE, i))
+        straight.append(replace(run, faults=_faults(config, drive, straight_path())))
+    square = []
+    for i in range(config.runs):
+        drive = _drive(config, _SQUARE_CODE, i, square_path())
+        lap = measure_square(drive, _misalignment_rad(config, _SQUARE_CODE, i))
+        square.append(replace(lap, faults=_faults(config, drive, square_path())))
+    return Seed002Result(config, tuple(straight), tuple(square))
+
+
+def _faults(config: Seed002Config, drive: DriveResult, path: list[Waypoint]) -> tuple[str, ...]:
+    """``drive_faults`` of one run with the robot's nominal geometry (the firmware's)."""
+    robot = config.robot
+    return tuple(drive_faults(drive, path[-1], Geometry.of(robot), robot.counter_bits,
+                              config.integrator))
 
 
 def report(result: Seed002Result) -> dict[str, object]:

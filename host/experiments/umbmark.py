@@ -36,6 +36,16 @@ ideal square (the 0.5-degree turn tolerance corrected while driving).
 
 **Correction** (Borenstein's): the firmware's radii become r_L * 2/(E_d + 1) and
 r_R * 2 E_d/(E_d + 1) (the mean kept) and its wheelbase E_b * b, written over CAN.
+
+**Verdicts** (``faults``: the reasons a result cannot be trusted; empty = PASS). A benchmark is
+valid when, in every run, the firmware came back to the origin it navigated to (within
+``drive.RETURN_TOLERANCE_M`` by its own odometry) and its on-board end agrees with the float64
+reference dead-reckoning the same logged counts with the geometry the firmware had (within
+``drive.ONBOARD_TOLERANCE_M``): else the return errors measure a wrong firmware, not the robot. A
+calibration passes when both benchmarks are valid, the estimate is plausible (the model fit
+explains the true ends: RMS residual within FIT_RESIDUAL_FRACTION of E_max,syst before, plus
+FIT_RESIDUAL_FLOOR_M; both factors within PLAUSIBLE_RANGE) and the correction cuts E_max,syst by
+at least ``min_improvement``.
 """
 
 from __future__ import annotations
@@ -46,9 +56,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from odocan.host.experiments.drive import DriveResult, NavSession, Waypoint
+from odocan.host.experiments.drive import (
+    DriveResult,
+    NavSession,
+    Waypoint,
+    dead_reckon,
+    drive_faults,
+)
 from odocan.host.experiments.seeding import run_seed
-from odocan.host.judge.reference import Geometry, deltas_from_counts, integrate
+from odocan.host.judge.reference import Geometry
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.robot import RobotProfile
@@ -56,11 +72,14 @@ from odocan.sim.robot import RobotProfile
 DIRECTIONS = ("cw", "ccw")
 SIDE_M = 4.0
 RUNS_PER_DIRECTION = 5
-WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 _FIT_STEP = 1e-7  # finite-difference step of the Gauss-Newton Jacobian (dimensionless)
 _FIT_ITERATIONS = 20
 _FIT_TOLERANCE = 1e-12
 _EXPERIMENT_CODE = {"cw": 3, "ccw": 4}
+FIT_RESIDUAL_FRACTION = 0.1
+FIT_RESIDUAL_FLOOR_M = 0.005
+PLAUSIBLE_RANGE = (0.5, 2.0)  # the error model's own range of E_d and E_b
+MIN_IMPROVEMENT = 2.0  # calibrate's default: E_max,syst at least halved
 
 
 @dataclass(frozen=True)
@@ -114,6 +133,7 @@ class UmbmarkResult:
 
     side_m: float
     runs: tuple[UmbmarkRun, ...]
+    geometry: Correction | None = None  # written to the firmware (None: the profile's)
 
     def of(self, direction: str) -> list[UmbmarkRun]:
         """The runs of one direction ("cw" or "ccw")."""
@@ -180,14 +200,13 @@ def borenstein(
     return BorensteinEstimate(alpha, beta, radius, (radius + half_b) / (radius - half_b), eb)
 
 
-def dead_reckoned_end(counts: tuple[np.ndarray, np.ndarray], geometry: Geometry) -> np.ndarray:
-    """(x, y) m where the float64 reference (exact arcs) ends on the logged raw counters."""
-    d_left = deltas_from_counts(counts[0], WIRE_COUNTER_BITS)
-    d_right = deltas_from_counts(counts[1], WIRE_COUNTER_BITS)
-    if d_left.size == 0:
-        return np.zeros(2)
-    poses = integrate(d_left, d_right, geometry, "exact")
-    return np.array([poses.x_m[-1], poses.y_m[-1]])
+def dead_reckoned_end(
+    counts: tuple[np.ndarray, np.ndarray], geometry: Geometry, counter_bits: int
+) -> np.ndarray:
+    """(x, y) m where the float64 reference (exact arcs) ends on the logged raw counters of a
+    ``counter_bits``-wide encoder (``drive.dead_reckon``: deltas wrap at min(counter_bits, 24)
+    bits, what the wire carries)."""
+    return np.array(dead_reckon(counts, geometry, counter_bits))
 
 
 def candidate_geometry(robot: RobotProfile, base: Correction, ed: float, eb: float) -> Geometry:
@@ -205,7 +224,8 @@ def _residuals(
     """True end minus dead-reckoned end, every run, flattened (m)."""
     geometry = candidate_geometry(robot, base, float(p[0]), float(p[1]))
     out = [
-        np.array([d.end.x_m, d.end.y_m]) - dead_reckoned_end(d.encoder_counts, geometry)
+        np.array([d.end.x_m, d.end.y_m])
+        - dead_reckoned_end(d.encoder_counts, geometry, robot.counter_bits)
         for d in drives
     ]
     return np.concatenate(out)
@@ -275,7 +295,22 @@ def run_umbmark(
                 )
             drive = session.drive(square_path(side_m, direction), square_timeout_s(side_m))
         runs.append(UmbmarkRun(direction, *return_error(drive), drive))
-    return UmbmarkResult(side_m, tuple(runs))
+    return UmbmarkResult(side_m, tuple(runs), geometry)
+
+
+def faults(result: UmbmarkResult, robot: RobotProfile) -> list[str]:
+    """Why the benchmark's return errors cannot be trusted (module docstring, ``drive_faults``
+    of every run: back at the origin, on-board end = float64 reference); empty when valid."""
+    firmware = result.geometry or Correction.nominal(robot)
+    geometry = Geometry(robot.counts_per_rev, firmware.wheel_radius_left_m,
+                        firmware.wheel_radius_right_m, firmware.wheelbase_m)
+    reasons = []
+    for direction in DIRECTIONS:
+        for k, run in enumerate(result.of(direction), start=1):
+            goal = square_path(result.side_m, direction)[-1]
+            for reason in drive_faults(run.drive, goal, geometry, robot.counter_bits, "exact"):
+                reasons.append(f"{direction.upper()} run {k}: {reason}")
+    return reasons
 
 
 METHODS = ("model", "borenstein")
@@ -293,6 +328,7 @@ class Calibration:
     nominal: Correction
     corrected: Correction
     after: UmbmarkResult
+    fit_residual_m: float = 0.0  # RMS of true end - dead-reckoned end at the model fit
 
     @property
     def estimated(self) -> tuple[float, float]:
@@ -320,13 +356,44 @@ def calibrate(
     nominal = Correction.nominal(robot)
     estimate = borenstein(before.cg("cw"), before.cg("ccw"), side_m, robot.wheelbase_m)
     start = (estimate.ed, estimate.eb) if _plausible(estimate.ed, estimate.eb) else (1.0, 1.0)
-    fitted = model_fit(robot, nominal, [r.drive for r in before.runs], start)
+    drives = [r.drive for r in before.runs]
+    fitted = model_fit(robot, nominal, drives, start)
+    residual = _residuals(robot, nominal, drives, np.array(fitted))
+    fit_residual_m = float(np.sqrt(np.mean(residual * residual)) * math.sqrt(2.0))
     chosen = (estimate.ed, estimate.eb) if method == "borenstein" else fitted
     corrected = nominal.corrected(*chosen)
     after = run_umbmark(
         robot, errors, seed, side_m=side_m, runs_per_direction=runs, geometry=corrected, phase=1
     )
-    return Calibration(before, estimate, fitted, method, nominal, corrected, after)
+    return Calibration(
+        before, estimate, fitted, method, nominal, corrected, after, fit_residual_m
+    )
+
+
+def calibration_faults(
+    cal: Calibration, robot: RobotProfile, min_improvement: float = MIN_IMPROVEMENT
+) -> list[str]:
+    """Why the calibration failed (module docstring); empty when it passed."""
+    reasons = [f"before: {r}" for r in faults(cal.before, robot)]
+    reasons += [f"after: {r}" for r in faults(cal.after, robot)]
+    ed, eb = cal.estimated
+    low, high = PLAUSIBLE_RANGE
+    if not all(math.isfinite(v) and low <= v <= high for v in (ed, eb)):
+        reasons.append(f"implausible estimate E_d {ed:.6g}, E_b {eb:.6g} (outside {low}..{high})")
+    limit_m = FIT_RESIDUAL_FRACTION * cal.before.emax_m + FIT_RESIDUAL_FLOOR_M
+    if cal.fit_residual_m > limit_m:
+        reasons.append(
+            f"implausible estimate: the model fit leaves {cal.fit_residual_m * 1e3:.1f} mm RMS "
+            f"between the true and the dead-reckoned ends (more than {limit_m * 1e3:.1f} mm): "
+            "the errors are beyond what the fit explains"
+        )
+    before, after = cal.before.emax_m, cal.after.emax_m
+    if not after * min_improvement <= before:
+        reasons.append(
+            f"the correction does not cut E_max,syst {min_improvement:g}x "
+            f"({before * 1e3:.1f} mm -> {after * 1e3:.1f} mm)"
+        )
+    return reasons
 
 
 def _plausible(ed: float, eb: float) -> bool:
@@ -372,7 +439,8 @@ def calibration_report(cal: Calibration, errors: ErrorModel) -> dict[str, object
         "borenstein": {"alpha_deg": math.degrees(b.alpha_rad), "beta_deg": math.degrees(b.beta_rad),
                        "radius_m": b.radius_m if math.isfinite(b.radius_m) else None,
                        "ed": b.ed, "eb": b.eb},
-        "model": {"ed": cal.model[0], "eb": cal.model[1]},
+        "model": {"ed": cal.model[0], "eb": cal.model[1],
+                  "fit_residual_rms_m": cal.fit_residual_m},
         "nominal": _geometry(cal.nominal),
         "corrected": _geometry(cal.corrected),
         "emax_before_m": cal.before.emax_m,

@@ -14,13 +14,17 @@ check and align millions of frames with numpy instead of one ``can.Message`` at 
 * anything else python-can reads (``.asc``, ``.blf``, ``.trc``, ``.csv``, ...): ``can.LogReader``.
 
 Every problem a person can cause (a missing file, a malformed line, an empty log) is a one-line
-``LogFormatError``.
+``LogFormatError``. One exception: a ``.log`` whose last line has no newline and is incomplete (a
+recorder killed mid-line leaves one: it does not parse, or carries fewer data bytes than the
+other frames of its ID) is read without that line, with a one-line warning that counts it.
 """
 
 from __future__ import annotations
 
 import re
+import sys
 from array import array
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -139,11 +143,17 @@ def empty_frames() -> FrameArrays:
     )
 
 
-def read_log(path: str | Path) -> FrameArrays:
+def warn_on_stderr(message: str) -> None:
+    """Print ``warning: MESSAGE`` on stderr (the CLI's one-line style)."""
+    print(f"warning: {message}", file=sys.stderr)
+
+
+def read_log(path: str | Path, *, warn: Callable[[str], None] = warn_on_stderr) -> FrameArrays:
     """Read a CAN log (``.log`` candump by the fast parser, anything else via ``can.LogReader``).
 
     Raises ``LogFormatError`` (one line) for a missing or unreadable file, a malformed line (named
-    ``LOG:LINE``), a frame of more than 8 bytes, or a log without a single frame.
+    ``LOG:LINE``), a frame of more than 8 bytes, or a log without a single frame. A partial last
+    line of a ``.log`` (module docstring) is skipped and reported through ``warn``.
     """
     path = Path(path)
     if not path.is_file():
@@ -153,12 +163,43 @@ def read_log(path: str | Path) -> FrameArrays:
             content = path.read_bytes()
         except OSError as exc:
             raise LogFormatError(f"{path}: cannot read: {exc.strerror or exc}") from None
+        content, skipped = _without_partial_last_line(content)
         frames = parse_candump(content, str(path))
+        if skipped:
+            line = content.count(b"\n") + 1
+            warn(
+                f"{path}: skipped {skipped} partial line at the end (line {line}, cut mid-line: "
+                "a recorder killed while writing?)"
+            )
     else:
         frames = _read_with_python_can(path)
     if len(frames) == 0:
         raise LogFormatError(f"{path}: empty log (not a single CAN frame)")
     return frames
+
+
+def _without_partial_last_line(content: bytes) -> tuple[bytes, int]:
+    """``content`` less its last line when that line has no newline and is incomplete (it does
+    not parse, or has fewer data bytes than the earlier frames of its ID); and the lines skipped
+    (0 or 1)."""
+    cut = content.rfind(b"\n") + 1
+    tail = content[cut:]
+    if not tail.strip():
+        return content, 0
+    try:
+        msg = parse_candump_line(tail)
+    except LogFormatError:
+        return content[:cut], 1
+    if msg is None or msg.is_error_frame or msg.is_remote_frame:
+        return content, 0
+    head = content[:cut]
+    token = f" {msg.arbitration_id:0{8 if msg.is_extended_id else 3}X}#"
+    before = max(head.rfind(token.encode()), head.rfind(token.lower().encode()))
+    if before < 0:
+        return content, 0
+    line_end = head.find(b"\n", before)
+    line = head[before : line_end if line_end >= 0 else len(head)].split(b"#", 1)[1].split()[0]
+    return (content[:cut], 1) if len(line) > 2 * len(msg.data) else (content, 0)
 
 
 def _read_with_python_can(path: Path) -> FrameArrays:

@@ -16,11 +16,27 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    three parts (X, Y, HEADING) naming one encoder frame make one truth sample.
 4. **Reference**: ``host.reference.integrate`` over the count deltas of the accepted encoder frames
    (mod 2^min(counter_bits, 24), what the wire carries), started at the first on-board sample.
-   The start pose is that sample's, to below its resolution: the on-board values are rounded to
-   0.1 mm and 2 pi/65536 rad, so the start is chosen inside the first sample's rounding interval
-   where the intervals of the following samples (minus the reference's own increments) overlap.
-   That keeps a log starting mid-drive within half an LSB of the firmware instead of carrying the
-   start's rounding (up to 4.8e-5 rad of heading, 0.5 mm after 10 m) along the whole drive.
+   The start pose is exact when the log starts at power-up: the firmware starts at pose 0 on the
+   first encoder frame it accepts, so a log whose first on-board sample names its first accepted
+   encoder frame, reads exactly 0 (X, Y, HEADING, TURNS) and whose first ODOM_STATUS summary says
+   UPTIME 0 starts the reference at exactly (0, 0, 0) -- provided, when the log has one, that the
+   first ODOM_STATUS page of encoder E2E counts says the firmware had accepted exactly the log's
+   encoder frames (it primed on the log's first: a recorder started late is not a power-up). The
+   exact start is not checked against the samples: a wrong firmware drifting from the start must
+   be judged from it, not from a start fitted to its drift. Without that page, a recorder
+   started in the firmware's first second after the robot moved less than half an LSB would be
+   taken for a power-up. Any other log (mid-drive) has its start fitted to below its resolution: the
+   on-board values are rounded to 0.1 mm and 2 pi/65536 rad, so the start heading is the middle
+   of the overlap of the heading intervals of *every* sample of the log (less the reference's
+   own increments): N samples at varied headings
+   pin it to about 2^-16 turn / N. The heading error rotates the whole reference about the start,
+   so on a drive with little heading variation (a long straight) the rotation is then taken from
+   the positions of all samples (least squares, each segment between gaps of the encoder
+   sequence with an offset of its own, see step 4's gaps below), never leaving the heading overlap:
+   a rotation the heading samples allow is one the log cannot tell from a different start. The
+   start position is the middle of the overlap of the first samples' position intervals.
+   Without that, a start heading off by its residual (7e-8 rad) grows as residual x distance,
+   enough to fail a correct firmware after 600 m.
 5. **Errors**: position errors are Euclidean distances (m), heading errors wrapped to [-pi, pi).
    On-board vs reference at every on-board sample; on-board vs truth at every truth sample that
    has an on-board sample of the same encoder frame.
@@ -52,6 +68,7 @@ POSITION_LSB_M = 1e-4  # X, Y: 0.1 mm
 HEADING_LSB_RAD = 2 * math.pi / 65536  # HEADING: BAM16
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 START_FIT_SAMPLES = 256  # on-board samples used to place the reference start (5 s at 50 Hz)
+ENC_E2E_PAGE = 2  # ODOM_STATUS page with the firmware's WHEEL_ENCODERS E2E counts
 REQUIRED = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y")
 
 FloatArray = npt.NDArray[np.float64]
@@ -95,6 +112,8 @@ class _Encoders:
     seq: IntArray  # the sender's sequence number (COUNTER unwrapped), strictly increasing
     left: IntArray  # LEFT_COUNT (wire, 24 bits)
     right: IntArray
+    timestamp_s: FloatArray
+    cycle_s: float | None  # the DBC cycle time
 
 
 @dataclass(frozen=True)
@@ -133,7 +152,8 @@ def analyze(
     enc = _encoders(frames, accepted, decoder)
     onboard, unmatched = _onboard_samples(frames, accepted, decoder, enc)
     truth = _truth_samples(frames, accepted, decoder, enc)
-    ref_all = _reference(enc, onboard, robot, integrator)
+    power_up = _starts_at_power_up(frames, accepted, decoder, onboard)
+    ref_all = _reference(enc, onboard, robot, integrator, power_up=power_up)
     ref = ref_all.at(onboard.enc)
     pos_err, head_err = _errors(onboard, ref)
     vs_ref = _summary(pos_err, head_err)
@@ -149,6 +169,7 @@ def analyze(
         "robot": _robot_dict(robot),
         "integrator": integrator,
         "integrator_source": source,
+        "reference_start": "power-up" if ref_all.exact_start else "fitted",
         "scenario": scenario,
         "seed": seed,
         "sim_seconds": _covered_s(frames, db),
@@ -273,6 +294,7 @@ def _encoders(
     return _Encoders(
         index=enc["index"], counter=counter, seq=seq,
         left=enc["LEFT_COUNT"].astype(np.int64), right=enc["RIGHT_COUNT"].astype(np.int64),
+        timestamp_s=enc["timestamp_s"], cycle_s=cycle_s,
     )
 
 
@@ -282,12 +304,20 @@ def contract_cycle_s(decoder: BulkDecoder, name: str) -> float | None:
     return cycle_ms / 1000.0 if cycle_ms else None
 
 
-def match_encoder(enc: _Encoders, index: IntArray, enc_counter: IntArray) -> IntArray:
-    """For frames at ``index`` naming ``enc_counter``: the encoder frame named (index into
-    ``enc``), -1 where it is not among the accepted encoder frames (module docstring, step 3)."""
+def match_encoder(
+    enc: _Encoders, index: IntArray, enc_counter: IntArray, timestamp_s: FloatArray
+) -> IntArray:
+    """For frames at ``index`` (sent at ``timestamp_s``) naming ``enc_counter``: the encoder
+    frame named (index into ``enc``), -1 where it is not among the accepted encoder frames
+    (module docstring, step 3). The latest accepted encoder frame must be less than 8 cycles
+    older than the naming frame: else the frame named (-8..+7 from it) cannot be told from one
+    16 cycles away (after a gap of 16 frames, E2E refuses the next as a repetition)."""
     latest = np.searchsorted(enc.index, index) - 1
     result = np.full(len(index), -1, dtype=np.int64)
     has = latest >= 0
+    if enc.cycle_s is not None:
+        age_s = timestamp_s - enc.timestamp_s[np.maximum(latest, 0)]
+        has &= age_s < 8 * enc.cycle_s
     latest = latest[has]
     offset = ((enc_counter[has] - enc.counter[latest] + 8) & 0xF) - 8
     target = enc.seq[latest] + offset
@@ -309,8 +339,8 @@ def _onboard_samples(
     """On-board samples (X and Y frames of one encoder frame); and the poses left unmatched."""
     px = _accepted(frames, accepted, decoder, "ODOM_POSE_X")
     py = _accepted(frames, accepted, decoder, "ODOM_POSE_Y")
-    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"])
-    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"])
+    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"], px["timestamp_s"])
+    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"], py["timestamp_s"])
     unmatched = int(np.count_nonzero(ex < 0) + np.count_nonzero(ey < 0))
     ux, fx = _first_per_encoder(ex)
     uy, fy = _first_per_encoder(ey)
@@ -345,7 +375,9 @@ def _truth_samples(
     found = []
     for p in parts:
         keep = accepted[p["index"]]
-        named = match_encoder(enc, p["index"][keep], p["ENC_COUNTER"][keep])
+        named = match_encoder(
+            enc, p["index"][keep], p["ENC_COUNTER"][keep], p["timestamp_s"][keep]
+        )
         uniq, first = _first_per_encoder(named)
         found.append((uniq, np.flatnonzero(keep)[first]))
     common = np.intersect1d(np.intersect1d(found[0][0], found[1][0]), found[2][0])
@@ -379,17 +411,59 @@ class _Reference:
     heading_rad: FloatArray
     distance_m: FloatArray
     restarts: int = 0  # gaps in the encoder sequence where the position was placed again
+    exact_start: bool = False  # started at the power-up pose (0, 0, 0), not fitted
 
     def at(self, enc: IntArray) -> _Reference:
         """The reference at the encoder frames ``enc`` (all >= start)."""
         k = enc - self.start
         return _Reference(
             self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
-            self.restarts,
+            self.restarts, self.exact_start,
         )
 
 
-def _reference(enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator: str) -> _Reference:
+def _starts_at_power_up(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, onboard: _Poses
+) -> bool:
+    """The log starts at the firmware's power-up (module docstring, step 4): its first on-board
+    sample names the first accepted encoder frame and reads exactly 0, and the first accepted
+    ODOM_STATUS summary says UPTIME 0."""
+    if int(onboard.enc[0]) != 0 or int(onboard.heading_raw[0]) != 0:
+        return False
+    if onboard.x_m[0] != 0.0 or onboard.y_m[0] != 0.0 or onboard.heading_rad[0] != 0.0:
+        return False
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
+    except DecodeError:
+        return False
+    if "UPTIME" not in page:
+        return False
+    uptime = page["UPTIME"][accepted[page["index"]]]
+    return len(uptime) > 0 and int(uptime[0]) == 0 and _saw_only_the_log(frames, accepted, decoder)
+
+
+def _saw_only_the_log(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
+) -> bool:
+    """Whether the firmware had accepted exactly the log's encoder frames when it sent its first
+    ODOM_STATUS page of WHEEL_ENCODERS E2E counts (ENC_E2E_OK): then it primed on the log's first
+    encoder frame. True when the log has no such page (other firmwares need not send it)."""
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+    except DecodeError:
+        return True
+    if "ENC_E2E_OK" not in page or not accepted[page["index"]].any():
+        return True
+    keep = accepted[page["index"]]
+    first, ok = int(page["index"][keep][0]), int(page["ENC_E2E_OK"][keep][0])
+    encoders = decoder.select(frames, "WHEEL_ENCODERS")
+    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < first)))
+    return ok == in_log & 0xFFFF
+
+
+def _reference(
+    enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator: str, *, power_up: bool
+) -> _Reference:
     """Integrate the encoder deltas from the first on-board sample on."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     e0 = int(onboard.enc[0])
@@ -402,8 +476,9 @@ def _reference(enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator:
     rel_h = np.concatenate((zero, rel.heading_rad))
     at = onboard.enc - e0
     segment = np.concatenate(([0], np.cumsum(np.diff(enc.seq[e0:]) > 1)))
-    in_first = int(np.searchsorted(segment[at], 1))  # samples before the first gap
-    x0, y0, h0 = _start_pose(onboard, rel_x[at], rel_y[at], rel_h[at], in_first)
+    x0, y0, h0, exact = _start_pose(
+        onboard, _Relative(rel_x[at], rel_y[at], rel_h[at], segment[at]), power_up=power_up
+    )
     cos0, sin0 = math.cos(h0), math.sin(h0)
     x_m = x0 + cos0 * rel_x - sin0 * rel_y
     y_m = y0 + sin0 * rel_x + cos0 * rel_y
@@ -416,6 +491,7 @@ def _reference(enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator:
         heading_rad=h0 + rel_h,
         distance_m=np.concatenate((zero, rel.distance_m)),
         restarts=int(segment[-1]),
+        exact_start=exact,
     )
 
 
@@ -440,25 +516,72 @@ def _segment_offsets(segment: IntArray, at: IntArray, error: FloatArray) -> Floa
     return result
 
 
+@dataclass(frozen=True)
+class _Relative:
+    """The reference's increments from the start to each on-board sample."""
+
+    x_m: FloatArray
+    y_m: FloatArray
+    heading_rad: FloatArray
+    segment: IntArray  # gaps of the encoder sequence before the sample
+
+
 def _start_pose(
-    onboard: _Poses, rel_x: FloatArray, rel_y: FloatArray, rel_h: FloatArray, in_first: int
-) -> tuple[float, float, float]:
-    """The first on-board pose, de-rounded: inside its rounding interval, where the intervals of
-    the first ``START_FIT_SAMPLES`` samples (less the reference's increments) overlap. The
-    position uses only the ``in_first`` samples before the first gap of the encoder sequence
-    (the heading, exact across gaps, uses them all)."""
-    n = min(START_FIT_SAMPLES, len(onboard.enc))
+    onboard: _Poses, rel: _Relative, *, power_up: bool
+) -> tuple[float, float, float, bool]:
+    """The start pose (x m, y m, unwrapped heading rad) and whether it is the exact power-up pose
+    (module docstring, step 4). The position uses only the samples before the first gap of the
+    encoder sequence (the heading, exact across gaps, uses them all)."""
+    n_first = max(1, int(np.searchsorted(rel.segment, 1)))
     h_first = onboard.heading_raw[0] * HEADING_LSB_RAD
-    offsets = _wrap_pi(onboard.heading_raw[:n] * HEADING_LSB_RAD - rel_h[:n] - h_first)
-    h0 = h_first + _overlap_mid(offsets, HEADING_LSB_RAD)
-    n = max(1, min(n, in_first))
+    offsets = _wrap_pi(onboard.heading_raw * HEADING_LSB_RAD - rel.heading_rad - h_first)
+    lo = float(np.max(offsets)) - 0.5 * HEADING_LSB_RAD
+    hi = float(np.min(offsets)) + 0.5 * HEADING_LSB_RAD
+    if power_up:
+        return 0.0, 0.0, 0.0, True
+    if lo <= hi:  # consistent: the middle of the whole log's overlap, refined by the positions
+        dh = 0.5 * (lo + hi)
+        dh += _rotation_fit(onboard, rel, h_first + dh, (lo - dh, hi - dh))
+    else:  # the samples disagree (a wrong firmware): place it on the first samples only
+        dh = _overlap_mid(offsets[:START_FIT_SAMPLES], HEADING_LSB_RAD)
+    h0 = h_first + dh
+    n = min(START_FIT_SAMPLES, n_first)
     cos0, sin0 = math.cos(h0), math.sin(h0)
-    px = cos0 * rel_x[:n] - sin0 * rel_y[:n]
-    py = sin0 * rel_x[:n] + cos0 * rel_y[:n]
+    px = cos0 * rel.x_m[:n] - sin0 * rel.y_m[:n]
+    py = sin0 * rel.x_m[:n] + cos0 * rel.y_m[:n]
     x0 = onboard.x_m[0] + _overlap_mid(onboard.x_m[:n] - px - onboard.x_m[0], POSITION_LSB_M)
     y0 = onboard.y_m[0] + _overlap_mid(onboard.y_m[:n] - py - onboard.y_m[0], POSITION_LSB_M)
     turns = math.floor((onboard.heading_rad[0] - h_first) / (2 * math.pi) + 0.5)
-    return float(x0), float(y0), float(h0 + turns * 2 * math.pi)
+    return float(x0), float(y0), float(h0 + turns * 2 * math.pi), False
+
+
+def _rotation_fit(
+    onboard: _Poses, rel: _Relative, h0: float, bounds: tuple[float, float]
+) -> float:
+    """The small rotation (rad) of the reference about the start that best fits the on-board
+    positions (least squares over every sample, each segment between gaps of the encoder
+    sequence with a position offset of its own), kept within ``bounds``. Linearised:
+    R(h0 + d) q = R(h0) q + d (-q_y, q_x)."""
+    cos0, sin0 = math.cos(h0), math.sin(h0)
+    qx = cos0 * rel.x_m - sin0 * rel.y_m
+    qy = sin0 * rel.x_m + cos0 * rel.y_m
+    bx = onboard.x_m - onboard.x_m[0] - qx
+    by = onboard.y_m - onboard.y_m[0] - qy
+    # normal equations of [1 0 -qy; 0 1 qx] (x_s, y_s, d) = (bx, by): offsets eliminated
+    qx_c, qy_c, bx_c, by_c = (_centred(v, rel.segment) for v in (qx, qy, bx, by))
+    spread = float(np.dot(qx_c, qx_c) + np.dot(qy_c, qy_c))
+    if spread <= (POSITION_LSB_M * POSITION_LSB_M) * len(qx):  # no lever arm: nothing to learn
+        return 0.0
+    d = float(np.dot(qx_c, by_c) - np.dot(qy_c, bx_c)) / spread
+    return min(max(d, bounds[0]), bounds[1])
+
+
+def _centred(values: FloatArray, segment: IntArray) -> FloatArray:
+    """``values`` less the mean of their segment."""
+    sums = np.bincount(segment, weights=values)
+    counts = np.maximum(np.bincount(segment), 1)
+    centred: FloatArray = values - (sums / counts)[segment]
+    return centred
 
 
 def _overlap_mid(offsets: FloatArray, lsb: float, *, base: bool = False) -> float:
@@ -630,7 +753,9 @@ def check_twist(
     }
     if not keep.any():
         return result
-    e = match_encoder(enc, twist["index"][keep], twist["ENC_COUNTER"][keep].astype(np.int64))
+    index = twist["index"][keep]
+    e = match_encoder(enc, index, twist["ENC_COUNTER"][keep].astype(np.int64),
+                      frames.timestamp_s[index])
     ok = (e >= 0) & (e >= np.maximum.accumulate(e))
     e = e[ok]
     linear = twist["LINEAR_VEL"][keep][ok] * TWIST_LSB

@@ -181,12 +181,40 @@ def read_csv(path: Path) -> list[dict[str, int]]:
 
 def verify(vector_set: dict[str, Any]) -> list[str]:
     """Re-run the current firmware on every case; the names of the cases that differ."""
-    params = RobotParams(**vector_set["params"])
-    if validate(params) != 0:
-        raise ConfigurationError("the vector file's parameters are invalid")
+    params = _params(vector_set)
     mismatched = []
     for case in vector_set["cases"]:
         counts = [(r["left_count"], r["right_count"]) for r in case["rows"]]
         if run_case(params, Case(case["name"], "", counts)) != case["rows"]:
             mismatched.append(case["name"])
     return mismatched
+
+
+def verify_csv(vector_set: dict[str, Any], out_dir: Path) -> list[str]:
+    """Re-run the current firmware on the counts of every case's CSV in ``out_dir`` (what a C
+    port most likely reads); the names of the CSV files that differ, are missing or unreadable.
+    Each must also hold the same rows as the JSON (a CSV cannot silently drop or add steps)."""
+    params = _params(vector_set)
+    mismatched = []
+    for case in vector_set["cases"]:
+        path = out_dir / f"{case['name']}.csv"
+        try:
+            rows = read_csv(path)
+        except VectorFormatError:
+            mismatched.append(path.name)
+            continue
+        counts = [(r.get("left_count", 0), r.get("right_count", 0)) for r in rows]
+        if rows != run_case(params, Case(case["name"], "", counts)) or rows != case["rows"]:
+            mismatched.append(path.name)
+    return mismatched
+
+
+def _params(vector_set: dict[str, Any]) -> RobotParams:
+    """The firmware configuration of a vector set (validated)."""
+    try:
+        params = RobotParams(**vector_set["params"])
+    except (KeyError, TypeError) as exc:
+        raise VectorFormatError(f"not an odocan vector set: bad params ({exc})") from None
+    if validate(params) != 0:
+        raise ConfigurationError("the vector file's parameters are invalid")
+    return params

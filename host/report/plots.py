@@ -211,7 +211,8 @@ def _draw_error_column(
     ref_seq = series["onboard_seq"]
     rows = (
         (truth_x, series.get("truth_position_error_m"), truth_seq, 1e3, "mm", _TRUTH, None),
-        (truth_x, series.get("truth_heading_error_unwrapped_rad"), truth_seq, 1e3, "mrad", _TRUTH, None),
+        (truth_x, series.get("truth_heading_error_unwrapped_rad"), truth_seq, 1e3, "mrad",
+         _TRUTH, None),
         (ref_x, series["position_error_m"], ref_seq, 1e3, "mm", _ONBOARD, tolerance.position_m),
         (ref_x, series["heading_error_unwrapped_rad"], ref_seq, 1e3, "mrad", _ONBOARD,
          tolerance.heading_rad),

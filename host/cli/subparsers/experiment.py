@@ -2,8 +2,10 @@
 
 10 x 1 m straight and 10 laps of the 80 cm square (``host.experiments.seed002``), each run a
 fresh robot in the closed-loop lockstep rig under ``--errors`` and a seeded start misalignment
-(``--misalign``, the std in degrees); the tables are measured from the ground truth. Exit 0, or 2
-on bad usage.
+(``--misalign``, the std in degrees); the tables are measured from the ground truth. Verdict:
+PASS when every run is valid (``Seed002Result.faults``: the firmware at its goal by its own
+odometry, its on-board end = the float64 reference on the logged counts). Exit 0 PASS, 1 FAIL
+(the reasons printed), 2 on bad usage.
 """
 
 from __future__ import annotations
@@ -12,7 +14,12 @@ import argparse
 
 from odocan.host.cli.options import float_in
 from odocan.host.experiments import render, seed002
-from odocan.host.experiments.options import add_common_arguments, check_report_path, write_report
+from odocan.host.experiments.options import (
+    add_common_arguments,
+    check_report_path,
+    verdict,
+    write_report,
+)
 from odocan.host.experiments.outputs import experiment_inputs
 from odocan.host.report.ci import (
     add_junit_argument,
@@ -72,8 +79,9 @@ def _do_experiment(args: argparse.Namespace) -> int:
         "ground truth, deviations positive to the left"
     )
     render.show(render.straight_table(result), render.square_table(result))
-    report = {**seed002.report(result), "inputs": experiment_inputs(
-        config.robot, args, integrator=config.integrator)}
+    reasons = result.faults()
+    report = {**seed002.report(result), "passed": not reasons, "faults": reasons,
+              "inputs": experiment_inputs(config.robot, args, integrator=config.integrator)}
     write_report(args.report, report)
     write_checks(args, "experiment", experiment_checks(report))
-    return 0
+    return verdict("seed002", reasons)

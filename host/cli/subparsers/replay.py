@@ -15,6 +15,16 @@ poses with the ones in the log at the same encoder frames (identical for the sam
 ``--log OUT`` writes the replayed bus. The integrator defaults to the one the log's ODOM_STATUS
 reports (else exact); Ctrl-C stops early and checks what ran.
 
+**Verdict.** PASS needs both: the replayed firmware within ``--tolerance`` of its float64
+reference (as ``odocan run``), and within ``--tolerance`` of the firmware that recorded the log
+(the logged on-board poses at the same encoder frames; positions up to the log's first gap of the
+encoder sequence, since across a gap the recording firmware may have had frames the log lacks,
+headings everywhere, since they are exact across gaps). When the replay departs, the cause is
+looked for by name (``diagnose``): the integrator the log's ODOM_STATUS reports against the one
+replayed, and which robot profile (the one given and every shipped one) the logged poses fit
+(``analyze`` of the log itself, no replay: the profile whose float64 odometry of the logged
+counts the logged poses follow within tolerance).
+
 **Real time** (``--realtime -i ... -c ...``): play the log's frames (``--only`` some messages)
 onto a live bus with their original timing relative to the first frame, ``--speed`` times
 faster; error frames are not sent. Ctrl-C stops cleanly (exit 0).
@@ -48,7 +58,7 @@ from odocan.host.io.logs import (
     FrameCollector,
     read_log,
 )
-from odocan.host.judge.analysis import Analysis, analyze
+from odocan.host.judge.analysis import Analysis, Tolerance, analyze
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
 from odocan.host.report.ci import (
@@ -59,14 +69,19 @@ from odocan.host.report.ci import (
 )
 from odocan.host.report.outputs import OutputError
 from odocan.host.report.progress import Progress, progress
-from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
+from odocan.host.report.summary import (
+    add_check_arguments,
+    check_output_paths,
+    finish,
+    write_report,
+)
 from odocan.sim import contract, robot
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.clock import LockstepClock
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import INTEGRATORS, firmware_params
-from odocan.sim.robot import RobotProfile
+from odocan.sim.robot import RobotProfile, list_profiles
 
 POLL_S = 0.1  # --realtime: a stop request is seen within this while waiting for a frame's time
 SPEED_MAX = 1000.0  # --speed: faster than that, the timing is no longer worth keeping
@@ -126,10 +141,23 @@ def _do_replay(args: argparse.Namespace) -> int:
     feed = ReplayInput.from_log(frames)
     integrator = args.integrator or logged_integrator(frames, feed.accepted) or "exact"
     analysis = _replay_and_analyze(frames, feed, profile, integrator, args)
-    _print_versus_log(analysis.report["replay"])
+    section = analysis.report["replay"]
+    _print_versus_log(section)
     analysis.report["inputs"] = log_inputs(args.log, profile, integrator, None)
+    reasons = departures(section["onboard_vs_log"], args.tolerance)
+    if reasons:
+        reasons += diagnose(frames, feed.accepted, profile, integrator, args.tolerance)
+    section.update(passed=not reasons, faults=reasons)
     title = f"odocan replay: {args.log} on {profile.name}, {integrator} integrator"
-    code = finish(analysis, args, title=title)
+    code = finish(analysis, args, title=title)  # prints the run's verdict (vs the reference)
+    if reasons:
+        analysis.report["passed"] = analysis.passed = False
+        if args.report is not None:
+            write_report(analysis.report, args.report)
+        print("FAIL: the replayed firmware departs from the log's")
+        for reason in reasons:
+            print(f"  - {reason}")
+        code = 1
     write_checks(args, "replay", analysis_checks(analysis.report))
     return code
 
@@ -407,17 +435,80 @@ def versus_log(
     common = sorted(old.keys() & new.keys())
     if not common:
         return {"samples": 0, "identical": 0, "max_position_diff_m": None,
-                "max_heading_diff_rad": None}
+                "max_heading_diff_rad": None, "before_first_gap": 0,
+                "max_position_diff_before_gap_m": None}
     a = np.array([old[t] for t in common], dtype=np.int64)
     b = np.array([new[t] for t in common], dtype=np.int64)
     position = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]) * POSITION_LSB_M
     heading = np.abs(a[:, 2] - b[:, 2]) * HEADING_LSB_RAD
+    ticks = EncoderTrack.of(log, log_accepted, BulkDecoder(contract.database())).tick
+    gaps = np.flatnonzero(np.diff(ticks) > 1)
+    first_gap = int(ticks[gaps[0]]) if len(gaps) else int(ticks[-1])  # last tick before it
+    before = int(np.searchsorted(np.array(common), first_gap, side="right"))
     return {
         "samples": len(common),
         "identical": int(np.count_nonzero((a == b).all(axis=1))),
         "max_position_diff_m": float(position.max()),
         "max_heading_diff_rad": float(heading.max()),
+        "before_first_gap": before,
+        "max_position_diff_before_gap_m": float(position[:before].max()) if before else None,
     }
+
+
+def departures(vs_log: dict[str, Any], tolerance: Tolerance) -> list[str]:
+    """Why the replayed firmware departs from the recorded one (module docstring, "Verdict"):
+    empty when it does not (or when the log has no on-board pose to compare with)."""
+    reasons = []
+    position = vs_log["max_position_diff_before_gap_m"]
+    if position is not None and position > tolerance.position_m:
+        reasons.append(f"its position differs from the log's by up to {position * 1e3:.4f} mm "
+                       f"(tolerance {tolerance.position_m * 1e3:.4g} mm)")
+    heading = vs_log["max_heading_diff_rad"]
+    if heading is not None and heading > tolerance.heading_rad:
+        reasons.append(f"its heading differs from the log's by up to {heading * 1e3:.4f} mrad "
+                       f"(tolerance {tolerance.heading_rad * 1e3:.4g} mrad)")
+    return reasons
+
+
+def diagnose(
+    log: FrameArrays, accepted: npt.NDArray[np.bool_], profile: RobotProfile, integrator: str,
+    tolerance: Tolerance,
+) -> list[str]:
+    """The likely cause of a departure, by name: an integrator other than the log's, a robot
+    profile other than the one the logged poses fit (module docstring, "Verdict")."""
+    reasons = []
+    logged = logged_integrator(log, accepted)
+    if logged is not None and logged != integrator:
+        reasons.append(f"integrator mismatch: the log's ODOM_STATUS reports {logged}, the replay "
+                       f"ran {integrator}")
+    fits = _fitting_profiles(log, profile, logged or integrator, tolerance)
+    if profile.name in fits:
+        if logged is None or logged == integrator:
+            reasons.append(f"the log fits robot {profile.name!r} with the {integrator} "
+                           "integrator: the firmware build differs from the one that recorded it")
+    elif fits:
+        reasons.append(f"robot mismatch: the log's poses fit robot {', '.join(map(repr, fits))}, "
+                       f"not {profile.name!r} (--robot)")
+    else:
+        reasons.append(f"the log's poses fit no known robot profile ({profile.name!r} given, "
+                       f"{', '.join(list_profiles())} shipped): give its profile with --robot")
+    return reasons
+
+
+def _fitting_profiles(
+    log: FrameArrays, given: RobotProfile, integrator: str, tolerance: Tolerance
+) -> list[str]:
+    """Names of the profiles (``given`` first, then the shipped ones) whose float64 odometry of
+    the logged counts the logged on-board poses follow within ``tolerance``."""
+    candidates = [given] + [robot.load(n) for n in list_profiles() if n != given.name]
+    fits = []
+    for candidate in candidates:
+        try:
+            if analyze(log, candidate, integrator, tolerance=tolerance).passed:
+                fits.append(candidate.name)
+        except OdocanError:
+            continue
+    return fits
 
 
 def _print_versus_log(section: dict[str, Any]) -> None:

@@ -2,8 +2,10 @@
 
 ``--runs`` squares of ``--side`` metres clockwise, then as many counter-clockwise
 (``host.experiments.umbmark``), each on a fresh robot in the closed-loop rig under ``--errors``;
-prints the return errors, their centres of gravity, r_c.g. and E_max,syst. Exit 0, or 2 on bad
-usage.
+prints the return errors, their centres of gravity, r_c.g. and E_max,syst, then the verdict:
+PASS when every run is valid (the firmware back at the origin by its own odometry, its on-board
+end agreeing with the float64 reference on the logged counts) and E_max,syst is within
+``--max-emax`` when given. Exit 0 PASS, 1 FAIL (the reasons printed), 2 on bad usage.
 """
 
 from __future__ import annotations
@@ -12,7 +14,12 @@ import argparse
 
 from odocan.host.cli.options import float_in
 from odocan.host.experiments import render, umbmark
-from odocan.host.experiments.options import add_common_arguments, check_report_path, write_report
+from odocan.host.experiments.options import (
+    add_common_arguments,
+    check_report_path,
+    verdict,
+    write_report,
+)
 from odocan.host.experiments.outputs import (
     add_plot_argument,
     check_outputs,
@@ -47,6 +54,12 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``umbmark`` (``calibrate`` shares them)."""
     add_common_arguments(parser, DEFAULT_ERRORS, umbmark.RUNS_PER_DIRECTION)
+    parser.add_argument(
+        "--max-emax",
+        type=float,
+        metavar="MM",
+        help="fail when E_max,syst exceeds this many mm (default: no limit)",
+    )
     parser.add_argument(
         "--side",
         type=float_in(SIDE_MIN_M, SIDE_MAX_M),
@@ -97,6 +110,8 @@ def header(args: argparse.Namespace, model: errors.ErrorModel, name: str) -> str
 def _do_umbmark(args: argparse.Namespace) -> int:
     check_report_path(args.report)
     check_outputs(args)
+    if args.max_emax is not None and not args.max_emax > 0:
+        raise ConfigurationError(f"--max-emax must be a positive length in mm, got {args.max_emax}")
     profile, model = robot.load(args.robot), errors.parse(args.errors)
     firmware = firmware_profile(args, profile)
     geometry = None if firmware is None else Correction.nominal(firmware)
@@ -113,9 +128,14 @@ def _do_umbmark(args: argparse.Namespace) -> int:
         "error_model": {"ed": model.ed, "eb": model.eb, "slip": model.slip},
         **umbmark.umbmark_report(result),
     }
+    reasons = umbmark.faults(result, profile)
+    if args.max_emax is not None and result.emax_m * 1e3 > args.max_emax:
+        reasons.append(f"E_max,syst {result.emax_m * 1e3:.1f} mm exceeds --max-emax "
+                       f"{args.max_emax:g} mm")
+    report.update(passed=not reasons, faults=reasons)
     report["inputs"] = experiment_inputs(profile, args, firmware=firmware)
     write_report(args.report, report)
     write_scatter(args, [("UMBmark", umbmark.umbmark_report(result))],
                   header(args, model, "UMBmark"))
     write_checks(args, "umbmark", umbmark_checks(report))
-    return 0
+    return verdict("UMBmark", reasons)

@@ -58,11 +58,12 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 
 def _do_vectors(args: argparse.Namespace) -> int:
     if args.check:
-        mismatched = vectors.verify(vectors.read_json(args.out / "vectors.json"))
+        vector_set = vectors.read_json(args.out / "vectors.json")
+        mismatched = vectors.verify(vector_set) + vectors.verify_csv(vector_set, args.out)
         if mismatched:
             print(f"mismatch in: {', '.join(mismatched)}")
             return 1
-        print(f"{args.out}: every case reproduced bit for bit")
+        print(f"{args.out}: every case (JSON and CSV) reproduced bit for bit")
         return 0
     check_out_dir(args.out)
     robot = load(args.robot)

@@ -1,0 +1,206 @@
+"""An independent judge for the tests: float64 odometry written for them, cantools decoding.
+
+Shares nothing with ``host.judge`` (no ``reference``, no ``analysis``, no ``host.io.logs``, no
+bulk decoder): it reads the candump text with a regular expression, checks each frame's AUTOSAR
+E2E Profile 2 CRC with a bitwise CRC8H2F of its own, decodes with ``cantools``'
+``Database.decode_message`` one frame at a time, and integrates the wheel counts with
+``math`` in plain float64:
+
+* dS_L,R = delta * 2 pi r_L,R / PPV; dS = (dS_L + dS_R) / 2; the heading is the exact function of
+  the cumulative counts, phi = phi0 + 2 pi (r_R N_R - r_L N_L) / (PPV b);
+* euler: x += dS cos(phi_new); rk2: x += dS cos(phi_mid);
+  exact: x += (dS / dtheta) (sin phi_new - sin phi_old) (the ICC arc, Taylor-expanded below
+  |dtheta| = 1e-6 to dS cos(phi_mid) (1 - dtheta^2 / 24)), and likewise for y.
+
+The start is told, not fitted: ``starts`` gives the firmware's true pose at the first encoder
+frame of every segment (a segment starts at the log's first encoder frame and after every gap of
+more than one period), e.g. from the synthesizer that wrote the log. An on-board sample is an
+ODOM_POSE_X and ODOM_POSE_Y pair naming the same encoder frame (ENC_COUNTER = that frame's
+COUNTER, the latest such frame in the log, if the log's latest encoder frame is less than 8
+periods older than the pose: else which frame it names cannot be told); an encoder frame
+repeating the COUNTER of its ID's previous frame is refused, as E2E Profile 2 refuses it (a
+repetition, or 16 frames lost: the same to it). The verdict: max
+position distance <= one LSB (0.1 mm) and max wrapped heading error <= one LSB (2 pi / 65536).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import cantools
+from cantools.database.can import Database
+
+from odocan.sim.contract import DBC_PATH
+
+POSITION_LSB_M = 1e-4
+HEADING_LSB_RAD = 2.0 * math.pi / 65536.0
+PERIOD_S = 0.01
+_LINE = re.compile(r"\((\d+\.\d+)\) \S+ ([0-9A-Fa-f]+)#([0-9A-Fa-f]*)")
+
+
+@dataclass(frozen=True)
+class Robot:
+    """The firmware's configuration, as ODOM_CONFIG carries it (nm, counts)."""
+
+    counts_per_rev: int
+    wheel_radius_left_nm: int
+    wheel_radius_right_nm: int
+    wheelbase_nm: int
+    counter_bits: int
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The checker's comparison of the on-board poses with its own odometry."""
+
+    samples: int
+    max_position_error_m: float
+    max_heading_error_rad: float
+
+    @property
+    def passed(self) -> bool:
+        return (self.max_position_error_m <= POSITION_LSB_M
+                and self.max_heading_error_rad <= HEADING_LSB_RAD)
+
+
+def crc8h2f(data: bytes) -> int:
+    """CRC8H2F, bit by bit: poly 0x2F, init 0xFF, no reflection, xorout 0xFF."""
+    crc = 0xFF
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x2F) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc ^ 0xFF
+
+
+class _Frames:
+    """The log's E2E-valid frames decoded with cantools, in order."""
+
+    def __init__(self, path: Path) -> None:
+        db = cantools.database.load_file(str(DBC_PATH))
+        assert isinstance(db, Database)
+        self.db = db
+        self._ids = {m.frame_id: [int(v) for v in m.dbc.attributes["E2EDataIDs"].value.split(",")]
+                     for m in db.messages}
+        self.rows: list[tuple[float, str, dict[str, float | int]]] = []
+        last_counter: dict[int, int] = {}
+        for line in path.read_text().splitlines():
+            m = _LINE.fullmatch(line.strip())
+            if m is None:
+                continue
+            can_id, data = int(m.group(2), 16), bytes.fromhex(m.group(3))
+            if can_id not in self._ids or len(data) != 8:
+                continue
+            if crc8h2f(data[1:] + bytes([self._ids[can_id][data[1] & 0xF]])) != data[0]:
+                continue
+            if last_counter.get(can_id) == data[1] & 0xF:
+                continue  # E2E Profile 2: a repetition (or 16 frames lost: the same to it)
+            last_counter[can_id] = data[1] & 0xF
+            message = self.db.get_message_by_frame_id(can_id)
+            signals = self.db.decode_message(can_id, data, decode_choices=False, scaling=False)
+            self.rows.append((float(m.group(1)), message.name, dict(signals)))  # type: ignore[arg-type]
+
+
+class _Odometry:
+    """Plain float64 odometry of one robot (module docstring)."""
+
+    def __init__(self, robot: Robot, integrator: str) -> None:
+        self.integrator = integrator
+        self.m_left = 2.0 * math.pi * robot.wheel_radius_left_nm * 1e-9 / robot.counts_per_rev
+        self.m_right = 2.0 * math.pi * robot.wheel_radius_right_nm * 1e-9 / robot.counts_per_rev
+        self.b = robot.wheelbase_nm * 1e-9
+        self.x = self.y = self.phi0 = 0.0
+        self.n_left = self.n_right = 0
+
+    def place(self, x: float, y: float, heading: float) -> None:
+        """Put the robot at a pose (the heading keeps being the function of the counts)."""
+        self.x, self.y = x, y
+        self.phi0 = heading - self.heading_offset()
+
+    def heading_offset(self) -> float:
+        return (self.n_right * self.m_right - self.n_left * self.m_left) / self.b
+
+    @property
+    def heading(self) -> float:
+        return self.phi0 + self.heading_offset()
+
+    def step(self, d_left: int, d_right: int) -> None:
+        ds = 0.5 * (d_left * self.m_left + d_right * self.m_right)
+        old = self.heading
+        self.n_left += d_left
+        self.n_right += d_right
+        new = self.heading
+        dtheta = new - old
+        if self.integrator == "euler":
+            self.x += ds * math.cos(new)
+            self.y += ds * math.sin(new)
+        elif self.integrator == "rk2" or abs(dtheta) < 1e-6:
+            factor = 1.0 if self.integrator == "rk2" else 1.0 - dtheta * dtheta / 24.0
+            self.x += ds * factor * math.cos(0.5 * (old + new))
+            self.y += ds * factor * math.sin(0.5 * (old + new))
+        else:
+            self.x += ds / dtheta * (math.sin(new) - math.sin(old))
+            self.y -= ds / dtheta * (math.cos(new) - math.cos(old))
+
+
+def check(
+    path: Path, robot: Robot, integrator: str,
+    starts: Callable[[float], tuple[float, float, float]],
+) -> Verdict:
+    """Compare the on-board poses of the log at ``path`` with this checker's odometry started
+    at ``starts(timestamp of the segment's first encoder frame)`` (module docstring)."""
+    frames = _Frames(path)
+    odo = _Odometry(robot, integrator)
+    wire = 1 << min(robot.counter_bits, 24)
+    recent: list[tuple[int, tuple[float, float, float]]] = []  # (COUNTER, pose) of the last 16
+    last_t = -math.inf  # the latest encoder frame's time
+    halves: dict[tuple[str, int], dict[str, float]] = {}
+    prev: tuple[float, int, int] | None = None
+    errors: list[tuple[float, float]] = []
+    for t, name, s in frames.rows:
+        if name == "WHEEL_ENCODERS":
+            left, right = int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"])
+            if prev is None:
+                odo.place(*starts(t))
+            else:
+                d_left = (left - prev[1] + wire // 2) % wire - wire // 2
+                d_right = (right - prev[2] + wire // 2) % wire - wire // 2
+                if t - prev[0] > 1.5 * PERIOD_S:  # a gap: the heading follows the counts,
+                    odo.n_left += d_left  # the position starts again where the firmware was
+                    odo.n_right += d_right
+                    odo.x, odo.y = starts(t)[:2]
+                else:
+                    odo.step(d_left, d_right)
+            prev = (t, left, right)
+            recent = [(int(s["COUNTER"]), (odo.x, odo.y, odo.heading)), *recent][:16]
+            last_t = t
+            halves.clear()
+        elif name in ("ODOM_POSE_X", "ODOM_POSE_Y") and t - last_t < 8 * PERIOD_S:
+            _pair(name, s, recent, halves, errors)
+    if not errors:
+        return Verdict(0, math.nan, math.nan)
+    return Verdict(len(errors), max(e[0] for e in errors), max(e[1] for e in errors))
+
+
+def _pair(
+    name: str, s: dict[str, float | int], recent: list[tuple[int, tuple[float, float, float]]],
+    halves: dict[tuple[str, int], dict[str, float]], errors: list[tuple[float, float]],
+) -> None:
+    """File one pose half; when both halves of one encoder frame are in, record its errors."""
+    named = int(s["ENC_COUNTER"])
+    pose = next((p for c, p in recent if c == named), None)
+    if pose is None:
+        return
+    halves.setdefault((name, named), {k: float(v) for k, v in s.items()})
+    x_half, y_half = halves.get(("ODOM_POSE_X", named)), halves.get(("ODOM_POSE_Y", named))
+    if x_half is None or y_half is None:
+        return
+    x, y = x_half["X"] * POSITION_LSB_M, y_half["Y"] * POSITION_LSB_M
+    heading = y_half["TURNS"] * 2.0 * math.pi + x_half["HEADING"] * HEADING_LSB_RAD
+    dh = (heading - pose[2] + math.pi) % (2.0 * math.pi) - math.pi
+    errors.append((math.hypot(x - pose[0], y - pose[1]), abs(dh)))
+    del halves[("ODOM_POSE_X", named)], halves[("ODOM_POSE_Y", named)]

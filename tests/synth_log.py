@@ -1,0 +1,167 @@
+"""Candump logs written directly (not simulated in real time) with the firmware's exact outputs.
+
+A drive is a sequence of count deltas per encoder period (10 ms). ``synthesize`` runs the
+firmware's own ``Odometry`` on the wrapping counters and packs the frames the ECU would send with
+the firmware codec (``firmware.frames``, E2E protected), rounding the pose exactly as the ECU's
+``_send_pose_and_twist`` does:
+
+* WHEEL_ENCODERS every 10 ms (the low min(counter_bits, 24) bits of each counter);
+* ODOM_POSE_X / ODOM_POSE_Y every other encoder frame, naming it (ENC_COUNTER), 1 ms after it;
+* ODOM_STATUS page 0 (STATE OK, the integrator, UPTIME) every 10th encoder frame, and the page
+  of WHEEL_ENCODERS E2E counts (ENC_E2E_OK: every frame so far) at frames 10, 60, 110, ...
+
+The firmware starts at pose 0 on the first frame (power-up). ``Synth.lines(start)`` cuts the log at
+an encoder frame to make a log that starts mid-drive; ``Synth.state[k]`` is the firmware's
+internal pose after encoder frame k (Q40 metres, BAM64 + whole turns) to compare against.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.firmware import frames as fr
+from odocan.firmware.config import Integrator, RobotParams, derive_constants
+from odocan.firmware.errors import ErrorMask, State
+from odocan.firmware.fixmath import mul_shr_round_i64, wrap_i32
+from odocan.firmware.odometry import Odometry
+from odocan.sim.robot import RobotProfile
+
+ENCODER_PERIOD_S = 0.01
+WIRE_BITS = 24
+INTEGRATORS = {"euler": Integrator.EULER, "rk2": Integrator.RK2, "exact": Integrator.EXACT}
+TWO_POW_40 = float(1 << 40)
+BAM64_TO_RAD = 2.0 * math.pi / 2.0**64
+
+
+@dataclass(frozen=True)
+class FirmwareState:
+    """The firmware's pose after one encoder frame (its internal integers)."""
+
+    x_q40_m: int
+    y_q40_m: int
+    heading_bam64: int
+    heading_turns: int
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        """(x m, y m, unwrapped heading rad)."""
+        heading = self.heading_turns * 2.0 * math.pi + self.heading_bam64 * BAM64_TO_RAD
+        return self.x_q40_m / TWO_POW_40, self.y_q40_m / TWO_POW_40, heading
+
+
+@dataclass
+class Synth:
+    """A synthesized drive: one candump line per frame, grouped by encoder frame."""
+
+    groups: list[list[str]] = field(default_factory=list)  # lines of encoder frame k and after
+    state: list[FirmwareState] = field(default_factory=list)
+    left_counts: list[int] = field(default_factory=list)  # the hardware counters (counter_bits)
+    right_counts: list[int] = field(default_factory=list)
+
+    def lines(self, start: int = 0, stop: int | None = None) -> list[str]:
+        """The log from encoder frame ``start`` (inclusive) to ``stop`` (exclusive)."""
+        return [line for group in self.groups[start:stop] for line in group]
+
+    def write(self, path: Path, start: int = 0, stop: int | None = None) -> Path:
+        """Write the candump log (``candump -L`` format) and return its path."""
+        path.write_text("".join(self.lines(start, stop)))
+        return path
+
+
+def _line(t_s: float, can_id: int, data: bytes) -> str:
+    return f"({t_s:.6f}) vcan0 {can_id:03X}#{data.hex().upper()}\n"
+
+
+def params_of(robot: RobotProfile, integrator: str) -> RobotParams:
+    """The firmware's configuration of ``robot``."""
+    return RobotParams(integrator=int(INTEGRATORS[integrator]), **robot.firmware_params())
+
+
+def synthesize(
+    robot: RobotProfile,
+    integrator: str,
+    d_left: npt.ArrayLike,
+    d_right: npt.ArrayLike,
+    *,
+    counts0: tuple[int, int] = (0, 0),
+    t0_s: float = 0.0,
+    x_bias_100um: dict[int, int] | None = None,
+) -> Synth:
+    """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
+    ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB."""
+    bias = x_bias_100um or {}
+    errors = ErrorMask()
+    odo = Odometry(derive_constants(params_of(robot, integrator), errors), errors)
+    bits = robot.counter_bits
+    mask, wire_mask = (1 << bits) - 1, (1 << min(bits, WIRE_BITS)) - 1
+    left, right = counts0[0] & mask, counts0[1] & mask
+    dl = np.concatenate(([0], np.asarray(d_left, dtype=np.int64)))
+    dr = np.concatenate(([0], np.asarray(d_right, dtype=np.int64)))
+    out = Synth()
+    pose_counter = status_counter = 0
+    for k in range(len(dl)):
+        left, right = (left + int(dl[k])) & mask, (right + int(dr[k])) & mask
+        odo.step_counts(left, right)
+        t_s = t0_s + k * ENCODER_PERIOD_S
+        group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
+                       fr.pack_wheel_encoders(k, left & wire_mask, right & wire_mask))]
+        if k % 2 == 0:
+            group += _pose_lines(odo, t_s + 0.001, pose_counter, k & 0xF, errors, bias.get(k, 0))
+            pose_counter += 1
+        if k % 10 == 0:
+            uptime_s = int(k * ENCODER_PERIOD_S + t0_s)
+            status = fr.pack_odom_status_summary(
+                status_counter, State.OK, odo.consts.integrator, 0, uptime_s, errors
+            )
+            group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, status))
+            status_counter += 1
+        if k % 50 == 10:  # the firmware's E2E counts of the encoder frames: k + 1 accepted
+            page = fr.pack_odom_status_e2e(
+                status_counter, fr.StatusPage.E2E_WHEEL_ENCODERS, k + 1, 0, 0, 0, 0
+            )
+            group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, page))
+            status_counter += 1
+        out.groups.append(group)
+        out.state.append(
+            FirmwareState(odo.x_q40_m, odo.y_q40_m, odo.heading_bam64, odo.heading_turns)
+        )
+        out.left_counts.append(left)
+        out.right_counts.append(right)
+    return out
+
+
+def _pose_lines(
+    odo: Odometry, t_s: float, counter: int, enc: int, errors: ErrorMask, x_bias_100um: int = 0
+) -> list[str]:
+    """ODOM_POSE_X and ODOM_POSE_Y, rounded as the ECU rounds them (X off by ``x_bias_100um``)."""
+    x_100um = mul_shr_round_i64(odo.x_q40_m, 10_000, 40, errors) + x_bias_100um
+    y_100um = mul_shr_round_i64(odo.y_q40_m, 10_000, 40, errors)
+    heading_rounded = odo.heading_bam64 + (1 << 47)
+    heading_bam16 = (heading_rounded >> 48) & 0xFFFF
+    turns = wrap_i32(odo.heading_turns + (heading_rounded >> 64))
+    pose_x = fr.pack_odom_pose_x(counter, enc, x_100um, heading_bam16, errors)
+    pose_y = fr.pack_odom_pose_y(counter, enc, y_100um, turns, errors)
+    return [_line(t_s, fr.ODOM_POSE_X_ID, pose_x), _line(t_s, fr.ODOM_POSE_Y_ID, pose_y)]
+
+
+def wandering_drive(
+    robot: RobotProfile, steps: int, step_m: float, seed: int
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Count deltas of a drive of straight runs and arcs of both senses (about ``step_m`` per
+    step), turning back now and then so that it wanders instead of running away."""
+    rng = np.random.default_rng(seed)
+    per_count = 2.0 * math.pi * robot.wheel_radius_m / robot.counts_per_rev
+    base = step_m / per_count
+    segment = rng.integers(50, 400, size=steps // 50 + 2)
+    curvature = rng.choice([0.0, 0.0, 0.01, -0.01, 0.05, -0.05, 0.002], size=len(segment))
+    idx = np.repeat(np.arange(len(segment)), segment)[:steps]
+    diff = curvature[idx] * base
+    noise = rng.normal(0.0, 0.01 * base, size=steps)
+    d_left = np.rint(base - diff + noise).astype(np.int64)
+    d_right = np.rint(base + diff + noise).astype(np.int64)
+    return d_left, d_right
