@@ -300,8 +300,12 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
     for _ in range(12):
         _nav_session(rng, ask)
     _frames(rng, ask)
-    for robot, integrator, timed in (("pmir", "exact", 1), ("kobuki", "rk2", 1), ("pmir", "euler", 0)):
-        _ecu_session(rng, ask, robot, integrator, timed=bool(timed))
+    for robot, integrator, timed in (
+        ("pmir", "exact", True),
+        ("kobuki", "rk2", True),
+        ("pmir", "euler", False),
+    ):
+        _ecu_session(rng, ask, robot, integrator, timed=timed)
     _ecu_session(rng, ask, "kobuki", "exact", counts_per_rev=0)  # FAULT until configured
     return cmds, want
 
@@ -336,8 +340,8 @@ def _ecu_session(
 
     ``timed``: every tick gets the board's u32 microsecond timer (``tick(now_us)``), released
     with jitter and wrapping during the session, and the MCU stalls now and then for 3 to 40
-    periods, as the board models it: the wheels keep turning, the controller's 3-frame receive
-    FIFO keeps the last frames and an overrun interrupt says it dropped others; a stall of 9
+    periods, as sim/board.py models it: the wheels keep turning, the controller's 3-frame receive
+    FIFO keeps the first frames and an overrun interrupt says it dropped others; a stall of 9
     periods or more is TIME_LOST. Untimed: ``tick()``, one period each."""
     params = firmware_params(load(robot), integrator)
     if counts_per_rev is not None:
@@ -383,7 +387,7 @@ def _ecu_session(
         for _ in range(stall):  # the MCU does not run: frames pile up in the controller's FIFO
             enc_counter = (enc_counter + 1) & 15
             backlog.append(frames.pack_wheel_encoders(enc_counter, *drive()))
-        for frame in backlog[-3:]:
+        for frame in backlog[:3]:  # FIFO-locked, as sim/board.py's bxCAN: the first 3 kept
             rx(frames.WHEEL_ENCODERS_ID, frame)
         if len(backlog) > 3:
             ecu.isr_rx_overrun()
@@ -394,7 +398,10 @@ def _ecu_session(
             counts[:] = [counts[0] + offset, counts[1] + offset]
             enc_counter = 15
         if tick == reboot_tick + 40:  # the host gives the pose again: COUNTER_RESET may clear
-            host(frames.ODOM_SET_POSE_ID, lambda c: frames.pack_odom_set_pose(c, 15, 0, ErrorMask()))
+            host(
+                frames.ODOM_SET_POSE_ID,
+                lambda c: frames.pack_odom_set_pose(c, frames.SetPoseField.APPLY, 0, ErrorMask()),
+            )
         wire = drive()
         silent = 1200 <= tick < 1220  # the watchdog: DEGRADED, then recovery
         if not silent and roll >= 20:
