@@ -652,6 +652,19 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
         if before == (State.DEGRADED, Reason.COUNTER_RESET) and after[0] != State.DEGRADED
     ]
     assert recovered and all(after == (State.OK, Reason.NONE) for after in recovered)
+    lost = [
+        i
+        for i in range(1, len(ticks))
+        if int(ticks[i][1]) == Reason.TIME_LOST != int(ticks[i - 1][1])
+    ]
+    twists_after_gap = [
+        frames.unpack_odom_twist(bytes.fromhex(f.split(":")[1])).linear_vel_mm_s
+        for i in lost
+        for t in ticks[i : i + 3]
+        for f in t[4:]
+        if f.startswith(f"{frames.ODOM_TWIST_ID:X}:")
+    ]
+    assert len(lost) >= 5 and any(twists_after_gap), "stalls while driving: the twist after a gap"
     sent = {f.split(":")[0] for t in ticks for f in t[4:]}
     assert sent == {"110", "200", "201", "202", "281", "302", "380"}
     assert max(int(t[3]) for t in ticks) > 0, "the TX queue refused frames"
