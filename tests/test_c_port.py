@@ -307,6 +307,7 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
     ):
         _ecu_session(rng, ask, robot, integrator, timed=timed)
     _ecu_session(rng, ask, "kobuki", "exact", counts_per_rev=0)  # FAULT until configured
+    _ecu_session(rng, ask, "kobuki", "euler", counter_bits=32)  # rebuilt from the 24-bit wire
     return cmds, want
 
 
@@ -331,6 +332,7 @@ def _ecu_session(
     integrator: str,
     counts_per_rev: int | None = None,
     timed: bool = True,
+    counter_bits: int | None = None,
 ) -> None:
     """The whole ECU, tick by tick: encoder frames from a kinematic robot driven by the ECU's own
     MOTOR_CMDs, navigation goals, pose and configuration writes, and faults (lost, repeated,
@@ -346,11 +348,13 @@ def _ecu_session(
     params = firmware_params(load(robot), integrator)
     if counts_per_rev is not None:
         params = dataclasses.replace(params, counts_per_rev=counts_per_rev)
+    if counter_bits is not None:
+        params = dataclasses.replace(params, counter_bits=counter_bits)
     tx = _RecordingTx()
     ecu = OdomEcu(tx, params)
     ask(f"ecu_new {' '.join(str(v) for v in dataclasses.astuple(params))}", "ok")
     m_per_count = 2 * math.pi * params.wheel_radius_left_nm * 1e-9 / (params.counts_per_rev or 500)
-    counts = [0.0, 0.0]
+    counts = [0.0, 0.0] if params.counter_bits == 16 else [(1 << 24) - 300.0] * 2  # wire wraps
     speeds = [0, 0]
     enc_counter = 0
     nominal_us = U32_MAX - rng.randrange(1_000_000, 5_000_000)  # the timer wraps in the session
