@@ -25,7 +25,7 @@ import pytest
 
 from odocan.firmware import config, e2e, fixmath, frames, nav, odometry, trig
 from odocan.firmware.ecu import OdomEcu
-from odocan.firmware.errors import ErrorFlag, ErrorMask
+from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.fixmath import (
     I16_MAX,
     I16_MIN,
@@ -300,9 +300,14 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
     for _ in range(12):
         _nav_session(rng, ask)
     _frames(rng, ask)
-    for robot, integrator in (("pmir", "exact"), ("kobuki", "rk2"), ("pmir", "euler")):
-        _ecu_session(rng, ask, robot, integrator)
+    for robot, integrator, timed in (
+        ("pmir", "exact", True),
+        ("kobuki", "rk2", True),
+        ("pmir", "euler", False),
+    ):
+        _ecu_session(rng, ask, robot, integrator, timed=timed)
     _ecu_session(rng, ask, "kobuki", "exact", counts_per_rev=0)  # FAULT until configured
+    _ecu_session(rng, ask, "kobuki", "euler", counter_bits=32)  # rebuilt from the 24-bit wire
     return cmds, want
 
 
@@ -326,20 +331,35 @@ def _ecu_session(
     robot: str,
     integrator: str,
     counts_per_rev: int | None = None,
+    timed: bool = True,
+    counter_bits: int | None = None,
 ) -> None:
     """The whole ECU, tick by tick: encoder frames from a kinematic robot driven by the ECU's own
     MOTOR_CMDs, navigation goals, pose and configuration writes, and faults (lost, repeated,
-    corrupt, short and foreign frames, silence, mailbox overflow, bus-off, a full TX queue)."""
+    corrupt, short and foreign frames, silence, mailbox overflow, bus-off, a full TX queue), and
+    the health paths: forged steps beyond the maximum wheel speed (IMPLAUSIBLE_STEP), a motor
+    controller reboot (counters and COUNTER restart: COUNTER_RESET, then ODOM_SET_POSE APPLY).
+
+    ``timed``: every tick gets the board's u32 microsecond timer (``tick(now_us)``), released
+    with jitter and wrapping during the session, and the MCU stalls now and then for 3 to 40
+    periods, as sim/board.py models it: the wheels keep turning, the controller's 3-frame receive
+    FIFO keeps the first frames and an overrun interrupt says it dropped others; a stall of 9
+    periods or more is TIME_LOST. Untimed: ``tick()``, one period each."""
     params = firmware_params(load(robot), integrator)
     if counts_per_rev is not None:
         params = dataclasses.replace(params, counts_per_rev=counts_per_rev)
+    if counter_bits is not None:
+        params = dataclasses.replace(params, counter_bits=counter_bits)
     tx = _RecordingTx()
     ecu = OdomEcu(tx, params)
     ask(f"ecu_new {' '.join(str(v) for v in dataclasses.astuple(params))}", "ok")
     m_per_count = 2 * math.pi * params.wheel_radius_left_nm * 1e-9 / (params.counts_per_rev or 500)
-    counts = [0.0, 0.0]
+    counts = [0.0, 0.0] if params.counter_bits == 16 else [(1 << 24) - 300.0] * 2  # wire wraps
     speeds = [0, 0]
     enc_counter = 0
+    nominal_us = U32_MAX - rng.randrange(1_000_000, 5_000_000)  # the timer wraps in the session
+    stalls = {rng.randrange(100, 2900): rng.choice((3, 8, 9, 10, 14, 25, 40)) for _ in range(6)}
+    reboot_tick = rng.randrange(1500, 2500)
     host_counters = {frames.NAV_GOAL_ID: 0, frames.ODOM_SET_POSE_ID: 0, frames.ODOM_CONFIG_ID: 0}
 
     def rx(can_id: int, data: bytes) -> None:
@@ -358,11 +378,35 @@ def _ecu_session(
         go = (rng.randrange(2), rng.randrange(2), rng.randrange(2), rng.randrange(256))
         host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal_go(c, *go, e))
 
+    def drive() -> list[int]:
+        """10 ms of the wheels at the last MOTOR_CMD; the counters' wire value."""
+        for side in range(2):
+            counts[side] += speeds[side] * 1e-5 / m_per_count
+        return [round(c) % (1 << 32) for c in counts]
+
     for tick in range(3_000):
         roll = rng.randrange(1000)
-        for side in range(2):  # 10 ms of the wheels at the last MOTOR_CMD
-            counts[side] += speeds[side] * 1e-5 / m_per_count
-        wire = [round(c) % (1 << 32) for c in counts]
+        stall = stalls.get(tick, 0) if timed else 0
+        backlog = []
+        for _ in range(stall):  # the MCU does not run: frames pile up in the controller's FIFO
+            enc_counter = (enc_counter + 1) & 15
+            backlog.append(frames.pack_wheel_encoders(enc_counter, *drive()))
+        for frame in backlog[:3]:  # FIFO-locked, as sim/board.py's bxCAN: the first 3 kept
+            rx(frames.WHEEL_ENCODERS_ID, frame)
+        if len(backlog) > 3:
+            ecu.isr_rx_overrun()
+            ask("ecu_overrun", "ok")
+        nominal_us += (stall + 1) * 10_000
+        if tick == reboot_tick:  # the motor controller reboots: counters and COUNTER restart
+            offset = rng.choice((-1, 1)) * rng.randrange(5_000, 20_000)
+            counts[:] = [counts[0] + offset, counts[1] + offset]
+            enc_counter = 15
+        if tick == reboot_tick + 40:  # the host gives the pose again: COUNTER_RESET may clear
+            host(
+                frames.ODOM_SET_POSE_ID,
+                lambda c: frames.pack_odom_set_pose(c, frames.SetPoseField.APPLY, 0, ErrorMask()),
+            )
+        wire = drive()
         silent = 1200 <= tick < 1220  # the watchdog: DEGRADED, then recovery
         if not silent and roll >= 20:
             enc_counter = (enc_counter + 1) & 15
@@ -409,9 +453,20 @@ def _ecu_session(
         elif roll < 25 or (tx.full and roll < 500):
             tx.full = not tx.full  # a full TX queue for a tick or two
             ask(f"ecu_txfull {int(tx.full)}", "ok")
+        elif roll < 28:  # a step beyond the maximum wheel speed that passes E2E (a forgery)
+            enc_counter = (enc_counter + 1) & 15
+            jump = rng.choice((-1, 1)) * rng.randrange(200, 30_000)
+            forged = [(w + jump) % (1 << 32) for w in wire]
+            rx(frames.WHEEL_ENCODERS_ID, frames.pack_wheel_encoders(enc_counter, *forged))
         tx.sent.clear()
-        ecu.tick()
-        ask("ecu_tick", int(ecu.state), ecu.errors.bits, ecu.tx_dropped, *tx.sent)
+        if timed:
+            now_us = (nominal_us + rng.randrange(-3_000, 3_001)) % (1 << 32)  # release jitter
+            ecu.tick(now_us)
+            tick_cmd = f"ecu_tick_at {now_us}"
+        else:
+            ecu.tick()
+            tick_cmd = "ecu_tick"
+        ask(tick_cmd, int(ecu.state), int(ecu.reason), ecu.errors.bits, ecu.tx_dropped, *tx.sent)
         for entry in tx.sent:
             can_id, data = entry.split(":")
             if int(can_id, 16) == frames.MOTOR_CMD_ID:
@@ -588,11 +643,35 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
     assert acks >= {0, 1, 2, 3, 4, 6}  # every reason NAV_GOAL can get (INCONSISTENT is config's)
     checks = {int(w.split()[0]) for c, w in zip(cmds, want, strict=True) if c.startswith("check")}
     assert checks == {int(s) for s in e2e.E2EStatus}
-    ticks = [w.split() for c, w in zip(cmds, want, strict=True) if c == "ecu_tick"]
+    ticks = [w.split() for c, w in zip(cmds, want, strict=True) if c.startswith("ecu_tick")]
     assert {int(t[0]) for t in ticks} == {0, 1, 2, 3}  # INIT, OK, DEGRADED, FAULT
-    sent = {f.split(":")[0] for t in ticks for f in t[3:]}
+    assert {int(t[1]) for t in ticks} == set(Reason), "every REASON, CONFIG_INVALID included"
+    assert any(c.startswith("ecu_tick_at") for c in cmds) and "ecu_tick" in cmds
+    health = ErrorFlag.TIME_LOST | ErrorFlag.IMPLAUSIBLE_STEP | ErrorFlag.COUNTER_RESET
+    assert all(any(int(t[2]) & flag for t in ticks) for flag in health)
+    states = [(int(t[0]), int(t[1])) for t in ticks]
+    recovered = [
+        after
+        for before, after in itertools.pairwise(states)
+        if before == (State.DEGRADED, Reason.COUNTER_RESET) and after[0] != State.DEGRADED
+    ]
+    assert recovered and all(after == (State.OK, Reason.NONE) for after in recovered)
+    lost = [
+        i
+        for i in range(1, len(ticks))
+        if int(ticks[i][1]) == Reason.TIME_LOST != int(ticks[i - 1][1])
+    ]
+    twists_after_gap = [
+        frames.unpack_odom_twist(bytes.fromhex(f.split(":")[1])).linear_vel_mm_s
+        for i in lost
+        for t in ticks[i : i + 3]
+        for f in t[4:]
+        if f.startswith(f"{frames.ODOM_TWIST_ID:X}:")
+    ]
+    assert len(lost) >= 5 and any(twists_after_gap), "stalls while driving: the twist after a gap"
+    sent = {f.split(":")[0] for t in ticks for f in t[4:]}
     assert sent == {"110", "200", "201", "202", "281", "302", "380"}
-    assert max(int(t[2]) for t in ticks) > 0, "the TX queue refused frames"
+    assert max(int(t[3]) for t in ticks) > 0, "the TX queue refused frames"
 
 
 @pytest.mark.parametrize("target", ["native", "arm32"])

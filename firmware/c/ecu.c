@@ -2,6 +2,14 @@
  * the mailbox; tick() runs every TICK_PERIOD_US: 1. drain the mailbox; 2. E2E check; 3. odometry
  * on WHEEL_ENCODERS, staged ODOM_SET_POSE / ODOM_CONFIG / NAV_GOAL writes answered by ODOM_ACK;
  * 4. navigation every 20 ms; 5. scheduled transmissions at the DBC's cycle times; 6. the watchdog.
+ *
+ * Time: time_periods (10 ms periods since reset) advances at the start of every tick by the
+ * periods elapsed on the board's microsecond timer (ecu_tick_at; ecu_tick: one period). A tick
+ * LOST_TIME_PERIODS or more late sets TIME_LOST and goes DEGRADED. DEGRADED always carries a
+ * reason: ENCODER_TIMEOUT, TIME_LOST, MAILBOX_OVERFLOW, IMPLAUSIBLE_STEP (a step beyond
+ * MAX_WHEEL_SPEED_MM_S, not integrated) or COUNTER_RESET (RESYNC_FRAMES refused frames consistent
+ * with each other: re-primed on the first of them, the jump never integrated; it stays until
+ * ODOM_SET_POSE APPLY). The module docstring of firmware/ecu.py says why.
  */
 #include "ecu.h"
 
@@ -50,10 +58,28 @@ static int mailbox_get(struct mailbox *mb)
     return (int)slot;
 }
 
+static void tick(struct odom_ecu *ecu, bool timed, uint32_t now_us);
+static void drain_mailbox(struct odom_ecu *ecu);
+static uint32_t advance_time(struct odom_ecu *ecu, bool timed, uint32_t now_us);
+static void check_overflows(struct odom_ecu *ecu);
+static void degrade(struct odom_ecu *ecu, enum reason reason);
 static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t len);
-static void extend_counters(struct odom_ecu *ecu, uint32_t left_wire, uint32_t right_wire,
-                            uint32_t *left, uint32_t *right);
-static void update_twist(struct odom_ecu *ecu, uint8_t counter);
+static void accept_encoders(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                            const uint32_t counts[2]);
+static void extend_counters(const struct odom_ecu *ecu, const uint32_t wire[2],
+                            uint32_t counts[2]);
+static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
+                            const uint32_t counts[2]);
+static uint32_t step_periods_max(const struct odom_ecu *ecu, uint8_t counter);
+static void step_bounds(struct odom_ecu *ecu);
+static bool plausible(const struct odom_ecu *ecu, const uint32_t prev[2], const uint32_t counts[2],
+                      uint32_t periods);
+static void on_implausible(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                           const uint32_t counts[2]);
+static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                             const uint32_t counts[2]);
+static void sum_step(struct odom_ecu *ecu);
+static void update_twist(struct odom_ecu *ecu, uint32_t periods);
 static void on_set_pose(struct odom_ecu *ecu, const uint8_t *data, size_t len);
 static void on_config(struct odom_ecu *ecu, const uint8_t *data, size_t len);
 static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame);
@@ -77,14 +103,18 @@ void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
     ecu->tx_ctx = tx_ctx;
     ecu->errors = 0u;
     ecu->state = STATE_INIT;
+    ecu->reason = REASON_NONE;
     if (validate(params) != CONFIG_OK) {
         ecu->errors |= ERROR_CONFIG_INVALID;
         ecu->state = STATE_FAULT;
+        ecu->reason = REASON_CONFIG_INVALID;
     }
     ecu->params = *params;
     struct odom_constants consts;
     derive_constants(params, &ecu->errors, &consts);
     odometry_init(&ecu->odometry, &consts, &ecu->errors);
+    ecu->max_wheel_speed_mm_s = MAX_WHEEL_SPEED_MM_S;
+    step_bounds(ecu);
     data_ids_of_slot(WHEEL_ENCODERS_E2E_SLOT, ecu->data_ids[0]);
     data_ids_of_slot(ODOM_SET_POSE_E2E_SLOT, ecu->data_ids[1]);
     data_ids_of_slot(ODOM_CONFIG_E2E_SLOT, ecu->data_ids[2]);
@@ -111,6 +141,14 @@ void ecu_isr_can_rx(struct odom_ecu *ecu, uint32_t can_id, const uint8_t *data, 
     }
 }
 
+/* CAN controller overrun interrupt: its receive FIFO dropped frames (counted as one mailbox
+ * overflow: the hardware flags the event, not the number). */
+void ecu_isr_rx_overrun(struct odom_ecu *ecu)
+{
+    ecu->mailbox.overflows++;
+    ecu->errors |= ERROR_MAILBOX_OVERFLOW;
+}
+
 /* CAN controller status interrupt: bus-off entered (true) or recovered (false). */
 void ecu_isr_bus_state(struct odom_ecu *ecu, bool bus_off)
 {
@@ -121,10 +159,44 @@ void ecu_isr_bus_state(struct odom_ecu *ecu, bool bus_off)
 
 /* --- the periodic tick --- */
 
-/* One period of the main loop, in the fixed order of the file comment. */
+/* One period of the main loop on a board without a timer: one period has passed. */
 void ecu_tick(struct odom_ecu *ecu)
 {
-    e2e_new_period(&ecu->rx_encoders);
+    tick(ecu, false, 0u);
+}
+
+/* One period of the main loop; now_us: the board's free-running u32 microsecond timer when the
+ * tick was released. */
+void ecu_tick_at(struct odom_ecu *ecu, uint32_t now_us)
+{
+    tick(ecu, true, now_us);
+}
+
+/* The main loop, in the fixed order of the file comment. */
+static void tick(struct odom_ecu *ecu, bool timed, uint32_t now_us)
+{
+    check_overflows(ecu);
+    uint32_t periods = advance_time(ecu, timed, now_us); /* after: a stall's overrun is TIME_LOST */
+    /* The E2E window widens with time; fully after frames of unknown age (a stall's backlog). */
+    uint32_t widen = ecu->samples_stale ? COUNTER_MASK : periods < COUNTER_MASK ? periods
+                                                                                 : COUNTER_MASK;
+    for (uint32_t k = 0u; k < widen; ++k) {
+        e2e_new_period(&ecu->rx_encoders);
+    }
+    ecu->tick_budget = ecu->periods_since_sample;
+    drain_mailbox(ecu);
+    if (ecu->tick_steps != 0u && !ecu->time_lost_now) {
+        update_twist(ecu, ecu->tick_budget > 1u ? ecu->tick_budget : 1u);
+    }
+    navigate(ecu);
+    transmit_scheduled(ecu);
+    watchdog(ecu);
+    ecu->ticks++;
+}
+
+/* Steps 1-3: every frame in arrival order, to its handler. */
+static void drain_mailbox(struct odom_ecu *ecu)
+{
     bool encoder_seen = false;
     int slot = mailbox_get(&ecu->mailbox);
     while (slot >= 0) {
@@ -148,10 +220,58 @@ void ecu_tick(struct odom_ecu *ecu)
     if (!encoder_seen) {
         e2e_check(&ecu->rx_encoders, NULL, 0u);
     }
-    navigate(ecu);
-    transmit_scheduled(ecu);
-    watchdog(ecu);
-    ecu->ticks++;
+}
+
+/* Firmware time: the periods elapsed on the timer since the previous tick, returned; rounded, the
+ * remainder carried to the next tick so jitter never drifts the clock (u32 elapsed: the timer may
+ * wrap, every 71.6 min). elapsed_us is in [-TICK/2, 2^32 + TICK/2): an i64; periods < 2^19. */
+static uint32_t advance_time(struct odom_ecu *ecu, bool timed, uint32_t now_us)
+{
+    uint32_t periods = 1u;
+    if (timed) {
+        if (ecu->timer_prev_valid) {
+            int64_t elapsed_us = (int64_t)(uint32_t)(now_us - ecu->timer_prev_us)
+                                 + ecu->timer_rest_us;
+            /* elapsed_us + TICK/2 >= 0: the rest is never below -TICK/2 */
+            periods = (uint32_t)((elapsed_us + TICK_PERIOD_US / 2) / TICK_PERIOD_US);
+            ecu->timer_rest_us = (int32_t)(elapsed_us - (int64_t)periods * TICK_PERIOD_US);
+        }
+        ecu->timer_prev_us = now_us;
+        ecu->timer_prev_valid = true;
+    }
+    ecu->time_periods += periods;
+    uint32_t since_encoder = ecu->ticks_since_encoder + periods; /* <= 2^16 + 2^19 */
+    ecu->ticks_since_encoder = since_encoder < STEP_PERIODS_MAX ? since_encoder : STEP_PERIODS_MAX;
+    uint32_t since_sample = ecu->periods_since_sample + periods;
+    ecu->periods_since_sample = since_sample < STEP_PERIODS_MAX ? since_sample : STEP_PERIODS_MAX;
+    ecu->time_lost_now = periods >= LOST_TIME_PERIODS;
+    if (ecu->time_lost_now) {
+        ecu->periods_lost += periods - 1u;
+        ecu->errors |= ERROR_TIME_LOST;
+        degrade(ecu, REASON_TIME_LOST);
+    }
+    return periods;
+}
+
+/* Frames the receive ISR dropped since the previous tick: DEGRADED (MAILBOX_OVERFLOW). */
+static void check_overflows(struct odom_ecu *ecu)
+{
+    uint32_t overflows = ecu->mailbox.overflows;
+    if (overflows != ecu->overflows_seen) {
+        ecu->overflows_seen = overflows;
+        degrade(ecu, REASON_MAILBOX_OVERFLOW);
+    }
+}
+
+/* OK or DEGRADED -> DEGRADED for reason (INIT and FAULT stay); recovery restarts. */
+static void degrade(struct odom_ecu *ecu, enum reason reason)
+{
+    if (ecu->state == STATE_OK || ecu->state == STATE_DEGRADED) {
+        ecu->state = STATE_DEGRADED;
+        ecu->reason = reason;
+        ecu->good_in_a_row = 0;
+        ecu->reason_tick = ecu->ticks;
+    }
 }
 
 /* --- step 2-3: received frames --- */
@@ -181,18 +301,35 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
         return;
     }
     uint8_t counter;
-    uint32_t left_wire;
-    uint32_t right_wire;
-    unpack_wheel_encoders(data, &counter, &left_wire, &right_wire);
-    uint32_t left;
-    uint32_t right;
-    extend_counters(ecu, left_wire, right_wire, &left, &right);
-    if (ecu->state != STATE_FAULT && odometry_step_counts(&ecu->odometry, left, right)) {
-        update_twist(ecu, counter);
+    uint32_t wire[2];
+    unpack_wheel_encoders(data, &counter, &wire[0], &wire[1]);
+    uint32_t counts[2];
+    extend_counters(ecu, wire, counts);
+    uint32_t periods = step_periods_max(ecu, counter);
+    if (!plausible(ecu, ecu->counts_prev_valid ? ecu->counts_prev : NULL, counts, periods)) {
+        on_implausible(ecu, counter, wire, counts);
+        return;
+    }
+    ecu->resync_first_valid = false;
+    accept_encoders(ecu, counter, wire, counts);
+}
+
+/* Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery. */
+static void accept_encoders(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                            const uint32_t counts[2])
+{
+    commit_counters(ecu, wire, counts);
+    if (ecu->state != STATE_FAULT
+        && odometry_step_counts(&ecu->odometry, counts[0], counts[1])) {
+        sum_step(ecu);
     }
     ecu->enc_prev_counter = counter;
     ecu->enc_counter = counter;
-    ecu->ticks_since_encoder = 0;
+    ecu->ticks_since_encoder = 0u;
+    ecu->samples_stale = ecu->time_lost_now;
+    if (!ecu->time_lost_now) {
+        ecu->periods_since_sample = 0u;
+    }
     if (ecu->good_in_a_row < RECOVERY_FRAMES) {
         ecu->good_in_a_row++;
     }
@@ -201,50 +338,168 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
     }
 }
 
-/* The hardware counters from their low 24 bits on the wire: a 16-bit counter fits as it is; a
- * 32-bit one is rebuilt by adding the wire's wrap-safe 24-bit delta. */
-static void extend_counters(struct odom_ecu *ecu, uint32_t left_wire, uint32_t right_wire,
-                            uint32_t *left, uint32_t *right)
+/* The hardware counters from their low 24 bits on the wire (nothing is stored): a 16-bit counter
+ * fits as it is; a 32-bit one is rebuilt by adding the wire's wrap-safe 24-bit delta to the last
+ * accepted frame's counters. */
+static void extend_counters(const struct odom_ecu *ecu, const uint32_t wire[2],
+                            uint32_t counts[2])
 {
-    if (ecu->odometry.consts.counter_bits <= WIRE_COUNTER_BITS) {
-        *left = left_wire;
-        *right = right_wire;
+    if (ecu->odometry.consts.counter_bits <= WIRE_COUNTER_BITS || !ecu->wire_prev_valid) {
+        counts[0] = wire[0];
+        counts[1] = wire[1];
         return;
     }
-    if (!ecu->wire_prev_valid) {
-        ecu->counts_u32[0] = left_wire;
-        ecu->counts_u32[1] = right_wire;
-    } else {
-        int32_t d_left = wrap_signed(left_wire - ecu->wire_prev[0], WIRE_COUNTER_BITS);
-        int32_t d_right = wrap_signed(right_wire - ecu->wire_prev[1], WIRE_COUNTER_BITS);
-        ecu->counts_u32[0] += (uint32_t)d_left;
-        ecu->counts_u32[1] += (uint32_t)d_right;
+    for (unsigned side = 0u; side < 2u; ++side) {
+        int32_t delta = wrap_signed(wire[side] - ecu->wire_prev[side], WIRE_COUNTER_BITS);
+        counts[side] = ecu->counts_u32[side] + (uint32_t)delta; /* mod 2^32 */
     }
-    ecu->wire_prev[0] = left_wire;
-    ecu->wire_prev[1] = right_wire;
-    ecu->wire_prev_valid = true;
-    *left = ecu->counts_u32[0];
-    *right = ecu->counts_u32[1];
 }
 
-/* Speeds over the last step: dt from the encoder counter's advance (lost frames count).
- * ds_q20_m * 10^9 is taken in 128 bits and saturated (exact below 8.6 m per step). */
-static void update_twist(struct odom_ecu *ecu, uint8_t counter)
+/* Take an accepted frame's counters as the base of the next deltas. */
+static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
+                            const uint32_t counts[2])
+{
+    for (unsigned side = 0u; side < 2u; ++side) {
+        ecu->wire_prev[side] = wire[side];
+        ecu->counts_u32[side] = counts[side];
+        ecu->counts_prev[side] = counts[side];
+    }
+    ecu->wire_prev_valid = true;
+    ecu->counts_prev_valid = true;
+}
+
+/* The most encoder periods that can separate this frame's sample from the last accepted one: n =
+ * the COUNTER advance (mod 16, 0 read as 16), plus whole counter cycles while n stays within the
+ * periods since that sample. Exact in a regular stream (1). At most STEP_PERIODS_MAX + 16. */
+static uint32_t step_periods_max(const struct odom_ecu *ecu, uint8_t counter)
 {
     int prev = ecu->enc_prev_counter;
-    unsigned periods = prev < 0 ? 1u : ((unsigned)(counter - prev) & COUNTER_MASK);
-    if (periods == 0u) {
-        periods = 1u;
+    if (prev < 0) {
+        return 1u;
     }
-    int64_t dt_us = (int64_t)periods * ENCODER_PERIOD_US;
-    int64_t ds_q20_m = asr_i64(ecu->odometry.last_ds_q49_m, 29u);
-    uint32_t scratch = 0u; /* Python sets no flag here: the twist's pack saturates later */
-    int64_t ds_scaled = wide_sat_i64(wide_mul_i64(ds_q20_m, INT64_C(1000000000)), &scratch);
-    ecu->twist_mm_s = div_round_i64(ds_scaled, dt_us * (INT64_C(1) << 20));
+    uint32_t advance = ((uint32_t)counter - (uint32_t)prev) & COUNTER_MASK;
+    if (advance == 0u) {
+        advance = COUNTER_MASK + 1u;
+    }
+    uint32_t budget = ecu->tick_budget; /* <= STEP_PERIODS_MAX */
+    if (budget <= advance) {
+        return advance;
+    }
+    return advance + (((budget - advance) >> 4) << 4);
+}
+
+/* Per wheel, the most counts one encoder period can hold at max_wheel_speed_mm_s:
+ * ceil(v_max * T / travel per count) + 1 (a count edge may fall either side of a sample).
+ * Configuration time: a 128-bit muldiv (travel < 2^44), then u64 division; the ceiling as
+ * quotient + (remainder != 0), which equals Python's (a + m - 1) // m without the u64 sum. The
+ * per-count travel is a u64 (U64_MAX after an invalid boot configuration). */
+static void step_bounds(struct odom_ecu *ecu)
+{
+    const struct odom_constants *c = &ecu->odometry.consts;
+    uint64_t travel_q48_m =
+        muldiv_round_u64((uint64_t)ecu->max_wheel_speed_mm_s * ENCODER_PERIOD_US,
+                         UINT64_C(1) << 48, UINT64_C(1000000000), &ecu->errors);
+    uint64_t per_count[2] = {(uint64_t)c->m_per_count_left_q48_m,
+                             (uint64_t)c->m_per_count_right_q48_m};
+    for (unsigned side = 0u; side < 2u; ++side) {
+        uint64_t m = per_count[side]; /* >= 1: muldiv rounds a positive circumference */
+        uint64_t ceil = travel_q48_m / m + (travel_q48_m % m != 0u ? 1u : 0u);
+        ecu->max_counts_per_period[side] = ceil + 1u;
+    }
+}
+
+/* True when each wheel moved at most periods times its per-period bound since prev (NULL:
+ * nothing to compare, plausible). periods <= 2^16 + 16 and the bound < 2^44: the product < 2^61. */
+static bool plausible(const struct odom_ecu *ecu, const uint32_t prev[2], const uint32_t counts[2],
+                      uint32_t periods)
+{
+    if (prev == NULL) {
+        return true;
+    }
+    unsigned bits = (unsigned)ecu->odometry.consts.counter_bits;
+    for (unsigned side = 0u; side < 2u; ++side) {
+        int32_t delta = wrap_signed(counts[side] - prev[side], bits);
+        if (abs_u64(delta) > (uint64_t)periods * ecu->max_counts_per_period[side]) {
+            return false;
+        }
+    }
+    return true;
+}
+
+/* Refuse the step (DEGRADED, IMPLAUSIBLE_STEP); RESYNC_FRAMES refused frames in a row that are
+ * plausible among themselves are a counter restart (COUNTER_RESET): re-prime on the first of them
+ * and integrate from there, never the jump. */
+static void on_implausible(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                           const uint32_t counts[2])
+{
+    ecu->frames_implausible++;
+    ecu->errors |= ERROR_IMPLAUSIBLE_STEP;
+    degrade(ecu, REASON_IMPLAUSIBLE_STEP);
+    uint32_t periods = ((uint32_t)counter - ecu->resync_last_counter) & COUNTER_MASK;
+    if (ecu->resync_first_valid
+        && plausible(ecu, ecu->resync_last, counts, periods != 0u ? periods : 1u)) {
+        ecu->resync_frames++;
+    } else {
+        ecu->resync_first[0] = counts[0];
+        ecu->resync_first[1] = counts[1];
+        ecu->resync_first_counter = counter;
+        ecu->resync_first_valid = true;
+        ecu->resync_frames = 1;
+    }
+    ecu->resync_last[0] = counts[0];
+    ecu->resync_last[1] = counts[1];
+    ecu->resync_last_counter = counter;
+    if (ecu->resync_frames >= RESYNC_FRAMES) {
+        restart_counters(ecu, counter, wire, counts);
+    }
+}
+
+/* The encoder counters restarted: prime on the first consistent frame, integrate from it up to
+ * counts (its periods from the COUNTER advance). */
+static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                             const uint32_t counts[2])
+{
+    if (!ecu->resync_first_valid) {
+        return;
+    }
+    ecu->errors |= ERROR_COUNTER_RESET;
+    degrade(ecu, REASON_COUNTER_RESET);
+    ecu->resync_first_valid = false;
+    ecu->resync_frames = 0;
+    odometry_unprime(&ecu->odometry);
+    (void)odometry_step_counts(&ecu->odometry, ecu->resync_first[0], ecu->resync_first[1]);
+    ecu->enc_prev_counter = -1;
+    accept_encoders(ecu, counter, wire, counts);
+}
+
+/* Add the step just integrated to this tick's sums (Q20 m, Q30 rad; i64, saturated). Each term
+ * is below 2^34 (dS >> 29) and 2^32 (the heading), each sum below 2^32 before: no overflow. */
+static void sum_step(struct odom_ecu *ecu)
+{
+    const struct odometry *odo = &ecu->odometry;
     int64_t dheading_q30_rad =
-        mul_shr_round_i64(ecu->odometry.last_dheading_bam64, TWO_PI_Q60, 94u, &ecu->errors);
-    ecu->twist_mrad_s =
-        div_round_i64(dheading_q30_rad * INT64_C(1000000000), dt_us * (INT64_C(1) << 30));
+        mul_shr_round_i64(odo->last_dheading_bam64, TWO_PI_Q60, 94u, &ecu->errors);
+    ecu->tick_ds_q20_m = sat_range(ecu->tick_ds_q20_m + asr_i64(odo->last_ds_q49_m, 29u),
+                                   -TWIST_SUM_MAX, TWIST_SUM_MAX, &ecu->errors);
+    ecu->tick_dheading_q30_rad = sat_range(ecu->tick_dheading_q30_rad + dheading_q30_rad,
+                                           -TWIST_SUM_MAX, TWIST_SUM_MAX, &ecu->errors);
+    ecu->tick_steps++;
+}
+
+/* Speeds over this tick's steps, which cover the periods (1 .. STEP_PERIODS_MAX) since the last
+ * accepted sample: firmware time, so lost frames, a burst after a stall and a late frame all give
+ * the true mean speed. Products < 2^32 * 10^9 < 2^62; dt_us < 2^30, so dt_us << 30 < 2^60. The
+ * sums restart. */
+static void update_twist(struct odom_ecu *ecu, uint32_t periods)
+{
+    int64_t dt_us = (int64_t)periods * ENCODER_PERIOD_US;
+    ecu->twist_mm_s =
+        div_round_i64(ecu->tick_ds_q20_m * INT64_C(1000000000), dt_us * (INT64_C(1) << 20));
+    ecu->twist_mrad_s = div_round_i64(ecu->tick_dheading_q30_rad * INT64_C(1000000000),
+                                      dt_us * (INT64_C(1) << 30));
+    ecu->tick_ds_q20_m = 0;
+    ecu->tick_dheading_q30_rad = 0;
+    ecu->tick_steps = 0u;
 }
 
 static void on_set_pose(struct odom_ecu *ecu, const uint8_t *data, size_t len)
@@ -270,6 +525,9 @@ static void on_set_pose(struct odom_ecu *ecu, const uint8_t *data, size_t len)
         }
         odometry_set_pose(odo, x_q40, y_q40, heading);
         ecu->staged_pose = 0u;
+        if (ecu->reason == REASON_COUNTER_RESET) { /* a pose given again: recovery may proceed */
+            ecu->reason = REASON_NONE;
+        }
     } else if (frame.field <= SET_POSE_HEADING) {
         ecu->staged_pose_value[frame.field] = frame.value;
         ecu->staged_pose |= 1u << frame.field;
@@ -324,13 +582,16 @@ static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame)
     if (candidate.counter_bits != ecu->params.counter_bits) {
         odometry_unprime(&ecu->odometry);
         ecu->wire_prev_valid = false;
+        ecu->counts_prev_valid = false;
     }
     ecu->params = candidate;
     struct odom_constants consts;
     derive_constants(&candidate, &ecu->errors, &consts);
     odometry_reconfigure(&ecu->odometry, &consts);
+    step_bounds(ecu);
     if (ecu->state == STATE_FAULT) {
         ecu->state = STATE_INIT;
+        ecu->reason = REASON_NONE;
     }
     ack(ecu, ODOM_CONFIG_ID, frame, ACK_RESULT_ACK, ACK_OK);
 }
@@ -445,7 +706,7 @@ static void send_status(struct odom_ecu *ecu)
     uint32_t error_bits = ecu->errors; /* read before the pack may add SATURATION */
     pack_odom_status_summary(data, next_counter(ecu, TX_STATUS), ecu->state,
                              ecu->odometry.consts.integrator, error_bits,
-                             ecu->ticks / TICKS_PER_SECOND, &ecu->errors);
+                             ecu->time_periods / TICKS_PER_SECOND, &ecu->errors, ecu->reason);
     send(ecu, ODOM_STATUS_ID, data);
     enum status_page page = ROTATING_PAGES[ecu->page_index];
     ecu->page_index = (ecu->page_index + 1u) % 5u;
@@ -464,12 +725,12 @@ static void send_status(struct odom_ecu *ecu)
     send(ecu, ODOM_STATUS_ID, data);
 }
 
-/* Frames refused by the E2E check or for their length (u32, wrapping). */
+/* Frames refused by the E2E check, for their length or as implausible (u32, wrapping). */
 uint32_t ecu_frames_rejected(const struct odom_ecu *ecu)
 {
     const struct e2e_receiver *rxs[4] = {&ecu->rx_encoders, &ecu->rx_set_pose, &ecu->rx_config,
                                          &ecu->rx_nav_goal};
-    uint32_t total = ecu->frames_bad_length;
+    uint32_t total = ecu->frames_bad_length + ecu->frames_implausible;
     for (unsigned k = 0u; k < 4u; ++k) {
         total += rxs[k]->count_error + rxs[k]->count_wrongsequence + rxs[k]->count_repeated;
     }
@@ -491,21 +752,23 @@ static void send(struct odom_ecu *ecu, uint32_t can_id, const uint8_t data[8])
 
 /* --- step 6: the watchdog --- */
 
+/* Encoders silent for WATCHDOG_TICKS periods of firmware time -> DEGRADED; back to OK after
+ * RECOVERY_FRAMES accepted frames with no new cause. */
 static void watchdog(struct odom_ecu *ecu)
 {
     if (ecu->state == STATE_INIT || ecu->state == STATE_FAULT) {
         return;
     }
     if (ecu->ticks_since_encoder >= WATCHDOG_TICKS) {
-        if (ecu->state != STATE_DEGRADED) {
-            ecu->state = STATE_DEGRADED;
-            ecu->errors |= ERROR_ENCODER_TIMEOUT;
+        ecu->errors |= ERROR_ENCODER_TIMEOUT;
+        if (ecu->state == STATE_OK || /* a cause raised in this very tick is kept */
+            (ecu->reason != REASON_ENCODER_TIMEOUT && ecu->reason_tick != ecu->ticks)) {
+            degrade(ecu, REASON_ENCODER_TIMEOUT);
         }
         ecu->good_in_a_row = 0;
-    } else if (ecu->state == STATE_DEGRADED && ecu->good_in_a_row >= RECOVERY_FRAMES) {
+    } else if (ecu->state == STATE_DEGRADED && ecu->good_in_a_row >= RECOVERY_FRAMES
+               && ecu->reason != REASON_COUNTER_RESET) { /* the pose lost its continuity */
         ecu->state = STATE_OK;
-    }
-    if (ecu->ticks_since_encoder < WATCHDOG_TICKS) { /* Python counts on; only >= matters */
-        ecu->ticks_since_encoder++;
+        ecu->reason = REASON_NONE;
     }
 }

@@ -9,6 +9,7 @@
 
 #include "config.h"
 #include "e2e.h"
+#include "errors.h"
 #include "hal.h"
 #include "nav.h"
 #include "odometry.h"
@@ -16,9 +17,14 @@
 #define ENCODER_PERIOD_US 10000
 #define POSE_PERIOD_TICKS 2u
 #define STATUS_PERIOD_TICKS 10u
-#define WATCHDOG_TICKS 10
+#define WATCHDOG_TICKS 10u
 #define RECOVERY_FRAMES 5
 #define TICKS_PER_SECOND (1000000u / TICK_PERIOD_US)
+#define LOST_TIME_PERIODS WATCHDOG_TICKS /* a tick this many periods after the last: time lost */
+#define MAX_WHEEL_SPEED_MM_S 4000u /* build-time maximum rim speed of either wheel */
+#define RESYNC_FRAMES 3 /* frames consistent with each other, not with the last: restarted */
+#define STEP_PERIODS_MAX 0xFFFFu /* the twist's dt and the plausibility bound saturate (655 s) */
+#define TWIST_SUM_MAX (INT64_C(1) << 32) /* one tick's summed steps: 4096 m (Q20), 4 rad (Q30) */
 #define WIRE_COUNTER_BITS 24u
 #define TX_IDS 7u /* the messages this node sends: one E2E counter each */
 
@@ -40,8 +46,11 @@ struct odom_ecu {
     void *tx_ctx;
     uint32_t errors;
     enum ecu_state state;
+    enum reason reason;
     struct robot_params params;
     struct odometry odometry;
+    uint32_t max_wheel_speed_mm_s;     /* u16: an encoder step beyond it is implausible */
+    uint64_t max_counts_per_period[2]; /* per wheel, at max_wheel_speed_mm_s */
     struct mailbox mailbox;
     uint8_t data_ids[4][DATA_ID_COUNT];
     struct e2e_receiver rx_encoders;
@@ -60,7 +69,33 @@ struct odom_ecu {
     bool wire_prev_valid;
     uint32_t wire_prev[2];
     uint32_t counts_u32[2];
-    int ticks_since_encoder;
+    bool counts_prev_valid;
+    uint32_t counts_prev[2];  /* counters of the last accepted frame */
+    uint32_t time_periods;    /* 10 ms periods since reset, by the timer (ticks run or not) */
+    bool timer_prev_valid;
+    uint32_t timer_prev_us;   /* the timer at the previous tick */
+    int32_t timer_rest_us;    /* within +-TICK_PERIOD_US/2: time not yet counted */
+    uint32_t periods_lost;    /* periods the firmware did not run (stalls), wrapping */
+    uint32_t frames_implausible; /* WHEEL_ENCODERS refused by the plausibility bound, wrapping */
+    uint32_t overflows_seen;
+    /* Refused frames consistent among themselves: counters and COUNTER of the first, the last. */
+    bool resync_first_valid;
+    uint32_t resync_first[2];
+    uint8_t resync_first_counter;
+    uint32_t resync_last[2];
+    uint8_t resync_last_counter;
+    int resync_frames;
+    uint32_t ticks_since_encoder; /* periods (firmware time) since the last accepted frame, sat. */
+    uint32_t reason_tick;         /* the tick that set reason */
+    /* Periods since the last accepted frame's sample is known to have been taken (u16, sat.). */
+    uint32_t periods_since_sample;
+    bool time_lost_now;  /* this tick came LOST_TIME_PERIODS periods or more late */
+    bool samples_stale;  /* the last accepted frame was taken in a tick that lost time */
+    uint32_t tick_budget; /* periods_since_sample at the start of this tick */
+    /* The steps since the last twist update (one tick; two after a tick that lost time). */
+    int64_t tick_ds_q20_m;         /* saturated to +-2^32 (4096 m) */
+    int64_t tick_dheading_q30_rad; /* saturated to +-2^32 (4 rad) */
+    unsigned tick_steps;
     int good_in_a_row;
     int64_t twist_mm_s;
     int64_t twist_mrad_s;
@@ -74,8 +109,10 @@ struct odom_ecu {
 void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
               const struct robot_params *params);
 void ecu_isr_can_rx(struct odom_ecu *ecu, uint32_t can_id, const uint8_t *data, size_t len);
+void ecu_isr_rx_overrun(struct odom_ecu *ecu);
 void ecu_isr_bus_state(struct odom_ecu *ecu, bool bus_off);
 void ecu_tick(struct odom_ecu *ecu);
+void ecu_tick_at(struct odom_ecu *ecu, uint32_t now_us);
 uint32_t ecu_frames_rejected(const struct odom_ecu *ecu);
 
 #endif

@@ -3,6 +3,7 @@
 #include "frames.h"
 
 #include "config.h"
+#include "errors.h"
 #include "fixmath.h"
 
 /* Profile 2 DataIDList of E2E slot `slot` (1..15): DataID[c] = (slot << 4) | c. */
@@ -203,9 +204,11 @@ void pack_odom_ack(uint8_t out[8], uint8_t counter, uint8_t request_counter, int
     seal(out, ODOM_ACK_E2E_SLOT);
 }
 
-/* ODOM_STATUS page 0: state, integrator, the low 16 bits of the error mask, uptime (u24). */
+/* ODOM_STATUS page 0: state, integrator, reason (saturated to the DBC range), the low 16 bits of
+ * the error mask, uptime (u24). */
 void pack_odom_status_summary(uint8_t out[8], uint8_t counter, int64_t state, int64_t integrator,
-                              uint32_t error_mask, int64_t uptime_s, uint32_t *errors)
+                              uint32_t error_mask, int64_t uptime_s, uint32_t *errors,
+                              int64_t reason)
 {
     struct odocan_odom_status_t m;
     (void)odocan_odom_status_init(&m);
@@ -213,6 +216,7 @@ void pack_odom_status_summary(uint8_t out[8], uint8_t counter, int64_t state, in
     m.page = PAGE_SUMMARY;
     m.state = (uint8_t)sat_range(state, 0, 3, errors);
     m.integrator = (uint8_t)sat_range(integrator, INTEGRATOR_EULER, INTEGRATOR_EXACT, errors);
+    m.reason = (uint8_t)sat_range(reason, REASON_NONE, REASON_CONFIG_INVALID, errors);
     m.error_mask = (uint16_t)error_mask;
     m.uptime = (uint32_t)sat_range(uptime_s, 0, 0xFFFFFF, errors);
     (void)odocan_odom_status_pack(out, &m, 8u);

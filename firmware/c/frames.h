@@ -77,7 +77,8 @@ void pack_nav_status(uint8_t out[8], uint8_t counter, int64_t state, int64_t goa
 void pack_odom_ack(uint8_t out[8], uint8_t counter, uint8_t request_counter, int64_t request_id,
                    uint8_t request_field, int64_t result, int64_t reason, uint32_t *errors);
 void pack_odom_status_summary(uint8_t out[8], uint8_t counter, int64_t state, int64_t integrator,
-                              uint32_t error_mask, int64_t uptime_s, uint32_t *errors);
+                              uint32_t error_mask, int64_t uptime_s, uint32_t *errors,
+                              int64_t reason);
 void pack_odom_status_frame_totals(uint8_t out[8], uint8_t counter, uint32_t lost,
                                    uint32_t rejected, uint32_t overflowed);
 void pack_odom_status_e2e(uint8_t out[8], uint8_t counter, enum status_page page, uint32_t ok,

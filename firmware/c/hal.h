@@ -1,8 +1,11 @@
 /* The firmware's hardware abstraction layer: all it knows of the world (firmware/hal.py).
  *
  * A board support package implements can_tx_fn and calls the ECU: ecu_isr_can_rx from the CAN
- * receive interrupt, ecu_tick every TICK_PERIOD_US from a periodic timer, ecu_isr_bus_state when
- * the controller enters or leaves bus-off. */
+ * receive interrupt; ecu_tick_at(ecu, now_us) every TICK_PERIOD_US from a periodic timer, now_us
+ * the free-running u32 microsecond timer at its release (the firmware's clock: a late or stalled
+ * tick is lost time, not one period; ecu_tick(ecu) on a board without a timer: one period);
+ * ecu_isr_rx_overrun when the CAN controller's receive FIFO overran; ecu_isr_bus_state when the
+ * controller enters or leaves bus-off. */
 #ifndef ODOCAN_HAL_H
 #define ODOCAN_HAL_H
 

@@ -31,9 +31,10 @@
  *   enc_pack COUNTER L R | motor_pack COUNTER L R -> the sealed frame (generated pack + E2E)
  *   goal_unpack HEX          -> counter field value mode append no_final_heading goal_id
  *   ecu_new PPV RL RR B BITS I -> ok                  (a new ECU)
- *   ecu_rx ID HEX | ecu_bus OFF | ecu_txfull FULL -> ok (a frame into the ISR, bus state, the
- *                                                        driver refusing frames or not)
- *   ecu_tick                 -> state errors tx_dropped then every frame sent, ID:HEX
+ *   ecu_rx ID HEX | ecu_bus OFF | ecu_txfull FULL | ecu_overrun -> ok (a frame into the ISR,
+ *                            bus state, the driver refusing frames or not, a receive FIFO overrun)
+ *   ecu_tick | ecu_tick_at NOW_US -> state reason errors tx_dropped then every frame sent, ID:HEX
+ *                            (ecu_tick: no timer, one period; ecu_tick_at: the u32 timer value)
  */
 #include <inttypes.h>
 #include <stdio.h>
@@ -381,12 +382,19 @@ int main(void)
         } else if (strcmp(cmd, "ecu_txfull") == 0) {
             tx_log.full = arg_u64() != 0u;
             printf("ok\n");
-        } else if (strcmp(cmd, "ecu_tick") == 0) {
+        } else if (strcmp(cmd, "ecu_overrun") == 0) {
+            ecu_isr_rx_overrun(&ecu);
+            printf("ok\n");
+        } else if (strcmp(cmd, "ecu_tick") == 0 || strcmp(cmd, "ecu_tick_at") == 0) {
             tx_log.used = 0u;
             tx_log.text[0] = '\0';
-            ecu_tick(&ecu);
-            printf("%d %" PRIu32 " %" PRIu32 "%s\n", (int)ecu.state, ecu.errors, ecu.tx_dropped,
-                   tx_log.text);
+            if (strcmp(cmd, "ecu_tick_at") == 0) {
+                ecu_tick_at(&ecu, (uint32_t)arg_u64());
+            } else {
+                ecu_tick(&ecu);
+            }
+            printf("%d %d %" PRIu32 " %" PRIu32 "%s\n", (int)ecu.state, (int)ecu.reason, ecu.errors,
+                   ecu.tx_dropped, tx_log.text);
         } else {
             printf("unknown %s\n", cmd);
         }

@@ -1296,6 +1296,7 @@ int odocan_odom_status_pack(
     case 0:
         dst_p[2] |= pack_left_shift_u8(src_p->state, 0u, 0x03u);
         dst_p[2] |= pack_left_shift_u8(src_p->integrator, 2u, 0x0cu);
+        dst_p[2] |= pack_left_shift_u8(src_p->reason, 4u, 0xf0u);
         dst_p[3] |= pack_left_shift_u16(src_p->error_mask, 0u, 0xffu);
         dst_p[4] |= pack_right_shift_u16(src_p->error_mask, 8u, 0xffu);
         dst_p[5] |= pack_left_shift_u32(src_p->uptime, 0u, 0xffu);
@@ -1373,6 +1374,7 @@ int odocan_odom_status_unpack(
     case 0:
         dst_p->state = unpack_right_shift_u8(src_p[2], 0u, 0x03u);
         dst_p->integrator = unpack_right_shift_u8(src_p[2], 2u, 0x0cu);
+        dst_p->reason = unpack_right_shift_u8(src_p[2], 4u, 0xf0u);
         dst_p->error_mask = unpack_right_shift_u16(src_p[3], 0u, 0xffu);
         dst_p->error_mask |= unpack_left_shift_u16(src_p[4], 8u, 0xffu);
         dst_p->uptime = unpack_right_shift_u32(src_p[5], 0u, 0xffu);
@@ -1501,6 +1503,11 @@ bool odocan_odom_status_nav_goal_e2_e_ok_is_in_range(uint16_t value)
 bool odocan_odom_status_integrator_is_in_range(uint8_t value)
 {
     return (value <= 2u);
+}
+
+bool odocan_odom_status_reason_is_in_range(uint8_t value)
+{
+    return (value <= 6u);
 }
 
 bool odocan_odom_status_error_mask_is_in_range(uint16_t value)

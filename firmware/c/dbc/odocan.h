@@ -168,6 +168,14 @@ extern "C" {
 #define ODOCAN_ODOM_STATUS_INTEGRATOR_RK2_CHOICE (1u)
 #define ODOCAN_ODOM_STATUS_INTEGRATOR_EXACT_CHOICE (2u)
 
+#define ODOCAN_ODOM_STATUS_REASON_NONE_CHOICE (0u)
+#define ODOCAN_ODOM_STATUS_REASON_ENCODER_TIMEOUT_CHOICE (1u)
+#define ODOCAN_ODOM_STATUS_REASON_TIME_LOST_CHOICE (2u)
+#define ODOCAN_ODOM_STATUS_REASON_MAILBOX_OVERFLOW_CHOICE (3u)
+#define ODOCAN_ODOM_STATUS_REASON_IMPLAUSIBLE_STEP_CHOICE (4u)
+#define ODOCAN_ODOM_STATUS_REASON_COUNTER_RESET_CHOICE (5u)
+#define ODOCAN_ODOM_STATUS_REASON_CONFIG_INVALID_CHOICE (6u)
+
 #define ODOCAN_SIM_TRUTH_PART_X_CHOICE (0u)
 #define ODOCAN_SIM_TRUTH_PART_Y_CHOICE (1u)
 #define ODOCAN_SIM_TRUTH_PART_HEADING_CHOICE (2u)
@@ -260,6 +268,7 @@ extern "C" {
 #define ODOCAN_ODOM_STATUS_CONFIG_E2_E_OK_NAME "CONFIG_E2E_OK"
 #define ODOCAN_ODOM_STATUS_NAV_GOAL_E2_E_OK_NAME "NAV_GOAL_E2E_OK"
 #define ODOCAN_ODOM_STATUS_INTEGRATOR_NAME "INTEGRATOR"
+#define ODOCAN_ODOM_STATUS_REASON_NAME "REASON"
 #define ODOCAN_ODOM_STATUS_ERROR_MASK_NAME "ERROR_MASK"
 #define ODOCAN_ODOM_STATUS_REJECTED_FRAMES_NAME "REJECTED_FRAMES"
 #define ODOCAN_ODOM_STATUS_ENC_E2_E_LOST_NAME "ENC_E2E_LOST"
@@ -1044,7 +1053,16 @@ struct odocan_odom_status_t {
     uint8_t integrator;
 
     /**
-     * u16: the low 16 bits of the firmware's sticky u32 error mask (firmware.errors.ErrorFlag).
+     * u4 enum: why STATE is not OK, the last cause of DEGRADED (or FAULT); NONE while OK.
+     *
+     * Range: 0..6 (0..6 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t reason;
+
+    /**
+     * u16: the low 16 bits of the firmware's sticky u32 error mask (firmware.errors.ErrorFlag): bit 0 SATURATION, 1 CONFIG_INVALID, 2 ENCODER_TIMEOUT, 3 MAILBOX_OVERFLOW, 4 E2E_ERROR, 6 BUS_OFF, 7 TIME_LOST, 8 IMPLAUSIBLE_STEP, 9 COUNTER_RESET.
      *
      * Range: 0..65535 (0..65535 -)
      * Scale: 1
@@ -1143,7 +1161,7 @@ struct odocan_odom_status_t {
     uint8_t nav_goal_e2_e_repeated;
 
     /**
-     * u16 wrapping: frames dropped because the receive mailbox was full.
+     * u16 wrapping: frames dropped because the receive mailbox was full (a receive FIFO overrun of the CAN controller counts once).
      *
      * Range: 0..65535 (0..65535 frame)
      * Scale: 1
@@ -2359,6 +2377,15 @@ bool odocan_odom_status_nav_goal_e2_e_ok_is_in_range(uint16_t value);
  * @return true if in range, false otherwise.
  */
 bool odocan_odom_status_integrator_is_in_range(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_status_reason_is_in_range(uint8_t value);
 
 /**
  * Check that given signal is in allowed range.
