@@ -310,8 +310,8 @@ def test_run_random_drives_for_a_longer_duration(
 def test_report_is_strict_json(tmp_path: Path) -> None:
     import numpy as np
 
-    from odocan.host.report.summary import write_report
+    from odocan.host.report.jsonutil import write_report
 
     path = tmp_path / "r.json"
-    write_report({"a": np.float64(np.nan), "b": [np.int64(3), math.inf], "c": {"d": 1.5}}, path)
+    write_report(path, {"a": np.float64(np.nan), "b": [np.int64(3), math.inf], "c": {"d": 1.5}})
     assert json.loads(path.read_text()) == {"a": None, "b": [3, None], "c": {"d": 1.5}}

@@ -7,11 +7,11 @@ error model's or the profile's own one-line message, ``error: ...`` and exit 2.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from odocan.host.cli.options import add_robot_argument, add_seed_argument, int_in
-from odocan.host.report.outputs import check_writable, write_text
+from odocan.host.report import jsonutil
+from odocan.host.report.outputs import check_writable
 
 RUNS_MAX = 1000  # runs of an experiment (about a second of CPU each)
 
@@ -44,9 +44,9 @@ def check_report_path(path: Path | None) -> None:
 
 
 def write_report(path: Path | None, report: dict[str, object]) -> None:
-    """Write ``report`` as indented JSON (nothing without ``--report``); an error names it."""
+    """Write ``report`` as strict JSON (nothing without ``--report``); an error names it."""
     if path is not None:
-        write_text(path, json.dumps(report, indent=2) + "\n", "--report")
+        jsonutil.write_report(path, report)
 
 
 def verdict(name: str, reasons: list[str]) -> int:

@@ -53,9 +53,9 @@ from odocan.host.io.export import (
     to_ns,
 )
 from odocan.host.io.logs import FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, FrameArrays
-from odocan.host.io.parquet import json_default, message_tables
+from odocan.host.io.parquet import message_tables
 from odocan.host.judge.analysis import Analysis
-from odocan.host.report.jsonutil import finite
+from odocan.host.report.jsonutil import report_json
 from odocan.sim import contract
 
 Record = tuple[int, str, dict[str, Any]]  # (log time ns, topic, JSON message)
@@ -92,8 +92,7 @@ def write_mcap(
             )
             for topic, name in topics.items()
         }
-        writer.write_metadata("odocan.report", {"json": json.dumps(finite(analysis.report),
-                                                                   default=json_default)})
+        writer.write_metadata("odocan.report", {"json": report_json(analysis.report)})
         count = 0
         for t_ns, topic, message in records:
             channels[topic].log(json.dumps(message).encode(), log_time=t_ns)

@@ -13,7 +13,6 @@ metadata of ``series.parquet`` (key ``odocan.report``).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cantools
@@ -27,7 +26,7 @@ from odocan.host.io.logs import FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, FrameArr
 from odocan.host.judge.analysis import Analysis
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
-from odocan.host.report.jsonutil import finite
+from odocan.host.report.jsonutil import report_json
 from odocan.sim import contract
 
 REPORT_KEY = b"odocan.report"
@@ -140,7 +139,7 @@ def write_parquet(
     the files written."""
     directory.mkdir(exist_ok=True)
     series, truth, events = series_tables(analysis)
-    report = json.dumps(finite(analysis.report), default=json_default).encode()
+    report = report_json(analysis.report).encode()
     series = series.replace_schema_metadata({REPORT_KEY: report})
     tables = {**message_tables(frames, db), "frames": frames_table(frames),
               "series": series, "truth": truth, "events": events}
@@ -151,9 +150,3 @@ def write_parquet(
         written.append(path)
     return written
 
-
-def json_default(value: object) -> object:
-    """``json.dumps`` default: numpy scalars as Python numbers."""
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"not JSON serializable: {type(value).__name__}")

@@ -14,20 +14,18 @@ subset, any order). The default, ``pos=1e-4,heading=9.587e-5``, is one LSB of ``
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from rich import box
 from rich.console import Console
 from rich.padding import Padding
 from rich.table import Table
 
 from odocan.host.judge.analysis import Analysis, Tolerance
-from odocan.host.report.jsonutil import finite
+from odocan.host.report.jsonutil import write_report
 from odocan.host.report.outputs import OutputError, check_writable
 from odocan.sim.exceptions import ConfigurationError
 
@@ -94,20 +92,6 @@ def check_output_paths(args: argparse.Namespace) -> None:
         check_writable(path, option)
 
 
-def write_report(report: dict[str, Any], path: Path) -> None:
-    """Write ``report`` as strict, indented JSON (numpy scalars become numbers, NaN null)."""
-    text = json.dumps(finite(report), indent=2, default=_json_default, allow_nan=False)
-    path.write_text(text + "\n", encoding="utf-8")
-
-
-def _json_default(value: object) -> object:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serializable: {type(value).__name__}")
-
-
 def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
     """Print the summary, then write ``--report`` and ``--plot``; 0 when passed, 1 when not.
 
@@ -121,7 +105,7 @@ def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
             continue
         try:
             if option == "--report":
-                write_report(analysis.report, path)
+                write_report(path, analysis.report)
             else:
                 from odocan.host.report.plots import plot_analysis  # matplotlib only when asked
 

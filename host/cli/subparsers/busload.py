@@ -44,7 +44,7 @@ from odocan.host.judge.schedulability import (
     messages_from_dbc,
     ms_to_ns,
 )
-from odocan.host.report.summary import write_report
+from odocan.host.report.jsonutil import write_report
 from odocan.sim.contract import database
 from odocan.sim.exceptions import ConfigurationError
 
@@ -123,7 +123,7 @@ def _do_busload(args: argparse.Namespace) -> int:
     report["dbc"] = str(args.dbc) if args.dbc is not None else "dbc/odocan.dbc"
     report["added"] = list(args.add)
     if args.report is not None:
-        write_report(report, args.report)
+        write_report(args.report, report)
     console = Console(file=sys.stdout, highlight=False, width=120)
     print_busload(load, console, title=f"odocan busload: {report['dbc']}")
     return 0 if load.schedulable else 1

@@ -67,14 +67,10 @@ from odocan.host.report.ci import (
     check_junit_path,
     write_checks,
 )
+from odocan.host.report.jsonutil import write_report
 from odocan.host.report.outputs import OutputError
 from odocan.host.report.progress import Progress, progress
-from odocan.host.report.summary import (
-    add_check_arguments,
-    check_output_paths,
-    finish,
-    write_report,
-)
+from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import contract, robot
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.clock import LockstepClock
@@ -153,7 +149,7 @@ def _do_replay(args: argparse.Namespace) -> int:
     if reasons:
         analysis.report["passed"] = analysis.passed = False
         if args.report is not None:
-            write_report(analysis.report, args.report)
+            write_report(args.report, analysis.report)
         print("FAIL: the replayed firmware departs from the log's")
         for reason in reasons:
             print(f"  - {reason}")
