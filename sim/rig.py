@@ -1,6 +1,8 @@
-"""The lockstep rig: every node in one process, on python-can ``virtual`` buses, in simulated time.
+"""The lockstep rig: every node in one process, on in-process python-can buses, in simulated time.
 
-Three bus handles share one virtual channel, as three ECUs share a wire: the sim (MOTOR_CTRL, SIM
+Three bus handles share one channel of the ``odocan`` transport (``sim.transport``; python-can's
+``virtual`` with ``RigConfig(transport="virtual")``, byte for byte the same frames), as three ECUs
+share a wire: the sim (MOTOR_CTRL, SIM
 and the scenario driver), the firmware board (ODOM_MCU) and the host (an observer handing every
 frame to python-can ``Listener``s such as ``can.Logger``). Each 10 ms tick runs, in this order:
 
@@ -36,9 +38,11 @@ from odocan.sim.faults import FaultInjectingBus, FaultSpec
 from odocan.sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import get_scenario
+from odocan.sim.transport import OdocanBus
 from odocan.sim.vehicle import Vehicle
 
 INTEGRATORS = tuple(i.name.lower() for i in Integrator)
+TRANSPORTS = ("odocan", "virtual")  # the in-process python-can interfaces the rig runs on
 
 
 def firmware_params(robot: RobotProfile, integrator: str) -> RobotParams:
@@ -65,6 +69,7 @@ class RigConfig:
     fw_faults: FaultSpec | None = None  # on the firmware's handle: what ODOM_MCU sends
     duration_s: float | None = None  # the run's length (default: the scenario's own)
     truth_phase_ticks: int = 0  # SIM_TRUTH on ticks k = phase (mod its cycle); keep it even
+    transport: str = "odocan"  # python-can interface of the rig's buses: one of TRANSPORTS
 
 
 class LockstepRig(Closing):
@@ -80,6 +85,10 @@ class LockstepRig(Closing):
             else get_scenario(config.scenario, config.robot, config.seed, config.duration_s)
         )
         params = firmware_params(config.robot, config.integrator)
+        if config.transport not in TRANSPORTS:
+            raise ConfigurationError(
+                f"unknown transport {config.transport!r} (known: {', '.join(TRANSPORTS)})"
+            )
         self.default_duration_s = (
             config.duration_s
             if config.duration_s is not None
@@ -127,9 +136,13 @@ class LockstepRig(Closing):
         return self.sim.driver
 
     def _open_bus(self, *, own: bool = False) -> can.BusABC:
+        """A handle on the rig's channel, stamped with simulated time (``preserve_timestamps``)."""
+        channel = self.config.channel
+        if self.config.transport == "odocan":  # by class: needs no installed entry point
+            return OdocanBus(channel, receive_own_messages=own, preserve_timestamps=True)
         return can.Bus(
-            interface="virtual",
-            channel=self.config.channel,
+            interface=self.config.transport,
+            channel=channel,
             preserve_timestamps=True,
             receive_own_messages=own,
         )
@@ -188,7 +201,7 @@ class LockstepRig(Closing):
         return False
 
     def close(self) -> None:
-        """Stop the listeners and release the virtual buses."""
+        """Stop the listeners and release the buses."""
         for listener in self.listeners:
             listener.stop()
         for bus in self._buses:

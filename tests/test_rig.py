@@ -7,6 +7,7 @@ Frames are recorded by python-can listeners on the rig's host handle (``can.Logg
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import itertools
 from collections import defaultdict
 from collections.abc import Callable
@@ -28,9 +29,13 @@ from odocan.firmware.hal import TICK_PERIOD_US
 from odocan.sim.board import TICK_S, TX_LATENCY_S
 from odocan.sim.contract import cycle_time_s, database, message
 from odocan.sim.errors import ErrorModel
-from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.faults import FaultSpec
+from odocan.sim.fleet import Fleet, FleetConfig
+from odocan.sim.rig import TRANSPORTS, LockstepRig, RigConfig
 from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import get_scenario
+from odocan.sim.transport import OdocanBus
 
 PMIR = load("pmir")
 EPS_S = 1e-6
@@ -86,6 +91,70 @@ def test_same_seed_gives_byte_identical_candump_logs(tmp_path: Path) -> None:
     assert first.count(b"\n") > 1500  # 5 s at 3.5 frames per 10 ms
     assert first == second
     assert first != other
+
+
+_FAULTS = FaultSpec.parse("drop=0.02,dup=0.01,delay=0.05:15,flip=0.01,seed=3")
+# sha256 of the candump log of 20 s of each run, as written by the rig of commit df15d82 (python-can
+# virtual buses, before the odocan transport and the speed work): every later change to the rig's
+# speed must keep these bytes.
+GOLDEN_LOGS = {
+    "random-slip": (
+        RigConfig(robot=PMIR, scenario="random", seed=3, errors=ErrorModel(slip=0.01)),
+        "226b9808225e9ead7b05dd35b43af29e78d0ddce900ab419eb4c3ac5a6f52a5e",
+    ),
+    "quadrature-euler-figure8": (
+        RigConfig(
+            robot=PMIR,
+            scenario="figure8",
+            integrator="euler",
+            seed=5,
+            quadrature=True,
+            errors=ErrorModel(ed=1.002, eb=0.998, slip=0.02),
+            truth_phase_ticks=2,
+        ),
+        "6dd5988aec98fa38bdbdce57dbc42ec79f5f0d65744ab5f43712c3d74ccd41ba",
+    ),
+    "faults": (
+        RigConfig(
+            robot=PMIR,
+            scenario="random",
+            seed=4,
+            errors=ErrorModel(slip=0.01),
+            faults=_FAULTS,
+            fw_faults=dataclasses.replace(_FAULTS, seed=4),
+        ),
+        "065a9daeee3a7786289529259e9f6901bd272e3a18f90f65077b2141627dca2d",
+    ),
+}
+
+
+def _golden_log(tmp_path: Path, config: RigConfig) -> bytes:
+    path = tmp_path / f"{config.transport}.log"
+    with LockstepRig(config, [can.Logger(path)]) as rig:
+        rig.run(20.0)
+    return path.read_bytes()
+
+
+@pytest.mark.parametrize("name", sorted(GOLDEN_LOGS))
+def test_logs_are_byte_identical_to_the_base_commits_on_either_transport(
+    tmp_path: Path, name: str
+) -> None:
+    config, sha256 = GOLDEN_LOGS[name]
+    logs = {t: _golden_log(tmp_path, dataclasses.replace(config, transport=t)) for t in TRANSPORTS}
+    assert logs["odocan"].count(b"\n") > 7000  # 20 s at 3.5+ frames per 10 ms
+    assert logs["odocan"] == logs["virtual"]
+    assert hashlib.sha256(logs["odocan"]).hexdigest() == sha256
+
+
+def test_the_rig_and_the_fleet_run_on_the_odocan_transport_by_default() -> None:
+    with LockstepRig(RigConfig(robot=PMIR)) as rig:
+        assert all(isinstance(bus, OdocanBus) for bus in rig._buses)
+    with Fleet(FleetConfig(robots=2, robot=PMIR)) as fleet:
+        assert all(isinstance(fleet.host_bus(i), OdocanBus) for i in range(2))
+    with LockstepRig(RigConfig(robot=PMIR, transport="virtual")) as rig:
+        assert all(type(bus).__name__ == "VirtualBus" for bus in rig._buses)
+    with pytest.raises(ConfigurationError, match="unknown transport 'pigeon'"):
+        LockstepRig(RigConfig(robot=PMIR, transport="pigeon"))
 
 
 # --- the watchdog ----------------------------------------------------------------------------

@@ -1,4 +1,7 @@
-"""``odocan run``: the lockstep rig on python-can ``virtual`` buses, then the analysis.
+"""``odocan run``: the lockstep rig on in-process python-can buses, then the analysis.
+
+The rig's buses are the ``odocan`` transport (``sim.transport``) unless ``--transport virtual``
+asks for python-can's own ``virtual`` interface: the same frames, byte for byte, only slower.
 
 The motor controller, the ground truth, the scenario driver and the firmware run in simulated
 time (about 100x faster than real time on one core); every frame goes to a ``FrameCollector``
@@ -31,7 +34,7 @@ from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
-from odocan.sim.rig import INTEGRATORS, LockstepRig, RigConfig
+from odocan.sim.rig import INTEGRATORS, TRANSPORTS, LockstepRig, RigConfig
 from odocan.sim.scenarios import SCENARIOS
 
 PROGRESS_MIN_S = 300.0  # simulated seconds from which a progress bar is worth showing
@@ -43,7 +46,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "run",
         help="run the firmware in the lockstep rig and check its odometry",
         description="Run the motor controller, ground truth, scenario driver and firmware in "
-        "lockstep on python-can virtual buses, then compare the on-board pose (decoded from the "
+        "lockstep on in-process python-can buses, then compare the on-board pose (decoded from the "
         "bus) with the float64 reference and the ground truth. Exit 0 within tolerance, 1 not, "
         "2 on bad usage.",
         epilog="With -i/-c every frame is also sent to that bus, paced to the wall clock "
@@ -67,6 +70,13 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "until 1 s before the end of a longer run)",
     )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    parser.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        default="odocan",
+        help="python-can interface of the rig's own buses (default: odocan, the lean in-process "
+        "transport; virtual: python-can's, same frames)",
+    )
     parser.add_argument(
         "--errors",
         default="",
@@ -94,6 +104,7 @@ def _do_run(args: argparse.Namespace) -> int:
         faults=faults,
         fw_faults=None if faults is None else replace(faults, seed=faults.seed + 1),
         duration_s=args.duration,
+        transport=args.transport,
     )
     check_log_path(args.log)
     check_output_paths(args)
