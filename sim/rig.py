@@ -2,9 +2,9 @@
 
 Three bus handles share one channel of the ``odocan`` transport (``sim.transport``; python-can's
 ``virtual`` with ``RigConfig(transport="virtual")``, byte for byte the same frames), as three ECUs
-share a wire: the sim (MOTOR_CTRL, SIM
-and the scenario driver), the firmware board (ODOM_MCU) and the host (an observer handing every
-frame to python-can ``Listener``s such as ``can.Logger``). Each 10 ms tick runs, in this order:
+share a wire: the sim (MOTOR_CTRL, SIM and the scenario driver; its acceptance filter passes
+MOTOR_CMD only), the firmware board (ODOM_MCU) and the host (an observer handing every frame to
+python-can ``Listener``s such as ``can.Logger``). Each 10 ms tick runs, in this order:
 
 1. the motor controller takes the MOTOR_CMD frames on its bus (from the firmware, in closed loop);
 2. the scenario driver sends its MOTOR_CMD (every 20 ms, the DBC's cycle time);
@@ -25,9 +25,11 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import can
 
+from odocan.firmware import frames as fr
 from odocan.firmware.config import Integrator, RobotParams
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.clock import LockstepClock
@@ -38,11 +40,15 @@ from odocan.sim.faults import FaultInjectingBus, FaultSpec
 from odocan.sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import get_scenario
-from odocan.sim.transport import OdocanBus
+from odocan.sim.transport import OdocanBus, data_frame
 from odocan.sim.vehicle import Vehicle
 
 INTEGRATORS = tuple(i.name.lower() for i in Integrator)
 TRANSPORTS = ("odocan", "virtual")  # the in-process python-can interfaces the rig runs on
+# The sim handle's acceptance filter: of all it hears, the motor controller takes MOTOR_CMD only.
+_MOTOR_CTRL_ACCEPTS: can.typechecking.CanFilters = [
+    {"can_id": fr.MOTOR_CMD_ID, "can_mask": 0x7FF, "extended": False}
+]
 
 
 def firmware_params(robot: RobotProfile, integrator: str) -> RobotParams:
@@ -97,7 +103,7 @@ class LockstepRig(Closing):
             else scenario.default_duration_s
         )
         self._buses: list[can.BusABC] = [
-            self._open_bus(),
+            self._open_bus(filters=_MOTOR_CTRL_ACCEPTS),
             self._open_bus(),
             self._open_bus(own=True),
         ]
@@ -135,26 +141,23 @@ class LockstepRig(Closing):
         """The scenario driver (None in closed loop); ``sim.set_scenario`` replaces it."""
         return self.sim.driver
 
-    def _open_bus(self, *, own: bool = False) -> can.BusABC:
+    def _open_bus(
+        self, *, own: bool = False, filters: can.typechecking.CanFilters | None = None
+    ) -> can.BusABC:
         """A handle on the rig's channel, stamped with simulated time (``preserve_timestamps``)."""
-        channel = self.config.channel
+        kwargs: dict[str, Any] = {
+            "receive_own_messages": own,
+            "preserve_timestamps": True,
+            "can_filters": filters,
+        }
         if self.config.transport == "odocan":  # by class: needs no installed entry point
-            return OdocanBus(channel, receive_own_messages=own, preserve_timestamps=True)
-        return can.Bus(
-            interface=self.config.transport,
-            channel=channel,
-            preserve_timestamps=True,
-            receive_own_messages=own,
-        )
+            return OdocanBus(self.config.channel, **kwargs)
+        return can.Bus(interface=self.config.transport, channel=self.config.channel, **kwargs)
 
     def send(self, can_id: int, data: bytes) -> None:
         """Send a frame as the HOST (e.g. NAV_GOAL, ODOM_CONFIG), stamped now; the firmware
         takes it at its next tick and the listeners hear it like any other frame."""
-        self.host_bus.send(
-            can.Message(
-                timestamp=self.clock.now_s(), arbitration_id=can_id, is_extended_id=False, data=data
-            )
-        )
+        self.host_bus.send(data_frame(self.clock.now_s(), can_id, data))
 
     def step(self) -> None:
         """One 10 ms tick, in the order of the module docstring."""
