@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import can
+import numpy as np
 import pytest
 
 from odocan.firmware import frames as fr
@@ -28,6 +29,7 @@ from odocan.firmware.ecu import (
 from odocan.firmware.hal import TICK_PERIOD_US
 from odocan.sim.board import TICK_S, TX_LATENCY_S
 from odocan.sim.contract import cycle_time_s, database, message
+from odocan.sim.drivetrain import Drivetrain, angle_travelled
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultSpec
@@ -36,6 +38,7 @@ from odocan.sim.rig import TRANSPORTS, LockstepRig, RigConfig
 from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import get_scenario
 from odocan.sim.transport import OdocanBus
+from odocan.sim.vehicle import Vehicle
 
 PMIR = load("pmir")
 EPS_S = 1e-6
@@ -329,3 +332,72 @@ def test_rig_frames_keep_the_dbc_cycle_times() -> None:
         assert len(times) >= 10, name
         periods = {round(b - a, 6) for a, b in itertools.pairwise(times)}
         assert periods == {cycle_time_s(name)}, name
+
+
+# --- the ground truth's fast path keeps every bit ----------------------------------------------
+
+
+def _reference_travel(drivetrain: Drivetrain, segments: list[Any]) -> np.ndarray:
+    """``Drivetrain.take_travel`` as first written (commit df15d82): whole-array numpy."""
+    seg = np.array(segments)
+    counts = seg[:, 0].astype(np.int64)
+    starts = np.cumsum(counts) - counts
+    local = np.arange(1, int(counts.sum()) + 1) - np.repeat(starts, counts)
+    t = (local / drivetrain.substep_hz)[:, np.newaxis]
+    w0 = np.repeat(seg[:, [1, 3]], counts, axis=0)
+    wsp = np.repeat(seg[:, [2, 4]], counts, axis=0)
+    alpha = np.array([drivetrain.config.accel_limit_mps2 / r for r in drivetrain.nominal_radii_m])
+    theta = angle_travelled(t, w0, wsp, alpha, drivetrain.config.time_constant_s)
+    previous = np.empty_like(theta)
+    previous[1:] = theta[:-1]
+    previous[starts] = 0.0
+    result: np.ndarray = (theta - previous) * np.array(drivetrain.actual_radii_m)
+    return result
+
+
+def _reference_advance(state: np.ndarray, ds_m: np.ndarray, wheelbase_m: float) -> np.ndarray:
+    """``GroundTruth.advance`` as first written: (x, y, heading, distance) after ``ds_m``."""
+    x0, y0, h0, d0 = state
+    ds_l, ds_r = ds_m[:, 0], ds_m[:, 1]
+    ds = 0.5 * (ds_r + ds_l)
+    dtheta = (ds_r - ds_l) / wheelbase_m
+    heading = np.cumsum(np.concatenate(([h0], dtheta)))
+    mid = heading[:-1] + 0.5 * dtheta
+    half = 0.5 * dtheta
+    small = np.abs(half) < 1e-4
+    safe = np.where(small, 1.0, half)
+    chord = ds * np.where(small, 1.0 - half * half / 6.0, np.sin(safe) / safe)
+    steps = np.stack((chord * np.cos(mid), chord * np.sin(mid), np.abs(ds)))
+    folds = np.cumsum(np.concatenate((np.array([[x0], [y0], [d0]]), steps), axis=1), axis=1)
+    return np.array([folds[0, -1], folds[1, -1], heading[-1], folds[2, -1]])
+
+
+@pytest.mark.parametrize("slip", [0.0, 0.02])
+def test_the_truths_fast_path_is_bit_identical_to_the_plain_numpy_one(slip: float) -> None:
+    """Drive as the rig does (10 ms advances, a command every 20 ms, straight runs where the
+    chord factor takes its series, stops that time out): every batch of wheel travel and every
+    pose equal, bit for bit, to the straightforward formulation's."""
+    vehicle = Vehicle(PMIR, ErrorModel(ed=1.003, eb=0.997, slip=slip), seed=11)
+    rng = np.random.default_rng(5)
+    state = np.zeros(4)
+    left = right = 0.0
+    for k in range(3000):
+        t_s = k * TICK_S
+        if k % 2 == 0 and k % 700 < 600:  # then 1 s without commands: the setpoints time out
+            if rng.random() < 0.1:
+                left = right = float(rng.uniform(-1, 1))  # straight: the series branch
+            elif rng.random() < 0.2:
+                left, right = (float(v) for v in rng.uniform(-1, 1, 2))
+            vehicle.command(left, right, t_s)
+        vehicle.advance_to(t_s)
+        if k % 10 == 3:
+            segments = list(vehicle.drivetrain._segments)
+            ds = vehicle.drivetrain.take_travel()
+            assert ds.tobytes() == _reference_travel(vehicle.drivetrain, segments).tobytes()
+            ds = vehicle.errors.apply_slip(ds, vehicle._rng)
+            truth = vehicle._truth
+            state = _reference_advance(state, ds, truth.wheelbase_m)
+            truth.advance(ds)
+            got = np.array([truth.x_m, truth.y_m, truth.heading_unwrapped_rad, truth.distance_m])
+            assert got.tobytes() == state.tobytes(), k
+    assert vehicle.truth().distance_m > 3.0
