@@ -201,13 +201,14 @@ class Drivetrain:
         starts = list(itertools.accumulate(counts, initial=0))[:-1]
         t = np.concatenate([self._local_times(n) for n in counts])  # (n, 1): s since each start
         seg = np.array(segments)
-        w0 = np.repeat(seg[:, [1, 3]], counts, axis=0)
-        wsp = np.repeat(seg[:, [2, 4]], counts, axis=0)
+        w0 = np.repeat(seg[:, 1::2], counts, axis=0)  # columns w0l, w0r
+        wsp = np.repeat(seg[:, 2::2], counts, axis=0)  # columns spl, spr
         theta = angle_travelled(t, w0, wsp, self._alpha, self.config.time_constant_s)
-        step = np.diff(theta, axis=0, prepend=0.0)  # the angle of each substep ...
-        step[starts] = theta[starts]  # ... measured from 0 at a segment's start
-        result: FloatArray = step * self._radii
-        return result
+        step = np.empty_like(theta)  # the angle of each substep, from 0 at a segment's start
+        np.subtract(theta[1:], theta[:-1], out=step[1:])
+        step[starts] = theta[starts]
+        step *= self._radii
+        return step
 
     def _local_times(self, n: int) -> FloatArray:
         """Column (k / substep_hz for k = 1 .. n); short ones cached (most span one tick)."""

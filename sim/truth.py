@@ -66,7 +66,7 @@ def chord_factor(dtheta: FloatArray) -> FloatArray:
     """sin(dtheta/2)/(dtheta/2): chord length over arc length, 1 at dtheta = 0."""
     half = 0.5 * dtheta
     small = np.abs(half) < _SMALL_HALF_ANGLE
-    if not small.any():  # the common case when turning: no series term to patch in
+    if not np.count_nonzero(small):  # the common case when turning: no series term to patch in
         result: FloatArray = np.sin(half) / half
         return result
     safe = np.where(small, 1.0, half)
