@@ -2,6 +2,8 @@
 
 The rig's buses are the ``odocan`` transport (``sim.transport``) unless ``--transport virtual``
 asks for python-can's own ``virtual`` interface: the same frames, byte for byte, only slower.
+``-b/--bitrate`` makes the rig's bus bit-timed (arbitration, exact frame lengths, delivery at the
+end of frame, in simulated time); without it the bus is instant.
 
 The motor controller, the ground truth, the scenario driver and the firmware run in simulated
 time (about 100x faster than real time on one core); every frame goes to a ``FrameCollector``
@@ -49,8 +51,10 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "lockstep on in-process python-can buses, then compare the on-board pose (decoded from the "
         "bus) with the float64 reference and the ground truth. Exit 0 within tolerance, 1 not, "
         "2 on bad usage.",
-        epilog="With -i/-c every frame is also sent to that bus, paced to the wall clock "
-        "(e.g. -i socketcan -c vcan0, then candump vcan0).",
+        epilog="With -b/--bitrate the rig's own bus is bit-timed (e.g. -b 500000: arbitration, "
+        "exact frame lengths with stuffing, delivery at the end of frame). With -i/-c every frame "
+        "is also sent to that bus, paced to the wall clock (e.g. -i socketcan -c vcan0, then "
+        "candump vcan0).",
     )
     parser.add_argument(
         "--scenario", choices=SCENARIOS, default="random", help="driving scenario (default: random)"
@@ -105,6 +109,7 @@ def _do_run(args: argparse.Namespace) -> int:
         fw_faults=None if faults is None else replace(faults, seed=faults.seed + 1),
         duration_s=args.duration,
         transport=args.transport,
+        bitrate=args.bitrate,
     )
     check_log_path(args.log)
     check_output_paths(args)
