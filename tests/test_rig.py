@@ -27,6 +27,7 @@ from odocan.firmware.ecu import (
     WATCHDOG_TICKS,
 )
 from odocan.firmware.hal import TICK_PERIOD_US
+from odocan.sim import canbits
 from odocan.sim.board import TICK_S, TX_LATENCY_S
 from odocan.sim.contract import cycle_time_s, database, message
 from odocan.sim.drivetrain import Drivetrain, angle_travelled
@@ -401,3 +402,41 @@ def test_the_truths_fast_path_is_bit_identical_to_the_plain_numpy_one(slip: floa
             got = np.array([truth.x_m, truth.y_m, truth.heading_unwrapped_rad, truth.distance_m])
             assert got.tobytes() == state.tobytes(), k
     assert vehicle.truth().distance_m > 3.0
+
+
+# --- the bit-timed rig -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("bitrate", [125_000, 1_000_000])
+def test_a_bit_timed_rig_is_deterministic_and_one_frame_at_a_time(
+    tmp_path: Path, bitrate: int
+) -> None:
+    config = RigConfig(
+        robot=PMIR, scenario="random", seed=3, errors=ErrorModel(slip=0.01), bitrate=bitrate
+    )
+    path_a, path_b = tmp_path / "a.log", tmp_path / "b.log"
+    for path in (path_a, path_b):
+        run_rig(config, 5.0, [can.Logger(path)])
+    assert path_a.read_bytes() == path_b.read_bytes()
+    timed = recorded(config, 5.0)
+    instant = recorded(dataclasses.replace(config, bitrate=None), 5.0)
+    # Every frame gets through (the last tick's may still be on the wire), none overlap, and
+    # each arrives after the instant it was sent (its tick, or 1 ms later for the firmware's).
+    assert len(instant) - 12 <= len(timed) <= len(instant)
+    for prev, msg in itertools.pairwise(timed):
+        bus_time_s = (canbits.frame_bits(msg) + canbits.INTERFRAME_BITS) / bitrate
+        assert msg.timestamp - prev.timestamp >= bus_time_s - 1e-12
+    for can_id in {m.arbitration_id for m in instant}:
+        sent = [m for m in instant if m.arbitration_id == can_id]
+        got = [m for m in timed if m.arbitration_id == can_id]
+        assert len(sent) - 3 <= len(got) <= len(sent)
+        assert all(g.timestamp > s.timestamp for g, s in zip(got, sent, strict=False))
+        if can_id == fr.WHEEL_ENCODERS_ID:  # the sim's own payloads do not depend on the bus
+            assert [g.data for g in got] == [s.data for s in sent[: len(got)]]
+
+
+def test_a_bit_timed_rig_refuses_what_has_no_bit_timing() -> None:
+    with pytest.raises(ConfigurationError, match="123456 bit/s is not a CAN bitrate"):
+        LockstepRig(RigConfig(robot=PMIR, bitrate=123_456))
+    with pytest.raises(ConfigurationError, match="needs the odocan transport"):
+        LockstepRig(RigConfig(robot=PMIR, bitrate=500_000, transport="virtual"))

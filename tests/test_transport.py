@@ -3,6 +3,7 @@ behaviour message for message, the plugin found by name, python-can's own tools 
 
 from __future__ import annotations
 
+import itertools
 import sys
 import threading
 import time
@@ -18,7 +19,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from odocan.sim import transport
+from odocan.sim import canbits, transport
 from odocan.sim.transport import OdocanBus
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -297,3 +298,187 @@ def test_python_cans_player_plays_a_log_onto_it(
     assert [(m.arbitration_id, bytes(m.data)) for m in heard] == [
         (m.arbitration_id, bytes(m.data)) for m in sent
     ]
+
+
+# --- frames as bits (sim.canbits) ------------------------------------------------------------
+
+_DATA_FRAME = st.builds(
+    lambda ext, can_id, data, rtr: can.Message(
+        arbitration_id=can_id & (0x1FFFFFFF if ext else 0x7FF),
+        is_extended_id=ext,
+        data=b"" if rtr else data,
+        is_remote_frame=rtr,
+        dlc=len(data),
+    ),
+    st.booleans(),
+    st.integers(0, 0x1FFFFFFF),
+    st.binary(max_size=8),
+    st.booleans(),
+)
+
+
+def _crc15_by_division(bits: str) -> int:
+    """CRC-15/CAN as the remainder of M(x) x^15 divided by the generator 0xC599 (GF(2))."""
+    value = int(bits, 2) << 15 if bits else 0
+    for top in range(len(bits) + 14, 14, -1):
+        if value >> top & 1:
+            value ^= 0xC599 << (top - 15)
+    return value
+
+
+def _stuffed_by_bit(bits: str) -> int:
+    """Stuff bits inserted, one bit at a time as a transmitter does."""
+    last, run, stuffed = "", 0, 0
+    for bit in bits:
+        run = run + 1 if bit == last else 1
+        last = bit
+        if run == 5:
+            stuffed += 1
+            last, run = ("1" if bit == "0" else "0"), 1
+    return stuffed
+
+
+@settings(max_examples=300, deadline=None)
+@given(_DATA_FRAME)
+def test_crc15_is_the_polynomial_remainder(msg: can.Message) -> None:
+    bits = canbits.unstuffed_bits(msg)
+    body, crc = bits[:-15], int(bits[-15:], 2)
+    assert crc == _crc15_by_division(body)
+
+
+@settings(max_examples=2000, deadline=None)
+@given(st.text(alphabet="01", max_size=160) | st.from_regex(r"\A(0{3,9}|1{3,9}){0,12}\Z"))
+def test_stuff_count_matches_a_bit_by_bit_transmitter(bits: str) -> None:
+    assert canbits.stuff_count(bits) == _stuffed_by_bit(bits)
+
+
+@settings(max_examples=300, deadline=None)
+@given(_DATA_FRAME)
+def test_frame_lengths_lie_within_the_published_bounds(msg: can.Message) -> None:
+    """Davis et al. 2007, eq. 4 (less the 3-bit interframe space): g + 8n + 10 bits unstuffed,
+    at most floor((g + 8n - 1)/4) stuff bits, g = 34 (standard) or 54 (extended)."""
+    n = 0 if msg.is_remote_frame else len(msg.data)
+    g = 54 if msg.is_extended_id else 34
+    bits = canbits.frame_bits(msg)
+    assert g + 8 * n + 10 <= bits <= g + 8 * n + 10 + (g + 8 * n - 1) // 4
+
+
+def test_a_frame_worked_by_hand() -> None:
+    """ID 0x000, no data: SOF, ID, RTR, IDE, r0 and DLC are 19 dominant bits and the CRC of
+    zeros is zero: 34 zeros carry a stuff bit after every 5 (6 of them), plus the 10-bit tail."""
+    msg = can.Message(arbitration_id=0, is_extended_id=False, data=b"")
+    assert canbits.unstuffed_bits(msg) == "0" * 34
+    assert canbits.frame_bits(msg) == 34 + 6 + 10
+    error = can.Message(is_error_frame=True)
+    assert canbits.frame_bits(error) == 14
+    with pytest.raises(ValueError, match="FD"):
+        canbits.frame_bits(can.Message(arbitration_id=1, is_fd=True, data=bytes(12)))
+
+
+def test_arbitration_order_is_bitwise() -> None:
+    key = canbits.arbitration_key
+    std = can.Message(arbitration_id=0x100, is_extended_id=False)
+    std_rtr = can.Message(arbitration_id=0x100, is_extended_id=False, is_remote_frame=True)
+    ext_same_base = can.Message(arbitration_id=0x100 << 18, is_extended_id=True)
+    ext_lower_base = can.Message(arbitration_id=(0x0FF << 18) | 0x3FFFF, is_extended_id=True)
+    error = can.Message(is_error_frame=True)
+    frames = [std_rtr, ext_same_base, std, ext_lower_base, error]
+    ordered = sorted(frames, key=key)
+    assert ordered == [error, ext_lower_base, std, std_rtr, ext_same_base]
+
+
+# --- the bit-timed wire ----------------------------------------------------------------------
+
+
+class FakeClock:
+    """Simulated time for bit-timed handles."""
+
+    def __init__(self) -> None:
+        self.now_s = 0.0
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+def _timed(channel: str, clock: FakeClock, bitrate: int = 500_000) -> list[OdocanBus]:
+    return [
+        OdocanBus(channel, bitrate=bitrate, clock=clock, preserve_timestamps=True) for _ in range(3)
+    ]
+
+
+def test_bit_timed_frames_arrive_at_their_end_of_frame_lowest_id_first(channel: str) -> None:
+    clock = FakeClock()
+    a, b, c = _timed(channel, clock)
+    try:
+        high, low = _msg(0x300, b"\xff" * 8, ts=0.0), _msg(0x100, b"\x00" * 3, ts=0.0)
+        a.send(high)
+        a.send(low)  # same controller, sent later: the lower identifier still wins
+        bits_low, bits_high = canbits.frame_bits(low), canbits.frame_bits(high)
+        end_low = bits_low / 500_000
+        end_high = (bits_low + canbits.INTERFRAME_BITS + bits_high) / 500_000
+        clock.now_s = end_low * 0.999
+        assert b.recv(0) is None
+        clock.now_s = end_low
+        got = b.recv(0)
+        assert got is not None and (got.arbitration_id, got.timestamp) == (0x100, end_low)
+        assert b.recv(0) is None
+        clock.now_s = 1.0
+        assert [(m.arbitration_id, m.timestamp) for m in _drain(b)] == [(0x300, end_high)]
+        assert [m.arbitration_id for m in _drain(c)] == [0x100, 0x300]
+        assert a.recv(0) is None
+        assert a.timing is not None and a.timing.frames == 2
+        assert a.timing.busy_bits == bits_low + bits_high + 2 * canbits.INTERFRAME_BITS
+    finally:
+        for bus in (a, b, c):
+            bus.shutdown()
+
+
+def test_a_frame_ready_during_a_transmission_contends_at_the_next_idle(channel: str) -> None:
+    clock = FakeClock()
+    a, b, c = _timed(channel, clock, bitrate=125_000)
+    try:
+        first = _msg(0x400, bytes(8), ts=0.0)
+        waiting = _msg(0x300, bytes(8), ts=0.0001)  # ready while `first` is on the wire
+        later_lower = _msg(0x200, bytes(8), ts=0.0005)  # ready later still, but a lower ID
+        same_id_again = _msg(0x200, b"\x01" * 8, ts=0.0005)  # same ID, same node: send order
+        a.send(first)
+        b.send(waiting)
+        clock.now_s = 0.00005
+        assert c.recv(0) is None  # runs the wire: `first` has started alone
+        a.send(later_lower)
+        a.send(same_id_again)
+        clock.now_s = 1.0
+        heard = _drain(c)
+        assert [m.arbitration_id for m in heard] == [0x400, 0x200, 0x200, 0x300]
+        assert [bytes(m.data)[0] for m in heard[1:3]] == [0, 1]
+        gaps = [t1.timestamp - t0.timestamp for t0, t1 in itertools.pairwise(heard)]
+        for gap, msg in zip(gaps, heard[1:], strict=True):
+            assert gap == pytest.approx((canbits.frame_bits(msg) + 3) / 125_000)
+    finally:
+        for bus in (a, b, c):
+            bus.shutdown()
+
+
+def test_a_bitrate_belongs_to_the_wire(channel: str) -> None:
+    with OdocanBus(channel, bitrate=250_000) as first:
+        with pytest.raises(can.CanInitializationError, match="250000 bit/s, not 500000"):
+            OdocanBus(channel, bitrate=500_000)
+        with OdocanBus(channel) as follower:  # no bitrate: joins the wire as it is
+            assert follower.timing is first.timing
+        with pytest.raises(can.CanOperationError, match="FD"):
+            first.send(can.Message(arbitration_id=1, is_fd=True, data=bytes(12)))
+    with OdocanBus(channel), pytest.raises(can.CanInitializationError, match="instant"):
+        OdocanBus(channel, bitrate=500_000)
+    for bad in (0, -5, 1.5, True):
+        with pytest.raises(can.CanInitializationError, match="positive integer"):
+            OdocanBus(channel + "-bad", bitrate=bad)  # type: ignore[arg-type]
+
+
+def test_a_blocked_receiver_gets_a_bit_timed_frame_on_the_wall_clock(channel: str) -> None:
+    with OdocanBus(channel, bitrate=10_000) as tx, OdocanBus(channel) as rx:
+        sent_at = time.time()
+        tx.send(_msg(0x123, bytes(8)))  # about 11 ms at 10 kbit/s
+        got = rx.recv(5.0)
+        assert got is not None and got.arbitration_id == 0x123
+        assert got.timestamp >= sent_at + canbits.frame_bits(got) / 10_000
+        assert time.time() >= got.timestamp
