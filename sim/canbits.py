@@ -23,7 +23,6 @@ An error frame (python-can's ``is_error_frame``) is modelled as its error flag a
 
 from __future__ import annotations
 
-import re
 from typing import Final
 
 import can
@@ -33,7 +32,6 @@ INTERFRAME_BITS: Final = 3
 TAIL_BITS: Final = 10  # CRC delimiter, ACK slot, ACK delimiter, EOF
 ERROR_FRAME_BITS: Final = 14  # error flag 6 + error delimiter 8
 STUFF_RUN: Final = 5
-_LONG_RUNS = re.compile("0{4,}|1{4,}")  # shorter runs are never stuffed
 
 
 def _crc15_table() -> tuple[int, ...]:
@@ -85,10 +83,29 @@ def payload(msg: can.Message) -> bytes:
 
 def unstuffed_bits(msg: can.Message) -> str:
     """The frame from SOF to the end of the CRC sequence, before stuffing, as '0'/'1'."""
-    head, data = header_bits(msg), payload(msg)
-    crc = crc15_bytes(data, crc15_bits(head))
-    data_bits = f"{int.from_bytes(data, 'big'):0{8 * len(data)}b}" if data else ""
-    return f"{head}{data_bits}{crc:015b}"
+    head, crc = _header_and_crc(msg)
+    data = payload(msg)
+    if not data:
+        return f"{head}{crc:015b}"
+    crc = crc15_bytes(data, crc)
+    return f"{head}{int.from_bytes(data, 'big'):0{8 * len(data)}b}{crc:015b}"
+
+
+def _header_and_crc(msg: can.Message) -> tuple[str, int]:
+    """``header_bits`` and the CRC register after them, cached per header (a bus carries a
+    few dozen identifiers, each mostly with one DLC)."""
+    key = (msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame, msg.dlc)
+    cached = _HEADERS.get(key)
+    if cached is None:
+        head = header_bits(msg)
+        cached = (head, crc15_bits(head))
+        if len(_HEADERS) < _HEADERS_CACHED:
+            _HEADERS[key] = cached
+    return cached
+
+
+_HEADERS: dict[tuple[int, bool, bool, int], tuple[str, int]] = {}
+_HEADERS_CACHED: Final = 4096
 
 
 def stuff_count(bits: str) -> int:
@@ -102,8 +119,7 @@ def stuff_count(bits: str) -> int:
     """
     stuffed = 0
     carry_at = -1  # where a run would start with one equal (stuff) bit already sent
-    for match in _LONG_RUNS.finditer(bits):
-        start, end = match.span()
+    for start, end in sorted(_long_runs(bits, "0") + _long_runs(bits, "1")):
         first = STUFF_RUN - (1 if start == carry_at else 0)
         extra = end - start - first
         if extra >= 0:
@@ -111,6 +127,22 @@ def stuff_count(bits: str) -> int:
             if extra % STUFF_RUN == 0:
                 carry_at = end
     return stuffed
+
+
+def _long_runs(bits: str, value: str) -> list[tuple[int, int]]:
+    """(start, end) of every run of four or more ``value`` bits (shorter runs are never
+    stuffed); ``str.find`` scans in C, far faster than a regular expression here."""
+    other = "1" if value == "0" else "0"
+    four = value * 4
+    runs = []
+    start = bits.find(four)
+    while start >= 0:
+        end = bits.find(other, start + 4)
+        if end < 0:
+            end = len(bits)
+        runs.append((start, end))
+        start = bits.find(four, end)
+    return runs
 
 
 def frame_bits(msg: can.Message) -> int:
