@@ -17,7 +17,8 @@ Targets (issue #13): real-time factor >= 360x as a whole process, transport <= 2
 receiver. The machine is shared: wall time counts the other processes too, CPU time (this
 process's) does not, so both are printed; the budget and the transport use CPU time. Prints
 figures, asserts nothing.
-Run: ``.venv/bin/python bench/rig.py [--seconds S] [--budget-seconds S] [--virtual] [--profile]``.
+Run: ``.venv/bin/python bench/rig.py [--seconds S] [--budget-seconds S] [--virtual]
+[--bitrate B ...] [--profile]`` (``--bitrate``: the rig also timed on a bit-timed bus).
 """
 
 from __future__ import annotations
@@ -61,11 +62,20 @@ class _Recorder(can.Listener):
 
 
 def make_rig(
-    seconds: float, listeners: list[can.Listener], channel: str, transport: str = "odocan"
+    seconds: float,
+    listeners: list[can.Listener],
+    channel: str,
+    transport: str = "odocan",
+    bitrate: int | None = None,
 ) -> LockstepRig:
     """The benchmarked rig: pmir, a random drive lasting the whole run."""
     config = RigConfig(
-        robot=load("pmir"), scenario="random", seed=7, channel=channel, transport=transport
+        robot=load("pmir"),
+        scenario="random",
+        seed=7,
+        channel=channel,
+        transport=transport,
+        bitrate=bitrate,
     )
     rig = LockstepRig(config, listeners)
     assert rig.driver is not None
@@ -73,12 +83,18 @@ def make_rig(
     return rig
 
 
-def time_rig(seconds: float, transport: str) -> tuple[float, float, int]:
-    """(wall s, CPU s, ticks) of the rig over ``seconds`` simulated."""
-    with make_rig(seconds, [FrameCollector()], f"bench-rig-{transport}", transport) as rig:
+def time_rig(
+    seconds: float, transport: str, bitrate: int | None = None
+) -> tuple[float, float, int, str]:
+    """(wall s, CPU s, ticks, bus load note) of the rig over ``seconds`` simulated."""
+    listeners: list[can.Listener] = [FrameCollector()]
+    with make_rig(seconds, listeners, f"bench-rig-{transport}", transport, bitrate) as rig:
         wall, cpu = time.perf_counter(), time.process_time()
         rig.run(seconds)
-        return time.perf_counter() - wall, time.process_time() - cpu, rig.ticks
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        timing = getattr(rig.host_bus, "timing", None)
+        load = "" if timing is None else f", bus load {timing.busy_bits / bitrate / seconds:.1%}"
+        return wall, cpu, rig.ticks, load
 
 
 # --- the per-tick budget ---------------------------------------------------------------------
@@ -246,15 +262,16 @@ def profile(seconds: float, top: int) -> None:
 # --- report ----------------------------------------------------------------------------------
 
 
-def report_rtf(seconds: float, transports: list[str]) -> float:
-    """Print the rig's speed on each transport; the CPU s per tick on the first."""
+def report_rtf(seconds: float, runs: list[tuple[str, int | None]]) -> float:
+    """Print the rig's speed on each (transport, bitrate); the CPU s per tick of the first."""
     per_tick: list[float] = []
-    for transport in transports:
-        wall, cpu, ticks = time_rig(seconds, transport)
+    for transport, bitrate in runs:
+        wall, cpu, ticks, load = time_rig(seconds, transport, bitrate)
         per_tick.append(cpu / ticks)
         rtf = seconds / wall
         verdict = "met" if rtf >= RTF_TARGET else "NOT met"
-        print(f"lockstep rig on {transport}, pmir, random drive, {seconds:g} s simulated")
+        bus = "instant" if bitrate is None else f"bit-timed at {bitrate} bit/s{load}"
+        print(f"lockstep rig on {transport} ({bus}), pmir, random drive, {seconds:g} s simulated")
         print(f"  wall time       {wall:>9.2f} s  ({wall / ticks * 1e6:.1f} us per tick)")
         print(f"  CPU time        {cpu:>9.2f} s  ({cpu / ticks * 1e6:.1f} us per tick)")
         print(
@@ -303,10 +320,20 @@ def main() -> None:
         "--budget-seconds", type=float, default=300.0, help="simulated time of the budget run"
     )
     parser.add_argument("--virtual", action="store_true", help="also time the rig on virtual")
+    parser.add_argument(
+        "--bitrate",
+        type=int,
+        action="append",
+        default=[],
+        help="also time the rig bit-timed at this bitrate (repeatable)",
+    )
     parser.add_argument("--profile", action="store_true", help="also print a cProfile top")
     parser.add_argument("--top", type=int, default=25, help="profile rows to print")
     args = parser.parse_args()
-    cpu_per_tick_s = report_rtf(args.seconds, ["odocan", "virtual"] if args.virtual else ["odocan"])
+    runs: list[tuple[str, int | None]] = [("odocan", None)]
+    runs += [("virtual", None)] if args.virtual else []
+    runs += [("odocan", bitrate) for bitrate in args.bitrate]
+    cpu_per_tick_s = report_rtf(args.seconds, runs)
     report_budget(args.budget_seconds, cpu_per_tick_s)
     report_transport(min(args.seconds, 600.0))
     if args.profile:

@@ -112,6 +112,7 @@ class BitTiming:
         self.on_wire: tuple[_Pending, float, float] | None = None  # frame, start s, end s
         self.idle_from_s = -math.inf  # the bus is idle (after the interframe space) from here
         self.horizon_s = -math.inf  # the latest time the wire has been run to
+        self.next_event_s = math.inf  # nothing happens on the wire before this
         self.frames = 0  # frames transmitted
         self.busy_bits = 0  # bit times those frames and their interframe spaces took
         self._seq = 0
@@ -130,15 +131,21 @@ class BitTiming:
             self._seq += 1
             ready = max(ready_s, self.horizon_s)
             self.pending.append((key, ready, self._seq, bits, sender, snapshot))
+            if self.on_wire is None:
+                self.next_event_s = min(self.next_event_s, max(ready, self.idle_from_s))
 
     def run_until(self, now_s: float) -> None:
         """Transmit, arbitrate and deliver everything the bus does up to ``now_s``."""
         with self.lock:
-            self.horizon_s = max(self.horizon_s, now_s)
+            if now_s > self.horizon_s:
+                self.horizon_s = now_s
+            if now_s < self.next_event_s:  # a receiver polling again: nothing new
+                return
             while True:
                 if self.on_wire is not None:
                     frame, _, end_s = self.on_wire
                     if end_s > now_s:
+                        self.next_event_s = end_s
                         return
                     self.on_wire = None
                     self.wire.deliver(frame[4], frame[5], end_s)
@@ -149,9 +156,11 @@ class BitTiming:
         """Arbitrate at the next bus idle, if it comes by ``now_s``; True when a frame won."""
         pending = self.pending
         if not pending:
+            self.next_event_s = math.inf
             return False
         idle_s = max(self.idle_from_s, min(p[1] for p in pending))
         if idle_s > now_s:
+            self.next_event_s = idle_s
             return False
         winner = min(p for p in pending if p[1] <= idle_s)
         pending.remove(winner)
