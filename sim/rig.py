@@ -44,7 +44,7 @@ from odocan.sim.clock import LockstepClock
 from odocan.sim.closing import Closing
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
-from odocan.sim.faults import FaultInjectingBus, FaultSpec
+from odocan.sim.faults import DEFAULT_BITRATE, FaultInjectingBus, FaultSpec
 from odocan.sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import get_scenario
@@ -134,9 +134,10 @@ class LockstepRig(Closing):
             self._open_bus(lambda: now_s() + TX_LATENCY_S),
             self._open_bus(lambda: (self.ticks + 1) * TICK_S, own=True),  # the whole tick
         ]
+        bitrate = DEFAULT_BITRATE if config.bitrate is None else config.bitrate
         for index, spec in ((0, config.faults), (1, config.fw_faults)):
-            if spec is not None and spec.active:
-                self._buses[index] = FaultInjectingBus(self._buses[index], spec)
+            if spec is not None and spec.active:  # bus-off recovery: 128 x 11 bits at the bitrate
+                self._buses[index] = FaultInjectingBus(self._buses[index], spec, bitrate=bitrate)
         sim_bus, fw_bus, self.host_bus = self._buses
         vehicle = Vehicle(
             config.robot, config.errors, seed=config.seed, quadrature=config.quadrature
