@@ -83,66 +83,85 @@ def payload(msg: can.Message) -> bytes:
 
 def unstuffed_bits(msg: can.Message) -> str:
     """The frame from SOF to the end of the CRC sequence, before stuffing, as '0'/'1'."""
-    head, crc = _header_and_crc(msg)
+    value, nbits = _unstuffed(msg)
+    return f"{value:0{nbits}b}"
+
+
+def _unstuffed(msg: can.Message) -> tuple[int, int]:
+    """``unstuffed_bits`` as an integer (SOF its most significant bit) and its length."""
+    head, head_bits, crc = _header(msg)
     data = payload(msg)
-    if not data:
-        return f"{head}{crc:015b}"
-    crc = crc15_bytes(data, crc)
-    return f"{head}{int.from_bytes(data, 'big'):0{8 * len(data)}b}{crc:015b}"
+    n = len(data)
+    if n:
+        crc = crc15_bytes(data, crc)
+        head = (head << (8 * n)) | int.from_bytes(data, "big")
+    return (head << 15) | crc, head_bits + 8 * n + 15
 
 
-def _header_and_crc(msg: can.Message) -> tuple[str, int]:
-    """``header_bits`` and the CRC register after them, cached per header (a bus carries a
-    few dozen identifiers, each mostly with one DLC)."""
+def _header(msg: can.Message) -> tuple[int, int, int]:
+    """``header_bits`` as (integer, length) and the CRC register after it, cached per header (a
+    bus carries a few dozen identifiers, each mostly with one DLC)."""
     key = (msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame, msg.dlc)
     cached = _HEADERS.get(key)
     if cached is None:
-        head = header_bits(msg)
-        cached = (head, crc15_bits(head))
+        bits = header_bits(msg)
+        cached = (int(bits, 2), len(bits), crc15_bits(bits))
         if len(_HEADERS) < _HEADERS_CACHED:
             _HEADERS[key] = cached
     return cached
 
 
-_HEADERS: dict[tuple[int, bool, bool, int], tuple[str, int]] = {}
+_HEADERS: dict[tuple[int, bool, bool, int], tuple[int, int, int]] = {}
 _HEADERS_CACHED: Final = 4096
 
 
-def stuff_count(bits: str) -> int:
-    """How many stuff bits a transmitter inserts into ``bits`` (after five equal bits, one of the
-    opposite value, which opens the next run).
+# Stuffing as a finite automaton. State = 5 * last bit + equal bits in a row (0..4; 0: none yet).
+def _stuff_bit(state: int, bit: int) -> tuple[int, int]:
+    """(stuff bits inserted, next state) after transmitting ``bit`` from ``state``."""
+    last, run = divmod(state, STUFF_RUN)
+    run = run + 1 if run and bit == last else 1
+    if run == STUFF_RUN:  # the stuff bit, of the other value, is the first of the next run
+        return 1, 5 * (1 - bit) + 1
+    return 0, 5 * bit + run
 
-    Only runs of four or more equal bits can be stuffed. A run of r bits entered with c equal
-    bits already sent (c = 1 right after a stuff bit of its value, else 0) takes its first stuff
-    bit after 5 - c bits and one more every 5 bits: 1 + (r - 5 + c) // 5 of them; when the last
-    lands on the run's final bit, that stuff bit is the first of the next run (c = 1 there).
-    """
-    stuffed = 0
-    carry_at = -1  # where a run would start with one equal (stuff) bit already sent
-    for start, end in sorted(_long_runs(bits, "0") + _long_runs(bits, "1")):
-        first = STUFF_RUN - (1 if start == carry_at else 0)
-        extra = end - start - first
-        if extra >= 0:
-            stuffed += 1 + extra // STUFF_RUN
-            if extra % STUFF_RUN == 0:
-                carry_at = end
+
+def _stuff_byte_table() -> tuple[int, ...]:
+    """Per (state, byte): stuff bits inserted << 4 | next state, the byte's bits MSB first."""
+    table = []
+    for state in range(2 * STUFF_RUN):
+        for byte in range(256):
+            stuffed, now = 0, state
+            for shift in range(7, -1, -1):
+                more, now = _stuff_bit(now, (byte >> shift) & 1)
+                stuffed += more
+            table.append(stuffed << 4 | now)
+    return tuple(table)
+
+
+_STUFF_BYTE: Final = _stuff_byte_table()
+
+
+def _stuff_count_int(value: int, nbits: int) -> int:
+    """Stuff bits a transmitter inserts into the ``nbits`` bits of ``value`` (MSB first): the
+    leading ``nbits % 8`` bits one at a time, then a table lookup per byte."""
+    lead = nbits % 8
+    stuffed, state = 0, 0
+    for shift in range(nbits - 1, nbits - 1 - lead, -1):
+        more, state = _stuff_bit(state, (value >> shift) & 1)
+        stuffed += more
+    table = _STUFF_BYTE
+    rest = value & ((1 << (nbits - lead)) - 1)
+    for byte in rest.to_bytes((nbits - lead) // 8, "big"):
+        entry = table[state << 8 | byte]
+        stuffed += entry >> 4
+        state = entry & 0xF
     return stuffed
 
 
-def _long_runs(bits: str, value: str) -> list[tuple[int, int]]:
-    """(start, end) of every run of four or more ``value`` bits (shorter runs are never
-    stuffed); ``str.find`` scans in C, far faster than a regular expression here."""
-    other = "1" if value == "0" else "0"
-    four = value * 4
-    runs = []
-    start = bits.find(four)
-    while start >= 0:
-        end = bits.find(other, start + 4)
-        if end < 0:
-            end = len(bits)
-        runs.append((start, end))
-        start = bits.find(four, end)
-    return runs
+def stuff_count(bits: str) -> int:
+    """How many stuff bits a transmitter inserts into ``bits`` ('0'/'1'): after five equal
+    bits, one of the opposite value, which counts toward the next run."""
+    return _stuff_count_int(int(bits, 2), len(bits)) if bits else 0
 
 
 def frame_bits(msg: can.Message) -> int:
@@ -151,8 +170,8 @@ def frame_bits(msg: can.Message) -> int:
         return ERROR_FRAME_BITS
     if msg.is_fd:
         raise ValueError("CAN FD frames have no classic bit timing")
-    bits = unstuffed_bits(msg)
-    return len(bits) + stuff_count(bits) + TAIL_BITS
+    value, nbits = _unstuffed(msg)
+    return nbits + _stuff_count_int(value, nbits) + TAIL_BITS
 
 
 def arbitration_key(msg: can.Message) -> tuple[int, int, int, int, int]:
