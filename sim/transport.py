@@ -134,6 +134,11 @@ class BitTiming:
             if self.on_wire is None:
                 self.next_event_s = min(self.next_event_s, max(ready, self.idle_from_s))
 
+    def drop_pending_of(self, sender: OdocanBus) -> None:
+        """Forget ``sender``'s frames still waiting for the bus."""
+        with self.lock:
+            self.pending = [p for p in self.pending if p[4] is not sender]
+
     def run_until(self, now_s: float) -> None:
         """Transmit, arbitrate and deliver everything the bus does up to ``now_s``."""
         with self.lock:
@@ -329,12 +334,19 @@ class OdocanBus(BusABC):
 
     # --- lifecycle --------------------------------------------------------------------------
 
+    def flush_tx_buffer(self) -> None:
+        """Bit-timed: drop this handle's frames still waiting for the bus (not the one on it)."""
+        if self.timing is not None:
+            self.timing.drop_pending_of(self)
+
     def shutdown(self) -> None:
-        """Leave the wire (idempotent); a receiver blocked in ``recv`` returns None."""
+        """Leave the wire (idempotent; bit-timed, its waiting frames go with it); a receiver
+        blocked in ``recv`` returns None."""
         super().shutdown()
         if not self._open:
             return
         self._open = False
+        self.flush_tx_buffer()
         with _wires_lock:
             wire = self._wire
             wire.handles = tuple(h for h in wire.handles if h is not self)

@@ -482,3 +482,23 @@ def test_a_blocked_receiver_gets_a_bit_timed_frame_on_the_wall_clock(channel: st
         assert got is not None and got.arbitration_id == 0x123
         assert got.timestamp >= sent_at + canbits.frame_bits(got) / 10_000
         assert time.time() >= got.timestamp
+
+
+def test_flushing_or_closing_a_bit_timed_handle_drops_its_waiting_frames(channel: str) -> None:
+    clock = FakeClock()
+    a, b, c = _timed(channel, clock)
+    try:
+        for can_id in (0x100, 0x101, 0x102):
+            a.send(_msg(can_id, ts=0.0))
+        b.send(_msg(0x200, ts=0.0))
+        c.send(_msg(0x300, ts=0.0))
+        clock.now_s = 1e-6
+        assert b.recv(0) is None  # 0x100 is now on the wire
+        a.flush_tx_buffer()  # 0x101 and 0x102 never leave
+        c.shutdown()  # 0x300 neither
+        clock.now_s = 1.0
+        assert [m.arbitration_id for m in _drain(b)] == [0x100]
+        assert [m.arbitration_id for m in _drain(a)] == [0x200]
+    finally:
+        for bus in (a, b, c):
+            bus.shutdown()
