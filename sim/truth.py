@@ -74,16 +74,6 @@ def chord_factor(dtheta: FloatArray) -> FloatArray:
     return result
 
 
-def _fold(start: FloatArray, steps: FloatArray) -> FloatArray:
-    """Row-wise running sums start, start+s1, (start+s1)+s2, ...: shape (rows, n + 1).
-
-    ``start`` has shape (rows,), ``steps`` (rows, n). A sequential left fold, so splitting the
-    steps into batches gives bit-identical sums.
-    """
-    result: FloatArray = np.cumsum(np.concatenate((start[:, np.newaxis], steps), axis=1), axis=1)
-    return result
-
-
 class GroundTruth:
     """Integrates the actual wheel ground travel into the true pose, substep by substep."""
 
@@ -110,8 +100,9 @@ class GroundTruth:
     def advance(self, ds_m: FloatArray) -> None:
         """Integrate substeps of ground travel ``ds_m`` (shape (n, 2): left, right; m).
 
-        Each fold runs in place in one preallocated row (the running value first): the same
-        sequential sums as ``_fold``, with fewer small-array calls (this runs every SIM_TRUTH).
+        Each sum is a sequential left fold (``np.cumsum`` in place over a row that starts with
+        the running value), so batching never changes a bit; one preallocated row per fold
+        keeps the small-array calls few (this runs at every SIM_TRUTH).
         """
         n = ds_m.shape[0]
         if n == 0:
