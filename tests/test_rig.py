@@ -26,6 +26,8 @@ from odocan.firmware.ecu import (
     STATUS_PERIOD_TICKS,
     WATCHDOG_TICKS,
 )
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.frames import NavGoalField, NavMode
 from odocan.firmware.hal import TICK_PERIOD_US
 from odocan.sim import canbits
 from odocan.sim.board import TICK_S, TX_LATENCY_S
@@ -440,3 +442,21 @@ def test_a_bit_timed_rig_refuses_what_has_no_bit_timing() -> None:
         LockstepRig(RigConfig(robot=PMIR, bitrate=123_456))
     with pytest.raises(ConfigurationError, match="needs the odocan transport"):
         LockstepRig(RigConfig(robot=PMIR, bitrate=500_000, transport="virtual"))
+
+
+def test_a_bit_timed_closed_loop_drives_to_its_goal() -> None:
+    """The host's NAV_GOAL, the firmware's MOTOR_CMD and the encoders all cross the bit-timed
+    wire: at 125 kbit/s each still lands within its tick, so the drive is the instant one."""
+    ends = []
+    for bitrate in (None, 125_000):
+        with LockstepRig(RigConfig(robot=PMIR, scenario=None, bitrate=bitrate)) as rig:
+            rig.run(0.5)
+            e = ErrorMask()
+            rig.send(fr.NAV_GOAL_ID, fr.pack_nav_goal(0, NavGoalField.X, 10_000, e))
+            rig.send(fr.NAV_GOAL_ID, fr.pack_nav_goal(1, NavGoalField.Y, 5_000, e))
+            rig.send(fr.NAV_GOAL_ID, fr.pack_nav_goal_go(2, NavMode.GO_TO_GOAL, 1, 1, 1, e))
+            rig.run(15.0)
+            truth = rig.vehicle.truth()
+            ends.append((truth.x_m, truth.y_m, rig.motor_controller.commands_applied))
+    assert ends[0] == ends[1]
+    assert ends[1][0] == pytest.approx(1.0, abs=0.01) and ends[1][1] == pytest.approx(0.5, abs=0.01)
