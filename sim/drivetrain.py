@@ -26,6 +26,7 @@ numpy (``take_travel``).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -36,6 +37,7 @@ from odocan.sim.robot import RobotProfile
 
 FloatArray = npt.NDArray[np.float64]
 TAU_RAD = 2.0 * math.pi
+_CACHED_SEGMENT_SUBSTEPS = 256  # take_travel keeps the time columns of segments up to this long
 
 
 @dataclass(frozen=True)
@@ -149,6 +151,7 @@ class Drivetrain:
         self._timeout_at: int | None = None
         self._segments: list[tuple[int, float, float, float, float]] = []
         self._pending = 0
+        self._local_times_cache: dict[int, FloatArray] = {}
 
     def command(self, left_mps: float, right_mps: float) -> None:
         """Latch rim-speed setpoints (m/s) at the current substep and restart the timeout."""
@@ -191,21 +194,30 @@ class Drivetrain:
         """Actual rim travel (m) per substep since the last call, shape (n, 2): left, right."""
         if not self._segments:
             return np.zeros((0, 2))
-        seg = np.array(self._segments)
-        counts = seg[:, 0].astype(np.int64)
-        self._segments.clear()
+        segments = self._segments
+        self._segments = []
         self._pending = 0
-        starts = np.cumsum(counts) - counts
-        local = np.arange(1, int(counts.sum()) + 1) - np.repeat(starts, counts)
-        t = (local / self.substep_hz)[:, np.newaxis]
-        w0 = np.repeat(seg[:, [1, 3]], counts, axis=0)
-        wsp = np.repeat(seg[:, [2, 4]], counts, axis=0)
+        counts = [n for n, *_ in segments]
+        starts = list(itertools.accumulate(counts, initial=0))[:-1]
+        t = np.concatenate([self._local_times(n) for n in counts])  # (n, 1): s since each start
+        seg = np.array(segments)
+        w0 = np.repeat(seg[:, 1::2], counts, axis=0)  # columns w0l, w0r
+        wsp = np.repeat(seg[:, 2::2], counts, axis=0)  # columns spl, spr
         theta = angle_travelled(t, w0, wsp, self._alpha, self.config.time_constant_s)
-        previous = np.empty_like(theta)  # the angle one substep earlier, 0 at a segment start
-        previous[1:] = theta[:-1]
-        previous[starts] = 0.0
-        result: FloatArray = (theta - previous) * self._radii
-        return result
+        step = np.empty_like(theta)  # the angle of each substep, from 0 at a segment's start
+        np.subtract(theta[1:], theta[:-1], out=step[1:])
+        step[starts] = theta[starts]
+        step *= self._radii
+        return step
+
+    def _local_times(self, n: int) -> FloatArray:
+        """Column (k / substep_hz for k = 1 .. n); short ones cached (most span one tick)."""
+        column = self._local_times_cache.get(n)
+        if column is None:
+            column = (np.arange(1, n + 1) / self.substep_hz)[:, np.newaxis]
+            if n <= _CACHED_SEGMENT_SUBSTEPS:
+                self._local_times_cache[n] = column
+        return column
 
     def encoder_counts(self) -> tuple[int, int]:
         """Raw (left, right) encoder counters, wrapped to ``profile.counter_bits`` (unsigned)."""

@@ -1,11 +1,11 @@
 """A fleet: N independent robots in one process, stepped in real time by one timer loop.
 
 Each robot is a ``sim.rig.LockstepRig`` of its own (the same node classes as the lockstep rig:
-motor controller, ground truth, scenario driver, firmware board, host observer) on its own
-python-can ``virtual`` channel, with seed ``seed + index``. ``Fleet.step(k)`` runs tick ``k`` of
-every robot (simulated time ``k * 10 ms``: a robot's frames are those of the lockstep rig with
-its seed); the host observer's frames are collected, tagged with the robot's index, for
-``take_batch``.
+motor controller, ground truth, scenario driver, firmware board, host observer) on its own channel
+of the in-process ``odocan`` transport (or python-can ``virtual``: ``FleetConfig.transport``),
+with seed ``seed + index``. ``Fleet.step(k)`` runs tick ``k`` of every robot (simulated time
+``k * 10 ms``: a robot's frames are those of the lockstep rig with its seed); the host observer's
+frames are collected, tagged with the robot's index, for ``take_batch``.
 
 ``run_realtime`` paces ``Fleet.step`` to the wall clock as one asyncio task: at each release
 ``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
@@ -50,6 +50,7 @@ class FleetConfig:
     integrator: str = "exact"
     scenario: str = "random"
     seed: int = 0
+    transport: str = "odocan"  # the rigs' python-can interface (sim.rig.TRANSPORTS)
 
 
 class _Collector(can.Listener):
@@ -85,6 +86,7 @@ class Fleet(Closing):
                     seed=config.seed + i,
                     channel=f"{prefix}-{i}",
                     truth_phase_ticks=_truth_phase(i),
+                    transport=config.transport,
                 ),
                 listeners=[self._collectors[i]],
             )

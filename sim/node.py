@@ -5,6 +5,7 @@ from __future__ import annotations
 import can
 
 from odocan.sim.clock import Clock
+from odocan.sim.transport import data_frame
 
 
 class BusNode:
@@ -20,12 +21,7 @@ class BusNode:
 
     def send_frame(self, can_id: int, data: bytes) -> bool:
         """Send one classic data frame stamped now; False (and counted) when the bus refuses."""
-        msg = can.Message(
-            timestamp=self.clock.now_s() + self.tx_latency_s,
-            arbitration_id=can_id,
-            is_extended_id=False,
-            data=data,
-        )
+        msg = data_frame(self.clock.now_s() + self.tx_latency_s, can_id, data)
         try:
             self.bus.send(msg)
         except can.CanError:

@@ -66,18 +66,11 @@ def chord_factor(dtheta: FloatArray) -> FloatArray:
     """sin(dtheta/2)/(dtheta/2): chord length over arc length, 1 at dtheta = 0."""
     half = 0.5 * dtheta
     small = np.abs(half) < _SMALL_HALF_ANGLE
+    if not np.count_nonzero(small):  # the common case when turning: no series term to patch in
+        result: FloatArray = np.sin(half) / half
+        return result
     safe = np.where(small, 1.0, half)
-    result: FloatArray = np.where(small, 1.0 - half * half / 6.0, np.sin(safe) / safe)
-    return result
-
-
-def _fold(start: FloatArray, steps: FloatArray) -> FloatArray:
-    """Row-wise running sums start, start+s1, (start+s1)+s2, ...: shape (rows, n + 1).
-
-    ``start`` has shape (rows,), ``steps`` (rows, n). A sequential left fold, so splitting the
-    steps into batches gives bit-identical sums.
-    """
-    result: FloatArray = np.cumsum(np.concatenate((start[:, np.newaxis], steps), axis=1), axis=1)
+    result = np.where(small, 1.0 - half * half / 6.0, np.sin(safe) / safe)
     return result
 
 
@@ -105,22 +98,36 @@ class GroundTruth:
             self._trace.append(np.zeros((5, 1)))
 
     def advance(self, ds_m: FloatArray) -> None:
-        """Integrate substeps of ground travel ``ds_m`` (shape (n, 2): left, right; m)."""
-        if ds_m.shape[0] == 0:
+        """Integrate substeps of ground travel ``ds_m`` (shape (n, 2): left, right; m).
+
+        Each sum is a sequential left fold (``np.cumsum`` in place over a row that starts with
+        the running value), so batching never changes a bit; one preallocated row per fold
+        keeps the small-array calls few (this runs at every SIM_TRUTH).
+        """
+        n = ds_m.shape[0]
+        if n == 0:
             return
         ds_l, ds_r = ds_m[:, 0], ds_m[:, 1]
         ds = 0.5 * (ds_r + ds_l)
         dtheta = (ds_r - ds_l) / self.wheelbase_m
-        heading = _fold(np.array([self.heading_unwrapped_rad]), dtheta[np.newaxis])[0]
+        heading = np.empty(n + 1)
+        heading[0] = self.heading_unwrapped_rad
+        heading[1:] = dtheta
+        np.cumsum(heading, out=heading)
         mid = heading[:-1] + 0.5 * dtheta
         chord = ds * chord_factor(dtheta)
-        steps = np.stack((chord * np.cos(mid), chord * np.sin(mid), np.abs(ds)))
-        x, y, dist = _fold(np.array([self.x_m, self.y_m, self.distance_m]), steps)
+        folds = np.empty((3, n + 1))
+        folds[:, 0] = (self.x_m, self.y_m, self.distance_m)
+        np.multiply(chord, np.cos(mid), out=folds[0, 1:])
+        np.multiply(chord, np.sin(mid), out=folds[1, 1:])
+        np.abs(ds, out=folds[2, 1:])
+        np.cumsum(folds, axis=1, out=folds)
+        x, y, dist = folds
         if self.trace_stride:
             self._record(x, y, heading, dist)
         self.x_m, self.y_m = float(x[-1]), float(y[-1])
         self.heading_unwrapped_rad, self.distance_m = float(heading[-1]), float(dist[-1])
-        self.substep += ds_m.shape[0]
+        self.substep += n
 
     def _record(self, x: FloatArray, y: FloatArray, h: FloatArray, d: FloatArray) -> None:
         """Keep the states (index 1..n of the folds) that fall on the trace stride."""

@@ -7,6 +7,7 @@ Frames are recorded by python-can listeners on the rig's host handle (``can.Logg
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import itertools
 from collections import defaultdict
 from collections.abc import Callable
@@ -14,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import can
+import numpy as np
 import pytest
 
 from odocan.firmware import frames as fr
@@ -24,13 +26,22 @@ from odocan.firmware.ecu import (
     STATUS_PERIOD_TICKS,
     WATCHDOG_TICKS,
 )
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.frames import NavGoalField, NavMode
 from odocan.firmware.hal import TICK_PERIOD_US
+from odocan.sim import canbits
 from odocan.sim.board import TICK_S, TX_LATENCY_S
 from odocan.sim.contract import cycle_time_s, database, message
+from odocan.sim.drivetrain import Drivetrain, angle_travelled
 from odocan.sim.errors import ErrorModel
-from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.faults import FaultSpec
+from odocan.sim.fleet import Fleet, FleetConfig
+from odocan.sim.rig import TRANSPORTS, LockstepRig, RigConfig
 from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import get_scenario
+from odocan.sim.transport import OdocanBus
+from odocan.sim.vehicle import Vehicle
 
 PMIR = load("pmir")
 EPS_S = 1e-6
@@ -86,6 +97,70 @@ def test_same_seed_gives_byte_identical_candump_logs(tmp_path: Path) -> None:
     assert first.count(b"\n") > 1500  # 5 s at 3.5 frames per 10 ms
     assert first == second
     assert first != other
+
+
+_FAULTS = FaultSpec.parse("drop=0.02,dup=0.01,delay=0.05:15,flip=0.01,seed=3")
+# sha256 of the candump log of 20 s of each run, as written by the rig of commit df15d82 (python-can
+# virtual buses, before the odocan transport and the speed work): every later change to the rig's
+# speed must keep these bytes.
+GOLDEN_LOGS = {
+    "random-slip": (
+        RigConfig(robot=PMIR, scenario="random", seed=3, errors=ErrorModel(slip=0.01)),
+        "226b9808225e9ead7b05dd35b43af29e78d0ddce900ab419eb4c3ac5a6f52a5e",
+    ),
+    "quadrature-euler-figure8": (
+        RigConfig(
+            robot=PMIR,
+            scenario="figure8",
+            integrator="euler",
+            seed=5,
+            quadrature=True,
+            errors=ErrorModel(ed=1.002, eb=0.998, slip=0.02),
+            truth_phase_ticks=2,
+        ),
+        "6dd5988aec98fa38bdbdce57dbc42ec79f5f0d65744ab5f43712c3d74ccd41ba",
+    ),
+    "faults": (
+        RigConfig(
+            robot=PMIR,
+            scenario="random",
+            seed=4,
+            errors=ErrorModel(slip=0.01),
+            faults=_FAULTS,
+            fw_faults=dataclasses.replace(_FAULTS, seed=4),
+        ),
+        "065a9daeee3a7786289529259e9f6901bd272e3a18f90f65077b2141627dca2d",
+    ),
+}
+
+
+def _golden_log(tmp_path: Path, config: RigConfig) -> bytes:
+    path = tmp_path / f"{config.transport}.log"
+    with LockstepRig(config, [can.Logger(path)]) as rig:
+        rig.run(20.0)
+    return path.read_bytes()
+
+
+@pytest.mark.parametrize("name", sorted(GOLDEN_LOGS))
+def test_logs_are_byte_identical_to_the_base_commits_on_either_transport(
+    tmp_path: Path, name: str
+) -> None:
+    config, sha256 = GOLDEN_LOGS[name]
+    logs = {t: _golden_log(tmp_path, dataclasses.replace(config, transport=t)) for t in TRANSPORTS}
+    assert logs["odocan"].count(b"\n") > 7000  # 20 s at 3.5+ frames per 10 ms
+    assert logs["odocan"] == logs["virtual"]
+    assert hashlib.sha256(logs["odocan"]).hexdigest() == sha256
+
+
+def test_the_rig_and_the_fleet_run_on_the_odocan_transport_by_default() -> None:
+    with LockstepRig(RigConfig(robot=PMIR)) as rig:
+        assert all(isinstance(bus, OdocanBus) for bus in rig._buses)
+    with Fleet(FleetConfig(robots=2, robot=PMIR)) as fleet:
+        assert all(isinstance(fleet.host_bus(i), OdocanBus) for i in range(2))
+    with LockstepRig(RigConfig(robot=PMIR, transport="virtual")) as rig:
+        assert all(type(bus).__name__ == "VirtualBus" for bus in rig._buses)
+    with pytest.raises(ConfigurationError, match="unknown transport 'pigeon'"):
+        LockstepRig(RigConfig(robot=PMIR, transport="pigeon"))
 
 
 # --- the watchdog ----------------------------------------------------------------------------
@@ -260,3 +335,128 @@ def test_rig_frames_keep_the_dbc_cycle_times() -> None:
         assert len(times) >= 10, name
         periods = {round(b - a, 6) for a, b in itertools.pairwise(times)}
         assert periods == {cycle_time_s(name)}, name
+
+
+# --- the ground truth's fast path keeps every bit ----------------------------------------------
+
+
+def _reference_travel(drivetrain: Drivetrain, segments: list[Any]) -> np.ndarray:
+    """``Drivetrain.take_travel`` as first written (commit df15d82): whole-array numpy."""
+    seg = np.array(segments)
+    counts = seg[:, 0].astype(np.int64)
+    starts = np.cumsum(counts) - counts
+    local = np.arange(1, int(counts.sum()) + 1) - np.repeat(starts, counts)
+    t = (local / drivetrain.substep_hz)[:, np.newaxis]
+    w0 = np.repeat(seg[:, [1, 3]], counts, axis=0)
+    wsp = np.repeat(seg[:, [2, 4]], counts, axis=0)
+    alpha = np.array([drivetrain.config.accel_limit_mps2 / r for r in drivetrain.nominal_radii_m])
+    theta = angle_travelled(t, w0, wsp, alpha, drivetrain.config.time_constant_s)
+    previous = np.empty_like(theta)
+    previous[1:] = theta[:-1]
+    previous[starts] = 0.0
+    result: np.ndarray = (theta - previous) * np.array(drivetrain.actual_radii_m)
+    return result
+
+
+def _reference_advance(state: np.ndarray, ds_m: np.ndarray, wheelbase_m: float) -> np.ndarray:
+    """``GroundTruth.advance`` as first written: (x, y, heading, distance) after ``ds_m``."""
+    x0, y0, h0, d0 = state
+    ds_l, ds_r = ds_m[:, 0], ds_m[:, 1]
+    ds = 0.5 * (ds_r + ds_l)
+    dtheta = (ds_r - ds_l) / wheelbase_m
+    heading = np.cumsum(np.concatenate(([h0], dtheta)))
+    mid = heading[:-1] + 0.5 * dtheta
+    half = 0.5 * dtheta
+    small = np.abs(half) < 1e-4
+    safe = np.where(small, 1.0, half)
+    chord = ds * np.where(small, 1.0 - half * half / 6.0, np.sin(safe) / safe)
+    steps = np.stack((chord * np.cos(mid), chord * np.sin(mid), np.abs(ds)))
+    folds = np.cumsum(np.concatenate((np.array([[x0], [y0], [d0]]), steps), axis=1), axis=1)
+    return np.array([folds[0, -1], folds[1, -1], heading[-1], folds[2, -1]])
+
+
+@pytest.mark.parametrize("slip", [0.0, 0.02])
+def test_the_truths_fast_path_is_bit_identical_to_the_plain_numpy_one(slip: float) -> None:
+    """Drive as the rig does (10 ms advances, a command every 20 ms, straight runs where the
+    chord factor takes its series, stops that time out): every batch of wheel travel and every
+    pose equal, bit for bit, to the straightforward formulation's."""
+    vehicle = Vehicle(PMIR, ErrorModel(ed=1.003, eb=0.997, slip=slip), seed=11)
+    rng = np.random.default_rng(5)
+    state = np.zeros(4)
+    left = right = 0.0
+    for k in range(3000):
+        t_s = k * TICK_S
+        if k % 2 == 0 and k % 700 < 600:  # then 1 s without commands: the setpoints time out
+            if rng.random() < 0.1:
+                left = right = float(rng.uniform(-1, 1))  # straight: the series branch
+            elif rng.random() < 0.2:
+                left, right = (float(v) for v in rng.uniform(-1, 1, 2))
+            vehicle.command(left, right, t_s)
+        vehicle.advance_to(t_s)
+        if k % 10 == 3:
+            segments = list(vehicle.drivetrain._segments)
+            ds = vehicle.drivetrain.take_travel()
+            assert ds.tobytes() == _reference_travel(vehicle.drivetrain, segments).tobytes()
+            ds = vehicle.errors.apply_slip(ds, vehicle._rng)
+            truth = vehicle._truth
+            state = _reference_advance(state, ds, truth.wheelbase_m)
+            truth.advance(ds)
+            got = np.array([truth.x_m, truth.y_m, truth.heading_unwrapped_rad, truth.distance_m])
+            assert got.tobytes() == state.tobytes(), k
+    assert vehicle.truth().distance_m > 3.0
+
+
+# --- the bit-timed rig -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("bitrate", [125_000, 1_000_000])
+def test_a_bit_timed_rig_is_deterministic_and_one_frame_at_a_time(
+    tmp_path: Path, bitrate: int
+) -> None:
+    config = RigConfig(
+        robot=PMIR, scenario="random", seed=3, errors=ErrorModel(slip=0.01), bitrate=bitrate
+    )
+    path_a, path_b = tmp_path / "a.log", tmp_path / "b.log"
+    for path in (path_a, path_b):
+        run_rig(config, 5.0, [can.Logger(path)])
+    assert path_a.read_bytes() == path_b.read_bytes()
+    timed = recorded(config, 5.0)
+    instant = recorded(dataclasses.replace(config, bitrate=None), 5.0)
+    # Every frame gets through (the last tick's may still be on the wire), none overlap, and
+    # each arrives after the instant it was sent (its tick, or 1 ms later for the firmware's).
+    assert len(instant) - 12 <= len(timed) <= len(instant)
+    for prev, msg in itertools.pairwise(timed):
+        bus_time_s = (canbits.frame_bits(msg) + canbits.INTERFRAME_BITS) / bitrate
+        assert msg.timestamp - prev.timestamp >= bus_time_s - 1e-12
+    for can_id in {m.arbitration_id for m in instant}:
+        sent = [m for m in instant if m.arbitration_id == can_id]
+        got = [m for m in timed if m.arbitration_id == can_id]
+        assert len(sent) - 3 <= len(got) <= len(sent)
+        assert all(g.timestamp > s.timestamp for g, s in zip(got, sent, strict=False))
+        if can_id == fr.WHEEL_ENCODERS_ID:  # the sim's own payloads do not depend on the bus
+            assert [g.data for g in got] == [s.data for s in sent[: len(got)]]
+
+
+def test_a_bit_timed_rig_refuses_what_has_no_bit_timing() -> None:
+    with pytest.raises(ConfigurationError, match="123456 bit/s is not a CAN bitrate"):
+        LockstepRig(RigConfig(robot=PMIR, bitrate=123_456))
+    with pytest.raises(ConfigurationError, match="needs the odocan transport"):
+        LockstepRig(RigConfig(robot=PMIR, bitrate=500_000, transport="virtual"))
+
+
+def test_a_bit_timed_closed_loop_drives_to_its_goal() -> None:
+    """The host's NAV_GOAL, the firmware's MOTOR_CMD and the encoders all cross the bit-timed
+    wire: at 125 kbit/s each still lands within its tick, so the drive is the instant one."""
+    ends = []
+    for bitrate in (None, 125_000):
+        with LockstepRig(RigConfig(robot=PMIR, scenario=None, bitrate=bitrate)) as rig:
+            rig.run(0.5)
+            e = ErrorMask()
+            rig.send(fr.NAV_GOAL_ID, fr.pack_nav_goal(0, NavGoalField.X, 10_000, e))
+            rig.send(fr.NAV_GOAL_ID, fr.pack_nav_goal(1, NavGoalField.Y, 5_000, e))
+            rig.send(fr.NAV_GOAL_ID, fr.pack_nav_goal_go(2, NavMode.GO_TO_GOAL, 1, 1, 1, e))
+            rig.run(15.0)
+            truth = rig.vehicle.truth()
+            ends.append((truth.x_m, truth.y_m, rig.motor_controller.commands_applied))
+    assert ends[0] == ends[1]
+    assert ends[1][0] == pytest.approx(1.0, abs=0.01) and ends[1][1] == pytest.approx(0.5, abs=0.01)

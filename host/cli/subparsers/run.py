@@ -1,4 +1,9 @@
-"""``odocan run``: the lockstep rig on python-can ``virtual`` buses, then the analysis.
+"""``odocan run``: the lockstep rig on in-process python-can buses, then the analysis.
+
+The rig's buses are the ``odocan`` transport (``sim.transport``) unless ``--transport virtual``
+asks for python-can's own ``virtual`` interface: the same frames, byte for byte, only slower.
+``-b/--bitrate`` makes the rig's bus bit-timed (arbitration, exact frame lengths, delivery at the
+end of frame, in simulated time); without it the bus is instant.
 
 The motor controller, the ground truth, the scenario driver and the firmware run in simulated
 time (about 100x faster than real time on one core); every frame goes to a ``FrameCollector``
@@ -54,7 +59,7 @@ from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
 from odocan.sim.faults import FaultSpec
 from odocan.sim.realtime import StopRequest, stop_on_signals
-from odocan.sim.rig import INTEGRATORS, LockstepRig, RigConfig
+from odocan.sim.rig import INTEGRATORS, TRANSPORTS, LockstepRig, RigConfig
 from odocan.sim.scenarios import SCENARIOS
 
 PROGRESS_EVERY_TICKS = 100  # one simulated second
@@ -67,11 +72,13 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "run",
         help="run the firmware in the lockstep rig and check its odometry",
         description="Run the motor controller, ground truth, scenario driver and firmware in "
-        "lockstep on python-can virtual buses, then compare the on-board pose (decoded from the "
+        "lockstep on in-process python-can buses, then compare the on-board pose (decoded from the "
         "bus) with the float64 reference and the ground truth. Exit 0 within tolerance, 1 not, "
         "2 on bad usage. Ctrl-C or SIGTERM stops early and checks what ran.",
-        epilog="With -i/-c every frame is also sent to that bus, paced to the wall clock "
-        "(e.g. -i socketcan -c vcan0, then candump vcan0).",
+        epilog="With -b/--bitrate the rig's own bus is bit-timed (e.g. -b 500000: arbitration, "
+        "exact frame lengths with stuffing, delivery at the end of frame). With -i/-c every frame "
+        "is also sent to that bus, paced to the wall clock (e.g. -i socketcan -c vcan0, then "
+        "candump vcan0).",
     )
     parser.add_argument(
         "--scenario", choices=SCENARIOS, default="random", help="driving scenario (default: random)"
@@ -92,6 +99,13 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "longer run)",
     )
     add_seed_argument(parser)
+    parser.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        default="odocan",
+        help="python-can interface of the rig's own buses (default: odocan, the lean in-process "
+        "transport; virtual: python-can's, same frames)",
+    )
     parser.add_argument(
         "--errors",
         default="",
@@ -124,6 +138,8 @@ def _do_run(args: argparse.Namespace) -> int:
         faults=faults,
         fw_faults=None if faults is None else replace(faults, seed=faults.seed + 1),
         duration_s=args.duration,
+        transport=args.transport,
+        bitrate=args.bitrate,
     )
     check_log_path(args.log)
     check_output_paths(args)
