@@ -47,18 +47,29 @@ pattern read odocan/%u/#
 class Mosquitto:
     """A mosquitto process on a free loopback port; ``restart`` keeps its port and its data."""
 
-    def __init__(self, workdir: Path) -> None:
+    def __init__(
+        self,
+        workdir: Path,
+        *,
+        users: dict[str, str] | None = None,
+        acl: str = ACL,
+        listener: str = "",
+    ) -> None:
+        """``users`` (default ``USERS``) and ``acl`` (default ``ACL``); ``listener``: more lines
+        for the listener (e.g. its TLS settings)."""
         assert MOSQUITTO is not None and MOSQUITTO_PASSWD is not None
         self.port = free_loopback_port()
         self.dir = workdir
+        self.users = USERS if users is None else users
         passwd = workdir / "passwd"
         passwd.touch()
-        for user, password in USERS.items():
+        for user, password in self.users.items():
             subprocess.run([MOSQUITTO_PASSWD, "-b", str(passwd), user, password], check=True)
-        (workdir / "acl").write_text(ACL)
+        (workdir / "acl").write_text(acl)
         self.conf = workdir / "mosquitto.conf"
         self.conf.write_text(
             f"listener {self.port} {LOOPBACK}\n"
+            f"{listener}"
             "allow_anonymous false\n"
             f"password_file {passwd}\n"
             f"acl_file {workdir / 'acl'}\n"
@@ -71,7 +82,7 @@ class Mosquitto:
 
     def url(self, user: str | None = "bridge") -> BrokerURL:
         """The broker as ``user`` (None: anonymous)."""
-        password = USERS.get(user) if user else None
+        password = self.users.get(user) if user else None
         return BrokerURL(host=LOOPBACK, port=self.port, username=user, password=password)
 
     def start(self) -> None:
