@@ -117,12 +117,12 @@ def read_password_file(path: Path) -> str:
         raise ConfigurationError(f"--password-file {path}: cannot read it ({why})") from None
     if not stat.S_ISREG(mode):
         raise ConfigurationError(f"--password-file {path}: not a regular file")
-    if mode & 0o077:
-        print(f"warning: --password-file {path} may be read by other users (mode "
-              f"{stat.S_IMODE(mode):03o}): chmod 600 {path}", file=sys.stderr)
     password = text.splitlines()[0] if text else ""
     if not password:
         raise ConfigurationError(f"--password-file {path}: empty first line")
+    if mode & 0o077:
+        print(f"warning: --password-file {path} may be read by other users (mode "
+              f"{stat.S_IMODE(mode):03o}): chmod 600 {path}", file=sys.stderr)
     return password
 
 
