@@ -23,7 +23,16 @@ import pytest
 from odocan.host.cli.app import main
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import LOOPBACK, free_loopback_port
-from tests.conftest_mqtt import MOSQUITTO, Mosquitto, client, collect, mosquitto  # noqa: F401
+from tests.conftest_mqtt import (  # noqa: F401
+    MOSQUITTO,
+    Mosquitto,
+    client,
+    collect,
+    mosquitto,
+    restore_logging,
+)
+
+pytestmark = pytest.mark.usefixtures("restore_logging")  # no INFO handler left for later tests
 
 COMMANDS = {
     "bridge": ["bridge", "-i", "virtual", "-c", f"test-connect-{os.getpid()}", "--duration", "5"],

@@ -18,9 +18,10 @@ import pytest
 from odocan.host.cli.app import main
 from odocan.host.mqtt.broker import LOOPBACK, BrokerError, BrokerURL
 from odocan.host.mqtt.options import PASSWORD_ENV
-from tests.conftest_mqtt import Mosquitto
+from tests.conftest_mqtt import Mosquitto, restore_logging  # noqa: F401
 from tests.requires import require_executables
 
+pytestmark = pytest.mark.usefixtures("restore_logging")
 SECRET = "Zq7-odocan-SECRET-42"  # distinctive: found anywhere means leaked
 
 
@@ -87,6 +88,7 @@ def test_the_password_never_shows_in_any_artefact(
     code = main(argv)
     text = artefacts(capsys, run)
     assert code == 0, text
+    assert "DEBUG: Sending CONNECT" in text  # --debug: paho's own log lines are in there too
     assert SECRET not in text
     warnings = [line for line in text.splitlines() if "visible to other users" in line]
     assert len(warnings) == (1 if source == "url" else 0), text

@@ -23,10 +23,11 @@ import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.mqtt.broker import LOOPBACK, BrokerURL
-from tests.conftest_mqtt import Mosquitto, client
+from tests.conftest_mqtt import Mosquitto, client, restore_logging  # noqa: F401
 from tests.requires import require_executables
 from tests.tls_certs import Pki, make_pki
 
+pytestmark = pytest.mark.usefixtures("restore_logging")
 PASSWORD = "tls-bridge-pw"
 
 

@@ -190,37 +190,41 @@ def tls_reason(text: str, *, client_cert: bool) -> str:
     return text
 
 
-_MQTT_CONNECT_311 = bytes.fromhex("100c00044d5154540402003c0000")  # clean, keepalive 60, no id
-_MQTT_DISCONNECT = bytes.fromhex("e000")
+_ALERT_WAIT_S = 1.0  # after our handshake: a broker that refuses us says so at once
 
 
 async def tls_diagnosis(broker: BrokerURL, timeout_s: float) -> str | None:
-    """Why TLS to ``broker`` fails, from a bare handshake and one anonymous MQTT 3.1.1 CONNECT,
-    or None when TLS itself works. With TLS 1.3 a broker that wants a client certificate says
-    so (an alert) only after the client's side of the handshake has finished: paho then waits
-    for a CONNACK that never comes; this sees the alert."""
+    """Why TLS to ``broker`` fails, from a bare handshake, or None when TLS itself works.
+
+    With TLS 1.3 a broker that wants a client certificate says so (an alert) only after the
+    client's side of the handshake has finished: paho then waits for a CONNACK that never
+    comes. Here, after the handshake, we listen (sending nothing) for up to a second: an MQTT
+    broker that accepted us waits for our CONNECT in silence; one that refused us sends the
+    alert, or closes."""
+    closed = ("the broker closed the connection after the TLS handshake (does it require a "
+              "client certificate?)" if broker.cert is None else None)
     try:
         async with asyncio.timeout(timeout_s):
             reader, writer = await asyncio.open_connection(
                 broker.host, broker.port, ssl=broker.tls_context(),
                 server_hostname=broker.host)
-            try:
-                writer.write(_MQTT_CONNECT_311)
-                await writer.drain()
-                answer = await reader.read(4)
-                if not answer:
-                    return ("the broker closed the connection after the TLS handshake (does it "
-                            "require a client certificate?)" if broker.cert is None else None)
-                writer.write(_MQTT_DISCONNECT)
-            finally:
-                writer.close()
-                with contextlib.suppress(Exception):
-                    await writer.wait_closed()
+        try:
+            async with asyncio.timeout(_ALERT_WAIT_S):
+                return closed if not await reader.read(1) else None
+        except TimeoutError:
+            return None  # silence: TLS is up, the broker waits for a CONNECT
+        except (ssl.SSLError, ssl.CertificateError):
+            raise
+        except OSError:  # reset after the handshake: refused without an alert we could read
+            return closed
+        finally:
+            writer.close()
+            with contextlib.suppress(Exception):
+                await writer.wait_closed()
     except (ssl.SSLError, ssl.CertificateError) as exc:
         return tls_reason(str(exc), client_cert=broker.cert is not None)
     except (OSError, TimeoutError, ConfigurationError):
         return None
-    return None
 
 
 async def first_connect_failure(exc: BaseException, broker: BrokerURL, timeout_s: float) -> str:
