@@ -256,3 +256,34 @@ def test_a_server_below_tls_1_2_is_refused(tls: TlsBrokers,
     line = [line for line in err.splitlines() if line.startswith("error:")]
     assert len(line) == 1 and ": TLS: " in line[0], err
     assert "TLS 1.2 or later" in line[0]
+
+
+@pytest.mark.parametrize("name", ["bridge", "fleet", "monitor"])
+@pytest.mark.parametrize(("case", "expected"), [
+    ("ca not PEM", "--ca {junk}: not a usable CA certificate"),
+    ("cert not PEM", "--cert {junk} / --key {key}: not a usable certificate and key"),
+    ("key of another certificate", "--cert {cert} / --key {server_key}: not a usable certificate "
+     "and key"),
+    ("cert without key", "--cert and --key go together"),
+])
+def test_bad_tls_files_are_one_line_before_any_connection(
+    name: str, case: str, expected: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Port 1: nothing listens there, so the line can only come from the files."""
+    pki = make_pki(tmp_path / "pki")
+    junk = tmp_path / "junk.pem"
+    junk.write_text("not a certificate\n")
+    files = {"junk": junk, "key": pki.client_key, "cert": pki.client_cert,
+             "server_key": pki.server_key}
+    ca, cert, key = {
+        "ca not PEM": (junk, pki.client_cert, pki.client_key),
+        "cert not PEM": (pki.ca, junk, pki.client_key),
+        "key of another certificate": (pki.ca, pki.client_cert, pki.server_key),
+        "cert without key": (pki.ca, pki.client_cert, None),
+    }[case]
+    args = ["--broker", f"mqtts://{LOOPBACK}:1", "--ca", str(ca), "--cert", str(cert)]
+    args += ["--key", str(key)] if key else []
+    code, _, err = run([*command(name), *args], capsys)
+    assert code == 2
+    (line,) = err.splitlines()
+    assert line.startswith(f"error: {expected.format(**files)}"), line
