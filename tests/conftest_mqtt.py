@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import getpass
 import json
+import logging
 import shutil
 import subprocess
 import time
@@ -24,6 +25,7 @@ import aiomqtt
 import pytest
 
 from odocan.host.mqtt.broker import LOOPBACK, BrokerURL, EmbeddedBroker, free_loopback_port
+from odocan.host.mqtt.options import LIBRARY_LOGGERS
 from tests.requires import require_executables
 
 MOSQUITTO = shutil.which("mosquitto") or (
@@ -47,18 +49,29 @@ pattern read odocan/%u/#
 class Mosquitto:
     """A mosquitto process on a free loopback port; ``restart`` keeps its port and its data."""
 
-    def __init__(self, workdir: Path) -> None:
+    def __init__(
+        self,
+        workdir: Path,
+        *,
+        users: dict[str, str] | None = None,
+        acl: str = ACL,
+        listener: str = "",
+    ) -> None:
+        """``users`` (default ``USERS``) and ``acl`` (default ``ACL``); ``listener``: more lines
+        for the listener (e.g. its TLS settings)."""
         assert MOSQUITTO is not None and MOSQUITTO_PASSWD is not None
         self.port = free_loopback_port()
         self.dir = workdir
+        self.users = USERS if users is None else users
         passwd = workdir / "passwd"
         passwd.touch()
-        for user, password in USERS.items():
+        for user, password in self.users.items():
             subprocess.run([MOSQUITTO_PASSWD, "-b", str(passwd), user, password], check=True)
-        (workdir / "acl").write_text(ACL)
+        (workdir / "acl").write_text(acl)
         self.conf = workdir / "mosquitto.conf"
         self.conf.write_text(
             f"listener {self.port} {LOOPBACK}\n"
+            f"{listener}"
             "allow_anonymous false\n"
             f"password_file {passwd}\n"
             f"acl_file {workdir / 'acl'}\n"
@@ -71,7 +84,7 @@ class Mosquitto:
 
     def url(self, user: str | None = "bridge") -> BrokerURL:
         """The broker as ``user`` (None: anonymous)."""
-        password = USERS.get(user) if user else None
+        password = self.users.get(user) if user else None
         return BrokerURL(host=LOOPBACK, port=self.port, username=user, password=password)
 
     def start(self) -> None:
@@ -110,6 +123,20 @@ def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
         yield broker
     finally:
         broker.stop()
+
+
+@pytest.fixture
+def restore_logging() -> Iterator[None]:
+    """The CLI runs here (``configure_logging``, with ``--debug`` too) set the levels and
+    handlers of odocan's and the libraries' loggers: put them back, so later tests' stderr
+    holds no lines of ours."""
+    loggers = [logging.getLogger(name) for name in ("odocan", *LIBRARY_LOGGERS)]
+    saved = [(lg, lg.level, list(lg.handlers), lg.propagate) for lg in loggers]
+    yield
+    for lg, level, handlers, propagate in saved:
+        lg.setLevel(level)
+        lg.handlers[:] = handlers
+        lg.propagate = propagate
 
 
 class Brokers:

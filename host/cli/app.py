@@ -126,6 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with sigterm_as_interrupt():
             args = build_parser().parse_args(argv)
+            args.debug = debug  # split off above; bridge/fleet show library logs with it
             return int(args.func(args))
     except KeyboardInterrupt:
         return EXIT_OK

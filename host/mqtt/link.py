@@ -55,7 +55,13 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from odocan.host.mqtt import topics
-from odocan.host.mqtt.broker import BrokerError, BrokerURL, connect_failure, protocol_unsupported
+from odocan.host.mqtt.broker import (
+    BrokerError,
+    BrokerURL,
+    connect_failure,
+    first_connect_failure,
+    protocol_unsupported,
+)
 
 log = logging.getLogger("odocan.mqtt")
 CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
@@ -279,9 +285,10 @@ class RobotLink:
                     log.info("%s: %s speaks MQTT 3.1.1 only: no reason codes, no message "
                              "expiry", self.robot, self.broker)
                     continue
-                reason = connect_failure(exc, self.connect_timeout_s, tls=self.broker.tls)
                 if self.connects == 0:
+                    reason = await first_connect_failure(exc, self.broker, self.connect_timeout_s)
                     raise BrokerError(f"cannot connect to {self.broker}: {reason}") from None
+                reason = connect_failure(exc, self.connect_timeout_s, tls=self.broker.tls)
                 log.warning("%s: reconnecting in %.1f s (%s)", self.robot, backoff, reason)
                 await _sleep_or_stop(stop, backoff)
                 backoff = min(backoff * 2, self.max_backoff_s)
@@ -461,7 +468,7 @@ async def _probe_v5(broker: BrokerURL, timeout_s: float) -> bool:
         if protocol_unsupported(exc):
             log.info("%s speaks MQTT 3.1.1 only: no reason codes, no message expiry", broker)
             return False
-        reason = connect_failure(exc, timeout_s, tls=broker.tls)
+        reason = await first_connect_failure(exc, broker, timeout_s)
         raise BrokerError(f"cannot connect to {broker}: {reason}") from None
 
 

@@ -1,31 +1,44 @@
-"""Command-line options shared by ``odocan bridge`` and ``odocan fleet``, the broker to use, and
-where the MQTT side's log lines go (``configure_logging``)."""
+"""Command-line options shared by ``odocan bridge`` and ``odocan fleet`` (and the credentials by
+``odocan monitor --broker``), the broker to use, and where the MQTT side's log lines go
+(``configure_logging``).
+
+Secrets stay out of argv: the password comes from ``--password-file`` (first line) or the
+environment variable ``ODOCAN_MQTT_PASSWORD``; one in the URL still works, with a warning.
+"""
 
 from __future__ import annotations
 
 import argparse
 import logging
+import os
+import stat
 import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
-from odocan.host.mqtt.broker import BrokerURL, EmbeddedBroker
+from odocan.host.mqtt.broker import LOOPBACK, BrokerURL, EmbeddedBroker, check_embedded_bind
 from odocan.sim.exceptions import ConfigurationError
+
+PASSWORD_ENV = "ODOCAN_MQTT_PASSWORD"
 
 
 def add_mqtt_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--broker``, ``--ca``, ``--cert``, ``--key``, ``--publish-hz``, ``--client-prefix``."""
+    """``--broker``, TLS and password options, ``--listen``, ``--publish-hz``,
+    ``--client-prefix``, ``--connect-timeout``, ``--command-expiry``."""
     group = parser.add_argument_group("MQTT (without --broker: an embedded amqtt broker)")
     group.add_argument(
         "--broker", metavar="URL",
         help="mqtt://[user:pass@]host[:port] or mqtts://... (default: start an embedded broker "
         "on a free 127.0.0.1 port)",
     )
-    group.add_argument("--ca", type=Path, help="CA certificate (PEM) for mqtts://")
-    group.add_argument("--cert", type=Path, help="client certificate (PEM) for mqtts://")
-    group.add_argument("--key", type=Path, help="client key (PEM) for mqtts://")
+    add_broker_credentials(group)
+    group.add_argument(
+        "--listen", default=LOOPBACK, metavar="ADDR",
+        help="address of the embedded broker: loopback only, since it lets anyone in "
+        "(default: %(default)s)",
+    )
     group.add_argument(
         "--publish-hz", type=float, default=10.0, metavar="HZ",
         help="pose/reference/error publications per robot and second (default: 10)",
@@ -45,12 +58,79 @@ def add_mqtt_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def broker_url(args: argparse.Namespace) -> BrokerURL | None:
-    """The ``--broker`` given (None: embedded); checks the TLS files exist."""
+def add_broker_credentials(group: argparse._ArgumentGroup) -> None:
+    """``--ca``, ``--cert``, ``--key`` (TLS) and ``--password-file`` (or ODOCAN_MQTT_PASSWORD)."""
+    group.add_argument("--ca", type=Path, help="CA certificate (PEM) that signed the broker's, "
+                       "for mqtts:// (default: the system's CAs)")
+    group.add_argument("--cert", type=Path, help="client certificate (PEM) for mqtts://")
+    group.add_argument("--key", type=Path, help="client key (PEM) for mqtts://")
+    group.add_argument(
+        "--password-file", type=Path, metavar="PATH",
+        help=f"the MQTT password: the first line of PATH (mode 600), for the user in "
+        f"--broker mqtt://USER@host; or set {PASSWORD_ENV}. A password in the URL works but "
+        "other users of the machine see it (ps, shell history)",
+    )
+
+
+def check_tls_files(args: argparse.Namespace) -> None:
+    """``ConfigurationError`` naming a ``--ca/--cert/--key`` that is not a file."""
     for name in ("ca", "cert", "key"):
         path = getattr(args, name, None)
         if path is not None and not path.is_file():
             raise ConfigurationError(f"--{name} {path}: no such file")
+
+
+def with_password(url: BrokerURL, args: argparse.Namespace) -> BrokerURL:
+    """``url`` with the password of ``--password-file`` or ``$ODOCAN_MQTT_PASSWORD`` (in that
+    order); a password in the URL itself is used, with one warning on stderr that it is visible
+    to other users. ``ConfigurationError`` (one line, naming the path) when the file cannot be
+    read, is empty, or comes with a password in the URL too."""
+    path: Path | None = getattr(args, "password_file", None)
+    if url.password is not None:
+        if path is not None:
+            raise ConfigurationError(
+                "--broker carries a password and --password-file gives one: give only one")
+        print("warning: the password in --broker is visible to other users of this machine "
+              f"(ps, shell history): use --password-file or {PASSWORD_ENV}", file=sys.stderr)
+        return url
+    if path is not None:
+        password = read_password_file(path)
+    elif os.environ.get(PASSWORD_ENV):
+        password = os.environ[PASSWORD_ENV]
+    else:
+        return url
+    if url.username is None:
+        source = "--password-file" if path is not None else PASSWORD_ENV
+        raise ConfigurationError(
+            f"{source}: a password needs a user name in --broker (mqtt://USER@host)")
+    return url.with_credentials(url.username, password)
+
+
+def read_password_file(path: Path) -> str:
+    """The first line of ``path``; a warning when others than its owner may read it;
+    ``ConfigurationError`` naming ``path`` when it cannot be read or is empty."""
+    try:
+        mode = path.stat().st_mode
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else "not UTF-8 text"
+        raise ConfigurationError(f"--password-file {path}: cannot read it ({why})") from None
+    if not stat.S_ISREG(mode):
+        raise ConfigurationError(f"--password-file {path}: not a regular file")
+    password = text.splitlines()[0] if text else ""
+    if not password:
+        raise ConfigurationError(f"--password-file {path}: empty first line")
+    if mode & 0o077:
+        print(f"warning: --password-file {path} may be read by other users (mode "
+              f"{stat.S_IMODE(mode):03o}): chmod 600 {path}", file=sys.stderr)
+    return password
+
+
+def broker_url(args: argparse.Namespace) -> BrokerURL | None:
+    """The ``--broker`` given (None: embedded), with its password (``with_password``); checks
+    the TLS files exist and ``--listen`` is loopback."""
+    check_tls_files(args)
+    check_embedded_bind(args.listen)
     if not 0 < args.publish_hz <= 1000:
         raise ConfigurationError(f"--publish-hz must be in (0, 1000], got {args.publish_hz}")
     if not 0 < args.connect_timeout <= 300:
@@ -62,10 +142,25 @@ def broker_url(args: argparse.Namespace) -> BrokerURL | None:
     if args.broker is None:
         if args.ca or args.cert or args.key:
             raise ConfigurationError("--ca/--cert/--key need --broker mqtts://...")
+        if args.password_file:
+            raise ConfigurationError("--password-file needs --broker mqtt://USER@host")
         return None
-    url = BrokerURL.parse(args.broker, ca=args.ca, cert=args.cert, key=args.key)
+    if args.listen != LOOPBACK:
+        raise ConfigurationError("--listen is the embedded broker's: not with --broker")
+    url = with_password(BrokerURL.parse(args.broker, ca=args.ca, cert=args.cert, key=args.key),
+                        args)
     if url.tls:
         url.tls_context()  # a bad --ca/--cert/--key is one line now, not at connect time
+    return url
+
+
+def monitor_broker_url(args: argparse.Namespace) -> BrokerURL:
+    """``odocan monitor --broker URL`` with its TLS files and password (``with_password``)."""
+    check_tls_files(args)
+    url = with_password(BrokerURL.parse(args.mqtt, ca=args.ca, cert=args.cert, key=args.key),
+                        args)
+    if url.tls:
+        url.tls_context()
     return url
 
 

@@ -34,8 +34,9 @@ from odocan.host.cli.options import add_duration_argument, add_robot_argument, c
 from odocan.host.cli.subparsers.analyze import load_dbc
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.judge.monitor import BusMonitor, fleet_snapshot, render_fleet, to_json
-from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.broker import BrokerError, BrokerURL, connect_failure, tls_diagnosis
 from odocan.host.mqtt.fleetview import RobotState, fleet_states
+from odocan.host.mqtt.options import add_broker_credentials, monitor_broker_url
 from odocan.host.report.tui import FrameFilter, MonitorApp, Recorder, Trace, View, run_screen
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
@@ -44,6 +45,7 @@ from odocan.sim.rig import INTEGRATORS
 DEFAULT_BROKER = "mqtt://127.0.0.1:1883"
 REFRESH_S = 0.25  # screen redraws
 RECONNECT_S = 1.0  # wait before reconnecting to the broker
+TLS_CHECK_S = 5.0  # the TLS handshake checked before watching an mqtts:// broker
 
 
 class BrokerUnreachable(OdocanError):
@@ -101,6 +103,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="show the fleet published on this MQTT broker instead of a CAN bus; without URL "
         f"{DEFAULT_BROKER} (--mqtt: alias) (default: a CAN bus)",
     )
+    add_broker_credentials(parser.add_argument_group("MQTT credentials (with --broker)"))
     add_bus_arguments(parser)
     parser.set_defaults(func=_do_monitor)
 
@@ -109,7 +112,9 @@ def _do_monitor(args: argparse.Namespace) -> int:
     if args.mqtt is not None:
         if args.interface is not None or args.channel is not None:
             raise ConfigurationError("--broker watches MQTT: give no -i/--interface or -c")
-        return _watch_fleet(BrokerURL.parse(args.mqtt), args)
+        return _watch_fleet(monitor_broker_url(args), args)
+    if args.ca or args.cert or args.key or args.password_file:
+        raise ConfigurationError("--ca/--cert/--key/--password-file go with --broker URL")
     model = BusMonitor(
         robot.load(args.robot),
         args.integrator,
@@ -178,7 +183,11 @@ class _FleetWatch:
         self.started = time.monotonic()
 
     async def run(self, redraw: Callable[[], None] | None) -> None:
-        """Follow the broker until the duration has passed (forever without one)."""
+        """Follow the broker until the duration has passed (forever without one); a TLS or
+        credentials problem at the first connection is a ``BrokerError`` at once (no retry
+        mends it)."""
+        if self.url.tls and (found := await tls_diagnosis(self.url, TLS_CHECK_S)) is not None:
+            raise BrokerError(f"cannot connect to {self.url}: TLS: {found}")
         try:
             async with asyncio.timeout(self.duration_s), asyncio.TaskGroup() as tasks:
                 tasks.create_task(self._follow(redraw), name="follow-broker")
@@ -205,6 +214,10 @@ class _FleetWatch:
                         redraw()
             except aiomqtt.MqttError as exc:
                 self.last_error = str(exc) or type(exc).__name__
+                reason = connect_failure(exc, TLS_CHECK_S, tls=self.url.tls,
+                                         client_cert=self.url.cert is not None)
+                if not self.connected_once and reason.startswith(("not authorized", "TLS:")):
+                    raise BrokerError(f"cannot connect to {self.url}: {reason}") from None
             await asyncio.sleep(RECONNECT_S)
 
     def snapshot(self) -> dict[str, Any]:
