@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 import can
 
 from odocan.firmware.config import Integrator, RobotParams
-from odocan.sim.board import TICK_S, FirmwareBoard
+from odocan.sim.board import TICK_S
+from odocan.sim.cboard import board_maker
 from odocan.sim.clock import LockstepClock
 from odocan.sim.closing import Closing
 from odocan.sim.errors import ErrorModel
@@ -65,6 +66,7 @@ class RigConfig:
     fw_faults: FaultSpec | None = None  # on the firmware's handle: what ODOM_MCU sends
     duration_s: float | None = None  # the run's length (default: the scenario's own)
     truth_phase_ticks: int = 0  # SIM_TRUTH on ticks k = phase (mod its cycle); keep it even
+    firmware: str = "python"  # "python": firmware/, "c": firmware/c (sim.cboard)
 
 
 class LockstepRig(Closing):
@@ -80,6 +82,7 @@ class LockstepRig(Closing):
             else get_scenario(config.scenario, config.robot, config.seed, config.duration_s)
         )
         params = firmware_params(config.robot, config.integrator)
+        make_board = board_maker(config.firmware)
         self.default_duration_s = (
             config.duration_s
             if config.duration_s is not None
@@ -102,7 +105,7 @@ class LockstepRig(Closing):
         self.sim = SimNode(
             sim_bus, vehicle, self.clock, scenario, truth_phase_ticks=config.truth_phase_ticks
         )
-        self.board = FirmwareBoard(fw_bus, params, self.clock)
+        self.board = make_board(fw_bus, params, self.clock, None)
         self.listeners = list(listeners)
         self.ticks = 0
 

@@ -40,6 +40,7 @@ from odocan.host.report.progress import progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
+from odocan.sim.cboard import FIRMWARES
 from odocan.sim.faults import FaultSpec
 from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import INTEGRATORS, LockstepRig, RigConfig
@@ -69,6 +70,13 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         choices=INTEGRATORS,
         default="exact",
         help="on-board integrator (default: exact)",
+    )
+    parser.add_argument(
+        "--firmware",
+        choices=FIRMWARES,
+        default="python",
+        help="the firmware on the board: python (firmware/) or c (firmware/c, built with make "
+        "on first use) (default: python)",
     )
     parser.add_argument(
         "--duration",
@@ -108,11 +116,14 @@ def _do_run(args: argparse.Namespace) -> int:
         faults=faults,
         fw_faults=None if faults is None else replace(faults, seed=faults.seed + 1),
         duration_s=args.duration,
+        firmware=args.firmware,
     )
     check_log_path(args.log)
     check_output_paths(args)
     analysis, log_error = _run_and_analyze(config, args)
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
+    if config.firmware != "python":
+        title += f", {config.firmware} firmware"
     code = finish(analysis, args, title=title)
     if log_error is not None:
         raise log_error
