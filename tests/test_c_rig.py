@@ -14,6 +14,7 @@ Skips with the reason when make or a C compiler is missing, and fails instead un
 from __future__ import annotations
 
 import ctypes
+import ctypes.util
 import math
 import shutil
 import signal
@@ -199,6 +200,18 @@ def test_a_missing_library_is_one_error_line(
     assert main(["run", "--duration", "1", "--firmware", "c"]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"error: --firmware c: cannot load {missing}") and err.count("\n") == 1
+
+
+def test_a_library_without_the_abi_is_one_error_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    libc = ctypes.util.find_library("c")
+    assert libc is not None
+    monkeypatch.setenv(cboard.LIBRARY_ENV, libc)
+    assert main(["run", "--duration", "1", "--firmware", "c"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: --firmware c: {libc} lacks the odocan_fw ABI: ")
+    assert err.count("\n") == 1
 
 
 def test_a_missing_compiler_is_one_error_line(
