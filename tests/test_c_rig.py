@@ -28,6 +28,7 @@ import pytest
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import State
 from odocan.host.cli.app import main
+from odocan.host.testkit import plugin
 from odocan.host.testkit.backends import LockstepBackend, parse_bus_spec
 from odocan.host.testkit.options import RigOptions
 from odocan.host.testkit.rig import make_rig
@@ -151,6 +152,7 @@ def test_make_board_names_the_firmwares() -> None:
     assert cboard.board_maker("c") is cboard.CFirmwareBoard
     with pytest.raises(cboard.ConfigurationError, match="unknown firmware 'rust'"):
         cboard.board_maker("rust")
+    assert plugin._FIRMWARES == cboard.FIRMWARES  # the plugin's copy (it loads no sim module)
 
 
 def test_library_speaks_the_abi_version() -> None:
