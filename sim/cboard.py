@@ -54,8 +54,14 @@ def _build_library() -> Path:
     make = shutil.which("make")
     if make is None:
         raise FirmwareBuildError("--firmware c: make not found on PATH (install make)")
-    LIBRARY_PATH.parent.mkdir(parents=True, exist_ok=True)
-    with open(LIBRARY_PATH.parent / ".lib.lock", "w") as lock:
+    try:
+        LIBRARY_PATH.parent.mkdir(parents=True, exist_ok=True)
+        lock = open(LIBRARY_PATH.parent / ".lib.lock", "w")  # noqa: SIM115 (closed below)
+    except OSError as exc:
+        raise FirmwareBuildError(
+            f"--firmware c: cannot build in {LIBRARY_PATH.parent}: {exc.strerror}"
+        ) from exc
+    with lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         command = [make, "-s", "-C", str(FIRMWARE_C_DIR), "lib"]
         if subprocess.run([*command, "-q"], capture_output=True, check=False).returncode == 0:

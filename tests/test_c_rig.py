@@ -216,6 +216,17 @@ def test_a_library_without_the_abi_is_one_error_line(
     assert err.count("\n") == 1
 
 
+def test_an_unwritable_build_directory_is_one_error_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a directory")
+    monkeypatch.setattr(cboard, "LIBRARY_PATH", blocker / "build" / "libodocan_fw.so")
+    assert main(["run", "--duration", "1", "--firmware", "c"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: --firmware c: cannot build in {blocker / 'build'}: Not a directory\n"
+
+
 def test_a_missing_compiler_is_one_error_line(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
