@@ -194,6 +194,19 @@ def test_a_transmit_exception_reaches_the_caller_after_the_tick() -> None:
     assert 1 <= ecu.ticks <= 10  # the tick ran to its end, then the error was raised
 
 
+def test_another_library_runs_through_odocan_fw_lib(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A team's library in $ODOCAN_FW_LIB (here a copy of ours) is the firmware that runs."""
+    theirs = tmp_path / "libtheirs.so"
+    shutil.copyfile(cboard.load_library()._name, theirs)
+    python_log = _run_log(tmp_path, "python")
+    monkeypatch.setenv(cboard.LIBRARY_ENV, str(theirs))
+    assert _run_log(tmp_path, "c") == python_log
+    assert theirs in cboard._loaded
+    capsys.readouterr()
+
+
 def test_a_missing_library_is_one_error_line(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
