@@ -26,7 +26,7 @@ import can
 
 from odocan.firmware.config import RobotParams
 from odocan.firmware.errors import ErrorFlag, ErrorMask, State
-from odocan.firmware.hal import CanTx
+from odocan.firmware.hal import TICK_PERIOD_US, CanTx
 from odocan.sim.board import FirmwareBoard
 from odocan.sim.clock import Clock
 from odocan.sim.exceptions import ConfigurationError, OdocanError
@@ -170,11 +170,16 @@ class CEcu:
         """CAN controller status interrupt: bus-off entered (True) or left (False)."""
         self._lib.odocan_fw_bus_state(self._fw, bus_off)
 
-    def tick(self) -> None:
-        """One period of the C main loop (``now_us`` from the clock, or ticks x 10 ms)."""
-        now_us = (
-            round(self._clock.now_s() * 1e6) if self._clock is not None else self.ticks * 10_000
-        )
+    def tick(self, now_us: int | None = None) -> None:
+        """One period of the C main loop. ``now_us``: the board's time, when the board passes
+        it; else the clock's, else the tick count x 10 ms (the ABI carries it; our ECU counts
+        ticks)."""
+        if now_us is None:
+            now_us = (
+                round(self._clock.now_s() * 1e6)
+                if self._clock is not None
+                else self.ticks * TICK_PERIOD_US
+            )
         self._tick(self._fw, now_us)
         if self._pending is not None:
             pending, self._pending = self._pending, None
