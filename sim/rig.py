@@ -39,7 +39,8 @@ import can
 
 from odocan.firmware import frames as fr
 from odocan.firmware.config import Integrator, RobotParams
-from odocan.sim.board import TICK_S, TX_LATENCY_S, FirmwareBoard
+from odocan.sim.board import TICK_S, TX_LATENCY_S
+from odocan.sim.cboard import board_maker
 from odocan.sim.clock import LockstepClock
 from odocan.sim.closing import Closing
 from odocan.sim.errors import ErrorModel
@@ -86,6 +87,7 @@ class RigConfig:
     truth_phase_ticks: int = 0  # SIM_TRUTH on ticks k = phase (mod its cycle); keep it even
     transport: str = "odocan"  # python-can interface of the rig's buses: one of TRANSPORTS
     bitrate: int | None = None  # bit/s: a bit-timed wire (odocan transport only); None: instant
+    firmware: str = "python"  # "python": firmware/, "c": firmware/c (sim.cboard)
 
 
 def _check_bitrate(config: RigConfig) -> None:
@@ -120,6 +122,7 @@ class LockstepRig(Closing):
                 f"unknown transport {config.transport!r} (known: {', '.join(TRANSPORTS)})"
             )
         _check_bitrate(config)
+        make_board = board_maker(config.firmware)
         self.default_duration_s = (
             config.duration_s
             if config.duration_s is not None
@@ -145,7 +148,7 @@ class LockstepRig(Closing):
         self.sim = SimNode(
             sim_bus, vehicle, self.clock, scenario, truth_phase_ticks=config.truth_phase_ticks
         )
-        self.board = FirmwareBoard(fw_bus, params, self.clock)
+        self.board = make_board(fw_bus, params, self.clock, None)
         self.listeners = list(listeners)
 
     @property

@@ -115,6 +115,7 @@ class LockstepBackend:
             channel=f"odocan-testkit-{next(_channels)}",
             faults=fault_spec(options.faults),
             fw_faults=fault_spec(options.fw_faults),
+            firmware=options.firmware,
         )
         self.rig = LockstepRig(config, [self.recorder])
 

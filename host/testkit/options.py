@@ -32,6 +32,7 @@ class RigOptions:
     faults: str = ""
     fw_faults: str = ""
     seed: int = 0
+    firmware: str = "python"  # lockstep only: "python" (firmware/) or "c" (firmware/c)
 
     def profile(self) -> RobotProfile:
         """The robot profile (a name or a TOML path)."""

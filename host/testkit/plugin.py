@@ -20,6 +20,9 @@ whatever firmware is on that bus: the fixture then does not start ours; it plays
 controller, the ground truth and the scenario driver in real time there and judges what the
 firmware sends (``host.testkit``). ``odocan_attach_timeout`` (s, default 30) bounds the wait for
 the firmware's first ODOM_STATUS.
+
+**Our C firmware**: ``--odocan-firmware c`` (or the ini option ``odocan_firmware``) runs the
+lockstep rigs on the C port (``firmware/c``, built with make on first use, ``sim.cboard``).
 """
 
 from __future__ import annotations
@@ -42,7 +45,9 @@ _INI = {
     "odocan_seed": ("seed of odocan_rig's vehicle and scenarios", "0"),
     "odocan_bus": ("can.Bus keywords of a bus with an external firmware (none: lockstep)", ""),
     "odocan_attach_timeout": ("seconds to wait for an external firmware to answer", "30"),
+    "odocan_firmware": ("our firmware in lockstep: python or c (firmware/c)", "python"),
 }
+_FIRMWARES = ("python", "c")  # sim.cboard.FIRMWARES, without importing the sim here
 _KEYS = ("robot", "integrator", "errors", "faults", "fw_faults", "seed")
 _ENCODER = pytest.StashKey["CommandEncoder"]()
 
@@ -75,6 +80,13 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         "interface=udp_multicast,channel=239.74.163.9,hop_limit=0 (default: our firmware in "
         "lockstep)",
     )
+    group.addoption(
+        "--odocan-firmware",
+        choices=_FIRMWARES,
+        default=None,
+        help="the firmware of the lockstep rigs: python (firmware/) or c (firmware/c, built with "
+        "make on first use) (default: ini odocan_firmware, else python)",
+    )
     for name, (text, default) in _INI.items():
         parser.addini(name, text, default=default)
 
@@ -96,11 +108,21 @@ def bus_kwargs(config: pytest.Config) -> dict[str, Any] | None:
     return parse_bus_spec(text) if text.strip() else None
 
 
+def firmware_kind(config: pytest.Config) -> str:
+    """Our firmware for the lockstep rigs (``--odocan-firmware``, else ini ``odocan_firmware``)."""
+    kind = config.getoption("--odocan-firmware") or str(config.getini("odocan_firmware")).strip()
+    if kind not in _FIRMWARES:
+        raise pytest.UsageError(f"odocan_firmware must be one of {', '.join(_FIRMWARES)}: {kind!r}")
+    return kind
+
+
 def pytest_report_header(config: pytest.Config) -> str:
     """One header line: which firmware the rigs put under test."""
     text = config.getoption("--odocan-bus") or str(config.getini("odocan_bus"))
     if text.strip():
         return f"odocan: external firmware on {text.strip()} (real time)"
+    if firmware_kind(config) == "c":
+        return "odocan: our C firmware (firmware/c) in lockstep (simulated time)"
     return "odocan: our firmware in lockstep (simulated time)"
 
 
@@ -140,6 +162,12 @@ def odocan_rig(request: pytest.FixtureRequest) -> Iterator[RigFactory]:
 
     defaults = _defaults(request)
     bus = bus_kwargs(request.config)
+    firmware = firmware_kind(request.config)
+    if bus is not None and firmware != "python":
+        raise pytest.UsageError(
+            "--odocan-firmware chooses our firmware in lockstep; with --odocan-bus the firmware "
+            "under test is the one on that bus (run it with odocan firmware --firmware c)"
+        )
     timeout_s = float(str(request.config.getini("odocan_attach_timeout")))
     rigs: list[OdocanRig] = []
 
@@ -151,7 +179,8 @@ def odocan_rig(request: pytest.FixtureRequest) -> Iterator[RigFactory]:
         if bus is not None and any(not rig.closed for rig in rigs):
             raise pytest.UsageError("one odocan rig at a time on an external firmware's bus")
         encoder = None if bus is None else _encoder(request.config)
-        rig = make_rig(RigOptions(**chosen), bus=bus, encoder=encoder, attach_timeout_s=timeout_s)
+        options = RigOptions(**chosen, firmware=firmware)
+        rig = make_rig(options, bus=bus, encoder=encoder, attach_timeout_s=timeout_s)
         rigs.append(rig)
         return rig
 

@@ -57,6 +57,7 @@ from odocan.host.report.progress import progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
+from odocan.sim.cboard import FIRMWARES
 from odocan.sim.faults import FaultSpec
 from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import INTEGRATORS, TRANSPORTS, LockstepRig, RigConfig
@@ -89,6 +90,13 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         choices=INTEGRATORS,
         default="exact",
         help="on-board integrator (default: exact)",
+    )
+    parser.add_argument(
+        "--firmware",
+        choices=FIRMWARES,
+        default="python",
+        help="the firmware on the board: python (firmware/) or c (firmware/c, built with make "
+        "on first use) (default: python)",
     )
     parser.add_argument(
         "--duration",
@@ -140,12 +148,15 @@ def _do_run(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         transport=args.transport,
         bitrate=args.bitrate,
+        firmware=args.firmware,
     )
     check_log_path(args.log)
     check_output_paths(args)
     check_export_paths(args.parquet, args.mcap)
     check_junit_path(args)
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
+    if config.firmware != "python":
+        title += f", {config.firmware} firmware"
     with serve_foxglove(args, config.robot, config.integrator) as live:
         extra: list[can.Listener] = [] if live is None else [Isolated(live)]
         analysis, log_error = _run_and_analyze(config, args, extra)
