@@ -51,7 +51,7 @@ import can
 from can import BusABC, CanInitializationError, CanOperationError, Message
 from can.typechecking import AutoDetectedConfig, CanFilters, Channel
 
-from odocan.sim.canbits import INTERFRAME_BITS, arbitration_key, frame_bits
+from odocan.sim.canbits import INTERFRAME_BITS, LatencyStats, arbitration_key, frame_bits
 
 INTERFACE: Final = "odocan"
 _POLL_S: Final = 0.001  # a bit-timed receiver blocked in recv looks at the wire this often
@@ -115,6 +115,7 @@ class BitTiming:
         self.next_event_s = math.inf  # nothing happens on the wire before this
         self.frames = 0  # frames transmitted
         self.busy_bits = 0  # bit times those frames and their interframe spaces took
+        self.latency = LatencyStats(bitrate)  # per ID: ready to end of frame, streaming max/p99
         self._seq = 0
 
     def enqueue(self, sender: OdocanBus, msg: Message, ready_s: float) -> None:
@@ -148,11 +149,12 @@ class BitTiming:
                 return
             while True:
                 if self.on_wire is not None:
-                    frame, _, end_s = self.on_wire
+                    frame, start_s, end_s = self.on_wire
                     if end_s > now_s:
                         self.next_event_s = end_s
                         return
                     self.on_wire = None
+                    self.latency.record(frame[5], frame[1], start_s, end_s)
                     self.wire.deliver(frame[4], frame[5], end_s)
                 if not self._start_next(now_s):
                     return

@@ -43,6 +43,7 @@ from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
+from odocan.host.judge import busstats
 from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
@@ -57,6 +58,7 @@ from odocan.host.report.progress import progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
+from odocan.sim.contract import database
 from odocan.sim.faults import FaultSpec
 from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import INTEGRATORS, TRANSPORTS, LockstepRig, RigConfig
@@ -176,6 +178,7 @@ def _run_and_analyze(
         trace = TruthTrace(rig, total_ticks) if args.plot is not None else None
         if mirror is not None:
             rig.listeners.append(PacedRedirect(mirror))
+        wire = getattr(rig.host_bus, "timing", None)  # bit-timed: the wire's own records
         try:
             start = time.perf_counter()
             _run(rig, rig.default_duration_s, None if trace is None else trace.record)
@@ -203,6 +206,8 @@ def _run_and_analyze(
         )
     if trace is not None and len(frames):
         analysis.series.update(trace.series(float(frames.timestamp_s[0])))
+    if wire is not None:
+        analysis.report["bus"] = busstats.from_wire(wire, database()).as_dict()
     write_exports(args, frames, analysis)
     return analysis, log_error
 
