@@ -240,6 +240,8 @@ class LatencyHistogram:
         for index in sorted(self.bins):
             seen += self.bins[index]
             if seen >= need:
+                if index == LATENCY_MAX_BINS - 1:  # the overflow bin: no upper edge but the max
+                    return self.max_bits
                 return min(self._upper_bits(index), self.max_bits)
         return self.max_bits
 
