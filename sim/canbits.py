@@ -192,6 +192,8 @@ def arbitration_key(msg: can.Message) -> tuple[int, int, int, int, int]:
 LATENCY_EXACT_BITS: Final = 8192  # below this, one bin per bit time
 LATENCY_COARSE_SHIFT: Final = 8  # above it, bins of 256 bit times
 LATENCY_MAX_BINS: Final = 16384  # latencies past the last bin share it (their max stays exact)
+LATENCY_MAX_IDS: Final = 1024  # identifiers tracked one by one; the rest share LATENCY_OTHER_IDS
+LATENCY_OTHER_IDS: Final = (-2, False)
 
 
 class LatencyHistogram:
@@ -230,6 +232,18 @@ class LatencyHistogram:
         if bits > self.max_bits:
             self.max_bits = bits
 
+    def merge(self, other: LatencyHistogram) -> None:
+        """Add ``other``'s latencies to these (same bins)."""
+        for index, count in other.bins.items():
+            self.bins[index] = self.bins.get(index, 0) + count
+        self.count += other.count
+        self.max_bits = max(self.max_bits, other.max_bits)
+
+    def count_above(self, bits: int) -> int:
+        """Latencies above ``bits`` (exact below ``LATENCY_EXACT_BITS``; above it, a bin that
+        straddles ``bits`` counts whole: never understated)."""
+        return sum(c for i, c in self.bins.items() if self._upper_bits(i) > bits)
+
     def quantile_bits(self, fraction: float) -> int:
         """The smallest bin edge at or below which ``fraction`` of the latencies lie (0 if none);
         never above the exact maximum."""
@@ -250,8 +264,10 @@ class LatencyStats:
     """Per identifier, the queuing + transmission latency of every frame a bit-timed wire
     carried: from the moment it was ready in its transmit buffer to its end of frame.
 
-    Keys are ``(arbitration_id, is_extended_id)``; error frames are ``(-1, False)``. The span
-    runs from the first frame's start of frame to the last one's end of frame.
+    Keys are ``(arbitration_id, is_extended_id)``; error frames are ``(-1, False)``; past
+    ``LATENCY_MAX_IDS`` identifiers (a babbling node sends random ones) the rest share
+    ``(-2, False)``, so memory stays bounded. The span runs from the first frame's start of frame
+    to the last one's end of frame.
     """
 
     def __init__(self, bitrate: int) -> None:
@@ -265,7 +281,11 @@ class LatencyStats:
         key = (-1, False) if msg.is_error_frame else (msg.arbitration_id, msg.is_extended_id)
         hist = self.by_id.get(key)
         if hist is None:
-            hist = self.by_id[key] = LatencyHistogram()
+            if len(self.by_id) >= LATENCY_MAX_IDS:
+                key = LATENCY_OTHER_IDS
+                hist = self.by_id.get(key)
+            if hist is None:
+                hist = self.by_id[key] = LatencyHistogram()
         # Rounded up to whole bit times; the 1e-6 bit absorbs float rounding of the timestamps.
         hist.add(max(0, math.ceil((end_s - ready_s) * self.bitrate - 1e-6)))
         self.first_start_s = min(self.first_start_s, start_s)

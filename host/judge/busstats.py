@@ -29,8 +29,8 @@ import can
 from cantools.database.can import Database
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.schedulability import BusLoad, analyse_bus, messages_from_dbc
-from odocan.sim.canbits import INTERFRAME_BITS, LatencyStats, frame_bits
+from odocan.host.judge.schedulability import NS_PER_S, BusLoad, analyse_bus, messages_from_dbc
+from odocan.sim.canbits import INTERFRAME_BITS, LatencyHistogram, LatencyStats, frame_bits
 from odocan.sim.exceptions import ConfigurationError
 
 P99 = 0.99
@@ -54,15 +54,24 @@ class MessageLatency:
     can_id: int  # -1: error frames
     extended: bool
     frames: int
-    max_us: float
-    p99_us: float
+    max_us: float | None  # None: no frame of it went out
+    p99_us: float | None
     bound_us: float | None  # R of the revised analysis; None: not in the DBC, or no bound
     deadline_us: float | None
+    late: int = 0  # frames whose latency passed the deadline (never understated)
+    still_queued: int = 0  # frames still waiting for the bus when the run ended
+
+    @property
+    def starved(self) -> bool:
+        """Frames of this DBC message came after their deadline, or never left the sender."""
+        return self.deadline_us is not None and (self.late > 0 or self.still_queued > 0)
 
     @property
     def within_bound(self) -> bool | None:
         """max <= R (None when there is no R to compare with)."""
-        return None if self.bound_us is None else self.max_us <= self.bound_us
+        if self.bound_us is None or self.max_us is None:
+            return None
+        return self.max_us <= self.bound_us
 
     def as_dict(self) -> dict[str, Any]:
         """The JSON report's row."""
@@ -76,6 +85,9 @@ class MessageLatency:
             "bound_us": self.bound_us,
             "deadline_us": self.deadline_us,
             "within_bound": self.within_bound,
+            "late": self.late,
+            "still_queued": self.still_queued,
+            "starved": self.starved,
         }
 
 
@@ -116,6 +128,7 @@ class BusStats:
             "latency": "ready in the transmit buffer to end of frame, us, rounded up to a bit time",
             "bound": "R, Davis et al. 2007 revised analysis of the DBC (from nominal release)",
             "within_bounds": self.within_bounds,
+            "starved": [m.name for m in self.messages if m.starved],
             "analysis_note": self.analysis_note or None,
             "messages": [m.as_dict() for m in self.messages],
         }
@@ -138,36 +151,74 @@ def bounds_by_id(
     return out, ""
 
 
-def from_wire(wire: TimedWire, db: Database, sporadic_ms: str | None = None) -> BusStats:
-    """The measured load and latencies of a bit-timed run, each against the DBC's R."""
+def pending_by_id(wire: TimedWire) -> dict[tuple[int, bool], int]:
+    """Frames still in the transmit buffers, per (ID, extended): read it before the buses close
+    (closing a handle drops its frames)."""
+    out: dict[tuple[int, bool], int] = {}
+    for pending in getattr(wire, "pending", ()):
+        msg = pending[5]
+        key = (-1, False) if msg.is_error_frame else (msg.arbitration_id, msg.is_extended_id)
+        out[key] = out.get(key, 0) + 1
+    return out
+
+
+def from_wire(
+    wire: TimedWire,
+    db: Database,
+    sporadic_ms: str | None = None,
+    still_queued: dict[tuple[int, bool], int] | None = None,
+) -> BusStats:
+    """The measured load and latencies of a bit-timed run, each DBC message against its R and
+    its deadline; every identifier the DBC does not know (a babbling node's) in one row.
+    ``still_queued``: ``pending_by_id`` taken when the run ended."""
     stats = wire.latency
     bitrate = wire.bitrate
     bounds, note = bounds_by_id(db, bitrate, sporadic_ms)
+    queued = still_queued or {}
     us_per_bit = 1e6 / bitrate
     rows = []
-    for key in sorted(stats.by_id):
-        hist = stats.by_id[key]
-        name, r_ns, d_ns = bounds.get(key, (_unknown_name(key), None, 0))
-        rows.append(
-            MessageLatency(
-                name=name,
-                can_id=key[0],
-                extended=key[1],
-                frames=hist.count,
-                max_us=hist.max_bits * us_per_bit,
-                p99_us=hist.quantile_bits(P99) * us_per_bit,
-                bound_us=None if r_ns is None else r_ns / 1000,
-                deadline_us=d_ns / 1000 if r_ns is not None else None,
-            )
-        )
+    for key in sorted(bounds, key=lambda k: (k[1], k[0])):
+        name, r_ns, d_ns = bounds[key]
+        hist = stats.by_id.get(key, LatencyHistogram())
+        if not hist.count and not queued.get(key):
+            continue  # a message this run never sent
+        deadline_bits = d_ns * bitrate // NS_PER_S
+        waiting = queued.get(key, 0)
+        rows.append(_row(name, key, hist, us_per_bit, r_ns, d_ns, deadline_bits, waiting))
+    others = [key for key in stats.by_id if key not in bounds]
+    if others:
+        merged = LatencyHistogram()
+        for key in others:
+            merged.merge(stats.by_id[key])
+        waiting = sum(n for key, n in queued.items() if key not in bounds)
+        name = f"(other: {len(others)} IDs)"
+        rows.append(_row(name, (-2, False), merged, us_per_bit, None, 0, None, waiting))
     span_s = stats.last_end_s - stats.first_start_s if wire.frames else 0.0
     return BusStats("run", bitrate, wire.frames, wire.busy_bits, span_s, rows, note)
 
 
-def _unknown_name(key: tuple[int, bool]) -> str:
-    if key[0] < 0:
-        return "(error frames)"
-    return f"(0x{key[0]:08X})" if key[1] else f"(0x{key[0]:03X})"
+def _row(
+    name: str,
+    key: tuple[int, bool],
+    hist: LatencyHistogram,
+    us_per_bit: float,
+    r_ns: int | None,
+    d_ns: int,
+    deadline_bits: int | None,
+    still_queued: int,
+) -> MessageLatency:
+    return MessageLatency(
+        name=name,
+        can_id=key[0],
+        extended=key[1],
+        frames=hist.count,
+        max_us=hist.max_bits * us_per_bit if hist.count else None,
+        p99_us=hist.quantile_bits(P99) * us_per_bit if hist.count else None,
+        bound_us=None if r_ns is None else r_ns / 1000,
+        deadline_us=None if deadline_bits is None else d_ns / 1000,
+        late=0 if deadline_bits is None else hist.count_above(deadline_bits),
+        still_queued=still_queued,
+    )
 
 
 def frame_lengths_bits(frames: FrameArrays) -> Iterable[int]:

@@ -232,22 +232,30 @@ def bus_lines(section: dict[str, Any]) -> list[str]:
     over = [m["name"] for m in section.get("messages", []) if m["within_bound"] is False]
     if over:
         lines.append("measured latency ABOVE the analysis' bound R: " + ", ".join(over))
+    starved = [
+        f"{m['name']} ({m['late']} late, {m['still_queued']} never sent)"
+        for m in section.get("messages", [])
+        if m.get("starved")
+    ]
+    if starved:
+        lines.append("STARVED past their deadline: " + ", ".join(starved))
     return lines
 
 
 def bus_table(section: dict[str, Any]) -> Table:
     """Per message: frames, measured max and p99 latency (queued to end of frame), the
-    analysis' worst-case R and the deadline, in ms."""
+    analysis' worst-case R and the deadline D, in ms; frames past D, frames never sent."""
     table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
     table.add_column("message")
-    for column in ("frames", "max ms", "p99 ms", "bound R ms", "deadline ms"):
+    for column in ("frames", "max ms", "p99 ms", "R ms", "D ms", "late", "queued"):
         table.add_column(column, justify="right")
     for row in section["messages"]:
-        style = "bold red" if row["within_bound"] is False else None
+        style = "bold red" if row["within_bound"] is False or row.get("starved") else None
         table.add_row(
             row["name"], str(row["frames"]), _ms_of_us(row["max_latency_us"]),
             _ms_of_us(row["p99_latency_us"]), _ms_of_us(row["bound_us"]),
-            _ms_of_us(row["deadline_us"]), style=style,
+            _ms_of_us(row["deadline_us"]), str(row.get("late", 0)),
+            str(row.get("still_queued", 0)), style=style,
         )
     return table
 

@@ -183,6 +183,7 @@ def _run_and_analyze(
             start = time.perf_counter()
             _run(rig, rig.default_duration_s, None if trace is None else trace.record)
             wall_s = time.perf_counter() - start
+            still_queued = None if wire is None else busstats.pending_by_id(wire)
         finally:
             try:
                 rig.close()
@@ -207,7 +208,8 @@ def _run_and_analyze(
     if trace is not None and len(frames):
         analysis.series.update(trace.series(float(frames.timestamp_s[0])))
     if wire is not None:
-        analysis.report["bus"] = busstats.from_wire(wire, database()).as_dict()
+        bus = busstats.from_wire(wire, database(), still_queued=still_queued)
+        analysis.report["bus"] = bus.as_dict()
     write_exports(args, frames, analysis)
     return analysis, log_error
 
