@@ -140,3 +140,56 @@ def test_analyze_refuses_a_bitrate_that_is_not_can(tmp_path: Path) -> None:
     assert done.returncode == 2
     assert done.stderr.strip().splitlines()[-1].startswith("error:")
     assert "Traceback" not in done.stderr
+
+
+def test_the_monitor_s_bus_load_over_its_window() -> None:
+    """Frames of a known length at a known pace: 53-bit frames (ID 0, no data, see above) every
+    1 ms are 53 000 bit/s; at 125 kbit/s a load of 42.4 %; the window forgets older frames."""
+    from odocan.host.judge.monitor import BusMonitor
+
+    model = BusMonitor(robot.load("pmir"), bitrate=125_000)
+    assert model.snapshot(0.0)["bus_load"]["bits_per_s"] is None
+    for k in range(3000):  # 3 s
+        model.feed(can.Message(timestamp=0.001 * (k + 1), arbitration_id=0, is_extended_id=False))
+    load = model.snapshot(0.0)["bus_load"]
+    assert load["frames"] == 1000  # the last second only
+    assert load["bits_per_s"] == pytest.approx(53_000, rel=1e-6)
+    assert load["load"] == pytest.approx(0.424, rel=1e-6)
+    window = busstats.LoadWindow(window_s=1.0, max_frames=10)
+    for k in range(100):
+        window.add(can.Message(timestamp=0.001 * (k + 1), arbitration_id=0, is_extended_id=False))
+    assert window.snapshot(None)["frames"] == 10 and window.snapshot(None)["load"] is None
+    assert window.bits_per_s() == pytest.approx(53_000, rel=1e-6)  # 9 frames over 9 ms
+
+
+@pytest.mark.parametrize("bitrate", [500_000, None])
+def test_the_monitor_header_shows_the_bus_load(bitrate: int | None) -> None:
+    from rich.console import Console
+
+    from odocan.host.judge.monitor import BusMonitor
+    from odocan.host.report.tui import Trace, View, screen
+
+    model = BusMonitor(robot.load("pmir"), bitrate=bitrate)
+    config = RigConfig(robot=robot.load("pmir"), seed=1, channel=f"busstats-tui-{bitrate}")
+
+    class Feed(can.Listener):
+        def on_message_received(self, msg: can.Message) -> None:
+            model.feed(msg, now_s=msg.timestamp)
+
+    with LockstepRig(config, listeners=[Feed()]) as rig:
+        for _ in range(300):
+            rig.step()
+    snapshot = model.snapshot(now_s=3.0)
+    load = snapshot["bus_load"]
+    # the rig's traffic: 360 frames/s (the summary's counts), 8-byte standard frames of 111 to
+    # 135 bits + 3 IFS
+    assert 360 * 114 < load["bits_per_s"] < 360 * 138
+    console = Console(width=80, height=24, record=True, color_system=None, force_terminal=False)
+    view = View(source="test", interface=None, now_s=3.0, started_s=0.0, last_frame_s=3.0)
+    console.print(screen(snapshot, Trace(model.db), view, width=80, height=24), end="")
+    header = console.export_text(styles=False).split("\n")[0]
+    if bitrate is None:
+        assert f"bus {load['bits_per_s'] / 1000:.1f} kbit/s" in header
+    else:
+        assert load["load"] == pytest.approx(load["bits_per_s"] / bitrate)
+        assert f"bus {load['load']:.0%}" in header

@@ -21,6 +21,7 @@ analysis' model excludes (a message sent more often than its period, a babbling 
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -248,3 +249,63 @@ def from_frames(frames: FrameArrays, bitrate: int) -> BusStats:
     first_start_s = float(frames.timestamp_s[0]) - lengths[0] / bitrate
     span_s = float(frames.timestamp_s[-1]) - first_start_s
     return BusStats("log", bitrate, len(lengths), busy_bits, span_s)
+
+
+LOAD_WINDOW_S = 1.0  # the live bus load is over the last second of bus time
+LOAD_WINDOW_FRAMES = 16_384  # at most this many frames in it (a 1 Mbit/s bus carries < 21 000/s)
+
+
+class LoadWindow:
+    """The bus load over the last ``window_s`` of bus time, frame by frame, in bounded memory:
+    each frame's exact length (``sim.canbits.frame_bits``, its own stuff bits) plus the 3-bit
+    interframe space, summed over the frames whose end of frame (their timestamp) lies in the
+    window. Before a full window has been heard, over the span since the first frame's start;
+    when more than ``max_frames`` end within the window, over the frames kept."""
+
+    def __init__(self, window_s: float = LOAD_WINDOW_S, max_frames: int = LOAD_WINDOW_FRAMES):
+        self.window_s = window_s
+        self._frames: deque[tuple[float, int]] = deque(maxlen=max_frames)
+        self._bits = 0
+        self._first_start_s: float | None = None
+        self.capped = False  # frames left the window by its size, not its age
+
+    def add(self, msg: can.Message) -> None:
+        """One frame heard, stamped with its end of frame (s). Never raises: a frame whose
+        length cannot be known (CAN FD) counts as nothing."""
+        try:
+            bits = frame_bits(msg) + INTERFRAME_BITS
+        except ValueError:
+            return
+        t_s = msg.timestamp
+        if self._first_start_s is None:
+            self._first_start_s = t_s - bits * 1e-6  # at most 1 Mbit/s: a lower bound of SOF
+        frames = self._frames
+        if len(frames) == frames.maxlen:
+            self._bits -= frames[0][1]
+            self.capped = True
+        frames.append((t_s, bits))
+        self._bits += bits
+        while frames and frames[0][0] <= t_s - self.window_s:
+            self._bits -= frames.popleft()[1]
+
+    def bits_per_s(self) -> float | None:
+        """Bits on the wire per second over the window (None before any frame)."""
+        frames = self._frames
+        if not frames or self._first_start_s is None:
+            return None
+        if self.capped:  # the frames after the oldest kept, over the time since its end
+            span_s = frames[-1][0] - frames[0][0]
+            return (self._bits - frames[0][1]) / span_s if span_s > 0 else None
+        span_s = min(self.window_s, frames[-1][0] - self._first_start_s)
+        return self._bits / span_s if span_s > 0 else None
+
+    def snapshot(self, bitrate: int | None) -> dict[str, Any]:
+        """``bits_per_s``, and ``load`` (a fraction) when the bitrate is known."""
+        rate = self.bits_per_s()
+        return {
+            "window_s": self.window_s,
+            "frames": len(self._frames),
+            "bits_per_s": rate,
+            "bitrate": bitrate,
+            "load": None if rate is None or not bitrate else rate / bitrate,
+        }
