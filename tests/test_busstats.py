@@ -127,6 +127,20 @@ def test_run_and_analyze_report_the_bus(tmp_path: Path) -> None:
     assert logged["load"] == pytest.approx(bus["load"], rel=1e-3)
 
 
+def test_latency_plot(tmp_path: Path) -> None:
+    plot = tmp_path / "latency.svg"
+    done = _odocan("run", "-b", "250000", "--duration", "2", "--latency-plot", str(plot))
+    assert done.returncode == 0, done.stderr
+    svg = plot.read_text()
+    assert svg.startswith("<?xml") and "WHEEL_ENCODERS" in svg and "250 kbit/s" in svg
+    done = _odocan("run", "--duration", "2", "--latency-plot", str(tmp_path / "x.png"))
+    assert done.returncode == 2 and "needs a bit-timed bus" in done.stderr
+    done = _odocan("run", "-b", "250000", "--duration", "2", "--latency-plot",
+                   str(tmp_path / "x.pdf"))
+    assert done.returncode == 2 and "unknown format" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
 def test_no_bus_section_without_a_bitrate(tmp_path: Path) -> None:
     report = tmp_path / "run.json"
     done = _odocan("run", "--duration", "2", "--report", str(report))
