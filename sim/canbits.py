@@ -288,5 +288,6 @@ class LatencyStats:
                 hist = self.by_id[key] = LatencyHistogram()
         # Rounded up to whole bit times; the 1e-6 bit absorbs float rounding of the timestamps.
         hist.add(max(0, math.ceil((end_s - ready_s) * self.bitrate - 1e-6)))
-        self.first_start_s = min(self.first_start_s, start_s)
-        self.last_end_s = max(self.last_end_s, end_s)
+        if start_s < self.first_start_s:
+            self.first_start_s = start_s
+        self.last_end_s = end_s  # the wire ends its frames in time order

@@ -31,7 +31,9 @@ length (``sim.canbits.frame_bits``: its own stuff bits, CRC-15 included), then t
 interframe space keeps it idle. Each receiver gets the frame stamped with its end-of-frame time,
 and only once its handle's ``clock()`` has reached that time (default ``time.time``; the lockstep
 rig passes its simulated clock). The bitrate belongs to the wire: the first handle on a channel
-sets it (or leaves the wire instant), later ones must agree or give none.
+sets it (or leaves the wire instant), later ones must agree or give none. The wire counts what it
+carried (``frames``, ``busy_bits``) and, per identifier, each frame's latency from ready to end of
+frame (``latency``: ``sim.canbits.LatencyStats``, streaming max and p99 in bounded memory).
 
 The plugin is registered under python-can's ``can.interface`` entry point group (pyproject.toml);
 ``register()`` adds it by hand to a python-can whose entry points predate the install.
