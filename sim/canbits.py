@@ -23,6 +23,7 @@ An error frame (python-can's ``is_error_frame``) is modelled as its error flag a
 
 from __future__ import annotations
 
+import math
 from typing import Final
 
 import can
@@ -184,3 +185,109 @@ def arbitration_key(msg: can.Message) -> tuple[int, int, int, int, int]:
         can_id = msg.arbitration_id & 0x1FFF_FFFF
         return (can_id >> 18, 1, 1, can_id & 0x3FFFF, rtr)
     return (msg.arbitration_id & 0x7FF, rtr, 0, 0, 0)
+
+
+# --- measured latencies: a streaming histogram per identifier ----------------------------------
+
+LATENCY_EXACT_BITS: Final = 8192  # below this, one bin per bit time
+LATENCY_COARSE_SHIFT: Final = 8  # above it, bins of 256 bit times
+LATENCY_MAX_BINS: Final = 16384  # latencies past the last bin share it (their max stays exact)
+LATENCY_MAX_IDS: Final = 1024  # identifiers tracked one by one; the rest share LATENCY_OTHER_IDS
+LATENCY_OTHER_IDS: Final = (-2, False)
+
+
+class LatencyHistogram:
+    """One message's latencies in whole bit times (rounded up), in bounded memory.
+
+    Exact per bit time up to ``LATENCY_EXACT_BITS``, then in bins of 2**``LATENCY_COARSE_SHIFT``
+    bit times, at most ``LATENCY_MAX_BINS`` bins; the count and the maximum are exact. A quantile
+    is the upper edge of its bin, so it never understates.
+    """
+
+    __slots__ = ("bins", "count", "max_bits")
+
+    def __init__(self) -> None:
+        self.bins: dict[int, int] = {}
+        self.count = 0
+        self.max_bits = 0
+
+    @staticmethod
+    def _bin(bits: int) -> int:
+        if bits < LATENCY_EXACT_BITS:
+            return bits
+        coarse = LATENCY_EXACT_BITS + ((bits - LATENCY_EXACT_BITS) >> LATENCY_COARSE_SHIFT)
+        return min(coarse, LATENCY_MAX_BINS - 1)
+
+    @staticmethod
+    def _upper_bits(index: int) -> int:
+        if index < LATENCY_EXACT_BITS:
+            return index
+        return LATENCY_EXACT_BITS + ((index - LATENCY_EXACT_BITS + 1) << LATENCY_COARSE_SHIFT) - 1
+
+    def add(self, bits: int) -> None:
+        """Count one latency of ``bits`` bit times."""
+        index = self._bin(bits)
+        self.bins[index] = self.bins.get(index, 0) + 1
+        self.count += 1
+        if bits > self.max_bits:
+            self.max_bits = bits
+
+    def merge(self, other: LatencyHistogram) -> None:
+        """Add ``other``'s latencies to these (same bins)."""
+        for index, count in other.bins.items():
+            self.bins[index] = self.bins.get(index, 0) + count
+        self.count += other.count
+        self.max_bits = max(self.max_bits, other.max_bits)
+
+    def count_above(self, bits: int) -> int:
+        """Latencies above ``bits`` (exact below ``LATENCY_EXACT_BITS``; above it, a bin that
+        straddles ``bits`` counts whole: never understated)."""
+        return sum(c for i, c in self.bins.items() if self._upper_bits(i) > bits)
+
+    def quantile_bits(self, fraction: float) -> int:
+        """The smallest bin edge at or below which ``fraction`` of the latencies lie (0 if none);
+        never above the exact maximum."""
+        if not self.count:
+            return 0
+        need = max(1, math.ceil(fraction * self.count - 1e-9))
+        seen = 0
+        for index in sorted(self.bins):
+            seen += self.bins[index]
+            if seen >= need:
+                if index == LATENCY_MAX_BINS - 1:  # the overflow bin: no upper edge but the max
+                    return self.max_bits
+                return min(self._upper_bits(index), self.max_bits)
+        return self.max_bits
+
+
+class LatencyStats:
+    """Per identifier, the queuing + transmission latency of every frame a bit-timed wire
+    carried: from the moment it was ready in its transmit buffer to its end of frame.
+
+    Keys are ``(arbitration_id, is_extended_id)``; error frames are ``(-1, False)``; past
+    ``LATENCY_MAX_IDS`` identifiers (a babbling node sends random ones) the rest share
+    ``(-2, False)``, so memory stays bounded. The span runs from the first frame's start of frame
+    to the last one's end of frame.
+    """
+
+    def __init__(self, bitrate: int) -> None:
+        self.bitrate = bitrate
+        self.by_id: dict[tuple[int, bool], LatencyHistogram] = {}
+        self.first_start_s = math.inf
+        self.last_end_s = -math.inf
+
+    def record(self, msg: can.Message, ready_s: float, start_s: float, end_s: float) -> None:
+        """One frame on the wire: ready at ``ready_s``, SOF at ``start_s``, EOF at ``end_s``."""
+        key = (-1, False) if msg.is_error_frame else (msg.arbitration_id, msg.is_extended_id)
+        hist = self.by_id.get(key)
+        if hist is None:
+            if len(self.by_id) >= LATENCY_MAX_IDS:
+                key = LATENCY_OTHER_IDS
+                hist = self.by_id.get(key)
+            if hist is None:
+                hist = self.by_id[key] = LatencyHistogram()
+        # Rounded up to whole bit times; the 1e-6 bit absorbs float rounding of the timestamps.
+        hist.add(max(0, math.ceil((end_s - ready_s) * self.bitrate - 1e-6)))
+        if start_s < self.first_start_s:
+            self.first_start_s = start_s
+        self.last_end_s = end_s  # the wire ends its frames in time order

@@ -31,7 +31,9 @@ length (``sim.canbits.frame_bits``: its own stuff bits, CRC-15 included), then t
 interframe space keeps it idle. Each receiver gets the frame stamped with its end-of-frame time,
 and only once its handle's ``clock()`` has reached that time (default ``time.time``; the lockstep
 rig passes its simulated clock). The bitrate belongs to the wire: the first handle on a channel
-sets it (or leaves the wire instant), later ones must agree or give none.
+sets it (or leaves the wire instant), later ones must agree or give none. The wire counts what it
+carried (``frames``, ``busy_bits``) and, per identifier, each frame's latency from ready to end of
+frame (``latency``: ``sim.canbits.LatencyStats``, streaming max and p99 in bounded memory).
 
 The plugin is registered under python-can's ``can.interface`` entry point group (pyproject.toml);
 ``register()`` adds it by hand to a python-can whose entry points predate the install.
@@ -51,7 +53,7 @@ import can
 from can import BusABC, CanInitializationError, CanOperationError, Message
 from can.typechecking import AutoDetectedConfig, CanFilters, Channel
 
-from odocan.sim.canbits import INTERFRAME_BITS, arbitration_key, frame_bits
+from odocan.sim.canbits import INTERFRAME_BITS, LatencyStats, arbitration_key, frame_bits
 
 INTERFACE: Final = "odocan"
 _POLL_S: Final = 0.001  # a bit-timed receiver blocked in recv looks at the wire this often
@@ -115,6 +117,7 @@ class BitTiming:
         self.next_event_s = math.inf  # nothing happens on the wire before this
         self.frames = 0  # frames transmitted
         self.busy_bits = 0  # bit times those frames and their interframe spaces took
+        self.latency = LatencyStats(bitrate)  # per ID: ready to end of frame, streaming max/p99
         self._seq = 0
 
     def enqueue(self, sender: OdocanBus, msg: Message, ready_s: float) -> None:
@@ -148,11 +151,12 @@ class BitTiming:
                 return
             while True:
                 if self.on_wire is not None:
-                    frame, _, end_s = self.on_wire
+                    frame, start_s, end_s = self.on_wire
                     if end_s > now_s:
                         self.next_event_s = end_s
                         return
                     self.on_wire = None
+                    self.latency.record(frame[5], frame[1], start_s, end_s)
                     self.wire.deliver(frame[4], frame[5], end_s)
                 if not self._start_next(now_s):
                     return

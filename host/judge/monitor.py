@@ -32,6 +32,10 @@ order: NO FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (with 
 POSE WRONG (on-board vs reference beyond ``POSE_TOLERANCE_M`` / ``_RAD``), UNVERIFIED (nothing
 compared yet), OK.
 
+``bus_load`` (``host.judge.busstats.LoadWindow``): bits on the wire per second over the last
+second of bus time, from every frame's exact stuffed length, and the load as a fraction when the
+monitor is given the bitrate.
+
 ``snapshot()`` is the whole model as JSON-ready data (``odocan monitor --json``);
 ``fleet_snapshot`` is the MQTT fleet's (``odocan monitor --mqtt``). ``render`` and
 ``render_fleet`` are re-exported from ``host.report.live``, where they now live.
@@ -52,6 +56,7 @@ import can
 from cantools.database.can import Database, Message
 
 from odocan.firmware.errors import ErrorFlag
+from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.fleetview import RobotState
@@ -158,9 +163,15 @@ class BusMonitor:
     """The state model of ``odocan monitor`` (see the module docstring)."""
 
     def __init__(
-        self, robot: RobotProfile, integrator: str | None = None, db: Database | None = None
+        self,
+        robot: RobotProfile,
+        integrator: str | None = None,
+        db: Database | None = None,
+        bitrate: int | None = None,
     ) -> None:
         self.db = db if db is not None else database()
+        self.bitrate = bitrate  # bit/s, for bus_load's fraction (None: bits/s only)
+        self.load = LoadWindow()
         self._by_key = {frame_key(m.frame_id, m.is_extended_frame): m for m in self.db.messages}
         self.e2e = E2EMonitor(self.db)
         self._e2e_configs = e2e_messages(self.db)
@@ -179,6 +190,7 @@ class BusMonitor:
         """One frame heard on the bus (``now_s``: local monotonic time, default now)."""
         now_s = time.monotonic() if now_s is None else now_s
         self.frames_total += 1
+        self.load.add(msg)
         if msg.is_error_frame or msg.is_remote_frame:
             self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
             return
@@ -384,6 +396,7 @@ class BusMonitor:
         return {
             "duration_s": now_s - self.started_monotonic_s,
             "frames_total": self.frames_total,
+            "bus_load": self.load.snapshot(self.bitrate),
             "messages": messages,
             "status": dict(self.status) or None,
             "health": self.health(now_s),

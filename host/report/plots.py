@@ -307,3 +307,49 @@ def _draw_scatter(ax: Axes, name: str, report: dict[str, Any]) -> None:
     ax.set_title(f"{name}: {report['side_m']:g} m square", fontsize="medium")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize="x-small")
+
+
+# --- bus latency (odocan run -b ... --latency-plot) -----------------------------------------
+
+
+def plot_latency(report: dict[str, Any], path: Path) -> None:
+    """The report's ``bus`` section as a figure saved to ``path`` (``.png`` or ``.svg``)."""
+    save(build_latency_figure(report["bus"]), path)
+
+
+def build_latency_figure(bus: dict[str, Any]) -> Figure:
+    """Per message, highest priority on top: the measured p99 and maximum latency (queued to end
+    of frame) as bars, the analysis' worst case R as a black tick, the deadline as a red one;
+    a log-scaled time axis in ms, so a 0.2 ms frame and a 100 ms deadline share it."""
+    rows = bus["messages"]
+    figure = plt.figure(figsize=(10, 1.2 + 0.45 * max(len(rows), 1)), layout="constrained")
+    axes = figure.add_subplot()
+    names = [row["name"] for row in rows]
+    ys = list(range(len(rows)))[::-1]
+    for y, row in zip(ys, rows, strict=True):
+        if row["max_latency_us"] is not None:
+            axes.barh(y, row["max_latency_us"] / 1000, height=0.7, color="tab:orange",
+                      label="max" if y == ys[0] else None)
+            axes.barh(y, row["p99_latency_us"] / 1000, height=0.7, color="tab:blue",
+                      label="p99" if y == ys[0] else None)
+        for key, colour, label in (("bound_us", "black", "R (analysis)"),
+                                   ("deadline_us", "red", "deadline")):
+            if row[key] is not None:
+                axes.plot([row[key] / 1000] * 2, [y - 0.45, y + 0.45], color=colour, lw=2,
+                          label=label if y == ys[0] else None)
+        if row.get("starved"):
+            axes.annotate(f"starved: {row['late']} late, {row['still_queued']} never sent",
+                          (0.99, y), xycoords=("axes fraction", "data"), va="center",
+                          ha="right", fontsize="small", color="red",
+                          bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8})
+    axes.set_yticks(ys, names)
+    axes.set_xscale("log")
+    axes.set_xlabel("latency, ready in the transmit buffer to end of frame (ms)")
+    load = bus.get("load")
+    load_text = "-" if load is None else f"{load:.1%}"
+    axes.set_title(f"bus latency per message: {bus['bitrate'] // 1000} kbit/s, measured load "
+                   f"{load_text} over {bus['span_s']:.1f} s, {bus['frames']} frames",
+                   fontsize="medium")
+    axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    axes.grid(axis="x", which="both", alpha=0.3)
+    return figure

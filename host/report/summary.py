@@ -122,7 +122,15 @@ def print_summary(
     console.print(f"[bold]{title}[/bold]", soft_wrap=True)
     for label, text in _facts(report):
         console.print(f"  {label:<10} {text}", soft_wrap=True, highlight=False)
-    for table in (frames_table(report), comparison_table(report)):
+    tables = [frames_table(report), comparison_table(report)]
+    bus = report.get("bus")
+    if bus:
+        console.print()
+        for i, line in enumerate(bus_lines(bus)):
+            console.print(f"  {'bus' if i == 0 else '':<10} {line}", soft_wrap=True)
+        if bus.get("messages"):
+            tables.insert(1, bus_table(bus))
+    for table in tables:
         console.print()
         console.print(Padding(table, (0, 0, 0, 2), expand=False))
     console.print()
@@ -209,6 +217,51 @@ def frames_table(report: dict[str, Any]) -> Table:
         table.add_row(name, str(count), *(_or_dash(counts.get(key)) for key in _E2E_COLUMNS))
     table.add_row("total", str(sum(frames.values())), *("" for _ in _E2E_COLUMNS), style="bold")
     return table
+
+
+def bus_lines(section: dict[str, Any]) -> list[str]:
+    """The bus section in a few lines: bitrate, measured load, any latency above its bound."""
+    load = section.get("load")
+    load_text = "-" if load is None else f"{load:.1%}"
+    lines = [
+        f"{section['bitrate'] // 1000} kbit/s, measured load {load_text} over "
+        f"{section['span_s']:.2f} s, {section['frames']} frames ({section['source']})"
+    ]
+    if section.get("analysis_note"):
+        lines.append(f"no worst-case bounds: {section['analysis_note']}")
+    over = [m["name"] for m in section.get("messages", []) if m["within_bound"] is False]
+    if over:
+        lines.append("measured latency ABOVE the analysis' bound R: " + ", ".join(over))
+    starved = [
+        f"{m['name']} ({m['late']} late, {m['still_queued']} never sent)"
+        for m in section.get("messages", [])
+        if m.get("starved")
+    ]
+    if starved:
+        lines.append("STARVED past their deadline: " + ", ".join(starved))
+    return lines
+
+
+def bus_table(section: dict[str, Any]) -> Table:
+    """Per message: frames, measured max and p99 latency (queued to end of frame), the
+    analysis' worst-case R and the deadline D, in ms; frames past D, frames never sent."""
+    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
+    table.add_column("message")
+    for column in ("frames", "max ms", "p99 ms", "R ms", "D ms", "late", "queued"):
+        table.add_column(column, justify="right")
+    for row in section["messages"]:
+        style = "bold red" if row["within_bound"] is False or row.get("starved") else None
+        table.add_row(
+            row["name"], str(row["frames"]), _ms_of_us(row["max_latency_us"]),
+            _ms_of_us(row["p99_latency_us"]), _ms_of_us(row["bound_us"]),
+            _ms_of_us(row["deadline_us"]), str(row.get("late", 0)),
+            str(row.get("still_queued", 0)), style=style,
+        )
+    return table
+
+
+def _ms_of_us(value_us: float | None) -> str:
+    return "-" if value_us is None else f"{value_us / 1000:.3f}"
 
 
 def _time_text(report: dict[str, Any]) -> str:

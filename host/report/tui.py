@@ -11,7 +11,7 @@ cbreak mode between frames.
 
 The screen, top to bottom (rows on 80×24)::
 
-    header       source, time, frames, PAUSED, the trace filter                       1
+    header       source, time, frames, bus load, PAUSED, the trace filter             1
     verdict      the judge's verdict (OK, STALE, CONFLICT, DEGRADED, POSE WRONG) and why 1
     firmware     STATE, reason (error bits), age of the status, integrator, uptime    1
     pose         on-board / reference / truth, on-board minus each (latest and max)   4
@@ -71,6 +71,7 @@ TRACE_LINES = 500  # decoded frames kept for the trace
 PAGE_WINDOW = 32  # frames per page for a page's rate
 REFRESH_S = 0.25  # screen redraws
 TOP_ROWS = 8  # header, verdict, firmware, pose (4), alert
+BUS_LOAD_WARN = 0.7  # the header's bus load turns red above this (a common design limit)
 WIDE_COLUMNS = 150  # from this width the trace sits beside the message table
 TALL_ROWS = 40  # from this height the latest signal values are shown too
 _HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
@@ -291,6 +292,12 @@ def _header(snapshot: dict[str, Any], trace: Trace, view: View) -> Text:
         f"  {view.now_s - view.started_s:.1f} s  {snapshot['frames_total']} frames",
         no_wrap=True, overflow="ellipsis",
     )
+    load = snapshot.get("bus_load") or {}
+    if load.get("load") is not None:
+        style = "bold red" if load["load"] > BUS_LOAD_WARN else ""
+        text.append(f"  bus {load['load']:.0%}", style=style)
+    elif load.get("bits_per_s") is not None:
+        text.append(f"  bus {load['bits_per_s'] / 1000:.1f} kbit/s")
     if trace.paused:
         text.append("  PAUSED", style="bold reverse yellow")
     if trace.filter.text:

@@ -11,6 +11,10 @@ A ``--dbc`` that does not match the log (a message the analysis needs is missing
 frames is in the log under the DBC's ID, or none passes its E2E check with the DBC's data IDs)
 is a one-line error. Frames the DBC does not know are counted (``unknown_frames`` in the report,
 a row of the summary) but are no error: a real bus carries other traffic too.
+
+``-b/--bitrate`` adds the measured bus load (``host.judge.busstats.from_frames``: each frame's
+exact stuffed length plus the interframe space, over the log's span); a log cannot say when a
+frame was queued, so there is no latency to measure.
 """
 
 from __future__ import annotations
@@ -24,7 +28,9 @@ from odocan.host.cli.inputs import explained, require_frames
 from odocan.host.cli.options import add_robot_argument
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.logs import read_log
+from odocan.host.judge import busstats
 from odocan.host.judge.analysis import analyze
+from odocan.host.judge.schedulability import BITRATES
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
     add_junit_argument,
@@ -59,6 +65,14 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     parser.add_argument(
         "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: odocan's own)"
     )
+    parser.add_argument(
+        "-b",
+        "--bitrate",
+        type=can_bitrate,
+        metavar="BIT/S",
+        help="the bus's bitrate: report the measured bus load (exact frame lengths over the "
+        "log's span) (default: no bus section)",
+    )
     add_check_arguments(parser)
     add_export_arguments(parser)
     add_junit_argument(parser)
@@ -80,11 +94,23 @@ def _do_analyze(args: argparse.Namespace) -> int:
             with explained(lambda: frames, str(args.log)):
                 analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance)
     write_exports(args, frames, analysis, db)
+    if args.bitrate is not None:
+        analysis.report["bus"] = busstats.from_frames(frames, args.bitrate).as_dict()
     analysis.report["inputs"] = log_inputs(args.log, profile, analysis.report["integrator"],
                                            args.dbc)
     code = finish(analysis, args, title=f"odocan analyze: {args.log}")
     write_checks(args, "analyze", analysis_checks(analysis.report))
     return code
+
+
+def can_bitrate(text: str) -> int:
+    """``--bitrate``: one of the standard CAN bitrates, in bit/s."""
+    value = int(text) if text.strip().isdigit() else -1
+    if value not in BITRATES:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a CAN bitrate (use one of {', '.join(map(str, BITRATES))})"
+        )
+    return value
 
 
 def log_inputs(

@@ -119,6 +119,7 @@ def _do_monitor(args: argparse.Namespace) -> int:
         robot.load(args.robot),
         args.integrator,
         load_dbc(args.dbc) if args.dbc is not None else None,
+        bitrate=args.bitrate,  # -b: the bus load as a fraction of the wire
     )
     trace = Trace(model.db, FrameFilter.parse(args.filter, model.db))
     check_log_path(args.log)

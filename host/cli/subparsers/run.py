@@ -43,6 +43,7 @@ from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
+from odocan.host.judge import busstats
 from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
@@ -52,12 +53,19 @@ from odocan.host.report.ci import (
     write_checks,
 )
 from odocan.host.report.foxglove import add_foxglove_arguments, serve_foxglove
-from odocan.host.report.outputs import OutputError
+from odocan.host.report.outputs import OutputError, check_writable
 from odocan.host.report.progress import progress
-from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
+from odocan.host.report.summary import (
+    PLOT_SUFFIXES,
+    add_check_arguments,
+    check_output_paths,
+    finish,
+)
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
 from odocan.sim.cboard import FIRMWARES
+from odocan.sim.contract import database
+from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultSpec
 from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import INTEGRATORS, TRANSPORTS, LockstepRig, RigConfig
@@ -127,6 +135,13 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="log every frame (.log candump, .asc, .blf) (default: no log)",
     )
     add_check_arguments(parser)
+    parser.add_argument(
+        "--latency-plot",
+        type=Path,
+        metavar="PATH",
+        help="with -b: plot each message's measured latency (p99, max) against the analysis' "
+        "worst case and its deadline (.png, .svg) (default: none)",
+    )
     add_export_arguments(parser)
     add_foxglove_arguments(parser)
     add_junit_argument(parser)
@@ -152,6 +167,7 @@ def _do_run(args: argparse.Namespace) -> int:
     )
     check_log_path(args.log)
     check_output_paths(args)
+    check_latency_plot(args.latency_plot, config.bitrate)
     check_export_paths(args.parquet, args.mcap)
     check_junit_path(args)
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
@@ -163,9 +179,30 @@ def _do_run(args: argparse.Namespace) -> int:
         analysis.report["inputs"] = run_inputs(config, args.errors)
         code = finish(analysis, args, title=title)
     write_checks(args, "run", analysis_checks(analysis.report))
+    if args.latency_plot is not None:
+        from odocan.host.report.plots import plot_latency  # matplotlib only when asked
+
+        try:
+            plot_latency(analysis.report, args.latency_plot)
+        except OSError as exc:
+            path = args.latency_plot
+            raise OutputError(f"--latency-plot {path}: {exc.strerror or exc}") from None
     if log_error is not None:
         raise log_error
     return code
+
+
+def check_latency_plot(path: Path | None, bitrate: int | None) -> None:
+    """``--latency-plot`` needs a bit-timed bus and a .png/.svg path that can be written."""
+    if path is None:
+        return
+    if bitrate is None:
+        raise ConfigurationError("--latency-plot needs a bit-timed bus: give -b/--bitrate")
+    if path.suffix.lower() not in PLOT_SUFFIXES:
+        raise ConfigurationError(
+            f"--latency-plot {path}: unknown format {path.suffix or '(none)'!r} (use .png or .svg)"
+        )
+    check_writable(path, "--latency-plot")
 
 
 def _run_and_analyze(
@@ -187,10 +224,12 @@ def _run_and_analyze(
         trace = TruthTrace(rig, total_ticks) if args.plot is not None else None
         if mirror is not None:
             rig.listeners.append(PacedRedirect(mirror))
+        wire = getattr(rig.host_bus, "timing", None)  # bit-timed: the wire's own records
         try:
             start = time.perf_counter()
             _run(rig, rig.default_duration_s, None if trace is None else trace.record)
             wall_s = time.perf_counter() - start
+            still_queued = None if wire is None else busstats.pending_by_id(wire)
         finally:
             try:
                 rig.close()
@@ -214,6 +253,9 @@ def _run_and_analyze(
         )
     if trace is not None and len(frames):
         analysis.series.update(trace.series(float(frames.timestamp_s[0])))
+    if wire is not None:
+        bus = busstats.from_wire(wire, database(), still_queued=still_queued)
+        analysis.report["bus"] = bus.as_dict()
     write_exports(args, frames, analysis)
     return analysis, log_error
 
