@@ -20,7 +20,7 @@ from __future__ import annotations
 import asyncio
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import can
 
@@ -43,7 +43,10 @@ def robot_name(index: int) -> str:
 
 @dataclass(frozen=True)
 class FleetConfig:
-    """N robots of one profile; robot i drives scenario ``scenario`` with seed ``seed + i``."""
+    """N robots of one profile; robot i drives scenario ``scenario`` with seed ``seed + i``.
+
+    A shard (``first`` > 0) holds robots ``first .. first + robots - 1`` of a larger fleet: their
+    names and seeds are those robots', so shards on several processes or machines never clash."""
 
     robots: int
     robot: RobotProfile
@@ -51,6 +54,11 @@ class FleetConfig:
     scenario: str = "random"
     seed: int = 0
     transport: str = "odocan"  # the rigs' python-can interface (sim.rig.TRANSPORTS)
+    first: int = 0  # fleet-wide index of this shard's first robot (names and seeds count on)
+
+    def shard(self, first: int, robots: int) -> FleetConfig:
+        """Robots ``first .. first + robots - 1`` of this fleet (fleet-wide indices)."""
+        return replace(self, first=self.first + first, robots=robots)
 
 
 class _Collector(can.Listener):
@@ -73,7 +81,7 @@ class Fleet(Closing):
         if config.robots < 1:
             raise ValueError(f"a fleet needs at least one robot, got {config.robots}")
         self.config = config
-        self.names = [robot_name(i) for i in range(config.robots)]
+        self.names = [robot_name(config.first + i) for i in range(config.robots)]
         self._batch: Batch = []
         self._collectors = [_Collector(i, self._batch) for i in range(config.robots)]
         prefix = f"odocan-fleet-{next(_fleet_ids)}"
@@ -83,7 +91,7 @@ class Fleet(Closing):
                     robot=config.robot,
                     integrator=config.integrator,
                     scenario=config.scenario,
-                    seed=config.seed + i,
+                    seed=config.seed + config.first + i,
                     channel=f"{prefix}-{i}",
                     truth_phase_ticks=_truth_phase(i),
                     transport=config.transport,
@@ -144,11 +152,14 @@ async def run_realtime(
     on_batch: Callable[[Batch], None] | None = None,
     stop: asyncio.Event | None = None,
     period_s: float = TICK_S,
+    stats: DeadlineStats | None = None,
 ) -> DeadlineStats:
     """Step ``fleet`` every ``period_s`` of the wall clock for ``duration_s`` (None: until
-    ``stop``); returns the deadline accounting (see the module docstring)."""
+    ``stop``); returns the deadline accounting (see the module docstring), kept in ``stats``
+    when given (so another task can watch it while the fleet runs)."""
     clock = RealTimeClock()
-    stats = DeadlineStats(period_s, period_s / 2)
+    if stats is None:
+        stats = DeadlineStats(period_s, period_s / 2)
     k = 0
     while stop is None or not stop.is_set():
         release = k * period_s

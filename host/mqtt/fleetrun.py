@@ -10,8 +10,21 @@ the fleet's frames offered to it each tick), runs for ``duration_s`` and returns
  "bridge": {"frames_in": ..., "frames_dropped": ..., "telemetry_dropped": ..., ...} | null,
  "per_robot": {"robot001": {"seed": ..., "frames": {"WHEEL_ENCODERS": ..., ...},
                             "frames_total": ..., "commands_accepted": ...,
-                            "commands_rejected": ...}, ...}}
+                            "commands_rejected": ..., "deadline_miss_ratio": ...,
+                            "pose_vs_reference": {"max_dpos_m": ..., "max_dheading_rad": ...,
+                                                  "samples": ...} | null,
+                            "pose_vs_truth": {...} | null,
+                            "verdict": "PASS" | "FAIL" | "UNJUDGED" | null, "reason": ...}, ...}}
 ```
+
+Per robot, the on-board pose is judged against the float64 reference the bridge's tracker steps
+with the robot's own accepted encoder frames (``host.judge.tracking.PoseTracker``, paired by
+ENC_COUNTER): PASS within ``FleetRun.tolerance``, FAIL beyond it or with no pose at all. The error
+against the ground truth (SIM_TRUTH) is reported, never judged: it is the odometry's own drift, not
+the firmware's arithmetic. When the bridge dropped frames (queue full), the references miss encoder
+steps, so no robot is judged (UNJUDGED) and the run fails for that reason instead of blaming a
+correct firmware. Without the bridge nothing watches the poses: ``verdict`` is null.
+``failures(report, max_miss_ratio)`` is the run's verdict: the thresholds broken, one line each.
 
 ``bridge`` holds ``Bridge.counters()``: frames dropped or failed, telemetry dropped (buffer full)
 or not kept while offline, QoS-1 publications dropped or refused by the broker, commands expired,
@@ -30,12 +43,20 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.tracking import ErrorStats
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
 from odocan.host.mqtt.options import broker_for
+from odocan.sim.board import TICK_S
 from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
 from odocan.sim.realtime import DeadlineStats
+
+# pose vs reference, in LSBs of the pose signals: the live reference starts at the rounded
+# on-board pose (half an LSB) and is compared with rounded poses (another half)
+TOLERANCE_LSB = 2
+FLEET_TOLERANCE = Tolerance(TOLERANCE_LSB * POSITION_LSB_M, TOLERANCE_LSB * HEADING_LSB_RAD)
 
 
 @dataclass(frozen=True)
@@ -50,18 +71,24 @@ class FleetRun:
     client_prefix: str = "odocan-bridge"
     connect_timeout_s: float = 5.0
     command_expiry_s: float = 5.0
+    tolerance: Tolerance = FLEET_TOLERANCE
 
 
 StartHook = Callable[[int, "BrokerURL | None"], None]
+ProgressHook = Callable[[DeadlineStats], None]
+PROGRESS_PERIOD_S = 0.5
 
 
-async def run_fleet(run: FleetRun, *, on_start: StartHook | None = None) -> dict[str, Any]:
+async def run_fleet(
+    run: FleetRun, *, on_start: StartHook | None = None, on_progress: ProgressHook | None = None
+) -> dict[str, Any]:
     """Run the fleet in real time (bridged when ``run.bridge``); returns the report.
-    ``on_start(robots, telemetry broker)`` is called when the clock starts (signals handled)."""
+    ``on_start(robots, telemetry broker)`` is called when the clock starts (signals handled);
+    ``on_progress(deadline stats so far)`` every ``PROGRESS_PERIOD_S`` while it runs."""
     with Fleet(run.fleet) as fleet:
         if not run.bridge:
             stats = await _paced(fleet, run.duration_s, None,
-                                 lambda: _started(on_start, fleet, None))
+                                 lambda: _started(on_start, fleet, None), on_progress)
             return _report(run, fleet, stats, None, None, False)
         async with broker_for(run.broker) as (url, embedded):
             bridge = Bridge(_endpoints(fleet, run), config=BridgeConfig(
@@ -73,7 +100,7 @@ async def run_fleet(run: FleetRun, *, on_start: StartHook | None = None) -> dict
                     tg.create_task(bridge.run(stop=stop), name="bridge")
                     await _all_connected(bridge, run.connect_timeout_s + 5.0)
                     stats = await _paced(fleet, run.duration_s, bridge.offer,
-                                         lambda: _started(on_start, fleet, url))
+                                         lambda: _started(on_start, fleet, url), on_progress)
                     stop.set()
             except BaseExceptionGroup as group:
                 raise first_error(group) from None
@@ -86,7 +113,8 @@ def _started(on_start: StartHook | None, fleet: Fleet, url: BrokerURL | None) ->
 
 
 async def _paced(
-    fleet: Fleet, duration_s: float, on_batch: Any, started: Callable[[], None]
+    fleet: Fleet, duration_s: float, on_batch: Any, started: Callable[[], None],
+    on_progress: ProgressHook | None = None,
 ) -> DeadlineStats:
     """Run the fleet until ``duration_s`` or SIGINT/SIGTERM, whichever comes first: a signal ends
     the run like its duration does, so the report is still written."""
@@ -96,12 +124,26 @@ async def _paced(
     started()
     gc.collect()
     gc.freeze()  # the long-lived set-up objects leave the collector's generations
+    stats = DeadlineStats(TICK_S, TICK_S / 2)
+    watcher = None
+    if on_progress is not None:
+        watcher = asyncio.create_task(_watch(stats, on_progress), name="fleet-progress")
     try:
-        return await run_realtime(fleet, duration_s=duration_s, on_batch=on_batch, stop=stop)
+        return await run_realtime(fleet, duration_s=duration_s, on_batch=on_batch, stop=stop,
+                                  stats=stats)
     finally:
+        if watcher is not None:
+            watcher.cancel()
         gc.unfreeze()
         for signum in handled:
             loop.remove_signal_handler(signum)
+
+
+async def _watch(stats: DeadlineStats, on_progress: ProgressHook) -> None:
+    """``on_progress(stats)`` every ``PROGRESS_PERIOD_S`` until cancelled."""
+    while True:
+        await asyncio.sleep(PROGRESS_PERIOD_S)
+        on_progress(stats)
 
 
 def _on_stop_signals(
@@ -142,16 +184,26 @@ def _report(
     url: BrokerURL | None, embedded: bool,
 ) -> dict[str, Any]:
     per_robot = {}
+    dropped = 0 if bridge is None else bridge.frames_dropped + bridge.frames_failed
     for i, name in enumerate(fleet.names):
         frames = fleet.frame_counts(i)
-        entry: dict[str, Any] = {"seed": run.fleet.seed + i, "frames": frames,
-                                 "frames_total": sum(frames.values())}
+        entry: dict[str, Any] = {"seed": run.fleet.seed + run.fleet.first + i, "frames": frames,
+                                 "frames_total": sum(frames.values()),
+                                 "deadline_miss_ratio": stats.deadline_miss_ratio}
         if bridge is not None:
-            entry["commands_accepted"] = bridge.robots[i].commands_sent
-            entry["commands_rejected"] = bridge.robots[i].commands_rejected
+            robot = bridge.robots[i]
+            entry["commands_accepted"] = robot.commands_sent
+            entry["commands_rejected"] = robot.commands_rejected
+            tracker = robot.telemetry.tracker
+            entry.update(judge_robot(tracker.vs_reference, tracker.vs_truth, run.tolerance,
+                                     frames_dropped=dropped))
+        else:
+            entry.update(pose_vs_reference=None, pose_vs_truth=None, verdict=None,
+                         reason="no bridge: the poses were not watched")
         per_robot[name] = entry
     return {
         "robots": run.fleet.robots,
+        "first_robot": fleet.names[0],
         "duration_s": run.duration_s,
         "period_s": stats.period_s,
         "deadline_miss_ratio": stats.deadline_miss_ratio,
@@ -161,6 +213,57 @@ def _report(
         "max_lateness_ms": round(stats.max_lateness_s * 1e3, 3),
         "broker": str(url) if url is not None else None,
         "embedded_broker": embedded,
+        "tolerance": {"position_m": run.tolerance.position_m,
+                      "heading_rad": run.tolerance.heading_rad},
         "bridge": None if bridge is None else bridge.counters(),
         "per_robot": per_robot,
     }
+
+
+def _errors(stats: ErrorStats) -> dict[str, Any] | None:
+    """The largest pose difference seen (m, rad) and how many samples; None without any."""
+    if not stats.samples:
+        return None
+    return {"max_dpos_m": stats.max_dpos_m, "max_dheading_rad": stats.max_dheading_rad,
+            "samples": stats.samples}
+
+
+def judge_robot(
+    vs_reference: ErrorStats, vs_truth: ErrorStats, tolerance: Tolerance, *,
+    frames_dropped: int = 0,
+) -> dict[str, Any]:
+    """One robot's pose errors and verdict (see the module docstring)."""
+    entry: dict[str, Any] = {"pose_vs_reference": _errors(vs_reference),
+                             "pose_vs_truth": _errors(vs_truth)}
+    if frames_dropped:
+        return {**entry, "verdict": "UNJUDGED",
+                "reason": f"the bridge dropped {frames_dropped} frames: the reference is not "
+                          "the firmware's"}
+    if not vs_reference.samples:
+        return {**entry, "verdict": "FAIL",
+                "reason": "no on-board pose paired with the reference"}
+    reasons = []
+    if vs_reference.max_dpos_m > tolerance.position_m:
+        reasons.append(f"position vs reference {vs_reference.max_dpos_m * 1e3:.4g} mm > "
+                       f"{tolerance.position_m * 1e3:.4g} mm")
+    if vs_reference.max_dheading_rad > tolerance.heading_rad:
+        reasons.append(f"heading vs reference {vs_reference.max_dheading_rad * 1e3:.4g} mrad > "
+                       f"{tolerance.heading_rad * 1e3:.4g} mrad")
+    return {**entry, "verdict": "FAIL" if reasons else "PASS",
+            "reason": "; ".join(reasons) or None}
+
+
+def failures(report: dict[str, Any], max_miss_ratio: float) -> list[str]:
+    """The thresholds a fleet report breaks, one line each (empty: the run passes)."""
+    out = []
+    ratio = report["deadline_miss_ratio"]
+    if ratio > max_miss_ratio:
+        out.append(f"deadline_miss_ratio {ratio:.4f} > --max-miss-ratio {max_miss_ratio:g}")
+    robots = report["per_robot"]
+    for verdict, what in (("FAIL", "pose vs reference out of tolerance"),
+                          ("UNJUDGED", "not judged")):
+        names = [name for name, r in robots.items() if r.get("verdict") == verdict]
+        if names:
+            first = robots[names[0]]["reason"]
+            out.append(f"{len(names)} of {len(robots)} robots {what} ({names[0]}: {first})")
+    return out
