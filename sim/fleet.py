@@ -46,7 +46,8 @@ class FleetConfig:
     """N robots of one profile; robot i drives scenario ``scenario`` with seed ``seed + i``.
 
     A shard (``first`` > 0) holds robots ``first .. first + robots - 1`` of a larger fleet: their
-    names and seeds are those robots', so shards on several processes or machines never clash."""
+    names, seeds, tick phases and so frames are those robots' in the whole fleet, so shards on
+    several processes or machines never clash and a robot's bytes do not depend on the sharding."""
 
     robots: int
     robot: RobotProfile
@@ -93,7 +94,7 @@ class Fleet(Closing):
                     scenario=config.scenario,
                     seed=config.seed + config.first + i,
                     channel=f"{prefix}-{i}",
-                    truth_phase_ticks=_truth_phase(i),
+                    truth_phase_ticks=_truth_phase(config.first + i),
                     transport=config.transport,
                 ),
                 listeners=[self._collectors[i]],
@@ -103,8 +104,9 @@ class Fleet(Closing):
 
     def step(self, k: int) -> None:
         """Tick ``k`` of every robot (simulated time ``k * TICK_S``)."""
+        first = self.config.first
         for index, rig in enumerate(self.rigs):
-            own_k = k - _tick_offset(index)
+            own_k = k - _tick_offset(first + index)
             if own_k >= 0:
                 rig.ticks = own_k
                 rig.step()
@@ -132,7 +134,7 @@ class Fleet(Closing):
 
 
 def _tick_offset(index: int) -> int:
-    """Robot ``index`` starts this many fleet ticks late: every other robot runs one tick out of
+    """Robot ``index`` (fleet-wide) starts this many fleet ticks late: every other robot runs one tick out of
     phase, so the pose, twist and MOTOR_CMD frames (every 2nd tick) of half the fleet fall on
     the other ticks. Each robot's own timeline is an ordinary rig's."""
     return index % 2

@@ -57,15 +57,15 @@ class Shard:
 
     @classmethod
     def parse(cls, text: str) -> Shard:
-        """``K/N`` with 1 <= K <= N <= ``MAX_SHARDS``; a one-line ``ConfigurationError``."""
+        """``K/N`` with 1 <= K <= N <= ``MAX_SHARDS``; ``ValueError`` saying what is wrong."""
         k, sep, n = text.partition("/")
         if not sep or not k.strip().isdigit() or not n.strip().isdigit():
-            raise ConfigurationError(f"--shard {text!r}: expected K/N, e.g. 1/2")
+            raise ValueError(f"expected K/N (part K of N, e.g. 1/2), got {text!r}")
         shard = cls(int(k), int(n))
         if not 1 <= shard.count <= MAX_SHARDS:
-            raise ConfigurationError(f"--shard {text}: N must be in [1, {MAX_SHARDS}]")
+            raise ValueError(f"N must be in [1, {MAX_SHARDS}], got {text}")
         if not 1 <= shard.index <= shard.count:
-            raise ConfigurationError(f"--shard {text}: K must be in [1, {shard.count}]")
+            raise ValueError(f"K must be in [1, {shard.count}], got {text}")
         return shard
 
     def robots(self, total: int) -> tuple[int, int]:

@@ -105,7 +105,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--shard",
-        type=Shard.parse,
+        type=_shard,
         default=Shard(),
         metavar="K/N",
         help="run part K of N of the fleet (N machines, one --broker; robot ids and seeds "
@@ -118,6 +118,14 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the embedded broker's 127.0.0.1 port (default: a free one); not with --broker",
     )
     add_mqtt_arguments(parser)
+
+
+def _shard(text: str) -> Shard:
+    """An argparse ``type``: ``K/N``."""
+    try:
+        return Shard.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _do_fleet(args: argparse.Namespace) -> int:
