@@ -134,9 +134,9 @@ class Fleet(Closing):
 
 
 def _tick_offset(index: int) -> int:
-    """Robot ``index`` (fleet-wide) starts this many fleet ticks late: every other robot runs one tick out of
-    phase, so the pose, twist and MOTOR_CMD frames (every 2nd tick) of half the fleet fall on
-    the other ticks. Each robot's own timeline is an ordinary rig's."""
+    """Robot ``index`` (fleet-wide) starts this many fleet ticks late: every other robot runs one
+    tick out of phase, so the pose, twist and MOTOR_CMD frames (every 2nd tick) of half the fleet
+    fall on the other ticks. Each robot's own timeline is an ordinary rig's."""
     return index % 2
 
 

@@ -19,7 +19,7 @@ import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance
-from odocan.host.judge.reference import Geometry
+from odocan.host.judge.reference import Geometry, ReferenceOdometry
 from odocan.host.judge.tracking import ErrorStats, Pose
 from odocan.host.mqtt import fleetrun
 from odocan.host.mqtt.broker import LOOPBACK, free_loopback_port
@@ -100,8 +100,36 @@ def test_judge_robot_passes_within_tolerance_and_fails_beyond_it() -> None:
     silent = judge_robot(ErrorStats(), ErrorStats(), tol)
     assert silent["verdict"] == "FAIL" and "no on-board pose" in silent["reason"]
     assert silent["pose_vs_reference"] is None and silent["pose_vs_truth"] is None
+    farther = judge_robot(_stats((3e-4, 0.0)), truth, tol, distance_m=10.0)
+    assert farther["verdict"] == "PASS"  # 0.2 mm + 10 m x half a heading LSB = 0.68 mm
+    assert math.isclose(farther["position_tolerance_m"], 2e-4 + 10.0 * HEADING_LSB_RAD / 2)
+    assert judge_robot(_stats((8e-4, 0.0)), truth, tol, distance_m=10.0)["verdict"] == "FAIL"
     blind = judge_robot(_stats((3e-4, 0.0)), truth, tol, frames_dropped=7)
     assert blind["verdict"] == "UNJUDGED" and "dropped 7 frames" in blind["reason"]
+
+
+@pytest.mark.parametrize("integrator", ["euler", "exact"])
+def test_half_a_heading_lsb_at_the_start_moves_a_pose_by_at_most_the_path_times_it(
+    integrator: str,
+) -> None:
+    """The widening ``position_tolerance_m`` allows, checked on the float64 reference itself:
+    two references on one random drive, one started half a heading LSB off."""
+    import random
+
+    geometry = Geometry.of(robot.load("pmir"))
+    rng = random.Random(3)
+    start_off = HEADING_LSB_RAD / 2
+    exact = ReferenceOdometry(geometry, integrator, 32)
+    turned = ReferenceOdometry(geometry, integrator, 32, heading_rad=start_off)
+    worst_ratio = 0.0
+    for _ in range(20_000):
+        d_left, d_right = rng.randint(-5, 40), rng.randint(-5, 40)
+        exact.step_deltas(d_left, d_right)
+        turned.step_deltas(d_left, d_right)
+        apart_m = math.hypot(turned.x_m - exact.x_m, turned.y_m - exact.y_m)
+        assert apart_m <= exact.distance_m * start_off + 1e-12
+        worst_ratio = max(worst_ratio, apart_m / (exact.distance_m * start_off))
+    assert exact.distance_m > 50.0 and worst_ratio > 0.5  # the bound is tight enough to matter
 
 
 def test_the_default_tolerance_is_two_lsb_of_the_pose_signals() -> None:

@@ -19,7 +19,9 @@ the fleet's frames offered to it each tick), runs for ``duration_s`` and returns
 
 Per robot, the on-board pose is judged against the float64 reference the bridge's tracker steps
 with the robot's own accepted encoder frames (``host.judge.tracking.PoseTracker``, paired by
-ENC_COUNTER): PASS within ``FleetRun.tolerance``, FAIL beyond it or with no pose at all. The error
+ENC_COUNTER): PASS within ``FleetRun.tolerance`` (the position limit widened by the path run, as
+the reference starts at the rounded pose: ``position_tolerance_m``), FAIL beyond it or with no
+pose at all. The error
 against the ground truth (SIM_TRUTH) is reported, never judged: it is the odometry's own drift, not
 the firmware's arithmetic. When the bridge dropped frames (queue full), the references miss encoder
 steps, so no robot is judged (UNJUDGED) and the run fails for that reason instead of blaming a
@@ -195,8 +197,10 @@ def _report(
             entry["commands_accepted"] = robot.commands_sent
             entry["commands_rejected"] = robot.commands_rejected
             tracker = robot.telemetry.tracker
-            entry.update(judge_robot(tracker.vs_reference, tracker.vs_truth, run.tolerance,
-                                     frames_dropped=dropped))
+            reference = getattr(tracker, "_ref", None)  # the live reference, since its start
+            entry.update(judge_robot(
+                tracker.vs_reference, tracker.vs_truth, run.tolerance, frames_dropped=dropped,
+                distance_m=0.0 if reference is None else float(reference.distance_m)))
         else:
             entry.update(pose_vs_reference=None, pose_vs_truth=None, verdict=None,
                          reason="no bridge: the poses were not watched")
@@ -228,13 +232,27 @@ def _errors(stats: ErrorStats) -> dict[str, Any] | None:
             "samples": stats.samples}
 
 
+def position_tolerance_m(tolerance: Tolerance, distance_m: float) -> float:
+    """The position limit after the reference has run ``distance_m`` (path length, m).
+
+    The live reference starts at the on-board pose as sent, its heading rounded to the signal's
+    LSB: a start off by at most half an LSB turns the whole path by that much, which moves the
+    end by at most ``distance_m * HEADING_LSB_RAD / 2`` (a chord is no longer than its arc) on top
+    of the fixed ``tolerance.position_m``."""
+    return tolerance.position_m + distance_m * HEADING_LSB_RAD / 2
+
+
 def judge_robot(
     vs_reference: ErrorStats, vs_truth: ErrorStats, tolerance: Tolerance, *,
-    frames_dropped: int = 0,
+    frames_dropped: int = 0, distance_m: float = 0.0,
 ) -> dict[str, Any]:
-    """One robot's pose errors and verdict (see the module docstring)."""
+    """One robot's pose errors and verdict (see the module docstring); ``distance_m``: the path
+    the reference has run since it started (widens the position limit, see
+    ``position_tolerance_m``)."""
+    limit_m = position_tolerance_m(tolerance, distance_m)
     entry: dict[str, Any] = {"pose_vs_reference": _errors(vs_reference),
-                             "pose_vs_truth": _errors(vs_truth)}
+                             "pose_vs_truth": _errors(vs_truth),
+                             "position_tolerance_m": limit_m}
     if frames_dropped:
         return {**entry, "verdict": "UNJUDGED",
                 "reason": f"the bridge dropped {frames_dropped} frames: the reference is not "
@@ -243,9 +261,9 @@ def judge_robot(
         return {**entry, "verdict": "FAIL",
                 "reason": "no on-board pose paired with the reference"}
     reasons = []
-    if vs_reference.max_dpos_m > tolerance.position_m:
+    if vs_reference.max_dpos_m > limit_m:
         reasons.append(f"position vs reference {vs_reference.max_dpos_m * 1e3:.4g} mm > "
-                       f"{tolerance.position_m * 1e3:.4g} mm")
+                       f"{limit_m * 1e3:.4g} mm")
     if vs_reference.max_dheading_rad > tolerance.heading_rad:
         reasons.append(f"heading vs reference {vs_reference.max_dheading_rad * 1e3:.4g} mrad > "
                        f"{tolerance.heading_rad * 1e3:.4g} mrad")

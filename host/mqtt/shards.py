@@ -120,6 +120,11 @@ class BrokerProcess:
         self.port = port
         return BrokerURL(host=LOOPBACK, port=port, v5=False)
 
+    @property
+    def pid(self) -> int | None:
+        """The broker process's id while it runs."""
+        return None if self._proc is None else int(self._proc.pid)
+
     def stop(self) -> None:
         """Stop it (SIGTERM, then SIGKILL after 5 s)."""
         proc, self._proc = self._proc, None
