@@ -142,6 +142,7 @@ def _worker(first: int, ratio: float, verdicts: list[str]) -> dict[str, object]:
     return {"robots": len(verdicts), "first_robot": next(iter(robots)), "duration_s": 1.0,
             "period_s": 0.01, "deadline_miss_ratio": ratio, "ticks": 100,
             "late_ticks": round(ratio * 100), "skipped_releases": 1, "max_lateness_ms": ratio * 50,
+            "cpu_s": 0.25,
             "broker": "mqtt://127.0.0.1:1", "embedded_broker": False, "tolerance": {},
             "bridge": {"frames_in": 10, "frames_dropped": 0}, "per_robot": robots}
 
@@ -151,7 +152,7 @@ def test_aggregate_takes_the_worst_worker_and_failures_name_every_threshold() ->
     assert report["robots"] == 4 and list(report["per_robot"]) == [
         "robot001", "robot002", "robot003", "robot004"]
     assert report["deadline_miss_ratio"] == 0.03  # not the 0.015 average: a late worker shows
-    assert report["ticks"] == 200 and report["late_ticks"] == 3
+    assert report["ticks"] == 200 and report["late_ticks"] == 3 and report["cpu_s"] == 0.5
     assert report["skipped_releases"] == 2 and report["bridge"]["frames_in"] == 20
     assert [w["first_robot"] for w in report["workers"]] == ["robot001", "robot003"]
     assert failures(report, 0.05) == [

@@ -32,6 +32,10 @@ correct firmware. Without the bridge nothing watches the poses: ``verdict`` is n
 or not kept while offline, QoS-1 publications dropped or refused by the broker, commands expired,
 reconnects. A broker that cannot be reached at the start is a ``BrokerError`` (no traceback).
 
+``cpu_s`` is the CPU time (s) the process spent while the clock ran: every thread, so the fleet,
+the bridge and the MQTT I/O, not the set-up; ``cpu_s / (robots * ticks)`` is the CPU per
+robot-tick, a figure other load on the machine barely moves (``bench/fleet.py``).
+
 ``deadline_miss_ratio`` is the share of 10 ms encoder cycles that started more than half a period
 late (``sim.realtime.DeadlineStats``).
 """
@@ -41,6 +45,7 @@ from __future__ import annotations
 import asyncio
 import gc
 import signal
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -89,9 +94,9 @@ async def run_fleet(
     ``on_progress(deadline stats so far)`` every ``PROGRESS_PERIOD_S`` while it runs."""
     with Fleet(run.fleet) as fleet:
         if not run.bridge:
-            stats = await _paced(fleet, run.duration_s, None,
-                                 lambda: _started(on_start, fleet, None), on_progress)
-            return _report(run, fleet, stats, None, None, False)
+            stats, cpu_s = await _paced(fleet, run.duration_s, None,
+                                        lambda: _started(on_start, fleet, None), on_progress)
+            return {**_report(run, fleet, stats, None, None, False), "cpu_s": cpu_s}
         async with broker_for(run.broker) as (url, embedded):
             bridge = Bridge(_endpoints(fleet, run), config=BridgeConfig(
                 broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix,
@@ -101,12 +106,13 @@ async def run_fleet(
                 async with asyncio.TaskGroup() as tg:
                     tg.create_task(bridge.run(stop=stop), name="bridge")
                     await _all_connected(bridge, run.connect_timeout_s + 5.0)
-                    stats = await _paced(fleet, run.duration_s, bridge.offer,
-                                         lambda: _started(on_start, fleet, url), on_progress)
+                    stats, cpu_s = await _paced(fleet, run.duration_s, bridge.offer,
+                                                lambda: _started(on_start, fleet, url),
+                                                on_progress)
                     stop.set()
             except BaseExceptionGroup as group:
                 raise first_error(group) from None
-            return _report(run, fleet, stats, bridge, url, embedded)
+            return {**_report(run, fleet, stats, bridge, url, embedded), "cpu_s": cpu_s}
 
 
 def _started(on_start: StartHook | None, fleet: Fleet, url: BrokerURL | None) -> None:
@@ -117,9 +123,10 @@ def _started(on_start: StartHook | None, fleet: Fleet, url: BrokerURL | None) ->
 async def _paced(
     fleet: Fleet, duration_s: float, on_batch: Any, started: Callable[[], None],
     on_progress: ProgressHook | None = None,
-) -> DeadlineStats:
+) -> tuple[DeadlineStats, float]:
     """Run the fleet until ``duration_s`` or SIGINT/SIGTERM, whichever comes first: a signal ends
-    the run like its duration does, so the report is still written."""
+    the run like its duration does, so the report is still written. Returns the deadline figures
+    and the CPU seconds this process spent meanwhile (every thread: loop, bridge, MQTT I/O)."""
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     handled = _on_stop_signals(loop, stop.set)
@@ -130,9 +137,11 @@ async def _paced(
     watcher = None
     if on_progress is not None:
         watcher = asyncio.create_task(_watch(stats, on_progress), name="fleet-progress")
+    cpu0_s = time.process_time()
     try:
-        return await run_realtime(fleet, duration_s=duration_s, on_batch=on_batch, stop=stop,
-                                  stats=stats)
+        await run_realtime(fleet, duration_s=duration_s, on_batch=on_batch, stop=stop,
+                           stats=stats)
+        return stats, time.process_time() - cpu0_s
     finally:
         if watcher is not None:
             watcher.cancel()

@@ -276,7 +276,7 @@ def _work(worker: int, run: FleetRun, events: Any, debug: bool) -> None:
 
 
 _WORKER_FIELDS = ("robots", "first_robot", "deadline_miss_ratio", "ticks", "late_ticks",
-                  "skipped_releases", "max_lateness_ms")
+                  "skipped_releases", "max_lateness_ms", "cpu_s")
 
 
 def aggregate(reports: list[dict[str, Any]]) -> dict[str, Any]:
@@ -299,6 +299,7 @@ def aggregate(reports: list[dict[str, Any]]) -> dict[str, Any]:
         "late_ticks": sum(r["late_ticks"] for r in reports),
         "skipped_releases": sum(r["skipped_releases"] for r in reports),
         "max_lateness_ms": max(r["max_lateness_ms"] for r in reports),
+        "cpu_s": sum(r["cpu_s"] for r in reports),
         "workers": [{k: r[k] for k in _WORKER_FIELDS} for r in reports],
         "bridge": bridge,
         "per_robot": per_robot,
