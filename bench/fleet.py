@@ -145,6 +145,9 @@ def main() -> None:
     parser.add_argument("--start", type=int, default=8)
     parser.add_argument("--max", type=int, default=256)
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--fixed", type=int, action="append", metavar="N",
+                        help="one trial of N robots per setting, no search (repeatable): the CPU "
+                        "figures on a machine too loaded for real time")
     parser.add_argument("--only", choices=("mosquitto", "embedded", "none"), action="append",
                         help="run only these settings (repeatable; default: all)")
     args = parser.parse_args()
@@ -173,6 +176,10 @@ def main() -> None:
         try:
             for label, bridge, broker, pid in settings:
                 print(f"{label}:")
+                if args.fixed:
+                    for n in args.fixed:
+                        trial(n, args.trial_s, bridge, broker, args.workers, pid)
+                    continue
                 results[label] = largest(
                     lambda n, b=bridge, u=broker, p=pid:
                     trial(n, args.trial_s, b, u, args.workers, p) <= LIMIT,
@@ -183,7 +190,8 @@ def main() -> None:
             if mosquitto is not None:
                 mosquitto[0].terminate()
                 mosquitto[0].wait()
-    print("largest real-time fleet (deadline_miss_ratio <= 0.001):")
+    if results:
+        print("largest real-time fleet (deadline_miss_ratio <= 0.001):")
     targets = {"mosquitto": 100, "embedded": 50}
     for label, n in results.items():
         target = next((t for key, t in targets.items() if key in label), None)

@@ -174,7 +174,7 @@ def test_fleet_on_two_workers_reports_every_robot(
     assert code == 0, out + err
     assert f"fleet: 2 robots running, telemetry on mqtt://127.0.0.1:{port}" in err
     lines = out.splitlines()
-    assert lines[0].startswith("fleet: 2 robots (robot003..), 2 worker(s)")
+    assert lines[0].startswith("fleet: 2 robots, robot003..robot004, 2 worker(s), ")
     assert lines[1:] == ["poses: 2 PASS", "PASS"]
     data = json.loads(report.read_text())
     assert data["embedded_broker"] and data["broker"] == f"mqtt://127.0.0.1:{port}"

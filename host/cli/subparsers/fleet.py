@@ -136,7 +136,8 @@ def _do_fleet(args: argparse.Namespace) -> int:
     first, robots = args.shard.robots(args.count)
     if args.workers > robots:
         raise ConfigurationError(
-            f"--workers {args.workers}: more workers than robots to run ({robots})")
+            f"--workers {args.workers}: more workers than robots to run ({robots})"
+        )
     check_writable(args.report, "--report")
     broker = broker_url(args)
     if broker is not None and args.port is not None:
@@ -168,8 +169,13 @@ def _run(run: FleetRun, workers: int, debug: bool) -> dict[str, Any]:
     """The fleet under a live progress line: elapsed, ETA, the late ticks so far."""
     label = f"fleet of {run.fleet.robots}"
     with wall_clock_progress(label, run.duration_s) as bar:
-        return run_sharded(run, workers, on_start=_say_started, debug=debug,
-                           on_progress=lambda ticks, late: _relabel(bar, label, ticks, late))
+        return run_sharded(
+            run,
+            workers,
+            on_start=_say_started,
+            debug=debug,
+            on_progress=lambda ticks, late: _relabel(bar, label, ticks, late),
+        )
 
 
 def _relabel(bar: Progress, label: str, ticks: int, late: int) -> None:
@@ -181,8 +187,10 @@ def _print_summary(report: dict[str, Any], broken: list[str]) -> None:
     """The summary line, per-robot verdict counts, then PASS or FAIL with every reason."""
     verdicts = Counter(str(r.get("verdict")) for r in report["per_robot"].values())
     workers = len(report.get("workers", [])) or 1
+    last = list(report["per_robot"])[-1]
     print(
-        f"fleet: {report['robots']} robots ({report['first_robot']}..), {workers} worker(s), "
+        f"fleet: {report['robots']} robots, {report['first_robot']}..{last}, "
+        f"{workers} worker(s), "
         f"{report['ticks']} ticks, deadline_miss_ratio {report['deadline_miss_ratio']:.4f} "
         f"(worst {report['max_lateness_ms']:.1f} ms), broker {report['broker']}"
     )
@@ -195,5 +203,8 @@ def _say_started(robots: int, url: BrokerURL | None) -> None:
     """One line on stderr when the clock starts: how many robots, and where to watch them
     (``odocan monitor --broker URL``)."""
     where = f", telemetry on {url}" if url is not None else ""
-    print(f"fleet: {robots} robots running{where}; Ctrl-C or SIGTERM stops and reports",
-          file=sys.stderr, flush=True)
+    print(
+        f"fleet: {robots} robots running{where}; Ctrl-C or SIGTERM stops and reports",
+        file=sys.stderr,
+        flush=True,
+    )
