@@ -243,3 +243,61 @@ def test_sigterm_stops_every_worker_and_the_report_is_written(tmp_path: Path) ->
     data = json.loads(report.read_text())
     assert list(data["per_robot"]) == ["robot001", "robot002", "robot003"]
     assert len(data["workers"]) == 2 and 0 < data["ticks"] < 2 * 120 * 100
+
+
+def test_run_sharded_passes_on_the_workers_progress() -> None:
+    """Two spawned workers without a bridge: progress sums both workers' ticks as they run."""
+    from odocan.host.mqtt.fleetrun import FleetRun
+    from odocan.host.mqtt.shards import run_sharded
+
+    seen: list[tuple[int, int]] = []
+    run = FleetRun(fleet=FleetConfig(robots=3, robot=robot.load("pmir"), seed=2),
+                   duration_s=2.0, bridge=False)
+    report = run_sharded(run, 2, on_progress=lambda ticks, late: seen.append((ticks, late)))
+    assert [w["robots"] for w in report["workers"]] == [1, 2]
+    assert len(seen) >= 2 and all(0 <= late <= ticks for ticks, late in seen)
+    assert [t for t, _ in seen] == sorted(t for t, _ in seen)
+    assert seen[-1][0] <= report["ticks"]
+    assert all(r["verdict"] is None for r in report["per_robot"].values())  # nothing watched
+    assert report["cpu_s"] > 0.0
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def test_workers_and_broker_stop_when_the_parent_is_killed(tmp_path: Path) -> None:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "odocan", "fleet", "-n", "2", "--workers", "2", "--duration",
+         "300", "--max-miss-ratio", "1"],
+        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    assert proc.stderr is not None
+    assert proc.stderr.readline().startswith("fleet: 2 robots running")
+    children = _children(proc.pid)
+    assert len(children) >= 3  # the broker and two workers (and the spawn resource tracker)
+    proc.kill()
+    proc.wait()
+    deadline = time.monotonic() + 30
+    alive = children
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.5)
+        alive = [pid for pid in alive if _running(pid)]
+    assert alive == [], alive
+
+
+def _running(pid: int) -> bool:
+    """Process ``pid`` exists and is not a zombie."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False

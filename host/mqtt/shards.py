@@ -13,16 +13,19 @@ reports, as at the end of ``--duration``.
 
 ``BrokerProcess`` runs the embedded amqtt broker in a process of its own (never in a worker, so
 the broker's CPU does not delay any robot's ticks) on a fixed or free 127.0.0.1 port; a port in
-use is a one-line ``ConfigurationError``.
+use is a one-line ``ConfigurationError``. Workers and the broker stop by themselves when the
+parent is killed -9 (they watch their parent process id).
 """
 
 from __future__ import annotations
 
 import asyncio
 import multiprocessing as mp
+import os
 import queue
 import signal
 import socket
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -45,6 +48,7 @@ from odocan.sim.exceptions import ConfigurationError, OdocanError
 MAX_SHARDS = 1000
 BROKER_START_S = 20.0  # spawn + importing amqtt on a loaded machine
 WORKER_RESULT_S = 60.0  # after the duration: the goodbye of every link, then the report
+ORPHAN_CHECK_S = 1.0  # a worker or broker whose parent died stops within this
 Progress = Callable[[int, int], None]  # (ticks, late ticks) summed over the workers so far
 
 
@@ -149,7 +153,10 @@ def _serve_broker(port: int, ready: Connection) -> None:
             ready.send(str(exc) or type(exc).__name__)
             return
         ready.send("ok")
-        await asyncio.Event().wait()
+        while os.getppid() == parent:  # an orphan (the parent killed -9) stops by itself
+            await asyncio.sleep(ORPHAN_CHECK_S)
+
+    parent = os.getppid()
 
     asyncio.run(serve())
 
@@ -258,9 +265,23 @@ def _check_alive(procs: list[Any], reports: dict[int, Any], deadline: float) -> 
         raise OdocanError("fleet workers did not report in time")
 
 
+def _stop_when_orphaned() -> None:
+    """A daemon thread: SIGTERM to this worker once its parent is gone (killed -9), so it stops
+    like at the end of its duration instead of running on unseen."""
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(ORPHAN_CHECK_S)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=watch, name="odocan-orphan-watch", daemon=True).start()
+
+
 def _work(worker: int, run: FleetRun, events: Any, debug: bool) -> None:
     """A worker process: run its slice, put ``(worker, kind, value)`` events, the report last."""
     configure_logging(debug)
+    _stop_when_orphaned()
     try:
         report = asyncio.run(run_fleet(
             run, on_start=lambda robots, url: events.put((worker, "started", robots)),
