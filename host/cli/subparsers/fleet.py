@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from collections import Counter
 from dataclasses import replace
 from pathlib import Path
@@ -166,13 +167,21 @@ def _do_fleet(args: argparse.Namespace) -> int:
 
 
 def _run(run: FleetRun, workers: int, debug: bool) -> dict[str, Any]:
-    """The fleet under a live progress line: elapsed, ETA, the late ticks so far."""
+    """The fleet under a live progress line (elapsed, ETA, the late ticks so far), drawn from
+    when the clock starts (the start line first), not while the workers and broker start."""
     label = f"fleet of {run.fleet.robots}"
     with wall_clock_progress(label, run.duration_s) as bar:
+        drawn, bar.enabled = bar.enabled, False
+
+        def started(robots: int, url: BrokerURL | None) -> None:
+            _say_started(robots, url)
+            bar.started = time.monotonic()
+            bar.enabled = drawn
+
         return run_sharded(
             run,
             workers,
-            on_start=_say_started,
+            on_start=started,
             debug=debug,
             on_progress=lambda ticks, late: _relabel(bar, label, ticks, late),
         )
