@@ -301,3 +301,16 @@ def _running(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
     except OSError:
         return False
+
+
+def test_a_workers_broker_error_is_one_line_in_the_parent(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as closed:
+        closed.bind((LOOPBACK, 0))  # bound, never listening: connections are refused
+        port = closed.getsockname()[1]
+        code = main(["fleet", "-n", "2", "--workers", "2", "--broker",
+                     f"mqtt://127.0.0.1:{port}", "--duration", "1", "--connect-timeout", "2"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err == f"error: cannot connect to mqtt://127.0.0.1:{port}: connection refused\n"
