@@ -104,6 +104,11 @@ def test_judge_robot_passes_within_tolerance_and_fails_beyond_it() -> None:
     assert farther["verdict"] == "PASS"  # 0.2 mm + 10 m x half a heading LSB = 0.68 mm
     assert math.isclose(farther["position_tolerance_m"], 2e-4 + 10.0 * HEADING_LSB_RAD / 2)
     assert judge_robot(_stats((8e-4, 0.0)), truth, tol, distance_m=10.0)["verdict"] == "FAIL"
+    behind = judge_robot(_stats((8e-4, 1e-4)), truth, tol, releases_skipped=3)
+    assert behind["verdict"] == "UNJUDGED" and "3 releases skipped" in behind["reason"]
+    behind_turned = judge_robot(_stats((8e-4, 5e-4)), truth, tol, releases_skipped=3)
+    assert behind_turned["verdict"] == "FAIL" and "heading" in behind_turned["reason"]
+    assert "position" not in behind_turned["reason"]
     blind = judge_robot(_stats((3e-4, 0.0)), truth, tol, frames_dropped=7)
     assert blind["verdict"] == "UNJUDGED" and "dropped 7 frames" in blind["reason"]
 
@@ -171,21 +176,27 @@ def test_fleet_on_two_workers_reports_every_robot(
                  "--seed", "5", "--port", str(port), "--max-miss-ratio", "1",
                  "--report", str(report)])
     out, err = capsys.readouterr()
-    assert code == 0, out + err
     assert f"fleet: 2 robots running, telemetry on mqtt://127.0.0.1:{port}" in err
     lines = out.splitlines()
     assert lines[0].startswith("fleet: 2 robots, robot003..robot004, 2 worker(s), ")
-    assert lines[1:] == ["poses: 2 PASS", "PASS"]
     data = json.loads(report.read_text())
+    behind = [w["skipped_releases"] > 0 for w in data["workers"]]  # a loaded machine
+    if not any(behind):
+        assert code == 0, out + err
+        assert lines[1:] == ["poses: 2 PASS", "PASS"]
+    else:
+        assert code == 1 and lines[-1].startswith("FAIL: ") and "releases skipped" in lines[-1]
     assert data["embedded_broker"] and data["broker"] == f"mqtt://127.0.0.1:{port}"
     assert [w["first_robot"] for w in data["workers"]] == ["robot003", "robot004"]
     robots = data["per_robot"]
     assert list(robots) == ["robot003", "robot004"]
     assert [r["seed"] for r in robots.values()] == [7, 8]
-    for r in robots.values():
-        assert r["verdict"] == "PASS"
+    for r, skipped in zip(robots.values(), behind, strict=True):
+        assert r["verdict"] == ("UNJUDGED" if skipped else "PASS"), r["reason"]
+        assert r["pose_vs_reference"]["max_dheading_rad"] <= 2 * HEADING_LSB_RAD
         assert r["pose_vs_reference"]["samples"] > 20
-        assert r["pose_vs_reference"]["max_dpos_m"] <= 2 * POSITION_LSB_M
+        if not skipped:
+            assert r["pose_vs_reference"]["max_dpos_m"] <= 2 * POSITION_LSB_M
         assert r["pose_vs_truth"]["samples"] > 0
         assert 0.0 <= r["deadline_miss_ratio"] <= 1.0
 
@@ -237,10 +248,13 @@ def test_sigterm_stops_every_worker_and_the_report_is_written(tmp_path: Path) ->
     began = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=60)
-    assert proc.returncode == 0, err
     assert time.monotonic() - began < 60
-    assert out.splitlines()[-1] == "PASS"
     data = json.loads(report.read_text())
+    if any(w["skipped_releases"] for w in data["workers"]):  # a loaded machine
+        assert proc.returncode == 1 and "releases skipped" in out.splitlines()[-1]
+    else:
+        assert proc.returncode == 0, err
+        assert out.splitlines()[-1] == "PASS"
     assert list(data["per_robot"]) == ["robot001", "robot002", "robot003"]
     assert len(data["workers"]) == 2 and 0 < data["ticks"] < 2 * 120 * 100
 
