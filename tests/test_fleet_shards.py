@@ -328,3 +328,14 @@ def test_a_workers_broker_error_is_one_line_in_the_parent(
     err = capsys.readouterr().err
     assert code == 2
     assert err == f"error: cannot connect to mqtt://127.0.0.1:{port}: connection refused\n"
+
+
+def test_run_sharded_without_a_broker_shares_one_broker_process() -> None:
+    from odocan.host.mqtt.fleetrun import FleetRun
+    from odocan.host.mqtt.shards import run_sharded
+
+    run = FleetRun(fleet=FleetConfig(robots=2, robot=robot.load("pmir")), duration_s=1.0)
+    report = run_sharded(run, 2)
+    assert report["embedded_broker"] and report["broker"].startswith("mqtt://127.0.0.1:")
+    assert report["bridge"]["frames_in"] > 0 and report["bridge"]["reconnects"] == 0
+    assert all(r["verdict"] in ("PASS", "UNJUDGED") for r in report["per_robot"].values())

@@ -176,10 +176,16 @@ def run_sharded(
     run: FleetRun, workers: int, *, on_start: StartHook | None = None,
     on_progress: Progress | None = None, debug: bool = False,
 ) -> dict[str, Any]:
-    """Run ``run.fleet`` over ``workers`` processes (1: in this one); the aggregated report."""
+    """Run ``run.fleet`` over ``workers`` processes (1: in this one); the aggregated report.
+    Bridged without a broker: one ``BrokerProcess`` for all of them, for the run."""
     if not 1 <= workers <= run.fleet.robots:
         raise ConfigurationError(
             f"--workers {workers}: must be in [1, {run.fleet.robots}] (the robots to run)")
+    if run.bridge and run.broker is None:
+        with embedded_broker(None) as url:
+            report = run_sharded(replace(run, broker=url), workers, on_start=on_start,
+                                 on_progress=on_progress, debug=debug)
+        return {**report, "embedded_broker": True}
     if workers == 1:
         return asyncio.run(run_fleet(
             run, on_start=on_start,
