@@ -20,7 +20,7 @@ from __future__ import annotations
 import asyncio
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import can
 
@@ -43,7 +43,11 @@ def robot_name(index: int) -> str:
 
 @dataclass(frozen=True)
 class FleetConfig:
-    """N robots of one profile; robot i drives scenario ``scenario`` with seed ``seed + i``."""
+    """N robots of one profile; robot i drives scenario ``scenario`` with seed ``seed + i``.
+
+    A shard (``first`` > 0) holds robots ``first .. first + robots - 1`` of a larger fleet: their
+    names, seeds, tick phases and so frames are those robots' in the whole fleet, so shards on
+    several processes or machines never clash and a robot's bytes do not depend on the sharding."""
 
     robots: int
     robot: RobotProfile
@@ -51,6 +55,11 @@ class FleetConfig:
     scenario: str = "random"
     seed: int = 0
     transport: str = "odocan"  # the rigs' python-can interface (sim.rig.TRANSPORTS)
+    first: int = 0  # fleet-wide index of this shard's first robot (names and seeds count on)
+
+    def shard(self, first: int, robots: int) -> FleetConfig:
+        """Robots ``first .. first + robots - 1`` of this fleet (fleet-wide indices)."""
+        return replace(self, first=self.first + first, robots=robots)
 
 
 class _Collector(can.Listener):
@@ -73,7 +82,7 @@ class Fleet(Closing):
         if config.robots < 1:
             raise ValueError(f"a fleet needs at least one robot, got {config.robots}")
         self.config = config
-        self.names = [robot_name(i) for i in range(config.robots)]
+        self.names = [robot_name(config.first + i) for i in range(config.robots)]
         self._batch: Batch = []
         self._collectors = [_Collector(i, self._batch) for i in range(config.robots)]
         prefix = f"odocan-fleet-{next(_fleet_ids)}"
@@ -83,9 +92,9 @@ class Fleet(Closing):
                     robot=config.robot,
                     integrator=config.integrator,
                     scenario=config.scenario,
-                    seed=config.seed + i,
+                    seed=config.seed + config.first + i,
                     channel=f"{prefix}-{i}",
-                    truth_phase_ticks=_truth_phase(i),
+                    truth_phase_ticks=_truth_phase(config.first + i),
                     transport=config.transport,
                 ),
                 listeners=[self._collectors[i]],
@@ -95,8 +104,9 @@ class Fleet(Closing):
 
     def step(self, k: int) -> None:
         """Tick ``k`` of every robot (simulated time ``k * TICK_S``)."""
+        first = self.config.first
         for index, rig in enumerate(self.rigs):
-            own_k = k - _tick_offset(index)
+            own_k = k - _tick_offset(first + index)
             if own_k >= 0:
                 rig.ticks = own_k
                 rig.step()
@@ -124,9 +134,9 @@ class Fleet(Closing):
 
 
 def _tick_offset(index: int) -> int:
-    """Robot ``index`` starts this many fleet ticks late: every other robot runs one tick out of
-    phase, so the pose, twist and MOTOR_CMD frames (every 2nd tick) of half the fleet fall on
-    the other ticks. Each robot's own timeline is an ordinary rig's."""
+    """Robot ``index`` (fleet-wide) starts this many fleet ticks late: every other robot runs one
+    tick out of phase, so the pose, twist and MOTOR_CMD frames (every 2nd tick) of half the fleet
+    fall on the other ticks. Each robot's own timeline is an ordinary rig's."""
     return index % 2
 
 
@@ -144,11 +154,14 @@ async def run_realtime(
     on_batch: Callable[[Batch], None] | None = None,
     stop: asyncio.Event | None = None,
     period_s: float = TICK_S,
+    stats: DeadlineStats | None = None,
 ) -> DeadlineStats:
     """Step ``fleet`` every ``period_s`` of the wall clock for ``duration_s`` (None: until
-    ``stop``); returns the deadline accounting (see the module docstring)."""
+    ``stop``); returns the deadline accounting (see the module docstring), kept in ``stats``
+    when given (so another task can watch it while the fleet runs)."""
     clock = RealTimeClock()
-    stats = DeadlineStats(period_s, period_s / 2)
+    if stats is None:
+        stats = DeadlineStats(period_s, period_s / 2)
     k = 0
     while stop is None or not stop.is_set():
         release = k * period_s

@@ -20,9 +20,10 @@ def test_fleet_runs_and_reports(
     code = main(["fleet", count_option, "2", "--duration", "1", "--seed", "7",
                  "--max-miss-ratio", "1", "--report", str(report)])
     out, err = capsys.readouterr()
-    assert code == 0, err
-    assert out.startswith("fleet: 2 robots, ")
     data = json.loads(report.read_text())
+    # 0, or 1 only because a loaded machine made the loop skip releases (positions not judged)
+    assert code == (1 if data["skipped_releases"] else 0), out + err
+    assert out.startswith("fleet: 2 robots, ")
     assert data["robots"] == 2 and data["duration_s"] == 1.0
     assert [r["seed"] for r in data["per_robot"].values()] == [7, 8]
     assert all(r["frames_total"] > 0 for r in data["per_robot"].values())

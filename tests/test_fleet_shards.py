@@ -1,0 +1,341 @@
+"""A fleet across processes and machines: shards and their robot ids, the per-robot verdict, the
+workers' aggregated report, and ``odocan fleet --workers/--shard/--port`` end to end on the
+embedded broker in its own process (real spawned workers, real MQTT connections)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from odocan.host.cli.app import main
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance
+from odocan.host.judge.reference import Geometry, ReferenceOdometry
+from odocan.host.judge.tracking import ErrorStats, Pose
+from odocan.host.mqtt import fleetrun
+from odocan.host.mqtt.broker import LOOPBACK, free_loopback_port
+from odocan.host.mqtt.fleetrun import FLEET_TOLERANCE, failures, judge_robot
+from odocan.host.mqtt.shards import Shard, aggregate, split
+from odocan.sim import robot
+from odocan.sim.fleet import Fleet, FleetConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("total", [1, 2, 5, 7, 100, 101])
+@pytest.mark.parametrize("parts", [1, 2, 3, 7])
+def test_split_covers_every_robot_once_in_near_equal_slices(total: int, parts: int) -> None:
+    slices = split(total, parts)
+    indices = [first + i for first, count in slices for i in range(count)]
+    assert indices == list(range(total))
+    sizes = [count for _, count in slices]
+    assert max(sizes) - min(sizes) <= 1
+
+
+def test_shard_parse_and_its_robots() -> None:
+    assert Shard.parse("2/3") == Shard(2, 3)
+    assert Shard(2, 3).robots(10) == (3, 3)
+    assert Shard(3, 3).robots(10) == (6, 4)
+    for bad in ("3", "1/", "/2", "a/b", "0/2", "3/2", "1/0", "-1/2", "1/2/3"):
+        with pytest.raises(ValueError):
+            Shard.parse(bad)
+
+
+def _frames(config: FleetConfig, ticks: int) -> dict[str, list[tuple[int, bytes]]]:
+    """Each robot's host-observed frames (ID, data) over ``ticks`` fleet ticks, by name."""
+    out: dict[str, list[tuple[int, bytes]]] = {}
+    with Fleet(config) as fleet:
+        for k in range(ticks):
+            fleet.step(k)
+            for index, msg in fleet.take_batch():
+                out.setdefault(fleet.names[index], []).append(
+                    (msg.arbitration_id, bytes(msg.data)))
+    return out
+
+
+@pytest.mark.parametrize("first", [1, 2])
+def test_a_shards_robots_send_the_bytes_they_send_in_the_whole_fleet(first: int) -> None:
+    """Names, seeds and tick phases are fleet-wide: sharding never changes a robot's frames."""
+    whole = FleetConfig(robots=4, robot=robot.load("pmir"), seed=11)
+    part = whole.shard(first, 2)
+    shard_frames = _frames(part, 120)
+    whole_frames = _frames(whole, 120)
+    names = [f"robot{first + i + 1:03d}" for i in range(2)]
+    assert sorted(shard_frames) == names
+    for name in names:
+        assert len(shard_frames[name]) > 100
+        assert shard_frames[name] == whole_frames[name]
+    assert shard_frames[names[0]] != whole_frames["robot001"]  # seeds differ: a real check
+
+
+def _stats(*errors: tuple[float, float]) -> ErrorStats:
+    """ErrorStats of on-board poses off the reference by (dx m, dheading rad)."""
+    stats = ErrorStats()
+    for k, (dx_m, dh_rad) in enumerate(errors):
+        stats.add(Pose(k, 1.0 + dx_m, 2.0, 0.5 + dh_rad), Pose(k, 1.0, 2.0, 0.5))
+    return stats
+
+
+def test_judge_robot_passes_within_tolerance_and_fails_beyond_it() -> None:
+    tol = Tolerance(2e-4, 2e-4)
+    truth = _stats((0.05, 0.01))  # odometry drift vs truth: reported, never judged
+    ok = judge_robot(_stats((1e-4, 1e-4), (-1.5e-4, 0.0)), truth, tol)
+    assert ok["verdict"] == "PASS" and ok["reason"] is None
+    assert ok["pose_vs_reference"]["samples"] == 2
+    assert math.isclose(ok["pose_vs_reference"]["max_dpos_m"], 1.5e-4)
+    assert math.isclose(ok["pose_vs_truth"]["max_dpos_m"], 0.05)
+    far = judge_robot(_stats((1e-4, 0.0), (3e-4, 0.0)), truth, tol)
+    assert far["verdict"] == "FAIL" and "position vs reference 0.3 mm > 0.2 mm" in far["reason"]
+    turned = judge_robot(_stats((0.0, 5e-4)), truth, tol)
+    assert turned["verdict"] == "FAIL" and "heading vs reference 0.5 mrad" in turned["reason"]
+    silent = judge_robot(ErrorStats(), ErrorStats(), tol)
+    assert silent["verdict"] == "FAIL" and "no on-board pose" in silent["reason"]
+    assert silent["pose_vs_reference"] is None and silent["pose_vs_truth"] is None
+    farther = judge_robot(_stats((3e-4, 0.0)), truth, tol, distance_m=10.0)
+    assert farther["verdict"] == "PASS"  # 0.2 mm + 10 m x half a heading LSB = 0.68 mm
+    assert math.isclose(farther["position_tolerance_m"], 2e-4 + 10.0 * HEADING_LSB_RAD / 2)
+    assert judge_robot(_stats((8e-4, 0.0)), truth, tol, distance_m=10.0)["verdict"] == "FAIL"
+    behind = judge_robot(_stats((8e-4, 1e-4)), truth, tol, releases_skipped=3)
+    assert behind["verdict"] == "UNJUDGED" and "3 releases skipped" in behind["reason"]
+    behind_turned = judge_robot(_stats((8e-4, 5e-4)), truth, tol, releases_skipped=3)
+    assert behind_turned["verdict"] == "FAIL" and "heading" in behind_turned["reason"]
+    assert "position" not in behind_turned["reason"]
+    blind = judge_robot(_stats((3e-4, 0.0)), truth, tol, frames_dropped=7)
+    assert blind["verdict"] == "UNJUDGED" and "dropped 7 frames" in blind["reason"]
+
+
+@pytest.mark.parametrize("integrator", ["euler", "exact"])
+def test_half_a_heading_lsb_at_the_start_moves_a_pose_by_at_most_the_path_times_it(
+    integrator: str,
+) -> None:
+    """The widening ``position_tolerance_m`` allows, checked on the float64 reference itself:
+    two references on one random drive, one started half a heading LSB off."""
+    import random
+
+    geometry = Geometry.of(robot.load("pmir"))
+    rng = random.Random(3)
+    start_off = HEADING_LSB_RAD / 2
+    exact = ReferenceOdometry(geometry, integrator, 32)
+    turned = ReferenceOdometry(geometry, integrator, 32, heading_rad=start_off)
+    worst_ratio = 0.0
+    for _ in range(20_000):
+        d_left, d_right = rng.randint(-5, 40), rng.randint(-5, 40)
+        exact.step_deltas(d_left, d_right)
+        turned.step_deltas(d_left, d_right)
+        apart_m = math.hypot(turned.x_m - exact.x_m, turned.y_m - exact.y_m)
+        assert apart_m <= exact.distance_m * start_off + 1e-12
+        worst_ratio = max(worst_ratio, apart_m / (exact.distance_m * start_off))
+    assert exact.distance_m > 50.0 and worst_ratio > 0.5  # the bound is tight enough to matter
+
+
+def test_the_default_tolerance_is_two_lsb_of_the_pose_signals() -> None:
+    assert Tolerance(2 * POSITION_LSB_M, 2 * HEADING_LSB_RAD) == FLEET_TOLERANCE
+
+
+def _worker(first: int, ratio: float, verdicts: list[str]) -> dict[str, object]:
+    robots = {f"robot{first + i + 1:03d}": {"verdict": v, "reason": f"why {first + i}"}
+              for i, v in enumerate(verdicts)}
+    return {"robots": len(verdicts), "first_robot": next(iter(robots)), "duration_s": 1.0,
+            "period_s": 0.01, "deadline_miss_ratio": ratio, "ticks": 100,
+            "late_ticks": round(ratio * 100), "skipped_releases": 1, "max_lateness_ms": ratio * 50,
+            "cpu_s": 0.25,
+            "broker": "mqtt://127.0.0.1:1", "embedded_broker": False, "tolerance": {},
+            "bridge": {"frames_in": 10, "frames_dropped": 0}, "per_robot": robots}
+
+
+def test_aggregate_takes_the_worst_worker_and_failures_name_every_threshold() -> None:
+    report = aggregate([_worker(0, 0.0, ["PASS", "PASS"]), _worker(2, 0.03, ["PASS", "FAIL"])])
+    assert report["robots"] == 4 and list(report["per_robot"]) == [
+        "robot001", "robot002", "robot003", "robot004"]
+    assert report["deadline_miss_ratio"] == 0.03  # not the 0.015 average: a late worker shows
+    assert report["ticks"] == 200 and report["late_ticks"] == 3 and report["cpu_s"] == 0.5
+    assert report["skipped_releases"] == 2 and report["bridge"]["frames_in"] == 20
+    assert [w["first_robot"] for w in report["workers"]] == ["robot001", "robot003"]
+    assert failures(report, 0.05) == [
+        "1 of 4 robots pose vs reference out of tolerance (robot004: why 3)"]
+    assert failures(report, 0.001)[0] == "deadline_miss_ratio 0.0300 > --max-miss-ratio 0.001"
+    passing = aggregate([_worker(0, 0.0, ["PASS"]), _worker(1, 0.0, ["PASS"])])
+    assert failures(passing, 0.001) == []
+
+
+def test_fleet_on_two_workers_reports_every_robot(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    report = tmp_path / "fleet.json"
+    port = free_loopback_port()
+    code = main(["fleet", "-n", "4", "--shard", "2/2", "--workers", "2", "--duration", "2",
+                 "--seed", "5", "--port", str(port), "--max-miss-ratio", "1",
+                 "--report", str(report)])
+    out, err = capsys.readouterr()
+    assert f"fleet: 2 robots running, telemetry on mqtt://127.0.0.1:{port}" in err
+    lines = out.splitlines()
+    assert lines[0].startswith("fleet: 2 robots, robot003..robot004, 2 worker(s), ")
+    data = json.loads(report.read_text())
+    behind = [w["skipped_releases"] > 0 for w in data["workers"]]  # a loaded machine
+    if not any(behind):
+        assert code == 0, out + err
+        assert lines[1:] == ["poses: 2 PASS", "PASS"]
+    else:
+        assert code == 1 and lines[-1].startswith("FAIL: ") and "releases skipped" in lines[-1]
+    assert data["embedded_broker"] and data["broker"] == f"mqtt://127.0.0.1:{port}"
+    assert [w["first_robot"] for w in data["workers"]] == ["robot003", "robot004"]
+    robots = data["per_robot"]
+    assert list(robots) == ["robot003", "robot004"]
+    assert [r["seed"] for r in robots.values()] == [7, 8]
+    for r, skipped in zip(robots.values(), behind, strict=True):
+        assert r["verdict"] == ("UNJUDGED" if skipped else "PASS"), r["reason"]
+        assert r["pose_vs_reference"]["max_dheading_rad"] <= 2 * HEADING_LSB_RAD
+        assert r["pose_vs_reference"]["samples"] > 20
+        if not skipped:
+            assert r["pose_vs_reference"]["max_dpos_m"] <= 2 * POSITION_LSB_M
+        assert r["pose_vs_truth"]["samples"] > 0
+        assert 0.0 <= r["deadline_miss_ratio"] <= 1.0
+
+
+def test_a_wrong_pose_fails_the_run_and_says_why(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The judge's reference on a 2 % longer wheelbase than the firmware's: every robot's
+    heading departs, the exit line says FAIL and which threshold."""
+    real = fleetrun._endpoints
+
+    def skewed(fleet: Fleet, run: fleetrun.FleetRun) -> list[fleetrun.RobotEndpoint]:
+        g = Geometry.of(run.fleet.robot)
+        wrong = replace(g, wheelbase_m=g.wheelbase_m * 1.02)
+        return [replace(e, geometry=wrong) for e in real(fleet, run)]
+
+    monkeypatch.setattr(fleetrun, "_endpoints", skewed)
+    code = main(["fleet", "-n", "2", "--duration", "2", "--scenario", "random",
+                 "--max-miss-ratio", "1"])
+    out = capsys.readouterr().out.splitlines()
+    assert code == 1
+    assert out[1] == "poses: 2 FAIL"
+    assert out[2].startswith("FAIL: 2 of 2 robots pose vs reference out of tolerance (robot001:")
+
+
+def test_a_port_in_use_is_one_error_line(capsys: pytest.CaptureFixture[str]) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as busy:
+        busy.bind((LOOPBACK, 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        code = main(["fleet", "-n", "2", "--port", str(port), "--duration", "1"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.startswith(f"error: --port {port}: 127.0.0.1:{port} cannot be used")
+    assert len(err.splitlines()) == 1
+
+
+def test_sigterm_stops_every_worker_and_the_report_is_written(tmp_path: Path) -> None:
+    report = tmp_path / "fleet.json"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "odocan", "fleet", "-n", "3", "--workers", "2", "--duration",
+         "120", "--max-miss-ratio", "1", "--report", str(report)],
+        cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stderr is not None
+    start = proc.stderr.readline()
+    assert start.startswith("fleet: 3 robots running, telemetry on mqtt://127.0.0.1:"), start
+    time.sleep(1.0)
+    began = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=60)
+    assert time.monotonic() - began < 60
+    data = json.loads(report.read_text())
+    if any(w["skipped_releases"] for w in data["workers"]):  # a loaded machine
+        assert proc.returncode == 1 and "releases skipped" in out.splitlines()[-1]
+    else:
+        assert proc.returncode == 0, err
+        assert out.splitlines()[-1] == "PASS"
+    assert list(data["per_robot"]) == ["robot001", "robot002", "robot003"]
+    assert len(data["workers"]) == 2 and 0 < data["ticks"] < 2 * 120 * 100
+
+
+def test_run_sharded_passes_on_the_workers_progress() -> None:
+    """Two spawned workers without a bridge: progress sums both workers' ticks as they run."""
+    from odocan.host.mqtt.fleetrun import FleetRun
+    from odocan.host.mqtt.shards import run_sharded
+
+    seen: list[tuple[int, int]] = []
+    run = FleetRun(fleet=FleetConfig(robots=3, robot=robot.load("pmir"), seed=2),
+                   duration_s=2.0, bridge=False)
+    report = run_sharded(run, 2, on_progress=lambda ticks, late: seen.append((ticks, late)))
+    assert [w["robots"] for w in report["workers"]] == [1, 2]
+    assert len(seen) >= 2 and all(0 <= late <= ticks for ticks, late in seen)
+    assert [t for t, _ in seen] == sorted(t for t, _ in seen)
+    assert seen[-1][0] <= report["ticks"]
+    assert all(r["verdict"] is None for r in report["per_robot"].values())  # nothing watched
+    assert report["cpu_s"] > 0.0
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def test_workers_and_broker_stop_when_the_parent_is_killed(tmp_path: Path) -> None:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "odocan", "fleet", "-n", "2", "--workers", "2", "--duration",
+         "300", "--max-miss-ratio", "1"],
+        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    assert proc.stderr is not None
+    assert proc.stderr.readline().startswith("fleet: 2 robots running")
+    children = _children(proc.pid)
+    assert len(children) >= 3  # the broker and two workers (and the spawn resource tracker)
+    proc.kill()
+    proc.wait()
+    deadline = time.monotonic() + 30
+    alive = children
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.5)
+        alive = [pid for pid in alive if _running(pid)]
+    assert alive == [], alive
+
+
+def _running(pid: int) -> bool:
+    """Process ``pid`` exists and is not a zombie."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_a_workers_broker_error_is_one_line_in_the_parent(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as closed:
+        closed.bind((LOOPBACK, 0))  # bound, never listening: connections are refused
+        port = closed.getsockname()[1]
+        code = main(["fleet", "-n", "2", "--workers", "2", "--broker",
+                     f"mqtt://127.0.0.1:{port}", "--duration", "1", "--connect-timeout", "2"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err == f"error: cannot connect to mqtt://127.0.0.1:{port}: connection refused\n"
+
+
+def test_run_sharded_without_a_broker_shares_one_broker_process() -> None:
+    from odocan.host.mqtt.fleetrun import FleetRun
+    from odocan.host.mqtt.shards import run_sharded
+
+    run = FleetRun(fleet=FleetConfig(robots=2, robot=robot.load("pmir")), duration_s=1.0)
+    report = run_sharded(run, 2)
+    assert report["embedded_broker"] and report["broker"].startswith("mqtt://127.0.0.1:")
+    assert report["bridge"]["frames_in"] > 0 and report["bridge"]["reconnects"] == 0
+    assert all(r["verdict"] in ("PASS", "UNJUDGED") for r in report["per_robot"].values())
