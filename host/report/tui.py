@@ -292,16 +292,16 @@ def _header(snapshot: dict[str, Any], trace: Trace, view: View) -> Text:
         f"  {view.now_s - view.started_s:.1f} s  {snapshot['frames_total']} frames",
         no_wrap=True, overflow="ellipsis",
     )
+    if trace.paused:  # what the keys changed comes first: it must not be cut off on 80 columns
+        text.append("  PAUSED", style="bold reverse yellow")
+    if trace.filter.text:
+        text.append(f"  filter {trace.filter.text}", style="magenta")
     load = snapshot.get("bus_load") or {}
     if load.get("load") is not None:
         style = "bold red" if load["load"] > BUS_LOAD_WARN else ""
         text.append(f"  bus {load['load']:.0%}", style=style)
     elif load.get("bits_per_s") is not None:
         text.append(f"  bus {load['bits_per_s'] / 1000:.1f} kbit/s")
-    if trace.paused:
-        text.append("  PAUSED", style="bold reverse yellow")
-    if trace.filter.text:
-        text.append(f"  filter {trace.filter.text}", style="magenta")
     return text
 
 
