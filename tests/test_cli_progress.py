@@ -60,3 +60,25 @@ def test_a_run_writes_nothing_extra_to_a_non_terminal_stderr(
 
     assert main(["run", "--duration", "2"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_an_experiment_counts_its_runs_with_an_eta(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``odocan umbmark`` (and experiment, calibrate) count squares done: the line has an ETA."""
+    from odocan.host.cli.app import main
+
+    stream = _Terminal()
+    lines: list[str] = []
+    real_line = Progress.line
+
+    def spy(self: Progress, done: float, now: float) -> str:
+        text = real_line(self, done, now)
+        lines.append(text)
+        return text
+
+    ticks = iter(range(0, 10**9, 10))  # a clock that moves 10 s per reading: past every delay
+    monkeypatch.setattr(progress_module.sys, "stderr", stream)
+    monkeypatch.setattr(progress_module.time, "monotonic", lambda: float(next(ticks)))
+    monkeypatch.setattr(Progress, "line", spy)
+    assert main(["umbmark", "--runs", "1", "--side", "0.5", "--errors", ""]) in (0, 1)
+    assert any(line.startswith("UMBmark: 2 x 1 squares:  50.0%") and "ETA" in line
+               for line in lines), lines

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from odocan.host.experiments.drive import (
@@ -174,8 +175,11 @@ def _misalignment_rad(config: Seed002Config, code: int, index: int) -> float:
     return math.radians(config.misalign_deg * draw) + 0.0  # + 0.0: no -0.0 in the report
 
 
-def run_seed002(config: Seed002Config) -> Seed002Result:
-    """Both experiments, ``config.runs`` runs each, measured from the ground truth."""
+def run_seed002(
+    config: Seed002Config, on_run: Callable[[], None] | None = None
+) -> Seed002Result:
+    """Both experiments, ``config.runs`` runs each, measured from the ground truth (``on_run``
+    after each run: a progress line)."""
     if config.runs < 1:
         raise ConfigurationError(f"--runs must be at least 1, got {config.runs}")
     if not (math.isfinite(config.misalign_deg) and 0.0 <= config.misalign_deg <= 45.0):
@@ -185,11 +189,15 @@ def run_seed002(config: Seed002Config) -> Seed002Result:
         drive = _drive(config, _STRAIGHT_CODE, i, straight_path())
         run = measure_straight(drive, _misalignment_rad(config, _STRAIGHT_CODE, i))
         straight.append(replace(run, faults=_faults(config, drive, straight_path())))
+        if on_run is not None:
+            on_run()
     square = []
     for i in range(config.runs):
         drive = _drive(config, _SQUARE_CODE, i, square_path())
         lap = measure_square(drive, _misalignment_rad(config, _SQUARE_CODE, i))
         square.append(replace(lap, faults=_faults(config, drive, square_path())))
+        if on_run is not None:
+            on_run()
     return Seed002Result(config, tuple(straight), tuple(square))
 
 

@@ -51,7 +51,7 @@ at least ``min_improvement``.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -276,10 +276,12 @@ def run_umbmark(
     runs_per_direction: int = RUNS_PER_DIRECTION,
     geometry: Correction | None = None,
     phase: int = 0,
+    on_run: Callable[[], None] | None = None,
 ) -> UmbmarkResult:
     """UMBmark: ``runs_per_direction`` squares each way, each on a freshly powered robot whose
     firmware is first given ``geometry`` over CAN (None: it keeps the profile's). ``phase``
-    separates the noise of a second benchmark (after calibration) from the first's."""
+    separates the noise of a second benchmark (after calibration) from the first's;
+    ``on_run`` is called after each square (a progress line)."""
     if side_m <= 0 or not math.isfinite(side_m):
         raise ConfigurationError(f"--side must be a positive length, got {side_m}")
     if runs_per_direction < 1:
@@ -295,6 +297,8 @@ def run_umbmark(
                 )
             drive = session.drive(square_path(side_m, direction), square_timeout_s(side_m))
         runs.append(UmbmarkRun(direction, *return_error(drive), drive))
+        if on_run is not None:
+            on_run()
     return UmbmarkResult(side_m, tuple(runs), geometry)
 
 
@@ -346,13 +350,16 @@ def calibrate(
     side_m: float = SIDE_M,
     runs_per_direction: int = RUNS_PER_DIRECTION,
     method: str = "model",
+    on_run: Callable[[], None] | None = None,
 ) -> Calibration:
     """UMBmark, both estimates of (E_d, E_b), the corrected geometry written to the firmware over
-    CAN (ODOM_CONFIG + APPLY, ACK awaited) at every power-up of a second UMBmark."""
+    CAN (ODOM_CONFIG + APPLY, ACK awaited) at every power-up of a second UMBmark (``on_run``
+    after each of the 4 x ``runs_per_direction`` squares)."""
     if method not in METHODS:
         raise ConfigurationError(f"unknown method {method!r} (known: {', '.join(METHODS)})")
     runs = runs_per_direction
-    before = run_umbmark(robot, errors, seed, side_m=side_m, runs_per_direction=runs)
+    before = run_umbmark(robot, errors, seed, side_m=side_m, runs_per_direction=runs,
+                         on_run=on_run)
     nominal = Correction.nominal(robot)
     estimate = borenstein(before.cg("cw"), before.cg("ccw"), side_m, robot.wheelbase_m)
     start = (estimate.ed, estimate.eb) if _plausible(estimate.ed, estimate.eb) else (1.0, 1.0)
@@ -363,7 +370,8 @@ def calibrate(
     chosen = (estimate.ed, estimate.eb) if method == "borenstein" else fitted
     corrected = nominal.corrected(*chosen)
     after = run_umbmark(
-        robot, errors, seed, side_m=side_m, runs_per_direction=runs, geometry=corrected, phase=1
+        robot, errors, seed, side_m=side_m, runs_per_direction=runs, geometry=corrected, phase=1,
+        on_run=on_run,
     )
     return Calibration(
         before, estimate, fitted, method, nominal, corrected, after, fit_residual_m

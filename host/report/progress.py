@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import TextIO
 
@@ -108,3 +108,17 @@ def wall_clock_progress(label: str, total_s: float | None) -> Iterator[Progress]
         finally:
             stop.set()
             thread.join()
+
+
+@contextmanager
+def counted_progress(label: str, total: int) -> Iterator[Callable[[], None]]:
+    """A progress line over ``total`` units with its ETA; yields the callback that counts one
+    unit done (for loops that live in another module, e.g. an experiment's runs)."""
+    with progress(label, total) as bar:
+        done = [0]
+
+        def one_more() -> None:
+            done[0] += 1
+            bar.update(done[0])
+
+        yield one_more

@@ -27,7 +27,7 @@ from odocan.host.experiments.keep import (
 from odocan.host.experiments.options import check_report_path, verdict, write_report
 from odocan.host.experiments.outputs import check_outputs, experiment_inputs, write_scatter
 from odocan.host.report.ci import calibration_checks, write_checks
-from odocan.host.report.progress import wall_clock_progress
+from odocan.host.report.progress import counted_progress
 from odocan.sim import errors, robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.robot import profile_sha256
@@ -77,7 +77,8 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     if not args.min_improvement >= 1.0:
         raise ConfigurationError(f"--min-improvement must be >= 1, got {args.min_improvement}")
     profile, model = robot.load(args.robot), errors.parse(args.errors)
-    with wall_clock_progress(f"calibrate: 2 x UMBmark of 2 x {args.runs} squares", None):
+    squares = 4 * args.runs
+    with counted_progress(f"calibrate: 2 x UMBmark of 2 x {args.runs} squares", squares) as one:
         cal = umbmark.calibrate(
             profile,
             model,
@@ -85,6 +86,7 @@ def _do_calibrate(args: argparse.Namespace) -> int:
             side_m=args.side,
             runs_per_direction=args.runs,
             method=args.method,
+            on_run=one,
         )
     print(header(args, model, "calibrate"))
     render.show(

@@ -27,7 +27,7 @@ from odocan.host.report.ci import (
     experiment_checks,
     write_checks,
 )
-from odocan.host.report.progress import wall_clock_progress
+from odocan.host.report.progress import counted_progress
 from odocan.sim import errors, robot
 
 EXPERIMENTS = ("seed002",)
@@ -70,8 +70,8 @@ def _do_experiment(args: argparse.Namespace) -> int:
         seed=args.seed,
         runs=args.runs,
     )
-    with wall_clock_progress(f"seed002: 2 x {config.runs} runs", None):
-        result = seed002.run_seed002(config)
+    with counted_progress(f"seed002: 2 x {config.runs} runs", 2 * config.runs) as one_more:
+        result = seed002.run_seed002(config, on_run=one_more)
     e = config.errors
     print(
         f"seed002 on {config.robot.name}: ed={e.ed:g}, eb={e.eb:g}, slip={e.slip:g}, start "

@@ -28,7 +28,7 @@ from odocan.host.experiments.outputs import (
 )
 from odocan.host.experiments.umbmark import Correction
 from odocan.host.report.ci import umbmark_checks, write_checks
-from odocan.host.report.progress import wall_clock_progress
+from odocan.host.report.progress import counted_progress
 from odocan.sim import errors, robot
 from odocan.sim.exceptions import ConfigurationError
 
@@ -115,10 +115,10 @@ def _do_umbmark(args: argparse.Namespace) -> int:
     profile, model = robot.load(args.robot), errors.parse(args.errors)
     firmware = firmware_profile(args, profile)
     geometry = None if firmware is None else Correction.nominal(firmware)
-    with wall_clock_progress(f"UMBmark: 2 x {args.runs} squares", None):
+    with counted_progress(f"UMBmark: 2 x {args.runs} squares", 2 * args.runs) as one_more:
         result = umbmark.run_umbmark(
             profile, model, args.seed, side_m=args.side, runs_per_direction=args.runs,
-            geometry=geometry,
+            geometry=geometry, on_run=one_more,
         )
     print(header(args, model, "UMBmark"))
     render.show(render.umbmark_table(result))
