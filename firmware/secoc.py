@@ -42,7 +42,7 @@ the AUTH reasons are ``firmware.frames.AckReason``'s AUTH_*.
 from __future__ import annotations
 
 from enum import IntEnum
-from typing import Final, NamedTuple, Protocol
+from typing import Final, NamedTuple
 
 from odocan.firmware import frames as fr
 from odocan.firmware.aes import AES128_KEY_BYTES, AES_BLOCK_BYTES, encrypt_words, load_be32
@@ -50,6 +50,7 @@ from odocan.firmware.cmac import CmacKey, cmac_key
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.fixmath import U32_MAX, u16, u32, u64, wrap_u32
 from odocan.firmware.frames import NAV_GOAL_ID, ODOM_CONFIG_ID, ODOM_SET_POSE_ID
+from odocan.firmware.hal import FreshnessNvm
 
 # --- the profile ---
 MAC_BITS: Final = 32  # truncated authenticator on the wire
@@ -91,7 +92,7 @@ SECURED_IDS: Final[tuple[int, ...]] = (NAV_GOAL_ID, ODOM_SET_POSE_ID, ODOM_CONFI
 
 
 class AuthStatus(IntEnum):
-    """Result of one verification; the values are the proposed ODOM_ACK ``REASON`` codes."""
+    """Result of one verification; the values are ODOM_ACK ``REASON``'s AUTH_* codes."""
 
     OK = 0
     FAILED = 7  # AUTH_FAILED: the authenticator does not match (forged, corrupted, wrong key)
@@ -108,18 +109,6 @@ class FreshnessCause(IntEnum):
     REFUSED = 2  # right after a FRESHNESS refusal
     ROLLOVER = 3  # EPOCH advanced after 2^28 - 4096 commands
     UNAVAILABLE = 4  # secured commands are refused (see AuthStatus.UNAVAILABLE)
-
-
-class FreshnessNvm(Protocol):
-    """The HAL's non-volatile cell holding EPOCH (a u32 in data flash or EEPROM)."""
-
-    def read_epoch(self) -> u32:
-        """The stored EPOCH; 0 when the cell was never written."""
-        ...
-
-    def write_epoch(self, epoch: u32) -> bool:
-        """Store ``epoch``; False when the write failed (the firmware then fails closed)."""
-        ...
 
 
 def authenticator_input(data_id: u16, pdu: bytes | bytearray, fv: u64) -> bytearray:

@@ -65,6 +65,7 @@ class RigConfig:
     fw_faults: FaultSpec | None = None  # on the firmware's handle: what ODOM_MCU sends
     duration_s: float | None = None  # the run's length (default: the scenario's own)
     truth_phase_ticks: int = 0  # SIM_TRUTH on ticks k = phase (mod its cycle); keep it even
+    secoc_key: bytes | None = field(default=None, repr=False)  # SecOC key (None: none); secret
 
 
 class LockstepRig(Closing):
@@ -102,7 +103,7 @@ class LockstepRig(Closing):
         self.sim = SimNode(
             sim_bus, vehicle, self.clock, scenario, truth_phase_ticks=config.truth_phase_ticks
         )
-        self.board = FirmwareBoard(fw_bus, params, self.clock)
+        self.board = FirmwareBoard(fw_bus, params, self.clock, secoc_key=config.secoc_key)
         self.listeners = list(listeners)
         self.ticks = 0
 
