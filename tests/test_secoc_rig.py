@@ -255,4 +255,4 @@ def test_a_firmware_whose_nvm_fails_refuses_every_secured_command() -> None:
         seen = step(lockstep, bus, signer.secure(set_pose(Counters(), 500, 500)))
     answers = [a.reason for a in acks(seen)]
     assert answers == [fr.AckReason.AUTH_UNAVAILABLE] * 3
-    assert AuthRequest.ODOM_SET_POSE == REQUEST[fr.ODOM_SET_POSE_ID]
+    assert REQUEST[fr.ODOM_SET_POSE_ID] == AuthRequest.ODOM_SET_POSE
