@@ -63,10 +63,8 @@ class Verdict:
 
     @property
     def passed(self) -> bool:
-        return (
-            self.max_position_error_m <= POSITION_LSB_M
-            and self.max_heading_error_rad <= HEADING_LSB_RAD
-        )
+        return (self.max_position_error_m <= POSITION_LSB_M
+                and self.max_heading_error_rad <= HEADING_LSB_RAD)
 
 
 def crc8h2f(data: bytes) -> int:
@@ -86,10 +84,8 @@ class _Frames:
         db = cantools.database.load_file(str(DBC_PATH))
         assert isinstance(db, Database)
         self.db = db
-        self._ids = {
-            m.frame_id: [int(v) for v in m.dbc.attributes["E2EDataIDs"].value.split(",")]
-            for m in db.messages
-        }
+        self._ids = {m.frame_id: [int(v) for v in m.dbc.attributes["E2EDataIDs"].value.split(",")]
+                     for m in db.messages}
         self.rows: list[tuple[float, str, dict[str, float | int]]] = []
         last_counter: dict[int, int] = {}
         for line in path.read_text().splitlines():
@@ -152,9 +148,7 @@ class _Odometry:
 
 
 def check(
-    path: Path,
-    robot: Robot,
-    integrator: str,
+    path: Path, robot: Robot, integrator: str,
     starts: Callable[[float], tuple[float, float, float]],
 ) -> Verdict:
     """Compare the on-board poses of the log at ``path`` with this checker's odometry started
@@ -193,11 +187,8 @@ def check(
 
 
 def _pair(
-    name: str,
-    s: dict[str, float | int],
-    recent: list[tuple[int, tuple[float, float, float]]],
-    halves: dict[tuple[str, int], dict[str, float]],
-    errors: list[tuple[float, float]],
+    name: str, s: dict[str, float | int], recent: list[tuple[int, tuple[float, float, float]]],
+    halves: dict[tuple[str, int], dict[str, float]], errors: list[tuple[float, float]],
 ) -> None:
     """File one pose half; when both halves of one encoder frame are in, record its errors."""
     named = int(s["ENC_COUNTER"])

@@ -108,13 +108,8 @@ def synthesize(
         left, right = (left + int(dl[k])) & mask, (right + int(dr[k])) & mask
         odo.step_counts(left, right)
         t_s = t0_s + k * ENCODER_PERIOD_S
-        group = [
-            _line(
-                t_s,
-                fr.WHEEL_ENCODERS_ID,
-                fr.pack_wheel_encoders(k, left & wire_mask, right & wire_mask),
-            )
-        ]
+        group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
+                       fr.pack_wheel_encoders(k, left & wire_mask, right & wire_mask))]
         if k % 2 == 0:
             group += _pose_lines(odo, t_s + 0.001, pose_counter, k & 0xF, errors, bias.get(k, 0))
             pose_counter += 1

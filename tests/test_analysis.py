@@ -38,19 +38,8 @@ SECONDS = 20.0
 ERRORS = ErrorModel(ed=1.01, eb=1.02)
 NO_ERRORS = ErrorModel()
 REPORT_KEYS = {
-    "robot",
-    "integrator",
-    "scenario",
-    "seed",
-    "sim_seconds",
-    "wall_seconds",
-    "realtime_factor",
-    "frames",
-    "onboard_vs_reference",
-    "onboard_vs_truth",
-    "final_onboard_pose",
-    "e2e",
-    "passed",
+    "robot", "integrator", "scenario", "seed", "sim_seconds", "wall_seconds", "realtime_factor",
+    "frames", "onboard_vs_reference", "onboard_vs_truth", "final_onboard_pose", "e2e", "passed",
     "tolerance",
 }
 
@@ -174,8 +163,7 @@ def test_dbc_mismatch_errors(tmp_path: Path) -> None:
     with pytest.raises(AnalysisError, match=r"no WHEEL_ENCODERS frame .* does not match"):
         analyze(frames, PMIR, db=moved)
     other_ids = dbc_variant(
-        tmp_path,
-        '"16,17,18,19,20,21,22,23,24,25,26,27,28,29,30,31"',
+        tmp_path, '"16,17,18,19,20,21,22,23,24,25,26,27,28,29,30,31"',
         '"32,33,34,35,36,37,38,39,40,41,42,43,44,45,46,47"',
     )
     with pytest.raises(AnalysisError, match="E2E check: the DBC does not match"):
@@ -217,15 +205,8 @@ def test_judge_own_error_after_100_km_is_below_a_twentieth_lsb(
     synth, d_left, d_right = long_drive(robot, integrator)
     analysis = analyze(read_log(synth.write(tmp_path / "long.log", cut)), load(robot))
     x0, y0, h0 = synth.state[cut].pose
-    exact = integrate(
-        d_left[cut:],
-        d_right[cut:],
-        Geometry.of(load(robot)),
-        integrator,
-        x0_m=x0,
-        y0_m=y0,
-        heading0_rad=h0,
-    )
+    exact = integrate(d_left[cut:], d_right[cut:], Geometry.of(load(robot)), integrator,
+                      x0_m=x0, y0_m=y0, heading0_rad=h0)
     exact_x = np.concatenate(([x0], exact.x_m))[::2]  # the pose is sent every other frame
     exact_y = np.concatenate(([y0], exact.y_m))[::2]
     judge_x, judge_y = analysis.series["reference_x_m"], analysis.series["reference_y_m"]
@@ -255,13 +236,8 @@ def test_a_pose_after_16_lost_frames_is_not_paired_with_the_frame_16_older(tmp_p
     profile = load("pmir")
     d = np.full(300, 30)
     synth = synthesize(profile, "exact", d, d + 1)
-    lines = [
-        line
-        for k, group in enumerate(synth.groups)
-        if not 100 < k < 116
-        for line in group
-        if not (k == 100 and " 100#" not in line)
-    ]
+    lines = [line for k, group in enumerate(synth.groups) if not 100 < k < 116
+             for line in group if not (k == 100 and " 100#" not in line)]
     analysis = analyze(read_log(write_lines(tmp_path / "gap16.log", lines)), profile)
     assert analysis.passed, analysis.report["onboard_vs_reference"]
     assert analysis.report["samples"]["unmatched_poses"] == 2  # X and Y of frame 116
@@ -282,7 +258,5 @@ def test_a_recorder_started_late_is_not_a_power_up(tmp_path: Path) -> None:
     whole = analyze(read_log(synth.write(tmp_path / "whole.log")), profile)
     late = analyze(read_log(synth.write(tmp_path / "late.log", 4)), profile)
     assert (whole.report["reference_start"], late.report["reference_start"]) == (
-        "power-up",
-        "fitted",
-    )
+        "power-up", "fitted")
     assert whole.passed and late.passed

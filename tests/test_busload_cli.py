@@ -166,10 +166,9 @@ def test_another_dbc(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
     assert (messages["SLOW"]["period_ms"], messages["SLOW"]["deadline_ms"]) == (10.0, 1.0)
     # blocked by BIG (160 bits, 1.28 ms), then FAST and itself (135 bits, 1.08 ms each)
     assert messages["SLOW"]["r_ms"] == pytest.approx(1.28 + 2 * 1.08)
-    assert (
-        messages["EVENT"]["period_ms"] == 50.0
-        and "GenMsgDelayTime" in messages["EVENT"]["assumption"]
-    )
+    assert messages["EVENT"]["period_ms"] == 50.0 and "GenMsgDelayTime" in messages["EVENT"][
+        "assumption"
+    ]
     assert messages["BARE"]["period_ms"] == 5.0  # the shortest cycle, FAST's
     big = messages["BIG"]
     assert big["extended"] and big["bits"] == 160 and big["id"] == 0x18FF0000

@@ -37,20 +37,8 @@ def calibrate(
     capsys: pytest.CaptureFixture[str], tmp_path: Path, errors: str, runs: int
 ) -> tuple[Path, dict[str, object], str]:
     path, report, junit = tmp_path / "kept.toml", tmp_path / "cal.json", tmp_path / "cal.xml"
-    code, out = cli(
-        capsys,
-        "calibrate",
-        "--runs",
-        str(runs),
-        *SQUARE,
-        errors,
-        "--write-robot",
-        str(path),
-        "--report",
-        str(report),
-        "--junit",
-        str(junit),
-    )
+    code, out = cli(capsys, "calibrate", "--runs", str(runs), *SQUARE, errors,
+                    "--write-robot", str(path), "--report", str(report), "--junit", str(junit))
     assert code == 0
     root = ET.parse(junit).getroot()
     names = [c.get("name") for c in root.iter("testcase")]
@@ -60,28 +48,12 @@ def calibrate(
 
 
 def fresh_umbmark(
-    capsys: pytest.CaptureFixture[str],
-    tmp_path: Path,
-    profile: Path,
-    errors: str,
-    runs: int,
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, profile: Path, errors: str, runs: int,
     seed: int,
 ) -> float:
     report = tmp_path / f"fresh{seed}.json"
-    code, _ = cli(
-        capsys,
-        "umbmark",
-        "--runs",
-        str(runs),
-        *SQUARE,
-        errors,
-        "--seed",
-        str(seed),
-        "--firmware-robot",
-        str(profile),
-        "--report",
-        str(report),
-    )
+    code, _ = cli(capsys, "umbmark", "--runs", str(runs), *SQUARE, errors, "--seed", str(seed),
+                  "--firmware-robot", str(profile), "--report", str(report))
     assert code == 0
     data = json.loads(report.read_text())
     assert data["inputs"]["firmware_robot"]["name"] == "pmir-calibrated"
@@ -109,14 +81,11 @@ def test_written_profile_loads_and_keeps_the_promise_exactly(
     nominal = robot.load("pmir")
     printed = dict(re.findall(r"^\s+(\w+_multiplier): ([0-9.]+)$", out, re.M))
     assert float(printed["wheel_separation_multiplier"]) == pytest.approx(
-        kept.wheelbase_m / nominal.wheelbase_m, abs=1e-9
-    )
+        kept.wheelbase_m / nominal.wheelbase_m, abs=1e-9)
     assert float(printed["left_wheel_radius_multiplier"]) == pytest.approx(
-        kept.wheel_radius_left_m / nominal.wheel_radius_left_m, abs=1e-9
-    )
+        kept.wheel_radius_left_m / nominal.wheel_radius_left_m, abs=1e-9)
     assert float(printed["right_wheel_radius_multiplier"]) == pytest.approx(
-        kept.wheel_radius_right_m / nominal.wheel_radius_right_m, abs=1e-9
-    )
+        kept.wheel_radius_right_m / nominal.wheel_radius_right_m, abs=1e-9)
     # E_b = 1.01 injected: the wheelbase grows by about 1 %, E_d = 1.002 splits the radii
     assert float(printed["wheel_separation_multiplier"]) == pytest.approx(1.01, abs=2e-3)
     ratio = kept.wheel_radius_right_m / kept.wheel_radius_left_m
@@ -139,11 +108,8 @@ def test_corrected_profile_and_multipliers_by_hand() -> None:
     fixed = Correction(0.0749243444, 0.0750756556, 0.3029659404)
     kept = corrected_profile(nominal, fixed)
     assert kept.firmware_params() == {
-        "counts_per_rev": 500,
-        "wheel_radius_left_nm": 74924344,
-        "wheel_radius_right_nm": 75075656,
-        "wheelbase_nm": 302965940,
-        "counter_bits": 16,
+        "counts_per_rev": 500, "wheel_radius_left_nm": 74924344,
+        "wheel_radius_right_nm": 75075656, "wheelbase_nm": 302965940, "counter_bits": 16,
     }
     m = ros2_multipliers(nominal, kept)
     exact = 1e-15  # the ratio of two doubles on the nm grid vs the ratio of the integers
@@ -157,9 +123,8 @@ def test_firmware_robot_with_other_encoders_is_refused(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     other = tmp_path / "other.toml"
-    other.write_text(
-        robot.to_toml(robot.load("pmir")).replace("counter_bits = 16", "counter_bits = 32")
-    )
+    other.write_text(robot.to_toml(robot.load("pmir")).replace("counter_bits = 16",
+                                                               "counter_bits = 32"))
     code = main(["umbmark", "--firmware-robot", str(other)])
     out, err = capsys.readouterr()
     assert (code, out) == (2, "")

@@ -117,19 +117,9 @@ def test_analyze_log_without_permission(
     if shutil.which("setpriv") is None:
         pytest.fail("running as root without util-linux's setpriv: cannot drop CAP_DAC_OVERRIDE")
     done = subprocess.run(
-        [
-            "setpriv",
-            "--bounding-set=-dac_override,-dac_read_search",
-            sys.executable,
-            "-m",
-            "odocan",
-            "analyze",
-            str(locked),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
+        ["setpriv", "--bounding-set=-dac_override,-dac_read_search",
+         sys.executable, "-m", "odocan", "analyze", str(locked)],
+        capture_output=True, text=True, timeout=120, check=False,
     )
     assert done.returncode == 2, done.stderr
     lines = done.stderr.splitlines()

@@ -54,10 +54,8 @@ BAD: list[tuple[str, tuple[str, ...]]] = [
     ("analyze /nonexistent/drive.log", ("/nonexistent/drive.log",)),
     ("analyze {foreign}", ("no WHEEL_ENCODERS frame", "none of them an odocan frame")),
     ("analyze {empty}", ("empty.log", "empty log")),
-    (
-        "analyze {corrupt}",
-        ("none of the 200 WHEEL_ENCODERS frames passes its E2E check", "corrupted"),
-    ),
+    ("analyze {corrupt}", ("none of the 200 WHEEL_ENCODERS frames passes its E2E check",
+                           "corrupted")),
     ("analyze {text}", ("notes.txt",)),
     ("analyze {foreign} --report /dev/full", ("--report /dev/full",)),
     ("analyze {foreign} --dbc /nonexistent/x.dbc", ("/nonexistent/x.dbc",)),
@@ -160,13 +158,8 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     good, corrupt = tmp / "good.log", tmp / "corrupt.log"
     assert main(["run", "--duration", "2", "--log", str(good)]) == 0
     corrupt.write_text(_corrupt_encoder_checksums(good.read_text()))
-    return {
-        "tmp": str(tmp),
-        "foreign": str(foreign),
-        "empty": str(empty),
-        "text": str(text),
-        "corrupt": str(corrupt),
-    }
+    return {"tmp": str(tmp), "foreign": str(foreign), "empty": str(empty), "text": str(text),
+            "corrupt": str(corrupt)}
 
 
 def _corrupt_encoder_checksums(candump: str) -> str:
@@ -267,10 +260,8 @@ def test_rig_close_releases_every_bus_when_a_listener_fails() -> None:
     from odocan.sim import robot
     from odocan.sim.rig import LockstepRig, RigConfig
 
-    rig = LockstepRig(
-        RigConfig(robot=robot.load("pmir"), channel="contract-close"),
-        listeners=[_FailingListener(), _FailingListener()],
-    )
+    rig = LockstepRig(RigConfig(robot=robot.load("pmir"), channel="contract-close"),
+                      listeners=[_FailingListener(), _FailingListener()])
     rig.step()
     with pytest.raises(OSError, match="No space"):
         rig.close()

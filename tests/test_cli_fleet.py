@@ -17,21 +17,8 @@ def test_fleet_runs_and_reports(
     count_option: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     report = tmp_path / "fleet.json"
-    code = main(
-        [
-            "fleet",
-            count_option,
-            "2",
-            "--duration",
-            "1",
-            "--seed",
-            "7",
-            "--max-miss-ratio",
-            "1",
-            "--report",
-            str(report),
-        ]
-    )
+    code = main(["fleet", count_option, "2", "--duration", "1", "--seed", "7",
+                 "--max-miss-ratio", "1", "--report", str(report)])
     out, err = capsys.readouterr()
     assert code == 0, err
     assert out.startswith("fleet: 2 robots, ")
@@ -42,9 +29,8 @@ def test_fleet_runs_and_reports(
 
 
 def test_bridge_stops_after_its_wall_clock_duration(capsys: pytest.CaptureFixture[str]) -> None:
-    code = main(
-        ["bridge", "-i", "virtual", "-c", "cli-bridge", "--name", "r1", "--duration", "0.5"]
-    )
+    code = main(["bridge", "-i", "virtual", "-c", "cli-bridge", "--name", "r1",
+                 "--duration", "0.5"])
     err = capsys.readouterr().err
     assert code == 0, err
     assert err.startswith("bridge r1: mqtt://127.0.0.1:") and "(embedded)" in err

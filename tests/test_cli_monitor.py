@@ -128,13 +128,8 @@ def test_monitor_json_on_a_live_bus(source: Source, capsys: pytest.CaptureFixtur
     enc = messages["WHEEL_ENCODERS"]
     assert enc["id"] == "0x100"
     assert enc["count"] == TICKS
-    assert enc["e2e"] == {
-        "ok": TICKS,
-        "lost": 0,
-        "repeated": 0,
-        "crc_errors": 0,
-        "wrong_sequence": 0,
-    }
+    assert enc["e2e"] == {"ok": TICKS, "lost": 0, "repeated": 0, "crc_errors": 0,
+                          "wrong_sequence": 0}
     assert 50 < enc["rate_hz"] < 200  # about 100 Hz: a loose sanity check, not a timing test
     assert enc["jitter_ms"] >= 0
     assert set(enc["last"]) == {"LEFT_COUNT", "RIGHT_COUNT"}
@@ -144,15 +139,9 @@ def test_monitor_json_on_a_live_bus(source: Source, capsys: pytest.CaptureFixtur
     assert pose_y["e2e"]["crc_errors"] == rounds
     assert pose_y["e2e"]["ok"] == TICKS // 2
     assert messages["ODOM_POSE_X"]["last"]["X"] == pytest.approx(model["pose"]["x_m"])
-    assert model["unknown"] == {
-        "unknown_id": rounds,
-        "wrong_dlc": rounds,
-        "error_frames": rounds,
-        "remote_frames": rounds,
-        "unprotected": 0,
-        "ids": {"0x123": rounds},
-        "undecodable": 0,
-    }
+    assert model["unknown"] == {"unknown_id": rounds, "wrong_dlc": rounds,
+                                "error_frames": rounds, "remote_frames": rounds,
+                                "unprotected": 0, "ids": {"0x123": rounds}, "undecodable": 0}
     assert model["frames_total"] == sum(m["count"] for m in messages.values()) + 4 * rounds
 
 
@@ -162,11 +151,7 @@ def test_monitor_follows_the_firmware_and_its_pose(
     model = monitor_json(capsys, "-i", "virtual", "-c", source.channel, "--duration", "2")
     status = model["status"]
     assert (status["state"], status["integrator"], status["error_mask"], status["errors"]) == (
-        "OK",
-        "EXACT",
-        0,
-        [],
-    )
+        "OK", "EXACT", 0, [])
     assert status["uptime_s"] in (0, 1)
     assert model["reference"]["integrator"] == "exact"  # as ODOM_STATUS reports it
     assert model["reference"]["starts"] == 1
@@ -192,9 +177,8 @@ def test_monitor_integrator_given(source: Source, capsys: pytest.CaptureFixture[
     """With --integrator the reference starts at the first pose, whatever ODOM_STATUS says;
     another integrator than the firmware's still agrees to about the quantisation."""
     source.garbage = False
-    model = monitor_json(
-        capsys, "-i", "virtual", "-c", source.channel, "--duration", "2", "--integrator", "rk2"
-    )
+    model = monitor_json(capsys, "-i", "virtual", "-c", source.channel, "--duration", "2",
+                         "--integrator", "rk2")
     assert model["reference"]["integrator"] == "rk2"
     assert model["error"]["pose_vs_reference"]["samples"] == TICKS // 2
     assert model["unknown"]["unknown_id"] == 0
@@ -202,15 +186,15 @@ def test_monitor_integrator_given(source: Source, capsys: pytest.CaptureFixture[
 
 def test_monitor_screen(source: Source, capsys: pytest.CaptureFixture[str]) -> None:
     """Without --json: the rich screen (its last frame, as stdout is not a terminal)."""
-    code, out, err = run_cli(
-        capsys, "monitor", "-i", "virtual", "-c", source.channel, "--duration", "2"
-    )
+    code, out, err = run_cli(capsys, "monitor", "-i", "virtual", "-c", source.channel,
+                             "--duration", "2")
     assert (code, err) == (0, "")
     assert f"odocan monitor virtual:{source.channel}" in out
     assert "firmware OK  reason no error bits" in out  # host.report.tui's screen, 80 columns
     assert "EXACT  uptime" in out
     assert "verdict STALE: ODOM_MCU silent for" in out  # the last frame: the source has stopped
-    for name in ("WHEEL_ENCODERS", "ODOM_POSE_X", "SIM_TRUTH", "on-board ", "reference ", "truth "):
+    for name in ("WHEEL_ENCODERS", "ODOM_POSE_X", "SIM_TRUTH", "on-board ", "reference ",
+                 "truth "):
         assert name in out
     assert f"not checked: unknown id {TICKS // GARBAGE_EVERY}" in out
 
@@ -286,12 +270,8 @@ def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
         async with EmbeddedBroker() as broker:
             urls.append(str(broker.url))
             ready.set()
-            run = FleetRun(
-                fleet=FleetConfig(robots=2, robot=robot.load("pmir"), seed=1),
-                duration_s=3.5,
-                broker=broker.url,
-                client_prefix="test-monitor",
-            )
+            run = FleetRun(fleet=FleetConfig(robots=2, robot=robot.load("pmir"), seed=1),
+                           duration_s=3.5, broker=broker.url, client_prefix="test-monitor")
             reports.append(await run_fleet(run))
 
     urls: list[str] = []

@@ -37,37 +37,24 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """A 6 s random drive (seed 5, exact integrator): its log and its report."""
     folder = tmp_path_factory.mktemp("replay")
     paths = {"log": folder / "run.log", "report": folder / "run.json"}
-    argv = [
-        "run",
-        "--duration",
-        "6",
-        "--seed",
-        "5",
-        "--log",
-        str(paths["log"]),
-        "--report",
-        str(paths["report"]),
-    ]
+    argv = ["run", "--duration", "6", "--seed", "5", "--log", str(paths["log"]),
+            "--report", str(paths["report"])]
     assert main(argv) == 0
     return paths
 
 
 def frames_of(path: Path, ids: set[int] | None = None) -> list[tuple[float, int, bytes]]:
     """(timestamp, ID, payload) of every frame of a log (of ``ids`` only, when given)."""
-    return [
-        (round(m.timestamp, 6), m.arbitration_id, bytes(m.data))
-        for m in can.LogReader(path)
-        if ids is None or m.arbitration_id in ids
-    ]
+    return [(round(m.timestamp, 6), m.arbitration_id, bytes(m.data)) for m in can.LogReader(path)
+            if ids is None or m.arbitration_id in ids]
 
 
 def test_replay_reproduces_the_run(
     recorded: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     report_path, log_out = tmp_path / "replay.json", tmp_path / "replay.log"
-    code, out, err = run_cli(
-        capsys, "replay", str(recorded["log"]), "--report", str(report_path), "--log", str(log_out)
-    )
+    code, out, err = run_cli(capsys, "replay", str(recorded["log"]), "--report",
+                             str(report_path), "--log", str(log_out))
     assert (code, err) == (0, "")
     run, replay = json.loads(recorded["report"].read_text()), json.loads(report_path.read_text())
     assert set(replay) >= set(run)  # the same report contract, plus the replay section
@@ -77,12 +64,8 @@ def test_replay_reproduces_the_run(
     assert section["encoder_frames_fed"] == section["ticks"] == 600
     assert section["ticks_without_frame"] == 0
     assert section["onboard_vs_log"] == {
-        "samples": 300,
-        "identical": 300,
-        "max_position_diff_m": 0.0,
-        "max_heading_diff_rad": 0.0,
-        "before_first_gap": 300,
-        "max_position_diff_before_gap_m": 0.0,
+        "samples": 300, "identical": 300, "max_position_diff_m": 0.0, "max_heading_diff_rad": 0.0,
+        "before_first_gap": 300, "max_position_diff_before_gap_m": 0.0,
     }
     assert (section["passed"], section["faults"]) == (True, [])
     # Bit-identical pose and twist frames, at the same times; the log's truth frames kept.
@@ -90,32 +73,21 @@ def test_replay_reproduces_the_run(
     assert frames_of(log_out, {0x700}) == frames_of(recorded["log"], {0x700})
     assert replay["frames"] == {k: v for k, v in run["frames"].items() if k != "MOTOR_CMD"}
     lines = out.splitlines()
-    assert lines[0] == (
-        "replay: 600 encoder frames fed in 600 ticks; on-board vs the log's at "
-        "300 encoder frames: 300 identical, max difference 0.0000 mm, 0.0000 mrad"
-    )
+    assert lines[0] == ("replay: 600 encoder frames fed in 600 ticks; on-board vs the log's at "
+                        "300 encoder frames: 300 identical, max difference 0.0000 mm, 0.0000 mrad")
     assert lines[1] == f"odocan replay: {recorded['log']} on pmir, exact integrator"
     assert lines[-1].startswith("PASS: ")
 
 
 @pytest.mark.parametrize("integrator", ["euler", "rk2"])
 def test_replay_with_another_integrator(
-    integrator: str,
-    recorded: dict[str, Path],
-    tmp_path: Path,
+    integrator: str, recorded: dict[str, Path], tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     """Another integrator: other poses; beyond the tolerance it fails, naming the mismatch."""
     report_path = tmp_path / "replay.json"
-    code, out, err = run_cli(
-        capsys,
-        "replay",
-        str(recorded["log"]),
-        "--integrator",
-        integrator,
-        "--report",
-        str(report_path),
-    )
+    code, out, err = run_cli(capsys, "replay", str(recorded["log"]), "--integrator", integrator,
+                             "--report", str(report_path))
     report = json.loads(report_path.read_text())
     departs = report["replay"]["onboard_vs_log"]["max_position_diff_m"] > 1e-4
     assert (code, err) == (int(departs), "")
@@ -123,10 +95,8 @@ def test_replay_with_another_integrator(
     if departs:
         lines = out.splitlines()
         assert "FAIL: the replayed firmware departs from the log's" in lines
-        assert lines[-1] == (
-            f"  - integrator mismatch: the log's ODOM_STATUS reports exact, the "
-            f"replay ran {integrator}"
-        )
+        assert lines[-1] == (f"  - integrator mismatch: the log's ODOM_STATUS reports exact, the "
+                             f"replay ran {integrator}")
     vs_log = report["replay"]["onboard_vs_log"]
     assert vs_log["samples"] == 300
     assert vs_log["identical"] < vs_log["samples"]  # another integrator: other poses ...
@@ -190,8 +160,7 @@ def test_replay_fails_with_an_absurd_tolerance(
 
 
 def test_replay_interrupted_checks_what_ran(
-    recorded: dict[str, Path],
-    monkeypatch: pytest.MonkeyPatch,
+    recorded: dict[str, Path], monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     from odocan.sim.board import FirmwareBoard
@@ -232,18 +201,14 @@ def test_replay_interrupted_checks_what_ran(
     ],
 )
 def test_replay_bad_input_is_one_line(
-    argv: list[str],
-    words: list[str],
-    recorded: dict[str, Path],
-    tmp_path: Path,
+    argv: list[str], words: list[str], recorded: dict[str, Path], tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     garbage = tmp_path / "garbage.log"
     garbage.write_text("(0.000000) vcan0 100#8F00000000000000\nthis is not candump\n")
     no_encoders = tmp_path / "no_encoders.log"
-    no_encoders.write_text(
-        "".join(ln + "\n" for ln in recorded["log"].read_text().splitlines() if " 700#" in ln)
-    )
+    no_encoders.write_text("".join(ln + "\n" for ln in recorded["log"].read_text().splitlines()
+                                   if " 700#" in ln))
     paths = {"log": recorded["log"], "garbage": garbage, "no_encoders": no_encoders}
     argv = [a.format(**paths) if a.startswith("{") else a for a in argv]
     assert_usage_error(capsys, main(["replay", *argv]), *words)
@@ -253,42 +218,23 @@ def test_replay_realtime_plays_the_log_onto_a_bus(
     recorded: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     short = tmp_path / "short.log"  # the first half second
-    short.write_text(
-        "".join(
-            ln + "\n"
-            for ln in recorded["log"].read_text().splitlines()
-            if float(ln[1 : ln.index(")")]) < 0.5
-        )
-    )
+    short.write_text("".join(ln + "\n" for ln in recorded["log"].read_text().splitlines()
+                             if float(ln[1:ln.index(")")]) < 0.5))
     expected = frames_of(short)
     heard: list[can.Message] = []
     with can.Bus(interface="virtual", channel="odocan-test-replay-rt") as listener:
-
         def listen() -> None:
             while len(heard) < len(expected) and (msg := listener.recv(5.0)) is not None:
                 heard.append(msg)
 
         thread = threading.Thread(target=listen, name="listener")
         thread.start()
-        code, out, err = run_cli(
-            capsys,
-            "replay",
-            str(short),
-            "--realtime",
-            "-i",
-            "virtual",
-            "-c",
-            "odocan-test-replay-rt",
-            "--speed",
-            "10",
-        )
+        code, out, err = run_cli(capsys, "replay", str(short), "--realtime", "-i", "virtual",
+                                 "-c", "odocan-test-replay-rt", "--speed", "10")
         thread.join(10)
     assert (code, err) == (0, "")
-    assert re.fullmatch(
-        rf"replay: {len(expected)} of {len(expected)} frames played in "
-        r"\d+\.\d\d s \(10x the recorded timing\)\n",
-        out,
-    ), out
+    assert re.fullmatch(rf"replay: {len(expected)} of {len(expected)} frames played in "
+                        r"\d+\.\d\d s \(10x the recorded timing\)\n", out), out
     assert [(m.arbitration_id, bytes(m.data)) for m in heard] == [f[1:] for f in expected]
     # Timing, loosely: the last frame comes after the first (the log spans 0.49 s).
     assert heard[-1].timestamp > heard[0].timestamp
@@ -300,20 +246,9 @@ def test_replay_realtime_only_some_messages(
     short = tmp_path / "short.log"
     short.write_text("".join(ln + "\n" for ln in recorded["log"].read_text().splitlines()[:100]))
     with can.Bus(interface="virtual", channel="odocan-test-replay-only") as listener:
-        code, out, err = run_cli(
-            capsys,
-            "replay",
-            str(short),
-            "--realtime",
-            "-i",
-            "virtual",
-            "-c",
-            "odocan-test-replay-only",
-            "--speed",
-            "50",
-            "--only",
-            "WHEEL_ENCODERS,SIM_TRUTH",
-        )
+        code, out, err = run_cli(capsys, "replay", str(short), "--realtime", "-i", "virtual",
+                                 "-c", "odocan-test-replay-only", "--speed", "50",
+                                 "--only", "WHEEL_ENCODERS,SIM_TRUTH")
         heard = []
         while (msg := listener.recv(0)) is not None:
             heard.append(msg)
@@ -329,13 +264,8 @@ def test_replay_a_log_without_firmware_frames(
     """A recording of the motor controller alone (encoders and truth): the firmware runs on it
     for the first time; the integrator is then the default, exact."""
     only = tmp_path / "motor_controller.log"
-    only.write_text(
-        "".join(
-            ln + "\n"
-            for ln in recorded["log"].read_text().splitlines()
-            if " 100#" in ln or " 700#" in ln
-        )
-    )
+    only.write_text("".join(ln + "\n" for ln in recorded["log"].read_text().splitlines()
+                            if " 100#" in ln or " 700#" in ln))
     report_path = tmp_path / "replay.json"
     code, out, err = run_cli(capsys, "replay", str(only), "--report", str(report_path))
     assert (code, err) == (0, "")
@@ -350,10 +280,8 @@ def test_replay_a_log_without_firmware_frames(
 def kobuki_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 6 s random drive of kobuki (seed 5)."""
     path = tmp_path_factory.mktemp("kobuki") / "k.log"
-    assert (
-        main(["run", "--robot", "kobuki", "--duration", "6", "--seed", "5", "--log", str(path)])
-        == 0
-    )
+    assert main(["run", "--robot", "kobuki", "--duration", "6", "--seed", "5", "--log",
+                 str(path)]) == 0
     return path
 
 
@@ -368,13 +296,11 @@ def test_replay_on_the_wrong_robot_fails_and_names_the_right_one(
     at = lines.index("FAIL: the replayed firmware departs from the log's")
     assert lines[at + 1].startswith("  - its position differs from the log's by up to ")
     assert lines[at + 2].startswith("  - its heading differs from the log's by up to ")
-    assert lines[at + 3 :] == [
-        "  - robot mismatch: the log's poses fit robot 'kobuki', not 'pmir' (--robot)"
-    ]
+    assert lines[at + 3:] == ["  - robot mismatch: the log's poses fit robot 'kobuki', not "
+                              "'pmir' (--robot)"]
     report = json.loads(report_path.read_text())
     assert report["passed"] is False and report["replay"]["faults"] == [
-        line[4:] for line in lines[at + 1 :]
-    ]
+        line[4:] for line in lines[at + 1:]]
     code, out, _ = run_cli(capsys, "replay", str(kobuki_log), "--robot", "kobuki")
     assert code == 0 and "departs" not in out
 
@@ -384,17 +310,13 @@ def test_replay_on_a_custom_robot_names_the_shipped_one_that_fits(
 ) -> None:
     """A custom profile the log was not recorded with: the shipped one that fits is named."""
     custom = tmp_path / "odd.toml"
-    custom.write_text(
-        'name = "odd"\ncounts_per_rev = 4000\nwheel_radius_left_m = 0.04\n'
-        "wheel_radius_right_m = 0.04\nwheelbase_m = 0.3\ncounter_bits = 32\n"
-    )
-    code, out, _ = run_cli(
-        capsys, "replay", str(kobuki_log), "--robot", str(custom), "--integrator", "exact"
-    )
+    custom.write_text('name = "odd"\ncounts_per_rev = 4000\nwheel_radius_left_m = 0.04\n'
+                      'wheel_radius_right_m = 0.04\nwheelbase_m = 0.3\ncounter_bits = 32\n')
+    code, out, _ = run_cli(capsys, "replay", str(kobuki_log), "--robot", str(custom),
+                           "--integrator", "exact")
     assert code == 1
-    assert out.splitlines()[-1] == (
-        "  - robot mismatch: the log's poses fit robot 'kobuki', not 'odd' (--robot)"
-    )
+    assert out.splitlines()[-1] == ("  - robot mismatch: the log's poses fit robot 'kobuki', not "
+                                    "'odd' (--robot)")
 
 
 def test_replay_reproduces_a_log_written_with_the_firmwares_integers(
@@ -412,13 +334,8 @@ def test_replay_reproduces_a_log_written_with_the_firmwares_integers(
     assert (code, err) == (0, "")
     vs_log = json.loads(report_path.read_text())["replay"]["onboard_vs_log"]
     assert vs_log["samples"] == vs_log["identical"] == 751
-    assert check(
-        log,
-        Robot(**profile.firmware_params()),
-        "rk2",
-        lambda t_s: synth.state[round(t_s / ENCODER_PERIOD_S)].pose,
-    ).passed
+    assert check(log, Robot(**profile.firmware_params()), "rk2",
+                 lambda t_s: synth.state[round(t_s / ENCODER_PERIOD_S)].pose).passed
     code, out, _ = run_cli(capsys, "replay", str(log), "--robot", "kobuki")
     assert code == 1 and out.splitlines()[-1] == (
-        "  - robot mismatch: the log's poses fit robot 'pmir', not 'kobuki' (--robot)"
-    )
+        "  - robot mismatch: the log's poses fit robot 'pmir', not 'kobuki' (--robot)")

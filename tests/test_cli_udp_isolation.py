@@ -26,21 +26,15 @@ SETTLE_S = 0.5
 def _groups() -> tuple[str, str]:
     """Two distinct random groups in the organisation-local scope, on distinct derived ports."""
     while True:
-        a, b = (
-            f"239.255.{secrets.randbelow(250) + 1}.{secrets.randbelow(250) + 1}" for _ in range(2)
-        )
+        a, b = (f"239.255.{secrets.randbelow(250) + 1}.{secrets.randbelow(250) + 1}"
+                for _ in range(2))
         if a != b and udp_port_for_group(a) != udp_port_for_group(b):
             return a, b
 
 
 def _args(group: str, *extra: str) -> argparse.Namespace:
-    return argparse.Namespace(
-        interface="udp_multicast",
-        channel=group,
-        bitrate=None,
-        bus_arg=["hop_limit=0", *extra],
-        faults="",
-    )
+    return argparse.Namespace(interface="udp_multicast", channel=group, bitrate=None,
+                              bus_arg=["hop_limit=0", *extra], faults="")
 
 
 def _open(group: str, *extra: str) -> can.BusABC:
@@ -59,14 +53,8 @@ def _exchange(extra: tuple[str, ...]) -> dict[str, list[int]]:
     try:
         for n in range(FRAMES):
             for tag, sender in enumerate(senders):
-                sender.send(
-                    can.Message(
-                        arbitration_id=0x100 + tag,
-                        data=n.to_bytes(2, "little"),
-                        is_extended_id=False,
-                        is_fd=False,
-                    )
-                )
+                sender.send(can.Message(arbitration_id=0x100 + tag, data=n.to_bytes(2, "little"),
+                                        is_extended_id=False, is_fd=False))
             time.sleep(0.001)
         heard: dict[str, list[int]] = {}
         for group, receiver in zip(groups, receivers, strict=True):
@@ -102,13 +90,8 @@ def test_the_port_is_derived_only_for_udp_multicast_without_one() -> None:
     assert port == udp_port_for_group(" 239.74.163.9 ")  # the same group, the same port
     assert udp_port_for_group("239.74.163.2") != port
     assert isolated_bus_kwargs({"interface": "udp_multicast", "channel": group}) == {
-        "interface": "udp_multicast",
-        "channel": group,
-        "port": port,
-    }
+        "interface": "udp_multicast", "channel": group, "port": port}
     given = {"interface": "udp_multicast", "channel": group, "port": 43113}
     assert isolated_bus_kwargs(given) == given
     assert isolated_bus_kwargs({"interface": "virtual", "channel": "x"}) == {
-        "interface": "virtual",
-        "channel": "x",
-    }
+        "interface": "virtual", "channel": "x"}

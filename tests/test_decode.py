@@ -76,9 +76,8 @@ def as_frames(can_id: int, payloads: list[bytes], extended: bool = False) -> Fra
     collector = FrameCollector()
     for i, data in enumerate(payloads):
         collector.on_message_received(
-            can.Message(
-                timestamp=i * 0.01, arbitration_id=can_id, data=data, is_extended_id=extended
-            )
+            can.Message(timestamp=i * 0.01, arbitration_id=can_id, data=data,
+                        is_extended_id=extended)
         )
     return collector.arrays()
 
@@ -149,25 +148,14 @@ def special_messages() -> list[can.Message]:
     """Frames the rig never sends: extended, remote, error, short, CAN FD, empty."""
     return [
         can.Message(timestamp=100.5, arbitration_id=0x1ABCDEF0, is_extended_id=True, data=b"\x01"),
-        can.Message(
-            timestamp=100.6, arbitration_id=0x123, is_extended_id=False, is_remote_frame=True, dlc=4
-        ),
+        can.Message(timestamp=100.6, arbitration_id=0x123, is_extended_id=False,
+                    is_remote_frame=True, dlc=4),
         can.Message(timestamp=100.7, is_error_frame=True),
         can.Message(timestamp=100.8, arbitration_id=0x7FF, is_extended_id=False, data=b""),
-        can.Message(
-            timestamp=100.9,
-            arbitration_id=0x42,
-            is_extended_id=False,
-            is_fd=True,
-            data=b"\xaa\xbb\xcc",
-        ),
-        can.Message(
-            timestamp=1700000000.123456,
-            arbitration_id=0x100,
-            is_extended_id=False,
-            data=bytes(range(8)),
-            is_rx=False,
-        ),
+        can.Message(timestamp=100.9, arbitration_id=0x42, is_extended_id=False, is_fd=True,
+                    data=b"\xaa\xbb\xcc"),
+        can.Message(timestamp=1700000000.123456, arbitration_id=0x100, is_extended_id=False,
+                    data=bytes(range(8)), is_rx=False),
     ]
 
 
@@ -177,10 +165,8 @@ def write_log(path: Path, frames: FrameArrays, extra: Sequence[can.Message] = ()
         for i in range(len(frames)):
             logger.on_message_received(
                 can.Message(
-                    timestamp=float(frames.timestamp_s[i]),
-                    arbitration_id=int(frames.can_id[i]),
-                    is_extended_id=False,
-                    data=bytes(frames.data[i][: frames.dlc[i]]),
+                    timestamp=float(frames.timestamp_s[i]), arbitration_id=int(frames.can_id[i]),
+                    is_extended_id=False, data=bytes(frames.data[i][: frames.dlc[i]]),
                     channel="vcan0",
                 )
             )

@@ -54,11 +54,8 @@ def seed002_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, str, dic
     path = tmp_path_factory.mktemp("seed002") / "report.json"
     stdout = io.StringIO()
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(stdout):
-        mp.setattr(
-            cli,
-            "SUBCOMMANDS",
-            cli.SUBCOMMANDS + tuple(c for c in OUR_COMMANDS if c not in cli.SUBCOMMANDS),
-        )
+        mp.setattr(cli, "SUBCOMMANDS", cli.SUBCOMMANDS + tuple(
+            c for c in OUR_COMMANDS if c not in cli.SUBCOMMANDS))
         code = cli.main(["experiment", "seed002", "--report", str(path)])
     return code, stdout.getvalue(), json.loads(path.read_text())
 
@@ -76,10 +73,9 @@ def test_tables_are_laid_out_like_the_papers(seed002_run: tuple[int, str, dict[s
     t1 = next(i for i, line in enumerate(lines) if line.startswith("Table 1."))
     t2 = next(i for i, line in enumerate(lines) if line.startswith("Table 2."))
     assert "1 m straight, 10 runs" in lines[t1] and "80 cm square" in lines[t2]
-    for start, end, header in (
-        (t1, t2, ("Distance travelled (cm)", "Deviation angle (deg)")),
-        (t2, len(lines), ("Side length (cm)", "Deviation angle (deg)", "Turn angle (deg)")),
-    ):
+    for start, end, header in ((t1, t2, ("Distance travelled (cm)", "Deviation angle (deg)")),
+                               (t2, len(lines), ("Side length (cm)", "Deviation angle (deg)",
+                                                 "Turn angle (deg)"))):
         block = lines[start:end]
         assert all(any(h in line for line in block) for h in header)
         rows = [line.split() for line in block if line.split() and line.split()[0].isdigit()]
@@ -90,12 +86,8 @@ def test_tables_are_laid_out_like_the_papers(seed002_run: tuple[int, str, dict[s
 
 def test_report_contract_and_plausible_values(seed002_run: tuple[int, str, dict[str, Any]]) -> None:
     _, _, report = seed002_run
-    assert report["error_model"] == {
-        "ed": 1.002,
-        "eb": 1.01,
-        "slip": 0.005,
-        "misalign_std_deg": 1.0,
-    }
+    assert report["error_model"] == {"ed": 1.002, "eb": 1.01, "slip": 0.005,
+                                     "misalign_std_deg": 1.0}
     straight, square = report["straight_1m"]["runs"], report["square_80cm"]["runs"]
     assert len(straight) == 10 and len(square) == 10
     for run in straight:
@@ -105,10 +97,8 @@ def test_report_contract_and_plausible_values(seed002_run: tuple[int, str, dict[
         assert {"side_m", "deviation_deg", "turn_deg"} <= run.keys()
         assert abs(run["side_m"] - 0.8) < 0.01 and abs(run["turn_deg"] - 90.0) < 3.0
         assert len(run["sides_m"]) == 4 and len(run["turns_deg"]) == 3
-    for table, runs, keys in (
-        ("straight_1m", straight, ("distance_m", "deviation_deg")),
-        ("square_80cm", square, ("side_m", "deviation_deg", "turn_deg")),
-    ):
+    for table, runs, keys in (("straight_1m", straight, ("distance_m", "deviation_deg")),
+                              ("square_80cm", square, ("side_m", "deviation_deg", "turn_deg"))):
         for key in keys:
             assert report[table]["mean"][key] == pytest.approx(_mean([r[key] for r in runs]))
     # the misalignment is what makes the straight runs' deviations differ (paper: 0 .. 10 deg)
@@ -188,21 +178,12 @@ def test_every_run_is_judged_and_a_wrong_firmware_fails(
     config = _config(ErrorModel(ed=1.002), runs=1)
     assert seed002.run_seed002(config).faults() == []
     kobuki = load("kobuki")
-    monkeypatch.setattr(
-        seed002.Geometry,
-        "of",
-        classmethod(
-            lambda cls, robot: cls(
-                kobuki.counts_per_rev,
-                kobuki.wheel_radius_left_m,
-                kobuki.wheel_radius_right_m,
-                kobuki.wheelbase_m,
-            )
-        ),
-    )
+    monkeypatch.setattr(seed002.Geometry, "of", classmethod(lambda cls, robot: cls(
+        kobuki.counts_per_rev, kobuki.wheel_radius_left_m, kobuki.wheel_radius_right_m,
+        kobuki.wheelbase_m)))
     code = cli.main(["experiment", "seed002", "--runs", "1", "--errors", "", "--misalign", "0"])
     out = capsys.readouterr().out
-    verdict = out[out.index("seed002: FAIL") :].splitlines()
+    verdict = out[out.index("seed002: FAIL"):].splitlines()
     assert code == 1 and len(verdict) == 3
     assert verdict[1].startswith("  - straight run 1: the on-board end is ")
     assert verdict[2].startswith("  - square run 1: the on-board end is ")

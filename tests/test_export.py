@@ -52,11 +52,10 @@ def test_duckdb_recomputes_the_reports_errors(
     run_outputs: tuple[dict[str, Any], Path, Path],
 ) -> None:
     report, parquet, _ = run_outputs
-    ((count, max_pos, max_head, max_recomputed),) = sql(
+    (count, max_pos, max_head, max_recomputed), = sql(
         "select count(*), max(position_error_m), max(abs(heading_error_rad)), "
         "max(sqrt((onboard_x_m - reference_x_m)^2 + (onboard_y_m - reference_y_m)^2)) "
-        "from {series}",
-        parquet,
+        "from {series}", parquet,
     )
     ref = report["onboard_vs_reference"]
     assert count == report["samples"]["onboard"] > 250
@@ -64,24 +63,17 @@ def test_duckdb_recomputes_the_reports_errors(
     assert max_head == ref["max_heading_error_rad"]
     assert max_recomputed == pytest.approx(ref["max_position_error_m"], rel=1e-12, abs=1e-18)
     columns = {row[0] for row in sql("select column_name from (describe {truth})", parquet)}
-    assert columns >= {
-        "timestamp_s",
-        "truth_x_m",
-        "truth_y_m",
-        "truth_heading_rad",
-        "truth_position_error_m",
-        "truth_heading_error_rad",
-    }
-    ((t_count, t_max),) = sql("select count(*), max(truth_position_error_m) from {truth}", parquet)
+    assert columns >= {"timestamp_s", "truth_x_m", "truth_y_m", "truth_heading_rad",
+                       "truth_position_error_m", "truth_heading_error_rad"}
+    (t_count, t_max), = sql("select count(*), max(truth_position_error_m) from {truth}", parquet)
     truth = report["onboard_vs_truth"]
     assert t_count == report["samples"]["truth_compared"] > 50
     assert t_max == truth["max_position_error_m"] > 1e-3  # the errors make the truth drift
     # where an on-board sample names the truth sample's encoder frame, the error is theirs
-    ((joined, off),) = sql(
+    (joined, off), = sql(
         "select count(*), count(*) filter (where abs(t.truth_position_error_m - "
         "sqrt((s.onboard_x_m - t.truth_x_m)^2 + (s.onboard_y_m - t.truth_y_m)^2)) > 1e-12) "
-        "from {truth} t join {series} s using (timestamp_s)",
-        parquet,
+        "from {truth} t join {series} s using (timestamp_s)", parquet,
     )
     assert joined > 25 and off == 0
 
@@ -90,10 +82,9 @@ def test_the_last_sample_is_the_reports_final_pose(
     run_outputs: tuple[dict[str, Any], Path, Path],
 ) -> None:
     report, parquet, _ = run_outputs
-    ((x, y, h),) = sql(
+    (x, y, h), = sql(
         "select onboard_x_m, onboard_y_m, onboard_heading_rad from {series} "
-        "order by timestamp_s desc limit 1",
-        parquet,
+        "order by timestamp_s desc limit 1", parquet,
     )
     final = report["final_onboard_pose"]
     assert (x, y, h) == (final["x_m"], final["y_m"], final["heading_rad"])
@@ -104,12 +95,11 @@ def test_the_pose_series_is_the_decoded_pose_frames(
 ) -> None:
     """ODOM_POSE_X.X_m (decoded, scaled) is the on-board x of the series, frame by frame."""
     _, parquet, _ = run_outputs
-    ((mismatch, matched),) = sql(
+    (mismatch, matched), = sql(
         "select count(*) filter (where abs(p.X_m - s.onboard_x_m) > 1e-9), count(*) "
         "from {series} s join {WHEEL_ENCODERS} e on e.timestamp_s = s.timestamp_s "
         "join {ODOM_POSE_X} p on p.index > e.index and p.ENC_COUNTER = e.COUNTER "
-        "and p.timestamp_s < e.timestamp_s + 0.01",
-        parquet,
+        "and p.timestamp_s < e.timestamp_s + 0.01", parquet,
     )
     assert matched >= 250
     assert mismatch == 0
@@ -124,9 +114,8 @@ def test_signals_equal_cantools_decode_per_frame(
     db = database()
     raw = {
         row[0]: row[1:]
-        for row in relation(
-            f"select row_number() over () - 1, can_id, data from '{parquet / 'frames.parquet'}'"
-        ).fetchall()
+        for row in relation(f"select row_number() over () - 1, can_id, data "
+                              f"from '{parquet / 'frames.parquet'}'").fetchall()
     }
     checked = 0
     for path in sorted(parquet.glob("[A-Z]*.parquet")):
@@ -155,7 +144,7 @@ def test_e2e_column_agrees_with_the_report(run_outputs: tuple[dict[str, Any], Pa
     for name, counts in report["e2e"].items():
         path = parquet / f"{name}.parquet"
         if path.exists():
-            ((ok,),) = relation(f"select count(*) filter (where e2e_ok) from '{path}'").fetchall()
+            (ok,), = relation(f"select count(*) filter (where e2e_ok) from '{path}'").fetchall()
             assert ok == counts["ok"], name
 
 
@@ -217,14 +206,12 @@ def test_mcap_poses_and_errors_match_the_report(
     assert last["pose"]["position"] == {"x": final["x_m"], "y": final["y_m"], "z": 0.0}
     assert abs(wrap(heading_of(last["pose"]["orientation"]) - final["heading_rad"])) < 1e-12
     errors = mcap_topics["/errors/reference"]
-    assert (
-        max(m["position_error_m"] for _, _, m in errors)
-        == (report["onboard_vs_reference"]["max_position_error_m"])
+    assert max(m["position_error_m"] for _, _, m in errors) == (
+        report["onboard_vs_reference"]["max_position_error_m"]
     )
     truth_errors = mcap_topics["/errors/truth"]
-    assert (
-        max(abs(m["heading_error_rad"]) for _, _, m in truth_errors)
-        == (report["onboard_vs_truth"]["max_heading_error_rad"])
+    assert max(abs(m["heading_error_rad"]) for _, _, m in truth_errors) == (
+        report["onboard_vs_truth"]["max_heading_error_rad"]
     )
 
 
@@ -246,7 +233,9 @@ def test_mcap_raw_frames_are_the_logged_bytes(
     run_outputs: tuple[dict[str, Any], Path, Path], mcap_topics: dict[str, Any]
 ) -> None:
     _, parquet, _ = run_outputs
-    frames = relation(f"select can_id, data from '{parquet / 'frames.parquet'}'").fetchall()
+    frames = relation(
+        f"select can_id, data from '{parquet / 'frames.parquet'}'"
+    ).fetchall()
     can = mcap_topics["/can/frames"]
     assert len(can) == len(frames) > 1000
     by_time = sorted(((m["id"], bytes(m["data"])) for _, _, m in can))
@@ -294,21 +283,11 @@ def test_analyze_exports_a_log(tmp_path: Path) -> None:
     assert main([*ARGS, "--log", str(log)]) == 0
     report_path, parquet, mcap = tmp_path / "r.json", tmp_path / "out" / "pq", tmp_path / "a.mcap"
     (tmp_path / "out").mkdir()
-    code = main(
-        [
-            "analyze",
-            str(log),
-            "--report",
-            str(report_path),
-            "--parquet",
-            str(parquet),
-            "--mcap",
-            str(mcap),
-        ]
-    )
+    code = main(["analyze", str(log), "--report", str(report_path), "--parquet", str(parquet),
+                 "--mcap", str(mcap)])
     assert code == 0
     report = json.loads(report_path.read_text())
-    ((max_pos,),) = sql("select max(position_error_m) from {series}", parquet)
+    (max_pos,), = sql("select max(position_error_m) from {series}", parquet)
     assert max_pos == report["onboard_vs_reference"]["max_position_error_m"]
     assert len(read_mcap(mcap)["/pose/onboard"]) == report["samples"]["onboard"]
 

@@ -38,8 +38,7 @@ async def _connect(port: int) -> Any:
     for _ in range(100):  # the server may still be starting
         try:
             return await websockets.connect(
-                f"ws://127.0.0.1:{port}",
-                subprotocols=SUBPROTOCOLS,
+                f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS,
             )
         except OSError:
             await asyncio.sleep(0.05)
@@ -58,16 +57,8 @@ async def _collect(port: int, idle_s: float) -> tuple[Received, dict[str, Any]]:
             if message["op"] == "advertise":
                 channels = {c["id"]: c for c in message["channels"]}
         topics = {sub: channels[cid]["topic"] for sub, cid in enumerate(channels)}
-        await ws.send(
-            json.dumps(
-                {
-                    "op": "subscribe",
-                    "subscriptions": [
-                        {"id": sub, "channelId": cid} for sub, cid in enumerate(channels)
-                    ],
-                }
-            )
-        )
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": sub, "channelId": cid} for sub, cid in enumerate(channels)]}))
         received: Received = {}
         while True:
             try:
@@ -193,17 +184,8 @@ def test_odocan_run_foxglove(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) ->
     port = free_port()
     report = tmp_path / "report.json"
     codes: list[int] = []
-    argv = [
-        "run",
-        "--duration",
-        "2",
-        "--seed",
-        "1",
-        "--foxglove",
-        str(port),
-        "--report",
-        str(report),
-    ]
+    argv = ["run", "--duration", "2", "--seed", "1", "--foxglove", str(port), "--report",
+            str(report)]
     thread = threading.Thread(target=lambda: codes.append(main(argv)))
     thread.start()
     received, _ = collect(port)
@@ -275,6 +257,7 @@ def test_realtime_without_foxglove_is_refused(capsys: pytest.CaptureFixture[str]
 def test_realtime_waits_for_each_frames_simulated_time(monkeypatch: pytest.MonkeyPatch) -> None:
     """The pacing, on a fake clock: each frame waits until its timestamp after the first."""
     import can
+
 
     clock = [100.0]
     sleeps: list[float] = []

@@ -28,19 +28,8 @@ def test_the_firmware_regenerates_the_committed_files_byte_for_byte(
     name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     robot, integrator = name.split("_")
-    argv = [
-        "vectors",
-        "--robot",
-        robot,
-        "--integrator",
-        integrator,
-        "--duration",
-        "3",
-        "--seed",
-        "7",
-        "--out",
-        str(tmp_path),
-    ]
+    argv = ["vectors", "--robot", robot, "--integrator", integrator, "--duration", "3",
+            "--seed", "7", "--out", str(tmp_path)]
     assert main(argv) == 0
     capsys.readouterr()
     committed = sorted(p.name for p in (GOLDEN / name).iterdir())

@@ -35,18 +35,17 @@ ENC = DB.get_message_by_name("WHEEL_ENCODERS")
 ENC_IDS = tuple(int(v) for v in ENC.dbc.attributes["E2EDataIDs"].value.split(","))
 CYCLE_S = 0.01
 FW_STATUS = {
-    E2EStatus.OK: "ok",
-    E2EStatus.OKSOMELOST: "oksomelost",
-    E2EStatus.REPEATED: "repeated",
-    E2EStatus.WRONGSEQUENCE: "wrong_sequence",
-    E2EStatus.ERROR: "crc_error",
+    E2EStatus.OK: "ok", E2EStatus.OKSOMELOST: "oksomelost", E2EStatus.REPEATED: "repeated",
+    E2EStatus.WRONGSEQUENCE: "wrong_sequence", E2EStatus.ERROR: "crc_error",
 }
 
 
 def autosar_message(data_ids: list[int]) -> cantools.database.can.Message:
     """A cantools message carrying a Profile 2 data-ID list, as the ARXML loader would make it."""
     message = DB.get_message_by_name("ODOM_POSE_X")
-    copy = cantools.database.can.Message(frame_id=message.frame_id, name="X", length=8, signals=[])
+    copy = cantools.database.can.Message(
+        frame_id=message.frame_id, name="X", length=8, signals=[]
+    )
     e2e = AutosarEnd2EndProperties()
     e2e.category = "PROFILE_02"
     e2e.data_ids = data_ids
@@ -98,9 +97,8 @@ def frames_at(events: list[tuple[int, bytes]], can_id: int = ENC.frame_id) -> Fr
     collector = FrameCollector()
     for tick, data in events:
         collector.on_message_received(
-            can.Message(
-                timestamp=tick * CYCLE_S, arbitration_id=can_id, data=data, is_extended_id=False
-            )
+            can.Message(timestamp=tick * CYCLE_S, arbitration_id=can_id, data=data,
+                        is_extended_id=False)
         )
     return collector.arrays()
 
@@ -202,19 +200,14 @@ def test_unknown_frames_are_counted_not_fatal() -> None:
         can.Message(timestamp=0.02, arbitration_id=0x100, data=bytes(8), is_extended_id=True),
         can.Message(timestamp=0.03, arbitration_id=0x100, data=bytes(4), is_extended_id=False),
         can.Message(timestamp=0.04, is_error_frame=True),
-        can.Message(
-            timestamp=0.05, arbitration_id=0x100, is_remote_frame=True, dlc=8, is_extended_id=False
-        ),
+        can.Message(timestamp=0.05, arbitration_id=0x100, is_remote_frame=True, dlc=8,
+                    is_extended_id=False),
     ]
     for msg in messages:
         collector.on_message_received(msg)
     counts, accepted = check_frames(collector.arrays(), DB)
     assert counts[UNKNOWN] == {
-        "unknown_id": 2,
-        "wrong_dlc": 1,
-        "error_frames": 1,
-        "remote_frames": 1,
-        "unprotected": 0,
+        "unknown_id": 2, "wrong_dlc": 1, "error_frames": 1, "remote_frames": 1, "unprotected": 0,
     }
     assert counts["WHEEL_ENCODERS"]["ok"] == 1
     assert accepted.tolist() == [True, False, False, False, False, False]

@@ -48,22 +48,16 @@ EXAMPLES = int(os.environ.get("ODOCAN_CAMPAIGN_EXAMPLES", "50"))  # CI: about 30
 
 def profile_of(robot: Robot) -> RobotProfile:
     """The host's profile of a checker robot (the same nanometres)."""
-    return RobotProfile(
-        "drawn",
-        robot.counts_per_rev,
-        robot.wheel_radius_left_nm / 1e9,
-        robot.wheel_radius_right_nm / 1e9,
-        robot.wheelbase_nm / 1e9,
-        robot.counter_bits,
-    )
+    return RobotProfile("drawn", robot.counts_per_rev, robot.wheel_radius_left_nm / 1e9,
+                        robot.wheel_radius_right_nm / 1e9, robot.wheelbase_nm / 1e9,
+                        robot.counter_bits)
 
 
 @st.composite
 def robots(draw: st.DrawFn) -> Robot:
     """A robot the firmware accepts."""
-    counts = draw(
-        st.one_of(st.integers(12, 400), st.integers(400, 20_000), st.integers(20_000, 1 << 24))
-    )
+    counts = draw(st.one_of(st.integers(12, 400), st.integers(400, 20_000),
+                            st.integers(20_000, 1 << 24)))
     radius_nm = round(10 ** draw(st.floats(math.log10(5e6), math.log10(5e8))))
     ratio = 1.0 + draw(st.floats(-0.05, 0.05))
     robot = Robot(
@@ -92,21 +86,17 @@ def drive(
     segment = rng.integers(20, 400, size=steps // 20 + 2)
     turn = rng.choice([0.0, 0.0, 0.002, -0.002, 0.05, -0.05, 1.0], size=len(segment))
     idx = np.repeat(np.arange(len(segment)), segment)[:steps]
-    half_diff_m = np.clip(
-        turn[idx] * step_m, -0.2 * MAX_DHEADING_RAD * b_m, 0.2 * MAX_DHEADING_RAD * b_m
-    )
+    half_diff_m = np.clip(turn[idx] * step_m, -0.2 * MAX_DHEADING_RAD * b_m,
+                          0.2 * MAX_DHEADING_RAD * b_m)
     noise_m = rng.normal(0.0, 0.01 * step_m, size=steps)
     d_left = np.rint((step_m - half_diff_m + noise_m) / m_left)
     d_right = np.rint((step_m + half_diff_m + noise_m) / m_right)
-    return (
-        np.clip(d_left, -limit, limit).astype(np.int64),
-        np.clip(d_right, -limit, limit).astype(np.int64),
-    )
+    return (np.clip(d_left, -limit, limit).astype(np.int64),
+            np.clip(d_right, -limit, limit).astype(np.int64))
 
 
-def with_gaps(
-    synth: Synth, start: int, gaps: list[tuple[float, int]], step_max: int, half: int
-) -> tuple[list[str], set[int]]:
+def with_gaps(synth: Synth, start: int, gaps: list[tuple[float, int]], step_max: int,
+              half: int) -> tuple[list[str], set[int]]:
     """The log from encoder frame ``start``, less the frames of each gap (at a fraction of the
     log, so many frames long), keeping each gap's count jump below half the counter range; and
     the encoder frames dropped."""
@@ -120,77 +110,33 @@ def with_gaps(
     return lines, dropped
 
 
-@settings(
-    max_examples=EXAMPLES,
-    deadline=None,
-    suppress_health_check=[HealthCheck.too_slow],
-    phases=[Phase.explicit, Phase.reuse, Phase.generate],
-)  # shrinking takes minutes
+@settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.too_slow],
+          phases=[Phase.explicit, Phase.reuse, Phase.generate])  # shrinking takes minutes
 @example(  # 100 km mid-drive on a pmir-like robot, gaps
-    robot=Robot(500, 75_000_000, 75_100_000, 300_000_000, 16),
-    integrator="rk2",
-    steps=12_000,
-    distance_m=1e5,
-    cut=6,
-    gaps=[(0.3, 5), (0.7, 1)],
-    fault="none",
-    radius_error_nm=1,
-    seed=7,
+    robot=Robot(500, 75_000_000, 75_100_000, 300_000_000, 16), integrator="rk2", steps=12_000,
+    distance_m=1e5, cut=6, gaps=[(0.3, 5), (0.7, 1)], fault="none", radius_error_nm=1, seed=7,
 ).via("100 km")
 @example(  # 100 km from power-up, 2^24 counts/rev on 32-bit counters
-    robot=Robot(1 << 24, 300_000_000, 299_000_000, 2_000_000_000, 32),
-    integrator="exact",
-    steps=12_000,
-    distance_m=1e5,
-    cut=0,
-    gaps=[],
-    fault="none",
-    radius_error_nm=1,
-    seed=8,
+    robot=Robot(1 << 24, 300_000_000, 299_000_000, 2_000_000_000, 32), integrator="exact",
+    steps=12_000, distance_m=1e5, cut=0, gaps=[], fault="none", radius_error_nm=1, seed=8,
 ).via("100 km")
 @example(  # a gap right after the first sample: the start rotation from the later segments
-    robot=Robot(12, 10_000_000, 10_000_000, 1_000_000_000, 16),
-    integrator="euler",
-    steps=200,
-    distance_m=10.0,
-    cut=1,
-    gaps=[(0.0, 14)],
-    fault="none",
-    radius_error_nm=1,
-    seed=1,
+    robot=Robot(12, 10_000_000, 10_000_000, 1_000_000_000, 16), integrator="euler", steps=200,
+    distance_m=10.0, cut=1, gaps=[(0.0, 14)], fault="none", radius_error_nm=1, seed=1,
 ).via("found by the campaign")
 @example(  # 16 pose frames lost: E2E takes the next for a repetition, both judges drop it
-    robot=Robot(12, 10_000_000, 10_000_000, 1_000_000_000, 16),
-    integrator="euler",
-    steps=200,
-    distance_m=10.0,
-    cut=0,
-    gaps=[(0.0, 29)],
-    fault="none",
-    radius_error_nm=1,
-    seed=0,
+    robot=Robot(12, 10_000_000, 10_000_000, 1_000_000_000, 16), integrator="euler", steps=200,
+    distance_m=10.0, cut=0, gaps=[(0.0, 29)], fault="none", radius_error_nm=1, seed=0,
 ).via("found by the campaign")
 @example(  # a radius 1 nm off, mid-drive: its slow heading drift fits a start heading
-    robot=Robot(11141, 51_741_018, 51_741_070, 1_000_000_000, 16),
-    integrator="euler",
-    steps=401,
-    distance_m=705.2224065893968,
-    cut=1,
-    gaps=[],
-    fault="radius",
-    radius_error_nm=1,
+    robot=Robot(11141, 51_741_018, 51_741_070, 1_000_000_000, 16), integrator="euler",
+    steps=401, distance_m=705.2224065893968, cut=1, gaps=[], fault="radius", radius_error_nm=1,
     seed=2_666_412_843,
 ).via("found by the campaign")
 @example(  # power-up, a radius 2 um off: judged from the exact start, never a re-fitted one
-    robot=Robot(3_628_801, 5_000_000, 5_000_000, 137_537_090, 16),
-    integrator="euler",
-    steps=200,
-    distance_m=1121.0844869420985,
-    cut=0,
-    gaps=[],
-    fault="radius",
-    radius_error_nm=2000,
-    seed=200,
+    robot=Robot(3_628_801, 5_000_000, 5_000_000, 137_537_090, 16), integrator="euler",
+    steps=200, distance_m=1121.0844869420985, cut=0, gaps=[], fault="radius",
+    radius_error_nm=2000, seed=200,
 ).via("found by the campaign")
 @given(
     robot=robots(),
@@ -204,27 +150,16 @@ def with_gaps(
     seed=st.integers(0, 2**32 - 1),
 )
 def test_analyze_agrees_with_the_independent_checker(
-    tmp_path_factory: pytest.TempPathFactory,
-    robot: Robot,
-    integrator: str,
-    steps: int,
-    distance_m: float,
-    cut: int,
-    gaps: list[tuple[float, int]],
-    fault: str,
-    radius_error_nm: int,
-    seed: int,
+    tmp_path_factory: pytest.TempPathFactory, robot: Robot, integrator: str, steps: int,
+    distance_m: float, cut: int, gaps: list[tuple[float, int]], fault: str,
+    radius_error_nm: int, seed: int,
 ) -> None:
     d_left, d_right = drive(robot, steps, distance_m, seed)
     firmware = robot
     bias: dict[int, int] = {}
     if fault == "radius":  # the firmware runs other radii than the profile says
-        firmware = Robot(
-            **{
-                **robot.__dict__,
-                "wheel_radius_left_nm": robot.wheel_radius_left_nm + radius_error_nm,
-            }
-        )
+        firmware = Robot(**{**robot.__dict__,
+                            "wheel_radius_left_nm": robot.wheel_radius_left_nm + radius_error_nm})
     elif fault == "x_bias":  # one X three LSB off (a pose is sent every other frame)
         bias = {2 * ((cut + steps // 2) // 2): 3}
     synth = synthesize(profile_of(firmware), integrator, d_left, d_right, x_bias_100um=bias)
@@ -238,9 +173,8 @@ def test_analyze_agrees_with_the_independent_checker(
     km = float(np.sum(nm)) * math.pi / robot.counts_per_rev * 1e-12
     event(f"drive: {'>= 50' if km >= 50 else '>= 1' if km >= 1 else '< 1'} km")
     event(f"fault: {fault}, {'mid-drive' if cut else 'power-up'}, {len(gaps)} gaps")
-    expected = check(
-        path, robot, integrator, lambda t_s: synth.state[round(t_s / ENCODER_PERIOD_S)].pose
-    )
+    expected = check(path, robot, integrator,
+                     lambda t_s: synth.state[round(t_s / ENCODER_PERIOD_S)].pose)
     analysis = analyze(read_log(path), profile_of(robot), integrator)
     got = analysis.report["onboard_vs_reference"]
     assert analysis.report["samples"]["onboard"] == expected.samples
@@ -251,13 +185,9 @@ def test_analyze_agrees_with_the_independent_checker(
             assert not analysis.passed and not expected.passed, (got, expected)
             return
         assert abs(got["max_position_error_m"] / POSITION_LSB_M - position_lsb) <= CLOSE_CALL, (
-            got,
-            expected,
-        )
+            got, expected)
         assert abs(got["max_heading_error_rad"] / HEADING_LSB_RAD - heading_lsb) <= CLOSE_CALL, (
-            got,
-            expected,
-        )
+            got, expected)
         if abs(position_lsb - 1) >= CLOSE_CALL and abs(heading_lsb - 1) >= CLOSE_CALL:
             assert analysis.passed == expected.passed, (got, expected)
     else:  # a wrong firmware: a start the log does not give is fitted (module docstring)
@@ -267,10 +197,8 @@ def test_analyze_agrees_with_the_independent_checker(
             freedom_heading = 0.5
         if position_lsb < 1 - CLOSE_CALL and heading_lsb < 1 - CLOSE_CALL:
             assert analysis.passed, (got, expected)
-        if (
-            position_lsb > 1 + freedom_position + CLOSE_CALL
-            or heading_lsb > 1 + freedom_heading + CLOSE_CALL
-        ):
+        if (position_lsb > 1 + freedom_position + CLOSE_CALL
+                or heading_lsb > 1 + freedom_heading + CLOSE_CALL):
             assert not analysis.passed, (got, expected)
     if fault == "x_bias" and not bias.keys() & dropped:
         assert not analysis.passed and not expected.passed

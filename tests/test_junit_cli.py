@@ -61,43 +61,17 @@ def check_inputs(section: dict[str, Any], robot_name: str = "pmir") -> None:
 def gap_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 12 s run with errors and a bus-off, logged."""
     log = tmp_path_factory.mktemp("junit") / "gap.log"
-    code = main(
-        [
-            "run",
-            "--duration",
-            "12",
-            "--seed",
-            "2",
-            "--errors",
-            "ed=1.002,eb=1.01",
-            "--faults",
-            "busoff=4:1,seed=9",
-            "--log",
-            str(log),
-        ]
-    )
+    code = main(["run", "--duration", "12", "--seed", "2", "--errors", "ed=1.002,eb=1.01",
+                 "--faults", "busoff=4:1,seed=9", "--log", str(log)])
     assert code == 0
     return log
 
 
 def test_run_junit_and_inputs(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     junit, report = tmp_path / "run.xml", tmp_path / "run.json"
-    code, _, err = cli(
-        capsys,
-        "run",
-        "--duration",
-        "3",
-        "--seed",
-        "4",
-        "--errors",
-        "ed=1.002,eb=1.01",
-        "--faults",
-        "drop=0.01,seed=3",
-        "--junit",
-        str(junit),
-        "--report",
-        str(report),
-    )
+    code, _, err = cli(capsys, "run", "--duration", "3", "--seed", "4", "--errors",
+                       "ed=1.002,eb=1.01", "--faults", "drop=0.01,seed=3",
+                       "--junit", str(junit), "--report", str(report))
     assert (code, err) == (0, "")
     suite, cases = parse_junit(junit)
     assert suite.get("name") == "run"
@@ -119,17 +93,8 @@ def test_analyze_fail_carries_the_figures(
 ) -> None:
     """The wrong integrator: exit 1, the position testcase fails with measured and limit."""
     junit, report = tmp_path / "a.xml", tmp_path / "a.json"
-    code, _, err = cli(
-        capsys,
-        "analyze",
-        str(gap_log),
-        "--integrator",
-        "euler",
-        "--junit",
-        str(junit),
-        "--report",
-        str(report),
-    )
+    code, _, err = cli(capsys, "analyze", str(gap_log), "--integrator", "euler",
+                       "--junit", str(junit), "--report", str(report))
     assert (code, err) == (1, "")
     _, cases = parse_junit(junit)
     failure = cases["onboard_vs_reference_position"].find("failure")
@@ -156,9 +121,8 @@ def test_analyze_pass(capsys: pytest.CaptureFixture[str], tmp_path: Path, gap_lo
 
 def test_replay_junit(capsys: pytest.CaptureFixture[str], tmp_path: Path, gap_log: Path) -> None:
     junit, report = tmp_path / "r.xml", tmp_path / "r.json"
-    code, _, err = cli(
-        capsys, "replay", str(gap_log), "--junit", str(junit), "--report", str(report)
-    )
+    code, _, err = cli(capsys, "replay", str(gap_log), "--junit", str(junit),
+                       "--report", str(report))
     assert err == ""
     suite, cases = parse_junit(junit)
     assert suite.get("name") == "replay"
@@ -168,19 +132,8 @@ def test_replay_junit(capsys: pytest.CaptureFixture[str], tmp_path: Path, gap_lo
 
 def test_experiment_junit(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     junit, report = tmp_path / "e.xml", tmp_path / "e.json"
-    code, _, err = cli(
-        capsys,
-        "experiment",
-        "seed002",
-        "--runs",
-        "1",
-        "--junit",
-        str(junit),
-        "--report",
-        str(report),
-        "--errors",
-        "ed=1.01",
-    )
+    code, _, err = cli(capsys, "experiment", "seed002", "--runs", "1", "--junit", str(junit),
+                       "--report", str(report), "--errors", "ed=1.01")
     assert (code, err) == (0, "")
     _, cases = parse_junit(junit)
     data = json.loads(report.read_text())
@@ -192,24 +145,12 @@ def test_experiment_junit(capsys: pytest.CaptureFixture[str], tmp_path: Path) ->
     assert data["inputs"]["errors"] == "ed=1.01"
 
 
-def test_umbmark_junit_plot_and_inputs(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+def test_umbmark_junit_plot_and_inputs(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
     junit, report, plot = tmp_path / "u.xml", tmp_path / "u.json", tmp_path / "u.png"
-    code, _, err = cli(
-        capsys,
-        "umbmark",
-        "--runs",
-        "1",
-        "--side",
-        "1",
-        "--seed",
-        "3",
-        "--junit",
-        str(junit),
-        "--report",
-        str(report),
-        "--plot",
-        str(plot),
-    )
+    code, _, err = cli(capsys, "umbmark", "--runs", "1", "--side", "1", "--seed", "3",
+                       "--junit", str(junit), "--report", str(report), "--plot", str(plot))
     assert (code, err) == (0, "")
     _, cases = parse_junit(junit)
     data = json.loads(report.read_text())

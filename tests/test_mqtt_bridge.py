@@ -45,15 +45,15 @@ GEOMETRY = Geometry.of(PMIR)
 
 
 @asynccontextmanager
-async def running_bridge(url: BrokerURL, **config: Any) -> AsyncIterator[tuple[Bridge, can.BusABC]]:
+async def running_bridge(
+    url: BrokerURL, **config: Any
+) -> AsyncIterator[tuple[Bridge, can.BusABC]]:
     """A bridge for ROBOT on a fresh virtual channel, and a listener on that channel."""
     channel = f"test-mqtt-{os.getpid()}-{next(_channels)}"
     send_bus = can.Bus(interface="virtual", channel=channel)
     listener = can.Bus(interface="virtual", channel=channel)
-    bridge = Bridge(
-        [RobotEndpoint(ROBOT, send_bus, GEOMETRY)],
-        config=BridgeConfig(broker=url, client_prefix=f"test-{channel}", **config),
-    )
+    bridge = Bridge([RobotEndpoint(ROBOT, send_bus, GEOMETRY)],
+                    config=BridgeConfig(broker=url, client_prefix=f"test-{channel}", **config))
     stop = asyncio.Event()
     task = asyncio.create_task(bridge.run(stop=stop), name="bridge")
     try:
@@ -91,27 +91,16 @@ BAD_COMMANDS = [
     ("set_pose", b"{not json", "malformed JSON"),
     ("set_pose", b"[1, 2]", "must be a JSON object"),
     ("set_pose", b'{"id": "m", "x_m": 1.0, "y_m": 2.0}', "missing field 'heading_rad'"),
-    (
-        "set_pose",
-        b'{"id": "u", "x_m": 1, "y_m": 2, "heading_rad": 0, "z_m": 3}',
-        "unknown field 'z_m'",
-    ),
+    ("set_pose", b'{"id": "u", "x_m": 1, "y_m": 2, "heading_rad": 0, "z_m": 3}',
+     "unknown field 'z_m'"),
     ("set_pose", b'{"id": "r", "x_m": 300000.0, "y_m": 0, "heading_rad": 0}', "out of range"),
     ("set_pose", b'{"id": "t", "x_m": "1", "y_m": 0, "heading_rad": 0}', "must be a number"),
-    (
-        "config",
-        b'{"id": "c", "counts_per_rev": 4096, "wheel_radius_left_m": 5.0, '
-        b'"wheel_radius_right_m": 0.05, "wheelbase_m": 0.3, "counter_bits": 32, '
-        b'"integrator": "exact"}',
-        "wheel_radius_left_m=5.0 out of range",
-    ),
-    (
-        "config",
-        b'{"id": "i", "counts_per_rev": 4096, "wheel_radius_left_m": 0.05, '
-        b'"wheel_radius_right_m": 0.05, "wheelbase_m": 0.3, "counter_bits": 32, '
-        b'"integrator": "simpson"}',
-        "integrator='simpson' is not one of",
-    ),
+    ("config", b'{"id": "c", "counts_per_rev": 4096, "wheel_radius_left_m": 5.0, '
+     b'"wheel_radius_right_m": 0.05, "wheelbase_m": 0.3, "counter_bits": 32, '
+     b'"integrator": "exact"}', "wheel_radius_left_m=5.0 out of range"),
+    ("config", b'{"id": "i", "counts_per_rev": 4096, "wheel_radius_left_m": 0.05, '
+     b'"wheel_radius_right_m": 0.05, "wheelbase_m": 0.3, "counter_bits": 32, '
+     b'"integrator": "simpson"}', "integrator='simpson' is not one of"),
     ("nav_goal", b'{"id": "n", "x_m": 1.0, "y_m": 2.0, "goal_id": 300}', "goal_id=300"),
     ("teleport", b'{"id": "x"}', "unknown command 'teleport'"),
 ]
@@ -120,9 +109,8 @@ BAD_COMMANDS = [
 @pytest.mark.parametrize("kind", BROKERS)
 def test_invalid_commands_are_rejected_and_never_reach_the_bus(kind: str, tmp_path: Path) -> None:
     async def scenario() -> None:
-        async with (
-            broker_of(kind, tmp_path) as brokers,
-            running_bridge(brokers.bridge) as (bridge, listener),
+        async with broker_of(kind, tmp_path) as brokers, running_bridge(brokers.bridge) as (
+            bridge, listener
         ):
             commands = [(name, payload) for name, payload, _ in BAD_COMMANDS]
             results = await command_results(brokers.operator, commands, len(commands))
@@ -138,10 +126,8 @@ def test_invalid_commands_are_rejected_and_never_reach_the_bus(kind: str, tmp_pa
             await asyncio.sleep(0.05)
             frames = [fr.unpack_odom_set_pose(m.data) for m in bus_frames(listener)]
             assert [(f.field, f.value) for f in frames] == [
-                (fr.SetPoseField.X, 15000),
-                (fr.SetPoseField.Y, -20000),
-                (fr.SetPoseField.HEADING, 60321),
-                (fr.SetPoseField.APPLY, 0),
+                (fr.SetPoseField.X, 15000), (fr.SetPoseField.Y, -20000),
+                (fr.SetPoseField.HEADING, 60321), (fr.SetPoseField.APPLY, 0),
             ]
 
     asyncio.run(scenario())
@@ -154,12 +140,8 @@ def test_fleet_telemetry_and_retained_status(kind: str, tmp_path: Path) -> None:
     async def scenario() -> tuple[list[tuple[str, dict[str, Any]]], dict[str, Any]]:
         async with broker_of(kind, tmp_path) as brokers, client(brokers.operator) as sub:
             await sub.subscribe(f"odocan/{ROBOT}/#", qos=1)
-            run = FleetRun(
-                fleet=FleetConfig(robots=1, robot=PMIR, seed=3),
-                duration_s=1.5,
-                broker=brokers.bridge,
-                client_prefix=f"test-fleet-{kind}",
-            )
+            run = FleetRun(fleet=FleetConfig(robots=1, robot=PMIR, seed=3), duration_s=1.5,
+                           broker=brokers.bridge, client_prefix=f"test-fleet-{kind}")
             report = await run_fleet(run)
             got = await collect(sub, lambda g: g[-1][1].get("state") == "offline")
             return got, report
@@ -170,11 +152,8 @@ def test_fleet_telemetry_and_retained_status(kind: str, tmp_path: Path) -> None:
         by_leaf.setdefault(topic_name.split("/", 2)[2], []).append(payload)
     assert {"pose", "reference", "error", "status"} <= set(by_leaf)
     assert by_leaf["status"][0]["state"] == "online"
-    assert by_leaf["status"][-1] == {
-        **by_leaf["status"][-1],
-        "state": "offline",
-        "reason": "bridge stopped",
-    }
+    assert by_leaf["status"][-1] == {**by_leaf["status"][-1], "state": "offline",
+                                     "reason": "bridge stopped"}
     for error in by_leaf["error"]:
         assert error["pose_vs_reference"]["dpos_m"] < 1e-3  # on-board vs float64: quantisation only
     pose = by_leaf["pose"][-1]
@@ -199,9 +178,7 @@ def test_a_robot_cannot_command_another_robot(mosquitto: Mosquitto) -> None:  # 
             async with client(mosquitto.url("robot002")) as intruder:
                 await intruder.publish(  # acknowledged by the broker, delivered to no one
                     topics.topic(ROBOT, "cmd/set_pose"),
-                    b'{"id": "intruder", "x_m": 9, "y_m": 9, "heading_rad": 0}',
-                    qos=1,
-                )
+                    b'{"id": "intruder", "x_m": 9, "y_m": 9, "heading_rad": 0}', qos=1)
             good = b'{"id": "owner", "x_m": 1, "y_m": 1, "heading_rad": 0}'
             results = await command_results(mosquitto.url(ROBOT), [("set_pose", good)], 1)
             await asyncio.sleep(0.3)  # a late intruder result would show up in the frames
@@ -261,22 +238,10 @@ def test_last_will_marks_a_killed_bridge_offline(kind: str, tmp_path: Path) -> N
             b = brokers.bridge
             creds = f"{b.username}:{b.password}@" if b.username else ""
             proc = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "odocan",
-                    "bridge",
-                    "--name",
-                    ROBOT,
-                    "--broker",
-                    f"mqtt://{creds}{b.host}:{b.port}",
-                    "-i",
-                    "virtual",
-                    "-c",
-                    f"test-will-{os.getpid()}",
-                ],
-                stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL,
+                [sys.executable, "-m", "odocan", "bridge", "--name", ROBOT,
+                 "--broker", f"mqtt://{creds}{b.host}:{b.port}", "-i", "virtual",
+                 "-c", f"test-will-{os.getpid()}"],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
             )
             try:
                 got = await collect(sub, lambda g: g[-1][1]["state"] == "online", 20)
@@ -321,12 +286,8 @@ async def feed_frames(bridge: Bridge, ticks: list[list[can.Message]], done: asyn
 
 
 def _shifted(msg: can.Message, offset_s: float) -> can.Message:
-    return can.Message(
-        timestamp=msg.timestamp + offset_s,
-        arbitration_id=msg.arbitration_id,
-        is_extended_id=False,
-        data=msg.data,
-    )
+    return can.Message(timestamp=msg.timestamp + offset_s, arbitration_id=msg.arbitration_id,
+                       is_extended_id=False, data=msg.data)
 
 
 @pytest.mark.parametrize("kind", BROKERS)
@@ -336,26 +297,19 @@ def test_poses_keep_flowing_during_a_command_flood(kind: str, tmp_path: Path) ->
     flood = 1000
 
     async def scenario() -> tuple[list[float], list[float]]:
-        async with (
-            broker_of(kind, tmp_path) as brokers,
-            running_bridge(brokers.bridge) as (bridge, _),
-            client(brokers.operator) as sub,
-        ):
+        async with broker_of(kind, tmp_path) as brokers, running_bridge(brokers.bridge) as (
+            bridge, _
+        ), client(brokers.operator) as sub:
             await sub.subscribe(topics.topic(ROBOT, "pose"), qos=0)
             await sub.subscribe(topics.topic(ROBOT, topics.RESULT_LEAF), qos=1)
             done = asyncio.Event()
             feeder = asyncio.create_task(feed_frames(bridge, ticks, done))
             await collect(sub, lambda g: sum(t.endswith("/pose") for t, _ in g) >= 3)
             good = b'{"x_m": 1, "y_m": 1, "heading_rad": 0}'
-            await asyncio.gather(
-                *(
-                    sub.publish(topics.topic(ROBOT, "cmd/set_pose"), good, qos=1)
-                    for _ in range(flood)
-                )
-            )
-            got = await collect(
-                sub, lambda g: sum(t.endswith("/result") for t, _ in g) >= flood, timeout_s=60
-            )
+            await asyncio.gather(*(sub.publish(topics.topic(ROBOT, "cmd/set_pose"), good, qos=1)
+                                   for _ in range(flood)))
+            got = await collect(sub, lambda g: sum(t.endswith("/result") for t, _ in g) >= flood,
+                                timeout_s=60)
             done.set()
             await feeder
         results = [p["unix_s"] for t, p in got if t.endswith("/result")]
@@ -382,13 +336,8 @@ def test_every_command_the_broker_accepted_is_answered_across_a_broker_restart(
     def operator() -> aiomqtt.Client:
         props = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
         props.SessionExpiryInterval = 300
-        return client(
-            mosquitto.url(ROBOT),
-            identifier=f"test-operator-{os.getpid()}",
-            protocol=aiomqtt.ProtocolVersion.V5,
-            clean_start=False,
-            properties=props,
-        )
+        return client(mosquitto.url(ROBOT), identifier=f"test-operator-{os.getpid()}",
+                      protocol=aiomqtt.ProtocolVersion.V5, clean_start=False, properties=props)
 
     async def listen(sub: aiomqtt.Client) -> None:
         with contextlib.suppress(aiomqtt.MqttError):
@@ -402,9 +351,8 @@ def test_every_command_the_broker_accepted_is_answered_across_a_broker_restart(
 
         async def one(k: int) -> None:
             payload = json.dumps({"id": k, "x_m": k / 10, "y_m": 0, "heading_rad": 0}).encode()
-            await sub.publish(
-                topics.topic(ROBOT, "cmd/set_pose"), payload, qos=1, properties=expiry
-            )
+            await sub.publish(topics.topic(ROBOT, "cmd/set_pose"), payload, qos=1,
+                              properties=expiry)
             accepted.append(k)  # the broker's PUBACK came
 
         await asyncio.gather(*(one(k) for k in ids))  # all at once: answers are owed at the end
@@ -474,10 +422,9 @@ def test_a_cancelled_bridge_publishes_offline_first(kind: str, tmp_path: Path) -
         async with broker_of(kind, tmp_path) as brokers, client(brokers.operator) as sub:
             await sub.subscribe(topics.topic(ROBOT, "status"), qos=1)
             with can.Bus(interface="virtual", channel=f"test-cancel-{next(_channels)}") as bus:
-                bridge = Bridge(
-                    [RobotEndpoint(ROBOT, bus, GEOMETRY)],
-                    config=BridgeConfig(broker=brokers.bridge, client_prefix=f"test-cancel-{kind}"),
-                )
+                bridge = Bridge([RobotEndpoint(ROBOT, bus, GEOMETRY)],
+                                config=BridgeConfig(broker=brokers.bridge,
+                                                    client_prefix=f"test-cancel-{kind}"))
                 task = asyncio.create_task(bridge.run(stop=asyncio.Event()))
                 got = await collect(sub, lambda g: g[-1][1]["state"] == "online")
                 task.cancel()  # not a clean stop: an error elsewhere, a TaskGroup shutting down
@@ -501,13 +448,11 @@ def test_hostile_payloads_through_a_real_broker_are_each_answered(
     ticks = rig_ticks(1.0)
 
     async def scenario() -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-        async with (
-            broker_of(kind, tmp_path) as brokers,
-            running_bridge(brokers.bridge) as (bridge, _),
+        async with broker_of(kind, tmp_path) as brokers, running_bridge(brokers.bridge) as (
+            bridge, _
         ):
             results = await command_results(
-                brokers.operator, [("set_pose", p) for p in payloads], len(payloads)
-            )
+                brokers.operator, [("set_pose", p) for p in payloads], len(payloads))
             async with client(brokers.operator) as sub:
                 await sub.subscribe(topics.topic(ROBOT, "pose"), qos=0)
                 done = asyncio.Event()
@@ -527,10 +472,9 @@ def test_hostile_payloads_through_a_real_broker_are_each_answered(
 @pytest.mark.parametrize("kind", BROKERS)
 def test_a_command_older_than_the_expiry_is_answered_expired(kind: str, tmp_path: Path) -> None:
     async def scenario() -> list[dict[str, Any]]:
-        async with (
-            broker_of(kind, tmp_path) as brokers,
-            running_bridge(brokers.bridge, command_expiry_s=1e-9) as (_, listener),
-        ):
+        async with broker_of(kind, tmp_path) as brokers, running_bridge(
+            brokers.bridge, command_expiry_s=1e-9
+        ) as (_, listener):
             good = b'{"id": "old", "x_m": 1, "y_m": 1, "heading_rad": 0}'
             results = await command_results(brokers.operator, [("set_pose", good)], 1)
             await asyncio.sleep(0.2)  # a frame sent anyway would be on the listener by now
@@ -562,8 +506,7 @@ def test_a_retained_command_is_not_run(kind: str, tmp_path: Path) -> None:
 
 
 def test_a_broker_that_lost_its_state_is_reported(
-    mosquitto: Mosquitto,
-    caplog: pytest.LogCaptureFixture,  # noqa: F811
+    mosquitto: Mosquitto, caplog: pytest.LogCaptureFixture  # noqa: F811
 ) -> None:
     """mosquitto killed with -9 before it ever saved: our session is gone when we are back."""
 

@@ -54,34 +54,19 @@ def the_error(lines: list[str]) -> str:
 
 
 @pytest.mark.parametrize("command", COMMANDS)
-@pytest.mark.parametrize(
-    ("broker", "expected"),
-    [
-        (
-            "mqtt://u:s3cret@127.0.0.1:{free}",
-            "cannot connect to mqtt://u@127.0.0.1:{free}: connection refused",
-        ),
-        (
-            "mqtts://u:s3cret@odocan-test.invalid",
-            "cannot connect to mqtts://u@odocan-test.invalid:8883: DNS: the host name does not resolve",
-        ),
-        (
-            "mqtt://u:s3cret@127.0.0.1:{silent} --connect-timeout 0.5",
-            "cannot connect to mqtt://u@127.0.0.1:{silent}: no answer within 0.5 s",
-        ),
-        (
-            "mqtts://127.0.0.1:{free} --ca /etc/passwd",
-            "--ca /etc/passwd: not a usable CA certificate",
-        ),
-        ("mqtt://127.0.0.1:{free} --connect-timeout 0", "--connect-timeout must be in (0, 300]"),
-        ("mqtt://127.0.0.1:{free} --command-expiry -1", "--command-expiry must be in (0, 3600]"),
-    ],
-)
+@pytest.mark.parametrize(("broker", "expected"), [
+    ("mqtt://u:s3cret@127.0.0.1:{free}", "cannot connect to mqtt://u@127.0.0.1:{free}: connection "
+     "refused"),
+    ("mqtts://u:s3cret@odocan-test.invalid",
+     "cannot connect to mqtts://u@odocan-test.invalid:8883: DNS: the host name does not resolve"),
+    ("mqtt://u:s3cret@127.0.0.1:{silent} --connect-timeout 0.5",
+     "cannot connect to mqtt://u@127.0.0.1:{silent}: no answer within 0.5 s"),
+    ("mqtts://127.0.0.1:{free} --ca /etc/passwd", "--ca /etc/passwd: not a usable CA certificate"),
+    ("mqtt://127.0.0.1:{free} --connect-timeout 0", "--connect-timeout must be in (0, 300]"),
+    ("mqtt://127.0.0.1:{free} --command-expiry -1", "--command-expiry must be in (0, 3600]"),
+])
 def test_an_unusable_broker_is_one_line_and_exit_2(
-    command: str,
-    broker: str,
-    expected: str,
-    silent_port: int,
+    command: str, broker: str, expected: str, silent_port: int,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     ports = {"free": free_loopback_port(), "silent": silent_port}
@@ -93,19 +78,13 @@ def test_an_unusable_broker_is_one_line_and_exit_2(
 
 
 @pytest.mark.parametrize("command", COMMANDS)
-@pytest.mark.parametrize(
-    ("user", "scheme", "expected"),
-    [
-        ("bridge:wrong", "mqtt", "not authorized (Not authorized)"),
-        (None, "mqtt", "not authorized (Not authorized)"),
-        ("bridge:bridge-pw", "mqtts", "TLS: the handshake failed; is this port TLS?"),
-    ],
-)
+@pytest.mark.parametrize(("user", "scheme", "expected"), [
+    ("bridge:wrong", "mqtt", "not authorized (Not authorized)"),
+    (None, "mqtt", "not authorized (Not authorized)"),
+    ("bridge:bridge-pw", "mqtts", "TLS: the handshake failed; is this port TLS?"),
+])
 def test_mosquitto_refusals_are_one_line_and_exit_2(
-    command: str,
-    user: str | None,
-    scheme: str,
-    expected: str,
+    command: str, user: str | None, scheme: str, expected: str,
     mosquitto: Mosquitto,  # noqa: F811
     capsys: pytest.CaptureFixture[str],
 ) -> None:
@@ -123,26 +102,14 @@ def test_acl_denials_are_one_warning_line_per_topic(
 ) -> None:
     """robot001 may not publish its own status (the ACL lets it write commands only)."""
     url = f"mqtt://robot001:pw-001@127.0.0.1:{mosquitto.port}"
-    argv = [
-        "bridge",
-        "-i",
-        "virtual",
-        "-c",
-        f"test-acl-{os.getpid()}",
-        "--duration",
-        "2.5",
-        "--name",
-        "robot001",
-        "--broker",
-        url,
-    ]
+    argv = ["bridge", "-i", "virtual", "-c", f"test-acl-{os.getpid()}", "--duration", "2.5",
+            "--name", "robot001", "--broker", url]
     code, lines = run_cli(argv, capsys)
     assert code == 0
     refusals = [line for line in lines if line.startswith("mqtt ") and "refused" in line]
     # status: online at the start, every second, offline at the end: refused each time, told once
-    assert refusals == [
-        "mqtt robot001: the broker refused a publication on odocan/robot001/status (Not authorized)"
-    ]
+    assert refusals == ["mqtt robot001: the broker refused a publication on odocan/robot001/status "
+                        "(Not authorized)"]
 
 
 def test_a_broker_restart_is_three_lines_and_no_library_noise(
@@ -154,23 +121,10 @@ def test_a_broker_restart_is_three_lines_and_no_library_noise(
     async def scenario() -> str:
         url = mosquitto.url("bridge")
         bridge = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "odocan",
-                "bridge",
-                "--name",
-                "robot001",
-                "-i",
-                "virtual",
-                "-c",
-                f"test-restart-{os.getpid()}",
-                "--broker",
-                f"mqtt://bridge:bridge-pw@127.0.0.1:{mosquitto.port}",
-            ],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
+            [sys.executable, "-m", "odocan", "bridge", "--name", "robot001", "-i", "virtual",
+             "-c", f"test-restart-{os.getpid()}",
+             "--broker", f"mqtt://bridge:bridge-pw@127.0.0.1:{mosquitto.port}"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
         )
         try:
             await wait_status(url, "online")
@@ -208,27 +162,14 @@ async def wait_status(url: object, state: str, *, fresh: bool = False) -> None:
                 await asyncio.sleep(0.1)
 
 
+
 def _openssl(*args: str, cwd: Path) -> None:
     subprocess.run(["openssl", *args], cwd=cwd, check=True, capture_output=True)
 
 
 def _ca(cwd: Path, name: str) -> None:
-    _openssl(
-        "req",
-        "-x509",
-        "-newkey",
-        "rsa:2048",
-        "-nodes",
-        "-keyout",
-        f"{name}.key",
-        "-out",
-        f"{name}.pem",
-        "-days",
-        "2",
-        "-subj",
-        f"/CN=odocan test {name}",
-        cwd=cwd,
-    )
+    _openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", f"{name}.key",
+             "-out", f"{name}.pem", "-days", "2", "-subj", f"/CN=odocan test {name}", cwd=cwd)
 
 
 @pytest.fixture
@@ -239,48 +180,19 @@ def tls_mosquitto(tmp_path: Path) -> Iterator[tuple[int, Path, Path]]:
     _ca(tmp_path, "ca")
     _ca(tmp_path, "other")
     (tmp_path / "ext").write_text("subjectAltName=IP:127.0.0.1\n")
-    _openssl(
-        "req",
-        "-newkey",
-        "rsa:2048",
-        "-nodes",
-        "-keyout",
-        "server.key",
-        "-out",
-        "server.csr",
-        "-subj",
-        "/CN=127.0.0.1",
-        cwd=tmp_path,
-    )
-    _openssl(
-        "x509",
-        "-req",
-        "-in",
-        "server.csr",
-        "-CA",
-        "ca.pem",
-        "-CAkey",
-        "ca.key",
-        "-CAcreateserial",
-        "-out",
-        "server.pem",
-        "-days",
-        "2",
-        "-extfile",
-        "ext",
-        cwd=tmp_path,
-    )
+    _openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", "server.key", "-out",
+             "server.csr", "-subj", "/CN=127.0.0.1", cwd=tmp_path)
+    _openssl("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+             "-CAcreateserial", "-out", "server.pem", "-days", "2", "-extfile", "ext",
+             cwd=tmp_path)
     port = free_loopback_port()
     conf = tmp_path / "tls.conf"
-    conf.write_text(
-        f"listener {port} {LOOPBACK}\nallow_anonymous true\n"
-        f"cafile {tmp_path / 'ca.pem'}\ncertfile {tmp_path / 'server.pem'}\n"
-        f"keyfile {tmp_path / 'server.key'}\nlog_dest none\n"
-        f"user {getpass.getuser()}\n"
-    )
-    proc = subprocess.Popen(
-        [MOSQUITTO, "-c", str(conf)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
-    )
+    conf.write_text(f"listener {port} {LOOPBACK}\nallow_anonymous true\n"
+                    f"cafile {tmp_path / 'ca.pem'}\ncertfile {tmp_path / 'server.pem'}\n"
+                    f"keyfile {tmp_path / 'server.key'}\nlog_dest none\n"
+                    f"user {getpass.getuser()}\n")
+    proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline:
@@ -304,7 +216,5 @@ def test_tls_with_the_right_ca_connects_and_with_another_is_one_line(
     assert lines[-1].startswith("bridge robot001: ") and "0 reconnects" in lines[-1]
     code, lines = run_cli([*argv, "--ca", str(other)], capsys)
     assert code == 2
-    assert (
-        f"cannot connect to mqtts://127.0.0.1:{port}: TLS: [SSL: CERTIFICATE_VERIFY_FAILED]"
-        in the_error(lines)
-    )
+    assert (f"cannot connect to mqtts://127.0.0.1:{port}: TLS: [SSL: CERTIFICATE_VERIFY_FAILED]"
+            in the_error(lines))

@@ -31,21 +31,8 @@ N_FUZZ = 100_000
 PMIR = robot.load("pmir")
 GEOMETRY = Geometry.of(PMIR)
 URL = BrokerURL(host="127.0.0.1", port=1)  # never connected to in this file
-KEYS = (
-    "x_m",
-    "y_m",
-    "heading_rad",
-    "id",
-    "counts_per_rev",
-    "wheel_radius_left_m",
-    "wheelbase_m",
-    "counter_bits",
-    "integrator",
-    "goal_id",
-    "mode",
-    "append",
-    "z",
-)
+KEYS = ("x_m", "y_m", "heading_rad", "id", "counts_per_rev", "wheel_radius_left_m",
+        "wheelbase_m", "counter_bits", "integrator", "goal_id", "mode", "append", "z")
 
 
 def _bridge(bus: can.BusABC) -> Bridge:
@@ -95,12 +82,8 @@ def _payload(rng: random.Random) -> bytes:
         return b'{"x_m": NaN, "y_m": -Infinity, "heading_rad": 1e999}'
     if kind == 7:
         return b'{"id": "' + b"a" * (MAX_COMMAND_BYTES + 1) + b'"}'
-    valid = {
-        "x_m": rng.uniform(-10, 10),
-        "y_m": rng.uniform(-10, 10),
-        "heading_rad": rng.uniform(-7, 7),
-        "id": rng.randint(-5, 5),
-    }
+    valid = {"x_m": rng.uniform(-10, 10), "y_m": rng.uniform(-10, 10),
+             "heading_rad": rng.uniform(-7, 7), "id": rng.randint(-5, 5)}
     if kind == 8:  # a plausible command with one key of a random value or type
         valid[rng.choice(list(valid))] = _value(rng)
     return json.dumps(valid).encode()
@@ -125,33 +108,26 @@ def test_10e5_random_command_payloads_are_each_answered_once() -> None:
         assert robot_.commands_failed == 0  # nothing reached the catch-all
         assert outcomes["accepted"] > 1000 and outcomes["rejected"] > 50_000
         # and the bridge still takes a valid command
-        ((_, answer),) = robot_.on_command(
-            "set_pose", b'{"id": 1, "x_m": 1, "y_m": 2, "heading_rad": 0}'
-        )
+        (_, answer), = robot_.on_command("set_pose", b'{"id": 1, "x_m": 1, "y_m": 2, '
+                                                     b'"heading_rad": 0}')
         assert answer["result"] == "accepted"
 
 
-@pytest.mark.parametrize(
-    ("payload", "reason"),
-    [
-        (
-            b'{"x_m": ' + b"1" * 400 + b', "y_m": 0, "heading_rad": 0}',
-            "x_m out of range (400-digit",
-        ),
-        (b"[" * 2000 + b"]" * 2000, "nested too deeply"),
-        (b'{"x_m": \xff\xfe}', "malformed JSON"),
-        (b'{"x_m": ' + b"1" * 5000 + b"}", "payload too large"),
-        (b'{"x_m": 1e999, "y_m": 0, "heading_rad": 0}', "x_m must be finite"),
-        (b'{"id": ' + b"9" * 30 + b', "x_m": 1, "y_m": 0, "heading_rad": 0}', "id must be"),
-        (b'{"x_m": [1], "y_m": {}, "heading_rad": null}', "x_m must be a number"),
-        (b'{"x_m": 1, "y_m": 0, "heading_rad": 0, "z": 1}', "unknown field 'z'"),
-    ],
-)
+@pytest.mark.parametrize(("payload", "reason"), [
+    (b'{"x_m": ' + b"1" * 400 + b', "y_m": 0, "heading_rad": 0}', "x_m out of range (400-digit"),
+    (b"[" * 2000 + b"]" * 2000, "nested too deeply"),
+    (b'{"x_m": \xff\xfe}', "malformed JSON"),
+    (b'{"x_m": ' + b"1" * 5000 + b"}", "payload too large"),
+    (b'{"x_m": 1e999, "y_m": 0, "heading_rad": 0}', "x_m must be finite"),
+    (b'{"id": ' + b"9" * 30 + b', "x_m": 1, "y_m": 0, "heading_rad": 0}', "id must be"),
+    (b'{"x_m": [1], "y_m": {}, "heading_rad": null}', "x_m must be a number"),
+    (b'{"x_m": 1, "y_m": 0, "heading_rad": 0, "z": 1}', "unknown field 'z'"),
+])
 def test_the_inputs_that_killed_the_bridge_are_rejected_with_a_reason(
     payload: bytes, reason: str
 ) -> None:
     with can.Bus(interface="virtual", channel=f"fuzz-one-{time.monotonic_ns()}") as bus:
-        ((_, answer),) = _bridge(bus).robots[0].on_command("set_pose", payload)
+        (_, answer), = _bridge(bus).robots[0].on_command("set_pose", payload)
     assert answer["result"] == "rejected"
     assert reason in answer["reason"]
 
@@ -163,9 +139,8 @@ def _rig_frames(seconds: float) -> list[can.Message]:
         def on_message_received(self, msg: can.Message) -> None:
             frames.append(msg)
 
-    with LockstepRig(
-        RigConfig(robot=PMIR, seed=7, channel=f"fuzz-rig-{time.monotonic_ns()}"), [Keep()]
-    ) as rig:
+    with LockstepRig(RigConfig(robot=PMIR, seed=7, channel=f"fuzz-rig-{time.monotonic_ns()}"),
+                     [Keep()]) as rig:
         rig.run(seconds)
     return frames
 
@@ -197,7 +172,7 @@ def test_10e5_random_frames_are_each_counted_and_the_poses_still_come() -> None:
         try:
             baseline = 0
             for start in range(0, len(fuzz), 64):  # in batches, as BusReader hands them over
-                bridge._handle([(0, m) for m in fuzz[start : start + 64]])
+                bridge._handle([(0, m) for m in fuzz[start:start + 64]])
                 if start < N_FUZZ // 10:
                     baseline = tracemalloc.get_traced_memory()[0]
             grown_bytes = tracemalloc.get_traced_memory()[0] - baseline
@@ -208,11 +183,9 @@ def test_10e5_random_frames_are_each_counted_and_the_poses_still_come() -> None:
         telemetry = bridge.robots[0].telemetry
         assert bridge.frames_failed == 0  # no frame reached the catch-all
         kinds = telemetry.e2e.counts()
-        counted = (
-            sum(telemetry.frames.values())
-            + sum(telemetry.rejected.values())
-            + sum(kinds.get("unknown", {}).get(k, 0) for k in ("error_frames", "remote_frames"))
-        )
+        counted = (sum(telemetry.frames.values()) + sum(telemetry.rejected.values())
+                   + sum(kinds.get("unknown", {}).get(k, 0)
+                         for k in ("error_frames", "remote_frames")))
         assert counted == len(fuzz), (counted, kinds)
         assert telemetry.rejected["ODOM_STATUS"] >= 1
         before = len([p for leaf, p in got if leaf == "pose"])
@@ -223,11 +196,8 @@ def test_10e5_random_frames_are_each_counted_and_the_poses_still_come() -> None:
     # the on-board pose as the rig's last ODOM_POSE_X/Y say (the fuzz's encoder frames moved the
     # float64 reference, which the error topic then shows; the pose itself is the bus's)
     pose_x = database().get_message_by_name("ODOM_POSE_X")
-    last_x = next(
-        m
-        for m in reversed(rig)
-        if m.arbitration_id == pose_x.frame_id and m.timestamp <= poses[-1]["t_s"]
-    )
+    last_x = next(m for m in reversed(rig) if m.arbitration_id == pose_x.frame_id
+                  and m.timestamp <= poses[-1]["t_s"])
     assert poses[-1]["x_m"] == pytest.approx(pose_x.decode(last_x.data)["X"], abs=1e-3)
 
 
@@ -266,26 +236,19 @@ def _arrived(age_s: float, expiry_s: float | None) -> _Arrived:
     return message
 
 
-@pytest.mark.parametrize(
-    ("age_s", "expiry_s", "verdict"),
-    [
-        (0.0, None, "run"),
-        (4.0, None, "run"),  # the default expiry: 5 s
-        (6.0, None, "expired"),
-        (2.0, 1.0, "expired"),  # the message's own (remaining) MQTT v5 expiry
-        (6.0, 60.0, "run"),
-    ],
-)
+@pytest.mark.parametrize(("age_s", "expiry_s", "verdict"), [
+    (0.0, None, "run"),
+    (4.0, None, "run"),  # the default expiry: 5 s
+    (6.0, None, "expired"),
+    (2.0, 1.0, "expired"),  # the message's own (remaining) MQTT v5 expiry
+    (6.0, 60.0, "run"),
+])
 def test_a_command_older_than_its_expiry_is_not_run(
     age_s: float, expiry_s: float | None, verdict: str
 ) -> None:
     seen: list[str] = []
-    link = RobotLink(
-        robot="robot001",
-        broker=URL,
-        command_expiry_s=5.0,
-        on_command=lambda n, p, v: seen.append(v) or [],
-    )  # type: ignore[func-returns-value]
+    link = RobotLink(robot="robot001", broker=URL, command_expiry_s=5.0,
+                     on_command=lambda n, p, v: seen.append(v) or [])  # type: ignore[func-returns-value]
     link._answer("set_pose", _arrived(age_s, expiry_s))
     assert seen == [verdict]
     assert link.commands_expired == (verdict == "expired")
@@ -295,8 +258,8 @@ def test_an_expired_or_busy_command_is_answered_with_its_id_and_not_sent() -> No
     with can.Bus(interface="virtual", channel=f"fuzz-exp-{time.monotonic_ns()}") as bus:
         robot_ = _bridge(bus).robots[0]
         payload = b'{"id": "late", "x_m": 1, "y_m": 2, "heading_rad": 0}'
-        ((_, expired),) = robot_.on_command("set_pose", payload, "expired")
-        ((_, busy),) = robot_.on_command("set_pose", payload, "busy")
+        (_, expired), = robot_.on_command("set_pose", payload, "expired")
+        (_, busy), = robot_.on_command("set_pose", payload, "busy")
         assert robot_.commands_sent == 0
     assert (expired["id"], expired["result"]) == ("late", "expired")
     assert (busy["id"], busy["result"]) == ("late", "rejected") and "busy" in busy["reason"]
@@ -308,14 +271,8 @@ def test_a_bus_of_random_ids_does_not_grow_the_rates_payload() -> None:
     telemetry = RobotTelemetry("r", GEOMETRY, "exact")
     rng = random.Random(5)
     for k in range(20_000):
-        telemetry.feed(
-            can.Message(
-                arbitration_id=rng.getrandbits(29),
-                is_extended_id=True,
-                data=rng.randbytes(8),
-                timestamp=k * 1e-4,
-            )
-        )
+        telemetry.feed(can.Message(arbitration_id=rng.getrandbits(29), is_extended_id=True,
+                                   data=rng.randbytes(8), timestamp=k * 1e-4))
     assert sum(telemetry.rejected.values()) == 20_000
     assert len(telemetry.rejected) == MAX_UNKNOWN_IDS + 1  # the first 32 IDs, then "other"
     assert len(topics.dumps(telemetry.rates(2.0)[1])) < 4096
@@ -362,9 +319,8 @@ def test_the_bus_reader_reads_on_after_bus_errors() -> None:
             reader.start()
             try:
                 for k in range(50):
-                    tx.send(
-                        can.Message(arbitration_id=0x7FF, data=bytes([k]), is_extended_id=False)
-                    )
+                    tx.send(can.Message(arbitration_id=0x7FF, data=bytes([k]),
+                                        is_extended_id=False))
                 async with asyncio.timeout(20):  # without the fix: the thread died at once
                     while _queued(bridge) < 50:
                         await asyncio.sleep(0.01)

@@ -22,8 +22,7 @@ GEOMETRY = Geometry.of(PMIR)
 
 def test_set_pose_frames_pass_the_e2e_check_and_carry_the_values() -> None:
     command = CommandEncoder().encode(
-        "set_pose", b'{"id": 7, "x_m": -1.25, "y_m": 3.5, "heading_rad": 6.5}'
-    )
+        "set_pose", b'{"id": 7, "x_m": -1.25, "y_m": 3.5, "heading_rad": 6.5}')
     monitor = E2EMonitor()
     message = database().get_message_by_name("ODOM_SET_POSE")
     decoded = []
@@ -58,17 +57,14 @@ def test_nav_goal_frames_when_the_dbc_has_it() -> None:
     assert (go["GOAL_ID"], go["NO_FINAL_HEADING"], go["APPEND"]) == (9, 1, 0)
 
 
-@pytest.mark.parametrize(
-    ("payload", "reason"),
-    [
-        (b'{"x_m": 1, "y_m": 2, "heading_rad": 0, "id": true}', "id must be"),
-        (b'{"x_m": 1e300, "y_m": 2, "heading_rad": 0}', "out of range"),
-        (b'{"x_m": 1, "y_m": -214748.5, "heading_rad": 0}', "y_m=-214748.5 out of range"),
-        (b'{"x_m": 1, "y_m": 2, "heading_rad": Infinity}', "heading_rad must be finite"),
-        (b'{"x_m": 1, "y_m": 2, "heading_rad": 0}' + b" " * 5000, "payload too large"),
-        (b"\xff\xfe", "malformed JSON"),
-    ],
-)
+@pytest.mark.parametrize(("payload", "reason"), [
+    (b'{"x_m": 1, "y_m": 2, "heading_rad": 0, "id": true}', "id must be"),
+    (b'{"x_m": 1e300, "y_m": 2, "heading_rad": 0}', "out of range"),
+    (b'{"x_m": 1, "y_m": -214748.5, "heading_rad": 0}', "y_m=-214748.5 out of range"),
+    (b'{"x_m": 1, "y_m": 2, "heading_rad": Infinity}', "heading_rad must be finite"),
+    (b'{"x_m": 1, "y_m": 2, "heading_rad": 0}' + b" " * 5000, "payload too large"),
+    (b"\xff\xfe", "malformed JSON"),
+])
 def test_set_pose_rejections(payload: bytes, reason: str) -> None:
     with pytest.raises(CommandRejected, match=reason):
         CommandEncoder().encode("set_pose", payload)
@@ -82,14 +78,11 @@ def test_a_rejected_command_does_not_use_an_e2e_counter() -> None:
     assert [f.counter for f in command.frames] == [0, 1, 2, 3]
 
 
-@pytest.mark.parametrize(
-    ("url", "expected"),
-    [
-        ("mqtt://127.0.0.1", ("127.0.0.1", 1883, False, None, None)),
-        ("mqtt://u:p%40ss@127.0.0.1:1884", ("127.0.0.1", 1884, False, "u", "p@ss")),
-        ("mqtts://127.0.0.1", ("127.0.0.1", 8883, True, None, None)),
-    ],
-)
+@pytest.mark.parametrize(("url", "expected"), [
+    ("mqtt://127.0.0.1", ("127.0.0.1", 1883, False, None, None)),
+    ("mqtt://u:p%40ss@127.0.0.1:1884", ("127.0.0.1", 1884, False, "u", "p@ss")),
+    ("mqtts://127.0.0.1", ("127.0.0.1", 8883, True, None, None)),
+])
 def test_broker_urls(url: str, expected: tuple[object, ...]) -> None:
     b = BrokerURL.parse(url)
     assert (b.host, b.port, b.tls, b.username, b.password) == expected
@@ -108,14 +101,16 @@ def test_tls_files_need_mqtts(tmp_path: object) -> None:
 
 
 def test_telemetry_of_a_lockstep_run_matches_the_reference() -> None:
-    telemetry = RobotTelemetry("r", GEOMETRY, "exact", counter_bits=PMIR.counter_bits, publish_hz=5)
+    telemetry = RobotTelemetry("r", GEOMETRY, "exact", counter_bits=PMIR.counter_bits,
+                               publish_hz=5)
     out = []
 
     class Feed(can.Listener):
         def on_message_received(self, msg: can.Message) -> None:
             out.extend(telemetry.feed(msg))
 
-    with LockstepRig(RigConfig(robot=PMIR, seed=5, channel="test-mqtt-telemetry"), [Feed()]) as rig:
+    with LockstepRig(RigConfig(robot=PMIR, seed=5, channel="test-mqtt-telemetry"),
+                     [Feed()]) as rig:
         rig.run(5.0)
     errors = [p for leaf, p in out if leaf == "error"]
     assert len(errors) == 25  # 5 Hz for 5 s
@@ -144,9 +139,8 @@ def test_a_fleet_robot_sends_the_lockstep_rigs_frames(
         def on_message_received(self, msg: can.Message) -> None:
             rig_frames.append(bytes(msg.data))
 
-    config = RigConfig(
-        robot=PMIR, seed=10 + index, channel="test-mqtt-fleet-rig", truth_phase_ticks=truth_phase
-    )
+    config = RigConfig(robot=PMIR, seed=10 + index, channel="test-mqtt-fleet-rig",
+                       truth_phase_ticks=truth_phase)
     with LockstepRig(config, [Keep()]) as rig:
         rig.run(1.2)
     assert fleet_frames == rig_frames

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-EXTERNAL_TEST = """
+EXTERNAL_TEST = '''
 import pytest
 
 
@@ -27,16 +27,15 @@ def test_a_straight_drive_matches_the_reference(odocan_rig):
     rig = odocan_rig(seed=4)
     rig.drive("straight", seconds=2.0)
     rig.assert_pose_matches_reference(position_m=1e-4)
-"""
+'''
 
 pytestmark = pytest.mark.slow
 
 
 def _run(argv: list[str], cwd: Path, timeout_s: float = 600) -> subprocess.CompletedProcess[str]:
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
-    done = subprocess.run(
-        argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout_s, check=False
-    )
+    done = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True,
+                          timeout=timeout_s, check=False)
     assert done.returncode == 0, f"{argv} -> {done.returncode}\n{done.stdout}\n{done.stderr}"
     return done
 
@@ -55,16 +54,10 @@ def test_the_wheel_has_one_top_level_name_and_its_data(dists: dict[str, Path]) -
     names = zipfile.ZipFile(dists["wheel"]).namelist()
     top = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
     assert top == {"odocan"}
-    for needed in (
-        "odocan/dbc/odocan.dbc",
-        "odocan/sim/robots/pmir.toml",
-        "odocan/sim/robots/kobuki.toml",
-        "odocan/host/mqtt/bridge.py",
-        "odocan/host/cli/subparsers/run.py",
-        "odocan/host/experiments/umbmark.py",
-        "odocan/__main__.py",
-        "odocan/firmware/py.typed",
-    ):
+    for needed in ("odocan/dbc/odocan.dbc", "odocan/sim/robots/pmir.toml",
+                   "odocan/sim/robots/kobuki.toml", "odocan/host/mqtt/bridge.py",
+                   "odocan/host/cli/subparsers/run.py", "odocan/host/experiments/umbmark.py",
+                   "odocan/__main__.py", "odocan/firmware/py.typed"):
         assert needed in names, needed
     assert not any(n.startswith(("odocan/tests/", "tests/", "tools/")) for n in names)
 
@@ -72,13 +65,8 @@ def test_the_wheel_has_one_top_level_name_and_its_data(dists: dict[str, Path]) -
 def test_the_sdist_carries_the_sources_and_the_dbc(dists: dict[str, Path]) -> None:
     with tarfile.open(dists["sdist"]) as sdist:
         names = {n.split("/", 1)[1] for n in sdist.getnames() if "/" in n}
-    for needed in (
-        "pyproject.toml",
-        "odocan/dbc/odocan.dbc",
-        "odocan/sim/robots/pmir.toml",
-        "odocan/firmware/odometry.py",
-        "odocan/host/cli/app.py",
-    ):
+    for needed in ("pyproject.toml", "odocan/dbc/odocan.dbc", "odocan/sim/robots/pmir.toml",
+                   "odocan/firmware/odometry.py", "odocan/host/cli/app.py"):
         assert needed in names, needed
 
 
@@ -105,7 +93,6 @@ def test_an_installed_odocan_runs_analyzes_and_serves_its_fixture(
     _run([str(python), "-c", "import firmware, odocan.firmware; assert firmware.MINE"], cwd=work)
 
     (work / "test_external.py").write_text(EXTERNAL_TEST)
-    tested = _run(
-        [str(python), "-m", "pytest", "-q", "-p", "no:cacheprovider", "test_external.py"], cwd=work
-    )
+    tested = _run([str(python), "-m", "pytest", "-q", "-p", "no:cacheprovider", "test_external.py"],
+                  cwd=work)
     assert "1 passed" in tested.stdout

@@ -68,21 +68,14 @@ def test_series_time_axis_and_lengths(drift: tuple[Analysis, dict[str, np.ndarra
     assert series["t_s"][-1] == pytest.approx(20.0, abs=0.1)  # seconds since the first frame
     m = len(series["truth_t_s"])
     assert m == drift[0].report["samples"]["truth_compared"] > 150  # 10 Hz over 20 s
-    for key in (
-        "truth_seq",
-        "truth_distance_m",
-        "truth_position_error_m",
-        "truth_heading_error_unwrapped_rad",
-        "truth_dx_m",
-        "truth_dy_m",
-    ):
+    for key in ("truth_seq", "truth_distance_m", "truth_position_error_m",
+                "truth_heading_error_unwrapped_rad", "truth_dx_m", "truth_dy_m"):
         assert len(series[key]) == m, key
     # the truth error series is the verdict's: same maximum as the report
     truth = drift[0].report["onboard_vs_truth"]
     assert series["truth_position_error_m"].max() == pytest.approx(truth["max_position_error_m"])
     assert np.hypot(series["truth_dx_m"], series["truth_dy_m"]) == pytest.approx(
-        series["truth_position_error_m"]
-    )
+        series["truth_position_error_m"])
     assert len(series["gap_start_t_s"]) == len(series["restart_t_s"]) == 0  # a clean bus
 
 
@@ -204,11 +197,8 @@ def _umbmark_report(scale_m: float) -> dict[str, object]:
         ys = [p[1] * scale_m for p in points]
         cg = (sum(xs) / 2, sum(ys) / 2)
         r[direction] = math.hypot(*cg)
-        out[direction] = {
-            "runs": [{"x_m": x, "y_m": y} for x, y in zip(xs, ys, strict=True)],
-            "cg": {"x_m": cg[0], "y_m": cg[1]},
-            "r_cg_m": r[direction],
-        }
+        out[direction] = {"runs": [{"x_m": x, "y_m": y} for x, y in zip(xs, ys, strict=True)],
+                          "cg": {"x_m": cg[0], "y_m": cg[1]}, "r_cg_m": r[direction]}
     out["emax_syst_m"] = max(r.values())
     return out
 
@@ -233,23 +223,8 @@ def test_reading_the_truth_for_the_plot_does_not_change_the_run(tmp_path: Path) 
     reports = []
     for extra in ([], ["--plot", str(tmp_path / "p.svg")]):
         path = tmp_path / f"r{len(extra)}.json"
-        assert (
-            main(
-                [
-                    "run",
-                    "--duration",
-                    "4",
-                    "--seed",
-                    "6",
-                    "--errors",
-                    "ed=1.01,slip=0.01",
-                    "--report",
-                    str(path),
-                    *extra,
-                ]
-            )
-            == 0
-        )
+        assert main(["run", "--duration", "4", "--seed", "6", "--errors", "ed=1.01,slip=0.01",
+                     "--report", str(path), *extra]) == 0
         data = json.loads(path.read_text())
         for key in ("wall_seconds", "realtime_factor"):
             data.pop(key)

@@ -77,18 +77,16 @@ def test_failing_assertions_carry_the_numbers(pytester: pytest.Pytester) -> None
     pytester.makepyfile(test_fails=FAILING)
     result = run(pytester)
     result.assert_outcomes(failed=4)
-    result.stdout.fnmatch_lines_random(
-        [
-            "*AssertionError: on-board pose vs float64 reference (exact, * samples over *s): "
-            "max position error * m > 1e-09 m (final * m)",
-            "*AssertionError: on-board pose vs ground truth (* samples over 2.* m, errors ed=1.01): "
-            "max position error * m > 0.001 m (final * m); max heading error * rad > 0.001 rad*",
-            "*AssertionError: goal 1 not reached at t = 0.5* s: TURNING, 2.8* m and * rad to go, "
-            "pose (* m, * m, * rad) (states: TURNING)",
-            "*AssertionError: goal 9 not reached at t = 1.00 s: no NAV_STATUS for it "
-            "(latest NAV_STATUS: goal 0 IDLE)",
-        ]
-    )
+    result.stdout.fnmatch_lines_random([
+        "*AssertionError: on-board pose vs float64 reference (exact, * samples over *s): "
+        "max position error * m > 1e-09 m (final * m)",
+        "*AssertionError: on-board pose vs ground truth (* samples over 2.* m, errors ed=1.01): "
+        "max position error * m > 0.001 m (final * m); max heading error * rad > 0.001 rad*",
+        "*AssertionError: goal 1 not reached at t = 0.5* s: TURNING, 2.8* m and * rad to go, "
+        "pose (* m, * m, * rad) (states: TURNING)",
+        "*AssertionError: goal 9 not reached at t = 1.00 s: no NAV_STATUS for it "
+        "(latest NAV_STATUS: goal 0 IDLE)",
+    ])
     (line,) = [ln for ln in result.stdout.lines if ln.startswith("E   ") and "(exact," in ln]
     assert "heading" not in line  # within its 1.0 rad bound: not named
 
@@ -201,10 +199,7 @@ def test_a_malformed_bus_option_is_an_error(pytester: pytest.Pytester) -> None:
 
 def test_parse_bus_spec_types_the_values() -> None:
     assert parse_bus_spec("interface=udp_multicast, channel=239.1.2.3,hop_limit=0,fd=false") == {
-        "interface": "udp_multicast",
-        "channel": "239.1.2.3",
-        "hop_limit": 0,
-        "fd": False,
+        "interface": "udp_multicast", "channel": "239.1.2.3", "hop_limit": 0, "fd": False,
     }
     with pytest.raises(BusSetupError, match="empty"):
         parse_bus_spec(" , ")
@@ -239,20 +234,9 @@ def udp_bus() -> Iterator[str]:
 def _start_firmware(spec: str) -> subprocess.Popen[str]:
     """``odocan firmware`` (default integrator exact) on the channel of ``spec``."""
     kwargs = parse_bus_spec(spec)
-    argv = [
-        sys.executable,
-        "-m",
-        "odocan",
-        "firmware",
-        "-i",
-        "udp_multicast",
-        "-c",
-        kwargs["channel"],
-        "--bus-arg",
-        f"port={kwargs['port']}",
-        "--bus-arg",
-        "hop_limit=0",
-    ]
+    argv = [sys.executable, "-m", "odocan", "firmware", "-i", "udp_multicast",
+            "-c", kwargs["channel"], "--bus-arg", f"port={kwargs['port']}",
+            "--bus-arg", "hop_limit=0"]
     return subprocess.Popen(argv, cwd=ROOT, stderr=subprocess.PIPE, text=True)
 
 

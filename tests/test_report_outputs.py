@@ -15,12 +15,8 @@ from odocan.sim.robot import load, profile_sha256
 def test_junit_names_every_check_and_carries_the_figures_of_a_failure(tmp_path: Path) -> None:
     checks = [
         Check("onboard_vs_reference", True, figures={"max_position_error_m": 3e-05}),
-        Check(
-            "onboard_vs_truth",
-            False,
-            "max position error 0.053 m > 0.01 m",
-            {"max_position_error_m": 0.053, "limit_m": 0.01},
-        ),
+        Check("onboard_vs_truth", False, "max position error 0.053 m > 0.01 m",
+              {"max_position_error_m": 0.053, "limit_m": 0.01}),
         Check("e2e", True),
     ]
     path = tmp_path / "junit.xml"
@@ -45,21 +41,13 @@ def test_junit_escapes_what_xml_cannot_hold_raw() -> None:
 
 def test_the_inputs_name_the_robot_the_dbc_and_the_version() -> None:
     robot = load("kobuki")
-    record = inputs(
-        robot,
-        integrator="rk2",
-        errors="ed=1.002",
-        faults="drop=0.01",
-        seeds={"sim": 3, "faults": 4},
-    )
+    record = inputs(robot, integrator="rk2", errors="ed=1.002", faults="drop=0.01",
+                    seeds={"sim": 3, "faults": 4})
     assert record["robot"]["name"] == "kobuki"
     assert record["robot"]["sha256"] == profile_sha256(robot)
     assert record["robot"]["wheelbase_nm"] == robot.firmware_params()["wheelbase_nm"]
     assert (record["integrator"], record["errors"], record["faults"]) == (
-        "rk2",
-        "ed=1.002",
-        "drop=0.01",
-    )
+        "rk2", "ed=1.002", "drop=0.01")
     assert record["seeds"] == {"sim": 3, "faults": 4}
     assert record["dbc"]["sha256"] == hashlib.sha256(DBC_PATH.read_bytes()).hexdigest()
     assert isinstance(record["odocan_version"], str) and record["odocan_version"]

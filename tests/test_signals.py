@@ -109,9 +109,8 @@ def _udp_listener(group: str) -> can.BusABC:
 
     from odocan.host.io.buses import open_bus
 
-    args = argparse.Namespace(
-        interface="udp_multicast", channel=group, bitrate=None, bus_arg=["hop_limit=0"], faults=""
-    )
+    args = argparse.Namespace(interface="udp_multicast", channel=group, bitrate=None,
+                              bus_arg=["hop_limit=0"], faults="")
     try:
         return open_bus(args)
     except Exception as exc:
@@ -128,17 +127,8 @@ def test_sigterm_stops_replay_realtime_cleanly(tmp_path: Path) -> None:
     group = f"239.255.{secrets.randbelow(250) + 1}.{secrets.randbelow(250) + 1}"
     listener = _udp_listener(group)
     try:
-        proc = _start(
-            "replay",
-            str(log),
-            "--realtime",
-            "-i",
-            "udp_multicast",
-            "-c",
-            group,
-            "--bus-arg",
-            "hop_limit=0",
-        )
+        proc = _start("replay", str(log), "--realtime", "-i", "udp_multicast", "-c", group,
+                      "--bus-arg", "hop_limit=0")
         for _ in range(20):  # well under way: the 30 s log holds 10 800 frames
             if listener.recv(START_TIMEOUT_S) is None:
                 proc.kill()

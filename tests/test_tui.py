@@ -61,15 +61,8 @@ class Fed:
         now_s = self.last_s + silent_s
         heard = {name: now_s - s.heard_monotonic_s for name, s in self.model.messages.items()}
         heard["ODOM_STATUS"] = status_age_s + silent_s
-        return View(
-            source="udp_multicast:239.255.1.2",
-            interface="udp_multicast",
-            now_s=now_s,
-            started_s=0.0,
-            last_frame_s=self.last_s,
-            heard_s=heard,
-            **kw,
-        )
+        return View(source="udp_multicast:239.255.1.2", interface="udp_multicast", now_s=now_s,
+                    started_s=0.0, last_frame_s=self.last_s, heard_s=heard, **kw)
 
 
 def feed_rig(ticks: int, faults: str = "") -> Fed:
@@ -86,12 +79,9 @@ def feed_rig(ticks: int, faults: str = "") -> Fed:
             trace.feed(msg)
             last[0] = msg.timestamp
 
-    config = RigConfig(
-        robot=robot.load("pmir"),
-        seed=2,
-        channel=f"tui-{os.getpid()}-{next(_channels)}",
-        faults=FaultSpec.parse(faults) if faults else None,
-    )
+    config = RigConfig(robot=robot.load("pmir"), seed=2,
+                       channel=f"tui-{os.getpid()}-{next(_channels)}",
+                       faults=FaultSpec.parse(faults) if faults else None)
     with LockstepRig(config, listeners=[Feed()]) as rig:
         for _ in range(ticks):
             rig.step()
@@ -100,14 +90,8 @@ def feed_rig(ticks: int, faults: str = "") -> Fed:
 
 def draw(fed: Fed, view: View, width: int = 80, height: int = 24) -> list[str]:
     """The screen as the rows of a ``width`` × ``height`` terminal (plain text)."""
-    console = Console(
-        width=width,
-        height=height,
-        record=True,
-        color_system=None,
-        force_terminal=False,
-        legacy_windows=False,
-    )
+    console = Console(width=width, height=height, record=True, color_system=None,
+                      force_terminal=False, legacy_windows=False)
     snapshot = fed.model.snapshot(now_s=view.now_s)
     console.print(screen(snapshot, fed.trace, view, width=width, height=height), end="")
     return console.export_text(styles=False).split("\n")[:height]
@@ -136,11 +120,8 @@ def test_healthy_screen_fits_80x24(healthy: Fed) -> None:
     assert rows[1].startswith("verdict OK")
     assert rows[2].startswith("firmware OK  reason no error bits  age 0.1 s  EXACT  uptime 2 s")
     snapshot = healthy.model.snapshot(now_s=healthy.last_s)
-    for row, (label, key) in zip(
-        rows[4:7],
-        (("on-board", "pose"), ("reference", "reference"), ("truth", "truth")),
-        strict=True,
-    ):
+    for row, (label, key) in zip(rows[4:7], (("on-board", "pose"), ("reference", "reference"),
+                                              ("truth", "truth")), strict=True):
         assert row.split()[:4] == [label, *_pose_cells(snapshot, key)]
     ref_error_mm = snapshot["error"]["pose_vs_reference"]["dpos_m"] * 1e3
     assert rows[5].split()[4] == f"{ref_error_mm:.3f}"
@@ -155,8 +136,8 @@ def test_healthy_screen_fits_80x24(healthy: Fed) -> None:
 def test_healthy_screen_shows_the_newest_trace_lines(healthy: Fed) -> None:
     rows = draw(healthy, healthy.view())
     title = next(i for i, r in enumerate(rows) if r.startswith("trace"))
-    shown = rows[title + 1 : 23]
-    newest = list(healthy.trace.lines)[-len(shown) :]
+    shown = rows[title + 1:23]
+    newest = list(healthy.trace.lines)[-len(shown):]
     for row, line in zip(shown, newest, strict=True):
         assert row.split()[1:3] == [f"{line.arbitration_id:03X}", line.name]
 
@@ -243,9 +224,8 @@ def test_filter_by_name_and_id(healthy: Fed) -> None:
     trace = Trace(db, only)
     fed = feed_rig(50)
     for line in fed.trace.lines:
-        trace.feed(
-            can.Message(arbitration_id=line.arbitration_id, data=bytes(8), is_extended_id=False)
-        )
+        trace.feed(can.Message(arbitration_id=line.arbitration_id, data=bytes(8),
+                               is_extended_id=False))
     assert {line.name for line in trace.lines} <= {"ODOM_POSE_X", "SIM_TRUTH", "ODOM_STATUS"}
     assert {line.arbitration_id for line in trace.lines} == {0x200, 0x380, 0x700}
     for bad in ("NO_SUCH_MESSAGE", "0xZZ"):
@@ -255,19 +235,12 @@ def test_filter_by_name_and_id(healthy: Fed) -> None:
 
 def test_pause_freezes_the_trace_and_keys_edit_the_filter(healthy: Fed) -> None:
     model = BusMonitor(robot.load("pmir"))
-    app = MonitorApp(
-        can.Bus(interface="virtual", channel=f"tui-keys-{os.getpid()}"),
-        model,
-        Trace(model.db),
-        View(source="x"),
-    )
+    app = MonitorApp(can.Bus(interface="virtual", channel=f"tui-keys-{os.getpid()}"), model,
+                     Trace(model.db), View(source="x"))
     try:
-        frames = [
-            can.Message(
-                arbitration_id=line.arbitration_id, data=bytes(8), timestamp=i, is_extended_id=False
-            )
-            for i, line in enumerate(list(healthy.trace.lines)[-40:])
-        ]
+        frames = [can.Message(arbitration_id=line.arbitration_id, data=bytes(8), timestamp=i,
+                              is_extended_id=False)
+                  for i, line in enumerate(list(healthy.trace.lines)[-40:])]
         for msg in frames[:10]:
             app.on_frame(msg)
         app.on_keys("p")
@@ -298,12 +271,9 @@ def test_log_records_every_frame_heard(suffix: str, tmp_path: Path, healthy: Fed
     receiver, sender = (can.Bus(interface="virtual", channel=channel) for _ in range(2))
     path = tmp_path / f"watch{suffix}"
     model = BusMonitor(robot.load("pmir"))
-    sent = [
-        can.Message(
-            arbitration_id=line.arbitration_id, data=bytes(range(k, k + 8)), is_extended_id=False
-        )
-        for k, line in enumerate(list(healthy.trace.lines)[-60:])
-    ]
+    sent = [can.Message(arbitration_id=line.arbitration_id, data=bytes(range(k, k + 8)),
+                        is_extended_id=False)
+            for k, line in enumerate(list(healthy.trace.lines)[-60:])]
     recorder = Recorder(path)
     try:
         app = MonitorApp(receiver, model, Trace(model.db), View(source="x"), recorder)
@@ -316,21 +286,18 @@ def test_log_records_every_frame_heard(suffix: str, tmp_path: Path, healthy: Fed
         sender.shutdown()
     assert recorder.count == len(sent) == model.frames_total
     back = list(can.LogReader(path))
-    assert [(m.arbitration_id, bytes(m.data)) for m in back] == [
-        (m.arbitration_id, bytes(m.data)) for m in sent
-    ]
+    assert [(m.arbitration_id, bytes(m.data)) for m in back] == \
+        [(m.arbitration_id, bytes(m.data)) for m in sent]
 
 
-def test_cli_log_and_filter(
-    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_cli_log_and_filter(monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+                            capsys: pytest.CaptureFixture[str]) -> None:
     from tests.test_cli_monitor import _InterruptingBus
 
     monkeypatch.setattr(monitor_cmd, "open_bus", lambda args: _InterruptingBus(7))
     path = tmp_path / "seen.asc"
-    code, out, err = run_cli(
-        capsys, "monitor", "-i", "virtual", "--log", str(path), "--filter", "0x7FF"
-    )
+    code, out, err = run_cli(capsys, "monitor", "-i", "virtual", "--log", str(path),
+                             "--filter", "0x7FF")
     assert (code, err) == (0, "")
     assert "filter 0x7FF" in out and "log 7 frames to /" in out
     assert len(list(can.LogReader(path))) == 7
@@ -344,34 +311,25 @@ def test_cli_log_and_filter(
         (["--log", "x.txt"], ["--log", ".txt"]),
     ],
 )
-def test_cli_bad_filter_or_log_is_one_line(
-    argv: list[str], words: list[str], capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_cli_bad_filter_or_log_is_one_line(argv: list[str], words: list[str],
+                                           capsys: pytest.CaptureFixture[str]) -> None:
     from odocan.host.cli.app import main
 
     assert_usage_error(capsys, main(["monitor", "-i", "virtual", *argv]), *words)
 
 
 def _fleet_row(dpos_m: float | None, updated_unix_s: float, online: bool = True) -> dict[str, Any]:
-    return {
-        "online": online,
-        "pose": {"x_m": 1.0, "y_m": 2.0, "heading_rad": 0.5},
-        "error": None if dpos_m is None else {"dpos_m": dpos_m, "dheading_rad": 0.0},
-        "status": {"state": "OK", "errors": []},
-        "rate_hz": 250.0,
-        "updated_unix_s": updated_unix_s,
-    }
+    return {"online": online, "pose": {"x_m": 1.0, "y_m": 2.0, "heading_rad": 0.5},
+            "error": None if dpos_m is None else {"dpos_m": dpos_m, "dheading_rad": 0.0},
+            "status": {"state": "OK", "errors": []}, "rate_hz": 250.0,
+            "updated_unix_s": updated_unix_s}
 
 
 def test_fleet_sorted_by_error_and_stale_marked() -> None:
     now = 1000.0
-    fleet = {
-        "robot001": _fleet_row(1e-6, now - 0.5),
-        "robot002": _fleet_row(5e-3, now - 0.2),
-        "robot003": _fleet_row(None, now - 0.1),
-        "robot004": _fleet_row(2e-5, now - 10.0),
-        "robot005": _fleet_row(1e-3, now - 0.1, online=False),
-    }
+    fleet = {"robot001": _fleet_row(1e-6, now - 0.5), "robot002": _fleet_row(5e-3, now - 0.2),
+             "robot003": _fleet_row(None, now - 0.1), "robot004": _fleet_row(2e-5, now - 10.0),
+             "robot005": _fleet_row(1e-3, now - 0.1, online=False)}
     console = Console(width=80, record=True, color_system=None)
     console.print(render_fleet(fleet, source="mqtt://x", elapsed_s=3.0, now_unix_s=now))
     rows = console.export_text(styles=False).splitlines()
@@ -385,9 +343,8 @@ def test_fleet_sorted_by_error_and_stale_marked() -> None:
 
 def test_fleet_view_redraws_on_a_timer_without_messages() -> None:
     """No broker at all: the screen still redraws every REFRESH_S (its clock moves)."""
-    watch = monitor_cmd._FleetWatch(
-        BrokerURL.parse(f"mqtt://127.0.0.1:{free_loopback_port()}"), 1.2
-    )
+    watch = monitor_cmd._FleetWatch(BrokerURL.parse(f"mqtt://127.0.0.1:{free_loopback_port()}"),
+                                    1.2)
     draws: list[float] = []
     asyncio.run(watch.run(lambda: draws.append(time.monotonic())))
     assert len(draws) >= 2  # the first draw, and at least one from the timer alone
@@ -395,31 +352,19 @@ def test_fleet_view_redraws_on_a_timer_without_messages() -> None:
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(
-    frames=st.lists(
-        st.tuples(
-            st.sampled_from([0x100, 0x110, 0x200, 0x201, 0x380, 0x700, 0x123])
-            | st.integers(0, 0x7FF),
-            st.binary(min_size=0, max_size=8),
-            st.booleans(),
-            st.sampled_from(["", "error", "remote"]),
-        ),
-        max_size=30,
-    )
-)
-def test_no_frame_stops_the_trace_or_the_screen(frames: list[tuple[int, bytes, bool, str]]) -> None:
+@given(frames=st.lists(st.tuples(
+    st.sampled_from([0x100, 0x110, 0x200, 0x201, 0x380, 0x700, 0x123]) | st.integers(0, 0x7FF),
+    st.binary(min_size=0, max_size=8), st.booleans(), st.sampled_from(["", "error", "remote"])),
+    max_size=30))
+def test_no_frame_stops_the_trace_or_the_screen(
+        frames: list[tuple[int, bytes, bool, str]]) -> None:
     """Any ID, length, ID kind, error or remote frame: decoded or shown raw, never raised."""
     model = BusMonitor(robot.load("pmir"))
     trace = Trace(model.db)
     for k, (can_id, data, extended, kind) in enumerate(frames):
-        msg = can.Message(
-            arbitration_id=can_id,
-            data=data,
-            is_extended_id=extended,
-            is_error_frame=kind == "error",
-            is_remote_frame=kind == "remote",
-            timestamp=k * 0.01,
-        )
+        msg = can.Message(arbitration_id=can_id, data=data, is_extended_id=extended,
+                          is_error_frame=kind == "error", is_remote_frame=kind == "remote",
+                          timestamp=k * 0.01)
         model.feed(msg, now_s=msg.timestamp)
         trace.feed(msg)
     assert len(trace.lines) == len(frames)
@@ -429,8 +374,7 @@ def test_no_frame_stops_the_trace_or_the_screen(frames: list[tuple[int, bytes, b
 
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full on this system")
 def test_cli_log_to_a_device_is_refused_before_the_watch(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``--log`` linked to /dev/full: refused up front (exit 2, one line naming the path), like
     every output the CLI writes, before any bus is opened."""
     path = tmp_path / "full.log"

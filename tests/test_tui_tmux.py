@@ -62,13 +62,9 @@ class Sender:
                 sender.bus.send(msg)
                 sender.sent += 1
 
-        config = RigConfig(
-            robot=robot.load("pmir"),
-            seed=self.seed,
-            channel=f"tmux-rig-{os.getpid()}-{id(self)}",
-            duration_s=120.0,
-            faults=FaultSpec.parse(self.faults) if self.faults else None,
-        )
+        config = RigConfig(robot=robot.load("pmir"), seed=self.seed,
+                           channel=f"tmux-rig-{os.getpid()}-{id(self)}", duration_s=120.0,
+                           faults=FaultSpec.parse(self.faults) if self.faults else None)
         with LockstepRig(config, listeners=[Forward()]) as rig:
             t0 = time.monotonic()
             for k in range(12_000):
@@ -89,16 +85,12 @@ class Pane:
 
     def __init__(self, command: str) -> None:
         self.socket = f"odocan-tui-{os.getpid()}-{time.monotonic_ns()}"
-        self._tmux("new-session", "-d", "-x", str(COLUMNS), "-y", str(ROWS), "-s", "tui", command)
+        self._tmux("new-session", "-d", "-x", str(COLUMNS), "-y", str(ROWS), "-s", "tui",
+                   command)
 
     def _tmux(self, *args: str) -> str:
-        done = subprocess.run(
-            ["tmux", "-L", self.socket, *args],
-            capture_output=True,
-            text=True,
-            timeout=20,
-            check=False,
-        )
+        done = subprocess.run(["tmux", "-L", self.socket, *args], capture_output=True,
+                              text=True, timeout=20, check=False)
         if done.returncode != 0:
             raise RuntimeError(f"tmux {args[0]}: {done.stderr.strip()}")
         return done.stdout
@@ -127,19 +119,16 @@ class Pane:
 
     def close(self) -> None:
         """Kill this test's own tmux server (and the monitor in it)."""
-        subprocess.run(
-            ["tmux", "-L", self.socket, "kill-server"], capture_output=True, timeout=20, check=False
-        )
+        subprocess.run(["tmux", "-L", self.socket, "kill-server"], capture_output=True,
+                       timeout=20, check=False)
 
 
 def monitor_command(bus_argv: list[str], *extra: str) -> str:
     """The shell command of the pane: the monitor, then its exit code, then a pause to read it."""
     env = f"PYTHONPATH={shlex.quote(os.environ.get('PYTHONPATH', str(ROOT)))}"
     argv = [sys.executable, "-m", "odocan", "monitor", *bus_argv, *extra]
-    return (
-        f"cd {shlex.quote(str(ROOT))} && env {env} TERM=xterm-256color "
-        f"{shlex.join(argv)}; echo EXIT=$?; sleep 30"
-    )
+    return (f"cd {shlex.quote(str(ROOT))} && env {env} TERM=xterm-256color "
+            f"{shlex.join(argv)}; echo EXIT=$?; sleep 30")
 
 
 @pytest.fixture
@@ -156,12 +145,10 @@ def udp() -> Iterator[tuple[list[str], can.BusABC]]:
 
 def healthy_rows(rows: list[str]) -> bool:
     """The verdict and firmware OK lines and three pose rows with numbers, within 24 rows."""
-    return (
-        rows[1].startswith("verdict OK")
-        and rows[2].startswith("firmware OK")
-        and [r.split()[0] for r in rows[4:7] if r.split()] == ["on-board", "reference", "truth"]
-        and all(len(r.split()) >= 8 and r.split()[1] != "-" for r in rows[4:7])
-    )
+    return (rows[1].startswith("verdict OK") and rows[2].startswith("firmware OK")
+            and [r.split()[0] for r in rows[4:7] if r.split()] == ["on-board", "reference",
+                                                                   "truth"]
+            and all(len(r.split()) >= 8 and r.split()[1] != "-" for r in rows[4:7]))
 
 
 def test_monitor_in_tmux_at_80x24(udp: tuple[list[str], Any]) -> None:

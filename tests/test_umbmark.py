@@ -119,10 +119,8 @@ def test_configure_writes_the_geometry_over_can_and_a_nack_is_an_error() -> None
         session.configure(fixed.wheel_radius_left_m, fixed.wheel_radius_right_m, fixed.wheelbase_m)
         params = session.rig.board.ecu.params
         assert (params.wheel_radius_left_nm, params.wheel_radius_right_nm, params.wheelbase_nm) == (
-            round(fixed.wheel_radius_left_m * 1e9),
-            round(fixed.wheel_radius_right_m * 1e9),
-            round(fixed.wheelbase_m * 1e9),
-        )
+            round(fixed.wheel_radius_left_m * 1e9), round(fixed.wheel_radius_right_m * 1e9),
+            round(fixed.wheelbase_m * 1e9))
         with pytest.raises(ExperimentError, match="NACK"):
             session.configure(0.075, 0.075, 0.0)
         assert session.rig.board.ecu.params == params  # all or nothing
@@ -237,21 +235,8 @@ def test_calibration_recovers_the_errors_on_every_profile(
     if robot.startswith("custom"):
         bits = int(robot[-2:])
         robot = profile_file(tmp_path, robot, 4096 if bits == 16 else 1 << 20, bits)
-    out, report = run_cli(
-        capsys,
-        tmp_path,
-        "calibrate",
-        "--robot",
-        robot,
-        "--side",
-        side,
-        "--errors",
-        "ed=1.002,eb=1.01",
-        "--seed",
-        "3",
-        "--runs",
-        "1",
-    )
+    out, report = run_cli(capsys, tmp_path, "calibrate", "--robot", robot, "--side", side,
+                          "--errors", "ed=1.002,eb=1.01", "--seed", "3", "--runs", "1")
     estimated = report["estimated"]
     assert abs(estimated["ed"] - 1.002) <= 0.1 * 0.002, estimated
     assert abs(estimated["eb"] - 1.01) <= 0.1 * 0.01, estimated
@@ -265,24 +250,11 @@ def test_calibration_of_implausible_errors_fails_with_a_reason(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     path = tmp_path / "report.json"
-    code = cli.main(
-        [
-            "calibrate",
-            "--robot",
-            "kobuki",
-            "--errors",
-            "ed=1.9,eb=1.9",
-            "--seed",
-            "3",
-            "--runs",
-            "1",
-            "--report",
-            str(path),
-        ]
-    )
+    code = cli.main(["calibrate", "--robot", "kobuki", "--errors", "ed=1.9,eb=1.9", "--seed", "3",
+                     "--runs", "1", "--report", str(path)])
     out, err = capsys.readouterr()
     assert code == 1 and err == ""
-    verdict = out[out.index("calibrate: FAIL\n") :].splitlines()
+    verdict = out[out.index("calibrate: FAIL\n"):].splitlines()
     assert len(verdict) >= 2 and all(line.startswith("  - ") for line in verdict[1:])
     assert "implausible estimate" in out
     report = json.loads(path.read_text())
@@ -309,25 +281,14 @@ def test_a_valid_benchmark_has_no_faults_and_a_wrong_firmware_has(
 def test_calibration_that_does_not_improve_fails(small_square: umbmark.UmbmarkResult) -> None:
     nominal = Correction.nominal(PMIR)
     cal = umbmark.Calibration(
-        small_square,
-        umbmark.borenstein(small_square.cg("cw"), small_square.cg("ccw"), 1.0, 0.3),
-        (1.0, 1.0),
-        "model",
-        nominal,
-        nominal,
-        small_square,
+        small_square, umbmark.borenstein(small_square.cg("cw"), small_square.cg("ccw"), 1.0, 0.3),
+        (1.0, 1.0), "model", nominal, nominal, small_square,
     )
     assert umbmark.calibration_faults(cal, PMIR, 1.0) == []
     reasons = umbmark.calibration_faults(cal, PMIR, 2.0)
     assert len(reasons) == 1 and reasons[0].startswith("the correction does not cut E_max,syst 2x")
     far = umbmark.Calibration(
-        small_square,
-        cal.borenstein,
-        (2.5, 1.0),
-        "model",
-        nominal,
-        nominal,
-        small_square,
+        small_square, cal.borenstein, (2.5, 1.0), "model", nominal, nominal, small_square,
         fit_residual_m=1.0,
     )
     reasons = umbmark.calibration_faults(far, PMIR, 1.0)

@@ -72,9 +72,8 @@ def test_an_edited_integer_in_a_csv_fails_the_check(
     path = tmp_path / "big_steps.csv"
     rows = vectors.read_csv(path)
     rows[row][column] += delta
-    lines = [",".join(vectors.CSV_COLUMNS)] + [
-        ",".join(str(r[c]) for c in vectors.CSV_COLUMNS) for r in rows
-    ]
+    lines = [",".join(vectors.CSV_COLUMNS)] + [",".join(str(r[c]) for c in vectors.CSV_COLUMNS)
+                                               for r in rows]
     path.write_text("\n".join(lines) + "\n")
     capsys.readouterr()
     assert main(["vectors", "--out", str(tmp_path), "--check"]) == 1

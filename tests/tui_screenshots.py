@@ -46,9 +46,8 @@ def save_png(pane: Pane, path: Path) -> None:
     cell_w, cell_h = round(font.getlength("M")), round(FONT_PX * 1.3)
     margin = 8
     background = THEME.background_color.rgb
-    image = Image.new(
-        "RGB", (2 * margin + COLUMNS * cell_w, 2 * margin + ROWS * cell_h), background
-    )
+    image = Image.new("RGB", (2 * margin + COLUMNS * cell_w, 2 * margin + ROWS * cell_h),
+                      background)
     draw = ImageDraw.Draw(image)
     # One decoder for the whole screen: tmux leaves out escapes a row inherits from the last.
     for y, text in enumerate(AnsiDecoder().decode("\n".join(pane.rows(ansi=True)))):
@@ -73,11 +72,8 @@ def _colours(style: Style) -> tuple[tuple[int, int, int], tuple[int, int, int]]:
     if style.reverse:
         fg, bg = bg, fg
     if style.dim:
-        fg = fg._replace(
-            red=(fg.red + bg.red) // 2,
-            green=(fg.green + bg.green) // 2,
-            blue=(fg.blue + bg.blue) // 2,
-        )
+        fg = fg._replace(red=(fg.red + bg.red) // 2, green=(fg.green + bg.green) // 2,
+                         blue=(fg.blue + bg.blue) // 2)
     return (fg.red, fg.green, fg.blue), (bg.red, bg.green, bg.blue)
 
 
@@ -89,9 +85,8 @@ def scene(out_dir: Path, name: str, faults: str, ready: str, stop_sender: bool) 
     pane = Pane(monitor_command(argv))
     try:
         sender.start()
-        pane.wait_for(
-            lambda r: r[1].startswith("firmware ") and "no ODOM" not in r[1], START_TIMEOUT_S
-        )
+        pane.wait_for(lambda r: r[1].startswith("firmware ") and "no ODOM" not in r[1],
+                      START_TIMEOUT_S)
         time.sleep(3.0)
         if stop_sender:
             sender.halt()
