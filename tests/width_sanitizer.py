@@ -30,7 +30,8 @@ Only integer values are checked (``bytes + bytes`` or a tuple concatenation is n
 integrator on both shipped robots, once more under dropped/duplicated/bit-flipped frames and a
 bus-off; a closed-loop rig taking NAV_GOALs (both modes), ODOM_CONFIGs (a NACK, 32-bit counters),
 ODOM_SET_POSE (200 km away), corrupt, short and overflowing frames; a rig whose firmware has a
-SecOC key (genuine, forged, stale, unsigned and orphan commands, reboots, a failing NVM); the golden vectors' edge cases;
+SecOC key (genuine, forged, stale, unsigned and orphan commands, reboots, a failing NVM); the
+golden vectors' edge cases;
 and a sweep of the pure functions (sincos, atan2, chord factor, navigation laws, E2E sequence,
 odometry steps of +-2^31 counts) over the edges of their C types. ``Recorder.seen`` tells which
 arithmetic places ran (``firmware_sites`` lists them all). Run ``python -m tests.width_sanitizer
