@@ -103,6 +103,20 @@ class SecocSigner:
         self.next_fv: int | None = None
         self._counter = -1
 
+    @property
+    def auth_frame_id(self) -> int:
+        """ODOM_AUTH's CAN ID (from the DBC)."""
+        return int(self._auth.frame_id)
+
+    @property
+    def freshness_frame_id(self) -> int:
+        """ODOM_FRESHNESS's CAN ID (from the DBC)."""
+        return int(self._fresh.frame_id)
+
+    def is_secured(self, can_id: int) -> bool:
+        """True for the CAN IDs that need an ODOM_AUTH (ODOM_SET_POSE, ODOM_CONFIG, NAV_GOAL)."""
+        return can_id in self._secured_ids
+
     def on_freshness(self, data: bytes) -> bool:
         """Adopt an ODOM_FRESHNESS frame's FV (next FV = it + 1); False: bad E2E, or FV 0."""
         if len(data) != 8 or not cantools.autosar.check_profile2_crc(
