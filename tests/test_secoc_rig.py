@@ -18,6 +18,7 @@ from odocan.firmware import frames as fr
 from odocan.firmware.e2e import p02_protect
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.secoc import FRESHNESS_TX_MASK, AuthRequest
+from odocan.host.judge.monitor import BusMonitor
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
@@ -256,3 +257,36 @@ def test_a_firmware_whose_nvm_fails_refuses_every_secured_command() -> None:
     answers = [a.reason for a in acks(seen)]
     assert answers == [fr.AckReason.AUTH_UNAVAILABLE] * 3
     assert REQUEST[fr.ODOM_SET_POSE_ID] == AuthRequest.ODOM_SET_POSE
+
+
+def test_the_monitor_counts_and_shows_authentication_failures(
+    rig: tuple[LockstepRig, Bus],
+) -> None:
+    lockstep, bus = rig
+    monitor = BusMonitor(load("pmir"))
+    heard: list[can.Message] = []
+    signer = synced_signer(lockstep, bus)
+    host = Counters()
+    heard += step(lockstep, bus, signer.secure(set_pose(host, 1_000, 0)))  # genuine: no count
+    rng = random.Random(3)
+    fv = (lockstep.board.ecu.secoc.receiver.last_fv + 1) if lockstep.board.ecu.secoc else 0
+    for _ in range(5):  # forged: AUTH_FAILED x5
+        can_id, data = any_command(host, rng)
+        auth = fr.pack_odom_auth(host(fr.ODOM_AUTH_ID), REQUEST[can_id], fv, 7, ErrorMask())
+        heard += step(lockstep, bus, [(can_id, data), (fr.ODOM_AUTH_ID, auth)])
+    heard += step(lockstep, bus, set_pose(host, 5, 5))  # unsigned: AUTH_MISSING x3
+    for _ in range(2):  # ODOM_AUTH with no command before it
+        auth = fr.pack_odom_auth(host(fr.ODOM_AUTH_ID), 2, fv, 7, ErrorMask())
+        heard += step(lockstep, bus, [(fr.ODOM_AUTH_ID, auth)])
+    for _ in range(5):
+        heard += step(lockstep, bus)
+    for msg in heard:
+        monitor.feed(msg)
+    assert monitor.snapshot()["auth"] == {
+        "auth_failed": 5,
+        "auth_freshness": 0,
+        "auth_missing": 3,
+        "auth_unavailable": 0,
+        "auth_without_command": 2,
+    }
+    assert sum(e["kind"] == "auth" for e in monitor.events) == 8

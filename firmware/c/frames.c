@@ -5,6 +5,7 @@
 #include "config.h"
 #include "errors.h"
 #include "fixmath.h"
+#include "nav.h"
 
 /* Profile 2 DataIDList of E2E slot `slot` (1..15): DataID[c] = (slot << 4) | c. */
 void data_ids_of_slot(unsigned slot, uint8_t ids[DATA_ID_COUNT])
