@@ -19,7 +19,10 @@ from odocan.host.cli.app import main
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.bridge import BridgeConfig, RobotEndpoint, _Robot
 from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.protocol.commands import CommandEncoder
 from odocan.host.protocol.secoc import SecocSigner
+from odocan.host.testkit.options import RigOptions
+from odocan.host.testkit.rig import make_rig
 from odocan.sim import robot
 from tests.test_secoc import KEY, MemoryNvm
 
@@ -137,3 +140,24 @@ def test_run_provisions_the_lockstep_firmware_with_the_key(
     plain = tmp_path / "plain.log"
     assert main(["run", "--scenario", "straight", "--duration", "3", "--log", str(plain)]) == 0
     assert " 304#" not in plain.read_text()
+
+
+def test_the_testkit_provisions_and_signs_with_the_secoc_key_option(tmp_path: Path) -> None:
+    key = tmp_path / "robot.key"
+    key.write_bytes(KEY)
+    key.chmod(0o600)
+    rig = make_rig(RigOptions(secoc_key=str(key)))
+    try:
+        rig.wait_ready()
+        rig.set_pose(1.25, -0.5, 0.0)  # signed: ACKed (CommandRefused otherwise)
+        rig.step(0.1)
+        assert abs(rig.pose.x_m - 1.25) < 1e-3 and abs(rig.pose.y_m + 0.5) < 1e-3
+        unsigned = CommandEncoder().encode("set_pose", b'{"x_m": 9, "y_m": 9, "heading_rad": 0}')
+        for frame in unsigned.frames:
+            rig.send(frame.can_id, frame.data)
+        rig.step(0.1)
+        reasons = [a["REASON"] for a in rig.frames("ODOM_ACK")]
+        assert reasons[-4:] == ["AUTH_MISSING"] * 4
+        assert abs(rig.pose.x_m - 1.25) < 1e-3
+    finally:
+        rig.close()

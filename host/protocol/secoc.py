@@ -127,6 +127,11 @@ class SecocSigner:
         assert isinstance(fields, dict)
         epoch, count = fields["FV_EPOCH"], fields["FV_COUNT"]
         assert isinstance(epoch, int) and isinstance(count, int)  # raw, no choices
+        return self.adopt(epoch, count)
+
+    def adopt(self, epoch: int, count: int) -> bool:
+        """Adopt the firmware's last accepted FV (ODOM_FRESHNESS FV_EPOCH, FV_COUNT already
+        E2E-checked); False, and no signing, when EPOCH is 0 (the firmware is unavailable)."""
         if epoch == 0:  # the firmware refuses every secured command (no key, NVM fault)
             self.next_fv = None
             return False

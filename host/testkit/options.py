@@ -32,6 +32,7 @@ class RigOptions:
     faults: str = ""
     fw_faults: str = ""
     seed: int = 0
+    secoc_key: str = ""  # SecOC key file: our firmware provisioned with it, commands signed
 
     def profile(self) -> RobotProfile:
         """The robot profile (a name or a TOML path)."""
