@@ -65,7 +65,8 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         type=Path,
         metavar="PATH",
         help="sign commands for a firmware provisioned with this SecOC key (16 raw bytes or 32 "
-        "hex digits, docs/secoc.md; not the TLS --key): an ODOM_AUTH follows each command frame",
+        "hex digits, docs/secoc.md; not the TLS --key): an ODOM_AUTH follows each command frame "
+        "(default: commands unsigned)",
     )
     add_mqtt_arguments(parser)
     add_bus_arguments(parser)
