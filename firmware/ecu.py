@@ -28,6 +28,14 @@ MAILBOX_OVERFLOW (a received frame was dropped), IMPLAUSIBLE_STEP (a step beyond
 odometry is re-primed on the first of them; the jump itself is never integrated). The motion
 between the last frame before a counter restart and the first after it is unknowable, so
 COUNTER_RESET stays until the host sets the pose again (ODOM_SET_POSE APPLY).
+
+SecOC (docs/secoc.md). A firmware provisioned with a key (``secoc_key``, configuration from the
+board, never on the bus) holds each ODOM_SET_POSE, ODOM_CONFIG and NAV_GOAL frame that passed its
+E2E check and acts on it only when the ODOM_AUTH that follows verifies (``firmware.secoc``);
+otherwise it answers ODOM_ACK NACK with the AUTH reason (AUTH_FAILED, AUTH_FRESHNESS,
+AUTH_MISSING after ``AUTH_TIMEOUT_TICKS``, AUTH_UNAVAILABLE). It sends ODOM_FRESHNESS at boot,
+every second and after a refusal. EPOCH lives in the board's ``FreshnessNvm`` cell. Without a key
+the firmware behaves as before SecOC (ODOM_AUTH is filtered, nothing extra is sent).
 """
 
 from __future__ import annotations
@@ -55,9 +63,18 @@ from odocan.firmware.fixmath import (
     wrap_signed,
     wrap_u32,
 )
-from odocan.firmware.hal import MAILBOX_SLOTS, TICK_PERIOD_US, CanTx
+from odocan.firmware.hal import MAILBOX_SLOTS, TICK_PERIOD_US, CanTx, FreshnessNvm
 from odocan.firmware.nav import NAV_PERIOD_TICKS, Navigator
 from odocan.firmware.odometry import Odometry
+from odocan.firmware.secoc import (
+    FRESHNESS_PERIOD_TICKS,
+    AuthRequest,
+    AuthStatus,
+    FreshnessCause,
+    Held,
+    SecocReceiver,
+    SecuredCommands,
+)
 
 ENCODER_PERIOD_US = 10_000  # WHEEL_ENCODERS GenMsgCycleTime
 POSE_PERIOD_TICKS = 2  # ODOM_POSE_X/Y, ODOM_TWIST: 20 ms
@@ -125,10 +142,17 @@ class OdomEcu:
     """The odometry ECU (node ``ODOM_MCU``)."""
 
     def __init__(
-        self, hal: CanTx, params: RobotParams, max_wheel_speed_mm_s: int = MAX_WHEEL_SPEED_MM_S
+        self,
+        hal: CanTx,
+        params: RobotParams,
+        max_wheel_speed_mm_s: int = MAX_WHEEL_SPEED_MM_S,
+        *,
+        secoc_key: bytes | None = None,
+        nvm: FreshnessNvm | None = None,
     ) -> None:
         """``max_wheel_speed_mm_s``: the fastest rim speed either wheel can reach (u16 mm/s); an
-        encoder step beyond it is refused as implausible."""
+        encoder step beyond it is refused as implausible. ``secoc_key`` (16 bytes; None: no
+        SecOC) and ``nvm`` (the EPOCH cell; None with a key: secured commands unavailable)."""
         self._hal = hal
         self.errors = ErrorMask()
         self.state = State.INIT
@@ -189,6 +213,10 @@ class OdomEcu:
         self._page_index = 0
         self._staged_pose: dict[int, int] = {}
         self._staged_config: dict[int, int] = {}
+        self.secoc: SecuredCommands | None = None
+        self.rx_auth = E2EReceiver(fr.ODOM_AUTH_DATA_IDS, max_delta_counter_init=15)
+        if secoc_key is not None:  # boot: EPOCH + 1 written to the NVM before anything else
+            self.secoc = SecuredCommands(SecocReceiver(secoc_key, nvm or _NoNvm()))
 
     # --- ISR context -------------------------------------------------------------------------
 
@@ -223,6 +251,7 @@ class OdomEcu:
             self.rx_encoders.new_period()
         self._tick_budget = self._periods_since_sample
         self._drain_mailbox()
+        self._expire_held()
         if self._tick_steps and not self._time_lost_now:
             self._update_twist(max(self._tick_budget, 1))
         self._navigate()
@@ -245,6 +274,8 @@ class OdomEcu:
                 self._on_config(data)
             elif can_id == fr.NAV_GOAL_ID:
                 self._on_nav_goal(data)
+            elif can_id == fr.ODOM_AUTH_ID and self.secoc is not None:
+                self._on_auth(data)
             else:
                 self.frames_filtered = wrap_u32(self.frames_filtered + 1)
             frame = self.mailbox.get()
@@ -457,9 +488,75 @@ class OdomEcu:
         self._tick_dheading_q30_rad = 0
         self._tick_steps = 0
 
-    def _on_set_pose(self, data: bytes) -> None:
-        if not self._e2e(self.rx_set_pose, data):
+    # --- SecOC: verify before acting ---
+
+    def _secured(self, request: AuthRequest, data: bytes) -> bool:
+        """True when the frame (E2E OK) was held for its ODOM_AUTH instead of acted on now; a
+        frame it displaced is refused (NACK AUTH_MISSING)."""
+        if self.secoc is None:
+            return False
+        displaced = self.secoc.hold(request, data, self.ticks)
+        if displaced is not None:
+            self._nack_held(displaced, AuthStatus.MISSING)
+        return True
+
+    def _on_auth(self, data: bytes) -> None:
+        """ODOM_AUTH: verify the held frame it names; act on it, or NACK it with the verdict."""
+        if self.secoc is None or not self._e2e(self.rx_auth, data):
             return
+        result = self.secoc.authenticate(fr.unpack_odom_auth(data))
+        if result is None:  # nothing held for it: counted (orphans), no answer
+            return
+        status, held = result
+        if status is not AuthStatus.OK:
+            self._nack_held(held, status)
+        elif held.can_id == fr.ODOM_SET_POSE_ID:
+            self._act_set_pose(held.pdu)
+        elif held.can_id == fr.ODOM_CONFIG_ID:
+            self._act_config(held.pdu)
+        else:
+            self._act_nav_goal(held.pdu)
+
+    def _expire_held(self) -> None:
+        """Held frames whose ODOM_AUTH did not come in time: NACK AUTH_MISSING."""
+        if self.secoc is None:
+            return
+        held = self.secoc.expire(self.ticks)
+        while held is not None:
+            self._nack_held(held, AuthStatus.MISSING)
+            held = self.secoc.expire(self.ticks)
+
+    def _nack_held(self, held: Held, status: AuthStatus) -> None:
+        """ODOM_ACK NACK for a held secured frame, REASON the AUTH verdict (7..10)."""
+        frame: fr.OdomSetPose | fr.OdomConfig | fr.NavGoal
+        if held.can_id == fr.ODOM_SET_POSE_ID:
+            frame = fr.unpack_odom_set_pose(held.pdu)
+        elif held.can_id == fr.ODOM_CONFIG_ID:
+            frame = fr.unpack_odom_config(held.pdu)
+        else:
+            frame = fr.unpack_nav_goal(held.pdu)
+        self._ack(held.can_id, frame, fr.AckResult.NACK, fr.AckReason(int(status)))
+
+    def _send_freshness(self) -> None:
+        """ODOM_FRESHNESS when due (boot, refusal, rollover, unavailable) and every second."""
+        if self.secoc is None:
+            return
+        receiver = self.secoc.receiver
+        cause = receiver.sync_cause
+        if cause is None and self.ticks % FRESHNESS_PERIOD_TICKS == 0:
+            cause = FreshnessCause.PERIODIC
+        if cause is not None:
+            receiver.sync_cause = None
+            counter = self._next_counter(fr.ODOM_FRESHNESS_ID)
+            self._send(fr.ODOM_FRESHNESS_ID, receiver.freshness_frame(counter, cause))
+
+    # --- the command handlers ---
+
+    def _on_set_pose(self, data: bytes) -> None:
+        if self._e2e(self.rx_set_pose, data) and not self._secured(AuthRequest.ODOM_SET_POSE, data):
+            self._act_set_pose(data)
+
+    def _act_set_pose(self, data: bytes) -> None:
         frame = fr.unpack_odom_set_pose(data)
         field = frame.field
         if field == fr.SetPoseField.APPLY:
@@ -490,8 +587,10 @@ class OdomEcu:
         return x_q40, y_q40, heading
 
     def _on_config(self, data: bytes) -> None:
-        if not self._e2e(self.rx_config, data):
-            return
+        if self._e2e(self.rx_config, data) and not self._secured(AuthRequest.ODOM_CONFIG, data):
+            self._act_config(data)
+
+    def _act_config(self, data: bytes) -> None:
         frame = fr.unpack_odom_config(data)
         if frame.param == fr.ConfigParam.APPLY:
             self._apply_config(frame)
@@ -531,8 +630,10 @@ class OdomEcu:
         self._ack(fr.ODOM_CONFIG_ID, frame, fr.AckResult.ACK, fr.AckReason.OK)
 
     def _on_nav_goal(self, data: bytes) -> None:
-        if not self._e2e(self.rx_nav_goal, data):
-            return
+        if self._e2e(self.rx_nav_goal, data) and not self._secured(AuthRequest.NAV_GOAL, data):
+            self._act_nav_goal(data)
+
+    def _act_nav_goal(self, data: bytes) -> None:
         frame = fr.unpack_nav_goal(data)
         reason = self.nav.request(frame, self.state is State.OK)
         result = fr.AckResult.ACK if reason is fr.AckReason.OK else fr.AckResult.NACK
@@ -586,6 +687,7 @@ class OdomEcu:
             self._send_status()
         if self.nav.changed or self.ticks % STATUS_PERIOD_TICKS == 0:
             self._send_nav_status()
+        self._send_freshness()
 
     def _send_nav_status(self) -> None:
         """NAV_STATUS; DISTANCE is clamped to its 65.535 m range here (a display limit)."""
@@ -704,6 +806,16 @@ class OdomEcu:
         ):
             self.state = State.OK
             self.reason = Reason.NONE
+
+
+class _NoNvm:
+    """No NVM cell given: every write fails, so secured commands are unavailable (fail closed)."""
+
+    def read_epoch(self) -> int:
+        return 0
+
+    def write_epoch(self, epoch: int) -> bool:
+        return False
 
 
 def _q40_from_100um(value_100um: int) -> int:

@@ -62,6 +62,8 @@ NAV_STATUS_ID: Final = 0x281
 ODOM_SET_POSE_ID: Final = 0x300
 ODOM_CONFIG_ID: Final = 0x301
 ODOM_ACK_ID: Final = 0x302
+ODOM_AUTH_ID: Final = 0x303
+ODOM_FRESHNESS_ID: Final = 0x304
 ODOM_STATUS_ID: Final = 0x380
 SIM_TRUTH_ID: Final = 0x700
 
@@ -83,6 +85,8 @@ ODOM_ACK_DATA_IDS: Final = _data_ids(8)
 ODOM_STATUS_DATA_IDS: Final = _data_ids(9)
 NAV_GOAL_DATA_IDS: Final = _data_ids(10)
 NAV_STATUS_DATA_IDS: Final = _data_ids(11)
+ODOM_AUTH_DATA_IDS: Final = _data_ids(12)
+ODOM_FRESHNESS_DATA_IDS: Final = _data_ids(13)
 SIM_TRUTH_DATA_IDS: Final = _data_ids(15)
 
 DATA_IDS_BY_FRAME_ID: Final[dict[int, tuple[u8, ...]]] = {
@@ -94,6 +98,8 @@ DATA_IDS_BY_FRAME_ID: Final[dict[int, tuple[u8, ...]]] = {
     ODOM_SET_POSE_ID: ODOM_SET_POSE_DATA_IDS,
     ODOM_CONFIG_ID: ODOM_CONFIG_DATA_IDS,
     ODOM_ACK_ID: ODOM_ACK_DATA_IDS,
+    ODOM_AUTH_ID: ODOM_AUTH_DATA_IDS,
+    ODOM_FRESHNESS_ID: ODOM_FRESHNESS_DATA_IDS,
     ODOM_STATUS_ID: ODOM_STATUS_DATA_IDS,
     NAV_GOAL_ID: NAV_GOAL_DATA_IDS,
     NAV_STATUS_ID: NAV_STATUS_DATA_IDS,
@@ -140,6 +146,10 @@ class AckReason(IntEnum):
     BUSY = 4  # cannot take the request now
     INCONSISTENT = 5  # each field valid, the set is not (APPLY)
     QUEUE_FULL = 6  # NAV_GOAL GO: the path already holds NAV_QUEUE_SLOTS goals
+    AUTH_FAILED = 7  # SecOC: the ODOM_AUTH authenticator does not match (forged, wrong key)
+    AUTH_FRESHNESS = 8  # SecOC: freshness not above the last accepted, or beyond the window
+    AUTH_MISSING = 9  # SecOC: no ODOM_AUTH within 20 ms, or displaced by the next frame
+    AUTH_UNAVAILABLE = 10  # SecOC: no usable key, NVM write failed or EPOCH exhausted
 
 
 class StatusPage(IntEnum):
@@ -249,6 +259,19 @@ class OdomConfig(NamedTuple):
     counter: int
     param: int  # ConfigParam
     value: u32  # u32 parameters; u8 for COUNTER_BITS / INTEGRATOR; raw u32 otherwise
+
+
+class OdomAuth(NamedTuple):
+    counter: int  # u4 E2E counter of the ODOM_AUTH frame
+    request: int  # u4 firmware.secoc.AuthRequest
+    freshness: int  # u16: the low 16 bits of FV
+    authenticator: int  # u32: MSB_32 of the CMAC tag
+
+
+class OdomFreshness(NamedTuple):
+    counter: int
+    cause: int  # firmware.secoc.FreshnessCause
+    fv: int  # u48: the firmware's last accepted FV (EPOCH << 28 | COUNT)
 
 
 class OdomAck(NamedTuple):
@@ -614,7 +637,7 @@ def pack_odom_ack(
         | (sat_range(request_id, 0, CAN_ID_MAX, errors) << 16)
         | ((request_field & U4_MAX) << 32)
         | (sat_range(result, AckResult.ACK, AckResult.NACK, errors) << 36)
-        | (sat_range(reason, AckReason.OK, AckReason.QUEUE_FULL, errors) << 40)
+        | (sat_range(reason, AckReason.OK, AckReason.AUTH_UNAVAILABLE, errors) << 40)
     )
     return _seal(word, ODOM_ACK_DATA_IDS)
 
@@ -630,6 +653,41 @@ def unpack_odom_ack(data: bytes | bytearray) -> OdomAck:
         (w >> 36) & 1,
         (w >> 40) & 0xFF,
     )
+
+
+# --- ODOM_AUTH (HOST -> ODOM_MCU; event, after each secured command frame) ---
+FV_MASK: Final = (1 << 48) - 1  # the u48 freshness value
+
+
+def pack_odom_auth(
+    counter: int, request: int, freshness: int, mac: int, errors: ErrorMask
+) -> bytes:
+    """ODOM_AUTH: REQUEST (byte 1 high nibble), FRESHNESS (bytes 2-3), AUTHENTICATOR (4-7)."""
+    word = (
+        _head(counter, sat_range(request, 0, 2, errors))
+        | ((freshness & U16_MAX) << 16)
+        | ((mac & U32_MAX) << 32)
+    )
+    return _seal(word, ODOM_AUTH_DATA_IDS)
+
+
+def unpack_odom_auth(data: bytes | bytearray) -> OdomAuth:
+    """ODOM_AUTH's raw fields (run its E2E check first)."""
+    w = _word(data)
+    return OdomAuth((w >> 8) & U4_MAX, (w >> 12) & U4_MAX, (w >> 16) & U16_MAX, (w >> 32) & U32_MAX)
+
+
+# --- ODOM_FRESHNESS (ODOM_MCU -> HOST; 1000 ms and on events) ---
+def pack_odom_freshness(counter: int, cause: int, fv: int, errors: ErrorMask) -> bytes:
+    """ODOM_FRESHNESS: CAUSE (byte 1 high nibble), FV (u48: COUNT bits 16-43, EPOCH 44-63)."""
+    word = _head(counter, sat_range(cause, 0, 4, errors)) | ((fv & FV_MASK) << 16)
+    return _seal(word, ODOM_FRESHNESS_DATA_IDS)
+
+
+def unpack_odom_freshness(data: bytes | bytearray) -> OdomFreshness:
+    """ODOM_FRESHNESS's raw fields."""
+    w = _word(data)
+    return OdomFreshness((w >> 8) & U4_MAX, (w >> 12) & U4_MAX, (w >> 16) & FV_MASK)
 
 
 # --- ODOM_STATUS (ODOM_MCU -> HOST; 100 ms, one page per cycle; multiplexed by PAGE) ---

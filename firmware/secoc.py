@@ -1,6 +1,6 @@
 """SecOC-style authenticated commands: ODOM_AUTH follows each ODOM_SET_POSE, ODOM_CONFIG, NAV_GOAL.
 
-The profile (docs/secoc.md has the reasoning, dbc/secoc_draft.dbc the frames)::
+The profile (docs/secoc.md has the reasoning, dbc/odocan.dbc the frames)::
 
     authenticator = MSB_32( AES-128-CMAC(K, DataID || PDU || FV) )
 
@@ -35,20 +35,22 @@ succeeds with probability 2^-32 per try. ODOM_AUTH carries ``REQUEST`` (which me
   every secured command is refused (``UNAVAILABLE``).
 
 All integer-only; per command: one AES block, no allocation but the 16-byte input block (a
-``uint8_t[16]`` on the stack in C). ``FreshnessNvm``, the two frame codecs and the AUTH reasons
-belong in ``firmware.hal`` / ``firmware.frames`` once the DBC draft is merged.
+``uint8_t[16]`` on the stack in C). The frame codecs live in ``firmware.frames``;
+the AUTH reasons are ``firmware.frames.AckReason``'s AUTH_*.
 """
 
 from __future__ import annotations
 
 from enum import IntEnum
-from typing import Final, NamedTuple, Protocol
+from typing import Final, NamedTuple
 
+from odocan.firmware import frames as fr
 from odocan.firmware.aes import AES128_KEY_BYTES, AES_BLOCK_BYTES, encrypt_words, load_be32
 from odocan.firmware.cmac import CmacKey, cmac_key
-from odocan.firmware.e2e import COUNTER_MASK, DATA_ID_COUNT, p02_protect
-from odocan.firmware.fixmath import U16_MAX, U32_MAX, u8, u16, u32, u64, wrap_u32
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.fixmath import U32_MAX, u16, u32, u64, wrap_u32
 from odocan.firmware.frames import NAV_GOAL_ID, ODOM_CONFIG_ID, ODOM_SET_POSE_ID
+from odocan.firmware.hal import FreshnessNvm
 
 # --- the profile ---
 MAC_BITS: Final = 32  # truncated authenticator on the wire
@@ -65,12 +67,16 @@ ROLLOVER_COUNT: Final = COUNT_MASK - FRESHNESS_WINDOW  # past it, EPOCH advances
 AUTH_TIMEOUT_TICKS: Final = 2  # a held command waits <= 2 ticks (20 ms) for its ODOM_AUTH
 FRESHNESS_PERIOD_TICKS: Final = 100  # ODOM_FRESHNESS every 1 s
 
-# --- the draft frames (dbc/secoc_draft.dbc) ---
-ODOM_AUTH_ID: Final = 0x303
-ODOM_FRESHNESS_ID: Final = 0x304
-ODOM_AUTH_DATA_IDS: Final[tuple[u8, ...]] = tuple((12 << 4) | c for c in range(DATA_ID_COUNT))
-ODOM_FRESHNESS_DATA_IDS: Final[tuple[u8, ...]] = tuple((13 << 4) | c for c in range(DATA_ID_COUNT))
+# --- the frames (dbc/odocan.dbc; codecs in firmware.frames) ---
+ODOM_AUTH_ID: Final = fr.ODOM_AUTH_ID
+ODOM_FRESHNESS_ID: Final = fr.ODOM_FRESHNESS_ID
+ODOM_AUTH_DATA_IDS: Final = fr.ODOM_AUTH_DATA_IDS
+ODOM_FRESHNESS_DATA_IDS: Final = fr.ODOM_FRESHNESS_DATA_IDS
 FRAME_LEN: Final = 8
+OdomAuth = fr.OdomAuth
+OdomFreshness = fr.OdomFreshness
+unpack_odom_auth = fr.unpack_odom_auth
+unpack_odom_freshness = fr.unpack_odom_freshness
 
 
 class AuthRequest(IntEnum):
@@ -86,7 +92,7 @@ SECURED_IDS: Final[tuple[int, ...]] = (NAV_GOAL_ID, ODOM_SET_POSE_ID, ODOM_CONFI
 
 
 class AuthStatus(IntEnum):
-    """Result of one verification; the values are the proposed ODOM_ACK ``REASON`` codes."""
+    """Result of one verification; the values are ODOM_ACK ``REASON``'s AUTH_* codes."""
 
     OK = 0
     FAILED = 7  # AUTH_FAILED: the authenticator does not match (forged, corrupted, wrong key)
@@ -103,31 +109,6 @@ class FreshnessCause(IntEnum):
     REFUSED = 2  # right after a FRESHNESS refusal
     ROLLOVER = 3  # EPOCH advanced after 2^28 - 4096 commands
     UNAVAILABLE = 4  # secured commands are refused (see AuthStatus.UNAVAILABLE)
-
-
-class FreshnessNvm(Protocol):
-    """The HAL's non-volatile cell holding EPOCH (a u32 in data flash or EEPROM)."""
-
-    def read_epoch(self) -> u32:
-        """The stored EPOCH; 0 when the cell was never written."""
-        ...
-
-    def write_epoch(self, epoch: u32) -> bool:
-        """Store ``epoch``; False when the write failed (the firmware then fails closed)."""
-        ...
-
-
-class OdomAuth(NamedTuple):
-    counter: int  # u4 E2E counter of the ODOM_AUTH frame
-    request: int  # u4 AuthRequest
-    freshness: u16  # low 16 bits of FV
-    authenticator: u32  # MSB_32 of the CMAC
-
-
-class OdomFreshness(NamedTuple):
-    counter: int
-    cause: int  # FreshnessCause
-    fv: u64  # u48: the receiver's last accepted FV
 
 
 def authenticator_input(data_id: u16, pdu: bytes | bytearray, fv: u64) -> bytearray:
@@ -306,32 +287,12 @@ class SecuredCommands:
         return None
 
 
-# --- frame codecs (Intel byte order, E2E Profile 2 header like every odocan frame) ---
+# --- frame codecs: firmware.frames (the DBC's ODOM_AUTH and ODOM_FRESHNESS) ---
 def pack_odom_auth(counter: int, request: int, freshness: u16, mac: u32) -> bytes:
-    """ODOM_AUTH: REQUEST in byte 1's high nibble, FRESHNESS bytes 2-3, AUTHENTICATOR bytes 4-7."""
-    word = ((request & 0xF) << 12) | ((freshness & U16_MAX) << 16) | ((mac & U32_MAX) << 32)
-    frame = bytearray(word.to_bytes(FRAME_LEN, "little"))
-    p02_protect(frame, counter, ODOM_AUTH_DATA_IDS)
-    return bytes(frame)
-
-
-def unpack_odom_auth(data: bytes | bytearray) -> OdomAuth:
-    """ODOM_AUTH's raw fields (run its E2EReceiver first)."""
-    word = int.from_bytes(data[:FRAME_LEN], "little")
-    return OdomAuth(
-        word >> 8 & COUNTER_MASK, word >> 12 & 0xF, word >> 16 & U16_MAX, word >> 32 & U32_MAX
-    )
+    """ODOM_AUTH (``firmware.frames.pack_odom_auth``; an out-of-range REQUEST saturates)."""
+    return fr.pack_odom_auth(counter, request, freshness, mac, ErrorMask())
 
 
 def pack_odom_freshness(counter: int, cause: int, fv: u64) -> bytes:
-    """ODOM_FRESHNESS: CAUSE in byte 1's high nibble, FV (u48: COUNT bits 16-43, EPOCH 44-63)."""
-    word = ((cause & 0xF) << 12) | ((fv & FV_MASK) << 16)
-    frame = bytearray(word.to_bytes(FRAME_LEN, "little"))
-    p02_protect(frame, counter, ODOM_FRESHNESS_DATA_IDS)
-    return bytes(frame)
-
-
-def unpack_odom_freshness(data: bytes | bytearray) -> OdomFreshness:
-    """ODOM_FRESHNESS's raw fields."""
-    word = int.from_bytes(data[:FRAME_LEN], "little")
-    return OdomFreshness(word >> 8 & COUNTER_MASK, word >> 12 & 0xF, word >> 16 & FV_MASK)
+    """ODOM_FRESHNESS (``firmware.frames.pack_odom_freshness``)."""
+    return fr.pack_odom_freshness(counter, cause, fv, ErrorMask())

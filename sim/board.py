@@ -12,6 +12,10 @@ receive FIFO (FIFO-locked mode, as bxCAN) and overruns the rest. So when ``run_t
 ``HALT_AFTER_S`` or more after the previous one (as long as the firmware calls lost time), only that
 many waiting frames reach the firmware; the others are dropped and the overrun interrupt tells the
 firmware, as would the hardware.
+
+SecOC (docs/secoc.md): a board built with ``secoc_key`` provisions the firmware with it and
+with its ``NvmCell``, the EPOCH cell of data flash: ``reboot`` starts a new firmware on the same
+cell, so the freshness values of the previous boot stay closed.
 """
 
 from __future__ import annotations
@@ -33,6 +37,29 @@ HALT_AFTER_S = (LOST_TIME_PERIODS - 0.5) * TICK_S
 _U32 = 0xFFFF_FFFF
 
 
+class NvmCell:
+    """One u32 cell of non-volatile memory (``firmware.hal.FreshnessNvm``): survives ``reboot``.
+
+    ``fail_writes`` plays a worn or locked flash page (the firmware then fails closed)."""
+
+    def __init__(self, epoch: int = 0) -> None:
+        self.epoch = epoch & _U32
+        self.writes = 0
+        self.fail_writes = False
+
+    def read_epoch(self) -> int:
+        """The stored EPOCH (0: never written, an erased cell)."""
+        return self.epoch
+
+    def write_epoch(self, epoch: int) -> bool:
+        """Store ``epoch``; False when the page refuses writes."""
+        if self.fail_writes:
+            return False
+        self.epoch = epoch & _U32
+        self.writes += 1
+        return True
+
+
 class FirmwareBoard(BusNode):
     """An ``OdomEcu`` on a python-can bus: receive ISR from ``recv``, transmit with ``send``."""
 
@@ -42,17 +69,36 @@ class FirmwareBoard(BusNode):
         params: RobotParams,
         clock: Clock,
         accept_ids: frozenset[int] | None = None,
+        *,
+        secoc_key: bytes | None = None,
+        nvm: NvmCell | None = None,
     ) -> None:
-        """``accept_ids``: the acceptance filter's IDs (None: every 11-bit data frame)."""
+        """``accept_ids``: the acceptance filter's IDs (None: every 11-bit data frame);
+        ``secoc_key``: the firmware's SecOC key (None: no SecOC), its EPOCH in ``nvm`` (default:
+        a fresh cell)."""
         super().__init__(bus, clock)
         self.accept_ids = accept_ids
-        self.ecu = OdomEcu(self, params)
+        self.params = params
+        self.secoc_key = secoc_key
+        self.nvm = nvm if nvm is not None else NvmCell()
+        self.ecu = self._start_firmware()
         self._bus_off = False
         self.frames_dropped_by_filter = 0
         self.frames_overrun = 0  # frames the halted MCU's receive FIFO could not hold
         self._last_run_s: float | None = None
 
     tx_latency_s = TX_LATENCY_S
+
+    def _start_firmware(self) -> OdomEcu:
+        """Reset: a firmware with the board's configuration (key and NVM cell)."""
+        if self.secoc_key is None:
+            return OdomEcu(self, self.params)
+        return OdomEcu(self, self.params, secoc_key=self.secoc_key, nvm=self.nvm)
+
+    def reboot(self) -> None:
+        """A reset of the MCU: RAM lost (a new firmware, INIT), the NVM cell kept."""
+        self.ecu = self._start_firmware()
+        self._last_run_s = None
 
     def transmit(self, can_id: int, data: bytes) -> bool:
         """The HAL's transmit (``firmware.hal.CanTx``)."""

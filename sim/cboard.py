@@ -19,8 +19,8 @@ import fcntl
 import os
 import shutil
 import subprocess
-from collections.abc import Callable
 from pathlib import Path
+from typing import Protocol
 
 import can
 
@@ -217,13 +217,30 @@ class CFirmwareBoard(FirmwareBoard):
         params: RobotParams,
         clock: Clock,
         accept_ids: frozenset[int] | None = None,
+        *,
+        secoc_key: bytes | None = None,
     ) -> None:
+        if secoc_key is not None:  # the ABI (version 1) provisions no key: say so, never ignore it
+            raise ConfigurationError(
+                "--secoc-key needs the Python firmware: the C library's ABI takes no key yet"
+            )
         ecu = CEcu(self, params, clock)  # built and loaded before the board takes the bus
         super().__init__(bus, params, clock, accept_ids)
         self.ecu = ecu  # type: ignore[assignment]
 
 
-BoardMaker = Callable[[can.BusABC, RobotParams, Clock, "frozenset[int] | None"], FirmwareBoard]
+class BoardMaker(Protocol):
+    """A board class: ``(bus, params, clock, accept_ids, *, secoc_key=None)``."""
+
+    def __call__(
+        self,
+        bus: can.BusABC,
+        params: RobotParams,
+        clock: Clock,
+        accept_ids: frozenset[int] | None = None,
+        *,
+        secoc_key: bytes | None = None,
+    ) -> FirmwareBoard: ...
 
 
 def board_maker(kind: str) -> BoardMaker:

@@ -88,6 +88,7 @@ class RigConfig:
     transport: str = "odocan"  # python-can interface of the rig's buses: one of TRANSPORTS
     bitrate: int | None = None  # bit/s: a bit-timed wire (odocan transport only); None: instant
     firmware: str = "python"  # "python": firmware/, "c": firmware/c (sim.cboard)
+    secoc_key: bytes | None = field(default=None, repr=False)  # SecOC key (None: none); secret
 
 
 def _check_bitrate(config: RigConfig) -> None:
@@ -148,7 +149,7 @@ class LockstepRig(Closing):
         self.sim = SimNode(
             sim_bus, vehicle, self.clock, scenario, truth_phase_ticks=config.truth_phase_ticks
         )
-        self.board = make_board(fw_bus, params, self.clock, None)
+        self.board = make_board(fw_bus, params, self.clock, None, secoc_key=config.secoc_key)
         self.listeners = list(listeners)
 
     @property

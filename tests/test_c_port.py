@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from odocan.firmware import config, e2e, fixmath, frames, nav, odometry, trig
+from odocan.firmware import cmac, config, e2e, fixmath, frames, nav, odometry, secoc, trig
 from odocan.firmware.ecu import OdomEcu
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.fixmath import (
@@ -308,7 +308,159 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
         _ecu_session(rng, ask, robot, integrator, timed=timed)
     _ecu_session(rng, ask, "kobuki", "exact", counts_per_rev=0)  # FAULT until configured
     _ecu_session(rng, ask, "kobuki", "euler", counter_bits=32)  # rebuilt from the 24-bit wire
+    _secoc_functions(rng, ask)
+    _secured_ecu_session(rng, ask)
+    _secured_ecu_session(rng, ask, key=b"")  # no valid key: fails closed
+    _secured_ecu_session(rng, ask, nvm_fails=True)  # the EPOCH cell refuses writes
     return cmds, want
+
+
+SECOC_KEY = bytes.fromhex("2b7e151628aed2a6abf7158809cf4f3c")  # RFC 4493's
+
+
+def _secoc_functions(rng: random.Random, ask: Callable[..., None]) -> None:
+    """AES-CMAC on every tail length (RFC 4493's key and random ones) and the authenticator."""
+    for length in (0, 1, 15, 16, 17, 31, 32, 33, 40, 63, 64):
+        for key in (SECOC_KEY, rng.randbytes(16)):
+            msg = rng.randbytes(length)
+            tag = cmac.cmac(cmac.cmac_key(key), msg)
+            ask(f"cmac {key.hex()} {msg.hex() or '-'}", tag.hex().upper())
+    for _ in range(300):
+        key, pdu = rng.randbytes(16), rng.randbytes(8)
+        can_id = rng.choice(secoc.SECURED_IDS)
+        fv = rng.getrandbits(48)
+        mac = secoc.authenticator(cmac.cmac_key(key), can_id, pdu, fv)
+        ask(f"auth {key.hex()} {can_id} {pdu.hex()} {fv}", mac)
+
+
+class _Cell:
+    """The EPOCH cell of the Python ECU in the secured sessions (the probe has its own)."""
+
+    def __init__(self, fails: bool) -> None:
+        self.epoch = 0
+        self.fails = fails
+
+    def read_epoch(self) -> int:
+        return self.epoch
+
+    def write_epoch(self, epoch: int) -> bool:
+        if not self.fails:
+            self.epoch = epoch
+        return not self.fails
+
+
+def _secured_ecu_session(
+    rng: random.Random, ask: Callable[..., None], key: bytes = SECOC_KEY, nvm_fails: bool = False
+) -> None:
+    """A provisioned ECU, frame for frame: genuine, forged, stale, replayed (also after a
+    reboot), unsigned, displaced and orphan commands on all three secured messages."""
+    params = firmware_params(load("pmir"), "exact")
+    cell = _Cell(nvm_fails)
+    tx = _RecordingTx()
+    mac_key = cmac.cmac_key(SECOC_KEY)
+    ask(f"nvm 0 {int(nvm_fails)}", "ok")
+
+    def boot() -> OdomEcu:
+        ask(f"ecu_new {' '.join(str(v) for v in dataclasses.astuple(params))}", "ok")
+        ask(f"ecu_secoc {key.hex() or '-'}", "ok")
+        return OdomEcu(tx, params, secoc_key=key, nvm=cell)
+
+    ecu = boot()
+    counters: dict[int, int] = {}
+    host_fv = [0]
+    recorded: list[list[tuple[int, bytes]]] = []
+    count = [0]
+
+    def counter(can_id: int) -> int:
+        counters[can_id] = (counters.get(can_id, -1) + 1) & 15
+        return counters[can_id]
+
+    def rx(can_id: int, data: bytes) -> None:
+        ecu.isr_can_rx(can_id, data)
+        ask(f"ecu_rx {can_id} {data.hex() or '-'}", "ok")
+
+    def command() -> tuple[int, bytes]:
+        can_id = rng.choice(secoc.SECURED_IDS)
+        e = ErrorMask()
+        if can_id == frames.NAV_GOAL_ID:
+            data = frames.pack_nav_goal(counter(can_id), rng.choice((0, 1, 2, 14)), 1000, e)
+        elif can_id == frames.ODOM_SET_POSE_ID:
+            field = rng.choice((0, 1, 2, 15, 7))
+            data = frames.pack_odom_set_pose(counter(can_id), field, rng.randrange(9999), e)
+        else:
+            data = frames.pack_odom_config(counter(can_id), 3, 300_000_000, e)
+        return can_id, data
+
+    def auth(can_id: int, data: bytes, fv: int, mac: int | None = None) -> tuple[int, bytes]:
+        tag = secoc.authenticator(mac_key, can_id, data, fv) if mac is None else mac
+        request = secoc.SECURED_IDS.index(can_id)
+        return frames.ODOM_AUTH_ID, secoc.pack_odom_auth(
+            counter(frames.ODOM_AUTH_ID), request, fv & 0xFFFF, tag
+        )
+
+    def recount(can_id: int, data: bytes) -> bytes:
+        frame = bytearray(data)
+        e2e.p02_protect(frame, counter(can_id), frames.DATA_IDS_BY_FRAME_ID[can_id])
+        return bytes(frame)
+
+    for tick in range(400):
+        if tick == 200:
+            ecu = boot()  # a reboot: RAM lost, the EPOCH cell kept
+        count[0] += 3
+        rx(frames.WHEEL_ENCODERS_ID, frames.pack_wheel_encoders(tick & 15, count[0], count[0]))
+        roll = rng.randrange(10)
+        if roll < 3:  # genuine
+            can_id, data = command()
+            host_fv[0] += 1
+            pair = [(can_id, data), auth(can_id, data, host_fv[0])]
+            recorded.append(pair)
+            for frame in pair:
+                rx(*frame)
+        elif roll == 3:  # forged: right freshness, random authenticator
+            can_id, data = command()
+            rx(can_id, data)
+            rx(*auth(can_id, data, host_fv[0] + 1, rng.getrandbits(32)))
+        elif roll == 4 and recorded:  # a recorded genuine command replayed
+            for can_id, data in rng.choice(recorded):
+                if can_id == frames.ODOM_AUTH_ID:
+                    fields = secoc.unpack_odom_auth(data)
+                    rx(can_id, secoc.pack_odom_auth(counter(can_id), *fields[1:]))
+                else:
+                    rx(can_id, recount(can_id, data))
+        elif roll == 5:  # unsigned (expires), or displaced by a second frame
+            rx(*command())
+            if rng.random() < 0.5:
+                can_id, data = command()
+                rx(can_id, data)
+                rx(*auth(can_id, data, host_fv[0] + 1))
+                host_fv[0] += 1
+        elif roll == 6:  # an orphan ODOM_AUTH, or one naming no secured message
+            frame = bytearray(secoc.pack_odom_auth(counter(frames.ODOM_AUTH_ID), 1, 0, 0))
+            frame[1] = (frame[1] & 0x0F) | (rng.choice((1, 5, 15)) << 4)
+            e2e.p02_protect(frame, frame[1] & 15, frames.ODOM_AUTH_DATA_IDS)
+            rx(frames.ODOM_AUTH_ID, bytes(frame))
+        elif roll == 7:  # beyond the window
+            can_id, data = command()
+            rx(can_id, data)
+            rx(*auth(can_id, data, host_fv[0] + 5000))
+        tx.sent.clear()
+        ecu.tick()
+        ask("ecu_tick", int(ecu.state), int(ecu.reason), ecu.errors.bits, ecu.tx_dropped, *tx.sent)
+        for entry in tx.sent:
+            can_id_hex, data_hex = entry.split(":")
+            if int(can_id_hex, 16) == frames.ODOM_FRESHNESS_ID:
+                host_fv[0] = secoc.unpack_odom_freshness(bytes.fromhex(data_hex)).fv
+    assert ecu.secoc is not None
+    rx_state = ecu.secoc.receiver
+    ask(
+        "ecu_secoc_counts",
+        rx_state.count_ok,
+        rx_state.count_failed,
+        rx_state.count_freshness,
+        ecu.secoc.orphans,
+        rx_state.epoch,
+        rx_state.last_fv,
+    )
 
 
 class _RecordingTx:
@@ -670,7 +822,17 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
     ]
     assert len(lost) >= 5 and any(twists_after_gap), "stalls while driving: the twist after a gap"
     sent = {f.split(":")[0] for t in ticks for f in t[4:]}
-    assert sent == {"110", "200", "201", "202", "281", "302", "380"}
+    assert sent == {"110", "200", "201", "202", "281", "302", "304", "380"}
+    reasons = {
+        frames.unpack_odom_ack(bytes.fromhex(f.split(":")[1])).reason
+        for t in ticks
+        for f in t[4:]
+        if f.startswith("302:")
+    }
+    assert {r for r in frames.AckReason if r.name.startswith("AUTH_")} <= reasons
+    counts = [w.split() for c, w in zip(cmds, want, strict=True) if c == "ecu_secoc_counts"]
+    accepted, failed, stale, orphans, epoch = (int(v) for v in counts[0][:5])
+    assert accepted > 20 and failed > 5 and stale > 5 and orphans > 5 and epoch == 2  # rebooted
     assert max(int(t[3]) for t in ticks) > 0, "the TX queue refused frames"
 
 

@@ -74,6 +74,8 @@ def test_loads_in_cantools_strict(db: cantools.database.can.Database) -> None:
         "ODOM_SET_POSE",
         "ODOM_CONFIG",
         "ODOM_ACK",
+        "ODOM_AUTH",
+        "ODOM_FRESHNESS",
         "ODOM_STATUS",
         "SIM_TRUTH",
         "NAV_GOAL",
@@ -99,7 +101,7 @@ def test_loads_in_canmatrix_without_any_warning(
     matrix, records, printed = load_canmatrix(DBC_PATH, caplog, capsys)
     assert [r.getMessage() for r in records] == []
     assert printed == ""
-    assert len(matrix.frames) == 12
+    assert len(matrix.frames) == 14
 
 
 @pytest.mark.parametrize(

@@ -221,6 +221,25 @@ KINDS = [
         lambda d: as_signals(f.unpack_odom_ack(d), {}),
     ),
     Kind(
+        "ODOM_AUTH",
+        None,
+        lambda c, v, e: f.pack_odom_auth(c, v["REQUEST"], v["FRESHNESS"], v["AUTHENTICATOR"], e),
+        lambda d: as_signals(f.unpack_odom_auth(d), {}),
+    ),
+    Kind(
+        "ODOM_FRESHNESS",
+        None,
+        lambda c, v, e: f.pack_odom_freshness(
+            c, v["CAUSE"], (v["FV_EPOCH"] << 28) | v["FV_COUNT"], e
+        ),
+        lambda d: {
+            "COUNTER": (r := f.unpack_odom_freshness(d)).counter,
+            "CAUSE": r.cause,
+            "FV_COUNT": r.fv & ((1 << 28) - 1),
+            "FV_EPOCH": r.fv >> 28,
+        },
+    ),
+    Kind(
         "ODOM_STATUS",
         0,
         lambda c, v, e: f.pack_odom_status_summary(
@@ -369,6 +388,8 @@ SATURATING = [
     if s.name not in ("ENC_COUNTER", "REQUEST_COUNTER", "REQUEST_FIELD", "TURNS", "ERROR_MASK")
     and not (k.message == "ODOM_STATUS" and k.mux != 0)
     and s.name not in ("LEFT_COUNT", "RIGHT_COUNT", "DISTANCE", "HEADING", "HEADING_ERROR")
+    # SecOC: truncations of wider values (FV's low bits, the CMAC's first 32), by design
+    and s.name not in ("FRESHNESS", "AUTHENTICATOR", "FV_COUNT", "FV_EPOCH")
 ] + [(k, "DISTANCE") for k in KINDS if k.message == "NAV_STATUS"]  # NAV_STATUS's saturates
 
 

@@ -174,6 +174,9 @@ def test_the_drives_did_what_they_say(drives: tuple[ws.Recorder, ws.DriveLog]) -
     assert (frames.ODOM_CONFIG_ID, frames.ConfigParam.APPLY, AckResult.ACK) in answered
     assert (frames.ODOM_CONFIG_ID, frames.ConfigParam.APPLY, AckResult.NACK) in answered
     assert (frames.ODOM_SET_POSE_ID, frames.SetPoseField.APPLY, AckResult.ACK) in answered
+    reasons = {ack.reason for ack in log.acks}  # the secured rig: every SecOC verdict
+    assert {int(r) for r in frames.AckReason if r.name.startswith("AUTH_")} <= reasons
+    assert log.heard.get(frames.ODOM_FRESHNESS_ID, 0) >= 4  # boot x3, refusal, periodic
 
 
 def test_the_session_keeps_its_own_modules(drives: tuple[ws.Recorder, ws.DriveLog]) -> None:

@@ -29,7 +29,9 @@ Only integer values are checked (``bytes + bytes`` or a tuple concatenation is n
 ``standard_drives`` runs, through the instrumented firmware: lockstep random drives of every
 integrator on both shipped robots, once more under dropped/duplicated/bit-flipped frames and a
 bus-off; a closed-loop rig taking NAV_GOALs (both modes), ODOM_CONFIGs (a NACK, 32-bit counters),
-ODOM_SET_POSE (200 km away), corrupt, short and overflowing frames; the golden vectors' edge cases;
+ODOM_SET_POSE (200 km away), corrupt, short and overflowing frames; a rig whose firmware has a
+SecOC key (genuine, forged, stale, unsigned and orphan commands, reboots, a failing NVM); the
+golden vectors' edge cases;
 and a sweep of the pure functions (sincos, atan2, chord factor, navigation laws, E2E sequence,
 odometry steps of +-2^31 counts) over the edges of their C types. ``Recorder.seen`` tells which
 arithmetic places ran (``firmware_sites`` lists them all). Run ``python -m tests.width_sanitizer
@@ -388,18 +390,23 @@ class _Unpacker(can.Listener):
                 "nav_goal",
                 "nav_status",
                 "odom_ack",
+                "odom_auth",
+                "odom_freshness",
                 "odom_status",
                 "sim_truth",
             ]
         }
         self.heard: dict[int, int] = {}
         self.acks: list[Any] = []
+        self.freshness: Any = None  # the last ODOM_FRESHNESS record
 
     def on_message_received(self, msg: can.Message) -> None:
         record = self.unpack[msg.arbitration_id](bytes(msg.data))
         self.heard[msg.arbitration_id] = self.heard.get(msg.arbitration_id, 0) + 1
         if msg.arbitration_id == self.fr.ODOM_ACK_ID:
             self.acks.append(record)
+        elif msg.arbitration_id == self.fr.ODOM_FRESHNESS_ID:
+            self.freshness = record
 
 
 def _lockstep_drives(duration_s: float, ears: _Unpacker) -> None:
@@ -605,6 +612,99 @@ def _secoc_drive() -> None:
         broken.freshness_frame(0, secoc.FreshnessCause.UNAVAILABLE)
 
 
+SECOC_KEY = bytes(range(0x40, 0x50))
+
+
+def _secured_rig_drive(ears: _Unpacker) -> None:
+    """The ECU's SecOC paths in a lockstep rig with a key: genuine ODOM_SET_POSE, ODOM_CONFIG and
+    NAV_GOAL (signed by the firmware's own authenticator), a forged and a stale one, an unsigned
+    one that expires, a displaced hold, an orphan ODOM_AUTH, a reboot (EPOCH 2 from the NVM
+    cell) and a board whose NVM refuses writes (AUTH_UNAVAILABLE)."""
+    fr = importlib.import_module(f"{FIRMWARE_PACKAGE}.frames")
+    secoc = importlib.import_module(f"{FIRMWARE_PACKAGE}.secoc")
+    cmac = importlib.import_module(f"{FIRMWARE_PACKAGE}.cmac")
+    errors_mod = importlib.import_module(f"{FIRMWARE_PACKAGE}.errors")
+    rig_mod = importlib.import_module("odocan.sim.rig")
+    robot = importlib.import_module("odocan.sim.robot")
+    scratch = errors_mod.ErrorMask()
+    mac_key = cmac.cmac_key(SECOC_KEY)
+    counters: dict[int, int] = {}
+    request = {fr.NAV_GOAL_ID: 0, fr.ODOM_SET_POSE_ID: 1, fr.ODOM_CONFIG_ID: 2}
+    config = rig_mod.RigConfig(
+        robot.load("pmir"), "exact", None, channel="width_secoc", secoc_key=SECOC_KEY
+    )
+    with contextlib.closing(rig_mod.LockstepRig(config)) as rig:
+        rig.listeners = [ears]
+        fv = [0]
+
+        def counter(frame_id: int) -> int:
+            counters[frame_id] = (counters.get(frame_id, -1) + 1) & 0xF
+            return counters[frame_id]
+
+        def signed(frame_id: int, data: bytes, *, forge: int = 0, stale: bool = False) -> None:
+            rig.send(frame_id, data)
+            fv[0] += 0 if stale else 1  # stale: the last accepted value again
+            tag = secoc.authenticator(mac_key, frame_id, data, fv[0]) ^ forge
+            rig.send(
+                fr.ODOM_AUTH_ID,
+                fr.pack_odom_auth(
+                    counter(fr.ODOM_AUTH_ID), request[frame_id], fv[0] & 0xFFFF, tag, scratch
+                ),
+            )
+
+        def sync() -> None:
+            rig.run(0.05)
+            fv[0] = ears.freshness.fv
+
+        rig.run(0.5)
+        sync()
+        for field_id, value in ((fr.SetPoseField.X, 12_345), (fr.SetPoseField.APPLY, 0)):
+            pose = fr.pack_odom_set_pose(counter(fr.ODOM_SET_POSE_ID), field_id, value, scratch)
+            signed(fr.ODOM_SET_POSE_ID, pose)
+            rig.step()
+        wheelbase = fr.pack_odom_config(
+            counter(fr.ODOM_CONFIG_ID), fr.ConfigParam.WHEELBASE, 301_000_000, scratch
+        )
+        signed(fr.ODOM_CONFIG_ID, wheelbase)
+        goal_x = fr.pack_nav_goal(counter(fr.NAV_GOAL_ID), fr.NavGoalField.X, 1_000, scratch)
+        signed(fr.NAV_GOAL_ID, goal_x)
+        goal_x = fr.pack_nav_goal(counter(fr.NAV_GOAL_ID), fr.NavGoalField.X, 1_000, scratch)
+        signed(fr.NAV_GOAL_ID, goal_x, stale=True)  # a replay: AUTH_FRESHNESS, then a resync
+        rig.step()
+        sync()
+
+        def goal_y() -> bytes:
+            return fr.pack_nav_goal(counter(fr.NAV_GOAL_ID), fr.NavGoalField.Y, 1_000, scratch)
+
+        signed(fr.NAV_GOAL_ID, goal_y(), forge=1)  # AUTH_FAILED
+        rig.send(fr.NAV_GOAL_ID, goal_y())  # unsigned and displaced by the next: AUTH_MISSING
+        rig.send(fr.NAV_GOAL_ID, goal_y())  # unsigned: AUTH_MISSING after 2 ticks
+        rig.send(
+            fr.ODOM_AUTH_ID,
+            fr.pack_odom_auth(counter(fr.ODOM_AUTH_ID), 1, 0, 0, scratch),  # an orphan
+        )
+        rig.run(0.1)
+        rig.board.reboot()
+        sync()
+        signed(
+            fr.ODOM_SET_POSE_ID,
+            fr.pack_odom_set_pose(counter(fr.ODOM_SET_POSE_ID), fr.SetPoseField.APPLY, 0, scratch),
+        )
+        rig.run(1.1)  # a periodic ODOM_FRESHNESS
+        rig.board.nvm.fail_writes = True
+        rig.board.reboot()
+        rig.send(
+            fr.ODOM_SET_POSE_ID,
+            fr.pack_odom_set_pose(counter(fr.ODOM_SET_POSE_ID), fr.SetPoseField.APPLY, 0, scratch),
+        )
+        rig.send(
+            fr.ODOM_AUTH_ID,
+            fr.pack_odom_auth(counter(fr.ODOM_AUTH_ID), 1, 1, 0, scratch),  # AUTH_UNAVAILABLE
+        )
+        rig.run(0.1)
+        rig.listeners = []
+
+
 HEALTH_SCENARIOS = "tests.test_health_firmware"  # stalls, overflows, forgeries, restarts, gaps
 
 
@@ -612,8 +712,11 @@ def _health_drive() -> None:
     """The firmware-level health scenarios (lost time, FIFO overrun, mailbox overflow, forged and
     implausible steps, counter restarts and their recovery, twist after 16/31/100-period gaps),
     run from a fresh import of their test module so that it binds the instrumented firmware."""
-    saved = {name: sys.modules.pop(name) for name in (HEALTH_SCENARIOS, "tests.test_ecu")
-             if name in sys.modules}
+    saved = {
+        name: sys.modules.pop(name)
+        for name in (HEALTH_SCENARIOS, "tests.test_ecu")
+        if name in sys.modules
+    }
     try:
         scenarios = importlib.import_module(HEALTH_SCENARIOS)
         for name in sorted(dir(scenarios)):
@@ -656,6 +759,7 @@ def standard_drives(recorder: Recorder, duration_s: float = 20.0) -> DriveLog:
         _vector_cases()
         _edge_sweep()
         _secoc_drive()
+        _secured_rig_drive(ears)
         _health_drive()
     return DriveLog(ears.heard, ears.acks)
 

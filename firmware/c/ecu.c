@@ -18,7 +18,8 @@
 #include "fixmath.h"
 #include "frames.h"
 
-enum tx_index { TX_MOTOR_CMD, TX_POSE_X, TX_POSE_Y, TX_TWIST, TX_ACK, TX_STATUS, TX_NAV_STATUS };
+enum tx_index { TX_MOTOR_CMD, TX_POSE_X, TX_POSE_Y, TX_TWIST, TX_ACK, TX_STATUS, TX_NAV_STATUS,
+                TX_FRESHNESS };
 
 static const enum status_page ROTATING_PAGES[5] = {
     PAGE_FRAME_TOTALS, PAGE_E2E_WHEEL_ENCODERS, PAGE_E2E_ODOM_SET_POSE, PAGE_E2E_ODOM_CONFIG,
@@ -80,10 +81,18 @@ static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32
                              const uint32_t counts[2]);
 static void sum_step(struct odom_ecu *ecu);
 static void update_twist(struct odom_ecu *ecu, uint32_t periods);
+static bool secured(struct odom_ecu *ecu, enum auth_request request, const uint8_t *data);
+static void on_auth(struct odom_ecu *ecu, const uint8_t *data, size_t len);
+static void expire_held(struct odom_ecu *ecu);
+static void nack_held(struct odom_ecu *ecu, const struct held *held, enum auth_status status);
+static void send_freshness(struct odom_ecu *ecu);
 static void on_set_pose(struct odom_ecu *ecu, const uint8_t *data, size_t len);
+static void act_set_pose(struct odom_ecu *ecu, const uint8_t *data);
 static void on_config(struct odom_ecu *ecu, const uint8_t *data, size_t len);
+static void act_config(struct odom_ecu *ecu, const uint8_t *data);
 static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame);
 static void on_nav_goal(struct odom_ecu *ecu, const uint8_t *data, size_t len);
+static void act_nav_goal(struct odom_ecu *ecu, const uint8_t *data);
 static void ack(struct odom_ecu *ecu, uint32_t request_id, const struct mux_record *frame,
                 enum ack_result result, enum ack_reason reason);
 static void navigate(struct odom_ecu *ecu);
@@ -134,6 +143,16 @@ void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
 /* --- ISR context --- */
 
 /* CAN receive interrupt: copy the frame into the mailbox (or count the overflow). */
+void ecu_provision_secoc(struct odom_ecu *ecu, const uint8_t *key, unsigned key_len,
+                         struct freshness_nvm nvm)
+{
+    ecu->secoc_on = true;
+    secoc_receiver_init(&ecu->secoc_rx, key, key_len, nvm, MAC_BITS);
+    secured_init(&ecu->secoc, &ecu->secoc_rx);
+    data_ids_of_slot(ODOM_AUTH_E2E_SLOT, ecu->auth_data_ids);
+    e2e_receiver_init(&ecu->rx_auth, ecu->auth_data_ids, 15u, false);
+}
+
 void ecu_isr_can_rx(struct odom_ecu *ecu, uint32_t can_id, const uint8_t *data, size_t len)
 {
     if (!mailbox_put(&ecu->mailbox, can_id, data, len)) {
@@ -185,6 +204,7 @@ static void tick(struct odom_ecu *ecu, bool timed, uint32_t now_us)
     }
     ecu->tick_budget = ecu->periods_since_sample;
     drain_mailbox(ecu);
+    expire_held(ecu);
     if (ecu->tick_steps != 0u && !ecu->time_lost_now) {
         update_twist(ecu, ecu->tick_budget > 1u ? ecu->tick_budget : 1u);
     }
@@ -212,6 +232,8 @@ static void drain_mailbox(struct odom_ecu *ecu)
             on_config(ecu, data, len);
         } else if (can_id == NAV_GOAL_ID) {
             on_nav_goal(ecu, data, len);
+        } else if (can_id == ODOM_AUTH_ID && ecu->secoc_on) {
+            on_auth(ecu, data, len);
         } else {
             ecu->frames_filtered++;
         }
@@ -502,11 +524,102 @@ static void update_twist(struct odom_ecu *ecu, uint32_t periods)
     ecu->tick_steps = 0u;
 }
 
-static void on_set_pose(struct odom_ecu *ecu, const uint8_t *data, size_t len)
+/* --- SecOC: verify before acting --- */
+
+/* True when the frame (E2E OK) was held for its ODOM_AUTH instead of acted on now; a frame it
+ * displaced is refused (NACK AUTH_MISSING). */
+static bool secured(struct odom_ecu *ecu, enum auth_request request, const uint8_t *data)
 {
-    if (!e2e(ecu, &ecu->rx_set_pose, data, len)) {
+    if (!ecu->secoc_on) {
+        return false;
+    }
+    struct held displaced;
+    if (secured_hold(&ecu->secoc, request, data, ecu->ticks, &displaced)) {
+        nack_held(ecu, &displaced, AUTH_MISSING);
+    }
+    return true;
+}
+
+/* ODOM_AUTH: verify the held frame it names; act on it, or NACK it with the verdict. */
+static void on_auth(struct odom_ecu *ecu, const uint8_t *data, size_t len)
+{
+    if (!ecu->secoc_on || !e2e(ecu, &ecu->rx_auth, data, len)) {
         return;
     }
+    struct odom_auth auth;
+    unpack_odom_auth(data, &auth);
+    enum auth_status status;
+    struct held held;
+    if (!secured_authenticate(&ecu->secoc, &auth, &status, &held)) {
+        return; /* nothing held for it: counted (orphans), no answer */
+    }
+    if (status != AUTH_OK) {
+        nack_held(ecu, &held, status);
+    } else if (held.can_id == ODOM_SET_POSE_ID) {
+        act_set_pose(ecu, held.pdu);
+    } else if (held.can_id == ODOM_CONFIG_ID) {
+        act_config(ecu, held.pdu);
+    } else {
+        act_nav_goal(ecu, held.pdu);
+    }
+}
+
+/* Held frames whose ODOM_AUTH did not come in time: NACK AUTH_MISSING. */
+static void expire_held(struct odom_ecu *ecu)
+{
+    if (!ecu->secoc_on) {
+        return;
+    }
+    struct held held;
+    while (secured_expire(&ecu->secoc, ecu->ticks, &held)) {
+        nack_held(ecu, &held, AUTH_MISSING);
+    }
+}
+
+/* ODOM_ACK NACK for a held secured frame, REASON the AUTH verdict (7..10). */
+static void nack_held(struct odom_ecu *ecu, const struct held *held, enum auth_status status)
+{
+    struct mux_record frame;
+    if (held->can_id == ODOM_SET_POSE_ID) {
+        unpack_odom_set_pose(held->pdu, &frame);
+    } else if (held->can_id == ODOM_CONFIG_ID) {
+        unpack_odom_config(held->pdu, &frame);
+    } else {
+        uint8_t mode, append, no_final_heading, goal_id;
+        unpack_nav_goal(held->pdu, &frame, &mode, &append, &no_final_heading, &goal_id);
+    }
+    ack(ecu, held->can_id, &frame, ACK_RESULT_NACK, (enum ack_reason)status);
+}
+
+/* ODOM_FRESHNESS when due (boot, refusal, rollover, unavailable) and every second. */
+static void send_freshness(struct odom_ecu *ecu)
+{
+    if (!ecu->secoc_on) {
+        return;
+    }
+    enum freshness_cause cause = ecu->secoc_rx.sync_cause;
+    if (cause == CAUSE_NONE && ecu->ticks % FRESHNESS_PERIOD_TICKS == 0u) {
+        cause = CAUSE_PERIODIC;
+    }
+    if (cause != CAUSE_NONE) {
+        uint8_t data[8];
+        ecu->secoc_rx.sync_cause = CAUSE_NONE;
+        secoc_freshness_frame(&ecu->secoc_rx, next_counter(ecu, TX_FRESHNESS), cause, data);
+        send(ecu, ODOM_FRESHNESS_ID, data);
+    }
+}
+
+/* --- the command handlers --- */
+
+static void on_set_pose(struct odom_ecu *ecu, const uint8_t *data, size_t len)
+{
+    if (e2e(ecu, &ecu->rx_set_pose, data, len) && !secured(ecu, AUTH_REQ_ODOM_SET_POSE, data)) {
+        act_set_pose(ecu, data);
+    }
+}
+
+static void act_set_pose(struct odom_ecu *ecu, const uint8_t *data)
+{
     struct mux_record frame;
     unpack_odom_set_pose(data, &frame);
     if (frame.field == SET_POSE_APPLY) {
@@ -540,9 +653,13 @@ static void on_set_pose(struct odom_ecu *ecu, const uint8_t *data, size_t len)
 
 static void on_config(struct odom_ecu *ecu, const uint8_t *data, size_t len)
 {
-    if (!e2e(ecu, &ecu->rx_config, data, len)) {
-        return;
+    if (e2e(ecu, &ecu->rx_config, data, len) && !secured(ecu, AUTH_REQ_ODOM_CONFIG, data)) {
+        act_config(ecu, data);
     }
+}
+
+static void act_config(struct odom_ecu *ecu, const uint8_t *data)
+{
     struct mux_record frame;
     unpack_odom_config(data, &frame);
     if (frame.field == PARAM_APPLY) {
@@ -598,9 +715,13 @@ static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame)
 
 static void on_nav_goal(struct odom_ecu *ecu, const uint8_t *data, size_t len)
 {
-    if (!e2e(ecu, &ecu->rx_nav_goal, data, len)) {
-        return;
+    if (e2e(ecu, &ecu->rx_nav_goal, data, len) && !secured(ecu, AUTH_REQ_NAV_GOAL, data)) {
+        act_nav_goal(ecu, data);
     }
+}
+
+static void act_nav_goal(struct odom_ecu *ecu, const uint8_t *data)
+{
     struct mux_record frame;
     struct nav_goal_frame goal;
     uint8_t mode;
@@ -657,6 +778,7 @@ static void transmit_scheduled(struct odom_ecu *ecu)
     if (ecu->nav.changed || ecu->ticks % STATUS_PERIOD_TICKS == 0u) {
         send_nav_status(ecu);
     }
+    send_freshness(ecu);
 }
 
 /* NAV_STATUS; DISTANCE is clamped to its 65.535 m range here (a display limit). */

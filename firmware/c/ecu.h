@@ -13,6 +13,7 @@
 #include "hal.h"
 #include "nav.h"
 #include "odometry.h"
+#include "secoc.h"
 
 #define ENCODER_PERIOD_US 10000
 #define POSE_PERIOD_TICKS 2u
@@ -26,7 +27,7 @@
 #define STEP_PERIODS_MAX 0xFFFFu /* the twist's dt and the plausibility bound saturate (655 s) */
 #define TWIST_SUM_MAX (INT64_C(1) << 32) /* one tick's summed steps: 4096 m (Q20), 4 rad (Q30) */
 #define WIRE_COUNTER_BITS 24u
-#define TX_IDS 7u /* the messages this node sends: one E2E counter each */
+#define TX_IDS 8u /* the messages this node sends: one E2E counter each */
 
 /* Firmware state (the STATE signal of ODOM_STATUS). */
 enum ecu_state { STATE_INIT = 0, STATE_OK = 1, STATE_DEGRADED = 2, STATE_FAULT = 3 };
@@ -104,10 +105,20 @@ struct odom_ecu {
     int64_t staged_pose_value[3];
     unsigned staged_config;    /* bit per CONFIG parameter */
     uint32_t staged_config_value[6];
+    /* SecOC (firmware/secoc.py, docs/secoc.md): off unless ecu_provision_secoc was called */
+    bool secoc_on;
+    struct secoc_receiver secoc_rx;
+    struct secured_commands secoc;
+    uint8_t auth_data_ids[DATA_ID_COUNT];
+    struct e2e_receiver rx_auth;
 };
 
 void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
               const struct robot_params *params);
+/* Provision the SecOC key (key_len 16; anything else fails closed) and the EPOCH cell: boots the
+ * freshness (EPOCH + 1 written first). Call once, right after ecu_init. */
+void ecu_provision_secoc(struct odom_ecu *ecu, const uint8_t *key, unsigned key_len,
+                         struct freshness_nvm nvm);
 void ecu_isr_can_rx(struct odom_ecu *ecu, uint32_t can_id, const uint8_t *data, size_t len);
 void ecu_isr_rx_overrun(struct odom_ecu *ecu);
 void ecu_isr_bus_state(struct odom_ecu *ecu, bool bus_off);

@@ -5,6 +5,8 @@
 #include "config.h"
 #include "errors.h"
 #include "fixmath.h"
+#include "nav.h"
+#include "secoc.h"
 
 /* Profile 2 DataIDList of E2E slot `slot` (1..15): DataID[c] = (slot << 4) | c. */
 void data_ids_of_slot(unsigned slot, uint8_t ids[DATA_ID_COUNT])
@@ -199,7 +201,7 @@ void pack_odom_ack(uint8_t out[8], uint8_t counter, uint8_t request_counter, int
     m.request_id = (uint16_t)sat_range(request_id, 0, CAN_ID_MAX, errors);
     m.request_field = (uint8_t)(request_field & 0x0Fu);
     m.result = (uint8_t)sat_range(result, ACK_RESULT_ACK, ACK_RESULT_NACK, errors);
-    m.reason = (uint8_t)sat_range(reason, 0, 6, errors);
+    m.reason = (uint8_t)sat_range(reason, 0, ACK_AUTH_UNAVAILABLE, errors);
     (void)odocan_odom_ack_pack(out, &m, 8u);
     seal(out, ODOM_ACK_E2E_SLOT);
 }
@@ -272,4 +274,42 @@ void pack_odom_status_e2e(uint8_t out[8], uint8_t counter, enum status_page page
     }
     (void)odocan_odom_status_pack(out, &m, 8u);
     seal(out, ODOM_STATUS_E2E_SLOT);
+}
+
+/* ODOM_AUTH: REQUEST (byte 1 high nibble, saturated to 0..2), FRESHNESS, AUTHENTICATOR. */
+void pack_odom_auth(uint8_t out[8], uint8_t counter, int64_t request, uint16_t freshness,
+                    uint32_t mac, uint32_t *errors)
+{
+    struct odocan_odom_auth_t m;
+    (void)odocan_odom_auth_init(&m);
+    m.counter = (uint8_t)(counter & COUNTER_MASK);
+    m.request = (uint8_t)sat_range(request, 0, 2, errors);
+    m.freshness = freshness;
+    m.authenticator = mac;
+    (void)odocan_odom_auth_pack(out, &m, 8u);
+    seal(out, ODOM_AUTH_E2E_SLOT);
+}
+
+/* ODOM_AUTH's raw fields (run its E2E check first); REQUEST read as the raw nibble. */
+void unpack_odom_auth(const uint8_t data[8], struct odom_auth *out)
+{
+    out->counter = (uint8_t)(data[1] & 0x0Fu);
+    out->request = (uint8_t)(data[1] >> 4);
+    out->freshness = (uint16_t)((unsigned)data[2] | ((unsigned)data[3] << 8));
+    out->authenticator = (uint32_t)data[4] | ((uint32_t)data[5] << 8) |
+                         ((uint32_t)data[6] << 16) | ((uint32_t)data[7] << 24);
+}
+
+/* ODOM_FRESHNESS: CAUSE (saturated to 0..4) and the u48 FV (COUNT bits 16-43, EPOCH 44-63). */
+void pack_odom_freshness(uint8_t out[8], uint8_t counter, int64_t cause, uint64_t fv,
+                         uint32_t *errors)
+{
+    struct odocan_odom_freshness_t m;
+    (void)odocan_odom_freshness_init(&m);
+    m.counter = (uint8_t)(counter & COUNTER_MASK);
+    m.cause = (uint8_t)sat_range(cause, 0, 4, errors);
+    m.fv_count = (uint32_t)(fv & 0x0FFFFFFFu);
+    m.fv_epoch = (uint32_t)((fv >> 28) & 0xFFFFFu);
+    (void)odocan_odom_freshness_pack(out, &m, 8u);
+    seal(out, ODOM_FRESHNESS_E2E_SLOT);
 }

@@ -22,6 +22,8 @@
 #define ODOM_CONFIG_ID ODOCAN_ODOM_CONFIG_FRAME_ID
 #define ODOM_ACK_ID ODOCAN_ODOM_ACK_FRAME_ID
 #define ODOM_STATUS_ID ODOCAN_ODOM_STATUS_FRAME_ID
+#define ODOM_AUTH_ID ODOCAN_ODOM_AUTH_FRAME_ID
+#define ODOM_FRESHNESS_ID ODOCAN_ODOM_FRESHNESS_FRAME_ID
 #define CAN_ID_MAX 0x7FFu
 #define NAV_QUEUE_DEPTH_MAX 16
 
@@ -37,6 +39,8 @@
 #define ODOM_STATUS_E2E_SLOT 9u
 #define NAV_GOAL_E2E_SLOT 10u
 #define NAV_STATUS_E2E_SLOT 11u
+#define ODOM_AUTH_E2E_SLOT 12u
+#define ODOM_FRESHNESS_E2E_SLOT 13u
 
 enum set_pose_field { SET_POSE_X = 0, SET_POSE_Y = 1, SET_POSE_HEADING = 2, SET_POSE_APPLY = 15 };
 enum config_param { PARAM_COUNTS_PER_REV = 0, PARAM_WHEEL_RADIUS_LEFT = 1,
@@ -54,6 +58,14 @@ struct mux_record {
 };
 
 void data_ids_of_slot(unsigned slot, uint8_t ids[DATA_ID_COUNT]);
+
+struct odom_auth; /* secoc.h */
+
+void pack_odom_auth(uint8_t out[8], uint8_t counter, int64_t request, uint16_t freshness,
+                    uint32_t mac, uint32_t *errors);
+void unpack_odom_auth(const uint8_t data[8], struct odom_auth *out);
+void pack_odom_freshness(uint8_t out[8], uint8_t counter, int64_t cause, uint64_t fv,
+                         uint32_t *errors);
 
 void unpack_wheel_encoders(const uint8_t data[8], uint8_t *counter, uint32_t *left_count,
                            uint32_t *right_count);

@@ -39,7 +39,10 @@ enum nav_mode { NAV_MODE_TURN_GO_TURN = 0, NAV_MODE_GO_TO_GOAL = 1 };
 enum nav_state { NAV_IDLE = 0, NAV_TURNING = 1, NAV_DRIVING = 2, NAV_FINAL_TURN = 3,
                  NAV_REACHED = 4, NAV_STOPPED = 5, NAV_ABORTED = 6 };
 enum ack_reason { ACK_OK = 0, ACK_OUT_OF_RANGE = 1, ACK_UNKNOWN_FIELD = 2, ACK_INCOMPLETE = 3,
-                  ACK_BUSY = 4, ACK_INCONSISTENT = 5, ACK_QUEUE_FULL = 6 };
+                  ACK_BUSY = 4, ACK_INCONSISTENT = 5, ACK_QUEUE_FULL = 6,
+                  /* SecOC verdicts (firmware/secoc.py AuthStatus) */
+                  ACK_AUTH_FAILED = 7, ACK_AUTH_FRESHNESS = 8, ACK_AUTH_MISSING = 9,
+                  ACK_AUTH_UNAVAILABLE = 10 };
 
 /* One NAV_GOAL frame's raw integers (the unpacker's record). */
 struct nav_goal_frame {

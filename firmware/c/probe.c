@@ -35,6 +35,11 @@
  *                            bus state, the driver refusing frames or not, a receive FIFO overrun)
  *   ecu_tick | ecu_tick_at NOW_US -> state reason errors tx_dropped then every frame sent, ID:HEX
  *                            (ecu_tick: no timer, one period; ecu_tick_at: the u32 timer value)
+ *   cmac KEY MSG|-           -> the 16-byte AES-CMAC tag (hex)
+ *   auth KEY DATA_ID PDU FV  -> the 32-bit SecOC authenticator
+ *   nvm EPOCH FAIL           -> ok                    (the probe's EPOCH cell: value, writes fail)
+ *   ecu_secoc KEY|-          -> ok                    (provision the ECU; "-": a bad key)
+ *   ecu_secoc_counts         -> ok failed freshness orphans epoch last_fv
  */
 #include <inttypes.h>
 #include <stdio.h>
@@ -48,6 +53,7 @@
 #include "fixmath.h"
 #include "nav.h"
 #include "odometry.h"
+#include "secoc.h"
 #include "trig.h"
 
 #define MAX_BYTES 64
@@ -118,6 +124,27 @@ static bool probe_transmit(void *ctx, uint32_t can_id, const uint8_t data[8])
     return true;
 }
 
+/* The probe's NVM cell: survives ecu_new (a reboot). */
+struct nvm_cell {
+    uint32_t epoch;
+    bool fail;
+};
+
+static uint32_t cell_read(void *ctx)
+{
+    return ((struct nvm_cell *)ctx)->epoch;
+}
+
+static bool cell_write(void *ctx, uint32_t epoch)
+{
+    struct nvm_cell *cell = ctx;
+    if (cell->fail) {
+        return false;
+    }
+    cell->epoch = epoch;
+    return true;
+}
+
 static void print_rx(const struct e2e_receiver *rx, enum e2e_status status)
 {
     printf("%d %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32
@@ -141,6 +168,7 @@ int main(void)
     ecu_init(&ecu, probe_transmit, &tx_log, &ecu_params);
     static struct navigator nav;
     static uint32_t nav_errors;
+    static struct nvm_cell nvm_cell;
     navigator_init(&nav, &nav_errors);
     while (fgets(line, sizeof line, stdin) != NULL) {
         const char *cmd = strtok(line, " \t\n");
@@ -361,6 +389,49 @@ int main(void)
             }
             printf("%u %u %" PRId64 " %u %u %u %u\n", (unsigned)m.counter, (unsigned)m.field, value,
                    mode, append, no_final, goal_id);
+        } else if (strcmp(cmd, "cmac") == 0) {
+            uint8_t key[MAX_BYTES];
+            long key_len = arg_bytes(key);
+            long n = arg_bytes(bytes);
+            cmac_key_t ck;
+            uint8_t tag[16];
+            if (key_len != AES128_KEY_BYTES) {
+                printf("bad key\n");
+                continue;
+            }
+            cmac_key(key, &ck);
+            aes_cmac(&ck, bytes, n < 0 ? 0u : (uint32_t)n, tag);
+            for (unsigned k = 0u; k < 16u; ++k) {
+                printf("%02X", (unsigned)tag[k]);
+            }
+            printf("\n");
+        } else if (strcmp(cmd, "auth") == 0) {
+            uint8_t key[MAX_BYTES];
+            long key_len = arg_bytes(key);
+            uint32_t data_id = (uint32_t)arg_u64();
+            (void)arg_bytes(bytes);
+            uint64_t fv = arg_u64();
+            cmac_key_t ck;
+            if (key_len != AES128_KEY_BYTES) {
+                printf("bad key\n");
+                continue;
+            }
+            cmac_key(key, &ck);
+            printf("%" PRIu32 "\n", authenticator(&ck, data_id, bytes, fv));
+        } else if (strcmp(cmd, "nvm") == 0) {
+            nvm_cell.epoch = (uint32_t)arg_u64();
+            nvm_cell.fail = arg_u64() != 0u;
+            printf("ok\n");
+        } else if (strcmp(cmd, "ecu_secoc") == 0) {
+            uint8_t key[MAX_BYTES];
+            long key_len = arg_bytes(key);
+            struct freshness_nvm nvm = {cell_read, cell_write, &nvm_cell};
+            ecu_provision_secoc(&ecu, key, key_len < 0 ? 0u : (unsigned)key_len, nvm);
+            printf("ok\n");
+        } else if (strcmp(cmd, "ecu_secoc_counts") == 0) {
+            printf("%" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu32 " %" PRIu64 "\n",
+                   ecu.secoc_rx.count_ok, ecu.secoc_rx.count_failed, ecu.secoc_rx.count_freshness,
+                   ecu.secoc.orphans, ecu.secoc_rx.epoch, ecu.secoc_rx.last_fv);
         } else if (strcmp(cmd, "ecu_new") == 0) {
             ecu_params.counts_per_rev = (uint32_t)arg_u64();
             ecu_params.wheel_radius_left_nm = (uint32_t)arg_u64();

@@ -159,6 +159,17 @@ class MessageStats:
         return 1e3 * statistics.pstdev(b - a for a, b in pairwise(self.times))
 
 
+# SecOC counts shown by the monitor: ODOM_ACK NACK reasons AUTH_*, and ODOM_AUTH frames that
+# follow no secured command frame.
+AUTH_COUNTS = (
+    "auth_failed",
+    "auth_freshness",
+    "auth_missing",
+    "auth_unavailable",
+    "auth_without_command",
+)
+
+
 class BusMonitor:
     """The state model of ``odocan monitor`` (see the module docstring)."""
 
@@ -185,6 +196,10 @@ class BusMonitor:
         self.sources = SourceWatch()
         self.events: deque[dict[str, Any]] = deque(maxlen=MAX_EVENTS)
         self._bus_time_s = 0.0  # the latest bus timestamp heard
+        # SecOC (docs/secoc.md): the firmware's AUTH_* refusals, and ODOM_AUTH frames that
+        # follow no command frame (a forger's, or a command lost on the way)
+        self.auth: Counter[str] = Counter({name: 0 for name in AUTH_COUNTS})
+        self._held: set[str] = set()  # secured messages with a command frame awaiting ODOM_AUTH
 
     def feed(self, msg: can.Message, now_s: float | None = None) -> None:
         """One frame heard on the bus (``now_s``: local monotonic time, default now)."""
@@ -247,6 +262,33 @@ class BusMonitor:
         name = "set pose" if "FIELD" in shown else "config"
         self.events.append({"t_s": self._bus_time_s, "kind": name,
                             "detail": f"{name} applied: reference restarted"})
+
+    def _on_command(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        """ODOM_SET_POSE or ODOM_CONFIG: its ODOM_AUTH may follow, and APPLY restarts."""
+        self._held.add("ODOM_SET_POSE" if "FIELD" in shown else "ODOM_CONFIG")
+        self._on_pose_request(s, shown)
+
+    def _on_nav_goal(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        self._held.add("NAV_GOAL")
+
+    def _on_auth(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        """ODOM_AUTH: it authenticates the last command frame of the message it names (as the
+        firmware's held slot does), or none: counted as an ODOM_AUTH without a command."""
+        request = str(shown.get("REQUEST", "?"))
+        if request in self._held:
+            self._held.discard(request)
+        else:
+            self.auth["auth_without_command"] += 1
+
+    def _on_ack(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        """ODOM_ACK: a NACK with an AUTH_* reason is an authentication failure (an event)."""
+        reason = str(shown.get("REASON", ""))
+        if not reason.startswith("AUTH_"):
+            return
+        self.auth[reason.lower()] += 1
+        request = shown.get("REQUEST_ID", "?")
+        self.events.append({"t_s": self._bus_time_s, "kind": "auth",
+                            "detail": f"{request} refused: {reason}"})
 
     def _on_encoders(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
@@ -403,12 +445,16 @@ class BusMonitor:
             **self.tracker.snapshot(),
             "unknown": {**e2e[UNKNOWN], "ids": dict(self.unknown_ids),
                         "undecodable": self.undecodable},
+            "auth": dict(self.auth),
         }
 
 
 _HANDLERS = {
-    "ODOM_SET_POSE": BusMonitor._on_pose_request,
-    "ODOM_CONFIG": BusMonitor._on_pose_request,
+    "ODOM_SET_POSE": BusMonitor._on_command,
+    "ODOM_CONFIG": BusMonitor._on_command,
+    "NAV_GOAL": BusMonitor._on_nav_goal,
+    "ODOM_AUTH": BusMonitor._on_auth,
+    "ODOM_ACK": BusMonitor._on_ack,
     "WHEEL_ENCODERS": BusMonitor._on_encoders,
     "ODOM_POSE_X": BusMonitor._on_pose_x,
     "ODOM_POSE_Y": BusMonitor._on_pose_y,

@@ -25,7 +25,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import can
@@ -36,6 +36,7 @@ from odocan.host.mqtt.broker import BrokerURL, first_error
 from odocan.host.mqtt.link import RobotLink, Verdict
 from odocan.host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
 from odocan.host.protocol.commands import Command, CommandEncoder, CommandRejected, command_id
+from odocan.host.protocol.secoc import SecocSigner
 
 log = logging.getLogger(__name__)
 Batch = list[tuple[int, can.Message]]
@@ -50,6 +51,8 @@ class RobotEndpoint:
     geometry: Geometry
     integrator: str = "exact"
     counter_bits: int = 32  # the robot's hardware encoder counters (16 or 32)
+    # SecOC (docs/secoc.md): an ODOM_AUTH after each secured frame; None: commands unsigned
+    signer: SecocSigner | None = field(default=None, repr=False)
 
 
 @dataclass(frozen=True)
@@ -118,6 +121,12 @@ class _Robot:
 
     def _send(self, command: Command) -> None:
         bus = self.endpoint.bus
+        signer = self.endpoint.signer
+        if signer is not None and signer.next_fv is None:  # before any frame: all or nothing
+            raise CommandRejected(
+                "SecOC: no ODOM_FRESHNESS from the firmware yet (it sends one every second)",
+                command.cmd_id,
+            )
         for frame in command.frames:
             ack = PendingAck(command.cmd_id, command.name, frame.final)
             self.telemetry.expect_ack(frame.can_id, frame.counter, ack)
@@ -126,6 +135,14 @@ class _Robot:
                                      data=frame.data))
             except can.CanError as exc:
                 raise CommandRejected(f"bus refused the frame: {exc}", command.cmd_id) from None
+            if signer is not None and signer.is_secured(frame.can_id):
+                auth = signer.sign(frame.can_id, frame.data)
+                try:
+                    bus.send(can.Message(arbitration_id=signer.auth_frame_id,
+                                         is_extended_id=False, data=auth))
+                except can.CanError as exc:
+                    raise CommandRejected(f"bus refused ODOM_AUTH: {exc}",
+                                          command.cmd_id) from None
         if command.name == "config":
             v = command.values
             self.telemetry.set_geometry(
@@ -222,6 +239,9 @@ class Bridge:
         self.frames_in += len(batch)
         for index, msg in batch:
             robot = robots[index]
+            signer = robot.endpoint.signer
+            if signer is not None and msg.arbitration_id == signer.freshness_frame_id:
+                signer.on_freshness(bytes(msg.data))  # a bad frame is refused by its E2E check
             try:
                 publications = robot.telemetry.feed(msg)
             except Exception as exc:  # a defect must not stop the bridge: count, log once

@@ -2,8 +2,7 @@
 
 The host's own implementation of the profile the firmware verifies (``firmware.secoc``,
 docs/secoc.md), with the ``cryptography`` package's AES-CMAC and the frames as the DBC draws them
-(``ODOM_AUTH`` and ``ODOM_FRESHNESS``: from dbc/odocan.dbc once merged, else the draft
-dbc/secoc_draft.dbc):
+(``ODOM_AUTH`` and ``ODOM_FRESHNESS`` from dbc/odocan.dbc):
 
     AUTHENTICATOR = first 32 bits of AES-128-CMAC(K, CAN ID u16 BE || 8 frame bytes || FV u48 BE)
 
@@ -23,8 +22,6 @@ from __future__ import annotations
 import logging
 import stat
 import string
-from functools import cache
-from importlib import resources
 from pathlib import Path
 from typing import Final
 
@@ -41,7 +38,6 @@ KEY_BYTES: Final = 16  # AES-128
 SECURED_MESSAGES: Final = ("NAV_GOAL", "ODOM_SET_POSE", "ODOM_CONFIG")  # ODOM_AUTH REQUEST VAL_s
 FRESHNESS_WINDOW: Final = 4096  # the firmware accepts FV up to last + 4096 (docs/secoc.md)
 log = logging.getLogger(__name__)
-_DRAFT_DBC = Path(str(resources.files("odocan").joinpath("dbc", "secoc_draft.dbc")))
 
 
 class SecocNotSynchronised(OdocanError):
@@ -72,20 +68,9 @@ def load_secoc_key(path: str | Path) -> bytes:
 
 
 def secoc_messages(db: Database | None = None) -> tuple[Message, Message]:
-    """``(ODOM_AUTH, ODOM_FRESHNESS)`` from ``db`` (default: the contract, else the draft)."""
+    """``(ODOM_AUTH, ODOM_FRESHNESS)`` from ``db`` (default: the contract, dbc/odocan.dbc)."""
     source = db or contract.database()
-    names = {message.name for message in source.messages}
-    if not {"ODOM_AUTH", "ODOM_FRESHNESS"} <= names:
-        source = _draft()
     return source.get_message_by_name("ODOM_AUTH"), source.get_message_by_name("ODOM_FRESHNESS")
-
-
-@cache
-def _draft() -> Database:
-    """dbc/secoc_draft.dbc, loaded once (strict)."""
-    db = cantools.database.load_file(_DRAFT_DBC, strict=True)
-    assert isinstance(db, Database)
-    return db
 
 
 def _data_ids(message: Message) -> list[int]:
@@ -118,6 +103,20 @@ class SecocSigner:
         self.next_fv: int | None = None
         self._counter = -1
 
+    @property
+    def auth_frame_id(self) -> int:
+        """ODOM_AUTH's CAN ID (from the DBC)."""
+        return int(self._auth.frame_id)
+
+    @property
+    def freshness_frame_id(self) -> int:
+        """ODOM_FRESHNESS's CAN ID (from the DBC)."""
+        return int(self._fresh.frame_id)
+
+    def is_secured(self, can_id: int) -> bool:
+        """True for the CAN IDs that need an ODOM_AUTH (ODOM_SET_POSE, ODOM_CONFIG, NAV_GOAL)."""
+        return can_id in self._secured_ids
+
     def on_freshness(self, data: bytes) -> bool:
         """Adopt an ODOM_FRESHNESS frame's FV (next FV = it + 1); False: bad E2E, or FV 0."""
         if len(data) != 8 or not cantools.autosar.check_profile2_crc(
@@ -128,6 +127,11 @@ class SecocSigner:
         assert isinstance(fields, dict)
         epoch, count = fields["FV_EPOCH"], fields["FV_COUNT"]
         assert isinstance(epoch, int) and isinstance(count, int)  # raw, no choices
+        return self.adopt(epoch, count)
+
+    def adopt(self, epoch: int, count: int) -> bool:
+        """Adopt the firmware's last accepted FV (ODOM_FRESHNESS FV_EPOCH, FV_COUNT already
+        E2E-checked); False, and no signing, when EPOCH is 0 (the firmware is unavailable)."""
         if epoch == 0:  # the firmware refuses every secured command (no key, NVM fault)
             self.next_fv = None
             return False

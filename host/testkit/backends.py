@@ -19,6 +19,7 @@ import can
 
 from odocan.host.io.buses import auto_type, isolated_bus_kwargs
 from odocan.host.protocol.pose import Pose
+from odocan.host.protocol.secoc import load_secoc_key
 from odocan.host.testkit.options import RigOptions, TestkitError, fault_spec
 from odocan.host.testkit.recorder import Recorder
 from odocan.sim import contract
@@ -116,6 +117,7 @@ class LockstepBackend:
             faults=fault_spec(options.faults),
             fw_faults=fault_spec(options.fw_faults),
             firmware=options.firmware,
+            secoc_key=load_secoc_key(options.secoc_key) if options.secoc_key else None,
         )
         self.rig = LockstepRig(config, [self.recorder])
 

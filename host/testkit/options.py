@@ -33,6 +33,7 @@ class RigOptions:
     fw_faults: str = ""
     seed: int = 0
     firmware: str = "python"  # lockstep only: "python" (firmware/) or "c" (firmware/c)
+    secoc_key: str = ""  # SecOC key file: our firmware provisioned with it, commands signed
 
     def profile(self) -> RobotProfile:
         """The robot profile (a name or a TOML path)."""

@@ -43,12 +43,17 @@ _INI = {
     "odocan_errors": ("the simulated robot's real errors, e.g. ed=1.002,eb=1.01,slip=0.01", ""),
     "odocan_faults": ("faults on what MOTOR_CTRL and SIM send, e.g. drop=0.01,seed=3", ""),
     "odocan_seed": ("seed of odocan_rig's vehicle and scenarios", "0"),
+    "odocan_secoc_key": (
+        "SecOC key file (16 raw bytes or 32 hex digits): our firmware is provisioned with it "
+        "and every command is signed (docs/secoc.md; none: no SecOC)",
+        "",
+    ),
     "odocan_bus": ("can.Bus keywords of a bus with an external firmware (none: lockstep)", ""),
     "odocan_attach_timeout": ("seconds to wait for an external firmware to answer", "30"),
     "odocan_firmware": ("our firmware in lockstep: python or c (firmware/c)", "python"),
 }
 _FIRMWARES = ("python", "c")  # sim.cboard.FIRMWARES, without importing the sim here
-_KEYS = ("robot", "integrator", "errors", "faults", "fw_faults", "seed")
+_KEYS = ("robot", "integrator", "errors", "faults", "fw_faults", "seed", "secoc_key")
 _ENCODER = pytest.StashKey["CommandEncoder"]()
 
 
@@ -64,6 +69,7 @@ class RigFactory(Protocol):
         faults: str | None = None,
         fw_faults: str | None = None,
         seed: int | None = None,
+        secoc_key: str | None = None,
     ) -> OdocanRig:
         """A new rig (closed at the end of the test)."""
         ...
@@ -95,7 +101,8 @@ def pytest_configure(config: pytest.Config) -> None:
     """Register the ``odocan`` marker."""
     config.addinivalue_line(
         "markers",
-        "odocan(robot=, integrator=, errors=, faults=, fw_faults=, seed=): defaults of the "
+        "odocan(robot=, integrator=, errors=, faults=, fw_faults=, seed=, secoc_key=): defaults "
+        "of the "
         "odocan_rig fixture for this test",
     )
 

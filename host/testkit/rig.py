@@ -31,6 +31,7 @@ import can
 from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.protocol.commands import Command, CommandEncoder
 from odocan.host.protocol.pose import Pose, latest_pose
+from odocan.host.protocol.secoc import SecocSigner, load_secoc_key
 from odocan.host.testkit.backends import Backend, ExternalBackend, LockstepBackend
 from odocan.host.testkit.judging import RigAssertions
 from odocan.host.testkit.options import CommandRefused, RigOptions, TestkitError, fault_spec
@@ -53,6 +54,7 @@ class OdocanRig(RigAssertions):
         self.options = options
         self.robot = options.profile()
         self._encoder = encoder if encoder is not None else CommandEncoder()
+        self._signer = SecocSigner(load_secoc_key(options.secoc_key)) if options.secoc_key else None
         self._next_goal_id = 1
         self._last_goal_id: int | None = None
         self._goal_acked_at: dict[int, float] = {}
@@ -254,19 +256,37 @@ class OdocanRig(RigAssertions):
         wait for the ACK of its last frame; returns the ACK's time (``CommandRefused`` on NACK)."""
         __tracebackhide__ = True
         cmd = self._encoder.encode(name, json.dumps(values).encode())
+        signer = self._synchronised_signer()
         seen = len(self.frames("ODOM_ACK"))
         for frame in cmd.frames:
             self.backend.send(frame.can_id, frame.data)
+            if signer is not None and signer.is_secured(frame.can_id):
+                self.backend.send(signer.auth_frame_id, signer.sign(frame.can_id, frame.data))
         self.backend.advance_until(
             lambda: self._answer(cmd, seen) is not None, self.backend.ack_timeout_s
         )
         answers = self.frames("ODOM_ACK")[seen:]
         nacks = [a for a in answers if a["RESULT"] == "NACK"]
         final = self._answer(cmd, seen)
+        if signer is not None and any(str(a["REASON"]).startswith("AUTH_") for a in nacks):
+            signer.next_fv = None  # resynchronise from the next ODOM_FRESHNESS
         if nacks or final is None:
             why = f"NACK {nacks[0]['REASON']}" if nacks else "no ODOM_ACK"
             raise CommandRefused(f"{name} {values}: {why} from the firmware")
         return float(final["timestamp_s"])
+
+    def _synchronised_signer(self) -> SecocSigner | None:
+        """The SecOC signer (None: no key), its freshness from the firmware's ODOM_FRESHNESS
+        (waited for, at most a second and a half: the firmware sends one every second)."""
+        signer = self._signer
+        if signer is None or signer.next_fv is not None:
+            return signer
+        seen = len(self.frames("ODOM_FRESHNESS"))
+        self.backend.advance_until(lambda: len(self.frames("ODOM_FRESHNESS")) > seen, 1.5)
+        latest = self.latest("ODOM_FRESHNESS")
+        if latest is None or not signer.adopt(int(latest["FV_EPOCH"]), int(latest["FV_COUNT"])):
+            raise TestkitError(f"SecOC: no usable ODOM_FRESHNESS from the firmware ({latest})")
+        return signer
 
     def _answer(self, cmd: Command, seen: int) -> dict[str, Any] | None:
         """The ODOM_ACK of ``cmd``'s last frame among the ACKs after the first ``seen``."""

@@ -1273,7 +1273,177 @@ bool odocan_odom_ack_result_is_in_range(uint8_t value)
 
 bool odocan_odom_ack_reason_is_in_range(uint8_t value)
 {
-    return (value <= 6u);
+    return (value <= 10u);
+}
+
+int odocan_odom_auth_pack(
+    uint8_t *dst_p,
+    const struct odocan_odom_auth_t *src_p,
+    size_t size)
+{
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    memset(&dst_p[0], 0, 8);
+
+    dst_p[0] |= pack_left_shift_u8(src_p->checksum, 0u, 0xffu);
+    dst_p[1] |= pack_left_shift_u8(src_p->counter, 0u, 0x0fu);
+    dst_p[1] |= pack_left_shift_u8(src_p->request, 4u, 0xf0u);
+    dst_p[2] |= pack_left_shift_u16(src_p->freshness, 0u, 0xffu);
+    dst_p[3] |= pack_right_shift_u16(src_p->freshness, 8u, 0xffu);
+    dst_p[4] |= pack_left_shift_u32(src_p->authenticator, 0u, 0xffu);
+    dst_p[5] |= pack_right_shift_u32(src_p->authenticator, 8u, 0xffu);
+    dst_p[6] |= pack_right_shift_u32(src_p->authenticator, 16u, 0xffu);
+    dst_p[7] |= pack_right_shift_u32(src_p->authenticator, 24u, 0xffu);
+
+    return (8);
+}
+
+int odocan_odom_auth_unpack(
+    struct odocan_odom_auth_t *dst_p,
+    const uint8_t *src_p,
+    size_t size)
+{
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    dst_p->checksum = unpack_right_shift_u8(src_p[0], 0u, 0xffu);
+    dst_p->counter = unpack_right_shift_u8(src_p[1], 0u, 0x0fu);
+    dst_p->request = unpack_right_shift_u8(src_p[1], 4u, 0xf0u);
+    dst_p->freshness = unpack_right_shift_u16(src_p[2], 0u, 0xffu);
+    dst_p->freshness |= unpack_left_shift_u16(src_p[3], 8u, 0xffu);
+    dst_p->authenticator = unpack_right_shift_u32(src_p[4], 0u, 0xffu);
+    dst_p->authenticator |= unpack_left_shift_u32(src_p[5], 8u, 0xffu);
+    dst_p->authenticator |= unpack_left_shift_u32(src_p[6], 16u, 0xffu);
+    dst_p->authenticator |= unpack_left_shift_u32(src_p[7], 24u, 0xffu);
+
+    return (0);
+}
+
+int odocan_odom_auth_init(struct odocan_odom_auth_t *msg_p)
+{
+    if (msg_p == NULL) return -1;
+
+    memset(msg_p, 0, sizeof(struct odocan_odom_auth_t));
+
+    return 0;
+}
+
+bool odocan_odom_auth_checksum_is_in_range(uint8_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool odocan_odom_auth_counter_is_in_range(uint8_t value)
+{
+    return (value <= 15u);
+}
+
+bool odocan_odom_auth_request_is_in_range(uint8_t value)
+{
+    return (value <= 2u);
+}
+
+bool odocan_odom_auth_freshness_is_in_range(uint16_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool odocan_odom_auth_authenticator_is_in_range(uint32_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+int odocan_odom_freshness_pack(
+    uint8_t *dst_p,
+    const struct odocan_odom_freshness_t *src_p,
+    size_t size)
+{
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    memset(&dst_p[0], 0, 8);
+
+    dst_p[0] |= pack_left_shift_u8(src_p->checksum, 0u, 0xffu);
+    dst_p[1] |= pack_left_shift_u8(src_p->counter, 0u, 0x0fu);
+    dst_p[1] |= pack_left_shift_u8(src_p->cause, 4u, 0xf0u);
+    dst_p[2] |= pack_left_shift_u32(src_p->fv_count, 0u, 0xffu);
+    dst_p[3] |= pack_right_shift_u32(src_p->fv_count, 8u, 0xffu);
+    dst_p[4] |= pack_right_shift_u32(src_p->fv_count, 16u, 0xffu);
+    dst_p[5] |= pack_right_shift_u32(src_p->fv_count, 24u, 0x0fu);
+    dst_p[5] |= pack_left_shift_u32(src_p->fv_epoch, 4u, 0xf0u);
+    dst_p[6] |= pack_right_shift_u32(src_p->fv_epoch, 4u, 0xffu);
+    dst_p[7] |= pack_right_shift_u32(src_p->fv_epoch, 12u, 0xffu);
+
+    return (8);
+}
+
+int odocan_odom_freshness_unpack(
+    struct odocan_odom_freshness_t *dst_p,
+    const uint8_t *src_p,
+    size_t size)
+{
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    dst_p->checksum = unpack_right_shift_u8(src_p[0], 0u, 0xffu);
+    dst_p->counter = unpack_right_shift_u8(src_p[1], 0u, 0x0fu);
+    dst_p->cause = unpack_right_shift_u8(src_p[1], 4u, 0xf0u);
+    dst_p->fv_count = unpack_right_shift_u32(src_p[2], 0u, 0xffu);
+    dst_p->fv_count |= unpack_left_shift_u32(src_p[3], 8u, 0xffu);
+    dst_p->fv_count |= unpack_left_shift_u32(src_p[4], 16u, 0xffu);
+    dst_p->fv_count |= unpack_left_shift_u32(src_p[5], 24u, 0x0fu);
+    dst_p->fv_epoch = unpack_right_shift_u32(src_p[5], 4u, 0xf0u);
+    dst_p->fv_epoch |= unpack_left_shift_u32(src_p[6], 4u, 0xffu);
+    dst_p->fv_epoch |= unpack_left_shift_u32(src_p[7], 12u, 0xffu);
+
+    return (0);
+}
+
+int odocan_odom_freshness_init(struct odocan_odom_freshness_t *msg_p)
+{
+    if (msg_p == NULL) return -1;
+
+    memset(msg_p, 0, sizeof(struct odocan_odom_freshness_t));
+
+    return 0;
+}
+
+bool odocan_odom_freshness_checksum_is_in_range(uint8_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool odocan_odom_freshness_counter_is_in_range(uint8_t value)
+{
+    return (value <= 15u);
+}
+
+bool odocan_odom_freshness_cause_is_in_range(uint8_t value)
+{
+    return (value <= 4u);
+}
+
+bool odocan_odom_freshness_fv_count_is_in_range(uint32_t value)
+{
+    return (value <= 268435455u);
+}
+
+bool odocan_odom_freshness_fv_epoch_is_in_range(uint32_t value)
+{
+    return (value <= 1048575u);
 }
 
 int odocan_odom_status_pack(

@@ -55,6 +55,8 @@ extern "C" {
 #define ODOCAN_ODOM_SET_POSE_FRAME_ID (0x300u)
 #define ODOCAN_ODOM_CONFIG_FRAME_ID (0x301u)
 #define ODOCAN_ODOM_ACK_FRAME_ID (0x302u)
+#define ODOCAN_ODOM_AUTH_FRAME_ID (0x303u)
+#define ODOCAN_ODOM_FRESHNESS_FRAME_ID (0x304u)
 #define ODOCAN_ODOM_STATUS_FRAME_ID (0x380u)
 #define ODOCAN_SIM_TRUTH_FRAME_ID (0x700u)
 
@@ -69,6 +71,8 @@ extern "C" {
 #define ODOCAN_ODOM_SET_POSE_LENGTH (8u)
 #define ODOCAN_ODOM_CONFIG_LENGTH (8u)
 #define ODOCAN_ODOM_ACK_LENGTH (8u)
+#define ODOCAN_ODOM_AUTH_LENGTH (8u)
+#define ODOCAN_ODOM_FRESHNESS_LENGTH (8u)
 #define ODOCAN_ODOM_STATUS_LENGTH (8u)
 #define ODOCAN_SIM_TRUTH_LENGTH (8u)
 
@@ -83,6 +87,8 @@ extern "C" {
 #define ODOCAN_ODOM_SET_POSE_IS_EXTENDED (0)
 #define ODOCAN_ODOM_CONFIG_IS_EXTENDED (0)
 #define ODOCAN_ODOM_ACK_IS_EXTENDED (0)
+#define ODOCAN_ODOM_AUTH_IS_EXTENDED (0)
+#define ODOCAN_ODOM_FRESHNESS_IS_EXTENDED (0)
 #define ODOCAN_ODOM_STATUS_IS_EXTENDED (0)
 #define ODOCAN_SIM_TRUTH_IS_EXTENDED (0)
 
@@ -93,6 +99,7 @@ extern "C" {
 #define ODOCAN_ODOM_POSE_Y_CYCLE_TIME_MS (20u)
 #define ODOCAN_ODOM_TWIST_CYCLE_TIME_MS (20u)
 #define ODOCAN_NAV_STATUS_CYCLE_TIME_MS (100u)
+#define ODOCAN_ODOM_FRESHNESS_CYCLE_TIME_MS (1000u)
 #define ODOCAN_ODOM_STATUS_CYCLE_TIME_MS (100u)
 #define ODOCAN_SIM_TRUTH_CYCLE_TIME_MS (100u)
 
@@ -151,6 +158,20 @@ extern "C" {
 #define ODOCAN_ODOM_ACK_REASON_BUSY_CHOICE (4u)
 #define ODOCAN_ODOM_ACK_REASON_INCONSISTENT_CHOICE (5u)
 #define ODOCAN_ODOM_ACK_REASON_QUEUE_FULL_CHOICE (6u)
+#define ODOCAN_ODOM_ACK_REASON_AUTH_FAILED_CHOICE (7u)
+#define ODOCAN_ODOM_ACK_REASON_AUTH_FRESHNESS_CHOICE (8u)
+#define ODOCAN_ODOM_ACK_REASON_AUTH_MISSING_CHOICE (9u)
+#define ODOCAN_ODOM_ACK_REASON_AUTH_UNAVAILABLE_CHOICE (10u)
+
+#define ODOCAN_ODOM_AUTH_REQUEST_NAV_GOAL_CHOICE (0u)
+#define ODOCAN_ODOM_AUTH_REQUEST_ODOM_SET_POSE_CHOICE (1u)
+#define ODOCAN_ODOM_AUTH_REQUEST_ODOM_CONFIG_CHOICE (2u)
+
+#define ODOCAN_ODOM_FRESHNESS_CAUSE_BOOT_CHOICE (0u)
+#define ODOCAN_ODOM_FRESHNESS_CAUSE_PERIODIC_CHOICE (1u)
+#define ODOCAN_ODOM_FRESHNESS_CAUSE_REFUSED_CHOICE (2u)
+#define ODOCAN_ODOM_FRESHNESS_CAUSE_ROLLOVER_CHOICE (3u)
+#define ODOCAN_ODOM_FRESHNESS_CAUSE_UNAVAILABLE_CHOICE (4u)
 
 #define ODOCAN_ODOM_STATUS_PAGE_SUMMARY_CHOICE (0u)
 #define ODOCAN_ODOM_STATUS_PAGE_FRAME_TOTALS_CHOICE (1u)
@@ -191,6 +212,8 @@ extern "C" {
 #define ODOCAN_ODOM_SET_POSE_NAME "ODOM_SET_POSE"
 #define ODOCAN_ODOM_CONFIG_NAME "ODOM_CONFIG"
 #define ODOCAN_ODOM_ACK_NAME "ODOM_ACK"
+#define ODOCAN_ODOM_AUTH_NAME "ODOM_AUTH"
+#define ODOCAN_ODOM_FRESHNESS_NAME "ODOM_FRESHNESS"
 #define ODOCAN_ODOM_STATUS_NAME "ODOM_STATUS"
 #define ODOCAN_SIM_TRUTH_NAME "SIM_TRUTH"
 
@@ -258,6 +281,16 @@ extern "C" {
 #define ODOCAN_ODOM_ACK_REQUEST_FIELD_NAME "REQUEST_FIELD"
 #define ODOCAN_ODOM_ACK_RESULT_NAME "RESULT"
 #define ODOCAN_ODOM_ACK_REASON_NAME "REASON"
+#define ODOCAN_ODOM_AUTH_CHECKSUM_NAME "CHECKSUM"
+#define ODOCAN_ODOM_AUTH_COUNTER_NAME "COUNTER"
+#define ODOCAN_ODOM_AUTH_REQUEST_NAME "REQUEST"
+#define ODOCAN_ODOM_AUTH_FRESHNESS_NAME "FRESHNESS"
+#define ODOCAN_ODOM_AUTH_AUTHENTICATOR_NAME "AUTHENTICATOR"
+#define ODOCAN_ODOM_FRESHNESS_CHECKSUM_NAME "CHECKSUM"
+#define ODOCAN_ODOM_FRESHNESS_COUNTER_NAME "COUNTER"
+#define ODOCAN_ODOM_FRESHNESS_CAUSE_NAME "CAUSE"
+#define ODOCAN_ODOM_FRESHNESS_FV_COUNT_NAME "FV_COUNT"
+#define ODOCAN_ODOM_FRESHNESS_FV_EPOCH_NAME "FV_EPOCH"
 #define ODOCAN_ODOM_STATUS_CHECKSUM_NAME "CHECKSUM"
 #define ODOCAN_ODOM_STATUS_COUNTER_NAME "COUNTER"
 #define ODOCAN_ODOM_STATUS_PAGE_NAME "PAGE"
@@ -945,13 +978,121 @@ struct odocan_odom_ack_t {
     uint8_t result;
 
     /**
-     * u8 enum: why; OK with ACK.
+     * u8 enum: why; OK with ACK. AUTH_* (7..10): the SecOC verdict on a secured command whose ODOM_AUTH failed, was stale, missing, or could not be checked (docs/secoc.md).
      *
-     * Range: 0..6 (0..6 -)
+     * Range: 0..10 (0..10 -)
      * Scale: 1
      * Offset: 0
      */
     uint8_t reason;
+};
+
+/**
+ * Signals in message ODOM_AUTH.
+ *
+ * SecOC authenticator of the secured command frame sent just before it (event): HOST sends it right after each ODOM_SET_POSE, ODOM_CONFIG or NAV_GOAL frame. A command whose ODOM_AUTH does not arrive within 20 ms is refused (NACK AUTH_MISSING). E2E slot 12 (data IDs 192..207).
+ *
+ * All signal values are as on the CAN bus.
+ */
+struct odocan_odom_auth_t {
+    /**
+     * E2E Profile 2 CRC8H2F, u8: over bytes 1..7 then DataID = E2EDataIDs[COUNTER].
+     *
+     * Range: 0..255 (0..255 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t checksum;
+
+    /**
+     * E2E Profile 2 sequence counter, u4, 0..15 then wraps to 0; +1 per frame sent.
+     *
+     * Range: 0..15 (0..15 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t counter;
+
+    /**
+     * u4 enum: the secured message authenticated (its last frame received).
+     *
+     * Range: 0..2 (0..2 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t request;
+
+    /**
+     * u16: the low 16 bits of the complete freshness value FV (u48 = EPOCH << 28 | COUNT) signed in the authenticator; the receiver rebuilds FV from its last accepted one (window +1..+4096).
+     *
+     * Range: 0..65535 (0..65535 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint16_t freshness;
+
+    /**
+     * u32: the first 32 bits of the AES-128-CMAC tag, read big-endian (tag byte 0 is the signal's most significant byte).
+     *
+     * Range: 0..4294967295 (0..4294967295 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint32_t authenticator;
+};
+
+/**
+ * Signals in message ODOM_FRESHNESS.
+ *
+ * Freshness synchronisation (unauthenticated: freshness is not secret): the firmware's last accepted FV, at boot, every 1000 ms, after each AUTH_FRESHNESS refusal and at an EPOCH rollover. The host signs its next command with FV + 1. E2E slot 13 (data IDs 208..223).
+ *
+ * All signal values are as on the CAN bus.
+ */
+struct odocan_odom_freshness_t {
+    /**
+     * E2E Profile 2 CRC8H2F, u8: over bytes 1..7 then DataID = E2EDataIDs[COUNTER].
+     *
+     * Range: 0..255 (0..255 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t checksum;
+
+    /**
+     * E2E Profile 2 sequence counter, u4, 0..15 then wraps to 0; +1 per frame sent.
+     *
+     * Range: 0..15 (0..15 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t counter;
+
+    /**
+     * u4 enum: why this frame was sent.
+     *
+     * Range: 0..4 (0..4 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t cause;
+
+    /**
+     * u28: COUNT, the low 28 bits of the last accepted FV (commands since the EPOCH began).
+     *
+     * Range: 0..268435455 (0..268435455 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint32_t fv_count;
+
+    /**
+     * u20: EPOCH, the high 20 bits of the last accepted FV; persisted in NVM, +1 at every boot; 0 when secured commands are unavailable.
+     *
+     * Range: 0..1048575 (0..1048575 boot)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint32_t fv_epoch;
 };
 
 /**
@@ -2250,6 +2391,170 @@ bool odocan_odom_ack_result_is_in_range(uint8_t value);
  * @return true if in range, false otherwise.
  */
 bool odocan_odom_ack_reason_is_in_range(uint8_t value);
+
+/**
+ * Pack message ODOM_AUTH.
+ *
+ * @param[out] dst_p Buffer to pack the message into.
+ * @param[in] src_p Data to pack.
+ * @param[in] size Size of dst_p.
+ *
+ * @return Size of packed data, or negative error code.
+ */
+int odocan_odom_auth_pack(
+    uint8_t *dst_p,
+    const struct odocan_odom_auth_t *src_p,
+    size_t size);
+
+/**
+ * Unpack message ODOM_AUTH.
+ *
+ * @param[out] dst_p Object to unpack the message into.
+ * @param[in] src_p Message to unpack.
+ * @param[in] size Size of src_p.
+ *
+ * @return zero(0) or negative error code.
+ */
+int odocan_odom_auth_unpack(
+    struct odocan_odom_auth_t *dst_p,
+    const uint8_t *src_p,
+    size_t size);
+
+/**
+ * Init message fields to default values from ODOM_AUTH.
+ *
+ * @param[in] msg_p Message to init.
+ *
+ * @return zero(0) on success or (-1) in case of nullptr argument.
+ */
+int odocan_odom_auth_init(struct odocan_odom_auth_t *msg_p);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_auth_checksum_is_in_range(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_auth_counter_is_in_range(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_auth_request_is_in_range(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_auth_freshness_is_in_range(uint16_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_auth_authenticator_is_in_range(uint32_t value);
+
+/**
+ * Pack message ODOM_FRESHNESS.
+ *
+ * @param[out] dst_p Buffer to pack the message into.
+ * @param[in] src_p Data to pack.
+ * @param[in] size Size of dst_p.
+ *
+ * @return Size of packed data, or negative error code.
+ */
+int odocan_odom_freshness_pack(
+    uint8_t *dst_p,
+    const struct odocan_odom_freshness_t *src_p,
+    size_t size);
+
+/**
+ * Unpack message ODOM_FRESHNESS.
+ *
+ * @param[out] dst_p Object to unpack the message into.
+ * @param[in] src_p Message to unpack.
+ * @param[in] size Size of src_p.
+ *
+ * @return zero(0) or negative error code.
+ */
+int odocan_odom_freshness_unpack(
+    struct odocan_odom_freshness_t *dst_p,
+    const uint8_t *src_p,
+    size_t size);
+
+/**
+ * Init message fields to default values from ODOM_FRESHNESS.
+ *
+ * @param[in] msg_p Message to init.
+ *
+ * @return zero(0) on success or (-1) in case of nullptr argument.
+ */
+int odocan_odom_freshness_init(struct odocan_odom_freshness_t *msg_p);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_freshness_checksum_is_in_range(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_freshness_counter_is_in_range(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_freshness_cause_is_in_range(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_freshness_fv_count_is_in_range(uint32_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_freshness_fv_epoch_is_in_range(uint32_t value);
 
 /**
  * Pack message ODOM_STATUS.

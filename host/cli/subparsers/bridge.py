@@ -13,6 +13,7 @@ import argparse
 import asyncio
 import signal
 import sys
+from pathlib import Path
 
 import can
 
@@ -29,6 +30,7 @@ from odocan.host.mqtt.options import (
     configure_logging,
 )
 from odocan.host.mqtt.topics import check_robot_name
+from odocan.host.protocol.secoc import SecocSigner, load_secoc_key
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import INTEGRATORS
@@ -58,6 +60,14 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the firmware's integrator (for the reference; default: exact)",
     )
     add_duration_argument(parser)
+    parser.add_argument(
+        "--secoc-key",
+        type=Path,
+        metavar="PATH",
+        help="sign commands for a firmware provisioned with this SecOC key (16 raw bytes or 32 "
+        "hex digits, docs/secoc.md; not the TLS --key): an ODOM_AUTH follows each command frame "
+        "(default: commands unsigned)",
+    )
     add_mqtt_arguments(parser)
     add_bus_arguments(parser)
 
@@ -71,9 +81,10 @@ def _do_bridge(args: argparse.Namespace) -> int:
     configure_logging(getattr(args, "debug", False))
     profile = robot.load(args.robot)
     geometry = Geometry.of(profile)
+    signer = None if args.secoc_key is None else SecocSigner(load_secoc_key(args.secoc_key))
     bus = open_bus(args)
     try:
-        asyncio.run(_bridge(args, name, url, bus, geometry, profile.counter_bits))
+        asyncio.run(_bridge(args, name, url, bus, geometry, profile.counter_bits, signer))
     finally:
         bus.shutdown()
     return 0
@@ -86,11 +97,12 @@ async def _bridge(
     bus: can.BusABC,
     geometry: Geometry,
     counter_bits: int,
+    signer: SecocSigner | None = None,
 ) -> None:
     async with broker_for(url) as (broker, embedded):
         print(f"bridge {name}: {broker}{' (embedded)' if embedded else ''}", file=sys.stderr)
         config = BridgeConfig(broker=broker, **bridge_options(args))
-        endpoint = RobotEndpoint(name, bus, geometry, args.integrator, counter_bits)
+        endpoint = RobotEndpoint(name, bus, geometry, args.integrator, counter_bits, signer)
         bridge = Bridge([endpoint], config=config)
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()

@@ -45,6 +45,7 @@ from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge import busstats
 from odocan.host.judge.analysis import Analysis, analyze
+from odocan.host.protocol.secoc import load_secoc_key
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
     add_junit_argument,
@@ -134,6 +135,13 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         metavar="PATH",
         help="log every frame (.log candump, .asc, .blf) (default: no log)",
     )
+    parser.add_argument(
+        "--secoc-key",
+        type=Path,
+        metavar="PATH",
+        help="provision the firmware with this SecOC key (16 raw bytes or 32 hex digits; "
+        "docs/secoc.md): its commands then need an ODOM_AUTH (default: no SecOC)",
+    )
     add_check_arguments(parser)
     parser.add_argument(
         "--latency-plot",
@@ -164,6 +172,7 @@ def _do_run(args: argparse.Namespace) -> int:
         transport=args.transport,
         bitrate=args.bitrate,
         firmware=args.firmware,
+        secoc_key=None if args.secoc_key is None else load_secoc_key(args.secoc_key),
     )
     check_log_path(args.log)
     check_output_paths(args)
