@@ -172,7 +172,7 @@ def analyze_logs_dask(
     ``timeout_s`` seconds. The workers must be able to import odocan and read the log paths
     (given absolute)."""
     try:
-        from distributed import Client, as_completed
+        from distributed import Client
     except ImportError as exc:
         raise DaskUnavailableError(f"--dask needs dask.distributed: {exc}") from None
     paths = [str(Path(p).resolve()) for p in logs]
@@ -186,15 +186,14 @@ def analyze_logs_dask(
             f"--dask {address}: cannot reach the scheduler within {timeout_s:g} s "
             f"({_one_line(exc)})"
         ) from None
-    by_path: dict[str, LogResult] = {}
+    results: list[LogResult] = []
     with client:
         futures = client.map(analyze_one, paths, job=job, pure=False)
-        for future in as_completed(futures):  # type: ignore[no-untyped-call]
-            result = future.result()
-            result = LogResult(shown[result.path], result.report, result.error, result.frames)
-            by_path[result.path] = result
-            on_done(result)
-    return [by_path[shown[path]] for path in paths]
+        for path, future in zip(paths, futures, strict=True):
+            done: LogResult = future.result()
+            results.append(LogResult(shown[path], done.report, done.error, done.frames))
+            on_done(results[-1])
+    return results
 
 
 def report_names(logs: Sequence[Path]) -> dict[Path, str]:

@@ -227,19 +227,14 @@ def print_batch_summary(results: list[LogResult]) -> None:
             _scaled(ref.get("max_position_error_m")), _scaled(ref.get("max_heading_error_rad")),
             _scaled(truth.get("max_position_error_m")), _scaled(truth.get("max_heading_error_rad")),
         )
-    console = Console(file=sys.stdout, highlight=False, width=max(100, _width()))
+    longest = max(len(r.path) for r in results)  # a row per log, never wrapped or cut
+    console = Console(file=sys.stdout, highlight=False, width=max(80, longest + 72))
     console.print(f"[bold]odocan analyze: {len(results)} logs[/bold]")
     console.print(table)
     passed = sum(r.passed for r in results)
     failed = sum(r.report is not None and not r.passed for r in results)
     errors = sum(r.report is None for r in results)
     console.print(f"{passed} PASS, {failed} FAIL, {errors} unreadable")
-
-
-def _width() -> int:
-    import shutil
-
-    return shutil.get_terminal_size((100, 24)).columns
 
 
 def _scaled(value: float | None) -> str:
