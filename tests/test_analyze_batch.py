@@ -14,10 +14,17 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from odocan.host.cli.app import main
-from odocan.host.io.logs import read_log
+from odocan.host.io.logs import (
+    FrameArrays,
+    LogFormatError,
+    parse_candump,
+    parse_candump_chunks,
+    read_log,
+)
 from odocan.host.judge import batch
 from tests.test_cli_run import assert_usage_error, run_cli
 
@@ -199,3 +206,56 @@ def test_find_logs_recurses_and_names_what_gives_nothing(tmp_path: Path) -> None
                                       tmp_path / "missing"])
     assert [p.name for p in logs] == ["1.log", "2.ASC", "3.blf"]  # no duplicate, no .txt
     assert problems == [f"{tmp_path / 'missing'}: no such log file or directory"]
+
+
+# --- one big log in bounded memory: the candump text parsed a chunk at a time ------------------
+
+
+def assert_same_frames(got: FrameArrays, want: FrameArrays) -> None:
+    assert len(got) == len(want)
+    for name in ("timestamp_s", "can_id", "dlc", "data", "flags"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+
+
+@pytest.mark.parametrize("chunk_bytes", [1, 37, 1000, 1 << 20])
+def test_chunks_give_the_frames_of_one_whole_parse(
+    archive: tuple[Path, dict[str, dict[str, Any]]], chunk_bytes: int
+) -> None:
+    """Every cut, down to one line per chunk, and odd lines (blank, CRLF, remote, error, FD,
+    lowercase, extended) that take the slow path in some chunks and the fast one in others."""
+    root, _ = archive
+    odd = (b"\n(1.5) vcan0 123#R\r\n(1.6) vcan0 20000080#0000000000000000\n"
+           b"(1.7) vcan0 1ABCDEF0#00112233 T\n(1.8) vcan0 0a1##1ab\n(1.9) vcan0 7ff#\n")
+    content = (root / "a.log").read_bytes()
+    content = content[:5000] + odd + content[5000:20000] + odd * 3 + content[20000:]
+    whole = parse_candump(content, "x.log")
+    assert_same_frames(parse_candump_chunks(content, len(content), "x.log", chunk_bytes), whole)
+
+
+def test_a_bad_line_in_a_later_chunk_is_named_by_its_line_in_the_file() -> None:
+    good = b"".join(b"(%d.000000) vcan0 123#0011\n" % i for i in range(300))
+    content = good + b"(300.000000) vcan0 123#00112\n" + good
+    with pytest.raises(LogFormatError) as whole:
+        parse_candump(content, "x.log")
+    with pytest.raises(LogFormatError) as chunked:
+        parse_candump_chunks(content, len(content), "x.log", 1000)
+    assert str(chunked.value) == str(whole.value)
+    assert str(whole.value).startswith("x.log:301:")
+
+
+def test_read_log_maps_the_file_and_keeps_the_partial_line_rule(tmp_path: Path,
+        archive: tuple[Path, dict[str, dict[str, Any]]]) -> None:
+    """read_log (mapped, chunked) on a log cut mid-line: the frames before the cut, the warning
+    naming the cut line, as the whole-content parse says."""
+    root, _ = archive
+    content = (root / "a.log").read_bytes()
+    cut = content[: content.rfind(b"\n", 0, len(content) // 2) + 12]  # a line cut after 11 bytes
+    log = tmp_path / "cut.log"
+    log.write_bytes(cut)
+    warnings: list[str] = []
+    frames = read_log(log, warn=warnings.append)
+    kept = cut[: cut.rfind(b"\n") + 1]
+    assert_same_frames(frames, parse_candump(kept))
+    line = kept.count(b"\n") + 1
+    assert warnings == [f"{log}: skipped 1 partial line at the end (line {line}, "
+                        "cut mid-line: a recorder killed while writing?)"]

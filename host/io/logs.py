@@ -21,6 +21,8 @@ other frames of its ID) is read without that line, with a one-line warning that 
 
 from __future__ import annotations
 
+import mmap
+import os
 import re
 import sys
 from array import array
@@ -159,14 +161,8 @@ def read_log(path: str | Path, *, warn: Callable[[str], None] = warn_on_stderr) 
     if not path.is_file():
         raise LogFormatError(f"{path}: no such log file")
     if path.suffix.lower() == ".log":
-        try:
-            content = path.read_bytes()
-        except OSError as exc:
-            raise LogFormatError(f"{path}: cannot read: {exc.strerror or exc}") from None
-        content, skipped = _without_partial_last_line(content)
-        frames = parse_candump(content, str(path))
+        frames, skipped, line = _read_candump_file(path)
         if skipped:
-            line = content.count(b"\n") + 1
             warn(
                 f"{path}: skipped {skipped} partial line at the end (line {line}, cut mid-line: "
                 "a recorder killed while writing?)"
@@ -178,28 +174,105 @@ def read_log(path: str | Path, *, warn: Callable[[str], None] = warn_on_stderr) 
     return frames
 
 
-def _without_partial_last_line(content: bytes) -> tuple[bytes, int]:
-    """``content`` less its last line when that line has no newline and is incomplete (it does
-    not parse, or has fewer data bytes than the earlier frames of its ID); and the lines skipped
-    (0 or 1)."""
+def _read_candump_file(path: Path) -> tuple[FrameArrays, int, int]:
+    """A ``.log`` file's frames, the partial last lines skipped (0 or 1) and that line's number.
+
+    The file is mapped, not read, and parsed ``CHUNK_BYTES`` at a time (cut at line ends), each
+    chunk's pages given back once parsed: the text of a big log never sits in memory whole; the
+    frames do (22 bytes each)."""
+    try:
+        with path.open("rb") as file:
+            if os.fstat(file.fileno()).st_size == 0:  # empty, or a file with no size (/proc)
+                return _parse_whole(file.read(), str(path))
+            with mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ) as content:
+                return _parse_whole(content, str(path))
+    except OSError as exc:
+        raise LogFormatError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def _parse_whole(content: bytes | mmap.mmap, name: str) -> tuple[FrameArrays, int, int]:
+    """``_read_candump_file`` on the file's content (bytes or a map of it)."""
+    end, skipped = _without_partial_last_line(content)
+    line = _count_newlines(content, end) + 1 if skipped else 0
+    return parse_candump_chunks(content, end, name), skipped, line
+
+
+def _count_newlines(content: bytes | mmap.mmap, end: int) -> int:
+    """Newlines in ``content[:end]``, counted a chunk at a time."""
+    return sum(
+        content[start : min(start + CHUNK_BYTES, end)].count(b"\n")
+        for start in range(0, end, CHUNK_BYTES)
+    )
+
+
+CHUNK_BYTES = 8 << 20  # text parsed at once: its intermediates are a few times this
+
+
+def parse_candump_chunks(
+    content: bytes | mmap.mmap, end: int, name: str, chunk_bytes: int = CHUNK_BYTES
+) -> FrameArrays:
+    """``parse_candump`` of ``content[:end]``, ``chunk_bytes`` (at least) at a time cut after a
+    newline; the same frames and the same ``NAME:LINE`` errors as one call on the whole. Pages
+    of a mapped ``content`` are released once parsed."""
+    parts: list[FrameArrays] = []
+    start = line = 0
+    while start < end:
+        stop = content.find(b"\n", min(start + chunk_bytes, end) - 1, end) + 1 or end
+        chunk = content[start:stop]
+        parts.append(parse_candump(chunk, name, first_line=line))
+        line += chunk.count(b"\n")
+        if isinstance(content, mmap.mmap):
+            _release(content, stop)
+        start = stop
+    return concat_frames(parts)
+
+
+def _release(content: mmap.mmap, stop: int) -> None:
+    """Give back the mapped pages before ``stop`` (read-only file pages: read again if need be)."""
+    size = stop - stop % mmap.PAGESIZE
+    if size > 0 and hasattr(mmap, "MADV_DONTNEED"):
+        content.madvise(mmap.MADV_DONTNEED, 0, size)
+
+
+def concat_frames(parts: list[FrameArrays]) -> FrameArrays:
+    """The frames of ``parts``, one after the other."""
+    if len(parts) == 1:
+        return parts[0]
+    if not parts:
+        return empty_frames()
+    return FrameArrays(
+        timestamp_s=np.concatenate([p.timestamp_s for p in parts]),
+        can_id=np.concatenate([p.can_id for p in parts]),
+        dlc=np.concatenate([p.dlc for p in parts]),
+        data=np.concatenate([p.data for p in parts]),
+        flags=np.concatenate([p.flags for p in parts]),
+    )
+
+
+def _without_partial_last_line(content: bytes | mmap.mmap) -> tuple[int, int]:
+    """Where ``content`` ends less its last line when that line has no newline and is incomplete
+    (it does not parse, or has fewer data bytes than the earlier frames of its ID); and the lines
+    skipped (0 or 1)."""
+    size = len(content)
     cut = content.rfind(b"\n") + 1
     tail = content[cut:]
     if not tail.strip():
-        return content, 0
+        return size, 0
     try:
         msg = parse_candump_line(tail)
     except LogFormatError:
-        return content[:cut], 1
+        return cut, 1
     if msg is None or msg.is_error_frame or msg.is_remote_frame:
-        return content, 0
-    head = content[:cut]
+        return size, 0
     token = f" {msg.arbitration_id:0{8 if msg.is_extended_id else 3}X}#"
-    before = max(head.rfind(token.encode()), head.rfind(token.lower().encode()))
+    before = max(
+        content.rfind(token.encode(), 0, cut), content.rfind(token.lower().encode(), 0, cut)
+    )
     if before < 0:
-        return content, 0
-    line_end = head.find(b"\n", before)
-    line = head[before : line_end if line_end >= 0 else len(head)].split(b"#", 1)[1].split()[0]
-    return (content[:cut], 1) if len(line) > 2 * len(msg.data) else (content, 0)
+        return size, 0
+    line_end = content.find(b"\n", before, cut)
+    line = content[before : line_end if line_end >= 0 else cut].split(b"#", 1)[1].split()[0]
+    return (cut, 1) if len(line) > 2 * len(msg.data) else (size, 0)
 
 
 def _read_with_python_can(path: Path) -> FrameArrays:
@@ -277,10 +350,11 @@ class _Parsed:
     frames: FrameArrays
 
 
-def parse_candump(content: bytes, name: str = "<log>") -> FrameArrays:
+def parse_candump(content: bytes, name: str = "<log>", *, first_line: int = 0) -> FrameArrays:
     """Parse ``candump -L`` text (bytes of the whole file) into FrameArrays, in line order.
 
-    ``name`` is used in error messages (``NAME:LINE: ...``).
+    ``name`` is used in error messages (``NAME:LINE: ...``), the lines numbered from
+    ``first_line`` + 1 (``content`` a later part of a file).
     """
     buf = np.frombuffer(content, dtype=np.uint8)
     starts, ends = _line_bounds(buf)
@@ -298,7 +372,7 @@ def parse_candump(content: bytes, name: str = "<log>") -> FrameArrays:
             slow_parts.append(rejected)
     slow_lines = np.sort(np.concatenate(slow_parts))
     if len(slow_lines):
-        fast_parts.append(_parse_slow(content, starts, ends, slow_lines, name))
+        fast_parts.append(_parse_slow(content, starts, ends, slow_lines, name, first_line))
     return _merge(fast_parts)
 
 
@@ -441,13 +515,15 @@ def _parse_slow(
     ends: npt.NDArray[np.int64],
     lines: npt.NDArray[np.int64],
     name: str,
+    first_line: int = 0,
 ) -> _Parsed:
-    """Parse the given lines one by one (blank lines skipped); the first bad one raises."""
+    """Parse the given lines one by one (blank lines skipped); the first bad one raises (named
+    ``NAME:LINE``, lines counted from ``first_line`` + 1)."""
     collector = FrameCollector()
     kept: list[int] = []
     for line in lines.tolist():
         raw = content[int(starts[line]) : int(ends[line])]
-        msg = parse_candump_line(raw, f"{name}:{line + 1}")
+        msg = parse_candump_line(raw, f"{name}:{first_line + line + 1}")
         if msg is not None:
             collector.on_message_received(msg)
             kept.append(line)
