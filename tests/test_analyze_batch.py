@@ -259,3 +259,14 @@ def test_read_log_maps_the_file_and_keeps_the_partial_line_rule(tmp_path: Path,
     line = kept.count(b"\n") + 1
     assert warnings == [f"{log}: skipped 1 partial line at the end (line {line}, "
                         "cut mid-line: a recorder killed while writing?)"]
+
+
+def test_a_lost_worker_is_its_logs_error_not_the_batchs_end() -> None:
+    from concurrent.futures.process import BrokenProcessPool
+
+    def died() -> batch.LogResult:
+        raise BrokenProcessPool("a child process terminated abruptly")
+
+    result = batch._outcome("x.log", died)
+    assert (result.path, result.report, result.passed) == ("x.log", None, False)
+    assert result.error == "worker lost: BrokenProcessPool: a child process terminated abruptly"

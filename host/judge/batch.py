@@ -151,12 +151,19 @@ def analyze_logs(
 
     by_path: dict[str, LogResult] = {}
     with ProcessPoolExecutor(max_workers=min(jobs, len(paths))) as pool:
-        futures = [pool.submit(analyze_one, path, job) for path in paths]
+        futures = {pool.submit(analyze_one, path, job): path for path in paths}
         for future in as_completed(futures):
-            result = future.result()
-            by_path[result.path] = result
+            by_path[futures[future]] = result = _outcome(futures[future], future.result)
             on_done(result)
     return [by_path[path] for path in paths]
+
+
+def _outcome(path: str, result: Callable[[], LogResult]) -> LogResult:
+    """``result()``, or the log's error when its worker died (killed, out of memory)."""
+    try:
+        return result()
+    except Exception as exc:  # BrokenProcessPool, dask's KilledWorker, a lost connection ...
+        return LogResult(path, error=f"worker lost: {type(exc).__name__}: {_one_line(exc)}")
 
 
 def analyze_logs_dask(
@@ -190,7 +197,7 @@ def analyze_logs_dask(
     with client:
         futures = client.map(analyze_one, paths, job=job, pure=False)
         for path, future in zip(paths, futures, strict=True):
-            done: LogResult = future.result()
+            done = _outcome(path, future.result)
             results.append(LogResult(shown[path], done.report, done.error, done.frames))
             on_done(results[-1])
     return results
