@@ -224,7 +224,19 @@ def parse_candump_chunks(
         if isinstance(content, mmap.mmap):
             _release(content, stop)
         start = stop
-    return concat_frames(parts)
+    return _concat_releasing(parts)
+
+
+def _concat_releasing(parts: list[FrameArrays]) -> FrameArrays:
+    """``concat_frames(parts)``, one field at a time, each field's parts dropped once joined:
+    at most one field is held twice (30 bytes a frame at the peak, not 44). Empties ``parts``."""
+    if len(parts) <= 1:
+        return concat_frames(parts)
+    names = ("timestamp_s", "can_id", "dlc", "data", "flags")
+    columns = {name: [getattr(p, name) for p in parts] for name in names}
+    parts.clear()
+    joined = {name: np.concatenate(columns.pop(name)) for name in names}
+    return FrameArrays(**joined)
 
 
 def _release(content: mmap.mmap, stop: int) -> None:
