@@ -328,7 +328,11 @@ for _i, _c in enumerate(b"0123456789"):
     _DIGIT[_c] = _i
 
 _C_DIGIT, _C_HEX, _C_CHANNEL, _C_DIRECTION = 1, 2, 4, 8
-_CLASS = np.zeros(256, dtype=np.uint8)  # character classes, a bit each
+_C_SPACE, _C_HASH, _C_DOT, _C_ANY = 0x10, 0x20, 0x40, 0x80  # a separator each; any byte
+_CLASS = np.full(256, _C_ANY, dtype=np.uint8)  # character classes, a bit each
+_CLASS[ord(" ")] |= _C_SPACE
+_CLASS[ord("#")] |= _C_HASH
+_CLASS[ord(".")] |= _C_DOT
 _CLASS[np.frombuffer(b"0123456789", np.uint8)] |= _C_DIGIT
 _CLASS[np.frombuffer(b"0123456789abcdefABCDEF", np.uint8)] |= _C_HEX
 _CLASS[ord(" ") + 1 : 127] |= _C_CHANNEL
@@ -435,25 +439,26 @@ def _parse_group(
 
 
 def _check_block(block: U8Array, c: _Columns) -> npt.NDArray[np.bool_]:
-    """Rows of ``block`` (lines of one length) that have the canonical layout ``c``: the
-    separators where the template has them, and a character of the right class in every other
-    column (one class lookup for the whole block)."""
-    need = np.zeros(c.length, dtype=np.uint8)
+    """Rows of ``block`` (lines of one length) that have the canonical layout ``c``: a character
+    of the right class in every column, the separators ``.``, `` ``, ``#`` being classes of their
+    own (one class lookup and one reduction for the whole block), then ``(`` and ``)``."""
+    need = np.full(c.length, _C_ANY, dtype=np.uint8)
     need[1 : c.close] = _C_DIGIT
+    need[c.dot] = _C_DOT
+    need[c.close + 1] = _C_SPACE
     need[c.close + 2 : c.id_start - 1] = _C_CHANNEL
+    need[c.id_start - 1] = _C_SPACE
     need[c.id_start : c.hash] = _C_HEX
+    need[c.hash] = _C_HASH
     need[c.hash + 1 : c.data_end] = _C_HEX
-    fixed = {0: "(", c.dot: ".", c.close: ")", c.close + 1: " ", c.id_start - 1: " ", c.hash: "#"}
     if c.data_end < c.length:  # " R" / " T"
-        fixed[c.data_end] = " "
+        need[c.data_end] = _C_SPACE
         need[c.data_end + 1] = _C_DIRECTION
-    for col in fixed:
-        need[col] = 0
     classes = _CLASS[block]
     classes &= need
-    ok: npt.NDArray[np.bool_] = (classes.astype(bool) | (need == 0)).all(axis=1)
-    for col, char in fixed.items():
-        ok &= block[:, col] == ord(char)
+    ok: npt.NDArray[np.bool_] = classes.all(axis=1)
+    ok &= block[:, 0] == ord("(")
+    ok &= block[:, c.close] == ord(")")
     if c.hash - c.id_start == 8:
         ok &= (_HEX[block[:, c.id_start]] & 0x2) == 0  # no error-frame flag (0x20000000)
     return ok
