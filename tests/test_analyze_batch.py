@@ -11,6 +11,7 @@ import json
 import socket
 import subprocess
 import sys
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -179,7 +180,40 @@ def test_an_unreachable_dask_scheduler_is_one_line_and_exit_2(
     assert done.returncode == 2, done
     assert done.stdout == ""
     (line,) = done.stderr.splitlines()
-    assert line.startswith(f"error: --dask {address}: cannot reach the scheduler"), line
+    assert line.startswith(f"error: --dask {address}: cannot connect within 1 s"), line
+
+
+def test_a_peer_that_is_no_dask_scheduler_is_one_line_and_exit_2(
+    archive: tuple[Path, dict[str, dict[str, Any]]],
+) -> None:
+    """A port that answers, but in another protocol (here: an HTTP error): no traceback, no
+    hang, whatever Dask's client makes of the bytes."""
+    root, _ = archive
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+
+        def answer() -> None:
+            for _ in range(8):  # the probe, then Dask's attempts
+                try:
+                    peer, _ = server.accept()
+                except OSError:
+                    return
+                with peer:
+                    peer.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n" * 4)
+
+        thread = threading.Thread(target=answer, daemon=True)
+        thread.start()
+        done = subprocess.run(
+            [sys.executable, "-m", "odocan", "analyze", str(root), "--dask", address,
+             "--dask-timeout", "1"],
+            capture_output=True, text=True, timeout=120, check=False,
+        )
+    assert done.returncode == 2, done
+    assert done.stdout == ""
+    (line,) = done.stderr.splitlines()
+    assert line.startswith(f"error: --dask {address}: no Dask scheduler answered within 1 s"), line
 
 
 def test_a_dask_local_cluster_gives_the_same_reports(

@@ -456,7 +456,7 @@ def _check_block(block: U8Array, c: _Columns) -> npt.NDArray[np.bool_]:
         need[c.data_end + 1] = _C_DIRECTION
     classes = _CLASS[block]
     classes &= need
-    ok: npt.NDArray[np.bool_] = classes.all(axis=1)
+    ok: npt.NDArray[np.bool_] = np.asarray(classes.all(axis=1))
     ok &= block[:, 0] == ord("(")
     ok &= block[:, c.close] == ord(")")
     if c.hash - c.id_start == 8:

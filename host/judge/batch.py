@@ -12,7 +12,10 @@ a dict), so the same function runs in a ``ProcessPoolExecutor`` and on a remote 
 
 from __future__ import annotations
 
+import gc
 import os
+import socket
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -178,21 +181,9 @@ def analyze_logs_dask(
     (``tcp://host:port``); ``DaskUnavailableError`` (one line) when it cannot be reached within
     ``timeout_s`` seconds. The workers must be able to import odocan and read the log paths
     (given absolute)."""
-    try:
-        from distributed import Client
-    except ImportError as exc:
-        raise DaskUnavailableError(f"--dask needs dask.distributed: {exc}") from None
     paths = [str(Path(p).resolve()) for p in logs]
     shown = {str(Path(p).resolve()): str(p) for p in logs}
-    try:
-        client = Client(  # type: ignore[no-untyped-call]
-            address, timeout=timeout_s, set_as_default=False
-        )
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise DaskUnavailableError(
-            f"--dask {address}: cannot reach the scheduler within {timeout_s:g} s "
-            f"({_one_line(exc)})"
-        ) from None
+    client = _connect(address, timeout_s)
     results: list[LogResult] = []
     with client:
         futures = client.map(analyze_one, paths, job=job, pure=False)
@@ -201,6 +192,40 @@ def analyze_logs_dask(
             results.append(LogResult(shown[path], done.report, done.error, done.frames))
             on_done(results[-1])
     return results
+
+
+def _connect(address: str, timeout_s: float) -> Any:
+    """A ``distributed.Client`` of the scheduler at ``address``, or ``DaskUnavailableError``
+    (one line) within about ``timeout_s`` seconds: a bad address, nobody listening, or a peer
+    that does not speak Dask's protocol."""
+    try:
+        from distributed import Client
+        from distributed.comm.addressing import get_address_host_port, parse_address
+    except ImportError as exc:
+        raise DaskUnavailableError(f"--dask needs dask.distributed: {exc}") from None
+    where = f"--dask {address}"
+    try:
+        scheme, _ = parse_address(address)
+        host, port = get_address_host_port(address) if scheme in ("tcp", "tls") else ("", 0)
+    except ValueError as exc:
+        raise DaskUnavailableError(f"{where}: not a scheduler address ({_one_line(exc)})") from None
+    if host:
+        try:
+            socket.create_connection((host, port), timeout=timeout_s).close()
+        except OSError as exc:
+            raise DaskUnavailableError(
+                f"{where}: cannot connect within {timeout_s:g} s ({_one_line(exc)})"
+            ) from None
+    hook = sys.unraisablehook  # a Client that failed half-made complains as it is collected
+    sys.unraisablehook = lambda unraisable: None
+    try:
+        return Client(address, timeout=timeout_s, set_as_default=False)  # type: ignore[no-untyped-call]
+    except Exception as exc:  # a timeout, or a peer that is no Dask scheduler (any error)
+        message = f"{where}: no Dask scheduler answered within {timeout_s:g} s ({_one_line(exc)})"
+    finally:
+        gc.collect()
+        sys.unraisablehook = hook
+    raise DaskUnavailableError(message)
 
 
 def report_names(logs: Sequence[Path]) -> dict[Path, str]:
