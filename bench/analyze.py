@@ -9,15 +9,25 @@ Makes (once, cached under ``out/bench/``) a candump log of about 1M frames with 
   parsed, so the parse is not counted against it);
 * cantools' command line: ``cantools decode --single-line dbc/odocan.dbc < LOG > /dev/null``.
 
-Target (issue #4): >= 20x faster than cantools while doing more. Prints figures; asserts
-nothing. Run: ``.venv/bin/python bench/analyze.py [--frames N] [--no-cli]``.
+Then, as whole processes (start-up and imports included, issue #14.2): ``odocan analyze LOG``
+against ``cantools decode --single-line``, each one's wall time, CPU time (user + system, the
+figure that suffers least from a loaded machine) and max RSS, read from ``wait4`` as
+``/usr/bin/time -v`` does; and with ``--batch N``, N copies (symlinks) of a smaller drive
+analysed as a fleet's archive with ``--jobs 1``, ``--jobs 2`` and a 2-worker Dask
+``LocalCluster``.
+
+Target (issues #4, #14): >= 20x faster than cantools while doing more. Prints figures; asserts
+nothing. Run: ``.venv/bin/python bench/analyze.py [--frames N | --log PATH] [--no-cli]
+[--batch 20]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -93,17 +103,85 @@ def time_cantools_cli(path: Path) -> float:
     return time.perf_counter() - start
 
 
+def whole_process(argv: list[str], stdin: Path | None = None) -> tuple[float, float, float, int]:
+    """Wall seconds, CPU seconds (user + system), max RSS in MB and exit code of ``argv`` run
+    to completion (stdout discarded), measured as ``/usr/bin/time -v`` does (``wait4``)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    stdin_file = stdin.open("rb") if stdin is not None else subprocess.DEVNULL
+    start = time.perf_counter()
+    child = subprocess.Popen(argv, stdin=stdin_file, stdout=subprocess.DEVNULL, env=env)
+    _, status, usage = os.wait4(child.pid, 0)
+    wall = time.perf_counter() - start
+    child.returncode = os.waitstatus_to_exitcode(status)
+    if stdin is not None:
+        stdin_file.close()  # type: ignore[union-attr]
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024, child.returncode
+
+
+def print_whole_processes(path: Path, frames: int, runs: int, cli: bool) -> None:
+    """``odocan analyze LOG`` and ``cantools decode`` as whole processes, side by side."""
+    odocan = [sys.executable, "-m", "odocan", "analyze", str(path)]
+    cantools_cli = [str(Path(sys.executable).parent / "cantools"), "decode", "--single-line",
+                    str(DBC_PATH)]
+    print(f"whole processes on {frames} frames (odocan best of {runs}; wall / CPU / max RSS)")
+    best = min((whole_process(odocan) for _ in range(runs)), key=lambda r: r[1])
+    print(f"odocan analyze LOG       {best[0]:8.2f} s  {best[1]:8.2f} s CPU  {best[2]:7.0f} MB"
+          f"  exit {best[3]}")
+    if not cli:
+        return
+    theirs = whole_process(cantools_cli, stdin=path)
+    print(f"cantools decode < LOG    {theirs[0]:8.2f} s  {theirs[1]:8.2f} s CPU  "
+          f"{theirs[2]:7.0f} MB  exit {theirs[3]}")
+    print(f"ratio (cantools / odocan): wall {theirs[0] / best[0]:5.1f}x, "
+          f"CPU {theirs[1] / best[1]:5.1f}x (target >= 20x)")
+
+
+def print_batch(count: int, frames: int) -> None:
+    """``count`` copies of a drive of ``frames`` frames as one archive: --jobs 1, --jobs 2 and a
+    2-worker Dask LocalCluster (wall seconds; the cluster's start-up not counted)."""
+    drive = make_log(frames)
+    with tempfile.TemporaryDirectory() as folder:
+        for i in range(count):
+            (Path(folder) / f"drive{i:02d}.log").symlink_to(drive)
+        base = [sys.executable, "-m", "odocan", "analyze", folder]
+        print(f"archive of {count} logs of {frames} frames (symlinks to one drive)")
+        for jobs in (1, 2):
+            wall, cpu, _, code = whole_process([*base, "--jobs", str(jobs)])
+            print(f"  --jobs {jobs}               {wall:8.2f} s  {cpu:8.2f} s CPU  exit {code}")
+        try:
+            from distributed import LocalCluster
+        except ImportError:
+            print("  dask: not installed (pip install 'odocan[dask]')")
+            return
+        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                          dashboard_address=None) as cluster:
+            wall, _, _, code = whole_process([*base, "--dask", cluster.scheduler_address])
+            print(f"  --dask (2 workers)     {wall:8.2f} s  (CPU in the workers)  exit {code}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--frames", type=int, default=1_000_000, help="log size (frames)")
+    parser.add_argument("--log", type=Path, help="use this candump log instead of making one")
     parser.add_argument("--no-cli", action="store_true", help="skip the cantools CLI run")
+    parser.add_argument("--runs", type=int, default=3, help="odocan runs (best kept)")
+    parser.add_argument("--batch", type=int, default=0, metavar="N",
+                        help="also time an archive of N logs (0: not)")
+    parser.add_argument("--batch-frames", type=int, default=36_000, help="frames per batch log")
+    parser.add_argument("--whole-only", action="store_true",
+                        help="only the whole-process figures (and --batch)")
     args = parser.parse_args()
-    path = make_log(args.frames)
+    path = args.log or make_log(args.frames)
+    if args.whole_only:
+        print_whole_processes(path, sum(1 for _ in path.open("rb")), args.runs, not args.no_cli)
+        if args.batch:
+            print_batch(args.batch, args.batch_frames)
+        return
     t_read, t_analyze, frames, passed = time_odocan(path)
     n = len(frames)
     ours = t_read + t_analyze
     size_mb = path.stat().st_size / 1e6
-    print(f"log: {path.relative_to(ROOT)}, {n} frames, {size_mb:.0f} MB")
+    print(f"log: {path}, {n} frames, {size_mb:.0f} MB")
     print("odocan, best of 3 (cantools: one run each)")
     print(f"odocan read_log          {t_read:8.2f} s  {n / t_read / 1e6:6.2f} M frames/s")
     print(f"odocan analyze           {t_analyze:8.2f} s  (passed: {passed})")
@@ -115,6 +193,9 @@ def main() -> None:
         t_cli = time_cantools_cli(path)
         print(f"cantools decode (CLI)    {t_cli:8.2f} s  {n / t_cli / 1e6:6.2f} M frames/s"
               f"  -> odocan {t_cli / ours:5.1f}x faster")
+    print_whole_processes(path, n, args.runs, not args.no_cli)
+    if args.batch:
+        print_batch(args.batch, args.batch_frames)
 
 
 if __name__ == "__main__":

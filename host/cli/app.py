@@ -76,8 +76,9 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The whole command line, every subcommand registered."""
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The whole command line, every subcommand registered; with ``only`` (a name in
+    ``SUBCOMMANDS``) just that one, so a command imports nothing of the others (start-up)."""
     parser = _Parser(
         prog="odocan",
         description="Fixed-point odometry firmware over CAN: "
@@ -89,7 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     subparsers.required = True
-    for name in SUBCOMMANDS:
+    for name in SUBCOMMANDS if only not in SUBCOMMANDS else (only,):
         try:
             module = importlib.import_module(f"odocan.host.cli.subparsers.{name}")
         except ImportError as exc:  # e.g. an optional dependency missing: say so when it is used
@@ -125,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     rich.console.Console.on_broken_pipe = _on_broken_pipe  # type: ignore[method-assign]
     try:
         with sigterm_as_interrupt():
-            args = build_parser().parse_args(argv)
+            args = build_parser(named_command(argv)).parse_args(argv)
             args.debug = debug  # split off above; bridge/fleet show library logs with it
             return int(args.func(args))
     except KeyboardInterrupt:
@@ -138,6 +139,14 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
+
+
+def named_command(argv: list[str]) -> str | None:
+    """The subcommand ``argv`` names (its first word, when options such as ``--help`` come
+    nowhere before it), or None: then the whole parser is built (help, errors list them all)."""
+    if argv and argv[0] in SUBCOMMANDS:
+        return argv[0]
+    return None
 
 
 def split_debug(argv: list[str]) -> tuple[list[str], bool]:

@@ -21,6 +21,8 @@ other frames of its ID) is read without that line, with a one-line warning that 
 
 from __future__ import annotations
 
+import mmap
+import os
 import re
 import sys
 from array import array
@@ -159,14 +161,8 @@ def read_log(path: str | Path, *, warn: Callable[[str], None] = warn_on_stderr) 
     if not path.is_file():
         raise LogFormatError(f"{path}: no such log file")
     if path.suffix.lower() == ".log":
-        try:
-            content = path.read_bytes()
-        except OSError as exc:
-            raise LogFormatError(f"{path}: cannot read: {exc.strerror or exc}") from None
-        content, skipped = _without_partial_last_line(content)
-        frames = parse_candump(content, str(path))
+        frames, skipped, line = _read_candump_file(path)
         if skipped:
-            line = content.count(b"\n") + 1
             warn(
                 f"{path}: skipped {skipped} partial line at the end (line {line}, cut mid-line: "
                 "a recorder killed while writing?)"
@@ -178,28 +174,117 @@ def read_log(path: str | Path, *, warn: Callable[[str], None] = warn_on_stderr) 
     return frames
 
 
-def _without_partial_last_line(content: bytes) -> tuple[bytes, int]:
-    """``content`` less its last line when that line has no newline and is incomplete (it does
-    not parse, or has fewer data bytes than the earlier frames of its ID); and the lines skipped
-    (0 or 1)."""
+def _read_candump_file(path: Path) -> tuple[FrameArrays, int, int]:
+    """A ``.log`` file's frames, the partial last lines skipped (0 or 1) and that line's number.
+
+    The file is mapped, not read, and parsed ``CHUNK_BYTES`` at a time (cut at line ends), each
+    chunk's pages given back once parsed: the text of a big log never sits in memory whole; the
+    frames do (22 bytes each)."""
+    try:
+        with path.open("rb") as file:
+            if os.fstat(file.fileno()).st_size == 0:  # empty, or a file with no size (/proc)
+                return _parse_whole(file.read(), str(path))
+            with mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ) as content:
+                return _parse_whole(content, str(path))
+    except OSError as exc:
+        raise LogFormatError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def _parse_whole(content: bytes | mmap.mmap, name: str) -> tuple[FrameArrays, int, int]:
+    """``_read_candump_file`` on the file's content (bytes or a map of it)."""
+    end, skipped = _without_partial_last_line(content)
+    line = _count_newlines(content, end) + 1 if skipped else 0
+    return parse_candump_chunks(content, end, name), skipped, line
+
+
+def _count_newlines(content: bytes | mmap.mmap, end: int) -> int:
+    """Newlines in ``content[:end]``, counted a chunk at a time."""
+    return sum(
+        content[start : min(start + CHUNK_BYTES, end)].count(b"\n")
+        for start in range(0, end, CHUNK_BYTES)
+    )
+
+
+CHUNK_BYTES = 8 << 20  # text parsed at once: its intermediates are a few times this
+
+
+def parse_candump_chunks(
+    content: bytes | mmap.mmap, end: int, name: str, chunk_bytes: int = CHUNK_BYTES
+) -> FrameArrays:
+    """``parse_candump`` of ``content[:end]``, ``chunk_bytes`` (at least) at a time cut after a
+    newline; the same frames and the same ``NAME:LINE`` errors as one call on the whole. Pages
+    of a mapped ``content`` are released once parsed."""
+    parts: list[FrameArrays] = []
+    start = line = 0
+    while start < end:
+        stop = content.find(b"\n", min(start + chunk_bytes, end) - 1, end) + 1 or end
+        chunk = content[start:stop]
+        parts.append(parse_candump(chunk, name, first_line=line))
+        line += chunk.count(b"\n")
+        if isinstance(content, mmap.mmap):
+            _release(content, stop)
+        start = stop
+    return _concat_releasing(parts)
+
+
+def _concat_releasing(parts: list[FrameArrays]) -> FrameArrays:
+    """``concat_frames(parts)``, one field at a time, each field's parts dropped once joined:
+    at most one field is held twice (30 bytes a frame at the peak, not 44). Empties ``parts``."""
+    if len(parts) <= 1:
+        return concat_frames(parts)
+    names = ("timestamp_s", "can_id", "dlc", "data", "flags")
+    columns = {name: [getattr(p, name) for p in parts] for name in names}
+    parts.clear()
+    joined = {name: np.concatenate(columns.pop(name)) for name in names}
+    return FrameArrays(**joined)
+
+
+def _release(content: mmap.mmap, stop: int) -> None:
+    """Give back the mapped pages before ``stop`` (read-only file pages: read again if need be)."""
+    size = stop - stop % mmap.PAGESIZE
+    if size > 0 and hasattr(mmap, "MADV_DONTNEED"):
+        content.madvise(mmap.MADV_DONTNEED, 0, size)
+
+
+def concat_frames(parts: list[FrameArrays]) -> FrameArrays:
+    """The frames of ``parts``, one after the other."""
+    if len(parts) == 1:
+        return parts[0]
+    if not parts:
+        return empty_frames()
+    return FrameArrays(
+        timestamp_s=np.concatenate([p.timestamp_s for p in parts]),
+        can_id=np.concatenate([p.can_id for p in parts]),
+        dlc=np.concatenate([p.dlc for p in parts]),
+        data=np.concatenate([p.data for p in parts]),
+        flags=np.concatenate([p.flags for p in parts]),
+    )
+
+
+def _without_partial_last_line(content: bytes | mmap.mmap) -> tuple[int, int]:
+    """Where ``content`` ends less its last line when that line has no newline and is incomplete
+    (it does not parse, or has fewer data bytes than the earlier frames of its ID); and the lines
+    skipped (0 or 1)."""
+    size = len(content)
     cut = content.rfind(b"\n") + 1
     tail = content[cut:]
     if not tail.strip():
-        return content, 0
+        return size, 0
     try:
         msg = parse_candump_line(tail)
     except LogFormatError:
-        return content[:cut], 1
+        return cut, 1
     if msg is None or msg.is_error_frame or msg.is_remote_frame:
-        return content, 0
-    head = content[:cut]
+        return size, 0
     token = f" {msg.arbitration_id:0{8 if msg.is_extended_id else 3}X}#"
-    before = max(head.rfind(token.encode()), head.rfind(token.lower().encode()))
+    before = max(
+        content.rfind(token.encode(), 0, cut), content.rfind(token.lower().encode(), 0, cut)
+    )
     if before < 0:
-        return content, 0
-    line_end = head.find(b"\n", before)
-    line = head[before : line_end if line_end >= 0 else len(head)].split(b"#", 1)[1].split()[0]
-    return (content[:cut], 1) if len(line) > 2 * len(msg.data) else (content, 0)
+        return size, 0
+    line_end = content.find(b"\n", before, cut)
+    line = content[before : line_end if line_end >= 0 else cut].split(b"#", 1)[1].split()[0]
+    return (cut, 1) if len(line) > 2 * len(msg.data) else (size, 0)
 
 
 def _read_with_python_can(path: Path) -> FrameArrays:
@@ -243,7 +328,11 @@ for _i, _c in enumerate(b"0123456789"):
     _DIGIT[_c] = _i
 
 _C_DIGIT, _C_HEX, _C_CHANNEL, _C_DIRECTION = 1, 2, 4, 8
-_CLASS = np.zeros(256, dtype=np.uint8)  # character classes, a bit each
+_C_SPACE, _C_HASH, _C_DOT, _C_ANY = 0x10, 0x20, 0x40, 0x80  # a separator each; any byte
+_CLASS = np.full(256, _C_ANY, dtype=np.uint8)  # character classes, a bit each
+_CLASS[ord(" ")] |= _C_SPACE
+_CLASS[ord("#")] |= _C_HASH
+_CLASS[ord(".")] |= _C_DOT
 _CLASS[np.frombuffer(b"0123456789", np.uint8)] |= _C_DIGIT
 _CLASS[np.frombuffer(b"0123456789abcdefABCDEF", np.uint8)] |= _C_HEX
 _CLASS[ord(" ") + 1 : 127] |= _C_CHANNEL
@@ -277,10 +366,11 @@ class _Parsed:
     frames: FrameArrays
 
 
-def parse_candump(content: bytes, name: str = "<log>") -> FrameArrays:
+def parse_candump(content: bytes, name: str = "<log>", *, first_line: int = 0) -> FrameArrays:
     """Parse ``candump -L`` text (bytes of the whole file) into FrameArrays, in line order.
 
-    ``name`` is used in error messages (``NAME:LINE: ...``).
+    ``name`` is used in error messages (``NAME:LINE: ...``), the lines numbered from
+    ``first_line`` + 1 (``content`` a later part of a file).
     """
     buf = np.frombuffer(content, dtype=np.uint8)
     starts, ends = _line_bounds(buf)
@@ -298,7 +388,7 @@ def parse_candump(content: bytes, name: str = "<log>") -> FrameArrays:
             slow_parts.append(rejected)
     slow_lines = np.sort(np.concatenate(slow_parts))
     if len(slow_lines):
-        fast_parts.append(_parse_slow(content, starts, ends, slow_lines, name))
+        fast_parts.append(_parse_slow(content, starts, ends, slow_lines, name, first_line))
     return _merge(fast_parts)
 
 
@@ -349,25 +439,26 @@ def _parse_group(
 
 
 def _check_block(block: U8Array, c: _Columns) -> npt.NDArray[np.bool_]:
-    """Rows of ``block`` (lines of one length) that have the canonical layout ``c``: the
-    separators where the template has them, and a character of the right class in every other
-    column (one class lookup for the whole block)."""
-    need = np.zeros(c.length, dtype=np.uint8)
+    """Rows of ``block`` (lines of one length) that have the canonical layout ``c``: a character
+    of the right class in every column, the separators ``.``, `` ``, ``#`` being classes of their
+    own (one class lookup and one reduction for the whole block), then ``(`` and ``)``."""
+    need = np.full(c.length, _C_ANY, dtype=np.uint8)
     need[1 : c.close] = _C_DIGIT
+    need[c.dot] = _C_DOT
+    need[c.close + 1] = _C_SPACE
     need[c.close + 2 : c.id_start - 1] = _C_CHANNEL
+    need[c.id_start - 1] = _C_SPACE
     need[c.id_start : c.hash] = _C_HEX
+    need[c.hash] = _C_HASH
     need[c.hash + 1 : c.data_end] = _C_HEX
-    fixed = {0: "(", c.dot: ".", c.close: ")", c.close + 1: " ", c.id_start - 1: " ", c.hash: "#"}
     if c.data_end < c.length:  # " R" / " T"
-        fixed[c.data_end] = " "
+        need[c.data_end] = _C_SPACE
         need[c.data_end + 1] = _C_DIRECTION
-    for col in fixed:
-        need[col] = 0
     classes = _CLASS[block]
     classes &= need
-    ok: npt.NDArray[np.bool_] = (classes.astype(bool) | (need == 0)).all(axis=1)
-    for col, char in fixed.items():
-        ok &= block[:, col] == ord(char)
+    ok: npt.NDArray[np.bool_] = np.asarray(classes.all(axis=1))
+    ok &= block[:, 0] == ord("(")
+    ok &= block[:, c.close] == ord(")")
     if c.hash - c.id_start == 8:
         ok &= (_HEX[block[:, c.id_start]] & 0x2) == 0  # no error-frame flag (0x20000000)
     return ok
@@ -441,13 +532,15 @@ def _parse_slow(
     ends: npt.NDArray[np.int64],
     lines: npt.NDArray[np.int64],
     name: str,
+    first_line: int = 0,
 ) -> _Parsed:
-    """Parse the given lines one by one (blank lines skipped); the first bad one raises."""
+    """Parse the given lines one by one (blank lines skipped); the first bad one raises (named
+    ``NAME:LINE``, lines counted from ``first_line`` + 1)."""
     collector = FrameCollector()
     kept: list[int] = []
     for line in lines.tolist():
         raw = content[int(starts[line]) : int(ends[line])]
-        msg = parse_candump_line(raw, f"{name}:{line + 1}")
+        msg = parse_candump_line(raw, f"{name}:{first_line + line + 1}")
         if msg is not None:
             collector.on_message_received(msg)
             kept.append(line)
