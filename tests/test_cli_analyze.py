@@ -70,7 +70,8 @@ def test_analyze_agrees_with_the_run(
     run_report = json.loads(logs["report"].read_text())
     report = json.loads(report_path.read_text())
     assert {k: report[k] for k in SAME_AS_RUN} == {k: run_report[k] for k in SAME_AS_RUN}
-    assert report["wall_seconds"] is None and report["scenario"] is None
+    assert report["wall_seconds"] is None
+    assert report["scenario"] is None
 
 
 def test_analyze_with_the_project_dbc_and_plot(
@@ -123,7 +124,9 @@ def test_analyze_log_without_permission(
     )
     assert done.returncode == 2, done.stderr
     lines = done.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ") and str(locked) in lines[0], lines
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("error: "), lines
+    assert str(locked) in lines[0], lines
 
 
 def test_analyze_malformed_log_names_the_line(

@@ -94,7 +94,8 @@ def test_run_prints_the_summary(capsys: pytest.CaptureFixture[str]) -> None:
     assert rows[0] == ["WHEEL_ENCODERS", "300", "300", "0", "0", "0", "0"]
     assert {row[0] for row in rows} >= {"MOTOR_CMD", "ODOM_POSE_X", "ODOM_POSE_Y", "SIM_TRUTH"}
     for row in rows[:-1]:
-        assert row[1] == row[2] and row[3:] == ["0", "0", "0", "0"], row
+        assert row[1] == row[2], row
+        assert row[3:] == ["0", "0", "0", "0"], row
     assert rows[-1] == ["total", str(sum(int(row[1]) for row in rows[:-1]))]
 
 
@@ -144,7 +145,8 @@ def test_run_report_has_the_contract_keys(
     assert all(isinstance(n, int) and n > 0 for n in report["frames"].values())
     reference, truth = report["onboard_vs_reference"], report["onboard_vs_truth"]
     for key in ERROR_KEYS:
-        assert isinstance(reference[key], float) and isinstance(truth[key], float), key
+        assert isinstance(reference[key], float), key
+        assert isinstance(truth[key], float), key
     for key in ("max_position_error_m", "final_position_error_m"):
         assert 0 <= reference[key] <= LSB_POSITION_M
     for key in ("max_heading_error_rad", "final_heading_error_rad"):

@@ -129,8 +129,10 @@ def test_canmatrix_reads_what_cantools_reads(
     matrix, _, _ = load_canmatrix(DBC_PATH, caplog, capsys)
     for message in db.messages:
         frame = matrix.frame_by_id(canmatrix.ArbitrationId(message.frame_id))
-        assert frame is not None and frame.name == message.name
-        assert frame.size == 8 and not frame.arbitration_id.extended
+        assert frame is not None
+        assert frame.name == message.name
+        assert frame.size == 8
+        assert not frame.arbitration_id.extended
         assert sorted(frame.transmitters) == sorted(message.senders)
         assert int(frame.cycle_time) == (message.cycle_time or 0)
         got = {
@@ -166,15 +168,19 @@ def test_canmatrix_reads_what_cantools_reads(
 def test_names_nodes_and_frame_format(db: cantools.database.can.Database) -> None:
     for message in db.messages:
         assert UPPER_SNAKE.match(message.name)
-        assert message.length == 8 and not message.is_extended_frame and not message.is_fd
+        assert message.length == 8
+        assert not message.is_extended_frame
+        assert not message.is_fd
         assert message.frame_id <= 0x7FF
         assert (message.frame_id in NAV_BLOCK) == message.name.startswith("NAV_")
-        assert set(message.senders) <= NODES and message.senders
+        assert set(message.senders) <= NODES
+        assert message.senders
         assert message.comment
         for signal in message.signals:
             assert UPPER_SNAKE.match(signal.name)
             assert signal.byte_order == "little_endian"
-            assert set(signal.receivers) <= NODES and signal.receivers
+            assert set(signal.receivers) <= NODES
+            assert signal.receivers
     assert sorted(db.get_message_by_name("MOTOR_CMD").senders) == ["HOST", "ODOM_MCU"]
 
 
@@ -184,9 +190,9 @@ def test_every_signal_has_a_unit_and_a_comment_with_its_raw_format(
     for message in db.messages:
         for signal in message.signals:
             assert signal.unit, f"{message.name}.{signal.name} has no unit"
-            assert signal.comment and RAW_FORMAT.search(signal.comment), (
-                f"{message.name}.{signal.name}: comment without a raw format"
-            )
+            missing = f"{message.name}.{signal.name}: comment without a raw format"
+            assert signal.comment, missing
+            assert RAW_FORMAT.search(signal.comment), missing
 
 
 def test_cyclic_messages_have_a_cycle_time_and_events_none(
@@ -194,14 +200,18 @@ def test_cyclic_messages_have_a_cycle_time_and_events_none(
 ) -> None:
     for message in db.messages:
         if send_type(message) in CYCLIC_SEND_TYPES:
-            assert message.cycle_time and message.cycle_time > 0, message.name
+            assert message.cycle_time, message.name
+            assert message.cycle_time > 0, message.name
         else:
-            assert send_type(message) == "Event" and not message.cycle_time, message.name
+            assert send_type(message) == "Event", message.name
+            assert not message.cycle_time, message.name
     cycles = {m.name: m.cycle_time for m in db.messages}
-    assert cycles["WHEEL_ENCODERS"] == 10 and cycles["ODOM_STATUS"] == 100
+    assert cycles["WHEEL_ENCODERS"] == 10
+    assert cycles["ODOM_STATUS"] == 100
     assert cycles["MOTOR_CMD"] == cycles["ODOM_POSE_X"] == 20
     assert cycles["SIM_TRUTH"] == 100  # 10 Hz truth, as a motion-capture reference gives
-    assert cycles["NAV_STATUS"] == 100 and send_type(db.get_message_by_name("NAV_GOAL")) == "Event"
+    assert cycles["NAV_STATUS"] == 100
+    assert send_type(db.get_message_by_name("NAV_GOAL")) == "Event"
 
 
 def test_every_message_has_checksum_and_counter_at_the_profile2_bits(
@@ -212,7 +222,8 @@ def test_every_message_has_checksum_and_counter_at_the_profile2_bits(
         counter = message.get_signal_by_name("COUNTER")
         assert (checksum.start, checksum.length, checksum.is_signed) == (0, 8, False)
         assert (counter.start, counter.length, counter.is_signed) == (8, 4, False)
-        assert checksum.multiplexer_ids is None and counter.multiplexer_ids is None
+        assert checksum.multiplexer_ids is None
+        assert counter.multiplexer_ids is None
 
 
 def test_byte1_high_nibble_is_the_mux_or_the_echoed_counter(
@@ -330,10 +341,13 @@ def test_every_raw_range_fits_its_bits(db: cantools.database.can.Database) -> No
     """[min|max] divided by the scale lands on integers inside the signal's width."""
     for message in db.messages:
         for signal in message.signals:
-            assert signal.offset == 0 and signal.minimum is not None and signal.maximum is not None
+            assert signal.offset == 0
+            assert signal.minimum is not None
+            assert signal.maximum is not None
             low = signal.minimum / signal.scale
             high = signal.maximum / signal.scale
-            assert abs(low - round(low)) < 1e-3 and abs(high - round(high)) < 0.5
+            assert abs(low - round(low)) < 1e-3
+            assert abs(high - round(high)) < 0.5
             lo_bits = -(1 << (signal.length - 1)) if signal.is_signed else 0
             hi_bits = (1 << (signal.length - (1 if signal.is_signed else 0))) - 1
             assert lo_bits <= round(low) <= round(high) <= hi_bits, f"{message.name}.{signal.name}"
@@ -342,8 +356,13 @@ def test_every_raw_range_fits_its_bits(db: cantools.database.can.Database) -> No
 def test_pose_resolutions(db: cantools.database.can.Database) -> None:
     x = db.get_message_by_name("ODOM_POSE_X").get_signal_by_name("X")
     heading = db.get_message_by_name("ODOM_POSE_X").get_signal_by_name("HEADING")
-    assert x.scale == 0.0001 and x.length == 32 and x.maximum is not None and x.maximum > 1000
-    assert heading.scale <= 1e-4 and heading.length == 16 and not heading.is_signed
+    assert x.scale == 0.0001
+    assert x.length == 32
+    assert x.maximum is not None
+    assert x.maximum > 1000
+    assert heading.scale <= 1e-4
+    assert heading.length == 16
+    assert not heading.is_signed
     assert abs(heading.scale * 65536 - 2 * 3.141592653589793) < 1e-12
 
 

@@ -291,7 +291,8 @@ def payload_signals(kind: Kind) -> list[Signal]:
 
 def raw_range(signal: Signal) -> tuple[int, int]:
     """The DBC [min|max] of ``signal`` in raw units."""
-    assert signal.minimum is not None and signal.maximum is not None
+    assert signal.minimum is not None
+    assert signal.maximum is not None
     return round(signal.minimum / signal.scale), round(signal.maximum / signal.scale)
 
 
@@ -425,7 +426,8 @@ def test_wrapping_fields_keep_their_low_bits(
     spec = DB.get_message_by_name(message).get_signal_by_name(signal)
     low_bits = value & ((1 << bits) - 1)
     expected = low_bits - (1 << bits) if spec.is_signed and low_bits >> (bits - 1) else low_bits
-    assert got == expected and errors.bits == 0
+    assert got == expected
+    assert errors.bits == 0
 
 
 def test_counter_is_taken_mod_16() -> None:
@@ -439,9 +441,11 @@ def test_unknown_pages_are_sent_raw_and_read_back() -> None:
     config = f.unpack_odom_config(f.pack_odom_config(2, 9, 123_456, errors))
     assert (config.param, config.value) == (9, 123_456)
     pose = f.unpack_odom_set_pose(f.pack_odom_set_pose(2, 7, 0xDEADBEEF, errors))
-    assert (pose.field, pose.value) == (7, 0xDEADBEEF) and errors.bits == 0
+    assert (pose.field, pose.value) == (7, 0xDEADBEEF)
+    assert errors.bits == 0
     goal = f.unpack_nav_goal(f.pack_nav_goal(2, 9, 0xDEADBEEF, errors))
-    assert (goal.field, goal.value) == (9, 0xDEADBEEF) and errors.bits == 0
+    assert (goal.field, goal.value) == (9, 0xDEADBEEF)
+    assert errors.bits == 0
 
 
 def test_nav_goal_go_reads_an_unknown_mode_raw() -> None:

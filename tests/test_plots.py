@@ -88,7 +88,8 @@ def test_smooth_truth_matches_the_simulators_full_rate_state(
     analysis, full = drift
     series = analysis.series
     x, y, label = plots.smooth_truth(series)
-    assert "SIM_TRUTH 10 Hz" in label and "interpolated" in label
+    assert "SIM_TRUTH 10 Hz" in label
+    assert "interpolated" in label
     t = series["t_s"]
     fx = np.interp(t, full["truth_full_t_s"], full["truth_full_x_m"])
     fy = np.interp(t, full["truth_full_t_s"], full["truth_full_y_m"])
@@ -160,8 +161,11 @@ def test_figure_lines_do_not_bridge_gaps(gappy: Analysis) -> None:
         finite = y[~np.isnan(y)]
         assert finite == pytest.approx(gappy.series["heading_error_unwrapped_rad"] * 1e3)
         title = figure._suptitle.get_text() if figure._suptitle else ""
-        assert "errors ed=1.002" in title and "faults busoff=10:2,seed=1" in title
-        assert "FAIL" in title and "pmir" in title and "exact integrator" in title
+        assert "errors ed=1.002" in title
+        assert "faults busoff=10:2,seed=1" in title
+        assert "FAIL" in title
+        assert "pmir" in title
+        assert "exact integrator" in title
         spans = [p for p in heading_ax.patches]
         assert len(spans) == len(gappy.series["gap_start_t_s"])
     finally:

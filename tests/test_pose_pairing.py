@@ -17,7 +17,8 @@ def y_half(counter: int, y_m: float, turns: int) -> dict[str, float]:
 
 def test_the_heading_is_unwrapped_by_turns() -> None:
     pose = pose_of(x_half(3, 1.5, 0.25), y_half(3, -2.0, -2))
-    assert pose.x_m == 1.5 and pose.y_m == -2.0
+    assert pose.x_m == 1.5
+    assert pose.y_m == -2.0
     assert pose.heading_rad == -2 * 2.0 * math.pi + 0.25
 
 

@@ -233,8 +233,10 @@ def _three_processes(bus_argv: list[str], listener: can.BusABC) -> None:
         sim_rc, sim_err = _stop(sim, None)
         fw_rc, fw_err = _stop(firmware, signal.SIGTERM)
     assert (sim_rc, fw_rc) == (0, 0), sim_err + fw_err
-    assert sim_err.startswith("odocan sim: ") and "deadline_miss_ratio" in sim_err
-    assert fw_err.startswith("odocan firmware: ") and "deadline_miss_ratio" in fw_err
+    assert sim_err.startswith("odocan sim: ")
+    assert "deadline_miss_ratio" in sim_err
+    assert fw_err.startswith("odocan firmware: ")
+    assert "deadline_miss_ratio" in fw_err
     sim_ticks = re.search(r"(\d+) ticks", sim_err)
     assert sim_ticks is not None, sim_err
     _check_traffic(capture, int(sim_ticks.group(1)))
@@ -268,4 +270,5 @@ def test_nodes_exit_cleanly_on_a_signal(udp_bus: tuple[list[str], can.BusABC], s
     assert len(capture.of(fr.ODOM_POSE_X_ID)) > 5
     for (rc, err), name in zip(results, ("sim", "firmware"), strict=True):
         assert rc == 0, err
-        assert err.startswith(f"odocan {name}: ") and "Traceback" not in err
+        assert err.startswith(f"odocan {name}: ")
+        assert "Traceback" not in err
