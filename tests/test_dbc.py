@@ -15,6 +15,7 @@ from cantools.subparsers.dump.formatting import layout_string
 from odocan.firmware import frames
 from odocan.firmware.config import Integrator
 from odocan.firmware.errors import State
+from tests.dbc_typed import choices, dbc_attribute, load_can_dbc
 
 ROOT = Path(__file__).resolve().parents[1]
 DBC_PATH = ROOT / "dbc" / "odocan.dbc"
@@ -29,22 +30,20 @@ NAV_SLOTS = {"NAV_GOAL": 10, "NAV_STATUS": 11}  # the E2E slots kept for them fr
 
 @pytest.fixture(scope="module")
 def db() -> cantools.database.can.Database:
-    loaded = cantools.database.load_file(DBC_PATH, strict=True)
-    assert isinstance(loaded, cantools.database.can.Database)
-    return loaded
+    return load_can_dbc(DBC_PATH)
 
 
 def send_type(message: Message) -> str:
     """The GenMsgSendType enum name of ``message``."""
     assert message.dbc is not None
     attribute = message.dbc.attributes["GenMsgSendType"]
+    assert isinstance(attribute.value, int), attribute.value  # an ENUM attribute: the index
     return str(attribute.definition.choices[attribute.value])
 
 
 def data_ids(message: Message) -> tuple[int, ...]:
     """The message's Profile 2 data-ID list from the ``E2EDataIDs`` attribute."""
-    assert message.dbc is not None
-    return tuple(int(v) for v in message.dbc.attributes["E2EDataIDs"].value.split(","))
+    return tuple(int(v) for v in dbc_attribute(message, "E2EDataIDs").split(","))
 
 
 def page_messages(message: Message) -> list[tuple[str, Message]]:
@@ -53,6 +52,7 @@ def page_messages(message: Message) -> list[tuple[str, Message]]:
     if not muxers:
         return [(message.name, message)]
     mux = muxers[0]
+    assert mux.choices is not None, mux.name
     pages = []
     for value in sorted({v for s in message.signals for v in (s.multiplexer_ids or [])}):
         signals = [s for s in message.signals if s.multiplexer_ids in (None, [value])]
@@ -84,7 +84,7 @@ def test_loads_in_cantools_strict(db: cantools.database.can.Database) -> None:
 
 def load_canmatrix(
     path: Path, caplog: pytest.LogCaptureFixture, capsys: pytest.CaptureFixture[str]
-) -> tuple[canmatrix.CanMatrix, list[logging.LogRecord], str]:
+) -> tuple[canmatrix.CanMatrix | None, list[logging.LogRecord], str]:
     """Load with canmatrix, returning its matrix, every log record, and what it printed."""
     caplog.clear()
     capsys.readouterr()
@@ -97,6 +97,7 @@ def test_loads_in_canmatrix_without_any_warning(
     caplog: pytest.LogCaptureFixture, capsys: pytest.CaptureFixture[str]
 ) -> None:
     matrix, records, printed = load_canmatrix(DBC_PATH, caplog, capsys)
+    assert matrix is not None
     assert [r.getMessage() for r in records] == []
     assert printed == ""
     assert len(matrix.frames) == 12
@@ -127,6 +128,7 @@ def test_canmatrix_reads_what_cantools_reads(
 ) -> None:
     """Two independent parsers agree on every frame, signal, comment, cycle time and mux."""
     matrix, _, _ = load_canmatrix(DBC_PATH, caplog, capsys)
+    assert matrix is not None
     for message in db.messages:
         frame = matrix.frame_by_id(canmatrix.ArbitrationId(message.frame_id))
         assert frame is not None
@@ -256,8 +258,7 @@ def test_encoders_and_commands_have_the_highest_priority(
 
 
 def test_enums_have_value_tables(db: cantools.database.can.Database) -> None:
-    status = db.get_message_by_name("ODOM_STATUS")
-    assert {int(k): str(v) for k, v in status.get_signal_by_name("STATE").choices.items()} == {
+    assert choices(db, "ODOM_STATUS", "STATE") == {
         0: "INIT",
         1: "OK",
         2: "DEGRADED",
@@ -265,10 +266,8 @@ def test_enums_have_value_tables(db: cantools.database.can.Database) -> None:
     }
     expected_integrator = {0: "EULER", 1: "RK2", 2: "EXACT"}
     for name in ("ODOM_STATUS", "ODOM_CONFIG"):
-        integrator = db.get_message_by_name(name).get_signal_by_name("INTEGRATOR")
-        assert {int(k): str(v) for k, v in integrator.choices.items()} == expected_integrator
-    reason = db.get_message_by_name("ODOM_ACK").get_signal_by_name("REASON")
-    assert {str(v) for v in reason.choices.values()} >= {
+        assert choices(db, name, "INTEGRATOR") == expected_integrator
+    assert set(choices(db, "ODOM_ACK", "REASON").values()) >= {
         "OK",
         "OUT_OF_RANGE",
         "UNKNOWN_FIELD",
@@ -276,8 +275,7 @@ def test_enums_have_value_tables(db: cantools.database.can.Database) -> None:
         "BUSY",
         "QUEUE_FULL",
     }
-    request_id = db.get_message_by_name("ODOM_ACK").get_signal_by_name("REQUEST_ID")
-    assert {int(k): str(v) for k, v in request_id.choices.items()} == {
+    assert choices(db, "ODOM_ACK", "REQUEST_ID") == {
         frames.NAV_GOAL_ID: "NAV_GOAL",
         frames.ODOM_SET_POSE_ID: "ODOM_SET_POSE",
         frames.ODOM_CONFIG_ID: "ODOM_CONFIG",
@@ -301,8 +299,7 @@ def test_firmware_enums_match_the_value_tables(db: cantools.database.can.Databas
         ("NAV_STATUS", "STATE", frames.NavState),
     ]
     for message_name, signal_name, enum in pairs:
-        signal = db.get_message_by_name(message_name).get_signal_by_name(signal_name)
-        assert {int(k): str(v) for k, v in signal.choices.items()} == {
+        assert choices(db, message_name, signal_name) == {
             int(member): member.name for member in enum
         }, f"{message_name}.{signal_name}"
 
@@ -321,6 +318,7 @@ def test_data_id_lists_follow_the_slot_scheme_and_are_unique(
         assert 1 <= slot <= 15
         assert (slot in NAV_SLOTS.values()) == message.name.startswith("NAV_")
         assert NAV_SLOTS.get(message.name, slot) == slot
+        assert message.comment is not None, message.name
         assert f"E2E slot {slot} " in message.comment
         assert not seen & set(ids)
         seen |= set(ids)
@@ -389,4 +387,4 @@ def readme_layouts(db: cantools.database.can.Database) -> str:
 
 
 if __name__ == "__main__":
-    print(readme_layouts(cantools.database.load_file(DBC_PATH, strict=True)))  # type: ignore[arg-type]
+    print(readme_layouts(load_can_dbc(DBC_PATH)))

@@ -25,10 +25,10 @@ from hypothesis import strategies as st
 from odocan.firmware import frames as f
 from odocan.firmware.e2e import E2EReceiver, E2EStatus
 from odocan.firmware.errors import ErrorFlag, ErrorMask
+from tests.dbc_typed import dbc_attribute, load_can_dbc
 
 DBC_PATH = Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc"
-DB = cantools.database.load_file(DBC_PATH, strict=True)
-assert isinstance(DB, cantools.database.can.Database)
+DB = load_can_dbc(DBC_PATH)
 
 Values = dict[str, int]
 
@@ -36,10 +36,9 @@ Values = dict[str, int]
 def with_e2e(message: Message) -> Message:
     """Attach the DBC's E2EDataIDs to ``message`` the way cantools' ARXML loader would, so that
     cantools.autosar picks the data ID from the counter itself."""
-    assert message.dbc is not None
     e2e = AutosarEnd2EndProperties()
     e2e.category = "PROFILE_02"
-    e2e.data_ids = [int(v) for v in message.dbc.attributes["E2EDataIDs"].value.split(",")]
+    e2e.data_ids = [int(v) for v in dbc_attribute(message, "E2EDataIDs").split(",")]
     e2e.payload_length = 8
     specifics = AutosarMessageSpecifics()
     specifics.e2e = e2e
@@ -336,6 +335,7 @@ def test_firmware_frames_are_cantools_frames(kind: Kind, data: st.DataObject, co
     assert packed == cantools_frame(kind, counter, values)
     assert cantools.autosar.check_profile2_crc(packed, message) is True
     decoded = message.decode(packed, decode_choices=False, scaling=False)
+    assert isinstance(decoded, dict)  # not a container message
     decoded.pop("CHECKSUM")
     assert decoded == expected_signals(kind, counter, values)
 
@@ -357,7 +357,9 @@ def test_every_message_and_page_is_covered() -> None:
         if not muxers:
             assert (message.name, None) in covered
         else:
-            for value in muxers[0].choices:
+            pages = muxers[0].choices
+            assert pages is not None, message.name
+            for value in pages:
                 assert (message.name, int(value)) in covered, (message.name, value)
 
 
