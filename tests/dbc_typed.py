@@ -26,17 +26,15 @@ def load_can_dbc(path: Path | str, *, strict: bool = True) -> Database:
 
 def decode(
     db: Database,
-    frame_id: int,
+    frame: int | str,
     data: bytes | bytearray,
     *,
     decode_choices: bool = True,
     scaling: bool = True,
 ) -> dict[str, SignalValue]:
-    """The signals of one frame (never a container message in our DBC)."""
-    signals = db.decode_message(
-        frame_id, bytes(data), decode_choices=decode_choices, scaling=scaling
-    )
-    assert isinstance(signals, dict), f"0x{frame_id:x}: a container message"
+    """The signals of one frame (by ID or name; never a container message in our DBC)."""
+    signals = db.decode_message(frame, bytes(data), decode_choices=decode_choices, scaling=scaling)
+    assert isinstance(signals, dict), f"{frame}: a container message"
     return signals
 
 
@@ -47,10 +45,10 @@ def number(value: SignalValue) -> int | float:
 
 
 def numbers(
-    db: Database, frame_id: int, data: bytes | bytearray, *, scaling: bool = True
+    db: Database, frame: int | str, data: bytes | bytearray, *, scaling: bool = True
 ) -> dict[str, int | float]:
     """The signals of one frame as numbers (choices not decoded)."""
-    signals = decode(db, frame_id, data, decode_choices=False, scaling=scaling)
+    signals = decode(db, frame, data, decode_choices=False, scaling=scaling)
     return {name: number(value) for name, value in signals.items()}
 
 

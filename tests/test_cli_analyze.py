@@ -17,6 +17,7 @@ import cantools
 import pytest
 
 from odocan.host.cli.app import main
+from tests.dbc_typed import load_can_dbc
 from tests.test_cli_run import assert_usage_error, run_cli
 
 DBC = Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc"
@@ -153,7 +154,7 @@ def _write_dbc(db: cantools.database.can.Database, path: Path) -> Path:
 def test_analyze_dbc_with_other_ids(
     logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    db = cantools.database.load_file(DBC)
+    db = load_can_dbc(DBC)
     db.get_message_by_name("WHEEL_ENCODERS").frame_id = 0x101
     db.refresh()
     other = _write_dbc(db, tmp_path / "other.dbc")
@@ -187,7 +188,7 @@ def test_analyze_counts_foreign_frames(
 def test_analyze_dbc_without_the_pose(
     logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    db = cantools.database.load_file(DBC)
+    db = load_can_dbc(DBC)
     db.messages[:] = [m for m in db.messages if m.name != "ODOM_POSE_Y"]
     db.refresh()
     other = _write_dbc(db, tmp_path / "nopose.dbc")

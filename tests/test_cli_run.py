@@ -17,6 +17,7 @@ import can
 import pytest
 
 from odocan.host.cli.app import main
+from tests.dbc_typed import decode, load_can_dbc
 
 LSB_POSITION_M = 1e-4
 LSB_HEADING_RAD = 2 * math.pi / 65536
@@ -294,14 +295,12 @@ def test_run_interrupted_checks_what_ran(
 def test_run_random_drives_for_a_longer_duration(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    import cantools
-
     log = tmp_path / "long.log"
     code, _, err = run_cli(capsys, "run", "--duration", "66", "--seed", "1", "--log", str(log))
     assert (code, err) == (0, "")
-    db = cantools.database.load_file(Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc")
+    db = load_can_dbc(Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc")
     speeds = {
-        round(msg.timestamp, 2): db.decode_message(msg.arbitration_id, msg.data)
+        round(msg.timestamp, 2): decode(db, msg.arbitration_id, msg.data)
         for msg in can.LogReader(log)
         if msg.arbitration_id == db.get_message_by_name("MOTOR_CMD").frame_id
     }

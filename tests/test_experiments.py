@@ -24,6 +24,7 @@ import pytest
 
 from odocan.host.cli import app as cli
 from odocan.host.experiments import seed002
+from odocan.host.judge.reference import Geometry
 from odocan.sim.errors import ErrorModel
 from odocan.sim.robot import load
 
@@ -192,7 +193,7 @@ def test_every_run_is_judged_and_a_wrong_firmware_fails(
     config = _config(ErrorModel(ed=1.002), runs=1)
     assert seed002.run_seed002(config).faults() == []
     kobuki = load("kobuki")
-    monkeypatch.setattr(seed002.Geometry, "of", classmethod(lambda cls, robot: cls(
+    monkeypatch.setattr(Geometry, "of", classmethod(lambda cls, robot: cls(
         kobuki.counts_per_rev, kobuki.wheel_radius_left_m, kobuki.wheel_radius_right_m,
         kobuki.wheelbase_m)))
     code = cli.main(["experiment", "seed002", "--runs", "1", "--errors", "", "--misalign", "0"])

@@ -26,6 +26,7 @@ from odocan.sim.contract import database
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FAULT_KINDS, BusOff, ErrorCounters, FaultInjectingBus, FaultSpec
 from odocan.sim.scenarios import RandomScenario
+from tests.dbc_typed import decode, number
 from tests.fault_rig import (
     FaultRig,
     PoseAudit,
@@ -104,7 +105,7 @@ def test_spec_validates_programmatic_construction() -> None:
     with pytest.raises(ConfigurationError, match="flip=0: BITS"):
         FaultSpec(flip=0.1, flip_bits=0)
     with pytest.raises(ConfigurationError, match="drop=True"):
-        FaultSpec(drop=True)  # type: ignore[arg-type]
+        FaultSpec(drop=True)  # a bool is a float to mypy: the spec itself must refuse it
 
 
 # --- ErrorCounters -----------------------------------------------------------------------------
@@ -148,7 +149,9 @@ def _key(msg: can.Message | None) -> tuple[object, ...] | None:
     return (msg.timestamp, msg.arbitration_id, *flags, msg.dlc, bytes(msg.data))
 
 
-def _send_all(spec: FaultSpec, n: int, period_s: float = 0.01) -> tuple[FaultInjectingBus, list]:
+def _send_all(
+    spec: FaultSpec, n: int, period_s: float = 0.01
+) -> tuple[FaultInjectingBus, list[can.Message]]:
     """Send frames 0..n-1 (numbered in their payload) through ``spec``; what a receiver got."""
     channel = unique_channel()
     rx = open_virtual(channel)
@@ -592,11 +595,16 @@ def test_a_replay_one_counter_cycle_old_passes_profile_2() -> None:
     assert pose == expected
 
 
+def _receive_all(reader: can.BufferedReader, frames: list[can.Message]) -> None:
+    for m in frames:
+        reader.on_message_received(m)
+
+
 def test_bus_off_of_the_motor_controller_degrades_the_firmware_and_it_recovers() -> None:
     spec = FaultSpec.parse("busoff=3:0.5,seed=1")
     reader = can.BufferedReader()
     with FaultRig(sim_faults=spec, seed=1) as rig:
-        rig.observers.append(lambda k, frames: [reader.on_message_received(m) for m in frames])
+        rig.observers.append(lambda k, frames: _receive_all(reader, frames))
         bus = rig.sim_bus
         assert isinstance(bus, FaultInjectingBus)
         seen: list[tuple[float, can.BusState]] = []
@@ -607,9 +615,10 @@ def test_bus_off_of_the_motor_controller_degrades_the_firmware_and_it_recovers()
     db = database()
     while (msg := reader.get_message(0)) is not None:
         if msg.arbitration_id == fr.ODOM_STATUS_ID:
-            signals = db.decode_message(msg.arbitration_id, msg.data, decode_choices=True)
+            signals = decode(db, msg.arbitration_id, msg.data, decode_choices=True)
             if signals["PAGE"] == "SUMMARY":
-                summaries.append((msg.timestamp, str(signals["STATE"]), int(signals["ERROR_MASK"])))
+                state, mask = str(signals["STATE"]), int(number(signals["ERROR_MASK"]))
+                summaries.append((msg.timestamp, state, mask))
     states = [s for _, s, _ in summaries]
     first_degraded = next(t for t, s, _ in summaries if s == "DEGRADED")
     back_ok = next(t for t, s, _ in summaries if s == "OK" and t > first_degraded)

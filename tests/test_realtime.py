@@ -28,6 +28,7 @@ import pytest
 from odocan.firmware import frames as fr
 from odocan.sim.contract import database
 from odocan.sim.realtime import DeadlineStats, PeriodicLoop, accepted_ids, stop_on_signals
+from tests.dbc_typed import numbers
 
 ROOT = Path(__file__).resolve().parent.parent
 CLI = [sys.executable, "-m", "odocan"]
@@ -197,7 +198,7 @@ def _stop(proc: subprocess.Popen[str], signum: int | None = signal.SIGTERM) -> t
     except subprocess.TimeoutExpired:
         proc.kill()
         _, err = proc.communicate()
-        pytest.fail(f"{proc.args} did not stop: {err}")
+        pytest.fail(f"{proc.args!r} did not stop: {err}")
     return proc.returncode, err
 
 
@@ -214,9 +215,9 @@ def _check_traffic(capture: Capture, sim_ticks: int) -> None:
     xs: list[float] = []
     for msg in capture.frames:
         if msg.arbitration_id == fr.WHEEL_ENCODERS_ID:
-            recent = [*recent[-3:], int(db.decode_message(msg.arbitration_id, msg.data)["COUNTER"])]
+            recent = [*recent[-3:], int(numbers(db, msg.arbitration_id, msg.data)["COUNTER"])]
         elif msg.arbitration_id == fr.ODOM_POSE_X_ID:
-            signals = db.decode_message(msg.arbitration_id, msg.data)
+            signals = numbers(db, msg.arbitration_id, msg.data)
             assert signals["ENC_COUNTER"] in recent  # one of the last 4 encoder frames
             xs.append(float(signals["X"]))
     assert len(xs) >= 2

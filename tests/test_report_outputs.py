@@ -31,7 +31,9 @@ def test_junit_names_every_check_and_carries_the_figures_of_a_failure(tmp_path: 
     assert failure.get("message") == "max position error 0.053 m > 0.01 m"
     assert "limit_m = 0.01" in (failure.text or "")
     assert cases["onboard_vs_reference"].find("failure") is None
-    assert "max_position_error_m = 3e-05" in (cases["onboard_vs_reference"].findtext("system-out"))
+    system_out = cases["onboard_vs_reference"].findtext("system-out")
+    assert system_out is not None
+    assert "max_position_error_m = 3e-05" in system_out
 
 
 def test_junit_escapes_what_xml_cannot_hold_raw() -> None:
