@@ -155,7 +155,8 @@ def wandering_drive(
     """Count deltas of a drive of straight runs and arcs of both senses (about ``step_m`` per
     step), turning back now and then so that it wanders instead of running away."""
     rng = np.random.default_rng(seed)
-    per_count = 2.0 * math.pi * robot.wheel_radius_m / robot.counts_per_rev
+    mean_radius_m = 0.5 * (robot.wheel_radius_left_m + robot.wheel_radius_right_m)
+    per_count = 2.0 * math.pi * mean_radius_m / robot.counts_per_rev
     base = step_m / per_count
     segment = rng.integers(50, 400, size=steps // 50 + 2)
     curvature = rng.choice([0.0, 0.0, 0.01, -0.01, 0.05, -0.05, 0.002], size=len(segment))
