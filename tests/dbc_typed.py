@@ -65,3 +65,14 @@ def choices(db: Database, message: str, signal: str) -> dict[int, str]:
     table = db.get_message_by_name(message).get_signal_by_name(signal).choices
     assert table is not None, f"{message}.{signal} has no VAL_ table"
     return {raw: str(name) for raw, name in table.items()}
+
+
+def integers(message: Message, data: bytes | bytearray) -> dict[str, int]:
+    """One frame of ``message`` decoded (scaled, choices not decoded), every signal an integer."""
+    signals = message.decode(bytes(data), decode_choices=False)
+    assert isinstance(signals, dict), f"{message.name}: a container message"
+    out: dict[str, int] = {}
+    for name, value in signals.items():
+        assert isinstance(value, int), (message.name, name, value)
+        out[name] = value
+    return out
