@@ -31,6 +31,7 @@ from odocan.sim.errors import ErrorModel
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import get_scenario
+from tests import dbc_typed
 
 PMIR = load("pmir")
 EPS_S = 1e-6
@@ -65,7 +66,9 @@ def recorded(config: RigConfig, seconds: float, **kwargs: Any) -> list[can.Messa
 def decode(msg: can.Message) -> dict[str, Any]:
     """Raw signal values of one frame (choices as names only for STATE and PAGE)."""
     return dict(
-        database().decode_message(msg.arbitration_id, msg.data, scaling=False, decode_choices=False)
+        dbc_typed.decode(
+            database(), msg.arbitration_id, msg.data, scaling=False, decode_choices=False
+        )
     )
 
 
@@ -121,11 +124,10 @@ def _gated_run(gap: tuple[int, int] | None) -> list[can.Message]:
 
 def _states(messages: list[can.Message]) -> list[tuple[float, str]]:
     """(timestamp, STATE name) of every ODOM_STATUS summary page."""
-    message = database().get_message_by_frame_id(fr.ODOM_STATUS_ID)
     out = []
     for msg in messages:
         if msg.arbitration_id == fr.ODOM_STATUS_ID:
-            signals = message.decode(msg.data)
+            signals = dbc_typed.decode(database(), fr.ODOM_STATUS_ID, msg.data)
             if signals["PAGE"] == "SUMMARY":
                 out.append((msg.timestamp, str(signals["STATE"])))
     return out
@@ -141,7 +143,8 @@ def test_watchdog_degrades_without_encoder_frames_and_recovers() -> None:
     states = _states(messages)
     status_s = STATUS_PERIOD_TICKS * TICK_S
     before = [s for t, s in states if t <= last_before]
-    assert len(before) >= 10 and set(before[1:]) == {"OK"}
+    assert len(before) >= 10
+    assert set(before[1:]) == {"OK"}
     degraded_at = min(t for t, s in states if s == "DEGRADED")
     deadline = last_before + WATCHDOG_TICKS * TICK_S + status_s + TX_LATENCY_S + EPS_S
     assert last_before < degraded_at <= deadline
@@ -231,7 +234,9 @@ def test_pose_is_unchanged_by_counter_wraps(scenario: str, bits: int) -> None:
 
 def test_firmware_cycle_constants_agree_with_the_dbc() -> None:
     def cycle_us(name: str) -> int:
-        return int(message(name).cycle_time) * 1000  # GenMsgCycleTime, ms
+        cycle_ms = message(name).cycle_time  # GenMsgCycleTime
+        assert cycle_ms is not None, name
+        return int(cycle_ms) * 1000
 
     assert cycle_us("WHEEL_ENCODERS") == ENCODER_PERIOD_US == TICK_PERIOD_US
     for name in ("ODOM_POSE_X", "ODOM_POSE_Y", "ODOM_TWIST"):
