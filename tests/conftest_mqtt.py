@@ -48,7 +48,8 @@ class Mosquitto:
     """A mosquitto process on a free loopback port; ``restart`` keeps its port and its data."""
 
     def __init__(self, workdir: Path) -> None:
-        assert MOSQUITTO is not None and MOSQUITTO_PASSWD is not None
+        assert MOSQUITTO is not None
+        assert MOSQUITTO_PASSWD is not None
         self.port = free_loopback_port()
         self.dir = workdir
         passwd = workdir / "passwd"
@@ -76,6 +77,7 @@ class Mosquitto:
 
     def start(self) -> None:
         """Start and wait until the port accepts connections."""
+        assert MOSQUITTO is not None  # as in __init__: the marker skips without it
         self.proc = subprocess.Popen([MOSQUITTO, "-c", str(self.conf)],
                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         deadline = time.monotonic() + 10
