@@ -19,6 +19,7 @@ import shutil
 import subprocess
 import sys
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -85,7 +86,8 @@ def test_the_c_frame_code_is_what_cantools_generates_from_the_dbc(tmp_path: Path
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
     for name in ("odocan.c", "odocan.h"):
         committed = (C_DIR / "dbc" / name).read_text(encoding="utf-8")
-        assert "float" not in committed and "double" not in committed
+        assert "float" not in committed
+        assert "double" not in committed
         assert "odocan_nav_goal_unpack" in committed
 
 
@@ -102,7 +104,8 @@ def test_dbc_check_catches_a_stale_frame_file(tmp_path: Path) -> None:
         text=True,
         check=False,
     )
-    assert result.returncode != 0 and "0x101u" in result.stdout
+    assert result.returncode != 0
+    assert "0x101u" in result.stdout
 
 
 @pytest.mark.slow
@@ -152,7 +155,9 @@ def test_one_changed_integer_fails_the_c_check(tmp_path: Path) -> None:
     x = re.findall(r'"x_q40_m": (-?\d+)', text)[200]
     bad_json = tmp_path / "bad.json"
     bad_json.write_text(text.replace(f'"x_q40_m": {x},', f'"x_q40_m": {int(x) + 1},', 1))
-    bad = subprocess.run([str(build / "vectors_check"), str(bad_json)], capture_output=True)
+    bad = subprocess.run(
+        [str(build / "vectors_check"), str(bad_json)], capture_output=True, text=True
+    )
     assert bad.returncode == 1
 
     wrong_radius = text.replace(
@@ -169,7 +174,8 @@ def test_one_changed_integer_fails_the_c_check(tmp_path: Path) -> None:
 def test_the_long_random_case_wraps_spins_and_is_deterministic() -> None:
     case = vectors.random_case(16, 3000, seed=4)
     assert case.counts == vectors.random_case(16, 3000, seed=4).counts
-    assert len(case.counts) == 3001 and all(0 <= c < 1 << 16 for pair in case.counts for c in pair)
+    assert len(case.counts) == 3001
+    assert all(0 <= c < 1 << 16 for pair in case.counts for c in pair)
     deltas = [
         (wrap_signed(b[0] - a[0], 16), wrap_signed(b[1] - a[1], 16))
         for a, b in itertools.pairwise(case.counts)
@@ -228,7 +234,7 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
     dheads = [rng.randrange(I64_MIN, I64_MAX + 1) for _ in range(3_000)]
     dheads += [rng.randrange(-(1 << 45), 1 << 45) for _ in range(1_000)]
     dheads += [I64_MIN, I64_MAX, 0, 1, -1]
-    dheads += [((lim << 65) // odometry.TWO_PI_Q60) + d for lim in limits for d in range(-3, 4)]
+    dheads += [((lim << 65) // config.TWO_PI_Q60) + d for lim in limits for d in range(-3, 4)]
     for dh in dheads:
         ask(f"chord {dh}", odometry.chord_factor_q62(dh))
     for _ in range(3_000):
@@ -254,9 +260,12 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
         errors = ErrorMask()
         ask(f"sat_i32 {s}", fixmath.sat_i32(s, errors), errors.bits)
     for _ in range(1_500):
+        counts_per_rev = rng.randrange(0, 1 << 25)
+        left_nm, right_nm = (rng.randrange(0, 2_100_000_000) for _ in range(2))
         params = config.RobotParams(
-            rng.randrange(0, 1 << 25),
-            *(rng.randrange(0, 2_100_000_000) for _ in range(2)),
+            counts_per_rev,
+            left_nm,
+            right_nm,
             rng.randrange(0, U32_MAX),
             rng.choice((16, 32, 8)),
             rng.choice((0, 1, 2, 3)),
@@ -373,7 +382,8 @@ def _ecu_session(
     def goal() -> None:
         e = ErrorMask()
         for field, value in ((0, rng.randrange(-3000, 3000)), (1, rng.randrange(-3000, 3000))):
-            host(frames.NAV_GOAL_ID, lambda c, f=field, v=value: frames.pack_nav_goal(c, f, v, e))
+            pack = partial(frames.pack_nav_goal, field=field, value=value, errors=e)
+            host(frames.NAV_GOAL_ID, pack)
         host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal(c, 2, rng.randrange(1 << 16), e))
         go = (rng.randrange(2), rng.randrange(2), rng.randrange(2), rng.randrange(256))
         host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal_go(c, *go, e))
@@ -425,20 +435,22 @@ def _ecu_session(
             value = rng.randrange(-100_000, 100_000) if field < 2 else rng.randrange(1 << 16)
             host(
                 frames.ODOM_SET_POSE_ID,
-                lambda c, f=field, v=value: frames.pack_odom_set_pose(c, f, v, ErrorMask()),
+                partial(frames.pack_odom_set_pose, field=field, value=value, errors=ErrorMask()),
             )
         elif roll < 18:
             param = rng.choice((0, 0, 1, 2, 3, 4, 5, 15, 15, 15, 9))
-            value = {
+            by_param = {
                 0: rng.choice((500, 2578, 0, 500)),
                 4: rng.choice((16, 32)),
                 5: rng.randrange(3),
             }
-            value.update({1: 75_000_000, 2: rng.choice((75_000_000, 35_000_000)), 3: 300_000_000})
-            v = value.get(param, 0)
+            by_param.update(
+                {1: 75_000_000, 2: rng.choice((75_000_000, 35_000_000)), 3: 300_000_000}
+            )
+            v = by_param.get(param, 0)
             host(
                 frames.ODOM_CONFIG_ID,
-                lambda c, p=param, v=v: frames.pack_odom_config(c, p, v, ErrorMask()),
+                partial(frames.pack_odom_config, param=param, value=v, errors=ErrorMask()),
             )
         elif roll < 20:
             rx(rng.choice((0x123, frames.ODOM_POSE_X_ID)), rng.randbytes(8))  # not for this node
@@ -484,7 +496,7 @@ def _frames(rng: random.Random, ask: Callable[..., None]) -> None:
         for data in (frame, junk):
             ask(f"enc_unpack {data.hex()}", *frames.unpack_wheel_encoders(data)[:3])
         speeds = [rng.randrange(I16_MIN, I16_MAX + 1) for _ in range(2)]
-        motor = frames.pack_motor_cmd(counter, *speeds, ErrorMask())
+        motor = frames.pack_motor_cmd(counter, speeds[0], speeds[1], ErrorMask())
         ask(f"motor_pack {counter} {speeds[0]} {speeds[1]}", motor.hex().upper())
         field = rng.choice((0, 1, 2, 14, 15, rng.randrange(16)))
         if field == NavGoalField.GO:
@@ -501,7 +513,7 @@ def _nav_functions(rng: random.Random, ask: Callable[..., None]) -> None:
     big = [I64_MIN, I64_MAX, 0, -1, 1 << 51, -(1 << 51)]
     pairs = [(rng.randrange(I64_MIN, I64_MAX + 1) >> rng.randrange(64), 0) for _ in range(2_000)]
     pairs = [(dx, rng.randrange(I64_MIN, I64_MAX + 1) >> rng.randrange(64)) for dx, _ in pairs]
-    pairs += list(itertools.product(big, repeat=2))
+    pairs += list(itertools.product(big, big))
     for dx, dy in pairs:
         errors = ErrorMask()
         ask(f"dist {dx} {dy}", nav.distance_um(dx, dy, errors), errors.bits)
@@ -607,7 +619,9 @@ def _e2e_session(rng: random.Random, ask: Callable[..., None]) -> None:
     ask(f"rx {data_ids.hex()} {init} {int(per_period)}", "ok")
 
     def state(status: e2e.E2EStatus) -> tuple[int, ...]:
-        counts = (rx.count_ok, rx.count_oksomelost, rx.count_repeated, rx.count_wrongsequence)
+        counts: tuple[int, ...] = (
+            rx.count_ok, rx.count_oksomelost, rx.count_repeated, rx.count_wrongsequence
+        )
         counts += (rx.count_error, rx.count_nonewdata, rx.lost_frames)
         window = (rx.last_valid_counter, rx.max_delta_counter, rx.lost_data, rx.accepted())
         return (int(status), *counts, *window)
@@ -646,7 +660,8 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
     ticks = [w.split() for c, w in zip(cmds, want, strict=True) if c.startswith("ecu_tick")]
     assert {int(t[0]) for t in ticks} == {0, 1, 2, 3}  # INIT, OK, DEGRADED, FAULT
     assert {int(t[1]) for t in ticks} == set(Reason), "every REASON, CONFIG_INVALID included"
-    assert any(c.startswith("ecu_tick_at") for c in cmds) and "ecu_tick" in cmds
+    assert any(c.startswith("ecu_tick_at") for c in cmds)
+    assert "ecu_tick" in cmds
     health = ErrorFlag.TIME_LOST | ErrorFlag.IMPLAUSIBLE_STEP | ErrorFlag.COUNTER_RESET
     assert all(any(int(t[2]) & flag for t in ticks) for flag in health)
     states = [(int(t[0]), int(t[1])) for t in ticks]
@@ -655,7 +670,8 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
         for before, after in itertools.pairwise(states)
         if before == (State.DEGRADED, Reason.COUNTER_RESET) and after[0] != State.DEGRADED
     ]
-    assert recovered and all(after == (State.OK, Reason.NONE) for after in recovered)
+    assert recovered
+    assert all(after == (State.OK, Reason.NONE) for after in recovered)
     lost = [
         i
         for i in range(1, len(ticks))
@@ -668,7 +684,8 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
         for f in t[4:]
         if f.startswith(f"{frames.ODOM_TWIST_ID:X}:")
     ]
-    assert len(lost) >= 5 and any(twists_after_gap), "stalls while driving: the twist after a gap"
+    assert len(lost) >= 5, "stalls while driving: the twist after a gap"
+    assert any(twists_after_gap), "stalls while driving: the twist after a gap"
     sent = {f.split(":")[0] for t in ticks for f in t[4:]}
     assert sent == {"110", "200", "201", "202", "281", "302", "380"}
     assert max(int(t[3]) for t in ticks) > 0, "the TX queue refused frames"
