@@ -14,6 +14,7 @@ $(BIN)/odocan: pyproject.toml
 run: $(BIN)/odocan
 	$(BIN)/odocan run
 
+# ruff over the whole tree; mypy over the files pyproject names (odocan, tests, examples).
 lint: $(BIN)/odocan
 	$(BIN)/ruff check .
 	$(BIN)/mypy

@@ -26,7 +26,8 @@ def test_navigates_to_a_goal_with_exact_odometry(odocan_rig):
     rig.run_until_reached(goal, timeout_s=30)
 
     status = rig.nav_status
-    assert status["GOAL_ID"] == goal and status["STATE"] == "REACHED"
+    assert status["GOAL_ID"] == goal
+    assert status["STATE"] == "REACHED"
     x, y, heading = rig.pose
     assert math.hypot(x - 1.0, y - 0.5) <= 0.005  # the firmware's position tolerance: 5 mm
     assert abs(heading - math.pi / 2) <= 0.0088  # its heading tolerance: 0.5 degree (+ 1 LSB)

@@ -59,7 +59,8 @@ class Mosquitto:
     ) -> None:
         """``users`` (default ``USERS``) and ``acl`` (default ``ACL``); ``listener``: more lines
         for the listener (e.g. its TLS settings)."""
-        assert MOSQUITTO is not None and MOSQUITTO_PASSWD is not None
+        assert MOSQUITTO is not None
+        assert MOSQUITTO_PASSWD is not None
         self.port = free_loopback_port()
         self.dir = workdir
         self.users = USERS if users is None else users
@@ -89,6 +90,7 @@ class Mosquitto:
 
     def start(self) -> None:
         """Start and wait until the port accepts connections."""
+        assert MOSQUITTO is not None  # as in __init__: the marker skips without it
         self.proc = subprocess.Popen([MOSQUITTO, "-c", str(self.conf)],
                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         deadline = time.monotonic() + 10

@@ -14,6 +14,7 @@ import tracemalloc
 import uuid
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from functools import partial
 
 import can
 import numpy as np
@@ -33,6 +34,7 @@ from odocan.sim.motor_controller import SimNode
 from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import RandomScenario, Scenario
 from odocan.sim.vehicle import Vehicle
+from tests.dbc_typed import dbc_attribute
 from tests.odo_helpers import geometry, params
 
 Observer = Callable[[int, list[can.Message]], None]
@@ -222,20 +224,27 @@ def _firmware_packers() -> dict[tuple[str, int | None], Callable[[int], bytes]]:
         ("ODOM_ACK", None): lambda c: fr.pack_odom_ack(c, 3, fr.ODOM_CONFIG_ID, 2, 1, 1, e),
     }
     for f in fr.SetPoseField:
-        packers["ODOM_SET_POSE", int(f)] = lambda c, f=f: fr.pack_odom_set_pose(c, f, 7_654, e)
+        packers["ODOM_SET_POSE", int(f)] = partial(
+            fr.pack_odom_set_pose, field=f, value=7_654, errors=e
+        )
     for p in fr.ConfigParam:
         value = (
             32 if p == fr.ConfigParam.COUNTER_BITS else 2 if p == fr.ConfigParam.INTEGRATOR else 75
         )
-        packers["ODOM_CONFIG", int(p)] = lambda c, p=p, v=value: fr.pack_odom_config(c, p, v, e)
+        packers["ODOM_CONFIG", int(p)] = partial(
+            fr.pack_odom_config, param=p, value=value, errors=e
+        )
     packers["ODOM_STATUS", 0] = lambda c: fr.pack_odom_status_summary(c, 1, 2, 0x0102, 3600, e)
     packers["ODOM_STATUS", 1] = lambda c: fr.pack_odom_status_frame_totals(c, 5, 6, 7)
     for page in range(2, 16):
-        packers["ODOM_STATUS", page] = lambda c, g=page: fr.pack_odom_status_e2e(
-            c, g, 1000, 1, 2, 3, 4
+        packers["ODOM_STATUS", page] = partial(
+            fr.pack_odom_status_e2e, page=page, ok=1000, lost=1, repeated=2, crc_error=3,
+            wrong_sequence=4,
         )
     for part in fr.SimTruthPart:
-        packers["SIM_TRUTH", int(part)] = lambda c, t=part: fr.pack_sim_truth(c, t, 9, -4321, e)
+        packers["SIM_TRUTH", int(part)] = partial(
+            fr.pack_sim_truth, part=part, enc_counter=9, value=-4321, errors=e
+        )
     return packers
 
 
@@ -273,13 +282,13 @@ def protected_frames(counter: int) -> dict[tuple[str, int | None], tuple[int, by
 
 def dbc_data_ids(frame_id: int) -> tuple[int, ...]:
     """The message's Profile 2 DataIDList from the DBC's ``E2EDataIDs`` attribute."""
-    attr = database().get_message_by_frame_id(frame_id).dbc.attributes["E2EDataIDs"].value
+    attr = dbc_attribute(database().get_message_by_frame_id(frame_id), "E2EDataIDs")
     return tuple(int(v) for v in attr.split(","))
 
 
 def _cantools_frame(name: str, mux: int | None, counter: int) -> bytes:
     msg = database().get_message_by_name(name)
-    values: dict[str, int | None] = {}
+    values: dict[str, int] = {}
     for s in msg.signals:
         if mux is not None and s.multiplexer_ids and mux not in s.multiplexer_ids:
             continue
@@ -291,6 +300,7 @@ def _cantools_frame(name: str, mux: int | None, counter: int) -> bytes:
     values["CHECKSUM"] = 0
     mux_signal = next((s for s in msg.signals if s.is_multiplexer), None)
     if mux_signal is not None:
+        assert mux is not None, name  # a multiplexed message is always asked for by page
         values[mux_signal.name] = mux
     data = bytearray(msg.encode(values, scaling=False, strict=False))
     data[0] = p02_crc(data, dbc_data_ids(msg.frame_id)[counter])

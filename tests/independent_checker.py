@@ -35,6 +35,7 @@ import cantools
 from cantools.database.can import Database
 
 from odocan.sim.contract import DBC_PATH
+from tests.dbc_typed import dbc_attribute
 
 POSITION_LSB_M = 1e-4
 HEADING_LSB_RAD = 2.0 * math.pi / 65536.0
@@ -84,7 +85,7 @@ class _Frames:
         db = cantools.database.load_file(str(DBC_PATH))
         assert isinstance(db, Database)
         self.db = db
-        self._ids = {m.frame_id: [int(v) for v in m.dbc.attributes["E2EDataIDs"].value.split(",")]
+        self._ids = {m.frame_id: [int(v) for v in dbc_attribute(m, "E2EDataIDs").split(",")]
                      for m in db.messages}
         self.rows: list[tuple[float, str, dict[str, float | int]]] = []
         last_counter: dict[int, int] = {}

@@ -30,6 +30,7 @@ from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import OdocanError
 from odocan.sim.rig import INTEGRATORS, LockstepRig, RigConfig
 from odocan.sim.robot import load
+from tests.dbc_typed import dbc_attribute
 from tests.synth_log import Synth, synthesize, wandering_drive
 
 PMIR = load("pmir")
@@ -64,7 +65,8 @@ def test_onboard_matches_reference_within_one_lsb(integrator: str) -> None:
     report = analysis.report
     assert set(report) >= REPORT_KEYS
     json.dumps(report)
-    assert analysis.passed and report["passed"]
+    assert analysis.passed
+    assert report["passed"]
     assert report["integrator"] == integrator  # read from ODOM_STATUS
     ref = report["onboard_vs_reference"]
     assert ref["max_position_error_m"] <= POSITION_LSB_M
@@ -136,7 +138,7 @@ def test_a_wrong_onboard_pose_fails() -> None:
     target = int(poses[len(poses) // 2])
     x = int.from_bytes(frames.data[target, 2:6].tobytes(), "little", signed=True) + 3
     frames.data[target, 2:6] = np.frombuffer(x.to_bytes(4, "little", signed=True), np.uint8)
-    ids = database().get_message_by_name("ODOM_POSE_X").dbc.attributes["E2EDataIDs"].value
+    ids = dbc_attribute(database().get_message_by_name("ODOM_POSE_X"), "E2EDataIDs")
     reprotect(frames, target, tuple(int(v) for v in ids.split(",")))
     analysis = analyze(frames, PMIR)
     assert not analysis.passed
@@ -259,4 +261,5 @@ def test_a_recorder_started_late_is_not_a_power_up(tmp_path: Path) -> None:
     late = analyze(read_log(synth.write(tmp_path / "late.log", 4)), profile)
     assert (whole.report["reference_start"], late.report["reference_start"]) == (
         "power-up", "fitted")
-    assert whole.passed and late.passed
+    assert whole.passed
+    assert late.passed

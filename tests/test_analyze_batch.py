@@ -121,7 +121,9 @@ def test_good_and_unreadable_logs_analyse_the_good_and_name_the_bad(
     assert code == 2
     (line,) = err.splitlines()
     assert line.startswith("error: 2 unreadable: ")
-    assert str(garbage) in line and str(empty) in line and "a.log" not in line
+    assert str(garbage) in line
+    assert str(empty) in line
+    assert "a.log" not in line
     assert "1 PASS, 0 FAIL, 1 unreadable" in out
     (written,) = reports_by_log(tmp_path / "reports").values()
     assert written["onboard_vs_reference"] == singles["a.log"]["onboard_vs_reference"]

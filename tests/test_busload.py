@@ -108,7 +108,8 @@ def test_arbitration_order() -> None:
         sched.arbitration_key((0x100 << 18) | 1, extended=True),
         sched.arbitration_key(0x101, extended=False),
     ]
-    assert keys == sorted(keys) and len(set(keys)) == 4
+    assert keys == sorted(keys)
+    assert len(set(keys)) == 4
 
 
 # --- an independent simulation of CAN arbitration --------------------------------------------
@@ -198,7 +199,8 @@ def analysed(flows: list[Flow], tau_ns: int) -> list[Response]:
 def assert_reached_from_critical_instant(flows: list[Flow], tau_ns: int) -> None:
     """For every flow: simulated from its critical instant, R - tau < simulated <= R."""
     for m, response in enumerate(analysed(flows, tau_ns)):
-        assert response.r_ns is not None and response.busy_ns is not None
+        assert response.r_ns is not None
+        assert response.busy_ns is not None
         instances, blocking_ns = critical_instant(flows, m, response.busy_ns)
         simulated = simulate(flows, instances, blocking_ns)[m]
         assert response.r_ns - tau_ns < simulated <= response.r_ns, flows[m].name
@@ -213,7 +215,8 @@ def test_analysis_bounds_every_simulated_response(seed: int) -> None:
     for _ in range(5):
         worst = simulate(flows, random_phasing(flows, rng, 200 * MS), 0)
         for flow, simulated, bound in zip(flows, worst, bounds, strict=True):
-            assert bound is not None and simulated <= bound, flow.name
+            assert bound is not None, flow.name
+            assert simulated <= bound, flow.name
     for m, flow in enumerate(flows):  # and from each flow's critical instant
         busy_ns = analysed(flows, tau_ns)[m].busy_ns
         assert busy_ns is not None
@@ -230,7 +233,8 @@ def test_bound_is_tight_up_to_the_tau_window(seed: int) -> None:
     tau_ns = sched.bit_time_ns(125_000)
     flows = random_flows(random.Random(seed), tau_ns)
     for m, response in enumerate(analysed(flows, tau_ns)):
-        assert response.r_ns is not None and response.busy_ns is not None
+        assert response.r_ns is not None
+        assert response.busy_ns is not None
         instances, blocking_ns = critical_instant(flows, m, response.busy_ns)
         simulated = simulate(flows, instances, blocking_ns)[m]
         assert simulated <= response.r_ns
@@ -302,10 +306,14 @@ def test_davis_example_tindell_analysis_is_optimistic() -> None:
 def test_davis_example_revised_analysis_finds_the_miss() -> None:
     a, b, c = analysed(DAVIS_SET, DAVIS_TAU_NS)
     assert (a.r_ns, b.r_ns) == (2 * MS, 3 * MS)
-    assert c.busy_ns == 7 * MS and c.instances == 2
-    assert c.worst_instance == 1 and c.r_ns == 3500 * US  # the second instance, 3.5 ms > 3.25 ms
-    assert not c.meets_deadline and c.slack_ns == -250 * US
-    assert a.meets_deadline and b.meets_deadline
+    assert c.busy_ns == 7 * MS
+    assert c.instances == 2
+    assert c.worst_instance == 1
+    assert c.r_ns == 3500 * US  # the second instance, 3.5 ms > 3.25 ms
+    assert not c.meets_deadline
+    assert c.slack_ns == -250 * US
+    assert a.meets_deadline
+    assert b.meets_deadline
 
 
 def test_davis_example_simulated_second_instance_misses() -> None:
@@ -326,8 +334,12 @@ def test_full_bus_is_unbounded_and_misses() -> None:
         Flow("c", 3, 1 * MS, 1000_000 * MS, 1000_000 * MS),
     ]
     a, b, c = analysed(flows, DAVIS_TAU_NS)
-    assert a.meets_deadline and a.r_ns == 2 * MS
-    assert b.busy_ns is None and b.r_ns is None and b.slack_ns is None and not b.meets_deadline
+    assert a.meets_deadline
+    assert a.r_ns == 2 * MS
+    assert b.busy_ns is None
+    assert b.r_ns is None
+    assert b.slack_ns is None
+    assert not b.meets_deadline
     assert c.r_ns is None
     assert b.b_ns == 1 * MS
 

@@ -103,8 +103,10 @@ def test_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "busload.json"
     code, _, _ = run_cli(capsys, "busload", "-b", "500000", "--report", str(path))
     report = json.loads(path.read_text())
-    assert code == 0 and report["schedulable"] is True
-    assert report["bitrate"] == 500_000 and report["bit_time_us"] == 2.0
+    assert code == 0
+    assert report["schedulable"] is True
+    assert report["bitrate"] == 500_000
+    assert report["bit_time_us"] == 2.0
     assert report["utilization"] == pytest.approx(0.27 * (5 / 10 + 4 / 20 + 3 / 100))
     assert report["utilization_cyclic"] == pytest.approx(0.27 * (1 / 10 + 4 / 20 + 3 / 100))
     assert (report["worst_slack_message"], report["worst_slack_ms"]) == ("ODOM_ACK", 7.03)
@@ -114,7 +116,8 @@ def test_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
         "c_ms": 0.27, "j_ms": 0.0, "b_ms": 0.27, "r_ms": 0.54,
     }  # fmt: skip
     ack = next(m for m in report["messages"] if m["name"] == "ODOM_ACK")
-    assert ack["kind"] == "sporadic" and "shortest cycle time" in ack["assumption"]
+    assert ack["kind"] == "sporadic"
+    assert "shortest cycle time" in ack["assumption"]
     assert report["sender_tick_ms"]["ODOM_MCU"] == 20.0
 
 
@@ -128,7 +131,8 @@ def test_what_if_added_message_makes_another_miss(
     assert code == 1
     assert out.splitlines()[-1] == "MISS: can miss the deadline: ODOM_ACK"
     report = json.loads(path.read_text())
-    assert report["added"] == ["HOG:0x050:8:1.2"] and report["schedulable"] is False
+    assert report["added"] == ["HOG:0x050:8:1.2"]
+    assert report["schedulable"] is False
     first, ack = report["messages"][0], report["messages"][10]
     assert (first["name"], first["r_ms"], first["slack_ms"]) == ("HOG", 1.08, 0.12)
     assert (ack["name"], ack["r_ms"], ack["slack_ms"]) == ("ODOM_ACK", 14.58, -4.58)
@@ -138,9 +142,11 @@ def test_125k_misses_with_default_sporadic_assumption_and_meets_with_100ms(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     code, out, _ = run_cli(capsys, "busload", "-b", "125000")
-    assert code == 1 and "MISS: can miss the deadline: ODOM_CONFIG, ODOM_ACK" in out
+    assert code == 1
+    assert "MISS: can miss the deadline: ODOM_CONFIG, ODOM_ACK" in out
     code, out, _ = run_cli(capsys, "busload", "-b", "125000", "--sporadic-ms", "100")
-    assert code == 0 and "least slack 7.840 ms (WHEEL_ENCODERS)" in out
+    assert code == 0
+    assert "least slack 7.840 ms (WHEEL_ENCODERS)" in out
 
 
 def test_tick_option_sets_the_jitter(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -161,17 +167,21 @@ def test_another_dbc(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
     argv = ["busload", "--dbc", str(dbc), "-b", "125000", "--report", str(report_path)]
     code, out, _ = run_cli(capsys, *argv)
     messages = {m["name"]: m for m in json.loads(report_path.read_text())["messages"]}
-    assert code == 1 and out.splitlines()[-1] == "MISS: can miss the deadline: SLOW"
+    assert code == 1
+    assert out.splitlines()[-1] == "MISS: can miss the deadline: SLOW"
     assert "- BARE: no cycle time: sporadic, min inter-arrival = the DBC's shortest cycle" in out
     assert (messages["SLOW"]["period_ms"], messages["SLOW"]["deadline_ms"]) == (10.0, 1.0)
     # blocked by BIG (160 bits, 1.28 ms), then FAST and itself (135 bits, 1.08 ms each)
     assert messages["SLOW"]["r_ms"] == pytest.approx(1.28 + 2 * 1.08)
-    assert messages["EVENT"]["period_ms"] == 50.0 and "GenMsgDelayTime" in messages["EVENT"][
+    assert messages["EVENT"]["period_ms"] == 50.0
+    assert "GenMsgDelayTime" in messages["EVENT"][
         "assumption"
     ]
     assert messages["BARE"]["period_ms"] == 5.0  # the shortest cycle, FAST's
     big = messages["BIG"]
-    assert big["extended"] and big["bits"] == 160 and big["id"] == 0x18FF0000
+    assert big["extended"]
+    assert big["bits"] == 160
+    assert big["id"] == 0x18FF0000
     assert list(messages)[-1] == "BIG"  # 29-bit ID 0x18FF0000: base 0x63F, the lowest priority
     code, _, _ = run_cli(capsys, "busload", "--dbc", str(small_dbc(tmp_path, 10)), "-b", "125000")
     assert code == 0

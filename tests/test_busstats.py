@@ -89,13 +89,16 @@ def test_the_wire_and_the_log_count_the_same_bits() -> None:
     assert from_log.frames == measured.frames == len(collector) > 1000
     assert from_log.busy_bits == measured.busy_bits
     assert 111 + 3 <= measured.busy_bits / measured.frames <= 135  # 8-byte standard frames
-    assert measured.load is not None and from_log.load is not None
+    assert measured.load is not None
+    assert from_log.load is not None
     assert from_log.load == pytest.approx(measured.load, rel=1e-3)
     names = {m.name for m in measured.messages}
     assert {"WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_STATUS", "SIM_TRUTH"} <= names
     assert measured.within_bounds is True
     for m in measured.messages:
-        assert m.bound_us is not None and m.p99_us is not None and m.max_us is not None
+        assert m.bound_us is not None
+        assert m.p99_us is not None
+        assert m.max_us is not None
         assert 0 < m.p99_us <= m.max_us <= m.bound_us
         assert not m.starved
 
@@ -111,9 +114,12 @@ def test_run_and_analyze_report_the_bus(tmp_path: Path) -> None:
     done = _odocan("run", "-b", "500000", "--duration", "5", "--log", str(log),
                    "--report", str(run_json))
     assert done.returncode == 0, done.stderr
-    assert "measured load" in done.stdout and "R ms" in done.stdout
+    assert "measured load" in done.stdout
+    assert "R ms" in done.stdout
     bus = json.loads(run_json.read_text())["bus"]
-    assert bus["source"] == "run" and bus["bitrate"] == 500_000 and bus["within_bounds"] is True
+    assert bus["source"] == "run"
+    assert bus["bitrate"] == 500_000
+    assert bus["within_bounds"] is True
     assert 0.05 < bus["load"] < 0.15
     rows = {row["name"]: row for row in bus["messages"]}
     assert rows["WHEEL_ENCODERS"]["frames"] == 500
@@ -122,7 +128,8 @@ def test_run_and_analyze_report_the_bus(tmp_path: Path) -> None:
     done = _odocan("analyze", str(log), "-b", "500000", "--report", str(log_json))
     assert done.returncode == 0, done.stderr
     logged = json.loads(log_json.read_text())["bus"]
-    assert logged["source"] == "log" and logged["messages"] == []
+    assert logged["source"] == "log"
+    assert logged["messages"] == []
     assert logged["frames"] == bus["frames"] == len(read_log(log))
     assert logged["load"] == pytest.approx(bus["load"], rel=1e-3)
 
@@ -132,12 +139,16 @@ def test_latency_plot(tmp_path: Path) -> None:
     done = _odocan("run", "-b", "250000", "--duration", "2", "--latency-plot", str(plot))
     assert done.returncode == 0, done.stderr
     svg = plot.read_text()
-    assert svg.startswith("<?xml") and "WHEEL_ENCODERS" in svg and "250 kbit/s" in svg
+    assert svg.startswith("<?xml")
+    assert "WHEEL_ENCODERS" in svg
+    assert "250 kbit/s" in svg
     done = _odocan("run", "--duration", "2", "--latency-plot", str(tmp_path / "x.png"))
-    assert done.returncode == 2 and "needs a bit-timed bus" in done.stderr
+    assert done.returncode == 2
+    assert "needs a bit-timed bus" in done.stderr
     done = _odocan("run", "-b", "250000", "--duration", "2", "--latency-plot",
                    str(tmp_path / "x.pdf"))
-    assert done.returncode == 2 and "unknown format" in done.stderr
+    assert done.returncode == 2
+    assert "unknown format" in done.stderr
     assert "Traceback" not in done.stderr
 
 
@@ -172,7 +183,8 @@ def test_the_monitor_s_bus_load_over_its_window() -> None:
     window = busstats.LoadWindow(window_s=1.0, max_frames=10)
     for k in range(100):
         window.add(can.Message(timestamp=0.001 * (k + 1), arbitration_id=0, is_extended_id=False))
-    assert window.snapshot(None)["frames"] == 10 and window.snapshot(None)["load"] is None
+    assert window.snapshot(None)["frames"] == 10
+    assert window.snapshot(None)["load"] is None
     assert window.bits_per_s() == pytest.approx(53_000, rel=1e-6)  # 9 frames over 9 ms
 
 

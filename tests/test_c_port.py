@@ -19,6 +19,7 @@ import shutil
 import subprocess
 import sys
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -85,7 +86,8 @@ def test_the_c_frame_code_is_what_cantools_generates_from_the_dbc(tmp_path: Path
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
     for name in ("odocan.c", "odocan.h"):
         committed = (C_DIR / "dbc" / name).read_text(encoding="utf-8")
-        assert "float" not in committed and "double" not in committed
+        assert "float" not in committed
+        assert "double" not in committed
         assert "odocan_nav_goal_unpack" in committed
 
 
@@ -102,7 +104,8 @@ def test_dbc_check_catches_a_stale_frame_file(tmp_path: Path) -> None:
         text=True,
         check=False,
     )
-    assert result.returncode != 0 and "0x101u" in result.stdout
+    assert result.returncode != 0
+    assert "0x101u" in result.stdout
 
 
 @pytest.mark.slow
@@ -152,7 +155,9 @@ def test_one_changed_integer_fails_the_c_check(tmp_path: Path) -> None:
     x = re.findall(r'"x_q40_m": (-?\d+)', text)[200]
     bad_json = tmp_path / "bad.json"
     bad_json.write_text(text.replace(f'"x_q40_m": {x},', f'"x_q40_m": {int(x) + 1},', 1))
-    bad = subprocess.run([str(build / "vectors_check"), str(bad_json)], capture_output=True)
+    bad = subprocess.run(
+        [str(build / "vectors_check"), str(bad_json)], capture_output=True, text=True
+    )
     assert bad.returncode == 1
 
     wrong_radius = text.replace(
@@ -169,7 +174,8 @@ def test_one_changed_integer_fails_the_c_check(tmp_path: Path) -> None:
 def test_the_long_random_case_wraps_spins_and_is_deterministic() -> None:
     case = vectors.random_case(16, 3000, seed=4)
     assert case.counts == vectors.random_case(16, 3000, seed=4).counts
-    assert len(case.counts) == 3001 and all(0 <= c < 1 << 16 for pair in case.counts for c in pair)
+    assert len(case.counts) == 3001
+    assert all(0 <= c < 1 << 16 for pair in case.counts for c in pair)
     deltas = [
         (wrap_signed(b[0] - a[0], 16), wrap_signed(b[1] - a[1], 16))
         for a, b in itertools.pairwise(case.counts)
@@ -212,6 +218,33 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
         cmds.append(cmd)
         want.append(" ".join(str(a) for a in answer))
 
+    _trig_probes(rng, ask)
+    _fixmath_probes(rng, ask)
+    _config_probes(rng, ask)
+    _crc_probes(rng, ask)
+    for _ in range(40):
+        _e2e_session(rng, ask)
+    _nav_functions(rng, ask)
+    for _ in range(12):
+        _nav_session(rng, ask)
+    _frames(rng, ask)
+    for robot, integrator, timed in (
+        ("pmir", "exact", True),
+        ("kobuki", "rk2", True),
+        ("pmir", "euler", False),
+    ):
+        _ecu_session(rng, ask, robot, integrator, timed=timed)
+    _ecu_session(rng, ask, "kobuki", "exact", counts_per_rev=0)  # FAULT until configured
+    _ecu_session(rng, ask, "kobuki", "euler", counter_bits=32)  # rebuilt from the 24-bit wire
+    _secoc_functions(rng, ask)
+    _secured_ecu_session(rng, ask)
+    _secured_ecu_session(rng, ask, key=b"")  # no valid key: fails closed
+    _secured_ecu_session(rng, ask, nvm_fails=True)  # the EPOCH cell refuses writes
+    return cmds, want
+
+
+def _trig_probes(rng: random.Random, ask: Callable[..., None]) -> None:
+    """sin/cos, atan2 and the chord factor on their knots, branch edges and random inputs."""
     angles = [(q << 30) + (k << 22) + o for q in range(4) for k in range(257) for o in (-3, 0, 3)]
     angles += [(1 << 21) * k + t for k in range(2048) for t in (-1, 0, 1)]  # knot ties
     angles += [rng.getrandbits(32) for _ in range(20_000)]
@@ -228,9 +261,13 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
     dheads = [rng.randrange(I64_MIN, I64_MAX + 1) for _ in range(3_000)]
     dheads += [rng.randrange(-(1 << 45), 1 << 45) for _ in range(1_000)]
     dheads += [I64_MIN, I64_MAX, 0, 1, -1]
-    dheads += [((lim << 65) // odometry.TWO_PI_Q60) + d for lim in limits for d in range(-3, 4)]
+    dheads += [((lim << 65) // config.TWO_PI_Q60) + d for lim in limits for d in range(-3, 4)]
     for dh in dheads:
         ask(f"chord {dh}", odometry.chord_factor_q62(dh))
+
+
+def _fixmath_probes(rng: random.Random, ask: Callable[..., None]) -> None:
+    """The fixmath helpers on random operands of every width and on their extremes."""
     for _ in range(3_000):
         a, b, c = (rng.getrandbits(rng.randrange(1, 65)) for _ in range(3))
         errors = ErrorMask()
@@ -253,10 +290,17 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
         s = rng.randrange(-(1 << 40), 1 << 40)
         errors = ErrorMask()
         ask(f"sat_i32 {s}", fixmath.sat_i32(s, errors), errors.bits)
+
+
+def _config_probes(rng: random.Random, ask: Callable[..., None]) -> None:
+    """validate and derive_constants on random parameters, mostly in range."""
     for _ in range(1_500):
+        counts_per_rev = rng.randrange(0, 1 << 25)
+        left_nm, right_nm = (rng.randrange(0, 2_100_000_000) for _ in range(2))
         params = config.RobotParams(
-            rng.randrange(0, 1 << 25),
-            *(rng.randrange(0, 2_100_000_000) for _ in range(2)),
+            counts_per_rev,
+            left_nm,
+            right_nm,
             rng.randrange(0, U32_MAX),
             rng.choice((16, 32, 8)),
             rng.choice((0, 1, 2, 3)),
@@ -287,6 +331,10 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
             k.bam64_per_count_right,
             errors.bits,
         )
+
+
+def _crc_probes(rng: random.Random, ask: Callable[..., None]) -> None:
+    """The Profile 2 CRC on AUTOSAR's vectors and random data, and its table."""
     for hex_bytes, crc in AUTOSAR_CRC8H2F.items():
         assert e2e.crc8h2f(bytes.fromhex(hex_bytes)) == crc
         ask(f"crc {hex_bytes}", crc)
@@ -294,25 +342,6 @@ def _probe_script(seed: int) -> tuple[list[str], list[str]]:
         data = rng.randbytes(rng.randrange(1, 40))
         ask(f"crc {data.hex()}", e2e.crc8h2f(data))
     ask("table", *e2e.CRC8H2F_TABLE)
-    for _ in range(40):
-        _e2e_session(rng, ask)
-    _nav_functions(rng, ask)
-    for _ in range(12):
-        _nav_session(rng, ask)
-    _frames(rng, ask)
-    for robot, integrator, timed in (
-        ("pmir", "exact", True),
-        ("kobuki", "rk2", True),
-        ("pmir", "euler", False),
-    ):
-        _ecu_session(rng, ask, robot, integrator, timed=timed)
-    _ecu_session(rng, ask, "kobuki", "exact", counts_per_rev=0)  # FAULT until configured
-    _ecu_session(rng, ask, "kobuki", "euler", counter_bits=32)  # rebuilt from the 24-bit wire
-    _secoc_functions(rng, ask)
-    _secured_ecu_session(rng, ask)
-    _secured_ecu_session(rng, ask, key=b"")  # no valid key: fails closed
-    _secured_ecu_session(rng, ask, nvm_fails=True)  # the EPOCH cell refuses writes
-    return cmds, want
 
 
 SECOC_KEY = bytes.fromhex("2b7e151628aed2a6abf7158809cf4f3c")  # RFC 4493's
@@ -502,128 +531,196 @@ def _ecu_session(
         params = dataclasses.replace(params, counts_per_rev=counts_per_rev)
     if counter_bits is not None:
         params = dataclasses.replace(params, counter_bits=counter_bits)
-    tx = _RecordingTx()
-    ecu = OdomEcu(tx, params)
-    ask(f"ecu_new {' '.join(str(v) for v in dataclasses.astuple(params))}", "ok")
-    m_per_count = 2 * math.pi * params.wheel_radius_left_nm * 1e-9 / (params.counts_per_rev or 500)
-    counts = [0.0, 0.0] if params.counter_bits == 16 else [(1 << 24) - 300.0] * 2  # wire wraps
-    speeds = [0, 0]
-    enc_counter = 0
-    nominal_us = U32_MAX - rng.randrange(1_000_000, 5_000_000)  # the timer wraps in the session
-    stalls = {rng.randrange(100, 2900): rng.choice((3, 8, 9, 10, 14, 25, 40)) for _ in range(6)}
-    reboot_tick = rng.randrange(1500, 2500)
-    host_counters = {frames.NAV_GOAL_ID: 0, frames.ODOM_SET_POSE_ID: 0, frames.ODOM_CONFIG_ID: 0}
+    session = _EcuSession(rng, ask, params, timed)
+    for tick in range(3_000):
+        session.period(tick)
 
-    def rx(can_id: int, data: bytes) -> None:
-        ecu.isr_can_rx(can_id, data)
-        ask(f"ecu_rx {can_id} {data.hex() or '-'}", "ok")
 
-    def host(can_id: int, pack: Callable[[int], bytes]) -> None:
-        counter = host_counters[can_id] = (host_counters[can_id] + 1) & 15
-        rx(can_id, pack(counter))
+class _EcuSession:
+    """One ECU session's state: the Python ECU, its kinematic robot and the host's counters."""
 
-    def goal() -> None:
-        e = ErrorMask()
+    def __init__(
+        self,
+        rng: random.Random,
+        ask: Callable[..., None],
+        params: config.RobotParams,
+        timed: bool,
+    ) -> None:
+        self.rng, self.ask, self.timed = rng, ask, timed
+        self.tx = _RecordingTx()
+        self.ecu = OdomEcu(self.tx, params)
+        ask(f"ecu_new {' '.join(str(v) for v in dataclasses.astuple(params))}", "ok")
+        self.m_per_count = (
+            2 * math.pi * params.wheel_radius_left_nm * 1e-9 / (params.counts_per_rev or 500)
+        )
+        wraps = params.counter_bits != 16  # the 24-bit wire wraps during the session
+        self.counts = [(1 << 24) - 300.0] * 2 if wraps else [0.0, 0.0]
+        self.speeds = [0, 0]
+        self.enc_counter = 0
+        self.nominal_us = U32_MAX - rng.randrange(1_000_000, 5_000_000)  # the timer wraps
+        self.stalls = {
+            rng.randrange(100, 2900): rng.choice((3, 8, 9, 10, 14, 25, 40)) for _ in range(6)
+        }
+        self.reboot_tick = rng.randrange(1500, 2500)
+        self.host_counters = {
+            frames.NAV_GOAL_ID: 0, frames.ODOM_SET_POSE_ID: 0, frames.ODOM_CONFIG_ID: 0
+        }
+
+    def rx(self, can_id: int, data: bytes) -> None:
+        self.ecu.isr_can_rx(can_id, data)
+        self.ask(f"ecu_rx {can_id} {data.hex() or '-'}", "ok")
+
+    def host(self, can_id: int, pack: Callable[[int], bytes]) -> None:
+        counter = self.host_counters[can_id] = (self.host_counters[can_id] + 1) & 15
+        self.rx(can_id, pack(counter))
+
+    def goal(self) -> None:
+        rng, e = self.rng, ErrorMask()
         for field, value in ((0, rng.randrange(-3000, 3000)), (1, rng.randrange(-3000, 3000))):
-            host(frames.NAV_GOAL_ID, lambda c, f=field, v=value: frames.pack_nav_goal(c, f, v, e))
-        host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal(c, 2, rng.randrange(1 << 16), e))
+            pack = partial(frames.pack_nav_goal, field=field, value=value, errors=e)
+            self.host(frames.NAV_GOAL_ID, pack)
+        self.host(
+            frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal(c, 2, rng.randrange(1 << 16), e)
+        )
         go = (rng.randrange(2), rng.randrange(2), rng.randrange(2), rng.randrange(256))
-        host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal_go(c, *go, e))
+        self.host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal_go(c, *go, e))
 
-    def drive() -> list[int]:
+    def drive(self) -> list[int]:
         """10 ms of the wheels at the last MOTOR_CMD; the counters' wire value."""
         for side in range(2):
-            counts[side] += speeds[side] * 1e-5 / m_per_count
-        return [round(c) % (1 << 32) for c in counts]
+            self.counts[side] += self.speeds[side] * 1e-5 / self.m_per_count
+        return [round(c) % (1 << 32) for c in self.counts]
 
-    for tick in range(3_000):
-        roll = rng.randrange(1000)
-        stall = stalls.get(tick, 0) if timed else 0
-        backlog = []
-        for _ in range(stall):  # the MCU does not run: frames pile up in the controller's FIFO
-            enc_counter = (enc_counter + 1) & 15
-            backlog.append(frames.pack_wheel_encoders(enc_counter, *drive()))
-        for frame in backlog[:3]:  # FIFO-locked, as sim/board.py's bxCAN: the first 3 kept
-            rx(frames.WHEEL_ENCODERS_ID, frame)
+    def next_encoders(self, wire: list[int]) -> bytes:
+        """The next WHEEL_ENCODERS frame (next COUNTER) carrying ``wire``."""
+        self.enc_counter = (self.enc_counter + 1) & 15
+        return frames.pack_wheel_encoders(self.enc_counter, *wire)
+
+    def period(self, tick: int) -> None:
+        """One encoder period: a stall, the motor controller's life, the frame, the host, a tick."""
+        roll = self.rng.randrange(1000)
+        stall = self.stalls.get(tick, 0) if self.timed else 0
+        self.stall(stall)
+        self.nominal_us += (stall + 1) * 10_000
+        self.motor_controller_life(tick)
+        wire = self.drive()
+        silent = 1200 <= tick < 1220  # the watchdog: DEGRADED, then recovery
+        if not silent and roll >= 20:
+            self.encoders(roll, wire)
+        self.inputs(tick, roll, wire)
+        self.tick()
+
+    def stall(self, periods: int) -> None:
+        """The MCU does not run: frames pile up in the controller's FIFO; as sim/board.py's bxCAN
+        (FIFO-locked) the first 3 are kept and an overrun interrupt follows."""
+        backlog = [self.next_encoders(self.drive()) for _ in range(periods)]
+        for frame in backlog[:3]:
+            self.rx(frames.WHEEL_ENCODERS_ID, frame)
         if len(backlog) > 3:
-            ecu.isr_rx_overrun()
-            ask("ecu_overrun", "ok")
-        nominal_us += (stall + 1) * 10_000
-        if tick == reboot_tick:  # the motor controller reboots: counters and COUNTER restart
-            offset = rng.choice((-1, 1)) * rng.randrange(5_000, 20_000)
-            counts[:] = [counts[0] + offset, counts[1] + offset]
-            enc_counter = 15
-        if tick == reboot_tick + 40:  # the host gives the pose again: COUNTER_RESET may clear
-            host(
+            self.ecu.isr_rx_overrun()
+            self.ask("ecu_overrun", "ok")
+
+    def motor_controller_life(self, tick: int) -> None:
+        """The motor controller reboots (counters and COUNTER restart); 40 ticks later the host
+        gives the pose again, so COUNTER_RESET may clear."""
+        if tick == self.reboot_tick:
+            offset = self.rng.choice((-1, 1)) * self.rng.randrange(5_000, 20_000)
+            self.counts[:] = [self.counts[0] + offset, self.counts[1] + offset]
+            self.enc_counter = 15
+        if tick == self.reboot_tick + 40:
+            self.host(
                 frames.ODOM_SET_POSE_ID,
                 lambda c: frames.pack_odom_set_pose(c, frames.SetPoseField.APPLY, 0, ErrorMask()),
             )
-        wire = drive()
-        silent = 1200 <= tick < 1220  # the watchdog: DEGRADED, then recovery
-        if not silent and roll >= 20:
-            enc_counter = (enc_counter + 1) & 15
-            frame = frames.pack_wheel_encoders(enc_counter, *wire)
-            if roll < 40:
-                frame = bytes([frame[0] ^ 1]) + frame[1:]  # corrupt
-            rx(frames.WHEEL_ENCODERS_ID, frame)
-            if roll < 50:
-                rx(frames.WHEEL_ENCODERS_ID, frame)  # repeated
+
+    def encoders(self, roll: int, wire: list[int]) -> None:
+        """This period's encoder frame, corrupt or repeated by ``roll``."""
+        frame = self.next_encoders(wire)
+        if roll < 40:
+            frame = bytes([frame[0] ^ 1]) + frame[1:]  # corrupt
+        self.rx(frames.WHEEL_ENCODERS_ID, frame)
+        if roll < 50:
+            self.rx(frames.WHEEL_ENCODERS_ID, frame)  # repeated
+
+    def inputs(self, tick: int, roll: int, wire: list[int]) -> None:
+        """Host commands and bus faults by ``roll``."""
+        rng = self.rng
         if roll < 1 or tick % 500 == 1:
-            goal()
+            self.goal()
         elif roll < 2 and tick % 3 == 0:
-            host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal(c, 14, 0, ErrorMask()))
+            self.host(frames.NAV_GOAL_ID, lambda c: frames.pack_nav_goal(c, 14, 0, ErrorMask()))
         elif roll < 5:
-            field = rng.choice((0, 1, 2, 15, 15, 7))
-            value = rng.randrange(-100_000, 100_000) if field < 2 else rng.randrange(1 << 16)
-            host(
-                frames.ODOM_SET_POSE_ID,
-                lambda c, f=field, v=value: frames.pack_odom_set_pose(c, f, v, ErrorMask()),
-            )
+            self.set_pose_field()
         elif roll < 18:
-            param = rng.choice((0, 0, 1, 2, 3, 4, 5, 15, 15, 15, 9))
-            value = {
-                0: rng.choice((500, 2578, 0, 500)),
-                4: rng.choice((16, 32)),
-                5: rng.randrange(3),
-            }
-            value.update({1: 75_000_000, 2: rng.choice((75_000_000, 35_000_000)), 3: 300_000_000})
-            v = value.get(param, 0)
-            host(
-                frames.ODOM_CONFIG_ID,
-                lambda c, p=param, v=v: frames.pack_odom_config(c, p, v, ErrorMask()),
-            )
-        elif roll < 20:
-            rx(rng.choice((0x123, frames.ODOM_POSE_X_ID)), rng.randbytes(8))  # not for this node
-        elif roll < 21:
-            rx(frames.NAV_GOAL_ID, rng.randbytes(rng.randrange(8)))  # short
-        elif roll < 22:
-            for _ in range(40):  # a burst: the mailbox overflows
-                rx(0x555, bytes(8))
-        elif roll < 23:
-            ecu.isr_bus_state(rng.random() < 0.5)
-            ask(f"ecu_bus {int(ecu.errors.has(ErrorFlag.BUS_OFF))}", "ok")
-        elif roll < 25 or (tx.full and roll < 500):
-            tx.full = not tx.full  # a full TX queue for a tick or two
-            ask(f"ecu_txfull {int(tx.full)}", "ok")
+            self.config_param()
+        elif roll < 25 or (self.tx.full and roll < 500):
+            self.faults(roll, wire)
         elif roll < 28:  # a step beyond the maximum wheel speed that passes E2E (a forgery)
-            enc_counter = (enc_counter + 1) & 15
+            self.enc_counter = (self.enc_counter + 1) & 15
             jump = rng.choice((-1, 1)) * rng.randrange(200, 30_000)
             forged = [(w + jump) % (1 << 32) for w in wire]
-            rx(frames.WHEEL_ENCODERS_ID, frames.pack_wheel_encoders(enc_counter, *forged))
+            self.rx(frames.WHEEL_ENCODERS_ID, frames.pack_wheel_encoders(self.enc_counter, *forged))
+
+    def set_pose_field(self) -> None:
+        field = self.rng.choice((0, 1, 2, 15, 15, 7))
+        value = self.rng.randrange(-100_000, 100_000) if field < 2 else self.rng.randrange(1 << 16)
+        self.host(
+            frames.ODOM_SET_POSE_ID,
+            partial(frames.pack_odom_set_pose, field=field, value=value, errors=ErrorMask()),
+        )
+
+    def config_param(self) -> None:
+        rng = self.rng
+        param = rng.choice((0, 0, 1, 2, 3, 4, 5, 15, 15, 15, 9))
+        by_param = {
+            0: rng.choice((500, 2578, 0, 500)),
+            4: rng.choice((16, 32)),
+            5: rng.randrange(3),
+        }
+        by_param.update({1: 75_000_000, 2: rng.choice((75_000_000, 35_000_000)), 3: 300_000_000})
+        v = by_param.get(param, 0)
+        self.host(
+            frames.ODOM_CONFIG_ID,
+            partial(frames.pack_odom_config, param=param, value=v, errors=ErrorMask()),
+        )
+
+    def faults(self, roll: int, wire: list[int]) -> None:
+        """Foreign, short and bursting frames, bus-off, a full TX queue (``roll`` 18 to 24, or
+        below 500 while the queue is full)."""
+        rng = self.rng
+        if roll < 20:
+            self.rx(rng.choice((0x123, frames.ODOM_POSE_X_ID)), rng.randbytes(8))  # not for us
+        elif roll < 21:
+            self.rx(frames.NAV_GOAL_ID, rng.randbytes(rng.randrange(8)))  # short
+        elif roll < 22:
+            for _ in range(40):  # a burst: the mailbox overflows
+                self.rx(0x555, bytes(8))
+        elif roll < 23:
+            self.ecu.isr_bus_state(rng.random() < 0.5)
+            self.ask(f"ecu_bus {int(self.ecu.errors.has(ErrorFlag.BUS_OFF))}", "ok")
+        else:
+            self.tx.full = not self.tx.full  # a full TX queue for a tick or two
+            self.ask(f"ecu_txfull {int(self.tx.full)}", "ok")
+
+    def tick(self) -> None:
+        """The ECU's tick (timed: at the jittered timer), its answer, and the wheels' new speeds
+        from any MOTOR_CMD it sent."""
+        ecu, tx = self.ecu, self.tx
         tx.sent.clear()
-        if timed:
-            now_us = (nominal_us + rng.randrange(-3_000, 3_001)) % (1 << 32)  # release jitter
+        if self.timed:
+            now_us = (self.nominal_us + self.rng.randrange(-3_000, 3_001)) % (1 << 32)  # jitter
             ecu.tick(now_us)
             tick_cmd = f"ecu_tick_at {now_us}"
         else:
             ecu.tick()
             tick_cmd = "ecu_tick"
-        ask(tick_cmd, int(ecu.state), int(ecu.reason), ecu.errors.bits, ecu.tx_dropped, *tx.sent)
+        state, reason = int(ecu.state), int(ecu.reason)
+        self.ask(tick_cmd, state, reason, ecu.errors.bits, ecu.tx_dropped, *tx.sent)
         for entry in tx.sent:
             can_id, data = entry.split(":")
             if int(can_id, 16) == frames.MOTOR_CMD_ID:
                 cmd = frames.unpack_motor_cmd(bytes.fromhex(data))
-                speeds = [cmd.left_speed_mm_s, cmd.right_speed_mm_s]
+                self.speeds = [cmd.left_speed_mm_s, cmd.right_speed_mm_s]
 
 
 def _frames(rng: random.Random, ask: Callable[..., None]) -> None:
@@ -636,7 +733,7 @@ def _frames(rng: random.Random, ask: Callable[..., None]) -> None:
         for data in (frame, junk):
             ask(f"enc_unpack {data.hex()}", *frames.unpack_wheel_encoders(data)[:3])
         speeds = [rng.randrange(I16_MIN, I16_MAX + 1) for _ in range(2)]
-        motor = frames.pack_motor_cmd(counter, *speeds, ErrorMask())
+        motor = frames.pack_motor_cmd(counter, speeds[0], speeds[1], ErrorMask())
         ask(f"motor_pack {counter} {speeds[0]} {speeds[1]}", motor.hex().upper())
         field = rng.choice((0, 1, 2, 14, 15, rng.randrange(16)))
         if field == NavGoalField.GO:
@@ -653,7 +750,7 @@ def _nav_functions(rng: random.Random, ask: Callable[..., None]) -> None:
     big = [I64_MIN, I64_MAX, 0, -1, 1 << 51, -(1 << 51)]
     pairs = [(rng.randrange(I64_MIN, I64_MAX + 1) >> rng.randrange(64), 0) for _ in range(2_000)]
     pairs = [(dx, rng.randrange(I64_MIN, I64_MAX + 1) >> rng.randrange(64)) for dx, _ in pairs]
-    pairs += list(itertools.product(big, repeat=2))
+    pairs += list(itertools.product(big, big))
     for dx, dy in pairs:
         errors = ErrorMask()
         ask(f"dist {dx} {dy}", nav.distance_um(dx, dy, errors), errors.bits)
@@ -712,16 +809,7 @@ def _nav_session(rng: random.Random, ask: Callable[..., None]) -> None:
 
     for _ in range(1_500):
         roll = rng.randrange(1000)
-        idle = navigator.state in (NavState.IDLE, NavState.STOPPED, NavState.ABORTED)
-        if (idle or (navigator.state == NavState.REACHED and not navigator.depth)) and roll < 200:
-            goal(append=rng.random() < 0.5)
-        elif roll < 8:
-            goal(append=True)
-        elif roll < 9:
-            for _ in range(17):  # a full path, then QUEUE_FULL
-                goal(append=True)
-        elif roll < 11:
-            send(rng.choice((NavGoalField.STOP, 7)), 0)
+        _nav_requests(rng, roll, navigator, goal, send)
         if running and roll >= 997:
             running = False
         elif not running and rng.random() < 0.1:
@@ -751,6 +839,27 @@ def _nav_session(rng: random.Random, ask: Callable[..., None]) -> None:
             y_m += v_m_s * 0.02 * math.sin(th_rad)
 
 
+def _nav_requests(
+    rng: random.Random,
+    roll: int,
+    navigator: nav.Navigator,
+    goal: Callable[..., None],
+    send: Callable[..., None],
+) -> None:
+    """One period's host requests by ``roll``: a goal when idle, appended goals, a path that
+    overflows the queue, STOP and an unknown field."""
+    idle = navigator.state in (NavState.IDLE, NavState.STOPPED, NavState.ABORTED)
+    if (idle or (navigator.state == NavState.REACHED and not navigator.depth)) and roll < 200:
+        goal(append=rng.random() < 0.5)
+    elif roll < 8:
+        goal(append=True)
+    elif roll < 9:
+        for _ in range(17):  # a full path, then QUEUE_FULL
+            goal(append=True)
+    elif roll < 11:
+        send(rng.choice((NavGoalField.STOP, 7)), 0)
+
+
 def _e2e_session(rng: random.Random, ask: Callable[..., None]) -> None:
     """A receiver fed protected frames with losses, repeats, jumps, corruption and silence."""
     data_ids = bytes(rng.getrandbits(8) for _ in range(16))
@@ -759,7 +868,9 @@ def _e2e_session(rng: random.Random, ask: Callable[..., None]) -> None:
     ask(f"rx {data_ids.hex()} {init} {int(per_period)}", "ok")
 
     def state(status: e2e.E2EStatus) -> tuple[int, ...]:
-        counts = (rx.count_ok, rx.count_oksomelost, rx.count_repeated, rx.count_wrongsequence)
+        counts: tuple[int, ...] = (
+            rx.count_ok, rx.count_oksomelost, rx.count_repeated, rx.count_wrongsequence
+        )
         counts += (rx.count_error, rx.count_nonewdata, rx.lost_frames)
         window = (rx.last_valid_counter, rx.max_delta_counter, rx.lost_data, rx.accepted())
         return (int(status), *counts, *window)
@@ -798,7 +909,8 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
     ticks = [w.split() for c, w in zip(cmds, want, strict=True) if c.startswith("ecu_tick")]
     assert {int(t[0]) for t in ticks} == {0, 1, 2, 3}  # INIT, OK, DEGRADED, FAULT
     assert {int(t[1]) for t in ticks} == set(Reason), "every REASON, CONFIG_INVALID included"
-    assert any(c.startswith("ecu_tick_at") for c in cmds) and "ecu_tick" in cmds
+    assert any(c.startswith("ecu_tick_at") for c in cmds)
+    assert "ecu_tick" in cmds
     health = ErrorFlag.TIME_LOST | ErrorFlag.IMPLAUSIBLE_STEP | ErrorFlag.COUNTER_RESET
     assert all(any(int(t[2]) & flag for t in ticks) for flag in health)
     states = [(int(t[0]), int(t[1])) for t in ticks]
@@ -807,7 +919,8 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
         for before, after in itertools.pairwise(states)
         if before == (State.DEGRADED, Reason.COUNTER_RESET) and after[0] != State.DEGRADED
     ]
-    assert recovered and all(after == (State.OK, Reason.NONE) for after in recovered)
+    assert recovered
+    assert all(after == (State.OK, Reason.NONE) for after in recovered)
     lost = [
         i
         for i in range(1, len(ticks))
@@ -820,7 +933,8 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
         for f in t[4:]
         if f.startswith(f"{frames.ODOM_TWIST_ID:X}:")
     ]
-    assert len(lost) >= 5 and any(twists_after_gap), "stalls while driving: the twist after a gap"
+    assert len(lost) >= 5, "stalls while driving: the twist after a gap"
+    assert any(twists_after_gap), "stalls while driving: the twist after a gap"
     sent = {f.split(":")[0] for t in ticks for f in t[4:]}
     assert sent == {"110", "200", "201", "202", "281", "302", "304", "380"}
     reasons = {
@@ -832,7 +946,11 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
     assert {r for r in frames.AckReason if r.name.startswith("AUTH_")} <= reasons
     counts = [w.split() for c, w in zip(cmds, want, strict=True) if c == "ecu_secoc_counts"]
     accepted, failed, stale, orphans, epoch = (int(v) for v in counts[0][:5])
-    assert accepted > 20 and failed > 5 and stale > 5 and orphans > 5 and epoch == 2  # rebooted
+    assert accepted > 20
+    assert failed > 5
+    assert stale > 5
+    assert orphans > 5
+    assert epoch == 2
     assert max(int(t[3]) for t in ticks) > 0, "the TX queue refused frames"
 
 

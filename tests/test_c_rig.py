@@ -176,7 +176,8 @@ def test_invalid_params_start_the_c_firmware_in_fault() -> None:
     ecu = cboard.CEcu(Hal(), params)
     for _ in range(10):
         ecu.tick()
-    assert ecu.state is State.FAULT and ecu.ticks == 10
+    assert ecu.state is State.FAULT
+    assert ecu.ticks == 10
     assert ecu.errors.bits & 2  # CONFIG_INVALID
     assert any(can_id == fr.ODOM_STATUS_ID for can_id, _ in sent)  # ODOM_STATUS still goes out
 
@@ -214,7 +215,8 @@ def test_a_missing_library_is_one_error_line(
     monkeypatch.setenv(cboard.LIBRARY_ENV, str(missing))
     assert main(["run", "--duration", "1", "--firmware", "c"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"error: --firmware c: cannot load {missing}") and err.count("\n") == 1
+    assert err.startswith(f"error: --firmware c: cannot load {missing}")
+    assert err.count("\n") == 1
 
 
 def test_a_library_without_the_abi_is_one_error_line(
@@ -302,4 +304,5 @@ def test_the_readme_example_passes_against_a_c_firmware_process(
             err = firmware.communicate()[1]
     result.assert_outcomes(passed=2)
     result.stdout.fnmatch_lines([f"odocan: external firmware on {udp_bus} (real time)"])
-    assert err.startswith("odocan firmware: c firmware, ") and "Traceback" not in err
+    assert err.startswith("odocan firmware: c firmware, ")
+    assert "Traceback" not in err

@@ -42,7 +42,9 @@ def calibrate(
     assert code == 0
     root = ET.parse(junit).getroot()
     names = [c.get("name") for c in root.iter("testcase")]
-    assert "emax_reduced" in names and "before_emax_syst" in names and "after_cg_ccw" in names
+    assert "emax_reduced" in names
+    assert "before_emax_syst" in names
+    assert "after_cg_ccw" in names
     assert root.get("failures") == "0"
     return path, json.loads(report.read_text()), out
 
@@ -128,5 +130,6 @@ def test_firmware_robot_with_other_encoders_is_refused(
     code = main(["umbmark", "--firmware-robot", str(other)])
     out, err = capsys.readouterr()
     assert (code, out) == (2, "")
-    assert err.startswith("error: --firmware-robot") and "16-bit" in err
+    assert err.startswith("error: --firmware-robot")
+    assert "16-bit" in err
     assert len(err.splitlines()) == 1

@@ -17,6 +17,7 @@ import cantools
 import pytest
 
 from odocan.host.cli.app import main
+from tests.dbc_typed import load_can_dbc
 from tests.test_cli_run import assert_usage_error, run_cli
 
 DBC = Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc"
@@ -70,7 +71,8 @@ def test_analyze_agrees_with_the_run(
     run_report = json.loads(logs["report"].read_text())
     report = json.loads(report_path.read_text())
     assert {k: report[k] for k in SAME_AS_RUN} == {k: run_report[k] for k in SAME_AS_RUN}
-    assert report["wall_seconds"] is None and report["scenario"] is None
+    assert report["wall_seconds"] is None
+    assert report["scenario"] is None
 
 
 def test_analyze_with_the_project_dbc_and_plot(
@@ -123,7 +125,9 @@ def test_analyze_log_without_permission(
     )
     assert done.returncode == 2, done.stderr
     lines = done.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ") and str(locked) in lines[0], lines
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("error: "), lines
+    assert str(locked) in lines[0], lines
 
 
 def test_analyze_malformed_log_names_the_line(
@@ -150,7 +154,7 @@ def _write_dbc(db: cantools.database.can.Database, path: Path) -> Path:
 def test_analyze_dbc_with_other_ids(
     logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    db = cantools.database.load_file(DBC)
+    db = load_can_dbc(DBC)
     db.get_message_by_name("WHEEL_ENCODERS").frame_id = 0x101
     db.refresh()
     other = _write_dbc(db, tmp_path / "other.dbc")
@@ -184,7 +188,7 @@ def test_analyze_counts_foreign_frames(
 def test_analyze_dbc_without_the_pose(
     logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    db = cantools.database.load_file(DBC)
+    db = load_can_dbc(DBC)
     db.messages[:] = [m for m in db.messages if m.name != "ODOM_POSE_Y"]
     db.refresh()
     other = _write_dbc(db, tmp_path / "nopose.dbc")

@@ -203,7 +203,8 @@ def test_bad_invocation_is_one_error_line_and_exit_2(
     assert "Traceback" not in err
     lines = err.splitlines()
     assert len([x for x in lines if x.startswith("error: ")]) == 1, err
-    assert lines[-1].startswith("error: ") and len(lines) == 1, err
+    assert lines[-1].startswith("error: "), err
+    assert len(lines) == 1, err
     for word in words:
         assert word in lines[-1], (word, lines[-1])
 
@@ -220,7 +221,8 @@ def test_a_report_that_fails_at_the_end_names_its_path_after_the_summary(
     out, err = capsys.readouterr()
     assert code == 2
     assert err == "error: --report /dev/full: No space left on device\n"
-    assert "PASS" in out and "WHEEL_ENCODERS" in out
+    assert "PASS" in out
+    assert "WHEEL_ENCODERS" in out
 
 
 @pytest.mark.parametrize(
@@ -252,7 +254,8 @@ def test_a_closed_stdout_ends_quietly() -> None:
         stderr=subprocess.PIPE,
         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
     )
-    assert proc.stdout is not None and proc.stderr is not None
+    assert proc.stdout is not None
+    assert proc.stderr is not None
     first = proc.stdout.readline()
     proc.stdout.close()  # as head -1 does
     err = proc.stderr.read()

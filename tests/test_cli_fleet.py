@@ -24,7 +24,8 @@ def test_fleet_runs_and_reports(
     # 0, or 1 only because a loaded machine made the loop skip releases (positions not judged)
     assert code == (1 if data["skipped_releases"] else 0), out + err
     assert out.startswith("fleet: 2 robots, ")
-    assert data["robots"] == 2 and data["duration_s"] == 1.0
+    assert data["robots"] == 2
+    assert data["duration_s"] == 1.0
     assert [r["seed"] for r in data["per_robot"].values()] == [7, 8]
     assert all(r["frames_total"] > 0 for r in data["per_robot"].values())
 
@@ -34,4 +35,5 @@ def test_bridge_stops_after_its_wall_clock_duration(capsys: pytest.CaptureFixtur
                  "--duration", "0.5"])
     err = capsys.readouterr().err
     assert code == 0, err
-    assert err.startswith("bridge r1: mqtt://127.0.0.1:") and "(embedded)" in err
+    assert err.startswith("bridge r1: mqtt://127.0.0.1:")
+    assert "(embedded)" in err

@@ -35,7 +35,7 @@ def test_every_option_has_help_showing_its_default(
         if isinstance(action, argparse._HelpAction) or not action.option_strings:
             continue
         assert action.help, f"{command} {action.option_strings}: no help"
-        shown = sub.formatter_class(prog="x")._get_help_string(action) or ""  # type: ignore[attr-defined]
+        shown = sub.formatter_class(prog="x")._get_help_string(action) or ""
         flag = isinstance(action, argparse._StoreTrueAction) or action.required
         assert flag or "default" in shown, f"{command} {action.option_strings}: {shown!r}"
     with pytest.raises(SystemExit):

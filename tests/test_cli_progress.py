@@ -29,7 +29,7 @@ def test_line_shows_share_elapsed_and_eta() -> None:
 
 def test_drawn_in_place_on_a_terminal_and_erased(monkeypatch: pytest.MonkeyPatch) -> None:
     now = [1000.0]
-    monkeypatch.setattr(progress_module.time, "monotonic", lambda: now[0])
+    monkeypatch.setattr(f"{progress_module.__name__}.time.monotonic", lambda: now[0])
     stream = _Terminal()
     with progress("work", 4, stream=stream, delay_s=1.0) as bar:
         bar.update(1)  # before the delay: nothing
@@ -44,7 +44,7 @@ def test_drawn_in_place_on_a_terminal_and_erased(monkeypatch: pytest.MonkeyPatch
 
 def test_silent_when_not_a_terminal(monkeypatch: pytest.MonkeyPatch) -> None:
     now = [0.0]
-    monkeypatch.setattr(progress_module.time, "monotonic", lambda: now[0])
+    monkeypatch.setattr(f"{progress_module.__name__}.time.monotonic", lambda: now[0])
     stream = io.StringIO()
     with progress("work", 4, stream=stream, delay_s=0) as bar:
         for done in range(5):

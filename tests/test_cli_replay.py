@@ -299,10 +299,12 @@ def test_replay_on_the_wrong_robot_fails_and_names_the_right_one(
     assert lines[at + 3:] == ["  - robot mismatch: the log's poses fit robot 'kobuki', not "
                               "'pmir' (--robot)"]
     report = json.loads(report_path.read_text())
-    assert report["passed"] is False and report["replay"]["faults"] == [
+    assert report["passed"] is False
+    assert report["replay"]["faults"] == [
         line[4:] for line in lines[at + 1:]]
     code, out, _ = run_cli(capsys, "replay", str(kobuki_log), "--robot", "kobuki")
-    assert code == 0 and "departs" not in out
+    assert code == 0
+    assert "departs" not in out
 
 
 def test_replay_on_a_custom_robot_names_the_shipped_one_that_fits(
@@ -337,5 +339,6 @@ def test_replay_reproduces_a_log_written_with_the_firmwares_integers(
     assert check(log, Robot(**profile.firmware_params()), "rk2",
                  lambda t_s: synth.state[round(t_s / ENCODER_PERIOD_S)].pose).passed
     code, out, _ = run_cli(capsys, "replay", str(log), "--robot", "kobuki")
-    assert code == 1 and out.splitlines()[-1] == (
+    assert code == 1
+    assert out.splitlines()[-1] == (
         "  - robot mismatch: the log's poses fit robot 'pmir', not 'kobuki' (--robot)")

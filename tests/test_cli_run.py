@@ -17,6 +17,7 @@ import can
 import pytest
 
 from odocan.host.cli.app import main
+from tests.dbc_typed import decode, load_can_dbc
 
 LSB_POSITION_M = 1e-4
 LSB_HEADING_RAD = 2 * math.pi / 65536
@@ -94,7 +95,8 @@ def test_run_prints_the_summary(capsys: pytest.CaptureFixture[str]) -> None:
     assert rows[0] == ["WHEEL_ENCODERS", "300", "300", "0", "0", "0", "0"]
     assert {row[0] for row in rows} >= {"MOTOR_CMD", "ODOM_POSE_X", "ODOM_POSE_Y", "SIM_TRUTH"}
     for row in rows[:-1]:
-        assert row[1] == row[2] and row[3:] == ["0", "0", "0", "0"], row
+        assert row[1] == row[2], row
+        assert row[3:] == ["0", "0", "0", "0"], row
     assert rows[-1] == ["total", str(sum(int(row[1]) for row in rows[:-1]))]
 
 
@@ -144,7 +146,8 @@ def test_run_report_has_the_contract_keys(
     assert all(isinstance(n, int) and n > 0 for n in report["frames"].values())
     reference, truth = report["onboard_vs_reference"], report["onboard_vs_truth"]
     for key in ERROR_KEYS:
-        assert isinstance(reference[key], float) and isinstance(truth[key], float), key
+        assert isinstance(reference[key], float), key
+        assert isinstance(truth[key], float), key
     for key in ("max_position_error_m", "final_position_error_m"):
         assert 0 <= reference[key] <= LSB_POSITION_M
     for key in ("max_heading_error_rad", "final_heading_error_rad"):
@@ -292,14 +295,12 @@ def test_run_interrupted_checks_what_ran(
 def test_run_random_drives_for_a_longer_duration(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    import cantools
-
     log = tmp_path / "long.log"
     code, _, err = run_cli(capsys, "run", "--duration", "66", "--seed", "1", "--log", str(log))
     assert (code, err) == (0, "")
-    db = cantools.database.load_file(Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc")
+    db = load_can_dbc(Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc")
     speeds = {
-        round(msg.timestamp, 2): db.decode_message(msg.arbitration_id, msg.data)
+        round(msg.timestamp, 2): decode(db, msg.arbitration_id, msg.data)
         for msg in can.LogReader(log)
         if msg.arbitration_id == db.get_message_by_name("MOTOR_CMD").frame_id
     }

@@ -15,6 +15,7 @@ from cantools.subparsers.dump.formatting import layout_string
 from odocan.firmware import frames
 from odocan.firmware.config import Integrator
 from odocan.firmware.errors import State
+from tests.dbc_typed import choices, dbc_attribute, load_can_dbc
 
 ROOT = Path(__file__).resolve().parents[1]
 DBC_PATH = ROOT / "dbc" / "odocan.dbc"
@@ -29,22 +30,20 @@ NAV_SLOTS = {"NAV_GOAL": 10, "NAV_STATUS": 11}  # the E2E slots kept for them fr
 
 @pytest.fixture(scope="module")
 def db() -> cantools.database.can.Database:
-    loaded = cantools.database.load_file(DBC_PATH, strict=True)
-    assert isinstance(loaded, cantools.database.can.Database)
-    return loaded
+    return load_can_dbc(DBC_PATH)
 
 
 def send_type(message: Message) -> str:
     """The GenMsgSendType enum name of ``message``."""
     assert message.dbc is not None
     attribute = message.dbc.attributes["GenMsgSendType"]
+    assert isinstance(attribute.value, int), attribute.value  # an ENUM attribute: the index
     return str(attribute.definition.choices[attribute.value])
 
 
 def data_ids(message: Message) -> tuple[int, ...]:
     """The message's Profile 2 data-ID list from the ``E2EDataIDs`` attribute."""
-    assert message.dbc is not None
-    return tuple(int(v) for v in message.dbc.attributes["E2EDataIDs"].value.split(","))
+    return tuple(int(v) for v in dbc_attribute(message, "E2EDataIDs").split(","))
 
 
 def page_messages(message: Message) -> list[tuple[str, Message]]:
@@ -53,6 +52,7 @@ def page_messages(message: Message) -> list[tuple[str, Message]]:
     if not muxers:
         return [(message.name, message)]
     mux = muxers[0]
+    assert mux.choices is not None, mux.name
     pages = []
     for value in sorted({v for s in message.signals for v in (s.multiplexer_ids or [])}):
         signals = [s for s in message.signals if s.multiplexer_ids in (None, [value])]
@@ -86,7 +86,7 @@ def test_loads_in_cantools_strict(db: cantools.database.can.Database) -> None:
 
 def load_canmatrix(
     path: Path, caplog: pytest.LogCaptureFixture, capsys: pytest.CaptureFixture[str]
-) -> tuple[canmatrix.CanMatrix, list[logging.LogRecord], str]:
+) -> tuple[canmatrix.CanMatrix | None, list[logging.LogRecord], str]:
     """Load with canmatrix, returning its matrix, every log record, and what it printed."""
     caplog.clear()
     capsys.readouterr()
@@ -99,6 +99,7 @@ def test_loads_in_canmatrix_without_any_warning(
     caplog: pytest.LogCaptureFixture, capsys: pytest.CaptureFixture[str]
 ) -> None:
     matrix, records, printed = load_canmatrix(DBC_PATH, caplog, capsys)
+    assert matrix is not None
     assert [r.getMessage() for r in records] == []
     assert printed == ""
     assert len(matrix.frames) == 14
@@ -129,10 +130,13 @@ def test_canmatrix_reads_what_cantools_reads(
 ) -> None:
     """Two independent parsers agree on every frame, signal, comment, cycle time and mux."""
     matrix, _, _ = load_canmatrix(DBC_PATH, caplog, capsys)
+    assert matrix is not None
     for message in db.messages:
         frame = matrix.frame_by_id(canmatrix.ArbitrationId(message.frame_id))
-        assert frame is not None and frame.name == message.name
-        assert frame.size == 8 and not frame.arbitration_id.extended
+        assert frame is not None
+        assert frame.name == message.name
+        assert frame.size == 8
+        assert not frame.arbitration_id.extended
         assert sorted(frame.transmitters) == sorted(message.senders)
         assert int(frame.cycle_time) == (message.cycle_time or 0)
         got = {
@@ -168,15 +172,19 @@ def test_canmatrix_reads_what_cantools_reads(
 def test_names_nodes_and_frame_format(db: cantools.database.can.Database) -> None:
     for message in db.messages:
         assert UPPER_SNAKE.match(message.name)
-        assert message.length == 8 and not message.is_extended_frame and not message.is_fd
+        assert message.length == 8
+        assert not message.is_extended_frame
+        assert not message.is_fd
         assert message.frame_id <= 0x7FF
         assert (message.frame_id in NAV_BLOCK) == message.name.startswith("NAV_")
-        assert set(message.senders) <= NODES and message.senders
+        assert set(message.senders) <= NODES
+        assert message.senders
         assert message.comment
         for signal in message.signals:
             assert UPPER_SNAKE.match(signal.name)
             assert signal.byte_order == "little_endian"
-            assert set(signal.receivers) <= NODES and signal.receivers
+            assert set(signal.receivers) <= NODES
+            assert signal.receivers
     assert sorted(db.get_message_by_name("MOTOR_CMD").senders) == ["HOST", "ODOM_MCU"]
 
 
@@ -186,9 +194,9 @@ def test_every_signal_has_a_unit_and_a_comment_with_its_raw_format(
     for message in db.messages:
         for signal in message.signals:
             assert signal.unit, f"{message.name}.{signal.name} has no unit"
-            assert signal.comment and RAW_FORMAT.search(signal.comment), (
-                f"{message.name}.{signal.name}: comment without a raw format"
-            )
+            missing = f"{message.name}.{signal.name}: comment without a raw format"
+            assert signal.comment, missing
+            assert RAW_FORMAT.search(signal.comment), missing
 
 
 def test_cyclic_messages_have_a_cycle_time_and_events_none(
@@ -196,14 +204,18 @@ def test_cyclic_messages_have_a_cycle_time_and_events_none(
 ) -> None:
     for message in db.messages:
         if send_type(message) in CYCLIC_SEND_TYPES:
-            assert message.cycle_time and message.cycle_time > 0, message.name
+            assert message.cycle_time, message.name
+            assert message.cycle_time > 0, message.name
         else:
-            assert send_type(message) == "Event" and not message.cycle_time, message.name
+            assert send_type(message) == "Event", message.name
+            assert not message.cycle_time, message.name
     cycles = {m.name: m.cycle_time for m in db.messages}
-    assert cycles["WHEEL_ENCODERS"] == 10 and cycles["ODOM_STATUS"] == 100
+    assert cycles["WHEEL_ENCODERS"] == 10
+    assert cycles["ODOM_STATUS"] == 100
     assert cycles["MOTOR_CMD"] == cycles["ODOM_POSE_X"] == 20
     assert cycles["SIM_TRUTH"] == 100  # 10 Hz truth, as a motion-capture reference gives
-    assert cycles["NAV_STATUS"] == 100 and send_type(db.get_message_by_name("NAV_GOAL")) == "Event"
+    assert cycles["NAV_STATUS"] == 100
+    assert send_type(db.get_message_by_name("NAV_GOAL")) == "Event"
 
 
 def test_every_message_has_checksum_and_counter_at_the_profile2_bits(
@@ -214,7 +226,8 @@ def test_every_message_has_checksum_and_counter_at_the_profile2_bits(
         counter = message.get_signal_by_name("COUNTER")
         assert (checksum.start, checksum.length, checksum.is_signed) == (0, 8, False)
         assert (counter.start, counter.length, counter.is_signed) == (8, 4, False)
-        assert checksum.multiplexer_ids is None and counter.multiplexer_ids is None
+        assert checksum.multiplexer_ids is None
+        assert counter.multiplexer_ids is None
 
 
 def test_byte1_high_nibble_is_the_mux_or_the_echoed_counter(
@@ -247,8 +260,7 @@ def test_encoders_and_commands_have_the_highest_priority(
 
 
 def test_enums_have_value_tables(db: cantools.database.can.Database) -> None:
-    status = db.get_message_by_name("ODOM_STATUS")
-    assert {int(k): str(v) for k, v in status.get_signal_by_name("STATE").choices.items()} == {
+    assert choices(db, "ODOM_STATUS", "STATE") == {
         0: "INIT",
         1: "OK",
         2: "DEGRADED",
@@ -256,10 +268,8 @@ def test_enums_have_value_tables(db: cantools.database.can.Database) -> None:
     }
     expected_integrator = {0: "EULER", 1: "RK2", 2: "EXACT"}
     for name in ("ODOM_STATUS", "ODOM_CONFIG"):
-        integrator = db.get_message_by_name(name).get_signal_by_name("INTEGRATOR")
-        assert {int(k): str(v) for k, v in integrator.choices.items()} == expected_integrator
-    reason = db.get_message_by_name("ODOM_ACK").get_signal_by_name("REASON")
-    assert {str(v) for v in reason.choices.values()} >= {
+        assert choices(db, name, "INTEGRATOR") == expected_integrator
+    assert set(choices(db, "ODOM_ACK", "REASON").values()) >= {
         "OK",
         "OUT_OF_RANGE",
         "UNKNOWN_FIELD",
@@ -267,8 +277,7 @@ def test_enums_have_value_tables(db: cantools.database.can.Database) -> None:
         "BUSY",
         "QUEUE_FULL",
     }
-    request_id = db.get_message_by_name("ODOM_ACK").get_signal_by_name("REQUEST_ID")
-    assert {int(k): str(v) for k, v in request_id.choices.items()} == {
+    assert choices(db, "ODOM_ACK", "REQUEST_ID") == {
         frames.NAV_GOAL_ID: "NAV_GOAL",
         frames.ODOM_SET_POSE_ID: "ODOM_SET_POSE",
         frames.ODOM_CONFIG_ID: "ODOM_CONFIG",
@@ -292,8 +301,7 @@ def test_firmware_enums_match_the_value_tables(db: cantools.database.can.Databas
         ("NAV_STATUS", "STATE", frames.NavState),
     ]
     for message_name, signal_name, enum in pairs:
-        signal = db.get_message_by_name(message_name).get_signal_by_name(signal_name)
-        assert {int(k): str(v) for k, v in signal.choices.items()} == {
+        assert choices(db, message_name, signal_name) == {
             int(member): member.name for member in enum
         }, f"{message_name}.{signal_name}"
 
@@ -312,6 +320,7 @@ def test_data_id_lists_follow_the_slot_scheme_and_are_unique(
         assert 1 <= slot <= 15
         assert (slot in NAV_SLOTS.values()) == message.name.startswith("NAV_")
         assert NAV_SLOTS.get(message.name, slot) == slot
+        assert message.comment is not None, message.name
         assert f"E2E slot {slot} " in message.comment
         assert not seen & set(ids)
         seen |= set(ids)
@@ -332,10 +341,13 @@ def test_every_raw_range_fits_its_bits(db: cantools.database.can.Database) -> No
     """[min|max] divided by the scale lands on integers inside the signal's width."""
     for message in db.messages:
         for signal in message.signals:
-            assert signal.offset == 0 and signal.minimum is not None and signal.maximum is not None
+            assert signal.offset == 0
+            assert signal.minimum is not None
+            assert signal.maximum is not None
             low = signal.minimum / signal.scale
             high = signal.maximum / signal.scale
-            assert abs(low - round(low)) < 1e-3 and abs(high - round(high)) < 0.5
+            assert abs(low - round(low)) < 1e-3
+            assert abs(high - round(high)) < 0.5
             lo_bits = -(1 << (signal.length - 1)) if signal.is_signed else 0
             hi_bits = (1 << (signal.length - (1 if signal.is_signed else 0))) - 1
             assert lo_bits <= round(low) <= round(high) <= hi_bits, f"{message.name}.{signal.name}"
@@ -344,8 +356,13 @@ def test_every_raw_range_fits_its_bits(db: cantools.database.can.Database) -> No
 def test_pose_resolutions(db: cantools.database.can.Database) -> None:
     x = db.get_message_by_name("ODOM_POSE_X").get_signal_by_name("X")
     heading = db.get_message_by_name("ODOM_POSE_X").get_signal_by_name("HEADING")
-    assert x.scale == 0.0001 and x.length == 32 and x.maximum is not None and x.maximum > 1000
-    assert heading.scale <= 1e-4 and heading.length == 16 and not heading.is_signed
+    assert x.scale == 0.0001
+    assert x.length == 32
+    assert x.maximum is not None
+    assert x.maximum > 1000
+    assert heading.scale <= 1e-4
+    assert heading.length == 16
+    assert not heading.is_signed
     assert abs(heading.scale * 65536 - 2 * 3.141592653589793) < 1e-12
 
 
@@ -372,4 +389,4 @@ def readme_layouts(db: cantools.database.can.Database) -> str:
 
 
 if __name__ == "__main__":
-    print(readme_layouts(cantools.database.load_file(DBC_PATH, strict=True)))  # type: ignore[arg-type]
+    print(readme_layouts(load_can_dbc(DBC_PATH)))

@@ -120,7 +120,8 @@ def test_in_sequence_with_wrap_14_15_0() -> None:
     rx = E2EReceiver(DATA_IDS)
     counters: list[int | None] = [13, 14, 15, 0, 1]
     assert statuses(rx, counters) == [E2EStatus.OK] * 5
-    assert rx.count_ok == 5 and rx.lost_frames == 0
+    assert rx.count_ok == 5
+    assert rx.lost_frames == 0
 
 
 def test_repeated_frame_is_reported_and_not_taken() -> None:
@@ -131,14 +132,17 @@ def test_repeated_frame_is_reported_and_not_taken() -> None:
         E2EStatus.REPEATED,
         E2EStatus.OK,
     ]
-    assert rx.count_repeated == 1 and rx.count_ok == 3
+    assert rx.count_repeated == 1
+    assert rx.count_ok == 3
 
 
 def test_lost_frames_within_the_window_are_oksomelost() -> None:
     """MaxDeltaCounterInit 1: the next call accepts +1 and +2 (AUTOSAR's own example)."""
     rx = E2EReceiver(DATA_IDS, max_delta_counter_init=1)
     assert statuses(rx, [14, 0]) == [E2EStatus.OK, E2EStatus.OKSOMELOST]  # 15 lost, over the wrap
-    assert rx.lost_data == 1 and rx.lost_frames == 1 and rx.count_oksomelost == 1
+    assert rx.lost_data == 1
+    assert rx.lost_frames == 1
+    assert rx.count_oksomelost == 1
     assert statuses(rx, [1]) == [E2EStatus.OK]
     assert rx.lost_data == 0
 
@@ -152,7 +156,8 @@ def test_window_widens_by_one_per_check_call_without_a_valid_frame() -> None:
         E2EStatus.NONEWDATA,
         E2EStatus.OKSOMELOST,
     ]
-    assert rx.lost_frames == 3 and rx.count_nonewdata == 2
+    assert rx.lost_frames == 3
+    assert rx.count_nonewdata == 2
 
 
 def test_jump_beyond_the_window_is_wrong_sequence() -> None:
@@ -190,7 +195,8 @@ def test_crc_error_wrong_data_id_and_bad_length_are_errors() -> None:
     assert rx.check(bytes(corrupted)) is E2EStatus.ERROR
     assert rx.check(frame(1, ids=OTHER_DATA_IDS)) is E2EStatus.ERROR  # masquerade
     assert rx.check(frame(1)[:7]) is E2EStatus.ERROR
-    assert rx.count_error == 3 and rx.last_valid_counter == 0
+    assert rx.count_error == 3
+    assert rx.last_valid_counter == 0
     assert rx.check(frame(1)) is E2EStatus.OK
 
 

@@ -24,6 +24,7 @@ import pytest
 
 from odocan.host.cli import app as cli
 from odocan.host.experiments import seed002
+from odocan.host.judge.reference import Geometry
 from odocan.sim.errors import ErrorModel
 from odocan.sim.robot import load
 
@@ -41,9 +42,11 @@ def registered(monkeypatch: pytest.MonkeyPatch) -> None:
 def assert_usage_error(capsys: pytest.CaptureFixture[str], code: int, *words: str) -> None:
     """Exit 2, nothing on stdout, exactly one line ``error: ...`` on stderr naming ``words``."""
     out, err = capsys.readouterr()
-    assert code == 2 and out == "", (code, out, err)
+    assert code == 2, (code, out, err)
+    assert out == "", (code, out, err)
     lines = err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert len(lines) == 1, err
+    assert lines[0].startswith("error: "), err
     for word in words:
         assert word in lines[0], (word, lines[0])
 
@@ -66,13 +69,17 @@ def _mean(values: list[float]) -> float:
 
 def test_tables_are_laid_out_like_the_papers(seed002_run: tuple[int, str, dict[str, Any]]) -> None:
     code, out, report = seed002_run
-    assert code == 0 and out.endswith("seed002: PASS\n")
-    assert report["passed"] is True and report["faults"] == []
+    assert code == 0
+    assert out.endswith("seed002: PASS\n")
+    assert report["passed"] is True
+    assert report["faults"] == []
     lines = out.splitlines()
-    assert "ed=1.002, eb=1.01, slip=0.005" in lines[0] and "N(0, 1 deg)" in lines[0]
+    assert "ed=1.002, eb=1.01, slip=0.005" in lines[0]
+    assert "N(0, 1 deg)" in lines[0]
     t1 = next(i for i, line in enumerate(lines) if line.startswith("Table 1."))
     t2 = next(i for i, line in enumerate(lines) if line.startswith("Table 2."))
-    assert "1 m straight, 10 runs" in lines[t1] and "80 cm square" in lines[t2]
+    assert "1 m straight, 10 runs" in lines[t1]
+    assert "80 cm square" in lines[t2]
     for start, end, header in ((t1, t2, ("Distance travelled (cm)", "Deviation angle (deg)")),
                                (t2, len(lines), ("Side length (cm)", "Deviation angle (deg)",
                                                  "Turn angle (deg)"))):
@@ -89,14 +96,17 @@ def test_report_contract_and_plausible_values(seed002_run: tuple[int, str, dict[
     assert report["error_model"] == {"ed": 1.002, "eb": 1.01, "slip": 0.005,
                                      "misalign_std_deg": 1.0}
     straight, square = report["straight_1m"]["runs"], report["square_80cm"]["runs"]
-    assert len(straight) == 10 and len(square) == 10
+    assert len(straight) == 10
+    assert len(square) == 10
     for run in straight:
         assert {"distance_m", "deviation_deg"} <= run.keys()
         assert abs(run["distance_m"] - 1.0) < 0.01
     for run in square:
         assert {"side_m", "deviation_deg", "turn_deg"} <= run.keys()
-        assert abs(run["side_m"] - 0.8) < 0.01 and abs(run["turn_deg"] - 90.0) < 3.0
-        assert len(run["sides_m"]) == 4 and len(run["turns_deg"]) == 3
+        assert abs(run["side_m"] - 0.8) < 0.01
+        assert abs(run["turn_deg"] - 90.0) < 3.0
+        assert len(run["sides_m"]) == 4
+        assert len(run["turns_deg"]) == 3
     for table, runs, keys in (("straight_1m", straight, ("distance_m", "deviation_deg")),
                               ("square_80cm", square, ("side_m", "deviation_deg", "turn_deg"))):
         for key in keys:
@@ -113,9 +123,11 @@ def _config(errors: ErrorModel, runs: int = 3, seed: int = 0) -> seed002.Seed002
 def test_without_errors_the_truth_is_the_paths_shape() -> None:
     result = seed002.run_seed002(_config(ErrorModel()))
     for s in result.straight:
-        assert abs(s.deviation_deg) < 0.01 and abs(s.distance_m - 1.0) < 0.01
+        assert abs(s.deviation_deg) < 0.01
+        assert abs(s.distance_m - 1.0) < 0.01
     for q in result.square:
-        assert abs(q.deviation_deg) < 0.25 and abs(q.turn_deg - 90.0) < 0.25
+        assert abs(q.deviation_deg) < 0.25
+        assert abs(q.turn_deg - 90.0) < 0.25
         assert all(abs(d) < 0.25 for d in q.deviations_deg)
 
 
@@ -163,9 +175,12 @@ def test_bad_options_are_one_line_exit_2(
 def test_runs_option_sets_the_rows(capsys: pytest.CaptureFixture[str]) -> None:
     code = cli.main(["experiment", "seed002", "--runs", "2", "--errors", "", "--misalign", "0"])
     out, err = capsys.readouterr()
-    assert code == 0 and err == ""
+    assert code == 0
+    assert err == ""
     rows = [line.split()[0] for line in out.splitlines() if line.split()]
-    assert rows.count("1") == 2 and rows.count("2") == 2 and "3" not in rows
+    assert rows.count("1") == 2
+    assert rows.count("2") == 2
+    assert "3" not in rows
     assert rows.count("Mean") == 2
 
 
@@ -178,12 +193,13 @@ def test_every_run_is_judged_and_a_wrong_firmware_fails(
     config = _config(ErrorModel(ed=1.002), runs=1)
     assert seed002.run_seed002(config).faults() == []
     kobuki = load("kobuki")
-    monkeypatch.setattr(seed002.Geometry, "of", classmethod(lambda cls, robot: cls(
+    monkeypatch.setattr(Geometry, "of", classmethod(lambda cls, robot: cls(
         kobuki.counts_per_rev, kobuki.wheel_radius_left_m, kobuki.wheel_radius_right_m,
         kobuki.wheelbase_m)))
     code = cli.main(["experiment", "seed002", "--runs", "1", "--errors", "", "--misalign", "0"])
     out = capsys.readouterr().out
     verdict = out[out.index("seed002: FAIL"):].splitlines()
-    assert code == 1 and len(verdict) == 3
+    assert code == 1
+    assert len(verdict) == 3
     assert verdict[1].startswith("  - straight run 1: the on-board end is ")
     assert verdict[2].startswith("  - square run 1: the on-board end is ")

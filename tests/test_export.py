@@ -75,7 +75,8 @@ def test_duckdb_recomputes_the_reports_errors(
         "sqrt((s.onboard_x_m - t.truth_x_m)^2 + (s.onboard_y_m - t.truth_y_m)^2)) > 1e-12) "
         "from {truth} t join {series} s using (timestamp_s)", parquet,
     )
-    assert joined > 25 and off == 0
+    assert joined > 25
+    assert off == 0
 
 
 def test_the_last_sample_is_the_reports_final_pose(
@@ -167,7 +168,8 @@ def read_mcap(path: Path) -> dict[str, list[tuple[str, int, dict[str, Any]]]]:
     topics: dict[str, list[tuple[str, int, dict[str, Any]]]] = {}
     with path.open("rb") as stream:
         for schema, channel, message in make_reader(stream).iter_messages(log_time_order=True):
-            assert schema is not None and schema.encoding == "jsonschema"
+            assert schema is not None
+            assert schema.encoding == "jsonschema"
             assert channel.message_encoding == "json"
             assert json.loads(schema.data)["title"] == schema.name
             topics.setdefault(channel.topic, []).append(
@@ -309,7 +311,8 @@ def test_unwritable_outputs_fail_before_the_run(
     code = main([*ARGS, "--report", str(report), option, str(target)])
     err = capsys.readouterr().err
     assert code == 2
-    assert err.startswith(f"error: {option} {target}") and message in err
+    assert err.startswith(f"error: {option} {target}")
+    assert message in err
     assert err.count("\n") == 1
     assert not report.exists()  # refused before the drive ran
 

@@ -26,6 +26,7 @@ from odocan.sim.contract import database
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FAULT_KINDS, BusOff, ErrorCounters, FaultInjectingBus, FaultSpec
 from odocan.sim.scenarios import RandomScenario
+from tests.dbc_typed import decode, number
 from tests.fault_rig import (
     FaultRig,
     PoseAudit,
@@ -104,7 +105,7 @@ def test_spec_validates_programmatic_construction() -> None:
     with pytest.raises(ConfigurationError, match="flip=0: BITS"):
         FaultSpec(flip=0.1, flip_bits=0)
     with pytest.raises(ConfigurationError, match="drop=True"):
-        FaultSpec(drop=True)  # type: ignore[arg-type]
+        FaultSpec(drop=True)  # a bool is a float to mypy: the spec itself must refuse it
 
 
 # --- ErrorCounters -----------------------------------------------------------------------------
@@ -148,7 +149,9 @@ def _key(msg: can.Message | None) -> tuple[object, ...] | None:
     return (msg.timestamp, msg.arbitration_id, *flags, msg.dlc, bytes(msg.data))
 
 
-def _send_all(spec: FaultSpec, n: int, period_s: float = 0.01) -> tuple[FaultInjectingBus, list]:
+def _send_all(
+    spec: FaultSpec, n: int, period_s: float = 0.01
+) -> tuple[FaultInjectingBus, list[can.Message]]:
     """Send frames 0..n-1 (numbered in their payload) through ``spec``; what a receiver got."""
     channel = unique_channel()
     rx = open_virtual(channel)
@@ -221,7 +224,9 @@ def test_flip_inverts_exactly_bits_of_the_payload_and_leaves_the_sender_message_
             bus.send(msg)
             assert bytes(msg.data) == before
             got = rx.recv(0)
-            assert got is not None and got.arbitration_id == 0x100 + i and got.dlc == 8
+            assert got is not None
+            assert got.arbitration_id == 0x100 + i
+            assert got.dlc == 8
             diff = int.from_bytes(got.data, "little") ^ int.from_bytes(before, "little")
             assert diff.bit_count() == 5
         assert bus.injected["flip"] == 200
@@ -233,7 +238,8 @@ def test_a_burst_loses_len_frames_in_a_row() -> None:
     numbers = sorted(int.from_bytes(m.data, "little") for m in got)
     missing = sorted(set(range(20_000)) - set(numbers))
     runs = [len(list(g)) for _, g in itertools.groupby(enumerate(missing), lambda t: t[1] - t[0])]
-    assert runs and all(r % 7 == 0 for r in runs)  # back-to-back bursts make multiples of 7
+    assert runs
+    assert all(r % 7 == 0 for r in runs)  # back-to-back bursts make multiples of 7
     assert bus.injected["burst"] == len(missing)
 
 
@@ -288,7 +294,8 @@ def test_babble_is_random_frames_at_its_rate() -> None:
     assert any(m.is_extended_id and m.arbitration_id > 0x7FF for m in babble)
     assert {m.dlc for m in babble} == set(range(9))
     stamps = [m.timestamp for m in got]
-    assert stamps == sorted(stamps) and stamps[-1] <= 9.99
+    assert stamps == sorted(stamps)
+    assert stamps[-1] <= 9.99
 
 
 def test_bus_off_refuses_sends_then_recovers_after_128_x_11_recessive_bits(
@@ -321,8 +328,10 @@ def test_bus_off_refuses_sends_then_recovers_after_128_x_11_recessive_bits(
     assert rx_count == 400 - refused
     assert bus.injected["busoff"] == 1
     log = caplog.text
-    assert "TEC 96, error warning" in log and "TEC 128, error passive" in log
-    assert "TEC 256 > 255: bus-off" in log and "recovered" in log
+    assert "TEC 96, error warning" in log
+    assert "TEC 128, error passive" in log
+    assert "TEC 256 > 255: bus-off" in log
+    assert "recovered" in log
 
 
 def test_wrapper_filters_shutdown_and_flush() -> None:
@@ -338,7 +347,8 @@ def test_wrapper_filters_shutdown_and_flush() -> None:
     peer.send(_numbered(1, 0.0, can_id=0x101))
     peer.send(_numbered(2, 0.0, can_id=0x100))
     got = bus.recv(0.1)
-    assert got is not None and got.arbitration_id == 0x100
+    assert got is not None
+    assert got.arbitration_id == 0x100
     bus.send(_numbered(3, 0.0))
     assert bus.held == 1
     bus.flush_tx_buffer()
@@ -364,7 +374,8 @@ def _accepted(rx: E2EReceiver, word: int) -> bool:
 def test_catalogue_covers_every_message_and_page_of_the_dbc() -> None:
     types = dbc_frame_types()
     assert {name for name, _ in types} == {m.name for m in database().messages}
-    assert ("ODOM_CONFIG", 15) in types and ("ODOM_STATUS", 4) in types  # APPLY, a late page
+    assert ("ODOM_CONFIG", 15) in types
+    assert ("ODOM_STATUS", 4) in types  # APPLY, a late page
     for frame_id, ids in fr.DATA_IDS_BY_FRAME_ID.items():
         assert dbc_data_ids(frame_id) == ids  # the firmware's lists are the DBC's
 
@@ -561,7 +572,8 @@ def test_duplicates_and_replays_leave_the_pose_bit_identical() -> None:
     rx = rig.ecu.rx_encoders
     dups = _encoder_faults(rig.sim_bus, "dup")  # type: ignore[arg-type]
     print(f"\n{dups} duplicates and {replayed} replays: pose {pose} (clean {expected})")
-    assert dups > 100 and replayed > 600
+    assert dups > 100
+    assert replayed > 600
     assert pose == expected
     assert rx.count_repeated + rx.count_wrongsequence == dups + replayed
     assert rx.lost_frames == 0
@@ -583,11 +595,16 @@ def test_a_replay_one_counter_cycle_old_passes_profile_2() -> None:
     assert pose == expected
 
 
+def _receive_all(reader: can.BufferedReader, frames: list[can.Message]) -> None:
+    for m in frames:
+        reader.on_message_received(m)
+
+
 def test_bus_off_of_the_motor_controller_degrades_the_firmware_and_it_recovers() -> None:
     spec = FaultSpec.parse("busoff=3:0.5,seed=1")
     reader = can.BufferedReader()
     with FaultRig(sim_faults=spec, seed=1) as rig:
-        rig.observers.append(lambda k, frames: [reader.on_message_received(m) for m in frames])
+        rig.observers.append(lambda k, frames: _receive_all(reader, frames))
         bus = rig.sim_bus
         assert isinstance(bus, FaultInjectingBus)
         seen: list[tuple[float, can.BusState]] = []
@@ -598,9 +615,10 @@ def test_bus_off_of_the_motor_controller_degrades_the_firmware_and_it_recovers()
     db = database()
     while (msg := reader.get_message(0)) is not None:
         if msg.arbitration_id == fr.ODOM_STATUS_ID:
-            signals = db.decode_message(msg.arbitration_id, msg.data, decode_choices=True)
+            signals = decode(db, msg.arbitration_id, msg.data, decode_choices=True)
             if signals["PAGE"] == "SUMMARY":
-                summaries.append((msg.timestamp, str(signals["STATE"]), int(signals["ERROR_MASK"])))
+                state, mask = str(signals["STATE"]), int(number(signals["ERROR_MASK"]))
+                summaries.append((msg.timestamp, state, mask))
     states = [s for _, s, _ in summaries]
     first_degraded = next(t for t, s, _ in summaries if s == "DEGRADED")
     back_ok = next(t for t, s, _ in summaries if s == "OK" and t > first_degraded)
@@ -608,9 +626,12 @@ def test_bus_off_of_the_motor_controller_degrades_the_firmware_and_it_recovers()
         f"\nbus-off at 3.0 s for 0.5 s (+2.8 ms recovery): ODOM_STATUS DEGRADED from "
         f"{first_degraded:.3f} s, OK again at {back_ok:.3f} s; {refused} frames refused"
     )
-    assert states[0] in ("INIT", "OK") and "DEGRADED" in states and states[-1] == "OK"
+    assert states[0] in ("INIT", "OK")
+    assert "DEGRADED" in states
+    assert states[-1] == "OK"
     assert 3.0 < first_degraded < 3.5 < back_ok < 4.0
     assert summaries[-1][2] & ErrorFlag.ENCODER_TIMEOUT
     assert all(s is can.BusState.ERROR for t, s in seen if 3.0 <= t < 3.5)
     assert all(s is can.BusState.ACTIVE for t, s in seen if t < 3.0 or t >= 3.51)
-    assert bus.injected["busoff"] == 1 and bus.injected["refused"] > 50
+    assert bus.injected["busoff"] == 1
+    assert bus.injected["refused"] > 50

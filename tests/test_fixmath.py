@@ -51,7 +51,8 @@ def _as_i64(word: int) -> int:
 
 def _umul32(a: int, b: int) -> int:
     """``(uint64_t)(uint32_t)a * (uint32_t)b`` (UMULL)."""
-    assert 0 <= a <= M32 and 0 <= b <= M32
+    assert 0 <= a <= M32
+    assert 0 <= b <= M32
     return a * b
 
 
@@ -283,4 +284,5 @@ def test_the_round_is_half_up_as_the_firmware_wrote_it(shift: int) -> None:
         for nudge in (-1, 0, 1):
             a = k * unit + nudge
             assert mul_round_i64(a, b, shift) == (a * b + half) >> shift
-    assert mul_round_i64(unit, b, shift) == 1 and mul_round_i64(-unit, b, shift) == 0
+    assert mul_round_i64(unit, b, shift) == 1
+    assert mul_round_i64(-unit, b, shift) == 0

@@ -89,28 +89,36 @@ def test_judge_robot_passes_within_tolerance_and_fails_beyond_it() -> None:
     tol = Tolerance(2e-4, 2e-4)
     truth = _stats((0.05, 0.01))  # odometry drift vs truth: reported, never judged
     ok = judge_robot(_stats((1e-4, 1e-4), (-1.5e-4, 0.0)), truth, tol)
-    assert ok["verdict"] == "PASS" and ok["reason"] is None
+    assert ok["verdict"] == "PASS"
+    assert ok["reason"] is None
     assert ok["pose_vs_reference"]["samples"] == 2
     assert math.isclose(ok["pose_vs_reference"]["max_dpos_m"], 1.5e-4)
     assert math.isclose(ok["pose_vs_truth"]["max_dpos_m"], 0.05)
     far = judge_robot(_stats((1e-4, 0.0), (3e-4, 0.0)), truth, tol)
-    assert far["verdict"] == "FAIL" and "position vs reference 0.3 mm > 0.2 mm" in far["reason"]
+    assert far["verdict"] == "FAIL"
+    assert "position vs reference 0.3 mm > 0.2 mm" in far["reason"]
     turned = judge_robot(_stats((0.0, 5e-4)), truth, tol)
-    assert turned["verdict"] == "FAIL" and "heading vs reference 0.5 mrad" in turned["reason"]
+    assert turned["verdict"] == "FAIL"
+    assert "heading vs reference 0.5 mrad" in turned["reason"]
     silent = judge_robot(ErrorStats(), ErrorStats(), tol)
-    assert silent["verdict"] == "FAIL" and "no on-board pose" in silent["reason"]
-    assert silent["pose_vs_reference"] is None and silent["pose_vs_truth"] is None
+    assert silent["verdict"] == "FAIL"
+    assert "no on-board pose" in silent["reason"]
+    assert silent["pose_vs_reference"] is None
+    assert silent["pose_vs_truth"] is None
     farther = judge_robot(_stats((3e-4, 0.0)), truth, tol, distance_m=10.0)
     assert farther["verdict"] == "PASS"  # 0.2 mm + 10 m x half a heading LSB = 0.68 mm
     assert math.isclose(farther["position_tolerance_m"], 2e-4 + 10.0 * HEADING_LSB_RAD / 2)
     assert judge_robot(_stats((8e-4, 0.0)), truth, tol, distance_m=10.0)["verdict"] == "FAIL"
     behind = judge_robot(_stats((8e-4, 1e-4)), truth, tol, releases_skipped=3)
-    assert behind["verdict"] == "UNJUDGED" and "3 releases skipped" in behind["reason"]
+    assert behind["verdict"] == "UNJUDGED"
+    assert "3 releases skipped" in behind["reason"]
     behind_turned = judge_robot(_stats((8e-4, 5e-4)), truth, tol, releases_skipped=3)
-    assert behind_turned["verdict"] == "FAIL" and "heading" in behind_turned["reason"]
+    assert behind_turned["verdict"] == "FAIL"
+    assert "heading" in behind_turned["reason"]
     assert "position" not in behind_turned["reason"]
     blind = judge_robot(_stats((3e-4, 0.0)), truth, tol, frames_dropped=7)
-    assert blind["verdict"] == "UNJUDGED" and "dropped 7 frames" in blind["reason"]
+    assert blind["verdict"] == "UNJUDGED"
+    assert "dropped 7 frames" in blind["reason"]
 
 
 @pytest.mark.parametrize("integrator", ["euler", "exact"])
@@ -134,7 +142,8 @@ def test_half_a_heading_lsb_at_the_start_moves_a_pose_by_at_most_the_path_times_
         apart_m = math.hypot(turned.x_m - exact.x_m, turned.y_m - exact.y_m)
         assert apart_m <= exact.distance_m * start_off + 1e-12
         worst_ratio = max(worst_ratio, apart_m / (exact.distance_m * start_off))
-    assert exact.distance_m > 50.0 and worst_ratio > 0.5  # the bound is tight enough to matter
+    assert exact.distance_m > 50.0
+    assert worst_ratio > 0.5
 
 
 def test_the_default_tolerance_is_two_lsb_of_the_pose_signals() -> None:
@@ -154,11 +163,15 @@ def _worker(first: int, ratio: float, verdicts: list[str]) -> dict[str, object]:
 
 def test_aggregate_takes_the_worst_worker_and_failures_name_every_threshold() -> None:
     report = aggregate([_worker(0, 0.0, ["PASS", "PASS"]), _worker(2, 0.03, ["PASS", "FAIL"])])
-    assert report["robots"] == 4 and list(report["per_robot"]) == [
+    assert report["robots"] == 4
+    assert list(report["per_robot"]) == [
         "robot001", "robot002", "robot003", "robot004"]
     assert report["deadline_miss_ratio"] == 0.03  # not the 0.015 average: a late worker shows
-    assert report["ticks"] == 200 and report["late_ticks"] == 3 and report["cpu_s"] == 0.5
-    assert report["skipped_releases"] == 2 and report["bridge"]["frames_in"] == 20
+    assert report["ticks"] == 200
+    assert report["late_ticks"] == 3
+    assert report["cpu_s"] == 0.5
+    assert report["skipped_releases"] == 2
+    assert report["bridge"]["frames_in"] == 20
     assert [w["first_robot"] for w in report["workers"]] == ["robot001", "robot003"]
     assert failures(report, 0.05) == [
         "1 of 4 robots pose vs reference out of tolerance (robot004: why 3)"]
@@ -185,8 +198,11 @@ def test_fleet_on_two_workers_reports_every_robot(
         assert code == 0, out + err
         assert lines[1:] == ["poses: 2 PASS", "PASS"]
     else:
-        assert code == 1 and lines[-1].startswith("FAIL: ") and "releases skipped" in lines[-1]
-    assert data["embedded_broker"] and data["broker"] == f"mqtt://127.0.0.1:{port}"
+        assert code == 1
+        assert lines[-1].startswith("FAIL: ")
+        assert "releases skipped" in lines[-1]
+    assert data["embedded_broker"]
+    assert data["broker"] == f"mqtt://127.0.0.1:{port}"
     assert [w["first_robot"] for w in data["workers"]] == ["robot003", "robot004"]
     robots = data["per_robot"]
     assert list(robots) == ["robot003", "robot004"]
@@ -251,12 +267,14 @@ def test_sigterm_stops_every_worker_and_the_report_is_written(tmp_path: Path) ->
     assert time.monotonic() - began < 60
     data = json.loads(report.read_text())
     if any(w["skipped_releases"] for w in data["workers"]):  # a loaded machine
-        assert proc.returncode == 1 and "releases skipped" in out.splitlines()[-1]
+        assert proc.returncode == 1
+        assert "releases skipped" in out.splitlines()[-1]
     else:
         assert proc.returncode == 0, err
         assert out.splitlines()[-1] == "PASS"
     assert list(data["per_robot"]) == ["robot001", "robot002", "robot003"]
-    assert len(data["workers"]) == 2 and 0 < data["ticks"] < 2 * 120 * 100
+    assert len(data["workers"]) == 2
+    assert 0 < data["ticks"] < 2 * 120 * 100
 
 
 def test_run_sharded_passes_on_the_workers_progress() -> None:
@@ -269,7 +287,8 @@ def test_run_sharded_passes_on_the_workers_progress() -> None:
                    duration_s=2.0, bridge=False)
     report = run_sharded(run, 2, on_progress=lambda ticks, late: seen.append((ticks, late)))
     assert [w["robots"] for w in report["workers"]] == [1, 2]
-    assert len(seen) >= 2 and all(0 <= late <= ticks for ticks, late in seen)
+    assert len(seen) >= 2
+    assert all(0 <= late <= ticks for ticks, late in seen)
     assert [t for t, _ in seen] == sorted(t for t, _ in seen)
     assert seen[-1][0] <= report["ticks"]
     assert all(r["verdict"] is None for r in report["per_robot"].values())  # nothing watched
@@ -336,6 +355,8 @@ def test_run_sharded_without_a_broker_shares_one_broker_process() -> None:
 
     run = FleetRun(fleet=FleetConfig(robots=2, robot=robot.load("pmir")), duration_s=1.0)
     report = run_sharded(run, 2)
-    assert report["embedded_broker"] and report["broker"].startswith("mqtt://127.0.0.1:")
-    assert report["bridge"]["frames_in"] > 0 and report["bridge"]["reconnects"] == 0
+    assert report["embedded_broker"]
+    assert report["broker"].startswith("mqtt://127.0.0.1:")
+    assert report["bridge"]["frames_in"] > 0
+    assert report["bridge"]["reconnects"] == 0
     assert all(r["verdict"] in ("PASS", "UNJUDGED") for r in report["per_robot"].values())

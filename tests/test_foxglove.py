@@ -213,7 +213,9 @@ def test_port_in_use_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
 def test_bad_port_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["run", "--foxglove", "70000"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error:") and "70000" in err and err.count("\n") == 1
+    assert err.startswith("error:")
+    assert "70000" in err
+    assert err.count("\n") == 1
 
 
 def test_an_owned_monitor_is_published_not_fed_twice() -> None:

@@ -25,10 +25,10 @@ from hypothesis import strategies as st
 from odocan.firmware import frames as f
 from odocan.firmware.e2e import E2EReceiver, E2EStatus
 from odocan.firmware.errors import ErrorFlag, ErrorMask
+from tests.dbc_typed import dbc_attribute, load_can_dbc
 
 DBC_PATH = Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc"
-DB = cantools.database.load_file(DBC_PATH, strict=True)
-assert isinstance(DB, cantools.database.can.Database)
+DB = load_can_dbc(DBC_PATH)
 
 Values = dict[str, int]
 
@@ -36,10 +36,9 @@ Values = dict[str, int]
 def with_e2e(message: Message) -> Message:
     """Attach the DBC's E2EDataIDs to ``message`` the way cantools' ARXML loader would, so that
     cantools.autosar picks the data ID from the counter itself."""
-    assert message.dbc is not None
     e2e = AutosarEnd2EndProperties()
     e2e.category = "PROFILE_02"
-    e2e.data_ids = [int(v) for v in message.dbc.attributes["E2EDataIDs"].value.split(",")]
+    e2e.data_ids = [int(v) for v in dbc_attribute(message, "E2EDataIDs").split(",")]
     e2e.payload_length = 8
     specifics = AutosarMessageSpecifics()
     specifics.e2e = e2e
@@ -310,7 +309,8 @@ def payload_signals(kind: Kind) -> list[Signal]:
 
 def raw_range(signal: Signal) -> tuple[int, int]:
     """The DBC [min|max] of ``signal`` in raw units."""
-    assert signal.minimum is not None and signal.maximum is not None
+    assert signal.minimum is not None
+    assert signal.maximum is not None
     return round(signal.minimum / signal.scale), round(signal.maximum / signal.scale)
 
 
@@ -354,6 +354,7 @@ def test_firmware_frames_are_cantools_frames(kind: Kind, data: st.DataObject, co
     assert packed == cantools_frame(kind, counter, values)
     assert cantools.autosar.check_profile2_crc(packed, message) is True
     decoded = message.decode(packed, decode_choices=False, scaling=False)
+    assert isinstance(decoded, dict)  # not a container message
     decoded.pop("CHECKSUM")
     assert decoded == expected_signals(kind, counter, values)
 
@@ -375,7 +376,9 @@ def test_every_message_and_page_is_covered() -> None:
         if not muxers:
             assert (message.name, None) in covered
         else:
-            for value in muxers[0].choices:
+            pages = muxers[0].choices
+            assert pages is not None, message.name
+            for value in pages:
                 assert (message.name, int(value)) in covered, (message.name, value)
 
 
@@ -446,7 +449,8 @@ def test_wrapping_fields_keep_their_low_bits(
     spec = DB.get_message_by_name(message).get_signal_by_name(signal)
     low_bits = value & ((1 << bits) - 1)
     expected = low_bits - (1 << bits) if spec.is_signed and low_bits >> (bits - 1) else low_bits
-    assert got == expected and errors.bits == 0
+    assert got == expected
+    assert errors.bits == 0
 
 
 def test_counter_is_taken_mod_16() -> None:
@@ -460,9 +464,11 @@ def test_unknown_pages_are_sent_raw_and_read_back() -> None:
     config = f.unpack_odom_config(f.pack_odom_config(2, 9, 123_456, errors))
     assert (config.param, config.value) == (9, 123_456)
     pose = f.unpack_odom_set_pose(f.pack_odom_set_pose(2, 7, 0xDEADBEEF, errors))
-    assert (pose.field, pose.value) == (7, 0xDEADBEEF) and errors.bits == 0
+    assert (pose.field, pose.value) == (7, 0xDEADBEEF)
+    assert errors.bits == 0
     goal = f.unpack_nav_goal(f.pack_nav_goal(2, 9, 0xDEADBEEF, errors))
-    assert (goal.field, goal.value) == (9, 0xDEADBEEF) and errors.bits == 0
+    assert (goal.field, goal.value) == (9, 0xDEADBEEF)
+    assert errors.bits == 0
 
 
 def test_nav_goal_go_reads_an_unknown_mode_raw() -> None:

@@ -20,6 +20,7 @@ from odocan.firmware.ecu import (
 )
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.hal import MAILBOX_SLOTS, TICK_PERIOD_US
+from tests.dbc_typed import choices
 from tests.odo_helpers import geometry, params
 from tests.test_ecu import DB, RecordingHal, Rig
 
@@ -48,6 +49,10 @@ class TimedRig(Rig):
         data = fr.pack_wheel_encoders(self.counter, left & 0xFFFF, right & 0xFFFF)
         self.counter = (self.counter + 1) % 16
         return data
+
+    def reason(self) -> Reason:
+        """The ECU's reason now, read afresh like ``Rig.state()``."""
+        return self.ecu.reason
 
     def summary(self) -> dict[str, int]:
         """The last ODOM_STATUS summary page, raw values."""
@@ -78,7 +83,8 @@ def test_twist_is_right_after_a_gap_of_lost_frames(lost: int) -> None:
     after = RecordingHal()
     after.sent = rig.hal.sent[sent_before:]
     twists = [t for t in after.decoded("ODOM_TWIST") if t["ENC_COUNTER"] == named]
-    assert twists and twists[0]["LINEAR_VEL"] == _speed_mm_s(COUNTS_PER_PERIOD)
+    assert twists
+    assert twists[0]["LINEAR_VEL"] == _speed_mm_s(COUNTS_PER_PERIOD)
     assert twists[0]["ANGULAR_VEL"] == 0
     assert not rig.ecu.errors.has(ErrorFlag.SATURATION)
     g = geometry(rig.ecu.params)
@@ -92,7 +98,7 @@ def test_a_stalled_firmware_reports_lost_time_and_keeps_the_distance() -> None:
     rig = TimedRig("euler")
     for _ in range(20):
         rig.step()
-    assert rig.ecu.state is State.OK
+    assert rig.state() is State.OK
     stall = 200  # a 2 s SIGSTOP: no tick and no ISR runs; the motors go on turning
     held = [rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD) for _ in range(3)]
     for _ in range(stall - 3):  # beyond the controller's 3-frame FIFO: overrun
@@ -100,8 +106,8 @@ def test_a_stalled_firmware_reports_lost_time_and_keeps_the_distance() -> None:
     for data in held:  # the ISR runs on resume: the FIFO's oldest frames
         rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, data)
     rig.tick(stall)
-    assert rig.ecu.state is State.DEGRADED
-    assert rig.ecu.reason is Reason.TIME_LOST
+    assert rig.state() is State.DEGRADED
+    assert rig.reason() is Reason.TIME_LOST
     assert rig.ecu.errors.has(ErrorFlag.TIME_LOST)
     assert rig.ecu.periods_lost == stall - 1
     rig.step()  # the first fresh frame: 198 periods after the last held one
@@ -113,7 +119,8 @@ def test_a_stalled_firmware_reports_lost_time_and_keeps_the_distance() -> None:
     )
     for _ in range(RECOVERY_FRAMES - 1):
         rig.step()
-    assert rig.ecu.state is State.OK and rig.ecu.reason is Reason.NONE
+    assert rig.state() is State.OK
+    assert rig.reason() is Reason.NONE
     assert rig.ecu.errors.has(ErrorFlag.TIME_LOST)  # sticky
 
 
@@ -122,19 +129,14 @@ def test_uptime_and_the_watchdog_count_time_not_ticks() -> None:
     rig.step()
     rig.tick(300)  # 3 s on the timer, one tick run
     assert rig.ecu.time_periods == 301
-    assert rig.ecu.state is State.DEGRADED
-    assert rig.ecu.reason is Reason.TIME_LOST
+    assert rig.state() is State.DEGRADED
+    assert rig.reason() is Reason.TIME_LOST
     for _ in range(9):
         rig.tick()
     status = [s for s in rig.hal.decoded("ODOM_STATUS") if s["PAGE"] == 0]
     assert status[-1]["UPTIME"] == 3
     assert status[-1]["REASON"] == Reason.ENCODER_TIMEOUT  # then the watchdog's own cause
-    assert (
-        DB.get_message_by_name("ODOM_STATUS")
-        .get_signal_by_name("REASON")
-        .choices[Reason.ENCODER_TIMEOUT]
-        == "ENCODER_TIMEOUT"
-    )
+    assert choices(DB, "ODOM_STATUS", "REASON")[Reason.ENCODER_TIMEOUT] == "ENCODER_TIMEOUT"
 
 
 def test_a_short_late_tick_is_not_lost_time() -> None:
@@ -143,7 +145,7 @@ def test_a_short_late_tick_is_not_lost_time() -> None:
         rig.step()
     rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, rig.encoders(5, 5))
     rig.tick(WATCHDOG_TICKS - 1)
-    assert rig.ecu.state is State.OK
+    assert rig.state() is State.OK
     assert not rig.ecu.errors.has(ErrorFlag.TIME_LOST)
 
 
@@ -154,10 +156,11 @@ def test_mailbox_overflow_degrades_with_its_reason_then_recovers() -> None:
     for _ in range(MAILBOX_SLOTS + 1):
         rig.ecu.isr_can_rx(0x555, bytes(8))
     rig.tick()
-    assert rig.ecu.state is State.DEGRADED and rig.ecu.reason is Reason.MAILBOX_OVERFLOW
+    assert rig.state() is State.DEGRADED
+    assert rig.reason() is Reason.MAILBOX_OVERFLOW
     for _ in range(RECOVERY_FRAMES):
         rig.step()
-    assert rig.ecu.state is State.OK
+    assert rig.state() is State.OK
 
 
 def _bound_counts(p_integrator: str = "exact") -> int:
@@ -172,11 +175,12 @@ def test_the_plausibility_bound_is_exact_at_standstill() -> None:
     for _ in range(5):
         rig.step(0, 0)
     rig.step(bound, -bound)  # the fastest possible spin: accepted
-    assert rig.ecu.state is State.OK
+    assert rig.state() is State.OK
     heading = rig.ecu.odometry.heading_bam64
     rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, rig.forged(rig.left + bound + 1, rig.right))
     rig.tick()
-    assert rig.ecu.state is State.DEGRADED and rig.ecu.reason is Reason.IMPLAUSIBLE_STEP
+    assert rig.state() is State.DEGRADED
+    assert rig.reason() is Reason.IMPLAUSIBLE_STEP
     assert rig.ecu.odometry.heading_bam64 == heading  # not integrated
     assert rig.ecu.frames_implausible == 1
 
@@ -214,12 +218,13 @@ def test_a_counter_restart_is_re_primed_not_integrated() -> None:
         for r in (rig, twin):
             r.step(5, 7)
     assert rig.ecu.errors.has(ErrorFlag.COUNTER_RESET)
-    assert rig.ecu.state is State.DEGRADED and rig.ecu.reason is Reason.COUNTER_RESET
+    assert rig.state() is State.DEGRADED
+    assert rig.reason() is Reason.COUNTER_RESET
     assert rig.ecu.odometry.x_q40_m != before
     for _ in range(2 * RECOVERY_FRAMES):
         for r in (rig, twin):
             r.step(5, 7)
-    assert rig.ecu.state is State.DEGRADED  # the step across the restart is lost: not OK
+    assert rig.state() is State.DEGRADED  # the step across the restart is lost: not OK
     assert rig.summary()["REASON"] == Reason.COUNTER_RESET
     assert abs(rig.ecu.odometry.x_q40_m - twin.ecu.odometry.x_q40_m) < 2**40 * 1e-9
     assert abs(rig.ecu.odometry.y_q40_m - twin.ecu.odometry.y_q40_m) < 2**40 * 1e-9
@@ -233,14 +238,15 @@ def test_a_pose_set_after_a_counter_restart_lets_the_firmware_recover() -> None:
     rig.left = rig.right = 0
     for _ in range(RESYNC_FRAMES + RECOVERY_FRAMES):
         rig.step(5, 7)
-    assert rig.ecu.reason is Reason.COUNTER_RESET
+    assert rig.reason() is Reason.COUNTER_RESET
     rig.ecu.isr_can_rx(
         fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
     )
     rig.step(5, 7)
     for _ in range(RECOVERY_FRAMES):
         rig.step(5, 7)
-    assert rig.ecu.state is State.OK and rig.ecu.reason is Reason.NONE
+    assert rig.state() is State.OK
+    assert rig.reason() is Reason.NONE
 
 
 def test_firmware_time_follows_a_jittery_timer_without_drift() -> None:

@@ -33,6 +33,7 @@ from odocan.sim.clock import LockstepClock
 from odocan.sim.contract import database
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
+from tests.dbc_typed import decode
 from tests.fault_rig import FaultRig, open_virtual, robot_params, unique_channel
 
 DB = database()
@@ -63,7 +64,7 @@ class Watch:
             if msg.arbitration_id in FIRMWARE_IDS:
                 self.last_firmware_s = msg.timestamp
             if msg.arbitration_id == STATUS.frame_id and msg.data[1] >> 4 == 0:
-                s = DB.decode_message(STATUS.frame_id, bytes(msg.data))
+                s = decode(DB, STATUS.frame_id, msg.data)
                 self.summaries.append((msg.timestamp, str(s["STATE"]), str(s["REASON"])))
         now_s = tick * TICK_S + TX_LATENCY_S
         self.verdicts.append((now_s, self.monitor.health(now_s)["state"]))
@@ -313,7 +314,8 @@ def run_forgery(seconds: float = 4.0, per_tick: int = 80) -> tuple[Watch, dict[s
 def test_forged_encoder_frames_never_move_the_pose_and_are_never_ok() -> None:
     watch, figures = run_forgery()
     flood = [state for t, state, _ in watch.summaries if t > 2.05]
-    assert flood and "OK" not in flood
+    assert flood
+    assert "OK" not in flood
     assert figures["pose_error_m"] < 1e-4
     assert "OK" not in verdicts_between(watch, 2.05, 6.0)
 
@@ -368,7 +370,8 @@ def test_forged_frames_that_pass_e2e_are_refused_as_implausible() -> None:
     """800 frames/s: the mailbox holds them, about 1/256 pass the CRC and some the sequence
     check; each is refused by the plausibility bound (DEGRADED) and the pose never moves."""
     _, figures = run_forgery(seconds=20.0, per_tick=8)
-    assert figures["overflows"] == 0 and figures["implausible"] >= 1
+    assert figures["overflows"] == 0
+    assert figures["implausible"] >= 1
     assert ("DEGRADED", "IMPLAUSIBLE_STEP") in figures["states"]
     assert figures["pose_error_m"] < 1e-4
 
@@ -381,7 +384,8 @@ def test_multiplexed_messages_have_per_page_rates_and_jitter() -> None:
         rig.run(4.0)
         messages = watch.monitor.snapshot(4.0)["messages"]
     status, truth = messages["ODOM_STATUS"], messages["SIM_TRUTH"]
-    assert status["jitter_ms"] is None and truth["jitter_ms"] is None
+    assert status["jitter_ms"] is None
+    assert truth["jitter_ms"] is None
     assert status["pages"]["SUMMARY"]["rate_hz"] == pytest.approx(10.0)
     for page in ("FRAME_TOTALS", "E2E_WHEEL_ENCODERS", "E2E_NAV_GOAL"):
         assert status["pages"][page]["rate_hz"] == pytest.approx(2.0)
@@ -389,7 +393,8 @@ def test_multiplexed_messages_have_per_page_rates_and_jitter() -> None:
         assert truth["pages"][part]["rate_hz"] == pytest.approx(10.0)
     for pages in (status["pages"], truth["pages"]):
         assert max(p["jitter_ms"] for p in pages.values()) < 1e-6
-    assert messages["WHEEL_ENCODERS"]["jitter_ms"] < 1e-6 and "pages" not in messages["ODOM_POSE_X"]
+    assert messages["WHEEL_ENCODERS"]["jitter_ms"] < 1e-6
+    assert "pages" not in messages["ODOM_POSE_X"]
 
 
 if __name__ == "__main__":

@@ -29,10 +29,11 @@ from odocan.host.protocol.e2e import (
     crc8h2f_p02_one,
 )
 from odocan.sim.contract import database
+from tests.dbc_typed import dbc_attribute
 
 DB = database()
 ENC = DB.get_message_by_name("WHEEL_ENCODERS")
-ENC_IDS = tuple(int(v) for v in ENC.dbc.attributes["E2EDataIDs"].value.split(","))
+ENC_IDS = tuple(int(v) for v in dbc_attribute(ENC, "E2EDataIDs").split(","))
 CYCLE_S = 0.01
 FW_STATUS = {
     E2EStatus.OK: "ok", E2EStatus.OKSOMELOST: "oksomelost", E2EStatus.REPEATED: "repeated",

@@ -38,18 +38,21 @@ def test_bulk_path_takes_any_frames(messages: list[can.Message], tmp_path: Path)
     assert len(frames) == FRAMES
     counts, accepted = check_frames(frames)
     unknown = counts["unknown"]
-    assert unknown["error_frames"] > 5_000 and unknown["remote_frames"] > 5_000
+    assert unknown["error_frames"] > 5_000
+    assert unknown["remote_frames"] > 5_000
     assert 0 < int(accepted.sum()) < FRAMES  # some sealed frames pass, garbage does not
     decoder = BulkDecoder(database())
     for message in database().messages:
         decoded = decoder.decode(frames, message.name)
         assert all(len(v) == len(decoded["index"]) for v in decoded.values())
+    error = None
     try:
         result = analyze(frames, load("pmir"), "exact")
     except OdocanError as exc:  # the frames do not make a drive: a one-line error, not a crash
-        assert "\n" not in str(exc)
+        error = str(exc)
     else:
         json.dumps(result.report, allow_nan=False)
+    assert error is None or "\n" not in error
 
     path = tmp_path / "fuzz.log"
     with can.Logger(path) as logger:

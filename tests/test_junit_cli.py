@@ -42,7 +42,8 @@ def figures(case: ET.Element) -> dict[str, str]:
     """``key = value`` lines of a testcase's failure text or system-out."""
     node = case.find("failure")
     node = node if node is not None else case.find("system-out")
-    assert node is not None and node.text
+    assert node is not None
+    assert node.text
     return dict(line.split(" = ", 1) for line in node.text.splitlines())
 
 
@@ -106,7 +107,8 @@ def test_analyze_fail_carries_the_figures(
     assert float(figures(cases["onboard_vs_reference_position"])["max_m"]) == measured
     inputs = data["inputs"]
     check_inputs(inputs)
-    assert inputs["errors"] is None and inputs["faults"] is None  # unknown for a log
+    assert inputs["errors"] is None
+    assert inputs["faults"] is None  # unknown for a log
     assert inputs["log"]["sha256"] == hashlib.sha256(gap_log.read_bytes()).hexdigest()
     assert inputs["integrator"] == "euler"
 
@@ -162,7 +164,7 @@ def test_umbmark_junit_plot_and_inputs(
 
 
 @pytest.mark.parametrize(
-    "argv, words",
+    ("argv", "words"),
     [
         (["run", "--duration", "1", "--junit", "/nonexistent/x.xml"], ["--junit", "/nonexistent"]),
         (["analyze", "x.log", "--junit", "/nonexistent/x.xml"], ["--junit"]),
@@ -180,6 +182,7 @@ def test_bad_outputs_are_refused_up_front(
     assert code == 2
     assert out == ""
     lines = err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert len(lines) == 1, err
+    assert lines[0].startswith("error: "), err
     for word in words:
         assert word in lines[0]

@@ -53,7 +53,8 @@ def test_isolated_listeners_keep_the_notifier_and_the_others_going() -> None:
     notifier = _pump(listeners, 300)
     assert counting.count == 300
     assert flaky.seen == 300
-    assert isinstance(listeners[0], Isolated) and listeners[0].errors == 100
+    assert isinstance(listeners[0], Isolated)
+    assert listeners[0].errors == 100
     assert notifier.exception is None
 
 

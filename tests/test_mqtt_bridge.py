@@ -202,7 +202,7 @@ def test_no_qos1_message_lost_across_a_broker_restart(mosquitto: Mosquitto) -> N
                 try:
                     async with asyncio.timeout(timeout_s):
                         async for message in sub.messages:
-                            payload = json.loads(message.payload)  # type: ignore[arg-type]
+                            payload = json.loads(message.payload)
                             if payload["state"] == "online":
                                 seqs.append(payload["seq"])
                             if until_seq is not None and seqs and seqs[-1] >= until_seq:
@@ -334,7 +334,7 @@ def test_every_command_the_broker_accepted_is_answered_across_a_broker_restart(
     answers: dict[int, list[str]] = {}
 
     def operator() -> aiomqtt.Client:
-        props = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
+        props = Properties(PacketTypes.CONNECT)
         props.SessionExpiryInterval = 300
         return client(mosquitto.url(ROBOT), identifier=f"test-operator-{os.getpid()}",
                       protocol=aiomqtt.ProtocolVersion.V5, clean_start=False, properties=props)
@@ -342,11 +342,11 @@ def test_every_command_the_broker_accepted_is_answered_across_a_broker_restart(
     async def listen(sub: aiomqtt.Client) -> None:
         with contextlib.suppress(aiomqtt.MqttError):
             async for message in sub.messages:
-                answer = json.loads(message.payload)  # type: ignore[arg-type]
+                answer = json.loads(message.payload)
                 answers.setdefault(answer["id"], []).append(answer["result"])
 
     async def send(sub: aiomqtt.Client, ids: range, accepted: list[int]) -> None:
-        expiry = Properties(PacketTypes.PUBLISH)  # type: ignore[no-untyped-call]
+        expiry = Properties(PacketTypes.PUBLISH)
         expiry.MessageExpiryInterval = 30
 
         async def one(k: int) -> None:

@@ -125,7 +125,8 @@ def test_the_bridge_connects_over_tls_with_a_client_certificate(
     assert code == 0, err
     assert f"bridge tlsbot: mqtts://bridge@127.0.0.1:{tls.good.port}" in err
     status = asyncio.run(retained(tls_url(tls.good, tls.pki), "odocan/tlsbot/status"))
-    assert status["state"] == "offline" and status["reason"] == "bridge stopped"
+    assert status["state"] == "offline"
+    assert status["reason"] == "bridge stopped"
 
 
 def test_the_fleet_connects_over_tls_with_a_client_certificate(

@@ -39,6 +39,12 @@ def _load_dbc() -> cantools.database.can.Database:
     return db
 
 
+def state(n: nav.Navigator) -> NavState:
+    """The navigator's state now: a call, so mypy does not keep ``n.state`` narrowed to what an
+    earlier assert saw across the steps that change it."""
+    return n.state
+
+
 DB = _load_dbc()
 TWO_PI = 2 * math.pi
 Q40 = float(1 << 40)
@@ -67,7 +73,8 @@ def bam32_rad(angle_bam32: int) -> float:
 @given(st.integers(0, (1 << 64) - 1))
 def test_isqrt_u64_is_floor_sqrt(n: int) -> None:
     r = isqrt_u64(n)
-    assert r == math.isqrt(n) and r * r <= n < (r + 1) * (r + 1)
+    assert r == math.isqrt(n)
+    assert r * r <= n < (r + 1) * (r + 1)
 
 
 def test_isqrt_u64_edges_and_every_small_value() -> None:
@@ -95,7 +102,8 @@ def test_distance_relative_2e_29_over_the_whole_i64_plane(dx: int, dy: int) -> N
     errors = ErrorMask()
     got_um = nav.distance_um(dx, dy, errors)
     want_um = math.hypot(dx / Q40, dy / Q40) * 1e6
-    assert abs(got_um - want_um) <= 3.0 + want_um * 2**-29 and errors.bits == 0
+    assert abs(got_um - want_um) <= 3.0 + want_um * 2**-29
+    assert errors.bits == 0
 
 
 @given(st.floats(-10, 10), st.floats(-10, 10), st.integers(0, (1 << 32) - 1))
@@ -165,7 +173,8 @@ def test_drive_straight_law_goes_along_the_track(dist_um: int, bearing_error: in
 def test_wheel_speeds_are_v_minus_plus_omega_half_b(v: int, omega: int, wheelbase_nm: int) -> None:
     left, right = nav.wheel_speeds_mm_s(v, omega, wheelbase_nm)
     half = omega / 1000 * wheelbase_nm * 1e-9 / 2 * 1000
-    assert abs(left - (v - half)) <= 0.5 and abs(right - (v + half)) <= 0.5
+    assert abs(left - (v - half)) <= 0.5
+    assert abs(right - (v + half)) <= 0.5
     assert left + right == 2 * v  # the same rounded half on both sides: no drift of v
 
 
@@ -239,19 +248,23 @@ class Pose:
 
 def test_turn_go_turn_walks_through_every_state() -> None:
     n, pose = nav.Navigator(ErrorMask()), Pose()
-    assert n.state is NavState.IDLE and not pose.step(n)  # idle: no MOTOR_CMD
+    assert state(n) is NavState.IDLE
+    assert not pose.step(n)  # idle: no MOTOR_CMD
     assert submit(n, goal_frames(0.0, 1.0, 180.0, goal_id=7)) is AckReason.OK
     assert (n.state, n.goal_id, n.depth) == (NavState.TURNING, 7, 1)
     assert pose.step(n)
     assert n.right_mm_s == nav.WHEEL_STEP_MM_S == -n.left_mm_s  # turning left, rate-limited
     assert abs(bam32_rad(n.heading_error_bam32) - math.pi / 2) < 1e-8
     pose.heading_deg = 89.8  # within 0.5 degree of the bearing: drive
-    assert pose.step(n) and n.state is NavState.DRIVING
+    assert pose.step(n)
+    assert state(n) is NavState.DRIVING
     pose.y_m = 0.996  # 4 mm short: the final turn
-    assert pose.step(n) and n.state is NavState.FINAL_TURN
+    assert pose.step(n)
+    assert state(n) is NavState.FINAL_TURN
     assert n.distance_um == pytest.approx(4000, abs=3)
     pose.heading_deg = 179.6
-    assert pose.step(n) and n.state is NavState.REACHED
+    assert pose.step(n)
+    assert state(n) is NavState.REACHED
     assert (n.left_mm_s, n.right_mm_s, n.depth) == (0, 0, 0)
     sent = [pose.step(n) for _ in range(10)]
     assert sent == [True] * (nav.ZERO_CMD_PERIODS - 1) + [False] * (11 - nav.ZERO_CMD_PERIODS)
@@ -261,7 +274,7 @@ def test_turn_go_turn_walks_through_every_state() -> None:
 def test_go_to_goal_starts_driving_and_skips_the_final_turn_without_heading() -> None:
     n, pose = nav.Navigator(ErrorMask()), Pose()
     assert submit(n, goal_frames(1.0, 1.0, None, mode=NavMode.GO_TO_GOAL)) is AckReason.OK
-    assert n.state is NavState.DRIVING
+    assert state(n) is NavState.DRIVING
     for k in range(1, 40):  # a fixed pose: the wheels ramp to the law's setpoints, then hold
         pose.step(n)
         v, omega = nav.go_to_goal_law(n.distance_um, n.heading_error_bam32, ErrorMask())
@@ -269,7 +282,9 @@ def test_go_to_goal_starts_driving_and_skips_the_final_turn_without_heading() ->
         step = k * nav.WHEEL_STEP_MM_S
         assert (n.left_mm_s, n.right_mm_s) == (clamp(left, step), clamp(right, step))
     pose.x_m, pose.y_m, pose.heading_deg = 0.998, 1.002, 123.0
-    assert pose.step(n) and n.state is NavState.REACHED and n.heading_error_bam32 == 0
+    assert pose.step(n)
+    assert state(n) is NavState.REACHED
+    assert n.heading_error_bam32 == 0
 
 
 def test_the_next_goal_starts_one_period_after_reached() -> None:
@@ -294,7 +309,8 @@ def test_requests_are_validated() -> None:
     assert submit(n, [*goal_frames(1.0, 0.0, None)[:2], bad_mode]) is AckReason.OUT_OF_RANGE
     assert submit(n, goal_frames(1.0, 0.0, None), running=False) is AckReason.BUSY
     assert n.request(fr.NavGoal(0, 9, 0, 0, 0, 0, 0), True) is AckReason.UNKNOWN_FIELD
-    assert n.state is NavState.IDLE and n.depth == 0
+    assert n.state is NavState.IDLE
+    assert n.depth == 0
     # GO consumed the staged fields: a bare GO after a refused one is INCOMPLETE
     assert n.request(goal_frames(1.0, 0.0, None)[-1], True) is AckReason.INCOMPLETE
 
@@ -305,7 +321,8 @@ def test_queue_full_replace_and_stop() -> None:
         assert submit(n, goal_frames(k + 1.0, 0.0, None, goal_id=k)) is AckReason.OK
     assert n.depth == nav.NAV_QUEUE_SLOTS == fr.NAV_QUEUE_DEPTH_MAX
     assert submit(n, goal_frames(9.0, 9.0, None, goal_id=99)) is AckReason.QUEUE_FULL
-    assert n.depth == nav.NAV_QUEUE_SLOTS and n.goal_id == 0
+    assert n.depth == nav.NAV_QUEUE_SLOTS
+    assert n.goal_id == 0
     for _ in range(5):
         pose.step(n)
     assert n.left_mm_s > 0
@@ -465,22 +482,28 @@ def test_closed_loop_path_reaches_every_goal_in_order(rig: LockstepNav, mode: Na
     for goal_id, goal in enumerate(SQUARE, start=1):
         rig.goal(*goal, mode=mode, goal_id=goal_id)
     acks = rig.of("ODOM_ACK")
-    assert len(acks) == 12 and {a["REQUEST_ID"] for _, a in acks} == {fr.NAV_GOAL_ID}
+    assert len(acks) == 12
+    assert {a["REQUEST_ID"] for _, a in acks} == {fr.NAV_GOAL_ID}
     assert {(a["RESULT"], a["REASON"]) for _, a in acks} == {(0, 0)}
     rig.run_until_done()
     assert rig.reached_ids() == [1, 2, 3]
     statuses = [s for _, s in rig.of("NAV_STATUS")]
     depths = [s["QUEUE_DEPTH"] for s in statuses if s["STATE"] == NavState.REACHED]
-    assert depths[:2] == [2, 1] and set(depths[2:]) == {0}
+    assert depths[:2] == [2, 1]
+    assert set(depths[2:]) == {0}
     for goal_id, goal in enumerate(SQUARE, start=1):
         d_m, dh_rad = pose_error(rig.truth_at_reached[goal_id], goal)
-        assert d_m < TRUTH_TOL_M and dh_rad < TRUTH_TOL_RAD, (goal_id, d_m, dh_rad)
+        assert d_m < TRUTH_TOL_M, (goal_id, d_m, dh_rad)
+        assert dh_rad < TRUTH_TOL_RAD, (goal_id, d_m, dh_rad)
     d_m, dh_rad = pose_error(rig.onboard_pose(), SQUARE[-1])  # settled, as the firmware sees it
-    assert d_m < TOL_M and dh_rad < TOL_RAD
+    assert d_m < TOL_M
+    assert dh_rad < TOL_RAD
     d_m, dh_rad = pose_error(truth_pose(rig), SQUARE[-1])
-    assert d_m < TRUTH_TOL_M and dh_rad < TRUTH_TOL_RAD
+    assert d_m < TRUTH_TOL_M
+    assert dh_rad < TRUTH_TOL_RAD
     last = statuses[-1]
-    assert last["STATE"] == NavState.REACHED and last["DISTANCE"] < TOL_M
+    assert last["STATE"] == NavState.REACHED
+    assert last["DISTANCE"] < TOL_M
     assert abs(last["HEADING_ERROR"]) < TOL_RAD
 
 
@@ -488,7 +511,8 @@ def test_closed_loop_motor_commands_every_20_ms_then_zero_then_silence(rig: Lock
     rig.goal(0.3, 0.0, None, goal_id=4)
     rig.run_until_done()
     ticks = [t for t, _ in rig.of("MOTOR_CMD")]
-    assert ticks and all(b - a == 2 for a, b in itertools.pairwise(ticks))
+    assert ticks
+    assert all(b - a == 2 for a, b in itertools.pairwise(ticks))
     commands = [(c["LEFT_SPEED"], c["RIGHT_SPEED"]) for _, c in rig.of("MOTOR_CMD")]
     assert commands[-nav.ZERO_CMD_PERIODS :] == [(0, 0)] * nav.ZERO_CMD_PERIODS
     assert max(c[0] for c in commands) <= nav.V_MAX_MM_S / 1000
@@ -503,7 +527,8 @@ def test_closed_loop_full_queue_is_nacked_and_stop_halts(rig: LockstepNav) -> No
     gos = [a for _, a in rig.of("ODOM_ACK") if a["REQUEST_FIELD"] == NavGoalField.GO]
     assert [a["RESULT"] for a in gos] == [0] * nav.NAV_QUEUE_SLOTS + [1]
     choices = DB.get_message_by_name("ODOM_ACK").get_signal_by_name("REASON").choices
-    assert choices is not None and choices[gos[-1]["REASON"]] == "QUEUE_FULL"
+    assert choices is not None
+    assert choices[gos[-1]["REASON"]] == "QUEUE_FULL"
     rig.run(1.0)
     assert rig.vehicle.wheel_speeds_mps()[0] > 0.2
     rig.stop()
@@ -528,7 +553,8 @@ def test_closed_loop_replace_drops_the_path(rig: LockstepNav) -> None:
     rig.run_until_done()
     assert rig.reached_ids() == [3]
     d_m, dh_rad = pose_error(rig.onboard_pose(), (0.0, 0.2, 90.0))
-    assert d_m < TOL_M and dh_rad < TOL_RAD
+    assert d_m < TOL_M
+    assert dh_rad < TOL_RAD
 
 
 def test_systematic_errors_show_in_the_truth_not_on_board() -> None:
@@ -544,19 +570,23 @@ def test_systematic_errors_show_in_the_truth_not_on_board() -> None:
             r.run_until_done()
             assert r.reached_ids() == [1, 2, 3]
             d_m, dh_rad = pose_error(r.onboard_pose(), SQUARE[-1])
-            assert d_m < TOL_M and dh_rad < TOL_RAD
+            assert d_m < TOL_M
+            assert dh_rad < TOL_RAD
             ends[name] = pose_error(truth_pose(r), SQUARE[-1])
         finally:
             r.close()
-    assert ends["none"][0] < TRUTH_TOL_M and ends["none"][1] < TRUTH_TOL_RAD
-    assert ends["ed_eb"][0] > 3 * TRUTH_TOL_M and ends["ed_eb"][1] > 2 * TRUTH_TOL_RAD
+    assert ends["none"][0] < TRUTH_TOL_M
+    assert ends["none"][1] < TRUTH_TOL_RAD
+    assert ends["ed_eb"][0] > 3 * TRUTH_TOL_M
+    assert ends["ed_eb"][1] > 2 * TRUTH_TOL_RAD
 
 
 def test_ecu_status_page_5_counts_nav_goal_frames(rig: LockstepNav) -> None:
     rig.goal(0.0, 0.0, None, goal_id=1)
     rig.run(1.1)  # every rotating page has gone out at least once since
     pages = [s for _, s in rig.of("ODOM_STATUS") if s["PAGE"] == fr.StatusPage.E2E_NAV_GOAL]
-    assert pages and pages[-1]["NAV_GOAL_E2E_OK"] == 3
+    assert pages
+    assert pages[-1]["NAV_GOAL_E2E_OK"] == 3
     assert pages[-1]["NAV_GOAL_E2E_CRC_ERROR"] == 0
 
 
@@ -568,4 +598,5 @@ def test_ecu_aborts_when_the_encoders_fall_silent(rig: LockstepNav) -> None:
         rig.clock.advance_to(rig.ticks * TICK_S)
         ecu.tick()
         rig.ticks += 1
-    assert ecu.nav.state is NavState.ABORTED and (ecu.nav.left_mm_s, ecu.nav.right_mm_s) == (0, 0)
+    assert ecu.nav.state is NavState.ABORTED
+    assert (ecu.nav.left_mm_s, ecu.nav.right_mm_s) == (0, 0)

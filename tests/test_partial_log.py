@@ -39,13 +39,16 @@ def test_the_warning_goes_to_stderr(tmp_path: Path, capsys: pytest.CaptureFixtur
     path = write(tmp_path, "".join(LINES) + "(0.0200")
     assert len(read_log(path)) == 3
     err = capsys.readouterr().err
-    assert err.startswith("warning: ") and "skipped 1 partial line" in err and err.count("\n") == 1
+    assert err.startswith("warning: ")
+    assert "skipped 1 partial line" in err
+    assert err.count("\n") == 1
 
 
 def test_a_complete_last_line_without_newline_is_kept(tmp_path: Path) -> None:
     warnings: list[str] = []
     frames = read_log(write(tmp_path, "".join(LINES)[:-1]), warn=warnings.append)
-    assert len(frames) == 3 and warnings == []
+    assert len(frames) == 3
+    assert warnings == []
 
 
 def test_a_bad_line_before_the_end_is_still_refused(tmp_path: Path) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 from odocan.host.protocol.pose import Pose, PosePairer, latest_pose, pose_of
 
@@ -17,7 +18,8 @@ def y_half(counter: int, y_m: float, turns: int) -> dict[str, float]:
 
 def test_the_heading_is_unwrapped_by_turns() -> None:
     pose = pose_of(x_half(3, 1.5, 0.25), y_half(3, -2.0, -2))
-    assert pose.x_m == 1.5 and pose.y_m == -2.0
+    assert pose.x_m == 1.5
+    assert pose.y_m == -2.0
     assert pose.heading_rad == -2 * 2.0 * math.pi + 0.25
 
 
@@ -38,7 +40,7 @@ def test_a_y_without_its_x_gives_nothing() -> None:
 
 
 def test_latest_pose_of_a_stream_with_a_lost_x() -> None:
-    stream = [
+    stream: list[tuple[str, Mapping[str, float]]] = [
         ("ODOM_POSE_X", x_half(7, 7.0, 0.7)),
         ("ODOM_POSE_Y", y_half(7, 70.0, 1)),
         ("WHEEL_ENCODERS", {"COUNTER": 9}),

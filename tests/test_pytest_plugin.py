@@ -10,7 +10,6 @@ import signal
 import socket
 import subprocess
 import sys
-from collections.abc import Iterator
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
@@ -209,7 +208,7 @@ def test_parse_bus_spec_types_the_values() -> None:
 
 
 @pytest.fixture
-def udp_bus() -> Iterator[str]:
+def udp_bus() -> str:
     """A fresh loopback-only udp_multicast channel as ``--odocan-bus`` text (skip if none)."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.bind(("127.0.0.1", 0))
@@ -228,7 +227,7 @@ def udp_bus() -> Iterator[str]:
     finally:
         rx.shutdown()
         tx.shutdown()
-    yield spec
+    return spec
 
 
 def _start_firmware(spec: str) -> subprocess.Popen[str]:
@@ -261,7 +260,8 @@ def test_the_same_file_in_lockstep_and_against_an_external_firmware(
         err = _stop(firmware)
     result.assert_outcomes(passed=2)
     result.stdout.fnmatch_lines([f"odocan: external firmware on {udp_bus} (real time)"])
-    assert err.startswith("odocan firmware: ") and "Traceback" not in err
+    assert err.startswith("odocan firmware: ")
+    assert "Traceback" not in err
 
 
 def test_no_external_firmware_on_the_bus_is_a_clear_error(

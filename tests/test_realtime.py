@@ -28,6 +28,7 @@ import pytest
 from odocan.firmware import frames as fr
 from odocan.sim.contract import database
 from odocan.sim.realtime import DeadlineStats, PeriodicLoop, accepted_ids, stop_on_signals
+from tests.dbc_typed import numbers
 
 ROOT = Path(__file__).resolve().parent.parent
 CLI = [sys.executable, "-m", "odocan"]
@@ -197,7 +198,7 @@ def _stop(proc: subprocess.Popen[str], signum: int | None = signal.SIGTERM) -> t
     except subprocess.TimeoutExpired:
         proc.kill()
         _, err = proc.communicate()
-        pytest.fail(f"{proc.args} did not stop: {err}")
+        pytest.fail(f"{proc.args!r} did not stop: {err}")
     return proc.returncode, err
 
 
@@ -214,9 +215,9 @@ def _check_traffic(capture: Capture, sim_ticks: int) -> None:
     xs: list[float] = []
     for msg in capture.frames:
         if msg.arbitration_id == fr.WHEEL_ENCODERS_ID:
-            recent = [*recent[-3:], int(db.decode_message(msg.arbitration_id, msg.data)["COUNTER"])]
+            recent = [*recent[-3:], int(numbers(db, msg.arbitration_id, msg.data)["COUNTER"])]
         elif msg.arbitration_id == fr.ODOM_POSE_X_ID:
-            signals = db.decode_message(msg.arbitration_id, msg.data)
+            signals = numbers(db, msg.arbitration_id, msg.data)
             assert signals["ENC_COUNTER"] in recent  # one of the last 4 encoder frames
             xs.append(float(signals["X"]))
     assert len(xs) >= 2
@@ -233,8 +234,10 @@ def _three_processes(bus_argv: list[str], listener: can.BusABC) -> None:
         sim_rc, sim_err = _stop(sim, None)
         fw_rc, fw_err = _stop(firmware, signal.SIGTERM)
     assert (sim_rc, fw_rc) == (0, 0), sim_err + fw_err
-    assert sim_err.startswith("odocan sim: ") and "deadline_miss_ratio" in sim_err
-    assert fw_err.startswith("odocan firmware: ") and "deadline_miss_ratio" in fw_err
+    assert sim_err.startswith("odocan sim: ")
+    assert "deadline_miss_ratio" in sim_err
+    assert fw_err.startswith("odocan firmware: ")
+    assert "deadline_miss_ratio" in fw_err
     sim_ticks = re.search(r"(\d+) ticks", sim_err)
     assert sim_ticks is not None, sim_err
     _check_traffic(capture, int(sim_ticks.group(1)))
@@ -268,4 +271,5 @@ def test_nodes_exit_cleanly_on_a_signal(udp_bus: tuple[list[str], can.BusABC], s
     assert len(capture.of(fr.ODOM_POSE_X_ID)) > 5
     for (rc, err), name in zip(results, ("sim", "firmware"), strict=True):
         assert rc == 0, err
-        assert err.startswith(f"odocan {name}: ") and "Traceback" not in err
+        assert err.startswith(f"odocan {name}: ")
+        assert "Traceback" not in err

@@ -27,16 +27,20 @@ def test_junit_names_every_check_and_carries_the_figures_of_a_failure(tmp_path: 
     cases = {case.get("name"): case for case in suite.findall("testcase")}
     assert list(cases) == ["onboard_vs_reference", "onboard_vs_truth", "e2e"]
     failure = cases["onboard_vs_truth"].find("failure")
-    assert failure is not None and failure.get("message") == "max position error 0.053 m > 0.01 m"
+    assert failure is not None
+    assert failure.get("message") == "max position error 0.053 m > 0.01 m"
     assert "limit_m = 0.01" in (failure.text or "")
     assert cases["onboard_vs_reference"].find("failure") is None
-    assert "max_position_error_m = 3e-05" in (cases["onboard_vs_reference"].findtext("system-out"))
+    system_out = cases["onboard_vs_reference"].findtext("system-out")
+    assert system_out is not None
+    assert "max_position_error_m = 3e-05" in system_out
 
 
 def test_junit_escapes_what_xml_cannot_hold_raw() -> None:
     text = junit_xml("analyze", [Check('a<b & "c"', False, "x < y & z")])
     case = ET.fromstring(text).find("testsuite/testcase")
-    assert case is not None and case.get("name") == 'a<b & "c"'
+    assert case is not None
+    assert case.get("name") == 'a<b & "c"'
 
 
 def test_the_inputs_name_the_robot_the_dbc_and_the_version() -> None:
@@ -50,4 +54,5 @@ def test_the_inputs_name_the_robot_the_dbc_and_the_version() -> None:
         "rk2", "ed=1.002", "drop=0.01")
     assert record["seeds"] == {"sim": 3, "faults": 4}
     assert record["dbc"]["sha256"] == hashlib.sha256(DBC_PATH.read_bytes()).hexdigest()
-    assert isinstance(record["odocan_version"], str) and record["odocan_version"]
+    assert isinstance(record["odocan_version"], str)
+    assert record["odocan_version"]

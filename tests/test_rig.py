@@ -42,6 +42,7 @@ from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import get_scenario
 from odocan.sim.transport import OdocanBus
 from odocan.sim.vehicle import Vehicle
+from tests import dbc_typed
 
 PMIR = load("pmir")
 EPS_S = 1e-6
@@ -76,7 +77,9 @@ def recorded(config: RigConfig, seconds: float, **kwargs: Any) -> list[can.Messa
 def decode(msg: can.Message) -> dict[str, Any]:
     """Raw signal values of one frame (choices as names only for STATE and PAGE)."""
     return dict(
-        database().decode_message(msg.arbitration_id, msg.data, scaling=False, decode_choices=False)
+        dbc_typed.decode(
+            database(), msg.arbitration_id, msg.data, scaling=False, decode_choices=False
+        )
     )
 
 
@@ -199,11 +202,10 @@ def _gated_run(gap: tuple[int, int] | None) -> list[can.Message]:
 
 def _states(messages: list[can.Message]) -> list[tuple[float, str]]:
     """(timestamp, STATE name) of every ODOM_STATUS summary page."""
-    message = database().get_message_by_frame_id(fr.ODOM_STATUS_ID)
     out = []
     for msg in messages:
         if msg.arbitration_id == fr.ODOM_STATUS_ID:
-            signals = message.decode(msg.data)
+            signals = dbc_typed.decode(database(), fr.ODOM_STATUS_ID, msg.data)
             if signals["PAGE"] == "SUMMARY":
                 out.append((msg.timestamp, str(signals["STATE"])))
     return out
@@ -219,7 +221,8 @@ def test_watchdog_degrades_without_encoder_frames_and_recovers() -> None:
     states = _states(messages)
     status_s = STATUS_PERIOD_TICKS * TICK_S
     before = [s for t, s in states if t <= last_before]
-    assert len(before) >= 10 and set(before[1:]) == {"OK"}
+    assert len(before) >= 10
+    assert set(before[1:]) == {"OK"}
     degraded_at = min(t for t, s in states if s == "DEGRADED")
     deadline = last_before + WATCHDOG_TICKS * TICK_S + status_s + TX_LATENCY_S + EPS_S
     assert last_before < degraded_at <= deadline
@@ -309,7 +312,9 @@ def test_pose_is_unchanged_by_counter_wraps(scenario: str, bits: int) -> None:
 
 def test_firmware_cycle_constants_agree_with_the_dbc() -> None:
     def cycle_us(name: str) -> int:
-        return int(message(name).cycle_time) * 1000  # GenMsgCycleTime, ms
+        cycle_ms = message(name).cycle_time  # GenMsgCycleTime
+        assert cycle_ms is not None, name
+        return int(cycle_ms) * 1000
 
     assert cycle_us("WHEEL_ENCODERS") == ENCODER_PERIOD_US == TICK_PERIOD_US
     for name in ("ODOM_POSE_X", "ODOM_POSE_Y", "ODOM_TWIST"):
@@ -462,4 +467,5 @@ def test_a_bit_timed_closed_loop_drives_to_its_goal() -> None:
             truth = rig.vehicle.truth()
             ends.append((truth.x_m, truth.y_m, rig.motor_controller.commands_applied))
     assert ends[0] == ends[1]
-    assert ends[1][0] == pytest.approx(1.0, abs=0.01) and ends[1][1] == pytest.approx(0.5, abs=0.01)
+    assert ends[1][0] == pytest.approx(1.0, abs=0.01)
+    assert ends[1][1] == pytest.approx(0.5, abs=0.01)

@@ -16,6 +16,7 @@ from odocan.firmware.cmac import cmac, cmac_key
 from odocan.firmware.e2e import E2EReceiver, E2EStatus, p02_protect
 from odocan.host.protocol import secoc as host
 from odocan.sim.exceptions import OdocanError
+from tests.dbc_typed import integers, load_can_dbc
 
 KEY = bytes.fromhex("000102030405060708090a0b0c0d0e0f")
 OTHER_KEY = bytes.fromhex("f0e0d0c0b0a090807060504030201000")
@@ -102,7 +103,8 @@ def test_each_wrong_part_is_refused() -> None:
     assert receiver.verify(SET_POSE, flipped, auth.freshness, auth.authenticator) == (
         fw.AuthStatus.FAILED
     )
-    assert receiver.last_fv == last and receiver.count_failed == 3
+    assert receiver.last_fv == last
+    assert receiver.count_failed == 3
     assert receiver.verify(SET_POSE, pdu, auth.freshness, auth.authenticator) is fw.AuthStatus.OK
 
 
@@ -118,7 +120,8 @@ def test_ten_thousand_random_authenticators_are_all_refused(mac_bits: int) -> No
         assert receiver.verify(can_id, command(rng, can_id), freshness, tag) is not (
             fw.AuthStatus.OK
         )
-    assert receiver.count_ok == 0 and receiver.count_failed == 10_000
+    assert receiver.count_ok == 0
+    assert receiver.count_failed == 10_000
 
 
 def test_truncation_compares_only_the_first_bits() -> None:
@@ -165,7 +168,8 @@ def test_a_reboot_does_not_reopen_old_freshness_values() -> None:
     assert receiver.last_fv == 2 << fw.COUNT_BITS
     assert all(deliver(receiver, *pair) is not fw.AuthStatus.OK for pair in before)
     rebooted = fw.SecocReceiver(KEY, nvm)  # a cold start reads the same cell: epoch 3
-    assert rebooted.epoch == 3 and rebooted.sync_cause is fw.FreshnessCause.BOOT
+    assert rebooted.epoch == 3
+    assert rebooted.sync_cause is fw.FreshnessCause.BOOT
     assert all(deliver(rebooted, *pair) is not fw.AuthStatus.OK for pair in before)
     # Resynchronisation: the host adopts ODOM_FRESHNESS and its next command goes through.
     pdu = command(rng, CONFIG)
@@ -186,7 +190,8 @@ def test_freshness_window_is_one_to_4096_ahead() -> None:
     assert deliver(receiver, SET_POSE, pdu, signer.sign(SET_POSE, pdu)) is fw.AuthStatus.OK
     assert receiver.sync_cause is fw.FreshnessCause.REFUSED  # the refusal asked for a resync
     frame = receiver.take_freshness_frame(5)
-    assert frame is not None and fw.unpack_odom_freshness(frame) == fw.OdomFreshness(
+    assert frame is not None
+    assert fw.unpack_odom_freshness(frame) == fw.OdomFreshness(
         5, fw.FreshnessCause.REFUSED, receiver.last_fv
     )
     assert receiver.take_freshness_frame(6) is None  # sent once
@@ -244,7 +249,7 @@ def test_held_commands_wait_for_their_authenticator() -> None:
 
 
 def test_frame_codecs_match_the_dbc() -> None:
-    db = cantools.database.load_file(CONTRACT, strict=True)
+    db = load_can_dbc(CONTRACT)
     auth_msg = db.get_message_by_name("ODOM_AUTH")
     fresh_msg = db.get_message_by_name("ODOM_FRESHNESS")
     assert (auth_msg.frame_id, fresh_msg.frame_id) == (fw.ODOM_AUTH_ID, fw.ODOM_FRESHNESS_ID)
@@ -255,12 +260,12 @@ def test_frame_codecs_match_the_dbc() -> None:
         data = fw.pack_odom_auth(counter, *fields)
         assert rx.check(data) is E2EStatus.OK
         assert cantools.autosar.check_profile2_crc(data, fw.ODOM_AUTH_DATA_IDS[counter & 0xF])
-        decoded = auth_msg.decode(data, decode_choices=False)
+        decoded = integers(auth_msg, data)
         assert (decoded["REQUEST"], decoded["FRESHNESS"], decoded["AUTHENTICATOR"]) == fields
         assert fw.unpack_odom_auth(data) == fw.OdomAuth(counter & 0xF, *fields)
         fv = rng.getrandbits(fw.FV_BITS)
         data = fw.pack_odom_freshness(counter, fw.FreshnessCause.PERIODIC, fv)
-        decoded = fresh_msg.decode(data, decode_choices=False)
+        decoded = integers(fresh_msg, data)
         assert (decoded["FV_EPOCH"] << fw.COUNT_BITS) | decoded["FV_COUNT"] == fv
         assert fw.unpack_odom_freshness(data).fv == fv
     signer = host.SecocSigner(KEY)
@@ -298,7 +303,8 @@ def test_over_a_python_can_bus() -> None:
             assert msg is not None
             if msg.arbitration_id == fw.ODOM_AUTH_ID:
                 verdict = gate.authenticate(fw.unpack_odom_auth(bytes(msg.data)))
-                assert verdict is not None and verdict[0] is fw.AuthStatus.OK
+                assert verdict is not None
+                assert verdict[0] is fw.AuthStatus.OK
                 acted.append((verdict[1].can_id, verdict[1].pdu))
             else:
                 gate.hold(fw.AuthRequest.ODOM_SET_POSE, bytes(msg.data), tick=0)
@@ -349,7 +355,9 @@ def test_key_file_of_the_wrong_length_is_one_line_naming_the_path(
     with pytest.raises(OdocanError) as caught:
         host.load_secoc_key(path)
     text = str(caught.value)
-    assert str(path) in text and message in text and "\n" not in text
+    assert str(path) in text
+    assert message in text
+    assert "\n" not in text
     assert KEY.hex() not in text
 
 
@@ -375,7 +383,7 @@ DOC = Path(__file__).resolve().parent.parent / "docs" / "secoc.md"
 
 def test_the_doc_draws_both_secoc_frames() -> None:
     doc = DOC.read_text(encoding="utf-8")
-    db = cantools.database.load_file(CONTRACT, strict=True)
+    db = load_can_dbc(CONTRACT)
     for message in (db.get_message_by_name(n) for n in ("ODOM_AUTH", "ODOM_FRESHNESS")):
         assert layout_string(message) in doc, f"docs/secoc.md: layout of {message.name} is stale"
 
@@ -411,4 +419,5 @@ def test_hostile_frames_never_raise_nor_verify() -> None:
         assert verdict is None or verdict[0] is not fw.AuthStatus.OK
         gate.expire(tick)
         signer.on_freshness(rng.randbytes(rng.randrange(10)))
-    assert receiver.count_ok == 0 and receiver.last_fv == 1 << fw.COUNT_BITS
+    assert receiver.count_ok == 0
+    assert receiver.last_fv == 1 << fw.COUNT_BITS

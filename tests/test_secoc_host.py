@@ -61,7 +61,8 @@ def test_the_bridge_signs_each_command_frame_and_the_firmware_verifies_it(
     payload = json.dumps({"x_m": 1.5, "y_m": -0.25, "heading_rad": 0.5}).encode()
     [early] = r.on_command("set_pose", payload)  # no ODOM_FRESHNESS seen yet: refused, unsent
     _, answer = early
-    assert answer["result"] == "rejected" and "ODOM_FRESHNESS" in answer["reason"]
+    assert answer["result"] == "rejected"
+    assert "ODOM_FRESHNESS" in answer["reason"]
     assert sent(firmware_bus) == []
     assert signer.on_freshness(receiver.freshness_frame(0, fw.FreshnessCause.BOOT))
     r.on_command("set_pose", payload)
@@ -74,7 +75,8 @@ def test_the_bridge_signs_each_command_frame_and_the_firmware_verifies_it(
         assert result is not None
         verdicts.append(result[0])
     assert verdicts == [fw.AuthStatus.OK] * 4
-    assert r.commands_sent == 1 and r.commands_rejected == 1
+    assert r.commands_sent == 1
+    assert r.commands_rejected == 1
 
 
 def test_without_a_key_the_bridge_sends_what_it_sent_before(
@@ -89,7 +91,9 @@ def test_without_a_key_the_bridge_sends_what_it_sent_before(
 def one_line_error(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
     assert main(list(argv)) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("error: ") and "\n" not in err and "Traceback" not in err
+    assert err.startswith("error: ")
+    assert "\n" not in err
+    assert "Traceback" not in err
     return err
 
 
@@ -101,7 +105,8 @@ def test_a_bad_key_file_is_one_line_exit_2(
     short.write_bytes(b"0123456789abcde")  # 15 bytes
     short.chmod(0o600)
     err = one_line_error(capsys, command, "--secoc-key", str(short), "--duration", "1")
-    assert str(short) in err and "15 bytes" in err
+    assert str(short) in err
+    assert "15 bytes" in err
     missing = tmp_path / "absent.key"
     err = one_line_error(capsys, command, "--secoc-key", str(missing), "--duration", "1")
     assert str(missing) in err
@@ -151,7 +156,8 @@ def test_the_testkit_provisions_and_signs_with_the_secoc_key_option(tmp_path: Pa
         rig.wait_ready()
         rig.set_pose(1.25, -0.5, 0.0)  # signed: ACKed (CommandRefused otherwise)
         rig.step(0.1)
-        assert abs(rig.pose.x_m - 1.25) < 1e-3 and abs(rig.pose.y_m + 0.5) < 1e-3
+        assert abs(rig.pose.x_m - 1.25) < 1e-3
+        assert abs(rig.pose.y_m + 0.5) < 1e-3
         unsigned = CommandEncoder().encode("set_pose", b'{"x_m": 9, "y_m": 9, "heading_rad": 0}')
         for frame in unsigned.frames:
             rig.send(frame.can_id, frame.data)

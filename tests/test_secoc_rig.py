@@ -123,7 +123,8 @@ def synced_signer(rig: LockstepRig, bus: Bus) -> SecocSigner:
     for _ in range(3):
         seen += step(rig, bus)
     boot = last_freshness(seen)
-    assert boot is not None and signer.on_freshness(boot)
+    assert boot is not None
+    assert signer.on_freshness(boot)
     return signer
 
 
@@ -214,11 +215,13 @@ def test_a_recorded_command_replayed_later_and_after_a_reboot_is_refused(
     seen = step(lockstep, bus) + step(lockstep, bus)
     assert lockstep.board.nvm.epoch == 2
     fresh = last_freshness(seen)
-    assert fresh is not None and fr.unpack_odom_freshness(fresh).cause == 0  # BOOT
+    assert fresh is not None
+    assert fr.unpack_odom_freshness(fresh).cause == 0
     refused = []
     for frames in recorded:  # their 16-bit freshness now falls inside the new window
         refused += [a.reason for a in acks(step(lockstep, bus, replay(frames)))]
-    assert len(refused) == 120 and fr.AckResult.ACK not in refused
+    assert len(refused) == 120
+    assert fr.AckResult.ACK not in refused
     assert set(refused) <= {fr.AckReason.AUTH_FAILED, fr.AckReason.AUTH_FRESHNESS}
     assert fr.AckReason.AUTH_FAILED in refused  # the window let them through: the MAC did not
     assert signer.on_freshness(fresh)  # the genuine host resynchronises and is obeyed again
@@ -249,7 +252,8 @@ def test_a_firmware_whose_nvm_fails_refuses_every_secured_command() -> None:
         lockstep.board.reboot()
         seen = step(lockstep, bus) + step(lockstep, bus)
         fresh = last_freshness(seen)
-        assert fresh is not None and fr.unpack_odom_freshness(fresh).fv == 0
+        assert fresh is not None
+        assert fr.unpack_odom_freshness(fresh).fv == 0
         signer = SecocSigner(KEY)
         assert not signer.on_freshness(fresh)  # the host refuses to sign
         signer.next_fv = 1 << 28  # a host that signs anyway

@@ -208,7 +208,8 @@ def test_16_bit_counters_wrap_and_deltas_recover_the_motion() -> None:
             unwrapped[j] += wrap_i16(now[j] - previous[j])
         previous = now
     exact = [encoder_count(a, 2578) for a in drive.angle]
-    assert exact[0] > 65536 and exact[1] < -65536  # really wrapped
+    assert exact[0] > 65536
+    assert exact[1] < -65536  # really wrapped
     assert unwrapped == exact
     assert drive.encoder_counts() == (exact[0] % 65536, exact[1] % 65536)
 
@@ -221,5 +222,6 @@ def test_32_bit_counters_wrap() -> None:
         drive.command(1.0, -1.0)
         drive.advance((k + 1) * 100)
     exact = [encoder_count(a, 2**24, quadrature=True) for a in drive.angle]
-    assert exact[0] > 2**32 and exact[1] < -(2**32)
+    assert exact[0] > 2**32
+    assert exact[1] < -(2**32)
     assert drive.encoder_counts() == (exact[0] % 2**32, exact[1] % 2**32)

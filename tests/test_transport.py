@@ -79,12 +79,16 @@ def test_no_receiver_shares_a_mutable_message(
     sent = _msg(data=b"\xaa" * 8)
     a.send(sent)
     got_b, got_c = b.recv(0), c.recv(0)
-    assert got_b is not None and got_c is not None
-    assert got_b is not got_c and got_b is not sent
-    assert got_b.data is not got_c.data and got_b.data is not sent.data
+    assert got_b is not None
+    assert got_c is not None
+    assert got_b is not got_c
+    assert got_b is not sent
+    assert got_b.data is not got_c.data
+    assert got_b.data is not sent.data
     got_b.data[0] = 0
     got_b.arbitration_id = 0x7FF
-    assert got_c.data == bytearray(b"\xaa" * 8) and got_c.arbitration_id == 0x123
+    assert got_c.data == bytearray(b"\xaa" * 8)
+    assert got_c.arbitration_id == 0x123
     assert sent.data == bytearray(b"\xaa" * 8)
     sent.data[1] = 0  # the sender reusing its buffer changes nothing already on the wire
     assert got_c.data == bytearray(b"\xaa" * 8)
@@ -141,7 +145,8 @@ def test_recv_waits_for_a_frame_from_another_thread(channel: str) -> None:
         timer.start()
         got = rx.recv(5.0)
         timer.join()
-        assert got is not None and got.arbitration_id == 0x42
+        assert got is not None
+        assert got.arbitration_id == 0x42
 
 
 def test_shutdown_wakes_a_blocked_receiver_and_closes_the_handle(channel: str) -> None:
@@ -153,7 +158,8 @@ def test_shutdown_wakes_a_blocked_receiver_and_closes_the_handle(channel: str) -
     time.sleep(0.05)
     rx.shutdown()
     waiter.join(5.0)
-    assert not waiter.is_alive() and result == [None]
+    assert not waiter.is_alive()
+    assert result == [None]
     tx.send(_msg())  # a closed handle is off the wire: nobody left to receive, no error
     with pytest.raises(can.CanOperationError):
         rx.send(_msg())
@@ -276,7 +282,8 @@ def test_can_bus_opens_it_by_name(channel: str) -> None:
         assert isinstance(tx, OdocanBus)
         tx.send(_msg(0x55))
         got = rx.recv(0)
-        assert got is not None and got.arbitration_id == 0x55
+        assert got is not None
+        assert got.arbitration_id == 0x55
         found = can.detect_available_configs(interfaces=["odocan"])
         assert {"interface": "odocan", "channel": channel} in found
 
@@ -420,13 +427,15 @@ def test_bit_timed_frames_arrive_at_their_end_of_frame_lowest_id_first(channel: 
         assert b.recv(0) is None
         clock.now_s = end_low
         got = b.recv(0)
-        assert got is not None and (got.arbitration_id, got.timestamp) == (0x100, end_low)
+        assert got is not None
+        assert (got.arbitration_id, got.timestamp) == (0x100, end_low)
         assert b.recv(0) is None
         clock.now_s = 1.0
         assert [(m.arbitration_id, m.timestamp) for m in _drain(b)] == [(0x300, end_high)]
         assert [m.arbitration_id for m in _drain(c)] == [0x100, 0x300]
         assert a.recv(0) is None
-        assert a.timing is not None and a.timing.frames == 2
+        assert a.timing is not None
+        assert a.timing.frames == 2
         assert a.timing.busy_bits == bits_low + bits_high + 2 * canbits.INTERFRAME_BITS
     finally:
         for bus in (a, b, c):
@@ -479,7 +488,8 @@ def test_a_blocked_receiver_gets_a_bit_timed_frame_on_the_wall_clock(channel: st
         sent_at = time.time()
         tx.send(_msg(0x123, bytes(8)))  # about 11 ms at 10 kbit/s
         got = rx.recv(5.0)
-        assert got is not None and got.arbitration_id == 0x123
+        assert got is not None
+        assert got.arbitration_id == 0x123
         assert got.timestamp >= sent_at + canbits.frame_bits(got) / 10_000
         assert time.time() >= got.timestamp
 

@@ -115,7 +115,8 @@ def _pose_cells(snapshot: dict[str, Any], key: str) -> list[str]:
 
 def test_healthy_screen_fits_80x24(healthy: Fed) -> None:
     rows = draw(healthy, healthy.view())
-    assert len(rows) == 24 and all(len(r.rstrip()) <= 80 for r in rows)
+    assert len(rows) == 24
+    assert all(len(r.rstrip()) <= 80 for r in rows)
     assert rows[0].startswith("odocan monitor udp_multicast:239.255.1.2")
     assert rows[1].startswith("verdict OK")
     assert rows[2].startswith("firmware OK  reason no error bits  age 0.1 s  EXACT  uptime 2 s")
@@ -148,7 +149,8 @@ def test_a_larger_terminal_shows_more(healthy: Fed) -> None:
     assert sum(1 for r in tall if "ENC_COUNTER" in r) > 10  # a long trace
     wide = draw(healthy, healthy.view(), width=220, height=24)
     status = next(r for r in wide if r.startswith("ODOM_STATUS"))
-    assert "SUMMARY=10" in status and "FRAME_TOTALS=2" in status  # page names in full
+    assert "SUMMARY=10" in status
+    assert "FRAME_TOTALS=2" in status  # page names in full
     assert re.search(r" \d+\.\d{3} [0-9A-F]{3} [A-Z_]+ ", status)  # the trace beside the table
 
 
@@ -211,7 +213,8 @@ def test_page_rates_add_up_to_the_message_rate(healthy: Fed) -> None:
         total = sum(p.rate_hz for p in rates if p.rate_hz is not None)
         assert total == pytest.approx(snapshot["messages"][name]["rate_hz"], rel=0.1)
     status = {p.name: p.number for p in healthy.trace.pages.rates_hz("ODOM_STATUS")}
-    assert status["SUMMARY"] == 0 and status["FRAME_TOTALS"] == 1  # the DBC's VAL_ table
+    assert status["SUMMARY"] == 0
+    assert status["FRAME_TOTALS"] == 1  # the DBC's VAL_ table
     assert healthy.trace.pages.rates_hz("SIM_TRUTH")[0].rate_hz == pytest.approx(10.0)
     row = next(r for r in draw(healthy, healthy.view()) if r.startswith("ODOM_STATUS"))
     assert "SUMMARY=10 p1=2 p2=2 p3=2" in row
@@ -220,7 +223,8 @@ def test_page_rates_add_up_to_the_message_rate(healthy: Fed) -> None:
 def test_filter_by_name_and_id(healthy: Fed) -> None:
     db = healthy.model.db
     only = FrameFilter.parse(["odom_pose_x", "0x380,SIM_TRUTH"], db)
-    assert only.names == {"ODOM_POSE_X", "SIM_TRUTH"} and only.ids == {0x380}
+    assert only.names == {"ODOM_POSE_X", "SIM_TRUTH"}
+    assert only.ids == {0x380}
     trace = Trace(db, only)
     fed = feed_rig(50)
     for line in fed.trace.lines:
@@ -246,16 +250,19 @@ def test_pause_freezes_the_trace_and_keys_edit_the_filter(healthy: Fed) -> None:
         app.on_keys("p")
         for msg in frames[10:20]:
             app.on_frame(msg)
-        assert app.trace.paused and len(app.trace.lines) == 10
+        assert app.trace.paused
+        assert len(app.trace.lines) == 10
         assert app.trace.hidden_while_paused == 10
         assert model.frames_total == 20  # the statistics never pause
         app.on_keys(" fODOM_POSE_YY\x7f\r")
-        assert not app.trace.paused and app.trace.filter.names == {"ODOM_POSE_Y"}
+        assert not app.trace.paused
+        assert app.trace.filter.names == {"ODOM_POSE_Y"}
         for msg in frames[20:]:
             app.on_frame(msg)
         assert {line.name for line in app.trace.lines} == {"ODOM_POSE_Y"}
         app.on_keys("fNOPE\r")
-        assert "NOPE" in app.view.note and app.trace.filter.names == {"ODOM_POSE_Y"}
+        assert "NOPE" in app.view.note
+        assert app.trace.filter.names == {"ODOM_POSE_Y"}
         app.on_keys("f\x1b")
         assert app.view.editing is None
         app.on_keys("q")
@@ -299,7 +306,8 @@ def test_cli_log_and_filter(monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
     code, out, err = run_cli(capsys, "monitor", "-i", "virtual", "--log", str(path),
                              "--filter", "0x7FF")
     assert (code, err) == (0, "")
-    assert "filter 0x7FF" in out and "log 7 frames to /" in out
+    assert "filter 0x7FF" in out
+    assert "log 7 frames to /" in out
     assert len(list(can.LogReader(path))) == 7
 
 
@@ -337,7 +345,8 @@ def test_fleet_sorted_by_error_and_stale_marked() -> None:
     order = [r.split()[0] for r in rows if r.startswith("robot0")]
     assert order == ["robot002", "robot005", "robot004", "robot001", "robot003"]
     states = {r.split()[0]: r for r in rows if r.startswith("robot0")}
-    assert "stale 10s" in states["robot004"] and "offline" in states["robot005"]
+    assert "stale 10s" in states["robot004"]
+    assert "offline" in states["robot005"]
     assert " OK " in states["robot001"]
 
 
@@ -381,4 +390,5 @@ def test_cli_log_to_a_device_is_refused_before_the_watch(
     path.symlink_to("/dev/full")
     code, out, err = run_cli(capsys, "monitor", "-i", "virtual", "--log", str(path))
     assert (code, out) == (2, "")
-    assert err.startswith(f"error: --log {path}: ") and len(err.strip().splitlines()) == 1
+    assert err.startswith(f"error: --log {path}: ")
+    assert len(err.strip().splitlines()) == 1

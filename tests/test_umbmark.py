@@ -43,7 +43,8 @@ def run_cli(
     path = tmp_path / "report.json"
     code = cli.main([*argv, "--report", str(path)])
     out, err = capsys.readouterr()
-    assert code == 0 and err == "", err
+    assert code == 0, err
+    assert err == "", err
     return out, json.loads(path.read_text())
 
 
@@ -67,10 +68,13 @@ def test_borenstein_against_a_hand_computed_example() -> None:
 
 def test_borenstein_without_curvature_and_the_centres_of_gravity() -> None:
     est = umbmark.borenstein(CentreOfGravity(-0.1, 0.0), CentreOfGravity(-0.1, 0.0), 4.0, 0.3)
-    assert est.beta_rad == 0.0 and est.ed == 1.0 and math.isinf(est.radius_m)
+    assert est.beta_rad == 0.0
+    assert est.ed == 1.0
+    assert math.isinf(est.radius_m)
     assert est.alpha_rad == pytest.approx(0.0125)
     cg = umbmark.centre_of_gravity([(0.3, -0.4), (0.1, 0.0), (0.2, -0.2)])
-    assert (cg.x_m, cg.y_m) == pytest.approx((0.2, -0.2)) and cg.r_m == pytest.approx(0.2828427)
+    assert (cg.x_m, cg.y_m) == pytest.approx((0.2, -0.2))
+    assert cg.r_m == pytest.approx(0.2828427)
 
 
 def test_the_correction_is_the_error_models_actual_geometry() -> None:
@@ -103,11 +107,13 @@ def test_signs_of_the_convention_by_simulation(
     result = umbmark.run_umbmark(PMIR, errors, 0, runs_per_direction=1)
     for direction, (sx, sy) in signs.items():
         cg = result.cg(direction)
-        assert cg.x_m * sx > 0.05 and cg.y_m * sy > 0.05, (direction, cg)
+        assert cg.x_m * sx > 0.05, (direction, cg)
+        assert cg.y_m * sy > 0.05, (direction, cg)
     est = umbmark.borenstein(result.cg("cw"), result.cg("ccw"), 4.0, PMIR.wheelbase_m)
     assert est.ed - 1 == pytest.approx(errors.ed - 1, abs=0.15 * 0.004)
     assert est.eb - 1 == pytest.approx(errors.eb - 1, abs=0.15 * 0.02)
-    assert (est.beta_rad > 0) == (errors.ed > 1) and (est.alpha_rad > 0) == (errors.eb > 1)
+    assert (est.beta_rad > 0) == (errors.ed > 1)
+    assert (est.alpha_rad > 0) == (errors.eb > 1)
 
 
 # --- over CAN ---------------------------------------------------------------------------------
@@ -136,13 +142,16 @@ def test_umbmark_without_errors_has_a_tiny_emax(
     assert report["error_model"] == {"ed": 1.0, "eb": 1.0, "slip": 0.0}
     for direction in ("cw", "ccw"):
         runs = report[direction]["runs"]
-        assert len(runs) == 5 and all({"x_m", "y_m"} <= r.keys() for r in runs)
+        assert len(runs) == 5
+        assert all({"x_m", "y_m"} <= r.keys() for r in runs)
         cg = report[direction]["cg"]
         assert cg["x_m"] == pytest.approx(sum(r["x_m"] for r in runs) / 5)
         assert report[direction]["r_cg_m"] == pytest.approx(math.hypot(cg["x_m"], cg["y_m"]))
     assert report["emax_syst_m"] == max(report["cw"]["r_cg_m"], report["ccw"]["r_cg_m"])
     assert report["emax_syst_m"] < 0.005
-    assert "E_max,syst" in out and "c.g." in out and "r_c.g." in out
+    assert "E_max,syst" in out
+    assert "c.g." in out
+    assert "r_c.g." in out
 
 
 @pytest.mark.slow
@@ -164,7 +173,9 @@ def test_calibration_acceptance(capsys: pytest.CaptureFixture[str], tmp_path: Pa
         assert {"cw", "ccw", "emax_syst_m"} <= report[phase].keys()
         assert {"x_m", "y_m"} == report[phase]["cw"]["cg"].keys()
     assert report["before"]["emax_syst_m"] == report["emax_before_m"]
-    assert "Before" in out and "After" in out and "ODOM_CONFIG" in out
+    assert "Before" in out
+    assert "After" in out
+    assert "ODOM_CONFIG" in out
 
 
 @pytest.mark.parametrize(
@@ -187,9 +198,11 @@ def test_bad_options_are_one_line_exit_2(
 ) -> None:
     code = cli.main(argv)
     out, err = capsys.readouterr()
-    assert code == 2 and out == "", (code, out, err)
+    assert code == 2, (code, out, err)
+    assert out == "", (code, out, err)
     lines = err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert len(lines) == 1, err
+    assert lines[0].startswith("error: "), err
     for word in words:
         assert word in lines[0], (word, lines[0])
 
@@ -241,7 +254,8 @@ def test_calibration_recovers_the_errors_on_every_profile(
     assert abs(estimated["ed"] - 1.002) <= 0.1 * 0.002, estimated
     assert abs(estimated["eb"] - 1.01) <= 0.1 * 0.01, estimated
     assert report["emax_before_m"] >= 5 * report["emax_after_m"]
-    assert report["passed"] and report["faults"] == []
+    assert report["passed"]
+    assert report["faults"] == []
     assert out.endswith("calibrate: PASS\n")
 
 
@@ -253,12 +267,15 @@ def test_calibration_of_implausible_errors_fails_with_a_reason(
     code = cli.main(["calibrate", "--robot", "kobuki", "--errors", "ed=1.9,eb=1.9", "--seed", "3",
                      "--runs", "1", "--report", str(path)])
     out, err = capsys.readouterr()
-    assert code == 1 and err == ""
+    assert code == 1
+    assert err == ""
     verdict = out[out.index("calibrate: FAIL\n"):].splitlines()
-    assert len(verdict) >= 2 and all(line.startswith("  - ") for line in verdict[1:])
+    assert len(verdict) >= 2
+    assert all(line.startswith("  - ") for line in verdict[1:])
     assert "implausible estimate" in out
     report = json.loads(path.read_text())
-    assert not report["passed"] and report["faults"] == [line[4:] for line in verdict[1:]]
+    assert not report["passed"]
+    assert report["faults"] == [line[4:] for line in verdict[1:]]
 
 
 @pytest.fixture(scope="module")
@@ -274,8 +291,10 @@ def test_a_valid_benchmark_has_no_faults_and_a_wrong_firmware_has(
     # judged as if the firmware had kobuki's geometry: its on-board ends are not what that
     # firmware would have computed from the same counts
     wrong = umbmark.faults(small_square, load("kobuki"))
-    assert len(wrong) == 2 and all("float64 reference" in r for r in wrong)
-    assert wrong[0].startswith("CW run 1: ") and wrong[1].startswith("CCW run 1: ")
+    assert len(wrong) == 2
+    assert all("float64 reference" in r for r in wrong)
+    assert wrong[0].startswith("CW run 1: ")
+    assert wrong[1].startswith("CCW run 1: ")
 
 
 def test_calibration_that_does_not_improve_fails(small_square: umbmark.UmbmarkResult) -> None:
@@ -286,7 +305,8 @@ def test_calibration_that_does_not_improve_fails(small_square: umbmark.UmbmarkRe
     )
     assert umbmark.calibration_faults(cal, PMIR, 1.0) == []
     reasons = umbmark.calibration_faults(cal, PMIR, 2.0)
-    assert len(reasons) == 1 and reasons[0].startswith("the correction does not cut E_max,syst 2x")
+    assert len(reasons) == 1
+    assert reasons[0].startswith("the correction does not cut E_max,syst 2x")
     far = umbmark.Calibration(
         small_square, cal.borenstein, (2.5, 1.0), "model", nominal, nominal, small_square,
         fit_residual_m=1.0,

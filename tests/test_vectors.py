@@ -50,7 +50,8 @@ def test_the_cases_cover_wraps_and_both_special_cases() -> None:
     rows = vectors.run_case(
         RobotParams(500, 75_000_000, 75_000_000, 300_000_000, 16, 2), cases["spin_in_place"]
     )
-    assert rows[-1]["x_q40_m"] == rows[-1]["y_q40_m"] == 0 and rows[-1]["heading_bam64"] != 0
+    assert rows[-1]["x_q40_m"] == rows[-1]["y_q40_m"] == 0
+    assert rows[-1]["heading_bam64"] != 0
 
 
 def test_bad_input_is_one_line(tmp_path: Path, capsys) -> None:
@@ -59,7 +60,8 @@ def test_bad_input_is_one_line(tmp_path: Path, capsys) -> None:
     assert err == "error: argument --duration: must be in [0.01, 3600], got -1\n"
     assert main(["vectors", "--out", str(tmp_path / "missing"), "--check"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and err.count("\n") == 1
+    assert err.startswith("error: ")
+    assert err.count("\n") == 1
 
 
 @pytest.mark.parametrize(

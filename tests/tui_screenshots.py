@@ -45,7 +45,8 @@ def save_png(pane: Pane, path: Path) -> None:
     font, bold = ImageFont.truetype(FONT, FONT_PX), ImageFont.truetype(FONT_BOLD, FONT_PX)
     cell_w, cell_h = round(font.getlength("M")), round(FONT_PX * 1.3)
     margin = 8
-    background = THEME.background_color.rgb
+    # RGB as _colours gives it (the triplet's .rgb is a CSS string: never equal to a tuple).
+    background = tuple(THEME.background_color)
     image = Image.new("RGB", (2 * margin + COLUMNS * cell_w, 2 * margin + ROWS * cell_h),
                       background)
     draw = ImageDraw.Draw(image)
