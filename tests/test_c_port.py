@@ -401,6 +401,9 @@ def _ecu_session(
             offset = rng.choice((-1, 1)) * rng.randrange(5_000, 20_000)
             counts[:] = [counts[0] + offset, counts[1] + offset]
             enc_counter = 15
+        if tick == reboot_tick + 20:  # a later cause must not hide COUNTER_RESET (a burst)
+            for _ in range(40):
+                rx(0x555, bytes(8))
         if tick == reboot_tick + 40:  # the host gives the pose again: COUNTER_RESET may clear
             host(
                 frames.ODOM_SET_POSE_ID,
