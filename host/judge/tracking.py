@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 from odocan.host.judge.reference import Geometry, ReferenceOdometry
-from odocan.sim.truth import wrap_angle
+from odocan.host.protocol.pose import heading_fields, unwrap_near, wrap_heading
 
 WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
 _RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
@@ -20,14 +20,15 @@ _TURN = 2.0 * math.pi
 
 
 def difference(a: Pose, b: Pose) -> dict[str, float]:
-    """a - b: position (m), distance (m) and heading wrapped to [-pi, pi) (rad)."""
+    """a - b: position (m), distance (m) and heading wrapped to (-pi, pi] (rad)."""
     dx, dy = a.x_m - b.x_m, a.y_m - b.y_m
     return {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy),
-            "dheading_rad": wrap_angle(a.heading_rad - b.heading_rad)}
+            "dheading_rad": wrap_heading(a.heading_rad - b.heading_rad)}
 
 
 class Pose(NamedTuple):
-    """A pose at one encoder frame (``seq``: the how-many-th encoder frame the monitor heard)."""
+    """A pose at one encoder frame (``seq``: the how-many-th encoder frame the monitor heard);
+    ``heading_rad`` is cumulative (unwrapped), ``pose_dict`` names both forms."""
 
     seq: int
     x_m: float
@@ -161,7 +162,9 @@ class PoseTracker:
             return None
         self._truth_parts = {}
         ref = self._named(self._refs[enc_counter])
-        truth = self.truth = Pose(ref.seq if ref else -1, parts[0][1], parts[1][1], parts[2][1])
+        truth = self.truth = Pose(
+            ref.seq if ref else -1, parts[0][1], parts[1][1], self._truth_heading(parts[2][1], ref)
+        )
         if ref is None:
             return truth, None
         self.reference_vs_truth.add(ref, truth)
@@ -171,6 +174,15 @@ class PoseTracker:
                             pose.heading_rad - at.heading_rad + ref.heading_rad)
             self.vs_truth.add(estimate, truth)
         return truth, ref
+
+    def _truth_heading(self, wrapped_rad: float, ref: Pose | None) -> float:
+        """SIM_TRUTH's HEADING ([0, 2 pi) on the bus) made cumulative: the turn nearest the
+        reference at that encoder frame, else nearest the previous truth (rad)."""
+        if ref is not None:
+            return unwrap_near(wrapped_rad, ref.heading_rad)
+        if self.truth is not None:
+            return unwrap_near(wrapped_rad, self.truth.heading_rad)
+        return wrap_heading(wrapped_rad)
 
     def _named(self, entry: Any) -> Any:
         """A ring entry if it is one of the last 8 encoder frames (not one 16 frames older)."""
@@ -200,10 +212,10 @@ class PoseTracker:
     def snapshot(self) -> dict[str, Any]:
         """``pose``, ``reference``, ``truth`` (None until known) and ``error``."""
         return {
-            "pose": _pose_dict(self.pose),
-            "reference": {**(_pose_dict(self.reference) or {}), "integrator": self.integrator,
+            "pose": pose_dict(self.pose),
+            "reference": {**(pose_dict(self.reference) or {}), "integrator": self.integrator,
                           "starts": self.reference_starts},
-            "truth": _pose_dict(self.truth),
+            "truth": pose_dict(self.truth),
             "error": {
                 "pose_vs_reference": self.vs_reference.as_dict(),
                 "pose_vs_truth": self.vs_truth.as_dict(),
@@ -212,7 +224,8 @@ class PoseTracker:
         }
 
 
-def _pose_dict(pose: Pose | None) -> dict[str, float] | None:
+def pose_dict(pose: Pose | None) -> dict[str, float] | None:
+    """JSON form: ``x_m``, ``y_m``, ``heading_rad`` in (-pi, pi], ``heading_unwrapped_rad``."""
     if pose is None:
         return None
-    return {"x_m": pose.x_m, "y_m": pose.y_m, "heading_rad": pose.heading_rad}
+    return {"x_m": pose.x_m, "y_m": pose.y_m, **heading_fields(pose.heading_rad)}

@@ -6,6 +6,10 @@ sends X before Y in the same tick. A pose is an X and a Y frame naming the same 
 heard first; the unwrapped heading is ``TURNS * 2 pi + HEADING``. Pairing by time (the latest X
 with the latest Y) mixes two ticks' halves whenever a frame is lost; this is the one pairing every
 consumer (the analysis, the live tracker, replay, the experiments, the pytest kit) uses.
+
+The heading convention of every host output (reports, MQTT, the monitor's JSON): ``heading_rad``
+is wrapped to (-pi, pi] and ``heading_unwrapped_rad`` is cumulative (turns counted), both named
+(``heading_fields``). Only the firmware vectors keep the firmware's integers.
 """
 
 from __future__ import annotations
@@ -15,6 +19,25 @@ from collections.abc import Iterable, Mapping
 from typing import Any, NamedTuple
 
 COUNTER_VALUES = 16  # ENC_COUNTER is the 4-bit E2E counter of the encoder frame named
+TURN_RAD = 2.0 * math.pi
+
+
+def wrap_heading(heading_rad: float) -> float:
+    """``heading_rad`` wrapped to (-pi, pi] (the host's one wrapped-heading convention)."""
+    wrapped = math.remainder(heading_rad, TURN_RAD)  # [-pi, pi]
+    return math.pi if wrapped <= -math.pi else wrapped
+
+
+def unwrap_near(heading_rad: float, near_rad: float) -> float:
+    """``heading_rad`` plus the whole turns that bring it nearest to ``near_rad`` (rad)."""
+    return near_rad + math.remainder(heading_rad - near_rad, TURN_RAD)
+
+
+def heading_fields(heading_unwrapped_rad: float) -> dict[str, float]:
+    """Both named headings of one pose: ``heading_rad`` in (-pi, pi] and the cumulative
+    ``heading_unwrapped_rad`` (rad)."""
+    return {"heading_rad": wrap_heading(heading_unwrapped_rad),
+            "heading_unwrapped_rad": heading_unwrapped_rad}
 
 
 class Pose(NamedTuple):
