@@ -12,10 +12,11 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 from odocan.host.judge.reference import Geometry, ReferenceOdometry
-from odocan.host.protocol.pose import heading_fields, unwrap_near, wrap_heading
+from odocan.host.protocol.pose import PosePairer, heading_fields, unwrap_near, wrap_heading
 
 WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
 _RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
+BACKLOG_FRAMES = 6_000  # encoder frames kept while waiting for the integrator (60 s at 100 Hz)
 _TURN = 2.0 * math.pi
 
 
@@ -63,11 +64,16 @@ class ErrorStats:
 class PoseTracker:
     """On-board pose vs the float64 reference (aligned by ENC_COUNTER) and vs SIM_TRUTH.
 
-    The reference starts at the first on-board pose once the integrator is known (``integrator``
-    given, or the one ODOM_STATUS reports), primed with the counts of the encoder frame that pose
-    names and stepped with every accepted WHEEL_ENCODERS frame after it; it starts again when
-    ODOM_STATUS reports another integrator. The start inherits the pose signals' rounding (0.1 mm,
-    2 pi/65536 rad), so the difference stays within about one LSB over a short watch.
+    The reference starts at the first on-board pose heard, primed with the counts of the
+    encoder frame that pose names and stepped with every accepted WHEEL_ENCODERS frame after it.
+    When the integrator is not known yet (``integrator`` None: the one ODOM_STATUS reports), the
+    poses and encoder frames heard meanwhile are kept (up to ``BACKLOG_FRAMES``) and compared
+    once it is, so the monitor (which waits for ODOM_STATUS) and the bridge (told the integrator)
+    start at the same pose and judge the same samples as ``analyze``. Pose halves are paired by
+    ``host.protocol.pose.PosePairer``, the one pairing. The reference starts again when
+    ODOM_STATUS reports another integrator. At power-up the first pose is exactly (0, 0, 0), the
+    start ``analyze`` uses; mid-drive the start inherits the pose signals' rounding (0.1 mm,
+    2 pi/65536 rad; ``analyze`` fits it instead), so the difference stays within about one LSB.
     """
 
     def __init__(
@@ -83,7 +89,10 @@ class PoseTracker:
         self._counts: list[tuple[int, int, int] | None] = [None] * _RING  # seq, left, right
         self._refs: list[Pose | None] = [None] * _RING
         self._ref: ReferenceOdometry | None = None
-        self._pose_x: tuple[int, float, float] | None = None  # enc counter, x, heading
+        self._pairer = PosePairer()
+        self._pending: Pose | None = None  # the first pose, heard before the integrator
+        self._backlog_counts: list[tuple[int, int, int, int]] = []  # seq, counter, left, right
+        self._backlog_poses: list[Pose] = []
         self._truth_parts: dict[int, tuple[int, float]] = {}
         self._last_pair: tuple[Pose, Pose] | None = None  # on-board, reference
         self.pose: Pose | None = None
@@ -102,18 +111,33 @@ class PoseTracker:
         if ref is not None:
             ref.step_counts(left, right)
             self._refs[counter] = Pose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad)
+        elif self._pending is not None:
+            self._backlog_counts.append((self.enc_seq, counter, left, right))
+            if len(self._backlog_counts) > BACKLOG_FRAMES:  # too long: start at a later pose
+                self._drop_backlog()
 
     def on_integrator(self, name: str) -> None:
         """ODOM_STATUS reports the firmware's integrator; a change restarts the reference."""
         if self.forced or name == self.integrator:
             return
+        first = self.integrator is None
         self.integrator = name
-        self.restart_reference()
+        if first and self._pending is not None:  # judge what was heard while waiting
+            self._start_reference(self._pending, self._backlog_counts, self._backlog_poses)
+            self._drop_backlog()
+        else:
+            self.restart_reference()
 
     def restart_reference(self) -> None:
         """Start the reference again at the next on-board pose (after a set-pose or config)."""
         self._ref = None
         self._refs = [None] * _RING
+        self._drop_backlog()
+
+    def _drop_backlog(self) -> None:
+        self._pending = None
+        self._backlog_counts = []
+        self._backlog_poses = []
 
     def set_geometry(self, geometry: Geometry, counter_bits: int) -> None:
         """New robot parameters (a config command); the reference restarts at the next pose."""
@@ -123,7 +147,9 @@ class PoseTracker:
 
     def on_pose_x(self, enc_counter: int, x_m: float, heading_rad: float) -> None:
         """ODOM_POSE_X (X in m, HEADING in rad within the turn)."""
-        self._pose_x = (enc_counter, x_m, heading_rad)
+        named = self._named(self._counts[enc_counter])
+        self._pairer.on_x({"ENC_COUNTER": enc_counter, "X": x_m, "HEADING": heading_rad},
+                          named[0] if named is not None else -1)
 
     def on_pose_y(
         self, enc_counter: int, y_m: float, turns: int
@@ -132,15 +158,24 @@ class PoseTracker:
 
         Returns (on-board pose, reference at that encoder frame or None), None when unpaired.
         """
-        if self._pose_x is None or self._pose_x[0] != enc_counter:
-            return None
-        _, x_m, heading_rad = self._pose_x
-        self._pose_x = None
         named = self._named(self._counts[enc_counter])
         seq = named[0] if named is not None else -1
-        pose = self.pose = Pose(seq, x_m, y_m, turns * _TURN + heading_rad)
-        if self._ref is None and named is not None and self.integrator is not None:
-            self._start_reference(pose, enc_counter)
+        paired = self._pairer.on_y({"ENC_COUNTER": enc_counter, "Y": y_m, "TURNS": turns}, seq)
+        if paired is None:
+            return None
+        pose = self.pose = Pose(seq, paired.x_m, paired.y_m, paired.heading_rad)
+        if self._ref is None and named is not None:
+            if self._pending is None:
+                self._pending = pose
+                self._backlog_counts = sorted(
+                    (c[0], i, c[1], c[2]) for i, c in enumerate(self._counts)
+                    if c is not None and c[0] >= seq
+                )
+            if self.integrator is None:
+                self._backlog_poses.append(pose)
+                return pose, None
+            self._start_reference(self._pending, self._backlog_counts, [])
+            self._drop_backlog()
         ref = self._named(self._refs[enc_counter])
         if ref is None or seq < 0:
             return pose, None
@@ -190,8 +225,12 @@ class PoseTracker:
             return None
         return entry
 
-    def _start_reference(self, pose: Pose, enc_counter: int) -> None:
-        """Start the reference at ``pose``, at the encoder frame it names, and catch up."""
+    def _start_reference(
+        self, pose: Pose, counts: list[tuple[int, int, int, int]], poses: list[Pose]
+    ) -> None:
+        """Start the reference at ``pose``, primed on the first of ``counts`` (seq, counter,
+        left, right: the encoder frame ``pose`` names and those after it), catch up, and compare
+        the ``poses`` heard meanwhile."""
         assert self.integrator is not None
         ref = self._ref = ReferenceOdometry(
             self.geometry, self.integrator, self.counter_bits,
@@ -199,15 +238,16 @@ class PoseTracker:
         )
         self.reference_starts += 1
         self._refs = [None] * _RING
-        start = self._counts[enc_counter]
-        assert start is not None
-        ref.step_counts(start[1], start[2])
-        self._refs[enc_counter] = Pose(start[0], pose.x_m, pose.y_m, pose.heading_rad)
-        later = sorted((c[0], c[1], c[2], i) for i, c in enumerate(self._counts)
-                       if c is not None and c[0] > start[0])
-        for seq, left, right, counter in later:
-            ref.step_counts(left, right)
-            self._refs[counter] = Pose(seq, ref.x_m, ref.y_m, ref.heading_rad)
+        at_seq: dict[int, Pose] = {}
+        for seq, counter, left, right in counts:
+            ref.step_counts(left, right)  # the first call primes: the reference stays at pose
+            at_seq[seq] = self._refs[counter] = Pose(seq, ref.x_m, ref.y_m, ref.heading_rad)
+        for heard in poses:
+            at = at_seq.get(heard.seq)
+            if at is not None:
+                self.reference = at
+                self._last_pair = (heard, at)
+                self.vs_reference.add(heard, at)
 
     def snapshot(self) -> dict[str, Any]:
         """``pose``, ``reference``, ``truth`` (None until known) and ``error``."""

@@ -107,7 +107,8 @@ class RobotTelemetry:
             return []
         can_id, data = msg.arbitration_id, bytes(msg.data)
         message = self._by_id.get(can_id)
-        status = self.e2e.check(can_id, data, extended=msg.is_extended_id)
+        status = self.e2e.check(can_id, data, extended=msg.is_extended_id,
+                                timestamp_s=msg.timestamp)  # the window widens with time
         if message is None or status not in ACCEPTED_E2E:
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
             return []

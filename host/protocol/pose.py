@@ -57,20 +57,32 @@ def pose_of(x_frame: Mapping[str, Any], y_frame: Mapping[str, Any]) -> Pose:
 class PosePairer:
     """Pairs decoded pose frames as they are heard: ``on_x`` keeps the X half of each encoder
     frame (one slot per ENC_COUNTER value), ``on_y`` completes it; a Y whose X was not heard, or
-    was already used, gives nothing."""
+    was already used, gives nothing.
+
+    ENC_COUNTER repeats every 16 encoder frames: a Y whose X was lost would find the X of the
+    frame 16 (or 32, ...) earlier in its slot. A caller that follows the encoder frames passes
+    ``frame_seq``, the encoder frame each half names (its ENC_COUNTER resolved against the
+    latest encoder frame heard, as ``host.judge.analysis`` does); halves naming different
+    frames are never paired."""
 
     def __init__(self) -> None:
-        self._x: list[Mapping[str, Any] | None] = [None] * COUNTER_VALUES
+        self._x: list[tuple[Mapping[str, Any], int | None] | None] = [None] * COUNTER_VALUES
 
-    def on_x(self, x_frame: Mapping[str, Any]) -> None:
-        """An accepted ODOM_POSE_X (decoded signals)."""
-        self._x[int(x_frame["ENC_COUNTER"]) % COUNTER_VALUES] = x_frame
+    def on_x(self, x_frame: Mapping[str, Any], frame_seq: int | None = None) -> None:
+        """An accepted ODOM_POSE_X (decoded signals), naming encoder frame ``frame_seq``."""
+        self._x[int(x_frame["ENC_COUNTER"]) % COUNTER_VALUES] = (x_frame, frame_seq)
 
-    def on_y(self, y_frame: Mapping[str, Any]) -> Pose | None:
-        """An accepted ODOM_POSE_Y: the pose it completes, None when its X half is missing."""
+    def on_y(self, y_frame: Mapping[str, Any], frame_seq: int | None = None) -> Pose | None:
+        """An accepted ODOM_POSE_Y: the pose it completes, None when its X half is missing (or
+        names another encoder frame)."""
         slot = int(y_frame["ENC_COUNTER"]) % COUNTER_VALUES
-        x_frame, self._x[slot] = self._x[slot], None
-        return None if x_frame is None else pose_of(x_frame, y_frame)
+        held, self._x[slot] = self._x[slot], None
+        if held is None:
+            return None
+        x_frame, x_seq = held
+        if x_seq is not None and frame_seq is not None and x_seq != frame_seq:
+            return None
+        return pose_of(x_frame, y_frame)
 
     def feed(self, name: str, signals: Mapping[str, Any]) -> Pose | None:
         """Either half by message name; other messages are ignored."""
