@@ -11,13 +11,57 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from odocan.host.judge.reference import Geometry, ReferenceOdometry
+from odocan.firmware.ecu import ENCODER_PERIOD_US, MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
+from odocan.host.judge.reference import Geometry, ReferenceOdometry, wrap_delta
 from odocan.host.protocol.pose import PosePairer, heading_fields, unwrap_near, wrap_heading
 
 WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
 _RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
+SILENCE_FRAMES = 8  # encoder frames heard without a pose: the firmware was stalled
 BACKLOG_FRAMES = 6_000  # encoder frames kept while waiting for the integrator (60 s at 100 Hz)
 _TURN = 2.0 * math.pi
+
+
+class StepGate:
+    """The firmware's plausibility rule on the reference's steps (firmware/ecu.py, the same as
+    ``host.judge.analysis``): a frame beyond ``MAX_WHEEL_SPEED_MM_S`` over the periods its COUNTER
+    advanced since the last accepted one is refused; ``RESYNC_FRAMES`` refused frames plausible
+    among themselves are a counter restart: one step from the first of them, never the jump."""
+
+    def __init__(self, geometry: Geometry, counter_bits: int) -> None:
+        travel_m = MAX_WHEEL_SPEED_MM_S * 1e-3 * ENCODER_PERIOD_US * 1e-6
+        self.bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
+                      math.ceil(travel_m / geometry.m_per_count_right) + 1)
+        self.bits = counter_bits
+        self.prev: tuple[int, int, int] | None = None  # counter, left, right of the last accepted
+        self._refused: list[tuple[int, int, int]] = []
+        self.counter_restarts = 0
+
+    def _delta(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[int, int]:
+        return wrap_delta(b[1] - a[1], self.bits), wrap_delta(b[2] - a[2], self.bits)
+
+    def _plausible(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> bool:
+        periods = ((b[0] - a[0]) % _RING) or _RING
+        d = self._delta(a, b)
+        return abs(d[0]) <= periods * self.bound[0] and abs(d[1]) <= periods * self.bound[1]
+
+    def step(self, counter: int, left: int, right: int) -> tuple[int, int] | None:
+        """The count step to integrate for this frame; None when it primes or is refused."""
+        frame = (counter, left, right)
+        prev, self.prev = self.prev, frame
+        if prev is None:
+            return None
+        if self._plausible(prev, frame):
+            self._refused = []
+            return self._delta(prev, frame)
+        self.prev = prev  # refused: the base stays
+        consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
+        self._refused = [*self._refused, frame] if consistent else [frame]
+        if len(self._refused) < RESYNC_FRAMES:
+            return None
+        first, self._refused, self.prev = self._refused[0], [], frame
+        self.counter_restarts += 1
+        return self._delta(first, frame)
 
 
 def difference(a: Pose, b: Pose) -> dict[str, float]:
@@ -86,9 +130,12 @@ class PoseTracker:
         self.forced = integrator is not None
         self.integrator = integrator
         self.enc_seq = -1
+        self._frames_since_pose = 0
+        self.stalls = 0  # firmware silences after which the reference restarted
         self._counts: list[tuple[int, int, int] | None] = [None] * _RING  # seq, left, right
         self._refs: list[Pose | None] = [None] * _RING
         self._ref: ReferenceOdometry | None = None
+        self._gate = StepGate(geometry, self.counter_bits)
         self._pairer = PosePairer()
         self._pending: Pose | None = None  # the first pose, heard before the integrator
         self._backlog_counts: list[tuple[int, int, int, int]] = []  # seq, counter, left, right
@@ -106,10 +153,13 @@ class PoseTracker:
     def on_encoders(self, counter: int, left: int, right: int) -> None:
         """An accepted WHEEL_ENCODERS frame (raw 24-bit counts)."""
         self.enc_seq += 1
+        self._frames_since_pose += 1
         self._counts[counter] = (self.enc_seq, left, right)
         ref = self._ref
         if ref is not None:
-            ref.step_counts(left, right)
+            step = self._gate.step(counter, left, right)
+            if step is not None:
+                ref.step_deltas(*step)
             self._refs[counter] = Pose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad)
         elif self._pending is not None:
             self._backlog_counts.append((self.enc_seq, counter, left, right))
@@ -158,6 +208,14 @@ class PoseTracker:
 
         Returns (on-board pose, reference at that encoder frame or None), None when unpaired.
         """
+        silent, self._frames_since_pose = self._frames_since_pose >= SILENCE_FRAMES, 0
+        if silent and self._ref is not None:
+            # The firmware was stalled: this pose names a backlog frame ENC_COUNTER cannot
+            # resolve, and it took the frames it missed as one step. Start again at the next.
+            self.stalls += 1
+            self.restart_reference()
+            self._pairer.on_y({"ENC_COUNTER": enc_counter, "Y": y_m, "TURNS": turns})
+            return None
         named = self._named(self._counts[enc_counter])
         seq = named[0] if named is not None else -1
         paired = self._pairer.on_y({"ENC_COUNTER": enc_counter, "Y": y_m, "TURNS": turns}, seq)
@@ -210,6 +268,11 @@ class PoseTracker:
             self.vs_truth.add(estimate, truth)
         return truth, ref
 
+    @property
+    def counter_restarts(self) -> int:
+        """Counter restarts the current reference re-primed on (as the firmware does)."""
+        return self._gate.counter_restarts
+
     def _truth_heading(self, wrapped_rad: float, ref: Pose | None) -> float:
         """SIM_TRUTH's HEADING ([0, 2 pi) on the bus) made cumulative: the turn nearest the
         reference at that encoder frame, else nearest the previous truth (rad)."""
@@ -238,9 +301,12 @@ class PoseTracker:
         )
         self.reference_starts += 1
         self._refs = [None] * _RING
+        self._gate = StepGate(self.geometry, self.counter_bits)
         at_seq: dict[int, Pose] = {}
         for seq, counter, left, right in counts:
-            ref.step_counts(left, right)  # the first call primes: the reference stays at pose
+            step = self._gate.step(counter, left, right)  # the first primes: stays at pose
+            if step is not None:
+                ref.step_deltas(*step)
             at_seq[seq] = self._refs[counter] = Pose(seq, ref.x_m, ref.y_m, ref.heading_rad)
         for heard in poses:
             at = at_seq.get(heard.seq)
@@ -254,7 +320,8 @@ class PoseTracker:
         return {
             "pose": pose_dict(self.pose),
             "reference": {**(pose_dict(self.reference) or {}), "integrator": self.integrator,
-                          "starts": self.reference_starts},
+                          "starts": self.reference_starts,
+                          "counter_restarts": self.counter_restarts, "stalls": self.stalls},
             "truth": pose_dict(self.truth),
             "error": {
                 "pose_vs_reference": self.vs_reference.as_dict(),
