@@ -10,12 +10,17 @@ from __future__ import annotations
 
 import itertools
 import math
+from pathlib import Path
 from typing import Any
 
 import can
+import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.telemetry import RobotTelemetry
@@ -23,6 +28,7 @@ from odocan.host.protocol.pose import heading_fields, wrap_heading
 from odocan.sim import robot
 from odocan.sim.contract import database
 from odocan.sim.rig import LockstepRig, RigConfig
+from tests.synth_log import synthesize
 
 PMIR = robot.load("pmir")
 TURN = 2.0 * math.pi
@@ -111,3 +117,14 @@ def test_mqtt_and_monitor_name_both_headings_and_the_enums_over_two_turns() -> N
         _check_headings(snapshot[key])
     assert abs(snapshot["pose"]["heading_unwrapped_rad"]) > 1.9 * TURN
     assert isinstance(monitor.status.get("state"), str)
+
+
+def test_the_report_names_both_headings(tmp_path: Path) -> None:
+    """``final_onboard_pose`` of a spin past two turns: wrapped and cumulative, both named."""
+    steps = 4_000
+    synth = synthesize(PMIR, "exact", np.full(steps, -5), np.full(steps, 5))
+    analysis = analyze(read_log(synth.write(tmp_path / "spin.log")), PMIR)
+    final = analysis.report["final_onboard_pose"]
+    unwrapped = _check_headings(final)
+    assert unwrapped == pytest.approx(synth.state[-1].pose[2], abs=1e-4)
+    assert unwrapped > 2 * TURN

@@ -68,6 +68,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import INTEGRATORS, Geometry, integrate, wrap_delta
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import UNKNOWN, check_frames
+from odocan.host.protocol.pose import heading_fields
 from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 from odocan.sim.robot import RobotProfile
@@ -217,10 +218,10 @@ def analyze(
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,
         "onboard_twist_vs_reference": twist,
-        "final_onboard_pose": {
+        "final_onboard_pose": {  # heading_rad in (-pi, pi], heading_unwrapped_rad cumulative
             "x_m": float(onboard.x_m[-1]),
             "y_m": float(onboard.y_m[-1]),
-            "heading_rad": float(onboard.heading_rad[-1]),
+            **heading_fields(float(onboard.heading_rad[-1])),
         },
         "e2e": {name: c for name, c in e2e.items() if name != UNKNOWN},
         "unknown_frames": e2e[UNKNOWN],
