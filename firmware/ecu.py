@@ -27,7 +27,8 @@ MAILBOX_OVERFLOW (a received frame was dropped), IMPLAUSIBLE_STEP (a step beyond
 ``RESYNC_FRAMES`` frames consistent with each other but not with the last accepted one, the
 odometry is re-primed on the first of them; the jump itself is never integrated). The motion
 between the last frame before a counter restart and the first after it is unknowable, so
-COUNTER_RESET stays until the host sets the pose again (ODOM_SET_POSE APPLY).
+COUNTER_RESET stays until the host sets the pose again (ODOM_SET_POSE APPLY): no later cause
+replaces it as the reason.
 
 SecOC (docs/secoc.md). A firmware provisioned with a key (``secoc_key``, configuration from the
 board, never on the bus) holds each ODOM_SET_POSE, ODOM_CONFIG and NAV_GOAL frame that passed its
@@ -311,10 +312,14 @@ class OdomEcu:
             self._degrade(Reason.MAILBOX_OVERFLOW)
 
     def _degrade(self, reason: Reason) -> None:
-        """OK or DEGRADED -> DEGRADED for ``reason`` (INIT and FAULT stay); recovery restarts."""
+        """OK or DEGRADED -> DEGRADED for ``reason`` (INIT and FAULT stay); recovery restarts.
+        COUNTER_RESET is never replaced by a later cause (those still set their error bits):
+        only ODOM_SET_POSE APPLY clears it, or a later cause would let the firmware report OK
+        on a pose that lost its continuity."""
         if self.state is State.OK or self.state is State.DEGRADED:
             self.state = State.DEGRADED
-            self.reason = reason
+            if self.reason is not Reason.COUNTER_RESET:
+                self.reason = reason
             self._good_in_a_row = 0
             self._reason_tick = self.ticks
 

@@ -19,7 +19,14 @@ ODOM_POSE_X and ODOM_POSE_Y pair naming the same encoder frame (ENC_COUNTER = th
 COUNTER, the latest such frame in the log, if the log's latest encoder frame is less than 8
 periods older than the pose: else which frame it names cannot be told); an encoder frame
 repeating the COUNTER of its ID's previous frame is refused, as E2E Profile 2 refuses it (a
-repetition, or 16 frames lost: the same to it). The verdict: max
+repetition, or 16 frames lost: the same to it).
+
+The firmware's plausibility rule, from its specification (firmware/ecu.py's module docstring),
+written again here: a step from the last accepted frame beyond ceil(v_max T / travel per count)
++ 1 counts per period elapsed on either wheel (v_max = 4 m/s, T = 10 ms) is refused, not
+integrated, and the on-board pose keeps naming the last accepted frame; ``RESYNC`` refused frames
+in a row, each plausible from the one before, are a counter restart: the odometry restarts from
+the first of them and takes one step to the last (the jump itself is lost). The verdict: max
 position distance <= one LSB (0.1 mm) and max wrapped heading error <= one LSB (2 pi / 65536).
 """
 
@@ -40,6 +47,8 @@ from tests.dbc_typed import dbc_attribute
 POSITION_LSB_M = 1e-4
 HEADING_LSB_RAD = 2.0 * math.pi / 65536.0
 PERIOD_S = 0.01
+MAX_WHEEL_SPEED_M_S = 4.0  # the firmware's build-time maximum rim speed
+RESYNC = 3  # refused frames consistent among themselves: the counters restarted
 _LINE = re.compile(r"\((\d+\.\d+)\) \S+ ([0-9A-Fa-f]+)#([0-9A-Fa-f]*)")
 
 
@@ -151,9 +160,11 @@ class _Odometry:
 def check(
     path: Path, robot: Robot, integrator: str,
     starts: Callable[[float], tuple[float, float, float]],
+    max_wheel_speed_m_s: float | None = MAX_WHEEL_SPEED_M_S,
 ) -> Verdict:
     """Compare the on-board poses of the log at ``path`` with this checker's odometry started
-    at ``starts(timestamp of the segment's first encoder frame)`` (module docstring)."""
+    at ``starts(timestamp of the segment's first encoder frame)`` (module docstring);
+    ``max_wheel_speed_m_s`` None: no plausibility rule (drives faster than any ECU allows)."""
     frames = _Frames(path)
     odo = _Odometry(robot, integrator)
     wire = 1 << min(robot.counter_bits, 24)
@@ -162,14 +173,41 @@ def check(
     halves: dict[tuple[str, int], dict[str, float]] = {}
     prev: tuple[float, int, int] | None = None
     errors: list[tuple[float, float]] = []
+    bound = [math.inf if max_wheel_speed_m_s is None
+             else math.ceil(max_wheel_speed_m_s * PERIOD_S / m) + 1
+             for m in (odo.m_left, odo.m_right)]
+
+    def deltas(a: tuple[float, int, int], b: tuple[float, int, int]) -> tuple[int, int]:
+        return ((b[1] - a[1] + wire // 2) % wire - wire // 2,
+                (b[2] - a[2] + wire // 2) % wire - wire // 2)
+
+    def plausible(a: tuple[float, int, int], b: tuple[float, int, int]) -> bool:
+        periods = max(1, round((b[0] - a[0]) / PERIOD_S))
+        d = deltas(a, b)
+        return abs(d[0]) <= periods * bound[0] and abs(d[1]) <= periods * bound[1]
+
+    refused: list[tuple[float, int, int]] = []  # the run of refused frames, each plausible
     for t, name, s in frames.rows:
         if name == "WHEEL_ENCODERS":
             left, right = int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"])
+            frame = (t, left, right)
+            last_t = t
+            halves.clear()
+            if prev is not None and not plausible(prev, frame):
+                consistent = bool(refused) and plausible(refused[-1], frame)
+                refused = [*refused, frame] if consistent else [frame]
+                if len(refused) < RESYNC:
+                    continue
+                odo.step(*deltas(refused[0], frame))  # restarted: from the first, one step
+                refused = []
+                prev = frame
+                recent = [(int(s["COUNTER"]), (odo.x, odo.y, odo.heading)), *recent][:16]
+                continue
+            refused = []
             if prev is None:
                 odo.place(*starts(t))
             else:
-                d_left = (left - prev[1] + wire // 2) % wire - wire // 2
-                d_right = (right - prev[2] + wire // 2) % wire - wire // 2
+                d_left, d_right = deltas(prev, frame)
                 if t - prev[0] > 1.5 * PERIOD_S:  # a gap: the heading follows the counts,
                     odo.n_left += d_left  # the position starts again where the firmware was
                     odo.n_right += d_right

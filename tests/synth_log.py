@@ -10,7 +10,11 @@ the firmware codec (``firmware.frames``, E2E protected), rounding the pose exact
 * ODOM_STATUS page 0 (STATE OK, the integrator, UPTIME) every 10th encoder frame, and the page
   of WHEEL_ENCODERS E2E counts (ENC_E2E_OK: every frame so far) at frames 10, 60, 110, ...
 
-The firmware starts at pose 0 on the first frame (power-up). ``Synth.lines(start)`` cuts the log at
+The firmware starts at pose 0 on the first frame (power-up). ``counter_jumps`` restarts the
+motor controller's counters (a reboot: the counts jump by an offset): the firmware refuses the
+first ``RESYNC_FRAMES - 1`` frames after the jump (its pose still names the last accepted frame),
+then re-primes on the first of them and integrates one step from it (COUNTER_RESET, firmware/ecu.py
+module docstring); the jump itself is never integrated. ``Synth.lines(start)`` cuts the log at
 an encoder frame to make a log that starts mid-drive; ``Synth.state[k]`` is the firmware's
 internal pose after encoder frame k (Q40 metres, BAM64 + whole turns) to compare against.
 """
@@ -26,6 +30,7 @@ import numpy.typing as npt
 
 from odocan.firmware import frames as fr
 from odocan.firmware.config import Integrator, RobotParams, derive_constants
+from odocan.firmware.ecu import RESYNC_FRAMES
 from odocan.firmware.errors import ErrorMask, State
 from odocan.firmware.fixmath import mul_shr_round_i64, wrap_i32
 from odocan.firmware.odometry import Odometry
@@ -91,10 +96,17 @@ def synthesize(
     counts0: tuple[int, int] = (0, 0),
     t0_s: float = 0.0,
     x_bias_100um: dict[int, int] | None = None,
+    counter_jumps: dict[int, int] | None = None,
 ) -> Synth:
     """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
-    ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB."""
+    ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB.
+    ``counter_jumps``: {encoder frame: offset in counts} where both counters restart (the jumps
+    at least ``RESYNC_FRAMES`` frames apart and beyond the plausibility bound)."""
     bias = x_bias_100um or {}
+    jumps = counter_jumps or {}
+    named = 0  # the COUNTER of the last encoder frame the firmware accepted
+    resync_first: tuple[int, int] | None = None
+    resync_until = -1
     errors = ErrorMask()
     odo = Odometry(derive_constants(params_of(robot, integrator), errors), errors)
     bits = robot.counter_bits
@@ -106,12 +118,24 @@ def synthesize(
     pose_counter = status_counter = 0
     for k in range(len(dl)):
         left, right = (left + int(dl[k])) & mask, (right + int(dr[k])) & mask
-        odo.step_counts(left, right)
+        if k in jumps:  # the motor controller restarts its counters
+            left, right = (left + jumps[k]) & mask, (right + jumps[k]) & mask
+            resync_first, resync_until = (left, right), k + RESYNC_FRAMES - 1
+        if k < resync_until:
+            pass  # refused: beyond the plausibility bound from the last accepted frame
+        elif k == resync_until and resync_first is not None:  # COUNTER_RESET: re-prime
+            odo.unprime()
+            odo.step_counts(*resync_first)
+            odo.step_counts(left, right)
+            named = k & 0xF
+        else:
+            odo.step_counts(left, right)
+            named = k & 0xF
         t_s = t0_s + k * ENCODER_PERIOD_S
         group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
                        fr.pack_wheel_encoders(k, left & wire_mask, right & wire_mask))]
         if k % 2 == 0:
-            group += _pose_lines(odo, t_s + 0.001, pose_counter, k & 0xF, errors, bias.get(k, 0))
+            group += _pose_lines(odo, t_s + 0.001, pose_counter, named, errors, bias.get(k, 0))
             pose_counter += 1
         if k % 10 == 0:
             uptime_s = int(k * ENCODER_PERIOD_S + t0_s)

@@ -205,7 +205,9 @@ def test_judge_own_error_after_100_km_is_below_a_twentieth_lsb(
     """The reference the judge builds vs the same float64 odometry started at the firmware's true
     internal pose (Q40, BAM64) of the log's first sample: only the start can differ."""
     synth, d_left, d_right = long_drive(robot, integrator)
-    analysis = analyze(read_log(synth.write(tmp_path / "long.log", cut)), load(robot))
+    # 2 m per 10 ms: faster than any ECU build allows, so without the plausibility rule
+    analysis = analyze(read_log(synth.write(tmp_path / "long.log", cut)), load(robot),
+                       max_wheel_speed_mm_s=None)
     x0, y0, h0 = synth.state[cut].pose
     exact = integrate(d_left[cut:], d_right[cut:], Geometry.of(load(robot)), integrator,
                       x0_m=x0, y0_m=y0, heading0_rad=h0)

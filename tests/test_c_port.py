@@ -627,6 +627,9 @@ class _EcuSession:
             offset = self.rng.choice((-1, 1)) * self.rng.randrange(5_000, 20_000)
             self.counts[:] = [self.counts[0] + offset, self.counts[1] + offset]
             self.enc_counter = 15
+        if tick == self.reboot_tick + 20:  # a later cause must not hide COUNTER_RESET (a burst)
+            for _ in range(40):
+                self.rx(0x555, bytes(8))
         if tick == self.reboot_tick + 40:
             self.host(
                 frames.ODOM_SET_POSE_ID,

@@ -162,7 +162,7 @@ def test_monitor_follows_the_firmware_and_its_pose(
     vs_truth = model["error"]["pose_vs_truth"]
     assert vs_truth["samples"] >= 5
     assert vs_truth["max_dpos_m"] < 5e-3
-    assert set(model["truth"]) == {"x_m", "y_m", "heading_rad"}
+    assert set(model["truth"]) == {"x_m", "y_m", "heading_rad", "heading_unwrapped_rad"}
     # the source stopped about 1 s before the monitor: the firmware is stale, whatever it said
     health = model["health"]
     firmware = health["nodes"]["ODOM_MCU"]
@@ -290,7 +290,7 @@ def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert set(robots) == {"robot001", "robot002"}
     for row in robots.values():
         assert row["online"] is True
-        assert set(row["pose"]) == {"x_m", "y_m", "heading_rad"}
+        assert set(row["pose"]) == {"x_m", "y_m", "heading_rad", "heading_unwrapped_rad"}
         assert row["error"]["dpos_m"] < 1e-3  # on-board vs float64: quantisation only
         assert row["status"]["state"] == "OK"
         # The bits are named as the mask says.

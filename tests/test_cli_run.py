@@ -154,7 +154,8 @@ def test_run_report_has_the_contract_keys(
         assert abs(reference[key]) <= LSB_HEADING_RAD
     assert abs(reference["final_heading_error_rad"]) <= reference["max_heading_error_rad"]
     assert report["onboard_vs_truth"]["distance_travelled_m"] > 0.5  # 0.5 m/s for ~3 s
-    assert set(report["final_onboard_pose"]) == {"x_m", "y_m", "heading_rad"}
+    assert set(report["final_onboard_pose"]) == {"x_m", "y_m", "heading_rad",
+                                                 "heading_unwrapped_rad"}
     assert set(report["e2e"]) >= {"WHEEL_ENCODERS"}
     for counts in report["e2e"].values():
         assert set(counts) >= set(E2E_KEYS)

@@ -256,3 +256,47 @@ def test_firmware_time_follows_a_jittery_timer_without_drift() -> None:
         rig.ecu.tick(k * TICK_PERIOD_US + j)
     assert rig.ecu.time_periods == len(jitter_us)
     assert not rig.ecu.errors.has(ErrorFlag.TIME_LOST)
+
+
+def _later_cause(rig: TimedRig, cause: str) -> None:
+    """One more cause of DEGRADED, raised while COUNTER_RESET waits for a pose."""
+    if cause == "overflow":
+        for _ in range(MAILBOX_SLOTS + 1):
+            rig.ecu.isr_can_rx(0x555, bytes(8))
+        rig.tick()
+    elif cause == "stall":
+        rig.tick(WATCHDOG_TICKS + 5)  # the MCU was stopped: time passed without ticks
+    elif cause == "implausible":
+        rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, rig.forged(rig.left + 9_000, rig.right))
+        rig.tick()
+    else:  # encoder timeout: the frames stop, the firmware keeps ticking
+        for _ in range(WATCHDOG_TICKS + 2):
+            rig.encoders(0, 0)
+            rig.tick()
+
+
+@pytest.mark.parametrize("cause", ["overflow", "stall", "implausible", "timeout"])
+def test_a_later_cause_does_not_hide_a_counter_restart(cause: str) -> None:
+    """COUNTER_RESET asks for a pose (ODOM_SET_POSE APPLY); a later cause must not replace it
+    and let the firmware report OK, five good frames later, on a pose that lost continuity."""
+    rig = TimedRig()
+    for _ in range(30):
+        rig.step(5, 7)
+    rig.left = rig.right = 0  # the motor controller rebooted
+    for _ in range(RESYNC_FRAMES + 2):
+        rig.step(5, 7)
+    assert rig.ecu.reason is Reason.COUNTER_RESET
+    _later_cause(rig, cause)
+    assert rig.ecu.state is State.DEGRADED
+    for _ in range(3 * RECOVERY_FRAMES):
+        rig.step(5, 7)
+    assert rig.ecu.state is State.DEGRADED
+    assert rig.ecu.reason is Reason.COUNTER_RESET
+    assert rig.summary()["REASON"] == Reason.COUNTER_RESET
+    rig.ecu.isr_can_rx(
+        fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+    )
+    for _ in range(RECOVERY_FRAMES + 1):
+        rig.step(5, 7)
+    assert rig.ecu.state is State.OK
+    assert rig.ecu.reason is Reason.NONE

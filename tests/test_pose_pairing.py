@@ -48,3 +48,12 @@ def test_latest_pose_of_a_stream_with_a_lost_x() -> None:
     ]
     assert latest_pose(stream) == Pose(7.0, 70.0, 2 * math.pi + 0.7)
     assert latest_pose([]) is None
+
+
+def test_halves_naming_different_encoder_frames_are_not_paired() -> None:
+    """The Y of frame 17 (ENC_COUNTER 1) whose X was lost must not complete the X of frame 1."""
+    pairer = PosePairer()
+    pairer.on_x(x_half(1, 1.0, 0.1), frame_seq=1)
+    assert pairer.on_y(y_half(1, 170.0, 0), frame_seq=17) is None
+    pairer.on_x(x_half(1, 17.0, 1.7), frame_seq=17)
+    assert pairer.on_y(y_half(1, 170.0, 0), frame_seq=17) == Pose(17.0, 170.0, 1.7)

@@ -285,12 +285,17 @@ static void check_overflows(struct odom_ecu *ecu)
     }
 }
 
-/* OK or DEGRADED -> DEGRADED for reason (INIT and FAULT stay); recovery restarts. */
+/* OK or DEGRADED -> DEGRADED for reason (INIT and FAULT stay); recovery restarts.
+ * COUNTER_RESET is never replaced by a later cause (those still set their error bits): only
+ * ODOM_SET_POSE APPLY clears it, or a later cause would let the firmware report OK on a pose that
+ * lost its continuity. */
 static void degrade(struct odom_ecu *ecu, enum reason reason)
 {
     if (ecu->state == STATE_OK || ecu->state == STATE_DEGRADED) {
         ecu->state = STATE_DEGRADED;
-        ecu->reason = reason;
+        if (ecu->reason != REASON_COUNTER_RESET) {
+            ecu->reason = reason;
+        }
         ecu->good_in_a_row = 0;
         ecu->reason_tick = ecu->ticks;
     }

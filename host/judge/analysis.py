@@ -37,6 +37,13 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    start position is the middle of the overlap of the first samples' position intervals.
    Without that, a start heading off by its residual (7e-8 rad) grows as residual x distance,
    enough to fail a correct firmware after 600 m.
+   The reference takes the steps the firmware is specified to take (firmware/ecu.py): a frame
+   beyond the plausibility bound (``MAX_WHEEL_SPEED_MM_S``) is refused, ``RESYNC_FRAMES`` refused
+   frames consistent among themselves are a counter restart, re-primed on the first of them (a
+   ``counter_restart`` event; the motion across it is lost on board and in the reference alike).
+   After the firmware was silent for ``SILENCE_CYCLES`` cycles (a stalled MCU) its first pose,
+   naming a backlog frame ENC_COUNTER cannot resolve, is left out, and the position restarts like
+   after a gap (a ``firmware_stall`` event): the firmware took the frames it missed as one step.
 5. **Errors**: position errors are Euclidean distances (m), heading errors wrapped to [-pi, pi).
    On-board vs reference at every on-board sample; on-board vs truth at every truth sample that
    has an on-board sample of the same encoder frame.
@@ -56,10 +63,12 @@ import cantools
 import numpy as np
 import numpy.typing as npt
 
+from odocan.firmware.ecu import ENCODER_PERIOD_US, MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import INTEGRATORS, Geometry, integrate, wrap_delta
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import UNKNOWN, check_frames
+from odocan.host.protocol.pose import heading_fields
 from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 from odocan.sim.robot import RobotProfile
@@ -67,6 +76,7 @@ from odocan.sim.robot import RobotProfile
 POSITION_LSB_M = 1e-4  # X, Y: 0.1 mm
 HEADING_LSB_RAD = 2 * math.pi / 65536  # HEADING: BAM16
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+SILENCE_CYCLES = 8  # pose frames this many encoder cycles apart: the firmware was stalled
 START_FIT_SAMPLES = 256  # on-board samples used to place the reference start (5 s at 50 Hz)
 ENC_E2E_PAGE = 2  # ODOM_STATUS page with the firmware's WHEEL_ENCODERS E2E counts
 REQUIRED = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y")
@@ -137,8 +147,13 @@ def analyze(
     scenario: str | None = None,
     seed: int | None = None,
     wall_seconds: float | None = None,
+    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
 ) -> Analysis:
     """Check the on-board odometry in ``frames`` (see the module docstring).
+
+    ``max_wheel_speed_mm_s``: the firmware's plausibility bound (its build-time maximum rim
+    speed): the reference refuses and re-primes where the firmware does; None: every step is
+    integrated (for synthesized drives faster than any ECU build allows).
 
     ``integrator`` None: the one ODOM_STATUS reports. ``scenario``, ``seed``, ``wall_seconds``
     (the wall-clock time the run took) only go into the report. Raises ``AnalysisError`` when the
@@ -150,10 +165,12 @@ def analyze(
     e2e, accepted = check_frames(frames, db)
     integrator, source = _pick_integrator(frames, accepted, decoder, integrator)
     enc = _encoders(frames, accepted, decoder)
-    onboard, unmatched = _onboard_samples(frames, accepted, decoder, enc)
+    onboard, unmatched, sent_s = _onboard_samples(frames, accepted, decoder, enc)
+    onboard, stalls = _after_stalls(onboard, sent_s, enc)
     truth = _truth_samples(frames, accepted, decoder, enc)
     power_up = _starts_at_power_up(frames, accepted, decoder, onboard)
-    ref_all = _reference(enc, onboard, robot, integrator, power_up=power_up)
+    ref_all = _reference(enc, onboard, robot, integrator, power_up=power_up,
+                         max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls)
     ref = ref_all.at(onboard.enc)
     pos_err, head_err = _errors(onboard, ref)
     vs_ref = _summary(pos_err, head_err)
@@ -183,14 +200,28 @@ def analyze(
             "unmatched_poses": unmatched,
             "encoder_frames": len(enc.index),
             "reference_restarts": ref_all.restarts,
+            "implausible_encoder_frames": ref_all.implausible_frames,
         },
+        "events": [
+            {"kind": "counter_restart", "t_s": float(frames.timestamp_s[enc.index[e]]),
+             "encoder_frame": int(e),
+             "detail": "the firmware re-primes here (COUNTER_RESET): the reference restarts "
+                       "with it; the motion across the restart is unknowable"}
+            for e in ref_all.counter_restarts
+        ] + [
+            {"kind": "firmware_stall", "t_s": float(frames.timestamp_s[enc.index[e]]),
+             "encoder_frame": int(e),
+             "detail": "the firmware was silent (a stall): it took the frames it missed as one "
+                       "step, so the reference's position is placed again after it"}
+            for e in stalls.tolist() if e > int(onboard.enc[0])
+        ],
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,
         "onboard_twist_vs_reference": twist,
-        "final_onboard_pose": {
+        "final_onboard_pose": {  # heading_rad in (-pi, pi], heading_unwrapped_rad cumulative
             "x_m": float(onboard.x_m[-1]),
             "y_m": float(onboard.y_m[-1]),
-            "heading_rad": float(onboard.heading_rad[-1]),
+            **heading_fields(float(onboard.heading_rad[-1])),
         },
         "e2e": {name: c for name, c in e2e.items() if name != UNKNOWN},
         "unknown_frames": e2e[UNKNOWN],
@@ -335,8 +366,9 @@ def _first_per_encoder(enc_idx: IntArray) -> tuple[IntArray, IntArray]:
 
 def _onboard_samples(
     frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: _Encoders
-) -> tuple[_Poses, int]:
-    """On-board samples (X and Y frames of one encoder frame); and the poses left unmatched."""
+) -> tuple[_Poses, int, FloatArray]:
+    """On-board samples (X and Y frames of one encoder frame); the poses left unmatched; and
+    when each sample's ODOM_POSE_Y was sent (s)."""
     px = _accepted(frames, accepted, decoder, "ODOM_POSE_X")
     py = _accepted(frames, accepted, decoder, "ODOM_POSE_Y")
     ex = match_encoder(enc, px["index"], px["ENC_COUNTER"], px["timestamp_s"])
@@ -359,7 +391,36 @@ def _onboard_samples(
         heading_rad=turns * 2 * math.pi + heading_raw * HEADING_LSB_RAD,
         heading_raw=heading_raw,
     )
-    return poses, unmatched
+    return poses, unmatched, py["timestamp_s"][sy].astype(np.float64)
+
+
+def _after_stalls(
+    onboard: _Poses, sent_s: FloatArray, enc: _Encoders
+) -> tuple[_Poses, IntArray]:
+    """Samples sent after the firmware was silent for ``SILENCE_CYCLES`` encoder cycles or more
+    while the log holds the encoder frames of that time (a stalled MCU, firmware/ecu.py
+    TIME_LOST): the first names a frame from before the silence
+    (its backlog), which ENC_COUNTER cannot resolve, so it is left out; and the firmware took the
+    frames it missed as one step, which a fine reference cannot follow on a curve, so the
+    reference's position restarts (a segment, like a gap) at the encoder frame after the last
+    sample before the silence. Returns the samples kept and those encoder frames (sorted)."""
+    if enc.cycle_s is None or len(sent_s) < 2:
+        return onboard, np.zeros(0, dtype=np.int64)
+    order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
+    sent = sent_s[order]
+    # Silent while the encoder frames went on (a log that lacks both is a recorder's gap).
+    heard = np.searchsorted(enc.timestamp_s, sent[1:]) - np.searchsorted(enc.timestamp_s, sent[:-1])
+    after = np.flatnonzero(
+        (np.diff(sent) >= SILENCE_CYCLES * enc.cycle_s) & (heard >= SILENCE_CYCLES - 1)
+    ) + 1
+    if len(after) == 0:
+        return onboard, np.zeros(0, dtype=np.int64)
+    keep = np.ones(len(sent_s), dtype=bool)
+    keep[order[after]] = False
+    breaks = np.unique(onboard.enc[order[after - 1]] + 1)
+    kept = _Poses(onboard.enc[keep], onboard.x_m[keep], onboard.y_m[keep],
+                  onboard.heading_rad[keep], onboard.heading_raw[keep])
+    return kept, breaks.astype(np.int64)
 
 
 def _truth_samples(
@@ -412,13 +473,15 @@ class _Reference:
     distance_m: FloatArray
     restarts: int = 0  # gaps in the encoder sequence where the position was placed again
     exact_start: bool = False  # started at the power-up pose (0, 0, 0), not fitted
+    counter_restarts: tuple[int, ...] = ()  # encoder frames the firmware re-primed on
+    implausible_frames: int = 0  # encoder frames the firmware refuses (not integrated)
 
     def at(self, enc: IntArray) -> _Reference:
         """The reference at the encoder frames ``enc`` (all >= start)."""
         k = enc - self.start
         return _Reference(
             self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
-            self.restarts, self.exact_start,
+            self.restarts, self.exact_start, self.counter_restarts, self.implausible_frames,
         )
 
 
@@ -462,20 +525,26 @@ def _saw_only_the_log(
 
 
 def _reference(
-    enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator: str, *, power_up: bool
+    enc: _Encoders, onboard: _Poses, robot: RobotProfile, integrator: str, *, power_up: bool,
+    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    breaks: IntArray | None = None,
 ) -> _Reference:
     """Integrate the encoder deltas from the first on-board sample on."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     e0 = int(onboard.enc[0])
-    d_left = wrap_delta(np.diff(enc.left[e0:]), bits)
-    d_right = wrap_delta(np.diff(enc.right[e0:]), bits)
     geometry = Geometry.of(robot)
+    steps = _firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s)
+    d_left, d_right = steps.d_left, steps.d_right
     rel = integrate(d_left, d_right, geometry, integrator)
     zero = np.zeros(1)
     rel_x, rel_y = np.concatenate((zero, rel.x_m)), np.concatenate((zero, rel.y_m))
     rel_h = np.concatenate((zero, rel.heading_rad))
     at = onboard.enc - e0
-    segment = np.concatenate(([0], np.cumsum(np.diff(enc.seq[e0:]) > 1)))
+    starts = np.concatenate(([False], np.diff(enc.seq[e0:]) > 1))
+    if breaks is not None:  # encoder frames where the firmware resumed after a stall
+        inside = breaks[(breaks > e0) & (breaks < len(enc.seq))] - e0
+        starts[inside] = True
+    segment = np.cumsum(starts)
     x0, y0, h0, exact = _start_pose(
         onboard, _Relative(rel_x[at], rel_y[at], rel_h[at], segment[at]), power_up=power_up
     )
@@ -492,7 +561,87 @@ def _reference(
         distance_m=np.concatenate((zero, rel.distance_m)),
         restarts=int(segment[-1]),
         exact_start=exact,
+        counter_restarts=tuple(e0 + k for k in steps.reprimed),
+        implausible_frames=steps.refused,
     )
+
+
+@dataclass
+class _Steps:
+    """The count steps the firmware integrates between the accepted encoder frames of the log
+    (element k: into frame ``e0 + k + 1``), with its refusals."""
+
+    d_left: IntArray
+    d_right: IntArray
+    refused: int = 0  # frames beyond the plausibility bound, not integrated
+    reprimed: list[int] = field(default_factory=list)  # frames (from e0) a counter restart primed
+
+
+def _firmware_steps(
+    enc: _Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: int | None
+) -> _Steps:
+    """The steps as firmware/ecu.py takes them: a frame whose step from the last accepted one
+    exceeds ``MAX_WHEEL_SPEED_MM_S`` over its periods is refused (IMPLAUSIBLE_STEP, not
+    integrated); ``RESYNC_FRAMES`` refused frames plausible among themselves are a counter restart
+    (COUNTER_RESET): the odometry re-primes on the first of them and integrates one step from it to
+    the last. Vectorised; a short state machine runs only from each refused frame on. The bound is
+    computed in float (the firmware's Q48 integer bound may differ by a count at the limit)."""
+    left, right = enc.left[e0:], enc.right[e0:]
+    seq = enc.seq[e0:]
+    steps = _Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
+    if max_wheel_speed_mm_s is None:
+        return steps
+    travel_m = max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
+    bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
+             math.ceil(travel_m / geometry.m_per_count_right) + 1)
+
+    def delta(a: int, b: int) -> tuple[int, int]:
+        return (int(wrap_delta(int(left[b]) - int(left[a]), bits)),
+                int(wrap_delta(int(right[b]) - int(right[a]), bits)))
+
+    def plausible(a: int, b: int) -> bool:
+        periods = max(1, int(seq[b] - seq[a]))
+        d = delta(a, b)
+        return abs(d[0]) <= periods * bound[0] and abs(d[1]) <= periods * bound[1]
+
+    periods = np.maximum(1, np.diff(seq))
+    bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])
+    k = 0
+    for first_bad in np.flatnonzero(bad).tolist():
+        if first_bad + 1 <= k:
+            continue  # handled by the state machine of an earlier refusal
+        k = _refusals(steps, first_bad, len(left), plausible, delta)
+    return steps
+
+
+def _refusals(
+    steps: _Steps,
+    prev: int,
+    n_frames: int,
+    plausible: Any,
+    delta: Any,
+) -> int:
+    """Run the firmware's refusal logic from frame ``prev + 1`` (``prev`` accepted) until a frame
+    is accepted again; return that frame (``n_frames`` at the end of the log)."""
+    resync_first: int | None = None
+    resync_last = 0
+    resync_frames = 0
+    for k in range(prev + 1, n_frames):
+        if plausible(prev, k):
+            steps.d_left[k - 1], steps.d_right[k - 1] = delta(prev, k)
+            return k
+        steps.refused += 1
+        steps.d_left[k - 1] = steps.d_right[k - 1] = 0
+        if resync_first is not None and plausible(resync_last, k):
+            resync_frames += 1
+        else:
+            resync_first, resync_frames = k, 1
+        resync_last = k
+        if resync_frames >= RESYNC_FRAMES:  # COUNTER_RESET: re-prime on the first, step to k
+            steps.d_left[k - 1], steps.d_right[k - 1] = delta(resync_first, k)
+            steps.reprimed.append(resync_first)
+            return k
+    return n_frames
 
 
 def _segment_offsets(segment: IntArray, at: IntArray, error: FloatArray) -> FloatArray:

@@ -496,6 +496,8 @@ def error_names(mask: int) -> list[str]:
 def _shown(message: Message, name: str, value: Any) -> Any:
     """A signal's value as shown: the enum name when it has one, else the number."""
     choices = message.get_signal_by_name(name).choices
+    if isinstance(value, str):  # already the name (the bridge publishes enums by name)
+        return value
     if choices and int(value) in choices:
         return str(choices[int(value)])
     return value
@@ -526,7 +528,8 @@ def _robot_row(state: RobotState, db: Database) -> dict[str, Any]:
                     "error_mask": mask, "errors": error_names(mask),
                     "uptime_s": summary.get("uptime")}
     hz = state.rates.get("hz") or {}
-    pose = {k: state.pose.get(k) for k in ("x_m", "y_m", "heading_rad")} if state.pose else None
+    keys = ("x_m", "y_m", "heading_rad", "heading_unwrapped_rad")
+    pose = {k: state.pose.get(k) for k in keys} if state.pose else None
     return {
         "online": state.online,
         "pose": pose,

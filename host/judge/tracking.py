@@ -11,23 +11,69 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from odocan.host.judge.reference import Geometry, ReferenceOdometry
-from odocan.sim.truth import wrap_angle
+from odocan.firmware.ecu import ENCODER_PERIOD_US, MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
+from odocan.host.judge.reference import Geometry, ReferenceOdometry, wrap_delta
+from odocan.host.protocol.pose import PosePairer, heading_fields, unwrap_near, wrap_heading
 
 WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
 _RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
+SILENCE_FRAMES = 8  # encoder frames heard without a pose: the firmware was stalled
+BACKLOG_FRAMES = 6_000  # encoder frames kept while waiting for the integrator (60 s at 100 Hz)
 _TURN = 2.0 * math.pi
 
 
+class StepGate:
+    """The firmware's plausibility rule on the reference's steps (firmware/ecu.py, the same as
+    ``host.judge.analysis``): a frame beyond ``MAX_WHEEL_SPEED_MM_S`` over the periods its COUNTER
+    advanced since the last accepted one is refused; ``RESYNC_FRAMES`` refused frames plausible
+    among themselves are a counter restart: one step from the first of them, never the jump."""
+
+    def __init__(self, geometry: Geometry, counter_bits: int) -> None:
+        travel_m = MAX_WHEEL_SPEED_MM_S * 1e-3 * ENCODER_PERIOD_US * 1e-6
+        self.bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
+                      math.ceil(travel_m / geometry.m_per_count_right) + 1)
+        self.bits = counter_bits
+        self.prev: tuple[int, int, int] | None = None  # counter, left, right of the last accepted
+        self._refused: list[tuple[int, int, int]] = []
+        self.counter_restarts = 0
+
+    def _delta(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[int, int]:
+        return wrap_delta(b[1] - a[1], self.bits), wrap_delta(b[2] - a[2], self.bits)
+
+    def _plausible(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> bool:
+        periods = ((b[0] - a[0]) % _RING) or _RING
+        d = self._delta(a, b)
+        return abs(d[0]) <= periods * self.bound[0] and abs(d[1]) <= periods * self.bound[1]
+
+    def step(self, counter: int, left: int, right: int) -> tuple[int, int] | None:
+        """The count step to integrate for this frame; None when it primes or is refused."""
+        frame = (counter, left, right)
+        prev, self.prev = self.prev, frame
+        if prev is None:
+            return None
+        if self._plausible(prev, frame):
+            self._refused = []
+            return self._delta(prev, frame)
+        self.prev = prev  # refused: the base stays
+        consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
+        self._refused = [*self._refused, frame] if consistent else [frame]
+        if len(self._refused) < RESYNC_FRAMES:
+            return None
+        first, self._refused, self.prev = self._refused[0], [], frame
+        self.counter_restarts += 1
+        return self._delta(first, frame)
+
+
 def difference(a: Pose, b: Pose) -> dict[str, float]:
-    """a - b: position (m), distance (m) and heading wrapped to [-pi, pi) (rad)."""
+    """a - b: position (m), distance (m) and heading wrapped to (-pi, pi] (rad)."""
     dx, dy = a.x_m - b.x_m, a.y_m - b.y_m
     return {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy),
-            "dheading_rad": wrap_angle(a.heading_rad - b.heading_rad)}
+            "dheading_rad": wrap_heading(a.heading_rad - b.heading_rad)}
 
 
 class Pose(NamedTuple):
-    """A pose at one encoder frame (``seq``: the how-many-th encoder frame the monitor heard)."""
+    """A pose at one encoder frame (``seq``: the how-many-th encoder frame the monitor heard);
+    ``heading_rad`` is cumulative (unwrapped), ``pose_dict`` names both forms."""
 
     seq: int
     x_m: float
@@ -62,11 +108,16 @@ class ErrorStats:
 class PoseTracker:
     """On-board pose vs the float64 reference (aligned by ENC_COUNTER) and vs SIM_TRUTH.
 
-    The reference starts at the first on-board pose once the integrator is known (``integrator``
-    given, or the one ODOM_STATUS reports), primed with the counts of the encoder frame that pose
-    names and stepped with every accepted WHEEL_ENCODERS frame after it; it starts again when
-    ODOM_STATUS reports another integrator. The start inherits the pose signals' rounding (0.1 mm,
-    2 pi/65536 rad), so the difference stays within about one LSB over a short watch.
+    The reference starts at the first on-board pose heard, primed with the counts of the
+    encoder frame that pose names and stepped with every accepted WHEEL_ENCODERS frame after it.
+    When the integrator is not known yet (``integrator`` None: the one ODOM_STATUS reports), the
+    poses and encoder frames heard meanwhile are kept (up to ``BACKLOG_FRAMES``) and compared
+    once it is, so the monitor (which waits for ODOM_STATUS) and the bridge (told the integrator)
+    start at the same pose and judge the same samples as ``analyze``. Pose halves are paired by
+    ``host.protocol.pose.PosePairer``, the one pairing. The reference starts again when
+    ODOM_STATUS reports another integrator. At power-up the first pose is exactly (0, 0, 0), the
+    start ``analyze`` uses; mid-drive the start inherits the pose signals' rounding (0.1 mm,
+    2 pi/65536 rad; ``analyze`` fits it instead), so the difference stays within about one LSB.
     """
 
     def __init__(
@@ -79,10 +130,16 @@ class PoseTracker:
         self.forced = integrator is not None
         self.integrator = integrator
         self.enc_seq = -1
+        self._frames_since_pose = 0
+        self.stalls = 0  # firmware silences after which the reference restarted
         self._counts: list[tuple[int, int, int] | None] = [None] * _RING  # seq, left, right
         self._refs: list[Pose | None] = [None] * _RING
         self._ref: ReferenceOdometry | None = None
-        self._pose_x: tuple[int, float, float] | None = None  # enc counter, x, heading
+        self._gate = StepGate(geometry, self.counter_bits)
+        self._pairer = PosePairer()
+        self._pending: Pose | None = None  # the first pose, heard before the integrator
+        self._backlog_counts: list[tuple[int, int, int, int]] = []  # seq, counter, left, right
+        self._backlog_poses: list[Pose] = []
         self._truth_parts: dict[int, tuple[int, float]] = {}
         self._last_pair: tuple[Pose, Pose] | None = None  # on-board, reference
         self.pose: Pose | None = None
@@ -96,23 +153,41 @@ class PoseTracker:
     def on_encoders(self, counter: int, left: int, right: int) -> None:
         """An accepted WHEEL_ENCODERS frame (raw 24-bit counts)."""
         self.enc_seq += 1
+        self._frames_since_pose += 1
         self._counts[counter] = (self.enc_seq, left, right)
         ref = self._ref
         if ref is not None:
-            ref.step_counts(left, right)
+            step = self._gate.step(counter, left, right)
+            if step is not None:
+                ref.step_deltas(*step)
             self._refs[counter] = Pose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad)
+        elif self._pending is not None:
+            self._backlog_counts.append((self.enc_seq, counter, left, right))
+            if len(self._backlog_counts) > BACKLOG_FRAMES:  # too long: start at a later pose
+                self._drop_backlog()
 
     def on_integrator(self, name: str) -> None:
         """ODOM_STATUS reports the firmware's integrator; a change restarts the reference."""
         if self.forced or name == self.integrator:
             return
+        first = self.integrator is None
         self.integrator = name
-        self.restart_reference()
+        if first and self._pending is not None:  # judge what was heard while waiting
+            self._start_reference(self._pending, self._backlog_counts, self._backlog_poses)
+            self._drop_backlog()
+        else:
+            self.restart_reference()
 
     def restart_reference(self) -> None:
         """Start the reference again at the next on-board pose (after a set-pose or config)."""
         self._ref = None
         self._refs = [None] * _RING
+        self._drop_backlog()
+
+    def _drop_backlog(self) -> None:
+        self._pending = None
+        self._backlog_counts = []
+        self._backlog_poses = []
 
     def set_geometry(self, geometry: Geometry, counter_bits: int) -> None:
         """New robot parameters (a config command); the reference restarts at the next pose."""
@@ -122,7 +197,9 @@ class PoseTracker:
 
     def on_pose_x(self, enc_counter: int, x_m: float, heading_rad: float) -> None:
         """ODOM_POSE_X (X in m, HEADING in rad within the turn)."""
-        self._pose_x = (enc_counter, x_m, heading_rad)
+        named = self._named(self._counts[enc_counter])
+        self._pairer.on_x({"ENC_COUNTER": enc_counter, "X": x_m, "HEADING": heading_rad},
+                          named[0] if named is not None else -1)
 
     def on_pose_y(
         self, enc_counter: int, y_m: float, turns: int
@@ -131,15 +208,32 @@ class PoseTracker:
 
         Returns (on-board pose, reference at that encoder frame or None), None when unpaired.
         """
-        if self._pose_x is None or self._pose_x[0] != enc_counter:
+        silent, self._frames_since_pose = self._frames_since_pose >= SILENCE_FRAMES, 0
+        if silent and self._ref is not None:
+            # The firmware was stalled: this pose names a backlog frame ENC_COUNTER cannot
+            # resolve, and it took the frames it missed as one step. Start again at the next.
+            self.stalls += 1
+            self.restart_reference()
+            self._pairer.on_y({"ENC_COUNTER": enc_counter, "Y": y_m, "TURNS": turns})
             return None
-        _, x_m, heading_rad = self._pose_x
-        self._pose_x = None
         named = self._named(self._counts[enc_counter])
         seq = named[0] if named is not None else -1
-        pose = self.pose = Pose(seq, x_m, y_m, turns * _TURN + heading_rad)
-        if self._ref is None and named is not None and self.integrator is not None:
-            self._start_reference(pose, enc_counter)
+        paired = self._pairer.on_y({"ENC_COUNTER": enc_counter, "Y": y_m, "TURNS": turns}, seq)
+        if paired is None:
+            return None
+        pose = self.pose = Pose(seq, paired.x_m, paired.y_m, paired.heading_rad)
+        if self._ref is None and named is not None:
+            if self._pending is None:
+                self._pending = pose
+                self._backlog_counts = sorted(
+                    (c[0], i, c[1], c[2]) for i, c in enumerate(self._counts)
+                    if c is not None and c[0] >= seq
+                )
+            if self.integrator is None:
+                self._backlog_poses.append(pose)
+                return pose, None
+            self._start_reference(self._pending, self._backlog_counts, [])
+            self._drop_backlog()
         ref = self._named(self._refs[enc_counter])
         if ref is None or seq < 0:
             return pose, None
@@ -161,7 +255,9 @@ class PoseTracker:
             return None
         self._truth_parts = {}
         ref = self._named(self._refs[enc_counter])
-        truth = self.truth = Pose(ref.seq if ref else -1, parts[0][1], parts[1][1], parts[2][1])
+        truth = self.truth = Pose(
+            ref.seq if ref else -1, parts[0][1], parts[1][1], self._truth_heading(parts[2][1], ref)
+        )
         if ref is None:
             return truth, None
         self.reference_vs_truth.add(ref, truth)
@@ -172,14 +268,32 @@ class PoseTracker:
             self.vs_truth.add(estimate, truth)
         return truth, ref
 
+    @property
+    def counter_restarts(self) -> int:
+        """Counter restarts the current reference re-primed on (as the firmware does)."""
+        return self._gate.counter_restarts
+
+    def _truth_heading(self, wrapped_rad: float, ref: Pose | None) -> float:
+        """SIM_TRUTH's HEADING ([0, 2 pi) on the bus) made cumulative: the turn nearest the
+        reference at that encoder frame, else nearest the previous truth (rad)."""
+        if ref is not None:
+            return unwrap_near(wrapped_rad, ref.heading_rad)
+        if self.truth is not None:
+            return unwrap_near(wrapped_rad, self.truth.heading_rad)
+        return wrap_heading(wrapped_rad)
+
     def _named(self, entry: Any) -> Any:
         """A ring entry if it is one of the last 8 encoder frames (not one 16 frames older)."""
         if entry is None or self.enc_seq - entry[0] >= _RING // 2:
             return None
         return entry
 
-    def _start_reference(self, pose: Pose, enc_counter: int) -> None:
-        """Start the reference at ``pose``, at the encoder frame it names, and catch up."""
+    def _start_reference(
+        self, pose: Pose, counts: list[tuple[int, int, int, int]], poses: list[Pose]
+    ) -> None:
+        """Start the reference at ``pose``, primed on the first of ``counts`` (seq, counter,
+        left, right: the encoder frame ``pose`` names and those after it), catch up, and compare
+        the ``poses`` heard meanwhile."""
         assert self.integrator is not None
         ref = self._ref = ReferenceOdometry(
             self.geometry, self.integrator, self.counter_bits,
@@ -187,23 +301,28 @@ class PoseTracker:
         )
         self.reference_starts += 1
         self._refs = [None] * _RING
-        start = self._counts[enc_counter]
-        assert start is not None
-        ref.step_counts(start[1], start[2])
-        self._refs[enc_counter] = Pose(start[0], pose.x_m, pose.y_m, pose.heading_rad)
-        later = sorted((c[0], c[1], c[2], i) for i, c in enumerate(self._counts)
-                       if c is not None and c[0] > start[0])
-        for seq, left, right, counter in later:
-            ref.step_counts(left, right)
-            self._refs[counter] = Pose(seq, ref.x_m, ref.y_m, ref.heading_rad)
+        self._gate = StepGate(self.geometry, self.counter_bits)
+        at_seq: dict[int, Pose] = {}
+        for seq, counter, left, right in counts:
+            step = self._gate.step(counter, left, right)  # the first primes: stays at pose
+            if step is not None:
+                ref.step_deltas(*step)
+            at_seq[seq] = self._refs[counter] = Pose(seq, ref.x_m, ref.y_m, ref.heading_rad)
+        for heard in poses:
+            at = at_seq.get(heard.seq)
+            if at is not None:
+                self.reference = at
+                self._last_pair = (heard, at)
+                self.vs_reference.add(heard, at)
 
     def snapshot(self) -> dict[str, Any]:
         """``pose``, ``reference``, ``truth`` (None until known) and ``error``."""
         return {
-            "pose": _pose_dict(self.pose),
-            "reference": {**(_pose_dict(self.reference) or {}), "integrator": self.integrator,
-                          "starts": self.reference_starts},
-            "truth": _pose_dict(self.truth),
+            "pose": pose_dict(self.pose),
+            "reference": {**(pose_dict(self.reference) or {}), "integrator": self.integrator,
+                          "starts": self.reference_starts,
+                          "counter_restarts": self.counter_restarts, "stalls": self.stalls},
+            "truth": pose_dict(self.truth),
             "error": {
                 "pose_vs_reference": self.vs_reference.as_dict(),
                 "pose_vs_truth": self.vs_truth.as_dict(),
@@ -212,7 +331,8 @@ class PoseTracker:
         }
 
 
-def _pose_dict(pose: Pose | None) -> dict[str, float] | None:
+def pose_dict(pose: Pose | None) -> dict[str, float] | None:
+    """JSON form: ``x_m``, ``y_m``, ``heading_rad`` in (-pi, pi], ``heading_unwrapped_rad``."""
     if pose is None:
         return None
-    return {"x_m": pose.x_m, "y_m": pose.y_m, "heading_rad": pose.heading_rad}
+    return {"x_m": pose.x_m, "y_m": pose.y_m, **heading_fields(pose.heading_rad)}

@@ -14,7 +14,12 @@ publications it makes due, as ``(leaf, payload)`` pairs (``host.mqtt.topics``):
   ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic);
 * ``SIM_TRUTH``'s three parts of one encoder frame make ``truth``, compared with the reference of
   that frame (``error.reference_vs_truth``, the latest: what odometry itself cannot know);
-* ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result``.
+* ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result`` (enums by
+  their DBC names: ``"state": "OK"``).
+
+Headings: ``heading_rad`` wrapped to (-pi, pi] and ``heading_unwrapped_rad`` cumulative, on
+``pose``, ``reference`` and ``truth`` (SIM_TRUTH's [0, 2 pi) made cumulative at the reference's
+turn); ``dheading_rad`` wrapped to (-pi, pi].
 
 ``periodic(now_s)`` returns ``status`` and ``rates`` (frames per second per message over the last
 window). Times: ``t_s`` is the frame's bus timestamp (s), ``unix_s`` the wall clock at publication.
@@ -32,7 +37,7 @@ from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.reference import Geometry
-from odocan.host.judge.tracking import Pose, PoseTracker, difference
+from odocan.host.judge.tracking import Pose, PoseTracker, difference, pose_dict
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor
 from odocan.sim.contract import database
@@ -92,6 +97,7 @@ class RobotTelemetry:
         self.firmware: dict[str, Any] = {}
         self.pending: dict[tuple[int, int], PendingAck] = {}
         self.status_seq = 0
+        self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
 
     # --- frames ---
     def feed(self, msg: can.Message) -> list[Publication]:
@@ -101,7 +107,8 @@ class RobotTelemetry:
             return []
         can_id, data = msg.arbitration_id, bytes(msg.data)
         message = self._by_id.get(can_id)
-        status = self.e2e.check(can_id, data, extended=msg.is_extended_id)
+        status = self.e2e.check(can_id, data, extended=msg.is_extended_id,
+                                timestamp_s=msg.timestamp)  # the window widens with time
         if message is None or status not in ACCEPTED_E2E:
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
             return []
@@ -186,7 +193,9 @@ class RobotTelemetry:
 
     def _on_status(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         page = int(s["PAGE"])
-        fields = {k.lower(): v for k, v in s.items() if k not in ("CHECKSUM", "COUNTER", "PAGE")}
+        message = self._by_id[self._status_id]
+        fields = {k.lower(): _named(message, k, v) for k, v in s.items()
+                  if k not in ("CHECKSUM", "COUNTER", "PAGE")}
         self.firmware[_page_name(self.db, page)] = fields
         return []
 
@@ -251,7 +260,18 @@ class RobotTelemetry:
 
 
 def _pose_dict(pose: Pose) -> dict[str, float]:
-    return {"x_m": pose.x_m, "y_m": pose.y_m, "heading_rad": pose.heading_rad}
+    """``x_m``, ``y_m``, ``heading_rad`` in (-pi, pi] and ``heading_unwrapped_rad``."""
+    fields = pose_dict(pose)
+    assert fields is not None
+    return fields
+
+
+def _named(message: Any, signal: str, value: Any) -> Any:
+    """An enum signal's value by its DBC name (``"OK"``, not 1); other values as they are."""
+    choices = message.get_signal_by_name(signal).choices
+    if choices and int(value) in choices:
+        return str(choices[int(value)])
+    return value
 
 
 def _choice(db: Database, message: str, signal: str, value: int) -> str:

@@ -17,6 +17,10 @@ cmd/config         you -> bridge    1     no      robot parameters (ODOM_CONFIG)
 cmd/result         bridge -> you    1     no      accepted / rejected (reason) / acked / nacked
 =================  ===============  ====  ======  =========================================
 
+Headings are named for what they are: ``heading_rad`` wrapped to (-pi, pi],
+``heading_unwrapped_rad`` cumulative (``host.protocol.pose.heading_fields``); enums go out by
+their DBC names.
+
 Telemetry is QoS 0 (the next sample replaces a lost one); status, commands and their results are
 QoS 1 (at least once, buffered by the bridge while the broker is away).
 """

@@ -6,6 +6,10 @@ sends X before Y in the same tick. A pose is an X and a Y frame naming the same 
 heard first; the unwrapped heading is ``TURNS * 2 pi + HEADING``. Pairing by time (the latest X
 with the latest Y) mixes two ticks' halves whenever a frame is lost; this is the one pairing every
 consumer (the analysis, the live tracker, replay, the experiments, the pytest kit) uses.
+
+The heading convention of every host output (reports, MQTT, the monitor's JSON): ``heading_rad``
+is wrapped to (-pi, pi] and ``heading_unwrapped_rad`` is cumulative (turns counted), both named
+(``heading_fields``). Only the firmware vectors keep the firmware's integers.
 """
 
 from __future__ import annotations
@@ -15,6 +19,25 @@ from collections.abc import Iterable, Mapping
 from typing import Any, NamedTuple
 
 COUNTER_VALUES = 16  # ENC_COUNTER is the 4-bit E2E counter of the encoder frame named
+TURN_RAD = 2.0 * math.pi
+
+
+def wrap_heading(heading_rad: float) -> float:
+    """``heading_rad`` wrapped to (-pi, pi] (the host's one wrapped-heading convention)."""
+    wrapped = math.remainder(heading_rad, TURN_RAD)  # [-pi, pi]
+    return math.pi if wrapped <= -math.pi else wrapped
+
+
+def unwrap_near(heading_rad: float, near_rad: float) -> float:
+    """``heading_rad`` plus the whole turns that bring it nearest to ``near_rad`` (rad)."""
+    return near_rad + math.remainder(heading_rad - near_rad, TURN_RAD)
+
+
+def heading_fields(heading_unwrapped_rad: float) -> dict[str, float]:
+    """Both named headings of one pose: ``heading_rad`` in (-pi, pi] and the cumulative
+    ``heading_unwrapped_rad`` (rad)."""
+    return {"heading_rad": wrap_heading(heading_unwrapped_rad),
+            "heading_unwrapped_rad": heading_unwrapped_rad}
 
 
 class Pose(NamedTuple):
@@ -34,20 +57,32 @@ def pose_of(x_frame: Mapping[str, Any], y_frame: Mapping[str, Any]) -> Pose:
 class PosePairer:
     """Pairs decoded pose frames as they are heard: ``on_x`` keeps the X half of each encoder
     frame (one slot per ENC_COUNTER value), ``on_y`` completes it; a Y whose X was not heard, or
-    was already used, gives nothing."""
+    was already used, gives nothing.
+
+    ENC_COUNTER repeats every 16 encoder frames: a Y whose X was lost would find the X of the
+    frame 16 (or 32, ...) earlier in its slot. A caller that follows the encoder frames passes
+    ``frame_seq``, the encoder frame each half names (its ENC_COUNTER resolved against the
+    latest encoder frame heard, as ``host.judge.analysis`` does); halves naming different
+    frames are never paired."""
 
     def __init__(self) -> None:
-        self._x: list[Mapping[str, Any] | None] = [None] * COUNTER_VALUES
+        self._x: list[tuple[Mapping[str, Any], int | None] | None] = [None] * COUNTER_VALUES
 
-    def on_x(self, x_frame: Mapping[str, Any]) -> None:
-        """An accepted ODOM_POSE_X (decoded signals)."""
-        self._x[int(x_frame["ENC_COUNTER"]) % COUNTER_VALUES] = x_frame
+    def on_x(self, x_frame: Mapping[str, Any], frame_seq: int | None = None) -> None:
+        """An accepted ODOM_POSE_X (decoded signals), naming encoder frame ``frame_seq``."""
+        self._x[int(x_frame["ENC_COUNTER"]) % COUNTER_VALUES] = (x_frame, frame_seq)
 
-    def on_y(self, y_frame: Mapping[str, Any]) -> Pose | None:
-        """An accepted ODOM_POSE_Y: the pose it completes, None when its X half is missing."""
+    def on_y(self, y_frame: Mapping[str, Any], frame_seq: int | None = None) -> Pose | None:
+        """An accepted ODOM_POSE_Y: the pose it completes, None when its X half is missing (or
+        names another encoder frame)."""
         slot = int(y_frame["ENC_COUNTER"]) % COUNTER_VALUES
-        x_frame, self._x[slot] = self._x[slot], None
-        return None if x_frame is None else pose_of(x_frame, y_frame)
+        held, self._x[slot] = self._x[slot], None
+        if held is None:
+            return None
+        x_frame, x_seq = held
+        if x_seq is not None and frame_seq is not None and x_seq != frame_seq:
+            return None
+        return pose_of(x_frame, y_frame)
 
     def feed(self, name: str, signals: Mapping[str, Any]) -> Pose | None:
         """Either half by message name; other messages are ignored."""

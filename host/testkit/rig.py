@@ -110,13 +110,16 @@ class OdocanRig(RigAssertions):
         self.backend.recorder.reset(self._t0)
 
     def _tracks_our_encoders(self) -> bool:
-        """STATE OK, and the last ``_TRACKING_POSES`` ODOM_POSE_X frames each name one of the
-        encoder frames sent just before them: the firmware integrates our counters (after a
-        restart of the sim its E2E receiver takes up to 16 frames to accept them again, and the
-        first one it takes carries the jump from the previous counters)."""
+        """STATE OK (or DEGRADED for COUNTER_RESET: our counters restarted, and only the pose
+        ``attach`` sets next clears it), and the last ``_TRACKING_POSES`` ODOM_POSE_X frames each
+        name one of the encoder frames sent just before them: the firmware integrates our
+        counters (after a restart of the sim its E2E receiver takes up to 16 frames to accept
+        them again, and it re-primes on the restarted counters)."""
         status = self.odom_status
         poses = self.frames("ODOM_POSE_X")[-_TRACKING_POSES:]
-        if not (status and status["STATE"] == "OK" and len(poses) == _TRACKING_POSES):
+        if status is None or len(poses) != _TRACKING_POSES:
+            return False
+        if status["STATE"] != "OK" and status.get("REASON") != "COUNTER_RESET":
             return False
         encoders = self.frames("WHEEL_ENCODERS")
         for pose in poses:
@@ -350,7 +353,7 @@ class OdocanRig(RigAssertions):
         analysis = self.analysis()
         series = analysis.series
         final = analysis.report["final_onboard_pose"]
-        heading = final["heading_rad"] - float(series["heading_error_rad"][-1])
+        heading = final["heading_unwrapped_rad"] - float(series["heading_error_rad"][-1])
         return Pose(float(series["reference_x_m"][-1]), float(series["reference_y_m"][-1]), heading)
 
     def analysis(self) -> Analysis:
