@@ -141,7 +141,16 @@ def _analyze_single(args: argparse.Namespace) -> int:
         analysis.report["bus"] = busstats.from_frames(frames, args.bitrate).as_dict()
     analysis.report["inputs"] = log_inputs(args.log, profile, analysis.report["integrator"],
                                            args.dbc)
+    hint = None
+    if not analysis.passed and db is None:  # a wrong --robot must not read as a firmware fault
+        from odocan.host.judge.diagnosis import robot_mismatch
+
+        hint = robot_mismatch(frames, profile, analysis.report["integrator"], args.tolerance)
+        if hint is not None:
+            analysis.report["diagnosis"] = [hint]
     code = finish(analysis, args, title=f"odocan analyze: {args.log}")
+    if hint is not None:
+        print(f"  - {hint}")
     write_checks(args, "analyze", analysis_checks(analysis.report))
     return code
 

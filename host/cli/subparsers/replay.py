@@ -59,6 +59,7 @@ from odocan.host.io.logs import (
     read_log,
 )
 from odocan.host.judge.analysis import Analysis, Tolerance, analyze
+from odocan.host.judge.diagnosis import fitting_profiles
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
 from odocan.host.report.ci import (
@@ -477,7 +478,7 @@ def diagnose(
     if logged is not None and logged != integrator:
         reasons.append(f"integrator mismatch: the log's ODOM_STATUS reports {logged}, the replay "
                        f"ran {integrator}")
-    fits = _fitting_profiles(log, profile, logged or integrator, tolerance)
+    fits = fitting_profiles(log, profile, logged or integrator, tolerance)
     if profile.name in fits:
         if logged is None or logged == integrator:
             reasons.append(f"the log fits robot {profile.name!r} with the {integrator} "
@@ -489,22 +490,6 @@ def diagnose(
         reasons.append(f"the log's poses fit no known robot profile ({profile.name!r} given, "
                        f"{', '.join(list_profiles())} shipped): give its profile with --robot")
     return reasons
-
-
-def _fitting_profiles(
-    log: FrameArrays, given: RobotProfile, integrator: str, tolerance: Tolerance
-) -> list[str]:
-    """Names of the profiles (``given`` first, then the shipped ones) whose float64 odometry of
-    the logged counts the logged on-board poses follow within ``tolerance``."""
-    candidates = [given] + [robot.load(n) for n in list_profiles() if n != given.name]
-    fits = []
-    for candidate in candidates:
-        try:
-            if analyze(log, candidate, integrator, tolerance=tolerance).passed:
-                fits.append(candidate.name)
-        except OdocanError:
-            continue
-    return fits
 
 
 def _print_versus_log(section: dict[str, Any]) -> None:
