@@ -628,3 +628,20 @@ def _parse_data(text: str, where: str) -> bytes:
         return bytes.fromhex(text)
     except ValueError:
         raise LogFormatError(f"{where}: bad hex in data {text!r}") from None
+
+
+def to_message(frames: FrameArrays, i: int) -> can.Message:
+    """Frame ``i`` as a python-can message (its logged timestamp, flags and payload)."""
+    flags = int(frames.flags[i])
+    dlc = int(frames.dlc[i])
+    remote = bool(flags & FLAG_REMOTE)
+    return can.Message(
+        timestamp=float(frames.timestamp_s[i]),
+        arbitration_id=int(frames.can_id[i]),
+        is_extended_id=bool(flags & FLAG_EXTENDED),
+        is_remote_frame=remote,
+        is_error_frame=bool(flags & FLAG_ERROR),
+        is_fd=bool(flags & FLAG_FD),
+        dlc=dlc,
+        data=None if remote else bytes(frames.data[i, :dlc]),
+    )
