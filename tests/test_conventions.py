@@ -128,3 +128,9 @@ def test_the_report_names_both_headings(tmp_path: Path) -> None:
     unwrapped = _check_headings(final)
     assert unwrapped == pytest.approx(synth.state[-1].pose[2], abs=1e-4)
     assert unwrapped > 2 * TURN
+    series = analysis.series  # the exported series: the same two names, the same convention
+    for who in ("onboard", "reference"):
+        wrapped, cumulative = series[f"{who}_heading_rad"], series[f"{who}_heading_unwrapped_rad"]
+        assert np.all((wrapped > -math.pi) & (wrapped <= math.pi)), who
+        assert np.abs(np.remainder(cumulative - wrapped + math.pi, TURN) - math.pi).max() < 1e-9
+        assert cumulative[-1] > 2 * TURN

@@ -84,11 +84,11 @@ def test_the_last_sample_is_the_reports_final_pose(
 ) -> None:
     report, parquet, _ = run_outputs
     (x, y, h), = sql(
-        "select onboard_x_m, onboard_y_m, onboard_heading_rad from {series} "
+        "select onboard_x_m, onboard_y_m, onboard_heading_unwrapped_rad from {series} "
         "order by timestamp_s desc limit 1", parquet,
     )
     final = report["final_onboard_pose"]
-    assert (x, y, h) == (final["x_m"], final["y_m"], final["heading_rad"])
+    assert (x, y, h) == (final["x_m"], final["y_m"], final["heading_unwrapped_rad"])
 
 
 def test_the_pose_series_is_the_decoded_pose_frames(

@@ -73,8 +73,10 @@ from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 from odocan.sim.robot import RobotProfile
 
-POSITION_LSB_M = 1e-4  # X, Y: 0.1 mm
-HEADING_LSB_RAD = 2 * math.pi / 65536  # HEADING: BAM16
+# One LSB of the pose signals, from the DBC's scales (the single source of truth): X, Y 0.1 mm,
+# HEADING a 16-bit binary angle (2 pi / 65536 rad).
+POSITION_LSB_M = float(contract.message("ODOM_POSE_X").get_signal_by_name("X").scale)
+HEADING_LSB_RAD = float(contract.message("ODOM_POSE_X").get_signal_by_name("HEADING").scale)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 SILENCE_CYCLES = 8  # pose frames this many encoder cycles apart: the firmware was stalled
 START_FIT_SAMPLES = 256  # on-board samples used to place the reference start (5 s at 50 Hz)
@@ -233,10 +235,12 @@ def analyze(
         "timestamp_s": frames.timestamp_s[enc.index[onboard.enc]],  # of the encoder frame
         "onboard_x_m": onboard.x_m,
         "onboard_y_m": onboard.y_m,
-        "onboard_heading_rad": onboard.heading_rad,
+        "onboard_heading_rad": _wrap_pi(onboard.heading_rad),  # (-pi, pi]
+        "onboard_heading_unwrapped_rad": onboard.heading_rad,
         "reference_x_m": ref.x_m,
         "reference_y_m": ref.y_m,
-        "reference_heading_rad": ref.heading_rad,
+        "reference_heading_rad": _wrap_pi(ref.heading_rad),
+        "reference_heading_unwrapped_rad": ref.heading_rad,
         "distance_m": ref.distance_m,
         "position_error_m": pos_err,
         "heading_error_rad": head_err,
@@ -743,8 +747,8 @@ def _overlap_mid(offsets: FloatArray, lsb: float, *, base: bool = False) -> floa
 
 
 def _wrap_pi(angle: FloatArray) -> FloatArray:
-    """Wrap to [-pi, pi)."""
-    wrapped: FloatArray = (angle + math.pi) % (2 * math.pi) - math.pi
+    """Wrap to (-pi, pi], the one convention (``odocan.sim.truth.wrap_angle`` for arrays)."""
+    wrapped: FloatArray = math.pi - (math.pi - angle) % (2 * math.pi)
     return wrapped
 
 
