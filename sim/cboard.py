@@ -34,7 +34,18 @@ from odocan.sim.exceptions import ConfigurationError, OdocanError
 FIRMWARES = ("python", "c")
 ABI_VERSION = 1  # ODOCAN_FW_ABI_VERSION of firmware/c/odocan_fw.h
 FIRMWARE_C_DIR = Path(__file__).resolve().parent.parent / "firmware" / "c"
-LIBRARY_PATH = FIRMWARE_C_DIR / "build" / "libodocan_fw.so"
+
+
+def _build_dir() -> Path:
+    """``firmware/c/build`` in a checkout; in an installed package that cannot be written (a
+    system site-packages), the user's cache (``$XDG_CACHE_HOME/odocan/firmware-c``)."""
+    if os.access(FIRMWARE_C_DIR, os.W_OK):
+        return FIRMWARE_C_DIR / "build"
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return cache / "odocan" / "firmware-c"
+
+
+LIBRARY_PATH = _build_dir() / "libodocan_fw.so"
 LIBRARY_ENV = "ODOCAN_FW_LIB"  # a prebuilt library with the same ABI (e.g. a team's own)
 
 _TxFn = ctypes.CFUNCTYPE(
@@ -63,7 +74,7 @@ def _build_library() -> Path:
         ) from exc
     with lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        command = [make, "-s", "-C", str(FIRMWARE_C_DIR), "lib"]
+        command = [make, "-s", "-C", str(FIRMWARE_C_DIR), f"BUILD={LIBRARY_PATH.parent}", "lib"]
         if subprocess.run([*command, "-q"], capture_output=True, check=False).returncode == 0:
             return LIBRARY_PATH  # up to date: no compiler needed
         compiler = os.environ.get("CC", "cc")
@@ -243,12 +254,17 @@ class BoardMaker(Protocol):
     ) -> FirmwareBoard: ...
 
 
-def board_maker(kind: str) -> BoardMaker:
+def board_maker(kind: str, *, secoc: bool = False) -> BoardMaker:
     """The board class of firmware ``kind`` ("python" or "c"), the C library built and loaded
-    now: call it before opening a bus, so a refusal leaves nothing to close."""
+    now: call it before opening a bus or a log, so a refusal leaves nothing to close or to
+    truncate (``secoc``: a SecOC key will be provisioned, which the C ABI cannot take yet)."""
     if kind == "python":
         return FirmwareBoard
     if kind == "c":
+        if secoc:
+            raise ConfigurationError(
+                "--secoc-key needs the Python firmware: the C library's ABI takes no key yet"
+            )
         load_library()
         return CFirmwareBoard
     raise ConfigurationError(f"unknown firmware {kind!r} (known: {', '.join(FIRMWARES)})")

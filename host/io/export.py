@@ -58,14 +58,22 @@ def write_exports(
     db: cantools.database.can.Database | None = None,
 ) -> None:
     """Write what ``--parquet``/``--mcap`` ask for (paths checked by ``check_export_paths``)."""
+    from odocan.host.report.outputs import OutputError
+
     if args.parquet is not None:
         from odocan.host.io.parquet import write_parquet
 
-        write_parquet(args.parquet, frames, analysis, db)
+        try:
+            write_parquet(args.parquet, frames, analysis, db)
+        except OSError as exc:
+            raise OutputError(f"--parquet {args.parquet}: {exc.strerror or exc}") from None
     if args.mcap is not None:
         from odocan.host.io.mcap import write_mcap
 
-        write_mcap(args.mcap, frames, analysis, db)
+        try:
+            write_mcap(args.mcap, frames, analysis, db)
+        except (OSError, RuntimeError) as exc:  # foxglove's writer raises RuntimeError on I/O
+            raise OutputError(f"--mcap {args.mcap}: {str(exc).splitlines()[0]}") from None
 
 
 # --- output paths --------------------------------------------------------------------------
@@ -79,9 +87,9 @@ def check_export_paths(parquet_dir: Path | None, mcap_path: Path | None) -> None
         _check_writable_dir("--parquet", parquet_dir, parquet_dir if parquet_dir.is_dir()
                             else parquet_dir.parent)
     if mcap_path is not None:
-        if mcap_path.is_dir():
-            raise ConfigurationError(f"--mcap {mcap_path}: is a directory")
-        _check_writable_dir("--mcap", mcap_path, mcap_path.parent)
+        from odocan.host.report.outputs import check_writable
+
+        check_writable(mcap_path, "--mcap")  # a directory, a device (/dev/full), no permission
 
 
 def _check_writable_dir(option: str, path: Path, directory: Path) -> None:

@@ -100,11 +100,18 @@ EVENT_PREFIXES = ("gap_", "restart_")  # spans and instants, not per-sample colu
 
 def series_tables(analysis: Analysis) -> tuple[pa.Table, pa.Table, pa.Table]:
     """(per on-board sample, per compared truth sample, gaps and reference restarts) tables of
-    ``analysis.series``: each column goes to the table whose rows it has."""
+    ``analysis.series``: each column goes to the table whose rows it has; a series of another
+    length (e.g. the sim's full-rate truth, ``truth_full_*``, kept for the plots) is not a
+    column of these."""
     series = analysis.series
     events = {k: v for k, v in series.items() if k.startswith(EVENT_PREFIXES)}
-    truth = {k: v for k, v in series.items() if k.startswith("truth_")}
-    onboard = {k: v for k, v in series.items() if k not in truth and k not in events}
+    n_onboard = len(series["onboard_x_m"])
+    n_truth = len(series["truth_timestamp_s"])
+    truth = {k: v for k, v in series.items()
+             if k.startswith("truth_") and k not in events and len(v) == n_truth}
+    onboard = {k: v for k, v in series.items()
+               if k not in truth and k not in events and not k.startswith("truth_")
+               and len(v) == n_onboard}
     truth_columns = {"timestamp_s": truth.pop("truth_timestamp_s"), **truth}
     return _table(onboard), _table(truth_columns), _events_table(events)
 

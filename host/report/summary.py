@@ -183,6 +183,10 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
         ),
         ("time", _time_text(report)),
     ]
+    inputs = report.get("inputs") or {}
+    if inputs.get("errors") is not None or inputs.get("faults") is not None:  # None: a log's
+        facts.append(("injected", f"errors {inputs.get('errors') or 'none'}, "
+                                  f"faults {inputs.get('faults') or 'none'}"))
     if truth.get("distance_travelled_m") is not None:
         facts.append(("distance", f"{truth['distance_travelled_m']:.3f} m travelled"))
     unchecked = {k: v for k, v in (report.get("unknown_frames") or {}).items() if v}

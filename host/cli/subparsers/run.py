@@ -64,7 +64,7 @@ from odocan.host.report.summary import (
 )
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
-from odocan.sim.cboard import FIRMWARES
+from odocan.sim.cboard import FIRMWARES, board_maker
 from odocan.sim.contract import database
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultSpec
@@ -179,6 +179,7 @@ def _do_run(args: argparse.Namespace) -> int:
     check_latency_plot(args.latency_plot, config.bitrate)
     check_export_paths(args.parquet, args.mcap)
     check_junit_path(args)
+    board_maker(config.firmware, secoc=config.secoc_key is not None)  # refusals before any file
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
     if config.firmware != "python":
         title += f", {config.firmware} firmware"

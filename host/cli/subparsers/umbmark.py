@@ -138,4 +138,7 @@ def _do_umbmark(args: argparse.Namespace) -> int:
     write_scatter(args, [("UMBmark", umbmark.umbmark_report(result))],
                   header(args, model, "UMBmark"))
     write_checks(args, "umbmark", umbmark_checks(report))
-    return verdict("UMBmark", reasons)
+    code = verdict("UMBmark", reasons)
+    if args.max_emax is None:  # a PASS says only that every run was valid: say what it is not
+        print("  (every run valid; E_max,syst is judged only with --max-emax MM)")
+    return code

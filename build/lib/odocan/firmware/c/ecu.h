@@ -1,0 +1,129 @@
+/* The odometry ECU's main loop: a receive ISR, a bounded mailbox and a periodic tick
+ * (firmware/ecu.py; its docstring gives the tick's fixed order). */
+#ifndef ODOCAN_ECU_H
+#define ODOCAN_ECU_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "config.h"
+#include "e2e.h"
+#include "errors.h"
+#include "hal.h"
+#include "nav.h"
+#include "odometry.h"
+#include "secoc.h"
+
+#define ENCODER_PERIOD_US 10000
+#define POSE_PERIOD_TICKS 2u
+#define STATUS_PERIOD_TICKS 10u
+#define WATCHDOG_TICKS 10u
+#define RECOVERY_FRAMES 5
+#define TICKS_PER_SECOND (1000000u / TICK_PERIOD_US)
+#define LOST_TIME_PERIODS WATCHDOG_TICKS /* a tick this many periods after the last: time lost */
+#define MAX_WHEEL_SPEED_MM_S 4000u /* build-time maximum rim speed of either wheel */
+#define RESYNC_FRAMES 3 /* frames consistent with each other, not with the last: restarted */
+#define STEP_PERIODS_MAX 0xFFFFu /* the twist's dt and the plausibility bound saturate (655 s) */
+#define TWIST_SUM_MAX (INT64_C(1) << 32) /* one tick's summed steps: 4096 m (Q20), 4 rad (Q30) */
+#define WIRE_COUNTER_BITS 24u
+#define TX_IDS 8u /* the messages this node sends: one E2E counter each */
+
+/* Firmware state (the STATE signal of ODOM_STATUS). */
+enum ecu_state { STATE_INIT = 0, STATE_OK = 1, STATE_DEGRADED = 2, STATE_FAULT = 3 };
+
+/* The receive mailbox: a ring of MAILBOX_SLOTS frames, filled in ISR context. */
+struct mailbox {
+    uint32_t ids[MAILBOX_SLOTS];
+    uint8_t data[MAILBOX_SLOTS][8];
+    size_t len[MAILBOX_SLOTS];
+    unsigned head;
+    unsigned count;
+    uint32_t overflows; /* wrapping */
+};
+
+struct odom_ecu {
+    can_tx_fn transmit;
+    void *tx_ctx;
+    uint32_t errors;
+    enum ecu_state state;
+    enum reason reason;
+    struct robot_params params;
+    struct odometry odometry;
+    uint32_t max_wheel_speed_mm_s;     /* u16: an encoder step beyond it is implausible */
+    uint64_t max_counts_per_period[2]; /* per wheel, at max_wheel_speed_mm_s */
+    struct mailbox mailbox;
+    uint8_t data_ids[4][DATA_ID_COUNT];
+    struct e2e_receiver rx_encoders;
+    struct e2e_receiver rx_set_pose;
+    struct e2e_receiver rx_config;
+    struct e2e_receiver rx_nav_goal;
+    struct navigator nav;
+    bool motor_cmd_due;
+    uint32_t ticks;
+    uint32_t frames_filtered;
+    uint32_t frames_bad_length;
+    uint32_t tx_dropped;
+    uint8_t tx_counters[TX_IDS];
+    uint8_t enc_counter;
+    int enc_prev_counter; /* -1: none yet */
+    bool wire_prev_valid;
+    uint32_t wire_prev[2];
+    uint32_t counts_u32[2];
+    bool counts_prev_valid;
+    uint32_t counts_prev[2];  /* counters of the last accepted frame */
+    uint32_t time_periods;    /* 10 ms periods since reset, by the timer (ticks run or not) */
+    bool timer_prev_valid;
+    uint32_t timer_prev_us;   /* the timer at the previous tick */
+    int32_t timer_rest_us;    /* within +-TICK_PERIOD_US/2: time not yet counted */
+    uint32_t periods_lost;    /* periods the firmware did not run (stalls), wrapping */
+    uint32_t frames_implausible; /* WHEEL_ENCODERS refused by the plausibility bound, wrapping */
+    uint32_t overflows_seen;
+    /* Refused frames consistent among themselves: counters and COUNTER of the first, the last. */
+    bool resync_first_valid;
+    uint32_t resync_first[2];
+    uint8_t resync_first_counter;
+    uint32_t resync_last[2];
+    uint8_t resync_last_counter;
+    int resync_frames;
+    uint32_t ticks_since_encoder; /* periods (firmware time) since the last accepted frame, sat. */
+    uint32_t reason_tick;         /* the tick that set reason */
+    /* Periods since the last accepted frame's sample is known to have been taken (u16, sat.). */
+    uint32_t periods_since_sample;
+    bool time_lost_now;  /* this tick came LOST_TIME_PERIODS periods or more late */
+    bool samples_stale;  /* the last accepted frame was taken in a tick that lost time */
+    uint32_t tick_budget; /* periods_since_sample at the start of this tick */
+    /* The steps since the last twist update (one tick; two after a tick that lost time). */
+    int64_t tick_ds_q20_m;         /* saturated to +-2^32 (4096 m) */
+    int64_t tick_dheading_q30_rad; /* saturated to +-2^32 (4 rad) */
+    unsigned tick_steps;
+    int good_in_a_row;
+    int64_t twist_mm_s;
+    int64_t twist_mrad_s;
+    unsigned page_index;
+    unsigned staged_pose;      /* bit per SET_POSE field */
+    int64_t staged_pose_value[3];
+    unsigned staged_config;    /* bit per CONFIG parameter */
+    uint32_t staged_config_value[6];
+    /* SecOC (firmware/secoc.py, docs/secoc.md): off unless ecu_provision_secoc was called */
+    bool secoc_on;
+    struct secoc_receiver secoc_rx;
+    struct secured_commands secoc;
+    uint8_t auth_data_ids[DATA_ID_COUNT];
+    struct e2e_receiver rx_auth;
+};
+
+void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
+              const struct robot_params *params);
+/* Provision the SecOC key (key_len 16; anything else fails closed) and the EPOCH cell: boots the
+ * freshness (EPOCH + 1 written first). Call once, right after ecu_init. */
+void ecu_provision_secoc(struct odom_ecu *ecu, const uint8_t *key, unsigned key_len,
+                         struct freshness_nvm nvm);
+void ecu_isr_can_rx(struct odom_ecu *ecu, uint32_t can_id, const uint8_t *data, size_t len);
+void ecu_isr_rx_overrun(struct odom_ecu *ecu);
+void ecu_isr_bus_state(struct odom_ecu *ecu, bool bus_off);
+void ecu_tick(struct odom_ecu *ecu);
+void ecu_tick_at(struct odom_ecu *ecu, uint32_t now_us);
+uint32_t ecu_frames_rejected(const struct odom_ecu *ecu);
+
+#endif

@@ -1,0 +1,209 @@
+"""Integer-only dead reckoning of a differential-drive robot from raw wheel encoder counters.
+
+State (C widths):
+
+* ``x_q40_m``, ``y_q40_m``: i64, Q40 metres (LSB 9.1e-13 m, range +-8388 km). Q40 rather than Q32:
+  a constant-speed straight drive rounds each step's increment the same way, and 360 000 such
+  roundings at Q32 would add up to 42 um; at Q40 they stay below 0.2 um.
+* ``heading_bam64``: u64 binary angle, a full turn is 2^64. It is the exact integer sum of
+  per-count constants (``firmware.config``), so wrap-around is free and no step rounds it.
+* ``distance_q40_m``: u64, distance travelled (sum of |dS|), Q40 metres.
+
+Per step, with dS_L, dS_R the wheel travels (Q48 m, exact products of counts and constants):
+
+* dS = (dS_R + dS_L) / 2 (seed 000 eq. 1), held as the sum in Q48, i.e. dS in Q49 with no rounding;
+* dtheta = k_R dR - k_L dL in BAM64 (seed 000 eq. 6), exact mod 2^64;
+* ``EULER`` (seed 000 eq. 15): phi = phi + dtheta first, then x += dS cos(phi), y += dS sin(phi);
+* ``RK2`` (seed 004): x += dS cos(phi + dtheta/2), y likewise, then phi += dtheta;
+* ``EXACT`` (seeds 003/004, the ICC update): rotating the robot about the ICC by dtheta moves it
+  along the chord, x += R (sin phi_new - sin phi) = 2R sin(dtheta/2) cos(phi + dtheta/2), with
+  R = dS/dtheta; i.e. the RK2 step scaled by the chord factor sin(u)/u, u = dtheta/2. This form
+  has no division by dtheta and no cancellation, so it keeps full precision at every step size.
+  Seed 004's special cases become thresholds: *straight* (dS_R ~ dS_L) when |u| < 2^-21 rad, where
+  the factor differs from 1 by less than 2^-44 and is taken as exactly 1; *spin in place*
+  (dS_R ~ -dS_L) when |dS| < 2^-41 m, where the increment is below half an LSB of x and the
+  position is left unchanged.
+"""
+
+from __future__ import annotations
+
+from odocan.firmware.config import TWO_PI_Q60, Integrator, OdomConstants
+from odocan.firmware.errors import ErrorFlag, ErrorMask
+from odocan.firmware.fixmath import (
+    I64_MAX,
+    I64_MIN,
+    U32_MAX,
+    U64_MAX,
+    mul_round_i64,
+    mul_sat_i64,
+    mul_shr_i64,
+    mul_sub_wrap_i64,
+    sat_i64,
+    wrap_i32,
+    wrap_signed,
+)
+from odocan.firmware.trig import sincos_q30
+
+ONE_Q62 = 1 << 62
+ONE_Q60 = 1 << 60
+STRAIGHT_LIMIT_Q60 = 1 << 39  # |u| < 2^-21 rad: the factor is 1 to within 2^-44 (straight case)
+SERIES_SHORT_LIMIT_Q60 = 1 << 57  # |u| <= 1/8 rad: three series terms suffice
+# (2k)(2k+1): the Horner denominators of sin(u)/u = 1 - u^2/(2*3) (1 - u^2/(4*5) (...)).
+SINC_DENOMINATORS = (6, 20, 42, 72, 110, 156, 210, 272)
+SPIN_LIMIT_Q49 = 1 << 8  # |dS| < 2^-41 m: below half an LSB of x (spin-in-place case)
+Q49_TO_Q40_SHIFT = 9
+DS_COS_TO_Q40_SHIFT = 39  # Q49 * Q30 = Q79 -> Q40
+
+
+class Odometry:
+    """The dead-reckoning state and its step. Runs in the periodic tick: no allocation per step."""
+
+    __slots__ = (
+        "_consts",
+        "_errors",
+        "_left_prev",
+        "_primed",
+        "_right_prev",
+        "distance_q40_m",
+        "heading_bam64",
+        "heading_turns",
+        "last_dheading_bam64",
+        "last_ds_q49_m",
+        "x_q40_m",
+        "y_q40_m",
+    )
+
+    def __init__(self, consts: OdomConstants, errors: ErrorMask) -> None:
+        self._consts = consts
+        self._errors = errors
+        self._primed = False
+        self._left_prev = 0
+        self._right_prev = 0
+        self.x_q40_m = 0
+        self.y_q40_m = 0
+        self.heading_bam64 = 0
+        self.heading_turns = 0  # i32: whole turns of the unwrapped heading (carries of the BAM64)
+        self.distance_q40_m = 0
+        self.last_ds_q49_m = 0  # i64, dS of the last step (for the twist)
+        self.last_dheading_bam64 = 0  # i64, signed dtheta of the last step (for the twist)
+
+    @property
+    def consts(self) -> OdomConstants:
+        """The constants in use."""
+        return self._consts
+
+    def reconfigure(self, consts: OdomConstants) -> None:
+        """Use new constants from the next step on; the pose and the counter history are kept."""
+        self._consts = consts
+
+    def set_pose(self, x_q40_m: int, y_q40_m: int, heading_bam64: int) -> None:
+        """Overwrite the pose (``ODOM_SET_POSE``); distance travelled and counters are kept."""
+        self.x_q40_m = x_q40_m
+        self.y_q40_m = y_q40_m
+        self.heading_bam64 = heading_bam64 & U64_MAX
+        self.heading_turns = 0
+
+    def unprime(self) -> None:
+        """Forget the last counters: the next ``step_counts`` only re-primes (after a gap)."""
+        self._primed = False
+
+    def step_counts(self, left_count: int, right_count: int) -> bool:
+        """Integrate from raw wrapping counters (``counter_bits`` wide, unsigned).
+
+        The first call after start only primes the previous counts. Deltas are wrap-safe, the
+        ODrive way: ``wrap_signed(now - prev, bits)``, exact while the true per-step delta is below
+        half the counter range. Returns True when a step was integrated.
+        """
+        bits = self._consts.counter_bits
+        if not self._primed:
+            self._left_prev, self._right_prev, self._primed = left_count, right_count, True
+            return False
+        d_left = wrap_signed(left_count - self._left_prev, bits)
+        d_right = wrap_signed(right_count - self._right_prev, bits)
+        self._left_prev, self._right_prev = left_count, right_count
+        self.step_deltas(d_left, d_right)
+        return True
+
+    def step_deltas(self, d_left: int, d_right: int) -> None:
+        """Integrate one step of count deltas (i32 each) with the configured integrator."""
+        c = self._consts
+        ds_q49_m = _sat(  # i32 x i64 products (up to 2^83 for a wild 32-bit step), saturated
+            mul_sat_i64(d_left, c.m_per_count_left_q48_m, self._errors)
+            + mul_sat_i64(d_right, c.m_per_count_right_q48_m, self._errors),
+            self._errors,
+        )
+        dheading = mul_sub_wrap_i64(  # exact mod 2^64, read as i64
+            d_right, c.bam64_per_count_right, d_left, c.bam64_per_count_left
+        )
+        heading_old = self.heading_bam64
+        heading_sum = heading_old + dheading
+        self.heading_bam64 = heading_sum & U64_MAX
+        if heading_sum != self.heading_bam64:  # C: the unsigned add's carry or borrow
+            self.heading_turns = wrap_i32(self.heading_turns + (heading_sum >> 64))
+        self.last_ds_q49_m = ds_q49_m
+        self.last_dheading_bam64 = dheading
+        if ds_q49_m == 0:
+            return
+        self.distance_q40_m = (
+            self.distance_q40_m + ((abs(ds_q49_m) + (1 << 8)) >> Q49_TO_Q40_SHIFT)
+        ) & U64_MAX
+        if c.integrator == Integrator.EULER:
+            self._advance(ds_q49_m, self.heading_bam64)
+            return
+        midpoint_bam64 = (heading_old + (dheading >> 1)) & U64_MAX
+        if c.integrator == Integrator.EXACT:
+            if -SPIN_LIMIT_Q49 < ds_q49_m < SPIN_LIMIT_Q49:
+                return
+            ds_q49_m = _scale_q62(ds_q49_m, chord_factor_q62(dheading))
+        self._advance(ds_q49_m, midpoint_bam64)
+
+    def _advance(self, ds_q49_m: int, direction_bam64: int) -> None:
+        """x += dS cos(direction), y += dS sin(direction); direction rounded to BAM32 for sincos.
+
+        dS (i64, Q49) times cos (i32, Q30) is a 94-bit Q79 product: ``mul_round_i64`` rounds it to
+        Q40 (|.| < 2^55); the sum with x is then saturated to i64.
+        """
+        sin_q30, cos_q30 = sincos_q30(((direction_bam64 + (1 << 31)) >> 32) & U32_MAX)
+        self.x_q40_m = _sat(
+            self.x_q40_m + mul_round_i64(ds_q49_m, cos_q30, DS_COS_TO_Q40_SHIFT), self._errors
+        )
+        self.y_q40_m = _sat(
+            self.y_q40_m + mul_round_i64(ds_q49_m, sin_q30, DS_COS_TO_Q40_SHIFT), self._errors
+        )
+
+
+def chord_factor_q62(dheading_bam64: int) -> int:
+    """sin(u)/u for u = dtheta/2, in Q62 (1.0 = 2^62), from a signed i64 BAM64 step.
+
+    |u| < 2^-21 rad: exactly 1 (the straight case). Otherwise the Horner series
+    1 - u^2/6 (1 - u^2/20 (1 - u^2/42 (...))) in Q60 (u^2 <= (pi/2)^2 fits i64 there): three
+    terms while |u| <= 1/8 rad (truncation < u^8/9! < 2^-42), eight terms up to |u| = pi/2, the
+    largest half-step a signed BAM64 can hold (truncation < (pi/2)^18/19! < 2^-44).
+    Widths: u = dtheta * 2pi / 2^65 is an i64 x i64 product (126 bits) rounded to Q60 (< 2^61);
+    u^2 and u^2 * acc (122 bits) are kept from bit 60 by ``mul_round_i64``/``mul_shr_i64``.
+    """
+    u_q60 = abs(mul_round_i64(dheading_bam64, TWO_PI_Q60, 65))
+    if u_q60 < STRAIGHT_LIMIT_Q60:
+        return ONE_Q62
+    u2_q60 = mul_round_i64(u_q60, u_q60, 60)
+    terms = 3 if u_q60 <= SERIES_SHORT_LIMIT_Q60 else len(SINC_DENOMINATORS)
+    acc_q60 = ONE_Q60
+    for denominator in SINC_DENOMINATORS[terms - 1 :: -1]:
+        acc_q60 = ONE_Q60 - mul_shr_i64(u2_q60, acc_q60, 60) // denominator
+    return acc_q60 << 2
+
+
+def _scale_q62(value: int, factor_q62: int) -> int:
+    """``value * factor`` for a Q62 factor in [0, 1]: rounds, never leaves the width of value
+    (the 126-bit product is ``mul_round_i64``'s)."""
+    if factor_q62 == ONE_Q62:
+        return value
+    return mul_round_i64(value, factor_q62, 62)
+
+
+def _sat(value: int, errors: ErrorMask) -> int:
+    """Inline-cheap i64 saturation (the common case is a pair of comparisons)."""
+    if I64_MIN <= value <= I64_MAX:
+        return value
+    errors.set(ErrorFlag.SATURATION)
+    return sat_i64(value, errors)

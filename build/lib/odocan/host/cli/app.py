@@ -1,0 +1,200 @@
+"""The ``odocan`` command line: one ``main()``, one module per subcommand (cantools' layout).
+
+Every error a person can cause becomes one line ``error: ...`` on stderr and exit code 2 (a
+traceback only with ``--debug``). Exit 1 means "ran, but the check failed" (e.g. out of tolerance).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import signal
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import FrameType
+from typing import NoReturn
+
+import can
+import rich.console
+
+from odocan.sim.exceptions import OdocanError
+
+# Each module has add_subparser(subparsers) that sets func=_do_<cmd>(args) -> int.
+SUBCOMMANDS = (
+    "run",
+    "analyze",
+    "replay",
+    "monitor",
+    "sim",
+    "firmware",
+    "vectors",
+    "bridge",
+    "fleet",
+    "experiment",
+    "umbmark",
+    "calibrate",
+    "busload",
+)
+VERSION = "0.1.0"
+EXIT_OK, EXIT_USAGE = 0, 2
+
+
+class UsageError(OdocanError):
+    """A bad command line (unknown option, bad value)."""
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Every option's help shows its default (``none`` when unset), unless the text already
+    says it; flags, required options and positionals are left as written."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if (
+            "default" in text
+            or not action.option_strings
+            or action.required
+            or action.default is False
+            or action.default is argparse.SUPPRESS
+        ):
+            return text
+        if action.default is None or action.default == "" or action.default == []:
+            return f"{text} (default: none)"
+        return super()._get_help_string(action)
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are exceptions (turned into one line by ``main``), and
+    whose help shows every default."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(message)
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The whole command line, every subcommand registered; with ``only`` (a name in
+    ``SUBCOMMANDS``) just that one, so a command imports nothing of the others (start-up)."""
+    parser = _Parser(
+        prog="odocan",
+        description="Fixed-point odometry firmware over CAN: "
+        "run the rig, analyze logs, replay drives, monitor a live bus.",
+    )
+    parser.add_argument("--version", action="version", version=f"odocan {VERSION}")
+    parser.add_argument(
+        "--debug", action="store_true", help="show tracebacks on errors (anywhere on the line)"
+    )
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    subparsers.required = True
+    for name in SUBCOMMANDS if only not in SUBCOMMANDS else (only,):
+        try:
+            module = importlib.import_module(f"odocan.host.cli.subparsers.{name}")
+        except ImportError as exc:  # e.g. an optional dependency missing: say so when it is used
+            _add_unavailable(subparsers, name, exc)
+            continue
+        module.add_subparser(subparsers)
+    return parser
+
+
+def _add_unavailable(
+    subparsers: argparse._SubParsersAction[_Parser], name: str, exc: ImportError
+) -> None:
+    """Register ``name`` as a subcommand that explains why it cannot run (cantools does the same
+    for its plugins), instead of dropping it from the command line without a word."""
+    reason = f"odocan {name} is unavailable: {exc}"
+    parser = subparsers.add_parser(name, help=f"(unavailable: {exc})", add_help=False)
+    parser.add_argument("rest", nargs=argparse.REMAINDER)
+
+    def unavailable(args: argparse.Namespace) -> int:
+        raise UsageError(reason)
+
+    parser.set_defaults(func=unavailable)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Parse ``argv`` (default: sys.argv[1:]) and run the subcommand; returns the exit code.
+
+    ``--debug`` is taken anywhere before a ``--``. SIGTERM is handled as SIGINT (Ctrl-C) while
+    the command runs. A closed stdout (``odocan run | head -1``) ends the command quietly, exit 0.
+    """
+    argv = sys.argv[1:] if argv is None else list(argv)
+    argv, debug = split_debug(argv)
+    rich.console.Console.on_broken_pipe = _on_broken_pipe  # type: ignore[method-assign]
+    try:
+        with sigterm_as_interrupt():
+            args = build_parser(named_command(argv)).parse_args(argv)
+            args.debug = debug  # split off above; bridge/fleet show library logs with it
+            return int(args.func(args))
+    except KeyboardInterrupt:
+        return EXIT_OK
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_OK
+    except (OdocanError, can.CanError, OSError) as exc:
+        if debug:
+            raise
+        print(f"error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+def named_command(argv: list[str]) -> str | None:
+    """The subcommand ``argv`` names (its first word, when options such as ``--help`` come
+    nowhere before it), or None: then the whole parser is built (help, errors list them all)."""
+    if argv and argv[0] in SUBCOMMANDS:
+        return argv[0]
+    return None
+
+
+def split_debug(argv: list[str]) -> tuple[list[str], bool]:
+    """``argv`` without its ``--debug`` flags (those before a ``--``), and whether one was there."""
+    end = argv.index("--") if "--" in argv else len(argv)
+    kept = [a for a in argv[:end] if a != "--debug"] + argv[end:]
+    return kept, len(kept) != len(argv)
+
+
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    raise KeyboardInterrupt
+
+
+@contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While inside, SIGTERM raises ``KeyboardInterrupt`` as Ctrl-C does, so every command that
+    stops cleanly on Ctrl-C (summary, report, logs closed) does so on SIGTERM too. Main thread
+    only (elsewhere a no-op); commands that install their own handlers override it."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _interrupt)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _on_broken_pipe(self: rich.console.Console) -> None:
+    """rich's hook when the reader of stdout went away: rich would exit 1, odocan ends quietly
+    (``main`` turns this into exit 0)."""
+    raise BrokenPipeError
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so the interpreter's final flush cannot fail again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # stdout without a file descriptor (captured in tests)
+        pass
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc) or type(exc).__name__
+    return " ".join(text.split())
+
+
+if __name__ == "__main__":
+    sys.exit(main())

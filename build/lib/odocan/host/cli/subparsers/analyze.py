@@ -1,0 +1,329 @@
+"""``odocan analyze LOG``: the same check as ``odocan run``, offline, on a log file.
+
+The log (``.log`` candump, ``.asc``, ``.blf``, as ``odocan run --log`` or any python-can or
+can-utils tool writes them) is read with ``host.logio.read_log``, decoded with the DBC and the
+on-board pose compared with the float64 reference computed from the logged encoder counts, and
+with the ground truth when ``SIM_TRUTH`` frames are present. The integrator defaults to the one
+the firmware reports in ``ODOM_STATUS``; the robot cannot be read from the bus and defaults to
+pmir. Same ``--report``, ``--plot``, ``--tolerance``, summary and exit codes as ``odocan run``.
+
+A ``--dbc`` that does not match the log (a message the analysis needs is missing, or none of its
+frames is in the log under the DBC's ID, or none passes its E2E check with the DBC's data IDs)
+is a one-line error. Frames the DBC does not know are counted (``unknown_frames`` in the report,
+a row of the summary) but are no error: a real bus carries other traffic too.
+
+``-b/--bitrate`` adds the measured bus load (``host.judge.busstats.from_frames``: each frame's
+exact stuffed length plus the interframe space, over the log's span); a log cannot say when a
+frame was queued, so there is no latency to measure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from odocan.host.cli.options import add_robot_argument, float_in, int_in
+from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
+from odocan.host.judge.reference import INTEGRATORS
+from odocan.host.judge.schedulability import BITRATES
+from odocan.host.report.ci import add_junit_argument, check_junit_path
+from odocan.host.report.summary import add_check_arguments, check_output_paths
+from odocan.sim.exceptions import ConfigurationError
+
+if TYPE_CHECKING:  # imported where used: a command pays only for what it runs
+    import cantools
+
+    from odocan.host.judge.batch import LogResult
+    from odocan.sim import robot
+
+MAX_JOBS = 1024
+
+
+def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``odocan analyze``."""
+    parser = subparsers.add_parser(
+        "analyze",
+        help="check the odometry recorded in CAN logs",
+        description="Decode a CAN log with the DBC and compare the on-board pose with the "
+        "float64 reference (and the ground truth when SIM_TRUTH frames are logged). Several "
+        "logs or directories (searched for .log, .asc, .blf) are analysed in parallel, one "
+        "summary row and one JSON report (--report-dir) per log. Exit 0 within tolerance, 1 "
+        "not (any log), 2 on bad usage or input (any log unreadable).",
+    )
+    parser.add_argument(
+        "log", type=Path, nargs="+", metavar="LOG",
+        help="CAN log: .log (candump), .asc, .blf; or a directory of them (recursively)",
+    )
+    add_robot_argument(parser)
+    parser.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        help="reference integrator (default: the one ODOM_STATUS reports)",
+    )
+    parser.add_argument(
+        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: odocan's own)"
+    )
+    parser.add_argument(
+        "-b",
+        "--bitrate",
+        type=can_bitrate,
+        metavar="BIT/S",
+        help="the bus's bitrate: report the measured bus load (exact frame lengths over the "
+        "log's span) (default: no bus section)",
+    )
+    add_check_arguments(parser)
+    add_export_arguments(parser)
+    add_junit_argument(parser)
+    _add_batch_arguments(parser)
+    parser.set_defaults(func=_do_analyze)
+
+
+def _add_batch_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("many logs")
+    group.add_argument(
+        "--jobs", type=int_in(1, MAX_JOBS), default=os.cpu_count() or 1, metavar="N",
+        help="worker processes for several logs (default: the cores, %(default)s here)",
+    )
+    group.add_argument(
+        "--report-dir", type=Path, metavar="DIR",
+        help="write one JSON report per log here (LOG's path below the logs' common folder, "
+        "/ as __, .json appended)",
+    )
+    group.add_argument(
+        "--dask", metavar="ADDRESS",
+        help="run the analyses on this Dask distributed scheduler (tcp://HOST:PORT) instead "
+        "of local processes; its workers must import odocan and see the logs' paths",
+    )
+    group.add_argument(
+        "--dask-timeout", type=float_in(0.0, 3600.0, lo_open=True), default=10.0, metavar="SECONDS",
+        help="give up on an unreachable --dask scheduler after this long",
+    )
+
+
+def _do_analyze(args: argparse.Namespace) -> int:
+    logs: list[Path] = args.log
+    if len(logs) == 1 and not logs[0].is_dir() and args.report_dir is None and args.dask is None:
+        args.log = logs[0]
+        return _analyze_single(args)
+    return _analyze_many(args)
+
+
+def _analyze_single(args: argparse.Namespace) -> int:
+    """One log: the full summary, ``--report``, ``--plot``, exports and ``--junit``."""
+    from odocan.host.cli.inputs import explained, require_frames
+    from odocan.host.io.logs import read_log
+    from odocan.host.judge.analysis import analyze
+    from odocan.host.report.ci import analysis_checks, write_checks
+    from odocan.host.report.progress import wall_clock_progress
+    from odocan.host.report.summary import finish
+    from odocan.sim import robot
+
+    profile = robot.load(args.robot)
+    check_output_paths(args)
+    check_export_paths(args.parquet, args.mcap)
+    check_junit_path(args)
+    db = load_dbc(args.dbc) if args.dbc is not None else None
+    with wall_clock_progress(f"analysing {args.log}", None):
+        frames = read_log(args.log)
+        if db is not None:  # another DBC: its own checks say whether it matches the log
+            analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance, db=db)
+        else:  # odocan's DBC: say plainly when the log holds none of its frames
+            require_frames(frames, str(args.log))
+            with explained(lambda: frames, str(args.log)):
+                analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance)
+    write_exports(args, frames, analysis, db)
+    if args.bitrate is not None:
+        from odocan.host.judge import busstats
+
+        analysis.report["bus"] = busstats.from_frames(frames, args.bitrate).as_dict()
+    analysis.report["inputs"] = log_inputs(args.log, profile, analysis.report["integrator"],
+                                           args.dbc)
+    hint = None
+    if not analysis.passed and db is None:  # a wrong --robot must not read as a firmware fault
+        from odocan.host.judge.diagnosis import robot_mismatch
+
+        hint = robot_mismatch(frames, profile, analysis.report["integrator"], args.tolerance)
+        if hint is not None:
+            analysis.report["diagnosis"] = [hint]
+    code = finish(analysis, args, title=f"odocan analyze: {args.log}")
+    if hint is not None:
+        print(f"  - {hint}")
+    write_checks(args, "analyze", analysis_checks(analysis.report))
+    return code
+
+
+def can_bitrate(text: str) -> int:
+    """``--bitrate``: one of the standard CAN bitrates, in bit/s."""
+    value = int(text) if text.strip().isdigit() else -1
+    if value not in BITRATES:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a CAN bitrate (use one of {', '.join(map(str, BITRATES))})"
+        )
+    return value
+
+
+def _analyze_many(args: argparse.Namespace) -> int:
+    """Several logs (or a directory): one summary row and one JSON report per log, in parallel.
+
+    Exit 2 when any log is unreadable or names nothing (the others are analysed all the same),
+    else 1 when any log fails its check, else 0; the logs at fault are named on stderr."""
+    from odocan.host.judge import batch
+    from odocan.sim import robot
+
+    single_only = [
+        option for option, value in (
+            ("--report", args.report), ("--plot", args.plot), ("--parquet", args.parquet),
+            ("--mcap", args.mcap), ("--junit", args.junit),
+        ) if value is not None
+    ]
+    if single_only:
+        raise ConfigurationError(
+            f"{', '.join(single_only)} take a single LOG; for several logs use --report-dir DIR"
+        )
+    robot.load(args.robot)  # a bad profile is a usage error before any work
+    if args.dbc is not None:
+        load_dbc(args.dbc)
+    if args.report_dir is not None:
+        check_report_dir(args.report_dir)
+    logs, problems = batch.find_logs(args.log)
+    if not logs:
+        raise ConfigurationError("; ".join(problems) or "no log given")
+    job = batch.Job(
+        robot=args.robot, integrator=args.integrator,
+        tolerance_position_m=args.tolerance.position_m,
+        tolerance_heading_rad=args.tolerance.heading_rad,
+        dbc=None if args.dbc is None else str(args.dbc.resolve()),
+    )
+    if args.dask is not None:
+        results = batch.analyze_logs_dask(
+            logs, job, address=args.dask, timeout_s=args.dask_timeout
+        )
+    else:
+        results = batch.analyze_logs(logs, job, jobs=args.jobs)
+    if args.report_dir is not None:
+        write_reports(results, args.report_dir)
+    print_batch_summary(results)
+    return _batch_exit(results, problems)
+
+
+def check_report_dir(directory: Path) -> None:
+    """Make ``--report-dir`` (and its parents) when missing and prove a file can be written in
+    it, before any log is read; else one-line ``ConfigurationError``."""
+    import tempfile
+
+    where = f"--report-dir {directory}"
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except FileExistsError:
+        raise ConfigurationError(f"{where}: exists and is not a directory") from None
+    except OSError as exc:
+        raise ConfigurationError(f"{where}: {exc.strerror or exc}") from None
+
+
+def write_reports(results: list[LogResult], directory: Path) -> None:
+    """One JSON report per analysed log in ``directory`` (names from ``batch.report_names``)."""
+    from odocan.host.judge.batch import report_names
+    from odocan.host.report.jsonutil import write_report
+    from odocan.host.report.outputs import OutputError
+
+    names = report_names([Path(r.path) for r in results])
+    for result in results:
+        if result.report is None:
+            continue
+        path = directory / names[Path(result.path)]
+        try:
+            write_report(path, result.report)
+        except OSError as exc:
+            raise OutputError(f"--report-dir {path}: {exc.strerror or exc}") from None
+
+
+def print_batch_summary(results: list[LogResult]) -> None:
+    """One row per log: frames, verdict, largest on-board errors against the reference and
+    the truth (mm, mrad); an unreadable log's row says why."""
+    from rich import box
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(box=box.SIMPLE_HEAD, pad_edge=False)
+    for column in ("log", "frames", "verdict", "ref mm", "ref mrad", "truth mm", "truth mrad"):
+        table.add_column(column, justify="left" if column in ("log", "verdict") else "right")
+    for result in results:
+        if result.report is None:
+            table.add_row(result.path, "-", "ERROR", "-", "-", "-", "-")
+            continue
+        ref = result.report["onboard_vs_reference"]
+        truth = result.report.get("onboard_vs_truth") or {}
+        table.add_row(
+            result.path, str(result.frames), "PASS" if result.passed else "FAIL",
+            _scaled(ref.get("max_position_error_m")), _scaled(ref.get("max_heading_error_rad")),
+            _scaled(truth.get("max_position_error_m")), _scaled(truth.get("max_heading_error_rad")),
+        )
+    longest = max(len(r.path) for r in results)  # a row per log, never wrapped or cut
+    console = Console(file=sys.stdout, highlight=False, width=max(80, longest + 72))
+    console.print(f"[bold]odocan analyze: {len(results)} logs[/bold]")
+    console.print(table)
+    passed = sum(r.passed for r in results)
+    failed = sum(r.report is not None and not r.passed for r in results)
+    errors = sum(r.report is None for r in results)
+    console.print(f"{passed} PASS, {failed} FAIL, {errors} unreadable")
+
+
+def _scaled(value: float | None) -> str:
+    """metres or radians as mm or mrad (4 significant digits), ``-`` when unknown."""
+    return "-" if value is None else f"{value * 1e3:.4g}"
+
+
+def _batch_exit(results: list[LogResult], problems: list[str]) -> int:
+    """2 when a path gave nothing or a log could not be analysed, else 1 when a log failed,
+    else 0; the logs at fault are named on stderr, one line each kind."""
+    failed = [r.path for r in results if r.report is not None and not r.passed]
+    bad = problems + [
+        r.error if r.error and r.path in r.error else f"{r.path}: {r.error}"
+        for r in results if r.report is None
+    ]
+    if failed:
+        print(f"FAIL: {len(failed)} of {len(results)} logs out of tolerance: {', '.join(failed)}",
+              file=sys.stderr)
+    if bad:
+        print(f"error: {len(bad)} unreadable: {'; '.join(bad)}", file=sys.stderr)
+        return 2
+    return 1 if failed else 0
+
+
+def log_inputs(
+    log: Path, profile: robot.RobotProfile, integrator: str, dbc: Path | None
+) -> dict[str, object]:
+    """The report's ``inputs`` for a log: the log itself (path, SHA-256) instead of seeds; the
+    errors and faults the robot had are unknown (None), not "none"."""
+    from odocan.host.report import provenance
+    from odocan.sim.contract import DBC_PATH
+
+    section = provenance.inputs(profile, integrator=integrator, dbc_path=dbc or DBC_PATH)
+    section.update(errors=None, faults=None,
+                   log={"path": str(log), "sha256": provenance.file_sha256(log)})
+    return section
+
+
+def load_dbc(path: Path) -> cantools.database.can.Database:
+    """Load a DBC strictly; any problem is a one-line ``ConfigurationError``."""
+    import cantools
+
+    try:
+        db = cantools.database.load_file(path, database_format="dbc", strict=True)
+    except OSError as exc:
+        raise ConfigurationError(f"cannot read DBC {path}: {exc.strerror or exc}") from None
+    except Exception as exc:  # cantools raises ParseError, UnsupportedDatabaseFormatError, ...
+        raise ConfigurationError(f"malformed DBC {path}: {_first_line(exc)}") from None
+    if not isinstance(db, cantools.database.can.Database):
+        raise ConfigurationError(f"{path} is not a CAN database")
+    return db
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip() or type(exc).__name__
+    return text.splitlines()[0]

@@ -1,0 +1,119 @@
+"""``odocan bridge``: one robot's CAN bus <-> MQTT (telemetry out, validated commands in).
+
+The bus (python-can's ``-i/-c/-b`` options) is read in a thread; frames are E2E-checked, decoded
+with the DBC, compared with the float64 reference and published under ``odocan/<name>/`` (see
+``host.mqtt.topics``); ``odocan/<name>/cmd/*`` commands are validated against the DBC before a
+frame is sent. Without ``--broker`` an embedded amqtt broker is started on a free loopback port.
+Runs until Ctrl-C (or ``--duration``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import signal
+import sys
+from pathlib import Path
+
+import can
+
+from odocan.host.cli.options import add_duration_argument, add_robot_argument
+from odocan.host.io.buses import add_bus_arguments, open_bus
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt.bridge import Bridge, BridgeConfig, BusReader, RobotEndpoint
+from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.options import (
+    add_mqtt_arguments,
+    bridge_options,
+    broker_for,
+    broker_url,
+    configure_logging,
+)
+from odocan.host.mqtt.topics import check_robot_name
+from odocan.host.protocol.secoc import SecocSigner, load_secoc_key
+from odocan.sim import robot
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.rig import INTEGRATORS
+
+
+def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``odocan bridge``."""
+    parser = subparsers.add_parser(
+        "bridge",
+        help="bridge one robot's CAN bus to MQTT",
+        description="Publish a robot's telemetry (pose, float64 reference, truth, error, status, "
+        "rates) to MQTT and send validated commands from MQTT to its bus.",
+    )
+    _add_arguments(parser)
+    parser.set_defaults(func=_do_bridge)
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--name", default="robot001", help="robot name in the topics odocan/NAME/..."
+    )
+    add_robot_argument(parser, role="profile for the reference")
+    parser.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        default="exact",
+        help="the firmware's integrator (for the reference; default: exact)",
+    )
+    add_duration_argument(parser)
+    parser.add_argument(
+        "--secoc-key",
+        type=Path,
+        metavar="PATH",
+        help="sign commands for a firmware provisioned with this SecOC key (16 raw bytes or 32 "
+        "hex digits, docs/secoc.md; not the TLS --key): an ODOM_AUTH follows each command frame "
+        "(default: commands unsigned)",
+    )
+    add_mqtt_arguments(parser)
+    add_bus_arguments(parser)
+
+
+def _do_bridge(args: argparse.Namespace) -> int:
+    try:
+        name = check_robot_name(args.name)
+    except ValueError as exc:
+        raise ConfigurationError(str(exc)) from None
+    url = broker_url(args)
+    configure_logging(getattr(args, "debug", False))
+    profile = robot.load(args.robot)
+    geometry = Geometry.of(profile)
+    signer = None if args.secoc_key is None else SecocSigner(load_secoc_key(args.secoc_key))
+    bus = open_bus(args)
+    try:
+        asyncio.run(_bridge(args, name, url, bus, geometry, profile.counter_bits, signer))
+    finally:
+        bus.shutdown()
+    return 0
+
+
+async def _bridge(
+    args: argparse.Namespace,
+    name: str,
+    url: BrokerURL | None,
+    bus: can.BusABC,
+    geometry: Geometry,
+    counter_bits: int,
+    signer: SecocSigner | None = None,
+) -> None:
+    async with broker_for(url) as (broker, embedded):
+        print(f"bridge {name}: {broker}{' (embedded)' if embedded else ''}", file=sys.stderr)
+        config = BridgeConfig(broker=broker, **bridge_options(args))
+        endpoint = RobotEndpoint(name, bus, geometry, args.integrator, counter_bits, signer)
+        bridge = Bridge([endpoint], config=config)
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        reader = BusReader(bus, bridge, loop)
+        reader.start()
+        if args.duration is not None:
+            loop.call_later(args.duration, stop.set)
+        try:
+            await bridge.run(stop=stop)
+        finally:
+            reader.stop()
+        print(f"bridge {name}: {bridge.summary()}", file=sys.stderr)

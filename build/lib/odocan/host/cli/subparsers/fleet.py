@@ -1,0 +1,219 @@
+"""``odocan fleet``: N independent robots in real time, bridged to MQTT.
+
+Each robot is the lockstep rig's set of nodes on its own channel of the in-process ``odocan``
+transport (scenario ``random`` with seed ``--seed + i``; ``-n/--count`` robots, ``--robot`` their
+profile); a timer loop steps them every 10 ms and accounts its deadlines; the bridge publishes
+every robot under ``odocan/robotNNN/`` (``host.mqtt.topics``) and judges its pose against the
+float64 reference. ``--workers W`` spreads the robots over W processes, each with its own loop and
+MQTT connections; ``--shard K/N`` runs this machine's part of a fleet of N machines on one broker
+(robot ids and seeds numbered across shards: ``host.mqtt.shards``). Without ``--broker`` an
+embedded amqtt broker runs in a process of its own, on ``--port`` or a free port; its URL is
+printed at the start (``odocan monitor --broker URL`` watches). ``--report`` writes the JSON
+contract of ``host.mqtt.fleetrun`` (``workers`` added by ``host.mqtt.shards``). The exit line says
+PASS, or FAIL and every threshold broken: exit 0, or 1 when ``deadline_miss_ratio`` exceeds
+``--max-miss-ratio`` or a robot's pose is out of tolerance or not judged.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import Counter
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from odocan.host.cli.options import SEED_LIMIT, add_seed_argument, float_in, int_in
+from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.fleetrun import FleetRun, failures
+from odocan.host.mqtt.options import (
+    add_mqtt_arguments,
+    bridge_options,
+    broker_url,
+    configure_logging,
+)
+from odocan.host.mqtt.shards import Shard, embedded_broker, run_sharded
+from odocan.host.report.outputs import check_writable, write_text
+from odocan.host.report.progress import Progress, wall_clock_progress
+from odocan.sim import robot
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.fleet import FleetConfig
+from odocan.sim.rig import INTEGRATORS
+from odocan.sim.scenarios import SCENARIOS
+
+FLEET_MAX_ROBOTS = 500  # one 2-core machine holds about 45 in real time (README, bench/fleet.py)
+FLEET_MAX_DURATION_S = 86400.0
+FLEET_MAX_WORKERS = 64
+
+
+def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``odocan fleet``."""
+    parser = subparsers.add_parser(
+        "fleet",
+        help="run N robots in real time, bridged to MQTT",
+        description="Run N independent robots (motor controller, truth, scenario, firmware on "
+        "their own virtual CAN channels) in real time in one process, bridged to MQTT.",
+    )
+    _add_arguments(parser)
+    parser.set_defaults(func=_do_fleet)
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "-n",
+        "--count",
+        "--robots",
+        dest="count",
+        type=int_in(1, FLEET_MAX_ROBOTS),
+        default=3,
+        metavar="N",
+        help=f"how many robots, 1 .. {FLEET_MAX_ROBOTS} (--robots: deprecated alias) "
+        "(default: %(default)s)",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float_in(0.0, FLEET_MAX_DURATION_S, lo_open=True),
+        default=10.0,
+        metavar="SECONDS",
+        help=f"WALL-CLOCK seconds to run, at most {FLEET_MAX_DURATION_S:g} (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--report", type=Path, metavar="PATH", help="write the JSON report (default: none)"
+    )
+    parser.add_argument(
+        "--robot", default="pmir", help="profile of every robot, name or TOML path (default: pmir)"
+    )
+    parser.add_argument(
+        "--integrator", choices=INTEGRATORS, default="exact", help="on-board integrator"
+    )
+    parser.add_argument("--scenario", choices=SCENARIOS, default="random", help="driving scenario")
+    add_seed_argument(parser, "robot i drives with seed SEED + i")
+    parser.add_argument(
+        "--max-miss-ratio",
+        type=float_in(0.0, 1.0),
+        default=0.001,
+        metavar="RATIO",
+        help="exit 1 above this deadline_miss_ratio, 0 .. 1 (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int_in(1, FLEET_MAX_WORKERS),
+        default=1,
+        metavar="W",
+        help="processes to spread this machine's robots over, 1 .. the robots (default: 1)",
+    )
+    parser.add_argument(
+        "--shard",
+        type=_shard,
+        default=Shard(),
+        metavar="K/N",
+        help="run part K of N of the fleet (N machines, one --broker; robot ids and seeds "
+        "count across the parts) (default: 1/1)",
+    )
+    parser.add_argument(
+        "--port",
+        type=int_in(1, 65535),
+        metavar="PORT",
+        help="the embedded broker's 127.0.0.1 port (default: a free one); not with --broker",
+    )
+    add_mqtt_arguments(parser)
+
+
+def _shard(text: str) -> Shard:
+    """An argparse ``type``: ``K/N``."""
+    try:
+        return Shard.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _do_fleet(args: argparse.Namespace) -> int:
+    if args.seed + args.count > SEED_LIMIT:
+        raise ConfigurationError(
+            f"--seed {args.seed} + --count {args.count}: the last robot's seed must be < 2^32"
+        )
+    first, robots = args.shard.robots(args.count)
+    if args.workers > robots:
+        raise ConfigurationError(
+            f"--workers {args.workers}: more workers than robots to run ({robots})"
+        )
+    check_writable(args.report, "--report")
+    broker = broker_url(args)
+    if broker is not None and args.port is not None:
+        raise ConfigurationError("--port is the embedded broker's: --broker names its own port")
+    fleet = FleetConfig(
+        robots=args.count,
+        robot=robot.load(args.robot),
+        integrator=args.integrator,
+        scenario=args.scenario,
+        seed=args.seed,
+    ).shard(first, robots)
+    run = FleetRun(fleet=fleet, duration_s=args.duration, broker=broker, **bridge_options(args))
+    debug = getattr(args, "debug", False)
+    configure_logging(debug)
+    if broker is None:
+        with embedded_broker(args.port) as url:
+            report = _run(replace(run, broker=url), args.workers, debug)
+        report["embedded_broker"] = True
+    else:
+        report = _run(run, args.workers, debug)
+    broken = failures(report, args.max_miss_ratio)
+    _print_summary(report, broken)
+    if args.report is not None:
+        write_text(args.report, json.dumps(report, indent=2) + "\n", "--report")
+    return 1 if broken else 0
+
+
+def _run(run: FleetRun, workers: int, debug: bool) -> dict[str, Any]:
+    """The fleet under a live progress line (elapsed, ETA, the late ticks so far), drawn from
+    when the clock starts (the start line first), not while the workers and broker start."""
+    label = f"fleet of {run.fleet.robots}"
+    with wall_clock_progress(label, run.duration_s) as bar:
+        drawn, bar.enabled = bar.enabled, False
+
+        def started(robots: int, url: BrokerURL | None) -> None:
+            _say_started(robots, url)
+            bar.started = time.monotonic()
+            bar.enabled = drawn
+
+        return run_sharded(
+            run,
+            workers,
+            on_start=started,
+            debug=debug,
+            on_progress=lambda ticks, late: _relabel(bar, label, ticks, late),
+        )
+
+
+def _relabel(bar: Progress, label: str, ticks: int, late: int) -> None:
+    """The progress line's label with the deadline figures so far."""
+    bar.label = f"{label}, {late} of {ticks} ticks late ({late / max(ticks, 1):.4f})"
+
+
+def _print_summary(report: dict[str, Any], broken: list[str]) -> None:
+    """The summary line, per-robot verdict counts, then PASS or FAIL with every reason."""
+    verdicts = Counter(str(r.get("verdict")) for r in report["per_robot"].values())
+    workers = len(report.get("workers", [])) or 1
+    last = list(report["per_robot"])[-1]
+    print(
+        f"fleet: {report['robots']} robots, {report['first_robot']}..{last}, "
+        f"{workers} worker(s), "
+        f"{report['ticks']} ticks, deadline_miss_ratio {report['deadline_miss_ratio']:.4f} "
+        f"(worst {report['max_lateness_ms']:.1f} ms), broker {report['broker']}"
+    )
+    print("poses: " + ", ".join(f"{n} {v}" for v, n in sorted(verdicts.items())))
+    print("FAIL: " + "; ".join(broken) if broken else "PASS")
+    sys.stdout.flush()
+
+
+def _say_started(robots: int, url: BrokerURL | None) -> None:
+    """One line on stderr when the clock starts: how many robots, and where to watch them
+    (``odocan monitor --broker URL``)."""
+    where = f", telemetry on {url}" if url is not None else ""
+    print(
+        f"fleet: {robots} robots running{where}; Ctrl-C or SIGTERM stops and reports",
+        file=sys.stderr,
+        flush=True,
+    )

@@ -1,0 +1,240 @@
+"""``odocan monitor``: a live terminal view of a CAN bus, or of a fleet over MQTT.
+
+On any python-can bus (``-i/-c/-b``, or python-can's configuration) every frame is fed to
+``host.judge.monitor.BusMonitor``: decoded signals per message with units, rate and period
+jitter, E2E counts, the firmware's status, and the on-board pose against the float64 reference
+(and SIM_TRUTH when present). The screen (``host.report.tui``, fits 80×24) redraws it a few times
+a second until Ctrl-C or ``q`` (exit 0) or ``--duration``, with a decoded trace (``--filter``,
+pause with space or ``p``); ``--log PATH`` records every frame heard.
+With ``--json`` there is no screen: at the end (``--duration`` or Ctrl-C) the
+model is printed as one JSON object, for scripts.
+
+``--broker [URL]`` (alias ``--mqtt``, the name it had) shows the fleet instead: one row per
+robot that ``odocan bridge``/``odocan fleet`` publish (``host.mqtt.fleetview.fleet_states``),
+reconnecting when the broker goes away, redrawn on a timer (stale robots marked, the worst error
+first).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import math
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import aiomqtt
+from rich.console import Console
+from rich.live import Live
+
+from odocan.host.cli.options import add_duration_argument, add_robot_argument, check_log_path
+from odocan.host.cli.subparsers.analyze import load_dbc
+from odocan.host.io.buses import add_bus_arguments, open_bus
+from odocan.host.judge.monitor import BusMonitor, fleet_snapshot, render_fleet, to_json
+from odocan.host.mqtt.broker import BrokerError, BrokerURL, connect_failure, tls_diagnosis
+from odocan.host.mqtt.fleetview import RobotState, fleet_states
+from odocan.host.mqtt.options import add_broker_credentials, monitor_broker_url
+from odocan.host.report.tui import FrameFilter, MonitorApp, Recorder, Trace, View, run_screen
+from odocan.sim import robot
+from odocan.sim.exceptions import ConfigurationError, OdocanError
+from odocan.sim.rig import INTEGRATORS
+
+DEFAULT_BROKER = "mqtt://127.0.0.1:1883"
+REFRESH_S = 0.25  # screen redraws
+RECONNECT_S = 1.0  # wait before reconnecting to the broker
+TLS_CHECK_S = 5.0  # the TLS handshake checked before watching an mqtts:// broker
+
+
+class BrokerUnreachable(OdocanError):
+    """The MQTT broker could not be reached during the whole watch."""
+
+
+def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``odocan monitor``."""
+    parser = subparsers.add_parser(
+        "monitor",
+        help="watch a live CAN bus (or an MQTT fleet) in the terminal",
+        description="Decode a live CAN bus with the DBC: per message the latest signal values, "
+        "rate, period jitter and E2E counts; the firmware's status; the on-board pose against "
+        "the float64 reference and the ground truth. Ctrl-C quits (exit 0).",
+        epilog="Example: odocan monitor -i socketcan -c vcan0; "
+        "odocan monitor -i virtual -c vcan0 --duration 5 --json; "
+        "odocan monitor --broker mqtt://127.0.0.1:1883",
+    )
+    add_duration_argument(parser)
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="no live view: print one JSON object of the model at the end",
+    )
+    parser.add_argument(
+        "--filter",
+        action="append",
+        default=[],
+        metavar="NAME|0xID",
+        help="trace only these messages (DBC name or CAN ID; repeatable, comma-separated); "
+        "'f' edits it live",
+    )
+    parser.add_argument(
+        "--log",
+        type=Path,
+        metavar="PATH",
+        help="record every frame heard while watching (.log candump, .asc, .blf)",
+    )
+    add_robot_argument(parser, role="profile for the reference")
+    parser.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        help="reference integrator (default: the one ODOM_STATUS reports)",
+    )
+    parser.add_argument(
+        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: odocan's own)"
+    )
+    parser.add_argument(
+        "--broker",
+        "--mqtt",
+        dest="mqtt",
+        nargs="?",
+        const=DEFAULT_BROKER,
+        metavar="URL",
+        help="show the fleet published on this MQTT broker instead of a CAN bus; without URL "
+        f"{DEFAULT_BROKER} (--mqtt: alias) (default: a CAN bus)",
+    )
+    add_broker_credentials(parser.add_argument_group("MQTT credentials (with --broker)"))
+    add_bus_arguments(parser)
+    parser.set_defaults(func=_do_monitor)
+
+
+def _do_monitor(args: argparse.Namespace) -> int:
+    if args.mqtt is not None:
+        if args.interface is not None or args.channel is not None:
+            raise ConfigurationError("--broker watches MQTT: give no -i/--interface or -c")
+        return _watch_fleet(monitor_broker_url(args), args)
+    if args.ca or args.cert or args.key or args.password_file:
+        raise ConfigurationError("--ca/--cert/--key/--password-file go with --broker URL")
+    model = BusMonitor(
+        robot.load(args.robot),
+        args.integrator,
+        load_dbc(args.dbc) if args.dbc is not None else None,
+        bitrate=args.bitrate,  # -b: the bus load as a fraction of the wire
+    )
+    trace = Trace(model.db, FrameFilter.parse(args.filter, model.db))
+    check_log_path(args.log)
+    recorder = Recorder(args.log) if args.log is not None else None
+    view = View(_source(args), interface=args.interface, log_path=args.log,
+                started_s=time.monotonic())
+    try:
+        bus = open_bus(args)
+        try:
+            app = MonitorApp(bus, model, trace, view, recorder)
+            if args.json:
+                app.receive(_deadline(args.duration))
+            else:
+                run_screen(app, _deadline(args.duration))
+        finally:
+            bus.shutdown()
+    finally:
+        if recorder is not None:
+            recorder.close()
+    if args.json:
+        print(to_json(model.snapshot()))
+    return 0
+
+
+def _source(args: argparse.Namespace) -> str:
+    return ":".join(str(v) for v in (args.interface or "python-can default", args.channel) if v)
+
+
+def _deadline(duration_s: float | None) -> float:
+    return math.inf if duration_s is None else time.monotonic() + duration_s
+
+
+# --- the fleet over MQTT ----------------------------------------------------------------------
+
+
+def _watch_fleet(url: BrokerURL, args: argparse.Namespace) -> int:
+    """The fleet table until the deadline or Ctrl-C; ``--json``: one object at the end."""
+    watch = _FleetWatch(url, args.duration)
+    try:
+        if args.json:
+            asyncio.run(watch.run(None))
+        else:
+            with Live(console=Console(file=sys.stdout), auto_refresh=False) as live:
+                asyncio.run(watch.run(lambda: live.update(watch.render(), refresh=True)))
+    except KeyboardInterrupt:
+        pass
+    if not watch.connected_once:
+        raise BrokerUnreachable(f"cannot reach the MQTT broker {url}: {watch.last_error}")
+    if args.json:
+        print(to_json(watch.snapshot()))
+    return 0
+
+
+class _FleetWatch:
+    """The latest fleet table, kept across reconnections."""
+
+    def __init__(self, url: BrokerURL, duration_s: float | None) -> None:
+        self.url, self.duration_s = url, duration_s
+        self.table: dict[str, RobotState] = {}
+        self.connected_once = False
+        self.last_error = ""
+        self.started = time.monotonic()
+
+    async def run(self, redraw: Callable[[], None] | None) -> None:
+        """Follow the broker until the duration has passed (forever without one); a TLS or
+        credentials problem at the first connection is a ``BrokerError`` at once (no retry
+        mends it)."""
+        if self.url.tls and (found := await tls_diagnosis(self.url, TLS_CHECK_S)) is not None:
+            raise BrokerError(f"cannot connect to {self.url}: TLS: {found}")
+        try:
+            async with asyncio.timeout(self.duration_s), asyncio.TaskGroup() as tasks:
+                tasks.create_task(self._follow(redraw), name="follow-broker")
+                if redraw is not None:  # the clock and staleness move without messages too
+                    tasks.create_task(self._tick(redraw), name="redraw")
+        except TimeoutError:
+            pass
+
+    @staticmethod
+    async def _tick(redraw: Callable[[], None]) -> None:
+        while True:
+            redraw()
+            await asyncio.sleep(REFRESH_S)
+
+    async def _follow(self, redraw: Callable[[], None] | None) -> None:
+        while True:
+            if redraw is not None:
+                redraw()
+            try:
+                async for table in fleet_states(broker=self.url, min_interval_s=REFRESH_S):
+                    self.connected_once, self.last_error = True, ""
+                    self.table = table
+                    if redraw is not None:
+                        redraw()
+            except aiomqtt.MqttError as exc:
+                self.last_error = str(exc) or type(exc).__name__
+                reason = connect_failure(exc, TLS_CHECK_S, tls=self.url.tls,
+                                         client_cert=self.url.cert is not None)
+                if not self.connected_once and reason.startswith(("not authorized", "TLS:")):
+                    raise BrokerError(f"cannot connect to {self.url}: {reason}") from None
+            await asyncio.sleep(RECONNECT_S)
+
+    def snapshot(self) -> dict[str, Any]:
+        """``broker``, ``duration_s`` and ``robots`` (``host.monitor.fleet_snapshot``)."""
+        return {
+            "broker": str(self.url),
+            "duration_s": time.monotonic() - self.started,
+            "robots": fleet_snapshot(self.table),
+        }
+
+    def render(self) -> Any:
+        """The screen (with the connection problem, if any)."""
+        note = f"broker: {self.last_error} (reconnecting)" if self.last_error else ""
+        return render_fleet(
+            fleet_snapshot(self.table),
+            source=str(self.url),
+            elapsed_s=time.monotonic() - self.started,
+            note=note,
+        )

@@ -1,0 +1,217 @@
+"""``odocan replay LOG``: re-run a recorded drive against the current firmware build (the engine
+is ``host.judge.replay``; this module is its command line and the real-time player).
+
+**Lockstep** (the default). The log's WHEEL_ENCODERS frames that pass the host's E2E check
+(``host.e2e.check_frames``) are fed, byte for byte, to a ``sim.board.FirmwareBoard`` on python-can
+``virtual`` buses, one firmware tick per 10 ms encoder period: the frames' ticks come from the
+sender's sequence (the E2E COUNTER unwrapped, widened by 16 where the timestamps say so, as
+``host.analysis`` does), so a gap in the log is a run of ticks without a frame, exactly as the
+firmware would have lived it (its E2E window widens, its watchdog may fire). Gaps longer than
+``MAX_GAP_TICKS`` are shortened to it. The firmware's clock is the first encoder frame's
+timestamp plus 10 ms per tick; the log's own SIM_TRUTH frames are put back on the bus where the
+log had them. Everything on the replayed bus is analysed as ``odocan run`` does
+(``host.analysis.analyze``, ``host.summary.finish``: same report keys, ``--report``, ``--plot``,
+``--tolerance``, summary, exit 0/1/2), plus a ``replay`` section comparing the replayed on-board
+poses with the ones in the log at the same encoder frames (identical for the same firmware).
+``--log OUT`` writes the replayed bus. The integrator defaults to the one the log's ODOM_STATUS
+reports (else exact); Ctrl-C stops early and checks what ran.
+
+**Verdict.** PASS needs both: the replayed firmware within ``--tolerance`` of its float64
+reference (as ``odocan run``), and within ``--tolerance`` of the firmware that recorded the log
+(the logged on-board poses at the same encoder frames; positions up to the log's first gap of the
+encoder sequence, since across a gap the recording firmware may have had frames the log lacks,
+headings everywhere, since they are exact across gaps). When the replay departs, the cause is
+looked for by name (``diagnose``): the integrator the log's ODOM_STATUS reports against the one
+replayed, and which robot profile (the one given and every shipped one) the logged poses fit
+(``analyze`` of the log itself, no replay: the profile whose float64 odometry of the logged
+counts the logged poses follow within tolerance).
+
+**Real time** (``--realtime -i ... -c ...``): play the log's frames (``--only`` some messages)
+onto a live bus with their original timing relative to the first frame, ``--speed`` times
+faster; error frames are not sent. Ctrl-C stops cleanly (exit 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from rich.console import Console
+
+from odocan.host.cli.options import add_robot_argument, check_log_path, float_in
+from odocan.host.cli.subparsers.analyze import log_inputs
+from odocan.host.io.buses import add_bus_arguments, open_bus
+from odocan.host.io.logs import (
+    FrameArrays,
+    read_log,
+)
+from odocan.host.io.player import play
+from odocan.host.judge.replay import (
+    ReplayInput,
+    departures,
+    diagnose,
+    logged_integrator,
+    replay_and_analyze,
+)
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.report.ci import (
+    add_junit_argument,
+    analysis_checks,
+    check_junit_path,
+    write_checks,
+)
+from odocan.host.report.jsonutil import write_report
+from odocan.host.report.progress import progress
+from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
+from odocan.sim import contract, robot
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.rig import INTEGRATORS
+
+POLL_S = 0.1  # --realtime: a stop request is seen within this while waiting for a frame's time
+SPEED_MAX = 1000.0  # --speed: faster than that, the timing is no longer worth keeping
+IntArray = npt.NDArray[np.int64]
+
+
+
+def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``odocan replay``."""
+    parser = subparsers.add_parser(
+        "replay",
+        help="re-run a recorded drive against the current firmware (or play a log onto a bus)",
+        description="Feed a log's WHEEL_ENCODERS frames to the current firmware in lockstep "
+        "(one tick per 10 ms encoder period, gaps kept) and check its odometry as odocan run "
+        "does; or, with --realtime, play the log onto a live bus with its original timing.",
+        epilog="Examples: odocan replay drive.log --integrator rk2 --report r.json; "
+        "odocan replay drive.log --realtime -i socketcan -c vcan0 --speed 2",
+    )
+    parser.add_argument("log", type=Path, metavar="LOG", help="CAN log: .log (candump), .asc, .blf")
+    add_robot_argument(parser)
+    parser.add_argument(
+        "--integrator", choices=INTEGRATORS,
+        help="on-board integrator (default: the one the log's ODOM_STATUS reports, else exact)",
+    )
+    parser.add_argument("--log", dest="log_out", type=Path, metavar="OUT",
+                        help="write the replayed bus (.log candump, .asc, .blf) (default: none)")
+    add_check_arguments(parser)
+    live = parser.add_argument_group("real time (--realtime)")
+    live.add_argument("--realtime", action="store_true",
+                      help="play the log onto the bus given by -i/-c/-b with its timing")
+    live.add_argument("--speed", type=float_in(0.0, SPEED_MAX, lo_open=True), default=1.0,
+                      metavar="X", help=f"play X times faster than recorded, at most "
+                      f"{SPEED_MAX:g} (default: 1)")
+    live.add_argument("--only", metavar="NAME[,NAME]",
+                      help="play only these DBC messages (e.g. WHEEL_ENCODERS,SIM_TRUTH) "
+                      "(default: every frame)")
+    add_bus_arguments(parser)
+    add_junit_argument(parser)
+    parser.set_defaults(func=_do_replay)
+
+
+def _do_replay(args: argparse.Namespace) -> int:
+    _check_options(args)
+    if args.realtime:
+        return _play_realtime(read_log(args.log), args)
+    profile = robot.load(args.robot)
+    check_output_paths(args)
+    check_junit_path(args)
+    check_log_path(args.log_out)
+    frames = read_log(args.log)
+    feed = ReplayInput.from_log(frames)
+    integrator = args.integrator or logged_integrator(frames, feed.accepted) or "exact"
+    analysis = replay_and_analyze(
+        frames, feed, profile, integrator, tolerance=args.tolerance, log=args.log,
+        log_out=args.log_out,
+    )
+    section = analysis.report["replay"]
+    _print_versus_log(section)
+    analysis.report["inputs"] = log_inputs(args.log, profile, integrator, None)
+    reasons = departures(section["onboard_vs_log"], args.tolerance)
+    if reasons:
+        reasons += diagnose(frames, feed.accepted, profile, integrator, args.tolerance)
+    section.update(passed=not reasons, faults=reasons)
+    title = f"odocan replay: {args.log} on {profile.name}, {integrator} integrator"
+    code = finish(analysis, args, title=title)  # prints the run's verdict (vs the reference)
+    if reasons:
+        analysis.report["passed"] = analysis.passed = False
+        if args.report is not None:
+            write_report(args.report, analysis.report)
+        print("FAIL: the replayed firmware departs from the log's")
+        for reason in reasons:
+            print(f"  - {reason}")
+        code = 1
+    write_checks(args, "replay", analysis_checks(analysis.report))
+    return code
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse options of the other mode, and a bad ``--speed``."""
+    if args.realtime:
+        given = [o for o, v in (("--report", args.report), ("--plot", args.plot),
+                                ("--log", args.log_out), ("--junit", args.junit))
+                 if v is not None]
+        if given:
+            raise ConfigurationError(f"{', '.join(given)}: not with --realtime (a player only)")
+        if not (math.isfinite(args.speed) and args.speed > 0):
+            raise ConfigurationError(f"--speed must be a positive factor, got {args.speed}")
+        return
+    given = [o for o, v in (("-i/--interface", args.interface), ("-c/--channel", args.channel),
+                            ("--only", args.only)) if v is not None]
+    if args.speed != 1.0:
+        given.append("--speed")
+    if given:
+        raise ConfigurationError(f"{', '.join(given)}: only with --realtime")
+
+
+def _print_versus_log(section: dict[str, Any]) -> None:
+    """One line: how the replayed firmware's poses compare with the log's."""
+    vs = section["onboard_vs_log"]
+    console = Console(file=sys.stdout, highlight=False)
+    if not vs["samples"]:
+        console.print("replay: the log has no on-board pose to compare with", soft_wrap=True)
+        return
+    console.print(
+        f"replay: {section['encoder_frames_fed']} encoder frames fed in {section['ticks']} "
+        f"ticks; on-board vs the log's at {vs['samples']} encoder frames: {vs['identical']} "
+        f"identical, max difference {vs['max_position_diff_m'] * 1e3:.4f} mm, "
+        f"{vs['max_heading_diff_rad'] * 1e3:.4f} mrad",
+        soft_wrap=True,
+    )
+
+
+# --- real time ---------------------------------------------------------------------------------
+
+
+def _play_realtime(frames: FrameArrays, args: argparse.Namespace) -> int:
+    """Play the selected frames onto the bus with their timing; Ctrl-C stops cleanly."""
+    selection = _selection(frames, args.only)
+    bus = open_bus(args)
+    start = time.monotonic()
+    try:
+        with progress(f"playing {len(selection)} frames", len(selection)) as bar:
+            sent, interrupted = play(bus, frames, selection, args.speed, bar)
+    finally:
+        bus.shutdown()
+    wall_s = time.monotonic() - start
+    print(f"replay: {'interrupted, ' if interrupted else ''}{sent} of {len(selection)} frames "
+          f"played in {wall_s:.2f} s ({args.speed:g}x the recorded timing)")
+    return 0
+
+
+def _selection(frames: FrameArrays, only: str | None) -> IntArray:
+    """Positions of the frames to play: all, or those of the ``--only`` messages."""
+    if only is None:
+        return np.arange(len(frames), dtype=np.int64)
+    decoder = BulkDecoder(contract.database())
+    picked = []
+    for name in (n.strip() for n in only.split(",") if n.strip()):
+        try:
+            picked.append(decoder.select(frames, name))
+        except DecodeError as exc:
+            raise ConfigurationError(f"--only: {exc}") from None
+    return np.sort(np.concatenate(picked)).astype(np.int64) if picked else np.zeros(0, np.int64)

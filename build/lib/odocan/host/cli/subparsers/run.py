@@ -1,0 +1,367 @@
+"""``odocan run``: the lockstep rig on in-process python-can buses, then the analysis.
+
+The rig's buses are the ``odocan`` transport (``sim.transport``) unless ``--transport virtual``
+asks for python-can's own ``virtual`` interface: the same frames, byte for byte, only slower.
+``-b/--bitrate`` makes the rig's bus bit-timed (arbitration, exact frame lengths, delivery at the
+end of frame, in simulated time); without it the bus is instant.
+
+The motor controller, the ground truth, the scenario driver and the firmware run in simulated
+time (about 100x faster than real time on one core); every frame goes to a ``FrameCollector``
+and, with ``--log``, to python-can's ``can.Logger`` (``.log`` candump, ``.asc``, ``.blf``). The
+on-board pose is then compared with the float64 reference and the ground truth
+(``host.analysis.analyze``); exit 0 within tolerance, 1 not, 2 on bad usage. Ctrl-C or SIGTERM
+stops the rig after the tick under way and checks what ran so far: the summary, the report and
+the log (``.asc`` footer, ``.blf`` header and object count) are all finished as after a full run.
+
+With ``-i/--interface`` or ``-c/--channel`` (python-can's bus options) every frame is also sent
+to that bus, paced to the wall clock so the copy keeps the DBC's cycle times (e.g.
+``-i socketcan -c vcan0`` for ``candump vcan0``, or ``odocan monitor`` on the same bus).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+import can
+import numpy as np
+
+from odocan.host.cli.inputs import explained, require_frames
+from odocan.host.cli.options import (
+    SIM_DURATION_MAX_S,
+    SIM_DURATION_MIN_S,
+    add_robot_argument,
+    add_seed_argument,
+    check_log_path,
+    float_in,
+)
+from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus, parse_faults
+from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
+from odocan.host.io.listeners import Isolated
+from odocan.host.io.logs import FrameCollector
+from odocan.host.judge import busstats
+from odocan.host.judge.analysis import Analysis, analyze
+from odocan.host.protocol.secoc import load_secoc_key
+from odocan.host.report import provenance
+from odocan.host.report.ci import (
+    add_junit_argument,
+    analysis_checks,
+    check_junit_path,
+    write_checks,
+)
+from odocan.host.report.foxglove import add_foxglove_arguments, serve_foxglove
+from odocan.host.report.outputs import OutputError, check_writable
+from odocan.host.report.progress import progress
+from odocan.host.report.summary import (
+    PLOT_SUFFIXES,
+    add_check_arguments,
+    check_output_paths,
+    finish,
+)
+from odocan.sim import errors, robot
+from odocan.sim.board import TICK_S
+from odocan.sim.cboard import FIRMWARES, board_maker
+from odocan.sim.contract import database
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.faults import FaultSpec
+from odocan.sim.realtime import StopRequest, stop_on_signals
+from odocan.sim.rig import INTEGRATORS, TRANSPORTS, LockstepRig, RigConfig
+from odocan.sim.scenarios import SCENARIOS
+
+PROGRESS_EVERY_TICKS = 100  # one simulated second
+TRUTH_TRACE_MAX = 100_000  # poses kept for the plot's truth (17 simulated minutes at 100 Hz)
+
+
+def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``odocan run``."""
+    parser = subparsers.add_parser(
+        "run",
+        help="run the firmware in the lockstep rig and check its odometry",
+        description="Run the motor controller, ground truth, scenario driver and firmware in "
+        "lockstep on in-process python-can buses, then compare the on-board pose (decoded from the "
+        "bus) with the float64 reference and the ground truth. Exit 0 within tolerance, 1 not, "
+        "2 on bad usage. Ctrl-C or SIGTERM stops early and checks what ran.",
+        epilog="With -b/--bitrate the rig's own bus is bit-timed (e.g. -b 500000: arbitration, "
+        "exact frame lengths with stuffing, delivery at the end of frame). With -i/-c every frame "
+        "is also sent to that bus, paced to the wall clock (e.g. -i socketcan -c vcan0, then "
+        "candump vcan0).",
+    )
+    parser.add_argument(
+        "--scenario", choices=SCENARIOS, default="random", help="driving scenario (default: random)"
+    )
+    add_robot_argument(parser)
+    parser.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        default="exact",
+        help="on-board integrator (default: exact)",
+    )
+    parser.add_argument(
+        "--firmware",
+        choices=FIRMWARES,
+        default="python",
+        help="the firmware on the board: python (firmware/) or c (firmware/c, built with make "
+        "on first use) (default: python)",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float_in(SIM_DURATION_MIN_S, SIM_DURATION_MAX_S),
+        metavar="SECONDS",
+        help=f"SIMULATED seconds, {SIM_DURATION_MIN_S:g} .. {SIM_DURATION_MAX_S:g} (default: "
+        "the scenario's own, 61 s for random; random drives until 1 s before the end of a "
+        "longer run)",
+    )
+    add_seed_argument(parser)
+    parser.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        default="odocan",
+        help="python-can interface of the rig's own buses (default: odocan, the lean in-process "
+        "transport; virtual: python-can's, same frames)",
+    )
+    parser.add_argument(
+        "--errors",
+        default="",
+        metavar="ed=..,eb=..,slip=..",
+        help="the robot's real errors: E_d, E_b, slip std (default: none)",
+    )
+    parser.add_argument(
+        "--log",
+        type=Path,
+        metavar="PATH",
+        help="log every frame (.log candump, .asc, .blf) (default: no log)",
+    )
+    parser.add_argument(
+        "--secoc-key",
+        type=Path,
+        metavar="PATH",
+        help="provision the firmware with this SecOC key (16 raw bytes or 32 hex digits; "
+        "docs/secoc.md): its commands then need an ODOM_AUTH (default: no SecOC)",
+    )
+    add_check_arguments(parser)
+    parser.add_argument(
+        "--latency-plot",
+        type=Path,
+        metavar="PATH",
+        help="with -b: plot each message's measured latency (p99, max) against the analysis' "
+        "worst case and its deadline (.png, .svg) (default: none)",
+    )
+    add_export_arguments(parser)
+    add_foxglove_arguments(parser)
+    add_junit_argument(parser)
+    add_fault_argument(parser)
+    add_bus_arguments(parser)
+    parser.set_defaults(func=_do_run)
+
+
+def _do_run(args: argparse.Namespace) -> int:
+    faults = parse_faults(args)
+    config = RigConfig(
+        robot=robot.load(args.robot),
+        integrator=args.integrator,
+        scenario=args.scenario,
+        seed=args.seed,
+        errors=errors.parse(args.errors),
+        faults=faults,
+        fw_faults=None if faults is None else replace(faults, seed=faults.seed + 1),
+        duration_s=args.duration,
+        transport=args.transport,
+        bitrate=args.bitrate,
+        firmware=args.firmware,
+        secoc_key=None if args.secoc_key is None else load_secoc_key(args.secoc_key),
+    )
+    check_log_path(args.log)
+    check_output_paths(args)
+    check_latency_plot(args.latency_plot, config.bitrate)
+    check_export_paths(args.parquet, args.mcap)
+    check_junit_path(args)
+    board_maker(config.firmware, secoc=config.secoc_key is not None)  # refusals before any file
+    title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
+    if config.firmware != "python":
+        title += f", {config.firmware} firmware"
+    with serve_foxglove(args, config.robot, config.integrator) as live:
+        extra: list[can.Listener] = [] if live is None else [Isolated(live)]
+        analysis, log_error = _run_and_analyze(config, args, extra)
+        analysis.report["inputs"] = run_inputs(config, args.errors)
+        code = finish(analysis, args, title=title)
+    write_checks(args, "run", analysis_checks(analysis.report))
+    if args.latency_plot is not None:
+        from odocan.host.report.plots import plot_latency  # matplotlib only when asked
+
+        try:
+            plot_latency(analysis.report, args.latency_plot)
+        except OSError as exc:
+            path = args.latency_plot
+            raise OutputError(f"--latency-plot {path}: {exc.strerror or exc}") from None
+    if log_error is not None:
+        raise log_error
+    return code
+
+
+def check_latency_plot(path: Path | None, bitrate: int | None) -> None:
+    """``--latency-plot`` needs a bit-timed bus and a .png/.svg path that can be written."""
+    if path is None:
+        return
+    if bitrate is None:
+        raise ConfigurationError("--latency-plot needs a bit-timed bus: give -b/--bitrate")
+    if path.suffix.lower() not in PLOT_SUFFIXES:
+        raise ConfigurationError(
+            f"--latency-plot {path}: unknown format {path.suffix or '(none)'!r} (use .png or .svg)"
+        )
+    check_writable(path, "--latency-plot")
+
+
+def _run_and_analyze(
+    config: RigConfig, args: argparse.Namespace, extra: list[can.Listener]
+) -> tuple[Analysis, OutputError | None]:
+    """Run the rig with its listeners (and ``extra``; the wall time measured around the run
+    only) and analyse what the host heard. A log that could not be finished is returned, not
+    raised, so that the summary is still printed."""
+    collector = FrameCollector()
+    listeners: list[can.Listener] = [collector, *extra]
+    wants_mirror = args.interface is not None or args.channel is not None
+    mirror = open_bus(args, with_faults=False) if wants_mirror else None
+    log_error: OutputError | None = None
+    try:
+        if args.log is not None:
+            listeners.append(_open_log(args.log))
+        rig = LockstepRig(config, listeners=listeners)
+        total_ticks = round(rig.default_duration_s / TICK_S)
+        trace = TruthTrace(rig, total_ticks) if args.plot is not None else None
+        if mirror is not None:
+            rig.listeners.append(PacedRedirect(mirror))
+        wire = getattr(rig.host_bus, "timing", None)  # bit-timed: the wire's own records
+        try:
+            start = time.perf_counter()
+            _run(rig, rig.default_duration_s, None if trace is None else trace.record)
+            wall_s = time.perf_counter() - start
+            still_queued = None if wire is None else busstats.pending_by_id(wire)
+        finally:
+            try:
+                rig.close()
+            except OSError as exc:
+                log_error = OutputError(f"--log {args.log}: {exc.strerror or exc}")
+    finally:
+        if mirror is not None:
+            mirror.shutdown()
+    frames = collector.arrays()
+    cause = _why_no_frames(config.faults)
+    require_frames(frames, "the run", cause)
+    with explained(lambda: frames, "the run", cause), progress(f"analysing {len(frames)}", None):
+        analysis = analyze(
+            frames,
+            config.robot,
+            config.integrator,
+            tolerance=args.tolerance,
+            scenario=config.scenario,
+            seed=config.seed,
+            wall_seconds=wall_s,
+        )
+    if trace is not None and len(frames):
+        analysis.series.update(trace.series(float(frames.timestamp_s[0])))
+    if wire is not None:
+        bus = busstats.from_wire(wire, database(), still_queued=still_queued)
+        analysis.report["bus"] = bus.as_dict()
+    write_exports(args, frames, analysis)
+    return analysis, log_error
+
+
+def _run(
+    rig: LockstepRig, duration_s: float, on_tick: Callable[[], None] | None = None
+) -> None:
+    """Step the rig for ``duration_s`` simulated seconds; SIGINT/SIGTERM stop it between two
+    ticks (a second signal, or any KeyboardInterrupt, at once), a progress line on a terminal."""
+    total = round(duration_s / TICK_S)
+    stop = StopRequest()
+    step = rig.step
+    with stop_on_signals(stop), progress(f"simulating {duration_s:g} s", total) as bar:
+        try:
+            for k in range(total):
+                step()
+                if on_tick is not None:
+                    on_tick()
+                if k % PROGRESS_EVERY_TICKS == 0:
+                    if stop.stop_requested:
+                        break
+                    bar.update(k)
+        except KeyboardInterrupt:
+            pass
+    if rig.ticks < total:
+        print(f"interrupted after {rig.ticks * TICK_S:g} s simulated", file=sys.stderr)
+
+
+def _open_log(path: Path) -> can.Listener:
+    """python-can's writer for ``path`` (by extension); an error names the path."""
+    try:
+        return can.Logger(path)
+    except OSError as exc:
+        raise OutputError(f"--log {path}: {exc.strerror or exc}") from None
+
+
+def _why_no_frames(faults: FaultSpec | None) -> str:
+    if faults is not None and faults.active:
+        return f"under --faults {faults}"
+    return "the rig sent none: a bug, please report it"
+
+
+class PacedRedirect(can.Listener):
+    """Send every frame to another bus, no earlier than its simulated time on the wall clock."""
+
+    def __init__(self, bus: can.BusABC) -> None:
+        """``bus``: where the copies go (opened and shut down by the caller)."""
+        self.bus = bus
+        self._start: float | None = None
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """Wait until ``msg.timestamp`` seconds after the first frame, then send a copy."""
+        now = time.monotonic()
+        if self._start is None:
+            self._start = now - msg.timestamp
+        delay = self._start + msg.timestamp - now
+        if delay > 0:
+            time.sleep(delay)
+        self.bus.send(msg)
+
+
+def run_inputs(config: RigConfig, errors_text: str) -> dict[str, object]:
+    """The report's ``inputs``: profile (hash), integrator, errors, faults, seeds, version, DBC."""
+    faults = config.faults
+    seeds = {"rig": config.seed}
+    if faults is not None and faults.active:
+        seeds["faults"], seeds["firmware_faults"] = faults.seed, faults.seed + 1
+    return provenance.inputs(
+        config.robot, integrator=config.integrator, errors=errors_text,
+        faults=str(faults) if faults is not None and faults.active else "", seeds=seeds,
+    )
+
+
+class TruthTrace:
+    """The simulator's true pose after every tick (100 Hz), for a smooth truth in the plot; a
+    run longer than ``TRUTH_TRACE_MAX`` ticks is sampled every k-th tick so that at most that
+    many poses are kept (the legend then gives the lower rate). Reading the truth does not
+    change the run (same frames, same report)."""
+
+    def __init__(self, rig: LockstepRig, total_ticks: int = 0) -> None:
+        """Record from ``rig`` (its vehicle's ``truth()``, read-only) over ``total_ticks``."""
+        self.rig = rig
+        self.every = max(1, -(-total_ticks // TRUTH_TRACE_MAX))
+        self.rows: list[tuple[float, float, float]] = []
+        self._calls = 0
+
+    def record(self) -> None:
+        """Called after each tick: append the true (t s, x m, y m) on every ``every``-th."""
+        self._calls += 1
+        if self._calls % self.every:
+            return
+        pose = self.rig.vehicle.truth()
+        self.rows.append((pose.t_s, pose.x_m, pose.y_m))
+
+    def series(self, t_first_s: float) -> dict[str, np.ndarray]:
+        """``truth_full_{t_s,x_m,y_m}``, times since ``t_first_s`` (the log's first frame)."""
+        data = np.array(self.rows, dtype=np.float64).reshape(-1, 3)
+        return {"truth_full_t_s": data[:, 0] - t_first_s, "truth_full_x_m": data[:, 1],
+                "truth_full_y_m": data[:, 2]}

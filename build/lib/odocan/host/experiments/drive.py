@@ -1,0 +1,328 @@
+"""Closed-loop drives: the firmware navigates a path of NAV_GOALs, the host measures the truth.
+
+One ``NavSession`` is one power cycle of the robot in the lockstep rig (``RigConfig(scenario=
+None)``): the vehicle at rest at the origin of its start frame (x forward, y to the left,
+headings counter-clockwise positive), the firmware configured with the robot's nominal geometry.
+The host may first write new geometry over CAN (``configure``: ODOM_CONFIG staged writes + APPLY,
+each frame answered by ODOM_ACK), then ``drive`` a path: each goal is staged and committed by
+NAV_GOAL frames built by ``host.commands.CommandEncoder`` (E2E-protected, checked against the
+DBC), the first one REPLACE, the others APPEND; the firmware drives turn-go-turn from its own
+odometry while the host listens:
+
+* every NAV_STATUS whose (STATE, GOAL_ID) differs from the previous one is a ``Mark``, stamped
+  with the ground truth of that tick (``Vehicle.truth()``: the tape measure of the experiment);
+* the last ODOM_POSE_X / ODOM_POSE_Y frames are the on-board pose (0.1 mm, 9.6e-5 rad);
+* every ODOM_ACK is checked: a NACK is an ``ExperimentError``.
+
+The drive ends when the last goal shows REACHED with an empty queue, then the robot is left
+``SETTLE_S`` to come to rest before the end pose is taken.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import can
+import numpy as np
+import numpy.typing as npt
+from cantools.database.can import Message
+from cantools.database.namedsignalvalue import NamedSignalValue
+
+from odocan.host.io.logs import FrameCollector
+from odocan.host.judge.reference import Geometry, deltas_from_counts, integrate
+from odocan.host.protocol.commands import CommandEncoder, CommandRejected
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.sim.board import TICK_S
+from odocan.sim.closing import Closing
+from odocan.sim.contract import database
+from odocan.sim.errors import ErrorModel
+from odocan.sim.exceptions import OdocanError
+from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.robot import RobotProfile
+from odocan.sim.truth import Pose
+
+BOOT_S = 0.2  # the odometry is OK (first encoder frames) before the first goal is sent
+SETTLE_S = 1.0  # after the last REACHED: the zero commands, then the motors' tail
+ACK_TIMEOUT_S = 0.5
+IntArray = npt.NDArray[np.int64]
+WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+RETURN_TOLERANCE_M = 0.01  # the firmware stops within 5 mm of a goal (POSITION_TOL), with margin
+ONBOARD_TOLERANCE_M = 1e-3  # on-board end vs float64 dead reckoning (the pose LSB is 0.1 mm)
+_FAILED = frozenset({"STOPPED", "ABORTED"})
+
+
+class ExperimentError(OdocanError):
+    """An experiment could not run as planned (a NACK, a goal not reached in time)."""
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """One goal of a path, in the odometry (start) frame: metres, and the final heading in
+    radians (None: NO_FINAL_HEADING, the robot stops in any heading)."""
+
+    x_m: float
+    y_m: float
+    heading_rad: float | None = None
+
+
+@dataclass(frozen=True)
+class Mark:
+    """The truth at a NAV_STATUS change: ``state`` (a NAV_STATUS STATE name) of goal ``goal_id``
+    began in the tick whose true pose is ``pose`` (start frame, m and rad)."""
+
+    goal_id: int
+    state: str
+    pose: Pose
+
+
+@dataclass(frozen=True)
+class DriveResult:
+    """A path driven: the marks in order, the settled true end pose, the on-board end pose
+    (x_m, y_m, heading_rad in [0, 2 pi)) as decoded from ODOM_POSE_X/Y, and the raw 24-bit
+    (left, right) counters of every WHEEL_ENCODERS frame from t = 0 (the first is at rest, the
+    last is of the tick of ``end``)."""
+
+    marks: tuple[Mark, ...]
+    end: Pose
+    onboard_end: tuple[float, float, float]
+    encoder_counts: tuple[IntArray, IntArray]
+
+    def mark(self, goal_id: int, state: str) -> Mark:
+        """The first mark of ``state`` for ``goal_id``; ExperimentError when there is none."""
+        for mark in self.marks:
+            if mark.goal_id == goal_id and mark.state == state:
+                return mark
+        raise ExperimentError(f"goal {goal_id} never showed {state}")
+
+
+class _NavListener(can.Listener):
+    """Hears NAV_STATUS changes, ODOM_ACKs and the last on-board pose (decoded with cantools)."""
+
+    def __init__(self) -> None:
+        db = database()
+        self._status = db.get_message_by_name("NAV_STATUS")
+        self._ack = db.get_message_by_name("ODOM_ACK")
+        self._pose_x = db.get_message_by_name("ODOM_POSE_X")
+        self._pose_y = db.get_message_by_name("ODOM_POSE_Y")
+        self.changes: list[tuple[int, str, int]] = []  # (goal_id, state, queue depth), unread
+        self.acks: list[dict[str, Any]] = []
+        self.last_x: bytes | None = None
+        self.last_y: bytes | None = None
+        self._previous: tuple[int, str] | None = None
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """Keep what the session needs (runs in the rig's host-drain step)."""
+        can_id = msg.arbitration_id
+        if can_id == self._status.frame_id:
+            signals = _signals(self._status, msg.data)
+            now = (int(signals["GOAL_ID"]), str(signals["STATE"]))
+            if now != self._previous:
+                self._previous = now
+                self.changes.append((*now, int(signals["QUEUE_DEPTH"])))
+        elif can_id == self._ack.frame_id:
+            self.acks.append(_signals(self._ack, msg.data, choices=False))
+        elif can_id == self._pose_x.frame_id:
+            self.last_x = bytes(msg.data)
+        elif can_id == self._pose_y.frame_id:
+            self.last_y = bytes(msg.data)
+
+    def reason_name(self, ack: dict[str, Any]) -> str:
+        """The REASON of a decoded ODOM_ACK by its DBC name."""
+        choices = self._ack.get_signal_by_name("REASON").choices
+        return str(choices[ack["REASON"]]) if choices and ack["REASON"] in choices else "?"
+
+    def onboard_pose(self) -> tuple[float, float, float]:
+        """The last on-board pose heard: (x m, y m, heading rad in [0, 2 pi))."""
+        if self.last_x is None or self.last_y is None:
+            raise ExperimentError("no ODOM_POSE_X/Y heard from the firmware")
+        pose_x = _signals(self._pose_x, self.last_x)
+        pose_y = _signals(self._pose_y, self.last_y)
+        return float(pose_x["X"]), float(pose_y["Y"]), float(pose_x["HEADING"])
+
+
+def _signals(message: Message, data: bytes | bytearray, choices: bool = True) -> dict[str, Any]:
+    """cantools' decoding of one frame (choices as their VAL_ names when ``choices``)."""
+    signals = message.decode(bytes(data), decode_choices=choices)
+    assert isinstance(signals, dict)
+    return {k: str(v) if isinstance(v, NamedSignalValue) else v for k, v in signals.items()}
+
+
+class NavSession(Closing):
+    """The robot powered on in the closed-loop rig; the host drives it over CAN.
+
+    Args:
+        robot: nominal profile (the firmware's geometry at boot).
+        errors: the real robot's errors (``sim.errors.ErrorModel``).
+        seed: seed of the slip noise.
+        integrator: on-board integrator name.
+        channel: the python-can ``virtual`` channel of this rig.
+    """
+
+    def __init__(
+        self,
+        robot: RobotProfile,
+        errors: ErrorModel,
+        seed: int,
+        integrator: str = "exact",
+        channel: str = "odocan-experiment",
+    ) -> None:
+        self.robot = robot
+        self.integrator = integrator
+        self.listener = _NavListener()
+        self.frames = FrameCollector()
+        config = RigConfig(
+            robot=robot,
+            integrator=integrator,
+            scenario=None,
+            seed=seed,
+            errors=errors,
+            channel=channel,
+        )
+        self.rig = LockstepRig(config, [self.listener, self.frames])
+        self.encoder = CommandEncoder()
+        self.marks: list[Mark] = []
+        self._last_goal = 0
+        self._finished = False
+
+    def close(self) -> None:
+        """Release the rig's buses."""
+        self.rig.close()
+
+    def _send_command(self, name: str, values: dict[str, Any]) -> int:
+        """Encode one command (JSON, as an MQTT client would) and send its frames now; the E2E
+        COUNTER of its committing frame (GO or APPLY)."""
+        try:
+            command = self.encoder.encode(name, json.dumps(values).encode())
+        except CommandRejected as exc:
+            raise ExperimentError(f"{name}: {exc.reason}") from None
+        for frame in command.frames:
+            self.rig.send(frame.can_id, frame.data)
+        return command.frames[-1].counter
+
+    def _await_ack(self, request_id: int, counter: int, what: str) -> None:
+        """Step until the ODOM_ACK of the committing frame; ExperimentError on any NACK."""
+
+        def answered() -> bool:
+            self._take_marks()
+            return any(
+                a["REQUEST_ID"] == request_id and a["REQUEST_COUNTER"] == counter
+                for a in self.listener.acks
+            )
+
+        if not self.rig.run_until(answered, ACK_TIMEOUT_S):
+            raise ExperimentError(f"{what}: no ODOM_ACK within {ACK_TIMEOUT_S} s")
+        for ack in self.listener.acks:
+            if ack["RESULT"] != 0:
+                raise ExperimentError(f"{what}: NACK ({self.listener.reason_name(ack)})")
+        self.listener.acks.clear()
+
+    def configure(self, radius_left_m: float, radius_right_m: float, wheelbase_m: float) -> None:
+        """Write the wheel radii and the wheelbase (m, sent as whole nanometres) over CAN:
+        ODOM_CONFIG staged writes + APPLY, waiting for the APPLY's ODOM_ACK."""
+        values = {
+            "counts_per_rev": self.robot.counts_per_rev,
+            "wheel_radius_left_m": radius_left_m,
+            "wheel_radius_right_m": radius_right_m,
+            "wheelbase_m": wheelbase_m,
+            "counter_bits": self.robot.counter_bits,
+            "integrator": self.integrator,
+        }
+        counter = self._send_command("config", values)
+        self._await_ack(database().get_message_by_name("ODOM_CONFIG").frame_id, counter, "config")
+
+    def drive(self, path: Sequence[Waypoint], timeout_s: float) -> DriveResult:
+        """Drive ``path`` turn-go-turn (goal ids 1..n); the marks, the settled truth, the
+        on-board end pose and the encoder log. ExperimentError when a goal is refused, stopped
+        or aborted, or the path takes longer than ``timeout_s`` simulated seconds."""
+        if self.rig.ticks * TICK_S < BOOT_S:
+            self.rig.run(BOOT_S)
+        nav_goal_id = database().get_message_by_name("NAV_GOAL").frame_id
+        self._last_goal = len(path)
+        self._finished = False
+        for goal_id, point in enumerate(path, start=1):
+            values: dict[str, Any] = {
+                "x_m": point.x_m,
+                "y_m": point.y_m,
+                "mode": "turn_go_turn",
+                "append": goal_id > 1,
+                "goal_id": goal_id,
+            }
+            if point.heading_rad is not None:
+                values["heading_rad"] = point.heading_rad
+            counter = self._send_command("nav_goal", values)
+            self._await_ack(nav_goal_id, counter, f"goal {goal_id}")
+        if not self._finished and not self.rig.run_until(self._take_marks, timeout_s):
+            raise ExperimentError(f"path of {len(path)} goals not reached within {timeout_s:g} s")
+        self.rig.run(SETTLE_S)
+        return DriveResult(
+            tuple(self.marks),
+            self.rig.vehicle.truth(),
+            self.listener.onboard_pose(),
+            self._encoder_counts(),
+        )
+
+    def _take_marks(self) -> bool:
+        """Turn the NAV_STATUS changes heard into marks with this tick's truth (called after
+        every tick); True once the path's last goal is REACHED with an empty queue."""
+        changes = self.listener.changes
+        if changes:
+            pose = self.rig.vehicle.truth()
+            for goal_id, state, depth in changes:
+                if state in _FAILED:
+                    raise ExperimentError(f"goal {goal_id} ended {state}")
+                self.marks.append(Mark(goal_id, state, pose))
+                if goal_id == self._last_goal and state == "REACHED" and depth == 0:
+                    self._finished = True
+            changes.clear()
+        return self._finished
+
+    def _encoder_counts(self) -> tuple[IntArray, IntArray]:
+        """(left, right) LEFT_COUNT/RIGHT_COUNT of every WHEEL_ENCODERS frame heard (raw u24)."""
+        decoded = BulkDecoder(database()).decode(self.frames.arrays(), "WHEEL_ENCODERS")
+        return decoded["LEFT_COUNT"].astype(np.int64), decoded["RIGHT_COUNT"].astype(np.int64)
+
+
+def wrap_pi(angle_rad: float) -> float:
+    """``angle_rad`` wrapped to [-pi, pi)."""
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def dead_reckon(
+    counts: tuple[IntArray, IntArray], geometry: Geometry, counter_bits: int,
+    integrator: str = "exact",
+) -> tuple[float, float]:
+    """(x, y) m where the float64 reference ends on the logged raw counters of a
+    ``counter_bits``-wide encoder, from the power-up pose 0: the wire carries the low
+    min(counter_bits, 24) bits, so the deltas wrap there (a 16-bit counter at 2^16)."""
+    bits = min(counter_bits, WIRE_COUNTER_BITS)
+    d_left = deltas_from_counts(counts[0], bits)
+    d_right = deltas_from_counts(counts[1], bits)
+    if d_left.size == 0:
+        return 0.0, 0.0
+    poses = integrate(d_left, d_right, geometry, integrator)
+    return float(poses.x_m[-1]), float(poses.y_m[-1])
+
+
+def drive_faults(
+    drive: DriveResult, goal: Waypoint, geometry: Geometry, counter_bits: int, integrator: str
+) -> list[str]:
+    """Why a drive's measurement cannot be trusted (empty: it can): the firmware did not end at
+    its last ``goal`` by its own odometry, or its on-board end departs from the float64
+    reference dead-reckoning the same logged counts with the firmware's ``geometry`` (then the
+    truth measures a wrong firmware, not the robot)."""
+    reasons = []
+    x_m, y_m = drive.onboard_end[0], drive.onboard_end[1]
+    away_m = math.hypot(x_m - goal.x_m, y_m - goal.y_m)
+    if away_m > RETURN_TOLERANCE_M:
+        reasons.append(f"the firmware stopped {away_m * 1e3:.1f} mm from its goal by its own "
+                       "odometry")
+    ref_x, ref_y = dead_reckon(drive.encoder_counts, geometry, counter_bits, integrator)
+    off_m = math.hypot(x_m - ref_x, y_m - ref_y)
+    if off_m > ONBOARD_TOLERANCE_M:
+        reasons.append(f"the on-board end is {off_m * 1e3:.1f} mm from the float64 reference on "
+                       "the same encoder counts (a wrong firmware)")
+    return reasons

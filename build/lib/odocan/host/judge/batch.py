@@ -1,0 +1,241 @@
+"""A fleet's archive: many CAN logs analysed in parallel, locally or on a Dask cluster.
+
+``find_logs`` expands the paths a person gives (files, and directories searched recursively for
+``.log``, ``.asc`` and ``.blf``); ``analyze_logs`` runs ``analyze_one`` on every log in a pool of
+processes (``jobs``) or, given a scheduler address, on a Dask distributed cluster. One log's
+failure (unreadable, not odocan's frames) is that log's result, never the batch's end: every log
+gets a ``LogResult`` saying frames, verdict and largest errors, or why it could not be analysed.
+
+Workers receive plain values (paths, names, numbers) and return plain values (the JSON report as
+a dict), so the same function runs in a ``ProcessPoolExecutor`` and on a remote Dask worker.
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import socket
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from odocan.sim.exceptions import OdocanError
+
+LOG_SUFFIXES = (".log", ".asc", ".blf")
+
+
+class DaskUnavailableError(OdocanError):
+    """The ``--dask`` scheduler cannot be reached (or dask is not installed)."""
+
+
+@dataclass(frozen=True)
+class Job:
+    """What every log is analysed with: robot profile name, integrator (None: the one the log's
+    ODOM_STATUS reports), position tolerance in metres, heading tolerance in radians, and the
+    DBC path (None: odocan's own)."""
+
+    robot: str
+    integrator: str | None
+    tolerance_position_m: float
+    tolerance_heading_rad: float
+    dbc: str | None = None
+
+
+@dataclass(frozen=True)
+class LogResult:
+    """One log's outcome: ``report`` (the JSON report, as ``odocan analyze LOG --report`` writes
+    it) when analysed, else ``error`` (one line: why it could not be read or analysed)."""
+
+    path: str
+    report: dict[str, Any] | None = None
+    error: str | None = None
+    frames: int | None = None  # frames in the log, whatever their ID (None: not read)
+    passed: bool = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "passed", bool(self.report and self.report.get("passed")))
+
+
+def find_logs(paths: Sequence[Path]) -> tuple[list[Path], list[str]]:
+    """The logs named by ``paths`` in order (a directory contributes its ``LOG_SUFFIXES`` files,
+    recursively, sorted; a file is taken whatever its suffix, so a bad one gets named later),
+    and one line per path that gives no log at all (missing, or a directory without logs)."""
+    logs: list[Path] = []
+    problems: list[str] = []
+    for path in paths:
+        if path.is_dir():
+            found = sorted(
+                p for p in path.rglob("*") if p.suffix.lower() in LOG_SUFFIXES and p.is_file()
+            )
+            if not found:
+                problems.append(f"{path}: no .log, .asc or .blf file in this directory")
+            logs.extend(found)
+        elif path.exists():
+            logs.append(path)
+        else:
+            problems.append(f"{path}: no such log file or directory")
+    unique = list(dict.fromkeys(p.resolve() for p in logs))
+    return [Path(os.path.relpath(p)) if _under_cwd(p) else p for p in unique], problems
+
+
+def _under_cwd(path: Path) -> bool:
+    return path.is_relative_to(Path.cwd())
+
+
+def analyze_one(path: str, job: Job) -> LogResult:
+    """Read and analyse one log (runs in a worker process); never raises for a bad log."""
+    from odocan.host.cli.inputs import explained, require_frames
+    from odocan.host.cli.subparsers.analyze import load_dbc, log_inputs
+    from odocan.host.io.logs import read_log
+    from odocan.host.judge.analysis import Tolerance, analyze
+    from odocan.sim import robot
+
+    log = Path(path)
+    try:
+        profile = robot.load(job.robot)
+        tolerance = Tolerance(job.tolerance_position_m, job.tolerance_heading_rad)
+        frames = read_log(log, warn=lambda message: None)
+        if job.dbc is not None:
+            db = load_dbc(Path(job.dbc))
+            analysis = analyze(frames, profile, job.integrator, tolerance=tolerance, db=db)
+        else:
+            require_frames(frames, path)
+            with explained(lambda: frames, path):
+                analysis = analyze(frames, profile, job.integrator, tolerance=tolerance)
+        report = analysis.report
+        report["inputs"] = log_inputs(
+            log, profile, report["integrator"], None if job.dbc is None else Path(job.dbc)
+        )
+    except (OdocanError, OSError) as exc:
+        return LogResult(path, error=_one_line(exc))
+    except Exception as exc:  # a log no check foresaw: this log's error, the batch goes on
+        return LogResult(path, error=f"cannot analyse: {type(exc).__name__}: {_one_line(exc)}")
+    return LogResult(path, report=_plain(report), frames=len(frames))
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with numpy scalars and arrays as Python numbers and lists (pickles anywhere)."""
+    import numpy as np
+
+    if isinstance(value, dict):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(item) for item in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return value
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join((str(exc) or type(exc).__name__).split())
+
+
+def analyze_logs(
+    logs: Sequence[Path],
+    job: Job,
+    *,
+    jobs: int,
+    on_done: Callable[[LogResult], None] = lambda result: None,
+) -> list[LogResult]:
+    """Every log analysed in ``jobs`` worker processes (1: in this process); results in the
+    order of ``logs``; ``on_done`` is called as each one finishes."""
+    paths = [str(p) for p in logs]
+    if jobs <= 1 or len(paths) == 1:
+        results = []
+        for path in paths:
+            results.append(analyze_one(path, job))
+            on_done(results[-1])
+        return results
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    by_path: dict[str, LogResult] = {}
+    with ProcessPoolExecutor(max_workers=min(jobs, len(paths))) as pool:
+        futures = {pool.submit(analyze_one, path, job): path for path in paths}
+        for future in as_completed(futures):
+            by_path[futures[future]] = result = _outcome(futures[future], future.result)
+            on_done(result)
+    return [by_path[path] for path in paths]
+
+
+def _outcome(path: str, result: Callable[[], LogResult]) -> LogResult:
+    """``result()``, or the log's error when its worker died (killed, out of memory)."""
+    try:
+        return result()
+    except Exception as exc:  # BrokenProcessPool, dask's KilledWorker, a lost connection ...
+        return LogResult(path, error=f"worker lost: {type(exc).__name__}: {_one_line(exc)}")
+
+
+def analyze_logs_dask(
+    logs: Sequence[Path],
+    job: Job,
+    *,
+    address: str,
+    timeout_s: float,
+    on_done: Callable[[LogResult], None] = lambda result: None,
+) -> list[LogResult]:
+    """Every log analysed on the Dask distributed cluster whose scheduler is at ``address``
+    (``tcp://host:port``); ``DaskUnavailableError`` (one line) when it cannot be reached within
+    ``timeout_s`` seconds. The workers must be able to import odocan and read the log paths
+    (given absolute)."""
+    paths = [str(Path(p).resolve()) for p in logs]
+    shown = {str(Path(p).resolve()): str(p) for p in logs}
+    client = _connect(address, timeout_s)
+    results: list[LogResult] = []
+    with client:
+        futures = client.map(analyze_one, paths, job=job, pure=False)
+        for path, future in zip(paths, futures, strict=True):
+            done = _outcome(path, future.result)
+            results.append(LogResult(shown[path], done.report, done.error, done.frames))
+            on_done(results[-1])
+    return results
+
+
+def _connect(address: str, timeout_s: float) -> Any:
+    """A ``distributed.Client`` of the scheduler at ``address``, or ``DaskUnavailableError``
+    (one line) within about ``timeout_s`` seconds: a bad address, nobody listening, or a peer
+    that does not speak Dask's protocol."""
+    try:
+        from distributed import Client
+        from distributed.comm.addressing import get_address_host_port, parse_address
+    except ImportError as exc:
+        raise DaskUnavailableError(f"--dask needs dask.distributed: {exc}") from None
+    where = f"--dask {address}"
+    try:
+        scheme, _ = parse_address(address)
+        host, port = get_address_host_port(address) if scheme in ("tcp", "tls") else ("", 0)
+    except ValueError as exc:
+        raise DaskUnavailableError(f"{where}: not a scheduler address ({_one_line(exc)})") from None
+    if host:
+        try:
+            socket.create_connection((host, port), timeout=timeout_s).close()
+        except OSError as exc:
+            raise DaskUnavailableError(
+                f"{where}: cannot connect within {timeout_s:g} s ({_one_line(exc)})"
+            ) from None
+    hook = sys.unraisablehook  # a Client that failed half-made complains as it is collected
+    sys.unraisablehook = lambda unraisable: None
+    try:
+        return Client(address, timeout=timeout_s, set_as_default=False)  # type: ignore[no-untyped-call]
+    except Exception as exc:  # a timeout, or a peer that is no Dask scheduler (any error)
+        message = f"{where}: no Dask scheduler answered within {timeout_s:g} s ({_one_line(exc)})"
+    finally:
+        gc.collect()
+        sys.unraisablehook = hook
+    raise DaskUnavailableError(message)
+
+
+def report_names(logs: Sequence[Path]) -> dict[Path, str]:
+    """A distinct JSON file name per log: its path below the logs' common folder with ``/`` as
+    ``__`` and ``.json`` appended (``a/drive.log`` -> ``a__drive.log.json``)."""
+    resolved = [p.resolve() for p in logs]
+    if not resolved:
+        return {}
+    root = Path(os.path.commonpath([p.parent for p in resolved]))
+    return {
+        log: "__".join(path.relative_to(root).parts) + ".json"
+        for log, path in zip(logs, resolved, strict=True)
+    }

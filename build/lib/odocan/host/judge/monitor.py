@@ -1,0 +1,548 @@
+"""The live view of a CAN bus (``odocan monitor``): the state model fed frame by frame (its
+rendering is ``host.report.live`` and ``host.report.tui``).
+
+``BusMonitor.feed(msg)`` takes every frame heard, in bus order, and never raises on what a bus
+carries: frames of unknown IDs, of the wrong DLC, error and remote frames are counted (the
+``unknown`` section of ``host.e2e.E2EMonitor``, plus the unknown IDs themselves), frames that
+cantools cannot decode are counted as ``undecodable``. Per DBC message it keeps:
+
+* ``count``, ``rate_hz`` and ``jitter_ms``: frames heard, and the rate and the standard deviation of
+  the inter-frame period over the last ``RATE_WINDOW`` frames (bus timestamps, ``msg.timestamp``);
+  for a multiplexed message the period jitter is per page (``pages``: count, rate and jitter of
+  each multiplexer value), as pages sent together have no common period;
+* ``e2e``: the Profile 2 counts (``ok``, ``lost``, ``repeated``, ``crc_errors``,
+  ``wrong_sequence``), judged as the firmware judges them (``E2EMonitor``, time-widened window);
+* ``last``: the latest value of every signal (physical units, enum names), from accepted frames
+  only; a multiplexed message keeps the latest value of each page's signals (and
+  ``last_frame``, the signals of its latest frame alone, is what the screen shows).
+
+From the decoded frames it follows the firmware: ``status`` (ODOM_STATUS: STATE, INTEGRATOR,
+ERROR_MASK with the bits named after ``firmware.errors.ErrorFlag``, UPTIME, frame totals) and the
+pose (``PoseTracker``): the on-board pose (ODOM_POSE_X + ODOM_POSE_Y naming one encoder frame)
+against a float64 ``ReferenceOdometry`` fed WHEEL_ENCODERS, compared at the very encoder frame the
+pose names (ENC_COUNTER), and against SIM_TRUTH when the bus carries it.
+
+Health (``health`` in the snapshot): the verdict never says OK while the pose shown may be wrong.
+A node is **stale** once none of its cyclic messages was heard for ``NODE_TIMEOUT_CYCLES`` times
+the fastest one's DBC cycle (opendbc's rule: 10 x 20 ms = 0.2 s for ODOM_MCU); every node carries
+its age. UPTIME against bus time tells a **reboot** (UPTIME going back, or INIT after running:
+the reference restarts and the E2E sequences of the node start afresh, reported as an event, not
+as lost frames) from **two sources** on one ID (two UPTIME offsets interleaving). The verdict, in
+order: NO FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (with its REASON),
+POSE WRONG (on-board vs reference beyond ``POSE_TOLERANCE_M`` / ``_RAD``), UNVERIFIED (nothing
+compared yet), OK.
+
+``bus_load`` (``host.judge.busstats.LoadWindow``): bits on the wire per second over the last
+second of bus time, from every frame's exact stuffed length, and the load as a fraction when the
+monitor is given the bitrate.
+
+``snapshot()`` is the whole model as JSON-ready data (``odocan monitor --json``);
+``fleet_snapshot`` is the MQTT fleet's (``odocan monitor --mqtt``). ``render`` and
+``render_fleet`` are re-exported from ``host.report.live``, where they now live.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+import time
+from collections import Counter, deque
+from dataclasses import dataclass, field
+from itertools import pairwise
+from typing import Any
+
+import can
+from cantools.database.can import Database, Message
+
+from odocan.firmware.errors import ErrorFlag
+from odocan.host.judge.busstats import LoadWindow
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.fleetview import RobotState
+from odocan.host.protocol.decode import frame_key
+from odocan.host.protocol.e2e import (
+    UNKNOWN,
+    E2EMonitor,
+    crc8h2f_p02_one,
+    e2e_messages,
+)
+from odocan.host.report.jsonutil import finite
+from odocan.sim.contract import database
+from odocan.sim.robot import RobotProfile
+
+RATE_WINDOW = 128  # frames per message for rate and jitter (1.28 s of WHEEL_ENCODERS)
+STALE_S = 1.0  # a message not heard for this long is shown dimmed
+ACCEPTED = frozenset({"ok", "oksomelost", "unprotected"})
+MAX_UNKNOWN_IDS = 32  # distinct unknown identifiers listed (all are counted)
+_HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
+NODE_TIMEOUT_CYCLES = 10  # a node is stale after 10 x its fastest cycle time (opendbc)
+FIRMWARE_NODE = "ODOM_MCU"
+UPTIME_MATCH_S = 2.0  # one source's UPTIME (whole s) minus bus time stays within this
+CONFLICT_HOLD_S = 2.0  # CONFLICT is shown this long after two sources last interleaved
+POSE_TOLERANCE_M = 1e-3  # on-board vs reference beyond this: POSE WRONG (10 LSB of X/Y)
+POSE_TOLERANCE_RAD = 1e-3  # ... or this (about 10 LSB of HEADING)
+MAX_EVENTS = 16  # events kept (the latest)
+
+
+@dataclass
+class SourceWatch:
+    """One node's UPTIME against bus time, summary after summary: a single source keeps
+    UPTIME - t constant (to the second), a reboot moves it once, two sources on one ID make two
+    offsets interleave."""
+
+    offset_s: float | None = None  # UPTIME - bus time of the source followed
+    other_s: float | None = None  # the offset before the last change
+    last_uptime_s: int = 0
+    last_state: str = ""
+    conflict_until_s: float = -math.inf
+
+    def observe(self, t_s: float, uptime_s: int, state: str) -> str | None:
+        """One ODOM_STATUS summary; returns ``"reboot"``, ``"two sources"``, ``"uptime jump"``
+        or None."""
+        offset = uptime_s - t_s
+        kind = None
+        if self.offset_s is None:
+            self.offset_s = offset
+        elif abs(offset - self.offset_s) <= UPTIME_MATCH_S:
+            if state == "INIT" and self.last_state not in ("", "INIT"):
+                kind = "reboot"
+        elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
+            kind = "two sources"
+            self.conflict_until_s = t_s + CONFLICT_HOLD_S
+            self.offset_s, self.other_s = self.other_s, self.offset_s
+        else:
+            kind = "reboot" if uptime_s < self.last_uptime_s or state == "INIT" else "uptime jump"
+            self.offset_s, self.other_s = offset, self.offset_s
+        self.last_uptime_s, self.last_state = uptime_s, state
+        return kind
+
+
+@dataclass
+class MessageStats:
+    """What the monitor knows of one DBC message."""
+
+    name: str
+    frame_id: int
+    count: int = 0
+    times: deque[float] = field(default_factory=lambda: deque(maxlen=RATE_WINDOW))
+    last: dict[str, Any] = field(default_factory=dict)  # every signal's latest value
+    last_frame: dict[str, Any] = field(default_factory=dict)  # the latest frame's signals
+    heard_monotonic_s: float = 0.0
+    pages: dict[str, MessageStats] = field(default_factory=dict)  # per multiplexer value
+
+    def heard(self, timestamp_s: float, now_s: float, page: str | None = None) -> None:
+        """Count one frame of this message (bus timestamp, local monotonic time, its page)."""
+        self.count += 1
+        self.times.append(timestamp_s)
+        self.heard_monotonic_s = now_s
+        if page is not None:
+            stats = self.pages.get(page)
+            if stats is None:
+                stats = self.pages[page] = MessageStats(page, self.frame_id)
+            stats.heard(timestamp_s, now_s)
+
+    def timing(self) -> dict[str, Any]:
+        """``count``, ``rate_hz``, ``jitter_ms``."""
+        return {"count": self.count, "rate_hz": self.rate_hz(), "jitter_ms": self.jitter_ms()}
+
+    def rate_hz(self) -> float | None:
+        """Frames per second over the window (None before two frames)."""
+        if len(self.times) < 2 or self.times[-1] <= self.times[0]:
+            return None
+        return (len(self.times) - 1) / (self.times[-1] - self.times[0])
+
+    def jitter_ms(self) -> float | None:
+        """Standard deviation of the inter-frame period over the window (ms)."""
+        if len(self.times) < 3:
+            return None
+        return 1e3 * statistics.pstdev(b - a for a, b in pairwise(self.times))
+
+
+# SecOC counts shown by the monitor: ODOM_ACK NACK reasons AUTH_*, and ODOM_AUTH frames that
+# follow no secured command frame.
+AUTH_COUNTS = (
+    "auth_failed",
+    "auth_freshness",
+    "auth_missing",
+    "auth_unavailable",
+    "auth_without_command",
+)
+
+
+class BusMonitor:
+    """The state model of ``odocan monitor`` (see the module docstring)."""
+
+    def __init__(
+        self,
+        robot: RobotProfile,
+        integrator: str | None = None,
+        db: Database | None = None,
+        bitrate: int | None = None,
+    ) -> None:
+        self.db = db if db is not None else database()
+        self.bitrate = bitrate  # bit/s, for bus_load's fraction (None: bits/s only)
+        self.load = LoadWindow()
+        self._by_key = {frame_key(m.frame_id, m.is_extended_frame): m for m in self.db.messages}
+        self.e2e = E2EMonitor(self.db)
+        self._e2e_configs = e2e_messages(self.db)
+        self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
+        self.messages: dict[str, MessageStats] = {}
+        self.unknown_ids: Counter[str] = Counter()
+        self.status: dict[str, Any] = {}
+        self.frames_total = 0
+        self.undecodable = 0
+        self.started_monotonic_s = time.monotonic()
+        self.sources = SourceWatch()
+        self.events: deque[dict[str, Any]] = deque(maxlen=MAX_EVENTS)
+        self._bus_time_s = 0.0  # the latest bus timestamp heard
+        # SecOC (docs/secoc.md): the firmware's AUTH_* refusals, and ODOM_AUTH frames that
+        # follow no command frame (a forger's, or a command lost on the way)
+        self.auth: Counter[str] = Counter({name: 0 for name in AUTH_COUNTS})
+        self._held: set[str] = set()  # secured messages with a command frame awaiting ODOM_AUTH
+
+    def feed(self, msg: can.Message, now_s: float | None = None) -> None:
+        """One frame heard on the bus (``now_s``: local monotonic time, default now)."""
+        now_s = time.monotonic() if now_s is None else now_s
+        self.frames_total += 1
+        self.load.add(msg)
+        if msg.is_error_frame or msg.is_remote_frame:
+            self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
+            return
+        data = bytes(msg.data)
+        timestamp_s = self._bus_time_s = msg.timestamp
+        message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
+        summary = self._summary(message, data) if message is not None else None
+        if summary is not None:  # before its E2E check, which a reboot or a second source fails
+            self._watch_source(*summary)
+        status = self.e2e.check(msg.arbitration_id, data, extended=msg.is_extended_id,
+                                timestamp_s=timestamp_s)
+        if message is None:
+            self._count_unknown_id(msg.arbitration_id)
+            return
+        if len(data) != message.length:
+            return  # counted by E2EMonitor as wrong_dlc
+        stats = self.messages.get(message.name)
+        if stats is None:
+            stats = self.messages[message.name] = MessageStats(message.name, message.frame_id)
+        stats.heard(timestamp_s, now_s, _page(message, data))
+        if status in ACCEPTED:
+            self._use(message, stats, data)
+
+    def _count_unknown_id(self, can_id: int) -> None:
+        key = f"0x{can_id:03X}"
+        if key in self.unknown_ids or len(self.unknown_ids) < MAX_UNKNOWN_IDS:
+            self.unknown_ids[key] += 1
+
+    def _use(self, message: Message, stats: MessageStats, data: bytes) -> None:
+        """Decode an accepted frame, keep its values and follow the firmware."""
+        try:
+            signals = message.decode(data, decode_choices=False)
+        except Exception:  # cantools: unknown multiplexer value, ... (never fatal)
+            self.undecodable += 1
+            return
+        assert isinstance(signals, dict)
+        shown = {name: _shown(message, name, value) for name, value in signals.items()
+                 if name not in _HIDDEN}
+        stats.last.update(shown)
+        stats.last_frame = shown
+        handler = _HANDLERS.get(message.name)
+        if handler is not None:
+            try:
+                handler(self, signals, shown)
+            except (KeyError, TypeError, ValueError):  # a --dbc without the signals it needs
+                self.undecodable += 1
+
+    def _on_pose_request(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        """ODOM_SET_POSE or ODOM_CONFIG APPLY: the on-board pose restarts from what the host
+        gave, so the reference restarts at the next on-board pose (an event)."""
+        if shown.get("FIELD", shown.get("PARAM")) != "APPLY":
+            return
+        self.tracker.restart_reference()
+        name = "set pose" if "FIELD" in shown else "config"
+        self.events.append({"t_s": self._bus_time_s, "kind": name,
+                            "detail": f"{name} applied: reference restarted"})
+
+    def _on_command(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        """ODOM_SET_POSE or ODOM_CONFIG: its ODOM_AUTH may follow, and APPLY restarts."""
+        self._held.add("ODOM_SET_POSE" if "FIELD" in shown else "ODOM_CONFIG")
+        self._on_pose_request(s, shown)
+
+    def _on_nav_goal(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        self._held.add("NAV_GOAL")
+
+    def _on_auth(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        """ODOM_AUTH: it authenticates the last command frame of the message it names (as the
+        firmware's held slot does), or none: counted as an ODOM_AUTH without a command."""
+        request = str(shown.get("REQUEST", "?"))
+        if request in self._held:
+            self._held.discard(request)
+        else:
+            self.auth["auth_without_command"] += 1
+
+    def _on_ack(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        """ODOM_ACK: a NACK with an AUTH_* reason is an authentication failure (an event)."""
+        reason = str(shown.get("REASON", ""))
+        if not reason.startswith("AUTH_"):
+            return
+        self.auth[reason.lower()] += 1
+        request = shown.get("REQUEST_ID", "?")
+        self.events.append({"t_s": self._bus_time_s, "kind": "auth",
+                            "detail": f"{request} refused: {reason}"})
+
+    def _on_encoders(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
+
+    def _on_pose_x(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]))
+
+    def _on_pose_y(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        self.tracker.on_pose_y(int(s["ENC_COUNTER"]), float(s["Y"]), int(s["TURNS"]))
+
+    def _on_truth(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        part = int(s["PART"])
+        value = s.get({0: "X", 1: "Y", 2: "HEADING"}.get(part, ""))
+        if value is not None:
+            self.tracker.on_truth(part, int(s["ENC_COUNTER"]), float(value))
+
+    def _on_status(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        page = str(shown.get("PAGE", s.get("PAGE")))
+        if page == "SUMMARY":
+            mask = int(s["ERROR_MASK"])
+            self.status.update(
+                state=shown["STATE"], integrator=shown["INTEGRATOR"], error_mask=mask,
+                errors=error_names(mask), uptime_s=int(s["UPTIME"]),
+                reason=str(shown.get("REASON", "NONE")),
+            )
+            integrator = str(shown["INTEGRATOR"]).lower()
+            if integrator in ("euler", "rk2", "exact"):
+                self.tracker.on_integrator(integrator)
+        elif page == "FRAME_TOTALS":
+            self.status.update({k.lower(): int(v) for k, v in s.items() if k.endswith("_FRAMES")})
+
+    def _watch_source(self, uptime_s: int, state: str) -> None:
+        """Reboots and a second source, from the summary's UPTIME and STATE (module docstring)."""
+        before = self.status.get("uptime_s")
+        kind = self.sources.observe(self._bus_time_s, uptime_s, state)
+        if kind is None:
+            return
+        detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
+        if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
+            self.tracker.restart_reference()
+            self._restart_sequences(FIRMWARE_NODE)
+            detail += ": reference restarted"
+        elif kind == "two sources":
+            detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
+            last = self.events[-1] if self.events else None
+            if last and last["kind"] == kind and self._bus_time_s - last["t_s"] < CONFLICT_HOLD_S:
+                last["t_s"] = self._bus_time_s  # one event while the conflict lasts
+                return
+        self.events.append({"t_s": self._bus_time_s, "kind": kind, "detail": detail})
+
+    def _summary(self, message: Message, data: bytes) -> tuple[int, str] | None:
+        """(UPTIME, STATE) of an ODOM_STATUS summary whose CRC holds, whatever its sequence."""
+        if message.name != "ODOM_STATUS" or len(data) != 8:
+            return None
+        config = self._e2e_configs.get(frame_key(message.frame_id, message.is_extended_frame))
+        ids = config.data_ids if config is not None else None
+        if not ids or data[0] != crc8h2f_p02_one(data, ids[data[1] & 0xF]):
+            return None
+        try:
+            signals = message.decode(data)
+        except Exception:  # not decodable: the E2E check and _use count it
+            return None
+        assert isinstance(signals, dict)
+        values: dict[str, Any] = dict(signals)
+        if str(values.get("PAGE")) != "SUMMARY":
+            return None
+        return int(values["UPTIME"]), str(values["STATE"])
+
+    def _restart_sequences(self, node: str) -> None:
+        """Forget the E2E sequence of every message ``node`` sends (a reboot restarts its
+        counters: that is not frames lost)."""
+        for message in self.db.messages:
+            if node in message.senders:
+                state = self.e2e._states.get(frame_key(message.frame_id, message.is_extended_frame))
+                if state is not None:  # the counts stay; the next frame starts the sequence
+                    state.waiting = True
+
+    def node_ages(self, now_s: float) -> dict[str, dict[str, Any]]:
+        """Per sending node heard: ``age_s`` since its last cyclic message, ``timeout_s``
+        (``NODE_TIMEOUT_CYCLES`` x the fastest cycle among its messages heard), ``stale``."""
+        nodes: dict[str, dict[str, Any]] = {}
+        for name, stats in self.messages.items():
+            message = self.db.get_message_by_name(name)
+            if message.send_type != "Cyclic" or not message.cycle_time or not message.senders:
+                continue
+            timeout_s = NODE_TIMEOUT_CYCLES * message.cycle_time / 1e3
+            node = nodes.setdefault(message.senders[0], {"age_s": math.inf, "timeout_s": math.inf})
+            node["age_s"] = min(node["age_s"], now_s - stats.heard_monotonic_s)
+            node["timeout_s"] = min(node["timeout_s"], timeout_s)
+        for node in nodes.values():
+            node["stale"] = node["age_s"] > node["timeout_s"]
+        return nodes
+
+    def health(self, now_s: float | None = None) -> dict[str, Any]:
+        """The verdict on the firmware and its pose (module docstring), why, node ages, events."""
+        now_s = time.monotonic() if now_s is None else now_s
+        nodes = self.node_ages(now_s)
+        state, why = self._verdict(nodes.get(FIRMWARE_NODE))
+        return {"state": state, "why": why, "nodes": nodes, "events": list(self.events)}
+
+    def _verdict(self, firmware: dict[str, Any] | None) -> tuple[str, list[str]]:
+        if firmware is None:
+            return "NO FIRMWARE", [f"no cyclic {FIRMWARE_NODE} message heard"]
+        if firmware["stale"]:
+            return "STALE", [
+                f"{FIRMWARE_NODE} silent for {firmware['age_s']:.2f} s (timeout "
+                f"{firmware['timeout_s']:.2f} s); it last said {self.status.get('state', '?')}"
+            ]
+        if self._bus_time_s <= self.sources.conflict_until_s:
+            return "CONFLICT", [str(self.events[-1]["detail"]) if self.events else "two sources"]
+        reported = str(self.status.get("state", "?"))
+        if reported != "OK":
+            return reported, [f"firmware reports {reported} ({self.status.get('reason', '?')})"]
+        error = self.tracker.vs_reference.latest
+        if not error:
+            return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
+        if error["dpos_m"] > POSE_TOLERANCE_M or abs(error["dheading_rad"]) > POSE_TOLERANCE_RAD:
+            return "POSE WRONG", [
+                f"on-board vs reference {error['dpos_m'] * 1e3:.1f} mm, "
+                f"{error['dheading_rad'] * 1e3:.2f} mrad"
+            ]
+        return "OK", []
+
+    def snapshot(self, now_s: float | None = None) -> dict[str, Any]:
+        """The whole model as JSON-ready data (``odocan monitor --json``); ``now_s``: local
+        monotonic time (default now) for the ages."""
+        now_s = time.monotonic() if now_s is None else now_s
+        e2e = self.e2e.counts()
+        messages = {}
+        for name in sorted(self.messages, key=lambda n: self.messages[n].frame_id):
+            stats = self.messages[name]
+            message = self.db.get_message_by_name(name)
+            messages[name] = {
+                "id": f"0x{stats.frame_id:03X}",
+                "count": stats.count,
+                "rate_hz": stats.rate_hz(),
+                "jitter_ms": None if stats.pages else stats.jitter_ms(),
+                "e2e": e2e.get(name, {}),
+                "age_s": now_s - stats.heard_monotonic_s,
+                "stale": _message_stale(message, now_s - stats.heard_monotonic_s),
+                "last": dict(stats.last),
+                "units": {sig: _unit(message, sig) for sig in stats.last},
+            }
+            if message.is_multiplexed():  # the latest page alone
+                messages[name]["last_frame"] = dict(stats.last_frame)
+                messages[name]["pages"] = {k: v.timing() for k, v in stats.pages.items()}
+        return {
+            "duration_s": now_s - self.started_monotonic_s,
+            "frames_total": self.frames_total,
+            "bus_load": self.load.snapshot(self.bitrate),
+            "messages": messages,
+            "status": dict(self.status) or None,
+            "health": self.health(now_s),
+            **self.tracker.snapshot(),
+            "unknown": {**e2e[UNKNOWN], "ids": dict(self.unknown_ids),
+                        "undecodable": self.undecodable},
+            "auth": dict(self.auth),
+        }
+
+
+_HANDLERS = {
+    "ODOM_SET_POSE": BusMonitor._on_command,
+    "ODOM_CONFIG": BusMonitor._on_command,
+    "NAV_GOAL": BusMonitor._on_nav_goal,
+    "ODOM_AUTH": BusMonitor._on_auth,
+    "ODOM_ACK": BusMonitor._on_ack,
+    "WHEEL_ENCODERS": BusMonitor._on_encoders,
+    "ODOM_POSE_X": BusMonitor._on_pose_x,
+    "ODOM_POSE_Y": BusMonitor._on_pose_y,
+    "SIM_TRUTH": BusMonitor._on_truth,
+    "ODOM_STATUS": BusMonitor._on_status,
+}
+
+
+def _page(message: Message, data: bytes) -> str | None:
+    """The multiplexer value of a frame of a multiplexed message (its enum name when it has
+    one), read from the payload before any decoding; None for a plain message."""
+    if not message.is_multiplexed():
+        return None
+    mux = next((s for s in message.signals if s.is_multiplexer), None)
+    if mux is None or mux.byte_order != "little_endian":
+        return None
+    value = (int.from_bytes(data, "little") >> mux.start) & ((1 << mux.length) - 1)
+    choices: dict[Any, Any] = dict(mux.choices or {})
+    return str(choices[value]) if value in choices else str(value)
+
+
+def _message_stale(message: Message, age_s: float) -> bool:
+    """Not heard for ``NODE_TIMEOUT_CYCLES`` cycles (event messages never go stale)."""
+    cycle_ms = message.cycle_time
+    return cycle_ms is not None and cycle_ms > 0 and age_s > NODE_TIMEOUT_CYCLES * cycle_ms / 1e3
+
+
+def to_json(snapshot: dict[str, Any]) -> str:
+    """Indented JSON of a snapshot; non-finite floats become null (JSON has no NaN)."""
+    return json.dumps(finite(snapshot), indent=2, default=str)
+
+
+def error_names(mask: int) -> list[str]:
+    """The ``ErrorFlag`` names of the bits set in ``mask`` (``BIT<n>`` for an unnamed bit)."""
+    named = {int(flag).bit_length() - 1: str(flag.name) for flag in ErrorFlag if flag}
+    return [named.get(bit, f"BIT{bit}") for bit in range(mask.bit_length()) if mask >> bit & 1]
+
+
+def _shown(message: Message, name: str, value: Any) -> Any:
+    """A signal's value as shown: the enum name when it has one, else the number."""
+    choices = message.get_signal_by_name(name).choices
+    if isinstance(value, str):  # already the name (the bridge publishes enums by name)
+        return value
+    if choices and int(value) in choices:
+        return str(choices[int(value)])
+    return value
+
+
+def _unit(message: Message, name: str) -> str:
+    unit = message.get_signal_by_name(name).unit
+    return "" if unit in (None, "-") else str(unit)
+
+
+# --- the MQTT fleet -------------------------------------------------------------------------
+
+
+def fleet_snapshot(table: dict[str, RobotState], db: Database | None = None) -> dict[str, Any]:
+    """Per robot: online, pose, error vs reference, firmware status, frame rates."""
+    db = db if db is not None else database()
+    return {name: _robot_row(table[name], db) for name in sorted(table)}
+
+
+def _robot_row(state: RobotState, db: Database) -> dict[str, Any]:
+    summary = (state.status.get("firmware") or {}).get("summary") or {}
+    status_msg = db.get_message_by_name("ODOM_STATUS")
+    firmware = None
+    if summary:
+        mask = int(summary.get("error_mask", 0))
+        firmware = {"state": _shown(status_msg, "STATE", summary.get("state", 0)),
+                    "integrator": _shown(status_msg, "INTEGRATOR", summary.get("integrator", 0)),
+                    "error_mask": mask, "errors": error_names(mask),
+                    "uptime_s": summary.get("uptime")}
+    hz = state.rates.get("hz") or {}
+    keys = ("x_m", "y_m", "heading_rad", "heading_unwrapped_rad")
+    pose = {k: state.pose.get(k) for k in keys} if state.pose else None
+    return {
+        "online": state.online,
+        "pose": pose,
+        "error": state.error.get("pose_vs_reference"),
+        "status": firmware,
+        "rate_hz": round(sum(hz.values()), 3) if hz else None,
+        "encoder_hz": hz.get("WHEEL_ENCODERS"),
+        "updated_unix_s": state.updated_unix_s,
+    }
+
+
+# Rendering lives in host.report.live; these names stay importable from here.
+from odocan.host.report.live import render, render_fleet  # noqa: E402
+
+__all__ = ["BusMonitor", "MessageStats", "error_names", "fleet_snapshot", "render",
+           "render_fleet", "to_json"]

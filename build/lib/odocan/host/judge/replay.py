@@ -1,0 +1,364 @@
+"""The replay engine: re-run a recorded drive against the current firmware build.
+
+**Lockstep** (the default). The log's WHEEL_ENCODERS frames that pass the host's E2E check
+(``host.e2e.check_frames``) are fed, byte for byte, to a ``sim.board.FirmwareBoard`` on python-can
+``virtual`` buses, one firmware tick per 10 ms encoder period: the frames' ticks come from the
+sender's sequence (the E2E COUNTER unwrapped, widened by 16 where the timestamps say so, as
+``host.analysis`` does), so a gap in the log is a run of ticks without a frame, exactly as the
+firmware would have lived it (its E2E window widens, its watchdog may fire). Gaps longer than
+``MAX_GAP_TICKS`` are shortened to it. The firmware's clock is the first encoder frame's
+timestamp plus 10 ms per tick; the log's own SIM_TRUTH frames are put back on the bus where the
+log had them. Everything on the replayed bus is analysed as ``odocan run`` does
+(``host.analysis.analyze``, ``host.summary.finish``: same report keys, ``--report``, ``--plot``,
+``--tolerance``, summary, exit 0/1/2), plus a ``replay`` section comparing the replayed on-board
+poses with the ones in the log at the same encoder frames (identical for the same firmware).
+``--log OUT`` writes the replayed bus. The integrator defaults to the one the log's ODOM_STATUS
+reports (else exact); Ctrl-C stops early and checks what ran.
+
+**Verdict.** PASS needs both: the replayed firmware within ``--tolerance`` of its float64
+reference (as ``odocan run``), and within ``--tolerance`` of the firmware that recorded the log
+(the logged on-board poses at the same encoder frames; positions up to the log's first gap of the
+encoder sequence, since across a gap the recording firmware may have had frames the log lacks,
+headings everywhere, since they are exact across gaps). When the replay departs, the cause is
+looked for by name (``diagnose``): the integrator the log's ODOM_STATUS reports against the one
+replayed, and which robot profile (the one given and every shipped one) the logged poses fit
+(``analyze`` of the log itself, no replay: the profile whose float64 odometry of the logged
+counts the logged poses follow within tolerance).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+import numpy.typing as npt
+
+from odocan.firmware.config import RobotParams
+from odocan.host.io.logs import (
+    FrameArrays,
+    FrameCollector,
+    to_message,
+)
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Analysis, Tolerance, analyze
+from odocan.host.judge.diagnosis import fitting_profiles
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.e2e import check_frames
+from odocan.host.report.outputs import OutputError
+from odocan.sim import contract
+from odocan.sim.board import TICK_S, FirmwareBoard
+from odocan.sim.clock import LockstepClock
+from odocan.sim.exceptions import OdocanError
+from odocan.sim.rig import INTEGRATORS, firmware_params
+from odocan.sim.robot import RobotProfile, list_profiles
+
+IntArray = npt.NDArray[np.int64]
+MAX_GAP_TICKS = 6000  # a gap in the log longer than 60 s is replayed as 60 s
+
+
+class ReplayError(OdocanError):
+    """A log that cannot be replayed (no encoder frame, ...)."""
+
+
+# --- what is fed -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class EncoderTrack:
+    """The accepted WHEEL_ENCODERS frames of a FrameArrays and the tick of each."""
+
+    index: IntArray  # positions in the frames
+    counter: IntArray  # E2E COUNTER
+    tick: IntArray  # 10 ms periods since the first one, strictly increasing
+
+    @classmethod
+    def of(cls, frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+           decoder: BulkDecoder) -> EncoderTrack:
+        """The track of ``frames`` (empty when none is accepted)."""
+        enc = decoder.decode(frames, "WHEEL_ENCODERS")
+        keep = accepted[enc["index"]]
+        counter = enc["COUNTER"][keep].astype(np.int64)
+        ticks = encoder_ticks(enc["timestamp_s"][keep], counter)
+        return cls(enc["index"][keep], counter, ticks)
+
+    def named(self, index: IntArray, enc_counter: IntArray) -> IntArray:
+        """The tick of the encoder frame that frames at ``index`` name by ``enc_counter``
+        (resolved against the latest accepted encoder frame before each); -1 when that frame is
+        not in the track."""
+        latest = np.searchsorted(self.index, index) - 1
+        result = np.full(len(index), -1, dtype=np.int64)
+        has = np.flatnonzero(latest >= 0)
+        last = latest[has]
+        target = self.tick[last] + ((enc_counter[has] - self.counter[last] + 8) & 0xF) - 8
+        found = np.minimum(np.searchsorted(self.tick, target), len(self.tick) - 1)
+        result[has] = np.where(self.tick[found] == target, target, -1)
+        return result
+
+
+def encoder_ticks(timestamp_s: npt.NDArray[np.float64], counter: IntArray) -> IntArray:
+    """The sender's period of each frame: COUNTER steps mod 16, widened by 16 where the
+    timestamps say that many periods passed; gaps capped at ``MAX_GAP_TICKS``."""
+    if len(counter) == 0:
+        return np.zeros(0, dtype=np.int64)
+    step = np.maximum(1, np.diff(counter) & 0xF).astype(np.int64)
+    periods = np.rint(np.diff(timestamp_s) / contract.cycle_time_s("WHEEL_ENCODERS"))
+    step += 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
+    step = np.minimum(step, MAX_GAP_TICKS)
+    return np.concatenate(([0], np.cumsum(step))).astype(np.int64)
+
+
+@dataclass(frozen=True)
+class ReplayInput:
+    """What a log gives the replay: the encoder frames to feed, and the SIM_TRUTH frames."""
+
+    accepted: npt.NDArray[np.bool_]  # E2E verdict of every frame of the log
+    encoders: EncoderTrack
+    truth: IntArray  # positions of the SIM_TRUTH frames (all of them, as logged)
+    rejected_encoders: int  # WHEEL_ENCODERS frames the E2E check dropped
+
+    @classmethod
+    def from_log(cls, frames: FrameArrays) -> ReplayInput:
+        """Check the log's frames; ``ReplayError`` without an encoder frame to feed."""
+        decoder = BulkDecoder(contract.database())
+        _, accepted = check_frames(frames)
+        encoders = EncoderTrack.of(frames, accepted, decoder)
+        total = len(decoder.select(frames, "WHEEL_ENCODERS"))
+        if total == 0:
+            raise ReplayError("no WHEEL_ENCODERS frame (ID 0x100, 8 bytes) in the log: "
+                              "nothing to feed the firmware")
+        if len(encoders.index) == 0:
+            raise ReplayError(f"none of the {total} WHEEL_ENCODERS frames passes its E2E check")
+        truth = decoder.select(frames, "SIM_TRUTH").astype(np.int64)
+        return cls(accepted, encoders, truth, total - len(encoders.index))
+
+
+def logged_integrator(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> str | None:
+    """The integrator the log's last accepted ODOM_STATUS summary reports (None: none)."""
+    decoder = BulkDecoder(contract.database())
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
+    except DecodeError:
+        return None
+    values = page["INTEGRATOR"][accepted[page["index"]]]
+    if len(values) == 0:
+        return None
+    signal = decoder.message("ODOM_STATUS").get_signal_by_name("INTEGRATOR")
+    choices: dict[Any, Any] = dict(signal.choices or {})
+    name = str(choices.get(int(values[-1]), "")).lower()
+    return name if name in INTEGRATORS else None
+
+
+# --- the lockstep replay -------------------------------------------------------------------
+
+
+class LockstepReplay:
+    """The firmware on python-can ``virtual`` buses, fed a log's frames one tick at a time.
+
+    Three handles on one channel, as in ``sim.rig``: the log's side (sends the encoder and truth
+    frames), the firmware's board, and the host's observer (drained into ``listeners``).
+    """
+
+    def __init__(
+        self, params: RobotParams, listeners: list[can.Listener], channel: str
+    ) -> None:
+        self.clock = LockstepClock()
+        self._buses = [can.Bus(interface="virtual", channel=channel, preserve_timestamps=True,
+                               receive_own_messages=False) for _ in range(3)]
+        self._log_bus, fw_bus, self._host_bus = self._buses
+        self.board = FirmwareBoard(fw_bus, params, self.clock)
+        self.listeners = listeners
+        self.ticks = 0
+        self.interrupted = False
+
+    def run(self, frames: FrameArrays, feed: ReplayInput) -> None:
+        """Feed every encoder frame at its tick (the log's truth frames where they were);
+        Ctrl-C stops early (``interrupted``)."""
+        enc = feed.encoders
+        t0 = float(frames.timestamp_s[enc.index[0]])
+        events = _events(enc.index, feed.truth)
+        due: int | None = None  # the tick whose encoder frame is on the bus, not yet run
+        try:
+            for position, which in events:
+                if which >= 0:  # an encoder frame: first run the ticks before its own
+                    tick = int(enc.tick[which])
+                    if due is not None:
+                        self._run_ticks(t0, due, tick)
+                    self.clock.advance_to(t0 + tick * TICK_S)
+                    due = tick
+                self._log_bus.send(to_message(frames, position))
+            if due is not None:
+                self._run_ticks(t0, due, due + 1)
+        except KeyboardInterrupt:
+            self.interrupted = True
+            print(f"interrupted after {self.ticks * TICK_S:g} s of the log", file=sys.stderr)
+
+    def _run_ticks(self, t0: float, first: int, stop: int) -> None:
+        """Firmware ticks ``first`` .. ``stop - 1`` (those after the first have no frame)."""
+        for tick in range(first, stop):
+            self.clock.advance_to(t0 + tick * TICK_S)
+            self.board.run_tick()
+            self._drain()
+            self.ticks += 1
+
+    def _drain(self) -> None:
+        recv = self._host_bus.recv
+        while (msg := recv(0)) is not None:
+            for listener in self.listeners:
+                listener.on_message_received(msg)
+
+    def close(self) -> None:
+        """Deliver what is left, stop the listeners, release the buses: every one, even when
+        a listener's ``stop()`` fails (the first error is raised once all are released)."""
+        first: BaseException | None = None
+        releases = [self._drain, *(li.stop for li in self.listeners)]
+        for release in [*releases, *(bus.shutdown for bus in self._buses)]:
+            try:
+                release()
+            except Exception as exc:
+                first = first or exc
+        if first is not None:
+            raise first
+
+
+def _events(encoders: IntArray, truth: IntArray) -> list[tuple[int, int]]:
+    """(position in the log, k) in log order: k the encoder frame's number, -1 for truth."""
+    events = [(int(p), k) for k, p in enumerate(encoders.tolist())]
+    events += [(int(p), -1) for p in truth.tolist()]
+    events.sort()
+    return events
+
+
+# --- the replayed firmware against the logged one ----------------------------------------------
+
+
+def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dict[int, tuple[
+        int, int, int]]:
+    """The on-board poses of ``frames`` by the tick of the encoder frame they name:
+    (X raw, Y raw, heading in BAM16 units unwrapped = TURNS * 65536 + HEADING)."""
+    decoder = BulkDecoder(contract.database())
+    track = EncoderTrack.of(frames, accepted, decoder)
+    halves = []
+    for name, value, extra in (("ODOM_POSE_X", "X", "HEADING"), ("ODOM_POSE_Y", "Y", "TURNS")):
+        d = decoder.decode(frames, name)
+        keep = accepted[d["index"]]
+        ticks = track.named(d["index"][keep], d["ENC_COUNTER"][keep].astype(np.int64))
+        half: dict[int, tuple[int, int]] = {}
+        for tick, v, e in zip(ticks.tolist(), d[value][keep].tolist(), d[extra][keep].tolist(),
+                              strict=True):
+            if tick >= 0:
+                half.setdefault(tick, (int(v), int(e)))
+        halves.append(half)
+    px, py = halves
+    return {t: (px[t][0], py[t][0], py[t][1] * 65536 + px[t][1]) for t in px.keys() & py.keys()}
+
+
+def versus_log(
+    log: FrameArrays, log_accepted: npt.NDArray[np.bool_], replayed: FrameArrays
+) -> dict[str, Any]:
+    """The replayed on-board poses against the logged ones at the same encoder frames."""
+    _, accepted = check_frames(replayed)
+    old, new = onboard_by_tick(log, log_accepted), onboard_by_tick(replayed, accepted)
+    common = sorted(old.keys() & new.keys())
+    if not common:
+        return {"samples": 0, "identical": 0, "max_position_diff_m": None,
+                "max_heading_diff_rad": None, "before_first_gap": 0,
+                "max_position_diff_before_gap_m": None}
+    a = np.array([old[t] for t in common], dtype=np.int64)
+    b = np.array([new[t] for t in common], dtype=np.int64)
+    position = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]) * POSITION_LSB_M
+    heading = np.abs(a[:, 2] - b[:, 2]) * HEADING_LSB_RAD
+    ticks = EncoderTrack.of(log, log_accepted, BulkDecoder(contract.database())).tick
+    gaps = np.flatnonzero(np.diff(ticks) > 1)
+    first_gap = int(ticks[gaps[0]]) if len(gaps) else int(ticks[-1])  # last tick before it
+    before = int(np.searchsorted(np.array(common), first_gap, side="right"))
+    return {
+        "samples": len(common),
+        "identical": int(np.count_nonzero((a == b).all(axis=1))),
+        "max_position_diff_m": float(position.max()),
+        "max_heading_diff_rad": float(heading.max()),
+        "before_first_gap": before,
+        "max_position_diff_before_gap_m": float(position[:before].max()) if before else None,
+    }
+
+
+def departures(vs_log: dict[str, Any], tolerance: Tolerance) -> list[str]:
+    """Why the replayed firmware departs from the recorded one (module docstring, "Verdict"):
+    empty when it does not (or when the log has no on-board pose to compare with)."""
+    reasons = []
+    position = vs_log["max_position_diff_before_gap_m"]
+    if position is not None and position > tolerance.position_m:
+        reasons.append(f"its position differs from the log's by up to {position * 1e3:.4f} mm "
+                       f"(tolerance {tolerance.position_m * 1e3:.4g} mm)")
+    heading = vs_log["max_heading_diff_rad"]
+    if heading is not None and heading > tolerance.heading_rad:
+        reasons.append(f"its heading differs from the log's by up to {heading * 1e3:.4f} mrad "
+                       f"(tolerance {tolerance.heading_rad * 1e3:.4g} mrad)")
+    return reasons
+
+
+def diagnose(
+    log: FrameArrays, accepted: npt.NDArray[np.bool_], profile: RobotProfile, integrator: str,
+    tolerance: Tolerance,
+) -> list[str]:
+    """The likely cause of a departure, by name: an integrator other than the log's, a robot
+    profile other than the one the logged poses fit (module docstring, "Verdict")."""
+    reasons = []
+    logged = logged_integrator(log, accepted)
+    if logged is not None and logged != integrator:
+        reasons.append(f"integrator mismatch: the log's ODOM_STATUS reports {logged}, the replay "
+                       f"ran {integrator}")
+    fits = fitting_profiles(log, profile, logged or integrator, tolerance)
+    if profile.name in fits:
+        if logged is None or logged == integrator:
+            reasons.append(f"the log fits robot {profile.name!r} with the {integrator} "
+                           "integrator: the firmware build differs from the one that recorded it")
+    elif fits:
+        reasons.append(f"robot mismatch: the log's poses fit robot {', '.join(map(repr, fits))}, "
+                       f"not {profile.name!r} (--robot)")
+    else:
+        reasons.append(f"the log's poses fit no known robot profile ({profile.name!r} given, "
+                       f"{', '.join(list_profiles())} shipped): give its profile with --robot")
+    return reasons
+
+
+def replay_and_analyze(
+    frames: FrameArrays, feed: ReplayInput, profile: RobotProfile, integrator: str, *,
+    tolerance: Tolerance, log: Path, log_out: Path | None = None,
+) -> Analysis:
+    """Run the replay (every frame it puts on its bus written to ``log_out`` when given),
+    analyse the replayed bus, add the ``replay`` section."""
+    collector = FrameCollector()
+    listeners: list[can.Listener] = [collector]
+    if log_out is not None:
+        listeners.append(can.Logger(log_out))
+    channel = f"odocan-replay-{id(collector):x}"
+    replay = LockstepReplay(firmware_params(profile, integrator), listeners, channel)
+    start = time.perf_counter()
+    try:
+        replay.run(frames, feed)
+    finally:
+        try:
+            replay.close()
+        except OSError as exc:
+            raise OutputError(f"--log {log_out}: {exc.strerror or exc}") from None
+    wall_s = time.perf_counter() - start
+    replayed = collector.arrays()
+    analysis = analyze(replayed, profile, integrator, tolerance=tolerance,
+                       wall_seconds=wall_s)
+    analysis.report["replay"] = {
+        "log": str(log),
+        "encoder_frames_fed": len(feed.encoders.index),
+        "encoder_frames_rejected": feed.rejected_encoders,
+        "truth_frames": len(feed.truth),
+        "ticks": replay.ticks,
+        "ticks_without_frame": replay.ticks - min(replay.ticks, len(feed.encoders.index)),
+        "interrupted": replay.interrupted,
+        "onboard_vs_log": versus_log(frames, feed.accepted, replayed),
+    }
+    return analysis
+
+

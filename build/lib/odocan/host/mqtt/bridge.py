@@ -1,0 +1,326 @@
+"""CAN <-> MQTT for any number of robots (asyncio + aiomqtt; python-can on the CAN side).
+
+Frames reach the bridge as batches of ``(robot index, can.Message)`` in a bounded
+``asyncio.Queue``:
+
+* from a live bus, ``BusReader`` runs python-can's blocking ``recv`` in a thread and hands each
+  batch to the event loop with ``loop.call_soon_threadsafe`` (the only thread crossing);
+* from the in-process fleet (``sim.fleet``), the fleet's timer task offers its batches directly.
+
+A full queue drops the batch and counts it (``frames_dropped``): the bus never waits for MQTT.
+The task ``can-frames`` feeds each robot's ``RobotTelemetry`` and queues its publications on the
+robot's ``RobotLink``; ``periodic`` publishes ``status`` and ``rates``; each link runs its own
+connection. Commands are validated by the robot's ``CommandEncoder`` and only then sent on the
+robot's bus; each one is answered on ``cmd/result`` (accepted, rejected with the reason, expired).
+No frame and no command can stop the bridge: a handler that raises anyway is counted
+(``frames_failed``, ``commands_failed``) and logged once. ``rates`` carries each link's counters
+(``link``: telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt import topics
+from odocan.host.mqtt.broker import BrokerURL, first_error
+from odocan.host.mqtt.link import RobotLink, Verdict
+from odocan.host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
+from odocan.host.protocol.commands import Command, CommandEncoder, CommandRejected, command_id
+from odocan.host.protocol.secoc import SecocSigner
+
+log = logging.getLogger(__name__)
+Batch = list[tuple[int, can.Message]]
+
+
+@dataclass(frozen=True)
+class RobotEndpoint:
+    """One robot as the bridge sees it: a name, the bus to send its commands on, its geometry."""
+
+    name: str
+    bus: can.BusABC
+    geometry: Geometry
+    integrator: str = "exact"
+    counter_bits: int = 32  # the robot's hardware encoder counters (16 or 32)
+    # SecOC (docs/secoc.md): an ODOM_AUTH after each secured frame; None: commands unsigned
+    signer: SecocSigner | None = field(default=None, repr=False)
+
+
+@dataclass(frozen=True)
+class BridgeConfig:
+    """How the bridge publishes (periods in seconds, rates in Hz)."""
+
+    broker: BrokerURL
+    publish_hz: float = 10.0
+    status_period_s: float = 1.0
+    rates_period_s: float = 1.0
+    keepalive_s: int = 5
+    client_prefix: str = "odocan-bridge"
+    queue_batches: int = 1024
+    connect_timeout_s: float = 5.0  # the first connection, else BrokerError
+    command_expiry_s: float = 5.0  # a command without its own MQTT v5 expiry, at most this old
+    telemetry_buffer: int = 1000  # QoS-0 publications per robot waiting for the socket
+    reliable_buffer: int = 1000  # QoS-1 publications per robot waiting for their PUBACK
+
+
+class _Robot:
+    """A robot's telemetry, command encoder, bus and link."""
+
+    def __init__(self, endpoint: RobotEndpoint, config: BridgeConfig) -> None:
+        self.endpoint = endpoint
+        self.telemetry = RobotTelemetry(
+            endpoint.name, endpoint.geometry, endpoint.integrator,
+            counter_bits=endpoint.counter_bits, publish_hz=config.publish_hz,
+            now_s=time.monotonic(),
+        )
+        self.encoder = CommandEncoder(self.telemetry.db)
+        self.link = RobotLink(
+            robot=endpoint.name, broker=config.broker, on_command=self.on_command,
+            client_prefix=config.client_prefix, keepalive_s=config.keepalive_s,
+            connect_timeout_s=config.connect_timeout_s,
+            command_expiry_s=config.command_expiry_s,
+            telemetry_buffer=config.telemetry_buffer, reliable_buffer=config.reliable_buffer,
+        )
+        self.commands_sent = self.commands_rejected = self.commands_failed = 0
+
+    def on_command(self, name: str, payload: bytes, verdict: Verdict = "run") -> list[Publication]:
+        """Validate, then send; always the one answer for ``cmd/result``, never an exception."""
+        name = name[:64]  # a topic level is up to 64 KiB: the answer echoes a bounded name
+        if verdict == "expired":
+            self.commands_rejected += 1
+            return [_result(command_id(payload), name, "expired",
+                            "older than its expiry: not run")]
+        if verdict in ("busy", "retained"):
+            self.commands_rejected += 1
+            reason = ("bridge busy: not run" if verdict == "busy" else
+                      "a retained command is not run (its age is unknown): publish without retain")
+            return [_result(command_id(payload), name, "rejected", reason)]
+        try:
+            command = self.encoder.encode(name, payload)
+            self._send(command)
+        except CommandRejected as exc:
+            self.commands_rejected += 1
+            return [_result(exc.cmd_id, name, "rejected", exc.reason)]
+        except Exception as exc:  # a defect must not stop the bridge: answer, log, go on
+            self.commands_failed += 1
+            log.warning("%s: command %s failed: %r", self.endpoint.name, name, exc,
+                        exc_info=log.isEnabledFor(logging.DEBUG))
+            return [_result(command_id(payload), name, "rejected",
+                            f"internal error ({type(exc).__name__})")]
+        self.commands_sent += 1
+        return [_result(command.cmd_id, name, "accepted", None, frames=len(command.frames))]
+
+    def _send(self, command: Command) -> None:
+        bus = self.endpoint.bus
+        signer = self.endpoint.signer
+        if signer is not None and signer.next_fv is None:  # before any frame: all or nothing
+            raise CommandRejected(
+                "SecOC: no ODOM_FRESHNESS from the firmware yet (it sends one every second)",
+                command.cmd_id,
+            )
+        for frame in command.frames:
+            ack = PendingAck(command.cmd_id, command.name, frame.final)
+            self.telemetry.expect_ack(frame.can_id, frame.counter, ack)
+            try:
+                bus.send(can.Message(arbitration_id=frame.can_id, is_extended_id=False,
+                                     data=frame.data))
+            except can.CanError as exc:
+                raise CommandRejected(f"bus refused the frame: {exc}", command.cmd_id) from None
+            if signer is not None and signer.is_secured(frame.can_id):
+                auth = signer.sign(frame.can_id, frame.data)
+                try:
+                    bus.send(can.Message(arbitration_id=signer.auth_frame_id,
+                                         is_extended_id=False, data=auth))
+                except can.CanError as exc:
+                    raise CommandRejected(f"bus refused ODOM_AUTH: {exc}",
+                                          command.cmd_id) from None
+        if command.name == "config":
+            v = command.values
+            self.telemetry.set_geometry(
+                Geometry(v["counts_per_rev"], v["wheel_radius_left_m"],
+                         v["wheel_radius_right_m"], v["wheelbase_m"]),
+                str(v["integrator"]).lower() if isinstance(v["integrator"], str)
+                else ("euler", "rk2", "exact")[v["integrator"]],
+                v["counter_bits"],
+            )
+
+
+def _result(
+    cmd_id: Any, name: str, result: str, reason: str | None, **extra: Any
+) -> Publication:
+    return (topics.RESULT_LEAF, topics.stamp(
+        {"id": cmd_id, "command": name, "result": result, "reason": reason, **extra}
+    ))
+
+
+class Bridge:
+    """CAN <-> MQTT for ``robots`` (see the module docstring)."""
+
+    def __init__(self, robots: Sequence[RobotEndpoint], *, config: BridgeConfig) -> None:
+        self.config = config
+        self.robots = [_Robot(r, config) for r in robots]
+        self.queue: asyncio.Queue[Batch] = asyncio.Queue(maxsize=config.queue_batches)
+        self.frames_dropped = 0
+        self.frames_in = 0
+        self.frames_failed = 0  # frames whose handling raised (a defect): counted, logged once
+
+    @property
+    def links(self) -> list[RobotLink]:
+        """Each robot's MQTT link, in robot order."""
+        return [r.link for r in self.robots]
+
+    def offer(self, batch: Batch) -> None:
+        """Queue one batch of frames (event-loop thread only); dropped and counted when full."""
+        try:
+            self.queue.put_nowait(batch)
+        except asyncio.QueueFull:
+            self.frames_dropped += len(batch)
+
+    async def run(self, *, stop: asyncio.Event) -> None:
+        """Serve until ``stop`` is set; every link publishes ``offline`` and disconnects.
+
+        ``BrokerError`` (not wrapped in a group) when a link's first connection fails."""
+        try:
+            async with asyncio.TaskGroup() as tg:
+                for robot in self.robots:
+                    tg.create_task(robot.link.run(stop=stop),
+                                   name=f"mqtt-link-{robot.link.robot}")
+                frames = tg.create_task(self._consume(), name="can-frames")
+                periodic = tg.create_task(self._periodic(), name="periodic")
+                await stop.wait()
+                await asyncio.sleep(0)
+                self._drain()
+                frames.cancel()
+                periodic.cancel()
+        except BaseExceptionGroup as group:
+            raise first_error(group) from None
+
+    def counters(self) -> dict[str, Any]:
+        """What was dropped, refused, expired or failed (the report's ``bridge`` entry)."""
+        totals: Counter[str] = Counter()
+        for link in self.links:
+            totals.update(link.counters())
+        return {
+            "frames_in": self.frames_in,
+            "frames_dropped": self.frames_dropped,
+            "frames_failed": self.frames_failed,
+            "commands_failed": sum(r.commands_failed for r in self.robots),
+            **totals,
+        }
+
+    def summary(self) -> str:
+        """One line of what was dropped, refused or expired (printed when the bridge stops)."""
+        c = self.counters()
+        return (f"{c['frames_in']} frames in ({c['frames_dropped']} dropped), telemetry "
+                f"dropped {c['telemetry_dropped']} (queue full) + {c['telemetry_offline']} "
+                f"(broker away), QoS-1 dropped {c['reliable_dropped']}, refused by the broker "
+                f"{c['refused']}, commands expired {c['commands_expired']}, "
+                f"{c['reconnects']} reconnects")
+
+    async def _consume(self) -> None:
+        while True:
+            self._handle(await self.queue.get())
+
+    def _drain(self) -> None:
+        while not self.queue.empty():
+            self._handle(self.queue.get_nowait())
+
+    def _handle(self, batch: Batch) -> None:
+        robots = self.robots
+        self.frames_in += len(batch)
+        for index, msg in batch:
+            robot = robots[index]
+            signer = robot.endpoint.signer
+            if signer is not None and msg.arbitration_id == signer.freshness_frame_id:
+                signer.on_freshness(bytes(msg.data))  # a bad frame is refused by its E2E check
+            try:
+                publications = robot.telemetry.feed(msg)
+            except Exception as exc:  # a defect must not stop the bridge: count, log once
+                if self.frames_failed == 0:
+                    log.warning("%s: frame %s failed: %r", robot.endpoint.name, msg, exc,
+                                exc_info=log.isEnabledFor(logging.DEBUG))
+                self.frames_failed += 1
+                continue
+            for leaf, payload in publications:
+                robot.link.publish(leaf, payload)
+
+    async def _periodic(self) -> None:
+        cfg = self.config
+        tick = min(cfg.status_period_s, cfg.rates_period_s)
+        next_status = next_rates = time.monotonic()
+        for robot in self.robots:  # online as soon as the link connects (retained)
+            robot.link.publish(*robot.telemetry.status())
+        while True:
+            await asyncio.sleep(tick)
+            now = time.monotonic()
+            if now >= next_rates + cfg.rates_period_s - 1e-3:
+                next_rates = now
+                for robot in self.robots:
+                    leaf, payload = robot.telemetry.rates(now)
+                    robot.link.publish(leaf, {**payload, "link": robot.link.counters()})
+            if now >= next_status + cfg.status_period_s - 1e-3:
+                next_status = now
+                for robot in self.robots:
+                    robot.link.publish(*robot.telemetry.status())
+
+
+class BusReader:
+    """python-can ``recv`` in a thread, batches handed to the bridge's loop thread-safely.
+
+    ``robot_index(msg)`` says whose frame it is (0 for a one-robot bus).
+    """
+
+    def __init__(
+        self, bus: can.BusABC, bridge: Bridge, loop: asyncio.AbstractEventLoop, *,
+        robot_index: int = 0, max_batch: int = 256,
+    ) -> None:
+        self.bus, self.bridge, self.loop = bus, bridge, loop
+        self.robot_index = robot_index
+        self.max_batch = max_batch
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="can-reader", daemon=True)
+        self.errors = 0  # bus errors while reading (counted, logged once)
+
+    def start(self) -> None:
+        """Start the reader thread."""
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the thread (within the 0.1 s recv timeout)."""
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+
+    def _run(self) -> None:
+        index = self.robot_index
+        while not self._stop.is_set():
+            msg = self._recv(0.1)
+            if msg is None:
+                continue
+            batch: Batch = [(index, msg)]
+            while len(batch) < self.max_batch and (msg := self._recv(0)) is not None:
+                batch.append((index, msg))
+            try:
+                self.loop.call_soon_threadsafe(self.bridge.offer, batch)
+            except RuntimeError:  # the loop is closed: we are shutting down
+                return
+
+    def _recv(self, timeout_s: float) -> can.Message | None:
+        """One frame, or None; a bus error is counted and logged once, and the reader goes on
+        (after ``timeout_s`` or 0.1 s: a bus that is down must not spin a core)."""
+        try:
+            return self.bus.recv(timeout_s)
+        except (can.CanError, OSError, ValueError) as exc:
+            if self.errors == 0:
+                log.warning("CAN bus %s: %s (reading on)", self.bus.channel_info, exc)
+            self.errors += 1
+            self._stop.wait(max(timeout_s, 0.1))
+            return None

@@ -1,0 +1,84 @@
+"""A fleet table's data source: subscribe to every robot's telemetry, yield per-robot state.
+
+For ``odocan monitor --mqtt`` (or any dashboard)::
+
+    async for table in fleet_states(broker=BrokerURL.parse("mqtt://127.0.0.1:1883")):
+        for name, state in sorted(table.items()):
+            print(name, state.online, state.pose.get("x_m"), state.rates.get("hz"))
+
+Each iteration yields the whole table (robot name -> ``RobotState``) after at most
+``min_interval_s`` of updates; it ends when the connection drops (aiomqtt.MqttError).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import AsyncIterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import aiomqtt
+
+from odocan.host.mqtt import topics
+from odocan.host.mqtt.broker import BrokerURL
+
+
+@dataclass
+class RobotState:
+    """The latest payload of each of a robot's topics (empty dicts until one arrives)."""
+
+    name: str
+    status: dict[str, Any] = field(default_factory=dict)
+    pose: dict[str, Any] = field(default_factory=dict)
+    reference: dict[str, Any] = field(default_factory=dict)
+    truth: dict[str, Any] = field(default_factory=dict)
+    error: dict[str, Any] = field(default_factory=dict)
+    rates: dict[str, Any] = field(default_factory=dict)
+    last_result: dict[str, Any] = field(default_factory=dict)
+    updated_unix_s: float = 0.0
+
+    @property
+    def online(self) -> bool:
+        """True while the retained status says ``online``."""
+        return self.status.get("state") == "online"
+
+
+_LEAF_FIELD = {"status": "status", "pose": "pose", "reference": "reference", "truth": "truth",
+               "error": "error", "rates": "rates", topics.RESULT_LEAF: "last_result"}
+
+
+def apply(table: dict[str, RobotState], topic_name: str, payload: bytes) -> bool:
+    """Fold one message into ``table``; False when it is not a robot topic or not JSON."""
+    split = topics.split(topic_name)
+    if split is None or split[1] not in _LEAF_FIELD:
+        return False
+    try:
+        data = json.loads(payload)
+    except ValueError:
+        return False
+    if not isinstance(data, dict):
+        return False
+    state = table.setdefault(split[0], RobotState(split[0]))
+    setattr(state, _LEAF_FIELD[split[1]], data)
+    state.updated_unix_s = time.time()
+    return True
+
+
+async def fleet_states(
+    *, broker: BrokerURL, min_interval_s: float = 0.2, identifier: str | None = None
+) -> AsyncIterator[dict[str, RobotState]]:
+    """Subscribe to ``odocan/+/#`` and yield the table at most every ``min_interval_s``."""
+    table: dict[str, RobotState] = {}
+    async with aiomqtt.Client(**broker.client_kwargs(), identifier=identifier) as client:
+        await client.subscribe(f"{topics.PREFIX}/+/#", qos=topics.QOS_RELIABLE)
+        last = 0.0
+        async for message in client.messages:
+            payload = message.payload
+            if not isinstance(payload, bytes | bytearray):
+                continue
+            if apply(table, message.topic.value, bytes(payload)):
+                now = time.monotonic()
+                if now - last >= min_interval_s:
+                    last = now
+                    yield table

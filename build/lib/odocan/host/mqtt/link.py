@@ -1,0 +1,483 @@
+"""One robot's MQTT connection: MQTT v5, last will, session, reconnect, two bounded buffers.
+
+``RobotLink.run(stop=...)`` keeps a connection to the broker until ``stop`` is set:
+
+* MQTT v5 (``paho`` via aiomqtt) so the broker's reason codes are seen: a CONNACK refusal is a
+  ``BrokerError`` naming the reason; a PUBACK or SUBACK refusal (an ACL denial) is one warning line
+  per topic, counted in ``refused``. A broker that answers "unsupported protocol version" to a
+  plain v5 CONNECT (``speaks_v5``, once per broker; amqtt) is spoken to in MQTT 3.1.1 instead (no
+  reason codes, no message expiry);
+* the first connection must succeed within ``connect_timeout_s``, else ``BrokerError`` (the
+  CLI's exit 2); later losses are one line each: "connection lost", "reconnecting in N s",
+  "reconnected" (exponential backoff from ``backoff_s`` up to ``max_backoff_s``);
+* client id ``<client_prefix>-<robot>``, clean start off: the broker keeps the ``cmd/+``
+  subscription and queues commands while the bridge is away, for at most ``command_expiry_s``
+  (the session expiry), so no command older than that is queued for it. A broker that comes back
+  without that session although we were away for less is one warning line (``sessions_lost``:
+  it lost its state, and with it what it held). Commands paho received (and acknowledged) before
+  a connection broke are still answered;
+* last will: ``status`` = ``{"state": "offline", "reason": "connection lost"}``, QoS 1, retained;
+  whenever ``run`` ends (stop, cancellation, an error) it publishes ``offline`` itself first;
+* telemetry never waits for acknowledgements: QoS-0 telemetry and QoS-1 publications (status,
+  results) have their own buffers and their own sender tasks. Telemetry is a bounded deque that
+  drops the oldest (``telemetry_dropped``); while disconnected it is not kept at all
+  (``telemetry_offline``: no stale pose is replayed after an outage). QoS-1 publications stay
+  queued until the broker acknowledged them (at least once across broker restarts), up to
+  ``reliable_buffer`` entries: beyond, the oldest ``status`` (superseded) goes first, then the
+  oldest entry (``reliable_dropped``);
+* commands arrive on ``odocan/<robot>/cmd/<name>`` and go to ``on_command(name, payload,
+  verdict)``, which returns the publications that answer it (``cmd/result``). ``verdict`` is
+  ``"run"``, or ``"expired"`` when the message is older than its MQTT v5 message expiry (the
+  remaining interval the broker passed on) or, without one, than ``command_expiry_s`` since it
+  arrived, or ``"busy"`` when ``command_queue`` messages already wait (answered at once, not run),
+  or ``"retained"`` for a command the broker kept as retained (its age is unknown, and it would
+  run again at every reconnect).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+import weakref
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from itertools import islice
+from typing import Any, Literal
+
+import aiomqtt
+import paho.mqtt.client as paho
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
+from paho.mqtt.subscribeoptions import SubscribeOptions
+
+from odocan.host.mqtt import topics
+from odocan.host.mqtt.broker import (
+    BrokerError,
+    BrokerURL,
+    connect_failure,
+    first_connect_failure,
+    protocol_unsupported,
+)
+
+log = logging.getLogger("odocan.mqtt")
+CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
+Publication = tuple[str, dict[str, Any]]
+Verdict = Literal["run", "expired", "busy", "retained"]
+CommandHandler = Callable[[str, bytes, Verdict], list[Publication]]
+
+
+@dataclass(eq=False)
+class _Outgoing:
+    """One queued QoS-1 publication (identity matters: equal payloads are distinct entries)."""
+
+    topic: str
+    body: bytes
+    retain: bool
+
+
+class _Arrived(aiomqtt.Message):
+    """aiomqtt's message plus when paho read it (``time.monotonic`` s) and its expiry (s)."""
+
+    arrival_s: float = 0.0
+    expiry_s: float | None = None
+
+
+class _ClosedBeforeConnack(aiomqtt.MqttError):
+    """The broker closed the connection without a CONNACK (amqtt does so to some v5 CONNECTs)."""
+
+
+class _Client(aiomqtt.Client):
+    """aiomqtt's client, keeping what it drops: PUBACK reason codes and arrival times.
+
+    ``on_refused(topic, reason)`` is called for each QoS-1 publication the broker refused;
+    ``on_overflow(message)`` for a message that finds ``max_waiting`` messages already queued.
+    """
+
+    def __init__(
+        self,
+        *,
+        on_refused: Callable[[str, str], None],
+        on_overflow: Callable[[_Arrived], None],
+        max_waiting: int,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(**kwargs)
+        self._on_refused, self._on_overflow = on_refused, on_overflow
+        self._max_waiting = max_waiting
+        self._qos1_topics: dict[int, str] = {}
+        self.session_present = False  # the CONNACK's flag: the broker still had our session
+        paho_publish = self._client.publish
+
+        def publish(topic: str, payload: Any = None, qos: int = 0, retain: bool = False,
+                    properties: Properties | None = None) -> paho.MQTTMessageInfo:
+            info = paho_publish(topic, payload, qos, retain, properties)
+            if qos > 0:
+                self._qos1_topics[info.mid] = topic
+            return info
+
+        setattr(self._client, "publish", publish)  # noqa: B010 (an instance's own attribute)
+
+    def _on_publish(self, client: paho.Client, userdata: Any, mid: int,
+                    reason_code: Any, properties: Any) -> None:
+        topic = self._qos1_topics.pop(mid, None)
+        if topic is not None and getattr(reason_code, "is_failure", False):
+            self._on_refused(topic, str(reason_code))
+        super()._on_publish(client, userdata, mid, reason_code, properties)
+
+    def _on_connect(self, client: paho.Client, userdata: Any, flags: Any,
+                    reason_code: Any, properties: Any = None) -> None:
+        self.session_present = bool(getattr(flags, "session_present", False))
+        super()._on_connect(client, userdata, flags, reason_code, properties)
+
+    def _on_disconnect(self, client: paho.Client, userdata: Any, flags: Any,
+                       reason_code: Any, properties: Any = None) -> None:
+        if not self._connected.done():  # aiomqtt would wait for a CONNACK that never comes
+            self._connected.set_exception(_ClosedBeforeConnack(
+                f"the broker closed the connection before its CONNACK ({reason_code})"))
+            return
+        super()._on_disconnect(client, userdata, flags, reason_code, properties)
+
+    def _on_message(self, client: paho.Client, userdata: Any,
+                    message: paho.MQTTMessage) -> None:
+        arrived = _Arrived._from_paho_message(message)
+        arrived.arrival_s = time.monotonic()
+        expiry = getattr(message.properties, "MessageExpiryInterval", None)
+        arrived.expiry_s = float(expiry) if expiry is not None else None
+        if self._queue.qsize() >= self._max_waiting:
+            self._on_overflow(arrived)
+            return
+        self._queue.put_nowait(arrived)
+
+
+class _Stopped(Exception):
+    """``stop`` was set: leave the connection's task group."""
+
+
+class RobotLink:
+    """The MQTT side of one robot (see the module docstring)."""
+
+    def __init__(
+        self,
+        *,
+        robot: str,
+        broker: BrokerURL,
+        on_command: CommandHandler,
+        client_prefix: str = "odocan-bridge",
+        keepalive_s: int = 5,
+        connect_timeout_s: float = 5.0,
+        command_expiry_s: float = 5.0,
+        backoff_s: float = 0.1,
+        max_backoff_s: float = 5.0,
+        telemetry_buffer: int = 1000,
+        reliable_buffer: int = 1000,
+        inflight: int = 20,
+        command_queue: int = 1000,
+    ) -> None:
+        self.robot = topics.check_robot_name(robot)
+        self.broker = broker
+        self.on_command = on_command
+        self.client_id = f"{client_prefix}-{robot}"
+        self.keepalive_s = keepalive_s
+        self.connect_timeout_s, self.command_expiry_s = connect_timeout_s, command_expiry_s
+        self.backoff_s, self.max_backoff_s = backoff_s, max_backoff_s
+        self.reliable: deque[_Outgoing] = deque()
+        self.reliable_buffer, self.inflight = reliable_buffer, inflight
+        self.telemetry: deque[tuple[str, bytes]] = deque(maxlen=telemetry_buffer)
+        self.command_queue = command_queue
+        self.v5 = broker.v5
+        self.telemetry_dropped = self.telemetry_offline = self.reliable_dropped = 0
+        self.commands_expired = self.commands_busy = 0
+        self.refused: Counter[str] = Counter()  # topic -> publications the broker refused
+        self.connects = 0
+        self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
+        self.connected = asyncio.Event()
+        self._telemetry_wake = asyncio.Event()
+        self._reliable_wake = asyncio.Event()
+
+    # --- the buffers (any task of the event loop) ---
+    def publish(self, leaf: str, payload: dict[str, Any]) -> None:
+        """Queue one publication on ``odocan/<robot>/<leaf>`` (QoS and retain by its class)."""
+        topic, body = topics.topic(self.robot, leaf), topics.dumps(payload)
+        if topics.qos(leaf) == topics.QOS_TELEMETRY:
+            if not self.connected.is_set():
+                self.telemetry_offline += 1  # stale by the time the broker is back
+                return
+            if len(self.telemetry) == self.telemetry.maxlen:
+                self.telemetry_dropped += 1
+            self.telemetry.append((topic, body))
+            self._telemetry_wake.set()
+            return
+        if len(self.reliable) >= self.reliable_buffer:
+            self._drop_reliable()
+        self.reliable.append(_Outgoing(topic, body, topics.retained(leaf)))
+        self._reliable_wake.set()
+
+    def _drop_reliable(self) -> None:
+        status = topics.topic(self.robot, topics.STATUS_LEAF)
+        victim = next((p for p in self.reliable if p.topic == status), self.reliable[0])
+        self.reliable.remove(victim)
+        if self.reliable_dropped == 0:
+            log.warning("%s: QoS-1 buffer full (%d): dropping the oldest", self.robot,
+                        self.reliable_buffer)
+        self.reliable_dropped += 1
+
+    def counters(self) -> dict[str, int]:
+        """What this link dropped, refused, expired (published in ``rates``, and reported)."""
+        return {
+            "telemetry_dropped": self.telemetry_dropped,
+            "telemetry_offline": self.telemetry_offline,
+            "reliable_dropped": self.reliable_dropped,
+            "reliable_queued": len(self.reliable),
+            "refused": sum(self.refused.values()),
+            "commands_expired": self.commands_expired,
+            "commands_busy": self.commands_busy,
+            "reconnects": max(self.connects - 1, 0),
+            "sessions_lost": self.sessions_lost,
+        }
+
+    # --- the connection ---
+    def _client(self) -> _Client:
+        will = aiomqtt.Will(
+            topics.topic(self.robot, topics.STATUS_LEAF),
+            topics.dumps(topics.status_payload(self.robot, "offline", reason="connection lost")),
+            qos=topics.QOS_RELIABLE,
+            retain=True,
+        )
+        session: dict[str, Any]
+        if self.v5:
+            props = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
+            props.SessionExpiryInterval = max(1, math.ceil(self.command_expiry_s))
+            session = {"protocol": aiomqtt.ProtocolVersion.V5, "clean_start": False,
+                       "properties": props}
+        else:
+            session = {"protocol": aiomqtt.ProtocolVersion.V311, "clean_session": False}
+        client = _Client(
+            **self.broker.client_kwargs(), **session,
+            on_refused=self._refused, on_overflow=self._overflow,
+            max_waiting=self.command_queue,
+            identifier=self.client_id, will=will, keepalive=self.keepalive_s,
+            timeout=self.connect_timeout_s, logger=CLIENT_LOG,
+        )
+        client._client.connect_timeout = self.connect_timeout_s  # the TCP connect, in paho
+        client.pending_calls_threshold = 10**9  # our buffers are bounded; no per-call warning
+        return client
+
+    async def run(self, *, stop: asyncio.Event) -> None:
+        """Connect, serve, reconnect with backoff; returns after ``stop``.
+
+        ``BrokerError`` when the first connection fails (refused, not authorized, TLS, DNS, no
+        answer within ``connect_timeout_s``): a bridge that never connected tells so at once.
+        """
+        if self.v5:
+            self.v5 = await speaks_v5(self.broker, self.connect_timeout_s)
+        backoff, lost_at = self.backoff_s, time.monotonic()
+        while not stop.is_set():
+            client = self._client()
+            try:
+                await self._connect(client)
+            except (aiomqtt.MqttError, TimeoutError, OSError) as exc:
+                if self.v5 and (protocol_unsupported(exc) or isinstance(exc, _ClosedBeforeConnack)):
+                    self.v5 = False
+                    log.info("%s: %s speaks MQTT 3.1.1 only: no reason codes, no message "
+                             "expiry", self.robot, self.broker)
+                    continue
+                if self.connects == 0:
+                    reason = await first_connect_failure(exc, self.broker, self.connect_timeout_s)
+                    raise BrokerError(f"cannot connect to {self.broker}: {reason}") from None
+                reason = connect_failure(exc, self.connect_timeout_s, tls=self.broker.tls)
+                log.warning("%s: reconnecting in %.1f s (%s)", self.robot, backoff, reason)
+                await _sleep_or_stop(stop, backoff)
+                backoff = min(backoff * 2, self.max_backoff_s)
+                continue
+            self.connects += 1
+            backoff = self.backoff_s
+            if self.connects > 1:
+                log.warning("%s: reconnected to %s", self.robot, self.broker)
+                self._check_session(client, time.monotonic() - lost_at)
+            try:
+                await self._session(client, stop)
+            except* (aiomqtt.MqttError, OSError) as group:
+                lost_at = time.monotonic()
+                log.warning("%s: connection lost (%s); reconnecting in %.1f s", self.robot,
+                            group.exceptions[0], backoff)
+                await _sleep_or_stop(stop, backoff)
+
+    def _check_session(self, client: _Client, away_s: float) -> None:
+        """A v5 broker without our session, though we were away for less than its expiry, has
+        lost its state (restarted without persistence, killed): commands it acknowledged but
+        had not delivered, and results it had not delivered, are gone. Say so (once a time)."""
+        if self.v5 and not client.session_present and away_s < self.command_expiry_s:
+            self.sessions_lost += 1
+            log.warning("%s: the broker lost its session state (restarted without its "
+                        "persistence?): commands and results it held may be lost", self.robot)
+
+    async def _connect(self, client: _Client) -> None:
+        """CONNECT within ``connect_timeout_s`` (TCP, TLS and CONNACK; DNS gets one more s)."""
+        async with asyncio.timeout(self.connect_timeout_s + 1.0):
+            await client.__aenter__()
+
+    async def _session(self, client: _Client, stop: asyncio.Event) -> None:
+        """Serve one connection; whatever ends it, ``offline`` is published first if it can be."""
+        try:
+            await self._subscribe(client)
+            self.connected.set()
+            async with asyncio.TaskGroup() as tg:
+                tg.create_task(self._receive(client), name=f"mqtt-commands-{self.robot}")
+                tg.create_task(self._send_telemetry(client), name=f"mqtt-tel-{self.robot}")
+                tg.create_task(self._send_reliable(client), name=f"mqtt-qos1-{self.robot}")
+                tg.create_task(_raise_on(stop), name=f"mqtt-stop-{self.robot}")
+        except* _Stopped:
+            pass
+        finally:
+            self.connected.clear()
+            self.telemetry.clear()
+            self._answer_waiting(client)
+            if stop.is_set() or not client._disconnected.done():
+                await self._goodbye(client)
+            with contextlib.suppress(Exception):
+                await client.__aexit__(None, None, None)
+
+    async def _subscribe(self, client: _Client) -> None:
+        """``cmd/+`` at QoS 1; in v5 with no-local, so our own ``cmd/result`` is not echoed."""
+        if self.v5:
+            options = SubscribeOptions(qos=topics.QOS_RELIABLE, noLocal=True)
+            codes = await client.subscribe(topics.command_filter(self.robot), options=options)
+        else:
+            codes = await client.subscribe(topics.command_filter(self.robot), qos=1)
+        for code in codes if isinstance(codes, list) else [codes]:
+            if getattr(code, "is_failure", False) or code == 0x80:
+                log.warning("%s: the broker refused the subscription %s (%s): no command will "
+                            "arrive", self.robot, topics.command_filter(self.robot), code)
+
+    async def _receive(self, client: _Client) -> None:
+        prefix = topics.topic(self.robot, "cmd/")
+        async for message in client.messages:
+            name = message.topic.value.removeprefix(prefix)
+            if name == "result" or not isinstance(message, _Arrived):
+                continue
+            for leaf, payload in self._answer(name, message):
+                self.publish(leaf, payload)
+
+    def _answer_waiting(self, client: _Client) -> None:
+        """Answer the commands this client received but we did not handle yet: paho has
+        acknowledged them to the broker, so the broker will not send them again."""
+        prefix = topics.topic(self.robot, "cmd/")
+        while not client._queue.empty():
+            message = client._queue.get_nowait()
+            name = message.topic.value.removeprefix(prefix)
+            if name != "result" and isinstance(message, _Arrived):
+                for leaf, payload in self._answer(name, message):
+                    self.publish(leaf, payload)
+
+    def _answer(self, name: str, message: _Arrived) -> list[Publication]:
+        expiry_s = message.expiry_s if message.expiry_s is not None else self.command_expiry_s
+        if message.retain:  # kept by the broker from whenever: would run again each reconnect
+            return self.on_command(name, _payload(message), "retained")
+        expired = time.monotonic() - message.arrival_s > expiry_s
+        self.commands_expired += expired
+        return self.on_command(name, _payload(message), "expired" if expired else "run")
+
+    def _overflow(self, message: _Arrived) -> None:
+        """Too many commands waiting: answer this one at once (it is not run)."""
+        name = message.topic.value.removeprefix(topics.topic(self.robot, "cmd/"))
+        if name != "result":
+            self.commands_busy += 1
+            for leaf, payload in self.on_command(name, _payload(message), "busy"):
+                self.publish(leaf, payload)
+
+    def _refused(self, topic: str, reason: str) -> None:
+        if not self.refused[topic]:
+            log.warning("%s: the broker refused a publication on %s (%s)", self.robot, topic,
+                        reason)
+        self.refused[topic] += 1
+
+    async def _send_telemetry(self, client: _Client) -> None:
+        """QoS 0, in batches: awaits only the socket writes, never an acknowledgement."""
+        while True:
+            await self._telemetry_wake.wait()
+            self._telemetry_wake.clear()
+            while self.telemetry:
+                batch = [self.telemetry.popleft() for _ in range(len(self.telemetry))]
+                await asyncio.gather(*(client.publish(t, b, qos=0) for t, b in batch))
+
+    async def _send_reliable(self, client: _Client) -> None:
+        """QoS 1, up to ``inflight`` at once; each entry leaves the buffer once acknowledged."""
+        while True:
+            if not self.reliable:
+                self._reliable_wake.clear()
+                await self._reliable_wake.wait()
+                continue
+            await self._publish_window(client)
+
+    async def _publish_window(self, client: _Client) -> None:
+        """The oldest ``inflight`` QoS-1 entries at once; each leaves once acknowledged."""
+        window = list(islice(self.reliable, self.inflight))
+        await asyncio.gather(*(client.publish(p.topic, p.body, qos=topics.QOS_RELIABLE,
+                                              retain=p.retain) for p in window))
+        for p in window:
+            with contextlib.suppress(ValueError):  # dropped meanwhile (buffer full)
+                self.reliable.remove(p)
+
+    async def _goodbye(self, client: _Client, timeout_s: float = 2.0) -> None:
+        """``offline`` (superseding queued statuses), then flush the QoS-1 buffer, if possible."""
+        status = topics.topic(self.robot, topics.STATUS_LEAF)
+        self.reliable = deque(p for p in self.reliable if p.topic != status)
+        offline = topics.status_payload(self.robot, "offline", reason="bridge stopped")
+        self.reliable.append(_Outgoing(status, topics.dumps(offline), True))
+        with contextlib.suppress(Exception):
+            async with asyncio.timeout(timeout_s):
+                while self.reliable:
+                    await self._publish_window(client)
+
+
+def _payload(message: aiomqtt.Message) -> bytes:
+    return bytes(message.payload) if isinstance(message.payload, bytes | bytearray) else b""
+
+
+_V5_SEEN: weakref.WeakKeyDictionary[
+    asyncio.AbstractEventLoop, tuple[asyncio.Lock, dict[tuple[str, int], bool]]
+] = weakref.WeakKeyDictionary()  # per event loop: its lock and the answers
+
+
+async def speaks_v5(broker: BrokerURL, timeout_s: float) -> bool:
+    """Whether ``broker`` speaks MQTT v5, from one plain v5 CONNECT (no will, no properties:
+    amqtt misreads a v5 CONNECT with properties and never answers). Cached per host and port
+    for the running event loop;
+    ``BrokerError`` when the broker cannot be used at all (refused, not authorized, TLS, DNS)."""
+    loop = asyncio.get_running_loop()
+    lock, seen = _V5_SEEN.setdefault(loop, (asyncio.Lock(), {}))
+    async with lock:
+        key = (broker.host, broker.port)
+        if key not in seen:
+            seen[key] = await _probe_v5(broker, timeout_s)
+        return seen[key]
+
+
+async def _probe_v5(broker: BrokerURL, timeout_s: float) -> bool:
+    client = aiomqtt.Client(**broker.client_kwargs(), protocol=aiomqtt.ProtocolVersion.V5,
+                            timeout=timeout_s, logger=CLIENT_LOG)
+    client._client.connect_timeout = timeout_s
+    try:
+        async with asyncio.timeout(timeout_s + 1.0), client:
+            return True
+    except (aiomqtt.MqttError, TimeoutError, OSError) as exc:
+        if protocol_unsupported(exc):
+            log.info("%s speaks MQTT 3.1.1 only: no reason codes, no message expiry", broker)
+            return False
+        reason = await first_connect_failure(exc, broker, timeout_s)
+        raise BrokerError(f"cannot connect to {broker}: {reason}") from None
+
+
+async def _raise_on(stop: asyncio.Event) -> None:
+    await stop.wait()
+    raise _Stopped
+
+
+async def _sleep_or_stop(stop: asyncio.Event, delay_s: float) -> None:
+    """Sleep ``delay_s`` seconds, or less when ``stop`` is set."""
+    with contextlib.suppress(TimeoutError):
+        await asyncio.wait_for(stop.wait(), timeout=delay_s)

@@ -1,0 +1,283 @@
+"""One robot's frames -> the telemetry the bridge publishes (synchronous, no I/O).
+
+``RobotTelemetry.feed(msg)`` takes every frame of one robot's bus in bus order and returns the
+publications it makes due, as ``(leaf, payload)`` pairs (``host.mqtt.topics``):
+
+* every frame is E2E-checked (``host.e2e.E2EMonitor``: the DBC's E2EDataIDs, Profile 2 CRC and
+  sequence) and decoded with cantools; frames the check rejects, and E2E-valid frames cantools
+  cannot decode (an unknown multiplexer page), are counted in ``rejected``, never used (foreign
+  IDs by hex up to ``MAX_UNKNOWN_IDS`` of them, then as ``other``);
+* ``WHEEL_ENCODERS`` steps the float64 reference (``host.reference.ReferenceOdometry``, 24-bit
+  wrapping counts); the reference pose after each frame is kept by the frame's E2E ``COUNTER``;
+* ``ODOM_POSE_X`` + ``ODOM_POSE_Y`` with the same ``ENC_COUNTER`` make the on-board pose, compared
+  with the reference of that very encoder frame: ``pose``, ``reference`` and ``error`` at most
+  ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic);
+* ``SIM_TRUTH``'s three parts of one encoder frame make ``truth``, compared with the reference of
+  that frame (``error.reference_vs_truth``, the latest: what odometry itself cannot know);
+* ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result`` (enums by
+  their DBC names: ``"state": "OK"``).
+
+Headings: ``heading_rad`` wrapped to (-pi, pi] and ``heading_unwrapped_rad`` cumulative, on
+``pose``, ``reference`` and ``truth`` (SIM_TRUTH's [0, 2 pi) made cumulative at the reference's
+turn); ``dheading_rad`` wrapped to (-pi, pi].
+
+``periodic(now_s)`` returns ``status`` and ``rates`` (frames per second per message over the last
+window). Times: ``t_s`` is the frame's bus timestamp (s), ``unix_s`` the wall clock at publication.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import can
+from cantools.database.can import Database
+from cantools.database.errors import DecodeError
+
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.tracking import Pose, PoseTracker, difference, pose_dict
+from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
+from odocan.host.protocol.e2e import E2EMonitor
+from odocan.sim.contract import database
+
+Publication = tuple[str, dict[str, Any]]
+ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
+MAX_UNKNOWN_IDS = 32  # foreign CAN IDs counted by name in ``rejected``; the rest as ``other``
+
+
+@dataclass
+class PendingAck:
+    """A command frame sent, waiting for its ODOM_ACK."""
+
+    cmd_id: Any
+    command: str
+    final: bool  # the APPLY / GO frame: its ACK completes the command
+
+
+@dataclass
+class _Window:
+    """Frame counts since the last ``rates`` publication."""
+
+    start_s: float
+    counts: Counter[str] = field(default_factory=Counter)
+
+
+class RobotTelemetry:
+    """The bridge's view of one robot, built only from its bus."""
+
+    def __init__(
+        self,
+        name: str,
+        geometry: Geometry,
+        integrator: str,
+        *,
+        counter_bits: int = 32,
+        publish_hz: float = 10.0,
+        db: Database | None = None,
+        now_s: float = 0.0,
+    ) -> None:
+        """``geometry``/``integrator``/``counter_bits``: the robot's parameters for the float64
+        reference (a 16-bit hardware counter wraps at 16 bits within the 24 on the bus)."""
+        self.name = name
+        self.db = db if db is not None else database()
+        self._by_id = {m.frame_id: m for m in self.db.messages}
+        self.e2e = E2EMonitor(self.db)
+        self.tracker = PoseTracker(geometry, counter_bits, integrator)
+        self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
+        self.frames: Counter[str] = Counter()
+        self.rejected: Counter[str] = Counter()
+        self._unknown_ids: set[str] = set()
+        self._window = _Window(now_s)
+        self._pose_x_counter = 0  # E2E COUNTER of the last ODOM_POSE_X
+        self._twist: dict[str, float] = {}
+        self._last_pub_t = -math.inf
+        self._truth_error: dict[str, Any] | None = None
+        self.firmware: dict[str, Any] = {}
+        self.pending: dict[tuple[int, int], PendingAck] = {}
+        self.status_seq = 0
+        self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
+
+    # --- frames ---
+    def feed(self, msg: can.Message) -> list[Publication]:
+        """One frame of this robot's bus; returns the publications it makes due."""
+        if msg.is_error_frame or msg.is_remote_frame:
+            self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
+            return []
+        can_id, data = msg.arbitration_id, bytes(msg.data)
+        message = self._by_id.get(can_id)
+        status = self.e2e.check(can_id, data, extended=msg.is_extended_id,
+                                timestamp_s=msg.timestamp)  # the window widens with time
+        if message is None or status not in ACCEPTED_E2E:
+            self.rejected[message.name if message else self._unknown_key(can_id)] += 1
+            return []
+        handler = self._handlers.get(message.name)
+        signals: Any = None
+        if handler is not None:
+            try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
+                signals = message.decode(data, decode_choices=False)
+            except DecodeError:
+                self.rejected[message.name] += 1
+                return []
+        self.frames[message.name] += 1
+        self._window.counts[message.name] += 1
+        if handler is None:
+            return []
+        assert isinstance(signals, dict)
+        publications: list[Publication] = handler(self, signals, msg.timestamp)
+        return publications
+
+    def _unknown_key(self, can_id: int) -> str:
+        """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
+        random IDs must not grow ``rejected`` (and the ``rates`` payload) without bound."""
+        key = hex(can_id)
+        if key in self._unknown_ids or len(self._unknown_ids) < MAX_UNKNOWN_IDS:
+            self._unknown_ids.add(key)
+            return key
+        return "other"
+
+    def _on_encoders(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
+        return []
+
+    def _on_pose_x(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), s["X"], s["HEADING"])
+        self._pose_x_counter = int(s["COUNTER"])
+        return []
+
+    def _on_twist(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        self._twist = {
+            "linear_vel_m_s": s["LINEAR_VEL"],
+            "angular_vel_rad_s": s["ANGULAR_VEL"],
+            "distance_m": s["DISTANCE"],
+        }
+        return []
+
+    def _on_pose_y(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        enc = int(s["ENC_COUNTER"])
+        sample = self.tracker.on_pose_y(enc, s["Y"], int(s["TURNS"]))
+        if t_s < self._last_pub_t:  # the bus clock went back (a restart, a replay): follow it
+            self._last_pub_t = -math.inf
+        if sample is None or t_s - self._last_pub_t < self.publish_period_s - 1e-6:
+            return []
+        self._last_pub_t = t_s
+        return self._pose_publications(*sample, enc, self._pose_x_counter, t_s)
+
+    def _pose_publications(
+        self, pose: Pose, ref: Pose | None, enc: int, counter: int, t_s: float
+    ) -> list[Publication]:
+        head = {"t_s": t_s, "counter": counter, "enc_counter": enc, "enc_seq": pose.seq}
+        pubs: list[Publication] = [("pose", stamp({**head, **_pose_dict(pose), **self._twist}))]
+        if ref is None or ref.seq != pose.seq:
+            return pubs
+        pubs.append(("reference", stamp({**head, **_pose_dict(ref)})))
+        error: dict[str, Any] = {**head, "pose_vs_reference": difference(pose, ref)}
+        if self._truth_error is not None:
+            error["reference_vs_truth"] = self._truth_error
+        pubs.append(("error", stamp(error)))
+        return pubs
+
+    def _on_truth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        enc, part = int(s["ENC_COUNTER"]), int(s["PART"])
+        value = s.get({0: "X", 1: "Y", 2: "HEADING"}.get(part, ""), 0.0)
+        sample = self.tracker.on_truth(part, enc, float(value))
+        if sample is None:
+            return []
+        truth, ref = sample
+        if ref is not None:  # the truth was sampled at that very encoder frame
+            self._truth_error = {"enc_seq": ref.seq, **difference(ref, truth)}
+        payload = {"t_s": t_s, "counter": int(s["COUNTER"]), "enc_counter": enc,
+                   "enc_seq": truth.seq, **_pose_dict(truth)}
+        return [("truth", stamp(payload))]
+
+    def _on_status(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        page = int(s["PAGE"])
+        message = self._by_id[self._status_id]
+        fields = {k.lower(): _named(message, k, v) for k, v in s.items()
+                  if k not in ("CHECKSUM", "COUNTER", "PAGE")}
+        self.firmware[_page_name(self.db, page)] = fields
+        return []
+
+    def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        key = (int(s["REQUEST_ID"]), int(s["REQUEST_COUNTER"]))
+        pending = self.pending.pop(key, None)
+        if pending is None:
+            return []
+        nack = int(s["RESULT"]) != 0
+        if not nack and not pending.final:
+            return []
+        if nack:  # forget the rest of this command: one answer per command
+            self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
+        elif pending.command in ("set_pose", "config"):
+            self.tracker.restart_reference()
+        reason = _choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
+        payload = {"id": pending.cmd_id, "command": pending.command,
+                   "result": "nacked" if nack else "acked", "reason": reason, "t_s": t_s}
+        return [(RESULT_LEAF, stamp(payload))]
+
+    def expect_ack(self, can_id: int, counter: int, ack: PendingAck) -> None:
+        """A command frame was sent: its ODOM_ACK will answer the command."""
+        self.pending[(can_id, counter)] = ack
+
+    def set_geometry(self, geometry: Geometry, integrator: str, counter_bits: int) -> None:
+        """New robot parameters (a config command): the reference restarts at the next pose."""
+        self.tracker.integrator = integrator
+        self.tracker.set_geometry(geometry, counter_bits)
+
+    _handlers: ClassVar[dict[str, Any]] = {
+        "WHEEL_ENCODERS": _on_encoders,
+        "ODOM_POSE_X": _on_pose_x,
+        "ODOM_POSE_Y": _on_pose_y,
+        "ODOM_TWIST": _on_twist,
+        "SIM_TRUTH": _on_truth,
+        "ODOM_STATUS": _on_status,
+        "ODOM_ACK": _on_ack,
+    }
+
+    # --- periodic ---
+    def rates(self, now_s: float) -> Publication:
+        """``rates``: frames/s per message since the previous call (wall clock ``now_s``)."""
+        window = self._window
+        span = max(now_s - window.start_s, 1e-9)
+        self._window = _Window(now_s)
+        payload = {
+            "window_s": round(span, 6),
+            "hz": {name: round(n / span, 3) for name, n in sorted(window.counts.items())},
+            "frames": dict(sorted(self.frames.items())),
+            "rejected": dict(sorted(self.rejected.items())),
+            "e2e": self.e2e.counts(),
+        }
+        return ("rates", stamp(payload))
+
+    def status(self, state: str = "online") -> Publication:
+        """``status`` (retained): online, the firmware's last ODOM_STATUS pages, a sequence."""
+        self.status_seq += 1
+        return ("status", status_payload(
+            self.name, state, seq=self.status_seq, firmware=self.firmware,
+            frames_total=sum(self.frames.values()),
+        ))
+
+
+def _pose_dict(pose: Pose) -> dict[str, float]:
+    """``x_m``, ``y_m``, ``heading_rad`` in (-pi, pi] and ``heading_unwrapped_rad``."""
+    fields = pose_dict(pose)
+    assert fields is not None
+    return fields
+
+
+def _named(message: Any, signal: str, value: Any) -> Any:
+    """An enum signal's value by its DBC name (``"OK"``, not 1); other values as they are."""
+    choices = message.get_signal_by_name(signal).choices
+    if choices and int(value) in choices:
+        return str(choices[int(value)])
+    return value
+
+
+def _choice(db: Database, message: str, signal: str, value: int) -> str:
+    choices = db.get_message_by_name(message).get_signal_by_name(signal).choices
+    return str(choices.get(value, value)) if choices else str(value)
+
+
+def _page_name(db: Database, page: int) -> str:
+    return _choice(db, "ODOM_STATUS", "PAGE", page).lower()

@@ -1,0 +1,372 @@
+"""The host's AUTOSAR E2E Profile 2 receiver: vectorised over a log, or streaming for a live bus.
+
+The host's own implementation of what the firmware does in ``firmware.e2e`` (dbc/README.md):
+
+* **CRC8H2F** (polynomial 0x2F, initial value 0xFF, final XOR 0xFF) over bytes 1..7 and then the
+  data ID ``E2EDataIDs[COUNTER]``, the 16-entry list of the DBC message attribute ``E2EDataIDs``.
+  Over a whole log: one table lookup per byte column for all frames at once.
+* **Sequence** (``E2E_P02Check``), per message in bus order, on the frames whose CRC is right:
+  ``delta = (COUNTER - last_valid) mod 16``: 1 OK; 0 REPEATED (dropped); 2..MaxDeltaCounter
+  OKSOMELOST (used, ``delta - 1`` frames lost); beyond WRONGSEQUENCE (dropped, the reference counter
+  kept: R4.0 has no re-sync counter, the widening window lets the sender back in). The first frame
+  is OK.
+* **MaxDeltaCounter**: as in the firmware, it restarts from ``MaxDeltaCounterInit`` at each accepted
+  frame and grows by one per receive period (up to 15) before a frame is judged. The firmware
+  counts its periods with ``check(None)`` calls; the host counts them from the timestamps:
+  a frame ``dt`` after the message's previous frame adds ``max(1, round(dt / cycle))`` periods
+  (``GenMsgCycleTime``). MaxDeltaCounterInit is 1 for ``Cyclic`` messages and 15 for the others
+  (event messages, ``CyclicIfActive`` MOTOR_CMD), as the firmware and the motor controller use.
+  *Intended difference*: two frames of one message within one period add two periods in the
+  firmware (two checks) and in the host (two frames), but a frame with the wrong DLC, which the
+  firmware drops before the check (no ``check(None)`` for that tick either), leaves no trace here
+  but the time that passed.
+
+``ok`` counts the frames accepted (OK or OKSOMELOST), as the firmware's ``*_E2E_OK`` signals;
+``lost`` the frames skipped by OKSOMELOST; ``crc_errors`` bad CRCs. Frames of IDs the DBC does not
+know, of the wrong DLC, error and remote frames are counted in the ``"unknown"`` section, never
+fatal; messages without ``E2EDataIDs`` are taken unchecked and counted there as ``unprotected``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cantools
+import numpy as np
+import numpy.typing as npt
+from cantools.database.can import Message
+
+from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
+from odocan.host.protocol.decode import frame_key, frame_keys
+from odocan.sim import contract
+from odocan.sim.exceptions import OdocanError
+
+E2E_KEYS = ("ok", "lost", "repeated", "crc_errors", "wrong_sequence")
+UNKNOWN = "unknown"  # the section of check_frames' counts for frames that are not checked
+UNKNOWN_KEYS = ("unknown_id", "wrong_dlc", "error_frames", "remote_frames", "unprotected")
+
+OK, OKSOMELOST, REPEATED, WRONG_SEQUENCE, CRC_ERROR = (
+    "ok", "oksomelost", "repeated", "wrong_sequence", "crc_error"
+)
+UNKNOWN_ID, WRONG_DLC, UNPROTECTED = "unknown_id", "wrong_dlc", "unprotected"
+_STATUS = (OK, OKSOMELOST, REPEATED, WRONG_SEQUENCE, CRC_ERROR)
+_S_OK, _S_LOST, _S_REPEATED, _S_WRONG, _S_CRC = range(5)
+
+CRC8H2F_POLY = 0x2F
+CRC8H2F_INIT = 0xFF
+CRC8H2F_XOR_OUT = 0xFF
+COUNTER_MASK = 0x0F
+MAX_DELTA_COUNTER = 15
+P02_LENGTH = 8  # bytes: Profile 2 over classic CAN frames
+
+
+class E2EConfigError(OdocanError):
+    """The DBC's E2E attributes cannot be used (a list that is not 16 data IDs of 0..255)."""
+
+
+def _crc_table() -> npt.NDArray[np.uint8]:
+    """The MSB-first CRC8H2F table (256 entries), built with numpy: 8 shift/xor rounds."""
+    crc: npt.NDArray[np.int64] = np.arange(256, dtype=np.int64)
+    for _ in range(8):
+        crc = np.where(crc & 0x80, (crc << 1) ^ CRC8H2F_POLY, crc << 1) & 0xFF
+    return crc.astype(np.uint8)
+
+
+CRC8H2F_TABLE = _crc_table()
+_TABLE_LIST = CRC8H2F_TABLE.tolist()
+
+
+def crc8h2f_p02(
+    data: npt.NDArray[np.uint8], data_ids: npt.NDArray[np.uint8]
+) -> npt.NDArray[np.uint8]:
+    """Profile 2 CRCs of N 8-byte frames: CRC8H2F over bytes 1..7 then each frame's data ID."""
+    table = CRC8H2F_TABLE
+    crc = np.full(data.shape[0], CRC8H2F_INIT, dtype=np.uint8)
+    for column in range(1, P02_LENGTH):
+        crc = table[crc ^ data[:, column]]
+    crc = table[crc ^ data_ids.astype(np.uint8)]
+    result: npt.NDArray[np.uint8] = crc ^ np.uint8(CRC8H2F_XOR_OUT)
+    return result
+
+
+def crc8h2f_p02_one(data: bytes, data_id: int) -> int:
+    """The same for one frame (live monitoring)."""
+    table = _TABLE_LIST
+    crc = CRC8H2F_INIT
+    for byte in data[1:P02_LENGTH]:
+        crc = table[crc ^ byte]
+    return int(table[crc ^ data_id] ^ CRC8H2F_XOR_OUT)
+
+
+@dataclass(frozen=True)
+class E2EMessage:
+    """What the receiver needs of one message of the DBC."""
+
+    name: str
+    key: int  # decode.frame_key: identifier and frame format
+    length: int  # DLC, bytes
+    data_ids: tuple[int, ...] | None  # E2EDataIDs (16), None: not protected
+    max_delta_init: int  # MaxDeltaCounterInit
+    cycle_s: float | None  # GenMsgCycleTime (None: not cyclic)
+
+
+def e2e_messages(db: cantools.database.can.Database) -> dict[int, E2EMessage]:
+    """The DBC's messages by ``frame_key``, with their E2E configuration."""
+    return {m.key: m for m in (_e2e_message(message) for message in db.messages)}
+
+
+def _e2e_message(message: Message) -> E2EMessage:
+    attributes = message.dbc.attributes if message.dbc is not None else {}
+    data_ids = None
+    if "E2EDataIDs" in attributes:
+        data_ids = _parse_data_ids(message.name, str(attributes["E2EDataIDs"].value))
+        if message.length != P02_LENGTH:
+            raise E2EConfigError(f"{message.name}: E2E Profile 2 needs 8-byte frames")
+    cyclic = bool(message.cycle_time) and message.send_type in (None, "Cyclic")
+    return E2EMessage(
+        name=message.name,
+        key=frame_key(message.frame_id, message.is_extended_frame),
+        length=message.length,
+        data_ids=data_ids,
+        max_delta_init=1 if cyclic else MAX_DELTA_COUNTER,
+        cycle_s=message.cycle_time / 1000.0 if message.cycle_time else None,
+    )
+
+
+def _parse_data_ids(name: str, text: str) -> tuple[int, ...]:
+    try:
+        ids = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise E2EConfigError(f"{name}: E2EDataIDs {text!r} is not a list of integers") from None
+    if len(ids) != 16 or not all(0 <= v <= 255 for v in ids):
+        raise E2EConfigError(f"{name}: E2EDataIDs must list 16 data IDs of 0..255, got {text!r}")
+    return ids
+
+
+# --- one message's sequence (AUTOSAR E2E_P02Check), shared by both APIs ---------------------------
+
+
+@dataclass
+class SequenceState:
+    """The Profile 2 check state of one message: last valid counter and the delta window."""
+
+    max_delta_init: int
+    waiting: bool = True  # no valid frame yet
+    last_valid: int = 0
+    window: int = 0  # MaxDeltaCounter
+    counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(E2E_KEYS, 0))
+
+    def check(self, crc_ok: bool, counter: int, periods: int = 1) -> str:
+        """Judge one frame ``periods`` receive periods after the previous one; count it."""
+        self.window = min(MAX_DELTA_COUNTER, self.window + periods)
+        if not crc_ok:
+            self.counts["crc_errors"] += 1
+            return CRC_ERROR
+        delta = (counter - self.last_valid) & COUNTER_MASK
+        if self.waiting or delta == 1:
+            status = OK
+        elif delta == 0:
+            self.counts["repeated"] += 1
+            return REPEATED
+        elif delta <= self.window:
+            status = OKSOMELOST
+            self.counts["lost"] += delta - 1
+        else:
+            self.counts["wrong_sequence"] += 1
+            return WRONG_SEQUENCE
+        self.waiting = False
+        self.last_valid = counter
+        self.window = self.max_delta_init
+        self.counts["ok"] += 1
+        return status
+
+
+def periods_between(dt_s: npt.NDArray[np.float64], cycle_s: float | None) -> npt.NDArray[np.int64]:
+    """Receive periods that a frame ``dt_s`` after the previous one closes: at least 1."""
+    if cycle_s is None:
+        return np.ones(dt_s.shape, dtype=np.int64)
+    return np.maximum(1, np.rint(dt_s / cycle_s)).astype(np.int64)
+
+
+def sequence_statuses(
+    crc_ok: npt.NDArray[np.bool_],
+    counter: npt.NDArray[np.int64],
+    periods: npt.NDArray[np.int64],
+    max_delta_init: int,
+) -> npt.NDArray[np.int8]:
+    """Status codes (``_STATUS`` order) of one message's frames in bus order.
+
+    Vectorised on the assumption that each valid frame's predecessor was accepted; the frames
+    from each place where that fails up to the next accepted frame are re-judged one by one with
+    ``SequenceState`` (the cost grows with the number of rejected frames only).
+    """
+    status = np.full(len(crc_ok), _S_CRC, dtype=np.int8)
+    valid = np.flatnonzero(crc_ok)
+    if len(valid) == 0:
+        return status
+    cum = np.cumsum(periods)
+    c = counter[valid] & COUNTER_MASK
+    naive = np.full(len(valid), _S_OK, dtype=np.int8)
+    delta = (c[1:] - c[:-1]) & COUNTER_MASK
+    window = np.minimum(MAX_DELTA_COUNTER, max_delta_init + cum[valid[1:]] - cum[valid[:-1]])
+    naive[1:] = np.select(
+        [delta == 1, delta == 0, delta <= window], [_S_OK, _S_REPEATED, _S_LOST], _S_WRONG
+    )
+    bad = np.flatnonzero((naive == _S_REPEATED) | (naive == _S_WRONG))
+    j = 0
+    while True:
+        k = int(np.searchsorted(bad, j))
+        if k == len(bad):
+            break
+        start = int(bad[k])  # its predecessor (start - 1) was accepted
+        j = _rejudge(naive, c, cum[valid], start, max_delta_init)
+    status[valid] = naive
+    return status
+
+
+def _rejudge(
+    naive: npt.NDArray[np.int8],
+    c: npt.NDArray[np.int64],
+    cum: npt.NDArray[np.int64],
+    start: int,
+    max_delta_init: int,
+) -> int:
+    """Re-judge valid frames from ``start`` until one is accepted; returns the next index."""
+    last, last_cum = int(c[start - 1]), int(cum[start - 1])
+    codes = {OK: _S_OK, OKSOMELOST: _S_LOST, REPEATED: _S_REPEATED, WRONG_SEQUENCE: _S_WRONG}
+    for j in range(start, len(c)):
+        state = SequenceState(max_delta_init, False, last, window=max_delta_init)
+        result = state.check(True, int(c[j]), int(cum[j]) - last_cum)
+        naive[j] = codes[result]
+        if result in (OK, OKSOMELOST):
+            return j + 1
+    return len(c)
+
+
+# --- a whole log -------------------------------------------------------------------------------
+
+
+def check_frames(
+    frames: FrameArrays, db: cantools.database.can.Database | None = None
+) -> tuple[dict[str, dict[str, int]], npt.NDArray[np.bool_]]:
+    """Profile 2 over every frame of a log.
+
+    Returns the counts per message name (``E2E_KEYS``; only messages present in the log) plus an
+    ``"unknown"`` section (``UNKNOWN_KEYS``), and the mask (N,) of the frames accepted (OK or
+    OKSOMELOST; the frames of unprotected messages are accepted unchecked). ``db`` defaults to
+    the contract (dbc/odocan.dbc).
+    """
+    configs = e2e_messages(db if db is not None else contract.database())
+    keys = frame_keys(frames)
+    accepted = np.zeros(len(frames), dtype=bool)
+    counts: dict[str, dict[str, int]] = {}
+    unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
+    unknown["error_frames"] = int(np.count_nonzero(frames.flags & FLAG_ERROR))
+    unknown["remote_frames"] = int(
+        np.count_nonzero((frames.flags & (FLAG_REMOTE | FLAG_ERROR)) == FLAG_REMOTE)
+    )
+    known = np.isin(keys, np.fromiter(configs, dtype=np.int64, count=len(configs)))
+    unknown["unknown_id"] = int(np.count_nonzero(~known & (keys >= 0)))
+    for key in np.unique(keys[known]).tolist():
+        config = configs[key]
+        of_id = np.flatnonzero(keys == key)
+        right_dlc = of_id[frames.dlc[of_id] == config.length]
+        unknown["wrong_dlc"] += len(of_id) - len(right_dlc)
+        if config.data_ids is None:
+            unknown["unprotected"] += len(right_dlc)
+            accepted[right_dlc] = True
+            continue
+        counts[config.name] = _check_message(frames, right_dlc, config, accepted)
+    counts[UNKNOWN] = unknown
+    return counts, accepted
+
+
+def _check_message(
+    frames: FrameArrays,
+    index: npt.NDArray[np.intp],
+    config: E2EMessage,
+    accepted: npt.NDArray[np.bool_],
+) -> dict[str, int]:
+    """Check the frames ``index`` of one protected message; mark the accepted ones."""
+    assert config.data_ids is not None
+    data = frames.data[index]
+    counter = (data[:, 1] & COUNTER_MASK).astype(np.int64)
+    ids = np.array(config.data_ids, dtype=np.uint8)[counter]
+    crc_ok = crc8h2f_p02(data, ids) == data[:, 0]
+    dt = np.diff(frames.timestamp_s[index], prepend=frames.timestamp_s[index[:1]])
+    periods = periods_between(dt, config.cycle_s)
+    status = sequence_statuses(crc_ok, counter, periods, config.max_delta_init)
+    good = (status == _S_OK) | (status == _S_LOST)
+    accepted[index[good]] = True
+    valid = np.flatnonzero(good)
+    lost = int(np.sum((counter[valid[1:]] - counter[valid[:-1]]) & COUNTER_MASK) - len(valid) + 1)
+    return {
+        "ok": len(valid),
+        "lost": lost if len(valid) else 0,
+        "repeated": int(np.count_nonzero(status == _S_REPEATED)),
+        "crc_errors": int(np.count_nonzero(status == _S_CRC)),
+        "wrong_sequence": int(np.count_nonzero(status == _S_WRONG)),
+    }
+
+
+# --- live -------------------------------------------------------------------------------------
+
+
+class E2EMonitor:
+    """The same rules, one frame at a time, for live monitoring.
+
+    ``check`` returns one of ``"ok"``, ``"oksomelost"``, ``"repeated"``, ``"wrong_sequence"``,
+    ``"crc_error"`` (E2E statuses), ``"unprotected"`` (a message without E2EDataIDs, taken as it
+    is), ``"unknown_id"`` or ``"wrong_dlc"`` (not checked). Give ``timestamp_s`` (seconds, e.g.
+    ``msg.timestamp``) to widen the window with time as ``check_frames`` does; without it each
+    frame counts as one period.
+    """
+
+    def __init__(self, db: cantools.database.can.Database | None = None) -> None:
+        self._configs = e2e_messages(db if db is not None else contract.database())
+        self._states: dict[int, SequenceState] = {}
+        self._last_time: dict[int, float] = {}
+        self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
+
+    def check(
+        self, can_id: int, data: bytes, *, extended: bool = False, timestamp_s: float | None = None
+    ) -> str:
+        """Judge one data frame (identifier, payload); count and return its status."""
+        key = frame_key(can_id, extended)
+        config = self._configs.get(key)
+        if config is None:
+            self._unknown["unknown_id"] += 1
+            return UNKNOWN_ID
+        if len(data) != config.length:
+            self._unknown["wrong_dlc"] += 1
+            return WRONG_DLC
+        if config.data_ids is None:
+            self._unknown["unprotected"] += 1
+            return UNPROTECTED
+        periods = self._periods(key, config, timestamp_s)
+        counter = data[1] & COUNTER_MASK
+        crc_ok = crc8h2f_p02_one(data, config.data_ids[counter]) == data[0]
+        state = self._states.setdefault(key, SequenceState(config.max_delta_init))
+        return state.check(crc_ok, counter, periods)
+
+    def _periods(self, key: int, config: E2EMessage, timestamp_s: float | None) -> int:
+        if timestamp_s is None:
+            return 1
+        last = self._last_time.get(key)
+        self._last_time[key] = timestamp_s
+        if last is None:
+            return 1
+        return int(periods_between(np.array([timestamp_s - last]), config.cycle_s)[0])
+
+    def count_frame_kind(self, *, error: bool = False, remote: bool = False) -> None:
+        """Count an error or remote frame (they are never checked)."""
+        if error:
+            self._unknown["error_frames"] += 1
+        elif remote:
+            self._unknown["remote_frames"] += 1
+
+    def counts(self) -> dict[str, dict[str, int]]:
+        """Counts per message name seen so far (``E2E_KEYS``) and the ``"unknown"`` section."""
+        result = {self._configs[key].name: dict(s.counts) for key, s in self._states.items()}
+        result[UNKNOWN] = dict(self._unknown)
+        return result

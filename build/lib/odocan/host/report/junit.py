@@ -1,0 +1,48 @@
+"""JUnit XML of odocan's checks, for CI servers (GitLab, Jenkins, GitHub's test reporters).
+
+One ``<testsuite>`` per command, one ``<testcase>`` per check (on-board vs reference, vs truth,
+E2E, a goal, a UMBmark bound ...); a failed check carries its figures in the ``<failure>`` message
+and text, so the CI page shows what was measured against which limit.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class Check:
+    """One verdict: ``name`` (e.g. ``onboard_vs_reference``), passed or not, and the figures that
+    decided it (``{"max_position_error_m": 3.1e-5, "limit_m": 1e-4}``)."""
+
+    name: str
+    passed: bool
+    message: str = ""
+    figures: dict[str, object] = field(default_factory=dict)
+
+
+def junit_xml(suite: str, checks: list[Check], *, time_s: float = 0.0) -> str:
+    """The JUnit XML document of ``checks`` as one test suite named ``suite``."""
+    failures = sum(not check.passed for check in checks)
+    root = ET.Element("testsuites", name="odocan", tests=str(len(checks)), failures=str(failures))
+    node = ET.SubElement(
+        root, "testsuite", name=suite, tests=str(len(checks)), failures=str(failures),
+        errors="0", skipped="0", time=f"{time_s:.3f}",
+    )
+    for check in checks:
+        case = ET.SubElement(node, "testcase", classname=f"odocan.{suite}", name=check.name)
+        figures = "\n".join(f"{key} = {value}" for key, value in check.figures.items())
+        if not check.passed:
+            failure = ET.SubElement(case, "failure", message=check.message or "check failed")
+            failure.text = figures
+        elif figures:
+            ET.SubElement(case, "system-out").text = figures
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode", xml_declaration=True) + "\n"
+
+
+def write_junit(path: Path, suite: str, checks: list[Check], *, time_s: float = 0.0) -> None:
+    """Write ``junit_xml(...)`` to ``path`` (UTF-8)."""
+    path.write_text(junit_xml(suite, checks, time_s=time_s), encoding="utf-8")

@@ -1,0 +1,236 @@
+"""Rendering of the monitor's model with rich: the plain screen of ``odocan monitor`` (``render``)
+and the MQTT fleet table (``render_fleet``), plus the pieces the TUI (``host.report.tui``) lays
+out: the firmware line, the pose table, the message table, the "not checked" line.
+
+Every function here is a pure function of a snapshot (``host.judge.monitor.BusMonitor.snapshot``
+or ``fleet_snapshot``) and of times passed in, so the same call draws the terminal, a test's
+fixed-size console and a recorded SVG.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+from rich import box
+from rich.console import Group, RenderableType
+from rich.table import Table
+from rich.text import Text
+
+from odocan.host.protocol.e2e import E2E_KEYS
+
+STALE_S = 1.0  # a message not heard for this long is shown dimmed
+FLEET_STALE_S = 3.0  # a robot whose last MQTT message is older than this is marked stale
+
+
+def render(snapshot: dict[str, Any], *, source: str,
+           heard: dict[str, float] | None = None) -> RenderableType:
+    """The live screen (fits 80 columns): header, per-message statistics, latest signal values,
+    firmware status, pose comparison, frames not checked.
+
+    ``heard``: message name -> seconds since last heard (rows not heard for ``STALE_S`` dimmed).
+    """
+    header = Text.assemble(
+        ("odocan monitor ", "bold"), (source, "cyan"),
+        f"   {snapshot['duration_s']:.1f} s   {snapshot['frames_total']} frames   Ctrl-C quits",
+    )
+    heard = heard or {}
+    return Group(
+        header, messages_table(snapshot, heard), signals_table(snapshot, heard),
+        status_line(snapshot.get("status")), health_line(snapshot.get("health")),
+        pose_table(snapshot), pose_note(snapshot),
+        unknown_line(snapshot["unknown"]),
+    )
+
+
+def compact_table(*columns: str) -> Table:
+    """A compact table; the first column left-aligned, the others right-aligned."""
+    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False,
+                  padding=(0, 1, 0, 0))
+    for i, column in enumerate(columns):
+        table.add_column(column, justify="left" if i == 0 else "right", no_wrap=True)
+    return table
+
+
+def messages_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
+    table = compact_table("message", "ID", "frames", "Hz", "jitter ms", "E2E ok", "lost", "rep",
+                   "crc", "seq")
+    for name, m in snapshot["messages"].items():
+        e2e = m["e2e"]
+        dim = "dim" if m.get("stale") or heard.get(name, 0.0) > STALE_S else None
+        table.add_row(
+            name, m["id"], str(m["count"]), num(m["rate_hz"], ".1f"),
+            num(m["jitter_ms"], ".2f"), *(num(e2e.get(k), "d") for k in E2E_KEYS), style=dim,
+        )
+        for page, stats in m.get("pages", {}).items():
+            table.add_row(f"  {page}", "", str(stats["count"]), num(stats["rate_hz"], ".1f"),
+                          num(stats["jitter_ms"], ".2f"), *("" for _ in E2E_KEYS), style=dim)
+    return table
+
+
+def signals_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
+    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
+    table.add_column("message", no_wrap=True)
+    table.add_column("latest values", overflow="fold", ratio=1)
+    for name, m in snapshot["messages"].items():
+        table.add_row(name, values_text(m.get("last_frame", m["last"]), m["units"]),
+                      style="dim" if heard.get(name, 0.0) > STALE_S else None)
+    return table
+
+
+def values_text(last: dict[str, Any], units: dict[str, str]) -> str:
+    items = []
+    for name, value in last.items():
+        text = f"{value:.4f}".rstrip("0").rstrip(".") if isinstance(value, float) else str(value)
+        unit = units.get(name, "")
+        items.append(f"{name} {text}{' ' + unit if unit else ''}")
+    return ", ".join(items)
+
+
+def status_line(status: dict[str, Any] | None) -> Text:
+    if not status:
+        return Text("firmware: no ODOM_STATUS summary yet", style="dim")
+    state = str(status.get("state"))
+    colour = {"OK": "green", "DEGRADED": "yellow", "FAULT": "bold red"}.get(state, "")
+    errors = ", ".join(status.get("errors") or []) or "none"
+    totals = ", ".join(f"{k.removesuffix('_frames')} {v}" for k, v in status.items()
+                       if k.endswith("_frames"))
+    return Text.assemble(
+        ("firmware ", "bold"), (state, colour),
+        f"   integrator {status.get('integrator')}   errors 0x{status.get('error_mask', 0):04X}"
+        f" ({errors})   uptime {status.get('uptime_s')} s"
+        + (f"   frames {totals}" if totals else ""),
+    )
+
+
+FIRMWARE_NODE = "ODOM_MCU"
+BAD_VERDICTS = frozenset({"STALE", "CONFLICT", "POSE WRONG", "FAULT", "NO FIRMWARE"})
+
+
+def health_line(health: dict[str, Any] | None) -> Text:
+    """The monitor's verdict, why, the firmware's age and the latest event."""
+    if not health:
+        return Text("")
+    state = str(health["state"])
+    colour = "green" if state == "OK" else "bold red" if state in BAD_VERDICTS else "yellow"
+    firmware = health["nodes"].get(FIRMWARE_NODE)
+    age = f"   age {firmware['age_s']:.2f} s" if firmware else ""
+    why = f": {'; '.join(health['why'])}" if health["why"] else ""
+    events = health["events"]
+    last = f"   event: {events[-1]['kind']} ({events[-1]['detail']})" if events else ""
+    return Text.assemble(("verdict ", "bold"), (state, colour), why + age + last)
+
+
+def pose_table(snapshot: dict[str, Any]) -> Table:
+    """On-board, reference and truth poses; on-board minus each (latest and max)."""
+    table = compact_table("pose", "x m", "y m", "hdg rad", "Δ mm", "Δ mrad", "max mm", "max mrad")
+    errors = snapshot["error"]
+    rows = (("on-board", snapshot["pose"], None),
+            ("reference", snapshot["reference"], errors["pose_vs_reference"]),
+            ("truth", snapshot["truth"], errors["pose_vs_truth"]))
+    for label, pose, error in rows:
+        pose, error = pose or {}, error or {}
+        table.add_row(
+            label, num(pose.get("x_m"), ".4f"), num(pose.get("y_m"), ".4f"),
+            num(pose.get("heading_rad"), ".4f"), scaled(error.get("dpos_m")),
+            scaled(error.get("dheading_rad")), scaled(error.get("max_dpos_m")),
+            scaled(error.get("max_dheading_rad")),
+        )
+    return table
+
+
+def pose_note(snapshot: dict[str, Any]) -> Text:
+    ref, errors = snapshot["reference"], snapshot["error"]
+    samples = [(errors[key] or {}).get("samples", 0) for key in ("pose_vs_reference",
+                                                                  "pose_vs_truth")]
+    return Text(f"Δ: on-board minus the row; reference {ref.get('integrator') or '(integrator?)'}"
+                f", started {ref.get('starts', 0)}x; compared {samples[0]} poses, {samples[1]} "
+                "truth", style="dim")
+
+
+def unknown_line(unknown: dict[str, Any]) -> Text:
+    counts = {k: v for k, v in unknown.items() if k != "ids" and v}
+    if not counts:
+        return Text("not checked: none", style="dim")
+    text = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in counts.items())
+    ids = ", ".join(f"{k}×{v}" for k, v in list(unknown.get("ids", {}).items())[:8])
+    return Text(f"not checked: {text}" + (f" (IDs {ids})" if ids else ""), style="yellow")
+
+
+def num(value: Any, spec: str) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    return format(value, spec)
+
+
+def scaled(value: float | None) -> str:
+    """Metres as mm, radians as mrad."""
+    return "-" if value is None else f"{value * 1e3:.4f}"
+
+
+# --- the MQTT fleet -------------------------------------------------------------------------
+
+
+def render_fleet(snapshot: dict[str, Any], *, source: str, elapsed_s: float, note: str = "",
+                 now_unix_s: float | None = None,
+                 stale_after_s: float = FLEET_STALE_S) -> RenderableType:
+    """The fleet table of ``odocan monitor --mqtt``, worst robot first.
+
+    Rows are sorted by position error against the reference (largest first, robots without one
+    last, then by name). A robot whose latest message (``updated_unix_s``) is older than
+    ``stale_after_s`` at ``now_unix_s`` (default: now) is shown ``stale`` with the age, dimmed,
+    whatever its retained status says; an offline robot is ``offline``.
+    """
+    now_unix_s = time.time() if now_unix_s is None else now_unix_s
+    rows = sorted(snapshot.items(), key=_worst_first)
+    stale = sum(1 for _, row in rows if fleet_age_s(row, now_unix_s) > stale_after_s)
+    header = Text.assemble(
+        ("odocan monitor --mqtt ", "bold"), (source, "cyan"),
+        f"   {elapsed_s:.1f} s   {len(snapshot)} robots"
+        + (f" ({stale} stale)" if stale else "") + "   Ctrl-C quits",
+    )
+    table = fleet_table()
+    for name, row in rows:
+        age_s = fleet_age_s(row, now_unix_s)
+        pose, error, status = row["pose"] or {}, row["error"] or {}, row["status"] or {}
+        state = str(status.get("state", "-"))
+        if not row["online"]:
+            state = "offline"
+        elif age_s > stale_after_s:
+            state = f"stale {age_s:.0f}s"
+        table.add_row(
+            name, num(pose.get("x_m"), ".4f"), num(pose.get("y_m"), ".4f"),
+            num(pose.get("heading_rad"), ".4f"), scaled(error.get("dpos_m")),
+            scaled(error.get("dheading_rad")), state,
+            " ".join(status.get("errors") or []) or "-", num(row["rate_hz"], ".1f"),
+            style=None if row["online"] and age_s <= stale_after_s else "dim",
+        )
+    parts: list[RenderableType] = [header, table]
+    if note:
+        parts.append(Text(note, style="yellow"))
+    return Group(*parts)
+
+
+def fleet_table() -> Table:
+    """The empty fleet table (columns of ``render_fleet``)."""
+    out = compact_table("robot", "x m", "y m", "hdg rad", "Δ mm", "Δ mrad", "state", "errors",
+                        "fr/s")
+    for column in out.columns[6:8]:
+        column.justify = "left"
+    out.columns[7].no_wrap, out.columns[7].min_width = False, 8  # names wrap at spaces
+    return out
+
+
+def fleet_age_s(row: dict[str, Any], now_unix_s: float) -> float:
+    """Seconds since a fleet row was last updated (infinite when never)."""
+    updated = row.get("updated_unix_s") or 0.0
+    return now_unix_s - updated if updated > 0 else math.inf
+
+
+def _worst_first(item: tuple[str, dict[str, Any]]) -> tuple[int, float, str]:
+    name, row = item
+    dpos_m = (row.get("error") or {}).get("dpos_m")
+    if dpos_m is None or not math.isfinite(dpos_m):
+        return (1, 0.0, name)
+    return (0, -dpos_m, name)

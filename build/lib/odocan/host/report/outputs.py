@@ -1,0 +1,54 @@
+"""Output paths (``--report``, ``--log``, ``--plot``, ``--out``) checked before the work starts.
+
+A path is writable when it is a regular file (or none yet) in an existing directory that this
+process may write, or ``/dev/null``. Anything else -- a missing directory, a directory, a
+device such as ``/dev/full`` or a terminal, a read-only file -- is refused at once with the
+option and the path named, so an hour of simulation is never lost to a report that cannot be
+written. A write that still fails at the end names its path too (``write_text``).
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+from odocan.sim.exceptions import ConfigurationError, OdocanError
+
+
+class OutputError(OdocanError):
+    """An output could not be written (the path and the reason in one line)."""
+
+
+def check_writable(path: Path | None, option: str) -> None:
+    """Refuse ``path`` unless a file can be created or replaced there (see the module)."""
+    if path is None or str(path) == os.devnull:
+        return
+    where = f"{option} {path}"
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as exc:  # e.g. /proc/x/f.json: ENOENT above, ENOTDIR, EACCES here
+        raise ConfigurationError(f"{where}: {exc.strerror or exc}") from None
+    if mode is not None:
+        if stat.S_ISDIR(mode):
+            raise ConfigurationError(f"{where}: is a directory")
+        if not stat.S_ISREG(mode):
+            raise ConfigurationError(f"{where}: not a regular file (a device, pipe or socket)")
+        if not os.access(path, os.W_OK):
+            raise ConfigurationError(f"{where}: permission denied")
+        return
+    parent = path.parent
+    if not parent.is_dir():
+        raise ConfigurationError(f"{where}: directory {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ConfigurationError(f"{where}: directory {parent} is not writable")
+
+
+def write_text(path: Path, text: str, option: str) -> None:
+    """Write ``text`` to ``path``; an I/O error becomes one ``OutputError`` naming the path."""
+    try:
+        path.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise OutputError(f"{option} {path}: {exc.strerror or exc}") from None

@@ -1,0 +1,304 @@
+"""What ``odocan run``, ``analyze`` and ``replay`` share after the analysis: options and outputs.
+
+* ``add_check_arguments(parser)`` adds ``--tolerance``, ``--report`` and ``--plot``;
+  ``check_output_paths(args)`` refuses a bad ``--plot``/``--report`` path *before* a long run.
+* ``finish(analysis, args, title=...)`` writes the JSON report and the plot, prints the summary
+  table (rich, to stdout) and returns the exit code: 0 when the on-board pose is within tolerance
+  of the float64 reference, 1 when it is not.
+
+``--tolerance`` is either one number, the position tolerance in metres (the heading keeps its
+default of one LSB of the pose signal, 2*pi/65536 rad), or ``pos=METRES,heading=RADIANS`` (any
+subset, any order). The default, ``pos=1e-4,heading=9.587e-5``, is one LSB of ``ODOM_POSE_X/Y``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+from rich import box
+from rich.console import Console
+from rich.padding import Padding
+from rich.table import Table
+
+from odocan.host.judge.analysis import Analysis, Tolerance
+from odocan.host.report.jsonutil import write_report
+from odocan.host.report.outputs import OutputError, check_writable
+from odocan.sim.exceptions import ConfigurationError
+
+PLOT_SUFFIXES = (".png", ".svg")
+_E2E_COLUMNS = {
+    "ok": "E2E ok",
+    "lost": "lost",
+    "repeated": "repeated",
+    "crc_errors": "CRC err",
+    "wrong_sequence": "wrong seq",
+}
+_TOLERANCE_KEYS = {"pos": "position_m", "heading": "heading_rad"}
+
+
+def parse_tolerance(text: str) -> Tolerance:
+    """``"1e-4"`` (position, metres) or ``"pos=1e-4,heading=1e-4"``; argparse type function."""
+    values: dict[str, float] = {}
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if len(items) == 1 and "=" not in items[0]:
+        items = [f"pos={items[0]}"]
+    for item in items:
+        key, sep, raw = (part.strip() for part in item.partition("="))
+        if not sep or key not in _TOLERANCE_KEYS:
+            raise argparse.ArgumentTypeError(
+                f"expected METRES or pos=METRES,heading=RADIANS, got {text!r}"
+            )
+        try:
+            value = float(raw)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise argparse.ArgumentTypeError(f"{key}={raw!r} must be a positive number")
+        values[_TOLERANCE_KEYS[key]] = value
+    if not values:
+        raise argparse.ArgumentTypeError("empty tolerance")
+    return Tolerance(**values)
+
+
+def add_check_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--tolerance``, ``--report`` and ``--plot`` to ``parser``."""
+    group = parser.add_argument_group("check and outputs")
+    group.add_argument(
+        "--tolerance",
+        type=parse_tolerance,
+        default=Tolerance(),
+        metavar="SPEC",
+        help="on-board vs reference tolerance: METRES, or pos=METRES,heading=RADIANS "
+        "(default: one LSB of the pose signals, pos=1e-4,heading=9.587e-5)",
+    )
+    group.add_argument("--report", type=Path, metavar="PATH", help="write the JSON report here")
+    group.add_argument(
+        "--plot", type=Path, metavar="PATH", help="write the trajectory and error plot (.png, .svg)"
+    )
+
+
+def check_output_paths(args: argparse.Namespace) -> None:
+    """Refuse a ``--plot`` of unknown format or an output that cannot be written, up front."""
+    plot: Path | None = args.plot
+    if plot is not None and plot.suffix.lower() not in PLOT_SUFFIXES:
+        raise ConfigurationError(
+            f"--plot {plot}: unknown format {plot.suffix or '(none)'!r} (use .png or .svg)"
+        )
+    for option, path in (("--plot", plot), ("--report", args.report)):
+        check_writable(path, option)
+
+
+def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
+    """Print the summary, then write ``--report`` and ``--plot``; 0 when passed, 1 when not.
+
+    The summary comes first so that an output that cannot be written (an ``OutputError``
+    naming its path, exit 2) never loses the verdict."""
+    console = Console(file=sys.stdout, highlight=False)
+    print_summary(analysis.report, args.tolerance, console, title=title)
+    sys.stdout.flush()
+    for option, path in (("--report", args.report), ("--plot", args.plot)):
+        if path is None:
+            continue
+        try:
+            if option == "--report":
+                write_report(path, analysis.report)
+            else:
+                from odocan.host.report.plots import plot_analysis  # matplotlib only when asked
+
+                plot_analysis(analysis, path, tolerance=args.tolerance)
+        except OSError as exc:
+            raise OutputError(f"{option} {path}: {exc.strerror or exc}") from None
+    return 0 if analysis.passed else 1
+
+
+def print_summary(
+    report: dict[str, Any], tolerance: Tolerance, console: Console, *, title: str
+) -> None:
+    """The run in a few lines, the comparison table and the verdict (fits 80 columns)."""
+    console.print(f"[bold]{title}[/bold]", soft_wrap=True)
+    for label, text in _facts(report):
+        console.print(f"  {label:<10} {text}", soft_wrap=True, highlight=False)
+    tables = [frames_table(report), comparison_table(report)]
+    bus = report.get("bus")
+    if bus:
+        console.print()
+        for i, line in enumerate(bus_lines(bus)):
+            console.print(f"  {'bus' if i == 0 else '':<10} {line}", soft_wrap=True)
+        if bus.get("messages"):
+            tables.insert(1, bus_table(bus))
+    for table in tables:
+        console.print()
+        console.print(Padding(table, (0, 0, 0, 2), expand=False))
+    console.print()
+    verdict, style = ("PASS", "green") if report["passed"] else ("FAIL", "bold red")
+    twist = report.get("onboard_twist_vs_reference") or {"passed": True}
+    pose_met = _pose_within(report, tolerance)
+    console.print(
+        f"[{style}]{verdict}[/{style}]: on-board vs reference within "
+        f"{tolerance.position_m * 1e3:.4g} mm and {tolerance.heading_rad * 1e3:.4g} mrad"
+        + ("" if pose_met else ": not met")
+        + (
+            ""
+            if twist["passed"]
+            else "; ODOM_TWIST outside the reference's speeds by up to "
+            f"{twist['max_linear_excess_mps']:.3f} m/s, "
+            f"{twist['max_angular_excess_rad_s']:.3f} rad/s"
+        ),
+        soft_wrap=True,
+    )
+
+
+def _pose_within(report: dict[str, Any], tolerance: Tolerance) -> bool:
+    vs_ref = report["onboard_vs_reference"]
+    return bool(
+        vs_ref["max_position_error_m"] <= tolerance.position_m
+        and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
+    )
+
+
+def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
+    """(label, text) lines: robot, geometry, run, time, distance, frames not checked, pose."""
+    robot = report["robot"]
+    pose = report["final_onboard_pose"]
+    truth = report.get("onboard_vs_truth") or {}
+    facts = [
+        (
+            "robot",
+            f"{robot['name']}, {robot['counts_per_rev']} counts/rev, "
+            f"{robot['counter_bits']}-bit counters",
+        ),
+        (
+            "geometry",
+            f"wheel radii {robot['wheel_radius_left_m']:g}/"
+            f"{robot['wheel_radius_right_m']:g} m, wheelbase {robot['wheelbase_m']:g} m",
+        ),
+        (
+            "run",
+            f"integrator {report['integrator']}, scenario {report.get('scenario') or '-'}, "
+            f"seed {_or_dash(report.get('seed'))}",
+        ),
+        ("time", _time_text(report)),
+    ]
+    if truth.get("distance_travelled_m") is not None:
+        facts.append(("distance", f"{truth['distance_travelled_m']:.3f} m travelled"))
+    unchecked = {k: v for k, v in (report.get("unknown_frames") or {}).items() if v}
+    if unchecked:
+        facts.append(
+            (
+                "unchecked",
+                f"{sum(unchecked.values())} frames: "
+                + ", ".join(f"{k} {v}" for k, v in unchecked.items()),
+            )
+        )
+    facts.append(
+        (
+            "final pose",
+            f"x {pose['x_m']:.4f} m, y {pose['y_m']:.4f} m, heading "
+            f"{pose['heading_rad']:.4f} rad ({math.degrees(pose['heading_rad']):.2f} deg)",
+        )
+    )
+    return facts
+
+
+def frames_table(report: dict[str, Any]) -> Table:
+    """Frames per message and their E2E check counts (a dash where a message has none)."""
+    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
+    table.add_column("message")
+    for column in ("frames", *_E2E_COLUMNS.values()):
+        table.add_column(column, justify="right")
+    frames: dict[str, int] = report.get("frames", {})
+    e2e: dict[str, dict[str, Any]] = report.get("e2e", {})
+    for name, count in frames.items():
+        counts = e2e.get(name, {})
+        table.add_row(name, str(count), *(_or_dash(counts.get(key)) for key in _E2E_COLUMNS))
+    table.add_row("total", str(sum(frames.values())), *("" for _ in _E2E_COLUMNS), style="bold")
+    return table
+
+
+def bus_lines(section: dict[str, Any]) -> list[str]:
+    """The bus section in a few lines: bitrate, measured load, any latency above its bound."""
+    load = section.get("load")
+    load_text = "-" if load is None else f"{load:.1%}"
+    lines = [
+        f"{section['bitrate'] // 1000} kbit/s, measured load {load_text} over "
+        f"{section['span_s']:.2f} s, {section['frames']} frames ({section['source']})"
+    ]
+    if section.get("analysis_note"):
+        lines.append(f"no worst-case bounds: {section['analysis_note']}")
+    over = [m["name"] for m in section.get("messages", []) if m["within_bound"] is False]
+    if over:
+        lines.append("measured latency ABOVE the analysis' bound R: " + ", ".join(over))
+    starved = [
+        f"{m['name']} ({m['late']} late, {m['still_queued']} never sent)"
+        for m in section.get("messages", [])
+        if m.get("starved")
+    ]
+    if starved:
+        lines.append("STARVED past their deadline: " + ", ".join(starved))
+    return lines
+
+
+def bus_table(section: dict[str, Any]) -> Table:
+    """Per message: frames, measured max and p99 latency (queued to end of frame), the
+    analysis' worst-case R and the deadline D, in ms; frames past D, frames never sent."""
+    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
+    table.add_column("message")
+    for column in ("frames", "max ms", "p99 ms", "R ms", "D ms", "late", "queued"):
+        table.add_column(column, justify="right")
+    for row in section["messages"]:
+        style = "bold red" if row["within_bound"] is False or row.get("starved") else None
+        table.add_row(
+            row["name"], str(row["frames"]), _ms_of_us(row["max_latency_us"]),
+            _ms_of_us(row["p99_latency_us"]), _ms_of_us(row["bound_us"]),
+            _ms_of_us(row["deadline_us"]), str(row.get("late", 0)),
+            str(row.get("still_queued", 0)), style=style,
+        )
+    return table
+
+
+def _ms_of_us(value_us: float | None) -> str:
+    return "-" if value_us is None else f"{value_us / 1000:.3f}"
+
+
+def _time_text(report: dict[str, Any]) -> str:
+    text = f"{report['sim_seconds']:.2f} s simulated"
+    if report.get("wall_seconds") is not None:
+        text += f" in {report['wall_seconds']:.2f} s"
+    if report.get("realtime_factor") is not None:
+        text += f" ({report['realtime_factor']:.0f}x real time)"
+    return text
+
+
+def comparison_table(report: dict[str, Any]) -> Table:
+    """Max and final position/heading errors of the on-board pose, vs reference and vs truth."""
+    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
+    table.add_column("on-board vs")
+    for column in ("max position", "final position", "max heading", "final heading"):
+        table.add_column(column, justify="right")
+    rows = (("reference", "onboard_vs_reference"), ("truth", "onboard_vs_truth"))
+    for label, key in rows:
+        errors = report.get(key) or {}
+        table.add_row(
+            label,
+            _mm(errors.get("max_position_error_m")),
+            _mm(errors.get("final_position_error_m")),
+            _mrad(errors.get("max_heading_error_rad")),
+            _mrad(errors.get("final_heading_error_rad")),
+        )
+    return table
+
+
+def _mm(value: float | None) -> str:
+    return "-" if value is None or not math.isfinite(value) else f"{value * 1e3:.4f} mm"
+
+
+def _mrad(value: float | None) -> str:
+    return "-" if value is None or not math.isfinite(value) else f"{value * 1e3:.4f} mrad"
+
+
+def _or_dash(value: object) -> str:
+    return "-" if value is None else str(value)

@@ -1,0 +1,1 @@
+"""The pytest kit: the ``odocan_rig`` fixture and the rig session behind it."""

@@ -1,0 +1,1 @@
+"""odocan sim: the hardware around the firmware (motors, encoders, ground truth, clocks, buses)."""

@@ -1,0 +1,149 @@
+"""The firmware's board: its HAL implemented on a python-can bus and a clock.
+
+The bus plays the MCU's CAN controller (11-bit data frames only: error, remote and extended frames
+never reach the firmware's mailbox, as a hardware acceptance filter would drop them, nor frames
+outside ``accept_ids`` when it is given); the caller's
+periodic loop plays its timer and calls ``run_tick`` every ``TICK_PERIOD_US``; the clock plays the
+MCU's free-running microsecond timer, passed to every tick.
+
+A stalled MCU (a debugger halt, a SIGSTOPped process, a tick loop that fell behind) runs no receive
+ISR: while it is halted its CAN controller keeps the first ``HW_RX_FIFO_FRAMES`` frames in its
+receive FIFO (FIFO-locked mode, as bxCAN) and overruns the rest. So when ``run_tick`` comes
+``HALT_AFTER_S`` or more after the previous one (as long as the firmware calls lost time), only that
+many waiting frames reach the firmware; the others are dropped and the overrun interrupt tells the
+firmware, as would the hardware.
+
+SecOC (docs/secoc.md): a board built with ``secoc_key`` provisions the firmware with it and
+with its ``NvmCell``, the EPOCH cell of data flash: ``reboot`` starts a new firmware on the same
+cell, so the freshness values of the previous boot stay closed.
+"""
+
+from __future__ import annotations
+
+import can
+
+from odocan.firmware.config import RobotParams
+from odocan.firmware.ecu import LOST_TIME_PERIODS, OdomEcu
+from odocan.firmware.hal import TICK_PERIOD_US
+from odocan.sim.clock import Clock
+from odocan.sim.node import BusNode
+
+TICK_S = TICK_PERIOD_US / 1e6
+TX_LATENCY_S = 0.001  # the firmware's frames leave 1 ms after the tick that made them
+HW_RX_FIFO_FRAMES = 3  # the CAN controller's receive FIFO depth (bxCAN: 3 per FIFO)
+# A tick this long after the previous one: the MCU was halted (the firmware's TIME_LOST). A
+# merely late tick is not: a real MCU's receive interrupt would have run meanwhile.
+HALT_AFTER_S = (LOST_TIME_PERIODS - 0.5) * TICK_S
+_U32 = 0xFFFF_FFFF
+
+
+class NvmCell:
+    """One u32 cell of non-volatile memory (``firmware.hal.FreshnessNvm``): survives ``reboot``.
+
+    ``fail_writes`` plays a worn or locked flash page (the firmware then fails closed)."""
+
+    def __init__(self, epoch: int = 0) -> None:
+        self.epoch = epoch & _U32
+        self.writes = 0
+        self.fail_writes = False
+
+    def read_epoch(self) -> int:
+        """The stored EPOCH (0: never written, an erased cell)."""
+        return self.epoch
+
+    def write_epoch(self, epoch: int) -> bool:
+        """Store ``epoch``; False when the page refuses writes."""
+        if self.fail_writes:
+            return False
+        self.epoch = epoch & _U32
+        self.writes += 1
+        return True
+
+
+class FirmwareBoard(BusNode):
+    """An ``OdomEcu`` on a python-can bus: receive ISR from ``recv``, transmit with ``send``."""
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        params: RobotParams,
+        clock: Clock,
+        accept_ids: frozenset[int] | None = None,
+        *,
+        secoc_key: bytes | None = None,
+        nvm: NvmCell | None = None,
+    ) -> None:
+        """``accept_ids``: the acceptance filter's IDs (None: every 11-bit data frame);
+        ``secoc_key``: the firmware's SecOC key (None: no SecOC), its EPOCH in ``nvm`` (default:
+        a fresh cell)."""
+        super().__init__(bus, clock)
+        self.accept_ids = accept_ids
+        self.params = params
+        self.secoc_key = secoc_key
+        self.nvm = nvm if nvm is not None else NvmCell()
+        self.ecu = self._start_firmware()
+        self._bus_off = False
+        self.frames_dropped_by_filter = 0
+        self.frames_overrun = 0  # frames the halted MCU's receive FIFO could not hold
+        self._last_run_s: float | None = None
+
+    tx_latency_s = TX_LATENCY_S
+
+    def _start_firmware(self) -> OdomEcu:
+        """Reset: a firmware with the board's configuration (key and NVM cell)."""
+        if self.secoc_key is None:
+            return OdomEcu(self, self.params)
+        return OdomEcu(self, self.params, secoc_key=self.secoc_key, nvm=self.nvm)
+
+    def reboot(self) -> None:
+        """A reset of the MCU: RAM lost (a new firmware, INIT), the NVM cell kept."""
+        self.ecu = self._start_firmware()
+        self._last_run_s = None
+
+    def transmit(self, can_id: int, data: bytes) -> bool:
+        """The HAL's transmit (``firmware.hal.CanTx``)."""
+        return self.send_frame(can_id, data)
+
+    def service_rx(self, fifo_frames: int | None = None) -> None:
+        """Deliver the frames waiting on the bus to the firmware's receive ISR: all of them, or
+        (after a halt) the first ``fifo_frames`` that pass the filter, the rest overrun."""
+        recv = self.bus.recv
+        isr = self.ecu.isr_can_rx
+        accept = self.accept_ids
+        overrun = 0
+        msg = recv(0)
+        while msg is not None:
+            if (
+                msg.is_error_frame
+                or msg.is_remote_frame
+                or msg.is_extended_id
+                or (accept is not None and msg.arbitration_id not in accept)
+            ):
+                self.frames_dropped_by_filter += 1
+            elif fifo_frames is not None and fifo_frames <= 0:
+                overrun += 1
+            else:
+                isr(msg.arbitration_id, bytes(msg.data))
+                if fifo_frames is not None:
+                    fifo_frames -= 1
+            msg = recv(0)
+        if overrun:
+            self.frames_overrun += overrun
+            self.ecu.isr_rx_overrun()
+
+    def run_tick(self) -> None:
+        """One timer period: the pending interrupts (status, receive), then the firmware's tick
+        with the timer's microseconds (the clock's, wrapped to u32)."""
+        now_s = self.clock.now_s()
+        halted = self._last_run_s is not None and now_s - self._last_run_s >= HALT_AFTER_S
+        self._last_run_s = now_s
+        self._service_bus_state()
+        self.service_rx(HW_RX_FIFO_FRAMES if halted else None)
+        self.ecu.tick(round(now_s * 1e6) & _U32)
+
+    def _service_bus_state(self) -> None:
+        """The controller's status interrupt: report entering and leaving bus-off."""
+        bus_off = self.bus.state is can.BusState.ERROR
+        if bus_off != self._bus_off:
+            self._bus_off = bus_off
+            self.ecu.isr_bus_state(bus_off)

@@ -1,0 +1,281 @@
+"""The C firmware on the board: ``firmware/c`` as a shared library, driven through ctypes.
+
+``CFirmwareBoard`` is a ``FirmwareBoard`` whose ECU is the C port (``firmware/c/ecu.c``) behind
+the ABI of ``firmware/c/odocan_fw.h`` instead of ``firmware.ecu.OdomEcu``: the board still does
+every bus I/O (acceptance filter, receive ISR, bus-off, transmit), so the rig and the real-time
+node do not care which firmware they run. ``make_board(kind, ...)`` / ``board_maker(kind)`` pick
+one by name (``--firmware {python,c}``).
+
+The library is built on demand with ``make -C firmware/c lib`` into
+``firmware/c/build/libodocan_fw.so`` (make rebuilds it when a source changed, and does nothing
+otherwise), or taken from ``$ODOCAN_FW_LIB``: a team's own firmware built against the same ABI.
+A missing compiler, make or library is one ``FirmwareBuildError`` naming what is missing.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import fcntl
+import os
+import shutil
+import subprocess
+from pathlib import Path
+from typing import Protocol
+
+import can
+
+from odocan.firmware.config import RobotParams
+from odocan.firmware.errors import ErrorFlag, ErrorMask, State
+from odocan.firmware.hal import TICK_PERIOD_US, CanTx
+from odocan.sim.board import FirmwareBoard
+from odocan.sim.clock import Clock
+from odocan.sim.exceptions import ConfigurationError, OdocanError
+
+FIRMWARES = ("python", "c")
+ABI_VERSION = 1  # ODOCAN_FW_ABI_VERSION of firmware/c/odocan_fw.h
+FIRMWARE_C_DIR = Path(__file__).resolve().parent.parent / "firmware" / "c"
+
+
+def _build_dir() -> Path:
+    """``firmware/c/build`` in a checkout; in an installed package that cannot be written (a
+    system site-packages), the user's cache (``$XDG_CACHE_HOME/odocan/firmware-c``)."""
+    if os.access(FIRMWARE_C_DIR, os.W_OK):
+        return FIRMWARE_C_DIR / "build"
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return cache / "odocan" / "firmware-c"
+
+
+LIBRARY_PATH = _build_dir() / "libodocan_fw.so"
+LIBRARY_ENV = "ODOCAN_FW_LIB"  # a prebuilt library with the same ABI (e.g. a team's own)
+
+_TxFn = ctypes.CFUNCTYPE(
+    ctypes.c_bool, ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(ctypes.c_uint8)
+)
+_loaded: dict[Path, ctypes.CDLL] = {}
+
+
+class FirmwareBuildError(OdocanError):
+    """The C firmware library could not be built or loaded (missing compiler, make, ABI)."""
+
+
+def _build_library() -> Path:
+    """``make -C firmware/c lib`` under a lock (parallel test processes build once); the path."""
+    if not (FIRMWARE_C_DIR / "Makefile").is_file():
+        raise FirmwareBuildError(f"--firmware c: no C firmware sources at {FIRMWARE_C_DIR}")
+    make = shutil.which("make")
+    if make is None:
+        raise FirmwareBuildError("--firmware c: make not found on PATH (install make)")
+    try:
+        LIBRARY_PATH.parent.mkdir(parents=True, exist_ok=True)
+        lock = open(LIBRARY_PATH.parent / ".lib.lock", "w")  # noqa: SIM115 (closed below)
+    except OSError as exc:
+        raise FirmwareBuildError(
+            f"--firmware c: cannot build in {LIBRARY_PATH.parent}: {exc.strerror}"
+        ) from exc
+    with lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        command = [make, "-s", "-C", str(FIRMWARE_C_DIR), f"BUILD={LIBRARY_PATH.parent}", "lib"]
+        if subprocess.run([*command, "-q"], capture_output=True, check=False).returncode == 0:
+            return LIBRARY_PATH  # up to date: no compiler needed
+        compiler = os.environ.get("CC", "cc")
+        if shutil.which(compiler) is None:
+            raise FirmwareBuildError(
+                f"--firmware c: C compiler {compiler!r} not found on PATH to build "
+                f"{LIBRARY_PATH} (install gcc, or set CC)"
+            )
+        done = subprocess.run(command, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        last = (done.stderr.strip().splitlines() or ["(no output)"])[-1]
+        raise FirmwareBuildError(f"--firmware c: building {LIBRARY_PATH} failed: {last}")
+    return LIBRARY_PATH
+
+
+def load_library() -> ctypes.CDLL:
+    """The firmware library (``$ODOCAN_FW_LIB``, else ours built on demand), its ABI checked."""
+    override = os.environ.get(LIBRARY_ENV)
+    path = Path(override) if override else _build_library()
+    lib = _loaded.get(path)
+    if lib is not None:
+        return lib
+    try:
+        lib = ctypes.CDLL(str(path))
+    except OSError as exc:
+        raise FirmwareBuildError(f"--firmware c: cannot load {path}: {exc}") from exc
+    try:
+        _declare(lib)
+    except AttributeError as exc:
+        raise FirmwareBuildError(f"--firmware c: {path} lacks the odocan_fw ABI: {exc}") from exc
+    version = lib.odocan_fw_abi_version()
+    if version != ABI_VERSION:
+        raise FirmwareBuildError(
+            f"--firmware c: {path} has ABI version {version}, this board speaks {ABI_VERSION}"
+        )
+    _loaded[path] = lib
+    return lib
+
+
+def _declare(lib: ctypes.CDLL) -> None:
+    """The argument and result types of odocan_fw.h."""
+    vp, u32 = ctypes.c_void_p, ctypes.c_uint32
+    lib.odocan_fw_abi_version.argtypes = []
+    lib.odocan_fw_abi_version.restype = u32
+    lib.odocan_fw_state_size.argtypes = []
+    lib.odocan_fw_state_size.restype = ctypes.c_size_t
+    lib.odocan_fw_init.argtypes = [vp, ctypes.c_size_t, ctypes.POINTER(u32), _TxFn, vp]
+    lib.odocan_fw_init.restype = ctypes.c_int
+    lib.odocan_fw_rx_isr.argtypes = [vp, u32, u32, ctypes.c_char_p]
+    lib.odocan_fw_rx_isr.restype = None
+    lib.odocan_fw_bus_state.argtypes = [vp, ctypes.c_bool]
+    lib.odocan_fw_bus_state.restype = None
+    lib.odocan_fw_rx_overrun.argtypes = [vp]
+    lib.odocan_fw_rx_overrun.restype = None
+    lib.odocan_fw_tick.argtypes = [vp, ctypes.c_uint64]
+    lib.odocan_fw_tick.restype = None
+    for name in ("odocan_fw_state", "odocan_fw_errors", "odocan_fw_ticks"):
+        getattr(lib, name).argtypes = [vp]
+        getattr(lib, name).restype = u32
+
+
+class CEcu:
+    """The C ECU with ``OdomEcu``'s entry points (``isr_can_rx``, ``isr_bus_state``, ``tick``)
+    and read-only ``state``, ``errors``, ``ticks``; its frames go to ``hal.transmit``."""
+
+    def __init__(self, hal: CanTx, params: RobotParams, clock: Clock | None = None) -> None:
+        """``clock``: what ``tick`` passes as ``now_us`` (None: the tick count x 10 ms)."""
+        self._lib = lib = load_library()
+        size = lib.odocan_fw_state_size()
+        self._mem = ctypes.create_string_buffer(size)  # malloc'ed: aligned for uint64_t
+        self._fw = ctypes.cast(self._mem, ctypes.c_void_p)
+        self._hal = hal
+        self._clock = clock
+        self._pending: BaseException | None = None
+        self._tx = _TxFn(self._transmit)  # kept alive as long as the firmware holds it
+        raw = (ctypes.c_uint32 * 6)(
+            params.counts_per_rev,
+            params.wheel_radius_left_nm,
+            params.wheel_radius_right_nm,
+            params.wheelbase_nm,
+            params.counter_bits,
+            params.integrator,
+        )
+        if lib.odocan_fw_init(self._fw, size, raw, self._tx, None) != 0:
+            raise FirmwareBuildError("--firmware c: odocan_fw_init refused its state buffer")
+        self.params = params
+        self._isr = lib.odocan_fw_rx_isr
+        self._tick = lib.odocan_fw_tick
+
+    def _transmit(
+        self, _ctx: int | None, can_id: int, data: ctypes._Pointer[ctypes.c_uint8]
+    ) -> bool:
+        """The firmware's ``can_tx_fn``: one frame to the HAL. An exception cannot cross the C
+        frames: it is kept, the frame counts as refused, and ``tick`` raises it on return."""
+        try:
+            return self._hal.transmit(can_id, ctypes.string_at(data, 8))
+        except BaseException as exc:  # re-raised by tick()
+            self._pending = self._pending or exc
+            return False
+
+    def isr_can_rx(self, can_id: int, data: bytes) -> None:
+        """CAN receive interrupt: the frame into the C mailbox."""
+        self._isr(self._fw, can_id, len(data), data)
+
+    def isr_bus_state(self, bus_off: bool) -> None:
+        """CAN controller status interrupt: bus-off entered (True) or left (False)."""
+        self._lib.odocan_fw_bus_state(self._fw, bus_off)
+
+    def isr_rx_overrun(self) -> None:
+        """CAN controller overrun interrupt: its receive FIFO dropped frames."""
+        self._lib.odocan_fw_rx_overrun(self._fw)
+
+    def tick(self, now_us: int | None = None) -> None:
+        """One period of the C main loop. ``now_us``: the board's time, when the board passes
+        it; else the clock's, else the tick count x 10 ms (the firmware's time, as in Python)."""
+        if now_us is None:
+            now_us = (
+                round(self._clock.now_s() * 1e6)
+                if self._clock is not None
+                else self.ticks * TICK_PERIOD_US
+            )
+        self._tick(self._fw, now_us)
+        if self._pending is not None:
+            pending, self._pending = self._pending, None
+            raise pending
+
+    @property
+    def state(self) -> State:
+        """The firmware state (ODOM_STATUS STATE)."""
+        return State(self._lib.odocan_fw_state(self._fw))
+
+    @property
+    def errors(self) -> ErrorMask:
+        """A snapshot of the sticky error mask."""
+        mask = ErrorMask()
+        mask.set(ErrorFlag(self._lib.odocan_fw_errors(self._fw)))
+        return mask
+
+    @property
+    def ticks(self) -> int:
+        """The u32 tick count."""
+        return int(self._lib.odocan_fw_ticks(self._fw))
+
+
+class CFirmwareBoard(FirmwareBoard):
+    """``FirmwareBoard`` with the C firmware as its ECU: same bus I/O, same interface."""
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        params: RobotParams,
+        clock: Clock,
+        accept_ids: frozenset[int] | None = None,
+        *,
+        secoc_key: bytes | None = None,
+    ) -> None:
+        if secoc_key is not None:  # the ABI (version 1) provisions no key: say so, never ignore it
+            raise ConfigurationError(
+                "--secoc-key needs the Python firmware: the C library's ABI takes no key yet"
+            )
+        ecu = CEcu(self, params, clock)  # built and loaded before the board takes the bus
+        super().__init__(bus, params, clock, accept_ids)
+        self.ecu = ecu  # type: ignore[assignment]
+
+
+class BoardMaker(Protocol):
+    """A board class: ``(bus, params, clock, accept_ids, *, secoc_key=None)``."""
+
+    def __call__(
+        self,
+        bus: can.BusABC,
+        params: RobotParams,
+        clock: Clock,
+        accept_ids: frozenset[int] | None = None,
+        *,
+        secoc_key: bytes | None = None,
+    ) -> FirmwareBoard: ...
+
+
+def board_maker(kind: str, *, secoc: bool = False) -> BoardMaker:
+    """The board class of firmware ``kind`` ("python" or "c"), the C library built and loaded
+    now: call it before opening a bus or a log, so a refusal leaves nothing to close or to
+    truncate (``secoc``: a SecOC key will be provisioned, which the C ABI cannot take yet)."""
+    if kind == "python":
+        return FirmwareBoard
+    if kind == "c":
+        if secoc:
+            raise ConfigurationError(
+                "--secoc-key needs the Python firmware: the C library's ABI takes no key yet"
+            )
+        load_library()
+        return CFirmwareBoard
+    raise ConfigurationError(f"unknown firmware {kind!r} (known: {', '.join(FIRMWARES)})")
+
+
+def make_board(
+    kind: str,
+    bus: can.BusABC,
+    params: RobotParams,
+    clock: Clock,
+    accept_ids: frozenset[int] | None = None,
+) -> FirmwareBoard:
+    """A board running firmware ``kind`` ("python": ``firmware/``, "c": ``firmware/c``)."""
+    return board_maker(kind)(bus, params, clock, accept_ids)

@@ -1,0 +1,45 @@
+"""The bus contract as the sim and the host read it: dbc/odocan.dbc through cantools.
+
+Cycle times, frame IDs and signal layouts come from the DBC (the single source of truth); the
+firmware carries the same numbers as constants, and tests prove the two agree.
+"""
+
+from __future__ import annotations
+
+import os
+from functools import cache
+from importlib import resources
+from pathlib import Path
+
+import cantools
+from cantools.database.can import Database, Message
+
+# Package data: dbc/ ships inside the odocan package (an installed wheel unpacks it to files).
+_DEFAULT_DBC = Path(str(resources.files("odocan").joinpath("dbc", "odocan.dbc")))
+DBC_PATH = Path(os.environ.get("ODOCAN_DBC", _DEFAULT_DBC))
+
+
+@cache
+def database(path: Path = DBC_PATH) -> Database:
+    """The DBC, loaded once (strict)."""
+    db = cantools.database.load_file(path, strict=True)
+    assert isinstance(db, Database)
+    return db
+
+
+def message(name: str) -> Message:
+    """One message of the contract by name."""
+    return database().get_message_by_name(name)
+
+
+def cycle_time_s(name: str) -> float:
+    """A cyclic message's ``GenMsgCycleTime`` in seconds."""
+    cycle_ms = message(name).cycle_time
+    if not cycle_ms:
+        raise ValueError(f"{name} has no GenMsgCycleTime in the DBC")
+    return cycle_ms / 1000.0
+
+
+def cycle_ticks(name: str, tick_s: float) -> int:
+    """A cyclic message's period in whole ticks of ``tick_s`` (at least 1)."""
+    return max(1, round(cycle_time_s(name) / tick_s))

@@ -1,0 +1,236 @@
+"""Two DC wheel motors with speed controllers, the wheels, and their incremental encoders.
+
+Motor model (each wheel). The motor controller receives a rim-speed setpoint v_sp (m/s, from
+MOTOR_CMD) and regulates the wheel *angular* speed to w_sp = v_sp / r_nom (the NOMINAL radius,
+all the controller knows). The response is first order with time constant tau, its rate limited
+to the acceleration limit a (m/s^2 at the nominal rim, i.e. alpha = a / r_nom in rad/s^2):
+
+    dw/dt = clip((w_sp - w) / tau, -alpha, +alpha)
+
+This has a closed form (``evolve``): a linear ramp at +-alpha while |w_sp - w| > alpha*tau, then
+an exponential approach, both integrated exactly for the wheel angle. The ground sees
+w * r_actual, so a diameter error (``sim.errors``) shows in the motion but not in the counts.
+When no command arrives for ``command_timeout_s`` the setpoint drops to 0 (the wheel then stops
+through the same dynamics), as real motor controllers do.
+
+Encoders: count = floor(angle / (2*pi) * counts_per_rev * k) from the continuous wheel angle
+(positive = wheel rolling forward), k = 1, or k = 4 with x4 quadrature decoding (all edges of
+both channels: the effective counts per revolution is then 4 * counts_per_rev). The counters are
+free running and wrap as unsigned 16- or 32-bit integers.
+
+Time runs on a fixed substep grid (``substep_hz``, default 1 kHz) held as an integer substep
+index, so a run is exactly reproducible. Segments between commands are evolved in closed form;
+the per-substep wheel travel needed by the ground truth is produced lazily, vectorised with
+numpy (``take_travel``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.sim.robot import RobotProfile
+
+FloatArray = npt.NDArray[np.float64]
+TAU_RAD = 2.0 * math.pi
+_CACHED_SEGMENT_SUBSTEPS = 256  # take_travel keeps the time columns of segments up to this long
+
+
+@dataclass(frozen=True)
+class MotorConfig:
+    """Motor controller parameters, the same for both wheels.
+
+    Attributes:
+        time_constant_s: first-order time constant tau, > 0 (default 0.05 s).
+        accel_limit_mps2: acceleration limit at the nominal rim, > 0 (default 2 m/s^2).
+        command_timeout_s: setpoint drops to 0 after this long without a command, > 0 (0.5 s).
+    """
+
+    time_constant_s: float = 0.05
+    accel_limit_mps2: float = 2.0
+    command_timeout_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        """Refuse non-positive or non-finite parameters."""
+        for key in ("time_constant_s", "accel_limit_mps2", "command_timeout_s"):
+            value = getattr(self, key)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"motor config: {key} must be positive and finite, got {value}")
+
+
+def evolve(w0: float, wsp: float, alpha: float, tau: float, t: float) -> tuple[float, float]:
+    """Closed form of dw/dt = clip((wsp - w)/tau, +-alpha) after ``t`` seconds (scalar).
+
+    Args:
+        w0: initial angular speed, rad/s. wsp: setpoint, rad/s.
+        alpha: acceleration limit, rad/s^2 (> 0). tau: time constant, s (> 0). t: time, s (>= 0).
+
+    Returns:
+        (w, dtheta): angular speed at ``t`` (rad/s) and angle travelled since 0 (rad).
+    """
+    e0 = w0 - wsp
+    excess = abs(e0) - alpha * tau
+    t1 = excess / alpha if excess > 0.0 else 0.0  # duration of the rate-limited ramp
+    s = math.copysign(alpha, e0) if excess > 0.0 else 0.0
+    tr = min(t, t1)
+    te = t - tr
+    e1 = e0 - s * tr
+    decay = -math.expm1(-te / tau)  # 1 - exp(-te/tau), exact for small te
+    w = wsp + e1 * (1.0 - decay)
+    dtheta = wsp * t + e0 * tr - 0.5 * s * tr * tr + e1 * tau * decay
+    return w, dtheta
+
+
+def angle_travelled(
+    t: FloatArray, w0: FloatArray, wsp: FloatArray, alpha: float | FloatArray, tau: float
+) -> FloatArray:
+    """Vectorised angle part of ``evolve``: radians travelled after ``t`` s (broadcasting)."""
+    e0 = w0 - wsp
+    excess = np.abs(e0) - alpha * tau
+    limited = excess > 0.0
+    t1 = np.where(limited, excess / alpha, 0.0)
+    s = np.where(limited, np.copysign(alpha, e0), 0.0)
+    tr = np.minimum(t, t1)
+    e1 = e0 - s * tr
+    decay = -np.expm1(-(t - tr) / tau)
+    result: FloatArray = wsp * t + e0 * tr - 0.5 * s * tr * tr + e1 * tau * decay
+    return result
+
+
+def encoder_count(angle_rad: float, counts_per_rev: int, quadrature: bool = False) -> int:
+    """Unwrapped encoder count of a wheel at ``angle_rad``: floor(angle/(2 pi) * cpr * k)."""
+    k = 4 if quadrature else 1
+    return math.floor(angle_rad / TAU_RAD * counts_per_rev * k)
+
+
+def wrap_counter(count: int, bits: int) -> int:
+    """``count`` as a free-running unsigned counter of ``bits`` (16 or 32) bits."""
+    return count & ((1 << bits) - 1)
+
+
+class Drivetrain:
+    """Both wheel motors, wheels and encoders on a fixed substep grid.
+
+    Wheel index 0 is left, 1 is right. ``advance(n)`` moves to substep ``n`` in closed form;
+    ``take_travel()`` returns the actual rim travel of every substep since the last call.
+    """
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        actual_radii_m: tuple[float, float],
+        substep_hz: int = 1000,
+        quadrature: bool = False,
+        config: MotorConfig | None = None,
+        counter_offset: tuple[int, int] = (0, 0),
+    ) -> None:
+        """Motors at rest, wheel angles 0, no command yet (setpoint 0).
+
+        ``counter_offset``: (left, right) counts the free-running counters read at angle 0 (a
+        counter powers up anywhere; tests start them near a wrap).
+        """
+        self.profile = profile
+        self.config = config or MotorConfig()
+        self.substep_hz = substep_hz
+        self.quadrature = quadrature
+        self.counter_offset = counter_offset
+        self.nominal_radii_m = (profile.wheel_radius_left_m, profile.wheel_radius_right_m)
+        self.actual_radii_m = actual_radii_m
+        self._alpha = np.array([self.config.accel_limit_mps2 / r for r in self.nominal_radii_m])
+        self._radii = np.array(actual_radii_m)
+        self._alpha_l, self._alpha_r = (float(a) for a in self._alpha)
+        self._timeout_substeps = max(1, round(self.config.command_timeout_s * substep_hz))
+        self.substep = 0
+        self.omega = [0.0, 0.0]  # rad/s
+        self.angle = [0.0, 0.0]  # rad, continuous
+        self.setpoint = [0.0, 0.0]  # rad/s
+        self._timeout_at: int | None = None
+        self._segments: list[tuple[int, float, float, float, float]] = []
+        self._pending = 0
+        self._local_times_cache: dict[int, FloatArray] = {}
+
+    def command(self, left_mps: float, right_mps: float) -> None:
+        """Latch rim-speed setpoints (m/s) at the current substep and restart the timeout."""
+        if not (math.isfinite(left_mps) and math.isfinite(right_mps)):
+            raise ValueError(f"wheel speed setpoints must be finite, got {left_mps}, {right_mps}")
+        self.setpoint = [left_mps / self.nominal_radii_m[0], right_mps / self.nominal_radii_m[1]]
+        self._timeout_at = self.substep + self._timeout_substeps
+
+    def advance(self, target_substep: int) -> None:
+        """Evolve both wheels up to ``target_substep`` (>= the current one), timeout included."""
+        while self.substep < target_substep:
+            end = target_substep
+            if self._timeout_at is not None and self._timeout_at < end:
+                end = self._timeout_at
+            self._run_segment(end - self.substep)
+            if self.substep == self._timeout_at:
+                self.setpoint = [0.0, 0.0]
+                self._timeout_at = None
+
+    def _run_segment(self, n: int) -> None:
+        """Evolve ``n`` substeps at constant setpoints and log the segment for ``take_travel``."""
+        t = n / self.substep_hz
+        tau = self.config.time_constant_s
+        w0l, w0r = self.omega
+        spl, spr = self.setpoint
+        wl, dl = evolve(w0l, spl, self._alpha_l, tau, t)
+        wr, dr = evolve(w0r, spr, self._alpha_r, tau, t)
+        self._segments.append((n, w0l, spl, w0r, spr))
+        self._pending += n
+        self.omega = [wl, wr]
+        self.angle = [self.angle[0] + dl, self.angle[1] + dr]
+        self.substep += n
+
+    @property
+    def pending_substeps(self) -> int:
+        """Substeps evolved but not yet returned by ``take_travel``."""
+        return self._pending
+
+    def take_travel(self) -> FloatArray:
+        """Actual rim travel (m) per substep since the last call, shape (n, 2): left, right."""
+        if not self._segments:
+            return np.zeros((0, 2))
+        segments = self._segments
+        self._segments = []
+        self._pending = 0
+        counts = [n for n, *_ in segments]
+        starts = list(itertools.accumulate(counts, initial=0))[:-1]
+        t = np.concatenate([self._local_times(n) for n in counts])  # (n, 1): s since each start
+        seg = np.array(segments)
+        w0 = np.repeat(seg[:, 1::2], counts, axis=0)  # columns w0l, w0r
+        wsp = np.repeat(seg[:, 2::2], counts, axis=0)  # columns spl, spr
+        theta = angle_travelled(t, w0, wsp, self._alpha, self.config.time_constant_s)
+        step = np.empty_like(theta)  # the angle of each substep, from 0 at a segment's start
+        np.subtract(theta[1:], theta[:-1], out=step[1:])
+        step[starts] = theta[starts]
+        step *= self._radii
+        return step
+
+    def _local_times(self, n: int) -> FloatArray:
+        """Column (k / substep_hz for k = 1 .. n); short ones cached (most span one tick)."""
+        column = self._local_times_cache.get(n)
+        if column is None:
+            column = (np.arange(1, n + 1) / self.substep_hz)[:, np.newaxis]
+            if n <= _CACHED_SEGMENT_SUBSTEPS:
+                self._local_times_cache[n] = column
+        return column
+
+    def encoder_counts(self) -> tuple[int, int]:
+        """Raw (left, right) encoder counters, wrapped to ``profile.counter_bits`` (unsigned)."""
+        cpr, bits = self.profile.counts_per_rev, self.profile.counter_bits
+        left0, right0 = self.counter_offset
+        return (
+            wrap_counter(left0 + encoder_count(self.angle[0], cpr, self.quadrature), bits),
+            wrap_counter(right0 + encoder_count(self.angle[1], cpr, self.quadrature), bits),
+        )
+
+    def wheel_speeds_mps(self) -> tuple[float, float]:
+        """Actual (left, right) ground speeds of the wheel rims, m/s (omega * actual radius)."""
+        return (
+            self.omega[0] * self.actual_radii_m[0],
+            self.omega[1] * self.actual_radii_m[1],
+        )

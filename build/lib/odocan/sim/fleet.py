@@ -1,0 +1,183 @@
+"""A fleet: N independent robots in one process, stepped in real time by one timer loop.
+
+Each robot is a ``sim.rig.LockstepRig`` of its own (the same node classes as the lockstep rig:
+motor controller, ground truth, scenario driver, firmware board, host observer) on its own channel
+of the in-process ``odocan`` transport (or python-can ``virtual``: ``FleetConfig.transport``),
+with seed ``seed + index``. ``Fleet.step(k)`` runs tick ``k`` of every robot (simulated time
+``k * 10 ms``: a robot's frames are those of the lockstep rig with its seed); the host observer's
+frames are collected, tagged with the robot's index, for ``take_batch``.
+
+``run_realtime`` paces ``Fleet.step`` to the wall clock as one asyncio task: at each release
+``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
+tick starting more than half a period after its release is late; releases a whole period or more
+behind are skipped, never run in a burst), steps every robot, and hands the tick's frames to
+``on_batch`` (e.g. the MQTT bridge). Between ticks the event loop runs the other tasks (MQTT I/O):
+one thread, no lock, no GIL contention with the timer.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import can
+
+from odocan.sim.board import TICK_S
+from odocan.sim.clock import RealTimeClock
+from odocan.sim.closing import Closing
+from odocan.sim.contract import cycle_ticks, database
+from odocan.sim.realtime import DeadlineStats
+from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.robot import RobotProfile
+
+Batch = list[tuple[int, can.Message]]
+_fleet_ids = iter(range(1 << 62))
+
+
+def robot_name(index: int) -> str:
+    """The name of robot ``index`` (0-based): ``robot001``, ``robot002``, ..."""
+    return f"robot{index + 1:03d}"
+
+
+@dataclass(frozen=True)
+class FleetConfig:
+    """N robots of one profile; robot i drives scenario ``scenario`` with seed ``seed + i``.
+
+    A shard (``first`` > 0) holds robots ``first .. first + robots - 1`` of a larger fleet: their
+    names, seeds, tick phases and so frames are those robots' in the whole fleet, so shards on
+    several processes or machines never clash and a robot's bytes do not depend on the sharding."""
+
+    robots: int
+    robot: RobotProfile
+    integrator: str = "exact"
+    scenario: str = "random"
+    seed: int = 0
+    transport: str = "odocan"  # the rigs' python-can interface (sim.rig.TRANSPORTS)
+    first: int = 0  # fleet-wide index of this shard's first robot (names and seeds count on)
+
+    def shard(self, first: int, robots: int) -> FleetConfig:
+        """Robots ``first .. first + robots - 1`` of this fleet (fleet-wide indices)."""
+        return replace(self, first=self.first + first, robots=robots)
+
+
+class _Collector(can.Listener):
+    """The host observer of robot ``index``: counts its frames and tags them into the batch."""
+
+    def __init__(self, index: int, batch: Batch) -> None:
+        self.index = index
+        self.batch = batch
+        self.counts: Counter[int] = Counter()
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self.counts[msg.arbitration_id] += 1
+        self.batch.append((self.index, msg))
+
+
+class Fleet(Closing):
+    """N lockstep rigs stepped together (see the module docstring)."""
+
+    def __init__(self, config: FleetConfig) -> None:
+        if config.robots < 1:
+            raise ValueError(f"a fleet needs at least one robot, got {config.robots}")
+        self.config = config
+        self.names = [robot_name(config.first + i) for i in range(config.robots)]
+        self._batch: Batch = []
+        self._collectors = [_Collector(i, self._batch) for i in range(config.robots)]
+        prefix = f"odocan-fleet-{next(_fleet_ids)}"
+        self.rigs = [
+            LockstepRig(
+                RigConfig(
+                    robot=config.robot,
+                    integrator=config.integrator,
+                    scenario=config.scenario,
+                    seed=config.seed + config.first + i,
+                    channel=f"{prefix}-{i}",
+                    truth_phase_ticks=_truth_phase(config.first + i),
+                    transport=config.transport,
+                ),
+                listeners=[self._collectors[i]],
+            )
+            for i in range(config.robots)
+        ]
+
+    def step(self, k: int) -> None:
+        """Tick ``k`` of every robot (simulated time ``k * TICK_S``)."""
+        first = self.config.first
+        for index, rig in enumerate(self.rigs):
+            own_k = k - _tick_offset(first + index)
+            if own_k >= 0:
+                rig.ticks = own_k
+                rig.step()
+
+    def take_batch(self) -> Batch:
+        """The frames the host observers saw since the last call, in bus order per robot."""
+        batch = list(self._batch)
+        self._batch.clear()
+        return batch
+
+    def host_bus(self, index: int) -> can.BusABC:
+        """Robot ``index``'s host bus handle (send commands to its firmware on it)."""
+        return self.rigs[index].host_bus
+
+    def frame_counts(self, index: int) -> dict[str, int]:
+        """Frames robot ``index``'s host observer saw, per message name."""
+        names = {m.frame_id: m.name for m in database().messages}
+        counts = self._collectors[index].counts
+        return {names.get(i, hex(i)): n for i, n in sorted(counts.items())}
+
+    def close(self) -> None:
+        """Release every robot's buses."""
+        for rig in self.rigs:
+            rig.close()
+
+
+def _tick_offset(index: int) -> int:
+    """Robot ``index`` (fleet-wide) starts this many fleet ticks late: every other robot runs one
+    tick out of phase, so the pose, twist and MOTOR_CMD frames (every 2nd tick) of half the fleet
+    fall on the other ticks. Each robot's own timeline is an ordinary rig's."""
+    return index % 2
+
+
+def _truth_phase(index: int) -> int:
+    """Robot ``index``'s SIM_TRUTH tick in its own timeline: pairs of robots take turns (the
+    truth is the costly part of a step), on even ticks so it stays aligned with the pose frames."""
+    cycle = cycle_ticks("SIM_TRUTH", TICK_S)
+    return (2 * (index // 2)) % cycle if cycle > 1 else 0
+
+
+async def run_realtime(
+    fleet: Fleet,
+    *,
+    duration_s: float | None,
+    on_batch: Callable[[Batch], None] | None = None,
+    stop: asyncio.Event | None = None,
+    period_s: float = TICK_S,
+    stats: DeadlineStats | None = None,
+) -> DeadlineStats:
+    """Step ``fleet`` every ``period_s`` of the wall clock for ``duration_s`` (None: until
+    ``stop``); returns the deadline accounting (see the module docstring), kept in ``stats``
+    when given (so another task can watch it while the fleet runs)."""
+    clock = RealTimeClock()
+    if stats is None:
+        stats = DeadlineStats(period_s, period_s / 2)
+    k = 0
+    while stop is None or not stop.is_set():
+        release = k * period_s
+        if duration_s is not None and release >= duration_s - 1e-9:
+            break
+        delay = release - clock.now_s()
+        await asyncio.sleep(max(delay, 0.0))  # 0: still let the MQTT tasks run once
+        lateness = max(clock.now_s() - release, 0.0)
+        if lateness >= period_s:
+            missed = int(lateness / period_s)
+            stats.skipped_releases += missed
+            k += missed
+        stats.record(lateness)
+        fleet.step(k)
+        batch = fleet.take_batch()
+        if on_batch is not None:
+            on_batch(batch)
+        k += 1
+    return stats

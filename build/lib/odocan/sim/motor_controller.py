@@ -1,0 +1,212 @@
+"""The simulated nodes around the firmware: motor controller, ground truth, scenario driver.
+
+* ``MotorController`` (node MOTOR_CTRL): follows E2E-checked ``MOTOR_CMD`` frames and sends
+  ``WHEEL_ENCODERS`` every cycle (the low 24 bits of each wrapping hardware counter).
+* ``TruthSender`` (node SIM): ``SIM_TRUTH`` (X, Y, HEADING parts) of the vehicle's ground truth at
+  the instant of an encoder frame, echoing its COUNTER.
+* ``ScenarioDriver`` (a HOST role): sends an open-loop scenario's wheel speeds as ``MOTOR_CMD``.
+
+They share one bus handle in the sim process. A CAN controller hears its own frames only when asked
+to, so the driver's commands reach the motor controller by ``deliver`` as well as on the bus.
+"""
+
+from __future__ import annotations
+
+import math
+
+import can
+
+from odocan.firmware import frames as fr
+from odocan.firmware.e2e import E2EReceiver, E2EStatus
+from odocan.firmware.errors import ErrorMask
+from odocan.sim.board import TICK_S
+from odocan.sim.clock import Clock
+from odocan.sim.contract import cycle_ticks
+from odocan.sim.errors import ErrorModel
+from odocan.sim.node import BusNode
+from odocan.sim.robot import RobotProfile
+from odocan.sim.scenarios import Scenario, get_scenario
+from odocan.sim.vehicle import Vehicle
+
+_U24 = 0xFF_FFFF
+_BAM16_PER_RAD = 65536 / (2 * math.pi)
+
+
+class MotorController(BusNode):
+    """Node MOTOR_CTRL: two wheel motors and their encoders, driven over CAN."""
+
+    def __init__(self, bus: can.BusABC, vehicle: Vehicle, clock: Clock) -> None:
+        super().__init__(bus, clock)
+        self.vehicle = vehicle
+        self.rx_motor_cmd = E2EReceiver(fr.MOTOR_CMD_DATA_IDS, max_delta_counter_init=15)
+        self.errors = ErrorMask()
+        self.counter = -1
+        self.commands_applied = 0
+        self._count_offset = (0, 0)  # the vehicle's counts at the last restart
+
+    def deliver(self, data: bytes) -> None:
+        """One received ``MOTOR_CMD`` payload: applied when its E2E check passes."""
+        status = self.rx_motor_cmd.check(data)
+        if status is E2EStatus.OK or status is E2EStatus.OKSOMELOST:
+            cmd = fr.unpack_motor_cmd(data)
+            self.vehicle.command(
+                cmd.left_speed_mm_s / 1000.0, cmd.right_speed_mm_s / 1000.0, self.clock.now_s()
+            )
+            self.commands_applied += 1
+
+    def service_rx(self) -> None:
+        """Apply every MOTOR_CMD waiting on the bus (other frames are not for this node)."""
+        msg = self.bus.recv(0)
+        while msg is not None:
+            if msg.arbitration_id == fr.MOTOR_CMD_ID and not msg.is_extended_id:
+                self.deliver(bytes(msg.data))
+            msg = self.bus.recv(0)
+
+    def restart(self) -> None:
+        """A reboot of this node: the encoder counters and the E2E counter start again from 0
+        (the robot stays where it is)."""
+        self.vehicle.advance_to(self.clock.now_s())
+        self._count_offset = self.vehicle.encoder_counts()
+        self.counter = -1
+        self.rx_motor_cmd.reset()
+
+    def sample_and_send(self) -> int:
+        """Advance the motors to now, send WHEEL_ENCODERS; returns the frame's COUNTER."""
+        self.vehicle.advance_to(self.clock.now_s())
+        mask = (1 << self.vehicle.profile.counter_bits) - 1
+        left, right = self.vehicle.encoder_counts()
+        left = (left - self._count_offset[0]) & mask
+        right = (right - self._count_offset[1]) & mask
+        self.counter = (self.counter + 1) & 0xF
+        self.send_frame(
+            fr.WHEEL_ENCODERS_ID, fr.pack_wheel_encoders(self.counter, left & _U24, right & _U24)
+        )
+        return self.counter
+
+
+class TruthSender(BusNode):
+    """Node SIM: the ground truth as SIM_TRUTH (0.1 mm, BAM16), aligned to an encoder frame."""
+
+    def __init__(self, bus: can.BusABC, vehicle: Vehicle, clock: Clock) -> None:
+        super().__init__(bus, clock)
+        self.vehicle = vehicle
+        self.errors = ErrorMask()
+        self.counter = -1
+
+    def send(self, enc_counter: int) -> None:
+        """Send the three SIM_TRUTH parts of the truth now."""
+        pose = self.vehicle.truth()
+        parts = (
+            (fr.SimTruthPart.X, round(pose.x_m * 1e4)),
+            (fr.SimTruthPart.Y, round(pose.y_m * 1e4)),
+            (fr.SimTruthPart.HEADING, round(pose.heading_rad * _BAM16_PER_RAD) & 0xFFFF),
+        )
+        for part, value in parts:
+            self.counter = (self.counter + 1) & 0xF
+            data = fr.pack_sim_truth(self.counter, part, enc_counter, value, self.errors)
+            self.send_frame(fr.SIM_TRUTH_ID, data)
+
+
+class ScenarioDriver(BusNode):
+    """A HOST role: an open-loop scenario's wheel speeds as MOTOR_CMD frames."""
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        scenario: Scenario,
+        clock: Clock,
+        motor_controller: MotorController | None = None,
+    ) -> None:
+        super().__init__(bus, clock)
+        self.scenario = scenario
+        self.local = motor_controller
+        self.errors = ErrorMask()
+        self.counter = -1
+
+    def send(self) -> None:
+        """Send the scenario's command for now (and deliver it locally)."""
+        left_mps, right_mps = self.scenario.command_at(self.clock.now_s())
+        self.counter = (self.counter + 1) & 0xF
+        data = fr.pack_motor_cmd(
+            self.counter, round(left_mps * 1000), round(right_mps * 1000), self.errors
+        )
+        self.send_frame(fr.MOTOR_CMD_ID, data)
+        if self.local is not None:
+            self.local.deliver(data)
+
+
+class SimNode:
+    """MOTOR_CTRL, SIM and an optional scenario driver on one bus handle: the sim side of every
+    rig (lockstep, real time, the pytest plugin's external backend). Each 10 ms tick ``k``: take
+    MOTOR_CMD, the driver's command (every 20 ms), sample and send WHEEL_ENCODERS, SIM_TRUTH at
+    its cycle (on ticks ``k = truth_phase_ticks`` modulo it)."""
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        vehicle: Vehicle,
+        clock: Clock,
+        scenario: Scenario | None,
+        *,
+        truth_phase_ticks: int = 0,
+    ) -> None:
+        self.bus = bus
+        self.clock = clock
+        self.vehicle = vehicle
+        self.motor_controller = MotorController(bus, vehicle, clock)
+        self.truth = TruthSender(bus, vehicle, clock)
+        self.driver: ScenarioDriver | None = None
+        self.set_scenario(scenario)
+        self.truth_phase_ticks = truth_phase_ticks
+        self._driver_ticks = cycle_ticks("MOTOR_CMD", TICK_S)
+        self._truth_ticks = cycle_ticks("SIM_TRUTH", TICK_S)
+
+    @classmethod
+    def build(
+        cls,
+        bus: can.BusABC,
+        robot: RobotProfile,
+        clock: Clock,
+        *,
+        scenario: str | None = "random",
+        seed: int = 0,
+        errors: ErrorModel | None = None,
+        quadrature: bool = False,
+        duration_s: float | None = None,
+        truth_phase_ticks: int = 0,
+    ) -> SimNode:
+        """A vehicle at rest at the origin, driven by the scenario named (None: no driver)."""
+        vehicle = Vehicle(robot, errors, seed=seed, quadrature=quadrature)
+        program = None if scenario is None else get_scenario(scenario, robot, seed, duration_s)
+        return cls(bus, vehicle, clock, program, truth_phase_ticks=truth_phase_ticks)
+
+    def set_scenario(self, scenario: Scenario | None) -> None:
+        """Drive ``scenario`` from now on (None: no driver, e.g. the firmware navigates)."""
+        self.driver = (
+            None
+            if scenario is None
+            else ScenarioDriver(self.bus, scenario, self.clock, self.motor_controller)
+        )
+
+    def tick(self, k: int) -> None:
+        """Tick ``k`` (10 ms each), in the order of the class docstring."""
+        self.motor_controller.service_rx()
+        if self.driver is not None and k % self._driver_ticks == 0:
+            self.driver.send()
+        enc_counter = self.motor_controller.sample_and_send()
+        if (k - self.truth_phase_ticks) % self._truth_ticks == 0:
+            self.truth.send(enc_counter)
+
+    def _nodes(self) -> list[BusNode]:
+        nodes: list[BusNode] = [self.motor_controller, self.truth]
+        return nodes if self.driver is None else [*nodes, self.driver]
+
+    @property
+    def frames_sent(self) -> int:
+        """Frames the nodes put on the bus."""
+        return sum(node.frames_sent for node in self._nodes())
+
+    @property
+    def tx_errors(self) -> int:
+        """Frames the bus refused."""
+        return sum(node.tx_errors for node in self._nodes())

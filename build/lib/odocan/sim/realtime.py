@@ -1,0 +1,189 @@
+"""Real-time nodes: a periodic loop with deadline accounting, and the sim node it paces.
+
+Each real-time node is its own process on any python-can bus (``odocan sim``, ``odocan firmware``).
+``PeriodicLoop`` calls ``tick(k)`` at the release times ``start + k * period`` of a
+``RealTimeClock``, sleeping in between, and counts:
+
+* a **late tick**: one that starts more than ``late_after_s`` after its release (default: half a
+  period). ``deadline_miss_ratio`` = late ticks / ticks run;
+* a **skipped release**: when a tick starts a whole period or more after its release, the releases
+  already passed are dropped (a timer interrupt that came while the CPU was busy is lost, not
+  queued): the loop never runs a burst of ticks to catch up, so frames keep their spacing.
+
+``stop_on_signals`` turns SIGINT (Ctrl-C) and SIGTERM into a request to stop after the current
+tick, so a node closes its bus and exits cleanly; a second signal interrupts at once. It takes
+anything ``Stoppable``: a ``PeriodicLoop``, or a bare ``StopRequest`` that a lockstep loop polls
+between its ticks (``odocan run``), so a signal never lands in the middle of a log write.
+
+``sim.motor_controller.SimNode``, the sim side of every rig, runs here on one bus handle:
+the motor controller, the SIM truth and the scenario driver, one tick at a time.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from types import FrameType
+from typing import Protocol
+
+from odocan.sim.board import TICK_S
+from odocan.sim.clock import RealTimeClock
+from odocan.sim.contract import database
+
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class Stoppable(Protocol):
+    """What ``stop_on_signals`` asks to stop."""
+
+    def request_stop(self) -> None:
+        """Stop at the next safe point (called from a signal handler)."""
+
+    @property
+    def stop_requested(self) -> bool:
+        """True once a stop was requested."""
+
+
+class StopRequest:
+    """A stop flag for loops that poll it between steps (``Stoppable``)."""
+
+    def __init__(self) -> None:
+        self._requested = False
+
+    def request_stop(self) -> None:
+        """Ask the loop to stop (safe from a signal handler)."""
+        self._requested = True
+
+    @property
+    def stop_requested(self) -> bool:
+        """True once a stop was requested."""
+        return self._requested
+
+
+@dataclass
+class DeadlineStats:
+    """Deadline accounting of a periodic loop (times in seconds)."""
+
+    period_s: float
+    late_after_s: float
+    ticks: int = 0
+    late_ticks: int = 0
+    skipped_releases: int = 0
+    max_lateness_s: float = 0.0
+
+    def record(self, lateness_s: float) -> None:
+        """Account one tick that started ``lateness_s`` after its release."""
+        self.ticks += 1
+        if lateness_s > self.late_after_s:
+            self.late_ticks += 1
+        self.max_lateness_s = max(self.max_lateness_s, lateness_s)
+
+    @property
+    def deadline_miss_ratio(self) -> float:
+        """Late ticks / ticks run (0.0 before the first tick)."""
+        return self.late_ticks / self.ticks if self.ticks else 0.0
+
+    def summary(self) -> str:
+        """One line: ticks, late ticks, the miss ratio, worst lateness (ms), skipped releases."""
+        return (
+            f"{self.ticks} ticks, {self.late_ticks} late "
+            f"(deadline_miss_ratio {self.deadline_miss_ratio:.4f}, "
+            f"worst {self.max_lateness_s * 1e3:.1f} ms), "
+            f"{self.skipped_releases} releases skipped"
+        )
+
+
+class PeriodicLoop:
+    """Runs ``tick(k)`` every ``period_s`` of a real-time clock until stopped or a duration ends."""
+
+    def __init__(
+        self,
+        period_s: float = TICK_S,
+        clock: RealTimeClock | None = None,
+        *,
+        late_after_s: float | None = None,
+    ) -> None:
+        """``late_after_s``: a tick starting later than this after its release is late
+        (default: half a period)."""
+        if period_s <= 0:
+            raise ValueError(f"period must be positive, got {period_s} s")
+        self.period_s = period_s
+        self.clock = clock or RealTimeClock()
+        self.stats = DeadlineStats(period_s, period_s / 2 if late_after_s is None else late_after_s)
+        self._stop_requested = False
+
+    def request_stop(self) -> None:
+        """Stop after the tick under way (safe from a signal handler)."""
+        self._stop_requested = True
+
+    @property
+    def stop_requested(self) -> bool:
+        """True once a stop was requested."""
+        return self._stop_requested
+
+    def run(self, tick: Callable[[int], None], duration_s: float | None = None) -> DeadlineStats:
+        """Call ``tick(k)`` at each release ``k`` (k = 0, 1, ...; skipped releases skip k).
+
+        Release 0 is the clock's time when ``run`` is called; releases run until ``duration_s``
+        after it (None: until stopped).
+        """
+        period = self.period_s
+        clock = self.clock
+        stats = self.stats
+        start = clock.now_s()
+        k = 0
+        while not self._stop_requested:
+            if duration_s is not None and k * period >= duration_s - 1e-9:
+                break
+            release = start + k * period
+            lateness = clock.sleep_until(release)
+            if self._stop_requested:
+                break
+            lateness = max(lateness, clock.now_s() - release)
+            if lateness >= period:
+                missed = int(lateness / period)
+                stats.skipped_releases += missed
+                k += missed
+            stats.record(lateness)
+            tick(k)
+            k += 1
+        return stats
+
+
+@contextmanager
+def stop_on_signals(loop: Stoppable) -> Iterator[None]:
+    """While inside: SIGINT and SIGTERM ask ``loop`` to stop; a second one raises
+    ``KeyboardInterrupt``. The previous handlers are restored on exit. Off the main thread
+    (where Python allows no handler) it does nothing."""
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        if loop.stop_requested:
+            raise KeyboardInterrupt
+        loop.request_stop()
+
+    if threading.current_thread() is not threading.main_thread():
+        yield  # only the main thread may install handlers: the caller's own stay in force
+        return
+    previous = {sig: signal.signal(sig, handler) for sig in _STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def accepted_ids(node: str) -> frozenset[int]:
+    """IDs of the frames ``node`` receives in the DBC: what its CAN controller's acceptance
+    filter would pass (``sim.board.FirmwareBoard``'s ``accept_ids``).
+
+    Not python-can's ``can_filters``: where they are applied in software (``udp_multicast``,
+    ``virtual``), ``recv(0)`` returns None at the first frame they reject, so a node draining
+    its bus with ``recv(0)`` would leave frames queued."""
+    return frozenset(
+        msg.frame_id
+        for msg in database().messages
+        if any(node in sig.receivers for sig in msg.signals)
+    )

@@ -1,0 +1,209 @@
+"""Robot profiles: the nominal geometry the firmware is configured with, read from TOML.
+
+A profile is the robot as its maker specifies it (the *nominal* geometry). The firmware holds
+lengths as integer nanometres, so on load every length is rounded to a whole number of
+nanometres and the float metres are set to the nearest double of that integer (``nm / 1e9``):
+the float reference and the firmware then describe the very same robot. The real robot's
+deviations from nominal (unequal diameters, wheelbase error, slip) live in ``sim.errors``.
+
+Shipped profiles live in ``sim/robots/<name>.toml``::
+
+    name = "pmir"                # optional, defaults to the file stem
+    counts_per_rev = 500         # encoder counts per wheel revolution (x1 decoding), 1 .. 2**24
+    wheel_radius_left_m = 0.075  # 0.001 .. 2 m
+    wheel_radius_right_m = 0.075
+    wheelbase_m = 0.30           # distance between the wheel contact points, 0.01 .. 4 m
+    counter_bits = 16            # width of the free-running encoder counters: 16 or 32
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from odocan.sim.exceptions import ConfigurationError
+
+ROBOTS_DIR = Path(str(resources.files("odocan.sim").joinpath("robots")))
+NM_PER_M = 1_000_000_000
+
+_RADIUS_RANGE_M = (0.001, 2.0)
+_WHEELBASE_RANGE_M = (0.01, 4.0)
+_CPR_RANGE = (1, 2**24)
+_COUNTER_BITS = (16, 32)
+_FLOAT_KEYS = ("wheel_radius_left_m", "wheel_radius_right_m", "wheelbase_m")
+_INT_KEYS = ("counts_per_rev", "counter_bits")
+_REQUIRED_KEYS = frozenset(_FLOAT_KEYS + _INT_KEYS)
+_OPTIONAL_KEYS = frozenset({"name"})
+
+
+class ProfileError(ConfigurationError):
+    """A robot profile could not be found, parsed or validated (one-line message)."""
+
+
+def _nm(length_m: float) -> int:
+    """Round a length in metres to whole nanometres (round half to even)."""
+    return round(length_m * NM_PER_M)
+
+
+def _metres(length_nm: int) -> float:
+    """The double nearest to ``length_nm`` nanometres (correctly rounded)."""
+    return length_nm / NM_PER_M
+
+
+@dataclass(frozen=True)
+class RobotProfile:
+    """Nominal geometry of a differential-drive robot, lengths on the 1 nm grid.
+
+    Attributes:
+        name: profile name.
+        counts_per_rev: encoder counts per wheel revolution with x1 decoding, 1 .. 2**24.
+        wheel_radius_left_m, wheel_radius_right_m: nominal wheel radii, 0.001 .. 2 m, each
+            exactly ``nm / 1e9`` for an integer ``nm``.
+        wheelbase_m: nominal distance between the wheel contact points, 0.01 .. 4 m, on the nm grid.
+        counter_bits: width of the free-running unsigned encoder counters, 16 or 32.
+    """
+
+    name: str
+    counts_per_rev: int
+    wheel_radius_left_m: float
+    wheel_radius_right_m: float
+    wheelbase_m: float
+    counter_bits: int
+
+    def firmware_params(self) -> dict[str, int]:
+        """The integers the firmware is configured with (lengths in nanometres)."""
+        return {
+            "counts_per_rev": self.counts_per_rev,
+            "wheel_radius_left_nm": _nm(self.wheel_radius_left_m),
+            "wheel_radius_right_nm": _nm(self.wheel_radius_right_m),
+            "wheelbase_nm": _nm(self.wheelbase_m),
+            "counter_bits": self.counter_bits,
+        }
+
+
+def to_toml(profile: RobotProfile) -> str:
+    """The profile as a TOML file that ``load`` reads back to the very same profile (every float
+    written as its shortest round-trip repr, so the nanometre grid is kept)."""
+    return (
+        f"name = {json.dumps(profile.name)}\n"
+        f"counts_per_rev = {profile.counts_per_rev}\n"
+        f"wheel_radius_left_m = {profile.wheel_radius_left_m!r}\n"
+        f"wheel_radius_right_m = {profile.wheel_radius_right_m!r}\n"
+        f"wheelbase_m = {profile.wheelbase_m!r}\n"
+        f"counter_bits = {profile.counter_bits}\n"
+    )
+
+
+def profile_sha256(profile: RobotProfile) -> str:
+    """A fingerprint of the geometry the firmware is configured with (the integers it receives,
+    not the file's spelling): two profiles with the same hash configure the same firmware."""
+    params = json.dumps(profile.firmware_params(), sort_keys=True).encode()
+    return hashlib.sha256(params).hexdigest()
+
+
+def list_profiles() -> list[str]:
+    """Names of the shipped profiles (``sim/robots/*.toml``), sorted."""
+    return sorted(p.stem for p in ROBOTS_DIR.glob("*.toml"))
+
+
+def load(name_or_path: str | Path) -> RobotProfile:
+    """Load a profile by shipped name (``"pmir"``) or from a TOML file path.
+
+    A ``Path``, or a string ending in ``.toml`` or containing a path separator, is a file path;
+    anything else is a shipped name. Raises ``ProfileError`` with a one-line message.
+    """
+    text = str(name_or_path)
+    if isinstance(name_or_path, Path) or text.endswith(".toml") or "/" in text or "\\" in text:
+        path = Path(name_or_path)
+        if not path.is_file():
+            raise ProfileError(f"robot profile file not found: {path}")
+    else:
+        known = list_profiles()
+        if text not in known:
+            raise ProfileError(f"unknown robot {text!r} (known: {', '.join(known)})")
+        path = ROBOTS_DIR / f"{text}.toml"
+    return _from_table(_read_toml(path), default_name=path.stem, source=str(path))
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    """Parse a TOML file, turning decode errors into ``ProfileError``."""
+    try:
+        with path.open("rb") as f:
+            return tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise ProfileError(f"malformed TOML in {path}: {exc}") from None
+    except OSError as exc:
+        raise ProfileError(f"cannot read robot profile {path}: {exc.strerror}") from None
+
+
+def _from_table(table: dict[str, Any], default_name: str, source: str) -> RobotProfile:
+    """Validate a parsed TOML table and build the profile on the nanometre grid."""
+    _check_keys(table, source)
+    name = table.get("name", default_name)
+    if not isinstance(name, str) or not name:
+        raise ProfileError(f"{source}: 'name' must be a non-empty string")
+    for key in _INT_KEYS:
+        _check_int(table[key], key, source)
+    for key in _FLOAT_KEYS:
+        _check_float(table[key], key, source)
+    _check_values(table, source)
+    return RobotProfile(
+        name=name,
+        counts_per_rev=table["counts_per_rev"],
+        wheel_radius_left_m=_metres(_nm(table["wheel_radius_left_m"])),
+        wheel_radius_right_m=_metres(_nm(table["wheel_radius_right_m"])),
+        wheelbase_m=_metres(_nm(table["wheelbase_m"])),
+        counter_bits=table["counter_bits"],
+    )
+
+
+def _check_keys(table: dict[str, Any], source: str) -> None:
+    """Refuse missing and unknown keys."""
+    missing = sorted(_REQUIRED_KEYS - table.keys())
+    if missing:
+        raise ProfileError(f"{source}: missing key(s): {', '.join(missing)}")
+    extra = sorted(table.keys() - _REQUIRED_KEYS - _OPTIONAL_KEYS)
+    if extra:
+        raise ProfileError(f"{source}: unknown key(s): {', '.join(extra)}")
+
+
+def _check_int(value: object, key: str, source: str) -> None:
+    """An integer, not a bool or a float."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ProfileError(f"{source}: {key!r} must be an integer, got {type(value).__name__}")
+
+
+def _check_float(value: object, key: str, source: str) -> None:
+    """A finite number (TOML float or integer), not a bool."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ProfileError(f"{source}: {key!r} must be a number, got {type(value).__name__}")
+    if not math.isfinite(value):
+        raise ProfileError(f"{source}: {key!r} must be finite, got {value}")
+
+
+def _check_values(table: dict[str, Any], source: str) -> None:
+    """Range checks, one clear message per failure."""
+    lo, hi = _RADIUS_RANGE_M
+    for key in ("wheel_radius_left_m", "wheel_radius_right_m"):
+        value = table[key]
+        if value <= 0:
+            raise ProfileError(f"{source}: {key!r} must be positive, got {value}")
+        if not lo <= value <= hi:
+            raise ProfileError(f"{source}: {key!r} = {value} m is outside {lo}..{hi} m")
+    lo, hi = _WHEELBASE_RANGE_M
+    if not lo <= table["wheelbase_m"] <= hi:
+        value = table["wheelbase_m"]
+        raise ProfileError(f"{source}: 'wheelbase_m' = {value} m is outside {lo}..{hi} m")
+    lo_c, hi_c = _CPR_RANGE
+    if not lo_c <= table["counts_per_rev"] <= hi_c:
+        value = table["counts_per_rev"]
+        raise ProfileError(f"{source}: 'counts_per_rev' = {value} is outside 1..2**24")
+    if table["counter_bits"] not in _COUNTER_BITS:
+        value = table["counter_bits"]
+        raise ProfileError(f"{source}: 'counter_bits' must be 16 or 32, got {value}")
