@@ -674,7 +674,10 @@ def _secured_rig_drive(ears: _Unpacker) -> None:
         sync()
 
         def goal_y() -> bytes:
-            return fr.pack_nav_goal(counter(fr.NAV_GOAL_ID), fr.NavGoalField.Y, 1_000, scratch)
+            data: bytes = fr.pack_nav_goal(  # fr is the instrumented module: typed Any
+                counter(fr.NAV_GOAL_ID), fr.NavGoalField.Y, 1_000, scratch
+            )
+            return data
 
         signed(fr.NAV_GOAL_ID, goal_y(), forge=1)  # AUTH_FAILED
         rig.send(fr.NAV_GOAL_ID, goal_y())  # unsigned and displaced by the next: AUTH_MISSING
