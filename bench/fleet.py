@@ -159,7 +159,7 @@ def main() -> None:
           f"handling {bridge_us:.0f} us -> one idle core fits about {10_000 / step_us:.0f} robots "
           f"without the bridge, {10_000 / (step_us + bridge_us):.0f} with it (before MQTT I/O)")
     wanted = set(args.only or ("mosquitto", "embedded", "none"))
-    results = {}
+    results: dict[str, int] = {}
     with tempfile.TemporaryDirectory() as tmp:
         mosquitto = start_mosquitto(Path(tmp)) if "mosquitto" in wanted else None
         embedded = BrokerProcess() if "embedded" in wanted else None
@@ -190,6 +190,11 @@ def main() -> None:
             if mosquitto is not None:
                 mosquitto[0].terminate()
                 mosquitto[0].wait()
+    print_largest(results)
+
+
+def print_largest(results: dict[str, int]) -> None:
+    """The largest real-time fleet of each setting searched, against its target."""
     if results:
         print("largest real-time fleet (deadline_miss_ratio <= 0.001):")
     targets = {"mosquitto": 100, "embedded": 50}

@@ -157,6 +157,80 @@ class _Odometry:
             self.y -= ds / dtheta * (math.cos(new) - math.cos(old))
 
 
+_Stamp = tuple[float, int, int]  # (time s, left count, right count) of one encoder frame
+
+
+class _Follower:
+    """``check``'s walk along the encoder frames: the odometry, the firmware's plausibility
+    rule and counter restarts, the recent (COUNTER, pose) pairs and the pose errors found."""
+
+    def __init__(
+        self, robot: Robot, integrator: str, starts: Callable[[float], tuple[float, float, float]],
+        max_wheel_speed_m_s: float | None,
+    ) -> None:
+        self.odo = _Odometry(robot, integrator)
+        self.starts = starts
+        self.wire = 1 << min(robot.counter_bits, 24)
+        self.recent: list[tuple[int, tuple[float, float, float]]] = []  # the last 16
+        self.last_t = -math.inf  # the latest encoder frame's time
+        self.halves: dict[tuple[str, int], dict[str, float]] = {}
+        self.prev: _Stamp | None = None
+        self.errors: list[tuple[float, float]] = []
+        self.bound = [math.inf if max_wheel_speed_m_s is None
+                      else math.ceil(max_wheel_speed_m_s * PERIOD_S / m) + 1
+                      for m in (self.odo.m_left, self.odo.m_right)]
+        self.refused: list[_Stamp] = []  # the run of refused frames, each plausible
+
+    def deltas(self, a: _Stamp, b: _Stamp) -> tuple[int, int]:
+        wire = self.wire
+        return ((b[1] - a[1] + wire // 2) % wire - wire // 2,
+                (b[2] - a[2] + wire // 2) % wire - wire // 2)
+
+    def plausible(self, a: _Stamp, b: _Stamp) -> bool:
+        periods = max(1, round((b[0] - a[0]) / PERIOD_S))
+        d = self.deltas(a, b)
+        return abs(d[0]) <= periods * self.bound[0] and abs(d[1]) <= periods * self.bound[1]
+
+    def encoders(self, t: float, s: dict[str, float | int]) -> None:
+        """One WHEEL_ENCODERS frame at ``t`` s."""
+        frame = (t, int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
+        self.last_t = t
+        self.halves.clear()
+        if self.prev is not None and not self.plausible(self.prev, frame):
+            self._refuse(frame, s)
+            return
+        self.refused = []
+        if self.prev is None:
+            self.odo.place(*self.starts(t))
+        else:
+            self._advance(self.prev, frame)
+        self._accept(frame, s)
+
+    def _refuse(self, frame: _Stamp, s: dict[str, float | int]) -> None:
+        """An implausible frame; the ``RESYNC``-th in a run is a counter restart."""
+        consistent = bool(self.refused) and self.plausible(self.refused[-1], frame)
+        self.refused = [*self.refused, frame] if consistent else [frame]
+        if len(self.refused) < RESYNC:
+            return
+        self.odo.step(*self.deltas(self.refused[0], frame))  # restarted: from the first, one step
+        self.refused = []
+        self._accept(frame, s)
+
+    def _advance(self, prev: _Stamp, frame: _Stamp) -> None:
+        d_left, d_right = self.deltas(prev, frame)
+        if frame[0] - prev[0] > 1.5 * PERIOD_S:  # a gap: the heading follows the counts,
+            self.odo.n_left += d_left  # the position starts again where the firmware was
+            self.odo.n_right += d_right
+            self.odo.x, self.odo.y = self.starts(frame[0])[:2]
+        else:
+            self.odo.step(d_left, d_right)
+
+    def _accept(self, frame: _Stamp, s: dict[str, float | int]) -> None:
+        self.prev = frame
+        odo = self.odo
+        self.recent = [(int(s["COUNTER"]), (odo.x, odo.y, odo.heading)), *self.recent][:16]
+
+
 def check(
     path: Path, robot: Robot, integrator: str,
     starts: Callable[[float], tuple[float, float, float]],
@@ -166,60 +240,13 @@ def check(
     at ``starts(timestamp of the segment's first encoder frame)`` (module docstring);
     ``max_wheel_speed_m_s`` None: no plausibility rule (drives faster than any ECU allows)."""
     frames = _Frames(path)
-    odo = _Odometry(robot, integrator)
-    wire = 1 << min(robot.counter_bits, 24)
-    recent: list[tuple[int, tuple[float, float, float]]] = []  # (COUNTER, pose) of the last 16
-    last_t = -math.inf  # the latest encoder frame's time
-    halves: dict[tuple[str, int], dict[str, float]] = {}
-    prev: tuple[float, int, int] | None = None
-    errors: list[tuple[float, float]] = []
-    bound = [math.inf if max_wheel_speed_m_s is None
-             else math.ceil(max_wheel_speed_m_s * PERIOD_S / m) + 1
-             for m in (odo.m_left, odo.m_right)]
-
-    def deltas(a: tuple[float, int, int], b: tuple[float, int, int]) -> tuple[int, int]:
-        return ((b[1] - a[1] + wire // 2) % wire - wire // 2,
-                (b[2] - a[2] + wire // 2) % wire - wire // 2)
-
-    def plausible(a: tuple[float, int, int], b: tuple[float, int, int]) -> bool:
-        periods = max(1, round((b[0] - a[0]) / PERIOD_S))
-        d = deltas(a, b)
-        return abs(d[0]) <= periods * bound[0] and abs(d[1]) <= periods * bound[1]
-
-    refused: list[tuple[float, int, int]] = []  # the run of refused frames, each plausible
+    walk = _Follower(robot, integrator, starts, max_wheel_speed_m_s)
     for t, name, s in frames.rows:
         if name == "WHEEL_ENCODERS":
-            left, right = int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"])
-            frame = (t, left, right)
-            last_t = t
-            halves.clear()
-            if prev is not None and not plausible(prev, frame):
-                consistent = bool(refused) and plausible(refused[-1], frame)
-                refused = [*refused, frame] if consistent else [frame]
-                if len(refused) < RESYNC:
-                    continue
-                odo.step(*deltas(refused[0], frame))  # restarted: from the first, one step
-                refused = []
-                prev = frame
-                recent = [(int(s["COUNTER"]), (odo.x, odo.y, odo.heading)), *recent][:16]
-                continue
-            refused = []
-            if prev is None:
-                odo.place(*starts(t))
-            else:
-                d_left, d_right = deltas(prev, frame)
-                if t - prev[0] > 1.5 * PERIOD_S:  # a gap: the heading follows the counts,
-                    odo.n_left += d_left  # the position starts again where the firmware was
-                    odo.n_right += d_right
-                    odo.x, odo.y = starts(t)[:2]
-                else:
-                    odo.step(d_left, d_right)
-            prev = (t, left, right)
-            recent = [(int(s["COUNTER"]), (odo.x, odo.y, odo.heading)), *recent][:16]
-            last_t = t
-            halves.clear()
-        elif name in ("ODOM_POSE_X", "ODOM_POSE_Y") and t - last_t < 8 * PERIOD_S:
-            _pair(name, s, recent, halves, errors)
+            walk.encoders(t, s)
+        elif name in ("ODOM_POSE_X", "ODOM_POSE_Y") and t - walk.last_t < 8 * PERIOD_S:
+            _pair(name, s, walk.recent, walk.halves, walk.errors)
+    errors = walk.errors
     if not errors:
         return Verdict(0, math.nan, math.nan)
     return Verdict(len(errors), max(e[0] for e in errors), max(e[1] for e in errors))

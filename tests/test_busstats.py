@@ -24,6 +24,7 @@ from odocan.sim.canbits import (
 )
 from odocan.sim.contract import database
 from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.transport import OdocanBus
 
 
 def _exact_quantile(values: list[int], fraction: float) -> int:
@@ -78,6 +79,7 @@ def test_the_wire_and_the_log_count_the_same_bits() -> None:
     config = RigConfig(robot=robot.load("pmir"), integrator="exact", scenario="random", seed=3,
                        duration_s=5.0, bitrate=250_000, channel="busstats-wire")
     rig = LockstepRig(config, listeners=[collector])
+    assert isinstance(rig.host_bus, OdocanBus)  # no fault injection: the plain in-process bus
     wire = rig.host_bus.timing
     try:
         rig.run(5.0)

@@ -383,113 +383,163 @@ def _secured_ecu_session(
 ) -> None:
     """A provisioned ECU, frame for frame: genuine, forged, stale, replayed (also after a
     reboot), unsigned, displaced and orphan commands on all three secured messages."""
-    params = firmware_params(load("pmir"), "exact")
-    cell = _Cell(nvm_fails)
-    tx = _RecordingTx()
-    mac_key = cmac.cmac_key(SECOC_KEY)
-    ask(f"nvm 0 {int(nvm_fails)}", "ok")
+    _SecuredSession(rng, ask, key, nvm_fails).run(400)
 
-    def boot() -> OdomEcu:
-        ask(f"ecu_new {' '.join(str(v) for v in dataclasses.astuple(params))}", "ok")
-        ask(f"ecu_secoc {key.hex() or '-'}", "ok")
-        return OdomEcu(tx, params, secoc_key=key, nvm=cell)
 
-    ecu = boot()
-    counters: dict[int, int] = {}
-    host_fv = [0]
-    recorded: list[list[tuple[int, bytes]]] = []
-    count = [0]
+class _SecuredSession:
+    """The state of one ``_secured_ecu_session``: the Python ECU and the C one fed the same
+    frames, the host's counters and freshness, and the recorded genuine commands."""
 
-    def counter(can_id: int) -> int:
-        counters[can_id] = (counters.get(can_id, -1) + 1) & 15
-        return counters[can_id]
+    def __init__(
+        self, rng: random.Random, ask: Callable[..., None], key: bytes, nvm_fails: bool
+    ) -> None:
+        self.rng, self.ask, self.key = rng, ask, key
+        self.params = firmware_params(load("pmir"), "exact")
+        self.cell = _Cell(nvm_fails)
+        self.tx = _RecordingTx()
+        self.mac_key = cmac.cmac_key(SECOC_KEY)
+        ask(f"nvm 0 {int(nvm_fails)}", "ok")
+        self.ecu = self.boot()
+        self.counters: dict[int, int] = {}
+        self.host_fv = 0
+        self.recorded: list[list[tuple[int, bytes]]] = []
+        self.count = 0
 
-    def rx(can_id: int, data: bytes) -> None:
-        ecu.isr_can_rx(can_id, data)
-        ask(f"ecu_rx {can_id} {data.hex() or '-'}", "ok")
+    def boot(self) -> OdomEcu:
+        self.ask(f"ecu_new {' '.join(str(v) for v in dataclasses.astuple(self.params))}", "ok")
+        self.ask(f"ecu_secoc {self.key.hex() or '-'}", "ok")
+        return OdomEcu(self.tx, self.params, secoc_key=self.key, nvm=self.cell)
 
-    def command() -> tuple[int, bytes]:
-        can_id = rng.choice(secoc.SECURED_IDS)
+    def counter(self, can_id: int) -> int:
+        self.counters[can_id] = (self.counters.get(can_id, -1) + 1) & 15
+        return self.counters[can_id]
+
+    def rx(self, can_id: int, data: bytes) -> None:
+        self.ecu.isr_can_rx(can_id, data)
+        self.ask(f"ecu_rx {can_id} {data.hex() or '-'}", "ok")
+
+    def command(self) -> tuple[int, bytes]:
+        can_id = self.rng.choice(secoc.SECURED_IDS)
         e = ErrorMask()
         if can_id == frames.NAV_GOAL_ID:
-            data = frames.pack_nav_goal(counter(can_id), rng.choice((0, 1, 2, 14)), 1000, e)
+            field = self.rng.choice((0, 1, 2, 14))
+            data = frames.pack_nav_goal(self.counter(can_id), field, 1000, e)
         elif can_id == frames.ODOM_SET_POSE_ID:
-            field = rng.choice((0, 1, 2, 15, 7))
-            data = frames.pack_odom_set_pose(counter(can_id), field, rng.randrange(9999), e)
+            field = self.rng.choice((0, 1, 2, 15, 7))
+            data = frames.pack_odom_set_pose(
+                self.counter(can_id), field, self.rng.randrange(9999), e
+            )
         else:
-            data = frames.pack_odom_config(counter(can_id), 3, 300_000_000, e)
+            data = frames.pack_odom_config(self.counter(can_id), 3, 300_000_000, e)
         return can_id, data
 
-    def auth(can_id: int, data: bytes, fv: int, mac: int | None = None) -> tuple[int, bytes]:
-        tag = secoc.authenticator(mac_key, can_id, data, fv) if mac is None else mac
+    def auth(self, can_id: int, data: bytes, fv: int, mac: int | None = None) -> tuple[int, bytes]:
+        tag = secoc.authenticator(self.mac_key, can_id, data, fv) if mac is None else mac
         request = secoc.SECURED_IDS.index(can_id)
         return frames.ODOM_AUTH_ID, secoc.pack_odom_auth(
-            counter(frames.ODOM_AUTH_ID), request, fv & 0xFFFF, tag
+            self.counter(frames.ODOM_AUTH_ID), request, fv & 0xFFFF, tag
         )
 
-    def recount(can_id: int, data: bytes) -> bytes:
+    def recount(self, can_id: int, data: bytes) -> bytes:
         frame = bytearray(data)
-        e2e.p02_protect(frame, counter(can_id), frames.DATA_IDS_BY_FRAME_ID[can_id])
+        e2e.p02_protect(frame, self.counter(can_id), frames.DATA_IDS_BY_FRAME_ID[can_id])
         return bytes(frame)
 
-    for tick in range(400):
+    def genuine(self) -> None:
+        can_id, data = self.command()
+        self.host_fv += 1
+        pair = [(can_id, data), self.auth(can_id, data, self.host_fv)]
+        self.recorded.append(pair)
+        for frame in pair:
+            self.rx(*frame)
+
+    def forged(self) -> None:
+        """Right freshness, random authenticator."""
+        can_id, data = self.command()
+        self.rx(can_id, data)
+        self.rx(*self.auth(can_id, data, self.host_fv + 1, self.rng.getrandbits(32)))
+
+    def replayed(self) -> None:
+        """A recorded genuine command, with fresh E2E counters."""
+        for can_id, data in self.rng.choice(self.recorded):
+            if can_id == frames.ODOM_AUTH_ID:
+                fields = secoc.unpack_odom_auth(data)
+                self.rx(can_id, secoc.pack_odom_auth(self.counter(can_id), *fields[1:]))
+            else:
+                self.rx(can_id, self.recount(can_id, data))
+
+    def unsigned(self) -> None:
+        """Unsigned (expires), or displaced by a second frame."""
+        self.rx(*self.command())
+        if self.rng.random() < 0.5:
+            can_id, data = self.command()
+            self.rx(can_id, data)
+            self.rx(*self.auth(can_id, data, self.host_fv + 1))
+            self.host_fv += 1
+
+    def orphan(self) -> None:
+        """An orphan ODOM_AUTH, or one naming no secured message."""
+        pdu = bytearray(secoc.pack_odom_auth(self.counter(frames.ODOM_AUTH_ID), 1, 0, 0))
+        pdu[1] = (pdu[1] & 0x0F) | (self.rng.choice((1, 5, 15)) << 4)
+        e2e.p02_protect(pdu, pdu[1] & 15, frames.ODOM_AUTH_DATA_IDS)
+        self.rx(frames.ODOM_AUTH_ID, bytes(pdu))
+
+    def beyond_window(self) -> None:
+        can_id, data = self.command()
+        self.rx(can_id, data)
+        self.rx(*self.auth(can_id, data, self.host_fv + 5000))
+
+    def inject(self, roll: int) -> None:
+        """The commands of one tick, by a roll in [0, 10): 8 and 9 (and 4 while nothing is
+        recorded) send none."""
+        if roll < 3:
+            self.genuine()
+        elif roll == 3:
+            self.forged()
+        elif roll == 4 and self.recorded:
+            self.replayed()
+        elif roll == 5:
+            self.unsigned()
+        elif roll == 6:
+            self.orphan()
+        elif roll == 7:
+            self.beyond_window()
+
+    def tick(self, tick: int) -> None:
         if tick == 200:
-            ecu = boot()  # a reboot: RAM lost, the EPOCH cell kept
-        count[0] += 3
-        rx(frames.WHEEL_ENCODERS_ID, frames.pack_wheel_encoders(tick & 15, count[0], count[0]))
-        roll = rng.randrange(10)
-        if roll < 3:  # genuine
-            can_id, data = command()
-            host_fv[0] += 1
-            pair = [(can_id, data), auth(can_id, data, host_fv[0])]
-            recorded.append(pair)
-            for frame in pair:
-                rx(*frame)
-        elif roll == 3:  # forged: right freshness, random authenticator
-            can_id, data = command()
-            rx(can_id, data)
-            rx(*auth(can_id, data, host_fv[0] + 1, rng.getrandbits(32)))
-        elif roll == 4 and recorded:  # a recorded genuine command replayed
-            for can_id, data in rng.choice(recorded):
-                if can_id == frames.ODOM_AUTH_ID:
-                    fields = secoc.unpack_odom_auth(data)
-                    rx(can_id, secoc.pack_odom_auth(counter(can_id), *fields[1:]))
-                else:
-                    rx(can_id, recount(can_id, data))
-        elif roll == 5:  # unsigned (expires), or displaced by a second frame
-            rx(*command())
-            if rng.random() < 0.5:
-                can_id, data = command()
-                rx(can_id, data)
-                rx(*auth(can_id, data, host_fv[0] + 1))
-                host_fv[0] += 1
-        elif roll == 6:  # an orphan ODOM_AUTH, or one naming no secured message
-            frame = bytearray(secoc.pack_odom_auth(counter(frames.ODOM_AUTH_ID), 1, 0, 0))
-            frame[1] = (frame[1] & 0x0F) | (rng.choice((1, 5, 15)) << 4)
-            e2e.p02_protect(frame, frame[1] & 15, frames.ODOM_AUTH_DATA_IDS)
-            rx(frames.ODOM_AUTH_ID, bytes(frame))
-        elif roll == 7:  # beyond the window
-            can_id, data = command()
-            rx(can_id, data)
-            rx(*auth(can_id, data, host_fv[0] + 5000))
-        tx.sent.clear()
+            self.ecu = self.boot()  # a reboot: RAM lost, the EPOCH cell kept
+        self.count += 3
+        self.rx(
+            frames.WHEEL_ENCODERS_ID,
+            frames.pack_wheel_encoders(tick & 15, self.count, self.count),
+        )
+        self.inject(self.rng.randrange(10))
+        self.tx.sent.clear()
+        ecu = self.ecu
         ecu.tick()
-        ask("ecu_tick", int(ecu.state), int(ecu.reason), ecu.errors.bits, ecu.tx_dropped, *tx.sent)
-        for entry in tx.sent:
+        self.ask(
+            "ecu_tick", int(ecu.state), int(ecu.reason), ecu.errors.bits, ecu.tx_dropped,
+            *self.tx.sent,
+        )
+        for entry in self.tx.sent:
             can_id_hex, data_hex = entry.split(":")
             if int(can_id_hex, 16) == frames.ODOM_FRESHNESS_ID:
-                host_fv[0] = secoc.unpack_odom_freshness(bytes.fromhex(data_hex)).fv
-    assert ecu.secoc is not None
-    rx_state = ecu.secoc.receiver
-    ask(
-        "ecu_secoc_counts",
-        rx_state.count_ok,
-        rx_state.count_failed,
-        rx_state.count_freshness,
-        ecu.secoc.orphans,
-        rx_state.epoch,
-        rx_state.last_fv,
-    )
+                self.host_fv = secoc.unpack_odom_freshness(bytes.fromhex(data_hex)).fv
+
+    def run(self, ticks: int) -> None:
+        for tick in range(ticks):
+            self.tick(tick)
+        assert self.ecu.secoc is not None
+        rx_state = self.ecu.secoc.receiver
+        self.ask(
+            "ecu_secoc_counts",
+            rx_state.count_ok,
+            rx_state.count_failed,
+            rx_state.count_freshness,
+            self.ecu.secoc.orphans,
+            rx_state.epoch,
+            rx_state.last_fv,
+        )
 
 
 class _RecordingTx:

@@ -26,6 +26,7 @@ import can
 import pytest
 
 from odocan.firmware import frames as fr
+from odocan.firmware.config import RobotParams
 from odocan.firmware.errors import State
 from odocan.host.cli.app import main
 from odocan.host.testkit import plugin
@@ -33,6 +34,8 @@ from odocan.host.testkit.backends import LockstepBackend, parse_bus_spec
 from odocan.host.testkit.options import RigOptions
 from odocan.host.testkit.rig import make_rig
 from odocan.sim import cboard
+from odocan.sim.board import FirmwareBoard
+from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import INTEGRATORS
 from tests import test_pytest_plugin
 from tests.requires import require_executables
@@ -148,9 +151,9 @@ def test_c_firmware_navigates_byte_identically() -> None:
 
 
 def test_make_board_names_the_firmwares() -> None:
-    assert cboard.board_maker("python") is cboard.FirmwareBoard
+    assert cboard.board_maker("python") is FirmwareBoard
     assert cboard.board_maker("c") is cboard.CFirmwareBoard
-    with pytest.raises(cboard.ConfigurationError, match="unknown firmware 'rust'"):
+    with pytest.raises(ConfigurationError, match="unknown firmware 'rust'"):
         cboard.board_maker("rust")
     assert plugin._FIRMWARES == cboard.FIRMWARES  # the plugin's copy (it loads no sim module)
 
@@ -172,7 +175,7 @@ def test_invalid_params_start_the_c_firmware_in_fault() -> None:
             sent.append((can_id, data))
             return True
 
-    params = cboard.RobotParams(0, 80_000_000, 80_000_000, 300_000_000, 32, 2)
+    params = RobotParams(0, 80_000_000, 80_000_000, 300_000_000, 32, 2)
     ecu = cboard.CEcu(Hal(), params)
     for _ in range(10):
         ecu.tick()
@@ -187,11 +190,15 @@ def test_a_transmit_exception_reaches_the_caller_after_the_tick() -> None:
         def transmit(self, can_id: int, data: bytes) -> bool:
             raise RuntimeError(f"driver gone ({can_id:#x})")
 
-    params = cboard.RobotParams(4096, 80_000_000, 80_000_000, 300_000_000, 32, 2)
+    params = RobotParams(4096, 80_000_000, 80_000_000, 300_000_000, 32, 2)
     ecu = cboard.CEcu(Broken(), params)
-    with pytest.raises(RuntimeError, match="driver gone"):
+
+    def ten_ticks() -> None:
         for _ in range(10):
             ecu.tick()
+
+    with pytest.raises(RuntimeError, match="driver gone"):
+        ten_ticks()
     assert 1 <= ecu.ticks <= 10  # the tick ran to its end, then the error was raised
 
 

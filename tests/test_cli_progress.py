@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import io
+import sys
+import time
 
 import pytest
 
@@ -76,8 +78,8 @@ def test_an_experiment_counts_its_runs_with_an_eta(monkeypatch: pytest.MonkeyPat
         return text
 
     ticks = iter(range(0, 10**9, 10))  # a clock that moves 10 s per reading: past every delay
-    monkeypatch.setattr(progress_module.sys, "stderr", stream)
-    monkeypatch.setattr(progress_module.time, "monotonic", lambda: float(next(ticks)))
+    monkeypatch.setattr(sys, "stderr", stream)
+    monkeypatch.setattr(time, "monotonic", lambda: float(next(ticks)))
     monkeypatch.setattr(Progress, "line", spy)
     assert main(["umbmark", "--runs", "1", "--side", "0.5", "--errors", ""]) in (0, 1)
     assert any(line.startswith("UMBmark: 2 x 1 squares:  50.0%") and "ETA" in line

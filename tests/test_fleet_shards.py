@@ -22,6 +22,7 @@ from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Toleranc
 from odocan.host.judge.reference import Geometry, ReferenceOdometry
 from odocan.host.judge.tracking import ErrorStats, Pose
 from odocan.host.mqtt import fleetrun
+from odocan.host.mqtt.bridge import RobotEndpoint
 from odocan.host.mqtt.broker import LOOPBACK, free_loopback_port
 from odocan.host.mqtt.fleetrun import FLEET_TOLERANCE, failures, judge_robot
 from odocan.host.mqtt.shards import Shard, aggregate, split
@@ -45,8 +46,13 @@ def test_shard_parse_and_its_robots() -> None:
     assert Shard.parse("2/3") == Shard(2, 3)
     assert Shard(2, 3).robots(10) == (3, 3)
     assert Shard(3, 3).robots(10) == (6, 4)
-    for bad in ("3", "1/", "/2", "a/b", "0/2", "3/2", "1/0", "-1/2", "1/2/3"):
-        with pytest.raises(ValueError):
+    not_k_of_n = r"expected K/N \(part K of N"
+    for bad, says in (("3", not_k_of_n), ("1/", not_k_of_n), ("/2", not_k_of_n),
+                      ("a/b", not_k_of_n), ("0/2", r"K must be in \[1, 2\], got 0/2"),
+                      ("3/2", r"K must be in \[1, 2\], got 3/2"),
+                      ("1/0", r"N must be in \[1, \d+\], got 1/0"), ("-1/2", not_k_of_n),
+                      ("1/2/3", not_k_of_n)):
+        with pytest.raises(ValueError, match=says):
             Shard.parse(bad)
 
 
@@ -224,7 +230,7 @@ def test_a_wrong_pose_fails_the_run_and_says_why(
     heading departs, the exit line says FAIL and which threshold."""
     real = fleetrun._endpoints
 
-    def skewed(fleet: Fleet, run: fleetrun.FleetRun) -> list[fleetrun.RobotEndpoint]:
+    def skewed(fleet: Fleet, run: fleetrun.FleetRun) -> list[RobotEndpoint]:
         g = Geometry.of(run.fleet.robot)
         wrong = replace(g, wheelbase_m=g.wheelbase_m * 1.02)
         return [replace(e, geometry=wrong) for e in real(fleet, run)]

@@ -298,5 +298,5 @@ def test_a_later_cause_does_not_hide_a_counter_restart(cause: str) -> None:
     )
     for _ in range(RECOVERY_FRAMES + 1):
         rig.step(5, 7)
-    assert rig.ecu.state is State.OK
-    assert rig.ecu.reason is Reason.NONE
+    assert rig.state() is State.OK
+    assert rig.reason() is Reason.NONE

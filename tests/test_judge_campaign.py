@@ -39,7 +39,7 @@ from hypothesis import HealthCheck, Phase, assume, event, example, given, settin
 from hypothesis import strategies as st
 
 from odocan.firmware.config import ConfigReason, RobotParams, validate
-from odocan.firmware.ecu import OdomEcu
+from odocan.firmware.ecu import RESYNC_FRAMES, OdomEcu
 from odocan.host.io.logs import FrameArrays, parse_candump, read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.sim.board import TICK_S
@@ -47,7 +47,7 @@ from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import get_scenario
 from tests.fault_rig import FaultRig
 from tests.independent_checker import Robot, check
-from tests.synth_log import ENCODER_PERIOD_S, RESYNC_FRAMES, Synth, params_of, synthesize
+from tests.synth_log import ENCODER_PERIOD_S, Synth, params_of, synthesize
 from tests.test_ecu import RecordingHal
 
 MAX_STEPS = 20_000
@@ -321,7 +321,8 @@ def test_counter_restarts_agree_with_the_independent_checker(
         got, expected)
     assert abs(got["max_heading_error_rad"] / HEADING_LSB_RAD - heading_lsb) <= CLOSE_CALL, (
         got, expected)
-    assert expected.passed and analysis.passed, (got, expected)
+    assert expected.passed, (got, expected)
+    assert analysis.passed, (got, expected)
 
 
 # --- a stalled firmware (lockstep, tests/fault_rig.py) -----------------------------------------

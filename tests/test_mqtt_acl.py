@@ -23,6 +23,7 @@ from pathlib import Path
 import can
 import paho.mqtt.client as paho
 import pytest
+from paho.mqtt.enums import CallbackAPIVersion
 
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import topics
@@ -68,7 +69,7 @@ def publish_v5(url: BrokerURL, topic: str, payload: dict[str, object]) -> str:
         reason.append(str(code))
         acked.set()
 
-    mqtt = paho.Client(paho.CallbackAPIVersion.VERSION2, protocol=paho.MQTTv5)
+    mqtt = paho.Client(CallbackAPIVersion.VERSION2, protocol=paho.MQTTv5)
     mqtt.username_pw_set(url.username, url.password)
     mqtt.on_publish = on_publish
     mqtt.connect(url.host, url.port)

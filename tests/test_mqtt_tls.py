@@ -66,7 +66,8 @@ def tls(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TlsBrokers]:
     password_file.write_text(PASSWORD + "\n")
     password_file.chmod(0o600)
     try:
-        yield TlsBrokers(pki, *brokers, password_file)
+        good, expired, wrong_host = brokers
+        yield TlsBrokers(pki, good, expired, wrong_host, password_file)
     finally:
         for broker in brokers:
             broker.stop()
@@ -101,7 +102,8 @@ def command(name: str, duration_s: str = "2") -> list[str]:
 def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
     code = main(argv)
     out, err = capsys.readouterr()
-    assert "Traceback" not in err and "ExceptionGroup" not in err, err
+    assert "Traceback" not in err, err
+    assert "ExceptionGroup" not in err, err
     assert PASSWORD not in out + err
     return code, out, err
 
@@ -241,7 +243,8 @@ def test_a_server_below_tls_1_2_is_refused(tls: TlsBrokers,
             await stop.wait()
 
     loop = asyncio.new_event_loop()
-    stop, ready, port = asyncio.Event(), threading.Event(), []
+    stop, ready = asyncio.Event(), threading.Event()
+    port: list[int] = []
     thread = threading.Thread(target=loop.run_until_complete, args=(serve(ready, port, stop),))
     thread.start()
     try:
@@ -255,7 +258,8 @@ def test_a_server_below_tls_1_2_is_refused(tls: TlsBrokers,
     assert code == 2
     assert handshakes == []  # no TLS 1.1 session was ever made
     line = [line for line in err.splitlines() if line.startswith("error:")]
-    assert len(line) == 1 and ": TLS: " in line[0], err
+    assert len(line) == 1, err
+    assert ": TLS: " in line[0], err
     assert "TLS 1.2 or later" in line[0]
 
 

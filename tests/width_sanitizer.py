@@ -674,7 +674,10 @@ def _secured_rig_drive(ears: _Unpacker) -> None:
         sync()
 
         def goal_y() -> bytes:
-            return fr.pack_nav_goal(counter(fr.NAV_GOAL_ID), fr.NavGoalField.Y, 1_000, scratch)
+            data: bytes = fr.pack_nav_goal(  # fr is the instrumented module: typed Any
+                counter(fr.NAV_GOAL_ID), fr.NavGoalField.Y, 1_000, scratch
+            )
+            return data
 
         signed(fr.NAV_GOAL_ID, goal_y(), forge=1)  # AUTH_FAILED
         rig.send(fr.NAV_GOAL_ID, goal_y())  # unsigned and displaced by the next: AUTH_MISSING
@@ -708,6 +711,20 @@ def _secured_rig_drive(ears: _Unpacker) -> None:
 HEALTH_SCENARIOS = "tests.test_health_firmware"  # stalls, overflows, forgeries, restarts, gaps
 
 
+def _call_each_case(test: Callable[..., None]) -> None:
+    """Call a test function once per case of its ``pytest.mark.parametrize`` (one such mark at
+    most, plain values), or once if it has none."""
+    marks = [m for m in getattr(test, "pytestmark", []) if m.name == "parametrize"]
+    if not marks:
+        test()
+        return
+    assert len(marks) == 1, f"{test.__name__}: one parametrize mark at most"
+    argnames, argvalues = marks[0].args[:2]
+    names = [n.strip() for n in argnames.split(",")] if isinstance(argnames, str) else argnames
+    for values in argvalues:
+        test(**dict(zip(names, values if len(names) > 1 else (values,), strict=True)))
+
+
 def _health_drive() -> None:
     """The firmware-level health scenarios (lost time, FIFO overrun, mailbox overflow, forged and
     implausible steps, counter restarts and their recovery, twist after 16/31/100-period gaps),
@@ -721,13 +738,8 @@ def _health_drive() -> None:
         scenarios = importlib.import_module(HEALTH_SCENARIOS)
         for name in sorted(dir(scenarios)):
             test = getattr(scenarios, name)
-            if not name.startswith("test_") or not callable(test):
-                continue
-            if name == "test_twist_is_right_after_a_gap_of_lost_frames":
-                for lost in (16, 31, 100):
-                    test(lost)
-            else:
-                test()
+            if name.startswith("test_") and callable(test):
+                _call_each_case(test)
         rig = scenarios.TimedRig()
         for _ in range(3):
             rig.step()
