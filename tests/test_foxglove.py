@@ -276,3 +276,60 @@ def test_realtime_waits_for_each_frames_simulated_time(monkeypatch: pytest.Monke
             clock[0] += work_s
     # 0.25 s on, less 0.1 s of work; the third frame is already late; the fourth 0.45 s early
     assert sleeps == pytest.approx([0.15, 0.45])
+
+
+def test_odocan_monitor_foxglove_serves_what_it_hears(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``odocan monitor --foxglove``: the monitor's own model, published frame by frame to a
+    client, from a live bus fed by a lockstep drive."""
+    import can
+
+    from odocan.host.cli.subparsers import monitor as monitor_cmd
+
+    made: list[FoxgloveLive] = []
+    real = monitor_cmd._foxglove
+
+    def keep(*args: Any) -> FoxgloveLive | None:
+        live = real(*args)
+        if live is not None:
+            made.append(live)
+        return live
+
+    monkeypatch.setattr(monitor_cmd, "_foxglove", keep)
+    port, channel = free_port(), f"fox-monitor-{port_suffix()}"
+    codes: list[int] = []
+    argv = ["monitor", "-i", "odocan", "-c", channel, "--duration", "8", "--json",
+            "--foxglove", str(port)]
+    monitor = threading.Thread(target=lambda: codes.append(main(argv)))
+    monitor.start()
+    result: dict[str, Any] = {}
+    client = threading.Thread(target=lambda: result.update(zip(("received", "channels"),
+                                                                collect(port, idle_s=3.0))))
+    client.start()
+    for _ in range(200):  # the command builds its server first
+        if made:
+            break
+        threading.Event().wait(0.05)
+    assert made and made[0].wait_for_client(30)
+
+    class Forward(can.Listener):
+        def __init__(self, bus: can.BusABC) -> None:
+            self.bus = bus
+
+        def on_message_received(self, msg: can.Message) -> None:
+            self.bus.send(msg)
+
+    with can.Bus(interface="odocan", channel=channel) as bus:
+        with LockstepRig(RigConfig(PMIR, "exact", "random", 2), [Forward(bus)]) as rig:
+            rig.run(2.0)
+        client.join(30)
+    monitor.join(30)
+    assert codes == [0]
+    poses = result["received"]["/pose/onboard"]
+    assert len(poses) >= 90  # 50 Hz over 2 s of drive, every one published
+    assert "/can/WHEEL_ENCODERS" in result["received"]
+
+
+def port_suffix() -> str:
+    import os
+
+    return f"{os.getpid()}-{threading.get_ident()}"

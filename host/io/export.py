@@ -76,6 +76,9 @@ def write_exports(
             raise OutputError(f"--mcap {args.mcap}: {str(exc).splitlines()[0]}") from None
 
 
+FOXGLOVE_PORT = 8765  # Foxglove's usual WebSocket port: --foxglove's default
+
+
 # --- output paths --------------------------------------------------------------------------
 
 

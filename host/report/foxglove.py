@@ -37,6 +37,7 @@ from cantools.database.can import Database
 from foxglove.websocket import ChannelView, Client, ServerListener
 
 from odocan.host.io.export import (
+    FOXGLOVE_PORT,
     POSE_TOPICS,
     TIME_SCHEMA,
     can_frame,
@@ -54,7 +55,7 @@ from odocan.host.protocol.decode import frame_key
 from odocan.sim.exceptions import BusSetupError, ConfigurationError
 from odocan.sim.robot import RobotProfile
 
-DEFAULT_PORT = 8765
+DEFAULT_PORT = FOXGLOVE_PORT
 HOST = "127.0.0.1"
 SETTLE_S = 0.3  # a client's subscriptions are complete after this long without a new one
 BACKLOG = 1 << 17  # messages buffered per client (a 61 s run at full speed is ~6e4)

@@ -37,7 +37,7 @@ import termios
 import time
 import tty
 from collections import deque
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -584,9 +584,12 @@ class MonitorApp:
     """The receive loop behind the screen: feed the model, the trace and the log; read keys."""
 
     def __init__(self, bus: can.BusABC, model: BusMonitor, trace: Trace, view: View,
-                 recorder: Recorder | None = None) -> None:
+                 recorder: Recorder | None = None,
+                 publish: Callable[[can.Message], None] | None = None) -> None:
+        """``publish``: called with every frame after the model took it (live Foxglove)."""
         self.bus, self.model, self.trace, self.view = bus, model, trace, view
         self.recorder = recorder
+        self.publish = publish
         self.quit = False
 
     def receive(self, deadline_s: float, redraw: Any | None = None) -> None:
@@ -612,6 +615,8 @@ class MonitorApp:
             self.recorder.record(msg)
         self.model.feed(msg)
         self.trace.feed(msg)
+        if self.publish is not None:
+            self.publish(msg)
 
     def on_keys(self, keys: str) -> None:
         """space/p: pause; f: edit the filter (Enter applies, Esc cancels); q: quit."""

@@ -24,15 +24,21 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import aiomqtt
 from rich.console import Console
 from rich.live import Live
 
-from odocan.host.cli.options import add_duration_argument, add_robot_argument, check_log_path
+from odocan.host.cli.options import (
+    add_duration_argument,
+    add_robot_argument,
+    check_log_path,
+    int_in,
+)
 from odocan.host.cli.subparsers.analyze import load_dbc
 from odocan.host.io.buses import add_bus_arguments, open_bus
+from odocan.host.io.export import FOXGLOVE_PORT
 from odocan.host.judge.monitor import BusMonitor, fleet_snapshot, render_fleet, to_json
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, connect_failure, tls_diagnosis
 from odocan.host.mqtt.fleetview import RobotState, fleet_states
@@ -41,6 +47,9 @@ from odocan.host.report.tui import FrameFilter, MonitorApp, Recorder, Trace, Vie
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 from odocan.sim.rig import INTEGRATORS
+
+if TYPE_CHECKING:
+    from odocan.host.report.foxglove import FoxgloveLive
 
 DEFAULT_BROKER = "mqtt://127.0.0.1:1883"
 REFRESH_S = 0.25  # screen redraws
@@ -69,6 +78,11 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "--json",
         action="store_true",
         help="no live view: print one JSON object of the model at the end",
+    )
+    parser.add_argument(
+        "--foxglove", nargs="?", type=int_in(1, 65535), const=FOXGLOVE_PORT, metavar="PORT",
+        help=f"also serve what is heard live to Foxglove on 127.0.0.1:PORT (default "
+        f"{FOXGLOVE_PORT}): poses, transforms, errors, decoded signals (default: off)",
     )
     parser.add_argument(
         "--filter",
@@ -115,8 +129,9 @@ def _do_monitor(args: argparse.Namespace) -> int:
         return _watch_fleet(monitor_broker_url(args), args)
     if args.ca or args.cert or args.key or args.password_file:
         raise ConfigurationError("--ca/--cert/--key/--password-file go with --broker URL")
+    profile = robot.load(args.robot)
     model = BusMonitor(
-        robot.load(args.robot),
+        profile,
         args.integrator,
         load_dbc(args.dbc) if args.dbc is not None else None,
         bitrate=args.bitrate,  # -b: the bus load as a fraction of the wire
@@ -126,10 +141,12 @@ def _do_monitor(args: argparse.Namespace) -> int:
     recorder = Recorder(args.log) if args.log is not None else None
     view = View(_source(args), interface=args.interface, log_path=args.log,
                 started_s=time.monotonic())
+    live = _foxglove(args, profile, model)
     try:
         bus = open_bus(args)
         try:
-            app = MonitorApp(bus, model, trace, view, recorder)
+            app = MonitorApp(bus, model, trace, view, recorder,
+                             None if live is None else live.publish)
             if args.json:
                 app.receive(_deadline(args.duration))
             else:
@@ -139,9 +156,26 @@ def _do_monitor(args: argparse.Namespace) -> int:
     finally:
         if recorder is not None:
             recorder.close()
+        if live is not None:
+            live.close()
     if args.json:
         print(to_json(model.snapshot()))
     return 0
+
+
+def _foxglove(
+    args: argparse.Namespace, profile: robot.RobotProfile, model: BusMonitor
+) -> FoxgloveLive | None:
+    """``--foxglove``: a live Foxglove server fed by this monitor's own model (its line on
+    stderr says where to connect); None without the option."""
+    if args.foxglove is None:
+        return None
+    from odocan.host.report.foxglove import FoxgloveLive
+
+    live = FoxgloveLive(profile, port=args.foxglove, monitor=model)
+    print(f"foxglove: serving on {live.url}: in Foxglove, Open connection > Foxglove WebSocket "
+          f"> {live.url}", file=sys.stderr, flush=True)
+    return live
 
 
 def _source(args: argparse.Namespace) -> str:
