@@ -302,8 +302,11 @@ def test_odocan_monitor_foxglove_serves_what_it_hears(monkeypatch: pytest.Monkey
     monitor = threading.Thread(target=lambda: codes.append(main(argv)))
     monitor.start()
     result: dict[str, Any] = {}
-    client = threading.Thread(target=lambda: result.update(zip(("received", "channels"),
-                                                                collect(port, idle_s=3.0))))
+
+    def listen() -> None:
+        result["received"], result["channels"] = collect(port, idle_s=3.0)
+
+    client = threading.Thread(target=listen)
     client.start()
     for _ in range(200):  # the command builds its server first
         if made:
