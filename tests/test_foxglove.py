@@ -312,7 +312,8 @@ def test_odocan_monitor_foxglove_serves_what_it_hears(monkeypatch: pytest.Monkey
         if made:
             break
         threading.Event().wait(0.05)
-    assert made and made[0].wait_for_client(30)
+    assert made
+    assert made[0].wait_for_client(30)
 
     class Forward(can.Listener):
         def __init__(self, bus: can.BusABC) -> None:
