@@ -359,14 +359,15 @@ def test_shared_identifier_is_refused() -> None:
 
 
 def test_odocan_dbc_utilization_by_hand() -> None:
-    """12 frames of 8 bytes, 135 bits each: 1 at 10 ms, 4 at 20 ms, 3 at 100 ms, and 4 event
-    messages taken as sporadic at the DBC's shortest cycle (10 ms)."""
+    """14 frames of 8 bytes, 135 bits each: 1 at 10 ms, 4 at 20 ms, 3 at 100 ms, 1 at 1000 ms
+    (ODOM_FRESHNESS), and 5 event messages taken as sporadic at the DBC's shortest cycle."""
     messages = sched.messages_from_dbc(database())
     load = sched.analyse_bus(messages, 500_000)
     frame_ms = 135 * 2e-3
-    assert load.utilization == pytest.approx(frame_ms * (5 / 10 + 4 / 20 + 3 / 100), rel=1e-12)
+    assert load.utilization == pytest.approx(
+        frame_ms * (6 / 10 + 4 / 20 + 3 / 100 + 1 / 1000), rel=1e-12)
     sporadic = [m.name for m in messages if not m.cyclic]
-    assert sporadic == ["NAV_GOAL", "ODOM_SET_POSE", "ODOM_CONFIG", "ODOM_ACK"]
+    assert sporadic == ["NAV_GOAL", "ODOM_SET_POSE", "ODOM_CONFIG", "ODOM_ACK", "ODOM_AUTH"]
     assert all("shortest cycle" in m.assumption for m in messages if not m.cyclic)
     wheel = load.responses[0]
     assert wheel.flow.name == "WHEEL_ENCODERS"

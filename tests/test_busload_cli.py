@@ -19,28 +19,31 @@ EXPECTED_500K = """\
 odocan busload: dbc/odocan.dbc at 500000 bit/s (Davis et al. 2007 analysis)
 times in ms: T period, D deadline, C frame, J queuing jitter, B blocking, R worst response; * sporadic
 
-    ID   message           sender          DLC   bits       T       D       C       J       B       R    slack
- ─────────────────────────────────────────────────────────────────────────────────────────────────────────────
- 0x100   WHEEL_ENCODERS    MOTOR_CTRL        8    135    10.0    10.0   0.270   0.000   0.270   0.540    9.460
- 0x110   MOTOR_CMD         ODOM_MCU,HOST     8    135    20.0    20.0   0.270   0.000   0.270   0.810   19.190
- 0x200   ODOM_POSE_X       ODOM_MCU          8    135    20.0    20.0   0.270   0.000   0.270   1.080   18.920
- 0x201   ODOM_POSE_Y       ODOM_MCU          8    135    20.0    20.0   0.270   0.000   0.270   1.350   18.650
- 0x202   ODOM_TWIST        ODOM_MCU          8    135    20.0    20.0   0.270   0.000   0.270   1.620   18.380
- 0x280   NAV_GOAL *        HOST              8    135    10.0    10.0   0.270   0.000   0.270   1.890    8.110
- 0x281   NAV_STATUS        ODOM_MCU          8    135   100.0   100.0   0.270   0.000   0.270   2.160   97.840
- 0x300   ODOM_SET_POSE *   HOST              8    135    10.0    10.0   0.270   0.000   0.270   2.430    7.570
- 0x301   ODOM_CONFIG *     HOST              8    135    10.0    10.0   0.270   0.000   0.270   2.700    7.300
- 0x302   ODOM_ACK *        ODOM_MCU          8    135    10.0    10.0   0.270   0.000   0.270   2.970    7.030
- 0x380   ODOM_STATUS       ODOM_MCU          8    135   100.0   100.0   0.270   0.000   0.270   3.240   96.760
- 0x700   SIM_TRUTH         SIM               8    135   100.0   100.0   0.270   0.000   0.000   3.240   96.760
+    ID   message           sender          DLC   bits        T        D       C       J       B       R     slack
+ ────────────────────────────────────────────────────────────────────────────────────────────────────────────────
+ 0x100   WHEEL_ENCODERS    MOTOR_CTRL        8    135     10.0     10.0   0.270   0.000   0.270   0.540     9.460
+ 0x110   MOTOR_CMD         ODOM_MCU,HOST     8    135     20.0     20.0   0.270   0.000   0.270   0.810    19.190
+ 0x200   ODOM_POSE_X       ODOM_MCU          8    135     20.0     20.0   0.270   0.000   0.270   1.080    18.920
+ 0x201   ODOM_POSE_Y       ODOM_MCU          8    135     20.0     20.0   0.270   0.000   0.270   1.350    18.650
+ 0x202   ODOM_TWIST        ODOM_MCU          8    135     20.0     20.0   0.270   0.000   0.270   1.620    18.380
+ 0x280   NAV_GOAL *        HOST              8    135     10.0     10.0   0.270   0.000   0.270   1.890     8.110
+ 0x281   NAV_STATUS        ODOM_MCU          8    135    100.0    100.0   0.270   0.000   0.270   2.160    97.840
+ 0x300   ODOM_SET_POSE *   HOST              8    135     10.0     10.0   0.270   0.000   0.270   2.430     7.570
+ 0x301   ODOM_CONFIG *     HOST              8    135     10.0     10.0   0.270   0.000   0.270   2.700     7.300
+ 0x302   ODOM_ACK *        ODOM_MCU          8    135     10.0     10.0   0.270   0.000   0.270   2.970     7.030
+ 0x303   ODOM_AUTH *       HOST              8    135     10.0     10.0   0.270   0.000   0.270   3.240     6.760
+ 0x304   ODOM_FRESHNESS    ODOM_MCU          8    135   1000.0   1000.0   0.270   0.000   0.270   3.510   996.490
+ 0x380   ODOM_STATUS       ODOM_MCU          8    135    100.0    100.0   0.270   0.000   0.270   3.780    96.220
+ 0x700   SIM_TRUTH         SIM               8    135    100.0    100.0   0.270   0.000   0.000   3.780    96.220
 
-utilization 19.7% (cyclic messages 8.9%)
+utilization 22.4% (cyclic messages 8.9%)
 sender ticks: HOST 20 ms, MOTOR_CTRL 10 ms, ODOM_MCU 20 ms, SIM 100 ms; queue jitter 0 ms
 - NAV_GOAL: no cycle time: sporadic, min inter-arrival = the DBC's shortest cycle time (10 ms)
 - ODOM_SET_POSE: no cycle time: sporadic, min inter-arrival = the DBC's shortest cycle time (10 ms)
 - ODOM_CONFIG: no cycle time: sporadic, min inter-arrival = the DBC's shortest cycle time (10 ms)
 - ODOM_ACK: no cycle time: sporadic, min inter-arrival = the DBC's shortest cycle time (10 ms)
-OK: every message meets its deadline; least slack 7.030 ms (ODOM_ACK)
+- ODOM_AUTH: no cycle time: sporadic, min inter-arrival = the DBC's shortest cycle time (10 ms)
+OK: every message meets its deadline; least slack 6.760 ms (ODOM_AUTH)
 """  # noqa: E501
 
 # Three nodes; FAST is cyclic, SLOW carries a deadline tighter than its cycle, EVENT has a
@@ -107,9 +110,12 @@ def test_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert report["schedulable"] is True
     assert report["bitrate"] == 500_000
     assert report["bit_time_us"] == 2.0
-    assert report["utilization"] == pytest.approx(0.27 * (5 / 10 + 4 / 20 + 3 / 100))
-    assert report["utilization_cyclic"] == pytest.approx(0.27 * (1 / 10 + 4 / 20 + 3 / 100))
-    assert (report["worst_slack_message"], report["worst_slack_ms"]) == ("ODOM_ACK", 7.03)
+    # 14 frames of 135 bits (0.27 ms): 6 at 10 ms (5 sporadic), 4 at 20, 3 at 100, 1 at 1000 ms
+    assert report["utilization"] == pytest.approx(0.27 * (6 / 10 + 4 / 20 + 3 / 100 + 1 / 1000))
+    assert report["utilization_cyclic"] == pytest.approx(
+        0.27 * (1 / 10 + 4 / 20 + 3 / 100 + 1 / 1000))
+    # ODOM_AUTH (0x303) is the lowest-priority sporadic message: 12 frames ahead of and with it
+    assert (report["worst_slack_message"], report["worst_slack_ms"]) == ("ODOM_AUTH", 6.76)
     wheel = report["messages"][0]
     assert {k: wheel[k] for k in ("name", "id", "bits", "c_ms", "j_ms", "b_ms", "r_ms")} == {
         "name": "WHEEL_ENCODERS", "id": 0x100, "bits": 135,
@@ -129,13 +135,18 @@ def test_what_if_added_message_makes_another_miss(
     argv = ["busload", "-b", "250000", "--add", "HOG:0x050:8:1.2", "--report", str(path)]
     code, out, _ = run_cli(capsys, *argv)
     assert code == 1
-    assert out.splitlines()[-1] == "MISS: can miss the deadline: ODOM_ACK"
+    assert out.splitlines()[-1] == "MISS: can miss the deadline: ODOM_ACK, ODOM_AUTH"
     report = json.loads(path.read_text())
     assert report["added"] == ["HOG:0x050:8:1.2"]
     assert report["schedulable"] is False
     first, ack = report["messages"][0], report["messages"][10]
     assert (first["name"], first["r_ms"], first["slack_ms"]) == ("HOG", 1.08, 0.12)
     assert (ack["name"], ack["r_ms"], ack["slack_ms"]) == ("ODOM_ACK", 14.58, -4.58)
+    auth = report["messages"][11]  # below ODOM_ACK: at least its own frame later, and late too
+    assert auth["name"] == "ODOM_AUTH"
+    assert auth["r_ms"] >= ack["r_ms"] + auth["c_ms"]
+    assert auth["slack_ms"] == pytest.approx(auth["deadline_ms"] - auth["r_ms"])
+    assert auth["slack_ms"] < 0
 
 
 def test_125k_misses_with_default_sporadic_assumption_and_meets_with_100ms(
@@ -143,7 +154,7 @@ def test_125k_misses_with_default_sporadic_assumption_and_meets_with_100ms(
 ) -> None:
     code, out, _ = run_cli(capsys, "busload", "-b", "125000")
     assert code == 1
-    assert "MISS: can miss the deadline: ODOM_CONFIG, ODOM_ACK" in out
+    assert "MISS: can miss the deadline: ODOM_CONFIG, ODOM_ACK, ODOM_AUTH" in out
     code, out, _ = run_cli(capsys, "busload", "-b", "125000", "--sporadic-ms", "100")
     assert code == 0
     assert "least slack 7.840 ms (WHEEL_ENCODERS)" in out
@@ -157,7 +168,7 @@ def test_tick_option_sets_the_jitter(tmp_path: Path, capsys: pytest.CaptureFixtu
     messages = {m["name"]: m for m in json.loads(path.read_text())["messages"]}
     assert messages["SIM_TRUTH"]["j_ms"] == 20.5
     assert messages["WHEEL_ENCODERS"]["j_ms"] == 0.5
-    assert messages["SIM_TRUTH"]["r_ms"] == pytest.approx(20.5 + 3.24)
+    assert messages["SIM_TRUTH"]["r_ms"] == pytest.approx(20.5 + 14 * 0.27)  # all 14 frames
 
 
 def test_another_dbc(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

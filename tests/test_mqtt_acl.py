@@ -1,4 +1,4 @@
-"""Least privilege with mosquitto ACLs: the roles of the README (``ROLES_ACL``) against a real
+"""Least privilege with mosquitto ACLs: the roles of docs/mqtt.md (``ROLES_ACL``) against a real
 broker, and the CAN side of each refusal.
 
 Each robot's bridge logs in as its robot name and may publish only its own telemetry and
@@ -34,7 +34,7 @@ from odocan.sim.exceptions import ConfigurationError
 from tests.conftest_mqtt import Mosquitto, client
 from tests.requires import require_executables
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+README = Path(__file__).resolve().parents[1] / "docs" / "mqtt.md"  # its security section
 USERS = {"robot001": "pw-r1", "robot002": "pw-r2", "operator": "pw-op", "viewer": "pw-view"}
 GEOMETRY = Geometry.of(robot.load("pmir"))
 SET_POSE = {"x_m": 1.0, "y_m": 2.0, "heading_rad": 0.5}

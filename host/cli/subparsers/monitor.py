@@ -40,7 +40,13 @@ from odocan.host.cli.subparsers.analyze import load_dbc
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.export import FOXGLOVE_PORT
 from odocan.host.judge.monitor import BusMonitor, fleet_snapshot, render_fleet, to_json
-from odocan.host.mqtt.broker import BrokerError, BrokerURL, connect_failure, tls_diagnosis
+from odocan.host.mqtt.broker import (
+    BrokerError,
+    BrokerURL,
+    connect_failure,
+    first_error,
+    tls_diagnosis,
+)
 from odocan.host.mqtt.fleetview import RobotState, fleet_states
 from odocan.host.mqtt.options import add_broker_credentials, monitor_broker_url
 from odocan.host.report.tui import FrameFilter, MonitorApp, Recorder, Trace, View, run_screen
@@ -200,6 +206,8 @@ def _watch_fleet(url: BrokerURL, args: argparse.Namespace) -> int:
                 asyncio.run(watch.run(lambda: live.update(watch.render(), refresh=True)))
     except KeyboardInterrupt:
         pass
+    except BaseExceptionGroup as group:  # the watch's TaskGroup: its one-line error, not a tree
+        raise first_error(group) from None
     if not watch.connected_once:
         raise BrokerUnreachable(f"cannot reach the MQTT broker {url}: {watch.last_error}")
     if args.json:
