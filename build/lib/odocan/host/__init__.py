@@ -1,1 +1,0 @@
-"""odocan host: the tools a person runs (CLI, decoding, float64 reference, reports, MQTT)."""

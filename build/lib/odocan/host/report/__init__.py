@@ -1,1 +1,0 @@
-"""What a person reads: summary tables, plots, JSON reports."""

@@ -1,1 +1,0 @@
-"""odocan sim: the hardware around the firmware (motors, encoders, ground truth, clocks, buses)."""
