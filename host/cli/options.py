@@ -79,6 +79,24 @@ def add_robot_argument(parser: argparse.ArgumentParser, *, role: str = "profile 
     )
 
 
+def add_firmware_arguments(parser: argparse.ArgumentParser) -> None:
+    """The board's firmware: ``--robot``, ``--integrator`` and ``--firmware python|c``
+    (``odocan run`` and ``odocan firmware``)."""
+    from odocan.sim.cboard import FIRMWARES
+    from odocan.sim.rig import INTEGRATORS
+
+    add_robot_argument(parser)
+    parser.add_argument(
+        "--integrator", choices=INTEGRATORS, default="exact",
+        help="on-board integrator (default: exact)",
+    )
+    parser.add_argument(
+        "--firmware", choices=FIRMWARES, default="python",
+        help="the firmware on the board: python (firmware/) or c (firmware/c, built with make "
+        "on first use) (default: python)",
+    )
+
+
 def add_duration_argument(parser: argparse.ArgumentParser) -> None:
     """``--duration S`` for real-time nodes: wall-clock seconds (default: until Ctrl-C or
     SIGTERM)."""

@@ -122,8 +122,9 @@ def health_line(health: dict[str, Any] | None) -> Text:
     return Text.assemble(("verdict ", "bold"), (state, colour), why + age + last)
 
 
-def pose_table(snapshot: dict[str, Any]) -> Table:
-    """On-board, reference and truth poses; on-board minus each (latest and max)."""
+def pose_table(snapshot: dict[str, Any], *, decimals: int = 4) -> Table:
+    """On-board, reference and truth poses (headings in (-pi, pi], as the model gives them);
+    on-board minus each in mm and mrad with ``decimals`` places (latest and max)."""
     table = compact_table("pose", "x m", "y m", "hdg rad", "Δ mm", "Δ mrad", "max mm", "max mrad")
     errors = snapshot["error"]
     rows = (("on-board", snapshot["pose"], None),
@@ -131,12 +132,10 @@ def pose_table(snapshot: dict[str, Any]) -> Table:
             ("truth", snapshot["truth"], errors["pose_vs_truth"]))
     for label, pose, error in rows:
         pose, error = pose or {}, error or {}
-        table.add_row(
-            label, num(pose.get("x_m"), ".4f"), num(pose.get("y_m"), ".4f"),
-            num(pose.get("heading_rad"), ".4f"), scaled(error.get("dpos_m")),
-            scaled(error.get("dheading_rad")), scaled(error.get("max_dpos_m")),
-            scaled(error.get("max_dheading_rad")),
-        )
+        milli = [scaled(error.get(key), decimals)
+                 for key in ("dpos_m", "dheading_rad", "max_dpos_m", "max_dheading_rad")]
+        table.add_row(label, num(pose.get("x_m"), ".4f"), num(pose.get("y_m"), ".4f"),
+                      num(pose.get("heading_rad"), ".4f"), *milli)
     return table
 
 
@@ -164,9 +163,9 @@ def num(value: Any, spec: str) -> str:
     return format(value, spec)
 
 
-def scaled(value: float | None) -> str:
+def scaled(value: float | None, decimals: int = 4) -> str:
     """Metres as mm, radians as mrad."""
-    return "-" if value is None else f"{value * 1e3:.4f}"
+    return "-" if value is None else f"{value * 1e3:.{decimals}f}"
 
 
 # --- the MQTT fleet -------------------------------------------------------------------------

@@ -29,7 +29,6 @@ whether or not it is shown), not by the model: ``PageRates``.
 
 from __future__ import annotations
 
-import math
 import os
 import select
 import sys
@@ -60,6 +59,7 @@ from odocan.host.report.live import (
     STALE_S,
     compact_table,
     num,
+    pose_table,
     unknown_line,
     values_text,
 )
@@ -352,35 +352,10 @@ def firmware_line(snapshot: dict[str, Any], status_age_s: float | None) -> Text:
 
 
 def _pose_rows(snapshot: dict[str, Any]) -> Table:
-    """On-board, reference and truth (4 rows with the header, 80 columns)."""
-    table = compact_table("pose", "x m", "y m", "hdg rad", "Δ mm", "Δ mrad", "max mm",
-                          "max mrad")
+    """On-board, reference and truth (4 rows with the header, 80 columns: 3 decimals)."""
+    table = pose_table(snapshot, decimals=3)
     table.box, table.show_edge = None, False
-    errors = snapshot["error"]
-    rows = (("on-board", snapshot["pose"], None),
-            ("reference", snapshot["reference"], errors["pose_vs_reference"]),
-            ("truth", snapshot["truth"], errors["pose_vs_truth"]))
-    for label, pose, error in rows:
-        pose, error = pose or {}, error or {}
-        table.add_row(
-            label, num(pose.get("x_m"), ".4f"), num(pose.get("y_m"), ".4f"),
-            num(_wrapped(pose.get("heading_rad")), ".4f"), _mm(error.get("dpos_m")),
-            _mm(error.get("dheading_rad")), _mm(error.get("max_dpos_m")),
-            _mm(error.get("max_dheading_rad")),
-        )
     return table
-
-
-def _wrapped(heading_rad: float | None) -> float | None:
-    """A heading in (-π, π] (the truth comes in [0, 2π), the on-board pose in (-π, π])."""
-    if heading_rad is None or not math.isfinite(heading_rad):
-        return heading_rad
-    return math.pi - math.fmod(math.pi - heading_rad, math.tau) % math.tau
-
-
-def _mm(value: float | None) -> str:
-    """Metres as mm (radians as mrad), 3 decimals: fits the 80-column pose rows."""
-    return "-" if value is None else f"{value * 1e3:.3f}"
 
 
 def alert_line(snapshot: dict[str, Any], view: View) -> Text:

@@ -14,12 +14,16 @@ from __future__ import annotations
 import argparse
 import sys
 
-from odocan.host.cli.options import add_duration_argument, add_robot_argument, check_duration
+from odocan.host.cli.options import (
+    add_duration_argument,
+    add_firmware_arguments,
+    check_duration,
+)
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
 from odocan.sim import robot
-from odocan.sim.cboard import FIRMWARES, board_maker
+from odocan.sim.cboard import board_maker
 from odocan.sim.realtime import PeriodicLoop, accepted_ids, stop_on_signals
-from odocan.sim.rig import INTEGRATORS, firmware_params
+from odocan.sim.rig import firmware_params
 
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -30,19 +34,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         description="The odometry ECU as a real-time CAN node: integrates WHEEL_ENCODERS, sends "
         "ODOM_POSE_X/Y and ODOM_TWIST every 20 ms and ODOM_STATUS every 100 ms.",
     )
-    add_robot_argument(parser)
-    parser.add_argument(
-        "--integrator",
-        choices=INTEGRATORS,
-        default="exact",
-        help="on-board integrator (default: exact)",
-    )
-    parser.add_argument(
-        "--firmware",
-        choices=FIRMWARES,
-        default="python",
-        help="python (firmware/) or c (firmware/c, built with make on first use) (default: python)",
-    )
+    add_firmware_arguments(parser)
     add_duration_argument(parser)
     add_bus_arguments(parser)
     add_fault_argument(parser)

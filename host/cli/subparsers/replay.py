@@ -1,34 +1,12 @@
-"""``odocan replay LOG``: re-run a recorded drive against the current firmware build (the engine
-is ``host.judge.replay``; this module is its command line and the real-time player).
+"""``odocan replay LOG``: re-run a recorded drive against the current firmware build.
 
-**Lockstep** (the default). The log's WHEEL_ENCODERS frames that pass the host's E2E check
-(``host.e2e.check_frames``) are fed, byte for byte, to a ``sim.board.FirmwareBoard`` on python-can
-``virtual`` buses, one firmware tick per 10 ms encoder period: the frames' ticks come from the
-sender's sequence (the E2E COUNTER unwrapped, widened by 16 where the timestamps say so, as
-``host.analysis`` does), so a gap in the log is a run of ticks without a frame, exactly as the
-firmware would have lived it (its E2E window widens, its watchdog may fire). Gaps longer than
-``MAX_GAP_TICKS`` are shortened to it. The firmware's clock is the first encoder frame's
-timestamp plus 10 ms per tick; the log's own SIM_TRUTH frames are put back on the bus where the
-log had them. Everything on the replayed bus is analysed as ``odocan run`` does
-(``host.analysis.analyze``, ``host.summary.finish``: same report keys, ``--report``, ``--plot``,
-``--tolerance``, summary, exit 0/1/2), plus a ``replay`` section comparing the replayed on-board
-poses with the ones in the log at the same encoder frames (identical for the same firmware).
-``--log OUT`` writes the replayed bus. The integrator defaults to the one the log's ODOM_STATUS
-reports (else exact); Ctrl-C stops early and checks what ran.
-
-**Verdict.** PASS needs both: the replayed firmware within ``--tolerance`` of its float64
-reference (as ``odocan run``), and within ``--tolerance`` of the firmware that recorded the log
-(the logged on-board poses at the same encoder frames; positions up to the log's first gap of the
-encoder sequence, since across a gap the recording firmware may have had frames the log lacks,
-headings everywhere, since they are exact across gaps). When the replay departs, the cause is
-looked for by name (``diagnose``): the integrator the log's ODOM_STATUS reports against the one
-replayed, and which robot profile (the one given and every shipped one) the logged poses fit
-(``analyze`` of the log itself, no replay: the profile whose float64 odometry of the logged
-counts the logged poses follow within tolerance).
+**Lockstep** (the default) is the engine of ``host.judge.replay`` (its docstring says how the log's
+frames are fed, tick by tick, and what PASS needs); this module is its command line: the options,
+the summary, ``--report``/``--plot``/``--junit``, and the verdict's reasons.
 
 **Real time** (``--realtime -i ... -c ...``): play the log's frames (``--only`` some messages)
 onto a live bus with their original timing relative to the first frame, ``--speed`` times
-faster; error frames are not sent. Ctrl-C stops cleanly (exit 0).
+faster (``host.io.player``); error frames are not sent. Ctrl-C stops cleanly (exit 0).
 """
 
 from __future__ import annotations

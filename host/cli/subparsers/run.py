@@ -34,7 +34,7 @@ from odocan.host.cli.inputs import explained, require_frames
 from odocan.host.cli.options import (
     SIM_DURATION_MAX_S,
     SIM_DURATION_MIN_S,
-    add_robot_argument,
+    add_firmware_arguments,
     add_seed_argument,
     check_log_path,
     float_in,
@@ -64,12 +64,12 @@ from odocan.host.report.summary import (
 )
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
-from odocan.sim.cboard import FIRMWARES, board_maker
+from odocan.sim.cboard import board_maker
 from odocan.sim.contract import database
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultSpec
 from odocan.sim.realtime import StopRequest, stop_on_signals
-from odocan.sim.rig import INTEGRATORS, TRANSPORTS, LockstepRig, RigConfig
+from odocan.sim.rig import TRANSPORTS, LockstepRig, RigConfig
 from odocan.sim.scenarios import SCENARIOS
 
 PROGRESS_EVERY_TICKS = 100  # one simulated second
@@ -93,20 +93,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     parser.add_argument(
         "--scenario", choices=SCENARIOS, default="random", help="driving scenario (default: random)"
     )
-    add_robot_argument(parser)
-    parser.add_argument(
-        "--integrator",
-        choices=INTEGRATORS,
-        default="exact",
-        help="on-board integrator (default: exact)",
-    )
-    parser.add_argument(
-        "--firmware",
-        choices=FIRMWARES,
-        default="python",
-        help="the firmware on the board: python (firmware/) or c (firmware/c, built with make "
-        "on first use) (default: python)",
-    )
+    add_firmware_arguments(parser)
     parser.add_argument(
         "--duration",
         type=float_in(SIM_DURATION_MIN_S, SIM_DURATION_MAX_S),
