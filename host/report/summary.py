@@ -184,7 +184,7 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
         ("time", _time_text(report)),
     ]
     inputs = report.get("inputs") or {}
-    if inputs.get("errors") is not None or inputs.get("faults") is not None:  # None: a log's
+    if inputs.get("errors") or inputs.get("faults"):  # what the run injected (a log: unknown)
         facts.append(("injected", f"errors {inputs.get('errors') or 'none'}, "
                                   f"faults {inputs.get('faults') or 'none'}"))
     if truth.get("distance_travelled_m") is not None:
