@@ -25,7 +25,7 @@ import aiomqtt
 import pytest
 
 from odocan.host.mqtt.broker import LOOPBACK, BrokerURL, EmbeddedBroker, free_loopback_port
-from odocan.host.mqtt.options import LIBRARY_LOGGERS
+from odocan.host.mqtt.options import LIBRARY_LOGGERS, MQTT_LOGGERS
 from tests.requires import require_executables
 
 MOSQUITTO = shutil.which("mosquitto") or (
@@ -132,7 +132,7 @@ def restore_logging() -> Iterator[None]:
     """The CLI runs here (``configure_logging``, with ``--debug`` too) set the levels and
     handlers of odocan's and the libraries' loggers: put them back, so later tests' stderr
     holds no lines of ours."""
-    loggers = [logging.getLogger(name) for name in ("odocan", *LIBRARY_LOGGERS)]
+    loggers = [logging.getLogger(name) for name in ("odocan", *MQTT_LOGGERS, *LIBRARY_LOGGERS)]
     saved = [(lg, lg.level, list(lg.handlers), lg.propagate) for lg in loggers]
     yield
     for lg, level, handlers, propagate in saved:

@@ -188,20 +188,25 @@ class _StderrHandler(logging.StreamHandler):  # type: ignore[type-arg]
         super().emit(record)
 
 
+MQTT_LOGGERS = ("odocan.mqtt", "odocan.host.mqtt")  # the link's and the bridge's own lines
+
+
 def configure_logging(debug: bool) -> None:
     """odocan's MQTT lines (connection lost / reconnecting / reconnected, refusals) on stderr,
-    one line each; the libraries' (amqtt, aiomqtt, paho) only with ``--debug``."""
+    one line each; the rest of odocan (e.g. the fault injector's per-frame lines) and the
+    libraries' (amqtt, aiomqtt, paho) only with ``--debug``."""
     handler = _StderrHandler()
     handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s" if debug
                                            else "mqtt %(message)s"))
-    odocan = logging.getLogger("odocan")
-    for name in ("odocan", *LIBRARY_LOGGERS):  # once per process, even when called again
+    for name in ("odocan", *MQTT_LOGGERS, *LIBRARY_LOGGERS):  # once per process, even if again
         old = logging.getLogger(name)
         for h in [h for h in old.handlers if isinstance(h, _StderrHandler)]:
             old.removeHandler(h)
-    odocan.addHandler(handler)
-    odocan.setLevel(logging.DEBUG if debug else logging.INFO)
-    odocan.propagate = False
+    for name in ("odocan",) if debug else MQTT_LOGGERS:
+        ours = logging.getLogger(name)
+        ours.addHandler(handler)
+        ours.setLevel(logging.DEBUG if debug else logging.INFO)
+        ours.propagate = False
     for name in LIBRARY_LOGGERS:
         logger = logging.getLogger(name)
         logger.setLevel(logging.DEBUG if debug else logging.CRITICAL)
