@@ -79,6 +79,21 @@ def add_robot_argument(parser: argparse.ArgumentParser, *, role: str = "profile 
     )
 
 
+def add_judge_arguments(parser: argparse.ArgumentParser) -> None:
+    """What a judge of a recorded or live bus needs: ``--integrator`` of the float64 reference
+    (default: the one ODOM_STATUS reports) and ``--dbc`` (``analyze`` and ``monitor``)."""
+    from odocan.host.judge.reference import INTEGRATORS
+
+    parser.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        help="reference integrator (default: the one ODOM_STATUS reports)",
+    )
+    parser.add_argument(
+        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: odocan's own)"
+    )
+
+
 def add_firmware_arguments(parser: argparse.ArgumentParser) -> None:
     """The board's firmware: ``--robot``, ``--integrator`` and ``--firmware python|c``
     (``odocan run`` and ``odocan firmware``)."""

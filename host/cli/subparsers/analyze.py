@@ -25,9 +25,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from odocan.host.cli.options import add_robot_argument, float_in, int_in
+from odocan.host.cli.options import add_judge_arguments, add_robot_argument, float_in, int_in
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
-from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.schedulability import BITRATES
 from odocan.host.report.ci import add_junit_argument, check_junit_path
 from odocan.host.report.summary import add_check_arguments, check_output_paths
@@ -58,14 +57,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="CAN log: .log (candump), .asc, .blf; or a directory of them (recursively)",
     )
     add_robot_argument(parser)
-    parser.add_argument(
-        "--integrator",
-        choices=INTEGRATORS,
-        help="reference integrator (default: the one ODOM_STATUS reports)",
-    )
-    parser.add_argument(
-        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: odocan's own)"
-    )
+    add_judge_arguments(parser)
     parser.add_argument(
         "-b",
         "--bitrate",

@@ -32,6 +32,7 @@ from rich.live import Live
 
 from odocan.host.cli.options import (
     add_duration_argument,
+    add_judge_arguments,
     add_robot_argument,
     check_log_path,
     int_in,
@@ -52,7 +53,6 @@ from odocan.host.mqtt.options import add_broker_credentials, monitor_broker_url
 from odocan.host.report.tui import FrameFilter, MonitorApp, Recorder, Trace, View, run_screen
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
-from odocan.sim.rig import INTEGRATORS
 
 if TYPE_CHECKING:
     from odocan.host.report.foxglove import FoxgloveLive
@@ -105,14 +105,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="record every frame heard while watching (.log candump, .asc, .blf)",
     )
     add_robot_argument(parser, role="profile for the reference")
-    parser.add_argument(
-        "--integrator",
-        choices=INTEGRATORS,
-        help="reference integrator (default: the one ODOM_STATUS reports)",
-    )
-    parser.add_argument(
-        "--dbc", type=Path, metavar="PATH", help="DBC to decode with (default: odocan's own)"
-    )
+    add_judge_arguments(parser)
     parser.add_argument(
         "--broker",
         "--mqtt",
