@@ -167,13 +167,9 @@ def _closed_port() -> int:
     return port
 
 
-def test_an_unreachable_dask_scheduler_is_one_line_and_exit_2(
-    archive: tuple[Path, dict[str, dict[str, Any]]],
-) -> None:
-    """As a whole process, so the test also proves the command ends (the subprocess timeout is a
-    guard against a hang, not a measurement)."""
-    root, _ = archive
-    address = f"tcp://127.0.0.1:{_closed_port()}"
+def _dask_error_line(root: Path, address: str) -> str:
+    """``odocan analyze ROOT --dask ADDRESS`` as a whole process (the timeout guards against a
+    hang, it measures nothing): exit 2, nothing on stdout, its one stderr line."""
     done = subprocess.run(
         [sys.executable, "-m", "odocan", "analyze", str(root), "--dask", address,
          "--dask-timeout", "1"],
@@ -182,6 +178,17 @@ def test_an_unreachable_dask_scheduler_is_one_line_and_exit_2(
     assert done.returncode == 2, done
     assert done.stdout == ""
     (line,) = done.stderr.splitlines()
+    return line
+
+
+def test_an_unreachable_dask_scheduler_is_one_line_and_exit_2(
+    archive: tuple[Path, dict[str, dict[str, Any]]],
+) -> None:
+    """As a whole process, so the test also proves the command ends (the subprocess timeout is a
+    guard against a hang, not a measurement)."""
+    root, _ = archive
+    address = f"tcp://127.0.0.1:{_closed_port()}"
+    line = _dask_error_line(root, address)
     assert line.startswith(f"error: --dask {address}: cannot connect within 1 s"), line
 
 
@@ -207,14 +214,7 @@ def test_a_peer_that_is_no_dask_scheduler_is_one_line_and_exit_2(
 
         thread = threading.Thread(target=answer, daemon=True)
         thread.start()
-        done = subprocess.run(
-            [sys.executable, "-m", "odocan", "analyze", str(root), "--dask", address,
-             "--dask-timeout", "1"],
-            capture_output=True, text=True, timeout=120, check=False,
-        )
-    assert done.returncode == 2, done
-    assert done.stdout == ""
-    (line,) = done.stderr.splitlines()
+        line = _dask_error_line(root, address)
     assert line.startswith(f"error: --dask {address}: no Dask scheduler answered within 1 s"), line
 
 
