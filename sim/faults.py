@@ -76,7 +76,12 @@ class FaultInjectingBus(BusABC):
         self.offered = 0  # frames the sender asked to send
         self._rng_frames = random.Random(f"{spec.seed}/frames")
         self._rng_flip = random.Random(f"{spec.seed}/flip")
-        self._babbler = Babbler(spec.babble, random.Random(f"{spec.seed}/babble"))
+        self._babbler = Babbler(
+            spec.babble,
+            random.Random(f"{spec.seed}/babble"),
+            can_id=spec.babble_id,
+            window=spec.babble_window,
+        )
         self._edges = exclusive_edges(spec)
         self._burst_left = 0
         self._held: list[tuple[float, int, can.Message]] = []  # (release time, seq, frame)

@@ -9,15 +9,20 @@ Every key is optional, comma-separated::
                     frames sent meanwhile overtake it: reordering
     flip=P[:BITS]   BITS distinct random bits of the payload are inverted (never the ID); BITS
                     defaults to 1 (a single-bit error, which every CRC detects)
-    babble=RATE     a babbling node: random frames (11/29-bit IDs, DLC 0-8, random payloads, 10%
-                    error frames, 10% remote frames) at RATE frames per second of the sender's
-                    time, as a Poisson process
+    babble=RATE[:ID[:T:DUR]]
+                    a babbling node at RATE frames per second of the sender's time, as a Poisson
+                    process: random frames (11/29-bit IDs, DLC 0-8, random payloads, 10% error
+                    frames, 10% remote frames); with ID (0x050 or 80) a stuck node sending data
+                    frames of 8 random bytes on that one ID (29-bit above 0x7FF), which on a
+                    bit-timed bus wins arbitration against every higher ID; with T:DUR it
+                    babbles only from T s for DUR s (else from the first frame, for ever)
     busoff=T:DUR    at T s the transmitter's error counter climbs past 255 (32 failed attempts,
                     +8 each, through the warning and error-passive limits): bus-off for DUR s,
                     then recovery after 128 occurrences of 11 recessive bits (at ``bitrate``)
     seed=N          the seed of every random draw (the same seed gives the same faults)
 
-P in [0, 1]; LEN >= 1; MS >= 0; 1 <= BITS <= 64; RATE >= 0 frames/s; T, DUR >= 0 s. A frame
+P in [0, 1]; LEN >= 1; MS >= 0; 1 <= BITS <= 64; RATE >= 0 frames/s; 0 <= ID <= 0x1FFFFFFF;
+T, DUR >= 0 s. A frame
 suffers at most one of drop, burst, dup, delay, flip: one uniform draw per frame is split into
 intervals of those widths (``exclusive_edges``: each has exactly its probability; their sum must
 be <= 1). ``sim.faults.FaultInjectingBus`` injects what a spec says.
@@ -31,6 +36,7 @@ from typing import Any
 
 from odocan.sim.exceptions import ConfigurationError
 
+MAX_CAN_ID = 0x1FFFFFFF  # the largest 29-bit identifier
 FAULT_KINDS = ("drop", "burst", "dup", "delay", "flip", "babble", "busoff", "refused")
 _EXCLUSIVE = ("drop", "burst", "dup", "delay", "flip")  # at most one of these per frame
 _KEYS = ("drop", "burst", "dup", "delay", "flip", "babble", "busoff", "seed")
@@ -42,7 +48,8 @@ def _fail(key: str, value: str, why: str) -> ConfigurationError:
 
 @dataclass(frozen=True)
 class BusOff:
-    """One bus-off episode: it starts at ``at_s`` (the sender's time) and lasts ``duration_s``."""
+    """One episode (bus-off, or a babble window): from ``at_s`` (the sender's time) for
+    ``duration_s``."""
 
     at_s: float
     duration_s: float
@@ -61,6 +68,8 @@ class FaultSpec:
     flip: float = 0.0
     flip_bits: int = 1
     babble: float = 0.0  # frames/s
+    babble_id: int | None = None  # None: random IDs
+    babble_window: BusOff | None = None  # None: from the first frame, for ever
     busoff: BusOff | None = None
     seed: int = 0
 
@@ -77,6 +86,11 @@ class FaultSpec:
         _check_float("delay", self.delay_ms, "MS")
         _check_int("flip", self.flip_bits, 1, 64, "BITS")
         _check_float("babble", self.babble, "RATE")
+        if self.babble_id is not None:
+            _check_int("babble", self.babble_id, 0, MAX_CAN_ID, "ID")
+        if self.babble_window is not None:
+            _check_float("babble", self.babble_window.at_s, "T")
+            _check_float("babble", self.babble_window.duration_s, "DUR")
         if self.busoff is not None:
             _check_float("busoff", self.busoff.at_s, "T")
             _check_float("busoff", self.busoff.duration_s, "DUR")
@@ -118,11 +132,22 @@ class FaultSpec:
         if self.flip:
             items.append(f"flip={_num(self.flip)}:{self.flip_bits}")
         if self.babble:
-            items.append(f"babble={_num(self.babble)}")
+            items.append(f"babble={_babble_text(self)}")
         if self.busoff is not None:
             items.append(f"busoff={_num(self.busoff.at_s)}:{_num(self.busoff.duration_s)}")
         items.append(f"seed={self.seed}")
         return ",".join(items)
+
+
+def _babble_text(spec: FaultSpec) -> str:
+    """RATE[:ID[:T:DUR]] of ``babble=``."""
+    text = _num(spec.babble)
+    if spec.babble_id is not None:
+        text += f":0x{spec.babble_id:03X}"
+        if spec.babble_window is not None:
+            window = spec.babble_window
+            text += f":{_num(window.at_s)}:{_num(window.duration_s)}"
+    return text
 
 
 def _num(value: float) -> str:
@@ -183,7 +208,7 @@ def _parse_value(key: str, value: str) -> dict[str, Any]:
     if key in ("drop", "dup"):
         return {key: _number(key, value, "P")}
     if key == "babble":
-        return {key: _number(key, value, "RATE")}
+        return _parse_babble(value)
     if key == "seed":
         return {key: _integer(key, value, "N")}
     if key == "burst":
@@ -210,6 +235,23 @@ def exclusive_edges(spec: FaultSpec) -> list[tuple[float, str]]:
             total += p
             edges.append((total, kind))
     return edges
+
+
+def _parse_babble(value: str) -> dict[str, Any]:
+    """``babble=RATE[:ID[:T:DUR]]``: the rate (frames/s), the one CAN ID, the window."""
+    parts = value.split(":")
+    if len(parts) not in (1, 2, 4):
+        raise _fail("babble", value, "expected babble=RATE[:ID[:T:DUR]]")
+    fields: dict[str, Any] = {"babble": _number("babble", parts[0], "RATE")}
+    if len(parts) >= 2:
+        try:
+            fields["babble_id"] = int(parts[1], 0)
+        except ValueError:
+            raise _fail("babble", value, "ID is not an integer (0x050 or 80)") from None
+    if len(parts) == 4:
+        at_s = _number("babble", parts[2], "T")
+        fields["babble_window"] = BusOff(at_s, _number("babble", parts[3], "DUR"))
+    return fields
 
 
 __all__ = ["FAULT_KINDS", "BusOff", "FaultSpec", "exclusive_edges"]
