@@ -227,6 +227,19 @@ def fleet_age_s(row: dict[str, Any], now_unix_s: float) -> float:
     return now_unix_s - updated if updated > 0 else math.inf
 
 
+def with_staleness(snapshot: dict[str, Any], now_unix_s: float,
+                   stale_after_s: float = FLEET_STALE_S) -> dict[str, Any]:
+    """``snapshot``'s rows with what the screen shows of their age: ``age_s`` (s since the
+    robot's last message, None when never) and ``stale`` (older than ``stale_after_s``)."""
+    out = {}
+    for name, row in snapshot.items():
+        age_s = fleet_age_s(row, now_unix_s)
+        finite = math.isfinite(age_s)
+        out[name] = {**row, "age_s": round(age_s, 3) if finite else None,
+                     "stale": not finite or age_s > stale_after_s}
+    return out
+
+
 def _worst_first(item: tuple[str, dict[str, Any]]) -> tuple[int, float, str]:
     name, row = item
     dpos_m = (row.get("error") or {}).get("dpos_m")
