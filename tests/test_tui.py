@@ -355,7 +355,8 @@ def test_fleet_sorted_by_error_and_stale_marked() -> None:
     assert marked["robot002"]["age_s"] == pytest.approx(0.2)
     assert marked["robot001"]["stale"] is False
     never = with_staleness({"robot006": _fleet_row(None, 0.0)}, now)["robot006"]
-    assert never["stale"] is True and never["age_s"] is None  # JSON has no infinity
+    assert never["stale"] is True
+    assert never["age_s"] is None  # JSON has no infinity
 
 
 def test_fleet_view_redraws_on_a_timer_without_messages() -> None:
