@@ -348,6 +348,14 @@ def test_fleet_sorted_by_error_and_stale_marked() -> None:
     assert "stale 10s" in states["robot004"]
     assert "offline" in states["robot005"]
     assert " OK " in states["robot001"]
+    # the header stays one line at 80 columns: a long broker URL is cut, the counts are kept
+    console = Console(width=80, record=True, color_system=None)
+    long_url = "mqtts://viewer@broker.fleet.example.org:8883"
+    console.print(render_fleet(fleet, source=long_url, elapsed_s=12.6, now_unix_s=now))
+    rows = console.export_text(styles=False).splitlines()
+    assert "5 robots (1 stale)" in rows[0]
+    assert rows[0].rstrip().endswith("…")
+    assert rows[1].startswith("robot ")
     # --json carries what the screen marks: the same robots stale, with their age
     marked = with_staleness(fleet, now)
     assert {name for name, row in marked.items() if row["stale"]} == {"robot004"}

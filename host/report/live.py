@@ -184,10 +184,11 @@ def render_fleet(snapshot: dict[str, Any], *, source: str, elapsed_s: float, not
     now_unix_s = time.time() if now_unix_s is None else now_unix_s
     rows = sorted(snapshot.items(), key=_worst_first)
     stale = sum(1 for _, row in rows if fleet_age_s(row, now_unix_s) > stale_after_s)
-    header = Text.assemble(
-        ("odocan monitor --mqtt ", "bold"), (source, "cyan"),
-        f"   {elapsed_s:.1f} s   {len(snapshot)} robots"
-        + (f" ({stale} stale)" if stale else "") + "   Ctrl-C quits",
+    header = Text.assemble(  # one line: the broker's URL last, cut short when it does not fit
+        ("odocan monitor --mqtt ", "bold"),
+        f"{len(snapshot)} robots" + (f" ({stale} stale)" if stale else "")
+        + f"   {elapsed_s:.1f} s   Ctrl-C quits   ", (source, "cyan"),
+        no_wrap=True, overflow="ellipsis",
     )
     table = fleet_table()
     for name, row in rows:
