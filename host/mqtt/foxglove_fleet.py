@@ -138,6 +138,7 @@ class FleetFoxglove:
     async def follow(self, broker: BrokerURL, *, identifier: str | None = None) -> None:
         """Subscribe to every robot's telemetry on ``broker`` and publish it, until cancelled
         (reconnecting every ``RECONNECT_S`` while the broker is away)."""
+        said = ""
         while True:
             try:
                 kwargs = broker.client_kwargs()
@@ -145,7 +146,12 @@ class FleetFoxglove:
                     await client.subscribe(f"{topics.PREFIX}/+/#", qos=topics.QOS_TELEMETRY)
                     async for message in client.messages:
                         self._on_mqtt(message.topic.value, message.payload)
-            except aiomqtt.MqttError:
+            except aiomqtt.MqttError as exc:
+                why = str(exc) or type(exc).__name__
+                if why != said:  # once per distinct problem, not once a second
+                    said = why
+                    print(f"foxglove: broker {broker}: {why} (retrying every {RECONNECT_S:g} s)",
+                          file=sys.stderr, flush=True)
                 await asyncio.sleep(RECONNECT_S)
 
     def _on_mqtt(self, topic_name: str, payload: object) -> None:
