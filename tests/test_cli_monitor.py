@@ -294,6 +294,8 @@ def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
         # The bits are named as the mask says.
         assert row["status"]["errors"] == error_names(row["status"]["error_mask"])
         assert row["encoder_hz"] > 0
+        assert row["stale"] is False  # the fleet was still publishing
+        assert 0.0 <= row["age_s"] < 3.0
 
 
 def test_error_names() -> None:

@@ -28,7 +28,7 @@ from rich.console import Console
 from odocan.host.cli.subparsers import monitor as monitor_cmd
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.mqtt.broker import BrokerURL, free_loopback_port
-from odocan.host.report.live import render_fleet
+from odocan.host.report.live import render_fleet, with_staleness
 from odocan.host.report.tui import (
     SILENCE_S,
     FrameFilter,
@@ -348,6 +348,23 @@ def test_fleet_sorted_by_error_and_stale_marked() -> None:
     assert "stale 10s" in states["robot004"]
     assert "offline" in states["robot005"]
     assert " OK " in states["robot001"]
+    # the header stays one line at 80 columns: a long broker URL is cut, the counts are kept
+    console = Console(width=80, record=True, color_system=None)
+    long_url = "mqtts://viewer@broker.fleet.example.org:8883"
+    console.print(render_fleet(fleet, source=long_url, elapsed_s=12.6, now_unix_s=now))
+    rows = console.export_text(styles=False).splitlines()
+    assert "5 robots (1 stale)" in rows[0]
+    assert rows[0].rstrip().endswith("…")
+    assert rows[1].startswith("robot ")
+    # --json carries what the screen marks: the same robots stale, with their age
+    marked = with_staleness(fleet, now)
+    assert {name for name, row in marked.items() if row["stale"]} == {"robot004"}
+    assert marked["robot004"]["age_s"] == 10.0
+    assert marked["robot002"]["age_s"] == pytest.approx(0.2)
+    assert marked["robot001"]["stale"] is False
+    never = with_staleness({"robot006": _fleet_row(None, 0.0)}, now)["robot006"]
+    assert never["stale"] is True
+    assert never["age_s"] is None  # JSON has no infinity
 
 
 def test_fleet_view_redraws_on_a_timer_without_messages() -> None:

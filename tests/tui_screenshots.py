@@ -10,6 +10,14 @@ to a loopback ``udp_multicast`` channel fed by the lockstep rig (``tests.test_tu
   its sends): encoders silent, the firmware DEGRADED with ENCODER_TIMEOUT;
 * ``monitor-stale.png``: the sender stopped: the silence warning, the status STALE.
 
+Two more of ``odocan monitor --broker`` (the MQTT fleet view) in the same 80×24 pane, watching
+``odocan fleet -n 3`` (robot001..003, with its embedded broker) and ``odocan fleet -n 4 --shard
+4/4`` (robot004 alone) on that broker, each fleet a process of its own:
+
+* ``fleet-healthy.png``: four robots publishing, worst error first;
+* ``fleet-stale.png``: robot004's process stopped (SIGSTOP: a hung robot whose connection stays
+  up, so no offline status comes), the row dimmed as ``stale Ns``.
+
 ``tmux capture-pane -e`` gives the screen with its colour escapes; rich parses them
 (``Text.from_ansi``) and Pillow (matplotlib's dependency) draws each cell of the 80×24 grid in
 DejaVu Sans Mono with rich's MONOKAI terminal colours (an SVG through librsvg lost the spaces
@@ -19,8 +27,12 @@ after coloured words).
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import can
@@ -31,6 +43,7 @@ from rich.console import Console
 from rich.style import Style
 from rich.terminal_theme import MONOKAI
 
+from odocan.host.mqtt.broker import free_loopback_port
 from tests.test_realtime import _udp_channel
 from tests.test_tui_tmux import COLUMNS, ROWS, START_TIMEOUT_S, Pane, Sender, monitor_command
 
@@ -100,13 +113,51 @@ def scene(out_dir: Path, name: str, faults: str, ready: str, stop_sender: bool) 
         bus.shutdown()
 
 
+@contextmanager
+def _fleet(*argv: str) -> Iterator[subprocess.Popen[bytes]]:
+    """``odocan fleet ARGV`` in a process of its own, stopped (and continued, to die) at the end."""
+    command = [sys.executable, "-m", "odocan", "fleet", *argv]
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        yield process
+    finally:
+        process.send_signal(signal.SIGCONT)
+        process.terminate()
+        process.wait(30)
+
+
+def fleet_scenes(out_dir: Path) -> None:
+    """The fleet view with four healthy robots, then with robot004 hung (stale)."""
+    port = free_loopback_port()
+    url = f"mqtt://127.0.0.1:{port}"
+    with _fleet("-n", "3", "--port", str(port), "--duration", "300", "--seed", "4"):
+        time.sleep(5.0)  # the embedded broker is up before the second fleet connects
+        with _fleet("-n", "4", "--shard", "4/4", "--broker", url, "--duration", "300",
+                    "--seed", "4") as hung:
+            pane = Pane(monitor_command(["--broker", url]))
+            try:
+                pane.wait_for(lambda r: "4 robots" in r[0] and "stale" not in r[0]
+                              and sum(" OK " in row for row in r) == 4, 60)
+                time.sleep(3.0)
+                save_png(pane, out_dir / "fleet-healthy.png")
+                hung.send_signal(signal.SIGSTOP)
+                pane.wait_for(lambda r: "(1 stale)" in r[0] and "stale 5s" in "".join(r), 60)
+                save_png(pane, out_dir / "fleet-stale.png")
+            finally:
+                pane.close()
+
+
 def main(out_dir: Path) -> None:
-    """Make the three screenshots in ``out_dir``."""
+    """Make the five screenshots in ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     scene(out_dir, "healthy", "", "firmware OK", stop_sender=False)
     scene(out_dir, "degraded", "busoff=5:60", "DEGRADED", stop_sender=False)
     scene(out_dir, "stale", "", "since the last frame", stop_sender=True)
+    fleet_scenes(out_dir)
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1] if len(sys.argv) > 1 else "docs/img"))
+    if sys.argv[2:] == ["--fleet"]:  # only the two fleet screenshots
+        fleet_scenes(Path(sys.argv[1]))
+    else:
+        main(Path(sys.argv[1] if len(sys.argv) > 1 else "docs/img"))

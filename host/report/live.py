@@ -184,10 +184,11 @@ def render_fleet(snapshot: dict[str, Any], *, source: str, elapsed_s: float, not
     now_unix_s = time.time() if now_unix_s is None else now_unix_s
     rows = sorted(snapshot.items(), key=_worst_first)
     stale = sum(1 for _, row in rows if fleet_age_s(row, now_unix_s) > stale_after_s)
-    header = Text.assemble(
-        ("odocan monitor --mqtt ", "bold"), (source, "cyan"),
-        f"   {elapsed_s:.1f} s   {len(snapshot)} robots"
-        + (f" ({stale} stale)" if stale else "") + "   Ctrl-C quits",
+    header = Text.assemble(  # one line: the broker's URL last, cut short when it does not fit
+        ("odocan monitor --mqtt ", "bold"),
+        f"{len(snapshot)} robots" + (f" ({stale} stale)" if stale else "")
+        + f"   {elapsed_s:.1f} s   Ctrl-C quits   ", (source, "cyan"),
+        no_wrap=True, overflow="ellipsis",
     )
     table = fleet_table()
     for name, row in rows:
@@ -225,6 +226,19 @@ def fleet_age_s(row: dict[str, Any], now_unix_s: float) -> float:
     """Seconds since a fleet row was last updated (infinite when never)."""
     updated = row.get("updated_unix_s") or 0.0
     return now_unix_s - updated if updated > 0 else math.inf
+
+
+def with_staleness(snapshot: dict[str, Any], now_unix_s: float,
+                   stale_after_s: float = FLEET_STALE_S) -> dict[str, Any]:
+    """``snapshot``'s rows with what the screen shows of their age: ``age_s`` (s since the
+    robot's last message, None when never) and ``stale`` (older than ``stale_after_s``)."""
+    out = {}
+    for name, row in snapshot.items():
+        age_s = fleet_age_s(row, now_unix_s)
+        finite = math.isfinite(age_s)
+        out[name] = {**row, "age_s": round(age_s, 3) if finite else None,
+                     "stale": not finite or age_s > stale_after_s}
+    return out
 
 
 def _worst_first(item: tuple[str, dict[str, Any]]) -> tuple[int, float, str]:

@@ -8,7 +8,8 @@ float64 reference. ``--workers W`` spreads the robots over W processes, each wit
 MQTT connections; ``--shard K/N`` runs this machine's part of a fleet of N machines on one broker
 (robot ids and seeds numbered across shards: ``host.mqtt.shards``). Without ``--broker`` an
 embedded amqtt broker runs in a process of its own, on ``--port`` or a free port; its URL is
-printed at the start (``odocan monitor --broker URL`` watches). ``--report`` writes the JSON
+printed at the start (``odocan monitor --broker URL`` watches; ``--foxglove [PORT]`` serves every
+robot live to Foxglove: ``host.mqtt.foxglove_fleet``). ``--report`` writes the JSON
 contract of ``host.mqtt.fleetrun`` (``workers`` added by ``host.mqtt.shards``). The exit line says
 PASS, or FAIL and every threshold broken: exit 0, or 1 when ``deadline_miss_ratio`` exceeds
 ``--max-miss-ratio`` or a robot's pose is out of tolerance or not judged.
@@ -28,6 +29,7 @@ from typing import Any
 from odocan.host.cli.options import SEED_LIMIT, add_seed_argument, float_in, int_in
 from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.fleetrun import FleetRun, failures
+from odocan.host.mqtt.foxglove_fleet import add_foxglove_argument, serve_fleet_foxglove
 from odocan.host.mqtt.options import (
     add_mqtt_arguments,
     bridge_options,
@@ -39,7 +41,7 @@ from odocan.host.report.outputs import check_writable, write_text
 from odocan.host.report.progress import Progress, wall_clock_progress
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError
-from odocan.sim.fleet import FleetConfig
+from odocan.sim.fleet import FleetConfig, robot_name
 from odocan.sim.rig import INTEGRATORS
 from odocan.sim.scenarios import SCENARIOS
 
@@ -119,6 +121,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the embedded broker's 127.0.0.1 port (default: a free one); not with --broker",
     )
     add_mqtt_arguments(parser)
+    add_foxglove_argument(parser)
 
 
 def _shard(text: str) -> Shard:
@@ -153,12 +156,14 @@ def _do_fleet(args: argparse.Namespace) -> int:
     run = FleetRun(fleet=fleet, duration_s=args.duration, broker=broker, **bridge_options(args))
     debug = getattr(args, "debug", False)
     configure_logging(debug)
+    names = [robot_name(fleet.first + i) for i in range(fleet.robots)]
     if broker is None:
-        with embedded_broker(args.port) as url:
+        with embedded_broker(args.port) as url, serve_fleet_foxglove(args, url, names):
             report = _run(replace(run, broker=url), args.workers, debug)
         report["embedded_broker"] = True
     else:
-        report = _run(run, args.workers, debug)
+        with serve_fleet_foxglove(args, broker, names):
+            report = _run(run, args.workers, debug)
     broken = failures(report, args.max_miss_ratio)
     _print_summary(report, broken)
     if args.report is not None:

@@ -50,6 +50,7 @@ from odocan.host.mqtt.broker import (
 )
 from odocan.host.mqtt.fleetview import RobotState, fleet_states
 from odocan.host.mqtt.options import add_broker_credentials, monitor_broker_url
+from odocan.host.report.live import with_staleness
 from odocan.host.report.tui import FrameFilter, MonitorApp, Recorder, Trace, View, run_screen
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
@@ -257,11 +258,12 @@ class _FleetWatch:
             await asyncio.sleep(RECONNECT_S)
 
     def snapshot(self) -> dict[str, Any]:
-        """``broker``, ``duration_s`` and ``robots`` (``host.monitor.fleet_snapshot``)."""
+        """``broker``, ``duration_s`` and ``robots`` (``host.monitor.fleet_snapshot``, with each
+        robot's ``age_s`` and ``stale`` as the screen marks them)."""
         return {
             "broker": str(self.url),
             "duration_s": time.monotonic() - self.started,
-            "robots": fleet_snapshot(self.table),
+            "robots": with_staleness(fleet_snapshot(self.table), time.time()),
         }
 
     def render(self) -> Any:

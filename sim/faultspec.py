@@ -1,0 +1,257 @@
+"""The fault model: what ``--faults`` text means, parsed and validated into a ``FaultSpec``.
+
+Every key is optional, comma-separated::
+
+    drop=P          each frame is lost with probability P
+    burst=P:LEN     with probability P a burst starts: this frame and the next LEN - 1 are lost
+    dup=P           the frame goes on the bus twice (a retransmission of the same bits)
+    delay=P:MS      the frame is held back and released MS ms later (by the wrapped clock), so
+                    frames sent meanwhile overtake it: reordering
+    flip=P[:BITS]   BITS distinct random bits of the payload are inverted (never the ID); BITS
+                    defaults to 1 (a single-bit error, which every CRC detects)
+    babble=RATE[:ID[:T:DUR]]
+                    a babbling node at RATE frames per second of the sender's time, as a Poisson
+                    process: random frames (11/29-bit IDs, DLC 0-8, random payloads, 10% error
+                    frames, 10% remote frames); with ID (0x050 or 80) a stuck node sending data
+                    frames of 8 random bytes on that one ID (29-bit above 0x7FF), which on a
+                    bit-timed bus wins arbitration against every higher ID; with T:DUR it
+                    babbles only from T s for DUR s (else from the first frame, for ever)
+    busoff=T:DUR    at T s the transmitter's error counter climbs past 255 (32 failed attempts,
+                    +8 each, through the warning and error-passive limits): bus-off for DUR s,
+                    then recovery after 128 occurrences of 11 recessive bits (at ``bitrate``)
+    seed=N          the seed of every random draw (the same seed gives the same faults)
+
+P in [0, 1]; LEN >= 1; MS >= 0; 1 <= BITS <= 64; RATE >= 0 frames/s; 0 <= ID <= 0x1FFFFFFF;
+T, DUR >= 0 s. A frame
+suffers at most one of drop, burst, dup, delay, flip: one uniform draw per frame is split into
+intervals of those widths (``exclusive_edges``: each has exactly its probability; their sum must
+be <= 1). ``sim.faults.FaultInjectingBus`` injects what a spec says.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from odocan.sim.exceptions import ConfigurationError
+
+MAX_CAN_ID = 0x1FFFFFFF  # the largest 29-bit identifier
+FAULT_KINDS = ("drop", "burst", "dup", "delay", "flip", "babble", "busoff", "refused")
+_EXCLUSIVE = ("drop", "burst", "dup", "delay", "flip")  # at most one of these per frame
+_KEYS = ("drop", "burst", "dup", "delay", "flip", "babble", "busoff", "seed")
+
+
+def _fail(key: str, value: str, why: str) -> ConfigurationError:
+    return ConfigurationError(f"faults: {key}={value}: {why}")
+
+
+@dataclass(frozen=True)
+class BusOff:
+    """One episode (bus-off, or a babble window): from ``at_s`` (the sender's time) for
+    ``duration_s``."""
+
+    at_s: float
+    duration_s: float
+
+
+@dataclass(frozen=True)
+class FaultSpec:
+    """What to inject (see the module docstring); validated at construction."""
+
+    drop: float = 0.0
+    burst: float = 0.0
+    burst_len: int = 1
+    dup: float = 0.0
+    delay: float = 0.0
+    delay_ms: float = 0.0
+    flip: float = 0.0
+    flip_bits: int = 1
+    babble: float = 0.0  # frames/s
+    babble_id: int | None = None  # None: random IDs
+    babble_window: BusOff | None = None  # None: from the first frame, for ever
+    busoff: BusOff | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in _EXCLUSIVE:
+            _check_probability(name, getattr(self, name))
+        total = sum(getattr(self, name) for name in _EXCLUSIVE)
+        if total > 1.0:
+            raise ConfigurationError(
+                f"faults: drop + burst + dup + delay + flip = {total:g} > 1 "
+                "(a frame suffers at most one of them)"
+            )
+        _check_int("burst", self.burst_len, 1, None, "LEN")
+        _check_float("delay", self.delay_ms, "MS")
+        _check_int("flip", self.flip_bits, 1, 64, "BITS")
+        _check_float("babble", self.babble, "RATE")
+        if self.babble_id is not None:
+            _check_int("babble", self.babble_id, 0, MAX_CAN_ID, "ID")
+        if self.babble_window is not None:
+            _check_float("babble", self.babble_window.at_s, "T")
+            _check_float("babble", self.babble_window.duration_s, "DUR")
+        if self.busoff is not None:
+            _check_float("busoff", self.busoff.at_s, "T")
+            _check_float("busoff", self.busoff.duration_s, "DUR")
+        _check_int("seed", self.seed, None, None, "N")
+
+    @classmethod
+    def parse(cls, text: str) -> FaultSpec:
+        """A spec from ``--faults`` text such as ``drop=0.01,burst=0.001:5,seed=3`` ("" = none)."""
+        values: dict[str, Any] = {}
+        seen: set[str] = set()
+        for item in (part.strip() for part in text.split(",")):
+            if not item:
+                continue
+            key, sep, value = (s.strip() for s in item.partition("="))
+            if not sep:
+                raise ConfigurationError(f"faults: {item!r}: expected KEY=VALUE")
+            if key not in _KEYS:
+                raise ConfigurationError(f"faults: unknown key {key!r} (known: {', '.join(_KEYS)})")
+            if key in seen:
+                raise ConfigurationError(f"faults: {key} given twice")
+            seen.add(key)
+            values.update(_parse_value(key, value))
+        return cls(**values)
+
+    @property
+    def active(self) -> bool:
+        """True when anything at all is injected."""
+        return self != FaultSpec(seed=self.seed)
+
+    def __str__(self) -> str:
+        """The canonical ``--faults`` text (``parse(str(spec)) == spec``)."""
+        items = [
+            f"{name}={_num(getattr(self, name))}" for name in ("drop", "dup") if getattr(self, name)
+        ]
+        if self.burst:
+            items.append(f"burst={_num(self.burst)}:{self.burst_len}")
+        if self.delay:
+            items.append(f"delay={_num(self.delay)}:{_num(self.delay_ms)}")
+        if self.flip:
+            items.append(f"flip={_num(self.flip)}:{self.flip_bits}")
+        if self.babble:
+            items.append(f"babble={_babble_text(self)}")
+        if self.busoff is not None:
+            items.append(f"busoff={_num(self.busoff.at_s)}:{_num(self.busoff.duration_s)}")
+        items.append(f"seed={self.seed}")
+        return ",".join(items)
+
+
+def _babble_text(spec: FaultSpec) -> str:
+    """RATE[:ID[:T:DUR]] of ``babble=``."""
+    text = _num(spec.babble)
+    if spec.babble_id is not None:
+        text += f":0x{spec.babble_id:03X}"
+        if spec.babble_window is not None:
+            window = spec.babble_window
+            text += f":{_num(window.at_s)}:{_num(window.duration_s)}"
+    return text
+
+
+def _num(value: float) -> str:
+    """A number as short as it reads back exactly: 0.01, 100, 2.5."""
+    text = repr(float(value))
+    return text[:-2] if text.endswith(".0") else text
+
+
+def _check_probability(key: str, p: object) -> None:
+    if isinstance(p, bool) or not isinstance(p, int | float) or not 0.0 <= p <= 1.0:
+        raise _fail(key, repr(p), "P must be a probability in [0, 1]")
+
+
+def _check_float(key: str, value: object, what: str) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise _fail(key, repr(value), f"{what} must be a finite number >= 0")
+    if value < 0:
+        raise _fail(key, repr(value), f"{what} must be a finite number >= 0")
+
+
+def _check_int(key: str, value: object, lo: int | None, hi: int | None, what: str) -> None:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int)
+        or (lo is not None and value < lo)
+        or (hi is not None and value > hi)
+    ):
+        bounds = f" in [{lo}, {hi}]" if hi is not None else (f" >= {lo}" if lo is not None else "")
+        raise _fail(key, repr(value), f"{what} must be an integer{bounds}")
+
+
+def _number(key: str, text: str, what: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise _fail(key, text, f"{what} is not a number") from None
+    if not math.isfinite(value):
+        raise _fail(key, text, f"{what} must be finite")
+    return value
+
+
+def _integer(key: str, text: str, what: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise _fail(key, text, f"{what} is not an integer") from None
+
+
+def _fields(key: str, value: str, shape: str, optional_second: bool = False) -> list[str]:
+    parts = value.split(":")
+    if len(parts) == 2 or (optional_second and len(parts) == 1):
+        return parts
+    raise _fail(key, value, f"expected {key}={shape}")
+
+
+def _parse_value(key: str, value: str) -> dict[str, Any]:
+    """The FaultSpec fields of one ``key=value`` item."""
+    if key in ("drop", "dup"):
+        return {key: _number(key, value, "P")}
+    if key == "babble":
+        return _parse_babble(value)
+    if key == "seed":
+        return {key: _integer(key, value, "N")}
+    if key == "burst":
+        p, n = _fields(key, value, "P:LEN")
+        return {"burst": _number(key, p, "P"), "burst_len": _integer(key, n, "LEN")}
+    if key == "delay":
+        p, ms = _fields(key, value, "P:MS")
+        return {"delay": _number(key, p, "P"), "delay_ms": _number(key, ms, "MS")}
+    if key == "flip":
+        parts = _fields(key, value, "P[:BITS]", optional_second=True)
+        bits = _integer(key, parts[1], "BITS") if len(parts) == 2 else 1
+        return {"flip": _number(key, parts[0], "P"), "flip_bits": bits}
+    at, duration = _fields(key, value, "T:DURATION")
+    return {"busoff": BusOff(_number(key, at, "T"), _number(key, duration, "DURATION"))}
+
+
+def exclusive_edges(spec: FaultSpec) -> list[tuple[float, str]]:
+    """Cumulative interval ends of the exclusive faults (zero-width ones left out)."""
+    edges = []
+    total = 0.0
+    for kind in _EXCLUSIVE:
+        p = float(getattr(spec, kind))
+        if p:
+            total += p
+            edges.append((total, kind))
+    return edges
+
+
+def _parse_babble(value: str) -> dict[str, Any]:
+    """``babble=RATE[:ID[:T:DUR]]``: the rate (frames/s), the one CAN ID, the window."""
+    parts = value.split(":")
+    if len(parts) not in (1, 2, 4):
+        raise _fail("babble", value, "expected babble=RATE[:ID[:T:DUR]]")
+    fields: dict[str, Any] = {"babble": _number("babble", parts[0], "RATE")}
+    if len(parts) >= 2:
+        try:
+            fields["babble_id"] = int(parts[1], 0)
+        except ValueError:
+            raise _fail("babble", value, "ID is not an integer (0x050 or 80)") from None
+    if len(parts) == 4:
+        at_s = _number("babble", parts[2], "T")
+        fields["babble_window"] = BusOff(at_s, _number("babble", parts[3], "DUR"))
+    return fields
+
+
+__all__ = ["FAULT_KINDS", "BusOff", "FaultSpec", "exclusive_edges"]
