@@ -30,8 +30,9 @@ def test_the_committed_header_is_the_generators_output(tmp_path: Path) -> None:
 def test_the_generated_tables_are_the_python_firmwares() -> None:
     tables = gen_aes_tables.compute()
     assert tables["SBOX"] == list(aes.SBOX)
-    for name, python in zip(("TE0", "TE1", "TE2", "TE3"), (aes.TE0, aes.TE1, aes.TE2, aes.TE3)):
-        assert tables[name] == list(python), name
+    python = {"TE0": aes.TE0, "TE1": aes.TE1, "TE2": aes.TE2, "TE3": aes.TE3}
+    for name, table in python.items():
+        assert tables[name] == list(table), name
 
 
 def test_fips_197_entries() -> None:

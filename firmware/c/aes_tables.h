@@ -1,9 +1,9 @@
 /* AES-128 tables of firmware/c/aes.c: GENERATED, do not edit.
  *
- * Written by `python tools/gen_aes_tables.py` from FIPS-197's definitions: the S-box
- * (5.1.1: affine map of the GF(2^8) inverse) and the four round tables Te0..Te3 (SubBytes
- * and MixColumns of one byte, Te_k = Te0 rotated right by 8k). static const: the tables
- * live in flash (256 B + 4 KiB). Included by aes.c only.
+ * Written by `python tools/gen_aes_tables.py` from FIPS-197's definitions: the
+ * S-box (5.1.1: affine map of the GF(2^8) inverse) and the four round tables Te0..Te3
+ * (SubBytes and MixColumns of one byte, Te_k = Te0 rotated right by 8k). static const:
+ * the tables live in flash (256 B + 4 KiB). Included by aes.c only.
  */
 #ifndef ODOCAN_AES_TABLES_H
 #define ODOCAN_AES_TABLES_H
