@@ -51,31 +51,39 @@ def test_each_robot_key_is_the_sp800_108_derivation_of_the_fleet_key() -> None:
 
 async def fleet_answers(commands: list[tuple[str, str, dict[str, Any]]]) -> list[dict[str, Any]]:
     """Run a 2-robot SecOC fleet (robot002's bridge without a key), publish ``commands``
-    (robot, command, payload) once the clock runs, and return every cmd/result answer."""
+    (robot, command, payload) once both robots' poses are on the broker (so each bridge has
+    seen its firmware's boot ODOM_FRESHNESS), and return every cmd/result answer."""
     async with EmbeddedBroker() as broker, client(broker.url) as operator:
         await operator.subscribe(f"odocan/+/{topics.RESULT_LEAF}", qos=1)
-        started = asyncio.Event()
+        await operator.subscribe("odocan/+/pose", qos=0)
         run = FleetRun(
             fleet=FleetConfig(robots=2, robot=robot.load("pmir"), seed=5, secoc_key=KEY),
-            duration_s=3.0, broker=broker.url, client_prefix="test-fleet-secoc",
+            duration_s=5.0, broker=broker.url, client_prefix="test-fleet-secoc",
             secoc_unsigned=frozenset({UNSIGNED}),
         )
-        task = asyncio.create_task(run_fleet(run, on_start=lambda *_: started.set()))
-        await asyncio.wait_for(started.wait(), 15)
-        await asyncio.sleep(0.3)  # the firmwares' boot ODOM_FRESHNESS reached the bridges
-        for name, command, payload in commands:
-            await operator.publish(topics.topic(name, f"cmd/{command}"), json.dumps(payload),
-                                   qos=1)
+        task = asyncio.create_task(run_fleet(run))
         answers: list[dict[str, Any]] = []
-        async with asyncio.timeout(10):
+        posed: set[str] = set()
+        async with asyncio.timeout(20):
             async for message in operator.messages:
                 assert isinstance(message.payload, bytes)
-                answers.append({"robot": message.topic.value.split("/")[1],
-                                **json.loads(message.payload)})
+                robot_name, leaf = message.topic.value.split("/", 2)[1:]
+                if leaf == "pose":
+                    if len(posed) < 2:
+                        posed.add(robot_name)
+                        if len(posed) == 2:
+                            await _publish(operator, commands)
+                    continue
+                answers.append({"robot": robot_name, **json.loads(message.payload)})
                 if sum(a["result"] in ("acked", "nacked") for a in answers) == len(commands):
                     break
         await task
     return answers
+
+
+async def _publish(operator: Any, commands: list[tuple[str, str, dict[str, Any]]]) -> None:
+    for name, command, payload in commands:
+        await operator.publish(topics.topic(name, f"cmd/{command}"), json.dumps(payload), qos=1)
 
 
 def test_a_fleet_command_is_acked_with_the_key_and_nacked_auth_without_it() -> None:
