@@ -15,10 +15,17 @@ firmware, as would the hardware.
 
 SecOC (docs/secoc.md): a board built with ``secoc_key`` provisions the firmware with it and
 with its ``NvmCell``, the EPOCH cell of data flash: ``reboot`` starts a new firmware on the same
-cell, so the freshness values of the previous boot stay closed.
+cell, so the freshness values of the previous boot stay closed. ``FileNvm`` is the same cell in
+a file (``odocan firmware --nvm PATH``): a firmware process restarted on it is a reboot.
 """
 
 from __future__ import annotations
+
+import contextlib
+import os
+import struct
+import zlib
+from pathlib import Path
 
 import can
 
@@ -26,6 +33,7 @@ from odocan.firmware.config import RobotParams
 from odocan.firmware.ecu import LOST_TIME_PERIODS, OdomEcu
 from odocan.firmware.hal import TICK_PERIOD_US
 from odocan.sim.clock import Clock
+from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.node import BusNode
 
 TICK_S = TICK_PERIOD_US / 1e6
@@ -58,6 +66,77 @@ class NvmCell:
         self.epoch = epoch & _U32
         self.writes += 1
         return True
+
+
+NVM_MAGIC = b"ODNV"  # the file's first 4 bytes: an odocan NVM image, layout version 1
+NVM_LAYOUT = struct.Struct("<4sII")  # magic, EPOCH (u32), CRC-32 (zlib) of magic + EPOCH
+
+
+class FileNvm(NvmCell):
+    """The EPOCH cell in a file: 12 bytes, ``ODNV`` + EPOCH (u32 LE) + CRC-32 of the first 8.
+
+    A missing file is an erased cell (EPOCH 0), created at the first write. A file of another
+    length, magic or CRC (a torn or foreign file) is refused at once (``ConfigurationError``):
+    reading it as 0 would reopen every freshness value used before, so the recovery is a person's
+    call (docs/secoc.md: delete the file AND provision a new key). Each write goes to a temporary
+    file in the same directory, is fsynced, then renamed over the old one (atomic on POSIX): a
+    crash leaves the old EPOCH or the new one, never half of one. A write that fails (disk full,
+    read-only) returns False, so the firmware fails closed, and keeps the reason in ``error``."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.error: str | None = None
+        super().__init__(self._load())
+
+    def _load(self) -> int:
+        """The stored EPOCH (0 when the file does not exist); ConfigurationError when corrupt."""
+        try:
+            raw = self.path.read_bytes()
+        except FileNotFoundError:
+            return 0
+        except OSError as exc:
+            raise ConfigurationError(f"NVM file {self.path}: {exc.strerror or exc}") from None
+        if len(raw) != NVM_LAYOUT.size:
+            raise ConfigurationError(
+                f"NVM file {self.path}: {len(raw)} bytes, expected {NVM_LAYOUT.size} (corrupt or "
+                "not an odocan NVM file)"
+            )
+        magic, epoch, crc = NVM_LAYOUT.unpack(raw)
+        if magic != NVM_MAGIC or crc != zlib.crc32(raw[:8]):
+            raise ConfigurationError(
+                f"NVM file {self.path}: bad {'magic' if magic != NVM_MAGIC else 'CRC'} "
+                "(corrupt or not an odocan NVM file)"
+            )
+        return int(epoch)
+
+    def write_epoch(self, epoch: int) -> bool:
+        """Store ``epoch`` in the file (temporary file, fsync, rename); False when it failed."""
+        if self.fail_writes:
+            return False
+        head = NVM_MAGIC + struct.pack("<I", epoch & _U32)
+        temp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        try:
+            with open(temp, "wb") as out:
+                out.write(head + struct.pack("<I", zlib.crc32(head)))
+                out.flush()
+                os.fsync(out.fileno())
+            os.replace(temp, self.path)
+            _fsync_dir(self.path.parent)
+        except OSError as exc:
+            self.error = f"NVM file {self.path}: {exc.strerror or exc}"
+            with contextlib.suppress(OSError):
+                temp.unlink(missing_ok=True)
+            return False
+        return super().write_epoch(epoch)
+
+
+def _fsync_dir(directory: Path) -> None:
+    """Make a rename in ``directory`` durable (POSIX: fsync the directory)."""
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 class FirmwareBoard(BusNode):

@@ -10,6 +10,11 @@ The library is built on demand with ``make -C firmware/c lib`` into
 ``firmware/c/build/libodocan_fw.so`` (make rebuilds it when a source changed, and does nothing
 otherwise), or taken from ``$ODOCAN_FW_LIB``: a team's own firmware built against the same ABI.
 A missing compiler, make or library is one ``FirmwareBuildError`` naming what is missing.
+
+SecOC (ABI 2, docs/secoc.md): a board with a key provisions it with
+``odocan_fw_provision_secoc`` right after ``odocan_fw_init``, with the board's EPOCH cell
+(``NvmCell``, or a file: ``sim.board.FileNvm``) behind two C callbacks. A library of ABI 1 (a
+team's firmware built before) still runs without a key; asked for one, it is refused in one line.
 """
 
 from __future__ import annotations
@@ -19,20 +24,23 @@ import fcntl
 import os
 import shutil
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 import can
 
 from odocan.firmware.config import RobotParams
 from odocan.firmware.errors import ErrorFlag, ErrorMask, State
-from odocan.firmware.hal import TICK_PERIOD_US, CanTx
-from odocan.sim.board import FirmwareBoard
+from odocan.firmware.hal import TICK_PERIOD_US, CanTx, FreshnessNvm
+from odocan.sim.board import FirmwareBoard, NvmCell
 from odocan.sim.clock import Clock
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 
 FIRMWARES = ("python", "c")
-ABI_VERSION = 1  # ODOCAN_FW_ABI_VERSION of firmware/c/odocan_fw.h
+ABI_VERSION = 2  # ODOCAN_FW_ABI_VERSION of firmware/c/odocan_fw.h
+ABI_VERSIONS = (1, 2)  # what this board speaks: 1 without SecOC, 2 with odocan_fw_provision_secoc
+SECOC_ABI = 2
 FIRMWARE_C_DIR = Path(__file__).resolve().parent.parent / "firmware" / "c"
 
 
@@ -51,7 +59,10 @@ LIBRARY_ENV = "ODOCAN_FW_LIB"  # a prebuilt library with the same ABI (e.g. a te
 _TxFn = ctypes.CFUNCTYPE(
     ctypes.c_bool, ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(ctypes.c_uint8)
 )
+_NvmRead = ctypes.CFUNCTYPE(ctypes.c_uint32, ctypes.c_void_p)
+_NvmWrite = ctypes.CFUNCTYPE(ctypes.c_bool, ctypes.c_void_p, ctypes.c_uint32)
 _loaded: dict[Path, ctypes.CDLL] = {}
+_T = TypeVar("_T")
 
 
 class FirmwareBuildError(OdocanError):
@@ -106,12 +117,36 @@ def load_library() -> ctypes.CDLL:
     except AttributeError as exc:
         raise FirmwareBuildError(f"--firmware c: {path} lacks the odocan_fw ABI: {exc}") from exc
     version = lib.odocan_fw_abi_version()
-    if version != ABI_VERSION:
+    if version not in ABI_VERSIONS:
         raise FirmwareBuildError(
-            f"--firmware c: {path} has ABI version {version}, this board speaks {ABI_VERSION}"
+            f"--firmware c: {path} has ABI version {version}, this board speaks "
+            f"{' or '.join(map(str, ABI_VERSIONS))}"
         )
+    if version >= SECOC_ABI:
+        _declare_secoc(lib)
     _loaded[path] = lib
     return lib
+
+
+def check_secoc_abi(lib: ctypes.CDLL) -> None:
+    """``ConfigurationError`` (one line) unless ``lib`` can be provisioned with a SecOC key."""
+    version = lib.odocan_fw_abi_version()
+    if version < SECOC_ABI:
+        raise ConfigurationError(
+            f"--secoc-key: the C firmware {lib._name} has ABI version {version}, which takes no "
+            f"SecOC key (odocan_fw_provision_secoc is ABI {SECOC_ABI}): rebuild it"
+        )
+
+
+def _declare_secoc(lib: ctypes.CDLL) -> None:
+    """ABI 2's odocan_fw_provision_secoc (missing from the library: FirmwareBuildError)."""
+    try:
+        provision = lib.odocan_fw_provision_secoc
+    except AttributeError as exc:
+        raise FirmwareBuildError(f"--firmware c: {lib._name} says ABI 2 but lacks {exc}") from exc
+    provision.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_uint32, _NvmRead, _NvmWrite,
+                          ctypes.c_void_p]
+    provision.restype = ctypes.c_int
 
 
 def _declare(lib: ctypes.CDLL) -> None:
@@ -140,9 +175,21 @@ class CEcu:
     """The C ECU with ``OdomEcu``'s entry points (``isr_can_rx``, ``isr_bus_state``, ``tick``)
     and read-only ``state``, ``errors``, ``ticks``; its frames go to ``hal.transmit``."""
 
-    def __init__(self, hal: CanTx, params: RobotParams, clock: Clock | None = None) -> None:
-        """``clock``: what ``tick`` passes as ``now_us`` (None: the tick count x 10 ms)."""
+    def __init__(
+        self,
+        hal: CanTx,
+        params: RobotParams,
+        clock: Clock | None = None,
+        *,
+        secoc_key: bytes | None = None,
+        nvm: FreshnessNvm | None = None,
+    ) -> None:
+        """``clock``: what ``tick`` passes as ``now_us`` (None: the tick count x 10 ms);
+        ``secoc_key`` and ``nvm``: as ``OdomEcu``'s (None: no SecOC; a key without a cell fails
+        closed), provisioned through ABI 2."""
         self._lib = lib = load_library()
+        if secoc_key is not None:
+            check_secoc_abi(lib)
         size = lib.odocan_fw_state_size()
         self._mem = ctypes.create_string_buffer(size)  # malloc'ed: aligned for uint64_t
         self._fw = ctypes.cast(self._mem, ctypes.c_void_p)
@@ -160,9 +207,40 @@ class CEcu:
         )
         if lib.odocan_fw_init(self._fw, size, raw, self._tx, None) != 0:
             raise FirmwareBuildError("--firmware c: odocan_fw_init refused its state buffer")
+        if secoc_key is not None:
+            self._provision(secoc_key, nvm)
         self.params = params
         self._isr = lib.odocan_fw_rx_isr
         self._tick = lib.odocan_fw_tick
+
+    def _provision(self, key: bytes, nvm: FreshnessNvm | None) -> None:
+        """odocan_fw_provision_secoc with ``key`` and ``nvm`` behind two C callbacks (kept alive
+        with the instance; an exception in one is raised here, like ``_transmit``'s)."""
+        if nvm is None:
+            read, write = _NvmRead(), _NvmWrite()  # NULL: the firmware fails closed
+        else:
+            read = _NvmRead(lambda _ctx: self._nvm_call(nvm.read_epoch, 0))
+            write = _NvmWrite(lambda _ctx, epoch: self._nvm_call(lambda: nvm.write_epoch(epoch),
+                                                                 False))
+        self._nvm_fns = (read, write)
+        done = self._lib.odocan_fw_provision_secoc(self._fw, key, len(key), read, write, None)
+        self._raise_pending()
+        if done != 0:
+            raise FirmwareBuildError("--firmware c: odocan_fw_provision_secoc refused the key")
+
+    def _nvm_call(self, call: Callable[[], _T], failed: _T) -> _T:
+        """An NVM callback's work; an exception cannot cross the C frames: kept, ``failed``."""
+        try:
+            return call()
+        except BaseException as exc:  # re-raised by the caller of the C function
+            self._pending = self._pending or exc
+            return failed
+
+    def _raise_pending(self) -> None:
+        """Raise the exception a callback kept during the last C call, if any."""
+        if self._pending is not None:
+            pending, self._pending = self._pending, None
+            raise pending
 
     def _transmit(
         self, _ctx: int | None, can_id: int, data: ctypes._Pointer[ctypes.c_uint8]
@@ -197,9 +275,7 @@ class CEcu:
                 else self.ticks * TICK_PERIOD_US
             )
         self._tick(self._fw, now_us)
-        if self._pending is not None:
-            pending, self._pending = self._pending, None
-            raise pending
+        self._raise_pending()
 
     @property
     def state(self) -> State:
@@ -230,18 +306,20 @@ class CFirmwareBoard(FirmwareBoard):
         accept_ids: frozenset[int] | None = None,
         *,
         secoc_key: bytes | None = None,
+        nvm: NvmCell | None = None,
     ) -> None:
-        if secoc_key is not None:  # the ABI (version 1) provisions no key: say so, never ignore it
-            raise ConfigurationError(
-                "--secoc-key needs the Python firmware: the C library's ABI takes no key yet"
-            )
-        ecu = CEcu(self, params, clock)  # built and loaded before the board takes the bus
-        super().__init__(bus, params, clock, accept_ids)
-        self.ecu = ecu  # type: ignore[assignment]
+        lib = load_library()  # built and loaded (and its ABI checked) before the board starts
+        if secoc_key is not None:
+            check_secoc_abi(lib)
+        super().__init__(bus, params, clock, accept_ids, secoc_key=secoc_key, nvm=nvm)
+
+    def _start_firmware(self) -> CEcu:  # type: ignore[override]
+        """Reset: a C firmware with the board's configuration (key and NVM cell)."""
+        return CEcu(self, self.params, self.clock, secoc_key=self.secoc_key, nvm=self.nvm)
 
 
 class BoardMaker(Protocol):
-    """A board class: ``(bus, params, clock, accept_ids, *, secoc_key=None)``."""
+    """A board class: ``(bus, params, clock, accept_ids, *, secoc_key=None, nvm=None)``."""
 
     def __call__(
         self,
@@ -251,21 +329,20 @@ class BoardMaker(Protocol):
         accept_ids: frozenset[int] | None = None,
         *,
         secoc_key: bytes | None = None,
+        nvm: NvmCell | None = None,
     ) -> FirmwareBoard: ...
 
 
 def board_maker(kind: str, *, secoc: bool = False) -> BoardMaker:
     """The board class of firmware ``kind`` ("python" or "c"), the C library built and loaded
     now: call it before opening a bus or a log, so a refusal leaves nothing to close or to
-    truncate (``secoc``: a SecOC key will be provisioned, which the C ABI cannot take yet)."""
+    truncate (``secoc``: a SecOC key will be provisioned: a C library of ABI 1 is refused)."""
     if kind == "python":
         return FirmwareBoard
     if kind == "c":
+        lib = load_library()
         if secoc:
-            raise ConfigurationError(
-                "--secoc-key needs the Python firmware: the C library's ABI takes no key yet"
-            )
-        load_library()
+            check_secoc_abi(lib)
         return CFirmwareBoard
     raise ConfigurationError(f"unknown firmware {kind!r} (known: {', '.join(FIRMWARES)})")
 

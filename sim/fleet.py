@@ -20,7 +20,7 @@ from __future__ import annotations
 import asyncio
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import can
 
@@ -28,6 +28,7 @@ from odocan.sim.board import TICK_S
 from odocan.sim.clock import RealTimeClock
 from odocan.sim.closing import Closing
 from odocan.sim.contract import cycle_ticks, database
+from odocan.sim.provision import robot_key
 from odocan.sim.realtime import DeadlineStats
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import RobotProfile
@@ -56,6 +57,8 @@ class FleetConfig:
     seed: int = 0
     transport: str = "odocan"  # the rigs' python-can interface (sim.rig.TRANSPORTS)
     first: int = 0  # fleet-wide index of this shard's first robot (names and seeds count on)
+    # SecOC fleet key (None: no SecOC): each firmware gets its own key, sim.provision.robot_key
+    secoc_key: bytes | None = field(default=None, repr=False)
 
     def shard(self, first: int, robots: int) -> FleetConfig:
         """Robots ``first .. first + robots - 1`` of this fleet (fleet-wide indices)."""
@@ -96,6 +99,8 @@ class Fleet(Closing):
                     channel=f"{prefix}-{i}",
                     truth_phase_ticks=_truth_phase(config.first + i),
                     transport=config.transport,
+                    secoc_key=None if config.secoc_key is None
+                    else robot_key(config.secoc_key, self.names[i]),
                 ),
                 listeners=[self._collectors[i]],
             )

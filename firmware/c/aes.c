@@ -1,21 +1,15 @@
 /* AES-128 block encryption (FIPS-197), integer-only: firmware/aes.py, same names and order.
  *
- * The S-box and the four round tables are computed from their definition (the multiplicative
- * inverse in GF(2^8) by log/antilog tables over the generator 0x03, then the affine map) the
- * first time a key is expanded, as firmware/aes.py computes them at import; on an MCU they would
- * be const tables in flash (4 x 1 KiB + 256 B) generated once. */
+ * The S-box and the four round tables are static const tables in flash (4 x 1 KiB + 256 B,
+ * aes_tables.h), generated at dev time by tools/gen_aes_tables.py from FIPS-197's definitions;
+ * firmware/aes.py computes the same tables at import (tests/test_aes_tables.py compares them). */
 #include "aes.h"
 
-#include <stdbool.h>
+#include "aes_tables.h"
 
 #define GF_POLY_LOW 0x1Bu
-#define SBOX_AFFINE_CONST 0x63u
 
 static const uint8_t RCON[10] = {0x01, 0x02, 0x04, 0x08, 0x10, 0x20, 0x40, 0x80, 0x1B, 0x36};
-
-static uint8_t SBOX[256];
-static uint32_t TE0[256], TE1[256], TE2[256], TE3[256];
-static bool tables_ready;
 
 /* Multiplication by x (0x02) in GF(2^8) (FIPS-197 4.2.1). */
 uint8_t xtime(uint8_t b)
@@ -25,45 +19,6 @@ uint8_t xtime(uint8_t b)
         doubled ^= 0x100u | GF_POLY_LOW;
     }
     return (uint8_t)doubled;
-}
-
-static uint8_t rotl8(uint8_t b, unsigned n)
-{
-    return (uint8_t)((unsigned)(b << n) | (unsigned)(b >> (8u - n)));
-}
-
-static uint32_t ror32(uint32_t word, unsigned n)
-{
-    return (word >> n) | (word << (32u - n));
-}
-
-static void init_tables(void)
-{
-    uint8_t exp[256], log[256] = {0};
-    uint8_t value = 1;
-    for (unsigned i = 0; i < 255u; i++) {
-        exp[i] = value;
-        log[value] = (uint8_t)i;
-        value = (uint8_t)(value ^ xtime(value)); /* value * 3 */
-    }
-    exp[255] = exp[0];
-    for (unsigned x = 0; x < 256u; x++) {
-        uint8_t inverse = x ? exp[255u - log[x]] : 0u;
-        uint8_t affine = inverse;
-        for (unsigned n = 1; n <= 4u; n++) {
-            affine = (uint8_t)(affine ^ rotl8(inverse, n));
-        }
-        SBOX[x] = (uint8_t)(affine ^ SBOX_AFFINE_CONST);
-    }
-    for (unsigned x = 0; x < 256u; x++) {
-        uint32_t s = SBOX[x];
-        uint32_t s2 = xtime((uint8_t)s);
-        TE0[x] = (s2 << 24) | (s << 16) | (s << 8) | (s2 ^ s);
-        TE1[x] = ror32(TE0[x], 8);
-        TE2[x] = ror32(TE0[x], 16);
-        TE3[x] = ror32(TE0[x], 24);
-    }
-    tables_ready = true;
 }
 
 static uint32_t sub_word(uint32_t word)
@@ -89,9 +44,6 @@ void store_be32(uint8_t *out, unsigned offset, uint32_t word)
 /* FIPS-197 5.2 KeyExpansion: the 44 round-key words (provisioning time, once per key). */
 void aes128_expand_key(const uint8_t key[AES128_KEY_BYTES], uint32_t rk[AES128_ROUND_KEY_WORDS])
 {
-    if (!tables_ready) {
-        init_tables();
-    }
     for (unsigned i = 0; i < 4u; i++) {
         rk[i] = load_be32(key, 4u * i);
     }

@@ -32,6 +32,38 @@ int odocan_fw_init(void *fw, size_t size, const uint32_t params[6], odocan_fw_tx
     return 0;
 }
 
+/* No EPOCH cell: reads "never written", refuses every write (the firmware fails closed). */
+static uint32_t no_nvm_read(void *nvm_ctx)
+{
+    (void)nvm_ctx;
+    return 0u;
+}
+
+static bool no_nvm_write(void *nvm_ctx, uint32_t epoch)
+{
+    (void)nvm_ctx;
+    (void)epoch;
+    return false;
+}
+
+int odocan_fw_provision_secoc(void *fw, const uint8_t *key, uint32_t key_len,
+                              odocan_fw_nvm_read_fn read_epoch,
+                              odocan_fw_nvm_write_fn write_epoch, void *nvm_ctx)
+{
+    struct odom_ecu *ecu = (struct odom_ecu *)fw;
+    if (ecu->secoc_on || ecu->ticks != 0u) {
+        return -1;
+    }
+    struct freshness_nvm nvm = {no_nvm_read, no_nvm_write, NULL};
+    if (read_epoch != NULL && write_epoch != NULL) {
+        nvm.read_epoch = read_epoch;
+        nvm.write_epoch = write_epoch;
+        nvm.ctx = nvm_ctx;
+    }
+    ecu_provision_secoc(ecu, key, key_len == AES128_KEY_BYTES ? AES128_KEY_BYTES : 0u, nvm);
+    return 0;
+}
+
 void odocan_fw_rx_isr(void *fw, uint32_t can_id, uint32_t len, const uint8_t *data)
 {
     ecu_isr_can_rx((struct odom_ecu *)fw, can_id, data, (size_t)len);

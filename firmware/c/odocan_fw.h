@@ -6,14 +6,18 @@
  * binds it without a header parser. The firmware allocates nothing: the host allocates
  * odocan_fw_state_size() bytes (aligned for uint64_t) and passes them to every call. One
  * instance is one ECU; a process may hold several. No call blocks or keeps a pointer to the
- * host's arguments beyond its return, except `tx` and `tx_ctx`, kept by odocan_fw_init.
+ * host's arguments beyond its return, except `tx` and `tx_ctx`, kept by odocan_fw_init, and the
+ * NVM functions and `nvm_ctx`, kept by odocan_fw_provision_secoc.
  *
  * Calling order, from a single thread (the board serialises its "interrupts"):
- *   odocan_fw_init once; then every TICK_PERIOD_US: odocan_fw_bus_state when the controller's
+ *   odocan_fw_init once; with SecOC, odocan_fw_provision_secoc right after it; then every
+ *   TICK_PERIOD_US: odocan_fw_bus_state when the controller's
  *   bus-off state changed, odocan_fw_rx_isr for every received frame, then odocan_fw_tick.
  *
  * Versioning: ODOCAN_FW_ABI_VERSION changes whenever a function, an argument or a meaning below
- * changes; a host checks odocan_fw_abi_version() before any other call. */
+ * changes; a host checks odocan_fw_abi_version() before any other call.
+ *   1: init, rx_isr, bus_state, rx_overrun, tick, state, errors, ticks (no SecOC).
+ *   2: 1 + odocan_fw_provision_secoc (a host with a key refuses a version-1 library). */
 #ifndef ODOCAN_FW_H
 #define ODOCAN_FW_H
 
@@ -21,7 +25,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define ODOCAN_FW_ABI_VERSION 1u
+#define ODOCAN_FW_ABI_VERSION 2u
 
 /* The firmware's transmit: queue one classic CAN data frame (11-bit ID, 8 bytes), called from
  * inside odocan_fw_tick. Return false when the frame could not be queued (TX queue full,
@@ -42,6 +46,22 @@ size_t odocan_fw_state_size(void);
  * Returns 0, or -1 (nothing done) when `size` is smaller than odocan_fw_state_size(). */
 int odocan_fw_init(void *fw, size_t size, const uint32_t params[6], odocan_fw_tx_fn tx,
                    void *tx_ctx);
+
+/* The SecOC EPOCH cell of non-volatile memory (data flash, EEPROM; docs/secoc.md): read the
+ * stored u32 EPOCH (0: never written), write one (false: the write failed, the firmware then
+ * refuses every secured command). Same types as secoc.h's struct freshness_nvm. */
+typedef uint32_t (*odocan_fw_nvm_read_fn)(void *nvm_ctx);
+typedef bool (*odocan_fw_nvm_write_fn)(void *nvm_ctx, uint32_t epoch);
+
+/* ABI 2. Provision the SecOC key (`key_len` bytes at `key`, copied: 16 for AES-128; NULL or
+ * another length: no usable key, every secured command refused AUTH_UNAVAILABLE) and the EPOCH
+ * cell, then boot the freshness (EPOCH + 1 written to the cell before anything is accepted).
+ * Without this call the firmware runs without SecOC, as under ABI 1. `read_epoch` or
+ * `write_epoch` NULL: no NVM, the firmware fails closed. Returns 0, or -1 (nothing done) when the
+ * instance was already provisioned or has ticked: a key is configuration, given at reset. */
+int odocan_fw_provision_secoc(void *fw, const uint8_t *key, uint32_t key_len,
+                              odocan_fw_nvm_read_fn read_epoch,
+                              odocan_fw_nvm_write_fn write_epoch, void *nvm_ctx);
 
 /* The CAN receive interrupt: one received 11-bit data frame of `len` bytes (`data` may be NULL
  * when len is 0). The firmware copies it into its mailbox and returns; frames of another length

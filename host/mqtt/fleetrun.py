@@ -57,8 +57,10 @@ from odocan.host.judge.tracking import ErrorStats
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
 from odocan.host.mqtt.options import broker_for
+from odocan.host.protocol.secoc import SecocSigner
 from odocan.sim.board import TICK_S
 from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
+from odocan.sim.provision import robot_key
 from odocan.sim.realtime import DeadlineStats
 
 # pose vs reference, in LSBs of the pose signals: the live reference starts at the rounded
@@ -80,6 +82,9 @@ class FleetRun:
     connect_timeout_s: float = 5.0
     command_expiry_s: float = 5.0
     tolerance: Tolerance = FLEET_TOLERANCE
+    # SecOC (fleet.secoc_key): robots whose bridge is given no key (a misprovisioned bridge: the
+    # firmware refuses their secured commands, NACK AUTH_MISSING); every other bridge signs
+    secoc_unsigned: frozenset[str] = frozenset()
 
 
 StartHook = Callable[[int, "BrokerURL | None"], None]
@@ -187,8 +192,18 @@ async def _all_connected(bridge: Bridge, timeout_s: float) -> None:
 def _endpoints(fleet: Fleet, run: FleetRun) -> list[RobotEndpoint]:
     p = run.fleet.robot
     geometry = Geometry.of(p)
-    return [RobotEndpoint(name, fleet.host_bus(i), geometry, run.fleet.integrator, p.counter_bits)
+    return [RobotEndpoint(name, fleet.host_bus(i), geometry, run.fleet.integrator, p.counter_bits,
+                          signer=_signer(run, name))
             for i, name in enumerate(fleet.names)]
+
+
+def _signer(run: FleetRun, name: str) -> SecocSigner | None:
+    """Robot ``name``'s SecOC signer: its own key, derived from the fleet key as its firmware's
+    was (``sim.provision``); None without a fleet key or for a robot in ``secoc_unsigned``."""
+    key = run.fleet.secoc_key
+    if key is None or name in run.secoc_unsigned:
+        return None
+    return SecocSigner(robot_key(key, name))
 
 
 def _report(

@@ -13,7 +13,7 @@ The screen, top to bottom (rows on 80×24)::
 
     header       source, time, frames, bus load, PAUSED, the trace filter             1
     verdict      the judge's verdict (OK, STALE, CONFLICT, DEGRADED, POSE WRONG) and why 1
-    firmware     STATE, reason (error bits), age of the status, integrator, uptime    1
+    firmware     STATE, AUTH refusals (SecOC), reason, status age, integrator, uptime 1
     pose         on-board / reference / truth, on-board minus each (latest and max)   4
     alert        nothing heard for 2 s and why, node events, frames not checked       1
     messages     rate, jitter, E2E, and per-page rates of multiplexed messages      ≥ 4
@@ -334,6 +334,7 @@ def firmware_line(snapshot: dict[str, Any], status_age_s: float | None) -> Text:
     line.append("firmware ", style="bold")
     if not status:
         line.append("no ODOM_STATUS summary yet", style="dim")
+        _append_auth(line, snapshot)
         return line
     state = str(status.get("state"))
     line.append(state, style={"OK": "bold green", "DEGRADED": "bold yellow",
@@ -342,6 +343,7 @@ def firmware_line(snapshot: dict[str, Any], status_age_s: float | None) -> Text:
     stale = bool(status.get("stale")) or (age_s is not None and age_s > STATUS_STALE_S)
     if stale:
         line.append(" STALE", style="bold reverse red")
+    _append_auth(line, snapshot)  # before the long fields: never cut off on 80 columns
     errors = status.get("errors") or []
     reason = " ".join(errors) if errors else "no error bits"
     line.append(f"  reason {reason}", style="yellow" if errors else "")
@@ -349,6 +351,27 @@ def firmware_line(snapshot: dict[str, Any], status_age_s: float | None) -> Text:
         line.append(f"  age {age_s:.1f} s", style="red" if stale else "")
     line.append(f"  {status.get('integrator')}  uptime {status.get('uptime_s')} s")
     return line
+
+
+# snapshot["auth"] counter -> its word on the firmware line, in this order
+AUTH_WORDS = {"auth_failed": "failed", "auth_freshness": "stale", "auth_missing": "missing",
+              "auth_unavailable": "unavailable", "auth_without_command": "orphan"}
+
+
+def auth_text(snapshot: dict[str, Any]) -> str:
+    """The SecOC refusals so far, e.g. ``AUTH 5 failed 3 missing 2 orphan``: the firmware's
+    NACKs by AUTH_* reason, and ODOM_AUTH frames that followed no command (``orphan``); only
+    the counts above 0, and "" when there are none (or the model counts none)."""
+    counts = snapshot.get("auth") or {}
+    parts = [f"{counts[key]} {word}" for key, word in AUTH_WORDS.items() if counts.get(key)]
+    return f"AUTH {' '.join(parts)}" if parts else ""
+
+
+def _append_auth(line: Text, snapshot: dict[str, Any]) -> None:
+    """The firmware line's authentication segment (bold red), when there is one."""
+    text = auth_text(snapshot)
+    if text:
+        line.append(f"  {text}", style="bold red")
 
 
 def _pose_rows(snapshot: dict[str, Any]) -> Table:

@@ -7,12 +7,18 @@ its timer. The board's acceptance filter passes only the frames ODOM_MCU receive
 interfaces such as ``udp_multicast`` hand a node its own frames back, a CAN controller does
 not. Without ``--duration`` it runs until Ctrl-C or SIGTERM; either way it closes the bus,
 prints a one-line summary on stderr and exits 0.
+
+SecOC (docs/secoc.md): ``--secoc-key PATH`` provisions the firmware (Python or C) with the key;
+its EPOCH lives in RAM for the process, or with ``--nvm PATH`` in a file (``sim.board.FileNvm``:
+atomic writes), so a restarted process is a reboot and keeps refusing the commands of the
+previous run. A corrupt NVM file, or one that cannot be written, is one line and exit 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from odocan.host.cli.options import (
     add_duration_argument,
@@ -20,8 +26,11 @@ from odocan.host.cli.options import (
     check_duration,
 )
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
+from odocan.host.protocol.secoc import load_secoc_key
 from odocan.sim import robot
+from odocan.sim.board import FileNvm, NvmCell
 from odocan.sim.cboard import board_maker
+from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.realtime import PeriodicLoop, accepted_ids, stop_on_signals
 from odocan.sim.rig import firmware_params
 
@@ -35,6 +44,20 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "ODOM_POSE_X/Y and ODOM_TWIST every 20 ms and ODOM_STATUS every 100 ms.",
     )
     add_firmware_arguments(parser)
+    parser.add_argument(
+        "--secoc-key",
+        type=Path,
+        metavar="PATH",
+        help="provision the firmware with this SecOC key (16 raw bytes or 32 hex digits, "
+        "docs/secoc.md): its commands then need an ODOM_AUTH (default: no SecOC)",
+    )
+    parser.add_argument(
+        "--nvm",
+        type=Path,
+        metavar="PATH",
+        help="the firmware's non-volatile memory (the SecOC EPOCH) in this file, created on "
+        "first use; needs --secoc-key (default: in RAM, lost when the process ends)",
+    )
     add_duration_argument(parser)
     add_bus_arguments(parser)
     add_fault_argument(parser)
@@ -44,11 +67,17 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 def _do_firmware(args: argparse.Namespace) -> int:
     params = firmware_params(robot.load(args.robot), args.integrator)
     check_duration(args.duration)
-    make_board = board_maker(args.firmware)  # builds the C library before the bus opens
+    key = None if args.secoc_key is None else load_secoc_key(args.secoc_key)
+    nvm = _nvm(args.nvm, key)
+    # builds the C library (and checks its ABI takes a key) before the bus opens
+    make_board = board_maker(args.firmware, secoc=key is not None)
     bus = open_bus(args)
     try:
         loop = PeriodicLoop()
-        board = make_board(bus, params, loop.clock, accepted_ids("ODOM_MCU"))
+        board = make_board(bus, params, loop.clock, accepted_ids("ODOM_MCU"), secoc_key=key,
+                           nvm=nvm)
+        if isinstance(nvm, FileNvm) and nvm.error is not None:  # the boot's EPOCH write
+            raise ConfigurationError(f"--nvm: {nvm.error}")
         with stop_on_signals(loop):
             stats = loop.run(lambda _k: board.run_tick(), args.duration)
     finally:
@@ -61,3 +90,15 @@ def _do_firmware(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     return 0
+
+
+def _nvm(path: Path | None, key: bytes | None) -> NvmCell | None:
+    """The EPOCH cell: ``path``'s file, or None (the board's RAM cell); refused without a key."""
+    if path is None:
+        return None
+    if key is None:
+        raise ConfigurationError("--nvm holds the SecOC EPOCH: it needs --secoc-key")
+    try:
+        return FileNvm(path)
+    except ConfigurationError as exc:
+        raise ConfigurationError(f"--nvm: {exc}") from None

@@ -37,6 +37,7 @@ from odocan.host.mqtt.options import (
     configure_logging,
 )
 from odocan.host.mqtt.shards import Shard, embedded_broker, run_sharded
+from odocan.host.protocol.secoc import load_secoc_key
 from odocan.host.report.outputs import check_writable, write_text
 from odocan.host.report.progress import Progress, wall_clock_progress
 from odocan.sim import robot
@@ -120,6 +121,14 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="PORT",
         help="the embedded broker's 127.0.0.1 port (default: a free one); not with --broker",
     )
+    parser.add_argument(
+        "--secoc-key",
+        type=Path,
+        metavar="PATH",
+        help="the fleet's SecOC key (16 raw bytes or 32 hex digits; not the TLS --key): each "
+        "robot's firmware verifies its commands with its own key derived from it, which its "
+        "bridge signs with (docs/secoc.md) (default: no SecOC)",
+    )
     add_mqtt_arguments(parser)
     add_foxglove_argument(parser)
 
@@ -152,6 +161,7 @@ def _do_fleet(args: argparse.Namespace) -> int:
         integrator=args.integrator,
         scenario=args.scenario,
         seed=args.seed,
+        secoc_key=None if args.secoc_key is None else load_secoc_key(args.secoc_key),
     ).shard(first, robots)
     run = FleetRun(fleet=fleet, duration_s=args.duration, broker=broker, **bridge_options(args))
     debug = getattr(args, "debug", False)
