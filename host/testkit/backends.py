@@ -31,6 +31,7 @@ from odocan.sim.motor_controller import SimNode
 from odocan.sim.realtime import PeriodicLoop
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.scenarios import Scenario
+from odocan.sim.tickloop import TickLoop
 from odocan.sim.vehicle import Vehicle
 
 _LOCKSTEP_ACK_TIMEOUT_S = 1.0  # simulated seconds for an ODOM_ACK (it comes in the next tick)
@@ -203,6 +204,7 @@ class ExternalBackend:
         self.sim = SimNode(sim_bus, vehicle, self.clock, None)
         self._outbox: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
         self._lock = threading.Lock()  # the vehicle and the driver
+        self._tick_loop = TickLoop(self._work, host_bus, [self.recorder])  # real time: no clock
         self._loop = PeriodicLoop(TICK_S, self.clock)
         self._failure: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="odocan-sim", daemon=True)
@@ -210,12 +212,13 @@ class ExternalBackend:
 
     def _run(self) -> None:
         try:
-            self._loop.run(self._tick)
+            self._loop.run(self._tick_loop.tick)
         except BaseException as exc:  # reported to the test thread at its next wait
             self._failure = exc
 
-    def _tick(self, k: int) -> None:
-        """Host frames out; then MOTOR_CTRL, driver, encoders, truth; then what the host heard."""
+    def _work(self, k: int) -> None:
+        """Host frames out; then MOTOR_CTRL, driver, encoders, truth (``sim.tickloop`` then
+        hands what the host heard to the recorder)."""
         while True:
             try:
                 can_id, data = self._outbox.get_nowait()
@@ -224,10 +227,6 @@ class ExternalBackend:
             self._host_bus.send(can.Message(arbitration_id=can_id, is_extended_id=False, data=data))
         with self._lock:
             self.sim.tick(k)
-        msg = self._host_bus.recv(0)
-        while msg is not None:
-            self.recorder.on_message_received(msg)
-            msg = self._host_bus.recv(0)
 
     def now_s(self) -> float:
         """Wall-clock seconds since the backend started."""
