@@ -18,10 +18,10 @@ from typing import Any, Protocol
 import can
 
 from odocan.host.io.buses import auto_type, isolated_bus_kwargs
+from odocan.host.protocol.heard import Recorder
 from odocan.host.protocol.pose import Pose
 from odocan.host.protocol.secoc import load_secoc_key
 from odocan.host.testkit.options import RigOptions, TestkitError, fault_spec
-from odocan.host.testkit.recorder import Recorder
 from odocan.sim import contract
 from odocan.sim.board import TICK_S
 from odocan.sim.clock import RealTimeClock
