@@ -33,16 +33,16 @@ from odocan.host.judge.reference import Geometry, deltas_from_counts, integrate
 from odocan.host.protocol.commands import CommandRejected
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.heard import Recorder
-from odocan.host.protocol.pose import Pose as OnboardPose
 from odocan.host.protocol.session import CommandNotAcked, CommandSession
 from odocan.sim.board import TICK_S
 from odocan.sim.closing import Closing
 from odocan.sim.contract import database
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import OdocanError
+from odocan.sim.pose import Pose
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import RobotProfile
-from odocan.sim.truth import Pose
+from odocan.sim.truth import TruthPose
 
 BOOT_S = 0.2  # the odometry is OK (first encoder frames) before the first goal is sent
 SETTLE_S = 1.0  # after the last REACHED: the zero commands, then the motors' tail
@@ -75,7 +75,7 @@ class Mark:
 
     goal_id: int
     state: str
-    pose: Pose
+    pose: TruthPose
 
 
 @dataclass(frozen=True)
@@ -87,8 +87,8 @@ class DriveResult:
     last is of the tick of ``end``)."""
 
     marks: tuple[Mark, ...]
-    end: Pose
-    onboard_end: OnboardPose
+    end: TruthPose
+    onboard_end: Pose
     encoder_counts: tuple[IntArray, IntArray]
 
     def mark(self, goal_id: int, state: str) -> Mark:
@@ -222,11 +222,6 @@ class NavSession(Closing):
         """(left, right) LEFT_COUNT/RIGHT_COUNT of every WHEEL_ENCODERS frame heard (raw u24)."""
         decoded = BulkDecoder(database()).decode(self.heard.arrays(), "WHEEL_ENCODERS")
         return decoded["LEFT_COUNT"].astype(np.int64), decoded["RIGHT_COUNT"].astype(np.int64)
-
-
-def wrap_pi(angle_rad: float) -> float:
-    """``angle_rad`` wrapped to [-pi, pi)."""
-    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def dead_reckon(

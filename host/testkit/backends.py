@@ -96,10 +96,6 @@ class _Shifted:
         return self._scenario.command_at(t_s - self._start_s)
 
 
-def _pose_of(truth: Any) -> Pose:
-    return Pose(float(truth.x_m), float(truth.y_m), float(truth.heading_rad))
-
-
 class LockstepBackend:
     """Our firmware in a ``LockstepRig``, closed loop, on a virtual channel of its own."""
 
@@ -144,7 +140,7 @@ class LockstepBackend:
 
     def truth(self) -> Pose:
         """The vehicle's true pose (float64)."""
-        return _pose_of(self.rig.vehicle.truth())
+        return self.rig.vehicle.truth().pose
 
     def buses(self) -> tuple[can.BusABC, ...]:
         """The sim's, the firmware's and the host's handles."""
@@ -266,7 +262,7 @@ class ExternalBackend:
     def truth(self) -> Pose:
         """The vehicle's true pose now."""
         with self._lock:
-            return _pose_of(self.sim.vehicle.truth())
+            return self.sim.vehicle.truth().pose
 
     def buses(self) -> tuple[can.BusABC, ...]:
         """The host's and the sim's handles."""
