@@ -21,7 +21,9 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from odocan.host.judge.monitor import BusMonitor  # noqa: E402
-from odocan.host.report.tui import REFRESH_S, Trace, View, screen  # noqa: E402
+from odocan.host.report.trace import Trace  # noqa: E402
+from odocan.host.report.tui import View, screen  # noqa: E402
+from odocan.host.report.tui_app import REFRESH_S  # noqa: E402
 from odocan.sim import robot  # noqa: E402
 from odocan.sim.rig import LockstepRig, RigConfig  # noqa: E402
 

@@ -49,6 +49,7 @@ from odocan.sim.faults import DEFAULT_BITRATE, FaultInjectingBus, FaultSpec
 from odocan.sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import get_scenario
+from odocan.sim.tickloop import TickLoop
 from odocan.sim.transport import OdocanBus, data_frame
 from odocan.sim.vehicle import Vehicle
 
@@ -131,7 +132,6 @@ class LockstepRig(Closing):
             if scenario is None
             else scenario.default_duration_s
         )
-        self.ticks = 0
         now_s = self.clock.now_s
         self._buses: list[can.BusABC] = [
             self._open_bus(now_s, filters=_MOTOR_CTRL_ACCEPTS),
@@ -150,7 +150,7 @@ class LockstepRig(Closing):
             sim_bus, vehicle, self.clock, scenario, truth_phase_ticks=config.truth_phase_ticks
         )
         self.board = make_board(fw_bus, params, self.clock, None, secoc_key=config.secoc_key)
-        self.listeners = list(listeners)
+        self.loop = TickLoop(self._work, self.host_bus, list(listeners), self.clock)
 
     @property
     def vehicle(self) -> Vehicle:
@@ -196,23 +196,32 @@ class LockstepRig(Closing):
         takes it at its next tick and the listeners hear it like any other frame."""
         self.host_bus.send(data_frame(self.clock.now_s(), can_id, data))
 
+    @property
+    def listeners(self) -> list[can.Listener]:
+        """What the host observer hands every frame to (python-can ``Listener``s)."""
+        return self.loop.listeners
+
+    @listeners.setter
+    def listeners(self, listeners: list[can.Listener]) -> None:
+        self.loop.listeners = listeners
+
+    @property
+    def ticks(self) -> int:
+        """Ticks run so far (the next one is ``ticks``); settable, e.g. by a staggered fleet."""
+        return self.loop.ticks
+
+    @ticks.setter
+    def ticks(self, value: int) -> None:
+        self.loop.ticks = value
+
     def step(self) -> None:
-        """One 10 ms tick, in the order of the module docstring."""
-        k = self.ticks
-        self.clock.advance_to(k * TICK_S)
+        """One 10 ms tick, in the order of the module docstring (``sim.tickloop``)."""
+        self.loop.step()
+
+    def _work(self, k: int) -> None:
+        """The nodes' work in tick ``k``: the sim node, then the firmware's board."""
         self.sim.tick(k)
         self.board.run_tick()
-        self._drain_host()
-        self.ticks = k + 1
-
-    def _drain_host(self) -> None:
-        recv = self.host_bus.recv
-        listeners = self.listeners
-        msg = recv(0)
-        while msg is not None:
-            for listener in listeners:
-                listener.on_message_received(msg)
-            msg = recv(0)
 
     def run(
         self, duration_s: float | None = None, progress: Callable[[int, int], None] | None = None
@@ -222,23 +231,12 @@ class LockstepRig(Closing):
         ``progress(done_ticks, total_ticks)`` is called about every simulated second.
         """
         total = round((self.default_duration_s if duration_s is None else duration_s) / TICK_S)
-        step = self.step
-        for k in range(total):
-            step()
-            if progress is not None and k % 100 == 99:
-                progress(k + 1, total)
-        if progress is not None:
-            progress(total, total)
+        self.loop.run(total, progress)
 
     def run_until(self, done: Callable[[], bool], timeout_s: float) -> bool:
         """Step until ``done()`` (checked after every tick) or ``timeout_s`` of simulated time
         has passed; True when ``done()`` was reached."""
-        end = self.ticks + round(timeout_s / TICK_S)
-        while self.ticks < end:
-            self.step()
-            if done():
-                return True
-        return False
+        return self.loop.run_until(done, round(timeout_s / TICK_S))
 
     def close(self) -> None:
         """Stop the listeners and release the virtual buses: every one of them, even when a

@@ -18,24 +18,21 @@ wrapped to (-pi, pi] only when reported.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
+from odocan.sim.pose import Pose, wrap_angle
+
 FloatArray = npt.NDArray[np.float64]
 _SMALL_HALF_ANGLE = 1e-4  # below this, sin(h)/h = 1 - h^2/6 to better than 1e-17
 
 
-def wrap_angle(angle_rad: float) -> float:
-    """``angle_rad`` wrapped to (-pi, pi]."""
-    return math.pi - (math.pi - angle_rad) % (2.0 * math.pi)
-
-
 @dataclass(frozen=True)
-class Pose:
-    """Ground-truth pose of the wheel-axle midpoint.
+class TruthPose:
+    """Ground-truth pose of the wheel-axle midpoint at one instant (``pose``: its plain
+    ``sim.pose.Pose``).
 
     Attributes:
         t_s: simulated time, s.
@@ -49,6 +46,11 @@ class Pose:
     y_m: float
     heading_rad: float
     distance_m: float
+
+    @property
+    def pose(self) -> Pose:
+        """x_m, y_m and the heading in (-pi, pi] as a plain ``Pose``."""
+        return Pose(self.x_m, self.y_m, self.heading_rad)
 
 
 @dataclass(frozen=True)
@@ -137,9 +139,9 @@ class GroundTruth:
         t = (self.substep + idx) / self.substep_hz
         self._trace.append(np.stack((t, x[idx], y[idx], h[idx], d[idx])))
 
-    def pose(self) -> Pose:
-        """The current pose, heading wrapped to (-pi, pi]."""
-        return Pose(
+    def pose(self) -> TruthPose:
+        """The current pose, heading wrapped to (-pi, pi] (``sim.pose.wrap_angle``)."""
+        return TruthPose(
             t_s=self.substep / self.substep_hz,
             x_m=self.x_m,
             y_m=self.y_m,

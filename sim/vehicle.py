@@ -19,7 +19,7 @@ from odocan.sim.drivetrain import Drivetrain, MotorConfig
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.robot import RobotProfile
-from odocan.sim.truth import GroundTruth, Pose, TruthTrace
+from odocan.sim.truth import GroundTruth, TruthPose, TruthTrace
 
 _MAX_PENDING = 1 << 16  # substeps held before the ground truth is brought up to date
 _TIME_EPS = 1e-6  # in substeps
@@ -114,7 +114,7 @@ class Vehicle:
         """Actual (left, right) wheel ground speeds now, m/s (before the random slip)."""
         return self.drivetrain.wheel_speeds_mps()
 
-    def truth(self) -> Pose:
+    def truth(self) -> TruthPose:
         """The true pose now."""
         self._sync_truth()
         return self._truth.pose()

@@ -33,6 +33,7 @@ from odocan.sim.faults import FaultInjectingBus, FaultSpec
 from odocan.sim.motor_controller import SimNode
 from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import RandomScenario, Scenario
+from odocan.sim.tickloop import TickLoop
 from odocan.sim.vehicle import Vehicle
 from tests.dbc_typed import dbc_attribute
 from tests.odo_helpers import geometry, params
@@ -85,7 +86,8 @@ class FaultRig:
         self.board = FirmwareBoard(self.fw_bus, self.params, self.clock)
         self.observers: list[Observer] = []
         self.before_board: list[Hook] = []
-        self.ticks = 0
+        self._heard: list[can.Message] = []
+        self.loop = TickLoop(self._work, self.host_bus, [_Heard(self._heard)], self.clock)
         self.halted: Callable[[int], bool] = lambda _k: False  # the MCU runs no tick (a stall)
 
     @property
@@ -93,20 +95,28 @@ class FaultRig:
         """The firmware."""
         return self.board.ecu
 
+    @property
+    def ticks(self) -> int:
+        """Ticks run so far."""
+        return self.loop.ticks
+
     def step(self) -> None:
-        """One 10 ms tick in ``LockstepRig.step``'s order (hooks run just before the board; the
-        board does not run in ticks where ``halted(k)``)."""
-        k = self.ticks
-        self.clock.advance_to(k * TICK_S)
+        """One 10 ms tick of ``sim.tickloop`` as ``LockstepRig.step`` runs it (hooks run just
+        before the board; the board does not run in ticks where ``halted(k)``); then the
+        observers get the tick's host frames."""
+        k = self.loop.ticks
+        self.loop.step()
+        frames = list(self._heard)
+        self._heard.clear()
+        for observer in self.observers:
+            observer(k, frames)
+
+    def _work(self, k: int) -> None:
         self.sim.tick(k)
         for hook in self.before_board:
             hook(k)
         if not self.halted(k):
             self.board.run_tick()
-        frames = list(_drain(self.host_bus))
-        for observer in self.observers:
-            observer(k, frames)
-        self.ticks = k + 1
 
     def run(self, duration_s: float) -> None:
         """``duration_s`` of simulated time."""
@@ -125,11 +135,14 @@ class FaultRig:
         self.close()
 
 
-def _drain(bus: can.BusABC) -> Iterator[can.Message]:
-    msg = bus.recv(0)
-    while msg is not None:
-        yield msg
-        msg = bus.recv(0)
+class _Heard(can.Listener):
+    """Keeps every frame the host observer hears, in bus order."""
+
+    def __init__(self, into: list[can.Message]) -> None:
+        self.into = into
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self.into.append(msg)
 
 
 @dataclass

@@ -195,7 +195,8 @@ def test_the_monitor_header_shows_the_bus_load(bitrate: int | None) -> None:
     from rich.console import Console
 
     from odocan.host.judge.monitor import BusMonitor
-    from odocan.host.report.tui import Trace, View, screen
+    from odocan.host.report.trace import Trace
+    from odocan.host.report.tui import View, screen
 
     model = BusMonitor(robot.load("pmir"), bitrate=bitrate)
     config = RigConfig(robot=robot.load("pmir"), seed=1, channel=f"busstats-tui-{bitrate}")

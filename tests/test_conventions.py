@@ -24,7 +24,7 @@ from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.telemetry import RobotTelemetry
-from odocan.host.protocol.pose import heading_fields, wrap_heading
+from odocan.host.protocol.pose import heading_fields, wrap_angle
 from odocan.sim import robot
 from odocan.sim.contract import database
 from odocan.sim.rig import LockstepRig, RigConfig
@@ -41,8 +41,8 @@ def _atan2_wrap(angle_rad: float) -> float:
 
 
 @given(st.floats(min_value=-1e4, max_value=1e4, allow_nan=False))
-def test_wrap_heading_is_in_the_half_open_interval_and_keeps_the_angle(angle_rad: float) -> None:
-    wrapped = wrap_heading(angle_rad)
+def test_wrap_angle_is_in_the_half_open_interval_and_keeps_the_angle(angle_rad: float) -> None:
+    wrapped = wrap_angle(angle_rad)
     assert -math.pi < wrapped <= math.pi
     difference = abs(wrapped - _atan2_wrap(angle_rad))
     assert min(difference, TURN - difference) < 1e-9  # the same angle (+pi and -pi coincide)
@@ -52,11 +52,11 @@ def test_wrap_heading_is_in_the_half_open_interval_and_keeps_the_angle(angle_rad
     assert abs(turns - round(turns)) < 1e-9
 
 
-def test_wrap_heading_at_the_bounds() -> None:
-    assert wrap_heading(math.pi) == math.pi
-    assert wrap_heading(-math.pi) == math.pi  # the open end goes to the closed one
-    assert wrap_heading(3 * math.pi) == math.pi
-    assert wrap_heading(6.28) < 0  # the truth's 6.28 rad of the issue is just below one turn
+def test_wrap_angle_at_the_bounds() -> None:
+    assert wrap_angle(math.pi) == math.pi
+    assert wrap_angle(-math.pi) == math.pi  # the open end goes to the closed one
+    assert wrap_angle(3 * math.pi) == math.pi
+    assert wrap_angle(6.28) < 0  # the truth's 6.28 rad of the issue is just below one turn
 
 
 def _check_headings(payload: dict[str, Any]) -> float:

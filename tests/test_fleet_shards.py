@@ -20,7 +20,7 @@ import pytest
 from odocan.host.cli.app import main
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance
 from odocan.host.judge.reference import Geometry, ReferenceOdometry
-from odocan.host.judge.tracking import ErrorStats, Pose
+from odocan.host.judge.tracking import ErrorStats, FramePose
 from odocan.host.mqtt import fleetrun
 from odocan.host.mqtt.bridge import RobotEndpoint
 from odocan.host.mqtt.broker import LOOPBACK, free_loopback_port
@@ -87,7 +87,7 @@ def _stats(*errors: tuple[float, float]) -> ErrorStats:
     """ErrorStats of on-board poses off the reference by (dx m, dheading rad)."""
     stats = ErrorStats()
     for k, (dx_m, dh_rad) in enumerate(errors):
-        stats.add(Pose(k, 1.0 + dx_m, 2.0, 0.5 + dh_rad), Pose(k, 1.0, 2.0, 0.5))
+        stats.add(FramePose(k, 1.0 + dx_m, 2.0, 0.5 + dh_rad), FramePose(k, 1.0, 2.0, 0.5))
     return stats
 
 

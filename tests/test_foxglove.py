@@ -24,6 +24,7 @@ from odocan.host.cli.app import main
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.analysis import analyze
 from odocan.host.report.foxglove import FoxgloveLive
+from odocan.sim.pose import wrap_angle
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 
@@ -86,10 +87,6 @@ def heading_of(q: dict[str, float]) -> float:
     return 2 * math.atan2(q["z"], q["w"])
 
 
-def wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
-
-
 @pytest.fixture(scope="module")
 def live_drive() -> tuple[Received, dict[str, Any], Any, FrameCollector]:
     """A 3 s lockstep drive served live; what a client received, and every frame."""
@@ -136,7 +133,7 @@ def test_live_poses_agree_with_the_offline_analysis(
     log_time, last = received["/pose/onboard"][-1]
     final = report["final_onboard_pose"]
     assert last["pose"]["position"] == {"x": final["x_m"], "y": final["y_m"], "z": 0.0}
-    assert abs(wrap(heading_of(last["pose"]["orientation"]) - final["heading_rad"])) < 1e-9
+    assert abs(wrap_angle(heading_of(last["pose"]["orientation"]) - final["heading_rad"])) < 1e-9
     # served at the ODOM_POSE_Y completing the sample, 1 ms after the encoder frame it names
     assert log_time == round(analysis.series["timestamp_s"][-1] * 1e9) + 1_000_000
     ref_errors = [m["position_error_m"] for _, m in received["/errors/reference"]]

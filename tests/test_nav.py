@@ -27,6 +27,7 @@ from odocan.firmware.fixmath import I64_MAX, I64_MIN, isqrt_u64
 from odocan.firmware.frames import AckReason, NavGoalField, NavMode, NavState
 from odocan.sim.board import TICK_S
 from odocan.sim.errors import ErrorModel
+from odocan.sim.pose import wrap_angle
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 
@@ -56,11 +57,6 @@ TOL_RAD = nav.HEADING_TOL_BAM32 * TWO_PI / 2**32  # 0.5 degree
 # measured worst case of 3.6 mm and 0.41 degree from the goal over the runs below.
 TRUTH_TOL_M = 0.008
 TRUTH_TOL_RAD = math.radians(0.75)
-
-
-def wrap_pi(angle_rad: float) -> float:
-    """``angle_rad`` in [-pi, pi)."""
-    return (angle_rad + math.pi) % TWO_PI - math.pi
 
 
 def bam32_rad(angle_bam32: int) -> float:
@@ -111,14 +107,14 @@ def test_bearing_error_against_float(dx_m: float, dy_m: float, heading_bam32: in
     dx, dy = to_q40(dx_m), to_q40(dy_m)
     got = nav.bearing_error_bam32(dx, dy, heading_bam32)
     assert -(2**31) <= got < 2**31
-    want = wrap_pi(math.atan2(dy, dx) - bam32_rad(heading_bam32))
-    assert abs(wrap_pi(bam32_rad(got) - want)) <= 2e-9  # atan2's 0.5 LSB + float noise
+    want = wrap_angle(math.atan2(dy, dx) - bam32_rad(heading_bam32))
+    assert abs(wrap_angle(bam32_rad(got) - want)) <= 2e-9  # atan2's 0.5 LSB + float noise
 
 
 @given(st.integers(0, (1 << 64) - 1))
 def test_heading_bam32_is_the_rounded_bam64(heading_bam64: int) -> None:
     got = nav.heading_bam32_of(heading_bam64)
-    assert abs(wrap_pi(bam32_rad(got) - heading_bam64 * TWO_PI / 2**64)) <= math.pi / 2**32
+    assert abs(wrap_angle(bam32_rad(got) - heading_bam64 * TWO_PI / 2**64)) <= math.pi / 2**32
 
 
 @given(st.integers(-(2**31), 2**31 - 1))
@@ -473,7 +469,7 @@ def pose_error(
     pose: tuple[float, float, float], goal: tuple[float, float, float]
 ) -> tuple[float, float]:
     return math.hypot(pose[0] - goal[0], pose[1] - goal[1]), abs(
-        wrap_pi(pose[2] - math.radians(goal[2]))
+        wrap_angle(pose[2] - math.radians(goal[2]))
     )
 
 

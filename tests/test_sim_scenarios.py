@@ -7,9 +7,10 @@ import math
 import numpy as np
 import pytest
 
+from odocan.sim.pose import wrap_angle
 from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import SCENARIOS, PhaseScenario, ScenarioError, get_scenario
-from odocan.sim.truth import Pose, wrap_angle
+from odocan.sim.truth import TruthPose
 from odocan.sim.vehicle import Vehicle
 
 PROFILES = ["pmir", "kobuki"]
@@ -26,7 +27,7 @@ def integrate(name: str, profile: RobotProfile) -> tuple[float, float]:
     return distance, heading
 
 
-def drive(name: str, profile: RobotProfile, seed: int = 0) -> Pose:
+def drive(name: str, profile: RobotProfile, seed: int = 0) -> TruthPose:
     """Run scenario ``name`` at 100 Hz commands on an error-free robot; the final true pose."""
     scenario = get_scenario(name, profile, seed)
     vehicle = Vehicle(profile)

@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from odocan.sim.truth import GroundTruth, chord_factor, wrap_angle
+from odocan.sim.pose import Pose, wrap_angle
+from odocan.sim.truth import GroundTruth, chord_factor
 
 HZ = 1000
 
@@ -129,8 +130,22 @@ def test_chord_factor_is_continuous_at_the_series_switch() -> None:
 
 @pytest.mark.parametrize(
     ("angle", "wrapped"),
-    [(0.0, 0.0), (math.pi, math.pi), (-math.pi, math.pi), (3 * math.pi, math.pi), (-0.5, -0.5)],
+    [
+        (0.0, 0.0), (math.pi, math.pi), (-math.pi, math.pi), (3 * math.pi, math.pi), (-0.5, -0.5),
+        # one ulp above pi: the angle just past -pi, never -pi itself (the old (pi - a) mod 2 pi
+        # form rounded it to -pi, outside its own (-pi, pi])
+        (math.nextafter(math.pi, 4.0), math.nextafter(math.pi, 4.0) - 2 * math.pi),
+    ],
 )
 def test_wrap_angle_range(angle: float, wrapped: float) -> None:
     assert wrap_angle(angle) == pytest.approx(wrapped, abs=1e-15)
     assert -math.pi < wrap_angle(angle) <= math.pi
+
+
+def test_the_truth_pose_carries_the_one_plain_pose() -> None:
+    truth = GroundTruth(0.3, HZ)
+    truth.advance(constant_travel(700, 0.2, 0.4))
+    sample = truth.pose()
+    assert sample.pose == Pose(sample.x_m, sample.y_m, sample.heading_rad)
+    assert type(sample.pose) is Pose
+    assert sample.pose.heading_rad == wrap_angle(truth.heading_unwrapped_rad)

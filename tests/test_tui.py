@@ -29,16 +29,9 @@ from odocan.host.cli.subparsers import monitor as monitor_cmd
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.mqtt.broker import BrokerURL, free_loopback_port
 from odocan.host.report.live import render_fleet, with_staleness
-from odocan.host.report.tui import (
-    SILENCE_S,
-    FrameFilter,
-    MonitorApp,
-    PageRates,
-    Recorder,
-    Trace,
-    View,
-    screen,
-)
+from odocan.host.report.trace import FrameFilter, PageRates, Trace
+from odocan.host.report.tui import SILENCE_S, View, screen
+from odocan.host.report.tui_app import MonitorApp, Recorder
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultSpec

@@ -11,7 +11,8 @@ import can
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorMask
 from odocan.host.judge.monitor import BusMonitor
-from odocan.host.report.tui import Trace, auth_text, firmware_line
+from odocan.host.report.trace import Trace
+from odocan.host.report.tui import auth_text, firmware_line
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests.test_secoc_rig import (

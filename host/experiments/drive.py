@@ -5,14 +5,16 @@ None)``): the vehicle at rest at the origin of its start frame (x forward, y to 
 headings counter-clockwise positive), the firmware configured with the robot's nominal geometry.
 The host may first write new geometry over CAN (``configure``: ODOM_CONFIG staged writes + APPLY,
 each frame answered by ODOM_ACK), then ``drive`` a path: each goal is staged and committed by
-NAV_GOAL frames built by ``host.commands.CommandEncoder`` (E2E-protected, checked against the
-DBC), the first one REPLACE, the others APPEND; the firmware drives turn-go-turn from its own
-odometry while the host listens:
+NAV_GOAL frames, the first one REPLACE, the others APPEND; the firmware drives turn-go-turn from
+its own odometry while the host listens. The commands, their ODOM_ACKs and NAV_STATUS go through
+``host.protocol.session.CommandSession`` (the pytest kit's too), over what the host heard
+(``host.protocol.heard``: E2E-checked, decoded from the DBC):
 
 * every NAV_STATUS whose (STATE, GOAL_ID) differs from the previous one is a ``Mark``, stamped
   with the ground truth of that tick (``Vehicle.truth()``: the tape measure of the experiment);
-* the last ODOM_POSE_X / ODOM_POSE_Y frames are the on-board pose (0.1 mm, 9.6e-5 rad);
-* every ODOM_ACK is checked: a NACK is an ``ExperimentError``.
+* the last ODOM_POSE_X / ODOM_POSE_Y pair naming one encoder frame is the on-board pose
+  (``host.protocol.pose``; 0.1 mm, 9.6e-5 rad);
+* every ODOM_ACK is checked: a NACK, or none, is an ``ExperimentError``.
 
 The drive ends when the last goal shows REACHED with an empty queue, then the robot is left
 ``SETTLE_S`` to come to rest before the end pose is taken.
@@ -20,30 +22,27 @@ The drive ends when the last goal shows REACHED with an empty queue, then the ro
 
 from __future__ import annotations
 
-import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
 
-import can
 import numpy as np
 import numpy.typing as npt
-from cantools.database.can import Message
-from cantools.database.namedsignalvalue import NamedSignalValue
 
-from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.reference import Geometry, deltas_from_counts, integrate
-from odocan.host.protocol.commands import CommandEncoder, CommandRejected
+from odocan.host.protocol.commands import CommandRejected
 from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.heard import Recorder
+from odocan.host.protocol.session import CommandNotAcked, CommandSession
 from odocan.sim.board import TICK_S
 from odocan.sim.closing import Closing
 from odocan.sim.contract import database
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import OdocanError
+from odocan.sim.pose import Pose
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import RobotProfile
-from odocan.sim.truth import Pose
+from odocan.sim.truth import TruthPose
 
 BOOT_S = 0.2  # the odometry is OK (first encoder frames) before the first goal is sent
 SETTLE_S = 1.0  # after the last REACHED: the zero commands, then the motors' tail
@@ -76,19 +75,20 @@ class Mark:
 
     goal_id: int
     state: str
-    pose: Pose
+    pose: TruthPose
 
 
 @dataclass(frozen=True)
 class DriveResult:
     """A path driven: the marks in order, the settled true end pose, the on-board end pose
-    (x_m, y_m, heading_rad in [0, 2 pi)) as decoded from ODOM_POSE_X/Y, and the raw 24-bit
+    (the last ODOM_POSE_X/Y pair naming one encoder frame, ``host.protocol.pose``: x_m, y_m and
+    the cumulative heading_rad, TURNS * 2 pi + HEADING), and the raw 24-bit
     (left, right) counters of every WHEEL_ENCODERS frame from t = 0 (the first is at rest, the
     last is of the tick of ``end``)."""
 
     marks: tuple[Mark, ...]
-    end: Pose
-    onboard_end: tuple[float, float, float]
+    end: TruthPose
+    onboard_end: Pose
     encoder_counts: tuple[IntArray, IntArray]
 
     def mark(self, goal_id: int, state: str) -> Mark:
@@ -99,60 +99,9 @@ class DriveResult:
         raise ExperimentError(f"goal {goal_id} never showed {state}")
 
 
-class _NavListener(can.Listener):
-    """Hears NAV_STATUS changes, ODOM_ACKs and the last on-board pose (decoded with cantools)."""
-
-    def __init__(self) -> None:
-        db = database()
-        self._status = db.get_message_by_name("NAV_STATUS")
-        self._ack = db.get_message_by_name("ODOM_ACK")
-        self._pose_x = db.get_message_by_name("ODOM_POSE_X")
-        self._pose_y = db.get_message_by_name("ODOM_POSE_Y")
-        self.changes: list[tuple[int, str, int]] = []  # (goal_id, state, queue depth), unread
-        self.acks: list[dict[str, Any]] = []
-        self.last_x: bytes | None = None
-        self.last_y: bytes | None = None
-        self._previous: tuple[int, str] | None = None
-
-    def on_message_received(self, msg: can.Message) -> None:
-        """Keep what the session needs (runs in the rig's host-drain step)."""
-        can_id = msg.arbitration_id
-        if can_id == self._status.frame_id:
-            signals = _signals(self._status, msg.data)
-            now = (int(signals["GOAL_ID"]), str(signals["STATE"]))
-            if now != self._previous:
-                self._previous = now
-                self.changes.append((*now, int(signals["QUEUE_DEPTH"])))
-        elif can_id == self._ack.frame_id:
-            self.acks.append(_signals(self._ack, msg.data, choices=False))
-        elif can_id == self._pose_x.frame_id:
-            self.last_x = bytes(msg.data)
-        elif can_id == self._pose_y.frame_id:
-            self.last_y = bytes(msg.data)
-
-    def reason_name(self, ack: dict[str, Any]) -> str:
-        """The REASON of a decoded ODOM_ACK by its DBC name."""
-        choices = self._ack.get_signal_by_name("REASON").choices
-        return str(choices[ack["REASON"]]) if choices and ack["REASON"] in choices else "?"
-
-    def onboard_pose(self) -> tuple[float, float, float]:
-        """The last on-board pose heard: (x m, y m, heading rad in [0, 2 pi))."""
-        if self.last_x is None or self.last_y is None:
-            raise ExperimentError("no ODOM_POSE_X/Y heard from the firmware")
-        pose_x = _signals(self._pose_x, self.last_x)
-        pose_y = _signals(self._pose_y, self.last_y)
-        return float(pose_x["X"]), float(pose_y["Y"]), float(pose_x["HEADING"])
-
-
-def _signals(message: Message, data: bytes | bytearray, choices: bool = True) -> dict[str, Any]:
-    """cantools' decoding of one frame (choices as their VAL_ names when ``choices``)."""
-    signals = message.decode(bytes(data), decode_choices=choices)
-    assert isinstance(signals, dict)
-    return {k: str(v) if isinstance(v, NamedSignalValue) else v for k, v in signals.items()}
-
-
 class NavSession(Closing):
-    """The robot powered on in the closed-loop rig; the host drives it over CAN.
+    """The robot powered on in the closed-loop rig; the host drives it over CAN through a
+    ``host.protocol.session.CommandSession`` (the one the pytest kit drives with).
 
     Args:
         robot: nominal profile (the firmware's geometry at boot).
@@ -172,8 +121,7 @@ class NavSession(Closing):
     ) -> None:
         self.robot = robot
         self.integrator = integrator
-        self.listener = _NavListener()
-        self.frames = FrameCollector()
+        self.heard = Recorder(database())
         config = RigConfig(
             robot=robot,
             integrator=integrator,
@@ -182,8 +130,10 @@ class NavSession(Closing):
             errors=errors,
             channel=channel,
         )
-        self.rig = LockstepRig(config, [self.listener, self.frames])
-        self.encoder = CommandEncoder()
+        self.rig = LockstepRig(config, [self.heard])
+        self.session = CommandSession(
+            self.heard, self.rig.send, self._run_until, ack_timeout_s=ACK_TIMEOUT_S
+        )
         self.marks: list[Mark] = []
         self._last_goal = 0
         self._finished = False
@@ -192,47 +142,39 @@ class NavSession(Closing):
         """Release the rig's buses."""
         self.rig.close()
 
-    def _send_command(self, name: str, values: dict[str, Any]) -> int:
-        """Encode one command (JSON, as an MQTT client would) and send its frames now; the E2E
-        COUNTER of its committing frame (GO or APPLY)."""
-        try:
-            command = self.encoder.encode(name, json.dumps(values).encode())
-        except CommandRejected as exc:
-            raise ExperimentError(f"{name}: {exc.reason}") from None
-        for frame in command.frames:
-            self.rig.send(frame.can_id, frame.data)
-        return command.frames[-1].counter
+    def _run_until(self, done: Callable[[], bool], timeout_s: float) -> bool:
+        """The session's wait: step the rig until ``done()``, taking the marks after every
+        tick (a goal that ends STOPPED or ABORTED meanwhile is an ``ExperimentError``)."""
 
-    def _await_ack(self, request_id: int, counter: int, what: str) -> None:
-        """Step until the ODOM_ACK of the committing frame; ExperimentError on any NACK."""
-
-        def answered() -> bool:
+        def marked_and_done() -> bool:
             self._take_marks()
-            return any(
-                a["REQUEST_ID"] == request_id and a["REQUEST_COUNTER"] == counter
-                for a in self.listener.acks
-            )
+            return done()
 
-        if not self.rig.run_until(answered, ACK_TIMEOUT_S):
-            raise ExperimentError(f"{what}: no ODOM_ACK within {ACK_TIMEOUT_S} s")
-        for ack in self.listener.acks:
-            if ack["RESULT"] != 0:
-                raise ExperimentError(f"{what}: NACK ({self.listener.reason_name(ack)})")
-        self.listener.acks.clear()
+        return self.rig.run_until(marked_and_done, timeout_s)
+
+    def _command(self, what: str, send: Callable[[], object]) -> None:
+        """Run one command of the session; a refusal, a NACK or no ODOM_ACK within
+        ``ACK_TIMEOUT_S`` as an ``ExperimentError`` naming ``what``."""
+        try:
+            send()
+        except CommandRejected as exc:
+            raise ExperimentError(f"{what}: {exc.reason}") from None
+        except CommandNotAcked as exc:
+            if exc.reason.startswith("NACK"):
+                raise ExperimentError(f"{what}: NACK ({exc.reason[5:]})") from None
+            raise ExperimentError(f"{what}: no ODOM_ACK within {ACK_TIMEOUT_S} s") from None
 
     def configure(self, radius_left_m: float, radius_right_m: float, wheelbase_m: float) -> None:
         """Write the wheel radii and the wheelbase (m, sent as whole nanometres) over CAN:
         ODOM_CONFIG staged writes + APPLY, waiting for the APPLY's ODOM_ACK."""
-        values = {
-            "counts_per_rev": self.robot.counts_per_rev,
-            "wheel_radius_left_m": radius_left_m,
-            "wheel_radius_right_m": radius_right_m,
-            "wheelbase_m": wheelbase_m,
-            "counter_bits": self.robot.counter_bits,
-            "integrator": self.integrator,
-        }
-        counter = self._send_command("config", values)
-        self._await_ack(database().get_message_by_name("ODOM_CONFIG").frame_id, counter, "config")
+        self._command("config", lambda: self.session.configure(
+            counts_per_rev=self.robot.counts_per_rev,
+            wheel_radius_left_m=radius_left_m,
+            wheel_radius_right_m=radius_right_m,
+            wheelbase_m=wheelbase_m,
+            counter_bits=self.robot.counter_bits,
+            integrator=self.integrator,
+        ))
 
     def drive(self, path: Sequence[Waypoint], timeout_s: float) -> DriveResult:
         """Drive ``path`` turn-go-turn (goal ids 1..n); the marks, the settled truth, the
@@ -240,55 +182,46 @@ class NavSession(Closing):
         or aborted, or the path takes longer than ``timeout_s`` simulated seconds."""
         if self.rig.ticks * TICK_S < BOOT_S:
             self.rig.run(BOOT_S)
-        nav_goal_id = database().get_message_by_name("NAV_GOAL").frame_id
         self._last_goal = len(path)
         self._finished = False
         for goal_id, point in enumerate(path, start=1):
-            values: dict[str, Any] = {
-                "x_m": point.x_m,
-                "y_m": point.y_m,
-                "mode": "turn_go_turn",
-                "append": goal_id > 1,
-                "goal_id": goal_id,
-            }
-            if point.heading_rad is not None:
-                values["heading_rad"] = point.heading_rad
-            counter = self._send_command("nav_goal", values)
-            self._await_ack(nav_goal_id, counter, f"goal {goal_id}")
+            self._goal(goal_id, point)
         if not self._finished and not self.rig.run_until(self._take_marks, timeout_s):
             raise ExperimentError(f"path of {len(path)} goals not reached within {timeout_s:g} s")
         self.rig.run(SETTLE_S)
+        onboard = self.heard.latest_pose()
+        if onboard is None:
+            raise ExperimentError("no ODOM_POSE_X/Y heard from the firmware")
         return DriveResult(
-            tuple(self.marks),
-            self.rig.vehicle.truth(),
-            self.listener.onboard_pose(),
-            self._encoder_counts(),
+            tuple(self.marks), self.rig.vehicle.truth(), onboard, self._encoder_counts()
         )
+
+    def _goal(self, goal_id: int, point: Waypoint) -> None:
+        """Goal ``goal_id`` (the first replaces the path, the others are appended), ACKed."""
+        self._command(f"goal {goal_id}", lambda: self.session.goal(
+            point.x_m, point.y_m, point.heading_rad, goal_id=goal_id, append=goal_id > 1
+        ))
 
     def _take_marks(self) -> bool:
         """Turn the NAV_STATUS changes heard into marks with this tick's truth (called after
         every tick); True once the path's last goal is REACHED with an empty queue."""
-        changes = self.listener.changes
+        changes = self.session.status_changes()
         if changes:
             pose = self.rig.vehicle.truth()
-            for goal_id, state, depth in changes:
-                if state in _FAILED:
-                    raise ExperimentError(f"goal {goal_id} ended {state}")
-                self.marks.append(Mark(goal_id, state, pose))
-                if goal_id == self._last_goal and state == "REACHED" and depth == 0:
+            for change in changes:
+                if change.state in _FAILED:
+                    raise ExperimentError(f"goal {change.goal_id} ended {change.state}")
+                self.marks.append(Mark(change.goal_id, change.state, pose))
+                if (change.goal_id, change.state, change.queue_depth) == (
+                    self._last_goal, "REACHED", 0
+                ):
                     self._finished = True
-            changes.clear()
         return self._finished
 
     def _encoder_counts(self) -> tuple[IntArray, IntArray]:
         """(left, right) LEFT_COUNT/RIGHT_COUNT of every WHEEL_ENCODERS frame heard (raw u24)."""
-        decoded = BulkDecoder(database()).decode(self.frames.arrays(), "WHEEL_ENCODERS")
+        decoded = BulkDecoder(database()).decode(self.heard.arrays(), "WHEEL_ENCODERS")
         return decoded["LEFT_COUNT"].astype(np.int64), decoded["RIGHT_COUNT"].astype(np.int64)
-
-
-def wrap_pi(angle_rad: float) -> float:
-    """``angle_rad`` wrapped to [-pi, pi)."""
-    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def dead_reckon(

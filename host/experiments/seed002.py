@@ -47,12 +47,12 @@ from odocan.host.experiments.drive import (
     NavSession,
     Waypoint,
     drive_faults,
-    wrap_pi,
 )
 from odocan.host.experiments.seeding import run_rng, run_seed
 from odocan.host.judge.reference import Geometry
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.pose import wrap_angle
 from odocan.sim.robot import RobotProfile
 
 STRAIGHT_M = 1.0
@@ -149,8 +149,8 @@ def measure_square(drive: DriveResult, delta_rad: float) -> SquareRun:
     for (x0, y0), (x1, y1) in itertools.pairwise(corners):
         lengths.append(math.hypot(x1 - x0, y1 - y0))
         directions.append(math.atan2(y1 - y0, x1 - x0))
-    deviations = [math.degrees(wrap_pi(d - k * math.pi / 2)) for k, d in enumerate(directions)]
-    turns = [math.degrees(wrap_pi(b - a)) for a, b in itertools.pairwise(directions)]
+    deviations = [math.degrees(wrap_angle(d - k * math.pi / 2)) for k, d in enumerate(directions)]
+    turns = [math.degrees(wrap_angle(b - a)) for a, b in itertools.pairwise(directions)]
     return SquareRun(
         _mean(lengths), _mean(deviations), _mean(turns), math.degrees(delta_rad),
         tuple(lengths), tuple(deviations), tuple(turns),

@@ -2,7 +2,7 @@
 
 **Convention.** Everything is in the robot's start frame: origin at the wheel-axle midpoint at
 the start, x forward along the start heading, y to the left, angles counter-clockwise positive
-(the ``sim.truth.Pose`` frame, which is also the on-board odometry's frame). The counter-clockwise
+(the ``sim.pose.Pose`` frame, which is also the on-board odometry's frame). The counter-clockwise
 (CCW) run drives the goals (L, 0), (L, L), (0, L), (0, 0) turning left; the clockwise (CW) run
 (L, 0), (L, -L), (0, -L), (0, 0) turning right; each corner's goal carries the heading of the
 next side (the last one heading 0), so the robot makes four 90-degree turns in place, as in the

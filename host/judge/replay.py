@@ -55,6 +55,7 @@ from odocan.sim.clock import LockstepClock
 from odocan.sim.exceptions import OdocanError
 from odocan.sim.rig import INTEGRATORS, firmware_params
 from odocan.sim.robot import RobotProfile, list_profiles
+from odocan.sim.tickloop import TickLoop, deliver
 
 IntArray = npt.NDArray[np.int64]
 MAX_GAP_TICKS = 6000  # a gap in the log longer than 60 s is replayed as 60 s
@@ -168,17 +169,27 @@ class LockstepReplay:
         self.clock = LockstepClock()
         self._buses = [can.Bus(interface="virtual", channel=channel, preserve_timestamps=True,
                                receive_own_messages=False) for _ in range(3)]
-        self._log_bus, fw_bus, self._host_bus = self._buses
+        self._log_bus, fw_bus, host_bus = self._buses
         self.board = FirmwareBoard(fw_bus, params, self.clock)
         self.listeners = listeners
-        self.ticks = 0
+        self.loop = TickLoop(self._work, host_bus, listeners, self.clock)
         self.interrupted = False
+
+    @property
+    def ticks(self) -> int:
+        """Firmware ticks run so far."""
+        return self.loop.ticks
+
+    def _work(self, _k: int) -> None:
+        """The nodes' work in a tick: the firmware's board alone (the log is the rest)."""
+        self.board.run_tick()
 
     def run(self, frames: FrameArrays, feed: ReplayInput) -> None:
         """Feed every encoder frame at its tick (the log's truth frames where they were);
         Ctrl-C stops early (``interrupted``)."""
         enc = feed.encoders
         t0 = float(frames.timestamp_s[enc.index[0]])
+        self.loop.start_s = t0
         events = _events(enc.index, feed.truth)
         due: int | None = None  # the tick whose encoder frame is on the bus, not yet run
         try:
@@ -186,29 +197,18 @@ class LockstepReplay:
                 if which >= 0:  # an encoder frame: first run the ticks before its own
                     tick = int(enc.tick[which])
                     if due is not None:
-                        self._run_ticks(t0, due, tick)
+                        self.loop.run_to(tick)
                     self.clock.advance_to(t0 + tick * TICK_S)
                     due = tick
                 self._log_bus.send(to_message(frames, position))
             if due is not None:
-                self._run_ticks(t0, due, due + 1)
+                self.loop.run_to(due + 1)
         except KeyboardInterrupt:
             self.interrupted = True
             print(f"interrupted after {self.ticks * TICK_S:g} s of the log", file=sys.stderr)
 
-    def _run_ticks(self, t0: float, first: int, stop: int) -> None:
-        """Firmware ticks ``first`` .. ``stop - 1`` (those after the first have no frame)."""
-        for tick in range(first, stop):
-            self.clock.advance_to(t0 + tick * TICK_S)
-            self.board.run_tick()
-            self._drain()
-            self.ticks += 1
-
     def _drain(self) -> None:
-        recv = self._host_bus.recv
-        while (msg := recv(0)) is not None:
-            for listener in self.listeners:
-                listener.on_message_received(msg)
+        deliver(self.loop.host_bus, self.listeners)
 
     def close(self) -> None:
         """Deliver what is left, stop the listeners, release the buses: every one, even when

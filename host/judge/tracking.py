@@ -13,7 +13,8 @@ from typing import Any, NamedTuple
 
 from odocan.firmware.ecu import ENCODER_PERIOD_US, MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
 from odocan.host.judge.reference import Geometry, ReferenceOdometry, wrap_delta
-from odocan.host.protocol.pose import PosePairer, heading_fields, unwrap_near, wrap_heading
+from odocan.host.protocol.pose import PosePairer, heading_fields, unwrap_near
+from odocan.sim.pose import wrap_angle
 
 WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
 _RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
@@ -64,16 +65,18 @@ class StepGate:
         return self._delta(first, frame)
 
 
-def difference(a: Pose, b: Pose) -> dict[str, float]:
+def difference(a: FramePose, b: FramePose) -> dict[str, float]:
     """a - b: position (m), distance (m) and heading wrapped to (-pi, pi] (rad)."""
     dx, dy = a.x_m - b.x_m, a.y_m - b.y_m
     return {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy),
-            "dheading_rad": wrap_heading(a.heading_rad - b.heading_rad)}
+            "dheading_rad": wrap_angle(a.heading_rad - b.heading_rad)}
 
 
-class Pose(NamedTuple):
-    """A pose at one encoder frame (``seq``: the how-many-th encoder frame the monitor heard);
-    ``heading_rad`` is cumulative (unwrapped), ``pose_dict`` names both forms."""
+class FramePose(NamedTuple):
+    """A pose at one encoder frame (``seq``: the how-many-th encoder frame the monitor heard,
+    -1 when unknown); ``heading_rad`` is cumulative (unwrapped), ``pose_dict`` names both forms.
+    A plain ``sim.pose.Pose`` with the frame it is of: on-board, reference and truth samples
+    are paired by ``seq``, never by time."""
 
     seq: int
     x_m: float
@@ -90,7 +93,7 @@ class ErrorStats:
     max_dpos_m: float = 0.0
     max_dheading_rad: float = 0.0
 
-    def add(self, a: Pose, b: Pose) -> None:
+    def add(self, a: FramePose, b: FramePose) -> None:
         """Record ``a - b`` (position in m, heading wrapped to (-pi, pi] in rad)."""
         self.latest = difference(a, b)
         self.samples += 1
@@ -133,18 +136,18 @@ class PoseTracker:
         self._frames_since_pose = 0
         self.stalls = 0  # firmware silences after which the reference restarted
         self._counts: list[tuple[int, int, int] | None] = [None] * _RING  # seq, left, right
-        self._refs: list[Pose | None] = [None] * _RING
+        self._refs: list[FramePose | None] = [None] * _RING
         self._ref: ReferenceOdometry | None = None
         self._gate = StepGate(geometry, self.counter_bits)
         self._pairer = PosePairer()
-        self._pending: Pose | None = None  # the first pose, heard before the integrator
+        self._pending: FramePose | None = None  # the first pose, heard before the integrator
         self._backlog_counts: list[tuple[int, int, int, int]] = []  # seq, counter, left, right
-        self._backlog_poses: list[Pose] = []
+        self._backlog_poses: list[FramePose] = []
         self._truth_parts: dict[int, tuple[int, float]] = {}
-        self._last_pair: tuple[Pose, Pose] | None = None  # on-board, reference
-        self.pose: Pose | None = None
-        self.reference: Pose | None = None
-        self.truth: Pose | None = None
+        self._last_pair: tuple[FramePose, FramePose] | None = None  # on-board, reference
+        self.pose: FramePose | None = None
+        self.reference: FramePose | None = None
+        self.truth: FramePose | None = None
         self.reference_starts = 0
         self.vs_reference = ErrorStats()
         self.vs_truth = ErrorStats()
@@ -160,7 +163,7 @@ class PoseTracker:
             step = self._gate.step(counter, left, right)
             if step is not None:
                 ref.step_deltas(*step)
-            self._refs[counter] = Pose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad)
+            self._refs[counter] = FramePose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad)
         elif self._pending is not None:
             self._backlog_counts.append((self.enc_seq, counter, left, right))
             if len(self._backlog_counts) > BACKLOG_FRAMES:  # too long: start at a later pose
@@ -203,7 +206,7 @@ class PoseTracker:
 
     def on_pose_y(
         self, enc_counter: int, y_m: float, turns: int
-    ) -> tuple[Pose, Pose | None] | None:
+    ) -> tuple[FramePose, FramePose | None] | None:
         """ODOM_POSE_Y: with the ODOM_POSE_X of the same encoder frame, one on-board sample.
 
         Returns (on-board pose, reference at that encoder frame or None), None when unpaired.
@@ -221,7 +224,7 @@ class PoseTracker:
         paired = self._pairer.on_y({"ENC_COUNTER": enc_counter, "Y": y_m, "TURNS": turns}, seq)
         if paired is None:
             return None
-        pose = self.pose = Pose(seq, paired.x_m, paired.y_m, paired.heading_rad)
+        pose = self.pose = FramePose(seq, paired.x_m, paired.y_m, paired.heading_rad)
         if self._ref is None and named is not None:
             if self._pending is None:
                 self._pending = pose
@@ -244,7 +247,7 @@ class PoseTracker:
 
     def on_truth(
         self, part: int, enc_counter: int, value: float
-    ) -> tuple[Pose, Pose | None] | None:
+    ) -> tuple[FramePose, FramePose | None] | None:
         """A SIM_TRUTH part (0 X m, 1 Y m, 2 HEADING rad); three of one encoder frame: a sample.
 
         Returns (truth, reference at that encoder frame or None) once the sample is complete.
@@ -255,7 +258,7 @@ class PoseTracker:
             return None
         self._truth_parts = {}
         ref = self._named(self._refs[enc_counter])
-        truth = self.truth = Pose(
+        truth = self.truth = FramePose(
             ref.seq if ref else -1, parts[0][1], parts[1][1], self._truth_heading(parts[2][1], ref)
         )
         if ref is None:
@@ -263,8 +266,10 @@ class PoseTracker:
         self.reference_vs_truth.add(ref, truth)
         if self._last_pair is not None:  # the on-board pose carried to this frame
             pose, at = self._last_pair
-            estimate = Pose(ref.seq, pose.x_m - at.x_m + ref.x_m, pose.y_m - at.y_m + ref.y_m,
-                            pose.heading_rad - at.heading_rad + ref.heading_rad)
+            estimate = FramePose(
+                ref.seq, pose.x_m - at.x_m + ref.x_m, pose.y_m - at.y_m + ref.y_m,
+                pose.heading_rad - at.heading_rad + ref.heading_rad,
+            )
             self.vs_truth.add(estimate, truth)
         return truth, ref
 
@@ -273,14 +278,14 @@ class PoseTracker:
         """Counter restarts the current reference re-primed on (as the firmware does)."""
         return self._gate.counter_restarts
 
-    def _truth_heading(self, wrapped_rad: float, ref: Pose | None) -> float:
+    def _truth_heading(self, wrapped_rad: float, ref: FramePose | None) -> float:
         """SIM_TRUTH's HEADING ([0, 2 pi) on the bus) made cumulative: the turn nearest the
         reference at that encoder frame, else nearest the previous truth (rad)."""
         if ref is not None:
             return unwrap_near(wrapped_rad, ref.heading_rad)
         if self.truth is not None:
             return unwrap_near(wrapped_rad, self.truth.heading_rad)
-        return wrap_heading(wrapped_rad)
+        return wrap_angle(wrapped_rad)
 
     def _named(self, entry: Any) -> Any:
         """A ring entry if it is one of the last 8 encoder frames (not one 16 frames older)."""
@@ -289,7 +294,7 @@ class PoseTracker:
         return entry
 
     def _start_reference(
-        self, pose: Pose, counts: list[tuple[int, int, int, int]], poses: list[Pose]
+        self, pose: FramePose, counts: list[tuple[int, int, int, int]], poses: list[FramePose]
     ) -> None:
         """Start the reference at ``pose``, primed on the first of ``counts`` (seq, counter,
         left, right: the encoder frame ``pose`` names and those after it), catch up, and compare
@@ -302,12 +307,13 @@ class PoseTracker:
         self.reference_starts += 1
         self._refs = [None] * _RING
         self._gate = StepGate(self.geometry, self.counter_bits)
-        at_seq: dict[int, Pose] = {}
+        at_seq: dict[int, FramePose] = {}
         for seq, counter, left, right in counts:
             step = self._gate.step(counter, left, right)  # the first primes: stays at pose
             if step is not None:
                 ref.step_deltas(*step)
-            at_seq[seq] = self._refs[counter] = Pose(seq, ref.x_m, ref.y_m, ref.heading_rad)
+            sample = FramePose(seq, ref.x_m, ref.y_m, ref.heading_rad)
+            at_seq[seq] = self._refs[counter] = sample
         for heard in poses:
             at = at_seq.get(heard.seq)
             if at is not None:
@@ -331,7 +337,7 @@ class PoseTracker:
         }
 
 
-def pose_dict(pose: Pose | None) -> dict[str, float] | None:
+def pose_dict(pose: FramePose | None) -> dict[str, float] | None:
     """JSON form: ``x_m``, ``y_m``, ``heading_rad`` in (-pi, pi], ``heading_unwrapped_rad``."""
     if pose is None:
         return None

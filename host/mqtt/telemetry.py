@@ -37,7 +37,7 @@ from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.reference import Geometry
-from odocan.host.judge.tracking import Pose, PoseTracker, difference, pose_dict
+from odocan.host.judge.tracking import FramePose, PoseTracker, difference, pose_dict
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor
 from odocan.sim.contract import database
@@ -165,7 +165,7 @@ class RobotTelemetry:
         return self._pose_publications(*sample, enc, self._pose_x_counter, t_s)
 
     def _pose_publications(
-        self, pose: Pose, ref: Pose | None, enc: int, counter: int, t_s: float
+        self, pose: FramePose, ref: FramePose | None, enc: int, counter: int, t_s: float
     ) -> list[Publication]:
         head = {"t_s": t_s, "counter": counter, "enc_counter": enc, "enc_seq": pose.seq}
         pubs: list[Publication] = [("pose", stamp({**head, **_pose_dict(pose), **self._twist}))]
@@ -259,7 +259,7 @@ class RobotTelemetry:
         ))
 
 
-def _pose_dict(pose: Pose) -> dict[str, float]:
+def _pose_dict(pose: FramePose) -> dict[str, float]:
     """``x_m``, ``y_m``, ``heading_rad`` in (-pi, pi] and ``heading_unwrapped_rad``."""
     fields = pose_dict(pose)
     assert fields is not None

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Final, Literal
 
@@ -153,11 +154,7 @@ class CommandEncoder:
 
     def encode(self, name: str, payload: bytes) -> Command:
         """``payload`` of ``cmd/<name>`` -> its frames; ``CommandRejected`` with the reason."""
-        spec = SPECS.get(name)
-        if spec is None:
-            raise CommandRejected(
-                f"unknown command {_short(name)!r} (known: {', '.join(SPECS)})"
-            )
+        spec = _spec(name)
         obj = _parse(payload)
         cmd_id = obj.pop("id", None)
         if cmd_id is not None and not _valid_id(cmd_id):
@@ -165,6 +162,15 @@ class CommandEncoder:
                 f"id must be a string of at most {MAX_ID_CHARS} characters or an integer "
                 "within int64"
             )
+        return self._build(spec, obj, cmd_id)
+
+    def build(self, name: str, values: Mapping[str, Any]) -> Command:
+        """The frames of command ``name`` with ``values`` (the keys of its JSON object, already
+        Python values: no JSON in between), checked exactly as ``encode`` checks a payload;
+        ``CommandRejected`` with the reason."""
+        return self._build(_spec(name), dict(values), None)
+
+    def _build(self, spec: CommandSpec, obj: dict[str, Any], cmd_id: Any) -> Command:
         try:
             values = _check_schema(spec, obj)
             message = self._message(spec)
@@ -175,7 +181,7 @@ class CommandEncoder:
             raise
         frames = tuple(self._frame(message, raw, i == len(raw_frames) - 1)
                        for i, raw in enumerate(raw_frames))
-        return Command(name, cmd_id, values, frames)
+        return Command(spec.name, cmd_id, values, frames)
 
     def _message(self, spec: CommandSpec) -> Message:
         try:
@@ -217,6 +223,13 @@ class CommandEncoder:
         data = cantools.autosar.apply_profile2_crc(bytes(encoded), data_ids[counter])
         assert data is not None
         return Frame(message.frame_id, bytes(data), counter, final)
+
+
+def _spec(name: str) -> CommandSpec:
+    spec = SPECS.get(name)
+    if spec is None:
+        raise CommandRejected(f"unknown command {_short(name)!r} (known: {', '.join(SPECS)})")
+    return spec
 
 
 def command_id(payload: bytes) -> Any:

@@ -7,25 +7,25 @@ heard first; the unwrapped heading is ``TURNS * 2 pi + HEADING``. Pairing by tim
 with the latest Y) mixes two ticks' halves whenever a frame is lost; this is the one pairing every
 consumer (the analysis, the live tracker, replay, the experiments, the pytest kit) uses.
 
-The heading convention of every host output (reports, MQTT, the monitor's JSON): ``heading_rad``
-is wrapped to (-pi, pi] and ``heading_unwrapped_rad`` is cumulative (turns counted), both named
-(``heading_fields``). Only the firmware vectors keep the firmware's integers.
+The on-board pose is a plain ``sim.pose.Pose`` whose heading is cumulative. The heading
+convention of every host output (reports, MQTT, the monitor's JSON): ``heading_rad`` is wrapped
+to (-pi, pi] by the one wrap, ``sim.pose.wrap_angle``, and ``heading_unwrapped_rad`` is cumulative
+(turns counted), both named (``heading_fields``). Only the firmware vectors keep the firmware's
+integers.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from typing import Any, NamedTuple
+from typing import Any
+
+from odocan.sim.pose import TURN_RAD, Pose, wrap_angle
+
+__all__ = ["COUNTER_VALUES", "Pose", "PosePairer", "heading_fields", "latest_pose", "pose_of",
+           "unwrap_near", "wrap_angle"]
 
 COUNTER_VALUES = 16  # ENC_COUNTER is the 4-bit E2E counter of the encoder frame named
-TURN_RAD = 2.0 * math.pi
-
-
-def wrap_heading(heading_rad: float) -> float:
-    """``heading_rad`` wrapped to (-pi, pi] (the host's one wrapped-heading convention)."""
-    wrapped = math.remainder(heading_rad, TURN_RAD)  # [-pi, pi]
-    return math.pi if wrapped <= -math.pi else wrapped
 
 
 def unwrap_near(heading_rad: float, near_rad: float) -> float:
@@ -36,16 +36,8 @@ def unwrap_near(heading_rad: float, near_rad: float) -> float:
 def heading_fields(heading_unwrapped_rad: float) -> dict[str, float]:
     """Both named headings of one pose: ``heading_rad`` in (-pi, pi] and the cumulative
     ``heading_unwrapped_rad`` (rad)."""
-    return {"heading_rad": wrap_heading(heading_unwrapped_rad),
+    return {"heading_rad": wrap_angle(heading_unwrapped_rad),
             "heading_unwrapped_rad": heading_unwrapped_rad}
-
-
-class Pose(NamedTuple):
-    """A pose in SI units: metres and the unwrapped heading in radians (counter-clockwise)."""
-
-    x_m: float
-    y_m: float
-    heading_rad: float
 
 
 def pose_of(x_frame: Mapping[str, Any], y_frame: Mapping[str, Any]) -> Pose:

@@ -50,7 +50,7 @@ from odocan.host.io.export import (
     to_ns,
 )
 from odocan.host.judge.monitor import BusMonitor
-from odocan.host.judge.tracking import Pose
+from odocan.host.judge.tracking import FramePose
 from odocan.host.protocol.decode import frame_key
 from odocan.sim.exceptions import BusSetupError, ConfigurationError
 from odocan.sim.robot import RobotProfile
@@ -111,7 +111,7 @@ class FoxgloveLive(can.Listener):
         self._channels: dict[str, foxglove.Channel] = {}
         self._columns: dict[str, dict[str, str]] = {}
         self._open_channels()
-        self._last: tuple[Pose | None, Pose | None] = (None, None)
+        self._last: tuple[FramePose | None, FramePose | None] = (None, None)
         self._frames_shown: dict[str, object] = {}
         self._truth_samples = 0
         self._by_key = {frame_key(m.frame_id, m.is_extended_frame): m.name
@@ -232,7 +232,7 @@ class FoxgloveLive(can.Listener):
             self._log("/errors/truth", t_ns,
                       pose_error(t_ns, latest["dpos_m"], latest["dheading_rad"]))
 
-    def _publish_pose(self, prefix: str, pose: Pose | None, t_ns: int) -> None:
+    def _publish_pose(self, prefix: str, pose: FramePose | None, t_ns: int) -> None:
         if pose is None:
             return
         topic, child = POSE_TOPICS[prefix]

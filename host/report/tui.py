@@ -23,37 +23,25 @@ The screen, top to bottom (rows on 80×24)::
 A terminal of 40 rows or more also shows the latest signal values of every message; one of
 150 columns or more puts the trace beside the message table.
 
-Per-page rates are counted here, from the frames the trace decodes (every frame is decoded
-whether or not it is shown), not by the model: ``PageRates``.
+Three modules by job: this one is the screen (the view state ``View`` and the pure ``screen``
+with its lines and tables); ``host.report.trace`` is what the trace sees (decoding, the filter,
+the per-page rates, counted from the frames the trace decodes, every frame whether or not it is
+shown, not by the model: ``PageRates``); ``host.report.tui_app`` is the app (the receive loop,
+``--log``, the keys, the live terminal).
 """
 
 from __future__ import annotations
 
-import os
-import select
-import sys
-import termios
-import time
-import tty
-from collections import deque
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
-import can
-from cantools.database.can import Database, Message
-from cantools.database.namedsignalvalue import NamedSignalValue
 from rich.console import Console, ConsoleOptions, Group, RenderableType, RenderResult
 from rich.layout import Layout
-from rich.live import Live
 from rich.segment import Segment
 from rich.table import Table
 from rich.text import Text
 
-from odocan.host.judge.monitor import BusMonitor
-from odocan.host.protocol.decode import frame_key
 from odocan.host.report.live import (
     BAD_VERDICTS,
     STALE_S,
@@ -63,168 +51,15 @@ from odocan.host.report.live import (
     unknown_line,
     values_text,
 )
-from odocan.sim.exceptions import ConfigurationError, OdocanError
+from odocan.host.report.trace import PageRate, PageRates, Trace
 
 SILENCE_S = 2.0  # nothing heard for this long: the warning line says so, and why it may be
 STATUS_STALE_S = 2.0  # an ODOM_STATUS older than this: the firmware line says STALE
-TRACE_LINES = 500  # decoded frames kept for the trace
-PAGE_WINDOW = 32  # frames per page for a page's rate
-REFRESH_S = 0.25  # screen redraws
 TOP_ROWS = 8  # header, verdict, firmware, pose (4), alert
 BUS_LOAD_WARN = 0.7  # the header's bus load turns red above this (a common design limit)
 WIDE_COLUMNS = 150  # from this width the trace sits beside the message table
 TALL_ROWS = 40  # from this height the latest signal values are shown too
-_HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
 
-
-# --- what the trace sees ----------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class FrameFilter:
-    """Which frames the trace shows: by message name or by CAN ID (empty: all)."""
-
-    names: frozenset[str] = frozenset()
-    ids: frozenset[int] = frozenset()
-    text: str = ""
-
-    @classmethod
-    def parse(cls, specs: Sequence[str], db: Database) -> FrameFilter:
-        """``NAME`` (a DBC message, any case) or ``0xID`` items, also comma-separated."""
-        names, ids = set(), set()
-        known = {m.name.upper() for m in db.messages}
-        items = [item.strip() for spec in specs for item in spec.split(",") if item.strip()]
-        for item in items:
-            if item.lower().startswith("0x"):
-                try:
-                    ids.add(int(item, 16))
-                except ValueError:
-                    raise ConfigurationError(f"--filter {item}: not a hexadecimal CAN ID") from None
-            elif item.upper() in known:
-                names.add(item.upper())
-            else:
-                raise ConfigurationError(
-                    f"--filter {item}: no such message in the DBC (give a name or 0xID)")
-        return cls(frozenset(names), frozenset(ids), ",".join(items))
-
-    def matches(self, arbitration_id: int, name: str | None) -> bool:
-        """True when the frame is shown."""
-        if not self.names and not self.ids:
-            return True
-        return arbitration_id in self.ids or (name is not None and name.upper() in self.names)
-
-
-class PageRate(NamedTuple):
-    """One page of a multiplexed message: its multiplexer value, name and rate (Hz)."""
-
-    number: int
-    name: str
-    rate_hz: float | None  # None before two frames
-
-
-@dataclass
-class PageRates:
-    """Frame rate of each page of each multiplexed message, from bus timestamps."""
-
-    times: dict[tuple[str, int], deque[float]] = field(default_factory=dict)
-    names: dict[tuple[str, int], str] = field(default_factory=dict)
-
-    def heard(self, message: str, number: int, name: str, timestamp_s: float) -> None:
-        """One frame of ``message``'s page ``number`` (``name``) at ``timestamp_s`` (bus, s)."""
-        key = (message, number)
-        if key not in self.times:
-            self.times[key] = deque(maxlen=PAGE_WINDOW)
-            self.names[key] = name
-        self.times[key].append(timestamp_s)
-
-    def rates_hz(self, message: str) -> list[PageRate]:
-        """The pages heard of ``message``, by multiplexer value, with their rates."""
-        out = []
-        for (name, number), times in sorted(self.times.items()):
-            if name == message:
-                span_s = times[-1] - times[0]
-                rate_hz = (len(times) - 1) / span_s if len(times) > 1 and span_s > 0 else None
-                out.append(PageRate(number, self.names[(name, number)], rate_hz))
-        return out
-
-
-@dataclass(frozen=True)
-class TraceLine:
-    """One decoded frame as the trace shows it."""
-
-    timestamp_s: float
-    arbitration_id: int
-    name: str  # "?" when the ID is not in the DBC
-    text: str
-
-
-class Trace:
-    """The latest decoded frames (filtered, frozen while paused) and the per-page rates."""
-
-    def __init__(self, db: Database, frame_filter: FrameFilter | None = None,
-                 lines: int = TRACE_LINES) -> None:
-        self.db = db
-        self.filter = frame_filter or FrameFilter()
-        self.lines: deque[TraceLine] = deque(maxlen=lines)
-        self.pages = PageRates()
-        self.paused = False
-        self.hidden_while_paused = 0
-        self.first_s: float | None = None  # bus time of the first frame (the trace's zero)
-        self._by_key = {frame_key(m.frame_id, m.is_extended_frame): m for m in db.messages}
-
-    def feed(self, msg: can.Message) -> None:
-        """Decode one frame: count its page, and keep it unless paused or filtered out."""
-        if self.first_s is None:
-            self.first_s = msg.timestamp
-        if msg.is_error_frame or msg.is_remote_frame:
-            self._keep(msg, "?", "error frame" if msg.is_error_frame else "remote frame")
-            return
-        message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
-        if message is None:
-            self._keep(msg, "?", bytes(msg.data).hex(" "))
-            return
-        text, page = _decoded(message, bytes(msg.data))
-        if page is not None:
-            self.pages.heard(message.name, *page, msg.timestamp)
-        self._keep(msg, message.name, text)
-
-    def _keep(self, msg: can.Message, name: str, text: str) -> None:
-        if not self.filter.matches(msg.arbitration_id, None if name == "?" else name):
-            return
-        if self.paused:
-            self.hidden_while_paused += 1
-            return
-        self.lines.append(TraceLine(msg.timestamp, msg.arbitration_id, name, text))
-
-    def toggle_pause(self) -> None:
-        """Freeze or resume the trace (the statistics never stop)."""
-        self.paused = not self.paused
-        self.hidden_while_paused = 0
-
-
-def _decoded(message: Message, data: bytes) -> tuple[str, tuple[int, str] | None]:
-    """The frame's signals as text, and its page (number, name) when it is multiplexed."""
-    try:
-        signals = message.decode(data, decode_choices=True, allow_truncated=True)
-    except Exception:  # cantools: wrong length, unknown page ... (never fatal)
-        return f"undecodable {data.hex(' ')}", None
-    assert isinstance(signals, dict)
-    page = None
-    muxes = [s.name for s in message.signals if s.is_multiplexer]
-    if muxes and muxes[0] in signals:
-        value = signals[muxes[0]]
-        number = value.value if isinstance(value, NamedSignalValue) else value
-        page = (int(number), str(value))
-    parts = []
-    for name, value in signals.items():
-        if name in _HIDDEN:
-            continue
-        shown = f"{value:.4f}".rstrip("0").rstrip(".") if isinstance(value, float) else str(value)
-        parts.append(f"{name} {shown}")
-    return " ".join(parts), page
-
-
-# --- the screen --------------------------------------------------------------------------------
 
 
 @dataclass
@@ -524,180 +359,3 @@ def _keys_line(trace: Trace, view: View) -> Text:
     if view.log_error:
         line.append(f"  log stopped: {view.log_error}", style="bold red")
     return line
-
-
-# --- the app ----------------------------------------------------------------------------------
-
-
-class RecordingError(OdocanError):
-    """``--log``: the recording could not be written (disk full, file gone, ...)."""
-
-
-class Recorder:
-    """``--log PATH``: every frame heard to python-can's ``can.Logger`` (.log/.asc/.blf).
-
-    A write error stops the recording (the keys line says so) but never the monitor; ``close()``
-    then raises ``RecordingError`` naming the path and the frames written, so the command ends
-    with one ``error:`` line and exit code 2 rather than a recording silently cut short.
-    """
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.count = 0
-        self.failure: Exception | None = None
-        try:
-            self._logger = can.Logger(path)
-        except (OSError, ValueError) as exc:
-            raise ConfigurationError(f"--log {path}: {exc}") from exc
-
-    def record(self, msg: can.Message) -> None:
-        """Write one frame (counted when written); after a failure, nothing more."""
-        if self.failure is not None:
-            return
-        try:
-            self._logger.on_message_received(msg)
-        except Exception as exc:  # any writer's error stops the recording, not the monitor
-            self.failure = exc
-            return
-        self.count += 1
-
-    @property
-    def error(self) -> str:
-        """The write error that stopped the recording ("" while recording)."""
-        exc = self.failure
-        return "" if exc is None else f"{type(exc).__name__}: {exc}"
-
-    def close(self) -> None:
-        """Finalise the file (a .blf's header and index are written here)."""
-        try:
-            self._logger.stop()
-        except Exception as exc:
-            self.failure = self.failure or exc
-        if self.failure is not None:
-            raise RecordingError(f"--log {self.path}: recording stopped after {self.count} "
-                                 f"frames: {self.error}")
-
-
-class MonitorApp:
-    """The receive loop behind the screen: feed the model, the trace and the log; read keys."""
-
-    def __init__(self, bus: can.BusABC, model: BusMonitor, trace: Trace, view: View,
-                 recorder: Recorder | None = None,
-                 publish: Callable[[can.Message], None] | None = None) -> None:
-        """``publish``: called with every frame after the model took it (live Foxglove)."""
-        self.bus, self.model, self.trace, self.view = bus, model, trace, view
-        self.recorder = recorder
-        self.publish = publish
-        self.quit = False
-
-    def receive(self, deadline_s: float, redraw: Any | None = None) -> None:
-        """Until ``deadline_s`` (monotonic), ``q`` or Ctrl-C; ``redraw()`` every ``REFRESH_S``."""
-        next_draw = 0.0
-        try:
-            while not self.quit and (now := time.monotonic()) < deadline_s:
-                if redraw is not None and now >= next_draw:
-                    redraw()
-                    next_draw = now + REFRESH_S
-                msg = self.bus.recv(timeout=max(0.0, min(REFRESH_S, deadline_s - now)))
-                if msg is not None:
-                    self.on_frame(msg)
-                if redraw is not None:
-                    self.on_keys(_read_keys())
-        except KeyboardInterrupt:
-            pass
-
-    def on_frame(self, msg: can.Message) -> None:
-        """One frame heard: log it, feed the model and the trace."""
-        self.view.last_frame_s = time.monotonic()
-        if self.recorder is not None:
-            self.recorder.record(msg)
-        self.model.feed(msg)
-        self.trace.feed(msg)
-        if self.publish is not None:
-            self.publish(msg)
-
-    def on_keys(self, keys: str) -> None:
-        """space/p: pause; f: edit the filter (Enter applies, Esc cancels); q: quit."""
-        for key in keys:
-            if self.view.editing is not None:
-                self._edit(key)
-            elif key in " p":
-                self.trace.toggle_pause()
-            elif key == "f":
-                self.view.editing, self.view.note = self.trace.filter.text, ""
-            elif key == "q":
-                self.quit = True
-
-    def _edit(self, key: str) -> None:
-        text = self.view.editing or ""
-        if key in "\r\n":
-            try:
-                self.trace.filter = FrameFilter.parse([text], self.trace.db)
-                self.trace.lines.clear()
-            except ConfigurationError as exc:
-                self.view.note = str(exc)
-            self.view.editing = None
-        elif key == "\x1b":
-            self.view.editing = None
-        elif key in "\x7f\b":
-            self.view.editing = text[:-1]
-        elif key.isprintable():
-            self.view.editing = text + key
-
-    def refresh_view(self) -> None:
-        """Bring the view's clock, ages and log count up to now."""
-        now = time.monotonic()
-        self.view.now_s = now
-        self.view.heard_s = {n: now - s.heard_monotonic_s for n, s in self.model.messages.items()}
-        if self.recorder is not None:
-            self.view.logged, self.view.log_error = self.recorder.count, self.recorder.error
-
-
-def run_screen(app: MonitorApp, deadline_s: float, console: Console | None = None) -> None:
-    """Show the screen until the deadline, ``q`` or Ctrl-C.
-
-    On a terminal it takes the whole (alternate) screen, and its last state is printed once more
-    after it closes, so it stays in the scrollback; elsewhere only the last state is printed."""
-    console = console or Console(file=sys.stdout)
-
-    def current(spare_rows: int = 0) -> Layout:
-        app.refresh_view()
-        width, height = console.size
-        return screen(app.model.snapshot(), app.trace, app.view, width=width,
-                      height=height - spare_rows)
-
-    with _cbreak(), Live(console=console, auto_refresh=False, screen=console.is_terminal,
-                         redirect_stderr=False) as live:
-        app.receive(deadline_s, lambda: live.update(current(), refresh=True))
-        live.update(current(), refresh=True)
-    if console.is_terminal:
-        console.print(current(spare_rows=1), height=console.size.height - 1)  # + the prompt
-
-
-@contextmanager
-def _cbreak() -> Iterator[None]:
-    """Keys arrive one by one without echo while the screen is up (no-op without a tty)."""
-    try:
-        fd = sys.stdin.fileno()
-        saved = termios.tcgetattr(fd) if os.isatty(fd) else None
-    except (OSError, ValueError, termios.error):
-        saved = None
-    if saved is None:
-        yield
-        return
-    tty.setcbreak(fd)
-    try:
-        yield
-    finally:
-        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
-
-
-def _read_keys() -> str:
-    """Whatever keys are waiting on a terminal's stdin ("" otherwise; never blocks)."""
-    try:
-        fd = sys.stdin.fileno()
-        if not os.isatty(fd) or not select.select([fd], [], [], 0)[0]:
-            return ""
-        return os.read(fd, 64).decode("utf-8", "replace")
-    except (OSError, ValueError):
-        return ""

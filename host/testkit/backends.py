@@ -18,10 +18,10 @@ from typing import Any, Protocol
 import can
 
 from odocan.host.io.buses import auto_type, isolated_bus_kwargs
+from odocan.host.protocol.heard import Recorder
 from odocan.host.protocol.pose import Pose
 from odocan.host.protocol.secoc import load_secoc_key
 from odocan.host.testkit.options import RigOptions, TestkitError, fault_spec
-from odocan.host.testkit.recorder import Recorder
 from odocan.sim import contract
 from odocan.sim.board import TICK_S
 from odocan.sim.clock import RealTimeClock
@@ -31,6 +31,7 @@ from odocan.sim.motor_controller import SimNode
 from odocan.sim.realtime import PeriodicLoop
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.scenarios import Scenario
+from odocan.sim.tickloop import TickLoop
 from odocan.sim.vehicle import Vehicle
 
 _LOCKSTEP_ACK_TIMEOUT_S = 1.0  # simulated seconds for an ODOM_ACK (it comes in the next tick)
@@ -95,10 +96,6 @@ class _Shifted:
         return self._scenario.command_at(t_s - self._start_s)
 
 
-def _pose_of(truth: Any) -> Pose:
-    return Pose(float(truth.x_m), float(truth.y_m), float(truth.heading_rad))
-
-
 class LockstepBackend:
     """Our firmware in a ``LockstepRig``, closed loop, on a virtual channel of its own."""
 
@@ -143,7 +140,7 @@ class LockstepBackend:
 
     def truth(self) -> Pose:
         """The vehicle's true pose (float64)."""
-        return _pose_of(self.rig.vehicle.truth())
+        return self.rig.vehicle.truth().pose
 
     def buses(self) -> tuple[can.BusABC, ...]:
         """The sim's, the firmware's and the host's handles."""
@@ -203,6 +200,7 @@ class ExternalBackend:
         self.sim = SimNode(sim_bus, vehicle, self.clock, None)
         self._outbox: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
         self._lock = threading.Lock()  # the vehicle and the driver
+        self._tick_loop = TickLoop(self._work, host_bus, [self.recorder])  # real time: no clock
         self._loop = PeriodicLoop(TICK_S, self.clock)
         self._failure: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="odocan-sim", daemon=True)
@@ -210,12 +208,13 @@ class ExternalBackend:
 
     def _run(self) -> None:
         try:
-            self._loop.run(self._tick)
+            self._loop.run(self._tick_loop.tick)
         except BaseException as exc:  # reported to the test thread at its next wait
             self._failure = exc
 
-    def _tick(self, k: int) -> None:
-        """Host frames out; then MOTOR_CTRL, driver, encoders, truth; then what the host heard."""
+    def _work(self, k: int) -> None:
+        """Host frames out; then MOTOR_CTRL, driver, encoders, truth (``sim.tickloop`` then
+        hands what the host heard to the recorder)."""
         while True:
             try:
                 can_id, data = self._outbox.get_nowait()
@@ -224,10 +223,6 @@ class ExternalBackend:
             self._host_bus.send(can.Message(arbitration_id=can_id, is_extended_id=False, data=data))
         with self._lock:
             self.sim.tick(k)
-        msg = self._host_bus.recv(0)
-        while msg is not None:
-            self.recorder.on_message_received(msg)
-            msg = self._host_bus.recv(0)
 
     def now_s(self) -> float:
         """Wall-clock seconds since the backend started."""
@@ -267,7 +262,7 @@ class ExternalBackend:
     def truth(self) -> Pose:
         """The vehicle's true pose now."""
         with self._lock:
-            return _pose_of(self.sim.vehicle.truth())
+            return self.sim.vehicle.truth().pose
 
     def buses(self) -> tuple[can.BusABC, ...]:
         """The host's and the sim's handles."""

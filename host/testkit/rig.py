@@ -12,8 +12,9 @@
 
 The firmware runs on one of two backends (``backends.py``): lockstep with ours, or any firmware
 that speaks the DBC on a real bus. The rig's parts: ``options.py`` (what a rig is made of),
-``recorder.py`` (what the host heard), ``judging.py`` (the assertions), this module (driving and
-reading).
+``host.protocol.heard`` (what the host heard), ``host.protocol.session`` (commands, their ACKs
+and NAV_STATUS: the same session the experiments drive with), ``judging.py`` (the assertions),
+this module (driving and reading).
 
 Times (``timestamp_s``, ``now_s``) are seconds since the recording started: simulated seconds in
 lockstep, wall-clock seconds on a real bus.
@@ -21,17 +22,17 @@ lockstep, wall-clock seconds on a real bus.
 
 from __future__ import annotations
 
-import json
-import math
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import can
 
 from odocan.host.judge.analysis import Analysis, analyze
-from odocan.host.protocol.commands import Command, CommandEncoder
-from odocan.host.protocol.pose import Pose, latest_pose
+from odocan.host.protocol.commands import CommandEncoder
+from odocan.host.protocol.heard import UnknownMessageError
+from odocan.host.protocol.pose import Pose
 from odocan.host.protocol.secoc import SecocSigner, load_secoc_key
+from odocan.host.protocol.session import CommandNotAcked, CommandSession, SecocUnsynchronised
 from odocan.host.testkit.backends import Backend, ExternalBackend, LockstepBackend
 from odocan.host.testkit.judging import RigAssertions
 from odocan.host.testkit.options import CommandRefused, RigOptions, TestkitError, fault_spec
@@ -53,11 +54,16 @@ class OdocanRig(RigAssertions):
         self.backend = backend
         self.options = options
         self.robot = options.profile()
-        self._encoder = encoder if encoder is not None else CommandEncoder()
-        self._signer = SecocSigner(load_secoc_key(options.secoc_key)) if options.secoc_key else None
+        self.session = CommandSession(
+            backend.recorder,
+            backend.send,
+            backend.advance_until,
+            ack_timeout_s=backend.ack_timeout_s,
+            encoder=encoder,
+            signer=SecocSigner(load_secoc_key(options.secoc_key)) if options.secoc_key else None,
+        )
         self._next_goal_id = 1
         self._last_goal_id: int | None = None
-        self._goal_acked_at: dict[int, float] = {}
         self._t0 = 0.0
         self._analysis: tuple[int, Analysis] | None = None
         self.closed = False
@@ -83,16 +89,15 @@ class OdocanRig(RigAssertions):
                 "this bus?"
             )
         p = self.robot
-        self.command(
-            "config",
-            {
-                "counts_per_rev": p.counts_per_rev,
-                "wheel_radius_left_m": p.wheel_radius_left_m,
-                "wheel_radius_right_m": p.wheel_radius_right_m,
-                "wheelbase_m": p.wheelbase_m,
-                "counter_bits": p.counter_bits,
-                "integrator": self.integrator,
-            },
+        self._refused_as_assertion(
+            lambda: self.session.configure(
+                counts_per_rev=p.counts_per_rev,
+                wheel_radius_left_m=p.wheel_radius_left_m,
+                wheel_radius_right_m=p.wheel_radius_right_m,
+                wheelbase_m=p.wheelbase_m,
+                counter_bits=p.counter_bits,
+                integrator=self.integrator,
+            )
         )
         if not self.backend.advance_until(self._tracks_our_encoders, timeout_s):
             raise TestkitError(
@@ -194,16 +199,11 @@ class OdocanRig(RigAssertions):
         self._next_goal_id = goal_id % 255 + 1
         self._last_goal_id = goal_id
         self.wait_ready()
-        payload: dict[str, Any] = {
-            "x_m": x_m,
-            "y_m": y_m,
-            "mode": mode,
-            "append": append,
-            "goal_id": goal_id,
-        }
-        if heading_rad is not None:
-            payload["heading_rad"] = heading_rad
-        self._goal_acked_at[goal_id] = self.command("nav_goal", payload)
+        self._refused_as_assertion(
+            lambda: self.session.goal(
+                x_m, y_m, heading_rad, goal_id=goal_id, mode=mode, append=append
+            )
+        )
         return goal_id
 
     def path(
@@ -225,17 +225,12 @@ class OdocanRig(RigAssertions):
             if self._last_goal_id is None:
                 raise TestkitError("run_until_reached: no goal was sent (goto or path first)")
             goal_id = self._last_goal_id
-        self.backend.advance_until(lambda: self._goal_ended(goal_id), timeout_s)
+        self.backend.advance_until(lambda: self.session.goal_ended(goal_id), timeout_s)
         self.assert_reached(goal_id)
 
     def _goal_states(self, goal_id: int) -> list[dict[str, Any]]:
         """NAV_STATUS frames of ``goal_id`` heard since its ACK."""
-        since = self._goal_acked_at.get(goal_id, -math.inf)
-        return [f for f in self.frames("NAV_STATUS", GOAL_ID=goal_id) if f["timestamp_s"] >= since]
-
-    def _goal_ended(self, goal_id: int) -> bool:
-        states = {f["STATE"] for f in self._goal_states(goal_id)}
-        return bool(states & {"REACHED", "STOPPED", "ABORTED"})
+        return self.session.goal_states(goal_id)
 
     def wait_ready(self, timeout_s: float | None = None) -> None:
         """Let time pass until the latest ODOM_STATUS reports STATE OK (``TestkitError`` if not)."""
@@ -252,53 +247,28 @@ class OdocanRig(RigAssertions):
         """Overwrite the on-board pose (ODOM_SET_POSE); returns the time of the ACK.
 
         The analysis does not follow the jump: use it before driving, not in the middle."""
-        return self.command("set_pose", {"x_m": x_m, "y_m": y_m, "heading_rad": heading_rad})
+        __tracebackhide__ = True
+        ack = self._refused_as_assertion(lambda: self.session.set_pose(x_m, y_m, heading_rad))
+        return float(ack["timestamp_s"])
 
     def command(self, name: str, values: dict[str, Any]) -> float:
-        """Send a validated command (``host.commands``: nav_goal, set_pose, config) and
-        wait for the ACK of its last frame; returns the ACK's time (``CommandRefused`` on NACK)."""
+        """Send a validated command (``host.protocol.commands``: nav_goal, set_pose, config)
+        and wait for the ACK of its last frame; returns the ACK's time (``CommandRefused`` on
+        NACK)."""
         __tracebackhide__ = True
-        cmd = self._encoder.encode(name, json.dumps(values).encode())
-        signer = self._synchronised_signer()
-        seen = len(self.frames("ODOM_ACK"))
-        for frame in cmd.frames:
-            self.backend.send(frame.can_id, frame.data)
-            if signer is not None and signer.is_secured(frame.can_id):
-                self.backend.send(signer.auth_frame_id, signer.sign(frame.can_id, frame.data))
-        self.backend.advance_until(
-            lambda: self._answer(cmd, seen) is not None, self.backend.ack_timeout_s
-        )
-        answers = self.frames("ODOM_ACK")[seen:]
-        nacks = [a for a in answers if a["RESULT"] == "NACK"]
-        final = self._answer(cmd, seen)
-        if signer is not None and any(str(a["REASON"]).startswith("AUTH_") for a in nacks):
-            signer.next_fv = None  # resynchronise from the next ODOM_FRESHNESS
-        if nacks or final is None:
-            why = f"NACK {nacks[0]['REASON']}" if nacks else "no ODOM_ACK"
-            raise CommandRefused(f"{name} {values}: {why} from the firmware")
-        return float(final["timestamp_s"])
+        ack = self._refused_as_assertion(lambda: self.session.command(name, values))
+        return float(ack["timestamp_s"])
 
-    def _synchronised_signer(self) -> SecocSigner | None:
-        """The SecOC signer (None: no key), its freshness from the firmware's ODOM_FRESHNESS
-        (waited for, at most a second and a half: the firmware sends one every second)."""
-        signer = self._signer
-        if signer is None or signer.next_fv is not None:
-            return signer
-        seen = len(self.frames("ODOM_FRESHNESS"))
-        self.backend.advance_until(lambda: len(self.frames("ODOM_FRESHNESS")) > seen, 1.5)
-        latest = self.latest("ODOM_FRESHNESS")
-        if latest is None or not signer.adopt(int(latest["FV_EPOCH"]), int(latest["FV_COUNT"])):
-            raise TestkitError(f"SecOC: no usable ODOM_FRESHNESS from the firmware ({latest})")
-        return signer
-
-    def _answer(self, cmd: Command, seen: int) -> dict[str, Any] | None:
-        """The ODOM_ACK of ``cmd``'s last frame among the ACKs after the first ``seen``."""
-        last = cmd.frames[-1]
-        name = self.backend.recorder.db.get_message_by_frame_id(last.can_id).name
-        for ack in self.frames("ODOM_ACK")[seen:]:
-            if ack["REQUEST_COUNTER"] == last.counter and str(ack["REQUEST_ID"]) == name:
-                return ack
-        return None
+    def _refused_as_assertion(self, send: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+        """``send()``'s ACK; a NACK or no answer as ``CommandRefused`` (an ``AssertionError``:
+        a test failure), no SecOC freshness as ``TestkitError``."""
+        __tracebackhide__ = True
+        try:
+            return send()
+        except CommandNotAcked as exc:
+            raise CommandRefused(str(exc)) from None
+        except SecocUnsynchronised as exc:
+            raise TestkitError(str(exc)) from None
 
     def send(self, can_id: int, data: bytes) -> None:
         """Send any frame as the HOST (no validation, no E2E: the bytes as given)."""
@@ -310,7 +280,10 @@ class OdocanRig(RigAssertions):
         """Every frame of message ``name`` heard so far that passed its E2E check, decoded by
         cantools (scaled values, choices by name) with ``timestamp_s``; ``match`` keeps the frames
         whose signals have those values, e.g. ``frames("ODOM_STATUS", PAGE="SUMMARY")``."""
-        decoded = self.backend.recorder.decoded(name)
+        try:
+            decoded = self.backend.recorder.decoded(name)
+        except UnknownMessageError as exc:
+            raise TestkitError(str(exc)) from None
         if not match:
             return decoded
         return [f for f in decoded if all(f.get(k) == v for k, v in match.items())]
@@ -334,9 +307,7 @@ class OdocanRig(RigAssertions):
     def pose(self) -> Pose:
         """The latest on-board pose: ODOM_POSE_X and ODOM_POSE_Y of one encoder frame
         (heading ``TURNS * 2 pi + HEADING``, to 0.1 mm and 2 pi / 65536 rad)."""
-        halves = [(name, f) for name in ("ODOM_POSE_X", "ODOM_POSE_Y") for f in self.frames(name)]
-        halves.sort(key=lambda half: (half[1]["timestamp_s"], half[0]))  # X first within a tick
-        pose = latest_pose(halves)
+        pose = self.backend.recorder.latest_pose()
         if pose is None:
             raise TestkitError("no ODOM_POSE_X/ODOM_POSE_Y pair heard yet: step the rig first")
         return pose

@@ -51,7 +51,9 @@ from odocan.host.mqtt.broker import (
 from odocan.host.mqtt.fleetview import RobotState, fleet_states
 from odocan.host.mqtt.options import add_broker_credentials, monitor_broker_url
 from odocan.host.report.live import with_staleness
-from odocan.host.report.tui import FrameFilter, MonitorApp, Recorder, Trace, View, run_screen
+from odocan.host.report.trace import FrameFilter, Trace
+from odocan.host.report.tui import View
+from odocan.host.report.tui_app import MonitorApp, Recorder, run_screen
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 

@@ -1,4 +1,11 @@
-"""What the host heard: every frame, kept for the analysis and decoded per message on demand."""
+"""What the host heard: every frame, kept for the analysis and decoded per message on demand.
+
+A python-can ``Listener`` on the host's bus handle. Every frame is kept (``arrays``, for
+``host.judge.analysis``); a message's frames are checked (E2E, ``host.protocol.e2e``) and decoded by
+cantools only when asked for (``decoded``), once each, in the order heard. Frames that fail their
+E2E check (or do not decode) are left out, as a host must: only what it may use is handed on. The
+command session (``host.protocol.session``) and the on-board pose (``latest_pose``) read it.
+"""
 
 from __future__ import annotations
 
@@ -12,11 +19,14 @@ from cantools.database.namedsignalvalue import NamedSignalValue
 
 from odocan.host.io.logs import FrameArrays, FrameCollector
 from odocan.host.protocol.e2e import OK, OKSOMELOST, UNPROTECTED, E2EMonitor
-from odocan.host.testkit.options import TestkitError
+from odocan.host.protocol.pose import Pose, latest_pose
+from odocan.sim.exceptions import OdocanError
 
 _ACCEPTED = (OK, OKSOMELOST, UNPROTECTED)  # E2E statuses of frames a host may use
 
-# --- what the host heard ----------------------------------------------------------------------
+
+class UnknownMessageError(OdocanError):
+    """A message name the DBC does not have."""
 
 
 class Recorder(can.Listener):
@@ -42,7 +52,8 @@ class Recorder(can.Listener):
             self._origin_s = origin_s
             self._collector = FrameCollector()
             self._raw: dict[int, list[tuple[float, bytes]]] = {}
-            self._decoded: dict[int, list[dict[str, Any]]] = {}
+            self._checked: dict[int, int] = {}  # raw frames of each ID checked so far
+            self._decoded: dict[int, list[dict[str, Any]]] = {}  # the accepted ones
             self._monitor = E2EMonitor(self.db)
 
     def on_message_received(self, msg: can.Message) -> None:
@@ -59,7 +70,7 @@ class Recorder(can.Listener):
                 )
 
     def arrays(self) -> FrameArrays:
-        """Every frame heard, as arrays (``host.logio``)."""
+        """Every frame heard, as arrays (``host.io.logs``)."""
         with self._lock:
             return self._collector.arrays()
 
@@ -67,19 +78,33 @@ class Recorder(can.Listener):
         with self._lock:
             return len(self._collector)
 
-    def decoded(self, name: str) -> list[dict[str, Any]]:
-        """The frames of message ``name`` that passed their E2E check, decoded (a copy)."""
+    def decoded(self, name: str, start: int = 0) -> list[dict[str, Any]]:
+        """The frames of message ``name`` that passed their E2E check, decoded (signals with
+        choices by name, and ``timestamp_s``), from the ``start``-th such frame on (a copy);
+        ``UnknownMessageError`` for a name the DBC lacks."""
         try:
             message = self.db.get_message_by_name(name)
         except KeyError:
             known = ", ".join(sorted(m.name for m in self.db.messages))
-            raise TestkitError(f"the DBC has no message {name!r} (known: {known})") from None
+            raise UnknownMessageError(f"the DBC has no message {name!r} (known: {known})") from None
         with self._lock:
-            done = self._decoded.setdefault(message.frame_id, [])
-            raw = self._raw.get(message.frame_id, [])
-            for timestamp, data in raw[len(done) :]:
-                done.append(self._decode(message, timestamp, data))
-            return [d for d in done if d]
+            frame_id = message.frame_id
+            done = self._decoded.setdefault(frame_id, [])
+            raw = self._raw.get(frame_id, [])
+            checked = self._checked.get(frame_id, 0)
+            for timestamp, data in raw[checked:]:
+                signals = self._decode(message, timestamp, data)
+                if signals:
+                    done.append(signals)
+            self._checked[frame_id] = len(raw)
+            return done[start:]
+
+    def latest_pose(self) -> Pose | None:
+        """The latest on-board pose heard (``host.protocol.pose``: ODOM_POSE_X and ODOM_POSE_Y
+        naming one encoder frame, X first within a tick); None before the first pair."""
+        halves = [(name, f) for name in ("ODOM_POSE_X", "ODOM_POSE_Y") for f in self.decoded(name)]
+        halves.sort(key=lambda half: (half[1]["timestamp_s"], half[0]))  # X first within a tick
+        return latest_pose(halves)
 
     def _decode(self, message: Any, timestamp: float, data: bytes) -> dict[str, Any]:
         """One frame's signals (choices by name) and ``timestamp_s``; {} when it is rejected."""
@@ -93,5 +118,3 @@ class Recorder(can.Listener):
         plain = {k: str(v) if isinstance(v, NamedSignalValue) else v for k, v in signals.items()}
         plain["timestamp_s"] = timestamp
         return plain
-
-

@@ -1,0 +1,113 @@
+"""sim.tickloop: the one tick loop of every rig, on real python-can virtual buses."""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Iterator
+
+import can
+import pytest
+
+from odocan.sim.board import TICK_S
+from odocan.sim.clock import LockstepClock
+from odocan.sim.tickloop import TickLoop, deliver
+
+
+class _Heard(can.Listener):
+    def __init__(self, name: str, log: list[tuple[str, int]]) -> None:
+        self.name = name
+        self.log = log
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self.log.append((self.name, msg.arbitration_id))
+
+
+@pytest.fixture
+def pair() -> Iterator[tuple[can.BusABC, can.BusABC]]:
+    """A sender and a host handle on one virtual channel of their own."""
+    channel = f"odocan-tickloop-{uuid.uuid4().hex}"
+    buses = [can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+             for _ in range(2)]
+    yield buses[0], buses[1]
+    for bus in buses:
+        bus.shutdown()
+
+
+def _send(bus: can.BusABC, can_id: int) -> None:
+    bus.send(can.Message(arbitration_id=can_id, is_extended_id=False, data=b"\x00"))
+
+
+def test_deliver_hands_each_frame_to_every_listener_in_bus_order(
+    pair: tuple[can.BusABC, can.BusABC],
+) -> None:
+    sender, host = pair
+    for can_id in (0x100, 0x200, 0x300):
+        _send(sender, can_id)
+    log: list[tuple[str, int]] = []
+    assert deliver(host, [_Heard("a", log), _Heard("b", log)]) == 3
+    assert log == [("a", 0x100), ("b", 0x100), ("a", 0x200), ("b", 0x200),
+                   ("a", 0x300), ("b", 0x300)]
+    assert deliver(host, [_Heard("a", log)]) == 0  # nothing left on the bus
+
+
+def test_each_tick_moves_the_clock_then_works_then_delivers(
+    pair: tuple[can.BusABC, can.BusABC],
+) -> None:
+    sender, host = pair
+    clock = LockstepClock()
+    log: list[tuple[str, int]] = []
+    seen: list[tuple[int, float, int]] = []  # (k, clock at the work, frames heard before it)
+
+    def work(k: int) -> None:
+        seen.append((k, clock.now_s(), len(log)))
+        _send(sender, 0x100 + k)
+
+    loop = TickLoop(work, host, [_Heard("h", log)], clock, start_s=12.5)
+    loop.run(3)
+    assert loop.ticks == 3
+    assert seen == [(0, 12.5, 0), (1, 12.5 + TICK_S, 1), (2, 12.5 + 2 * TICK_S, 2)]
+    assert log == [("h", 0x100), ("h", 0x101), ("h", 0x102)]  # each in its own tick
+
+
+def test_progress_every_simulated_second_and_at_the_end(
+    pair: tuple[can.BusABC, can.BusABC],
+) -> None:
+    _, host = pair
+    calls: list[tuple[int, int]] = []
+    TickLoop(lambda _k: None, host, []).run(250, lambda done, total: calls.append((done, total)))
+    assert calls == [(100, 250), (200, 250), (250, 250)]
+
+
+def test_run_until_stops_at_the_first_tick_done_holds_or_at_the_timeout(
+    pair: tuple[can.BusABC, can.BusABC],
+) -> None:
+    _, host = pair
+    ticks: list[int] = []
+    loop = TickLoop(ticks.append, host, [])
+    assert loop.run_until(lambda: len(ticks) == 4, timeout_ticks=10)
+    assert ticks == [0, 1, 2, 3]
+    assert not loop.run_until(lambda: False, timeout_ticks=5)
+    assert ticks == list(range(9))
+
+
+def test_run_to_and_a_set_tick_count_continue_from_there(
+    pair: tuple[can.BusABC, can.BusABC],
+) -> None:
+    _, host = pair
+    ticks: list[int] = []
+    loop = TickLoop(ticks.append, host, [])
+    loop.ticks = 40  # a robot of a staggered fleet
+    loop.run_to(43)
+    loop.run_to(42)  # already past: nothing
+    assert ticks == [40, 41, 42]
+
+
+def test_without_a_clock_tick_k_only_works_and_delivers(
+    pair: tuple[can.BusABC, can.BusABC],
+) -> None:
+    sender, host = pair
+    log: list[tuple[str, int]] = []
+    loop = TickLoop(lambda k: _send(sender, k), host, [_Heard("h", log)])
+    loop.tick(7)  # as sim.realtime.PeriodicLoop calls it
+    assert log == [("h", 7)]
+    assert loop.ticks == 0  # the real-time loop counts its own ticks
