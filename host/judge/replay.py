@@ -28,6 +28,7 @@ counts the logged poses follow within tolerance).
 
 from __future__ import annotations
 
+import itertools
 import sys
 import time
 from dataclasses import dataclass
@@ -59,6 +60,9 @@ from odocan.sim.tickloop import TickLoop, deliver
 
 IntArray = npt.NDArray[np.int64]
 MAX_GAP_TICKS = 6000  # a gap in the log longer than 60 s is replayed as 60 s
+# One fresh in-process channel per replay, numbered (not id()-named) so two runs of the same
+# command write the same bytes to --log.
+_REPLAY_CHANNELS = itertools.count(1)
 
 
 class ReplayError(OdocanError):
@@ -335,7 +339,7 @@ def replay_and_analyze(
     listeners: list[can.Listener] = [collector]
     if log_out is not None:
         listeners.append(can.Logger(log_out))
-    channel = f"odocan-replay-{id(collector):x}"
+    channel = f"odocan-replay-{next(_REPLAY_CHANNELS)}"
     replay = LockstepReplay(firmware_params(profile, integrator), listeners, channel)
     start = time.perf_counter()
     try:
