@@ -31,7 +31,7 @@ from odocan.host.mqtt.broker import BrokerURL, free_loopback_port
 from odocan.host.report.live import render_fleet, with_staleness
 from odocan.host.report.trace import FrameFilter, PageRates, Trace
 from odocan.host.report.tui import SILENCE_S, View, screen
-from odocan.host.report.tui_app import MonitorApp, Recorder
+from odocan.host.report.tui_app import FrameLog, MonitorApp
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultSpec
@@ -274,7 +274,7 @@ def test_log_records_every_frame_heard(suffix: str, tmp_path: Path, healthy: Fed
     sent = [can.Message(arbitration_id=line.arbitration_id, data=bytes(range(k, k + 8)),
                         is_extended_id=False)
             for k, line in enumerate(list(healthy.trace.lines)[-60:])]
-    recorder = Recorder(path)
+    recorder = FrameLog(path)
     try:
         app = MonitorApp(receiver, model, Trace(model.db), View(source="x"), recorder)
         for msg in sent:

@@ -33,7 +33,7 @@ class RecordingError(OdocanError):
     """``--log``: the recording could not be written (disk full, file gone, ...)."""
 
 
-class Recorder:
+class FrameLog:
     """``--log PATH``: every frame heard to python-can's ``can.Logger`` (.log/.asc/.blf).
 
     A write error stops the recording (the keys line says so) but never the monitor; ``close()``
@@ -82,7 +82,7 @@ class MonitorApp:
     """The receive loop behind the screen: feed the model, the trace and the log; read keys."""
 
     def __init__(self, bus: can.BusABC, model: BusMonitor, trace: Trace, view: View,
-                 recorder: Recorder | None = None,
+                 recorder: FrameLog | None = None,
                  publish: Callable[[can.Message], None] | None = None) -> None:
         """``publish``: called with every frame after the model took it (live Foxglove)."""
         self.bus, self.model, self.trace, self.view = bus, model, trace, view

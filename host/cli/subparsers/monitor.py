@@ -53,7 +53,7 @@ from odocan.host.mqtt.options import add_broker_credentials, monitor_broker_url
 from odocan.host.report.live import with_staleness
 from odocan.host.report.trace import FrameFilter, Trace
 from odocan.host.report.tui import View
-from odocan.host.report.tui_app import MonitorApp, Recorder, run_screen
+from odocan.host.report.tui_app import FrameLog, MonitorApp, run_screen
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 
@@ -140,7 +140,7 @@ def _do_monitor(args: argparse.Namespace) -> int:
     )
     trace = Trace(model.db, FrameFilter.parse(args.filter, model.db))
     check_log_path(args.log)
-    recorder = Recorder(args.log) if args.log is not None else None
+    recorder = FrameLog(args.log) if args.log is not None else None
     view = View(_source(args), interface=args.interface, log_path=args.log,
                 started_s=time.monotonic())
     live = _foxglove(args, profile, model)
