@@ -40,6 +40,25 @@ BO_ 291 BIG: 8 A
  SG_ TOP : 55|16@0+ (1,0) [0|65535] "-" A
 """
 
+# Layouts at the edges of the 64-bit word: full-width signals, signals ending at bit 63 (no mask
+# after the shift), signed signals whose sign bit is bit 63, in both byte orders.
+EDGE_DBC = """VERSION ""
+BU_: A
+BO_ 512 S64: 8 A
+ SG_ S64 : 0|64@1- (1,0) [0|0] "-" A
+BO_ 513 U64: 8 A
+ SG_ U64 : 0|64@1+ (1,0) [0|0] "-" A
+BO_ 514 TOPS: 8 A
+ SG_ LOW : 0|40@1+ (1,0) [0|0] "-" A
+ SG_ TOP : 40|24@1- (1,0) [0|0] "-" A
+BO_ 515 MOTO64: 8 A
+ SG_ M64 : 7|64@0- (1,0) [0|0] "-" A
+BO_ 516 MOTOEND: 8 A
+ SG_ HIGH : 7|1@0- (1,0) [0|0] "-" A
+ SG_ REST : 6|55@0+ (1,0) [0|0] "-" A
+ SG_ LAST : 63|8@0- (1,0) [0|0] "-" A
+"""
+
 
 def pages(message: Message) -> list[int | None]:
     """Multiplexer values of a message's pages (None: not multiplexed)."""
@@ -118,6 +137,39 @@ def test_bulk_decoder_big_endian_and_signed_layouts(payload: bytes) -> None:
     db = cantools.database.load_string(MOTOROLA_DBC, database_format="dbc")
     assert isinstance(db, Database)
     assert_same(db, BulkDecoder(db), "BIG", [payload])
+
+
+@settings(max_examples=200, deadline=None)
+@given(payload=st.binary(min_size=8, max_size=8))
+def test_bulk_decoder_at_the_edges_of_the_word(payload: bytes) -> None:
+    db = cantools.database.load_string(EDGE_DBC, database_format="dbc")
+    assert isinstance(db, Database)
+    decoder = BulkDecoder(db)
+    for name in ("S64", "U64", "TOPS", "MOTO64", "MOTOEND"):
+        assert_same(db, decoder, name, [payload, bytes(8), b"\xff" * 8])
+
+
+def test_the_decoder_s_cache_is_read_only_and_belongs_to_one_frames() -> None:
+    """What ``decode`` keeps for the next call cannot be changed in place (numpy refuses), each
+    call gets a dict of its own, and other frames (the next chunk of a stream) get their own
+    values, not the cached ones."""
+    frames = rig_run()
+    decoder = BulkDecoder(DB)
+    first = decoder.decode(frames, "WHEEL_ENCODERS")
+    with pytest.raises(ValueError, match="read-only"):
+        first["LEFT_COUNT"][0] = 0
+    with pytest.raises(ValueError, match="read-only"):
+        decoder.select(frames, "WHEEL_ENCODERS")[0] = 0
+    first["LEFT_COUNT"] = np.zeros(1)
+    again = decoder.decode(frames, "WHEEL_ENCODERS")
+    assert len(again["LEFT_COUNT"]) == len(again["index"]) > 1
+    later = frames.select(np.arange(len(frames) // 2, len(frames)))
+    part = decoder.decode(later, "WHEEL_ENCODERS")
+    fresh = BulkDecoder(DB).decode(later, "WHEEL_ENCODERS")
+    assert part.keys() == fresh.keys()
+    for key, value in fresh.items():
+        np.testing.assert_array_equal(part[key], value)
+    assert len(part["index"]) < len(again["index"])
 
 
 @cache

@@ -7,7 +7,8 @@ frames of a message at once: the 8 payload bytes as one 64-bit word (little-endi
 signals, big-endian for Motorola ones), a shift, a mask and a sign extension.
 
 The values are cantools' *raw* values (``decode_message(..., scaling=False)``): int64 arrays
-(float64 for IEEE float signals). Scale them with the signal's ``scale``/``offset`` yourself.
+(float64 for IEEE float signals; uint64 for an unsigned 64-bit signal, which int64 cannot
+hold). Scale them with the signal's ``scale``/``offset`` yourself.
 """
 
 from __future__ import annotations
@@ -101,13 +102,22 @@ class BulkDecoder:
     page is meaningful only where the multiplexer selects it (elsewhere it is what its bits
     hold). ``decode_page`` returns just the frames of one page with just that page's signals,
     exactly what cantools returns for each of them.
+
+    The analysis asks for the same message several times (a page at a time, the frame counts,
+    the E2E-accepted frames): what ``select`` and ``decode`` computed is kept for the last
+    ``FrameArrays`` seen (immutable), so each message of a log is selected and decoded once. The
+    kept arrays are read-only: a caller that changed one in place would change every later
+    answer, so numpy refuses it. Each call returns a dict of its own.
     """
 
     def __init__(self, db: cantools.database.can.Database) -> None:
         self.db = db
         self._layouts: dict[str, tuple[SignalLayout, ...]] = {}
         self._messages: dict[str, Message] = {}
-        self._keys: tuple[FrameArrays, npt.NDArray[np.int64]] | None = None
+        self._frames: FrameArrays | None = None  # the frames the caches below belong to
+        self._keys: npt.NDArray[np.int64] | None = None
+        self._selected: dict[str, npt.NDArray[np.intp]] = {}
+        self._decoded: dict[str, dict[str, np.ndarray]] = {}
         for message in db.messages:
             self._messages[message.name] = message
             self._layouts[message.name] = tuple(signal_layout(s) for s in message.signals)
@@ -120,30 +130,50 @@ class BulkDecoder:
             raise DecodeError(f"the DBC has no message {name}") from None
 
     def select(self, frames: FrameArrays, name: str) -> npt.NDArray[np.intp]:
-        """Positions in ``frames`` of the decodable frames of message ``name``."""
-        message = self.message(name)
-        if message.length > 8:
-            raise DecodeError(f"{name}: {message.length}-byte message (classic CAN only)")
-        key = frame_key(message.frame_id, message.is_extended_frame)
-        mask = (self._frame_keys(frames) == key) & (frames.dlc == message.length)
-        return np.flatnonzero(mask)
+        """Positions in ``frames`` of the decodable frames of message ``name`` (read-only)."""
+        self._use(frames)
+        index = self._selected.get(name)
+        if index is None:
+            message = self.message(name)
+            if message.length > 8:
+                raise DecodeError(f"{name}: {message.length}-byte message (classic CAN only)")
+            key = frame_key(message.frame_id, message.is_extended_frame)
+            assert self._keys is not None
+            index = _frozen(np.flatnonzero(self._keys == key))
+            index = _frozen(index[frames.dlc[index] == message.length])
+            self._selected[name] = index
+        return index
 
-    def _frame_keys(self, frames: FrameArrays) -> npt.NDArray[np.int64]:
-        """``frame_keys(frames)``, kept for the last FrameArrays seen (they are immutable)."""
-        if self._keys is None or self._keys[0] is not frames:
-            self._keys = (frames, frame_keys(frames))
-        return self._keys[1]
+    def _use(self, frames: FrameArrays) -> None:
+        """Start the caches afresh when ``frames`` is not the FrameArrays they belong to."""
+        if self._frames is not frames:
+            self._frames = frames
+            self._keys = frame_keys(frames)
+            self._selected = {}
+            self._decoded = {}
 
     def decode(self, frames: FrameArrays, message_name: str) -> dict[str, np.ndarray]:
         """Raw values of every signal of ``message_name`` over its frames (see the class doc)."""
-        index = self.select(frames, message_name)
-        words_le, words_be = _words(frames.data[index])
+        index = self.select(frames, message_name)  # also makes the caches belong to frames
+        decoded = self._decoded.get(message_name)
+        if decoded is None:
+            decoded = self._decode(frames, message_name, index)
+            self._decoded[message_name] = decoded
+        return dict(decoded)
+
+    def _decode(
+        self, frames: FrameArrays, message_name: str, index: npt.NDArray[np.intp]
+    ) -> dict[str, np.ndarray]:
+        """``decode`` computed: each byte order's 64-bit words only if a signal uses it."""
+        layouts = self._layouts[message_name]
+        data = frames.data[index]
+        words = {big: _words(data, big) for big in {lay.big_endian for lay in layouts}}
         result: dict[str, np.ndarray] = {
-            "timestamp_s": frames.timestamp_s[index],
-            "index": index.astype(np.int64),
+            "timestamp_s": _frozen(frames.timestamp_s[index]),
+            "index": _frozen(index.astype(np.int64)),
         }
-        for layout in self._layouts[message_name]:
-            result[layout.name] = extract(words_be if layout.big_endian else words_le, layout)
+        for layout in layouts:
+            result[layout.name] = _frozen(extract(words[layout.big_endian], layout))
         return result
 
     def decode_page(
@@ -156,41 +186,53 @@ class BulkDecoder:
         muxes = [lay.name for lay in layouts if lay.is_multiplexer and lay.mux_signal is None]
         if not muxes:
             raise DecodeError(f"{message_name} is not multiplexed")
-        keep = decoded[muxes[0]] == mux_value
-        names = [lay.name for lay in layouts if _selected(lay, decoded, keep)]
-        page = {name: decoded[name][keep] for name in names}
-        page["timestamp_s"] = decoded["timestamp_s"][keep]
-        page["index"] = decoded["index"][keep]
+        kept = np.flatnonzero(decoded[muxes[0]] == mux_value)
+        names = [lay.name for lay in layouts if _selected(lay, muxes[0], mux_value, decoded, kept)]
+        page = {name: decoded[name][kept] for name in names}
+        page["timestamp_s"] = decoded["timestamp_s"][kept]
+        page["index"] = decoded["index"][kept]
         return page
 
 
-def _selected(layout: SignalLayout, decoded: dict[str, np.ndarray], keep: np.ndarray) -> bool:
-    """Whether a signal is present in the kept frames (its multiplexer selects it in all)."""
-    if layout.mux_signal is None:
+def _frozen(array: np.ndarray) -> np.ndarray:
+    """``array``, made read-only (the decoder's caches hand the same arrays out again)."""
+    array.flags.writeable = False
+    return array
+
+
+def _selected(
+    layout: SignalLayout, mux: str, mux_value: int, decoded: dict[str, np.ndarray],
+    kept: npt.NDArray[np.intp],
+) -> bool:
+    """Whether a signal is present in the kept frames of page ``mux_value`` of the top-level
+    multiplexer ``mux`` (its multiplexer selects it in all of them; in none kept: all are)."""
+    if layout.mux_signal is None or len(kept) == 0:
         return True
-    return bool(np.isin(decoded[layout.mux_signal][keep], layout.mux_ids).all())
+    if layout.mux_signal == mux:  # every kept frame has mux == mux_value
+        return mux_value in layout.mux_ids
+    return bool(np.isin(decoded[layout.mux_signal][kept], layout.mux_ids).all())
 
 
-def _words(data: npt.NDArray[np.uint8]) -> tuple[npt.NDArray[np.uint64], npt.NDArray[np.uint64]]:
-    """Each 8-byte payload as a little-endian and as a big-endian unsigned 64-bit word."""
+def _words(data: npt.NDArray[np.uint8], big_endian: bool) -> npt.NDArray[np.uint64]:
+    """Each 8-byte payload as one unsigned 64-bit word: little-endian (Intel signals) or
+    big-endian (Motorola), in the machine's own byte order."""
     contiguous = np.ascontiguousarray(data, dtype=np.uint8)
-    little = contiguous.view("<u8").reshape(-1).astype(np.uint64)
-    big = contiguous.view(">u8").reshape(-1).astype(np.uint64)
-    return little, big
+    word = contiguous.view(">u8" if big_endian else "<u8").reshape(-1)
+    return word.astype(np.uint64, copy=not word.dtype.isnative)
 
 
 def extract(words: npt.NDArray[np.uint64], layout: SignalLayout) -> np.ndarray:
-    """One signal's raw values from 64-bit words: shift, mask, sign-extend (or IEEE view)."""
-    mask = np.uint64((1 << layout.length) - 1)
-    raw = (words >> np.uint64(layout.shift)) & mask
+    """One signal's raw values from 64-bit words: shift and mask, or for a signed signal shift
+    its top bit to bit 63 and shift back arithmetically (the sign extension); or IEEE view."""
     if layout.is_float:
+        raw = (words >> np.uint64(layout.shift)) & np.uint64((1 << layout.length) - 1)
         float_type = np.float32 if layout.length == 32 else np.float64
         int_type = np.uint32 if layout.length == 32 else np.uint64
         return raw.astype(int_type).view(float_type).astype(np.float64)
-    if layout.length == 64:
-        return raw.view(np.int64) if layout.signed else raw.astype(np.int64)
-    value = raw.astype(np.int64)
     if layout.signed:
-        sign = np.int64(1 << (layout.length - 1))
-        value = (value ^ sign) - sign
-    return value
+        top = words << np.uint64(64 - layout.shift - layout.length)
+        return top.view(np.int64) >> np.int64(64 - layout.length)
+    value = words >> np.uint64(layout.shift)
+    if layout.shift + layout.length < 64:
+        value &= np.uint64((1 << layout.length) - 1)
+    return value.view(np.int64) if layout.length < 64 else value  # uint64: int64 cannot hold it
