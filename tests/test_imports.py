@@ -21,9 +21,12 @@ HEAVY = ("matplotlib", "aiomqtt", "amqtt", "paho", "pyarrow", "foxglove", "foxgl
 MQTT = ("aiomqtt", "paho")
 # What each command's start-up (its module and its parser) may not import: HEAVY, less what the
 # command is for. monitor's --broker, bridge and fleet speak MQTT; bridge and fleet sign commands
-# with SecOC (cryptography's AES-CMAC).
+# with SecOC (cryptography's AES-CMAC). run and analyze parse (and refuse bad usage) without rich:
+# it comes with the summary.
 FORBIDDEN = {
     **{name: frozenset(HEAVY) for name in SUBCOMMANDS},
+    "run": frozenset({*HEAVY, "rich"}),
+    "analyze": frozenset({*HEAVY, "rich"}),
     "monitor": frozenset(HEAVY) - set(MQTT),
     "bridge": frozenset(HEAVY) - {*MQTT, "cryptography"},
     "fleet": frozenset(HEAVY) - {*MQTT, "cryptography"},
