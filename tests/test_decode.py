@@ -149,27 +149,26 @@ def test_bulk_decoder_at_the_edges_of_the_word(payload: bytes) -> None:
         assert_same(db, decoder, name, [payload, bytes(8), b"\xff" * 8])
 
 
-def test_the_decoder_s_cache_is_read_only_and_belongs_to_one_frames() -> None:
-    """What ``decode`` keeps for the next call cannot be changed in place (numpy refuses), each
-    call gets a dict of its own, and other frames (the next chunk of a stream) get their own
-    values, not the cached ones."""
+def test_the_decoder_s_kept_selection_is_read_only_and_belongs_to_one_frames() -> None:
+    """What ``select`` keeps for the next call cannot be changed in place (numpy refuses), and
+    other frames (the next chunk of a stream) get their own selection and values, not the kept
+    ones; decoded values are the caller's own."""
     frames = rig_run()
     decoder = BulkDecoder(DB)
-    first = decoder.decode(frames, "WHEEL_ENCODERS")
+    first = decoder.select(frames, "WHEEL_ENCODERS")
     with pytest.raises(ValueError, match="read-only"):
-        first["LEFT_COUNT"][0] = 0
-    with pytest.raises(ValueError, match="read-only"):
-        decoder.select(frames, "WHEEL_ENCODERS")[0] = 0
-    first["LEFT_COUNT"] = np.zeros(1)
+        first[0] = 0
+    decoded = decoder.decode(frames, "WHEEL_ENCODERS")
+    decoded["LEFT_COUNT"][:] = 0
     again = decoder.decode(frames, "WHEEL_ENCODERS")
-    assert len(again["LEFT_COUNT"]) == len(again["index"]) > 1
+    assert np.any(again["LEFT_COUNT"] != 0)
     later = frames.select(np.arange(len(frames) // 2, len(frames)))
     part = decoder.decode(later, "WHEEL_ENCODERS")
     fresh = BulkDecoder(DB).decode(later, "WHEEL_ENCODERS")
     assert part.keys() == fresh.keys()
     for key, value in fresh.items():
         np.testing.assert_array_equal(part[key], value)
-    assert len(part["index"]) < len(again["index"])
+    assert 0 < len(part["index"]) < len(first)
 
 
 @cache

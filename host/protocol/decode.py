@@ -103,11 +103,11 @@ class BulkDecoder:
     hold). ``decode_page`` returns just the frames of one page with just that page's signals,
     exactly what cantools returns for each of them.
 
-    The analysis asks for the same message several times (a page at a time, the frame counts,
-    the E2E-accepted frames): what ``select`` and ``decode`` computed is kept for the last
-    ``FrameArrays`` seen (immutable), so each message of a log is selected and decoded once. The
-    kept arrays are read-only: a caller that changed one in place would change every later
-    answer, so numpy refuses it. Each call returns a dict of its own.
+    The analysis asks for the same message's frames several times (its frame counts, a page at
+    a time, the E2E-accepted frames): ``select`` keeps its answer for the last ``FrameArrays``
+    seen (immutable), at most 8 bytes a frame over all messages, and hands it out read-only (a
+    caller that changed it in place would change every later answer). Decoded values are not
+    kept: each call returns arrays of its own, and a page decodes only its own frames' signals.
     """
 
     def __init__(self, db: cantools.database.can.Database) -> None:
@@ -115,9 +115,8 @@ class BulkDecoder:
         self._layouts: dict[str, tuple[SignalLayout, ...]] = {}
         self._messages: dict[str, Message] = {}
         self._frames: FrameArrays | None = None  # the frames the caches below belong to
-        self._keys: npt.NDArray[np.int64] | None = None
+        self._keys: npt.NDArray[np.int64] = np.zeros(0, dtype=np.int64)
         self._selected: dict[str, npt.NDArray[np.intp]] = {}
-        self._decoded: dict[str, dict[str, np.ndarray]] = {}
         for message in db.messages:
             self._messages[message.name] = message
             self._layouts[message.name] = tuple(signal_layout(s) for s in message.signals)
@@ -131,86 +130,78 @@ class BulkDecoder:
 
     def select(self, frames: FrameArrays, name: str) -> npt.NDArray[np.intp]:
         """Positions in ``frames`` of the decodable frames of message ``name`` (read-only)."""
-        self._use(frames)
+        if self._frames is not frames:  # start the caches afresh
+            self._frames, self._keys, self._selected = frames, frame_keys(frames), {}
         index = self._selected.get(name)
         if index is None:
             message = self.message(name)
             if message.length > 8:
                 raise DecodeError(f"{name}: {message.length}-byte message (classic CAN only)")
-            key = frame_key(message.frame_id, message.is_extended_frame)
-            assert self._keys is not None
-            index = _frozen(np.flatnonzero(self._keys == key))
-            index = _frozen(index[frames.dlc[index] == message.length])
+            of_id = np.flatnonzero(self._keys == frame_key(message.frame_id,
+                                                            message.is_extended_frame))
+            index = of_id[frames.dlc[of_id] == message.length]
+            index.flags.writeable = False
             self._selected[name] = index
         return index
 
-    def _use(self, frames: FrameArrays) -> None:
-        """Start the caches afresh when ``frames`` is not the FrameArrays they belong to."""
-        if self._frames is not frames:
-            self._frames = frames
-            self._keys = frame_keys(frames)
-            self._selected = {}
-            self._decoded = {}
-
     def decode(self, frames: FrameArrays, message_name: str) -> dict[str, np.ndarray]:
         """Raw values of every signal of ``message_name`` over its frames (see the class doc)."""
-        index = self.select(frames, message_name)  # also makes the caches belong to frames
-        decoded = self._decoded.get(message_name)
-        if decoded is None:
-            decoded = self._decode(frames, message_name, index)
-            self._decoded[message_name] = decoded
-        return dict(decoded)
-
-    def _decode(
-        self, frames: FrameArrays, message_name: str, index: npt.NDArray[np.intp]
-    ) -> dict[str, np.ndarray]:
-        """``decode`` computed: each byte order's 64-bit words only if a signal uses it."""
-        layouts = self._layouts[message_name]
-        data = frames.data[index]
-        words = {big: _words(data, big) for big in {lay.big_endian for lay in layouts}}
-        result: dict[str, np.ndarray] = {
-            "timestamp_s": _frozen(frames.timestamp_s[index]),
-            "index": _frozen(index.astype(np.int64)),
-        }
-        for layout in layouts:
-            result[layout.name] = _frozen(extract(words[layout.big_endian], layout))
-        return result
+        index = self.select(frames, message_name)
+        return self._decode(frames, index, self._layouts[message_name])
 
     def decode_page(
         self, frames: FrameArrays, message_name: str, mux_value: int
     ) -> dict[str, np.ndarray]:
         """The frames of one multiplexer page (value of the top-level multiplexer) with the
         signals cantools decodes for it."""
-        decoded = self.decode(frames, message_name)
         layouts = self._layouts[message_name]
-        muxes = [lay.name for lay in layouts if lay.is_multiplexer and lay.mux_signal is None]
+        muxes = [lay for lay in layouts if lay.is_multiplexer and lay.mux_signal is None]
         if not muxes:
             raise DecodeError(f"{message_name} is not multiplexed")
-        kept = np.flatnonzero(decoded[muxes[0]] == mux_value)
-        names = [lay.name for lay in layouts if _selected(lay, muxes[0], mux_value, decoded, kept)]
-        page = {name: decoded[name][kept] for name in names}
-        page["timestamp_s"] = decoded["timestamp_s"][kept]
-        page["index"] = decoded["index"][kept]
+        index = self.select(frames, message_name)
+        data = frames.data[index]
+        top = muxes[0]
+        kept = np.flatnonzero(extract(_words(data, top.big_endian), top) == mux_value)
+        wanted = layouts if len(kept) == 0 else tuple(  # an empty page: every signal, as ever
+            lay for lay in layouts if lay.mux_signal != top.name or mux_value in lay.mux_ids
+        )
+        decoded = self._decode(frames, index[kept], wanted, data[kept])
+        page = {
+            lay.name: decoded[lay.name]
+            for lay in wanted if _selected(lay, top.name, mux_value, decoded)
+        }
+        page["timestamp_s"] = decoded["timestamp_s"]
+        page["index"] = decoded["index"]
         return page
 
-
-def _frozen(array: np.ndarray) -> np.ndarray:
-    """``array``, made read-only (the decoder's caches hand the same arrays out again)."""
-    array.flags.writeable = False
-    return array
+    @staticmethod
+    def _decode(
+        frames: FrameArrays, index: npt.NDArray[np.intp], layouts: tuple[SignalLayout, ...],
+        data: npt.NDArray[np.uint8] | None = None,
+    ) -> dict[str, np.ndarray]:
+        """The signals of ``layouts`` over the frames ``index`` (``data``: their payloads, when
+        already gathered); each byte order's 64-bit words built only if a signal uses it."""
+        payloads = frames.data[index] if data is None else data
+        words = {big: _words(payloads, big) for big in {lay.big_endian for lay in layouts}}
+        result: dict[str, np.ndarray] = {
+            "timestamp_s": frames.timestamp_s[index],
+            "index": index.astype(np.int64),
+        }
+        for layout in layouts:
+            result[layout.name] = extract(words[layout.big_endian], layout)
+        return result
 
 
 def _selected(
-    layout: SignalLayout, mux: str, mux_value: int, decoded: dict[str, np.ndarray],
-    kept: npt.NDArray[np.intp],
+    layout: SignalLayout, mux: str, mux_value: int, page: dict[str, np.ndarray]
 ) -> bool:
-    """Whether a signal is present in the kept frames of page ``mux_value`` of the top-level
-    multiplexer ``mux`` (its multiplexer selects it in all of them; in none kept: all are)."""
-    if layout.mux_signal is None or len(kept) == 0:
+    """Whether a signal is present in the frames of page ``mux_value`` of the top-level
+    multiplexer ``mux`` (its multiplexer selects it in all of them; on an empty page: all are)."""
+    if layout.mux_signal is None or len(page["index"]) == 0:
         return True
-    if layout.mux_signal == mux:  # every kept frame has mux == mux_value
+    if layout.mux_signal == mux:  # every frame of the page has mux == mux_value
         return mux_value in layout.mux_ids
-    return bool(np.isin(decoded[layout.mux_signal][kept], layout.mux_ids).all())
+    return bool(np.isin(page[layout.mux_signal], layout.mux_ids).all())
 
 
 def _words(data: npt.NDArray[np.uint8], big_endian: bool) -> npt.NDArray[np.uint64]:
