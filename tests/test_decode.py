@@ -59,6 +59,22 @@ BO_ 516 MOTOEND: 8 A
  SG_ LAST : 63|8@0- (1,0) [0|0] "-" A
 """
 
+# Extended multiplexing: SUB is itself a multiplexer, on page 0 of TOP only.
+NESTED_DBC = """VERSION ""
+BU_: A
+BO_ 600 NEST: 8 A
+ SG_ TOP M : 0|4@1+ (1,0) [0|15] "-" A
+ SG_ SUB m0M : 4|4@1+ (1,0) [0|15] "-" A
+ SG_ A m1 : 8|8@1+ (1,0) [0|255] "-" A
+ SG_ B m2 : 8|8@1- (1,0) [0|0] "-" A
+ SG_ C m1 : 16|16@1+ (1,0) [0|0] "-" A
+
+SG_MUL_VAL_ 600 SUB TOP 0-0;
+SG_MUL_VAL_ 600 A SUB 1-1;
+SG_MUL_VAL_ 600 B SUB 2-2;
+SG_MUL_VAL_ 600 C TOP 1-1;
+"""
+
 
 def pages(message: Message) -> list[int | None]:
     """Multiplexer values of a message's pages (None: not multiplexed)."""
@@ -147,6 +163,23 @@ def test_bulk_decoder_at_the_edges_of_the_word(payload: bytes) -> None:
     decoder = BulkDecoder(db)
     for name in ("S64", "U64", "TOPS", "MOTO64", "MOTOEND"):
         assert_same(db, decoder, name, [payload, bytes(8), b"\xff" * 8])
+
+
+@settings(max_examples=100, deadline=None)
+@given(top=st.integers(0, 1), sub=st.integers(1, 2), rest=st.binary(min_size=7, max_size=7))
+def test_a_page_of_a_nested_multiplexer_is_what_cantools_decodes(
+    top: int, sub: int, rest: bytes
+) -> None:
+    """decode_page on frames of one (TOP, SUB) (the pages the DBC defines): exactly the
+    signals and values cantools decodes."""
+    db = cantools.database.load_string(NESTED_DBC, database_format="dbc")
+    assert isinstance(db, Database)
+    payload = bytes([top | sub << 4]) + rest
+    frames = as_frames(600, [payload, payload])
+    page = BulkDecoder(db).decode_page(frames, "NEST", top)
+    expected = numbers(db, "NEST", payload, scaling=False)
+    assert {key: int(value[1]) for key, value in page.items() if key not in
+            ("timestamp_s", "index")} == expected
 
 
 def test_the_decoder_s_kept_selection_is_read_only_and_belongs_to_one_frames() -> None:

@@ -201,6 +201,8 @@ def _selected(
         return True
     if layout.mux_signal == mux:  # every frame of the page has mux == mux_value
         return mux_value in layout.mux_ids
+    if layout.mux_signal not in page:  # a nested multiplexer of another page
+        return False
     return bool(np.isin(page[layout.mux_signal], layout.mux_ids).all())
 
 
