@@ -132,3 +132,17 @@ def test_version_imports_no_library_and_prints_the_package_version() -> None:
     assert not {m for m in modules if m.startswith("odocan.host.cli.subparsers.")}
     top = {m.split(".")[0] for m in modules}
     assert top.isdisjoint({*HEAVY, "numpy", "can", "cantools", "rich"}), top
+
+
+def test_python_can_errors_stay_usage_errors_though_app_does_not_import_can() -> None:
+    """``main`` no longer imports python-can to catch its errors; a ``CanError`` a command
+    raises (python-can then imported) is still a one-line usage error, anything else is not."""
+    import can
+
+    from odocan.host.cli.app import is_usage_error
+    from odocan.sim.exceptions import ConfigurationError
+
+    assert is_usage_error(can.CanInitializationError("no such channel"))
+    assert is_usage_error(ConfigurationError("bad value"))
+    assert is_usage_error(FileNotFoundError(2, "No such file", "x.log"))
+    assert not is_usage_error(ValueError("a bug"))
