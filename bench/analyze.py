@@ -16,9 +16,12 @@ figure that suffers least from a loaded machine) and max RSS, read from ``wait4`
 analysed as a fleet's archive with ``--jobs 1``, ``--jobs 2`` and a 2-worker Dask
 ``LocalCluster``.
 
+With ``--startup``: the start-up alone, as whole processes (best of ``--runs``): the bare
+interpreter, ``odocan --version`` and ``odocan analyze`` on a 2-second drive.
+
 Target (issues #4, #14): >= 20x faster than cantools while doing more. Prints figures; asserts
 nothing. Run: ``.venv/bin/python bench/analyze.py [--frames N | --log PATH] [--no-cli]
-[--batch 20]``.
+[--batch 20] [--startup]``.
 """
 
 from __future__ import annotations
@@ -136,6 +139,20 @@ def print_whole_processes(path: Path, frames: int, runs: int, cli: bool) -> None
           f"CPU {theirs[1] / best[1]:5.1f}x (target >= 20x)")
 
 
+def print_startup(runs: int) -> None:
+    """Start-up as whole processes, best of ``runs`` by CPU: the interpreter alone, ``odocan
+    --version``, ``odocan analyze`` on a 2-second drive (720 frames)."""
+    small = make_log(720)
+    print(f"start-up, whole processes (best of {runs}; wall / CPU)")
+    for label, argv in (
+        ("python -c pass", [sys.executable, "-c", "pass"]),
+        ("odocan --version", [sys.executable, "-m", "odocan", "--version"]),
+        ("odocan analyze (720 fr.)", [sys.executable, "-m", "odocan", "analyze", str(small)]),
+    ):
+        best = min((whole_process(argv) for _ in range(runs)), key=lambda r: r[1])
+        print(f"{label:24s} {best[0]:6.3f} s  {best[1]:6.3f} s CPU  exit {best[3]}")
+
+
 def print_batch(count: int, frames: int) -> None:
     """``count`` copies of a drive of ``frames`` frames as one archive: --jobs 1, --jobs 2 and a
     2-worker Dask LocalCluster (wall seconds; the cluster's start-up not counted)."""
@@ -170,7 +187,12 @@ def main() -> None:
     parser.add_argument("--batch-frames", type=int, default=36_000, help="frames per batch log")
     parser.add_argument("--whole-only", action="store_true",
                         help="only the whole-process figures (and --batch)")
+    parser.add_argument("--startup", action="store_true",
+                        help="only the start-up figures (--version, analyze on 720 frames)")
     args = parser.parse_args()
+    if args.startup:
+        print_startup(args.runs)
+        return
     path = args.log or make_log(args.frames)
     if args.whole_only:
         print_whole_processes(path, sum(1 for _ in path.open("rb")), args.runs, not args.no_cli)

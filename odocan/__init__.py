@@ -8,9 +8,7 @@ One import name, four rooms (the repository's top-level folders, linked here):
 - ``odocan.dbc``: the bus contract, ``odocan.dbc``, shipped as package data.
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("odocan")
-except PackageNotFoundError:  # a source checkout that was never installed
-    __version__ = "0+unknown"
+# The one definition of the version: pyproject.toml reads it from here ([tool.setuptools.dynamic]),
+# and a literal costs nothing at start-up, where importlib.metadata's lookup costs every command
+# tens of milliseconds (odocan --version included). It is the same in a source checkout.
+__version__ = "0.1.0"

@@ -40,6 +40,41 @@ BO_ 291 BIG: 8 A
  SG_ TOP : 55|16@0+ (1,0) [0|65535] "-" A
 """
 
+# Layouts at the edges of the 64-bit word: full-width signals, signals ending at bit 63 (no mask
+# after the shift), signed signals whose sign bit is bit 63, in both byte orders.
+EDGE_DBC = """VERSION ""
+BU_: A
+BO_ 512 S64: 8 A
+ SG_ S64 : 0|64@1- (1,0) [0|0] "-" A
+BO_ 513 U64: 8 A
+ SG_ U64 : 0|64@1+ (1,0) [0|0] "-" A
+BO_ 514 TOPS: 8 A
+ SG_ LOW : 0|40@1+ (1,0) [0|0] "-" A
+ SG_ TOP : 40|24@1- (1,0) [0|0] "-" A
+BO_ 515 MOTO64: 8 A
+ SG_ M64 : 7|64@0- (1,0) [0|0] "-" A
+BO_ 516 MOTOEND: 8 A
+ SG_ HIGH : 7|1@0- (1,0) [0|0] "-" A
+ SG_ REST : 6|55@0+ (1,0) [0|0] "-" A
+ SG_ LAST : 63|8@0- (1,0) [0|0] "-" A
+"""
+
+# Extended multiplexing: SUB is itself a multiplexer, on page 0 of TOP only.
+NESTED_DBC = """VERSION ""
+BU_: A
+BO_ 600 NEST: 8 A
+ SG_ TOP M : 0|4@1+ (1,0) [0|15] "-" A
+ SG_ SUB m0M : 4|4@1+ (1,0) [0|15] "-" A
+ SG_ A m1 : 8|8@1+ (1,0) [0|255] "-" A
+ SG_ B m2 : 8|8@1- (1,0) [0|0] "-" A
+ SG_ C m1 : 16|16@1+ (1,0) [0|0] "-" A
+
+SG_MUL_VAL_ 600 SUB TOP 0-0;
+SG_MUL_VAL_ 600 A SUB 1-1;
+SG_MUL_VAL_ 600 B SUB 2-2;
+SG_MUL_VAL_ 600 C TOP 1-1;
+"""
+
 
 def pages(message: Message) -> list[int | None]:
     """Multiplexer values of a message's pages (None: not multiplexed)."""
@@ -118,6 +153,55 @@ def test_bulk_decoder_big_endian_and_signed_layouts(payload: bytes) -> None:
     db = cantools.database.load_string(MOTOROLA_DBC, database_format="dbc")
     assert isinstance(db, Database)
     assert_same(db, BulkDecoder(db), "BIG", [payload])
+
+
+@settings(max_examples=200, deadline=None)
+@given(payload=st.binary(min_size=8, max_size=8))
+def test_bulk_decoder_at_the_edges_of_the_word(payload: bytes) -> None:
+    db = cantools.database.load_string(EDGE_DBC, database_format="dbc")
+    assert isinstance(db, Database)
+    decoder = BulkDecoder(db)
+    for name in ("S64", "U64", "TOPS", "MOTO64", "MOTOEND"):
+        assert_same(db, decoder, name, [payload, bytes(8), b"\xff" * 8])
+
+
+@settings(max_examples=100, deadline=None)
+@given(top=st.integers(0, 1), sub=st.integers(1, 2), rest=st.binary(min_size=7, max_size=7))
+def test_a_page_of_a_nested_multiplexer_is_what_cantools_decodes(
+    top: int, sub: int, rest: bytes
+) -> None:
+    """decode_page on frames of one (TOP, SUB) (the pages the DBC defines): exactly the
+    signals and values cantools decodes."""
+    db = cantools.database.load_string(NESTED_DBC, database_format="dbc")
+    assert isinstance(db, Database)
+    payload = bytes([top | sub << 4]) + rest
+    frames = as_frames(600, [payload, payload])
+    page = BulkDecoder(db).decode_page(frames, "NEST", top)
+    expected = numbers(db, "NEST", payload, scaling=False)
+    assert {key: int(value[1]) for key, value in page.items() if key not in
+            ("timestamp_s", "index")} == expected
+
+
+def test_the_decoder_s_kept_selection_is_read_only_and_belongs_to_one_frames() -> None:
+    """What ``select`` keeps for the next call cannot be changed in place (numpy refuses), and
+    other frames (the next chunk of a stream) get their own selection and values, not the kept
+    ones; decoded values are the caller's own."""
+    frames = rig_run()
+    decoder = BulkDecoder(DB)
+    first = decoder.select(frames, "WHEEL_ENCODERS")
+    with pytest.raises(ValueError, match="read-only"):
+        first[0] = 0
+    decoded = decoder.decode(frames, "WHEEL_ENCODERS")
+    decoded["LEFT_COUNT"][:] = 0
+    again = decoder.decode(frames, "WHEEL_ENCODERS")
+    assert np.any(again["LEFT_COUNT"] != 0)
+    later = frames.select(np.arange(len(frames) // 2, len(frames)))
+    part = decoder.decode(later, "WHEEL_ENCODERS")
+    fresh = BulkDecoder(DB).decode(later, "WHEEL_ENCODERS")
+    assert part.keys() == fresh.keys()
+    for key, value in fresh.items():
+        np.testing.assert_array_equal(part[key], value)
+    assert 0 < len(part["index"]) < len(first)
 
 
 @cache

@@ -14,21 +14,49 @@ from pathlib import Path
 
 import pytest
 
-from odocan.host.cli.app import main
+from odocan.host.cli.app import SUBCOMMANDS, main
 
 HEAVY = ("matplotlib", "aiomqtt", "amqtt", "paho", "pyarrow", "foxglove", "foxglove_sdk", "mcap",
          "cryptography", "dask", "distributed")
+MQTT = ("aiomqtt", "paho")
+# What each command's start-up (its module and its parser) may not import: HEAVY, less what the
+# command is for. monitor's --broker, bridge and fleet speak MQTT; bridge and fleet sign commands
+# with SecOC (cryptography's AES-CMAC). run and analyze parse (and refuse bad usage) without rich:
+# it comes with the summary.
+FORBIDDEN = {
+    **{name: frozenset(HEAVY) for name in SUBCOMMANDS},
+    "run": frozenset({*HEAVY, "rich"}),
+    "analyze": frozenset({*HEAVY, "rich"}),
+    "monitor": frozenset(HEAVY) - set(MQTT),
+    "bridge": frozenset(HEAVY) - {*MQTT, "cryptography"},
+    "fleet": frozenset(HEAVY) - {*MQTT, "cryptography"},
+}
 PROBE = """
 import json, sys
-from odocan.host.cli.app import main
+from odocan.host.cli.app import SUBCOMMANDS, main
 code = main(sys.argv[1:])
 print(json.dumps({"code": code, "modules": sorted({m.split(".")[0] for m in sys.modules})}))
 """
+VERSION_PROBE = """
+import json, sys
+from odocan.host.cli.app import main
+try:
+    main(["--version"])
+except SystemExit as done:
+    assert done.code == 0, done.code
+print(json.dumps(sorted(sys.modules)))
+"""
+STARTUP_PROBE = """
+import json, sys
+from odocan.host.cli.app import build_parser, named_command
+build_parser(named_command(sys.argv[1:]))
+print(json.dumps({"code": 0, "modules": sorted({m.split(".")[0] for m in sys.modules})}))
+"""
 
 
-def imported_by(*argv: str) -> tuple[int, set[str]]:
+def imported_by(*argv: str, probe: str = PROBE) -> tuple[int, set[str]]:
     """Exit code and top-level packages imported by ``odocan ARGV`` in a fresh interpreter."""
-    done = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True,
+    done = subprocess.run([sys.executable, "-c", probe, *argv], capture_output=True, text=True,
                           timeout=300, check=False)
     last = json.loads(done.stdout.strip().splitlines()[-1])
     return int(last["code"]), set(last["modules"])
@@ -64,3 +92,57 @@ def test_the_full_parser_still_lists_every_command() -> None:
     assert done.returncode == 0
     for command in ("run", "analyze", "replay", "monitor", "bridge", "fleet", "busload"):
         assert f"    {command}" in done.stdout
+
+
+@pytest.mark.parametrize("command", SUBCOMMANDS)
+def test_each_command_starts_without_what_it_does_not_use(command: str) -> None:
+    """What ``odocan COMMAND`` imports before it runs (its module, its parser): none of its
+    forbidden packages."""
+    _, modules = imported_by(command, probe=STARTUP_PROBE)
+    assert "odocan" in modules  # the probe ran
+    assert modules.isdisjoint(FORBIDDEN[command]), sorted(modules & FORBIDDEN[command])
+
+
+def test_the_startup_probe_sees_a_command_s_own_heavy_imports() -> None:
+    """The same probe on ``bridge``: MQTT is loaded, so the check above can fail."""
+    _, modules = imported_by("bridge", probe=STARTUP_PROBE)
+    assert set(MQTT) <= modules
+
+
+def test_run_imports_foxglove_mqtt_and_cryptography_only_when_asked(tmp_path: Path) -> None:
+    """A whole ``odocan run``: no Foxglove server (nor the monitor's MQTT fleet view behind
+    it), no AES-CMAC without ``--secoc-key``."""
+    code, modules = imported_by("run", "--duration", "1", "--seed", "2",
+                                "--report", str(tmp_path / "r.json"))
+    assert code == 0
+    assert modules.isdisjoint(HEAVY), sorted(modules & set(HEAVY))
+    assert {"numpy", "cantools", "can", "rich"} <= modules
+
+
+def test_version_imports_no_library_and_prints_the_package_version() -> None:
+    """``odocan --version``: no subcommand built, nothing heavy imported, not even numpy,
+    python-can, cantools or rich; it prints the version pyproject.toml gives the package."""
+    from importlib.metadata import version
+
+    done = subprocess.run([sys.executable, "-c", VERSION_PROBE], capture_output=True, text=True,
+                          timeout=300, check=False)
+    printed, last = done.stdout.strip().splitlines()
+    modules = set(json.loads(last))
+    assert printed == f"odocan {version('odocan')}"
+    assert not {m for m in modules if m.startswith("odocan.host.cli.subparsers.")}
+    top = {m.split(".")[0] for m in modules}
+    assert top.isdisjoint({*HEAVY, "numpy", "can", "cantools", "rich"}), top
+
+
+def test_python_can_errors_stay_usage_errors_though_app_does_not_import_can() -> None:
+    """``main`` no longer imports python-can to catch its errors; a ``CanError`` a command
+    raises (python-can then imported) is still a one-line usage error, anything else is not."""
+    import can
+
+    from odocan.host.cli.app import is_usage_error
+    from odocan.sim.exceptions import ConfigurationError
+
+    assert is_usage_error(can.CanInitializationError("no such channel"))
+    assert is_usage_error(ConfigurationError("bad value"))
+    assert is_usage_error(FileNotFoundError(2, "No such file", "x.log"))
+    assert not is_usage_error(ValueError("a bug"))

@@ -2,6 +2,10 @@
 
 Every error a person can cause becomes one line ``error: ...`` on stderr and exit code 2 (a
 traceback only with ``--debug``). Exit 1 means "ran, but the check failed" (e.g. out of tolerance).
+
+Start-up is part of every command's speed: this module imports neither python-can nor rich (the
+command that uses them does), ``--version`` builds no subcommand at all, and a named command
+builds only its own parser.
 """
 
 from __future__ import annotations
@@ -16,9 +20,7 @@ from contextlib import contextmanager
 from types import FrameType
 from typing import NoReturn
 
-import can
-import rich.console
-
+from odocan import __version__
 from odocan.sim.exceptions import OdocanError
 
 # Each module has add_subparser(subparsers) that sets func=_do_<cmd>(args) -> int.
@@ -37,7 +39,7 @@ SUBCOMMANDS = (
     "calibrate",
     "busload",
 )
-VERSION = "0.1.0"
+VERSION = __version__  # one definition, in odocan/__init__.py (pyproject.toml reads it too)
 EXIT_OK, EXIT_USAGE = 0, 2
 
 
@@ -78,7 +80,8 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The whole command line, every subcommand registered; with ``only`` (a name in
-    ``SUBCOMMANDS``) just that one, so a command imports nothing of the others (start-up)."""
+    ``SUBCOMMANDS``) just that one, so a command imports nothing of the others (start-up); with
+    ``only=""`` none (``--version``)."""
     parser = _Parser(
         prog="odocan",
         description="Fixed-point odometry firmware over CAN: "
@@ -90,7 +93,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     subparsers.required = True
-    for name in SUBCOMMANDS if only not in SUBCOMMANDS else (only,):
+    for name in SUBCOMMANDS if only is None else tuple(n for n in SUBCOMMANDS if n == only):
         try:
             module = importlib.import_module(f"odocan.host.cli.subparsers.{name}")
         except ImportError as exc:  # e.g. an optional dependency missing: say so when it is used
@@ -123,29 +126,42 @@ def main(argv: list[str] | None = None) -> int:
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     argv, debug = split_debug(argv)
-    rich.console.Console.on_broken_pipe = _on_broken_pipe  # type: ignore[method-assign]
     try:
         with sigterm_as_interrupt():
             args = build_parser(named_command(argv)).parse_args(argv)
             args.debug = debug  # split off above; bridge/fleet show library logs with it
+            _quiet_broken_pipe_in_rich()
             return int(args.func(args))
     except KeyboardInterrupt:
         return EXIT_OK
     except BrokenPipeError:
         _silence_stdout()
         return EXIT_OK
-    except (OdocanError, can.CanError, OSError) as exc:
-        if debug:
+    except Exception as exc:
+        if debug or not is_usage_error(exc):
             raise
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
 
 
+def is_usage_error(exc: BaseException) -> bool:
+    """Whether ``exc`` is one a person causes (odocan's errors, python-can's, I/O): one line,
+    exit 2. python-can is looked up only if a command imported it: else none of its errors can
+    have been raised, and importing it here would cost every command its start-up."""
+    if isinstance(exc, OdocanError | OSError):
+        return True
+    can = sys.modules.get("can")
+    return can is not None and isinstance(exc, can.CanError)
+
+
 def named_command(argv: list[str]) -> str | None:
     """The subcommand ``argv`` names (its first word, when options such as ``--help`` come
-    nowhere before it), or None: then the whole parser is built (help, errors list them all)."""
+    nowhere before it); ``""`` for a bare ``--version`` (no subcommand needed); or None: then
+    the whole parser is built (help, errors list them all)."""
     if argv and argv[0] in SUBCOMMANDS:
         return argv[0]
+    if argv == ["--version"]:
+        return ""
     return None
 
 
@@ -176,9 +192,17 @@ def sigterm_as_interrupt() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-def _on_broken_pipe(self: rich.console.Console) -> None:
-    """rich's hook when the reader of stdout went away: rich would exit 1, odocan ends quietly
-    (``main`` turns this into exit 0)."""
+def _quiet_broken_pipe_in_rich() -> None:
+    """Make rich's hook for a reader of stdout that went away raise ``BrokenPipeError`` (rich
+    would exit 1; ``main`` ends quietly, exit 0). Installed once the command line is parsed, so
+    ``--version``, ``--help`` and usage errors never import rich."""
+    from rich.console import Console
+
+    Console.on_broken_pipe = _on_broken_pipe  # type: ignore[method-assign]
+
+
+def _on_broken_pipe(self: object) -> None:
+    """rich's ``Console.on_broken_pipe``: raise, for ``main`` to end quietly."""
     raise BrokenPipeError
 
 

@@ -7,7 +7,8 @@ frames of a message at once: the 8 payload bytes as one 64-bit word (little-endi
 signals, big-endian for Motorola ones), a shift, a mask and a sign extension.
 
 The values are cantools' *raw* values (``decode_message(..., scaling=False)``): int64 arrays
-(float64 for IEEE float signals). Scale them with the signal's ``scale``/``offset`` yourself.
+(float64 for IEEE float signals; uint64 for an unsigned 64-bit signal, which int64 cannot
+hold). Scale them with the signal's ``scale``/``offset`` yourself.
 """
 
 from __future__ import annotations
@@ -101,13 +102,21 @@ class BulkDecoder:
     page is meaningful only where the multiplexer selects it (elsewhere it is what its bits
     hold). ``decode_page`` returns just the frames of one page with just that page's signals,
     exactly what cantools returns for each of them.
+
+    The analysis asks for the same message's frames several times (its frame counts, a page at
+    a time, the E2E-accepted frames): ``select`` keeps its answer for the last ``FrameArrays``
+    seen (immutable), at most 8 bytes a frame over all messages, and hands it out read-only (a
+    caller that changed it in place would change every later answer). Decoded values are not
+    kept: each call returns arrays of its own, and a page decodes only its own frames' signals.
     """
 
     def __init__(self, db: cantools.database.can.Database) -> None:
         self.db = db
         self._layouts: dict[str, tuple[SignalLayout, ...]] = {}
         self._messages: dict[str, Message] = {}
-        self._keys: tuple[FrameArrays, npt.NDArray[np.int64]] | None = None
+        self._frames: FrameArrays | None = None  # the frames the caches below belong to
+        self._keys: npt.NDArray[np.int64] = np.zeros(0, dtype=np.int64)
+        self._selected: dict[str, npt.NDArray[np.intp]] = {}
         for message in db.messages:
             self._messages[message.name] = message
             self._layouts[message.name] = tuple(signal_layout(s) for s in message.signals)
@@ -120,77 +129,103 @@ class BulkDecoder:
             raise DecodeError(f"the DBC has no message {name}") from None
 
     def select(self, frames: FrameArrays, name: str) -> npt.NDArray[np.intp]:
-        """Positions in ``frames`` of the decodable frames of message ``name``."""
-        message = self.message(name)
-        if message.length > 8:
-            raise DecodeError(f"{name}: {message.length}-byte message (classic CAN only)")
-        key = frame_key(message.frame_id, message.is_extended_frame)
-        mask = (self._frame_keys(frames) == key) & (frames.dlc == message.length)
-        return np.flatnonzero(mask)
-
-    def _frame_keys(self, frames: FrameArrays) -> npt.NDArray[np.int64]:
-        """``frame_keys(frames)``, kept for the last FrameArrays seen (they are immutable)."""
-        if self._keys is None or self._keys[0] is not frames:
-            self._keys = (frames, frame_keys(frames))
-        return self._keys[1]
+        """Positions in ``frames`` of the decodable frames of message ``name`` (read-only)."""
+        if self._frames is not frames:  # start the caches afresh
+            self._frames, self._keys, self._selected = frames, frame_keys(frames), {}
+        index = self._selected.get(name)
+        if index is None:
+            message = self.message(name)
+            if message.length > 8:
+                raise DecodeError(f"{name}: {message.length}-byte message (classic CAN only)")
+            of_id = np.flatnonzero(self._keys == frame_key(message.frame_id,
+                                                            message.is_extended_frame))
+            index = of_id[frames.dlc[of_id] == message.length]
+            index.flags.writeable = False
+            self._selected[name] = index
+        return index
 
     def decode(self, frames: FrameArrays, message_name: str) -> dict[str, np.ndarray]:
         """Raw values of every signal of ``message_name`` over its frames (see the class doc)."""
         index = self.select(frames, message_name)
-        words_le, words_be = _words(frames.data[index])
-        result: dict[str, np.ndarray] = {
-            "timestamp_s": frames.timestamp_s[index],
-            "index": index.astype(np.int64),
-        }
-        for layout in self._layouts[message_name]:
-            result[layout.name] = extract(words_be if layout.big_endian else words_le, layout)
-        return result
+        return self._decode(frames, index, self._layouts[message_name])
 
     def decode_page(
         self, frames: FrameArrays, message_name: str, mux_value: int
     ) -> dict[str, np.ndarray]:
         """The frames of one multiplexer page (value of the top-level multiplexer) with the
         signals cantools decodes for it."""
-        decoded = self.decode(frames, message_name)
         layouts = self._layouts[message_name]
-        muxes = [lay.name for lay in layouts if lay.is_multiplexer and lay.mux_signal is None]
+        muxes = [lay for lay in layouts if lay.is_multiplexer and lay.mux_signal is None]
         if not muxes:
             raise DecodeError(f"{message_name} is not multiplexed")
-        keep = decoded[muxes[0]] == mux_value
-        names = [lay.name for lay in layouts if _selected(lay, decoded, keep)]
-        page = {name: decoded[name][keep] for name in names}
-        page["timestamp_s"] = decoded["timestamp_s"][keep]
-        page["index"] = decoded["index"][keep]
+        index = self.select(frames, message_name)
+        data = frames.data[index]
+        top = muxes[0]
+        kept = np.flatnonzero(extract(_words(data, top.big_endian), top) == mux_value)
+        wanted = layouts if len(kept) == 0 else tuple(  # an empty page: every signal, as ever
+            lay for lay in layouts if lay.mux_signal != top.name or mux_value in lay.mux_ids
+        )
+        decoded = self._decode(frames, index[kept], wanted, data[kept])
+        page = {
+            lay.name: decoded[lay.name]
+            for lay in wanted if _selected(lay, top.name, mux_value, decoded)
+        }
+        page["timestamp_s"] = decoded["timestamp_s"]
+        page["index"] = decoded["index"]
         return page
 
+    @staticmethod
+    def _decode(
+        frames: FrameArrays, index: npt.NDArray[np.intp], layouts: tuple[SignalLayout, ...],
+        data: npt.NDArray[np.uint8] | None = None,
+    ) -> dict[str, np.ndarray]:
+        """The signals of ``layouts`` over the frames ``index`` (``data``: their payloads, when
+        already gathered); each byte order's 64-bit words built only if a signal uses it."""
+        payloads = frames.data[index] if data is None else data
+        words = {big: _words(payloads, big) for big in {lay.big_endian for lay in layouts}}
+        result: dict[str, np.ndarray] = {
+            "timestamp_s": frames.timestamp_s[index],
+            "index": index.astype(np.int64),
+        }
+        for layout in layouts:
+            result[layout.name] = extract(words[layout.big_endian], layout)
+        return result
 
-def _selected(layout: SignalLayout, decoded: dict[str, np.ndarray], keep: np.ndarray) -> bool:
-    """Whether a signal is present in the kept frames (its multiplexer selects it in all)."""
-    if layout.mux_signal is None:
+
+def _selected(
+    layout: SignalLayout, mux: str, mux_value: int, page: dict[str, np.ndarray]
+) -> bool:
+    """Whether a signal is present in the frames of page ``mux_value`` of the top-level
+    multiplexer ``mux`` (its multiplexer selects it in all of them; on an empty page: all are)."""
+    if layout.mux_signal is None or len(page["index"]) == 0:
         return True
-    return bool(np.isin(decoded[layout.mux_signal][keep], layout.mux_ids).all())
+    if layout.mux_signal == mux:  # every frame of the page has mux == mux_value
+        return mux_value in layout.mux_ids
+    if layout.mux_signal not in page:  # a nested multiplexer of another page
+        return False
+    return bool(np.isin(page[layout.mux_signal], layout.mux_ids).all())
 
 
-def _words(data: npt.NDArray[np.uint8]) -> tuple[npt.NDArray[np.uint64], npt.NDArray[np.uint64]]:
-    """Each 8-byte payload as a little-endian and as a big-endian unsigned 64-bit word."""
+def _words(data: npt.NDArray[np.uint8], big_endian: bool) -> npt.NDArray[np.uint64]:
+    """Each 8-byte payload as one unsigned 64-bit word: little-endian (Intel signals) or
+    big-endian (Motorola), in the machine's own byte order."""
     contiguous = np.ascontiguousarray(data, dtype=np.uint8)
-    little = contiguous.view("<u8").reshape(-1).astype(np.uint64)
-    big = contiguous.view(">u8").reshape(-1).astype(np.uint64)
-    return little, big
+    word = contiguous.view(">u8" if big_endian else "<u8").reshape(-1)
+    return word.astype(np.uint64, copy=not word.dtype.isnative)
 
 
 def extract(words: npt.NDArray[np.uint64], layout: SignalLayout) -> np.ndarray:
-    """One signal's raw values from 64-bit words: shift, mask, sign-extend (or IEEE view)."""
-    mask = np.uint64((1 << layout.length) - 1)
-    raw = (words >> np.uint64(layout.shift)) & mask
+    """One signal's raw values from 64-bit words: shift and mask, or for a signed signal shift
+    its top bit to bit 63 and shift back arithmetically (the sign extension); or IEEE view."""
     if layout.is_float:
+        raw = (words >> np.uint64(layout.shift)) & np.uint64((1 << layout.length) - 1)
         float_type = np.float32 if layout.length == 32 else np.float64
         int_type = np.uint32 if layout.length == 32 else np.uint64
         return raw.astype(int_type).view(float_type).astype(np.float64)
-    if layout.length == 64:
-        return raw.view(np.int64) if layout.signed else raw.astype(np.int64)
-    value = raw.astype(np.int64)
     if layout.signed:
-        sign = np.int64(1 << (layout.length - 1))
-        value = (value ^ sign) - sign
-    return value
+        top = words << np.uint64(64 - layout.shift - layout.length)
+        return top.view(np.int64) >> np.int64(64 - layout.length)
+    value = words >> np.uint64(layout.shift)
+    if layout.shift + layout.length < 64:
+        value &= np.uint64((1 << layout.length) - 1)
+    return value.view(np.int64) if layout.length < 64 else value  # uint64: int64 cannot hold it

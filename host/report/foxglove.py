@@ -52,11 +52,11 @@ from odocan.host.io.export import (
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.tracking import FramePose
 from odocan.host.protocol.decode import frame_key
+from odocan.host.report.foxglove_options import HOST
 from odocan.sim.exceptions import BusSetupError, ConfigurationError
 from odocan.sim.robot import RobotProfile
 
 DEFAULT_PORT = FOXGLOVE_PORT
-HOST = "127.0.0.1"
 SETTLE_S = 0.3  # a client's subscriptions are complete after this long without a new one
 BACKLOG = 1 << 17  # messages buffered per client (a 61 s run at full speed is ~6e4)
 
@@ -255,32 +255,7 @@ class FoxgloveLive(can.Listener):
         self.close()
 
 
-# --- the CLI's options -----------------------------------------------------------------------
-
-
-def port_number(text: str) -> int:
-    """argparse type: a TCP port, 0 (any free port) to 65535."""
-    try:
-        port = int(text)
-    except ValueError:
-        port = -1
-    if not 0 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"expected a TCP port 0..65535, got {text!r}")
-    return port
-
-
-def add_foxglove_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add ``--foxglove [PORT]`` and ``--realtime`` (``odocan run``)."""
-    group = parser.add_argument_group("live Foxglove")
-    group.add_argument(
-        "--foxglove", nargs="?", type=port_number, const=DEFAULT_PORT, metavar="PORT",
-        help=f"serve the drive live to Foxglove on {HOST}:PORT (default {DEFAULT_PORT}); the "
-        "drive starts when a client subscribes, and the server stays until it disconnects",
-    )
-    group.add_argument(
-        "--realtime", action="store_true",
-        help="with --foxglove: pace the drive to the wall clock, to watch it as it happens",
-    )
+# --- odocan run --foxglove (its options: host.report.foxglove_options, light) ------------------
 
 
 @contextmanager

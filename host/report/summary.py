@@ -17,17 +17,16 @@ import argparse
 import math
 import sys
 from pathlib import Path
-from typing import Any
-
-from rich import box
-from rich.console import Console
-from rich.padding import Padding
-from rich.table import Table
+from typing import TYPE_CHECKING, Any
 
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.report.jsonutil import write_report
 from odocan.host.report.outputs import OutputError, check_writable
 from odocan.sim.exceptions import ConfigurationError
+
+if TYPE_CHECKING:  # rich is imported where a summary is printed, not by the options above
+    from rich.console import Console
+    from rich.table import Table
 
 PLOT_SUFFIXES = (".png", ".svg")
 _E2E_COLUMNS = {
@@ -97,6 +96,8 @@ def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
 
     The summary comes first so that an output that cannot be written (an ``OutputError``
     naming its path, exit 2) never loses the verdict."""
+    from rich.console import Console
+
     console = Console(file=sys.stdout, highlight=False)
     print_summary(analysis.report, args.tolerance, console, title=title)
     sys.stdout.flush()
@@ -119,6 +120,8 @@ def print_summary(
     report: dict[str, Any], tolerance: Tolerance, console: Console, *, title: str
 ) -> None:
     """The run in a few lines, the comparison table and the verdict (fits 80 columns)."""
+    from rich.padding import Padding
+
     console.print(f"[bold]{title}[/bold]", soft_wrap=True)
     for label, text in _facts(report):
         console.print(f"  {label:<10} {text}", soft_wrap=True, highlight=False)
@@ -210,7 +213,7 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
 
 def frames_table(report: dict[str, Any]) -> Table:
     """Frames per message and their E2E check counts (a dash where a message has none)."""
-    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
+    table = _table()
     table.add_column("message")
     for column in ("frames", *_E2E_COLUMNS.values()):
         table.add_column(column, justify="right")
@@ -249,7 +252,7 @@ def bus_lines(section: dict[str, Any]) -> list[str]:
 def bus_table(section: dict[str, Any]) -> Table:
     """Per message: frames, measured max and p99 latency (queued to end of frame), the
     analysis' worst-case R and the deadline D, in ms; frames past D, frames never sent."""
-    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
+    table = _table()
     table.add_column("message")
     for column in ("frames", "max ms", "p99 ms", "R ms", "D ms", "late", "queued"):
         table.add_column(column, justify="right")
@@ -279,7 +282,7 @@ def _time_text(report: dict[str, Any]) -> str:
 
 def comparison_table(report: dict[str, Any]) -> Table:
     """Max and final position/heading errors of the on-board pose, vs reference and vs truth."""
-    table = Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
+    table = _table()
     table.add_column("on-board vs")
     for column in ("max position", "final position", "max heading", "final heading"):
         table.add_column(column, justify="right")
@@ -306,3 +309,11 @@ def _mrad(value: float | None) -> str:
 
 def _or_dash(value: object) -> str:
     return "-" if value is None else str(value)
+
+
+def _table() -> Table:
+    """An empty summary table: a rule under the bold header, no outer edge."""
+    from rich import box
+    from rich.table import Table
+
+    return Table(box=box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)

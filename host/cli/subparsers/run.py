@@ -45,7 +45,6 @@ from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge import busstats
 from odocan.host.judge.analysis import Analysis, analyze
-from odocan.host.protocol.secoc import load_secoc_key
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
     add_junit_argument,
@@ -53,7 +52,7 @@ from odocan.host.report.ci import (
     check_junit_path,
     write_checks,
 )
-from odocan.host.report.foxglove import add_foxglove_arguments, serve_foxglove
+from odocan.host.report.foxglove_options import add_foxglove_arguments, foxglove_session
 from odocan.host.report.outputs import OutputError, check_writable
 from odocan.host.report.progress import progress
 from odocan.host.report.summary import (
@@ -147,8 +146,14 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 
 def _do_run(args: argparse.Namespace) -> int:
     faults = parse_faults(args)
+    profile = robot.load(args.robot)
+    secoc_key = None
+    if args.secoc_key is not None:  # cryptography (AES-CMAC) only for a SecOC run
+        from odocan.host.protocol.secoc import load_secoc_key
+
+        secoc_key = load_secoc_key(args.secoc_key)
     config = RigConfig(
-        robot=robot.load(args.robot),
+        robot=profile,
         integrator=args.integrator,
         scenario=args.scenario,
         seed=args.seed,
@@ -159,7 +164,7 @@ def _do_run(args: argparse.Namespace) -> int:
         transport=args.transport,
         bitrate=args.bitrate,
         firmware=args.firmware,
-        secoc_key=None if args.secoc_key is None else load_secoc_key(args.secoc_key),
+        secoc_key=secoc_key,
     )
     check_log_path(args.log)
     check_output_paths(args)
@@ -170,7 +175,7 @@ def _do_run(args: argparse.Namespace) -> int:
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
     if config.firmware != "python":
         title += f", {config.firmware} firmware"
-    with serve_foxglove(args, config.robot, config.integrator) as live:
+    with foxglove_session(args, config.robot, config.integrator) as live:
         extra: list[can.Listener] = [] if live is None else [Isolated(live)]
         analysis, log_error = _run_and_analyze(config, args, extra)
         analysis.report["inputs"] = run_inputs(config, args.errors)
