@@ -45,7 +45,7 @@ from odocan.host.io.export import (
 )
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL
-from odocan.host.report.foxglove import DEFAULT_PORT, HOST, port_number
+from odocan.host.report.foxglove_options import HOST
 from odocan.sim.exceptions import BusSetupError
 
 RECONNECT_S = 1.0  # after the broker went away
@@ -213,18 +213,6 @@ class FollowerThread:
         self._thread.join(timeout_s)
 
 
-# --- the CLI's option ------------------------------------------------------------------------
-
-
-def add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
-    """``--foxglove [PORT]`` of ``odocan fleet``."""
-    parser.add_argument(
-        "--foxglove", nargs="?", type=port_number, const=DEFAULT_PORT, metavar="PORT",
-        help=f"serve every robot's poses, transforms and errors live to Foxglove on "
-        f"{HOST}:PORT (default {DEFAULT_PORT}; 0: any free port), from the fleet's MQTT telemetry",
-    )
-
-
 @contextlib.contextmanager
 def serve_fleet_foxglove(
     args: argparse.Namespace, broker: BrokerURL, robots: Iterable[str]
@@ -245,4 +233,4 @@ def serve_fleet_foxglove(
         live.close()
 
 
-__all__ = ["FleetFoxglove", "FollowerThread", "add_foxglove_argument", "serve_fleet_foxglove"]
+__all__ = ["FleetFoxglove", "FollowerThread", "serve_fleet_foxglove"]

@@ -28,8 +28,6 @@ from typing import Final
 import cantools
 import cantools.autosar
 from cantools.database.can import Database, Message
-from cryptography.hazmat.primitives.ciphers import algorithms
-from cryptography.hazmat.primitives.cmac import CMAC
 
 from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
@@ -140,6 +138,10 @@ class SecocSigner:
 
     def mac(self, can_id: int, pdu: bytes, fv: int) -> int:
         """The truncated authenticator (``mac_bits`` MSBs of the CMAC tag, as an integer)."""
+        # cryptography only once a command is signed: a session without a key never loads it
+        from cryptography.hazmat.primitives.ciphers import algorithms
+        from cryptography.hazmat.primitives.cmac import CMAC
+
         cmac = CMAC(algorithms.AES(self._key))
         cmac.update(can_id.to_bytes(2, "big") + bytes(pdu) + fv.to_bytes(6, "big"))
         return int.from_bytes(cmac.finalize(), "big") >> (128 - self.mac_bits)

@@ -26,7 +26,6 @@ from odocan.host.cli.options import (
     check_duration,
 )
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
-from odocan.host.protocol.secoc import load_secoc_key
 from odocan.sim import robot
 from odocan.sim.board import FileNvm, NvmCell
 from odocan.sim.cboard import board_maker
@@ -64,10 +63,17 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     parser.set_defaults(func=_do_firmware)
 
 
+def _secoc_key(path: Path) -> bytes:
+    """The key file read by the host's loader (cryptography only for a SecOC firmware)."""
+    from odocan.host.protocol.secoc import load_secoc_key
+
+    return load_secoc_key(path)
+
+
 def _do_firmware(args: argparse.Namespace) -> int:
     params = firmware_params(robot.load(args.robot), args.integrator)
     check_duration(args.duration)
-    key = None if args.secoc_key is None else load_secoc_key(args.secoc_key)
+    key = None if args.secoc_key is None else _secoc_key(args.secoc_key)
     nvm = _nvm(args.nvm, key)
     # builds the C library (and checks its ABI takes a key) before the bus opens
     make_board = board_maker(args.firmware, secoc=key is not None)

@@ -18,18 +18,19 @@ PASS, or FAIL and every threshold broken: exit 0, or 1 when ``deadline_miss_rati
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
 from collections import Counter
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from odocan.host.cli.options import SEED_LIMIT, add_seed_argument, float_in, int_in
+from odocan.host.io.export import FOXGLOVE_PORT
 from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.fleetrun import FleetRun, failures
-from odocan.host.mqtt.foxglove_fleet import add_foxglove_argument, serve_fleet_foxglove
 from odocan.host.mqtt.options import (
     add_mqtt_arguments,
     bridge_options,
@@ -38,6 +39,7 @@ from odocan.host.mqtt.options import (
 )
 from odocan.host.mqtt.shards import Shard, embedded_broker, run_sharded
 from odocan.host.protocol.secoc import load_secoc_key
+from odocan.host.report.foxglove_options import HOST, port_number
 from odocan.host.report.outputs import check_writable, write_text
 from odocan.host.report.progress import Progress, wall_clock_progress
 from odocan.sim import robot
@@ -45,6 +47,11 @@ from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.fleet import FleetConfig, robot_name
 from odocan.sim.rig import INTEGRATORS
 from odocan.sim.scenarios import SCENARIOS
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+    from odocan.host.mqtt.foxglove_fleet import FleetFoxglove
 
 FLEET_MAX_ROBOTS = 500  # one 2-core machine holds about 45 in real time (README, bench/fleet.py)
 FLEET_MAX_DURATION_S = 86400.0
@@ -130,7 +137,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         "bridge signs with (docs/secoc.md) (default: no SecOC)",
     )
     add_mqtt_arguments(parser)
-    add_foxglove_argument(parser)
+    _add_foxglove_argument(parser)
 
 
 def _shard(text: str) -> Shard:
@@ -168,17 +175,38 @@ def _do_fleet(args: argparse.Namespace) -> int:
     configure_logging(debug)
     names = [robot_name(fleet.first + i) for i in range(fleet.robots)]
     if broker is None:
-        with embedded_broker(args.port) as url, serve_fleet_foxglove(args, url, names):
+        with embedded_broker(args.port) as url, _foxglove(args, url, names):
             report = _run(replace(run, broker=url), args.workers, debug)
         report["embedded_broker"] = True
     else:
-        with serve_fleet_foxglove(args, broker, names):
+        with _foxglove(args, broker, names):
             report = _run(run, args.workers, debug)
     broken = failures(report, args.max_miss_ratio)
     _print_summary(report, broken)
     if args.report is not None:
         write_text(args.report, json.dumps(report, indent=2) + "\n", "--report")
     return 1 if broken else 0
+
+
+def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
+    """``--foxglove [PORT]``: the Foxglove SDK is imported only when it is given."""
+    parser.add_argument(
+        "--foxglove", nargs="?", type=port_number, const=FOXGLOVE_PORT, metavar="PORT",
+        help=f"serve every robot's poses, transforms and errors live to Foxglove on "
+        f"{HOST}:PORT (default {FOXGLOVE_PORT}; 0: any free port), from the fleet's MQTT "
+        "telemetry",
+    )
+
+
+def _foxglove(
+    args: argparse.Namespace, broker: BrokerURL, robots: Iterable[str]
+) -> contextlib.AbstractContextManager[FleetFoxglove | None]:
+    """``serve_fleet_foxglove`` with ``--foxglove``; else a context that imports nothing."""
+    if args.foxglove is None:
+        return contextlib.nullcontext(None)
+    from odocan.host.mqtt.foxglove_fleet import serve_fleet_foxglove
+
+    return serve_fleet_foxglove(args, broker, robots)
 
 
 def _run(run: FleetRun, workers: int, debug: bool) -> dict[str, Any]:
