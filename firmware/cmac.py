@@ -28,7 +28,6 @@ from odocan.firmware.aes import (
 from odocan.firmware.fixmath import U32_MAX, u32
 
 CMAC_RB_128: Final = 0x87  # R_128 of SP 800-38B 5.3: x^128 = x^7 + x^2 + x + 1
-ZERO_BLOCK: Final = bytes(AES_BLOCK_BYTES)
 PAD_FIRST_BYTE: Final = 0x80  # the "1" bit of RFC 4493's padding 10^i
 
 
