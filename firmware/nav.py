@@ -374,7 +374,8 @@ class Navigator:
 
 
 def q40_from_100um(value_100um: i32) -> i64:
-    """0.1 mm units (i32) to Q40 metres (i64), exactly rounded (as firmware.ecu does for
-    ODOM_SET_POSE): whole metres shifted, plus the remainder (< 10^4) scaled."""
+    """0.1 mm units (i32) to Q40 metres (i64), exactly rounded (NAV_GOAL and ODOM_SET_POSE's
+    X/Y, ``firmware.commands``), without a 72-bit intermediate: whole metres shifted, plus the
+    remainder (< 10^4, so ``r << 40`` < 2^54) divided."""
     metres, remainder_100um = divmod(value_100um, 10_000)  # floor semantics, remainder >= 0
     return (metres << 40) + div_round_i64(remainder_100um << 40, 10_000)

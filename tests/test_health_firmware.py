@@ -112,7 +112,7 @@ def test_a_stalled_firmware_reports_lost_time_and_keeps_the_distance() -> None:
     assert rig.ecu.periods_lost == stall - 1
     rig.step()  # the first fresh frame: 198 periods after the last held one
     assert rig.ecu.frames_implausible == 0
-    assert rig.ecu._twist_mm_s == _speed_mm_s(COUNTS_PER_PERIOD)
+    assert rig.ecu.twist.linear_mm_s == _speed_mm_s(COUNTS_PER_PERIOD)
     g = geometry(rig.ecu.params)
     assert rig.ecu.odometry.x_q40_m / 2**40 == pytest.approx(
         (19 + stall + 1) * COUNTS_PER_PERIOD * g.m_per_count_left, abs=1e-9
