@@ -74,9 +74,7 @@ ODOM_AUTH_DATA_IDS: Final = fr.ODOM_AUTH_DATA_IDS
 ODOM_FRESHNESS_DATA_IDS: Final = fr.ODOM_FRESHNESS_DATA_IDS
 FRAME_LEN: Final = 8
 OdomAuth = fr.OdomAuth
-OdomFreshness = fr.OdomFreshness
 unpack_odom_auth = fr.unpack_odom_auth
-unpack_odom_freshness = fr.unpack_odom_freshness
 
 
 class AuthRequest(IntEnum):
@@ -287,12 +285,7 @@ class SecuredCommands:
         return None
 
 
-# --- frame codecs: firmware.frames (the DBC's ODOM_AUTH and ODOM_FRESHNESS) ---
-def pack_odom_auth(counter: int, request: int, freshness: u16, mac: u32) -> bytes:
-    """ODOM_AUTH (``firmware.frames.pack_odom_auth``; an out-of-range REQUEST saturates)."""
-    return fr.pack_odom_auth(counter, request, freshness, mac, ErrorMask())
-
-
+# --- frame codec: firmware.frames (a host's ODOM_AUTH packer: tests/host_frames.py) ---
 def pack_odom_freshness(counter: int, cause: int, fv: u64) -> bytes:
     """ODOM_FRESHNESS (``firmware.frames.pack_odom_freshness``)."""
     return fr.pack_odom_freshness(counter, cause, fv, ErrorMask())

@@ -20,6 +20,7 @@ from odocan.firmware.ecu import (
 )
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.hal import MAILBOX_SLOTS, TICK_PERIOD_US
+from tests import host_frames as hf
 from tests.dbc_typed import choices
 from tests.odo_helpers import geometry, params
 from tests.test_ecu import DB, RecordingHal, Rig
@@ -240,7 +241,7 @@ def test_a_pose_set_after_a_counter_restart_lets_the_firmware_recover() -> None:
         rig.step(5, 7)
     assert rig.reason() is Reason.COUNTER_RESET
     rig.ecu.isr_can_rx(
-        fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+        fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
     )
     rig.step(5, 7)
     for _ in range(RECOVERY_FRAMES):
@@ -294,7 +295,7 @@ def test_a_later_cause_does_not_hide_a_counter_restart(cause: str) -> None:
     assert rig.ecu.reason is Reason.COUNTER_RESET
     assert rig.summary()["REASON"] == Reason.COUNTER_RESET
     rig.ecu.isr_can_rx(
-        fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+        fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
     )
     for _ in range(RECOVERY_FRAMES + 1):
         rig.step(5, 7)
