@@ -97,11 +97,10 @@ class Auth:
         if self.secoc is None:
             return
         receiver = self.secoc.receiver
-        cause = receiver.sync_cause
+        cause = receiver.take_sync_cause()
         if cause is None and self._ecu.clock.ticks % FRESHNESS_PERIOD_TICKS == 0:
             cause = FreshnessCause.PERIODIC
         if cause is not None:
-            receiver.sync_cause = None
             tx = self._ecu.tx
             counter = tx.next_counter(fr.ODOM_FRESHNESS_ID)
             tx.send(fr.ODOM_FRESHNESS_ID, receiver.freshness_frame(counter, cause))

@@ -19,7 +19,6 @@ from typing import Final, NamedTuple
 
 from odocan.firmware.aes import (
     AES_BLOCK_BYTES,
-    encrypt_block,
     encrypt_words,
     expand_key,
     load_be32,
@@ -109,8 +108,3 @@ def _last_block(message: bytes | bytearray, offset: int, complete: bool) -> byte
     if not complete:
         block[tail] = PAD_FIRST_BYTE
     return block
-
-
-def aes128_encrypt(key: CmacKey, block: bytes | bytearray) -> bytes:
-    """One AES-128 block under a provisioned key (tests and the C-port vectors)."""
-    return encrypt_block(key.rk, block)

@@ -172,11 +172,6 @@ class SecocReceiver:
         self.sync_cause: FreshnessCause | None = None  # an ODOM_FRESHNESS is due, and why
         self.boot()
 
-    @property
-    def available(self) -> bool:
-        """True when secured commands can be accepted (key, NVM and EPOCH all fine)."""
-        return self._key is not None and self.epoch != 0
-
     def boot(self) -> None:
         """Reset and power-on: EPOCH <- NVM + 1, written back before anything is accepted."""
         self._advance_epoch(self._nvm.read_epoch(), FreshnessCause.BOOT)
@@ -217,17 +212,13 @@ class SecocReceiver:
             self._advance_epoch(self.epoch, FreshnessCause.ROLLOVER)
         return AuthStatus.OK
 
-    def take_freshness_frame(self, counter: int) -> bytes | None:
-        """The ODOM_FRESHNESS due now (boot, refusal, rollover, unavailable), once; else None.
-
-        The ECU calls it every tick, and ``freshness_frame(counter, PERIODIC)`` every
-        ``FRESHNESS_PERIOD_TICKS``.
-        """
+    def take_sync_cause(self) -> FreshnessCause | None:
+        """Why an ODOM_FRESHNESS is due now (boot, refusal, rollover, unavailable), once; else
+        None. The ECU asks every tick (``firmware.auth``), and sends one with PERIODIC every
+        ``FRESHNESS_PERIOD_TICKS`` besides."""
         cause = self.sync_cause
-        if cause is None:
-            return None
         self.sync_cause = None
-        return self.freshness_frame(counter, cause)
+        return cause
 
     def freshness_frame(self, counter: int, cause: FreshnessCause) -> bytes:
         """ODOM_FRESHNESS carrying ``last_fv`` (0 when unavailable) and ``cause``."""

@@ -190,12 +190,12 @@ def test_freshness_window_is_one_to_4096_ahead() -> None:
     signer.next_fv = receiver.last_fv + fw.FRESHNESS_WINDOW  # exactly 4096 ahead: accepted
     assert deliver(receiver, SET_POSE, pdu, signer.sign(SET_POSE, pdu)) is fw.AuthStatus.OK
     assert receiver.sync_cause is fw.FreshnessCause.REFUSED  # the refusal asked for a resync
-    frame = receiver.take_freshness_frame(5)
-    assert frame is not None
+    assert receiver.take_sync_cause() is fw.FreshnessCause.REFUSED
+    assert receiver.take_sync_cause() is None  # sent once
+    frame = receiver.freshness_frame(5, fw.FreshnessCause.REFUSED)
     assert hf.unpack_odom_freshness(frame) == hf.OdomFreshness(
         5, fw.FreshnessCause.REFUSED, receiver.last_fv
     )
-    assert receiver.take_freshness_frame(6) is None  # sent once
     assert host.FRESHNESS_WINDOW == fw.FRESHNESS_WINDOW
 
 
@@ -220,7 +220,7 @@ def test_fail_closed_without_key_nvm_or_epochs() -> None:
         fw.SecocReceiver(KEY, broken),
         fw.SecocReceiver(KEY, MemoryNvm(epoch=fw.EPOCH_MAX)),
     ):
-        assert not receiver.available
+        assert receiver.epoch == 0  # unavailable: no EPOCH to accept a freshness value in
         assert receiver.sync_cause is fw.FreshnessCause.UNAVAILABLE
         mac = fw.authenticator(cmac_key(KEY), NAV_GOAL, pdu, 1)
         assert receiver.verify(NAV_GOAL, pdu, 1, mac) is fw.AuthStatus.UNAVAILABLE

@@ -577,7 +577,6 @@ def _secoc_drive() -> None:
     secoc = importlib.import_module(f"{FIRMWARE_PACKAGE}.secoc")
     key = bytes(range(0x2B, 0x3B))
     mac_key = cmac.cmac_key(key)
-    cmac.aes128_encrypt(mac_key, bytes(16))
     for length in range(0, 49):
         cmac.cmac(mac_key, bytes((7 * k + length) & 0xFF for k in range(length)))
     nvm = _Nvm()
@@ -590,7 +589,7 @@ def _secoc_drive() -> None:
             tag = secoc.truncate(secoc.authenticator(mac_key, 0x300, pdu, fv), mac_bits)
             receiver.verify(0x300, pdu, fv & 0xFFFF, tag)
             receiver.verify(0x300, pdu, fv & 0xFFFF, tag ^ 1)
-        receiver.take_freshness_frame(3)
+        receiver.take_sync_cause()
         hf.unpack_odom_freshness(receiver.freshness_frame(4, secoc.FreshnessCause.REFUSED))
         commands = secoc.SecuredCommands(receiver)
         for request in secoc.AuthRequest:
