@@ -24,6 +24,7 @@ from odocan.sim.board import FirmwareBoard
 from odocan.sim.clock import LockstepClock
 from odocan.sim.faults import FaultInjectingBus, FaultSpec
 from odocan.sim.scenarios import RandomScenario
+from tests import host_frames as hf
 from tests.fault_rig import (
     FaultRig,
     PoseAudit,
@@ -195,8 +196,8 @@ def _bench_busoff() -> None:
     states = []
     while (msg := reader.get_message(0)) is not None:
         if msg.arbitration_id == fr.ODOM_STATUS_ID:
-            page = fr.unpack_odom_status(bytes(msg.data))
-            if isinstance(page, fr.OdomStatusSummary):
+            page = hf.unpack_odom_status(bytes(msg.data))
+            if isinstance(page, hf.OdomStatusSummary):
                 states.append((round(msg.timestamp, 3), page.state))
     changes = [(t, s) for i, (t, s) in enumerate(states) if i == 0 or s != states[i - 1][1]]
     print(

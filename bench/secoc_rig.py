@@ -29,6 +29,7 @@ from odocan.host.protocol.secoc import SecocSigner
 from odocan.sim.board import TICK_S
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
+from tests import host_frames as hf
 
 KEY = bytes(range(16))
 FRESHNESS_ID = fr.ODOM_FRESHNESS_ID
@@ -53,7 +54,7 @@ def set_pose_frames(counter0: int, k: int) -> list[tuple[int, bytes]]:
         (15, 0),
     )
     return [
-        (fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(counter0 + i, f, v, e))
+        (fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(counter0 + i, f, v, e))
         for i, (f, v) in enumerate(fields)
     ]
 
@@ -93,12 +94,12 @@ def drive(secured: bool, seconds: float, period_s: float) -> dict[str, object]:
                         m
                         for m in tape.frames[seen:]
                         if m.arbitration_id == fr.ODOM_ACK_ID
-                        and fr.unpack_odom_ack(m.data).request_field == 15
+                        and hf.unpack_odom_ack(m.data).request_field == 15
                     ]
                     if acks:
                         break
                 wall.append(time.perf_counter() - start)
-                assert fr.unpack_odom_ack(acks[0].data).result == fr.AckResult.ACK
+                assert hf.unpack_odom_ack(acks[0].data).result == fr.AckResult.ACK
                 latencies.append(acks[0].timestamp - sent_s)
                 commands += 1
             else:

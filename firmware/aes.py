@@ -177,14 +177,3 @@ def _last_round_word(sb: tuple[u8, ...], a: u32, b: u32, c: u32, d: u32) -> u32:
         | (sb[(c >> 8) & 0xFF] << 8)
         | sb[d & 0xFF]
     )
-
-
-def encrypt_block(rk: tuple[u32, ...], block: bytes | bytearray) -> bytes:
-    """AES-128 encryption of one 16-byte ``block`` (C: ``aes128_encrypt(rk, in, out)``)."""
-    out = bytearray(AES_BLOCK_BYTES)
-    words = encrypt_words(
-        rk, load_be32(block, 0), load_be32(block, 4), load_be32(block, 8), load_be32(block, 12)
-    )
-    for i in range(4):
-        store_be32(out, 4 * i, words[i])
-    return bytes(out)

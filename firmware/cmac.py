@@ -19,7 +19,6 @@ from typing import Final, NamedTuple
 
 from odocan.firmware.aes import (
     AES_BLOCK_BYTES,
-    encrypt_block,
     encrypt_words,
     expand_key,
     load_be32,
@@ -28,7 +27,6 @@ from odocan.firmware.aes import (
 from odocan.firmware.fixmath import U32_MAX, u32
 
 CMAC_RB_128: Final = 0x87  # R_128 of SP 800-38B 5.3: x^128 = x^7 + x^2 + x + 1
-ZERO_BLOCK: Final = bytes(AES_BLOCK_BYTES)
 PAD_FIRST_BYTE: Final = 0x80  # the "1" bit of RFC 4493's padding 10^i
 
 
@@ -110,8 +108,3 @@ def _last_block(message: bytes | bytearray, offset: int, complete: bool) -> byte
     if not complete:
         block[tail] = PAD_FIRST_BYTE
     return block
-
-
-def aes128_encrypt(key: CmacKey, block: bytes | bytearray) -> bytes:
-    """One AES-128 block under a provisioned key (tests and the C-port vectors)."""
-    return encrypt_block(key.rk, block)

@@ -73,11 +73,6 @@ def wrap_u32(value: int) -> u32:
     return value & U32_MAX
 
 
-def wrap_u64(value: int) -> u64:
-    """C: ``(uint64_t)value``."""
-    return value & U64_MAX
-
-
 def wrap_i16(value: int) -> i16:
     """Two's-complement reinterpretation of the low 16 bits.
 
@@ -103,17 +98,6 @@ def wrap_signed(value: int, bits: int) -> int:
     """
     half = 1 << (bits - 1)
     return ((value + half) & ((1 << bits) - 1)) - half
-
-
-def sat_i32(value: int, errors: ErrorMask) -> i32:
-    """Clamp to int32_t; set SATURATION in ``errors`` when clamped."""
-    if value > I32_MAX:
-        errors.set(ErrorFlag.SATURATION)
-        return I32_MAX
-    if value < I32_MIN:
-        errors.set(ErrorFlag.SATURATION)
-        return I32_MIN
-    return value
 
 
 def sat_i64(value: int, errors: ErrorMask) -> i64:

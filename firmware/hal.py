@@ -1,6 +1,6 @@
 """The firmware's hardware abstraction layer: all it knows of the world.
 
-The firmware never reads a clock or a bus itself. A board support package (``sim.ecu`` in this
+The firmware never reads a clock or a bus itself. A board support package (``sim.board`` in this
 project; a CAN driver and a timer on a real MCU) implements ``CanTx`` and calls into the firmware:
 
 * ``OdomEcu.isr_can_rx(can_id, data)`` from the CAN receive interrupt: copies the frame into a

@@ -78,7 +78,6 @@ K_DRIVE_MILLI_PER_S = 1500  # turn-go-turn, driving: v = 1.5/s * d cos(e)
 K1_MILLI_PER_S = 3000  # go-to-goal (seed 003): omega = K1 (phi_r - phi)
 K2_MILLI_PER_S = 1000  # go-to-goal (seed 003): v = K2 d
 
-MILLI_PER_UNIT = 1000
 MICRO_PER_UNIT = 1_000_000
 URAD_PER_TURN_Q20 = mul_round_i64(TWO_PI_Q60, MICRO_PER_UNIT, 40)  # 2*pi*1e6 in Q20 (< 2^43)
 HALF_WHEEL_DIVISOR = 2_000_000_000  # omega[mrad/s] * b[nm] / 2e9 = omega b/2 in mm/s
@@ -375,7 +374,8 @@ class Navigator:
 
 
 def q40_from_100um(value_100um: i32) -> i64:
-    """0.1 mm units (i32) to Q40 metres (i64), exactly rounded (as firmware.ecu does for
-    ODOM_SET_POSE): whole metres shifted, plus the remainder (< 10^4) scaled."""
+    """0.1 mm units (i32) to Q40 metres (i64), exactly rounded (NAV_GOAL and ODOM_SET_POSE's
+    X/Y, ``firmware.commands``), without a 72-bit intermediate: whole metres shifted, plus the
+    remainder (< 10^4, so ``r << 40`` < 2^54) divided."""
     metres, remainder_100um = divmod(value_100um, 10_000)  # floor semantics, remainder >= 0
     return (metres << 40) + div_round_i64(remainder_100um << 40, 10_000)

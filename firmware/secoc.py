@@ -74,9 +74,7 @@ ODOM_AUTH_DATA_IDS: Final = fr.ODOM_AUTH_DATA_IDS
 ODOM_FRESHNESS_DATA_IDS: Final = fr.ODOM_FRESHNESS_DATA_IDS
 FRAME_LEN: Final = 8
 OdomAuth = fr.OdomAuth
-OdomFreshness = fr.OdomFreshness
 unpack_odom_auth = fr.unpack_odom_auth
-unpack_odom_freshness = fr.unpack_odom_freshness
 
 
 class AuthRequest(IntEnum):
@@ -174,11 +172,6 @@ class SecocReceiver:
         self.sync_cause: FreshnessCause | None = None  # an ODOM_FRESHNESS is due, and why
         self.boot()
 
-    @property
-    def available(self) -> bool:
-        """True when secured commands can be accepted (key, NVM and EPOCH all fine)."""
-        return self._key is not None and self.epoch != 0
-
     def boot(self) -> None:
         """Reset and power-on: EPOCH <- NVM + 1, written back before anything is accepted."""
         self._advance_epoch(self._nvm.read_epoch(), FreshnessCause.BOOT)
@@ -219,17 +212,13 @@ class SecocReceiver:
             self._advance_epoch(self.epoch, FreshnessCause.ROLLOVER)
         return AuthStatus.OK
 
-    def take_freshness_frame(self, counter: int) -> bytes | None:
-        """The ODOM_FRESHNESS due now (boot, refusal, rollover, unavailable), once; else None.
-
-        The ECU calls it every tick, and ``freshness_frame(counter, PERIODIC)`` every
-        ``FRESHNESS_PERIOD_TICKS``.
-        """
+    def take_sync_cause(self) -> FreshnessCause | None:
+        """Why an ODOM_FRESHNESS is due now (boot, refusal, rollover, unavailable), once; else
+        None. The ECU asks every tick (``firmware.auth``), and sends one with PERIODIC every
+        ``FRESHNESS_PERIOD_TICKS`` besides."""
         cause = self.sync_cause
-        if cause is None:
-            return None
         self.sync_cause = None
-        return self.freshness_frame(counter, cause)
+        return cause
 
     def freshness_frame(self, counter: int, cause: FreshnessCause) -> bytes:
         """ODOM_FRESHNESS carrying ``last_fv`` (0 when unavailable) and ``cause``."""
@@ -287,12 +276,7 @@ class SecuredCommands:
         return None
 
 
-# --- frame codecs: firmware.frames (the DBC's ODOM_AUTH and ODOM_FRESHNESS) ---
-def pack_odom_auth(counter: int, request: int, freshness: u16, mac: u32) -> bytes:
-    """ODOM_AUTH (``firmware.frames.pack_odom_auth``; an out-of-range REQUEST saturates)."""
-    return fr.pack_odom_auth(counter, request, freshness, mac, ErrorMask())
-
-
+# --- frame codec: firmware.frames (a host's ODOM_AUTH packer: tests/host_frames.py) ---
 def pack_odom_freshness(counter: int, cause: int, fv: u64) -> bytes:
     """ODOM_FRESHNESS (``firmware.frames.pack_odom_freshness``)."""
     return fr.pack_odom_freshness(counter, cause, fv, ErrorMask())

@@ -41,7 +41,6 @@ from odocan.firmware.trig_tables import (
     SIN_STEP_Q64,
 )
 
-ONE_Q30 = 1 << 30
 QUARTER_BAM32 = 1 << 30
 HALF_BAM32 = 1 << 31
 

@@ -35,6 +35,7 @@ from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import RandomScenario, Scenario
 from odocan.sim.tickloop import TickLoop
 from odocan.sim.vehicle import Vehicle
+from tests import host_frames as hf
 from tests.dbc_typed import dbc_attribute
 from tests.odo_helpers import geometry, params
 
@@ -173,10 +174,10 @@ class PoseAudit:
                 encoder_seen = True
                 self._encoder(data)
             elif msg.arbitration_id == fr.ODOM_POSE_X_ID and _crc_ok(data, fr.ODOM_POSE_X_DATA_IDS):
-                pose = fr.unpack_odom_pose_x(data)
+                pose = hf.unpack_odom_pose_x(data)
                 self.pose_x.append((len(self.counts), pose.x_100um, pose.heading_bam16))
             elif msg.arbitration_id == fr.ODOM_POSE_Y_ID and _crc_ok(data, fr.ODOM_POSE_Y_DATA_IDS):
-                self.pose_y.append((len(self.counts), fr.unpack_odom_pose_y(data).y_100um))
+                self.pose_y.append((len(self.counts), hf.unpack_odom_pose_y(data).y_100um))
         if not encoder_seen:
             self.rx.check(None)
 
@@ -238,14 +239,14 @@ def _firmware_packers() -> dict[tuple[str, int | None], Callable[[int], bytes]]:
     }
     for f in fr.SetPoseField:
         packers["ODOM_SET_POSE", int(f)] = partial(
-            fr.pack_odom_set_pose, field=f, value=7_654, errors=e
+            hf.pack_odom_set_pose, field=f, value=7_654, errors=e
         )
     for p in fr.ConfigParam:
         value = (
             32 if p == fr.ConfigParam.COUNTER_BITS else 2 if p == fr.ConfigParam.INTEGRATOR else 75
         )
         packers["ODOM_CONFIG", int(p)] = partial(
-            fr.pack_odom_config, param=p, value=value, errors=e
+            hf.pack_odom_config, param=p, value=value, errors=e
         )
     packers["ODOM_STATUS", 0] = lambda c: fr.pack_odom_status_summary(c, 1, 2, 0x0102, 3600, e)
     packers["ODOM_STATUS", 1] = lambda c: fr.pack_odom_status_frame_totals(c, 5, 6, 7)
@@ -338,7 +339,7 @@ class CountingHal:
 def random_frame(rng: random.Random) -> tuple[int, bool, bytes]:
     """(ID, extended, data): any ID and DLC, or (SEALED_SHARE) a CRC-valid frame of the DBC."""
     if rng.random() < SEALED_SHARE:
-        can_id, ids = rng.choice(list(fr.DATA_IDS_BY_FRAME_ID.items()))
+        can_id, ids = rng.choice(list(hf.DATA_IDS_BY_FRAME_ID.items()))
         data = bytearray(rng.randbytes(8))
         data[0] = p02_crc(data, ids[data[1] & 0xF])
         return can_id, False, bytes(data)

@@ -8,7 +8,7 @@ import pytest
 from cryptography.hazmat.primitives.ciphers import Cipher, algorithms, modes
 from cryptography.hazmat.primitives.cmac import CMAC
 
-from odocan.firmware.aes import SBOX, TE0, TE3, encrypt_block, expand_key, xtime
+from odocan.firmware.aes import SBOX, TE0, TE3, encrypt_words, expand_key, xtime
 from odocan.firmware.cmac import cmac, cmac_key
 
 RFC4493_KEY = bytes.fromhex("2b7e151628aed2a6abf7158809cf4f3c")
@@ -25,6 +25,14 @@ RFC4493_VECTORS = [
     (40, "dfa66747de9ae63030ca32611497c827"),
     (64, "51f0bebf7e3b9d92fc49741779363cfe"),
 ]
+
+
+def encrypt_block(rk: tuple[int, ...], block: bytes) -> bytes:
+    """One 16-byte block through the firmware's ``encrypt_words`` (big-endian columns, FIPS-197
+    3.4), as C's ``aes128_encrypt`` wraps ``aes128_encrypt_words``."""
+    columns = [int.from_bytes(block[4 * i : 4 * i + 4], "big") for i in range(4)]
+    words = encrypt_words(rk, *columns)
+    return b"".join(word.to_bytes(4, "big") for word in words)
 
 
 def _gf_mul(a: int, b: int) -> int:

@@ -28,6 +28,7 @@ from odocan.sim import cboard
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import LockstepRig, RigConfig, firmware_params
 from odocan.sim.robot import load
+from tests import host_frames as hf
 from tests.requires import require_executables
 from tests.test_secoc_rig import (
     KEY,
@@ -53,7 +54,7 @@ def c_library() -> None:
 def forged(counters: Counters, rng: random.Random, fv: int) -> list[tuple[int, bytes]]:
     """A set_pose frame and an ODOM_AUTH with the right freshness and a random authenticator."""
     can_id, data = set_pose(counters, rng.randrange(1, 9_999), 0)[0]
-    auth = fr.pack_odom_auth(counters(fr.ODOM_AUTH_ID), REQUEST[can_id], fv & FRESHNESS_TX_MASK,
+    auth = hf.pack_odom_auth(counters(fr.ODOM_AUTH_ID), REQUEST[can_id], fv & FRESHNESS_TX_MASK,
                              rng.getrandbits(32), ErrorMask())
     return [(can_id, data), (fr.ODOM_AUTH_ID, auth)]
 
@@ -61,7 +62,7 @@ def forged(counters: Counters, rng: random.Random, fv: int) -> list[tuple[int, b
 def nav_goal(counters: Counters) -> list[tuple[int, bytes]]:
     """A nav goal: X, Y, HEADING, then GO."""
     e = ErrorMask()
-    return [(fr.NAV_GOAL_ID, fr.pack_nav_goal(counters(fr.NAV_GOAL_ID), f, v, e))
+    return [(fr.NAV_GOAL_ID, hf.pack_nav_goal(counters(fr.NAV_GOAL_ID), f, v, e))
             for f, v in ((fr.NavGoalField.X, 5_000), (fr.NavGoalField.Y, 2_000),
                          (fr.NavGoalField.HEADING, 0), (fr.NavGoalField.GO, 0))]
 
@@ -132,7 +133,7 @@ def test_the_provisioned_c_firmware_sends_its_boot_freshness_and_writes_its_epoc
         assert again == -1  # a key is given once, at reset
     fresh = last_freshness(seen)
     assert fresh is not None
-    assert fr.unpack_odom_freshness(fresh).fv == 1 << 28  # EPOCH 1, COUNT 0
+    assert hf.unpack_odom_freshness(fresh).fv == 1 << 28  # EPOCH 1, COUNT 0
 
 
 def test_a_c_firmware_without_an_nvm_cell_refuses_every_secured_command() -> None:
@@ -144,7 +145,7 @@ def test_a_c_firmware_without_an_nvm_cell_refuses_every_secured_command() -> Non
     sent: list[tuple[int, bytes]] = []
     ecu = cboard.CEcu(NoBoard(), firmware_params(load("pmir"), "exact"), secoc_key=KEY, nvm=None)
     ecu.tick(0)
-    fresh = [fr.unpack_odom_freshness(d) for i, d in sent if i == fr.ODOM_FRESHNESS_ID]
+    fresh = [hf.unpack_odom_freshness(d) for i, d in sent if i == fr.ODOM_FRESHNESS_ID]
     assert [f.fv for f in fresh] == [0]  # CAUSE UNAVAILABLE: the host refuses to sign
 
 

@@ -15,6 +15,7 @@ from cantools.subparsers.dump.formatting import layout_string
 from odocan.firmware import frames
 from odocan.firmware.config import Integrator
 from odocan.firmware.errors import State
+from tests import host_frames as hf
 from tests.dbc_typed import choices, dbc_attribute, load_can_dbc
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -296,8 +297,8 @@ def test_firmware_enums_match_the_value_tables(db: cantools.database.can.Databas
         ("SIM_TRUTH", "PART", frames.SimTruthPart),
         ("NAV_GOAL", "FIELD", frames.NavGoalField),
         ("NAV_GOAL", "MODE", frames.NavMode),
-        ("NAV_GOAL", "APPEND", frames.NavAppend),
-        ("NAV_GOAL", "NO_FINAL_HEADING", frames.NavFinalHeading),
+        ("NAV_GOAL", "APPEND", hf.NavAppend),
+        ("NAV_GOAL", "NO_FINAL_HEADING", hf.NavFinalHeading),
         ("NAV_STATUS", "STATE", frames.NavState),
     ]
     for message_name, signal_name, enum in pairs:
@@ -330,8 +331,8 @@ def test_firmware_ids_and_data_ids_are_the_dbc_ones(db: cantools.database.can.Da
     for message in db.messages:
         assert getattr(frames, f"{message.name}_ID") == message.frame_id
         assert getattr(frames, f"{message.name}_DATA_IDS") == data_ids(message)
-        assert frames.DATA_IDS_BY_FRAME_ID[message.frame_id] == data_ids(message)
-    assert len(frames.DATA_IDS_BY_FRAME_ID) == len(db.messages)
+        assert hf.DATA_IDS_BY_FRAME_ID[message.frame_id] == data_ids(message)
+    assert len(hf.DATA_IDS_BY_FRAME_ID) == len(db.messages)
 
 
 # --- ranges ---

@@ -12,6 +12,7 @@ from odocan.firmware.config import RobotParams
 from odocan.firmware.ecu import RECOVERY_FRAMES, WATCHDOG_TICKS, OdomEcu
 from odocan.firmware.errors import ErrorFlag, ErrorMask, State
 from odocan.firmware.hal import MAILBOX_SLOTS
+from tests import host_frames as hf
 from tests.dbc_typed import decode, load_can_dbc
 from tests.odo_helpers import geometry, params
 
@@ -153,7 +154,7 @@ def test_mailbox_overflow_is_counted_and_bounded() -> None:
 
 def _config(rig: Rig, param: int, value: int) -> dict[str, Any]:
     counter = len([1 for i, _ in rig.hal.sent if i == fr.ODOM_ACK_ID])
-    rig.command(fr.ODOM_CONFIG_ID, fr.pack_odom_config(counter, param, value, rig.scratch))
+    rig.command(fr.ODOM_CONFIG_ID, hf.pack_odom_config(counter, param, value, rig.scratch))
     return rig.hal.decoded("ODOM_ACK")[-1]
 
 
@@ -184,9 +185,9 @@ def test_set_pose_overwrites_the_staged_fields_only() -> None:
     rig.drive(20)
     y_before = rig.ecu.odometry.y_q40_m
     for field, value in ((fr.SetPoseField.X, -123_456), (fr.SetPoseField.HEADING, 16384)):
-        rig.command(fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(field, field, value, rig.scratch))
+        rig.command(fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(field, field, value, rig.scratch))
     rig.command(
-        fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(3, fr.SetPoseField.APPLY, 0, rig.scratch)
+        fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(3, fr.SetPoseField.APPLY, 0, rig.scratch)
     )
     odo = rig.ecu.odometry
     assert odo.x_q40_m / 2**40 == pytest.approx(-12.3456, abs=1e-12)

@@ -26,6 +26,7 @@ from odocan.sim.contract import database
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FAULT_KINDS, BusOff, ErrorCounters, FaultInjectingBus, FaultSpec
 from odocan.sim.scenarios import RandomScenario
+from tests import host_frames as hf
 from tests.dbc_typed import decode, number
 from tests.fault_rig import (
     FaultRig,
@@ -376,7 +377,7 @@ def test_catalogue_covers_every_message_and_page_of_the_dbc() -> None:
     assert {name for name, _ in types} == {m.name for m in database().messages}
     assert ("ODOM_CONFIG", 15) in types
     assert ("ODOM_STATUS", 4) in types  # APPLY, a late page
-    for frame_id, ids in fr.DATA_IDS_BY_FRAME_ID.items():
+    for frame_id, ids in hf.DATA_IDS_BY_FRAME_ID.items():
         assert dbc_data_ids(frame_id) == ids  # the firmware's lists are the DBC's
 
 
@@ -504,8 +505,8 @@ def test_ten_minutes_of_drops_duplicates_and_flips_are_all_counted() -> None:
 def _collect_states(frames: list[can.Message], states: set[int]) -> None:
     for msg in frames:
         if msg.arbitration_id == fr.ODOM_STATUS_ID:
-            page = fr.unpack_odom_status(bytes(msg.data))
-            if isinstance(page, fr.OdomStatusSummary):
+            page = hf.unpack_odom_status(bytes(msg.data))
+            if isinstance(page, hf.OdomStatusSummary):
                 states.add(page.state)
 
 

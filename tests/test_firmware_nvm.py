@@ -23,6 +23,7 @@ from odocan.host.protocol.secoc import SecocSigner
 from odocan.sim import cboard
 from odocan.sim.board import NVM_MAGIC, FileNvm
 from odocan.sim.exceptions import ConfigurationError
+from tests import host_frames as hf
 from tests.requires import require_executables
 from tests.test_realtime import (
     START_TIMEOUT_S,
@@ -121,7 +122,7 @@ def _send_and_ack(bus: can.BusABC, frames: list[tuple[int, bytes]]) -> list[tupl
     for can_id, data in frames:
         bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
     got = _listen(bus, lambda c: len(c.of(fr.ODOM_ACK_ID)) >= commands, 5.0)
-    answers = [fr.unpack_odom_ack(m.data) for m in got.of(fr.ODOM_ACK_ID)]
+    answers = [hf.unpack_odom_ack(m.data) for m in got.of(fr.ODOM_ACK_ID)]
     return [(a.result, a.reason) for a in answers]
 
 

@@ -1,4 +1,6 @@
-"""The firmware's hand-written frame codec against cantools (layouts) and cantools.autosar (CRC).
+"""The hand-written frame codec against cantools (layouts) and cantools.autosar (CRC): the
+firmware's half (firmware/frames.py, what the ECU receives and transmits) and the host's half
+(tests/host_frames.py, what a host sends it and reads from it).
 
 For every message and every multiplexer page, over every signal's whole raw range:
 firmware-packed bytes are exactly cantools-encoded bytes with the CRC applied by cantools.autosar,
@@ -25,6 +27,7 @@ from hypothesis import strategies as st
 from odocan.firmware import frames as f
 from odocan.firmware.e2e import E2EReceiver, E2EStatus
 from odocan.firmware.errors import ErrorFlag, ErrorMask
+from tests import host_frames as hf
 from tests.dbc_typed import dbc_attribute, load_can_dbc
 
 DBC_PATH = Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc"
@@ -94,7 +97,7 @@ def sim_truth_kind(part: int, signal: str) -> Kind:
         return f.pack_sim_truth(c, part, v["ENC_COUNTER"], v[signal], e)
 
     def do_unpack(data: bytes) -> Values:
-        r = f.unpack_sim_truth(data)
+        r = hf.unpack_sim_truth(data)
         return {"COUNTER": r.counter, "PART": r.part, "ENC_COUNTER": r.enc_counter, signal: r.value}
 
     return Kind("SIM_TRUTH", part, do_pack, do_unpack)
@@ -109,8 +112,8 @@ def nav_goal_kind(field: int, signal: str | None) -> Kind:
 
     def do_pack(c: int, v: Values, e: ErrorMask) -> bytes:
         if field == f.NavGoalField.GO:
-            return f.pack_nav_goal_go(c, **{k: v[s] for k, s in NAV_GO_SIGNALS.items()}, errors=e)
-        return f.pack_nav_goal(c, field, v[signal] if signal else 0, e)
+            return hf.pack_nav_goal_go(c, **{k: v[s] for k, s in NAV_GO_SIGNALS.items()}, errors=e)
+        return hf.pack_nav_goal(c, field, v[signal] if signal else 0, e)
 
     def do_unpack(data: bytes) -> Values:
         r = f.unpack_nav_goal(data)
@@ -135,8 +138,8 @@ def status_e2e_kind(page: int, prefix: str) -> Kind:
         return f.pack_odom_status_e2e(c, page, **args)
 
     def do_unpack(data: bytes) -> Values:
-        r = f.unpack_odom_status(data)
-        assert isinstance(r, f.OdomStatusE2E)
+        r = hf.unpack_odom_status(data)
+        assert isinstance(r, hf.OdomStatusE2E)
         names = {k: f"{prefix}_E2E_{s}" for k, s in STATUS_E2E_NAMES.items()}
         return as_signals(r, names)
 
@@ -163,13 +166,15 @@ KINDS = [
         "ODOM_POSE_X",
         None,
         lambda c, v, e: f.pack_odom_pose_x(c, v["ENC_COUNTER"], v["X"], v["HEADING"], e),
-        lambda d: as_signals(f.unpack_odom_pose_x(d), {"x_100um": "X", "heading_bam16": "HEADING"}),
+        lambda d: as_signals(
+            hf.unpack_odom_pose_x(d), {"x_100um": "X", "heading_bam16": "HEADING"}
+        ),
     ),
     Kind(
         "ODOM_POSE_Y",
         None,
         lambda c, v, e: f.pack_odom_pose_y(c, v["ENC_COUNTER"], v["Y"], v["TURNS"], e),
-        lambda d: as_signals(f.unpack_odom_pose_y(d), {"y_100um": "Y"}),
+        lambda d: as_signals(hf.unpack_odom_pose_y(d), {"y_100um": "Y"}),
     ),
     Kind(
         "ODOM_TWIST",
@@ -178,7 +183,7 @@ KINDS = [
             c, v["ENC_COUNTER"], v["LINEAR_VEL"], v["ANGULAR_VEL"], v["DISTANCE"], e
         ),
         lambda d: as_signals(
-            f.unpack_odom_twist(d),
+            hf.unpack_odom_twist(d),
             {
                 "linear_vel_mm_s": "LINEAR_VEL",
                 "angular_vel_mrad_s": "ANGULAR_VEL",
@@ -187,7 +192,7 @@ KINDS = [
         ),
     ),
     *(
-        mux_kind("ODOM_SET_POSE", int(field), signal, f.pack_odom_set_pose, f.unpack_odom_set_pose)
+        mux_kind("ODOM_SET_POSE", int(field), signal, hf.pack_odom_set_pose, f.unpack_odom_set_pose)
         for field, signal in [
             (f.SetPoseField.X, "X"),
             (f.SetPoseField.Y, "Y"),
@@ -200,7 +205,7 @@ KINDS = [
             "ODOM_CONFIG",
             int(param),
             None if param == f.ConfigParam.APPLY else param.name,
-            f.pack_odom_config,
+            hf.pack_odom_config,
             f.unpack_odom_config,
         )
         for param in f.ConfigParam
@@ -217,12 +222,12 @@ KINDS = [
             v["REASON"],
             e,
         ),
-        lambda d: as_signals(f.unpack_odom_ack(d), {}),
+        lambda d: as_signals(hf.unpack_odom_ack(d), {}),
     ),
     Kind(
         "ODOM_AUTH",
         None,
-        lambda c, v, e: f.pack_odom_auth(c, v["REQUEST"], v["FRESHNESS"], v["AUTHENTICATOR"], e),
+        lambda c, v, e: hf.pack_odom_auth(c, v["REQUEST"], v["FRESHNESS"], v["AUTHENTICATOR"], e),
         lambda d: as_signals(f.unpack_odom_auth(d), {}),
     ),
     Kind(
@@ -232,7 +237,7 @@ KINDS = [
             c, v["CAUSE"], (v["FV_EPOCH"] << 28) | v["FV_COUNT"], e
         ),
         lambda d: {
-            "COUNTER": (r := f.unpack_odom_freshness(d)).counter,
+            "COUNTER": (r := hf.unpack_odom_freshness(d)).counter,
             "CAUSE": r.cause,
             "FV_COUNT": r.fv & ((1 << 28) - 1),
             "FV_EPOCH": r.fv >> 28,
@@ -244,7 +249,7 @@ KINDS = [
         lambda c, v, e: f.pack_odom_status_summary(
             c, v["STATE"], v["INTEGRATOR"], v["ERROR_MASK"], v["UPTIME"], e, v["REASON"]
         ),
-        lambda d: as_signals(f.unpack_odom_status(d), {"uptime_s": "UPTIME"}) | {"PAGE": 0},
+        lambda d: as_signals(hf.unpack_odom_status(d), {"uptime_s": "UPTIME"}) | {"PAGE": 0},
     ),
     Kind(
         "ODOM_STATUS",
@@ -254,7 +259,7 @@ KINDS = [
         ),
         lambda d: (
             as_signals(
-                f.unpack_odom_status(d),
+                hf.unpack_odom_status(d),
                 {
                     "lost": "LOST_FRAMES",
                     "rejected": "REJECTED_FRAMES",
@@ -285,7 +290,7 @@ KINDS = [
             e,
         ),
         lambda d: as_signals(
-            f.unpack_nav_status(d),
+            hf.unpack_nav_status(d),
             {"distance_mm": "DISTANCE", "heading_error_bam16": "HEADING_ERROR"},
         ),
     ),
@@ -364,7 +369,7 @@ def test_firmware_frames_are_cantools_frames(kind: Kind, data: st.DataObject, co
 def test_firmware_unpacks_cantools_frames(kind: Kind, data: st.DataObject, counter: int) -> None:
     values = data.draw(values_strategy(kind))
     frame = cantools_frame(kind, counter, values)
-    receiver = E2EReceiver(f.DATA_IDS_BY_FRAME_ID[DB.get_message_by_name(kind.message).frame_id])
+    receiver = E2EReceiver(hf.DATA_IDS_BY_FRAME_ID[DB.get_message_by_name(kind.message).frame_id])
     assert receiver.check(frame) is E2EStatus.OK
     assert kind.unpack(frame) == expected_signals(kind, counter, values)
 
@@ -461,19 +466,19 @@ def test_counter_is_taken_mod_16() -> None:
 def test_unknown_pages_are_sent_raw_and_read_back() -> None:
     """The firmware NACKs an unknown FIELD/PARAM: the codec must carry one to it."""
     errors = ErrorMask()
-    config = f.unpack_odom_config(f.pack_odom_config(2, 9, 123_456, errors))
+    config = f.unpack_odom_config(hf.pack_odom_config(2, 9, 123_456, errors))
     assert (config.param, config.value) == (9, 123_456)
-    pose = f.unpack_odom_set_pose(f.pack_odom_set_pose(2, 7, 0xDEADBEEF, errors))
+    pose = f.unpack_odom_set_pose(hf.pack_odom_set_pose(2, 7, 0xDEADBEEF, errors))
     assert (pose.field, pose.value) == (7, 0xDEADBEEF)
     assert errors.bits == 0
-    goal = f.unpack_nav_goal(f.pack_nav_goal(2, 9, 0xDEADBEEF, errors))
+    goal = f.unpack_nav_goal(hf.pack_nav_goal(2, 9, 0xDEADBEEF, errors))
     assert (goal.field, goal.value) == (9, 0xDEADBEEF)
     assert errors.bits == 0
 
 
 def test_nav_goal_go_reads_an_unknown_mode_raw() -> None:
     """MODE outside the DBC range reaches the firmware (which NACKs it OUT_OF_RANGE)."""
-    frame = f.pack_nav_goal(0, f.NavGoalField.GO, 0x2A07, ErrorMask())  # raw bits, not GO's packer
+    frame = hf.pack_nav_goal(0, f.NavGoalField.GO, 0x2A07, ErrorMask())  # raw bits, not GO's packer
     goal = f.unpack_nav_goal(frame)
     assert (goal.field, goal.mode, goal.append, goal.no_final_heading, goal.goal_id) == (
         f.NavGoalField.GO,

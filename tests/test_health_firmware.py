@@ -20,6 +20,7 @@ from odocan.firmware.ecu import (
 )
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.hal import MAILBOX_SLOTS, TICK_PERIOD_US
+from tests import host_frames as hf
 from tests.dbc_typed import choices
 from tests.odo_helpers import geometry, params
 from tests.test_ecu import DB, RecordingHal, Rig
@@ -112,7 +113,7 @@ def test_a_stalled_firmware_reports_lost_time_and_keeps_the_distance() -> None:
     assert rig.ecu.periods_lost == stall - 1
     rig.step()  # the first fresh frame: 198 periods after the last held one
     assert rig.ecu.frames_implausible == 0
-    assert rig.ecu._twist_mm_s == _speed_mm_s(COUNTS_PER_PERIOD)
+    assert rig.ecu.twist.linear_mm_s == _speed_mm_s(COUNTS_PER_PERIOD)
     g = geometry(rig.ecu.params)
     assert rig.ecu.odometry.x_q40_m / 2**40 == pytest.approx(
         (19 + stall + 1) * COUNTS_PER_PERIOD * g.m_per_count_left, abs=1e-9
@@ -240,7 +241,7 @@ def test_a_pose_set_after_a_counter_restart_lets_the_firmware_recover() -> None:
         rig.step(5, 7)
     assert rig.reason() is Reason.COUNTER_RESET
     rig.ecu.isr_can_rx(
-        fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+        fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
     )
     rig.step(5, 7)
     for _ in range(RECOVERY_FRAMES):
@@ -294,7 +295,7 @@ def test_a_later_cause_does_not_hide_a_counter_restart(cause: str) -> None:
     assert rig.ecu.reason is Reason.COUNTER_RESET
     assert rig.summary()["REASON"] == Reason.COUNTER_RESET
     rig.ecu.isr_can_rx(
-        fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+        fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
     )
     for _ in range(RECOVERY_FRAMES + 1):
         rig.step(5, 7)

@@ -33,6 +33,7 @@ from odocan.sim.clock import LockstepClock
 from odocan.sim.contract import database
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
+from tests import host_frames as hf
 from tests.dbc_typed import decode
 from tests.fault_rig import FaultRig, open_virtual, robot_params, unique_channel
 
@@ -206,7 +207,7 @@ def run_counter_reset() -> tuple[Watch, dict[str, Any]]:
             if k == 499:
                 rig.sim.motor_controller.restart()
             if k == 800:
-                data = fr.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+                data = hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
                 tool.send(
                     can.Message(
                         arbitration_id=fr.ODOM_SET_POSE_ID,

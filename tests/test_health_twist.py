@@ -83,12 +83,12 @@ def test_linear_vel_after_a_gap_is_the_speed(busoff_s: float) -> None:
 
 def _old_dt(ecu: OdomEcu) -> None:
     """The twist of the 4-bit COUNTER advance: 16 lost frames look like none."""
-    update = ecu._update_twist
+    update = ecu.twist.update
 
     def wrong(periods: int) -> None:
         update((periods % 16) or 1)
 
-    ecu._update_twist = wrong  # type: ignore[method-assign]
+    ecu.twist.update = wrong  # type: ignore[method-assign]
 
 
 def test_the_judge_fails_a_twist_from_the_wrong_dt() -> None:

@@ -30,6 +30,7 @@ from odocan.sim.errors import ErrorModel
 from odocan.sim.pose import wrap_angle
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
+from tests import host_frames as hf
 
 
 def _load_dbc() -> cantools.database.can.Database:
@@ -410,13 +411,13 @@ class LockstepNav:
             counter = next(self._counter)
             if r.field == NavGoalField.GO:
                 args = (r.mode, r.append, r.no_final_heading, r.goal_id)
-                self.send(fr.pack_nav_goal_go(counter, *args, self._scratch))
+                self.send(hf.pack_nav_goal_go(counter, *args, self._scratch))
             else:
-                self.send(fr.pack_nav_goal(counter, r.field, r.value, self._scratch))
+                self.send(hf.pack_nav_goal(counter, r.field, r.value, self._scratch))
         self.step()
 
     def stop(self) -> None:
-        self.send(fr.pack_nav_goal(next(self._counter), NavGoalField.STOP, 0, self._scratch))
+        self.send(hf.pack_nav_goal(next(self._counter), NavGoalField.STOP, 0, self._scratch))
         self.step()
 
     def run_until_done(self, limit_s: float = 60.0) -> None:

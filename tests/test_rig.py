@@ -43,6 +43,7 @@ from odocan.sim.scenarios import get_scenario
 from odocan.sim.transport import OdocanBus
 from odocan.sim.vehicle import Vehicle
 from tests import dbc_typed
+from tests import host_frames as hf
 
 PMIR = load("pmir")
 EPS_S = 1e-6
@@ -460,9 +461,9 @@ def test_a_bit_timed_closed_loop_drives_to_its_goal() -> None:
         with LockstepRig(RigConfig(robot=PMIR, scenario=None, bitrate=bitrate)) as rig:
             rig.run(0.5)
             e = ErrorMask()
-            rig.send(fr.NAV_GOAL_ID, fr.pack_nav_goal(0, NavGoalField.X, 10_000, e))
-            rig.send(fr.NAV_GOAL_ID, fr.pack_nav_goal(1, NavGoalField.Y, 5_000, e))
-            rig.send(fr.NAV_GOAL_ID, fr.pack_nav_goal_go(2, NavMode.GO_TO_GOAL, 1, 1, 1, e))
+            rig.send(fr.NAV_GOAL_ID, hf.pack_nav_goal(0, NavGoalField.X, 10_000, e))
+            rig.send(fr.NAV_GOAL_ID, hf.pack_nav_goal(1, NavGoalField.Y, 5_000, e))
+            rig.send(fr.NAV_GOAL_ID, hf.pack_nav_goal_go(2, NavMode.GO_TO_GOAL, 1, 1, 1, e))
             rig.run(15.0)
             truth = rig.vehicle.truth()
             ends.append((truth.x_m, truth.y_m, rig.motor_controller.commands_applied))

@@ -16,6 +16,7 @@ from odocan.firmware.cmac import cmac, cmac_key
 from odocan.firmware.e2e import E2EReceiver, E2EStatus, p02_protect
 from odocan.host.protocol import secoc as host
 from odocan.sim.exceptions import OdocanError
+from tests import host_frames as hf
 from tests.dbc_typed import integers, load_can_dbc
 
 KEY = bytes.fromhex("000102030405060708090a0b0c0d0e0f")
@@ -189,12 +190,12 @@ def test_freshness_window_is_one_to_4096_ahead() -> None:
     signer.next_fv = receiver.last_fv + fw.FRESHNESS_WINDOW  # exactly 4096 ahead: accepted
     assert deliver(receiver, SET_POSE, pdu, signer.sign(SET_POSE, pdu)) is fw.AuthStatus.OK
     assert receiver.sync_cause is fw.FreshnessCause.REFUSED  # the refusal asked for a resync
-    frame = receiver.take_freshness_frame(5)
-    assert frame is not None
-    assert fw.unpack_odom_freshness(frame) == fw.OdomFreshness(
+    assert receiver.take_sync_cause() is fw.FreshnessCause.REFUSED
+    assert receiver.take_sync_cause() is None  # sent once
+    frame = receiver.freshness_frame(5, fw.FreshnessCause.REFUSED)
+    assert hf.unpack_odom_freshness(frame) == hf.OdomFreshness(
         5, fw.FreshnessCause.REFUSED, receiver.last_fv
     )
-    assert receiver.take_freshness_frame(6) is None  # sent once
     assert host.FRESHNESS_WINDOW == fw.FRESHNESS_WINDOW
 
 
@@ -219,7 +220,7 @@ def test_fail_closed_without_key_nvm_or_epochs() -> None:
         fw.SecocReceiver(KEY, broken),
         fw.SecocReceiver(KEY, MemoryNvm(epoch=fw.EPOCH_MAX)),
     ):
-        assert not receiver.available
+        assert receiver.epoch == 0  # unavailable: no EPOCH to accept a freshness value in
         assert receiver.sync_cause is fw.FreshnessCause.UNAVAILABLE
         mac = fw.authenticator(cmac_key(KEY), NAV_GOAL, pdu, 1)
         assert receiver.verify(NAV_GOAL, pdu, 1, mac) is fw.AuthStatus.UNAVAILABLE
@@ -257,7 +258,7 @@ def test_frame_codecs_match_the_dbc() -> None:
     rx = E2EReceiver(fw.ODOM_AUTH_DATA_IDS)
     for counter in range(40):
         fields = (rng.randrange(3), rng.getrandbits(16), rng.getrandbits(32))
-        data = fw.pack_odom_auth(counter, *fields)
+        data = hf.pack_odom_auth(counter, *fields)
         assert rx.check(data) is E2EStatus.OK
         assert cantools.autosar.check_profile2_crc(data, fw.ODOM_AUTH_DATA_IDS[counter & 0xF])
         decoded = integers(auth_msg, data)
@@ -267,7 +268,7 @@ def test_frame_codecs_match_the_dbc() -> None:
         data = fw.pack_odom_freshness(counter, fw.FreshnessCause.PERIODIC, fv)
         decoded = integers(fresh_msg, data)
         assert (decoded["FV_EPOCH"] << fw.COUNT_BITS) | decoded["FV_COUNT"] == fv
-        assert fw.unpack_odom_freshness(data).fv == fv
+        assert hf.unpack_odom_freshness(data).fv == fv
     signer = host.SecocSigner(KEY)
     assert (signer.mac_bits, signer.freshness_bits) == (fw.MAC_BITS, fw.FRESHNESS_TX_BITS)
     assert (signer.count_bits, signer.epoch_bits) == (fw.COUNT_BITS, fw.EPOCH_BITS)
@@ -404,7 +405,7 @@ def test_the_doc_vectors_for_the_c_port() -> None:
         mac = fw.authenticator(cmac_key(key), can_id, pdu_b, fv_i)
         assert host.SecocSigner(key).mac(can_id, pdu_b, fv_i) == mac
         request = fw.SECURED_IDS.index(can_id)
-        assert fw.pack_odom_auth(3, request, fv_i & 0xFFFF, mac).hex() == auth
+        assert hf.pack_odom_auth(3, request, fv_i & 0xFFFF, mac).hex() == auth
 
 
 def test_hostile_frames_never_raise_nor_verify() -> None:

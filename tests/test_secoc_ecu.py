@@ -16,6 +16,7 @@ from odocan.firmware.e2e import E2EReceiver, E2EStatus
 from odocan.firmware.ecu import OdomEcu
 from odocan.firmware.errors import ErrorMask
 from odocan.host.protocol.secoc import SecocSigner
+from tests import host_frames as hf
 from tests.odo_helpers import params
 from tests.test_ecu import RecordingHal
 from tests.test_secoc import KEY, MemoryNvm
@@ -64,7 +65,7 @@ def set_pose_frames(x_100um: int, y_100um: int, counter0: int) -> list[tuple[int
         (fr.SetPoseField.APPLY, 0),
     ]
     return [
-        (fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(counter0 + i, field, value, errors))
+        (fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(counter0 + i, field, value, errors))
         for i, (field, value) in enumerate(fields)
     ]
 
@@ -99,7 +100,7 @@ def test_a_genuine_command_moves_the_pose_a_forged_one_does_not() -> None:
         forged = []
         for i, (can_id, data) in enumerate(set_pose_frames(99_990, 99_990, 3 + 3 * attempt)):
             freshness = (front.gate.receiver.last_fv + 1) & fw.FRESHNESS_TX_MASK
-            auth = fw.pack_odom_auth(3 * attempt + i, 1, freshness, rng.getrandbits(32))
+            auth = hf.pack_odom_auth(3 * attempt + i, 1, freshness, rng.getrandbits(32))
             forged += [(can_id, data), (fw.ODOM_AUTH_ID, auth)]
         send(front, forged)
     assert pose_mm(front) == (1234, -500)

@@ -22,6 +22,7 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
+from tests import host_frames as hf
 
 KEY = bytes.fromhex("000102030405060708090a0b0c0d0e0f")
 SECURED = (fr.NAV_GOAL_ID, fr.ODOM_SET_POSE_ID, fr.ODOM_CONFIG_ID)
@@ -50,8 +51,8 @@ def rig() -> Iterator[tuple[LockstepRig, Bus]]:
         yield lockstep, bus
 
 
-def acks(frames: list[can.Message]) -> list[fr.OdomAck]:
-    return [fr.unpack_odom_ack(m.data) for m in frames if m.arbitration_id == fr.ODOM_ACK_ID]
+def acks(frames: list[can.Message]) -> list[hf.OdomAck]:
+    return [hf.unpack_odom_ack(m.data) for m in frames if m.arbitration_id == fr.ODOM_ACK_ID]
 
 
 def last_freshness(frames: list[can.Message]) -> bytes | None:
@@ -62,12 +63,12 @@ def last_freshness(frames: list[can.Message]) -> bytes | None:
 def pose_100um(frames: list[can.Message]) -> tuple[int, int]:
     """The last on-board X and Y (0.1 mm) on the bus."""
     x = [
-        fr.unpack_odom_pose_x(m.data).x_100um
+        hf.unpack_odom_pose_x(m.data).x_100um
         for m in frames
         if m.arbitration_id == fr.ODOM_POSE_X_ID
     ]
     y = [
-        fr.unpack_odom_pose_y(m.data).y_100um
+        hf.unpack_odom_pose_y(m.data).y_100um
         for m in frames
         if m.arbitration_id == fr.ODOM_POSE_Y_ID
     ]
@@ -89,7 +90,7 @@ class Counters:
 def set_pose(counters: Counters, x_100um: int, y_100um: int) -> list[tuple[int, bytes]]:
     e = ErrorMask()
     return [
-        (fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose(counters(fr.ODOM_SET_POSE_ID), f, v, e))
+        (fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(counters(fr.ODOM_SET_POSE_ID), f, v, e))
         for f, v in ((fr.SetPoseField.X, x_100um), (fr.SetPoseField.Y, y_100um), (15, 0))
     ]
 
@@ -100,10 +101,10 @@ def any_command(counters: Counters, rng: random.Random) -> tuple[int, bytes]:
     can_id = rng.choice(SECURED)
     value = rng.randrange(1, 50_000)
     if can_id == fr.NAV_GOAL_ID:
-        return can_id, fr.pack_nav_goal(counters(can_id), fr.NavGoalField.X, value, e)
+        return can_id, hf.pack_nav_goal(counters(can_id), fr.NavGoalField.X, value, e)
     if can_id == fr.ODOM_SET_POSE_ID:
-        return can_id, fr.pack_odom_set_pose(counters(can_id), fr.SetPoseField.Y, value, e)
-    data = fr.pack_odom_config(counters(can_id), fr.ConfigParam.WHEELBASE, 400_000_000, e)
+        return can_id, hf.pack_odom_set_pose(counters(can_id), fr.SetPoseField.Y, value, e)
+    data = hf.pack_odom_config(counters(can_id), fr.ConfigParam.WHEELBASE, 400_000_000, e)
     return can_id, data
 
 
@@ -157,14 +158,14 @@ def test_forged_commands_with_random_authenticators_are_never_accepted(
     attacker = Counters()
     rng = random.Random(18)
     tries, per_tick = 10_000, 8
-    answers: list[fr.OdomAck] = []
+    answers: list[hf.OdomAck] = []
     seen = step(lockstep, bus)
     next_fv = lockstep.board.ecu.secoc.receiver.last_fv + 1 if lockstep.board.ecu.secoc else 0
     for _ in range(tries // per_tick):
         frames = []
         for _ in range(per_tick):
             can_id, data = any_command(attacker, rng)
-            auth = fr.pack_odom_auth(
+            auth = hf.pack_odom_auth(
                 attacker(fr.ODOM_AUTH_ID),
                 REQUEST[can_id],
                 next_fv & FRESHNESS_TX_MASK,
@@ -200,7 +201,7 @@ def test_a_recorded_command_replayed_later_and_after_a_reboot_is_refused(
         for can_id, data in frames:
             if can_id == fr.ODOM_AUTH_ID:
                 fields = fr.unpack_odom_auth(data)
-                data = fr.pack_odom_auth(attacker(can_id), *fields[1:], ErrorMask())
+                data = hf.pack_odom_auth(attacker(can_id), *fields[1:], ErrorMask())
             else:
                 data = _recount(data, attacker(can_id), can_id)
             out.append((can_id, data))
@@ -216,7 +217,7 @@ def test_a_recorded_command_replayed_later_and_after_a_reboot_is_refused(
     assert lockstep.board.nvm.epoch == 2
     fresh = last_freshness(seen)
     assert fresh is not None
-    assert fr.unpack_odom_freshness(fresh).cause == 0
+    assert hf.unpack_odom_freshness(fresh).cause == 0
     refused = []
     for frames in recorded:  # their 16-bit freshness now falls inside the new window
         refused += [a.reason for a in acks(step(lockstep, bus, replay(frames)))]
@@ -232,7 +233,7 @@ def test_a_recorded_command_replayed_later_and_after_a_reboot_is_refused(
 def _recount(data: bytes, counter: int, can_id: int) -> bytes:
     """The same command with another E2E COUNTER (what a replaying node can always do)."""
     frame = bytearray(data)
-    p02_protect(frame, counter, fr.DATA_IDS_BY_FRAME_ID[can_id])
+    p02_protect(frame, counter, hf.DATA_IDS_BY_FRAME_ID[can_id])
     return bytes(frame)
 
 
@@ -253,7 +254,7 @@ def test_a_firmware_whose_nvm_fails_refuses_every_secured_command() -> None:
         seen = step(lockstep, bus) + step(lockstep, bus)
         fresh = last_freshness(seen)
         assert fresh is not None
-        assert fr.unpack_odom_freshness(fresh).fv == 0
+        assert hf.unpack_odom_freshness(fresh).fv == 0
         signer = SecocSigner(KEY)
         assert not signer.on_freshness(fresh)  # the host refuses to sign
         signer.next_fv = 1 << 28  # a host that signs anyway
@@ -276,11 +277,11 @@ def test_the_monitor_counts_and_shows_authentication_failures(
     fv = (lockstep.board.ecu.secoc.receiver.last_fv + 1) if lockstep.board.ecu.secoc else 0
     for _ in range(5):  # forged: AUTH_FAILED x5
         can_id, data = any_command(host, rng)
-        auth = fr.pack_odom_auth(host(fr.ODOM_AUTH_ID), REQUEST[can_id], fv, 7, ErrorMask())
+        auth = hf.pack_odom_auth(host(fr.ODOM_AUTH_ID), REQUEST[can_id], fv, 7, ErrorMask())
         heard += step(lockstep, bus, [(can_id, data), (fr.ODOM_AUTH_ID, auth)])
     heard += step(lockstep, bus, set_pose(host, 5, 5))  # unsigned: AUTH_MISSING x3
     for _ in range(2):  # ODOM_AUTH with no command before it
-        auth = fr.pack_odom_auth(host(fr.ODOM_AUTH_ID), 2, fv, 7, ErrorMask())
+        auth = hf.pack_odom_auth(host(fr.ODOM_AUTH_ID), 2, fv, 7, ErrorMask())
         heard += step(lockstep, bus, [(fr.ODOM_AUTH_ID, auth)])
     for _ in range(5):
         heard += step(lockstep, bus)

@@ -15,6 +15,7 @@ from odocan.host.report.trace import Trace
 from odocan.host.report.tui import auth_text, firmware_line
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
+from tests import host_frames as hf
 from tests.test_secoc_rig import (
     KEY,
     REQUEST,
@@ -40,12 +41,12 @@ def attacked() -> Fed:
         assert signer.next_fv is not None
         for _ in range(5):
             can_id, data = any_command(host, rng)
-            auth = fr.pack_odom_auth(host(fr.ODOM_AUTH_ID), REQUEST[can_id],
+            auth = hf.pack_odom_auth(host(fr.ODOM_AUTH_ID), REQUEST[can_id],
                                      signer.next_fv & 0xFFFF, rng.getrandbits(32), ErrorMask())
             heard += step(rig, bus, [(can_id, data), (fr.ODOM_AUTH_ID, auth)])
         heard += step(rig, bus, set_pose(host, 5, 5))
         for _ in range(2):
-            auth = fr.pack_odom_auth(host(fr.ODOM_AUTH_ID), 2, 0, 7, ErrorMask())
+            auth = hf.pack_odom_auth(host(fr.ODOM_AUTH_ID), 2, 0, 7, ErrorMask())
             heard += step(rig, bus, [(fr.ODOM_AUTH_ID, auth)])
         for _ in range(20):
             heard += step(rig, bus)

@@ -58,6 +58,8 @@ from typing import Any, NamedTuple
 
 import can
 
+from tests import host_frames as hf
+
 FIRMWARE_PACKAGE = "odocan.firmware"
 FIRMWARE_DIR = Path(__file__).resolve().parent.parent / "firmware"
 FIXMATH_MODULE = FIRMWARE_PACKAGE + ".fixmath"
@@ -372,29 +374,27 @@ def instrumented_firmware(recorder: Recorder) -> Iterator[None]:
 
 
 class _Unpacker(can.Listener):
-    """The host's ears: every frame heard is unpacked by the firmware's own ``unpack_*`` (so the
-    decoders run instrumented too) and counted by frame id; the ODOM_ACK records are kept."""
+    """The host's ears: every frame heard is unpacked (the firmware's own ``unpack_*`` for what
+    it receives, so those decoders run instrumented too) and counted by frame id; the ODOM_ACK
+    records are kept."""
 
     def __init__(self) -> None:
         self.fr = importlib.import_module(FIRMWARE_PACKAGE + ".frames")
+        received = ["wheel_encoders", "motor_cmd", "odom_set_pose", "odom_config", "nav_goal"]
+        decoders = {name: getattr(self.fr, f"unpack_{name}") for name in [*received, "odom_auth"]}
+        for name in [  # the host's half (tests/host_frames.py): not firmware, not instrumented
+            "odom_pose_x",
+            "odom_pose_y",
+            "odom_twist",
+            "nav_status",
+            "odom_ack",
+            "odom_freshness",
+            "odom_status",
+            "sim_truth",
+        ]:
+            decoders[name] = getattr(hf, f"unpack_{name}")
         self.unpack: dict[int, Callable[[bytes], Any]] = {
-            getattr(self.fr, f"{name.upper()}_ID"): getattr(self.fr, f"unpack_{name}")
-            for name in [
-                "wheel_encoders",
-                "motor_cmd",
-                "odom_pose_x",
-                "odom_pose_y",
-                "odom_twist",
-                "odom_set_pose",
-                "odom_config",
-                "nav_goal",
-                "nav_status",
-                "odom_ack",
-                "odom_auth",
-                "odom_freshness",
-                "odom_status",
-                "sim_truth",
-            ]
+            getattr(self.fr, f"{name.upper()}_ID"): decode for name, decode in decoders.items()
         }
         self.heard: dict[int, int] = {}
         self.acks: list[Any] = []
@@ -454,10 +454,10 @@ def _closed_loop_drive(goal_s: float, ears: _Unpacker) -> None:
             rig.send(frame_id, pack(counters[frame_id] - 1, *fields, scratch))
 
         def goal(x_m: int, y_m: int, heading_bam16: int, mode: int, goal_id: int) -> None:
-            send(fr.NAV_GOAL_ID, fr.pack_nav_goal, fr.NavGoalField.X, x_m)
-            send(fr.NAV_GOAL_ID, fr.pack_nav_goal, fr.NavGoalField.Y, y_m)
-            send(fr.NAV_GOAL_ID, fr.pack_nav_goal, fr.NavGoalField.HEADING, heading_bam16)
-            send(fr.NAV_GOAL_ID, fr.pack_nav_goal_go, mode, 1, 0, goal_id)
+            send(fr.NAV_GOAL_ID, hf.pack_nav_goal, fr.NavGoalField.X, x_m)
+            send(fr.NAV_GOAL_ID, hf.pack_nav_goal, fr.NavGoalField.Y, y_m)
+            send(fr.NAV_GOAL_ID, hf.pack_nav_goal, fr.NavGoalField.HEADING, heading_bam16)
+            send(fr.NAV_GOAL_ID, hf.pack_nav_goal_go, mode, 1, 0, goal_id)
 
         rig.run(0.5)  # odometry running: before that a GO is refused (BUSY)
         goal(6_000, 3_000, 0x4000, fr.NavMode.TURN_GO_TURN, 1)  # 0.6 m, 0.3 m, 90 degrees
@@ -472,7 +472,7 @@ def _closed_loop_drive(goal_s: float, ears: _Unpacker) -> None:
             (fr.ConfigParam.COUNTER_BITS, 32),  # the 24-bit wire counts extended on board
             (fr.ConfigParam.APPLY, 0),
         ):
-            send(fr.ODOM_CONFIG_ID, fr.pack_odom_config, param, value)
+            send(fr.ODOM_CONFIG_ID, hf.pack_odom_config, param, value)
             rig.step()
         for field_id, value in (
             (fr.SetPoseField.X, -2_000_000_000),  # -200 km: far goals, distance shifts
@@ -480,7 +480,7 @@ def _closed_loop_drive(goal_s: float, ears: _Unpacker) -> None:
             (fr.SetPoseField.HEADING, 0x8001),
             (fr.SetPoseField.APPLY, 0),
         ):
-            send(fr.ODOM_SET_POSE_ID, fr.pack_odom_set_pose, field_id, value)
+            send(fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose, field_id, value)
             rig.step()
         rig.send(fr.NAV_GOAL_ID, bytes(8))  # a corrupted frame: E2E rejects it
         rig.send(fr.NAV_GOAL_ID, bytes(7))  # a frame of the wrong length
@@ -488,7 +488,7 @@ def _closed_loop_drive(goal_s: float, ears: _Unpacker) -> None:
             rig.send(fr.SIM_TRUTH_ID, bytes(8))
         goal(0, 0, 0, fr.NavMode.TURN_GO_TURN, 3)
         rig.run(goal_s / 4)
-        send(fr.NAV_GOAL_ID, fr.pack_nav_goal, fr.NavGoalField.STOP, 0)
+        send(fr.NAV_GOAL_ID, hf.pack_nav_goal, fr.NavGoalField.STOP, 0)
         rig.run(goal_s / 4)
         rig.listeners = []
 
@@ -577,7 +577,6 @@ def _secoc_drive() -> None:
     secoc = importlib.import_module(f"{FIRMWARE_PACKAGE}.secoc")
     key = bytes(range(0x2B, 0x3B))
     mac_key = cmac.cmac_key(key)
-    cmac.aes128_encrypt(mac_key, bytes(16))
     for length in range(0, 49):
         cmac.cmac(mac_key, bytes((7 * k + length) & 0xFF for k in range(length)))
     nvm = _Nvm()
@@ -590,14 +589,14 @@ def _secoc_drive() -> None:
             tag = secoc.truncate(secoc.authenticator(mac_key, 0x300, pdu, fv), mac_bits)
             receiver.verify(0x300, pdu, fv & 0xFFFF, tag)
             receiver.verify(0x300, pdu, fv & 0xFFFF, tag ^ 1)
-        receiver.take_freshness_frame(3)
-        secoc.unpack_odom_freshness(receiver.freshness_frame(4, secoc.FreshnessCause.REFUSED))
+        receiver.take_sync_cause()
+        hf.unpack_odom_freshness(receiver.freshness_frame(4, secoc.FreshnessCause.REFUSED))
         commands = secoc.SecuredCommands(receiver)
         for request in secoc.AuthRequest:
             commands.hold(request, pdu, 10)
             fv = receiver.last_fv + 1
             tag = secoc.truncate(secoc.authenticator(mac_key, 0x300, pdu, fv), 32)
-            frame = secoc.pack_odom_auth(5, int(request), fv & 0xFFFF, tag)
+            frame = hf.pack_odom_auth(5, int(request), fv & 0xFFFF, tag)
             commands.authenticate(secoc.unpack_odom_auth(frame))
             commands.hold(request, pdu, 0xFFFF_FFF0)
             commands.expire(0xFFFF_FFFF)
@@ -647,7 +646,7 @@ def _secured_rig_drive(ears: _Unpacker) -> None:
             tag = secoc.authenticator(mac_key, frame_id, data, fv[0]) ^ forge
             rig.send(
                 fr.ODOM_AUTH_ID,
-                fr.pack_odom_auth(
+                hf.pack_odom_auth(
                     counter(fr.ODOM_AUTH_ID), request[frame_id], fv[0] & 0xFFFF, tag, scratch
                 ),
             )
@@ -659,50 +658,47 @@ def _secured_rig_drive(ears: _Unpacker) -> None:
         rig.run(0.5)
         sync()
         for field_id, value in ((fr.SetPoseField.X, 12_345), (fr.SetPoseField.APPLY, 0)):
-            pose = fr.pack_odom_set_pose(counter(fr.ODOM_SET_POSE_ID), field_id, value, scratch)
+            pose = hf.pack_odom_set_pose(counter(fr.ODOM_SET_POSE_ID), field_id, value, scratch)
             signed(fr.ODOM_SET_POSE_ID, pose)
             rig.step()
-        wheelbase = fr.pack_odom_config(
+        wheelbase = hf.pack_odom_config(
             counter(fr.ODOM_CONFIG_ID), fr.ConfigParam.WHEELBASE, 301_000_000, scratch
         )
         signed(fr.ODOM_CONFIG_ID, wheelbase)
-        goal_x = fr.pack_nav_goal(counter(fr.NAV_GOAL_ID), fr.NavGoalField.X, 1_000, scratch)
+        goal_x = hf.pack_nav_goal(counter(fr.NAV_GOAL_ID), fr.NavGoalField.X, 1_000, scratch)
         signed(fr.NAV_GOAL_ID, goal_x)
-        goal_x = fr.pack_nav_goal(counter(fr.NAV_GOAL_ID), fr.NavGoalField.X, 1_000, scratch)
+        goal_x = hf.pack_nav_goal(counter(fr.NAV_GOAL_ID), fr.NavGoalField.X, 1_000, scratch)
         signed(fr.NAV_GOAL_ID, goal_x, stale=True)  # a replay: AUTH_FRESHNESS, then a resync
         rig.step()
         sync()
 
         def goal_y() -> bytes:
-            data: bytes = fr.pack_nav_goal(  # fr is the instrumented module: typed Any
-                counter(fr.NAV_GOAL_ID), fr.NavGoalField.Y, 1_000, scratch
-            )
-            return data
+            return hf.pack_nav_goal(counter(fr.NAV_GOAL_ID), fr.NavGoalField.Y, 1_000, scratch)
 
         signed(fr.NAV_GOAL_ID, goal_y(), forge=1)  # AUTH_FAILED
         rig.send(fr.NAV_GOAL_ID, goal_y())  # unsigned and displaced by the next: AUTH_MISSING
         rig.send(fr.NAV_GOAL_ID, goal_y())  # unsigned: AUTH_MISSING after 2 ticks
         rig.send(
             fr.ODOM_AUTH_ID,
-            fr.pack_odom_auth(counter(fr.ODOM_AUTH_ID), 1, 0, 0, scratch),  # an orphan
+            hf.pack_odom_auth(counter(fr.ODOM_AUTH_ID), 1, 0, 0, scratch),  # an orphan
         )
         rig.run(0.1)
         rig.board.reboot()
         sync()
         signed(
             fr.ODOM_SET_POSE_ID,
-            fr.pack_odom_set_pose(counter(fr.ODOM_SET_POSE_ID), fr.SetPoseField.APPLY, 0, scratch),
+            hf.pack_odom_set_pose(counter(fr.ODOM_SET_POSE_ID), fr.SetPoseField.APPLY, 0, scratch),
         )
         rig.run(1.1)  # a periodic ODOM_FRESHNESS
         rig.board.nvm.fail_writes = True
         rig.board.reboot()
         rig.send(
             fr.ODOM_SET_POSE_ID,
-            fr.pack_odom_set_pose(counter(fr.ODOM_SET_POSE_ID), fr.SetPoseField.APPLY, 0, scratch),
+            hf.pack_odom_set_pose(counter(fr.ODOM_SET_POSE_ID), fr.SetPoseField.APPLY, 0, scratch),
         )
         rig.send(
             fr.ODOM_AUTH_ID,
-            fr.pack_odom_auth(counter(fr.ODOM_AUTH_ID), 1, 1, 0, scratch),  # AUTH_UNAVAILABLE
+            hf.pack_odom_auth(counter(fr.ODOM_AUTH_ID), 1, 1, 0, scratch),  # AUTH_UNAVAILABLE
         )
         rig.run(0.1)
         rig.listeners = []
@@ -744,7 +740,8 @@ def _health_drive() -> None:
         for _ in range(3):
             rig.step()
         rig.ecu.isr_rx_overrun()  # the board's CAN FIFO overrun interrupt
-        rig.ecu._step_periods_max(rig.ecu._enc_prev_counter)  # a whole 16-period counter cycle
+        encoders = rig.ecu.encoders
+        encoders._step_periods_max(encoders._enc_prev_counter)  # a whole 16-period counter cycle
     finally:
         for name in (HEALTH_SCENARIOS, "tests.test_ecu"):
             sys.modules.pop(name, None)

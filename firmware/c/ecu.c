@@ -10,6 +10,11 @@
  * MAX_WHEEL_SPEED_MM_S, not integrated) or COUNTER_RESET (RESYNC_FRAMES refused frames consistent
  * with each other: re-primed on the first of them, the jump never integrated; it stays until
  * ODOM_SET_POSE APPLY). The module docstring of firmware/ecu.py says why.
+ *
+ * One file here, one Python module per job there (firmware/ecu.py composes them); each section
+ * below names its module: mailbox.py, clock.py (advance_time), health.py (check_overflows,
+ * degrade, watchdog), reception.py (e2e), encoders.py, twist.py, auth.py (SecOC), commands.py,
+ * reports.py (step 5) and transmit.py (next_counter, send).
  */
 #include "ecu.h"
 
@@ -26,7 +31,7 @@ static const enum status_page ROTATING_PAGES[5] = {
     PAGE_E2E_NAV_GOAL,
 };
 
-/* --- the mailbox --- */
+/* --- the mailbox (firmware/mailbox.py) --- */
 
 /* ISR context: store one frame (at most 8 bytes kept; the length is kept for the check), or
  * count an overflow. */
@@ -176,7 +181,8 @@ void ecu_isr_bus_state(struct odom_ecu *ecu, bool bus_off)
     }
 }
 
-/* --- the periodic tick --- */
+/* --- the periodic tick (firmware/ecu.py; advance_time: clock.py; check_overflows, degrade:
+ * health.py) --- */
 
 /* One period of the main loop on a board without a timer: one period has passed. */
 void ecu_tick(struct odom_ecu *ecu)
@@ -301,7 +307,8 @@ static void degrade(struct odom_ecu *ecu, enum reason reason)
     }
 }
 
-/* --- step 2-3: received frames --- */
+/* --- step 2-3: received frames (e2e: firmware/reception.py; WHEEL_ENCODERS:
+ * firmware/encoders.py; sum_step, update_twist: firmware/twist.py) --- */
 
 /* The Profile 2 check; true when the frame may be used (OK or OKSOMELOST). */
 static bool e2e(struct odom_ecu *ecu, struct e2e_receiver *receiver, const uint8_t *data,
@@ -529,7 +536,7 @@ static void update_twist(struct odom_ecu *ecu, uint32_t periods)
     ecu->tick_steps = 0u;
 }
 
-/* --- SecOC: verify before acting --- */
+/* --- SecOC: verify before acting (firmware/auth.py) --- */
 
 /* True when the frame (E2E OK) was held for its ODOM_AUTH instead of acted on now; a frame it
  * displaced is refused (NACK AUTH_MISSING). */
@@ -614,7 +621,7 @@ static void send_freshness(struct odom_ecu *ecu)
     }
 }
 
-/* --- the command handlers --- */
+/* --- the command handlers (firmware/commands.py) --- */
 
 static void on_set_pose(struct odom_ecu *ecu, const uint8_t *data, size_t len)
 {
@@ -764,7 +771,8 @@ static void navigate(struct odom_ecu *ecu)
     }
 }
 
-/* --- step 5: scheduled transmissions --- */
+/* --- step 5: scheduled transmissions (firmware/reports.py; next_counter, send:
+ * firmware/transmit.py) --- */
 
 static void transmit_scheduled(struct odom_ecu *ecu)
 {
@@ -877,7 +885,7 @@ static void send(struct odom_ecu *ecu, uint32_t can_id, const uint8_t data[8])
     }
 }
 
-/* --- step 6: the watchdog --- */
+/* --- step 6: the watchdog (firmware/health.py) --- */
 
 /* Encoders silent for WATCHDOG_TICKS periods of firmware time -> DEGRADED; back to OK after
  * RECOVERY_FRAMES accepted frames with no new cause. */

@@ -1,5 +1,6 @@
 /* The odometry ECU's main loop: a receive ISR, a bounded mailbox and a periodic tick
- * (firmware/ecu.py; its docstring gives the tick's fixed order). */
+ * (firmware/ecu.py, which composes one module per job; its docstring gives the tick's fixed
+ * order). */
 #ifndef ODOCAN_ECU_H
 #define ODOCAN_ECU_H
 

@@ -16,7 +16,7 @@ void data_ids_of_slot(unsigned slot, uint8_t ids[DATA_ID_COUNT])
     }
 }
 
-/* The CHECKSUM of a packed frame (its COUNTER already in byte 1): frames.py's _seal. */
+/* The CHECKSUM of a packed frame (its COUNTER already in byte 1): frames.py's seal_frame. */
 static void seal(uint8_t frame[8], unsigned slot)
 {
     uint8_t ids[DATA_ID_COUNT];
@@ -276,7 +276,8 @@ void pack_odom_status_e2e(uint8_t out[8], uint8_t counter, enum status_page page
     seal(out, ODOM_STATUS_E2E_SLOT);
 }
 
-/* ODOM_AUTH: REQUEST (byte 1 high nibble, saturated to 0..2), FRESHNESS, AUTHENTICATOR. */
+/* ODOM_AUTH: REQUEST (byte 1 high nibble, saturated to 0..2), FRESHNESS, AUTHENTICATOR. The host's
+ * side (tests/host_frames.py in Python): the ECU never sends it; the probes check it. */
 void pack_odom_auth(uint8_t out[8], uint8_t counter, int64_t request, uint16_t freshness,
                     uint32_t mac, uint32_t *errors)
 {

@@ -1,0 +1,223 @@
+"""Step 3 for WHEEL_ENCODERS: from the wire's 24-bit counts to an integrated, plausible step.
+
+Every frame that passes its E2E check is extended to the hardware counters' width (16 or 32 bits,
+ODrive style), then checked against the build-time maximum rim speed (``MAX_WHEEL_SPEED_MM_S``)
+over the most encoder periods that can separate it from the last accepted sample. A plausible
+step is integrated (``firmware.odometry``) and summed into the twist; an implausible one is
+refused (DEGRADED, IMPLAUSIBLE_STEP). ``RESYNC_FRAMES`` refused frames consistent with each other
+but not with the last accepted one are a counter restart (COUNTER_RESET): the odometry is
+re-primed on the first of them and the jump itself is never integrated. The counters are absolute,
+so the first frame after a gap carries the distance driven meanwhile.
+"""
+
+from __future__ import annotations
+
+from odocan.firmware import frames as fr
+from odocan.firmware.clock import FirmwareClock
+from odocan.firmware.e2e import COUNTER_MASK, E2EReceiver
+from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
+from odocan.firmware.fixmath import U16_MAX, U32_MAX, muldiv_round_u64, wrap_signed, wrap_u32
+from odocan.firmware.health import Health
+from odocan.firmware.odometry import Odometry
+from odocan.firmware.reception import Reception
+from odocan.firmware.twist import ENCODER_PERIOD_US, Twist
+
+MAX_WHEEL_SPEED_MM_S = 4_000  # build-time maximum rim speed of either wheel (a #define)
+RESYNC_FRAMES = 3  # frames consistent with each other, not with the last one: counters restarted
+STEP_PERIODS_MAX = U16_MAX  # the twist's dt and the plausibility bound saturate here (655 s)
+WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+
+Counts = tuple[int, int]  # (left, right) counter values
+
+
+class EncoderInput:
+    """The WHEEL_ENCODERS receiver: E2E state, the counters' base, plausibility and restarts."""
+
+    def __init__(
+        self,
+        odometry: Odometry,
+        health: Health,
+        clock: FirmwareClock,
+        twist: Twist,
+        reception: Reception,
+        max_wheel_speed_mm_s: int,
+    ) -> None:
+        """``max_wheel_speed_mm_s``: the fastest rim speed either wheel can reach (u16 mm/s)."""
+        self._odometry = odometry
+        self._health = health
+        self._errors: ErrorMask = health.errors
+        self._clock = clock
+        self._twist = twist
+        self._reception = reception
+        self.max_wheel_speed_mm_s = max_wheel_speed_mm_s
+        self._max_counts_per_period = self.step_bounds()
+        # The window widens once per tick (not per frame): a replay cannot widen it.
+        self.rx = E2EReceiver(
+            fr.WHEEL_ENCODERS_DATA_IDS, max_delta_counter_init=0, window_per_period=True
+        )
+        self.enc_counter = 0  # COUNTER of the last accepted WHEEL_ENCODERS frame
+        self._enc_prev_counter: int | None = None
+        self._wire_prev: Counts | None = None
+        self._counts_u32 = (0, 0)
+        self._counts_prev: Counts | None = None  # counters of the last accepted frame
+        self.frames_implausible = 0  # u32: WHEEL_ENCODERS refused by the plausibility bound
+        # Refused frames consistent among themselves: (left, right, COUNTER) of the first, last.
+        self._resync_first: tuple[int, int, int] | None = None
+        self._resync_last: tuple[int, int, int] = (0, 0, 0)
+        self._resync_frames = 0
+        self.periods_since_frame = 0  # periods (of firmware time) since the last accepted frame
+        # Periods since the last accepted frame's sample is known to have been taken (frames
+        # taken in a tick that lost time were sampled at unknown times during the stall).
+        self._periods_since_sample = 0  # u16, saturated
+        self._samples_stale = False  # the last accepted frame was taken in a tick that lost time
+        self.tick_budget = 0  # _periods_since_sample at the start of this tick
+
+    # --- once per tick, before the drain ---
+
+    def start_tick(self, periods: int) -> None:
+        """``periods`` of firmware time passed: age the last sample, widen the E2E window (fully
+        after frames of unknown age, a stall's backlog) and fix this tick's period budget."""
+        self.periods_since_frame = min(self.periods_since_frame + periods, STEP_PERIODS_MAX)
+        self._periods_since_sample = min(self._periods_since_sample + periods, STEP_PERIODS_MAX)
+        widen = COUNTER_MASK if self._samples_stale else min(periods, COUNTER_MASK)
+        for _ in range(widen):
+            self.rx.new_period()
+        self.tick_budget = self._periods_since_sample
+
+    def no_frame(self) -> None:
+        """No WHEEL_ENCODERS in this tick's drain: the E2E receiver counts the missing frame."""
+        self.rx.check(None)
+
+    # --- a received frame ---
+
+    def on_frame(self, data: bytes) -> None:
+        """One WHEEL_ENCODERS frame from the mailbox."""
+        if not self._reception.usable(self.rx, data):
+            return
+        frame = fr.unpack_wheel_encoders(data)
+        wire = (frame.left_count, frame.right_count)
+        counts = self._extend_counters(wire)
+        periods = self._step_periods_max(frame.counter)
+        if not self._plausible(self._counts_prev, counts, periods):
+            self._on_implausible(frame.counter, wire, counts)
+            return
+        self._resync_first = None
+        self._accept(frame.counter, wire, counts)
+
+    def _accept(self, counter: int, wire: Counts, counts: Counts) -> None:
+        """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
+        self._commit_counters(wire, counts)
+        if self._health.state is not State.FAULT and self._odometry.step_counts(
+            counts[0], counts[1]
+        ):
+            self._twist.sum_step()
+        self._enc_prev_counter = counter
+        self.enc_counter = counter
+        self.periods_since_frame = 0
+        time_lost_now = self._clock.time_lost_now
+        self._samples_stale = time_lost_now
+        if not time_lost_now:
+            self._periods_since_sample = 0
+        self._health.encoder_accepted()
+
+    def _extend_counters(self, wire: Counts) -> Counts:
+        """The hardware counters from their low 24 bits on the wire (nothing is stored).
+
+        A 16-bit counter fits the wire as it is. A 32-bit one is rebuilt by adding the wire's
+        wrap-safe 24-bit delta (C: ``prev += (int32_t)((wire - prev_wire) << 8) >> 8``).
+        """
+        if self._odometry.consts.counter_bits <= WIRE_COUNTER_BITS or self._wire_prev is None:
+            return wire
+        d_left = wrap_signed(wire[0] - self._wire_prev[0], WIRE_COUNTER_BITS)
+        d_right = wrap_signed(wire[1] - self._wire_prev[1], WIRE_COUNTER_BITS)
+        return (self._counts_u32[0] + d_left) & U32_MAX, (self._counts_u32[1] + d_right) & U32_MAX
+
+    def _commit_counters(self, wire: Counts, counts: Counts) -> None:
+        """Take an accepted frame's counters as the base of the next deltas."""
+        self._wire_prev = wire
+        self._counts_u32 = counts
+        self._counts_prev = counts
+
+    # --- plausibility ---
+
+    def _step_periods_max(self, counter: int) -> int:
+        """The most encoder periods that can separate this frame's sample from the last accepted
+        one: n = the COUNTER advance (mod 16), plus whole counter cycles while n stays within the
+        periods since that sample (less than a period of queueing on either side; after a tick
+        that lost time, since the last sample before it). Exact in a regular stream (1)."""
+        prev = self._enc_prev_counter
+        if prev is None:
+            return 1
+        advance = ((counter - prev) & COUNTER_MASK) or (COUNTER_MASK + 1)
+        budget = self.tick_budget  # <= STEP_PERIODS_MAX
+        if budget <= advance:
+            return advance
+        return advance + (((budget - advance) >> 4) << 4)
+
+    def step_bounds(self) -> tuple[int, int]:
+        """Per wheel, the most counts one encoder period can hold at ``max_wheel_speed_mm_s``:
+        ceil(v_max * T / travel per count) + 1 (a count edge may fall either side of a sample).
+        Configuration time: a 128-bit muldiv, then u64 division."""
+        c = self._odometry.consts
+        travel_q48_m = muldiv_round_u64(
+            self.max_wheel_speed_mm_s * ENCODER_PERIOD_US, 1 << 48, 1_000_000_000, self._errors
+        )
+        return (
+            (travel_q48_m + c.m_per_count_left_q48_m - 1) // c.m_per_count_left_q48_m + 1,
+            (travel_q48_m + c.m_per_count_right_q48_m - 1) // c.m_per_count_right_q48_m + 1,
+        )
+
+    def _plausible(self, prev: Counts | None, counts: Counts, periods: int) -> bool:
+        """True when each wheel moved at most ``periods`` times its per-period bound (u64: at
+        most 2^16 * 2^32) since ``prev`` (None: nothing to compare, plausible)."""
+        if prev is None:
+            return True
+        bits = self._odometry.consts.counter_bits
+        left_max, right_max = self._max_counts_per_period
+        d_left = wrap_signed(counts[0] - prev[0], bits)
+        d_right = wrap_signed(counts[1] - prev[1], bits)
+        return abs(d_left) <= periods * left_max and abs(d_right) <= periods * right_max
+
+    def _on_implausible(self, counter: int, wire: Counts, counts: Counts) -> None:
+        """Refuse the step (DEGRADED, IMPLAUSIBLE_STEP); ``RESYNC_FRAMES`` refused frames in a row
+        that are plausible among themselves are a counter restart (COUNTER_RESET): re-prime on
+        the first of them and integrate from there, never the jump."""
+        self.frames_implausible = wrap_u32(self.frames_implausible + 1)
+        self._errors.set(ErrorFlag.IMPLAUSIBLE_STEP)
+        self._health.degrade(Reason.IMPLAUSIBLE_STEP)
+        last = self._resync_last
+        if self._resync_first is not None and self._plausible(
+            (last[0], last[1]), counts, ((counter - last[2]) & COUNTER_MASK) or 1
+        ):
+            self._resync_frames += 1
+        else:
+            self._resync_first = (counts[0], counts[1], counter)
+            self._resync_frames = 1
+        self._resync_last = (counts[0], counts[1], counter)
+        if self._resync_frames >= RESYNC_FRAMES:
+            self._restart_counters(counter, wire, counts)
+
+    def _restart_counters(self, counter: int, wire: Counts, counts: Counts) -> None:
+        """The encoder counters restarted: prime on the first consistent frame, integrate from it
+        up to ``counts`` (its periods from the COUNTER advance)."""
+        first = self._resync_first
+        if first is None:
+            return
+        self._errors.set(ErrorFlag.COUNTER_RESET)
+        self._health.degrade(Reason.COUNTER_RESET)
+        self._resync_first = None
+        self._resync_frames = 0
+        self._odometry.unprime()
+        self._odometry.step_counts(first[0], first[1])
+        self._enc_prev_counter = None
+        self._accept(counter, wire, counts)
+
+    # --- configuration ---
+
+    def reconfigure(self, counter_bits_changed: bool) -> None:
+        """After ODOM_CONFIG APPLY (the odometry already holds the new constants): new per-period
+        bounds; a new counter width also forgets the counters' base (the next frame primes)."""
+        if counter_bits_changed:
+            self._wire_prev = None
+            self._counts_prev = None
+        self._max_counts_per_period = self.step_bounds()

@@ -1,0 +1,109 @@
+"""The ECU's health: its state (INIT / OK / DEGRADED / FAULT), why, and the watchdog.
+
+DEGRADED always carries a ``Reason`` (ODOM_STATUS ``REASON``): ENCODER_TIMEOUT (no accepted
+WHEEL_ENCODERS for ``WATCHDOG_TICKS`` periods), TIME_LOST (a tick released that late),
+MAILBOX_OVERFLOW (a received frame was dropped), IMPLAUSIBLE_STEP or COUNTER_RESET (both from
+``firmware.encoders``). ``RECOVERY_FRAMES`` accepted encoder frames in a row with no new cause
+bring it back to OK. The motion between the last frame before a counter restart and the first
+after it is unknowable, so COUNTER_RESET stays until the host sets the pose again (ODOM_SET_POSE
+APPLY): no later cause replaces it as the reason. Errors are state, never exceptions: each cause
+also sets its sticky bit in the u32 error mask.
+"""
+
+from __future__ import annotations
+
+from odocan.firmware.clock import WATCHDOG_TICKS, FirmwareClock
+from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
+
+RECOVERY_FRAMES = 5  # accepted encoder frames in a row to leave DEGRADED
+
+
+class Health:
+    """State, reason and the watchdog's recovery count (C: two enums, a u8 and a u32)."""
+
+    __slots__ = (
+        "_clock",
+        "_overflows_seen",
+        "_reason_tick",
+        "errors",
+        "good_in_a_row",
+        "reason",
+        "state",
+    )
+
+    def __init__(self, errors: ErrorMask, clock: FirmwareClock) -> None:
+        self.errors = errors
+        self._clock = clock
+        self.state = State.INIT
+        self.reason = Reason.NONE
+        self.good_in_a_row = 0  # accepted encoder frames since the last cause (<= RECOVERY_FRAMES)
+        self._reason_tick = 0  # u32: the tick that set ``reason``
+        self._overflows_seen = 0  # u32: the mailbox's overflow count at the previous tick
+
+    def config_fault(self) -> None:
+        """The configuration is invalid: FAULT (CONFIG_INVALID) until a valid one is applied."""
+        self.errors.set(ErrorFlag.CONFIG_INVALID)
+        self.state = State.FAULT
+        self.reason = Reason.CONFIG_INVALID
+
+    def config_applied(self) -> None:
+        """A valid configuration was applied: FAULT -> INIT (the next encoder frame: OK)."""
+        if self.state is State.FAULT:
+            self.state = State.INIT
+            self.reason = Reason.NONE
+
+    def pose_set(self) -> None:
+        """The host set the pose again (ODOM_SET_POSE APPLY): COUNTER_RESET may now recover."""
+        if self.reason is Reason.COUNTER_RESET:
+            self.reason = Reason.NONE
+
+    def degrade(self, reason: Reason) -> None:
+        """OK or DEGRADED -> DEGRADED for ``reason`` (INIT and FAULT stay); recovery restarts.
+        COUNTER_RESET is never replaced by a later cause (those still set their error bits):
+        only ODOM_SET_POSE APPLY clears it, or a later cause would let the firmware report OK
+        on a pose that lost its continuity."""
+        if self.state is State.OK or self.state is State.DEGRADED:
+            self.state = State.DEGRADED
+            if self.reason is not Reason.COUNTER_RESET:
+                self.reason = reason
+            self.good_in_a_row = 0
+            self._reason_tick = self._clock.ticks
+
+    def time_lost(self) -> None:
+        """This tick was released ``LOST_TIME_PERIODS`` or more late: TIME_LOST, DEGRADED."""
+        self.errors.set(ErrorFlag.TIME_LOST)
+        self.degrade(Reason.TIME_LOST)
+
+    def check_overflows(self, overflows: int) -> None:
+        """Frames the receive ISR dropped since the previous tick (``overflows``: the mailbox's
+        u32 count): DEGRADED (MAILBOX_OVERFLOW)."""
+        if overflows != self._overflows_seen:
+            self._overflows_seen = overflows
+            self.degrade(Reason.MAILBOX_OVERFLOW)
+
+    def encoder_accepted(self) -> None:
+        """An accepted WHEEL_ENCODERS frame: one more toward recovery; the first leaves INIT."""
+        if self.good_in_a_row < RECOVERY_FRAMES:
+            self.good_in_a_row += 1
+        if self.state is State.INIT:
+            self.state = State.OK
+
+    def watchdog(self, periods_since_encoder: int) -> None:
+        """Step 6. Encoders silent for WATCHDOG_TICKS periods of firmware time -> DEGRADED; back
+        to OK after RECOVERY_FRAMES accepted frames with no new cause."""
+        if self.state is State.INIT or self.state is State.FAULT:
+            return
+        if periods_since_encoder >= WATCHDOG_TICKS:
+            self.errors.set(ErrorFlag.ENCODER_TIMEOUT)
+            if self.state is State.OK or (  # a cause raised in this very tick is kept
+                self.reason is not Reason.ENCODER_TIMEOUT and self._reason_tick != self._clock.ticks
+            ):
+                self.degrade(Reason.ENCODER_TIMEOUT)
+            self.good_in_a_row = 0
+        elif (
+            self.state is State.DEGRADED
+            and self.good_in_a_row >= RECOVERY_FRAMES
+            and self.reason is not Reason.COUNTER_RESET  # the pose lost its continuity
+        ):
+            self.state = State.OK
+            self.reason = Reason.NONE

@@ -1,0 +1,58 @@
+"""ODOM_TWIST's speeds: the steps integrated in a tick, over the firmware time they cover.
+
+Each accepted step adds its travel (Q20 m) and heading change (Q30 rad) to this tick's sums (i64,
+saturated to +-2^32: 4096 m and 4 rad). At the end of the drain the speeds are the sums over the
+periods since the last accepted sample (firmware time, not ticks): lost frames, a burst after a
+stall (summed over two ticks) and a late frame all give the true mean speed.
+"""
+
+from __future__ import annotations
+
+from odocan.firmware.config import TWO_PI_Q60
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.fixmath import div_round_i64, mul_shr_round_i64, sat_range
+from odocan.firmware.odometry import Odometry
+
+ENCODER_PERIOD_US = 10_000  # WHEEL_ENCODERS GenMsgCycleTime
+TWIST_SUM_MAX = 1 << 32  # one tick's summed steps saturate at 4096 m (Q20) and 4 rad (Q30)
+
+
+class Twist:
+    """This tick's summed steps and the last speeds (C: two i64 sums, a u8 count, two i32)."""
+
+    def __init__(self, odometry: Odometry, errors: ErrorMask) -> None:
+        self._odometry = odometry
+        self._errors = errors
+        self.tick_ds_q20_m = 0  # i64, saturated to +-2^32 (4096 m)
+        self.tick_dheading_q30_rad = 0  # i64, saturated to +-2^32 (4 rad)
+        self.steps = 0  # steps summed since the last update
+        self.linear_mm_s = 0  # i32: ODOM_TWIST LINEAR_VEL before its i16 saturation
+        self.angular_mrad_s = 0  # i32: ODOM_TWIST ANGULAR_VEL before its i16 saturation
+
+    def sum_step(self) -> None:
+        """Add the step just integrated to this tick's sums (Q20 m, Q30 rad; i64, saturated)."""
+        odo = self._odometry
+        dheading_q30_rad = mul_shr_round_i64(odo.last_dheading_bam64, TWO_PI_Q60, 94, self._errors)
+        self.tick_ds_q20_m = sat_range(
+            self.tick_ds_q20_m + (odo.last_ds_q49_m >> 29),
+            -TWIST_SUM_MAX,
+            TWIST_SUM_MAX,
+            self._errors,
+        )
+        self.tick_dheading_q30_rad = sat_range(
+            self.tick_dheading_q30_rad + dheading_q30_rad,
+            -TWIST_SUM_MAX,
+            TWIST_SUM_MAX,
+            self._errors,
+        )
+        self.steps += 1
+
+    def update(self, periods: int) -> None:
+        """Speeds over this tick's steps, which cover the ``periods`` (1 .. STEP_PERIODS_MAX)
+        since the last accepted sample. Products < 2^32 * 10^9 < 2^63. The sums restart."""
+        dt_us = periods * ENCODER_PERIOD_US
+        self.linear_mm_s = div_round_i64(self.tick_ds_q20_m * 1_000_000_000, dt_us << 20)
+        self.angular_mrad_s = div_round_i64(self.tick_dheading_q30_rad * 1_000_000_000, dt_us << 30)
+        self.tick_ds_q20_m = 0
+        self.tick_dheading_q30_rad = 0
+        self.steps = 0
