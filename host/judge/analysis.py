@@ -65,6 +65,7 @@ import numpy.typing as npt
 
 from odocan.firmware.ecu import ENCODER_PERIOD_US, MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.reboots import Life, merge, split_lives
 from odocan.host.judge.reference import INTEGRATORS, Geometry, integrate, wrap_delta
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import UNKNOWN, check_frames
@@ -164,13 +165,72 @@ def analyze(
     db = db if db is not None else contract.database()
     decoder = BulkDecoder(db)
     _require_messages(decoder)
+    lives = split_lives(frames, decoder)
+    if len(lives) == 1:
+        return _analyze_life(frames, robot, integrator, tolerance=tolerance, db=db,
+                             decoder=decoder, scenario=scenario, seed=seed,
+                             wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+    _, accepted = check_frames(frames, db)
+    integrator, source = _pick_integrator(frames, accepted, decoder, integrator)
+    done: list[tuple[Life, Analysis, float]] = []
+    failure: AnalysisError | None = None
+    for life in lives:
+        part = frames.select(life.index)
+        try:
+            result = _analyze_life(part, robot, integrator, tolerance=tolerance, db=db,
+                                   decoder=BulkDecoder(db), boot=life.boot,
+                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+        except AnalysisError as exc:  # a life without on-board samples: reported, not compared
+            failure = failure or exc
+            continue
+        done.append((life, result, float(part.timestamp_s[0])))
+    if not done:
+        assert failure is not None
+        raise failure
+    report, series = merge([d[1].report for d in done], [d[1].series for d in done],
+                           [d[0] for d in done], [d[2] for d in done])
+    covered_s = _covered_s(frames, db)
+    report.update(
+        integrator_source=source, scenario=scenario, seed=seed, sim_seconds=covered_s,
+        wall_seconds=wall_seconds, realtime_factor=_realtime(covered_s, wall_seconds),
+        frames=_frame_counts(frames, decoder),
+    )
+    vs_ref = report["onboard_vs_reference"]
+    report["passed"] = bool(
+        vs_ref["max_position_error_m"] is not None
+        and vs_ref["max_position_error_m"] <= tolerance.position_m
+        and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
+        and report["onboard_twist_vs_reference"]["passed"]
+    )
+    return Analysis(report=report, series=series, passed=report["passed"])
+
+
+def _analyze_life(
+    frames: FrameArrays,
+    robot: RobotProfile,
+    integrator: str | None,
+    *,
+    tolerance: Tolerance,
+    db: cantools.database.can.Database,
+    decoder: BulkDecoder,
+    boot: bool = False,
+    scenario: str | None = None,
+    seed: int | None = None,
+    wall_seconds: float | None = None,
+    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+) -> Analysis:
+    """``analyze`` of one firmware life (``host.judge.reboots``); ``boot``: the frames start at
+    a reboot, the firmware's pose 0 at their first encoder frame."""
     e2e, accepted = check_frames(frames, db)
     integrator, source = _pick_integrator(frames, accepted, decoder, integrator)
     enc = _encoders(frames, accepted, decoder)
     onboard, unmatched, sent_s = _onboard_samples(frames, accepted, decoder, enc)
     onboard, stalls = _after_stalls(onboard, sent_s, enc)
     truth = _truth_samples(frames, accepted, decoder, enc)
-    power_up = _starts_at_power_up(frames, accepted, decoder, onboard)
+    if boot:
+        power_up = _saw_only_the_log(frames, accepted, decoder)
+    else:
+        power_up = _starts_at_power_up(frames, accepted, decoder, onboard)
     ref_all = _reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls)
     ref = ref_all.at(onboard.enc)
@@ -217,6 +277,7 @@ def analyze(
                        "step, so the reference's position is placed again after it"}
             for e in stalls.tolist() if e > int(onboard.enc[0])
         ],
+        "reboots": [],
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,
         "onboard_twist_vs_reference": twist,
@@ -535,7 +596,7 @@ def _reference(
 ) -> _Reference:
     """Integrate the encoder deltas from the first on-board sample on."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
-    e0 = int(onboard.enc[0])
+    e0 = 0 if power_up else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
     geometry = Geometry.of(robot)
     steps = _firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s)
     d_left, d_right = steps.d_left, steps.d_right

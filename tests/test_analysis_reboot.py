@@ -1,0 +1,105 @@
+"""A firmware reboot inside a log: ``analyze`` restarts its reference from the power-up pose.
+
+The logs are written directly (``tests/synth_log.py``: the firmware's own odometry and codec):
+a wandering drive in which a new firmware boots at an encoder frame (pose, E2E counters and
+UPTIME from 0). Each verdict is checked against ``tests/independent_checker.py`` (float64
+odometry of its own, cantools decoding, told where the firmware rebooted), never against host
+code: a correct firmware passes across the reboot, a firmware whose pose after the reboot is
+off by more than one LSB fails (the restart starts at the power-up pose, 0, not at the first
+sample after it, so it cannot adopt the error).
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import pytest
+from rich.console import Console
+
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import Tolerance, analyze
+from odocan.host.report.summary import print_summary
+from odocan.sim.robot import RobotProfile, load
+from tests.independent_checker import Robot, check
+from tests.synth_log import ENCODER_PERIOD_S, Synth, synthesize, wandering_drive
+
+STEPS = 2000  # 20 s of driving
+REBOOT = 1000  # the encoder frame the new firmware primes on (10 s)
+
+
+def checker_robot(profile: RobotProfile) -> Robot:
+    p = profile.firmware_params()
+    return Robot(p["counts_per_rev"], p["wheel_radius_left_nm"], p["wheel_radius_right_nm"],
+                 p["wheelbase_nm"], p["counter_bits"])
+
+
+def rebooting_drive(
+    profile: RobotProfile, integrator: str, *, bias: dict[int, int] | None = None,
+    reboot_at: int = REBOOT,
+) -> Synth:
+    d_left, d_right = wandering_drive(profile, STEPS, 0.004, seed=7)
+    return synthesize(profile, integrator, d_left, d_right, reboot_at=reboot_at,
+                      x_bias_100um=bias)
+
+
+def independent(path: Path, profile: RobotProfile, integrator: str, reboot_at: int) -> bool:
+    """The independent checker's verdict, started at power-up (0) at the log's first frame
+    and again at the reboot."""
+    verdict = check(path, checker_robot(profile), integrator, lambda t: (0.0, 0.0, 0.0),
+                    reboots_t_s=[reboot_at * ENCODER_PERIOD_S])
+    assert verdict.samples > 0
+    return verdict.passed
+
+
+@pytest.mark.parametrize(("robot", "integrator"), [("kobuki", "exact"), ("pmir", "rk2")])
+def test_a_correct_firmware_passes_across_a_reboot(
+    tmp_path: Path, robot: str, integrator: str
+) -> None:
+    profile = load(robot)
+    path = rebooting_drive(profile, integrator).write(tmp_path / "reboot.log")
+    assert independent(path, profile, integrator, REBOOT)
+    analysis = analyze(read_log(path), profile)
+    report = analysis.report
+    assert analysis.passed, report["onboard_vs_reference"]
+    assert len(report["reboots"]) == 1
+    reboot = report["reboots"][0]
+    assert reboot["t_s"] == pytest.approx(REBOOT * ENCODER_PERIOD_S, abs=0.002)
+    assert reboot["reference_start"] == "power-up"
+    assert [e["kind"] for e in report["events"]].count("reboot") == 1
+    assert report["samples"]["onboard"] == STEPS // 2 + 1  # both lives' samples, all compared
+    assert report["e2e"]["ODOM_POSE_X"]["wrong_sequence"] == 0  # a restart, not a fault
+    assert report["e2e"]["ODOM_POSE_X"]["lost"] == 0
+
+
+@pytest.mark.parametrize("bias_100um", [2, -3])
+def test_a_wrong_pose_after_a_reboot_fails(tmp_path: Path, bias_100um: int) -> None:
+    """Every pose of the new firmware is off by 2 or 3 LSB in X: the restart must not hide it."""
+    profile = load("kobuki")
+    bias = {k: bias_100um for k in range(REBOOT, STEPS + 1)}
+    path = rebooting_drive(profile, "exact", bias=bias).write(tmp_path / "wrong.log")
+    assert not independent(path, profile, "exact", REBOOT)
+    analysis = analyze(read_log(path), profile)
+    assert not analysis.passed
+    assert analysis.report["onboard_vs_reference"]["max_position_error_m"] >= 1.5e-4
+    assert len(analysis.report["reboots"]) == 1
+
+
+def test_a_wrong_pose_before_a_reboot_fails(tmp_path: Path) -> None:
+    profile = load("kobuki")
+    bias = {k: 3 for k in range(600, REBOOT)}
+    path = rebooting_drive(profile, "exact", bias=bias).write(tmp_path / "wrong.log")
+    assert not independent(path, profile, "exact", REBOOT)
+    assert not analyze(read_log(path), profile).passed
+
+
+def test_a_reboot_on_an_odd_frame_and_the_summary(tmp_path: Path) -> None:
+    """The new firmware primes on an odd encoder frame; the report's summary line names it."""
+    profile = load("pmir")
+    path = rebooting_drive(profile, "euler", reboot_at=801).write(tmp_path / "odd.log")
+    assert independent(path, profile, "euler", 801)
+    analysis = analyze(read_log(path), profile)
+    assert analysis.passed, analysis.report["onboard_vs_reference"]
+    out = io.StringIO()
+    print_summary(analysis.report, Tolerance(), Console(file=out, width=80), title="odd")
+    assert "reboot" in out.getvalue()
