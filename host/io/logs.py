@@ -3,7 +3,8 @@
 ``FrameArrays`` holds N frames in bus order, one array per field, so that the host can decode,
 check and align millions of frames with numpy instead of one ``can.Message`` at a time.
 
-``read_log`` reads:
+``read_log`` reads a whole log; ``iter_log`` streams it, a chunk of frames at a time (the
+same frames, never the whole log in memory). Both read:
 
 * ``.log`` (``candump -L``, also what ``can.Logger`` writes): with a parser of its own, vectorised
   over the whole file. Lines are grouped by shape (length and position of ``#``); each group is
@@ -26,7 +27,7 @@ import os
 import re
 import sys
 from array import array
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -80,8 +81,11 @@ class FrameArrays:
         """Alias of ``can_id`` (python-can's name)."""
         return self.can_id
 
-    def select(self, mask: npt.NDArray[np.bool_] | npt.NDArray[np.intp]) -> FrameArrays:
-        """The frames picked by a boolean mask or an index array, in the order given."""
+    def select(
+        self, mask: npt.NDArray[np.bool_] | npt.NDArray[np.intp] | slice
+    ) -> FrameArrays:
+        """The frames picked by a boolean mask, an index array or a slice (a view), in the order
+        given."""
         return FrameArrays(
             self.timestamp_s[mask], self.can_id[mask], self.dlc[mask], self.data[mask],
             self.flags[mask],
@@ -214,17 +218,91 @@ def parse_candump_chunks(
     """``parse_candump`` of ``content[:end]``, ``chunk_bytes`` (at least) at a time cut after a
     newline; the same frames and the same ``NAME:LINE`` errors as one call on the whole. Pages
     of a mapped ``content`` are released once parsed."""
-    parts: list[FrameArrays] = []
+    return _concat_releasing(list(candump_parts(content, end, name, chunk_bytes)))
+
+
+def candump_parts(
+    content: bytes | mmap.mmap, end: int, name: str, chunk_bytes: int = CHUNK_BYTES
+) -> Iterator[FrameArrays]:
+    """The frames of ``content[:end]`` (``candump -L`` text), one part per ``chunk_bytes`` (at
+    least) of text cut after a newline, in order; errors as ``parse_candump`` on the whole."""
     start = line = 0
     while start < end:
         stop = content.find(b"\n", min(start + chunk_bytes, end) - 1, end) + 1 or end
         chunk = content[start:stop]
-        parts.append(parse_candump(chunk, name, first_line=line))
+        part = parse_candump(chunk, name, first_line=line)
         line += chunk.count(b"\n")
         if isinstance(content, mmap.mmap):
             _release(content, stop)
         start = stop
-    return _concat_releasing(parts)
+        yield part
+
+
+CHUNK_FRAMES = 1 << 18  # frames per chunk of ``iter_log``: about 6 MB of FrameArrays
+
+
+def iter_log(
+    path: str | Path, *, chunk_frames: int = CHUNK_FRAMES,
+    warn: Callable[[str], None] = warn_on_stderr,
+) -> Iterator[FrameArrays]:
+    """The frames of a log in bus order, ``chunk_frames`` at a time (the last chunk may hold
+    fewer), never the whole log in memory: a ``.log`` is mapped and parsed a text chunk at a
+    time, anything else streams through ``can.LogReader``. The frames and the errors are those
+    of ``read_log`` (concatenated, the chunks are ``read_log(path)``), raised when reached."""
+    if chunk_frames < 1:
+        raise ValueError(f"chunk_frames must be at least 1, got {chunk_frames}")
+    path = Path(path)
+    if not path.is_file():
+        raise LogFormatError(f"{path}: no such log file")
+    parts = _candump_file_parts(path, warn) if path.suffix.lower() == ".log" else (
+        _python_can_parts(path, chunk_frames))
+    total = 0
+    for chunk in _rechunk(parts, chunk_frames):
+        total += len(chunk)
+        yield chunk
+    if total == 0:
+        raise LogFormatError(f"{path}: empty log (not a single CAN frame)")
+
+
+def _candump_file_parts(path: Path, warn: Callable[[str], None]) -> Iterator[FrameArrays]:
+    """``candump_parts`` of a mapped ``.log``, its partial last line skipped with a warning."""
+    try:
+        with path.open("rb") as file:
+            if os.fstat(file.fileno()).st_size == 0:
+                content: bytes | mmap.mmap = file.read()
+            else:
+                content = mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ)
+    except OSError as exc:
+        raise LogFormatError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        end, skipped = _without_partial_last_line(content)
+        if skipped:
+            warn(
+                f"{path}: skipped {skipped} partial line at the end (line "
+                f"{_count_newlines(content, end) + 1}, cut mid-line: a recorder killed while "
+                "writing?)"
+            )
+        yield from candump_parts(content, end, str(path))
+    finally:
+        if isinstance(content, mmap.mmap):
+            content.close()
+
+
+def _rechunk(parts: Iterable[FrameArrays], size: int) -> Iterator[FrameArrays]:
+    """The frames of ``parts`` again, ``size`` at a time (the last chunk may hold fewer)."""
+    pending: list[FrameArrays] = []
+    held = 0
+    for part in parts:
+        while len(part):
+            take = min(size - held, len(part))
+            pending.append(part if take == len(part) else part.select(slice(0, take)))
+            part = part.select(slice(take, None)) if take < len(part) else empty_frames()
+            held += take
+            if held == size:
+                yield concat_frames(pending)
+                pending, held = [], 0
+    if held:
+        yield concat_frames(pending)
 
 
 def _concat_releasing(parts: list[FrameArrays]) -> FrameArrays:
@@ -289,6 +367,12 @@ def _without_partial_last_line(content: bytes | mmap.mmap) -> tuple[int, int]:
 
 def _read_with_python_can(path: Path) -> FrameArrays:
     """Any format python-can reads, through ``can.LogReader``."""
+    return concat_frames(list(_python_can_parts(path, 1 << 62)))
+
+
+def _python_can_parts(path: Path, chunk_frames: int) -> Iterator[FrameArrays]:
+    """Any format python-can reads, through ``can.LogReader`` (which streams), at most
+    ``chunk_frames`` frames at a time."""
     collector = FrameCollector()
     count = 0
     try:
@@ -300,6 +384,9 @@ def _read_with_python_can(path: Path) -> FrameArrays:
                     "frames of more than 8 bytes are not supported)"
                 )
             collector.on_message_received(msg)
+            if len(collector) >= chunk_frames:
+                yield collector.arrays()
+                collector = FrameCollector()
     except LogFormatError:
         raise
     except ValueError as exc:  # python-can: unknown suffix, bad file contents
@@ -308,7 +395,8 @@ def _read_with_python_can(path: Path) -> FrameArrays:
         raise LogFormatError(
             f"{path}: cannot read frame {count + 1}: {type(exc).__name__}: {_first_line(exc)}"
         ) from None
-    return collector.arrays()
+    if len(collector):
+        yield collector.arrays()
 
 
 def _first_line(exc: BaseException) -> str:
