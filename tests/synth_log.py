@@ -17,7 +17,8 @@ then re-primes on the first of them and integrates one step from it (COUNTER_RES
 module docstring); the jump itself is never integrated. ``reboot_at`` restarts the firmware at an
 encoder frame (a new ECU on the same bus): its pose restarts at 0 primed on that frame, its E2E
 counters and UPTIME at 0; its first ODOM_STATUS summary (UPTIME 0, STATE OK: it accepted the frame
-in its first tick, as on the rig) follows that frame. ``Synth.lines(start)`` cuts the log at
+in its first tick, as on the rig) follows that frame; or, ``boot_in_init``, its first summary
+(STATE INIT, UPTIME 0) comes 5 ms before that frame. ``Synth.lines(start)`` cuts the log at
 an encoder frame to make a log that starts mid-drive; ``Synth.state[k]`` is the firmware's
 internal pose after encoder frame k (Q40 metres, BAM64 + whole turns) to compare against.
 """
@@ -101,12 +102,14 @@ def synthesize(
     x_bias_100um: dict[int, int] | None = None,
     counter_jumps: dict[int, int] | None = None,
     reboot_at: int | None = None,
+    boot_in_init: bool = False,
 ) -> Synth:
     """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
     ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB.
     ``counter_jumps``: {encoder frame: offset in counts} where both counters restart (the jumps
     at least ``RESYNC_FRAMES`` frames apart and beyond the plausibility bound).
-    ``reboot_at``: the encoder frame the firmware restarts on (module docstring)."""
+    ``reboot_at``: the encoder frame the firmware restarts on (module docstring);
+    ``boot_in_init``: it booted 5 ms before that frame, its first summary saying INIT."""
     bias = x_bias_100um or {}
     jumps = counter_jumps or {}
     named = 0  # the COUNTER of the last encoder frame the firmware accepted
@@ -146,10 +149,14 @@ def synthesize(
         group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
                        fr.pack_wheel_encoders(k, left & wire_mask, right & wire_mask))]
         life = k - boot  # frames since the firmware primed
+        if boot_in_init and k == reboot_at:  # booted before the frame: INIT, no pose yet
+            init = fr.pack_odom_status_summary(0, State.INIT, odo.consts.integrator, 0, 0, errors)
+            group.insert(0, _line(t_s - 0.005, fr.ODOM_STATUS_ID, init))
+            status_counter = 1
         if life % 2 == 0:
             group += _pose_lines(odo, t_s + 0.001, pose_counter, named, errors, bias.get(k, 0))
             pose_counter += 1
-        if life % 10 == 0:
+        if life % 10 == 0 and not (boot_in_init and k == reboot_at):
             uptime_s = int(life * ENCODER_PERIOD_S + (t0_s if boot == 0 else 0.0))
             status = fr.pack_odom_status_summary(
                 status_counter, State.OK, odo.consts.integrator, 0, uptime_s, errors

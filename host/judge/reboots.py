@@ -20,6 +20,13 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
   starts at the summary and its start is fitted like a log that starts mid-drive.
 
 A life with no on-board sample (a reboot at the very end) is reported, not compared.
+
+Known limit: UPTIME counts whole seconds, so when the log lacks the boot summary itself, the
+next summaries of the new firmware's first second also say UPTIME 0 and the life is taken to
+start at the wrong encoder frame (its first poses then fall in the life before and fail). With
+the firmware's page of WHEEL_ENCODERS E2E counts in the log, the start is at least not taken
+for a power-up (``host.judge.samples.saw_only_the_log``); pinning the prime frame from that
+page is the next step.
 ``merge`` makes one report and one set of series of the lives' (``host.judge.analysis``).
 """
 
