@@ -12,10 +12,27 @@ with their state carried across chunk boundaries, so that the result is the whol
   timestamps say more periods passed), carried by the last accepted frame's COUNTER, time and
   sequence number: the integer sequence numbers are those of the whole log.
 
-Positions (``index``) are positions in the whole log (frames before the chunk counted). The
-later stages (alignment, reference, comparison) still take the whole log: issue #14.1 is not
-done (the start-heading fit of ``host.judge.reference_path`` needs every sample before the
-first error can be computed, so they need a second pass over the file).
+Positions (``index``) are positions in the whole log (frames before the chunk counted).
+
+Not done yet (issue #14.1): the later stages (alignment, reference, comparison) still take the
+whole log, so ``odocan analyze`` still holds every frame (1 GB candump log: 2.5 GB max RSS,
+``bench/analyze_memory.py``). The plan for them, so that a one-chunk run and an n-chunk run give
+the same report bit for bit:
+
+* carried state: the last 16 accepted encoder frames (ENC_COUNTER resolves -8..+7 from the
+  latest), the unpaired pose halves and the encoder frames already paired (first of each), the
+  last sample's send time (stalls), the refusal state machine of ``reference_path._refusals``,
+  the integrator's last pose (``np.cumsum`` over the carried value followed by the chunk is
+  the whole log's cumsum, element for element), the truth samples waiting for the next on-board
+  one (``compare.onboard_at``), the last two twist frames and their step-speed window;
+* the whole-log quantities of the start fit: max/min of the heading overlap and of each
+  segment's position overlap are exact in any order; the rotation fit's sums (and the segment
+  means) are not, so they are to be summed in fixed blocks of samples aligned on the sample
+  number (a block's partial sum is complete only when its last sample arrives; the blocks are
+  then added in order): the same additions whatever the chunking;
+* passes over the file (``iter_log`` again): 1. samples, reference increments, overlaps -> the
+  start heading of the overlap; 2. the rotation fit and the segment offsets; 3. errors, truth,
+  twist, report; plot series decimated or written to disk.
 """
 
 from __future__ import annotations
