@@ -111,3 +111,26 @@ def test_a_reboot_on_an_odd_frame_and_the_summary(tmp_path: Path) -> None:
     out = io.StringIO()
     print_summary(analysis.report, Tolerance(), Console(file=out, width=80), title="odd")
     assert "reboot" in out.getvalue()
+
+
+@pytest.mark.parametrize("bias_100um", [0, 2])
+def test_a_log_missing_the_boot_summary_finds_the_frame_the_firmware_primed_on(
+    tmp_path: Path, bias_100um: int
+) -> None:
+    """The recorder lost the new firmware's first ODOM_STATUS summary: the next ones (UPTIME
+    counts whole seconds) also say 0, 100 ms later. Its page of encoder E2E counts names the
+    frame it primed on: a correct firmware passes from its power-up pose, a wrong one fails."""
+    profile = load("kobuki")
+    bias = {k: bias_100um for k in range(REBOOT, STEPS + 1)}
+    synth = rebooting_drive(profile, "exact", bias=bias)
+    boot_group = synth.groups[REBOOT]
+    status = [line for line in boot_group if " 380#" in line.upper()]
+    assert len(status) == 1
+    synth.groups[REBOOT] = [line for line in boot_group if line not in status]
+    path = synth.write(tmp_path / "no_boot_summary.log")
+    assert independent(path, profile, "exact", REBOOT) == (bias_100um == 0)
+    analysis = analyze(read_log(path), profile)
+    assert analysis.passed == (bias_100um == 0), analysis.report["onboard_vs_reference"]
+    reboot = analysis.report["reboots"][0]
+    assert reboot["t_s"] == pytest.approx((REBOOT + 10) * ENCODER_PERIOD_S, abs=0.002)
+    assert reboot["reference_start"] == "power-up"

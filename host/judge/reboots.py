@@ -17,16 +17,19 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
   before its summary, firmware/ecu.py step 5; a frame the old firmware sent after it would be
   taken for the new one's);
 * UPTIME above 0 (the recorder missed the boot summary): where it primed is unknown; the life
-  starts at the summary and its start is fitted like a log that starts mid-drive.
+  starts at the summary and its start is fitted like a log that starts mid-drive;
+* whatever the summary says, when the new firmware's first page of WHEEL_ENCODERS E2E counts
+  (ENC_E2E_OK: encoder frames accepted since its boot) follows, it names the frame it primed
+  on exactly: the ENC_E2E_OK-th accepted encoder frame back from the page. That holds when the
+  log missed the boot summary (UPTIME counts whole seconds: the summaries of the first second
+  all say 0) and is checked again on the life (``host.judge.samples.saw_only_the_log``).
 
 A life with no on-board sample (a reboot at the very end) is reported, not compared.
 
-Known limit: UPTIME counts whole seconds, so when the log lacks the boot summary itself, the
-next summaries of the new firmware's first second also say UPTIME 0 and the life is taken to
-start at the wrong encoder frame (its first poses then fall in the life before and fail). With
-the firmware's page of WHEEL_ENCODERS E2E counts in the log, the start is at least not taken
-for a power-up (``host.judge.samples.saw_only_the_log``); pinning the prime frame from that
-page is the next step.
+Known limit: without that page (other firmwares need not send it) and without the boot summary
+in the log, the life is taken to start at the next summary's frame and its first poses fall in
+the life before (and fail there).
+
 ``merge`` makes one report and one set of series of the lives' (``host.judge.analysis``).
 """
 
@@ -39,9 +42,10 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.samples import ENC_E2E_PAGE
 from odocan.host.judge.sources import SourceWatch
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
-from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
+from odocan.host.protocol.e2e import check_frames, crc8h2f_p02, e2e_messages
 
 SUMMARY_PAGE = 0  # ODOM_STATUS page with STATE and UPTIME
 
@@ -62,9 +66,18 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     boots = _boot_summaries(frames, decoder)
     if not boots:
         return [Life(everything, boot=False)]
+    _, accepted = check_frames(frames, decoder.db)  # the encoder frames a firmware takes
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    starts = [_life_start(position, uptime_s, state, encoders)
-              for position, uptime_s, state, _ in boots]
+    encoders = encoders[accepted[encoders]]
+    pages = _encoder_count_pages(frames, decoder)
+    starts: list[int] = []
+    limits = [b[0] for b in boots[1:]] + [len(frames)]
+    for (position, uptime_s, state, _), limit in zip(boots, limits, strict=True):
+        start = _life_start(position, uptime_s, state, encoders)
+        counted = _counted_start(position, limit, encoders, pages)
+        if counted is not None and counted > (starts[-1] if starts else 0):
+            start = counted
+        starts.append(start)
     lives = [Life(everything[: starts[0]], boot=False)]
     for k, (position, uptime_s, _, before_s) in enumerate(boots):
         end = starts[k + 1] if k + 1 < len(starts) else len(frames)
@@ -83,6 +96,54 @@ def _life_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[
     return position
 
 
+def _counted_start(
+    position: int, limit: int, encoders: npt.NDArray[np.intp],
+    pages: tuple[npt.NDArray[np.int64], ...],
+) -> int | None:
+    """The encoder frame the firmware primed on, from its first page of WHEEL_ENCODERS E2E
+    counts after the summary at ``position`` (and before ``limit``, the next boot): it had
+    accepted ENC_E2E_OK frames, so it primed on the ENC_E2E_OK-th accepted encoder frame back
+    from that page (when the log lacks none of them). None without such a page."""
+    where, ok = pages
+    after = int(np.searchsorted(where, position))
+    if after == len(where) or where[after] >= limit or int(ok[after]) <= 0:
+        return None
+    before = encoders[encoders < where[after]]
+    if len(before) < int(ok[after]):
+        return None
+    return int(before[-int(ok[after])])
+
+
+def _encoder_count_pages(
+    frames: FrameArrays, decoder: BulkDecoder
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Positions and ENC_E2E_OK of the ODOM_STATUS pages of WHEEL_ENCODERS E2E counts whose CRC
+    holds (empty when the log or the DBC has none)."""
+    none = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+    except DecodeError:
+        return none
+    if "ENC_E2E_OK" not in page:
+        return none
+    good = _crc_holds(frames, decoder, page["index"])
+    return page["index"][good].astype(np.int64), page["ENC_E2E_OK"][good].astype(np.int64)
+
+
+def _crc_holds(
+    frames: FrameArrays, decoder: BulkDecoder, index: npt.NDArray[np.int64]
+) -> npt.NDArray[np.bool_]:
+    """Which ODOM_STATUS frames at ``index`` carry a right CRC, whatever their sequence."""
+    message = decoder.message("ODOM_STATUS")
+    config = e2e_messages(decoder.db).get(message.frame_id)
+    if config is None or config.data_ids is None:
+        return np.ones(len(index), dtype=bool)
+    data = frames.data[index]
+    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & 0xF]
+    good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
+    return good
+
+
 def _boot_summaries(
     frames: FrameArrays, decoder: BulkDecoder
 ) -> list[tuple[int, int, str, int]]:
@@ -95,14 +156,8 @@ def _boot_summaries(
         return []
     if "UPTIME" not in page or "STATE" not in page or len(page["index"]) == 0:
         return []
-    config = e2e_messages(decoder.db).get(message.frame_id)
     index = page["index"]
-    if config is not None and config.data_ids is not None:
-        data = frames.data[index]
-        ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & 0xF]
-        good = crc8h2f_p02(data, ids) == data[:, 0]
-    else:
-        good = np.ones(len(index), dtype=bool)
+    good = _crc_holds(frames, decoder, index)
     choices = dict(message.get_signal_by_name("STATE").choices or {})
     watch = SourceWatch()
     boots = []
