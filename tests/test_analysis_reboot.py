@@ -12,17 +12,22 @@ sample after it, so it cannot adopt the error).
 from __future__ import annotations
 
 import io
+import os
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
 from rich.console import Console
 
 from odocan.host.io.logs import read_log
-from odocan.host.judge.analysis import Tolerance, analyze
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance, analyze
+from odocan.host.judge.sources import UPTIME_MATCH_S
 from odocan.host.report.summary import print_summary
 from odocan.sim.robot import RobotProfile, load
 from tests.independent_checker import Robot, check
 from tests.synth_log import ENCODER_PERIOD_S, Synth, synthesize, wandering_drive
+from tests.test_judge_campaign import CLOSE_CALL, COMPARED_UP_TO, drive, profile_of, robots
 
 STEPS = 2000  # 20 s of driving
 REBOOT = 1000  # the encoder frame the new firmware primes on (10 s)
@@ -134,3 +139,57 @@ def test_a_log_missing_the_boot_summary_finds_the_frame_the_firmware_primed_on(
     reboot = analysis.report["reboots"][0]
     assert reboot["t_s"] == pytest.approx((REBOOT + 10) * ENCODER_PERIOD_S, abs=0.002)
     assert reboot["reference_start"] == "power-up"
+
+
+# --- a campaign: random robots, drives and reboots, against the independent checker ----------
+
+CAMPAIGN_EXAMPLES = int(os.environ.get("ODOCAN_CAMPAIGN_EXAMPLES", "50")) // 2
+
+
+@settings(max_examples=CAMPAIGN_EXAMPLES, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow],
+          phases=[Phase.explicit, Phase.reuse, Phase.generate])
+@given(
+    robot=robots(),
+    integrator=st.sampled_from(["euler", "rk2", "exact"]),
+    steps=st.integers(400, 4_000),
+    distance_m=st.floats(0.0, 4.0).map(lambda e: 10.0**e),
+    where=st.floats(0.02, 0.98),
+    boot_in_init=st.booleans(),
+    bias_100um=st.sampled_from([0, 0, 3, -3]),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_reboots_agree_with_the_independent_checker(
+    tmp_path_factory: pytest.TempPathFactory, robot: Robot, integrator: str, steps: int,
+    distance_m: float, where: float, boot_in_init: bool, bias_100um: int, seed: int,
+) -> None:
+    """A firmware reboot anywhere in a drive of any robot: a right firmware passes with the
+    checker, one whose X is 3 LSB off after the reboot fails with it. The reboot comes over
+    ``UPTIME_MATCH_S`` after power-up (plus the second UPTIME rounds off) unless its boot says
+    INIT: sooner, an UPTIME of 0 again tells nothing (the shared detection's limit)."""
+    d_left, d_right = drive(robot, steps, distance_m, seed)
+    first = 1 if boot_in_init else round((UPTIME_MATCH_S + 1.1) / ENCODER_PERIOD_S)
+    reboot_at = first + int(where * (steps - first))
+    bias = {k: bias_100um for k in range(reboot_at, steps + 1)}
+    synth = synthesize(profile_of(robot), integrator, d_left, d_right, reboot_at=reboot_at,
+                       x_bias_100um=bias, boot_in_init=boot_in_init)
+    path = synth.write(tmp_path_factory.mktemp("reboots") / "drive.log")
+    expected = check(path, robot, integrator, lambda t: (0.0, 0.0, 0.0),
+                     max_wheel_speed_m_s=None, reboots_t_s=[reboot_at * ENCODER_PERIOD_S])
+    analysis = analyze(read_log(path), profile_of(robot), integrator, max_wheel_speed_mm_s=None)
+    got = analysis.report["onboard_vs_reference"]
+    assert [r["reference_start"] for r in analysis.report["reboots"]] == ["power-up"]
+    position_lsb = expected.max_position_error_m / POSITION_LSB_M
+    heading_lsb = expected.max_heading_error_rad / HEADING_LSB_RAD
+    if max(position_lsb, heading_lsb) > COMPARED_UP_TO:  # large errors: both fail
+        assert not expected.passed
+        assert not analysis.passed, (got, expected)
+        return
+    assert abs(got["max_position_error_m"] / POSITION_LSB_M - position_lsb) <= CLOSE_CALL, (
+        got, expected)
+    assert abs(got["max_heading_error_rad"] / HEADING_LSB_RAD - heading_lsb) <= CLOSE_CALL, (
+        got, expected)
+    if abs(position_lsb - 1) >= CLOSE_CALL and abs(heading_lsb - 1) >= CLOSE_CALL:
+        assert analysis.passed == expected.passed, (got, expected)
+    if bias_100um:
+        assert not analysis.passed, (got, expected)
