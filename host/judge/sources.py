@@ -2,8 +2,11 @@
 
 The one detection of a firmware reboot, shared by the live monitor (``host.judge.monitor``) and
 the log analysis (``host.judge.analysis``): a source's UPTIME (whole seconds) minus bus time stays
-constant within ``UPTIME_MATCH_S``; a reboot moves that offset once (UPTIME going back) or says
-INIT after running; two sources on one ID make two offsets interleave.
+constant within ``UPTIME_MATCH_S``; a reboot moves that offset once, or sends an UPTIME below the
+last one (even within ``UPTIME_MATCH_S``: a reboot a second or two after power-up), or says INIT
+after running; two sources on one ID make two offsets interleave (two sources whose offsets
+differ by less than ``UPTIME_MATCH_S`` look like reboots). A reboot within the first second
+after the previous one that does not say INIT cannot be told from UPTIME (0 again).
 """
 
 from __future__ import annotations
@@ -35,8 +38,11 @@ class SourceWatch:
         if self.offset_s is None:
             self.offset_s = offset
         elif abs(offset - self.offset_s) <= UPTIME_MATCH_S:
-            if state == "INIT" and self.last_state not in ("", "INIT"):
+            if (state == "INIT" and self.last_state not in ("", "INIT")) or (
+                uptime_s < self.last_uptime_s  # one source's UPTIME never goes back
+            ):
                 kind = "reboot"
+                self.offset_s = offset
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
             kind = "two sources"
             self.conflict_until_s = t_s + CONFLICT_HOLD_S
