@@ -21,8 +21,8 @@ from odocan.host.io.logs import (
     read_log,
     to_message,
 )
-from odocan.host.judge.samples import encoder_frames
-from odocan.host.judge.stream import StreamE2E, StreamEncoders
+from odocan.host.judge.samples import encoder_frames, onboard_samples
+from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.contract import database
@@ -36,11 +36,13 @@ CHUNKS = [1, 2, 7, 64, 1 << 20]
 def awkward_lines() -> tuple[str, ...]:
     """A drive with a firmware reboot (frame 300), a counter restart (frame 500), a gap of 20
     encoder frames (620..639: the COUNTER wraps inside it), a repeated frame, a frame with a bad
-    CRC and two frames swapped."""
+    CRC, two frames swapped, and poses logged before the encoder frame they name."""
     profile = load("pmir")
     d_left, d_right = wandering_drive(profile, 800, 0.004, seed=3)
     synth = synthesize(profile, "rk2", d_left, d_right, reboot_at=300,
                        counter_jumps={500: 20_000})
+    for k in (150, 152, 161):  # the poses (and status) logged before the frame they name
+        synth.groups[k] = synth.groups[k][1:] + synth.groups[k][:1]
     lines = list(synth.lines(0, 620)) + list(synth.lines(640))
     lines.insert(101, lines[100])  # repeated
     bad = lines[205]
@@ -133,3 +135,32 @@ def test_streamed_e2e_and_encoder_sequence_are_the_whole_logs(
         got = np.concatenate([getattr(p, name) for p in parts])
         np.testing.assert_array_equal(got, getattr(want_enc, name), err_msg=name)
     assert np.any(np.diff(want_enc.seq) >= 16)  # the gap took more than one COUNTER turn
+
+
+@pytest.mark.parametrize("chunk_frames", CHUNKS)
+def test_streamed_onboard_samples_are_the_whole_logs(tmp_path: Path, chunk_frames: int) -> None:
+    """Pose frames paired with the encoder frame they name across every cut: the same samples,
+    in the same order, the same unmatched count, as the whole log's alignment."""
+    path = write(tmp_path, ".log")
+    db = database()
+    whole = read_log(path)
+    _, accepted_all = check_frames(whole, db)
+    enc = encoder_frames(whole, accepted_all, BulkDecoder(db))
+    want, want_unmatched, want_sent = onboard_samples(whole, accepted_all, BulkDecoder(db), enc)
+    e2e, numbering = StreamE2E(db), StreamEncoders(BulkDecoder(db))
+    poses = StreamPoses(BulkDecoder(db))
+    parts, sent = [], []
+    for chunk in iter_log(path, chunk_frames=chunk_frames):
+        accepted = e2e.feed(chunk)
+        samples, sent_s = poses.feed(chunk, accepted, numbering.feed(chunk, accepted))
+        parts.append(samples)
+        sent.append(sent_s)
+    samples, sent_s = poses.finish()
+    parts.append(samples)
+    sent.append(sent_s)
+    for name in ("enc", "x_m", "y_m", "heading_rad", "heading_raw"):
+        got = np.concatenate([p[name] for p in parts])
+        np.testing.assert_array_equal(got, getattr(want, name), err_msg=name)
+    np.testing.assert_array_equal(np.concatenate(sent), want_sent)
+    assert poses.unmatched == want_unmatched
+    assert want_unmatched > 0  # the gap and the refused frames leave poses without their frame

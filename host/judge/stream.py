@@ -12,6 +12,11 @@ with their state carried across chunk boundaries, so that the result is the whol
   timestamps say more periods passed), carried by the last accepted frame's COUNTER, time and
   sequence number: the integer sequence numbers are those of the whole log.
 
+* ``StreamPoses``: the on-board samples (``host.judge.samples.onboard_samples``: ODOM_POSE_X and
+  _Y naming one encoder frame, the first of each), carried by the last 16 encoder frames, the
+  pose frames that name a frame the log has not reached yet, and the halves not yet paired;
+  a sample is given out once no later frame can name its encoder frame.
+
 Positions (``index``) are positions in the whole log (frames before the chunk counted).
 
 Not done yet (issue #14.1): the later stages (alignment, reference, comparison) still take the
@@ -19,9 +24,8 @@ whole log, so ``odocan analyze`` still holds every frame (1 GB candump log: 2.5 
 ``bench/analyze_memory.py``). The plan for them, so that a one-chunk run and an n-chunk run give
 the same report bit for bit:
 
-* carried state: the last 16 accepted encoder frames (ENC_COUNTER resolves -8..+7 from the
-  latest), the unpaired pose halves and the encoder frames already paired (first of each), the
-  last sample's send time (stalls), the refusal state machine of ``reference_path._refusals``,
+* carried state: the last sample's send time (stalls), SIM_TRUTH's parts as ``StreamPoses``
+  carries the pose halves, the refusal state machine of ``reference_path._refusals``,
   the integrator's last pose (``np.cumsum`` over the carried value followed by the chunk is
   the whole log's cumsum, element for element), the truth samples waiting for the next on-board
   one (``compare.onboard_at``), the last two twist frames and their step-speed window;
@@ -37,6 +41,7 @@ the same report bit for bit:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import cantools
@@ -44,7 +49,12 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays, concat_frames, empty_frames
-from odocan.host.judge.samples import Encoders, contract_cycle_s
+from odocan.host.judge.samples import (
+    HEADING_LSB_RAD,
+    POSITION_LSB_M,
+    Encoders,
+    contract_cycle_s,
+)
 from odocan.host.protocol.decode import BulkDecoder, frame_keys
 from odocan.host.protocol.e2e import check_frames, e2e_messages
 
@@ -140,3 +150,152 @@ class StreamEncoders:
         if self._last is None:
             return np.concatenate(([0], np.cumsum(step))).astype(np.int64)
         return (self._last[2] + np.cumsum(step)).astype(np.int64)
+
+
+@dataclass
+class _Halves:
+    """Pose frames of one kind (ODOM_POSE_X or _Y) not yet resolved: global frame position,
+    ENC_COUNTER, time, and the signal columns."""
+
+    index: npt.NDArray[np.int64]
+    enc_counter: npt.NDArray[np.int64]
+    timestamp_s: npt.NDArray[np.float64]
+    values: dict[str, np.ndarray]
+
+    @classmethod
+    def of(cls, rows: dict[str, np.ndarray], offset: int) -> _Halves:
+        values = {k: v for k, v in rows.items() if k not in ("index", "timestamp_s")}
+        return cls(rows["index"] + offset, rows["ENC_COUNTER"].astype(np.int64),
+                   rows["timestamp_s"], values)
+
+    def join(self, other: _Halves) -> _Halves:
+        return _Halves(
+            np.concatenate((self.index, other.index)),
+            np.concatenate((self.enc_counter, other.enc_counter)),
+            np.concatenate((self.timestamp_s, other.timestamp_s)),
+            {k: np.concatenate((v, other.values[k])) for k, v in self.values.items()},
+        )
+
+    def take(self, keep: npt.NDArray[np.bool_]) -> _Halves:
+        return _Halves(self.index[keep], self.enc_counter[keep], self.timestamp_s[keep],
+                       {k: v[keep] for k, v in self.values.items()})
+
+
+RECENT_ENCODERS = 16  # encoder frames kept from the chunks before: ENC_COUNTER names -8..+7
+
+
+@dataclass
+class StreamPoses:
+    """The on-board samples of ``host.judge.samples.onboard_samples`` (ODOM_POSE_X and
+    ODOM_POSE_Y naming one encoder frame, the first of each), chunk by chunk.
+
+    A pose frame resolves against the latest accepted encoder frame before it (-8..+7 in the
+    sequence): one naming a frame the log has not reached yet waits for the next chunk, and so
+    do the frames of its kind after it (the first frame naming an encoder frame wins). A
+    sample is given out once no later frame can name its encoder frame (its sequence number
+    more than 8 below every later frame's latest), in encoder order; ``enc`` counts the
+    accepted encoder frames of the whole log."""
+
+    decoder: BulkDecoder
+    unmatched: int = 0  # pose frames naming no accepted encoder frame of the log
+    _offset: int = 0
+    _enc_count: int = 0
+    _recent: dict[str, np.ndarray] = field(default_factory=dict)  # g, index, counter, seq, t
+    _pending: dict[str, _Halves] = field(default_factory=dict)
+    _first: dict[str, dict[int, tuple[int, dict[str, float], float]]] = field(
+        default_factory=lambda: {"ODOM_POSE_X": {}, "ODOM_POSE_Y": {}})
+
+    def feed(
+        self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_], enc: Encoders
+    ) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
+        """The samples that are final after this chunk (``enc`` its encoder frames from
+        ``StreamEncoders``): columns enc, x_m, y_m, heading_rad, heading_raw; and sent_s."""
+        known = self._known(enc)
+        floor = np.inf
+        for name in ("ODOM_POSE_X", "ODOM_POSE_Y"):
+            rows = self.decoder.decode(chunk, name)
+            keep = accepted[rows["index"]]
+            new = _Halves.of({k: v[keep] for k, v in rows.items()}, self._offset)
+            halves = self._pending[name].join(new) if name in self._pending else new
+            floor = min(floor, self._resolve(name, halves, known, final=False))
+        self._offset += len(chunk)
+        self._enc_count += len(enc.index)
+        self._recent = {k: v[-RECENT_ENCODERS:] for k, v in known.items()}
+        return self._emit(floor)
+
+    def finish(self) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
+        """The samples left at the end of the log."""
+        known = self._recent
+        for name, halves in list(self._pending.items()):
+            self._resolve(name, halves, known, final=True)
+        return self._emit(np.inf)
+
+    def _known(self, enc: Encoders) -> dict[str, np.ndarray]:
+        """The recent encoder frames and this chunk's: g (number in the log), index, counter,
+        seq, timestamp_s."""
+        now = {"g": self._enc_count + np.arange(len(enc.index), dtype=np.int64),
+               "index": enc.index, "counter": enc.counter, "seq": enc.seq,
+               "t": enc.timestamp_s}
+        if not self._recent:
+            return now
+        return {k: np.concatenate((self._recent[k], v)) for k, v in now.items()}
+
+    def _resolve(
+        self, name: str, halves: _Halves, known: dict[str, np.ndarray], *, final: bool
+    ) -> float:
+        """Resolve what can be (``final``: everything); returns the lowest sequence number a
+        frame not resolved yet may name (inf when none waits)."""
+        if len(known["seq"]) == 0:  # no encoder frame before any of them: none can match
+            self.unmatched += len(halves.index)
+            self._pending[name] = halves.take(np.zeros(len(halves.index), dtype=bool))
+            return np.inf
+        cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        latest = np.searchsorted(known["index"], halves.index) - 1
+        has = latest >= 0
+        if cycle_s is not None:
+            has &= halves.timestamp_s - known["t"][np.maximum(latest, 0)] < 8 * cycle_s
+        offset = ((halves.enc_counter - known["counter"][np.maximum(latest, 0)] + 8) & 0xF) - 8
+        target = known["seq"][np.maximum(latest, 0)] + offset
+        top = int(known["seq"][-1]) if len(known["seq"]) else -1
+        waits = has & (target > top) & (not final)
+        cut = int(np.argmax(waits)) if waits.any() else len(halves.index)
+        self._pending[name] = halves.take(np.arange(len(halves.index)) >= cut)
+        found = np.minimum(np.searchsorted(known["seq"], target[:cut]), len(known["seq"]) - 1)
+        hit = has[:cut] & (known["seq"][found] == target[:cut])
+        self.unmatched += int(np.count_nonzero(~hit))
+        firsts = self._first[name]
+        for j in np.flatnonzero(hit).tolist():
+            g = int(known["g"][found[j]])
+            if g not in firsts:
+                firsts[g] = (int(known["seq"][found[j]]),
+                             {k: v[j] for k, v in halves.values.items()},
+                             float(halves.timestamp_s[j]))
+        if cut == len(halves.index):
+            return float(top - 8) if not final else np.inf
+        return float(min(known["seq"][np.maximum(latest[cut:], 0)].min(), top) - 8)
+
+    def _emit(self, floor: float) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
+        """The samples of encoder frames below sequence ``floor``, in encoder order; halves
+        there that found no partner are dropped."""
+        xs, ys = self._first["ODOM_POSE_X"], self._first["ODOM_POSE_Y"]
+        done = sorted(g for g in xs.keys() | ys.keys()
+                      if (xs[g][0] if g in xs else ys[g][0]) < floor)
+        both = [g for g in done if g in xs and g in ys]
+        sx = [xs[g][1] for g in both]
+        sy = [ys[g][1] for g in both]
+        sent = np.array([ys[g][2] for g in both], dtype=np.float64)
+        for g in done:
+            xs.pop(g, None)
+            ys.pop(g, None)
+        heading_raw = np.array([s["HEADING"] for s in sx], dtype=np.int64)
+        turns = np.array([s["TURNS"] for s in sy]).astype(np.float64)
+        x = np.array([s["X"] for s in sx])
+        y = np.array([s["Y"] for s in sy])
+        samples = {
+            "enc": np.array(both, dtype=np.int64),
+            "x_m": x * POSITION_LSB_M,
+            "y_m": y * POSITION_LSB_M,
+            "heading_rad": turns * 2 * math.pi + heading_raw * HEADING_LSB_RAD,
+            "heading_raw": heading_raw,
+        }
+        return samples, sent
