@@ -8,7 +8,10 @@ power-up pose -- the verdict must stay PASS. Then runs, as whole processes measu
 ``/usr/bin/time -v`` (``os.wait4``: wall, user + system CPU, max RSS):
 
 * ``python -m odocan analyze LOG --robot pmir``;
-* ``cantools decode --single-line dbc/odocan.dbc < LOG`` (skipped with ``--no-cantools``).
+* ``cantools decode --single-line dbc/odocan.dbc < LOG`` (skipped with ``--no-cantools``);
+* the stages that stream today (``host.judge.stream``: ``iter_log`` -> E2E -> encoder sequence
+  -> on-board samples, chunk by chunk; the verdict's later stages do not stream yet), in a
+  child process of their own.
 
 The log is written to ``--dir`` (default: the system's temporary directory; check ``df -h``
 first: it needs ``--gb`` GB free) and deleted afterwards (``--keep`` keeps it). Prints figures;
@@ -83,6 +86,24 @@ def whole_process(argv: list[str], stdin: Path | None = None) -> tuple[float, fl
             os.waitstatus_to_exitcode(status))
 
 
+def stream_stages(log: Path) -> None:
+    """The streaming stages over ``log`` (run in the child process): prints the samples."""
+    from odocan.host.io.logs import iter_log
+    from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
+    from odocan.host.protocol.decode import BulkDecoder
+    from odocan.sim.contract import database
+
+    db = database()
+    e2e, numbering, poses = StreamE2E(db), StreamEncoders(BulkDecoder(db)), StreamPoses(
+        BulkDecoder(db))
+    samples = 0
+    for chunk in iter_log(log):
+        accepted = e2e.feed(chunk)
+        samples += len(poses.feed(chunk, accepted, numbering.feed(chunk, accepted))[0]["enc"])
+    samples += len(poses.finish()[0]["enc"])
+    print(f"{samples} on-board samples, {poses.unmatched} unmatched")
+
+
 def report(label: str, frames: int, figures: tuple[float, float, float, int]) -> None:
     wall, cpu, rss_mb, code = figures
     print(f"{label:<26} {wall:8.1f} s wall {cpu:8.1f} s CPU {rss_mb:8.0f} MB max RSS "
@@ -96,7 +117,11 @@ def main() -> None:
     parser.add_argument("--dir", type=Path, default=Path(tempfile.gettempdir()))
     parser.add_argument("--no-cantools", action="store_true")
     parser.add_argument("--keep", action="store_true", help="keep the log")
+    parser.add_argument("--stream-child", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.stream_child is not None:
+        stream_stages(args.stream_child)
+        return
     log = args.dir / f"odocan_bench_{args.gb:g}gb.log"
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
@@ -107,6 +132,8 @@ def main() -> None:
     try:
         odocan = [sys.executable, "-m", "odocan", "analyze", str(log), "--robot", ROBOT]
         report("odocan analyze LOG", frames, whole_process(odocan))
+        stages = [sys.executable, __file__, "--stream-child", str(log)]
+        report("streamed stages (E2E..poses)", frames, whole_process(stages))
         if not args.no_cantools:
             cantools = [str(Path(sys.executable).parent / "cantools"), "decode",
                         "--single-line", str(DBC_PATH)]
