@@ -15,15 +15,20 @@ import io
 import os
 from pathlib import Path
 
+import can
 import pytest
 from hypothesis import HealthCheck, Phase, example, given, settings
 from hypothesis import strategies as st
 from rich.console import Console
 
-from odocan.host.io.logs import read_log
+from odocan.host.io.logs import FrameCollector, read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance, analyze
+from odocan.host.judge.monitor import BusMonitor
 from odocan.host.report.summary import print_summary
+from odocan.sim.board import FirmwareBoard
 from odocan.sim.robot import RobotProfile, load
+from odocan.sim.scenarios import get_scenario
+from tests.fault_rig import FaultRig
 from tests.independent_checker import Robot, check
 from tests.synth_log import ENCODER_PERIOD_S, Synth, synthesize, wandering_drive
 from tests.test_judge_campaign import CLOSE_CALL, COMPARED_UP_TO, drive, profile_of, robots
@@ -196,3 +201,34 @@ def test_reboots_agree_with_the_independent_checker(
         assert analysis.passed == expected.passed, (got, expected)
     if bias_100um:
         assert not analysis.passed, (got, expected)
+
+
+# --- a reboot recorded in the lockstep rig (the real firmware, tests/fault_rig.py) ----------
+
+
+def test_a_reboot_recorded_in_the_rig_passes_and_the_monitor_agrees() -> None:
+    """The firmware restarts at 5 s (a new ECU on the same board and bus, as the monitor's
+    reboot test does); the frames recorded from the bus: analyze passes, reports one reboot
+    from the power-up pose, and the live monitor fed the same frames saw the same reboot."""
+    collector = FrameCollector()
+    monitor = BusMonitor(load("pmir"), "exact")
+    with FaultRig(scenario=get_scenario("circle", load("pmir"), duration_s=60.0)) as rig:
+        def record(tick: int, frames: list[can.Message]) -> None:
+            for msg in frames:
+                collector.on_message_received(msg)
+                monitor.feed(msg, now_s=msg.timestamp)
+
+        def reboot(k: int) -> None:
+            if k == 500:
+                rig.board = FirmwareBoard(rig.fw_bus, rig.params, rig.clock)
+
+        rig.observers.append(record)
+        rig.before_board.append(reboot)
+        rig.run(8.0)
+    analysis = analyze(collector.arrays(), load("pmir"))
+    report = analysis.report
+    assert analysis.passed, report["onboard_vs_reference"]
+    assert [r["reference_start"] for r in report["reboots"]] == ["power-up"]
+    assert report["reboots"][0]["t_s"] == pytest.approx(5.0, abs=0.011)
+    assert [e["kind"] for e in monitor.events] == ["reboot"]
+    assert monitor.events[0]["t_s"] == pytest.approx(report["reboots"][0]["t_s"], abs=1e-9)
