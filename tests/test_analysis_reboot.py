@@ -232,3 +232,19 @@ def test_a_reboot_recorded_in_the_rig_passes_and_the_monitor_agrees() -> None:
     assert report["reboots"][0]["t_s"] == pytest.approx(5.0, abs=0.011)
     assert [e["kind"] for e in monitor.events] == ["reboot"]
     assert monitor.events[0]["t_s"] == pytest.approx(report["reboots"][0]["t_s"], abs=1e-9)
+
+
+def test_a_reboot_at_the_end_of_the_log_is_reported_without_samples(tmp_path: Path) -> None:
+    """The log ends right after the new firmware's boot summary: no pose of it to compare; the
+    reboot is still reported, the verdict is the first life's."""
+    profile = load("pmir")
+    synth = rebooting_drive(profile, "exact")
+    synth.groups[REBOOT] = [line for line in synth.groups[REBOOT]
+                            if " 200#" not in line and " 201#" not in line]
+    path = synth.write(tmp_path / "end.log", 0, REBOOT + 1)
+    analysis = analyze(read_log(path), profile)
+    assert analysis.passed, analysis.report["onboard_vs_reference"]
+    assert analysis.report["reboots"] == [
+        {"t_s": pytest.approx(REBOOT * ENCODER_PERIOD_S, abs=0.002), "uptime_before_s": 9,
+         "reference_start": None, "onboard_samples": 0, "life": None}]
+    assert analysis.report["samples"]["onboard"] == REBOOT // 2

@@ -164,6 +164,7 @@ def analyze(
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
     done: list[tuple[Life, Analysis, float]] = []
     failure: AnalysisError | None = None
+    silent: list[Life] = []
     for life in lives:
         part = frames.select(life.index)
         try:
@@ -172,13 +173,14 @@ def analyze(
                                    max_wheel_speed_mm_s=max_wheel_speed_mm_s)
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
+            silent.append(life)
             continue
         done.append((life, result, float(part.timestamp_s[0])))
     if not done:
         assert failure is not None
         raise failure
     report, series = merge([d[1].report for d in done], [d[1].series for d in done],
-                           [d[0] for d in done], [d[2] for d in done])
+                           [d[0] for d in done], [d[2] for d in done], silent=silent)
     covered_s = _covered_s(frames, db)
     report.update(
         integrator_source=source, scenario=scenario, seed=seed, sim_seconds=covered_s,

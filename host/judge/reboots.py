@@ -184,9 +184,12 @@ def merge(
     series: list[dict[str, np.ndarray]],
     lives: list[Life],
     t_first_s: list[float],
+    *,
+    silent: list[Life] | None = None,
 ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """One report and one set of series from those of the lives with samples (``lives``,
-    ``t_first_s``: each one's, in order; the first of them is the whole log's origin)."""
+    ``t_first_s``: each one's, in order; the first of them is the whole log's origin); the
+    reboots of the ``silent`` lives (no on-board sample) are reported with 0 samples."""
     report = dict(reports[0])
     last = reports[-1]
     report["samples"] = {key: sum(r["samples"][key] for r in reports) for key in _SUMMED_SAMPLES}
@@ -206,11 +209,17 @@ def merge(
          "reference_start": r["reference_start"], "onboard_samples": r["samples"]["onboard"],
          "life": k}
         for k, (life, r) in enumerate(zip(lives, reports, strict=True)) if life.t_s is not None
+    ] + [
+        {"t_s": life.t_s, "uptime_before_s": life.uptime_before_s, "reference_start": None,
+         "onboard_samples": 0, "life": None}
+        for life in silent or [] if life.t_s is not None
     ]
+    reboots.sort(key=lambda b: b["t_s"])
     events += [
         {"kind": "reboot", "t_s": b["t_s"], "life": b["life"],
-         "detail": f"the firmware restarted (UPTIME {b['uptime_before_s']} s -> 0): the "
-                   f"reference restarts from its {b['reference_start']} pose"}
+         "detail": f"the firmware restarted (UPTIME {b['uptime_before_s']} s -> 0): "
+                   + (f"the reference restarts from its {b['reference_start']} pose"
+                      if b["reference_start"] else "no on-board pose after it to compare")}
         for b in reboots
     ]
     report["events"] = sorted(events, key=lambda e: e["t_s"])
