@@ -13,6 +13,7 @@ import can
 import numpy as np
 import pytest
 
+from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
 from odocan.host.io.logs import (
     FrameArrays,
     LogFormatError,
@@ -21,8 +22,10 @@ from odocan.host.io.logs import (
     read_log,
     to_message,
 )
+from odocan.host.judge.reference import Geometry, integrate
+from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import encoder_frames, onboard_samples
-from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
+from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses, StreamReference
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.contract import database
@@ -164,3 +167,33 @@ def test_streamed_onboard_samples_are_the_whole_logs(tmp_path: Path, chunk_frame
     np.testing.assert_array_equal(np.concatenate(sent), want_sent)
     assert poses.unmatched == want_unmatched
     assert want_unmatched > 0  # the gap and the refused frames leave poses without their frame
+
+
+@pytest.mark.parametrize("chunk_frames", CHUNKS)
+@pytest.mark.parametrize("integrator", ["euler", "exact"])
+def test_streamed_reference_is_the_whole_logs(
+    tmp_path: Path, chunk_frames: int, integrator: str
+) -> None:
+    """The steps as the firmware takes them (refusals and the counter restart's re-prime across
+    cuts) and their integration: every increment bit for bit the whole log's."""
+    path = write(tmp_path, ".log")
+    db = database()
+    whole = read_log(path)
+    _, accepted_all = check_frames(whole, db)
+    enc = encoder_frames(whole, accepted_all, BulkDecoder(db))
+    geometry = Geometry.of(load("pmir"))
+    steps = firmware_steps(enc, 0, geometry, 16, MAX_WHEEL_SPEED_MM_S)
+    rel = integrate(steps.d_left, steps.d_right, geometry, integrator)
+    e2e, numbering = StreamE2E(db), StreamEncoders(BulkDecoder(db))
+    reference = StreamReference(geometry, integrator, 16, MAX_WHEEL_SPEED_MM_S)
+    parts = []
+    for chunk in iter_log(path, chunk_frames=chunk_frames):
+        accepted = e2e.feed(chunk)
+        parts.append(reference.feed(numbering.feed(chunk, accepted)))
+    for name in ("x_m", "y_m", "heading_rad", "distance_m"):
+        want = np.concatenate(([0.0], getattr(rel, name)))
+        np.testing.assert_array_equal(np.concatenate([p[name] for p in parts]), want,
+                                      err_msg=name)
+    assert steps.refused > 0  # the counter restart's frames
+    assert reference.refused == steps.refused
+    assert reference.reprimed == steps.reprimed

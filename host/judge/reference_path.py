@@ -60,7 +60,7 @@ def build_reference(
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     e0 = 0 if power_up else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
     geometry = Geometry.of(robot)
-    steps = _firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s)
+    steps = firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s)
     d_left, d_right = steps.d_left, steps.d_right
     rel = integrate(d_left, d_right, geometry, integrator)
     zero = np.zeros(1)
@@ -94,7 +94,7 @@ def build_reference(
 
 
 @dataclass
-class _Steps:
+class Steps:
     """The count steps the firmware integrates between the accepted encoder frames of the log
     (element k: into frame ``e0 + k + 1``), with its refusals."""
 
@@ -102,11 +102,12 @@ class _Steps:
     d_right: IntArray
     refused: int = 0  # frames beyond the plausibility bound, not integrated
     reprimed: list[int] = field(default_factory=list)  # frames (from e0) a counter restart primed
+    open_from: int | None = None  # the last accepted frame when the log ends in a refusal run
 
 
-def _firmware_steps(
+def firmware_steps(
     enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: int | None
-) -> _Steps:
+) -> Steps:
     """The steps as firmware/ecu.py takes them: a frame whose step from the last accepted one
     exceeds ``MAX_WHEEL_SPEED_MM_S`` over its periods is refused (IMPLAUSIBLE_STEP, not
     integrated); ``RESYNC_FRAMES`` refused frames plausible among themselves are a counter restart
@@ -115,7 +116,7 @@ def _firmware_steps(
     computed in float (the firmware's Q48 integer bound may differ by a count at the limit)."""
     left, right = enc.left[e0:], enc.right[e0:]
     seq = enc.seq[e0:]
-    steps = _Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
+    steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
     if max_wheel_speed_mm_s is None:
         return steps
     travel_m = max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
@@ -138,11 +139,13 @@ def _firmware_steps(
         if first_bad + 1 <= k:
             continue  # handled by the state machine of an earlier refusal
         k = _refusals(steps, first_bad, len(left), plausible, delta)
+        if k == len(left):
+            steps.open_from = first_bad
     return steps
 
 
 def _refusals(
-    steps: _Steps,
+    steps: Steps,
     prev: int,
     n_frames: int,
     plausible: Any,

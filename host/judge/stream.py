@@ -17,6 +17,12 @@ with their state carried across chunk boundaries, so that the result is the whol
   pose frames that name a frame the log has not reached yet, and the halves not yet paired;
   a sample is given out once no later frame can name its encoder frame.
 
+* ``StreamReference``: the steps as the firmware takes them (``reference_path.firmware_steps``:
+  plausibility refusals, counter restarts) and their integration from pose 0 (``reference.
+  integrate``), carried by the last accepted encoder frame (inside a refusal run, every frame
+  since it) and the running sums: ``np.cumsum`` continued from the carried sum is the whole
+  log's, bit for bit (adding the carried sum afterwards is not, and the test says so).
+
 Positions (``index``) are positions in the whole log (frames before the chunk counted).
 
 Not done yet (issue #14.1): the later stages (alignment, reference, comparison) still take the
@@ -25,10 +31,9 @@ whole log, so ``odocan analyze`` still holds every frame (1 GB candump log: 2.5 
 the same report bit for bit:
 
 * carried state: the last sample's send time (stalls), SIM_TRUTH's parts as ``StreamPoses``
-  carries the pose halves, the refusal state machine of ``reference_path._refusals``,
-  the integrator's last pose (``np.cumsum`` over the carried value followed by the chunk is
-  the whole log's cumsum, element for element), the truth samples waiting for the next on-board
-  one (``compare.onboard_at``), the last two twist frames and their step-speed window;
+  carries the pose halves, the truth samples waiting for the next on-board one
+  (``compare.onboard_at``), the last two twist frames and their step-speed window, the
+  reference's increments back to the start of the segment being placed;
 * the whole-log quantities of the start fit: max/min of the heading overlap and of each
   segment's position overlap are exact in any order; the rotation fit's sums (and the segment
   means) are not, so they are to be summed in fixed blocks of samples aligned on the sample
@@ -49,6 +54,8 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays, concat_frames, empty_frames
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
@@ -299,3 +306,78 @@ class StreamPoses:
             "heading_raw": heading_raw,
         }
         return samples, sent
+
+
+@dataclass
+class StreamReference:
+    """The reference's increments from encoder frame 0 of the chunks fed (the steps as the
+    firmware takes them, ``reference_path.firmware_steps``, integrated as
+    ``reference.integrate`` from pose 0), chunk by chunk, element for element the whole log's.
+
+    Carried: the last accepted encoder frame (and, inside a run of refused frames, every frame
+    since it: the refusal state machine is run again from it, its earlier verdicts dropped), the
+    integer count sums and the running float sums (``np.cumsum`` continued from the carried
+    sum is the whole log's cumsum)."""
+
+    geometry: Geometry
+    integrator: str
+    bits: int
+    max_wheel_speed_mm_s: int | None
+    refused: int = 0
+    reprimed: list[int] = field(default_factory=list)  # encoder frames a counter restart primed
+    _window: dict[str, np.ndarray] = field(default_factory=dict)  # left, right, seq, g
+    _sums: tuple[int, int, float, float, float, float] = (0, 0, 0.0, 0.0, 0.0, 0.0)
+    _count: int = 0  # encoder frames fed
+
+    def feed(self, enc: Encoders) -> dict[str, np.ndarray]:
+        """The increments at this chunk's encoder frames: x_m, y_m, heading_rad, distance_m."""
+        g = self._count + np.arange(len(enc.index), dtype=np.int64)
+        first_chunk = self._count == 0
+        self._count += len(enc.index)
+        new = {"left": enc.left, "right": enc.right, "seq": enc.seq, "g": g}
+        win = ({k: np.concatenate((self._window[k], v)) for k, v in new.items()}
+               if self._window else new)
+        carried = len(win["g"]) - len(g)
+        if len(g) == 0:
+            return {k: np.zeros(0) for k in ("x_m", "y_m", "heading_rad", "distance_m")}
+        window = Encoders(index=win["g"], counter=win["g"] & 0xF, seq=win["seq"],
+                          left=win["left"], right=win["right"],
+                          timestamp_s=np.zeros(len(win["g"])), cycle_s=None)
+        steps = firmware_steps(window, 0, self.geometry, self.bits, self.max_wheel_speed_mm_s)
+        self.refused += steps.refused - max(0, carried - 1)  # carried refusals counted before
+        self.reprimed += [int(win["g"][k]) for k in steps.reprimed]  # decided in this window
+        skip = max(carried, 1) - 1  # step k leads into window frame k + 1
+        out = self._integrate(steps.d_left[skip:], steps.d_right[skip:])
+        last = steps.open_from if steps.open_from is not None else len(win["g"]) - 1
+        self._window = {k: v[last:] for k, v in win.items()}
+        if first_chunk:  # the very first frame: pose 0 before any step
+            out = {k: np.concatenate(([0.0], v)) for k, v in out.items()}
+        return out
+
+    def _integrate(
+        self, d_left: npt.NDArray[np.int64], d_right: npt.NDArray[np.int64]
+    ) -> dict[str, np.ndarray]:
+        """``reference.integrate`` from pose 0, continued from the carried sums."""
+        g = self.geometry
+        cum_l0, cum_r0, h_old0, sx0, sy0, dist0 = self._sums
+        ds_left = d_left * g.m_per_count_left
+        ds = 0.5 * (ds_left + d_right * g.m_per_count_right)
+        cum_left = np.cumsum(np.concatenate(([cum_l0], d_left)))[1:]
+        cum_right = np.cumsum(np.concatenate(([cum_r0], d_right)))[1:]
+        heading = (0.0 + (g.m_per_count_right / g.wheelbase_m) * cum_right
+                   - (g.m_per_count_left / g.wheelbase_m) * cum_left)
+        heading_old = np.concatenate(([h_old0], heading[:-1]))
+        if self.integrator == "euler":
+            direction = heading
+        else:
+            direction = 0.5 * (heading_old + heading)
+            if self.integrator == "exact":
+                ds = ds * np.sinc((heading - heading_old) / (2.0 * math.pi))
+        sx = np.cumsum(np.concatenate(([sx0], ds * np.cos(direction))))[1:]
+        sy = np.cumsum(np.concatenate(([sy0], ds * np.sin(direction))))[1:]
+        dist = np.cumsum(np.concatenate(([dist0], np.abs(0.5 * (ds_left + d_right
+                                                               * g.m_per_count_right)))))[1:]
+        if len(heading):
+            self._sums = (int(cum_left[-1]), int(cum_right[-1]), float(heading[-1]),
+                          float(sx[-1]), float(sy[-1]), float(dist[-1]))
+        return {"x_m": 0.0 + sx, "y_m": 0.0 + sy, "heading_rad": heading, "distance_m": dist}
