@@ -10,8 +10,8 @@ power-up pose -- the verdict must stay PASS. Then runs, as whole processes measu
 * ``python -m odocan analyze LOG --robot pmir``;
 * ``cantools decode --single-line dbc/odocan.dbc < LOG`` (skipped with ``--no-cantools``);
 * the stages that stream today (``host.judge.stream``: ``iter_log`` -> E2E -> encoder sequence
-  -> on-board samples, chunk by chunk; the verdict's later stages do not stream yet), in a
-  child process of their own.
+  -> on-board samples and the reference's steps and increments, chunk by chunk; the verdict's
+  later stages do not stream yet), in a child process of their own.
 
 The log is written to ``--dir`` (default: the system's temporary directory; check ``df -h``
 first: it needs ``--gb`` GB free) and deleted afterwards (``--keep`` keeps it). Prints figures;
@@ -88,20 +88,32 @@ def whole_process(argv: list[str], stdin: Path | None = None) -> tuple[float, fl
 
 def stream_stages(log: Path) -> None:
     """The streaming stages over ``log`` (run in the child process): prints the samples."""
+    from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
     from odocan.host.io.logs import iter_log
-    from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
+    from odocan.host.judge.reference import Geometry
+    from odocan.host.judge.stream import (
+        StreamE2E,
+        StreamEncoders,
+        StreamPoses,
+        StreamReference,
+    )
     from odocan.host.protocol.decode import BulkDecoder
     from odocan.sim.contract import database
 
-    db = database()
+    db, profile = database(), load(ROBOT)
     e2e, numbering, poses = StreamE2E(db), StreamEncoders(BulkDecoder(db)), StreamPoses(
         BulkDecoder(db))
+    reference = StreamReference(Geometry.of(profile), "exact", min(profile.counter_bits, 24),
+                                MAX_WHEEL_SPEED_MM_S)
     samples = 0
     for chunk in iter_log(log):
         accepted = e2e.feed(chunk)
-        samples += len(poses.feed(chunk, accepted, numbering.feed(chunk, accepted))[0]["enc"])
+        enc = numbering.feed(chunk, accepted)
+        reference.feed(enc)
+        samples += len(poses.feed(chunk, accepted, enc)[0]["enc"])
     samples += len(poses.finish()[0]["enc"])
-    print(f"{samples} on-board samples, {poses.unmatched} unmatched")
+    print(f"{samples} on-board samples, {poses.unmatched} unmatched, "
+          f"{len(reference.reprimed)} counter restarts")
 
 
 def report(label: str, frames: int, figures: tuple[float, float, float, int]) -> None:
@@ -133,7 +145,7 @@ def main() -> None:
         odocan = [sys.executable, "-m", "odocan", "analyze", str(log), "--robot", ROBOT]
         report("odocan analyze LOG", frames, whole_process(odocan))
         stages = [sys.executable, __file__, "--stream-child", str(log)]
-        report("streamed stages (E2E..poses)", frames, whole_process(stages))
+        report("streamed stages (E2E..ref)", frames, whole_process(stages))
         if not args.no_cantools:
             cantools = [str(Path(sys.executable).parent / "cantools"), "decode",
                         "--single-line", str(DBC_PATH)]
