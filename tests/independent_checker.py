@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -166,9 +166,10 @@ class _Follower:
 
     def __init__(
         self, robot: Robot, integrator: str, starts: Callable[[float], tuple[float, float, float]],
-        max_wheel_speed_m_s: float | None,
+        max_wheel_speed_m_s: float | None, reboots_t_s: Collection[float] = (),
     ) -> None:
         self.odo = _Odometry(robot, integrator)
+        self.reboots_us = {round(t * 1e6) for t in reboots_t_s}
         self.starts = starts
         self.wire = 1 << min(robot.counter_bits, 24)
         self.recent: list[tuple[int, tuple[float, float, float]]] = []  # the last 16
@@ -196,6 +197,8 @@ class _Follower:
         frame = (t, int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
         self.last_t = t
         self.halves.clear()
+        if round(t * 1e6) in self.reboots_us:  # a new firmware: primed on this frame
+            self.prev, self.refused = None, []
         if self.prev is not None and not self.plausible(self.prev, frame):
             self._refuse(frame, s)
             return
@@ -235,12 +238,14 @@ def check(
     path: Path, robot: Robot, integrator: str,
     starts: Callable[[float], tuple[float, float, float]],
     max_wheel_speed_m_s: float | None = MAX_WHEEL_SPEED_M_S,
+    reboots_t_s: Collection[float] = (),
 ) -> Verdict:
     """Compare the on-board poses of the log at ``path`` with this checker's odometry started
     at ``starts(timestamp of the segment's first encoder frame)`` (module docstring);
-    ``max_wheel_speed_m_s`` None: no plausibility rule (drives faster than any ECU allows)."""
+    ``max_wheel_speed_m_s`` None: no plausibility rule (drives faster than any ECU allows);
+    ``reboots_t_s``: encoder frames (their times) a rebooted firmware primed on."""
     frames = _Frames(path)
-    walk = _Follower(robot, integrator, starts, max_wheel_speed_m_s)
+    walk = _Follower(robot, integrator, starts, max_wheel_speed_m_s, reboots_t_s)
     for t, name, s in frames.rows:
         if name == "WHEEL_ENCODERS":
             walk.encoders(t, s)

@@ -14,7 +14,11 @@ The firmware starts at pose 0 on the first frame (power-up). ``counter_jumps`` r
 motor controller's counters (a reboot: the counts jump by an offset): the firmware refuses the
 first ``RESYNC_FRAMES - 1`` frames after the jump (its pose still names the last accepted frame),
 then re-primes on the first of them and integrates one step from it (COUNTER_RESET, firmware/ecu.py
-module docstring); the jump itself is never integrated. ``Synth.lines(start)`` cuts the log at
+module docstring); the jump itself is never integrated. ``reboot_at`` restarts the firmware at an
+encoder frame (a new ECU on the same bus): its pose restarts at 0 primed on that frame, its E2E
+counters and UPTIME at 0; its first ODOM_STATUS summary (UPTIME 0, STATE OK: it accepted the frame
+in its first tick, as on the rig) follows that frame; or, ``boot_in_init``, its first summary
+(STATE INIT, UPTIME 0) comes 5 ms before that frame. ``Synth.lines(start)`` cuts the log at
 an encoder frame to make a log that starts mid-drive; ``Synth.state[k]`` is the firmware's
 internal pose after encoder frame k (Q40 metres, BAM64 + whole turns) to compare against.
 """
@@ -97,11 +101,15 @@ def synthesize(
     t0_s: float = 0.0,
     x_bias_100um: dict[int, int] | None = None,
     counter_jumps: dict[int, int] | None = None,
+    reboot_at: int | None = None,
+    boot_in_init: bool = False,
 ) -> Synth:
     """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
     ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB.
     ``counter_jumps``: {encoder frame: offset in counts} where both counters restart (the jumps
-    at least ``RESYNC_FRAMES`` frames apart and beyond the plausibility bound)."""
+    at least ``RESYNC_FRAMES`` frames apart and beyond the plausibility bound).
+    ``reboot_at``: the encoder frame the firmware restarts on (module docstring);
+    ``boot_in_init``: it booted 5 ms before that frame, its first summary saying INIT."""
     bias = x_bias_100um or {}
     jumps = counter_jumps or {}
     named = 0  # the COUNTER of the last encoder frame the firmware accepted
@@ -116,7 +124,13 @@ def synthesize(
     dr = np.concatenate(([0], np.asarray(d_right, dtype=np.int64)))
     out = Synth()
     pose_counter = status_counter = 0
+    boot = 0  # the encoder frame the running firmware primed on
     for k in range(len(dl)):
+        if k == reboot_at:  # a new firmware: pose 0, E2E counters and UPTIME from 0
+            errors = ErrorMask()
+            odo = Odometry(derive_constants(params_of(robot, integrator), errors), errors)
+            pose_counter = status_counter = 0
+            boot = k
         left, right = (left + int(dl[k])) & mask, (right + int(dr[k])) & mask
         if k in jumps:  # the motor controller restarts its counters
             left, right = (left + jumps[k]) & mask, (right + jumps[k]) & mask
@@ -134,19 +148,24 @@ def synthesize(
         t_s = t0_s + k * ENCODER_PERIOD_S
         group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
                        fr.pack_wheel_encoders(k, left & wire_mask, right & wire_mask))]
-        if k % 2 == 0:
+        life = k - boot  # frames since the firmware primed
+        if boot_in_init and k == reboot_at:  # booted before the frame: INIT, no pose yet
+            init = fr.pack_odom_status_summary(0, State.INIT, odo.consts.integrator, 0, 0, errors)
+            group.insert(0, _line(t_s - 0.005, fr.ODOM_STATUS_ID, init))
+            status_counter = 1
+        if life % 2 == 0:
             group += _pose_lines(odo, t_s + 0.001, pose_counter, named, errors, bias.get(k, 0))
             pose_counter += 1
-        if k % 10 == 0:
-            uptime_s = int(k * ENCODER_PERIOD_S + t0_s)
+        if life % 10 == 0 and not (boot_in_init and k == reboot_at):
+            uptime_s = int(life * ENCODER_PERIOD_S + (t0_s if boot == 0 else 0.0))
             status = fr.pack_odom_status_summary(
                 status_counter, State.OK, odo.consts.integrator, 0, uptime_s, errors
             )
             group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, status))
             status_counter += 1
-        if k % 50 == 10:  # the firmware's E2E counts of the encoder frames: k + 1 accepted
+        if life % 50 == 10:  # the firmware's E2E counts of the encoder frames: life + 1 accepted
             page = fr.pack_odom_status_e2e(
-                status_counter, fr.StatusPage.E2E_WHEEL_ENCODERS, k + 1, 0, 0, 0, 0
+                status_counter, fr.StatusPage.E2E_WHEEL_ENCODERS, life + 1, 0, 0, 0, 0
             )
             group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, page))
             status_counter += 1

@@ -58,6 +58,7 @@ from cantools.database.can import Database, Message
 from odocan.firmware.errors import ErrorFlag
 from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.sources import CONFLICT_HOLD_S, SourceWatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.fleetview import RobotState
 from odocan.host.protocol.decode import frame_key
@@ -78,44 +79,9 @@ MAX_UNKNOWN_IDS = 32  # distinct unknown identifiers listed (all are counted)
 _HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
 NODE_TIMEOUT_CYCLES = 10  # a node is stale after 10 x its fastest cycle time (opendbc)
 FIRMWARE_NODE = "ODOM_MCU"
-UPTIME_MATCH_S = 2.0  # one source's UPTIME (whole s) minus bus time stays within this
-CONFLICT_HOLD_S = 2.0  # CONFLICT is shown this long after two sources last interleaved
 POSE_TOLERANCE_M = 1e-3  # on-board vs reference beyond this: POSE WRONG (10 LSB of X/Y)
 POSE_TOLERANCE_RAD = 1e-3  # ... or this (about 10 LSB of HEADING)
 MAX_EVENTS = 16  # events kept (the latest)
-
-
-@dataclass
-class SourceWatch:
-    """One node's UPTIME against bus time, summary after summary: a single source keeps
-    UPTIME - t constant (to the second), a reboot moves it once, two sources on one ID make two
-    offsets interleave."""
-
-    offset_s: float | None = None  # UPTIME - bus time of the source followed
-    other_s: float | None = None  # the offset before the last change
-    last_uptime_s: int = 0
-    last_state: str = ""
-    conflict_until_s: float = -math.inf
-
-    def observe(self, t_s: float, uptime_s: int, state: str) -> str | None:
-        """One ODOM_STATUS summary; returns ``"reboot"``, ``"two sources"``, ``"uptime jump"``
-        or None."""
-        offset = uptime_s - t_s
-        kind = None
-        if self.offset_s is None:
-            self.offset_s = offset
-        elif abs(offset - self.offset_s) <= UPTIME_MATCH_S:
-            if state == "INIT" and self.last_state not in ("", "INIT"):
-                kind = "reboot"
-        elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
-            kind = "two sources"
-            self.conflict_until_s = t_s + CONFLICT_HOLD_S
-            self.offset_s, self.other_s = self.other_s, self.offset_s
-        else:
-            kind = "reboot" if uptime_s < self.last_uptime_s or state == "INIT" else "uptime jump"
-            self.offset_s, self.other_s = offset, self.offset_s
-        self.last_uptime_s, self.last_state = uptime_s, state
-        return kind
 
 
 @dataclass

@@ -192,6 +192,11 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
                                   f"faults {inputs.get('faults') or 'none'}"))
     if truth.get("distance_travelled_m") is not None:
         facts.append(("distance", f"{truth['distance_travelled_m']:.3f} m travelled"))
+    reboots = report.get("reboots") or []
+    if reboots:  # each restarts the reference (host.judge.reboots)
+        facts.append(("reboots", f"{len(reboots)}: the firmware restarted at "
+                      + ", ".join(f"{r['t_s']:.2f} s ({r['reference_start']})" for r in reboots)
+                      + "; the reference restarted with it"))
     unchecked = {k: v for k, v in (report.get("unknown_frames") or {}).items() if v}
     if unchecked:
         facts.append(

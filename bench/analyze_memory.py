@@ -1,0 +1,159 @@
+"""Max RSS and frames/s of ``odocan analyze`` against ``cantools decode`` on a big candump log.
+
+Builds a log of about ``--gb`` GB (default 1) by concatenating one lockstep drive (``--drive-s``
+seconds of the rig's ``random`` scenario on pmir, made once) again and again, each copy's
+timestamps shifted to follow the previous one: every copy starts with a firmware power-up, so
+the analysis sees a reboot at each seam (``host.judge.reboots``) and judges every life from its
+power-up pose -- the verdict must stay PASS. Then runs, as whole processes measured like
+``/usr/bin/time -v`` (``os.wait4``: wall, user + system CPU, max RSS):
+
+* ``python -m odocan analyze LOG --robot pmir``;
+* ``cantools decode --single-line dbc/odocan.dbc < LOG`` (skipped with ``--no-cantools``);
+* the stages that stream today (``host.judge.stream``: ``iter_log`` -> E2E -> encoder sequence
+  -> on-board samples and the reference's steps and increments, chunk by chunk; the verdict's
+  later stages do not stream yet), in a child process of their own.
+
+The log is written to ``--dir`` (default: the system's temporary directory; check ``df -h``
+first: it needs ``--gb`` GB free) and deleted afterwards (``--keep`` keeps it). Prints figures;
+asserts nothing. Run: ``.venv/bin/python bench/analyze_memory.py [--gb 1] [--no-cantools]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import can  # noqa: E402
+
+from odocan.sim.contract import DBC_PATH  # noqa: E402
+from odocan.sim.rig import LockstepRig, RigConfig  # noqa: E402
+from odocan.sim.robot import load  # noqa: E402
+
+ROBOT = "pmir"
+_STAMP = re.compile(rb"^\((\d+)\.(\d{6})\)")
+
+
+def make_drive(seconds: float, path: Path) -> Path:
+    """One drive of the lockstep rig as a candump log."""
+    logger = can.Logger(str(path))
+    with LockstepRig(RigConfig(load(ROBOT), "exact", "random", 1), [logger]) as rig:
+        rig.run(seconds)
+    return path
+
+
+def concatenate(drive: Path, target_bytes: int, out: Path) -> tuple[int, int]:
+    """Copies of ``drive`` one after the other (timestamps shifted by whole drives, in
+    microseconds so that the text keeps 6 decimals) until ``target_bytes``; (copies, frames)."""
+    lines = drive.read_bytes().splitlines(keepends=True)
+    stamps = [_STAMP.match(line) for line in lines]
+    micros = [int(m.group(1)) * 1_000_000 + int(m.group(2)) if m else 0 for m in stamps]
+    span_us = micros[-1] - micros[0] + 10_000
+    size = copies = frames = 0
+    with out.open("wb") as f:
+        while size < target_bytes:
+            shift = copies * span_us
+            chunk = b"".join(
+                b"(%d.%06d)" % divmod(us + shift, 1_000_000) + line[m.end():] if m else line
+                for line, m, us in zip(lines, stamps, micros, strict=True)
+            )
+            f.write(chunk)
+            size += len(chunk)
+            copies += 1
+            frames += len(lines)
+    return copies, frames
+
+
+def whole_process(argv: list[str], stdin: Path | None = None) -> tuple[float, float, float, int]:
+    """Wall s, CPU s (user + system), max RSS MB and exit code of ``argv`` (stdout dropped)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    stdin_file = stdin.open("rb") if stdin is not None else subprocess.DEVNULL
+    start = time.perf_counter()
+    child = subprocess.Popen(argv, stdin=stdin_file, stdout=subprocess.DEVNULL, env=env)
+    _, status, usage = os.wait4(child.pid, 0)
+    wall = time.perf_counter() - start
+    if stdin is not None:
+        stdin_file.close()  # type: ignore[union-attr]
+    return (wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024,
+            os.waitstatus_to_exitcode(status))
+
+
+def stream_stages(log: Path) -> None:
+    """The streaming stages over ``log`` (run in the child process): prints the samples."""
+    from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
+    from odocan.host.io.logs import iter_log
+    from odocan.host.judge.reference import Geometry
+    from odocan.host.judge.stream import (
+        StreamE2E,
+        StreamEncoders,
+        StreamPoses,
+        StreamReference,
+    )
+    from odocan.host.protocol.decode import BulkDecoder
+    from odocan.sim.contract import database
+
+    db, profile = database(), load(ROBOT)
+    e2e, numbering, poses = StreamE2E(db), StreamEncoders(BulkDecoder(db)), StreamPoses(
+        BulkDecoder(db))
+    reference = StreamReference(Geometry.of(profile), "exact", min(profile.counter_bits, 24),
+                                MAX_WHEEL_SPEED_MM_S)
+    samples = 0
+    for chunk in iter_log(log):
+        accepted = e2e.feed(chunk)
+        enc = numbering.feed(chunk, accepted)
+        reference.feed(enc)
+        samples += len(poses.feed(chunk, accepted, enc)[0]["enc"])
+    samples += len(poses.finish()[0]["enc"])
+    print(f"{samples} on-board samples, {poses.unmatched} unmatched, "
+          f"{len(reference.reprimed)} counter restarts")
+
+
+def report(label: str, frames: int, figures: tuple[float, float, float, int]) -> None:
+    wall, cpu, rss_mb, code = figures
+    print(f"{label:<26} {wall:8.1f} s wall {cpu:8.1f} s CPU {rss_mb:8.0f} MB max RSS "
+          f"{frames / wall / 1e6:6.2f} M frames/s  exit {code}", flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--gb", type=float, default=1.0, help="log size in GB (1e9 bytes)")
+    parser.add_argument("--drive-s", type=float, default=600.0, help="seconds of one drive")
+    parser.add_argument("--dir", type=Path, default=Path(tempfile.gettempdir()))
+    parser.add_argument("--no-cantools", action="store_true")
+    parser.add_argument("--keep", action="store_true", help="keep the log")
+    parser.add_argument("--stream-child", type=Path, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.stream_child is not None:
+        stream_stages(args.stream_child)
+        return
+    log = args.dir / f"odocan_bench_{args.gb:g}gb.log"
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        drive = make_drive(args.drive_s, Path(tmp) / "drive.log")
+        copies, frames = concatenate(drive, int(args.gb * 1e9), log)
+    print(f"{log}: {log.stat().st_size / 1e9:.2f} GB, {frames} frames, {copies} drives of "
+          f"{args.drive_s:g} s (made in {time.perf_counter() - start:.0f} s)", flush=True)
+    try:
+        odocan = [sys.executable, "-m", "odocan", "analyze", str(log), "--robot", ROBOT]
+        report("odocan analyze LOG", frames, whole_process(odocan))
+        stages = [sys.executable, __file__, "--stream-child", str(log)]
+        report("streamed stages (E2E..ref)", frames, whole_process(stages))
+        if not args.no_cantools:
+            cantools = [str(Path(sys.executable).parent / "cantools"), "decode",
+                        "--single-line", str(DBC_PATH)]
+            report("cantools decode < LOG", frames, whole_process(cantools, stdin=log))
+    finally:
+        if not args.keep:
+            log.unlink()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,264 @@
+"""The comparisons: on-board vs reference and vs truth (errors and their summaries), ODOM_TWIST
+against the reference's speeds, and the series the plots need (``host.judge.analysis`` module
+docstring, step 5)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.reference_path import Reference, wrap_pi
+from odocan.host.judge.samples import (
+    HEADING_LSB_RAD,
+    WIRE_COUNTER_BITS,
+    Encoders,
+    FloatArray,
+    IntArray,
+    Poses,
+    contract_cycle_s,
+    match_encoder,
+)
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.sim.robot import RobotProfile
+
+# --- errors and the report --------------------------------------------------------------------
+
+
+def pose_errors(onboard: Poses, ref: Reference) -> tuple[FloatArray, FloatArray]:
+    """Position (m) and wrapped heading (rad) errors, on-board minus reference (at the same
+    encoder frames), per sample."""
+    position = np.hypot(onboard.x_m - ref.x_m, onboard.y_m - ref.y_m)
+    heading = wrap_pi(onboard.heading_raw * HEADING_LSB_RAD - ref.heading_rad)
+    return position, heading
+
+
+def error_summary(position: FloatArray, heading: FloatArray) -> dict[str, Any]:
+    """Max and final errors (None when there is no sample)."""
+    if len(position) == 0:
+        return dict.fromkeys(
+            ("max_position_error_m", "max_heading_error_rad", "final_position_error_m",
+             "final_heading_error_rad"),
+        )
+    return {
+        "max_position_error_m": float(np.max(position)),
+        "max_heading_error_rad": float(np.max(np.abs(heading))),
+        "final_position_error_m": float(position[-1]),
+        "final_heading_error_rad": float(heading[-1]),
+    }
+
+
+def versus_truth(
+    onboard: Poses, truth: Poses, ref: Reference
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """On-board vs truth at every truth sample with an on-board sample at or after it."""
+    estimate, keep = onboard_at(onboard, ref, truth.enc)
+    position = np.hypot(estimate.x_m - truth.x_m[keep], estimate.y_m - truth.y_m[keep])
+    heading = wrap_pi(estimate.heading_rad - truth.heading_rad[keep])
+    series = {
+        "truth_enc": truth.enc[keep],
+        "truth_x_m": truth.x_m[keep],
+        "truth_y_m": truth.y_m[keep],
+        "truth_heading_rad": truth.heading_rad[keep],
+        "truth_position_error_m": position,
+        "truth_heading_error_rad": heading,
+    }
+    return error_summary(position, heading), series
+
+
+def onboard_at(onboard: Poses, ref: Reference, enc: IntArray) -> tuple[Poses, IntArray]:
+    """The on-board pose at encoder frames ``enc``: the on-board sample there, or else the
+    reference there plus (on-board - reference) at the nearest following on-board sample.
+
+    The firmware sends its pose every other encoder frame (ODOM_POSE_* every 20 ms), so a truth
+    sample may fall between two; the reference carries the on-board pose back by the one encoder
+    step, exactly as the firmware integrated it (within the on-board vs reference tolerance).
+    Returns the poses and the positions in ``enc`` that have one.
+    """
+    following = np.searchsorted(onboard.enc, enc)
+    keep = np.flatnonzero((following < len(onboard.enc)) & (enc >= ref.start))
+    s = following[keep]
+    here, there = ref.at(enc[keep]), ref.at(onboard.enc[s])
+    heading = onboard.heading_raw[s] * HEADING_LSB_RAD
+    poses = Poses(
+        enc=enc[keep],
+        x_m=onboard.x_m[s] - there.x_m + here.x_m,
+        y_m=onboard.y_m[s] - there.y_m + here.y_m,
+        heading_rad=np.asarray(heading - there.heading_rad + here.heading_rad, dtype=np.float64),
+        heading_raw=onboard.heading_raw[s],
+    )
+    return poses, keep
+
+
+
+# --- the twist: ODOM_TWIST against the reference's speeds ------------------------------------
+
+TWIST_LSB = 1e-3  # LINEAR_VEL 1 mm/s, ANGULAR_VEL 1 mrad/s
+TWIST_RELATIVE = 0.02  # the firmware's dt is its own tick time: a late frame may shift it a bit
+TWIST_RANGE = (-32.768, 32.767)  # both signals: i16 LSBs, saturated by the sender
+TWIST_GAP_ACCEL_MPS2 = 5.0  # rim acceleration bound inside a step the log holds only in part
+
+
+def check_twist(
+    frames: FrameArrays,
+    accepted: npt.NDArray[np.bool_],
+    decoder: BulkDecoder,
+    enc: Encoders,
+    robot: RobotProfile,
+) -> dict[str, Any]:
+    """ODOM_TWIST (LINEAR_VEL, ANGULAR_VEL) against the reference's speeds.
+
+    The firmware reports the mean speed over its steps since its previous twist; a mean lies
+    between the smallest and largest per-period speed it averages. So each twist frame must lie
+    in the band of the reference's per-step speeds (step distance and heading change over its
+    encoder periods) over the encoder frames since the twist frame before the previous one
+    (twist frames come every other period), widened by one LSB plus ``TWIST_RELATIVE``. A
+    twist from a wrong dt (e.g. 17 x the speed after 16 lost frames) falls far outside. Where
+    the log lacks encoder frames the firmware may have had, a step of n periods only gives the
+    mean of its periods: the band widens there by one count per period (quantisation) and
+    ``TWIST_GAP_ACCEL_MPS2`` over the n - 1 periods. A log without ODOM_TWIST passes with 0
+    samples.
+    """
+    try:
+        twist = decoder.decode(frames, "ODOM_TWIST")
+    except DecodeError:
+        twist = {"index": np.zeros(0, dtype=np.int64)}
+    keep = accepted[twist["index"]] if len(twist["index"]) else np.zeros(0, dtype=bool)
+    result: dict[str, Any] = {
+        "samples": 0,
+        "max_linear_excess_mps": 0.0,
+        "max_angular_excess_rad_s": 0.0,
+        "passed": True,
+    }
+    if not keep.any():
+        return result
+    index = twist["index"][keep]
+    e = match_encoder(enc, index, twist["ENC_COUNTER"][keep].astype(np.int64),
+                      frames.timestamp_s[index])
+    ok = (e >= 0) & (e >= np.maximum.accumulate(e))
+    e = e[ok]
+    linear = twist["LINEAR_VEL"][keep][ok] * TWIST_LSB
+    angular = twist["ANGULAR_VEL"][keep][ok] * TWIST_LSB
+    (v_ref, w_ref), (v_gap, w_gap) = _step_speeds(enc, robot, decoder)
+    excess_v = _outside_band(linear, e, v_ref, v_gap)
+    excess_w = _outside_band(angular, e, w_ref, w_gap)
+    judged = ~np.isnan(excess_v)
+    result["samples"] = int(np.count_nonzero(judged))
+    if result["samples"]:
+        result["max_linear_excess_mps"] = float(np.max(excess_v[judged]))
+        result["max_angular_excess_rad_s"] = float(np.max(excess_w[judged]))
+        result["passed"] = bool(
+            result["max_linear_excess_mps"] == 0.0 and result["max_angular_excess_rad_s"] == 0.0
+        )
+    return result
+
+
+def _step_speeds(
+    enc: Encoders, robot: RobotProfile, decoder: BulkDecoder
+) -> tuple[tuple[FloatArray, FloatArray], tuple[FloatArray, FloatArray]]:
+    """Per accepted encoder frame j >= 1: the reference's linear (m/s) and angular (rad/s) speed
+    over the step from frame j - 1, spread over its periods (element 0: NaN); and how far a
+    single period inside a step of several may differ from that mean (0 for one period)."""
+    g = Geometry.of(robot)
+    bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
+    ds_left = wrap_delta(np.diff(enc.left), bits) * g.m_per_count_left
+    ds_right = wrap_delta(np.diff(enc.right), bits) * g.m_per_count_right
+    cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS") or 0.01
+    periods = np.diff(enc.seq)
+    dt_s = periods * cycle_s
+    nan = np.full(1, np.nan)
+    v = np.concatenate((nan, 0.5 * (ds_left + ds_right) / dt_s))
+    w = np.concatenate((nan, (ds_right - ds_left) / g.wheelbase_m / dt_s))
+    count_mps = max(g.m_per_count_left, g.m_per_count_right) / cycle_s
+    accel_mps = TWIST_GAP_ACCEL_MPS2 * (periods - 1) * cycle_s
+    gap_v = np.concatenate(([0.0], np.where(periods > 1, count_mps + accel_mps, 0.0)))
+    gap_w = gap_v * (2.0 / g.wheelbase_m)
+    return (v, w), (gap_v, gap_w)
+
+
+def _outside_band(value: FloatArray, e: IntArray, step: FloatArray, gap: FloatArray) -> FloatArray:
+    """How far each ``value`` (at encoder frame ``e``) lies outside the band of ``step`` over
+    (e two samples back, e], widened by the largest ``gap`` there: 0 inside, NaN where the
+    window is empty."""
+    out = np.full(len(value), np.nan)
+    if len(e) < 3:
+        return out
+    step, gap = step[: int(e[-1]) + 1], gap[: int(e[-1]) + 1]
+    starts = np.minimum(e[:-1] + 1, len(step) - 1)
+    empty = e[1:] < e[:-1] + 1  # segment k: steps (e[k], e[k + 1]]
+    seg_lo = np.where(empty, np.inf, np.minimum.reduceat(step, starts))
+    seg_hi = np.where(empty, -np.inf, np.maximum.reduceat(step, starts))
+    seg_gap = np.where(empty, 0.0, np.maximum.reduceat(gap, starts))
+    lo = np.minimum(seg_lo[:-1], seg_lo[1:])
+    hi = np.maximum(seg_hi[:-1], seg_hi[1:])
+    known = np.isfinite(lo) & np.isfinite(hi)  # the window holds a step
+    lo, hi = np.clip(lo, *TWIST_RANGE), np.clip(hi, *TWIST_RANGE)
+    slack = TWIST_LSB + TWIST_RELATIVE * np.maximum(np.abs(lo), np.abs(hi))
+    slack += np.maximum(seg_gap[:-1], seg_gap[1:])
+    v = value[2:]
+    excess = np.maximum(0.0, np.maximum(v - hi - slack, lo - slack - v))
+    out[2:] = np.where(known, excess, np.nan)
+    return out
+
+
+# --- series for the plots (time axis, unwrapped headings, truth errors, gaps) ------------------
+
+
+def plot_series(
+    frames: FrameArrays, enc: Encoders, onboard: Poses, truth: Poses, ref: Reference
+) -> dict[str, np.ndarray]:
+    """What the plots need beyond the verdict's series (all times in s since the log's first
+    frame, distances in m along the reference):
+
+    * ``t_s``, ``onboard_seq``: time and encoder sequence number of each on-board sample;
+      ``heading_error_unwrapped_rad``: on-board (TURNS * 2 pi + HEADING) minus the reference's
+      continuous heading: no +-pi sawtooth, exact across gaps too;
+    * ``truth_t_s``, ``truth_seq``, ``truth_distance_m``, ``truth_heading_error_unwrapped_rad``,
+      ``truth_dx_m``, ``truth_dy_m``: at each compared truth sample (the verdict's series has
+      ``truth_position_error_m`` and the wrapped ``truth_heading_error_rad``; the components are
+      truth minus on-board); SIM_TRUTH has no turn count, so its heading error is unwrapped by
+      continuity (exact while it changes by less than pi between two compared samples);
+    * ``gap_{start,end}_{t_s,distance_m}``: spans between consecutive on-board samples further
+      apart in the encoder sequence than usual (dropped pose or encoder frames);
+    * ``restart_t_s``, ``restart_distance_m``: where the reference was placed again after a gap
+      in the encoder sequence.
+    """
+    t_first = float(frames.timestamp_s[0]) if len(frames) else 0.0
+    enc_t = frames.timestamp_s[enc.index] - t_first
+    estimate, keep = onboard_at(onboard, ref, truth.enc)
+    t_enc = truth.enc[keep]
+    truth_heading = wrap_pi(estimate.heading_rad - truth.heading_rad[keep])
+    gaps = _sample_gaps(enc.seq[onboard.enc])
+    distance = ref.at(onboard.enc).distance_m
+    restart_enc = ref.start + 1 + np.flatnonzero(np.diff(enc.seq[ref.start :]) > 1)
+    return {
+        "t_s": enc_t[onboard.enc],
+        "onboard_seq": enc.seq[onboard.enc],
+        "heading_error_unwrapped_rad": onboard.heading_rad - ref.at(onboard.enc).heading_rad,
+        "truth_t_s": enc_t[t_enc],
+        "truth_seq": enc.seq[t_enc],
+        "truth_distance_m": ref.at(t_enc).distance_m,
+        "truth_heading_error_unwrapped_rad": np.unwrap(truth_heading),
+        "truth_dx_m": truth.x_m[keep] - estimate.x_m,
+        "truth_dy_m": truth.y_m[keep] - estimate.y_m,
+        "gap_start_t_s": enc_t[onboard.enc[gaps]],
+        "gap_end_t_s": enc_t[onboard.enc[gaps + 1]],
+        "gap_start_distance_m": distance[gaps],
+        "gap_end_distance_m": distance[gaps + 1],
+        "restart_t_s": enc_t[restart_enc],
+        "restart_distance_m": ref.at(restart_enc).distance_m,
+    }
+
+
+def _sample_gaps(seq: IntArray) -> IntArray:
+    """Positions i where samples i and i + 1 are further apart in the encoder sequence than the
+    usual (median) step: a frame was dropped between them."""
+    steps = np.diff(seq)
+    if len(steps) == 0:
+        return np.zeros(0, dtype=np.int64)
+    usual = max(1, int(np.median(steps)))
+    return np.flatnonzero(steps > usual).astype(np.int64)
+

@@ -1,0 +1,279 @@
+"""Firmware reboots inside a log: where each firmware life starts, and one report of them all.
+
+A reboot is told the way the live monitor tells it (``host.judge.sources.SourceWatch``, the one
+detection): the ODOM_STATUS summaries whose CRC holds, whatever their E2E sequence (a new
+firmware restarts its counters), fed in bus order; a ``"reboot"`` is UPTIME going back or INIT
+after running. The frame of that summary is the new firmware's first (its tick 0 sends a
+summary, firmware/ecu.py).
+
+The new firmware's pose is (0, 0, 0) at the first encoder frame it accepted (it primes there),
+so each life is analysed on its own, its reference restarted from that power-up pose at that
+frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frames lost):
+
+* the boot summary says UPTIME 0 and STATE INIT: the firmware had no encoder frame yet; it
+  primes on the first WHEEL_ENCODERS frame after the summary;
+* UPTIME 0 and any other state: it accepted one in its first tick, the latest WHEEL_ENCODERS
+  frame before the summary; the life starts at that frame (the first tick's pose frames come
+  before its summary, firmware/ecu.py step 5; a frame the old firmware sent after it would be
+  taken for the new one's);
+* UPTIME above 0 (the recorder missed the boot summary): where it primed is unknown; the life
+  starts at the summary and its start is fitted like a log that starts mid-drive;
+* whatever the summary says, when the new firmware's first page of WHEEL_ENCODERS E2E counts
+  (ENC_E2E_OK: encoder frames accepted since its boot) follows, it names the frame it primed
+  on exactly: the ENC_E2E_OK-th accepted encoder frame back from the page. That holds when the
+  log missed the boot summary (UPTIME counts whole seconds: the summaries of the first second
+  all say 0) and is checked again on the life (``host.judge.samples.saw_only_the_log``).
+
+A life with no on-board sample (a reboot at the very end) is reported, not compared.
+
+Known limit: without that page (other firmwares need not send it) and without the boot summary
+in the log, the life is taken to start at the next summary's frame and its first poses fall in
+the life before (and fail there).
+
+``merge`` makes one report and one set of series of the lives' (``host.judge.analysis``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.samples import ENC_E2E_PAGE
+from odocan.host.judge.sources import SourceWatch
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.e2e import check_frames, crc8h2f_p02, e2e_messages
+
+SUMMARY_PAGE = 0  # ODOM_STATUS page with STATE and UPTIME
+
+
+@dataclass(frozen=True)
+class Life:
+    """The frames of one firmware life: positions in the log, in bus order."""
+
+    index: npt.NDArray[np.int64]
+    boot: bool  # starts at the firmware's power-up (pose 0 at its first encoder frame)
+    t_s: float | None = None  # bus time of the boot summary (None: the log's first life)
+    uptime_before_s: int | None = None  # the last UPTIME the previous firmware reported
+
+
+def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
+    """The log cut at every reboot (module docstring); one life when there is none."""
+    everything = np.arange(len(frames), dtype=np.int64)
+    boots = _boot_summaries(frames, decoder)
+    if not boots:
+        return [Life(everything, boot=False)]
+    _, accepted = check_frames(frames, decoder.db)  # the encoder frames a firmware takes
+    encoders = decoder.select(frames, "WHEEL_ENCODERS")
+    encoders = encoders[accepted[encoders]]
+    pages = _encoder_count_pages(frames, decoder)
+    starts: list[int] = []
+    limits = [b[0] for b in boots[1:]] + [len(frames)]
+    for (position, uptime_s, state, _), limit in zip(boots, limits, strict=True):
+        start = _life_start(position, uptime_s, state, encoders)
+        counted = _counted_start(position, limit, encoders, pages)
+        if counted is not None and counted > (starts[-1] if starts else 0):
+            start = counted
+        starts.append(start)
+    lives = [Life(everything[: starts[0]], boot=False)]
+    for k, (position, uptime_s, _, before_s) in enumerate(boots):
+        end = starts[k + 1] if k + 1 < len(starts) else len(frames)
+        lives.append(Life(everything[starts[k] : end], boot=uptime_s == 0,
+                          t_s=float(frames.timestamp_s[position]), uptime_before_s=before_s))
+    return lives
+
+
+def _life_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[np.intp]) -> int:
+    """Where the life whose boot summary is at ``position`` starts: at the encoder frame it
+    primed on in its first tick (UPTIME 0, not INIT: the latest before the summary, which its
+    first pose frames precede too), else at the summary."""
+    earlier = encoders[encoders < position]
+    if uptime_s == 0 and state != "INIT" and len(earlier):
+        return int(earlier[-1])
+    return position
+
+
+def _counted_start(
+    position: int, limit: int, encoders: npt.NDArray[np.intp],
+    pages: tuple[npt.NDArray[np.int64], ...],
+) -> int | None:
+    """The encoder frame the firmware primed on, from its first page of WHEEL_ENCODERS E2E
+    counts after the summary at ``position`` (and before ``limit``, the next boot): it had
+    accepted ENC_E2E_OK frames, so it primed on the ENC_E2E_OK-th accepted encoder frame back
+    from that page (when the log lacks none of them). None without such a page."""
+    where, ok = pages
+    after = int(np.searchsorted(where, position))
+    if after == len(where) or where[after] >= limit or int(ok[after]) <= 0:
+        return None
+    before = encoders[encoders < where[after]]
+    if len(before) < int(ok[after]):
+        return None
+    return int(before[-int(ok[after])])
+
+
+def _encoder_count_pages(
+    frames: FrameArrays, decoder: BulkDecoder
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Positions and ENC_E2E_OK of the ODOM_STATUS pages of WHEEL_ENCODERS E2E counts whose CRC
+    holds (empty when the log or the DBC has none)."""
+    none = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+    except DecodeError:
+        return none
+    if "ENC_E2E_OK" not in page:
+        return none
+    good = _crc_holds(frames, decoder, page["index"])
+    return page["index"][good].astype(np.int64), page["ENC_E2E_OK"][good].astype(np.int64)
+
+
+def _crc_holds(
+    frames: FrameArrays, decoder: BulkDecoder, index: npt.NDArray[np.int64]
+) -> npt.NDArray[np.bool_]:
+    """Which ODOM_STATUS frames at ``index`` carry a right CRC, whatever their sequence."""
+    message = decoder.message("ODOM_STATUS")
+    config = e2e_messages(decoder.db).get(message.frame_id)
+    if config is None or config.data_ids is None:
+        return np.ones(len(index), dtype=bool)
+    data = frames.data[index]
+    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & 0xF]
+    good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
+    return good
+
+
+def _boot_summaries(
+    frames: FrameArrays, decoder: BulkDecoder
+) -> list[tuple[int, int, str, int]]:
+    """(position, UPTIME s, STATE, previous UPTIME s) of each summary that starts a new
+    firmware (module docstring)."""
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", SUMMARY_PAGE)
+        message = decoder.message("ODOM_STATUS")
+    except DecodeError:
+        return []
+    if "UPTIME" not in page or "STATE" not in page or len(page["index"]) == 0:
+        return []
+    index = page["index"]
+    good = _crc_holds(frames, decoder, index)
+    choices = dict(message.get_signal_by_name("STATE").choices or {})
+    watch = SourceWatch()
+    boots = []
+    for position, t_s, uptime_s, state in zip(
+        index[good].tolist(), page["timestamp_s"][good].tolist(),
+        page["UPTIME"][good].tolist(), page["STATE"][good].tolist(), strict=True,
+    ):
+        name = str(choices.get(int(state), int(state)))
+        before = watch.last_uptime_s
+        if watch.observe(float(t_s), int(uptime_s), name) == "reboot":
+            boots.append((int(position), int(uptime_s), name, int(before)))
+    return boots
+
+
+# --- one report of the lives ----------------------------------------------------------------
+
+_SUMMED_SAMPLES = ("onboard", "truth", "truth_compared", "unmatched_poses", "encoder_frames",
+                   "reference_restarts", "implausible_encoder_frames")
+_TIME_SERIES = ("t_s", "truth_t_s", "gap_start_t_s", "gap_end_t_s", "restart_t_s")
+
+
+def merge(
+    reports: list[dict[str, Any]],
+    series: list[dict[str, np.ndarray]],
+    lives: list[Life],
+    t_first_s: list[float],
+    *,
+    silent: list[Life] | None = None,
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """One report and one set of series from those of the lives with samples (``lives``,
+    ``t_first_s``: each one's, in order; the first of them is the whole log's origin); the
+    reboots of the ``silent`` lives (no on-board sample) are reported with 0 samples."""
+    report = dict(reports[0])
+    last = reports[-1]
+    report["samples"] = {key: sum(r["samples"][key] for r in reports) for key in _SUMMED_SAMPLES}
+    report["onboard_vs_reference"] = _worst([r["onboard_vs_reference"] for r in reports])
+    truths = [r["onboard_vs_truth"] for r in reports]
+    report["onboard_vs_truth"] = _worst(truths)
+    report["onboard_vs_truth"]["distance_travelled_m"] = float(
+        sum(t["distance_travelled_m"] for t in truths))
+    report["onboard_twist_vs_reference"] = _twist(
+        [r["onboard_twist_vs_reference"] for r in reports])
+    report["final_onboard_pose"] = last["final_onboard_pose"]
+    report["e2e"] = _summed_counts([r["e2e"] for r in reports])
+    report["unknown_frames"] = _summed_counts([{"u": r["unknown_frames"]} for r in reports])["u"]
+    events = [dict(e, life=k) for k, r in enumerate(reports) for e in r["events"]]
+    reboots = [
+        {"t_s": life.t_s, "uptime_before_s": life.uptime_before_s,
+         "reference_start": r["reference_start"], "onboard_samples": r["samples"]["onboard"],
+         "life": k}
+        for k, (life, r) in enumerate(zip(lives, reports, strict=True)) if life.t_s is not None
+    ] + [
+        {"t_s": life.t_s, "uptime_before_s": life.uptime_before_s, "reference_start": None,
+         "onboard_samples": 0, "life": None}
+        for life in silent or [] if life.t_s is not None
+    ]
+    reboots.sort(key=lambda b: b["t_s"])
+    events += [
+        {"kind": "reboot", "t_s": b["t_s"], "life": b["life"],
+         "detail": f"the firmware restarted (UPTIME {b['uptime_before_s']} s -> 0): "
+                   + (f"the reference restarts from its {b['reference_start']} pose"
+                      if b["reference_start"] else "no on-board pose after it to compare")}
+        for b in reboots
+    ]
+    report["events"] = sorted(events, key=lambda e: e["t_s"])
+    report["reboots"] = reboots
+    return report, _joined(series, reports, t_first_s)
+
+
+def _worst(parts: list[dict[str, Any]]) -> dict[str, Any]:
+    """Max errors over the lives, final errors of the last one with a sample."""
+    known = [p for p in parts if p["max_position_error_m"] is not None]
+    if not known:
+        return dict(parts[-1])
+    return {
+        "max_position_error_m": max(p["max_position_error_m"] for p in known),
+        "max_heading_error_rad": max(p["max_heading_error_rad"] for p in known),
+        "final_position_error_m": known[-1]["final_position_error_m"],
+        "final_heading_error_rad": known[-1]["final_heading_error_rad"],
+    }
+
+
+def _twist(parts: list[dict[str, Any]]) -> dict[str, Any]:
+    return {
+        "samples": sum(p["samples"] for p in parts),
+        "max_linear_excess_mps": max(p["max_linear_excess_mps"] for p in parts),
+        "max_angular_excess_rad_s": max(p["max_angular_excess_rad_s"] for p in parts),
+        "passed": all(p["passed"] for p in parts),
+    }
+
+
+def _summed_counts(parts: list[dict[str, dict[str, int]]]) -> dict[str, dict[str, int]]:
+    """Counts per message summed over the lives (E2E sequences start afresh at a reboot)."""
+    total: dict[str, dict[str, int]] = {}
+    for part in parts:
+        for name, counts in part.items():
+            into = total.setdefault(name, dict.fromkeys(counts, 0))
+            for key, value in counts.items():
+                into[key] = into.get(key, 0) + value
+    return total
+
+
+def _joined(
+    series: list[dict[str, np.ndarray]], reports: list[dict[str, Any]], t_first_s: list[float]
+) -> dict[str, np.ndarray]:
+    """The lives' series one after the other: times since the log's first frame, distances
+    along the reference carried on from one life to the next."""
+    distance = time = 0.0
+    pieces: dict[str, list[np.ndarray]] = {}
+    for k, part in enumerate(series):
+        time = t_first_s[k] - t_first_s[0]
+        for key, values in part.items():
+            if key.endswith("distance_m"):
+                values = values + distance
+            elif key in _TIME_SERIES:
+                values = values + time
+            pieces.setdefault(key, []).append(values)
+        distance += float(reports[k]["onboard_vs_truth"]["distance_travelled_m"])
+    return {key: np.concatenate(values) for key, values in pieces.items()}

@@ -1,0 +1,280 @@
+"""The reference along a log: the count steps as the firmware takes them (plausibility,
+counter restarts), the start pose (exact at power-up, else fitted), and the segments after gaps
+and stalls (``host.judge.analysis`` module docstring, step 4)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from odocan.firmware.ecu import ENCODER_PERIOD_US, MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
+from odocan.host.judge.reference import Geometry, integrate, wrap_delta
+from odocan.host.judge.samples import (
+    HEADING_LSB_RAD,
+    POSITION_LSB_M,
+    START_FIT_SAMPLES,
+    WIRE_COUNTER_BITS,
+    Encoders,
+    FloatArray,
+    IntArray,
+    Poses,
+)
+from odocan.sim.robot import RobotProfile
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The reference pose at every accepted encoder frame from the first on-board sample's on
+    (element k: encoder frame ``start + k``)."""
+
+    start: int  # index into Encoders of the first on-board sample
+    x_m: FloatArray
+    y_m: FloatArray
+    heading_rad: FloatArray
+    distance_m: FloatArray
+    restarts: int = 0  # gaps in the encoder sequence where the position was placed again
+    exact_start: bool = False  # started at the power-up pose (0, 0, 0), not fitted
+    counter_restarts: tuple[int, ...] = ()  # encoder frames the firmware re-primed on
+    implausible_frames: int = 0  # encoder frames the firmware refuses (not integrated)
+
+    def at(self, enc: IntArray) -> Reference:
+        """The reference at the encoder frames ``enc`` (all >= start)."""
+        k = enc - self.start
+        return Reference(
+            self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
+            self.restarts, self.exact_start, self.counter_restarts, self.implausible_frames,
+        )
+
+
+
+
+def build_reference(
+    enc: Encoders, onboard: Poses, robot: RobotProfile, integrator: str, *, power_up: bool,
+    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    breaks: IntArray | None = None,
+) -> Reference:
+    """Integrate the encoder deltas from the first on-board sample on."""
+    bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
+    e0 = 0 if power_up else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
+    geometry = Geometry.of(robot)
+    steps = firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s)
+    d_left, d_right = steps.d_left, steps.d_right
+    rel = integrate(d_left, d_right, geometry, integrator)
+    zero = np.zeros(1)
+    rel_x, rel_y = np.concatenate((zero, rel.x_m)), np.concatenate((zero, rel.y_m))
+    rel_h = np.concatenate((zero, rel.heading_rad))
+    at = onboard.enc - e0
+    starts = np.concatenate(([False], np.diff(enc.seq[e0:]) > 1))
+    if breaks is not None:  # encoder frames where the firmware resumed after a stall
+        inside = breaks[(breaks > e0) & (breaks < len(enc.seq))] - e0
+        starts[inside] = True
+    segment = np.cumsum(starts)
+    x0, y0, h0, exact = _start_pose(
+        onboard, _Relative(rel_x[at], rel_y[at], rel_h[at], segment[at]), power_up=power_up
+    )
+    cos0, sin0 = math.cos(h0), math.sin(h0)
+    x_m = x0 + cos0 * rel_x - sin0 * rel_y
+    y_m = y0 + sin0 * rel_x + cos0 * rel_y
+    x_m += _segment_offsets(segment, at, onboard.x_m - x_m[at])
+    y_m += _segment_offsets(segment, at, onboard.y_m - y_m[at])
+    return Reference(
+        start=e0,
+        x_m=x_m,
+        y_m=y_m,
+        heading_rad=h0 + rel_h,
+        distance_m=np.concatenate((zero, rel.distance_m)),
+        restarts=int(segment[-1]),
+        exact_start=exact,
+        counter_restarts=tuple(e0 + k for k in steps.reprimed),
+        implausible_frames=steps.refused,
+    )
+
+
+@dataclass
+class Steps:
+    """The count steps the firmware integrates between the accepted encoder frames of the log
+    (element k: into frame ``e0 + k + 1``), with its refusals."""
+
+    d_left: IntArray
+    d_right: IntArray
+    refused: int = 0  # frames beyond the plausibility bound, not integrated
+    reprimed: list[int] = field(default_factory=list)  # frames (from e0) a counter restart primed
+    open_from: int | None = None  # the last accepted frame when the log ends in a refusal run
+
+
+def firmware_steps(
+    enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: int | None
+) -> Steps:
+    """The steps as firmware/ecu.py takes them: a frame whose step from the last accepted one
+    exceeds ``MAX_WHEEL_SPEED_MM_S`` over its periods is refused (IMPLAUSIBLE_STEP, not
+    integrated); ``RESYNC_FRAMES`` refused frames plausible among themselves are a counter restart
+    (COUNTER_RESET): the odometry re-primes on the first of them and integrates one step from it to
+    the last. Vectorised; a short state machine runs only from each refused frame on. The bound is
+    computed in float (the firmware's Q48 integer bound may differ by a count at the limit)."""
+    left, right = enc.left[e0:], enc.right[e0:]
+    seq = enc.seq[e0:]
+    steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
+    if max_wheel_speed_mm_s is None:
+        return steps
+    travel_m = max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
+    bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
+             math.ceil(travel_m / geometry.m_per_count_right) + 1)
+
+    def delta(a: int, b: int) -> tuple[int, int]:
+        return (int(wrap_delta(int(left[b]) - int(left[a]), bits)),
+                int(wrap_delta(int(right[b]) - int(right[a]), bits)))
+
+    def plausible(a: int, b: int) -> bool:
+        periods = max(1, int(seq[b] - seq[a]))
+        d = delta(a, b)
+        return abs(d[0]) <= periods * bound[0] and abs(d[1]) <= periods * bound[1]
+
+    periods = np.maximum(1, np.diff(seq))
+    bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])
+    k = 0
+    for first_bad in np.flatnonzero(bad).tolist():
+        if first_bad + 1 <= k:
+            continue  # handled by the state machine of an earlier refusal
+        k = _refusals(steps, first_bad, len(left), plausible, delta)
+        if k == len(left):
+            steps.open_from = first_bad
+    return steps
+
+
+def _refusals(
+    steps: Steps,
+    prev: int,
+    n_frames: int,
+    plausible: Any,
+    delta: Any,
+) -> int:
+    """Run the firmware's refusal logic from frame ``prev + 1`` (``prev`` accepted) until a frame
+    is accepted again; return that frame (``n_frames`` at the end of the log)."""
+    resync_first: int | None = None
+    resync_last = 0
+    resync_frames = 0
+    for k in range(prev + 1, n_frames):
+        if plausible(prev, k):
+            steps.d_left[k - 1], steps.d_right[k - 1] = delta(prev, k)
+            return k
+        steps.refused += 1
+        steps.d_left[k - 1] = steps.d_right[k - 1] = 0
+        if resync_first is not None and plausible(resync_last, k):
+            resync_frames += 1
+        else:
+            resync_first, resync_frames = k, 1
+        resync_last = k
+        if resync_frames >= RESYNC_FRAMES:  # COUNTER_RESET: re-prime on the first, step to k
+            steps.d_left[k - 1], steps.d_right[k - 1] = delta(resync_first, k)
+            steps.reprimed.append(resync_first)
+            return k
+    return n_frames
+
+
+def _segment_offsets(segment: IntArray, at: IntArray, error: FloatArray) -> FloatArray:
+    """Position corrections per encoder frame after gaps in the encoder sequence.
+
+    Across a gap the firmware may have integrated frames the log does not hold (a logger that
+    missed them): the heading stays exact (a function of the absolute counts) but the position's
+    path over the gap is unknown. Each segment after a gap is therefore placed like the start:
+    the middle of the overlap of its on-board samples' rounding intervals (a segment without a
+    sample keeps the previous correction). Segment 0 (the start) is not moved.
+    """
+    n_segments = int(segment[-1]) + 1
+    offsets = np.full(n_segments, np.nan)
+    offsets[0] = 0.0
+    seg_of_sample = segment[at]
+    bounds = np.searchsorted(seg_of_sample, np.arange(n_segments + 1))
+    for k in np.flatnonzero(bounds[2:] > bounds[1:-1]) + 1:
+        offsets[k] = _overlap_mid(error[bounds[k] : bounds[k + 1]], POSITION_LSB_M, base=True)
+    filled = np.maximum.accumulate(np.where(np.isnan(offsets), 0, np.arange(n_segments)))
+    result: FloatArray = offsets[filled][segment]
+    return result
+
+
+@dataclass(frozen=True)
+class _Relative:
+    """The reference's increments from the start to each on-board sample."""
+
+    x_m: FloatArray
+    y_m: FloatArray
+    heading_rad: FloatArray
+    segment: IntArray  # gaps of the encoder sequence before the sample
+
+
+def _start_pose(
+    onboard: Poses, rel: _Relative, *, power_up: bool
+) -> tuple[float, float, float, bool]:
+    """The start pose (x m, y m, unwrapped heading rad) and whether it is the exact power-up pose
+    (module docstring, step 4). The position uses only the samples before the first gap of the
+    encoder sequence (the heading, exact across gaps, uses them all)."""
+    n_first = max(1, int(np.searchsorted(rel.segment, 1)))
+    h_first = onboard.heading_raw[0] * HEADING_LSB_RAD
+    offsets = wrap_pi(onboard.heading_raw * HEADING_LSB_RAD - rel.heading_rad - h_first)
+    lo = float(np.max(offsets)) - 0.5 * HEADING_LSB_RAD
+    hi = float(np.min(offsets)) + 0.5 * HEADING_LSB_RAD
+    if power_up:
+        return 0.0, 0.0, 0.0, True
+    if lo <= hi:  # consistent: the middle of the whole log's overlap, refined by the positions
+        dh = 0.5 * (lo + hi)
+        dh += _rotation_fit(onboard, rel, h_first + dh, (lo - dh, hi - dh))
+    else:  # the samples disagree (a wrong firmware): place it on the first samples only
+        dh = _overlap_mid(offsets[:START_FIT_SAMPLES], HEADING_LSB_RAD)
+    h0 = h_first + dh
+    n = min(START_FIT_SAMPLES, n_first)
+    cos0, sin0 = math.cos(h0), math.sin(h0)
+    px = cos0 * rel.x_m[:n] - sin0 * rel.y_m[:n]
+    py = sin0 * rel.x_m[:n] + cos0 * rel.y_m[:n]
+    x0 = onboard.x_m[0] + _overlap_mid(onboard.x_m[:n] - px - onboard.x_m[0], POSITION_LSB_M)
+    y0 = onboard.y_m[0] + _overlap_mid(onboard.y_m[:n] - py - onboard.y_m[0], POSITION_LSB_M)
+    turns = math.floor((onboard.heading_rad[0] - h_first) / (2 * math.pi) + 0.5)
+    return float(x0), float(y0), float(h0 + turns * 2 * math.pi), False
+
+
+def _rotation_fit(
+    onboard: Poses, rel: _Relative, h0: float, bounds: tuple[float, float]
+) -> float:
+    """The small rotation (rad) of the reference about the start that best fits the on-board
+    positions (least squares over every sample, each segment between gaps of the encoder
+    sequence with a position offset of its own), kept within ``bounds``. Linearised:
+    R(h0 + d) q = R(h0) q + d (-q_y, q_x)."""
+    cos0, sin0 = math.cos(h0), math.sin(h0)
+    qx = cos0 * rel.x_m - sin0 * rel.y_m
+    qy = sin0 * rel.x_m + cos0 * rel.y_m
+    bx = onboard.x_m - onboard.x_m[0] - qx
+    by = onboard.y_m - onboard.y_m[0] - qy
+    # normal equations of [1 0 -qy; 0 1 qx] (x_s, y_s, d) = (bx, by): offsets eliminated
+    qx_c, qy_c, bx_c, by_c = (_centred(v, rel.segment) for v in (qx, qy, bx, by))
+    spread = float(np.dot(qx_c, qx_c) + np.dot(qy_c, qy_c))
+    if spread <= (POSITION_LSB_M * POSITION_LSB_M) * len(qx):  # no lever arm: nothing to learn
+        return 0.0
+    d = float(np.dot(qx_c, by_c) - np.dot(qy_c, bx_c)) / spread
+    return min(max(d, bounds[0]), bounds[1])
+
+
+def _centred(values: FloatArray, segment: IntArray) -> FloatArray:
+    """``values`` less the mean of their segment."""
+    sums = np.bincount(segment, weights=values)
+    counts = np.maximum(np.bincount(segment), 1)
+    centred: FloatArray = values - (sums / counts)[segment]
+    return centred
+
+
+def _overlap_mid(offsets: FloatArray, lsb: float, *, base: bool = False) -> float:
+    """Middle of the overlap of [o - lsb/2, o + lsb/2] over ``offsets``, kept within the first
+    interval (around 0, or around ``offsets[0]`` with ``base``)."""
+    first = float(offsets[0]) if base else 0.0
+    lo = float(np.max(offsets)) - 0.5 * lsb
+    hi = float(np.min(offsets)) + 0.5 * lsb
+    return min(max(0.5 * (lo + hi), first - 0.5 * lsb), first + 0.5 * lsb)
+
+
+def wrap_pi(angle: FloatArray) -> FloatArray:
+    """Wrap to (-pi, pi], the one convention (``odocan.sim.truth.wrap_angle`` for arrays)."""
+    wrapped: FloatArray = math.pi - (math.pi - angle) % (2 * math.pi)
+    return wrapped
+
+

@@ -1,0 +1,315 @@
+"""The inputs of the analysis, from the frames: E2E-accepted rows decoded with the DBC, the
+encoder sequence, the exact alignment of the pose and truth frames to the encoder frames they name,
+and whether the log starts at the firmware's power-up (``host.judge.analysis`` module docstring,
+steps 1 to 3 and the power-up rule of step 4)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.reference import INTEGRATORS
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.sim import contract
+from odocan.sim.exceptions import OdocanError
+
+# One LSB of the pose signals, from the DBC's scales (the single source of truth): X, Y 0.1 mm,
+# HEADING a 16-bit binary angle (2 pi / 65536 rad).
+POSITION_LSB_M = float(contract.message("ODOM_POSE_X").get_signal_by_name("X").scale)
+HEADING_LSB_RAD = float(contract.message("ODOM_POSE_X").get_signal_by_name("HEADING").scale)
+WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+SILENCE_CYCLES = 8  # pose frames this many encoder cycles apart: the firmware was stalled
+START_FIT_SAMPLES = 256  # on-board samples used to place the reference start (5 s at 50 Hz)
+ENC_E2E_PAGE = 2  # ODOM_STATUS page with the firmware's WHEEL_ENCODERS E2E counts
+REQUIRED = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y")
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+class AnalysisError(OdocanError):
+    """The frames cannot be analysed: DBC and log do not match, nothing to compare, ..."""
+
+
+
+@dataclass(frozen=True)
+class Encoders:
+    """The accepted WHEEL_ENCODERS frames, in bus order."""
+
+    index: IntArray  # position in the frames
+    counter: IntArray  # E2E COUNTER
+    seq: IntArray  # the sender's sequence number (COUNTER unwrapped), strictly increasing
+    left: IntArray  # LEFT_COUNT (wire, 24 bits)
+    right: IntArray
+    timestamp_s: FloatArray
+    cycle_s: float | None  # the DBC cycle time
+
+
+@dataclass(frozen=True)
+class Poses:
+    """Samples of a pose (on-board or truth), one per encoder frame, sorted by it."""
+
+    enc: IntArray  # index into Encoders
+    x_m: FloatArray
+    y_m: FloatArray
+    heading_rad: FloatArray  # on-board: TURNS * 2 pi + HEADING; truth: HEADING (wrapped)
+    heading_raw: IntArray  # HEADING, BAM16
+
+
+
+# --- inputs ---------------------------------------------------------------------------------
+
+
+def require_messages(decoder: BulkDecoder) -> None:
+    """The DBC must define the messages the analysis reads."""
+    missing = []
+    for name in REQUIRED:
+        try:
+            decoder.message(name)
+        except DecodeError:
+            missing.append(name)
+    if missing:
+        raise AnalysisError(f"the DBC does not define {', '.join(missing)}: not the odocan DBC?")
+
+
+def accepted_rows(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, name: str
+) -> dict[str, np.ndarray]:
+    """The decoded frames of ``name`` that passed E2E; an error when there are none."""
+    decoded = decoder.decode(frames, name)
+    keep = accepted[decoded["index"]]
+    if not keep.any():
+        message = decoder.message(name)
+        if len(keep) == 0:
+            raise AnalysisError(
+                f"no {name} frame (ID 0x{message.frame_id:03X}, {message.length} bytes) in the "
+                "log: the DBC does not match the log"
+            )
+        raise AnalysisError(
+            f"none of the {len(keep)} {name} frames passes its E2E check: "
+            "the DBC does not match the log"
+        )
+    return {key: value[keep] for key, value in decoded.items()}
+
+
+def pick_integrator(
+    frames: FrameArrays,
+    accepted: npt.NDArray[np.bool_],
+    decoder: BulkDecoder,
+    integrator: str | None,
+) -> tuple[str, str]:
+    """The integrator given, or the last one ODOM_STATUS's summary page reports."""
+    if integrator is not None:
+        if integrator not in INTEGRATORS:
+            raise AnalysisError(
+                f"unknown integrator {integrator!r} (known: {', '.join(INTEGRATORS)})"
+            )
+        return integrator, "argument"
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
+        signal = decoder.message("ODOM_STATUS").get_signal_by_name("INTEGRATOR")
+    except (DecodeError, KeyError):
+        page, signal = {}, None
+    values = page["INTEGRATOR"][accepted[page["index"]]] if page else np.zeros(0)
+    if signal is None or len(values) == 0:
+        raise AnalysisError("no ODOM_STATUS summary in the log to tell the integrator: give it")
+    choices: dict[Any, Any] = dict(signal.choices or {})
+    name = str(choices.get(int(values[-1]), "")).lower()
+    if name not in INTEGRATORS:
+        raise AnalysisError(f"ODOM_STATUS reports an unknown integrator ({int(values[-1])})")
+    return name, "ODOM_STATUS"
+
+
+def encoder_frames(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
+) -> Encoders:
+    """The accepted encoder frames and their sender sequence numbers."""
+    enc = accepted_rows(frames, accepted, decoder, "WHEEL_ENCODERS")
+    counter = enc["COUNTER"].astype(np.int64)
+    step = (np.diff(counter) & 0xF).astype(np.int64)
+    cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS")
+    if cycle_s is not None and len(step):
+        periods = np.rint(np.diff(enc["timestamp_s"]) / cycle_s).astype(np.int64)
+        step = step + 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
+    seq = np.concatenate(([0], np.cumsum(step))).astype(np.int64)
+    return Encoders(
+        index=enc["index"], counter=counter, seq=seq,
+        left=enc["LEFT_COUNT"].astype(np.int64), right=enc["RIGHT_COUNT"].astype(np.int64),
+        timestamp_s=enc["timestamp_s"], cycle_s=cycle_s,
+    )
+
+
+def contract_cycle_s(decoder: BulkDecoder, name: str) -> float | None:
+    """A message's cycle time in seconds (None when it has none)."""
+    cycle_ms = decoder.message(name).cycle_time
+    return cycle_ms / 1000.0 if cycle_ms else None
+
+
+def match_encoder(
+    enc: Encoders, index: IntArray, enc_counter: IntArray, timestamp_s: FloatArray
+) -> IntArray:
+    """For frames at ``index`` (sent at ``timestamp_s``) naming ``enc_counter``: the encoder
+    frame named (index into ``enc``), -1 where it is not among the accepted encoder frames
+    (module docstring, step 3). The latest accepted encoder frame must be less than 8 cycles
+    older than the naming frame: else the frame named (-8..+7 from it) cannot be told from one
+    16 cycles away (after a gap of 16 frames, E2E refuses the next as a repetition)."""
+    latest = np.searchsorted(enc.index, index) - 1
+    result = np.full(len(index), -1, dtype=np.int64)
+    has = latest >= 0
+    if enc.cycle_s is not None:
+        age_s = timestamp_s - enc.timestamp_s[np.maximum(latest, 0)]
+        has &= age_s < 8 * enc.cycle_s
+    latest = latest[has]
+    offset = ((enc_counter[has] - enc.counter[latest] + 8) & 0xF) - 8
+    target = enc.seq[latest] + offset
+    found = np.minimum(np.searchsorted(enc.seq, target), len(enc.seq) - 1)
+    result[np.flatnonzero(has)] = np.where(enc.seq[found] == target, found, -1)
+    return result
+
+
+def _first_per_encoder(enc_idx: IntArray) -> tuple[IntArray, IntArray]:
+    """Encoder frames named (sorted, unique) and the first position naming each."""
+    named = enc_idx >= 0
+    uniq, first = np.unique(enc_idx[named], return_index=True)
+    return uniq, np.flatnonzero(named)[first]
+
+
+def onboard_samples(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders
+) -> tuple[Poses, int, FloatArray]:
+    """On-board samples (X and Y frames of one encoder frame); the poses left unmatched; and
+    when each sample's ODOM_POSE_Y was sent (s)."""
+    px = accepted_rows(frames, accepted, decoder, "ODOM_POSE_X")
+    py = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")
+    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"], px["timestamp_s"])
+    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"], py["timestamp_s"])
+    unmatched = int(np.count_nonzero(ex < 0) + np.count_nonzero(ey < 0))
+    ux, fx = _first_per_encoder(ex)
+    uy, fy = _first_per_encoder(ey)
+    both, ix, iy = np.intersect1d(ux, uy, assume_unique=True, return_indices=True)
+    if len(both) == 0:
+        raise AnalysisError(
+            "no ODOM_POSE_X/ODOM_POSE_Y pair names an encoder frame of the log: nothing to compare"
+        )
+    sx, sy = fx[ix], fy[iy]
+    heading_raw = px["HEADING"][sx].astype(np.int64)
+    turns = py["TURNS"][sy].astype(np.float64)
+    poses = Poses(
+        enc=both.astype(np.int64),
+        x_m=px["X"][sx] * POSITION_LSB_M,
+        y_m=py["Y"][sy] * POSITION_LSB_M,
+        heading_rad=turns * 2 * math.pi + heading_raw * HEADING_LSB_RAD,
+        heading_raw=heading_raw,
+    )
+    return poses, unmatched, py["timestamp_s"][sy].astype(np.float64)
+
+
+def after_stalls(
+    onboard: Poses, sent_s: FloatArray, enc: Encoders
+) -> tuple[Poses, IntArray]:
+    """Samples sent after the firmware was silent for ``SILENCE_CYCLES`` encoder cycles or more
+    while the log holds the encoder frames of that time (a stalled MCU, firmware/ecu.py
+    TIME_LOST): the first names a frame from before the silence
+    (its backlog), which ENC_COUNTER cannot resolve, so it is left out; and the firmware took the
+    frames it missed as one step, which a fine reference cannot follow on a curve, so the
+    reference's position restarts (a segment, like a gap) at the encoder frame after the last
+    sample before the silence. Returns the samples kept and those encoder frames (sorted)."""
+    if enc.cycle_s is None or len(sent_s) < 2:
+        return onboard, np.zeros(0, dtype=np.int64)
+    order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
+    sent = sent_s[order]
+    # Silent while the encoder frames went on (a log that lacks both is a recorder's gap).
+    heard = np.searchsorted(enc.timestamp_s, sent[1:]) - np.searchsorted(enc.timestamp_s, sent[:-1])
+    after = np.flatnonzero(
+        (np.diff(sent) >= SILENCE_CYCLES * enc.cycle_s) & (heard >= SILENCE_CYCLES - 1)
+    ) + 1
+    if len(after) == 0:
+        return onboard, np.zeros(0, dtype=np.int64)
+    keep = np.ones(len(sent_s), dtype=bool)
+    keep[order[after]] = False
+    breaks = np.unique(onboard.enc[order[after - 1]] + 1)
+    kept = Poses(onboard.enc[keep], onboard.x_m[keep], onboard.y_m[keep],
+                  onboard.heading_rad[keep], onboard.heading_raw[keep])
+    return kept, breaks.astype(np.int64)
+
+
+def truth_samples(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders
+) -> Poses:
+    """Truth samples (X, Y and HEADING parts naming one encoder frame); empty without SIM_TRUTH."""
+    try:
+        parts = [decoder.decode_page(frames, "SIM_TRUTH", part) for part in (0, 1, 2)]
+    except DecodeError:
+        parts = []
+    if not parts or any(len(p["index"]) == 0 for p in parts):
+        return empty_poses()
+    found = []
+    for p in parts:
+        keep = accepted[p["index"]]
+        named = match_encoder(
+            enc, p["index"][keep], p["ENC_COUNTER"][keep], p["timestamp_s"][keep]
+        )
+        uniq, first = _first_per_encoder(named)
+        found.append((uniq, np.flatnonzero(keep)[first]))
+    common = np.intersect1d(np.intersect1d(found[0][0], found[1][0]), found[2][0])
+    pick = [f[1][np.searchsorted(f[0], common)] for f in found]
+    heading_raw = parts[2]["HEADING"][pick[2]].astype(np.int64)
+    return Poses(
+        enc=common.astype(np.int64),
+        x_m=parts[0]["X"][pick[0]] * POSITION_LSB_M,
+        y_m=parts[1]["Y"][pick[1]] * POSITION_LSB_M,
+        heading_rad=heading_raw.astype(np.float64) * HEADING_LSB_RAD,
+        heading_raw=heading_raw,
+    )
+
+
+def empty_poses() -> Poses:
+    empty_f, empty_i = np.zeros(0), np.zeros(0, dtype=np.int64)
+    return Poses(empty_i, empty_f, empty_f, empty_f, empty_i)
+
+
+
+def starts_at_power_up(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, onboard: Poses
+) -> bool:
+    """The log starts at the firmware's power-up (module docstring, step 4): its first on-board
+    sample names the first accepted encoder frame and reads exactly 0, and the first accepted
+    ODOM_STATUS summary says UPTIME 0."""
+    if int(onboard.enc[0]) != 0 or int(onboard.heading_raw[0]) != 0:
+        return False
+    if onboard.x_m[0] != 0.0 or onboard.y_m[0] != 0.0 or onboard.heading_rad[0] != 0.0:
+        return False
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
+    except DecodeError:
+        return False
+    if "UPTIME" not in page:
+        return False
+    uptime = page["UPTIME"][accepted[page["index"]]]
+    return len(uptime) > 0 and int(uptime[0]) == 0 and saw_only_the_log(frames, accepted, decoder)
+
+
+def saw_only_the_log(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
+) -> bool:
+    """Whether the firmware had accepted exactly the log's encoder frames when it sent its first
+    ODOM_STATUS page of WHEEL_ENCODERS E2E counts (ENC_E2E_OK): then it primed on the log's first
+    encoder frame. True when the log has no such page (other firmwares need not send it)."""
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+    except DecodeError:
+        return True
+    if "ENC_E2E_OK" not in page or not accepted[page["index"]].any():
+        return True
+    keep = accepted[page["index"]]
+    first, ok = int(page["index"][keep][0]), int(page["ENC_E2E_OK"][keep][0])
+    encoders = decoder.select(frames, "WHEEL_ENCODERS")
+    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < first)))
+    return ok == in_log & 0xFFFF
+
+

@@ -1,0 +1,383 @@
+"""The first stages of the analysis over a log given chunk by chunk (``host.io.logs.iter_log``),
+with their state carried across chunk boundaries, so that the result is the whole log's.
+
+* ``StreamE2E``: AUTOSAR E2E Profile 2 (``host.protocol.e2e.check_frames``) a chunk at a time:
+  the same counts and the same accepted frames as one check of the whole log. The state of one
+  message is the tail of its frames from its last accepted one on (usually that one frame: the
+  sequence check of a frame depends only on the frames of its ID since the last accepted one,
+  and on the time since the previous frame of its ID); the tail is checked again in front of
+  the next chunk and its own verdicts taken off (``counts(tail + chunk) - counts(tail)``).
+* ``StreamEncoders``: the accepted WHEEL_ENCODERS frames and their place in the sender's sequence
+  (``host.judge.samples.encoder_frames``: the COUNTER unwrapped, widened by 16 where the
+  timestamps say more periods passed), carried by the last accepted frame's COUNTER, time and
+  sequence number: the integer sequence numbers are those of the whole log.
+
+* ``StreamPoses``: the on-board samples (``host.judge.samples.onboard_samples``: ODOM_POSE_X and
+  _Y naming one encoder frame, the first of each), carried by the last 16 encoder frames, the
+  pose frames that name a frame the log has not reached yet, and the halves not yet paired;
+  a sample is given out once no later frame can name its encoder frame.
+
+* ``StreamReference``: the steps as the firmware takes them (``reference_path.firmware_steps``:
+  plausibility refusals, counter restarts) and their integration from pose 0 (``reference.
+  integrate``), carried by the last accepted encoder frame (inside a refusal run, every frame
+  since it) and the running sums: ``np.cumsum`` continued from the carried sum is the whole
+  log's, bit for bit (adding the carried sum afterwards is not, and the test says so).
+
+Positions (``index``) are positions in the whole log (frames before the chunk counted).
+
+Not done yet (issue #14.1): the later stages (alignment, reference, comparison) still take the
+whole log, so ``odocan analyze`` still holds every frame (1 GB candump log: 2.5 GB max RSS,
+``bench/analyze_memory.py``). The plan for them, so that a one-chunk run and an n-chunk run give
+the same report bit for bit:
+
+* carried state: the last sample's send time (stalls), SIM_TRUTH's parts as ``StreamPoses``
+  carries the pose halves, the truth samples waiting for the next on-board one
+  (``compare.onboard_at``), the last two twist frames and their step-speed window, the
+  reference's increments back to the start of the segment being placed;
+* the whole-log quantities of the start fit: max/min of the heading overlap and of each
+  segment's position overlap are exact in any order; the rotation fit's sums (and the segment
+  means) are not, so they are to be summed in fixed blocks of samples aligned on the sample
+  number (a block's partial sum is complete only when its last sample arrives; the blocks are
+  then added in order): the same additions whatever the chunking;
+* passes over the file (``iter_log`` again): 1. samples, reference increments, overlaps -> the
+  start heading of the overlap; 2. the rotation fit and the segment offsets; 3. errors, truth,
+  twist, report; plot series decimated or written to disk.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cantools
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays, concat_frames, empty_frames
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.reference_path import firmware_steps
+from odocan.host.judge.samples import (
+    HEADING_LSB_RAD,
+    POSITION_LSB_M,
+    Encoders,
+    contract_cycle_s,
+)
+from odocan.host.protocol.decode import BulkDecoder, frame_keys
+from odocan.host.protocol.e2e import check_frames, e2e_messages
+
+Counts = dict[str, dict[str, int]]
+
+
+def _add(total: Counts, part: Counts, sign: int = 1) -> None:
+    """``total += sign * part``, per section and key."""
+    for name, counts in part.items():
+        into = total.setdefault(name, dict.fromkeys(counts, 0))
+        for key, value in counts.items():
+            into[key] = into.get(key, 0) + sign * value
+
+
+@dataclass
+class StreamE2E:
+    """``check_frames`` over a log fed chunk by chunk (module docstring)."""
+
+    db: cantools.database.can.Database
+    counts: Counts = field(default_factory=dict)  # so far: ``check_frames``' first result
+    _tail: FrameArrays = field(default_factory=empty_frames)
+
+    def feed(self, chunk: FrameArrays) -> npt.NDArray[np.bool_]:
+        """Check the next chunk; returns its accepted mask (the counts grow)."""
+        n_tail = len(self._tail)
+        both = concat_frames([self._tail, chunk]) if n_tail else chunk
+        counts, accepted = check_frames(both, self.db)
+        if n_tail:
+            tail_counts, _ = check_frames(self._tail, self.db)
+            _add(counts, tail_counts, -1)
+        _add(self.counts, counts)
+        self._tail = both.select(self._tails(both, accepted))
+        return accepted[n_tail:]
+
+    def _tails(self, frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> npt.NDArray[np.intp]:
+        """Positions of each protected message's frames (of its DLC) from its last accepted one
+        on, or its last frame when none was accepted, in bus order."""
+        keys = frame_keys(frames)
+        keep: list[npt.NDArray[np.intp]] = []
+        for key, config in e2e_messages(self.db).items():
+            if config.data_ids is None:
+                continue
+            of_id = np.flatnonzero((keys == key) & (frames.dlc == config.length))
+            if len(of_id) == 0:
+                continue
+            good = np.flatnonzero(accepted[of_id])
+            keep.append(of_id[int(good[-1]) if len(good) else len(of_id) - 1 :])
+        if not keep:
+            return np.zeros(0, dtype=np.intp)
+        return np.sort(np.concatenate(keep))
+
+
+@dataclass
+class StreamEncoders:
+    """The accepted WHEEL_ENCODERS frames of each chunk with their sequence numbers, as
+    ``host.judge.samples.encoder_frames`` numbers them over the whole log."""
+
+    decoder: BulkDecoder
+    _offset: int = 0  # frames of the log before the next chunk
+    _last: tuple[int, float, int] | None = None  # COUNTER, time s, seq of the last accepted
+
+    def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> Encoders:
+        """The chunk's accepted encoder frames (``index``: positions in the whole log)."""
+        rows = self.decoder.decode(chunk, "WHEEL_ENCODERS")
+        keep = accepted[rows["index"]]
+        counter = rows["COUNTER"][keep].astype(np.int64)
+        stamps = rows["timestamp_s"][keep]
+        cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        seq = self._numbered(counter, stamps, cycle_s)
+        encoders = Encoders(
+            index=rows["index"][keep] + self._offset, counter=counter, seq=seq,
+            left=rows["LEFT_COUNT"][keep].astype(np.int64),
+            right=rows["RIGHT_COUNT"][keep].astype(np.int64),
+            timestamp_s=stamps, cycle_s=cycle_s,
+        )
+        self._offset += len(chunk)
+        if len(counter):
+            self._last = (int(counter[-1]), float(stamps[-1]), int(seq[-1]))
+        return encoders
+
+    def _numbered(
+        self, counter: npt.NDArray[np.int64], stamps: npt.NDArray[np.float64],
+        cycle_s: float | None,
+    ) -> npt.NDArray[np.int64]:
+        """Sequence numbers, continuing from the last accepted frame of the chunks before."""
+        if self._last is not None:
+            counter = np.concatenate(([self._last[0]], counter))
+            stamps = np.concatenate(([self._last[1]], stamps))
+        step = (np.diff(counter) & 0xF).astype(np.int64)
+        if cycle_s is not None and len(step):
+            periods = np.rint(np.diff(stamps) / cycle_s).astype(np.int64)
+            step = step + 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
+        if self._last is None:
+            return np.concatenate(([0], np.cumsum(step))).astype(np.int64)
+        return (self._last[2] + np.cumsum(step)).astype(np.int64)
+
+
+@dataclass
+class _Halves:
+    """Pose frames of one kind (ODOM_POSE_X or _Y) not yet resolved: global frame position,
+    ENC_COUNTER, time, and the signal columns."""
+
+    index: npt.NDArray[np.int64]
+    enc_counter: npt.NDArray[np.int64]
+    timestamp_s: npt.NDArray[np.float64]
+    values: dict[str, np.ndarray]
+
+    @classmethod
+    def of(cls, rows: dict[str, np.ndarray], offset: int) -> _Halves:
+        values = {k: v for k, v in rows.items() if k not in ("index", "timestamp_s")}
+        return cls(rows["index"] + offset, rows["ENC_COUNTER"].astype(np.int64),
+                   rows["timestamp_s"], values)
+
+    def join(self, other: _Halves) -> _Halves:
+        return _Halves(
+            np.concatenate((self.index, other.index)),
+            np.concatenate((self.enc_counter, other.enc_counter)),
+            np.concatenate((self.timestamp_s, other.timestamp_s)),
+            {k: np.concatenate((v, other.values[k])) for k, v in self.values.items()},
+        )
+
+    def take(self, keep: npt.NDArray[np.bool_]) -> _Halves:
+        return _Halves(self.index[keep], self.enc_counter[keep], self.timestamp_s[keep],
+                       {k: v[keep] for k, v in self.values.items()})
+
+
+RECENT_ENCODERS = 16  # encoder frames kept from the chunks before: ENC_COUNTER names -8..+7
+
+
+@dataclass
+class StreamPoses:
+    """The on-board samples of ``host.judge.samples.onboard_samples`` (ODOM_POSE_X and
+    ODOM_POSE_Y naming one encoder frame, the first of each), chunk by chunk.
+
+    A pose frame resolves against the latest accepted encoder frame before it (-8..+7 in the
+    sequence): one naming a frame the log has not reached yet waits for the next chunk, and so
+    do the frames of its kind after it (the first frame naming an encoder frame wins). A
+    sample is given out once no later frame can name its encoder frame (its sequence number
+    more than 8 below every later frame's latest), in encoder order; ``enc`` counts the
+    accepted encoder frames of the whole log."""
+
+    decoder: BulkDecoder
+    unmatched: int = 0  # pose frames naming no accepted encoder frame of the log
+    _offset: int = 0
+    _enc_count: int = 0
+    _recent: dict[str, np.ndarray] = field(default_factory=dict)  # g, index, counter, seq, t
+    _pending: dict[str, _Halves] = field(default_factory=dict)
+    _first: dict[str, dict[int, tuple[int, dict[str, float], float]]] = field(
+        default_factory=lambda: {"ODOM_POSE_X": {}, "ODOM_POSE_Y": {}})
+
+    def feed(
+        self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_], enc: Encoders
+    ) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
+        """The samples that are final after this chunk (``enc`` its encoder frames from
+        ``StreamEncoders``): columns enc, x_m, y_m, heading_rad, heading_raw; and sent_s."""
+        known = self._known(enc)
+        floor = np.inf
+        for name in ("ODOM_POSE_X", "ODOM_POSE_Y"):
+            rows = self.decoder.decode(chunk, name)
+            keep = accepted[rows["index"]]
+            new = _Halves.of({k: v[keep] for k, v in rows.items()}, self._offset)
+            halves = self._pending[name].join(new) if name in self._pending else new
+            floor = min(floor, self._resolve(name, halves, known, final=False))
+        self._offset += len(chunk)
+        self._enc_count += len(enc.index)
+        self._recent = {k: v[-RECENT_ENCODERS:] for k, v in known.items()}
+        return self._emit(floor)
+
+    def finish(self) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
+        """The samples left at the end of the log."""
+        known = self._recent
+        for name, halves in list(self._pending.items()):
+            self._resolve(name, halves, known, final=True)
+        return self._emit(np.inf)
+
+    def _known(self, enc: Encoders) -> dict[str, np.ndarray]:
+        """The recent encoder frames and this chunk's: g (number in the log), index, counter,
+        seq, timestamp_s."""
+        now = {"g": self._enc_count + np.arange(len(enc.index), dtype=np.int64),
+               "index": enc.index, "counter": enc.counter, "seq": enc.seq,
+               "t": enc.timestamp_s}
+        if not self._recent:
+            return now
+        return {k: np.concatenate((self._recent[k], v)) for k, v in now.items()}
+
+    def _resolve(
+        self, name: str, halves: _Halves, known: dict[str, np.ndarray], *, final: bool
+    ) -> float:
+        """Resolve what can be (``final``: everything); returns the lowest sequence number a
+        frame not resolved yet may name (inf when none waits)."""
+        if len(known["seq"]) == 0:  # no encoder frame before any of them: none can match
+            self.unmatched += len(halves.index)
+            self._pending[name] = halves.take(np.zeros(len(halves.index), dtype=bool))
+            return np.inf
+        cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        latest = np.searchsorted(known["index"], halves.index) - 1
+        has = latest >= 0
+        if cycle_s is not None:
+            has &= halves.timestamp_s - known["t"][np.maximum(latest, 0)] < 8 * cycle_s
+        offset = ((halves.enc_counter - known["counter"][np.maximum(latest, 0)] + 8) & 0xF) - 8
+        target = known["seq"][np.maximum(latest, 0)] + offset
+        top = int(known["seq"][-1]) if len(known["seq"]) else -1
+        waits = has & (target > top) & (not final)
+        cut = int(np.argmax(waits)) if waits.any() else len(halves.index)
+        self._pending[name] = halves.take(np.arange(len(halves.index)) >= cut)
+        found = np.minimum(np.searchsorted(known["seq"], target[:cut]), len(known["seq"]) - 1)
+        hit = has[:cut] & (known["seq"][found] == target[:cut])
+        self.unmatched += int(np.count_nonzero(~hit))
+        firsts = self._first[name]
+        for j in np.flatnonzero(hit).tolist():
+            g = int(known["g"][found[j]])
+            if g not in firsts:
+                firsts[g] = (int(known["seq"][found[j]]),
+                             {k: v[j] for k, v in halves.values.items()},
+                             float(halves.timestamp_s[j]))
+        if cut == len(halves.index):
+            return float(top - 8) if not final else np.inf
+        return float(min(known["seq"][np.maximum(latest[cut:], 0)].min(), top) - 8)
+
+    def _emit(self, floor: float) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
+        """The samples of encoder frames below sequence ``floor``, in encoder order; halves
+        there that found no partner are dropped."""
+        xs, ys = self._first["ODOM_POSE_X"], self._first["ODOM_POSE_Y"]
+        done = sorted(g for g in xs.keys() | ys.keys()
+                      if (xs[g][0] if g in xs else ys[g][0]) < floor)
+        both = [g for g in done if g in xs and g in ys]
+        sx = [xs[g][1] for g in both]
+        sy = [ys[g][1] for g in both]
+        sent = np.array([ys[g][2] for g in both], dtype=np.float64)
+        for g in done:
+            xs.pop(g, None)
+            ys.pop(g, None)
+        heading_raw = np.array([s["HEADING"] for s in sx], dtype=np.int64)
+        turns = np.array([s["TURNS"] for s in sy]).astype(np.float64)
+        x = np.array([s["X"] for s in sx])
+        y = np.array([s["Y"] for s in sy])
+        samples = {
+            "enc": np.array(both, dtype=np.int64),
+            "x_m": x * POSITION_LSB_M,
+            "y_m": y * POSITION_LSB_M,
+            "heading_rad": turns * 2 * math.pi + heading_raw * HEADING_LSB_RAD,
+            "heading_raw": heading_raw,
+        }
+        return samples, sent
+
+
+@dataclass
+class StreamReference:
+    """The reference's increments from encoder frame 0 of the chunks fed (the steps as the
+    firmware takes them, ``reference_path.firmware_steps``, integrated as
+    ``reference.integrate`` from pose 0), chunk by chunk, element for element the whole log's.
+
+    Carried: the last accepted encoder frame (and, inside a run of refused frames, every frame
+    since it: the refusal state machine is run again from it, its earlier verdicts dropped), the
+    integer count sums and the running float sums (``np.cumsum`` continued from the carried
+    sum is the whole log's cumsum)."""
+
+    geometry: Geometry
+    integrator: str
+    bits: int
+    max_wheel_speed_mm_s: int | None
+    refused: int = 0
+    reprimed: list[int] = field(default_factory=list)  # encoder frames a counter restart primed
+    _window: dict[str, np.ndarray] = field(default_factory=dict)  # left, right, seq, g
+    _sums: tuple[int, int, float, float, float, float] = (0, 0, 0.0, 0.0, 0.0, 0.0)
+    _count: int = 0  # encoder frames fed
+
+    def feed(self, enc: Encoders) -> dict[str, np.ndarray]:
+        """The increments at this chunk's encoder frames: x_m, y_m, heading_rad, distance_m."""
+        g = self._count + np.arange(len(enc.index), dtype=np.int64)
+        first_chunk = self._count == 0
+        self._count += len(enc.index)
+        new = {"left": enc.left, "right": enc.right, "seq": enc.seq, "g": g}
+        win = ({k: np.concatenate((self._window[k], v)) for k, v in new.items()}
+               if self._window else new)
+        carried = len(win["g"]) - len(g)
+        if len(g) == 0:
+            return {k: np.zeros(0) for k in ("x_m", "y_m", "heading_rad", "distance_m")}
+        window = Encoders(index=win["g"], counter=win["g"] & 0xF, seq=win["seq"],
+                          left=win["left"], right=win["right"],
+                          timestamp_s=np.zeros(len(win["g"])), cycle_s=None)
+        steps = firmware_steps(window, 0, self.geometry, self.bits, self.max_wheel_speed_mm_s)
+        self.refused += steps.refused - max(0, carried - 1)  # carried refusals counted before
+        self.reprimed += [int(win["g"][k]) for k in steps.reprimed]  # decided in this window
+        skip = max(carried, 1) - 1  # step k leads into window frame k + 1
+        out = self._integrate(steps.d_left[skip:], steps.d_right[skip:])
+        last = steps.open_from if steps.open_from is not None else len(win["g"]) - 1
+        self._window = {k: v[last:] for k, v in win.items()}
+        if first_chunk:  # the very first frame: pose 0 before any step
+            out = {k: np.concatenate(([0.0], v)) for k, v in out.items()}
+        return out
+
+    def _integrate(
+        self, d_left: npt.NDArray[np.int64], d_right: npt.NDArray[np.int64]
+    ) -> dict[str, np.ndarray]:
+        """``reference.integrate`` from pose 0, continued from the carried sums."""
+        g = self.geometry
+        cum_l0, cum_r0, h_old0, sx0, sy0, dist0 = self._sums
+        ds_left = d_left * g.m_per_count_left
+        ds = 0.5 * (ds_left + d_right * g.m_per_count_right)
+        cum_left = np.cumsum(np.concatenate(([cum_l0], d_left)))[1:]
+        cum_right = np.cumsum(np.concatenate(([cum_r0], d_right)))[1:]
+        heading = (0.0 + (g.m_per_count_right / g.wheelbase_m) * cum_right
+                   - (g.m_per_count_left / g.wheelbase_m) * cum_left)
+        heading_old = np.concatenate(([h_old0], heading[:-1]))
+        if self.integrator == "euler":
+            direction = heading
+        else:
+            direction = 0.5 * (heading_old + heading)
+            if self.integrator == "exact":
+                ds = ds * np.sinc((heading - heading_old) / (2.0 * math.pi))
+        sx = np.cumsum(np.concatenate(([sx0], ds * np.cos(direction))))[1:]
+        sy = np.cumsum(np.concatenate(([sy0], ds * np.sin(direction))))[1:]
+        dist = np.cumsum(np.concatenate(([dist0], np.abs(0.5 * (ds_left + d_right
+                                                               * g.m_per_count_right)))))[1:]
+        if len(heading):
+            self._sums = (int(cum_left[-1]), int(cum_right[-1]), float(heading[-1]),
+                          float(sx[-1]), float(sy[-1]), float(dist[-1]))
+        return {"x_m": 0.0 + sx, "y_m": 0.0 + sy, "heading_rad": heading, "distance_m": dist}
