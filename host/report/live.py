@@ -197,8 +197,8 @@ def render_fleet(snapshot: dict[str, Any], *, source: str, elapsed_s: float, not
         state = str(status.get("state", "-"))
         if not row["online"]:
             state = "offline"
-        elif age_s > stale_after_s:
-            state = f"stale {age_s:.0f}s"
+        elif age_s > stale_after_s:  # infinite: only retained messages, never heard live
+            state = f"stale {age_s:.0f}s" if math.isfinite(age_s) else "stale"
         table.add_row(
             name, num(pose.get("x_m"), ".4f"), num(pose.get("y_m"), ".4f"),
             num(pose.get("heading_rad"), ".4f"), scaled(error.get("dpos_m")),
