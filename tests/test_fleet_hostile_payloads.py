@@ -4,7 +4,8 @@ Anyone who may publish under ``odocan/<robot>/`` (a third-party bridge, a test t
 without ACLs) can send a pose of ``{"x_m": 1e400-as-an-integer}`` or ``{"x_m": "1"}``. JSON
 parses both. ``odocan fleet --foxglove``'s follower used to die on the first (``float()`` of a
 400-digit integer raised OverflowError out of its message loop: Foxglove went silent for the
-rest of the run, with a thread traceback on stderr). The fleet table: tests/test_fleet_table_hostile.py.
+rest of the run, with a thread traceback on stderr). The fleet table:
+tests/test_fleet_table_hostile.py.
 """
 
 from __future__ import annotations
