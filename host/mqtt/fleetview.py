@@ -13,6 +13,7 @@ Each iteration yields the whole table (robot name -> ``RobotState``) after at mo
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
@@ -48,8 +49,15 @@ _LEAF_FIELD = {"status": "status", "pose": "pose", "reference": "reference", "tr
                "error": "error", "rates": "rates", topics.RESULT_LEAF: "last_result"}
 
 
-def apply(table: dict[str, RobotState], topic_name: str, payload: bytes) -> bool:
-    """Fold one message into ``table``; False when it is not a robot topic or not JSON."""
+def apply(
+    table: dict[str, RobotState], topic_name: str, payload: bytes, *, retained: bool = False
+) -> bool:
+    """Fold one message into ``table``; False when it is not a robot topic or not JSON.
+
+    A live message updates the robot now. A ``retained`` one (the broker's copy, sent to a new
+    subscriber) is as old as its payload's ``unix_s`` says (the publisher's wall clock, s), or of
+    unknown age (the robot's ``updated_unix_s`` is left as it was): a robot gone for an hour
+    must not look alive because its last status is still on the broker."""
     split = topics.split(topic_name)
     if split is None or split[1] not in _LEAF_FIELD:
         return False
@@ -61,8 +69,23 @@ def apply(table: dict[str, RobotState], topic_name: str, payload: bytes) -> bool
         return False
     state = table.setdefault(split[0], RobotState(split[0]))
     setattr(state, _LEAF_FIELD[split[1]], data)
-    state.updated_unix_s = time.time()
+    now_unix_s = time.time()
+    if not retained:
+        state.updated_unix_s = now_unix_s
+    else:
+        sent_unix_s = _published_unix_s(data, now_unix_s)
+        if sent_unix_s is not None:
+            state.updated_unix_s = max(state.updated_unix_s, sent_unix_s)
     return True
+
+
+def _published_unix_s(data: dict[str, Any], now_unix_s: float) -> float | None:
+    """The payload's ``unix_s`` (s since the epoch, at most ``now_unix_s``), None if absent
+    or not a finite number."""
+    sent = data.get("unix_s")
+    if isinstance(sent, bool) or not isinstance(sent, int | float) or not math.isfinite(sent):
+        return None
+    return min(float(sent), now_unix_s)
 
 
 async def fleet_states(
@@ -77,7 +100,7 @@ async def fleet_states(
             payload = message.payload
             if not isinstance(payload, bytes | bytearray):
                 continue
-            if apply(table, message.topic.value, bytes(payload)):
+            if apply(table, message.topic.value, bytes(payload), retained=message.retain):
                 now = time.monotonic()
                 if now - last >= min_interval_s:
                     last = now

@@ -66,6 +66,7 @@ class FleetFoxglove:
         self._context = foxglove.Context()
         self._channels: dict[str, foxglove.Channel] = {}
         self.published = 0
+        self.skipped = 0  # MQTT messages that raised while being served (none expected)
         self._lock = threading.Lock()
         self._channel("/tf", "foxglove.FrameTransform")
         for name in robots:
@@ -145,7 +146,7 @@ class FleetFoxglove:
                 async with aiomqtt.Client(**kwargs, identifier=identifier) as client:
                     await client.subscribe(f"{topics.PREFIX}/+/#", qos=topics.QOS_TELEMETRY)
                     async for message in client.messages:
-                        self._on_mqtt(message.topic.value, message.payload)
+                        self._on_mqtt_guarded(message.topic.value, message.payload)
             except aiomqtt.MqttError as exc:
                 why = str(exc) or type(exc).__name__
                 if why != said:  # once per distinct problem, not once a second
@@ -153,6 +154,14 @@ class FleetFoxglove:
                     print(f"foxglove: broker {broker}: {why} (retrying every {RECONNECT_S:g} s)",
                           file=sys.stderr, flush=True)
                 await asyncio.sleep(RECONNECT_S)
+
+    def _on_mqtt_guarded(self, topic_name: str, payload: object) -> None:
+        """``_on_mqtt``; a message it cannot serve is counted in ``skipped``, never raised: one
+        message must not stop the live view for the rest of the fleet's run."""
+        try:
+            self._on_mqtt(topic_name, payload)
+        except Exception:  # house rule 6: no single message stops the node
+            self.skipped += 1
 
     def _on_mqtt(self, topic_name: str, payload: object) -> None:
         split = topics.split(topic_name)
@@ -173,12 +182,21 @@ class FleetFoxglove:
 
 
 def _numbers(payload: dict[str, Any], *keys: str) -> tuple[float, ...] | None:
-    """The finite numbers under ``keys``, or None when one is missing or not a finite number."""
-    values = [payload.get(key) for key in keys]
-    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
-        return None
-    numbers = tuple(float(v) for v in values if isinstance(v, int | float))
-    return numbers if all(math.isfinite(v) for v in numbers) else None
+    """The finite numbers under ``keys``, or None when one is missing or not a finite number
+    (a JSON integer beyond every float, ``1`` followed by 400 zeros, is not one)."""
+    numbers = []
+    for key in keys:
+        value = payload.get(key)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            return None
+        try:
+            number = float(value)
+        except OverflowError:
+            return None
+        if not math.isfinite(number):
+            return None
+        numbers.append(number)
+    return tuple(numbers)
 
 
 class FollowerThread:

@@ -157,15 +157,28 @@ def unknown_line(unknown: dict[str, Any]) -> Text:
     return Text(f"not checked: {text}" + (f" (IDs {ids})" if ids else ""), style="yellow")
 
 
+def real(value: Any) -> float | None:
+    """``value`` as a finite float; None for anything else (None, text, a list, NaN, a bool, a
+    JSON integer beyond every float): what MQTT hands the fleet view is not trusted."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
+
+
 def num(value: Any, spec: str) -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-"
-    return format(value, spec)
+    """``value`` formatted with ``spec``, or ``-`` when it is not a finite number."""
+    number = real(value)
+    return "-" if number is None else format(value if isinstance(value, int) else number, spec)
 
 
-def scaled(value: float | None, decimals: int = 4) -> str:
-    """Metres as mm, radians as mrad."""
-    return "-" if value is None else f"{value * 1e3:.{decimals}f}"
+def scaled(value: Any, decimals: int = 4) -> str:
+    """Metres as mm, radians as mrad (``-`` when not a finite number)."""
+    number = real(value)
+    return "-" if number is None else f"{number * 1e3:.{decimals}f}"
 
 
 # --- the MQTT fleet -------------------------------------------------------------------------
@@ -197,8 +210,8 @@ def render_fleet(snapshot: dict[str, Any], *, source: str, elapsed_s: float, not
         state = str(status.get("state", "-"))
         if not row["online"]:
             state = "offline"
-        elif age_s > stale_after_s:
-            state = f"stale {age_s:.0f}s"
+        elif age_s > stale_after_s:  # infinite: only retained messages, never heard live
+            state = f"stale {age_s:.0f}s" if math.isfinite(age_s) else "stale"
         table.add_row(
             name, num(pose.get("x_m"), ".4f"), num(pose.get("y_m"), ".4f"),
             num(pose.get("heading_rad"), ".4f"), scaled(error.get("dpos_m")),
@@ -243,7 +256,8 @@ def with_staleness(snapshot: dict[str, Any], now_unix_s: float,
 
 def _worst_first(item: tuple[str, dict[str, Any]]) -> tuple[int, float, str]:
     name, row = item
-    dpos_m = (row.get("error") or {}).get("dpos_m")
-    if dpos_m is None or not math.isfinite(dpos_m):
+    error = row.get("error")
+    dpos_m = real(error.get("dpos_m")) if isinstance(error, dict) else None
+    if dpos_m is None:
         return (1, 0.0, name)
     return (0, -dpos_m, name)
