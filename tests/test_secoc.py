@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import random
 from pathlib import Path
 
@@ -339,6 +340,19 @@ def test_a_key_file_open_to_others_loads_with_a_warning(
     assert KEY.hex() not in caplog.text
 
 
+def test_a_wrong_key_open_to_others_is_only_the_error(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """One line: the file is no key, so its mode is not worth a warning."""
+    path = tmp_path / "bad.key"
+    path.write_bytes(b"\x01" * 15)
+    path.chmod(0o644)
+    with caplog.at_level("WARNING", logger="odocan.host.protocol.secoc"), \
+            pytest.raises(OdocanError, match="15 bytes"):
+        host.load_secoc_key(path)
+    assert caplog.records == []
+
+
 @pytest.mark.parametrize(
     ("content", "message"),
     [
@@ -362,11 +376,14 @@ def test_key_file_of_the_wrong_length_is_one_line_naming_the_path(
     assert KEY.hex() not in text
 
 
-@pytest.mark.parametrize("kind", ["missing", "directory"])
+@pytest.mark.parametrize("kind", ["missing", "directory", "fifo"])
 def test_unreadable_key_file_is_one_line_naming_the_path(tmp_path: Path, kind: str) -> None:
+    """A FIFO is refused before any read (reading it would block until a writer came)."""
     path = tmp_path / "secoc.key"
     if kind == "directory":
         path.mkdir()
+    elif kind == "fifo":
+        os.mkfifo(path)
     with pytest.raises(OdocanError, match=r"^cannot read SecOC key .*secoc\.key: \w") as caught:
         host.load_secoc_key(path)
     assert "\n" not in str(caught.value)
