@@ -14,6 +14,8 @@ import time
 
 from rich.console import Console
 
+from odocan.host.judge.monitor import fleet_snapshot, to_json
+from odocan.host.mqtt.fleetview import RobotState
 from odocan.host.report.live import render_fleet
 
 HUGE = b"1" + b"0" * 400
@@ -47,3 +49,34 @@ def test_the_fleet_table_draws_rows_with_hostile_values() -> None:
     # a sane error sorts first; rows without a usable one after it, by name
     order = [line.split()[0] for line in lines if line.startswith("robot0")]
     assert order == ["robot001", "robot002", "robot003"]
+
+
+def test_a_hostile_retained_status_or_rate_leaves_the_snapshot_whole() -> None:
+    """``monitor --mqtt --json`` builds its rows from retained messages anyone allowed to
+    publish can leave: an error mask that is no integer (or beyond every float), an enum that
+    is a list, rates that are strings stopped every later monitor with a traceback. Such a
+    status is no firmware summary (None) and such a rate is not counted; the rest stays."""
+    states = {
+        "robot001": RobotState("robot001", status={"state": "online", "firmware": {
+            "summary": {"error_mask": 0, "state": 1, "integrator": 2, "uptime": 5}}},
+            rates={"hz": {"WHEEL_ENCODERS": 100.0, "ODOM_POSE_X": 50}}),
+        "robot002": RobotState("robot002", status={"state": "online", "firmware": {
+            "summary": {"error_mask": "x"}}}, rates={"hz": {"WHEEL_ENCODERS": "fast"}}),
+        "robot003": RobotState("robot003", status={"firmware": {"summary": {
+            "error_mask": json.loads(HUGE)}}}, rates={"hz": {"A": json.loads(b"1e400"),
+                                                            "B": json.loads(HUGE), "C": 7}}),
+        "robot004": RobotState("robot004", status={"firmware": {"summary": {"state": [1]}}},
+                               rates={"hz": [1, 2]}),
+        "robot005": RobotState("robot005", status={"firmware": "x"}),
+    }
+    snapshot = fleet_snapshot(states)
+    good = snapshot["robot001"]
+    assert good["status"] == {"state": "OK", "integrator": "EXACT", "error_mask": 0,
+                              "errors": [], "uptime_s": 5}
+    assert (good["rate_hz"], good["encoder_hz"]) == (150.0, 100.0)
+    for name in ("robot002", "robot003", "robot004", "robot005"):
+        assert snapshot[name]["status"] is None, name
+    assert (snapshot["robot002"]["rate_hz"], snapshot["robot002"]["encoder_hz"]) == (None, None)
+    assert snapshot["robot003"]["rate_hz"] == 7.0
+    assert snapshot["robot004"]["rate_hz"] is None
+    assert json.loads(to_json(snapshot))["robot003"]["rate_hz"] == 7.0  # what --json prints

@@ -484,27 +484,57 @@ def fleet_snapshot(table: dict[str, RobotState], db: Database | None = None) -> 
 
 
 def _robot_row(state: RobotState, db: Database) -> dict[str, Any]:
-    summary = (state.status.get("firmware") or {}).get("summary") or {}
-    status_msg = db.get_message_by_name("ODOM_STATUS")
-    firmware = None
-    if summary:
-        mask = int(summary.get("error_mask", 0))
-        firmware = {"state": _shown(status_msg, "STATE", summary.get("state", 0)),
-                    "integrator": _shown(status_msg, "INTEGRATOR", summary.get("integrator", 0)),
-                    "error_mask": mask, "errors": error_names(mask),
-                    "uptime_s": summary.get("uptime")}
-    hz = state.rates.get("hz") or {}
+    hz = _rates_hz(state.rates)
     keys = ("x_m", "y_m", "heading_rad", "heading_unwrapped_rad")
     pose = {k: state.pose.get(k) for k in keys} if state.pose else None
     return {
         "online": state.online,
         "pose": pose,
         "error": state.error.get("pose_vs_reference"),
-        "status": firmware,
+        "status": _firmware_row(state.status, db),
         "rate_hz": round(sum(hz.values()), 3) if hz else None,
         "encoder_hz": hz.get("WHEEL_ENCODERS"),
         "updated_unix_s": state.updated_unix_s,
     }
+
+
+def _firmware_row(status: dict[str, Any], db: Database) -> dict[str, Any] | None:
+    """The firmware's summary in a retained status; None when there is none or it is not one
+    a bridge publishes (a status from anyone allowed to publish must not stop the monitor)."""
+    firmware = status.get("firmware")
+    summary = firmware.get("summary") if isinstance(firmware, dict) else None
+    if not isinstance(summary, dict) or not summary:
+        return None
+    mask = summary.get("error_mask", 0)
+    if not isinstance(mask, int) or not 0 <= mask < 1 << 32:
+        return None
+    status_msg = db.get_message_by_name("ODOM_STATUS")
+    try:
+        return {"state": _shown(status_msg, "STATE", summary.get("state", 0)),
+                "integrator": _shown(status_msg, "INTEGRATOR", summary.get("integrator", 0)),
+                "error_mask": mask, "errors": error_names(mask),
+                "uptime_s": summary.get("uptime")}
+    except (TypeError, ValueError, OverflowError):  # an enum that is no number nor name
+        return None
+
+
+def _rates_hz(rates: dict[str, Any]) -> dict[str, float]:
+    """The per-message rates of a rates payload that are finite numbers."""
+    hz = rates.get("hz")
+    if not isinstance(hz, dict):
+        return {}
+    return {name: rate for name, v in hz.items() if (rate := _finite(v)) is not None}
+
+
+def _finite(value: Any) -> float | None:
+    """``value`` as a finite float; None for anything else (a string, a bool, 1e400, 10**400)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
 
 
 # Rendering lives in host.report.live; these names stay importable from here.
