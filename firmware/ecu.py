@@ -390,13 +390,15 @@ class OdomEcu:
     def _step_periods_max(self, counter: int) -> int:
         """The most encoder periods that can separate this frame's sample from the last accepted
         one: n = the COUNTER advance (mod 16), plus whole counter cycles while n stays within the
-        periods since that sample (less than a period of queueing on either side; after a tick
-        that lost time, since the last sample before it). Exact in a regular stream (1)."""
+        periods since that sample, plus one (less than a period of queueing on either side: a
+        late frame was accepted a tick after its period, so its sample is a period older than
+        the budget says; after a tick that lost time, since the last sample before it). Exact in
+        a regular stream (1)."""
         prev = self._enc_prev_counter
         if prev is None:
             return 1
         advance = ((counter - prev) & COUNTER_MASK) or (COUNTER_MASK + 1)
-        budget = self._tick_budget  # <= STEP_PERIODS_MAX
+        budget = self._tick_budget + 1  # <= STEP_PERIODS_MAX + 1: u32
         if budget <= advance:
             return advance
         return advance + (((budget - advance) >> 4) << 4)

@@ -397,7 +397,8 @@ static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
 
 /* The most encoder periods that can separate this frame's sample from the last accepted one: n =
  * the COUNTER advance (mod 16, 0 read as 16), plus whole counter cycles while n stays within the
- * periods since that sample. Exact in a regular stream (1). At most STEP_PERIODS_MAX + 16. */
+ * periods since that sample, plus one (a period of queueing). Exact in a regular stream (1). At
+ * most STEP_PERIODS_MAX + 16. */
 static uint32_t step_periods_max(const struct odom_ecu *ecu, uint8_t counter)
 {
     int prev = ecu->enc_prev_counter;
@@ -408,7 +409,8 @@ static uint32_t step_periods_max(const struct odom_ecu *ecu, uint8_t counter)
     if (advance == 0u) {
         advance = COUNTER_MASK + 1u;
     }
-    uint32_t budget = ecu->tick_budget; /* <= STEP_PERIODS_MAX */
+    /* + 1: a late frame was accepted a tick after its period (a period of queueing) */
+    uint32_t budget = (uint32_t)ecu->tick_budget + 1u; /* <= STEP_PERIODS_MAX + 1 */
     if (budget <= advance) {
         return advance;
     }
