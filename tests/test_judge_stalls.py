@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import itertools
 import random
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,7 @@ from hypothesis import strategies as st
 
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
-from odocan.sim.robot import load
+from odocan.sim.robot import RobotProfile, load
 from tests.independent_checker import Robot, check
 from tests.synth_log import ENCODER_PERIOD_S, Synth, synthesize_stalled, wandering_drive
 from tests.test_judge_campaign import CLOSE_CALL, bound_counts, profile_of, robots, slow_drive
@@ -32,7 +33,7 @@ def _kobuki_drive(
     return wandering_drive(KOBUKI, steps, 0.004, seed)  # 0.4 m/s, arcs of both senses
 
 
-def _starts(synth: Synth):  # type: ignore[no-untyped-def]
+def _starts(synth: Synth) -> Callable[[float], tuple[float, float, float]]:
     return lambda t_s: synth.state[round(t_s / ENCODER_PERIOD_S)].pose
 
 
@@ -108,11 +109,10 @@ def test_a_wrong_pose_after_a_stall_fails_both_judges(tmp_path: Path) -> None:
     assert not analyze(read_log(path), KOBUKI).passed
 
 
-def _robot(profile: object) -> Robot:
-    p = profile  # RobotProfile
-    return Robot(p.counts_per_rev, round(p.wheel_radius_left_m * 1e9),  # type: ignore[attr-defined]
-                 round(p.wheel_radius_right_m * 1e9), round(p.wheelbase_m * 1e9),  # type: ignore[attr-defined]
-                 p.counter_bits)  # type: ignore[attr-defined]
+def _robot(p: RobotProfile) -> Robot:
+    """The checker's robot of a host profile (nanometres)."""
+    return Robot(p.counts_per_rev, round(p.wheel_radius_left_m * 1e9),
+                 round(p.wheel_radius_right_m * 1e9), round(p.wheelbase_m * 1e9), p.counter_bits)
 
 
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
