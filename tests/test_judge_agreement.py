@@ -7,22 +7,27 @@ robots with stalled and held firmwares (``tests/synth_log.synthesize_stalled``).
 from __future__ import annotations
 
 import itertools
+import math
 import random
 from collections.abc import Callable
 from pathlib import Path
 
 import can
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, Phase, assume, given, settings
 from hypothesis import strategies as st
 
+from odocan.host.experiments.drive import DriveResult
+from odocan.host.experiments.umbmark import Correction, model_fit
 from odocan.host.io.logs import parse_candump_line, read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance, analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.replay import ReplayInput, replay_and_analyze
 from odocan.host.mqtt.telemetry import RobotTelemetry
-from tests.independent_checker import Robot, check
+from odocan.sim.truth import Pose
+from tests.independent_checker import Robot, _Odometry, check
 from tests.synth_log import ENCODER_PERIOD_S, Synth, synthesize_stalled
 from tests.test_judge_campaign import bound_counts, profile_of, robots, slow_drive
 
@@ -135,3 +140,63 @@ def test_a_random_jitter_does_not_change_the_live_verdict() -> None:
     for position_m, heading_rad in _live_errors(robot, "exact", lines):
         assert position_m <= POSITION_SLACK_LSB * POSITION_LSB_M
         assert heading_rad <= HEADING_SLACK_LSB * HEADING_LSB_RAD
+
+
+# --- calibrate's estimator against the checker's odometry -------------------------------------
+
+
+def _square_counts(robot: Robot, side_m: float, sense: int) -> tuple[list[int], list[int]]:
+    """Per-period wheel count steps of a square (four sides, four quarter turns on the spot of
+    ``sense`` +1 ccw, -1 cw), with the profile's nominal geometry, at about 0.2 m/s."""
+    m_per_count = 2 * math.pi * robot.wheel_radius_left_nm * 1e-9 / robot.counts_per_rev
+    per_period = max(1, round(0.002 / m_per_count))
+    turn_counts = round(0.25 * math.pi * robot.wheelbase_nm * 1e-9 / m_per_count)
+    left: list[int] = []
+    right: list[int] = []
+    for _ in range(4):
+        n = max(1, round(side_m / (per_period * m_per_count)))
+        left += [per_period] * n
+        right += [per_period] * n
+        turns = max(1, turn_counts // per_period)
+        step = turn_counts // turns
+        left += [-sense * step] * turns
+        right += [sense * step] * turns
+    return left, right
+
+
+def _drive_result(robot: Robot, truth: Robot, left: list[int], right: list[int]) -> DriveResult:
+    """A square driven by a robot whose real geometry is ``truth``: its raw 24-bit counters, and
+    the true end from the checker's own float64 odometry (exact arcs)."""
+    odo = _Odometry(truth, "exact")
+    for d_left, d_right in zip(left, right, strict=True):
+        odo.step(d_left, d_right)
+    wire = 1 << min(robot.counter_bits, 24)
+    counts = (np.concatenate(([0], np.cumsum(left))) % wire,
+              np.concatenate(([0], np.cumsum(right))) % wire)
+    end = Pose(0.0, odo.x, odo.y, odo.heading, 0.0)
+    return DriveResult((), end, (0.0, 0.0, 0.0), (counts[0].astype(np.int64),
+                                                  counts[1].astype(np.int64)))
+
+
+@settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    robot=robots(),
+    ed=st.sampled_from([0.995, 0.998, 1.002, 1.005]),
+    eb=st.sampled_from([0.98, 0.99, 1.01, 1.03]),
+)
+def test_calibrates_estimates_agree_with_the_checker(robot: Robot, ed: float, eb: float) -> None:
+    """``umbmark.model_fit`` (what ``odocan calibrate`` estimates E_d, E_b with) on squares
+    driven by a robot whose real geometry has E_d, E_b (the true ends from the checker's own
+    odometry, not the host's): the estimates within 1 % of the injected deviations."""
+    profile = profile_of(robot)
+    base = Correction.nominal(profile)
+    real = base.corrected(ed, eb)
+    truth = Robot(robot.counts_per_rev, round(real.wheel_radius_left_m * 1e9),
+                  round(real.wheel_radius_right_m * 1e9), round(real.wheelbase_m * 1e9),
+                  robot.counter_bits)
+    side_m = max(1.0, 10 * robot.wheelbase_nm * 1e-9)
+    drives = [_drive_result(robot, truth, *_square_counts(robot, side_m, sense))
+              for sense in (1, -1)]
+    got_ed, got_eb = model_fit(profile, base, drives)
+    assert abs(got_ed - ed) <= 0.01 * abs(ed - 1.0), (got_ed, ed)
+    assert abs(got_eb - eb) <= 0.01 * abs(eb - 1.0), (got_eb, eb)
