@@ -86,6 +86,7 @@ TICKS_PER_SECOND = 1_000_000 // TICK_PERIOD_US
 LOST_TIME_PERIODS = WATCHDOG_TICKS  # a tick this many periods after the previous one: time lost
 MAX_WHEEL_SPEED_MM_S = 4_000  # build-time maximum rim speed of either wheel (a #define)
 RESYNC_FRAMES = 3  # frames consistent with each other, not with the last one: counters restarted
+COUNTER_VALUES = 16  # E2E COUNTER values (4 bits): one whole counter cycle
 STEP_PERIODS_MAX = U16_MAX  # the twist's dt and the plausibility bound saturate here (655 s)
 TWIST_SUM_MAX = 1 << 32  # one tick's summed steps saturate at 4096 m (Q20) and 4 rad (Q30)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
@@ -208,6 +209,9 @@ class OdomEcu:
         self._tick_ds_q20_m = 0  # i64, saturated to +-2^32 (4096 m)
         self._tick_dheading_q30_rad = 0  # i64, saturated to +-2^32 (4 rad)
         self._tick_steps = 0
+        self._tick_periods = 0  # u16, saturated: the sample periods the summed steps span
+        self._tick_carried = False  # the sums hold steps of a tick that lost time
+        self._step_periods = 1  # u32: the sample periods of the step being accepted
         self._good_in_a_row = 0
         self._twist_mm_s = 0
         self._twist_mrad_s = 0
@@ -254,7 +258,10 @@ class OdomEcu:
         self._drain_mailbox()
         self._expire_held()
         if self._tick_steps and not self._time_lost_now:
-            self._update_twist(max(self._tick_budget, 1))
+            carried = self._tick_carried  # a stall's backlog: its frames' periods are unknown
+            self._update_twist(max(self._tick_budget, 1) if carried else self._tick_periods)
+        elif self._tick_steps:
+            self._tick_carried = True
         self._navigate()
         self._transmit_scheduled()
         self._watchdog()
@@ -349,6 +356,7 @@ class OdomEcu:
             self._on_implausible(frame.counter, wire, counts)
             return
         self._resync_first = None
+        self._step_periods = periods
         self._accept_encoders(frame.counter, wire, counts)
 
     def _accept_encoders(
@@ -463,6 +471,7 @@ class OdomEcu:
         self.odometry.unprime()
         self.odometry.step_counts(first[0], first[1])
         self._enc_prev_counter = None
+        self._step_periods = ((counter - first[2]) & COUNTER_MASK) or COUNTER_VALUES
         self._accept_encoders(counter, wire, counts)
 
     def _sum_step(self) -> None:
@@ -482,18 +491,24 @@ class OdomEcu:
             self.errors,
         )
         self._tick_steps += 1
+        self._tick_periods = min(self._tick_periods + self._step_periods, STEP_PERIODS_MAX)
 
     def _update_twist(self, periods: int) -> None:
-        """Speeds over this tick's steps, which cover the ``periods`` (1 .. STEP_PERIODS_MAX)
-        since the last accepted sample: firmware time, so lost frames, a burst after a stall
-        (summed over two ticks) and a late frame all give the true mean speed. Products
-        < 2^32 * 10^9 < 2^63. The sums restart."""
+        """Speeds over this tick's steps, which cover ``periods`` (1 .. STEP_PERIODS_MAX): the
+        sample periods of the steps (``_step_periods_max``: the COUNTER advance, whole counter
+        cycles from firmware time), so lost frames and a late frame (accepted a tick after its
+        period: one step in a tick of two periods, then two steps in a tick of one) give the true
+        mean speed; after a stall (summed over two ticks) the firmware time since the last sample
+        before it, as the backlog's sample times are unknown. Products < 2^32 * 10^9 < 2^63. The
+        sums restart."""
         dt_us = periods * ENCODER_PERIOD_US
         self._twist_mm_s = div_round_i64(self._tick_ds_q20_m * 1_000_000_000, dt_us << 20)
         self._twist_mrad_s = div_round_i64(self._tick_dheading_q30_rad * 1_000_000_000, dt_us << 30)
         self._tick_ds_q20_m = 0
         self._tick_dheading_q30_rad = 0
         self._tick_steps = 0
+        self._tick_periods = 0
+        self._tick_carried = False
 
     # --- SecOC: verify before acting ---
 

@@ -13,7 +13,7 @@ import pytest
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorFlag, Reason, State
 from tests.odo_helpers import geometry
-from tests.test_health_firmware import COUNTS_PER_PERIOD, TimedRig
+from tests.test_health_firmware import COUNTS_PER_PERIOD, TimedRig, _speed_mm_s
 
 
 def _late_then_lost(rig: TimedRig) -> None:
@@ -42,3 +42,36 @@ def test_a_late_frame_then_a_lost_one_keeps_the_distance(after: int) -> None:
     assert rig.ecu.odometry.x_q40_m / 2**40 == pytest.approx(
         (frames - 1) * COUNTS_PER_PERIOD * g.m_per_count_left, abs=1e-9
     )
+
+
+@pytest.mark.parametrize(("late_in_a_row", "then_lost"), [(1, False), (1, True), (2, False),
+                                                       (5, False)])
+def test_the_twist_is_the_true_speed_across_late_frames(
+    late_in_a_row: int, then_lost: bool
+) -> None:
+    """Frames a tick late (a 3 ms delay across a tick): one tick takes no step, a later one two;
+    the twist spans the steps' sample periods, not the ticks (it was half, then twice the speed:
+    0.124 and 0.635 m/s for a 0.25 and 0.32 m/s kobuki in a faulted run)."""
+    rig = TimedRig("exact")
+    for _ in range(20):
+        rig.step()
+    twists = []
+    held = rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD)
+    rig.tick()  # its frame is still on its way
+    for _ in range(late_in_a_row - 1):
+        late = rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD)
+        rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, held)
+        rig.tick()
+        twists.append(rig.ecu._twist_mm_s)
+        held = late
+    rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, held)
+    if then_lost:
+        rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD)
+        rig.tick()
+        twists.append(rig.ecu._twist_mm_s)
+    for _ in range(3):
+        rig.step()
+        twists.append(rig.ecu._twist_mm_s)
+    assert set(twists) == {_speed_mm_s(COUNTS_PER_PERIOD)}, twists
+    sent = [t["LINEAR_VEL"] for t in rig.hal.decoded("ODOM_TWIST")]
+    assert set(sent[-3:]) == {_speed_mm_s(COUNTS_PER_PERIOD)}

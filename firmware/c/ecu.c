@@ -123,6 +123,7 @@ void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
     derive_constants(params, &ecu->errors, &consts);
     odometry_init(&ecu->odometry, &consts, &ecu->errors);
     ecu->max_wheel_speed_mm_s = MAX_WHEEL_SPEED_MM_S;
+    ecu->step_periods = 1u;
     step_bounds(ecu);
     data_ids_of_slot(WHEEL_ENCODERS_E2E_SLOT, ecu->data_ids[0]);
     data_ids_of_slot(ODOM_SET_POSE_E2E_SLOT, ecu->data_ids[1]);
@@ -206,7 +207,11 @@ static void tick(struct odom_ecu *ecu, bool timed, uint32_t now_us)
     drain_mailbox(ecu);
     expire_held(ecu);
     if (ecu->tick_steps != 0u && !ecu->time_lost_now) {
-        update_twist(ecu, ecu->tick_budget > 1u ? ecu->tick_budget : 1u);
+        /* a stall's backlog: its frames' periods are unknown, firmware time then */
+        uint32_t budget = ecu->tick_budget > 1u ? ecu->tick_budget : 1u;
+        update_twist(ecu, ecu->tick_carried ? budget : ecu->tick_periods);
+    } else if (ecu->tick_steps != 0u) {
+        ecu->tick_carried = true;
     }
     navigate(ecu);
     transmit_scheduled(ecu);
@@ -338,6 +343,7 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
         return;
     }
     ecu->resync_first_valid = false;
+    ecu->step_periods = periods;
     accept_encoders(ecu, counter, wire, counts);
 }
 
@@ -498,6 +504,10 @@ static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32
     odometry_unprime(&ecu->odometry);
     (void)odometry_step_counts(&ecu->odometry, ecu->resync_first[0], ecu->resync_first[1]);
     ecu->enc_prev_counter = -1;
+    ecu->step_periods = ((uint32_t)counter - (uint32_t)ecu->resync_first_counter) & COUNTER_MASK;
+    if (ecu->step_periods == 0u) {
+        ecu->step_periods = COUNTER_MASK + 1u;
+    }
     accept_encoders(ecu, counter, wire, counts);
 }
 
@@ -513,11 +523,15 @@ static void sum_step(struct odom_ecu *ecu)
     ecu->tick_dheading_q30_rad = sat_range(ecu->tick_dheading_q30_rad + dheading_q30_rad,
                                            -TWIST_SUM_MAX, TWIST_SUM_MAX, &ecu->errors);
     ecu->tick_steps++;
+    uint32_t periods = ecu->tick_periods + ecu->step_periods; /* < 2^17 + 16 */
+    ecu->tick_periods = periods < STEP_PERIODS_MAX ? periods : STEP_PERIODS_MAX;
 }
 
-/* Speeds over this tick's steps, which cover the periods (1 .. STEP_PERIODS_MAX) since the last
- * accepted sample: firmware time, so lost frames, a burst after a stall and a late frame all give
- * the true mean speed. Products < 2^32 * 10^9 < 2^62; dt_us < 2^30, so dt_us << 30 < 2^60. The
+/* Speeds over this tick's steps, which cover the periods (1 .. STEP_PERIODS_MAX): the steps'
+ * sample periods (step_periods_max: the COUNTER advance, whole counter cycles from firmware time),
+ * so lost frames and a late frame (one step in a tick of two periods, then two in a tick of one)
+ * give the true mean speed; after a stall (summed over two ticks) the firmware time since the last
+ * sample before it, as the backlog's sample times are unknown. Products < 2^32 * 10^9 < 2^62; dt_us < 2^30, so dt_us << 30 < 2^60. The
  * sums restart. */
 static void update_twist(struct odom_ecu *ecu, uint32_t periods)
 {
@@ -529,6 +543,8 @@ static void update_twist(struct odom_ecu *ecu, uint32_t periods)
     ecu->tick_ds_q20_m = 0;
     ecu->tick_dheading_q30_rad = 0;
     ecu->tick_steps = 0u;
+    ecu->tick_periods = 0u;
+    ecu->tick_carried = false;
 }
 
 /* --- SecOC: verify before acting --- */
