@@ -211,7 +211,7 @@ class OdomEcu:
         self._tick_steps = 0
         self._tick_periods = 0  # u16, saturated: the sample periods the summed steps span
         self._tick_carried = False  # the sums hold steps of a tick that lost time
-        self._step_periods = 1  # u32: the sample periods of the step being accepted
+        self._this_step_periods = 1  # u32: the sample periods of the step being accepted
         self._good_in_a_row = 0
         self._twist_mm_s = 0
         self._twist_mrad_s = 0
@@ -351,12 +351,12 @@ class OdomEcu:
         frame = fr.unpack_wheel_encoders(data)
         wire = (frame.left_count, frame.right_count)
         counts = self._extend_counters(wire)
-        periods = self._step_periods_max(frame.counter)
+        periods = self._step_periods(frame.counter)
         if not self._plausible(self._counts_prev, counts, periods):
             self._on_implausible(frame.counter, wire, counts)
             return
         self._resync_first = None
-        self._step_periods = periods
+        self._this_step_periods = periods
         self._accept_encoders(frame.counter, wire, counts)
 
     def _accept_encoders(
@@ -395,18 +395,18 @@ class OdomEcu:
         self._counts_u32 = counts
         self._counts_prev = counts
 
-    def _step_periods_max(self, counter: int) -> int:
-        """The most encoder periods that can separate this frame's sample from the last accepted
-        one: n = the COUNTER advance (mod 16), plus whole counter cycles while n stays within the
-        periods since that sample, plus one (less than a period of queueing on either side: a
-        late frame was accepted a tick after its period, so its sample is a period older than
-        the budget says; after a tick that lost time, since the last sample before it). Exact in
-        a regular stream (1)."""
+    def _step_periods(self, counter: int) -> int:
+        """The encoder periods between this frame's sample and the last accepted one's: the
+        COUNTER advance n (mod 16), plus the whole counter cycles that bring it nearest to the
+        periods since that frame was accepted (after a tick that lost time, since the last sample
+        before it). Exact while the two frames' queueing differs by less than 8 periods (a frame
+        held 15 ms lands two ticks late: the nearest cycle, not the one below); n in a regular
+        stream (1)."""
         prev = self._enc_prev_counter
         if prev is None:
             return 1
-        advance = ((counter - prev) & COUNTER_MASK) or (COUNTER_MASK + 1)
-        budget = self._tick_budget + 1  # <= STEP_PERIODS_MAX + 1: u32
+        advance = ((counter - prev) & COUNTER_MASK) or COUNTER_VALUES
+        budget = self._tick_budget + COUNTER_VALUES // 2  # <= STEP_PERIODS_MAX + 8: u32
         if budget <= advance:
             return advance
         return advance + (((budget - advance) >> 4) << 4)
@@ -471,7 +471,7 @@ class OdomEcu:
         self.odometry.unprime()
         self.odometry.step_counts(first[0], first[1])
         self._enc_prev_counter = None
-        self._step_periods = ((counter - first[2]) & COUNTER_MASK) or COUNTER_VALUES
+        self._this_step_periods = ((counter - first[2]) & COUNTER_MASK) or COUNTER_VALUES
         self._accept_encoders(counter, wire, counts)
 
     def _sum_step(self) -> None:
@@ -491,11 +491,11 @@ class OdomEcu:
             self.errors,
         )
         self._tick_steps += 1
-        self._tick_periods = min(self._tick_periods + self._step_periods, STEP_PERIODS_MAX)
+        self._tick_periods = min(self._tick_periods + self._this_step_periods, STEP_PERIODS_MAX)
 
     def _update_twist(self, periods: int) -> None:
         """Speeds over this tick's steps, which cover ``periods`` (1 .. STEP_PERIODS_MAX): the
-        sample periods of the steps (``_step_periods_max``: the COUNTER advance, whole counter
+        sample periods of the steps (``_step_periods``: the COUNTER advance, whole counter
         cycles from firmware time), so lost frames and a late frame (accepted a tick after its
         period: one step in a tick of two periods, then two steps in a tick of one) give the true
         mean speed; after a stall (summed over two ticks) the firmware time since the last sample

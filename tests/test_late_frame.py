@@ -16,24 +16,30 @@ from tests.odo_helpers import geometry
 from tests.test_health_firmware import COUNTS_PER_PERIOD, TimedRig, _speed_mm_s
 
 
-def _late_then_lost(rig: TimedRig) -> None:
-    """Frame k arrives in the tick of period k + 1; frame k + 1 is lost on the bus."""
+def _late_then_lost(rig: TimedRig, late_ticks: int) -> None:
+    """Frame k arrives ``late_ticks`` ticks after its period (a 3 or 15 ms delay); the frames
+    sent meanwhile, and the next one, are lost on the bus: the E2E window shuts for 16 frames."""
     late = rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD)
     rig.tick()  # period k: its frame is still on its way
+    for _ in range(late_ticks - 1):
+        rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD)  # lost
+        rig.tick()
     rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, late)
-    rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD)  # frame k + 1: lost
+    rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD)  # lost
     rig.tick()
 
 
-@pytest.mark.parametrize("after", [20, 40])
-def test_a_late_frame_then_a_lost_one_keeps_the_distance(after: int) -> None:
+@pytest.mark.parametrize(("late_ticks", "after"), [(1, 20), (1, 40), (2, 20), (2, 40)])
+def test_a_late_frame_then_a_lost_one_keeps_the_distance(late_ticks: int, after: int) -> None:
     rig = TimedRig("euler")
     for _ in range(20):
         rig.step()
-    _late_then_lost(rig)
+    _late_then_lost(rig, late_ticks)
+    twists = []
     for _ in range(after):
         rig.step()
-    frames = 20 + 2 + after
+        twists.append(rig.ecu._twist_mm_s)
+    frames = 20 + 1 + late_ticks + after
     g = geometry(rig.ecu.params)
     assert rig.ecu.frames_implausible == 0
     assert not rig.ecu.errors.has(ErrorFlag.COUNTER_RESET)
@@ -42,6 +48,7 @@ def test_a_late_frame_then_a_lost_one_keeps_the_distance(after: int) -> None:
     assert rig.ecu.odometry.x_q40_m / 2**40 == pytest.approx(
         (frames - 1) * COUNTS_PER_PERIOD * g.m_per_count_left, abs=1e-9
     )
+    assert set(twists) == {_speed_mm_s(COUNTS_PER_PERIOD)}, twists  # the step across, too
 
 
 @pytest.mark.parametrize(("late_in_a_row", "then_lost"), [(1, False), (1, True), (2, False),

@@ -744,7 +744,7 @@ def _health_drive() -> None:
         for _ in range(3):
             rig.step()
         rig.ecu.isr_rx_overrun()  # the board's CAN FIFO overrun interrupt
-        rig.ecu._step_periods_max(rig.ecu._enc_prev_counter)  # a whole 16-period counter cycle
+        rig.ecu._step_periods(rig.ecu._enc_prev_counter)  # a whole 16-period counter cycle
     finally:
         for name in (HEALTH_SCENARIOS, "tests.test_ecu"):
             sys.modules.pop(name, None)

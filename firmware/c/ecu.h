@@ -99,7 +99,7 @@ struct odom_ecu {
     unsigned tick_steps;
     uint32_t tick_periods; /* the sample periods the summed steps span (u16, saturated) */
     bool tick_carried;     /* the sums hold steps of a tick that lost time */
-    uint32_t step_periods; /* the sample periods of the step being accepted */
+    uint32_t this_step_periods; /* the sample periods of the step being accepted */
     int good_in_a_row;
     int64_t twist_mm_s;
     int64_t twist_mrad_s;
