@@ -212,6 +212,7 @@ class OdomEcu:
         self._tick_periods = 0  # u16, saturated: the sample periods the summed steps span
         self._tick_carried = False  # the sums hold steps of a tick that lost time
         self._this_step_periods = 1  # u32: the sample periods of the step being accepted
+        self._tick_late = 0  # u32: periods this tick came after its due time
         self._good_in_a_row = 0
         self._twist_mm_s = 0
         self._twist_mrad_s = 0
@@ -250,6 +251,7 @@ class OdomEcu:
         (None: no timer, one period has passed)."""
         self._check_overflows()
         periods = self._advance_time(now_us)  # after: a stall's overrun is TIME_LOST
+        self._tick_late = periods - 1 if periods > 0 else 0  # its frames may have queued so long
         # The E2E window widens with time; fully after frames of unknown age (a stall's backlog).
         widen = COUNTER_MASK if self._samples_stale else min(periods, COUNTER_MASK)
         for _ in range(widen):
@@ -398,15 +400,17 @@ class OdomEcu:
     def _step_periods(self, counter: int) -> int:
         """The encoder periods between this frame's sample and the last accepted one's: the
         COUNTER advance n (mod 16), plus the whole counter cycles that bring it nearest to the
-        periods since that frame was accepted (after a tick that lost time, since the last sample
-        before it). Exact while the two frames' queueing differs by less than 8 periods (a frame
-        held 15 ms lands two ticks late: the nearest cycle, not the one below); n in a regular
-        stream (1)."""
+        periods since that frame was accepted (0 for a second frame in one tick; after a tick that
+        lost time, since the last sample before it), less the periods this tick came late (its
+        frames waited in the mailbox meanwhile). Exact while the two frames' queueing, beyond
+        that, differs by less than 8 periods (a frame held 15 ms lands two ticks late: the
+        nearest cycle, not the one below); n in a regular stream (1)."""
         prev = self._enc_prev_counter
         if prev is None:
             return 1
         advance = ((counter - prev) & COUNTER_MASK) or COUNTER_VALUES
-        budget = self._tick_budget + COUNTER_VALUES // 2  # <= STEP_PERIODS_MAX + 8: u32
+        since, late = self._periods_since_sample, self._tick_late
+        budget = (since - late if since > late else 0) + COUNTER_VALUES // 2  # <= U16_MAX + 8
         if budget <= advance:
             return advance
         return advance + (((budget - advance) >> 4) << 4)

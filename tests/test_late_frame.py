@@ -82,3 +82,50 @@ def test_the_twist_is_the_true_speed_across_late_frames(
     assert set(twists) == {_speed_mm_s(COUNTS_PER_PERIOD)}, twists
     sent = [t["LINEAR_VEL"] for t in rig.hal.decoded("ODOM_TWIST")]
     assert set(sent[-3:]) == {_speed_mm_s(COUNTS_PER_PERIOD)}
+
+
+def test_a_late_frame_after_a_hold_and_the_next_in_one_tick() -> None:
+    """The window reopens on a late frame 13 periods on (OKSOMELOST) and the next frame comes in
+    the same tick: one period after it, not a counter cycle (a 30-min faulted kobuki run: the
+    twist was 0.134 m/s for a 0.3 m/s robot)."""
+    rig = TimedRig("exact")
+    for _ in range(20):
+        rig.step()
+    _late_then_lost(rig, 1)  # the E2E window shuts
+    for _ in range(12):
+        rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD)  # refused (WRONGSEQUENCE), then lost
+        rig.tick()
+    late = rig.encoders(COUNTS_PER_PERIOD, COUNTS_PER_PERIOD)
+    rig.tick()
+    rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, late)  # 13 periods on: within the widened window
+    twists = []
+    for _ in range(4):
+        rig.step()
+        twists.append(rig.ecu._twist_mm_s)
+    assert set(twists) == {_speed_mm_s(COUNTS_PER_PERIOD)}, twists
+    g = geometry(rig.ecu.params)
+    assert rig.ecu.odometry.x_q40_m / 2**40 == pytest.approx(
+        (20 + 2 + 13 + 4 - 1) * COUNTS_PER_PERIOD * g.m_per_count_left, abs=1e-9
+    )
+
+
+@pytest.mark.parametrize("late_periods", [3, 9])
+def test_frames_queued_behind_a_late_tick_are_one_period_apart(late_periods: int) -> None:
+    """The tick comes ``late_periods`` periods late (below the lost-time limit): the frames of
+    those periods waited in the mailbox and are taken in one tick, each one period after the
+    one before, not a counter cycle (the twist stays the true speed)."""
+    rig = TimedRig("exact")
+    for _ in range(20):
+        rig.step()
+    for _ in range(late_periods):
+        rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, rig.encoders(COUNTS_PER_PERIOD,
+                                                              COUNTS_PER_PERIOD))
+    rig.tick(late_periods)
+    assert rig.ecu._twist_mm_s == _speed_mm_s(COUNTS_PER_PERIOD)
+    rig.step()
+    assert rig.ecu._twist_mm_s == _speed_mm_s(COUNTS_PER_PERIOD)
+    assert rig.ecu.frames_implausible == 0
+    g = geometry(rig.ecu.params)
+    assert rig.ecu.odometry.x_q40_m / 2**40 == pytest.approx(
+        (20 + late_periods) * COUNTS_PER_PERIOD * g.m_per_count_left, abs=1e-9
+    )

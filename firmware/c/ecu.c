@@ -197,6 +197,7 @@ static void tick(struct odom_ecu *ecu, bool timed, uint32_t now_us)
 {
     check_overflows(ecu);
     uint32_t periods = advance_time(ecu, timed, now_us); /* after: a stall's overrun is TIME_LOST */
+    ecu->tick_late = periods > 0u ? periods - 1u : 0u; /* its frames may have queued so long */
     /* The E2E window widens with time; fully after frames of unknown age (a stall's backlog). */
     uint32_t widen = ecu->samples_stale ? COUNTER_MASK : periods < COUNTER_MASK ? periods
                                                                                  : COUNTER_MASK;
@@ -403,7 +404,8 @@ static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
 
 /* The encoder periods between this frame's sample and the last accepted one's: the COUNTER
  * advance n (mod 16, 0 read as 16), plus the whole counter cycles that bring it nearest to the
- * periods since that frame was accepted. Exact while the two frames' queueing differs by less than
+ * periods since that frame was accepted (0 for a second frame in one tick), less the periods
+ * this tick came late (its frames waited in the mailbox meanwhile). Exact while the two frames' queueing differs by less than
  * 8 periods; n in a regular stream (1). At most STEP_PERIODS_MAX + 24. */
 static uint32_t step_periods(const struct odom_ecu *ecu, uint8_t counter)
 {
@@ -415,7 +417,8 @@ static uint32_t step_periods(const struct odom_ecu *ecu, uint8_t counter)
     if (advance == 0u) {
         advance = COUNTER_MASK + 1u;
     }
-    uint32_t budget = (uint32_t)ecu->tick_budget + 8u; /* <= STEP_PERIODS_MAX + 8 */
+    uint32_t since = ecu->periods_since_sample;
+    uint32_t budget = (since > ecu->tick_late ? since - ecu->tick_late : 0u) + 8u; /* <= 2^16 + 8 */
     if (budget <= advance) {
         return advance;
     }
