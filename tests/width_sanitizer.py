@@ -741,7 +741,7 @@ def _health_drive() -> None:
             rig.step()
         rig.ecu.isr_rx_overrun()  # the board's CAN FIFO overrun interrupt
         encoders = rig.ecu.encoders
-        encoders._step_periods_max(encoders._enc_prev_counter)  # a whole 16-period counter cycle
+        encoders._step_periods(encoders._enc_prev_counter)  # a whole 16-period counter cycle
     finally:
         for name in (HEALTH_SCENARIOS, "tests.test_ecu"):
             sys.modules.pop(name, None)

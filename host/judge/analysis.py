@@ -9,11 +9,17 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
 3. **Alignment, exact** (never by nearest time): a pose frame's ENC_COUNTER names the encoder frame
    the firmware had integrated last. It is resolved against the latest accepted encoder frame
    before the pose frame, L: the named frame is ``seq(L) + wrap_i4(ENC_COUNTER - COUNTER(L))``
-   (-8..+7 frames from L; normally 0). When that frame is accepted in the log, the pose belongs
-   to it; when it is not (the log missed a frame the firmware had), the pose is left out rather
-   than paired with a frame 16 counts older. ODOM_POSE_X and ODOM_POSE_Y naming the same encoder
-   frame make one on-board sample (the first of each, if the pose was sent again). SIM_TRUTH's
-   three parts (X, Y, HEADING) naming one encoder frame make one truth sample.
+   (-8..+7 frames from L; normally 0). When that frame is accepted in the log before the pose
+   frame, the pose belongs to it; when it is not (the log missed a frame the firmware had, or
+   it comes later: the firmware cannot have integrated it), the pose is left out rather than
+   paired with a frame 16 counts away. A pose naming the same ENC_COUNTER as the one its sender
+   sent just before (COUNTER + 1, less than ``SILENCE_CYCLES`` cycles earlier) names the same
+   frame: E2E refuses a repeated counter, so the firmware cannot have moved on by exactly 16
+   frames in one send period (a firmware held on one frame while the bus went on, e.g. its
+   E2E window shut after a late frame and a lost one, keeps naming it). ODOM_POSE_X and
+   ODOM_POSE_Y naming the same encoder frame make one on-board sample (the first of each, if
+   the pose was sent again). SIM_TRUTH's three parts (X, Y, HEADING) naming one encoder frame
+   make one truth sample (named by the simulator, whenever its encoder frame reaches the bus).
 4. **Reference**: ``host.reference.integrate`` over the count deltas of the accepted encoder frames
    (mod 2^min(counter_bits, 24), what the wire carries), started at the first on-board sample.
    The start pose is exact when the log starts at power-up: the firmware starts at pose 0 on the
@@ -44,6 +50,8 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    After the firmware was silent for ``SILENCE_CYCLES`` cycles (a stalled MCU) its first pose,
    naming a backlog frame ENC_COUNTER cannot resolve, is left out, and the position restarts like
    after a gap (a ``firmware_stall`` event): the firmware took the frames it missed as one step.
+   Likewise when two consecutive samples name frames ``SILENCE_CYCLES`` or more apart while the
+   log holds the frames between (the firmware integrated none of them, then one step).
 5. **Errors**: position errors are Euclidean distances (m), heading errors wrapped to [-pi, pi).
    On-board vs reference at every on-board sample; on-board vs truth at every truth sample that
    has an on-board sample of the same encoder frame.
@@ -265,8 +273,8 @@ def _analyze_life(
         ] + [
             {"kind": "firmware_stall", "t_s": float(frames.timestamp_s[enc.index[e]]),
              "encoder_frame": int(e),
-             "detail": "the firmware was silent (a stall): it took the frames it missed as one "
-                       "step, so the reference's position is placed again after it"}
+             "detail": "the firmware was silent or held its pose (a stall): it took the frames it "
+                       "missed as one step, so the reference's position is placed again after it"}
             for e in stalls.tolist() if e > int(onboard.enc[0])
         ],
         "reboots": [],

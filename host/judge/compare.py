@@ -137,7 +137,7 @@ def check_twist(
         return result
     index = twist["index"][keep]
     e = match_encoder(enc, index, twist["ENC_COUNTER"][keep].astype(np.int64),
-                      frames.timestamp_s[index])
+                      frames.timestamp_s[index], twist["COUNTER"][keep].astype(np.int64))
     ok = (e >= 0) & (e >= np.maximum.accumulate(e))
     e = e[ok]
     linear = twist["LINEAR_VEL"][keep][ok] * TWIST_LSB

@@ -151,13 +151,18 @@ def contract_cycle_s(decoder: BulkDecoder, name: str) -> float | None:
 
 
 def match_encoder(
-    enc: Encoders, index: IntArray, enc_counter: IntArray, timestamp_s: FloatArray
+    enc: Encoders, index: IntArray, enc_counter: IntArray, timestamp_s: FloatArray,
+    own_counter: IntArray | None = None, *, causal: bool = True,
 ) -> IntArray:
     """For frames at ``index`` (sent at ``timestamp_s``) naming ``enc_counter``: the encoder
     frame named (index into ``enc``), -1 where it is not among the accepted encoder frames
-    (module docstring, step 3). The latest accepted encoder frame must be less than 8 cycles
-    older than the naming frame: else the frame named (-8..+7 from it) cannot be told from one
-    16 cycles away (after a gap of 16 frames, E2E refuses the next as a repetition)."""
+    before the naming frame (host.judge.analysis docstring, step 3). The latest accepted encoder
+    frame must be less than 8 cycles older than the naming frame: else the frame named (-8..+7
+    from it) cannot be told from one 16 cycles away (after a gap of 16 frames, E2E refuses the
+    next as a repetition). ``own_counter``: the naming frames' E2E COUNTER (one message), to
+    carry a repeated ENC_COUNTER over consecutive sends (``_held``). ``causal`` False: the named
+    frame may come later in the log (SIM_TRUTH: the simulator names its own sample, whenever the
+    encoder frame reaches the bus)."""
     latest = np.searchsorted(enc.index, index) - 1
     result = np.full(len(index), -1, dtype=np.int64)
     has = latest >= 0
@@ -168,8 +173,30 @@ def match_encoder(
     offset = ((enc_counter[has] - enc.counter[latest] + 8) & 0xF) - 8
     target = enc.seq[latest] + offset
     found = np.minimum(np.searchsorted(enc.seq, target), len(enc.seq) - 1)
-    result[np.flatnonzero(has)] = np.where(enc.seq[found] == target, found, -1)
+    before = (enc.index[found] < index[has]) | (not causal)  # not integrated before it came
+    result[np.flatnonzero(has)] = np.where((enc.seq[found] == target) & before, found, -1)
+    if own_counter is not None and enc.cycle_s is not None:
+        result = _held(result, enc_counter, own_counter, timestamp_s, enc.cycle_s)
     return result
+
+
+def _held(
+    named: IntArray, enc_counter: IntArray, own_counter: IntArray, timestamp_s: FloatArray,
+    cycle_s: float,
+) -> IntArray:
+    """``named`` with each frame that repeats the ENC_COUNTER of its sender's previous send
+    (own COUNTER + 1, less than ``SILENCE_CYCLES`` cycles later) naming what that one named
+    (host.judge.analysis docstring, step 3), along runs of such repeats."""
+    if len(named) < 2:
+        return named
+    repeat = np.concatenate(([False], (
+        (np.diff(enc_counter) == 0)
+        & ((np.diff(own_counter) & 0xF) == 1)
+        & (np.diff(timestamp_s) < SILENCE_CYCLES * cycle_s)
+    )))
+    run_start = np.maximum.accumulate(np.where(repeat, 0, np.arange(len(named))))
+    held: IntArray = named[run_start]
+    return held
 
 
 def _first_per_encoder(enc_idx: IntArray) -> tuple[IntArray, IntArray]:
@@ -186,8 +213,10 @@ def onboard_samples(
     when each sample's ODOM_POSE_Y was sent (s)."""
     px = accepted_rows(frames, accepted, decoder, "ODOM_POSE_X")
     py = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")
-    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"], px["timestamp_s"])
-    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"], py["timestamp_s"])
+    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"], px["timestamp_s"],
+                       px["COUNTER"].astype(np.int64))
+    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"], py["timestamp_s"],
+                       py["COUNTER"].astype(np.int64))
     unmatched = int(np.count_nonzero(ex < 0) + np.count_nonzero(ey < 0))
     ux, fx = _first_per_encoder(ex)
     uy, fy = _first_per_encoder(ey)
@@ -218,24 +247,35 @@ def after_stalls(
     (its backlog), which ENC_COUNTER cannot resolve, so it is left out; and the firmware took the
     frames it missed as one step, which a fine reference cannot follow on a curve, so the
     reference's position restarts (a segment, like a gap) at the encoder frame after the last
-    sample before the silence. Returns the samples kept and those encoder frames (sorted)."""
+    sample before the silence. The same restart where the firmware kept talking but held its
+    pose (``_frozen``). Returns the samples kept and those encoder frames (sorted)."""
     if enc.cycle_s is None or len(sent_s) < 2:
         return onboard, np.zeros(0, dtype=np.int64)
     order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
     sent = sent_s[order]
     # Silent while the encoder frames went on (a log that lacks both is a recorder's gap).
+    # Half a cycle short of SILENCE_CYCLES: samples come in whole send periods, and time stamps
+    # summed in float must not decide (79.999... ms is 80 ms).
     heard = np.searchsorted(enc.timestamp_s, sent[1:]) - np.searchsorted(enc.timestamp_s, sent[:-1])
     after = np.flatnonzero(
-        (np.diff(sent) >= SILENCE_CYCLES * enc.cycle_s) & (heard >= SILENCE_CYCLES - 1)
+        (np.diff(sent) >= (SILENCE_CYCLES - 0.5) * enc.cycle_s) & (heard >= SILENCE_CYCLES - 1)
     ) + 1
-    if len(after) == 0:
-        return onboard, np.zeros(0, dtype=np.int64)
     keep = np.ones(len(sent_s), dtype=bool)
     keep[order[after]] = False
-    breaks = np.unique(onboard.enc[order[after - 1]] + 1)
     kept = Poses(onboard.enc[keep], onboard.x_m[keep], onboard.y_m[keep],
-                  onboard.heading_rad[keep], onboard.heading_raw[keep])
+                 onboard.heading_rad[keep], onboard.heading_raw[keep])
+    breaks = np.unique(np.concatenate((onboard.enc[order[after - 1]] + 1, _frozen(kept, enc))))
     return kept, breaks.astype(np.int64)
+
+
+def _frozen(onboard: Poses, enc: Encoders) -> IntArray:
+    """Encoder frames after a sample whose next sample names a frame ``SILENCE_CYCLES`` or more
+    periods later while the log holds the frames between: the firmware held its pose on one frame
+    (it kept naming it) and then took the frames since as one step, as after a stall."""
+    seq = enc.seq[onboard.enc]
+    held = (np.diff(seq) >= SILENCE_CYCLES) & (np.diff(onboard.enc) >= SILENCE_CYCLES)
+    frozen: IntArray = onboard.enc[:-1][held] + 1
+    return frozen
 
 
 def truth_samples(
@@ -252,7 +292,7 @@ def truth_samples(
     for p in parts:
         keep = accepted[p["index"]]
         named = match_encoder(
-            enc, p["index"][keep], p["ENC_COUNTER"][keep], p["timestamp_s"][keep]
+            enc, p["index"][keep], p["ENC_COUNTER"][keep], p["timestamp_s"][keep], causal=False
         )
         uniq, first = _first_per_encoder(named)
         found.append((uniq, np.flatnonzero(keep)[first]))

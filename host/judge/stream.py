@@ -13,9 +13,10 @@ with their state carried across chunk boundaries, so that the result is the whol
   sequence number: the integer sequence numbers are those of the whole log.
 
 * ``StreamPoses``: the on-board samples (``host.judge.samples.onboard_samples``: ODOM_POSE_X and
-  _Y naming one encoder frame, the first of each), carried by the last 16 encoder frames, the
-  pose frames that name a frame the log has not reached yet, and the halves not yet paired;
-  a sample is given out once no later frame can name its encoder frame.
+  _Y naming one encoder frame, the first of each), carried by the last 16 encoder frames, each
+  kind's last pose frame (a repeat of its ENC_COUNTER names what it named), and the halves not
+  yet paired; a pose names only a frame before it, so it resolves in its own chunk, and a
+  sample is given out once no later frame can name its encoder frame.
 
 * ``StreamReference``: the steps as the firmware takes them (``reference_path.firmware_steps``:
   plausibility refusals, counter restarts) and their integration from pose 0 (``reference.
@@ -59,6 +60,7 @@ from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
+    SILENCE_CYCLES,
     Encoders,
     contract_cycle_s,
 )
@@ -161,7 +163,7 @@ class StreamEncoders:
 
 @dataclass
 class _Halves:
-    """Pose frames of one kind (ODOM_POSE_X or _Y) not yet resolved: global frame position,
+    """Pose frames of one kind (ODOM_POSE_X or _Y) of a chunk: global frame position,
     ENC_COUNTER, time, and the signal columns."""
 
     index: npt.NDArray[np.int64]
@@ -175,18 +177,6 @@ class _Halves:
         return cls(rows["index"] + offset, rows["ENC_COUNTER"].astype(np.int64),
                    rows["timestamp_s"], values)
 
-    def join(self, other: _Halves) -> _Halves:
-        return _Halves(
-            np.concatenate((self.index, other.index)),
-            np.concatenate((self.enc_counter, other.enc_counter)),
-            np.concatenate((self.timestamp_s, other.timestamp_s)),
-            {k: np.concatenate((v, other.values[k])) for k, v in self.values.items()},
-        )
-
-    def take(self, keep: npt.NDArray[np.bool_]) -> _Halves:
-        return _Halves(self.index[keep], self.enc_counter[keep], self.timestamp_s[keep],
-                       {k: v[keep] for k, v in self.values.items()})
-
 
 RECENT_ENCODERS = 16  # encoder frames kept from the chunks before: ENC_COUNTER names -8..+7
 
@@ -197,20 +187,24 @@ class StreamPoses:
     ODOM_POSE_Y naming one encoder frame, the first of each), chunk by chunk.
 
     A pose frame resolves against the latest accepted encoder frame before it (-8..+7 in the
-    sequence): one naming a frame the log has not reached yet waits for the next chunk, and so
-    do the frames of its kind after it (the first frame naming an encoder frame wins). A
-    sample is given out once no later frame can name its encoder frame (its sequence number
-    more than 8 below every later frame's latest), in encoder order; ``enc`` counts the
-    accepted encoder frames of the whole log."""
+    sequence) and names only a frame before it in the log (``samples.match_encoder``, causal),
+    so it resolves in its own chunk; a frame repeating the ENC_COUNTER of its kind's previous
+    one names what that one named (``samples._held``: carried across chunks by the last frame
+    of each kind). The first frame naming an encoder frame wins. A sample is given out once no
+    later frame can name its encoder frame (its sequence number more than 8 below the latest
+    encoder frame's), in encoder order; ``enc`` counts the accepted encoder frames of the
+    whole log."""
 
     decoder: BulkDecoder
     unmatched: int = 0  # pose frames naming no accepted encoder frame of the log
     _offset: int = 0
     _enc_count: int = 0
     _recent: dict[str, np.ndarray] = field(default_factory=dict)  # g, index, counter, seq, t
-    _pending: dict[str, _Halves] = field(default_factory=dict)
     _first: dict[str, dict[int, tuple[int, dict[str, float], float]]] = field(
         default_factory=lambda: {"ODOM_POSE_X": {}, "ODOM_POSE_Y": {}})
+    # per kind, its last pose frame: ENC_COUNTER, COUNTER, time, encoder frame named (g), seq
+    _last_row: dict[str, tuple[int, int, float, int, int]] = field(default_factory=dict)
+    _given_below: float = -np.inf  # samples of sequence numbers below this are given out
 
     def feed(
         self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_], enc: Encoders
@@ -218,13 +212,13 @@ class StreamPoses:
         """The samples that are final after this chunk (``enc`` its encoder frames from
         ``StreamEncoders``): columns enc, x_m, y_m, heading_rad, heading_raw; and sent_s."""
         known = self._known(enc)
-        floor = np.inf
         for name in ("ODOM_POSE_X", "ODOM_POSE_Y"):
             rows = self.decoder.decode(chunk, name)
             keep = accepted[rows["index"]]
-            new = _Halves.of({k: v[keep] for k, v in rows.items()}, self._offset)
-            halves = self._pending[name].join(new) if name in self._pending else new
-            floor = min(floor, self._resolve(name, halves, known, final=False))
+            self._resolve(name, _Halves.of({k: v[keep] for k, v in rows.items()}, self._offset),
+                          known)
+        # a later pose names a frame at most 8 before the latest encoder frame before it
+        floor = float(known["seq"][-1] - 8) if len(known["seq"]) else -np.inf
         self._offset += len(chunk)
         self._enc_count += len(enc.index)
         self._recent = {k: v[-RECENT_ENCODERS:] for k, v in known.items()}
@@ -232,9 +226,6 @@ class StreamPoses:
 
     def finish(self) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
         """The samples left at the end of the log."""
-        known = self._recent
-        for name, halves in list(self._pending.items()):
-            self._resolve(name, halves, known, final=True)
         return self._emit(np.inf)
 
     def _known(self, enc: Encoders) -> dict[str, np.ndarray]:
@@ -247,43 +238,68 @@ class StreamPoses:
             return now
         return {k: np.concatenate((self._recent[k], v)) for k, v in now.items()}
 
-    def _resolve(
-        self, name: str, halves: _Halves, known: dict[str, np.ndarray], *, final: bool
-    ) -> float:
-        """Resolve what can be (``final``: everything); returns the lowest sequence number a
-        frame not resolved yet may name (inf when none waits)."""
-        if len(known["seq"]) == 0:  # no encoder frame before any of them: none can match
-            self.unmatched += len(halves.index)
-            self._pending[name] = halves.take(np.zeros(len(halves.index), dtype=bool))
-            return np.inf
+    def _resolve(self, name: str, halves: _Halves, known: dict[str, np.ndarray]) -> None:
+        """Resolve this chunk's frames of one kind (all of them: a pose names a frame before
+        it), keeping the first frame naming each encoder frame not given out yet."""
+        g, seq = self._named(halves, known)
+        cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        if cycle_s is not None and len(halves.index):
+            g, seq = self._held(name, halves, g, seq, cycle_s)
+        self.unmatched += int(np.count_nonzero(g < 0))
+        firsts = self._first[name]
+        for j in np.flatnonzero((g >= 0) & (seq >= self._given_below)).tolist():
+            if int(g[j]) not in firsts:
+                firsts[int(g[j])] = (int(seq[j]), {k: v[j] for k, v in halves.values.items()},
+                                     float(halves.timestamp_s[j]))
+
+    def _named(
+        self, halves: _Halves, known: dict[str, np.ndarray]
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """The encoder frame each pose frame names (g, its sequence number; -1 when none of the
+        log's accepted frames before it)."""
+        g = np.full(len(halves.index), -1, dtype=np.int64)
+        seq = np.full(len(halves.index), -1, dtype=np.int64)
+        if len(known["seq"]) == 0:
+            return g, seq
         cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
         latest = np.searchsorted(known["index"], halves.index) - 1
         has = latest >= 0
+        last = np.maximum(latest, 0)
         if cycle_s is not None:
-            has &= halves.timestamp_s - known["t"][np.maximum(latest, 0)] < 8 * cycle_s
-        offset = ((halves.enc_counter - known["counter"][np.maximum(latest, 0)] + 8) & 0xF) - 8
-        target = known["seq"][np.maximum(latest, 0)] + offset
-        top = int(known["seq"][-1]) if len(known["seq"]) else -1
-        waits = has & (target > top) & (not final)
-        cut = int(np.argmax(waits)) if waits.any() else len(halves.index)
-        self._pending[name] = halves.take(np.arange(len(halves.index)) >= cut)
-        found = np.minimum(np.searchsorted(known["seq"], target[:cut]), len(known["seq"]) - 1)
-        hit = has[:cut] & (known["seq"][found] == target[:cut])
-        self.unmatched += int(np.count_nonzero(~hit))
-        firsts = self._first[name]
-        for j in np.flatnonzero(hit).tolist():
-            g = int(known["g"][found[j]])
-            if g not in firsts:
-                firsts[g] = (int(known["seq"][found[j]]),
-                             {k: v[j] for k, v in halves.values.items()},
-                             float(halves.timestamp_s[j]))
-        if cut == len(halves.index):
-            return float(top - 8) if not final else np.inf
-        return float(min(known["seq"][np.maximum(latest[cut:], 0)].min(), top) - 8)
+            has &= halves.timestamp_s - known["t"][last] < 8 * cycle_s
+        target = known["seq"][last] + ((halves.enc_counter - known["counter"][last] + 8) & 0xF) - 8
+        found = np.minimum(np.searchsorted(known["seq"], target), len(known["seq"]) - 1)
+        hit = has & (known["seq"][found] == target) & (known["index"][found] < halves.index)
+        g[hit] = known["g"][found[hit]]
+        seq[hit] = target[hit]
+        return g, seq
+
+    def _held(
+        self, name: str, halves: _Halves, g: npt.NDArray[np.int64], seq: npt.NDArray[np.int64],
+        cycle_s: float,
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """``samples._held`` across chunks: the kind's last frame carried in front."""
+        counter = halves.values["COUNTER"].astype(np.int64)
+        ec, own, t = halves.enc_counter, counter, halves.timestamp_s
+        if name in self._last_row:
+            e0, c0, t0, g0, s0 = self._last_row[name]
+            ec, own, t = np.r_[e0, ec], np.r_[c0, own], np.r_[t0, t]
+            g, seq = np.r_[g0, g], np.r_[s0, seq]
+        repeat = np.concatenate(([False], (
+            (np.diff(ec) == 0) & ((np.diff(own) & 0xF) == 1)
+            & (np.diff(t) < SILENCE_CYCLES * cycle_s)
+        )))
+        run_start = np.maximum.accumulate(np.where(repeat, 0, np.arange(len(g))))
+        g, seq = g[run_start], seq[run_start]
+        self._last_row[name] = (int(ec[-1]), int(own[-1]), float(t[-1]), int(g[-1]),
+                                int(seq[-1]))
+        cut = len(g) - len(halves.index)
+        return g[cut:], seq[cut:]
 
     def _emit(self, floor: float) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
         """The samples of encoder frames below sequence ``floor``, in encoder order; halves
         there that found no partner are dropped."""
+        self._given_below = max(self._given_below, floor)
         xs, ys = self._first["ODOM_POSE_X"], self._first["ODOM_POSE_Y"]
         done = sorted(g for g in xs.keys() | ys.keys()
                       if (xs[g][0] if g in xs else ys[g][0]) < floor)
