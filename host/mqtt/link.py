@@ -195,6 +195,7 @@ class RobotLink:
         self.connects = 0
         self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
         self.connected = asyncio.Event()
+        self._taken: list[aiomqtt.Message] = []  # off paho's queue, not answered (cancelled)
         self._telemetry_wake = asyncio.Event()
         self._reliable_wake = asyncio.Event()
 
@@ -354,24 +355,52 @@ class RobotLink:
                             "arrive", self.robot, topics.command_filter(self.robot), code)
 
     async def _receive(self, client: _Client) -> None:
-        prefix = topics.topic(self.robot, "cmd/")
-        async for message in client.messages:
-            name = message.topic.value.removeprefix(prefix)
-            if name == "result" or not isinstance(message, _Arrived):
-                continue
+        while True:
+            self._handle(await self._next_message(client))
+
+    async def _next_message(self, client: _Client) -> aiomqtt.Message:
+        """The next message paho received; ``MqttError`` once the connection is lost.
+
+        Never loses one, unlike aiomqtt's ``client.messages``: its iterator takes a message off
+        the queue in a task of its own and drops it when the iteration is cancelled (the session's
+        task group ending) or the connection drops in the same turn. Here a message taken when
+        this task is cancelled is kept in ``_taken`` for ``_answer_waiting``; one not yet taken
+        stays in the queue."""
+        queue = client._queue
+        if not queue.empty():
+            return queue.get_nowait()
+        get = asyncio.ensure_future(queue.get())
+        try:
+            await asyncio.wait((get, client._disconnected), return_when=asyncio.FIRST_COMPLETED)
+        except asyncio.CancelledError:
+            get.cancel()  # a task not done yet has not taken its message off the queue
+            if get.done() and not get.cancelled():
+                self._taken.append(get.result())
+            raise
+        if get.done():
+            return get.result()
+        get.cancel()
+        lost = client._disconnected
+        reason = None if lost.cancelled() else lost.exception()  # retrieved: asyncio logs none
+        raise aiomqtt.MqttError(
+            "Disconnected during message iteration" + (f" ({reason})" if reason else "")
+        )
+
+    def _handle(self, message: aiomqtt.Message) -> None:
+        """Answer one message on ``cmd/<name>`` (our own ``cmd/result`` is not a command)."""
+        name = message.topic.value.removeprefix(topics.topic(self.robot, "cmd/"))
+        if name != "result" and isinstance(message, _Arrived):
             for leaf, payload in self._answer(name, message):
                 self.publish(leaf, payload)
 
     def _answer_waiting(self, client: _Client) -> None:
         """Answer the commands this client received but we did not handle yet: paho has
         acknowledged them to the broker, so the broker will not send them again."""
-        prefix = topics.topic(self.robot, "cmd/")
+        taken, self._taken = self._taken, []
+        for message in taken:
+            self._handle(message)
         while not client._queue.empty():
-            message = client._queue.get_nowait()
-            name = message.topic.value.removeprefix(prefix)
-            if name != "result" and isinstance(message, _Arrived):
-                for leaf, payload in self._answer(name, message):
-                    self.publish(leaf, payload)
+            self._handle(client._queue.get_nowait())
 
     def _answer(self, name: str, message: _Arrived) -> list[Publication]:
         expiry_s = message.expiry_s if message.expiry_s is not None else self.command_expiry_s
