@@ -109,6 +109,7 @@ class _Client(aiomqtt.Client):
         self._on_refused, self._on_overflow = on_refused, on_overflow
         self._max_waiting = max_waiting
         self._qos1_topics: dict[int, str] = {}
+        self._written: dict[int, asyncio.Future[None]] = {}  # QoS-0 mid -> its socket write
         self.session_present = False  # the CONNACK's flag: the broker still had our session
         paho_publish = self._client.publish
 
@@ -121,8 +122,33 @@ class _Client(aiomqtt.Client):
 
         setattr(self._client, "publish", publish)  # noqa: B010 (an instance's own attribute)
 
+    def publish_now(self, topic: str, body: bytes) -> paho.MQTTMessageInfo:
+        """QoS 0 straight into paho's outgoing queue (no coroutine, no task, no event per
+        message, as aiomqtt's ``publish`` makes them); ``MqttCodeError`` when paho refuses (the
+        connection is gone). ``written(info)`` waits until the socket took it."""
+        info = self._client.publish(topic, body, 0)
+        if info.rc != paho.MQTT_ERR_SUCCESS:
+            raise aiomqtt.MqttCodeError(info.rc, "Could not publish message")
+        return info
+
+    async def written(self, info: paho.MQTTMessageInfo) -> None:
+        """Wait until paho wrote the QoS-0 publication ``info`` to the socket (and so every one
+        queued before it: paho writes in order)."""
+        if info.is_published():
+            return
+        done = self._written[info.mid] = asyncio.get_running_loop().create_future()
+        try:
+            await asyncio.wait_for(done, timeout=self.timeout)
+        except TimeoutError:
+            raise aiomqtt.MqttError("Operation timed out") from None
+        finally:
+            self._written.pop(info.mid, None)
+
     def _on_publish(self, client: paho.Client, userdata: Any, mid: int,
                     reason_code: Any, properties: Any) -> None:
+        written = self._written.pop(mid, None)
+        if written is not None and not written.done():
+            written.set_result(None)
         topic = self._qos1_topics.pop(mid, None)
         if topic is not None and getattr(reason_code, "is_failure", False):
             self._on_refused(topic, str(reason_code))
@@ -425,13 +451,19 @@ class RobotLink:
         self.refused[topic] += 1
 
     async def _send_telemetry(self, client: _Client) -> None:
-        """QoS 0, in batches: awaits only the socket writes, never an acknowledgement."""
+        """QoS 0, in batches: awaits only the socket writes, never an acknowledgement. A batch
+        goes to paho at once and the next waits until the socket took its last message, so
+        while the socket is slow the telemetry waits in the bounded deque (drop-oldest), not
+        in paho's unbounded queue."""
         while True:
             await self._telemetry_wake.wait()
             self._telemetry_wake.clear()
             while self.telemetry:
-                batch = [self.telemetry.popleft() for _ in range(len(self.telemetry))]
-                await asyncio.gather(*(client.publish(t, b, qos=0) for t, b in batch))
+                last = None
+                for _ in range(len(self.telemetry)):
+                    last = client.publish_now(*self.telemetry.popleft())
+                if last is not None:
+                    await client.written(last)
 
     async def _send_reliable(self, client: _Client) -> None:
         """QoS 1, up to ``inflight`` at once; each entry leaves the buffer once acknowledged."""
