@@ -137,8 +137,9 @@ class _Client(aiomqtt.Client):
         if info.is_published():
             return
         done = self._written[info.mid] = asyncio.get_running_loop().create_future()
-        try:
-            await asyncio.wait_for(done, timeout=self.timeout)
+        try:  # not asyncio.wait_for: in 3.11 it can swallow a cancellation that meets the result
+            async with asyncio.timeout(self.timeout):
+                await done
         except TimeoutError:
             raise aiomqtt.MqttError("Operation timed out") from None
         finally:
