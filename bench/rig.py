@@ -172,6 +172,8 @@ def budget(seconds: float) -> dict[str, float]:
         b = Budget()
         for bus in rig._buses:
             b.wrap(bus, "send", "transport: send (a copy per receiver)")
+            if isinstance(bus, OdocanBus):  # the nodes' sends (BusNode.send_frame)
+                b.wrap(bus, "send_data", "transport: send (a copy per receiver)")
             b.wrap(bus, "recv", "transport: recv")
         b.wrap(rig, "step", "rig and node glue (the rest)")
         b.wrap(rig.motor_controller, "send_frame", "can.Message build (BusNode.send_frame)")

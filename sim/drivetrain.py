@@ -282,12 +282,18 @@ class Drivetrain:
         return column
 
     def encoder_counts(self) -> tuple[int, int]:
-        """Raw (left, right) encoder counters, wrapped to ``profile.counter_bits`` (unsigned)."""
-        cpr, bits = self.profile.counts_per_rev, self.profile.counter_bits
+        """Raw (left, right) encoder counters, wrapped to ``profile.counter_bits`` (unsigned):
+        ``wrap_counter(offset + encoder_count(angle, cpr, quadrature), bits)`` inlined (it runs
+        every tick; the same operations in the same order)."""
+        cpr = self.profile.counts_per_rev
+        k = 4 if self.quadrature else 1
+        mask = (1 << self.profile.counter_bits) - 1
         left0, right0 = self.counter_offset
+        angle_l, angle_r = self.angle
+        floor = math.floor
         return (
-            wrap_counter(left0 + encoder_count(self.angle[0], cpr, self.quadrature), bits),
-            wrap_counter(right0 + encoder_count(self.angle[1], cpr, self.quadrature), bits),
+            (left0 + floor(angle_l / TAU_RAD * cpr * k)) & mask,
+            (right0 + floor(angle_r / TAU_RAD * cpr * k)) & mask,
         )
 
     def wheel_speeds_mps(self) -> tuple[float, float]:
