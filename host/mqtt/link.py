@@ -109,6 +109,7 @@ class _Client(aiomqtt.Client):
         self._on_refused, self._on_overflow = on_refused, on_overflow
         self._max_waiting = max_waiting
         self._qos1_topics: dict[int, str] = {}
+        self._written: dict[int, asyncio.Future[None]] = {}  # QoS-0 mid -> its socket write
         self.session_present = False  # the CONNACK's flag: the broker still had our session
         paho_publish = self._client.publish
 
@@ -121,8 +122,34 @@ class _Client(aiomqtt.Client):
 
         setattr(self._client, "publish", publish)  # noqa: B010 (an instance's own attribute)
 
+    def publish_now(self, topic: str, body: bytes) -> paho.MQTTMessageInfo:
+        """QoS 0 straight into paho's outgoing queue (no coroutine, no task, no event per
+        message, as aiomqtt's ``publish`` makes them); ``MqttCodeError`` when paho refuses (the
+        connection is gone). ``written(info)`` waits until the socket took it."""
+        info = self._client.publish(topic, body, 0)
+        if info.rc != paho.MQTT_ERR_SUCCESS:
+            raise aiomqtt.MqttCodeError(info.rc, "Could not publish message")
+        return info
+
+    async def written(self, info: paho.MQTTMessageInfo) -> None:
+        """Wait until paho wrote the QoS-0 publication ``info`` to the socket (and so every one
+        queued before it: paho writes in order)."""
+        if info.is_published():
+            return
+        done = self._written[info.mid] = asyncio.get_running_loop().create_future()
+        try:  # not asyncio.wait_for: in 3.11 it can swallow a cancellation that meets the result
+            async with asyncio.timeout(self.timeout):
+                await done
+        except TimeoutError:
+            raise aiomqtt.MqttError("Operation timed out") from None
+        finally:
+            self._written.pop(info.mid, None)
+
     def _on_publish(self, client: paho.Client, userdata: Any, mid: int,
                     reason_code: Any, properties: Any) -> None:
+        written = self._written.pop(mid, None)
+        if written is not None and not written.done():
+            written.set_result(None)
         topic = self._qos1_topics.pop(mid, None)
         if topic is not None and getattr(reason_code, "is_failure", False):
             self._on_refused(topic, str(reason_code))
@@ -195,6 +222,7 @@ class RobotLink:
         self.connects = 0
         self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
         self.connected = asyncio.Event()
+        self._taken: list[aiomqtt.Message] = []  # off paho's queue, not answered (cancelled)
         self._telemetry_wake = asyncio.Event()
         self._reliable_wake = asyncio.Event()
 
@@ -354,24 +382,52 @@ class RobotLink:
                             "arrive", self.robot, topics.command_filter(self.robot), code)
 
     async def _receive(self, client: _Client) -> None:
-        prefix = topics.topic(self.robot, "cmd/")
-        async for message in client.messages:
-            name = message.topic.value.removeprefix(prefix)
-            if name == "result" or not isinstance(message, _Arrived):
-                continue
+        while True:
+            self._handle(await self._next_message(client))
+
+    async def _next_message(self, client: _Client) -> aiomqtt.Message:
+        """The next message paho received; ``MqttError`` once the connection is lost.
+
+        Never loses one, unlike aiomqtt's ``client.messages``: its iterator takes a message off
+        the queue in a task of its own and drops it when the iteration is cancelled (the session's
+        task group ending) or the connection drops in the same turn. Here a message taken when
+        this task is cancelled is kept in ``_taken`` for ``_answer_waiting``; one not yet taken
+        stays in the queue."""
+        queue = client._queue
+        if not queue.empty():
+            return queue.get_nowait()
+        get = asyncio.ensure_future(queue.get())
+        try:
+            await asyncio.wait((get, client._disconnected), return_when=asyncio.FIRST_COMPLETED)
+        except asyncio.CancelledError:
+            get.cancel()  # a task not done yet has not taken its message off the queue
+            if get.done() and not get.cancelled():
+                self._taken.append(get.result())
+            raise
+        if get.done():
+            return get.result()
+        get.cancel()
+        lost = client._disconnected
+        reason = None if lost.cancelled() else lost.exception()  # retrieved: asyncio logs none
+        raise aiomqtt.MqttError(
+            "Disconnected during message iteration" + (f" ({reason})" if reason else "")
+        )
+
+    def _handle(self, message: aiomqtt.Message) -> None:
+        """Answer one message on ``cmd/<name>`` (our own ``cmd/result`` is not a command)."""
+        name = message.topic.value.removeprefix(topics.topic(self.robot, "cmd/"))
+        if name != "result" and isinstance(message, _Arrived):
             for leaf, payload in self._answer(name, message):
                 self.publish(leaf, payload)
 
     def _answer_waiting(self, client: _Client) -> None:
         """Answer the commands this client received but we did not handle yet: paho has
         acknowledged them to the broker, so the broker will not send them again."""
-        prefix = topics.topic(self.robot, "cmd/")
+        taken, self._taken = self._taken, []
+        for message in taken:
+            self._handle(message)
         while not client._queue.empty():
-            message = client._queue.get_nowait()
-            name = message.topic.value.removeprefix(prefix)
-            if name != "result" and isinstance(message, _Arrived):
-                for leaf, payload in self._answer(name, message):
-                    self.publish(leaf, payload)
+            self._handle(client._queue.get_nowait())
 
     def _answer(self, name: str, message: _Arrived) -> list[Publication]:
         expiry_s = message.expiry_s if message.expiry_s is not None else self.command_expiry_s
@@ -396,13 +452,19 @@ class RobotLink:
         self.refused[topic] += 1
 
     async def _send_telemetry(self, client: _Client) -> None:
-        """QoS 0, in batches: awaits only the socket writes, never an acknowledgement."""
+        """QoS 0, in batches: awaits only the socket writes, never an acknowledgement. A batch
+        goes to paho at once and the next waits until the socket took its last message, so
+        while the socket is slow the telemetry waits in the bounded deque (drop-oldest), not
+        in paho's unbounded queue."""
         while True:
             await self._telemetry_wake.wait()
             self._telemetry_wake.clear()
             while self.telemetry:
-                batch = [self.telemetry.popleft() for _ in range(len(self.telemetry))]
-                await asyncio.gather(*(client.publish(t, b, qos=0) for t, b in batch))
+                last = None
+                for _ in range(len(self.telemetry)):
+                    last = client.publish_now(*self.telemetry.popleft())
+                if last is not None:
+                    await client.written(last)
 
     async def _send_reliable(self, client: _Client) -> None:
         """QoS 1, up to ``inflight`` at once; each entry leaves the buffer once acknowledged."""
