@@ -70,13 +70,13 @@ from odocan.firmware.frames import (
     NavGoalField,
     NavMode,
     SetPoseField,
-    SimTruthPart,
     StatusPage,
     e2e_head,
     frame_word,
     i32_field,
     seal_frame,
 )
+from odocan.sim.frames import SimTruthPart
 
 
 # --- enums on the wire the firmware reads as raw bits (NAV_GOAL GO's flags) ---

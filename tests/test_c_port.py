@@ -41,6 +41,7 @@ from odocan.firmware.fixmath import (
 from odocan.firmware.frames import NavGoal, NavGoalField, NavState
 from odocan.host.cli.app import main
 from odocan.host.judge import vectors
+from odocan.sim import frames as sf
 from odocan.sim.rig import firmware_params
 from odocan.sim.robot import load
 from tests import host_frames as hf
@@ -513,7 +514,7 @@ class _SecuredSession:
         self.count += 3
         self.rx(
             frames.WHEEL_ENCODERS_ID,
-            frames.pack_wheel_encoders(tick & 15, self.count, self.count),
+            sf.pack_wheel_encoders(tick & 15, self.count, self.count),
         )
         self.inject(self.rng.randrange(10))
         self.tx.sent.clear()
@@ -646,7 +647,7 @@ class _EcuSession:
     def next_encoders(self, wire: list[int]) -> bytes:
         """The next WHEEL_ENCODERS frame (next COUNTER) carrying ``wire``."""
         self.enc_counter = (self.enc_counter + 1) & 15
-        return frames.pack_wheel_encoders(self.enc_counter, *wire)
+        return sf.pack_wheel_encoders(self.enc_counter, *wire)
 
     def period(self, tick: int) -> None:
         """One encoder period: a stall, the motor controller's life, the frame, the host, a tick."""
@@ -714,7 +715,7 @@ class _EcuSession:
             self.enc_counter = (self.enc_counter + 1) & 15
             jump = rng.choice((-1, 1)) * rng.randrange(200, 30_000)
             forged = [(w + jump) % (1 << 32) for w in wire]
-            self.rx(frames.WHEEL_ENCODERS_ID, frames.pack_wheel_encoders(self.enc_counter, *forged))
+            self.rx(frames.WHEEL_ENCODERS_ID, sf.pack_wheel_encoders(self.enc_counter, *forged))
 
     def set_pose_field(self) -> None:
         field = self.rng.choice((0, 1, 2, 15, 15, 7))
@@ -774,7 +775,7 @@ class _EcuSession:
         for entry in tx.sent:
             can_id, data = entry.split(":")
             if int(can_id, 16) == frames.MOTOR_CMD_ID:
-                cmd = frames.unpack_motor_cmd(bytes.fromhex(data))
+                cmd = sf.unpack_motor_cmd(bytes.fromhex(data))
                 self.speeds = [cmd.left_speed_mm_s, cmd.right_speed_mm_s]
 
 
@@ -782,7 +783,7 @@ def _frames(rng: random.Random, ask: Callable[..., None]) -> None:
     """The cantools-generated C (dbc/odocan.c) against firmware/frames.py's own packers."""
     for _ in range(2_000):
         counter, left, right = rng.randrange(16), rng.getrandbits(32), rng.getrandbits(32)
-        frame = frames.pack_wheel_encoders(counter, left, right)
+        frame = sf.pack_wheel_encoders(counter, left, right)
         ask(f"enc_pack {counter} {left} {right}", frame.hex().upper())
         junk = rng.randbytes(8)
         for data in (frame, junk):

@@ -265,7 +265,7 @@ def test_frame_codecs_match_the_dbc() -> None:
         decoded = integers(auth_msg, data)
         assert (decoded["REQUEST"], decoded["FRESHNESS"], decoded["AUTHENTICATOR"]) == fields
         assert fw.unpack_odom_auth(data) == fw.OdomAuth(counter & 0xF, *fields)
-        fv = rng.getrandbits(fw.FV_BITS)
+        fv = rng.getrandbits(fw.COUNT_BITS + fw.EPOCH_BITS)
         data = fw.pack_odom_freshness(counter, fw.FreshnessCause.PERIODIC, fv)
         decoded = integers(fresh_msg, data)
         assert (decoded["FV_EPOCH"] << fw.COUNT_BITS) | decoded["FV_COUNT"] == fv

@@ -380,8 +380,10 @@ class _Unpacker(can.Listener):
 
     def __init__(self) -> None:
         self.fr = importlib.import_module(FIRMWARE_PACKAGE + ".frames")
-        received = ["wheel_encoders", "motor_cmd", "odom_set_pose", "odom_config", "nav_goal"]
-        decoders = {name: getattr(self.fr, f"unpack_{name}") for name in [*received, "odom_auth"]}
+        received = ["wheel_encoders", "odom_set_pose", "odom_config", "nav_goal", "odom_auth"]
+        decoders = {name: getattr(self.fr, f"unpack_{name}") for name in received}
+        sim_frames = importlib.import_module("odocan.sim.frames")  # MOTOR_CTRL's: not firmware
+        decoders["motor_cmd"] = sim_frames.unpack_motor_cmd
         for name in [  # the host's half (tests/host_frames.py): not firmware, not instrumented
             "odom_pose_x",
             "odom_pose_y",
