@@ -280,8 +280,6 @@ def _fixmath_probes(rng: random.Random, ask: Callable[..., None]) -> None:
         errors = ErrorMask()
         ask(f"mulshr {a} {b} {shift}", fixmath.mul_shr_round_i64(a, b, shift, errors), errors.bits)
     for v in [rng.randrange(I64_MIN, I64_MAX + 1) for _ in range(2_000)] + [I64_MIN, I64_MAX]:
-        shift = rng.randrange(1, 64)
-        ask(f"shr_round {v} {shift}", fixmath.shr_round(v, shift))
         d = rng.choice([1, 2, 3, 10, rng.randrange(1, I64_MAX)])
         ask(f"div_round {v} {d}", fixmath.div_round_i64(v, d))
     for n in [rng.getrandbits(rng.randrange(1, 65)) for _ in range(2_000)] + [0, 1, 2, U64_MAX]:
@@ -289,10 +287,6 @@ def _fixmath_probes(rng: random.Random, ask: Callable[..., None]) -> None:
     for _ in range(2_000):
         v, bits = rng.getrandbits(32), rng.choice((16, 32))
         ask(f"wrap_signed {v} {bits}", fixmath.wrap_signed(v, bits))
-        s = rng.randrange(-(1 << 40), 1 << 40)
-        errors = ErrorMask()
-        expected = fixmath.sat_range(s, fixmath.I32_MIN, fixmath.I32_MAX, errors)
-        ask(f"sat_i32 {s}", expected, errors.bits)  # the C port's sat_i32 against the clamp
 
 
 def _config_probes(rng: random.Random, ask: Callable[..., None]) -> None:
@@ -445,7 +439,7 @@ class _SecuredSession:
 
     def recount(self, can_id: int, data: bytes) -> bytes:
         frame = bytearray(data)
-        e2e.p02_protect(frame, self.counter(can_id), hf.DATA_IDS_BY_FRAME_ID[can_id])
+        hf.p02_protect(frame, self.counter(can_id), hf.DATA_IDS_BY_FRAME_ID[can_id])
         return bytes(frame)
 
     def genuine(self) -> None:
@@ -484,7 +478,7 @@ class _SecuredSession:
         """An orphan ODOM_AUTH, or one naming no secured message."""
         pdu = bytearray(hf.pack_odom_auth(self.counter(frames.ODOM_AUTH_ID), 1, 0, 0))
         pdu[1] = (pdu[1] & 0x0F) | (self.rng.choice((1, 5, 15)) << 4)
-        e2e.p02_protect(pdu, pdu[1] & 15, frames.ODOM_AUTH_DATA_IDS)
+        hf.p02_protect(pdu, pdu[1] & 15, frames.ODOM_AUTH_DATA_IDS)
         self.rx(frames.ODOM_AUTH_ID, bytes(pdu))
 
     def beyond_window(self) -> None:
@@ -814,8 +808,6 @@ def _nav_functions(rng: random.Random, ask: Callable[..., None]) -> None:
         ask(f"bearing {dx} {dy} {h}", nav.bearing_error_bam32(dx, dy, h))
     angles = [rng.randrange(I32_MIN, I32_MAX + 1) for _ in range(2_000)] + [I32_MIN, I32_MAX, 0]
     for a in angles:
-        errors = ErrorMask()
-        ask(f"urad {a}", nav.angle_urad(a, errors), errors.bits)
         k = rng.choice((nav.K_TURN_MILLI_PER_S, nav.K1_MILLI_PER_S, rng.randrange(0, 5000)))
         errors = ErrorMask()
         ask(f"turn {a} {k}", nav.turn_rate_mrad_s(a, k, errors), errors.bits)
@@ -945,7 +937,7 @@ def _e2e_session(rng: random.Random, ask: Callable[..., None]) -> None:
         else:
             frame = bytearray(rng.randbytes(8))
             counter = (counter + rng.choice((0, 1, 1, 1, 1, 2, 3, 7, 15))) & 15
-            e2e.p02_protect(frame, counter, tuple(data_ids))
+            hf.p02_protect(frame, counter, tuple(data_ids))
             ask(f"protect {frame.hex()} {counter}", frame.hex().upper())
             if action < 24:
                 frame[rng.randrange(8)] ^= 1 << rng.randrange(8)

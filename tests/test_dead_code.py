@@ -17,7 +17,6 @@ PRODUCT = ("firmware", "sim", "host", "tools")
 
 _ACK = "an AckReason value, reached as AckReason(int(AuthStatus))"
 _C_TWIN = "mirrored by the C port, whose probe proves the two equal; goes with its C twin"
-_C_MIRROR = "mirrored by the C port; goes with its C twin"
 JUSTIFIED: dict[str, str] = {
     "firmware/config.py:RK2": "an Integrator value, reached by value from the DBC and ODOM_CONFIG",
     "firmware/frames.py:AUTH_FAILED": _ACK,
@@ -27,10 +26,6 @@ JUSTIFIED: dict[str, str] = {
     "names it and as e2e.c keeps it",
     "firmware/e2e.py:CRC8H2F_CHECK": "the CRC's AUTOSAR check value, next to the CRC it checks",
     "firmware/e2e.py:crc8h2f": f"the bare CRC-8H2F (the ECU seals with p02_crc); {_C_TWIN}",
-    "firmware/e2e.py:p02_protect": f"the Profile 2 sender (E2E_P02Protect); {_C_TWIN}",
-    "firmware/e2e.py:p02_next_counter": f"the Profile 2 sender's counter; {_C_MIRROR}",
-    "firmware/fixmath.py:shr_round": f"the rounding shift the fixmath docs define; {_C_TWIN}",
-    "firmware/nav.py:angle_urad": f"a BAM32 angle in µrad; {_C_TWIN}",
 }
 
 

@@ -87,7 +87,6 @@ struct navigator {
 uint32_t heading_bam32_of(uint64_t heading_bam64);
 int32_t bearing_error_bam32(int64_t dx_q40_m, int64_t dy_q40_m, uint32_t heading_bam32);
 int64_t distance_um(int64_t dx_q40_m, int64_t dy_q40_m, uint32_t *errors);
-int32_t angle_urad(int32_t angle_bam32, uint32_t *errors);
 int32_t turn_rate_mrad_s(int32_t error_bam32, int32_t gain_milli_per_s, uint32_t *errors);
 int32_t speed_mm_s(int64_t distance_um_, int32_t gain_milli_per_s);
 void wheel_speeds_mm_s(int32_t v_mm_s, int32_t omega_mrad_s, uint32_t wheelbase_nm,
