@@ -27,7 +27,7 @@
 
 #define MILLI_PER_UNIT 1000
 #define MICRO_PER_UNIT 1000000
-/* 2*pi*1e6 in Q20 (< 2^43): shr_round(TWO_PI_Q60 * 10^6, 40), a 83-bit product, evaluated once
+/* 2*pi*1e6 in Q20 (< 2^43): round(TWO_PI_Q60 * 10^6 / 2^40), a 83-bit product, evaluated once
  * (the probe test checks every function that uses it against the Python firmware). */
 #define URAD_PER_TURN_Q20 INT64_C(6588397316661)
 #define HALF_WHEEL_DIVISOR INT64_C(2000000000) /* omega[mrad/s] * b[nm] / 2e9 = mm/s */
