@@ -38,6 +38,7 @@ from odocan.firmware.ecu import RECOVERY_FRAMES, RESYNC_FRAMES, WATCHDOG_TICKS
 from odocan.firmware.errors import ErrorMask, Reason, State
 from odocan.firmware.fixmath import mul_shr_round_i64, wrap_i32
 from odocan.firmware.odometry import Odometry
+from odocan.sim import frames as sf
 from odocan.sim.robot import RobotProfile
 
 ENCODER_PERIOD_S = 0.01
@@ -147,7 +148,7 @@ def synthesize(
             named = k & 0xF
         t_s = t0_s + k * ENCODER_PERIOD_S
         group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
-                       fr.pack_wheel_encoders(k, left & wire_mask, right & wire_mask))]
+                       sf.pack_wheel_encoders(k, left & wire_mask, right & wire_mask))]
         life = k - boot  # frames since the firmware primed
         if boot_in_init and k == reboot_at:  # booted before the frame: INIT, no pose yet
             init = fr.pack_odom_status_summary(0, State.INIT, odo.consts.integrator, 0, 0, errors)
@@ -292,7 +293,7 @@ def synthesize_stalled(
             odo.step_counts(int(left[j]), int(right[j]))
             named, accepted = j & 0xF, accepted + 1
         t_s = k * ENCODER_PERIOD_S
-        group = [_line(t_s, fr.WHEEL_ENCODERS_ID, fr.pack_wheel_encoders(
+        group = [_line(t_s, fr.WHEEL_ENCODERS_ID, sf.pack_wheel_encoders(
             k, int(left[k]) & wire_mask, int(right[k]) & wire_mask))]
         resumed = k > 0 and paces[k - 1].silent and not pace.silent
         if not pace.silent and (k % 2 == 0 or resumed):

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 from cantools.database.can import Database
 
-from odocan.firmware.e2e import p02_protect
 from odocan.host.io.logs import FrameArrays, FrameCollector, read_log
 from odocan.host.judge.analysis import (
     HEADING_LSB_RAD,
@@ -31,6 +30,7 @@ from odocan.sim.exceptions import OdocanError
 from odocan.sim.rig import INTEGRATORS, LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests.dbc_typed import dbc_attribute
+from tests.host_frames import p02_protect
 from tests.synth_log import Synth, synthesize, wandering_drive
 
 PMIR = load("pmir")

@@ -17,8 +17,6 @@ MAX_LINES = 500
 
 OVER_LIMIT: dict[str, str] = {
     "host/judge/monitor.py": "the live monitor model; splits once reboot detection is shared (#11)",
-    "firmware/frames.py": "its last section is the sim's side of the codec (pack_wheel_encoders, "
-    "unpack_motor_cmd, pack_sim_truth); it moves to sim/ with sim/motor_controller.py (#17)",
 }
 
 

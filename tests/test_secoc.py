@@ -14,7 +14,7 @@ from cantools.subparsers.dump.formatting import layout_string
 
 from odocan.firmware import secoc as fw
 from odocan.firmware.cmac import cmac, cmac_key
-from odocan.firmware.e2e import E2EReceiver, E2EStatus, p02_protect
+from odocan.firmware.e2e import E2EReceiver, E2EStatus
 from odocan.host.protocol import secoc as host
 from odocan.sim.exceptions import OdocanError
 from tests import host_frames as hf
@@ -48,7 +48,7 @@ class MemoryNvm:
 def command(rng: random.Random, can_id: int) -> bytes:
     """A random E2E-protected 8-byte command frame (payload need not be meaningful for SecOC)."""
     frame = bytearray(rng.randbytes(8))
-    p02_protect(frame, rng.randrange(16), tuple(range(16)))
+    hf.p02_protect(frame, rng.randrange(16), tuple(range(16)))
     return bytes(frame)
 
 
@@ -265,7 +265,7 @@ def test_frame_codecs_match_the_dbc() -> None:
         decoded = integers(auth_msg, data)
         assert (decoded["REQUEST"], decoded["FRESHNESS"], decoded["AUTHENTICATOR"]) == fields
         assert fw.unpack_odom_auth(data) == fw.OdomAuth(counter & 0xF, *fields)
-        fv = rng.getrandbits(fw.FV_BITS)
+        fv = rng.getrandbits(fw.COUNT_BITS + fw.EPOCH_BITS)
         data = fw.pack_odom_freshness(counter, fw.FreshnessCause.PERIODIC, fv)
         decoded = integers(fresh_msg, data)
         assert (decoded["FV_EPOCH"] << fw.COUNT_BITS) | decoded["FV_COUNT"] == fv
