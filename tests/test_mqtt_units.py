@@ -167,10 +167,10 @@ def test_a_telemetry_sender_cancelled_as_its_write_completes_stops() -> None:
 
     import paho.mqtt.client as paho
 
-    from odocan.host.mqtt.link import _Client
+    from odocan.host.mqtt.client import LinkClient
 
     async def scenario() -> bool:
-        client = _Client(hostname="127.0.0.1", on_refused=lambda *_: None,
+        client = LinkClient(hostname="127.0.0.1", on_refused=lambda *_: None,
                          on_overflow=lambda _: None, max_waiting=1, timeout=5.0)
         info = paho.MQTTMessageInfo(7)  # queued, not yet written
         waiter = asyncio.create_task(client.written(info))

@@ -49,7 +49,6 @@ from itertools import islice
 from typing import Any, Literal
 
 import aiomqtt
-import paho.mqtt.client as paho
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from paho.mqtt.subscribeoptions import SubscribeOptions
@@ -62,6 +61,7 @@ from odocan.host.mqtt.broker import (
     first_connect_failure,
     protocol_unsupported,
 )
+from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient
 
 log = logging.getLogger("odocan.mqtt")
 CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
@@ -77,107 +77,6 @@ class _Outgoing:
     topic: str
     body: bytes
     retain: bool
-
-
-class _Arrived(aiomqtt.Message):
-    """aiomqtt's message plus when paho read it (``time.monotonic`` s) and its expiry (s)."""
-
-    arrival_s: float = 0.0
-    expiry_s: float | None = None
-
-
-class _ClosedBeforeConnack(aiomqtt.MqttError):
-    """The broker closed the connection without a CONNACK (amqtt does so to some v5 CONNECTs)."""
-
-
-class _Client(aiomqtt.Client):
-    """aiomqtt's client, keeping what it drops: PUBACK reason codes and arrival times.
-
-    ``on_refused(topic, reason)`` is called for each QoS-1 publication the broker refused;
-    ``on_overflow(message)`` for a message that finds ``max_waiting`` messages already queued.
-    """
-
-    def __init__(
-        self,
-        *,
-        on_refused: Callable[[str, str], None],
-        on_overflow: Callable[[_Arrived], None],
-        max_waiting: int,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(**kwargs)
-        self._on_refused, self._on_overflow = on_refused, on_overflow
-        self._max_waiting = max_waiting
-        self._qos1_topics: dict[int, str] = {}
-        self._written: dict[int, asyncio.Future[None]] = {}  # QoS-0 mid -> its socket write
-        self.session_present = False  # the CONNACK's flag: the broker still had our session
-        paho_publish = self._client.publish
-
-        def publish(topic: str, payload: Any = None, qos: int = 0, retain: bool = False,
-                    properties: Properties | None = None) -> paho.MQTTMessageInfo:
-            info = paho_publish(topic, payload, qos, retain, properties)
-            if qos > 0:
-                self._qos1_topics[info.mid] = topic
-            return info
-
-        setattr(self._client, "publish", publish)  # noqa: B010 (an instance's own attribute)
-
-    def publish_now(self, topic: str, body: bytes) -> paho.MQTTMessageInfo:
-        """QoS 0 straight into paho's outgoing queue (no coroutine, no task, no event per
-        message, as aiomqtt's ``publish`` makes them); ``MqttCodeError`` when paho refuses (the
-        connection is gone). ``written(info)`` waits until the socket took it."""
-        info = self._client.publish(topic, body, 0)
-        if info.rc != paho.MQTT_ERR_SUCCESS:
-            raise aiomqtt.MqttCodeError(info.rc, "Could not publish message")
-        return info
-
-    async def written(self, info: paho.MQTTMessageInfo) -> None:
-        """Wait until paho wrote the QoS-0 publication ``info`` to the socket (and so every one
-        queued before it: paho writes in order)."""
-        if info.is_published():
-            return
-        done = self._written[info.mid] = asyncio.get_running_loop().create_future()
-        try:  # not asyncio.wait_for: in 3.11 it can swallow a cancellation that meets the result
-            async with asyncio.timeout(self.timeout):
-                await done
-        except TimeoutError:
-            raise aiomqtt.MqttError("Operation timed out") from None
-        finally:
-            self._written.pop(info.mid, None)
-
-    def _on_publish(self, client: paho.Client, userdata: Any, mid: int,
-                    reason_code: Any, properties: Any) -> None:
-        written = self._written.pop(mid, None)
-        if written is not None and not written.done():
-            written.set_result(None)
-        topic = self._qos1_topics.pop(mid, None)
-        if topic is not None and getattr(reason_code, "is_failure", False):
-            self._on_refused(topic, str(reason_code))
-        super()._on_publish(client, userdata, mid, reason_code, properties)
-
-    def _on_connect(self, client: paho.Client, userdata: Any, flags: Any,
-                    reason_code: Any, properties: Any = None) -> None:
-        self.session_present = bool(getattr(flags, "session_present", False))
-        super()._on_connect(client, userdata, flags, reason_code, properties)
-
-    def _on_disconnect(self, client: paho.Client, userdata: Any, flags: Any,
-                       reason_code: Any, properties: Any = None) -> None:
-        if not self._connected.done():  # aiomqtt would wait for a CONNACK that never comes
-            self._connected.set_exception(_ClosedBeforeConnack(
-                f"the broker closed the connection before its CONNACK ({reason_code})"))
-            return
-        super()._on_disconnect(client, userdata, flags, reason_code, properties)
-
-    def _on_message(self, client: paho.Client, userdata: Any,
-                    message: paho.MQTTMessage) -> None:
-        arrived = _Arrived._from_paho_message(message)
-        arrived.arrival_s = time.monotonic()
-        expiry = getattr(message.properties, "MessageExpiryInterval", None)
-        arrived.expiry_s = float(expiry) if expiry is not None else None
-        if self._queue.qsize() >= self._max_waiting:
-            self._on_overflow(arrived)
-            return
-        self._queue.put_nowait(arrived)
 
 
 class _Stopped(Exception):
@@ -268,7 +167,7 @@ class RobotLink:
         }
 
     # --- the connection ---
-    def _client(self) -> _Client:
+    def _client(self) -> LinkClient:
         will = aiomqtt.Will(
             topics.topic(self.robot, topics.STATUS_LEAF),
             topics.dumps(topics.status_payload(self.robot, "offline", reason="connection lost")),
@@ -283,7 +182,7 @@ class RobotLink:
                        "properties": props}
         else:
             session = {"protocol": aiomqtt.ProtocolVersion.V311, "clean_session": False}
-        client = _Client(
+        client = LinkClient(
             **self.broker.client_kwargs(), **session,
             on_refused=self._refused, on_overflow=self._overflow,
             max_waiting=self.command_queue,
@@ -308,7 +207,7 @@ class RobotLink:
             try:
                 await self._connect(client)
             except (aiomqtt.MqttError, TimeoutError, OSError) as exc:
-                if self.v5 and (protocol_unsupported(exc) or isinstance(exc, _ClosedBeforeConnack)):
+                if self.v5 and (protocol_unsupported(exc) or isinstance(exc, ClosedBeforeConnack)):
                     self.v5 = False
                     log.info("%s: %s speaks MQTT 3.1.1 only: no reason codes, no message "
                              "expiry", self.robot, self.broker)
@@ -334,7 +233,7 @@ class RobotLink:
                             group.exceptions[0], backoff)
                 await _sleep_or_stop(stop, backoff)
 
-    def _check_session(self, client: _Client, away_s: float) -> None:
+    def _check_session(self, client: LinkClient, away_s: float) -> None:
         """A v5 broker without our session, though we were away for less than its expiry, has
         lost its state (restarted without persistence, killed): commands it acknowledged but
         had not delivered, and results it had not delivered, are gone. Say so (once a time)."""
@@ -343,12 +242,12 @@ class RobotLink:
             log.warning("%s: the broker lost its session state (restarted without its "
                         "persistence?): commands and results it held may be lost", self.robot)
 
-    async def _connect(self, client: _Client) -> None:
+    async def _connect(self, client: LinkClient) -> None:
         """CONNECT within ``connect_timeout_s`` (TCP, TLS and CONNACK; DNS gets one more s)."""
         async with asyncio.timeout(self.connect_timeout_s + 1.0):
             await client.__aenter__()
 
-    async def _session(self, client: _Client, stop: asyncio.Event) -> None:
+    async def _session(self, client: LinkClient, stop: asyncio.Event) -> None:
         """Serve one connection; whatever ends it, ``offline`` is published first if it can be."""
         try:
             await self._subscribe(client)
@@ -369,7 +268,7 @@ class RobotLink:
             with contextlib.suppress(Exception):
                 await client.__aexit__(None, None, None)
 
-    async def _subscribe(self, client: _Client) -> None:
+    async def _subscribe(self, client: LinkClient) -> None:
         """``cmd/+`` at QoS 1; in v5 with no-local, so our own ``cmd/result`` is not echoed."""
         if self.v5:
             options = SubscribeOptions(qos=topics.QOS_RELIABLE, noLocal=True)
@@ -381,11 +280,11 @@ class RobotLink:
                 log.warning("%s: the broker refused the subscription %s (%s): no command will "
                             "arrive", self.robot, topics.command_filter(self.robot), code)
 
-    async def _receive(self, client: _Client) -> None:
+    async def _receive(self, client: LinkClient) -> None:
         while True:
             self._handle(await self._next_message(client))
 
-    async def _next_message(self, client: _Client) -> aiomqtt.Message:
+    async def _next_message(self, client: LinkClient) -> aiomqtt.Message:
         """The next message paho received; ``MqttError`` once the connection is lost.
 
         Never loses one, unlike aiomqtt's ``client.messages``: its iterator takes a message off
@@ -416,11 +315,11 @@ class RobotLink:
     def _handle(self, message: aiomqtt.Message) -> None:
         """Answer one message on ``cmd/<name>`` (our own ``cmd/result`` is not a command)."""
         name = message.topic.value.removeprefix(topics.topic(self.robot, "cmd/"))
-        if name != "result" and isinstance(message, _Arrived):
+        if name != "result" and isinstance(message, Arrived):
             for leaf, payload in self._answer(name, message):
                 self.publish(leaf, payload)
 
-    def _answer_waiting(self, client: _Client) -> None:
+    def _answer_waiting(self, client: LinkClient) -> None:
         """Answer the commands this client received but we did not handle yet: paho has
         acknowledged them to the broker, so the broker will not send them again."""
         taken, self._taken = self._taken, []
@@ -429,7 +328,7 @@ class RobotLink:
         while not client._queue.empty():
             self._handle(client._queue.get_nowait())
 
-    def _answer(self, name: str, message: _Arrived) -> list[Publication]:
+    def _answer(self, name: str, message: Arrived) -> list[Publication]:
         expiry_s = message.expiry_s if message.expiry_s is not None else self.command_expiry_s
         if message.retain:  # kept by the broker from whenever: would run again each reconnect
             return self.on_command(name, _payload(message), "retained")
@@ -437,7 +336,7 @@ class RobotLink:
         self.commands_expired += expired
         return self.on_command(name, _payload(message), "expired" if expired else "run")
 
-    def _overflow(self, message: _Arrived) -> None:
+    def _overflow(self, message: Arrived) -> None:
         """Too many commands waiting: answer this one at once (it is not run)."""
         name = message.topic.value.removeprefix(topics.topic(self.robot, "cmd/"))
         if name != "result":
@@ -451,7 +350,7 @@ class RobotLink:
                         reason)
         self.refused[topic] += 1
 
-    async def _send_telemetry(self, client: _Client) -> None:
+    async def _send_telemetry(self, client: LinkClient) -> None:
         """QoS 0, in batches: awaits only the socket writes, never an acknowledgement. A batch
         goes to paho at once and the next waits until the socket took its last message, so
         while the socket is slow the telemetry waits in the bounded deque (drop-oldest), not
@@ -466,7 +365,7 @@ class RobotLink:
                 if last is not None:
                     await client.written(last)
 
-    async def _send_reliable(self, client: _Client) -> None:
+    async def _send_reliable(self, client: LinkClient) -> None:
         """QoS 1, up to ``inflight`` at once; each entry leaves the buffer once acknowledged."""
         while True:
             if not self.reliable:
@@ -475,7 +374,7 @@ class RobotLink:
                 continue
             await self._publish_window(client)
 
-    async def _publish_window(self, client: _Client) -> None:
+    async def _publish_window(self, client: LinkClient) -> None:
         """The oldest ``inflight`` QoS-1 entries at once; each leaves once acknowledged."""
         window = list(islice(self.reliable, self.inflight))
         await asyncio.gather(*(client.publish(p.topic, p.body, qos=topics.QOS_RELIABLE,
@@ -484,7 +383,7 @@ class RobotLink:
             with contextlib.suppress(ValueError):  # dropped meanwhile (buffer full)
                 self.reliable.remove(p)
 
-    async def _goodbye(self, client: _Client, timeout_s: float = 2.0) -> None:
+    async def _goodbye(self, client: LinkClient, timeout_s: float = 2.0) -> None:
         """``offline`` (superseding queued statuses), then flush the QoS-1 buffer, if possible."""
         status = topics.topic(self.robot, topics.STATUS_LEAF)
         self.reliable = deque(p for p in self.reliable if p.topic != status)
