@@ -15,7 +15,7 @@ from pathlib import Path
 import can
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, assume, given, settings
+from hypothesis import HealthCheck, Phase, assume, example, given, settings
 from hypothesis import strategies as st
 
 from odocan.host.experiments.drive import DriveResult
@@ -148,9 +148,13 @@ def test_a_random_jitter_does_not_change_the_live_verdict() -> None:
 
 def _square_counts(robot: Robot, side_m: float, sense: int) -> tuple[list[int], list[int]]:
     """Per-period wheel count steps of a square (four sides, four quarter turns on the spot of
-    ``sense`` +1 ccw, -1 cw), with the profile's nominal geometry, at about 0.2 m/s."""
+    ``sense`` +1 ccw, -1 cw), with the profile's nominal geometry, at about 0.2 m/s, or slower
+    where that would move a wheel by more than an eighth of its counter's range in one period
+    (a turn step is up to twice that: a real counter's delta must stay well inside half its
+    range to be read without ambiguity)."""
     m_per_count = 2 * math.pi * robot.wheel_radius_left_nm * 1e-9 / robot.counts_per_rev
-    per_period = max(1, round(0.002 / m_per_count))
+    range_counts = 1 << min(robot.counter_bits, 24)
+    per_period = max(1, min(round(0.002 / m_per_count), range_counts // 8))
     turn_counts = round(0.25 * math.pi * robot.wheelbase_nm * 1e-9 / m_per_count)
     left: list[int] = []
     right: list[int] = []
@@ -185,6 +189,8 @@ def _drive_result(robot: Robot, truth: Robot, left: list[int], right: list[int])
     ed=st.sampled_from([0.995, 0.998, 1.002, 1.005]),
     eb=st.sampled_from([0.98, 0.99, 1.01, 1.03]),
 )
+# 1 cm wheels, 2^20 counts/rev, a 16-bit counter: 0.2 m/s would be 32 700 counts per period
+@example(robot=Robot(1027605, 10_000_000, 10_000_000, 100_000_000, 16), ed=1.005, eb=1.03)
 def test_calibrates_estimates_agree_with_the_checker(robot: Robot, ed: float, eb: float) -> None:
     """``umbmark.model_fit`` (what ``odocan calibrate`` estimates E_d, E_b with) on squares
     driven by a robot whose real geometry has E_d, E_b (the true ends from the checker's own
