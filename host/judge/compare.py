@@ -176,6 +176,12 @@ def _step_speeds(
     accel_mps = TWIST_GAP_ACCEL_MPS2 * (periods - 1) * cycle_s
     gap_v = np.concatenate(([0.0], np.where(periods > 1, count_mps + accel_mps, 0.0)))
     gap_w = gap_v * (2.0 / g.wheelbase_m)
+    # A frame that waited on a busy bus came more periods after the one before than its COUNTER
+    # step says: the firmware, which cannot tell waiting from losing, may spread the step over
+    # the time it waited (its mean speed then lies between 0 and the step's speed).
+    waited = np.concatenate(([False], np.diff(enc.timestamp_s) > (periods + 0.5) * cycle_s))
+    gap_v = np.where(waited, np.maximum(gap_v, np.abs(v)), gap_v)
+    gap_w = np.where(waited, np.maximum(gap_w, np.abs(w)), gap_w)
     return (v, w), (gap_v, gap_w)
 
 
