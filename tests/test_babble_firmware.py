@@ -219,7 +219,8 @@ def _run_log(tmp_path: Path) -> Path:
 
 def _biased_x(log: Path, out: Path, pick: Callable[[int, float], bool], lsb: int) -> int:
     """``log`` with X of the ODOM_POSE_X frames ``pick(k, t_s)`` chooses (k counts them) off by
-    ``lsb`` LSB, CRC recomputed (a wrong firmware that still speaks E2E); how many it changed."""
+    ``lsb`` LSB, CRC recomputed (a wrong firmware that still speaks E2E); how many it changed.
+    Frames on that ID with a wrong CRC (a babbler's) are left as they are."""
     db = database()
     message = db.get_message_by_name("ODOM_POSE_X")
     data_ids = e2e_messages(db)[frame_key(message.frame_id, False)].data_ids
@@ -228,9 +229,9 @@ def _biased_x(log: Path, out: Path, pick: Callable[[int, float], bool], lsb: int
     for line in log.read_text().splitlines(keepends=True):
         stamp, channel, frame = line.split()[:3]
         can_id, payload = frame.split("#")
-        if int(can_id, 16) == message.frame_id:
+        data = bytearray(bytes.fromhex(payload)) if len(payload) == 16 else bytearray()
+        if int(can_id, 16) == message.frame_id and _e2e_ok(bytes(data), data_ids):
             if pick(k, float(stamp.strip("()"))):
-                data = bytearray(bytes.fromhex(payload))
                 x = int.from_bytes(data[2:6], "little", signed=True) + lsb
                 data[2:6] = x.to_bytes(4, "little", signed=True)
                 data[0] = crc8h2f_p02_one(bytes(data), data_ids[data[1] & 0xF])
@@ -240,6 +241,11 @@ def _biased_x(log: Path, out: Path, pick: Callable[[int, float], bool], lsb: int
         lines.append(line)
     out.write_text("".join(lines))
     return changed
+
+
+def _e2e_ok(data: bytes, data_ids: tuple[int, ...]) -> bool:
+    """An 8-byte frame whose CRC is right (the firmware's, not a babbler's forgery)."""
+    return len(data) == 8 and data[0] == crc8h2f_p02_one(data, data_ids[data[1] & 0xF])
 
 
 def _analyze(log: Path, tmp_path: Path) -> tuple[int, dict[str, Any]]:
