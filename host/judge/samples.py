@@ -194,7 +194,9 @@ def queued_frames(timestamp_s: FloatArray, cycle_s: float) -> npt.NDArray[np.boo
     close on the bus were not sent when they were made (a busy bus, e.g. a babbling node of
     higher priority, held them back and then let them out in a burst)."""
     close = np.diff(timestamp_s) < QUEUED_GAP_CYCLES * cycle_s
-    queued: npt.NDArray[np.bool_] = np.concatenate(([False], close)) | np.concatenate((close, [False]))
+    queued: npt.NDArray[np.bool_] = (
+        np.concatenate(([False], close)) | np.concatenate((close, [False]))
+    )
     return queued
 
 
@@ -224,7 +226,8 @@ def _queued(
         if not queued[k]:
             made_s = float(timestamp_s[k])
             continue
-        chained = k > 0 and named[k - 1] >= 0 and (int(own_counter[k] - own_counter[k - 1]) & 0xF) == 1
+        chained = (k > 0 and named[k - 1] >= 0
+                   and (int(own_counter[k] - own_counter[k - 1]) & 0xF) == 1)
         made_s = made_s + send_s if chained else np.nan
         named[k] = _named_by(enc, int(named[k - 1]), int(enc_counter[k]), made_s, int(index[k]))
     return named
