@@ -297,6 +297,7 @@ def firmware_losses(
     upto = np.maximum(np.searchsorted(enc.index, index) - 1, 0)  # the latest before each page
     gaps = np.concatenate(([0], np.cumsum(np.diff(enc.seq) - 1)))
     excess = (np.diff(lost) & 0xFF) - (gaps[upto[1:]] - gaps[upto[:-1]])
+    excess = np.minimum(excess, upto[1:] - upto[:-1])  # no more than the frames there were
     spans = [(int(upto[k]), int(upto[k + 1]), int(excess[k])) for k in np.flatnonzero(excess > 0)]
     tail = int(upto[-1]) if len(upto) else 0
     if _overflow_reported_after(frames, accepted, decoder, int(index[-1]) if len(index) else -1):
