@@ -33,11 +33,19 @@ from pathlib import Path
 from typing import Any
 
 import can
+import numpy as np
 
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorFlag
-from odocan.host.protocol.decode import frame_key
-from odocan.host.protocol.e2e import crc8h2f_p02_one, e2e_messages
+from odocan.host.io.logs import read_log
+from odocan.host.judge.samples import (
+    accepted_rows,
+    encoder_frames,
+    match_encoder,
+    queued_frames,
+)
+from odocan.host.protocol.decode import BulkDecoder, frame_key
+from odocan.host.protocol.e2e import check_frames, crc8h2f_p02_one, e2e_messages
 from odocan.sim.contract import database
 from odocan.sim.faults import FaultInjectingBus, FaultSpec
 from odocan.sim.rig import LockstepRig, RigConfig
@@ -275,3 +283,52 @@ def test_a_wrong_pose_in_the_burst_still_fails(tmp_path: Path) -> None:
         assert code == 1
         assert not report["passed"]
         assert report["onboard_vs_reference"]["max_position_error_m"] > 1.5e-4
+
+
+class _Spy:
+    """The firmware's CAN driver, wrapped: for each ODOM_POSE_X it hands over, the number of
+    WHEEL_ENCODERS frames the firmware had accepted when it made it (its own count)."""
+
+    def __init__(self, hal: Any, accepted: Callable[[], int]) -> None:
+        self.hal, self.accepted = hal, accepted
+        self.made: list[int] = []
+
+    def transmit(self, can_id: int, data: bytes) -> bool:
+        if can_id == fr.ODOM_POSE_X_ID:
+            self.made.append(self.accepted())
+        return bool(self.hal.transmit(can_id, data))
+
+
+def test_the_judge_pairs_each_queued_pose_with_the_frame_its_firmware_had(tmp_path: Path) -> None:
+    """The pairing itself, against the firmware's own knowledge: every ODOM_POSE_X, burst or
+    not, paired with the encoder frame the firmware had accepted last when it made the frame
+    (its accepted count, read from the running firmware; host and firmware accept all 450)."""
+    reader = can.BufferedReader()
+    config = RigConfig(load("pmir"), channel=f"babble-{uuid.uuid4().hex}",
+                       faults=FaultSpec.parse(BABBLE), bitrate=BITRATE, seed=3)
+    with LockstepRig(config, [reader]) as rig:
+        ecu = rig.board.ecu
+        spy = _Spy(ecu.tx._hal, ecu.rx_encoders.accepted)
+        ecu.tx._hal = spy
+        for _ in range(round(DURATION_S * 100)):
+            rig.step()
+    log = tmp_path / "pairing.log"
+    with can.Logger(str(log)) as logger:
+        while (msg := reader.get_message(0)) is not None:
+            logger.on_message_received(msg)
+    frames = read_log(log)
+    db = database()
+    decoder = BulkDecoder(db)
+    _, accepted = check_frames(frames, db)
+    enc = encoder_frames(frames, accepted, decoder)
+    px = accepted_rows(frames, accepted, decoder, "ODOM_POSE_X")
+    named = match_encoder(enc, px["index"], px["ENC_COUNTER"].astype(np.int64),
+                          px["timestamp_s"], px["COUNTER"].astype(np.int64))
+    had = np.array(spy.made) - 1  # the firmware's last accepted frame, from 0
+    queued = queued_frames(px["timestamp_s"], 0.01)
+    print(f"\n{len(named)} ODOM_POSE_X, {int(queued.sum())} of them queued; paired as the firmware "
+          f"had them: {int(np.sum(named == had))}, left out: {int(np.sum(named < 0))}")
+    assert len(enc.index) == DURATION_S * 100  # the host accepts every encoder frame too
+    assert len(named) == len(had)  # every one reached the log, in the order it was made
+    assert queued.sum() > 30  # the burst is there
+    assert np.array_equal(named, had)
