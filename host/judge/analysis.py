@@ -247,10 +247,11 @@ def _analyze_life(
     vs_truth["distance_travelled_m"] = float(ref.distance_m[-1])
     twist = check_twist(frames, accepted, decoder, enc, robot)
     losses = firmware_losses(frames, accepted, decoder, enc)
-    allowance = loss_allowance(enc, robot, integrator, losses, onboard.enc)
+    allowance = loss_allowance(enc, robot, integrator, losses, onboard.enc, onboard.enc)
     vs_ref["loss_allowance_m"] = float(np.max(allowance, initial=0.0))
     after_span = loss_allowance(enc, robot, integrator, losses,
-                                np.array([last + 1 for _, last, _ in losses], dtype=np.int64))
+                                np.array([last + 1 for _, last, _ in losses], dtype=np.int64),
+                                onboard.enc)
     vs_ref["max_position_error_beyond_allowance_m"] = float(np.max(pos_err - allowance))
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m

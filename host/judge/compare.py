@@ -323,17 +323,19 @@ def _overflow_reported_after(
 
 def loss_allowance(
     enc: Encoders, robot: RobotProfile, integrator: str, spans: list[tuple[int, int, int]],
-    at: IntArray,
+    at: IntArray, named: IntArray,
 ) -> FloatArray:
     """How far (m) the on-board position may lie from the fine reference at encoder frames
     ``at`` because of the frames the firmware lost (``firmware_losses``): per span, the sum of
-    its n largest ``drop_errors``, summed over the spans that began before the frame. A lost
+    its n largest ``drop_errors`` (the frames ``named`` by on-board samples excepted: the firmware
+    had them), summed over the spans that began before the frame. A lost
     frame only changes the step it belongs to (the heading after it is exact, a function of
     the counts), so the errors add up as vectors: their sum of lengths bounds them."""
     allowance = np.zeros(len(at))
     if not spans:
         return allowance
     drop = drop_errors(enc, robot, integrator)
+    drop[named[named < len(drop)]] = 0.0  # a frame an on-board sample names was not lost
     for first, last, n in spans:
         worst = np.sort(drop[first : last + 1])[::-1][:n]
         allowance += np.where(at > first, float(np.sum(worst)), 0.0)
