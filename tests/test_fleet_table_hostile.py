@@ -14,8 +14,8 @@ import time
 
 from rich.console import Console
 
-from odocan.host.judge.monitor import fleet_snapshot, to_json
-from odocan.host.mqtt.fleetview import RobotState
+from odocan.host.judge.monitor import to_json
+from odocan.host.mqtt.fleetview import RobotState, fleet_snapshot
 from odocan.host.report.live import render_fleet
 
 HUGE = b"1" + b"0" * 400
