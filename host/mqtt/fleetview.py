@@ -25,6 +25,7 @@ from cantools.database.can import Database
 from odocan.host.judge.monitor import error_names, shown_value
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.report.jsonutil import real
 from odocan.sim.contract import database
 
 
@@ -159,15 +160,4 @@ def _rates_hz(rates: dict[str, Any]) -> dict[str, float]:
     hz = rates.get("hz")
     if not isinstance(hz, dict):
         return {}
-    return {name: rate for name, v in hz.items() if (rate := _finite(v)) is not None}
-
-
-def _finite(value: Any) -> float | None:
-    """``value`` as a finite float; None for anything else (a string, a bool, 1e400, 10**400)."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return None
-    try:
-        number = float(value)
-    except OverflowError:
-        return None
-    return number if math.isfinite(number) else None
+    return {name: rate for name, v in hz.items() if (rate := real(v)) is not None}

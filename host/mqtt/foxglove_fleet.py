@@ -25,7 +25,6 @@ import argparse
 import asyncio
 import contextlib
 import json
-import math
 import os
 import sys
 import threading
@@ -46,6 +45,7 @@ from odocan.host.io.export import (
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.report.foxglove_options import HOST
+from odocan.host.report.jsonutil import real
 from odocan.sim.exceptions import BusSetupError
 
 RECONNECT_S = 1.0  # after the broker went away
@@ -184,19 +184,8 @@ class FleetFoxglove:
 def _numbers(payload: dict[str, Any], *keys: str) -> tuple[float, ...] | None:
     """The finite numbers under ``keys``, or None when one is missing or not a finite number
     (a JSON integer beyond every float, ``1`` followed by 400 zeros, is not one)."""
-    numbers = []
-    for key in keys:
-        value = payload.get(key)
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            return None
-        try:
-            number = float(value)
-        except OverflowError:
-            return None
-        if not math.isfinite(number):
-            return None
-        numbers.append(number)
-    return tuple(numbers)
+    numbers = [n for key in keys if (n := real(payload.get(key))) is not None]
+    return tuple(numbers) if len(numbers) == len(keys) else None
 
 
 class FollowerThread:

@@ -19,6 +19,7 @@ from rich.table import Table
 from rich.text import Text
 
 from odocan.host.protocol.e2e import E2E_KEYS
+from odocan.host.report.jsonutil import real
 
 STALE_S = 1.0  # a message not heard for this long is shown dimmed
 FLEET_STALE_S = 3.0  # a robot whose last MQTT message is older than this is marked stale
@@ -155,18 +156,6 @@ def unknown_line(unknown: dict[str, Any]) -> Text:
     text = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in counts.items())
     ids = ", ".join(f"{k}×{v}" for k, v in list(unknown.get("ids", {}).items())[:8])
     return Text(f"not checked: {text}" + (f" (IDs {ids})" if ids else ""), style="yellow")
-
-
-def real(value: Any) -> float | None:
-    """``value`` as a finite float; None for anything else (None, text, a list, NaN, a bool, a
-    JSON integer beyond every float): what MQTT hands the fleet view is not trusted."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return None
-    try:
-        number = float(value)
-    except OverflowError:
-        return None
-    return number if math.isfinite(number) else None
 
 
 def num(value: Any, spec: str) -> str:
