@@ -41,7 +41,9 @@ def test_a_retained_status_without_a_time_is_never_heard_live() -> None:
     table: dict[str, RobotState] = {}
     assert apply(table, "odocan/robot001/status", b'{"state": "online"}', retained=True)
     assert table["robot001"].updated_unix_s == 0.0
-    for bad in (b'{"state": "online", "unix_s": "x"}', b'{"state": "online", "unix_s": 1e999}'):
+    huge = b'{"state": "online", "unix_s": 1' + b"0" * 400 + b"}"  # an int beyond every float
+    for bad in (b'{"state": "online", "unix_s": "x"}', b'{"state": "online", "unix_s": 1e999}',
+                huge):
         assert apply(table, "odocan/robot001/status", bad, retained=True)
         assert table["robot001"].updated_unix_s == 0.0
     # a live message (not retained) is heard now

@@ -13,7 +13,6 @@ Each iteration yields the whole table (robot name -> ``RobotState``) after at mo
 from __future__ import annotations
 
 import json
-import math
 import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
@@ -86,10 +85,8 @@ def apply(
 def _published_unix_s(data: dict[str, Any], now_unix_s: float) -> float | None:
     """The payload's ``unix_s`` (s since the epoch, at most ``now_unix_s``), None if absent
     or not a finite number."""
-    sent = data.get("unix_s")
-    if isinstance(sent, bool) or not isinstance(sent, int | float) or not math.isfinite(sent):
-        return None
-    return min(float(sent), now_unix_s)
+    sent = real(data.get("unix_s"))
+    return None if sent is None else min(sent, now_unix_s)
 
 
 async def fleet_states(
