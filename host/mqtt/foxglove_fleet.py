@@ -44,9 +44,8 @@ from odocan.host.io.export import (
 )
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL
-from odocan.host.report.foxglove_options import HOST
+from odocan.host.report.foxglove_options import Served, start_server
 from odocan.host.report.jsonutil import real
-from odocan.sim.exceptions import BusSetupError
 
 RECONNECT_S = 1.0  # after the broker went away
 _POSE_LEAVES = {"pose": "onboard", "reference": "reference", "truth": "truth"}
@@ -54,7 +53,7 @@ _ERROR_TOPICS = {"pose_vs_reference": "errors/reference",
                  "reference_vs_truth": "errors/reference_vs_truth"}
 
 
-class FleetFoxglove:
+class FleetFoxglove(Served):
     """A Foxglove server of every robot's poses, transforms and errors (module docstring).
 
     Args:
@@ -71,23 +70,7 @@ class FleetFoxglove:
         self._channel("/tf", "foxglove.FrameTransform")
         for name in robots:
             self._open_robot(name)
-        try:
-            self.server = foxglove.start_server(
-                name="odocan fleet", host=HOST, port=port, context=self._context
-            )
-        except Exception as exc:  # the SDK raises RuntimeError (port in use, ...)
-            where = f"--foxglove {port}: cannot serve on {HOST}:{port}"
-            raise BusSetupError(f"{where}: {exc}") from None
-
-    @property
-    def port(self) -> int:
-        """The TCP port served."""
-        return int(self.server.port)
-
-    @property
-    def url(self) -> str:
-        """What to type in Foxglove's Open connection."""
-        return f"ws://localhost:{self.port}"
+        self.server = start_server("odocan fleet", port, context=self._context)
 
     def _channel(self, topic: str, schema_name: str) -> None:
         self._channels[topic] = foxglove.Channel(
