@@ -38,6 +38,7 @@ SUBCOMMANDS = (
     "umbmark",
     "calibrate",
     "busload",
+    "key",
 )
 VERSION = __version__  # one definition, in odocan/__init__.py (pyproject.toml reads it too)
 EXIT_OK, EXIT_USAGE = 0, 2
