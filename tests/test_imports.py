@@ -205,3 +205,17 @@ def test_io_protocol_and_judge_import_no_upper_room(tmp_path: Path) -> None:
         ("judge/x.py", "odocan.host.report"),
         ("judge/x.py", "odocan.host.mqtt.bridge"),
     }
+
+
+def test_bare_help_imports_no_subcommand() -> None:
+    """``odocan --help`` lists every command without importing one (nor numpy, python-can,
+    cantools, rich)."""
+    probe = VERSION_PROBE.replace('["--version"]', '["--help"]')
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                          timeout=300, check=False)
+    modules = set(json.loads(done.stdout.strip().splitlines()[-1]))
+    assert "    key" in done.stdout
+    assert "    run" in done.stdout
+    assert not {m for m in modules if m.startswith("odocan.host.cli.subparsers.")}
+    top = {m.split(".")[0] for m in modules}
+    assert top.isdisjoint({*HEAVY, "numpy", "can", "cantools", "rich"}), top
