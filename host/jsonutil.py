@@ -4,7 +4,7 @@ One writer for every ``--report``: strict JSON (numpy scalars and arrays as numb
 NaN and infinities as null), an I/O error naming the path.
 
 It lives at host/ level, below every room, so io/ and judge/ write JSON without importing
-report/ (``odocan.host.report.jsonutil`` re-exports it for the rooms above).
+report/.
 """
 
 from __future__ import annotations

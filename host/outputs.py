@@ -7,7 +7,7 @@ option and the path named, so an hour of simulation is never lost to a report th
 written. A write that still fails at the end names its path too (``write_text``).
 
 It lives at host/ level, below every room, so io/ and judge/ use ``OutputError`` without
-importing report/ (``odocan.host.report.outputs`` re-exports it for the rooms above).
+importing report/.
 """
 
 from __future__ import annotations
