@@ -56,6 +56,7 @@ import can
 from cantools.database.can import Database, Message
 
 from odocan.firmware.errors import ErrorFlag
+from odocan.host.jsonutil import finite
 from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import CONFLICT_HOLD_S, SourceWatch
@@ -67,7 +68,6 @@ from odocan.host.protocol.e2e import (
     crc8h2f_p02_one,
     e2e_messages,
 )
-from odocan.host.report.jsonutil import finite
 from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile
 

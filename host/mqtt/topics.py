@@ -32,7 +32,7 @@ import re
 import time
 from typing import Any, Final
 
-from odocan.host.report.jsonutil import finite
+from odocan.host.jsonutil import finite
 
 PREFIX: Final = "odocan"
 TELEMETRY_LEAVES: Final = ("pose", "reference", "truth", "error", "rates")

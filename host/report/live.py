@@ -18,8 +18,8 @@ from rich.console import Group, RenderableType
 from rich.table import Table
 from rich.text import Text
 
+from odocan.host.jsonutil import real
 from odocan.host.protocol.e2e import E2E_KEYS
-from odocan.host.report.jsonutil import real
 
 STALE_S = 1.0  # a message not heard for this long is shown dimmed
 FLEET_STALE_S = 3.0  # a robot whose last MQTT message is older than this is marked stale
