@@ -10,9 +10,14 @@ prints, besides the report's miss ratio and CPU per robot-tick (us):
   would show as one residue with more late ticks than the others);
 - with ``--slow-ms X``: asyncio debug mode, and which callbacks ran longer than X ms (debug mode
   itself costs CPU: compare its miss ratio with a run without it);
-- with ``--profile``: the top functions by own time (cProfile, over the whole run).
+- with ``--profile``: the top functions by own time (cProfile, over the whole run);
+- with ``--flat-out``: no clock at all: the ticks of ``--seconds`` run back to back (the event
+  loop gets a few turns between ticks, for the bridge and the MQTT I/O), so the CPU per
+  robot-tick is measured without the wall clock (a shared machine's other load barely moves it;
+  ``status``/``rates``, once a wall-clock second, land on fewer ticks).
 
     .venv/bin/python bench/fleet_jitter.py --robots 25 --seconds 10 [--slow-ms 2] [--profile]
+    .venv/bin/python bench/fleet_jitter.py --robots 20 --seconds 20 --flat-out [--profile]
 
 Wall-clock figures depend on the machine's other load (printed: the load average); the CPU per
 robot-tick barely does.
@@ -39,10 +44,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from fleet import start_mosquitto  # bench/fleet.py
 
+import odocan.host.mqtt.fleetrun as fleetrun
 import odocan.sim.realtime as realtime
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
 from odocan.sim import robot
-from odocan.sim.fleet import FleetConfig
+from odocan.sim.board import TICK_S
+from odocan.sim.fleet import Batch, Fleet, FleetConfig
 
 LATE_S = 0.005  # a tick is late after half a 10 ms period (sim.realtime.DeadlineStats)
 
@@ -80,6 +87,28 @@ class Probe:
             self._gc_start_s = now_s
         else:
             self.gcs.append((self._gc_start_s, now_s - self._gc_start_s, info["generation"]))
+
+
+async def flat_out(
+    fleet: Fleet, *, duration_s: float | None, on_batch: Any = None, stop: Any = None,
+    period_s: float = TICK_S, stats: realtime.DeadlineStats | None = None,
+) -> realtime.DeadlineStats:
+    """``sim.fleet.run_realtime`` without the clock: every tick of ``duration_s`` back to back,
+    with ``TURNS`` event-loop turns after each (the bridge, the links' sends, the socket)."""
+    stats = stats if stats is not None else realtime.DeadlineStats(period_s, period_s / 2)
+    assert duration_s is not None
+    for k in range(round(duration_s / period_s)):
+        stats.record(0.0)
+        fleet.step(k)
+        batch: Batch = fleet.take_batch()
+        if on_batch is not None:
+            on_batch(batch)
+        for _ in range(TURNS):
+            await asyncio.sleep(0)
+    return stats
+
+
+TURNS = 4
 
 
 def percentile_ms(sorted_s: list[float], q: float) -> float:
@@ -126,7 +155,10 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--slow-ms", type=float, default=None)
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--flat-out", action="store_true")
     args = parser.parse_args()
+    if args.flat_out:
+        fleetrun.run_realtime = flat_out  # type: ignore[assignment]
     probe = Probe()
     probe.install()
     with tempfile.TemporaryDirectory() as tmp:
