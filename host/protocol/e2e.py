@@ -355,7 +355,9 @@ class E2EMonitor:
         periods = self._periods(key, config, timestamp_s)
         counter = data[1] & COUNTER_MASK
         crc_ok = crc8h2f_p02_one(data, config.data_ids[counter]) == data[0]
-        state = self._states.setdefault(key, SequenceState(config.max_delta_init))
+        state = self._states.get(key)
+        if state is None:  # not setdefault: it would build a state (and its counts) per frame
+            state = self._states[key] = SequenceState(config.max_delta_init)
         return state.check(crc_ok, counter, periods)
 
     def _periods(self, key: int, config: E2EMessage, timestamp_s: float | None) -> int:
