@@ -3,6 +3,8 @@
 Runs ``n`` robots in this one process (what one ``odocan fleet --workers N`` worker runs) and
 prints, besides the report's miss ratio and CPU per robot-tick (us):
 
+- the MQTT publications and socket writes per robot-tick (counted over the whole run, the
+  connections' start and end included);
 - the lateness distribution of the 10 ms ticks (ms: p50, p90, p99, p99.9, max);
 - the cyclic GC's collections while the clock ran (``gc.callbacks``: count per generation, the
   longest pause) and how many late ticks had a collection in the period before them;
@@ -44,7 +46,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from fleet import start_mosquitto  # bench/fleet.py
 
+import odocan.host.mqtt.client as client
 import odocan.host.mqtt.fleetrun as fleetrun
+import odocan.host.mqtt.link as link
 import odocan.sim.realtime as realtime
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
 from odocan.sim import robot
@@ -61,6 +65,8 @@ class Probe:
         self.ticks: list[tuple[float, float]] = []  # (perf_counter s, lateness s)
         self.gcs: list[tuple[float, float, int]] = []  # (start s, pause s, generation)
         self.slow: list[tuple[float, str]] = []
+        self.senders: list[client.CoalescedSend] = []  # every link's socket writes
+        self.publications = 0  # QoS 0 and QoS 1, every link
         self._gc_start_s = 0.0
 
     def install(self) -> None:
@@ -74,6 +80,19 @@ class Probe:
         realtime.DeadlineStats.record = recorded  # type: ignore[method-assign]
         gc.callbacks.append(self._on_gc)
         probe = self
+        made = client.CoalescedSend.__init__
+        publish = link.RobotLink.publish
+
+        def making(sender: client.CoalescedSend, paho: Any) -> None:
+            made(sender, paho)
+            probe.senders.append(sender)
+
+        def publishing(robot_link: link.RobotLink, leaf: str, payload: dict[str, Any]) -> None:
+            probe.publications += 1
+            publish(robot_link, leaf, payload)
+
+        client.CoalescedSend.__init__ = making  # type: ignore[method-assign]
+        link.RobotLink.publish = publishing  # type: ignore[method-assign]
 
         class SlowCallbacks(logging.Handler):
             def emit(self, rec: logging.LogRecord) -> None:
@@ -131,6 +150,9 @@ def show(probe: Probe, report: dict[str, Any], robots: int) -> None:
     print(f"{robots} robots, {ticks} ticks, load average {os.getloadavg()[0]:.2f}: "
           f"deadline_miss_ratio {report['deadline_miss_ratio']:.4f}, "
           f"CPU {report['cpu_s'] / robots / ticks * 1e6:.0f} us per robot-tick")
+    writes = sum(sender.writes for sender in probe.senders)
+    print(f"MQTT: {probe.publications / robots / ticks:.3f} publications and "
+          f"{writes / robots / ticks:.3f} socket writes per robot-tick (the whole run)")
     late = sorted(lateness for _, lateness in probe.ticks)
     print("lateness ms: " + ", ".join(f"p{q * 100:g} {percentile_ms(late, q):.2f}"
                                        for q in (0.5, 0.9, 0.99, 0.999, 1.0)))
