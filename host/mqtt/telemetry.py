@@ -4,9 +4,10 @@
 publications it makes due, as ``(leaf, payload)`` pairs (``host.mqtt.topics``):
 
 * every frame is E2E-checked (``host.e2e.E2EMonitor``: the DBC's E2EDataIDs, Profile 2 CRC and
-  sequence) and decoded with cantools; frames the check rejects, and E2E-valid frames cantools
-  cannot decode (an unknown multiplexer page), are counted in ``rejected``, never used (foreign
-  IDs by hex up to ``MAX_UNKNOWN_IDS`` of them, then as ``other``);
+  sequence) and decoded with cantools (its decode compiled: ``host.mqtt.livedecode``); frames
+  the check rejects, and E2E-valid frames cantools cannot decode (an unknown multiplexer page),
+  are counted in ``rejected``, never used (foreign IDs by hex up to ``MAX_UNKNOWN_IDS`` of them,
+  then as ``other``);
 * ``WHEEL_ENCODERS`` steps the float64 reference (``host.reference.ReferenceOdometry``, 24-bit
   wrapping counts); the reference pose after each frame is kept by the frame's E2E ``COUNTER``;
 * ``ODOM_POSE_X`` + ``ODOM_POSE_Y`` with the same ``ENC_COUNTER`` make the on-board pose, compared
@@ -38,6 +39,7 @@ from cantools.database.errors import DecodeError
 
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.tracking import FramePose, PoseTracker, difference, pose_dict
+from odocan.host.mqtt.livedecode import LiveDecoder
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor
 from odocan.sim.contract import database
@@ -83,6 +85,7 @@ class RobotTelemetry:
         self.name = name
         self.db = db if db is not None else database()
         self._by_id = {m.frame_id: m for m in self.db.messages}
+        self._decoders = {m.frame_id: LiveDecoder(m) for m in self.db.messages}
         self.e2e = E2EMonitor(self.db)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
@@ -116,7 +119,7 @@ class RobotTelemetry:
         signals: Any = None
         if handler is not None:
             try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
-                signals = message.decode(data, decode_choices=False)
+                signals = self._decoders[can_id].decode(data)  # cantools' decode, compiled
             except DecodeError:
                 self.rejected[message.name] += 1
                 return []
