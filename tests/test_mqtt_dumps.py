@@ -8,8 +8,8 @@ from typing import Any
 from hypothesis import given
 from hypothesis import strategies as st
 
+from odocan.host.jsonutil import finite
 from odocan.host.mqtt.topics import dumps
-from odocan.host.report.jsonutil import finite
 
 LEAVES = st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5)
 PAYLOADS = st.dictionaries(
