@@ -293,9 +293,13 @@ class BusMonitor:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
-            self.tracker.restart_reference()
+            if uptime_s == 0:  # its boot summary: the reference starts at its power-up pose
+                self.tracker.power_up(primed_now=state != "INIT")
+                detail += ": reference restarted at the power-up pose"
+            else:  # the boot summary was missed: where it primed is unknown
+                self.tracker.restart_reference()
+                detail += ": reference restarted"
             self._restart_sequences(FIRMWARE_NODE)
-            detail += ": reference restarted"
         elif kind == "two sources":
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
             last = self.events[-1] if self.events else None

@@ -194,6 +194,30 @@ class PoseTracker:
         self._refs = [None] * _RING
         self._drop_backlog()
 
+    def power_up(self, primed_now: bool) -> None:
+        """A firmware reboot (``host.judge.sources``): the new firmware's life starts at its
+        power-up pose, (0, 0, 0) at the encoder frame it primed on, as ``analyze`` starts it
+        (``host.judge.reboots``): the latest accepted encoder frame when its boot summary says
+        UPTIME 0 and not INIT (``primed_now``: it primed in its first tick), else the next one.
+        No pose is adopted, so a firmware that comes up wrong shows its error. Without a known
+        integrator it falls back to ``restart_reference`` (the next pose is adopted)."""
+        self.restart_reference()
+        if self.integrator is None:
+            return
+        self._ref = ReferenceOdometry(self.geometry, self.integrator, self.counter_bits,
+                                      x_m=0.0, y_m=0.0, heading_rad=0.0)
+        self.reference_starts += 1
+        self._gate = StepGate(self.geometry, self.counter_bits)
+        self._frames_since_pose = 0  # the boot is not a stall: never placed at its first pose
+        if not primed_now:
+            return
+        latest = [(c[0], i, c[1], c[2]) for i, c in enumerate(self._counts)
+                  if c is not None and c[0] == self.enc_seq]
+        if latest:
+            seq, counter, left, right = latest[0]
+            self._gate.step(counter, left, right)  # primes: the pose stays at 0
+            self._refs[counter] = FramePose(seq, 0.0, 0.0, 0.0)
+
     def _drop_backlog(self) -> None:
         self._pending = None
         self._backlog_counts = []
