@@ -13,6 +13,8 @@ import pytest
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import POSITION_LSB_M, analyze
 from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.robot import load
 from tests.test_analysis_reboot import REBOOT, STEPS, independent, rebooting_drive
 
@@ -26,14 +28,25 @@ def monitor_of(path: Path, robot: str, integrator: str) -> BusMonitor:
     return monitor
 
 
+def bridge_of(path: Path, robot: str, integrator: str) -> RobotTelemetry:
+    """The MQTT bridge's judge of one robot fed every frame of the log."""
+    profile = load(robot)
+    bridge = RobotTelemetry("r1", Geometry.of(profile), integrator,
+                            counter_bits=profile.counter_bits)
+    with can.LogReader(str(path)) as reader:
+        for msg in reader:
+            bridge.feed(msg)
+    return bridge
+
+
 @pytest.mark.parametrize(("bias_100um", "boot_in_init"),
                          [(0, False), (0, True), (2, False), (-3, False), (2, True)])
 def test_the_monitor_judges_a_rebooted_firmware_from_its_power_up_pose(
     tmp_path: Path, bias_100um: int, boot_in_init: bool
 ) -> None:
-    """A firmware whose X after the reboot is off by a few LSB: the monitor's max error vs
-    reference shows it (it did not: it adopted the first wrong pose), and agrees with analyze
-    and the independent checker; a correct reboot stays within one LSB."""
+    """A firmware whose X after the reboot is off by a few LSB: the monitor's and the bridge's
+    max error vs reference show it (they did not: they adopted the first wrong pose), and agree
+    with analyze and the independent checker; a correct reboot stays within one LSB."""
     profile = load("kobuki")
     bias = {k: bias_100um for k in range(REBOOT, STEPS + 1)} if bias_100um else None
     path = rebooting_drive(profile, "exact", bias=bias, boot_in_init=boot_in_init).write(
@@ -42,13 +55,17 @@ def test_the_monitor_judges_a_rebooted_firmware_from_its_power_up_pose(
     assert right == (bias_100um == 0)
     analysis = analyze(read_log(path), profile)
     assert analysis.passed == right
+    offline = analysis.report["onboard_vs_reference"]["max_position_error_m"]
     monitor = monitor_of(path, "kobuki", "exact")
     assert [e["kind"] for e in monitor.events] == ["reboot"]
-    assert monitor.tracker.reference_starts == 2
-    live = monitor.tracker.vs_reference.max_dpos_m
-    if right:
-        assert live <= 1.5 * POSITION_LSB_M
-    else:
-        assert live == pytest.approx(abs(bias_100um) * POSITION_LSB_M, abs=0.6 * POSITION_LSB_M)
-    offline = analysis.report["onboard_vs_reference"]["max_position_error_m"]
-    assert live == pytest.approx(offline, abs=POSITION_LSB_M)  # one judge: within one LSB
+    bridge = bridge_of(path, "kobuki", "exact")
+    assert bridge.reboots == 1
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.reference_starts == 2
+        live = tracker.vs_reference.max_dpos_m
+        if right:
+            assert live <= 1.5 * POSITION_LSB_M
+        else:
+            assert live == pytest.approx(abs(bias_100um) * POSITION_LSB_M,
+                                         abs=0.6 * POSITION_LSB_M)
+        assert live == pytest.approx(offline, abs=POSITION_LSB_M)  # one judge: within one LSB

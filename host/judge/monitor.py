@@ -58,13 +58,17 @@ from cantools.database.can import Database, Message
 from odocan.firmware.errors import ErrorFlag
 from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.reference import Geometry
-from odocan.host.judge.sources import CONFLICT_HOLD_S, SourceWatch
+from odocan.host.judge.sources import (
+    CONFLICT_HOLD_S,
+    SourceWatch,
+    boot_summary,
+    start_new_life,
+)
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import (
     UNKNOWN,
     E2EMonitor,
-    crc8h2f_p02_one,
     e2e_messages,
 )
 from odocan.host.report.jsonutil import finite
@@ -293,13 +297,8 @@ class BusMonitor:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
-            if uptime_s == 0:  # its boot summary: the reference starts at its power-up pose
-                self.tracker.power_up(primed_now=state != "INIT")
-                detail += ": reference restarted at the power-up pose"
-            else:  # the boot summary was missed: where it primed is unknown
-                self.tracker.restart_reference()
-                detail += ": reference restarted"
-            self._restart_sequences(FIRMWARE_NODE)
+            senders = [m for m in self.db.messages if FIRMWARE_NODE in m.senders]
+            detail += ": " + start_new_life(self.tracker, self.e2e, senders, uptime_s, state)
         elif kind == "two sources":
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
             last = self.events[-1] if self.events else None
@@ -310,30 +309,8 @@ class BusMonitor:
 
     def _summary(self, message: Message, data: bytes) -> tuple[int, str] | None:
         """(UPTIME, STATE) of an ODOM_STATUS summary whose CRC holds, whatever its sequence."""
-        if message.name != "ODOM_STATUS" or len(data) != 8:
-            return None
         config = self._e2e_configs.get(frame_key(message.frame_id, message.is_extended_frame))
-        ids = config.data_ids if config is not None else None
-        if not ids or data[0] != crc8h2f_p02_one(data, ids[data[1] & 0xF]):
-            return None
-        try:
-            signals = message.decode(data)
-        except Exception:  # not decodable: the E2E check and _use count it
-            return None
-        assert isinstance(signals, dict)
-        values: dict[str, Any] = dict(signals)
-        if str(values.get("PAGE")) != "SUMMARY":
-            return None
-        return int(values["UPTIME"]), str(values["STATE"])
-
-    def _restart_sequences(self, node: str) -> None:
-        """Forget the E2E sequence of every message ``node`` sends (a reboot restarts its
-        counters: that is not frames lost)."""
-        for message in self.db.messages:
-            if node in message.senders:
-                state = self.e2e._states.get(frame_key(message.frame_id, message.is_extended_frame))
-                if state is not None:  # the counts stay; the next frame starts the sequence
-                    state.waiting = True
+        return boot_summary(message, data, config.data_ids if config is not None else None)
 
     def node_ages(self, now_s: float) -> dict[str, dict[str, Any]]:
         """Per sending node heard: ``age_s`` since its last cyclic message, ``timeout_s``

@@ -13,6 +13,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
+
+from cantools.database.can import Message
+
+from odocan.host.judge.tracking import PoseTracker
+from odocan.host.protocol.decode import frame_key
+from odocan.host.protocol.e2e import E2EMonitor, crc8h2f_p02_one
 
 UPTIME_MATCH_S = 2.0  # one source's UPTIME (whole s) minus bus time stays within this
 CONFLICT_HOLD_S = 2.0  # CONFLICT is shown this long after two sources last interleaved
@@ -53,3 +60,38 @@ class SourceWatch:
         self.last_uptime_s, self.last_state = uptime_s, state
         return kind
 
+
+
+def boot_summary(message: Message, data: bytes, data_ids: Any) -> tuple[int, str] | None:
+    """(UPTIME s, STATE) of an ODOM_STATUS summary whose CRC holds, whatever its E2E sequence
+    (a rebooted firmware restarts it); ``data_ids``: the message's E2E DataIDs. None otherwise."""
+    if message.name != "ODOM_STATUS" or len(data) != 8:
+        return None
+    if not data_ids or data[0] != crc8h2f_p02_one(data, data_ids[data[1] & 0xF]):
+        return None
+    try:
+        signals = message.decode(data)
+    except Exception:  # not decodable: the E2E check and the caller count it
+        return None
+    assert isinstance(signals, dict)
+    values: dict[str, Any] = dict(signals)
+    if str(values.get("PAGE")) != "SUMMARY":
+        return None
+    return int(values["UPTIME"]), str(values["STATE"])
+
+
+def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, senders: list[Message],
+                   uptime_s: int, state: str) -> str:
+    """A reboot told by ``SourceWatch``: the reference starts at the power-up pose when this is
+    the boot summary (UPTIME 0; ``host.judge.reboots``), else (the boot summary missed: where it
+    primed is unknown) at the next pose; the E2E sequences of the messages the firmware sends
+    (``senders``) start afresh (a reboot is not frames lost). Returns what was done (text)."""
+    for message in senders:
+        seq = e2e._states.get(frame_key(message.frame_id, message.is_extended_frame))
+        if seq is not None:  # the counts stay; the next frame starts the sequence
+            seq.waiting = True
+    if uptime_s == 0:
+        tracker.power_up(primed_now=state != "INIT")
+        return "reference restarted at the power-up pose"
+    tracker.restart_reference()
+    return "reference restarted"

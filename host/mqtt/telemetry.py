@@ -37,10 +37,13 @@ from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.tracking import FramePose, PoseTracker, difference, pose_dict
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
-from odocan.host.protocol.e2e import E2EMonitor
+from odocan.host.protocol.e2e import E2EMonitor, e2e_messages
 from odocan.sim.contract import database
+
+FIRMWARE_NODE = "ODOM_MCU"  # the DBC node that sends the firmware's frames
 
 Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
@@ -98,6 +101,9 @@ class RobotTelemetry:
         self.pending: dict[tuple[int, int], PendingAck] = {}
         self.status_seq = 0
         self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
+        self._status_ids = e2e_messages(self.db).get(self._status_id)
+        self.sources = SourceWatch()  # reboots, as the monitor tells them (host.judge.sources)
+        self.reboots = 0
 
     # --- frames ---
     def feed(self, msg: can.Message) -> list[Publication]:
@@ -107,6 +113,8 @@ class RobotTelemetry:
             return []
         can_id, data = msg.arbitration_id, bytes(msg.data)
         message = self._by_id.get(can_id)
+        if message is not None and can_id == self._status_id and not msg.is_extended_id:
+            self._watch_source(message, data, msg.timestamp)  # before E2E: a reboot fails it
         status = self.e2e.check(can_id, data, extended=msg.is_extended_id,
                                 timestamp_s=msg.timestamp)  # the window widens with time
         if message is None or status not in ACCEPTED_E2E:
@@ -127,6 +135,17 @@ class RobotTelemetry:
         assert isinstance(signals, dict)
         publications: list[Publication] = handler(self, signals, msg.timestamp)
         return publications
+
+    def _watch_source(self, message: Any, data: bytes, t_s: float) -> None:
+        """A reboot (UPTIME going back, INIT after running) starts the firmware's new life at
+        its power-up pose, as the monitor and ``analyze`` do (``host.judge.sources``)."""
+        ids = self._status_ids.data_ids if self._status_ids is not None else None
+        summary = boot_summary(message, data, ids)
+        if summary is None or self.sources.observe(t_s, *summary) != "reboot":
+            return
+        self.reboots += 1
+        senders = [m for m in self.db.messages if FIRMWARE_NODE in m.senders]
+        start_new_life(self.tracker, self.e2e, senders, *summary)
 
     def _unknown_key(self, can_id: int) -> str:
         """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
