@@ -195,8 +195,10 @@ class BusMonitor:
         if stats is None:
             stats = self.messages[message.name] = MessageStats(message.name, message.frame_id)
         stats.heard(timestamp_s, now_s, _page(message, data))
+        self.tracker.advance(timestamp_s)  # settles the pose halves heard half a cycle before
         if status in ACCEPTED:
             self._use(message, stats, data)
+        self.tracker.take_samples()  # judged in ``tracker.vs_reference``
 
     def _count_unknown_id(self, can_id: int) -> None:
         key = f"0x{can_id:03X}"
@@ -260,13 +262,16 @@ class BusMonitor:
                             "detail": f"{request} refused: {reason}"})
 
     def _on_encoders(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
+        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]),
+                                 self._bus_time_s)
 
     def _on_pose_x(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]))
+        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]),
+                               counter=int(s["COUNTER"]), t_s=self._bus_time_s)
 
     def _on_pose_y(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        self.tracker.on_pose_y(int(s["ENC_COUNTER"]), float(s["Y"]), int(s["TURNS"]))
+        self.tracker.on_pose_y(int(s["ENC_COUNTER"]), float(s["Y"]), int(s["TURNS"]),
+                               counter=int(s["COUNTER"]), t_s=self._bus_time_s)
 
     def _on_truth(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         part = int(s["PART"])

@@ -93,7 +93,6 @@ class RobotTelemetry:
         self.rejected: Counter[str] = Counter()
         self._unknown_ids: set[str] = set()
         self._window = _Window(now_s)
-        self._pose_x_counter = 0  # E2E COUNTER of the last ODOM_POSE_X
         self._twist: dict[str, float] = {}
         self._last_pub_t = -math.inf
         self._truth_error: dict[str, Any] | None = None
@@ -117,9 +116,10 @@ class RobotTelemetry:
             self._watch_source(message, data, msg.timestamp)  # before E2E: a reboot fails it
         status = self.e2e.check(can_id, data, extended=msg.is_extended_id,
                                 timestamp_s=msg.timestamp)  # the window widens with time
+        self.tracker.advance(msg.timestamp)  # settles the pose halves heard half a cycle before
         if message is None or status not in ACCEPTED_E2E:
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
-            return []
+            return self._samples()
         handler = self._handlers.get(message.name)
         signals: Any = None
         if handler is not None:
@@ -127,14 +127,14 @@ class RobotTelemetry:
                 signals = message.decode(data, decode_choices=False)
             except DecodeError:
                 self.rejected[message.name] += 1
-                return []
+                return self._samples()
         self.frames[message.name] += 1
         self._window.counts[message.name] += 1
         if handler is None:
-            return []
+            return self._samples()
         assert isinstance(signals, dict)
         publications: list[Publication] = handler(self, signals, msg.timestamp)
-        return publications
+        return publications + self._samples()
 
     def _watch_source(self, message: Any, data: bytes, t_s: float) -> None:
         """A reboot (UPTIME going back, INIT after running) starts the firmware's new life at
@@ -157,12 +157,13 @@ class RobotTelemetry:
         return "other"
 
     def _on_encoders(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
+        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]),
+                                 t_s)
         return []
 
     def _on_pose_x(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), s["X"], s["HEADING"])
-        self._pose_x_counter = int(s["COUNTER"])
+        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), s["X"], s["HEADING"],
+                               counter=int(s["COUNTER"]), t_s=t_s)
         return []
 
     def _on_twist(self, s: dict[str, Any], t_s: float) -> list[Publication]:
@@ -174,14 +175,25 @@ class RobotTelemetry:
         return []
 
     def _on_pose_y(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        enc = int(s["ENC_COUNTER"])
-        sample = self.tracker.on_pose_y(enc, s["Y"], int(s["TURNS"]))
+        self.tracker.on_pose_y(int(s["ENC_COUNTER"]), s["Y"], int(s["TURNS"]),
+                               counter=int(s["COUNTER"]), t_s=t_s)
+        return []
+
+    def _samples(self) -> list[Publication]:
+        """The on-board samples the tracker settled on this frame: the latest published, at
+        most ``publish_hz`` times per second of bus time (its ODOM_POSE_Y's)."""
+        samples = self.tracker.take_samples()
+        if not samples:
+            return []
+        sample = samples[-1]
+        t_s = sample.t_s
         if t_s < self._last_pub_t:  # the bus clock went back (a restart, a replay): follow it
             self._last_pub_t = -math.inf
-        if sample is None or t_s - self._last_pub_t < self.publish_period_s - 1e-6:
+        if t_s - self._last_pub_t < self.publish_period_s - 1e-6:
             return []
         self._last_pub_t = t_s
-        return self._pose_publications(*sample, enc, self._pose_x_counter, t_s)
+        return self._pose_publications(sample.pose, sample.reference, sample.enc_counter,
+                                       sample.counter, t_s)
 
     def _pose_publications(
         self, pose: FramePose, ref: FramePose | None, enc: int, counter: int, t_s: float
