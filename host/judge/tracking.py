@@ -230,6 +230,7 @@ class PoseTracker:
         self._last_compared = -1  # the encoder frame of the last sample compared
         self._place_at_next = False  # after a stall or a held pose: place the position again
         self.pose: FramePose | None = None
+        self.pose_t_s = 0.0  # bus time of the ODOM_POSE_Y of ``pose`` (s)
         self.reference: FramePose | None = None
         self.truth: FramePose | None = None
         self.reference_starts = 0
@@ -327,9 +328,15 @@ class PoseTracker:
         k = int(np.searchsorted(at, pos))
         stop = k + 2  # the half and the one after it, if heard
         t_s = halves.col("t_s")[:stop]
+        # The bus times must show the send period for the queued rule: a bus stamped on receipt
+        # from a sender faster than real time (a lockstep rig forwarded) shows every frame in a
+        # burst. Then the plain rule (the latest frame on the bus) is the only one left, where
+        # analyze, given such a log, pairs nothing.
+        clocked = len(t_s) < 3 or float(np.median(np.diff(t_s))) >= QUEUED_GAP_CYCLES * CYCLE_S
+        own = halves.col("counter")[:stop].astype(np.int64) if clocked else None
         named = match_encoder(enc, at[:stop], halves.col("enc_counter")[:stop].astype(np.int64),
-                              t_s, halves.col("counter")[:stop].astype(np.int64))
-        queued = bool(queued_frames(t_s, CYCLE_S)[k])
+                              t_s, own)
+        queued = clocked and bool(queued_frames(t_s, CYCLE_S)[k])
         found = int(named[k])
         return (int(w.col("seq")[found]) if found >= 0 else -1), queued
 
@@ -343,6 +350,7 @@ class PoseTracker:
         self._sampled.add(seq)
         self._sampled.discard(seq - ENC_WINDOW)
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
+        self.pose_t_s = y.t_s
         ref = self._compare(pose, y, queued)
         self._settled.append(Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
 
