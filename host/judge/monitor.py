@@ -291,6 +291,8 @@ class BusMonitor:
             integrator = str(shown["INTEGRATOR"]).lower()
             if integrator in ("euler", "rk2", "exact"):
                 self.tracker.on_integrator(integrator)
+        elif page == "E2E_WHEEL_ENCODERS":
+            self.tracker.on_enc_lost(int(s["ENC_E2E_LOST"]))
         elif page == "FRAME_TOTALS":
             self.status.update({k.lower(): int(v) for k, v in s.items() if k.endswith("_FRAMES")})
 
@@ -356,9 +358,12 @@ class BusMonitor:
         error = self.tracker.vs_reference.latest
         if not error:
             return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
-        if error["dpos_m"] > POSE_TOLERANCE_M or abs(error["dheading_rad"]) > POSE_TOLERANCE_RAD:
+        allowed_m = self.tracker.allowance_m()  # for encoder frames the firmware lost
+        if (error["dpos_m"] - allowed_m > POSE_TOLERANCE_M
+                or abs(error["dheading_rad"]) > POSE_TOLERANCE_RAD):
+            plus = f" (allowed {allowed_m * 1e3:.1f} mm for lost frames)" if allowed_m else ""
             return "POSE WRONG", [
-                f"on-board vs reference {error['dpos_m'] * 1e3:.1f} mm, "
+                f"on-board vs reference {error['dpos_m'] * 1e3:.1f} mm{plus}, "
                 f"{error['dheading_rad'] * 1e3:.2f} mrad"
             ]
         return "OK", []

@@ -20,6 +20,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from odocan.firmware.ecu import ENCODER_PERIOD_US, MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
+from odocan.host.judge.compare import drop_errors_of, lost_beyond_gaps, worst_losses_m
 from odocan.host.judge.reference import Geometry, ReferenceOdometry, wrap_delta
 from odocan.host.judge.samples import (
     QUEUED_GAP_CYCLES,
@@ -69,7 +70,8 @@ class _Columns:
         return min(self._n, self.size)
 
 
-class _Half(NamedTuple):
+@dataclass(slots=True)
+class _Half:
     """A pose half heard: its place among the frames fed (``pos``), ENC_COUNTER, its own E2E
     COUNTER, bus time (s) and values (X: X m, HEADING rad; Y: Y m, TURNS)."""
 
@@ -229,6 +231,10 @@ class PoseTracker:
         self._last_sample_t: float | None = None  # bus time of the last sample's ODOM_POSE_Y
         self._last_compared = -1  # the encoder frame of the last sample compared
         self._place_at_next = False  # after a stall or a held pose: place the position again
+        self._lost_page: tuple[int, int] | None = None  # ENC_E2E_LOST, latest frame then
+        self._allowances: list[tuple[int, float]] = []  # (first frame, m) per lossy span
+        self._revisable: list[tuple[int, float]] = []  # (frame, m) of samples since that page
+        self._beyond_settled_m = 0.0  # largest error beyond its allowance of the other samples
         self.pose: FramePose | None = None
         self.pose_t_s = 0.0  # bus time of the ODOM_POSE_Y of ``pose`` (s)
         self.reference: FramePose | None = None
@@ -253,6 +259,8 @@ class PoseTracker:
         self.enc_seq += 1
         self._pos += 1
         self._window.append(self.enc_seq, self._pos, counter, t_s, left, right)
+        if self.enc_seq % ENC_WINDOW == 0:
+            self._forget(self.enc_seq - ENC_WINDOW)
         self._counts[counter] = (self.enc_seq, left, right)
         ref = self._ref
         if ref is not None:
@@ -264,6 +272,14 @@ class PoseTracker:
             self._backlog_counts.append((self.enc_seq, counter, left, right))
             if len(self._backlog_counts) > BACKLOG_FRAMES:  # too long: start at a later pose
                 self._drop_backlog()
+
+    def _forget(self, before: int) -> None:
+        """Drop what is kept of the encoder frames before ``before`` (seq): the state stays
+        bounded whatever the bus says."""
+        self._xs = {seq: half for seq, half in self._xs.items() if seq >= before}
+        self._ys = {seq: half for seq, half in self._ys.items() if seq >= before}
+        self._sampled = {seq for seq in self._sampled if seq >= before}
+        self._ref_at = {seq: ref for seq, ref in self._ref_at.items() if seq >= before}
 
     def _keep_ref(self, ref: FramePose) -> None:
         self._ref_at[ref.seq] = ref
@@ -288,7 +304,7 @@ class PoseTracker:
     def _on_half(self, name: str, half: _Half) -> None:
         self.advance(half.t_s)
         self._pos += 1
-        half = half._replace(pos=self._pos)
+        half.pos = self._pos
         self._halves[name].append(half.pos, half.enc_counter, half.counter, half.t_s)
         if name in self._unsettled:  # its successor is heard: it is known whether it queued
             self._settle(name)
@@ -302,7 +318,6 @@ class PoseTracker:
             return  # left out, as analyze leaves it out (unmatched)
         if name == "x":
             self._xs.setdefault(seq, half)
-            self._xs.pop(seq - ENC_WINDOW, None)
             waiting = self._ys.pop(seq, None)
             if waiting is not None:
                 self._pair(seq, half, *waiting)
@@ -310,7 +325,6 @@ class PoseTracker:
             self._pair(seq, self._xs[seq], half, queued)
         else:
             self._ys.setdefault(seq, (half, queued))
-            self._ys.pop(seq - ENC_WINDOW, None)
 
     def _named(self, halves: _Columns, pos: int) -> tuple[int, bool]:
         """The encoder frame (seq) the half at ``pos`` names, -1 when none, and whether it
@@ -348,7 +362,6 @@ class PoseTracker:
         if seq in self._sampled:
             return
         self._sampled.add(seq)
-        self._sampled.discard(seq - ENC_WINDOW)
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
         self.pose_t_s = y.t_s
         ref = self._compare(pose, y, queued)
@@ -403,11 +416,68 @@ class PoseTracker:
             return None
         if self._place_at_next:
             ref = self._place(pose, ref)
+        self._record(pose, ref)
+        return ref
+
+    def _record(self, pose: FramePose, ref: FramePose) -> None:
         self.reference = ref
         self._last_pair = (pose, ref)
-        self._last_compared = seq
+        self._last_compared = pose.seq
         self.vs_reference.add(pose, ref)
-        return ref
+        self._revisable.append((pose.seq, self.vs_reference.latest["dpos_m"]))
+        if self._revisable[0][0] < pose.seq - ENC_WINDOW:  # beyond any span's reach
+            self._settle_errors(pose.seq - ENC_WINDOW)
+
+    def _settle_errors(self, upto: int) -> None:
+        """The samples up to encoder frame ``upto`` can get no more allowance."""
+        settled = [(f, e) for f, e in self._revisable if f <= upto]
+        self._revisable = [(f, e) for f, e in self._revisable if f > upto]
+        self._beyond_settled_m = max([self._beyond_settled_m,
+                                      *(e - self.allowance_m(f) for f, e in settled)])
+
+    # --- encoder frames the firmware lost that the bus carried (host.judge.compare) ---
+
+    def on_enc_lost(self, lost: int) -> None:
+        """ODOM_STATUS page E2E_WHEEL_ENCODERS: the firmware's ENC_E2E_LOST (u8). Where it grew
+        by more than the bus's own gaps since the previous page, the firmware lost frames the
+        bus carried (``compare.firmware_losses``): the position may leave the fine reference by
+        the sum of the largest errors that many lost frames make there (``loss_allowance``),
+        from the frame of the previous page on, as ``analyze`` allows it."""
+        upto = self.enc_seq
+        before, self._lost_page = self._lost_page, (lost, upto)
+        if before is None or self._ref is None or not len(self._window):
+            return
+        seqs = self._window.col("seq")
+        i0, i1 = np.searchsorted(seqs, before[1]), len(seqs) - 1
+        if i0 >= len(seqs) or seqs[i0] != before[1]:
+            return  # the previous page's frame left the window: not judged
+        w = self._window
+        counter = w.col("counter").astype(np.int64)
+        sent = sender_seq(counter, w.col("t_s"), CYCLE_S)
+        n = int(lost_beyond_gaps(np.array(before[0]), np.array(lost), sent[i0], sent[i1],
+                                 np.array(i1 - i0)))
+        if n > 0:
+            assert self.integrator is not None
+            enc = Encoders(index=w.col("pos").astype(np.int64), counter=counter, seq=sent,
+                           left=w.col("left").astype(np.int64),
+                           right=w.col("right").astype(np.int64), timestamp_s=w.col("t_s"),
+                           cycle_s=CYCLE_S)
+            drop = drop_errors_of(enc, self.geometry, self.counter_bits, self.integrator)
+            drop[np.isin(seqs.astype(np.int64), list(self._sampled))] = 0.0  # were not lost
+            self._allowances.append((before[1], worst_losses_m(drop, int(i0), int(i1), n)))
+        self._settle_errors(upto)  # later spans start at this page's frame
+
+    def allowance_m(self, seq: int | None = None) -> float:
+        """The loss allowance (m) at encoder frame ``seq`` (default: the latest sample's)."""
+        seq = self._last_compared if seq is None else seq
+        return sum(a for first, a in self._allowances if seq > first)
+
+    @property
+    def max_beyond_allowance_m(self) -> float:
+        """The largest on-board vs reference position error beyond its loss allowance (m);
+        analyze's ``max_position_error_beyond_allowance_m``."""
+        recent = (e - self.allowance_m(f) for f, e in self._revisable)
+        return max([self._beyond_settled_m, *recent]) if self.vs_reference.samples else 0.0
 
     # --- lives and restarts ---
 
@@ -430,6 +500,8 @@ class PoseTracker:
         self._last_sample_t = None
         self._place_at_next = False
         self._ref_at = {}
+        self._settle_errors(self.enc_seq)
+        self._allowances = []
         self._drop_backlog()
 
     def power_up(self, primed_now: bool) -> None:
@@ -440,6 +512,7 @@ class PoseTracker:
         No pose is adopted, so a firmware that comes up wrong shows its error. Without a known
         integrator it falls back to ``restart_reference`` (the next pose is adopted)."""
         self.restart_reference()
+        self._lost_page = None  # the new firmware counts from 0
         if self.integrator is None:
             return
         self._ref = ReferenceOdometry(self.geometry, self.integrator, self.counter_bits,
@@ -550,10 +623,16 @@ class PoseTracker:
         for heard in poses:
             at = self._ref_at.get(heard.seq)
             if at is not None:
-                self.reference = at
-                self._last_pair = (heard, at)
-                self._last_compared = heard.seq
-                self.vs_reference.add(heard, at)
+                self._record(heard, at)
+
+    def _vs_reference_dict(self) -> dict[str, Any] | None:
+        """``vs_reference`` with ``loss_allowance_m`` (at the latest sample) and
+        ``max_dpos_beyond_allowance_m``."""
+        stats = self.vs_reference.as_dict()
+        if stats is None:
+            return None
+        return {**stats, "loss_allowance_m": self.allowance_m(),
+                "max_dpos_beyond_allowance_m": self.max_beyond_allowance_m}
 
     def snapshot(self) -> dict[str, Any]:
         """``pose``, ``reference``, ``truth`` (None until known) and ``error``."""
@@ -564,7 +643,7 @@ class PoseTracker:
                           "counter_restarts": self.counter_restarts, "stalls": self.stalls},
             "truth": pose_dict(self.truth),
             "error": {
-                "pose_vs_reference": self.vs_reference.as_dict(),
+                "pose_vs_reference": self._vs_reference_dict(),
                 "pose_vs_truth": self.vs_truth.as_dict(),
                 "reference_vs_truth": self.reference_vs_truth.as_dict(),
             },

@@ -227,7 +227,10 @@ class RobotTelemetry:
         message = self._by_id[self._status_id]
         fields = {k.lower(): _named(message, k, v) for k, v in s.items()
                   if k not in ("CHECKSUM", "COUNTER", "PAGE")}
-        self.firmware[_page_name(self.db, page)] = fields
+        name = _page_name(self.db, page)
+        self.firmware[name] = fields
+        if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
+            self.tracker.on_enc_lost(int(s["ENC_E2E_LOST"]))
         return []
 
     def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
