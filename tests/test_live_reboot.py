@@ -69,3 +69,31 @@ def test_the_monitor_judges_a_rebooted_firmware_from_its_power_up_pose(
             assert live == pytest.approx(abs(bias_100um) * POSITION_LSB_M,
                                          abs=0.6 * POSITION_LSB_M)
         assert live == pytest.approx(offline, abs=POSITION_LSB_M)  # one judge: within one LSB
+
+
+@pytest.mark.parametrize(("bias_100um", "boot_in_init"), [(0, False), (0, True), (2, False),
+                                                          (-3, True)])
+def test_without_the_boot_summary_the_live_judges_find_the_frame_it_primed_on(
+    tmp_path: Path, bias_100um: int, boot_in_init: bool
+) -> None:
+    """The recorder lost the new firmware's boot summary; the next one (UPTIME 0 again, 100 ms
+    later) tells the reboot. The live judges used to take the latest encoder frame then for the
+    one it primed on: a correct firmware 63 mm off. Its first page of encoder E2E counts
+    (ENC_E2E_OK) names that frame, as analyze reads it: the same verdict, the same error."""
+    profile = load("kobuki")
+    bias = {k: bias_100um for k in range(REBOOT, STEPS + 1)} if bias_100um else None
+    synth = rebooting_drive(profile, "exact", bias=bias, boot_in_init=boot_in_init)
+    synth.groups[REBOOT] = [line for line in synth.groups[REBOOT] if " 380#" not in line.upper()]
+    path = synth.write(tmp_path / "no_boot_summary.log")
+    right = independent(path, profile, "exact", REBOOT)
+    assert right == (bias_100um == 0)
+    analysis = analyze(read_log(path), profile)
+    assert analysis.passed == right
+    assert analysis.report["reboots"][0]["reference_start"] == "power-up"
+    offline = analysis.report["onboard_vs_reference"]["max_position_error_m"]
+    monitor, bridge = monitor_of(path, "kobuki", "exact"), bridge_of(path, "kobuki", "exact")
+    assert [e["kind"] for e in monitor.events] == ["reboot"]
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.reference_starts == 2
+        assert tracker.vs_reference.max_dpos_m == pytest.approx(offline, abs=1e-12)
+        assert (tracker.vs_reference.max_dpos_m <= POSITION_LSB_M) == right

@@ -292,7 +292,7 @@ class BusMonitor:
             if integrator in ("euler", "rk2", "exact"):
                 self.tracker.on_integrator(integrator)
         elif page == "E2E_WHEEL_ENCODERS":
-            self.tracker.on_enc_lost(int(s["ENC_E2E_LOST"]))
+            self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]))
         elif page == "FRAME_TOTALS":
             self.status.update({k.lower(): int(v) for k, v in s.items() if k.endswith("_FRAMES")})
 
@@ -358,6 +358,8 @@ class BusMonitor:
         error = self.tracker.vs_reference.latest
         if not error:
             return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
+        if self.tracker.awaiting_boot:
+            return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
         allowed_m = self.tracker.allowance_m()  # for encoder frames the firmware lost
         if (error["dpos_m"] - allowed_m > POSE_TOLERANCE_M
                 or abs(error["dheading_rad"]) > POSE_TOLERANCE_RAD):

@@ -39,6 +39,7 @@ WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
 _RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
 SILENCE_FRAMES = SILENCE_CYCLES  # encoder cycles without a pose: the firmware was stalled
 BACKLOG_FRAMES = 6_000  # encoder frames kept while waiting for the integrator (60 s at 100 Hz)
+BOOT_COUNT_WAIT_S = 1.0  # after a reboot, how long the count page is waited for (s of bus time)
 HALF_WINDOW = 256  # pose halves of each message kept to resolve the frame one names (5 s)
 ENC_WINDOW = 512  # encoder frames kept for it, and the reference at each (5 s at 100 Hz)
 CYCLE_S = float(contract.message("WHEEL_ENCODERS").cycle_time or 10) / 1000.0  # DBC cycle
@@ -235,6 +236,9 @@ class PoseTracker:
         self._allowances: list[tuple[int, float]] = []  # (first frame, m) per lossy span
         self._revisable: list[tuple[int, float]] = []  # (frame, m) of samples since that page
         self._beyond_settled_m = 0.0  # largest error beyond its allowance of the other samples
+        self._now_s = 0.0  # the latest bus time (s)
+        self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
+        self._boot_poses: list[FramePose] = []  # the new life's samples while it waits
         self.pose: FramePose | None = None
         self.pose_t_s = 0.0  # bus time of the ODOM_POSE_Y of ``pose`` (s)
         self.reference: FramePose | None = None
@@ -248,7 +252,11 @@ class PoseTracker:
 
     def advance(self, t_s: float) -> None:
         """Bus time is now ``t_s`` (any frame heard): pose halves heard half an encoder cycle or
-        more before are settled (no half of their message can come close after them)."""
+        more before are settled (no half of their message can come close after them); a new
+        life that waited ``BOOT_COUNT_WAIT_S`` for its count page starts without it."""
+        self._now_s = t_s
+        if self._boot is not None and t_s > self._boot[1]:
+            self._finish_boot(self._boot[0])
         for name, half in sorted(self._unsettled.items(), key=lambda item: item[1].pos):
             if t_s - half.t_s >= QUEUED_GAP_CYCLES * CYCLE_S:
                 self._settle(name)
@@ -396,6 +404,9 @@ class PoseTracker:
             # which a fine reference cannot follow on a curve: placed again, as after a stall.
             self.stalls += 1
             self._place_at_next = True
+        if self._boot is not None:  # a new life waiting for the frame it primed on
+            self._boot_poses.append(pose)
+            return None
         if self._ref is None:
             if self._pending is None:
                 self._pending = pose
@@ -507,26 +518,52 @@ class PoseTracker:
     def power_up(self, primed_now: bool) -> None:
         """A firmware reboot (``host.judge.sources``): the new firmware's life starts at its
         power-up pose, (0, 0, 0) at the encoder frame it primed on, as ``analyze`` starts it
-        (``host.judge.reboots``): the latest accepted encoder frame when its boot summary says
-        UPTIME 0 and not INIT (``primed_now``: it primed in its first tick), else the next one.
-        No pose is adopted, so a firmware that comes up wrong shows its error. Without a known
-        integrator it falls back to ``restart_reference`` (the next pose is adopted)."""
+        (``host.judge.reboots``). That frame is the one its first page of WHEEL_ENCODERS E2E
+        counts names (``on_enc_counts``: the ENC_E2E_OK-th encoder frame back), whatever the
+        summary said (the recorder may have missed the boot summary: those of the first second
+        all say UPTIME 0); until that page, or ``BOOT_COUNT_WAIT_S`` without one, the new
+        life's samples wait. Without the page: the latest accepted encoder frame when the boot
+        summary says UPTIME 0 and not INIT (``primed_now``: it primed in its first tick), else
+        the next one. No pose is adopted, so a firmware that comes up wrong shows its error.
+        Without a known integrator it falls back to ``restart_reference`` (the next pose is
+        adopted)."""
         self.restart_reference()
         self._lost_page = None  # the new firmware counts from 0
         if self.integrator is None:
             return
-        self._ref = ReferenceOdometry(self.geometry, self.integrator, self.counter_bits,
-                                      x_m=0.0, y_m=0.0, heading_rad=0.0)
-        self.reference_starts += 1
-        self._gate = StepGate(self.geometry, self.counter_bits)
-        if not primed_now:
+        guess = self.enc_seq if primed_now else self.enc_seq + 1
+        self._boot = (guess, self._now_s + BOOT_COUNT_WAIT_S)
+        self._boot_poses = []
+
+    @property
+    def awaiting_boot(self) -> bool:
+        """A new firmware life waits for the frame it primed on (its samples are not judged
+        yet)."""
+        return self._boot is not None
+
+    def _finish_boot(self, primed: int) -> None:
+        """Start the new life's reference at (0, 0, 0) at encoder frame ``primed`` (seq) and
+        judge the samples heard since the reboot; adopt the next pose when that frame is not
+        known (not heard yet, or no longer in the window)."""
+        poses, self._boot, self._boot_poses = self._boot_poses, None, []
+        seqs = self._window.col("seq")
+        keep = seqs >= primed
+        if not keep.any() or int(seqs[keep][0]) != primed:
+            self.restart_reference()
             return
-        latest = [(c[0], i, c[1], c[2]) for i, c in enumerate(self._counts)
-                  if c is not None and c[0] == self.enc_seq]
-        if latest:
-            seq, counter, left, right = latest[0]
-            self._gate.step(counter, left, right)  # primes: the pose stays at 0
-            self._keep_ref(FramePose(seq, 0.0, 0.0, 0.0))
+        counts = list(zip(seqs[keep].astype(int).tolist(),
+                          self._window.col("counter")[keep].astype(int).tolist(),
+                          self._window.col("left")[keep].astype(int).tolist(),
+                          self._window.col("right")[keep].astype(int).tolist(), strict=True))
+        self._start_reference(FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
+
+    def on_enc_counts(self, ok: int, lost: int) -> None:
+        """ODOM_STATUS page E2E_WHEEL_ENCODERS: the firmware's ENC_E2E_OK (encoder frames it
+        accepted since its boot, u16 wrapping) and ENC_E2E_LOST. The first page after a reboot
+        names the frame it primed on (``power_up``); then ``on_enc_lost``."""
+        if self._boot is not None and 0 < ok <= self.enc_seq + 1:
+            self._finish_boot(self.enc_seq - ok + 1)
+        self.on_enc_lost(lost)
 
     def _drop_backlog(self) -> None:
         self._pending = None

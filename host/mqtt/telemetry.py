@@ -230,7 +230,7 @@ class RobotTelemetry:
         name = _page_name(self.db, page)
         self.firmware[name] = fields
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
-            self.tracker.on_enc_lost(int(s["ENC_E2E_LOST"]))
+            self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]))
         return []
 
     def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
