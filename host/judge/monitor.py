@@ -60,6 +60,7 @@ from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import (
     CONFLICT_HOLD_S,
+    FIRMWARE_NODE,
     SourceWatch,
     boot_summary,
     start_new_life,
@@ -81,7 +82,6 @@ ACCEPTED = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # distinct unknown identifiers listed (all are counted)
 _HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
 NODE_TIMEOUT_CYCLES = 10  # a node is stale after 10 x its fastest cycle time (opendbc)
-FIRMWARE_NODE = "ODOM_MCU"
 POSE_TOLERANCE_M = 1e-3  # on-board vs reference beyond this: POSE WRONG (10 LSB of X/Y)
 POSE_TOLERANCE_RAD = 1e-3  # ... or this (about 10 LSB of HEADING)
 MAX_EVENTS = 16  # events kept (the latest)
@@ -304,8 +304,7 @@ class BusMonitor:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
-            senders = [m for m in self.db.messages if FIRMWARE_NODE in m.senders]
-            detail += ": " + start_new_life(self.tracker, self.e2e, senders, uptime_s, state)
+            detail += ": " + start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
         elif kind == "two sources":
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
             last = self.events[-1] if self.events else None

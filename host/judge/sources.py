@@ -15,12 +15,12 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from cantools.database.can import Message
+from cantools.database.can import Database, Message
 
 from odocan.host.judge.tracking import PoseTracker
-from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import E2EMonitor, crc8h2f_p02_one
 
+FIRMWARE_NODE = "ODOM_MCU"  # the DBC node that sends the firmware's frames (ODOM_STATUS, ...)
 UPTIME_MATCH_S = 2.0  # one source's UPTIME (whole s) minus bus time stays within this
 CONFLICT_HOLD_S = 2.0  # CONFLICT is shown this long after two sources last interleaved
 
@@ -80,16 +80,16 @@ def boot_summary(message: Message, data: bytes, data_ids: Any) -> tuple[int, str
     return int(values["UPTIME"]), str(values["STATE"])
 
 
-def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, senders: list[Message],
+def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
                    uptime_s: int, state: str) -> str:
-    """A reboot told by ``SourceWatch``: the reference starts at the power-up pose when this is
-    the boot summary (UPTIME 0; ``host.judge.reboots``), else (the boot summary missed: where it
-    primed is unknown) at the next pose; the E2E sequences of the messages the firmware sends
-    (``senders``) start afresh (a reboot is not frames lost). Returns what was done (text)."""
-    for message in senders:
-        seq = e2e._states.get(frame_key(message.frame_id, message.is_extended_frame))
-        if seq is not None:  # the counts stay; the next frame starts the sequence
-            seq.waiting = True
+    """A reboot told by ``SourceWatch``: the reference starts at the power-up pose when the
+    summary says UPTIME 0 (``PoseTracker.power_up``; ``host.judge.reboots``), else (more than a
+    second after the boot: its page of encoder E2E counts may be gone too) at the next pose;
+    the E2E sequences of the messages ``FIRMWARE_NODE`` sends in ``db`` start afresh (a reboot
+    is not frames lost). Returns what was done (text)."""
+    for message in db.messages:
+        if FIRMWARE_NODE in message.senders:  # the counts stay; the next frame starts afresh
+            e2e.restart_sequence(message.frame_id, extended=message.is_extended_frame)
     if uptime_s == 0:
         tracker.power_up(primed_now=state != "INIT")
         return "reference restarted at the power-up pose"

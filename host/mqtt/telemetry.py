@@ -43,8 +43,6 @@ from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor, e2e_messages
 from odocan.sim.contract import database
 
-FIRMWARE_NODE = "ODOM_MCU"  # the DBC node that sends the firmware's frames
-
 Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # foreign CAN IDs counted by name in ``rejected``; the rest as ``other``
@@ -144,8 +142,7 @@ class RobotTelemetry:
         if summary is None or self.sources.observe(t_s, *summary) != "reboot":
             return
         self.reboots += 1
-        senders = [m for m in self.db.messages if FIRMWARE_NODE in m.senders]
-        start_new_life(self.tracker, self.e2e, senders, *summary)
+        start_new_life(self.tracker, self.e2e, self.db, *summary)
 
     def _unknown_key(self, can_id: int) -> str:
         """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of

@@ -18,6 +18,7 @@ from rich.console import Group, RenderableType
 from rich.table import Table
 from rich.text import Text
 
+from odocan.host.judge.sources import FIRMWARE_NODE
 from odocan.host.protocol.e2e import E2E_KEYS
 from odocan.host.report.jsonutil import real
 
@@ -105,7 +106,6 @@ def status_line(status: dict[str, Any] | None) -> Text:
     )
 
 
-FIRMWARE_NODE = "ODOM_MCU"
 BAD_VERDICTS = frozenset({"STALE", "CONFLICT", "POSE WRONG", "FAULT", "NO FIRMWARE"})
 
 
