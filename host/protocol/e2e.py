@@ -360,6 +360,13 @@ class E2EMonitor:
             state = self._states[key] = SequenceState(config.max_delta_init)
         return state.check(crc_ok, counter, periods)
 
+    def restart_sequence(self, can_id: int, *, extended: bool = False) -> None:
+        """The sender of this message restarted (a reboot: its COUNTER starts again): its next
+        frame starts the sequence afresh, as the first frame heard does. The counts stay."""
+        state = self._states.get(frame_key(can_id, extended))
+        if state is not None:
+            state.waiting = True
+
     def _periods(self, key: int, config: E2EMessage, timestamp_s: float | None) -> int:
         if timestamp_s is None:
             return 1
