@@ -75,27 +75,21 @@ class _Wire:
         self, sender: OdocanBus, timestamp: float, can_id: int, data: bytes | bytearray
     ) -> None:
         """``deliver`` of a classic 11-bit data frame given by its fields (``data_frame``'s),
-        without the sender's ``Message``: each receiver's is built, filtered, then queued."""
-        name = self.name
+        without the sender's ``Message``: every receiver whose filter passes ``can_id`` queues
+        one shared, immutable ``DataFrame`` (its ``Message`` is built only if ``recv`` asks);
+        the sender's own echo, when asked for, is a ``Message`` (``is_rx=False``)."""
+        frame: DataFrame = (timestamp, can_id, bytes(data))
         for handle in self.handles:
-            if handle is sender and not sender.receive_own_messages:
+            if handle is sender:
+                if sender.receive_own_messages:
+                    echo = sender._message_of(frame)
+                    echo.is_rx = False
+                    if sender._filters is None or sender._matches_filters(echo):
+                        sender._put(echo)
                 continue
-            out: Message = _new_message(Message)
-            out.timestamp = timestamp
-            out.arbitration_id = can_id
-            out.is_extended_id = False
-            out.is_remote_frame = False
-            out.is_error_frame = False
-            out.channel = name
-            out.data = bytearray(data)
-            out.dlc = len(out.data)
-            out.is_fd = False
-            out.is_rx = handle is not sender
-            out.bitrate_switch = False
-            out.error_state_indicator = False
-            if handle._filters is not None and not handle._matches_filters(out):
+            if handle._filters is not None and not handle._accepts_data(can_id):
                 continue  # the receiver's acceptance filter: the frame never enters its queue
-            handle._put(out)
+            handle._put(frame)
 
     def deliver(self, sender: OdocanBus, msg: Message, timestamp: float) -> None:
         """A fresh copy of ``msg``, stamped ``timestamp``, into every handle that hears it."""
@@ -209,6 +203,22 @@ class BitTiming:
 
 
 _wires: dict[Channel, _Wire] = {}
+# A classic 11-bit data frame as ``send_data`` queues it: (timestamp s, identifier, payload).
+# Immutable, so one tuple serves every receiver; ``recv`` turns it into a fresh ``Message``.
+DataFrame = tuple[float, int, bytes]
+Received = DataFrame | Message  # what ``OdocanBus.drain`` returns, in bus order
+
+
+class FrameBatchListener(can.Listener):
+    """A python-can ``Listener`` that also takes a tick's frames at once, as ``OdocanBus.drain``
+    returns them (``sim.tickloop.deliver`` hands them so when every listener is one): the same
+    frames in the same order as ``on_message_received`` one by one, without a ``Message`` per
+    ``DataFrame``. A ``Message`` in the batch belongs to the listener (the receiver's own copy);
+    no one changes it afterwards."""
+
+    def on_frames(self, frames: list[Received]) -> None:
+        """The frames, in bus order (the list may be kept: the caller does not reuse it)."""
+        raise NotImplementedError
 _wires_lock: Final = threading.Lock()
 
 
@@ -269,10 +279,11 @@ class OdocanBus(BusABC):
         self.preserve_timestamps = bool(preserve_timestamps)
         self.rx_overruns = 0
         self.clock = clock or time.time
-        self._queue: deque[Message] = deque(maxlen=rx_queue_size or None)
+        self._queue: deque[Received] = deque(maxlen=rx_queue_size or None)
         self._waiting = False
         self._ready = threading.Condition(threading.Lock())
         self._open = True
+        self._data_accepts: dict[int, bool] = {}  # can_id -> the filters pass its data frame
         with _wires_lock:
             wire = _wires.get(channel)
             if wire is None:
@@ -314,7 +325,7 @@ class OdocanBus(BusABC):
             self, timestamp if self.preserve_timestamps else time.time(), can_id, data
         )
 
-    def _put(self, msg: Message) -> None:
+    def _put(self, msg: Received) -> None:
         """Queue one received frame (runs in the sender's thread)."""
         queue = self._queue
         if queue.maxlen is not None and len(queue) == queue.maxlen:
@@ -336,13 +347,78 @@ class OdocanBus(BusABC):
         queue = self._queue
         if self._filters is None:
             if queue:
-                return queue.popleft()
+                item = queue.popleft()
+                return self._message_of(item) if isinstance(item, tuple) else item
             return None if timeout == 0 else self._wait(timeout)
         while queue:
-            msg = queue.popleft()
+            msg = self.as_message(queue.popleft())
             if self._matches_filters(msg):
                 return msg
         return None if timeout == 0 else self._wait(timeout)
+
+    def drain(self) -> list[Received]:
+        """Every frame waiting on this instant handle that passes the filters, in bus order, as
+        queued: a ``DataFrame`` tuple for what ``send_data`` sent (no ``Message`` built), a
+        ``Message`` otherwise. ``recv(0)`` until None, without the per-frame objects; the
+        lockstep rig's receivers read their tick's frames this way. A bit-timed handle's frames
+        come through ``recv`` (as ``Message``s), which runs its wire first."""
+        if not self._open:
+            raise CanOperationError("Cannot operate on a closed bus")
+        if self.timing is not None:
+            return list(iter(lambda: self.recv(0), None))
+        queue = self._queue
+        if not queue:
+            return []
+        items: list[Received] = []
+        take, popleft = items.append, queue.popleft
+        while queue:  # popleft, not list(queue): a sender in another thread may append meanwhile
+            take(popleft())
+        if self._filters is None:
+            return items
+        return [item for item in items if self._passes(item)]
+
+    def _passes(self, item: Received) -> bool:
+        """The filters pass this queued frame (re-checked: ``set_filters`` may have come after
+        it was queued)."""
+        if isinstance(item, tuple):
+            return self._accepts_data(item[1])
+        return self._matches_filters(item)
+
+    def _accepts_data(self, can_id: int) -> bool:
+        """python-can's filters on a classic 11-bit data frame of ``can_id`` (cached per id:
+        ``_matches_filters`` only reads the identifier and ``is_extended_id``)."""
+        accepts = self._data_accepts.get(can_id)
+        if accepts is None:
+            accepts = self._data_accepts[can_id] = self._matches_filters(
+                data_frame(0.0, can_id, b"")
+            )
+        return accepts
+
+    def _apply_filters(self, filters: CanFilters | None) -> None:
+        """New filters (``BusABC.set_filters``): forget the identifiers they were checked for."""
+        self._data_accepts = {}
+
+    def _message_of(self, frame: DataFrame) -> Message:
+        """A fresh ``Message`` of a queued ``DataFrame``, as ``send`` of ``data_frame`` delivers
+        it (``is_rx`` True, the channel's name)."""
+        out: Message = _new_message(Message)
+        out.timestamp = frame[0]
+        out.arbitration_id = frame[1]
+        out.is_extended_id = False
+        out.is_remote_frame = False
+        out.is_error_frame = False
+        out.channel = self._wire.name
+        out.data = bytearray(frame[2])
+        out.dlc = len(out.data)
+        out.is_fd = False
+        out.is_rx = True
+        out.bitrate_switch = False
+        out.error_state_indicator = False
+        return out
+
+    def as_message(self, item: Received) -> Message:
+        """A frame ``drain`` returned as a ``Message`` (a ``DataFrame``'s built now)."""
+        return self._message_of(item) if isinstance(item, tuple) else item
 
     def _wait(self, timeout: float | None) -> Message | None:
         """Block until a frame that passes the filters arrives or ``timeout`` runs out (bit-timed:
@@ -354,7 +430,7 @@ class OdocanBus(BusABC):
             if self.timing is not None:
                 self.timing.run_until(self.clock())
             while queue:
-                msg = queue.popleft()
+                msg = self.as_message(queue.popleft())
                 if self._matches_filters(msg):
                     return msg
             remaining = None if deadline is None else deadline - time.monotonic()
