@@ -5,13 +5,14 @@ from __future__ import annotations
 
 from array import array
 from dataclasses import dataclass
+from typing import cast
 
 import can
 import numpy as np
 import numpy.typing as npt
 
 from odocan.sim.exceptions import OdocanError
-from odocan.sim.transport import FrameBatchListener, Received
+from odocan.sim.transport import DataFrame, FrameBatchListener, Received
 
 FLAG_EXTENDED = 0x01  # 29-bit identifier
 FLAG_REMOTE = 0x02  # remote transmission request
@@ -20,6 +21,7 @@ FLAG_FD = 0x08  # CAN FD frame (of at most 8 bytes)
 MAX_DLC = 8  # classic CAN payload; longer frames are refused
 
 U8Array = npt.NDArray[np.uint8]
+_FULL_DLC = bytes([MAX_DLC])
 _FLUSH_FRAMES = 4096  # batched frames (``FrameCollector.on_frames``) held before the arrays
 
 
@@ -112,14 +114,14 @@ class FrameCollector(FrameBatchListener):
         pending, self._pending = self._pending, []
         if not pending:
             return
-        if all(isinstance(frame, tuple) for frame in pending):
-            stamps, ids, payloads = zip(*pending, strict=True)
-            lengths = list(map(len, payloads))
-            if min(lengths) == MAX_DLC == max(lengths):
-                self._timestamp.extend(stamps)
-                self._can_id.extend(ids)
-                self._dlc.extend(lengths)
-                self._flags.frombytes(bytes(len(lengths)))
+        if set(map(type, pending)) == {tuple}:
+            frames = cast("list[DataFrame]", pending)
+            payloads = [frame[2] for frame in frames]
+            if set(map(len, payloads)) == {MAX_DLC}:
+                self._timestamp.extend([frame[0] for frame in frames])
+                self._can_id.extend([frame[1] for frame in frames])
+                self._dlc.frombytes(_FULL_DLC * len(frames))
+                self._flags.frombytes(bytes(len(frames)))
                 self._data += b"".join(payloads)
                 return
         for frame in pending:
