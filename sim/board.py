@@ -195,9 +195,8 @@ class FirmwareBoard(BusNode):
         self.ecu = self._start_firmware()
         self._last_run_s = None
 
-    def transmit(self, can_id: int, data: bytes) -> bool:
-        """The HAL's transmit (``firmware.hal.CanTx``)."""
-        return self.send_frame(can_id, data)
+    # The HAL's transmit (``firmware.hal.CanTx``): ``send_frame`` itself, one call less a frame.
+    transmit = BusNode.send_frame
 
     def service_rx(self, fifo_frames: int | None = None) -> None:
         """Deliver the frames waiting on the bus to the firmware's receive ISR: all of them, or

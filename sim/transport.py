@@ -87,9 +87,17 @@ class _Wire:
                     if sender._filters is None or sender._matches_filters(echo):
                         sender._put(echo)
                 continue
-            if handle._filters is not None and not handle._accepts_data(can_id):
-                continue  # the receiver's acceptance filter: the frame never enters its queue
-            handle._put(frame)
+            if handle._filters is not None:  # the receiver's acceptance filter (cached per id)
+                accepts = handle._data_accepts.get(can_id)
+                if not (handle._accepts_data(can_id) if accepts is None else accepts):
+                    continue  # refused: the frame never enters its queue
+            queue = handle._queue  # handle._put(frame), inlined: two receivers per frame
+            if queue.maxlen is not None and len(queue) == queue.maxlen:
+                handle.rx_overruns += 1
+            queue.append(frame)
+            if handle._waiting:
+                with handle._ready:
+                    handle._ready.notify()
 
     def deliver(self, sender: OdocanBus, msg: Message, timestamp: float) -> None:
         """A fresh copy of ``msg``, stamped ``timestamp``, into every handle that hears it."""
@@ -316,14 +324,12 @@ class OdocanBus(BusABC):
         """``send(data_frame(timestamp, can_id, data))`` on an instant wire, without building
         the sender's ``Message`` (the receivers get theirs as from ``send``): the lockstep rig's
         nodes send this way (``sim.node.BusNode``). A bit-timed wire goes through ``send``."""
-        if not self._open:
-            raise CanOperationError("Cannot operate on a closed bus")
-        if self.timing is not None:
+        if self.timing is None and self._open:
+            self._wire.deliver_data(
+                self, timestamp if self.preserve_timestamps else time.time(), can_id, data
+            )
+        else:  # closed (refused there) or bit-timed
             self.send(data_frame(timestamp, can_id, data))
-            return
-        self._wire.deliver_data(
-            self, timestamp if self.preserve_timestamps else time.time(), can_id, data
-        )
 
     def _put(self, msg: Received) -> None:
         """Queue one received frame (runs in the sender's thread)."""
