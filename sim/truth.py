@@ -115,7 +115,7 @@ class GroundTruth:
         heading = np.empty(n + 1)
         heading[0] = self.heading_unwrapped_rad
         heading[1:] = dtheta
-        np.cumsum(heading, out=heading)
+        heading.cumsum(out=heading)  # np.cumsum without its Python wrapper: the same fold
         mid = heading[:-1] + 0.5 * dtheta
         chord = ds * chord_factor(dtheta)
         folds = np.empty((3, n + 1))
@@ -123,7 +123,7 @@ class GroundTruth:
         np.multiply(chord, np.cos(mid), out=folds[0, 1:])
         np.multiply(chord, np.sin(mid), out=folds[1, 1:])
         np.abs(ds, out=folds[2, 1:])
-        np.cumsum(folds, axis=1, out=folds)
+        folds.cumsum(axis=1, out=folds)
         x, y, dist = folds
         if self.trace_stride:
             self._record(x, y, heading, dist)
