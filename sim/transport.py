@@ -14,6 +14,11 @@ same channel in the same process is a node on one wire. The semantics are python
   acceptance filter: a frame they refuse never enters its queue (and ``recv`` checks again, for
   frames queued before ``set_filters``).
 
+**The lockstep rig's path** (issue #13): ``send_data(id, payload, t)`` queues one immutable
+``DataFrame`` tuple ``(t, id, payload)`` that every accepting receiver shares (no ``Message`` per
+receiver); ``recv`` still hands out a fresh ``Message`` of it, while ``drain`` returns a tick's
+frames as queued, and ``FrameBatchListener``s (``host.io.frames.FrameCollector``) take them so.
+
 It is faster than virtual because it does less: one fresh message per accepting receiver built slot
 by slot (virtual deep-copies the message, its ``bytearray`` and its channel with ``deepcopy``), a
 ``collections.deque`` per handle instead of a ``queue.Queue`` (no lock on the lockstep path: a
@@ -82,7 +87,7 @@ class _Wire:
         for handle in self.handles:
             if handle is sender:
                 if sender.receive_own_messages:
-                    echo = sender._message_of(frame)
+                    echo = sender.as_message(frame)
                     echo.is_rx = False
                     if sender._filters is None or sender._matches_filters(echo):
                         sender._put(echo)
@@ -211,6 +216,8 @@ class BitTiming:
 
 
 _wires: dict[Channel, _Wire] = {}
+_wires_lock: Final = threading.Lock()
+
 # A classic 11-bit data frame as ``send_data`` queues it: (timestamp s, identifier, payload).
 # Immutable, so one tuple serves every receiver; ``recv`` turns it into a fresh ``Message``.
 DataFrame = tuple[float, int, bytes]
@@ -227,7 +234,6 @@ class FrameBatchListener(can.Listener):
     def on_frames(self, frames: list[Received]) -> None:
         """The frames, in bus order (the list may be kept: the caller does not reuse it)."""
         raise NotImplementedError
-_wires_lock: Final = threading.Lock()
 
 
 def data_frame(timestamp_s: float, can_id: int, data: bytes | bytearray) -> Message:
@@ -353,8 +359,7 @@ class OdocanBus(BusABC):
         queue = self._queue
         if self._filters is None:
             if queue:
-                item = queue.popleft()
-                return self._message_of(item) if isinstance(item, tuple) else item
+                return self.as_message(queue.popleft())
             return None if timeout == 0 else self._wait(timeout)
         while queue:
             msg = self.as_message(queue.popleft())
@@ -381,14 +386,8 @@ class OdocanBus(BusABC):
             take(popleft())
         if self._filters is None:
             return items
-        return [item for item in items if self._passes(item)]
-
-    def _passes(self, item: Received) -> bool:
-        """The filters pass this queued frame (re-checked: ``set_filters`` may have come after
-        it was queued)."""
-        if isinstance(item, tuple):
-            return self._accepts_data(item[1])
-        return self._matches_filters(item)
+        accepts, matches = self._accepts_data, self._matches_filters  # set_filters may be newer
+        return [f for f in items if (accepts(f[1]) if isinstance(f, tuple) else matches(f))]
 
     def _accepts_data(self, can_id: int) -> bool:
         """python-can's filters on a classic 11-bit data frame of ``can_id`` (cached per id:
@@ -404,27 +403,24 @@ class OdocanBus(BusABC):
         """New filters (``BusABC.set_filters``): forget the identifiers they were checked for."""
         self._data_accepts = {}
 
-    def _message_of(self, frame: DataFrame) -> Message:
-        """A fresh ``Message`` of a queued ``DataFrame``, as ``send`` of ``data_frame`` delivers
-        it (``is_rx`` True, the channel's name)."""
+    def as_message(self, item: Received) -> Message:
+        """A queued frame as a ``Message``: a ``DataFrame``'s built fresh, as ``send`` of
+        ``data_frame`` delivers it (``is_rx`` True, the channel's name)."""
+        if not isinstance(item, tuple):
+            return item
         out: Message = _new_message(Message)
-        out.timestamp = frame[0]
-        out.arbitration_id = frame[1]
+        out.timestamp, out.arbitration_id, payload = item
         out.is_extended_id = False
         out.is_remote_frame = False
         out.is_error_frame = False
         out.channel = self._wire.name
-        out.data = bytearray(frame[2])
+        out.data = bytearray(payload)
         out.dlc = len(out.data)
         out.is_fd = False
         out.is_rx = True
         out.bitrate_switch = False
         out.error_state_indicator = False
         return out
-
-    def as_message(self, item: Received) -> Message:
-        """A frame ``drain`` returned as a ``Message`` (a ``DataFrame``'s built now)."""
-        return self._message_of(item) if isinstance(item, tuple) else item
 
     def _wait(self, timeout: float | None) -> Message | None:
         """Block until a frame that passes the filters arrives or ``timeout`` runs out (bit-timed:
