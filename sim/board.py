@@ -36,8 +36,9 @@ from odocan.firmware.ecu import LOST_TIME_PERIODS, OdomEcu
 from odocan.firmware.hal import TICK_PERIOD_US
 from odocan.sim.clock import Clock
 from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.framebatch import Received
 from odocan.sim.node import BusNode
-from odocan.sim.transport import OdocanBus, Received
+from odocan.sim.transport import OdocanBus
 
 TICK_S = TICK_PERIOD_US / 1e6
 TX_LATENCY_S = 0.001  # the firmware's frames leave 1 ms after the tick that made them

@@ -29,7 +29,8 @@ import can
 
 from odocan.sim.board import TICK_S
 from odocan.sim.clock import LockstepClock
-from odocan.sim.transport import FrameBatchListener, OdocanBus
+from odocan.sim.framebatch import FrameBatchListener
+from odocan.sim.transport import OdocanBus
 
 Work = Callable[[int], None]  # the nodes' work in tick k
 

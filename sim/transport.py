@@ -59,6 +59,7 @@ from can import BusABC, CanInitializationError, CanOperationError, Message
 from can.typechecking import AutoDetectedConfig, CanFilters, Channel
 
 from odocan.sim.canbits import INTERFRAME_BITS, LatencyStats, arbitration_key, frame_bits
+from odocan.sim.framebatch import DataFrame, Received
 
 INTERFACE: Final = "odocan"
 _POLL_S: Final = 0.001  # a bit-timed receiver blocked in recv looks at the wire this often
@@ -217,24 +218,6 @@ class BitTiming:
 
 _wires: dict[Channel, _Wire] = {}
 _wires_lock: Final = threading.Lock()
-
-# A classic 11-bit data frame as ``send_data`` queues it: (timestamp s, identifier, payload).
-# Immutable, so one tuple serves every receiver; ``recv`` turns it into a fresh ``Message``.
-DataFrame = tuple[float, int, bytes]
-Received = DataFrame | Message  # what ``OdocanBus.drain`` returns, in bus order
-
-
-class FrameBatchListener(can.Listener):
-    """A python-can ``Listener`` that also takes a tick's frames at once, as ``OdocanBus.drain``
-    returns them (``sim.tickloop.deliver`` hands them so when every listener is one): the same
-    frames in the same order as ``on_message_received`` one by one, without a ``Message`` per
-    ``DataFrame``. A ``Message`` in the batch belongs to the listener (the receiver's own copy);
-    no one changes it afterwards."""
-
-    def on_frames(self, frames: list[Received]) -> None:
-        """The frames, in bus order (the list may be kept: the caller does not reuse it)."""
-        raise NotImplementedError
-
 
 def data_frame(timestamp_s: float, can_id: int, data: bytes | bytearray) -> Message:
     """A classic 11-bit data frame, as ``can.Message(timestamp=..., arbitration_id=...,

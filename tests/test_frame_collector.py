@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from odocan.host.io.frames import FrameArrays, FrameCollector
-from odocan.sim.transport import DataFrame, OdocanBus, Received
+from odocan.sim.framebatch import DataFrame, Received
+from odocan.sim.transport import OdocanBus
 
 _FLUSH = 4096  # host.io.frames._FLUSH_FRAMES, crossed on purpose below
 

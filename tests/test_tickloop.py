@@ -10,8 +10,9 @@ import pytest
 
 from odocan.sim.board import TICK_S
 from odocan.sim.clock import LockstepClock
+from odocan.sim.framebatch import FrameBatchListener, Received
 from odocan.sim.tickloop import TickLoop, deliver
-from odocan.sim.transport import FrameBatchListener, OdocanBus, Received
+from odocan.sim.transport import OdocanBus
 
 
 class _Heard(can.Listener):

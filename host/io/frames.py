@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.sim.exceptions import OdocanError
-from odocan.sim.transport import DataFrame, FrameBatchListener, Received
+from odocan.sim.framebatch import DataFrame, FrameBatchListener, Received
 
 FLAG_EXTENDED = 0x01  # 29-bit identifier
 FLAG_REMOTE = 0x02  # remote transmission request
