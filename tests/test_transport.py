@@ -579,6 +579,13 @@ def test_drain_applies_filters_set_before_and_after_the_frames_were_queued(
     for can_id in (0x10, 0x21, 0x2F, 0x30):
         sender.send_data(can_id, b"\x00", 1.0)
     assert [f[1] for f in picky.drain()] == [0x21, 0x2F]  # type: ignore[index]
+    full = OdocanBus(channel, rx_queue_size=1, can_filters=[{"can_id": 0x21, "can_mask": 0x7FF}])
+    for can_id in (0x10, 0x21, 0x10, 0x30):  # the second 0x10's refusal comes from the cache
+        sender.send_data(can_id, b"\x00", 1.0)
+    assert [f[1] for f in picky.drain()] == [0x21]  # type: ignore[index]
+    assert [f[1] for f in full.drain()] == [0x21]  # type: ignore[index]
+    assert full.rx_overruns == 0  # a refused frame never entered the one-frame queue
+    full.shutdown()
     for can_id in (0x10, 0x21, 0x2F):  # 0x10 never enters the queue
         sender.send_data(can_id, b"\x00", 1.0)
     sender.send(_msg(0x21))
