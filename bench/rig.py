@@ -175,12 +175,15 @@ def budget(seconds: float) -> dict[str, float]:
             if isinstance(bus, OdocanBus):  # the nodes' sends (BusNode.send_frame)
                 b.wrap(bus, "send_data", "transport: send (a copy per receiver)")
             b.wrap(bus, "recv", "transport: recv")
+            if isinstance(bus, OdocanBus):  # the board's and the host's tick at once
+                b.wrap(bus, "drain", "transport: recv")
         b.wrap(rig, "step", "rig and node glue (the rest)")
-        b.wrap(rig.motor_controller, "send_frame", "can.Message build (BusNode.send_frame)")
-        b.wrap(rig.truth, "send_frame", "can.Message build (BusNode.send_frame)")
-        b.wrap(rig.board, "send_frame", "can.Message build (BusNode.send_frame)")
+        b.wrap(rig.motor_controller, "send_frame", "node send glue (BusNode.send_frame)")
+        b.wrap(rig.truth, "send_frame", "node send glue (BusNode.send_frame)")
+        b.wrap(rig.board, "send_frame", "node send glue (BusNode.send_frame)")
+        b.wrap(rig.board, "transmit", "node send glue (BusNode.send_frame)")  # the HAL's
         assert rig.driver is not None
-        b.wrap(rig.driver, "send_frame", "can.Message build (BusNode.send_frame)")
+        b.wrap(rig.driver, "send_frame", "node send glue (BusNode.send_frame)")
         b.wrap(rig.driver.scenario, "command_at", "scenario (RandomScenario.command_at)")
         b.wrap(rig.vehicle, "advance_to", "vehicle: motors and encoders")
         b.wrap(rig.vehicle, "encoder_counts", "vehicle: motors and encoders")
@@ -192,6 +195,7 @@ def budget(seconds: float) -> dict[str, float]:
         b.wrap(rig.board.ecu, "isr_can_rx", "firmware: receive ISR")
         b.wrap(rig.board.ecu, "tick", "firmware: tick (odometry, scheduling)")
         b.wrap(collector, "on_message_received", "host: FrameCollector")
+        b.wrap(collector, "on_frames", "host: FrameCollector")
         start = CLOCK()
         try:
             rig.run(seconds)

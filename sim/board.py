@@ -26,6 +26,7 @@ import os
 import stat
 import struct
 import zlib
+from collections.abc import Iterable
 from pathlib import Path
 
 import can
@@ -35,7 +36,9 @@ from odocan.firmware.ecu import LOST_TIME_PERIODS, OdomEcu
 from odocan.firmware.hal import TICK_PERIOD_US
 from odocan.sim.clock import Clock
 from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.framebatch import Received
 from odocan.sim.node import BusNode
+from odocan.sim.transport import OdocanBus
 
 TICK_S = TICK_PERIOD_US / 1e6
 TX_LATENCY_S = 0.001  # the firmware's frames leave 1 ms after the tick that made them
@@ -193,33 +196,36 @@ class FirmwareBoard(BusNode):
         self.ecu = self._start_firmware()
         self._last_run_s = None
 
-    def transmit(self, can_id: int, data: bytes) -> bool:
-        """The HAL's transmit (``firmware.hal.CanTx``)."""
-        return self.send_frame(can_id, data)
+    # The HAL's transmit (``firmware.hal.CanTx``): ``send_frame`` itself, one call less a frame.
+    transmit = BusNode.send_frame
 
     def service_rx(self, fifo_frames: int | None = None) -> None:
         """Deliver the frames waiting on the bus to the firmware's receive ISR: all of them, or
         (after a halt) the first ``fifo_frames`` that pass the filter, the rest overrun."""
-        recv = self.bus.recv
+        bus = self.bus
+        if type(bus) is OdocanBus and bus.timing is None:
+            frames: Iterable[Received] = bus.drain()  # the lean transport: no Message built
+        else:
+            frames = iter(lambda: bus.recv(0), None)
         isr = self.ecu.isr_can_rx
         accept = self.accept_ids
         overrun = 0
-        msg = recv(0)
-        while msg is not None:
-            if (
-                msg.is_error_frame
-                or msg.is_remote_frame
-                or msg.is_extended_id
-                or (accept is not None and msg.arbitration_id not in accept)
-            ):
+        for frame in frames:
+            if isinstance(frame, tuple):  # a classic 11-bit data frame (``send_data``'s)
+                can_id, data = frame[1], frame[2]
+            elif frame.is_error_frame or frame.is_remote_frame or frame.is_extended_id:
+                self.frames_dropped_by_filter += 1
+                continue
+            else:
+                can_id, data = frame.arbitration_id, bytes(frame.data)
+            if accept is not None and can_id not in accept:
                 self.frames_dropped_by_filter += 1
             elif fifo_frames is not None and fifo_frames <= 0:
                 overrun += 1
             else:
-                isr(msg.arbitration_id, bytes(msg.data))
+                isr(can_id, data)
                 if fifo_frames is not None:
                     fifo_frames -= 1
-            msg = recv(0)
         if overrun:
             self.frames_overrun += overrun
             self.ecu.isr_rx_overrun()

@@ -56,9 +56,10 @@ def _build_dir() -> Path:
 LIBRARY_PATH = _build_dir() / "libodocan_fw.so"
 LIBRARY_ENV = "ODOCAN_FW_LIB"  # a prebuilt library with the same ABI (e.g. a team's own)
 
-_TxFn = ctypes.CFUNCTYPE(
-    ctypes.c_bool, ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(ctypes.c_uint8)
-)
+_Payload = ctypes.c_char * 8  # a frame's ``const uint8_t data[8]``
+# ``data`` as a pointer to 8 chars: ``data.contents.raw`` copies them in one step (about 1 us a
+# frame less than ``ctypes.string_at`` on a ``uint8_t *``, which is a foreign call of its own).
+_TxFn = ctypes.CFUNCTYPE(ctypes.c_bool, ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(_Payload))
 _NvmRead = ctypes.CFUNCTYPE(ctypes.c_uint32, ctypes.c_void_p)
 _NvmWrite = ctypes.CFUNCTYPE(ctypes.c_bool, ctypes.c_void_p, ctypes.c_uint32)
 _loaded: dict[Path, ctypes.CDLL] = {}
@@ -243,12 +244,12 @@ class CEcu:
             raise pending
 
     def _transmit(
-        self, _ctx: int | None, can_id: int, data: ctypes._Pointer[ctypes.c_uint8]
+        self, _ctx: int | None, can_id: int, data: ctypes._Pointer[ctypes.Array[ctypes.c_char]]
     ) -> bool:
         """The firmware's ``can_tx_fn``: one frame to the HAL. An exception cannot cross the C
         frames: it is kept, the frame counts as refused, and ``tick`` raises it on return."""
         try:
-            return self._hal.transmit(can_id, ctypes.string_at(data, 8))
+            return self._hal.transmit(can_id, data.contents.raw)
         except BaseException as exc:  # re-raised by tick()
             self._pending = self._pending or exc
             return False

@@ -23,18 +23,28 @@ the same, as its own loop did.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import cast
 
 import can
 
 from odocan.sim.board import TICK_S
 from odocan.sim.clock import LockstepClock
+from odocan.sim.framebatch import FrameBatchListener
+from odocan.sim.transport import OdocanBus
 
 Work = Callable[[int], None]  # the nodes' work in tick k
 
 
 def deliver(bus: can.BusABC, listeners: Sequence[can.Listener]) -> int:
     """Hand every frame waiting on ``bus`` to each of ``listeners`` (in bus order, each frame to
-    every listener before the next frame is read); returns how many frames were delivered."""
+    every listener before the next frame is read); returns how many frames were delivered.
+
+    On an instant ``odocan`` handle the frames are drained a batch at a time
+    (``OdocanBus.drain``, again until none is left: a frame a listener sends meanwhile comes
+    after, as with ``recv``): when every listener is a ``FrameBatchListener`` they get the list
+    (no ``Message`` built), else each frame goes out as the ``Message`` ``recv`` would give."""
+    if type(bus) is OdocanBus and bus.timing is None:
+        return _deliver_drained(bus, listeners)
     recv = bus.recv
     count = 0
     msg = recv(0)
@@ -43,6 +53,27 @@ def deliver(bus: can.BusABC, listeners: Sequence[can.Listener]) -> int:
             listener.on_message_received(msg)
         count += 1
         msg = recv(0)
+    return count
+
+
+def _deliver_drained(bus: OdocanBus, listeners: Sequence[can.Listener]) -> int:
+    """``deliver`` on an instant ``odocan`` handle (see there)."""
+    count = 0
+    frames = bus.drain()
+    while frames:
+        count += len(frames)
+        # By class (not isinstance: can.Listener's ABCMeta check costs more than the rest).
+        batch = [li for li in listeners if FrameBatchListener in type(li).__mro__]
+        if len(batch) == len(listeners):
+            for batch_listener in cast("list[FrameBatchListener]", batch):
+                batch_listener.on_frames(frames)
+        else:
+            as_message = bus.as_message
+            for frame in frames:
+                message = as_message(frame)
+                for listener in listeners:
+                    listener.on_message_received(message)
+        frames = bus.drain()
     return count
 
 

@@ -14,6 +14,11 @@ same channel in the same process is a node on one wire. The semantics are python
   acceptance filter: a frame they refuse never enters its queue (and ``recv`` checks again, for
   frames queued before ``set_filters``).
 
+**The lockstep rig's path** (issue #13): ``send_data(id, payload, t)`` queues one immutable
+``DataFrame`` tuple ``(t, id, payload)`` that every accepting receiver shares (no ``Message`` per
+receiver); ``recv`` still hands out a fresh ``Message`` of it, while ``drain`` returns a tick's
+frames as queued, and ``FrameBatchListener``s (``host.io.frames.FrameCollector``) take them so.
+
 It is faster than virtual because it does less: one fresh message per accepting receiver built slot
 by slot (virtual deep-copies the message, its ``bytearray`` and its channel with ``deepcopy``), a
 ``collections.deque`` per handle instead of a ``queue.Queue`` (no lock on the lockstep path: a
@@ -54,6 +59,7 @@ from can import BusABC, CanInitializationError, CanOperationError, Message
 from can.typechecking import AutoDetectedConfig, CanFilters, Channel
 
 from odocan.sim.canbits import INTERFRAME_BITS, LatencyStats, arbitration_key, frame_bits
+from odocan.sim.framebatch import DataFrame, Received
 
 INTERFACE: Final = "odocan"
 _POLL_S: Final = 0.001  # a bit-timed receiver blocked in recv looks at the wire this often
@@ -75,27 +81,29 @@ class _Wire:
         self, sender: OdocanBus, timestamp: float, can_id: int, data: bytes | bytearray
     ) -> None:
         """``deliver`` of a classic 11-bit data frame given by its fields (``data_frame``'s),
-        without the sender's ``Message``: each receiver's is built, filtered, then queued."""
-        name = self.name
+        without the sender's ``Message``: every receiver whose filter passes ``can_id`` queues
+        one shared, immutable ``DataFrame`` (its ``Message`` is built only if ``recv`` asks);
+        the sender's own echo, when asked for, is a ``Message`` (``is_rx=False``)."""
+        frame: DataFrame = (timestamp, can_id, bytes(data))
         for handle in self.handles:
-            if handle is sender and not sender.receive_own_messages:
+            if handle is sender:
+                if sender.receive_own_messages:
+                    echo = sender.as_message(frame)
+                    echo.is_rx = False
+                    if sender._filters is None or sender._matches_filters(echo):
+                        sender._put(echo)
                 continue
-            out: Message = _new_message(Message)
-            out.timestamp = timestamp
-            out.arbitration_id = can_id
-            out.is_extended_id = False
-            out.is_remote_frame = False
-            out.is_error_frame = False
-            out.channel = name
-            out.data = bytearray(data)
-            out.dlc = len(out.data)
-            out.is_fd = False
-            out.is_rx = handle is not sender
-            out.bitrate_switch = False
-            out.error_state_indicator = False
-            if handle._filters is not None and not handle._matches_filters(out):
-                continue  # the receiver's acceptance filter: the frame never enters its queue
-            handle._put(out)
+            if handle._filters is not None:  # the receiver's acceptance filter (cached per id)
+                accepts = handle._data_accepts.get(can_id)
+                if not (handle._accepts_data(can_id) if accepts is None else accepts):
+                    continue  # refused: the frame never enters its queue
+            queue = handle._queue  # handle._put(frame), inlined: two receivers per frame
+            if queue.maxlen is not None and len(queue) == queue.maxlen:
+                handle.rx_overruns += 1
+            queue.append(frame)
+            if handle._waiting:
+                with handle._ready:
+                    handle._ready.notify()
 
     def deliver(self, sender: OdocanBus, msg: Message, timestamp: float) -> None:
         """A fresh copy of ``msg``, stamped ``timestamp``, into every handle that hears it."""
@@ -211,7 +219,6 @@ class BitTiming:
 _wires: dict[Channel, _Wire] = {}
 _wires_lock: Final = threading.Lock()
 
-
 def data_frame(timestamp_s: float, can_id: int, data: bytes | bytearray) -> Message:
     """A classic 11-bit data frame, as ``can.Message(timestamp=..., arbitration_id=...,
     is_extended_id=False, data=...)`` builds it, built slot by slot (half the cost)."""
@@ -269,10 +276,11 @@ class OdocanBus(BusABC):
         self.preserve_timestamps = bool(preserve_timestamps)
         self.rx_overruns = 0
         self.clock = clock or time.time
-        self._queue: deque[Message] = deque(maxlen=rx_queue_size or None)
+        self._queue: deque[Received] = deque(maxlen=rx_queue_size or None)
         self._waiting = False
         self._ready = threading.Condition(threading.Lock())
         self._open = True
+        self._data_accepts: dict[int, bool] = {}  # can_id -> the filters pass its data frame
         with _wires_lock:
             wire = _wires.get(channel)
             if wire is None:
@@ -305,16 +313,14 @@ class OdocanBus(BusABC):
         """``send(data_frame(timestamp, can_id, data))`` on an instant wire, without building
         the sender's ``Message`` (the receivers get theirs as from ``send``): the lockstep rig's
         nodes send this way (``sim.node.BusNode``). A bit-timed wire goes through ``send``."""
-        if not self._open:
-            raise CanOperationError("Cannot operate on a closed bus")
-        if self.timing is not None:
+        if self.timing is None and self._open:
+            self._wire.deliver_data(
+                self, timestamp if self.preserve_timestamps else time.time(), can_id, data
+            )
+        else:  # closed (refused there) or bit-timed
             self.send(data_frame(timestamp, can_id, data))
-            return
-        self._wire.deliver_data(
-            self, timestamp if self.preserve_timestamps else time.time(), can_id, data
-        )
 
-    def _put(self, msg: Message) -> None:
+    def _put(self, msg: Received) -> None:
         """Queue one received frame (runs in the sender's thread)."""
         queue = self._queue
         if queue.maxlen is not None and len(queue) == queue.maxlen:
@@ -336,13 +342,68 @@ class OdocanBus(BusABC):
         queue = self._queue
         if self._filters is None:
             if queue:
-                return queue.popleft()
+                return self.as_message(queue.popleft())
             return None if timeout == 0 else self._wait(timeout)
         while queue:
-            msg = queue.popleft()
+            msg = self.as_message(queue.popleft())
             if self._matches_filters(msg):
                 return msg
         return None if timeout == 0 else self._wait(timeout)
+
+    def drain(self) -> list[Received]:
+        """Every frame waiting on this instant handle that passes the filters, in bus order, as
+        queued: a ``DataFrame`` tuple for what ``send_data`` sent (no ``Message`` built), a
+        ``Message`` otherwise. ``recv(0)`` until None, without the per-frame objects; the
+        lockstep rig's receivers read their tick's frames this way. A bit-timed handle's frames
+        come through ``recv`` (as ``Message``s), which runs its wire first."""
+        if not self._open:
+            raise CanOperationError("Cannot operate on a closed bus")
+        if self.timing is not None:
+            return list(iter(lambda: self.recv(0), None))
+        queue = self._queue
+        if not queue:
+            return []
+        items: list[Received] = []
+        take, popleft = items.append, queue.popleft
+        while queue:  # popleft, not list(queue): a sender in another thread may append meanwhile
+            take(popleft())
+        if self._filters is None:
+            return items
+        accepts, matches = self._accepts_data, self._matches_filters  # set_filters may be newer
+        return [f for f in items if (accepts(f[1]) if isinstance(f, tuple) else matches(f))]
+
+    def _accepts_data(self, can_id: int) -> bool:
+        """python-can's filters on a classic 11-bit data frame of ``can_id`` (cached per id:
+        ``_matches_filters`` only reads the identifier and ``is_extended_id``)."""
+        accepts = self._data_accepts.get(can_id)
+        if accepts is None:
+            accepts = self._data_accepts[can_id] = self._matches_filters(
+                data_frame(0.0, can_id, b"")
+            )
+        return accepts
+
+    def _apply_filters(self, filters: CanFilters | None) -> None:
+        """New filters (``BusABC.set_filters``): forget the identifiers they were checked for."""
+        self._data_accepts = {}
+
+    def as_message(self, item: Received) -> Message:
+        """A queued frame as a ``Message``: a ``DataFrame``'s built fresh, as ``send`` of
+        ``data_frame`` delivers it (``is_rx`` True, the channel's name)."""
+        if not isinstance(item, tuple):
+            return item
+        out: Message = _new_message(Message)
+        out.timestamp, out.arbitration_id, payload = item
+        out.is_extended_id = False
+        out.is_remote_frame = False
+        out.is_error_frame = False
+        out.channel = self._wire.name
+        out.data = bytearray(payload)
+        out.dlc = len(out.data)
+        out.is_fd = False
+        out.is_rx = True
+        out.bitrate_switch = False
+        out.error_state_indicator = False
+        return out
 
     def _wait(self, timeout: float | None) -> Message | None:
         """Block until a frame that passes the filters arrives or ``timeout`` runs out (bit-timed:
@@ -354,7 +415,7 @@ class OdocanBus(BusABC):
             if self.timing is not None:
                 self.timing.run_until(self.clock())
             while queue:
-                msg = queue.popleft()
+                msg = self.as_message(queue.popleft())
                 if self._matches_filters(msg):
                     return msg
             remaining = None if deadline is None else deadline - time.monotonic()

@@ -66,7 +66,11 @@ class TruthTrace:
 
 def chord_factor(dtheta: FloatArray) -> FloatArray:
     """sin(dtheta/2)/(dtheta/2): chord length over arc length, 1 at dtheta = 0."""
-    half = 0.5 * dtheta
+    return _chord_factor_of_half(0.5 * dtheta)
+
+
+def _chord_factor_of_half(half: FloatArray) -> FloatArray:
+    """``chord_factor`` of ``2 * half`` (``half = 0.5 * dtheta``, which the caller keeps)."""
     small = np.abs(half) < _SMALL_HALF_ANGLE
     if not np.count_nonzero(small):  # the common case when turning: no series term to patch in
         result: FloatArray = np.sin(half) / half
@@ -111,24 +115,26 @@ class GroundTruth:
             return
         ds_l, ds_r = ds_m[:, 0], ds_m[:, 1]
         ds = 0.5 * (ds_r + ds_l)
-        dtheta = (ds_r - ds_l) / self.wheelbase_m
         heading = np.empty(n + 1)
         heading[0] = self.heading_unwrapped_rad
-        heading[1:] = dtheta
-        np.cumsum(heading, out=heading)
-        mid = heading[:-1] + 0.5 * dtheta
-        chord = ds * chord_factor(dtheta)
+        dtheta = heading[1:]  # (ds_r - ds_l) / b, computed in place before the fold
+        np.subtract(ds_r, ds_l, out=dtheta)
+        dtheta /= self.wheelbase_m
+        half = 0.5 * dtheta  # the midpoint heading's and the chord factor's half angle
+        heading.cumsum(out=heading)  # np.cumsum without its Python wrapper: the same fold
+        mid = heading[:-1] + half
+        chord = ds * _chord_factor_of_half(half)
         folds = np.empty((3, n + 1))
         folds[:, 0] = (self.x_m, self.y_m, self.distance_m)
         np.multiply(chord, np.cos(mid), out=folds[0, 1:])
         np.multiply(chord, np.sin(mid), out=folds[1, 1:])
         np.abs(ds, out=folds[2, 1:])
-        np.cumsum(folds, axis=1, out=folds)
+        folds.cumsum(axis=1, out=folds)
         x, y, dist = folds
         if self.trace_stride:
             self._record(x, y, heading, dist)
-        self.x_m, self.y_m = float(x[-1]), float(y[-1])
-        self.heading_unwrapped_rad, self.distance_m = float(heading[-1]), float(dist[-1])
+        self.x_m, self.y_m, self.distance_m = folds[:, -1].tolist()
+        self.heading_unwrapped_rad = heading.item(-1)
         self.substep += n
 
     def _record(self, x: FloatArray, y: FloatArray, h: FloatArray, d: FloatArray) -> None:

@@ -10,7 +10,9 @@ import pytest
 
 from odocan.sim.board import TICK_S
 from odocan.sim.clock import LockstepClock
+from odocan.sim.framebatch import FrameBatchListener, Received
 from odocan.sim.tickloop import TickLoop, deliver
+from odocan.sim.transport import OdocanBus
 
 
 class _Heard(can.Listener):
@@ -111,3 +113,60 @@ def test_without_a_clock_tick_k_only_works_and_delivers(
     loop.tick(7)  # as sim.realtime.PeriodicLoop calls it
     assert log == [("h", 7)]
     assert loop.ticks == 0  # the real-time loop counts its own ticks
+
+
+class _Batches(FrameBatchListener):
+    def __init__(self, log: list[object]) -> None:
+        self.log = log
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self.log.append(("msg", msg.arbitration_id))
+
+    def on_frames(self, frames: list[Received]) -> None:
+        self.log.append(("batch", [f[1] if isinstance(f, tuple) else f.arbitration_id
+                                   for f in frames]))
+
+
+@pytest.fixture
+def lean() -> Iterator[tuple[OdocanBus, OdocanBus]]:
+    """A sender and a host (hearing itself) on one ``odocan`` channel of their own."""
+    channel = f"odocan-tickloop-{uuid.uuid4().hex}"
+    buses = (OdocanBus(channel, preserve_timestamps=True),
+             OdocanBus(channel, preserve_timestamps=True, receive_own_messages=True))
+    yield buses
+    for bus in buses:
+        bus.shutdown()
+
+
+def test_on_a_lean_handle_batch_listeners_get_the_tick_as_one_list(
+    lean: tuple[OdocanBus, OdocanBus],
+) -> None:
+    sender, host = lean
+    for can_id in (0x100, 0x200):
+        sender.send_data(can_id, b"\x00", 0.0)
+    _send(sender, 0x300)  # a Message (send) among the DataFrames (send_data)
+    log: list[object] = []
+    assert deliver(host, [_Batches(log), _Batches(log)]) == 3
+    assert log == [("batch", [0x100, 0x200, 0x300])] * 2
+    assert deliver(host, [_Batches(log)]) == 0
+    assert len(log) == 2
+
+
+def test_with_any_plain_listener_each_frame_goes_to_every_listener_as_a_message(
+    lean: tuple[OdocanBus, OdocanBus],
+) -> None:
+    sender, host = lean
+    for can_id in (0x100, 0x200):
+        sender.send_data(can_id, b"\x00", 0.0)
+    log: list[object] = []
+    heard: list[tuple[str, int]] = []
+
+    class Answering(_Heard):
+        def on_message_received(self, msg: can.Message) -> None:
+            super().on_message_received(msg)
+            if msg.arbitration_id == 0x100:  # heard again in this very delivery, as with recv
+                host.send(can.Message(arbitration_id=0x101, is_extended_id=False))
+
+    assert deliver(host, [_Batches(log), Answering("a", heard)]) == 3
+    assert log == [("msg", 0x100), ("msg", 0x200), ("msg", 0x101)]
+    assert heard == [("a", 0x100), ("a", 0x200), ("a", 0x101)]

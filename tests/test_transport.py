@@ -546,3 +546,69 @@ def test_flushing_or_closing_a_bit_timed_handle_drops_its_waiting_frames(channel
     finally:
         for bus in (a, b, c):
             bus.shutdown()
+
+
+# --- drain: a tick's frames at once, without a Message per send_data frame -------------------
+
+
+def test_drain_gives_what_recv_gives_in_bus_order(channel: str) -> None:
+    """``drain`` against ``recv(0)`` until None on twin handles: the same frames, field for
+    field once made ``Message``s (``as_message``); ``send_data``'s come as ``DataFrame``
+    tuples, ``send``'s as ``Message``s, interleaved in bus order."""
+    sender = OdocanBus(channel, preserve_timestamps=True)
+    by_recv, by_drain = OdocanBus(channel), OdocanBus(channel)
+    sender.send_data(0x10, bytearray(b"\x01\x02"), 1.0)
+    sender.send(_msg(0x20, b"\x03", ts=2.0))
+    sender.send_data(0x7FF, b"x" * 8, 3.0)
+    drained = by_drain.drain()
+    assert [type(f) for f in drained] == [tuple, can.Message, tuple]
+    assert drained[0] == (1.0, 0x10, b"\x01\x02")
+    assert isinstance(drained[0][2], bytes)  # immutable: one tuple serves every receiver
+    assert [_fields(by_drain.as_message(f)) for f in drained] == [_fields(m)
+                                                                   for m in _drain(by_recv)]
+    assert by_drain.drain() == []
+    for bus in (sender, by_recv, by_drain):
+        bus.shutdown()
+
+
+def test_drain_applies_filters_set_before_and_after_the_frames_were_queued(
+    channel: str,
+) -> None:
+    sender = OdocanBus(channel, preserve_timestamps=True)
+    picky = OdocanBus(channel, can_filters=[{"can_id": 0x20, "can_mask": 0x7F0}])
+    for can_id in (0x10, 0x21, 0x2F, 0x30):
+        sender.send_data(can_id, b"\x00", 1.0)
+    assert [f[1] for f in picky.drain()] == [0x21, 0x2F]  # type: ignore[index]
+    full = OdocanBus(channel, rx_queue_size=1, can_filters=[{"can_id": 0x21, "can_mask": 0x7FF}])
+    for can_id in (0x10, 0x21, 0x10, 0x30):  # the second 0x10's refusal comes from the cache
+        sender.send_data(can_id, b"\x00", 1.0)
+    assert [f[1] for f in picky.drain()] == [0x21]  # type: ignore[index]
+    assert [f[1] for f in full.drain()] == [0x21]  # type: ignore[index]
+    assert full.rx_overruns == 0  # a refused frame never entered the one-frame queue
+    full.shutdown()
+    for can_id in (0x10, 0x21, 0x2F):  # 0x10 never enters the queue
+        sender.send_data(can_id, b"\x00", 1.0)
+    sender.send(_msg(0x21))
+    sender.send(_msg(0x22))
+    picky.set_filters([{"can_id": 0x21, "can_mask": 0x7FF, "extended": False}])  # re-checked
+    assert [picky.as_message(f).arbitration_id for f in picky.drain()] == [0x21, 0x21]
+    picky.set_filters(None)
+    sender.send_data(0x30, b"", 1.0)
+    assert [f[1] for f in picky.drain()] == [0x30]  # type: ignore[index]
+    for bus in (sender, picky):
+        bus.shutdown()
+
+
+def test_a_bit_timed_handle_drains_messages_once_its_wire_ran(channel: str) -> None:
+    now = [0.0]
+    sender = OdocanBus(channel, preserve_timestamps=True, bitrate=500_000, clock=lambda: now[0])
+    host = OdocanBus(channel, bitrate=500_000, clock=lambda: now[0])
+    sender.send_data(0x10, b"\x01" * 8, 0.0)
+    assert host.drain() == []  # still on the wire
+    now[0] = 1.0
+    drained = host.drain()
+    assert [(type(m), m.arbitration_id) for m in drained] == [(can.Message, 0x10)]  # type: ignore[union-attr]
+    for bus in (sender, host):
+        bus.shutdown()
+    with pytest.raises(can.CanOperationError):
+        host.drain()
