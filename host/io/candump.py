@@ -122,9 +122,7 @@ for _i, _c in enumerate(b"0123456789abcdef"):
     _HEX[_c] = _i
 for _i, _c in enumerate(b"ABCDEF"):
     _HEX[_c] = 10 + _i
-_DIGIT = np.full(256, -1, dtype=np.int16)
-for _i, _c in enumerate(b"0123456789"):
-    _DIGIT[_c] = _i
+_HEX_U8 = _HEX.astype(np.uint8)  # the same for checked digits, without a cast per frame
 
 _C_DIGIT, _C_HEX, _C_CHANNEL, _C_DIRECTION = 1, 2, 4, 8
 _C_SPACE, _C_HASH, _C_DOT, _C_ANY = 0x10, 0x20, 0x40, 0x80  # a separator each; any byte
@@ -272,10 +270,11 @@ def _hex_value(cols: U8Array) -> npt.NDArray[np.int64]:
 
 
 def _decimal_value(cols: U8Array) -> npt.NDArray[np.int64]:
-    """The value of decimal digit columns (most significant first)."""
-    value = np.zeros(cols.shape[0], dtype=np.int64)
-    for j in range(cols.shape[1]):
-        value = value * 10 + _DIGIT[cols[:, j]]
+    """The value of decimal digit columns (most significant first; already checked to be
+    ASCII digits, at most ``_MAX_TIMESTAMP_DIGITS`` of them, so every sum fits an int64): one
+    integer matrix product with the powers of ten instead of a pass per column."""
+    powers = 10 ** np.arange(cols.shape[1] - 1, -1, -1, dtype=np.int64)
+    value: npt.NDArray[np.int64] = (cols - np.uint8(ord("0"))).astype(np.int64) @ powers
     return value
 
 
@@ -291,7 +290,7 @@ def _decode_block(block: U8Array, c: _Columns) -> FrameArrays:
     can_id = _hex_value(block[:, c.id_start : c.hash]) & _ID_MASK_29
     nbytes = (c.data_end - c.hash - 1) // 2
     data = np.zeros((n, MAX_DLC), dtype=np.uint8)
-    hexes = _HEX[block[:, c.hash + 1 : c.data_end]].astype(np.uint8)
+    hexes = _HEX_U8[block[:, c.hash + 1 : c.data_end]]
     data[:, :nbytes] = (hexes[:, 0::2] << 4) | hexes[:, 1::2]
     flags = FLAG_EXTENDED if c.hash - c.id_start > 3 else 0
     return FrameArrays(
