@@ -229,6 +229,9 @@ def _parse_group(
             break
         block = windows[starts[lines]]
         ok = _check_block(block, cols)
+        if ok.all():  # the usual case: no copy of the block, nothing left over
+            parsed.append(_Parsed(lines, _decode_block(block, cols)))
+            return parsed, lines[:0]
         if ok.any():
             parsed.append(_Parsed(lines[ok], _decode_block(block[ok], cols)))
         lines = lines[~ok]
@@ -251,9 +254,10 @@ def _check_block(block: U8Array, c: _Columns) -> npt.NDArray[np.bool_]:
     if c.data_end < c.length:  # " R" / " T"
         need[c.data_end] = _C_SPACE
         need[c.data_end + 1] = _C_DIRECTION
-    classes = _CLASS[block]
+    classes = _CLASS[block]  # a fresh C-contiguous copy: its rows are consecutive
     classes &= need
-    ok: npt.NDArray[np.bool_] = np.asarray(classes.all(axis=1))
+    ok = np.ones(block.shape[0], dtype=bool)
+    ok[np.flatnonzero(classes.ravel() == 0) // c.length] = False  # rows with a wrong class
     ok &= block[:, 0] == ord("(")
     ok &= block[:, c.close] == ord(")")
     if c.hash - c.id_start == 8:
