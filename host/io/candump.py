@@ -311,17 +311,20 @@ def _merge(parts: list[_Parsed]) -> FrameArrays:
     if not parts:
         return empty_frames()
     line = np.concatenate([p.line for p in parts])
-    order = np.argsort(line, kind="stable")
+    in_order = bool(np.all(line[1:] > line[:-1]))  # one part (the usual chunk): no reordering
+    order = None if in_order else np.argsort(line, kind="stable")
 
     def cat(field: str) -> npt.NDArray[np.generic]:
-        return np.concatenate([getattr(p.frames, field) for p in parts])[order]
+        columns = [getattr(p.frames, field) for p in parts]
+        joined = columns[0] if len(columns) == 1 else np.concatenate(columns)
+        return joined if order is None else joined[order]
 
-    return FrameArrays(
-        timestamp_s=cat("timestamp_s").astype(np.float64),
-        can_id=cat("can_id").astype(np.uint32),
-        dlc=cat("dlc").astype(np.uint8),
-        data=cat("data").astype(np.uint8),
-        flags=cat("flags").astype(np.uint8),
+    return FrameArrays(  # the parts' arrays are fresh: kept as they are when the type is right
+        timestamp_s=cat("timestamp_s").astype(np.float64, copy=False),
+        can_id=cat("can_id").astype(np.uint32, copy=False),
+        dlc=cat("dlc").astype(np.uint8, copy=False),
+        data=cat("data").astype(np.uint8, copy=False),
+        flags=cat("flags").astype(np.uint8, copy=False),
     )
 
 
