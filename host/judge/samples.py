@@ -372,7 +372,10 @@ def truth_samples(
         )
         uniq, first = _first_per_encoder(named)
         found.append((uniq, np.flatnonzero(keep)[first]))
-    common = np.intersect1d(np.intersect1d(found[0][0], found[1][0]), found[2][0])
+    common = np.intersect1d(  # each part's frames named are sorted and unique already
+        np.intersect1d(found[0][0], found[1][0], assume_unique=True), found[2][0],
+        assume_unique=True,
+    )
     pick = [f[1][np.searchsorted(f[0], common)] for f in found]
     heading_raw = parts[2]["HEADING"][pick[2]].astype(np.int64)
     return Poses(
