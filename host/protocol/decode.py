@@ -106,8 +106,10 @@ class BulkDecoder:
     The analysis asks for the same message's frames several times (its frame counts, a page at
     a time, the E2E-accepted frames): ``select`` keeps its answer for the last ``FrameArrays``
     seen (immutable), at most 8 bytes a frame over all messages, and hands it out read-only (a
-    caller that changed it in place would change every later answer). Decoded values are not
-    kept: each call returns arrays of its own, and a page decodes only its own frames' signals.
+    caller that changed it in place would change every later answer); ``decode_page`` keeps
+    the page (top multiplexer value) of each frame of a multiplexed message (8 bytes a frame
+    more). Decoded values are not kept: each call returns arrays of its own, and a page decodes
+    only its own frames' signals.
     """
 
     def __init__(self, db: cantools.database.can.Database) -> None:
@@ -117,6 +119,7 @@ class BulkDecoder:
         self._frames: FrameArrays | None = None  # the frames the caches below belong to
         self._keys: npt.NDArray[np.int64] = np.zeros(0, dtype=np.int64)
         self._selected: dict[str, npt.NDArray[np.intp]] = {}
+        self._pages: dict[str, np.ndarray] = {}  # top multiplexer value of each selected frame
         for message in db.messages:
             self._messages[message.name] = message
             self._layouts[message.name] = tuple(signal_layout(s) for s in message.signals)
@@ -132,6 +135,7 @@ class BulkDecoder:
         """Positions in ``frames`` of the decodable frames of message ``name`` (read-only)."""
         if self._frames is not frames:  # start the caches afresh
             self._frames, self._keys, self._selected = frames, frame_keys(frames), {}
+            self._pages = {}
         index = self._selected.get(name)
         if index is None:
             message = self.message(name)
@@ -159,13 +163,16 @@ class BulkDecoder:
         if not muxes:
             raise DecodeError(f"{message_name} is not multiplexed")
         index = self.select(frames, message_name)
-        data = frames.data[index]
         top = muxes[0]
-        kept = np.flatnonzero(extract(_words(data, top.big_endian), top) == mux_value)
+        pages = self._pages.get(message_name)
+        if pages is None:  # kept for the message's other pages
+            pages = extract(_words(frames.data[index], top.big_endian), top)
+            self._pages[message_name] = pages
+        kept = np.flatnonzero(pages == mux_value)
         wanted = layouts if len(kept) == 0 else tuple(  # an empty page: every signal, as ever
             lay for lay in layouts if lay.mux_signal != top.name or mux_value in lay.mux_ids
         )
-        decoded = self._decode(frames, index[kept], wanted, data[kept])
+        decoded = self._decode(frames, index[kept], wanted)
         page = {
             lay.name: decoded[lay.name]
             for lay in wanted if _selected(lay, top.name, mux_value, decoded)
