@@ -237,14 +237,15 @@ def sequence_statuses(
     valid = np.flatnonzero(crc_ok)
     if len(valid) == 0:
         return status
-    cum = np.cumsum(periods)
-    c = counter[valid] & COUNTER_MASK
+    every = len(valid) == len(crc_ok)  # the usual case: no gather of the valid frames
+    c = (counter if every else counter[valid]) & COUNTER_MASK
     naive = np.full(len(valid), _S_OK, dtype=np.int8)
     delta = (c[1:] - c[:-1]) & COUNTER_MASK
-    window = np.minimum(MAX_DELTA_COUNTER, max_delta_init + cum[valid[1:]] - cum[valid[:-1]])
-    naive[1:] = np.select(
-        [delta == 1, delta == 0, delta <= window], [_S_OK, _S_REPEATED, _S_LOST], _S_WRONG
-    )
+    cum = np.cumsum(periods)
+    cum_valid = cum if every else cum[valid]
+    window = np.minimum(MAX_DELTA_COUNTER, max_delta_init + cum_valid[1:] - cum_valid[:-1])
+    naive[1:] = np.where(delta == 1, _S_OK, np.where(
+        delta == 0, _S_REPEATED, np.where(delta <= window, _S_LOST, _S_WRONG)))
     bad = np.flatnonzero((naive == _S_REPEATED) | (naive == _S_WRONG))
     j = 0
     while True:
@@ -252,7 +253,9 @@ def sequence_statuses(
         if k == len(bad):
             break
         start = int(bad[k])  # its predecessor (start - 1) was accepted
-        j = _rejudge(naive, c, cum[valid], start, max_delta_init)
+        j = _rejudge(naive, c, cum_valid, start, max_delta_init)
+    if every:
+        return naive
     status[valid] = naive
     return status
 
@@ -377,9 +380,14 @@ def _check_message(
     periods = periods_between(dt, config.cycle_s)
     status = sequence_statuses(crc_ok[index], counter, periods, config.max_delta_init)
     good = (status == _S_OK) | (status == _S_LOST)
-    accepted[index[good]] = True
-    valid = np.flatnonzero(good)
-    lost = int(np.sum((counter[valid[1:]] - counter[valid[:-1]]) & COUNTER_MASK) - len(valid) + 1)
+    if good.all():  # the usual case: no gathers
+        accepted[index] = True
+        valid, steps = np.arange(len(good)), counter[1:] - counter[:-1]
+    else:
+        accepted[index[good]] = True
+        valid = np.flatnonzero(good)
+        steps = counter[valid[1:]] - counter[valid[:-1]]
+    lost = int(np.sum(steps & COUNTER_MASK) - len(valid) + 1)
     return {
         "ok": len(valid),
         "lost": lost if len(valid) else 0,
