@@ -13,6 +13,7 @@ hold). Scale them with the signal's ``scale``/``offset`` yourself.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import cantools
@@ -90,6 +91,70 @@ def frame_keys(frames: FrameArrays) -> npt.NDArray[np.int64]:
     return keys
 
 
+_STANDARD_IDS = 0x800  # 11-bit identifiers: their keys are the identifiers
+
+
+def message_numbers(
+    keys: npt.NDArray[np.int64], sorted_keys: npt.NDArray[np.int64]
+) -> npt.NDArray[np.intp]:
+    """For each frame key, the position of its message in ``sorted_keys`` (a database's keys,
+    ascending), or ``len(sorted_keys)`` for a frame of none: a table lookup by the low 11 bits
+    checked against the key when every message has a standard identifier, else a search."""
+    count = len(sorted_keys)
+    padded = np.append(sorted_keys, -2)  # no frame's key: what "no message" compares to
+    if count and sorted_keys[-1] < _STANDARD_IDS:
+        table = np.full(_STANDARD_IDS, count, dtype=np.intp)
+        table[sorted_keys] = np.arange(count)
+        number = table[keys & (_STANDARD_IDS - 1)]
+    else:
+        number = np.searchsorted(sorted_keys, keys)
+    number[padded[number] != keys] = count
+    result: npt.NDArray[np.intp] = number
+    return result
+
+
+@dataclass(frozen=True)
+class FrameGroups:
+    """The frames of a log grouped by message: ``of(k)``, the positions (ascending) of the
+    frames whose key is ``sorted_keys[k]``; ``of(len(sorted_keys))``, those of no message."""
+
+    sorted_keys: tuple[int, ...]
+    numbers: npt.NDArray[np.intp]  # each frame's message number (``message_numbers``)
+    positions: npt.NDArray[np.intp]
+    bounds: tuple[int, ...]
+
+    def of(self, number: int) -> npt.NDArray[np.intp]:
+        """The positions of message ``number``'s frames (read-only view)."""
+        return self.positions[self.bounds[number] : self.bounds[number + 1]]
+
+    def count(self, number: int) -> int:
+        return self.bounds[number + 1] - self.bounds[number]
+
+
+_last_groups: tuple[weakref.ref[FrameArrays], FrameGroups] | None = None
+
+
+def frame_groups(frames: FrameArrays, sorted_keys: tuple[int, ...]) -> FrameGroups:
+    """``FrameGroups`` of ``frames`` by ``sorted_keys`` (ascending): one table lookup and one
+    stable radix sort of message numbers for all messages at once. The last answer is kept for
+    the same ``FrameArrays`` (immutable) and keys: the E2E check and each ``BulkDecoder`` of an
+    analysis share it."""
+    global _last_groups
+    last = _last_groups
+    if last is not None and last[0]() is frames and last[1].sorted_keys == sorted_keys:
+        return last[1]
+    number = message_numbers(frame_keys(frames), np.array(sorted_keys, dtype=np.int64))
+    small = number.astype(np.uint16) if len(sorted_keys) < 0xFFFF else number
+    positions = np.argsort(small, kind="stable")  # radix sort: each message in bus order
+    positions.flags.writeable = False
+    per_message = np.bincount(number, minlength=len(sorted_keys) + 1)
+    bounds = (0, *np.cumsum(per_message).tolist())
+    number.flags.writeable = False
+    groups = FrameGroups(sorted_keys, number, positions, bounds)
+    _last_groups = (weakref.ref(frames), groups)
+    return groups
+
+
 class BulkDecoder:
     """Decode every frame of a message at once, from the layouts of a cantools database.
 
@@ -117,12 +182,16 @@ class BulkDecoder:
         self._layouts: dict[str, tuple[SignalLayout, ...]] = {}
         self._messages: dict[str, Message] = {}
         self._frames: FrameArrays | None = None  # the frames the caches below belong to
-        self._keys: npt.NDArray[np.int64] = np.zeros(0, dtype=np.int64)
+        self._groups: FrameGroups | None = None
+        self._numbers: dict[int, int] = {}  # frame key -> its message's number in the groups
         self._selected: dict[str, npt.NDArray[np.intp]] = {}
         self._pages: dict[str, np.ndarray] = {}  # top multiplexer value of each selected frame
         for message in db.messages:
             self._messages[message.name] = message
             self._layouts[message.name] = tuple(signal_layout(s) for s in message.signals)
+        keys = sorted({frame_key(m.frame_id, m.is_extended_frame) for m in db.messages})
+        self._sorted_keys = tuple(keys)
+        self._numbers = {key: number for number, key in enumerate(keys)}
 
     def message(self, name: str) -> Message:
         """The cantools message ``name`` (``DecodeError`` when the database has none)."""
@@ -134,15 +203,16 @@ class BulkDecoder:
     def select(self, frames: FrameArrays, name: str) -> npt.NDArray[np.intp]:
         """Positions in ``frames`` of the decodable frames of message ``name`` (read-only)."""
         if self._frames is not frames:  # start the caches afresh
-            self._frames, self._keys, self._selected = frames, frame_keys(frames), {}
-            self._pages = {}
+            self._frames, self._selected, self._pages = frames, {}, {}
+            self._groups = frame_groups(frames, self._sorted_keys)
         index = self._selected.get(name)
         if index is None:
             message = self.message(name)
             if message.length > 8:
                 raise DecodeError(f"{name}: {message.length}-byte message (classic CAN only)")
-            of_id = np.flatnonzero(self._keys == frame_key(message.frame_id,
-                                                            message.is_extended_frame))
+            assert self._groups is not None
+            of_id = self._groups.of(
+                self._numbers[frame_key(message.frame_id, message.is_extended_frame)])
             index = of_id[frames.dlc[of_id] == message.length]
             index.flags.writeable = False
             self._selected[name] = index

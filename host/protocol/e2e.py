@@ -37,7 +37,7 @@ import numpy.typing as npt
 from cantools.database.can import Message
 
 from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
-from odocan.host.protocol.decode import frame_key, frame_keys
+from odocan.host.protocol.decode import frame_groups, frame_key
 from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 
@@ -296,7 +296,6 @@ def check_frames(
     of all protected frames found in one pass; the sequence is then judged per message.
     """
     configs = e2e_messages(db if db is not None else contract.database())
-    keys = frame_keys(frames)
     accepted = np.zeros(len(frames), dtype=bool)
     counts: dict[str, dict[str, int]] = {}
     unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
@@ -304,18 +303,18 @@ def check_frames(
     unknown["remote_frames"] = int(
         np.count_nonzero((frames.flags & (FLAG_REMOTE | FLAG_ERROR)) == FLAG_REMOTE)
     )
-    in_order = [configs[key] for key in sorted(configs)]
-    message = _message_numbers(keys, np.array(sorted(configs), dtype=np.int64))
-    known = message < len(in_order)
-    unknown["unknown_id"] = int(np.count_nonzero(~known & (keys >= 0)))
-    per_message = np.bincount(message, minlength=len(in_order) + 1)
-    grouped = np.argsort(message.astype(np.uint16), kind="stable")  # radix: in bus order
-    bounds = np.concatenate(([0], np.cumsum(per_message))).tolist()
+    sorted_keys = tuple(sorted(configs))
+    in_order = [configs[key] for key in sorted_keys]
+    groups = frame_groups(frames, sorted_keys)
+    of_none = groups.of(len(in_order))  # error and remote frames (key -1) among them
+    unknown["unknown_id"] = int(
+        np.count_nonzero((frames.flags[of_none] & (FLAG_ERROR | FLAG_REMOTE)) == 0))
     protected = [c.data_ids is not None for c in in_order]
-    crc_ok = _crc_ok(frames, message, in_order) if any(protected) else None
-    for number in np.flatnonzero(per_message[:-1]).tolist():
-        config = in_order[number]
-        of_id = grouped[bounds[number] : bounds[number + 1]]
+    crc_ok = _crc_ok(frames, groups.numbers, in_order) if any(protected) else None
+    for number, config in enumerate(in_order):
+        of_id = groups.of(number)
+        if len(of_id) == 0:
+            continue
         right_dlc = of_id[frames.dlc[of_id] == config.length]
         unknown["wrong_dlc"] += len(of_id) - len(right_dlc)
         if crc_ok is None or config.data_ids is None:
@@ -325,28 +324,6 @@ def check_frames(
         counts[config.name] = _check_message(frames, right_dlc, config, accepted, crc_ok)
     counts[UNKNOWN] = unknown
     return counts, accepted
-
-
-_STANDARD_IDS = 0x800  # 11-bit identifiers: their keys are the identifiers
-
-
-def _message_numbers(
-    keys: npt.NDArray[np.int64], sorted_keys: npt.NDArray[np.int64]
-) -> npt.NDArray[np.intp]:
-    """For each frame key, the position of its message in ``sorted_keys`` (the DBC's keys,
-    ascending), or ``len(sorted_keys)`` for a frame of none: a table lookup by the low 11 bits
-    checked against the key when every message has a standard identifier, else a search."""
-    count = len(sorted_keys)
-    padded = np.append(sorted_keys, -2)  # no frame's key: what "no message" compares to
-    if count and sorted_keys[-1] < _STANDARD_IDS:
-        table = np.full(_STANDARD_IDS, count, dtype=np.intp)
-        table[sorted_keys] = np.arange(count)
-        number = table[keys & (_STANDARD_IDS - 1)]
-    else:
-        number = np.searchsorted(sorted_keys, keys)
-    number[padded[number] != keys] = count
-    result: npt.NDArray[np.intp] = number
-    return result
 
 
 def _crc_ok(
