@@ -286,7 +286,7 @@ def _parse_block(block: U8Array, c: _Columns) -> tuple[npt.NDArray[np.bool_], Fr
     offset = np.subtract(flat, np.tile(low, n))
     bad_rows = [_rows_with(np.greater(offset, np.tile(span, n)).reshape(n, c.length))]
     bad_rows.append(_rows_with(block[:, c.close + 2 : c.id_start - 1] == ord("#")))  # channel
-    id_digits = _HEX[block[:, c.id_start : c.hash]]
+    id_digits = np.take(_HEX, block[:, c.id_start : c.hash])  # take: faster than [] here
     bad_rows.append(_rows_with(id_digits < 0))
     can_id = np.zeros(n, dtype=np.int64)
     for j in range(c.hash - c.id_start):
@@ -297,7 +297,7 @@ def _parse_block(block: U8Array, c: _Columns) -> tuple[npt.NDArray[np.bool_], Fr
     pairs = np.ndarray(
         (n, nbytes), dtype=_U16_LE, buffer=block, offset=c.hash + 1, strides=(c.length, 2)
     )
-    payload = _HEX_PAIR[pairs]
+    payload = np.take(_HEX_PAIR, pairs)
     bad_rows.append(_rows_with(payload == _BAD_PAIR))
     if c.data_end < c.length:
         direction = block[:, c.data_end + 1] | 0x20  # lower case

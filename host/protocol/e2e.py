@@ -115,9 +115,9 @@ def crc8h2f_p02(
         return np.zeros(0, dtype=np.uint8)
     pairs = np.ndarray((data.shape[0], 3), dtype=_U16_LE, buffer=data, offset=1, strides=(8, 2))
     last = data[:, 7].astype(np.uint16) | (data_ids.astype(np.uint16) << 8)
-    crc = _CRC_PAIRS[3][last] ^ np.uint8(_CRC_ZEROS)
+    crc = np.take(_CRC_PAIRS[3], last) ^ np.uint8(_CRC_ZEROS)
     for k in range(3):
-        crc ^= _CRC_PAIRS[k][pairs[:, k]]
+        crc ^= np.take(_CRC_PAIRS[k], pairs[:, k])
     result: npt.NDArray[np.uint8] = crc
     return result
 
