@@ -173,12 +173,15 @@ def _parse_counting(content: bytes, name: str, first_line: int) -> tuple[FrameAr
     starts, ends, newlines = _line_bounds(buf)
     lengths = ends - starts
     fast_parts: list[_Parsed] = []
-    slow_parts = [np.flatnonzero((lengths == 0) | (lengths > _MAX_FAST_LENGTH))]
-    candidates = np.flatnonzero((lengths > 0) & (lengths <= _MAX_FAST_LENGTH))
-    order = candidates[np.argsort(lengths[candidates], kind="stable")]
-    sorted_lengths = lengths[order]
-    bounds = np.flatnonzero(np.diff(sorted_lengths)) + 1
-    for lines in np.split(order, bounds):
+    if len(lengths) and 0 < lengths.min() == lengths.max() <= _MAX_FAST_LENGTH:
+        groups = [np.arange(len(lengths))]  # one length (a chunk often is): nothing to sort
+        slow_parts = [groups[0][:0]]
+    else:
+        slow_parts = [np.flatnonzero((lengths == 0) | (lengths > _MAX_FAST_LENGTH))]
+        candidates = np.flatnonzero((lengths > 0) & (lengths <= _MAX_FAST_LENGTH))
+        order = candidates[np.argsort(lengths[candidates], kind="stable")]
+        groups = np.split(order, np.flatnonzero(np.diff(lengths[order])) + 1)
+    for lines in groups:
         if len(lines):
             parsed, rejected = _parse_group(buf, starts, int(lengths[lines[0]]), lines)
             fast_parts.extend(parsed)
@@ -191,7 +194,7 @@ def _parse_counting(content: bytes, name: str, first_line: int) -> tuple[FrameAr
 
 def _line_bounds(buf: U8Array) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], int]:
     """Start and end (exclusive, without ``\\r\\n``) of every line; the count of newlines."""
-    newlines = np.flatnonzero(buf == ord("\n")).astype(np.int64)
+    newlines = np.flatnonzero(buf == ord("\n")).astype(np.int64, copy=False)
     starts = np.concatenate(([0], newlines + 1))
     ends = np.concatenate((newlines, [len(buf)]))
     if len(buf) and buf[-1] == ord("\n"):
