@@ -127,9 +127,6 @@ class FrameGroups:
         """The positions of message ``number``'s frames (read-only view)."""
         return self.positions[self.bounds[number] : self.bounds[number + 1]]
 
-    def count(self, number: int) -> int:
-        return self.bounds[number + 1] - self.bounds[number]
-
 
 _last_groups: tuple[weakref.ref[FrameArrays], FrameGroups] | None = None
 
