@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from typing import Any
 
 import cantools
 import numpy as np
@@ -95,21 +96,27 @@ _STANDARD_IDS = 0x800  # 11-bit identifiers: their keys are the identifiers
 
 
 def message_numbers(
-    keys: npt.NDArray[np.int64], sorted_keys: npt.NDArray[np.int64]
-) -> npt.NDArray[np.intp]:
-    """For each frame key, the position of its message in ``sorted_keys`` (a database's keys,
-    ascending), or ``len(sorted_keys)`` for a frame of none: a table lookup by the low 11 bits
-    checked against the key when every message has a standard identifier, else a search."""
+    frames: FrameArrays, sorted_keys: npt.NDArray[np.int64]
+) -> npt.NDArray[np.integer[Any]]:
+    """For each frame, the position of its message's key (``frame_key``) in ``sorted_keys`` (a
+    database's keys, ascending), or ``len(sorted_keys)`` for a frame of none. When every message
+    has a standard identifier: a uint16 table lookup by the low 11 bits of the identifier,
+    checked against it (and against the extended, error and remote flags, which no standard key
+    has), without the int64 keys; else a search of the keys."""
     count = len(sorted_keys)
-    padded = np.append(sorted_keys, -2)  # no frame's key: what "no message" compares to
     if count and sorted_keys[-1] < _STANDARD_IDS:
-        table = np.full(_STANDARD_IDS, count, dtype=np.intp)
+        table = np.full(_STANDARD_IDS, count, dtype=np.uint16)
         table[sorted_keys] = np.arange(count)
-        number = table[keys & (_STANDARD_IDS - 1)]
-    else:
-        number = np.searchsorted(sorted_keys, keys)
-    number[padded[number] != keys] = count
-    result: npt.NDArray[np.intp] = number
+        number = np.take(table, frames.can_id & (_STANDARD_IDS - 1))
+        ids = np.append(sorted_keys, 0).astype(np.uint32)  # [count]: any, that frame has none
+        plain = (frames.flags & (FLAG_EXTENDED | FLAG_ERROR | FLAG_REMOTE)) == 0
+        number[~(plain & (np.take(ids, number) == frames.can_id))] = count
+        return number
+    keys = frame_keys(frames)
+    padded = np.append(sorted_keys, -2)  # no frame's key: what "no message" compares to
+    found = np.searchsorted(sorted_keys, keys)
+    found[padded[found] != keys] = count
+    result: npt.NDArray[np.intp] = found
     return result
 
 
@@ -119,7 +126,7 @@ class FrameGroups:
     frames whose key is ``sorted_keys[k]``; ``of(len(sorted_keys))``, those of no message."""
 
     sorted_keys: tuple[int, ...]
-    numbers: npt.NDArray[np.intp]  # each frame's message number (``message_numbers``)
+    numbers: npt.NDArray[np.integer[Any]]  # each frame's message number (``message_numbers``)
     positions: npt.NDArray[np.intp]
     bounds: tuple[int, ...]
 
@@ -140,8 +147,8 @@ def frame_groups(frames: FrameArrays, sorted_keys: tuple[int, ...]) -> FrameGrou
     last = _last_groups
     if last is not None and last[0]() is frames and last[1].sorted_keys == sorted_keys:
         return last[1]
-    number = message_numbers(frame_keys(frames), np.array(sorted_keys, dtype=np.int64))
-    small = number.astype(np.uint16) if len(sorted_keys) < 0xFFFF else number
+    number = message_numbers(frames, np.array(sorted_keys, dtype=np.int64))
+    small = number.astype(np.uint16, copy=False) if len(sorted_keys) < 0xFFFF else number
     positions = np.argsort(small, kind="stable")  # radix sort: each message in bus order
     positions.flags.writeable = False
     per_message = np.bincount(number, minlength=len(sorted_keys) + 1)

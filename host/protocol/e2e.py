@@ -30,6 +30,7 @@ fatal; messages without ``E2EDataIDs`` are taken unchecked and counted there as 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import cantools
 import numpy as np
@@ -327,7 +328,7 @@ def check_frames(
 
 
 def _crc_ok(
-    frames: FrameArrays, message: npt.NDArray[np.intp], in_order: list[E2EMessage]
+    frames: FrameArrays, message: npt.NDArray[np.integer[Any]], in_order: list[E2EMessage]
 ) -> npt.NDArray[np.bool_]:
     """Whether each frame's byte 0 is the Profile 2 CRC of its message (its data ID picked by
     its counter; meaningless for frames of unprotected or unknown messages)."""
@@ -336,7 +337,8 @@ def _crc_ok(
         if config.data_ids is not None:
             data_ids[number] = config.data_ids
     counter = frames.data[:, 1] & COUNTER_MASK
-    crc = crc8h2f_p02(frames.data, data_ids.ravel()[message * 16 + counter])
+    # message * 16 + counter: below 2048 * 16 when message is a uint16 (message_numbers)
+    crc = crc8h2f_p02(frames.data, np.take(data_ids.ravel(), message * 16 + counter))
     ok: npt.NDArray[np.bool_] = crc == frames.data[:, 0]
     return ok
 
