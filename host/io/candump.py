@@ -56,9 +56,13 @@ def candump_parts(
     """The frames of ``content[:end]`` (``candump -L`` text), one part per ``chunk_bytes`` (at
     least) of text cut after a newline, in order; errors as ``parse_candump`` on the whole."""
     start = line = 0
+    scratch = np.empty(0, dtype=np.uint8)  # one buffer for every chunk's text: no fresh pages
     while start < end:
         stop = content.find(b"\n", min(start + chunk_bytes, end) - 1, end) + 1 or end
-        chunk = content[start:stop]
+        if len(scratch) < stop - start:
+            scratch = np.empty(stop - start, dtype=np.uint8)
+        chunk = scratch[: stop - start]
+        chunk[:] = np.frombuffer(content, np.uint8, stop - start, start)  # (a view while copied)
         part, newlines = _parse_counting(chunk, name, line)
         line += newlines
         if isinstance(content, mmap.mmap):
@@ -167,9 +171,11 @@ def parse_candump(content: bytes, name: str = "<log>", *, first_line: int = 0) -
     return _parse_counting(content, name, first_line)[0]
 
 
-def _parse_counting(content: bytes, name: str, first_line: int) -> tuple[FrameArrays, int]:
-    """``parse_candump``, and the newlines in ``content`` (found once for both)."""
-    buf = np.frombuffer(content, dtype=np.uint8)
+def _parse_counting(
+    content: bytes | U8Array, name: str, first_line: int
+) -> tuple[FrameArrays, int]:
+    """``parse_candump`` (of text as bytes or uint8), and the newlines in it (found once)."""
+    buf = np.frombuffer(content, dtype=np.uint8) if isinstance(content, bytes) else content
     starts, ends, newlines = _line_bounds(buf)
     lengths = ends - starts
     fast_parts: list[_Parsed] = []
@@ -383,7 +389,7 @@ def _merge(parts: list[_Parsed]) -> FrameArrays:
 
 
 def _parse_slow(
-    content: bytes,
+    content: bytes | U8Array,
     starts: npt.NDArray[np.int64],
     ends: npt.NDArray[np.int64],
     lines: npt.NDArray[np.int64],
@@ -395,7 +401,7 @@ def _parse_slow(
     collector = FrameCollector()
     kept: list[int] = []
     for line in lines.tolist():
-        raw = content[int(starts[line]) : int(ends[line])]
+        raw = bytes(content[int(starts[line]) : int(ends[line])])
         msg = parse_candump_line(raw, f"{name}:{first_line + line + 1}")
         if msg is not None:
             collector.on_message_received(msg)
