@@ -38,7 +38,7 @@ def count_newlines(content: bytes | mmap.mmap, end: int) -> int:
     )
 
 
-CHUNK_BYTES = 8 << 20  # text parsed at once: its intermediates are a few times this
+CHUNK_BYTES = 1 << 20  # text parsed at once: its intermediates (a few times this) stay in cache
 
 
 def parse_candump_chunks(
@@ -56,11 +56,15 @@ def candump_parts(
     """The frames of ``content[:end]`` (``candump -L`` text), one part per ``chunk_bytes`` (at
     least) of text cut after a newline, in order; errors as ``parse_candump`` on the whole."""
     start = line = 0
+    scratch = np.empty(0, dtype=np.uint8)  # one buffer for every chunk's text: no fresh pages
     while start < end:
         stop = content.find(b"\n", min(start + chunk_bytes, end) - 1, end) + 1 or end
-        chunk = content[start:stop]
-        part = parse_candump(chunk, name, first_line=line)
-        line += chunk.count(b"\n")
+        if len(scratch) < stop - start:
+            scratch = np.empty(stop - start, dtype=np.uint8)
+        chunk = scratch[: stop - start]
+        chunk[:] = np.frombuffer(content, np.uint8, stop - start, start)  # (a view while copied)
+        part, newlines = _parse_counting(chunk, name, line)
+        line += newlines
         if isinstance(content, mmap.mmap):
             _release(content, stop)
         start = stop
@@ -122,21 +126,14 @@ for _i, _c in enumerate(b"0123456789abcdef"):
     _HEX[_c] = _i
 for _i, _c in enumerate(b"ABCDEF"):
     _HEX[_c] = 10 + _i
-_DIGIT = np.full(256, -1, dtype=np.int16)
-for _i, _c in enumerate(b"0123456789"):
-    _DIGIT[_c] = _i
-
-_C_DIGIT, _C_HEX, _C_CHANNEL, _C_DIRECTION = 1, 2, 4, 8
-_C_SPACE, _C_HASH, _C_DOT, _C_ANY = 0x10, 0x20, 0x40, 0x80  # a separator each; any byte
-_CLASS = np.full(256, _C_ANY, dtype=np.uint8)  # character classes, a bit each
-_CLASS[ord(" ")] |= _C_SPACE
-_CLASS[ord("#")] |= _C_HASH
-_CLASS[ord(".")] |= _C_DOT
-_CLASS[np.frombuffer(b"0123456789", np.uint8)] |= _C_DIGIT
-_CLASS[np.frombuffer(b"0123456789abcdefABCDEF", np.uint8)] |= _C_HEX
-_CLASS[ord(" ") + 1 : 127] |= _C_CHANNEL
-_CLASS[ord("#")] &= ~np.uint8(_C_CHANNEL)
-_CLASS[np.frombuffer(b"RrTt", np.uint8)] |= _C_DIRECTION
+_BAD_PAIR = 0x100  # _HEX_PAIR's value of a pair that is not two hex digits
+_pairs = np.arange(1 << 16)
+_first, _second = _HEX[_pairs & 0xFF], _HEX[_pairs >> 8]  # a little-endian uint16: text order
+_HEX_PAIR = np.where((_first < 0) | (_second < 0), _BAD_PAIR, _first * 16 + _second).astype(
+    np.uint16
+)  # two hex digits read as one '<u2' -> their byte, or _BAD_PAIR: one lookup checks and decodes
+del _pairs, _first, _second
+_U16_LE, _U64_LE = np.dtype("<u2"), np.dtype("<u8")
 _MAX_FAST_LENGTH = 200  # longer lines go the slow way
 _TEMPLATE_ROUNDS = 4
 
@@ -171,16 +168,26 @@ def parse_candump(content: bytes, name: str = "<log>", *, first_line: int = 0) -
     ``name`` is used in error messages (``NAME:LINE: ...``), the lines numbered from
     ``first_line`` + 1 (``content`` a later part of a file).
     """
-    buf = np.frombuffer(content, dtype=np.uint8)
-    starts, ends = _line_bounds(buf)
+    return _parse_counting(content, name, first_line)[0]
+
+
+def _parse_counting(
+    content: bytes | U8Array, name: str, first_line: int
+) -> tuple[FrameArrays, int]:
+    """``parse_candump`` (of text as bytes or uint8), and the newlines in it (found once)."""
+    buf = np.frombuffer(content, dtype=np.uint8) if isinstance(content, bytes) else content
+    starts, ends, newlines = _line_bounds(buf)
     lengths = ends - starts
     fast_parts: list[_Parsed] = []
-    slow_parts = [np.flatnonzero((lengths == 0) | (lengths > _MAX_FAST_LENGTH))]
-    candidates = np.flatnonzero((lengths > 0) & (lengths <= _MAX_FAST_LENGTH))
-    order = candidates[np.argsort(lengths[candidates], kind="stable")]
-    sorted_lengths = lengths[order]
-    bounds = np.flatnonzero(np.diff(sorted_lengths)) + 1
-    for lines in np.split(order, bounds):
+    if len(lengths) and 0 < lengths.min() == lengths.max() <= _MAX_FAST_LENGTH:
+        groups = [np.arange(len(lengths))]  # one length (a chunk often is): nothing to sort
+        slow_parts = [groups[0][:0]]
+    else:
+        slow_parts = [np.flatnonzero((lengths == 0) | (lengths > _MAX_FAST_LENGTH))]
+        candidates = np.flatnonzero((lengths > 0) & (lengths <= _MAX_FAST_LENGTH))
+        order = candidates[np.argsort(lengths[candidates], kind="stable")]
+        groups = np.split(order, np.flatnonzero(np.diff(lengths[order])) + 1)
+    for lines in groups:
         if len(lines):
             parsed, rejected = _parse_group(buf, starts, int(lengths[lines[0]]), lines)
             fast_parts.extend(parsed)
@@ -188,22 +195,20 @@ def parse_candump(content: bytes, name: str = "<log>", *, first_line: int = 0) -
     slow_lines = np.sort(np.concatenate(slow_parts))
     if len(slow_lines):
         fast_parts.append(_parse_slow(content, starts, ends, slow_lines, name, first_line))
-    return _merge(fast_parts)
+    return _merge(fast_parts), newlines
 
 
-def _line_bounds(buf: U8Array) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Start and end (exclusive, without ``\\r\\n``) of every line."""
-    newlines = np.flatnonzero(buf == ord("\n")).astype(np.int64)
+def _line_bounds(buf: U8Array) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], int]:
+    """Start and end (exclusive, without ``\\r\\n``) of every line; the count of newlines."""
+    newlines = np.flatnonzero(buf == ord("\n")).astype(np.int64, copy=False)
     starts = np.concatenate(([0], newlines + 1))
     ends = np.concatenate((newlines, [len(buf)]))
     if len(buf) and buf[-1] == ord("\n"):
         starts, ends = starts[:-1], ends[:-1]
-    if len(ends):
-        cr = np.zeros(len(ends), dtype=bool)
-        nonempty = ends > starts
-        cr[nonempty] = buf[ends[nonempty] - 1] == ord("\r")
+    if len(buf):  # a line's end - 1 is in buf (at 0 if the line is empty, then ignored)
+        cr = (buf[np.maximum(ends - 1, 0)] == ord("\r")) & (ends > starts)
         ends = ends - cr
-    return starts, ends
+    return starts, ends, len(newlines)
 
 
 def _template(buf: U8Array, start: int, length: int) -> _Columns | None:
@@ -222,85 +227,140 @@ def _parse_group(
     """Parse lines of one length: take the first remaining line as the template, parse every
     line of that layout at once, repeat (a few rounds) on the rest; returns (parsed, rejected)."""
     parsed: list[_Parsed] = []
-    windows = np.lib.stride_tricks.sliding_window_view(buf, length)
+    block = np.lib.stride_tricks.sliding_window_view(buf, length)[starts[lines]]
     for _ in range(_TEMPLATE_ROUNDS):
         if len(lines) == 0:
             break
         cols = _template(buf, int(starts[lines[0]]), length)
         if cols is None:
             break
-        block = windows[starts[lines]]
-        ok = _check_block(block, cols)
+        ok, frames = _parse_block(block, cols)
+        if ok.all():  # the usual case: nothing selected, nothing left over
+            parsed.append(_Parsed(lines, frames))
+            return parsed, lines[:0]
         if ok.any():
-            parsed.append(_Parsed(lines[ok], _decode_block(block[ok], cols)))
-        lines = lines[~ok]
+            parsed.append(_Parsed(lines[ok], frames.select(ok)))
+        lines, block = lines[~ok], block[~ok]
     return parsed, lines
 
 
-def _check_block(block: U8Array, c: _Columns) -> npt.NDArray[np.bool_]:
-    """Rows of ``block`` (lines of one length) that have the canonical layout ``c``: a character
-    of the right class in every column, the separators ``.``, `` ``, ``#`` being classes of their
-    own (one class lookup and one reduction for the whole block), then ``(`` and ``)``."""
-    need = np.full(c.length, _C_ANY, dtype=np.uint8)
-    need[1 : c.close] = _C_DIGIT
-    need[c.dot] = _C_DOT
-    need[c.close + 1] = _C_SPACE
-    need[c.close + 2 : c.id_start - 1] = _C_CHANNEL
-    need[c.id_start - 1] = _C_SPACE
-    need[c.id_start : c.hash] = _C_HEX
-    need[c.hash] = _C_HASH
-    need[c.hash + 1 : c.data_end] = _C_HEX
+def _column_ranges(c: _Columns) -> tuple[U8Array, U8Array]:
+    """Per column of the layout ``c``, the bytes it allows as a range: ``byte - low <= span``
+    (uint8 arithmetic, so a byte below ``low`` wraps above every span). Separators are a range
+    of one byte; hex digits get the range ``0``..``f`` and the direction ``R``..``t``, both
+    checked exactly when decoded."""
+    low = np.zeros(c.length, dtype=np.uint8)
+    span = np.zeros(c.length, dtype=np.uint8)
+
+    def allow(first: int, stop: int, chars: bytes) -> None:
+        low[first:stop], span[first:stop] = chars[0], chars[-1] - chars[0]
+
+    allow(0, 1, b"(")
+    allow(1, c.close, b"09")
+    allow(c.dot, c.dot + 1, b".")
+    allow(c.close, c.close + 1, b")")
+    allow(c.close + 1, c.close + 2, b" ")
+    allow(c.close + 2, c.id_start - 1, b"!~")  # the channel: printable, no space (nor '#')
+    allow(c.id_start - 1, c.id_start, b" ")
+    allow(c.id_start, c.hash, b"0f")
+    allow(c.hash, c.hash + 1, b"#")
+    allow(c.hash + 1, c.data_end, b"0f")
     if c.data_end < c.length:  # " R" / " T"
-        need[c.data_end] = _C_SPACE
-        need[c.data_end + 1] = _C_DIRECTION
-    classes = _CLASS[block]
-    classes &= need
-    ok: npt.NDArray[np.bool_] = np.asarray(classes.all(axis=1))
-    ok &= block[:, 0] == ord("(")
-    ok &= block[:, c.close] == ord(")")
-    if c.hash - c.id_start == 8:
-        ok &= (_HEX[block[:, c.id_start]] & 0x2) == 0  # no error-frame flag (0x20000000)
-    return ok
+        allow(c.data_end, c.data_end + 1, b" ")
+        allow(c.data_end + 1, c.data_end + 2, b"Rt")
+    return low, span
 
 
-def _hex_value(cols: U8Array) -> npt.NDArray[np.int64]:
-    """The value of hex digit columns (most significant first)."""
-    value = np.zeros(cols.shape[0], dtype=np.int64)
-    for j in range(cols.shape[1]):
-        value = value * 16 + _HEX[cols[:, j]]
-    return value
+def _rows_with(bad: npt.NDArray[np.bool_]) -> npt.NDArray[np.intp]:
+    """The rows of a 2-D ``bad`` with a True (found from the flat, usually empty, hits)."""
+    if not bad.any():
+        return np.zeros(0, dtype=np.intp)
+    rows: npt.NDArray[np.intp] = np.flatnonzero(bad.ravel()) // bad.shape[1]
+    return rows
 
 
-def _decimal_value(cols: U8Array) -> npt.NDArray[np.int64]:
-    """The value of decimal digit columns (most significant first)."""
-    value = np.zeros(cols.shape[0], dtype=np.int64)
-    for j in range(cols.shape[1]):
-        value = value * 10 + _DIGIT[cols[:, j]]
-    return value
+def _parse_block(block: U8Array, c: _Columns) -> tuple[npt.NDArray[np.bool_], FrameArrays]:
+    """The rows of ``block`` (lines of one length, C-contiguous) that have the canonical layout
+    ``c``, and the frames of all rows (those of the other rows are meaningless).
 
-
-def _decode_block(block: U8Array, c: _Columns) -> FrameArrays:
-    """FrameArrays of canonical lines (already checked).
-
-    The timestamp is the exact integer of all its digits divided by a power of ten: one correctly
-    rounded division, so it is the very double ``float(text)`` gives.
+    One range test of every byte against its column's range (``_column_ranges``), then the
+    decoding checks what a range cannot: hex digits by the tables that decode them, the
+    direction letter, no error-frame flag (0x20000000) in an 8-digit ID. The timestamp is the
+    exact integer of all its digits divided by a power of ten: one correctly rounded division,
+    so it is the very double ``float(text)`` gives.
     """
     n = block.shape[0]
-    digits = np.concatenate((block[:, 1 : c.dot], block[:, c.dot + 1 : c.close]), axis=1)
-    timestamp = _decimal_value(digits) / float(10 ** (c.close - c.dot - 1))
-    can_id = _hex_value(block[:, c.id_start : c.hash]) & _ID_MASK_29
+    low, span = _column_ranges(c)
+    flat = block.reshape(-1)
+    offset = np.subtract(flat, np.tile(low, n))
+    bad_rows = [_rows_with(np.greater(offset, np.tile(span, n)).reshape(n, c.length))]
+    bad_rows.append(_rows_with(block[:, c.close + 2 : c.id_start - 1] == ord("#")))  # channel
+    id_digits = np.take(_HEX, block[:, c.id_start : c.hash])  # take: faster than [] here
+    bad_rows.append(_rows_with(id_digits < 0))
+    can_id = np.zeros(n, dtype=np.int64)
+    for j in range(c.hash - c.id_start):
+        can_id = can_id * 16 + id_digits[:, j]
+    if c.hash - c.id_start == 8:
+        bad_rows.append(np.flatnonzero(id_digits[:, 0] & 0x2))  # the error-frame flag
     nbytes = (c.data_end - c.hash - 1) // 2
+    pairs = np.ndarray(
+        (n, nbytes), dtype=_U16_LE, buffer=block, offset=c.hash + 1, strides=(c.length, 2)
+    )
+    payload = np.take(_HEX_PAIR, pairs)
+    bad_rows.append(_rows_with(payload == _BAD_PAIR))
+    if c.data_end < c.length:
+        direction = block[:, c.data_end + 1] | 0x20  # lower case
+        bad_rows.append(np.flatnonzero((direction != ord("r")) & (direction != ord("t"))))
+    ok = np.ones(n, dtype=bool)
+    for rows in bad_rows:
+        ok[rows] = False
     data = np.zeros((n, MAX_DLC), dtype=np.uint8)
-    hexes = _HEX[block[:, c.hash + 1 : c.data_end]].astype(np.uint8)
-    data[:, :nbytes] = (hexes[:, 0::2] << 4) | hexes[:, 1::2]
+    data[:, :nbytes] = payload
     flags = FLAG_EXTENDED if c.hash - c.id_start > 3 else 0
-    return FrameArrays(
-        timestamp_s=timestamp,
-        can_id=can_id.astype(np.uint32),
+    frames = FrameArrays(
+        timestamp_s=_timestamp_value(block, c) / float(10 ** (c.close - c.dot - 1)),
+        can_id=(can_id & _ID_MASK_29).astype(np.uint32),
         dlc=np.full(n, nbytes, dtype=np.uint8),
         data=data,
         flags=np.full(n, flags, dtype=np.uint8),
     )
+    return ok, frames
+
+
+def _timestamp_value(block: U8Array, c: _Columns) -> npt.NDArray[np.int64]:
+    """The integer of the timestamp digits of every row, the ``.`` left out (at most
+    ``_MAX_TIMESTAMP_DIGITS``: it fits an int64; a row with a non-digit gets a meaningless
+    value)."""
+    fraction = _digits_value(block, c.dot + 1, c.close)
+    value: npt.NDArray[np.int64] = _digits_value(block, 1, c.dot) * 10 ** (c.close - c.dot - 1)
+    return value + fraction
+
+
+_ASCII_ZEROS = 0x3030303030303030  # "00000000" as a little-endian uint64
+
+
+def _digits_value(block: U8Array, first: int, stop: int) -> npt.NDArray[np.int64]:
+    """The value of the decimal digit columns ``first:stop`` of every row (most significant
+    first), 8 digits at a time: the 8 bytes from a digit read as one little-endian uint64 and
+    summed in three multiply-and-mask steps (SWAR), the bytes after a shorter run shifted out
+    and ``0`` put before it; a run that would read past the row goes a column at a time."""
+    n, length = block.shape
+    value = np.zeros(n, dtype=np.int64)
+    for start in range(first, stop, 8):
+        count = min(8, stop - start)
+        if start + 8 > length:
+            for column in range(start, start + count):
+                value = value * 10 + (block[:, column].astype(np.int64) - ord("0"))
+            continue
+        x = np.ndarray((n,), dtype=_U64_LE, buffer=block, offset=start, strides=(length,))
+        if count < 8:
+            x = (x << np.uint64(8 * (8 - count))) | np.uint64(_ASCII_ZEROS >> (8 * count))
+        x = x - np.uint64(_ASCII_ZEROS)
+        x = (x * np.uint64(10) + (x >> np.uint64(8))) & np.uint64(0x00FF00FF00FF00FF)
+        x = (x * np.uint64(100) + (x >> np.uint64(16))) & np.uint64(0x0000FFFF0000FFFF)
+        x = (x * np.uint64(10000) + (x >> np.uint64(32))) & np.uint64(0xFFFFFFFF)
+        value = value * 10**count + x.astype(np.int64)
+    return value
 
 
 def _merge(parts: list[_Parsed]) -> FrameArrays:
@@ -308,17 +368,20 @@ def _merge(parts: list[_Parsed]) -> FrameArrays:
     if not parts:
         return empty_frames()
     line = np.concatenate([p.line for p in parts])
-    order = np.argsort(line, kind="stable")
+    in_order = bool(np.all(line[1:] > line[:-1]))  # one part (the usual chunk): no reordering
+    order = None if in_order else np.argsort(line, kind="stable")
 
     def cat(field: str) -> npt.NDArray[np.generic]:
-        return np.concatenate([getattr(p.frames, field) for p in parts])[order]
+        columns = [getattr(p.frames, field) for p in parts]
+        joined = columns[0] if len(columns) == 1 else np.concatenate(columns)
+        return joined if order is None else joined[order]
 
-    return FrameArrays(
-        timestamp_s=cat("timestamp_s").astype(np.float64),
-        can_id=cat("can_id").astype(np.uint32),
-        dlc=cat("dlc").astype(np.uint8),
-        data=cat("data").astype(np.uint8),
-        flags=cat("flags").astype(np.uint8),
+    return FrameArrays(  # the parts' arrays are fresh: kept as they are when the type is right
+        timestamp_s=cat("timestamp_s").astype(np.float64, copy=False),
+        can_id=cat("can_id").astype(np.uint32, copy=False),
+        dlc=cat("dlc").astype(np.uint8, copy=False),
+        data=cat("data").astype(np.uint8, copy=False),
+        flags=cat("flags").astype(np.uint8, copy=False),
     )
 
 
@@ -326,7 +389,7 @@ def _merge(parts: list[_Parsed]) -> FrameArrays:
 
 
 def _parse_slow(
-    content: bytes,
+    content: bytes | U8Array,
     starts: npt.NDArray[np.int64],
     ends: npt.NDArray[np.int64],
     lines: npt.NDArray[np.int64],
@@ -338,7 +401,7 @@ def _parse_slow(
     collector = FrameCollector()
     kept: list[int] = []
     for line in lines.tolist():
-        raw = content[int(starts[line]) : int(ends[line])]
+        raw = bytes(content[int(starts[line]) : int(ends[line])])
         msg = parse_candump_line(raw, f"{name}:{first_line + line + 1}")
         if msg is not None:
             collector.on_message_received(msg)

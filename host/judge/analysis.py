@@ -352,10 +352,13 @@ def _covered_s(frames: FrameArrays, db: cantools.database.can.Database) -> float
     """Seconds of bus time the log covers: its encoder periods (first to last encoder frame,
     plus one cycle), or the plain frame span when it has no encoder frame."""
     message = db.get_message_by_name("WHEEL_ENCODERS")
-    stamps = frames.timestamp_s[frames.can_id == message.frame_id]
-    if len(stamps) == 0 or not message.cycle_time:
+    is_encoder = frames.can_id == message.frame_id
+    if not is_encoder.any() or not message.cycle_time:
         return _span(frames)
-    return float(stamps[-1] - stamps[0]) + message.cycle_time / 1000.0
+    first = int(np.argmax(is_encoder))  # argmax stops at the first True: no gather of them all
+    last = len(frames) - 1 - int(np.argmax(is_encoder[::-1]))
+    stamps = frames.timestamp_s
+    return float(stamps[last] - stamps[first]) + message.cycle_time / 1000.0
 
 
 def _span(frames: FrameArrays) -> float:

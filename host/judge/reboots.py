@@ -159,17 +159,30 @@ def _boot_summaries(
     index = page["index"]
     good = _crc_holds(frames, decoder, index)
     choices = dict(message.get_signal_by_name("STATE").choices or {})
+    codes, which = np.unique(page["STATE"][good], return_inverse=True)
+    names = [str(choices.get(int(code), int(code))) for code in codes.tolist()]
+    states = np.array(names, dtype=object)[which]
+    positions, times_s = index[good], page["timestamp_s"][good]
+    uptimes_s = page["UPTIME"][good].astype(np.int64)
     watch = SourceWatch()
     boots = []
-    for position, t_s, uptime_s, state in zip(
-        index[good].tolist(), page["timestamp_s"][good].tolist(),
-        page["UPTIME"][good].tolist(), page["STATE"][good].tolist(), strict=True,
-    ):
-        name = str(choices.get(int(state), int(state)))
+    k, window = 0, _FIRST_WINDOW
+    while k < len(positions):  # quiet stretches at once (observe_quiet), the others one by one
+        end = min(len(positions), k + window)
+        k += watch.observe_quiet(times_s[k:end], uptimes_s[k:end], states[k:end])
+        if k == end:
+            window *= 2
+            continue
+        window = _FIRST_WINDOW
         before = watch.last_uptime_s
-        if watch.observe(float(t_s), int(uptime_s), name) == "reboot":
-            boots.append((int(position), int(uptime_s), name, int(before)))
+        name = str(states[k])
+        if watch.observe(float(times_s[k]), int(uptimes_s[k]), name) == "reboot":
+            boots.append((int(positions[k]), int(uptimes_s[k]), name, int(before)))
+        k += 1
     return boots
+
+
+_FIRST_WINDOW = 64  # summaries tried at once after one that was not quiet (doubles while quiet)
 
 
 # --- one report of the lives ----------------------------------------------------------------

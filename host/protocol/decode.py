@@ -13,7 +13,9 @@ hold). Scale them with the signal's ``scale``/``offset`` yourself.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
+from typing import Any
 
 import cantools
 import numpy as np
@@ -90,6 +92,73 @@ def frame_keys(frames: FrameArrays) -> npt.NDArray[np.int64]:
     return keys
 
 
+_STANDARD_IDS = 0x800  # 11-bit identifiers: their keys are the identifiers
+
+
+def message_numbers(
+    frames: FrameArrays, sorted_keys: npt.NDArray[np.int64]
+) -> npt.NDArray[np.integer[Any]]:
+    """For each frame, the position of its message's key (``frame_key``) in ``sorted_keys`` (a
+    database's keys, ascending), or ``len(sorted_keys)`` for a frame of none. When every message
+    has a standard identifier: a uint16 table lookup by the low 11 bits of the identifier,
+    checked against it (and against the extended, error and remote flags, which no standard key
+    has), without the int64 keys; else a search of the keys."""
+    count = len(sorted_keys)
+    if count and sorted_keys[-1] < _STANDARD_IDS:
+        table = np.full(_STANDARD_IDS, count, dtype=np.uint16)
+        table[sorted_keys] = np.arange(count)
+        number = np.take(table, frames.can_id & (_STANDARD_IDS - 1))
+        ids = np.append(sorted_keys, 0).astype(np.uint32)  # [count]: any, that frame has none
+        plain = (frames.flags & (FLAG_EXTENDED | FLAG_ERROR | FLAG_REMOTE)) == 0
+        number[~(plain & (np.take(ids, number) == frames.can_id))] = count
+        return number
+    keys = frame_keys(frames)
+    padded = np.append(sorted_keys, -2)  # no frame's key: what "no message" compares to
+    found = np.searchsorted(sorted_keys, keys)
+    found[padded[found] != keys] = count
+    result: npt.NDArray[np.intp] = found
+    return result
+
+
+@dataclass(frozen=True)
+class FrameGroups:
+    """The frames of a log grouped by message: ``of(k)``, the positions (ascending) of the
+    frames whose key is ``sorted_keys[k]``; ``of(len(sorted_keys))``, those of no message."""
+
+    sorted_keys: tuple[int, ...]
+    numbers: npt.NDArray[np.integer[Any]]  # each frame's message number (``message_numbers``)
+    positions: npt.NDArray[np.intp]
+    bounds: tuple[int, ...]
+
+    def of(self, number: int) -> npt.NDArray[np.intp]:
+        """The positions of message ``number``'s frames (read-only view)."""
+        return self.positions[self.bounds[number] : self.bounds[number + 1]]
+
+
+_last_groups: tuple[weakref.ref[FrameArrays], FrameGroups] | None = None
+
+
+def frame_groups(frames: FrameArrays, sorted_keys: tuple[int, ...]) -> FrameGroups:
+    """``FrameGroups`` of ``frames`` by ``sorted_keys`` (ascending): one table lookup and one
+    stable radix sort of message numbers for all messages at once. The last answer is kept for
+    the same ``FrameArrays`` (immutable) and keys: the E2E check and each ``BulkDecoder`` of an
+    analysis share it."""
+    global _last_groups
+    last = _last_groups
+    if last is not None and last[0]() is frames and last[1].sorted_keys == sorted_keys:
+        return last[1]
+    number = message_numbers(frames, np.array(sorted_keys, dtype=np.int64))
+    small = number.astype(np.uint16, copy=False) if len(sorted_keys) < 0xFFFF else number
+    positions = np.argsort(small, kind="stable")  # radix sort: each message in bus order
+    positions.flags.writeable = False
+    per_message = np.bincount(number, minlength=len(sorted_keys) + 1)
+    bounds = (0, *np.cumsum(per_message).tolist())
+    number.flags.writeable = False
+    groups = FrameGroups(sorted_keys, number, positions, bounds)
+    _last_groups = (weakref.ref(frames), groups)
+    return groups
+
+
 class BulkDecoder:
     """Decode every frame of a message at once, from the layouts of a cantools database.
 
@@ -106,8 +175,10 @@ class BulkDecoder:
     The analysis asks for the same message's frames several times (its frame counts, a page at
     a time, the E2E-accepted frames): ``select`` keeps its answer for the last ``FrameArrays``
     seen (immutable), at most 8 bytes a frame over all messages, and hands it out read-only (a
-    caller that changed it in place would change every later answer). Decoded values are not
-    kept: each call returns arrays of its own, and a page decodes only its own frames' signals.
+    caller that changed it in place would change every later answer); ``decode_page`` keeps
+    the page (top multiplexer value) of each frame of a multiplexed message (8 bytes a frame
+    more). Decoded values are not kept: each call returns arrays of its own, and a page decodes
+    only its own frames' signals.
     """
 
     def __init__(self, db: cantools.database.can.Database) -> None:
@@ -115,11 +186,16 @@ class BulkDecoder:
         self._layouts: dict[str, tuple[SignalLayout, ...]] = {}
         self._messages: dict[str, Message] = {}
         self._frames: FrameArrays | None = None  # the frames the caches below belong to
-        self._keys: npt.NDArray[np.int64] = np.zeros(0, dtype=np.int64)
+        self._groups: FrameGroups | None = None
+        self._numbers: dict[int, int] = {}  # frame key -> its message's number in the groups
         self._selected: dict[str, npt.NDArray[np.intp]] = {}
+        self._pages: dict[str, np.ndarray] = {}  # top multiplexer value of each selected frame
         for message in db.messages:
             self._messages[message.name] = message
             self._layouts[message.name] = tuple(signal_layout(s) for s in message.signals)
+        keys = sorted({frame_key(m.frame_id, m.is_extended_frame) for m in db.messages})
+        self._sorted_keys = tuple(keys)
+        self._numbers = {key: number for number, key in enumerate(keys)}
 
     def message(self, name: str) -> Message:
         """The cantools message ``name`` (``DecodeError`` when the database has none)."""
@@ -131,14 +207,16 @@ class BulkDecoder:
     def select(self, frames: FrameArrays, name: str) -> npt.NDArray[np.intp]:
         """Positions in ``frames`` of the decodable frames of message ``name`` (read-only)."""
         if self._frames is not frames:  # start the caches afresh
-            self._frames, self._keys, self._selected = frames, frame_keys(frames), {}
+            self._frames, self._selected, self._pages = frames, {}, {}
+            self._groups = frame_groups(frames, self._sorted_keys)
         index = self._selected.get(name)
         if index is None:
             message = self.message(name)
             if message.length > 8:
                 raise DecodeError(f"{name}: {message.length}-byte message (classic CAN only)")
-            of_id = np.flatnonzero(self._keys == frame_key(message.frame_id,
-                                                            message.is_extended_frame))
+            assert self._groups is not None
+            of_id = self._groups.of(
+                self._numbers[frame_key(message.frame_id, message.is_extended_frame)])
             index = of_id[frames.dlc[of_id] == message.length]
             index.flags.writeable = False
             self._selected[name] = index
@@ -159,13 +237,16 @@ class BulkDecoder:
         if not muxes:
             raise DecodeError(f"{message_name} is not multiplexed")
         index = self.select(frames, message_name)
-        data = frames.data[index]
         top = muxes[0]
-        kept = np.flatnonzero(extract(_words(data, top.big_endian), top) == mux_value)
+        pages = self._pages.get(message_name)
+        if pages is None:  # kept for the message's other pages
+            pages = extract(_words(frames.data[index], top.big_endian), top)
+            self._pages[message_name] = pages
+        kept = np.flatnonzero(pages == mux_value)
         wanted = layouts if len(kept) == 0 else tuple(  # an empty page: every signal, as ever
             lay for lay in layouts if lay.mux_signal != top.name or mux_value in lay.mux_ids
         )
-        decoded = self._decode(frames, index[kept], wanted, data[kept])
+        decoded = self._decode(frames, index[kept], wanted)
         page = {
             lay.name: decoded[lay.name]
             for lay in wanted if _selected(lay, top.name, mux_value, decoded)

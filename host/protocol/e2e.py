@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import cantools
 import numpy as np
@@ -38,7 +39,7 @@ import numpy.typing as npt
 from cantools.database.can import Message
 
 from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
-from odocan.host.protocol.decode import frame_key, frame_keys
+from odocan.host.protocol.decode import frame_groups, frame_key
 from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 
@@ -77,16 +78,49 @@ CRC8H2F_TABLE = _crc_table()
 _TABLE_LIST = CRC8H2F_TABLE.tolist()
 
 
+def _pair_tables() -> tuple[npt.NDArray[np.uint8], ...]:
+    """CRC8H2F is linear in its register and bytes: the register after the 8 bytes of Profile 2
+    (bytes 1..7, the data ID) is ``_CRC_ZEROS`` (those of zero bytes) XOR each byte's own
+    contribution at its place. These 4 tables (65536 entries) give the contributions of two
+    neighbouring places at once, indexed by the two bytes as one little-endian uint16."""
+    byte = np.arange(256)
+    places = []
+    for place in range(P02_LENGTH):
+        register = CRC8H2F_TABLE[byte]
+        for _ in range(place + 1, P02_LENGTH):
+            register = CRC8H2F_TABLE[register]
+        places.append(register)
+    return tuple(
+        np.bitwise_xor.outer(places[2 * k + 1], places[2 * k]).ravel() for k in range(4)
+    )
+
+
+def _crc_of_zeros() -> int:
+    register = CRC8H2F_INIT
+    for _ in range(P02_LENGTH):
+        register = int(CRC8H2F_TABLE[register])
+    return register
+
+
+_CRC_PAIRS = _pair_tables()
+_CRC_ZEROS = _crc_of_zeros() ^ CRC8H2F_XOR_OUT
+_U16_LE = np.dtype("<u2")
+
+
 def crc8h2f_p02(
     data: npt.NDArray[np.uint8], data_ids: npt.NDArray[np.uint8]
 ) -> npt.NDArray[np.uint8]:
-    """Profile 2 CRCs of N 8-byte frames: CRC8H2F over bytes 1..7 then each frame's data ID."""
-    table = CRC8H2F_TABLE
-    crc = np.full(data.shape[0], CRC8H2F_INIT, dtype=np.uint8)
-    for column in range(1, P02_LENGTH):
-        crc = table[crc ^ data[:, column]]
-    crc = table[crc ^ data_ids.astype(np.uint8)]
-    result: npt.NDArray[np.uint8] = crc ^ np.uint8(CRC8H2F_XOR_OUT)
+    """Profile 2 CRCs of N 8-byte frames: CRC8H2F over bytes 1..7 then each frame's data ID
+    (four lookups a frame in ``_CRC_PAIRS``: bytes 1-2, 3-4, 5-6 read in place as uint16)."""
+    data = np.ascontiguousarray(data, dtype=np.uint8)
+    if data.shape[0] == 0:
+        return np.zeros(0, dtype=np.uint8)
+    pairs = np.ndarray((data.shape[0], 3), dtype=_U16_LE, buffer=data, offset=1, strides=(8, 2))
+    last = data[:, 7].astype(np.uint16) | (data_ids.astype(np.uint16) << 8)
+    crc = np.take(_CRC_PAIRS[3], last) ^ np.uint8(_CRC_ZEROS)
+    for k in range(3):
+        crc ^= np.take(_CRC_PAIRS[k], pairs[:, k])
+    result: npt.NDArray[np.uint8] = crc
     return result
 
 
@@ -213,14 +247,15 @@ def sequence_statuses(
     valid = np.flatnonzero(crc_ok)
     if len(valid) == 0:
         return status
-    cum = np.cumsum(periods)
-    c = counter[valid] & COUNTER_MASK
+    every = len(valid) == len(crc_ok)  # the usual case: no gather of the valid frames
+    c = (counter if every else counter[valid]) & COUNTER_MASK
     naive = np.full(len(valid), _S_OK, dtype=np.int8)
     delta = (c[1:] - c[:-1]) & COUNTER_MASK
-    window = np.minimum(MAX_DELTA_COUNTER, max_delta_init + cum[valid[1:]] - cum[valid[:-1]])
-    naive[1:] = np.select(
-        [delta == 1, delta == 0, delta <= window], [_S_OK, _S_REPEATED, _S_LOST], _S_WRONG
-    )
+    cum = np.cumsum(periods)
+    cum_valid = cum if every else cum[valid]
+    window = np.minimum(MAX_DELTA_COUNTER, max_delta_init + cum_valid[1:] - cum_valid[:-1])
+    naive[1:] = np.where(delta == 1, _S_OK, np.where(
+        delta == 0, _S_REPEATED, np.where(delta <= window, _S_LOST, _S_WRONG)))
     bad = np.flatnonzero((naive == _S_REPEATED) | (naive == _S_WRONG))
     j = 0
     while True:
@@ -228,7 +263,9 @@ def sequence_statuses(
         if k == len(bad):
             break
         start = int(bad[k])  # its predecessor (start - 1) was accepted
-        j = _rejudge(naive, c, cum[valid], start, max_delta_init)
+        j = _rejudge(naive, c, cum_valid, start, max_delta_init)
+    if every:
+        return naive
     status[valid] = naive
     return status
 
@@ -264,9 +301,11 @@ def check_frames(
     ``"unknown"`` section (``UNKNOWN_KEYS``), and the mask (N,) of the frames accepted (OK or
     OKSOMELOST; the frames of unprotected messages are accepted unchecked). ``db`` defaults to
     the contract (dbc/odocan.dbc).
+
+    The frames are grouped by message once (a stable sort of their message numbers) and the CRCs
+    of all protected frames found in one pass; the sequence is then judged per message.
     """
     configs = e2e_messages(db if db is not None else contract.database())
-    keys = frame_keys(frames)
     accepted = np.zeros(len(frames), dtype=bool)
     counts: dict[str, dict[str, int]] = {}
     unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
@@ -274,20 +313,43 @@ def check_frames(
     unknown["remote_frames"] = int(
         np.count_nonzero((frames.flags & (FLAG_REMOTE | FLAG_ERROR)) == FLAG_REMOTE)
     )
-    known = np.isin(keys, np.fromiter(configs, dtype=np.int64, count=len(configs)))
-    unknown["unknown_id"] = int(np.count_nonzero(~known & (keys >= 0)))
-    for key in np.unique(keys[known]).tolist():
-        config = configs[key]
-        of_id = np.flatnonzero(keys == key)
+    sorted_keys = tuple(sorted(configs))
+    in_order = [configs[key] for key in sorted_keys]
+    groups = frame_groups(frames, sorted_keys)
+    of_none = groups.of(len(in_order))  # error and remote frames (key -1) among them
+    unknown["unknown_id"] = int(
+        np.count_nonzero((frames.flags[of_none] & (FLAG_ERROR | FLAG_REMOTE)) == 0))
+    protected = [c.data_ids is not None for c in in_order]
+    crc_ok = _crc_ok(frames, groups.numbers, in_order) if any(protected) else None
+    for number, config in enumerate(in_order):
+        of_id = groups.of(number)
+        if len(of_id) == 0:
+            continue
         right_dlc = of_id[frames.dlc[of_id] == config.length]
         unknown["wrong_dlc"] += len(of_id) - len(right_dlc)
-        if config.data_ids is None:
+        if crc_ok is None or config.data_ids is None:
             unknown["unprotected"] += len(right_dlc)
             accepted[right_dlc] = True
             continue
-        counts[config.name] = _check_message(frames, right_dlc, config, accepted)
+        counts[config.name] = _check_message(frames, right_dlc, config, accepted, crc_ok)
     counts[UNKNOWN] = unknown
     return counts, accepted
+
+
+def _crc_ok(
+    frames: FrameArrays, message: npt.NDArray[np.integer[Any]], in_order: list[E2EMessage]
+) -> npt.NDArray[np.bool_]:
+    """Whether each frame's byte 0 is the Profile 2 CRC of its message (its data ID picked by
+    its counter; meaningless for frames of unprotected or unknown messages)."""
+    data_ids = np.zeros((len(in_order) + 1, 16), dtype=np.uint8)
+    for number, config in enumerate(in_order):
+        if config.data_ids is not None:
+            data_ids[number] = config.data_ids
+    counter = frames.data[:, 1] & COUNTER_MASK
+    # message * 16 + counter: below 2048 * 16 when message is a uint16 (message_numbers)
+    crc = crc8h2f_p02(frames.data, np.take(data_ids.ravel(), message * 16 + counter))
+    ok: npt.NDArray[np.bool_] = crc == frames.data[:, 0]
+    return ok
 
 
 def _check_message(
@@ -295,20 +357,25 @@ def _check_message(
     index: npt.NDArray[np.intp],
     config: E2EMessage,
     accepted: npt.NDArray[np.bool_],
+    crc_ok: npt.NDArray[np.bool_],
 ) -> dict[str, int]:
-    """Check the frames ``index`` of one protected message; mark the accepted ones."""
+    """Check the frames ``index`` of one protected message (``crc_ok``: of every frame); mark
+    the accepted ones."""
     assert config.data_ids is not None
-    data = frames.data[index]
-    counter = (data[:, 1] & COUNTER_MASK).astype(np.int64)
-    ids = np.array(config.data_ids, dtype=np.uint8)[counter]
-    crc_ok = crc8h2f_p02(data, ids) == data[:, 0]
-    dt = np.diff(frames.timestamp_s[index], prepend=frames.timestamp_s[index[:1]])
+    counter = (frames.data[index, 1] & COUNTER_MASK).astype(np.int64)
+    timestamp_s = frames.timestamp_s[index]
+    dt = np.diff(timestamp_s, prepend=timestamp_s[:1])
     periods = periods_between(dt, config.cycle_s)
-    status = sequence_statuses(crc_ok, counter, periods, config.max_delta_init)
+    status = sequence_statuses(crc_ok[index], counter, periods, config.max_delta_init)
     good = (status == _S_OK) | (status == _S_LOST)
-    accepted[index[good]] = True
-    valid = np.flatnonzero(good)
-    lost = int(np.sum((counter[valid[1:]] - counter[valid[:-1]]) & COUNTER_MASK) - len(valid) + 1)
+    if good.all():  # the usual case: no gathers
+        accepted[index] = True
+        valid, steps = np.arange(len(good)), counter[1:] - counter[:-1]
+    else:
+        accepted[index[good]] = True
+        valid = np.flatnonzero(good)
+        steps = counter[valid[1:]] - counter[valid[:-1]]
+    lost = int(np.sum(steps & COUNTER_MASK) - len(valid) + 1)
     return {
         "ok": len(valid),
         "lost": lost if len(valid) else 0,
