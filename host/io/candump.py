@@ -318,13 +318,28 @@ def _parse_block(block: U8Array, c: _Columns) -> tuple[npt.NDArray[np.bool_], Fr
     data[:, :nbytes] = payload
     flags = FLAG_EXTENDED if c.hash - c.id_start > 3 else 0
     frames = FrameArrays(
-        timestamp_s=_timestamp_value(block, c) / float(10 ** (c.close - c.dot - 1)),
+        timestamp_s=_timestamps_s(block, c),
         can_id=(can_id & _ID_MASK_29).astype(np.uint32),
         dlc=np.full(n, nbytes, dtype=np.uint8),
         data=data,
         flags=np.full(n, flags, dtype=np.uint8),
     )
     return ok, frames
+
+
+_EXACT_DOUBLE_INT = 1 << 53  # integers below this are exact doubles
+
+
+def _timestamps_s(block: U8Array, c: _Columns) -> npt.NDArray[np.float64]:
+    """The timestamp of every row, the very double ``float(text)`` gives: the digits' integer
+    and the power of ten are exact doubles, so one correctly rounded division is the correctly
+    rounded decimal. A row whose integer is 2^53 or more (16+ digits, e.g. a Unix time in ns) is
+    not an exact double: its text goes through ``float`` itself."""
+    value = _timestamp_value(block, c)
+    seconds: npt.NDArray[np.float64] = value / float(10 ** (c.close - c.dot - 1))
+    for row in np.flatnonzero(value >= _EXACT_DOUBLE_INT):
+        seconds[row] = float(bytes(block[row, 1 : c.close]))
+    return seconds
 
 
 def _timestamp_value(block: U8Array, c: _Columns) -> npt.NDArray[np.int64]:
