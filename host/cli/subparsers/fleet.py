@@ -1,20 +1,6 @@
 """``odocan fleet``: N independent robots in real time, bridged to MQTT.
 
 Each robot is the lockstep rig's set of nodes on its own channel of the in-process ``odocan``
-<<<<<<< HEAD
-transport (scenario ``random`` with seed ``--seed + i``; ``-n/--count`` robots, ``--robot`` their
-profile); a timer loop steps them every 10 ms and accounts its deadlines; the bridge publishes
-every robot under ``odocan/robotNNN/`` (``host.mqtt.topics``) and judges its pose against the
-float64 reference. ``--workers W`` spreads the robots over W processes, each with its own loop and
-MQTT connections; ``--shard K/N`` runs this machine's part of a fleet of N machines on one broker
-(robot ids and seeds numbered across shards: ``host.mqtt.shards``). Without ``--broker`` an
-embedded amqtt broker runs in a process of its own, on ``--port`` or a free port; its URL is
-printed at the start (``odocan monitor --broker URL`` watches; ``--foxglove [PORT]`` serves every
-robot live to Foxglove: ``host.mqtt.foxglove_fleet``). ``--report`` writes the JSON
-contract of ``host.mqtt.fleetrun`` (``workers`` added by ``host.mqtt.shards``). The exit line says
-PASS, or FAIL and every threshold broken: exit 0, or 1 when ``deadline_miss_ratio`` exceeds
-``--max-miss-ratio`` or a robot's pose is out of tolerance or not judged.
-=======
 transport (``--transport virtual``: python-can's; scenario ``random`` with seed ``--seed + i``;
 ``-n/--count`` robots, ``--robot`` their profile); a timer loop steps them every 10 ms and accounts
 its deadlines; the bridge publishes every robot under ``odocan/robotNNN/`` (``host.mqtt.topics``)
@@ -23,11 +9,11 @@ processes, each with its own loop and MQTT connections; ``--shard K/N`` runs thi
 a fleet of N machines on one broker (robot ids and seeds numbered across shards:
 ``host.mqtt.shards``). Without ``--broker`` an embedded amqtt broker runs in a process of its own,
 on ``--port`` or a free port; its URL is printed at the start (``odocan monitor --broker URL``
-watches). ``--report`` writes the JSON contract of ``host.mqtt.fleetrun`` (``workers`` added by
+watches; ``--foxglove [PORT]`` serves every robot live to Foxglove: ``host.mqtt.foxglove_fleet``).
+``--report`` writes the JSON contract of ``host.mqtt.fleetrun`` (``workers`` added by
 ``host.mqtt.shards``). The exit line says PASS, or FAIL and every threshold broken: exit 0, or 1
 when ``deadline_miss_ratio`` exceeds ``--max-miss-ratio`` or a robot's pose is out of tolerance or
 not judged.
->>>>>>> speed
 """
 
 from __future__ import annotations
