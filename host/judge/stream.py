@@ -219,8 +219,8 @@ class StreamPoses:
         ``StreamEncoders``): columns enc, x_m, y_m, heading_rad, heading_raw; and sent_s."""
         known = self._known(enc)
         floor = np.inf
-        for name in ("ODOM_POSE_X", "ODOM_POSE_Y"):
-            rows = self.decoder.decode(chunk, name)
+        for name in self._first:
+            rows = self._rows(chunk, name)
             keep = accepted[rows["index"]]
             new = _Halves.of({k: v[keep] for k, v in rows.items()}, self._offset)
             halves = self._pending[name].join(new) if name in self._pending else new
@@ -229,6 +229,10 @@ class StreamPoses:
         self._enc_count += len(enc.index)
         self._recent = {k: v[-RECENT_ENCODERS:] for k, v in known.items()}
         return self._emit(floor)
+
+    def _rows(self, chunk: FrameArrays, name: str) -> dict[str, np.ndarray]:
+        """The chunk's decoded frames of one kind (with ENC_COUNTER)."""
+        return self.decoder.decode(chunk, name)
 
     def finish(self) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
         """The samples left at the end of the log."""

@@ -1,0 +1,127 @@
+"""Streaming a log chunk by chunk gives the whole log's truth samples (``StreamTruth``) and the
+report's facts (``StreamFacts``: frames per message, covered seconds, the integrator, the
+power-up rule's inputs), at every chunk size down to one frame: on the awkward synthesized log
+of ``tests/test_stream.py`` (a reboot, a counter restart, a gap across a COUNTER wrap, refused
+frames, poses logged before their encoder frame) and on a lockstep rig run whose bus drops,
+repeats and corrupts frames and whose firmware reboots."""
+
+from __future__ import annotations
+
+from functools import cache
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from odocan.host.io.logs import FrameArrays, FrameCollector, iter_log, read_log, to_message
+from odocan.host.judge.analysis import _covered_s, _frame_counts
+from odocan.host.judge.samples import (
+    Poses,
+    encoder_frames,
+    onboard_samples,
+    pick_integrator,
+    saw_only_the_log,
+    starts_at_power_up,
+    truth_samples,
+)
+from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
+from odocan.host.judge.stream_facts import StreamFacts
+from odocan.host.judge.stream_truth import StreamTruth
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.e2e import check_frames
+from odocan.sim.board import FirmwareBoard
+from odocan.sim.contract import database
+from odocan.sim.faults import FaultSpec
+from odocan.sim.robot import load
+from odocan.sim.scenarios import get_scenario
+from tests.fault_rig import FaultRig
+from tests.test_stream import awkward_lines
+
+CHUNKS = [1, 2, 7, 64, 1 << 20]
+POSE_COLUMNS = ("enc", "x_m", "y_m", "heading_rad", "heading_raw")
+
+
+@cache
+def rig_frames() -> FrameArrays:
+    """3 s of the rig's circle, its firmware rebooted at 2 s, the sim's frames dropped (3 %),
+    repeated (2 %) and bit-flipped (1 %) on the bus."""
+    collector = FrameCollector()
+    faults = FaultSpec(drop=0.03, dup=0.02, flip=0.01, flip_bits=2, seed=7)
+    scenario = get_scenario("circle", load("pmir"), duration_s=60.0)
+    with FaultRig(sim_faults=faults, scenario=scenario) as rig:
+        def record(tick: int, frames: list[can.Message]) -> None:
+            for msg in frames:
+                collector.on_message_received(msg)
+
+        def reboot(k: int) -> None:
+            if k == 200:
+                rig.board = FirmwareBoard(rig.fw_bus, rig.params, rig.clock)
+
+        rig.observers.append(record)
+        rig.before_board.append(reboot)
+        rig.run(3.0)
+    return collector.arrays()
+
+
+def log_of(tmp_path: Path, which: str) -> Path:
+    path = tmp_path / f"{which}.log"
+    if which == "awkward":
+        path.write_text("".join(awkward_lines()))
+        return path
+    with can.Logger(str(path)) as logger:
+        frames = rig_frames()
+        for i in range(len(frames)):
+            logger.on_message_received(to_message(frames, i))
+    return path
+
+
+def pose_columns(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    return {name: np.concatenate([p[name] for p in parts]) for name in POSE_COLUMNS}
+
+
+@pytest.mark.parametrize("chunk_frames", CHUNKS)
+@pytest.mark.parametrize("which", ["awkward", "rig"])
+def test_streamed_truth_and_facts_are_the_whole_logs(
+    tmp_path: Path, which: str, chunk_frames: int
+) -> None:
+    path = log_of(tmp_path, which)
+    db = database()
+    whole = read_log(path)
+    decoder = BulkDecoder(db)
+    _, accepted_all = check_frames(whole, db)
+    enc = encoder_frames(whole, accepted_all, decoder)
+    want_truth = truth_samples(whole, accepted_all, decoder, enc)
+    onboard, _, _ = onboard_samples(whole, accepted_all, decoder, enc)
+
+    e2e, numbering = StreamE2E(db), StreamEncoders(BulkDecoder(db))
+    poses, truth = StreamPoses(BulkDecoder(db)), StreamTruth(BulkDecoder(db))
+    facts = StreamFacts(BulkDecoder(db))
+    truth_parts, first_sample = [], []
+    for chunk in iter_log(path, chunk_frames=chunk_frames):
+        accepted = e2e.feed(chunk)
+        encoders = numbering.feed(chunk, accepted)
+        first_sample.append(poses.feed(chunk, accepted, encoders)[0])
+        truth_parts.append(truth.feed(chunk, accepted, encoders)[0])
+        facts.feed(chunk, accepted)
+    truth_parts.append(truth.finish()[0])
+    first_sample.append(poses.finish()[0])
+
+    got = pose_columns(truth_parts)
+    for name in POSE_COLUMNS:
+        np.testing.assert_array_equal(got[name], getattr(want_truth, name), err_msg=name)
+    assert facts.frame_counts == _frame_counts(whole, decoder)
+    assert facts.covered_s() == _covered_s(whole, db)
+    assert facts.integrator(None) == pick_integrator(whole, accepted_all, decoder, None)
+    assert facts.saw_only_the_log() == saw_only_the_log(whole, accepted_all, decoder)
+    first = pose_columns(first_sample)
+    head = Poses(*(first[name][:1] for name in POSE_COLUMNS))
+    want_power_up = starts_at_power_up(whole, accepted_all, decoder, onboard)
+    assert facts.starts_at_power_up(head) == want_power_up
+    if which == "rig":  # the run is what the docstring says: truth, refused frames, power-up
+        assert len(want_truth.enc) > 20  # SIM_TRUTH at 10 Hz
+        counts = e2e.counts["WHEEL_ENCODERS"]
+        assert counts["lost"] + counts["repeated"] + counts["crc_errors"] > 0
+        assert want_power_up
+    else:
+        assert len(want_truth.enc) == 0  # the synthesized log carries no SIM_TRUTH
