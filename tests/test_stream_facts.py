@@ -16,6 +16,7 @@ import pytest
 
 from odocan.host.io.logs import FrameArrays, FrameCollector, iter_log, read_log, to_message
 from odocan.host.judge.analysis import _covered_s, _frame_counts
+from odocan.host.judge.compare import _outside_band, check_twist
 from odocan.host.judge.samples import (
     Poses,
     encoder_frames,
@@ -28,6 +29,7 @@ from odocan.host.judge.samples import (
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
 from odocan.host.judge.stream_facts import StreamFacts
 from odocan.host.judge.stream_truth import StreamTruth
+from odocan.host.judge.stream_twist import StreamTwist
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.board import FirmwareBoard
@@ -125,3 +127,41 @@ def test_streamed_truth_and_facts_are_the_whole_logs(
         assert want_power_up
     else:
         assert len(want_truth.enc) == 0  # the synthesized log carries no SIM_TRUTH
+
+
+@pytest.mark.parametrize("chunk_frames", CHUNKS)
+@pytest.mark.parametrize("which", ["awkward", "rig"])
+def test_streamed_twist_check_is_the_whole_logs(
+    tmp_path: Path, which: str, chunk_frames: int
+) -> None:
+    """ODOM_TWIST judged against the reference's step speeds across every cut: the same number
+    of judged frames and the same largest excesses (compared exactly) as the whole log's."""
+    path = log_of(tmp_path, which)
+    db, robot = database(), load("pmir")
+    whole = read_log(path)
+    decoder = BulkDecoder(db)
+    _, accepted_all = check_frames(whole, db)
+    enc = encoder_frames(whole, accepted_all, decoder)
+    want = check_twist(whole, accepted_all, decoder, enc, robot)
+    e2e, numbering = StreamE2E(db), StreamEncoders(BulkDecoder(db))
+    twist = StreamTwist(BulkDecoder(db), robot)
+    for chunk in iter_log(path, chunk_frames=chunk_frames):
+        accepted = e2e.feed(chunk)
+        twist.feed(chunk, accepted, numbering.feed(chunk, accepted))
+    assert twist.finish() == want
+    if which == "rig":  # the synthesized log has no ODOM_TWIST
+        assert want["samples"] > 20
+
+
+def test_the_twist_band_of_the_last_segment_holds_its_last_step() -> None:
+    """The whole log's band over steps (e[k], e[k + 1]] ends at the last named encoder frame
+    even when the log's last twist frames name one frame again (the firmware heard no new
+    encoder frame): the step into it is in the band (``reduceat`` once cut it off there)."""
+    step = np.array([np.nan, 1.0, 1.0, 1.0, 5.0])  # per encoder frame: speed of the step into it
+    gap = np.zeros(5)
+    e = np.array([0, 1, 4, 4])  # the last two twist frames both name encoder frame 4
+    out = _outside_band(np.array([0.0, 0.0, 5.0, 5.0]), e, step, gap)
+    np.testing.assert_array_equal(out[2:], [0.0, 0.0])  # 5.0 lies in the band [1, 5]
+    out = _outside_band(np.array([0.0, 0.0, 6.0, 6.0]), e, step, gap)
+    slack = 1e-3 + 0.02 * 5.0
+    np.testing.assert_allclose(out[2:], [1.0 - slack, 1.0 - slack])

@@ -186,12 +186,16 @@ def _outside_band(value: FloatArray, e: IntArray, step: FloatArray, gap: FloatAr
     out = np.full(len(value), np.nan)
     if len(e) < 3:
         return out
-    step, gap = step[: int(e[-1]) + 1], gap[: int(e[-1]) + 1]
-    starts = np.minimum(e[:-1] + 1, len(step) - 1)
-    empty = e[1:] < e[:-1] + 1  # segment k: steps (e[k], e[k + 1]]
-    seg_lo = np.where(empty, np.inf, np.minimum.reduceat(step, starts))
-    seg_hi = np.where(empty, -np.inf, np.maximum.reduceat(step, starts))
-    seg_gap = np.where(empty, 0.0, np.maximum.reduceat(gap, starts))
+    # segment k: steps (e[k], e[k + 1]], the slices [e[k] + 1, e[k + 1] + 1) of ``reduceat``
+    # (a closing start and a padding step so that the last segment ends at e[-1] too)
+    pad = np.zeros(1)
+    step = np.concatenate((step[: int(e[-1]) + 1], pad))
+    gap = np.concatenate((gap[: int(e[-1]) + 1], pad))
+    starts = e + 1
+    empty = e[1:] < e[:-1] + 1
+    seg_lo = np.where(empty, np.inf, np.minimum.reduceat(step, starts)[:-1])
+    seg_hi = np.where(empty, -np.inf, np.maximum.reduceat(step, starts)[:-1])
+    seg_gap = np.where(empty, 0.0, np.maximum.reduceat(gap, starts)[:-1])
     lo = np.minimum(seg_lo[:-1], seg_lo[1:])
     hi = np.maximum(seg_hi[:-1], seg_hi[1:])
     known = np.isfinite(lo) & np.isfinite(hi)  # the window holds a step
