@@ -17,6 +17,7 @@ import pytest
 from odocan.host.io.logs import FrameArrays, FrameCollector, iter_log, read_log, to_message
 from odocan.host.judge.analysis import _covered_s, _frame_counts
 from odocan.host.judge.compare import _outside_band, check_twist
+from odocan.host.judge.reboots import split_lives
 from odocan.host.judge.samples import (
     Poses,
     encoder_frames,
@@ -28,6 +29,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
 from odocan.host.judge.stream_facts import StreamFacts
+from odocan.host.judge.stream_lives import StreamLives
 from odocan.host.judge.stream_truth import StreamTruth
 from odocan.host.judge.stream_twist import StreamTwist
 from odocan.host.protocol.decode import BulkDecoder
@@ -165,3 +167,22 @@ def test_the_twist_band_of_the_last_segment_holds_its_last_step() -> None:
     out = _outside_band(np.array([0.0, 0.0, 6.0, 6.0]), e, step, gap)
     slack = 1e-3 + 0.02 * 5.0
     np.testing.assert_allclose(out[2:], [1.0 - slack, 1.0 - slack])
+
+
+@pytest.mark.parametrize("chunk_frames", CHUNKS)
+@pytest.mark.parametrize("which", ["awkward", "rig"])
+def test_streamed_lives_are_the_whole_logs(tmp_path: Path, which: str, chunk_frames: int) -> None:
+    """The firmware reboot found, and each life started, where the whole log's split puts it."""
+    path = log_of(tmp_path, which)
+    db = database()
+    whole = read_log(path)
+    want = split_lives(whole, BulkDecoder(db))
+    e2e, lives = StreamE2E(db), StreamLives(BulkDecoder(db))
+    for chunk in iter_log(path, chunk_frames=chunk_frames):
+        lives.feed(chunk, e2e.feed(chunk))
+    got = lives.finish()
+    assert len(want) == 2  # both logs hold one reboot
+    assert [(g.start, g.stop) for g in got] == [(int(w.index[0]), int(w.index[-1]) + 1)
+                                                for w in want]
+    assert [(g.boot, g.t_s, g.uptime_before_s) for g in got] == [
+        (w.boot, w.t_s, w.uptime_before_s) for w in want]
