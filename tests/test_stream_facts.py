@@ -20,6 +20,7 @@ from odocan.host.judge.compare import _outside_band, check_twist
 from odocan.host.judge.reboots import split_lives
 from odocan.host.judge.samples import (
     Poses,
+    after_stalls,
     encoder_frames,
     onboard_samples,
     pick_integrator,
@@ -30,6 +31,7 @@ from odocan.host.judge.samples import (
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
 from odocan.host.judge.stream_facts import StreamFacts
 from odocan.host.judge.stream_lives import StreamLives
+from odocan.host.judge.stream_stalls import StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
 from odocan.host.judge.stream_twist import StreamTwist
 from odocan.host.protocol.decode import BulkDecoder
@@ -48,8 +50,8 @@ POSE_COLUMNS = ("enc", "x_m", "y_m", "heading_rad", "heading_raw")
 
 @cache
 def rig_frames() -> FrameArrays:
-    """3 s of the rig's circle, its firmware rebooted at 2 s, the sim's frames dropped (3 %),
-    repeated (2 %) and bit-flipped (1 %) on the bus."""
+    """3 s of the rig's circle, its MCU stalled for 0.3 s at 1 s, its firmware rebooted at 2 s,
+    the sim's frames dropped (3 %), repeated (2 %) and bit-flipped (1 %) on the bus."""
     collector = FrameCollector()
     faults = FaultSpec(drop=0.03, dup=0.02, flip=0.01, flip_bits=2, seed=7)
     scenario = get_scenario("circle", load("pmir"), duration_s=60.0)
@@ -64,6 +66,7 @@ def rig_frames() -> FrameArrays:
 
         rig.observers.append(record)
         rig.before_board.append(reboot)
+        rig.halted = lambda k: 100 <= k < 130
         rig.run(3.0)
     return collector.arrays()
 
@@ -186,3 +189,38 @@ def test_streamed_lives_are_the_whole_logs(tmp_path: Path, which: str, chunk_fra
                                                 for w in want]
     assert [(g.boot, g.t_s, g.uptime_before_s) for g in got] == [
         (w.boot, w.t_s, w.uptime_before_s) for w in want]
+
+
+@pytest.mark.parametrize("chunk_frames", CHUNKS)
+@pytest.mark.parametrize("which", ["awkward", "rig"])
+def test_streamed_stalls_are_the_whole_logs(tmp_path: Path, which: str, chunk_frames: int) -> None:
+    """The samples sent after a stall left out and the reference's restarts placed where the
+    whole log's ``after_stalls`` puts them, the kept samples in encoder order."""
+    path = log_of(tmp_path, which)
+    db = database()
+    whole = read_log(path)
+    decoder = BulkDecoder(db)
+    _, accepted_all = check_frames(whole, db)
+    enc = encoder_frames(whole, accepted_all, decoder)
+    onboard, _, sent_all = onboard_samples(whole, accepted_all, decoder, enc)
+    want, want_breaks = after_stalls(onboard, sent_all, enc)
+    e2e, numbering = StreamE2E(db), StreamEncoders(BulkDecoder(db))
+    poses, stalls = StreamPoses(BulkDecoder(db)), StreamStalls(enc.cycle_s)
+    parts = []
+    for chunk in iter_log(path, chunk_frames=chunk_frames):
+        accepted = e2e.feed(chunk)
+        encoders = numbering.feed(chunk, accepted)
+        samples, sent = poses.feed(chunk, accepted, encoders)
+        watermark = min(float(chunk.timestamp_s[-1]), poses.open_sent_s())
+        parts.append(stalls.feed(samples, sent, encoders.timestamp_s, watermark))
+    samples, sent = poses.finish()
+    parts.append(stalls.feed(samples, sent, np.zeros(0), np.inf))
+    parts.append(stalls.finish())
+    got = pose_columns(parts)
+    for name in POSE_COLUMNS:
+        np.testing.assert_array_equal(got[name], getattr(want, name), err_msg=name)
+    np.testing.assert_array_equal(stalls.breaks, want_breaks)
+    assert stalls.exact
+    if which == "rig":  # the stall is in the log (and, over both lives, the reboot's silence)
+        assert len(want_breaks) >= 1
+        assert len(want.enc) < len(onboard.enc)

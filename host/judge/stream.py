@@ -234,6 +234,14 @@ class StreamPoses:
         """The chunk's decoded frames of one kind (with ENC_COUNTER)."""
         return self.decoder.decode(chunk, name)
 
+    def open_sent_s(self, name: str = "ODOM_POSE_Y") -> float:
+        """The earliest time of a ``name`` frame fed but not yet given out in a sample
+        (waiting for its encoder frame or its partner); inf when none."""
+        times = [t for _, _, t in self._first[name].values()]
+        if name in self._pending and len(self._pending[name].timestamp_s):
+            times.append(float(np.min(self._pending[name].timestamp_s)))
+        return min(times, default=math.inf)
+
     def finish(self) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
         """The samples left at the end of the log."""
         known = self._recent
