@@ -18,6 +18,7 @@ from odocan.host.io.logs import FrameArrays, FrameCollector, iter_log, read_log,
 from odocan.host.judge.analysis import _covered_s, _frame_counts
 from odocan.host.judge.compare import _outside_band, check_twist
 from odocan.host.judge.reboots import split_lives
+from odocan.host.judge.reference_path import DOT_BLOCK, block_dot
 from odocan.host.judge.samples import (
     Poses,
     after_stalls,
@@ -30,6 +31,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
 from odocan.host.judge.stream_facts import StreamFacts
+from odocan.host.judge.stream_fit import BlockDot, SegmentSums
 from odocan.host.judge.stream_lives import StreamLives
 from odocan.host.judge.stream_stalls import StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
@@ -224,3 +226,24 @@ def test_streamed_stalls_are_the_whole_logs(tmp_path: Path, which: str, chunk_fr
     if which == "rig":  # the stall is in the log (and, over both lives, the reboot's silence)
         assert len(want_breaks) >= 1
         assert len(want.enc) < len(onboard.enc)
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 64, 1 << 20])
+def test_the_start_fits_sums_streamed_are_the_whole_logs(chunk: int) -> None:
+    """The rotation fit's segment means (``np.bincount``) and its dot products in fixed blocks
+    (``block_dot``), summed chunk by chunk over more than one block with segments cut
+    anywhere: equal bit for bit (values of mixed magnitudes, where the order of the additions
+    shows)."""
+    rng = np.random.default_rng(14)
+    n = DOT_BLOCK + 4_321
+    segment = np.cumsum(rng.random(n) < 0.001).astype(np.int64)
+    a = rng.normal(size=n) * 10.0 ** rng.integers(-6, 6, size=n)
+    b = rng.normal(size=n) * 10.0 ** rng.integers(-6, 6, size=n)
+    sums, dot = SegmentSums(), BlockDot()
+    for start in range(0, n, chunk):
+        sums.feed(segment[start : start + chunk], a[start : start + chunk])
+        dot.feed(a[start : start + chunk], b[start : start + chunk])
+    want_means = np.bincount(segment, weights=a) / np.maximum(np.bincount(segment), 1)
+    np.testing.assert_array_equal(sums.means(), want_means)
+    assert dot.result() == block_dot(a, b)
+    assert block_dot(a[:DOT_BLOCK], b[:DOT_BLOCK]) == float(np.dot(a[:DOT_BLOCK], b[:DOT_BLOCK]))
