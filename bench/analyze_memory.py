@@ -9,9 +9,11 @@ power-up pose -- the verdict must stay PASS. Then runs, as whole processes measu
 
 * ``python -m odocan analyze LOG --robot pmir``;
 * ``cantools decode --single-line dbc/odocan.dbc < LOG`` (skipped with ``--no-cantools``);
-* the stages that stream today (``host.judge.stream``: ``iter_log`` -> E2E -> encoder sequence
-  -> on-board samples and the reference's steps and increments, chunk by chunk; the verdict's
-  later stages do not stream yet), in a child process of their own.
+* the stages that stream today, chunk by chunk over the whole log as one life
+  (``host.judge.stream``: ``iter_log`` -> E2E -> encoder sequence -> on-board samples and the
+  reference's steps and increments; ``stream_stalls``, ``stream_truth``, ``stream_twist``,
+  ``stream_facts``, ``stream_lives``; the start fit, the errors and the report do not stream
+  yet), in a child process of their own; it prints what it found.
 
 The log is written to ``--dir`` (default: the system's temporary directory; check ``df -h``
 first: it needs ``--gb`` GB free) and deleted afterwards (``--keep`` keeps it). Prints figures;
@@ -28,6 +30,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -72,12 +75,16 @@ def concatenate(drive: Path, target_bytes: int, out: Path) -> tuple[int, int]:
     return copies, frames
 
 
-def whole_process(argv: list[str], stdin: Path | None = None) -> tuple[float, float, float, int]:
-    """Wall s, CPU s (user + system), max RSS MB and exit code of ``argv`` (stdout dropped)."""
+def whole_process(
+    argv: list[str], stdin: Path | None = None, *, show: bool = False
+) -> tuple[float, float, float, int]:
+    """Wall s, CPU s (user + system), max RSS MB and exit code of ``argv`` (stdout dropped
+    unless ``show``)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     stdin_file = stdin.open("rb") if stdin is not None else subprocess.DEVNULL
     start = time.perf_counter()
-    child = subprocess.Popen(argv, stdin=stdin_file, stdout=subprocess.DEVNULL, env=env)
+    child = subprocess.Popen(argv, stdin=stdin_file, stdout=None if show else subprocess.DEVNULL,
+                             env=env)
     _, status, usage = os.wait4(child.pid, 0)
     wall = time.perf_counter() - start
     if stdin is not None:
@@ -87,7 +94,8 @@ def whole_process(argv: list[str], stdin: Path | None = None) -> tuple[float, fl
 
 
 def stream_stages(log: Path) -> None:
-    """The streaming stages over ``log`` (run in the child process): prints the samples."""
+    """The streaming stages over ``log`` (run in the child process, the whole log as one
+    life): prints what they found."""
     from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
     from odocan.host.io.logs import iter_log
     from odocan.host.judge.reference import Geometry
@@ -97,6 +105,11 @@ def stream_stages(log: Path) -> None:
         StreamPoses,
         StreamReference,
     )
+    from odocan.host.judge.stream_facts import StreamFacts
+    from odocan.host.judge.stream_lives import StreamLives
+    from odocan.host.judge.stream_stalls import StreamStalls
+    from odocan.host.judge.stream_truth import StreamTruth
+    from odocan.host.judge.stream_twist import StreamTwist
     from odocan.host.protocol.decode import BulkDecoder
     from odocan.sim.contract import database
 
@@ -105,15 +118,37 @@ def stream_stages(log: Path) -> None:
         BulkDecoder(db))
     reference = StreamReference(Geometry.of(profile), "exact", min(profile.counter_bits, 24),
                                 MAX_WHEEL_SPEED_MM_S)
-    samples = 0
+    truth, twist = StreamTruth(BulkDecoder(db)), StreamTwist(BulkDecoder(db), profile)
+    facts, lives = StreamFacts(BulkDecoder(db)), StreamLives(BulkDecoder(db))
+    stalls: StreamStalls | None = None
+    samples = truths = 0
     for chunk in iter_log(log):
         accepted = e2e.feed(chunk)
         enc = numbering.feed(chunk, accepted)
+        stalls = stalls or StreamStalls(enc.cycle_s)
         reference.feed(enc)
-        samples += len(poses.feed(chunk, accepted, enc)[0]["enc"])
-    samples += len(poses.finish()[0]["enc"])
-    print(f"{samples} on-board samples, {poses.unmatched} unmatched, "
-          f"{len(reference.reprimed)} counter restarts")
+        onboard, sent = poses.feed(chunk, accepted, enc)
+        watermark = min(float(chunk.timestamp_s[-1]), poses.open_sent_s())
+        samples += len(stalls.feed(onboard, sent, enc.timestamp_s, watermark)["enc"])
+        truths += len(truth.feed(chunk, accepted, enc)[0]["enc"])
+        twist.feed(chunk, accepted, enc)
+        facts.feed(chunk, accepted)
+        lives.feed(chunk, accepted)
+    assert stalls is not None
+    onboard, sent = poses.finish()
+    samples += len(stalls.feed(onboard, sent, numbering_empty(), float("inf"))["enc"])
+    samples += len(stalls.finish()["enc"])
+    truths += len(truth.finish()[0]["enc"])
+    print(f"{samples} on-board samples after {len(stalls.breaks)} stalls (exact: "
+          f"{stalls.exact}), {poses.unmatched} unmatched, {len(reference.reprimed)} counter "
+          f"restarts, {truths} truth samples, twist {twist.finish()}, "
+          f"{len(lives.finish())} lives, {facts.covered_s():.1f} s covered")
+
+
+def numbering_empty() -> Any:
+    """No encoder frame (the stalls' last feed)."""
+    import numpy as np
+    return np.zeros(0)
 
 
 def report(label: str, frames: int, figures: tuple[float, float, float, int]) -> None:
@@ -145,7 +180,7 @@ def main() -> None:
         odocan = [sys.executable, "-m", "odocan", "analyze", str(log), "--robot", ROBOT]
         report("odocan analyze LOG", frames, whole_process(odocan))
         stages = [sys.executable, __file__, "--stream-child", str(log)]
-        report("streamed stages (E2E..ref)", frames, whole_process(stages))
+        report("streamed stages", frames, whole_process(stages, show=True))
         if not args.no_cantools:
             cantools = [str(Path(sys.executable).parent / "cantools"), "decode",
                         "--single-line", str(DBC_PATH)]

@@ -25,24 +25,32 @@ with their state carried across chunk boundaries, so that the result is the whol
 
 Positions (``index``) are positions in the whole log (frames before the chunk counted).
 
-Not done yet (issue #14.1): the later stages (alignment, reference, comparison) still take the
-whole log, so ``odocan analyze`` still holds every frame (1 GB candump log: 2.5 GB max RSS,
-``bench/analyze_memory.py``). The plan for them, so that a one-chunk run and an n-chunk run give
-the same report bit for bit:
+Beside it, each exact at any chunk size against the whole-log function (tests/test_stream*.py,
+on a log cut at every frame and on a faulted rig run with a stall and a reboot):
+``stream_lives.StreamLives`` (``reboots.split_lives``), ``stream_stalls.StreamStalls``
+(``samples.after_stalls``; with an ``exact`` flag for logs whose times go back),
+``stream_truth.StreamTruth`` (``samples.truth_samples``), ``stream_twist.StreamTwist``
+(``compare.check_twist``), ``stream_facts.StreamFacts`` (frame counts, covered seconds, the
+integrator, the power-up rule's inputs), ``stream_fit.SegmentSums`` and ``BlockDot`` (the
+rotation fit's segment means and its dot products, ``reference_path.block_dot``).
 
-* carried state: the last sample's send time (stalls), SIM_TRUTH's parts as ``StreamPoses``
-  carries the pose halves, the truth samples waiting for the next on-board one
-  (``compare.onboard_at``), the last two twist frames and their step-speed window, the
-  reference's increments back to the start of the segment being placed;
-* the whole-log quantities of the start fit: max/min of the heading overlap and of each
-  segment's position overlap are exact in any order; the rotation fit's sums (and the segment
-  means) are not, so they are to be summed in fixed blocks of samples aligned on the sample
-  number (a block's partial sum is complete only when its last sample arrives; the blocks are
-  then added in order): the same additions whatever the chunking;
-* passes over the file (``iter_log`` again): 1. samples, reference increments, overlaps -> the
-  start heading of the overlap; 2. the rotation fit and the segment offsets; 3. errors, truth,
-  twist, report; plot series decimated or written to disk.
-"""
+Not done yet (issue #14.1): the stages are not chained into an analysis, so ``odocan analyze``
+still holds every frame (1 GB candump log: 2.5 GB max RSS, ``bench/analyze_memory.py``). The
+plan for the rest, so that a one-chunk run and an n-chunk run give the same report bit for bit:
+
+* lives first (``StreamLives`` over the whole log, with the whole log's E2E and the integrator
+  from ``StreamFacts``), then each life as a range of frames with E2E afresh, ``reboots.merge``
+  taking the lives' reports without series;
+* pass 1 over a life: E2E, encoders, samples after stalls, truth, twist, facts; the encoder
+  frames (index, seq, counts, time) and the kept samples spilled to a temporary file in
+  columns (a few tens of bytes a frame), so that the later passes read blocks of them, not the
+  log; the first on-board sample decides the start frame e0 (power-up: 0);
+* pass 2: ``StreamReference`` from e0 and the segments (gaps of the sequence, stall breaks) ->
+  the heading overlap (max/min: exact in any order) and the first ``START_FIT_SAMPLES`` samples;
+* pass 3: the rotation fit's segment means (``SegmentSums``); pass 4: its dots (``BlockDot``)
+  -> the start pose; pass 5: each segment's position overlap (max/min/first); pass 6: the
+  errors, the truth comparison (``compare.onboard_at``: a truth sample waits for the next
+  on-board one), the events and the report. Exports keep the whole-log path."""
 
 from __future__ import annotations
 
