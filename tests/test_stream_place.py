@@ -28,6 +28,7 @@ from odocan.host.judge.samples import (
     encoder_frames,
     onboard_samples,
 )
+from odocan.host.judge.stream_life import placed_chunks
 from odocan.host.judge.stream_place import PlacedChunk, segment_offsets, start_pose
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
@@ -39,10 +40,12 @@ from tests.test_stream_facts import rig_frames
 CHUNKS = [1, 7, 64, 1 << 20]
 
 
-def placement_inputs(frames: FrameArrays) -> tuple[Poses, _Relative, np.ndarray, np.ndarray]:
+def placement_inputs(
+    frames: FrameArrays,
+) -> tuple[Poses, _Relative, np.ndarray, np.ndarray, np.ndarray]:
     """What ``build_reference`` places (a start fitted from sample 0's encoder frame): the
     samples after stalls, their increments and segments; and every encoder frame's segment
-    and increments (x, y)."""
+    and increments (x, y); the stalls' breaks."""
     db, robot = database(), load("pmir")
     decoder = BulkDecoder(db)
     _, accepted = check_frames(frames, db)
@@ -51,7 +54,8 @@ def placement_inputs(frames: FrameArrays) -> tuple[Poses, _Relative, np.ndarray,
     onboard, breaks = after_stalls(onboard, sent, enc)
     e0 = int(onboard.enc[0])
     geometry = Geometry.of(robot)
-    steps = firmware_steps(enc, e0, geometry, 16, MAX_WHEEL_SPEED_MM_S)
+    bits = min(robot.counter_bits, 24)
+    steps = firmware_steps(enc, e0, geometry, bits, MAX_WHEEL_SPEED_MM_S)
     rel = integrate(steps.d_left, steps.d_right, geometry, "exact")
     zero = np.zeros(1)
     rel_x, rel_y = np.concatenate((zero, rel.x_m)), np.concatenate((zero, rel.y_m))
@@ -62,7 +66,7 @@ def placement_inputs(frames: FrameArrays) -> tuple[Poses, _Relative, np.ndarray,
     starts[inside] = True
     segment = np.cumsum(starts)
     relative = _Relative(rel_x[at], rel_y[at], rel_h[at], segment[at])
-    return onboard, relative, segment, np.stack((rel_x, rel_y))
+    return onboard, relative, segment, np.stack((rel_x, rel_y)), breaks
 
 
 def chunks_of(onboard: Poses, rel: _Relative, size: int) -> Iterator[PlacedChunk]:
@@ -88,7 +92,7 @@ def test_placement_in_passes_is_the_whole_logs(tmp_path: Path, which: str, chunk
         frames = read_log(path)
     else:
         frames = logs()[which]
-    onboard, rel, segment, rel_xy = placement_inputs(frames)
+    onboard, rel, segment, rel_xy, _ = placement_inputs(frames)
     want = _start_pose(onboard, rel, power_up=False)
     got = start_pose(lambda: chunks_of(onboard, rel, chunk), power_up=False)
     assert got == want
@@ -107,3 +111,34 @@ def test_placement_in_passes_is_the_whole_logs(tmp_path: Path, which: str, chunk
     np.testing.assert_array_equal(off_y[segment], want_y)
     if which == "rig first life":  # the fit's branch: consistent headings, a lever arm
         assert int(segment[-1]) >= 1  # the stall's restart
+
+
+def frames_of(tmp_path: Path, which: str) -> FrameArrays:
+    if which != "awkward":
+        return logs()[which]
+    path = tmp_path / "awkward.log"
+    path.write_text("".join(awkward_lines()))
+    return read_log(path)
+
+
+@pytest.mark.parametrize("chunk", CHUNKS)
+@pytest.mark.parametrize("which", ["rig first life", "rig across the reboot", "awkward"])
+def test_placed_chunks_from_the_frames_are_the_whole_logs(
+    tmp_path: Path, which: str, chunk: int
+) -> None:
+    """The frames chunk by chunk to the placement's input: the samples after stalls, the
+    reference's increments at each and its segment, as the whole log's build_reference has
+    them."""
+    frames = frames_of(tmp_path, which)
+    onboard, rel, _, _, breaks = placement_inputs(frames)
+    pieces = (frames.select(np.arange(s, min(s + chunk, len(frames))))
+              for s in range(0, len(frames), chunk))
+    got = list(placed_chunks(pieces, database(), load("pmir"), "exact",
+                             e0=int(onboard.enc[0]), breaks=breaks,
+                             max_wheel_speed_mm_s=MAX_WHEEL_SPEED_MM_S))
+    want = {"x_m": onboard.x_m, "y_m": onboard.y_m, "heading_rad": onboard.heading_rad,
+            "heading_raw": onboard.heading_raw, "rel_x_m": rel.x_m, "rel_y_m": rel.y_m,
+            "rel_heading_rad": rel.heading_rad, "segment": rel.segment}
+    for name, values in want.items():
+        np.testing.assert_array_equal(np.concatenate([getattr(p, name) for p in got]), values,
+                                      err_msg=name)
