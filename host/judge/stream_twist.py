@@ -34,7 +34,7 @@ KEEP_STEPS = 32  # steps kept whole below the latest encoder frame: more than a 
 
 Band = tuple[float, float, float]  # lowest, highest per-step speed, widest gap slack
 EMPTY: Band = (math.inf, -math.inf, 0.0)
-Judgment = tuple[float, float] | None  # linear and angular excess; None: not judged
+FloatArray = npt.NDArray[np.float64]
 
 
 def _band(values: npt.NDArray[np.float64], gaps: npt.NDArray[np.float64]) -> Band:
@@ -60,17 +60,6 @@ def _join(a: tuple[Band, Band], b: tuple[Band, Band]) -> tuple[Band, Band]:
     """The bands of two sets of steps together (linear, angular)."""
     return tuple((min(x[0], y[0]), max(x[1], y[1]), max(x[2], y[2]))  # type: ignore[return-value]
                  for x, y in zip(a, b, strict=True))
-
-
-def _excess(value: float, a: Band, b: Band) -> float | None:
-    """``compare._outside_band`` of one value over segments ``a`` then ``b``; None: unknown."""
-    lo, hi = min(a[0], b[0]), max(a[1], b[1])
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        return None
-    lo, hi = float(np.clip(lo, *TWIST_RANGE)), float(np.clip(hi, *TWIST_RANGE))
-    slack = TWIST_LSB + TWIST_RELATIVE * max(abs(lo), abs(hi))
-    slack += max(a[2], b[2])
-    return max(0.0, max(value - hi - slack, lo - slack - value))
 
 
 @dataclass
@@ -182,12 +171,6 @@ class StreamTwist:
         s = self._steps
         return (_band(s["v"][rows], s["gap_v"][rows]), _band(s["w"][rows], s["gap_w"][rows]))
 
-    def _segment(self, a: int, b: int) -> tuple[Band, Band]:
-        """The bands of the steps into encoder frames (a, b], ``a`` the last taken twist
-        frame's encoder frame: linear, angular."""
-        inside = (self._steps["g"] > a) & (self._steps["g"] <= b)
-        return _join(self._folded, self._bands(inside))
-
     # --- twist frames ---------------------------------------------------------------------
 
     def _resolve(self, known: dict[str, np.ndarray], *, final: bool) -> None:
@@ -214,42 +197,93 @@ class StreamTwist:
             found = np.minimum(np.searchsorted(known["seq"], target[:cut]), len(known["seq"]) - 1)
             hit = has[:cut] & (known["seq"][found] == target[:cut])
             e = np.where(hit, known["g"][found], -1)
-        for j in range(cut):
-            self._running_max = max(self._running_max, int(e[j]))
-            if e[j] >= 0 and e[j] >= self._running_max:
-                self._take_twist(_Twist(int(e[j]), float(p["linear"][j]),
-                                        float(p["angular"][j])))
+        self._take_all(e[:cut].astype(np.int64), p["linear"][:cut], p["angular"][:cut])
         self._pending = {k: v[cut:] for k, v in p.items()}
 
-    def _take_twist(self, twist: _Twist) -> None:
-        """Twist frame k (k = ``_count``): its segment, and its judgment when k >= 2."""
-        k = self._count
-        self._count += 1
-        if k == 0:
-            self._ok = [twist]
+    def _take_all(self, e: npt.NDArray[np.int64], linear: FloatArray,
+                  angular: FloatArray) -> None:
+        """Twist frames naming encoder frames ``e`` (-1: none), in bus order: those at or after
+        every earlier one's are taken and judged from the third on (``compare._outside_band``,
+        its segments' bands from the steps kept and the band carried)."""
+        if len(e) == 0:
             return
-        prev = self._ok[-1]
-        segment = self._segment(prev.e, twist.e) if twist.e > prev.e else (EMPTY, EMPTY)
-        if k >= 2:
-            self._take(self._judge(twist, self._prev_band, segment))
-        self._prev_band = segment
-        self._ok = [prev, twist]
-        if twist.e > prev.e:
+        running = np.maximum.accumulate(np.concatenate(([self._running_max], e)))[1:]
+        self._running_max = int(running[-1])
+        ok = (e >= 0) & (e >= running)
+        e, linear, angular = e[ok], linear[ok], angular[ok]
+        if self._count == 0 and len(e):
+            self._ok = [_Twist(int(e[0]), float(linear[0]), float(angular[0]))]
+            self._count = 1
+            e, linear, angular = e[1:], linear[1:], angular[1:]
+        if len(e) == 0:
+            return
+        prev_e = self._ok[-1].e
+        bands = self._segments(prev_e, e)  # per new frame: lo, hi, gap (linear), (angular)
+        k = self._count + np.arange(len(e))
+        for value, (lo_b, hi_b, gap_b), (lo_a0, hi_a0, gap_a0), best in (
+            (linear, bands[0], self._prev_band[0], "linear"),
+            (angular, bands[1], self._prev_band[1], "angular"),
+        ):
+            lo_a = np.concatenate(([lo_a0], lo_b[:-1]))
+            hi_a = np.concatenate(([hi_a0], hi_b[:-1]))
+            gap_a = np.concatenate(([gap_a0], gap_b[:-1]))
+            excess = _outside(value, (lo_a, hi_a, gap_a), (lo_b, hi_b, gap_b))
+            judged = ~np.isnan(excess) & (k >= 2)
+            if best == "linear":
+                self.samples += int(np.count_nonzero(judged))
+            if judged.any():
+                top = float(np.max(excess[judged]))
+                if best == "linear":
+                    self.max_linear_excess_mps = max(self.max_linear_excess_mps, top)
+                else:
+                    self.max_angular_excess_rad_s = max(self.max_angular_excess_rad_s, top)
+        self._prev_band = ((float(bands[0][0][-1]), float(bands[0][1][-1]),
+                            float(bands[0][2][-1])),
+                           (float(bands[1][0][-1]), float(bands[1][1][-1]),
+                            float(bands[1][2][-1])))
+        if int(e[-1]) > prev_e:
             self._folded = (EMPTY, EMPTY)  # every folded step lies before the new E
+        self._ok = [_Twist(int(e[-1]), float(linear[-1]), float(angular[-1]))]
+        self._count += len(e)
 
-    def _judge(self, twist: _Twist, a: tuple[Band, Band], b: tuple[Band, Band]) -> Judgment:
-        v = _excess(twist.linear, a[0], b[0])
-        w = _excess(twist.angular, a[1], b[1])
-        if v is None or w is None:
-            return None
-        return v, w
+    def _segments(
+        self, prev_e: int, e: npt.NDArray[np.int64]
+    ) -> tuple[tuple[FloatArray, FloatArray, FloatArray], ...]:
+        """The bands (lo, hi, widest gap; linear then angular) of the steps (E before, E] of
+        each new twist frame, the first from ``prev_e`` (the steps folded joining it)."""
+        g = self._steps["g"]
+        g0 = int(g[0]) if len(g) else prev_e + 1
+        begins = np.concatenate(([prev_e], e[:-1]))
+        empty = e <= begins
+        starts = np.concatenate((np.maximum(begins + 1 - g0, 0), [int(e[-1]) + 1 - g0]))
+        starts = np.minimum(starts, len(g))
+        out = []
+        for speed, gap, folded in (("v", "gap_v", self._folded[0]),
+                                   ("w", "gap_w", self._folded[1])):
+            values = np.concatenate((self._steps[speed], np.zeros(1)))
+            gaps = np.concatenate((self._steps[gap], np.zeros(1)))
+            lo = np.where(empty, np.inf, np.minimum.reduceat(values, starts)[:-1])
+            hi = np.where(empty, -np.inf, np.maximum.reduceat(values, starts)[:-1])
+            wide = np.where(empty, 0.0, np.maximum.reduceat(gaps, starts)[:-1])
+            if not empty[0]:
+                lo[0], hi[0] = min(lo[0], folded[0]), max(hi[0], folded[1])
+                wide[0] = max(wide[0], folded[2])
+            out.append((lo, hi, wide))
+        return tuple(out)
 
-    def _take(self, judged: Judgment) -> None:
-        if judged is None:
-            return
-        self.samples += 1
-        if self.samples == 1:
-            self.max_linear_excess_mps, self.max_angular_excess_rad_s = judged
-        else:
-            self.max_linear_excess_mps = max(self.max_linear_excess_mps, judged[0])
-            self.max_angular_excess_rad_s = max(self.max_angular_excess_rad_s, judged[1])
+
+def _outside(
+    value: FloatArray, a: tuple[FloatArray, FloatArray, FloatArray],
+    b: tuple[FloatArray, FloatArray, FloatArray],
+) -> FloatArray:
+    """``compare._outside_band``'s excess of each value over its two segments' bands ``a``
+    and ``b`` (NaN: no step in either), with the same operations in the same order."""
+    lo = np.minimum(a[0], b[0])
+    hi = np.maximum(a[1], b[1])
+    known = np.isfinite(lo) & np.isfinite(hi)
+    lo, hi = np.clip(lo, *TWIST_RANGE), np.clip(hi, *TWIST_RANGE)
+    slack = TWIST_LSB + TWIST_RELATIVE * np.maximum(np.abs(lo), np.abs(hi))
+    slack += np.maximum(a[2], b[2])
+    excess = np.maximum(0.0, np.maximum(value - hi - slack, lo - slack - value))
+    out: FloatArray = np.where(known, excess, np.nan)
+    return out
