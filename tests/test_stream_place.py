@@ -15,8 +15,10 @@ import pytest
 
 from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
 from odocan.host.io.logs import FrameArrays, read_log
+from odocan.host.judge.compare import error_summary, pose_errors
 from odocan.host.judge.reference import Geometry, integrate
 from odocan.host.judge.reference_path import (
+    Reference,
     _Relative,
     _segment_offsets,
     _start_pose,
@@ -29,7 +31,12 @@ from odocan.host.judge.samples import (
     onboard_samples,
 )
 from odocan.host.judge.stream_life import placed_chunks
-from odocan.host.judge.stream_place import PlacedChunk, segment_offsets, start_pose
+from odocan.host.judge.stream_place import (
+    PlacedChunk,
+    reference_errors,
+    segment_offsets,
+    start_pose,
+)
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.contract import database
@@ -66,7 +73,7 @@ def placement_inputs(
     starts[inside] = True
     segment = np.cumsum(starts)
     relative = _Relative(rel_x[at], rel_y[at], rel_h[at], segment[at])
-    return onboard, relative, segment, np.stack((rel_x, rel_y)), breaks
+    return onboard, relative, segment, np.stack((rel_x, rel_y, rel_h)), breaks
 
 
 def chunks_of(onboard: Poses, rel: _Relative, size: int) -> Iterator[PlacedChunk]:
@@ -109,6 +116,13 @@ def test_placement_in_passes_is_the_whole_logs(tmp_path: Path, which: str, chunk
                                    int(segment[-1]) + 1)
     np.testing.assert_array_equal(off_x[segment], want_x)
     np.testing.assert_array_equal(off_y[segment], want_y)
+    ref = Reference(int(onboard.enc[0]), x_m + want_x, y_m + want_y, h0 + rel_xy[2],
+                    np.zeros(len(x_m))).at(onboard.enc)
+    want_errors = error_summary(*pose_errors(onboard, ref))
+    got_errors = reference_errors(lambda: chunks_of(onboard, rel, chunk), (x0, y0, h0),
+                                  (off_x, off_y))
+    assert got_errors == want_errors
+    assert list(got_errors) == list(want_errors)  # the report's key order too
     if which == "rig first life":  # the fit's branch: consistent headings, a lever arm
         assert int(segment[-1]) >= 1  # the stall's restart
 

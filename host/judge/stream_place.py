@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from odocan.host.judge.compare import error_summary
 from odocan.host.judge.reference_path import (
     _overlap_mid,
     wrap_pi,
@@ -44,13 +46,14 @@ class PlacedChunk:
     rel_y_m: FloatArray
     rel_heading_rad: FloatArray
     segment: IntArray
+    rel_distance_m: FloatArray = field(default_factory=lambda: np.zeros(0))  # when needed
 
     def head(self, n: int) -> PlacedChunk:
         return PlacedChunk(*(getattr(self, k)[:n] for k in _FIELDS))
 
 
 _FIELDS = ("x_m", "y_m", "heading_rad", "heading_raw", "rel_x_m", "rel_y_m",
-           "rel_heading_rad", "segment")
+           "rel_heading_rad", "segment", "rel_distance_m")
 Passes = Callable[[], Iterable[PlacedChunk]]
 
 
@@ -170,3 +173,34 @@ def segment_offsets(
         filled = np.maximum.accumulate(np.where(np.isnan(offsets), 0, np.arange(n_segments)))
         result.append(offsets[filled])
     return result[0], result[1]
+
+
+def reference_errors(
+    passes: Passes, start: tuple[float, float, float],
+    offsets: tuple[FloatArray, FloatArray],
+) -> dict[str, Any]:
+    """``compare.error_summary`` of ``compare.pose_errors`` (on-board minus the placed
+    reference at every sample, ``build_reference`` then ``Reference.at``) in one pass: the
+    maxima and the last sample's errors."""
+    x0, y0, h0 = start
+    cos0, sin0 = math.cos(h0), math.sin(h0)
+    top_position = top_heading = -math.inf
+    last: tuple[FloatArray, FloatArray] | None = None
+    for chunk in passes():
+        if len(chunk.segment) == 0:
+            continue
+        ref_x = x0 + cos0 * chunk.rel_x_m - sin0 * chunk.rel_y_m
+        ref_x += offsets[0][chunk.segment]
+        ref_y = y0 + sin0 * chunk.rel_x_m + cos0 * chunk.rel_y_m
+        ref_y += offsets[1][chunk.segment]
+        position = np.hypot(chunk.x_m - ref_x, chunk.y_m - ref_y)
+        heading = wrap_pi(chunk.heading_raw * HEADING_LSB_RAD - (h0 + chunk.rel_heading_rad))
+        top_position = max(top_position, float(np.max(position)))
+        top_heading = max(top_heading, float(np.max(np.abs(heading))))
+        last = (position[-1:], heading[-1:])
+    if last is None:
+        return error_summary(np.zeros(0), np.zeros(0))
+    summary = error_summary(*last)
+    summary["max_position_error_m"] = top_position
+    summary["max_heading_error_rad"] = top_heading
+    return summary
