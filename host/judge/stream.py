@@ -101,8 +101,15 @@ class StreamE2E:
             tail_counts, _ = check_frames(self._tail, self.db)
             _add(counts, tail_counts, -1)
         _add(self.counts, counts)
+        self.counts = self._ordered(self.counts)
         self._tail = both.select(self._tails(both, accepted))
         return accepted[n_tail:]
+
+    def _ordered(self, counts: Counts) -> Counts:
+        """The sections in ``check_frames``' order: messages by frame key, ``unknown`` last."""
+        rank = {config.name: key for key, config in e2e_messages(self.db).items()}
+        names = sorted((n for n in counts if n in rank), key=rank.__getitem__)
+        return {n: counts[n] for n in names + [n for n in counts if n not in rank]}
 
     def _tails(self, frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> npt.NDArray[np.intp]:
         """Positions of each protected message's frames (of its DLC) from its last accepted one

@@ -81,10 +81,13 @@ class StreamFacts:
             if self._first_s is None:
                 self._first_s = float(chunk.timestamp_s[0])
             self._last_s = float(chunk.timestamp_s[-1])
-        for message in self.decoder.db.messages:
-            n = len(self.decoder.select(chunk, message.name))
+        counts = {}
+        for message in self.decoder.db.messages:  # in the DBC's order, as the whole log's
+            n = len(self.decoder.select(chunk, message.name)) + self.frame_counts.get(
+                message.name, 0)
             if n:
-                self.frame_counts[message.name] = self.frame_counts.get(message.name, 0) + n
+                counts[message.name] = n
+        self.frame_counts = counts
         self._feed_encoder_span(chunk)
         self._feed_status(chunk, accepted)
         self._offset += len(chunk)

@@ -47,13 +47,14 @@ class PlacedChunk:
     rel_heading_rad: FloatArray
     segment: IntArray
     rel_distance_m: FloatArray = field(default_factory=lambda: np.zeros(0))  # when needed
+    enc: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # when needed
 
     def head(self, n: int) -> PlacedChunk:
         return PlacedChunk(*(getattr(self, k)[:n] for k in _FIELDS))
 
 
 _FIELDS = ("x_m", "y_m", "heading_rad", "heading_raw", "rel_x_m", "rel_y_m",
-           "rel_heading_rad", "segment", "rel_distance_m")
+           "rel_heading_rad", "segment", "rel_distance_m", "enc")
 Passes = Callable[[], Iterable[PlacedChunk]]
 
 

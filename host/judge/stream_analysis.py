@@ -1,0 +1,312 @@
+"""``odocan analyze`` of a log file in bounded memory (issue #14.1): the report of
+``host.judge.analysis.analyze`` (without the plot and export series), from the log read chunk
+by chunk (``host.io.logs.iter_log``) in passes, each stage's state carried across chunks
+(``host.judge.stream`` and the modules beside it), so that the report is the whole log's at
+any chunk size (tests/test_stream_report.py).
+
+Passes: the whole log once (E2E, the firmware lives, the report's facts); then per life:
+1. E2E, encoder sequence, samples after stalls, truth, twist, facts -> the start frame e0
+   (power-up or the first sample's), the stalls' breaks;
+2. (and 3, 4 when the heading samples agree) the start pose (``stream_place.start_pose``);
+5. the segment offsets; 6. the errors against the reference and the truth, the distance, the
+   events' times. Memory: the chunk and the stages' carried state, never the log."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import cantools
+import numpy as np
+
+from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
+from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log
+from odocan.host.judge.analysis import Tolerance, _realtime, _robot_dict
+from odocan.host.judge.reboots import Life, merge
+from odocan.host.judge.samples import REQUIRED, AnalysisError, Poses, require_messages
+from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
+from odocan.host.judge.stream_compare import TruthCompare
+from odocan.host.judge.stream_facts import StreamFacts
+from odocan.host.judge.stream_life import LifeInfo, life_chunks
+from odocan.host.judge.stream_lives import LifeSpan, StreamLives
+from odocan.host.judge.stream_place import PlacedChunk, reference_errors, segment_offsets
+from odocan.host.judge.stream_place import start_pose as place_start
+from odocan.host.judge.stream_stalls import StreamStalls
+from odocan.host.judge.stream_truth import StreamTruth
+from odocan.host.judge.stream_twist import StreamTwist
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.e2e import UNKNOWN
+from odocan.host.protocol.pose import heading_fields
+from odocan.sim import contract
+from odocan.sim.robot import RobotProfile
+
+Frames = Callable[[], Iterable[FrameArrays]]  # a life's frames, from its first, each call
+DEFAULT_TOLERANCE = Tolerance()
+
+
+def analyze_file(
+    path: str | Path,
+    robot: RobotProfile,
+    integrator: str | None = None,
+    *,
+    tolerance: Tolerance = DEFAULT_TOLERANCE,
+    db: cantools.database.can.Database | None = None,
+    scenario: str | None = None,
+    seed: int | None = None,
+    wall_seconds: float | None = None,
+    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    chunk_frames: int = CHUNK_FRAMES,
+) -> dict[str, Any]:
+    """``analyze(read_log(path), ...).report``, the log read ``chunk_frames`` at a time."""
+    db = db if db is not None else contract.database()
+    decoder = BulkDecoder(db)
+    require_messages(decoder)
+    e2e, lives, facts = StreamE2E(db), StreamLives(BulkDecoder(db)), StreamFacts(BulkDecoder(db))
+    for chunk in iter_log(path, chunk_frames=chunk_frames):
+        accepted = e2e.feed(chunk)
+        lives.feed(chunk, accepted)
+        facts.feed(chunk, accepted)
+    spans = lives.finish()
+
+    def frames_of(span: LifeSpan) -> Frames:
+        return lambda: _frames(path, chunk_frames, span.start, span.stop)
+
+    if len(spans) == 1:
+        return _life(frames_of(spans[0]), robot, integrator, tolerance=tolerance, db=db,
+                     boot=False, scenario=scenario, seed=seed, wall_seconds=wall_seconds,
+                     max_wheel_speed_mm_s=max_wheel_speed_mm_s)[0]
+    integrator, source = facts.integrator(integrator)
+    done: list[tuple[LifeSpan, dict[str, Any], float]] = []
+    failure: AnalysisError | None = None
+    silent: list[Life] = []
+    for span in spans:
+        try:
+            report, t_first = _life(frames_of(span), robot, integrator, tolerance=tolerance,
+                                    db=db, boot=span.boot,
+                                    max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+        except AnalysisError as exc:  # a life without on-board samples: reported, not compared
+            failure = failure or exc
+            silent.append(_as_life(span))
+            continue
+        done.append((span, report, t_first))
+    if not done:
+        assert failure is not None
+        raise failure
+    report, _ = merge([d[1] for d in done], [{} for _ in done], [_as_life(d[0]) for d in done],
+                      [d[2] for d in done], silent=silent)
+    covered_s = facts.covered_s()
+    report.update(
+        integrator_source=source, scenario=scenario, seed=seed, sim_seconds=covered_s,
+        wall_seconds=wall_seconds, realtime_factor=_realtime(covered_s, wall_seconds),
+        frames=facts.frame_counts,
+    )
+    vs_ref = report["onboard_vs_reference"]
+    report["passed"] = bool(
+        vs_ref["max_position_error_m"] is not None
+        and vs_ref["max_position_error_m"] <= tolerance.position_m
+        and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
+        and report["onboard_twist_vs_reference"]["passed"]
+    )
+    return report
+
+
+def _as_life(span: LifeSpan) -> Life:
+    """A ``reboots.Life`` for ``merge`` (which reads its time and UPTIME, not its frames)."""
+    return Life(np.zeros(0, dtype=np.int64), span.boot, span.t_s, span.uptime_before_s)
+
+
+def _frames(path: str | Path, chunk_frames: int, start: int, stop: int) -> Iterator[FrameArrays]:
+    """The frames [start, stop) of the log, in chunks of at most ``chunk_frames``."""
+    offset = 0
+    for chunk in iter_log(path, chunk_frames=chunk_frames):
+        lo, hi = max(start - offset, 0), min(stop - offset, len(chunk))
+        offset += len(chunk)
+        if lo < hi:
+            yield chunk if (lo, hi) == (0, len(chunk)) else chunk.select(np.arange(lo, hi))
+        if offset >= stop:
+            return
+
+
+def _life(
+    frames: Frames, robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
+    db: cantools.database.can.Database, boot: bool, max_wheel_speed_mm_s: int | None,
+    scenario: str | None = None, seed: int | None = None, wall_seconds: float | None = None,
+) -> tuple[dict[str, Any], float]:
+    """``analysis._analyze_life``'s report of one life, and its first frame's time."""
+    first = _first_pass(frames, db, robot)
+    facts = first.facts
+    integrator, source = facts.integrator(integrator)
+    first.check()
+    power_up = facts.saw_only_the_log() if boot else facts.starts_at_power_up(first.head)
+    e0 = 0 if power_up else int(first.head.enc[0])
+    breaks = first.breaks
+
+    def placed(info: LifeInfo | None = None) -> Iterator[PlacedChunk]:
+        for chunk, _ in life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
+                                    max_wheel_speed_mm_s=max_wheel_speed_mm_s, info=info):
+            yield chunk
+
+    info = LifeInfo()
+    x0, y0, h0, exact = place_start(lambda: placed(info), power_up=power_up)
+    offsets = segment_offsets(placed, (x0, y0, h0), info.segments + 1)
+    truth = TruthCompare((x0, y0, h0), offsets)
+    last: list[PlacedChunk] = []
+    wanted = frozenset(info.reprimed) | frozenset(breaks.tolist())
+    final = LifeInfo()
+
+    def with_truth() -> Iterator[PlacedChunk]:
+        for chunk, told in life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
+                                       max_wheel_speed_mm_s=max_wheel_speed_mm_s, info=final,
+                                       times_of=wanted):
+            truth.feed(chunk, told)
+            if len(chunk.enc):
+                last[:] = [chunk]
+            yield chunk
+
+    vs_ref = reference_errors(with_truth, (x0, y0, h0), offsets)
+    vs_truth = truth.summary()
+    vs_truth["distance_travelled_m"] = float(last[0].rel_distance_m[-1])
+    twist = first.twist.finish()
+    passed = bool(
+        vs_ref["max_position_error_m"] <= tolerance.position_m
+        and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
+        and twist["passed"]
+    )
+    covered_s = facts.covered_s()
+    counts = first.e2e.counts
+    report = {
+        "robot": _robot_dict(robot),
+        "integrator": integrator,
+        "integrator_source": source,
+        "reference_start": "power-up" if exact else "fitted",
+        "scenario": scenario,
+        "seed": seed,
+        "sim_seconds": covered_s,
+        "wall_seconds": wall_seconds,
+        "realtime_factor": _realtime(covered_s, wall_seconds),
+        "frames": facts.frame_counts,
+        "samples": {
+            "onboard": first.kept,
+            "truth": first.truths,
+            "truth_compared": truth.compared,
+            "unmatched_poses": first.poses.unmatched,
+            "encoder_frames": first.encoders,
+            "reference_restarts": info.segments,
+            "implausible_encoder_frames": info.refused,
+        },
+        "events": [
+            {"kind": "counter_restart", "t_s": final.times_s[e], "encoder_frame": int(e),
+             "detail": "the firmware re-primes here (COUNTER_RESET): the reference restarts "
+                       "with it; the motion across the restart is unknowable"}
+            for e in info.reprimed
+        ] + [
+            {"kind": "firmware_stall", "t_s": final.times_s[e], "encoder_frame": int(e),
+             "detail": "the firmware was silent (a stall): it took the frames it missed as one "
+                       "step, so the reference's position is placed again after it"}
+            for e in breaks.tolist() if e > int(first.head.enc[0])
+        ],
+        "reboots": [],
+        "onboard_vs_reference": vs_ref,
+        "onboard_vs_truth": vs_truth,
+        "onboard_twist_vs_reference": twist,
+        "final_onboard_pose": {
+            "x_m": float(first.tail.x_m[-1]),
+            "y_m": float(first.tail.y_m[-1]),
+            **heading_fields(float(first.tail.heading_rad[-1])),
+        },
+        "e2e": {name: c for name, c in counts.items() if name != UNKNOWN},
+        "unknown_frames": counts[UNKNOWN],
+        "tolerance": {"position_m": tolerance.position_m, "heading_rad": tolerance.heading_rad},
+        "passed": passed,
+    }
+    return report, first.t_first_s
+
+
+class _FirstPass:
+    """Pass 1 over a life (module docstring)."""
+
+    def __init__(self, db: cantools.database.can.Database, robot: RobotProfile) -> None:
+        self.decoder = BulkDecoder(db)
+        self.e2e = StreamE2E(db)
+        self.numbering = StreamEncoders(BulkDecoder(db))
+        self.poses = StreamPoses(BulkDecoder(db))
+        self.truth = StreamTruth(BulkDecoder(db))
+        self.twist = StreamTwist(BulkDecoder(db), robot)
+        self.facts = StreamFacts(BulkDecoder(db))
+        self.stalls: StreamStalls | None = None
+        self.rows = dict.fromkeys(REQUIRED, 0)  # decoded frames of the required messages
+        self.accepted = dict.fromkeys(REQUIRED, 0)  # and those E2E accepts
+        self.samples = self.kept = self.truths = self.encoders = 0
+        self.head = self.tail = _poses({})
+        self.t_first_s = 0.0
+
+    def feed(self, chunk: FrameArrays) -> None:
+        if self.e2e.counts == {} and len(chunk):
+            self.t_first_s = float(chunk.timestamp_s[0])
+        accepted = self.e2e.feed(chunk)
+        for name in REQUIRED:
+            index = self.decoder.select(chunk, name)
+            self.rows[name] += len(index)
+            self.accepted[name] += int(np.count_nonzero(accepted[index]))
+        enc = self.numbering.feed(chunk, accepted)
+        self.encoders += len(enc.index)
+        self.stalls = self.stalls or StreamStalls(enc.cycle_s)
+        samples, sent = self.poses.feed(chunk, accepted, enc)
+        watermark = min(float(chunk.timestamp_s[-1]), self.poses.open_sent_s())
+        self._kept(self.stalls.feed(samples, sent, enc.timestamp_s, watermark), samples)
+        self.truths += len(self.truth.feed(chunk, accepted, enc)[0]["enc"])
+        self.twist.feed(chunk, accepted, enc)
+        self.facts.feed(chunk, accepted)
+
+    def finish(self) -> None:
+        if self.stalls is None:
+            return
+        samples, sent = self.poses.finish()
+        self._kept(self.stalls.feed(samples, sent, np.zeros(0), np.inf), samples)
+        self._kept(self.stalls.finish(), {"enc": np.zeros(0)})
+        self.truths += len(self.truth.finish()[0]["enc"])
+
+    def _kept(self, kept: dict[str, np.ndarray], fed: dict[str, np.ndarray]) -> None:
+        self.samples += len(fed["enc"])
+        if len(kept["enc"]):
+            if self.kept == 0:
+                self.head = _poses({k: v[:1] for k, v in kept.items()})
+            self.tail = _poses({k: v[-1:] for k, v in kept.items()})
+            self.kept += len(kept["enc"])
+
+    @property
+    def breaks(self) -> np.ndarray:
+        return self.stalls.breaks if self.stalls is not None else np.zeros(0, dtype=np.int64)
+
+    def check(self) -> None:
+        """``analysis._analyze_life``'s errors, in its order: the required messages missing
+        or all refused, no on-board sample."""
+        for name in REQUIRED:
+            if self.accepted[name] == 0:
+                message = self.decoder.message(name)
+                if self.rows[name] == 0:
+                    raise AnalysisError(
+                        f"no {name} frame (ID 0x{message.frame_id:03X}, {message.length} bytes)"
+                        " in the log: the DBC does not match the log")
+                raise AnalysisError(f"none of the {self.rows[name]} {name} frames passes its "
+                                    "E2E check: the DBC does not match the log")
+        if self.samples == 0:
+            raise AnalysisError("no ODOM_POSE_X/ODOM_POSE_Y pair names an encoder frame of the "
+                                "log: nothing to compare")
+
+
+def _first_pass(frames: Frames, db: cantools.database.can.Database,
+                robot: RobotProfile) -> _FirstPass:
+    first = _FirstPass(db, robot)
+    for chunk in frames():
+        first.feed(chunk)
+    first.finish()
+    return first
+
+
+def _poses(columns: dict[str, np.ndarray]) -> Poses:
+    empty_i, empty_f = np.zeros(0, dtype=np.int64), np.zeros(0)
+    return Poses(columns.get("enc", empty_i), columns.get("x_m", empty_f),
+                 columns.get("y_m", empty_f), columns.get("heading_rad", empty_f),
+                 columns.get("heading_raw", empty_i))
