@@ -10,11 +10,16 @@ import json
 from pathlib import Path
 
 import can
+import numpy as np
 import pytest
 
+from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log, to_message
 from odocan.host.judge.analysis import analyze
+from odocan.host.judge.stream import StreamEncoders
 from odocan.host.judge.stream_analysis import analyze_file
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.sim.contract import database
 from odocan.sim.robot import load
 from tests.test_stream import awkward_lines
 from tests.test_stream_facts import rig_frames
@@ -49,3 +54,38 @@ def test_the_streamed_report_is_the_whole_logs(
     if which == "rig":
         assert want["samples"]["truth_compared"] > 0
         assert [e["kind"] for e in want["events"]].count("firmware_stall") >= 1
+
+
+def test_odocan_analyze_streams_the_report_it_wrote_from_the_whole_log(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The command: the streamed report (``--chunk-frames 7``) is the one the whole-log path
+    writes (``-b`` reads the whole log and adds only its bus section), the same verdict and
+    exit code; a failed verdict too (a wrong --integrator)."""
+    path = log_of(tmp_path, "rig")
+    for extra in ([], ["--integrator", "euler"]):
+        streamed, whole = tmp_path / "streamed.json", tmp_path / "whole.json"
+        code_s = main(["analyze", str(path), "--report", str(streamed), "--chunk-frames", "7",
+                       *extra])
+        out_s = capsys.readouterr().out
+        code_w = main(["analyze", str(path), "--report", str(whole), "-b", "500000", *extra])
+        out_w = capsys.readouterr().out
+        got, want = json.loads(streamed.read_text()), json.loads(whole.read_text())
+        del want["bus"]
+        assert got == want
+        assert list(got) == list(want)
+        assert code_s == code_w == (0 if not extra else 1)
+        verdict = "FAIL" if extra else "PASS"
+        assert verdict in out_s
+        assert verdict in out_w
+
+
+def test_an_empty_chunk_numbers_no_encoder_frame() -> None:
+    """A chunk without an accepted encoder frame gives no sequence number (it gave one)."""
+    db = database()
+    numbering = StreamEncoders(BulkDecoder(db))
+    frames = rig_frames()
+    ids = {db.get_message_by_name("WHEEL_ENCODERS").frame_id}
+    other = frames.select(np.flatnonzero(~np.isin(frames.can_id, list(ids)))[:5])
+    encoders = numbering.feed(other, np.ones(len(other), dtype=bool))
+    assert len(encoders.seq) == len(encoders.index) == 0

@@ -162,6 +162,8 @@ class StreamEncoders:
         cycle_s: float | None,
     ) -> npt.NDArray[np.int64]:
         """Sequence numbers, continuing from the last accepted frame of the chunks before."""
+        if len(counter) == 0:  # (numbering from 0 would give the empty chunk one number)
+            return np.zeros(0, dtype=np.int64)
         if self._last is not None:
             counter = np.concatenate(([self._last[0]], counter))
             stamps = np.concatenate(([self._last[1]], stamps))
