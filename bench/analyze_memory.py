@@ -7,13 +7,13 @@ the analysis sees a reboot at each seam (``host.judge.reboots``) and judges ever
 power-up pose -- the verdict must stay PASS. Then runs, as whole processes measured like
 ``/usr/bin/time -v`` (``os.wait4``: wall, user + system CPU, max RSS):
 
-* ``python -m odocan analyze LOG --robot pmir``;
+* ``python -m odocan analyze LOG --robot pmir`` (streamed: ``host.judge.stream_analysis``);
 * ``cantools decode --single-line dbc/odocan.dbc < LOG`` (skipped with ``--no-cantools``);
-* the stages that stream today, chunk by chunk over the whole log as one life
+* the first pass's stages alone, chunk by chunk over the whole log as one life
   (``host.judge.stream``: ``iter_log`` -> E2E -> encoder sequence -> on-board samples and the
   reference's steps and increments; ``stream_stalls``, ``stream_truth``, ``stream_twist``,
-  ``stream_facts``, ``stream_lives``; the start fit, the errors and the report do not stream
-  yet), in a child process of their own; it prints what it found.
+  ``stream_facts``, ``stream_lives``), in a child process of their own; it prints what it
+  found.
 
 The log is written to ``--dir`` (default: the system's temporary directory; check ``df -h``
 first: it needs ``--gb`` GB free) and deleted afterwards (``--keep`` keeps it). Prints figures;

@@ -89,3 +89,16 @@ def test_an_empty_chunk_numbers_no_encoder_frame() -> None:
     other = frames.select(np.flatnonzero(~np.isin(frames.can_id, list(ids)))[:5])
     encoders = numbering.feed(other, np.ones(len(other), dtype=bool))
     assert len(encoders.seq) == len(encoders.index) == 0
+
+
+@pytest.mark.parametrize("suffix", [".asc", ".blf"])
+def test_asc_and_blf_logs_stream_the_same_report(tmp_path: Path, suffix: str) -> None:
+    """The other log formats stream through python-can's readers: the same report."""
+    frames = rig_frames()
+    path = tmp_path / f"rig{suffix}"
+    with can.Logger(str(path)) as logger:
+        for i in range(len(frames)):
+            logger.on_message_received(to_message(frames, i))
+    profile = load("pmir")
+    want = analyze(read_log(path), profile).report
+    assert json.dumps(analyze_file(path, profile, chunk_frames=64)) == json.dumps(want)

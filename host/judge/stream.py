@@ -34,23 +34,16 @@ on a log cut at every frame and on a faulted rig run with a stall and a reboot):
 integrator, the power-up rule's inputs), ``stream_fit.SegmentSums`` and ``BlockDot`` (the
 rotation fit's segment means and its dot products, ``reference_path.block_dot``).
 
-Not done yet (issue #14.1): the stages are not chained into an analysis, so ``odocan analyze``
-still holds every frame (1 GB candump log: 2.5 GB max RSS, ``bench/analyze_memory.py``). The
-plan for the rest, so that a one-chunk run and an n-chunk run give the same report bit for bit:
-
-* lives first (``StreamLives`` over the whole log, with the whole log's E2E and the integrator
-  from ``StreamFacts``), then each life as a range of frames with E2E afresh, ``reboots.merge``
-  taking the lives' reports without series;
-* pass 1 over a life: E2E, encoders, samples after stalls, truth, twist, facts; the encoder
-  frames (index, seq, counts, time) and the kept samples spilled to a temporary file in
-  columns (a few tens of bytes a frame), so that the later passes read blocks of them, not the
-  log; the first on-board sample decides the start frame e0 (power-up: 0);
-* pass 2: ``StreamReference`` from e0 and the segments (gaps of the sequence, stall breaks) ->
-  the heading overlap (max/min: exact in any order) and the first ``START_FIT_SAMPLES`` samples;
-* pass 3: the rotation fit's segment means (``SegmentSums``); pass 4: its dots (``BlockDot``)
-  -> the start pose; pass 5: each segment's position overlap (max/min/first); pass 6: the
-  errors, the truth comparison (``compare.onboard_at``: a truth sample waits for the next
-  on-board one), the events and the report. Exports keep the whole-log path."""
+Chained (``stream_analysis.analyze_file``, what ``odocan analyze`` runs on one log): a pass
+over the whole log for the lives (``StreamLives``, with the whole log's E2E) and the facts, then
+per life, as a range of frames with E2E afresh: 1. E2E, encoders, samples after stalls, truth,
+twist, facts -> the start frame e0 and the stalls' breaks; 2.-4. the start pose
+(``stream_place.start_pose``: the heading overlap, the rotation fit's ``SegmentSums`` and
+``BlockDot``), fed by ``stream_life.life_chunks`` (the samples with the reference's increments
+from e0 and their segments); 5. the segment offsets; 6. the errors, the truth comparison
+(``stream_compare.TruthCompare``), the distance and the events' times; ``reboots.merge``
+takes the lives' reports without series. The plot and export series are not streamed (those
+options read the whole log)."""
 
 from __future__ import annotations
 
