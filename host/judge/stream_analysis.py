@@ -65,8 +65,8 @@ def analyze_file(
     require_messages(decoder)
     with tempfile.TemporaryDirectory(prefix="odocan-analyze-") as tmp:
         spill = FrameSpill(Path(tmp))
-        e2e, lives = StreamE2E(db), StreamLives(BulkDecoder(db))
-        facts = StreamFacts(BulkDecoder(db))
+        e2e, lives = StreamE2E(db), StreamLives(decoder)  # one decoder: its cache too
+        facts = StreamFacts(decoder)
         for chunk in iter_log(path, chunk_frames=chunk_frames):
             spill.write(chunk)
             accepted = e2e.feed(chunk)
@@ -268,11 +268,11 @@ class _FirstPass:
     def __init__(self, db: cantools.database.can.Database, robot: RobotProfile) -> None:
         self.decoder = BulkDecoder(db)
         self.e2e = StreamE2E(db)
-        self.numbering = StreamEncoders(BulkDecoder(db))
-        self.poses = StreamPoses(BulkDecoder(db))
-        self.truth = StreamTruth(BulkDecoder(db))
-        self.twist = StreamTwist(BulkDecoder(db), robot)
-        self.facts = StreamFacts(BulkDecoder(db))
+        self.numbering = StreamEncoders(self.decoder)
+        self.poses = StreamPoses(self.decoder)
+        self.truth = StreamTruth(self.decoder)
+        self.twist = StreamTwist(self.decoder, robot)
+        self.facts = StreamFacts(self.decoder)
         self.stalls: StreamStalls | None = None
         self.rows = dict.fromkeys(REQUIRED, 0)  # decoded frames of the required messages
         self.accepted = dict.fromkeys(REQUIRED, 0)  # and those E2E accepts

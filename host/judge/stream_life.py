@@ -108,7 +108,7 @@ def life_chunks(
     each with the reference's rows at its encoder frame; ``info`` filled at the end."""
     decoder = BulkDecoder(db)
     e2e, numbering = StreamE2E(db), StreamEncoders(decoder)
-    poses, truth = StreamPoses(BulkDecoder(db)), StreamTruth(BulkDecoder(db))
+    poses, truth = StreamPoses(decoder), StreamTruth(decoder)  # one decoder: its cache too
     stalls: StreamStalls | None = None
     reference = StreamReference(Geometry.of(robot), integrator,
                                 min(robot.counter_bits, WIRE_COUNTER_BITS), max_wheel_speed_mm_s)
