@@ -293,12 +293,14 @@ class StreamPoses:
         hit = has[:cut] & (known["seq"][found] == target[:cut])
         self.unmatched += int(np.count_nonzero(~hit))
         firsts = self._first[name]
-        for j in np.flatnonzero(hit).tolist():
-            g = int(known["g"][found[j]])
+        hits = np.flatnonzero(hit)
+        named = found[hits]
+        columns = {k: v[hits].tolist() for k, v in halves.values.items()}  # plain Python values
+        for i, (g, seq, t) in enumerate(zip(known["g"][named].tolist(),
+                                            known["seq"][named].tolist(),
+                                            halves.timestamp_s[hits].tolist(), strict=True)):
             if g not in firsts:
-                firsts[g] = (int(known["seq"][found[j]]),
-                             {k: v[j] for k, v in halves.values.items()},
-                             float(halves.timestamp_s[j]))
+                firsts[g] = (seq, {k: v[i] for k, v in columns.items()}, t)
         if cut == len(halves.index):
             return float(top - 8) if not final else np.inf
         return float(min(known["seq"][np.maximum(latest[cut:], 0)].min(), top) - 8)
