@@ -17,8 +17,9 @@ from odocan.sim.robot import RobotProfile, profile_sha256
 
 
 def file_sha256(path: Path) -> str:
-    """SHA-256 of a file's bytes (hex)."""
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+    """SHA-256 of a file's bytes (hex), read in blocks (a log of any size)."""
+    with path.open("rb") as file:
+        return hashlib.file_digest(file, "sha256").hexdigest()
 
 
 def inputs(
