@@ -102,3 +102,29 @@ def test_asc_and_blf_logs_stream_the_same_report(tmp_path: Path, suffix: str) ->
     profile = load("pmir")
     want = analyze(read_log(path), profile).report
     assert json.dumps(analyze_file(path, profile, chunk_frames=64)) == json.dumps(want)
+
+
+def test_a_batch_worker_streams_the_same_report(tmp_path: Path) -> None:
+    """``odocan analyze LOG…``'s worker (``batch.analyze_one``) streams too: the report and
+    the frame count of the whole-log path; a log the analysis refuses still gets its one-line
+    reason."""
+    from odocan.host.judge.analysis import Tolerance
+    from odocan.host.judge.batch import Job, analyze_one
+
+    path = log_of(tmp_path, "rig")
+    tolerance = Tolerance()
+    result = analyze_one(str(path), Job("pmir", None, tolerance.position_m,
+                                        tolerance.heading_rad))
+    whole = read_log(path)
+    want = analyze(whole, load("pmir")).report
+    assert result.report is not None
+    got = dict(result.report)
+    del got["inputs"]
+    assert json.dumps(got) == json.dumps(json.loads(json.dumps(want)))
+    assert result.frames == len(whole)
+    empty = tmp_path / "foreign.log"
+    empty.write_text("(1.000000) vcan0 123#0102\n" * 3)
+    refused = analyze_one(str(empty), Job("pmir", None, tolerance.position_m,
+                                          tolerance.heading_rad))
+    assert refused.error is not None
+    assert "WHEEL_ENCODERS" in refused.error

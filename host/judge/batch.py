@@ -90,21 +90,29 @@ def analyze_one(path: str, job: Job) -> LogResult:
     from odocan.host.cli.subparsers.analyze import load_dbc, log_inputs
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import Tolerance, analyze
+    from odocan.host.judge.samples import AnalysisError
+    from odocan.host.judge.stream_analysis import analyze_file_counted
     from odocan.sim import robot
 
     log = Path(path)
     try:
         profile = robot.load(job.robot)
         tolerance = Tolerance(job.tolerance_position_m, job.tolerance_heading_rad)
-        frames = read_log(log, warn=lambda message: None)
-        if job.dbc is not None:
-            db = load_dbc(Path(job.dbc))
-            analysis = analyze(frames, profile, job.integrator, tolerance=tolerance, db=db)
-        else:
-            require_frames(frames, path)
-            with explained(lambda: frames, path):
-                analysis = analyze(frames, profile, job.integrator, tolerance=tolerance)
-        report = analysis.report
+        db = load_dbc(Path(job.dbc)) if job.dbc is not None else None
+        try:  # streamed, in bounded memory (host.judge.stream_analysis): the same report
+            report, n_frames = analyze_file_counted(
+                log, profile, job.integrator, tolerance=tolerance, db=db,
+                warn=lambda message: None)
+        except AnalysisError:  # refused: the whole log's path says why, in the log's terms
+            frames = read_log(log, warn=lambda message: None)
+            n_frames = len(frames)
+            if db is not None:
+                analysis = analyze(frames, profile, job.integrator, tolerance=tolerance, db=db)
+            else:
+                require_frames(frames, path)
+                with explained(lambda: frames, path):
+                    analysis = analyze(frames, profile, job.integrator, tolerance=tolerance)
+            report = analysis.report
         report["inputs"] = log_inputs(
             log, profile, report["integrator"], None if job.dbc is None else Path(job.dbc)
         )
@@ -112,7 +120,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
         return LogResult(path, error=_one_line(exc))
     except Exception as exc:  # a log no check foresaw: this log's error, the batch goes on
         return LogResult(path, error=f"cannot analyse: {type(exc).__name__}: {_one_line(exc)}")
-    return LogResult(path, report=_plain(report), frames=len(frames))
+    return LogResult(path, report=_plain(report), frames=n_frames)
 
 
 def _plain(value: Any) -> Any:

@@ -22,7 +22,7 @@ import cantools
 import numpy as np
 
 from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
-from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log
+from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge.analysis import Tolerance, _realtime, _robot_dict
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.samples import REQUIRED, AnalysisError, Poses, require_messages
@@ -58,8 +58,31 @@ def analyze_file(
     wall_seconds: float | None = None,
     max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
     chunk_frames: int = CHUNK_FRAMES,
+    warn: Callable[[str], None] = warn_on_stderr,
 ) -> dict[str, Any]:
-    """``analyze(read_log(path), ...).report``, the log read ``chunk_frames`` at a time."""
+    """``analyze(read_log(path), ...).report``, the log read ``chunk_frames`` at a time
+    (``warn``: where ``iter_log`` says it skipped a partial last line)."""
+    return analyze_file_counted(
+        path, robot, integrator, tolerance=tolerance, db=db, scenario=scenario, seed=seed,
+        wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s,
+        chunk_frames=chunk_frames, warn=warn)[0]
+
+
+def analyze_file_counted(
+    path: str | Path,
+    robot: RobotProfile,
+    integrator: str | None = None,
+    *,
+    tolerance: Tolerance = DEFAULT_TOLERANCE,
+    db: cantools.database.can.Database | None = None,
+    scenario: str | None = None,
+    seed: int | None = None,
+    wall_seconds: float | None = None,
+    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    chunk_frames: int = CHUNK_FRAMES,
+    warn: Callable[[str], None] = warn_on_stderr,
+) -> tuple[dict[str, Any], int]:
+    """``analyze_file``'s report and the number of frames in the log."""
     db = db if db is not None else contract.database()
     decoder = BulkDecoder(db)
     require_messages(decoder)
@@ -67,7 +90,9 @@ def analyze_file(
         spill = FrameSpill(Path(tmp))
         e2e, lives = StreamE2E(db), StreamLives(decoder)  # one decoder: its cache too
         facts = StreamFacts(decoder)
-        for chunk in iter_log(path, chunk_frames=chunk_frames):
+        n_frames = 0
+        for chunk in iter_log(path, chunk_frames=chunk_frames, warn=warn):
+            n_frames += len(chunk)
             spill.write(chunk)
             accepted = e2e.feed(chunk)
             lives.feed(chunk, accepted)
@@ -77,7 +102,7 @@ def analyze_file(
             lives.finish(), facts, lambda span: lambda: spill.read(span.start, span.stop,
                                                                     chunk_frames),
             robot, integrator, tolerance=tolerance, db=db, scenario=scenario, seed=seed,
-            wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+            wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s), n_frames
 
 
 def _analyze_lives(
