@@ -17,7 +17,7 @@ from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log, to_message
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.stream import StreamEncoders
-from odocan.host.judge.stream_analysis import analyze_file
+from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.contract import database
 from odocan.sim.robot import load
@@ -128,3 +128,32 @@ def test_a_batch_worker_streams_the_same_report(tmp_path: Path) -> None:
                                           tolerance.heading_rad))
     assert refused.error is not None
     assert "WHEEL_ENCODERS" in refused.error
+
+
+def test_a_log_whose_times_go_back_is_analysed_whole(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Encoder frames whose times go back: the stall detection of a stream could differ from
+    the whole log's, so the streamed analysis refuses (``NotStreamable``) and the command
+    analyses the whole log: the whole log's report."""
+    frames = rig_frames()
+    wheel = np.flatnonzero(frames.can_id == database().get_message_by_name(
+        "WHEEL_ENCODERS").frame_id)
+    stamps = frames.timestamp_s.copy()
+    stamps[wheel[40]] = stamps[wheel[39]] - 0.001  # recorded out of time order
+    path = tmp_path / "back.log"
+    with can.Logger(str(path)) as logger:
+        for i in range(len(frames)):
+            message = to_message(frames, i)
+            message.timestamp = float(stamps[i])
+            logger.on_message_received(message)
+    with pytest.raises(NotStreamable):
+        analyze_file(path, load("pmir"))
+    report = tmp_path / "report.json"
+    code = main(["analyze", str(path), "--report", str(report)])
+    capsys.readouterr()
+    want = analyze(read_log(path), load("pmir")).report
+    got = json.loads(report.read_text())
+    del got["inputs"]
+    assert got == json.loads(json.dumps(want))
+    assert code == (0 if want["passed"] else 1)

@@ -91,7 +91,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import Tolerance, analyze
     from odocan.host.judge.samples import AnalysisError
-    from odocan.host.judge.stream_analysis import analyze_file_counted
+    from odocan.host.judge.stream_analysis import NotStreamable, analyze_file_counted
     from odocan.sim import robot
 
     log = Path(path)
@@ -103,7 +103,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
             report, n_frames = analyze_file_counted(
                 log, profile, job.integrator, tolerance=tolerance, db=db,
                 warn=lambda message: None)
-        except AnalysisError:  # refused: the whole log's path says why, in the log's terms
+        except (AnalysisError, NotStreamable):  # refused: the whole log's path says why
             frames = read_log(log, warn=lambda message: None)
             n_frames = len(frames)
             if db is not None:

@@ -40,9 +40,15 @@ from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import UNKNOWN
 from odocan.host.protocol.pose import heading_fields
 from odocan.sim import contract
+from odocan.sim.exceptions import OdocanError
 from odocan.sim.robot import RobotProfile
 
 Frames = Callable[[], Iterable[FrameArrays]]  # a life's frames, from its first, each call
+
+
+class NotStreamable(OdocanError):
+    """The streamed report could differ from the whole log's (``StreamStalls.exact``: frames
+    whose times go back where the stall detection looks): analyse the whole log instead."""
 DEFAULT_TOLERANCE = Tolerance()
 
 
@@ -199,6 +205,8 @@ def _life(
 ) -> tuple[dict[str, Any], float]:
     """``analysis._analyze_life``'s report of one life, and its first frame's time."""
     first = _first_pass(frames, db, robot)
+    if first.stalls is not None and not first.stalls.exact:
+        raise NotStreamable("the log's frame times go back around a silence of the firmware")
     facts = first.facts
     integrator, source = facts.integrator(integrator)
     first.check()

@@ -20,7 +20,9 @@ Memory: one log without ``--plot``, ``--parquet``, ``--mcap`` or ``-b`` is analy
 (``host.judge.stream_analysis``: passes over the file ``--chunk-frames`` frames at a time,
 the report bit for bit the whole log's), in bounded memory whatever its size; those four read
 the whole log (their series and frames), and so does a log the analysis refuses (to explain
-why in the log's terms) or fails (to look for a wrong ``--robot``).
+why in the log's terms) or fails (to look for a wrong ``--robot``), or whose frame times go
+back where the stall detection looks (``stream_analysis.NotStreamable``). ``odocan analyze
+LOG…`` streams each log the same way (``host.judge.batch.analyze_one``).
 """
 
 from __future__ import annotations
@@ -184,12 +186,12 @@ def _streamed(
     from odocan.host.io.logs import CHUNK_FRAMES
     from odocan.host.judge.analysis import Analysis
     from odocan.host.judge.samples import AnalysisError
-    from odocan.host.judge.stream_analysis import analyze_file
+    from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
 
     try:
         report = analyze_file(args.log, profile, args.integrator, tolerance=args.tolerance,
                               db=db, chunk_frames=args.chunk_frames or CHUNK_FRAMES)
-    except AnalysisError:
+    except (AnalysisError, NotStreamable):
         return None
     return Analysis(report=report, passed=report["passed"])
 
