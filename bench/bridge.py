@@ -9,7 +9,8 @@ One robot's lockstep frames are offered to the bridge at the bus's pace (100 fra
   from the broker's start to the bridge's next pose;
 * ``restart``/``killed`` (mosquitto only): an operator with a persistent v5 session sends 40
   commands, the broker is stopped (SIGTERM) or killed (SIGKILL) and started, 40 more: how many of
-  the commands the broker acknowledged were answered on ``cmd/result``.
+  the commands the broker acknowledged were answered on ``cmd/result``; killed twice: a mosquitto
+  saving only at exit (it loses the operator's session) and one saving at every change.
 
     .venv/bin/python bench/bridge.py [--flood 1000]
 """
@@ -53,13 +54,16 @@ PMIR = robot.load("pmir")
 class Mosquitto:
     """An anonymous mosquitto on a fixed free port, restartable (None when not installed)."""
 
-    def __init__(self, workdir: Path) -> None:
+    def __init__(self, workdir: Path, durable: bool = False) -> None:
+        """``durable``: save the state at every change (``autosave_on_changes``), not at exit."""
         self.exe = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
         self.url = BrokerURL(host=LOOPBACK, port=free_loopback_port())
         self.conf = workdir / "bench.conf"
         self.conf.write_text(f"listener {self.url.port} {LOOPBACK}\nallow_anonymous true\n"
                              f"persistence true\npersistence_location {workdir}/\nlog_dest none\n"
-                             f"user {getpass.getuser()}\n")  # as root: keep access to workdir
+                             + ("autosave_on_changes true\nautosave_interval 1\n" if durable
+                                else "")
+                             + f"user {getpass.getuser()}\n")  # as root: keep access to workdir
         self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self) -> None:
@@ -241,10 +245,19 @@ def main() -> None:
                 print("mosquitto outage: " + asyncio.run(outage(mosquitto, ticks)))
                 print("mosquitto restart (SIGTERM): "
                       + asyncio.run(answered(mosquitto, ticks, kill=False)))
-                print("mosquitto killed (SIGKILL): "
+                print("mosquitto killed (SIGKILL), saving only at exit: "
                       + asyncio.run(answered(mosquitto, ticks, kill=True)))
             finally:
                 mosquitto.stop()
+        (Path(tmp) / "durable").mkdir()
+        durable = Mosquitto(Path(tmp) / "durable", durable=True) if mosquitto else None
+        if durable is not None:
+            durable.start()
+            try:
+                print("mosquitto killed (SIGKILL), saving at every change: "
+                      + asyncio.run(answered(durable, ticks, kill=True)))
+            finally:
+                durable.stop()
 
     async def embedded() -> str:
         async with EmbeddedBroker() as broker:

@@ -10,6 +10,12 @@ count) and the broker's (/proc/PID/stat). One idle core's worth of CPU is 10 000
 robots per core is about 10 000 / (us per robot-tick).
 
     .venv/bin/python bench/fleet.py [--trial-s 3] [--start 8] [--max 256] [--workers 2]
+    .venv/bin/python bench/fleet.py --robots 50,75,100 --workers 2 --broker mosquitto \
+        --trial-s 20 [--repeat 2]     # a sweep, unattended, ends with one table
+
+``--robots`` (or ``--fixed``) replaces the search by one trial per size; the table's "2 cores"
+column is 20 000 us / (fleet + bridge + broker CPU per robot-tick): what two idle cores would
+hold at the trial's measured cost (the steadier figure on a shared machine).
 """
 
 from __future__ import annotations
@@ -50,15 +56,20 @@ def proc_cpu_s(pid: int | None) -> float:
 
 
 def trial(n: int, seconds: float, bridge: bool, broker: BrokerURL | None, workers: int,
-          broker_pid: int | None) -> float:
-    """One run of ``n`` robots; prints and returns its deadline_miss_ratio."""
+          broker_pid: int | None) -> dict[str, Any]:
+    """One run of ``n`` robots; prints its figures and returns them (a row of the table)."""
     run = FleetRun(fleet=FleetConfig(robots=n, robot=robot.load("pmir")), duration_s=seconds,
                    bridge=bridge, broker=broker, client_prefix=f"bench-{n}-{time.time_ns()}")
     broker0 = proc_cpu_s(broker_pid)
     report = run_sharded(run, min(workers, n)) if bridge else asyncio.run(run_fleet(run))
     broker_cpu = proc_cpu_s(broker_pid) - broker0  # includes the workers' connect and goodbye
     ratio: float = report["deadline_miss_ratio"]
-    robot_ticks = sum(w["robots"] * w["ticks"] for w in _workers(report))
+    robot_ticks = max(sum(w["robots"] * w["ticks"] for w in _workers(report)), 1)
+    row = {"robots": n, "ratio": ratio, "late": report["late_ticks"], "ticks": report["ticks"],
+           "worst_ms": report["max_lateness_ms"], "skipped": report["skipped_releases"],
+           "fleet_us": report["cpu_s"] / robot_ticks * 1e6,
+           "broker_us": broker_cpu / robot_ticks * 1e6, "load": os.getloadavg()[0],
+           "dropped": report["bridge"]["frames_dropped"] if report["bridge"] else 0}
     extra = ""
     if report["bridge"]:
         extra = (f", bridge frames {report['bridge']['frames_in']}, "
@@ -66,9 +77,9 @@ def trial(n: int, seconds: float, bridge: bool, broker: BrokerURL | None, worker
     print(f"  N={n:4d}: deadline_miss_ratio {ratio:.4f} ({report['late_ticks']} late of "
           f"{report['ticks']}, worst {report['max_lateness_ms']:.1f} ms, "
           f"{report['skipped_releases']} skipped{extra}); CPU per robot-tick: fleet+bridge "
-          f"{report['cpu_s'] / robot_ticks * 1e6:.0f} us, broker "
-          f"{broker_cpu / robot_ticks * 1e6:.0f} us; load {os.getloadavg()[0]:.2f}", flush=True)
-    return ratio
+          f"{row['fleet_us']:.0f} us, broker {row['broker_us']:.0f} us; "
+          f"load {row['load']:.2f}", flush=True)
+    return row
 
 
 def _workers(report: dict[str, Any]) -> list[dict[str, Any]]:
@@ -148,9 +159,18 @@ def main() -> None:
     parser.add_argument("--fixed", type=int, action="append", metavar="N",
                         help="one trial of N robots per setting, no search (repeatable): the CPU "
                         "figures on a machine too loaded for real time")
-    parser.add_argument("--only", choices=("mosquitto", "embedded", "none"), action="append",
-                        help="run only these settings (repeatable; default: all)")
+    parser.add_argument("--robots", type=_counts, metavar="N,N,...",
+                        help="a sweep: one trial of each fleet size per setting, no search, then "
+                        "a table (e.g. 50,75,100); unattended")
+    parser.add_argument("--only", "--broker", dest="only",
+                        choices=("mosquitto", "embedded", "none"), action="append",
+                        help="run only these settings (repeatable; default: all; none: the "
+                        "fleet without a bridge)")
+    parser.add_argument("--repeat", type=int, default=1, metavar="R",
+                        help="with --robots/--fixed: run each size R times (default: 1)")
     args = parser.parse_args()
+    sweep = [n for n in (args.robots or []) + (args.fixed or []) for _ in range(args.repeat)]
+    rows: list[tuple[str, dict[str, Any]]] = []
     print(f"fleet bench: {os.cpu_count()} CPUs, {args.trial_s:.0f} s per trial, "
           f"limit deadline_miss_ratio <= {LIMIT}, {args.workers} workers, "
           f"load {os.getloadavg()[0]:.2f}")
@@ -176,13 +196,14 @@ def main() -> None:
         try:
             for label, bridge, broker, pid in settings:
                 print(f"{label}:")
-                if args.fixed:
-                    for n in args.fixed:
-                        trial(n, args.trial_s, bridge, broker, args.workers, pid)
+                if sweep:
+                    for n in sweep:
+                        rows.append((label, trial(n, args.trial_s, bridge, broker, args.workers,
+                                                  pid)))
                     continue
                 results[label] = largest(
                     lambda n, b=bridge, u=broker, p=pid:
-                    trial(n, args.trial_s, b, u, args.workers, p) <= LIMIT,
+                    trial(n, args.trial_s, b, u, args.workers, p)["ratio"] <= LIMIT,
                     args.start, args.max)
         finally:
             if embedded is not None:
@@ -191,6 +212,37 @@ def main() -> None:
                 mosquitto[0].terminate()
                 mosquitto[0].wait()
     print_largest(results)
+    print_table(rows)
+
+
+def _counts(text: str) -> list[int]:
+    """An argparse ``type``: ``50,75,100`` (positive integers)."""
+    try:
+        counts = [int(part) for part in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected N,N,... (robots), got {text!r}") from None
+    if not counts or min(counts) < 1:
+        raise argparse.ArgumentTypeError(f"robot counts must be >= 1, got {text!r}")
+    return counts
+
+
+def print_table(rows: list[tuple[str, dict[str, Any]]]) -> None:
+    """The sweep as one table: each trial's deadline figures, its CPU per robot-tick and the
+    robots two idle cores would hold at that cost (20 000 us per 10 ms tick over fleet + bridge +
+    broker: an upper bound, before scheduling jitter)."""
+    if not rows:
+        return
+    print(f"\n{'setting':44s} {'N':>4s} {'miss ratio':>10s} {'late/ticks':>13s} "
+          f"{'worst ms':>8s} {'skip':>4s} {'drop':>5s} {'fleet us':>8s} {'broker us':>9s} "
+          f"{'2 cores':>7s} {'load':>5s}  verdict")
+    for label, r in rows:
+        per_tick = r["fleet_us"] + r["broker_us"]
+        fits = 20_000 / per_tick if per_tick > 0 else float("inf")
+        verdict = "real time" if r["ratio"] <= LIMIT else "MISSES"
+        print(f"{label:44s} {r['robots']:4d} {r['ratio']:10.4f} "
+              f"{r['late']:>6d}/{r['ticks']:<6d} {r['worst_ms']:8.1f} {r['skipped']:4d} "
+              f"{r['dropped']:5d} {r['fleet_us']:8.0f} {r['broker_us']:9.0f} {fits:7.0f} "
+              f"{r['load']:5.2f}  {verdict}")
 
 
 def print_largest(results: dict[str, int]) -> None:

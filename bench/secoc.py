@@ -33,9 +33,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from odocan.firmware import secoc as fw
 from odocan.firmware.cmac import cmac_key
-from odocan.firmware.e2e import E2EReceiver, p02_protect
+from odocan.firmware.e2e import E2EReceiver
 from odocan.host.protocol.secoc import SecocSigner
 from tests.fault_rig import binomial_upper_bound
+from tests.host_frames import p02_protect
 
 KEY = bytes.fromhex("2b7e151628aed2a6abf7158809cf4f3c")
 BITRATE = 500_000  # bit/s, the odocan bus

@@ -1,4 +1,4 @@
-"""AUTOSAR E2E Profile 2 on classic CAN frames: CRC8H2F, the sender's protect, the receiver's check.
+"""AUTOSAR E2E Profile 2 on classic CAN frames: CRC8H2F, the Profile 2 CRC, the receiver's check.
 
 The header of every odocan frame (dbc/odocan.dbc)::
 
@@ -78,22 +78,6 @@ def p02_crc(frame: bytes | bytearray, data_id: u8) -> u8:
     crc = t[crc ^ frame[7]]
     crc = t[crc ^ data_id]
     return crc ^ CRC8H2F_XOR_OUT
-
-
-def p02_protect(frame: bytearray, counter: int, data_ids: tuple[u8, ...]) -> None:
-    """``E2E_P02Protect`` on an 8-byte frame: write COUNTER (byte 1 low nibble), then CHECKSUM.
-
-    ``counter`` is taken modulo 16 (the sender's u4 counter); byte 1's high nibble is kept.
-    ``data_ids`` is the message's 16-entry list; the entry chosen is ``data_ids[counter]``.
-    """
-    counter &= COUNTER_MASK
-    frame[1] = (frame[1] & 0xF0) | counter
-    frame[0] = p02_crc(frame, data_ids[counter])
-
-
-def p02_next_counter(counter: int) -> int:
-    """The sender's next counter: ``(counter + 1) mod 16`` (Profile 2 counts 0..15)."""
-    return (counter + 1) & COUNTER_MASK
 
 
 class E2EStatus(IntEnum):

@@ -153,8 +153,7 @@ class OdomEcu:
         self.encoders.start_tick(periods)
         self._drain_mailbox()
         self.auth.expire_held()
-        if self.twist.steps and not self.clock.time_lost_now:
-            self.twist.update(max(self.encoders.tick_budget, 1))
+        self.twist.end_drain(self.clock.time_lost_now, self.encoders.tick_budget)
         motor_cmd_due = self._navigate()
         self.reports.transmit_scheduled(motor_cmd_due)
         self.health.watchdog(self.encoders.periods_since_frame)

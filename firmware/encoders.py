@@ -24,6 +24,7 @@ from odocan.firmware.twist import ENCODER_PERIOD_US, Twist
 
 MAX_WHEEL_SPEED_MM_S = 4_000  # build-time maximum rim speed of either wheel (a #define)
 RESYNC_FRAMES = 3  # frames consistent with each other, not with the last one: counters restarted
+COUNTER_VALUES = 16  # E2E COUNTER values (4 bits): one whole counter cycle
 STEP_PERIODS_MAX = U16_MAX  # the twist's dt and the plausibility bound saturate here (655 s)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 
@@ -71,6 +72,8 @@ class EncoderInput:
         self._periods_since_sample = 0  # u16, saturated
         self._samples_stale = False  # the last accepted frame was taken in a tick that lost time
         self.tick_budget = 0  # _periods_since_sample at the start of this tick
+        self._tick_late = 0  # u32: periods this tick came after its due time
+        self._this_step_periods = 1  # u32: the sample periods of the step being accepted
 
     # --- once per tick, before the drain ---
 
@@ -79,6 +82,7 @@ class EncoderInput:
         after frames of unknown age, a stall's backlog) and fix this tick's period budget."""
         self.periods_since_frame = min(self.periods_since_frame + periods, STEP_PERIODS_MAX)
         self._periods_since_sample = min(self._periods_since_sample + periods, STEP_PERIODS_MAX)
+        self._tick_late = periods - 1 if periods > 0 else 0  # its frames may have queued so long
         widen = COUNTER_MASK if self._samples_stale else min(periods, COUNTER_MASK)
         for _ in range(widen):
             self.rx.new_period()
@@ -97,11 +101,12 @@ class EncoderInput:
         frame = fr.unpack_wheel_encoders(data)
         wire = (frame.left_count, frame.right_count)
         counts = self._extend_counters(wire)
-        periods = self._step_periods_max(frame.counter)
+        periods = self._step_periods(frame.counter)
         if not self._plausible(self._counts_prev, counts, periods):
             self._on_implausible(frame.counter, wire, counts)
             return
         self._resync_first = None
+        self._this_step_periods = periods
         self._accept(frame.counter, wire, counts)
 
     def _accept(self, counter: int, wire: Counts, counts: Counts) -> None:
@@ -110,7 +115,7 @@ class EncoderInput:
         if self._health.state is not State.FAULT and self._odometry.step_counts(
             counts[0], counts[1]
         ):
-            self._twist.sum_step()
+            self._twist.sum_step(self._this_step_periods)
         self._enc_prev_counter = counter
         self.enc_counter = counter
         self.periods_since_frame = 0
@@ -140,16 +145,20 @@ class EncoderInput:
 
     # --- plausibility ---
 
-    def _step_periods_max(self, counter: int) -> int:
-        """The most encoder periods that can separate this frame's sample from the last accepted
-        one: n = the COUNTER advance (mod 16), plus whole counter cycles while n stays within the
-        periods since that sample (less than a period of queueing on either side; after a tick
-        that lost time, since the last sample before it). Exact in a regular stream (1)."""
+    def _step_periods(self, counter: int) -> int:
+        """The encoder periods between this frame's sample and the last accepted one's: the
+        COUNTER advance n (mod 16), plus the whole counter cycles that bring it nearest to the
+        periods since that frame was accepted (0 for a second frame in one tick; after a tick that
+        lost time, since the last sample before it), less the periods this tick came late (its
+        frames waited in the mailbox meanwhile). Exact while the two frames' queueing, beyond
+        that, differs by less than 8 periods (a frame held 15 ms lands two ticks late: the
+        nearest cycle, not the one below); n in a regular stream (1)."""
         prev = self._enc_prev_counter
         if prev is None:
             return 1
-        advance = ((counter - prev) & COUNTER_MASK) or (COUNTER_MASK + 1)
-        budget = self.tick_budget  # <= STEP_PERIODS_MAX
+        advance = ((counter - prev) & COUNTER_MASK) or COUNTER_VALUES
+        since, late = self._periods_since_sample, self._tick_late
+        budget = (since - late if since > late else 0) + COUNTER_VALUES // 2  # <= U16_MAX + 8
         if budget <= advance:
             return advance
         return advance + (((budget - advance) >> 4) << 4)
@@ -210,6 +219,7 @@ class EncoderInput:
         self._odometry.unprime()
         self._odometry.step_counts(first[0], first[1])
         self._enc_prev_counter = None
+        self._this_step_periods = ((counter - first[2]) & COUNTER_MASK) or COUNTER_VALUES
         self._accept(counter, wire, counts)
 
     # --- configuration ---

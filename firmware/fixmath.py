@@ -8,7 +8,6 @@ for on a 32-bit two's-complement MCU with a 64-bit multiply (Cortex-M3/M4: ``SMU
 * ``wrap_*``: the value modulo 2^N, read back in the type (C's conversion to a fixed-width type).
 * ``sat_*``: clamp to the type's range; on clamping, the SATURATION bit is set in the error mask
   that the caller passes in. The loop never raises.
-* ``shr_round``: arithmetic shift right rounding half up, ``(v + (1 << (n-1))) >> n`` in C.
 * ``mul_sub_wrap_i64``: ``a*b - c*d`` mod 2^64 (C's ``uint64_t`` multiply and subtract).
 * ``mul_shr_i64``, ``mul_round_i64``: the exact 128-bit product of two i64, shifted right
   (floor, or rounded half up), read back as an i64.
@@ -120,14 +119,6 @@ def sat_range(value: int, low: int, high: int, errors: ErrorMask) -> int:
         errors.set(ErrorFlag.SATURATION)
         return low
     return value
-
-
-def shr_round(value: int, shift: int) -> int:
-    """Arithmetic shift right by ``shift`` >= 1, rounding half up (toward +inf).
-
-    C: ``(value + ((int64_t)1 << (shift - 1))) >> shift`` with an arithmetic ``>>``.
-    """
-    return (value + (1 << (shift - 1))) >> shift
 
 
 def mul_sub_wrap_i64(a: i64, b: i64, c: i64, d: i64) -> i64:

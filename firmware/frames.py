@@ -13,8 +13,8 @@ COUNTER in bits 8-11; a multiplexer sits in byte 1's high nibble.
   that wrap by contract (counter low bits, angles, totals) are masked. Packers never raise.
 
 The host's directions (what it sends the ECU and reads from it) are not the MCU's code:
-``tests/host_frames.py`` holds them, on the same header helpers. The last section is the motor
-controller's and the simulator's side, which ``sim/motor_controller.py`` imports from here.
+``tests/host_frames.py`` holds them, on the same header helpers; the motor controller's and the
+simulator's side (WHEEL_ENCODERS out, MOTOR_CMD in, SIM_TRUTH) is ``sim/frames.py``.
 """
 
 from __future__ import annotations
@@ -32,13 +32,11 @@ from odocan.firmware.fixmath import (
     I32_MIN,
     U16_MAX,
     U32_MAX,
-    i16,
     sat_range,
     u8,
     u16,
     u32,
     u64,
-    wrap_i16,
     wrap_i32,
     wrap_u16,
     wrap_u32,
@@ -409,7 +407,9 @@ def pack_odom_ack(
 
 
 # --- ODOM_FRESHNESS (ODOM_MCU -> HOST; 1000 ms and on events) ---
-FV_MASK: Final = (1 << 48) - 1  # the u48 freshness value
+# The u48 FV (FV_COUNT and FV_EPOCH side by side): firmware.secoc's EPOCH << COUNT_BITS | COUNT.
+# Its one home is here: secoc imports this codec, so the codec cannot import secoc.
+FV_MASK: Final = (1 << 48) - 1
 
 
 def pack_odom_freshness(counter: int, cause: int, fv: int, errors: ErrorMask) -> bytes:
@@ -466,47 +466,3 @@ def pack_odom_status_e2e(
         | ((wrong_sequence & 0xFF) << 56)
     )
     return seal_frame(word, ODOM_STATUS_DATA_IDS)
-
-
-# === not the MCU's: the motor controller's and the simulator's side (sim/motor_controller.py) ===
-class MotorCmd(NamedTuple):
-    counter: int
-    left_speed_mm_s: i16
-    right_speed_mm_s: i16
-
-
-class SimTruthPart(IntEnum):
-    """SIM_TRUTH multiplexer ``PART``."""
-
-    X = 0
-    Y = 1
-    HEADING = 2
-
-
-def pack_wheel_encoders(counter: int, left_count: int, right_count: int) -> bytes:
-    """WHEEL_ENCODERS: the low 24 bits of each hardware counter (any width: wrapping, never
-    saturated)."""
-    word = e2e_head(counter, 0) | ((left_count & U24_MAX) << 16) | ((right_count & U24_MAX) << 40)
-    return seal_frame(word, WHEEL_ENCODERS_DATA_IDS)
-
-
-def unpack_motor_cmd(data: bytes | bytearray) -> MotorCmd:
-    """MOTOR_CMD: rim speed setpoints in mm/s."""
-    w = frame_word(data)
-    return MotorCmd((w >> 8) & U4_MAX, wrap_i16(w >> 16), wrap_i16(w >> 32))
-
-
-def pack_sim_truth(
-    counter: int, part: int, enc_counter: int, value: int, errors: ErrorMask
-) -> bytes:
-    """SIM_TRUTH: one part. X/Y saturate to i32 (0.1 mm), HEADING wraps to u16; an unknown
-    ``part`` sends ``value`` as raw u32."""
-    part &= U4_MAX
-    if part in (SimTruthPart.X, SimTruthPart.Y):
-        raw = i32_field(value, errors)
-    elif part == SimTruthPart.HEADING:
-        raw = wrap_u16(value)
-    else:
-        raw = wrap_u32(value)
-    word = e2e_head(counter, part) | ((enc_counter & U4_MAX) << 16) | (raw << 24)
-    return seal_frame(word, SIM_TRUTH_DATA_IDS)

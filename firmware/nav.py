@@ -131,11 +131,6 @@ def distance_um(dx_q40_m: i64, dy_q40_m: i64, errors: ErrorMask) -> i64:
     return mul_shr_round_i64(d_q20_m, MICRO_PER_UNIT, 20, errors)
 
 
-def angle_urad(angle_bam32: i32, errors: ErrorMask) -> i32:
-    """A signed BAM32 angle in µrad (|result| <= 3 141 593), rounded."""
-    return mul_shr_round_i64(wrap_i32(angle_bam32), URAD_PER_TURN_Q20, 52, errors)
-
-
 def _clamp(value: int, limit: int) -> int:
     """Clamp to [-limit, limit]: a design limit (no SATURATION flag)."""
     return -limit if value < -limit else min(value, limit)

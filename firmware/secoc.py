@@ -56,12 +56,10 @@ from odocan.firmware.hal import FreshnessNvm
 MAC_BITS: Final = 32  # truncated authenticator on the wire
 FRESHNESS_TX_BITS: Final = 16  # truncated freshness on the wire
 FRESHNESS_TX_MASK: Final = (1 << FRESHNESS_TX_BITS) - 1
-COUNT_BITS: Final = 28  # FV = EPOCH << 28 | COUNT
+COUNT_BITS: Final = 28  # FV = EPOCH << 28 | COUNT: 48 bits, firmware.frames.FV_MASK
 EPOCH_BITS: Final = 20
 COUNT_MASK: Final = (1 << COUNT_BITS) - 1
 EPOCH_MAX: Final = (1 << EPOCH_BITS) - 1
-FV_BITS: Final = COUNT_BITS + EPOCH_BITS  # 48
-FV_MASK: Final = (1 << FV_BITS) - 1
 FRESHNESS_WINDOW: Final = 4096  # accepted: 1 <= FV - last_fv <= 4096
 ROLLOVER_COUNT: Final = COUNT_MASK - FRESHNESS_WINDOW  # past it, EPOCH advances
 AUTH_TIMEOUT_TICKS: Final = 2  # a held command waits <= 2 ticks (20 ms) for its ODOM_AUTH

@@ -1,20 +1,24 @@
 """ODOM_TWIST's speeds: the steps integrated in a tick, over the firmware time they cover.
 
 Each accepted step adds its travel (Q20 m) and heading change (Q30 rad) to this tick's sums (i64,
-saturated to +-2^32: 4096 m and 4 rad). At the end of the drain the speeds are the sums over the
-periods since the last accepted sample (firmware time, not ticks): lost frames, a burst after a
-stall (summed over two ticks) and a late frame all give the true mean speed.
+saturated to +-2^32: 4096 m and 4 rad), and its sample periods (``EncoderInput._step_periods``:
+the COUNTER advance, whole counter cycles from firmware time) to their span. At the end of the
+drain the speeds are the sums over that span, not over ticks: lost frames and a late frame
+(accepted a tick after its period: one step in a tick of two periods, then two steps in a tick
+of one) give the true mean speed. After a stall the steps are summed over two ticks and divided
+by the firmware time since the last sample before it, as the backlog's sample times are unknown.
 """
 
 from __future__ import annotations
 
 from odocan.firmware.config import TWO_PI_Q60
 from odocan.firmware.errors import ErrorMask
-from odocan.firmware.fixmath import div_round_i64, mul_shr_round_i64, sat_range
+from odocan.firmware.fixmath import U16_MAX, div_round_i64, mul_shr_round_i64, sat_range
 from odocan.firmware.odometry import Odometry
 
 ENCODER_PERIOD_US = 10_000  # WHEEL_ENCODERS GenMsgCycleTime
 TWIST_SUM_MAX = 1 << 32  # one tick's summed steps saturate at 4096 m (Q20) and 4 rad (Q30)
+PERIODS_MAX = U16_MAX  # the speeds' dt saturates here (655 s; encoders.STEP_PERIODS_MAX)
 
 
 class Twist:
@@ -26,11 +30,14 @@ class Twist:
         self.tick_ds_q20_m = 0  # i64, saturated to +-2^32 (4096 m)
         self.tick_dheading_q30_rad = 0  # i64, saturated to +-2^32 (4 rad)
         self.steps = 0  # steps summed since the last update
+        self.tick_periods = 0  # u16, saturated: the sample periods the summed steps span
+        self.carried = False  # the sums hold steps of a tick that lost time
         self.linear_mm_s = 0  # i32: ODOM_TWIST LINEAR_VEL before its i16 saturation
         self.angular_mrad_s = 0  # i32: ODOM_TWIST ANGULAR_VEL before its i16 saturation
 
-    def sum_step(self) -> None:
-        """Add the step just integrated to this tick's sums (Q20 m, Q30 rad; i64, saturated)."""
+    def sum_step(self, periods: int) -> None:
+        """Add the step just integrated, spanning ``periods`` sample periods, to this tick's sums
+        (Q20 m, Q30 rad; i64, saturated)."""
         odo = self._odometry
         dheading_q30_rad = mul_shr_round_i64(odo.last_dheading_bam64, TWO_PI_Q60, 94, self._errors)
         self.tick_ds_q20_m = sat_range(
@@ -46,13 +53,28 @@ class Twist:
             self._errors,
         )
         self.steps += 1
+        self.tick_periods = min(self.tick_periods + periods, PERIODS_MAX)
+
+    def end_drain(self, time_lost_now: bool, periods_since_sample: int) -> None:
+        """After the drain: the speeds of this tick's steps, unless the tick lost time (a stall's
+        backlog: summed on, over the next tick, and then over ``periods_since_sample``)."""
+        if not self.steps:
+            return
+        if time_lost_now:
+            self.carried = True
+        elif self.carried:
+            self.update(max(periods_since_sample, 1))
+        else:
+            self.update(self.tick_periods)
 
     def update(self, periods: int) -> None:
-        """Speeds over this tick's steps, which cover the ``periods`` (1 .. STEP_PERIODS_MAX)
-        since the last accepted sample. Products < 2^32 * 10^9 < 2^63. The sums restart."""
+        """Speeds over this tick's steps, which cover ``periods`` (1 .. PERIODS_MAX). Products
+        < 2^32 * 10^9 < 2^63. The sums restart."""
         dt_us = periods * ENCODER_PERIOD_US
         self.linear_mm_s = div_round_i64(self.tick_ds_q20_m * 1_000_000_000, dt_us << 20)
         self.angular_mrad_s = div_round_i64(self.tick_dheading_q30_rad * 1_000_000_000, dt_us << 30)
         self.tick_ds_q20_m = 0
         self.tick_dheading_q30_rad = 0
         self.steps = 0
+        self.tick_periods = 0
+        self.carried = False

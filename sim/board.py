@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import struct
 import zlib
 from pathlib import Path
@@ -89,8 +90,14 @@ class FileNvm(NvmCell):
         super().__init__(self._load())
 
     def _load(self) -> int:
-        """The stored EPOCH (0 when the file does not exist); ConfigurationError when corrupt."""
+        """The stored EPOCH (0 when the file does not exist); ConfigurationError when corrupt
+        or not a regular file (a FIFO would block the read for ever, a device is no NVM)."""
         try:
+            mode = self.path.stat().st_mode
+            if not stat.S_ISREG(mode):
+                raise ConfigurationError(
+                    f"NVM file {self.path}: not a regular file ({_file_kind(mode)})"
+                )
             raw = self.path.read_bytes()
         except FileNotFoundError:
             return 0
@@ -128,6 +135,13 @@ class FileNvm(NvmCell):
                 temp.unlink(missing_ok=True)
             return False
         return super().write_epoch(epoch)
+
+
+def _file_kind(mode: int) -> str:
+    """What a non-regular file is, for an error message."""
+    kinds = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a device"),
+             (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"))
+    return next((name for test, name in kinds if test(mode)), "not a file")
 
 
 def _fsync_dir(directory: Path) -> None:

@@ -197,18 +197,80 @@ class Drivetrain:
         segments = self._segments
         self._segments = []
         self._pending = 0
+        if self._all_unlimited(segments):
+            theta = self._unlimited_angles(segments)
+        else:
+            theta = self._angles(segments)
+        step = np.empty_like(theta)  # the angle of each substep, from 0 at a segment's start
+        np.subtract(theta[1:], theta[:-1], out=step[1:])
         counts = [n for n, *_ in segments]
-        starts = list(itertools.accumulate(counts, initial=0))[:-1]
+        if len(set(counts)) == 1:  # segments start every n substeps: a strided view
+            step[:: counts[0]] = theta[:: counts[0]]
+        else:
+            starts = list(itertools.accumulate(counts, initial=0))[:-1]
+            step[starts] = theta[starts]
+        step *= self._radii
+        return step
+
+    def _angles(self, segments: list[tuple[int, float, float, float, float]]) -> FloatArray:
+        """Angle travelled since each segment's start, per substep (n, 2): the general case."""
+        counts = [n for n, *_ in segments]
         t = np.concatenate([self._local_times(n) for n in counts])  # (n, 1): s since each start
         seg = np.array(segments)
         w0 = np.repeat(seg[:, 1::2], counts, axis=0)  # columns w0l, w0r
         wsp = np.repeat(seg[:, 2::2], counts, axis=0)  # columns spl, spr
-        theta = angle_travelled(t, w0, wsp, self._alpha, self.config.time_constant_s)
-        step = np.empty_like(theta)  # the angle of each substep, from 0 at a segment's start
-        np.subtract(theta[1:], theta[:-1], out=step[1:])
-        step[starts] = theta[starts]
-        step *= self._radii
-        return step
+        return angle_travelled(t, w0, wsp, self._alpha, self.config.time_constant_s)
+
+    def _all_unlimited(self, segments: list[tuple[int, float, float, float, float]]) -> bool:
+        """No wheel of any segment starts rate-limited (``angle_travelled``'s ``excess > 0``,
+        the same IEEE operations on Python floats): the common case of a smooth drive."""
+        limit_l = self._alpha_l * self.config.time_constant_s
+        limit_r = self._alpha_r * self.config.time_constant_s
+        return not any(
+            abs(w0l - spl) - limit_l > 0.0 or abs(w0r - spr) - limit_r > 0.0
+            for _, w0l, spl, w0r, spr in segments
+        )
+
+    def _unlimited_angles(
+        self, segments: list[tuple[int, float, float, float, float]]
+    ) -> FloatArray:
+        """``angle_travelled`` when no wheel is rate-limited, bit for bit: there ``t1 = s = tr
+        = 0`` and ``e1 = e0``, so each angle is ``(wsp t + e0 * 0) + (e0 tau) decay(t)`` (``- 0``
+        changes no bit, ``e0 * 0`` keeps the sign of a zero). Per segment the scalars (wsp,
+        e0 * 0, e0 tau) on Python floats, per substep the cached columns of t and ``decay(t) =
+        -expm1(-t / tau)``: four whole-array operations instead of about twenty."""
+        tau = self.config.time_constant_s
+        rows = [
+            (spl, spr, (w0l - spl) * 0.0, (w0r - spr) * 0.0, (w0l - spl) * tau, (w0r - spr) * tau)
+            for _, w0l, spl, w0r, spr in segments
+        ]
+        counts = [n for n, *_ in segments]
+        per_segment = np.array(rows)
+        if len(set(counts)) == 1:  # equal segments (one per tick): (m, n, 2) by broadcasting
+            n = counts[0]
+            grid = per_segment[:, np.newaxis, :]  # (m, 1, 6) against the (n, 1) columns
+            theta3: FloatArray = grid[..., 0:2] * self._local_times(n)
+            theta3 += grid[..., 2:4]
+            theta3 += grid[..., 4:6] * self._local_decay(n)
+            return theta3.reshape(-1, 2)
+        per_substep = np.repeat(per_segment, counts, axis=0)
+        t = np.concatenate([self._local_times(n) for n in counts])
+        decay = np.concatenate([self._local_decay(n) for n in counts])
+        theta: FloatArray = per_substep[:, 0:2] * t
+        theta += per_substep[:, 2:4]
+        theta += per_substep[:, 4:6] * decay
+        return theta
+
+    def _local_decay(self, n: int) -> FloatArray:
+        """Column ``-expm1(-t / tau)`` of ``_local_times(n)``, as ``angle_travelled`` computes
+        it with ``tr = 0`` (cached with the times)."""
+        key = -n
+        column = self._local_times_cache.get(key)
+        if column is None:
+            column = -np.expm1(-self._local_times(n) / self.config.time_constant_s)
+            if n <= _CACHED_SEGMENT_SUBSTEPS:
+                self._local_times_cache[key] = column
+        return column
 
     def _local_times(self, n: int) -> FloatArray:
         """Column (k / substep_hz for k = 1 .. n); short ones cached (most span one tick)."""
@@ -220,12 +282,18 @@ class Drivetrain:
         return column
 
     def encoder_counts(self) -> tuple[int, int]:
-        """Raw (left, right) encoder counters, wrapped to ``profile.counter_bits`` (unsigned)."""
-        cpr, bits = self.profile.counts_per_rev, self.profile.counter_bits
+        """Raw (left, right) encoder counters, wrapped to ``profile.counter_bits`` (unsigned):
+        ``wrap_counter(offset + encoder_count(angle, cpr, quadrature), bits)`` inlined (it runs
+        every tick; the same operations in the same order)."""
+        cpr = self.profile.counts_per_rev
+        k = 4 if self.quadrature else 1
+        mask = (1 << self.profile.counter_bits) - 1
         left0, right0 = self.counter_offset
+        angle_l, angle_r = self.angle
+        floor = math.floor
         return (
-            wrap_counter(left0 + encoder_count(self.angle[0], cpr, self.quadrature), bits),
-            wrap_counter(right0 + encoder_count(self.angle[1], cpr, self.quadrature), bits),
+            (left0 + floor(angle_l / TAU_RAD * cpr * k)) & mask,
+            (right0 + floor(angle_r / TAU_RAD * cpr * k)) & mask,
         )
 
     def wheel_speeds_mps(self) -> tuple[float, float]:

@@ -23,6 +23,7 @@ from odocan.sim.board import TICK_S
 from odocan.sim.clock import Clock
 from odocan.sim.contract import cycle_ticks
 from odocan.sim.errors import ErrorModel
+from odocan.sim.frames import SimTruthPart, pack_sim_truth, pack_wheel_encoders, unpack_motor_cmd
 from odocan.sim.node import BusNode
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import Scenario, get_scenario
@@ -48,7 +49,7 @@ class MotorController(BusNode):
         """One received ``MOTOR_CMD`` payload: applied when its E2E check passes."""
         status = self.rx_motor_cmd.check(data)
         if status is E2EStatus.OK or status is E2EStatus.OKSOMELOST:
-            cmd = fr.unpack_motor_cmd(data)
+            cmd = unpack_motor_cmd(data)
             self.vehicle.command(
                 cmd.left_speed_mm_s / 1000.0, cmd.right_speed_mm_s / 1000.0, self.clock.now_s()
             )
@@ -79,7 +80,7 @@ class MotorController(BusNode):
         right = (right - self._count_offset[1]) & mask
         self.counter = (self.counter + 1) & 0xF
         self.send_frame(
-            fr.WHEEL_ENCODERS_ID, fr.pack_wheel_encoders(self.counter, left & _U24, right & _U24)
+            fr.WHEEL_ENCODERS_ID, pack_wheel_encoders(self.counter, left & _U24, right & _U24)
         )
         return self.counter
 
@@ -97,13 +98,13 @@ class TruthSender(BusNode):
         """Send the three SIM_TRUTH parts of the truth now."""
         pose = self.vehicle.truth()
         parts = (
-            (fr.SimTruthPart.X, round(pose.x_m * 1e4)),
-            (fr.SimTruthPart.Y, round(pose.y_m * 1e4)),
-            (fr.SimTruthPart.HEADING, round(pose.heading_rad * _BAM16_PER_RAD) & 0xFFFF),
+            (SimTruthPart.X, round(pose.x_m * 1e4)),
+            (SimTruthPart.Y, round(pose.y_m * 1e4)),
+            (SimTruthPart.HEADING, round(pose.heading_rad * _BAM16_PER_RAD) & 0xFFFF),
         )
         for part, value in parts:
             self.counter = (self.counter + 1) & 0xF
-            data = fr.pack_sim_truth(self.counter, part, enc_counter, value, self.errors)
+            data = pack_sim_truth(self.counter, part, enc_counter, value, self.errors)
             self.send_frame(fr.SIM_TRUTH_ID, data)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import can
 
 from odocan.sim.clock import Clock
-from odocan.sim.transport import data_frame
+from odocan.sim.transport import OdocanBus, data_frame
 
 
 class BusNode:
@@ -20,10 +20,18 @@ class BusNode:
         self.tx_errors = 0  # frames the bus refused (CanError)
 
     def send_frame(self, can_id: int, data: bytes) -> bool:
-        """Send one classic data frame stamped now; False (and counted) when the bus refuses."""
-        msg = data_frame(self.clock.now_s() + self.tx_latency_s, can_id, data)
+        """Send one classic data frame stamped now; False (and counted) when the bus refuses.
+
+        The lean transport takes the frame's fields (``OdocanBus.send_data``: no Message built
+        for the sender only to be copied for each receiver); any other bus (python-can's, a
+        fault injector, a wrapper put in ``self.bus``) a ``can.Message``."""
+        stamp_s = self.clock.now_s() + self.tx_latency_s
+        bus = self.bus
         try:
-            self.bus.send(msg)
+            if type(bus) is OdocanBus:
+                bus.send_data(can_id, data, stamp_s)
+            else:
+                bus.send(data_frame(stamp_s, can_id, data))
         except can.CanError:
             self.tx_errors += 1
             return False

@@ -42,7 +42,7 @@ from odocan.firmware.config import Integrator, RobotParams
 from odocan.sim.board import TICK_S, TX_LATENCY_S
 from odocan.sim.cboard import board_maker
 from odocan.sim.clock import LockstepClock
-from odocan.sim.closing import Closing
+from odocan.sim.closing import Closing, release_all
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import DEFAULT_BITRATE, FaultInjectingBus, FaultSpec
@@ -242,11 +242,4 @@ class LockstepRig(Closing):
         """Stop the listeners and release the virtual buses: every one of them, even when a
         listener's ``stop()`` or a bus's ``shutdown()`` fails (e.g. a log that cannot be
         finished on a full disk); the first such error is raised once all are closed."""
-        first: BaseException | None = None
-        for release in [*(li.stop for li in self.listeners), *(b.shutdown for b in self._buses)]:
-            try:
-                release()
-            except Exception as exc:
-                first = first or exc
-        if first is not None:
-            raise first
+        release_all([*(li.stop for li in self.listeners), *(b.shutdown for b in self._buses)])

@@ -71,6 +71,32 @@ class _Wire:
         self.handles: tuple[OdocanBus, ...] = ()
         self.timing = None if bitrate is None else BitTiming(self, bitrate)
 
+    def deliver_data(
+        self, sender: OdocanBus, timestamp: float, can_id: int, data: bytes | bytearray
+    ) -> None:
+        """``deliver`` of a classic 11-bit data frame given by its fields (``data_frame``'s),
+        without the sender's ``Message``: each receiver's is built, filtered, then queued."""
+        name = self.name
+        for handle in self.handles:
+            if handle is sender and not sender.receive_own_messages:
+                continue
+            out: Message = _new_message(Message)
+            out.timestamp = timestamp
+            out.arbitration_id = can_id
+            out.is_extended_id = False
+            out.is_remote_frame = False
+            out.is_error_frame = False
+            out.channel = name
+            out.data = bytearray(data)
+            out.dlc = len(out.data)
+            out.is_fd = False
+            out.is_rx = handle is not sender
+            out.bitrate_switch = False
+            out.error_state_indicator = False
+            if handle._filters is not None and not handle._matches_filters(out):
+                continue  # the receiver's acceptance filter: the frame never enters its queue
+            handle._put(out)
+
     def deliver(self, sender: OdocanBus, msg: Message, timestamp: float) -> None:
         """A fresh copy of ``msg``, stamped ``timestamp``, into every handle that hears it."""
         name = self.name
@@ -274,6 +300,19 @@ class OdocanBus(BusABC):
             self._wire.deliver(self, msg, timestamp)
         else:
             self.timing.enqueue(self, msg, timestamp)
+
+    def send_data(self, can_id: int, data: bytes | bytearray, timestamp: float) -> None:
+        """``send(data_frame(timestamp, can_id, data))`` on an instant wire, without building
+        the sender's ``Message`` (the receivers get theirs as from ``send``): the lockstep rig's
+        nodes send this way (``sim.node.BusNode``). A bit-timed wire goes through ``send``."""
+        if not self._open:
+            raise CanOperationError("Cannot operate on a closed bus")
+        if self.timing is not None:
+            self.send(data_frame(timestamp, can_id, data))
+            return
+        self._wire.deliver_data(
+            self, timestamp if self.preserve_timestamps else time.time(), can_id, data
+        )
 
     def _put(self, msg: Message) -> None:
         """Queue one received frame (runs in the sender's thread)."""

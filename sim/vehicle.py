@@ -97,8 +97,9 @@ class Vehicle:
 
     def advance_to(self, t_s: float) -> None:
         """Run the simulation up to time ``t_s`` (s, >= current time, floored to the grid)."""
-        self.drivetrain.advance(self._substep_of(t_s))
-        if self.drivetrain.pending_substeps >= _MAX_PENDING:
+        drivetrain = self.drivetrain
+        drivetrain.advance(self._substep_of(t_s))
+        if drivetrain._pending >= _MAX_PENDING:  # pending_substeps, read every tick
             self._sync_truth()
 
     def command(self, left_mps: float, right_mps: float, t_s: float) -> None:

@@ -3,7 +3,9 @@
 ``Mosquitto`` writes a configuration on a free 127.0.0.1 port with ``allow_anonymous false``, a
 password file made by ``mosquitto_passwd -b`` and an ACL: user ``bridge`` may read and write
 ``odocan/#``; each robot's user (``robot001``, ``robot002``) may write only its own commands and
-read only its own topics. Persistence is on, so a restart keeps sessions and queued messages.
+read only its own topics. Persistence is on, so a restart keeps sessions and queued messages;
+``durable=True`` also saves them at every change (``autosave_on_changes``, ``autosave_interval
+1``), so a broker killed with -9 keeps them too (``durable_mosquitto``).
 Tests that need mosquitto skip with the reason when it is not installed.
 """
 
@@ -56,9 +58,10 @@ class Mosquitto:
         users: dict[str, str] | None = None,
         acl: str = ACL,
         listener: str = "",
+        durable: bool = False,
     ) -> None:
         """``users`` (default ``USERS``) and ``acl`` (default ``ACL``); ``listener``: more lines
-        for the listener (e.g. its TLS settings)."""
+        for the listener (e.g. its TLS settings); ``durable``: persist at every change."""
         assert MOSQUITTO is not None
         assert MOSQUITTO_PASSWD is not None
         self.port = free_loopback_port()
@@ -70,6 +73,7 @@ class Mosquitto:
             subprocess.run([MOSQUITTO_PASSWD, "-b", str(passwd), user, password], check=True)
         (workdir / "acl").write_text(acl)
         self.conf = workdir / "mosquitto.conf"
+        autosave = "autosave_on_changes true\nautosave_interval 1\n" if durable else ""
         self.conf.write_text(
             f"listener {self.port} {LOOPBACK}\n"
             f"{listener}"
@@ -78,6 +82,7 @@ class Mosquitto:
             f"acl_file {workdir / 'acl'}\n"
             "persistence true\n"
             f"persistence_location {workdir}/\n"
+            f"{autosave}"
             "log_dest none\n"
             f"user {getpass.getuser()}\n"  # as root: keep the privileges to the tmp files
         )
@@ -113,6 +118,18 @@ class Mosquitto:
             self.proc.terminate()
             self.proc.wait(timeout=10)
             self.proc = None
+
+
+@pytest.fixture
+def durable_mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
+    """A running mosquitto that saves its state at every change: kill -9 loses none of it."""
+    require_executables("mosquitto", "mosquitto_passwd", install="apt-get install mosquitto")
+    broker = Mosquitto(tmp_path, durable=True)
+    broker.start()
+    try:
+        yield broker
+    finally:
+        broker.stop()
 
 
 @pytest.fixture

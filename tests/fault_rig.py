@@ -26,6 +26,7 @@ from odocan.firmware.ecu import OdomEcu
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.hal import MAILBOX_SLOTS
 from odocan.host.judge.reference import deltas_from_counts, integrate
+from odocan.sim import frames as sf
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.clock import LockstepClock
 from odocan.sim.contract import database
@@ -230,7 +231,7 @@ def _firmware_packers() -> dict[tuple[str, int | None], Callable[[int], bytes]]:
     """Frames packed by ``firmware.frames`` with typical values, by (message, mux value)."""
     e = ErrorMask()
     packers: dict[tuple[str, int | None], Callable[[int], bytes]] = {
-        ("WHEEL_ENCODERS", None): lambda c: fr.pack_wheel_encoders(c, 0x12_3456, 0xAB_CDEF),
+        ("WHEEL_ENCODERS", None): lambda c: sf.pack_wheel_encoders(c, 0x12_3456, 0xAB_CDEF),
         ("MOTOR_CMD", None): lambda c: fr.pack_motor_cmd(c, 512, -300, e),
         ("ODOM_POSE_X", None): lambda c: fr.pack_odom_pose_x(c, 5, 123_456, 0x4000, e),
         ("ODOM_POSE_Y", None): lambda c: fr.pack_odom_pose_y(c, 6, -98_765, -2, e),
@@ -255,9 +256,9 @@ def _firmware_packers() -> dict[tuple[str, int | None], Callable[[int], bytes]]:
             fr.pack_odom_status_e2e, page=page, ok=1000, lost=1, repeated=2, crc_error=3,
             wrong_sequence=4,
         )
-    for part in fr.SimTruthPart:
+    for part in sf.SimTruthPart:
         packers["SIM_TRUTH", int(part)] = partial(
-            fr.pack_sim_truth, part=part, enc_counter=9, value=-4321, errors=e
+            sf.pack_sim_truth, part=part, enc_counter=9, value=-4321, errors=e
         )
     return packers
 

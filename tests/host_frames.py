@@ -9,6 +9,10 @@ bench/ build and read those frames here, bit for bit, on the firmware's own head
 against cantools over every raw range. The product's host reads the bus with cantools
 (``odocan.host.protocol``), never with this.
 
+It also holds the E2E sender (``p02_protect``, ``p02_next_counter``: ``E2E_P02Protect`` on
+``firmware.e2e.p02_crc``), which the ECU never runs and the tests' hosts do; ``tests/test_e2e.py``
+proves it against cantools.autosar.
+
 Same conventions as the firmware's half: ``pack_*`` saturate a value outside its signal's DBC
 range (SATURATION in ``errors``) and never raise; ``unpack_*`` return the raw fields, the E2E
 check being the receiver's job.
@@ -19,6 +23,7 @@ from __future__ import annotations
 from enum import IntEnum
 from typing import Final, NamedTuple
 
+from odocan.firmware.e2e import COUNTER_MASK, p02_crc
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.fixmath import (
     U16_MAX,
@@ -70,13 +75,30 @@ from odocan.firmware.frames import (
     NavGoalField,
     NavMode,
     SetPoseField,
-    SimTruthPart,
     StatusPage,
     e2e_head,
     frame_word,
     i32_field,
     seal_frame,
 )
+from odocan.sim.frames import SimTruthPart
+
+
+# --- the E2E sender (the ECU seals its own frames with firmware.frames.seal_frame) ---
+def p02_protect(frame: bytearray, counter: int, data_ids: tuple[u8, ...]) -> None:
+    """``E2E_P02Protect`` on an 8-byte frame: write COUNTER (byte 1 low nibble), then CHECKSUM.
+
+    ``counter`` is taken modulo 16 (the sender's u4 counter); byte 1's high nibble is kept.
+    ``data_ids`` is the message's 16-entry list; the entry chosen is ``data_ids[counter]``.
+    """
+    counter &= COUNTER_MASK
+    frame[1] = (frame[1] & 0xF0) | counter
+    frame[0] = p02_crc(frame, data_ids[counter])
+
+
+def p02_next_counter(counter: int) -> int:
+    """The sender's next counter: ``(counter + 1) mod 16`` (Profile 2 counts 0..15)."""
+    return (counter + 1) & COUNTER_MASK
 
 
 # --- enums on the wire the firmware reads as raw bits (NAV_GOAL GO's flags) ---

@@ -26,8 +26,15 @@ written again here: a step from the last accepted frame beyond ceil(v_max T / tr
 + 1 counts per period elapsed on either wheel (v_max = 4 m/s, T = 10 ms) is refused, not
 integrated, and the on-board pose keeps naming the last accepted frame; ``RESYNC`` refused frames
 in a row, each plausible from the one before, are a counter restart: the odometry restarts from
-the first of them and takes one step to the last (the jump itself is lost). The verdict: max
-position distance <= one LSB (0.1 mm) and max wrapped heading error <= one LSB (2 pi / 65536).
+the first of them and takes one step to the last (the jump itself is lost).
+
+A stalled firmware (no ODOM_POSE frame for ``SILENCE_PERIODS`` periods or more while at least
+``SILENCE_PERIODS - 1`` encoder frames went by, firmware/ecu.py TIME_LOST): its first pose
+after the silence names a frame of its backlog that ENC_COUNTER cannot tell, so it is not
+compared; the firmware took the frames it missed as one step, so at the next accepted encoder
+frame the position starts again where the firmware was (``starts``), as after a gap, and the
+heading goes on following the counts. The verdict: max position distance <= one LSB (0.1 mm)
+and max wrapped heading error <= one LSB (2 pi / 65536).
 """
 
 from __future__ import annotations
@@ -49,6 +56,7 @@ HEADING_LSB_RAD = 2.0 * math.pi / 65536.0
 PERIOD_S = 0.01
 MAX_WHEEL_SPEED_M_S = 4.0  # the firmware's build-time maximum rim speed
 RESYNC = 3  # refused frames consistent among themselves: the counters restarted
+SILENCE_PERIODS = 8  # no pose for this many periods while the encoder frames went on: a stall
 _LINE = re.compile(r"\((\d+\.\d+)\) \S+ ([0-9A-Fa-f]+)#([0-9A-Fa-f]*)")
 
 
@@ -181,6 +189,19 @@ class _Follower:
                       else math.ceil(max_wheel_speed_m_s * PERIOD_S / m) + 1
                       for m in (self.odo.m_left, self.odo.m_right)]
         self.refused: list[_Stamp] = []  # the run of refused frames, each plausible
+        self.last_pose_t = -math.inf  # the latest pose frame's time
+        self.heard_since_pose = 0  # encoder frames since it
+        self.resumed_t: float | None = None  # a stall ended: pose frames at this time are skipped
+        self.place_next = False  # ... and the position starts again at the next encoder frame
+
+    def pose_frame(self, t: float) -> bool:
+        """Whether a pose frame at ``t`` s may be compared (False: the first after a stall)."""
+        silent = t - self.last_pose_t >= (SILENCE_PERIODS - 0.5) * PERIOD_S
+        if silent and self.heard_since_pose >= SILENCE_PERIODS - 1 and self.prev is not None:
+            self.resumed_t, self.place_next = t, True
+            self.halves.clear()
+        self.last_pose_t, self.heard_since_pose = t, 0
+        return t != self.resumed_t
 
     def deltas(self, a: _Stamp, b: _Stamp) -> tuple[int, int]:
         wire = self.wire
@@ -196,6 +217,7 @@ class _Follower:
         """One WHEEL_ENCODERS frame at ``t`` s."""
         frame = (t, int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
         self.last_t = t
+        self.heard_since_pose += 1
         self.halves.clear()
         if round(t * 1e6) in self.reboots_us:  # a new firmware: primed on this frame
             self.prev, self.refused = None, []
@@ -221,7 +243,8 @@ class _Follower:
 
     def _advance(self, prev: _Stamp, frame: _Stamp) -> None:
         d_left, d_right = self.deltas(prev, frame)
-        if frame[0] - prev[0] > 1.5 * PERIOD_S:  # a gap: the heading follows the counts,
+        if frame[0] - prev[0] > 1.5 * PERIOD_S or self.place_next:  # a gap or a stall: the
+            self.place_next = False  # heading follows the counts,
             self.odo.n_left += d_left  # the position starts again where the firmware was
             self.odo.n_right += d_right
             self.odo.x, self.odo.y = self.starts(frame[0])[:2]
@@ -249,7 +272,8 @@ def check(
     for t, name, s in frames.rows:
         if name == "WHEEL_ENCODERS":
             walk.encoders(t, s)
-        elif name in ("ODOM_POSE_X", "ODOM_POSE_Y") and t - walk.last_t < 8 * PERIOD_S:
+        elif name in ("ODOM_POSE_X", "ODOM_POSE_Y") and walk.pose_frame(t) \
+                and t - walk.last_t < 8 * PERIOD_S:
             _pair(name, s, walk.recent, walk.halves, walk.errors)
     errors = walk.errors
     if not errors:

@@ -34,10 +34,11 @@ import numpy.typing as npt
 
 from odocan.firmware import frames as fr
 from odocan.firmware.config import Integrator, RobotParams, derive_constants
-from odocan.firmware.ecu import RESYNC_FRAMES
-from odocan.firmware.errors import ErrorMask, State
+from odocan.firmware.ecu import RECOVERY_FRAMES, RESYNC_FRAMES, WATCHDOG_TICKS
+from odocan.firmware.errors import ErrorMask, Reason, State
 from odocan.firmware.fixmath import mul_shr_round_i64, wrap_i32
 from odocan.firmware.odometry import Odometry
+from odocan.sim import frames as sf
 from odocan.sim.robot import RobotProfile
 
 ENCODER_PERIOD_S = 0.01
@@ -147,7 +148,7 @@ def synthesize(
             named = k & 0xF
         t_s = t0_s + k * ENCODER_PERIOD_S
         group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
-                       fr.pack_wheel_encoders(k, left & wire_mask, right & wire_mask))]
+                       sf.pack_wheel_encoders(k, left & wire_mask, right & wire_mask))]
         life = k - boot  # frames since the firmware primed
         if boot_in_init and k == reboot_at:  # booted before the frame: INIT, no pose yet
             init = fr.pack_odom_status_summary(0, State.INIT, odo.consts.integrator, 0, 0, errors)
@@ -209,3 +210,112 @@ def wandering_drive(
     d_left = np.rint(base - diff + noise).astype(np.int64)
     d_right = np.rint(base + diff + noise).astype(np.int64)
     return d_left, d_right
+
+
+STALL_FIFO_FRAMES = 3  # the CAN controller's receive FIFO: the frames a stalled MCU still gets
+
+
+@dataclass
+class _Pace:
+    """What the firmware does at one encoder frame of ``synthesize_stalled``."""
+
+    silent: bool = False  # no tick runs: nothing integrated, nothing sent
+    steps: list[int] = field(default_factory=list)  # encoder frames integrated in this tick
+    reason: Reason = Reason.NONE
+
+
+def _paces(
+    n_frames: int, stalls: dict[int, int], holds: dict[int, int], late: set[int]
+) -> list[_Pace]:
+    """Per encoder frame: silent or not, the frames integrated, the reason reported."""
+    paces = [_Pace(steps=[k]) for k in range(n_frames)]
+    for k in sorted(late):
+        if k + 1 < n_frames:
+            paces[k].steps.remove(k)
+            paces[k + 1].steps.insert(0, k)
+    for k, n in stalls.items():
+        for j in range(k, min(k + n, n_frames)):
+            paces[j] = _Pace(silent=True)
+        if k + n < n_frames:  # resume: the FIFO's oldest frames (stale), then fresh ones
+            paces[k + n] = _Pace(steps=list(range(k, k + STALL_FIFO_FRAMES)),
+                                 reason=Reason.TIME_LOST)
+        for j in range(k + n + 1, min(k + n + 1 + RECOVERY_FRAMES, n_frames)):
+            paces[j].reason = Reason.TIME_LOST
+    for k, n in holds.items():
+        for j in range(k, min(k + n, n_frames)):
+            paces[j] = _Pace(reason=Reason.ENCODER_TIMEOUT if j - k >= WATCHDOG_TICKS
+                             else Reason.NONE)
+        for j in range(k + n, min(k + n + RECOVERY_FRAMES, n_frames)):
+            paces[j].reason = Reason.ENCODER_TIMEOUT if n >= WATCHDOG_TICKS else Reason.NONE
+    return paces
+
+
+def synthesize_stalled(
+    robot: RobotProfile,
+    integrator: str,
+    d_left: npt.ArrayLike,
+    d_right: npt.ArrayLike,
+    *,
+    stalls: dict[int, int] | None = None,
+    holds: dict[int, int] | None = None,
+    x_bias_100um: dict[int, int] | None = None,
+    late: set[int] | None = None,
+) -> Synth:
+    """Like ``synthesize`` (power-up, no counter jumps), with a firmware that stops keeping pace:
+
+    * ``stalls`` {k: n}: the MCU stalls from encoder frame k for n frames (n >= 8): no tick runs,
+      nothing is sent, while the motor controller goes on. Resuming at frame k + n, its first
+      tick takes the ``STALL_FIFO_FRAMES`` frames its CAN FIFO held (k, k + 1, k + 2: the rest
+      overran) and sends a pose naming the last of them (a backlog frame); frame k + n + 1 is
+      then one step from it across the frames missed. ODOM_STATUS: DEGRADED (TIME_LOST) until
+      ``RECOVERY_FRAMES`` frames later, then OK, as firmware/ecu.py does.
+    * ``holds`` {k: n}: the firmware goes on ticking and sending but accepts none of frames
+      k .. k + n - 1 (its E2E window shut after a late frame and a lost one): its poses keep
+      naming frame k - 1; frame k + n is one step across them (DEGRADED, ENCODER_TIMEOUT, after
+      ``WATCHDOG_TICKS`` frames).
+    * ``late``: frames that reach the firmware a tick after their period (integrated then).
+    * ``x_bias_100um``: a wrong firmware, as in ``synthesize``.
+
+    ``Synth.state[k]`` is the firmware's pose after the tick of frame k (unchanged while silent
+    or held)."""
+    errors = ErrorMask()
+    odo = Odometry(derive_constants(params_of(robot, integrator), errors), errors)
+    mask, wire_mask = (1 << robot.counter_bits) - 1, (1 << min(robot.counter_bits, WIRE_BITS)) - 1
+    dl = np.concatenate(([0], np.asarray(d_left, dtype=np.int64)))
+    dr = np.concatenate(([0], np.asarray(d_right, dtype=np.int64)))
+    left, right = np.cumsum(dl) & mask, np.cumsum(dr) & mask
+    paces = _paces(len(dl), stalls or {}, holds or {}, late or set())
+    out = Synth()
+    named, accepted = 0, 0
+    pose_counter = status_counter = 0
+    for k, pace in enumerate(paces):
+        for j in pace.steps:
+            odo.step_counts(int(left[j]), int(right[j]))
+            named, accepted = j & 0xF, accepted + 1
+        t_s = k * ENCODER_PERIOD_S
+        group = [_line(t_s, fr.WHEEL_ENCODERS_ID, sf.pack_wheel_encoders(
+            k, int(left[k]) & wire_mask, int(right[k]) & wire_mask))]
+        resumed = k > 0 and paces[k - 1].silent and not pace.silent
+        if not pace.silent and (k % 2 == 0 or resumed):
+            group += _pose_lines(odo, t_s + 0.001, pose_counter, named, errors,
+                                 (x_bias_100um or {}).get(k, 0))
+            pose_counter += 1
+        if not pace.silent and (k % 10 == 0 or resumed):
+            state = State.OK if pace.reason is Reason.NONE else State.DEGRADED
+            status = fr.pack_odom_status_summary(status_counter, state, odo.consts.integrator, 0,
+                                                 int(t_s), errors, int(pace.reason))
+            group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, status))
+            status_counter += 1
+        if not pace.silent and k % 50 == 10:
+            page = fr.pack_odom_status_e2e(
+                status_counter, fr.StatusPage.E2E_WHEEL_ENCODERS, accepted, 0, 0, 0, 0
+            )
+            group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, page))
+            status_counter += 1
+        out.groups.append(group)
+        out.state.append(
+            FirmwareState(odo.x_q40_m, odo.y_q40_m, odo.heading_bam64, odo.heading_turns)
+        )
+        out.left_counts.append(int(left[k]))
+        out.right_counts.append(int(right[k]))
+    return out

@@ -29,7 +29,7 @@ RFC4493_VECTORS = [
 
 def encrypt_block(rk: tuple[int, ...], block: bytes) -> bytes:
     """One 16-byte block through the firmware's ``encrypt_words`` (big-endian columns, FIPS-197
-    3.4), as C's ``aes128_encrypt`` wraps ``aes128_encrypt_words``."""
+    3.4), as C's ``aes_cmac`` loads and stores the words around ``aes128_encrypt_words``."""
     columns = [int.from_bytes(block[4 * i : 4 * i + 4], "big") for i in range(4)]
     words = encrypt_words(rk, *columns)
     return b"".join(word.to_bytes(4, "big") for word in words)

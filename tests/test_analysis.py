@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 from cantools.database.can import Database
 
-from odocan.firmware.e2e import p02_protect
 from odocan.host.io.logs import FrameArrays, FrameCollector, read_log
 from odocan.host.judge.analysis import (
     HEADING_LSB_RAD,
@@ -24,6 +23,7 @@ from odocan.host.judge.analysis import (
     Tolerance,
     analyze,
 )
+from odocan.host.judge.compare import _outside_band
 from odocan.host.judge.reference import Geometry, integrate
 from odocan.sim.contract import DBC_PATH, database
 from odocan.sim.errors import ErrorModel
@@ -31,6 +31,7 @@ from odocan.sim.exceptions import OdocanError
 from odocan.sim.rig import INTEGRATORS, LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests.dbc_typed import dbc_attribute
+from tests.host_frames import p02_protect
 from tests.synth_log import Synth, synthesize, wandering_drive
 
 PMIR = load("pmir")
@@ -265,3 +266,16 @@ def test_a_recorder_started_late_is_not_a_power_up(tmp_path: Path) -> None:
         "power-up", "fitted")
     assert whole.passed
     assert late.passed
+
+
+def test_the_twist_band_keeps_the_step_into_the_last_named_frame() -> None:
+    """When the log's last twist frames name the same encoder frame again, the band of the
+    segment before them still holds the step into that frame (``reduceat``'s clipped start cut
+    it off: a narrower band could fail a correct firmware, and where the log ended decided)."""
+    step = np.array([0.0, 0.1, 0.1, 0.1, 0.5])  # the speed steps at encoder frames 0..4
+    gap = np.zeros(5)
+    e = np.array([0, 2, 4, 4])  # the encoder frames four twist frames name
+    value = np.array([0.1, 0.1, 0.5, 0.5])  # each the speed of its last step
+    out = _outside_band(value, e, step, gap)
+    assert out[2] == 0.0
+    assert out[3] == 0.0

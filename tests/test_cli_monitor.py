@@ -313,11 +313,12 @@ def test_rate_and_jitter_come_from_the_bus_timestamps() -> None:
     (the frames carry their time; the live test above leaves rates to the wall clock)."""
     from odocan.firmware import frames as fw_frames
     from odocan.host.judge.monitor import BusMonitor
+    from odocan.sim import frames as sf
     from odocan.sim.robot import load
 
     model = BusMonitor(load("pmir"))
     for k in range(200):
-        data = fw_frames.pack_wheel_encoders(k % 16, 5 * k, 5 * k)
+        data = sf.pack_wheel_encoders(k % 16, 5 * k, 5 * k)
         msg = can.Message(arbitration_id=fw_frames.WHEEL_ENCODERS_ID, data=data,
                           is_extended_id=False, timestamp=k * 0.01)
         model.feed(msg, now_s=k * 0.01)

@@ -15,6 +15,7 @@ from cantools.subparsers.dump.formatting import layout_string
 from odocan.firmware import frames
 from odocan.firmware.config import Integrator
 from odocan.firmware.errors import State
+from odocan.sim import frames as sf
 from tests import host_frames as hf
 from tests.dbc_typed import choices, dbc_attribute, load_can_dbc
 
@@ -294,7 +295,7 @@ def test_firmware_enums_match_the_value_tables(db: cantools.database.can.Databas
         ("ODOM_ACK", "REASON", frames.AckReason),
         ("ODOM_STATUS", "PAGE", frames.StatusPage),
         ("ODOM_STATUS", "STATE", State),
-        ("SIM_TRUTH", "PART", frames.SimTruthPart),
+        ("SIM_TRUTH", "PART", sf.SimTruthPart),
         ("NAV_GOAL", "FIELD", frames.NavGoalField),
         ("NAV_GOAL", "MODE", frames.NavMode),
         ("NAV_GOAL", "APPEND", hf.NavAppend),

@@ -14,9 +14,8 @@ from odocan.firmware.e2e import (
     E2EStatus,
     crc8h2f,
     p02_crc,
-    p02_next_counter,
-    p02_protect,
 )
+from tests.host_frames import p02_next_counter, p02_protect
 
 DATA_IDS = tuple(range(0x10, 0x20))
 OTHER_DATA_IDS = tuple(range(0x20, 0x30))

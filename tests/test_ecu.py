@@ -12,6 +12,7 @@ from odocan.firmware.config import RobotParams
 from odocan.firmware.ecu import RECOVERY_FRAMES, WATCHDOG_TICKS, OdomEcu
 from odocan.firmware.errors import ErrorFlag, ErrorMask, State
 from odocan.firmware.hal import MAILBOX_SLOTS
+from odocan.sim import frames as sf
 from tests import host_frames as hf
 from tests.dbc_typed import decode, load_can_dbc
 from tests.odo_helpers import geometry, params
@@ -52,7 +53,7 @@ class Rig:
     def encoders(self, d_left: int, d_right: int, *, bits: int = 16) -> bytes:
         self.left = (self.left + d_left) % (1 << bits)
         self.right = (self.right + d_right) % (1 << bits)
-        data = fr.pack_wheel_encoders(self.counter, self.left & 0xFFFFFF, self.right & 0xFFFFFF)
+        data = sf.pack_wheel_encoders(self.counter, self.left & 0xFFFFFF, self.right & 0xFFFFFF)
         self.counter = (self.counter + 1) % 16
         return data
 

@@ -83,6 +83,36 @@ def test_a_shards_robots_send_the_bytes_they_send_in_the_whole_fleet(first: int)
     assert shard_frames[names[0]] != whole_frames["robot001"]  # seeds differ: a real check
 
 
+def test_every_robot_sends_the_same_bytes_on_either_transport() -> None:
+    """``odocan fleet --transport``: python-can ``virtual`` and the ``odocan`` plugin carry the
+    same frames, robot by robot, in the fleet's lockstep steps."""
+    lean = FleetConfig(robots=3, robot=robot.load("pmir"), seed=3)
+    frames = {t: _frames(replace(lean, transport=t), 150) for t in ("odocan", "virtual")}
+    assert sorted(frames["odocan"]) == ["robot001", "robot002", "robot003"]
+    for name, sent in frames["odocan"].items():
+        assert len(sent) > 300
+        assert frames["virtual"][name] == sent, name
+
+
+def test_fleet_on_python_cans_virtual_runs_and_judges_every_robot(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    report = tmp_path / "fleet.json"
+    code = main(["fleet", "-n", "2", "--transport", "virtual", "--duration", "2", "--seed", "4",
+                 "--max-miss-ratio", "1", "--report", str(report)])
+    out, err = capsys.readouterr()
+    data = json.loads(report.read_text())
+    assert data["transport"] == "virtual"
+    robots = data["per_robot"]
+    assert list(robots) == ["robot001", "robot002"]
+    skipped = data["skipped_releases"] > 0  # a loaded machine: the positions are not judged
+    assert code == (1 if skipped else 0), out + err
+    for r in robots.values():
+        assert r["verdict"] == ("UNJUDGED" if skipped else "PASS"), r["reason"]
+        assert r["pose_vs_reference"]["samples"] > 20
+        assert r["frames"]["WHEEL_ENCODERS"] > 100
+
+
 def _stats(*errors: tuple[float, float]) -> ErrorStats:
     """ErrorStats of on-board poses off the reference by (dx m, dheading rad)."""
     stats = ErrorStats()

@@ -1,5 +1,6 @@
 """The hand-written frame codec against cantools (layouts) and cantools.autosar (CRC): the
-firmware's half (firmware/frames.py, what the ECU receives and transmits) and the host's half
+firmware's half (firmware/frames.py, what the ECU receives and transmits), the sim's half
+(sim/frames.py, what the motor controller and the simulator send and receive) and the host's half
 (tests/host_frames.py, what a host sends it and reads from it).
 
 For every message and every multiplexer page, over every signal's whole raw range:
@@ -25,8 +26,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from odocan.firmware import frames as f
+from odocan.firmware import secoc
 from odocan.firmware.e2e import E2EReceiver, E2EStatus
 from odocan.firmware.errors import ErrorFlag, ErrorMask
+from odocan.sim import frames as sf
 from tests import host_frames as hf
 from tests.dbc_typed import dbc_attribute, load_can_dbc
 
@@ -94,7 +97,7 @@ def mux_kind(message: str, mux: int, value_signal: str | None, pack: Any, unpack
 
 def sim_truth_kind(part: int, signal: str) -> Kind:
     def do_pack(c: int, v: Values, e: ErrorMask) -> bytes:
-        return f.pack_sim_truth(c, part, v["ENC_COUNTER"], v[signal], e)
+        return sf.pack_sim_truth(c, part, v["ENC_COUNTER"], v[signal], e)
 
     def do_unpack(data: bytes) -> Values:
         r = hf.unpack_sim_truth(data)
@@ -150,7 +153,7 @@ KINDS = [
     Kind(
         "WHEEL_ENCODERS",
         None,
-        lambda c, v, _e: f.pack_wheel_encoders(c, v["LEFT_COUNT"], v["RIGHT_COUNT"]),
+        lambda c, v, _e: sf.pack_wheel_encoders(c, v["LEFT_COUNT"], v["RIGHT_COUNT"]),
         lambda d: as_signals(f.unpack_wheel_encoders(d), {}),
     ),
     Kind(
@@ -158,7 +161,7 @@ KINDS = [
         None,
         lambda c, v, e: f.pack_motor_cmd(c, v["LEFT_SPEED"], v["RIGHT_SPEED"], e),
         lambda d: as_signals(
-            f.unpack_motor_cmd(d),
+            sf.unpack_motor_cmd(d),
             {"left_speed_mm_s": "LEFT_SPEED", "right_speed_mm_s": "RIGHT_SPEED"},
         ),
     ),
@@ -458,9 +461,20 @@ def test_wrapping_fields_keep_their_low_bits(
     assert errors.bits == 0
 
 
+def test_fv_mask_is_the_dbc_fv_signals_and_the_secoc_fv_width() -> None:
+    """One FV_MASK (firmware.frames): FV_COUNT and FV_EPOCH side by side in the DBC, and
+    SecOC's FV = EPOCH << COUNT_BITS | COUNT."""
+    message = DB.get_message_by_name("ODOM_FRESHNESS")
+    count, epoch = (message.get_signal_by_name(name) for name in ("FV_COUNT", "FV_EPOCH"))
+    assert (count.length, epoch.length) == (secoc.COUNT_BITS, secoc.EPOCH_BITS)
+    assert count.start + count.length == epoch.start
+    assert (1 << (count.length + epoch.length)) - 1 == f.FV_MASK
+    assert not hasattr(secoc, "FV_MASK")
+
+
 def test_counter_is_taken_mod_16() -> None:
-    assert f.pack_wheel_encoders(17, 5, 6) == f.pack_wheel_encoders(1, 5, 6)
-    assert f.unpack_wheel_encoders(f.pack_wheel_encoders(15, 5, 6)).counter == 15
+    assert sf.pack_wheel_encoders(17, 5, 6) == sf.pack_wheel_encoders(1, 5, 6)
+    assert f.unpack_wheel_encoders(sf.pack_wheel_encoders(15, 5, 6)).counter == 15
 
 
 def test_unknown_pages_are_sent_raw_and_read_back() -> None:

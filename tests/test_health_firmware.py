@@ -20,6 +20,7 @@ from odocan.firmware.ecu import (
 )
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.hal import MAILBOX_SLOTS, TICK_PERIOD_US
+from odocan.sim import frames as sf
 from tests import host_frames as hf
 from tests.dbc_typed import choices
 from tests.odo_helpers import geometry, params
@@ -47,7 +48,7 @@ class TimedRig(Rig):
 
     def forged(self, left: int, right: int) -> bytes:
         """A valid frame (next COUNTER, good CRC) carrying counts the motors never had."""
-        data = fr.pack_wheel_encoders(self.counter, left & 0xFFFF, right & 0xFFFF)
+        data = sf.pack_wheel_encoders(self.counter, left & 0xFFFF, right & 0xFFFF)
         self.counter = (self.counter + 1) % 16
         return data
 

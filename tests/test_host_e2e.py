@@ -17,7 +17,7 @@ from cantools.database.can.formats.arxml.message_specifics import AutosarMessage
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from odocan.firmware.e2e import E2EReceiver, E2EStatus, p02_protect
+from odocan.firmware.e2e import E2EReceiver, E2EStatus
 from odocan.host.io.logs import FrameArrays, FrameCollector
 from odocan.host.protocol.e2e import (
     CRC8H2F_TABLE,
@@ -30,6 +30,7 @@ from odocan.host.protocol.e2e import (
 )
 from odocan.sim.contract import database
 from tests.dbc_typed import dbc_attribute
+from tests.host_frames import p02_protect
 
 DB = database()
 ENC = DB.get_message_by_name("WHEEL_ENCODERS")

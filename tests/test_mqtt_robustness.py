@@ -20,7 +20,8 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.bridge import Batch, Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerURL
-from odocan.host.mqtt.link import RobotLink, _Arrived
+from odocan.host.mqtt.client import Arrived
+from odocan.host.mqtt.link import RobotLink
 from odocan.host.protocol.commands import MAX_COMMAND_BYTES
 from odocan.sim import robot
 from odocan.sim.contract import database
@@ -234,8 +235,8 @@ def test_qos1_buffer_drops_superseded_statuses_first() -> None:
     assert [s["seq"] for s in kept if "seq" in s] == [5, 6, 7, 8, 9]  # the newest statuses
 
 
-def _arrived(age_s: float, expiry_s: float | None) -> _Arrived:
-    message = _Arrived("odocan/robot001/cmd/set_pose", b'{"id": "e"}', 1, False, 1, None)
+def _arrived(age_s: float, expiry_s: float | None) -> Arrived:
+    message = Arrived("odocan/robot001/cmd/set_pose", b'{"id": "e"}', 1, False, 1, None)
     message.arrival_s = time.monotonic() - age_s
     message.expiry_s = expiry_s
     return message

@@ -157,3 +157,30 @@ def test_fleet_view_folds_messages_into_a_table() -> None:
     assert not apply(table, "elsewhere/robot002/pose", b"{}")
     assert table["robot002"].online
     assert table["robot002"].pose == {"x_m": 1.5}
+
+
+def test_a_telemetry_sender_cancelled_as_its_write_completes_stops() -> None:
+    """The session ends (cancel) in the same turn paho reports the socket write: the sender must
+    end, not swallow the cancellation and wait forever for more telemetry (asyncio.wait_for in
+    Python 3.11 does swallow it: the fleet's stop then hung)."""
+    import asyncio
+
+    import paho.mqtt.client as paho
+
+    from odocan.host.mqtt.client import LinkClient
+
+    async def scenario() -> bool:
+        client = LinkClient(hostname="127.0.0.1", on_refused=lambda *_: None,
+                         on_overflow=lambda _: None, max_waiting=1, timeout=5.0)
+        info = paho.MQTTMessageInfo(7)  # queued, not yet written
+        waiter = asyncio.create_task(client.written(info))
+        await asyncio.sleep(0)
+        client._on_publish(client._client, None, 7, 0, None)  # the write completes ...
+        waiter.cancel()  # ... as the session's task group cancels the sender
+        try:
+            await waiter
+        except asyncio.CancelledError:
+            return True
+        return False
+
+    assert asyncio.run(scenario())

@@ -118,12 +118,6 @@ def test_heading_bam32_is_the_rounded_bam64(heading_bam64: int) -> None:
     assert abs(wrap_angle(bam32_rad(got) - heading_bam64 * TWO_PI / 2**64)) <= math.pi / 2**32
 
 
-@given(st.integers(-(2**31), 2**31 - 1))
-def test_angle_urad_against_float(angle_bam32: int) -> None:
-    got = nav.angle_urad(angle_bam32, ErrorMask())
-    assert abs(got - bam32_rad(angle_bam32) * 1e6) <= 0.5 + 1e-6
-
-
 # --- the control laws ---------------------------------------------------------------------------
 
 

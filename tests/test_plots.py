@@ -145,6 +145,14 @@ def test_broken_inserts_nan_at_sequence_gaps() -> None:
     assert len(plots.broken(np.zeros(0), np.zeros(0))) == 0
 
 
+def test_no_line_joins_two_firmware_lives() -> None:
+    """After a reboot the sequence starts again at 0 (each life is numbered from its boot):
+    the end of one life is not joined to the power-up pose of the next."""
+    seq = np.array([0, 2, 4, 6, 0, 2, 4])
+    out = plots.broken(np.arange(7.0), seq)
+    assert list(np.flatnonzero(np.isnan(out))) == [4]
+
+
 def test_figure_lines_do_not_bridge_gaps(gappy: Analysis) -> None:
     """In the drawn figure, the on-board - reference heading line breaks at every gap, and
     shows the unwrapped values."""

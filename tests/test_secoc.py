@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import random
 from pathlib import Path
 
@@ -13,7 +14,7 @@ from cantools.subparsers.dump.formatting import layout_string
 
 from odocan.firmware import secoc as fw
 from odocan.firmware.cmac import cmac, cmac_key
-from odocan.firmware.e2e import E2EReceiver, E2EStatus, p02_protect
+from odocan.firmware.e2e import E2EReceiver, E2EStatus
 from odocan.host.protocol import secoc as host
 from odocan.sim.exceptions import OdocanError
 from tests import host_frames as hf
@@ -47,7 +48,7 @@ class MemoryNvm:
 def command(rng: random.Random, can_id: int) -> bytes:
     """A random E2E-protected 8-byte command frame (payload need not be meaningful for SecOC)."""
     frame = bytearray(rng.randbytes(8))
-    p02_protect(frame, rng.randrange(16), tuple(range(16)))
+    hf.p02_protect(frame, rng.randrange(16), tuple(range(16)))
     return bytes(frame)
 
 
@@ -264,7 +265,7 @@ def test_frame_codecs_match_the_dbc() -> None:
         decoded = integers(auth_msg, data)
         assert (decoded["REQUEST"], decoded["FRESHNESS"], decoded["AUTHENTICATOR"]) == fields
         assert fw.unpack_odom_auth(data) == fw.OdomAuth(counter & 0xF, *fields)
-        fv = rng.getrandbits(fw.FV_BITS)
+        fv = rng.getrandbits(fw.COUNT_BITS + fw.EPOCH_BITS)
         data = fw.pack_odom_freshness(counter, fw.FreshnessCause.PERIODIC, fv)
         decoded = integers(fresh_msg, data)
         assert (decoded["FV_EPOCH"] << fw.COUNT_BITS) | decoded["FV_COUNT"] == fv
@@ -339,6 +340,19 @@ def test_a_key_file_open_to_others_loads_with_a_warning(
     assert KEY.hex() not in caplog.text
 
 
+def test_a_wrong_key_open_to_others_is_only_the_error(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """One line: the file is no key, so its mode is not worth a warning."""
+    path = tmp_path / "bad.key"
+    path.write_bytes(b"\x01" * 15)
+    path.chmod(0o644)
+    with caplog.at_level("WARNING", logger="odocan.host.protocol.secoc"), \
+            pytest.raises(OdocanError, match="15 bytes"):
+        host.load_secoc_key(path)
+    assert caplog.records == []
+
+
 @pytest.mark.parametrize(
     ("content", "message"),
     [
@@ -362,11 +376,14 @@ def test_key_file_of_the_wrong_length_is_one_line_naming_the_path(
     assert KEY.hex() not in text
 
 
-@pytest.mark.parametrize("kind", ["missing", "directory"])
+@pytest.mark.parametrize("kind", ["missing", "directory", "fifo"])
 def test_unreadable_key_file_is_one_line_naming_the_path(tmp_path: Path, kind: str) -> None:
+    """A FIFO is refused before any read (reading it would block until a writer came)."""
     path = tmp_path / "secoc.key"
     if kind == "directory":
         path.mkdir()
+    elif kind == "fifo":
+        os.mkfifo(path)
     with pytest.raises(OdocanError, match=r"^cannot read SecOC key .*secoc\.key: \w") as caught:
         host.load_secoc_key(path)
     assert "\n" not in str(caught.value)

@@ -15,7 +15,6 @@ import can
 import pytest
 
 from odocan.firmware import frames as fr
-from odocan.firmware.e2e import p02_protect
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.secoc import FRESHNESS_TX_MASK, AuthRequest
 from odocan.host.judge.monitor import BusMonitor
@@ -233,7 +232,7 @@ def test_a_recorded_command_replayed_later_and_after_a_reboot_is_refused(
 def _recount(data: bytes, counter: int, can_id: int) -> bytes:
     """The same command with another E2E COUNTER (what a replaying node can always do)."""
     frame = bytearray(data)
-    p02_protect(frame, counter, hf.DATA_IDS_BY_FRAME_ID[can_id])
+    hf.p02_protect(frame, counter, hf.DATA_IDS_BY_FRAME_ID[can_id])
     return bytes(frame)
 
 

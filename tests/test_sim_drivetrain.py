@@ -225,3 +225,32 @@ def test_32_bit_counters_wrap() -> None:
     assert exact[0] > 2**32
     assert exact[1] < -(2**32)
     assert drive.encoder_counts() == (exact[0] % 2**32, exact[1] % 2**32)
+
+
+_SPEED = st.sampled_from([0.0, -0.0, 1e-300]) | st.floats(-20.0, 20.0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(st.tuples(st.integers(1, 12), _SPEED, _SPEED, _SPEED, _SPEED), min_size=1,
+             max_size=12),
+    st.booleans(),
+)
+def test_the_unlimited_fast_path_is_angle_travelled_bit_for_bit(
+    raw: list[tuple[int, float, float, float, float]], equal: bool
+) -> None:
+    """``Drivetrain._unlimited_angles`` against ``angle_travelled`` (via ``_angles``) on batches
+    no wheel of which is rate-limited: equal segments (the broadcast) and unequal ones (the
+    repeat), signed zeros included."""
+    drive = nominal_drivetrain(load("pmir"))
+    limit = drive._alpha_l * drive.config.time_constant_s * 0.999  # pmir: equal wheels
+    segments = [
+        (raw[0][0] if equal else n, w0l, w0l + (spl - w0l) % limit, w0r, w0r + (spr - w0r) % limit)
+        for n, w0l, spl, w0r, spr in raw
+    ]
+    segments = [s for s in segments if abs(s[1] - s[2]) <= limit and abs(s[3] - s[4]) <= limit]
+    if not segments:
+        return
+    assert drive._all_unlimited(segments)
+    fast = drive._unlimited_angles(segments)
+    assert fast.tobytes() == drive._angles(segments).tobytes()

@@ -9,7 +9,13 @@ import pytest
 
 from odocan.sim.pose import wrap_angle
 from odocan.sim.robot import RobotProfile, load
-from odocan.sim.scenarios import SCENARIOS, PhaseScenario, ScenarioError, get_scenario
+from odocan.sim.scenarios import (
+    SCENARIOS,
+    PhaseScenario,
+    RandomScenario,
+    ScenarioError,
+    get_scenario,
+)
 from odocan.sim.truth import TruthPose
 from odocan.sim.vehicle import Vehicle
 
@@ -107,3 +113,21 @@ def test_random_is_seeded_bounded_and_smooth() -> None:
     assert np.abs(a).max() > 0.3  # really moves
     assert np.abs(np.diff(a, axis=0)).max() < 0.02  # < 2 m/s^2 at 100 Hz
     assert np.std(a[:, 0] - a[:, 1]) > 0.05  # it turns, too
+
+
+def test_random_commands_are_the_bits_of_the_numpy_expression() -> None:
+    """The scalar ``command_at`` against the numpy expression it replaced, on the rig's 20 ms
+    grid (an hour) and at arbitrary instants; seed 7 drives into the +-1 m/s clip."""
+    clipped = 0
+    for seed in (0, 7):
+        scenario = RandomScenario(seed, duration_s=3600.0)
+        amp, omega, phase = scenario._amp, scenario._omega, scenario._phase
+        rng = np.random.default_rng(seed)
+        times = [k * 0.02 for k in range(180_000)] + rng.uniform(0.0, 3600.0, 20_000).tolist()
+        for t_s in times:
+            raw = (amp * np.sin(omega * t_s + phase)).sum(axis=1)
+            want = [float(v).hex() for v in np.clip(raw, -1.0, 1.0)]
+            got = scenario.command_at(t_s)
+            assert [v.hex() for v in got] == want, (seed, t_s)
+            clipped += any(abs(v) == 1.0 for v in got)
+    assert clipped > 500  # the clip was exercised

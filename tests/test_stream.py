@@ -30,7 +30,7 @@ from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.contract import database
 from odocan.sim.robot import load
-from tests.synth_log import synthesize, wandering_drive
+from tests.synth_log import synthesize, synthesize_stalled, wandering_drive
 
 CHUNKS = [1, 2, 7, 64, 1 << 20]
 
@@ -140,11 +140,26 @@ def test_streamed_e2e_and_encoder_sequence_are_the_whole_logs(
     assert np.any(np.diff(want_enc.seq) >= 16)  # the gap took more than one COUNTER turn
 
 
+def held_log(tmp_path: Path) -> Path:
+    """A firmware that stalls (frame 300, 40 frames), holds its pose on one frame while its E2E
+    window is shut (frame 700, 30 frames: its poses keep naming frame 699) and takes late
+    frames: pose frames repeating the ENC_COUNTER of the one before them."""
+    profile = load("kobuki")
+    d_left, d_right = wandering_drive(profile, 1200, 0.004, seed=3)
+    synth = synthesize_stalled(profile, "exact", d_left, d_right, stalls={300: 40},
+                               holds={700: 30}, late={150, 151, 900})
+    return synth.write(tmp_path / "held.log")
+
+
+@pytest.mark.parametrize("log", ["awkward", "held"])
 @pytest.mark.parametrize("chunk_frames", CHUNKS)
-def test_streamed_onboard_samples_are_the_whole_logs(tmp_path: Path, chunk_frames: int) -> None:
+def test_streamed_onboard_samples_are_the_whole_logs(
+    tmp_path: Path, chunk_frames: int, log: str
+) -> None:
     """Pose frames paired with the encoder frame they name across every cut: the same samples,
-    in the same order, the same unmatched count, as the whole log's alignment."""
-    path = write(tmp_path, ".log")
+    in the same order, the same unmatched count, as the whole log's alignment (held poses
+    carried across cuts)."""
+    path = write(tmp_path, ".log") if log == "awkward" else held_log(tmp_path)
     db = database()
     whole = read_log(path)
     _, accepted_all = check_frames(whole, db)
@@ -166,7 +181,8 @@ def test_streamed_onboard_samples_are_the_whole_logs(tmp_path: Path, chunk_frame
         np.testing.assert_array_equal(got, getattr(want, name), err_msg=name)
     np.testing.assert_array_equal(np.concatenate(sent), want_sent)
     assert poses.unmatched == want_unmatched
-    assert want_unmatched > 0  # the gap and the refused frames leave poses without their frame
+    if log == "awkward":
+        assert want_unmatched > 0  # the gap and the refused frames leave poses without a frame
 
 
 @pytest.mark.parametrize("chunk_frames", CHUNKS)

@@ -12,6 +12,7 @@ from collections.abc import Iterator
 from importlib import import_module
 from importlib.metadata import entry_points
 from pathlib import Path
+from typing import Any
 
 import can
 import can.player
@@ -70,6 +71,39 @@ def test_every_other_handle_receives_and_only_the_asking_sender_hears_itself(
     assert [(m.arbitration_id, m.is_rx) for m in _drain(c)] == [(0x10, True), (0x20, False)]
     a.send(_msg(0x30))
     assert all(m.channel == channel for m in _drain(b))
+
+
+def _fields(msg: can.Message) -> tuple[object, ...]:
+    return (msg.timestamp, msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame,
+            msg.is_error_frame, msg.channel, msg.dlc, bytes(msg.data), msg.is_fd, msg.is_rx,
+            msg.bitrate_switch, msg.error_state_indicator)
+
+
+@pytest.mark.parametrize("bitrate", [None, 500_000])
+def test_send_data_delivers_what_send_of_the_same_frame_delivers(
+    bitrate: int | None, channel: str
+) -> None:
+    """``send_data(id, data, t)`` (the rig's nodes) against ``send(data_frame(t, id, data))``:
+    every field of every receiver's message, the sender's echo and a receiver's filter."""
+    heard: dict[str, list[tuple[object, ...]]] = {}
+    for way in ("send", "send_data"):
+        name = channel  # one wire at a time: every handle closes before the next way
+        kw: dict[str, Any] = {"preserve_timestamps": True, "bitrate": bitrate}
+        kw["clock"] = lambda: 10.0  # bit-timed: every frame has ended by then
+        sender = OdocanBus(name, receive_own_messages=True, **kw)
+        plain = OdocanBus(name, **kw)
+        picky = OdocanBus(name, can_filters=[{"can_id": 0x20, "can_mask": 0x7FF}], **kw)
+        frames = ((0x10, b"\x01\x02", 1.5), (0x20, b"", 2.0), (0x7FF, b"x" * 8, 3.0))
+        for can_id, data, t_s in frames:
+            if way == "send":
+                sender.send(transport.data_frame(t_s, can_id, data))
+            else:
+                sender.send_data(can_id, data, t_s)
+        heard[way] = [_fields(m) for bus in (sender, plain, picky) for m in _drain(bus)]
+        for bus in (sender, plain, picky):
+            bus.shutdown()
+    assert len(heard["send"]) == 3 + 3 + 1
+    assert heard["send_data"] == heard["send"]
 
 
 def test_no_receiver_shares_a_mutable_message(

@@ -127,7 +127,6 @@ def test_the_audited_fixmath_helpers_are_the_reviewed_set() -> None:
         "wrap_i32",
         "wrap_i64",
         "wrap_signed",
-        "shr_round",
         "mul_sub_wrap_i64",
         "mul_shr_i64",
         "mul_round_i64",

@@ -380,8 +380,10 @@ class _Unpacker(can.Listener):
 
     def __init__(self) -> None:
         self.fr = importlib.import_module(FIRMWARE_PACKAGE + ".frames")
-        received = ["wheel_encoders", "motor_cmd", "odom_set_pose", "odom_config", "nav_goal"]
-        decoders = {name: getattr(self.fr, f"unpack_{name}") for name in [*received, "odom_auth"]}
+        received = ["wheel_encoders", "odom_set_pose", "odom_config", "nav_goal", "odom_auth"]
+        decoders = {name: getattr(self.fr, f"unpack_{name}") for name in received}
+        sim_frames = importlib.import_module("odocan.sim.frames")  # MOTOR_CTRL's: not firmware
+        decoders["motor_cmd"] = sim_frames.unpack_motor_cmd
         for name in [  # the host's half (tests/host_frames.py): not firmware, not instrumented
             "odom_pose_x",
             "odom_pose_y",
@@ -531,7 +533,6 @@ def _edge_sweep() -> None:
     for d in i64:
         odometry.chord_factor_q62(d)
     for e in i32:
-        nav.angle_urad(e, errors)
         nav.go_to_goal_law(1 << 43, e, errors)
         nav.drive_straight_law(1 << 43, e, errors)
         nav.wheel_speeds_mm_s(e, e, 4_000_000_000)
@@ -540,9 +541,9 @@ def _edge_sweep() -> None:
     receiver = e2e.E2EReceiver(data_ids, max_delta_counter_init=0, window_per_period=True)
     counter = 0
     for jump in (1, 1, 0, 5, 1):  # OK, OK, REPEATED, WRONGSEQUENCE, OK
-        counter = e2e.p02_next_counter(counter + jump - 1)
+        counter = hf.p02_next_counter(counter + jump - 1)
         frame = bytearray(8)
-        e2e.p02_protect(frame, counter, data_ids)
+        hf.p02_protect(frame, counter, data_ids)
         receiver.check(bytes(frame))
     for integrator, bits in itertools.product(range(3), (16, 32)):
         config = fw["config"]
@@ -741,7 +742,7 @@ def _health_drive() -> None:
             rig.step()
         rig.ecu.isr_rx_overrun()  # the board's CAN FIFO overrun interrupt
         encoders = rig.ecu.encoders
-        encoders._step_periods_max(encoders._enc_prev_counter)  # a whole 16-period counter cycle
+        encoders._step_periods(encoders._enc_prev_counter)  # a whole 16-period counter cycle
     finally:
         for name in (HEALTH_SCENARIOS, "tests.test_ecu"):
             sys.modules.pop(name, None)

@@ -7,19 +7,7 @@
 
 #include "aes_tables.h"
 
-#define GF_POLY_LOW 0x1Bu
-
 static const uint8_t RCON[10] = {0x01, 0x02, 0x04, 0x08, 0x10, 0x20, 0x40, 0x80, 0x1B, 0x36};
-
-/* Multiplication by x (0x02) in GF(2^8) (FIPS-197 4.2.1). */
-uint8_t xtime(uint8_t b)
-{
-    uint32_t doubled = (uint32_t)b << 1;
-    if (doubled & 0x100u) {
-        doubled ^= 0x100u | GF_POLY_LOW;
-    }
-    return (uint8_t)doubled;
-}
 
 static uint32_t sub_word(uint32_t word)
 {
@@ -85,17 +73,4 @@ void aes128_encrypt_words(const uint32_t rk[AES128_ROUND_KEY_WORDS], uint32_t s[
     s[1] = last_round_word(s1, s2, s3, s0) ^ rk[last + 1u];
     s[2] = last_round_word(s2, s3, s0, s1) ^ rk[last + 2u];
     s[3] = last_round_word(s3, s0, s1, s2) ^ rk[last + 3u];
-}
-
-void aes128_encrypt(const uint32_t rk[AES128_ROUND_KEY_WORDS], const uint8_t in[AES_BLOCK_BYTES],
-                    uint8_t out[AES_BLOCK_BYTES])
-{
-    uint32_t s[4];
-    for (unsigned i = 0; i < 4u; i++) {
-        s[i] = load_be32(in, 4u * i);
-    }
-    aes128_encrypt_words(rk, s);
-    for (unsigned i = 0; i < 4u; i++) {
-        store_be32(out, 4u * i, s[i]);
-    }
 }

@@ -10,12 +10,9 @@
 #define AES128_ROUNDS 10
 #define AES128_ROUND_KEY_WORDS (4 * (AES128_ROUNDS + 1))
 
-uint8_t xtime(uint8_t b);
 uint32_t load_be32(const uint8_t *data, unsigned offset);
 void store_be32(uint8_t *out, unsigned offset, uint32_t word);
 void aes128_expand_key(const uint8_t key[AES128_KEY_BYTES], uint32_t rk[AES128_ROUND_KEY_WORDS]);
 void aes128_encrypt_words(const uint32_t rk[AES128_ROUND_KEY_WORDS], uint32_t s[4]);
-void aes128_encrypt(const uint32_t rk[AES128_ROUND_KEY_WORDS], const uint8_t in[AES_BLOCK_BYTES],
-                    uint8_t out[AES_BLOCK_BYTES]);
 
 #endif

@@ -75,20 +75,6 @@ uint8_t p02_crc(const uint8_t frame[FRAME_LEN], uint8_t data_id)
     return (uint8_t)(crc ^ CRC8H2F_XOR_OUT);
 }
 
-/* E2E_P02Protect: write COUNTER (byte 1 low nibble, taken mod 16), then CHECKSUM. */
-void p02_protect(uint8_t frame[FRAME_LEN], uint8_t counter, const uint8_t data_ids[DATA_ID_COUNT])
-{
-    counter &= COUNTER_MASK;
-    frame[1] = (uint8_t)((frame[1] & 0xF0u) | counter);
-    frame[0] = p02_crc(frame, data_ids[counter]);
-}
-
-/* The sender's next counter: (counter + 1) mod 16. */
-uint8_t p02_next_counter(uint8_t counter)
-{
-    return (uint8_t)((counter + 1u) & COUNTER_MASK);
-}
-
 void e2e_receiver_init(struct e2e_receiver *rx, const uint8_t data_ids[DATA_ID_COUNT],
                        uint8_t max_delta_counter_init, bool window_per_period)
 {

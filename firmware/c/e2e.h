@@ -48,8 +48,6 @@ struct e2e_receiver {
 
 uint8_t crc8h2f(const uint8_t *data, size_t len);
 uint8_t p02_crc(const uint8_t frame[FRAME_LEN], uint8_t data_id);
-void p02_protect(uint8_t frame[FRAME_LEN], uint8_t counter, const uint8_t data_ids[DATA_ID_COUNT]);
-uint8_t p02_next_counter(uint8_t counter);
 void e2e_receiver_init(struct e2e_receiver *rx, const uint8_t data_ids[DATA_ID_COUNT],
                        uint8_t max_delta_counter_init, bool window_per_period);
 void e2e_reset(struct e2e_receiver *rx);

@@ -76,7 +76,7 @@ static void extend_counters(const struct odom_ecu *ecu, const uint32_t wire[2],
                             uint32_t counts[2]);
 static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
                             const uint32_t counts[2]);
-static uint32_t step_periods_max(const struct odom_ecu *ecu, uint8_t counter);
+static uint32_t step_periods(const struct odom_ecu *ecu, uint8_t counter);
 static void step_bounds(struct odom_ecu *ecu);
 static bool plausible(const struct odom_ecu *ecu, const uint32_t prev[2], const uint32_t counts[2],
                       uint32_t periods);
@@ -128,6 +128,7 @@ void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
     derive_constants(params, &ecu->errors, &consts);
     odometry_init(&ecu->odometry, &consts, &ecu->errors);
     ecu->max_wheel_speed_mm_s = MAX_WHEEL_SPEED_MM_S;
+    ecu->this_step_periods = 1u;
     step_bounds(ecu);
     data_ids_of_slot(WHEEL_ENCODERS_E2E_SLOT, ecu->data_ids[0]);
     data_ids_of_slot(ODOM_SET_POSE_E2E_SLOT, ecu->data_ids[1]);
@@ -202,6 +203,7 @@ static void tick(struct odom_ecu *ecu, bool timed, uint32_t now_us)
 {
     check_overflows(ecu);
     uint32_t periods = advance_time(ecu, timed, now_us); /* after: a stall's overrun is TIME_LOST */
+    ecu->tick_late = periods > 0u ? periods - 1u : 0u; /* its frames may have queued so long */
     /* The E2E window widens with time; fully after frames of unknown age (a stall's backlog). */
     uint32_t widen = ecu->samples_stale ? COUNTER_MASK : periods < COUNTER_MASK ? periods
                                                                                  : COUNTER_MASK;
@@ -212,7 +214,11 @@ static void tick(struct odom_ecu *ecu, bool timed, uint32_t now_us)
     drain_mailbox(ecu);
     expire_held(ecu);
     if (ecu->tick_steps != 0u && !ecu->time_lost_now) {
-        update_twist(ecu, ecu->tick_budget > 1u ? ecu->tick_budget : 1u);
+        /* a stall's backlog: its frames' periods are unknown, firmware time then */
+        uint32_t budget = ecu->tick_budget > 1u ? ecu->tick_budget : 1u;
+        update_twist(ecu, ecu->tick_carried ? budget : ecu->tick_periods);
+    } else if (ecu->tick_steps != 0u) {
+        ecu->tick_carried = true;
     }
     navigate(ecu);
     transmit_scheduled(ecu);
@@ -339,12 +345,13 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
     unpack_wheel_encoders(data, &counter, &wire[0], &wire[1]);
     uint32_t counts[2];
     extend_counters(ecu, wire, counts);
-    uint32_t periods = step_periods_max(ecu, counter);
+    uint32_t periods = step_periods(ecu, counter);
     if (!plausible(ecu, ecu->counts_prev_valid ? ecu->counts_prev : NULL, counts, periods)) {
         on_implausible(ecu, counter, wire, counts);
         return;
     }
     ecu->resync_first_valid = false;
+    ecu->this_step_periods = periods;
     accept_encoders(ecu, counter, wire, counts);
 }
 
@@ -402,10 +409,12 @@ static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
     ecu->counts_prev_valid = true;
 }
 
-/* The most encoder periods that can separate this frame's sample from the last accepted one: n =
- * the COUNTER advance (mod 16, 0 read as 16), plus whole counter cycles while n stays within the
- * periods since that sample. Exact in a regular stream (1). At most STEP_PERIODS_MAX + 16. */
-static uint32_t step_periods_max(const struct odom_ecu *ecu, uint8_t counter)
+/* The encoder periods between this frame's sample and the last accepted one's: the COUNTER
+ * advance n (mod 16, 0 read as 16), plus the whole counter cycles that bring it nearest to the
+ * periods since that frame was accepted (0 for a second frame in one tick), less the periods
+ * this tick came late (its frames waited in the mailbox meanwhile). Exact while the two frames' queueing differs by less than
+ * 8 periods; n in a regular stream (1). At most STEP_PERIODS_MAX + 24. */
+static uint32_t step_periods(const struct odom_ecu *ecu, uint8_t counter)
 {
     int prev = ecu->enc_prev_counter;
     if (prev < 0) {
@@ -415,7 +424,8 @@ static uint32_t step_periods_max(const struct odom_ecu *ecu, uint8_t counter)
     if (advance == 0u) {
         advance = COUNTER_MASK + 1u;
     }
-    uint32_t budget = ecu->tick_budget; /* <= STEP_PERIODS_MAX */
+    uint32_t since = ecu->periods_since_sample;
+    uint32_t budget = (since > ecu->tick_late ? since - ecu->tick_late : 0u) + 8u; /* <= 2^16 + 8 */
     if (budget <= advance) {
         return advance;
     }
@@ -503,6 +513,11 @@ static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32
     odometry_unprime(&ecu->odometry);
     (void)odometry_step_counts(&ecu->odometry, ecu->resync_first[0], ecu->resync_first[1]);
     ecu->enc_prev_counter = -1;
+    ecu->this_step_periods =
+        ((uint32_t)counter - (uint32_t)ecu->resync_first_counter) & COUNTER_MASK;
+    if (ecu->this_step_periods == 0u) {
+        ecu->this_step_periods = COUNTER_MASK + 1u;
+    }
     accept_encoders(ecu, counter, wire, counts);
 }
 
@@ -518,11 +533,15 @@ static void sum_step(struct odom_ecu *ecu)
     ecu->tick_dheading_q30_rad = sat_range(ecu->tick_dheading_q30_rad + dheading_q30_rad,
                                            -TWIST_SUM_MAX, TWIST_SUM_MAX, &ecu->errors);
     ecu->tick_steps++;
+    uint32_t periods = ecu->tick_periods + ecu->this_step_periods; /* < 2^17 + 16 */
+    ecu->tick_periods = periods < STEP_PERIODS_MAX ? periods : STEP_PERIODS_MAX;
 }
 
-/* Speeds over this tick's steps, which cover the periods (1 .. STEP_PERIODS_MAX) since the last
- * accepted sample: firmware time, so lost frames, a burst after a stall and a late frame all give
- * the true mean speed. Products < 2^32 * 10^9 < 2^62; dt_us < 2^30, so dt_us << 30 < 2^60. The
+/* Speeds over this tick's steps, which cover the periods (1 .. STEP_PERIODS_MAX): the steps'
+ * sample periods (step_periods: the COUNTER advance, whole counter cycles from firmware time),
+ * so lost frames and a late frame (one step in a tick of two periods, then two in a tick of one)
+ * give the true mean speed; after a stall (summed over two ticks) the firmware time since the last
+ * sample before it, as the backlog's sample times are unknown. Products < 2^32 * 10^9 < 2^62; dt_us < 2^30, so dt_us << 30 < 2^60. The
  * sums restart. */
 static void update_twist(struct odom_ecu *ecu, uint32_t periods)
 {
@@ -534,6 +553,8 @@ static void update_twist(struct odom_ecu *ecu, uint32_t periods)
     ecu->tick_ds_q20_m = 0;
     ecu->tick_dheading_q30_rad = 0;
     ecu->tick_steps = 0u;
+    ecu->tick_periods = 0u;
+    ecu->tick_carried = false;
 }
 
 /* --- SecOC: verify before acting (firmware/auth.py) --- */

@@ -98,6 +98,10 @@ struct odom_ecu {
     int64_t tick_ds_q20_m;         /* saturated to +-2^32 (4096 m) */
     int64_t tick_dheading_q30_rad; /* saturated to +-2^32 (4 rad) */
     unsigned tick_steps;
+    uint32_t tick_periods; /* the sample periods the summed steps span (u16, saturated) */
+    bool tick_carried;     /* the sums hold steps of a tick that lost time */
+    uint32_t this_step_periods; /* the sample periods of the step being accepted */
+    uint32_t tick_late;         /* periods this tick came after its due time */
     int good_in_a_row;
     int64_t twist_mm_s;
     int64_t twist_mrad_s;

@@ -27,20 +27,6 @@ int32_t wrap_signed(uint32_t value, unsigned bits)
     return (int32_t)((int64_t)((value + half) & mask) - (int64_t)half);
 }
 
-/* Clamp to int32_t; set SATURATION in *errors when clamped. */
-int32_t sat_i32(int64_t value, uint32_t *errors)
-{
-    if (value > I32_MAX) {
-        *errors |= ERROR_SATURATION;
-        return I32_MAX;
-    }
-    if (value < I32_MIN) {
-        *errors |= ERROR_SATURATION;
-        return I32_MIN;
-    }
-    return (int32_t)value;
-}
-
 /* Clamp to [low, high] (a raw signal's range); set SATURATION when clamped. */
 int64_t sat_range(int64_t value, int64_t low, int64_t high, uint32_t *errors)
 {
@@ -53,14 +39,6 @@ int64_t sat_range(int64_t value, int64_t low, int64_t high, uint32_t *errors)
         return low;
     }
     return value;
-}
-
-/* Arithmetic shift right by 1 <= shift <= 63, rounding half up (toward +inf): Python's
- * (value + (1 << (shift - 1))) >> shift, whose sum may pass I64_MAX: summed in 128 bits. */
-int64_t shr_round(int64_t value, unsigned shift)
-{
-    wide128_t sum = wide_add(wide_from_i64(value), wide_from_u64((uint64_t)1u << (shift - 1u)));
-    return wide_to_i64(wide_asr(sum, shift)); /* |result| <= 2^62 + 1 */
 }
 
 /* sat_i64(round((a * b) / 2^shift)), 1 <= shift <= 127: the full 128-bit product, rounded half

@@ -175,9 +175,7 @@ static inline int64_t wide_sat_i64(wide128_t value, uint32_t *errors)
 int16_t wrap_i16(int64_t value);
 int32_t wrap_i32(int64_t value);
 int32_t wrap_signed(uint32_t value, unsigned bits);
-int32_t sat_i32(int64_t value, uint32_t *errors);
 int64_t sat_range(int64_t value, int64_t low, int64_t high, uint32_t *errors);
-int64_t shr_round(int64_t value, unsigned shift);
 int64_t mul_shr_round_i64(int64_t a, int64_t b, unsigned shift, uint32_t *errors);
 uint64_t muldiv_round_u64(uint64_t a, uint64_t b, uint64_t c, uint32_t *errors);
 int64_t div_round_i64(int64_t numerator, int64_t denominator);

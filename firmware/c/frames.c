@@ -276,21 +276,6 @@ void pack_odom_status_e2e(uint8_t out[8], uint8_t counter, enum status_page page
     seal(out, ODOM_STATUS_E2E_SLOT);
 }
 
-/* ODOM_AUTH: REQUEST (byte 1 high nibble, saturated to 0..2), FRESHNESS, AUTHENTICATOR. The host's
- * side (tests/host_frames.py in Python): the ECU never sends it; the probes check it. */
-void pack_odom_auth(uint8_t out[8], uint8_t counter, int64_t request, uint16_t freshness,
-                    uint32_t mac, uint32_t *errors)
-{
-    struct odocan_odom_auth_t m;
-    (void)odocan_odom_auth_init(&m);
-    m.counter = (uint8_t)(counter & COUNTER_MASK);
-    m.request = (uint8_t)sat_range(request, 0, 2, errors);
-    m.freshness = freshness;
-    m.authenticator = mac;
-    (void)odocan_odom_auth_pack(out, &m, 8u);
-    seal(out, ODOM_AUTH_E2E_SLOT);
-}
-
 /* ODOM_AUTH's raw fields (run its E2E check first); REQUEST read as the raw nibble. */
 void unpack_odom_auth(const uint8_t data[8], struct odom_auth *out)
 {

@@ -61,8 +61,6 @@ void data_ids_of_slot(unsigned slot, uint8_t ids[DATA_ID_COUNT]);
 
 struct odom_auth; /* secoc.h */
 
-void pack_odom_auth(uint8_t out[8], uint8_t counter, int64_t request, uint16_t freshness,
-                    uint32_t mac, uint32_t *errors);
 void unpack_odom_auth(const uint8_t data[8], struct odom_auth *out);
 void pack_odom_freshness(uint8_t out[8], uint8_t counter, int64_t cause, uint64_t fv,
                          uint32_t *errors);

@@ -44,12 +44,6 @@ int64_t distance_um(int64_t dx_q40_m, int64_t dy_q40_m, uint32_t *errors)
     return mul_shr_round_i64(d_q20_m, MICRO_PER_UNIT, 20u, errors);
 }
 
-/* A signed BAM32 angle in urad (|result| <= 3 141 593), rounded. */
-int32_t angle_urad(int32_t angle_bam32, uint32_t *errors)
-{
-    return (int32_t)mul_shr_round_i64(angle_bam32, URAD_PER_TURN_Q20, 52u, errors);
-}
-
 /* Clamp to [-limit, limit]: a design limit (no SATURATION flag). */
 static int64_t clamp(int64_t value, int64_t limit)
 {

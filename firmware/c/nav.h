@@ -27,7 +27,7 @@
 
 #define MILLI_PER_UNIT 1000
 #define MICRO_PER_UNIT 1000000
-/* 2*pi*1e6 in Q20 (< 2^43): shr_round(TWO_PI_Q60 * 10^6, 40), a 83-bit product, evaluated once
+/* 2*pi*1e6 in Q20 (< 2^43): round(TWO_PI_Q60 * 10^6 / 2^40), a 83-bit product, evaluated once
  * (the probe test checks every function that uses it against the Python firmware). */
 #define URAD_PER_TURN_Q20 INT64_C(6588397316661)
 #define HALF_WHEEL_DIVISOR INT64_C(2000000000) /* omega[mrad/s] * b[nm] / 2e9 = mm/s */
@@ -87,7 +87,6 @@ struct navigator {
 uint32_t heading_bam32_of(uint64_t heading_bam64);
 int32_t bearing_error_bam32(int64_t dx_q40_m, int64_t dy_q40_m, uint32_t heading_bam32);
 int64_t distance_um(int64_t dx_q40_m, int64_t dy_q40_m, uint32_t *errors);
-int32_t angle_urad(int32_t angle_bam32, uint32_t *errors);
 int32_t turn_rate_mrad_s(int32_t error_bam32, int32_t gain_milli_per_s, uint32_t *errors);
 int32_t speed_mm_s(int64_t distance_um_, int32_t gain_milli_per_s);
 void wheel_speeds_mm_s(int32_t v_mm_s, int32_t omega_mrad_s, uint32_t wheelbase_nm,

@@ -7,11 +7,9 @@
  *   chord DH                 -> chord_factor_q62      (i64 BAM64 step)
  *   muldiv A B C             -> quotient errors       (u64 each)
  *   mulshr A B S             -> result errors         (i64, i64, shift)
- *   shr_round V S            -> result
  *   div_round N D            -> result
  *   isqrt N                  -> result
  *   wrap_signed V BITS       -> result                (V: u32)
- *   sat_i32 V                -> result errors
  *   config PPV RL RR B BITS I -> reason [m_l m_r k_l k_r errors]
  *   crc HEX                  -> crc8h2f of the bytes ("-" for none)
  *   table                    -> the 256 CRC8H2F table entries
@@ -20,8 +18,9 @@
  *   check HEX|-              -> status ok oksomelost repeated wrongsequence error nonewdata
  *                               lost_frames last_valid_counter max_delta_counter lost_data
  *                               accepted
- *   protect HEX COUNTER      -> the frame after p02_protect (with the receiver's data IDs)
- *   dist DX DY | bearing DX DY H32 | urad A | turn E K | speed D K | wheels V W B | gtg D E
+ *   protect HEX COUNTER      -> the frame after protect() (E2E_P02Protect on e2e.c's p02_crc,
+ *                               with the receiver's data IDs)
+ *   dist DX DY | bearing DX DY H32 | turn E K | speed D K | wheels V W B | gtg D E
  *   | straight D E | rate T P | q40 V  -> the nav.c function's results (and errors)
  *   nav_new                  -> ok                    (a new navigator)
  *   nav_req FIELD VALUE MODE APPEND NO_FINAL GOAL_ID RUNNING -> ack reason
@@ -92,6 +91,16 @@ static void data_ids_of_slot(unsigned slot, uint8_t ids[DATA_ID_COUNT])
     for (unsigned c = 0u; c < DATA_ID_COUNT; ++c) {
         ids[c] = (uint8_t)((slot << 4) | c);
     }
+}
+
+/* E2E_P02Protect, a sender's side the ECU never runs (it seals its frames in frames.c): write
+ * COUNTER (byte 1 low nibble, taken mod 16), then CHECKSUM by e2e.c's p02_crc. */
+static void protect(uint8_t frame[FRAME_LEN], uint8_t counter,
+                    const uint8_t data_ids[DATA_ID_COUNT])
+{
+    counter &= COUNTER_MASK;
+    frame[1] = (uint8_t)((frame[1] & 0xF0u) | counter);
+    frame[0] = p02_crc(frame, data_ids[counter]);
 }
 
 static void print_frame(const uint8_t frame[FRAME_LEN])
@@ -196,9 +205,6 @@ int main(void)
             int64_t b = arg_i64();
             int64_t r = mul_shr_round_i64(a, b, (unsigned)arg_u64(), &errors);
             printf("%" PRId64 " %" PRIu32 "\n", r, errors);
-        } else if (strcmp(cmd, "shr_round") == 0) {
-            int64_t v = arg_i64();
-            printf("%" PRId64 "\n", shr_round(v, (unsigned)arg_u64()));
         } else if (strcmp(cmd, "div_round") == 0) {
             int64_t n = arg_i64();
             printf("%" PRId64 "\n", div_round_i64(n, arg_i64()));
@@ -207,9 +213,6 @@ int main(void)
         } else if (strcmp(cmd, "wrap_signed") == 0) {
             uint32_t v = (uint32_t)arg_u64();
             printf("%" PRId32 "\n", wrap_signed(v, (unsigned)arg_u64()));
-        } else if (strcmp(cmd, "sat_i32") == 0) {
-            int32_t r = sat_i32(arg_i64(), &errors);
-            printf("%" PRId32 " %" PRIu32 "\n", r, errors);
         } else if (strcmp(cmd, "config") == 0) {
             struct robot_params p;
             p.counts_per_rev = (uint32_t)arg_u64();
@@ -259,7 +262,7 @@ int main(void)
             long n = arg_bytes(bytes);
             uint8_t counter = (uint8_t)arg_u64();
             if (n == (long)FRAME_LEN) {
-                p02_protect(bytes, counter, data_ids);
+                protect(bytes, counter, data_ids);
             }
             for (long k = 0; k < n; ++k) {
                 printf("%02X", (unsigned)bytes[k]);
@@ -273,9 +276,6 @@ int main(void)
             int64_t dx = arg_i64();
             int64_t dy = arg_i64();
             printf("%" PRId32 "\n", bearing_error_bam32(dx, dy, (uint32_t)arg_u64()));
-        } else if (strcmp(cmd, "urad") == 0) {
-            int32_t r = angle_urad((int32_t)arg_i64(), &errors);
-            printf("%" PRId32 " %" PRIu32 "\n", r, errors);
         } else if (strcmp(cmd, "turn") == 0) {
             int32_t e = (int32_t)arg_i64();
             int32_t w = turn_rate_mrad_s(e, (int32_t)arg_i64(), &errors);
@@ -360,7 +360,7 @@ int main(void)
                 odocan_motor_cmd_pack(frame, &m, sizeof frame);
                 data_ids_of_slot(2u, ids);
             }
-            p02_protect(frame, counter, ids);
+            protect(frame, counter, ids);
             print_frame(frame);
         } else if (strcmp(cmd, "goal_unpack") == 0) {
             long n = arg_bytes(bytes);

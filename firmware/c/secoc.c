@@ -66,11 +66,6 @@ void secoc_receiver_init(struct secoc_receiver *rx, const uint8_t *key, unsigned
     secoc_boot(rx);
 }
 
-bool secoc_available(const struct secoc_receiver *rx)
-{
-    return rx->key_valid && rx->epoch != 0u;
-}
-
 /* Reset and power-on: EPOCH <- NVM + 1, written back before anything is accepted. */
 void secoc_boot(struct secoc_receiver *rx)
 {

@@ -74,7 +74,6 @@ uint32_t truncate_mac(uint32_t mac32, unsigned mac_bits);
 /* key: 16 bytes, or NULL / another length (key_len) for "no valid key". Boots. */
 void secoc_receiver_init(struct secoc_receiver *rx, const uint8_t *key, unsigned key_len,
                          struct freshness_nvm nvm, unsigned mac_bits);
-bool secoc_available(const struct secoc_receiver *rx);
 void secoc_boot(struct secoc_receiver *rx);
 enum auth_status secoc_verify(struct secoc_receiver *rx, uint32_t data_id, const uint8_t pdu[8],
                               uint16_t freshness, uint32_t mac);

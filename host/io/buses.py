@@ -68,7 +68,7 @@ def add_fault_argument(parser: argparse.ArgumentParser) -> None:
         default="",
         metavar="SPEC",
         help="faults on this node's sends: drop=P,burst=P:LEN,dup=P,delay=P:MS,flip=P,"
-        "babble=RATE[:ID[:T:DUR]],busoff=T:DUR,seed=N (see README, 'Faults on the bus')",
+        "babble=RATE[:ID[:T:DUR]],busoff=T:DUR,seed=N (docs/bus.md, 'Faults on the bus')",
     )
 
 

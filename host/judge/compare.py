@@ -137,7 +137,7 @@ def check_twist(
         return result
     index = twist["index"][keep]
     e = match_encoder(enc, index, twist["ENC_COUNTER"][keep].astype(np.int64),
-                      frames.timestamp_s[index])
+                      frames.timestamp_s[index], twist["COUNTER"][keep].astype(np.int64))
     ok = (e >= 0) & (e >= np.maximum.accumulate(e))
     e = e[ok]
     linear = twist["LINEAR_VEL"][keep][ok] * TWIST_LSB
@@ -176,6 +176,12 @@ def _step_speeds(
     accel_mps = TWIST_GAP_ACCEL_MPS2 * (periods - 1) * cycle_s
     gap_v = np.concatenate(([0.0], np.where(periods > 1, count_mps + accel_mps, 0.0)))
     gap_w = gap_v * (2.0 / g.wheelbase_m)
+    # A frame that waited on a busy bus came more periods after the one before than its COUNTER
+    # step says: the firmware, which cannot tell waiting from losing, may spread the step over
+    # the time it waited (its mean speed then lies between 0 and the step's speed).
+    waited = np.concatenate(([False], np.diff(enc.timestamp_s) > (periods + 0.5) * cycle_s))
+    gap_v = np.where(waited, np.maximum(gap_v, np.abs(v)), gap_v)
+    gap_w = np.where(waited, np.maximum(gap_w, np.abs(w)), gap_w)
     return (v, w), (gap_v, gap_w)
 
 
@@ -266,3 +272,102 @@ def _sample_gaps(seq: IntArray) -> IntArray:
     usual = max(1, int(np.median(steps)))
     return np.flatnonzero(steps > usual).astype(np.int64)
 
+
+
+# --- encoder frames the firmware lost that the log holds (ODOM_STATUS) ------------------------
+
+LOST_PAGE = 2  # ODOM_STATUS page with the firmware's WHEEL_ENCODERS E2E counts (ENC_E2E_LOST)
+
+
+def firmware_losses(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders
+) -> list[tuple[int, int, int]]:
+    """Where the firmware lost encoder frames the log holds (its mailbox overflowed): ``(first,
+    last, n)``, n frames lost among encoder frames first..last (indices into ``enc``).
+
+    The firmware counts the WHEEL_ENCODERS frames it lost (ENC_E2E_LOST, u8, page 2 of
+    ODOM_STATUS, every 500 ms); between two such pages, its count grew by more than the gaps of
+    the log's own encoder sequence there: the rest it lost after they were on the bus. After
+    the last page, a summary saying MAILBOX_OVERFLOW counts every frame since as possibly lost.
+    """
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", LOST_PAGE)
+    except DecodeError:
+        return []
+    if "ENC_E2E_LOST" not in page or len(enc.seq) < 2:
+        return []
+    keep = accepted[page["index"]]
+    index, lost = page["index"][keep], page["ENC_E2E_LOST"][keep].astype(np.int64)
+    upto = np.maximum(np.searchsorted(enc.index, index) - 1, 0)  # the latest before each page
+    gaps = np.concatenate(([0], np.cumsum(np.diff(enc.seq) - 1)))
+    excess = (np.diff(lost) & 0xFF) - (gaps[upto[1:]] - gaps[upto[:-1]])
+    excess = np.minimum(excess, upto[1:] - upto[:-1])  # no more than the frames there were
+    spans = [(int(upto[k]), int(upto[k + 1]), int(excess[k])) for k in np.flatnonzero(excess > 0)]
+    tail = int(upto[-1]) if len(upto) else 0
+    if _overflow_reported_after(frames, accepted, decoder, int(index[-1]) if len(index) else -1):
+        spans.append((tail, len(enc.seq) - 1, len(enc.seq) - 1 - tail))
+    return spans
+
+
+def _overflow_reported_after(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, after: int
+) -> bool:
+    """Whether an ODOM_STATUS summary after frame ``after`` says DEGRADED for MAILBOX_OVERFLOW."""
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
+        signal = decoder.message("ODOM_STATUS").get_signal_by_name("REASON")
+    except (DecodeError, KeyError):
+        return False
+    names = {str(name): int(value) for value, name in (signal.choices or {}).items()}
+    if "REASON" not in page or "MAILBOX_OVERFLOW" not in names:
+        return False
+    later = accepted[page["index"]] & (page["index"] > after)
+    return bool(np.any(page["REASON"][later] == names["MAILBOX_OVERFLOW"]))
+
+
+def loss_allowance(
+    enc: Encoders, robot: RobotProfile, integrator: str, spans: list[tuple[int, int, int]],
+    at: IntArray, named: IntArray,
+) -> FloatArray:
+    """How far (m) the on-board position may lie from the fine reference at encoder frames
+    ``at`` because of the frames the firmware lost (``firmware_losses``): per span, the sum of
+    its n largest ``drop_errors`` (the frames ``named`` by on-board samples excepted: the firmware
+    had them), summed over the spans that began before the frame. A lost
+    frame only changes the step it belongs to (the heading after it is exact, a function of
+    the counts), so the errors add up as vectors: their sum of lengths bounds them."""
+    allowance = np.zeros(len(at))
+    if not spans:
+        return allowance
+    drop = drop_errors(enc, robot, integrator)
+    drop[named[named < len(drop)]] = 0.0  # a frame an on-board sample names was not lost
+    for first, last, n in spans:
+        worst = np.sort(drop[first : last + 1])[::-1][:n]
+        allowance += np.where(at > first, float(np.sum(worst)), 0.0)
+    return allowance
+
+
+def drop_errors(enc: Encoders, robot: RobotProfile, integrator: str) -> FloatArray:
+    """Per encoder frame j: how far (m) the pose moves when frame j is lost, i.e. the firmware
+    takes the steps into j and into j + 1 as one step (``host.judge.reference.integrate``'s
+    step, for ``integrator``); 0 for the first and the last frame."""
+    g = Geometry.of(robot)
+    bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
+    dl, dr = wrap_delta(np.diff(enc.left), bits), wrap_delta(np.diff(enc.right), bits)
+    heading = np.concatenate(([0.0], np.cumsum(
+        (g.m_per_count_right / g.wheelbase_m) * dr - (g.m_per_count_left / g.wheelbase_m) * dl)))
+    one_x, one_y = _step_vector(dl, dr, heading[:-1], heading[1:], g, integrator)
+    two_x, two_y = _step_vector(dl[:-1] + dl[1:], dr[:-1] + dr[1:], heading[:-2], heading[2:],
+                                g, integrator)
+    error = np.hypot(one_x[:-1] + one_x[1:] - two_x, one_y[:-1] + one_y[1:] - two_y)
+    return np.concatenate(([0.0], error, [0.0])) if len(enc.seq) > 2 else np.zeros(len(enc.seq))
+
+
+def _step_vector(
+    dl: IntArray, dr: IntArray, h_old: FloatArray, h_new: FloatArray, g: Geometry, integrator: str
+) -> tuple[FloatArray, FloatArray]:
+    """The displacement (m) of one step of ``integrator`` from heading ``h_old`` to ``h_new``."""
+    ds = 0.5 * (dl * g.m_per_count_left + dr * g.m_per_count_right)
+    direction = h_new if integrator == "euler" else 0.5 * (h_old + h_new)
+    if integrator == "exact":
+        ds = ds * np.sinc((h_new - h_old) / (2.0 * np.pi))
+    return ds * np.cos(direction), ds * np.sin(direction)

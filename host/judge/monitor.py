@@ -60,7 +60,6 @@ from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import CONFLICT_HOLD_S, SourceWatch
 from odocan.host.judge.tracking import PoseTracker
-from odocan.host.mqtt.fleetview import RobotState
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import (
     UNKNOWN,
@@ -208,7 +207,7 @@ class BusMonitor:
             self.undecodable += 1
             return
         assert isinstance(signals, dict)
-        shown = {name: _shown(message, name, value) for name, value in signals.items()
+        shown = {name: shown_value(message, name, value) for name, value in signals.items()
                  if name not in _HIDDEN}
         stats.last.update(shown)
         stats.last_frame = shown
@@ -459,7 +458,7 @@ def error_names(mask: int) -> list[str]:
     return [named.get(bit, f"BIT{bit}") for bit in range(mask.bit_length()) if mask >> bit & 1]
 
 
-def _shown(message: Message, name: str, value: Any) -> Any:
+def shown_value(message: Message, name: str, value: Any) -> Any:
     """A signal's value as shown: the enum name when it has one, else the number."""
     choices = message.get_signal_by_name(name).choices
     if isinstance(value, str):  # already the name (the bridge publishes enums by name)
@@ -476,39 +475,4 @@ def _unit(message: Message, name: str) -> str:
 
 # --- the MQTT fleet -------------------------------------------------------------------------
 
-
-def fleet_snapshot(table: dict[str, RobotState], db: Database | None = None) -> dict[str, Any]:
-    """Per robot: online, pose, error vs reference, firmware status, frame rates."""
-    db = db if db is not None else database()
-    return {name: _robot_row(table[name], db) for name in sorted(table)}
-
-
-def _robot_row(state: RobotState, db: Database) -> dict[str, Any]:
-    summary = (state.status.get("firmware") or {}).get("summary") or {}
-    status_msg = db.get_message_by_name("ODOM_STATUS")
-    firmware = None
-    if summary:
-        mask = int(summary.get("error_mask", 0))
-        firmware = {"state": _shown(status_msg, "STATE", summary.get("state", 0)),
-                    "integrator": _shown(status_msg, "INTEGRATOR", summary.get("integrator", 0)),
-                    "error_mask": mask, "errors": error_names(mask),
-                    "uptime_s": summary.get("uptime")}
-    hz = state.rates.get("hz") or {}
-    keys = ("x_m", "y_m", "heading_rad", "heading_unwrapped_rad")
-    pose = {k: state.pose.get(k) for k in keys} if state.pose else None
-    return {
-        "online": state.online,
-        "pose": pose,
-        "error": state.error.get("pose_vs_reference"),
-        "status": firmware,
-        "rate_hz": round(sum(hz.values()), 3) if hz else None,
-        "encoder_hz": hz.get("WHEEL_ENCODERS"),
-        "updated_unix_s": state.updated_unix_s,
-    }
-
-
-# Rendering lives in host.report.live; these names stay importable from here.
-from odocan.host.report.live import render, render_fleet  # noqa: E402
-
-__all__ = ["BusMonitor", "MessageStats", "error_names", "fleet_snapshot", "render",
-           "render_fleet", "to_json"]
+__all__ = ["BusMonitor", "MessageStats", "error_names", "shown_value", "to_json"]

@@ -53,6 +53,7 @@ from odocan.host.report.outputs import OutputError
 from odocan.sim import contract
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.clock import LockstepClock
+from odocan.sim.closing import release_all
 from odocan.sim.exceptions import OdocanError
 from odocan.sim.rig import INTEGRATORS, firmware_params
 from odocan.sim.robot import RobotProfile, list_profiles
@@ -217,15 +218,8 @@ class LockstepReplay:
     def close(self) -> None:
         """Deliver what is left, stop the listeners, release the buses: every one, even when
         a listener's ``stop()`` fails (the first error is raised once all are released)."""
-        first: BaseException | None = None
-        releases = [self._drain, *(li.stop for li in self.listeners)]
-        for release in [*releases, *(bus.shutdown for bus in self._buses)]:
-            try:
-                release()
-            except Exception as exc:
-                first = first or exc
-        if first is not None:
-            raise first
+        release_all([self._drain, *(li.stop for li in self.listeners),
+                     *(bus.shutdown for bus in self._buses)])
 
 
 def _events(encoders: IntArray, truth: IntArray) -> list[tuple[int, int]]:

@@ -24,6 +24,7 @@ POSITION_LSB_M = float(contract.message("ODOM_POSE_X").get_signal_by_name("X").s
 HEADING_LSB_RAD = float(contract.message("ODOM_POSE_X").get_signal_by_name("HEADING").scale)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 SILENCE_CYCLES = 8  # pose frames this many encoder cycles apart: the firmware was stalled
+QUEUED_GAP_CYCLES = 0.5  # two sends of one message closer than this waited to be sent
 START_FIT_SAMPLES = 256  # on-board samples used to place the reference start (5 s at 50 Hz)
 ENC_E2E_PAGE = 2  # ODOM_STATUS page with the firmware's WHEEL_ENCODERS E2E counts
 REQUIRED = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y")
@@ -128,14 +129,19 @@ def pick_integrator(
 def encoder_frames(
     frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
 ) -> Encoders:
-    """The accepted encoder frames and their sender sequence numbers."""
+    """The accepted encoder frames and their sender sequence numbers: COUNTER steps, widened by
+    16 where the time stamps say that many more periods passed, unless the frame after the gap
+    came in a burst (``queued_frames``)."""
     enc = accepted_rows(frames, accepted, decoder, "WHEEL_ENCODERS")
     counter = enc["COUNTER"].astype(np.int64)
     step = (np.diff(counter) & 0xF).astype(np.int64)
     cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS")
     if cycle_s is not None and len(step):
         periods = np.rint(np.diff(enc["timestamp_s"]) / cycle_s).astype(np.int64)
-        step = step + 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
+        lost = 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
+        # a frame let out in a burst after the gap waited in the sender's buffer: the gap is
+        # a busy bus, not lost frames (the COUNTER step is the whole step)
+        step = step + np.where(queued_frames(enc["timestamp_s"], cycle_s)[1:], 0, lost)
     seq = np.concatenate(([0], np.cumsum(step))).astype(np.int64)
     return Encoders(
         index=enc["index"], counter=counter, seq=seq,
@@ -151,13 +157,18 @@ def contract_cycle_s(decoder: BulkDecoder, name: str) -> float | None:
 
 
 def match_encoder(
-    enc: Encoders, index: IntArray, enc_counter: IntArray, timestamp_s: FloatArray
+    enc: Encoders, index: IntArray, enc_counter: IntArray, timestamp_s: FloatArray,
+    own_counter: IntArray | None = None, *, causal: bool = True,
 ) -> IntArray:
     """For frames at ``index`` (sent at ``timestamp_s``) naming ``enc_counter``: the encoder
     frame named (index into ``enc``), -1 where it is not among the accepted encoder frames
-    (module docstring, step 3). The latest accepted encoder frame must be less than 8 cycles
-    older than the naming frame: else the frame named (-8..+7 from it) cannot be told from one
-    16 cycles away (after a gap of 16 frames, E2E refuses the next as a repetition)."""
+    before the naming frame (host.judge.analysis docstring, step 3). The latest accepted encoder
+    frame must be less than 8 cycles older than the naming frame: else the frame named (-8..+7
+    from it) cannot be told from one 16 cycles away (after a gap of 16 frames, E2E refuses the
+    next as a repetition). ``own_counter``: the naming frames' E2E COUNTER (one message), to
+    carry a repeated ENC_COUNTER over consecutive sends (``_held``). ``causal`` False: the named
+    frame may come later in the log (SIM_TRUTH: the simulator names its own sample, whenever the
+    encoder frame reaches the bus)."""
     latest = np.searchsorted(enc.index, index) - 1
     result = np.full(len(index), -1, dtype=np.int64)
     has = latest >= 0
@@ -168,8 +179,93 @@ def match_encoder(
     offset = ((enc_counter[has] - enc.counter[latest] + 8) & 0xF) - 8
     target = enc.seq[latest] + offset
     found = np.minimum(np.searchsorted(enc.seq, target), len(enc.seq) - 1)
-    result[np.flatnonzero(has)] = np.where(enc.seq[found] == target, found, -1)
+    before = (enc.index[found] < index[has]) | (not causal)  # not integrated before it came
+    result[np.flatnonzero(has)] = np.where((enc.seq[found] == target) & before, found, -1)
+    if own_counter is not None and enc.cycle_s is not None:
+        result = _held(result, enc_counter, own_counter, timestamp_s, enc.cycle_s)
+        result = _queued(result, enc, index, enc_counter, own_counter, timestamp_s)
     return result
+
+
+def queued_frames(timestamp_s: FloatArray, cycle_s: float) -> npt.NDArray[np.bool_]:
+    """Frames of one periodic sender (in bus order) that waited in its transmit buffer: less
+    than ``QUEUED_GAP_CYCLES`` encoder cycles from the one before or after them. A firmware
+    sends each pose and twist message at most once per encoder period, so two of them that
+    close on the bus were not sent when they were made (a busy bus, e.g. a babbling node of
+    higher priority, held them back and then let them out in a burst)."""
+    close = np.diff(timestamp_s) < QUEUED_GAP_CYCLES * cycle_s
+    queued: npt.NDArray[np.bool_] = (
+        np.concatenate(([False], close)) | np.concatenate((close, [False]))
+    )
+    return queued
+
+
+def _queued(
+    named: IntArray, enc: Encoders, index: IntArray, enc_counter: IntArray,
+    own_counter: IntArray, timestamp_s: FloatArray,
+) -> IntArray:
+    """``named`` with each queued frame (``queued_frames``) resolved from when its sender made
+    it, not from when the bus let it out (host.judge.analysis docstring, step 3).
+
+    A queued frame was made long before it reached the bus, so the latest encoder frame before
+    it on the bus says nothing of what its sender had. Its sender makes one every send period
+    (the median spacing of the frames, 20 ms for a pose): counted on from the last frame before
+    the burst that was not queued (sent when made), without a loss between (own COUNTER + 1
+    each), the k-th queued frame was made ``k`` send periods later. It names the latest encoder
+    frame of its ENC_COUNTER that was on the bus by then, not before the frame its predecessor
+    named (a firmware names frames in increasing order) and accepted in the log before it.
+    A queued frame without such a chain names none (it is left out, not guessed)."""
+    assert enc.cycle_s is not None
+    queued = queued_frames(timestamp_s, enc.cycle_s)
+    if not queued.any():
+        return named
+    send_s = float(np.median(np.diff(timestamp_s)))
+    named = named.copy()
+    made_s = np.nan  # when the previous frame was made (bus time s)
+    for k in range(len(named)):
+        if not queued[k]:
+            made_s = float(timestamp_s[k])
+            continue
+        chained = (k > 0 and named[k - 1] >= 0
+                   and (int(own_counter[k] - own_counter[k - 1]) & 0xF) == 1)
+        made_s = made_s + send_s if chained else np.nan
+        named[k] = _named_by(enc, int(named[k - 1]), int(enc_counter[k]), made_s, int(index[k]))
+    return named
+
+
+def _named_by(enc: Encoders, floor: int, enc_counter: int, made_s: float, index: int) -> int:
+    """The latest accepted encoder frame at or after ``floor`` with COUNTER ``enc_counter``, on
+    the bus by ``made_s`` and before frame ``index`` of the log; -1 when none (or no time)."""
+    if np.isnan(made_s):
+        return -1
+    last = min(int(np.searchsorted(enc.timestamp_s, made_s, side="right")),
+               int(np.searchsorted(enc.index, index))) - 1
+    if last < floor:
+        return -1
+    target = int(enc.seq[last]) - ((int(enc.counter[last]) - enc_counter) & 0xF)
+    found = int(np.searchsorted(enc.seq, target))
+    if target < enc.seq[floor] or found >= len(enc.seq) or enc.seq[found] != target:
+        return -1
+    return found
+
+
+def _held(
+    named: IntArray, enc_counter: IntArray, own_counter: IntArray, timestamp_s: FloatArray,
+    cycle_s: float,
+) -> IntArray:
+    """``named`` with each frame that repeats the ENC_COUNTER of its sender's previous send
+    (own COUNTER + 1, less than ``SILENCE_CYCLES`` cycles later) naming what that one named
+    (host.judge.analysis docstring, step 3), along runs of such repeats."""
+    if len(named) < 2:
+        return named
+    repeat = np.concatenate(([False], (
+        (np.diff(enc_counter) == 0)
+        & ((np.diff(own_counter) & 0xF) == 1)
+        & (np.diff(timestamp_s) < SILENCE_CYCLES * cycle_s)
+    )))
+    run_start = np.maximum.accumulate(np.where(repeat, 0, np.arange(len(named))))
+    held: IntArray = named[run_start]
+    return held
 
 
 def _first_per_encoder(enc_idx: IntArray) -> tuple[IntArray, IntArray]:
@@ -186,8 +282,10 @@ def onboard_samples(
     when each sample's ODOM_POSE_Y was sent (s)."""
     px = accepted_rows(frames, accepted, decoder, "ODOM_POSE_X")
     py = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")
-    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"], px["timestamp_s"])
-    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"], py["timestamp_s"])
+    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"], px["timestamp_s"],
+                       px["COUNTER"].astype(np.int64))
+    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"], py["timestamp_s"],
+                       py["COUNTER"].astype(np.int64))
     unmatched = int(np.count_nonzero(ex < 0) + np.count_nonzero(ey < 0))
     ux, fx = _first_per_encoder(ex)
     uy, fy = _first_per_encoder(ey)
@@ -218,24 +316,42 @@ def after_stalls(
     (its backlog), which ENC_COUNTER cannot resolve, so it is left out; and the firmware took the
     frames it missed as one step, which a fine reference cannot follow on a curve, so the
     reference's position restarts (a segment, like a gap) at the encoder frame after the last
-    sample before the silence. Returns the samples kept and those encoder frames (sorted)."""
+    sample before the silence. The same restart where the firmware kept talking but held its
+    pose (``_frozen``). Returns the samples kept and those encoder frames (sorted)."""
     if enc.cycle_s is None or len(sent_s) < 2:
         return onboard, np.zeros(0, dtype=np.int64)
     order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
     sent = sent_s[order]
     # Silent while the encoder frames went on (a log that lacks both is a recorder's gap).
+    # Half a cycle short of SILENCE_CYCLES: samples come in whole send periods, and time stamps
+    # summed in float must not decide (79.999... ms is 80 ms).
     heard = np.searchsorted(enc.timestamp_s, sent[1:]) - np.searchsorted(enc.timestamp_s, sent[:-1])
+    # A sample let out in a burst (queued_frames) was not silent: the bus held it back.
+    queued = queued_frames(sent, enc.cycle_s)
     after = np.flatnonzero(
-        (np.diff(sent) >= SILENCE_CYCLES * enc.cycle_s) & (heard >= SILENCE_CYCLES - 1)
+        (np.diff(sent) >= (SILENCE_CYCLES - 0.5) * enc.cycle_s) & (heard >= SILENCE_CYCLES - 1)
+        & ~queued[1:]
     ) + 1
-    if len(after) == 0:
-        return onboard, np.zeros(0, dtype=np.int64)
     keep = np.ones(len(sent_s), dtype=bool)
     keep[order[after]] = False
-    breaks = np.unique(onboard.enc[order[after - 1]] + 1)
     kept = Poses(onboard.enc[keep], onboard.x_m[keep], onboard.y_m[keep],
-                  onboard.heading_rad[keep], onboard.heading_raw[keep])
+                 onboard.heading_rad[keep], onboard.heading_raw[keep])
+    queued_by_sample = np.zeros(len(sent_s), dtype=bool)
+    queued_by_sample[order] = queued
+    frozen = _frozen(kept, enc, queued_by_sample[keep])
+    breaks = np.unique(np.concatenate((onboard.enc[order[after - 1]] + 1, frozen)))
     return kept, breaks.astype(np.int64)
+
+
+def _frozen(onboard: Poses, enc: Encoders, queued: npt.NDArray[np.bool_]) -> IntArray:
+    """Encoder frames after a sample whose next sample names a frame ``SILENCE_CYCLES`` or more
+    periods later while the log holds the frames between: the firmware held its pose on one frame
+    (it kept naming it) and then took the frames since as one step, as after a stall."""
+    seq = enc.seq[onboard.enc]
+    held = (np.diff(seq) >= SILENCE_CYCLES) & (np.diff(onboard.enc) >= SILENCE_CYCLES)
+    held &= ~queued[1:]  # a queued sample was made long before it was sent: not evidence
+    frozen: IntArray = onboard.enc[:-1][held] + 1
+    return frozen
 
 
 def truth_samples(
@@ -252,7 +368,7 @@ def truth_samples(
     for p in parts:
         keep = accepted[p["index"]]
         named = match_encoder(
-            enc, p["index"][keep], p["ENC_COUNTER"][keep], p["timestamp_s"][keep]
+            enc, p["index"][keep], p["ENC_COUNTER"][keep], p["timestamp_s"][keep], causal=False
         )
         uniq, first = _first_per_encoder(named)
         found.append((uniq, np.flatnonzero(keep)[first]))

@@ -13,9 +13,11 @@ with their state carried across chunk boundaries, so that the result is the whol
   sequence number: the integer sequence numbers are those of the whole log.
 
 * ``StreamPoses``: the on-board samples (``host.judge.samples.onboard_samples``: ODOM_POSE_X and
-  _Y naming one encoder frame, the first of each), carried by the last 16 encoder frames, the
-  pose frames that name a frame the log has not reached yet, and the halves not yet paired;
-  a sample is given out once no later frame can name its encoder frame.
+  _Y naming one encoder frame, the first of each), carried by the last 16 encoder frames, each
+  kind's last pose frame (a repeat of its ENC_COUNTER names what it named), and the halves not
+  yet paired; a pose names only a frame before it, so it resolves in its own chunk (SIM_TRUTH,
+  not causal: a part naming a frame the log has not reached yet waits), and a sample is given
+  out once no later frame can name its encoder frame.
 
 * ``StreamReference``: the steps as the firmware takes them (``reference_path.firmware_steps``:
   plausibility refusals, counter restarts) and their integration from pose 0 (``reference.
@@ -60,6 +62,7 @@ from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
+    SILENCE_CYCLES,
     Encoders,
     contract_cycle_s,
 )
@@ -207,20 +210,30 @@ class StreamPoses:
     ODOM_POSE_Y naming one encoder frame, the first of each), chunk by chunk.
 
     A pose frame resolves against the latest accepted encoder frame before it (-8..+7 in the
-    sequence): one naming a frame the log has not reached yet waits for the next chunk, and so
-    do the frames of its kind after it (the first frame naming an encoder frame wins). A
-    sample is given out once no later frame can name its encoder frame (its sequence number
-    more than 8 below every later frame's latest), in encoder order; ``enc`` counts the
-    accepted encoder frames of the whole log."""
+    sequence) and names only a frame before it in the log (``samples.match_encoder``, causal),
+    so it resolves in its own chunk; a frame repeating the ENC_COUNTER of its kind's previous
+    one names what that one named (``samples._held``: carried across chunks by the last frame
+    of each kind). The first frame naming an encoder frame wins. A sample is given out once no
+    later frame can name its encoder frame (its sequence number more than 8 below the latest
+    encoder frame's), in encoder order; ``enc`` counts the accepted encoder frames of the
+    whole log.
+
+    ``causal`` False (``stream_truth.StreamTruth``: the simulator names its own sample, whenever
+    its encoder frame reaches the bus): a frame naming one the log has not reached yet waits
+    for the next chunk, and so do the frames of its kind after it."""
 
     decoder: BulkDecoder
     unmatched: int = 0  # pose frames naming no accepted encoder frame of the log
     _offset: int = 0
     _enc_count: int = 0
     _recent: dict[str, np.ndarray] = field(default_factory=dict)  # g, index, counter, seq, t
-    _pending: dict[str, _Halves] = field(default_factory=dict)
+    _pending: dict[str, _Halves] = field(default_factory=dict)  # (not causal) frames waiting
     _first: dict[str, dict[int, tuple[int, dict[str, float], float]]] = field(
         default_factory=lambda: {"ODOM_POSE_X": {}, "ODOM_POSE_Y": {}})
+    # per kind, its last pose frame: ENC_COUNTER, COUNTER, time, encoder frame named (g), seq
+    _last_row: dict[str, tuple[int, int, float, int, int]] = field(default_factory=dict)
+    _given_below: float = -np.inf  # samples of sequence numbers below this are given out
+    causal: bool = True  # a frame names only an encoder frame before it (held ones carried)
 
     def feed(
         self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_], enc: Encoders
@@ -272,42 +285,91 @@ class StreamPoses:
     def _resolve(
         self, name: str, halves: _Halves, known: dict[str, np.ndarray], *, final: bool
     ) -> float:
-        """Resolve what can be (``final``: everything); returns the lowest sequence number a
-        frame not resolved yet may name (inf when none waits)."""
+        """Resolve what can be (causal, or ``final``: everything); keep the first frame naming
+        each encoder frame not given out yet; returns the lowest sequence number a frame not
+        resolved yet may name (inf when none waits)."""
         if len(known["seq"]) == 0:  # no encoder frame before any of them: none can match
             self.unmatched += len(halves.index)
             self._pending[name] = halves.take(np.zeros(len(halves.index), dtype=bool))
-            return np.inf
-        cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
-        latest = np.searchsorted(known["index"], halves.index) - 1
-        has = latest >= 0
-        if cycle_s is not None:
-            has &= halves.timestamp_s - known["t"][np.maximum(latest, 0)] < 8 * cycle_s
-        offset = ((halves.enc_counter - known["counter"][np.maximum(latest, 0)] + 8) & 0xF) - 8
-        target = known["seq"][np.maximum(latest, 0)] + offset
-        top = int(known["seq"][-1]) if len(known["seq"]) else -1
-        waits = has & (target > top) & (not final)
+            return -np.inf if not final else np.inf  # (no sample either: nothing to give out)
+        g, seq, latest, beyond = self._named(halves, known)
+        top = int(known["seq"][-1])
+        waits = beyond & (not final) & (not self.causal)
         cut = int(np.argmax(waits)) if waits.any() else len(halves.index)
         self._pending[name] = halves.take(np.arange(len(halves.index)) >= cut)
-        found = np.minimum(np.searchsorted(known["seq"], target[:cut]), len(known["seq"]) - 1)
-        hit = has[:cut] & (known["seq"][found] == target[:cut])
-        self.unmatched += int(np.count_nonzero(~hit))
-        firsts = self._first[name]
-        hits = np.flatnonzero(hit)
-        named = found[hits]
-        columns = {k: v[hits].tolist() for k, v in halves.values.items()}  # plain Python values
-        for i, (g, seq, t) in enumerate(zip(known["g"][named].tolist(),
-                                            known["seq"][named].tolist(),
-                                            halves.timestamp_s[hits].tolist(), strict=True)):
-            if g not in firsts:
-                firsts[g] = (seq, {k: v[i] for k, v in columns.items()}, t)
+        g, seq = g[:cut], seq[:cut]
+        cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        if self.causal and cycle_s is not None and len(halves.index):
+            g, seq = self._held(name, halves, g, seq, cycle_s)
+        self.unmatched += int(np.count_nonzero(g < 0))
+        self._keep_first(name, halves, g, seq)
         if cut == len(halves.index):
             return float(top - 8) if not final else np.inf
         return float(min(known["seq"][np.maximum(latest[cut:], 0)].min(), top) - 8)
 
+    def _keep_first(
+        self, name: str, halves: _Halves, g: npt.NDArray[np.int64], seq: npt.NDArray[np.int64]
+    ) -> None:
+        """The first frame of ``halves`` naming each encoder frame not given out yet."""
+        firsts = self._first[name]
+        hits = np.flatnonzero((g >= 0) & (seq >= self._given_below))
+        columns = {k: v[hits].tolist() for k, v in halves.values.items()}  # plain Python values
+        for i, (gi, si, t) in enumerate(zip(g[hits].tolist(), seq[hits].tolist(),
+                                            halves.timestamp_s[hits].tolist(), strict=True)):
+            if gi not in firsts:
+                firsts[gi] = (si, {k: v[i] for k, v in columns.items()}, t)
+
+    def _named(
+        self, halves: _Halves, known: dict[str, np.ndarray]
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64],
+               npt.NDArray[np.bool_]]:
+        """The encoder frame each pose frame names: g (number in the log; -1 when none of the
+        log's accepted frames, before it when causal) and its sequence number (-1 likewise);
+        the latest encoder frame before each (position in ``known``); and which name a frame
+        beyond the latest known one (not causal: they wait for the next chunk)."""
+        g = np.full(len(halves.index), -1, dtype=np.int64)
+        seq = np.full(len(halves.index), -1, dtype=np.int64)
+        cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        latest = np.searchsorted(known["index"], halves.index) - 1
+        has = latest >= 0
+        last = np.maximum(latest, 0)
+        if cycle_s is not None:
+            has &= halves.timestamp_s - known["t"][last] < 8 * cycle_s
+        target = known["seq"][last] + ((halves.enc_counter - known["counter"][last] + 8) & 0xF) - 8
+        found = np.minimum(np.searchsorted(known["seq"], target), len(known["seq"]) - 1)
+        hit = has & (known["seq"][found] == target)
+        if self.causal:  # not integrated before the pose came: the firmware cannot name it
+            hit &= known["index"][found] < halves.index
+        g[hit] = known["g"][found[hit]]
+        seq[hit] = target[hit]
+        return g, seq, latest, has & (target > known["seq"][-1])
+
+    def _held(
+        self, name: str, halves: _Halves, g: npt.NDArray[np.int64], seq: npt.NDArray[np.int64],
+        cycle_s: float,
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """``samples._held`` across chunks: the kind's last frame carried in front."""
+        counter = halves.values["COUNTER"].astype(np.int64)
+        ec, own, t = halves.enc_counter, counter, halves.timestamp_s
+        if name in self._last_row:
+            e0, c0, t0, g0, s0 = self._last_row[name]
+            ec, own, t = np.r_[e0, ec], np.r_[c0, own], np.r_[t0, t]
+            g, seq = np.r_[g0, g], np.r_[s0, seq]
+        repeat = np.concatenate(([False], (
+            (np.diff(ec) == 0) & ((np.diff(own) & 0xF) == 1)
+            & (np.diff(t) < SILENCE_CYCLES * cycle_s)
+        )))
+        run_start = np.maximum.accumulate(np.where(repeat, 0, np.arange(len(g))))
+        g, seq = g[run_start], seq[run_start]
+        self._last_row[name] = (int(ec[-1]), int(own[-1]), float(t[-1]), int(g[-1]),
+                                int(seq[-1]))
+        cut = len(g) - len(halves.index)
+        return g[cut:], seq[cut:]
+
     def _emit(self, floor: float) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
         """The samples of encoder frames below sequence ``floor``, in encoder order; halves
         there that found no partner are dropped."""
+        self._given_below = max(self._given_below, floor)
         xs, ys = self._first["ODOM_POSE_X"], self._first["ODOM_POSE_Y"]
         done = sorted(g for g in xs.keys() | ys.keys()
                       if (xs[g][0] if g in xs else ys[g][0]) < floor)

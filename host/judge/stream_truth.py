@@ -35,6 +35,7 @@ class StreamTruth(StreamPoses):
 
     _first: dict[str, dict[int, tuple[int, dict[str, float], float]]] = field(
         default_factory=_no_parts)
+    causal: bool = False  # the simulator names its own sample (``samples.truth_samples``)
 
     def _rows(self, chunk: FrameArrays, name: str) -> dict[str, np.ndarray]:
         """One part's frames: index, timestamp_s, ENC_COUNTER and its value (none without

@@ -75,7 +75,7 @@ def difference(a: FramePose, b: FramePose) -> dict[str, float]:
 class FramePose(NamedTuple):
     """A pose at one encoder frame (``seq``: the how-many-th encoder frame the monitor heard,
     -1 when unknown); ``heading_rad`` is cumulative (unwrapped), ``pose_dict`` names both forms.
-    A plain ``sim.pose.Pose`` with the frame it is of: on-board, reference and truth samples
+    A plain ``sim.pose.FramePose`` with the frame it is of: on-board, reference and truth samples
     are paired by ``seq``, never by time."""
 
     seq: int
@@ -116,7 +116,7 @@ class PoseTracker:
     When the integrator is not known yet (``integrator`` None: the one ODOM_STATUS reports), the
     poses and encoder frames heard meanwhile are kept (up to ``BACKLOG_FRAMES``) and compared
     once it is, so the monitor (which waits for ODOM_STATUS) and the bridge (told the integrator)
-    start at the same pose and judge the same samples as ``analyze``. Pose halves are paired by
+    start at the same pose and judge the same samples as ``analyze``. FramePose halves are paired by
     ``host.protocol.pose.PosePairer``, the one pairing. The reference starts again when
     ODOM_STATUS reports another integrator. At power-up the first pose is exactly (0, 0, 0), the
     start ``analyze`` uses; mid-drive the start inherits the pose signals' rounding (0.1 mm,
@@ -145,6 +145,11 @@ class PoseTracker:
         self._backlog_poses: list[FramePose] = []
         self._truth_parts: dict[int, tuple[int, float]] = {}
         self._last_pair: tuple[FramePose, FramePose] | None = None  # on-board, reference
+        # (ENC_COUNTER, encoder frame named or -1, frames heard then) of the last X and Y half
+        self._last_x: tuple[int, int, int] | None = None
+        self._last_y: tuple[int, int, int] | None = None
+        self._last_compared = -1  # the encoder frame of the last sample compared
+        self._place_at_next = False  # after a stall or a held pose: place the position again
         self.pose: FramePose | None = None
         self.reference: FramePose | None = None
         self.truth: FramePose | None = None
@@ -184,6 +189,8 @@ class PoseTracker:
     def restart_reference(self) -> None:
         """Start the reference again at the next on-board pose (after a set-pose or config)."""
         self._ref = None
+        self._last_compared = -1
+        self._place_at_next = False
         self._refs = [None] * _RING
         self._drop_backlog()
 
@@ -200,9 +207,20 @@ class PoseTracker:
 
     def on_pose_x(self, enc_counter: int, x_m: float, heading_rad: float) -> None:
         """ODOM_POSE_X (X in m, HEADING in rad within the turn)."""
+        seq = self._resolve(self._last_x, enc_counter)
+        self._last_x = (enc_counter, seq, self.enc_seq)
+        self._pairer.on_x({"ENC_COUNTER": enc_counter, "X": x_m, "HEADING": heading_rad}, seq)
+
+    def _resolve(self, last: tuple[int, int, int] | None, enc_counter: int) -> int:
+        """The encoder frame (seq) a pose half names, -1 when unknown. A half repeating the
+        ENC_COUNTER of the previous half of its kind, fewer than ``SILENCE_FRAMES`` frames later,
+        names what that one named (E2E refuses a repeated COUNTER: the firmware held on one frame,
+        e.g. after a late and a lost frame, while the bus carried a new frame with the same
+        COUNTER; ``host.judge.analysis._held``)."""
+        if last is not None and last[0] == enc_counter and self.enc_seq - last[2] < SILENCE_FRAMES:
+            return last[1]
         named = self._named(self._counts[enc_counter])
-        self._pairer.on_x({"ENC_COUNTER": enc_counter, "X": x_m, "HEADING": heading_rad},
-                          named[0] if named is not None else -1)
+        return int(named[0]) if named is not None else -1
 
     def on_pose_y(
         self, enc_counter: int, y_m: float, turns: int
@@ -214,17 +232,27 @@ class PoseTracker:
         silent, self._frames_since_pose = self._frames_since_pose >= SILENCE_FRAMES, 0
         if silent and self._ref is not None:
             # The firmware was stalled: this pose names a backlog frame ENC_COUNTER cannot
-            # resolve, and it took the frames it missed as one step. Start again at the next.
+            # resolve, and it took the frames it missed as one step: the reference's position
+            # is placed again at the next pose (its heading, a function of the counts, goes on).
             self.stalls += 1
-            self.restart_reference()
+            self._place_at_next = True
             self._pairer.on_y({"ENC_COUNTER": enc_counter, "Y": y_m, "TURNS": turns})
             return None
-        named = self._named(self._counts[enc_counter])
-        seq = named[0] if named is not None else -1
+        seq = self._resolve(self._last_y, enc_counter)
+        self._last_y = (enc_counter, seq, self.enc_seq)
         paired = self._pairer.on_y({"ENC_COUNTER": enc_counter, "Y": y_m, "TURNS": turns}, seq)
         if paired is None:
             return None
         pose = self.pose = FramePose(seq, paired.x_m, paired.y_m, paired.heading_rad)
+        named = self._named(self._counts[enc_counter])
+        if named is not None and named[0] != seq:
+            named = None  # the ring moved on: the frame this pose names is a held one
+        held = 0 <= self._last_compared <= seq - SILENCE_FRAMES
+        if self._ref is not None and held and not self._place_at_next:
+            # The firmware held its pose that long, then took the frames since as one step,
+            # which a fine reference cannot follow on a curve: placed again, as after a stall.
+            self.stalls += 1
+            self._place_at_next = True
         if self._ref is None and named is not None:
             if self._pending is None:
                 self._pending = pose
@@ -238,12 +266,29 @@ class PoseTracker:
             self._start_reference(self._pending, self._backlog_counts, [])
             self._drop_backlog()
         ref = self._named(self._refs[enc_counter])
-        if ref is None or seq < 0:
+        if ref is None or seq < 0 or ref.seq != seq:
             return pose, None
+        if self._place_at_next:
+            ref = self._place(pose, ref)
         self.reference = ref
         self._last_pair = (pose, ref)
+        self._last_compared = seq
         self.vs_reference.add(pose, ref)
         return pose, ref
+
+    def _place(self, pose: FramePose, ref: FramePose) -> FramePose:
+        """Move the reference's position (now and at the frames heard since ``ref``) by
+        ``pose - ref``: it starts again where the firmware is, within the pose's rounding (so
+        within about 1.4 LSB after), while its heading goes on exact. Returns the moved ``ref``."""
+        assert self._ref is not None
+        dx, dy = pose.x_m - ref.x_m, pose.y_m - ref.y_m
+        self._ref.x_m += dx
+        self._ref.y_m += dy
+        self._refs = [r if r is None or r.seq < ref.seq else r._replace(x_m=r.x_m + dx,
+                                                                         y_m=r.y_m + dy)
+                      for r in self._refs]
+        self._place_at_next = False
+        return ref._replace(x_m=ref.x_m + dx, y_m=ref.y_m + dy)
 
     def on_truth(
         self, part: int, enc_counter: int, value: float
@@ -319,6 +364,7 @@ class PoseTracker:
             if at is not None:
                 self.reference = at
                 self._last_pair = (heard, at)
+                self._last_compared = heard.seq
                 self.vs_reference.add(heard, at)
 
     def snapshot(self) -> dict[str, Any]:

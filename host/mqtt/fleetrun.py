@@ -4,7 +4,8 @@
 the fleet's frames offered to it each tick), runs for ``duration_s`` and returns the report:
 
 ```
-{"robots": N, "duration_s": ..., "period_s": 0.01, "deadline_miss_ratio": ...,
+{"robots": N, "transport": "odocan" | "virtual", "duration_s": ..., "period_s": 0.01,
+ "deadline_miss_ratio": ...,
  "ticks": ..., "late_ticks": ..., "skipped_releases": ..., "max_lateness_ms": ...,
  "broker": "mqtt://127.0.0.1:PORT" | null, "embedded_broker": bool,
  "bridge": {"frames_in": ..., "frames_dropped": ..., "telemetry_dropped": ..., ...} | null,
@@ -234,6 +235,7 @@ def _report(
     return {
         "robots": run.fleet.robots,
         "first_robot": fleet.names[0],
+        "transport": run.fleet.transport,
         "duration_s": run.duration_s,
         "period_s": stats.period_s,
         "deadline_miss_ratio": stats.deadline_miss_ratio,

@@ -19,9 +19,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import aiomqtt
+from cantools.database.can import Database
 
+from odocan.host.judge.monitor import error_names, shown_value
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.report.jsonutil import real
+from odocan.sim.contract import database
 
 
 @dataclass
@@ -48,8 +52,15 @@ _LEAF_FIELD = {"status": "status", "pose": "pose", "reference": "reference", "tr
                "error": "error", "rates": "rates", topics.RESULT_LEAF: "last_result"}
 
 
-def apply(table: dict[str, RobotState], topic_name: str, payload: bytes) -> bool:
-    """Fold one message into ``table``; False when it is not a robot topic or not JSON."""
+def apply(
+    table: dict[str, RobotState], topic_name: str, payload: bytes, *, retained: bool = False
+) -> bool:
+    """Fold one message into ``table``; False when it is not a robot topic or not JSON.
+
+    A live message updates the robot now. A ``retained`` one (the broker's copy, sent to a new
+    subscriber) is as old as its payload's ``unix_s`` says (the publisher's wall clock, s), or of
+    unknown age (the robot's ``updated_unix_s`` is left as it was): a robot gone for an hour
+    must not look alive because its last status is still on the broker."""
     split = topics.split(topic_name)
     if split is None or split[1] not in _LEAF_FIELD:
         return False
@@ -61,8 +72,21 @@ def apply(table: dict[str, RobotState], topic_name: str, payload: bytes) -> bool
         return False
     state = table.setdefault(split[0], RobotState(split[0]))
     setattr(state, _LEAF_FIELD[split[1]], data)
-    state.updated_unix_s = time.time()
+    now_unix_s = time.time()
+    if not retained:
+        state.updated_unix_s = now_unix_s
+    else:
+        sent_unix_s = _published_unix_s(data, now_unix_s)
+        if sent_unix_s is not None:
+            state.updated_unix_s = max(state.updated_unix_s, sent_unix_s)
     return True
+
+
+def _published_unix_s(data: dict[str, Any], now_unix_s: float) -> float | None:
+    """The payload's ``unix_s`` (s since the epoch, at most ``now_unix_s``), None if absent
+    or not a finite number."""
+    sent = real(data.get("unix_s"))
+    return None if sent is None else min(sent, now_unix_s)
 
 
 async def fleet_states(
@@ -77,8 +101,60 @@ async def fleet_states(
             payload = message.payload
             if not isinstance(payload, bytes | bytearray):
                 continue
-            if apply(table, message.topic.value, bytes(payload)):
+            if apply(table, message.topic.value, bytes(payload), retained=message.retain):
                 now = time.monotonic()
                 if now - last >= min_interval_s:
                     last = now
                     yield table
+
+
+# --- the fleet table's rows (monitor --mqtt, its --json) ----------------------------------
+
+
+def fleet_snapshot(table: dict[str, RobotState], db: Database | None = None) -> dict[str, Any]:
+    """Per robot: online, pose, error vs reference, firmware status, frame rates."""
+    db = db if db is not None else database()
+    return {name: _robot_row(table[name], db) for name in sorted(table)}
+
+
+def _robot_row(state: RobotState, db: Database) -> dict[str, Any]:
+    hz = _rates_hz(state.rates)
+    keys = ("x_m", "y_m", "heading_rad", "heading_unwrapped_rad")
+    pose = {k: state.pose.get(k) for k in keys} if state.pose else None
+    return {
+        "online": state.online,
+        "pose": pose,
+        "error": state.error.get("pose_vs_reference"),
+        "status": _firmware_row(state.status, db),
+        "rate_hz": round(sum(hz.values()), 3) if hz else None,
+        "encoder_hz": hz.get("WHEEL_ENCODERS"),
+        "updated_unix_s": state.updated_unix_s,
+    }
+
+
+def _firmware_row(status: dict[str, Any], db: Database) -> dict[str, Any] | None:
+    """The firmware's summary in a retained status; None when there is none or it is not one
+    a bridge publishes (a status from anyone allowed to publish must not stop the monitor)."""
+    firmware = status.get("firmware")
+    summary = firmware.get("summary") if isinstance(firmware, dict) else None
+    if not isinstance(summary, dict) or not summary:
+        return None
+    mask = summary.get("error_mask", 0)
+    if not isinstance(mask, int) or not 0 <= mask < 1 << 32:
+        return None
+    status_msg = db.get_message_by_name("ODOM_STATUS")
+    try:
+        return {"state": shown_value(status_msg, "STATE", summary.get("state", 0)),
+                "integrator": shown_value(status_msg, "INTEGRATOR", summary.get("integrator", 0)),
+                "error_mask": mask, "errors": error_names(mask),
+                "uptime_s": summary.get("uptime")}
+    except (TypeError, ValueError, OverflowError):  # an enum that is no number nor name
+        return None
+
+
+def _rates_hz(rates: dict[str, Any]) -> dict[str, float]:
+    """The per-message rates of a rates payload that are finite numbers."""
+    hz = rates.get("hz")
+    if not isinstance(hz, dict):
+        return {}
+    return {name: rate for name, v in hz.items() if (rate := real(v)) is not None}

@@ -25,7 +25,6 @@ import argparse
 import asyncio
 import contextlib
 import json
-import math
 import os
 import sys
 import threading
@@ -45,8 +44,8 @@ from odocan.host.io.export import (
 )
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL
-from odocan.host.report.foxglove_options import HOST
-from odocan.sim.exceptions import BusSetupError
+from odocan.host.report.foxglove_options import Served, start_server
+from odocan.host.report.jsonutil import real
 
 RECONNECT_S = 1.0  # after the broker went away
 _POSE_LEAVES = {"pose": "onboard", "reference": "reference", "truth": "truth"}
@@ -54,7 +53,7 @@ _ERROR_TOPICS = {"pose_vs_reference": "errors/reference",
                  "reference_vs_truth": "errors/reference_vs_truth"}
 
 
-class FleetFoxglove:
+class FleetFoxglove(Served):
     """A Foxglove server of every robot's poses, transforms and errors (module docstring).
 
     Args:
@@ -66,27 +65,12 @@ class FleetFoxglove:
         self._context = foxglove.Context()
         self._channels: dict[str, foxglove.Channel] = {}
         self.published = 0
+        self.skipped = 0  # MQTT messages that raised while being served (none expected)
         self._lock = threading.Lock()
         self._channel("/tf", "foxglove.FrameTransform")
         for name in robots:
             self._open_robot(name)
-        try:
-            self.server = foxglove.start_server(
-                name="odocan fleet", host=HOST, port=port, context=self._context
-            )
-        except Exception as exc:  # the SDK raises RuntimeError (port in use, ...)
-            where = f"--foxglove {port}: cannot serve on {HOST}:{port}"
-            raise BusSetupError(f"{where}: {exc}") from None
-
-    @property
-    def port(self) -> int:
-        """The TCP port served."""
-        return int(self.server.port)
-
-    @property
-    def url(self) -> str:
-        """What to type in Foxglove's Open connection."""
-        return f"ws://localhost:{self.port}"
+        self.server = start_server("odocan fleet", port, context=self._context)
 
     def _channel(self, topic: str, schema_name: str) -> None:
         self._channels[topic] = foxglove.Channel(
@@ -145,7 +129,7 @@ class FleetFoxglove:
                 async with aiomqtt.Client(**kwargs, identifier=identifier) as client:
                     await client.subscribe(f"{topics.PREFIX}/+/#", qos=topics.QOS_TELEMETRY)
                     async for message in client.messages:
-                        self._on_mqtt(message.topic.value, message.payload)
+                        self._on_mqtt_guarded(message.topic.value, message.payload)
             except aiomqtt.MqttError as exc:
                 why = str(exc) or type(exc).__name__
                 if why != said:  # once per distinct problem, not once a second
@@ -153,6 +137,14 @@ class FleetFoxglove:
                     print(f"foxglove: broker {broker}: {why} (retrying every {RECONNECT_S:g} s)",
                           file=sys.stderr, flush=True)
                 await asyncio.sleep(RECONNECT_S)
+
+    def _on_mqtt_guarded(self, topic_name: str, payload: object) -> None:
+        """``_on_mqtt``; a message it cannot serve is counted in ``skipped``, never raised: one
+        message must not stop the live view for the rest of the fleet's run."""
+        try:
+            self._on_mqtt(topic_name, payload)
+        except Exception:  # house rule 6: no single message stops the node
+            self.skipped += 1
 
     def _on_mqtt(self, topic_name: str, payload: object) -> None:
         split = topics.split(topic_name)
@@ -173,12 +165,10 @@ class FleetFoxglove:
 
 
 def _numbers(payload: dict[str, Any], *keys: str) -> tuple[float, ...] | None:
-    """The finite numbers under ``keys``, or None when one is missing or not a finite number."""
-    values = [payload.get(key) for key in keys]
-    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
-        return None
-    numbers = tuple(float(v) for v in values if isinstance(v, int | float))
-    return numbers if all(math.isfinite(v) for v in numbers) else None
+    """The finite numbers under ``keys``, or None when one is missing or not a finite number
+    (a JSON integer beyond every float, ``1`` followed by 400 zeros, is not one)."""
+    numbers = [n for key in keys if (n := real(payload.get(key))) is not None]
+    return tuple(numbers) if len(numbers) == len(keys) else None
 
 
 class FollowerThread:

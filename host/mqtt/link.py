@@ -49,7 +49,6 @@ from itertools import islice
 from typing import Any, Literal
 
 import aiomqtt
-import paho.mqtt.client as paho
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from paho.mqtt.subscribeoptions import SubscribeOptions
@@ -62,6 +61,7 @@ from odocan.host.mqtt.broker import (
     first_connect_failure,
     protocol_unsupported,
 )
+from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient
 
 log = logging.getLogger("odocan.mqtt")
 CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
@@ -77,80 +77,6 @@ class _Outgoing:
     topic: str
     body: bytes
     retain: bool
-
-
-class _Arrived(aiomqtt.Message):
-    """aiomqtt's message plus when paho read it (``time.monotonic`` s) and its expiry (s)."""
-
-    arrival_s: float = 0.0
-    expiry_s: float | None = None
-
-
-class _ClosedBeforeConnack(aiomqtt.MqttError):
-    """The broker closed the connection without a CONNACK (amqtt does so to some v5 CONNECTs)."""
-
-
-class _Client(aiomqtt.Client):
-    """aiomqtt's client, keeping what it drops: PUBACK reason codes and arrival times.
-
-    ``on_refused(topic, reason)`` is called for each QoS-1 publication the broker refused;
-    ``on_overflow(message)`` for a message that finds ``max_waiting`` messages already queued.
-    """
-
-    def __init__(
-        self,
-        *,
-        on_refused: Callable[[str, str], None],
-        on_overflow: Callable[[_Arrived], None],
-        max_waiting: int,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(**kwargs)
-        self._on_refused, self._on_overflow = on_refused, on_overflow
-        self._max_waiting = max_waiting
-        self._qos1_topics: dict[int, str] = {}
-        self.session_present = False  # the CONNACK's flag: the broker still had our session
-        paho_publish = self._client.publish
-
-        def publish(topic: str, payload: Any = None, qos: int = 0, retain: bool = False,
-                    properties: Properties | None = None) -> paho.MQTTMessageInfo:
-            info = paho_publish(topic, payload, qos, retain, properties)
-            if qos > 0:
-                self._qos1_topics[info.mid] = topic
-            return info
-
-        setattr(self._client, "publish", publish)  # noqa: B010 (an instance's own attribute)
-
-    def _on_publish(self, client: paho.Client, userdata: Any, mid: int,
-                    reason_code: Any, properties: Any) -> None:
-        topic = self._qos1_topics.pop(mid, None)
-        if topic is not None and getattr(reason_code, "is_failure", False):
-            self._on_refused(topic, str(reason_code))
-        super()._on_publish(client, userdata, mid, reason_code, properties)
-
-    def _on_connect(self, client: paho.Client, userdata: Any, flags: Any,
-                    reason_code: Any, properties: Any = None) -> None:
-        self.session_present = bool(getattr(flags, "session_present", False))
-        super()._on_connect(client, userdata, flags, reason_code, properties)
-
-    def _on_disconnect(self, client: paho.Client, userdata: Any, flags: Any,
-                       reason_code: Any, properties: Any = None) -> None:
-        if not self._connected.done():  # aiomqtt would wait for a CONNACK that never comes
-            self._connected.set_exception(_ClosedBeforeConnack(
-                f"the broker closed the connection before its CONNACK ({reason_code})"))
-            return
-        super()._on_disconnect(client, userdata, flags, reason_code, properties)
-
-    def _on_message(self, client: paho.Client, userdata: Any,
-                    message: paho.MQTTMessage) -> None:
-        arrived = _Arrived._from_paho_message(message)
-        arrived.arrival_s = time.monotonic()
-        expiry = getattr(message.properties, "MessageExpiryInterval", None)
-        arrived.expiry_s = float(expiry) if expiry is not None else None
-        if self._queue.qsize() >= self._max_waiting:
-            self._on_overflow(arrived)
-            return
-        self._queue.put_nowait(arrived)
 
 
 class _Stopped(Exception):
@@ -195,6 +121,7 @@ class RobotLink:
         self.connects = 0
         self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
         self.connected = asyncio.Event()
+        self._taken: list[aiomqtt.Message] = []  # off paho's queue, not answered (cancelled)
         self._telemetry_wake = asyncio.Event()
         self._reliable_wake = asyncio.Event()
 
@@ -240,7 +167,7 @@ class RobotLink:
         }
 
     # --- the connection ---
-    def _client(self) -> _Client:
+    def _client(self) -> LinkClient:
         will = aiomqtt.Will(
             topics.topic(self.robot, topics.STATUS_LEAF),
             topics.dumps(topics.status_payload(self.robot, "offline", reason="connection lost")),
@@ -255,7 +182,7 @@ class RobotLink:
                        "properties": props}
         else:
             session = {"protocol": aiomqtt.ProtocolVersion.V311, "clean_session": False}
-        client = _Client(
+        client = LinkClient(
             **self.broker.client_kwargs(), **session,
             on_refused=self._refused, on_overflow=self._overflow,
             max_waiting=self.command_queue,
@@ -280,7 +207,7 @@ class RobotLink:
             try:
                 await self._connect(client)
             except (aiomqtt.MqttError, TimeoutError, OSError) as exc:
-                if self.v5 and (protocol_unsupported(exc) or isinstance(exc, _ClosedBeforeConnack)):
+                if self.v5 and (protocol_unsupported(exc) or isinstance(exc, ClosedBeforeConnack)):
                     self.v5 = False
                     log.info("%s: %s speaks MQTT 3.1.1 only: no reason codes, no message "
                              "expiry", self.robot, self.broker)
@@ -306,7 +233,7 @@ class RobotLink:
                             group.exceptions[0], backoff)
                 await _sleep_or_stop(stop, backoff)
 
-    def _check_session(self, client: _Client, away_s: float) -> None:
+    def _check_session(self, client: LinkClient, away_s: float) -> None:
         """A v5 broker without our session, though we were away for less than its expiry, has
         lost its state (restarted without persistence, killed): commands it acknowledged but
         had not delivered, and results it had not delivered, are gone. Say so (once a time)."""
@@ -315,12 +242,12 @@ class RobotLink:
             log.warning("%s: the broker lost its session state (restarted without its "
                         "persistence?): commands and results it held may be lost", self.robot)
 
-    async def _connect(self, client: _Client) -> None:
+    async def _connect(self, client: LinkClient) -> None:
         """CONNECT within ``connect_timeout_s`` (TCP, TLS and CONNACK; DNS gets one more s)."""
         async with asyncio.timeout(self.connect_timeout_s + 1.0):
             await client.__aenter__()
 
-    async def _session(self, client: _Client, stop: asyncio.Event) -> None:
+    async def _session(self, client: LinkClient, stop: asyncio.Event) -> None:
         """Serve one connection; whatever ends it, ``offline`` is published first if it can be."""
         try:
             await self._subscribe(client)
@@ -341,7 +268,7 @@ class RobotLink:
             with contextlib.suppress(Exception):
                 await client.__aexit__(None, None, None)
 
-    async def _subscribe(self, client: _Client) -> None:
+    async def _subscribe(self, client: LinkClient) -> None:
         """``cmd/+`` at QoS 1; in v5 with no-local, so our own ``cmd/result`` is not echoed."""
         if self.v5:
             options = SubscribeOptions(qos=topics.QOS_RELIABLE, noLocal=True)
@@ -353,27 +280,55 @@ class RobotLink:
                 log.warning("%s: the broker refused the subscription %s (%s): no command will "
                             "arrive", self.robot, topics.command_filter(self.robot), code)
 
-    async def _receive(self, client: _Client) -> None:
-        prefix = topics.topic(self.robot, "cmd/")
-        async for message in client.messages:
-            name = message.topic.value.removeprefix(prefix)
-            if name == "result" or not isinstance(message, _Arrived):
-                continue
+    async def _receive(self, client: LinkClient) -> None:
+        while True:
+            self._handle(await self._next_message(client))
+
+    async def _next_message(self, client: LinkClient) -> aiomqtt.Message:
+        """The next message paho received; ``MqttError`` once the connection is lost.
+
+        Never loses one, unlike aiomqtt's ``client.messages``: its iterator takes a message off
+        the queue in a task of its own and drops it when the iteration is cancelled (the session's
+        task group ending) or the connection drops in the same turn. Here a message taken when
+        this task is cancelled is kept in ``_taken`` for ``_answer_waiting``; one not yet taken
+        stays in the queue."""
+        queue = client._queue
+        if not queue.empty():
+            return queue.get_nowait()
+        get = asyncio.ensure_future(queue.get())
+        try:
+            await asyncio.wait((get, client._disconnected), return_when=asyncio.FIRST_COMPLETED)
+        except asyncio.CancelledError:
+            get.cancel()  # a task not done yet has not taken its message off the queue
+            if get.done() and not get.cancelled():
+                self._taken.append(get.result())
+            raise
+        if get.done():
+            return get.result()
+        get.cancel()
+        lost = client._disconnected
+        reason = None if lost.cancelled() else lost.exception()  # retrieved: asyncio logs none
+        raise aiomqtt.MqttError(
+            "Disconnected during message iteration" + (f" ({reason})" if reason else "")
+        )
+
+    def _handle(self, message: aiomqtt.Message) -> None:
+        """Answer one message on ``cmd/<name>`` (our own ``cmd/result`` is not a command)."""
+        name = message.topic.value.removeprefix(topics.topic(self.robot, "cmd/"))
+        if name != "result" and isinstance(message, Arrived):
             for leaf, payload in self._answer(name, message):
                 self.publish(leaf, payload)
 
-    def _answer_waiting(self, client: _Client) -> None:
+    def _answer_waiting(self, client: LinkClient) -> None:
         """Answer the commands this client received but we did not handle yet: paho has
         acknowledged them to the broker, so the broker will not send them again."""
-        prefix = topics.topic(self.robot, "cmd/")
+        taken, self._taken = self._taken, []
+        for message in taken:
+            self._handle(message)
         while not client._queue.empty():
-            message = client._queue.get_nowait()
-            name = message.topic.value.removeprefix(prefix)
-            if name != "result" and isinstance(message, _Arrived):
-                for leaf, payload in self._answer(name, message):
-                    self.publish(leaf, payload)
+            self._handle(client._queue.get_nowait())
 
-    def _answer(self, name: str, message: _Arrived) -> list[Publication]:
+    def _answer(self, name: str, message: Arrived) -> list[Publication]:
         expiry_s = message.expiry_s if message.expiry_s is not None else self.command_expiry_s
         if message.retain:  # kept by the broker from whenever: would run again each reconnect
             return self.on_command(name, _payload(message), "retained")
@@ -381,7 +336,7 @@ class RobotLink:
         self.commands_expired += expired
         return self.on_command(name, _payload(message), "expired" if expired else "run")
 
-    def _overflow(self, message: _Arrived) -> None:
+    def _overflow(self, message: Arrived) -> None:
         """Too many commands waiting: answer this one at once (it is not run)."""
         name = message.topic.value.removeprefix(topics.topic(self.robot, "cmd/"))
         if name != "result":
@@ -395,16 +350,22 @@ class RobotLink:
                         reason)
         self.refused[topic] += 1
 
-    async def _send_telemetry(self, client: _Client) -> None:
-        """QoS 0, in batches: awaits only the socket writes, never an acknowledgement."""
+    async def _send_telemetry(self, client: LinkClient) -> None:
+        """QoS 0, in batches: awaits only the socket writes, never an acknowledgement. A batch
+        goes to paho at once and the next waits until the socket took its last message, so
+        while the socket is slow the telemetry waits in the bounded deque (drop-oldest), not
+        in paho's unbounded queue."""
         while True:
             await self._telemetry_wake.wait()
             self._telemetry_wake.clear()
             while self.telemetry:
-                batch = [self.telemetry.popleft() for _ in range(len(self.telemetry))]
-                await asyncio.gather(*(client.publish(t, b, qos=0) for t, b in batch))
+                last = None
+                for _ in range(len(self.telemetry)):
+                    last = client.publish_now(*self.telemetry.popleft())
+                if last is not None:
+                    await client.written(last)
 
-    async def _send_reliable(self, client: _Client) -> None:
+    async def _send_reliable(self, client: LinkClient) -> None:
         """QoS 1, up to ``inflight`` at once; each entry leaves the buffer once acknowledged."""
         while True:
             if not self.reliable:
@@ -413,7 +374,7 @@ class RobotLink:
                 continue
             await self._publish_window(client)
 
-    async def _publish_window(self, client: _Client) -> None:
+    async def _publish_window(self, client: LinkClient) -> None:
         """The oldest ``inflight`` QoS-1 entries at once; each leaves once acknowledged."""
         window = list(islice(self.reliable, self.inflight))
         await asyncio.gather(*(client.publish(p.topic, p.body, qos=topics.QOS_RELIABLE,
@@ -422,7 +383,7 @@ class RobotLink:
             with contextlib.suppress(ValueError):  # dropped meanwhile (buffer full)
                 self.reliable.remove(p)
 
-    async def _goodbye(self, client: _Client, timeout_s: float = 2.0) -> None:
+    async def _goodbye(self, client: LinkClient, timeout_s: float = 2.0) -> None:
         """``offline`` (superseding queued statuses), then flush the QoS-1 buffer, if possible."""
         status = topics.topic(self.robot, topics.STATUS_LEAF)
         self.reliable = deque(p for p in self.reliable if p.topic != status)

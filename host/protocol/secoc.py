@@ -43,26 +43,39 @@ class SecocNotSynchronised(OdocanError):
 
 
 def load_secoc_key(path: str | Path) -> bytes:
-    """The 16-byte AES-128 key in ``path`` (16 raw bytes, or 32 hex digits)."""
+    """The 16-byte AES-128 key in ``path`` (16 raw bytes, or 32 hex digits): a regular file,
+    checked before it is read (a FIFO would block for ever); a key open to other users is
+    taken with a warning, once it is known to be a key."""
     try:
-        raw = Path(path).read_bytes()
         mode = Path(path).stat().st_mode
+        if not stat.S_ISREG(mode):
+            raise OdocanError(f"cannot read SecOC key {path}: not a regular file")
+        raw = Path(path).read_bytes()
     except OSError as exc:
         raise OdocanError(f"cannot read SecOC key {path}: {exc.strerror or exc}") from None
+    key = _key_of(raw)
+    if key is None:
+        raise OdocanError(
+            f"SecOC key {path}: {len(raw)} bytes, expected 16 raw bytes or 32 hex digits "
+            "(AES-128)"
+        )
     if mode & (stat.S_IRWXG | stat.S_IRWXO):
         log.warning(
             "SecOC key %s is open to other users (mode %03o): chmod 600 it",
             path,
             stat.S_IMODE(mode),
         )
+    return key
+
+
+def _key_of(raw: bytes) -> bytes | None:
+    """The key in a key file's bytes (16 raw bytes, or 32 hex digits); None if neither."""
     if len(raw) == KEY_BYTES:
         return raw
     text = raw.strip()
     if len(text) == 2 * KEY_BYTES and all(chr(c) in string.hexdigits for c in text):
         return bytes.fromhex(text.decode("ascii"))
-    raise OdocanError(
-        f"SecOC key {path}: {len(raw)} bytes, expected 16 raw bytes or 32 hex digits (AES-128)"
-    )
+    return None
 
 
 def secoc_messages(db: Database | None = None) -> tuple[Message, Message]:

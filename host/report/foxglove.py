@@ -52,8 +52,8 @@ from odocan.host.io.export import (
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.tracking import FramePose
 from odocan.host.protocol.decode import frame_key
-from odocan.host.report.foxglove_options import HOST
-from odocan.sim.exceptions import BusSetupError, ConfigurationError
+from odocan.host.report.foxglove_options import Served, start_server
+from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.robot import RobotProfile
 
 DEFAULT_PORT = FOXGLOVE_PORT
@@ -86,7 +86,7 @@ class _Subscriptions(ServerListener):
             return self.changed.wait_for(lambda: (self.count > 0) == subscribed, timeout_s)
 
 
-class FoxgloveLive(can.Listener):
+class FoxgloveLive(can.Listener, Served):
     """Serve a drive live to Foxglove (module docstring); a context manager (stops the server)."""
 
     def __init__(
@@ -117,24 +117,9 @@ class FoxgloveLive(can.Listener):
         self._by_key = {frame_key(m.frame_id, m.is_extended_frame): m.name
                         for m in self.monitor.db.messages}
         self._start_s: float | None = None
-        try:
-            self.server = foxglove.start_server(
-                name="odocan", host=HOST, port=port, context=self._context,
-                server_listener=self._subscriptions, message_backlog_size=BACKLOG,
-            )
-        except Exception as exc:  # the SDK raises RuntimeError (port in use, ...)
-            where = f"--foxglove {port}: cannot serve on {HOST}:{port}"
-            raise BusSetupError(f"{where}: {exc}") from None
-
-    @property
-    def port(self) -> int:
-        """The TCP port served."""
-        return int(self.server.port)
-
-    @property
-    def url(self) -> str:
-        """What to type in Foxglove's Open connection."""
-        return f"ws://localhost:{self.port}"
+        self.server = start_server("odocan", port, context=self._context,
+                                   server_listener=self._subscriptions,
+                                   message_backlog_size=BACKLOG)
 
     def _open_channels(self) -> None:
         topics = {"/can/frames": "odocan.CanFrame", "/tf": "foxglove.FrameTransform",

@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import argparse
 from contextlib import AbstractContextManager, nullcontext
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from odocan.host.io.export import FOXGLOVE_PORT
+from odocan.sim.exceptions import BusSetupError
 
 if TYPE_CHECKING:
+    from foxglove.websocket import WebSocketServer
+
     from odocan.host.report.foxglove import FoxgloveLive
     from odocan.sim.robot import RobotProfile
 
@@ -56,3 +59,30 @@ def foxglove_session(
     from odocan.host.report.foxglove import serve_foxglove
 
     return serve_foxglove(args, robot, integrator)
+
+
+class Served:
+    """What a live Foxglove server (``self.server``, from ``start_server``) tells a user."""
+
+    server: WebSocketServer
+
+    @property
+    def port(self) -> int:
+        """The TCP port served."""
+        return int(self.server.port)
+
+    @property
+    def url(self) -> str:
+        """What to type in Foxglove's Open connection."""
+        return f"ws://localhost:{self.port}"
+
+
+def start_server(name: str, port: int, **kwargs: Any) -> WebSocketServer:
+    """``foxglove.start_server`` on ``HOST``:``port`` (0: any free one); a port in use or
+    refused is a ``BusSetupError`` naming it (the CLI's one line, exit 2)."""
+    import foxglove
+
+    try:
+        return foxglove.start_server(name=name, host=HOST, port=port, **kwargs)
+    except Exception as exc:  # the SDK raises RuntimeError (port in use, ...)
+        raise BusSetupError(f"--foxglove {port}: cannot serve on {HOST}:{port}: {exc}") from None

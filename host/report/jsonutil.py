@@ -25,6 +25,18 @@ def finite(value: Any) -> Any:
     return value
 
 
+def real(value: Any) -> float | None:
+    """``value`` as a finite float; None for anything else (None, text, a list, NaN, a bool, a
+    JSON integer beyond every float): what MQTT hands the fleet view is not trusted."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
+
+
 def json_default(value: object) -> object:
     """``json.dumps`` default: numpy scalars as Python numbers, arrays as lists."""
     if isinstance(value, np.generic):

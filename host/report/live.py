@@ -19,6 +19,7 @@ from rich.table import Table
 from rich.text import Text
 
 from odocan.host.protocol.e2e import E2E_KEYS
+from odocan.host.report.jsonutil import real
 
 STALE_S = 1.0  # a message not heard for this long is shown dimmed
 FLEET_STALE_S = 3.0  # a robot whose last MQTT message is older than this is marked stale
@@ -158,14 +159,15 @@ def unknown_line(unknown: dict[str, Any]) -> Text:
 
 
 def num(value: Any, spec: str) -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-"
-    return format(value, spec)
+    """``value`` formatted with ``spec``, or ``-`` when it is not a finite number."""
+    number = real(value)
+    return "-" if number is None else format(value if isinstance(value, int) else number, spec)
 
 
-def scaled(value: float | None, decimals: int = 4) -> str:
-    """Metres as mm, radians as mrad."""
-    return "-" if value is None else f"{value * 1e3:.{decimals}f}"
+def scaled(value: Any, decimals: int = 4) -> str:
+    """Metres as mm, radians as mrad (``-`` when not a finite number)."""
+    number = real(value)
+    return "-" if number is None else f"{number * 1e3:.{decimals}f}"
 
 
 # --- the MQTT fleet -------------------------------------------------------------------------
@@ -197,8 +199,8 @@ def render_fleet(snapshot: dict[str, Any], *, source: str, elapsed_s: float, not
         state = str(status.get("state", "-"))
         if not row["online"]:
             state = "offline"
-        elif age_s > stale_after_s:
-            state = f"stale {age_s:.0f}s"
+        elif age_s > stale_after_s:  # infinite: only retained messages, never heard live
+            state = f"stale {age_s:.0f}s" if math.isfinite(age_s) else "stale"
         table.add_row(
             name, num(pose.get("x_m"), ".4f"), num(pose.get("y_m"), ".4f"),
             num(pose.get("heading_rad"), ".4f"), scaled(error.get("dpos_m")),
@@ -243,7 +245,8 @@ def with_staleness(snapshot: dict[str, Any], now_unix_s: float,
 
 def _worst_first(item: tuple[str, dict[str, Any]]) -> tuple[int, float, str]:
     name, row = item
-    dpos_m = (row.get("error") or {}).get("dpos_m")
-    if dpos_m is None or not math.isfinite(dpos_m):
+    error = row.get("error")
+    dpos_m = real(error.get("dpos_m")) if isinstance(error, dict) else None
+    if dpos_m is None:
         return (1, 0.0, name)
     return (0, -dpos_m, name)

@@ -126,12 +126,13 @@ def _mrad(value: float | None) -> str:
 
 def break_indices(seq: np.ndarray) -> np.ndarray:
     """Positions i where samples i and i + 1 are further apart in ``seq`` (encoder sequence
-    numbers) than its usual (median) step: a line must not join them."""
+    numbers) than its usual (median) step, or where ``seq`` starts again (a firmware reboot:
+    each life is numbered from 0): a line must not join them."""
     steps = np.diff(np.asarray(seq, dtype=np.int64))
     if len(steps) == 0:
         return np.zeros(0, dtype=np.int64)
     usual = max(1, int(np.median(steps)))
-    return np.flatnonzero(steps > usual)
+    return np.flatnonzero((steps > usual) | (steps <= 0))
 
 
 def broken(values: np.ndarray, seq: np.ndarray) -> np.ndarray:

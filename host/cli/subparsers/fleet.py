@@ -1,6 +1,7 @@
 """``odocan fleet``: N independent robots in real time, bridged to MQTT.
 
 Each robot is the lockstep rig's set of nodes on its own channel of the in-process ``odocan``
+<<<<<<< HEAD
 transport (scenario ``random`` with seed ``--seed + i``; ``-n/--count`` robots, ``--robot`` their
 profile); a timer loop steps them every 10 ms and accounts its deadlines; the bridge publishes
 every robot under ``odocan/robotNNN/`` (``host.mqtt.topics``) and judges its pose against the
@@ -13,6 +14,20 @@ robot live to Foxglove: ``host.mqtt.foxglove_fleet``). ``--report`` writes the J
 contract of ``host.mqtt.fleetrun`` (``workers`` added by ``host.mqtt.shards``). The exit line says
 PASS, or FAIL and every threshold broken: exit 0, or 1 when ``deadline_miss_ratio`` exceeds
 ``--max-miss-ratio`` or a robot's pose is out of tolerance or not judged.
+=======
+transport (``--transport virtual``: python-can's; scenario ``random`` with seed ``--seed + i``;
+``-n/--count`` robots, ``--robot`` their profile); a timer loop steps them every 10 ms and accounts
+its deadlines; the bridge publishes every robot under ``odocan/robotNNN/`` (``host.mqtt.topics``)
+and judges its pose against the float64 reference. ``--workers W`` spreads the robots over W
+processes, each with its own loop and MQTT connections; ``--shard K/N`` runs this machine's part of
+a fleet of N machines on one broker (robot ids and seeds numbered across shards:
+``host.mqtt.shards``). Without ``--broker`` an embedded amqtt broker runs in a process of its own,
+on ``--port`` or a free port; its URL is printed at the start (``odocan monitor --broker URL``
+watches). ``--report`` writes the JSON contract of ``host.mqtt.fleetrun`` (``workers`` added by
+``host.mqtt.shards``). The exit line says PASS, or FAIL and every threshold broken: exit 0, or 1
+when ``deadline_miss_ratio`` exceeds ``--max-miss-ratio`` or a robot's pose is out of tolerance or
+not judged.
+>>>>>>> speed
 """
 
 from __future__ import annotations
@@ -45,7 +60,7 @@ from odocan.host.report.progress import Progress, wall_clock_progress
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.fleet import FleetConfig, robot_name
-from odocan.sim.rig import INTEGRATORS
+from odocan.sim.rig import INTEGRATORS, TRANSPORTS
 from odocan.sim.scenarios import SCENARIOS
 
 if TYPE_CHECKING:
@@ -99,6 +114,13 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         "--integrator", choices=INTEGRATORS, default="exact", help="on-board integrator"
     )
     parser.add_argument("--scenario", choices=SCENARIOS, default="random", help="driving scenario")
+    parser.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        default="odocan",
+        help="python-can interface of each robot's own bus (default: odocan, the lean "
+        "in-process transport; virtual: python-can's, same frames)",
+    )
     add_seed_argument(parser, "robot i drives with seed SEED + i")
     parser.add_argument(
         "--max-miss-ratio",
@@ -169,6 +191,7 @@ def _do_fleet(args: argparse.Namespace) -> int:
         scenario=args.scenario,
         seed=args.seed,
         secoc_key=None if args.secoc_key is None else load_secoc_key(args.secoc_key),
+        transport=args.transport,
     ).shard(first, robots)
     run = FleetRun(fleet=fleet, duration_s=args.duration, broker=broker, **bridge_options(args))
     debug = getattr(args, "debug", False)

@@ -40,7 +40,7 @@ from odocan.host.cli.options import (
 from odocan.host.cli.subparsers.analyze import load_dbc
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.export import FOXGLOVE_PORT
-from odocan.host.judge.monitor import BusMonitor, fleet_snapshot, render_fleet, to_json
+from odocan.host.judge.monitor import BusMonitor, to_json
 from odocan.host.mqtt.broker import (
     BrokerError,
     BrokerURL,
@@ -48,9 +48,9 @@ from odocan.host.mqtt.broker import (
     first_error,
     tls_diagnosis,
 )
-from odocan.host.mqtt.fleetview import RobotState, fleet_states
+from odocan.host.mqtt.fleetview import RobotState, fleet_snapshot, fleet_states
 from odocan.host.mqtt.options import add_broker_credentials, monitor_broker_url
-from odocan.host.report.live import with_staleness
+from odocan.host.report.live import render_fleet, with_staleness
 from odocan.host.report.trace import FrameFilter, Trace
 from odocan.host.report.tui import View
 from odocan.host.report.tui_app import FrameLog, MonitorApp, run_screen

@@ -1,0 +1,123 @@
+"""The paho-level MQTT client of ``host.mqtt.link.RobotLink``: aiomqtt's client, keeping what
+aiomqtt drops.
+
+* PUBACK reason codes of QoS-1 publications (a broker's ACL refusal is seen per topic);
+* when paho read each message and its MQTT v5 message expiry (commands expire);
+* the CONNACK's session-present flag (a broker that lost our session is noticed);
+* a connection the broker closes before its CONNACK (amqtt, to some v5 CONNECTs) as an error
+  instead of a wait for ever;
+* QoS-0 telemetry straight into paho's queue (``publish_now``), and a wait for its socket write
+  (``written``), instead of aiomqtt's coroutine, task and event per message.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable
+from typing import Any
+
+import aiomqtt
+import paho.mqtt.client as paho
+from paho.mqtt.properties import Properties
+
+
+class Arrived(aiomqtt.Message):
+    """aiomqtt's message plus when paho read it (``time.monotonic`` s) and its expiry (s)."""
+
+    arrival_s: float = 0.0
+    expiry_s: float | None = None
+
+
+class ClosedBeforeConnack(aiomqtt.MqttError):
+    """The broker closed the connection without a CONNACK (amqtt does so to some v5 CONNECTs)."""
+
+
+class LinkClient(aiomqtt.Client):
+    """aiomqtt's client, keeping what it drops: PUBACK reason codes and arrival times.
+
+    ``on_refused(topic, reason)`` is called for each QoS-1 publication the broker refused;
+    ``on_overflow(message)`` for a message that finds ``max_waiting`` messages already queued.
+    """
+
+    def __init__(
+        self,
+        *,
+        on_refused: Callable[[str, str], None],
+        on_overflow: Callable[[Arrived], None],
+        max_waiting: int,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(**kwargs)
+        self._on_refused, self._on_overflow = on_refused, on_overflow
+        self._max_waiting = max_waiting
+        self._qos1_topics: dict[int, str] = {}
+        self._written: dict[int, asyncio.Future[None]] = {}  # QoS-0 mid -> its socket write
+        self.session_present = False  # the CONNACK's flag: the broker still had our session
+        paho_publish = self._client.publish
+
+        def publish(topic: str, payload: Any = None, qos: int = 0, retain: bool = False,
+                    properties: Properties | None = None) -> paho.MQTTMessageInfo:
+            info = paho_publish(topic, payload, qos, retain, properties)
+            if qos > 0:
+                self._qos1_topics[info.mid] = topic
+            return info
+
+        setattr(self._client, "publish", publish)  # noqa: B010 (an instance's own attribute)
+
+    def publish_now(self, topic: str, body: bytes) -> paho.MQTTMessageInfo:
+        """QoS 0 straight into paho's outgoing queue (no coroutine, no task, no event per
+        message, as aiomqtt's ``publish`` makes them); ``MqttCodeError`` when paho refuses (the
+        connection is gone). ``written(info)`` waits until the socket took it."""
+        info = self._client.publish(topic, body, 0)
+        if info.rc != paho.MQTT_ERR_SUCCESS:
+            raise aiomqtt.MqttCodeError(info.rc, "Could not publish message")
+        return info
+
+    async def written(self, info: paho.MQTTMessageInfo) -> None:
+        """Wait until paho wrote the QoS-0 publication ``info`` to the socket (and so every one
+        queued before it: paho writes in order)."""
+        if info.is_published():
+            return
+        done = self._written[info.mid] = asyncio.get_running_loop().create_future()
+        try:  # not asyncio.wait_for: in 3.11 it can swallow a cancellation that meets the result
+            async with asyncio.timeout(self.timeout):
+                await done
+        except TimeoutError:
+            raise aiomqtt.MqttError("Operation timed out") from None
+        finally:
+            self._written.pop(info.mid, None)
+
+    def _on_publish(self, client: paho.Client, userdata: Any, mid: int,
+                    reason_code: Any, properties: Any) -> None:
+        written = self._written.pop(mid, None)
+        if written is not None and not written.done():
+            written.set_result(None)
+        topic = self._qos1_topics.pop(mid, None)
+        if topic is not None and getattr(reason_code, "is_failure", False):
+            self._on_refused(topic, str(reason_code))
+        super()._on_publish(client, userdata, mid, reason_code, properties)
+
+    def _on_connect(self, client: paho.Client, userdata: Any, flags: Any,
+                    reason_code: Any, properties: Any = None) -> None:
+        self.session_present = bool(getattr(flags, "session_present", False))
+        super()._on_connect(client, userdata, flags, reason_code, properties)
+
+    def _on_disconnect(self, client: paho.Client, userdata: Any, flags: Any,
+                       reason_code: Any, properties: Any = None) -> None:
+        if not self._connected.done():  # aiomqtt would wait for a CONNACK that never comes
+            self._connected.set_exception(ClosedBeforeConnack(
+                f"the broker closed the connection before its CONNACK ({reason_code})"))
+            return
+        super()._on_disconnect(client, userdata, flags, reason_code, properties)
+
+    def _on_message(self, client: paho.Client, userdata: Any,
+                    message: paho.MQTTMessage) -> None:
+        arrived = Arrived._from_paho_message(message)
+        arrived.arrival_s = time.monotonic()
+        expiry = getattr(message.properties, "MessageExpiryInterval", None)
+        arrived.expiry_s = float(expiry) if expiry is not None else None
+        if self._queue.qsize() >= self._max_waiting:
+            self._on_overflow(arrived)
+            return
+        self._queue.put_nowait(arrived)

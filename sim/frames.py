@@ -1,0 +1,74 @@
+"""The motor controller's and the simulator's side of the bus's integer codec.
+
+What MOTOR_CTRL and SIM send and receive, not what the ODOM_MCU runs: MOTOR_CTRL packs
+WHEEL_ENCODERS and reads MOTOR_CMD, SIM packs SIM_TRUTH (``sim.motor_controller``). Built on the
+firmware's header helpers (``firmware.frames``: ``e2e_head``, ``seal_frame``, ``frame_word``), with
+the same conventions: a packer saturates a value outside its signal's DBC range (SATURATION in
+``errors``) or masks a field that wraps by contract, and never raises; an unpacker returns the raw
+fields, the E2E check being the receiver's job. ``tests/test_frames.py`` proves them against
+cantools over every raw range.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+from typing import NamedTuple
+
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.fixmath import i16, wrap_i16, wrap_u16, wrap_u32
+from odocan.firmware.frames import (
+    SIM_TRUTH_DATA_IDS,
+    U4_MAX,
+    U24_MAX,
+    WHEEL_ENCODERS_DATA_IDS,
+    e2e_head,
+    frame_word,
+    i32_field,
+    seal_frame,
+)
+
+
+class MotorCmd(NamedTuple):
+    counter: int  # u4 E2E counter
+    left_speed_mm_s: i16
+    right_speed_mm_s: i16
+
+
+class SimTruthPart(IntEnum):
+    """SIM_TRUTH multiplexer ``PART``."""
+
+    X = 0
+    Y = 1
+    HEADING = 2
+
+
+# --- WHEEL_ENCODERS (MOTOR_CTRL -> ODOM_MCU, HOST; 10 ms) ---
+def pack_wheel_encoders(counter: int, left_count: int, right_count: int) -> bytes:
+    """WHEEL_ENCODERS: the low 24 bits of each hardware counter (any width: wrapping, never
+    saturated)."""
+    word = e2e_head(counter, 0) | ((left_count & U24_MAX) << 16) | ((right_count & U24_MAX) << 40)
+    return seal_frame(word, WHEEL_ENCODERS_DATA_IDS)
+
+
+# --- MOTOR_CMD (ODOM_MCU or HOST -> MOTOR_CTRL; 20 ms while commanding) ---
+def unpack_motor_cmd(data: bytes | bytearray) -> MotorCmd:
+    """MOTOR_CMD: rim speed setpoints in mm/s."""
+    w = frame_word(data)
+    return MotorCmd((w >> 8) & U4_MAX, wrap_i16(w >> 16), wrap_i16(w >> 32))
+
+
+# --- SIM_TRUTH (SIM -> HOST; 100 ms, one part per frame; multiplexed by PART) ---
+def pack_sim_truth(
+    counter: int, part: int, enc_counter: int, value: int, errors: ErrorMask
+) -> bytes:
+    """SIM_TRUTH: one part. X/Y saturate to i32 (0.1 mm), HEADING wraps to u16; an unknown
+    ``part`` sends ``value`` as raw u32."""
+    part &= U4_MAX
+    if part in (SimTruthPart.X, SimTruthPart.Y):
+        raw = i32_field(value, errors)
+    elif part == SimTruthPart.HEADING:
+        raw = wrap_u16(value)
+    else:
+        raw = wrap_u32(value)
+    word = e2e_head(counter, part) | ((enc_counter & U4_MAX) << 16) | (raw << 24)
+    return seal_frame(word, SIM_TRUTH_DATA_IDS)
