@@ -300,13 +300,20 @@ def firmware_losses(
     index, lost = page["index"][keep], page["ENC_E2E_LOST"][keep].astype(np.int64)
     upto = np.maximum(np.searchsorted(enc.index, index) - 1, 0)  # the latest before each page
     gaps = np.concatenate(([0], np.cumsum(np.diff(enc.seq) - 1)))
-    excess = (np.diff(lost) & 0xFF) - (gaps[upto[1:]] - gaps[upto[:-1]])
-    excess = np.minimum(excess, upto[1:] - upto[:-1])  # no more than the frames there were
-    spans = [(int(upto[k]), int(upto[k + 1]), int(excess[k])) for k in np.flatnonzero(excess > 0)]
+    spans = loss_spans(upto, gaps[upto], lost)
     tail = int(upto[-1]) if len(upto) else 0
     if _overflow_reported_after(frames, accepted, decoder, int(index[-1]) if len(index) else -1):
         spans.append((tail, len(enc.seq) - 1, len(enc.seq) - 1 - tail))
     return spans
+
+
+def loss_spans(upto: IntArray, gaps: IntArray, lost: IntArray) -> list[tuple[int, int, int]]:
+    """``firmware_losses``' spans between consecutive ENC_E2E_LOST pages: ``upto`` the latest
+    encoder frame before each page, ``gaps`` the frames the log's own sequence misses up to
+    it, ``lost`` the page's count (u8): where the count grew by more than the log's gaps."""
+    excess = (np.diff(lost) & 0xFF) - np.diff(gaps)
+    excess = np.minimum(excess, np.diff(upto))  # no more than the frames there were
+    return [(int(upto[k]), int(upto[k + 1]), int(excess[k])) for k in np.flatnonzero(excess > 0)]
 
 
 def _overflow_reported_after(
@@ -341,8 +348,7 @@ def loss_allowance(
     drop = drop_errors(enc, robot, integrator)
     drop[named[named < len(drop)]] = 0.0  # a frame an on-board sample names was not lost
     for first, last, n in spans:
-        worst = np.sort(drop[first : last + 1])[::-1][:n]
-        allowance += np.where(at > first, float(np.sum(worst)), 0.0)
+        allowance += np.where(at > first, span_weight(drop[first : last + 1], n), 0.0)
     return allowance
 
 
@@ -353,13 +359,34 @@ def drop_errors(enc: Encoders, robot: RobotProfile, integrator: str) -> FloatArr
     g = Geometry.of(robot)
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     dl, dr = wrap_delta(np.diff(enc.left), bits), wrap_delta(np.diff(enc.right), bits)
-    heading = np.concatenate(([0.0], np.cumsum(
-        (g.m_per_count_right / g.wheelbase_m) * dr - (g.m_per_count_left / g.wheelbase_m) * dl)))
+    heading = np.concatenate(([0.0], np.cumsum(heading_steps(dl, dr, g))))
+    error = merge_errors(dl, dr, heading, g, integrator)
+    return np.concatenate(([0.0], error, [0.0])) if len(enc.seq) > 2 else np.zeros(len(enc.seq))
+
+
+def heading_steps(dl: IntArray, dr: IntArray, g: Geometry) -> FloatArray:
+    """The heading change (rad) of each step of ``dl``, ``dr`` counts (``drop_errors``)."""
+    steps: FloatArray = (g.m_per_count_right / g.wheelbase_m) * dr - (
+        g.m_per_count_left / g.wheelbase_m) * dl
+    return steps
+
+
+def merge_errors(
+    dl: IntArray, dr: IntArray, heading: FloatArray, g: Geometry, integrator: str
+) -> FloatArray:
+    """``drop_errors`` of the frames between consecutive steps: step k (``dl[k]``, ``dr[k]``)
+    goes from ``heading[k]`` to ``heading[k + 1]``; element k is the error of taking steps k
+    and k + 1 as one (elementwise: any window of steps gives the same values)."""
     one_x, one_y = _step_vector(dl, dr, heading[:-1], heading[1:], g, integrator)
     two_x, two_y = _step_vector(dl[:-1] + dl[1:], dr[:-1] + dr[1:], heading[:-2], heading[2:],
                                 g, integrator)
-    error = np.hypot(one_x[:-1] + one_x[1:] - two_x, one_y[:-1] + one_y[1:] - two_y)
-    return np.concatenate(([0.0], error, [0.0])) if len(enc.seq) > 2 else np.zeros(len(enc.seq))
+    error: FloatArray = np.hypot(one_x[:-1] + one_x[1:] - two_x, one_y[:-1] + one_y[1:] - two_y)
+    return error
+
+
+def span_weight(drops: FloatArray, n: int) -> float:
+    """A lossy span's allowance (m): the sum of its ``n`` largest ``drops`` (``loss_allowance``)."""
+    return float(np.sum(np.sort(drops)[::-1][:n]))
 
 
 def _step_vector(

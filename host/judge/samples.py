@@ -323,15 +323,10 @@ def after_stalls(
     order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
     sent = sent_s[order]
     # Silent while the encoder frames went on (a log that lacks both is a recorder's gap).
-    # Half a cycle short of SILENCE_CYCLES: samples come in whole send periods, and time stamps
-    # summed in float must not decide (79.999... ms is 80 ms).
     heard = np.searchsorted(enc.timestamp_s, sent[1:]) - np.searchsorted(enc.timestamp_s, sent[:-1])
     # A sample let out in a burst (queued_frames) was not silent: the bus held it back.
     queued = queued_frames(sent, enc.cycle_s)
-    after = np.flatnonzero(
-        (np.diff(sent) >= (SILENCE_CYCLES - 0.5) * enc.cycle_s) & (heard >= SILENCE_CYCLES - 1)
-        & ~queued[1:]
-    ) + 1
+    after = np.flatnonzero(silent(sent, heard, enc.cycle_s) & ~queued[1:]) + 1
     keep = np.ones(len(sent_s), dtype=bool)
     keep[order[after]] = False
     kept = Poses(onboard.enc[keep], onboard.x_m[keep], onboard.y_m[keep],
@@ -347,11 +342,31 @@ def _frozen(onboard: Poses, enc: Encoders, queued: npt.NDArray[np.bool_]) -> Int
     """Encoder frames after a sample whose next sample names a frame ``SILENCE_CYCLES`` or more
     periods later while the log holds the frames between: the firmware held its pose on one frame
     (it kept naming it) and then took the frames since as one step, as after a stall."""
-    seq = enc.seq[onboard.enc]
-    held = (np.diff(seq) >= SILENCE_CYCLES) & (np.diff(onboard.enc) >= SILENCE_CYCLES)
-    held &= ~queued[1:]  # a queued sample was made long before it was sent: not evidence
-    frozen: IntArray = onboard.enc[:-1][held] + 1
+    return frozen_breaks(onboard.enc, enc.seq[onboard.enc], queued)
+
+
+def frozen_breaks(sample_enc: IntArray, sample_seq: IntArray,
+                  queued: npt.NDArray[np.bool_] | None = None) -> IntArray:
+    """``_frozen`` of consecutive samples (their encoder frames in the log and sequence
+    numbers, in encoder order; ``queued``: which came in a burst, None: none did)."""
+    held = (np.diff(sample_seq) >= SILENCE_CYCLES) & (np.diff(sample_enc) >= SILENCE_CYCLES)
+    if queued is not None:
+        held &= ~queued[1:]  # a queued sample was made long before it was sent: not evidence
+    frozen: IntArray = sample_enc[:-1][held] + 1
     return frozen
+
+
+def silent(
+    sent_s: FloatArray, heard: IntArray, cycle_s: float
+) -> npt.NDArray[np.bool_]:
+    """``after_stalls``' silence between consecutive samples (send times ``sent_s`` in send
+    order, ``heard``: encoder frames logged between each two): at least half a cycle short of
+    ``SILENCE_CYCLES`` apart (samples come in whole send periods, and time stamps summed in
+    float must not decide: 79.999... ms is 80 ms) while the encoder frames went on."""
+    quiet: npt.NDArray[np.bool_] = (
+        (np.diff(sent_s) >= (SILENCE_CYCLES - 0.5) * cycle_s) & (heard >= SILENCE_CYCLES - 1)
+    )
+    return quiet
 
 
 def truth_samples(

@@ -239,7 +239,8 @@ class StreamPoses:
         self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_], enc: Encoders
     ) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
         """The samples that are final after this chunk (``enc`` its encoder frames from
-        ``StreamEncoders``): columns enc, x_m, y_m, heading_rad, heading_raw; and sent_s."""
+        ``StreamEncoders``): columns enc, x_m, y_m, heading_rad, heading_raw, seq (the encoder
+        frame's sequence number); and sent_s."""
         known = self._known(enc)
         floor = np.inf
         for name in self._first:
@@ -377,6 +378,7 @@ class StreamPoses:
         sx = [xs[g][1] for g in both]
         sy = [ys[g][1] for g in both]
         sent = np.array([ys[g][2] for g in both], dtype=np.float64)
+        seq = np.array([ys[g][0] for g in both], dtype=np.int64)
         for g in done:
             xs.pop(g, None)
             ys.pop(g, None)
@@ -390,6 +392,7 @@ class StreamPoses:
             "y_m": y * POSITION_LSB_M,
             "heading_rad": turns * 2 * math.pi + heading_raw * HEADING_LSB_RAD,
             "heading_raw": heading_raw,
+            "seq": seq,  # the encoder frame's sequence number
         }
         return samples, sent
 

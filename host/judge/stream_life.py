@@ -12,7 +12,7 @@ the last sample given out are dropped."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
 import cantools
@@ -103,9 +103,11 @@ def life_chunks(
     integrator: str, *, e0: int, breaks: npt.NDArray[np.int64],
     max_wheel_speed_mm_s: int | None, info: LifeInfo | None = None,
     times_of: frozenset[int] = frozenset(),
+    on_encoders: Callable[[Encoders], None] | None = None,
 ) -> Iterator[tuple[PlacedChunk, TruthChunk]]:
     """``placed_chunks`` with the truth samples beside them (``stream_truth.StreamTruth``),
-    each with the reference's rows at its encoder frame; ``info`` filled at the end."""
+    each with the reference's rows at its encoder frame; ``info`` filled at the end;
+    ``on_encoders``: told each chunk's accepted encoder frames."""
     decoder = BulkDecoder(db)
     e2e, numbering = StreamE2E(db), StreamEncoders(decoder)
     poses, truth = StreamPoses(decoder), StreamTruth(decoder)  # one decoder: its cache too
@@ -119,6 +121,8 @@ def life_chunks(
     for chunk in chunks:
         accepted = e2e.feed(chunk)
         enc = numbering.feed(chunk, accepted)
+        if on_encoders is not None:
+            on_encoders(enc)
         stalls = stalls or StreamStalls(enc.cycle_s)
         g = count + np.arange(len(enc.index), dtype=np.int64)
         count += len(g)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from odocan.host.judge.compare import error_summary
 from odocan.host.judge.reference_path import (
@@ -179,13 +180,17 @@ def segment_offsets(
 def reference_errors(
     passes: Passes, start: tuple[float, float, float],
     offsets: tuple[FloatArray, FloatArray],
+    allowance: Callable[[npt.NDArray[np.int64]], FloatArray] | None = None,
 ) -> dict[str, Any]:
     """``compare.error_summary`` of ``compare.pose_errors`` (on-board minus the placed
     reference at every sample, ``build_reference`` then ``Reference.at``) in one pass: the
-    maxima and the last sample's errors."""
+    maxima and the last sample's errors; then ``loss_allowance_m`` and
+    ``max_position_error_beyond_allowance_m`` (``analysis._analyze_life``: ``allowance`` at
+    the samples' encoder frames, ``compare.loss_allowance``; None: 0 everywhere)."""
     x0, y0, h0 = start
     cos0, sin0 = math.cos(h0), math.sin(h0)
-    top_position = top_heading = -math.inf
+    top_position = top_heading = top_beyond = -math.inf
+    top_allowance = 0.0
     last: tuple[FloatArray, FloatArray] | None = None
     for chunk in passes():
         if len(chunk.segment) == 0:
@@ -198,10 +203,15 @@ def reference_errors(
         heading = wrap_pi(chunk.heading_raw * HEADING_LSB_RAD - (h0 + chunk.rel_heading_rad))
         top_position = max(top_position, float(np.max(position)))
         top_heading = max(top_heading, float(np.max(np.abs(heading))))
+        allowed = allowance(chunk.enc) if allowance is not None else np.zeros(len(position))
+        top_allowance = max(top_allowance, float(np.max(allowed)))
+        top_beyond = max(top_beyond, float(np.max(position - allowed)))
         last = (position[-1:], heading[-1:])
     if last is None:
         return error_summary(np.zeros(0), np.zeros(0))
     summary = error_summary(*last)
     summary["max_position_error_m"] = top_position
     summary["max_heading_error_rad"] = top_heading
+    summary["loss_allowance_m"] = top_allowance
+    summary["max_position_error_beyond_allowance_m"] = top_beyond
     return summary

@@ -25,14 +25,15 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from odocan.host.judge.samples import SILENCE_CYCLES
+from odocan.host.judge.samples import frozen_breaks, silent
 
-COLUMNS = ("enc", "x_m", "y_m", "heading_rad", "heading_raw")
+COLUMNS = ("enc", "x_m", "y_m", "heading_rad", "heading_raw", "seq")
 
 
 def _empty() -> dict[str, np.ndarray]:
     return {"enc": np.zeros(0, dtype=np.int64), "x_m": np.zeros(0), "y_m": np.zeros(0),
-            "heading_rad": np.zeros(0), "heading_raw": np.zeros(0, dtype=np.int64)}
+            "heading_rad": np.zeros(0), "heading_raw": np.zeros(0, dtype=np.int64),
+            "seq": np.zeros(0, dtype=np.int64)}
 
 
 def _cat(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -54,6 +55,7 @@ class StreamStalls:
     _last_enc_t: float = -np.inf
     _prev: tuple[float, int, int] | None = None  # last taken: sent, enc, encoders before it
     _breaks: set[int] = field(default_factory=set)
+    _last_given: tuple[int, int] | None = None  # the last sample given out: enc, seq
 
     def feed(
         self, samples: dict[str, np.ndarray], sent_s: npt.NDArray[np.float64],
@@ -106,8 +108,7 @@ class StreamStalls:
                 all_heard = np.concatenate(([p_heard], heard_to))
             else:
                 all_sent, all_enc, all_heard = sent, enc, heard_to
-            after = np.flatnonzero((np.diff(all_sent) >= SILENCE_CYCLES * self.cycle_s)
-                                   & (np.diff(all_heard) >= SILENCE_CYCLES - 1)) + 1
+            after = np.flatnonzero(silent(all_sent, np.diff(all_heard), self.cycle_s)) + 1
             self._breaks.update((all_enc[after - 1] + 1).tolist())
             shift = 0 if self._prev is None else 1
             drop[after - shift] = True
@@ -127,4 +128,16 @@ class StreamStalls:
              else int(np.searchsorted(decided["enc"], limit)))
         out = {k: v[:n] for k, v in decided.items()}
         self._decided = {k: v[n:] for k, v in decided.items()}
+        self._frozen(out)
         return out
+
+    def _frozen(self, given: dict[str, np.ndarray]) -> None:
+        """``samples._frozen`` over the samples given out (in encoder order), the last one
+        before carried in front: where the firmware held its pose, a break."""
+        if self.cycle_s is None or len(given["enc"]) == 0:
+            return
+        enc, seq = given["enc"], given["seq"]
+        if self._last_given is not None:
+            enc, seq = np.r_[self._last_given[0], enc], np.r_[self._last_given[1], seq]
+        self._breaks.update(frozen_breaks(enc, seq).tolist())
+        self._last_given = (int(enc[-1]), int(seq[-1]))

@@ -7,8 +7,8 @@ against the band of the per-step speeds over the two segments (E[k-2], E[k-1]] a
 (E[k-1], E[k]]. Carried here:
 
 * the last 16 accepted encoder frames (a twist frame names one -8..+7 from the latest before
-  it) and the twist frames naming one the log has not reached yet (they wait, and the later
-  ones with them: the order matters);
+  it, and only one before it: ``samples.match_encoder`` is causal) and the last twist frame
+  (a repeat of its ENC_COUNTER names what it named: ``samples._held``, with its COUNTER);
 * the per-step speeds from the last taken twist frame's encoder frame on (those no twist frame
   to come can name only as their band: min, max and widest gap are exact in any order), the
   previous segment's band, and the last encoder frame (for the next step's speed);
@@ -25,7 +25,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.compare import TWIST_LSB, TWIST_RANGE, TWIST_RELATIVE, _step_speeds
-from odocan.host.judge.samples import Encoders, contract_cycle_s
+from odocan.host.judge.samples import Encoders, _held, contract_cycle_s
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
 
@@ -82,7 +82,9 @@ class StreamTwist:
     _offset: int = 0
     _enc_count: int = 0
     _recent: dict[str, np.ndarray] = field(default_factory=dict)  # g, index, counter, seq, t
-    _pending: dict[str, np.ndarray] = field(default_factory=dict)  # twist frames waiting
+    _pending: dict[str, np.ndarray] = field(default_factory=dict)  # this chunk's twist frames
+    # the last twist frame: ENC_COUNTER, COUNTER, time, encoder frame named (-1: none)
+    _last_row: tuple[int, int, float, int] | None = None
     _last_enc: Encoders | None = None  # the last accepted encoder frame (one element)
     _steps: dict[str, np.ndarray] = field(default_factory=dict)  # g, v, w, gap_v, gap_w
     _running_max: int = -1  # of every E named so far (-1 for a frame naming none)
@@ -106,12 +108,13 @@ class StreamTwist:
             keep = accepted[rows["index"]]
             new = {"index": rows["index"][keep] + self._offset,
                    "enc_counter": rows["ENC_COUNTER"][keep].astype(np.int64),
+                   "counter": rows["COUNTER"][keep].astype(np.int64),
                    "t": chunk.timestamp_s[rows["index"][keep]],
                    "linear": rows["LINEAR_VEL"][keep] * TWIST_LSB,
                    "angular": rows["ANGULAR_VEL"][keep] * TWIST_LSB}
             self._pending = ({k: np.concatenate((self._pending[k], v)) for k, v in new.items()}
                              if self._pending else new)
-        self._resolve(known, final=False)
+        self._resolve(known)
         self._offset += len(chunk)
         self._enc_count += len(enc.index)
         self._recent = {k: v[-RECENT_ENCODERS:] for k, v in known.items()}
@@ -119,8 +122,6 @@ class StreamTwist:
 
     def finish(self) -> dict[str, Any]:
         """The result ``check_twist`` gives for the whole log."""
-        if self._pending:
-            self._resolve(self._recent, final=True)
         return {
             "samples": self.samples,
             "max_linear_excess_mps": self.max_linear_excess_mps,
@@ -173,18 +174,17 @@ class StreamTwist:
 
     # --- twist frames ---------------------------------------------------------------------
 
-    def _resolve(self, known: dict[str, np.ndarray], *, final: bool) -> None:
-        """Name the encoder frame of every waiting twist frame that can be named (in order),
-        and take those naming one."""
+    def _resolve(self, known: dict[str, np.ndarray]) -> None:
+        """Name the encoder frame of every waiting twist frame (``samples.match_encoder``:
+        causal, so each names one in its own chunk; a repeated ENC_COUNTER carried by
+        ``samples._held`` from the last frame before) and take those naming one."""
         p = self._pending
         if not p or len(p["index"]) == 0:
             return
         n = len(p["index"])
-        if len(known["seq"]) == 0:
-            e = np.full(n, -1, dtype=np.int64)
-            cut = n
-        else:
-            cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        e = np.full(n, -1, dtype=np.int64)
+        cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        if len(known["seq"]):
             latest = np.searchsorted(known["index"], p["index"]) - 1
             has = latest >= 0
             at = np.maximum(latest, 0)
@@ -192,13 +192,25 @@ class StreamTwist:
                 has &= p["t"] - known["t"][at] < 8 * cycle_s
             offset = ((p["enc_counter"] - known["counter"][at] + 8) & 0xF) - 8
             target = known["seq"][at] + offset
-            waits = has & (target > int(known["seq"][-1])) & (not final)
-            cut = int(np.argmax(waits)) if waits.any() else n
-            found = np.minimum(np.searchsorted(known["seq"], target[:cut]), len(known["seq"]) - 1)
-            hit = has[:cut] & (known["seq"][found] == target[:cut])
-            e = np.where(hit, known["g"][found], -1)
-        self._take_all(e[:cut].astype(np.int64), p["linear"][:cut], p["angular"][:cut])
-        self._pending = {k: v[cut:] for k, v in p.items()}
+            found = np.minimum(np.searchsorted(known["seq"], target), len(known["seq"]) - 1)
+            hit = has & (known["seq"][found] == target) & (known["index"][found] < p["index"])
+            e = np.where(hit, known["g"][found], -1).astype(np.int64)
+        if cycle_s is not None:
+            e = self._held(e, cycle_s)
+        self._take_all(e, p["linear"], p["angular"])
+        self._pending = {}
+
+    def _held(self, e: npt.NDArray[np.int64], cycle_s: float) -> npt.NDArray[np.int64]:
+        """``samples._held`` over the waiting frames, the last frame before carried in front
+        (its ENC_COUNTER, COUNTER, time and encoder frame named)."""
+        p = self._pending
+        ec, own, t = p["enc_counter"], p["counter"], p["t"]
+        if self._last_row is not None:
+            e0, c0, t0, n0 = self._last_row
+            ec, own, t, e = np.r_[e0, ec], np.r_[c0, own], np.r_[t0, t], np.r_[n0, e]
+        held = _held(e, ec, own, t, cycle_s)
+        self._last_row = (int(ec[-1]), int(own[-1]), float(t[-1]), int(held[-1]))
+        return held[len(held) - len(p["index"]):]
 
     def _take_all(self, e: npt.NDArray[np.int64], linear: FloatArray,
                   angular: FloatArray) -> None:
