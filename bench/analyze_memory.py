@@ -7,7 +7,8 @@ the analysis sees a reboot at each seam (``host.judge.reboots``) and judges ever
 power-up pose -- the verdict must stay PASS. Then runs, as whole processes measured like
 ``/usr/bin/time -v`` (``os.wait4``: wall, user + system CPU, max RSS):
 
-* ``python -m odocan analyze LOG --robot pmir`` (streamed: ``host.judge.stream_analysis``);
+* ``python -m odocan analyze LOG --robot pmir --stream always`` (streamed:
+  ``host.judge.stream_analysis``), and ``--stream never`` (the whole log) with ``--whole``;
 * ``cantools decode --single-line dbc/odocan.dbc < LOG`` (skipped with ``--no-cantools``);
 * the first pass's stages alone, chunk by chunk over the whole log as one life
   (``host.judge.stream``: ``iter_log`` -> E2E -> encoder sequence -> on-board samples and the
@@ -18,6 +19,11 @@ power-up pose -- the verdict must stay PASS. Then runs, as whole processes measu
 The log is written to ``--dir`` (default: the system's temporary directory; check ``df -h``
 first: it needs ``--gb`` GB free) and deleted afterwards (``--keep`` keeps it). Prints figures;
 asserts nothing. Run: ``.venv/bin/python bench/analyze_memory.py [--gb 1] [--no-cantools]``.
+
+``--threshold MB MB ...``: instead, the whole-log path's max RSS on logs of those sizes in each
+format (.log, then the same frames as .asc and .blf through python-can), a line fitted per
+format (base + MB/MB of log) and the size where it reaches the 300 MB target divided by the
+margin: what ``stream_analysis.WHOLE_RSS_MB`` holds and where ``--stream auto`` starts to stream.
 """
 
 from __future__ import annotations
@@ -157,6 +163,49 @@ def report(label: str, frames: int, figures: tuple[float, float, float, int]) ->
           f"{frames / wall / 1e6:6.2f} M frames/s  exit {code}", flush=True)
 
 
+def threshold(sizes_mb: list[float], drive_s: float, directory: Path) -> None:
+    """The whole-log path's max RSS per format and size, the fitted lines and the sizes
+    where ``--stream auto`` streams (module docstring)."""
+    from odocan.host.judge.stream_analysis import RSS_MARGIN, RSS_TARGET_MB
+
+    with tempfile.TemporaryDirectory(dir=directory) as tmp:
+        drive = make_drive(drive_s, Path(tmp) / "drive.log")
+        rows: dict[str, list[tuple[float, float]]] = {}
+        for mb in sizes_mb:
+            log = Path(tmp) / f"t{mb:g}.log"
+            _, frames = concatenate(drive, int(mb * 1e6), log)
+            for suffix in (".log", ".asc", ".blf"):
+                path = log if suffix == ".log" else convert(log, suffix)
+                size_mb = path.stat().st_size / 1e6
+                argv = [sys.executable, "-m", "odocan", "analyze", str(path), "--robot", ROBOT,
+                        "--stream", "never"]
+                wall, cpu, rss, code = whole_process(argv)
+                rows.setdefault(suffix, []).append((size_mb, rss))
+                print(f"whole {suffix:<5} {size_mb:8.1f} MB {frames:9d} frames {wall:7.1f} s "
+                      f"wall {cpu:7.1f} s CPU {rss:7.0f} MB max RSS  "
+                      f"{rss / size_mb:5.2f} MB/MB  exit {code}", flush=True)
+                if path != log:
+                    path.unlink()
+            log.unlink()
+    for suffix, points in rows.items():
+        (s0, r0), (s1, r1) = points[0], points[-1]
+        per_mb = (r1 - r0) / (s1 - s0)
+        base = r0 - per_mb * s0
+        above = (RSS_TARGET_MB / RSS_MARGIN - base) / per_mb
+        print(f"{suffix:<5} max RSS = {base:.1f} MB + {per_mb:.3f} x MB of log; streams above "
+              f"{above:.0f} MB (whole path there: {RSS_TARGET_MB / RSS_MARGIN:.0f} MB, target "
+              f"{RSS_TARGET_MB:.0f} MB / margin {RSS_MARGIN:g})")
+
+
+def convert(log: Path, suffix: str) -> Path:
+    """``log``'s frames in another format (python-can's reader and writer)."""
+    out = log.with_suffix(suffix)
+    with can.Logger(str(out)) as writer:
+        for message in can.LogReader(str(log)):
+            writer.on_message_received(message)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--gb", type=float, default=1.0, help="log size in GB (1e9 bytes)")
@@ -164,10 +213,17 @@ def main() -> None:
     parser.add_argument("--dir", type=Path, default=Path(tempfile.gettempdir()))
     parser.add_argument("--no-cantools", action="store_true")
     parser.add_argument("--keep", action="store_true", help="keep the log")
+    parser.add_argument("--whole", action="store_true",
+                        help="also the whole-log path (--stream never) on the big log")
+    parser.add_argument("--threshold", type=float, nargs="+", metavar="MB",
+                        help="measure the whole path's max RSS at these log sizes instead")
     parser.add_argument("--stream-child", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.stream_child is not None:
         stream_stages(args.stream_child)
+        return
+    if args.threshold:
+        threshold(args.threshold, min(args.drive_s, 60.0), args.dir)
         return
     log = args.dir / f"odocan_bench_{args.gb:g}gb.log"
     with tempfile.TemporaryDirectory() as tmp:
@@ -178,7 +234,9 @@ def main() -> None:
           f"{args.drive_s:g} s (made in {time.perf_counter() - start:.0f} s)", flush=True)
     try:
         odocan = [sys.executable, "-m", "odocan", "analyze", str(log), "--robot", ROBOT]
-        report("odocan analyze LOG", frames, whole_process(odocan))
+        report("odocan analyze (streamed)", frames, whole_process([*odocan, "--stream", "always"]))
+        if args.whole:
+            report("odocan analyze (whole)", frames, whole_process([*odocan, "--stream", "never"]))
         stages = [sys.executable, __file__, "--stream-child", str(log)]
         report("streamed stages", frames, whole_process(stages, show=True))
         if not args.no_cantools:

@@ -64,6 +64,34 @@ class NotStreamable(OdocanError):
 
 
 DEFAULT_TOLERANCE = Tolerance()
+STREAM_MODES = ("auto", "always", "never")
+RSS_TARGET_MB = 300.0  # the max RSS ``odocan analyze`` of one log aims to stay under (#14.1)
+# The whole-log path's max RSS (MB) against its log's size (MB), per format: base + per_mb * size,
+# measured by ``bench/analyze_memory.py --threshold`` (docs/benchmarks.md); a log bigger than
+# the size where that reaches RSS_TARGET_MB / RSS_MARGIN streams.
+WHOLE_RSS_MB = {".log": (100.0, 2.4), ".asc": (100.0, 2.4), ".blf": (100.0, 2.4)}
+RSS_MARGIN = 1.5
+
+
+def stream_above_bytes(suffix: str) -> float:
+    """The log size (bytes) above which ``odocan analyze`` streams a log of this format (a
+    format not measured: the most memory-hungry one's)."""
+    base, per_mb = WHOLE_RSS_MB.get(suffix.lower(), max(WHOLE_RSS_MB.values(),
+                                                        key=lambda fit: fit[1]))
+    return max(0.0, (RSS_TARGET_MB / RSS_MARGIN - base) / per_mb) * 1e6
+
+
+def streams(path: str | Path, mode: str = "auto") -> bool:
+    """Whether to analyse ``path`` as a stream: ``always``, ``never``, or (``auto``) when the
+    whole-log path would take more than the max-RSS target for a log that size (the streamed
+    path costs about 3x its CPU; the report is the same either way)."""
+    if mode != "auto":
+        return mode == "always"
+    try:
+        size = Path(path).stat().st_size
+    except OSError:
+        return False  # the whole-log path names the path in its error
+    return size > stream_above_bytes(Path(path).suffix)
 
 
 def analyze_file(
@@ -261,8 +289,7 @@ def _life(
                 last[:] = [chunk]
             yield chunk
 
-    vs_ref = reference_errors(with_truth, (x0, y0, h0), offsets,
-                              drops.allowance if spans else None)
+    vs_ref = reference_errors(with_truth, (x0, y0, h0), offsets, drops.allowance)
     vs_truth = truth.summary()
     vs_truth["distance_travelled_m"] = float(last[0].rel_distance_m[-1])
     twist = first.twist.finish()

@@ -149,7 +149,9 @@ class SpanDrops:
         self._named.update(sample_enc[inside].tolist())
 
     def allowance(self, at: npt.NDArray[np.int64]) -> FloatArray:
-        """``loss_allowance`` at encoder frames ``at``."""
+        """``loss_allowance`` at encoder frames ``at`` (0 everywhere without a span)."""
+        if not self.spans:
+            return np.zeros(len(at))
         sums = self._weights()
         begun = np.searchsorted(np.array([s[0] for s in self.spans], dtype=np.int64), at,
                                 side="left")  # spans whose first frame is before each

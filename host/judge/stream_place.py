@@ -184,9 +184,9 @@ def reference_errors(
 ) -> dict[str, Any]:
     """``compare.error_summary`` of ``compare.pose_errors`` (on-board minus the placed
     reference at every sample, ``build_reference`` then ``Reference.at``) in one pass: the
-    maxima and the last sample's errors; then ``loss_allowance_m`` and
-    ``max_position_error_beyond_allowance_m`` (``analysis._analyze_life``: ``allowance`` at
-    the samples' encoder frames, ``compare.loss_allowance``; None: 0 everywhere)."""
+    maxima and the last sample's errors; with an ``allowance`` (at the samples' encoder frames,
+    ``compare.loss_allowance``) then ``loss_allowance_m`` and
+    ``max_position_error_beyond_allowance_m`` as ``analysis._analyze_life`` adds them."""
     x0, y0, h0 = start
     cos0, sin0 = math.cos(h0), math.sin(h0)
     top_position = top_heading = top_beyond = -math.inf
@@ -203,15 +203,17 @@ def reference_errors(
         heading = wrap_pi(chunk.heading_raw * HEADING_LSB_RAD - (h0 + chunk.rel_heading_rad))
         top_position = max(top_position, float(np.max(position)))
         top_heading = max(top_heading, float(np.max(np.abs(heading))))
-        allowed = allowance(chunk.enc) if allowance is not None else np.zeros(len(position))
-        top_allowance = max(top_allowance, float(np.max(allowed)))
-        top_beyond = max(top_beyond, float(np.max(position - allowed)))
+        allowed = allowance(chunk.enc) if allowance is not None else np.zeros(0)
+        if allowance is not None:
+            top_allowance = max(top_allowance, float(np.max(allowed)))
+            top_beyond = max(top_beyond, float(np.max(position - allowed)))
         last = (position[-1:], heading[-1:])
     if last is None:
         return error_summary(np.zeros(0), np.zeros(0))
     summary = error_summary(*last)
     summary["max_position_error_m"] = top_position
     summary["max_heading_error_rad"] = top_heading
-    summary["loss_allowance_m"] = top_allowance
-    summary["max_position_error_beyond_allowance_m"] = top_beyond
+    if allowance is not None:
+        summary["loss_allowance_m"] = top_allowance
+        summary["max_position_error_beyond_allowance_m"] = top_beyond
     return summary

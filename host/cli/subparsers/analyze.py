@@ -86,6 +86,12 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "same at any size (default: 262144; --plot, --parquet, --mcap and -b read the whole "
         "log)",
     )
+    parser.add_argument(
+        "--stream", choices=("auto", "always", "never"), default="auto",
+        help="analyse the log as a stream in bounded memory (about 3x the CPU) or read it "
+        "whole: auto streams a log too big for the whole path to stay under 300 MB max RSS; "
+        "the report is the same either way (default: %(default)s)",
+    )
     parser.set_defaults(func=_do_analyze)
 
 
@@ -173,9 +179,12 @@ def _analyze_single(args: argparse.Namespace) -> int:
 
 
 def _streams(args: argparse.Namespace) -> bool:
-    """Whether the analysis streams (the module docstring): nothing asks for the whole log."""
+    """Whether the analysis streams (the module docstring): nothing asks for the whole log,
+    and ``--stream`` (auto: the log's size) says so."""
+    from odocan.host.judge.stream_analysis import streams
+
     return (args.plot is None and args.parquet is None and args.mcap is None
-            and args.bitrate is None)
+            and args.bitrate is None and streams(args.log, args.stream))
 
 
 def _streamed(
@@ -237,6 +246,7 @@ def _analyze_many(args: argparse.Namespace) -> int:
         tolerance_position_m=args.tolerance.position_m,
         tolerance_heading_rad=args.tolerance.heading_rad,
         dbc=None if args.dbc is None else str(args.dbc.resolve()),
+        stream=args.stream,
     )
     if args.dask is not None:
         results = batch.analyze_logs_dask(
