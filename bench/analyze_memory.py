@@ -21,7 +21,8 @@ first: it needs ``--gb`` GB free) and deleted afterwards (``--keep`` keeps it). 
 asserts nothing. Run: ``.venv/bin/python bench/analyze_memory.py [--gb 1] [--no-cantools]``.
 
 ``--threshold MB MB ...``: instead, the whole-log path's max RSS on logs of those sizes in each
-format (.log, then the same frames as .asc and .blf through python-can), a line fitted per
+format (the first MB of one long drive: a single life, the whole path's worst case; .log, then
+the same frames as .asc and .blf through python-can), a line fitted per
 format (base + MB/MB of log) and the size where it reaches the 300 MB target divided by the
 margin: what ``stream_analysis.WHOLE_RSS_MB`` holds and where ``--stream auto`` starts to stream.
 """
@@ -169,11 +170,13 @@ def threshold(sizes_mb: list[float], drive_s: float, directory: Path) -> None:
     from odocan.host.judge.stream_analysis import RSS_MARGIN, RSS_TARGET_MB
 
     with tempfile.TemporaryDirectory(dir=directory) as tmp:
+        # one life (the whole path's worst case: its arrays span the life), long enough
+        drive_s = max(drive_s, max(sizes_mb) * 1e6 / CANDUMP_BYTES_PER_S * 1.05)
         drive = make_drive(drive_s, Path(tmp) / "drive.log")
         rows: dict[str, list[tuple[float, float]]] = {}
         for mb in sizes_mb:
             log = Path(tmp) / f"t{mb:g}.log"
-            _, frames = concatenate(drive, int(mb * 1e6), log)
+            frames = head(drive, int(mb * 1e6), log)
             for suffix in (".log", ".asc", ".blf"):
                 path = log if suffix == ".log" else convert(log, suffix)
                 size_mb = path.stat().st_size / 1e6
@@ -195,6 +198,22 @@ def threshold(sizes_mb: list[float], drive_s: float, directory: Path) -> None:
         print(f"{suffix:<5} max RSS = {base:.1f} MB + {per_mb:.3f} x MB of log; streams above "
               f"{above:.0f} MB (whole path there: {RSS_TARGET_MB / RSS_MARGIN:.0f} MB, target "
               f"{RSS_TARGET_MB:.0f} MB / margin {RSS_MARGIN:g})")
+
+
+CANDUMP_BYTES_PER_S = 15_400  # the rig's candump log: 360 frames/s of about 43 bytes
+
+
+def head(drive: Path, target_bytes: int, out: Path) -> int:
+    """The first lines of ``drive`` up to ``target_bytes`` into ``out``; how many."""
+    lines, size = [], 0
+    with drive.open("rb") as f:
+        for line in f:
+            if size + len(line) > target_bytes:
+                break
+            lines.append(line)
+            size += len(line)
+    out.write_bytes(b"".join(lines))
+    return len(lines)
 
 
 def convert(log: Path, suffix: str) -> Path:
@@ -223,7 +242,7 @@ def main() -> None:
         stream_stages(args.stream_child)
         return
     if args.threshold:
-        threshold(args.threshold, min(args.drive_s, 60.0), args.dir)
+        threshold(args.threshold, 0.0, args.dir)
         return
     log = args.dir / f"odocan_bench_{args.gb:g}gb.log"
     with tempfile.TemporaryDirectory() as tmp:

@@ -175,9 +175,14 @@ class SpanDrops:
         return self._sums
 
     def _inside(self, frames: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
-        inside = np.zeros(len(frames), dtype=bool)
-        for first, last, _ in self.spans:
-            inside |= (frames >= first) & (frames <= last)
+        """Which ``frames`` lie in a span (the spans' firsts and lasts do not go back: the
+        latest span begun at or before a frame reaches furthest)."""
+        if not self.spans:
+            return np.zeros(len(frames), dtype=bool)
+        firsts = np.array([s[0] for s in self.spans], dtype=np.int64)
+        lasts = np.array([s[1] for s in self.spans], dtype=np.int64)
+        k = np.searchsorted(firsts, frames, side="right") - 1
+        inside: npt.NDArray[np.bool_] = (k >= 0) & (frames <= lasts[np.maximum(k, 0)])
         return inside
 
     def _keep(self, frames: npt.NDArray[np.int64], errors: FloatArray) -> None:

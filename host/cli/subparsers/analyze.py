@@ -16,13 +16,16 @@ a row of the summary) but are no error: a real bus carries other traffic too.
 exact stuffed length plus the interframe space, over the log's span); a log cannot say when a
 frame was queued, so there is no latency to measure.
 
-Memory: one log without ``--plot``, ``--parquet``, ``--mcap`` or ``-b`` is analysed as a stream
-(``host.judge.stream_analysis``: passes over the file ``--chunk-frames`` frames at a time,
-the report bit for bit the whole log's), in bounded memory whatever its size; those four read
-the whole log (their series and frames), and so does a log the analysis refuses (to explain
-why in the log's terms) or fails (to look for a wrong ``--robot``), or whose frame times go
-back where the stall detection looks (``stream_analysis.NotStreamable``). ``odocan analyze
-LOG…`` streams each log the same way (``host.judge.batch.analyze_one``).
+Memory: a log too big for the whole-log path to stay under 300 MB max RSS (its size against
+the path's measured RSS per MB of that format: ``stream_analysis.streams``; ``--stream always``
+or ``never`` forces either) and without ``--plot``, ``--parquet``, ``--mcap`` or ``-b`` is
+analysed as a stream (``host.judge.stream_analysis``: passes over the file ``--chunk-frames``
+frames at a time, the report bit for bit the whole log's, at about 3x the CPU), in bounded
+memory whatever its size; those four read the whole log (their series and frames), and so does
+a log the analysis refuses (to explain why in the log's terms) or fails (to look for a wrong
+``--robot``), or that the stream cannot judge exactly (``stream_analysis.NotStreamable``: frame
+times going back around a stall, frames let out in a burst after a busy bus). ``odocan analyze
+LOG…`` chooses the same way for each log (``host.judge.batch.analyze_one``).
 """
 
 from __future__ import annotations
