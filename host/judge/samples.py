@@ -169,15 +169,9 @@ def match_encoder(
     carry a repeated ENC_COUNTER over consecutive sends (``_held``). ``causal`` False: the named
     frame may come later in the log (SIM_TRUTH: the simulator names its own sample, whenever the
     encoder frame reaches the bus)."""
-    latest = np.searchsorted(enc.index, index) - 1
     result = np.full(len(index), -1, dtype=np.int64)
-    has = latest >= 0
-    if enc.cycle_s is not None:
-        age_s = timestamp_s - enc.timestamp_s[np.maximum(latest, 0)]
-        has &= age_s < 8 * enc.cycle_s
-    latest = latest[has]
-    offset = ((enc_counter[has] - enc.counter[latest] + 8) & 0xF) - 8
-    target = enc.seq[latest] + offset
+    has, target = named_targets(enc, index, enc_counter, timestamp_s)
+    target = target[has]
     found = np.minimum(np.searchsorted(enc.seq, target), len(enc.seq) - 1)
     before = (enc.index[found] < index[has]) | (not causal)  # not integrated before it came
     result[np.flatnonzero(has)] = np.where((enc.seq[found] == target) & before, found, -1)
@@ -185,6 +179,21 @@ def match_encoder(
         result = _held(result, enc_counter, own_counter, timestamp_s, enc.cycle_s)
         result = _queued(result, enc, index, enc_counter, own_counter, timestamp_s)
     return result
+
+
+def named_targets(
+    enc: Encoders, index: IntArray, enc_counter: IntArray, timestamp_s: FloatArray
+) -> tuple[npt.NDArray[np.bool_], IntArray]:
+    """``match_encoder``'s first step: which frames have a latest accepted encoder frame before
+    them less than 8 cycles older, and the sequence number each names from it (``enc`` not
+    empty)."""
+    latest = np.searchsorted(enc.index, index) - 1
+    has = latest >= 0
+    last = np.maximum(latest, 0)
+    if enc.cycle_s is not None:
+        has &= timestamp_s - enc.timestamp_s[last] < 8 * enc.cycle_s
+    target: IntArray = enc.seq[last] + (((enc_counter - enc.counter[last] + 8) & 0xF) - 8)
+    return has, target
 
 
 def queued_frames(timestamp_s: FloatArray, cycle_s: float) -> npt.NDArray[np.bool_]:

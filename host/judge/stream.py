@@ -64,9 +64,11 @@ from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
-    SILENCE_CYCLES,
     Encoders,
+    _held,
     contract_cycle_s,
+    match_encoder,
+    named_targets,
 )
 from odocan.host.protocol.decode import BulkDecoder, frame_keys
 from odocan.host.protocol.e2e import check_frames, e2e_messages
@@ -206,6 +208,14 @@ class _Halves:
 RECENT_ENCODERS = 16  # encoder frames kept from the chunks before: ENC_COUNTER names -8..+7
 
 
+def known_encoders(known: dict[str, np.ndarray], cycle_s: float | None) -> Encoders:
+    """The carried and the chunk's encoder frames (``known``: g, index, counter, seq, t) as
+    ``Encoders`` for ``samples.match_encoder`` (positions in ``known``; no counts)."""
+    none = np.zeros(len(known["index"]), dtype=np.int64)
+    return Encoders(index=known["index"], counter=known["counter"], seq=known["seq"],
+                    left=none, right=none, timestamp_s=known["t"], cycle_s=cycle_s)
+
+
 @dataclass
 class StreamPoses:
     """The on-board samples of ``host.judge.samples.onboard_samples`` (ODOM_POSE_X and
@@ -330,21 +340,15 @@ class StreamPoses:
         log's accepted frames, before it when causal) and its sequence number (-1 likewise);
         the latest encoder frame before each (position in ``known``); and which name a frame
         beyond the latest known one (not causal: they wait for the next chunk)."""
-        g = np.full(len(halves.index), -1, dtype=np.int64)
-        seq = np.full(len(halves.index), -1, dtype=np.int64)
-        cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        enc = known_encoders(known, contract_cycle_s(self.decoder, "WHEEL_ENCODERS"))
+        at = match_encoder(enc, halves.index, halves.enc_counter, halves.timestamp_s,
+                           causal=self.causal)
+        g = np.where(at >= 0, known["g"][np.maximum(at, 0)], -1).astype(np.int64)
+        seq = np.where(at >= 0, known["seq"][np.maximum(at, 0)], -1).astype(np.int64)
         latest = np.searchsorted(known["index"], halves.index) - 1
-        has = latest >= 0
-        last = np.maximum(latest, 0)
-        if cycle_s is not None:
-            has &= halves.timestamp_s - known["t"][last] < 8 * cycle_s
-        target = known["seq"][last] + ((halves.enc_counter - known["counter"][last] + 8) & 0xF) - 8
-        found = np.minimum(np.searchsorted(known["seq"], target), len(known["seq"]) - 1)
-        hit = has & (known["seq"][found] == target)
-        if self.causal:  # not integrated before the pose came: the firmware cannot name it
-            hit &= known["index"][found] < halves.index
-        g[hit] = known["g"][found[hit]]
-        seq[hit] = target[hit]
+        if self.causal:  # a frame named later in the log is not named: nothing waits
+            return g, seq, latest, np.zeros(len(at), dtype=bool)
+        has, target = named_targets(enc, halves.index, halves.enc_counter, halves.timestamp_s)
         return g, seq, latest, has & (target > known["seq"][-1])
 
     def _held(
@@ -358,11 +362,7 @@ class StreamPoses:
             e0, c0, t0, g0, s0 = self._last_row[name]
             ec, own, t = np.r_[e0, ec], np.r_[c0, own], np.r_[t0, t]
             g, seq = np.r_[g0, g], np.r_[s0, seq]
-        repeat = np.concatenate(([False], (
-            (np.diff(ec) == 0) & ((np.diff(own) & 0xF) == 1)
-            & (np.diff(t) < SILENCE_CYCLES * cycle_s)
-        )))
-        run_start = np.maximum.accumulate(np.where(repeat, 0, np.arange(len(g))))
+        run_start = _held(np.arange(len(g), dtype=np.int64), ec, own, t, cycle_s)
         g, seq = g[run_start], seq[run_start]
         self._last_row[name] = (int(ec[-1]), int(own[-1]), float(t[-1]), int(g[-1]),
                                 int(seq[-1]))

@@ -25,7 +25,8 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.compare import TWIST_LSB, TWIST_RANGE, TWIST_RELATIVE, _step_speeds
-from odocan.host.judge.samples import Encoders, _held, contract_cycle_s
+from odocan.host.judge.samples import Encoders, _held, contract_cycle_s, match_encoder
+from odocan.host.judge.stream import known_encoders
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
 
@@ -185,16 +186,9 @@ class StreamTwist:
         e = np.full(n, -1, dtype=np.int64)
         cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
         if len(known["seq"]):
-            latest = np.searchsorted(known["index"], p["index"]) - 1
-            has = latest >= 0
-            at = np.maximum(latest, 0)
-            if cycle_s is not None:
-                has &= p["t"] - known["t"][at] < 8 * cycle_s
-            offset = ((p["enc_counter"] - known["counter"][at] + 8) & 0xF) - 8
-            target = known["seq"][at] + offset
-            found = np.minimum(np.searchsorted(known["seq"], target), len(known["seq"]) - 1)
-            hit = has & (known["seq"][found] == target) & (known["index"][found] < p["index"])
-            e = np.where(hit, known["g"][found], -1).astype(np.int64)
+            at = match_encoder(known_encoders(known, cycle_s), p["index"], p["enc_counter"],
+                               p["t"])
+            e = np.where(at >= 0, known["g"][np.maximum(at, 0)], -1).astype(np.int64)
         if cycle_s is not None:
             e = self._held(e, cycle_s)
         self._take_all(e, p["linear"], p["angular"])
