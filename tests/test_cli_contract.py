@@ -103,6 +103,12 @@ BAD: list[tuple[str, tuple[str, ...]]] = [
     ("busload --dbc {tmp}/missing.dbc", ("missing.dbc",)),
     ("busload -b 10000", ("100",)),
     ("busload --report /proc/x/b.json", ("/proc/x/b.json",)),
+    # key
+    ("key derive --fleet-key {tmp}/missing.key --robot r1 --out {tmp}/r1.key", ("missing.key",)),
+    ("key derive --fleet-key {text} --robot r1 --out {tmp}/r1.key", ("notes.txt", "10 bytes")),
+    ("key derive --fleet-key {text} --robot r1 --out {tmp}/no/r1.key", ("notes.txt",)),
+    ("key derive --robot r1 --out {tmp}/r1.key", ("--fleet-key",)),
+    ("key rotate --fleet-key {text} --robot r1 --out {tmp}/r1.key", ("rotate",)),
     # bridge
     ("bridge --name bad/name", ("bad/name",)),
     ("bridge --duration 0", ("--duration",)),

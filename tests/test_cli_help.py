@@ -61,3 +61,13 @@ def test_monitor_broker_has_the_bridge_s_name() -> None:
     monitor = _subparsers()["monitor"]
     assert monitor._option_string_actions["--broker"] is monitor._option_string_actions["--mqtt"]
     assert "--broker" in _subparsers()["bridge"]._option_string_actions
+
+
+def test_bare_help_read_from_the_sources_is_the_full_parser_s_help() -> None:
+    """``odocan --help`` reads each command's one-line help from its module's source: the text
+    is exactly what building every subparser prints."""
+    from odocan.host.cli.app import summary_parser
+
+    cheap = summary_parser()
+    assert cheap is not None
+    assert cheap.format_help() == build_parser().format_help()

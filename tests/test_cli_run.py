@@ -312,7 +312,7 @@ def test_run_random_drives_for_a_longer_duration(
 def test_report_is_strict_json(tmp_path: Path) -> None:
     import numpy as np
 
-    from odocan.host.report.jsonutil import write_report
+    from odocan.host.jsonutil import write_report
 
     path = tmp_path / "r.json"
     write_report(path, {"a": np.float64(np.nan), "b": [np.int64(3), math.inf], "c": {"d": 1.5}})

@@ -217,3 +217,24 @@ def test_unknown_frames_are_counted_not_fatal() -> None:
     assert monitor.check(0x555, bytes(8)) == "unknown_id"
     assert monitor.check(0x100, bytes(4)) == "wrong_dlc"
     assert monitor.check(0x100, encoder_frame(5)) == "ok"
+
+
+def test_restart_sequence_takes_the_next_frame_afresh_and_keeps_the_counts() -> None:
+    """A rebooted sender's COUNTER starts again (host.judge.sources.start_new_life): after
+    ``restart_sequence`` its next frame is accepted whatever its COUNTER; without it, that
+    frame is out of sequence. The counts so far stay."""
+    def heard(restart: bool) -> tuple[list[str], dict[str, int]]:
+        monitor = E2EMonitor(DB)
+        statuses = [monitor.check(ENC.frame_id, encoder_frame(c), timestamp_s=c * 0.01)
+                    for c in range(6)]
+        if restart:
+            monitor.restart_sequence(ENC.frame_id)
+        statuses.append(monitor.check(ENC.frame_id, encoder_frame(13), timestamp_s=0.06))
+        statuses.append(monitor.check(ENC.frame_id, encoder_frame(14), timestamp_s=0.07))
+        return statuses, monitor.counts()["WHEEL_ENCODERS"]
+
+    statuses, counts = heard(restart=True)
+    assert statuses == ["ok"] * 8
+    assert counts["ok"] == 8
+    statuses, _ = heard(restart=False)
+    assert statuses[6] != "ok"

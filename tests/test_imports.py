@@ -146,3 +146,76 @@ def test_python_can_errors_stay_usage_errors_though_app_does_not_import_can() ->
     assert is_usage_error(ConfigurationError("bad value"))
     assert is_usage_error(FileNotFoundError(2, "No such file", "x.log"))
     assert not is_usage_error(ValueError("a bug"))
+
+
+LOWER_ROOMS = ("io", "protocol", "judge")  # README: cli -> {experiments, mqtt, testkit, report}
+UPPER_ROOMS = ("report", "cli", "mqtt", "experiments", "testkit")  # -> judge -> protocol -> io
+# Arrows that still point back up, each named (a fix shrinks this; a new one fails the test):
+# the batch analyzer reuses the CLI's log discovery and DBC loading; the player's progress line.
+KNOWN_BACK_ARROWS = {
+    ("judge/batch.py", "odocan.host.cli.inputs"),
+    ("judge/batch.py", "odocan.host.cli.subparsers.analyze"),
+    ("io/player.py", "odocan.host.report.progress"),
+}
+
+
+def imported_modules(path: Path) -> set[str]:
+    """Every module ``path`` imports, at the top or lazily inside a function (absolute names;
+    ``from odocan.host import report`` counts as ``odocan.host.report``)."""
+    import ast
+
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            assert node.level == 0, f"{path}: relative import"
+            base = node.module or ""
+            names.add(base)
+            if base in ("odocan", "odocan.host"):  # the names are modules (rooms)
+                names.update(f"{base}.{alias.name}" for alias in node.names)
+    return names
+
+
+def back_arrows(host: Path) -> set[tuple[str, str]]:
+    """(file under host/, module) for each import of an upper room by a lower room."""
+    upper = tuple(f"odocan.host.{room}" for room in UPPER_ROOMS)
+    found = set()
+    for room in LOWER_ROOMS:
+        for path in sorted((host / room).rglob("*.py")):
+            for name in imported_modules(path):
+                if name in upper or name.startswith(tuple(f"{u}." for u in upper)):
+                    found.add((path.relative_to(host).as_posix(), name))
+    return found
+
+
+def test_io_protocol_and_judge_import_no_upper_room(tmp_path: Path) -> None:
+    """io/, protocol/ and judge/ import nothing of report/, cli/, mqtt/, experiments/ or
+    testkit/ (what they share with those rooms lives at host/ level: ``host.outputs``,
+    ``host.jsonutil``), but for the arrows named in ``KNOWN_BACK_ARROWS``."""
+    host = Path(__file__).resolve().parents[1] / "host"
+    assert back_arrows(host) == KNOWN_BACK_ARROWS
+    # the check sees an arrow back, lazy or not, in any spelling
+    planted = tmp_path / "judge"
+    planted.mkdir()
+    (planted / "x.py").write_text(
+        "def f():\n    from odocan.host import report\n    import odocan.host.mqtt.bridge\n"
+    )
+    assert back_arrows(tmp_path) == {
+        ("judge/x.py", "odocan.host.report"),
+        ("judge/x.py", "odocan.host.mqtt.bridge"),
+    }
+
+
+def test_bare_help_imports_no_subcommand() -> None:
+    """``odocan --help`` lists every command without importing one (nor numpy, python-can,
+    cantools, rich)."""
+    probe = VERSION_PROBE.replace('["--version"]', '["--help"]')
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                          timeout=300, check=False)
+    modules = set(json.loads(done.stdout.strip().splitlines()[-1]))
+    assert "    key" in done.stdout
+    assert "    run" in done.stdout
+    assert not {m for m in modules if m.startswith("odocan.host.cli.subparsers.")}
+    top = {m.split(".")[0] for m in modules}
+    assert top.isdisjoint({*HEAVY, "numpy", "can", "cantools", "rich"}), top

@@ -14,7 +14,7 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
-from odocan.host.report.outputs import check_writable
+from odocan.host.outputs import check_writable
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError
 

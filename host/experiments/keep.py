@@ -15,7 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from odocan.host.experiments.umbmark import Correction
-from odocan.host.report.outputs import check_writable, write_text
+from odocan.host.outputs import check_writable, write_text
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.robot import NM_PER_M, RobotProfile, to_toml
 

@@ -9,9 +9,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from odocan.host import jsonutil
 from odocan.host.cli.options import add_robot_argument, add_seed_argument, int_in
-from odocan.host.report import jsonutil
-from odocan.host.report.outputs import check_writable
+from odocan.host.outputs import check_writable
 
 RUNS_MAX = 1000  # runs of an experiment (about a second of CPU each)
 

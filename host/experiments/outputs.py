@@ -11,9 +11,9 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from odocan.host.outputs import OutputError, check_writable
 from odocan.host.report import provenance
 from odocan.host.report.ci import add_junit_argument, check_junit_path
-from odocan.host.report.outputs import OutputError, check_writable
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.robot import RobotProfile, profile_sha256
 

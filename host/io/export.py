@@ -58,7 +58,7 @@ def write_exports(
     db: cantools.database.can.Database | None = None,
 ) -> None:
     """Write what ``--parquet``/``--mcap`` ask for (paths checked by ``check_export_paths``)."""
-    from odocan.host.report.outputs import OutputError
+    from odocan.host.outputs import OutputError
 
     if args.parquet is not None:
         from odocan.host.io.parquet import write_parquet
@@ -90,7 +90,7 @@ def check_export_paths(parquet_dir: Path | None, mcap_path: Path | None) -> None
         _check_writable_dir("--parquet", parquet_dir, parquet_dir if parquet_dir.is_dir()
                             else parquet_dir.parent)
     if mcap_path is not None:
-        from odocan.host.report.outputs import check_writable
+        from odocan.host.outputs import check_writable
 
         check_writable(mcap_path, "--mcap")  # a directory, a device (/dev/full), no permission
 

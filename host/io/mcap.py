@@ -54,8 +54,8 @@ from odocan.host.io.export import (
 )
 from odocan.host.io.logs import FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, FrameArrays
 from odocan.host.io.parquet import message_tables
+from odocan.host.jsonutil import report_json
 from odocan.host.judge.analysis import Analysis
-from odocan.host.report.jsonutil import report_json
 from odocan.sim import contract
 
 Record = tuple[int, str, dict[str, Any]]  # (log time ns, topic, JSON message)

@@ -23,10 +23,10 @@ from cantools.database.can import Message, Signal
 
 from odocan.host.io.export import column_name
 from odocan.host.io.logs import FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, FrameArrays
+from odocan.host.jsonutil import report_json
 from odocan.host.judge.analysis import Analysis
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
-from odocan.host.report.jsonutil import report_json
 from odocan.sim import contract
 
 REPORT_KEY = b"odocan.report"

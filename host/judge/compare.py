@@ -299,21 +299,33 @@ def firmware_losses(
     keep = accepted[page["index"]]
     index, lost = page["index"][keep], page["ENC_E2E_LOST"][keep].astype(np.int64)
     upto = np.maximum(np.searchsorted(enc.index, index) - 1, 0)  # the latest before each page
-    gaps = np.concatenate(([0], np.cumsum(np.diff(enc.seq) - 1)))
-    spans = loss_spans(upto, gaps[upto], lost)
+    excess = lost_beyond_gaps(lost[:-1], lost[1:], enc.seq[upto[:-1]], enc.seq[upto[1:]],
+                              upto[1:] - upto[:-1])
+    spans = [(int(upto[k]), int(upto[k + 1]), int(excess[k])) for k in np.flatnonzero(excess > 0)]
     tail = int(upto[-1]) if len(upto) else 0
     if _overflow_reported_after(frames, accepted, decoder, int(index[-1]) if len(index) else -1):
         spans.append((tail, len(enc.seq) - 1, len(enc.seq) - 1 - tail))
     return spans
 
 
-def loss_spans(upto: IntArray, gaps: IntArray, lost: IntArray) -> list[tuple[int, int, int]]:
-    """``firmware_losses``' spans between consecutive ENC_E2E_LOST pages: ``upto`` the latest
-    encoder frame before each page, ``gaps`` the frames the log's own sequence misses up to
-    it, ``lost`` the page's count (u8): where the count grew by more than the log's gaps."""
-    excess = (np.diff(lost) & 0xFF) - np.diff(gaps)
-    excess = np.minimum(excess, np.diff(upto))  # no more than the frames there were
-    return [(int(upto[k]), int(upto[k + 1]), int(excess[k])) for k in np.flatnonzero(excess > 0)]
+def lost_beyond_gaps(
+    lost_before: IntArray, lost_after: IntArray, seq_before: IntArray, seq_after: IntArray,
+    frames: IntArray,
+) -> IntArray:
+    """Encoder frames the firmware lost that the log holds, between two ODOM_STATUS pages: its
+    ENC_E2E_LOST (u8, wrapping) grew from ``lost_before`` to ``lost_after`` while the log's
+    encoder sequence went from ``seq_before`` to ``seq_after`` over ``frames`` accepted frames
+    (the gaps between are frames the log lacks too); no more than ``frames``. Shared with the
+    live judge (``host.judge.tracking``)."""
+    gaps = (seq_after - seq_before) - frames
+    excess: IntArray = np.minimum(((lost_after - lost_before) & 0xFF) - gaps, frames)
+    return excess
+
+
+def worst_losses_m(drop: FloatArray, first: int, last: int, n: int) -> float:
+    """The allowance (m) of one span: the sum of the ``n`` largest ``drop`` errors among
+    encoder frames ``first``..``last``."""
+    return float(np.sum(np.sort(drop[first : last + 1])[::-1][:n]))
 
 
 def _overflow_reported_after(
@@ -348,7 +360,7 @@ def loss_allowance(
     drop = drop_errors(enc, robot, integrator)
     drop[named[named < len(drop)]] = 0.0  # a frame an on-board sample names was not lost
     for first, last, n in spans:
-        allowance += np.where(at > first, span_weight(drop[first : last + 1], n), 0.0)
+        allowance += np.where(at > first, worst_losses_m(drop, first, last, n), 0.0)
     return allowance
 
 
@@ -356,8 +368,12 @@ def drop_errors(enc: Encoders, robot: RobotProfile, integrator: str) -> FloatArr
     """Per encoder frame j: how far (m) the pose moves when frame j is lost, i.e. the firmware
     takes the steps into j and into j + 1 as one step (``host.judge.reference.integrate``'s
     step, for ``integrator``); 0 for the first and the last frame."""
-    g = Geometry.of(robot)
-    bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
+    return drop_errors_of(enc, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
+                          integrator)
+
+
+def drop_errors_of(enc: Encoders, g: Geometry, bits: int, integrator: str) -> FloatArray:
+    """``drop_errors`` for a geometry and wire counter width (``bits``): the live judge's form."""
     dl, dr = wrap_delta(np.diff(enc.left), bits), wrap_delta(np.diff(enc.right), bits)
     heading = np.concatenate(([0.0], np.cumsum(heading_steps(dl, dr, g))))
     error = merge_errors(dl, dr, heading, g, integrator)
@@ -382,11 +398,6 @@ def merge_errors(
                                 g, integrator)
     error: FloatArray = np.hypot(one_x[:-1] + one_x[1:] - two_x, one_y[:-1] + one_y[1:] - two_y)
     return error
-
-
-def span_weight(drops: FloatArray, n: int) -> float:
-    """A lossy span's allowance (m): the sum of its ``n`` largest ``drops`` (``loss_allowance``)."""
-    return float(np.sum(np.sort(drops)[::-1][:n]))
 
 
 def _step_vector(

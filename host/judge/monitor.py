@@ -56,18 +56,23 @@ import can
 from cantools.database.can import Database, Message
 
 from odocan.firmware.errors import ErrorFlag
+from odocan.host.jsonutil import finite
 from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.reference import Geometry
-from odocan.host.judge.sources import CONFLICT_HOLD_S, SourceWatch
+from odocan.host.judge.sources import (
+    CONFLICT_HOLD_S,
+    FIRMWARE_NODE,
+    SourceWatch,
+    boot_summary,
+    start_new_life,
+)
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import (
     UNKNOWN,
     E2EMonitor,
-    crc8h2f_p02_one,
     e2e_messages,
 )
-from odocan.host.report.jsonutil import finite
 from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile
 
@@ -77,7 +82,6 @@ ACCEPTED = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # distinct unknown identifiers listed (all are counted)
 _HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
 NODE_TIMEOUT_CYCLES = 10  # a node is stale after 10 x its fastest cycle time (opendbc)
-FIRMWARE_NODE = "ODOM_MCU"
 POSE_TOLERANCE_M = 1e-3  # on-board vs reference beyond this: POSE WRONG (10 LSB of X/Y)
 POSE_TOLERANCE_RAD = 1e-3  # ... or this (about 10 LSB of HEADING)
 MAX_EVENTS = 16  # events kept (the latest)
@@ -191,8 +195,10 @@ class BusMonitor:
         if stats is None:
             stats = self.messages[message.name] = MessageStats(message.name, message.frame_id)
         stats.heard(timestamp_s, now_s, _page(message, data))
+        self.tracker.advance(timestamp_s)  # settles the pose halves heard half a cycle before
         if status in ACCEPTED:
             self._use(message, stats, data)
+        self.tracker.take_samples()  # judged in ``tracker.vs_reference``
 
     def _count_unknown_id(self, can_id: int) -> None:
         key = f"0x{can_id:03X}"
@@ -256,13 +262,16 @@ class BusMonitor:
                             "detail": f"{request} refused: {reason}"})
 
     def _on_encoders(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
+        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]),
+                                 self._bus_time_s)
 
     def _on_pose_x(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]))
+        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]),
+                               counter=int(s["COUNTER"]), t_s=self._bus_time_s)
 
     def _on_pose_y(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        self.tracker.on_pose_y(int(s["ENC_COUNTER"]), float(s["Y"]), int(s["TURNS"]))
+        self.tracker.on_pose_y(int(s["ENC_COUNTER"]), float(s["Y"]), int(s["TURNS"]),
+                               counter=int(s["COUNTER"]), t_s=self._bus_time_s)
 
     def _on_truth(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         part = int(s["PART"])
@@ -282,6 +291,8 @@ class BusMonitor:
             integrator = str(shown["INTEGRATOR"]).lower()
             if integrator in ("euler", "rk2", "exact"):
                 self.tracker.on_integrator(integrator)
+        elif page == "E2E_WHEEL_ENCODERS":
+            self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]))
         elif page == "FRAME_TOTALS":
             self.status.update({k.lower(): int(v) for k, v in s.items() if k.endswith("_FRAMES")})
 
@@ -293,9 +304,7 @@ class BusMonitor:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
-            self.tracker.restart_reference()
-            self._restart_sequences(FIRMWARE_NODE)
-            detail += ": reference restarted"
+            detail += ": " + start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
         elif kind == "two sources":
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
             last = self.events[-1] if self.events else None
@@ -306,30 +315,8 @@ class BusMonitor:
 
     def _summary(self, message: Message, data: bytes) -> tuple[int, str] | None:
         """(UPTIME, STATE) of an ODOM_STATUS summary whose CRC holds, whatever its sequence."""
-        if message.name != "ODOM_STATUS" or len(data) != 8:
-            return None
         config = self._e2e_configs.get(frame_key(message.frame_id, message.is_extended_frame))
-        ids = config.data_ids if config is not None else None
-        if not ids or data[0] != crc8h2f_p02_one(data, ids[data[1] & 0xF]):
-            return None
-        try:
-            signals = message.decode(data)
-        except Exception:  # not decodable: the E2E check and _use count it
-            return None
-        assert isinstance(signals, dict)
-        values: dict[str, Any] = dict(signals)
-        if str(values.get("PAGE")) != "SUMMARY":
-            return None
-        return int(values["UPTIME"]), str(values["STATE"])
-
-    def _restart_sequences(self, node: str) -> None:
-        """Forget the E2E sequence of every message ``node`` sends (a reboot restarts its
-        counters: that is not frames lost)."""
-        for message in self.db.messages:
-            if node in message.senders:
-                state = self.e2e._states.get(frame_key(message.frame_id, message.is_extended_frame))
-                if state is not None:  # the counts stay; the next frame starts the sequence
-                    state.waiting = True
+        return boot_summary(message, data, config.data_ids if config is not None else None)
 
     def node_ages(self, now_s: float) -> dict[str, dict[str, Any]]:
         """Per sending node heard: ``age_s`` since its last cyclic message, ``timeout_s``
@@ -370,9 +357,14 @@ class BusMonitor:
         error = self.tracker.vs_reference.latest
         if not error:
             return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
-        if error["dpos_m"] > POSE_TOLERANCE_M or abs(error["dheading_rad"]) > POSE_TOLERANCE_RAD:
+        if self.tracker.awaiting_boot:
+            return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
+        allowed_m = self.tracker.allowance_m()  # for encoder frames the firmware lost
+        if (error["dpos_m"] - allowed_m > POSE_TOLERANCE_M
+                or abs(error["dheading_rad"]) > POSE_TOLERANCE_RAD):
+            plus = f" (allowed {allowed_m * 1e3:.1f} mm for lost frames)" if allowed_m else ""
             return "POSE WRONG", [
-                f"on-board vs reference {error['dpos_m'] * 1e3:.1f} mm, "
+                f"on-board vs reference {error['dpos_m'] * 1e3:.1f} mm{plus}, "
                 f"{error['dheading_rad'] * 1e3:.2f} mrad"
             ]
         return "OK", []

@@ -47,9 +47,9 @@ from odocan.host.io.logs import (
 )
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Analysis, Tolerance, analyze
 from odocan.host.judge.diagnosis import fitting_profiles
+from odocan.host.outputs import OutputError
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
-from odocan.host.report.outputs import OutputError
 from odocan.sim import contract
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.clock import LockstepClock

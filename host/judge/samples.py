@@ -134,20 +134,30 @@ def encoder_frames(
     came in a burst (``queued_frames``)."""
     enc = accepted_rows(frames, accepted, decoder, "WHEEL_ENCODERS")
     counter = enc["COUNTER"].astype(np.int64)
-    step = (np.diff(counter) & 0xF).astype(np.int64)
     cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS")
-    if cycle_s is not None and len(step):
-        periods = np.rint(np.diff(enc["timestamp_s"]) / cycle_s).astype(np.int64)
-        lost = 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
-        # a frame let out in a burst after the gap waited in the sender's buffer: the gap is
-        # a busy bus, not lost frames (the COUNTER step is the whole step)
-        step = step + np.where(queued_frames(enc["timestamp_s"], cycle_s)[1:], 0, lost)
-    seq = np.concatenate(([0], np.cumsum(step))).astype(np.int64)
     return Encoders(
-        index=enc["index"], counter=counter, seq=seq,
+        index=enc["index"], counter=counter,
+        seq=sender_seq(counter, enc["timestamp_s"], cycle_s),
         left=enc["LEFT_COUNT"].astype(np.int64), right=enc["RIGHT_COUNT"].astype(np.int64),
         timestamp_s=enc["timestamp_s"], cycle_s=cycle_s,
     )
+
+
+def sender_seq(counter: IntArray, timestamp_s: FloatArray, cycle_s: float | None) -> IntArray:
+    """The sender's sequence numbers of encoder frames (bus order; ``counter``: their E2E
+    COUNTER, ``timestamp_s``: bus times): COUNTER steps mod 16, widened by 16 where the time
+    stamps say that many more periods passed, unless the frame after the gap came in a burst
+    (``queued_frames``). Shared by ``encoder_frames`` and the live judge
+    (``host.judge.tracking``), which applies it to its window of recent frames."""
+    step = (np.diff(counter) & 0xF).astype(np.int64)
+    if cycle_s is not None and len(step):
+        periods = np.rint(np.diff(timestamp_s) / cycle_s).astype(np.int64)
+        lost = 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
+        # a frame let out in a burst after the gap waited in the sender's buffer: the gap is
+        # a busy bus, not lost frames (the COUNTER step is the whole step)
+        step = step + np.where(queued_frames(timestamp_s, cycle_s)[1:], 0, lost)
+    seq: IntArray = np.concatenate(([0], np.cumsum(step))).astype(np.int64)
+    return seq
 
 
 def contract_cycle_s(decoder: BulkDecoder, name: str) -> float | None:

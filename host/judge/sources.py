@@ -13,7 +13,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
+from cantools.database.can import Database, Message
+
+from odocan.host.judge.tracking import PoseTracker
+from odocan.host.protocol.e2e import E2EMonitor, crc8h2f_p02_one
+
+FIRMWARE_NODE = "ODOM_MCU"  # the DBC node that sends the firmware's frames (ODOM_STATUS, ...)
 UPTIME_MATCH_S = 2.0  # one source's UPTIME (whole s) minus bus time stays within this
 CONFLICT_HOLD_S = 2.0  # CONFLICT is shown this long after two sources last interleaved
 
@@ -53,3 +60,38 @@ class SourceWatch:
         self.last_uptime_s, self.last_state = uptime_s, state
         return kind
 
+
+
+def boot_summary(message: Message, data: bytes, data_ids: Any) -> tuple[int, str] | None:
+    """(UPTIME s, STATE) of an ODOM_STATUS summary whose CRC holds, whatever its E2E sequence
+    (a rebooted firmware restarts it); ``data_ids``: the message's E2E DataIDs. None otherwise."""
+    if message.name != "ODOM_STATUS" or len(data) != 8:
+        return None
+    if not data_ids or data[0] != crc8h2f_p02_one(data, data_ids[data[1] & 0xF]):
+        return None
+    try:
+        signals = message.decode(data)
+    except Exception:  # not decodable: the E2E check and the caller count it
+        return None
+    assert isinstance(signals, dict)
+    values: dict[str, Any] = dict(signals)
+    if str(values.get("PAGE")) != "SUMMARY":
+        return None
+    return int(values["UPTIME"]), str(values["STATE"])
+
+
+def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
+                   uptime_s: int, state: str) -> str:
+    """A reboot told by ``SourceWatch``: the reference starts at the power-up pose when the
+    summary says UPTIME 0 (``PoseTracker.power_up``; ``host.judge.reboots``), else (more than a
+    second after the boot: its page of encoder E2E counts may be gone too) at the next pose;
+    the E2E sequences of the messages ``FIRMWARE_NODE`` sends in ``db`` start afresh (a reboot
+    is not frames lost). Returns what was done (text)."""
+    for message in db.messages:
+        if FIRMWARE_NODE in message.senders:  # the counts stay; the next frame starts afresh
+            e2e.restart_sequence(message.frame_id, extended=message.is_extended_frame)
+    if uptime_s == 0:
+        tracker.power_up(primed_now=state != "INIT")
+        return "reference restarted at the power-up pose"
+    tracker.restart_reference()
+    return "reference restarted"

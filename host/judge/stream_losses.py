@@ -1,8 +1,8 @@
 """The encoder frames the firmware lost that the log holds, chunk by chunk (issue #14.1):
 ``host.judge.compare.firmware_losses`` over a life fed in chunks, its spans the whole life's.
 
-Carried: the last ENC_E2E_LOST page (its count, the latest encoder frame before it and the
-log's own gaps up to there: ``compare.loss_spans`` runs on it and the chunk's pages), the
+Carried: the last ENC_E2E_LOST page (its count, the latest encoder frame before it and that
+frame's sequence number: ``compare.lost_beyond_gaps`` runs on it and the chunk's pages), the
 encoder frames counted so far with the last one's sequence number, and whether a summary saying
 MAILBOX_OVERFLOW came after the last page (``compare._overflow_reported_after`` per chunk).
 
@@ -22,9 +22,9 @@ from odocan.host.judge.compare import (
     LOST_PAGE,
     _overflow_reported_after,
     heading_steps,
-    loss_spans,
+    lost_beyond_gaps,
     merge_errors,
-    span_weight,
+    worst_losses_m,
 )
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import Encoders
@@ -43,7 +43,7 @@ class StreamLosses:
     _offset: int = 0  # frames before the chunk
     _enc_count: int = 0  # accepted encoder frames before the chunk
     _last_seq: int = 0  # the sequence number of the last of them
-    _page: tuple[int, int, int] | None = None  # the last page: upto, gaps at upto, lost
+    _page: tuple[int, int, int] | None = None  # the last page: upto, its seq, lost
     _signal: bool = True  # the DBC's ODOM_STATUS has ENC_E2E_LOST
     _overflow_after: bool = False  # a MAILBOX_OVERFLOW summary after the last page
 
@@ -81,13 +81,14 @@ class StreamLosses:
         before = np.searchsorted(enc.index, index)  # the chunk's encoder frames before each
         upto = np.maximum(self._enc_count + before - 1, 0)
         seq = np.where(before > 0, enc.seq[np.maximum(before - 1, 0)] if len(enc.seq)
-                       else 0, self._last_seq if self._enc_count else 0)
-        gaps = seq - upto  # the log's own gaps up to there (its sequence starts at 0)
+                       else 0, self._last_seq if self._enc_count else 0)  # (seq[0] is 0)
         if self._page is not None:
-            upto, gaps, lost = (np.r_[self._page[0], upto], np.r_[self._page[1], gaps],
-                                np.r_[self._page[2], lost])
-        self._found += loss_spans(upto, gaps, lost)
-        self._page = (int(upto[-1]), int(gaps[-1]), int(lost[-1]))
+            upto, seq, lost = (np.r_[self._page[0], upto], np.r_[self._page[1], seq],
+                               np.r_[self._page[2], lost])
+        excess = lost_beyond_gaps(lost[:-1], lost[1:], seq[:-1], seq[1:], np.diff(upto))
+        self._found += [(int(upto[k]), int(upto[k + 1]), int(excess[k]))
+                        for k in np.flatnonzero(excess > 0)]
+        self._page = (int(upto[-1]), int(seq[-1]), int(lost[-1]))
 
     def _page_rows(self, chunk: FrameArrays) -> dict[str, np.ndarray]:
         """The chunk's ENC_E2E_LOST pages ({} without that signal in the DBC)."""
@@ -108,7 +109,7 @@ class SpanDrops:
     pass over its encoder frames (``feed``) and its kept on-board samples (``named``): each
     frame's ``drop_errors`` from the steps into it and out of it (the heading a continued
     cumulative sum, bit for bit the whole life's), kept only inside the spans; then each
-    span's weight (``compare.span_weight``, the frames a sample names excepted) and the
+    span's weight (``compare.worst_losses_m``, the frames a sample names excepted) and the
     allowance at any encoder frame (the weights of the spans that began before it, added in
     the same order)."""
 
@@ -166,7 +167,7 @@ class SpanDrops:
                 drops = np.array([0.0 if g in self._named or g in (0, last)
                                   else self._drops.get(g, 0.0)
                                   for g in range(first, stop + 1)], dtype=np.float64)
-                weights.append(span_weight(drops, n))
+                weights.append(worst_losses_m(drops, 0, len(drops) - 1, n))
             total, sums = 0.0, []
             for w in weights:  # loss_allowance's order: 0.0 + w1 + w2 + ...
                 total = total + w

@@ -9,11 +9,13 @@ Frames reach the bridge as batches of ``(robot index, can.Message)`` in a bounde
 
 A full queue drops the batch and counts it (``frames_dropped``): the bus never waits for MQTT.
 The task ``can-frames`` feeds each robot's ``RobotTelemetry`` and queues its publications on the
-robot's ``RobotLink``; ``periodic`` publishes ``status`` and ``rates``; each link runs its own
-connection. Commands are validated by the robot's ``CommandEncoder`` and only then sent on the
-robot's bus; each one is answered on ``cmd/result`` (accepted, rejected with the reason, expired).
-No frame and no command can stop the bridge: a handler that raises anyway is counted
-(``frames_failed``, ``commands_failed``) and logged once. ``rates`` carries each link's counters
+robot's ``RobotLink``, ``slice_frames`` frames at a time with a loop turn between slices (so a
+large fleet's tick never holds the loop for long); ``periodic`` publishes ``status`` and
+``rates``; each link runs its own connection. Commands are validated by the robot's
+``CommandEncoder`` and only then sent on the robot's bus; each one is answered on
+``cmd/result`` (accepted, rejected with the reason, expired). No frame and no command can stop
+the bridge: a handler that raises anyway is counted (``frames_failed``, ``commands_failed``) and
+logged once. ``rates`` carries each link's counters
 (``link``: telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects).
 """
 
@@ -66,6 +68,7 @@ class BridgeConfig:
     keepalive_s: int = 5
     client_prefix: str = "odocan-bridge"
     queue_batches: int = 1024
+    slice_frames: int = 64  # frames handled in one go before the event loop gets a turn
     connect_timeout_s: float = 5.0  # the first connection, else BrokerError
     command_expiry_s: float = 5.0  # a command without its own MQTT v5 expiry, at most this old
     telemetry_buffer: int = 1000  # QoS-0 publications per robot waiting for the socket
@@ -172,6 +175,8 @@ class Bridge:
         self.frames_dropped = 0
         self.frames_in = 0
         self.frames_failed = 0  # frames whose handling raised (a defect): counted, logged once
+        self._pending: Batch = []  # the batch being handled, slice by slice (``_consume``)
+        self._pending_at = 0  # its first frame not handled yet
 
     @property
     def links(self) -> list[RobotLink]:
@@ -227,10 +232,26 @@ class Bridge:
                 f"{c['reconnects']} reconnects")
 
     async def _consume(self) -> None:
+        """Handle the batches, ``slice_frames`` frames at a time with a loop turn between
+        slices: a whole tick of a large fleet in one callback would hold back the fleet's next
+        tick (and the links' sends) for milliseconds. The frames not handled yet wait in
+        ``_pending`` (handled by ``_drain`` when the bridge stops), in bus order."""
+        size = max(1, self.config.slice_frames)
         while True:
-            self._handle(await self.queue.get())
+            if not self._pending:
+                self._pending = await self.queue.get()
+                self._pending_at = 0
+            start = self._pending_at
+            self._pending_at = start + size
+            self._handle(self._pending[start:start + size])
+            if self._pending_at >= len(self._pending):
+                self._pending = []
+            else:
+                await asyncio.sleep(0)
 
     def _drain(self) -> None:
+        pending, self._pending = self._pending[self._pending_at:], []
+        self._handle(pending)
         while not self.queue.empty():
             self._handle(self.queue.get_nowait())
 

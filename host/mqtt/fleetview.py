@@ -21,10 +21,10 @@ from typing import Any
 import aiomqtt
 from cantools.database.can import Database
 
+from odocan.host.jsonutil import real
 from odocan.host.judge.monitor import error_names, shown_value
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL
-from odocan.host.report.jsonutil import real
 from odocan.sim.contract import database
 
 

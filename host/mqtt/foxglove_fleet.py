@@ -42,10 +42,10 @@ from odocan.host.io.export import (
     pose_error,
     pose_in_frame,
 )
+from odocan.host.jsonutil import real
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.report.foxglove_options import Served, start_server
-from odocan.host.report.jsonutil import real
 
 RECONNECT_S = 1.0  # after the broker went away
 _POSE_LEAVES = {"pose": "onboard", "reference": "reference", "truth": "truth"}

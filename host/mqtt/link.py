@@ -354,7 +354,8 @@ class RobotLink:
         """QoS 0, in batches: awaits only the socket writes, never an acknowledgement. A batch
         goes to paho at once and the next waits until the socket took its last message, so
         while the socket is slow the telemetry waits in the bounded deque (drop-oldest), not
-        in paho's unbounded queue."""
+        in paho's unbounded queue. The batch is written at once, in one send
+        (``LinkClient.flush``)."""
         while True:
             await self._telemetry_wake.wait()
             self._telemetry_wake.clear()
@@ -362,6 +363,7 @@ class RobotLink:
                 last = None
                 for _ in range(len(self.telemetry)):
                     last = client.publish_now(*self.telemetry.popleft())
+                client.flush()  # the batch in one socket write, now
                 if last is not None:
                     await client.written(last)
 

@@ -4,9 +4,10 @@
 publications it makes due, as ``(leaf, payload)`` pairs (``host.mqtt.topics``):
 
 * every frame is E2E-checked (``host.e2e.E2EMonitor``: the DBC's E2EDataIDs, Profile 2 CRC and
-  sequence) and decoded with cantools; frames the check rejects, and E2E-valid frames cantools
-  cannot decode (an unknown multiplexer page), are counted in ``rejected``, never used (foreign
-  IDs by hex up to ``MAX_UNKNOWN_IDS`` of them, then as ``other``);
+  sequence) and decoded with cantools (its decode compiled: ``host.mqtt.livedecode``); frames
+  the check rejects, and E2E-valid frames cantools cannot decode (an unknown multiplexer page),
+  are counted in ``rejected``, never used (foreign IDs by hex up to ``MAX_UNKNOWN_IDS`` of them,
+  then as ``other``);
 * ``WHEEL_ENCODERS`` steps the float64 reference (``host.reference.ReferenceOdometry``, 24-bit
   wrapping counts); the reference pose after each frame is kept by the frame's E2E ``COUNTER``;
 * ``ODOM_POSE_X`` + ``ODOM_POSE_Y`` with the same ``ENC_COUNTER`` make the on-board pose, compared
@@ -37,9 +38,11 @@ from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.tracking import FramePose, PoseTracker, difference, pose_dict
+from odocan.host.mqtt.livedecode import LiveDecoder
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
-from odocan.host.protocol.e2e import E2EMonitor
+from odocan.host.protocol.e2e import E2EMonitor, e2e_messages
 from odocan.sim.contract import database
 
 Publication = tuple[str, dict[str, Any]]
@@ -83,6 +86,7 @@ class RobotTelemetry:
         self.name = name
         self.db = db if db is not None else database()
         self._by_id = {m.frame_id: m for m in self.db.messages}
+        self._decoders = {m.frame_id: LiveDecoder(m) for m in self.db.messages}
         self.e2e = E2EMonitor(self.db)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
@@ -90,7 +94,6 @@ class RobotTelemetry:
         self.rejected: Counter[str] = Counter()
         self._unknown_ids: set[str] = set()
         self._window = _Window(now_s)
-        self._pose_x_counter = 0  # E2E COUNTER of the last ODOM_POSE_X
         self._twist: dict[str, float] = {}
         self._last_pub_t = -math.inf
         self._truth_error: dict[str, Any] | None = None
@@ -98,6 +101,9 @@ class RobotTelemetry:
         self.pending: dict[tuple[int, int], PendingAck] = {}
         self.status_seq = 0
         self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
+        self._status_ids = e2e_messages(self.db).get(self._status_id)
+        self.sources = SourceWatch()  # reboots, as the monitor tells them (host.judge.sources)
+        self.reboots = 0
 
     # --- frames ---
     def feed(self, msg: can.Message) -> list[Publication]:
@@ -107,26 +113,39 @@ class RobotTelemetry:
             return []
         can_id, data = msg.arbitration_id, bytes(msg.data)
         message = self._by_id.get(can_id)
+        if message is not None and can_id == self._status_id and not msg.is_extended_id:
+            self._watch_source(message, data, msg.timestamp)  # before E2E: a reboot fails it
         status = self.e2e.check(can_id, data, extended=msg.is_extended_id,
                                 timestamp_s=msg.timestamp)  # the window widens with time
+        self.tracker.advance(msg.timestamp)  # settles the pose halves heard half a cycle before
         if message is None or status not in ACCEPTED_E2E:
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
-            return []
+            return self._samples()
         handler = self._handlers.get(message.name)
         signals: Any = None
         if handler is not None:
             try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
-                signals = message.decode(data, decode_choices=False)
+                signals = self._decoders[can_id].decode(data)  # cantools' decode, compiled
             except DecodeError:
                 self.rejected[message.name] += 1
-                return []
+                return self._samples()
         self.frames[message.name] += 1
         self._window.counts[message.name] += 1
         if handler is None:
-            return []
+            return self._samples()
         assert isinstance(signals, dict)
         publications: list[Publication] = handler(self, signals, msg.timestamp)
-        return publications
+        return publications + self._samples()
+
+    def _watch_source(self, message: Any, data: bytes, t_s: float) -> None:
+        """A reboot (UPTIME going back, INIT after running) starts the firmware's new life at
+        its power-up pose, as the monitor and ``analyze`` do (``host.judge.sources``)."""
+        ids = self._status_ids.data_ids if self._status_ids is not None else None
+        summary = boot_summary(message, data, ids)
+        if summary is None or self.sources.observe(t_s, *summary) != "reboot":
+            return
+        self.reboots += 1
+        start_new_life(self.tracker, self.e2e, self.db, *summary)
 
     def _unknown_key(self, can_id: int) -> str:
         """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
@@ -138,12 +157,13 @@ class RobotTelemetry:
         return "other"
 
     def _on_encoders(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
+        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]),
+                                 t_s)
         return []
 
     def _on_pose_x(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), s["X"], s["HEADING"])
-        self._pose_x_counter = int(s["COUNTER"])
+        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), s["X"], s["HEADING"],
+                               counter=int(s["COUNTER"]), t_s=t_s)
         return []
 
     def _on_twist(self, s: dict[str, Any], t_s: float) -> list[Publication]:
@@ -155,14 +175,25 @@ class RobotTelemetry:
         return []
 
     def _on_pose_y(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        enc = int(s["ENC_COUNTER"])
-        sample = self.tracker.on_pose_y(enc, s["Y"], int(s["TURNS"]))
+        self.tracker.on_pose_y(int(s["ENC_COUNTER"]), s["Y"], int(s["TURNS"]),
+                               counter=int(s["COUNTER"]), t_s=t_s)
+        return []
+
+    def _samples(self) -> list[Publication]:
+        """The on-board samples the tracker settled on this frame: the latest published, at
+        most ``publish_hz`` times per second of bus time (its ODOM_POSE_Y's)."""
+        samples = self.tracker.take_samples()
+        if not samples:
+            return []
+        sample = samples[-1]
+        t_s = sample.t_s
         if t_s < self._last_pub_t:  # the bus clock went back (a restart, a replay): follow it
             self._last_pub_t = -math.inf
-        if sample is None or t_s - self._last_pub_t < self.publish_period_s - 1e-6:
+        if t_s - self._last_pub_t < self.publish_period_s - 1e-6:
             return []
         self._last_pub_t = t_s
-        return self._pose_publications(*sample, enc, self._pose_x_counter, t_s)
+        return self._pose_publications(sample.pose, sample.reference, sample.enc_counter,
+                                       sample.counter, t_s)
 
     def _pose_publications(
         self, pose: FramePose, ref: FramePose | None, enc: int, counter: int, t_s: float
@@ -196,7 +227,10 @@ class RobotTelemetry:
         message = self._by_id[self._status_id]
         fields = {k.lower(): _named(message, k, v) for k, v in s.items()
                   if k not in ("CHECKSUM", "COUNTER", "PAGE")}
-        self.firmware[_page_name(self.db, page)] = fields
+        name = _page_name(self.db, page)
+        self.firmware[name] = fields
+        if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
+            self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]))
         return []
 
     def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:

@@ -32,7 +32,7 @@ import re
 import time
 from typing import Any, Final
 
-from odocan.host.report.jsonutil import finite
+from odocan.host.jsonutil import finite
 
 PREFIX: Final = "odocan"
 TELEMETRY_LEAVES: Final = ("pose", "reference", "truth", "error", "rates")
@@ -80,8 +80,13 @@ def check_robot_name(name: str) -> str:
 
 
 def dumps(payload: dict[str, Any]) -> bytes:
-    """Compact JSON; non-finite floats become null (JSON has no NaN)."""
-    return json.dumps(finite(payload), separators=(",", ":")).encode()
+    """Compact JSON; non-finite floats become null (JSON has no NaN). Encoded as it is first
+    (every publication of every robot comes here); only a payload with a NaN or an infinity
+    (``ValueError``) is copied with them as null (``finite``) and encoded again."""
+    try:
+        return json.dumps(payload, separators=(",", ":"), allow_nan=False).encode()
+    except ValueError:
+        return json.dumps(finite(payload), separators=(",", ":")).encode()
 
 
 def stamp(payload: dict[str, Any]) -> dict[str, Any]:

@@ -29,6 +29,7 @@ fatal; messages without ``E2EDataIDs`` are taken unchecked and counted there as 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import cantools
@@ -186,6 +187,14 @@ def periods_between(dt_s: npt.NDArray[np.float64], cycle_s: float | None) -> npt
     if cycle_s is None:
         return np.ones(dt_s.shape, dtype=np.int64)
     return np.maximum(1, np.rint(dt_s / cycle_s)).astype(np.int64)
+
+
+def period_count(dt_s: float, cycle_s: float | None) -> int:
+    """``periods_between`` for one frame, without numpy (the live check runs it per frame):
+    the same round-half-even of the same float64 quotient; a NaN or infinite gap counts 1."""
+    if cycle_s is None or not math.isfinite(dt_s):
+        return 1
+    return max(1, round(dt_s / cycle_s))
 
 
 def sequence_statuses(
@@ -346,8 +355,17 @@ class E2EMonitor:
         periods = self._periods(key, config, timestamp_s)
         counter = data[1] & COUNTER_MASK
         crc_ok = crc8h2f_p02_one(data, config.data_ids[counter]) == data[0]
-        state = self._states.setdefault(key, SequenceState(config.max_delta_init))
+        state = self._states.get(key)
+        if state is None:  # not setdefault: it would build a state (and its counts) per frame
+            state = self._states[key] = SequenceState(config.max_delta_init)
         return state.check(crc_ok, counter, periods)
+
+    def restart_sequence(self, can_id: int, *, extended: bool = False) -> None:
+        """The sender of this message restarted (a reboot: its COUNTER starts again): its next
+        frame starts the sequence afresh, as the first frame heard does. The counts stay."""
+        state = self._states.get(frame_key(can_id, extended))
+        if state is not None:
+            state.waiting = True
 
     def _periods(self, key: int, config: E2EMessage, timestamp_s: float | None) -> int:
         if timestamp_s is None:
@@ -356,7 +374,7 @@ class E2EMonitor:
         self._last_time[key] = timestamp_s
         if last is None:
             return 1
-        return int(periods_between(np.array([timestamp_s - last]), config.cycle_s)[0])
+        return period_count(timestamp_s - last, config.cycle_s)
 
     def count_frame_kind(self, *, error: bool = False, remote: bool = False) -> None:
         """Count an error or remote frame (they are never checked)."""

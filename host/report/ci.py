@@ -19,8 +19,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+from odocan.host.outputs import check_writable, write_text
 from odocan.host.report.junit import Check, junit_xml
-from odocan.host.report.outputs import check_writable, write_text
 
 
 def add_junit_argument(parser: argparse.ArgumentParser) -> None:

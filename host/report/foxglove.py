@@ -171,8 +171,8 @@ class FoxgloveLive(can.Listener, Served):
         ))
         self._publish_signals(msg, t_ns)
         tracker = self.monitor.tracker
-        if tracker.pose is not self._last[0]:
-            self._publish_onboard(t_ns)
+        if tracker.pose is not self._last[0]:  # at its ODOM_POSE_Y (it settles a bit later)
+            self._publish_onboard(to_ns(tracker.pose_t_s))
         if tracker.truth is not self._last[1]:
             self._publish_truth(t_ns)
         self._last = (tracker.pose, tracker.truth)

@@ -18,8 +18,9 @@ from rich.console import Group, RenderableType
 from rich.table import Table
 from rich.text import Text
 
+from odocan.host.jsonutil import real
+from odocan.host.judge.sources import FIRMWARE_NODE
 from odocan.host.protocol.e2e import E2E_KEYS
-from odocan.host.report.jsonutil import real
 
 STALE_S = 1.0  # a message not heard for this long is shown dimmed
 FLEET_STALE_S = 3.0  # a robot whose last MQTT message is older than this is marked stale
@@ -105,7 +106,6 @@ def status_line(status: dict[str, Any] | None) -> Text:
     )
 
 
-FIRMWARE_NODE = "ODOM_MCU"
 BAD_VERDICTS = frozenset({"STALE", "CONFLICT", "POSE WRONG", "FAULT", "NO FIRMWARE"})
 
 

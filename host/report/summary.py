@@ -19,9 +19,9 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from odocan.host.jsonutil import write_report
 from odocan.host.judge.analysis import Analysis, Tolerance
-from odocan.host.report.jsonutil import write_report
-from odocan.host.report.outputs import OutputError, check_writable
+from odocan.host.outputs import OutputError, check_writable
 from odocan.sim.exceptions import ConfigurationError
 
 if TYPE_CHECKING:  # rich is imported where a summary is printed, not by the options above

@@ -281,9 +281,9 @@ def check_report_dir(directory: Path) -> None:
 
 def write_reports(results: list[LogResult], directory: Path) -> None:
     """One JSON report per analysed log in ``directory`` (names from ``batch.report_names``)."""
+    from odocan.host.jsonutil import write_report
     from odocan.host.judge.batch import report_names
-    from odocan.host.report.jsonutil import write_report
-    from odocan.host.report.outputs import OutputError
+    from odocan.host.outputs import OutputError
 
     names = report_names([Path(r.path) for r in results])
     for result in results:

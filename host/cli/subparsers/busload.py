@@ -33,6 +33,7 @@ from rich.console import Console
 from rich.table import Table
 
 from odocan.host.cli.subparsers.analyze import load_dbc
+from odocan.host.jsonutil import write_report
 from odocan.host.judge.schedulability import (
     BITRATES,
     MAX_DLC,
@@ -44,7 +45,6 @@ from odocan.host.judge.schedulability import (
     messages_from_dbc,
     ms_to_ns,
 )
-from odocan.host.report.jsonutil import write_report
 from odocan.sim.contract import database
 from odocan.sim.exceptions import ConfigurationError
 

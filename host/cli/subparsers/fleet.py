@@ -53,9 +53,9 @@ from odocan.host.mqtt.options import (
     configure_logging,
 )
 from odocan.host.mqtt.shards import Shard, embedded_broker, run_sharded
+from odocan.host.outputs import check_writable, write_text
 from odocan.host.protocol.secoc import load_secoc_key
 from odocan.host.report.foxglove_options import HOST, port_number
-from odocan.host.report.outputs import check_writable, write_text
 from odocan.host.report.progress import Progress, wall_clock_progress
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError

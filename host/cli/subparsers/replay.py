@@ -30,6 +30,7 @@ from odocan.host.io.logs import (
     read_log,
 )
 from odocan.host.io.player import play
+from odocan.host.jsonutil import write_report
 from odocan.host.judge.replay import (
     ReplayInput,
     departures,
@@ -44,7 +45,6 @@ from odocan.host.report.ci import (
     check_junit_path,
     write_checks,
 )
-from odocan.host.report.jsonutil import write_report
 from odocan.host.report.progress import progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.sim import contract, robot

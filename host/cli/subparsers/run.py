@@ -45,6 +45,7 @@ from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge import busstats
 from odocan.host.judge.analysis import Analysis, analyze
+from odocan.host.outputs import OutputError, check_writable
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
     add_junit_argument,
@@ -53,7 +54,6 @@ from odocan.host.report.ci import (
     write_checks,
 )
 from odocan.host.report.foxglove_options import add_foxglove_arguments, foxglove_session
-from odocan.host.report.outputs import OutputError, check_writable
 from odocan.host.report.progress import progress
 from odocan.host.report.summary import (
     PLOT_SUFFIXES,

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from odocan.host.cli.options import add_robot_argument, add_seed_argument, float_in, int_in
 from odocan.host.judge import vectors
-from odocan.host.report.outputs import OutputError
+from odocan.host.outputs import OutputError
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import INTEGRATORS
 from odocan.sim.robot import load

@@ -2,6 +2,9 @@
 
 One writer for every ``--report``: strict JSON (numpy scalars and arrays as numbers and lists,
 NaN and infinities as null), an I/O error naming the path.
+
+It lives at host/ level, below every room, so io/ and judge/ write JSON without importing
+report/.
 """
 
 from __future__ import annotations
@@ -54,6 +57,6 @@ def report_json(report: dict[str, Any]) -> str:
 def write_report(path: Path, report: dict[str, Any], option: str = "--report") -> None:
     """Write ``report_json(report)`` to ``path``; an I/O error is one ``OutputError`` naming
     ``option`` and the path."""
-    from odocan.host.report.outputs import write_text
+    from odocan.host.outputs import write_text
 
     write_text(path, report_json(report), option)

@@ -5,6 +5,9 @@ process may write, or ``/dev/null``. Anything else -- a missing directory, a dir
 device such as ``/dev/full`` or a terminal, a read-only file -- is refused at once with the
 option and the path named, so an hour of simulation is never lost to a report that cannot be
 written. A write that still fails at the end names its path too (``write_text``).
+
+It lives at host/ level, below every room, so io/ and judge/ use ``OutputError`` without
+importing report/.
 """
 
 from __future__ import annotations

@@ -1,0 +1,99 @@
+"""The live judges start a rebooted firmware's life like ``analyze`` does: at its power-up pose
+(0, 0, 0) at the encoder frame it primed on, never at its first pose (which would adopt an
+error it came up with). Logs written by ``tests/synth_log.py``; the truth of each verdict is
+``tests/independent_checker.py``'s."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import can
+import pytest
+
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import POSITION_LSB_M, analyze
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.sim.robot import load
+from tests.test_analysis_reboot import REBOOT, STEPS, independent, rebooting_drive
+
+
+def monitor_of(path: Path, robot: str, integrator: str) -> BusMonitor:
+    """A BusMonitor fed every frame of the log at its bus time."""
+    monitor = BusMonitor(load(robot), integrator)
+    with can.LogReader(str(path)) as reader:
+        for msg in reader:
+            monitor.feed(msg, now_s=msg.timestamp)
+    return monitor
+
+
+def bridge_of(path: Path, robot: str, integrator: str) -> RobotTelemetry:
+    """The MQTT bridge's judge of one robot fed every frame of the log."""
+    profile = load(robot)
+    bridge = RobotTelemetry("r1", Geometry.of(profile), integrator,
+                            counter_bits=profile.counter_bits)
+    with can.LogReader(str(path)) as reader:
+        for msg in reader:
+            bridge.feed(msg)
+    return bridge
+
+
+@pytest.mark.parametrize(("bias_100um", "boot_in_init"),
+                         [(0, False), (0, True), (2, False), (-3, False), (2, True)])
+def test_the_monitor_judges_a_rebooted_firmware_from_its_power_up_pose(
+    tmp_path: Path, bias_100um: int, boot_in_init: bool
+) -> None:
+    """A firmware whose X after the reboot is off by a few LSB: the monitor's and the bridge's
+    max error vs reference show it (they did not: they adopted the first wrong pose), and agree
+    with analyze and the independent checker; a correct reboot stays within one LSB."""
+    profile = load("kobuki")
+    bias = {k: bias_100um for k in range(REBOOT, STEPS + 1)} if bias_100um else None
+    path = rebooting_drive(profile, "exact", bias=bias, boot_in_init=boot_in_init).write(
+        tmp_path / "reboot.log")
+    right = independent(path, profile, "exact", REBOOT)
+    assert right == (bias_100um == 0)
+    analysis = analyze(read_log(path), profile)
+    assert analysis.passed == right
+    offline = analysis.report["onboard_vs_reference"]["max_position_error_m"]
+    monitor = monitor_of(path, "kobuki", "exact")
+    assert [e["kind"] for e in monitor.events] == ["reboot"]
+    bridge = bridge_of(path, "kobuki", "exact")
+    assert bridge.reboots == 1
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.reference_starts == 2
+        live = tracker.vs_reference.max_dpos_m
+        if right:
+            assert live <= 1.5 * POSITION_LSB_M
+        else:
+            assert live == pytest.approx(abs(bias_100um) * POSITION_LSB_M,
+                                         abs=0.6 * POSITION_LSB_M)
+        assert live == pytest.approx(offline, abs=POSITION_LSB_M)  # one judge: within one LSB
+
+
+@pytest.mark.parametrize(("bias_100um", "boot_in_init"), [(0, False), (0, True), (2, False),
+                                                          (-3, True)])
+def test_without_the_boot_summary_the_live_judges_find_the_frame_it_primed_on(
+    tmp_path: Path, bias_100um: int, boot_in_init: bool
+) -> None:
+    """The recorder lost the new firmware's boot summary; the next one (UPTIME 0 again, 100 ms
+    later) tells the reboot. The live judges used to take the latest encoder frame then for the
+    one it primed on: a correct firmware 63 mm off. Its first page of encoder E2E counts
+    (ENC_E2E_OK) names that frame, as analyze reads it: the same verdict, the same error."""
+    profile = load("kobuki")
+    bias = {k: bias_100um for k in range(REBOOT, STEPS + 1)} if bias_100um else None
+    synth = rebooting_drive(profile, "exact", bias=bias, boot_in_init=boot_in_init)
+    synth.groups[REBOOT] = [line for line in synth.groups[REBOOT] if " 380#" not in line.upper()]
+    path = synth.write(tmp_path / "no_boot_summary.log")
+    right = independent(path, profile, "exact", REBOOT)
+    assert right == (bias_100um == 0)
+    analysis = analyze(read_log(path), profile)
+    assert analysis.passed == right
+    assert analysis.report["reboots"][0]["reference_start"] == "power-up"
+    offline = analysis.report["onboard_vs_reference"]["max_position_error_m"]
+    monitor, bridge = monitor_of(path, "kobuki", "exact"), bridge_of(path, "kobuki", "exact")
+    assert [e["kind"] for e in monitor.events] == ["reboot"]
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.reference_starts == 2
+        assert tracker.vs_reference.max_dpos_m == pytest.approx(offline, abs=1e-12)
+        assert (tracker.vs_reference.max_dpos_m <= POSITION_LSB_M) == right

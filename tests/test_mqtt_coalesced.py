@@ -1,0 +1,151 @@
+"""One socket write per burst of publications, and the bridge's batches handled in slices.
+
+The coalesced writes go through a real mosquitto to a real subscriber: every message must arrive
+intact and in order, also when the socket takes only a few bytes at a time (partial writes).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from typing import Any
+
+import can
+
+from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
+from odocan.host.mqtt.broker import LOOPBACK, BrokerURL
+from odocan.host.mqtt.client import CoalescedSend, LinkClient
+from tests.conftest_mqtt import Mosquitto, client, mosquitto  # noqa: F401 (fixtures)
+from tests.test_mqtt_bridge import GEOMETRY, ROBOT, rig_ticks
+
+TOPIC = "odocan/robot001/pose"
+BURST = 30
+
+
+def _link_client(url: BrokerURL, name: str) -> LinkClient:
+    return LinkClient(**url.client_kwargs(), on_refused=lambda *_: None,
+                      on_overflow=lambda _: None, max_waiting=10, identifier=name, timeout=5.0)
+
+
+async def _burst_through(
+    broker: Mosquitto, *, bytes_per_send: int | None = None
+) -> tuple[list[dict[str, Any]], int]:
+    """BURST QoS-0 publications of growing size in one burst; what the subscriber got, in
+    order, and how many send syscalls the link made for them."""
+    async with client(broker.url("robot001")) as sub, \
+            _link_client(broker.url("bridge"), "coalesced-test") as link:
+        await sub.subscribe(TOPIC, qos=0)
+        await asyncio.sleep(0.2)  # the subscription is in place at the broker
+        coalesced = link.coalesced
+        if bytes_per_send is not None:  # a socket that takes a few bytes per send
+            real = coalesced.send
+            coalesced.send = lambda buf: real(buf[:bytes_per_send])
+        writes0 = coalesced.writes
+        last = None
+        for i in range(BURST):
+            last = link.publish_now(TOPIC, json.dumps({"i": i, "pad": "x" * (i * 7)}).encode())
+        link.flush()
+        writes = coalesced.writes - writes0
+        assert last is not None
+        await link.written(last)
+        got: list[dict[str, Any]] = []
+        async with asyncio.timeout(10):
+            async for message in sub.messages:
+                assert isinstance(message.payload, bytes)
+                got.append(json.loads(message.payload))
+                if len(got) == BURST:
+                    break
+    return got, writes
+
+
+def test_a_burst_of_publications_is_one_socket_write_and_arrives_whole(
+    mosquitto: Mosquitto,  # noqa: F811
+) -> None:
+    got, writes = asyncio.run(_burst_through(mosquitto))
+    assert [p["i"] for p in got] == list(range(BURST))
+    assert [len(p["pad"]) for p in got] == [i * 7 for i in range(BURST)]
+    assert writes == 1  # paho alone: one send per packet (30)
+
+
+def test_partial_writes_still_deliver_every_message_intact_in_order(
+    mosquitto: Mosquitto,  # noqa: F811
+) -> None:
+    got, writes = asyncio.run(_burst_through(mosquitto, bytes_per_send=7))
+    assert [p["i"] for p in got] == list(range(BURST))
+    assert [len(p["pad"]) for p in got] == [i * 7 for i in range(BURST)]
+    assert writes > BURST  # 7 bytes a time: many sends, each starting where the last stopped
+
+
+def test_a_coalesced_write_stops_at_a_disconnect() -> None:
+    """Bytes queued after a DISCONNECT are not written with it (paho closes the socket)."""
+    import paho.mqtt.client as paho
+    from paho.mqtt.enums import CallbackAPIVersion
+
+    sent: list[bytes] = []
+    mqtt = paho.Client(CallbackAPIVersion.VERSION2)
+    coalesced = CoalescedSend(mqtt)
+
+    def send(buf: bytes | bytearray) -> int:
+        sent.append(bytes(buf))
+        return len(buf)
+
+    coalesced.send = send
+    sock = object()
+    mqtt._sock = sock  # type: ignore[assignment]
+    for command, packet in ((0x30, b"BBBB"), (0xE0, b"\xe0\x00"), (0x30, b"CCCC")):  # PUBLISH,
+        mqtt._out_packet.append({"command": command, "pos": 0, "packet": packet,  # DISCONNECT
+                                 "mid": 0, "qos": 0, "to_process": len(packet), "info": None})
+    assert coalesced(b"AA") == 2
+    assert sent == [b"AABBBB\xe0\x00"]
+    assert coalesced(b"BBBB") == 4
+    assert coalesced(b"\xe0\x00") == 2
+    assert len(sent) == 1
+    for _ in range(3):  # paho pops each packet before it sends it
+        mqtt._out_packet.popleft()
+    assert coalesced(b"CCCC") == 4
+    assert sent[-1] == b"CCCC"
+    mqtt._sock = None  # nothing for paho to close
+
+
+def test_a_large_batch_is_handled_in_slices_with_loop_turns_between() -> None:
+    """A batch of many frames gives the loop a turn every ``slice_frames`` frames; stopping
+    mid-batch still handles the rest (``_drain``); the telemetry is that of one whole pass."""
+    frames = [(0, m) for tick in rig_ticks(1.0) for m in tick]
+    assert len(frames) > 200
+    url = BrokerURL(host=LOOPBACK, port=1)  # never connected: handling needs no broker
+
+    def bridge(slice_frames: int) -> Bridge:
+        bus = can.Bus(interface="virtual", channel="coalesced-slices")
+        return Bridge([RobotEndpoint(ROBOT, bus, GEOMETRY)],
+                      config=BridgeConfig(broker=url, slice_frames=slice_frames))
+
+    async def sliced() -> tuple[list[int], Bridge]:
+        b = bridge(64)
+        b.offer(frames)
+        seen = []
+        consume = asyncio.create_task(b._consume())
+        for _ in range(3):
+            await asyncio.sleep(0)
+            seen.append(b.frames_in)
+        consume.cancel()
+        b._drain()
+        return seen, b
+
+    async def whole() -> Bridge:
+        b = bridge(10**6)
+        b.offer(frames)
+        consume = asyncio.create_task(b._consume())
+        await asyncio.sleep(0)
+        consume.cancel()
+        return b
+
+    seen, in_slices = asyncio.run(sliced())
+    at_once = asyncio.run(whole())
+    assert seen == [64, 128, 192]  # one slice per loop turn
+    assert in_slices.frames_in == at_once.frames_in == len(frames)
+    telemetry = [b.robots[0].telemetry for b in (in_slices, at_once)]
+    assert telemetry[0].frames == telemetry[1].frames
+    assert telemetry[0].tracker.vs_reference == telemetry[1].tracker.vs_reference
+    assert telemetry[0].tracker.vs_reference.samples > 0
+    for b in (in_slices, at_once):
+        b.robots[0].endpoint.bus.shutdown()
