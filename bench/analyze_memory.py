@@ -24,7 +24,8 @@ asserts nothing. Run: ``.venv/bin/python bench/analyze_memory.py [--gb 1] [--no-
 format (the first MB of one long drive: a single life, the whole path's worst case; .log, then
 the same frames as .asc and .blf through python-can), a line fitted per
 format (base + MB/MB of log) and the size where it reaches the 300 MB target divided by the
-margin: what ``stream_analysis.WHOLE_RSS_MB`` holds and where ``--stream auto`` starts to stream.
+margin: what ``stream_analysis.WHOLE_RSS_MB`` holds and where ``--stream auto`` starts to stream;
+and ``--stream auto`` itself on each log (whichever path it chose: its max RSS).
 """
 
 from __future__ import annotations
@@ -187,6 +188,9 @@ def threshold(sizes_mb: list[float], drive_s: float, directory: Path) -> None:
                 print(f"whole {suffix:<5} {size_mb:8.1f} MB {frames:9d} frames {wall:7.1f} s "
                       f"wall {cpu:7.1f} s CPU {rss:7.0f} MB max RSS  "
                       f"{rss / size_mb:5.2f} MB/MB  exit {code}", flush=True)
+                wall, cpu, rss, code = whole_process([*argv[:-1], "auto"])
+                print(f"auto  {suffix:<5} {size_mb:8.1f} MB {frames:9d} frames {wall:7.1f} s "
+                      f"wall {cpu:7.1f} s CPU {rss:7.0f} MB max RSS  exit {code}", flush=True)
                 if path != log:
                     path.unlink()
             log.unlink()
