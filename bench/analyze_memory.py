@@ -83,22 +83,30 @@ def concatenate(drive: Path, target_bytes: int, out: Path) -> tuple[int, int]:
     return copies, frames
 
 
+TIME = Path("/usr/bin/time")  # GNU time: the child's own max RSS (%M), see whole_process
+
+
 def whole_process(
     argv: list[str], stdin: Path | None = None, *, show: bool = False
 ) -> tuple[float, float, float, int]:
     """Wall s, CPU s (user + system), max RSS MB and exit code of ``argv`` (stdout dropped
-    unless ``show``)."""
+    unless ``show``). The max RSS is GNU time's %M of ``argv`` when /usr/bin/time is there:
+    ``os.wait4``'s ru_maxrss of a child that Python spawned (vfork) counts this process's own
+    RSS at the spawn, which is large here while a log is built."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     stdin_file = stdin.open("rb") if stdin is not None else subprocess.DEVNULL
-    start = time.perf_counter()
-    child = subprocess.Popen(argv, stdin=stdin_file, stdout=None if show else subprocess.DEVNULL,
-                             env=env)
-    _, status, usage = os.wait4(child.pid, 0)
-    wall = time.perf_counter() - start
+    with tempfile.NamedTemporaryFile("r", suffix=".rss") as rss_file:
+        timed = ["/usr/bin/time", "-f", "%M", "-o", rss_file.name, *argv] if TIME.exists() else argv
+        start = time.perf_counter()
+        child = subprocess.Popen(timed, stdin=stdin_file,
+                                 stdout=None if show else subprocess.DEVNULL, env=env)
+        _, status, usage = os.wait4(child.pid, 0)
+        wall = time.perf_counter() - start
+        text = Path(rss_file.name).read_text().split()
+        rss_mb = int(text[-1]) / 1024 if TIME.exists() and text else usage.ru_maxrss / 1024
     if stdin is not None:
         stdin_file.close()  # type: ignore[union-attr]
-    return (wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024,
-            os.waitstatus_to_exitcode(status))
+    return (wall, usage.ru_utime + usage.ru_stime, rss_mb, os.waitstatus_to_exitcode(status))
 
 
 def stream_stages(log: Path) -> None:
