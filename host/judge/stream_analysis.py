@@ -75,7 +75,7 @@ RSS_TARGET_MB = 300.0  # the max RSS ``odocan analyze`` of one log aims to stay 
 # The whole-log path's max RSS (MB) against its log's size (MB), per format: base + per_mb * size,
 # measured by ``bench/analyze_memory.py --threshold`` (docs/benchmarks.md); a log bigger than
 # the size where that reaches RSS_TARGET_MB / RSS_MARGIN streams.
-WHOLE_RSS_MB = {".log": (55.0, 4.680), ".asc": (54.3, 3.096), ".blf": (49.3, 35.326)}
+WHOLE_RSS_MB = {".log": (65.4, 2.738), ".asc": (54.6, 1.888), ".blf": (52.2, 21.480)}
 RSS_MARGIN = 1.5
 
 
