@@ -7,15 +7,25 @@ the analysis sees a reboot at each seam (``host.judge.reboots``) and judges ever
 power-up pose -- the verdict must stay PASS. Then runs, as whole processes measured like
 ``/usr/bin/time -v`` (``os.wait4``: wall, user + system CPU, max RSS):
 
-* ``python -m odocan analyze LOG --robot pmir``;
+* ``python -m odocan analyze LOG --robot pmir --stream always`` (streamed:
+  ``host.judge.stream_analysis``), and ``--stream never`` (the whole log) with ``--whole``;
 * ``cantools decode --single-line dbc/odocan.dbc < LOG`` (skipped with ``--no-cantools``);
-* the stages that stream today (``host.judge.stream``: ``iter_log`` -> E2E -> encoder sequence
-  -> on-board samples and the reference's steps and increments, chunk by chunk; the verdict's
-  later stages do not stream yet), in a child process of their own.
+* the first pass's stages alone, chunk by chunk over the whole log as one life
+  (``host.judge.stream``: ``iter_log`` -> E2E -> encoder sequence -> on-board samples and the
+  reference's steps and increments; ``stream_stalls``, ``stream_truth``, ``stream_twist``,
+  ``stream_facts``, ``stream_lives``), in a child process of their own; it prints what it
+  found.
 
 The log is written to ``--dir`` (default: the system's temporary directory; check ``df -h``
 first: it needs ``--gb`` GB free) and deleted afterwards (``--keep`` keeps it). Prints figures;
 asserts nothing. Run: ``.venv/bin/python bench/analyze_memory.py [--gb 1] [--no-cantools]``.
+
+``--threshold MB MB ...``: instead, the whole-log path's max RSS on logs of those sizes in each
+format (the first MB of one long drive: a single life, the whole path's worst case; .log, then
+the same frames as .asc and .blf through python-can), a line fitted per
+format (base + MB/MB of log) and the size where it reaches the 300 MB target divided by the
+margin: what ``stream_analysis.WHOLE_RSS_MB`` holds and where ``--stream auto`` starts to stream;
+and ``--stream auto`` itself on each log (whichever path it chose: its max RSS).
 """
 
 from __future__ import annotations
@@ -28,6 +38,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -72,22 +83,35 @@ def concatenate(drive: Path, target_bytes: int, out: Path) -> tuple[int, int]:
     return copies, frames
 
 
-def whole_process(argv: list[str], stdin: Path | None = None) -> tuple[float, float, float, int]:
-    """Wall s, CPU s (user + system), max RSS MB and exit code of ``argv`` (stdout dropped)."""
+TIME = Path("/usr/bin/time")  # GNU time: the child's own max RSS (%M), see whole_process
+
+
+def whole_process(
+    argv: list[str], stdin: Path | None = None, *, show: bool = False
+) -> tuple[float, float, float, int]:
+    """Wall s, CPU s (user + system), max RSS MB and exit code of ``argv`` (stdout dropped
+    unless ``show``). The max RSS is GNU time's %M of ``argv`` when /usr/bin/time is there:
+    ``os.wait4``'s ru_maxrss of a child that Python spawned (vfork) counts this process's own
+    RSS at the spawn, which is large here while a log is built."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     stdin_file = stdin.open("rb") if stdin is not None else subprocess.DEVNULL
-    start = time.perf_counter()
-    child = subprocess.Popen(argv, stdin=stdin_file, stdout=subprocess.DEVNULL, env=env)
-    _, status, usage = os.wait4(child.pid, 0)
-    wall = time.perf_counter() - start
+    with tempfile.NamedTemporaryFile("r", suffix=".rss") as rss_file:
+        timed = ["/usr/bin/time", "-f", "%M", "-o", rss_file.name, *argv] if TIME.exists() else argv
+        start = time.perf_counter()
+        child = subprocess.Popen(timed, stdin=stdin_file,
+                                 stdout=None if show else subprocess.DEVNULL, env=env)
+        _, status, usage = os.wait4(child.pid, 0)
+        wall = time.perf_counter() - start
+        text = Path(rss_file.name).read_text().split()
+        rss_mb = int(text[-1]) / 1024 if TIME.exists() and text else usage.ru_maxrss / 1024
     if stdin is not None:
         stdin_file.close()  # type: ignore[union-attr]
-    return (wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024,
-            os.waitstatus_to_exitcode(status))
+    return (wall, usage.ru_utime + usage.ru_stime, rss_mb, os.waitstatus_to_exitcode(status))
 
 
 def stream_stages(log: Path) -> None:
-    """The streaming stages over ``log`` (run in the child process): prints the samples."""
+    """The streaming stages over ``log`` (run in the child process, the whole log as one
+    life): prints what they found."""
     from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
     from odocan.host.io.logs import iter_log
     from odocan.host.judge.reference import Geometry
@@ -97,6 +121,11 @@ def stream_stages(log: Path) -> None:
         StreamPoses,
         StreamReference,
     )
+    from odocan.host.judge.stream_facts import StreamFacts
+    from odocan.host.judge.stream_lives import StreamLives
+    from odocan.host.judge.stream_stalls import StreamStalls
+    from odocan.host.judge.stream_truth import StreamTruth
+    from odocan.host.judge.stream_twist import StreamTwist
     from odocan.host.protocol.decode import BulkDecoder
     from odocan.sim.contract import database
 
@@ -105,21 +134,107 @@ def stream_stages(log: Path) -> None:
         BulkDecoder(db))
     reference = StreamReference(Geometry.of(profile), "exact", min(profile.counter_bits, 24),
                                 MAX_WHEEL_SPEED_MM_S)
-    samples = 0
+    truth, twist = StreamTruth(BulkDecoder(db)), StreamTwist(BulkDecoder(db), profile)
+    facts, lives = StreamFacts(BulkDecoder(db)), StreamLives(BulkDecoder(db))
+    stalls: StreamStalls | None = None
+    samples = truths = 0
     for chunk in iter_log(log):
         accepted = e2e.feed(chunk)
         enc = numbering.feed(chunk, accepted)
+        stalls = stalls or StreamStalls(enc.cycle_s)
         reference.feed(enc)
-        samples += len(poses.feed(chunk, accepted, enc)[0]["enc"])
-    samples += len(poses.finish()[0]["enc"])
-    print(f"{samples} on-board samples, {poses.unmatched} unmatched, "
-          f"{len(reference.reprimed)} counter restarts")
+        onboard, sent = poses.feed(chunk, accepted, enc)
+        watermark = min(float(chunk.timestamp_s[-1]), poses.open_sent_s())
+        samples += len(stalls.feed(onboard, sent, enc.timestamp_s, watermark)["enc"])
+        truths += len(truth.feed(chunk, accepted, enc)[0]["enc"])
+        twist.feed(chunk, accepted, enc)
+        facts.feed(chunk, accepted)
+        lives.feed(chunk, accepted)
+    assert stalls is not None
+    onboard, sent = poses.finish()
+    samples += len(stalls.feed(onboard, sent, numbering_empty(), float("inf"))["enc"])
+    samples += len(stalls.finish()["enc"])
+    truths += len(truth.finish()[0]["enc"])
+    print(f"{samples} on-board samples after {len(stalls.breaks)} stalls (exact: "
+          f"{stalls.exact}), {poses.unmatched} unmatched, {len(reference.reprimed)} counter "
+          f"restarts, {truths} truth samples, twist {twist.finish()}, "
+          f"{len(lives.finish())} lives, {facts.covered_s():.1f} s covered")
+
+
+def numbering_empty() -> Any:
+    """No encoder frame (the stalls' last feed)."""
+    import numpy as np
+    return np.zeros(0)
 
 
 def report(label: str, frames: int, figures: tuple[float, float, float, int]) -> None:
     wall, cpu, rss_mb, code = figures
     print(f"{label:<26} {wall:8.1f} s wall {cpu:8.1f} s CPU {rss_mb:8.0f} MB max RSS "
           f"{frames / wall / 1e6:6.2f} M frames/s  exit {code}", flush=True)
+
+
+def threshold(sizes_mb: list[float], drive_s: float, directory: Path) -> None:
+    """The whole-log path's max RSS per format and size, the fitted lines and the sizes
+    where ``--stream auto`` streams (module docstring)."""
+    from odocan.host.judge.stream_analysis import RSS_MARGIN, RSS_TARGET_MB
+
+    with tempfile.TemporaryDirectory(dir=directory) as tmp:
+        # one life (the whole path's worst case: its arrays span the life), long enough
+        drive_s = max(drive_s, max(sizes_mb) * 1e6 / CANDUMP_BYTES_PER_S * 1.05)
+        drive = make_drive(drive_s, Path(tmp) / "drive.log")
+        rows: dict[str, list[tuple[float, float]]] = {}
+        for mb in sizes_mb:
+            log = Path(tmp) / f"t{mb:g}.log"
+            frames = head(drive, int(mb * 1e6), log)
+            for suffix in (".log", ".asc", ".blf"):
+                path = log if suffix == ".log" else convert(log, suffix)
+                size_mb = path.stat().st_size / 1e6
+                argv = [sys.executable, "-m", "odocan", "analyze", str(path), "--robot", ROBOT,
+                        "--stream", "never"]
+                wall, cpu, rss, code = whole_process(argv)
+                rows.setdefault(suffix, []).append((size_mb, rss))
+                print(f"whole {suffix:<5} {size_mb:8.1f} MB {frames:9d} frames {wall:7.1f} s "
+                      f"wall {cpu:7.1f} s CPU {rss:7.0f} MB max RSS  "
+                      f"{rss / size_mb:5.2f} MB/MB  exit {code}", flush=True)
+                wall, cpu, rss, code = whole_process([*argv[:-1], "auto"])
+                print(f"auto  {suffix:<5} {size_mb:8.1f} MB {frames:9d} frames {wall:7.1f} s "
+                      f"wall {cpu:7.1f} s CPU {rss:7.0f} MB max RSS  exit {code}", flush=True)
+                if path != log:
+                    path.unlink()
+            log.unlink()
+    for suffix, points in rows.items():
+        (s0, r0), (s1, r1) = points[0], points[-1]
+        per_mb = (r1 - r0) / (s1 - s0)
+        base = r0 - per_mb * s0
+        above = (RSS_TARGET_MB / RSS_MARGIN - base) / per_mb
+        print(f"{suffix:<5} max RSS = {base:.1f} MB + {per_mb:.3f} x MB of log; streams above "
+              f"{above:.0f} MB (whole path there: {RSS_TARGET_MB / RSS_MARGIN:.0f} MB, target "
+              f"{RSS_TARGET_MB:.0f} MB / margin {RSS_MARGIN:g})")
+
+
+CANDUMP_BYTES_PER_S = 15_400  # the rig's candump log: 360 frames/s of about 43 bytes
+
+
+def head(drive: Path, target_bytes: int, out: Path) -> int:
+    """The first lines of ``drive`` up to ``target_bytes`` into ``out``; how many."""
+    lines, size = [], 0
+    with drive.open("rb") as f:
+        for line in f:
+            if size + len(line) > target_bytes:
+                break
+            lines.append(line)
+            size += len(line)
+    out.write_bytes(b"".join(lines))
+    return len(lines)
+
+
+def convert(log: Path, suffix: str) -> Path:
+    """``log``'s frames in another format (python-can's reader and writer)."""
+    out = log.with_suffix(suffix)
+    with can.Logger(str(out)) as writer:
+        for message in can.LogReader(str(log)):
+            writer.on_message_received(message)
+    return out
 
 
 def main() -> None:
@@ -129,10 +244,17 @@ def main() -> None:
     parser.add_argument("--dir", type=Path, default=Path(tempfile.gettempdir()))
     parser.add_argument("--no-cantools", action="store_true")
     parser.add_argument("--keep", action="store_true", help="keep the log")
+    parser.add_argument("--whole", action="store_true",
+                        help="also the whole-log path (--stream never) on the big log")
+    parser.add_argument("--threshold", type=float, nargs="+", metavar="MB",
+                        help="measure the whole path's max RSS at these log sizes instead")
     parser.add_argument("--stream-child", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.stream_child is not None:
         stream_stages(args.stream_child)
+        return
+    if args.threshold:
+        threshold(args.threshold, 0.0, args.dir)
         return
     log = args.dir / f"odocan_bench_{args.gb:g}gb.log"
     with tempfile.TemporaryDirectory() as tmp:
@@ -143,9 +265,11 @@ def main() -> None:
           f"{args.drive_s:g} s (made in {time.perf_counter() - start:.0f} s)", flush=True)
     try:
         odocan = [sys.executable, "-m", "odocan", "analyze", str(log), "--robot", ROBOT]
-        report("odocan analyze LOG", frames, whole_process(odocan))
+        report("odocan analyze (streamed)", frames, whole_process([*odocan, "--stream", "always"]))
+        if args.whole:
+            report("odocan analyze (whole)", frames, whole_process([*odocan, "--stream", "never"]))
         stages = [sys.executable, __file__, "--stream-child", str(log)]
-        report("streamed stages (E2E..ref)", frames, whole_process(stages))
+        report("streamed stages", frames, whole_process(stages, show=True))
         if not args.no_cantools:
             cantools = [str(Path(sys.executable).parent / "cantools"), "decode",
                         "--single-line", str(DBC_PATH)]

@@ -34,13 +34,15 @@ class DaskUnavailableError(OdocanError):
 class Job:
     """What every log is analysed with: robot profile name, integrator (None: the one the log's
     ODOM_STATUS reports), position tolerance in metres, heading tolerance in radians, and the
-    DBC path (None: odocan's own)."""
+    DBC path (None: odocan's own), and whether to stream each log (``stream_analysis.streams``:
+    auto, always, never)."""
 
     robot: str
     integrator: str | None
     tolerance_position_m: float
     tolerance_heading_rad: float
     dbc: str | None = None
+    stream: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -90,21 +92,35 @@ def analyze_one(path: str, job: Job) -> LogResult:
     from odocan.host.cli.subparsers.analyze import load_dbc, log_inputs
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import Tolerance, analyze
+    from odocan.host.judge.samples import AnalysisError
+    from odocan.host.judge.stream_analysis import NotStreamable, analyze_file_counted, streams
     from odocan.sim import robot
 
     log = Path(path)
     try:
         profile = robot.load(job.robot)
         tolerance = Tolerance(job.tolerance_position_m, job.tolerance_heading_rad)
-        frames = read_log(log, warn=lambda message: None)
-        if job.dbc is not None:
-            db = load_dbc(Path(job.dbc))
-            analysis = analyze(frames, profile, job.integrator, tolerance=tolerance, db=db)
-        else:
-            require_frames(frames, path)
-            with explained(lambda: frames, path):
-                analysis = analyze(frames, profile, job.integrator, tolerance=tolerance)
-        report = analysis.report
+        db = load_dbc(Path(job.dbc)) if job.dbc is not None else None
+        streamed: tuple[dict[str, Any], int] | None = None
+        if streams(log, job.stream):  # in bounded memory (host.judge.stream_analysis)
+            try:
+                streamed = analyze_file_counted(log, profile, job.integrator,
+                                                tolerance=tolerance, db=db,
+                                                warn=lambda message: None)
+            except (AnalysisError, NotStreamable):  # refused: the whole log's path says why
+                streamed = None
+        if streamed is not None:
+            report, n_frames = streamed
+        else:  # the whole log: the same report
+            frames = read_log(log, warn=lambda message: None)
+            n_frames = len(frames)
+            if db is not None:
+                analysis = analyze(frames, profile, job.integrator, tolerance=tolerance, db=db)
+            else:
+                require_frames(frames, path)
+                with explained(lambda: frames, path):
+                    analysis = analyze(frames, profile, job.integrator, tolerance=tolerance)
+            report = analysis.report
         report["inputs"] = log_inputs(
             log, profile, report["integrator"], None if job.dbc is None else Path(job.dbc)
         )
@@ -112,7 +128,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
         return LogResult(path, error=_one_line(exc))
     except Exception as exc:  # a log no check foresaw: this log's error, the batch goes on
         return LogResult(path, error=f"cannot analyse: {type(exc).__name__}: {_one_line(exc)}")
-    return LogResult(path, report=_plain(report), frames=len(frames))
+    return LogResult(path, report=_plain(report), frames=n_frames)
 
 
 def _plain(value: Any) -> Any:

@@ -375,13 +375,29 @@ def drop_errors(enc: Encoders, robot: RobotProfile, integrator: str) -> FloatArr
 def drop_errors_of(enc: Encoders, g: Geometry, bits: int, integrator: str) -> FloatArray:
     """``drop_errors`` for a geometry and wire counter width (``bits``): the live judge's form."""
     dl, dr = wrap_delta(np.diff(enc.left), bits), wrap_delta(np.diff(enc.right), bits)
-    heading = np.concatenate(([0.0], np.cumsum(
-        (g.m_per_count_right / g.wheelbase_m) * dr - (g.m_per_count_left / g.wheelbase_m) * dl)))
+    heading = np.concatenate(([0.0], np.cumsum(heading_steps(dl, dr, g))))
+    error = merge_errors(dl, dr, heading, g, integrator)
+    return np.concatenate(([0.0], error, [0.0])) if len(enc.seq) > 2 else np.zeros(len(enc.seq))
+
+
+def heading_steps(dl: IntArray, dr: IntArray, g: Geometry) -> FloatArray:
+    """The heading change (rad) of each step of ``dl``, ``dr`` counts (``drop_errors``)."""
+    steps: FloatArray = (g.m_per_count_right / g.wheelbase_m) * dr - (
+        g.m_per_count_left / g.wheelbase_m) * dl
+    return steps
+
+
+def merge_errors(
+    dl: IntArray, dr: IntArray, heading: FloatArray, g: Geometry, integrator: str
+) -> FloatArray:
+    """``drop_errors`` of the frames between consecutive steps: step k (``dl[k]``, ``dr[k]``)
+    goes from ``heading[k]`` to ``heading[k + 1]``; element k is the error of taking steps k
+    and k + 1 as one (elementwise: any window of steps gives the same values)."""
     one_x, one_y = _step_vector(dl, dr, heading[:-1], heading[1:], g, integrator)
     two_x, two_y = _step_vector(dl[:-1] + dl[1:], dr[:-1] + dr[1:], heading[:-2], heading[2:],
                                 g, integrator)
-    error = np.hypot(one_x[:-1] + one_x[1:] - two_x, one_y[:-1] + one_y[1:] - two_y)
-    return np.concatenate(([0.0], error, [0.0])) if len(enc.seq) > 2 else np.zeros(len(enc.seq))
+    error: FloatArray = np.hypot(one_x[:-1] + one_x[1:] - two_x, one_y[:-1] + one_y[1:] - two_y)
+    return error
 
 
 def _step_vector(

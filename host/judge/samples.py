@@ -181,15 +181,9 @@ def match_encoder(
     carry a repeated ENC_COUNTER over consecutive sends (``_held``). ``causal`` False: the named
     frame may come later in the log (SIM_TRUTH: the simulator names its own sample, whenever the
     encoder frame reaches the bus)."""
-    latest = np.searchsorted(enc.index, index) - 1
     result = np.full(len(index), -1, dtype=np.int64)
-    has = latest >= 0
-    if enc.cycle_s is not None:
-        age_s = timestamp_s - enc.timestamp_s[np.maximum(latest, 0)]
-        has &= age_s < 8 * enc.cycle_s
-    latest = latest[has]
-    offset = ((enc_counter[has] - enc.counter[latest] + 8) & 0xF) - 8
-    target = enc.seq[latest] + offset
+    has, target = named_targets(enc, index, enc_counter, timestamp_s)
+    target = target[has]
     found = np.minimum(np.searchsorted(enc.seq, target), len(enc.seq) - 1)
     before = (enc.index[found] < index[has]) | (not causal)  # not integrated before it came
     result[np.flatnonzero(has)] = np.where((enc.seq[found] == target) & before, found, -1)
@@ -197,6 +191,21 @@ def match_encoder(
         result = _held(result, enc_counter, own_counter, timestamp_s, enc.cycle_s)
         result = _queued(result, enc, index, enc_counter, own_counter, timestamp_s)
     return result
+
+
+def named_targets(
+    enc: Encoders, index: IntArray, enc_counter: IntArray, timestamp_s: FloatArray
+) -> tuple[npt.NDArray[np.bool_], IntArray]:
+    """``match_encoder``'s first step: which frames have a latest accepted encoder frame before
+    them less than 8 cycles older, and the sequence number each names from it (``enc`` not
+    empty)."""
+    latest = np.searchsorted(enc.index, index) - 1
+    has = latest >= 0
+    last = np.maximum(latest, 0)
+    if enc.cycle_s is not None:
+        has &= timestamp_s - enc.timestamp_s[last] < 8 * enc.cycle_s
+    target: IntArray = enc.seq[last] + (((enc_counter - enc.counter[last] + 8) & 0xF) - 8)
+    return has, target
 
 
 def queued_frames(timestamp_s: FloatArray, cycle_s: float) -> npt.NDArray[np.bool_]:
@@ -335,15 +344,10 @@ def after_stalls(
     order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
     sent = sent_s[order]
     # Silent while the encoder frames went on (a log that lacks both is a recorder's gap).
-    # Half a cycle short of SILENCE_CYCLES: samples come in whole send periods, and time stamps
-    # summed in float must not decide (79.999... ms is 80 ms).
     heard = np.searchsorted(enc.timestamp_s, sent[1:]) - np.searchsorted(enc.timestamp_s, sent[:-1])
     # A sample let out in a burst (queued_frames) was not silent: the bus held it back.
     queued = queued_frames(sent, enc.cycle_s)
-    after = np.flatnonzero(
-        (np.diff(sent) >= (SILENCE_CYCLES - 0.5) * enc.cycle_s) & (heard >= SILENCE_CYCLES - 1)
-        & ~queued[1:]
-    ) + 1
+    after = np.flatnonzero(silent(sent, heard, enc.cycle_s) & ~queued[1:]) + 1
     keep = np.ones(len(sent_s), dtype=bool)
     keep[order[after]] = False
     kept = Poses(onboard.enc[keep], onboard.x_m[keep], onboard.y_m[keep],
@@ -361,11 +365,31 @@ def _frozen(onboard: Poses, enc: Encoders, queued: npt.NDArray[np.bool_]) -> Int
     """Encoder frames after a sample whose next sample names a frame ``SILENCE_CYCLES`` or more
     periods later while the log holds the frames between: the firmware held its pose on one frame
     (it kept naming it) and then took the frames since as one step, as after a stall."""
-    seq = enc.seq[onboard.enc]
-    held = (np.diff(seq) >= SILENCE_CYCLES) & (np.diff(onboard.enc) >= SILENCE_CYCLES)
-    held &= ~queued[1:]  # a queued sample was made long before it was sent: not evidence
-    frozen: IntArray = onboard.enc[:-1][held] + 1
+    return frozen_breaks(onboard.enc, enc.seq[onboard.enc], queued)
+
+
+def frozen_breaks(sample_enc: IntArray, sample_seq: IntArray,
+                  queued: npt.NDArray[np.bool_] | None = None) -> IntArray:
+    """``_frozen`` of consecutive samples (their encoder frames in the log and sequence
+    numbers, in encoder order; ``queued``: which came in a burst, None: none did)."""
+    held = (np.diff(sample_seq) >= SILENCE_CYCLES) & (np.diff(sample_enc) >= SILENCE_CYCLES)
+    if queued is not None:
+        held &= ~queued[1:]  # a queued sample was made long before it was sent: not evidence
+    frozen: IntArray = sample_enc[:-1][held] + 1
     return frozen
+
+
+def silent(
+    sent_s: FloatArray, heard: IntArray, cycle_s: float
+) -> npt.NDArray[np.bool_]:
+    """``after_stalls``' silence between consecutive samples (send times ``sent_s`` in send
+    order, ``heard``: encoder frames logged between each two): at least half a cycle short of
+    ``SILENCE_CYCLES`` apart (samples come in whole send periods, and time stamps summed in
+    float must not decide: 79.999... ms is 80 ms) while the encoder frames went on."""
+    quiet: npt.NDArray[np.bool_] = (
+        (np.diff(sent_s) >= (SILENCE_CYCLES - 0.5) * cycle_s) & (heard >= SILENCE_CYCLES - 1)
+    )
+    return quiet
 
 
 def truth_samples(

@@ -15,8 +15,9 @@ with their state carried across chunk boundaries, so that the result is the whol
 * ``StreamPoses``: the on-board samples (``host.judge.samples.onboard_samples``: ODOM_POSE_X and
   _Y naming one encoder frame, the first of each), carried by the last 16 encoder frames, each
   kind's last pose frame (a repeat of its ENC_COUNTER names what it named), and the halves not
-  yet paired; a pose names only a frame before it, so it resolves in its own chunk, and a
-  sample is given out once no later frame can name its encoder frame.
+  yet paired; a pose names only a frame before it, so it resolves in its own chunk (SIM_TRUTH,
+  not causal: a part naming a frame the log has not reached yet waits), and a sample is given
+  out once no later frame can name its encoder frame.
 
 * ``StreamReference``: the steps as the firmware takes them (``reference_path.firmware_steps``:
   plausibility refusals, counter restarts) and their integration from pose 0 (``reference.
@@ -26,24 +27,27 @@ with their state carried across chunk boundaries, so that the result is the whol
 
 Positions (``index``) are positions in the whole log (frames before the chunk counted).
 
-Not done yet (issue #14.1): the later stages (alignment, reference, comparison) still take the
-whole log, so ``odocan analyze`` still holds every frame (1 GB candump log: 2.5 GB max RSS,
-``bench/analyze_memory.py``). The plan for them, so that a one-chunk run and an n-chunk run give
-the same report bit for bit:
+Beside it, each exact at any chunk size against the whole-log function (tests/test_stream*.py,
+on a log cut at every frame and on a faulted rig run with a stall and a reboot):
+``stream_lives.StreamLives`` (``reboots.split_lives``), ``stream_stalls.StreamStalls``
+(``samples.after_stalls``; with an ``exact`` flag for logs whose times go back),
+``stream_truth.StreamTruth`` (``samples.truth_samples``), ``stream_twist.StreamTwist``
+(``compare.check_twist``), ``stream_losses.StreamLosses`` and ``SpanDrops``
+(``compare.firmware_losses`` and ``loss_allowance``), ``stream_facts.StreamFacts`` (frame
+counts, covered seconds, the integrator, the power-up rule's inputs), ``stream_fit.SegmentSums``
+and ``BlockDot`` (the rotation fit's segment means and its dot products,
+``reference_path.block_dot``).
 
-* carried state: the last sample's send time (stalls), SIM_TRUTH's parts as ``StreamPoses``
-  carries the pose halves, the truth samples waiting for the next on-board one
-  (``compare.onboard_at``), the last two twist frames and their step-speed window, the
-  reference's increments back to the start of the segment being placed;
-* the whole-log quantities of the start fit: max/min of the heading overlap and of each
-  segment's position overlap are exact in any order; the rotation fit's sums (and the segment
-  means) are not, so they are to be summed in fixed blocks of samples aligned on the sample
-  number (a block's partial sum is complete only when its last sample arrives; the blocks are
-  then added in order): the same additions whatever the chunking;
-* passes over the file (``iter_log`` again): 1. samples, reference increments, overlaps -> the
-  start heading of the overlap; 2. the rotation fit and the segment offsets; 3. errors, truth,
-  twist, report; plot series decimated or written to disk.
-"""
+Chained (``stream_analysis.analyze_file``, what ``odocan analyze`` runs on one log): a pass
+over the whole log for the lives (``StreamLives``, with the whole log's E2E) and the facts, then
+per life, as a range of frames with E2E afresh: 1. E2E, encoders, samples after stalls, truth,
+twist, facts -> the start frame e0 and the stalls' breaks; 2.-4. the start pose
+(``stream_place.start_pose``: the heading overlap, the rotation fit's ``SegmentSums`` and
+``BlockDot``), fed by ``stream_life.life_chunks`` (the samples with the reference's increments
+from e0 and their segments); 5. the segment offsets; 6. the errors, the truth comparison
+(``stream_compare.TruthCompare``), the distance and the events' times; ``reboots.merge``
+takes the lives' reports without series. The plot and export series are not streamed (those
+options read the whole log)."""
 
 from __future__ import annotations
 
@@ -60,9 +64,11 @@ from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
-    SILENCE_CYCLES,
     Encoders,
+    _held,
     contract_cycle_s,
+    match_encoder,
+    named_targets,
 )
 from odocan.host.protocol.decode import BulkDecoder, frame_keys
 from odocan.host.protocol.e2e import check_frames, e2e_messages
@@ -95,8 +101,15 @@ class StreamE2E:
             tail_counts, _ = check_frames(self._tail, self.db)
             _add(counts, tail_counts, -1)
         _add(self.counts, counts)
+        self.counts = self._ordered(self.counts)
         self._tail = both.select(self._tails(both, accepted))
         return accepted[n_tail:]
+
+    def _ordered(self, counts: Counts) -> Counts:
+        """The sections in ``check_frames``' order: messages by frame key, ``unknown`` last."""
+        rank = {config.name: key for key, config in e2e_messages(self.db).items()}
+        names = sorted((n for n in counts if n in rank), key=rank.__getitem__)
+        return {n: counts[n] for n in names + [n for n in counts if n not in rank]}
 
     def _tails(self, frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> npt.NDArray[np.intp]:
         """Positions of each protected message's frames (of its DLC) from its last accepted one
@@ -149,6 +162,8 @@ class StreamEncoders:
         cycle_s: float | None,
     ) -> npt.NDArray[np.int64]:
         """Sequence numbers, continuing from the last accepted frame of the chunks before."""
+        if len(counter) == 0:  # (numbering from 0 would give the empty chunk one number)
+            return np.zeros(0, dtype=np.int64)
         if self._last is not None:
             counter = np.concatenate(([self._last[0]], counter))
             stamps = np.concatenate(([self._last[1]], stamps))
@@ -163,7 +178,7 @@ class StreamEncoders:
 
 @dataclass
 class _Halves:
-    """Pose frames of one kind (ODOM_POSE_X or _Y) of a chunk: global frame position,
+    """Pose frames of one kind (ODOM_POSE_X or _Y) not yet resolved: global frame position,
     ENC_COUNTER, time, and the signal columns."""
 
     index: npt.NDArray[np.int64]
@@ -177,8 +192,28 @@ class _Halves:
         return cls(rows["index"] + offset, rows["ENC_COUNTER"].astype(np.int64),
                    rows["timestamp_s"], values)
 
+    def join(self, other: _Halves) -> _Halves:
+        return _Halves(
+            np.concatenate((self.index, other.index)),
+            np.concatenate((self.enc_counter, other.enc_counter)),
+            np.concatenate((self.timestamp_s, other.timestamp_s)),
+            {k: np.concatenate((v, other.values[k])) for k, v in self.values.items()},
+        )
+
+    def take(self, keep: npt.NDArray[np.bool_]) -> _Halves:
+        return _Halves(self.index[keep], self.enc_counter[keep], self.timestamp_s[keep],
+                       {k: v[keep] for k, v in self.values.items()})
+
 
 RECENT_ENCODERS = 16  # encoder frames kept from the chunks before: ENC_COUNTER names -8..+7
+
+
+def known_encoders(known: dict[str, np.ndarray], cycle_s: float | None) -> Encoders:
+    """The carried and the chunk's encoder frames (``known``: g, index, counter, seq, t) as
+    ``Encoders`` for ``samples.match_encoder`` (positions in ``known``; no counts)."""
+    none = np.zeros(len(known["index"]), dtype=np.int64)
+    return Encoders(index=known["index"], counter=known["counter"], seq=known["seq"],
+                    left=none, right=none, timestamp_s=known["t"], cycle_s=cycle_s)
 
 
 @dataclass
@@ -193,39 +228,61 @@ class StreamPoses:
     of each kind). The first frame naming an encoder frame wins. A sample is given out once no
     later frame can name its encoder frame (its sequence number more than 8 below the latest
     encoder frame's), in encoder order; ``enc`` counts the accepted encoder frames of the
-    whole log."""
+    whole log.
+
+    ``causal`` False (``stream_truth.StreamTruth``: the simulator names its own sample, whenever
+    its encoder frame reaches the bus): a frame naming one the log has not reached yet waits
+    for the next chunk, and so do the frames of its kind after it."""
 
     decoder: BulkDecoder
     unmatched: int = 0  # pose frames naming no accepted encoder frame of the log
     _offset: int = 0
     _enc_count: int = 0
     _recent: dict[str, np.ndarray] = field(default_factory=dict)  # g, index, counter, seq, t
+    _pending: dict[str, _Halves] = field(default_factory=dict)  # (not causal) frames waiting
     _first: dict[str, dict[int, tuple[int, dict[str, float], float]]] = field(
         default_factory=lambda: {"ODOM_POSE_X": {}, "ODOM_POSE_Y": {}})
     # per kind, its last pose frame: ENC_COUNTER, COUNTER, time, encoder frame named (g), seq
     _last_row: dict[str, tuple[int, int, float, int, int]] = field(default_factory=dict)
     _given_below: float = -np.inf  # samples of sequence numbers below this are given out
+    causal: bool = True  # a frame names only an encoder frame before it (held ones carried)
 
     def feed(
         self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_], enc: Encoders
     ) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
         """The samples that are final after this chunk (``enc`` its encoder frames from
-        ``StreamEncoders``): columns enc, x_m, y_m, heading_rad, heading_raw; and sent_s."""
+        ``StreamEncoders``): columns enc, x_m, y_m, heading_rad, heading_raw, seq (the encoder
+        frame's sequence number); and sent_s."""
         known = self._known(enc)
-        for name in ("ODOM_POSE_X", "ODOM_POSE_Y"):
-            rows = self.decoder.decode(chunk, name)
+        floor = np.inf
+        for name in self._first:
+            rows = self._rows(chunk, name)
             keep = accepted[rows["index"]]
-            self._resolve(name, _Halves.of({k: v[keep] for k, v in rows.items()}, self._offset),
-                          known)
-        # a later pose names a frame at most 8 before the latest encoder frame before it
-        floor = float(known["seq"][-1] - 8) if len(known["seq"]) else -np.inf
+            new = _Halves.of({k: v[keep] for k, v in rows.items()}, self._offset)
+            halves = self._pending[name].join(new) if name in self._pending else new
+            floor = min(floor, self._resolve(name, halves, known, final=False))
         self._offset += len(chunk)
         self._enc_count += len(enc.index)
         self._recent = {k: v[-RECENT_ENCODERS:] for k, v in known.items()}
         return self._emit(floor)
 
+    def _rows(self, chunk: FrameArrays, name: str) -> dict[str, np.ndarray]:
+        """The chunk's decoded frames of one kind (with ENC_COUNTER)."""
+        return self.decoder.decode(chunk, name)
+
+    def open_sent_s(self, name: str = "ODOM_POSE_Y") -> float:
+        """The earliest time of a ``name`` frame fed but not yet given out in a sample
+        (waiting for its encoder frame or its partner); inf when none."""
+        times = [t for _, _, t in self._first[name].values()]
+        if name in self._pending and len(self._pending[name].timestamp_s):
+            times.append(float(np.min(self._pending[name].timestamp_s)))
+        return min(times, default=math.inf)
+
     def finish(self) -> tuple[dict[str, np.ndarray], npt.NDArray[np.float64]]:
         """The samples left at the end of the log."""
+        known = self._recent
+        for name, halves in list(self._pending.items()):
+            self._resolve(name, halves, known, final=True)
         return self._emit(np.inf)
 
     def _known(self, enc: Encoders) -> dict[str, np.ndarray]:
@@ -238,41 +295,61 @@ class StreamPoses:
             return now
         return {k: np.concatenate((self._recent[k], v)) for k, v in now.items()}
 
-    def _resolve(self, name: str, halves: _Halves, known: dict[str, np.ndarray]) -> None:
-        """Resolve this chunk's frames of one kind (all of them: a pose names a frame before
-        it), keeping the first frame naming each encoder frame not given out yet."""
-        g, seq = self._named(halves, known)
+    def _resolve(
+        self, name: str, halves: _Halves, known: dict[str, np.ndarray], *, final: bool
+    ) -> float:
+        """Resolve what can be (causal, or ``final``: everything); keep the first frame naming
+        each encoder frame not given out yet; returns the lowest sequence number a frame not
+        resolved yet may name (inf when none waits)."""
+        if len(known["seq"]) == 0:  # no encoder frame before any of them: none can match
+            self.unmatched += len(halves.index)
+            self._pending[name] = halves.take(np.zeros(len(halves.index), dtype=bool))
+            return -np.inf if not final else np.inf  # (no sample either: nothing to give out)
+        g, seq, latest, beyond = self._named(halves, known)
+        top = int(known["seq"][-1])
+        waits = beyond & (not final) & (not self.causal)
+        cut = int(np.argmax(waits)) if waits.any() else len(halves.index)
+        self._pending[name] = halves.take(np.arange(len(halves.index)) >= cut)
+        g, seq = g[:cut], seq[:cut]
         cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
-        if cycle_s is not None and len(halves.index):
+        if self.causal and cycle_s is not None and len(halves.index):
             g, seq = self._held(name, halves, g, seq, cycle_s)
         self.unmatched += int(np.count_nonzero(g < 0))
+        self._keep_first(name, halves, g, seq)
+        if cut == len(halves.index):
+            return float(top - 8) if not final else np.inf
+        return float(min(known["seq"][np.maximum(latest[cut:], 0)].min(), top) - 8)
+
+    def _keep_first(
+        self, name: str, halves: _Halves, g: npt.NDArray[np.int64], seq: npt.NDArray[np.int64]
+    ) -> None:
+        """The first frame of ``halves`` naming each encoder frame not given out yet."""
         firsts = self._first[name]
-        for j in np.flatnonzero((g >= 0) & (seq >= self._given_below)).tolist():
-            if int(g[j]) not in firsts:
-                firsts[int(g[j])] = (int(seq[j]), {k: v[j] for k, v in halves.values.items()},
-                                     float(halves.timestamp_s[j]))
+        hits = np.flatnonzero((g >= 0) & (seq >= self._given_below))
+        columns = {k: v[hits].tolist() for k, v in halves.values.items()}  # plain Python values
+        for i, (gi, si, t) in enumerate(zip(g[hits].tolist(), seq[hits].tolist(),
+                                            halves.timestamp_s[hits].tolist(), strict=True)):
+            if gi not in firsts:
+                firsts[gi] = (si, {k: v[i] for k, v in columns.items()}, t)
 
     def _named(
         self, halves: _Halves, known: dict[str, np.ndarray]
-    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-        """The encoder frame each pose frame names (g, its sequence number; -1 when none of the
-        log's accepted frames before it)."""
-        g = np.full(len(halves.index), -1, dtype=np.int64)
-        seq = np.full(len(halves.index), -1, dtype=np.int64)
-        if len(known["seq"]) == 0:
-            return g, seq
-        cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64],
+               npt.NDArray[np.bool_]]:
+        """The encoder frame each pose frame names: g (number in the log; -1 when none of the
+        log's accepted frames, before it when causal) and its sequence number (-1 likewise);
+        the latest encoder frame before each (position in ``known``); and which name a frame
+        beyond the latest known one (not causal: they wait for the next chunk)."""
+        enc = known_encoders(known, contract_cycle_s(self.decoder, "WHEEL_ENCODERS"))
+        at = match_encoder(enc, halves.index, halves.enc_counter, halves.timestamp_s,
+                           causal=self.causal)
+        g = np.where(at >= 0, known["g"][np.maximum(at, 0)], -1).astype(np.int64)
+        seq = np.where(at >= 0, known["seq"][np.maximum(at, 0)], -1).astype(np.int64)
         latest = np.searchsorted(known["index"], halves.index) - 1
-        has = latest >= 0
-        last = np.maximum(latest, 0)
-        if cycle_s is not None:
-            has &= halves.timestamp_s - known["t"][last] < 8 * cycle_s
-        target = known["seq"][last] + ((halves.enc_counter - known["counter"][last] + 8) & 0xF) - 8
-        found = np.minimum(np.searchsorted(known["seq"], target), len(known["seq"]) - 1)
-        hit = has & (known["seq"][found] == target) & (known["index"][found] < halves.index)
-        g[hit] = known["g"][found[hit]]
-        seq[hit] = target[hit]
-        return g, seq
+        if self.causal:  # a frame named later in the log is not named: nothing waits
+            return g, seq, latest, np.zeros(len(at), dtype=bool)
+        has, target = named_targets(enc, halves.index, halves.enc_counter, halves.timestamp_s)
+        return g, seq, latest, has & (target > known["seq"][-1])
 
     def _held(
         self, name: str, halves: _Halves, g: npt.NDArray[np.int64], seq: npt.NDArray[np.int64],
@@ -285,11 +362,7 @@ class StreamPoses:
             e0, c0, t0, g0, s0 = self._last_row[name]
             ec, own, t = np.r_[e0, ec], np.r_[c0, own], np.r_[t0, t]
             g, seq = np.r_[g0, g], np.r_[s0, seq]
-        repeat = np.concatenate(([False], (
-            (np.diff(ec) == 0) & ((np.diff(own) & 0xF) == 1)
-            & (np.diff(t) < SILENCE_CYCLES * cycle_s)
-        )))
-        run_start = np.maximum.accumulate(np.where(repeat, 0, np.arange(len(g))))
+        run_start = _held(np.arange(len(g), dtype=np.int64), ec, own, t, cycle_s)
         g, seq = g[run_start], seq[run_start]
         self._last_row[name] = (int(ec[-1]), int(own[-1]), float(t[-1]), int(g[-1]),
                                 int(seq[-1]))
@@ -307,6 +380,7 @@ class StreamPoses:
         sx = [xs[g][1] for g in both]
         sy = [ys[g][1] for g in both]
         sent = np.array([ys[g][2] for g in both], dtype=np.float64)
+        seq = np.array([ys[g][0] for g in both], dtype=np.int64)
         for g in done:
             xs.pop(g, None)
             ys.pop(g, None)
@@ -320,6 +394,7 @@ class StreamPoses:
             "y_m": y * POSITION_LSB_M,
             "heading_rad": turns * 2 * math.pi + heading_raw * HEADING_LSB_RAD,
             "heading_raw": heading_raw,
+            "seq": seq,  # the encoder frame's sequence number
         }
         return samples, sent
 

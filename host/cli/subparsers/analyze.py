@@ -15,6 +15,17 @@ a row of the summary) but are no error: a real bus carries other traffic too.
 ``-b/--bitrate`` adds the measured bus load (``host.judge.busstats.from_frames``: each frame's
 exact stuffed length plus the interframe space, over the log's span); a log cannot say when a
 frame was queued, so there is no latency to measure.
+
+Memory: a log too big for the whole-log path to stay under 300 MB max RSS (its size against
+the path's measured RSS per MB of that format: ``stream_analysis.streams``; ``--stream always``
+or ``never`` forces either) and without ``--plot``, ``--parquet``, ``--mcap`` or ``-b`` is
+analysed as a stream (``host.judge.stream_analysis``: passes over the file ``--chunk-frames``
+frames at a time, the report bit for bit the whole log's, at about 3x the CPU), in bounded
+memory whatever its size; those four read the whole log (their series and frames), and so does
+a log the analysis refuses (to explain why in the log's terms) or fails (to look for a wrong
+``--robot``), or that the stream cannot judge exactly (``stream_analysis.NotStreamable``: frame
+times going back around a stall, frames let out in a burst after a busy bus). ``odocan analyze
+LOG…`` chooses the same way for each log (``host.judge.batch.analyze_one``).
 """
 
 from __future__ import annotations
@@ -35,6 +46,8 @@ from odocan.sim.exceptions import ConfigurationError
 if TYPE_CHECKING:  # imported where used: a command pays only for what it runs
     import cantools
 
+    from odocan.host.io.logs import FrameArrays
+    from odocan.host.judge.analysis import Analysis
     from odocan.host.judge.batch import LogResult
     from odocan.sim import robot
 
@@ -70,6 +83,18 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     add_export_arguments(parser)
     add_junit_argument(parser)
     _add_batch_arguments(parser)
+    parser.add_argument(
+        "--chunk-frames", type=int_in(1, 1 << 30), default=None, metavar="N",
+        help="frames per chunk of the streamed analysis, a developer knob: the report is the "
+        "same at any size (default: 262144; --plot, --parquet, --mcap and -b read the whole "
+        "log)",
+    )
+    parser.add_argument(
+        "--stream", choices=("auto", "always", "never"), default="auto",
+        help="analyse the log as a stream in bounded memory (about 3x the CPU) or read it "
+        "whole: auto streams a log too big for the whole path to stay under 300 MB max RSS; "
+        "the report is the same either way (default: %(default)s)",
+    )
     parser.set_defaults(func=_do_analyze)
 
 
@@ -119,17 +144,25 @@ def _analyze_single(args: argparse.Namespace) -> int:
     check_junit_path(args)
     db = load_dbc(args.dbc) if args.dbc is not None else None
     with wall_clock_progress(f"analysing {args.log}", None):
-        frames = read_log(args.log)
-        if db is not None:  # another DBC: its own checks say whether it matches the log
-            analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance, db=db)
-        else:  # odocan's DBC: say plainly when the log holds none of its frames
-            require_frames(frames, str(args.log))
-            with explained(lambda: frames, str(args.log)):
-                analysis = analyze(frames, profile, args.integrator, tolerance=args.tolerance)
-    write_exports(args, frames, analysis, db)
+        analysis = _streamed(args, profile, db) if _streams(args) else None
+        frames: FrameArrays | None = None
+        if analysis is None:
+            frames = whole = read_log(args.log)
+            if db is not None:  # another DBC: its own checks say whether it matches the log
+                analysis = analyze(whole, profile, args.integrator, tolerance=args.tolerance,
+                                   db=db)
+            else:  # odocan's DBC: say plainly when the log holds none of its frames
+                require_frames(whole, str(args.log))
+                with explained(lambda: whole, str(args.log)):
+                    analysis = analyze(whole, profile, args.integrator,
+                                       tolerance=args.tolerance)
+    assert analysis is not None
+    if frames is not None:
+        write_exports(args, frames, analysis, db)
     if args.bitrate is not None:
         from odocan.host.judge import busstats
 
+        assert frames is not None  # -b reads the whole log
         analysis.report["bus"] = busstats.from_frames(frames, args.bitrate).as_dict()
     analysis.report["inputs"] = log_inputs(args.log, profile, analysis.report["integrator"],
                                            args.dbc)
@@ -137,6 +170,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
     if not analysis.passed and db is None:  # a wrong --robot must not read as a firmware fault
         from odocan.host.judge.diagnosis import robot_mismatch
 
+        frames = frames if frames is not None else read_log(args.log)  # a failed verdict only
         hint = robot_mismatch(frames, profile, analysis.report["integrator"], args.tolerance)
         if hint is not None:
             analysis.report["diagnosis"] = [hint]
@@ -145,6 +179,33 @@ def _analyze_single(args: argparse.Namespace) -> int:
         print(f"  - {hint}")
     write_checks(args, "analyze", analysis_checks(analysis.report))
     return code
+
+
+def _streams(args: argparse.Namespace) -> bool:
+    """Whether the analysis streams (the module docstring): nothing asks for the whole log,
+    and ``--stream`` (auto: the log's size) says so."""
+    from odocan.host.judge.stream_analysis import streams
+
+    return (args.plot is None and args.parquet is None and args.mcap is None
+            and args.bitrate is None and streams(args.log, args.stream))
+
+
+def _streamed(
+    args: argparse.Namespace, profile: robot.RobotProfile, db: cantools.database.can.Database | None
+) -> Analysis | None:
+    """The streamed analysis of ``args.log``; None when it refuses the log (the whole log's
+    path then says why, in the log's terms)."""
+    from odocan.host.io.logs import CHUNK_FRAMES
+    from odocan.host.judge.analysis import Analysis
+    from odocan.host.judge.samples import AnalysisError
+    from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
+
+    try:
+        report = analyze_file(args.log, profile, args.integrator, tolerance=args.tolerance,
+                              db=db, chunk_frames=args.chunk_frames or CHUNK_FRAMES)
+    except (AnalysisError, NotStreamable):
+        return None
+    return Analysis(report=report, passed=report["passed"])
 
 
 def can_bitrate(text: str) -> int:
@@ -188,6 +249,7 @@ def _analyze_many(args: argparse.Namespace) -> int:
         tolerance_position_m=args.tolerance.position_m,
         tolerance_heading_rad=args.tolerance.heading_rad,
         dbc=None if args.dbc is None else str(args.dbc.resolve()),
+        stream=args.stream,
     )
     if args.dask is not None:
         results = batch.analyze_logs_dask(

@@ -1,0 +1,472 @@
+"""``odocan analyze`` of a log file in bounded memory (issue #14.1): the report of
+``host.judge.analysis.analyze`` (without the plot and export series), from the log read chunk
+by chunk (``host.io.logs.iter_log``) in passes, each stage's state carried across chunks
+(``host.judge.stream`` and the modules beside it), so that the report is the whole log's at
+any chunk size (tests/test_stream_report.py).
+
+Passes: the whole log once (E2E, the firmware lives, the report's facts); then per life:
+1. E2E, encoder sequence, samples after stalls and holds, truth, twist, facts, the spans where
+   the firmware lost encoder frames the log holds (``stream_losses.StreamLosses``) -> the start
+   frame e0 (power-up or the first sample's), the stalls' breaks;
+2. (and 3, 4 when the heading samples agree) the start pose (``stream_place.start_pose``);
+5. the segment offsets, and the lossy spans' weights (``stream_losses.SpanDrops``);
+6. the errors against the reference (and beyond the loss allowance) and the truth, the
+   distance, the events' times. Memory: the chunk and the stages' carried state, never the log.
+
+A life whose pose, twist or encoder frames came in a burst after a busy bus is refused
+(``NotStreamable``): ``samples._queued`` pairs them by the median send period of the whole life.
+``streams`` says when to stream at all: the whole-log path is about 3x cheaper in CPU."""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import cantools
+import numpy as np
+
+from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
+from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
+from odocan.host.judge.analysis import Tolerance, _realtime, _robot_dict
+from odocan.host.judge.reboots import Life, merge
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.samples import (
+    REQUIRED,
+    WIRE_COUNTER_BITS,
+    AnalysisError,
+    Poses,
+    queued_frames,
+    require_messages,
+)
+from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
+from odocan.host.judge.stream_compare import TruthCompare
+from odocan.host.judge.stream_facts import StreamFacts
+from odocan.host.judge.stream_life import LifeInfo, life_chunks
+from odocan.host.judge.stream_lives import LifeSpan, StreamLives
+from odocan.host.judge.stream_losses import SpanDrops, StreamLosses
+from odocan.host.judge.stream_place import PlacedChunk, reference_errors, segment_offsets
+from odocan.host.judge.stream_place import start_pose as place_start
+from odocan.host.judge.stream_stalls import StreamStalls
+from odocan.host.judge.stream_truth import StreamTruth
+from odocan.host.judge.stream_twist import StreamTwist
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.e2e import UNKNOWN
+from odocan.host.protocol.pose import heading_fields
+from odocan.sim import contract
+from odocan.sim.exceptions import OdocanError
+from odocan.sim.robot import RobotProfile
+
+Frames = Callable[[], Iterable[FrameArrays]]  # a life's frames, from its first, each call
+QUEUED_MESSAGES = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y", "ODOM_TWIST")
+
+
+class NotStreamable(OdocanError):
+    """The streamed report could differ from the whole log's: analyse the whole log instead.
+    A life is refused when its frames' times go back where the stall detection looks
+    (``StreamStalls.exact``), when a pose, twist or encoder frame came in a burst after a busy
+    bus (``samples.queued_frames``: their pairing takes a median over the whole life)."""
+
+
+DEFAULT_TOLERANCE = Tolerance()
+STREAM_MODES = ("auto", "always", "never")
+RSS_TARGET_MB = 300.0  # the max RSS ``odocan analyze`` of one log aims to stay under (#14.1)
+# The whole-log path's max RSS (MB) against its log's size (MB), per format: base + per_mb * size,
+# measured by ``bench/analyze_memory.py --threshold`` (docs/benchmarks.md); a log bigger than
+# the size where that reaches RSS_TARGET_MB / RSS_MARGIN streams.
+WHOLE_RSS_MB = {".log": (65.4, 2.738), ".asc": (54.6, 1.888), ".blf": (52.2, 21.480)}
+RSS_MARGIN = 1.5
+
+
+def stream_above_bytes(suffix: str) -> float:
+    """The log size (bytes) above which ``odocan analyze`` streams a log of this format (a
+    format not measured: the most memory-hungry one's)."""
+    base, per_mb = WHOLE_RSS_MB.get(suffix.lower(), max(WHOLE_RSS_MB.values(),
+                                                        key=lambda fit: fit[1]))
+    return max(0.0, (RSS_TARGET_MB / RSS_MARGIN - base) / per_mb) * 1e6
+
+
+def streams(path: str | Path, mode: str = "auto") -> bool:
+    """Whether to analyse ``path`` as a stream: ``always``, ``never``, or (``auto``) when the
+    whole-log path would take more than the max-RSS target for a log that size (the streamed
+    path costs about 3x its CPU; the report is the same either way)."""
+    if mode != "auto":
+        return mode == "always"
+    try:
+        size = Path(path).stat().st_size
+    except OSError:
+        return False  # the whole-log path names the path in its error
+    return size > stream_above_bytes(Path(path).suffix)
+
+
+def analyze_file(
+    path: str | Path,
+    robot: RobotProfile,
+    integrator: str | None = None,
+    *,
+    tolerance: Tolerance = DEFAULT_TOLERANCE,
+    db: cantools.database.can.Database | None = None,
+    scenario: str | None = None,
+    seed: int | None = None,
+    wall_seconds: float | None = None,
+    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    chunk_frames: int = CHUNK_FRAMES,
+    warn: Callable[[str], None] = warn_on_stderr,
+) -> dict[str, Any]:
+    """``analyze(read_log(path), ...).report``, the log read ``chunk_frames`` at a time
+    (``warn``: where ``iter_log`` says it skipped a partial last line)."""
+    return analyze_file_counted(
+        path, robot, integrator, tolerance=tolerance, db=db, scenario=scenario, seed=seed,
+        wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s,
+        chunk_frames=chunk_frames, warn=warn)[0]
+
+
+def analyze_file_counted(
+    path: str | Path,
+    robot: RobotProfile,
+    integrator: str | None = None,
+    *,
+    tolerance: Tolerance = DEFAULT_TOLERANCE,
+    db: cantools.database.can.Database | None = None,
+    scenario: str | None = None,
+    seed: int | None = None,
+    wall_seconds: float | None = None,
+    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    chunk_frames: int = CHUNK_FRAMES,
+    warn: Callable[[str], None] = warn_on_stderr,
+) -> tuple[dict[str, Any], int]:
+    """``analyze_file``'s report and the number of frames in the log."""
+    db = db if db is not None else contract.database()
+    decoder = BulkDecoder(db)
+    require_messages(decoder)
+    with tempfile.TemporaryDirectory(prefix="odocan-analyze-") as tmp:
+        spill = FrameSpill(Path(tmp))
+        e2e, lives = StreamE2E(db), StreamLives(decoder)  # one decoder: its cache too
+        facts = StreamFacts(decoder)
+        n_frames = 0
+        for chunk in iter_log(path, chunk_frames=chunk_frames, warn=warn):
+            n_frames += len(chunk)
+            spill.write(chunk)
+            accepted = e2e.feed(chunk)
+            lives.feed(chunk, accepted)
+            facts.feed(chunk, accepted)
+        spill.close()
+        return _analyze_lives(
+            lives.finish(), facts, lambda span: lambda: spill.read(span.start, span.stop,
+                                                                    chunk_frames),
+            robot, integrator, tolerance=tolerance, db=db, scenario=scenario, seed=seed,
+            wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s), n_frames
+
+
+def _analyze_lives(
+    spans: list[LifeSpan], facts: StreamFacts, frames_of: Callable[[LifeSpan], Frames],
+    robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
+    db: cantools.database.can.Database, scenario: str | None, seed: int | None,
+    wall_seconds: float | None, max_wheel_speed_mm_s: int | None,
+) -> dict[str, Any]:
+    """``analysis.analyze`` over the lives found (``frames_of``: a life's frames, each call
+    from its first)."""
+
+    if len(spans) == 1:
+        return _life(frames_of(spans[0]), robot, integrator, tolerance=tolerance, db=db,
+                     boot=False, scenario=scenario, seed=seed, wall_seconds=wall_seconds,
+                     max_wheel_speed_mm_s=max_wheel_speed_mm_s)[0]
+    integrator, source = facts.integrator(integrator)
+    done: list[tuple[LifeSpan, dict[str, Any], float]] = []
+    failure: AnalysisError | None = None
+    silent: list[Life] = []
+    for span in spans:
+        try:
+            report, t_first = _life(frames_of(span), robot, integrator, tolerance=tolerance,
+                                    db=db, boot=span.boot,
+                                    max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+        except AnalysisError as exc:  # a life without on-board samples: reported, not compared
+            failure = failure or exc
+            silent.append(_as_life(span))
+            continue
+        done.append((span, report, t_first))
+    if not done:
+        assert failure is not None
+        raise failure
+    report, _ = merge([d[1] for d in done], [{} for _ in done], [_as_life(d[0]) for d in done],
+                      [d[2] for d in done], silent=silent)
+    covered_s = facts.covered_s()
+    report.update(
+        integrator_source=source, scenario=scenario, seed=seed, sim_seconds=covered_s,
+        wall_seconds=wall_seconds, realtime_factor=_realtime(covered_s, wall_seconds),
+        frames=facts.frame_counts,
+    )
+    vs_ref = report["onboard_vs_reference"]
+    report["passed"] = bool(
+        vs_ref["max_position_error_m"] is not None
+        and all(d[1]["passed"] for d in done)  # each life within its tolerance and allowance
+        and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
+        and report["onboard_twist_vs_reference"]["passed"]
+    )
+    return report
+
+
+def _as_life(span: LifeSpan) -> Life:
+    """A ``reboots.Life`` for ``merge`` (which reads its time and UPTIME, not its frames)."""
+    return Life(np.zeros(0, dtype=np.int64), span.boot, span.t_s, span.uptime_before_s)
+
+
+class FrameSpill:
+    """The log's frames written once, column by column, to files in ``directory`` (26 bytes a
+    frame, no text to parse again), then read back by ranges: each life's passes read its
+    own frames, not the log from its start."""
+
+    COLUMNS = (("timestamp_s", np.float64, ()), ("can_id", np.uint32, ()),
+               ("dlc", np.uint8, ()), ("data", np.uint8, (8,)), ("flags", np.uint8, ()))
+
+    def __init__(self, directory: Path) -> None:
+        self._paths = {name: directory / f"{name}.bin" for name, _, _ in self.COLUMNS}
+        self._files: dict[str, BinaryIO] = {
+            name: path.open("wb") for name, path in self._paths.items()}
+
+    def write(self, chunk: FrameArrays) -> None:
+        for name, dtype, _ in self.COLUMNS:
+            np.ascontiguousarray(getattr(chunk, name), dtype=dtype).tofile(self._files[name])
+
+    def close(self) -> None:
+        for file in self._files.values():
+            file.close()
+
+    def read(self, start: int, stop: int, chunk_frames: int) -> Iterator[FrameArrays]:
+        """The frames [start, stop), ``chunk_frames`` at a time."""
+        for lo in range(start, stop, chunk_frames):
+            n = min(chunk_frames, stop - lo)
+            columns = {}
+            for name, dtype, shape in self.COLUMNS:
+                width = int(np.prod(shape, dtype=np.int64))
+                values = np.fromfile(self._paths[name], dtype=dtype, count=n * width,
+                                     offset=lo * width * np.dtype(dtype).itemsize)
+                columns[name] = values.reshape((n, *shape))
+            yield FrameArrays(**columns)
+
+
+def _life(
+    frames: Frames, robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
+    db: cantools.database.can.Database, boot: bool, max_wheel_speed_mm_s: int | None,
+    scenario: str | None = None, seed: int | None = None, wall_seconds: float | None = None,
+) -> tuple[dict[str, Any], float]:
+    """``analysis._analyze_life``'s report of one life, and its first frame's time."""
+    first = _first_pass(frames, db, robot)
+    if first.stalls is not None and not first.stalls.exact:
+        raise NotStreamable("the log's frame times go back around a silence of the firmware")
+    if first.queued:  # samples._queued pairs them by a median over the whole life
+        raise NotStreamable("frames let out in a burst after a busy bus (queued pairing)")
+    facts = first.facts
+    integrator, source = facts.integrator(integrator)
+    first.check()
+    power_up = facts.saw_only_the_log() if boot else facts.starts_at_power_up(first.head)
+    e0 = 0 if power_up else int(first.head.enc[0])
+    breaks = first.breaks
+    spans = first.losses.spans()
+    drops = SpanDrops(spans, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
+                      integrator)
+
+    def placed(info: LifeInfo | None = None, losses: bool = False) -> Iterator[PlacedChunk]:
+        for chunk, _ in life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
+                                    max_wheel_speed_mm_s=max_wheel_speed_mm_s, info=info,
+                                    on_encoders=drops.feed if losses else None):
+            if losses:
+                drops.named(chunk.enc)
+            yield chunk
+
+    info = LifeInfo()
+    x0, y0, h0, exact = place_start(lambda: placed(info), power_up=power_up)
+    # the offsets' pass also weighs the lossy spans (compare.loss_allowance), when there are
+    offsets = segment_offsets(lambda: placed(losses=bool(spans)), (x0, y0, h0),
+                              info.segments + 1)
+    truth = TruthCompare((x0, y0, h0), offsets)
+    last: list[PlacedChunk] = []
+    wanted = (frozenset(info.reprimed) | frozenset(breaks.tolist())
+              | frozenset(first for first, _, _ in spans))
+    final = LifeInfo()
+
+    def with_truth() -> Iterator[PlacedChunk]:
+        for chunk, told in life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
+                                       max_wheel_speed_mm_s=max_wheel_speed_mm_s, info=final,
+                                       times_of=wanted):
+            truth.feed(chunk, told)
+            if len(chunk.enc):
+                last[:] = [chunk]
+            yield chunk
+
+    vs_ref = reference_errors(with_truth, (x0, y0, h0), offsets, drops.allowance)
+    vs_truth = truth.summary()
+    vs_truth["distance_travelled_m"] = float(last[0].rel_distance_m[-1])
+    twist = first.twist.finish()
+    after_span = drops.allowance(np.array([last + 1 for _, last, _ in spans], dtype=np.int64))
+    passed = bool(
+        vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
+        and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
+        and twist["passed"]
+    )
+    covered_s = facts.covered_s()
+    counts = first.e2e.counts
+    report = {
+        "robot": _robot_dict(robot),
+        "integrator": integrator,
+        "integrator_source": source,
+        "reference_start": "power-up" if exact else "fitted",
+        "scenario": scenario,
+        "seed": seed,
+        "sim_seconds": covered_s,
+        "wall_seconds": wall_seconds,
+        "realtime_factor": _realtime(covered_s, wall_seconds),
+        "frames": facts.frame_counts,
+        "samples": {
+            "onboard": first.kept,
+            "truth": first.truths,
+            "truth_compared": truth.compared,
+            "unmatched_poses": first.poses.unmatched,
+            "encoder_frames": first.encoders,
+            "reference_restarts": info.segments,
+            "implausible_encoder_frames": info.refused,
+        },
+        "events": [
+            {"kind": "counter_restart", "t_s": final.times_s[e], "encoder_frame": int(e),
+             "detail": "the firmware re-primes here (COUNTER_RESET): the reference restarts "
+                       "with it; the motion across the restart is unknowable"}
+            for e in info.reprimed
+        ] + [
+            {"kind": "firmware_stall", "t_s": final.times_s[e], "encoder_frame": int(e),
+             "detail": "the firmware was silent or held its pose (a stall): it took the frames it "
+                       "missed as one step, so the reference's position is placed again after it"}
+            for e in breaks.tolist() if e > int(first.head.enc[0])
+        ] + [
+            {"kind": "encoder_frames_lost_on_board", "t_s": final.times_s[begin],
+             "encoder_frame": int(begin),
+             "detail": f"the firmware reports {n} encoder frames lost up to encoder frame "
+                       f"{end} that the log holds (its mailbox overflowed): it took their "
+                       "steps as one, so its position may leave the fine reference by up to "
+                       f"{allowed * 1e3:.4f} mm from here (loss_allowance_m)"}
+            for (begin, end, n), allowed in zip(spans, after_span.tolist(), strict=True)
+        ],
+        "reboots": [],
+        "onboard_vs_reference": vs_ref,
+        "onboard_vs_truth": vs_truth,
+        "onboard_twist_vs_reference": twist,
+        "final_onboard_pose": {
+            "x_m": float(first.tail.x_m[-1]),
+            "y_m": float(first.tail.y_m[-1]),
+            **heading_fields(float(first.tail.heading_rad[-1])),
+        },
+        "e2e": {name: c for name, c in counts.items() if name != UNKNOWN},
+        "unknown_frames": counts[UNKNOWN],
+        "tolerance": {"position_m": tolerance.position_m, "heading_rad": tolerance.heading_rad},
+        "passed": passed,
+    }
+    return report, first.t_first_s
+
+
+class _FirstPass:
+    """Pass 1 over a life (module docstring)."""
+
+    def __init__(self, db: cantools.database.can.Database, robot: RobotProfile) -> None:
+        self.decoder = BulkDecoder(db)
+        self.e2e = StreamE2E(db)
+        self.numbering = StreamEncoders(self.decoder)
+        self.poses = StreamPoses(self.decoder)
+        self.truth = StreamTruth(self.decoder)
+        self.twist = StreamTwist(self.decoder, robot)
+        self.facts = StreamFacts(self.decoder)
+        self.losses = StreamLosses(self.decoder)
+        self.queued = False  # frames of a periodic sender let out in a burst (queued_frames)
+        self._last_t: dict[str, float] = {}  # per such message, its last accepted frame's time
+        self.stalls: StreamStalls | None = None
+        self.rows = dict.fromkeys(REQUIRED, 0)  # decoded frames of the required messages
+        self.accepted = dict.fromkeys(REQUIRED, 0)  # and those E2E accepts
+        self.samples = self.kept = self.truths = self.encoders = 0
+        self.head = self.tail = _poses({})
+        self.t_first_s = 0.0
+
+    def feed(self, chunk: FrameArrays) -> None:
+        if self.e2e.counts == {} and len(chunk):
+            self.t_first_s = float(chunk.timestamp_s[0])
+        accepted = self.e2e.feed(chunk)
+        for name in REQUIRED:
+            index = self.decoder.select(chunk, name)
+            self.rows[name] += len(index)
+            self.accepted[name] += int(np.count_nonzero(accepted[index]))
+        enc = self.numbering.feed(chunk, accepted)
+        self.encoders += len(enc.index)
+        self.stalls = self.stalls or StreamStalls(enc.cycle_s)
+        samples, sent = self.poses.feed(chunk, accepted, enc)
+        watermark = min(float(chunk.timestamp_s[-1]), self.poses.open_sent_s())
+        self._kept(self.stalls.feed(samples, sent, enc.timestamp_s, watermark), samples)
+        self.truths += len(self.truth.feed(chunk, accepted, enc)[0]["enc"])
+        self.twist.feed(chunk, accepted, enc)
+        self.facts.feed(chunk, accepted)
+        self.losses.feed(chunk, accepted, enc)
+        if enc.cycle_s is not None:
+            self._bursts(chunk, accepted, enc.cycle_s)
+
+    def _bursts(self, chunk: FrameArrays, accepted: np.ndarray, cycle_s: float) -> None:
+        """Whether a message ``samples.queued_frames`` looks at (encoder frames, poses, twist)
+        has two accepted frames closer than it allows, in log order (a superset of every
+        pair it can find: a pair in time order has one at least as close in log order)."""
+        for name in QUEUED_MESSAGES:
+            index = self.decoder.select(chunk, name)
+            t = chunk.timestamp_s[index[accepted[index]]]
+            if len(t) == 0:
+                continue
+            if name in self._last_t:
+                t = np.concatenate(([self._last_t[name]], t))
+            self.queued = self.queued or bool(queued_frames(t, cycle_s).any())
+            self._last_t[name] = float(t[-1])
+
+    def finish(self) -> None:
+        if self.stalls is None:
+            return
+        samples, sent = self.poses.finish()
+        self._kept(self.stalls.feed(samples, sent, np.zeros(0), np.inf), samples)
+        self._kept(self.stalls.finish(), {"enc": np.zeros(0)})
+        self.truths += len(self.truth.finish()[0]["enc"])
+
+    def _kept(self, kept: dict[str, np.ndarray], fed: dict[str, np.ndarray]) -> None:
+        self.samples += len(fed["enc"])
+        if len(kept["enc"]):
+            if self.kept == 0:
+                self.head = _poses({k: v[:1] for k, v in kept.items()})
+            self.tail = _poses({k: v[-1:] for k, v in kept.items()})
+            self.kept += len(kept["enc"])
+
+    @property
+    def breaks(self) -> np.ndarray:
+        return self.stalls.breaks if self.stalls is not None else np.zeros(0, dtype=np.int64)
+
+    def check(self) -> None:
+        """``analysis._analyze_life``'s errors, in its order: the required messages missing
+        or all refused, no on-board sample."""
+        for name in REQUIRED:
+            if self.accepted[name] == 0:
+                message = self.decoder.message(name)
+                if self.rows[name] == 0:
+                    raise AnalysisError(
+                        f"no {name} frame (ID 0x{message.frame_id:03X}, {message.length} bytes)"
+                        " in the log: the DBC does not match the log")
+                raise AnalysisError(f"none of the {self.rows[name]} {name} frames passes its "
+                                    "E2E check: the DBC does not match the log")
+        if self.samples == 0:
+            raise AnalysisError("no ODOM_POSE_X/ODOM_POSE_Y pair names an encoder frame of the "
+                                "log: nothing to compare")
+
+
+def _first_pass(frames: Frames, db: cantools.database.can.Database,
+                robot: RobotProfile) -> _FirstPass:
+    first = _FirstPass(db, robot)
+    for chunk in frames():
+        first.feed(chunk)
+    first.finish()
+    return first
+
+
+def _poses(columns: dict[str, np.ndarray]) -> Poses:
+    empty_i, empty_f = np.zeros(0, dtype=np.int64), np.zeros(0)
+    return Poses(columns.get("enc", empty_i), columns.get("x_m", empty_f),
+                 columns.get("y_m", empty_f), columns.get("heading_rad", empty_f),
+                 columns.get("heading_raw", empty_i))

@@ -1,0 +1,168 @@
+"""The analysis' facts about a log, gathered chunk by chunk (``host.io.logs.iter_log``), each
+equal to what ``host.judge.analysis`` takes from the whole log (issue #14.1):
+
+* the frames per DBC message (``analysis._frame_counts``) and the seconds of bus time the log
+  covers (``analysis._covered_s``: first to last WHEEL_ENCODERS frame plus one cycle, or the
+  first to the last frame);
+* the integrator ODOM_STATUS reports (``samples.pick_integrator``: the last accepted summary's);
+* the power-up rule's inputs (``samples.starts_at_power_up`` and ``saw_only_the_log``): the
+  first accepted summary's UPTIME, and the first accepted page of WHEEL_ENCODERS E2E counts
+  (ENC_E2E_OK) with the number of accepted encoder frames before it.
+
+Carried: running counts, first and last times, the last INTEGRATOR value, the first UPTIME,
+the first ENC_E2E_OK page. Whether a page's signal is in the log is decided as
+``BulkDecoder.decode_page`` decides it over the whole log: present in every chunk that holds
+frames of that page (a page with no frame at all in the log has every signal)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.reference import INTEGRATORS
+from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+
+SUMMARY_PAGE = 0  # ODOM_STATUS page with UPTIME and INTEGRATOR
+
+
+@dataclass
+class _Signal:
+    """One signal of one ODOM_STATUS page over the chunks: is it in the page (AND over the
+    chunks with frames of the page), its first and last accepted value and the first's
+    position in the log."""
+
+    present: bool = True
+    first: int | None = None
+    first_at: int | None = None
+    last: int | None = None
+
+    def feed(self, page: dict[str, np.ndarray], name: str, keep: npt.NDArray[np.bool_],
+             offset: int) -> None:
+        if len(page["index"]) == 0:
+            return
+        if name not in page:
+            self.present = False
+            return
+        values = page[name][keep]
+        if len(values) == 0:
+            return
+        if self.first is None:
+            self.first = int(values[0])
+            self.first_at = int(page["index"][keep][0]) + offset
+        self.last = int(values[-1])
+
+
+@dataclass
+class StreamFacts:
+    """The facts of the module docstring over a log fed chunk by chunk (``accepted``: the
+    chunk's E2E-accepted mask from ``host.judge.stream.StreamE2E``)."""
+
+    decoder: BulkDecoder
+    frame_counts: dict[str, int] = field(default_factory=dict)  # analysis._frame_counts
+    _offset: int = 0
+    _first_s: float | None = None  # the log's first frame
+    _last_s: float | None = None
+    _enc_first_s: float | None = None  # every frame of WHEEL_ENCODERS' ID, accepted or not
+    _enc_last_s: float | None = None
+    _uptime: _Signal = field(default_factory=_Signal)
+    _integrator: _Signal = field(default_factory=_Signal)
+    _enc_ok: _Signal = field(default_factory=_Signal)
+    _has_status: bool = True  # the DBC's ODOM_STATUS is multiplexed
+    _accepted_encoders: int = 0  # accepted WHEEL_ENCODERS frames before the first count page
+
+    def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
+        """Take the next chunk's facts."""
+        if len(chunk):
+            if self._first_s is None:
+                self._first_s = float(chunk.timestamp_s[0])
+            self._last_s = float(chunk.timestamp_s[-1])
+        counts = {}
+        for message in self.decoder.db.messages:  # in the DBC's order, as the whole log's
+            n = len(self.decoder.select(chunk, message.name)) + self.frame_counts.get(
+                message.name, 0)
+            if n:
+                counts[message.name] = n
+        self.frame_counts = counts
+        self._feed_encoder_span(chunk)
+        self._feed_status(chunk, accepted)
+        self._offset += len(chunk)
+
+    def _feed_encoder_span(self, chunk: FrameArrays) -> None:
+        message = self.decoder.db.get_message_by_name("WHEEL_ENCODERS")
+        stamps = chunk.timestamp_s[chunk.can_id == message.frame_id]
+        if len(stamps):
+            if self._enc_first_s is None:
+                self._enc_first_s = float(stamps[0])
+            self._enc_last_s = float(stamps[-1])
+
+    def _feed_status(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
+        if not self._has_status:
+            return
+        try:
+            summary = self.decoder.decode_page(chunk, "ODOM_STATUS", SUMMARY_PAGE)
+            counts = self.decoder.decode_page(chunk, "ODOM_STATUS", ENC_E2E_PAGE)
+        except (DecodeError, KeyError):  # no multiplexed ODOM_STATUS in the DBC
+            self._has_status = False
+            return
+        keep = accepted[summary["index"]]
+        self._uptime.feed(summary, "UPTIME", keep, self._offset)
+        self._integrator.feed(summary, "INTEGRATOR", keep, self._offset)
+        before = self._enc_ok.first is None
+        self._enc_ok.feed(counts, "ENC_E2E_OK", accepted[counts["index"]], self._offset)
+        if before:  # count the accepted encoder frames up to the first count page
+            encoders = self.decoder.select(chunk, "WHEEL_ENCODERS")
+            limit = (len(chunk) if self._enc_ok.first_at is None
+                     else self._enc_ok.first_at - self._offset)
+            self._accepted_encoders += int(np.count_nonzero(
+                accepted[encoders] & (encoders < limit)))
+
+    def covered_s(self) -> float:
+        """``analysis._covered_s`` of the frames fed."""
+        message = self.decoder.db.get_message_by_name("WHEEL_ENCODERS")
+        if self._enc_first_s is None or self._enc_last_s is None or not message.cycle_time:
+            if self._first_s is None or self._last_s is None:
+                return 0.0
+            return float(self._last_s - self._first_s)
+        return float(self._enc_last_s - self._enc_first_s) + message.cycle_time / 1000.0
+
+    def integrator(self, given: str | None) -> tuple[str, str]:
+        """``samples.pick_integrator`` of the frames fed."""
+        if given is not None:
+            if given not in INTEGRATORS:
+                known = ", ".join(INTEGRATORS)
+                raise AnalysisError(f"unknown integrator {given!r} (known: {known})")
+            return given, "argument"
+        try:
+            signal = self.decoder.message("ODOM_STATUS").get_signal_by_name("INTEGRATOR")
+        except (DecodeError, KeyError):
+            signal = None
+        last = self._integrator.last if self._has_status and self._integrator.present else None
+        if signal is None or last is None:
+            raise AnalysisError("no ODOM_STATUS summary in the log to tell the integrator: give it")
+        choices: dict[Any, Any] = dict(signal.choices or {})
+        name = str(choices.get(last, "")).lower()
+        if name not in INTEGRATORS:
+            raise AnalysisError(f"ODOM_STATUS reports an unknown integrator ({last})")
+        return name, "ODOM_STATUS"
+
+    def saw_only_the_log(self) -> bool:
+        """``samples.saw_only_the_log`` of the frames fed."""
+        if not self._has_status or not self._enc_ok.present or self._enc_ok.first is None:
+            return True
+        return self._enc_ok.first == self._accepted_encoders & 0xFFFF
+
+    def starts_at_power_up(self, first: Poses) -> bool:
+        """``samples.starts_at_power_up``, given the log's first on-board sample (``first``:
+        its columns, at least one element)."""
+        if int(first.enc[0]) != 0 or int(first.heading_raw[0]) != 0:
+            return False
+        if first.x_m[0] != 0.0 or first.y_m[0] != 0.0 or first.heading_rad[0] != 0.0:
+            return False
+        if not self._has_status or not self._uptime.present:
+            return False
+        return self._uptime.first == 0 and self.saw_only_the_log()

@@ -1,0 +1,153 @@
+"""Where each firmware life of a log starts, chunk by chunk (issue #14.1):
+``host.judge.reboots.split_lives`` over a log fed in chunks, the same lives.
+
+A reboot is a summary (ODOM_STATUS page 0, CRC holding) that ``SourceWatch`` calls one, fed in
+bus order as in the whole log. Its life starts at the summary, at the latest accepted encoder
+frame before it (UPTIME 0, not INIT), or at the encoder frame its first page of WHEEL_ENCODERS
+E2E counts names (the ENC_E2E_OK-th accepted encoder frame back from that page, when the page
+comes before the next reboot). Carried: the watch, the positions of the last 2^16 accepted
+encoder frames (ENC_E2E_OK is a wrapping u16: no page names one further back), and the
+reboot still waiting for its first count page. A reboot's start is final at its first count
+page, at the next reboot or at the end of the log; lives are contiguous ranges of frames."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.reboots import SUMMARY_PAGE, _crc_holds
+from odocan.host.judge.samples import ENC_E2E_PAGE
+from odocan.host.judge.sources import SourceWatch
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+
+ENCODERS_KEPT = 1 << 16  # accepted encoder frames remembered (ENC_E2E_OK is a u16)
+
+
+@dataclass(frozen=True)
+class LifeSpan:
+    """One firmware life: frames ``[start, stop)`` of the log (``host.judge.reboots.Life``)."""
+
+    start: int
+    stop: int
+    boot: bool
+    t_s: float | None = None
+    uptime_before_s: int | None = None
+
+
+@dataclass
+class _Boot:
+    position: int
+    uptime_s: int
+    t_s: float
+    before_s: int
+    start: int  # from the summary (``reboots._life_start``)
+
+
+@dataclass
+class StreamLives:
+    """``split_lives`` chunk by chunk: ``feed`` each chunk with its E2E-accepted mask (of the
+    whole log's check, ``host.judge.stream.StreamE2E``), then ``finish`` with the lives."""
+
+    decoder: BulkDecoder
+    _offset: int = 0
+    _watch: SourceWatch = field(default_factory=SourceWatch)
+    _encoders: npt.NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int64))
+    _waiting: _Boot | None = None  # the last reboot, before its first count page
+    _boots: list[tuple[_Boot, int]] = field(default_factory=list)  # with their final start
+    _summaries: bool = True  # the DBC's ODOM_STATUS has UPTIME and STATE on its summary page
+
+    def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
+        """Take the next chunk's accepted encoder frames, reboots and count pages."""
+        encoders = self.decoder.select(chunk, "WHEEL_ENCODERS")
+        self._encoders = np.concatenate(
+            (self._encoders, encoders[accepted[encoders]].astype(np.int64) + self._offset))
+        events = sorted(self._boot_events(chunk) + self._page_events(chunk),
+                        key=lambda event: event[0])
+        for position, boot in events:
+            if isinstance(boot, _Boot):
+                self._decide(None)
+                self._waiting = boot
+            else:
+                self._decide((position, boot))
+        self._encoders = self._encoders[-ENCODERS_KEPT:]
+        self._offset += len(chunk)
+
+    def finish(self, n_frames: int | None = None) -> list[LifeSpan]:
+        """The lives (``n_frames``: the log's frames, default all fed)."""
+        self._decide(None)
+        stop = self._offset if n_frames is None else n_frames
+        if not self._boots or not self._summaries:
+            return [LifeSpan(0, stop, boot=False)]
+        starts = [start for _, start in self._boots]
+        lives = [LifeSpan(0, starts[0], boot=False)]
+        for k, (boot, start) in enumerate(self._boots):
+            end = starts[k + 1] if k + 1 < len(starts) else stop
+            lives.append(LifeSpan(start, end, boot=boot.uptime_s == 0, t_s=boot.t_s,
+                                  uptime_before_s=boot.before_s))
+        return lives
+
+    def _decide(self, page: tuple[int, int] | None) -> None:
+        """The waiting reboot's start, from its first count page (position, ENC_E2E_OK) or
+        without one."""
+        boot = self._waiting
+        if boot is None:
+            return
+        self._waiting = None
+        start = boot.start
+        if page is not None and page[1] > 0:
+            before = self._encoders[self._encoders < page[0]]
+            if len(before) >= page[1]:
+                counted = int(before[-page[1]])
+                if counted > (self._boots[-1][1] if self._boots else 0):
+                    start = counted
+        self._boots.append((boot, start))
+
+    def _boot_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | int]]:
+        """The chunk's reboots (``reboots._boot_summaries``), at their positions in the log."""
+        if not self._summaries:
+            return []
+        try:
+            page = self.decoder.decode_page(chunk, "ODOM_STATUS", SUMMARY_PAGE)
+            message = self.decoder.message("ODOM_STATUS")
+        except (DecodeError, KeyError):
+            self._summaries = False
+            return []
+        if len(page["index"]) == 0:
+            return []
+        if "UPTIME" not in page or "STATE" not in page:
+            self._summaries = False
+            return []
+        index = page["index"]
+        good = _crc_holds(chunk, self.decoder, index)
+        choices = dict(message.get_signal_by_name("STATE").choices or {})
+        events: list[tuple[int, _Boot | int]] = []
+        for position, t_s, uptime_s, state in zip(
+            index[good].tolist(), page["timestamp_s"][good].tolist(),
+            page["UPTIME"][good].tolist(), page["STATE"][good].tolist(), strict=True,
+        ):
+            name = str(choices.get(int(state), int(state)))
+            before = self._watch.last_uptime_s
+            if self._watch.observe(float(t_s), int(uptime_s), name) == "reboot":
+                at = int(position) + self._offset
+                earlier = self._encoders[self._encoders < at]
+                start = (int(earlier[-1]) if int(uptime_s) == 0 and name != "INIT"
+                         and len(earlier) else at)
+                events.append((at, _Boot(at, int(uptime_s), float(t_s), int(before), start)))
+        return events
+
+    def _page_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | int]]:
+        """The chunk's count pages whose CRC holds: (position in the log, ENC_E2E_OK)."""
+        try:
+            page = self.decoder.decode_page(chunk, "ODOM_STATUS", ENC_E2E_PAGE)
+        except (DecodeError, KeyError):
+            return []
+        if "ENC_E2E_OK" not in page or len(page["index"]) == 0:
+            return []
+        good = _crc_holds(chunk, self.decoder, page["index"])
+        return [(int(p) + self._offset, int(ok)) for p, ok in
+                zip(page["index"][good].tolist(), page["ENC_E2E_OK"][good].tolist(),
+                    strict=True)]

@@ -1,0 +1,143 @@
+"""The firmware's stalls chunk by chunk (issue #14.1): ``host.judge.samples.after_stalls`` over
+the on-board samples as ``host.judge.stream.StreamPoses`` gives them out (in encoder order).
+
+``after_stalls`` looks at the samples in the order they were sent (ODOM_POSE_Y's time, ties
+in encoder order): a sample sent ``SILENCE_CYCLES`` cycles or more after the one before while
+``SILENCE_CYCLES - 1`` or more accepted encoder frames were logged between the two (counted by
+time: ``searchsorted`` on their timestamps) is left out, and the reference's position restarts
+at the encoder frame after the one before. Here the samples wait in a buffer until no sample
+to come can have been sent before them: the caller gives a watermark (the earliest time of a
+pose frame ``StreamPoses`` still holds, and the chunk's last frame time); they are then taken
+in send order with the last one taken carried, and given out again in encoder order once every
+sample before them is decided.
+
+``exact`` says whether the result is the whole log's: it is unless a sample sent before one
+already taken arrives later, an encoder frame arrives older than a sample already taken, or
+the encoder frames' timestamps go back (then the whole log's ``searchsorted`` itself counts on
+an unsorted array); a log whose frames are in time order never does that (the awkward test log,
+with frames swapped and repeated, does not either). A streamed analysis that finds a log not
+exact must say so or fall back to the whole log."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.judge.samples import frozen_breaks, silent
+
+COLUMNS = ("enc", "x_m", "y_m", "heading_rad", "heading_raw", "seq")
+
+
+def _empty() -> dict[str, np.ndarray]:
+    return {"enc": np.zeros(0, dtype=np.int64), "x_m": np.zeros(0), "y_m": np.zeros(0),
+            "heading_rad": np.zeros(0), "heading_raw": np.zeros(0, dtype=np.int64),
+            "seq": np.zeros(0, dtype=np.int64)}
+
+
+def _cat(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    return {k: np.concatenate((a[k], b[k])) for k in a}
+
+
+@dataclass
+class StreamStalls:
+    """``after_stalls`` chunk by chunk (module docstring); ``cycle_s``: the encoder cycle
+    (None: no stall is found, as in the whole log)."""
+
+    cycle_s: float | None
+    exact: bool = True
+    _buffer: dict[str, np.ndarray] = field(default_factory=_empty)  # not yet taken
+    _sent: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    _decided: dict[str, np.ndarray] = field(default_factory=_empty)  # kept, not given out
+    _enc_t: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    _enc_before: int = 0  # encoder frames dropped from _enc_t (all before the last taken)
+    _last_enc_t: float = -np.inf
+    _prev: tuple[float, int, int] | None = None  # last taken: sent, enc, encoders before it
+    _breaks: set[int] = field(default_factory=set)
+    _last_given: tuple[int, int] | None = None  # the last sample given out: enc, seq
+
+    def feed(
+        self, samples: dict[str, np.ndarray], sent_s: npt.NDArray[np.float64],
+        encoder_t_s: npt.NDArray[np.float64], watermark_s: float,
+    ) -> dict[str, np.ndarray]:
+        """Take samples (``StreamPoses``' output: columns and send times) and the chunk's
+        accepted encoder frames' times; returns the samples kept that are final, in encoder
+        order. No sample to come may have been sent before ``watermark_s``."""
+        if len(encoder_t_s):
+            if encoder_t_s[0] < self._last_enc_t or np.any(np.diff(encoder_t_s) < 0):
+                self.exact = False
+            if self._prev is not None and float(encoder_t_s[0]) < self._prev[0]:
+                self.exact = False  # a count already taken would have included it
+            self._last_enc_t = float(encoder_t_s[-1])
+            self._enc_t = np.concatenate((self._enc_t, encoder_t_s))
+        if self._prev is not None and len(sent_s) and float(np.min(sent_s)) < self._prev[0]:
+            self.exact = False  # sent before a sample already taken
+        self._buffer = _cat(self._buffer, {k: samples[k] for k in COLUMNS})
+        self._sent = np.concatenate((self._sent, sent_s))
+        self._take(self._sent < watermark_s)
+        return self._give()
+
+    def finish(self) -> dict[str, np.ndarray]:
+        """The samples kept that are left."""
+        self._take(np.ones(len(self._sent), dtype=bool))
+        return self._give()
+
+    @property
+    def breaks(self) -> npt.NDArray[np.int64]:
+        """The encoder frames where the firmware resumed after a stall (sorted)."""
+        return np.array(sorted(self._breaks), dtype=np.int64)
+
+    def _take(self, ready: npt.NDArray[np.bool_]) -> None:
+        """Decide the ``ready`` samples of the buffer, in send order."""
+        if not ready.any():
+            return
+        part = {k: v[ready] for k, v in self._buffer.items()}
+        sent = self._sent[ready]
+        self._buffer = {k: v[~ready] for k, v in self._buffer.items()}
+        self._sent = self._sent[~ready]
+        order = np.lexsort((part["enc"], sent))
+        sent, enc = sent[order], part["enc"][order]
+        drop = np.zeros(len(sent), dtype=bool)
+        if self.cycle_s is not None:
+            heard_to = self._enc_before + np.searchsorted(self._enc_t, sent)
+            if self._prev is not None:
+                p_sent, p_enc, p_heard = self._prev
+                all_sent = np.concatenate(([p_sent], sent))
+                all_enc = np.concatenate(([p_enc], enc))
+                all_heard = np.concatenate(([p_heard], heard_to))
+            else:
+                all_sent, all_enc, all_heard = sent, enc, heard_to
+            after = np.flatnonzero(silent(all_sent, np.diff(all_heard), self.cycle_s)) + 1
+            self._breaks.update((all_enc[after - 1] + 1).tolist())
+            shift = 0 if self._prev is None else 1
+            drop[after - shift] = True
+            self._prev = (float(sent[-1]), int(enc[-1]), int(heard_to[-1]))
+            gone = int(np.searchsorted(self._enc_t, sent[-1]))
+            self._enc_before += gone
+            self._enc_t = self._enc_t[gone:]
+        kept = order[~drop]
+        self._decided = _cat(self._decided, {k: v[kept] for k, v in part.items()})
+
+    def _give(self) -> dict[str, np.ndarray]:
+        """The decided samples before every sample still waiting, in encoder order."""
+        limit = int(np.min(self._buffer["enc"])) if len(self._buffer["enc"]) else None
+        order = np.argsort(self._decided["enc"], kind="stable")
+        decided = {k: v[order] for k, v in self._decided.items()}
+        n = (len(order) if limit is None
+             else int(np.searchsorted(decided["enc"], limit)))
+        out = {k: v[:n] for k, v in decided.items()}
+        self._decided = {k: v[n:] for k, v in decided.items()}
+        self._frozen(out)
+        return out
+
+    def _frozen(self, given: dict[str, np.ndarray]) -> None:
+        """``samples._frozen`` over the samples given out (in encoder order), the last one
+        before carried in front: where the firmware held its pose, a break."""
+        if self.cycle_s is None or len(given["enc"]) == 0:
+            return
+        enc, seq = given["enc"], given["seq"]
+        if self._last_given is not None:
+            enc, seq = np.r_[self._last_given[0], enc], np.r_[self._last_given[1], seq]
+        self._breaks.update(frozen_breaks(enc, seq).tolist())
+        self._last_given = (int(enc[-1]), int(seq[-1]))
