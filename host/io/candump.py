@@ -9,10 +9,10 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-import can
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.io.candump_line import CAN_ERR_FLAG, ID_MASK_29, parse_candump_line
 from odocan.host.io.frames import (
     FLAG_EXTENDED,
     MAX_DLC,
@@ -24,9 +24,6 @@ from odocan.host.io.frames import (
     empty_frames,
 )
 
-_CAN_ERR_FLAG = 0x20000000  # candump: error frame marker in the ID (can/error.h)
-_CAN_ERR_BUSERROR = 0x00000080
-_ID_MASK_29 = 0x1FFFFFFF
 _MAX_TIMESTAMP_DIGITS = 18  # digits that fit an int64 exactly
 
 
@@ -216,7 +213,7 @@ def _template(buf: U8Array, start: int, length: int) -> _Columns | None:
     m = _CANONICAL.fullmatch(bytes(buf[start : start + length]))
     if m is None or len(m.group(1)) + len(m.group(2)) > _MAX_TIMESTAMP_DIGITS:
         return None
-    if len(m.group(4)) == 8 and int(m.group(4), 16) & _CAN_ERR_FLAG:
+    if len(m.group(4)) == 8 and int(m.group(4), 16) & CAN_ERR_FLAG:
         return None  # error frame marker: the slow path applies python-can's rules
     return _Columns(length, m.end(1), m.end(2), m.start(4), m.end(4), m.end(5))
 
@@ -319,7 +316,7 @@ def _parse_block(block: U8Array, c: _Columns) -> tuple[npt.NDArray[np.bool_], Fr
     flags = FLAG_EXTENDED if c.hash - c.id_start > 3 else 0
     frames = FrameArrays(
         timestamp_s=_timestamps_s(block, c),
-        can_id=(can_id & _ID_MASK_29).astype(np.uint32),
+        can_id=(can_id & ID_MASK_29).astype(np.uint32),
         dlc=np.full(n, nbytes, dtype=np.uint8),
         data=data,
         flags=np.full(n, flags, dtype=np.uint8),
@@ -422,86 +419,3 @@ def _parse_slow(
             collector.on_message_received(msg)
             kept.append(line)
     return _Parsed(np.array(kept, dtype=np.int64), collector.arrays())
-
-
-def parse_candump_line(raw: bytes, where: str = "<line>") -> can.Message | None:
-    """One ``candump -L`` line as python-can reads it (None for a blank line).
-
-    Raises ``LogFormatError`` naming ``where`` (``LOG:LINE``) and what is wrong.
-    """
-    try:
-        text = raw.decode("ascii").strip()
-    except UnicodeDecodeError:
-        raise LogFormatError(f"{where}: not ASCII text") from None
-    if not text:
-        return None
-    fields = text.split()
-    is_rx = True
-    if len(fields) == 4 and fields[3].lower() in ("r", "t"):
-        is_rx = fields.pop().lower() == "r"
-    if len(fields) != 3:
-        raise LogFormatError(
-            f"{where}: expected '(TIMESTAMP) CHANNEL ID#DATA', got {len(fields)} field(s)"
-        )
-    timestamp = _parse_timestamp(fields[0], where)
-    can_id_text, sep, data_text = fields[2].partition("#")
-    if not sep:
-        raise LogFormatError(f"{where}: no '#' between CAN ID and data in {fields[2]!r}")
-    can_id = _parse_can_id(can_id_text, where)
-    if can_id & _CAN_ERR_FLAG and can_id & _CAN_ERR_BUSERROR:
-        return can.Message(timestamp=timestamp, is_error_frame=True)
-    is_fd = data_text.startswith("#")
-    if is_fd:
-        data_text = data_text[2:]
-    if data_text[:1].lower() == "r":
-        dlc = _parse_remote_dlc(data_text[1:], where)
-        return can.Message(
-            timestamp=timestamp, arbitration_id=can_id & _ID_MASK_29,
-            is_extended_id=len(can_id_text) > 3, is_remote_frame=True, dlc=dlc, is_rx=is_rx,
-        )
-    return can.Message(
-        timestamp=timestamp, arbitration_id=can_id & _ID_MASK_29,
-        is_extended_id=len(can_id_text) > 3, data=_parse_data(data_text, where), is_fd=is_fd,
-        is_rx=is_rx,
-    )
-
-
-def _parse_timestamp(text: str, where: str) -> float:
-    """``(SECONDS)`` -> float seconds."""
-    if not (text.startswith("(") and text.endswith(")")):
-        raise LogFormatError(f"{where}: missing timestamp: expected '(SECONDS)', got {text!r}")
-    try:
-        return float(text[1:-1])
-    except ValueError:
-        raise LogFormatError(f"{where}: bad timestamp {text!r}") from None
-
-
-def _parse_can_id(text: str, where: str) -> int:
-    """1..8 hex digits."""
-    if not 1 <= len(text) <= 8 or any(ch not in "0123456789abcdefABCDEF" for ch in text):
-        raise LogFormatError(f"{where}: bad CAN ID {text!r} (1 to 8 hex digits)")
-    return int(text, 16)
-
-
-def _parse_remote_dlc(text: str, where: str) -> int:
-    """The optional DLC digit(s) after ``R``."""
-    if not text:
-        return 0
-    if not text.isdigit() or int(text) > MAX_DLC:
-        raise LogFormatError(f"{where}: bad remote frame length {text!r} (0..8)")
-    return int(text)
-
-
-def _parse_data(text: str, where: str) -> bytes:
-    """Hex data, two digits a byte, at most 8 bytes."""
-    if len(text) % 2:
-        raise LogFormatError(f"{where}: odd number of hex digits in data {text!r}")
-    if len(text) > 2 * MAX_DLC:
-        raise LogFormatError(
-            f"{where}: {len(text) // 2} data bytes (more than 8: CAN FD frames of more than "
-            "8 bytes are not supported)"
-        )
-    try:
-        return bytes.fromhex(text)
-    except ValueError:
-        raise LogFormatError(f"{where}: bad hex in data {text!r}") from None

@@ -37,9 +37,9 @@ from odocan.host.io.candump import (
     count_newlines,
     parse_candump,
     parse_candump_chunks,
-    parse_candump_line,
     without_partial_last_line,
 )
+from odocan.host.io.candump_line import parse_candump_line
 from odocan.host.io.frames import (
     FLAG_ERROR,
     FLAG_EXTENDED,
