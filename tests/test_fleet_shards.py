@@ -27,7 +27,7 @@ from odocan.host.mqtt.broker import LOOPBACK, free_loopback_port
 from odocan.host.mqtt.fleetrun import FLEET_TOLERANCE, failures, judge_robot
 from odocan.host.mqtt.shards import Shard, aggregate, split
 from odocan.sim import robot
-from odocan.sim.fleet import Fleet, FleetConfig
+from odocan.sim.fleet import Fleet, FleetConfig, frame_fields
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -62,9 +62,9 @@ def _frames(config: FleetConfig, ticks: int) -> dict[str, list[tuple[int, bytes]
     with Fleet(config) as fleet:
         for k in range(ticks):
             fleet.step(k)
-            for index, msg in fleet.take_batch():
-                out.setdefault(fleet.names[index], []).append(
-                    (msg.arbitration_id, bytes(msg.data)))
+            for index, frame in fleet.take_batch():
+                _, can_id, data = frame_fields(frame)
+                out.setdefault(fleet.names[index], []).append((can_id, data))
     return out
 
 

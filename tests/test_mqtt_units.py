@@ -13,7 +13,7 @@ from odocan.host.protocol.commands import CommandEncoder, CommandRejected
 from odocan.host.protocol.e2e import E2EMonitor
 from odocan.sim import robot
 from odocan.sim.contract import DBC_PATH, database
-from odocan.sim.fleet import Fleet, FleetConfig
+from odocan.sim.fleet import Fleet, FleetConfig, frame_fields
 from odocan.sim.rig import LockstepRig, RigConfig
 from tests.dbc_typed import numbers
 
@@ -132,7 +132,7 @@ def test_a_fleet_robot_sends_the_lockstep_rigs_frames(
         fleet_frames: list[bytes] = []
         for k in range(120 + start_tick):
             fleet.step(k)
-            fleet_frames += [bytes(m.data) for i, m in fleet.take_batch() if i == index]
+            fleet_frames += [frame_fields(f)[2] for i, f in fleet.take_batch() if i == index]
     rig_frames: list[bytes] = []
 
     class Keep(can.Listener):
