@@ -61,6 +61,7 @@ class FleetConfig:
     scenario: str = "random"
     seed: int = 0
     transport: str = "odocan"  # the rigs' python-can interface (sim.rig.TRANSPORTS)
+    firmware: str = "python"  # every board's firmware (sim.cboard.FIRMWARES): python or c
     first: int = 0  # fleet-wide index of this shard's first robot (names and seeds count on)
     # SecOC fleet key (None: no SecOC): each firmware gets its own key, sim.provision.robot_key
     secoc_key: bytes | None = field(default=None, repr=False)
@@ -113,6 +114,7 @@ class Fleet(Closing):
                     channel=f"{prefix}-{i}",
                     truth_phase_ticks=_truth_phase(config.first + i),
                     transport=config.transport,
+                    firmware=config.firmware,
                     secoc_key=None if config.secoc_key is None
                     else robot_key(config.secoc_key, self.names[i]),
                 ),
