@@ -125,7 +125,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--firmware", choices=FIRMWARES, default="python",
         help="every board's firmware: python (firmware/) or c (firmware/c, built with make on "
-        "first use; bit-exact, half the fleet step's CPU) (default: python)",
+        "first use; bit-exact, a third less CPU per fleet step) (default: python)",
     )
     add_seed_argument(parser, "robot i drives with seed SEED + i")
     parser.add_argument(
