@@ -143,8 +143,8 @@ def cpu_cost_us(n: int = 10, ticks: int = 300) -> tuple[float, float]:
             fleet.step(k)
             batch = fleet.take_batch()
             t1 = time.process_time()
-            for i, msg in batch:
-                telemetry[i].feed(msg)
+            for i, frame in batch:
+                telemetry[i].feed_frame(frame)
             bridge_s += time.process_time() - t1
             step_s += t1 - t0
     return step_s / (n * ticks) * 1e6, bridge_s / (n * ticks) * 1e6

@@ -20,6 +20,7 @@ prints, besides the report's miss ratio and CPU per robot-tick (us):
 
     .venv/bin/python bench/fleet_jitter.py --robots 25 --seconds 10 [--slow-ms 2] [--profile]
     .venv/bin/python bench/fleet_jitter.py --robots 20 --seconds 20 --flat-out [--profile]
+    .venv/bin/python bench/fleet_jitter.py --robots 20 --seconds 10 --flat-out --firmware c
 
 Wall-clock figures depend on the machine's other load (printed: the load average); the CPU per
 robot-tick barely does.
@@ -178,6 +179,7 @@ def main() -> int:
     parser.add_argument("--slow-ms", type=float, default=None)
     parser.add_argument("--profile", action="store_true")
     parser.add_argument("--flat-out", action="store_true")
+    parser.add_argument("--firmware", choices=("python", "c"), default="python")
     args = parser.parse_args()
     if args.flat_out:
         fleetrun.run_realtime = flat_out  # type: ignore[assignment]
@@ -189,7 +191,8 @@ def main() -> int:
             print("error: mosquitto is not installed", file=sys.stderr)
             return 2
         broker, url = started
-        run = FleetRun(FleetConfig(robots=args.robots, robot=robot.load("pmir")),
+        run = FleetRun(FleetConfig(robots=args.robots, robot=robot.load("pmir"),
+                                   firmware=args.firmware),
                        duration_s=args.seconds, broker=url)
 
         async def go() -> dict[str, Any]:

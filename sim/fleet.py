@@ -5,7 +5,9 @@ motor controller, ground truth, scenario driver, firmware board, host observer) 
 of the in-process ``odocan`` transport (or python-can ``virtual``: ``FleetConfig.transport``),
 with seed ``seed + index``. ``Fleet.step(k)`` runs tick ``k`` of every robot (simulated time
 ``k * 10 ms``: a robot's frames are those of the lockstep rig with its seed); the host observer's
-frames are collected, tagged with the robot's index, for ``take_batch``.
+frames are collected, tagged with the robot's index, for ``take_batch``: on the ``odocan``
+transport as the ``(t, id, payload)`` tuples it queued (``sim.framebatch``; ``frame_fields``
+reads either kind), a tick's at once, without a ``can.Message`` per frame.
 
 ``run_realtime`` paces ``Fleet.step`` to the wall clock as one asyncio task: at each release
 ``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
@@ -21,6 +23,7 @@ import asyncio
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from itertools import repeat
 
 import can
 
@@ -28,12 +31,14 @@ from odocan.sim.board import TICK_S
 from odocan.sim.clock import RealTimeClock
 from odocan.sim.closing import Closing
 from odocan.sim.contract import cycle_ticks, database
+from odocan.sim.framebatch import DataFrame, FrameBatchListener, Received
 from odocan.sim.provision import robot_key
 from odocan.sim.realtime import DeadlineStats
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import RobotProfile
 
-Batch = list[tuple[int, can.Message]]
+# (robot index, frame) in bus order per robot: a frame as its transport queued it (Received)
+Batch = list[tuple[int, Received]]
 _fleet_ids = iter(range(1 << 62))
 
 
@@ -56,6 +61,7 @@ class FleetConfig:
     scenario: str = "random"
     seed: int = 0
     transport: str = "odocan"  # the rigs' python-can interface (sim.rig.TRANSPORTS)
+    firmware: str = "python"  # every board's firmware (sim.cboard.FIRMWARES): python or c
     first: int = 0  # fleet-wide index of this shard's first robot (names and seeds count on)
     # SecOC fleet key (None: no SecOC): each firmware gets its own key, sim.provision.robot_key
     secoc_key: bytes | None = field(default=None, repr=False)
@@ -65,13 +71,22 @@ class FleetConfig:
         return replace(self, first=self.first + first, robots=robots)
 
 
-class _Collector(can.Listener):
-    """The host observer of robot ``index``: counts its frames and tags them into the batch."""
+class _Collector(FrameBatchListener):
+    """The host observer of robot ``index``: counts its frames and tags them into the batch.
+
+    On the ``odocan`` transport a tick's frames arrive at once (``on_frames``) as the transport
+    queued them, ``DataFrame`` tuples shared with no one else (no ``Message`` built); on
+    ``virtual`` one ``Message`` at a time."""
 
     def __init__(self, index: int, batch: Batch) -> None:
         self.index = index
         self.batch = batch
         self.counts: Counter[int] = Counter()
+
+    def on_frames(self, frames: list[Received]) -> None:
+        self.counts.update([f[1] if type(f) is tuple else f.arbitration_id  # type: ignore[union-attr]
+                            for f in frames])
+        self.batch.extend(zip(repeat(self.index), frames))
 
     def on_message_received(self, msg: can.Message) -> None:
         self.counts[msg.arbitration_id] += 1
@@ -99,6 +114,7 @@ class Fleet(Closing):
                     channel=f"{prefix}-{i}",
                     truth_phase_ticks=_truth_phase(config.first + i),
                     transport=config.transport,
+                    firmware=config.firmware,
                     secoc_key=None if config.secoc_key is None
                     else robot_key(config.secoc_key, self.names[i]),
                 ),
@@ -136,6 +152,15 @@ class Fleet(Closing):
         """Release every robot's buses."""
         for rig in self.rigs:
             rig.close()
+
+
+def frame_fields(frame: Received) -> DataFrame:
+    """``(timestamp s, identifier, payload)`` of a batch's frame, a ``DataFrame`` or a
+    ``Message`` (of a classic data frame: a ``DataFrame`` drops the other flags)."""
+    if type(frame) is tuple:
+        return frame
+    assert isinstance(frame, can.Message)
+    return frame.timestamp, frame.arbitration_id, bytes(frame.data)
 
 
 def _tick_offset(index: int) -> int:

@@ -27,7 +27,8 @@ from odocan.host.mqtt.broker import LOOPBACK, free_loopback_port
 from odocan.host.mqtt.fleetrun import FLEET_TOLERANCE, failures, judge_robot
 from odocan.host.mqtt.shards import Shard, aggregate, split
 from odocan.sim import robot
-from odocan.sim.fleet import Fleet, FleetConfig
+from odocan.sim.fleet import Fleet, FleetConfig, frame_fields
+from tests.requires import require_executables
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -56,15 +57,19 @@ def test_shard_parse_and_its_robots() -> None:
             Shard.parse(bad)
 
 
-def _frames(config: FleetConfig, ticks: int) -> dict[str, list[tuple[int, bytes]]]:
-    """Each robot's host-observed frames (ID, data) over ``ticks`` fleet ticks, by name."""
-    out: dict[str, list[tuple[int, bytes]]] = {}
+def _frames(
+    config: FleetConfig, ticks: int, *, stamped: bool = False
+) -> dict[str, list[tuple[float, int, bytes]]]:
+    """Each robot's host-observed frames (timestamp s or 0 unless ``stamped``, ID, data) over
+    ``ticks`` fleet ticks, by name."""
+    out: dict[str, list[tuple[float, int, bytes]]] = {}
     with Fleet(config) as fleet:
         for k in range(ticks):
             fleet.step(k)
-            for index, msg in fleet.take_batch():
+            for index, frame in fleet.take_batch():
+                t_s, can_id, data = frame_fields(frame)
                 out.setdefault(fleet.names[index], []).append(
-                    (msg.arbitration_id, bytes(msg.data)))
+                    (t_s if stamped else 0.0, can_id, data))
     return out
 
 
@@ -87,11 +92,24 @@ def test_every_robot_sends_the_same_bytes_on_either_transport() -> None:
     """``odocan fleet --transport``: python-can ``virtual`` and the ``odocan`` plugin carry the
     same frames, robot by robot, in the fleet's lockstep steps."""
     lean = FleetConfig(robots=3, robot=robot.load("pmir"), seed=3)
-    frames = {t: _frames(replace(lean, transport=t), 150) for t in ("odocan", "virtual")}
+    frames = {t: _frames(replace(lean, transport=t), 150, stamped=True)
+              for t in ("odocan", "virtual")}
     assert sorted(frames["odocan"]) == ["robot001", "robot002", "robot003"]
     for name, sent in frames["odocan"].items():
         assert len(sent) > 300
         assert frames["virtual"][name] == sent, name
+
+
+def test_every_robot_sends_the_same_bytes_with_the_c_firmware() -> None:
+    """``odocan fleet --firmware c``: the C port on every board, frame for frame the bytes (and
+    timestamps) of the Python firmware's fleet."""
+    require_executables("make", "cc", install="apt-get install gcc make")
+    python = FleetConfig(robots=3, robot=robot.load("pmir"), seed=5)
+    frames = {f: _frames(replace(python, firmware=f), 150, stamped=True) for f in ("python", "c")}
+    assert sorted(frames["c"]) == ["robot001", "robot002", "robot003"]
+    for name, sent in frames["python"].items():
+        assert len(sent) > 300
+        assert frames["c"][name] == sent, name
 
 
 def test_fleet_on_python_cans_virtual_runs_and_judges_every_robot(
@@ -111,6 +129,24 @@ def test_fleet_on_python_cans_virtual_runs_and_judges_every_robot(
         assert r["verdict"] == ("UNJUDGED" if skipped else "PASS"), r["reason"]
         assert r["pose_vs_reference"]["samples"] > 20
         assert r["frames"]["WHEEL_ENCODERS"] > 100
+
+
+def test_fleet_with_the_c_firmware_runs_and_judges_every_robot(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    require_executables("make", "cc", install="apt-get install gcc make")
+    report = tmp_path / "fleet.json"
+    code = main(["fleet", "-n", "2", "--firmware", "c", "--duration", "2", "--seed", "6",
+                 "--max-miss-ratio", "1", "--report", str(report)])
+    out, err = capsys.readouterr()
+    data = json.loads(report.read_text())
+    assert (data["firmware"], data["transport"]) == ("c", "odocan")
+    robots = data["per_robot"]
+    skipped = data["skipped_releases"] > 0  # a loaded machine: the positions are not judged
+    assert code == (1 if skipped else 0), out + err
+    for r in robots.values():
+        assert r["verdict"] == ("UNJUDGED" if skipped else "PASS"), r["reason"]
+        assert r["pose_vs_reference"]["samples"] > 20
 
 
 def _stats(*errors: tuple[float, float]) -> ErrorStats:

@@ -12,7 +12,7 @@ from typing import Any
 
 import can
 
-from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
+from odocan.host.mqtt.bridge import Batch, Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import LOOPBACK, BrokerURL
 from odocan.host.mqtt.client import CoalescedSend, LinkClient
 from tests.conftest_mqtt import Mosquitto, client, mosquitto  # noqa: F401 (fixtures)
@@ -110,7 +110,7 @@ def test_a_coalesced_write_stops_at_a_disconnect() -> None:
 def test_a_large_batch_is_handled_in_slices_with_loop_turns_between() -> None:
     """A batch of many frames gives the loop a turn every ``slice_frames`` frames; stopping
     mid-batch still handles the rest (``_drain``); the telemetry is that of one whole pass."""
-    frames = [(0, m) for tick in rig_ticks(1.0) for m in tick]
+    frames: Batch = [(0, m) for tick in rig_ticks(1.0) for m in tick]
     assert len(frames) > 200
     url = BrokerURL(host=LOOPBACK, port=1)  # never connected: handling needs no broker
 

@@ -13,7 +13,7 @@ from odocan.host.protocol.commands import CommandEncoder, CommandRejected
 from odocan.host.protocol.e2e import E2EMonitor
 from odocan.sim import robot
 from odocan.sim.contract import DBC_PATH, database
-from odocan.sim.fleet import Fleet, FleetConfig
+from odocan.sim.fleet import Fleet, FleetConfig, frame_fields
 from odocan.sim.rig import LockstepRig, RigConfig
 from tests.dbc_typed import numbers
 
@@ -122,6 +122,33 @@ def test_telemetry_of_a_lockstep_run_matches_the_reference() -> None:
     assert hz["WHEEL_ENCODERS"] == pytest.approx(100.0)  # 500 frames over the 5 s "window"
 
 
+def test_telemetry_takes_the_fleets_frame_tuples_as_it_takes_messages() -> None:
+    """``feed_frame`` of the transport's ``(t, id, payload)`` tuples (the fleet's path, no
+    ``Message`` built) publishes what ``feed`` publishes for the same frames as Messages."""
+    with Fleet(FleetConfig(robots=1, robot=PMIR, seed=8)) as fleet:
+        frames = []
+        for k in range(300):
+            fleet.step(k)
+            frames += [f for _, f in fleet.take_batch()]
+    assert all(type(f) is tuple for f in frames)  # the lean path really carried them
+    by_tuple, by_message = (RobotTelemetry("r", GEOMETRY, "exact", counter_bits=PMIR.counter_bits)
+                            for _ in range(2))
+    out_tuple, out_message = [], []
+    for frame in frames:
+        t_s, can_id, data = frame_fields(frame)
+        out_tuple += by_tuple.feed_frame(frame)
+        out_message += by_message.feed(
+            can.Message(timestamp=t_s, arbitration_id=can_id, is_extended_id=False, data=data))
+
+    def unstamped(out: list[tuple[str, dict[str, object]]]) -> list[tuple[str, object]]:
+        return [(leaf, {k: v for k, v in p.items() if k != "unix_s"}) for leaf, p in out]
+
+    assert len([leaf for leaf, _ in out_tuple if leaf == "error"]) >= 25  # 10 Hz for 3 s
+    assert unstamped(out_tuple) == unstamped(out_message)
+    assert by_tuple.frames == by_message.frames
+    assert not by_tuple.rejected
+
+
 @pytest.mark.parametrize(("index", "start_tick", "truth_phase"), [(1, 1, 0), (2, 0, 2)])
 def test_a_fleet_robot_sends_the_lockstep_rigs_frames(
     index: int, start_tick: int, truth_phase: int
@@ -132,7 +159,7 @@ def test_a_fleet_robot_sends_the_lockstep_rigs_frames(
         fleet_frames: list[bytes] = []
         for k in range(120 + start_tick):
             fleet.step(k)
-            fleet_frames += [bytes(m.data) for i, m in fleet.take_batch() if i == index]
+            fleet_frames += [frame_fields(f)[2] for i, f in fleet.take_batch() if i == index]
     rig_frames: list[bytes] = []
 
     class Keep(can.Listener):

@@ -1,7 +1,8 @@
 """CAN <-> MQTT for any number of robots (asyncio + aiomqtt; python-can on the CAN side).
 
-Frames reach the bridge as batches of ``(robot index, can.Message)`` in a bounded
-``asyncio.Queue``:
+Frames reach the bridge as batches of ``(robot index, frame)`` in a bounded ``asyncio.Queue``, a
+frame being a ``can.Message`` or, from the lockstep fleet, the ``(t, id, payload)`` tuple its
+transport queued (``sim.framebatch.Received``: no ``Message`` built per frame):
 
 * from a live bus, ``BusReader`` runs python-can's blocking ``recv`` in a thread and hands each
   batch to the event loop with ``loop.call_soon_threadsafe`` (the only thread crossing);
@@ -39,9 +40,11 @@ from odocan.host.mqtt.link import RobotLink, Verdict
 from odocan.host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
 from odocan.host.protocol.commands import Command, CommandEncoder, CommandRejected, command_id
 from odocan.host.protocol.secoc import SecocSigner
+from odocan.sim.framebatch import Received
 
 log = logging.getLogger(__name__)
-Batch = list[tuple[int, can.Message]]
+# (robot index, frame): a live bus's frames are Messages, the lockstep fleet's mostly DataFrames
+Batch = list[tuple[int, Received]]
 
 
 @dataclass(frozen=True)
@@ -157,6 +160,14 @@ class _Robot:
             )
 
 
+def _id_and_data(frame: Received) -> tuple[int, bytes]:
+    """A frame's identifier and payload, a ``DataFrame`` tuple's or a ``Message``'s."""
+    if type(frame) is tuple:
+        return frame[1], frame[2]
+    assert isinstance(frame, can.Message)
+    return frame.arbitration_id, bytes(frame.data)
+
+
 def _result(
     cmd_id: Any, name: str, result: str, reason: str | None, **extra: Any
 ) -> Publication:
@@ -258,16 +269,18 @@ class Bridge:
     def _handle(self, batch: Batch) -> None:
         robots = self.robots
         self.frames_in += len(batch)
-        for index, msg in batch:
+        for index, frame in batch:
             robot = robots[index]
             signer = robot.endpoint.signer
-            if signer is not None and msg.arbitration_id == signer.freshness_frame_id:
-                signer.on_freshness(bytes(msg.data))  # a bad frame is refused by its E2E check
+            if signer is not None:
+                can_id, data = _id_and_data(frame)
+                if can_id == signer.freshness_frame_id:
+                    signer.on_freshness(data)  # a bad frame is refused by its E2E check
             try:
-                publications = robot.telemetry.feed(msg)
+                publications = robot.telemetry.feed_frame(frame)
             except Exception as exc:  # a defect must not stop the bridge: count, log once
                 if self.frames_failed == 0:
-                    log.warning("%s: frame %s failed: %r", robot.endpoint.name, msg, exc,
+                    log.warning("%s: frame %s failed: %r", robot.endpoint.name, frame, exc,
                                 exc_info=log.isEnabledFor(logging.DEBUG))
                 self.frames_failed += 1
                 continue

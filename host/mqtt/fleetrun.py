@@ -4,7 +4,8 @@
 the fleet's frames offered to it each tick), runs for ``duration_s`` and returns the report:
 
 ```
-{"robots": N, "transport": "odocan" | "virtual", "duration_s": ..., "period_s": 0.01,
+{"robots": N, "transport": "odocan" | "virtual", "firmware": "python" | "c",
+ "duration_s": ..., "period_s": 0.01,
  "deadline_miss_ratio": ...,
  "ticks": ..., "late_ticks": ..., "skipped_releases": ..., "max_lateness_ms": ...,
  "broker": "mqtt://127.0.0.1:PORT" | null, "embedded_broker": bool,
@@ -236,6 +237,7 @@ def _report(
         "robots": run.fleet.robots,
         "first_robot": fleet.names[0],
         "transport": run.fleet.transport,
+        "firmware": run.fleet.firmware,
         "duration_s": run.duration_s,
         "period_s": stats.period_s,
         "deadline_miss_ratio": stats.deadline_miss_ratio,

@@ -1,7 +1,9 @@
 """One robot's frames -> the telemetry the bridge publishes (synchronous, no I/O).
 
 ``RobotTelemetry.feed(msg)`` takes every frame of one robot's bus in bus order and returns the
-publications it makes due, as ``(leaf, payload)`` pairs (``host.mqtt.topics``):
+publications it makes due, as ``(leaf, payload)`` pairs (``host.mqtt.topics``); ``feed_frame``
+takes the lockstep fleet's frames as its transport queues them (``(t, id, payload)`` tuples, no
+``can.Message`` per frame):
 
 * every frame is E2E-checked (``host.e2e.E2EMonitor``: the DBC's E2EDataIDs, Profile 2 CRC and
   sequence) and decoded with cantools (its decode compiled: ``host.mqtt.livedecode``); frames
@@ -44,6 +46,7 @@ from odocan.host.mqtt.livedecode import LiveDecoder
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor, e2e_messages
 from odocan.sim.contract import database
+from odocan.sim.framebatch import Received
 
 Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
@@ -111,13 +114,26 @@ class RobotTelemetry:
         if msg.is_error_frame or msg.is_remote_frame:
             self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
             return []
-        can_id, data = msg.arbitration_id, bytes(msg.data)
+        return self._feed(msg.timestamp, msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
+
+    def feed_frame(self, frame: Received) -> list[Publication]:
+        """``feed`` of a frame as the lockstep transport queues it (``sim.framebatch``): a
+        ``DataFrame`` ``(t s, 11-bit id, payload)`` is taken as it is (no ``Message`` built), a
+        ``Message`` goes to ``feed``."""
+        if type(frame) is tuple:
+            t_s, can_id, data = frame
+            return self._feed(t_s, can_id, data, False)
+        assert isinstance(frame, can.Message)
+        return self.feed(frame)
+
+    def _feed(self, t_s: float, can_id: int, data: bytes, extended: bool) -> list[Publication]:
+        """One data frame given by its fields (bus timestamp ``t_s`` s, identifier, payload)."""
         message = self._by_id.get(can_id)
-        if message is not None and can_id == self._status_id and not msg.is_extended_id:
-            self._watch_source(message, data, msg.timestamp)  # before E2E: a reboot fails it
-        status = self.e2e.check(can_id, data, extended=msg.is_extended_id,
-                                timestamp_s=msg.timestamp)  # the window widens with time
-        self.tracker.advance(msg.timestamp)  # settles the pose halves heard half a cycle before
+        if message is not None and can_id == self._status_id and not extended:
+            self._watch_source(message, data, t_s)  # before E2E: a reboot fails it
+        status = self.e2e.check(can_id, data, extended=extended,
+                                timestamp_s=t_s)  # the window widens with time
+        self.tracker.advance(t_s)  # settles the pose halves heard half a cycle before
         if message is None or status not in ACCEPTED_E2E:
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
             return self._samples()
@@ -134,7 +150,7 @@ class RobotTelemetry:
         if handler is None:
             return self._samples()
         assert isinstance(signals, dict)
-        publications: list[Publication] = handler(self, signals, msg.timestamp)
+        publications: list[Publication] = handler(self, signals, t_s)
         return publications + self._samples()
 
     def _watch_source(self, message: Any, data: bytes, t_s: float) -> None:
