@@ -74,6 +74,7 @@ class EncoderInput:
         self.tick_budget = 0  # _periods_since_sample at the start of this tick
         self._tick_late = 0  # u32: periods this tick came after its due time
         self._this_step_periods = 1  # u32: the sample periods of the step being accepted
+        self._overflows_at_accept = 0  # u32: overflows_before when the last frame was accepted
 
     # --- once per tick, before the drain ---
 
@@ -102,7 +103,7 @@ class EncoderInput:
         wire = (frame.left_count, frame.right_count)
         counts = self._extend_counters(wire)
         periods = self._step_periods(frame.counter)
-        if not self._plausible(self._counts_prev, counts, periods):
+        if not self._plausible(self._counts_prev, counts, self._bound_periods(periods)):
             self._on_implausible(frame.counter, wire, counts)
             return
         self._resync_first = None
@@ -123,6 +124,7 @@ class EncoderInput:
         self._samples_stale = time_lost_now
         if not time_lost_now:
             self._periods_since_sample = 0
+        self._overflows_at_accept = self._health.overflows_before
         self._health.encoder_accepted()
 
     def _extend_counters(self, wire: Counts) -> Counts:
@@ -162,6 +164,20 @@ class EncoderInput:
         if budget <= advance:
             return advance
         return advance + (((budget - advance) >> 4) << 4)
+
+    def _bound_periods(self, periods: int) -> int:
+        """The periods the plausibility bound allows this step: ``periods``, or STEP_PERIODS_MAX
+        when the mailbox may have dropped frames between the last accepted frame and this one
+        (drops seen at a tick's start from the accepting tick on, before this frame's tick: a
+        full ring drops the newest, so they came after that tick's frames). A queued burst (a
+        babbler held the bus) that overflows the mailbox can drop 16 or more encoder frames,
+        which the 4-bit COUNTER cannot count (E2E takes the 17th for the next one) and firmware
+        time cannot see (they all waited): bounded by ``periods`` such a step was refused and the
+        next frames taken for a counter restart (COUNTER_RESET, the dropped distance never
+        integrated). The counters are absolute, so the wide step is exact."""
+        if self._overflows_at_accept != self._health.overflows_before:
+            return STEP_PERIODS_MAX
+        return periods
 
     def step_bounds(self) -> tuple[int, int]:
         """Per wheel, the most counts one encoder period can hold at ``max_wheel_speed_mm_s``:

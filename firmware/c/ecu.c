@@ -77,6 +77,7 @@ static void extend_counters(const struct odom_ecu *ecu, const uint32_t wire[2],
 static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
                             const uint32_t counts[2]);
 static uint32_t step_periods(const struct odom_ecu *ecu, uint8_t counter);
+static uint32_t bound_periods(const struct odom_ecu *ecu, uint32_t periods);
 static void step_bounds(struct odom_ecu *ecu);
 static bool plausible(const struct odom_ecu *ecu, const uint32_t prev[2], const uint32_t counts[2],
                       uint32_t periods);
@@ -291,6 +292,7 @@ static uint32_t advance_time(struct odom_ecu *ecu, bool timed, uint32_t now_us)
 static void check_overflows(struct odom_ecu *ecu)
 {
     uint32_t overflows = ecu->mailbox.overflows;
+    ecu->overflows_before = ecu->overflows_seen;
     if (overflows != ecu->overflows_seen) {
         ecu->overflows_seen = overflows;
         degrade(ecu, REASON_MAILBOX_OVERFLOW);
@@ -346,7 +348,8 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
     uint32_t counts[2];
     extend_counters(ecu, wire, counts);
     uint32_t periods = step_periods(ecu, counter);
-    if (!plausible(ecu, ecu->counts_prev_valid ? ecu->counts_prev : NULL, counts, periods)) {
+    if (!plausible(ecu, ecu->counts_prev_valid ? ecu->counts_prev : NULL, counts,
+                   bound_periods(ecu, periods))) {
         on_implausible(ecu, counter, wire, counts);
         return;
     }
@@ -367,6 +370,7 @@ static void accept_encoders(struct odom_ecu *ecu, uint8_t counter, const uint32_
     ecu->enc_prev_counter = counter;
     ecu->enc_counter = counter;
     ecu->ticks_since_encoder = 0u;
+    ecu->enc_overflows_at_accept = ecu->overflows_before;
     ecu->samples_stale = ecu->time_lost_now;
     if (!ecu->time_lost_now) {
         ecu->periods_since_sample = 0u;
@@ -430,6 +434,19 @@ static uint32_t step_periods(const struct odom_ecu *ecu, uint8_t counter)
         return advance;
     }
     return advance + (((budget - advance) >> 4) << 4);
+}
+
+/* The periods the plausibility bound allows this step (encoders.py _bound_periods): periods, or
+ * STEP_PERIODS_MAX when the mailbox may have dropped frames between the last accepted frame and
+ * this one (drops seen at a tick's start from the accepting tick on, before this frame's tick: a
+ * full ring drops the newest). A burst that overflows the mailbox can drop 16 or more encoder
+ * frames, which the 4-bit COUNTER cannot count: the counters are absolute, the wide step exact. */
+static uint32_t bound_periods(const struct odom_ecu *ecu, uint32_t periods)
+{
+    if (ecu->enc_overflows_at_accept != ecu->overflows_before) {
+        return STEP_PERIODS_MAX;
+    }
+    return periods;
 }
 
 /* Per wheel, the most counts one encoder period can hold at max_wheel_speed_mm_s:
