@@ -229,13 +229,22 @@ def _queued(
         chained = (k > 0 and named[k - 1] >= 0
                    and (int(own_counter[k] - own_counter[k - 1]) & 0xF) == 1)
         made_s = made_s + send_s if chained else np.nan
-        named[k] = _named_by(enc, int(named[k - 1]), int(enc_counter[k]), made_s, int(index[k]))
+        named[k] = _named_by(enc, int(named[k - 1]), int(enc_counter[k]), made_s, int(index[k]),
+                             send_s)
     return named
 
 
-def _named_by(enc: Encoders, floor: int, enc_counter: int, made_s: float, index: int) -> int:
+def _named_by(
+    enc: Encoders, floor: int, enc_counter: int, made_s: float, index: int, send_s: float
+) -> int:
     """The latest accepted encoder frame at or after ``floor`` with COUNTER ``enc_counter``, on
-    the bus by ``made_s`` and before frame ``index`` of the log; -1 when none (or no time)."""
+    the bus by ``made_s`` and before frame ``index`` of the log; -1 when none (or no time), and
+    -1 when the name is ambiguous: another accepted frame of that COUNTER (16 before or after
+    it, at or after ``floor``, before ``index``) came within half a send period (``send_s``) of
+    it on the bus. That happens when the encoder frames came out in a burst too (about 240 us
+    apart at 500 kbit/s, 16 of them in 3.8 ms; about 1 ms apart at 125 kbit/s, 16 ms): ``made_s``
+    is good to a fraction of a send period, and a firmware whose mailbox overflowed had an
+    earlier frame of that COUNTER than the latest on the bus, so time cannot tell which it had."""
     if np.isnan(made_s):
         return -1
     last = min(int(np.searchsorted(enc.timestamp_s, made_s, side="right")),
@@ -246,6 +255,11 @@ def _named_by(enc: Encoders, floor: int, enc_counter: int, made_s: float, index:
     found = int(np.searchsorted(enc.seq, target))
     if target < enc.seq[floor] or found >= len(enc.seq) or enc.seq[found] != target:
         return -1
+    for other in (target - 16, target + 16):
+        j = int(np.searchsorted(enc.seq, other))
+        if (j < len(enc.seq) and enc.seq[j] == other and j >= floor and enc.index[j] < index
+                and abs(float(enc.timestamp_s[j] - enc.timestamp_s[found])) < 0.5 * send_s):
+            return -1
     return found
 
 
