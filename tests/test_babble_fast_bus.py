@@ -25,11 +25,16 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from odocan.firmware.errors import ErrorFlag
+import pytest
+
+from odocan.firmware import frames as fr
+from odocan.firmware.errors import ErrorFlag, Reason, State
+from odocan.firmware.hal import MAILBOX_SLOTS
 from odocan.sim.faults import FaultSpec
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests.test_babble_firmware import _analyze, _biased_x
+from tests.test_ecu import Rig
 
 BABBLE = "babble=6000:0x050:2:0.5,seed=0"
 DURATION_S = 6.0
@@ -106,3 +111,56 @@ def test_at_500_kbit_the_judge_leaves_out_the_poses_it_cannot_pair(tmp_path: Pat
     print(f"wrong: exit {code}, {wrong_report['onboard_vs_reference']}")
     assert code == 1
     assert wrong_report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] > 1.5e-4
+
+
+STEADY = (10, 12)  # counts per period of the left and right wheel: a steady arc
+
+
+def _burst_rig(dropped: int) -> tuple[Rig, list[tuple[int, int, int]]]:
+    """An ECU fed one frame a tick, then, in one tick, ``MAILBOX_SLOTS + dropped`` frames back
+    to back (the mailbox keeps 32, drops the rest), then one a tick again; after each later tick:
+    (LINEAR_VEL mm/s, ENC_E2E_LOST, frames implausible)."""
+    rig = Rig()
+    rig.drive(20, *STEADY)
+    for _ in range(MAILBOX_SLOTS + dropped):
+        rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, rig.encoders(*STEADY))
+    rig.ecu.tick()
+    after = []
+    for _ in range(40):
+        rig.drive(1, *STEADY)
+        enc = rig.ecu.encoders
+        after.append((rig.ecu.twist.linear_mm_s, enc.rx.lost_frames, enc.frames_implausible))
+    return rig, after
+
+
+@pytest.mark.parametrize("dropped", [1, 11, 14, 15, 16, 17, 31, 40])
+def test_after_frames_its_mailbox_dropped_the_twist_is_right_and_every_one_is_counted(
+    dropped: int,
+) -> None:
+    """The frame after a run the mailbox dropped carries the counts of all of them: the
+    firmware takes it at once (its E2E window widened fully), as a step of ``dropped`` + 1
+    periods (the drop count, not the 4-bit COUNTER, gives the whole cycles), so ODOM_TWIST stays
+    the steady speed, and ENC_E2E_LOST counts every dropped frame. Before, the window stayed
+    narrow: it refused the frames until the COUNTER came round and took a 17-period step for one
+    period (17 times the speed), or (16 dropped) took the 17th frame as the next; and
+    ENC_E2E_LOST counted none of it (the judge allowed them nothing)."""
+    steady = Rig()  # every frame, one a tick
+    steady.drive(20 + MAILBOX_SLOTS + dropped + 40, *STEADY)
+    rig, after = _burst_rig(dropped)
+    speed = steady.ecu.twist.linear_mm_s
+    assert speed > 0
+    assert [a[0] for a in after] == [speed] * len(after)
+    # After 15 (mod 16) dropped, the next frame has the last accepted COUNTER: E2E refuses it as
+    # REPEATED, and the step that merges it is one frame longer.
+    refused = 1 if dropped % 16 == 15 else 0
+    assert after[-1][1:] == (dropped + refused, 0)
+    assert rig.ecu.encoders.rx.count_repeated == refused
+    assert rig.ecu.mailbox.overflows == dropped
+    assert not rig.ecu.errors.bits & (ErrorFlag.COUNTER_RESET | ErrorFlag.IMPLAUSIBLE_STEP)
+    assert rig.state() is State.OK  # recovered from MAILBOX_OVERFLOW
+    assert rig.ecu.reason is Reason.NONE
+    # the pose: the same arc as with every frame (the exact integrator's steps merge exactly)
+    odo, ref = rig.ecu.odometry, steady.ecu.odometry
+    assert odo.heading_bam64 == ref.heading_bam64
+    assert abs(odo.x_q40_m - ref.x_q40_m) < 1 << 12  # 4 nm
+    assert abs(odo.y_q40_m - ref.y_q40_m) < 1 << 12
