@@ -17,7 +17,9 @@ plausibility bound is STEP_PERIODS_MAX periods (``EncoderInput._bound_periods``)
 
 from __future__ import annotations
 
+import itertools
 import json
+import math
 import subprocess
 import sys
 import uuid
@@ -25,16 +27,23 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorFlag, Reason, State
 from odocan.firmware.hal import MAILBOX_SLOTS
+from odocan.host.judge.compare import _OneSteps, _worst_runs, drop_errors, run_errors
+from odocan.host.judge.samples import Encoders
 from odocan.sim.faults import FaultSpec
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
+from tests.independent_checker import Robot, _Odometry
 from tests.test_babble_firmware import _analyze, _biased_x
 from tests.test_ecu import Rig
+from tests.test_judge_campaign import profile_of, robots
 
 BABBLE = "babble=6000:0x050:2:0.5,seed=0"
 DURATION_S = 6.0
@@ -63,10 +72,10 @@ def test_a_burst_that_overflows_the_mailbox_is_no_counter_restart() -> None:
     assert implausible == 0
 
 
-def _run(tmp_path: Path, bitrate: int) -> tuple[Path, dict[str, Any]]:
+def _run(tmp_path: Path, bitrate: int, robot: str = "pmir") -> tuple[Path, dict[str, Any]]:
     log, report = tmp_path / f"b{bitrate}.log", tmp_path / f"b{bitrate}.json"
     subprocess.run(
-        [sys.executable, "-m", "odocan", "run", "-b", str(bitrate), "--robot", "pmir",
+        [sys.executable, "-m", "odocan", "run", "-b", str(bitrate), "--robot", robot,
          "--seed", "0", "--duration", str(DURATION_S), "--faults", BABBLE,
          "--log", str(log), "--report", str(report)],
         capture_output=True, text=True, timeout=300, check=False,
@@ -91,26 +100,79 @@ def test_the_correct_firmware_passes_at_1_mbit_and_a_3_lsb_wrong_one_fails(
     assert wrong_report["passed"] is False
 
 
-def test_at_500_kbit_the_judge_leaves_out_the_poses_it_cannot_pair(tmp_path: Path) -> None:
+def _analyze_as(log: Path, tmp_path: Path, robot: str) -> tuple[int, dict[str, Any]]:
+    report_path = tmp_path / f"{log.stem}.json"
+    done = subprocess.run(
+        [sys.executable, "-m", "odocan", "analyze", str(log), "--robot", robot,
+         "--report", str(report_path)],
+        capture_output=True, text=True, timeout=300, check=False,
+    )
+    return done.returncode, json.loads(report_path.read_text())
+
+
+def _no_stall(report: dict[str, Any]) -> None:
+    """The firmware integrated every frame it drained: no stall, the reference never placed
+    again; the frames its mailbox dropped are reported and allowed."""
+    assert report["samples"]["reference_restarts"] == 0
+    assert {e["kind"] for e in report["events"]} == {"encoder_frames_lost_on_board"}
+
+
+def test_at_500_kbit_a_correct_firmware_passes_and_a_wrong_one_fails(tmp_path: Path) -> None:
     """At 500 kbit/s the queued encoder frames come out about 240 us apart, so one ENC_COUNTER
     recurs every 3.8 ms of bus time: the pose the firmware made at 3.41 s named encoder frame 277
     (its mailbox had dropped the later ones) while frame 293 of the same COUNTER was on the bus
     by the time the judge estimated it was made. Paired with 293 it was 32 mm off, a FAIL of a
-    correct firmware; now a name that time cannot tell from one 16 frames away is left out. The
-    pose is within one LSB of the reference; the same log with every X 3 LSB off after the
-    babble began still FAILs on the position. (The twist of this run still FAILs: the firmware
-    took 17-period steps for one period, see docs/bus.md.)"""
+    correct firmware; now a name that time cannot tell from one 16 frames away is left out.
+    ODOM_TWIST was 17 times too fast after mailbox drops (fixed in the firmware, above).
+
+    And the judge took the firmware for stalled: its poses named frame 200 for 1.4 s (queued,
+    let out at 3.43 s) and the first one after them came 1.48 s after the first, with 7 encoder
+    frames on time just before: the reference's position was placed again at 3.38 s, which
+    hid any offset from there on (X 10 mm off from 3.5 s PASSed). Now the silence counts from
+    the last pose sent, and only encoder frames that came on time count as heard. The pose is
+    within one LSB of the reference beyond the allowance; 3 LSB off from the babble on, and 10 mm
+    off from 3.5 s, FAIL."""
     log, report = _run(tmp_path, 500_000)
     print(f"\n{report['onboard_vs_reference']}\n{report['samples']}")
+    assert report["passed"] is True
+    assert report["onboard_twist_vs_reference"]["passed"] is True
     assert report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] <= 1e-4
     assert report["onboard_vs_reference"]["max_heading_error_rad"] <= 1e-4
     assert report["samples"]["onboard"] > 200
+    _no_stall(report)
+    for name, start_s, lsb in (("early", 2.0, 3), ("late", 3.5, 100)):
+        wrong = tmp_path / f"{name}.log"
+        assert _biased_x(log, wrong, lambda k, t, s=start_s: t > s, lsb) > 100
+        code, wrong_report = _analyze(wrong, tmp_path)
+        print(f"{name}: exit {code}, {wrong_report['onboard_vs_reference']}")
+        assert code == 1
+        assert wrong_report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] > (
+            lsb * 1e-4 / 2
+        )
+
+
+def test_at_1_mbit_kobuki_passes_on_the_allowance_for_a_run_of_26_lost_frames(
+    tmp_path: Path,
+) -> None:
+    """kobuki at 1 Mbit/s: the mailbox dropped frame 201 and then 25 in a row (247 .. 271), which
+    the firmware took as one step: 0.65 mm from the fine reference on its curve, far more than
+    the sum of 26 single-frame merge errors (6 um). The judge used to hide it behind a stall
+    restart (with any offset after it); the allowance now takes the worst placement of the lost
+    frames in runs (``compare.loss_allowance``), from the encoder frame the firmware had when it
+    made the status page before (that page was queued: ``compare.firmware_losses``). 3 LSB off
+    from the babble on: FAIL."""
+    log, report = _run(tmp_path, 1_000_000, "kobuki")
+    vs_ref = report["onboard_vs_reference"]
+    print(f"\n{vs_ref}\n{report['events']}")
+    assert report["passed"] is True
+    _no_stall(report)
+    assert vs_ref["max_position_error_m"] > 3e-4  # the merged run is real, the allowance counts
+    assert vs_ref["max_position_error_m"] <= vs_ref["loss_allowance_m"] + 1e-4
     wrong = tmp_path / "wrong.log"
     assert _biased_x(log, wrong, lambda k, t: t > 2.0, 3) > 100
-    code, wrong_report = _analyze(wrong, tmp_path)
+    code, wrong_report = _analyze_as(wrong, tmp_path, "kobuki")
     print(f"wrong: exit {code}, {wrong_report['onboard_vs_reference']}")
     assert code == 1
-    assert wrong_report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] > 1.5e-4
 
 
 STEADY = (10, 12)  # counts per period of the left and right wheel: a steady arc
@@ -164,3 +226,86 @@ def test_after_frames_its_mailbox_dropped_the_twist_is_right_and_every_one_is_co
     assert odo.heading_bam64 == ref.heading_bam64
     assert abs(odo.x_q40_m - ref.x_q40_m) < 1 << 12  # 4 nm
     assert abs(odo.y_q40_m - ref.y_q40_m) < 1 << 12
+
+
+def _encoders(robot: Robot, steps: list[tuple[int, int]]) -> Encoders:
+    """Encoder frames, one per period, carrying the counts of ``steps`` from 0."""
+    wire = 1 << min(robot.counter_bits, 24)
+    left = np.concatenate(([0], np.cumsum([s[0] for s in steps])))
+    right = np.concatenate(([0], np.cumsum([s[1] for s in steps])))
+    n = len(left)
+    return Encoders(index=np.arange(n), counter=np.arange(n) & 0xF, seq=np.arange(n),
+                    left=left % wire, right=right % wire,
+                    timestamp_s=np.arange(n, dtype=np.float64) * 0.01, cycle_s=0.01)
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    robot=robots(),
+    integrator=st.sampled_from(["euler", "rk2", "exact"]),
+    steps=st.lists(st.tuples(st.integers(-40, 40), st.integers(-40, 40)), min_size=3,
+                   max_size=24),
+    data=st.data(),
+)
+def test_the_merge_error_of_a_run_of_lost_frames_is_the_checkers(
+    robot: Robot, integrator: str, steps: list[tuple[int, int]], data: st.DataObject
+) -> None:
+    """``run_errors(j, r)``: how far the pose ends when frames j .. j + r - 1 are lost (the
+    r + 1 steps taken as one), against the checker's float64 odometry driving the same counts
+    both ways; r = 1 is ``drop_errors``."""
+    enc = _encoders(robot, steps)
+    n = len(enc.seq)
+    j = data.draw(st.integers(1, n - 2), label="first lost frame")
+    r = data.draw(st.integers(1, n - 1 - j), label="frames lost")
+    got = float(run_errors(_OneSteps.of(enc, profile_of(robot), integrator), np.array([j]), r)[0])
+    every, lost = _Odometry(robot, integrator), _Odometry(robot, integrator)
+    merged = [0, 0]
+    for k, (d_left, d_right) in enumerate(steps):
+        every.step(d_left, d_right)
+        merged = [merged[0] + d_left, merged[1] + d_right]
+        if j - 1 <= k < j + r - 1:
+            continue  # frame k + 1 lost: its step waits for the next one
+        lost.step(*merged)
+        merged = [0, 0]
+    want = math.hypot(every.x - lost.x, every.y - lost.y)
+    scale = sum(abs(a) + abs(b) for a, b in steps) * every.m_left
+    assert abs(got - want) <= 1e-9 * max(scale, 1e-3), (got, want)
+    if r == 1:
+        assert got == pytest.approx(drop_errors(enc, profile_of(robot), integrator)[j], abs=1e-12)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    robot=robots(),
+    steps=st.lists(st.tuples(st.integers(-40, 40), st.integers(-40, 40)), min_size=4,
+                   max_size=11),
+    data=st.data(),
+)
+def test_the_loss_allowance_is_the_worst_placement_of_the_lost_frames(
+    robot: Robot, steps: list[tuple[int, int]], data: st.DataObject
+) -> None:
+    """``_worst_runs``: the largest sum of run errors over every set of at most n lost frames
+    in the span (named frames never lost; a run error need not grow with the run, so at most n
+    is the safe side), by brute force over all the sets: runs of consecutive lost frames merge
+    into one step each."""
+    enc = _encoders(robot, steps)
+    n_frames = len(enc.seq)
+    one = _OneSteps.of(enc, profile_of(robot), "rk2")
+    first = data.draw(st.integers(0, n_frames - 2), label="first")
+    last = data.draw(st.integers(first, n_frames - 1), label="last")
+    lost_ok = np.array(data.draw(st.lists(st.booleans(), min_size=n_frames,
+                                          max_size=n_frames), label="may be lost"))
+    n = data.draw(st.integers(0, 5), label="lost")
+    candidates = [k for k in range(max(first, 1), min(last, n_frames - 2) + 1) if lost_ok[k]]
+    best = 0.0
+    for size in range(min(n, len(candidates)) + 1):
+        for chosen in itertools.combinations(candidates, size):
+            total, k = 0.0, 0
+            while k < len(chosen):  # maximal runs of consecutive lost frames
+                end = k
+                while end + 1 < len(chosen) and chosen[end + 1] == chosen[end] + 1:
+                    end += 1
+                total += float(run_errors(one, np.array([chosen[k]]), end - k + 1)[0])
+                k = end + 1
+            best = max(best, total)
+    assert _worst_runs(one, lost_ok, first, last, n) == pytest.approx(best, rel=1e-12, abs=1e-15)

@@ -105,6 +105,7 @@ from odocan.host.judge.samples import (
     POSITION_LSB_M,
     REQUIRED,
     AnalysisError,
+    accepted_rows,
     after_stalls,
     encoder_frames,
     onboard_samples,
@@ -232,7 +233,8 @@ def _analyze_life(
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
     enc = encoder_frames(frames, accepted, decoder)
     onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc)
-    onboard, stalls = after_stalls(onboard, sent_s, enc)
+    pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
+    onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s)
     truth = truth_samples(frames, accepted, decoder, enc)
     if boot:
         power_up = saw_only_the_log(frames, accepted, decoder)

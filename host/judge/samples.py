@@ -322,11 +322,13 @@ def onboard_samples(
 
 
 def after_stalls(
-    onboard: Poses, sent_s: FloatArray, enc: Encoders
+    onboard: Poses, sent_s: FloatArray, enc: Encoders, pose_sent_s: FloatArray | None = None
 ) -> tuple[Poses, IntArray]:
     """Samples sent after the firmware was silent for ``SILENCE_CYCLES`` encoder cycles or more
-    while the log holds the encoder frames of that time (a stalled MCU, firmware/ecu.py
-    TIME_LOST): the first names a frame from before the silence
+    (no ODOM_POSE_Y at all: ``pose_sent_s``, every one's bus time, also those that name the
+    previous sample's frame again, e.g. queued ones the bus let out late) while the log holds
+    the encoder frames of that time, which came on time (``frames_on_time``; a stalled MCU,
+    firmware/ecu.py TIME_LOST): the first names a frame from before the silence
     (its backlog), which ENC_COUNTER cannot resolve, so it is left out; and the firmware took the
     frames it missed as one step, which a fine reference cannot follow on a curve, so the
     reference's position restarts (a segment, like a gap) at the encoder frame after the last
@@ -336,15 +338,22 @@ def after_stalls(
         return onboard, np.zeros(0, dtype=np.int64)
     order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
     sent = sent_s[order]
-    # Silent while the encoder frames went on (a log that lacks both is a recorder's gap).
-    # Half a cycle short of SILENCE_CYCLES: samples come in whole send periods, and time stamps
-    # summed in float must not decide (79.999... ms is 80 ms).
-    heard = np.searchsorted(enc.timestamp_s, sent[1:]) - np.searchsorted(enc.timestamp_s, sent[:-1])
+    # Silent while the encoder frames went on, on time (a log that lacks both is a recorder's
+    # gap; a bus that held both back let the frames out in a burst). Half a cycle short of
+    # SILENCE_CYCLES: samples come in whole send periods, and time stamps summed in float must
+    # not decide (79.999... ms is 80 ms).
+    talked = sent[:-1]  # the last pose the firmware sent before each next sample
+    if pose_sent_s is not None and len(pose_sent_s):
+        k = np.searchsorted(pose_sent_s, sent[1:], side="left") - 1
+        talked = np.maximum(talked, np.where(k >= 0, pose_sent_s[np.maximum(k, 0)], -np.inf))
+    heard = frames_on_time(
+        enc, np.searchsorted(enc.timestamp_s, talked), np.searchsorted(enc.timestamp_s, sent[1:])
+    )
     # A sample let out in a burst (queued_frames) was not silent: the bus held it back.
     queued = queued_frames(sent, enc.cycle_s)
     after = np.flatnonzero(
-        (np.diff(sent) >= (SILENCE_CYCLES - 0.5) * enc.cycle_s) & (heard >= SILENCE_CYCLES - 1)
-        & ~queued[1:]
+        (sent[1:] - talked >= (SILENCE_CYCLES - 0.5) * enc.cycle_s)
+        & (heard >= SILENCE_CYCLES - 1) & ~queued[1:]
     ) + 1
     keep = np.ones(len(sent_s), dtype=bool)
     keep[order[after]] = False
@@ -357,12 +366,28 @@ def after_stalls(
     return kept, breaks.astype(np.int64)
 
 
+def frames_on_time(enc: Encoders, lo: IntArray, hi: IntArray) -> IntArray:
+    """How many of the encoder frames ``lo[k]`` .. ``hi[k]`` - 1 (positions in ``enc``) came on
+    time: not ``queued_frames`` (a busy bus let them out in a burst). A firmware that missed
+    frames which came on time was silent or held (a stall); frames the bus held back came all
+    at once, and a firmware that drains them one by one in its next tick missed none of them
+    (its mailbox may drop some: ENC_E2E_LOST counts those, ``compare.firmware_losses``)."""
+    if enc.cycle_s is None:
+        return np.asarray(hi - lo, dtype=np.int64)
+    on_time = ~queued_frames(enc.timestamp_s, enc.cycle_s)
+    before = np.concatenate(([0], np.cumsum(on_time, dtype=np.int64)))
+    counted: IntArray = before[hi] - before[lo]
+    return counted
+
+
 def _frozen(onboard: Poses, enc: Encoders, queued: npt.NDArray[np.bool_]) -> IntArray:
     """Encoder frames after a sample whose next sample names a frame ``SILENCE_CYCLES`` or more
-    periods later while the log holds the frames between: the firmware held its pose on one frame
-    (it kept naming it) and then took the frames since as one step, as after a stall."""
+    periods later while the log holds ``SILENCE_CYCLES`` frames between that came on time
+    (``frames_on_time``): the firmware held its pose on one frame (it kept naming it) and then
+    took the frames since as one step, as after a stall."""
     seq = enc.seq[onboard.enc]
-    held = (np.diff(seq) >= SILENCE_CYCLES) & (np.diff(onboard.enc) >= SILENCE_CYCLES)
+    heard = frames_on_time(enc, onboard.enc[:-1] + 1, onboard.enc[1:] + 1)
+    held = (np.diff(seq) >= SILENCE_CYCLES) & (heard >= SILENCE_CYCLES)
     held &= ~queued[1:]  # a queued sample was made long before it was sent: not evidence
     frozen: IntArray = onboard.enc[:-1][held] + 1
     return frozen
