@@ -178,14 +178,21 @@ class EncoderInput:
 
     def _counter_advance(self, counter: int) -> int:
         """The frames from the last accepted one to this one (0: none accepted yet): the COUNTER
-        advance (mod 16, 1..16), or, when the mailbox dropped d WHEEL_ENCODERS frames between
-        them, the least advance above d with that COUNTER: d + 1 + ((advance - 1 - d) mod 16).
-        Exact while fewer than 16 frames were also lost on the wire or refused."""
+        advance (mod 16, 1..16), or, when the mailbox dropped d frames on the WHEEL_ENCODERS ID
+        between them, the advance with that COUNTER nearest to d + 1 (d - 7 .. d + 8 frames
+        between): d counts frames on the ID that were not the encoders' too (a babbler's, which
+        E2E would have refused: an advance of 17 for 1 would make the twist 17 times too low),
+        and frames may also have been lost on the wire or refused (REPEATED) after the drops.
+        Exact while those miscount d by less than 8; the plain advance when d is 0."""
         prev = self._enc_prev_counter
         if prev is None:
             return 0
         dropped = min(wrap_u32(self._dropped_before - self._dropped_at_accept), STEP_PERIODS_MAX)
-        return dropped + 1 + ((counter - prev - 1 - dropped) & COUNTER_MASK)
+        beyond = (counter - prev - 1 - dropped) & COUNTER_MASK
+        advance = dropped + 1 + beyond
+        if beyond >= COUNTER_VALUES // 2 and advance > COUNTER_VALUES:
+            return advance - COUNTER_VALUES  # d counted frames that were not the encoders'
+        return advance
 
     def _mailbox_dropped(self) -> bool:
         """The mailbox dropped frames (any, or an overrun) after the last accepted encoder

@@ -309,3 +309,36 @@ def test_the_loss_allowance_is_the_worst_placement_of_the_lost_frames(
                 k = end + 1
             best = max(best, total)
     assert _worst_runs(one, lost_ok, first, last, n) == pytest.approx(best, rel=1e-12, abs=1e-15)
+
+
+@pytest.mark.parametrize(("foreign", "real"), [(1, 0), (1, 1), (7, 0), (3, 17)])
+def test_a_babblers_frames_on_the_encoder_id_are_not_taken_for_dropped_encoder_frames(
+    foreign: int, real: int
+) -> None:
+    """A babbler on the WHEEL_ENCODERS ID fills the mailbox with frames E2E refuses (a bad CRC)
+    and the ring drops ``foreign`` more of them, with ``real`` encoder frames: the ISR counts
+    them all on the ID. Taken for encoder frames, one forged drop made the next step 17 periods
+    instead of 1 (the twist 17 times too low: kobuki 60 s under babble=8000 FAILed on it). The
+    advance nearest to the count is taken: the twist stays steady, ENC_E2E_LOST counts the real
+    drops only."""
+    steady = Rig()
+    steady.drive(60 + real, *STEADY)
+    rig = Rig()
+    rig.drive(20, *STEADY)
+    for _ in range(MAILBOX_SLOTS + foreign):
+        bad = bytearray(rig.encoders(*STEADY))
+        rig.counter = (rig.counter - 1) % 16  # not the motor controller's frame: no COUNTER
+        rig.left, rig.right = rig.left - STEADY[0], rig.right - STEADY[1]
+        bad[0] ^= 0xFF  # a CRC the E2E check refuses
+        rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, bytes(bad))
+    for _ in range(real):
+        rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, rig.encoders(*STEADY))  # dropped
+    rig.ecu.tick()
+    speeds = []
+    for _ in range(40):
+        rig.drive(1, *STEADY)
+        speeds.append(rig.ecu.twist.linear_mm_s)
+    assert speeds == [steady.ecu.twist.linear_mm_s] * len(speeds)
+    assert rig.ecu.encoders.rx.lost_frames == real
+    assert rig.ecu.encoders.frames_dropped == foreign + real
+    assert rig.ecu.odometry.heading_bam64 == steady.ecu.odometry.heading_bam64

@@ -442,9 +442,10 @@ static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
 }
 
 /* The frames from the last accepted one to this one (0: none accepted yet): the COUNTER advance
- * (mod 16, 1..16), or, when the mailbox dropped d WHEEL_ENCODERS frames between them, the least
- * advance above d with that COUNTER: d + 1 + ((advance - 1 - d) mod 16) (encoders.py
- * _counter_advance). At most STEP_PERIODS_MAX + 16. */
+ * (mod 16, 1..16), or, when the mailbox dropped d frames on the WHEEL_ENCODERS ID between them,
+ * the advance with that COUNTER nearest to d + 1 (d - 7 .. d + 8 frames between): d counts a
+ * babbler's frames on the ID too, and frames may also have been lost on the wire or refused
+ * after the drops (encoders.py _counter_advance). At most STEP_PERIODS_MAX + 16. */
 static uint32_t counter_advance(const struct odom_ecu *ecu, uint8_t counter)
 {
     int prev = ecu->enc_prev_counter;
@@ -455,7 +456,12 @@ static uint32_t counter_advance(const struct odom_ecu *ecu, uint8_t counter)
     if (dropped > STEP_PERIODS_MAX) {
         dropped = STEP_PERIODS_MAX;
     }
-    return dropped + 1u + (((uint32_t)counter - (uint32_t)prev - 1u - dropped) & COUNTER_MASK);
+    uint32_t beyond = ((uint32_t)counter - (uint32_t)prev - 1u - dropped) & COUNTER_MASK;
+    uint32_t advance = dropped + 1u + beyond;
+    if (beyond >= (COUNTER_MASK + 1u) / 2u && advance > COUNTER_MASK + 1u) {
+        return advance - (COUNTER_MASK + 1u); /* d counted frames that were not the encoders' */
+    }
+    return advance;
 }
 
 /* The mailbox dropped frames (any, or an overrun) after the last accepted encoder frame and
