@@ -24,6 +24,7 @@ import subprocess
 import sys
 import uuid
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -117,6 +118,11 @@ def _no_stall(report: dict[str, Any]) -> None:
     assert {e["kind"] for e in report["events"]} == {"encoder_frames_lost_on_board"}
 
 
+def _after(start_s: float, k: int, t_s: float) -> bool:
+    """``_biased_x``'s pick: every frame sent after ``start_s``."""
+    return t_s > start_s
+
+
 def test_at_500_kbit_a_correct_firmware_passes_and_a_wrong_one_fails(tmp_path: Path) -> None:
     """At 500 kbit/s the queued encoder frames come out about 240 us apart, so one ENC_COUNTER
     recurs every 3.8 ms of bus time: the pose the firmware made at 3.41 s named encoder frame 277
@@ -142,7 +148,7 @@ def test_at_500_kbit_a_correct_firmware_passes_and_a_wrong_one_fails(tmp_path: P
     _no_stall(report)
     for name, start_s, lsb in (("early", 2.0, 3), ("late", 3.5, 100)):
         wrong = tmp_path / f"{name}.log"
-        assert _biased_x(log, wrong, lambda k, t, s=start_s: t > s, lsb) > 100
+        assert _biased_x(log, wrong, partial(_after, start_s), lsb) > 100
         code, wrong_report = _analyze(wrong, tmp_path)
         print(f"{name}: exit {code}, {wrong_report['onboard_vs_reference']}")
         assert code == 1
