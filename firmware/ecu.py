@@ -127,6 +127,8 @@ class OdomEcu:
         """CAN receive interrupt: copy the frame into the mailbox (or count the overflow)."""
         if not self.mailbox.put(can_id, data):
             self.errors.set(ErrorFlag.MAILBOX_OVERFLOW)
+            if can_id == fr.WHEEL_ENCODERS_ID:
+                self.encoders.isr_dropped()
 
     def isr_rx_overrun(self) -> None:
         """CAN controller overrun interrupt: its receive FIFO dropped frames (counted as one

@@ -74,16 +74,34 @@ class EncoderInput:
         self.tick_budget = 0  # _periods_since_sample at the start of this tick
         self._tick_late = 0  # u32: periods this tick came after its due time
         self._this_step_periods = 1  # u32: the sample periods of the step being accepted
+        self._overflows_at_accept = 0  # u32: overflows_before when the last frame was accepted
+        # WHEEL_ENCODERS frames the mailbox dropped (u32, wrapping; the ISR writes it) and its
+        # value at this tick's start, at the previous tick's start, and when the last frame was
+        # accepted: the frames dropped between that frame and this tick's are the difference of
+        # the last two (a full ring drops the newest, so drops seen at a tick's start came after
+        # every frame that tick drains).
+        self.frames_dropped = 0
+        self._dropped_seen = 0
+        self._dropped_before = 0
+        self._dropped_at_accept = 0
 
     # --- once per tick, before the drain ---
 
+    def isr_dropped(self) -> None:
+        """ISR context: the mailbox was full and dropped a WHEEL_ENCODERS frame."""
+        self.frames_dropped = wrap_u32(self.frames_dropped + 1)
+
     def start_tick(self, periods: int) -> None:
         """``periods`` of firmware time passed: age the last sample, widen the E2E window (fully
-        after frames of unknown age, a stall's backlog) and fix this tick's period budget."""
+        after frames of unknown age, a stall's backlog, and after frames the mailbox dropped:
+        their count, not the window, bounds the step) and fix this tick's period budget."""
+        self._dropped_before = self._dropped_seen
+        self._dropped_seen = self.frames_dropped
         self.periods_since_frame = min(self.periods_since_frame + periods, STEP_PERIODS_MAX)
         self._periods_since_sample = min(self._periods_since_sample + periods, STEP_PERIODS_MAX)
         self._tick_late = periods - 1 if periods > 0 else 0  # its frames may have queued so long
-        widen = COUNTER_MASK if self._samples_stale else min(periods, COUNTER_MASK)
+        stale = self._samples_stale or self._mailbox_dropped()
+        widen = COUNTER_MASK if stale else min(periods, COUNTER_MASK)
         for _ in range(widen):
             self.rx.new_period()
         self.tick_budget = self._periods_since_sample
@@ -101,13 +119,24 @@ class EncoderInput:
         frame = fr.unpack_wheel_encoders(data)
         wire = (frame.left_count, frame.right_count)
         counts = self._extend_counters(wire)
-        periods = self._step_periods(frame.counter)
-        if not self._plausible(self._counts_prev, counts, periods):
+        advance = self._counter_advance(frame.counter)
+        periods = self._step_periods(advance)
+        if not self._plausible(self._counts_prev, counts, self._bound_periods(periods)):
             self._on_implausible(frame.counter, wire, counts)
             return
         self._resync_first = None
         self._this_step_periods = periods
+        self._count_cycles_dropped(frame.counter, advance)
         self._accept(frame.counter, wire, counts)
+
+    def _count_cycles_dropped(self, counter: int, advance: int) -> None:
+        """ENC_E2E_LOST (the E2E receiver's ``lost_frames``) also counts the whole COUNTER cycles
+        of frames the mailbox dropped, which the E2E check (the COUNTER mod 16) cannot see:
+        ``advance`` less the plain COUNTER advance."""
+        prev = self._enc_prev_counter
+        if prev is not None:
+            plain = ((counter - prev) & COUNTER_MASK) or COUNTER_VALUES
+            self.rx.lost_frames = wrap_u32(self.rx.lost_frames + advance - plain)
 
     def _accept(self, counter: int, wire: Counts, counts: Counts) -> None:
         """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
@@ -123,6 +152,8 @@ class EncoderInput:
         self._samples_stale = time_lost_now
         if not time_lost_now:
             self._periods_since_sample = 0
+        self._overflows_at_accept = self._health.overflows_before
+        self._dropped_at_accept = self._dropped_before
         self._health.encoder_accepted()
 
     def _extend_counters(self, wire: Counts) -> Counts:
@@ -145,23 +176,59 @@ class EncoderInput:
 
     # --- plausibility ---
 
-    def _step_periods(self, counter: int) -> int:
-        """The encoder periods between this frame's sample and the last accepted one's: the
-        COUNTER advance n (mod 16), plus the whole counter cycles that bring it nearest to the
-        periods since that frame was accepted (0 for a second frame in one tick; after a tick that
-        lost time, since the last sample before it), less the periods this tick came late (its
-        frames waited in the mailbox meanwhile). Exact while the two frames' queueing, beyond
-        that, differs by less than 8 periods (a frame held 15 ms lands two ticks late: the
-        nearest cycle, not the one below); n in a regular stream (1)."""
+    def _counter_advance(self, counter: int) -> int:
+        """The frames from the last accepted one to this one (0: none accepted yet): the COUNTER
+        advance (mod 16, 1..16), or, when the mailbox dropped d frames on the WHEEL_ENCODERS ID
+        between them, the advance with that COUNTER nearest to d + 1 (d - 7 .. d + 8 frames
+        between): d counts frames on the ID that were not the encoders' too (a babbler's, which
+        E2E would have refused: an advance of 17 for 1 would make the twist 17 times too low),
+        and frames may also have been lost on the wire or refused (REPEATED) after the drops.
+        Exact while those miscount d by less than 8; the plain advance when d is 0."""
         prev = self._enc_prev_counter
         if prev is None:
+            return 0
+        dropped = min(wrap_u32(self._dropped_before - self._dropped_at_accept), STEP_PERIODS_MAX)
+        beyond = (counter - prev - 1 - dropped) & COUNTER_MASK
+        advance = dropped + 1 + beyond
+        if beyond >= COUNTER_VALUES // 2 and advance > COUNTER_VALUES:
+            return advance - COUNTER_VALUES  # d counted frames that were not the encoders'
+        return advance
+
+    def _mailbox_dropped(self) -> bool:
+        """The mailbox dropped frames (any, or an overrun) after the last accepted encoder
+        frame and before this tick's frames."""
+        return self._overflows_at_accept != self._health.overflows_before
+
+    def _step_periods(self, advance: int) -> int:
+        """The encoder periods between this frame's sample and the last accepted one's: the
+        frames' advance n (``_counter_advance``; 0: none accepted yet, 1), plus the whole counter
+        cycles that bring it nearest to the periods since that frame was accepted (0 for a
+        second frame in one tick; after a tick that lost time, since the last sample before it),
+        less the periods this tick came late (its frames waited in the mailbox meanwhile). Exact
+        while the two frames' queueing, beyond that, differs by less than 8 periods (a frame
+        held 15 ms lands two ticks late: the nearest cycle, not the one below); n in a regular
+        stream (1)."""
+        if advance == 0:
             return 1
-        advance = ((counter - prev) & COUNTER_MASK) or COUNTER_VALUES
         since, late = self._periods_since_sample, self._tick_late
         budget = (since - late if since > late else 0) + COUNTER_VALUES // 2  # <= U16_MAX + 8
         if budget <= advance:
             return advance
         return advance + (((budget - advance) >> 4) << 4)
+
+    def _bound_periods(self, periods: int) -> int:
+        """The periods the plausibility bound allows this step: ``periods``, or STEP_PERIODS_MAX
+        when the mailbox may have dropped frames between the last accepted frame and this one
+        (drops seen at a tick's start from the accepting tick on, before this frame's tick: a
+        full ring drops the newest, so they came after that tick's frames). A queued burst (a
+        babbler held the bus) that overflows the mailbox can drop 16 or more encoder frames,
+        which the 4-bit COUNTER cannot count (E2E takes the 17th for the next one) and firmware
+        time cannot see (they all waited): bounded by ``periods`` such a step was refused and the
+        next frames taken for a counter restart (COUNTER_RESET, the dropped distance never
+        integrated). The counters are absolute, so the wide step is exact."""
+        if self._mailbox_dropped():
+            return STEP_PERIODS_MAX
+        return periods
 
     def step_bounds(self) -> tuple[int, int]:
         """Per wheel, the most counts one encoder period can hold at ``max_wheel_speed_mm_s``:

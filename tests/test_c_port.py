@@ -674,6 +674,13 @@ class _EcuSession:
             offset = self.rng.choice((-1, 1)) * self.rng.randrange(5_000, 20_000)
             self.counts[:] = [self.counts[0] + offset, self.counts[1] + offset]
             self.enc_counter = 15
+        if tick in (self.reboot_tick - 600, self.reboot_tick - 300):
+            # A bus that held the encoder frames back lets them out back to back: the mailbox
+            # keeps 32, drops the rest (18 and 35 with the period's own: whole COUNTER cycles).
+            for _ in range(49 if tick < self.reboot_tick - 300 else 66):
+                self.rx(frames.WHEEL_ENCODERS_ID, self.next_encoders(self.drive()))
+            for _ in range(3):  # a babbler's frames on the ID, dropped too (counted, not ours)
+                self.rx(frames.WHEEL_ENCODERS_ID, bytes([0xA5]) + self.rng.randbytes(7))
         if tick == self.reboot_tick + 20:  # a later cause must not hide COUNTER_RESET (a burst)
             for _ in range(40):
                 self.rx(0x555, bytes(8))

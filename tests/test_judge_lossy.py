@@ -5,7 +5,7 @@ drops encoder frames the log still has, takes two periods' counts as one step th
 (ODOM_STATUS: DEGRADED for MAILBOX_OVERFLOW, ENC_E2E_LOST growing) and its pose leaves the fine
 reference by a fraction of a millimetre over 10 s. The judge cannot tell which frames it lost,
 but it knows how many per ODOM_STATUS page and what losing each frame would do: the position
-gets that allowance (``compare.loss_allowance``), the heading none. The merge error per frame is
+gets that allowance (``losses.loss_allowance``), the heading none. The merge error per frame is
 checked against the independent checker's own odometry; a wrong firmware in the same drive
 still FAILs.
 """
@@ -23,7 +23,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from odocan.host.judge.compare import drop_errors
+from odocan.host.judge.losses import drop_errors
 from odocan.host.judge.samples import Encoders
 from tests.independent_checker import Robot, _Odometry
 from tests.test_babble_firmware import _biased_x

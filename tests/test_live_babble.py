@@ -9,7 +9,7 @@ rules 5 and 6: one judge, not three).
   latest frames: the same samples, the same errors, and a wrong firmware still shows.
 * A babbler that overflows the firmware's mailbox (``tests/test_judge_lossy.py``'s run): the
   firmware loses frames the bus carried and says how many (ENC_E2E_LOST); the live judges allow
-  the position what analyze allows (``compare.loss_allowance``'s rule, revised as each page
+  the position what analyze allows (``losses.loss_allowance``'s rule, revised as each page
   comes), never the heading, and a wrong firmware still shows beyond it. Limits, stated: after a
   stall the live judges place the position at the first pose after it where analyze fits the
   segment (within one LSB of each other), and they leave out analyze's tail rule (frames since

@@ -205,7 +205,9 @@ def test_streamed_stalls_are_the_whole_logs(tmp_path: Path, which: str, chunk_fr
     _, accepted_all = check_frames(whole, db)
     enc = encoder_frames(whole, accepted_all, decoder)
     onboard, _, sent_all = onboard_samples(whole, accepted_all, decoder, enc)
-    want, want_breaks = after_stalls(onboard, sent_all, enc)
+    pose_y = decoder.select(whole, "ODOM_POSE_Y")
+    pose_sent = whole.timestamp_s[pose_y[accepted_all[pose_y]]]
+    want, want_breaks = after_stalls(onboard, sent_all, enc, pose_sent)
     e2e, numbering = StreamE2E(db), StreamEncoders(BulkDecoder(db))
     poses, stalls = StreamPoses(BulkDecoder(db)), StreamStalls(enc.cycle_s)
     parts = []
@@ -214,7 +216,9 @@ def test_streamed_stalls_are_the_whole_logs(tmp_path: Path, which: str, chunk_fr
         encoders = numbering.feed(chunk, accepted)
         samples, sent = poses.feed(chunk, accepted, encoders)
         watermark = min(float(chunk.timestamp_s[-1]), poses.open_sent_s())
-        parts.append(stalls.feed(samples, sent, encoders.timestamp_s, watermark))
+        pose_y = numbering.decoder.select(chunk, "ODOM_POSE_Y")
+        pose_t = chunk.timestamp_s[pose_y[accepted[pose_y]]]
+        parts.append(stalls.feed(samples, sent, encoders.timestamp_s, watermark, pose_t))
     samples, sent = poses.finish()
     parts.append(stalls.feed(samples, sent, np.zeros(0), np.inf))
     parts.append(stalls.finish())

@@ -1,6 +1,6 @@
 """The encoder frames the firmware lost that the log holds, streamed (``StreamLosses``,
-``SpanDrops``): the spans of ``compare.firmware_losses`` and the allowance of
-``compare.loss_allowance`` at every encoder frame and every on-board sample, bit for bit, at
+``SpanDrops``): the spans of ``losses.firmware_losses`` and the allowance of
+``losses.loss_allowance`` at every encoder frame and every on-board sample, bit for bit, at
 every chunk size, on the lossy run of tests/test_stream_report.py (a babbler overflows the
 firmware's mailbox) and on the faulted rig run (frames lost in an MCU stall)."""
 
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from odocan.host.io.logs import iter_log, read_log
-from odocan.host.judge.compare import firmware_losses, loss_allowance
+from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import (
     WIRE_COUNTER_BITS,
@@ -47,7 +47,9 @@ def test_streamed_losses_and_allowance_are_the_whole_logs(
     _, accepted = check_frames(whole, db)
     enc = encoder_frames(whole, accepted, decoder)
     onboard, _, sent = onboard_samples(whole, accepted, decoder, enc)
-    onboard, _ = after_stalls(onboard, sent, enc)
+    pose_y = decoder.select(whole, "ODOM_POSE_Y")
+    pose_sent = whole.timestamp_s[pose_y[accepted[pose_y]]]
+    onboard, _ = after_stalls(onboard, sent, enc, pose_sent)
     integrator, _ = pick_integrator(whole, accepted, decoder, None)
     want_spans = firmware_losses(whole, accepted, decoder, enc)
     every = np.arange(len(enc.seq), dtype=np.int64)

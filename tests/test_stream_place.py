@@ -58,7 +58,9 @@ def placement_inputs(
     _, accepted = check_frames(frames, db)
     enc = encoder_frames(frames, accepted, decoder)
     onboard, _, sent = onboard_samples(frames, accepted, decoder, enc)
-    onboard, breaks = after_stalls(onboard, sent, enc)
+    pose_y = decoder.select(frames, "ODOM_POSE_Y")
+    pose_sent = frames.timestamp_s[pose_y[accepted[pose_y]]]
+    onboard, breaks = after_stalls(onboard, sent, enc, pose_sent)
     e0 = int(onboard.enc[0])
     geometry = Geometry.of(robot)
     bits = min(robot.counter_bits, 24)

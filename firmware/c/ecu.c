@@ -76,7 +76,11 @@ static void extend_counters(const struct odom_ecu *ecu, const uint32_t wire[2],
                             uint32_t counts[2]);
 static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
                             const uint32_t counts[2]);
-static uint32_t step_periods(const struct odom_ecu *ecu, uint8_t counter);
+static uint32_t counter_advance(const struct odom_ecu *ecu, uint8_t counter);
+static bool mailbox_dropped(const struct odom_ecu *ecu);
+static uint32_t step_periods(const struct odom_ecu *ecu, uint32_t advance);
+static uint32_t bound_periods(const struct odom_ecu *ecu, uint32_t periods);
+static void count_cycles_dropped(struct odom_ecu *ecu, uint8_t counter, uint32_t advance);
 static void step_bounds(struct odom_ecu *ecu);
 static bool plausible(const struct odom_ecu *ecu, const uint32_t prev[2], const uint32_t counts[2],
                       uint32_t periods);
@@ -163,6 +167,9 @@ void ecu_isr_can_rx(struct odom_ecu *ecu, uint32_t can_id, const uint8_t *data, 
 {
     if (!mailbox_put(&ecu->mailbox, can_id, data, len)) {
         ecu->errors |= ERROR_MAILBOX_OVERFLOW;
+        if (can_id == WHEEL_ENCODERS_ID) {
+            ecu->enc_frames_dropped++;
+        }
     }
 }
 
@@ -204,9 +211,12 @@ static void tick(struct odom_ecu *ecu, bool timed, uint32_t now_us)
     check_overflows(ecu);
     uint32_t periods = advance_time(ecu, timed, now_us); /* after: a stall's overrun is TIME_LOST */
     ecu->tick_late = periods > 0u ? periods - 1u : 0u; /* its frames may have queued so long */
-    /* The E2E window widens with time; fully after frames of unknown age (a stall's backlog). */
-    uint32_t widen = ecu->samples_stale ? COUNTER_MASK : periods < COUNTER_MASK ? periods
-                                                                                 : COUNTER_MASK;
+    ecu->enc_dropped_before = ecu->enc_dropped_seen;
+    ecu->enc_dropped_seen = ecu->enc_frames_dropped;
+    /* The E2E window widens with time; fully after frames of unknown age (a stall's backlog) and
+     * after frames the mailbox dropped (their count, not the window, bounds the step). */
+    bool stale = ecu->samples_stale || mailbox_dropped(ecu);
+    uint32_t widen = stale ? COUNTER_MASK : periods < COUNTER_MASK ? periods : COUNTER_MASK;
     for (uint32_t k = 0u; k < widen; ++k) {
         e2e_new_period(&ecu->rx_encoders);
     }
@@ -291,6 +301,7 @@ static uint32_t advance_time(struct odom_ecu *ecu, bool timed, uint32_t now_us)
 static void check_overflows(struct odom_ecu *ecu)
 {
     uint32_t overflows = ecu->mailbox.overflows;
+    ecu->overflows_before = ecu->overflows_seen;
     if (overflows != ecu->overflows_seen) {
         ecu->overflows_seen = overflows;
         degrade(ecu, REASON_MAILBOX_OVERFLOW);
@@ -345,14 +356,33 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
     unpack_wheel_encoders(data, &counter, &wire[0], &wire[1]);
     uint32_t counts[2];
     extend_counters(ecu, wire, counts);
-    uint32_t periods = step_periods(ecu, counter);
-    if (!plausible(ecu, ecu->counts_prev_valid ? ecu->counts_prev : NULL, counts, periods)) {
+    uint32_t advance = counter_advance(ecu, counter);
+    uint32_t periods = step_periods(ecu, advance);
+    if (!plausible(ecu, ecu->counts_prev_valid ? ecu->counts_prev : NULL, counts,
+                   bound_periods(ecu, periods))) {
         on_implausible(ecu, counter, wire, counts);
         return;
     }
     ecu->resync_first_valid = false;
     ecu->this_step_periods = periods;
+    count_cycles_dropped(ecu, counter, advance);
     accept_encoders(ecu, counter, wire, counts);
+}
+
+/* ENC_E2E_LOST (the E2E receiver's lost_frames) also counts the whole COUNTER cycles of frames
+ * the mailbox dropped, which the E2E check (the COUNTER mod 16) cannot see: advance less the
+ * plain COUNTER advance (encoders.py _count_cycles_dropped). */
+static void count_cycles_dropped(struct odom_ecu *ecu, uint8_t counter, uint32_t advance)
+{
+    int prev = ecu->enc_prev_counter;
+    if (prev < 0) {
+        return;
+    }
+    uint32_t plain = ((uint32_t)counter - (uint32_t)prev) & COUNTER_MASK;
+    if (plain == 0u) {
+        plain = COUNTER_MASK + 1u;
+    }
+    ecu->rx_encoders.lost_frames += advance - plain; /* wrapping */
 }
 
 /* Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery. */
@@ -367,6 +397,8 @@ static void accept_encoders(struct odom_ecu *ecu, uint8_t counter, const uint32_
     ecu->enc_prev_counter = counter;
     ecu->enc_counter = counter;
     ecu->ticks_since_encoder = 0u;
+    ecu->enc_overflows_at_accept = ecu->overflows_before;
+    ecu->enc_dropped_at_accept = ecu->enc_dropped_before;
     ecu->samples_stale = ecu->time_lost_now;
     if (!ecu->time_lost_now) {
         ecu->periods_since_sample = 0u;
@@ -409,20 +441,46 @@ static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
     ecu->counts_prev_valid = true;
 }
 
-/* The encoder periods between this frame's sample and the last accepted one's: the COUNTER
- * advance n (mod 16, 0 read as 16), plus the whole counter cycles that bring it nearest to the
- * periods since that frame was accepted (0 for a second frame in one tick), less the periods
- * this tick came late (its frames waited in the mailbox meanwhile). Exact while the two frames' queueing differs by less than
- * 8 periods; n in a regular stream (1). At most STEP_PERIODS_MAX + 24. */
-static uint32_t step_periods(const struct odom_ecu *ecu, uint8_t counter)
+/* The frames from the last accepted one to this one (0: none accepted yet): the COUNTER advance
+ * (mod 16, 1..16), or, when the mailbox dropped d frames on the WHEEL_ENCODERS ID between them,
+ * the advance with that COUNTER nearest to d + 1 (d - 7 .. d + 8 frames between): d counts a
+ * babbler's frames on the ID too, and frames may also have been lost on the wire or refused
+ * after the drops (encoders.py _counter_advance). At most STEP_PERIODS_MAX + 16. */
+static uint32_t counter_advance(const struct odom_ecu *ecu, uint8_t counter)
 {
     int prev = ecu->enc_prev_counter;
     if (prev < 0) {
-        return 1u;
+        return 0u;
     }
-    uint32_t advance = ((uint32_t)counter - (uint32_t)prev) & COUNTER_MASK;
+    uint32_t dropped = ecu->enc_dropped_before - ecu->enc_dropped_at_accept; /* wrapping */
+    if (dropped > STEP_PERIODS_MAX) {
+        dropped = STEP_PERIODS_MAX;
+    }
+    uint32_t beyond = ((uint32_t)counter - (uint32_t)prev - 1u - dropped) & COUNTER_MASK;
+    uint32_t advance = dropped + 1u + beyond;
+    if (beyond >= (COUNTER_MASK + 1u) / 2u && advance > COUNTER_MASK + 1u) {
+        return advance - (COUNTER_MASK + 1u); /* d counted frames that were not the encoders' */
+    }
+    return advance;
+}
+
+/* The mailbox dropped frames (any, or an overrun) after the last accepted encoder frame and
+ * before this tick's frames (encoders.py _mailbox_dropped). */
+static bool mailbox_dropped(const struct odom_ecu *ecu)
+{
+    return ecu->enc_overflows_at_accept != ecu->overflows_before;
+}
+
+/* The encoder periods between this frame's sample and the last accepted one's: the COUNTER
+ * advance n (counter_advance), plus the whole counter cycles that bring it nearest to the
+ * periods since that frame was accepted (0 for a second frame in one tick), less the periods
+ * this tick came late (its frames waited in the mailbox meanwhile). Exact while the two frames'
+ * queueing differs by less than 8 periods; n in a regular stream (1). At most
+ * 2 * STEP_PERIODS_MAX + 24. */
+static uint32_t step_periods(const struct odom_ecu *ecu, uint32_t advance)
+{
     if (advance == 0u) {
-        advance = COUNTER_MASK + 1u;
+        return 1u;
     }
     uint32_t since = ecu->periods_since_sample;
     uint32_t budget = (since > ecu->tick_late ? since - ecu->tick_late : 0u) + 8u; /* <= 2^16 + 8 */
@@ -430,6 +488,19 @@ static uint32_t step_periods(const struct odom_ecu *ecu, uint8_t counter)
         return advance;
     }
     return advance + (((budget - advance) >> 4) << 4);
+}
+
+/* The periods the plausibility bound allows this step (encoders.py _bound_periods): periods, or
+ * STEP_PERIODS_MAX when the mailbox may have dropped frames between the last accepted frame and
+ * this one (drops seen at a tick's start from the accepting tick on, before this frame's tick: a
+ * full ring drops the newest). A burst that overflows the mailbox can drop 16 or more encoder
+ * frames, which the 4-bit COUNTER cannot count: the counters are absolute, the wide step exact. */
+static uint32_t bound_periods(const struct odom_ecu *ecu, uint32_t periods)
+{
+    if (mailbox_dropped(ecu)) {
+        return STEP_PERIODS_MAX;
+    }
+    return periods;
 }
 
 /* Per wheel, the most counts one encoder period can hold at max_wheel_speed_mm_s:
@@ -533,7 +604,7 @@ static void sum_step(struct odom_ecu *ecu)
     ecu->tick_dheading_q30_rad = sat_range(ecu->tick_dheading_q30_rad + dheading_q30_rad,
                                            -TWIST_SUM_MAX, TWIST_SUM_MAX, &ecu->errors);
     ecu->tick_steps++;
-    uint32_t periods = ecu->tick_periods + ecu->this_step_periods; /* < 2^17 + 16 */
+    uint32_t periods = ecu->tick_periods + ecu->this_step_periods; /* < 2^18 */
     ecu->tick_periods = periods < STEP_PERIODS_MAX ? periods : STEP_PERIODS_MAX;
 }
 

@@ -80,6 +80,15 @@ struct odom_ecu {
     uint32_t periods_lost;    /* periods the firmware did not run (stalls), wrapping */
     uint32_t frames_implausible; /* WHEEL_ENCODERS refused by the plausibility bound, wrapping */
     uint32_t overflows_seen;
+    uint32_t overflows_before; /* overflows_seen at the previous tick (health.py overflows_before) */
+    uint32_t enc_overflows_at_accept; /* overflows_before when the last encoder frame was accepted */
+    /* WHEEL_ENCODERS frames the mailbox dropped (wrapping; the ISR writes it), its value at this
+     * tick's start, at the previous tick's start and when the last frame was accepted
+     * (encoders.py frames_dropped, _dropped_seen, _dropped_before, _dropped_at_accept). */
+    uint32_t enc_frames_dropped;
+    uint32_t enc_dropped_seen;
+    uint32_t enc_dropped_before;
+    uint32_t enc_dropped_at_accept;
     /* Refused frames consistent among themselves: counters and COUNTER of the first, the last. */
     bool resync_first_valid;
     uint32_t resync_first[2];

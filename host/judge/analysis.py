@@ -57,7 +57,7 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    has an on-board sample of the same encoder frame. Where the firmware reports encoder frames
    lost that the log holds (ODOM_STATUS ENC_E2E_LOST grew by more than the log's own gaps: its
    mailbox overflowed), it took two steps as one there: the position may leave the fine
-   reference by the sum of the largest such merge errors (``compare.loss_allowance``, reported
+   reference by the sum of the largest such merge errors (``losses.loss_allowance``, reported
    as ``loss_allowance_m`` and an ``encoder_frames_lost_on_board`` event per span), which the
    verdict allows on top of the tolerance; the heading stays exact (a function of the counts).
 
@@ -92,12 +92,11 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.compare import (
     check_twist,
     error_summary,
-    firmware_losses,
-    loss_allowance,
     plot_series,
     pose_errors,
     versus_truth,
 )
+from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.reboots import Life, merge, split_lives
 from odocan.host.judge.reference_path import build_reference, wrap_pi
 from odocan.host.judge.samples import (
@@ -105,6 +104,7 @@ from odocan.host.judge.samples import (
     POSITION_LSB_M,
     REQUIRED,
     AnalysisError,
+    accepted_rows,
     after_stalls,
     encoder_frames,
     onboard_samples,
@@ -232,7 +232,8 @@ def _analyze_life(
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
     enc = encoder_frames(frames, accepted, decoder)
     onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc)
-    onboard, stalls = after_stalls(onboard, sent_s, enc)
+    pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
+    onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s)
     truth = truth_samples(frames, accepted, decoder, enc)
     if boot:
         power_up = saw_only_the_log(frames, accepted, decoder)

@@ -250,13 +250,22 @@ def _queued(
         chained = (k > 0 and named[k - 1] >= 0
                    and (int(own_counter[k] - own_counter[k - 1]) & 0xF) == 1)
         made_s = made_s + send_s if chained else np.nan
-        named[k] = _named_by(enc, int(named[k - 1]), int(enc_counter[k]), made_s, int(index[k]))
+        named[k] = _named_by(enc, int(named[k - 1]), int(enc_counter[k]), made_s, int(index[k]),
+                             send_s)
     return named
 
 
-def _named_by(enc: Encoders, floor: int, enc_counter: int, made_s: float, index: int) -> int:
+def _named_by(
+    enc: Encoders, floor: int, enc_counter: int, made_s: float, index: int, send_s: float
+) -> int:
     """The latest accepted encoder frame at or after ``floor`` with COUNTER ``enc_counter``, on
-    the bus by ``made_s`` and before frame ``index`` of the log; -1 when none (or no time)."""
+    the bus by ``made_s`` and before frame ``index`` of the log; -1 when none (or no time), and
+    -1 when the name is ambiguous: another accepted frame of that COUNTER (16 before or after
+    it, at or after ``floor``, before ``index``) came within half a send period (``send_s``) of
+    it on the bus. That happens when the encoder frames came out in a burst too (about 240 us
+    apart at 500 kbit/s, 16 of them in 3.8 ms; about 1 ms apart at 125 kbit/s, 16 ms): ``made_s``
+    is good to a fraction of a send period, and a firmware whose mailbox overflowed had an
+    earlier frame of that COUNTER than the latest on the bus, so time cannot tell which it had."""
     if np.isnan(made_s):
         return -1
     last = min(int(np.searchsorted(enc.timestamp_s, made_s, side="right")),
@@ -267,6 +276,11 @@ def _named_by(enc: Encoders, floor: int, enc_counter: int, made_s: float, index:
     found = int(np.searchsorted(enc.seq, target))
     if target < enc.seq[floor] or found >= len(enc.seq) or enc.seq[found] != target:
         return -1
+    for other in (target - 16, target + 16):
+        j = int(np.searchsorted(enc.seq, other))
+        if (j < len(enc.seq) and enc.seq[j] == other and j >= floor and enc.index[j] < index
+                and abs(float(enc.timestamp_s[j] - enc.timestamp_s[found])) < 0.5 * send_s):
+            return -1
     return found
 
 
@@ -329,11 +343,13 @@ def onboard_samples(
 
 
 def after_stalls(
-    onboard: Poses, sent_s: FloatArray, enc: Encoders
+    onboard: Poses, sent_s: FloatArray, enc: Encoders, pose_sent_s: FloatArray | None = None
 ) -> tuple[Poses, IntArray]:
     """Samples sent after the firmware was silent for ``SILENCE_CYCLES`` encoder cycles or more
-    while the log holds the encoder frames of that time (a stalled MCU, firmware/ecu.py
-    TIME_LOST): the first names a frame from before the silence
+    (no ODOM_POSE_Y at all: ``pose_sent_s``, every one's bus time, also those that name the
+    previous sample's frame again, e.g. queued ones the bus let out late) while the log holds
+    the encoder frames of that time, which came on time (``frames_on_time``; a stalled MCU,
+    firmware/ecu.py TIME_LOST): the first names a frame from before the silence
     (its backlog), which ENC_COUNTER cannot resolve, so it is left out; and the firmware took the
     frames it missed as one step, which a fine reference cannot follow on a curve, so the
     reference's position restarts (a segment, like a gap) at the encoder frame after the last
@@ -343,11 +359,19 @@ def after_stalls(
         return onboard, np.zeros(0, dtype=np.int64)
     order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
     sent = sent_s[order]
-    # Silent while the encoder frames went on (a log that lacks both is a recorder's gap).
-    heard = np.searchsorted(enc.timestamp_s, sent[1:]) - np.searchsorted(enc.timestamp_s, sent[:-1])
+    # Silent while the encoder frames went on, on time (a log that lacks both is a recorder's
+    # gap; a bus that held both back let the frames out in a burst), measured from the last pose
+    # the firmware sent before each next sample (queued ones naming the same frame included).
+    talked = sent[:-1]
+    if pose_sent_s is not None and len(pose_sent_s):
+        k = np.searchsorted(pose_sent_s, sent[1:], side="left") - 1
+        talked = np.maximum(talked, np.where(k >= 0, pose_sent_s[np.maximum(k, 0)], -np.inf))
+    heard = frames_on_time(
+        enc, np.searchsorted(enc.timestamp_s, talked), np.searchsorted(enc.timestamp_s, sent[1:])
+    )
     # A sample let out in a burst (queued_frames) was not silent: the bus held it back.
     queued = queued_frames(sent, enc.cycle_s)
-    after = np.flatnonzero(silent(sent, heard, enc.cycle_s) & ~queued[1:]) + 1
+    after = np.flatnonzero(silent(sent[1:] - talked, heard, enc.cycle_s) & ~queued[1:]) + 1
     keep = np.ones(len(sent_s), dtype=bool)
     keep[order[after]] = False
     kept = Poses(onboard.enc[keep], onboard.x_m[keep], onboard.y_m[keep],
@@ -361,18 +385,37 @@ def after_stalls(
     return kept, breaks[first].astype(np.int64)
 
 
+def frames_on_time(enc: Encoders, lo: IntArray, hi: IntArray) -> IntArray:
+    """How many of the encoder frames ``lo[k]`` .. ``hi[k]`` - 1 (positions in ``enc``) came on
+    time: not ``queued_frames`` (a busy bus let them out in a burst). A firmware that missed
+    frames which came on time was silent or held (a stall); frames the bus held back came all
+    at once, and a firmware that drains them one by one in its next tick missed none of them
+    (its mailbox may drop some: ENC_E2E_LOST counts those, ``losses.firmware_losses``)."""
+    if enc.cycle_s is None:
+        return np.asarray(hi - lo, dtype=np.int64)
+    on_time = ~queued_frames(enc.timestamp_s, enc.cycle_s)
+    before = np.concatenate(([0], np.cumsum(on_time, dtype=np.int64)))
+    counted: IntArray = before[hi] - before[lo]
+    return counted
+
+
 def _frozen(onboard: Poses, enc: Encoders, queued: npt.NDArray[np.bool_]) -> IntArray:
     """Encoder frames after a sample whose next sample names a frame ``SILENCE_CYCLES`` or more
-    periods later while the log holds the frames between: the firmware held its pose on one frame
-    (it kept naming it) and then took the frames since as one step, as after a stall."""
-    return frozen_breaks(onboard.enc, enc.seq[onboard.enc], queued)
+    periods later while the log holds ``SILENCE_CYCLES`` frames between that came on time
+    (``frames_on_time``): the firmware held its pose on one frame (it kept naming it) and then
+    took the frames since as one step, as after a stall."""
+    heard = frames_on_time(enc, onboard.enc[:-1] + 1, onboard.enc[1:] + 1)
+    return frozen_breaks(onboard.enc, enc.seq[onboard.enc], queued, heard)
 
 
 def frozen_breaks(sample_enc: IntArray, sample_seq: IntArray,
-                  queued: npt.NDArray[np.bool_] | None = None) -> IntArray:
+                  queued: npt.NDArray[np.bool_] | None = None,
+                  heard: IntArray | None = None) -> IntArray:
     """``_frozen`` of consecutive samples (their encoder frames in the log and sequence
-    numbers, in encoder order; ``queued``: which came in a burst, None: none did)."""
-    held = (np.diff(sample_seq) >= SILENCE_CYCLES) & (np.diff(sample_enc) >= SILENCE_CYCLES)
+    numbers, in encoder order; ``queued``: which came in a burst, None: none did; ``heard``: the
+    frames on time between each two, None: every frame between, as when none came in a burst)."""
+    on_time = np.diff(sample_enc) if heard is None else heard
+    held = (np.diff(sample_seq) >= SILENCE_CYCLES) & (on_time >= SILENCE_CYCLES)
     if queued is not None:
         held &= ~queued[1:]  # a queued sample was made long before it was sent: not evidence
     frozen: IntArray = sample_enc[:-1][held] + 1
@@ -380,14 +423,14 @@ def frozen_breaks(sample_enc: IntArray, sample_seq: IntArray,
 
 
 def silent(
-    sent_s: FloatArray, heard: IntArray, cycle_s: float
+    quiet_s: FloatArray, heard: IntArray, cycle_s: float
 ) -> npt.NDArray[np.bool_]:
-    """``after_stalls``' silence between consecutive samples (send times ``sent_s`` in send
-    order, ``heard``: encoder frames logged between each two): at least half a cycle short of
-    ``SILENCE_CYCLES`` apart (samples come in whole send periods, and time stamps summed in
-    float must not decide: 79.999... ms is 80 ms) while the encoder frames went on."""
+    """``after_stalls``' silence before each next sample (``quiet_s``: seconds since the
+    firmware last sent a pose, ``heard``: encoder frames logged on time meanwhile): at least half
+    a cycle short of ``SILENCE_CYCLES`` (samples come in whole send periods, and time stamps
+    summed in float must not decide: 79.999... ms is 80 ms) while the encoder frames went on."""
     quiet: npt.NDArray[np.bool_] = (
-        (np.diff(sent_s) >= (SILENCE_CYCLES - 0.5) * cycle_s) & (heard >= SILENCE_CYCLES - 1)
+        (quiet_s >= (SILENCE_CYCLES - 0.5) * cycle_s) & (heard >= SILENCE_CYCLES - 1)
     )
     return quiet
 

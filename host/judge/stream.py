@@ -33,7 +33,7 @@ on a log cut at every frame and on a faulted rig run with a stall and a reboot):
 (``samples.after_stalls``; with an ``exact`` flag for logs whose times go back),
 ``stream_truth.StreamTruth`` (``samples.truth_samples``), ``stream_twist.StreamTwist``
 (``compare.check_twist``), ``stream_losses.StreamLosses`` and ``SpanDrops``
-(``compare.firmware_losses`` and ``loss_allowance``), ``stream_facts.StreamFacts`` (frame
+(``losses.firmware_losses`` and ``loss_allowance``), ``stream_facts.StreamFacts`` (frame
 counts, covered seconds, the integrator, the power-up rule's inputs), ``stream_fit.SegmentSums``
 and ``BlockDot`` (the rotation fit's segment means and its dot products,
 ``reference_path.block_dot``).

@@ -255,6 +255,8 @@ def _life(
     first = _first_pass(frames, db, robot)
     if first.stalls is not None and not first.stalls.exact:
         raise NotStreamable("the log's frame times go back around a silence of the firmware")
+    if not first.losses.exact:  # a summary stamped before an earlier encoder frame
+        raise NotStreamable("the log's status times go back against its encoder frames")
     if first.queued:  # samples._queued pairs them by a median over the whole life
         raise NotStreamable("frames let out in a burst after a busy bus (queued pairing)")
     facts = first.facts
@@ -277,7 +279,7 @@ def _life(
 
     info = LifeInfo()
     x0, y0, h0, exact = place_start(lambda: placed(info), power_up=power_up)
-    # the offsets' pass also weighs the lossy spans (compare.loss_allowance), when there are
+    # the offsets' pass also weighs the lossy spans (losses.loss_allowance), when there are
     offsets = segment_offsets(lambda: placed(losses=bool(spans)), (x0, y0, h0),
                               info.segments + 1)
     truth = TruthCompare((x0, y0, h0), offsets)
@@ -397,7 +399,9 @@ class _FirstPass:
         self.stalls = self.stalls or StreamStalls(enc.cycle_s)
         samples, sent = self.poses.feed(chunk, accepted, enc)
         watermark = min(float(chunk.timestamp_s[-1]), self.poses.open_sent_s())
-        self._kept(self.stalls.feed(samples, sent, enc.timestamp_s, watermark), samples)
+        pose_y = self.decoder.select(chunk, "ODOM_POSE_Y")
+        pose_t = chunk.timestamp_s[pose_y[accepted[pose_y]]]
+        self._kept(self.stalls.feed(samples, sent, enc.timestamp_s, watermark, pose_t), samples)
         self.truths += len(self.truth.feed(chunk, accepted, enc)[0]["enc"])
         self.twist.feed(chunk, accepted, enc)
         self.facts.feed(chunk, accepted)

@@ -133,7 +133,9 @@ def life_chunks(
         rows.add(g[from_e0], enc.seq[from_e0], increments, inside)
         samples, sent = poses.feed(chunk, accepted, enc)
         watermark = min(float(chunk.timestamp_s[-1]), poses.open_sent_s())
-        placed = _placed(stalls.feed(samples, sent, enc.timestamp_s, watermark), rows)
+        pose_y = decoder.select(chunk, "ODOM_POSE_Y")
+        pose_t = chunk.timestamp_s[pose_y[accepted[pose_y]]]
+        placed = _placed(stalls.feed(samples, sent, enc.timestamp_s, watermark, pose_t), rows)
         told = _truth(truth.feed(chunk, accepted, enc)[0], rows, e0,
                       _truth_floor(truth, count - 1))
         last_sample = int(placed.enc[-1]) if len(placed.enc) else last_sample

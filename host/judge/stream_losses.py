@@ -1,10 +1,10 @@
 """The encoder frames the firmware lost that the log holds, chunk by chunk (issue #14.1):
-``host.judge.compare.firmware_losses`` over a life fed in chunks, its spans the whole life's.
+``host.judge.losses.firmware_losses`` over a life fed in chunks, its spans the whole life's.
 
 Carried: the last ENC_E2E_LOST page (its count, the latest encoder frame before it and that
-frame's sequence number: ``compare.lost_beyond_gaps`` runs on it and the chunk's pages), the
+frame's sequence number: ``losses.lost_beyond_gaps`` runs on it and the chunk's pages), the
 encoder frames counted so far with the last one's sequence number, and whether a summary saying
-MAILBOX_OVERFLOW came after the last page (``compare._overflow_reported_after`` per chunk).
+MAILBOX_OVERFLOW came after the last page (``losses._overflow_reported_after`` per chunk).
 
 The streamed analysis does not place the allowance itself (its per-sample sums of the largest
 merge errors): a life with a span is refused (``stream_analysis.NotStreamable``) and analysed
@@ -12,40 +12,57 @@ whole; without one the allowance is 0 everywhere, as in the whole log."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.compare import (
+from odocan.host.judge.losses import (
     LOST_PAGE,
+    _OneSteps,
     _overflow_reported_after,
+    _step_vector,
+    _worst_runs,
     heading_steps,
     lost_beyond_gaps,
-    merge_errors,
-    worst_losses_m,
 )
 from odocan.host.judge.reference import Geometry, wrap_delta
-from odocan.host.judge.samples import Encoders
+from odocan.host.judge.samples import (
+    Encoders,
+    FloatArray,
+    IntArray,
+    contract_cycle_s,
+    queued_frames,
+)
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
-
-FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass
 class StreamLosses:
     """``firmware_losses`` chunk by chunk: ``feed`` each chunk with its accepted mask and
-    ``StreamEncoders``' frames, then ``spans``."""
+    ``StreamEncoders``' frames, then ``spans``. Carried: every accepted ENC_E2E_LOST page
+    (the latest encoder frame before it, that frame's sequence number, its count, its time) and
+    every accepted summary page's time with the encoder frames stamped at or before it (a few
+    numbers per status period), for ``losses._made_from``'s start of each span."""
 
     decoder: BulkDecoder
-    _found: list[tuple[int, int, int]] = field(default_factory=list)  # spans between pages
     _offset: int = 0  # frames before the chunk
     _enc_count: int = 0  # accepted encoder frames before the chunk
     _last_seq: int = 0  # the sequence number of the last of them
-    _page: tuple[int, int, int] | None = None  # the last page: upto, its seq, lost
+    _last_enc_t: float = -math.inf  # the time of the last of them
+    _pages: list[tuple[int, int, int, float]] = field(default_factory=list)  # upto, seq, lost, t
+    _summaries_t: list[float] = field(default_factory=list)  # accepted page 0 times
+    _summaries_upto: list[int] = field(default_factory=list)  # encoder frames stamped <= each
+    _in_order: bool = True  # no summary stamped before an encoder frame of an earlier chunk
     _signal: bool = True  # the DBC's ODOM_STATUS has ENC_E2E_LOST
     _overflow_after: bool = False  # a MAILBOX_OVERFLOW summary after the last page
+
+    @property
+    def exact(self) -> bool:
+        """Whether ``spans`` is the whole life's (summary times in order with the frames')."""
+        return self._in_order
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_], enc: Encoders) -> None:
         """Take the next chunk (``enc``: its accepted encoder frames, ``index`` in the log)."""
@@ -54,41 +71,83 @@ class StreamLosses:
         index = page["index"][keep] if page else np.zeros(0, dtype=np.int64)
         if len(index):
             self._add_pages(index + self._offset, page["ENC_E2E_LOST"][keep].astype(np.int64),
-                            enc)
+                            chunk.timestamp_s[index], enc)
         reported = _overflow_reported_after(chunk, accepted, self.decoder,
                                             int(index[-1]) if len(index) else -1)
         self._overflow_after = reported if len(index) else (self._overflow_after or reported)
+        self._add_summaries(chunk, accepted, enc)
         self._offset += len(chunk)
         self._enc_count += len(enc.index)
         if len(enc.seq):
             self._last_seq = int(enc.seq[-1])
+            self._last_enc_t = float(enc.timestamp_s[-1])
 
     def spans(self) -> list[tuple[int, int, int]]:
         """``firmware_losses`` of the life fed: (first, last, n) per span."""
         n_enc = self._enc_count
         if not self._signal or n_enc < 2:
             return []
-        spans = list(self._found)
-        tail = self._page[0] if self._page is not None else 0
+        spans: list[tuple[int, int, int]] = []
+        if self._pages:
+            upto, seq, lost = (np.array([p[k] for p in self._pages], dtype=np.int64)
+                               for k in range(3))
+            made = self._made_from(upto, np.array([p[3] for p in self._pages]))
+            excess = lost_beyond_gaps(lost[:-1], lost[1:], seq[:-1], seq[1:], np.diff(upto),
+                                      at_most=upto[1:] - made[:-1])
+            spans = [(int(made[k]), int(upto[k + 1]), int(excess[k]))
+                     for k in np.flatnonzero(excess > 0)]
+        tail = self._pages[-1][0] if self._pages else 0
         if self._overflow_after:
             spans.append((tail, n_enc - 1, n_enc - 1 - tail))
         return spans
 
+    def _made_from(self, upto: IntArray, page_t: FloatArray) -> IntArray:
+        """``losses._made_from`` from the carried summaries."""
+        cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        if cycle_s is None or not self._summaries_t:
+            return upto
+        sent_s = np.array(self._summaries_t)
+        on_time = ~queued_frames(sent_s, cycle_s)
+        stamped = np.array(self._summaries_upto, dtype=np.int64)[on_time]
+        k = np.searchsorted(sent_s[on_time], page_t, side="right") - 1
+        at = np.where(k >= 0, stamped[np.maximum(k, 0)], 0)
+        made: IntArray = np.minimum(upto, np.maximum(at - 1, 0))
+        return made
+
     def _add_pages(
-        self, index: npt.NDArray[np.int64], lost: npt.NDArray[np.int64], enc: Encoders
+        self, index: npt.NDArray[np.int64], lost: npt.NDArray[np.int64], t_s: FloatArray,
+        enc: Encoders,
     ) -> None:
-        """The chunk's pages (``index`` in the log) after the one carried."""
+        """The chunk's pages (``index`` in the log, ``t_s`` their times)."""
         before = np.searchsorted(enc.index, index)  # the chunk's encoder frames before each
         upto = np.maximum(self._enc_count + before - 1, 0)
         seq = np.where(before > 0, enc.seq[np.maximum(before - 1, 0)] if len(enc.seq)
                        else 0, self._last_seq if self._enc_count else 0)  # (seq[0] is 0)
-        if self._page is not None:
-            upto, seq, lost = (np.r_[self._page[0], upto], np.r_[self._page[1], seq],
-                               np.r_[self._page[2], lost])
-        excess = lost_beyond_gaps(lost[:-1], lost[1:], seq[:-1], seq[1:], np.diff(upto))
-        self._found += [(int(upto[k]), int(upto[k + 1]), int(excess[k]))
-                        for k in np.flatnonzero(excess > 0)]
-        self._page = (int(upto[-1]), int(seq[-1]), int(lost[-1]))
+        self._pages += zip(upto.tolist(), seq.tolist(), lost.tolist(), t_s.tolist(),
+                           strict=True)
+
+    def _add_summaries(
+        self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_], enc: Encoders
+    ) -> None:
+        """The chunk's accepted summary pages, each with the encoder frames stamped at or before
+        it (``np.searchsorted(enc.timestamp_s, t, side="right")`` over the life's frames, whose
+        times do not go back): those still open take the chunk's frames stamped at their time."""
+        stamps = enc.timestamp_s
+        for k in range(len(self._summaries_t) - 1, -1, -1):  # the open ones: at the end
+            t = self._summaries_t[k]
+            if t < self._last_enc_t:
+                break
+            self._summaries_upto[k] += int(np.searchsorted(stamps, t, side="right"))
+        try:
+            rows = self.decoder.decode_page(chunk, "ODOM_STATUS", 0)["index"]
+        except DecodeError:
+            return
+        t_s = chunk.timestamp_s[rows[accepted[rows]]]
+        if np.any(t_s < self._last_enc_t):
+            self._in_order = False
+        self._summaries_t += t_s.tolist()
+        self._summaries_upto += (self._enc_count
+                                 + np.searchsorted(stamps, t_s, side="right")).tolist()
 
     def _page_rows(self, chunk: FrameArrays) -> dict[str, np.ndarray]:
         """The chunk's ENC_E2E_LOST pages ({} without that signal in the DBC)."""
@@ -105,49 +164,55 @@ class StreamLosses:
 
 @dataclass
 class SpanDrops:
-    """``compare.loss_allowance`` for the spans of a life (``StreamLosses.spans``) from a
-    pass over its encoder frames (``feed``) and its kept on-board samples (``named``): each
-    frame's ``drop_errors`` from the steps into it and out of it (the heading a continued
-    cumulative sum, bit for bit the whole life's), kept only inside the spans; then each
-    span's weight (``compare.worst_losses_m``, the frames a sample names excepted) and the
-    allowance at any encoder frame (the weights of the spans that began before it, added in
-    the same order)."""
+    """``losses.loss_allowance`` for the spans of a life (``StreamLosses.spans``) from a pass
+    over its encoder frames (``feed``) and its kept on-board samples (``named``): each frame's
+    cumulative counts, heading and single-step displacement (``losses._OneSteps``: continued
+    cumulative sums, bit for bit the whole life's), kept only from the frame before each span to
+    the frame after it; then each span's weight (``losses._worst_runs`` on them, the frames a
+    sample names excepted) and the allowance at any encoder frame (the weights of the spans
+    that began before it, added in the same order)."""
 
     spans: list[tuple[int, int, int]]
     geometry: Geometry
     bits: int
     integrator: str
     _count: int = 0  # encoder frames fed
-    _window: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], FloatArray] | None = None
-    _drops: dict[int, float] = field(default_factory=dict)  # frame -> its drop error
-    _named: set[int] = field(default_factory=set)  # frames in a span a sample names
+    _last: tuple[int, int, int, int, float, float, float] | None = None  # raw l, r; cum l, r;
+    # heading, cum x, cum y of the last frame fed
+    _kept: dict[int, tuple[int, int, float, float, float]] = field(default_factory=dict)
+    _named: set[int] = field(default_factory=set)  # frames near a span a sample names
     _sums: FloatArray | None = None  # weights added up, span by span
 
     def feed(self, enc: Encoders) -> None:
         """The life's next accepted encoder frames."""
         if len(enc.index) == 0:
             return
-        left, right = enc.left, enc.right
-        if self._window is not None:  # the last two frames: left, right, heading
-            left, right = np.r_[self._window[0], left], np.r_[self._window[1], right]
+        g, last = self.geometry, self._last
+        left, right = enc.left.astype(np.int64), enc.right.astype(np.int64)
+        if last is not None:
+            left, right = np.r_[last[0], left], np.r_[last[1], right]
         dl = wrap_delta(np.diff(left), self.bits)
         dr = wrap_delta(np.diff(right), self.bits)
-        carried = 0 if self._window is None else len(self._window[0])
-        new_steps = heading_steps(dl[max(carried - 1, 0):], dr[max(carried - 1, 0):],
-                                  self.geometry)
-        h_last = 0.0 if self._window is None else float(self._window[2][-1])
-        heading = np.cumsum(np.concatenate(([h_last], new_steps)))
-        heading = heading if self._window is None else np.r_[self._window[2][:-1], heading]
-        first_g = self._count - carried  # the window's first frame
-        errors = merge_errors(dl, dr, heading, self.geometry, self.integrator)
-        self._keep(first_g + 1 + np.arange(len(errors)), errors)
+        start = (0, 0, 0.0, 0.0, 0.0) if last is None else last[2:]
+        heading = np.cumsum(np.concatenate(([start[2]], heading_steps(dl, dr, g))))
+        one_x, one_y = _step_vector(dl, dr, heading[:-1], heading[1:], g, self.integrator)
+        cum_l = np.cumsum(np.concatenate(([start[0]], dl)))
+        cum_r = np.cumsum(np.concatenate(([start[1]], dr)))
+        cum_x = np.cumsum(np.concatenate(([start[3]], one_x)))
+        cum_y = np.cumsum(np.concatenate(([start[4]], one_y)))
+        skip = 0 if last is None else 1  # element 0 is the last frame fed, kept already
+        frames = self._count + np.arange(len(heading) - skip)
+        for k in np.flatnonzero(self._near(frames)).tolist():
+            j = k + skip
+            self._kept[int(frames[k])] = (int(cum_l[j]), int(cum_r[j]), float(heading[j]),
+                                          float(cum_x[j]), float(cum_y[j]))
         self._count += len(enc.index)
-        self._window = (left[-2:], right[-2:], heading[-2:])
+        self._last = (int(left[-1]), int(right[-1]), int(cum_l[-1]), int(cum_r[-1]),
+                      float(heading[-1]), float(cum_x[-1]), float(cum_y[-1]))
 
     def named(self, sample_enc: npt.NDArray[np.int64]) -> None:
         """Kept on-board samples' encoder frames: a frame a sample names was not lost."""
-        inside = self._inside(sample_enc)
-        self._named.update(sample_enc[inside].tolist())
+        self._named.update(sample_enc[self._near(sample_enc)].tolist())
 
     def allowance(self, at: npt.NDArray[np.int64]) -> FloatArray:
         """``loss_allowance`` at encoder frames ``at`` (0 everywhere without a span)."""
@@ -161,31 +226,35 @@ class SpanDrops:
 
     def _weights(self) -> FloatArray:
         if self._sums is None:
-            last = self._count - 1  # the life's last frame (drop 0, as the first)
-            weights = []
-            for first, stop, n in self.spans:
-                drops = np.array([0.0 if g in self._named or g in (0, last)
-                                  else self._drops.get(g, 0.0)
-                                  for g in range(first, stop + 1)], dtype=np.float64)
-                weights.append(worst_losses_m(drops, 0, len(drops) - 1, n))
             total, sums = 0.0, []
-            for w in weights:  # loss_allowance's order: 0.0 + w1 + w2 + ...
-                total = total + w
+            for first, last, n in self.spans:  # loss_allowance's order: 0.0 + w1 + w2 + ...
+                total = total + self._weight(first, last, n)
                 sums.append(total)
             self._sums = np.array(sums, dtype=np.float64)
         return self._sums
 
-    def _inside(self, frames: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
-        """Which ``frames`` lie in a span (the spans' firsts and lasts do not go back: the
-        latest span begun at or before a frame reaches furthest)."""
+    def _weight(self, first: int, last: int, n: int) -> float:
+        """``_worst_runs`` of one span on the frames kept around it, from the frame before it
+        to the frame after it: in local positions its frames are never the window's ends
+        unless they are the life's, which ``_worst_runs`` never loses either."""
+        lo, hi = max(first - 1, 0), min(last + 1, self._count - 1)
+        rows = [self._kept[g] for g in range(lo, hi + 1)]
+        steps = _OneSteps(
+            self.geometry, self.integrator,
+            np.array([r[0] for r in rows], dtype=np.int64),
+            np.array([r[1] for r in rows], dtype=np.int64),
+            np.array([r[2] for r in rows]), np.array([r[3] for r in rows]),
+            np.array([r[4] for r in rows]),
+        )
+        lost_ok = np.array([g not in self._named for g in range(lo, hi + 1)], dtype=bool)
+        return _worst_runs(steps, lost_ok, first - lo, last - lo, n)
+
+    def _near(self, frames: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
+        """Which ``frames`` lie from the frame before a span to the frame after it."""
         if not self.spans:
             return np.zeros(len(frames), dtype=bool)
-        firsts = np.array([s[0] for s in self.spans], dtype=np.int64)
-        lasts = np.array([s[1] for s in self.spans], dtype=np.int64)
+        firsts = np.array([s[0] - 1 for s in self.spans], dtype=np.int64)
+        lasts = np.maximum.accumulate(np.array([s[1] + 1 for s in self.spans], dtype=np.int64))
         k = np.searchsorted(firsts, frames, side="right") - 1
-        inside: npt.NDArray[np.bool_] = (k >= 0) & (frames <= lasts[np.maximum(k, 0)])
-        return inside
-
-    def _keep(self, frames: npt.NDArray[np.int64], errors: FloatArray) -> None:
-        inside = self._inside(frames)
-        self._drops.update(zip(frames[inside].tolist(), errors[inside].tolist(), strict=True))
+        near: npt.NDArray[np.bool_] = (k >= 0) & (frames <= lasts[np.maximum(k, 0)])
+        return near

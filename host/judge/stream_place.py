@@ -185,7 +185,7 @@ def reference_errors(
     """``compare.error_summary`` of ``compare.pose_errors`` (on-board minus the placed
     reference at every sample, ``build_reference`` then ``Reference.at``) in one pass: the
     maxima and the last sample's errors; with an ``allowance`` (at the samples' encoder frames,
-    ``compare.loss_allowance``) then ``loss_allowance_m`` and
+    ``losses.loss_allowance``) then ``loss_allowance_m`` and
     ``max_position_error_beyond_allowance_m`` as ``analysis._analyze_life`` adds them."""
     x0, y0, h0 = start
     cos0, sin0 = math.cos(h0), math.sin(h0)

@@ -54,16 +54,26 @@ class StreamStalls:
     _enc_before: int = 0  # encoder frames dropped from _enc_t (all before the last taken)
     _last_enc_t: float = -np.inf
     _prev: tuple[float, int, int] | None = None  # last taken: sent, enc, encoders before it
+    _pose_t: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))  # ODOM_POSE_Y
     _breaks: set[int] = field(default_factory=set)
     _last_given: tuple[int, int] | None = None  # the last sample given out: enc, seq
 
     def feed(
         self, samples: dict[str, np.ndarray], sent_s: npt.NDArray[np.float64],
         encoder_t_s: npt.NDArray[np.float64], watermark_s: float,
+        pose_t_s: npt.NDArray[np.float64] | None = None,
     ) -> dict[str, np.ndarray]:
-        """Take samples (``StreamPoses``' output: columns and send times) and the chunk's
-        accepted encoder frames' times; returns the samples kept that are final, in encoder
-        order. No sample to come may have been sent before ``watermark_s``."""
+        """Take samples (``StreamPoses``' output: columns and send times), the chunk's accepted
+        encoder frames' times and its accepted ODOM_POSE_Y frames' times (the silence before a
+        sample is counted from the last pose the firmware sent, a sample or not); returns the
+        samples kept that are final, in encoder order. No sample to come may have been sent
+        before ``watermark_s``."""
+        if pose_t_s is not None and len(pose_t_s):
+            if (len(self._pose_t) and pose_t_s[0] < self._pose_t[-1]) or np.any(
+                    np.diff(pose_t_s) < 0) or (self._prev is not None
+                                               and float(pose_t_s[0]) < self._prev[0]):
+                self.exact = False  # the whole log's searchsorted on them: unsorted, or late
+            self._pose_t = np.concatenate((self._pose_t, pose_t_s))
         if len(encoder_t_s):
             if encoder_t_s[0] < self._last_enc_t or np.any(np.diff(encoder_t_s) < 0):
                 self.exact = False
@@ -102,13 +112,19 @@ class StreamStalls:
         if self.cycle_s is not None:
             heard_to = self._enc_before + np.searchsorted(self._enc_t, sent)
             if self._prev is not None:
-                p_sent, p_enc, p_heard = self._prev
+                p_sent, p_enc, _ = self._prev
                 all_sent = np.concatenate(([p_sent], sent))
                 all_enc = np.concatenate(([p_enc], enc))
-                all_heard = np.concatenate(([p_heard], heard_to))
             else:
-                all_sent, all_enc, all_heard = sent, enc, heard_to
-            after = np.flatnonzero(silent(all_sent, np.diff(all_heard), self.cycle_s)) + 1
+                all_sent, all_enc = sent, enc
+            talked = all_sent[:-1]  # samples.after_stalls: from the last pose sent before
+            if len(self._pose_t):
+                k = np.searchsorted(self._pose_t, all_sent[1:], side="left") - 1
+                talked = np.maximum(talked, np.where(k >= 0, self._pose_t[np.maximum(k, 0)],
+                                                     -np.inf))
+            heard = (self._enc_before + np.searchsorted(self._enc_t, all_sent[1:])
+                     - (self._enc_before + np.searchsorted(self._enc_t, talked)))
+            after = np.flatnonzero(silent(all_sent[1:] - talked, heard, self.cycle_s)) + 1
             self._breaks.update((all_enc[after - 1] + 1).tolist())
             shift = 0 if self._prev is None else 1
             drop[after - shift] = True
@@ -116,6 +132,7 @@ class StreamStalls:
             gone = int(np.searchsorted(self._enc_t, sent[-1]))
             self._enc_before += gone
             self._enc_t = self._enc_t[gone:]
+            self._pose_t = self._pose_t[max(int(np.searchsorted(self._pose_t, sent[-1])) - 1, 0):]
         kept = order[~drop]
         self._decided = _cat(self._decided, {k: v[kept] for k, v in part.items()})
 

@@ -20,7 +20,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from odocan.firmware.ecu import ENCODER_PERIOD_US, MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
-from odocan.host.judge.compare import drop_errors_of, lost_beyond_gaps, worst_losses_m
+from odocan.host.judge.losses import drop_errors_of, lost_beyond_gaps, worst_losses_m
 from odocan.host.judge.reference import Geometry, ReferenceOdometry, wrap_delta
 from odocan.host.judge.samples import (
     QUEUED_GAP_CYCLES,
@@ -451,7 +451,7 @@ class PoseTracker:
     def on_enc_lost(self, lost: int) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS: the firmware's ENC_E2E_LOST (u8). Where it grew
         by more than the bus's own gaps since the previous page, the firmware lost frames the
-        bus carried (``compare.firmware_losses``): the position may leave the fine reference by
+        bus carried (``losses.firmware_losses``): the position may leave the fine reference by
         the sum of the largest errors that many lost frames make there (``loss_allowance``),
         from the frame of the previous page on, as ``analyze`` allows it."""
         upto = self.enc_seq
