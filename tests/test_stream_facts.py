@@ -21,7 +21,6 @@ from odocan.host.judge.reboots import split_lives
 from odocan.host.judge.reference_path import DOT_BLOCK, block_dot
 from odocan.host.judge.samples import (
     Poses,
-    after_stalls,
     encoder_frames,
     onboard_samples,
     pick_integrator,
@@ -29,6 +28,7 @@ from odocan.host.judge.samples import (
     starts_at_power_up,
     truth_samples,
 )
+from odocan.host.judge.stalls import after_stalls
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
 from odocan.host.judge.stream_facts import StreamFacts
 from odocan.host.judge.stream_fit import BlockDot, SegmentSums

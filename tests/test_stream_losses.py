@@ -16,11 +16,11 @@ from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import (
     WIRE_COUNTER_BITS,
-    after_stalls,
     encoder_frames,
     onboard_samples,
     pick_integrator,
 )
+from odocan.host.judge.stalls import after_stalls
 from odocan.host.judge.stream import StreamE2E, StreamEncoders
 from odocan.host.judge.stream_losses import SpanDrops, StreamLosses
 from odocan.host.protocol.decode import BulkDecoder

@@ -26,10 +26,10 @@ from odocan.host.judge.reference_path import (
 )
 from odocan.host.judge.samples import (
     Poses,
-    after_stalls,
     encoder_frames,
     onboard_samples,
 )
+from odocan.host.judge.stalls import after_stalls
 from odocan.host.judge.stream_life import placed_chunks
 from odocan.host.judge.stream_place import (
     PlacedChunk,

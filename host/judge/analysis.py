@@ -105,7 +105,6 @@ from odocan.host.judge.samples import (
     REQUIRED,
     AnalysisError,
     accepted_rows,
-    after_stalls,
     encoder_frames,
     onboard_samples,
     pick_integrator,
@@ -114,6 +113,7 @@ from odocan.host.judge.samples import (
     starts_at_power_up,
     truth_samples,
 )
+from odocan.host.judge.stalls import after_stalls
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import UNKNOWN, check_frames
 from odocan.host.protocol.pose import heading_fields

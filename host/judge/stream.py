@@ -30,7 +30,7 @@ Positions (``index``) are positions in the whole log (frames before the chunk co
 Beside it, each exact at any chunk size against the whole-log function (tests/test_stream*.py,
 on a log cut at every frame and on a faulted rig run with a stall and a reboot):
 ``stream_lives.StreamLives`` (``reboots.split_lives``), ``stream_stalls.StreamStalls``
-(``samples.after_stalls``; with an ``exact`` flag for logs whose times go back),
+(``stalls.after_stalls``; with an ``exact`` flag for logs whose times go back),
 ``stream_truth.StreamTruth`` (``samples.truth_samples``), ``stream_twist.StreamTwist``
 (``compare.check_twist``), ``stream_losses.StreamLosses`` and ``SpanDrops``
 (``losses.firmware_losses`` and ``loss_allowance``), ``stream_facts.StreamFacts`` (frame

@@ -1,4 +1,4 @@
-"""The firmware's stalls chunk by chunk (issue #14.1): ``host.judge.samples.after_stalls`` over
+"""The firmware's stalls chunk by chunk (issue #14.1): ``host.judge.stalls.after_stalls`` over
 the on-board samples as ``host.judge.stream.StreamPoses`` gives them out (in encoder order).
 
 ``after_stalls`` looks at the samples in the order they were sent (ODOM_POSE_Y's time, ties
@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from odocan.host.judge.samples import frozen_breaks, silent
+from odocan.host.judge.stalls import frozen_breaks, silent
 
 COLUMNS = ("enc", "x_m", "y_m", "heading_rad", "heading_raw", "seq")
 
@@ -117,7 +117,7 @@ class StreamStalls:
                 all_enc = np.concatenate(([p_enc], enc))
             else:
                 all_sent, all_enc = sent, enc
-            talked = all_sent[:-1]  # samples.after_stalls: from the last pose sent before
+            talked = all_sent[:-1]  # stalls.after_stalls: from the last pose sent before
             if len(self._pose_t):
                 k = np.searchsorted(self._pose_t, all_sent[1:], side="left") - 1
                 talked = np.maximum(talked, np.where(k >= 0, self._pose_t[np.maximum(k, 0)],
@@ -149,7 +149,7 @@ class StreamStalls:
         return out
 
     def _frozen(self, given: dict[str, np.ndarray]) -> None:
-        """``samples._frozen`` over the samples given out (in encoder order), the last one
+        """``stalls._frozen`` over the samples given out (in encoder order), the last one
         before carried in front: where the firmware held its pose, a break."""
         if self.cycle_s is None or len(given["enc"]) == 0:
             return

@@ -376,7 +376,7 @@ class PoseTracker:
         self._settled.append(Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
 
     def _silent_before(self, y: _Half, queued: bool) -> bool:
-        """The firmware was silent before this sample (``samples.after_stalls``): its
+        """The firmware was silent before this sample (``stalls.after_stalls``): its
         ODOM_POSE_Y came ``SILENCE_CYCLES`` - 0.5 cycles or more after the previous sample's
         while the encoder frames went on (``SILENCE_CYCLES`` - 1 or more heard between), and
         it was not let out in a burst."""

@@ -1,0 +1,111 @@
+"""The firmware's stalls and holds in a log (``host.judge.analysis`` module docstring, step 3):
+samples sent after the firmware was silent while the encoder frames went on, and poses it held on
+one frame, after which it took the frames it missed as one step, so the reference's position is
+placed again there."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.judge.samples import (
+    SILENCE_CYCLES,
+    Encoders,
+    FloatArray,
+    IntArray,
+    Poses,
+    queued_frames,
+)
+
+
+def after_stalls(
+    onboard: Poses, sent_s: FloatArray, enc: Encoders, pose_sent_s: FloatArray | None = None
+) -> tuple[Poses, IntArray]:
+    """Samples sent after the firmware was silent for ``SILENCE_CYCLES`` encoder cycles or more
+    (no ODOM_POSE_Y at all: ``pose_sent_s``, every one's bus time, also those that name the
+    previous sample's frame again, e.g. queued ones the bus let out late) while the log holds
+    the encoder frames of that time, which came on time (``frames_on_time``; a stalled MCU,
+    firmware/ecu.py TIME_LOST): the first names a frame from before the silence
+    (its backlog), which ENC_COUNTER cannot resolve, so it is left out; and the firmware took the
+    frames it missed as one step, which a fine reference cannot follow on a curve, so the
+    reference's position restarts (a segment, like a gap) at the encoder frame after the last
+    sample before the silence. The same restart where the firmware kept talking but held its
+    pose (``_frozen``). Returns the samples kept and those encoder frames (sorted)."""
+    if enc.cycle_s is None or len(sent_s) < 2:
+        return onboard, np.zeros(0, dtype=np.int64)
+    order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
+    sent = sent_s[order]
+    # Silent while the encoder frames went on, on time (a log that lacks both is a recorder's
+    # gap; a bus that held both back let the frames out in a burst), measured from the last pose
+    # the firmware sent before each next sample (queued ones naming the same frame included).
+    talked = sent[:-1]
+    if pose_sent_s is not None and len(pose_sent_s):
+        k = np.searchsorted(pose_sent_s, sent[1:], side="left") - 1
+        talked = np.maximum(talked, np.where(k >= 0, pose_sent_s[np.maximum(k, 0)], -np.inf))
+    heard = frames_on_time(
+        enc, np.searchsorted(enc.timestamp_s, talked), np.searchsorted(enc.timestamp_s, sent[1:])
+    )
+    # A sample let out in a burst (queued_frames) was not silent: the bus held it back.
+    queued = queued_frames(sent, enc.cycle_s)
+    after = np.flatnonzero(silent(sent[1:] - talked, heard, enc.cycle_s) & ~queued[1:]) + 1
+    keep = np.ones(len(sent_s), dtype=bool)
+    keep[order[after]] = False
+    kept = Poses(onboard.enc[keep], onboard.x_m[keep], onboard.y_m[keep],
+                 onboard.heading_rad[keep], onboard.heading_raw[keep])
+    queued_by_sample = np.zeros(len(sent_s), dtype=bool)
+    queued_by_sample[order] = queued
+    frozen = _frozen(kept, enc, queued_by_sample[keep])
+    breaks = np.sort(np.concatenate((onboard.enc[order[after - 1]] + 1, frozen)))
+    first = np.ones(len(breaks), dtype=bool)  # np.unique by hand: its plain form imports
+    first[1:] = breaks[1:] != breaks[:-1]  # numpy.ma (10 ms of start-up) for nothing
+    return kept, breaks[first].astype(np.int64)
+
+
+def frames_on_time(enc: Encoders, lo: IntArray, hi: IntArray) -> IntArray:
+    """How many of the encoder frames ``lo[k]`` .. ``hi[k]`` - 1 (positions in ``enc``) came on
+    time: not ``queued_frames`` (a busy bus let them out in a burst). A firmware that missed
+    frames which came on time was silent or held (a stall); frames the bus held back came all
+    at once, and a firmware that drains them one by one in its next tick missed none of them
+    (its mailbox may drop some: ENC_E2E_LOST counts those, ``losses.firmware_losses``)."""
+    if enc.cycle_s is None:
+        return np.asarray(hi - lo, dtype=np.int64)
+    on_time = ~queued_frames(enc.timestamp_s, enc.cycle_s)
+    before = np.concatenate(([0], np.cumsum(on_time, dtype=np.int64)))
+    counted: IntArray = before[hi] - before[lo]
+    return counted
+
+
+def _frozen(onboard: Poses, enc: Encoders, queued: npt.NDArray[np.bool_]) -> IntArray:
+    """Encoder frames after a sample whose next sample names a frame ``SILENCE_CYCLES`` or more
+    periods later while the log holds ``SILENCE_CYCLES`` frames between that came on time
+    (``frames_on_time``): the firmware held its pose on one frame (it kept naming it) and then
+    took the frames since as one step, as after a stall."""
+    heard = frames_on_time(enc, onboard.enc[:-1] + 1, onboard.enc[1:] + 1)
+    return frozen_breaks(onboard.enc, enc.seq[onboard.enc], queued, heard)
+
+
+def frozen_breaks(sample_enc: IntArray, sample_seq: IntArray,
+                  queued: npt.NDArray[np.bool_] | None = None,
+                  heard: IntArray | None = None) -> IntArray:
+    """``_frozen`` of consecutive samples (their encoder frames in the log and sequence
+    numbers, in encoder order; ``queued``: which came in a burst, None: none did; ``heard``: the
+    frames on time between each two, None: every frame between, as when none came in a burst)."""
+    on_time = np.diff(sample_enc) if heard is None else heard
+    held = (np.diff(sample_seq) >= SILENCE_CYCLES) & (on_time >= SILENCE_CYCLES)
+    if queued is not None:
+        held &= ~queued[1:]  # a queued sample was made long before it was sent: not evidence
+    frozen: IntArray = sample_enc[:-1][held] + 1
+    return frozen
+
+
+def silent(
+    quiet_s: FloatArray, heard: IntArray, cycle_s: float
+) -> npt.NDArray[np.bool_]:
+    """``after_stalls``' silence before each next sample (``quiet_s``: seconds since the
+    firmware last sent a pose, ``heard``: encoder frames logged on time meanwhile): at least half
+    a cycle short of ``SILENCE_CYCLES`` (samples come in whole send periods, and time stamps
+    summed in float must not decide: 79.999... ms is 80 ms) while the encoder frames went on."""
+    quiet: npt.NDArray[np.bool_] = (
+        (quiet_s >= (SILENCE_CYCLES - 0.5) * cycle_s) & (heard >= SILENCE_CYCLES - 1)
+    )
+    return quiet
