@@ -17,6 +17,7 @@ from typing import Any
 import pytest
 
 from odocan.host.judge import tracking
+from odocan.host.judge.samples import match_encoder
 from odocan.host.judge.tracking import PoseTracker, Sample
 from odocan.sim.robot import load
 from tests.test_analysis_reboot import REBOOT, rebooting_drive
@@ -58,7 +59,7 @@ def _judged(path: Path, robot: str) -> tuple[list[Any], int, int]:
     statistics; and how many halves went to ``match_encoder`` and were resolved in all."""
     samples: list[list[Sample]] = [[], []]
     calls = {"slow": 0, "named": 0}
-    take, named, match = PoseTracker.take_samples, PoseTracker._named, tracking.match_encoder
+    take, named, match = PoseTracker.take_samples, PoseTracker._named, match_encoder
 
     def taking(self: PoseTracker) -> list[Sample]:
         got = take(self)
@@ -81,7 +82,7 @@ def _judged(path: Path, robot: str) -> tuple[list[Any], int, int]:
         monitor = monitor_of(path, robot, "exact")
         patch.setattr(PoseTracker, "_which", 1, raising=False)
         bridge = bridge_of(path, robot, "exact")
-    judged = [samples]
+    judged: list[Any] = [samples]
     for tracker in (monitor.tracker, bridge.tracker):
         judged.append((tracker.snapshot(), vars(tracker.vs_reference), vars(tracker.vs_truth),
                        tracker.allowance_m(), tracker.max_beyond_allowance_m, tracker.stalls,
