@@ -45,29 +45,31 @@ HALF_WINDOW = 256  # pose halves of each message kept to resolve the frame one n
 ENC_WINDOW = 512  # encoder frames kept for it, and the reference at each (5 s at 100 Hz)
 CYCLE_S = float(contract.message("WHEEL_ENCODERS").cycle_time or 10) / 1000.0  # DBC cycle
 _TURN = 2.0 * math.pi
+_RECENT = 32  # latest rows of a window kept as tuples for the fast path (``_named_plain``)
 _QUEUED_GAP_S = QUEUED_GAP_CYCLES * CYCLE_S  # closer sends of one message waited (queued)
 _REPEAT_S = SILENCE_CYCLES * CYCLE_S  # a repeated ENC_COUNTER closer than this is held
 
 
-def _named_plain(
-    halves: deque[tuple[float, ...]], window: deque[tuple[float, ...]], pos: int
-) -> int | None:
+def _named_plain(halves: deque[tuple[float, ...]], columns: _Columns, pos: int) -> int | None:
     """``PoseTracker._named`` for the common half, without numpy: the encoder frame (seq) the
     half at ``pos`` names, -1 when none; None when ``samples.match_encoder``'s held or queued
     rule may apply (``_plain_half``). Else its plain rule alone decides, computed here as it
     computes it on the window: the latest encoder frame before the half (less than 8 cycles
     older), the offset of ENC_COUNTER from its COUNTER, and the frame that many sender steps
-    (``samples.sender_seq``, pair by pair) back. ``window`` rows: seq, pos, COUNTER, bus
-    time s, ..."""
+    (``samples.sender_seq``, pair by pair) back; None too when that reaches back beyond the
+    window's rows kept as tuples. ``columns.rows``: seq, pos, COUNTER, bus time s, ..."""
     half = _plain_half(halves, pos)
     if half is None:
         return None
     enc_counter, t_s = half
+    window = columns.rows
     n = len(window)
     latest = -1  # negative index into ``window``: the latest frame before the half
     while latest >= -n and window[latest][1] >= pos:
         latest -= 1
-    if latest < -n or t_s - window[latest][3] >= 8 * CYCLE_S:
+    if latest < -n:
+        return -1 if columns.whole else None
+    if t_s - window[latest][3] >= 8 * CYCLE_S:
         return -1
     offset = ((int(enc_counter - window[latest][2]) + 8) & 0xF) - 8
     if offset > 0:
@@ -81,6 +83,9 @@ def _named_plain(
             break
         back += step
         j -= 1
+    else:
+        if not columns.whole:
+            return None  # the walk may go on before the rows kept: let match_encoder judge
     return int(window[j][0]) if back == -offset else -1
 
 
@@ -124,24 +129,31 @@ def _sender_step(window: deque[tuple[float, ...]], j: int) -> int:
 
 
 class _Columns:
-    """The latest ``size`` rows of a few numeric columns: as plain tuples (``rows``, a ring
-    buffer for the fast path) and as numpy views (``col``, filled on demand: rows appended since
-    the last call are copied in one go, amortised O(1)): the live judge's window of recent
-    frames."""
+    """The latest ``size`` rows of a few numeric columns, as numpy views (``col``, amortised
+    O(1) append: rows are copied in ``_RECENT`` at a time, or when a view is asked for), and
+    the latest ``_RECENT`` of them as plain tuples (``rows``, a ring buffer for the fast path;
+    ``whole``: they are the whole window): the live judge's window of recent frames."""
 
     def __init__(self, names: tuple[str, ...], size: int) -> None:
         self.size = size
         self._col = {name: i for i, name in enumerate(names)}
         self._data = np.zeros((2 * size, len(names)))
         self._n = 0  # rows in ``_data``
+        self._count = 0  # rows appended in all
         self._unflushed: list[tuple[float, ...]] = []  # rows appended, not in ``_data`` yet
-        self.rows: deque[tuple[float, ...]] = deque(maxlen=size)
+        self.rows: deque[tuple[float, ...]] = deque(maxlen=_RECENT)
 
     def append(self, *row: float) -> None:
         self.rows.append(row)
+        self._count += 1
         self._unflushed.append(row)
-        if len(self._unflushed) >= 2 * self.size:  # only the latest ``size`` can be kept
-            del self._unflushed[: -self.size]
+        if len(self._unflushed) >= _RECENT:  # copied in a batch: the state stays small
+            self._flush()
+
+    @property
+    def whole(self) -> bool:
+        """``rows`` holds every row of the window (its first is the window's first)."""
+        return self._count <= _RECENT
 
     def _flush(self) -> None:
         rows, self._unflushed = self._unflushed[-self.size :], []
@@ -160,7 +172,7 @@ class _Columns:
         return column
 
     def __len__(self) -> int:
-        return len(self.rows)
+        return min(self._count, self.size)
 
 
 @dataclass(slots=True)
@@ -438,7 +450,7 @@ class PoseTracker:
         ENC_COUNTER by the plain rule alone, in plain Python (``_named_plain``: the same
         result)."""
         if self.fast_path:
-            plain = _named_plain(halves.rows, self._window.rows, pos)
+            plain = _named_plain(halves.rows, self._window, pos)
             if plain is not None:
                 return plain, False
         if not len(self._window):
