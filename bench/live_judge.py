@@ -6,7 +6,10 @@ WHEEL_ENCODERS (the poses come out in bursts: the live judges resolve those on t
 window), and its frames are fed to each judge as they were heard. Printed: microseconds of CPU
 per frame and the max on-board vs reference error each judge ends with (m).
 
-Run: ``.venv/bin/python bench/live_judge.py [--seconds S]``.
+``--slow``: every pose half by ``samples.match_encoder`` over the window (the fast path of
+``tracking._named_plain`` off: what the judges cost before it; the same results).
+
+Run: ``.venv/bin/python bench/live_judge.py [--seconds S] [--slow]``.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import can
 
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.robot import load
 
@@ -34,7 +38,10 @@ RUNS = {
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=30.0, help="drive length (s)")
+    parser.add_argument("--slow", action="store_true",
+                        help="every pose half by match_encoder (no fast path)")
     args = parser.parse_args()
+    PoseTracker.fast_path = not args.slow
     profile = load("pmir")
     with tempfile.TemporaryDirectory() as tmp:
         for name, extra in RUNS.items():

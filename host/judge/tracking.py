@@ -14,6 +14,7 @@ half of its message is heard: only then is it known whether it came out in a bur
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -44,31 +45,134 @@ HALF_WINDOW = 256  # pose halves of each message kept to resolve the frame one n
 ENC_WINDOW = 512  # encoder frames kept for it, and the reference at each (5 s at 100 Hz)
 CYCLE_S = float(contract.message("WHEEL_ENCODERS").cycle_time or 10) / 1000.0  # DBC cycle
 _TURN = 2.0 * math.pi
+_RECENT = 32  # latest rows of a window kept as tuples for the fast path (``_named_plain``)
+_QUEUED_GAP_S = QUEUED_GAP_CYCLES * CYCLE_S  # closer sends of one message waited (queued)
+_REPEAT_S = SILENCE_CYCLES * CYCLE_S  # a repeated ENC_COUNTER closer than this is held
+
+
+def _named_plain(halves: deque[tuple[float, ...]], columns: _Columns, pos: int) -> int | None:
+    """``PoseTracker._named`` for the common half, without numpy: the encoder frame (seq) the
+    half at ``pos`` names, -1 when none; None when ``samples.match_encoder``'s held or queued
+    rule may apply (``_plain_half``). Else its plain rule alone decides, computed here as it
+    computes it on the window: the latest encoder frame before the half (less than 8 cycles
+    older), the offset of ENC_COUNTER from its COUNTER, and the frame that many sender steps
+    (``samples.sender_seq``, pair by pair) back; None too when that reaches back beyond the
+    window's rows kept as tuples. ``columns.rows``: seq, pos, COUNTER, bus time s, ..."""
+    half = _plain_half(halves, pos)
+    if half is None:
+        return None
+    enc_counter, t_s = half
+    window = columns.rows
+    n = len(window)
+    latest = -1  # negative index into ``window``: the latest frame before the half
+    while latest >= -n and window[latest][1] >= pos:
+        latest -= 1
+    if latest < -n:
+        return -1 if columns.whole else None
+    if t_s - window[latest][3] >= 8 * CYCLE_S:
+        return -1
+    offset = ((int(enc_counter - window[latest][2]) + 8) & 0xF) - 8
+    if offset > 0:
+        return -1  # not on the bus before the half
+    # the first frame whose seq >= seq[latest] + offset (searchsorted): walk back from latest
+    # while the one before still is; ``back``: seq[latest] - seq[j]
+    j, back = latest, 0
+    while j > -n:
+        step = _sender_step(window, j)
+        if back + step > -offset:
+            break
+        back += step
+        j -= 1
+    else:
+        if not columns.whole:
+            return None  # the walk may go on before the rows kept: let match_encoder judge
+    return int(window[j][0]) if back == -offset else -1
+
+
+def _plain_half(halves: deque[tuple[float, ...]], pos: int) -> tuple[float, float] | None:
+    """ENC_COUNTER and bus time (s) of the half at ``pos`` (one of the last two ``halves`` rows:
+    pos, ENC_COUNTER, COUNTER, bus time s); None when it is not there or when it is less than
+    ``QUEUED_GAP_CYCLES`` from a neighbour (queued) or repeats its predecessor's ENC_COUNTER
+    with own COUNTER + 1 within ``SILENCE_CYCLES`` (held)."""
+    n_halves = len(halves)
+    if n_halves and halves[-1][0] == pos:
+        k = -1
+    elif n_halves > 1 and halves[-2][0] == pos:
+        k = -2
+        if halves[-1][3] - halves[-2][3] < _QUEUED_GAP_S:
+            return None
+    else:
+        return None
+    _, enc_counter, counter, t_s = halves[k]
+    if n_halves > -k:
+        _, prev_enc, prev_counter, prev_t = halves[k - 1]
+        if t_s - prev_t < _QUEUED_GAP_S:
+            return None
+        if (prev_enc == enc_counter and (int(counter - prev_counter) & 0xF) == 1
+                and t_s - prev_t < _REPEAT_S):
+            return None
+    return enc_counter, t_s
+
+
+def _sender_step(window: deque[tuple[float, ...]], j: int) -> int:
+    """``samples.sender_seq``'s step from frame ``j - 1`` to frame ``j`` (negative indices into
+    the window, ``j`` > -len): COUNTER step mod 16, widened by 16 per 16 periods more the bus
+    times show unless frame ``j`` queued (less than ``QUEUED_GAP_CYCLES`` from a neighbour)."""
+    _, _, counter, t_s = window[j][:4]
+    _, _, prev_counter, prev_t = window[j - 1][:4]
+    step = int(counter - prev_counter) & 0xF
+    dt = t_s - prev_t
+    if dt < _QUEUED_GAP_S or (j < -1 and window[j + 1][3] - t_s < _QUEUED_GAP_S):
+        return step
+    periods = round(dt / CYCLE_S)
+    return step + 16 * max(0, round((periods - step) / 16))
 
 
 class _Columns:
-    """The latest ``size`` rows of a few numeric columns, as numpy views (amortised O(1)
-    append): the live judge's window of recent frames."""
+    """The latest ``size`` rows of a few numeric columns, as numpy views (``col``, amortised
+    O(1) append: rows are copied in ``_RECENT`` at a time, or when a view is asked for), and
+    the latest ``_RECENT`` of them as plain tuples (``rows``, a ring buffer for the fast path;
+    ``whole``: they are the whole window): the live judge's window of recent frames."""
 
     def __init__(self, names: tuple[str, ...], size: int) -> None:
         self.size = size
         self._col = {name: i for i, name in enumerate(names)}
         self._data = np.zeros((2 * size, len(names)))
-        self._n = 0
+        self._n = 0  # rows in ``_data``
+        self._count = 0  # rows appended in all
+        self._unflushed: list[tuple[float, ...]] = []  # rows appended, not in ``_data`` yet
+        self.rows: deque[tuple[float, ...]] = deque(maxlen=_RECENT)
 
     def append(self, *row: float) -> None:
-        if self._n == len(self._data):  # keep the latest ``size`` rows, at the front
-            self._data[: self.size] = self._data[self._n - self.size : self._n]
-            self._n = self.size
-        self._data[self._n] = row
-        self._n += 1
+        self.rows.append(row)
+        self._count += 1
+        self._unflushed.append(row)
+        if len(self._unflushed) >= _RECENT:  # copied in a batch: the state stays small
+            self._flush()
+
+    @property
+    def whole(self) -> bool:
+        """``rows`` holds every row of the window (its first is the window's first)."""
+        return self._count <= _RECENT
+
+    def _flush(self) -> None:
+        rows, self._unflushed = self._unflushed[-self.size :], []
+        m = len(rows)
+        if self._n + m > len(self._data):  # keep the latest ``size`` rows, at the front
+            keep = min(self._n, self.size - m)
+            self._data[:keep] = self._data[self._n - keep : self._n]
+            self._n = keep
+        self._data[self._n : self._n + m] = rows
+        self._n += m
 
     def col(self, name: str) -> FloatArray:
+        if self._unflushed:
+            self._flush()
         column: FloatArray = self._data[max(0, self._n - self.size) : self._n, self._col[name]]
         return column
 
     def __len__(self) -> int:
-        return min(self._n, self.size)
+        return min(self._count, self.size)
 
 
 @dataclass(slots=True)
@@ -234,7 +338,8 @@ class PoseTracker:
         self._place_at_next = False  # after a stall or a held pose: place the position again
         self._lost_page: tuple[int, int] | None = None  # ENC_E2E_LOST, latest frame then
         self._allowances: list[tuple[int, float]] = []  # (first frame, m) per lossy span
-        self._revisable: list[tuple[int, float]] = []  # (frame, m) of samples since that page
+        self._revisable: deque[tuple[int, float]] = deque()  # (frame, m) of samples since
+        self._revisable_in_order = True  # ``_revisable`` by frame (then settled from its head)
         self._beyond_settled_m = 0.0  # largest error beyond its allowance of the other samples
         self._now_s = 0.0  # the latest bus time (s)
         self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
@@ -248,6 +353,8 @@ class PoseTracker:
         self.vs_truth = ErrorStats()
         self.reference_vs_truth = ErrorStats()
 
+    fast_path = True  # False: every half by ``match_encoder`` over the window (tests compare)
+
     # --- frames ---
 
     def advance(self, t_s: float) -> None:
@@ -257,8 +364,10 @@ class PoseTracker:
         self._now_s = t_s
         if self._boot is not None and t_s > self._boot[1]:
             self._finish_boot(self._boot[0])
+        if not self._unsettled:
+            return
         for name, half in sorted(self._unsettled.items(), key=lambda item: item[1].pos):
-            if t_s - half.t_s >= QUEUED_GAP_CYCLES * CYCLE_S:
+            if t_s - half.t_s >= _QUEUED_GAP_S:
                 self._settle(name)
 
     def on_encoders(self, counter: int, left: int, right: int, t_s: float) -> None:
@@ -337,7 +446,13 @@ class PoseTracker:
     def _named(self, halves: _Columns, pos: int) -> tuple[int, bool]:
         """The encoder frame (seq) the half at ``pos`` names, -1 when none, and whether it
         queued: ``host.judge.samples.match_encoder`` over the window (the held and queued rules,
-        the age bound, the causal rule)."""
+        the age bound, the causal rule); a half neither queued nor repeating its predecessor's
+        ENC_COUNTER by the plain rule alone, in plain Python (``_named_plain``: the same
+        result)."""
+        if self.fast_path:
+            plain = _named_plain(halves.rows, self._window, pos)
+            if plain is not None:
+                return plain, False
         if not len(self._window):
             return -1, False
         w = self._window
@@ -381,12 +496,11 @@ class PoseTracker:
         while the encoder frames went on (``SILENCE_CYCLES`` - 1 or more heard between), and
         it was not let out in a burst."""
         last, self._last_sample_t = self._last_sample_t, y.t_s
-        if last is None or queued:
+        if last is None or queued or y.t_s - last < (SILENCE_CYCLES - 0.5) * CYCLE_S:
             return False
         stamps = self._window.col("t_s")
         heard = int(np.searchsorted(stamps, y.t_s) - np.searchsorted(stamps, last))
-        return (y.t_s - last >= (SILENCE_CYCLES - 0.5) * CYCLE_S
-                and heard >= SILENCE_CYCLES - 1)
+        return heard >= SILENCE_CYCLES - 1
 
     def _compare(self, pose: FramePose, y: _Half, queued: bool) -> FramePose | None:
         """Judge one on-board sample; the reference at its encoder frame, None when unknown."""
@@ -435,14 +549,27 @@ class PoseTracker:
         self._last_pair = (pose, ref)
         self._last_compared = pose.seq
         self.vs_reference.add(pose, ref)
-        self._revisable.append((pose.seq, self.vs_reference.latest["dpos_m"]))
-        if self._revisable[0][0] < pose.seq - ENC_WINDOW:  # beyond any span's reach
+        revisable = self._revisable
+        if revisable and pose.seq < revisable[-1][0]:
+            self._revisable_in_order = False
+        revisable.append((pose.seq, self.vs_reference.latest["dpos_m"]))
+        if revisable[0][0] < pose.seq - ENC_WINDOW:  # beyond any span's reach
             self._settle_errors(pose.seq - ENC_WINDOW)
 
     def _settle_errors(self, upto: int) -> None:
         """The samples up to encoder frame ``upto`` can get no more allowance."""
-        settled = [(f, e) for f, e in self._revisable if f <= upto]
-        self._revisable = [(f, e) for f, e in self._revisable if f > upto]
+        revisable = self._revisable
+        if self._revisable_in_order and self.fast_path:  # those up to ``upto`` lead
+            settled = []
+            while revisable and revisable[0][0] <= upto:
+                settled.append(revisable.popleft())
+        else:
+            settled = [(f, e) for f, e in revisable if f <= upto]
+            self._revisable = deque((f, e) for f, e in revisable if f > upto)
+            frames = [f for f, _ in self._revisable]
+            self._revisable_in_order = frames == sorted(frames)
+        if not settled:
+            return
         self._beyond_settled_m = max([self._beyond_settled_m,
                                       *(e - self.allowance_m(f) for f, e in settled)])
 
