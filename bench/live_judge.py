@@ -7,7 +7,7 @@ window), and its frames are fed to each judge as they were heard. Printed: micro
 per frame and the max on-board vs reference error each judge ends with (m).
 
 ``--slow``: every pose half by ``samples.match_encoder`` over the window (the fast path of
-``tracking._named_plain`` off: what the judges cost before it; the same results).
+``livewindow.named_plain`` off: what the judges cost before it; the same results).
 
 Run: ``.venv/bin/python bench/live_judge.py [--seconds S] [--slow]``.
 """

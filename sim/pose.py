@@ -5,7 +5,7 @@ the heading in radians, counter-clockwise positive. Whoever makes one says which
 holds: the ground truth's ``TruthPose.pose`` wraps it to (-pi, pi], the on-board pose the host
 pairs from ODOM_POSE_X/Y (``host.protocol.pose``) and the float64 reference keep it cumulative
 (turns counted). Types that carry more are named for what they carry: ``sim.truth.TruthPose``
-(time and distance travelled), ``host.judge.tracking.FramePose`` (the encoder frame it is of).
+(time and distance travelled), ``host.judge.livepose.FramePose`` (the encoder frame it is of).
 
 ``wrap_angle`` is the one wrap of an angle to (-pi, pi] (the host's outputs, the truth, the
 trackers): IEEE ``remainder`` by a full turn is exact, so the only rounding is the turn's own

@@ -36,7 +36,7 @@ from hypothesis import strategies as st
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorFlag, Reason, State
 from odocan.firmware.hal import MAILBOX_SLOTS
-from odocan.host.judge.losses import _OneSteps, _worst_runs, drop_errors, run_errors
+from odocan.host.judge.losses import OneSteps, drop_errors, run_errors, worst_runs_m
 from odocan.host.judge.samples import Encoders
 from odocan.sim.faults import FaultSpec
 from odocan.sim.rig import LockstepRig, RigConfig
@@ -263,7 +263,7 @@ def test_the_merge_error_of_a_run_of_lost_frames_is_the_checkers(
     n = len(enc.seq)
     j = data.draw(st.integers(1, n - 2), label="first lost frame")
     r = data.draw(st.integers(1, n - 1 - j), label="frames lost")
-    got = float(run_errors(_OneSteps.of(enc, profile_of(robot), integrator), np.array([j]), r)[0])
+    got = float(run_errors(OneSteps.of(enc, profile_of(robot), integrator), np.array([j]), r)[0])
     every, lost = _Odometry(robot, integrator), _Odometry(robot, integrator)
     merged = [0, 0]
     for k, (d_left, d_right) in enumerate(steps):
@@ -290,13 +290,13 @@ def test_the_merge_error_of_a_run_of_lost_frames_is_the_checkers(
 def test_the_loss_allowance_is_the_worst_placement_of_the_lost_frames(
     robot: Robot, steps: list[tuple[int, int]], data: st.DataObject
 ) -> None:
-    """``_worst_runs``: the largest sum of run errors over every set of at most n lost frames
+    """``worst_runs_m``: the largest sum of run errors over every set of at most n lost frames
     in the span (named frames never lost; a run error need not grow with the run, so at most n
     is the safe side), by brute force over all the sets: runs of consecutive lost frames merge
     into one step each."""
     enc = _encoders(robot, steps)
     n_frames = len(enc.seq)
-    one = _OneSteps.of(enc, profile_of(robot), "rk2")
+    one = OneSteps.of(enc, profile_of(robot), "rk2")
     first = data.draw(st.integers(0, n_frames - 2), label="first")
     last = data.draw(st.integers(first, n_frames - 1), label="last")
     lost_ok = np.array(data.draw(st.lists(st.booleans(), min_size=n_frames,
@@ -314,7 +314,7 @@ def test_the_loss_allowance_is_the_worst_placement_of_the_lost_frames(
                 total += float(run_errors(one, np.array([chosen[k]]), end - k + 1)[0])
                 k = end + 1
             best = max(best, total)
-    assert _worst_runs(one, lost_ok, first, last, n) == pytest.approx(best, rel=1e-12, abs=1e-15)
+    assert worst_runs_m(one, lost_ok, first, last, n) == pytest.approx(best, rel=1e-12, abs=1e-15)
 
 
 @pytest.mark.parametrize(("foreign", "real"), [(1, 0), (1, 1), (7, 0), (3, 17)])

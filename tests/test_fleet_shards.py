@@ -19,8 +19,8 @@ import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance
+from odocan.host.judge.livepose import ErrorStats, FramePose
 from odocan.host.judge.reference import Geometry, ReferenceOdometry
-from odocan.host.judge.tracking import ErrorStats, FramePose
 from odocan.host.mqtt import fleetrun
 from odocan.host.mqtt.bridge import RobotEndpoint
 from odocan.host.mqtt.broker import LOOPBACK, free_loopback_port

@@ -1,4 +1,4 @@
-"""The live judges' fast path (``tracking._named_plain``: a pose half neither queued nor held
+"""The live judges' fast path (``livewindow.named_plain``: a pose half neither queued nor held
 resolved in plain Python) gives what ``samples.match_encoder`` over the whole window gives: on a
 plain drive, a babbled one (bursts), a lossy one (ENC_E2E_LOST grows: the allowance) and a
 reboot (with and without the boot summary), the monitor's and the bridge's every sample, error
@@ -16,9 +16,10 @@ from typing import Any
 
 import pytest
 
-from odocan.host.judge import tracking
+from odocan.host.judge import livewindow
+from odocan.host.judge.livepose import Sample
 from odocan.host.judge.samples import match_encoder
-from odocan.host.judge.tracking import PoseTracker, Sample
+from odocan.host.judge.tracking import PoseTracker
 from odocan.sim.robot import load
 from tests.test_analysis_reboot import REBOOT, rebooting_drive
 from tests.test_babble_firmware import _run_log
@@ -77,7 +78,7 @@ def _judged(path: Path, robot: str) -> tuple[list[Any], int, int]:
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(PoseTracker, "take_samples", taking)
         patch.setattr(PoseTracker, "_named", counting_named)
-        patch.setattr(tracking, "match_encoder", counting_match)
+        patch.setattr(livewindow, "match_encoder", counting_match)
         patch.setattr(PoseTracker, "_which", 0, raising=False)
         monitor = monitor_of(path, robot, "exact")
         patch.setattr(PoseTracker, "_which", 1, raising=False)
@@ -86,7 +87,7 @@ def _judged(path: Path, robot: str) -> tuple[list[Any], int, int]:
     for tracker in (monitor.tracker, bridge.tracker):
         judged.append((tracker.snapshot(), vars(tracker.vs_reference), vars(tracker.vs_truth),
                        tracker.allowance_m(), tracker.max_beyond_allowance_m, tracker.stalls,
-                       tracker.reference_starts, list(tracker._allowances)))
+                       tracker.reference_starts, list(tracker._losses.spans)))
     return judged, calls["slow"], calls["named"]
 
 

@@ -70,13 +70,6 @@ def lost_beyond_gaps(
     return excess
 
 
-def worst_losses_m(drop: FloatArray, first: int, last: int, n: int) -> float:
-    """The live judge's allowance (m) of one span: the sum of the ``n`` largest ``drop`` errors
-    among encoder frames ``first``..``last`` (analyze's ``loss_allowance`` also weighs runs of
-    lost frames merged into one step: ``_worst_runs``)."""
-    return float(np.sum(np.sort(drop[first : last + 1])[::-1][:n]))
-
-
 def _made_from(
     frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders,
     index: IntArray,
@@ -134,16 +127,16 @@ def loss_allowance(
     allowance = np.zeros(len(at))
     if not spans:
         return allowance
-    steps = _OneSteps.of(enc, robot, integrator)
+    steps = OneSteps.of(enc, robot, integrator)
     lost_ok = np.ones(len(enc.seq), dtype=bool)
     lost_ok[named[named < len(lost_ok)]] = False  # a frame an on-board sample names was not lost
     for first, last, n in spans:
-        worst = _worst_runs(steps, lost_ok, first, last, n)
+        worst = worst_runs_m(steps, lost_ok, first, last, n)
         allowance += np.where(at > first, worst, 0.0)
     return allowance
 
 
-def _worst_runs(steps: _OneSteps, lost_ok: npt.NDArray[np.bool_], first: int, last: int,
+def worst_runs_m(steps: OneSteps, lost_ok: npt.NDArray[np.bool_], first: int, last: int,
                 n: int) -> float:
     """The largest sum of ``run_errors`` over disjoint runs of lost frames among frames
     ``first`` .. ``last`` (only where ``lost_ok``), ``n`` frames in all (fewer where the span
@@ -176,7 +169,7 @@ def _worst_runs(steps: _OneSteps, lost_ok: npt.NDArray[np.bool_], first: int, la
 
 
 @dataclass(frozen=True)
-class _OneSteps:
+class OneSteps:
     """Per encoder step j (from frame j to j + 1): the counts, the heading before it, and the
     cumulative displacement of the single steps (element j: from frame 0 to frame j)."""
 
@@ -189,21 +182,25 @@ class _OneSteps:
     cum_y: FloatArray
 
     @staticmethod
-    def of(enc: Encoders, robot: RobotProfile, integrator: str) -> _OneSteps:
-        g = Geometry.of(robot)
-        bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
+    def of(enc: Encoders, robot: RobotProfile, integrator: str) -> OneSteps:
+        return OneSteps.of_geometry(enc, Geometry.of(robot),
+                                     min(robot.counter_bits, WIRE_COUNTER_BITS), integrator)
+
+    @staticmethod
+    def of_geometry(enc: Encoders, g: Geometry, bits: int, integrator: str) -> OneSteps:
+        """``of`` for a geometry and wire counter width (``bits``): the live judge's form."""
         dl, dr = wrap_delta(np.diff(enc.left), bits), wrap_delta(np.diff(enc.right), bits)
         heading = np.concatenate(([0.0], np.cumsum(heading_steps(dl, dr, g))))
         one_x, one_y = _step_vector(dl, dr, heading[:-1], heading[1:], g, integrator)
         zero = np.zeros(1, dtype=np.int64)
-        return _OneSteps(
+        return OneSteps(
             g, integrator, np.concatenate((zero, np.cumsum(dl))),
             np.concatenate((zero, np.cumsum(dr))), heading,
             np.concatenate(([0.0], np.cumsum(one_x))), np.concatenate(([0.0], np.cumsum(one_y))),
         )
 
 
-def run_errors(steps: _OneSteps, j: IntArray, r: int) -> FloatArray:
+def run_errors(steps: OneSteps, j: IntArray, r: int) -> FloatArray:
     """How far (m) the pose moves when frames j .. j + r - 1 are lost, i.e. the firmware takes
     the r + 1 steps from frame j - 1 to frame j + r as one (``host.judge.reference.integrate``'s
     step, for its integrator); ``j`` >= 1, j + r <= the last frame."""

@@ -21,12 +21,12 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.losses import (
     LOST_PAGE,
-    _OneSteps,
+    OneSteps,
     _overflow_reported_after,
     _step_vector,
-    _worst_runs,
     heading_steps,
     lost_beyond_gaps,
+    worst_runs_m,
 )
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import (
@@ -166,9 +166,9 @@ class StreamLosses:
 class SpanDrops:
     """``losses.loss_allowance`` for the spans of a life (``StreamLosses.spans``) from a pass
     over its encoder frames (``feed``) and its kept on-board samples (``named``): each frame's
-    cumulative counts, heading and single-step displacement (``losses._OneSteps``: continued
+    cumulative counts, heading and single-step displacement (``losses.OneSteps``: continued
     cumulative sums, bit for bit the whole life's), kept only from the frame before each span to
-    the frame after it; then each span's weight (``losses._worst_runs`` on them, the frames a
+    the frame after it; then each span's weight (``losses.worst_runs_m`` on them, the frames a
     sample names excepted) and the allowance at any encoder frame (the weights of the spans
     that began before it, added in the same order)."""
 
@@ -234,12 +234,12 @@ class SpanDrops:
         return self._sums
 
     def _weight(self, first: int, last: int, n: int) -> float:
-        """``_worst_runs`` of one span on the frames kept around it, from the frame before it
+        """``worst_runs_m`` of one span on the frames kept around it, from the frame before it
         to the frame after it: in local positions its frames are never the window's ends
-        unless they are the life's, which ``_worst_runs`` never loses either."""
+        unless they are the life's, which ``worst_runs_m`` never loses either."""
         lo, hi = max(first - 1, 0), min(last + 1, self._count - 1)
         rows = [self._kept[g] for g in range(lo, hi + 1)]
-        steps = _OneSteps(
+        steps = OneSteps(
             self.geometry, self.integrator,
             np.array([r[0] for r in rows], dtype=np.int64),
             np.array([r[1] for r in rows], dtype=np.int64),
@@ -247,7 +247,7 @@ class SpanDrops:
             np.array([r[4] for r in rows]),
         )
         lost_ok = np.array([g not in self._named for g in range(lo, hi + 1)], dtype=bool)
-        return _worst_runs(steps, lost_ok, first - lo, last - lo, n)
+        return worst_runs_m(steps, lost_ok, first - lo, last - lo, n)
 
     def _near(self, frames: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
         """Which ``frames`` lie from the frame before a span to the frame after it."""

@@ -54,8 +54,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance
+from odocan.host.judge.livepose import ErrorStats
 from odocan.host.judge.reference import Geometry
-from odocan.host.judge.tracking import ErrorStats
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
 from odocan.host.mqtt.options import broker_for

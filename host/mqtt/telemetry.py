@@ -39,9 +39,10 @@ import can
 from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
+from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
-from odocan.host.judge.tracking import FramePose, PoseTracker, difference, pose_dict
+from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.livedecode import LiveDecoder
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor, e2e_messages

@@ -49,8 +49,8 @@ from odocan.host.io.export import (
     pose_in_frame,
     to_ns,
 )
+from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.monitor import BusMonitor
-from odocan.host.judge.tracking import FramePose
 from odocan.host.protocol.decode import frame_key
 from odocan.host.report.foxglove_options import Served, start_server
 from odocan.sim.exceptions import ConfigurationError

@@ -1,0 +1,88 @@
+"""The live judge's loss allowance (``host.judge.tracking``): ``losses.loss_allowance``'s rule on
+the window of the latest encoder frames. Where the firmware's ENC_E2E_LOST grew by more than the
+bus's own gaps since its previous page, it lost frames the bus carried (``losses.firmware_losses``):
+the position may leave the fine reference by the worst error that many frames lost in runs make
+there (``losses.worst_runs_m``), from the frame of the previous page on, as ``analyze`` allows
+it. A sample's error beyond its allowance is settled once no later page can reach its frame."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from odocan.host.judge.livewindow import ENC_WINDOW, Columns, window_encoders
+from odocan.host.judge.losses import OneSteps, lost_beyond_gaps, worst_runs_m
+from odocan.host.judge.reference import Geometry
+
+
+class LiveAllowance:
+    """The allowance per lossy span and every sample's error beyond it."""
+
+    def __init__(self) -> None:
+        self.lost_page: tuple[int, int] | None = None  # ENC_E2E_LOST, latest frame then
+        self.spans: list[tuple[int, float]] = []  # (first frame, m) per lossy span
+        self._revisable: deque[tuple[int, float]] = deque()  # (frame, m) of samples since
+        self._in_order = True  # ``_revisable`` by frame (then settled from its head)
+        self._beyond_settled_m = 0.0  # largest error beyond its allowance of the other samples
+
+    def record(self, seq: int, dpos_m: float, fast: bool) -> None:
+        """A sample at encoder frame ``seq``, ``dpos_m`` from the reference."""
+        revisable = self._revisable
+        if revisable and seq < revisable[-1][0]:
+            self._in_order = False
+        revisable.append((seq, dpos_m))
+        if revisable[0][0] < seq - ENC_WINDOW:  # beyond any span's reach
+            self.settle(seq - ENC_WINDOW, fast)
+
+    def settle(self, upto: int, fast: bool) -> None:
+        """The samples up to encoder frame ``upto`` can get no more allowance."""
+        revisable = self._revisable
+        if self._in_order and fast:  # those up to ``upto`` lead
+            settled = []
+            while revisable and revisable[0][0] <= upto:
+                settled.append(revisable.popleft())
+        else:
+            settled = [(f, e) for f, e in revisable if f <= upto]
+            self._revisable = deque((f, e) for f, e in revisable if f > upto)
+            frames = [f for f, _ in self._revisable]
+            self._in_order = frames == sorted(frames)
+        if settled:
+            self._beyond_settled_m = max([self._beyond_settled_m,
+                                          *(e - self.at_m(f) for f, e in settled)])
+
+    def restart(self, upto: int, fast: bool) -> None:
+        """A new reference: the samples so far are settled, no span reaches past it."""
+        self.settle(upto, fast)
+        self.spans = []
+
+    def at_m(self, seq: int) -> float:
+        """The allowance (m) at encoder frame ``seq``."""
+        return sum(a for first, a in self.spans if seq > first)
+
+    def max_beyond_m(self) -> float:
+        """The largest position error beyond its allowance (m) of every sample recorded."""
+        recent = (e - self.at_m(f) for f, e in self._revisable)
+        return max([self._beyond_settled_m, *recent])
+
+    def on_page(self, lost: int, upto: int, window: Columns | None, sampled: set[int],
+                steps_of: tuple[Geometry, int, str | None]) -> None:
+        """ODOM_STATUS's ENC_E2E_LOST ``lost`` with encoder frame ``upto`` the latest; with a
+        ``window`` (a reference running): a span from the previous page's frame where it grew
+        beyond the gaps (``sampled``: frames a sample names, which the firmware had)."""
+        before, self.lost_page = self.lost_page, (lost, upto)
+        if before is None or window is None or not len(window):
+            return
+        seqs = window.col("seq")
+        i0, i1 = int(np.searchsorted(seqs, before[1])), len(seqs) - 1
+        if i0 >= len(seqs) or seqs[i0] != before[1]:
+            return  # the previous page's frame left the window: not judged
+        enc = window_encoders(window)
+        sent = enc.seq
+        n = int(lost_beyond_gaps(np.array(before[0]), np.array(lost), sent[i0], sent[i1],
+                                 np.array(i1 - i0)))
+        geometry, bits, integrator = steps_of
+        if n > 0 and integrator is not None:
+            steps = OneSteps.of_geometry(enc, geometry, bits, integrator)
+            lost_ok = ~np.isin(seqs.astype(np.int64), list(sampled))  # named: not lost
+            self.spans.append((before[1], worst_runs_m(steps, lost_ok, i0, i1, n)))

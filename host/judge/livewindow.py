@@ -1,0 +1,201 @@
+"""The live judge's window of the latest pose halves and encoder frames (``host.judge.tracking``):
+the columns ``samples.match_encoder`` reads, and the plain-Python fast path that gives the common
+half (not in a burst, not a repeat) the answer ``match_encoder`` would, without numpy per frame."""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from odocan.host.judge.samples import (
+    QUEUED_GAP_CYCLES,
+    SILENCE_CYCLES,
+    Encoders,
+    FloatArray,
+    match_encoder,
+    queued_frames,
+    sender_seq,
+)
+from odocan.sim import contract
+
+HALF_WINDOW = 256  # pose halves of each message kept to resolve the frame one names (5 s)
+ENC_WINDOW = 512  # encoder frames kept for it, and the reference at each (5 s at 100 Hz)
+CYCLE_S = float(contract.message("WHEEL_ENCODERS").cycle_time or 10) / 1000.0  # DBC cycle
+RECENT = 32  # latest rows of a window kept as tuples for the fast path (``named_plain``)
+QUEUED_GAP_S = QUEUED_GAP_CYCLES * CYCLE_S  # closer sends of one message waited (queued)
+REPEAT_S = SILENCE_CYCLES * CYCLE_S  # a repeated ENC_COUNTER closer than this is held
+
+
+def named_plain(halves: deque[tuple[float, ...]], columns: Columns, pos: int) -> int | None:
+    """``PoseTracker._named`` for the common half, without numpy: the encoder frame (seq) the
+    half at ``pos`` names, -1 when none; None when ``samples.match_encoder``'s held or queued
+    rule may apply (``plain_half``). Else its plain rule alone decides, computed here as it
+    computes it on the window: the latest encoder frame before the half (less than 8 cycles
+    older), the offset of ENC_COUNTER from its COUNTER, and the frame that many sender steps
+    (``samples.sender_seq``, pair by pair) back; None too when that reaches back beyond the
+    window's rows kept as tuples. ``columns.rows``: seq, pos, COUNTER, bus time s, ..."""
+    half = plain_half(halves, pos)
+    if half is None:
+        return None
+    enc_counter, t_s = half
+    window = columns.rows
+    n = len(window)
+    latest = -1  # negative index into ``window``: the latest frame before the half
+    while latest >= -n and window[latest][1] >= pos:
+        latest -= 1
+    if latest < -n:
+        return -1 if columns.whole else None
+    if t_s - window[latest][3] >= 8 * CYCLE_S:
+        return -1
+    offset = ((int(enc_counter - window[latest][2]) + 8) & 0xF) - 8
+    if offset > 0:
+        return -1  # not on the bus before the half
+    # the first frame whose seq >= seq[latest] + offset (searchsorted): walk back from latest
+    # while the one before still is; ``back``: seq[latest] - seq[j]
+    j, back = latest, 0
+    while j > -n:
+        step = _sender_step(window, j)
+        if back + step > -offset:
+            break
+        back += step
+        j -= 1
+    else:
+        if not columns.whole:
+            return None  # the walk may go on before the rows kept: let match_encoder judge
+    return int(window[j][0]) if back == -offset else -1
+
+
+def plain_half(halves: deque[tuple[float, ...]], pos: int) -> tuple[float, float] | None:
+    """ENC_COUNTER and bus time (s) of the half at ``pos`` (one of the last two ``halves`` rows:
+    pos, ENC_COUNTER, COUNTER, bus time s); None when it is not there or when it is less than
+    ``QUEUED_GAP_CYCLES`` from a neighbour (queued) or repeats its predecessor's ENC_COUNTER
+    with own COUNTER + 1 within ``SILENCE_CYCLES`` (held)."""
+    n_halves = len(halves)
+    if n_halves and halves[-1][0] == pos:
+        k = -1
+    elif n_halves > 1 and halves[-2][0] == pos:
+        k = -2
+        if halves[-1][3] - halves[-2][3] < QUEUED_GAP_S:
+            return None
+    else:
+        return None
+    _, enc_counter, counter, t_s = halves[k]
+    if n_halves > -k:
+        _, prev_enc, prev_counter, prev_t = halves[k - 1]
+        if t_s - prev_t < QUEUED_GAP_S:
+            return None
+        if (prev_enc == enc_counter and (int(counter - prev_counter) & 0xF) == 1
+                and t_s - prev_t < REPEAT_S):
+            return None
+    return enc_counter, t_s
+
+
+def _sender_step(window: deque[tuple[float, ...]], j: int) -> int:
+    """``samples.sender_seq``'s step from frame ``j - 1`` to frame ``j`` (negative indices into
+    the window, ``j`` > -len): COUNTER step mod 16, widened by 16 per 16 periods more the bus
+    times show unless frame ``j`` queued (less than ``QUEUED_GAP_CYCLES`` from a neighbour)."""
+    _, _, counter, t_s = window[j][:4]
+    _, _, prev_counter, prev_t = window[j - 1][:4]
+    step = int(counter - prev_counter) & 0xF
+    dt = t_s - prev_t
+    if dt < QUEUED_GAP_S or (j < -1 and window[j + 1][3] - t_s < QUEUED_GAP_S):
+        return step
+    periods = round(dt / CYCLE_S)
+    return step + 16 * max(0, round((periods - step) / 16))
+
+
+class Columns:
+    """The latest ``size`` rows of a few numeric columns, as numpy views (``col``, amortised
+    O(1) append: rows are copied in ``RECENT`` at a time, or when a view is asked for), and
+    the latest ``RECENT`` of them as plain tuples (``rows``, a ring buffer for the fast path;
+    ``whole``: they are the whole window): the live judge's window of recent frames."""
+
+    def __init__(self, names: tuple[str, ...], size: int) -> None:
+        self.size = size
+        self._col = {name: i for i, name in enumerate(names)}
+        self._data = np.zeros((2 * size, len(names)))
+        self._n = 0  # rows in ``_data``
+        self._count = 0  # rows appended in all
+        self._unflushed: list[tuple[float, ...]] = []  # rows appended, not in ``_data`` yet
+        self.rows: deque[tuple[float, ...]] = deque(maxlen=RECENT)
+
+    def append(self, *row: float) -> None:
+        self.rows.append(row)
+        self._count += 1
+        self._unflushed.append(row)
+        if len(self._unflushed) >= RECENT:  # copied in a batch: the state stays small
+            self._flush()
+
+    @property
+    def whole(self) -> bool:
+        """``rows`` holds every row of the window (its first is the window's first)."""
+        return self._count <= RECENT
+
+    def _flush(self) -> None:
+        rows, self._unflushed = self._unflushed[-self.size :], []
+        m = len(rows)
+        if self._n + m > len(self._data):  # keep the latest ``size`` rows, at the front
+            keep = min(self._n, self.size - m)
+            self._data[:keep] = self._data[self._n - keep : self._n]
+            self._n = keep
+        self._data[self._n : self._n + m] = rows
+        self._n += m
+
+    def col(self, name: str) -> FloatArray:
+        if self._unflushed:
+            self._flush()
+        column: FloatArray = self._data[max(0, self._n - self.size) : self._n, self._col[name]]
+        return column
+
+    def __len__(self) -> int:
+        return min(self._count, self.size)
+
+
+@dataclass(slots=True)
+class Half:
+    """A pose half heard: its place among the frames fed (``pos``), ENC_COUNTER, its own E2E
+    COUNTER, bus time (s) and values (X: X m, HEADING rad; Y: Y m, TURNS)."""
+
+    pos: int
+    enc_counter: int
+    counter: int
+    t_s: float
+    value: float
+    extra: float
+
+
+def window_encoders(window: Columns) -> Encoders:
+    """The window's encoder frames as ``samples.Encoders`` (sequence numbers by
+    ``samples.sender_seq``, as ``samples.encoder_frames`` numbers a log's)."""
+    counter = window.col("counter").astype(np.int64)
+    return Encoders(index=window.col("pos").astype(np.int64), counter=counter,
+                    seq=sender_seq(counter, window.col("t_s"), CYCLE_S),
+                    left=window.col("left").astype(np.int64),
+                    right=window.col("right").astype(np.int64),
+                    timestamp_s=window.col("t_s"), cycle_s=CYCLE_S)
+
+
+def named_in_window(halves: Columns, w: Columns, pos: int) -> tuple[int, bool]:
+    """The encoder frame (seq) the half at ``pos`` of ``halves`` names, -1 when none, and
+    whether it queued: ``host.judge.samples.match_encoder`` over the window ``w`` (the held and
+    queued rules, the age bound, the causal rule)."""
+    if not len(w):
+        return -1, False
+    enc = window_encoders(w)
+    at = halves.col("pos").astype(np.int64)
+    k = int(np.searchsorted(at, pos))
+    stop = k + 2  # the half and the one after it, if heard
+    t_s = halves.col("t_s")[:stop]
+    # The bus times must show the send period for the queued rule: a bus stamped on receipt
+    # from a sender faster than real time (a lockstep rig forwarded) shows every frame in a
+    # burst. Then the plain rule (the latest frame on the bus) is the only one left, where
+    # analyze, given such a log, pairs nothing.
+    clocked = len(t_s) < 3 or float(np.median(np.diff(t_s))) >= QUEUED_GAP_CYCLES * CYCLE_S
+    own = halves.col("counter")[:stop].astype(np.int64) if clocked else None
+    named = match_encoder(enc, at[:stop], halves.col("enc_counter")[:stop].astype(np.int64),
+                          t_s, own)
+    queued = clocked and bool(queued_frames(t_s, CYCLE_S)[k])
+    found = int(named[k])
+    return (int(w.col("seq")[found]) if found >= 0 else -1), queued
