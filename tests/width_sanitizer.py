@@ -706,6 +706,11 @@ def _secured_rig_drive(ears: _Unpacker) -> None:
 
 
 HEALTH_SCENARIOS = "tests.test_health_firmware"  # stalls, overflows, forgeries, restarts, gaps
+BURST_SCENARIOS = "tests.test_babble_fast_bus"  # runs the mailbox dropped, a babbler on its ID
+BURST_TESTS = (
+    "test_after_frames_its_mailbox_dropped_the_twist_is_right_and_every_one_is_counted",
+    "test_a_babblers_frames_on_the_encoder_id_are_not_taken_for_dropped_encoder_frames",
+)
 
 
 def _call_each_case(test: Callable[..., None]) -> None:
@@ -724,19 +729,20 @@ def _call_each_case(test: Callable[..., None]) -> None:
 
 def _health_drive() -> None:
     """The firmware-level health scenarios (lost time, FIFO overrun, mailbox overflow, forged and
-    implausible steps, counter restarts and their recovery, twist after 16/31/100-period gaps),
+    implausible steps, counter restarts and their recovery, twist after 16/31/100-period gaps,
+    runs of frames the mailbox dropped, a babbler's frames on the encoder ID),
     run from a fresh import of their test module so that it binds the instrumented firmware."""
-    saved = {
-        name: sys.modules.pop(name)
-        for name in (HEALTH_SCENARIOS, "tests.test_ecu")
-        if name in sys.modules
-    }
+    fresh = (HEALTH_SCENARIOS, BURST_SCENARIOS, "tests.test_ecu")
+    saved = {name: sys.modules.pop(name) for name in fresh if name in sys.modules}
     try:
         scenarios = importlib.import_module(HEALTH_SCENARIOS)
         for name in sorted(dir(scenarios)):
             test = getattr(scenarios, name)
             if name.startswith("test_") and callable(test):
                 _call_each_case(test)
+        bursts = importlib.import_module(BURST_SCENARIOS)
+        for name in BURST_TESTS:
+            _call_each_case(getattr(bursts, name))
         rig = scenarios.TimedRig()
         for _ in range(3):
             rig.step()
@@ -744,7 +750,7 @@ def _health_drive() -> None:
         encoders = rig.ecu.encoders
         encoders._step_periods(encoders._enc_prev_counter)  # a whole 16-period counter cycle
     finally:
-        for name in (HEALTH_SCENARIOS, "tests.test_ecu"):
+        for name in fresh:
             sys.modules.pop(name, None)
         sys.modules.update(saved)
 
