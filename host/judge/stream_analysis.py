@@ -76,7 +76,7 @@ RSS_TARGET_MB = 300.0  # the max RSS ``odocan analyze`` of one log aims to stay 
 # measured by ``bench/analyze_memory.py --threshold`` (docs/benchmarks.md); a log bigger than
 # the size where that reaches RSS_TARGET_MB / RSS_MARGIN streams.
 WHOLE_RSS_MB = {".log": (65.4, 2.738), ".asc": (54.6, 1.888), ".blf": (52.2, 21.480)}
-RSS_MARGIN = 1.2  # the fit is of the worst case (one long life); 250 MB keeps the 1.44 M-frame bench log whole
+RSS_MARGIN = 1.2  # over a worst-case fit (one long life): 250 MB, the bench log stays whole
 
 
 def stream_above_bytes(suffix: str) -> float:
