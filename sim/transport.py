@@ -391,18 +391,8 @@ class OdocanBus(BusABC):
         ``data_frame`` delivers it (``is_rx`` True, the channel's name)."""
         if not isinstance(item, tuple):
             return item
-        out: Message = _new_message(Message)
-        out.timestamp, out.arbitration_id, payload = item
-        out.is_extended_id = False
-        out.is_remote_frame = False
-        out.is_error_frame = False
+        out = data_frame(*item)
         out.channel = self._wire.name
-        out.data = bytearray(payload)
-        out.dlc = len(out.data)
-        out.is_fd = False
-        out.is_rx = True
-        out.bitrate_switch = False
-        out.error_state_indicator = False
         return out
 
     def _wait(self, timeout: float | None) -> Message | None:

@@ -223,14 +223,26 @@ def _start_pose(
         dh += _rotation_fit(onboard, rel, h_first + dh, (lo - dh, hi - dh))
     else:  # the samples disagree (a wrong firmware): place it on the first samples only
         dh = _overlap_mid(offsets[:START_FIT_SAMPLES], HEADING_LSB_RAD)
-    h0 = h_first + dh
     n = min(START_FIT_SAMPLES, n_first)
+    return placed_start(h_first, dh, onboard.x_m[:n], onboard.y_m[:n],
+                        float(onboard.heading_rad[0]), rel.x_m[:n], rel.y_m[:n])
+
+
+def placed_start(
+    h_first: float, dh: float, x_m: FloatArray, y_m: FloatArray, heading0_rad: float,
+    rel_x_m: FloatArray, rel_y_m: FloatArray,
+) -> tuple[float, float, float, bool]:
+    """The fitted start pose from its heading ``h_first + dh``: the position is the middle of
+    the overlap of the first samples' rounding intervals (``x_m``, ``y_m``: their on-board
+    positions, ``rel_*``: the reference's from the start), the heading in the first sample's
+    turn. Shared by ``_start_pose`` and the streamed ``stream_place.start_pose``."""
+    h0 = h_first + dh
     cos0, sin0 = math.cos(h0), math.sin(h0)
-    px = cos0 * rel.x_m[:n] - sin0 * rel.y_m[:n]
-    py = sin0 * rel.x_m[:n] + cos0 * rel.y_m[:n]
-    x0 = onboard.x_m[0] + _overlap_mid(onboard.x_m[:n] - px - onboard.x_m[0], POSITION_LSB_M)
-    y0 = onboard.y_m[0] + _overlap_mid(onboard.y_m[:n] - py - onboard.y_m[0], POSITION_LSB_M)
-    turns = math.floor((onboard.heading_rad[0] - h_first) / (2 * math.pi) + 0.5)
+    px = cos0 * rel_x_m - sin0 * rel_y_m
+    py = sin0 * rel_x_m + cos0 * rel_y_m
+    x0 = x_m[0] + _overlap_mid(x_m - px - x_m[0], POSITION_LSB_M)
+    y0 = y_m[0] + _overlap_mid(y_m - py - y_m[0], POSITION_LSB_M)
+    turns = math.floor((heading0_rad - h_first) / (2 * math.pi) + 0.5)
     return float(x0), float(y0), float(h0 + turns * 2 * math.pi), False
 
 

@@ -22,6 +22,7 @@ import numpy.typing as npt
 from odocan.host.judge.compare import error_summary
 from odocan.host.judge.reference_path import (
     _overlap_mid,
+    placed_start,
     wrap_pi,
 )
 from odocan.host.judge.samples import (
@@ -93,15 +94,9 @@ def start_pose(passes: Passes, *, power_up: bool) -> tuple[float, float, float, 
     else:  # the samples disagree (a wrong firmware): place it on the first samples only
         offsets = wrap_pi(head.heading_raw * HEADING_LSB_RAD - head.rel_heading_rad - h_first)
         dh = _overlap_mid(offsets[:START_FIT_SAMPLES], HEADING_LSB_RAD)
-    h0 = h_first + dh
     n = min(START_FIT_SAMPLES, n_first)
-    cos0, sin0 = math.cos(h0), math.sin(h0)
-    px = cos0 * head.rel_x_m[:n] - sin0 * head.rel_y_m[:n]
-    py = sin0 * head.rel_x_m[:n] + cos0 * head.rel_y_m[:n]
-    x0 = head.x_m[0] + _overlap_mid(head.x_m[:n] - px - head.x_m[0], POSITION_LSB_M)
-    y0 = head.y_m[0] + _overlap_mid(head.y_m[:n] - py - head.y_m[0], POSITION_LSB_M)
-    turns = math.floor((head.heading_rad[0] - h_first) / (2 * math.pi) + 0.5)
-    return float(x0), float(y0), float(h0 + turns * 2 * math.pi), False
+    return placed_start(h_first, dh, head.x_m[:n], head.y_m[:n], float(head.heading_rad[0]),
+                        head.rel_x_m[:n], head.rel_y_m[:n])
 
 
 def _terms(chunk: PlacedChunk, head: PlacedChunk, h0: float) -> tuple[FloatArray, ...]:
