@@ -56,6 +56,7 @@ from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from odocan.sim.vehicle import Vehicle
 from tests.dbc_typed import numbers
+from tests.test_forged_pairing import run_one_forged_frame
 from tests.test_health_rig import (
     Watch,
     run_counter_reset,
@@ -449,6 +450,19 @@ def _print_case(name: str, watch: Watch, restarted: bool = False) -> None:
           f"{independent}, vs the vehicle's truth {direct}")
 
 
+def _one_forged_frame() -> None:
+    """tests/test_forged_pairing.py's case: what analyze and the live judge say of it."""
+    for ahead in (1, 2, 3):
+        watch, collector = run_one_forged_frame(ahead)
+        result = analyze(collector.arrays(), load("pmir"))
+        verdicts = sorted({v for _, v in watch.verdicts})
+        print(f"  one forged encoder frame (CRC right, COUNTER +{ahead}, in a genuine frame's "
+              f"tick): firmware pose vs independent {watch.pose_error_m() * 1e3:.3f} mm; "
+              f"analyze {'PASS' if result.passed else 'FAIL'} (on-board vs reference "
+              f"{result.report['onboard_vs_reference']['max_position_error_m'] * 1e3:.3f} mm); "
+              f"live verdicts {verdicts}")
+
+
 def section_faults(quick: bool) -> None:
     print("\n5. Fault cases (pmir circle, lockstep rig, tests/test_health_rig.py's scenarios; "
           "the live judge BusMonitor fed every frame)")
@@ -473,6 +487,7 @@ def section_faults(quick: bool) -> None:
     _print_case(f"forgery: 800 random frames/s from 2 s for {seconds:g} s (overflows "
                 f"{figures['overflows']}, implausible steps refused {figures['implausible']})",
                 watch)
+    _one_forged_frame()
     watch, _ = run_duplicate()
     _print_case("duplicate: a second firmware on the same IDs from 3 s, end 6 s", watch)
     watch, to_stale_s = run_silence()
