@@ -29,5 +29,13 @@ def test_a_message_without_a_cycle_and_a_gap_that_is_no_number_count_one_period(
     assert period_count(5.0, None) == 1
     assert period_count(math.nan, 0.01) == 1
     assert period_count(math.inf, 0.01) == 1
-    assert period_count(0.0, 0.01) == 1
     assert period_count(0.05, 0.01) == 5
+
+
+def test_a_frame_within_half_a_period_of_the_previous_closes_none() -> None:
+    """As the firmware's WHEEL_ENCODERS window, which widens once per tick: a second frame sent
+    with a genuine one (a babbler's, a forger's) cannot widen it (tests/test_forged_pairing.py)."""
+    assert period_count(0.0, 0.01) == 0
+    assert period_count(0.004, 0.01) == 0
+    assert period_count(0.006, 0.01) == 1
+    assert period_count(-0.001, 0.01) == 0  # a timestamp out of order closes none either

@@ -6,19 +6,19 @@ next genuine frame named by a pose will carry made ``analyze`` FAIL (10–15 mm 
 reference) and the live judge say POSE WRONG, while the firmware refused the frame and its pose
 stayed right (checked here against a float64 arc integration of the robot's own counts).
 
-Cause (host/protocol/e2e.py): the host's Profile 2 window for WHEEL_ENCODERS is wider than the
-firmware's. The firmware (firmware/encoders.py) checks them with MaxDeltaCounterInit 0 and a
-window that widens once per tick (``window_per_period``), so a second frame in the tick of an
-accepted one may only advance the COUNTER by 1; the host uses MaxDeltaCounterInit 1 (every
-``Cyclic`` message) and widens by at least one period per frame (``periods_between``), so it takes
-the forgery (COUNTER + 2, same instant) as OKSOMELOST, refuses the next two genuine frames as
-WRONG_SEQUENCE and REPEATED, and pairs the pose naming COUNTER + 2 with the forged frame, two
-periods (10 mm at 0.5 m/s) before the one the firmware had. Marked xfail (strict) until the host's
-window follows the firmware's; remove the mark with the fix.
+Cause, before the fix (host/protocol/e2e.py): the host's Profile 2 window for WHEEL_ENCODERS
+was wider than the firmware's. The firmware (firmware/encoders.py) checks them with
+MaxDeltaCounterInit 0 and a window that widens once per tick (``window_per_period``), so a
+second frame in the tick of an accepted one may only advance the COUNTER by 1; the host used
+MaxDeltaCounterInit 1 (every ``Cyclic`` message) and widened by at least one period per frame
+(``periods_between``), so it took the forgery (COUNTER + 2) as OKSOMELOST, refused the next two
+genuine frames as WRONG_SEQUENCE and REPEATED, and paired the pose naming COUNTER + 2 with the
+forged frame, two periods (10 mm at 0.5 m/s) before the one the firmware had.
 
-The forgery here is one frame, sent right after the genuine frame of tick ``FORGED_AT`` with the
-COUNTER of the genuine frame ``ahead`` periods later and counts 100 000 away (beyond any
-plausible step), its CRC computed with the DBC's data IDs (``sim.frames``).
+The forgery here is one frame, sent right after the genuine frame of tick ``FORGED_AT`` (at its
+instant, or ``late_s`` later, before the firmware's next tick) with the COUNTER of the genuine
+frame ``ahead`` periods later and counts 100 000 away (beyond any plausible step), its CRC
+computed with the DBC's data IDs (``sim.frames``).
 """
 
 from __future__ import annotations
@@ -26,20 +26,24 @@ from __future__ import annotations
 import can
 import pytest
 
+from odocan.firmware.ecu import OdomEcu
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.analysis import analyze
+from odocan.host.protocol.e2e import e2e_messages
 from odocan.sim import frames as sf
 from odocan.sim.board import TICK_S
+from odocan.sim.contract import database
 from odocan.sim.robot import load
-from tests.fault_rig import open_virtual
+from tests.fault_rig import CountingHal, open_virtual, robot_params
 from tests.test_health_rig import Watch, circle_rig
 
 FORGED_AT = 300  # an even tick: the firmware sends a pose naming this frame, the next one at +2
 OFFSET_COUNTS = 100_000  # far beyond the plausibility bound of one 10 ms period
 
 
-def run_one_forged_frame(ahead: int) -> tuple[Watch, FrameCollector]:
-    """pmir on the circle for 5 s, one forged encoder frame at ``FORGED_AT``."""
+def run_one_forged_frame(ahead: int, late_s: float = 0.0) -> tuple[Watch, FrameCollector]:
+    """pmir on the circle for 5 s, one forged encoder frame at ``FORGED_AT`` (``late_s`` after
+    the genuine frame's instant)."""
     collector = FrameCollector()
     with circle_rig() as rig:
         watch = Watch(rig)
@@ -57,7 +61,7 @@ def run_one_forged_frame(ahead: int) -> tuple[Watch, FrameCollector]:
                 data = sf.pack_wheel_encoders((k + ahead) & 0xF, (left + OFFSET_COUNTS) & 0xFFFFFF,
                                               (right + OFFSET_COUNTS) & 0xFFFFFF)
                 attacker.send(can.Message(arbitration_id=0x100, is_extended_id=False, data=data,
-                                          timestamp=k * TICK_S))
+                                          timestamp=k * TICK_S + late_s))
 
         rig.before_board.append(forge)
         try:
@@ -71,7 +75,7 @@ FALSE_FAIL = pytest.mark.xfail(
     strict=True, reason="host E2E window for WHEEL_ENCODERS wider than the firmware's (docstring)")
 
 
-@pytest.mark.parametrize("ahead", [1, pytest.param(2, marks=FALSE_FAIL), 3])
+@pytest.mark.parametrize("ahead", [1, 2, 3])
 def test_one_forged_encoder_frame_does_not_fail_a_correct_firmware(ahead: int) -> None:
     watch, collector = run_one_forged_frame(ahead)
     assert watch.pose_error_m() < 1e-4  # the firmware's pose is right: it refused the frame
@@ -79,3 +83,11 @@ def test_one_forged_encoder_frame_does_not_fail_a_correct_firmware(ahead: int) -
     assert result.report["onboard_vs_reference"]["max_position_error_m"] < 1e-4
     assert result.passed
     assert "POSE WRONG" not in {verdict for _, verdict in watch.verdicts}
+
+
+def test_the_hosts_encoder_window_is_the_firmwares() -> None:
+    """The host checks WHEEL_ENCODERS with the firmware's MaxDeltaCounterInit."""
+    firmware = OdomEcu(CountingHal(), robot_params(load("pmir"), "exact")).rx_encoders
+    host = next(m for m in e2e_messages(database()).values() if m.name == "WHEEL_ENCODERS")
+    assert host.max_delta_init == firmware.max_delta_counter_init == 0
+    assert firmware.window_per_period

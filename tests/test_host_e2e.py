@@ -106,17 +106,19 @@ def frames_at(events: list[tuple[int, bytes]], can_id: int = ENC.frame_id) -> Fr
 
 
 def firmware_statuses(events: list[tuple[int, bytes]]) -> list[str]:
-    """The firmware receiver fed the same frames, with ``check(None)`` in each empty period."""
-    rx = E2EReceiver(ENC_IDS)
+    """The firmware's WHEEL_ENCODERS receiver (firmware/encoders.py: MaxDeltaCounterInit 0, the
+    window widened once per tick, ``new_period``) fed the same frames, with ``check(None)`` in
+    each empty period; frames of one tick share its period."""
+    rx = E2EReceiver(ENC_IDS, max_delta_counter_init=0, window_per_period=True)
     result = []
     tick = events[0][0] if events else 0
     for when, data in events:
-        while tick < when:  # periods without a frame (one check(None) each)
+        while tick < when:  # a new period each tick; the empty ones end with check(None)
             tick += 1
+            rx.new_period()
             if tick < when:
                 rx.check(None)
         result.append(FW_STATUS[rx.check(data)])
-        tick = when
     return result
 
 
@@ -135,7 +137,12 @@ CRAFTED = [
     ("in order", [0, 1, 2, 3], ["ok"] * 4, {"ok": 4}),
     ("wrap", [14, 15, 0, 1], ["ok"] * 4, {"ok": 4}),
     ("repeated", [3, 4, 4, 5], ["ok", "ok", "repeated", "ok"], {"ok": 3, "repeated": 1}),
-    ("one lost", [3, 4, 6, 7], ["ok", "ok", "oksomelost", "ok"], {"ok": 4, "lost": 1}),
+    (  # only time lets a frame through that jumps the COUNTER (one_lost below)
+        "+2 within one period",
+        [3, 4, 6, 7],
+        ["ok", "ok", "wrong_sequence", "wrong_sequence"],
+        {"ok": 2, "wrong_sequence": 2},
+    ),
     (
         "jump beyond the window, then re-sync",
         [3, 4, 9, 10, 5],
@@ -156,6 +163,24 @@ def test_crafted_sequences(
     assert accepted.tolist() == [s in ("ok", "oksomelost") for s in expected]
     full = dict.fromkeys(E2E_KEYS, 0) | counts
     assert check_frames(frames_at(events), DB)[0]["WHEEL_ENCODERS"] == full
+
+
+def test_one_lost_frame_is_oksomelost() -> None:
+    events = [(0, encoder_frame(3)), (1, encoder_frame(4)), (3, encoder_frame(6)),
+              (4, encoder_frame(7))]
+    statuses, accepted = host_statuses(events)
+    assert statuses == firmware_statuses(events) == ["ok", "ok", "oksomelost", "ok"]
+    assert accepted.all()
+    counts = check_frames(frames_at(events), DB)[0]["WHEEL_ENCODERS"]
+    assert counts == dict.fromkeys(E2E_KEYS, 0) | {"ok": 4, "lost": 1}
+
+
+def test_a_second_frame_in_one_period_does_not_widen_the_window() -> None:
+    """A forger's frame sent with a genuine one (tests/test_forged_pairing.py): +2 refused."""
+    events = [(0, encoder_frame(3)), (0, encoder_frame(5)), (1, encoder_frame(4)),
+              (2, encoder_frame(5))]
+    statuses, _ = host_statuses(events)
+    assert statuses == firmware_statuses(events) == ["ok", "wrong_sequence", "ok", "ok"]
 
 
 def test_window_widens_with_time_like_the_firmware() -> None:

@@ -12,14 +12,15 @@ The host's own implementation of what the firmware does in ``firmware.e2e`` (dbc
   is OK.
 * **MaxDeltaCounter**: as in the firmware, it restarts from ``MaxDeltaCounterInit`` at each accepted
   frame and grows by one per receive period (up to 15) before a frame is judged. The firmware
-  counts its periods with ``check(None)`` calls; the host counts them from the timestamps:
-  a frame ``dt`` after the message's previous frame adds ``max(1, round(dt / cycle))`` periods
-  (``GenMsgCycleTime``). MaxDeltaCounterInit is 1 for ``Cyclic`` messages and 15 for the others
-  (event messages, ``CyclicIfActive`` MOTOR_CMD), as the firmware and the motor controller use.
-  *Intended difference*: two frames of one message within one period add two periods in the
-  firmware (two checks) and in the host (two frames), but a frame with the wrong DLC, which the
-  firmware drops before the check (no ``check(None)`` for that tick either), leaves no trace here
-  but the time that passed.
+  widens its WHEEL_ENCODERS window once per tick (``window_per_period``: frames within one
+  period cannot widen it); the host counts the periods from the timestamps: a frame ``dt``
+  after the message's previous frame adds ``round(dt / cycle)`` periods (``GenMsgCycleTime``),
+  none within half a period, so a babbler's or a forger's frames sent with a genuine one do not
+  open the window to themselves (one frame per period adds one, as before).
+  MaxDeltaCounterInit is 1 for ``Cyclic`` messages and 15 for the others (event messages,
+  ``CyclicIfActive`` MOTOR_CMD), but 0 for WHEEL_ENCODERS, as the firmware checks them
+  (``RECEIVER_WINDOW_INIT``). *Intended difference*: a frame with the wrong DLC, which the
+  firmware drops before the check, leaves no trace here but the time that passed.
 
 ``ok`` counts the frames accepted (OK or OKSOMELOST), as the firmware's ``*_E2E_OK`` signals;
 ``lost`` the frames skipped by OKSOMELOST; ``crc_errors`` bad CRCs. Frames of IDs the DBC does not
@@ -59,6 +60,10 @@ CRC8H2F_INIT = 0xFF
 CRC8H2F_XOR_OUT = 0xFF
 COUNTER_MASK = 0x0F
 MAX_DELTA_COUNTER = 15
+# MaxDeltaCounterInit of the messages whose receiver in the firmware does not use the default
+# (1 for Cyclic): WHEEL_ENCODERS is checked with 0 and a window widened once per period
+# (firmware/encoders.py ``EncoderInput.rx``), so only +1 passes without time having passed.
+RECEIVER_WINDOW_INIT = {"WHEEL_ENCODERS": 0}
 P02_LENGTH = 8  # bytes: Profile 2 over classic CAN frames
 
 
@@ -163,7 +168,7 @@ def _e2e_message(message: Message) -> E2EMessage:
         key=frame_key(message.frame_id, message.is_extended_frame),
         length=message.length,
         data_ids=data_ids,
-        max_delta_init=1 if cyclic else MAX_DELTA_COUNTER,
+        max_delta_init=RECEIVER_WINDOW_INIT.get(message.name, 1 if cyclic else MAX_DELTA_COUNTER),
         cycle_s=message.cycle_time / 1000.0 if message.cycle_time else None,
     )
 
@@ -217,10 +222,12 @@ class SequenceState:
 
 
 def periods_between(dt_s: npt.NDArray[np.float64], cycle_s: float | None) -> npt.NDArray[np.int64]:
-    """Receive periods that a frame ``dt_s`` after the previous one closes: at least 1."""
+    """Receive periods that a frame ``dt_s`` after the previous one closes: ``round(dt / cycle)``,
+    0 within half a period (a second frame in one period widens no window); 1 each without a
+    cycle time."""
     if cycle_s is None:
         return np.ones(dt_s.shape, dtype=np.int64)
-    return np.maximum(1, np.rint(dt_s / cycle_s)).astype(np.int64)
+    return np.maximum(0, np.rint(dt_s / cycle_s)).astype(np.int64)
 
 
 def period_count(dt_s: float, cycle_s: float | None) -> int:
@@ -228,7 +235,7 @@ def period_count(dt_s: float, cycle_s: float | None) -> int:
     the same round-half-even of the same float64 quotient; a NaN or infinite gap counts 1."""
     if cycle_s is None or not math.isfinite(dt_s):
         return 1
-    return max(1, round(dt_s / cycle_s))
+    return max(0, round(dt_s / cycle_s))
 
 
 def sequence_statuses(
