@@ -90,4 +90,5 @@ def test_the_hosts_encoder_window_is_the_firmwares() -> None:
     firmware = OdomEcu(CountingHal(), robot_params(load("pmir"), "exact")).rx_encoders
     host = next(m for m in e2e_messages(database()).values() if m.name == "WHEEL_ENCODERS")
     assert host.max_delta_init == firmware.max_delta_counter_init == 0
+    assert host.min_periods == 0  # a frame within half a period widens nothing
     assert firmware.window_per_period

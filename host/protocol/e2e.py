@@ -12,15 +12,19 @@ The host's own implementation of what the firmware does in ``firmware.e2e`` (dbc
   is OK.
 * **MaxDeltaCounter**: as in the firmware, it restarts from ``MaxDeltaCounterInit`` at each accepted
   frame and grows by one per receive period (up to 15) before a frame is judged. The firmware
-  widens its WHEEL_ENCODERS window once per tick (``window_per_period``: frames within one
-  period cannot widen it); the host counts the periods from the timestamps: a frame ``dt``
-  after the message's previous frame adds ``round(dt / cycle)`` periods (``GenMsgCycleTime``),
-  none within half a period, so a babbler's or a forger's frames sent with a genuine one do not
-  open the window to themselves (one frame per period adds one, as before).
-  MaxDeltaCounterInit is 1 for ``Cyclic`` messages and 15 for the others (event messages,
-  ``CyclicIfActive`` MOTOR_CMD), but 0 for WHEEL_ENCODERS, as the firmware checks them
-  (``RECEIVER_WINDOW_INIT``). *Intended difference*: a frame with the wrong DLC, which the
-  firmware drops before the check, leaves no trace here but the time that passed.
+  counts its periods with ``check(None)`` calls; the host counts them from the timestamps:
+  a frame ``dt`` after the message's previous frame adds ``max(1, round(dt / cycle))`` periods
+  (``GenMsgCycleTime``). MaxDeltaCounterInit is 1 for ``Cyclic`` messages and 15 for the others
+  (event messages, ``CyclicIfActive`` MOTOR_CMD), as the firmware and the motor controller use,
+  except WHEEL_ENCODERS (``PER_PERIOD_WINDOW``): the firmware checks them with init 0 and a
+  window widened once per tick (``window_per_period``), so a frame there adds
+  ``round(dt / cycle)`` periods, none within half a period: a babbler's or a forger's frame
+  sent with a genuine one cannot open the window to itself. (Messages sent several frames per
+  cycle, the pages of ODOM_STATUS and SIM_TRUTH, keep at least one period a frame.)
+  *Intended difference*: two frames of one of those messages within one period add two periods
+  in the firmware (two checks) and in the host (two frames), but a frame with the wrong DLC,
+  which the firmware drops before the check (no ``check(None)`` for that tick either), leaves
+  no trace here but the time that passed.
 
 ``ok`` counts the frames accepted (OK or OKSOMELOST), as the firmware's ``*_E2E_OK`` signals;
 ``lost`` the frames skipped by OKSOMELOST; ``crc_errors`` bad CRCs. Frames of IDs the DBC does not
@@ -60,10 +64,9 @@ CRC8H2F_INIT = 0xFF
 CRC8H2F_XOR_OUT = 0xFF
 COUNTER_MASK = 0x0F
 MAX_DELTA_COUNTER = 15
-# MaxDeltaCounterInit of the messages whose receiver in the firmware does not use the default
-# (1 for Cyclic): WHEEL_ENCODERS is checked with 0 and a window widened once per period
-# (firmware/encoders.py ``EncoderInput.rx``), so only +1 passes without time having passed.
-RECEIVER_WINDOW_INIT = {"WHEEL_ENCODERS": 0}
+# Messages the firmware checks with MaxDeltaCounterInit 0 and a window widened once per period
+# (firmware/encoders.py ``EncoderInput.rx``): only +1 passes without time having passed.
+PER_PERIOD_WINDOW = frozenset({"WHEEL_ENCODERS"})
 P02_LENGTH = 8  # bytes: Profile 2 over classic CAN frames
 
 
@@ -148,6 +151,7 @@ class E2EMessage:
     data_ids: tuple[int, ...] | None  # E2EDataIDs (16), None: not protected
     max_delta_init: int  # MaxDeltaCounterInit
     cycle_s: float | None  # GenMsgCycleTime (None: not cyclic)
+    min_periods: int = 1  # periods a frame adds at least (0: the window widens with time only)
 
 
 def e2e_messages(db: cantools.database.can.Database) -> dict[int, E2EMessage]:
@@ -163,13 +167,15 @@ def _e2e_message(message: Message) -> E2EMessage:
         if message.length != P02_LENGTH:
             raise E2EConfigError(f"{message.name}: E2E Profile 2 needs 8-byte frames")
     cyclic = bool(message.cycle_time) and message.send_type in (None, "Cyclic")
+    per_period = message.name in PER_PERIOD_WINDOW
     return E2EMessage(
         name=message.name,
         key=frame_key(message.frame_id, message.is_extended_frame),
         length=message.length,
         data_ids=data_ids,
-        max_delta_init=RECEIVER_WINDOW_INIT.get(message.name, 1 if cyclic else MAX_DELTA_COUNTER),
+        max_delta_init=0 if per_period else 1 if cyclic else MAX_DELTA_COUNTER,
         cycle_s=message.cycle_time / 1000.0 if message.cycle_time else None,
+        min_periods=0 if per_period else 1,
     )
 
 
@@ -221,21 +227,23 @@ class SequenceState:
         return status
 
 
-def periods_between(dt_s: npt.NDArray[np.float64], cycle_s: float | None) -> npt.NDArray[np.int64]:
-    """Receive periods that a frame ``dt_s`` after the previous one closes: ``round(dt / cycle)``,
-    0 within half a period (a second frame in one period widens no window); 1 each without a
-    cycle time."""
+def periods_between(
+    dt_s: npt.NDArray[np.float64], cycle_s: float | None, min_periods: int = 1
+) -> npt.NDArray[np.int64]:
+    """Receive periods that a frame ``dt_s`` after the previous one closes: ``round(dt /
+    cycle)``, at least ``min_periods`` (0: a second frame in one period widens no window); 1
+    each without a cycle time."""
     if cycle_s is None:
         return np.ones(dt_s.shape, dtype=np.int64)
-    return np.maximum(0, np.rint(dt_s / cycle_s)).astype(np.int64)
+    return np.maximum(min_periods, np.rint(dt_s / cycle_s)).astype(np.int64)
 
 
-def period_count(dt_s: float, cycle_s: float | None) -> int:
+def period_count(dt_s: float, cycle_s: float | None, min_periods: int = 1) -> int:
     """``periods_between`` for one frame, without numpy (the live check runs it per frame):
     the same round-half-even of the same float64 quotient; a NaN or infinite gap counts 1."""
     if cycle_s is None or not math.isfinite(dt_s):
         return 1
-    return max(0, round(dt_s / cycle_s))
+    return max(min_periods, round(dt_s / cycle_s))
 
 
 def sequence_statuses(
@@ -372,7 +380,7 @@ def _check_message(
     counter = (frames.data[index, 1] & COUNTER_MASK).astype(np.int64)
     timestamp_s = frames.timestamp_s[index]
     dt = np.diff(timestamp_s, prepend=timestamp_s[:1])
-    periods = periods_between(dt, config.cycle_s)
+    periods = periods_between(dt, config.cycle_s, config.min_periods)
     status = sequence_statuses(crc_ok[index], counter, periods, config.max_delta_init)
     good = (status == _S_OK) | (status == _S_LOST)
     if good.all():  # the usual case: no gathers
@@ -448,7 +456,7 @@ class E2EMonitor:
         self._last_time[key] = timestamp_s
         if last is None:
             return 1
-        return period_count(timestamp_s - last, config.cycle_s)
+        return period_count(timestamp_s - last, config.cycle_s, config.min_periods)
 
     def count_frame_kind(self, *, error: bool = False, remote: bool = False) -> None:
         """Count an error or remote frame (they are never checked)."""
