@@ -35,7 +35,7 @@ from odocan.sim.board import TICK_S
 from odocan.sim.contract import database
 from odocan.sim.robot import load
 from tests.fault_rig import CountingHal, open_virtual, robot_params
-from tests.test_health_rig import Watch, circle_rig
+from tests.test_health_rig import Watch, circle_rig, run_forgery
 
 FORGED_AT = 300  # an even tick: the firmware sends a pose naming this frame, the next one at +2
 OFFSET_COUNTS = 100_000  # far beyond the plausibility bound of one 10 ms period
@@ -71,13 +71,12 @@ def run_one_forged_frame(ahead: int, late_s: float = 0.0) -> tuple[Watch, FrameC
     return watch, collector
 
 
-FALSE_FAIL = pytest.mark.xfail(
-    strict=True, reason="host E2E window for WHEEL_ENCODERS wider than the firmware's (docstring)")
-
-
+@pytest.mark.parametrize("late_s", [0.0, 0.009])
 @pytest.mark.parametrize("ahead", [1, 2, 3])
-def test_one_forged_encoder_frame_does_not_fail_a_correct_firmware(ahead: int) -> None:
-    watch, collector = run_one_forged_frame(ahead)
+def test_one_forged_encoder_frame_does_not_fail_a_correct_firmware(
+    ahead: int, late_s: float
+) -> None:
+    watch, collector = run_one_forged_frame(ahead, late_s)
     assert watch.pose_error_m() < 1e-4  # the firmware's pose is right: it refused the frame
     result = analyze(collector.arrays(), load("pmir"))
     assert result.report["onboard_vs_reference"]["max_position_error_m"] < 1e-4
@@ -92,3 +91,38 @@ def test_the_hosts_encoder_window_is_the_firmwares() -> None:
     assert host.max_delta_init == firmware.max_delta_counter_init == 0
     assert host.min_periods == 0  # a frame within half a period widens nothing
     assert firmware.window_per_period
+
+
+class _Recording(Watch):
+    """The health rig's watch, keeping every host frame for ``analyze``."""
+
+    collector: FrameCollector | None = None
+
+    def __call__(self, tick: int, frames: list[can.Message]) -> None:
+        super().__call__(tick, frames)
+        if _Recording.collector is not None:
+            for msg in frames:
+                _Recording.collector.on_message_received(msg)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "open: the host cannot tell which forged frames the firmware's full mailbox dropped; a "
+    "forgery of COUNTER + 1 it accepted makes it refuse the next genuine frame as REPEATED and "
+    "pair that frame's pose one period early (heading 6.3 mrad, beyond the loss allowance, "
+    "which covers position only)"))
+def test_a_forgery_flood_does_not_fail_a_correct_firmware(monkeypatch: pytest.MonkeyPatch) -> None:
+    """8 000 random frames/s on WHEEL_ENCODERS for 4 s (tests/test_health_rig.py): the
+    firmware's mailbox overflows (it says DEGRADED, MAILBOX_OVERFLOW) and drops most of them, its
+    pose stays right; ``analyze`` of the same frames must not FAIL it. Found by
+    bench/verdicts.py: forged frames past the 32nd of their tick, which the firmware never saw,
+    pass the host's CRC and sequence check at ticks 233, 447, 451, 483 and the genuine frames
+    after them are refused."""
+    collector = FrameCollector()
+    monkeypatch.setattr(_Recording, "collector", collector)
+    monkeypatch.setattr("tests.test_health_rig.Watch", _Recording)
+    watch, figures = run_forgery(4.0, 80)
+    assert figures["overflows"] > 0
+    assert watch.pose_error_m() < 1e-4  # the firmware's pose is right
+    result = analyze(collector.arrays(), load("pmir"))
+    assert result.report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] < 1e-4
+    assert result.passed, result.report["onboard_vs_reference"]
