@@ -37,6 +37,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 import can
 
@@ -56,7 +57,7 @@ from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from odocan.sim.vehicle import Vehicle
 from tests.dbc_typed import numbers
-from tests.test_forged_pairing import run_one_forged_frame
+from tests.test_forged_pairing import RecordingWatch, run_one_forged_frame
 from tests.test_health_rig import (
     Watch,
     run_counter_reset,
@@ -478,10 +479,19 @@ def section_faults(quick: bool) -> None:
     _print_case("counter reset: the motor controller restarted at 5 s; APPLY at 8 s, end 9 s",
                 watch)
     seconds = 2.0 if quick else 4.0
-    watch, figures = run_forgery(seconds)
+    collector = FrameCollector()
+    with mock.patch.object(RecordingWatch, "collector", collector), \
+            mock.patch("tests.test_health_rig.Watch", RecordingWatch):
+        watch, figures = run_forgery(seconds)
     _print_case(f"forgery: 8000 random frames/s on WHEEL_ENCODERS from 2 s for {seconds:g} s "
                 f"(mailbox overflows {figures['overflows']}, implausible steps refused "
                 f"{figures['implausible']})", watch)
+    result = analyze(collector.arrays(), load("pmir"))
+    vs_ref = result.report["onboard_vs_reference"]
+    print(f"    analyze of the same frames: {'PASS' if result.passed else 'FAIL'} (position "
+          f"{vs_ref['max_position_error_m'] * 1e3:.3f} mm, allowed "
+          f"{vs_ref['loss_allowance_m'] * 1e3:.1f} mm for frames lost on board; heading "
+          f"{vs_ref['max_heading_error_rad'] * 1e3:.3f} mrad)")
     seconds = 5.0 if quick else 20.0
     watch, figures = run_forgery(seconds, 8)
     _print_case(f"forgery: 800 random frames/s from 2 s for {seconds:g} s (overflows "

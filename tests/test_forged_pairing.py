@@ -93,16 +93,16 @@ def test_the_hosts_encoder_window_is_the_firmwares() -> None:
     assert firmware.window_per_period
 
 
-class _Recording(Watch):
+class RecordingWatch(Watch):
     """The health rig's watch, keeping every host frame for ``analyze``."""
 
     collector: FrameCollector | None = None
 
     def __call__(self, tick: int, frames: list[can.Message]) -> None:
         super().__call__(tick, frames)
-        if _Recording.collector is not None:
+        if RecordingWatch.collector is not None:
             for msg in frames:
-                _Recording.collector.on_message_received(msg)
+                RecordingWatch.collector.on_message_received(msg)
 
 
 @pytest.mark.xfail(strict=True, reason=(
@@ -118,8 +118,8 @@ def test_a_forgery_flood_does_not_fail_a_correct_firmware(monkeypatch: pytest.Mo
     pass the host's CRC and sequence check at ticks 233, 447, 451, 483 and the genuine frames
     after them are refused."""
     collector = FrameCollector()
-    monkeypatch.setattr(_Recording, "collector", collector)
-    monkeypatch.setattr("tests.test_health_rig.Watch", _Recording)
+    monkeypatch.setattr(RecordingWatch, "collector", collector)
+    monkeypatch.setattr("tests.test_health_rig.Watch", RecordingWatch)
     watch, figures = run_forgery(4.0, 80)
     assert figures["overflows"] > 0
     assert watch.pose_error_m() < 1e-4  # the firmware's pose is right
