@@ -198,6 +198,17 @@ class SimNode:
         if (k - self.truth_phase_ticks) % self._truth_ticks == 0:
             self.truth.send(enc_counter)
 
+    def planned_command(self, k: int, t_s: float) -> tuple[float, float] | None:
+        """The rim speeds (m/s) the motor controller will apply from the driver at tick ``k``
+        (at ``t_s``, the clock's time then), as ``MotorController.deliver`` decodes them from
+        MOTOR_CMD (whole mm/s), or None when the driver sends nothing then: the forecast of
+        ``sim.lookahead.PlannedVehicle`` (checked there against what really comes)."""
+        driver = self.driver
+        if driver is None or k % self._driver_ticks:
+            return None
+        left_mps, right_mps = driver.scenario.command_at(t_s)
+        return round(left_mps * 1000) / 1000.0, round(right_mps * 1000) / 1000.0
+
     def _nodes(self) -> list[BusNode]:
         nodes: list[BusNode] = [self.motor_controller, self.truth]
         return nodes if self.driver is None else [*nodes, self.driver]

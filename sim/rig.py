@@ -46,6 +46,7 @@ from odocan.sim.closing import Closing, release_all
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import DEFAULT_BITRATE, FaultInjectingBus, FaultSpec
+from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import get_scenario
@@ -55,6 +56,7 @@ from odocan.sim.vehicle import Vehicle
 
 INTEGRATORS = tuple(i.name.lower() for i in Integrator)
 TRANSPORTS = ("odocan", "virtual")  # the in-process python-can interfaces the rig runs on
+LOOKAHEAD = True  # a scenario's drive runs ahead in blocks (sim.lookahead); False: tick by tick
 CAN_BITRATES = (10_000, 20_000, 50_000, 100_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 # The sim handle's acceptance filter: of all it hears, the motor controller takes MOTOR_CMD only.
 _MOTOR_CTRL_ACCEPTS: can.typechecking.CanFilters = [
@@ -143,12 +145,16 @@ class LockstepRig(Closing):
             if spec is not None and spec.active:  # bus-off recovery: 128 x 11 bits at the bitrate
                 self._buses[index] = FaultInjectingBus(self._buses[index], spec, bitrate=bitrate)
         sim_bus, fw_bus, self.host_bus = self._buses
-        vehicle = Vehicle(
+        open_loop = scenario is not None and LOOKAHEAD
+        vehicle_class = PlannedVehicle if open_loop else Vehicle  # open loop: run ahead
+        vehicle = vehicle_class(
             config.robot, config.errors, seed=config.seed, quadrature=config.quadrature
         )
         self.sim = SimNode(
             sim_bus, vehicle, self.clock, scenario, truth_phase_ticks=config.truth_phase_ticks
         )
+        if isinstance(vehicle, PlannedVehicle):  # the clock of tick k: 0.0 + k * TICK_S
+            vehicle.plan(self.sim.planned_command, TICK_S)
         self.board = make_board(fw_bus, params, self.clock, None, secoc_key=config.secoc_key)
         self.loop = TickLoop(self._work, self.host_bus, list(listeners), self.clock)
 
