@@ -44,6 +44,7 @@ from odocan.firmware import frames as fr
 from odocan.firmware.e2e import E2EReceiver
 from odocan.host.io.logs import FrameCollector
 from odocan.sim.board import TICK_S
+from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from odocan.sim.scenarios import RandomScenario
@@ -185,9 +186,13 @@ def budget(seconds: float) -> dict[str, float]:
         assert rig.driver is not None
         b.wrap(rig.driver, "send_frame", "node send glue (BusNode.send_frame)")
         b.wrap(rig.driver.scenario, "command_at", "scenario (RandomScenario.command_at)")
-        b.wrap(rig.vehicle, "advance_to", "vehicle: motors and encoders")
-        b.wrap(rig.vehicle, "encoder_counts", "vehicle: motors and encoders")
-        b.wrap(rig.vehicle, "truth", "vehicle: ground truth (vehicle.truth)")
+        vehicle = rig.vehicle
+        b.wrap(vehicle, "advance_to", "vehicle: motors and encoders")
+        b.wrap(vehicle, "command", "vehicle: motors and encoders")
+        b.wrap(vehicle, "encoder_counts", "vehicle: motors and encoders")
+        b.wrap(vehicle, "truth", "vehicle: ground truth (vehicle.truth)")
+        if isinstance(vehicle, PlannedVehicle):  # the scenario's drive, run a block ahead
+            b.wrap(vehicle, "_start_block", "vehicle: a block run ahead (sim.lookahead)")
         for name in dir(fr):  # both sides call them through the module
             if name.startswith(("pack_", "unpack_")):
                 b.wrap(fr, name, "codecs: pack/unpack (E2E CRC included)")

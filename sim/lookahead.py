@@ -210,17 +210,18 @@ class PlannedVehicle(Vehicle):
         block = _Block()
         forecast, start_s, tick_s = self._forecast, self._start_s, self._tick_s
         drivetrain = self.drivetrain
+        advance, counts, grid = drivetrain.advance, drivetrain.encoder_counts, self._grid_substep
         first = self._next_tick
-        for k in range(first, first + BLOCK_TICKS):
+        for k in range(first, first + BLOCK_TICKS):  # Vehicle.command and advance_to, unchecked
             t_s = start_s + k * tick_s
+            n = grid(t_s)
+            advance(n)
             speeds = forecast(k, t_s)
-            if speeds is not None:  # Vehicle.command without this class's advance_to
-                Vehicle.advance_to(self, t_s)
+            if speeds is not None:
                 drivetrain.command(speeds[0], speeds[1])
-                block.commands.append((drivetrain.substep, speeds[0], speeds[1]))
-            Vehicle.advance_to(self, t_s)
-            block.index[drivetrain.substep] = len(block.counts)
-            block.counts.append(drivetrain.encoder_counts())
+                block.commands.append((n, speeds[0], speeds[1]))
+            block.index[n] = len(block.counts)
+            block.counts.append(counts())
         block.end = drivetrain.substep
         block.truth_s0 = self._truth.substep
         ds = self.drivetrain.take_travel()
@@ -242,7 +243,7 @@ class PlannedVehicle(Vehicle):
             (d.substep, list(d.omega), list(d.angle), list(d.setpoint), d._timeout_at,
              list(d._segments), d._pending),
             (t.substep, t.x_m, t.y_m, t.heading_unwrapped_rad, t.distance_m, len(t._trace)),
-            self._rng.bit_generator.state,
+            self._rng.bit_generator.state if self.errors.slip else None,  # (it draws no noise)
         )
 
     def _fall_back(self) -> None:
@@ -255,7 +256,8 @@ class PlannedVehicle(Vehicle):
         (d.substep, d.omega, d.angle, d.setpoint, d._timeout_at, d._segments, d._pending) = drive
         (t.substep, t.x_m, t.y_m, t.heading_unwrapped_rad, t.distance_m, trace_len) = truth
         del t._trace[trace_len:]
-        self._rng.bit_generator.state = rng
+        if rng is not None:
+            self._rng.bit_generator.state = rng
         self._block = None
         self.fell_back = True
         for call in self._calls:
