@@ -96,11 +96,11 @@ class PlannedVehicle(Vehicle):
 
     def advance_to(self, t_s: float) -> None:
         """``Vehicle.advance_to``, served from the block while the forecast holds."""
-        block = self._served(t_s)
-        if block is None:
+        served = self._served(t_s)
+        if served is None:
             super().advance_to(t_s)
             return
-        n = self._planned_substep(t_s)
+        block, n = served
         nxt = block.next_command
         if n not in block.index or (nxt < len(block.commands) and block.commands[nxt][0] < n):
             self._fall_back()  # off the tick grid, or past a predicted command that never came
@@ -111,11 +111,11 @@ class PlannedVehicle(Vehicle):
 
     def command(self, left_mps: float, right_mps: float, t_s: float) -> None:
         """``Vehicle.command``, checked against the forecast while it holds."""
-        block = self._served(t_s)
-        if block is None:
+        served = self._served(t_s)
+        if served is None:
             super().command(left_mps, right_mps, t_s)
             return
-        n = self._planned_substep(t_s)
+        block, n = served
         nxt = block.next_command
         if nxt >= len(block.commands) or block.commands[nxt] != (n, left_mps, right_mps):
             self._fall_back()
@@ -159,34 +159,34 @@ class PlannedVehicle(Vehicle):
 
     # --- the blocks ---------------------------------------------------------------------------
 
-    def _served(self, t_s: float) -> _Block | None:
+    def _served(self, t_s: float) -> tuple[_Block, int] | None:
         """The block that serves a call at ``t_s`` (the next one started when ``t_s`` is past
-        this one's end and every predicted command came); None: the plain vehicle does."""
+        this one's end and every predicted command came) and the substep of ``t_s``; None: the
+        plain vehicle does."""
         block = self._block
         if block is None:
             if self.fell_back or self._forecast is None or not self._start_first(t_s):
                 return None
             block = self._block
             assert block is not None
-        if self._planned_substep(t_s) > block.end:
+        n = self._grid_substep(t_s)
+        if n < self._now:  # Vehicle._substep_of against the rig's time, not the block's end
+            raise VehicleError(f"time runs backwards: {t_s} s is before {self.t_s} s")
+        if n > block.end:
             if block.next_command < len(block.commands):
                 self._fall_back()
                 return None
             self._start_block()
             block = self._block
-        return block
-
-    def _planned_substep(self, t_s: float) -> int:
-        """``Vehicle._substep_of`` against the rig's time (the drivetrain is ahead of it)."""
-        n = self._grid_substep(t_s)
-        if n < self._now:
-            raise VehicleError(f"time runs backwards: {t_s} s is before {self.t_s} s")
-        return n
+            assert block is not None
+        return block, n
 
     def _grid_substep(self, t_s: float) -> int:
-        if not math.isfinite(t_s):
-            raise VehicleError(f"time must be finite, got {t_s}")
-        return math.floor(t_s * self.substep_hz + _TIME_EPS)
+        """The substep of ``t_s`` (``Vehicle._substep_of``'s grid, without its order check)."""
+        try:
+            return math.floor(t_s * self.substep_hz + _TIME_EPS)
+        except (ValueError, OverflowError):  # NaN, inf
+            raise VehicleError(f"time must be finite, got {t_s}") from None
 
     def _start_first(self, t_s: float) -> bool:
         """Start the first block at the tick of ``t_s``, when the vehicle stands exactly there

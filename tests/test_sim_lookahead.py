@@ -163,3 +163,11 @@ def test_the_rig_sends_the_same_frames_with_and_without_the_lookahead(
 ) -> None:
     assert lookahead.BLOCK_TICKS * TICK_S < 5.0  # several blocks in the run
     assert rig_frames(monkeypatch, True, 5.0) == rig_frames(monkeypatch, False, 5.0)
+
+
+@pytest.mark.parametrize("t_s", [math.nan, math.inf])
+def test_a_time_that_is_not_finite_is_refused(t_s: float) -> None:
+    _, planned = pair()
+    observe(planned, 5)
+    with pytest.raises(ValueError, match="finite"):
+        planned.advance_to(t_s)
