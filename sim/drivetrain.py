@@ -178,8 +178,16 @@ class Drivetrain:
         tau = self.config.time_constant_s
         w0l, w0r = self.omega
         spl, spr = self.setpoint
-        wl, dl = evolve(w0l, spl, self._alpha_l, tau, t)
-        wr, dr = evolve(w0r, spr, self._alpha_r, tau, t)
+        el, er = w0l - spl, w0r - spr
+        if abs(el) - self._alpha_l * tau > 0.0 or abs(er) - self._alpha_r * tau > 0.0:
+            wl, dl = evolve(w0l, spl, self._alpha_l, tau, t)
+            wr, dr = evolve(w0r, spr, self._alpha_r, tau, t)
+        else:  # neither wheel rate-limited: evolve's own operations with t1 = s = tr = 0
+            decay = -math.expm1(-t / tau)  # te = t - 0.0 = t, the same for both wheels
+            keep = 1.0 - decay
+            wl, wr = spl + el * keep, spr + er * keep  # e1 = e0 - 0.0 * 0.0 = e0
+            dl = (spl * t + el * 0.0) + el * tau * decay  # "- 0.5 * s * tr * tr" = "- 0.0"
+            dr = (spr * t + er * 0.0) + er * tau * decay
         self._segments.append((n, w0l, spl, w0r, spr))
         self._pending += n
         self.omega = [wl, wr]
