@@ -8,8 +8,9 @@ a driver tick, a sample at every tick), and its ground truth integrated over the
 one batch (``GroundTruth.advance_folds``: sequential folds, bit-identical however batched; the
 slip noise drawn in row order, the same stream). The rig's calls are then served from the block:
 a command is checked against the forecast, a sample reads the counts recorded at its tick, a
-truth request the folds at its substep. One numpy batch of ~1000 substeps instead of one per
-SIM_TRUTH (10 ticks, ~100 substeps) is where the time goes down.
+truth request the folds at its substep. One numpy batch of 5000 substeps instead of one per
+SIM_TRUTH (10 ticks, 100 substeps) is where the time goes down: numpy's cost per call, not per
+element, was most of it (and the drive's wheel travel is taken as one array as well).
 
 Whatever the forecast missed — a command it did not predict (the firmware or the host sent
 MOTOR_CMD, a fault), a predicted one that did not come or came with other speeds, a time off the
@@ -33,7 +34,7 @@ from odocan.sim.robot import RobotProfile
 from odocan.sim.truth import TruthPose, TruthTrace
 from odocan.sim.vehicle import _TIME_EPS, Vehicle, VehicleError
 
-BLOCK_TICKS = 100  # ticks simulated ahead at once (1 s at 10 ms: ~1000 substeps of truth)
+BLOCK_TICKS = 500  # ticks run ahead at once (5 s at 10 ms: 5000 substeps of truth in one batch)
 
 Forecast = Callable[[int, float], tuple[float, float] | None]  # (tick, its time s) -> m/s or None
 _Call = tuple[float, float, float] | float  # command (left m/s, right m/s, t s), advance_to(t s)
