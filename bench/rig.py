@@ -7,7 +7,9 @@
 2. **Per-tick budget by part** (``--budget-seconds``, default 300 s simulated): the same rig with
    a timer around each part (exclusive times: a part's nested parts are subtracted; the timers'
    own cost, measured on a no-op, is taken out of "the rest"). Each part's share of the timed run
-   is then applied to the CPU time per tick of the plain run (1.), so the µs add up to it.
+   is then applied to the CPU time per tick of the plain run (1.), so the µs add up to it. The
+   scenario's drive runs ahead in blocks (``sim.lookahead``): a block's drivetrain, encoder counts
+   and truth are one part, the checks of the rig's calls against it "motors and encoders".
 3. **The transport, µs per frame per receiver** (CPU time). The frames the rig put on the bus
    are replayed through three fresh handles with no simulation (per tick the sim handle drains
    and sends, the firmware handle drains and sends, the host handle drains: each frame reaches

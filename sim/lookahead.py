@@ -211,11 +211,12 @@ class PlannedVehicle(Vehicle):
         block = _Block()
         forecast, start_s, tick_s = self._forecast, self._start_s, self._tick_s
         drivetrain = self.drivetrain
-        advance, counts, grid = drivetrain.advance, drivetrain.encoder_counts, self._grid_substep
+        advance, counts, hz = drivetrain.advance, drivetrain.encoder_counts, self.substep_hz
+        floor = math.floor
         first = self._next_tick
         for k in range(first, first + BLOCK_TICKS):  # Vehicle.command and advance_to, unchecked
             t_s = start_s + k * tick_s
-            n = grid(t_s)
+            n = floor(t_s * hz + _TIME_EPS)  # _grid_substep: t_s is finite here
             advance(n)
             speeds = forecast(k, t_s)
             if speeds is not None:
