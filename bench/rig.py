@@ -86,6 +86,7 @@ def make_rig(
         transport=transport,
         bitrate=bitrate,
         firmware=FIRMWARE[0],
+        lookahead=True,  # as odocan run
     )
     rig = LockstepRig(config, listeners)
     assert rig.driver is not None

@@ -18,6 +18,9 @@ tick grid, a read of the drivetrain's own state — the vehicle falls back for g
 the state it had at the block's start (drivetrain, truth, the noise generator) and replays the
 calls actually made since, then carries on as a plain ``Vehicle``. A forecast can cost time,
 never a bit: the encoder counts and poses are those of the plain vehicle, call for call.
+
+A block's work comes at once (~2 ms for 500 ticks): the rig uses it when asked
+(``RigConfig(lookahead=True)``: ``odocan run``, ``bench/rig.py``), never in real time (the fleet).
 """
 
 from __future__ import annotations

@@ -56,7 +56,6 @@ from odocan.sim.vehicle import Vehicle
 
 INTEGRATORS = tuple(i.name.lower() for i in Integrator)
 TRANSPORTS = ("odocan", "virtual")  # the in-process python-can interfaces the rig runs on
-LOOKAHEAD = True  # a scenario's drive runs ahead in blocks (sim.lookahead); False: tick by tick
 CAN_BITRATES = (10_000, 20_000, 50_000, 100_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 # The sim handle's acceptance filter: of all it hears, the motor controller takes MOTOR_CMD only.
 _MOTOR_CTRL_ACCEPTS: can.typechecking.CanFilters = [
@@ -92,6 +91,9 @@ class RigConfig:
     bitrate: int | None = None  # bit/s: a bit-timed wire (odocan transport only); None: instant
     firmware: str = "python"  # "python": firmware/, "c": firmware/c (sim.cboard)
     secoc_key: bytes | None = field(default=None, repr=False)  # SecOC key (None: none); secret
+    # A scenario's open-loop drive run ahead in blocks (sim.lookahead): the same frames, less CPU,
+    # but a block's ~2 ms come at once: for a rig run flat out (odocan run), not in real time.
+    lookahead: bool = False
 
 
 def _check_bitrate(config: RigConfig) -> None:
@@ -145,8 +147,8 @@ class LockstepRig(Closing):
             if spec is not None and spec.active:  # bus-off recovery: 128 x 11 bits at the bitrate
                 self._buses[index] = FaultInjectingBus(self._buses[index], spec, bitrate=bitrate)
         sim_bus, fw_bus, self.host_bus = self._buses
-        open_loop = scenario is not None and LOOKAHEAD
-        vehicle_class = PlannedVehicle if open_loop else Vehicle  # open loop: run ahead
+        ahead = scenario is not None and config.lookahead
+        vehicle_class = PlannedVehicle if ahead else Vehicle
         vehicle = vehicle_class(
             config.robot, config.errors, seed=config.seed, quadrature=config.quadrature
         )
