@@ -7,7 +7,9 @@
 2. **Per-tick budget by part** (``--budget-seconds``, default 300 s simulated): the same rig with
    a timer around each part (exclusive times: a part's nested parts are subtracted; the timers'
    own cost, measured on a no-op, is taken out of "the rest"). Each part's share of the timed run
-   is then applied to the CPU time per tick of the plain run (1.), so the µs add up to it.
+   is then applied to the CPU time per tick of the plain run (1.), so the µs add up to it. The
+   scenario's drive runs ahead in blocks (``sim.lookahead``): a block's drivetrain, encoder counts
+   and truth are one part, the checks of the rig's calls against it "motors and encoders".
 3. **The transport, µs per frame per receiver** (CPU time). The frames the rig put on the bus
    are replayed through three fresh handles with no simulation (per tick the sim handle drains
    and sends, the firmware handle drains and sends, the host handle drains: each frame reaches
@@ -44,6 +46,7 @@ from odocan.firmware import frames as fr
 from odocan.firmware.e2e import E2EReceiver
 from odocan.host.io.logs import FrameCollector
 from odocan.sim.board import TICK_S
+from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from odocan.sim.scenarios import RandomScenario
@@ -83,6 +86,7 @@ def make_rig(
         transport=transport,
         bitrate=bitrate,
         firmware=FIRMWARE[0],
+        lookahead=True,  # as odocan run
     )
     rig = LockstepRig(config, listeners)
     assert rig.driver is not None
@@ -185,9 +189,13 @@ def budget(seconds: float) -> dict[str, float]:
         assert rig.driver is not None
         b.wrap(rig.driver, "send_frame", "node send glue (BusNode.send_frame)")
         b.wrap(rig.driver.scenario, "command_at", "scenario (RandomScenario.command_at)")
-        b.wrap(rig.vehicle, "advance_to", "vehicle: motors and encoders")
-        b.wrap(rig.vehicle, "encoder_counts", "vehicle: motors and encoders")
-        b.wrap(rig.vehicle, "truth", "vehicle: ground truth (vehicle.truth)")
+        vehicle = rig.vehicle
+        b.wrap(vehicle, "advance_to", "vehicle: motors and encoders")
+        b.wrap(vehicle, "command", "vehicle: motors and encoders")
+        b.wrap(vehicle, "encoder_counts", "vehicle: motors and encoders")
+        b.wrap(vehicle, "truth", "vehicle: ground truth (vehicle.truth)")
+        if isinstance(vehicle, PlannedVehicle):  # the scenario's drive, run a block ahead
+            b.wrap(vehicle, "_start_block", "vehicle: a block run ahead (sim.lookahead)")
         for name in dir(fr):  # both sides call them through the module
             if name.startswith(("pack_", "unpack_")):
                 b.wrap(fr, name, "codecs: pack/unpack (E2E CRC included)")

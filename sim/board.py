@@ -242,7 +242,8 @@ class FirmwareBoard(BusNode):
 
     def _service_bus_state(self) -> None:
         """The controller's status interrupt: report entering and leaving bus-off."""
-        bus_off = self.bus.state is can.BusState.ERROR
+        bus = self.bus  # the lean transport's instant handle is never bus-off (BusABC.state)
+        bus_off = type(bus) is not OdocanBus and bus.state is can.BusState.ERROR
         if bus_off != self._bus_off:
             self._bus_off = bus_off
             self.ecu.isr_bus_state(bus_off)

@@ -37,6 +37,7 @@ from odocan.sim.robot import RobotProfile
 
 FloatArray = npt.NDArray[np.float64]
 TAU_RAD = 2.0 * math.pi
+_MANY_SEGMENTS = 32  # take_travel handles more segments than this as one array
 _CACHED_SEGMENT_SUBSTEPS = 256  # take_travel keeps the time columns of segments up to this long
 
 
@@ -177,8 +178,16 @@ class Drivetrain:
         tau = self.config.time_constant_s
         w0l, w0r = self.omega
         spl, spr = self.setpoint
-        wl, dl = evolve(w0l, spl, self._alpha_l, tau, t)
-        wr, dr = evolve(w0r, spr, self._alpha_r, tau, t)
+        el, er = w0l - spl, w0r - spr
+        if abs(el) - self._alpha_l * tau > 0.0 or abs(er) - self._alpha_r * tau > 0.0:
+            wl, dl = evolve(w0l, spl, self._alpha_l, tau, t)
+            wr, dr = evolve(w0r, spr, self._alpha_r, tau, t)
+        else:  # neither wheel rate-limited: evolve's own operations with t1 = s = tr = 0
+            decay = -math.expm1(-t / tau)  # te = t - 0.0 = t, the same for both wheels
+            keep = 1.0 - decay
+            wl, wr = spl + el * keep, spr + er * keep  # e1 = e0 - 0.0 * 0.0 = e0
+            dl = (spl * t + el * 0.0) + el * tau * decay  # "- 0.5 * s * tr * tr" = "- 0.0"
+            dr = (spr * t + er * 0.0) + er * tau * decay
         self._segments.append((n, w0l, spl, w0r, spr))
         self._pending += n
         self.omega = [wl, wr]
@@ -197,13 +206,15 @@ class Drivetrain:
         segments = self._segments
         self._segments = []
         self._pending = 0
-        if self._all_unlimited(segments):
+        counts = [n for n, *_ in segments]
+        if len(segments) > _MANY_SEGMENTS:  # a block run ahead: the segments as one array
+            theta = self._many_angles(segments, counts)
+        elif self._all_unlimited(segments):
             theta = self._unlimited_angles(segments)
         else:
             theta = self._angles(segments)
         step = np.empty_like(theta)  # the angle of each substep, from 0 at a segment's start
         np.subtract(theta[1:], theta[:-1], out=step[1:])
-        counts = [n for n, *_ in segments]
         if len(set(counts)) == 1:  # segments start every n substeps: a strided view
             step[:: counts[0]] = theta[:: counts[0]]
         else:
@@ -211,6 +222,28 @@ class Drivetrain:
             step[starts] = theta[starts]
         step *= self._radii
         return step
+
+    def _many_angles(
+        self, segments: list[tuple[int, float, float, float, float]], counts: list[int]
+    ) -> FloatArray:
+        """``_unlimited_angles`` or ``_angles`` of many segments, bit for bit: the per-segment
+        scalars (the rate-limit test, e0 * 0, e0 * tau) as whole columns, the same IEEE
+        operations on the same doubles as the Python floats there."""
+        seg = np.array(segments)
+        w0, wsp = seg[:, 1::2], seg[:, 2::2]  # columns (left, right)
+        e0 = w0 - wsp
+        tau = self.config.time_constant_s
+        limits = np.array([self._alpha_l * tau, self._alpha_r * tau])
+        if np.any(np.abs(e0) - limits > 0.0):
+            return self._angles(segments)
+        if len(set(counts)) != 1:
+            return self._unlimited_angles(segments)
+        n = counts[0]
+        t, decay = self._local_times(n), self._local_decay(n)  # (n, 1) against (m, 1, 2)
+        theta3: FloatArray = wsp[:, np.newaxis, :] * t
+        theta3 += (e0 * 0.0)[:, np.newaxis, :]
+        theta3 += (e0 * tau)[:, np.newaxis, :] * decay
+        return theta3.reshape(-1, 2)
 
     def _angles(self, segments: list[tuple[int, float, float, float, float]]) -> FloatArray:
         """Angle travelled since each segment's start, per substep (n, 2): the general case."""

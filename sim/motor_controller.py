@@ -123,10 +123,23 @@ class ScenarioDriver(BusNode):
         self.local = motor_controller
         self.errors = ErrorMask()
         self.counter = -1
+        # Commands a forecast computed ahead (``command_at``), by time, and for which scenario.
+        self._ahead: dict[float, tuple[float, float]] = {}
+        self._ahead_of: Scenario | None = None
+
+    def command_at(self, t_s: float) -> tuple[float, float]:
+        """The scenario's command at ``t_s``, kept until ``send`` takes it (a scenario is a pure
+        function of time: the forecast of ``sim.lookahead`` and the send share one call)."""
+        if self._ahead_of is not self.scenario:
+            self._ahead, self._ahead_of = {}, self.scenario
+        command = self._ahead[t_s] = self.scenario.command_at(t_s)
+        return command
 
     def send(self) -> None:
         """Send the scenario's command for now (and deliver it locally)."""
-        left_mps, right_mps = self.scenario.command_at(self.clock.now_s())
+        now_s = self.clock.now_s()
+        ahead = self._ahead.pop(now_s, None) if self._ahead_of is self.scenario else None
+        left_mps, right_mps = self.scenario.command_at(now_s) if ahead is None else ahead
         self.counter = (self.counter + 1) & 0xF
         data = fr.pack_motor_cmd(
             self.counter, round(left_mps * 1000), round(right_mps * 1000), self.errors
@@ -197,6 +210,17 @@ class SimNode:
         enc_counter = self.motor_controller.sample_and_send()
         if (k - self.truth_phase_ticks) % self._truth_ticks == 0:
             self.truth.send(enc_counter)
+
+    def planned_command(self, k: int, t_s: float) -> tuple[float, float] | None:
+        """The rim speeds (m/s) the motor controller will apply from the driver at tick ``k``
+        (at ``t_s``, the clock's time then), as ``MotorController.deliver`` decodes them from
+        MOTOR_CMD (whole mm/s), or None when the driver sends nothing then: the forecast of
+        ``sim.lookahead.PlannedVehicle`` (checked there against what really comes)."""
+        driver = self.driver
+        if driver is None or k % self._driver_ticks:
+            return None
+        left_mps, right_mps = driver.command_at(t_s)
+        return round(left_mps * 1000) / 1000.0, round(right_mps * 1000) / 1000.0
 
     def _nodes(self) -> list[BusNode]:
         nodes: list[BusNode] = [self.motor_controller, self.truth]

@@ -46,6 +46,7 @@ from odocan.sim.closing import Closing, release_all
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import DEFAULT_BITRATE, FaultInjectingBus, FaultSpec
+from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import get_scenario
@@ -90,6 +91,9 @@ class RigConfig:
     bitrate: int | None = None  # bit/s: a bit-timed wire (odocan transport only); None: instant
     firmware: str = "python"  # "python": firmware/, "c": firmware/c (sim.cboard)
     secoc_key: bytes | None = field(default=None, repr=False)  # SecOC key (None: none); secret
+    # A scenario's open-loop drive run ahead in blocks (sim.lookahead): the same frames, less CPU,
+    # but a block's ~2 ms come at once: for a rig run flat out (odocan run), not in real time.
+    lookahead: bool = False
 
 
 def _check_bitrate(config: RigConfig) -> None:
@@ -143,12 +147,16 @@ class LockstepRig(Closing):
             if spec is not None and spec.active:  # bus-off recovery: 128 x 11 bits at the bitrate
                 self._buses[index] = FaultInjectingBus(self._buses[index], spec, bitrate=bitrate)
         sim_bus, fw_bus, self.host_bus = self._buses
-        vehicle = Vehicle(
+        ahead = scenario is not None and config.lookahead
+        vehicle_class = PlannedVehicle if ahead else Vehicle
+        vehicle = vehicle_class(
             config.robot, config.errors, seed=config.seed, quadrature=config.quadrature
         )
         self.sim = SimNode(
             sim_bus, vehicle, self.clock, scenario, truth_phase_ticks=config.truth_phase_ticks
         )
+        if isinstance(vehicle, PlannedVehicle):  # the clock of tick k: 0.0 + k * TICK_S
+            vehicle.plan(self.sim.planned_command, TICK_S)
         self.board = make_board(fw_bus, params, self.clock, None, secoc_key=config.secoc_key)
         self.loop = TickLoop(self._work, self.host_bus, list(listeners), self.clock)
 

@@ -104,15 +104,20 @@ class GroundTruth:
             self._trace.append(np.zeros((5, 1)))
 
     def advance(self, ds_m: FloatArray) -> None:
-        """Integrate substeps of ground travel ``ds_m`` (shape (n, 2): left, right; m).
+        """Integrate substeps of ground travel ``ds_m`` (shape (n, 2): left, right; m)."""
+        if ds_m.shape[0]:
+            self.advance_folds(ds_m)
+
+    def advance_folds(self, ds_m: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``advance`` over n >= 1 substeps, returning its folds: (x, y, distance) of shape
+        (3, n + 1) and the unwrapped heading (n + 1,), index 0 the state before the first
+        substep, index i the state after substep i (``sim.lookahead`` reads a block's poses).
 
         Each sum is a sequential left fold (``np.cumsum`` in place over a row that starts with
         the running value), so batching never changes a bit; one preallocated row per fold
         keeps the small-array calls few (this runs at every SIM_TRUTH).
         """
         n = ds_m.shape[0]
-        if n == 0:
-            return
         ds_l, ds_r = ds_m[:, 0], ds_m[:, 1]
         ds = 0.5 * (ds_r + ds_l)
         heading = np.empty(n + 1)
@@ -136,6 +141,7 @@ class GroundTruth:
         self.x_m, self.y_m, self.distance_m = folds[:, -1].tolist()
         self.heading_unwrapped_rad = heading.item(-1)
         self.substep += n
+        return folds, heading
 
     def _record(self, x: FloatArray, y: FloatArray, h: FloatArray, d: FloatArray) -> None:
         """Keep the states (index 1..n of the folds) that fall on the trace stride."""

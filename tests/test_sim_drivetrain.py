@@ -254,3 +254,33 @@ def test_the_unlimited_fast_path_is_angle_travelled_bit_for_bit(
     assert drive._all_unlimited(segments)
     fast = drive._unlimited_angles(segments)
     assert fast.tobytes() == drive._angles(segments).tobytes()
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.floats(-3.0, 3.0),
+    st.floats(-3.0, 3.0),
+    st.floats(-0.2, 0.2),
+    st.floats(-0.2, 0.2),
+    st.integers(1, 40),
+)
+def test_a_segment_is_evolve_s_closed_form_bit_for_bit(
+    w0l: float, w0r: float, left_mps: float, right_mps: float, n: int
+) -> None:
+    """``_run_segment`` (its unlimited fast path included) against ``evolve`` per wheel."""
+    profile = load("pmir")
+    drivetrain = Drivetrain(profile, (0.03, 0.031))
+    drivetrain.omega = [w0l, w0r]
+    drivetrain.command(left_mps, right_mps)
+    spl, spr = drivetrain.setpoint
+    tau = drivetrain.config.time_constant_s
+    t = n / drivetrain.substep_hz
+    want_l = evolve(w0l, spl, drivetrain._alpha_l, tau, t)
+    want_r = evolve(w0r, spr, drivetrain._alpha_r, tau, t)
+    drivetrain._run_segment(n)
+    assert drivetrain.omega == [want_l[0], want_r[0]]
+    assert drivetrain.angle == [want_l[1], want_r[1]]
+    # and the signs of zeros too (a wheel at rest commanded to rest)
+    assert [math.copysign(1.0, a) for a in drivetrain.angle] == [
+        math.copysign(1.0, want_l[1]), math.copysign(1.0, want_r[1])
+    ]

@@ -165,6 +165,8 @@ def _do_run(args: argparse.Namespace) -> int:
         bitrate=args.bitrate,
         firmware=args.firmware,
         secoc_key=secoc_key,
+        # flat out: the drive may run ahead (not when frames are paced onto a live bus)
+        lookahead=args.interface is None and args.channel is None,
     )
     check_log_path(args.log)
     check_output_paths(args)
