@@ -23,13 +23,20 @@ computed with the DBC's data IDs (``sim.frames``).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import can
+import numpy as np
 import pytest
 
 from odocan.firmware.ecu import OdomEcu
-from odocan.host.io.logs import FrameCollector
+from odocan.host.io.frames import to_message
+from odocan.host.io.logs import FrameArrays, FrameCollector
 from odocan.host.judge.analysis import analyze
-from odocan.host.protocol.e2e import e2e_messages
+from odocan.host.judge.samples import twinned_encoder_frames
+from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.e2e import check_frames, e2e_messages
 from odocan.sim import frames as sf
 from odocan.sim.board import TICK_S
 from odocan.sim.contract import database
@@ -105,15 +112,14 @@ class RecordingWatch(Watch):
                 RecordingWatch.collector.on_message_received(msg)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "open: the host cannot tell which forged frames the firmware's full mailbox dropped; a "
-    "forgery of COUNTER + 1 it accepted makes it refuse the next genuine frame as REPEATED and "
-    "pair that frame's pose one period early (heading 6.3 mrad, beyond the loss allowance, "
-    "which covers position only)"))
-def test_a_forgery_flood_does_not_fail_a_correct_firmware(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_forgery_flood_does_not_fail_a_correct_firmware(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
     """8 000 random frames/s on WHEEL_ENCODERS for 4 s (tests/test_health_rig.py): the
     firmware's mailbox overflows (it says DEGRADED, MAILBOX_OVERFLOW) and drops most of them, its
-    pose stays right; ``analyze`` of the same frames must not FAIL it. Found by
+    pose stays right; ``analyze`` of the same frames must not fail its pose: the poses naming a
+    COUNTER that a forged frame whose CRC holds carried too are left out
+    (``samples.twinned_encoder_frames``). Found by
     bench/verdicts.py: forged frames past the 32nd of their tick, which the firmware never saw,
     pass the host's CRC and sequence check at ticks 233, 447, 451, 483 and the genuine frames
     after them are refused."""
@@ -123,6 +129,74 @@ def test_a_forgery_flood_does_not_fail_a_correct_firmware(monkeypatch: pytest.Mo
     watch, figures = run_forgery(4.0, 80)
     assert figures["overflows"] > 0
     assert watch.pose_error_m() < 1e-4  # the firmware's pose is right
-    result = analyze(collector.arrays(), load("pmir"))
+    frames = collector.arrays()
+    result = analyze(frames, load("pmir"))
     assert result.report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] < 1e-4
-    assert result.passed, result.report["onboard_vs_reference"]
+    vs_ref = result.report["onboard_vs_reference"]
+    assert vs_ref["max_heading_error_rad"] <= result.report["tolerance"]["heading_rad"]
+    # The run still FAILs, rightly, on ODOM_TWIST: the firmware's twist is wrong under the
+    # flood (open, in the closing note): its step's periods count the mailbox's dropped frames
+    # on the encoder ID (firmware/encoders.py _counter_advance), forged ones too, so its
+    # LINEAR_VEL reads ~0.01 m/s while the robot drives at 0.5 (checked here from the bus).
+    twist = collector.arrays()
+    decoded = BulkDecoder(database()).decode(twist, "ODOM_TWIST")
+    late = decoded["timestamp_s"] > 2.5  # the flood starts at 2 s
+    assert float(np.min(decoded["LINEAR_VEL"][late])) * 0.001 < 0.1  # truth: 0.5 m/s
+    assert not result.report["onboard_twist_vs_reference"]["passed"]
+    # the forged frames of a counter a genuine one carries too: their poses are left out
+    assert result.report["samples"]["unmatched_poses"] > 0
+    with pytest.raises(NotStreamable):  # the stream refuses: analysed whole
+        analyze_file(written(frames, tmp_path / "flood.log"), load("pmir"), chunk_frames=64)
+
+
+def written(frames: FrameArrays, path: Path) -> Path:
+    """``frames`` as a log at ``path``."""
+    with can.Logger(str(path)) as logger:
+        for i in range(len(frames)):
+            logger.on_message_received(to_message(frames, i))
+    return path
+
+
+def test_a_twin_is_refused_by_the_stream(tmp_path: Path) -> None:
+    """The streamed analysis does not carry twins: a log with one is analysed whole (the
+    forgery of COUNTER + 1, 9 ms after the genuine frame: no burst, only the twin)."""
+    _, collector = run_one_forged_frame(1, 0.009)
+    with pytest.raises(NotStreamable, match="COUNTER"):
+        analyze_file(written(collector.arrays(), tmp_path / "twin.log"), load("pmir"),
+                     chunk_frames=64)
+
+
+def test_a_twin_is_found_whichever_came_first() -> None:
+    """``twinned_encoder_frames``: a refused frame of the COUNTER of the accepted one before it,
+    CRC right, counts different, marks that accepted frame, whether the genuine frame or the
+    forged one came first; an exact repetition and a frame whose CRC is wrong do not."""
+    db = database()
+    decoder = BulkDecoder(db)
+
+    def frame(counter: int, left: int, crc_ok: bool = True) -> can.Message:
+        data = bytearray(sf.pack_wheel_encoders(counter, left, left))
+        if not crc_ok:
+            data[0] ^= 0xFF
+        return can.Message(arbitration_id=0x100, is_extended_id=False, data=bytes(data))
+
+    cases = {  # frames, the twinned accepted frames
+        "forged first": ([frame(0, 0), frame(1, 900_000), frame(1, 50), frame(2, 100)],
+                         [False, True, False]),
+        "genuine first": ([frame(0, 0), frame(1, 50), frame(1, 900_000), frame(2, 100)],
+                          [False, True, False]),
+        "exact repeat": ([frame(0, 0), frame(1, 50), frame(1, 50), frame(2, 100)],
+                         [False, False, False]),
+        "wrong CRC": ([frame(0, 0), frame(1, 50), frame(1, 9, crc_ok=False), frame(2, 100)],
+                      [False, False, False]),
+    }
+    for name, (messages, want) in cases.items():
+        collector = FrameCollector()
+        for k, msg in enumerate(messages):
+            msg.timestamp = 0.01 * k if k < 2 else 0.01 + 0.002 * (k - 1)
+            collector.on_message_received(msg)
+        frames = collector.arrays()
+        _, accepted = check_frames(frames, db)
+        rows = decoder.decode(frames, "WHEEL_ENCODERS")
+        keep = accepted[rows["index"]]
+        got = twinned_encoder_frames(frames, rows, keep, decoder)
+        assert got.tolist() == want, name

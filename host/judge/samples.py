@@ -15,6 +15,7 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 
@@ -49,6 +50,7 @@ class Encoders:
     right: IntArray
     timestamp_s: FloatArray
     cycle_s: float | None  # the DBC cycle time
+    twinned: npt.NDArray[np.bool_] | None = None  # ``twinned_encoder_frames``; None: none
 
 
 @dataclass(frozen=True)
@@ -133,7 +135,10 @@ def encoder_frames(
 ) -> Encoders:
     """The accepted encoder frames and their sender sequence numbers: COUNTER steps, widened by
     16 where the time stamps say that many more periods passed, unless the frame after the gap
-    came in a burst (``queued_frames``)."""
+    came in a burst (``queued_frames``); and which have a twin (``twinned_encoder_frames``)."""
+    rows = decoder.decode(frames, "WHEEL_ENCODERS")
+    keep = accepted[rows["index"]]
+    twinned = twinned_encoder_frames(frames, rows, keep, decoder)
     enc = accepted_rows(frames, accepted, decoder, "WHEEL_ENCODERS")
     counter = enc["COUNTER"].astype(np.int64)
     cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS")
@@ -142,7 +147,43 @@ def encoder_frames(
         seq=sender_seq(counter, enc["timestamp_s"], cycle_s),
         left=enc["LEFT_COUNT"].astype(np.int64), right=enc["RIGHT_COUNT"].astype(np.int64),
         timestamp_s=enc["timestamp_s"], cycle_s=cycle_s,
+        twinned=twinned if twinned.any() else None,
     )
+
+
+def twinned_encoder_frames(
+    frames: FrameArrays, rows: dict[str, np.ndarray], keep: npt.NDArray[np.bool_],
+    decoder: BulkDecoder,
+) -> npt.NDArray[np.bool_]:
+    """Which accepted WHEEL_ENCODERS frames (``rows``: every one decoded, ``keep``: those E2E
+    accepted) have a twin: a later frame of the same COUNTER before the next accepted one, its
+    CRC right but its counts different (E2E refused it as REPEATED). A forger's frame (random
+    payloads pass Profile 2's CRC about once in 256) or a second sender's; either may have come
+    first. The firmware took whichever reached its mailbox first and was kept, and a full
+    mailbox drops frames the bus log holds, so a pose naming that COUNTER cannot be told to
+    belong to either: ``match_encoder`` names none (the pose is left out, not guessed one
+    period off). An exact repetition (the same counts) is no twin."""
+    twinned = np.zeros(int(np.count_nonzero(keep)), dtype=bool)
+    refused = np.flatnonzero(~keep)
+    if len(refused) == 0 or len(twinned) == 0:
+        return twinned
+    kept = np.flatnonzero(keep)
+    before = np.searchsorted(kept, refused) - 1  # the latest accepted frame before each
+    refused, before = refused[before >= 0], before[before >= 0]
+    prev = kept[before]
+    same = (rows["COUNTER"][refused] == rows["COUNTER"][prev]) & (
+        (rows["LEFT_COUNT"][refused] != rows["LEFT_COUNT"][prev])
+        | (rows["RIGHT_COUNT"][refused] != rows["RIGHT_COUNT"][prev]))
+    if not same.any():
+        return twinned
+    config = next(m for m in e2e_messages(decoder.db).values() if m.name == "WHEEL_ENCODERS")
+    if config.data_ids is None:
+        return twinned
+    data = frames.data[rows["index"][refused[same]]]
+    ids = np.asarray(config.data_ids, dtype=np.uint8)[rows["COUNTER"][refused[same]] & 0xF]
+    crc_right = crc8h2f_p02(data, ids) == data[:, 0]
+    twinned[before[same][crc_right]] = True
+    return twinned
 
 
 def sender_seq(counter: IntArray, timestamp_s: FloatArray, cycle_s: float | None) -> IntArray:
@@ -190,6 +231,8 @@ def match_encoder(
     if own_counter is not None and enc.cycle_s is not None:
         result = _held(result, enc_counter, own_counter, timestamp_s, enc.cycle_s)
         result = _queued(result, enc, index, enc_counter, own_counter, timestamp_s)
+    if enc.twinned is not None:  # which of a frame and its twin the firmware had is unknown
+        result[(result >= 0) & enc.twinned[np.maximum(result, 0)]] = -1
     return result
 
 

@@ -39,6 +39,7 @@ from odocan.host.judge.samples import (
     Poses,
     queued_frames,
     require_messages,
+    twinned_encoder_frames,
 )
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
 from odocan.host.judge.stream_compare import TruthCompare
@@ -253,12 +254,7 @@ def _life(
 ) -> tuple[dict[str, Any], float]:
     """``analysis._analyze_life``'s report of one life, and its first frame's time."""
     first = _first_pass(frames, db, robot)
-    if first.stalls is not None and not first.stalls.exact:
-        raise NotStreamable("the log's frame times go back around a silence of the firmware")
-    if not first.losses.exact:  # a summary stamped before an earlier encoder frame
-        raise NotStreamable("the log's status times go back against its encoder frames")
-    if first.queued:  # samples._queued pairs them by a median over the whole life
-        raise NotStreamable("frames let out in a burst after a busy bus (queued pairing)")
+    first.refuse()
     facts = first.facts
     integrator, source = facts.integrator(integrator)
     first.check()
@@ -378,6 +374,8 @@ class _FirstPass:
         self.facts = StreamFacts(self.decoder)
         self.losses = StreamLosses(self.decoder)
         self.queued = False  # frames of a periodic sender let out in a burst (queued_frames)
+        self.twins = False  # an encoder frame with a twin (samples.twinned_encoder_frames)
+        self._last_enc: dict[str, np.ndarray] | None = None  # the last accepted encoder row
         self._last_t: dict[str, float] = {}  # per such message, its last accepted frame's time
         self.stalls: StreamStalls | None = None
         self.rows = dict.fromkeys(REQUIRED, 0)  # decoded frames of the required messages
@@ -408,6 +406,21 @@ class _FirstPass:
         self.losses.feed(chunk, accepted, enc)
         if enc.cycle_s is not None:
             self._bursts(chunk, accepted, enc.cycle_s)
+        self._twins(chunk, accepted)
+
+    def _twins(self, chunk: FrameArrays, accepted: np.ndarray) -> None:
+        """Whether an accepted encoder frame has a twin (``samples.twinned_encoder_frames``,
+        over the chunk and the last accepted encoder frame before it)."""
+        rows = self.decoder.decode(chunk, "WHEEL_ENCODERS")
+        keep = accepted[rows["index"]]
+        if self._last_enc is not None:
+            rows = {k: np.concatenate((self._last_enc[k], v)) for k, v in rows.items()}
+            keep = np.concatenate(([True], keep))
+        if keep.any():
+            last = int(np.flatnonzero(keep)[-1])
+            self._last_enc = {k: v[last:last + 1] for k, v in rows.items()}
+        self.twins = self.twins or bool(
+            twinned_encoder_frames(chunk, rows, keep, self.decoder).any())
 
     def _bursts(self, chunk: FrameArrays, accepted: np.ndarray, cycle_s: float) -> None:
         """Whether a message ``samples.queued_frames`` looks at (encoder frames, poses, twist)
@@ -438,6 +451,17 @@ class _FirstPass:
                 self.head = _poses({k: v[:1] for k, v in kept.items()})
             self.tail = _poses({k: v[-1:] for k, v in kept.items()})
             self.kept += len(kept["enc"])
+
+    def refuse(self) -> None:
+        """``NotStreamable`` when the life is one the stream cannot judge as the whole log."""
+        if self.twins:  # the stream's encoder frames carry no twins (samples.encoder_frames)
+            raise NotStreamable("two encoder frames of one COUNTER (a forger or a second sender)")
+        if self.stalls is not None and not self.stalls.exact:
+            raise NotStreamable("the log's frame times go back around a silence of the firmware")
+        if not self.losses.exact:  # a summary stamped before an earlier encoder frame
+            raise NotStreamable("the log's status times go back against its encoder frames")
+        if self.queued:  # samples._queued pairs them by a median over the whole life
+            raise NotStreamable("frames let out in a burst after a busy bus (queued pairing)")
 
     @property
     def breaks(self) -> np.ndarray:
