@@ -45,10 +45,15 @@ SUBCOMMANDS = (
 )
 VERSION = __version__  # one definition, in odocan/__init__.py (pyproject.toml reads it too)
 EXIT_OK, EXIT_USAGE = 0, 2
+EXIT_SIGNAL_BASE = 128  # the shell's convention: killed by signal N exits 128 + N
 
 
 class UsageError(OdocanError):
     """A bad command line (unknown option, bad value)."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Ctrl-C raises ``KeyboardInterrupt`` (and caught where it is)."""
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -163,7 +168,11 @@ def main(argv: list[str] | None = None) -> int:
     """Parse ``argv`` (default: sys.argv[1:]) and run the subcommand; returns the exit code.
 
     ``--debug`` is taken anywhere before a ``--``. SIGTERM is handled as SIGINT (Ctrl-C) while
-    the command runs. A closed stdout (``odocan run | head -1``) ends the command quietly, exit 0.
+    the command runs: a command that stops on it with its verdict (run, replay, monitor, fleet,
+    bridge ...) exits as it says; one interrupted before its verdict (analyze, or any command
+    still starting) says so on stderr and exits 130 (SIGINT) or 143 (SIGTERM), never 0 -- a CI
+    job killed by its timeout must not read as a pass. A closed stdout (``odocan run | head -1``)
+    ends the command quietly, exit 0.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     argv, debug = split_debug(argv)
@@ -174,8 +183,8 @@ def main(argv: list[str] | None = None) -> int:
             args.debug = debug  # split off above; bridge/fleet show library logs with it
             _quiet_broken_pipe_in_rich()
             return int(args.func(args))
-    except KeyboardInterrupt:
-        return EXIT_OK
+    except KeyboardInterrupt as exc:
+        return _interrupted(exc, named_command(argv))
     except BrokenPipeError:
         _silence_stdout()
         return EXIT_OK
@@ -184,6 +193,14 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
+
+
+def _interrupted(exc: KeyboardInterrupt, command: str | None) -> int:
+    """One line on stderr for a command stopped by a signal before its verdict; 128 + N."""
+    signum = signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
+    what = f"odocan {command}" if command else "odocan"
+    print(f"interrupted ({signum.name}): {what} stopped before its verdict", file=sys.stderr)
+    return EXIT_SIGNAL_BASE + int(signum)
 
 
 def is_usage_error(exc: BaseException) -> bool:
@@ -215,7 +232,7 @@ def split_debug(argv: list[str]) -> tuple[list[str], bool]:
 
 
 def _interrupt(signum: int, frame: FrameType | None) -> None:
-    raise KeyboardInterrupt
+    raise Terminated
 
 
 @contextmanager

@@ -41,7 +41,7 @@ from odocan.host.cli.options import (
 )
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus, parse_faults
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
-from odocan.host.io.listeners import Isolated
+from odocan.host.io.listeners import Isolated, Recording
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge import busstats
 from odocan.host.judge.analysis import Analysis, analyze
@@ -287,9 +287,11 @@ def _run(
 
 
 def _open_log(path: Path) -> can.Listener:
-    """python-can's writer for ``path`` (by extension); an error names the path."""
+    """python-can's writer for ``path`` (by extension); an error names the path. A write that
+    fails mid-run (a full disk) stops the recording, not the run: the summary is printed, then
+    the error with the path (``rig.close()`` raises it, ``_run_and_analyze`` returns it)."""
     try:
-        return can.Logger(path)
+        return Recording(can.Logger(path))
     except OSError as exc:
         raise OutputError(f"--log {path}: {exc.strerror or exc}") from None
 

@@ -1,0 +1,98 @@
+"""Outputs that fail while being written name their path, in one line, and lose nothing else.
+
+Found from outside on a disk that fills up (a 64 kB tmpfs): ``odocan run --log x.log`` died
+with ``error: [Errno 28] No space left on device`` -- no path, no summary of the hour it had
+simulated -- and ``--mcap`` printed one ``error logging message`` line per message (4 835 lines
+for a 10 s drive) before its error. Here the full disk is a python-can writer whose file
+refuses every write after a few thousand bytes (ENOSPC), as the kernel's does.
+"""
+
+from __future__ import annotations
+
+import errno
+import io
+from pathlib import Path
+from typing import Any
+
+import can
+import pytest
+
+from odocan.host.cli.app import main
+
+
+class _FullDisk(io.StringIO):
+    """A text file that takes ``room`` characters, then fails like a full disk."""
+
+    def __init__(self, room: int) -> None:
+        super().__init__()
+        self.room = room
+
+    def write(self, text: str) -> int:
+        if self.tell() + len(text) > self.room:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return super().write(text)
+
+
+def _logger_on_a_full_disk(room: int) -> Any:
+    real = can.Logger
+
+    def make(path: Path, *args: Any, **kwargs: Any) -> can.Listener:
+        writer = real(path, *args, **kwargs)
+        writer.file.close()
+        writer.file = _FullDisk(room)
+        return writer
+
+    return make
+
+
+def test_run_log_on_a_full_disk_names_the_path_and_keeps_the_summary(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = tmp_path / "drive.log"
+    monkeypatch.setattr(can, "Logger", _logger_on_a_full_disk(4000))
+    code = main(["run", "--duration", "2", "--log", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 2, err
+    assert "PASS: on-board vs reference" in out  # the run went on and was judged
+    lines = err.splitlines()
+    assert lines[-1].startswith(f"error: --log {log}: No space left on device (recording "
+                                "stopped after "), err
+    frames = int(lines[-1].split("stopped after ")[1].split()[0])
+    assert 0 < frames < 4000 // 30  # candump lines are ~40 characters: cut early, counted
+    assert "Traceback" not in err
+
+
+class _BusThenCtrlC(can.BusABC):
+    """A bus that hears ``frames`` encoder frames, then gets Ctrl-C."""
+
+    def __init__(self, frames: int) -> None:
+        self.left = frames
+        super().__init__(channel="then-ctrl-c")
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self.left == 0:
+            raise KeyboardInterrupt
+        self.left -= 1
+        return can.Message(arbitration_id=0x100, data=bytes(8), is_extended_id=False), False
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        raise NotImplementedError
+
+
+def test_monitor_json_is_kept_when_its_recording_fills_the_disk(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    from odocan.host.cli.subparsers import monitor as monitor_cmd
+
+    log = tmp_path / "heard.log"
+    monkeypatch.setattr(can, "Logger", _logger_on_a_full_disk(2000))
+    monkeypatch.setattr(monitor_cmd, "open_bus", lambda args: _BusThenCtrlC(300))
+    code = main(["monitor", "-i", "virtual", "--json", "--log", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 2, err
+    assert json.loads(out)["frames_total"] == 300  # what was heard is shown
+    last = err.splitlines()[-1]
+    assert last.startswith(f"error: --log {log}: recording stopped after "), err
+    assert last.endswith("No space left on device"), err
