@@ -36,8 +36,8 @@ class _FullDisk(io.StringIO):
 def _logger_on_a_full_disk(room: int) -> Any:
     real = can.Logger
 
-    def make(path: Path, *args: Any, **kwargs: Any) -> can.Listener:
-        writer = real(path, *args, **kwargs)
+    def make(path: Path, *args: Any, **kwargs: Any) -> Any:
+        writer: Any = real(path, *args, **kwargs)
         writer.file.close()
         writer.file = _FullDisk(room)
         return writer
