@@ -11,6 +11,11 @@ from __future__ import annotations
 
 import errno
 import io
+import os
+import resource
+import signal
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +23,8 @@ import can
 import pytest
 
 from odocan.host.cli.app import main
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 class _FullDisk(io.StringIO):
@@ -96,3 +103,33 @@ def test_monitor_json_is_kept_when_its_recording_fills_the_disk(
     last = err.splitlines()[-1]
     assert last.startswith(f"error: --log {log}: recording stopped after "), err
     assert last.endswith("No space left on device"), err
+
+
+def _odocan_with_file_size_limit(limit_bytes: int, *argv: str) -> subprocess.CompletedProcess[str]:
+    """``python -m odocan ARGV`` in a process whose files cannot grow past ``limit_bytes``
+    (RLIMIT_FSIZE, SIGXFSZ ignored: a write past it fails with EFBIG, as a full disk fails with
+    ENOSPC) -- a disk that fills, without privileges."""
+
+    def limit() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONDONTWRITEBYTECODE": "1"}
+    return subprocess.run([sys.executable, "-m", "odocan", *argv], cwd=ROOT, env=env,
+                          preexec_fn=limit, capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.parametrize("command", ["run", "analyze"])
+def test_mcap_on_a_full_disk_is_one_line_naming_the_path_after_the_summary(
+    command: str, tmp_path: Path
+) -> None:
+    path = tmp_path / "drive.mcap"
+    argv = ["run", "--duration", "10"]
+    if command == "analyze":
+        log = tmp_path / "drive.log"
+        assert main([*argv, "--log", str(log)]) == 0
+        argv = ["analyze", str(log)]
+    done = _odocan_with_file_size_limit(20_000, *argv, "--mcap", str(path))
+    assert done.returncode == 2, done.stderr
+    assert done.stderr == f"error: --mcap {path}: File too large\n"  # was 4 835 lines
+    assert "PASS: on-board vs reference" in done.stdout  # the verdict is not lost

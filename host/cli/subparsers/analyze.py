@@ -157,8 +157,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
                     analysis = analyze(whole, profile, args.integrator,
                                        tolerance=args.tolerance)
     assert analysis is not None
-    if frames is not None:
-        write_exports(args, frames, analysis, db)
+    whole_log = frames  # --parquet/--mcap read the whole log: written after the summary
     if args.bitrate is not None:
         from odocan.host.judge import busstats
 
@@ -178,6 +177,8 @@ def _analyze_single(args: argparse.Namespace) -> int:
     if hint is not None:
         print(f"  - {hint}")
     write_checks(args, "analyze", analysis_checks(analysis.report))
+    if whole_log is not None:
+        write_exports(args, whole_log, analysis, db)
     return code
 
 

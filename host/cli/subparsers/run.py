@@ -211,8 +211,8 @@ def _run_and_analyze(
     config: RigConfig, args: argparse.Namespace, extra: list[can.Listener]
 ) -> tuple[Analysis, OutputError | None]:
     """Run the rig with its listeners (and ``extra``; the wall time measured around the run
-    only) and analyse what the host heard. A log that could not be finished is returned, not
-    raised, so that the summary is still printed."""
+    only) and analyse what the host heard. A log or an export that could not be finished is
+    returned, not raised, so that the summary is still printed."""
     collector = FrameCollector()
     listeners: list[can.Listener] = [collector, *extra]
     wants_mirror = args.interface is not None or args.channel is not None
@@ -258,7 +258,10 @@ def _run_and_analyze(
     if wire is not None:
         bus = busstats.from_wire(wire, database(), still_queued=still_queued)
         analysis.report["bus"] = bus.as_dict()
-    write_exports(args, frames, analysis)
+    try:
+        write_exports(args, frames, analysis)
+    except OutputError as exc:  # as a log: raised once the summary is out
+        log_error = log_error or exc
     return analysis, log_error
 
 
