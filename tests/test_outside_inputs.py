@@ -18,7 +18,8 @@ def _one_error_line(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
     code = main(argv)
     out, err = capsys.readouterr()
     assert code == 2, (out, err)
-    assert err.count("\n") == 1 and err.startswith("error: "), err
+    assert err.count("\n") == 1, err
+    assert err.startswith("error: "), err
     return err
 
 
@@ -42,3 +43,48 @@ def test_every_mqtt_command_refuses_a_malformed_broker_url(
 ) -> None:
     err = _one_error_line(capsys, [command, "--broker", "mqtt://[::1"])
     assert "--broker 'mqtt://[::1'" in err
+
+
+@pytest.fixture(scope="module")
+def vectors_json(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
+    import json
+
+    out = tmp_path_factory.mktemp("vectors")
+    assert main(["vectors", "--out", str(out), "--duration", "0.1"]) == 0
+    data: dict[str, object] = json.loads((out / "vectors.json").read_text())
+    return data
+
+
+def _case0(data: dict[str, object]) -> dict[str, object]:
+    cases = data["cases"]
+    assert isinstance(cases, list)
+    case: dict[str, object] = cases[0]
+    return case
+
+
+@pytest.mark.parametrize(
+    "edit",
+    [
+        lambda d: [],  # a JSON list: AttributeError
+        lambda d: None,
+        lambda d: {**d, "cases": 5},  # TypeError: 'int' object is not iterable
+        lambda d: {**d, "cases": [5]},
+        lambda d: {**d, "cases": [{**_case0(d), "rows": 7}]},
+        lambda d: {**d, "cases": [{**_case0(d), "rows": [{}]}]},  # KeyError: 'left_count'
+        lambda d: {**d, "cases": [{**_case0(d), "rows": [{"left_count": "a"}]}]},
+        lambda d: {**d, "cases": [{**_case0(d), "rows": [{"left_count": 1.5}]}]},
+        lambda d: {**d, "cases": [{**_case0(d), "name": "../../x"}]},  # read outside --out
+        lambda d: {**d, "cases": [{**_case0(d), "name": 5}]},
+        lambda d: {**d, "params": {**d["params"], "counts_per_rev": "x"}},
+    ],
+)
+def test_vectors_check_refuses_a_malformed_vector_file_in_one_line(
+    edit: object, vectors_json: dict[str, object], tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    import json
+
+    assert callable(edit)
+    (tmp_path / "vectors.json").write_text(json.dumps(edit(vectors_json)))
+    err = _one_error_line(capsys, ["vectors", "--out", str(tmp_path), "--check"])
+    assert f"{tmp_path / 'vectors.json'}: " in err
