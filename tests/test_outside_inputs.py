@@ -88,3 +88,19 @@ def test_vectors_check_refuses_a_malformed_vector_file_in_one_line(
     (tmp_path / "vectors.json").write_text(json.dumps(edit(vectors_json)))
     err = _one_error_line(capsys, ["vectors", "--out", str(tmp_path), "--check"])
     assert f"{tmp_path / 'vectors.json'}: " in err
+
+
+@pytest.mark.parametrize("stamp", ["nan", "inf", "-inf", "NaN", "infinity"])
+@pytest.mark.parametrize("stream", ["never", "always"])
+def test_a_candump_line_with_a_non_finite_timestamp_is_refused(
+    stamp: str, stream: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """'(nan)' was taken: the summary said 'nan s simulated, measured load nan%' and PASS."""
+    good = tmp_path / "good.log"
+    assert main(["run", "--duration", "1", "--log", str(good)]) == 0
+    lines = good.read_text().splitlines(keepends=True)
+    bad = tmp_path / "bad.log"
+    bad.write_text("".join(lines[:50]) + f"({stamp}) vcan0 100#00\n" + "".join(lines[50:]))
+    capsys.readouterr()
+    err = _one_error_line(capsys, ["analyze", str(bad), "--stream", stream])
+    assert err == f"error: {bad}:51: bad timestamp '({stamp})' (not a finite number)\n"

@@ -4,6 +4,8 @@ not take (non-canonical lines, error frames, remote and FD frames, the first bad
 
 from __future__ import annotations
 
+import math
+
 import can
 
 from odocan.host.io.frames import MAX_DLC, LogFormatError
@@ -60,9 +62,12 @@ def _parse_timestamp(text: str, where: str) -> float:
     if not (text.startswith("(") and text.endswith(")")):
         raise LogFormatError(f"{where}: missing timestamp: expected '(SECONDS)', got {text!r}")
     try:
-        return float(text[1:-1])
+        seconds = float(text[1:-1])
     except ValueError:
         raise LogFormatError(f"{where}: bad timestamp {text!r}") from None
+    if not math.isfinite(seconds):  # '(nan)': every duration and rate after it would be nan
+        raise LogFormatError(f"{where}: bad timestamp {text!r} (not a finite number)")
+    return seconds
 
 
 def _parse_can_id(text: str, where: str) -> int:
