@@ -104,3 +104,19 @@ def test_a_candump_line_with_a_non_finite_timestamp_is_refused(
     capsys.readouterr()
     err = _one_error_line(capsys, ["analyze", str(bad), "--stream", stream])
     assert err == f"error: {bad}:51: bad timestamp '({stamp})' (not a finite number)\n"
+
+
+def test_replay_of_a_directory_or_a_pipe_says_what_it_is(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Both said 'no such log file', though the path is there."""
+    import os
+
+    err = _one_error_line(capsys, ["replay", str(tmp_path)])
+    assert err == f"error: {tmp_path}: a directory, not a log file\n"
+    pipe = tmp_path / "drive.log"
+    os.mkfifo(pipe)
+    err = _one_error_line(capsys, ["replay", str(pipe)])
+    assert err == f"error: {pipe}: not a regular file (a pipe, device or socket)\n"
+    err = _one_error_line(capsys, ["replay", str(tmp_path / "missing.log")])
+    assert err == f"error: {tmp_path / 'missing.log'}: no such log file\n"
