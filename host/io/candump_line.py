@@ -4,8 +4,6 @@ not take (non-canonical lines, error frames, remote and FD frames, the first bad
 
 from __future__ import annotations
 
-import math
-
 import can
 
 from odocan.host.io.frames import MAX_DLC, LogFormatError
@@ -59,6 +57,8 @@ def parse_candump_line(raw: bytes, where: str = "<line>") -> can.Message | None:
 
 def _parse_timestamp(text: str, where: str) -> float:
     """``(SECONDS)`` -> float seconds."""
+    import math  # the slow path only (lines the vectorised parser does not take)
+
     if not (text.startswith("(") and text.endswith(")")):
         raise LogFormatError(f"{where}: missing timestamp: expected '(SECONDS)', got {text!r}")
     try:
