@@ -24,7 +24,7 @@ from types import FrameType
 from typing import NoReturn
 
 from odocan import __version__
-from odocan.sim.exceptions import OdocanError
+from odocan.sim.exceptions import OdocanError, Terminated
 
 # Each module has add_subparser(subparsers) that sets func=_do_<cmd>(args) -> int.
 SUBCOMMANDS = (
@@ -50,10 +50,6 @@ EXIT_SIGNAL_BASE = 128  # the shell's convention: killed by signal N exits 128 +
 
 class UsageError(OdocanError):
     """A bad command line (unknown option, bad value)."""
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where Ctrl-C raises ``KeyboardInterrupt`` (and caught where it is)."""
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
