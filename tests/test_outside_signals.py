@@ -44,7 +44,7 @@ def test_analyze_stopped_by_a_signal_mid_read_exits_128_plus_n(
     assert main(["analyze", str(log), "--stream", "never"]) == code
     out, err = capsys.readouterr()
     assert out == ""
-    assert err == f"interrupted ({signum.name}): odocan analyze stopped before its verdict\n"
+    assert err == f"interrupted ({signum.name}): odocan analyze stopped before it finished\n"
 
 
 def test_sigterm_handler_is_restored_after_main(tmp_path: Path) -> None:

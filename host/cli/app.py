@@ -195,7 +195,7 @@ def _interrupted(exc: KeyboardInterrupt, command: str | None) -> int:
     """One line on stderr for a command stopped by a signal before its verdict; 128 + N."""
     signum = signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
     what = f"odocan {command}" if command else "odocan"
-    print(f"interrupted ({signum.name}): {what} stopped before its verdict", file=sys.stderr)
+    print(f"interrupted ({signum.name}): {what} stopped before it finished", file=sys.stderr)
     return EXIT_SIGNAL_BASE + int(signum)
 
 
