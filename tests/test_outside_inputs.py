@@ -120,3 +120,16 @@ def test_replay_of_a_directory_or_a_pipe_says_what_it_is(
     assert err == f"error: {pipe}: not a regular file (a pipe, device or socket)\n"
     err = _one_error_line(capsys, ["replay", str(tmp_path / "missing.log")])
     assert err == f"error: {tmp_path / 'missing.log'}: no such log file\n"
+
+
+def test_a_bus_that_fails_to_open_leaves_no_second_line(
+    capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    """'-i udp_multicast -c notanip' printed its error, then python-can's 'UdpMulticastBus was
+    not properly shut down' from the half-made bus's ``__del__``."""
+    import gc
+
+    _one_error_line(capsys, ["monitor", "-i", "udp_multicast", "-c", "notanip", "--json",
+                             "--duration", "1"])
+    gc.collect()
+    assert "not properly shut down" not in caplog.text
