@@ -51,3 +51,58 @@ def test_sigterm_handler_is_restored_after_main(tmp_path: Path) -> None:
     before = signal.getsignal(signal.SIGTERM)
     assert main(["busload"]) in (0, 1)
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+MARKS = "ODOCAN_TEST_BATCH_MARKS"
+LONG_S = 5.0  # a long log's analysis, as the workers see it
+
+
+def _slow_analyze_one(path: str, job: object) -> object:
+    """``batch.analyze_one`` standing in for logs: marks its process id and the log, takes
+    ``LONG_S`` (drive00 none: its result comes at once)."""
+    import time
+
+    from odocan.host.judge.batch import LogResult
+
+    with open(os.environ[MARKS], "a") as marks:
+        marks.write(f"{os.getpid()} {path}\n")
+    if not path.endswith("drive00.log"):
+        time.sleep(LONG_S)
+    return LogResult(path, error="not analysed (test)")
+
+
+def _gone(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return True
+    return state in ("Z", "X")  # dead (a zombie until reaped)
+
+
+def test_ctrl_c_in_a_batch_stops_its_workers_at_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ctrl-C or SIGTERM in ``analyze logs/`` went on to analyse every log still queued (the
+    pool's exit waited for all of them: 5 s for 12 logs here, hours for an archive); a worker's
+    log under way is ended too (a 1 GB log is half a minute)."""
+    import time
+
+    from odocan.host.judge import batch
+
+    marks = tmp_path / "marks"
+    monkeypatch.setenv(MARKS, str(marks))
+    monkeypatch.setattr(batch, "analyze_one", _slow_analyze_one)  # forked workers see it
+
+    def interrupt(result: object) -> None:
+        raise KeyboardInterrupt
+
+    job = batch.Job("pmir", None, 1e-4, 1e-4)
+    paths = [tmp_path / f"drive{i:02}.log" for i in range(40)]
+    with pytest.raises(KeyboardInterrupt):
+        batch.analyze_logs(paths, job, jobs=2, on_done=interrupt)
+    pids = {int(line.split()[0]) for line in marks.read_text().splitlines()}
+    deadline = time.monotonic() + LONG_S / 2
+    while not all(_gone(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert all(_gone(pid) for pid in pids), "a worker went on with its log"
+    assert len(marks.read_text().splitlines()) < 10  # not every queued log
