@@ -133,3 +133,14 @@ def test_a_bus_that_fails_to_open_leaves_no_second_line(
                              "--duration", "1"])
     gc.collect()
     assert "not properly shut down" not in caplog.text
+
+
+def test_a_robot_profile_that_is_not_utf8_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A TOML file of other bytes (a binary picked by mistake) was a UnicodeDecodeError
+    traceback: tomllib decodes before it parses, and only its TOMLDecodeError was caught."""
+    profile = tmp_path / "robot.toml"
+    profile.write_bytes(b"\xff\xfename = 'x'\n")
+    err = _one_error_line(capsys, ["run", "--duration", "1", "--robot", str(profile)])
+    assert err.startswith(f"error: malformed TOML in {profile}: not UTF-8 text"), err
