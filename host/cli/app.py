@@ -168,7 +168,8 @@ def main(argv: list[str] | None = None) -> int:
     bridge ...) exits as it says; one interrupted before its verdict (analyze, or any command
     still starting) says so on stderr and exits 130 (SIGINT) or 143 (SIGTERM), never 0 -- a CI
     job killed by its timeout must not read as a pass. A closed stdout (``odocan run | head -1``)
-    ends the command quietly, exit 0.
+    ends the command quietly with 141, as SIGPIPE ends a writer: under ``set -o pipefail`` a
+    FAIL piped to ``head`` must not read as a pass either.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     argv, debug = split_debug(argv)
@@ -183,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
         return _interrupted(exc, named_command(argv))
     except BrokenPipeError:
         _silence_stdout()
-        return EXIT_OK
+        return EXIT_SIGNAL_BASE + int(signal.SIGPIPE)
     except Exception as exc:
         if debug or not is_usage_error(exc):
             raise
@@ -249,7 +250,7 @@ def sigterm_as_interrupt() -> Iterator[None]:
 
 def _quiet_broken_pipe_in_rich() -> None:
     """Make rich's hook for a reader of stdout that went away raise ``BrokenPipeError`` (rich
-    would exit 1; ``main`` ends quietly, exit 0). Installed once the command line is parsed, so
+    would exit 1; ``main`` ends quietly, exit 141). Installed once the command line is parsed, so
     ``--version``, ``--help`` and usage errors never import rich."""
     from rich.console import Console
 
