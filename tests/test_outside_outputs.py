@@ -133,3 +133,45 @@ def test_mcap_on_a_full_disk_is_one_line_naming_the_path_after_the_summary(
     assert done.returncode == 2, done.stderr
     assert done.stderr == f"error: --mcap {path}: File too large\n"  # was 4 835 lines
     assert "PASS: on-board vs reference" in done.stdout  # the verdict is not lost
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    log = tmp_path_factory.mktemp("recorded") / "drive.log"
+    assert main(["run", "--duration", "1", "--log", str(log)]) == 0
+    return log
+
+
+@pytest.mark.parametrize(
+    ("command", "option"),
+    [("analyze", "--report"), ("analyze", "--junit"), ("analyze", "--mcap"),
+     ("replay", "--junit"), ("replay", "--log"), ("replay", "--report")],
+)
+def test_an_output_on_the_input_log_is_refused_and_the_log_kept(
+    command: str, option: str, recorded: Path, tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``analyze drive.log --report drive.log`` replaced the recording with its JSON report;
+    ``replay drive.log --log drive.log`` with the replayed bus."""
+    log = tmp_path / "drive.log"
+    log.write_bytes(recorded.read_bytes())
+    capsys.readouterr()
+    alias = tmp_path / "." / "drive.log"  # the same file by another spelling
+    code = main([command, str(log), option, str(alias)])
+    out, err = capsys.readouterr()
+    assert code == 2, out
+    assert err == (f"error: {option} {alias}: that is LOG {log}, the input: it would be "
+                   "overwritten\n")
+    assert log.read_bytes() == recorded.read_bytes()
+
+
+def test_two_outputs_of_a_run_on_one_file_are_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``run --log out --report out``: the report replaced the hour's log at the end."""
+    out_path = tmp_path / "out.log"
+    code = main(["run", "--duration", "1", "--log", str(out_path), "--junit", str(out_path)])
+    out, err = capsys.readouterr()
+    assert code == 2, out
+    assert err == f"error: --junit {out_path}: that is --log {out_path}, also an output\n"
+    assert not out_path.exists()

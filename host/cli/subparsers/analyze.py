@@ -133,6 +133,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
     from odocan.host.cli.inputs import explained, require_frames
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import analyze
+    from odocan.host.outputs import check_distinct
     from odocan.host.report.ci import analysis_checks, write_checks
     from odocan.host.report.progress import wall_clock_progress
     from odocan.host.report.summary import finish
@@ -142,6 +143,8 @@ def _analyze_single(args: argparse.Namespace) -> int:
     check_output_paths(args)
     check_export_paths(args.parquet, args.mcap)
     check_junit_path(args)
+    check_distinct([("--report", args.report), ("--plot", args.plot), ("--junit", args.junit),
+                    ("--mcap", args.mcap)], [("LOG", args.log), ("--dbc", args.dbc)])
     db = load_dbc(args.dbc) if args.dbc is not None else None
     with wall_clock_progress(f"analysing {args.log}", None):
         analysis = _streamed(args, profile, db) if _streams(args) else None

@@ -45,7 +45,7 @@ from odocan.host.io.listeners import Isolated, Recording
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge import busstats
 from odocan.host.judge.analysis import Analysis, analyze
-from odocan.host.outputs import OutputError, check_writable
+from odocan.host.outputs import OutputError, check_distinct, check_writable
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
     add_junit_argument,
@@ -171,6 +171,9 @@ def _do_run(args: argparse.Namespace) -> int:
     check_latency_plot(args.latency_plot, config.bitrate)
     check_export_paths(args.parquet, args.mcap)
     check_junit_path(args)
+    check_distinct([("--log", args.log), ("--report", args.report), ("--plot", args.plot),
+                    ("--junit", args.junit), ("--mcap", args.mcap),
+                    ("--latency-plot", args.latency_plot)])
     board_maker(config.firmware, secoc=config.secoc_key is not None)  # refusals before any file
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
     if config.firmware != "python":
