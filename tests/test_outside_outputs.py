@@ -175,3 +175,20 @@ def test_two_outputs_of_a_run_on_one_file_are_refused(
     assert code == 2, out
     assert err == f"error: --junit {out_path}: that is --log {out_path}, also an output\n"
     assert not out_path.exists()
+
+
+def test_key_derive_never_writes_over_the_fleet_key(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``key derive --fleet-key K --out K --force`` replaced the fleet's secret with one
+    robot's key, exit 0: every other robot's key is lost with it."""
+    fleet_key = tmp_path / "fleet.key"
+    fleet_key.write_text("00112233445566778899aabbccddeeff\n")
+    fleet_key.chmod(0o600)
+    code = main(["key", "derive", "--fleet-key", str(fleet_key), "--robot", "robot001",
+                 "--out", str(fleet_key), "--force"])
+    out, err = capsys.readouterr()
+    assert code == 2, out
+    assert err == (f"error: --out {fleet_key}: that is --fleet-key {fleet_key}, the input: it "
+                   "would be overwritten\n")
+    assert fleet_key.read_text() == "00112233445566778899aabbccddeeff\n"
