@@ -144,3 +144,40 @@ def test_a_robot_profile_that_is_not_utf8_is_one_line(
     profile.write_bytes(b"\xff\xfename = 'x'\n")
     err = _one_error_line(capsys, ["run", "--duration", "1", "--robot", str(profile)])
     assert err.startswith(f"error: malformed TOML in {profile}: not UTF-8 text"), err
+
+
+def _odocan_with_memory_limit(*argv: str) -> tuple[int, str]:
+    """``python -m odocan ARGV`` in a process of at most 3 GB of address space: a regression
+    that reads /dev/zero whole fails with MemoryError here instead of taking the machine."""
+    import os
+    import resource
+    import subprocess
+    import sys
+
+    limit = 3 << 30
+
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "-m", "odocan", *argv], cwd=root,
+                          env={**os.environ, "PYTHONPATH": str(root)}, preexec_fn=cap,
+                          capture_output=True, text=True, timeout=120)
+    return done.returncode, done.stderr
+
+
+@pytest.mark.parametrize(
+    ("argv", "error"),
+    [
+        (["bridge", "-i", "virtual", "--broker", "mqtt://user@127.0.0.1:1",
+          "--password-file", "/dev/zero"],
+         "error: --password-file /dev/zero: not a regular file\n"),
+        (["busload", "--dbc", "/dev/zero"],
+         "error: cannot read DBC /dev/zero: not a regular file\n"),
+    ],
+)
+def test_an_endless_device_as_an_input_file_is_refused_unread(
+    argv: list[str], error: str
+) -> None:
+    """Both read /dev/zero until the kernel killed them (exit 137 on this 24 GB machine)."""
+    assert _odocan_with_memory_limit(*argv) == (2, error)

@@ -369,14 +369,20 @@ def log_inputs(
 
 def load_dbc(path: Path) -> cantools.database.can.Database:
     """Load a DBC strictly; any problem is a one-line ``ConfigurationError``."""
+    import stat
+
     import cantools
 
     try:
-        db = cantools.database.load_file(path, database_format="dbc", strict=True)
+        regular = stat.S_ISREG(path.stat().st_mode)
+        if regular:  # else cantools would read /dev/zero until memory ends
+            db = cantools.database.load_file(path, database_format="dbc", strict=True)
     except OSError as exc:
         raise ConfigurationError(f"cannot read DBC {path}: {exc.strerror or exc}") from None
     except Exception as exc:  # cantools raises ParseError, UnsupportedDatabaseFormatError, ...
         raise ConfigurationError(f"malformed DBC {path}: {_first_line(exc)}") from None
+    if not regular:
+        raise ConfigurationError(f"cannot read DBC {path}: not a regular file")
     if not isinstance(db, cantools.database.can.Database):
         raise ConfigurationError(f"{path} is not a CAN database")
     return db
