@@ -55,3 +55,27 @@ def write_text(path: Path, text: str, option: str) -> None:
         path.write_text(text, encoding="utf-8")
     except OSError as exc:
         raise OutputError(f"{option} {path}: {exc.strerror or exc}") from None
+
+
+def check_distinct(
+    outputs: list[tuple[str, Path | None]], inputs: list[tuple[str, Path | None]] | None = None
+) -> None:
+    """Refuse two outputs on one file, or an output on an input (``analyze drive.log --report
+    drive.log`` replaced the recording with its report): one line naming both, before any work.
+    The same file is the same inode when both exist, else the same absolute path."""
+    seen = [(option, path, True) for option, path in inputs or [] if path is not None]
+    for option, path in outputs:
+        if path is None or str(path) == os.devnull:
+            continue
+        for other_option, other, is_input in seen:
+            if _same_file(path, other):
+                what = "the input: it would be overwritten" if is_input else "also an output"
+                raise ConfigurationError(f"{option} {path}: that is {other_option} {other}, {what}")
+        seen.append((option, path, False))
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return a.resolve() == b.resolve()

@@ -17,3 +17,8 @@ class ConfigurationError(OdocanError, ValueError):
 
 class BusSetupError(OdocanError):
     """A CAN interface could not be opened (unknown interface, missing channel, no vcan)."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Ctrl-C raises ``KeyboardInterrupt`` (and caught wherever that is):
+    the CLI ends a command stopped by it before its verdict with exit code 143, not 130."""

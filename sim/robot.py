@@ -138,6 +138,9 @@ def _read_toml(path: Path) -> dict[str, Any]:
             return tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise ProfileError(f"malformed TOML in {path}: {exc}") from None
+    except UnicodeDecodeError as exc:  # tomllib decodes the whole file before it parses
+        raise ProfileError(f"malformed TOML in {path}: not UTF-8 text ({exc.reason} at byte "
+                           f"{exc.start})") from None
     except OSError as exc:
         raise ProfileError(f"cannot read robot profile {path}: {exc.strerror}") from None
 

@@ -153,14 +153,16 @@ def _catches_sigterm(pid: int) -> bool:
 def test_sigterm_ends_monitor_with_its_json(tmp_path: Path) -> None:
     import json
 
-    proc = _start("monitor", "-i", "virtual", "-c", f"sig-{os.getpid()}", "--json")
+    log = tmp_path / "heard.log"  # made once the monitor is past its imports and options
+    proc = _start("monitor", "-i", "virtual", "-c", f"sig-{os.getpid()}", "--json",
+                  "--log", str(log))
     deadline = time.monotonic() + START_TIMEOUT_S
-    while not _catches_sigterm(proc.pid):
+    while not (_catches_sigterm(proc.pid) and log.exists()):
         if time.monotonic() > deadline or proc.poll() is not None:
             proc.kill()
             pytest.fail(f"monitor never handled SIGTERM: {proc.communicate()}")
         time.sleep(0.05)
-    time.sleep(1.0)  # past parsing: the bus is open and the receive loop running
+    time.sleep(0.2)  # a signal before its receive loop stops it the same way (JSON, exit 0)
     code, out, err = _terminate(proc)
     assert (code, err) == (0, "")
     assert isinstance(json.loads(out), dict)

@@ -24,7 +24,7 @@ from types import FrameType
 from typing import NoReturn
 
 from odocan import __version__
-from odocan.sim.exceptions import OdocanError
+from odocan.sim.exceptions import OdocanError, Terminated
 
 # Each module has add_subparser(subparsers) that sets func=_do_<cmd>(args) -> int.
 SUBCOMMANDS = (
@@ -45,6 +45,7 @@ SUBCOMMANDS = (
 )
 VERSION = __version__  # one definition, in odocan/__init__.py (pyproject.toml reads it too)
 EXIT_OK, EXIT_USAGE = 0, 2
+EXIT_SIGNAL_BASE = 128  # the shell's convention: killed by signal N exits 128 + N
 
 
 class UsageError(OdocanError):
@@ -163,7 +164,12 @@ def main(argv: list[str] | None = None) -> int:
     """Parse ``argv`` (default: sys.argv[1:]) and run the subcommand; returns the exit code.
 
     ``--debug`` is taken anywhere before a ``--``. SIGTERM is handled as SIGINT (Ctrl-C) while
-    the command runs. A closed stdout (``odocan run | head -1``) ends the command quietly, exit 0.
+    the command runs: a command that stops on it with its verdict (run, replay, monitor, fleet,
+    bridge ...) exits as it says; one interrupted before its verdict (analyze, or any command
+    still starting) says so on stderr and exits 130 (SIGINT) or 143 (SIGTERM), never 0 -- a CI
+    job killed by its timeout must not read as a pass. A closed stdout (``odocan run | head -1``)
+    ends the command quietly with 141, as SIGPIPE ends a writer: under ``set -o pipefail`` a
+    FAIL piped to ``head`` must not read as a pass either.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     argv, debug = split_debug(argv)
@@ -174,16 +180,24 @@ def main(argv: list[str] | None = None) -> int:
             args.debug = debug  # split off above; bridge/fleet show library logs with it
             _quiet_broken_pipe_in_rich()
             return int(args.func(args))
-    except KeyboardInterrupt:
-        return EXIT_OK
+    except KeyboardInterrupt as exc:
+        return _interrupted(exc, named_command(argv))
     except BrokenPipeError:
         _silence_stdout()
-        return EXIT_OK
+        return EXIT_SIGNAL_BASE + int(signal.SIGPIPE)
     except Exception as exc:
         if debug or not is_usage_error(exc):
             raise
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
+
+
+def _interrupted(exc: KeyboardInterrupt, command: str | None) -> int:
+    """One line on stderr for a command stopped by a signal before its verdict; 128 + N."""
+    signum = signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
+    what = f"odocan {command}" if command else "odocan"
+    print(f"interrupted ({signum.name}): {what} stopped before it finished", file=sys.stderr)
+    return EXIT_SIGNAL_BASE + int(signum)
 
 
 def is_usage_error(exc: BaseException) -> bool:
@@ -215,7 +229,7 @@ def split_debug(argv: list[str]) -> tuple[list[str], bool]:
 
 
 def _interrupt(signum: int, frame: FrameType | None) -> None:
-    raise KeyboardInterrupt
+    raise Terminated
 
 
 @contextmanager
@@ -236,7 +250,7 @@ def sigterm_as_interrupt() -> Iterator[None]:
 
 def _quiet_broken_pipe_in_rich() -> None:
     """Make rich's hook for a reader of stdout that went away raise ``BrokenPipeError`` (rich
-    would exit 1; ``main`` ends quietly, exit 0). Installed once the command line is parsed, so
+    would exit 1; ``main`` ends quietly, exit 141). Installed once the command line is parsed, so
     ``--version``, ``--help`` and usage errors never import rich."""
     from rich.console import Console
 

@@ -127,8 +127,23 @@ def _open_raw_bus(args: argparse.Namespace, **overrides: Any) -> can.BusABC:
     try:
         return can.Bus(**kwargs)
     except (can.CanError, ValueError, OSError, ImportError, TypeError) as exc:
+        _release_half_made(exc)
         described = ", ".join(f"{k}={v}" for k, v in kwargs.items()) or "python-can defaults"
         raise BusSetupError(f"cannot open CAN bus ({described}): {exc}") from exc
+
+
+def _release_half_made(exc: BaseException) -> None:
+    """Shut down the bus whose constructor raised ``exc`` (found in its traceback): else its
+    ``__del__`` adds "UdpMulticastBus was not properly shut down" after the one error line."""
+    tb = exc.__traceback__
+    while tb is not None:
+        bus = tb.tb_frame.f_locals.get("self")
+        if isinstance(bus, can.BusABC):
+            try:
+                bus.shutdown()
+            except Exception:  # half made: what shutdown() releases may not exist yet
+                bus._is_shutdown = True  # what BusABC.__del__ checks
+        tb = tb.tb_next
 
 
 def udp_port_for_group(group: str) -> int:

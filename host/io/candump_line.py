@@ -57,12 +57,17 @@ def parse_candump_line(raw: bytes, where: str = "<line>") -> can.Message | None:
 
 def _parse_timestamp(text: str, where: str) -> float:
     """``(SECONDS)`` -> float seconds."""
+    import math  # the slow path only (lines the vectorised parser does not take)
+
     if not (text.startswith("(") and text.endswith(")")):
         raise LogFormatError(f"{where}: missing timestamp: expected '(SECONDS)', got {text!r}")
     try:
-        return float(text[1:-1])
+        seconds = float(text[1:-1])
     except ValueError:
         raise LogFormatError(f"{where}: bad timestamp {text!r}") from None
+    if not math.isfinite(seconds):  # '(nan)': every duration and rate after it would be nan
+        raise LogFormatError(f"{where}: bad timestamp {text!r} (not a finite number)")
+    return seconds
 
 
 def _parse_can_id(text: str, where: str) -> int:

@@ -67,6 +67,17 @@ def warn_on_stderr(message: str) -> None:
     print(f"warning: {message}", file=sys.stderr)
 
 
+def require_log_file(path: Path) -> None:
+    """``LogFormatError`` saying what ``path`` is when it is not a regular file to read."""
+    if path.is_file():
+        return
+    if path.is_dir():
+        raise LogFormatError(f"{path}: a directory, not a log file")
+    if path.exists():
+        raise LogFormatError(f"{path}: not a regular file (a pipe, device or socket)")
+    raise LogFormatError(f"{path}: no such log file")
+
+
 def read_log(path: str | Path, *, warn: Callable[[str], None] = warn_on_stderr) -> FrameArrays:
     """Read a CAN log (``.log`` candump by the fast parser, anything else via ``can.LogReader``).
 
@@ -75,8 +86,7 @@ def read_log(path: str | Path, *, warn: Callable[[str], None] = warn_on_stderr) 
     line of a ``.log`` (module docstring) is skipped and reported through ``warn``.
     """
     path = Path(path)
-    if not path.is_file():
-        raise LogFormatError(f"{path}: no such log file")
+    require_log_file(path)
     if path.suffix.lower() == ".log":
         frames, skipped, line = _read_candump_file(path)
         if skipped:
@@ -129,8 +139,7 @@ def iter_log(
     if chunk_frames < 1:
         raise ValueError(f"chunk_frames must be at least 1, got {chunk_frames}")
     path = Path(path)
-    if not path.is_file():
-        raise LogFormatError(f"{path}: no such log file")
+    require_log_file(path)
     parts = _candump_file_parts(path, warn) if path.suffix.lower() == ".log" else (
         _python_can_parts(path, chunk_frames))
     total = 0

@@ -29,7 +29,10 @@ from __future__ import annotations
 
 import heapq
 import json
+import logging
+import re
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -84,20 +87,62 @@ def write_mcap(
                *analysis_records(analysis.series)]
     records = heapq.merge(*streams, key=lambda record: record[0])  # each stream in time order
     context = foxglove.Context()
-    with foxglove.open_mcap(path, allow_overwrite=True, context=context) as writer:
-        channels = {
-            topic: foxglove.Channel(
-                topic, schema=foxglove.Schema(name=name, encoding="jsonschema", data=schemas[name]),
-                message_encoding="json", context=context,
-            )
-            for topic, name in topics.items()
-        }
-        writer.write_metadata("odocan.report", {"json": report_json(analysis.report)})
-        count = 0
-        for t_ns, topic, message in records:
-            channels[topic].log(json.dumps(message).encode(), log_time=t_ns)
-            count += 1
+    count = 0
+    with _sink_errors() as failed:
+        try:
+            with foxglove.open_mcap(path, allow_overwrite=True, context=context) as writer:
+                channels = {
+                    topic: foxglove.Channel(
+                        topic, message_encoding="json", context=context,
+                        schema=foxglove.Schema(name=name, encoding="jsonschema",
+                                               data=schemas[name]),
+                    )
+                    for topic, name in topics.items()
+                }
+                writer.write_metadata("odocan.report", {"json": report_json(analysis.report)})
+                for t_ns, topic, message in records:
+                    channels[topic].log(json.dumps(message).encode(), log_time=t_ns)
+                    count += 1
+                    if failed:
+                        break
+        except RuntimeError:  # closing after a failed write fails again: the first cause counts
+            if not failed:
+                raise
+    if failed:
+        raise RuntimeError(failed[0])
     return count
+
+
+class _SinkErrors(logging.Handler):
+    """Takes the foxglove SDK's log records (its MCAP sink reports a failed write as a
+    ``WARNING`` per message, "error logging message: McapError(Io(Os {... message: "No space
+    left on device" }))", and goes on): the first one's reason is kept, none is printed."""
+
+    def __init__(self, failed: list[str]) -> None:
+        super().__init__(logging.WARNING)
+        self.failed = failed
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not self.failed:
+            text = record.getMessage()
+            found = re.search(r'message: "([^"]*)"', text)
+            self.failed.append(found.group(1) if found else text)
+
+
+@contextmanager
+def _sink_errors() -> Iterator[list[str]]:
+    """While inside, the foxglove SDK's warnings go to a list (empty while all is well),
+    not to stderr: a full disk is one error line, not one line per message."""
+    failed: list[str] = []
+    logger = logging.getLogger("foxglove")
+    handler, propagate = _SinkErrors(failed), logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        yield failed
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
 
 
 def _frame_records(frames: FrameArrays) -> Iterator[Record]:

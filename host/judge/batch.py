@@ -171,10 +171,27 @@ def analyze_logs(
     by_path: dict[str, LogResult] = {}
     with ProcessPoolExecutor(max_workers=min(jobs, len(paths))) as pool:
         futures = {pool.submit(analyze_one, path, job): path for path in paths}
-        for future in as_completed(futures):
-            by_path[futures[future]] = result = _outcome(futures[future], future.result)
-            on_done(result)
+        try:
+            for future in as_completed(futures):
+                by_path[futures[future]] = result = _outcome(futures[future], future.result)
+                on_done(result)
+        except BaseException:  # Ctrl-C, SIGTERM: the pool's exit would run every queued log
+            _stop_pool(pool)
+            raise
     return [by_path[path] for path in paths]
+
+
+def _stop_pool(pool: Any) -> None:
+    """Cancel the logs still queued and end the workers' logs under way (a 1 GB log takes
+    half a minute): the pool's exit then only joins its processes. They only read logs and
+    return reports: nothing of theirs is left half written."""
+    # CPython's workers, by their private name (no public way in 3.11), taken before
+    # shutdown() forgets them; SIGKILL, for a forked worker inherits the CLI's SIGTERM handler
+    # and would go on to its next log
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.kill()
 
 
 def _outcome(path: str, result: Callable[[], LogResult]) -> LogResult:

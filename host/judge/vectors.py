@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import json
 import random
+import re
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -165,9 +166,44 @@ def read_json(path: Path) -> dict[str, Any]:
         data: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise VectorFormatError(f"{path}: {exc}") from exc
-    if data.get("format_version") != FORMAT_VERSION:
+    if not isinstance(data, dict) or data.get("format_version") != FORMAT_VERSION:
         raise VectorFormatError(f"{path}: not an odocan vector file (format_version)")
+    problem = _shape_problem(data)
+    if problem:
+        raise VectorFormatError(f"{path}: not an odocan vector file ({problem})")
     return data
+
+
+_CASE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")  # a file name in --out, nothing more
+_PARAM_NAMES = tuple(RobotParams.__dataclass_fields__)
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _shape_problem(data: dict[str, Any]) -> str:
+    """What in a parsed vector file is not as ``build`` writes it ("" when all is): params of
+    integers, cases named as plain file names, rows of integers in ``CSV_COLUMNS``."""
+    params = data.get("params")
+    if not isinstance(params, dict) or sorted(params) != sorted(_PARAM_NAMES) or not all(
+        _is_int(v) for v in params.values()
+    ):
+        return f"params must be the integers {', '.join(_PARAM_NAMES)}"
+    cases = data.get("cases")
+    if not isinstance(cases, list):
+        return "cases must be a list"
+    for number, case in enumerate(cases):
+        if not isinstance(case, dict) or not isinstance(case.get("name"), str) or \
+                not _CASE_NAME.fullmatch(case["name"]):
+            return f"case {number}: a plain name (letters, digits, _ . -) is needed"
+        rows = case.get("rows")
+        if not isinstance(rows, list) or not all(
+            isinstance(r, dict) and tuple(r) == CSV_COLUMNS and all(_is_int(v) for v in r.values())
+            for r in rows
+        ):
+            return f"case {case['name']}: rows must hold the integers {', '.join(CSV_COLUMNS)}"
+    return ""
 
 
 def read_csv(path: Path) -> list[dict[str, int]]:

@@ -58,7 +58,10 @@ class BrokerURL:
         key: Path | None = None,
     ) -> BrokerURL:
         """Parse ``url``; a one-line ``ConfigurationError`` when it is not a broker URL."""
-        parts = urlsplit(url)
+        try:
+            parts = urlsplit(url)
+        except ValueError as exc:  # e.g. 'mqtt://[::1' (an unclosed IPv6 bracket)
+            raise ConfigurationError(f"--broker {url!r}: {exc}") from None
         if parts.scheme not in _DEFAULT_PORTS:
             raise ConfigurationError(f"--broker {url!r}: expected mqtt://host[:port] or mqtts://")
         if not parts.hostname:
@@ -66,9 +69,12 @@ class BrokerURL:
         if parts.path not in ("", "/") or parts.query or parts.fragment:
             raise ConfigurationError(f"--broker {url!r}: unexpected path or query")
         try:
-            port = parts.port or _DEFAULT_PORTS[parts.scheme]
+            port = parts.port
         except ValueError as exc:
             raise ConfigurationError(f"--broker {url!r}: {exc}") from None
+        if port == 0:  # no broker listens there ('mqtts://h:0' was taken as h:8883)
+            raise ConfigurationError(f"--broker {url!r}: port 0 (give 1..65535, or none)")
+        port = port or _DEFAULT_PORTS[parts.scheme]
         tls = parts.scheme == "mqtts"
         if not tls and (ca or cert or key):
             raise ConfigurationError("--ca/--cert/--key need an mqtts:// broker")

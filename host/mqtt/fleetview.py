@@ -48,6 +48,7 @@ class RobotState:
         return self.status.get("state") == "online"
 
 
+MAX_TELEMETRY_BYTES = 64 * 1024  # a telemetry payload, at most (a rates payload: ~2 kB)
 _LEAF_FIELD = {"status": "status", "pose": "pose", "reference": "reference", "truth": "truth",
                "error": "error", "rates": "rates", topics.RESULT_LEAF: "last_result"}
 
@@ -55,18 +56,19 @@ _LEAF_FIELD = {"status": "status", "pose": "pose", "reference": "reference", "tr
 def apply(
     table: dict[str, RobotState], topic_name: str, payload: bytes, *, retained: bool = False
 ) -> bool:
-    """Fold one message into ``table``; False when it is not a robot topic or not JSON.
+    """Fold one message into ``table``; False when it is not a robot topic or not JSON (of at
+    most ``MAX_TELEMETRY_BYTES``, nested no deeper than Python's JSON parser goes).
 
     A live message updates the robot now. A ``retained`` one (the broker's copy, sent to a new
     subscriber) is as old as its payload's ``unix_s`` says (the publisher's wall clock, s), or of
     unknown age (the robot's ``updated_unix_s`` is left as it was): a robot gone for an hour
     must not look alive because its last status is still on the broker."""
     split = topics.split(topic_name)
-    if split is None or split[1] not in _LEAF_FIELD:
+    if split is None or split[1] not in _LEAF_FIELD or len(payload) > MAX_TELEMETRY_BYTES:
         return False
     try:
         data = json.loads(payload)
-    except ValueError:
+    except (ValueError, RecursionError):  # RecursionError: '[' nested thousands deep
         return False
     if not isinstance(data, dict):
         return False

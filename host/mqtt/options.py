@@ -106,17 +106,25 @@ def with_password(url: BrokerURL, args: argparse.Namespace) -> BrokerURL:
     return url.with_credentials(url.username, password)
 
 
+MAX_PASSWORD_BYTES = 65535  # MQTT's limit for a password (a two-byte length)
+
+
 def read_password_file(path: Path) -> str:
     """The first line of ``path``; a warning when others than its owner may read it;
     ``ConfigurationError`` naming ``path`` when it cannot be read or is empty."""
     try:
         mode = path.stat().st_mode
-        text = path.read_text(encoding="utf-8")
+        if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):  # a directory: open() says so
+            raise ConfigurationError(  # before reading: /dev/zero has no first line, ever
+                f"--password-file {path}: not a regular file")
+        with path.open("rb") as file:
+            text = file.readline(MAX_PASSWORD_BYTES + 1).decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         why = exc.strerror if isinstance(exc, OSError) and exc.strerror else "not UTF-8 text"
         raise ConfigurationError(f"--password-file {path}: cannot read it ({why})") from None
-    if not stat.S_ISREG(mode):
-        raise ConfigurationError(f"--password-file {path}: not a regular file")
+    if len(text.rstrip("\r\n")) > MAX_PASSWORD_BYTES:
+        raise ConfigurationError(
+            f"--password-file {path}: first line longer than {MAX_PASSWORD_BYTES} bytes")
     password = text.splitlines()[0] if text else ""
     if not password:
         raise ConfigurationError(f"--password-file {path}: empty first line")

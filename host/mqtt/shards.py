@@ -43,7 +43,7 @@ from odocan.host.mqtt.broker import (
 )
 from odocan.host.mqtt.fleetrun import FleetRun, StartHook, run_fleet
 from odocan.host.mqtt.options import configure_logging
-from odocan.sim.exceptions import ConfigurationError, OdocanError
+from odocan.sim.exceptions import ConfigurationError, OdocanError, Terminated
 
 MAX_SHARDS = 1000
 BROKER_START_S = 20.0  # spawn + importing amqtt on a loaded machine
@@ -206,10 +206,15 @@ def _run_workers(
              for w, r in enumerate(runs)]
     for proc in procs:
         proc.start()
-    previous = {s: signal.signal(s, lambda *_: _stop_all(procs))
-                for s in (signal.SIGINT, signal.SIGTERM)}
+    signals: list[int] = []  # the ones this process got: passed on to every worker
+
+    def stop(signum: int, frame: object) -> None:
+        signals.append(signum)
+        _stop_all(procs)
+
+    previous = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        return _collect(runs, procs, events, on_start, on_progress)
+        return _collect(runs, procs, events, on_start, on_progress, signals)
     except BaseException:
         _stop_all(procs)
         raise
@@ -232,9 +237,10 @@ def _stop_all(procs: list[Any]) -> None:
 
 def _collect(
     runs: list[FleetRun], procs: list[Any], events: Any, on_start: StartHook | None,
-    on_progress: Progress | None,
+    on_progress: Progress | None, signals: list[int],
 ) -> list[dict[str, Any]]:
-    """Wait for every worker's report, passing on start and progress events."""
+    """Wait for every worker's report, passing on start and progress events (``signals``:
+    those passed on to the workers so far)."""
     reports: dict[int, dict[str, Any]] = {}
     started: set[int] = set()
     progress: dict[int, tuple[int, int]] = {}
@@ -244,7 +250,7 @@ def _collect(
         try:
             worker, kind, value = events.get(timeout=0.2)
         except queue.Empty:
-            _check_alive(procs, reports, deadline)
+            _check_alive(procs, reports, deadline, signals)
             continue
         if kind == "error":
             raise (BrokerError if value[0] == "broker" else OdocanError)(value[1])
@@ -261,9 +267,16 @@ def _collect(
     return [reports[w] for w in range(len(runs))]
 
 
-def _check_alive(procs: list[Any], reports: dict[int, Any], deadline: float) -> None:
-    """``OdocanError`` when a worker ended without its report, or the reports are overdue."""
+def _check_alive(
+    procs: list[Any], reports: dict[int, Any], deadline: float, signals: list[int]
+) -> None:
+    """``OdocanError`` when a worker ended without its report, or the reports are overdue; the
+    interruption itself (``KeyboardInterrupt``, ``Terminated`` for SIGTERM) when the worker
+    was stopped by the signal passed on from this process before it could report (a Ctrl-C
+    or SIGTERM while the workers start: no fleet ran, and that is not a worker's fault)."""
     dead = [w for w, p in enumerate(procs) if w not in reports and not p.is_alive()]
+    if dead and signals and procs[dead[0]].exitcode in (-signal.SIGTERM, -signal.SIGINT):
+        raise Terminated if signals[0] == signal.SIGTERM else KeyboardInterrupt
     if dead:
         raise OdocanError(f"fleet worker {dead[0]} ended without a report "
                           f"(exit code {procs[dead[0]].exitcode})")

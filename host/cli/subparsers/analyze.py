@@ -133,6 +133,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
     from odocan.host.cli.inputs import explained, require_frames
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import analyze
+    from odocan.host.outputs import check_distinct
     from odocan.host.report.ci import analysis_checks, write_checks
     from odocan.host.report.progress import wall_clock_progress
     from odocan.host.report.summary import finish
@@ -142,6 +143,8 @@ def _analyze_single(args: argparse.Namespace) -> int:
     check_output_paths(args)
     check_export_paths(args.parquet, args.mcap)
     check_junit_path(args)
+    check_distinct([("--report", args.report), ("--plot", args.plot), ("--junit", args.junit),
+                    ("--mcap", args.mcap)], [("LOG", args.log), ("--dbc", args.dbc)])
     db = load_dbc(args.dbc) if args.dbc is not None else None
     with wall_clock_progress(f"analysing {args.log}", None):
         analysis = _streamed(args, profile, db) if _streams(args) else None
@@ -157,8 +160,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
                     analysis = analyze(whole, profile, args.integrator,
                                        tolerance=args.tolerance)
     assert analysis is not None
-    if frames is not None:
-        write_exports(args, frames, analysis, db)
+    whole_log = frames  # --parquet/--mcap read the whole log: written after the summary
     if args.bitrate is not None:
         from odocan.host.judge import busstats
 
@@ -178,6 +180,8 @@ def _analyze_single(args: argparse.Namespace) -> int:
     if hint is not None:
         print(f"  - {hint}")
     write_checks(args, "analyze", analysis_checks(analysis.report))
+    if whole_log is not None:
+        write_exports(args, whole_log, analysis, db)
     return code
 
 
@@ -365,14 +369,20 @@ def log_inputs(
 
 def load_dbc(path: Path) -> cantools.database.can.Database:
     """Load a DBC strictly; any problem is a one-line ``ConfigurationError``."""
+    import stat
+
     import cantools
 
     try:
-        db = cantools.database.load_file(path, database_format="dbc", strict=True)
+        regular = stat.S_ISREG(path.stat().st_mode)
+        if regular:  # else cantools would read /dev/zero until memory ends
+            db = cantools.database.load_file(path, database_format="dbc", strict=True)
     except OSError as exc:
         raise ConfigurationError(f"cannot read DBC {path}: {exc.strerror or exc}") from None
     except Exception as exc:  # cantools raises ParseError, UnsupportedDatabaseFormatError, ...
         raise ConfigurationError(f"malformed DBC {path}: {_first_line(exc)}") from None
+    if not regular:
+        raise ConfigurationError(f"cannot read DBC {path}: not a regular file")
     if not isinstance(db, cantools.database.can.Database):
         raise ConfigurationError(f"{path} is not a CAN database")
     return db

@@ -22,6 +22,7 @@ import os
 import tempfile
 from pathlib import Path
 
+from odocan.host.outputs import check_distinct
 from odocan.host.protocol.secoc import load_secoc_key
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 from odocan.sim.provision import robot_key
@@ -55,6 +56,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 
 def _do_key_derive(args: argparse.Namespace) -> int:
     name = robot_name(args.robot)
+    check_distinct([("--out", Path(args.out))], [("--fleet-key", Path(args.fleet_key))])
     key = robot_key(load_secoc_key(args.fleet_key), name)
     data = key if args.format == "raw" else (key.hex() + "\n").encode("ascii")
     write_key_file(Path(args.out), data, force=args.force)

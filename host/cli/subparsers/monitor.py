@@ -53,7 +53,7 @@ from odocan.host.mqtt.options import add_broker_credentials, monitor_broker_url
 from odocan.host.report.live import render_fleet, with_staleness
 from odocan.host.report.trace import FrameFilter, Trace
 from odocan.host.report.tui import View
-from odocan.host.report.tui_app import FrameLog, MonitorApp, run_screen
+from odocan.host.report.tui_app import FrameLog, MonitorApp, RecordingError, run_screen
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 
@@ -144,6 +144,22 @@ def _do_monitor(args: argparse.Namespace) -> int:
     view = View(_source(args), interface=args.interface, log_path=args.log,
                 started_s=time.monotonic())
     live = _foxglove(args, profile, model)
+    failure = _watch_bus(args, model, trace, view, recorder, live)
+    if args.json:
+        print(to_json(model.snapshot()))
+    if failure is not None:
+        raise failure
+    return 0
+
+
+def _watch_bus(
+    args: argparse.Namespace, model: BusMonitor, trace: Trace, view: View,
+    recorder: FrameLog | None, live: FoxgloveLive | None,
+) -> RecordingError | None:
+    """Watch the bus until the deadline, ``q``, Ctrl-C or SIGTERM (even one that comes before
+    the receive loop runs); the recording's error, returned so that what was heard is still
+    shown (``--json``) before the command ends with it."""
+    failure: RecordingError | None = None
     try:
         bus = open_bus(args)
         try:
@@ -155,14 +171,17 @@ def _do_monitor(args: argparse.Namespace) -> int:
                 run_screen(app, _deadline(args.duration))
         finally:
             bus.shutdown()
+    except KeyboardInterrupt:  # before the loop took it: quit the same way
+        pass
     finally:
         if recorder is not None:
-            recorder.close()
+            try:
+                recorder.close()
+            except RecordingError as exc:
+                failure = exc
         if live is not None:
             live.close()
-    if args.json:
-        print(to_json(model.snapshot()))
-    return 0
+    return failure
 
 
 def _foxglove(

@@ -38,6 +38,7 @@ from odocan.host.judge.replay import (
     logged_integrator,
     replay_and_analyze,
 )
+from odocan.host.outputs import check_distinct
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.report.ci import (
     add_junit_argument,
@@ -99,6 +100,8 @@ def _do_replay(args: argparse.Namespace) -> int:
     check_output_paths(args)
     check_junit_path(args)
     check_log_path(args.log_out)
+    check_distinct([("--log", args.log_out), ("--report", args.report), ("--plot", args.plot),
+                    ("--junit", args.junit)], [("LOG", args.log)])
     frames = read_log(args.log)
     feed = ReplayInput.from_log(frames)
     integrator = args.integrator or logged_integrator(frames, feed.accepted) or "exact"

@@ -41,11 +41,11 @@ from odocan.host.cli.options import (
 )
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus, parse_faults
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
-from odocan.host.io.listeners import Isolated
+from odocan.host.io.listeners import Isolated, Recording
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge import busstats
 from odocan.host.judge.analysis import Analysis, analyze
-from odocan.host.outputs import OutputError, check_writable
+from odocan.host.outputs import OutputError, check_distinct, check_writable
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
     add_junit_argument,
@@ -173,6 +173,9 @@ def _do_run(args: argparse.Namespace) -> int:
     check_latency_plot(args.latency_plot, config.bitrate)
     check_export_paths(args.parquet, args.mcap)
     check_junit_path(args)
+    check_distinct([("--log", args.log), ("--report", args.report), ("--plot", args.plot),
+                    ("--junit", args.junit), ("--mcap", args.mcap),
+                    ("--latency-plot", args.latency_plot)])
     board_maker(config.firmware, secoc=config.secoc_key is not None)  # refusals before any file
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
     if config.firmware != "python":
@@ -213,8 +216,8 @@ def _run_and_analyze(
     config: RigConfig, args: argparse.Namespace, extra: list[can.Listener]
 ) -> tuple[Analysis, OutputError | None]:
     """Run the rig with its listeners (and ``extra``; the wall time measured around the run
-    only) and analyse what the host heard. A log that could not be finished is returned, not
-    raised, so that the summary is still printed."""
+    only) and analyse what the host heard. A log or an export that could not be finished is
+    returned, not raised, so that the summary is still printed."""
     collector = FrameCollector()
     listeners: list[can.Listener] = [collector, *extra]
     wants_mirror = args.interface is not None or args.channel is not None
@@ -260,7 +263,10 @@ def _run_and_analyze(
     if wire is not None:
         bus = busstats.from_wire(wire, database(), still_queued=still_queued)
         analysis.report["bus"] = bus.as_dict()
-    write_exports(args, frames, analysis)
+    try:
+        write_exports(args, frames, analysis)
+    except OutputError as exc:  # as a log: raised once the summary is out
+        log_error = log_error or exc
     return analysis, log_error
 
 
@@ -289,9 +295,11 @@ def _run(
 
 
 def _open_log(path: Path) -> can.Listener:
-    """python-can's writer for ``path`` (by extension); an error names the path."""
+    """python-can's writer for ``path`` (by extension); an error names the path. A write that
+    fails mid-run (a full disk) stops the recording, not the run: the summary is printed, then
+    the error with the path (``rig.close()`` raises it, ``_run_and_analyze`` returns it)."""
     try:
-        return can.Logger(path)
+        return Recording(can.Logger(path))
     except OSError as exc:
         raise OutputError(f"--log {path}: {exc.strerror or exc}") from None
 
