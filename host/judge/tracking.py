@@ -124,10 +124,14 @@ class PoseTracker:
         self._now_s = t_s
         if self._boot is not None and t_s > self._boot[1]:
             self._finish_boot(self._boot[0])
-        if not self._unsettled:
+        unsettled = self._unsettled
+        if not unsettled:
             return
-        for name, half in sorted(self._unsettled.items(), key=lambda item: item[1].pos):
-            if t_s - half.t_s >= QUEUED_GAP_S:
+        due = [(half.pos, name) for name, half in unsettled.items()
+               if t_s - half.t_s >= QUEUED_GAP_S]
+        if due:  # in the order heard
+            due.sort()
+            for _, name in due:
                 self._settle(name)
 
     def on_encoders(self, counter: int, left: int, right: int, t_s: float) -> None:
@@ -172,6 +176,11 @@ class PoseTracker:
         """ODOM_POSE_Y (Y in m, TURNS; its E2E COUNTER, bus time s): with the ODOM_POSE_X of
         the same encoder frame, one on-board sample once settled (``take_samples``)."""
         self._on_half("y", Half(0, enc_counter, counter, t_s, y_m, turns))
+
+    @property
+    def has_samples(self) -> bool:
+        """Samples settled since the last ``take_samples`` wait (a cheap check per frame)."""
+        return bool(self._settled)
 
     def take_samples(self) -> list[Sample]:
         """The on-board samples settled since the last call, in the order settled."""
@@ -234,6 +243,8 @@ class PoseTracker:
         last, self._last_sample_t = self._last_sample_t, y.t_s
         if last is None or queued:
             return False
+        if y.t_s - last < (SILENCE_CYCLES - 0.5) * CYCLE_S:
+            return False  # the common case, decided without numpy: ``talked`` >= ``last``
         ys = self._halves["y"].col("t_s")[: int(np.searchsorted(self._halves["y"].col("t_s"),
                                                                  y.t_s, side="left"))]
         talked = max(last, float(ys[-1])) if len(ys) else last

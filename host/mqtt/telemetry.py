@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import can
-from cantools.database.can import Database
+from cantools.database.can import Database, Message
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
@@ -61,6 +61,39 @@ class PendingAck:
     cmd_id: Any
     command: str
     final: bool  # the APPLY / GO frame: its ACK completes the command
+
+
+@dataclass(frozen=True, slots=True)
+class _Route:
+    """What ``RobotTelemetry`` does with an 11-bit frame of one message of the DBC: its name, its
+    handler (None: counted only, never decoded), its compiled decoder; for ODOM_STATUS the
+    PAGE signal's place (``status_page``: shift, mask, SUMMARY's value) to pass only its
+    summaries to the reboot watch (``host.judge.sources.boot_summary`` reads nothing else)."""
+
+    message: Message
+    name: str
+    handler: Any
+    decode: Any
+    status_page: tuple[int, int, int] | None
+
+    @classmethod
+    def of(cls, message: Message, handler: Any) -> _Route:
+        page = None
+        if message.name == "ODOM_STATUS":
+            signal = message.get_signal_by_name("PAGE")
+            summary = next((v for v, n in (signal.choices or {}).items() if str(n) == "SUMMARY"),
+                           None)
+            if signal.byte_order == "little_endian" and summary is not None:
+                page = (signal.start, (1 << signal.length) - 1, int(summary))
+            else:  # another layout: every frame goes to the reboot watch
+                page = (0, 0, 0)
+        return cls(message, message.name, handler, LiveDecoder(message).decode, page)
+
+    def is_summary(self, data: bytes) -> bool:
+        """Whether an ODOM_STATUS payload may be a SUMMARY page (its raw PAGE says so)."""
+        assert self.status_page is not None
+        shift, mask, summary = self.status_page
+        return (int.from_bytes(data, "little") >> shift) & mask == summary
 
 
 @dataclass
@@ -90,7 +123,8 @@ class RobotTelemetry:
         self.name = name
         self.db = db if db is not None else database()
         self._by_id = {m.frame_id: m for m in self.db.messages}
-        self._decoders = {m.frame_id: LiveDecoder(m) for m in self.db.messages}
+        self._routes = {m.frame_id: _Route.of(m, self._handlers.get(m.name))
+                        for m in self.db.messages if not m.is_extended_frame}
         self.e2e = E2EMonitor(self.db)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
@@ -106,6 +140,11 @@ class RobotTelemetry:
         self.status_seq = 0
         self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
         self._status_ids = e2e_messages(self.db).get(self._status_id)
+        status = self._by_id[self._status_id]  # per signal: its key in ``firmware``, its enum
+        self._status_signals = {sig.name: (sig.name.lower(), sig.choices)
+                                for sig in status.signals}
+        self._page_names = {int(v): str(n).lower()
+                            for v, n in (status.get_signal_by_name("PAGE").choices or {}).items()}
         self.sources = SourceWatch()  # reboots, as the monitor tells them (host.judge.sources)
         self.reboots = 0
 
@@ -128,31 +167,38 @@ class RobotTelemetry:
         return self.feed(frame)
 
     def _feed(self, t_s: float, can_id: int, data: bytes, extended: bool) -> list[Publication]:
-        """One data frame given by its fields (bus timestamp ``t_s`` s, identifier, payload)."""
-        message = self._by_id.get(can_id)
-        if message is not None and can_id == self._status_id and not extended:
-            self._watch_source(message, data, t_s)  # before E2E: a reboot fails it
+        """One data frame given by its fields (bus timestamp ``t_s`` s, identifier, payload).
+
+        Runs per frame of every robot (the fleet's hot path): one lookup of the frame's route
+        (message, handler, decoder), the sample check only when the tracker settled one."""
+        route = None if extended else self._routes.get(can_id)
+        if route is not None and route.status_page is not None \
+                and route.is_summary(data):  # before E2E: a reboot fails it
+            self._watch_source(route.message, data, t_s)
         status = self.e2e.check(can_id, data, extended=extended,
                                 timestamp_s=t_s)  # the window widens with time
-        self.tracker.advance(t_s)  # settles the pose halves heard half a cycle before
-        if message is None or status not in ACCEPTED_E2E:
+        tracker = self.tracker
+        tracker.advance(t_s)  # settles the pose halves heard half a cycle before
+        if route is None or status not in ACCEPTED_E2E:
+            message = self._by_id.get(can_id)
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
-            return self._samples()
-        handler = self._handlers.get(message.name)
-        signals: Any = None
-        if handler is not None:
-            try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
-                signals = self._decoders[can_id].decode(data)  # cantools' decode, compiled
-            except DecodeError:
-                self.rejected[message.name] += 1
-                return self._samples()
-        self.frames[message.name] += 1
-        self._window.counts[message.name] += 1
+            return self._samples() if tracker.has_samples else []
+        name, handler = route.name, route.handler
         if handler is None:
-            return self._samples()
-        assert isinstance(signals, dict)
+            self.frames[name] += 1
+            self._window.counts[name] += 1
+            return self._samples() if tracker.has_samples else []
+        try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
+            signals = route.decode(data)  # cantools' decode, compiled
+        except DecodeError:
+            self.rejected[name] += 1
+            return self._samples() if tracker.has_samples else []
+        self.frames[name] += 1
+        self._window.counts[name] += 1
         publications: list[Publication] = handler(self, signals, t_s)
-        return publications + self._samples()
+        if tracker.has_samples:
+            return publications + self._samples() if publications else self._samples()
+        return publications
 
     def _watch_source(self, message: Any, data: bytes, t_s: float) -> None:
         """A reboot (UPTIME going back, INIT after running) starts the firmware's new life at
@@ -241,10 +287,10 @@ class RobotTelemetry:
 
     def _on_status(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         page = int(s["PAGE"])
-        message = self._by_id[self._status_id]
-        fields = {k.lower(): _named(message, k, v) for k, v in s.items()
+        signals = self._status_signals
+        fields = {signals[k][0]: _named_value(signals[k][1], v) for k, v in s.items()
                   if k not in ("CHECKSUM", "COUNTER", "PAGE")}
-        name = _page_name(self.db, page)
+        name = self._page_names.get(page) or _page_name(self.db, page)
         self.firmware[name] = fields
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
             self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]))
@@ -317,9 +363,9 @@ def _pose_dict(pose: FramePose) -> dict[str, float]:
     return fields
 
 
-def _named(message: Any, signal: str, value: Any) -> Any:
-    """An enum signal's value by its DBC name (``"OK"``, not 1); other values as they are."""
-    choices = message.get_signal_by_name(signal).choices
+def _named_value(choices: Any, value: Any) -> Any:
+    """An enum signal's value by its DBC name (``"OK"``, not 1; ``choices``: the signal's);
+    other values as they are."""
     if choices and int(value) in choices:
         return str(choices[int(value)])
     return value
