@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import can
 import cantools
 import pytest
@@ -116,10 +118,39 @@ def test_telemetry_of_a_lockstep_run_matches_the_reference() -> None:
     assert len(errors) == 25  # 5 Hz for 5 s
     assert max(e["pose_vs_reference"]["dpos_m"] for e in errors) < 2e-4  # 0.1 mm LSB on the bus
     assert "reference_vs_truth" in errors[-1]
-    assert sum(1 for leaf, _ in out if leaf == "truth") == 50  # SIM_TRUTH every 100 ms
+    truths = [p for leaf, p in out if leaf == "truth"]
+    assert len(truths) == 25  # SIM_TRUTH every 100 ms, published with the pose at 5 Hz
+    poses = {p["t_s"] for leaf, p in out if leaf == "pose"}
+    assert all(p["unix_s"] and p["t_s"] <= max(poses) for p in truths)
+    leaves = [leaf for leaf, _ in out]
+    assert leaves[:4] == ["truth", "pose", "reference", "error"]  # before the first pose: alone
+    assert leaves[4:] == ["pose", "reference", "error", "truth"] * 24  # then with the pose
     assert telemetry.rejected == {}
     hz = telemetry.rates(5.0)[1]["hz"]
     assert hz["WHEEL_ENCODERS"] == pytest.approx(100.0)  # 500 frames over the 5 s "window"
+
+
+def test_without_poses_the_truth_goes_alone_at_the_publish_rate() -> None:
+    """The truth rides with the pose; while no pose is published (the firmware silent, its pose
+    frames lost) it still goes out, alone, at most ``publish_hz`` times a second."""
+    telemetry = RobotTelemetry("r", GEOMETRY, "exact", counter_bits=PMIR.counter_bits,
+                               publish_hz=5)
+    pose_ids = {telemetry.db.get_message_by_name(n).frame_id for n in ("ODOM_POSE_X",
+                                                                         "ODOM_POSE_Y")}
+    out = []
+
+    class Feed(can.Listener):
+        def on_message_received(self, msg: can.Message) -> None:
+            if msg.arbitration_id not in pose_ids:
+                out.extend(telemetry.feed(msg))
+
+    with LockstepRig(RigConfig(robot=PMIR, seed=5, channel="test-mqtt-truth-alone"),
+                     [Feed()]) as rig:
+        rig.run(5.0)
+    assert {leaf for leaf, _ in out} == {"truth"}
+    stamps = [p["t_s"] for _, p in out]
+    assert len(stamps) == 25  # SIM_TRUTH every 100 ms, published every 200 ms
+    assert min(b - a for a, b in itertools.pairwise(stamps)) == pytest.approx(0.2)
 
 
 def test_telemetry_takes_the_fleets_frame_tuples_as_it_takes_messages() -> None:

@@ -16,7 +16,10 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
   with the reference of that very encoder frame: ``pose``, ``reference`` and ``error`` at most
   ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic);
 * ``SIM_TRUTH``'s three parts of one encoder frame make ``truth``, compared with the reference of
-  that frame (``error.reference_vs_truth``, the latest: what odometry itself cannot know);
+  that frame (``error.reference_vs_truth``, the latest: what odometry itself cannot know); the
+  latest ``truth`` goes out with the next ``pose`` (so a robot's telemetry of a period leaves in
+  one socket write), or alone at most ``publish_hz`` times a second while no pose was published
+  for two periods;
 * ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result`` (enums by
   their DBC names: ``"state": "OK"``).
 
@@ -135,6 +138,8 @@ class RobotTelemetry:
         self._twist: dict[str, float] = {}
         self._last_pub_t = -math.inf
         self._truth_error: dict[str, Any] | None = None
+        self._truth: dict[str, Any] | None = None  # the latest truth not published yet
+        self._truth_pub_t = -math.inf  # bus time of the last truth published (s)
         self.firmware: dict[str, Any] = {}
         self.pending: dict[tuple[int, int], PendingAck] = {}
         self.status_seq = 0
@@ -264,13 +269,13 @@ class RobotTelemetry:
         head = {"t_s": t_s, "counter": counter, "enc_counter": enc, "enc_seq": pose.seq}
         pubs: list[Publication] = [("pose", stamp({**head, **_pose_dict(pose), **self._twist}))]
         if ref is None or ref.seq != pose.seq:
-            return pubs
+            return self._with_truth(pubs, t_s)
         pubs.append(("reference", stamp({**head, **_pose_dict(ref)})))
         error: dict[str, Any] = {**head, "pose_vs_reference": difference(pose, ref)}
         if self._truth_error is not None:
             error["reference_vs_truth"] = self._truth_error
         pubs.append(("error", stamp(error)))
-        return pubs
+        return self._with_truth(pubs, t_s)
 
     def _on_truth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         enc, part = int(s["ENC_COUNTER"]), int(s["PART"])
@@ -281,9 +286,24 @@ class RobotTelemetry:
         truth, ref = sample
         if ref is not None:  # the truth was sampled at that very encoder frame
             self._truth_error = {"enc_seq": ref.seq, **difference(ref, truth)}
-        payload = {"t_s": t_s, "counter": int(s["COUNTER"]), "enc_counter": enc,
-                   "enc_seq": truth.seq, **_pose_dict(truth)}
-        return [("truth", stamp(payload))]
+        self._truth = {"t_s": t_s, "counter": int(s["COUNTER"]), "enc_counter": enc,
+                       "enc_seq": truth.seq, **_pose_dict(truth)}
+        if t_s < self._truth_pub_t:  # the bus clock went back (a restart, a replay): follow it
+            self._truth_pub_t = -math.inf
+        period_s = self.publish_period_s
+        if t_s - self._last_pub_t < 2 * period_s or t_s - self._truth_pub_t < period_s - 1e-6:
+            return []  # it goes with the next pose (``_with_truth``)
+        return self._with_truth([], t_s)  # no pose published lately: the truth goes alone
+
+    def _with_truth(self, pubs: list[Publication], t_s: float) -> list[Publication]:
+        """``pubs`` and the latest ``truth`` not published yet, if any (bus time ``t_s``): the
+        truth rides with the pose's publications, so a robot's telemetry of one publication
+        period leaves in one socket write, at most ``publish_hz`` times a second."""
+        truth, self._truth = self._truth, None
+        if truth is not None:
+            pubs.append(("truth", stamp(truth)))
+            self._truth_pub_t = t_s
+        return pubs
 
     def _on_status(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         page = int(s["PAGE"])
