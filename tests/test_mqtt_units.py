@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
+from typing import Any
 
 import can
 import cantools
@@ -242,3 +244,41 @@ def test_a_telemetry_sender_cancelled_as_its_write_completes_stops() -> None:
         return False
 
     assert asyncio.run(scenario())
+
+
+def test_the_periodic_publications_of_a_fleet_are_spread_over_the_period() -> None:
+    """``status`` and ``rates`` of 20 robots: every robot's once a period, the robots in groups
+    whose turns fall in different loop turns over the period (no burst of the whole fleet)."""
+    import asyncio
+    import time
+
+    from odocan.host.mqtt.bridge import PERIODIC_SLOTS, Bridge, BridgeConfig, RobotEndpoint
+
+    period_s = 0.5
+    with can.Bus(interface="virtual", channel="test-mqtt-periodic") as bus:
+        bridge = Bridge([RobotEndpoint(f"robot{i:03d}", bus, GEOMETRY) for i in range(20)],
+                        config=BridgeConfig(broker=BrokerURL.parse("mqtt://127.0.0.1"),
+                                            status_period_s=period_s, rates_period_s=period_s))
+        sent: list[tuple[float, str, str]] = []
+
+        def recorder(name: str) -> Callable[[str, dict[str, Any]], None]:
+            return lambda leaf, _payload: sent.append((time.monotonic(), name, leaf))
+
+        for robot in bridge.robots:
+            robot.link.publish = recorder(robot.link.robot)  # type: ignore[method-assign,assignment]
+
+        async def scenario() -> None:
+            task = asyncio.create_task(bridge._periodic())
+            await asyncio.sleep(period_s * 1.05)
+            task.cancel()
+
+        asyncio.run(scenario())
+    initial, later = sent[:20], sent[20:]
+    assert {leaf for _, _, leaf in initial} == {"status"}  # online at once
+    names = sorted(name for _, name, _ in initial)
+    for leaf in ("status", "rates"):
+        assert sorted(name for _, name, lf in later if lf == leaf) == names
+    gaps_s = [b[0] - a[0] for a, b in itertools.pairwise(later)]
+    turns = 1 + sum(gap > period_s / PERIODIC_SLOTS / 2 for gap in gaps_s)
+    assert PERIODIC_SLOTS == 10
+    assert turns >= 5  # spread over 10 turns (a loaded machine may merge a few)

@@ -12,9 +12,10 @@ A full queue drops the batch and counts it (``frames_dropped``): the bus never w
 The task ``can-frames`` feeds each robot's ``RobotTelemetry`` and queues its publications on the
 robot's ``RobotLink``, ``slice_frames`` frames at a time with a loop turn between slices (so a
 large fleet's tick never holds the loop for long); ``periodic`` publishes ``status`` and
-``rates``; each link runs its own connection. Commands are validated by the robot's
-``CommandEncoder`` and only then sent on the robot's bus; each one is answered on
-``cmd/result`` (accepted, rejected with the reason, expired). No frame and no command can stop
+``rates``, the robots' turns spread over the period (``PERIODIC_SLOTS`` groups); each link
+runs its own connection. Commands are validated by the robot's ``CommandEncoder`` and only then
+sent on the robot's bus; each one is answered on ``cmd/result`` (accepted, rejected with the
+reason, expired). No frame and no command can stop
 the bridge: a handler that raises anyway is counted (``frames_failed``, ``commands_failed``) and
 logged once. ``rates`` carries each link's counters
 (``link``: telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects).
@@ -76,6 +77,9 @@ class BridgeConfig:
     command_expiry_s: float = 5.0  # a command without its own MQTT v5 expiry, at most this old
     telemetry_buffer: int = 1000  # QoS-0 publications per robot waiting for the socket
     reliable_buffer: int = 1000  # QoS-1 publications per robot waiting for their PUBACK
+
+
+PERIODIC_SLOTS = 10  # ``status``/``rates`` turns per period (``Bridge._periodic``)
 
 
 class _Robot:
@@ -288,23 +292,33 @@ class Bridge:
                 robot.link.publish(leaf, payload)
 
     async def _periodic(self) -> None:
+        """``status`` (at once, then every ``status_period_s``) and ``rates`` (every
+        ``rates_period_s``) of every robot, the robots in ``PERIODIC_SLOTS`` groups whose turns
+        are spread over the period: a large fleet's periodic publications (~30 us of CPU a
+        robot, plus the QoS-1 status's round trip) never come as one burst in one loop turn,
+        which would hold back the fleet's next tick."""
         cfg = self.config
-        tick = min(cfg.status_period_s, cfg.rates_period_s)
-        next_status = next_rates = time.monotonic()
         for robot in self.robots:  # online as soon as the link connects (retained)
             robot.link.publish(*robot.telemetry.status())
+        slots = max(1, min(PERIODIC_SLOTS, len(self.robots)))
+        groups = [self.robots[slot::slots] for slot in range(slots)]
+        start = time.monotonic()
+        due_rates = [start + cfg.rates_period_s * (slot + 1) / slots for slot in range(slots)]
+        due_status = [start + cfg.status_period_s * (slot + 1) / slots for slot in range(slots)]
+        turn_s = min(cfg.status_period_s, cfg.rates_period_s) / slots
         while True:
-            await asyncio.sleep(tick)
+            await asyncio.sleep(turn_s)
             now = time.monotonic()
-            if now >= next_rates + cfg.rates_period_s - 1e-3:
-                next_rates = now
-                for robot in self.robots:
-                    leaf, payload = robot.telemetry.rates(now)
-                    robot.link.publish(leaf, {**payload, "link": robot.link.counters()})
-            if now >= next_status + cfg.status_period_s - 1e-3:
-                next_status = now
-                for robot in self.robots:
-                    robot.link.publish(*robot.telemetry.status())
+            for slot, group in enumerate(groups):
+                if now >= due_rates[slot] - 1e-3:
+                    due_rates[slot] = max(due_rates[slot] + cfg.rates_period_s, now)
+                    for robot in group:
+                        leaf, payload = robot.telemetry.rates(now)
+                        robot.link.publish(leaf, {**payload, "link": robot.link.counters()})
+                if now >= due_status[slot] - 1e-3:
+                    due_status[slot] = max(due_status[slot] + cfg.status_period_s, now)
+                    for robot in group:
+                        robot.link.publish(*robot.telemetry.status())
 
 
 class BusReader:
