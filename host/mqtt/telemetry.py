@@ -99,6 +99,21 @@ class _Route:
         return (int.from_bytes(data, "little") >> shift) & mask == summary
 
 
+_ROUTES: dict[int, tuple[Database, dict[int, _Route]]] = {}  # by id(db), with db kept alive
+
+
+def _routes(db: Database) -> dict[int, _Route]:
+    """The routes of ``db``'s 11-bit messages by identifier, built once per database and shared
+    by every robot (read only: a fleet's robots share one compiled decoder per message, not
+    one each, which keeps a worker's working set small)."""
+    entry = _ROUTES.get(id(db))
+    if entry is None or entry[0] is not db:
+        routes = {m.frame_id: _Route.of(m, RobotTelemetry._handlers.get(m.name))
+                  for m in db.messages if not m.is_extended_frame}
+        entry = _ROUTES[id(db)] = (db, routes)
+    return entry[1]
+
+
 @dataclass
 class _Window:
     """Frame counts since the last ``rates`` publication."""
@@ -126,8 +141,7 @@ class RobotTelemetry:
         self.name = name
         self.db = db if db is not None else database()
         self._by_id = {m.frame_id: m for m in self.db.messages}
-        self._routes = {m.frame_id: _Route.of(m, self._handlers.get(m.name))
-                        for m in self.db.messages if not m.is_extended_frame}
+        self._routes = _routes(self.db)
         self.e2e = E2EMonitor(self.db)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
