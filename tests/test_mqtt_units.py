@@ -282,3 +282,32 @@ def test_the_periodic_publications_of_a_fleet_are_spread_over_the_period() -> No
     turns = 1 + sum(gap > period_s / PERIODIC_SLOTS / 2 for gap in gaps_s)
     assert PERIODIC_SLOTS == 10
     assert turns >= 5  # spread over 10 turns (a loaded machine may merge a few)
+
+
+def test_a_fleets_publications_are_spread_over_the_ticks_of_a_period() -> None:
+    """With ``fleetrun.publish_phase_s`` the robots of a fleet publish their poses on different
+    ticks of the 100 ms period (without: every even robot on one tick, every odd on the next),
+    each still at 10 Hz; the phase only delays the first publication."""
+    from odocan.host.mqtt.fleetrun import publish_phase_s
+
+    def pose_ticks(phased: bool) -> dict[int, list[int]]:
+        ticks: dict[int, list[int]] = {}
+        with Fleet(FleetConfig(robots=10, robot=PMIR, seed=4)) as fleet:
+            telemetry = [RobotTelemetry(name, GEOMETRY, "exact", counter_bits=PMIR.counter_bits,
+                                        publish_phase_s=publish_phase_s(i, 10.0) if phased
+                                        else 0.0)
+                         for i, name in enumerate(fleet.names)]
+            for k in range(300):
+                fleet.step(k)
+                for i, frame in fleet.take_batch():
+                    if any(leaf == "pose" for leaf, _ in telemetry[i].feed_frame(frame)):
+                        ticks.setdefault(i, []).append(k)
+        return ticks
+
+    plain, phased = pose_ticks(False), pose_ticks(True)
+    assert len({k % 10 for ks in plain.values() for k in ks}) == 2
+    assert len({k % 10 for ks in phased.values() for k in ks}) == 10
+    for i, ks in phased.items():
+        assert all(b - a == 10 for a, b in itertools.pairwise(ks))  # 10 Hz
+        assert ks[0] - plain[i][0] == 2 * (i // 2 % 5)  # delayed by its phase only
+        assert len(ks) >= len(plain[i]) - 1

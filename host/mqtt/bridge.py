@@ -59,6 +59,7 @@ class RobotEndpoint:
     counter_bits: int = 32  # the robot's hardware encoder counters (16 or 32)
     # SecOC (docs/secoc.md): an ODOM_AUTH after each secured frame; None: commands unsigned
     signer: SecocSigner | None = field(default=None, repr=False)
+    publish_phase_s: float = 0.0  # its first pose published this long after the first sample
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,7 @@ class _Robot:
         self.telemetry = RobotTelemetry(
             endpoint.name, endpoint.geometry, endpoint.integrator,
             counter_bits=endpoint.counter_bits, publish_hz=config.publish_hz,
+            publish_phase_s=endpoint.publish_phase_s,
             now_s=time.monotonic(),
         )
         self.encoder = CommandEncoder(self.telemetry.db)

@@ -61,6 +61,7 @@ from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
 from odocan.host.mqtt.options import broker_for
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.sim.board import TICK_S
+from odocan.sim.contract import cycle_ticks
 from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
 from odocan.sim.provision import robot_key
 from odocan.sim.realtime import DeadlineStats
@@ -195,8 +196,21 @@ def _endpoints(fleet: Fleet, run: FleetRun) -> list[RobotEndpoint]:
     p = run.fleet.robot
     geometry = Geometry.of(p)
     return [RobotEndpoint(name, fleet.host_bus(i), geometry, run.fleet.integrator, p.counter_bits,
-                          signer=_signer(run, name))
+                          signer=_signer(run, name),
+                          publish_phase_s=publish_phase_s(run.fleet.first + i, run.publish_hz))
             for i, name in enumerate(fleet.names)]
+
+
+def publish_phase_s(index: int, publish_hz: float) -> float:
+    """When robot ``index`` (fleet-wide) publishes its first pose after its first sample (s of
+    bus time): pairs of robots take turns over the publication period, a pose cycle apart, so a
+    worker's telemetry (and its socket writes) is spread over the ticks of a period instead of
+    every robot's landing on the same one (odd robots already run a tick out of phase)."""
+    if publish_hz <= 0:
+        return 0.0
+    cycle_s = cycle_ticks("ODOM_POSE_Y", TICK_S) * TICK_S
+    turns = max(1, int(1.0 / publish_hz / cycle_s + 1e-9))
+    return (index // 2) % turns * cycle_s
 
 
 def _signer(run: FleetRun, name: str) -> SecocSigner | None:

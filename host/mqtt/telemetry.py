@@ -14,7 +14,9 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
   wrapping counts); the reference pose after each frame is kept by the frame's E2E ``COUNTER``;
 * ``ODOM_POSE_X`` + ``ODOM_POSE_Y`` with the same ``ENC_COUNTER`` make the on-board pose, compared
   with the reference of that very encoder frame: ``pose``, ``reference`` and ``error`` at most
-  ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic);
+  ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic),
+  the first ``publish_phase_s`` of bus time after the first sample (a fleet spreads its robots'
+  publications over the ticks of a period);
 * ``SIM_TRUTH``'s three parts of one encoder frame make ``truth``, compared with the reference of
   that frame (``error.reference_vs_truth``, the latest: what odometry itself cannot know); the
   latest ``truth`` goes out with the next ``pose`` (so a robot's telemetry of a period leaves in
@@ -133,6 +135,7 @@ class RobotTelemetry:
         *,
         counter_bits: int = 32,
         publish_hz: float = 10.0,
+        publish_phase_s: float = 0.0,
         db: Database | None = None,
         now_s: float = 0.0,
     ) -> None:
@@ -145,6 +148,7 @@ class RobotTelemetry:
         self.e2e = E2EMonitor(self.db)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
+        self._publish_phase_s = publish_phase_s  # the first pose waits this long (bus time)
         self.frames: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self._unknown_ids: set[str] = set()
@@ -271,6 +275,8 @@ class RobotTelemetry:
         t_s = sample.t_s
         if t_s < self._last_pub_t:  # the bus clock went back (a restart, a replay): follow it
             self._last_pub_t = -math.inf
+        if self._last_pub_t == -math.inf and self._publish_phase_s > 0:  # the first sample
+            self._last_pub_t = t_s + self._publish_phase_s - self.publish_period_s
         if t_s - self._last_pub_t < self.publish_period_s - 1e-6:
             return []
         self._last_pub_t = t_s
