@@ -205,21 +205,21 @@ class RobotTelemetry:
         if route is None or status not in ACCEPTED_E2E:
             message = self._by_id.get(can_id)
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
-            return self._samples() if tracker.has_samples else []
+            return self._samples() if tracker.settled else []
         name, handler = route.name, route.handler
         if handler is None:
             self.frames[name] += 1
             self._window.counts[name] += 1
-            return self._samples() if tracker.has_samples else []
+            return self._samples() if tracker.settled else []
         try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
             signals = route.decode(data)  # cantools' decode, compiled
         except DecodeError:
             self.rejected[name] += 1
-            return self._samples() if tracker.has_samples else []
+            return self._samples() if tracker.settled else []
         self.frames[name] += 1
         self._window.counts[name] += 1
         publications: list[Publication] = handler(self, signals, t_s)
-        if tracker.has_samples:
+        if tracker.settled:
             return publications + self._samples() if publications else self._samples()
         return publications
 
