@@ -24,7 +24,7 @@ with the robot's own accepted encoder frames (``host.judge.tracking.PoseTracker`
 ENC_COUNTER): PASS within ``FleetRun.tolerance`` (the position limit widened by the path run, as
 the reference starts at the rounded pose: ``position_tolerance_m``), FAIL beyond it or with no
 pose at all. When the loop fell a whole period behind (skipped releases), some encoder steps
-spanned several cycles: only the heading is judged then (UNJUDGED unless it fails). The error
+spanned several cycles: the pose is not judged then (UNJUDGED, ``judge_robot``). The error
 against the ground truth (SIM_TRUTH) is reported, never judged: it is the odometry's own drift, not
 the firmware's arithmetic. When the bridge dropped frames (queue full), the references miss encoder
 steps, so no robot is judged (UNJUDGED) and the run fails for that reason instead of blaming a
@@ -293,9 +293,12 @@ def judge_robot(
     """One robot's pose errors and verdict (see the module docstring); ``distance_m``: the path
     the reference has run since it started (widens the position limit, see
     ``position_tolerance_m``); ``releases_skipped``: the worker fell a whole period behind, so
-    some encoder steps spanned several 10 ms cycles: the heading is still judged (exact in both),
-    the position is not (the firmware is specified for 10 ms steps; longer ones were seen to move
-    a correct firmware's position 2-3 LSB off the reference)."""
+    some encoder steps spanned several 10 ms cycles: the pose is not judged (UNJUDGED, which
+    fails the run without blaming the firmware). The position: the firmware is specified for
+    10 ms steps, longer ones were seen to move a correct firmware's position 2-3 LSB off the
+    reference. The heading too: a step over 16 cycles or more (one jump of the loop) wraps the
+    4-bit COUNTER, so the reference's plausibility gate sees one period and refuses a step the
+    firmware took (a correct firmware was seen 0.26-0.57 rad off after a jump of 17-40 ticks)."""
     limit_m = position_tolerance_m(tolerance, distance_m)
     entry: dict[str, Any] = {"pose_vs_reference": _errors(vs_reference),
                              "pose_vs_truth": _errors(vs_truth),
@@ -311,11 +314,12 @@ def judge_robot(
     if vs_reference.max_dheading_rad > tolerance.heading_rad:
         reasons.append(f"heading vs reference {vs_reference.max_dheading_rad * 1e3:.4g} mrad > "
                        f"{tolerance.heading_rad * 1e3:.4g} mrad")
-    if releases_skipped and not reasons:
+    if releases_skipped:
+        seen = f" ({reasons[0]})" if reasons else ""
         return {**entry, "verdict": "UNJUDGED",
                 "reason": f"{releases_skipped} releases skipped (the loop fell behind): encoder "
-                          "steps longer than 10 ms, the position is not judged"}
-    if vs_reference.max_dpos_m > limit_m and not releases_skipped:
+                          f"steps longer than 10 ms, the pose is not judged{seen}"}
+    if vs_reference.max_dpos_m > limit_m:
         reasons.append(f"position vs reference {vs_reference.max_dpos_m * 1e3:.4g} mm > "
                        f"{limit_m * 1e3:.4g} mm")
     return {**entry, "verdict": "FAIL" if reasons else "PASS",
