@@ -3,6 +3,9 @@
 Runs ``n`` robots in this one process (what one ``odocan fleet --workers N`` worker runs) and
 prints, besides the report's miss ratio and CPU per robot-tick (us):
 
+- the CPU per robot-tick by part: the fleet step, the bridge's intake (``Bridge._handle``: E2E,
+  decode, the live judge, the publications queued) and the rest (MQTT writes, the links' tasks,
+  the event loop);
 - the MQTT publications and socket writes per robot-tick (counted over the whole run, the
   connections' start and end included);
 - the lateness distribution of the 10 ms ticks (ms: p50, p90, p99, p99.9, max);
@@ -47,9 +50,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from fleet import start_mosquitto  # bench/fleet.py
 
+import odocan.host.mqtt.bridge as bridge_module
 import odocan.host.mqtt.client as client
 import odocan.host.mqtt.fleetrun as fleetrun
 import odocan.host.mqtt.link as link
+import odocan.sim.fleet as fleet_module
 import odocan.sim.realtime as realtime
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
 from odocan.sim import robot
@@ -69,6 +74,7 @@ class Probe:
         self.senders: list[client.CoalescedSend] = []  # every link's socket writes
         self.publications = 0  # QoS 0 and QoS 1, every link
         self._gc_start_s = 0.0
+        self.part_s: Counter[str] = Counter()  # process time in the fleet step, the intake
 
     def install(self) -> None:
         record = realtime.DeadlineStats.record
@@ -92,6 +98,8 @@ class Probe:
             probe.publications += 1
             publish(robot_link, leaf, payload)
 
+        self._time_part(fleet_module.Fleet, "step", "step")
+        self._time_part(bridge_module.Bridge, "_handle", "intake")
         client.CoalescedSend.__init__ = making  # type: ignore[method-assign]
         link.RobotLink.publish = publishing  # type: ignore[method-assign]
 
@@ -100,6 +108,20 @@ class Probe:
                 probe.slow.append((time.perf_counter(), rec.getMessage()))
 
         logging.getLogger("asyncio").addHandler(SlowCallbacks())
+
+    def _time_part(self, cls: Any, method: str, part: str) -> None:
+        """Add the process time of ``cls.method`` to ``part_s[part]``."""
+        original = getattr(cls, method)
+        part_s = self.part_s
+
+        def timed(*args: Any) -> Any:
+            t0_s = time.process_time()
+            try:
+                return original(*args)
+            finally:
+                part_s[part] += time.process_time() - t0_s
+
+        setattr(cls, method, timed)
 
     def _on_gc(self, phase: str, info: dict[str, Any]) -> None:
         now_s = time.perf_counter()
@@ -151,6 +173,11 @@ def show(probe: Probe, report: dict[str, Any], robots: int) -> None:
     print(f"{robots} robots, {ticks} ticks, load average {os.getloadavg()[0]:.2f}: "
           f"deadline_miss_ratio {report['deadline_miss_ratio']:.4f}, "
           f"CPU {report['cpu_s'] / robots / ticks * 1e6:.0f} us per robot-tick")
+    per = robots * ticks / 1e6
+    step_us, intake_us = probe.part_s["step"] / per, probe.part_s["intake"] / per
+    print(f"parts per robot-tick (us): fleet step {step_us:.1f}, bridge intake (E2E, decode, "
+          f"live judge, publications queued) {intake_us:.1f}, the rest (MQTT writes, the links' "
+          f"tasks, the event loop) {report['cpu_s'] / per - step_us - intake_us:.1f}")
     writes = sum(sender.writes for sender in probe.senders)
     print(f"MQTT: {probe.publications / robots / ticks:.3f} publications and "
           f"{writes / robots / ticks:.3f} socket writes per robot-tick (the whole run)")

@@ -149,3 +149,24 @@ def test_a_large_batch_is_handled_in_slices_with_loop_turns_between() -> None:
     assert telemetry[0].tracker.vs_reference.samples > 0
     for b in (in_slices, at_once):
         b.robots[0].endpoint.bus.shutdown()
+
+
+def test_aiomqtts_own_qos0_publish_still_completes(mosquitto: Mosquitto) -> None:  # noqa: F811
+    """The links' writes skip paho's per-packet ``on_publish`` (``LinkClient.quiet_writes``); a
+    QoS-0 publication made through aiomqtt's ``publish``, which waits for that callback, turns
+    it back on and completes, as does a ``publish_now`` after it."""
+
+    async def scenario() -> tuple[bool, bool]:
+        async with _link_client(mosquitto.url("bridge"), "quiet-test") as link:
+            quiet_before = link.quiet_writes
+            for i in range(20):  # aiomqtt's QoS 0: awaits on_publish unless written at once
+                link.publish_now(TOPIC, b"{}")  # queued ahead: its own publish waits
+                async with asyncio.timeout(5):
+                    await link.publish(TOPIC, json.dumps({"i": i}).encode(), qos=0)
+            last = link.publish_now(TOPIC, b"{}")
+            link.flush()
+            async with asyncio.timeout(5):
+                await link.written(last)
+            return quiet_before, link.quiet_writes
+
+    assert asyncio.run(scenario()) == (True, False)

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Callable
+from typing import Any
+
 import can
 import cantools
 import pytest
@@ -116,10 +120,39 @@ def test_telemetry_of_a_lockstep_run_matches_the_reference() -> None:
     assert len(errors) == 25  # 5 Hz for 5 s
     assert max(e["pose_vs_reference"]["dpos_m"] for e in errors) < 2e-4  # 0.1 mm LSB on the bus
     assert "reference_vs_truth" in errors[-1]
-    assert sum(1 for leaf, _ in out if leaf == "truth") == 50  # SIM_TRUTH every 100 ms
+    truths = [p for leaf, p in out if leaf == "truth"]
+    assert len(truths) == 25  # SIM_TRUTH every 100 ms, published with the pose at 5 Hz
+    poses = {p["t_s"] for leaf, p in out if leaf == "pose"}
+    assert all(p["unix_s"] and p["t_s"] <= max(poses) for p in truths)
+    leaves = [leaf for leaf, _ in out]
+    assert leaves[:4] == ["truth", "pose", "reference", "error"]  # before the first pose: alone
+    assert leaves[4:] == ["pose", "reference", "error", "truth"] * 24  # then with the pose
     assert telemetry.rejected == {}
     hz = telemetry.rates(5.0)[1]["hz"]
     assert hz["WHEEL_ENCODERS"] == pytest.approx(100.0)  # 500 frames over the 5 s "window"
+
+
+def test_without_poses_the_truth_goes_alone_at_the_publish_rate() -> None:
+    """The truth rides with the pose; while no pose is published (the firmware silent, its pose
+    frames lost) it still goes out, alone, at most ``publish_hz`` times a second."""
+    telemetry = RobotTelemetry("r", GEOMETRY, "exact", counter_bits=PMIR.counter_bits,
+                               publish_hz=5)
+    pose_ids = {telemetry.db.get_message_by_name(n).frame_id for n in ("ODOM_POSE_X",
+                                                                         "ODOM_POSE_Y")}
+    out = []
+
+    class Feed(can.Listener):
+        def on_message_received(self, msg: can.Message) -> None:
+            if msg.arbitration_id not in pose_ids:
+                out.extend(telemetry.feed(msg))
+
+    with LockstepRig(RigConfig(robot=PMIR, seed=5, channel="test-mqtt-truth-alone"),
+                     [Feed()]) as rig:
+        rig.run(5.0)
+    assert {leaf for leaf, _ in out} == {"truth"}
+    stamps = [p["t_s"] for _, p in out]
+    assert len(stamps) == 25  # SIM_TRUTH every 100 ms, published every 200 ms
+    assert min(b - a for a, b in itertools.pairwise(stamps)) == pytest.approx(0.2)
 
 
 def test_telemetry_takes_the_fleets_frame_tuples_as_it_takes_messages() -> None:
@@ -211,3 +244,70 @@ def test_a_telemetry_sender_cancelled_as_its_write_completes_stops() -> None:
         return False
 
     assert asyncio.run(scenario())
+
+
+def test_the_periodic_publications_of_a_fleet_are_spread_over_the_period() -> None:
+    """``status`` and ``rates`` of 20 robots: every robot's once a period, the robots in groups
+    whose turns fall in different loop turns over the period (no burst of the whole fleet)."""
+    import asyncio
+    import time
+
+    from odocan.host.mqtt.bridge import PERIODIC_SLOTS, Bridge, BridgeConfig, RobotEndpoint
+
+    period_s = 0.5
+    with can.Bus(interface="virtual", channel="test-mqtt-periodic") as bus:
+        bridge = Bridge([RobotEndpoint(f"robot{i:03d}", bus, GEOMETRY) for i in range(20)],
+                        config=BridgeConfig(broker=BrokerURL.parse("mqtt://127.0.0.1"),
+                                            status_period_s=period_s, rates_period_s=period_s))
+        sent: list[tuple[float, str, str]] = []
+
+        def recorder(name: str) -> Callable[[str, dict[str, Any]], None]:
+            return lambda leaf, _payload: sent.append((time.monotonic(), name, leaf))
+
+        for robot in bridge.robots:
+            robot.link.publish = recorder(robot.link.robot)  # type: ignore[method-assign,assignment]
+
+        async def scenario() -> None:
+            task = asyncio.create_task(bridge._periodic())
+            await asyncio.sleep(period_s * 1.05)
+            task.cancel()
+
+        asyncio.run(scenario())
+    initial, later = sent[:20], sent[20:]
+    assert {leaf for _, _, leaf in initial} == {"status"}  # online at once
+    names = sorted(name for _, name, _ in initial)
+    for leaf in ("status", "rates"):
+        assert sorted(name for _, name, lf in later if lf == leaf) == names
+    gaps_s = [b[0] - a[0] for a, b in itertools.pairwise(later)]
+    turns = 1 + sum(gap > period_s / PERIODIC_SLOTS / 2 for gap in gaps_s)
+    assert PERIODIC_SLOTS == 10
+    assert turns >= 5  # spread over 10 turns (a loaded machine may merge a few)
+
+
+def test_a_fleets_publications_are_spread_over_the_ticks_of_a_period() -> None:
+    """With ``fleetrun.publish_phase_s`` the robots of a fleet publish their poses on different
+    ticks of the 100 ms period (without: every even robot on one tick, every odd on the next),
+    each still at 10 Hz; the phase only delays the first publication."""
+    from odocan.host.mqtt.fleetrun import publish_phase_s
+
+    def pose_ticks(phased: bool) -> dict[int, list[int]]:
+        ticks: dict[int, list[int]] = {}
+        with Fleet(FleetConfig(robots=10, robot=PMIR, seed=4)) as fleet:
+            telemetry = [RobotTelemetry(name, GEOMETRY, "exact", counter_bits=PMIR.counter_bits,
+                                        publish_phase_s=publish_phase_s(i, 10.0) if phased
+                                        else 0.0)
+                         for i, name in enumerate(fleet.names)]
+            for k in range(300):
+                fleet.step(k)
+                for i, frame in fleet.take_batch():
+                    if any(leaf == "pose" for leaf, _ in telemetry[i].feed_frame(frame)):
+                        ticks.setdefault(i, []).append(k)
+        return ticks
+
+    plain, phased = pose_ticks(False), pose_ticks(True)
+    assert len({k % 10 for ks in plain.values() for k in ks}) == 2
+    assert len({k % 10 for ks in phased.values() for k in ks}) == 10
+    for i, ks in phased.items():
+        assert all(b - a == 10 for a, b in itertools.pairwise(ks))  # 10 Hz
+        assert ks[0] - plain[i][0] == 2 * (i // 2 % 5)  # delayed by its phase only
+        assert len(ks) >= len(plain[i]) - 1

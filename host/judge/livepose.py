@@ -57,9 +57,12 @@ class StepGate:
         prev, self.prev = self.prev, frame
         if prev is None:
             return None
-        if self._plausible(prev, frame):
-            self._refused = []
-            return self._delta(prev, frame)
+        delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
+        periods = ((counter - prev[0]) % RING) or RING
+        if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
+            if self._refused:
+                self._refused = []
+            return delta
         self.prev = prev  # refused: the base stays
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
         self._refused = [*self._refused, frame] if consistent else [frame]

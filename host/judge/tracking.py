@@ -88,7 +88,7 @@ class PoseTracker:
         self._xs: dict[int, Half] = {}  # settled X halves by the encoder frame they name
         self._ys: dict[int, tuple[Half, bool]] = {}  # settled Y halves (and queued) waiting
         self._sampled: set[int] = set()  # encoder frames an on-board sample was made of
-        self._settled: list[Sample] = []  # samples settled since ``take_samples``
+        self.settled: list[Sample] = []  # samples settled since ``take_samples``
         self._ref_at: dict[int, FramePose] = {}  # the reference at the latest encoder frames
         self._ref: ReferenceOdometry | None = None
         self._gate = StepGate(geometry, self.counter_bits)
@@ -126,9 +126,9 @@ class PoseTracker:
             self._finish_boot(self._boot[0])
         if not self._unsettled:
             return
-        for name, half in sorted(self._unsettled.items(), key=lambda item: item[1].pos):
-            if t_s - half.t_s >= QUEUED_GAP_S:
-                self._settle(name)
+        for _, name in sorted((half.pos, name) for name, half in self._unsettled.items()
+                              if t_s - half.t_s >= QUEUED_GAP_S):  # due, in the order heard
+            self._settle(name)
 
     def on_encoders(self, counter: int, left: int, right: int, t_s: float) -> None:
         """An accepted WHEEL_ENCODERS frame (raw 24-bit counts) heard at bus time ``t_s``."""
@@ -175,7 +175,7 @@ class PoseTracker:
 
     def take_samples(self) -> list[Sample]:
         """The on-board samples settled since the last call, in the order settled."""
-        settled, self._settled = self._settled, []
+        settled, self.settled = self.settled, []
         return settled
 
     def _on_half(self, name: str, half: Half) -> None:
@@ -226,14 +226,14 @@ class PoseTracker:
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
         self.pose_t_s = y.t_s
         ref = self._compare(pose, y, queued)
-        self._settled.append(Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
+        self.settled.append(Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
 
     def _silent_before(self, y: Half, queued: bool) -> bool:
         """The firmware was silent before this sample, not let out in a burst: the rule of
         ``stalls.after_stalls`` (from the last ODOM_POSE_Y sent, encoder frames on time)."""
         last, self._last_sample_t = self._last_sample_t, y.t_s
-        if last is None or queued:
-            return False
+        if last is None or queued or y.t_s - last < (SILENCE_CYCLES - 0.5) * CYCLE_S:
+            return False  # the last, decided without numpy (the common case): talked >= last
         ys = self._halves["y"].col("t_s")[: int(np.searchsorted(self._halves["y"].col("t_s"),
                                                                  y.t_s, side="left"))]
         talked = max(last, float(ys[-1])) if len(ys) else last

@@ -10,7 +10,9 @@ aiomqtt drops.
   (``written``), instead of aiomqtt's coroutine, task and event per message;
 * one socket write for every packet queued (``CoalescedSend``; paho writes each packet with a send
   of its own, ~1.4 syscalls per publication, each a wake-up of the broker), and a batch written at
-  once from the event loop (``flush``) instead of a writer callback a loop turn later.
+  once from the event loop (``flush``) instead of a writer callback a loop turn later, without
+  paho's per-packet ``on_publish`` (``quiet_writes``: its ``ReasonCode`` and ``Properties`` per
+  QoS-0 packet; ``written`` reads the packets' infos instead).
 """
 
 from __future__ import annotations
@@ -101,7 +103,11 @@ class LinkClient(aiomqtt.Client):
         self._on_refused, self._on_overflow = on_refused, on_overflow
         self._max_waiting = max_waiting
         self._qos1_topics: dict[int, str] = {}
-        self._written: dict[int, asyncio.Future[None]] = {}  # QoS-0 mid -> its socket write
+        # QoS-0 mid -> its info and a future resolved once the socket took it (``written``)
+        self._written: dict[int, tuple[paho.MQTTMessageInfo, asyncio.Future[None]]] = {}
+        # flush without paho's on_publish (``flush``); off for good once aiomqtt publishes a
+        # QoS-0 message itself (its ``publish`` waits for that callback)
+        self.quiet_writes = True
         self.session_present = False  # the CONNACK's flag: the broker still had our session
         paho_publish = self._client.publish
 
@@ -110,9 +116,12 @@ class LinkClient(aiomqtt.Client):
             info = paho_publish(topic, payload, qos, retain, properties)
             if qos > 0:
                 self._qos1_topics[info.mid] = topic
+            else:
+                self.quiet_writes = False
             return info
 
         setattr(self._client, "publish", publish)  # noqa: B010 (an instance's own attribute)
+        self._paho_publish = paho_publish
         self.coalesced = CoalescedSend(self._client)
         setattr(self._client, "_sock_send", self.coalesced)  # noqa: B010
         self._loop_thread = threading.get_ident()  # made in the event loop's thread
@@ -120,12 +129,29 @@ class LinkClient(aiomqtt.Client):
     def flush(self) -> None:
         """Write what paho has queued now, from the event loop (one coalesced send), instead of
         a loop turn later from the writer callback; whatever the socket does not take now is
-        still written by that callback. An error is the connection's end, as in aiomqtt."""
+        still written by that callback. An error is the connection's end, as in aiomqtt.
+
+        While ``quiet_writes``, paho's ``on_publish`` is off for the write: paho calls it for
+        every QoS-0 packet written (a QoS-1 one's comes with its PUBACK, read elsewhere), with a
+        ``ReasonCode`` and a ``Properties`` built for each (a tenth of a fleet worker's MQTT
+        CPU), and the only QoS-0 packets are ``publish_now``'s, whose writes ``written`` learns
+        from their infos here instead."""
+        client = self._client
+        quiet = self.quiet_writes
+        on_publish = client._on_publish
+        if quiet:
+            client._on_publish = None
         try:
-            self._client.loop_write()
+            client.loop_write()
         except Exception as exc:  # aiomqtt's own writer callback does the same
             if not self._disconnected.done():
                 self._disconnected.set_exception(exc)
+        finally:
+            if quiet:
+                client._on_publish = on_publish
+                for info, done in self._written.values():
+                    if info.is_published() and not done.done():
+                        done.set_result(None)
 
     def _on_socket_register_write(self, client: paho.Client, userdata: Any,
                                   sock: Any) -> None:
@@ -140,7 +166,7 @@ class LinkClient(aiomqtt.Client):
         """QoS 0 straight into paho's outgoing queue (no coroutine, no task, no event per
         message, as aiomqtt's ``publish`` makes them); ``MqttCodeError`` when paho refuses (the
         connection is gone). ``written(info)`` waits until the socket took it."""
-        info = self._client.publish(topic, body, 0)
+        info = self._paho_publish(topic, body, 0)  # not the wrapper: quiet writes stay on
         if info.rc != paho.MQTT_ERR_SUCCESS:
             raise aiomqtt.MqttCodeError(info.rc, "Could not publish message")
         return info
@@ -150,7 +176,8 @@ class LinkClient(aiomqtt.Client):
         queued before it: paho writes in order)."""
         if info.is_published():
             return
-        done = self._written[info.mid] = asyncio.get_running_loop().create_future()
+        done = asyncio.get_running_loop().create_future()
+        self._written[info.mid] = (info, done)
         try:  # not asyncio.wait_for: in 3.11 it can swallow a cancellation that meets the result
             async with asyncio.timeout(self.timeout):
                 await done
@@ -162,8 +189,8 @@ class LinkClient(aiomqtt.Client):
     def _on_publish(self, client: paho.Client, userdata: Any, mid: int,
                     reason_code: Any, properties: Any) -> None:
         written = self._written.pop(mid, None)
-        if written is not None and not written.done():
-            written.set_result(None)
+        if written is not None and not written[1].done():
+            written[1].set_result(None)
         topic = self._qos1_topics.pop(mid, None)
         if topic is not None and getattr(reason_code, "is_failure", False):
             self._on_refused(topic, str(reason_code))

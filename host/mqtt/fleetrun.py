@@ -24,7 +24,7 @@ with the robot's own accepted encoder frames (``host.judge.tracking.PoseTracker`
 ENC_COUNTER): PASS within ``FleetRun.tolerance`` (the position limit widened by the path run, as
 the reference starts at the rounded pose: ``position_tolerance_m``), FAIL beyond it or with no
 pose at all. When the loop fell a whole period behind (skipped releases), some encoder steps
-spanned several cycles: only the heading is judged then (UNJUDGED unless it fails). The error
+spanned several cycles: the pose is not judged then (UNJUDGED, ``judge_robot``). The error
 against the ground truth (SIM_TRUTH) is reported, never judged: it is the odometry's own drift, not
 the firmware's arithmetic. When the bridge dropped frames (queue full), the references miss encoder
 steps, so no robot is judged (UNJUDGED) and the run fails for that reason instead of blaming a
@@ -61,6 +61,7 @@ from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
 from odocan.host.mqtt.options import broker_for
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.sim.board import TICK_S
+from odocan.sim.contract import cycle_ticks
 from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
 from odocan.sim.provision import robot_key
 from odocan.sim.realtime import DeadlineStats
@@ -195,8 +196,21 @@ def _endpoints(fleet: Fleet, run: FleetRun) -> list[RobotEndpoint]:
     p = run.fleet.robot
     geometry = Geometry.of(p)
     return [RobotEndpoint(name, fleet.host_bus(i), geometry, run.fleet.integrator, p.counter_bits,
-                          signer=_signer(run, name))
+                          signer=_signer(run, name),
+                          publish_phase_s=publish_phase_s(run.fleet.first + i, run.publish_hz))
             for i, name in enumerate(fleet.names)]
+
+
+def publish_phase_s(index: int, publish_hz: float) -> float:
+    """When robot ``index`` (fleet-wide) publishes its first pose after its first sample (s of
+    bus time): pairs of robots take turns over the publication period, a pose cycle apart, so a
+    worker's telemetry (and its socket writes) is spread over the ticks of a period instead of
+    every robot's landing on the same one (odd robots already run a tick out of phase)."""
+    if publish_hz <= 0:
+        return 0.0
+    cycle_s = cycle_ticks("ODOM_POSE_Y", TICK_S) * TICK_S
+    turns = max(1, int(1.0 / publish_hz / cycle_s + 1e-9))
+    return (index // 2) % turns * cycle_s
 
 
 def _signer(run: FleetRun, name: str) -> SecocSigner | None:
@@ -279,9 +293,12 @@ def judge_robot(
     """One robot's pose errors and verdict (see the module docstring); ``distance_m``: the path
     the reference has run since it started (widens the position limit, see
     ``position_tolerance_m``); ``releases_skipped``: the worker fell a whole period behind, so
-    some encoder steps spanned several 10 ms cycles: the heading is still judged (exact in both),
-    the position is not (the firmware is specified for 10 ms steps; longer ones were seen to move
-    a correct firmware's position 2-3 LSB off the reference)."""
+    some encoder steps spanned several 10 ms cycles: the pose is not judged (UNJUDGED, which
+    fails the run without blaming the firmware). The position: the firmware is specified for
+    10 ms steps, longer ones were seen to move a correct firmware's position 2-3 LSB off the
+    reference. The heading too: a step over 16 cycles or more (one jump of the loop) wraps the
+    4-bit COUNTER, so the reference's plausibility gate sees one period and refuses a step the
+    firmware took (a correct firmware was seen 0.26-0.57 rad off after a jump of 17-40 ticks)."""
     limit_m = position_tolerance_m(tolerance, distance_m)
     entry: dict[str, Any] = {"pose_vs_reference": _errors(vs_reference),
                              "pose_vs_truth": _errors(vs_truth),
@@ -297,11 +314,12 @@ def judge_robot(
     if vs_reference.max_dheading_rad > tolerance.heading_rad:
         reasons.append(f"heading vs reference {vs_reference.max_dheading_rad * 1e3:.4g} mrad > "
                        f"{tolerance.heading_rad * 1e3:.4g} mrad")
-    if releases_skipped and not reasons:
+    if releases_skipped:
+        seen = f" ({reasons[0]})" if reasons else ""
         return {**entry, "verdict": "UNJUDGED",
                 "reason": f"{releases_skipped} releases skipped (the loop fell behind): encoder "
-                          "steps longer than 10 ms, the position is not judged"}
-    if vs_reference.max_dpos_m > limit_m and not releases_skipped:
+                          f"steps longer than 10 ms, the pose is not judged{seen}"}
+    if vs_reference.max_dpos_m > limit_m:
         reasons.append(f"position vs reference {vs_reference.max_dpos_m * 1e3:.4g} mm > "
                        f"{limit_m * 1e3:.4g} mm")
     return {**entry, "verdict": "FAIL" if reasons else "PASS",

@@ -5,7 +5,8 @@ The bridge decodes every accepted frame of every robot, one at a time (a fleet o
 call; ``LiveDecoder`` reads the same tree once (cantools' own ``_codecs``: signals, multiplexers,
 their selected sub-trees) and decodes a frame as one little-endian integer, a shift and a mask per
 signal, a sign extension, and the signal's own cantools conversion (``raw_to_scaled``: the very
-same arithmetic, so the same ints and floats). Multiplexed messages select their sub-tree by the
+same arithmetic, so the same ints and floats; an identity conversion, which returns the raw
+integer, is not called). Multiplexed messages select their sub-tree by the
 multiplexer's value as cantools does; a value the DBC does not define is cantools'
 ``DecodeError``, and so is a payload shorter than the message (a longer one is cut, as cantools'
 ``allow_excess``). A message this form does not cover (a big-endian or float signal, a container)
@@ -20,9 +21,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from cantools.database.can import Message
+from cantools.database.conversion import IdentityConversion
 from cantools.database.errors import DecodeError
 
-Field = tuple[str, int, int, int, Callable[[int, bool], Any]]  # name, shift, mask, sign, scale
+# name, shift, mask, sign, scale (None: cantools' IdentityConversion, whose scaling is the raw
+# value itself: not called)
+Field = tuple[str, int, int, int, Callable[[int, bool], Any] | None]
 
 
 @dataclass(frozen=True)
@@ -64,7 +68,7 @@ def _covered(message: Message) -> bool:
 def _compile(node: Any) -> _Node:
     fields = tuple(
         (s.name, s.start, (1 << s.length) - 1, 1 << (s.length - 1) if s.is_signed else 0,
-         s.conversion.raw_to_scaled)
+         None if type(s.conversion) is IdentityConversion else s.conversion.raw_to_scaled)
         for s in node["signals"]
     )
     muxes = tuple((name, {value: _compile(sub) for value, sub in by_value.items()})
@@ -77,7 +81,7 @@ def _decode(node: _Node, word: int, out: dict[str, Any]) -> None:
         raw = (word >> shift) & mask
         if raw & sign:
             raw -= sign << 1
-        out[name] = scale(raw, False)
+        out[name] = raw if scale is None else scale(raw, False)
     for name, by_value in node.muxes:
         sub = by_value.get(int(out[name]))
         if sub is None:

@@ -14,9 +14,14 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
   wrapping counts); the reference pose after each frame is kept by the frame's E2E ``COUNTER``;
 * ``ODOM_POSE_X`` + ``ODOM_POSE_Y`` with the same ``ENC_COUNTER`` make the on-board pose, compared
   with the reference of that very encoder frame: ``pose``, ``reference`` and ``error`` at most
-  ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic);
+  ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic),
+  the first ``publish_phase_s`` of bus time after the first sample (a fleet spreads its robots'
+  publications over the ticks of a period);
 * ``SIM_TRUTH``'s three parts of one encoder frame make ``truth``, compared with the reference of
-  that frame (``error.reference_vs_truth``, the latest: what odometry itself cannot know);
+  that frame (``error.reference_vs_truth``, the latest: what odometry itself cannot know); the
+  latest ``truth`` goes out with the next ``pose`` (so a robot's telemetry of a period leaves in
+  one socket write), or alone at most ``publish_hz`` times a second while no pose was published
+  for two periods;
 * ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result`` (enums by
   their DBC names: ``"state": "OK"``).
 
@@ -36,7 +41,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import can
-from cantools.database.can import Database
+from cantools.database.can import Database, Message
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
@@ -63,6 +68,54 @@ class PendingAck:
     final: bool  # the APPLY / GO frame: its ACK completes the command
 
 
+@dataclass(frozen=True, slots=True)
+class _Route:
+    """What ``RobotTelemetry`` does with an 11-bit frame of one message of the DBC: its name, its
+    handler (None: counted only, never decoded), its compiled decoder; for ODOM_STATUS the
+    PAGE signal's place (``status_page``: shift, mask, SUMMARY's value) to pass only its
+    summaries to the reboot watch (``host.judge.sources.boot_summary`` reads nothing else)."""
+
+    message: Message
+    name: str
+    handler: Any
+    decode: Any
+    status_page: tuple[int, int, int] | None
+
+    @classmethod
+    def of(cls, message: Message, handler: Any) -> _Route:
+        page = None
+        if message.name == "ODOM_STATUS":
+            signal = message.get_signal_by_name("PAGE")
+            summary = next((v for v, n in (signal.choices or {}).items() if str(n) == "SUMMARY"),
+                           None)
+            if signal.byte_order == "little_endian" and summary is not None:
+                page = (signal.start, (1 << signal.length) - 1, int(summary))
+            else:  # another layout: every frame goes to the reboot watch
+                page = (0, 0, 0)
+        return cls(message, message.name, handler, LiveDecoder(message).decode, page)
+
+    def is_summary(self, data: bytes) -> bool:
+        """Whether an ODOM_STATUS payload may be a SUMMARY page (its raw PAGE says so)."""
+        assert self.status_page is not None
+        shift, mask, summary = self.status_page
+        return (int.from_bytes(data, "little") >> shift) & mask == summary
+
+
+_ROUTES: dict[int, tuple[Database, dict[int, _Route]]] = {}  # by id(db), with db kept alive
+
+
+def _routes(db: Database) -> dict[int, _Route]:
+    """The routes of ``db``'s 11-bit messages by identifier, built once per database and shared
+    by every robot (read only: a fleet's robots share one compiled decoder per message, not
+    one each, which keeps a worker's working set small)."""
+    entry = _ROUTES.get(id(db))
+    if entry is None or entry[0] is not db:
+        routes = {m.frame_id: _Route.of(m, RobotTelemetry._handlers.get(m.name))
+                  for m in db.messages if not m.is_extended_frame}
+        entry = _ROUTES[id(db)] = (db, routes)
+    return entry[1]
+
+
 @dataclass
 class _Window:
     """Frame counts since the last ``rates`` publication."""
@@ -82,6 +135,7 @@ class RobotTelemetry:
         *,
         counter_bits: int = 32,
         publish_hz: float = 10.0,
+        publish_phase_s: float = 0.0,
         db: Database | None = None,
         now_s: float = 0.0,
     ) -> None:
@@ -90,10 +144,11 @@ class RobotTelemetry:
         self.name = name
         self.db = db if db is not None else database()
         self._by_id = {m.frame_id: m for m in self.db.messages}
-        self._decoders = {m.frame_id: LiveDecoder(m) for m in self.db.messages}
+        self._routes = _routes(self.db)
         self.e2e = E2EMonitor(self.db)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
+        self._publish_phase_s = publish_phase_s  # the first pose waits this long (bus time)
         self.frames: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self._unknown_ids: set[str] = set()
@@ -101,11 +156,18 @@ class RobotTelemetry:
         self._twist: dict[str, float] = {}
         self._last_pub_t = -math.inf
         self._truth_error: dict[str, Any] | None = None
+        self._truth: dict[str, Any] | None = None  # the latest truth not published yet
+        self._truth_pub_t = -math.inf  # bus time of the last truth published (s)
         self.firmware: dict[str, Any] = {}
         self.pending: dict[tuple[int, int], PendingAck] = {}
         self.status_seq = 0
         self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
         self._status_ids = e2e_messages(self.db).get(self._status_id)
+        status = self._by_id[self._status_id]  # per signal: its key in ``firmware``, its enum
+        self._status_signals = {sig.name: (sig.name.lower(), sig.choices)
+                                for sig in status.signals}
+        self._page_names = {int(v): str(n).lower()
+                            for v, n in (status.get_signal_by_name("PAGE").choices or {}).items()}
         self.sources = SourceWatch()  # reboots, as the monitor tells them (host.judge.sources)
         self.reboots = 0
 
@@ -128,31 +190,38 @@ class RobotTelemetry:
         return self.feed(frame)
 
     def _feed(self, t_s: float, can_id: int, data: bytes, extended: bool) -> list[Publication]:
-        """One data frame given by its fields (bus timestamp ``t_s`` s, identifier, payload)."""
-        message = self._by_id.get(can_id)
-        if message is not None and can_id == self._status_id and not extended:
-            self._watch_source(message, data, t_s)  # before E2E: a reboot fails it
+        """One data frame given by its fields (bus timestamp ``t_s`` s, identifier, payload).
+
+        Runs per frame of every robot (the fleet's hot path): one lookup of the frame's route
+        (message, handler, decoder), the sample check only when the tracker settled one."""
+        route = None if extended else self._routes.get(can_id)
+        if route is not None and route.status_page is not None \
+                and route.is_summary(data):  # before E2E: a reboot fails it
+            self._watch_source(route.message, data, t_s)
         status = self.e2e.check(can_id, data, extended=extended,
                                 timestamp_s=t_s)  # the window widens with time
-        self.tracker.advance(t_s)  # settles the pose halves heard half a cycle before
-        if message is None or status not in ACCEPTED_E2E:
+        tracker = self.tracker
+        tracker.advance(t_s)  # settles the pose halves heard half a cycle before
+        if route is None or status not in ACCEPTED_E2E:
+            message = self._by_id.get(can_id)
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
-            return self._samples()
-        handler = self._handlers.get(message.name)
-        signals: Any = None
-        if handler is not None:
-            try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
-                signals = self._decoders[can_id].decode(data)  # cantools' decode, compiled
-            except DecodeError:
-                self.rejected[message.name] += 1
-                return self._samples()
-        self.frames[message.name] += 1
-        self._window.counts[message.name] += 1
+            return self._samples() if tracker.settled else []
+        name, handler = route.name, route.handler
         if handler is None:
-            return self._samples()
-        assert isinstance(signals, dict)
+            self.frames[name] += 1
+            self._window.counts[name] += 1
+            return self._samples() if tracker.settled else []
+        try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
+            signals = route.decode(data)  # cantools' decode, compiled
+        except DecodeError:
+            self.rejected[name] += 1
+            return self._samples() if tracker.settled else []
+        self.frames[name] += 1
+        self._window.counts[name] += 1
         publications: list[Publication] = handler(self, signals, t_s)
-        return publications + self._samples()
+        if tracker.settled:
+            return publications + self._samples() if publications else self._samples()
+        return publications
 
     def _watch_source(self, message: Any, data: bytes, t_s: float) -> None:
         """A reboot (UPTIME going back, INIT after running) starts the firmware's new life at
@@ -206,6 +275,8 @@ class RobotTelemetry:
         t_s = sample.t_s
         if t_s < self._last_pub_t:  # the bus clock went back (a restart, a replay): follow it
             self._last_pub_t = -math.inf
+        if self._last_pub_t == -math.inf and self._publish_phase_s > 0:  # the first sample
+            self._last_pub_t = t_s + self._publish_phase_s - self.publish_period_s
         if t_s - self._last_pub_t < self.publish_period_s - 1e-6:
             return []
         self._last_pub_t = t_s
@@ -218,13 +289,13 @@ class RobotTelemetry:
         head = {"t_s": t_s, "counter": counter, "enc_counter": enc, "enc_seq": pose.seq}
         pubs: list[Publication] = [("pose", stamp({**head, **_pose_dict(pose), **self._twist}))]
         if ref is None or ref.seq != pose.seq:
-            return pubs
+            return self._with_truth(pubs, t_s)
         pubs.append(("reference", stamp({**head, **_pose_dict(ref)})))
         error: dict[str, Any] = {**head, "pose_vs_reference": difference(pose, ref)}
         if self._truth_error is not None:
             error["reference_vs_truth"] = self._truth_error
         pubs.append(("error", stamp(error)))
-        return pubs
+        return self._with_truth(pubs, t_s)
 
     def _on_truth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         enc, part = int(s["ENC_COUNTER"]), int(s["PART"])
@@ -235,16 +306,31 @@ class RobotTelemetry:
         truth, ref = sample
         if ref is not None:  # the truth was sampled at that very encoder frame
             self._truth_error = {"enc_seq": ref.seq, **difference(ref, truth)}
-        payload = {"t_s": t_s, "counter": int(s["COUNTER"]), "enc_counter": enc,
-                   "enc_seq": truth.seq, **_pose_dict(truth)}
-        return [("truth", stamp(payload))]
+        self._truth = {"t_s": t_s, "counter": int(s["COUNTER"]), "enc_counter": enc,
+                       "enc_seq": truth.seq, **_pose_dict(truth)}
+        if t_s < self._truth_pub_t:  # the bus clock went back (a restart, a replay): follow it
+            self._truth_pub_t = -math.inf
+        period_s = self.publish_period_s
+        if t_s - self._last_pub_t < 2 * period_s or t_s - self._truth_pub_t < period_s - 1e-6:
+            return []  # it goes with the next pose (``_with_truth``)
+        return self._with_truth([], t_s)  # no pose published lately: the truth goes alone
+
+    def _with_truth(self, pubs: list[Publication], t_s: float) -> list[Publication]:
+        """``pubs`` and the latest ``truth`` not published yet, if any (bus time ``t_s``): the
+        truth rides with the pose's publications, so a robot's telemetry of one publication
+        period leaves in one socket write, at most ``publish_hz`` times a second."""
+        truth, self._truth = self._truth, None
+        if truth is not None:
+            pubs.append(("truth", stamp(truth)))
+            self._truth_pub_t = t_s
+        return pubs
 
     def _on_status(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         page = int(s["PAGE"])
-        message = self._by_id[self._status_id]
-        fields = {k.lower(): _named(message, k, v) for k, v in s.items()
+        signals = self._status_signals
+        fields = {signals[k][0]: _named_value(signals[k][1], v) for k, v in s.items()
                   if k not in ("CHECKSUM", "COUNTER", "PAGE")}
-        name = _page_name(self.db, page)
+        name = self._page_names.get(page) or _page_name(self.db, page)
         self.firmware[name] = fields
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
             self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]))
@@ -317,9 +403,9 @@ def _pose_dict(pose: FramePose) -> dict[str, float]:
     return fields
 
 
-def _named(message: Any, signal: str, value: Any) -> Any:
-    """An enum signal's value by its DBC name (``"OK"``, not 1); other values as they are."""
-    choices = message.get_signal_by_name(signal).choices
+def _named_value(choices: Any, value: Any) -> Any:
+    """An enum signal's value by its DBC name (``"OK"``, not 1; ``choices``: the signal's);
+    other values as they are."""
     if choices and int(value) in choices:
         return str(choices[int(value)])
     return value

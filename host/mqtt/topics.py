@@ -79,12 +79,16 @@ def check_robot_name(name: str) -> str:
     return name
 
 
+# json.dumps with these options would build its encoder per call: built once (the same text)
+_COMPACT: Final = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
+
+
 def dumps(payload: dict[str, Any]) -> bytes:
     """Compact JSON; non-finite floats become null (JSON has no NaN). Encoded as it is first
     (every publication of every robot comes here); only a payload with a NaN or an infinity
     (``ValueError``) is copied with them as null (``finite``) and encoded again."""
     try:
-        return json.dumps(payload, separators=(",", ":"), allow_nan=False).encode()
+        return _COMPACT.encode(payload).encode()
     except ValueError:
         return json.dumps(finite(payload), separators=(",", ":")).encode()
 
