@@ -17,7 +17,6 @@ from odocan.host.io.frames import (
     FLAG_EXTENDED,
     MAX_DLC,
     FrameArrays,
-    FrameCollector,
     LogFormatError,
     U8Array,
     concat_frames,
@@ -410,6 +409,8 @@ def _parse_slow(
 ) -> _Parsed:
     """Parse the given lines one by one (blank lines skipped); the first bad one raises (named
     ``NAME:LINE``, lines counted from ``first_line`` + 1)."""
+    from odocan.host.io.collector import FrameCollector  # python-can's Listener: when needed
+
     collector = FrameCollector()
     kept: list[int] = []
     for line in lines.tolist():

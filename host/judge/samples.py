@@ -14,14 +14,15 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import INTEGRATORS
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
-from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 
 # One LSB of the pose signals, from the DBC's scales (the single source of truth): X, Y 0.1 mm,
 # HEADING a 16-bit binary angle (2 pi / 65536 rad).
-POSITION_LSB_M = float(contract.message("ODOM_POSE_X").get_signal_by_name("X").scale)
-HEADING_LSB_RAD = float(contract.message("ODOM_POSE_X").get_signal_by_name("HEADING").scale)
+_POSE_X = default_plan().get_message_by_name("ODOM_POSE_X")
+POSITION_LSB_M = float(_POSE_X.get_signal_by_name("X").scale)
+HEADING_LSB_RAD = float(_POSE_X.get_signal_by_name("HEADING").scale)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 SILENCE_CYCLES = 8  # pose frames this many encoder cycles apart: the firmware was stalled
 QUEUED_GAP_CYCLES = 0.5  # two sends of one message closer than this waited to be sent

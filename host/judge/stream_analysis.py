@@ -22,9 +22,8 @@ from __future__ import annotations
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
 
-import cantools
 import numpy as np
 
 from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
@@ -51,12 +50,15 @@ from odocan.host.judge.stream_place import start_pose as place_start
 from odocan.host.judge.stream_stalls import StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
 from odocan.host.judge.stream_twist import StreamTwist
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import UNKNOWN
 from odocan.host.protocol.pose import heading_fields
-from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 from odocan.sim.robot import RobotProfile
+
+if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
+    from odocan.host.protocol.dbcplan import DatabaseSpec
 
 Frames = Callable[[], Iterable[FrameArrays]]  # a life's frames, from its first, each call
 QUEUED_MESSAGES = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y", "ODOM_TWIST")
@@ -106,7 +108,7 @@ def analyze_file(
     integrator: str | None = None,
     *,
     tolerance: Tolerance = DEFAULT_TOLERANCE,
-    db: cantools.database.can.Database | None = None,
+    db: DatabaseSpec | None = None,
     scenario: str | None = None,
     seed: int | None = None,
     wall_seconds: float | None = None,
@@ -128,7 +130,7 @@ def analyze_file_counted(
     integrator: str | None = None,
     *,
     tolerance: Tolerance = DEFAULT_TOLERANCE,
-    db: cantools.database.can.Database | None = None,
+    db: DatabaseSpec | None = None,
     scenario: str | None = None,
     seed: int | None = None,
     wall_seconds: float | None = None,
@@ -137,7 +139,7 @@ def analyze_file_counted(
     warn: Callable[[str], None] = warn_on_stderr,
 ) -> tuple[dict[str, Any], int]:
     """``analyze_file``'s report and the number of frames in the log."""
-    db = db if db is not None else contract.database()
+    db = db if db is not None else default_plan()
     decoder = BulkDecoder(db)
     require_messages(decoder)
     with tempfile.TemporaryDirectory(prefix="odocan-analyze-") as tmp:
@@ -162,7 +164,7 @@ def analyze_file_counted(
 def _analyze_lives(
     spans: list[LifeSpan], facts: StreamFacts, frames_of: Callable[[LifeSpan], Frames],
     robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
-    db: cantools.database.can.Database, scenario: str | None, seed: int | None,
+    db: DatabaseSpec, scenario: str | None, seed: int | None,
     wall_seconds: float | None, max_wheel_speed_mm_s: int | None,
 ) -> dict[str, Any]:
     """``analysis.analyze`` over the lives found (``frames_of``: a life's frames, each call
@@ -248,7 +250,7 @@ class FrameSpill:
 
 def _life(
     frames: Frames, robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
-    db: cantools.database.can.Database, boot: bool, max_wheel_speed_mm_s: int | None,
+    db: DatabaseSpec, boot: bool, max_wheel_speed_mm_s: int | None,
     scenario: str | None = None, seed: int | None = None, wall_seconds: float | None = None,
 ) -> tuple[dict[str, Any], float]:
     """``analysis._analyze_life``'s report of one life, and its first frame's time."""
@@ -368,7 +370,7 @@ def _life(
 class _FirstPass:
     """Pass 1 over a life (module docstring)."""
 
-    def __init__(self, db: cantools.database.can.Database, robot: RobotProfile) -> None:
+    def __init__(self, db: DatabaseSpec, robot: RobotProfile) -> None:
         self.decoder = BulkDecoder(db)
         self.e2e = StreamE2E(db)
         self.numbering = StreamEncoders(self.decoder)
@@ -460,7 +462,7 @@ class _FirstPass:
                                 "log: nothing to compare")
 
 
-def _first_pass(frames: Frames, db: cantools.database.can.Database,
+def _first_pass(frames: Frames, db: DatabaseSpec,
                 robot: RobotProfile) -> _FirstPass:
     first = _FirstPass(db, robot)
     for chunk in frames():

@@ -31,17 +31,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import cantools
 import numpy as np
 import numpy.typing as npt
-from cantools.database.can import Message
 
 from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import frame_groups, frame_key
 from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
+
+if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
+    from odocan.host.protocol.dbcplan import DatabaseSpec, MessageSpec
 
 E2E_KEYS = ("ok", "lost", "repeated", "crc_errors", "wrong_sequence")
 UNKNOWN = "unknown"  # the section of check_frames' counts for frames that are not checked
@@ -145,12 +147,12 @@ class E2EMessage:
     cycle_s: float | None  # GenMsgCycleTime (None: not cyclic)
 
 
-def e2e_messages(db: cantools.database.can.Database) -> dict[int, E2EMessage]:
+def e2e_messages(db: DatabaseSpec) -> dict[int, E2EMessage]:
     """The DBC's messages by ``frame_key``, with their E2E configuration."""
     return {m.key: m for m in (_e2e_message(message) for message in db.messages)}
 
 
-def _e2e_message(message: Message) -> E2EMessage:
+def _e2e_message(message: MessageSpec) -> E2EMessage:
     attributes = message.dbc.attributes if message.dbc is not None else {}
     data_ids = None
     if "E2EDataIDs" in attributes:
@@ -293,7 +295,7 @@ def _rejudge(
 
 
 def check_frames(
-    frames: FrameArrays, db: cantools.database.can.Database | None = None
+    frames: FrameArrays, db: DatabaseSpec | None = None
 ) -> tuple[dict[str, dict[str, int]], npt.NDArray[np.bool_]]:
     """Profile 2 over every frame of a log.
 
@@ -305,7 +307,7 @@ def check_frames(
     The frames are grouped by message once (a stable sort of their message numbers) and the CRCs
     of all protected frames found in one pass; the sequence is then judged per message.
     """
-    configs = e2e_messages(db if db is not None else contract.database())
+    configs = e2e_messages(db if db is not None else default_plan())
     accepted = np.zeros(len(frames), dtype=bool)
     counts: dict[str, dict[str, int]] = {}
     unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
@@ -398,7 +400,7 @@ class E2EMonitor:
     frame counts as one period.
     """
 
-    def __init__(self, db: cantools.database.can.Database | None = None) -> None:
+    def __init__(self, db: DatabaseSpec | None = None) -> None:
         self._configs = e2e_messages(db if db is not None else contract.database())
         self._states: dict[int, SequenceState] = {}
         self._last_time: dict[int, float] = {}
