@@ -228,3 +228,27 @@ def test_bare_help_imports_no_subcommand() -> None:
     assert not {m for m in modules if m.startswith("odocan.host.cli.subparsers.")}
     top = {m.split(".")[0] for m in modules}
     assert top.isdisjoint({*HEAVY, "numpy", "can", "cantools", "rich"}), top
+
+
+BLAS_PROBE = """
+import os, sys
+from odocan.host.cli import main
+try:
+    main(["--version"])
+except SystemExit:
+    pass
+import numpy
+print(os.environ.get("OPENBLAS_NUM_THREADS"))
+"""
+
+
+@pytest.mark.parametrize(("given", "seen"), [(None, "1"), ("3", "3")])
+def test_the_command_runs_blas_on_one_thread_unless_told(given: str | None, seen: str) -> None:
+    """``main`` sets OpenBLAS to one thread before numpy loads (``host.cli.BLAS_THREADS``: no
+    spinning thread pool, the same dot-product bits on every machine); a user's value stays."""
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    done = subprocess.run([sys.executable, "-c", BLAS_PROBE], capture_output=True, text=True,
+                          env=env, timeout=300, check=True)
+    assert done.stdout.strip().splitlines()[-1] == seen
