@@ -86,7 +86,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S  # not ecu: its secoc, nav, ...
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.compare import (
     check_twist,

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
-from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge.analysis import Tolerance, _realtime, _robot_dict
 from odocan.host.judge.reboots import Life, merge
@@ -40,6 +40,12 @@ from odocan.host.judge.samples import (
     require_messages,
 )
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
+from odocan.host.judge.stream_choice import RSS_MARGIN as RSS_MARGIN
+from odocan.host.judge.stream_choice import RSS_TARGET_MB as RSS_TARGET_MB
+from odocan.host.judge.stream_choice import STREAM_MODES as STREAM_MODES
+from odocan.host.judge.stream_choice import WHOLE_RSS_MB as WHOLE_RSS_MB
+from odocan.host.judge.stream_choice import stream_above_bytes as stream_above_bytes
+from odocan.host.judge.stream_choice import streams as streams
 from odocan.host.judge.stream_compare import TruthCompare
 from odocan.host.judge.stream_facts import StreamFacts
 from odocan.host.judge.stream_life import LifeInfo, life_chunks
@@ -72,34 +78,6 @@ class NotStreamable(OdocanError):
 
 
 DEFAULT_TOLERANCE = Tolerance()
-STREAM_MODES = ("auto", "always", "never")
-RSS_TARGET_MB = 300.0  # the max RSS ``odocan analyze`` of one log aims to stay under (#14.1)
-# The whole-log path's max RSS (MB) against its log's size (MB), per format: base + per_mb * size,
-# measured by ``bench/analyze_memory.py --threshold`` (docs/benchmarks.md); a log bigger than
-# the size where that reaches RSS_TARGET_MB / RSS_MARGIN streams.
-WHOLE_RSS_MB = {".log": (65.4, 2.738), ".asc": (54.6, 1.888), ".blf": (52.2, 21.480)}
-RSS_MARGIN = 1.2  # over a worst-case fit (one long life): 250 MB, the bench log stays whole
-
-
-def stream_above_bytes(suffix: str) -> float:
-    """The log size (bytes) above which ``odocan analyze`` streams a log of this format (a
-    format not measured: the most memory-hungry one's)."""
-    base, per_mb = WHOLE_RSS_MB.get(suffix.lower(), max(WHOLE_RSS_MB.values(),
-                                                        key=lambda fit: fit[1]))
-    return max(0.0, (RSS_TARGET_MB / RSS_MARGIN - base) / per_mb) * 1e6
-
-
-def streams(path: str | Path, mode: str = "auto") -> bool:
-    """Whether to analyse ``path`` as a stream: ``always``, ``never``, or (``auto``) when the
-    whole-log path would take more than the max-RSS target for a log that size (the streamed
-    path costs about 3x its CPU; the report is the same either way)."""
-    if mode != "auto":
-        return mode == "always"
-    try:
-        size = Path(path).stat().st_size
-    except OSError:
-        return False  # the whole-log path names the path in its error
-    return size > stream_above_bytes(Path(path).suffix)
 
 
 def analyze_file(

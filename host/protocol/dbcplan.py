@@ -23,96 +23,93 @@ import hashlib
 import importlib.util
 import json
 import os
-import tempfile
-from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from functools import cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
-
-if TYPE_CHECKING:
-    import cantools
+from typing import TYPE_CHECKING, Any
 
 PLAN_FORMAT = 1  # bump when the plan's fields change: older cache files are then ignored
 CACHE_ENV = "ODOCAN_CACHE_DIR"
 
 
 # --- what the judge reads of a DBC (cantools' names) ----------------------------------------
+# (Protocols for mypy only: nothing checks them at run time, so they cost no start-up.)
 
+if TYPE_CHECKING:
+    from collections.abc import Mapping, Sequence
+    from typing import Protocol
 
-class AttributeSpec(Protocol):
-    """A DBC attribute's value (cantools ``Attribute``)."""
+    import cantools
 
-    @property
-    def value(self) -> Any: ...
+    class AttributeSpec(Protocol):
+        """A DBC attribute's value (cantools ``Attribute``)."""
 
+        @property
+        def value(self) -> Any: ...
 
-class DbcSpecificsSpec(Protocol):
-    """A message's DBC attributes by name (cantools ``DbcSpecifics``)."""
+    class DbcSpecificsSpec(Protocol):
+        """A message's DBC attributes by name (cantools ``DbcSpecifics``)."""
 
-    @property
-    def attributes(self) -> Mapping[str, AttributeSpec]: ...
+        @property
+        def attributes(self) -> Mapping[str, AttributeSpec]: ...
 
+    class SignalSpec(Protocol):
+        """One signal's layout, scale and value names (cantools ``Signal``)."""
 
-class SignalSpec(Protocol):
-    """One signal's layout, scale and value names (cantools ``Signal``)."""
+        @property
+        def name(self) -> str: ...
+        @property
+        def start(self) -> int: ...
+        @property
+        def length(self) -> int: ...
+        @property
+        def byte_order(self) -> str: ...
+        @property
+        def is_signed(self) -> bool: ...
+        @property
+        def is_float(self) -> bool: ...
+        @property
+        def scale(self) -> int | float: ...
+        @property
+        def offset(self) -> int | float: ...
+        @property
+        def multiplexer_signal(self) -> str | None: ...
+        @property
+        def multiplexer_ids(self) -> Sequence[int] | None: ...
+        @property
+        def is_multiplexer(self) -> bool: ...
+        @property
+        def choices(self) -> Mapping[int, object] | None: ...
 
-    @property
-    def name(self) -> str: ...
-    @property
-    def start(self) -> int: ...
-    @property
-    def length(self) -> int: ...
-    @property
-    def byte_order(self) -> str: ...
-    @property
-    def is_signed(self) -> bool: ...
-    @property
-    def is_float(self) -> bool: ...
-    @property
-    def scale(self) -> int | float: ...
-    @property
-    def offset(self) -> int | float: ...
-    @property
-    def multiplexer_signal(self) -> str | None: ...
-    @property
-    def multiplexer_ids(self) -> Sequence[int] | None: ...
-    @property
-    def is_multiplexer(self) -> bool: ...
-    @property
-    def choices(self) -> Mapping[int, object] | None: ...
+    class MessageSpec(Protocol):
+        """One message (cantools ``Message``): cycle time in ms, length in bytes."""
 
+        @property
+        def name(self) -> str: ...
+        @property
+        def frame_id(self) -> int: ...
+        @property
+        def is_extended_frame(self) -> bool: ...
+        @property
+        def length(self) -> int: ...
+        @property
+        def cycle_time(self) -> int | None: ...
+        @property
+        def send_type(self) -> str | None: ...
+        @property
+        def signals(self) -> Sequence[SignalSpec]: ...
+        @property
+        def dbc(self) -> DbcSpecificsSpec | None: ...
 
-class MessageSpec(Protocol):
-    """One message (cantools ``Message``): cycle time in ms, length in bytes."""
+        def get_signal_by_name(self, name: str) -> SignalSpec: ...
 
-    @property
-    def name(self) -> str: ...
-    @property
-    def frame_id(self) -> int: ...
-    @property
-    def is_extended_frame(self) -> bool: ...
-    @property
-    def length(self) -> int: ...
-    @property
-    def cycle_time(self) -> int | None: ...
-    @property
-    def send_type(self) -> str | None: ...
-    @property
-    def signals(self) -> Sequence[SignalSpec]: ...
-    @property
-    def dbc(self) -> DbcSpecificsSpec | None: ...
+    class DatabaseSpec(Protocol):
+        """A DBC's messages (cantools ``Database``, or a ``DbcPlan``)."""
 
-    def get_signal_by_name(self, name: str) -> SignalSpec: ...
+        @property
+        def messages(self) -> Sequence[MessageSpec]: ...
 
-
-class DatabaseSpec(Protocol):
-    """A DBC's messages (cantools ``Database``, or a ``DbcPlan``)."""
-
-    @property
-    def messages(self) -> Sequence[MessageSpec]: ...
-
-    def get_message_by_name(self, name: str) -> MessageSpec: ...
+        def get_message_by_name(self, name: str) -> MessageSpec: ...
 
 
 # --- the plan: those fields as plain data -----------------------------------------------------
@@ -313,6 +310,8 @@ def _parse(path: Path) -> cantools.database.can.Database:
 def _write_atomically(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file and a rename (readers see the old
     file or the new one, never half of one); nothing when it cannot be written."""
+    import tempfile  # here: a warm run writes nothing
+
     temporary: str | None = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

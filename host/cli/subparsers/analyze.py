@@ -184,7 +184,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
 def _streams(args: argparse.Namespace) -> bool:
     """Whether the analysis streams (the module docstring): nothing asks for the whole log,
     and ``--stream`` (auto: the log's size) says so."""
-    from odocan.host.judge.stream_analysis import streams
+    from odocan.host.judge.stream_choice import streams  # not the streamed judge itself
 
     return (args.plot is None and args.parquet is None and args.mcap is None
             and args.bitrate is None and streams(args.log, args.stream))
