@@ -222,7 +222,10 @@ def periods_between(dt_s: npt.NDArray[np.float64], cycle_s: float | None) -> npt
     """Receive periods that a frame ``dt_s`` after the previous one closes: at least 1."""
     if cycle_s is None:
         return np.ones(dt_s.shape, dtype=np.int64)
-    return np.maximum(1, np.rint(dt_s / cycle_s)).astype(np.int64)
+    quotient = np.divide(dt_s, cycle_s, out=np.empty(np.shape(dt_s), dtype=np.float64))
+    np.rint(quotient, out=quotient)  # in place: one temporary, not three
+    np.maximum(quotient, 1, out=quotient)
+    return quotient.astype(np.int64)
 
 
 def period_count(dt_s: float, cycle_s: float | None) -> int:
@@ -246,27 +249,33 @@ def sequence_statuses(
     ``SequenceState`` (the cost grows with the number of rejected frames only).
     """
     status = np.full(len(crc_ok), _S_CRC, dtype=np.int8)
-    valid = np.flatnonzero(crc_ok)
-    if len(valid) == 0:
+    every = bool(crc_ok.all())  # the usual case: no gather of the valid frames
+    valid = None if every else np.flatnonzero(crc_ok)
+    if valid is not None and len(valid) == 0:
         return status
-    every = len(valid) == len(crc_ok)  # the usual case: no gather of the valid frames
-    c = (counter if every else counter[valid]) & COUNTER_MASK
-    naive = np.full(len(valid), _S_OK, dtype=np.int8)
-    delta = (c[1:] - c[:-1]) & COUNTER_MASK
-    cum = np.cumsum(periods)
-    cum_valid = cum if every else cum[valid]
-    window = np.minimum(MAX_DELTA_COUNTER, max_delta_init + cum_valid[1:] - cum_valid[:-1])
-    naive[1:] = np.where(delta == 1, _S_OK, np.where(
-        delta == 0, _S_REPEATED, np.where(delta <= window, _S_LOST, _S_WRONG)))
+    c = ((counter if valid is None else counter[valid]) & COUNTER_MASK).astype(np.int8)
+    naive = np.full(len(c), _S_OK, dtype=np.int8)
+    delta = (c[1:] - c[:-1]) & COUNTER_MASK  # int8: 0..15, the step mod 16
+    cum_valid = None if valid is None else np.cumsum(periods)[valid]
+    # periods from each valid frame to the next: its own, when every frame is valid
+    window = periods[1:] + max_delta_init if cum_valid is None else (
+        cum_valid[1:] - cum_valid[:-1] + max_delta_init)
+    np.minimum(window, MAX_DELTA_COUNTER, out=window)
+    codes = [np.int8(code) for code in (_S_OK, _S_REPEATED, _S_LOST, _S_WRONG)]
+    naive[1:] = np.where(delta == 1, codes[0], np.where(
+        delta == 0, codes[1], np.where(delta <= window, codes[2], codes[3])))
     bad = np.flatnonzero((naive == _S_REPEATED) | (naive == _S_WRONG))
+    if len(bad) and cum_valid is None:
+        cum_valid = np.cumsum(periods)
     j = 0
     while True:
         k = int(np.searchsorted(bad, j))
         if k == len(bad):
             break
         start = int(bad[k])  # its predecessor (start - 1) was accepted
+        assert cum_valid is not None
         j = _rejudge(naive, c, cum_valid, start, max_delta_init)
-    if every:
+    if valid is None:
         return naive
     status[valid] = naive
     return status
@@ -274,7 +283,7 @@ def sequence_statuses(
 
 def _rejudge(
     naive: npt.NDArray[np.int8],
-    c: npt.NDArray[np.int64],
+    c: npt.NDArray[np.int8],
     cum: npt.NDArray[np.int64],
     start: int,
     max_delta_init: int,
@@ -372,15 +381,16 @@ def _check_message(
     good = (status == _S_OK) | (status == _S_LOST)
     if good.all():  # the usual case: no gathers
         accepted[index] = True
-        valid, steps = np.arange(len(good)), counter[1:] - counter[:-1]
+        count, steps = len(good), counter[1:] - counter[:-1]
     else:
         accepted[index[good]] = True
         valid = np.flatnonzero(good)
-        steps = counter[valid[1:]] - counter[valid[:-1]]
-    lost = int(np.sum(steps & COUNTER_MASK) - len(valid) + 1)
+        count, steps = len(valid), counter[valid[1:]] - counter[valid[:-1]]
+    steps &= COUNTER_MASK
+    lost = int(np.sum(steps) - count + 1)
     return {
-        "ok": len(valid),
-        "lost": lost if len(valid) else 0,
+        "ok": count,
+        "lost": lost if count else 0,
         "repeated": int(np.count_nonzero(status == _S_REPEATED)),
         "crc_errors": int(np.count_nonzero(status == _S_CRC)),
         "wrong_sequence": int(np.count_nonzero(status == _S_WRONG)),
