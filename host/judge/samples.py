@@ -305,10 +305,18 @@ def _held(
 
 
 def _first_per_encoder(enc_idx: IntArray) -> tuple[IntArray, IntArray]:
-    """Encoder frames named (sorted, unique) and the first position naming each."""
-    named = enc_idx >= 0
-    uniq, first = np.unique(enc_idx[named], return_index=True)
-    return uniq, np.flatnonzero(named)[first]
+    """Encoder frames named (sorted, unique) and the first position naming each: where the
+    named frames never go back (the usual case: a sender names them in bus order), where each
+    value first appears, without ``np.unique``'s sort."""
+    named = np.flatnonzero(enc_idx >= 0)
+    values = enc_idx[named]
+    if len(values) > 1 and not bool(np.all(values[1:] >= values[:-1])):
+        uniq, first = np.unique(values, return_index=True)
+        return uniq, named[first]
+    new = np.empty(len(values), dtype=bool)
+    new[:1] = True
+    np.not_equal(values[1:], values[:-1], out=new[1:])
+    return values[new], named[new]
 
 
 def onboard_samples(
