@@ -12,6 +12,11 @@ frames is in the log under the DBC's ID, or none passes its E2E check with the D
 is a one-line error. Frames the DBC does not know are counted (``unknown_frames`` in the report,
 a row of the summary) but are no error: a real bus carries other traffic too.
 
+odocan's DBC is read through a plan of it (``host.protocol.dbcplan``) that cantools derives on
+the first run and that is cached, keyed by the DBC's content, in ``$ODOCAN_CACHE_DIR`` (default
+``~/.cache/odocan``): later runs import neither cantools nor python-can. ``--dbc`` is read by
+cantools every time.
+
 ``-b/--bitrate`` adds the measured bus load (``host.judge.busstats.from_frames``: each frame's
 exact stuffed length plus the interframe space, over the log's span); a log cannot say when a
 frame was queued, so there is no latency to measure.
