@@ -207,10 +207,14 @@ def _outside_band(value: FloatArray, e: IntArray, step: FloatArray, gap: FloatAr
     if len(e) < 3:
         return out
     # segment k: steps (e[k], e[k + 1]], the slices [e[k] + 1, e[k + 1] + 1) of ``reduceat``
-    # (a closing start and a padding step so that the last segment ends at e[-1] too)
-    pad = np.zeros(1)
-    step = np.concatenate((step[: int(e[-1]) + 1], pad))
-    gap = np.concatenate((gap[: int(e[-1]) + 1], pad))
+    # (a closing start, e[-1] + 1, so that the last segment ends at e[-1] too: the one after it
+    # is dropped, so the step there may be any, the next real one or, at the end, a padding 0)
+    end = int(e[-1]) + 1
+    if end < len(step):  # views: no copies
+        step, gap = step[: end + 1], gap[: end + 1]
+    else:
+        pad = np.zeros(1)
+        step, gap = np.concatenate((step[:end], pad)), np.concatenate((gap[:end], pad))
     starts = e + 1
     empty = e[1:] < e[:-1] + 1
     seg_lo = np.where(empty, np.inf, np.minimum.reduceat(step, starts)[:-1])
