@@ -12,9 +12,11 @@ Makes (once, cached under ``out/bench/``) a candump log of about 1M frames with 
 Then, as whole processes (start-up and imports included, issue #14.2): ``odocan analyze LOG``
 against ``cantools decode --single-line``, each one's wall time, CPU time (user + system, the
 figure that suffers least from a loaded machine) and max RSS, read from ``wait4`` as
-``/usr/bin/time -v`` does; and with ``--batch N``, N copies (symlinks) of a smaller drive
-analysed as a fleet's archive with ``--jobs 1``, ``--jobs 2`` and a 2-worker Dask
-``LocalCluster``.
+``/usr/bin/time -v`` does, in ``--runs`` pairs run alternately (a shared machine's load moves
+both), with each pair's ratio and their range; odocan once more before them with an empty
+DBC-plan cache (``host.protocol.dbcplan``: its first run after a DBC change); and with
+``--batch N``, N copies (symlinks) of a smaller drive analysed as a fleet's archive with
+``--jobs 1``, ``--jobs 2`` and a 2-worker Dask ``LocalCluster``.
 
 With ``--startup``: the start-up alone, as whole processes (best of ``--runs``): the bare
 interpreter, ``odocan --version`` and ``odocan analyze`` on a 2-second drive.
@@ -106,10 +108,12 @@ def time_cantools_cli(path: Path) -> float:
     return time.perf_counter() - start
 
 
-def whole_process(argv: list[str], stdin: Path | None = None) -> tuple[float, float, float, int]:
+def whole_process(
+    argv: list[str], stdin: Path | None = None, env: dict[str, str] | None = None
+) -> tuple[float, float, float, int]:
     """Wall seconds, CPU seconds (user + system), max RSS in MB and exit code of ``argv`` run
     to completion (stdout discarded), measured as ``/usr/bin/time -v`` does (``wait4``)."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = dict(os.environ if env is None else env, PYTHONPATH=str(ROOT))
     stdin_file = stdin.open("rb") if stdin is not None else subprocess.DEVNULL
     start = time.perf_counter()
     child = subprocess.Popen(argv, stdin=stdin_file, stdout=subprocess.DEVNULL, env=env)
@@ -122,21 +126,36 @@ def whole_process(argv: list[str], stdin: Path | None = None) -> tuple[float, fl
 
 
 def print_whole_processes(path: Path, frames: int, runs: int, cli: bool) -> None:
-    """``odocan analyze LOG`` and ``cantools decode`` as whole processes, side by side."""
+    """``odocan analyze LOG`` and ``cantools decode`` as whole processes, side by side: first
+    odocan with an empty DBC-plan cache (its first run after a DBC change parses the DBC with
+    cantools), then ``runs`` pairs alternating odocan (warm cache) and cantools, each pair's
+    ratio and their range (a shared machine's load moves both)."""
     odocan = [sys.executable, "-m", "odocan", "analyze", str(path)]
     cantools_cli = [str(Path(sys.executable).parent / "cantools"), "decode", "--single-line",
                     str(DBC_PATH)]
-    print(f"whole processes on {frames} frames (odocan best of {runs}; wall / CPU / max RSS)")
-    best = min((whole_process(odocan) for _ in range(runs)), key=lambda r: r[1])
-    print(f"odocan analyze LOG       {best[0]:8.2f} s  {best[1]:8.2f} s CPU  {best[2]:7.0f} MB"
-          f"  exit {best[3]}")
-    if not cli:
-        return
-    theirs = whole_process(cantools_cli, stdin=path)
-    print(f"cantools decode < LOG    {theirs[0]:8.2f} s  {theirs[1]:8.2f} s CPU  "
-          f"{theirs[2]:7.0f} MB  exit {theirs[3]}")
-    print(f"ratio (cantools / odocan): wall {theirs[0] / best[0]:5.1f}x, "
-          f"CPU {theirs[1] / best[1]:5.1f}x (target >= 20x)")
+    print(f"whole processes on {frames} frames (wall / CPU user+sys / max RSS)")
+    with tempfile.TemporaryDirectory() as cache:
+        cold = whole_process(odocan, env=dict(os.environ, ODOCAN_CACHE_DIR=cache))
+    print(f"odocan analyze, cold     {cold[0]:8.2f} s  {cold[1]:8.2f} s CPU  {cold[2]:7.0f} MB"
+          f"  exit {cold[3]}  (empty DBC-plan cache)")
+    whole_process(odocan)  # the default cache warm, whatever ran before
+    ratios_cpu, ratios_wall = [], []
+    for run in range(runs):
+        ours = whole_process(odocan)
+        print(f"odocan analyze LOG       {ours[0]:8.2f} s  {ours[1]:8.2f} s CPU  {ours[2]:7.0f} MB"
+              f"  exit {ours[3]}")
+        if not cli:
+            continue
+        theirs = whole_process(cantools_cli, stdin=path)
+        ratios_cpu.append(theirs[1] / ours[1])
+        ratios_wall.append(theirs[0] / ours[0])
+        print(f"cantools decode < LOG    {theirs[0]:8.2f} s  {theirs[1]:8.2f} s CPU  "
+              f"{theirs[2]:7.0f} MB  exit {theirs[3]}   pair {run + 1}: CPU "
+              f"{ratios_cpu[-1]:5.1f}x, wall {ratios_wall[-1]:5.1f}x")
+    if ratios_cpu:
+        print(f"ratio (cantools / odocan) over {len(ratios_cpu)} pairs: CPU "
+              f"{min(ratios_cpu):.1f}-{max(ratios_cpu):.1f}x, wall "
+              f"{min(ratios_wall):.1f}-{max(ratios_wall):.1f}x (target >= 20x)")
 
 
 def print_startup(runs: int) -> None:
@@ -181,7 +200,8 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=1_000_000, help="log size (frames)")
     parser.add_argument("--log", type=Path, help="use this candump log instead of making one")
     parser.add_argument("--no-cli", action="store_true", help="skip the cantools CLI run")
-    parser.add_argument("--runs", type=int, default=3, help="odocan runs (best kept)")
+    parser.add_argument("--runs", type=int, default=3,
+                        help="whole-process pairs (odocan, cantools); start-up: runs (best kept)")
     parser.add_argument("--batch", type=int, default=0, metavar="N",
                         help="also time an archive of N logs (0: not)")
     parser.add_argument("--batch-frames", type=int, default=36_000, help="frames per batch log")

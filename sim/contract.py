@@ -10,9 +10,10 @@ import os
 from functools import cache
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import cantools
-from cantools.database.can import Database, Message
+if TYPE_CHECKING:  # imported when the DBC is read: odocan analyze reads a plan of it instead
+    from cantools.database.can import Database, Message
 
 # Package data: dbc/ ships inside the odocan package (an installed wheel unpacks it to files).
 _DEFAULT_DBC = Path(str(resources.files("odocan").joinpath("dbc", "odocan.dbc")))
@@ -22,6 +23,9 @@ DBC_PATH = Path(os.environ.get("ODOCAN_DBC", _DEFAULT_DBC))
 @cache
 def database(path: Path = DBC_PATH) -> Database:
     """The DBC, loaded once (strict)."""
+    import cantools
+    from cantools.database.can import Database
+
     db = cantools.database.load_file(path, strict=True)
     assert isinstance(db, Database)
     return db

@@ -25,6 +25,7 @@ from odocan.host.judge.analysis import (
 )
 from odocan.host.judge.compare import _outside_band
 from odocan.host.judge.reference import Geometry, integrate
+from odocan.host.judge.samples import _first_per_encoder
 from odocan.sim.contract import DBC_PATH, database
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import OdocanError
@@ -279,3 +280,20 @@ def test_the_twist_band_keeps_the_step_into_the_last_named_frame() -> None:
     out = _outside_band(value, e, step, gap)
     assert out[2] == 0.0
     assert out[3] == 0.0
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_first_per_encoder_is_np_unique_s_first_occurrences(seed: int) -> None:
+    """The fast path (named frames in order) and the general one agree with ``np.unique``."""
+    rng = np.random.default_rng(seed)
+    named = np.sort(rng.integers(0, 400, size=1000))  # in bus order, repeats
+    if seed % 2:
+        named[rng.integers(0, 1000, size=40)] = rng.integers(0, 400, size=40)  # some go back
+    named[rng.random(1000) < 0.1] = -1  # not matched
+    keep = np.flatnonzero(named >= 0)
+    expected, first = np.unique(named[keep], return_index=True)
+    uniq, positions = _first_per_encoder(named)
+    np.testing.assert_array_equal(uniq, expected)
+    np.testing.assert_array_equal(positions, keep[first])
+    assert _first_per_encoder(np.full(3, -1))[0].size == 0
+

@@ -8,6 +8,7 @@ timing assertion: what is imported or not, which does not depend on the machine'
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -54,10 +55,12 @@ print(json.dumps({"code": 0, "modules": sorted({m.split(".")[0] for m in sys.mod
 """
 
 
-def imported_by(*argv: str, probe: str = PROBE) -> tuple[int, set[str]]:
+def imported_by(
+    *argv: str, probe: str = PROBE, env: dict[str, str] | None = None
+) -> tuple[int, set[str]]:
     """Exit code and top-level packages imported by ``odocan ARGV`` in a fresh interpreter."""
     done = subprocess.run([sys.executable, "-c", probe, *argv], capture_output=True, text=True,
-                          timeout=300, check=False)
+                          timeout=300, check=False, env=env)
     last = json.loads(done.stdout.strip().splitlines()[-1])
     return int(last["code"]), set(last["modules"])
 
@@ -69,11 +72,17 @@ def small_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return log
 
 
-def test_analyze_imports_nothing_heavy_it_does_not_use(small_log: Path) -> None:
-    code, modules = imported_by("analyze", str(small_log))
-    assert code == 0
-    assert modules.isdisjoint(HEAVY), sorted(modules & set(HEAVY))
-    assert {"numpy", "cantools", "rich"} <= modules  # the probe sees what analyze does use
+def test_analyze_imports_nothing_heavy_it_does_not_use(small_log: Path, tmp_path: Path) -> None:
+    """Nor, once the DBC's plan is cached (``host.protocol.dbcplan``), cantools or python-can:
+    the first run parses the DBC with cantools, the next ones read the plan."""
+    env = dict(os.environ, ODOCAN_CACHE_DIR=str(tmp_path / "cache"))
+    for run in ("cold", "warm"):
+        code, modules = imported_by("analyze", str(small_log), env=env)
+        assert code == 0
+        assert modules.isdisjoint(HEAVY), sorted(modules & set(HEAVY))
+        assert {"numpy", "rich"} <= modules  # the probe sees what analyze does use
+        assert ("cantools" in modules) == (run == "cold"), run
+        assert ("can" in modules) == (run == "cold"), run  # cantools imports python-can
 
 
 def test_the_probe_sees_heavy_imports_when_a_command_uses_them(
@@ -219,3 +228,27 @@ def test_bare_help_imports_no_subcommand() -> None:
     assert not {m for m in modules if m.startswith("odocan.host.cli.subparsers.")}
     top = {m.split(".")[0] for m in modules}
     assert top.isdisjoint({*HEAVY, "numpy", "can", "cantools", "rich"}), top
+
+
+BLAS_PROBE = """
+import os, sys
+from odocan.host.cli import main
+try:
+    main(["--version"])
+except SystemExit:
+    pass
+import numpy
+print(os.environ.get("OPENBLAS_NUM_THREADS"))
+"""
+
+
+@pytest.mark.parametrize(("given", "seen"), [(None, "1"), ("3", "3")])
+def test_the_command_runs_blas_on_one_thread_unless_told(given: str | None, seen: str) -> None:
+    """``main`` sets OpenBLAS to one thread before numpy loads (``host.cli.BLAS_THREADS``: no
+    spinning thread pool, the same dot-product bits on every machine); a user's value stays."""
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    done = subprocess.run([sys.executable, "-c", BLAS_PROBE], capture_output=True, text=True,
+                          env=env, timeout=300, check=True)
+    assert done.stdout.strip().splitlines()[-1] == seen

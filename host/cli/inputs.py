@@ -16,9 +16,9 @@ import numpy as np
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import REQUIRED, AnalysisError
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
-from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 
 T = TypeVar("T")
@@ -31,7 +31,7 @@ class MissingFramesError(OdocanError):
 def require_frames(frames: FrameArrays, source: str, cause: str = "") -> None:
     """Raise one line naming ``source`` when a message of ``REQUIRED`` has no frame in
     ``frames`` (``cause``: a likely reason, appended)."""
-    db = contract.database()
+    db = default_plan()
     decoder = BulkDecoder(db)
     missing = [name for name in REQUIRED if len(decoder.select(frames, name)) == 0]
     if not missing:
@@ -54,7 +54,7 @@ def require_accepted(frames: FrameArrays, source: str, cause: str = "") -> None:
     """As ``require_frames``, then: at least one frame of each ``REQUIRED`` message passes its
     E2E check (with odocan's DBC, so a failure is the frames' fault, not the DBC's)."""
     require_frames(frames, source, cause)
-    decoder = BulkDecoder(contract.database())
+    decoder = BulkDecoder(default_plan())
     _, accepted = check_frames(frames)
     for name in REQUIRED:
         index = decoder.select(frames, name)

@@ -17,7 +17,6 @@ from odocan.host.io.frames import (
     FLAG_EXTENDED,
     MAX_DLC,
     FrameArrays,
-    FrameCollector,
     LogFormatError,
     U8Array,
     concat_frames,
@@ -224,7 +223,7 @@ def _parse_group(
     """Parse lines of one length: take the first remaining line as the template, parse every
     line of that layout at once, repeat (a few rounds) on the rest; returns (parsed, rejected)."""
     parsed: list[_Parsed] = []
-    block = np.lib.stride_tricks.sliding_window_view(buf, length)[starts[lines]]
+    block = _rows(buf, starts[lines], length)
     for _ in range(_TEMPLATE_ROUNDS):
         if len(lines) == 0:
             break
@@ -239,6 +238,21 @@ def _parse_group(
             parsed.append(_Parsed(lines[ok], frames.select(ok)))
         lines, block = lines[~ok], block[~ok]
     return parsed, lines
+
+
+def _rows(buf: U8Array, first: npt.NDArray[np.int64], length: int) -> U8Array:
+    """The ``length`` bytes of ``buf`` from each of ``first`` (ascending) as the rows of a 2-D
+    array: a strided view when they are evenly spaced (a chunk's lines of one length, one after
+    the other: no copy of the text), else a copy."""
+    if len(first) > 1:
+        step = int(first[1] - first[0])
+        if step >= length and bool(np.all(np.diff(first) == step)):
+            rows: U8Array = np.lib.stride_tricks.as_strided(
+                buf[int(first[0]):], shape=(len(first), length), strides=(step, 1),
+                writeable=False)
+            return rows
+    copied: U8Array = np.lib.stride_tricks.sliding_window_view(buf, length)[first]
+    return copied
 
 
 def _column_ranges(c: _Columns) -> tuple[U8Array, U8Array]:
@@ -277,8 +291,9 @@ def _rows_with(bad: npt.NDArray[np.bool_]) -> npt.NDArray[np.intp]:
 
 
 def _parse_block(block: U8Array, c: _Columns) -> tuple[npt.NDArray[np.bool_], FrameArrays]:
-    """The rows of ``block`` (lines of one length, C-contiguous) that have the canonical layout
-    ``c``, and the frames of all rows (those of the other rows are meaningless).
+    """The rows of ``block`` (lines of one length: a copy, or a view with rows apart by more than
+    their length, ``_rows``) that have the canonical layout ``c``, and the frames of all rows
+    (those of the other rows are meaningless).
 
     One range test of every byte against its column's range (``_column_ranges``), then the
     decoding checks what a range cannot: hex digits by the tables that decode them, the
@@ -288,9 +303,7 @@ def _parse_block(block: U8Array, c: _Columns) -> tuple[npt.NDArray[np.bool_], Fr
     """
     n = block.shape[0]
     low, span = _column_ranges(c)
-    flat = block.reshape(-1)
-    offset = np.subtract(flat, np.tile(low, n))
-    bad_rows = [_rows_with(np.greater(offset, np.tile(span, n)).reshape(n, c.length))]
+    bad_rows = [_rows_with(np.subtract(block, low) > span)]  # uint8: broadcast by column
     bad_rows.append(_rows_with(block[:, c.close + 2 : c.id_start - 1] == ord("#")))  # channel
     id_digits = np.take(_HEX, block[:, c.id_start : c.hash])  # take: faster than [] here
     bad_rows.append(_rows_with(id_digits < 0))
@@ -300,9 +313,7 @@ def _parse_block(block: U8Array, c: _Columns) -> tuple[npt.NDArray[np.bool_], Fr
     if c.hash - c.id_start == 8:
         bad_rows.append(np.flatnonzero(id_digits[:, 0] & 0x2))  # the error-frame flag
     nbytes = (c.data_end - c.hash - 1) // 2
-    pairs = np.ndarray(
-        (n, nbytes), dtype=_U16_LE, buffer=block, offset=c.hash + 1, strides=(c.length, 2)
-    )
+    pairs = block[:, c.hash + 1 : c.hash + 1 + 2 * nbytes].view(_U16_LE)  # in place, unaligned
     payload = np.take(_HEX_PAIR, pairs)
     bad_rows.append(_rows_with(payload == _BAD_PAIR))
     if c.data_end < c.length:
@@ -364,7 +375,7 @@ def _digits_value(block: U8Array, first: int, stop: int) -> npt.NDArray[np.int64
             for column in range(start, start + count):
                 value = value * 10 + (block[:, column].astype(np.int64) - ord("0"))
             continue
-        x = np.ndarray((n,), dtype=_U64_LE, buffer=block, offset=start, strides=(length,))
+        x = block[:, start : start + 8].view(_U64_LE)[:, 0]  # in place, unaligned
         if count < 8:
             x = (x << np.uint64(8 * (8 - count))) | np.uint64(_ASCII_ZEROS >> (8 * count))
         x = x - np.uint64(_ASCII_ZEROS)
@@ -410,6 +421,8 @@ def _parse_slow(
 ) -> _Parsed:
     """Parse the given lines one by one (blank lines skipped); the first bad one raises (named
     ``NAME:LINE``, lines counted from ``first_line`` + 1)."""
+    from odocan.host.io.collector import FrameCollector  # python-can's Listener: when needed
+
     collector = FrameCollector()
     kept: list[int] = []
     for line in lines.tolist():

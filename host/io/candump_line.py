@@ -4,7 +4,7 @@ not take (non-canonical lines, error frames, remote and FD frames, the first bad
 
 from __future__ import annotations
 
-import can
+from typing import TYPE_CHECKING
 
 from odocan.host.io.frames import MAX_DLC, LogFormatError
 
@@ -12,12 +12,17 @@ CAN_ERR_FLAG = 0x20000000  # candump: error frame marker in the ID (can/error.h)
 _CAN_ERR_BUSERROR = 0x00000080
 ID_MASK_29 = 0x1FFFFFFF
 
+if TYPE_CHECKING:
+    import can
+
 
 def parse_candump_line(raw: bytes, where: str = "<line>") -> can.Message | None:
     """One ``candump -L`` line as python-can reads it (None for a blank line).
 
     Raises ``LogFormatError`` naming ``where`` (``LOG:LINE``) and what is wrong.
     """
+    import can  # here, not at start-up: a canonical log never comes this way
+
     try:
         text = raw.decode("ascii").strip()
     except UnicodeDecodeError:

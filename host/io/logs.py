@@ -28,8 +28,7 @@ import os
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-
-import can
+from typing import TYPE_CHECKING
 
 from odocan.host.io.candump import (
     CHUNK_BYTES,
@@ -47,12 +46,25 @@ from odocan.host.io.frames import (
     FLAG_REMOTE,
     MAX_DLC,
     FrameArrays,
-    FrameCollector,
     LogFormatError,
     concat_frames,
     empty_frames,
     to_message,
 )
+
+if TYPE_CHECKING:
+    from odocan.host.io.collector import FrameCollector as FrameCollector
+
+
+def __getattr__(name: str) -> object:
+    """``FrameCollector`` on first use (``host.io.frames.__getattr__``: no python-can at
+    start-up)."""
+    if name == "FrameCollector":
+        from odocan.host.io.collector import FrameCollector
+
+        return FrameCollector
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "CHUNK_BYTES", "CHUNK_FRAMES", "FLAG_ERROR", "FLAG_EXTENDED", "FLAG_FD", "FLAG_REMOTE",
@@ -200,6 +212,10 @@ def _read_with_python_can(path: Path) -> FrameArrays:
 def _python_can_parts(path: Path, chunk_frames: int) -> Iterator[FrameArrays]:
     """Any format python-can reads, through ``can.LogReader`` (which streams), at most
     ``chunk_frames`` frames at a time."""
+    import can  # python-can's readers: imported for the formats that need them
+
+    from odocan.host.io.collector import FrameCollector
+
     collector = FrameCollector()
     count = 0
     try:

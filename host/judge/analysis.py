@@ -82,12 +82,11 @@ __all__ = ["HEADING_LSB_RAD", "POSITION_LSB_M", "REQUIRED", "Analysis", "Analysi
            "Tolerance", "analyze"]
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import cantools
 import numpy as np
 
-from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S  # not ecu: its secoc, nav, ...
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.compare import (
     check_twist,
@@ -114,11 +113,14 @@ from odocan.host.judge.samples import (
     truth_samples,
 )
 from odocan.host.judge.stalls import after_stalls
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import UNKNOWN, check_frames
 from odocan.host.protocol.pose import heading_fields
-from odocan.sim import contract
 from odocan.sim.robot import RobotProfile
+
+if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
+    from odocan.host.protocol.dbcplan import DatabaseSpec
 
 
 @dataclass(frozen=True)
@@ -151,7 +153,7 @@ def analyze(
     integrator: str | None = None,
     *,
     tolerance: Tolerance = Tolerance(),
-    db: cantools.database.can.Database | None = None,
+    db: DatabaseSpec | None = None,
     scenario: str | None = None,
     seed: int | None = None,
     wall_seconds: float | None = None,
@@ -167,7 +169,7 @@ def analyze(
     (the wall-clock time the run took) only go into the report. Raises ``AnalysisError`` when the
     DBC does not match the frames or there is nothing to compare.
     """
-    db = db if db is not None else contract.database()
+    db = db if db is not None else default_plan()
     decoder = BulkDecoder(db)
     require_messages(decoder)
     lives = split_lives(frames, decoder)
@@ -218,7 +220,7 @@ def _analyze_life(
     integrator: str | None,
     *,
     tolerance: Tolerance,
-    db: cantools.database.can.Database,
+    db: DatabaseSpec,
     decoder: BulkDecoder,
     boot: bool = False,
     scenario: str | None = None,
@@ -349,7 +351,7 @@ def _robot_dict(robot: RobotProfile) -> dict[str, Any]:
     }
 
 
-def _covered_s(frames: FrameArrays, db: cantools.database.can.Database) -> float:
+def _covered_s(frames: FrameArrays, db: DatabaseSpec) -> float:
     """Seconds of bus time the log covers: its encoder periods (first to last encoder frame,
     plus one cycle), or the plain frame span when it has no encoder frame."""
     message = db.get_message_by_name("WHEEL_ENCODERS")

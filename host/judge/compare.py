@@ -169,19 +169,33 @@ def _step_speeds(
     cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS") or 0.01
     periods = np.diff(enc.seq)
     dt_s = periods * cycle_s
-    nan = np.full(1, np.nan)
-    v = np.concatenate((nan, 0.5 * (ds_left + ds_right) / dt_s))
-    w = np.concatenate((nan, (ds_right - ds_left) / g.wheelbase_m / dt_s))
+    # Each series is built in place in its output, element 0 first (the same operations in the
+    # same order as the one-line formulas in the comments: the same bits, a few full-size
+    # temporaries instead of a dozen).
+    v, w = np.empty(len(periods) + 1), np.empty(len(periods) + 1)
+    v[0] = w[0] = np.nan
+    np.add(ds_left, ds_right, out=v[1:])  # 0.5 * (ds_left + ds_right) / dt_s
+    v[1:] *= 0.5
+    v[1:] /= dt_s
+    np.subtract(ds_right, ds_left, out=w[1:])  # (ds_right - ds_left) / wheelbase_m / dt_s
+    w[1:] /= g.wheelbase_m
+    w[1:] /= dt_s
     count_mps = max(g.m_per_count_left, g.m_per_count_right) / cycle_s
-    accel_mps = TWIST_GAP_ACCEL_MPS2 * (periods - 1) * cycle_s
-    gap_v = np.concatenate(([0.0], np.where(periods > 1, count_mps + accel_mps, 0.0)))
+    gap_v = np.empty(len(periods) + 1)  # periods > 1: count_mps + 5.0 * (periods - 1) * cycle_s
+    gap_v[0] = 0.0
+    np.multiply(TWIST_GAP_ACCEL_MPS2, periods - 1, out=gap_v[1:])
+    gap_v[1:] *= cycle_s
+    gap_v[1:] += count_mps
+    gap_v[1:][periods <= 1] = 0.0
     gap_w = gap_v * (2.0 / g.wheelbase_m)
     # A frame that waited on a busy bus came more periods after the one before than its COUNTER
     # step says: the firmware, which cannot tell waiting from losing, may spread the step over
     # the time it waited (its mean speed then lies between 0 and the step's speed).
-    waited = np.concatenate(([False], np.diff(enc.timestamp_s) > (periods + 0.5) * cycle_s))
-    gap_v = np.where(waited, np.maximum(gap_v, np.abs(v)), gap_v)
-    gap_w = np.where(waited, np.maximum(gap_w, np.abs(w)), gap_w)
+    late_s = periods + 0.5
+    late_s *= cycle_s
+    waited = 1 + np.flatnonzero(np.diff(enc.timestamp_s) > late_s)
+    gap_v[waited] = np.maximum(gap_v[waited], np.abs(v[waited]))
+    gap_w[waited] = np.maximum(gap_w[waited], np.abs(w[waited]))
     return (v, w), (gap_v, gap_w)
 
 
@@ -193,10 +207,14 @@ def _outside_band(value: FloatArray, e: IntArray, step: FloatArray, gap: FloatAr
     if len(e) < 3:
         return out
     # segment k: steps (e[k], e[k + 1]], the slices [e[k] + 1, e[k + 1] + 1) of ``reduceat``
-    # (a closing start and a padding step so that the last segment ends at e[-1] too)
-    pad = np.zeros(1)
-    step = np.concatenate((step[: int(e[-1]) + 1], pad))
-    gap = np.concatenate((gap[: int(e[-1]) + 1], pad))
+    # (a closing start, e[-1] + 1, so that the last segment ends at e[-1] too: the one after it
+    # is dropped, so the step there may be any, the next real one or, at the end, a padding 0)
+    end = int(e[-1]) + 1
+    if end < len(step):  # views: no copies
+        step, gap = step[: end + 1], gap[: end + 1]
+    else:
+        pad = np.zeros(1)
+        step, gap = np.concatenate((step[:end], pad)), np.concatenate((gap[:end], pad))
     starts = e + 1
     empty = e[1:] < e[:-1] + 1
     seg_lo = np.where(empty, np.inf, np.minimum.reduceat(step, starts)[:-1])

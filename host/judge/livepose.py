@@ -8,7 +8,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from odocan.firmware.ecu import ENCODER_PERIOD_US, MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
+from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.protocol.pose import heading_fields, unwrap_near
 from odocan.sim.pose import wrap_angle

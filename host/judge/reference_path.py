@@ -10,7 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from odocan.firmware.ecu import ENCODER_PERIOD_US, MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
+from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.reference import Geometry, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,

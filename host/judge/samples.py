@@ -14,15 +14,16 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import INTEGRATORS
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
-from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 
 # One LSB of the pose signals, from the DBC's scales (the single source of truth): X, Y 0.1 mm,
 # HEADING a 16-bit binary angle (2 pi / 65536 rad).
-POSITION_LSB_M = float(contract.message("ODOM_POSE_X").get_signal_by_name("X").scale)
-HEADING_LSB_RAD = float(contract.message("ODOM_POSE_X").get_signal_by_name("HEADING").scale)
+_POSE_X = default_plan().get_message_by_name("ODOM_POSE_X")
+POSITION_LSB_M = float(_POSE_X.get_signal_by_name("X").scale)
+HEADING_LSB_RAD = float(_POSE_X.get_signal_by_name("HEADING").scale)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 SILENCE_CYCLES = 8  # pose frames this many encoder cycles apart: the firmware was stalled
 QUEUED_GAP_CYCLES = 0.5  # two sends of one message closer than this waited to be sent
@@ -192,14 +193,24 @@ def sender_seq(counter: IntArray, timestamp_s: FloatArray, cycle_s: float | None
     stamps say that many more periods passed, unless the frame after the gap came in a burst
     (``queued_frames``). Shared by ``encoder_frames`` and the live judge
     (``host.judge.tracking``), which applies it to its window of recent frames."""
-    step = (np.diff(counter) & 0xF).astype(np.int64)
-    if cycle_s is not None and len(step):
-        periods = np.rint(np.diff(timestamp_s) / cycle_s).astype(np.int64)
-        lost = 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
+    step = np.diff(counter).astype(np.int64, copy=False)
+    step &= 0xF
+    if cycle_s is not None and len(step):  # in place: the same operations, fewer temporaries
+        gap_periods = np.diff(timestamp_s)
+        gap_periods /= cycle_s
+        periods = np.rint(gap_periods, out=gap_periods).astype(np.int64)
+        periods -= step
+        lost_16 = np.rint(periods / 16)
+        np.maximum(0, lost_16, out=lost_16)
+        lost = lost_16.astype(np.int64)
+        lost *= 16
         # a frame let out in a burst after the gap waited in the sender's buffer: the gap is
         # a busy bus, not lost frames (the COUNTER step is the whole step)
-        step = step + np.where(queued_frames(timestamp_s, cycle_s)[1:], 0, lost)
-    seq: IntArray = np.concatenate(([0], np.cumsum(step))).astype(np.int64)
+        lost[queued_frames(timestamp_s, cycle_s)[1:]] = 0
+        step += lost
+    seq: IntArray = np.empty(len(step) + 1, dtype=np.int64)
+    seq[0] = 0
+    np.cumsum(step, out=seq[1:])
     return seq
 
 
@@ -347,10 +358,18 @@ def _held(
 
 
 def _first_per_encoder(enc_idx: IntArray) -> tuple[IntArray, IntArray]:
-    """Encoder frames named (sorted, unique) and the first position naming each."""
-    named = enc_idx >= 0
-    uniq, first = np.unique(enc_idx[named], return_index=True)
-    return uniq, np.flatnonzero(named)[first]
+    """Encoder frames named (sorted, unique) and the first position naming each: where the
+    named frames never go back (the usual case: a sender names them in bus order), where each
+    value first appears, without ``np.unique``'s sort."""
+    named = np.flatnonzero(enc_idx >= 0)
+    values = enc_idx[named]
+    if len(values) > 1 and not bool(np.all(values[1:] >= values[:-1])):
+        uniq, first = np.unique(values, return_index=True)
+        return uniq, named[first]
+    new = np.empty(len(values), dtype=bool)
+    new[:1] = True
+    np.not_equal(values[1:], values[:-1], out=new[1:])
+    return values[new], named[new]
 
 
 def onboard_samples(

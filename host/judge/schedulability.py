@@ -39,9 +39,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from cantools.database.can import Database, Message
+if TYPE_CHECKING:
+    from cantools.database.can import Database, Message
 
 from odocan.sim.exceptions import ConfigurationError
 

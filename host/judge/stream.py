@@ -53,8 +53,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-import cantools
 import numpy as np
 import numpy.typing as npt
 
@@ -73,6 +73,9 @@ from odocan.host.judge.samples import (
 from odocan.host.protocol.decode import BulkDecoder, frame_keys
 from odocan.host.protocol.e2e import check_frames, e2e_messages
 
+if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
+    from odocan.host.protocol.dbcplan import DatabaseSpec
+
 Counts = dict[str, dict[str, int]]
 
 
@@ -88,7 +91,7 @@ def _add(total: Counts, part: Counts, sign: int = 1) -> None:
 class StreamE2E:
     """``check_frames`` over a log fed chunk by chunk (module docstring)."""
 
-    db: cantools.database.can.Database
+    db: DatabaseSpec
     counts: Counts = field(default_factory=dict)  # so far: ``check_frames``' first result
     _tail: FrameArrays = field(default_factory=empty_frames)
 

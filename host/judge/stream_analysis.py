@@ -22,12 +22,11 @@ from __future__ import annotations
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
 
-import cantools
 import numpy as np
 
-from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge.analysis import Tolerance, _realtime, _robot_dict
 from odocan.host.judge.reboots import Life, merge
@@ -42,6 +41,12 @@ from odocan.host.judge.samples import (
     twinned_encoder_frames,
 )
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
+from odocan.host.judge.stream_choice import RSS_MARGIN as RSS_MARGIN
+from odocan.host.judge.stream_choice import RSS_TARGET_MB as RSS_TARGET_MB
+from odocan.host.judge.stream_choice import STREAM_MODES as STREAM_MODES
+from odocan.host.judge.stream_choice import WHOLE_RSS_MB as WHOLE_RSS_MB
+from odocan.host.judge.stream_choice import stream_above_bytes as stream_above_bytes
+from odocan.host.judge.stream_choice import streams as streams
 from odocan.host.judge.stream_compare import TruthCompare
 from odocan.host.judge.stream_facts import StreamFacts
 from odocan.host.judge.stream_life import LifeInfo, life_chunks
@@ -52,12 +57,15 @@ from odocan.host.judge.stream_place import start_pose as place_start
 from odocan.host.judge.stream_stalls import StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
 from odocan.host.judge.stream_twist import StreamTwist
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import UNKNOWN
 from odocan.host.protocol.pose import heading_fields
-from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 from odocan.sim.robot import RobotProfile
+
+if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
+    from odocan.host.protocol.dbcplan import DatabaseSpec
 
 Frames = Callable[[], Iterable[FrameArrays]]  # a life's frames, from its first, each call
 QUEUED_MESSAGES = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y", "ODOM_TWIST")
@@ -71,34 +79,6 @@ class NotStreamable(OdocanError):
 
 
 DEFAULT_TOLERANCE = Tolerance()
-STREAM_MODES = ("auto", "always", "never")
-RSS_TARGET_MB = 300.0  # the max RSS ``odocan analyze`` of one log aims to stay under (#14.1)
-# The whole-log path's max RSS (MB) against its log's size (MB), per format: base + per_mb * size,
-# measured by ``bench/analyze_memory.py --threshold`` (docs/benchmarks.md); a log bigger than
-# the size where that reaches RSS_TARGET_MB / RSS_MARGIN streams.
-WHOLE_RSS_MB = {".log": (65.4, 2.738), ".asc": (54.6, 1.888), ".blf": (52.2, 21.480)}
-RSS_MARGIN = 1.2  # over a worst-case fit (one long life): 250 MB, the bench log stays whole
-
-
-def stream_above_bytes(suffix: str) -> float:
-    """The log size (bytes) above which ``odocan analyze`` streams a log of this format (a
-    format not measured: the most memory-hungry one's)."""
-    base, per_mb = WHOLE_RSS_MB.get(suffix.lower(), max(WHOLE_RSS_MB.values(),
-                                                        key=lambda fit: fit[1]))
-    return max(0.0, (RSS_TARGET_MB / RSS_MARGIN - base) / per_mb) * 1e6
-
-
-def streams(path: str | Path, mode: str = "auto") -> bool:
-    """Whether to analyse ``path`` as a stream: ``always``, ``never``, or (``auto``) when the
-    whole-log path would take more than the max-RSS target for a log that size (the streamed
-    path costs about 3x its CPU; the report is the same either way)."""
-    if mode != "auto":
-        return mode == "always"
-    try:
-        size = Path(path).stat().st_size
-    except OSError:
-        return False  # the whole-log path names the path in its error
-    return size > stream_above_bytes(Path(path).suffix)
 
 
 def analyze_file(
@@ -107,7 +87,7 @@ def analyze_file(
     integrator: str | None = None,
     *,
     tolerance: Tolerance = DEFAULT_TOLERANCE,
-    db: cantools.database.can.Database | None = None,
+    db: DatabaseSpec | None = None,
     scenario: str | None = None,
     seed: int | None = None,
     wall_seconds: float | None = None,
@@ -129,7 +109,7 @@ def analyze_file_counted(
     integrator: str | None = None,
     *,
     tolerance: Tolerance = DEFAULT_TOLERANCE,
-    db: cantools.database.can.Database | None = None,
+    db: DatabaseSpec | None = None,
     scenario: str | None = None,
     seed: int | None = None,
     wall_seconds: float | None = None,
@@ -138,7 +118,7 @@ def analyze_file_counted(
     warn: Callable[[str], None] = warn_on_stderr,
 ) -> tuple[dict[str, Any], int]:
     """``analyze_file``'s report and the number of frames in the log."""
-    db = db if db is not None else contract.database()
+    db = db if db is not None else default_plan()
     decoder = BulkDecoder(db)
     require_messages(decoder)
     with tempfile.TemporaryDirectory(prefix="odocan-analyze-") as tmp:
@@ -163,7 +143,7 @@ def analyze_file_counted(
 def _analyze_lives(
     spans: list[LifeSpan], facts: StreamFacts, frames_of: Callable[[LifeSpan], Frames],
     robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
-    db: cantools.database.can.Database, scenario: str | None, seed: int | None,
+    db: DatabaseSpec, scenario: str | None, seed: int | None,
     wall_seconds: float | None, max_wheel_speed_mm_s: int | None,
 ) -> dict[str, Any]:
     """``analysis.analyze`` over the lives found (``frames_of``: a life's frames, each call
@@ -249,7 +229,7 @@ class FrameSpill:
 
 def _life(
     frames: Frames, robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
-    db: cantools.database.can.Database, boot: bool, max_wheel_speed_mm_s: int | None,
+    db: DatabaseSpec, boot: bool, max_wheel_speed_mm_s: int | None,
     scenario: str | None = None, seed: int | None = None, wall_seconds: float | None = None,
 ) -> tuple[dict[str, Any], float]:
     """``analysis._analyze_life``'s report of one life, and its first frame's time."""
@@ -364,7 +344,7 @@ def _life(
 class _FirstPass:
     """Pass 1 over a life (module docstring)."""
 
-    def __init__(self, db: cantools.database.can.Database, robot: RobotProfile) -> None:
+    def __init__(self, db: DatabaseSpec, robot: RobotProfile) -> None:
         self.decoder = BulkDecoder(db)
         self.e2e = StreamE2E(db)
         self.numbering = StreamEncoders(self.decoder)
@@ -484,7 +464,7 @@ class _FirstPass:
                                 "log: nothing to compare")
 
 
-def _first_pass(frames: Frames, db: cantools.database.can.Database,
+def _first_pass(frames: Frames, db: DatabaseSpec,
                 robot: RobotProfile) -> _FirstPass:
     first = _FirstPass(db, robot)
     for chunk in frames():

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-import cantools
 import numpy as np
 import numpy.typing as npt
 
@@ -28,6 +28,9 @@ from odocan.host.judge.stream_stalls import StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.robot import RobotProfile
+
+if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
+    from odocan.host.protocol.dbcplan import DatabaseSpec
 
 
 @dataclass
@@ -99,7 +102,7 @@ class TruthChunk:
 
 
 def life_chunks(
-    chunks: Iterable[FrameArrays], db: cantools.database.can.Database, robot: RobotProfile,
+    chunks: Iterable[FrameArrays], db: DatabaseSpec, robot: RobotProfile,
     integrator: str, *, e0: int, breaks: npt.NDArray[np.int64],
     max_wheel_speed_mm_s: int | None, info: LifeInfo | None = None,
     times_of: frozenset[int] = frozenset(),
@@ -177,7 +180,7 @@ def _truth(samples: dict[str, np.ndarray], rows: _Rows, e0: int, floor: float) -
 
 
 def placed_chunks(
-    chunks: Iterable[FrameArrays], db: cantools.database.can.Database, robot: RobotProfile,
+    chunks: Iterable[FrameArrays], db: DatabaseSpec, robot: RobotProfile,
     integrator: str, *, e0: int, breaks: npt.NDArray[np.int64],
     max_wheel_speed_mm_s: int | None, info: LifeInfo | None = None,
 ) -> Iterator[PlacedChunk]:

@@ -15,15 +15,16 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import cantools
 import numpy as np
 import numpy.typing as npt
-from cantools.database.can import Message, Signal
 
 from odocan.host.io.logs import FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, FrameArrays
 from odocan.sim.exceptions import OdocanError
+
+if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
+    from odocan.host.protocol.dbcplan import DatabaseSpec, MessageSpec, SignalSpec
 
 Int64Array = npt.NDArray[np.int64]
 
@@ -60,7 +61,7 @@ class SignalLayout:
     is_multiplexer: bool = False
 
 
-def signal_layout(signal: Signal) -> SignalLayout:
+def signal_layout(signal: SignalSpec) -> SignalLayout:
     """The layout of a cantools signal (``cantools.database.utils.start_bit`` conventions)."""
     if signal.byte_order == "big_endian":
         msb = 8 * (signal.start // 8) + (7 - signal.start % 8)  # bit 0 = MSB of byte 0
@@ -181,10 +182,10 @@ class BulkDecoder:
     only its own frames' signals.
     """
 
-    def __init__(self, db: cantools.database.can.Database) -> None:
+    def __init__(self, db: DatabaseSpec) -> None:
         self.db = db
         self._layouts: dict[str, tuple[SignalLayout, ...]] = {}
-        self._messages: dict[str, Message] = {}
+        self._messages: dict[str, MessageSpec] = {}
         self._frames: FrameArrays | None = None  # the frames the caches below belong to
         self._groups: FrameGroups | None = None
         self._numbers: dict[int, int] = {}  # frame key -> its message's number in the groups
@@ -197,7 +198,7 @@ class BulkDecoder:
         self._sorted_keys = tuple(keys)
         self._numbers = {key: number for number, key in enumerate(keys)}
 
-    def message(self, name: str) -> Message:
+    def message(self, name: str) -> MessageSpec:
         """The cantools message ``name`` (``DecodeError`` when the database has none)."""
         try:
             return self._messages[name]

@@ -36,17 +36,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import cantools
 import numpy as np
 import numpy.typing as npt
-from cantools.database.can import Message
 
 from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import frame_groups, frame_key
 from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
+
+if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
+    from odocan.host.protocol.dbcplan import DatabaseSpec, MessageSpec
 
 E2E_KEYS = ("ok", "lost", "repeated", "crc_errors", "wrong_sequence")
 UNKNOWN = "unknown"  # the section of check_frames' counts for frames that are not checked
@@ -154,12 +156,12 @@ class E2EMessage:
     min_periods: int = 1  # periods a frame adds at least (0: the window widens with time only)
 
 
-def e2e_messages(db: cantools.database.can.Database) -> dict[int, E2EMessage]:
+def e2e_messages(db: DatabaseSpec) -> dict[int, E2EMessage]:
     """The DBC's messages by ``frame_key``, with their E2E configuration."""
     return {m.key: m for m in (_e2e_message(message) for message in db.messages)}
 
 
-def _e2e_message(message: Message) -> E2EMessage:
+def _e2e_message(message: MessageSpec) -> E2EMessage:
     attributes = message.dbc.attributes if message.dbc is not None else {}
     data_ids = None
     if "E2EDataIDs" in attributes:
@@ -235,7 +237,10 @@ def periods_between(
     each without a cycle time."""
     if cycle_s is None:
         return np.ones(dt_s.shape, dtype=np.int64)
-    return np.maximum(min_periods, np.rint(dt_s / cycle_s)).astype(np.int64)
+    quotient = np.divide(dt_s, cycle_s, out=np.empty(np.shape(dt_s), dtype=np.float64))
+    np.rint(quotient, out=quotient)  # in place: one temporary, not three
+    np.maximum(quotient, min_periods, out=quotient)
+    return quotient.astype(np.int64)
 
 
 def period_count(dt_s: float, cycle_s: float | None, min_periods: int = 1) -> int:
@@ -259,27 +264,33 @@ def sequence_statuses(
     ``SequenceState`` (the cost grows with the number of rejected frames only).
     """
     status = np.full(len(crc_ok), _S_CRC, dtype=np.int8)
-    valid = np.flatnonzero(crc_ok)
-    if len(valid) == 0:
+    every = bool(crc_ok.all())  # the usual case: no gather of the valid frames
+    valid = None if every else np.flatnonzero(crc_ok)
+    if valid is not None and len(valid) == 0:
         return status
-    every = len(valid) == len(crc_ok)  # the usual case: no gather of the valid frames
-    c = (counter if every else counter[valid]) & COUNTER_MASK
-    naive = np.full(len(valid), _S_OK, dtype=np.int8)
-    delta = (c[1:] - c[:-1]) & COUNTER_MASK
-    cum = np.cumsum(periods)
-    cum_valid = cum if every else cum[valid]
-    window = np.minimum(MAX_DELTA_COUNTER, max_delta_init + cum_valid[1:] - cum_valid[:-1])
-    naive[1:] = np.where(delta == 1, _S_OK, np.where(
-        delta == 0, _S_REPEATED, np.where(delta <= window, _S_LOST, _S_WRONG)))
+    c = ((counter if valid is None else counter[valid]) & COUNTER_MASK).astype(np.int8)
+    naive = np.full(len(c), _S_OK, dtype=np.int8)
+    delta = (c[1:] - c[:-1]) & COUNTER_MASK  # int8: 0..15, the step mod 16
+    cum_valid = None if valid is None else np.cumsum(periods)[valid]
+    # periods from each valid frame to the next: its own, when every frame is valid
+    window = periods[1:] + max_delta_init if cum_valid is None else (
+        cum_valid[1:] - cum_valid[:-1] + max_delta_init)
+    np.minimum(window, MAX_DELTA_COUNTER, out=window)
+    codes = [np.int8(code) for code in (_S_OK, _S_REPEATED, _S_LOST, _S_WRONG)]
+    naive[1:] = np.where(delta == 1, codes[0], np.where(
+        delta == 0, codes[1], np.where(delta <= window, codes[2], codes[3])))
     bad = np.flatnonzero((naive == _S_REPEATED) | (naive == _S_WRONG))
+    if len(bad) and cum_valid is None:
+        cum_valid = np.cumsum(periods)
     j = 0
     while True:
         k = int(np.searchsorted(bad, j))
         if k == len(bad):
             break
         start = int(bad[k])  # its predecessor (start - 1) was accepted
+        assert cum_valid is not None
         j = _rejudge(naive, c, cum_valid, start, max_delta_init)
-    if every:
+    if valid is None:
         return naive
     status[valid] = naive
     return status
@@ -287,7 +298,7 @@ def sequence_statuses(
 
 def _rejudge(
     naive: npt.NDArray[np.int8],
-    c: npt.NDArray[np.int64],
+    c: npt.NDArray[np.int8],
     cum: npt.NDArray[np.int64],
     start: int,
     max_delta_init: int,
@@ -308,7 +319,7 @@ def _rejudge(
 
 
 def check_frames(
-    frames: FrameArrays, db: cantools.database.can.Database | None = None
+    frames: FrameArrays, db: DatabaseSpec | None = None
 ) -> tuple[dict[str, dict[str, int]], npt.NDArray[np.bool_]]:
     """Profile 2 over every frame of a log.
 
@@ -320,7 +331,7 @@ def check_frames(
     The frames are grouped by message once (a stable sort of their message numbers) and the CRCs
     of all protected frames found in one pass; the sequence is then judged per message.
     """
-    configs = e2e_messages(db if db is not None else contract.database())
+    configs = e2e_messages(db if db is not None else default_plan())
     accepted = np.zeros(len(frames), dtype=bool)
     counts: dict[str, dict[str, int]] = {}
     unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
@@ -385,15 +396,16 @@ def _check_message(
     good = (status == _S_OK) | (status == _S_LOST)
     if good.all():  # the usual case: no gathers
         accepted[index] = True
-        valid, steps = np.arange(len(good)), counter[1:] - counter[:-1]
+        count, steps = len(good), counter[1:] - counter[:-1]
     else:
         accepted[index[good]] = True
         valid = np.flatnonzero(good)
-        steps = counter[valid[1:]] - counter[valid[:-1]]
-    lost = int(np.sum(steps & COUNTER_MASK) - len(valid) + 1)
+        count, steps = len(valid), counter[valid[1:]] - counter[valid[:-1]]
+    steps &= COUNTER_MASK
+    lost = int(np.sum(steps) - count + 1)
     return {
-        "ok": len(valid),
-        "lost": lost if len(valid) else 0,
+        "ok": count,
+        "lost": lost if count else 0,
         "repeated": int(np.count_nonzero(status == _S_REPEATED)),
         "crc_errors": int(np.count_nonzero(status == _S_CRC)),
         "wrong_sequence": int(np.count_nonzero(status == _S_WRONG)),
@@ -413,7 +425,7 @@ class E2EMonitor:
     frame counts as one period.
     """
 
-    def __init__(self, db: cantools.database.can.Database | None = None) -> None:
+    def __init__(self, db: DatabaseSpec | None = None) -> None:
         self._configs = e2e_messages(db if db is not None else contract.database())
         self._states: dict[int, SequenceState] = {}
         self._last_time: dict[int, float] = {}

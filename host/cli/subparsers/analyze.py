@@ -12,6 +12,11 @@ frames is in the log under the DBC's ID, or none passes its E2E check with the D
 is a one-line error. Frames the DBC does not know are counted (``unknown_frames`` in the report,
 a row of the summary) but are no error: a real bus carries other traffic too.
 
+odocan's DBC is read through a plan of it (``host.protocol.dbcplan``) that cantools derives on
+the first run and that is cached, keyed by the DBC's content, in ``$ODOCAN_CACHE_DIR`` (default
+``~/.cache/odocan``): later runs import neither cantools nor python-can. ``--dbc`` is read by
+cantools every time.
+
 ``-b/--bitrate`` adds the measured bus load (``host.judge.busstats.from_frames``: each frame's
 exact stuffed length plus the interframe space, over the log's span); a log cannot say when a
 frame was queued, so there is no latency to measure.
@@ -188,7 +193,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
 def _streams(args: argparse.Namespace) -> bool:
     """Whether the analysis streams (the module docstring): nothing asks for the whole log,
     and ``--stream`` (auto: the log's size) says so."""
-    from odocan.host.judge.stream_analysis import streams
+    from odocan.host.judge.stream_choice import streams  # not the streamed judge itself
 
     return (args.plot is None and args.parquet is None and args.mcap is None
             and args.bitrate is None and streams(args.log, args.stream))

@@ -1,0 +1,36 @@
+"""Whether ``odocan analyze`` streams a log (``host.judge.stream_analysis``) or reads it whole:
+a choice made from the log's size alone, before anything is read, without importing the
+streamed judge (a whole-log analysis never needs it)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+STREAM_MODES = ("auto", "always", "never")
+RSS_TARGET_MB = 300.0  # the max RSS ``odocan analyze`` of one log aims to stay under (#14.1)
+# The whole-log path's max RSS (MB) against its log's size (MB), per format: base + per_mb * size,
+# measured by ``bench/analyze_memory.py --threshold`` (docs/benchmarks.md); a log bigger than
+# the size where that reaches RSS_TARGET_MB / RSS_MARGIN streams.
+WHOLE_RSS_MB = {".log": (65.4, 2.738), ".asc": (54.6, 1.888), ".blf": (52.2, 21.480)}
+RSS_MARGIN = 1.2  # over a worst-case fit (one long life): 250 MB, the bench log stays whole
+
+
+def stream_above_bytes(suffix: str) -> float:
+    """The log size (bytes) above which ``odocan analyze`` streams a log of this format (a
+    format not measured: the most memory-hungry one's)."""
+    base, per_mb = WHOLE_RSS_MB.get(suffix.lower(), max(WHOLE_RSS_MB.values(),
+                                                        key=lambda fit: fit[1]))
+    return max(0.0, (RSS_TARGET_MB / RSS_MARGIN - base) / per_mb) * 1e6
+
+
+def streams(path: str | Path, mode: str = "auto") -> bool:
+    """Whether to analyse ``path`` as a stream: ``always``, ``never``, or (``auto``) when the
+    whole-log path would take more than the max-RSS target for a log that size (the streamed
+    path costs about 3x its CPU; the report is the same either way)."""
+    if mode != "auto":
+        return mode == "always"
+    try:
+        size = Path(path).stat().st_size
+    except OSError:
+        return False  # the whole-log path names the path in its error
+    return size > stream_above_bytes(Path(path).suffix)
