@@ -121,6 +121,12 @@ from odocan.sim import contract
 from odocan.sim.robot import RobotProfile
 
 
+STALL_DETAIL = ("the firmware was silent or held its pose (a stall): it took the frames it "
+                "missed as one step or several, so the reference's position is placed again "
+                "after it, by no more than the worst merge error there plus the tolerance "
+                "(reference_breaks)")
+
+
 @dataclass(frozen=True)
 class Tolerance:
     """Pass limits of on-board vs reference (position as a distance, heading wrapped)."""
@@ -240,7 +246,8 @@ def _analyze_life(
     else:
         power_up = starts_at_power_up(frames, accepted, decoder, onboard)
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
-                         max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls)
+                         max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
+                         slack_m=tolerance.position_m)
     ref = ref_all.at(onboard.enc)
     pos_err, head_err = pose_errors(onboard, ref)
     vs_ref = error_summary(pos_err, head_err)
@@ -279,6 +286,7 @@ def _analyze_life(
             "reference_restarts": ref_all.restarts,
             "implausible_encoder_frames": ref_all.implausible_frames,
         },
+        "reference_breaks": ref_all.placements.as_dict(),
         "events": [
             {"kind": "counter_restart", "t_s": float(frames.timestamp_s[enc.index[e]]),
              "encoder_frame": int(e),
@@ -288,8 +296,7 @@ def _analyze_life(
         ] + [
             {"kind": "firmware_stall", "t_s": float(frames.timestamp_s[enc.index[e]]),
              "encoder_frame": int(e),
-             "detail": "the firmware was silent or held its pose (a stall): it took the frames it "
-                       "missed as one step, so the reference's position is placed again after it"}
+             "detail": STALL_DETAIL}
             for e in stalls.tolist() if e > int(onboard.enc[0])
         ] + [
             {"kind": "encoder_frames_lost_on_board",

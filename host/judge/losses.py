@@ -190,6 +190,11 @@ class OneSteps:
     def of_geometry(enc: Encoders, g: Geometry, bits: int, integrator: str) -> OneSteps:
         """``of`` for a geometry and wire counter width (``bits``): the live judge's form."""
         dl, dr = wrap_delta(np.diff(enc.left), bits), wrap_delta(np.diff(enc.right), bits)
+        return OneSteps.of_deltas(dl, dr, g, integrator)
+
+    @staticmethod
+    def of_deltas(dl: IntArray, dr: IntArray, g: Geometry, integrator: str) -> OneSteps:
+        """``of`` for the count steps between consecutive frames (from the first frame on)."""
         heading = np.concatenate(([0.0], np.cumsum(heading_steps(dl, dr, g))))
         one_x, one_y = _step_vector(dl, dr, heading[:-1], heading[1:], g, integrator)
         zero = np.zeros(1, dtype=np.int64)
@@ -204,7 +209,12 @@ def run_errors(steps: OneSteps, j: IntArray, r: int) -> FloatArray:
     """How far (m) the pose moves when frames j .. j + r - 1 are lost, i.e. the firmware takes
     the r + 1 steps from frame j - 1 to frame j + r as one (``host.judge.reference.integrate``'s
     step, for its integrator); ``j`` >= 1, j + r <= the last frame."""
-    a, b = j - 1, j + r
+    return merge_error(steps, j - 1, j + r)
+
+
+def merge_error(steps: OneSteps, a: IntArray, b: IntArray | int) -> FloatArray:
+    """How far (m) the pose moves when the firmware takes the steps from frame ``a`` to frame
+    ``b`` as one (the frames between lost): ``run_errors`` by its ends (``a`` < ``b``)."""
     dl = steps.cum_left[b] - steps.cum_left[a]
     dr = steps.cum_right[b] - steps.cum_right[a]
     one_x = steps.cum_x[b] - steps.cum_x[a]

@@ -29,7 +29,7 @@ import numpy as np
 
 from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
-from odocan.host.judge.analysis import Tolerance, _realtime, _robot_dict
+from odocan.host.judge.analysis import STALL_DETAIL, Tolerance, _realtime, _robot_dict
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import (
@@ -336,8 +336,7 @@ def _life(
             for e in info.reprimed
         ] + [
             {"kind": "firmware_stall", "t_s": final.times_s[e], "encoder_frame": int(e),
-             "detail": "the firmware was silent or held its pose (a stall): it took the frames it "
-                       "missed as one step, so the reference's position is placed again after it"}
+             "detail": STALL_DETAIL}
             for e in breaks.tolist() if e > int(first.head.enc[0])
         ] + [
             {"kind": "encoder_frames_lost_on_board", "t_s": final.times_s[begin],
