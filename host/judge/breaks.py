@@ -16,7 +16,7 @@ of the samples the placement rests on). A larger offset is not absorbed: the pla
 the bound and the samples after the break show the rest (``bound_offsets``, ``clamp_offset``).
 
 Spans of more than ``MAX_MERGE_FRAMES`` frames take a cheaper bound: twice the path length
-(a run's merge error is at most its fine path plus its merged step)."""
+(``path_bound_m``: a run's merge error is at most its fine path plus its merged step)."""
 
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ def merge_allowance_m(
     dl = wrap_delta(np.diff(np.asarray(left, dtype=np.int64)), bits)
     dr = wrap_delta(np.diff(np.asarray(right, dtype=np.int64)), bits)
     if n - 2 > MAX_MERGE_FRAMES:
-        return path_bound_m(dl, dr, geometry)
+        return path_bound_m(int(np.sum(np.abs(dl))), int(np.sum(np.abs(dr))), geometry)
     steps = OneSteps.of_deltas(dl, dr, geometry, integrator)
     best = np.zeros(n)  # best[t]: the largest sum with frame t taken (runs before it)
     for t in range(1, n):
@@ -55,11 +55,11 @@ def merge_allowance_m(
     return float(best[-1])
 
 
-def path_bound_m(dl: IntArray, dr: IntArray, geometry: Geometry) -> float:
-    """Twice the path length (m) of the count steps ``dl``, ``dr``: a bound on any merge error
-    across them."""
-    ds = np.abs(0.5 * (dl * geometry.m_per_count_left + dr * geometry.m_per_count_right))
-    return 2.0 * float(np.sum(ds))
+def path_bound_m(counts_left: int, counts_right: int, geometry: Geometry) -> float:
+    """A bound (m) on any merge error across steps of ``counts_*`` counts in all (the sums of
+    their absolute values, exact in any order): a run's merged step and its fine path are each
+    at most its path, and twice a step's travel |dS_L + dS_R| is at most |dS_L| + |dS_R|."""
+    return counts_left * geometry.m_per_count_left + counts_right * geometry.m_per_count_right
 
 
 def clamp_offset(dx_m: float, dy_m: float, limit_m: float) -> tuple[float, float]:
