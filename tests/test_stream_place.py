@@ -20,9 +20,9 @@ from odocan.host.judge.reference import Geometry, integrate
 from odocan.host.judge.reference_path import (
     Reference,
     _Relative,
-    raw_segment_offsets,
     _start_pose,
     firmware_steps,
+    raw_segment_offsets,
 )
 from odocan.host.judge.samples import (
     Poses,

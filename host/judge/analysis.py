@@ -120,7 +120,6 @@ from odocan.host.protocol.pose import heading_fields
 from odocan.sim import contract
 from odocan.sim.robot import RobotProfile
 
-
 STALL_DETAIL = ("the firmware was silent or held its pose (a stall): it took the frames it "
                 "missed as one step or several, so the reference's position is placed again "
                 "after it, by no more than the worst merge error there plus the tolerance "

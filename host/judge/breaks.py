@@ -21,6 +21,7 @@ Spans of more than ``MAX_MERGE_FRAMES`` frames take a cheaper bound: twice the p
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -140,8 +141,8 @@ def bound_offsets(
             continue
         if free:
             summary.gaps += 1
-            summary.max_gap_absorbed_m = max(
-                summary.max_gap_absorbed_m, math.hypot(raw_x_m[k] - x[k - 1], raw_y_m[k] - y[k - 1]))
+            moved_m = math.hypot(raw_x_m[k] - x[k - 1], raw_y_m[k] - y[k - 1])
+            summary.max_gap_absorbed_m = max(summary.max_gap_absorbed_m, moved_m)
             anchor, budget, free = (float(raw_x_m[k]), float(raw_y_m[k])), 0.0, False
             x[k], y[k] = anchor
             continue
@@ -151,3 +152,18 @@ def bound_offsets(
         dx, dy = clamp_offset(dx, dy, limit)
         x[k], y[k] = anchor[0] + dx, anchor[1] + dy
     return x, y, summary
+
+
+def placed_offsets(
+    raw_x_m: FloatArray, raw_y_m: FloatArray, openings: list[tuple[int, bool]],
+    allowance_of: Callable[[int], float], slack_m: float,
+) -> tuple[FloatArray, FloatArray, BreakSummary]:
+    """``bound_offsets`` of segments 1, 2, ... opened at ``openings`` (their first encoder
+    frame, and whether a gap of the log opened it), a stall's allowance by ``allowance_of``
+    (its first frame): the whole-log and the streamed judge's one way."""
+    allowance = np.zeros(len(raw_x_m))
+    gap = np.zeros(len(raw_x_m), dtype=np.int64)
+    for k, (first, by_gap) in enumerate(openings, start=1):
+        gap[k] = by_gap
+        allowance[k] = 0.0 if by_gap else allowance_of(first)
+    return bound_offsets(raw_x_m, raw_y_m, gap, allowance, slack_m)

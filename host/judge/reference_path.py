@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from odocan.firmware.ecu import ENCODER_PERIOD_US, MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
-from odocan.host.judge.breaks import BreakSummary, bound_offsets, merge_allowance_m
+from odocan.host.judge.breaks import BreakSummary, merge_allowance_m, placed_offsets
 from odocan.host.judge.reference import Geometry, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -86,16 +86,11 @@ def build_reference(
     x_m = x0 + cos0 * rel_x - sin0 * rel_y
     y_m = y0 + sin0 * rel_x + cos0 * rel_y
     opened = np.flatnonzero(starts)  # the first frame (from e0) of segments 1, 2, ...
-    allowance = np.zeros(int(segment[-1]) + 1)
-    for k, first in enumerate(opened.tolist(), start=1):
-        if not gaps[first]:
-            allowance[k] = break_allowance(enc, e0 + first, onboard.enc, geometry, bits,
-                                           integrator)
-    gap = np.zeros(len(allowance), dtype=np.int64)
-    gap[1:] = gaps[opened]
-    off_x, off_y, placed = bound_offsets(
+    off_x, off_y, placed = placed_offsets(
         raw_segment_offsets(segment, at, onboard.x_m - x_m[at]),
-        raw_segment_offsets(segment, at, onboard.y_m - y_m[at]), gap, allowance, slack_m)
+        raw_segment_offsets(segment, at, onboard.y_m - y_m[at]),
+        list(zip((opened + e0).tolist(), gaps[opened].tolist(), strict=True)),
+        lambda b: break_allowance(enc, b, onboard.enc, geometry, bits, integrator), slack_m)
     x_m += off_x[segment]
     y_m += off_y[segment]
     return Reference(

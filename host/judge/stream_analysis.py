@@ -30,7 +30,7 @@ import numpy as np
 from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance, _realtime, _robot_dict
-from odocan.host.judge.breaks import bound_offsets
+from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import (
@@ -255,12 +255,7 @@ def _life(
 ) -> tuple[dict[str, Any], float]:
     """``analysis._analyze_life``'s report of one life, and its first frame's time."""
     first = _first_pass(frames, db, robot)
-    if first.stalls is not None and not first.stalls.exact:
-        raise NotStreamable("the log's frame times go back around a silence of the firmware")
-    if not first.losses.exact:  # a summary stamped before an earlier encoder frame
-        raise NotStreamable("the log's status times go back against its encoder frames")
-    if first.queued:  # samples._queued pairs them by a median over the whole life
-        raise NotStreamable("frames let out in a burst after a busy bus (queued pairing)")
+    _refuse_unstreamable(first)
     facts = first.facts
     integrator, source = facts.integrator(integrator)
     first.check()
@@ -284,8 +279,7 @@ def _life(
                                     on_encoders=on_encoders if losses else None):
             if losses:
                 drops.named(chunk.enc)
-            else:
-                counts.named(chunk.enc)
+            counts.named(chunk.enc)  # the same each pass: the first sets it
             yield chunk
 
     info = LifeInfo()
@@ -293,12 +287,8 @@ def _life(
     # the offsets' pass also weighs the lossy spans (losses.loss_allowance) and keeps the
     # counts across the stalls' breaks (their allowance)
     raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
-    allowance = np.zeros(info.segments + 1)
-    gap = np.zeros(info.segments + 1, dtype=np.int64)
-    for k, (g, by_gap) in enumerate(info.openings, start=1):
-        gap[k] = by_gap
-        allowance[k] = 0.0 if by_gap else counts.allowance(g)
-    off_x, off_y, placements = bound_offsets(*raw, gap, allowance, tolerance.position_m)
+    off_x, off_y, placements = placed_offsets(*raw, info.openings, counts.allowance,
+                                              tolerance.position_m)
     offsets = (off_x, off_y)
     truth = TruthCompare((x0, y0, h0), offsets)
     last: list[PlacedChunk] = []
@@ -381,6 +371,16 @@ def _life(
         "passed": passed,
     }
     return report, first.t_first_s
+
+
+def _refuse_unstreamable(first: _FirstPass) -> None:
+    """``NotStreamable`` when the first pass found the life's report could differ."""
+    if first.stalls is not None and not first.stalls.exact:
+        raise NotStreamable("the log's frame times go back around a silence of the firmware")
+    if not first.losses.exact:  # a summary stamped before an earlier encoder frame
+        raise NotStreamable("the log's status times go back against its encoder frames")
+    if first.queued:  # samples._queued pairs them by a median over the whole life
+        raise NotStreamable("frames let out in a burst after a busy bus (queued pairing)")
 
 
 class _FirstPass:
