@@ -34,9 +34,13 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_analysis import analyze_file
 from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.sim.board import TICK_S
 from odocan.sim.robot import RobotProfile, load
+from odocan.sim.scenarios import get_scenario
+from tests.fault_rig import FaultRig
 from tests.independent_checker import Robot, _Odometry
 from tests.synth_log import STALL_FIFO_FRAMES, synthesize_stalled, wandering_drive
+from tests.test_babble_firmware import _biased_x
 from tests.test_judge_campaign import profile_of, robots
 
 KOBUKI = load("kobuki")
@@ -243,3 +247,48 @@ def test_the_merge_allowance_is_the_worst_set_of_lost_frames(
         worst = max(worst, total)
         assert math.hypot(fine.x - firmware.x, fine.y - firmware.y) <= got + 1e-9 * scale
     assert got == pytest.approx(worst, abs=1e-9 * scale)
+
+
+# --- the lockstep rig: the MCU halted (a SIGSTOP), the controller's FIFO keeps 3 frames ------
+
+
+def _rig_stall_log(path: Path, halt_ticks: int) -> Path:
+    """pmir on a curvy random drive, the MCU halted ``halt_ticks`` ticks from 5 s."""
+    messages: list[can.Message] = []
+    scenario = get_scenario("random", load("pmir"), seed=4, duration_s=60.0)
+    with FaultRig(scenario=scenario, integrator="exact") as rig:
+        rig.observers.append(lambda tick, frames: messages.extend(frames))
+        rig.halted = lambda k: 500 <= k < 500 + halt_ticks
+        rig.run((500 + halt_ticks + 300) * TICK_S)
+    path.write_text("".join(
+        f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#{bytes(m.data).hex().upper()}\n"
+        for m in messages))
+    return path
+
+
+@pytest.mark.parametrize("beyond_lsb", [3, 100])
+def test_a_jump_after_a_rig_stall_fails_and_the_stall_alone_passes(
+    tmp_path: Path, beyond_lsb: int
+) -> None:
+    """A jump ``beyond_lsb`` beyond the stall's allowance (1.02 mm on this curve: the worst
+    set of frames lost over its 0.4 s) fails every judge."""
+    halt_ticks = 40
+    pmir = load("pmir")
+    log = _rig_stall_log(tmp_path / "stall.log", halt_ticks)
+    right = analyze(read_log(log), pmir, "exact")
+    breaks = right.report["reference_breaks"]
+    assert right.passed, (right.report["onboard_vs_reference"], breaks)
+    assert breaks["stall_placements"] == 1
+    assert breaks["max_offset_beyond_allowance_m"] == 0.0
+    bias_lsb = math.ceil(breaks["offset_allowance_m"] / POSITION_LSB_M) + beyond_lsb
+    wrong = tmp_path / "wrong.log"
+    resumed_s = (500 + halt_ticks) * TICK_S - 0.0005  # every X from the first pose after it
+    assert _biased_x(log, wrong, lambda k, t_s: t_s >= resumed_s, bias_lsb) > 100
+    bad = analyze(read_log(wrong), pmir, "exact")
+    assert bad.report["reference_breaks"]["offset_allowance_m"] == breaks["offset_allowance_m"]
+    assert not bad.passed
+    _streamed_alike(wrong, pmir, bad.report, "exact")
+    monitor, bridge, _ = _live(pmir, "exact", wrong)
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.stalls == 1
+        assert tracker.vs_reference.max_dpos_m > POSITION_LSB_M

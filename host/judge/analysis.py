@@ -48,10 +48,17 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    frames consistent among themselves are a counter restart, re-primed on the first of them (a
    ``counter_restart`` event; the motion across it is lost on board and in the reference alike).
    After the firmware was silent for ``SILENCE_CYCLES`` cycles (a stalled MCU) its first pose,
-   naming a backlog frame ENC_COUNTER cannot resolve, is left out, and the position restarts like
-   after a gap (a ``firmware_stall`` event): the firmware took the frames it missed as one step.
-   Likewise when two consecutive samples name frames ``SILENCE_CYCLES`` or more apart while the
-   log holds the frames between (the firmware integrated none of them, then one step).
+   naming a backlog frame ENC_COUNTER cannot resolve, is left out, and the position is placed
+   again (a ``firmware_stall`` event): the firmware took the frames it missed as one step (or
+   several). Likewise when two consecutive samples name frames ``SILENCE_CYCLES`` or more apart
+   while the log holds the frames between (the firmware integrated none of them, then one step).
+   That placement is bounded (``host.judge.breaks``): it may move the position by no more than
+   the worst merge error of the frames the firmware may have missed there, summed over the
+   stalls since the last free placement, plus the position tolerance; a larger offset is not
+   absorbed, the samples after the stall show the rest. Only a gap of the log's encoder
+   sequence (frames the logger missed: the path across it is unknowable) places it freely.
+   ``reference_breaks`` in the report counts both and gives the largest offset a stall's
+   placement asked for, its allowance, and the largest offset a gap's absorbed (not checked).
 5. **Errors**: position errors are Euclidean distances (m), heading errors wrapped to [-pi, pi).
    On-board vs reference at every on-board sample; on-board vs truth at every truth sample that
    has an on-board sample of the same encoder frame. Where the firmware reports encoder frames

@@ -44,8 +44,8 @@ def merge_allowance_m(
     n = len(left)
     if n < 3:
         return 0.0
-    dl = wrap_delta(np.diff(np.asarray(left, dtype=np.int64)), bits)
-    dr = wrap_delta(np.diff(np.asarray(right, dtype=np.int64)), bits)
+    dl: IntArray = wrap_delta(np.diff(np.asarray(left, dtype=np.int64)).astype(np.int64), bits)
+    dr: IntArray = wrap_delta(np.diff(np.asarray(right, dtype=np.int64)).astype(np.int64), bits)
     if n - 2 > MAX_MERGE_FRAMES:
         return path_bound_m(int(np.sum(np.abs(dl))), int(np.sum(np.abs(dr))), geometry)
     steps = OneSteps.of_deltas(dl, dr, geometry, integrator)

@@ -266,12 +266,12 @@ def _life(
     drops = SpanDrops(spans, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
                       integrator)
 
-    counts = StreamBreakCounts(breaks[breaks > e0].tolist(), Geometry.of(robot),
+    across = StreamBreakCounts(breaks[breaks > e0].tolist(), Geometry.of(robot),
                                min(robot.counter_bits, WIRE_COUNTER_BITS), integrator)
 
     def on_encoders(enc: Encoders) -> None:
         drops.feed(enc)
-        counts.feed(enc)
+        across.feed(enc)
 
     def placed(info: LifeInfo | None = None, losses: bool = False) -> Iterator[PlacedChunk]:
         for chunk, _ in life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
@@ -279,7 +279,7 @@ def _life(
                                     on_encoders=on_encoders if losses else None):
             if losses:
                 drops.named(chunk.enc)
-            counts.named(chunk.enc)  # the same each pass: the first sets it
+            across.named(chunk.enc)  # the same each pass: the first sets it
             yield chunk
 
     info = LifeInfo()
@@ -287,7 +287,7 @@ def _life(
     # the offsets' pass also weighs the lossy spans (losses.loss_allowance) and keeps the
     # counts across the stalls' breaks (their allowance)
     raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
-    off_x, off_y, placements = placed_offsets(*raw, info.openings, counts.allowance,
+    off_x, off_y, placements = placed_offsets(*raw, info.openings, across.allowance,
                                               tolerance.position_m)
     offsets = (off_x, off_y)
     truth = TruthCompare((x0, y0, h0), offsets)
