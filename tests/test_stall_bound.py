@@ -16,6 +16,7 @@ very step the synthesized firmware took.
 from __future__ import annotations
 
 import itertools
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from odocan.host.cli.app import main
 from odocan.host.io.logs import parse_candump_line, read_log
 from odocan.host.judge.analysis import POSITION_LSB_M, analyze
 from odocan.host.judge.breaks import MAX_MERGE_FRAMES, merge_allowance_m
@@ -34,11 +36,13 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_analysis import analyze_file
 from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.sim import cboard
 from odocan.sim.board import TICK_S
 from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import get_scenario
 from tests.fault_rig import FaultRig
 from tests.independent_checker import Robot, _Odometry
+from tests.requires import require_executables
 from tests.synth_log import STALL_FIFO_FRAMES, synthesize_stalled, wandering_drive
 from tests.test_babble_firmware import _biased_x
 from tests.test_judge_campaign import profile_of, robots
@@ -75,9 +79,9 @@ def _live(profile: RobotProfile, integrator: str, path: Path) -> tuple[BusMonito
 
 
 def _streamed_alike(path: Path, profile: RobotProfile, whole: dict[str, Any],
-                    integrator: str | None = None) -> None:
+                    integrator: str | None = None, chunks: tuple[int, ...] = CHUNKS) -> None:
     """The streamed report is the whole log's, bit for bit, at several chunk sizes."""
-    for chunk in CHUNKS:
+    for chunk in chunks:
         streamed = analyze_file(path, profile, integrator, chunk_frames=chunk)
         for key, value in whole.items():
             assert streamed[key] == value, (chunk, key)
@@ -292,3 +296,25 @@ def test_a_jump_after_a_rig_stall_fails_and_the_stall_alone_passes(
     for tracker in (monitor.tracker, bridge.tracker):
         assert tracker.stalls == 1
         assert tracker.vs_reference.max_dpos_m > POSITION_LSB_M
+
+
+@pytest.mark.parametrize("firmware", ["python", "c"])
+def test_the_babbled_firmware_passes_with_its_stalls_within_allowance(
+    tmp_path: Path, firmware: str
+) -> None:
+    """kobuki under babble=8000 (the mailbox overflows, the firmware misses frames and holds):
+    our Python and C firmware pass, every placement after a stall within its allowance."""
+    if firmware == "c":
+        require_executables("make", "cc", install="apt-get install gcc make")
+        cboard.load_library()
+    report_path, log = tmp_path / "report.json", tmp_path / "drive.log"
+    code = main(["run", "--robot", "kobuki", "--duration", "5", "--faults", "babble=8000",
+                 "--firmware", firmware, "--log", str(log), "--report", str(report_path)])
+    report = json.loads(report_path.read_text())
+    breaks = report["reference_breaks"]
+    assert code == 0, (report["onboard_vs_reference"], breaks)
+    assert report["passed"] is True
+    assert breaks["stall_placements"] >= 3
+    assert breaks["max_offset_beyond_allowance_m"] == 0.0
+    assert 0.0 < breaks["max_offset_absorbed_m"] <= breaks["offset_allowance_m"]
+    _streamed_alike(log, KOBUKI, analyze(read_log(log), KOBUKI).report, chunks=(4_999, 65_536))
