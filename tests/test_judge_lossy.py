@@ -103,8 +103,12 @@ def test_a_firmware_that_reports_its_lost_frames_passes_and_a_wrong_one_fails(
     assert vs_ref["max_position_error_beyond_allowance_m"] <= LSB_M
     assert vs_ref["max_position_error_m"] <= vs_ref["loss_allowance_m"] + LSB_M
     assert vs_ref["max_heading_error_rad"] <= 2 * math.pi / 65536  # the heading gets none
+    # the babbler's stalls: each placement within its merge allowance (host.judge.breaks)
+    breaks = report["reference_breaks"]
+    assert breaks["stall_placements"] >= 1
+    assert breaks["max_offset_beyond_allowance_m"] == 0.0
     # a wrong firmware in the same drive: 0.5 mm off early, or every other X 2 mm off from 5 s
-    # on (a constant offset from a stall on is placed away with the segment: the judge's rule)
+    # on (a constant offset from a stall on fails too: tests/test_stall_bound.py)
     for name, pick, lsb in (("early", lambda k, t: 1.0 < t < 1.5, 5),
                             ("late", lambda k, t: t > 5.0 and k % 2 == 0, 20)):
         wrong = tmp_path / f"{name}.log"

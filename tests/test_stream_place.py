@@ -20,9 +20,9 @@ from odocan.host.judge.reference import Geometry, integrate
 from odocan.host.judge.reference_path import (
     Reference,
     _Relative,
-    _segment_offsets,
     _start_pose,
     firmware_steps,
+    raw_segment_offsets,
 )
 from odocan.host.judge.samples import (
     Poses,
@@ -112,12 +112,15 @@ def test_placement_in_passes_is_the_whole_logs(tmp_path: Path, which: str, chunk
     x_m = x0 + cos0 * rel_xy[0] - sin0 * rel_xy[1]
     y_m = y0 + sin0 * rel_xy[0] + cos0 * rel_xy[1]
     at = onboard.enc - onboard.enc[0]
-    want_x = _segment_offsets(segment, at, onboard.x_m - x_m[at])
-    want_y = _segment_offsets(segment, at, onboard.y_m - y_m[at])
+    raw_x = raw_segment_offsets(segment, at, onboard.x_m - x_m[at])
+    raw_y = raw_segment_offsets(segment, at, onboard.y_m - y_m[at])
     off_x, off_y = segment_offsets(lambda: chunks_of(onboard, rel, chunk), (x0, y0, h0),
                                    int(segment[-1]) + 1)
-    np.testing.assert_array_equal(off_x[segment], want_x)
-    np.testing.assert_array_equal(off_y[segment], want_y)
+    np.testing.assert_array_equal(off_x, raw_x)  # NaN where a segment has no sample
+    np.testing.assert_array_equal(off_y, raw_y)
+    filled = np.maximum.accumulate(np.where(np.isnan(raw_x), 0, np.arange(len(raw_x))))
+    off_x, off_y = off_x[filled], off_y[filled]
+    want_x, want_y = raw_x[filled][segment], raw_y[filled][segment]
     ref = Reference(int(onboard.enc[0]), x_m + want_x, y_m + want_y, h0 + rel_xy[2],
                     np.zeros(len(x_m))).at(onboard.enc)
     want_errors = error_summary(*pose_errors(onboard, ref))

@@ -48,10 +48,17 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    frames consistent among themselves are a counter restart, re-primed on the first of them (a
    ``counter_restart`` event; the motion across it is lost on board and in the reference alike).
    After the firmware was silent for ``SILENCE_CYCLES`` cycles (a stalled MCU) its first pose,
-   naming a backlog frame ENC_COUNTER cannot resolve, is left out, and the position restarts like
-   after a gap (a ``firmware_stall`` event): the firmware took the frames it missed as one step.
-   Likewise when two consecutive samples name frames ``SILENCE_CYCLES`` or more apart while the
-   log holds the frames between (the firmware integrated none of them, then one step).
+   naming a backlog frame ENC_COUNTER cannot resolve, is left out, and the position is placed
+   again (a ``firmware_stall`` event): the firmware took the frames it missed as one step (or
+   several). Likewise when two consecutive samples name frames ``SILENCE_CYCLES`` or more apart
+   while the log holds the frames between (the firmware integrated none of them, then one step).
+   That placement is bounded (``host.judge.breaks``): it may move the position by no more than
+   the worst merge error of the frames the firmware may have missed there, summed over the
+   stalls since the last free placement, plus the position tolerance; a larger offset is not
+   absorbed, the samples after the stall show the rest. Only a gap of the log's encoder
+   sequence (frames the logger missed: the path across it is unknowable) places it freely.
+   ``reference_breaks`` in the report counts both and gives the largest offset a stall's
+   placement asked for, its allowance, and the largest offset a gap's absorbed (not checked).
 5. **Errors**: position errors are Euclidean distances (m), heading errors wrapped to [-pi, pi).
    On-board vs reference at every on-board sample; on-board vs truth at every truth sample that
    has an on-board sample of the same encoder frame. Where the firmware reports encoder frames
@@ -121,6 +128,11 @@ from odocan.sim.robot import RobotProfile
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
     from odocan.host.protocol.dbcplan import DatabaseSpec
+
+STALL_DETAIL = ("the firmware was silent or held its pose (a stall): it took the frames it "
+                "missed as one step or several, so the reference's position is placed again "
+                "after it, by no more than the worst merge error there plus the tolerance "
+                "(reference_breaks)")
 
 
 @dataclass(frozen=True)
@@ -242,7 +254,8 @@ def _analyze_life(
     else:
         power_up = starts_at_power_up(frames, accepted, decoder, onboard)
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
-                         max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls)
+                         max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
+                         slack_m=tolerance.position_m)
     ref = ref_all.at(onboard.enc)
     pos_err, head_err = pose_errors(onboard, ref)
     vs_ref = error_summary(pos_err, head_err)
@@ -281,6 +294,7 @@ def _analyze_life(
             "reference_restarts": ref_all.restarts,
             "implausible_encoder_frames": ref_all.implausible_frames,
         },
+        "reference_breaks": ref_all.placements.as_dict(),
         "events": [
             {"kind": "counter_restart", "t_s": float(frames.timestamp_s[enc.index[e]]),
              "encoder_frame": int(e),
@@ -290,8 +304,7 @@ def _analyze_life(
         ] + [
             {"kind": "firmware_stall", "t_s": float(frames.timestamp_s[enc.index[e]]),
              "encoder_frame": int(e),
-             "detail": "the firmware was silent or held its pose (a stall): it took the frames it "
-                       "missed as one step, so the reference's position is placed again after it"}
+             "detail": STALL_DETAIL}
             for e in stalls.tolist() if e > int(onboard.enc[0])
         ] + [
             {"kind": "encoder_frames_lost_on_board",

@@ -190,6 +190,11 @@ class OneSteps:
     def of_geometry(enc: Encoders, g: Geometry, bits: int, integrator: str) -> OneSteps:
         """``of`` for a geometry and wire counter width (``bits``): the live judge's form."""
         dl, dr = wrap_delta(np.diff(enc.left), bits), wrap_delta(np.diff(enc.right), bits)
+        return OneSteps.of_deltas(dl, dr, g, integrator)
+
+    @staticmethod
+    def of_deltas(dl: IntArray, dr: IntArray, g: Geometry, integrator: str) -> OneSteps:
+        """``of`` for the count steps between consecutive frames (from the first frame on)."""
         heading = np.concatenate(([0.0], np.cumsum(heading_steps(dl, dr, g))))
         one_x, one_y = _step_vector(dl, dr, heading[:-1], heading[1:], g, integrator)
         zero = np.zeros(1, dtype=np.int64)
@@ -204,7 +209,12 @@ def run_errors(steps: OneSteps, j: IntArray, r: int) -> FloatArray:
     """How far (m) the pose moves when frames j .. j + r - 1 are lost, i.e. the firmware takes
     the r + 1 steps from frame j - 1 to frame j + r as one (``host.judge.reference.integrate``'s
     step, for its integrator); ``j`` >= 1, j + r <= the last frame."""
-    a, b = j - 1, j + r
+    return merge_error(steps, j - 1, j + r)
+
+
+def merge_error(steps: OneSteps, a: IntArray, b: IntArray | int) -> FloatArray:
+    """How far (m) the pose moves when the firmware takes the steps from frame ``a`` to frame
+    ``b`` as one (the frames between lost): ``run_errors`` by its ends (``a`` < ``b``)."""
     dl = steps.cum_left[b] - steps.cum_left[a]
     dr = steps.cum_right[b] - steps.cum_right[a]
     one_x = steps.cum_x[b] - steps.cum_x[a]
@@ -254,9 +264,19 @@ def merge_errors(
 def _step_vector(
     dl: IntArray, dr: IntArray, h_old: FloatArray, h_new: FloatArray, g: Geometry, integrator: str
 ) -> tuple[FloatArray, FloatArray]:
-    """The displacement (m) of one step of ``integrator`` from heading ``h_old`` to ``h_new``."""
+    """The displacement (m) of one step of ``integrator`` from heading ``h_old`` to ``h_new``.
+    A step turning half a turn or more is taken as the firmware takes it: its heading change
+    read as a signed BAM, wrapped to [-pi, pi) (firmware/odometry.py), so a merged step of a
+    spin may point the other way."""
     ds = 0.5 * (dl * g.m_per_count_left + dr * g.m_per_count_right)
-    direction = h_new if integrator == "euler" else 0.5 * (h_old + h_new)
+    turn = h_new - h_old
+    wide = np.abs(turn) >= np.pi
+    if np.any(wide):
+        turn = np.where(wide, (turn + np.pi) % (2.0 * np.pi) - np.pi, turn)
+        h_mid = np.where(wide, h_old + 0.5 * turn, 0.5 * (h_old + h_new))
+    else:
+        h_mid = 0.5 * (h_old + h_new)
+    direction = h_new if integrator == "euler" else h_mid
     if integrator == "exact":
-        ds = ds * np.sinc((h_new - h_old) / (2.0 * np.pi))
+        ds = ds * np.sinc(turn / (2.0 * np.pi))
     return ds * np.cos(direction), ds * np.sin(direction)

@@ -42,6 +42,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.samples import ENC_E2E_PAGE
 from odocan.host.judge.sources import SourceWatch
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -207,6 +208,7 @@ def merge(
     last = reports[-1]
     report["samples"] = {key: sum(r["samples"][key] for r in reports) for key in _SUMMED_SAMPLES}
     report["onboard_vs_reference"] = _worst([r["onboard_vs_reference"] for r in reports])
+    report["reference_breaks"] = merged_breaks([r["reference_breaks"] for r in reports])
     truths = [r["onboard_vs_truth"] for r in reports]
     report["onboard_vs_truth"] = _worst(truths)
     report["onboard_vs_truth"]["distance_travelled_m"] = float(

@@ -12,6 +12,7 @@ import numpy as np
 
 from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
 from odocan.firmware.twist import ENCODER_PERIOD_US
+from odocan.host.judge.breaks import BreakSummary, merge_allowance_m, placed_offsets
 from odocan.host.judge.reference import Geometry, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -40,6 +41,7 @@ class Reference:
     exact_start: bool = False  # started at the power-up pose (0, 0, 0), not fitted
     counter_restarts: tuple[int, ...] = ()  # encoder frames the firmware re-primed on
     implausible_frames: int = 0  # encoder frames the firmware refuses (not integrated)
+    placements: BreakSummary = field(default_factory=BreakSummary)  # after stalls and gaps
 
     def at(self, enc: IntArray) -> Reference:
         """The reference at the encoder frames ``enc`` (all >= start)."""
@@ -47,6 +49,7 @@ class Reference:
         return Reference(
             self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
             self.restarts, self.exact_start, self.counter_restarts, self.implausible_frames,
+            self.placements,
         )
 
 
@@ -56,8 +59,11 @@ def build_reference(
     enc: Encoders, onboard: Poses, robot: RobotProfile, integrator: str, *, power_up: bool,
     max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
     breaks: IntArray | None = None,
+    slack_m: float = POSITION_LSB_M,
 ) -> Reference:
-    """Integrate the encoder deltas from the first on-board sample on."""
+    """Integrate the encoder deltas from the first on-board sample on; the position placed
+    again after gaps and after the stalls' ``breaks`` (within ``breaks.bound_offsets``' bound,
+    ``slack_m``: the position tolerance)."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     e0 = 0 if power_up else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
     geometry = Geometry.of(robot)
@@ -68,7 +74,8 @@ def build_reference(
     rel_x, rel_y = np.concatenate((zero, rel.x_m)), np.concatenate((zero, rel.y_m))
     rel_h = np.concatenate((zero, rel.heading_rad))
     at = onboard.enc - e0
-    starts = np.concatenate(([False], np.diff(enc.seq[e0:]) > 1))
+    gaps = np.concatenate(([False], np.diff(enc.seq[e0:]) > 1))
+    starts = gaps.copy()
     if breaks is not None:  # encoder frames where the firmware resumed after a stall
         inside = breaks[(breaks > e0) & (breaks < len(enc.seq))] - e0
         starts[inside] = True
@@ -79,8 +86,14 @@ def build_reference(
     cos0, sin0 = math.cos(h0), math.sin(h0)
     x_m = x0 + cos0 * rel_x - sin0 * rel_y
     y_m = y0 + sin0 * rel_x + cos0 * rel_y
-    x_m += _segment_offsets(segment, at, onboard.x_m - x_m[at])
-    y_m += _segment_offsets(segment, at, onboard.y_m - y_m[at])
+    opened = np.flatnonzero(starts)  # the first frame (from e0) of segments 1, 2, ...
+    off_x, off_y, placed = placed_offsets(
+        raw_segment_offsets(segment, at, onboard.x_m - x_m[at]),
+        raw_segment_offsets(segment, at, onboard.y_m - y_m[at]),
+        list(zip((opened + e0).tolist(), gaps[opened].tolist(), strict=True)),
+        lambda b: break_allowance(enc, b, onboard.enc, geometry, bits, integrator), slack_m)
+    x_m += off_x[segment]
+    y_m += off_y[segment]
     return Reference(
         start=e0,
         x_m=x_m,
@@ -91,7 +104,21 @@ def build_reference(
         exact_start=exact,
         counter_restarts=tuple(e0 + k for k in steps.reprimed),
         implausible_frames=steps.refused,
+        placements=placed,
     )
+
+
+def break_allowance(enc: Encoders, b: int, sample_enc: IntArray, geometry: Geometry, bits: int,
+                    integrator: str) -> float:
+    """``breaks.merge_allowance_m`` of the break at encoder frame ``b``: from frame b - 1 (the
+    last the firmware named before it) to the first frame a kept sample names at or after b (0
+    without one: nothing after it is compared)."""
+    k = int(np.searchsorted(sample_enc, b))
+    if k == len(sample_enc):
+        return 0.0
+    j = int(sample_enc[k])
+    return merge_allowance_m(enc.left[b - 1 : j + 1], enc.right[b - 1 : j + 1], geometry, bits,
+                             integrator)
 
 
 @dataclass
@@ -175,14 +202,16 @@ def _refusals(
     return n_frames
 
 
-def _segment_offsets(segment: IntArray, at: IntArray, error: FloatArray) -> FloatArray:
-    """Position corrections per encoder frame after gaps in the encoder sequence.
+def raw_segment_offsets(segment: IntArray, at: IntArray, error: FloatArray) -> FloatArray:
+    """The position correction (m, one axis) each segment's samples ask for, per segment.
 
     Across a gap the firmware may have integrated frames the log does not hold (a logger that
     missed them): the heading stays exact (a function of the absolute counts) but the position's
-    path over the gap is unknown. Each segment after a gap is therefore placed like the start:
-    the middle of the overlap of its on-board samples' rounding intervals (a segment without a
-    sample keeps the previous correction). Segment 0 (the start) is not moved.
+    path over the gap is unknown. After a stall or hold the firmware took the frames it missed
+    as one step or several. Each such segment asks to be placed like the start: the middle of
+    the overlap of its on-board samples' rounding intervals (NaN for a segment without a
+    sample); ``breaks.bound_offsets`` places it (a stall's within its allowance). Segment 0
+    (the start) is not moved.
     """
     n_segments = int(segment[-1]) + 1
     offsets = np.full(n_segments, np.nan)
@@ -191,9 +220,7 @@ def _segment_offsets(segment: IntArray, at: IntArray, error: FloatArray) -> Floa
     bounds = np.searchsorted(seg_of_sample, np.arange(n_segments + 1))
     for k in np.flatnonzero(bounds[2:] > bounds[1:-1]) + 1:
         offsets[k] = _overlap_mid(error[bounds[k] : bounds[k + 1]], POSITION_LSB_M, base=True)
-    filled = np.maximum.accumulate(np.where(np.isnan(offsets), 0, np.arange(n_segments)))
-    result: FloatArray = offsets[filled][segment]
-    return result
+    return offsets
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """The firmware's stalls and holds in a log (``host.judge.analysis`` module docstring, step 3):
 samples sent after the firmware was silent while the encoder frames went on, and poses it held on
 one frame, after which it took the frames it missed as one step, so the reference's position is
-placed again there."""
+placed again there, within the bound of ``host.judge.breaks``."""
 
 from __future__ import annotations
 

@@ -28,13 +28,15 @@ import numpy as np
 
 from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
-from odocan.host.judge.analysis import Tolerance, _realtime, _robot_dict
+from odocan.host.judge.analysis import STALL_DETAIL, Tolerance, _realtime, _robot_dict
+from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import (
     REQUIRED,
     WIRE_COUNTER_BITS,
     AnalysisError,
+    Encoders,
     Poses,
     queued_frames,
     require_messages,
@@ -54,7 +56,7 @@ from odocan.host.judge.stream_lives import LifeSpan, StreamLives
 from odocan.host.judge.stream_losses import SpanDrops, StreamLosses
 from odocan.host.judge.stream_place import PlacedChunk, reference_errors, segment_offsets
 from odocan.host.judge.stream_place import start_pose as place_start
-from odocan.host.judge.stream_stalls import StreamStalls
+from odocan.host.judge.stream_stalls import StreamBreakCounts, StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
 from odocan.host.judge.stream_twist import StreamTwist
 from odocan.host.protocol.dbcplan import default_plan
@@ -245,19 +247,30 @@ def _life(
     drops = SpanDrops(spans, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
                       integrator)
 
+    across = StreamBreakCounts(breaks[breaks > e0].tolist(), Geometry.of(robot),
+                               min(robot.counter_bits, WIRE_COUNTER_BITS), integrator)
+
+    def on_encoders(enc: Encoders) -> None:
+        drops.feed(enc)
+        across.feed(enc)
+
     def placed(info: LifeInfo | None = None, losses: bool = False) -> Iterator[PlacedChunk]:
         for chunk, _ in life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
                                     max_wheel_speed_mm_s=max_wheel_speed_mm_s, info=info,
-                                    on_encoders=drops.feed if losses else None):
+                                    on_encoders=on_encoders if losses else None):
             if losses:
                 drops.named(chunk.enc)
+            across.named(chunk.enc)  # the same each pass: the first sets it
             yield chunk
 
     info = LifeInfo()
     x0, y0, h0, exact = place_start(lambda: placed(info), power_up=power_up)
-    # the offsets' pass also weighs the lossy spans (losses.loss_allowance), when there are
-    offsets = segment_offsets(lambda: placed(losses=bool(spans)), (x0, y0, h0),
-                              info.segments + 1)
+    # the offsets' pass also weighs the lossy spans (losses.loss_allowance) and keeps the
+    # counts across the stalls' breaks (their allowance)
+    raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
+    off_x, off_y, placements = placed_offsets(*raw, info.openings, across.allowance,
+                                              tolerance.position_m)
+    offsets = (off_x, off_y)
     truth = TruthCompare((x0, y0, h0), offsets)
     last: list[PlacedChunk] = []
     wanted = (frozenset(info.reprimed) | frozenset(breaks.tolist())
@@ -305,6 +318,7 @@ def _life(
             "reference_restarts": info.segments,
             "implausible_encoder_frames": info.refused,
         },
+        "reference_breaks": placements.as_dict(),
         "events": [
             {"kind": "counter_restart", "t_s": final.times_s[e], "encoder_frame": int(e),
              "detail": "the firmware re-primes here (COUNTER_RESET): the reference restarts "
@@ -312,8 +326,7 @@ def _life(
             for e in info.reprimed
         ] + [
             {"kind": "firmware_stall", "t_s": final.times_s[e], "encoder_frame": int(e),
-             "detail": "the firmware was silent or held its pose (a stall): it took the frames it "
-                       "missed as one step, so the reference's position is placed again after it"}
+             "detail": STALL_DETAIL}
             for e in breaks.tolist() if e > int(first.head.enc[0])
         ] + [
             {"kind": "encoder_frames_lost_on_board", "t_s": final.times_s[begin],

@@ -41,6 +41,8 @@ class _Rows:
     columns: dict[str, np.ndarray] = field(default_factory=dict)
     last_seq: int | None = None  # of the last encoder frame from e0
     segment: int = 0  # the last row's
+    openings: list[tuple[int, bool]] = field(default_factory=list)  # per segment from 1: its
+    # first encoder frame and whether a gap of the sequence opened it (else a stall's break)
 
     def add(self, g: npt.NDArray[np.int64], seq: npt.NDArray[np.int64],
             increments: dict[str, np.ndarray], breaks: npt.NDArray[np.int64]) -> None:
@@ -48,10 +50,12 @@ class _Rows:
             return
         prior = np.concatenate(([self.last_seq if self.last_seq is not None else seq[0]],
                                 seq))
-        starts = np.diff(prior) > 1
+        gaps = np.diff(prior) > 1
         if self.last_seq is None:
-            starts[0] = False  # the start frame opens segment 0
-        starts |= np.isin(g, breaks)  # breaks after e0 only: e0 itself opens segment 0
+            gaps[0] = False  # the start frame opens segment 0
+        starts = gaps | np.isin(g, breaks)  # breaks after e0 only: e0 itself opens segment 0
+        opened = np.flatnonzero(starts)
+        self.openings += zip(g[opened].tolist(), gaps[opened].tolist(), strict=True)
         segment = self.segment + np.cumsum(starts)
         new = {"g": g, "segment": segment, **increments}
         self.columns = ({k: np.concatenate((self.columns[k], v)) for k, v in new.items()}
@@ -81,6 +85,7 @@ class LifeInfo:
     refused: int = 0
     reprimed: list[int] = field(default_factory=list)
     segments: int = 0  # the last encoder frame's segment (reference_path's ``restarts``)
+    openings: list[tuple[int, bool]] = field(default_factory=list)  # ``_Rows.openings``
     times_s: dict[int, float] = field(default_factory=dict)
 
 
@@ -150,7 +155,7 @@ def life_chunks(
     placed = _placed(stalls.feed(samples, sent, np.zeros(0), np.inf), rows)
     yield placed, _truth(truth.finish()[0], rows, e0, np.inf)
     yield _placed(stalls.finish(), rows), _truth(_no_truth(), rows, e0, np.inf)
-    info.refused, info.segments = reference.refused, rows.segment
+    info.refused, info.segments, info.openings = reference.refused, rows.segment, rows.openings
     info.reprimed = [e0 + k for k in reference.reprimed]
 
 

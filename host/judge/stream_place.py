@@ -136,9 +136,10 @@ def _rotation_fit(
 def segment_offsets(
     passes: Passes, start: tuple[float, float, float], n_segments: int
 ) -> tuple[FloatArray, FloatArray]:
-    """``reference_path._segment_offsets`` of x and y, per segment (``n_segments``: those of
-    the encoder frames, ``segment[-1] + 1``), for the reference started at ``start`` (x0 m,
-    y0 m, h0 rad): index them with an encoder frame's segment."""
+    """``reference_path.raw_segment_offsets`` of x and y, per segment (``n_segments``: those of
+    the encoder frames, ``segment[-1] + 1``; NaN for a segment without a sample), for the
+    reference started at ``start`` (x0 m, y0 m, h0 rad): ``breaks.bound_offsets`` places
+    them."""
     x0, y0, h0 = start
     cos0, sin0 = math.cos(h0), math.sin(h0)
     first = np.full((2, n_segments), np.nan)
@@ -167,8 +168,7 @@ def segment_offsets(
             base = float(first[axis, k])
             offsets[k] = min(max(0.5 * (lo + hi), base - 0.5 * POSITION_LSB_M),
                              base + 0.5 * POSITION_LSB_M)
-        filled = np.maximum.accumulate(np.where(np.isnan(offsets), 0, np.arange(n_segments)))
-        result.append(offsets[filled])
+        result.append(offsets)
     return result[0], result[1]
 
 

@@ -25,6 +25,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.judge.breaks import MAX_MERGE_FRAMES, merge_allowance_m, path_bound_m
+from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.samples import Encoders
 from odocan.host.judge.stalls import frozen_breaks, silent
 
 COLUMNS = ("enc", "x_m", "y_m", "heading_rad", "heading_raw", "seq")
@@ -158,3 +161,67 @@ class StreamStalls:
             enc, seq = np.r_[self._last_given[0], enc], np.r_[self._last_given[1], seq]
         self._breaks.update(frozen_breaks(enc, seq).tolist())
         self._last_given = (int(enc[-1]), int(seq[-1]))
+
+
+@dataclass
+class StreamBreakCounts:
+    """``reference_path.break_allowance`` of every break after e0 (``breaks``, sorted), from
+    two passes over a life: the first tells each break the first kept sample at or after it
+    (``named``, the samples in encoder order, as often as asked: the same answer); the second
+    feeds the encoder frames (``feed``, from the life's first), of which only those from the
+    frame before each break to that sample are kept (or, for a span beyond
+    ``breaks.MAX_MERGE_FRAMES``, only the sums of their steps' absolute counts, exact in any
+    chunking); ``allowance`` then gives ``breaks.merge_allowance_m`` bit for bit."""
+
+    breaks: list[int]
+    geometry: Geometry
+    bits: int
+    integrator: str
+    _ends: dict[int, int] = field(default_factory=dict)  # break -> the first sample after
+    _count: int = 0  # encoder frames fed
+    _left: dict[int, list[np.ndarray]] = field(default_factory=dict)
+    _right: dict[int, list[np.ndarray]] = field(default_factory=dict)
+    _sums: dict[int, list[int]] = field(default_factory=dict)  # |dl|, |dr| sums, last l, r
+
+    def named(self, sample_enc: npt.NDArray[np.int64]) -> None:
+        """Kept samples' encoder frames (in encoder order over the passes)."""
+        if len(sample_enc) == 0:
+            return
+        for b in self.breaks:
+            if b in self._ends:
+                continue
+            k = int(np.searchsorted(sample_enc, b))
+            if k < len(sample_enc):
+                self._ends[b] = int(sample_enc[k])
+
+    def feed(self, enc: Encoders) -> None:
+        """The life's next accepted encoder frames (after every ``named``)."""
+        lo, hi = self._count, self._count + len(enc.index)
+        self._count = hi
+        for b, j in self._ends.items():
+            a0, a1 = max(b - 1, lo), min(j + 1, hi)
+            if a1 <= a0:
+                continue
+            left = enc.left[a0 - lo : a1 - lo].astype(np.int64)
+            right = enc.right[a0 - lo : a1 - lo].astype(np.int64)
+            if j - (b - 1) - 1 <= MAX_MERGE_FRAMES:
+                self._left.setdefault(b, []).append(left)
+                self._right.setdefault(b, []).append(right)
+                continue
+            sums = self._sums.get(b)
+            if sums is not None:
+                left, right = np.r_[sums[2], left], np.r_[sums[3], right]
+            else:
+                sums = self._sums[b] = [0, 0, 0, 0]
+            sums[0] += int(np.sum(np.abs(wrap_delta(np.diff(left), self.bits))))
+            sums[1] += int(np.sum(np.abs(wrap_delta(np.diff(right), self.bits))))
+            sums[2], sums[3] = int(left[-1]), int(right[-1])
+
+    def allowance(self, b: int) -> float:
+        """The allowance (m) of the break at encoder frame ``b`` (0 without a sample after)."""
+        if b in self._sums:
+            return path_bound_m(self._sums[b][0], self._sums[b][1], self.geometry)
+        if b not in self._left:
+            return 0.0
+        return merge_allowance_m(np.concatenate(self._left[b]), np.concatenate(self._right[b]),
+                                 self.geometry, self.bits, self.integrator)

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from odocan.host.judge.breaks import BreakSummary, clamp_offset, merge_allowance_m, path_bound_m
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livepose import (
     RING,
@@ -38,8 +39,8 @@ from odocan.host.judge.livewindow import (
     named_in_window,
     named_plain,
 )
-from odocan.host.judge.reference import Geometry, ReferenceOdometry
-from odocan.host.judge.samples import SILENCE_CYCLES, queued_frames
+from odocan.host.judge.reference import Geometry, ReferenceOdometry, wrap_delta
+from odocan.host.judge.samples import POSITION_LSB_M, SILENCE_CYCLES, queued_frames
 from odocan.sim.pose import TURN_RAD
 
 WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
@@ -101,6 +102,13 @@ class PoseTracker:
         self._last_compared = -1  # the encoder frame of the last sample compared
         self._place_at_next = False  # after a stall or a held pose: place the position again
         self._losses = LiveAllowance()
+        self.position_tolerance_m = POSITION_LSB_M  # the slack of a placement after a stall
+        self.placements = BreakSummary()  # what the placements after stalls absorbed
+        self._shift = (0.0, 0.0)  # the placements' offset of the reference since its start (m)
+        self._budget_m = 0.0  # the stalls' merge allowances summed since its start (m)
+        self._abs_at: dict[int, tuple[int, int]] = {}  # per recent frame: |count steps| summed
+        self._abs_counts = (0, 0)  # ... up to the latest encoder frame
+        self._abs_last: tuple[int, int] | None = None  # ... at the last sample compared
         self._now_s = 0.0  # the latest bus time (s)
         self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
         self._boot_poses: list[FramePose] = []  # the new life's samples while it waits
@@ -135,6 +143,13 @@ class PoseTracker:
         self.advance(t_s)
         self.enc_seq += 1
         self._pos += 1
+        prev = self._window.rows[-1] if len(self._window) else None
+        if prev is not None:
+            bits = self.counter_bits
+            self._abs_counts = (self._abs_counts[0] + abs(wrap_delta(left - int(prev[4]), bits)),
+                                self._abs_counts[1] + abs(wrap_delta(right - int(prev[5]), bits)))
+        self._abs_at[self.enc_seq] = self._abs_counts
+        self._abs_at.pop(self.enc_seq - ENC_WINDOW, None)
         self._window.append(self.enc_seq, self._pos, counter, t_s, left, right)
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
@@ -157,6 +172,7 @@ class PoseTracker:
         self._ys = {seq: half for seq, half in self._ys.items() if seq >= before}
         self._sampled = {seq for seq in self._sampled if seq >= before}
         self._ref_at = {seq: ref for seq, ref in self._ref_at.items() if seq >= before}
+        self._abs_at = {seq: sums for seq, sums in self._abs_at.items() if seq >= before}
 
     def _keep_ref(self, ref: FramePose) -> None:
         self._ref_at[ref.seq] = ref
@@ -287,6 +303,7 @@ class PoseTracker:
         return ref
 
     def _record(self, pose: FramePose, ref: FramePose) -> None:
+        self._abs_last = self._abs_at.get(pose.seq)
         self.reference = ref
         self._last_pair = (pose, ref)
         self._last_compared = pose.seq
@@ -333,6 +350,7 @@ class PoseTracker:
         self._last_sample_t = None
         self._place_at_next = False
         self._ref_at = {}
+        self._shift, self._budget_m = (0.0, 0.0), 0.0
         self._losses.restart(self.enc_seq, self.fast_path)
         self._drop_backlog()
 
@@ -400,15 +418,41 @@ class PoseTracker:
     def _place(self, pose: FramePose, ref: FramePose) -> FramePose:
         """Move the reference's position (now and at the frames heard since ``ref``) by
         ``pose - ref``: it starts again where the firmware is, within the pose's rounding (so
-        within about 1.4 LSB after), while its heading goes on exact. Returns the moved ``ref``."""
+        within about 1.4 LSB after), while its heading goes on exact; no further from where it
+        started than the stalls' merge allowances since plus the tolerance
+        (``host.judge.breaks``, as ``analyze`` places it). Returns the moved ``ref``."""
         assert self._ref is not None
-        dx, dy = pose.x_m - ref.x_m, pose.y_m - ref.y_m
+        self._budget_m += self._break_allowance_m(self._last_compared, pose.seq)
+        sx, sy = self._shift
+        want_x, want_y = sx + pose.x_m - ref.x_m, sy + pose.y_m - ref.y_m
+        limit = self._budget_m + self.position_tolerance_m
+        self.placements.add_stall(math.hypot(want_x, want_y), limit)
+        self._shift = clamp_offset(want_x, want_y, limit)
+        dx, dy = self._shift[0] - sx, self._shift[1] - sy
         self._ref.x_m += dx
         self._ref.y_m += dy
         self._ref_at = {seq: r if seq < ref.seq else r._replace(x_m=r.x_m + dx, y_m=r.y_m + dy)
                         for seq, r in self._ref_at.items()}
         self._place_at_next = False
         return ref._replace(x_m=ref.x_m + dx, y_m=ref.y_m + dy)
+
+    def _break_allowance_m(self, before: int, after: int) -> float:
+        """``breaks.merge_allowance_m`` from encoder frame ``before`` (the last sample compared)
+        to ``after`` (seq), from the window's counts, or the path bound from the sums of the
+        count steps when ``before`` left the window; inf when neither is known."""
+        seqs = self._window.col("seq")
+        i0 = int(np.searchsorted(seqs, before))
+        i1 = int(np.searchsorted(seqs, after))
+        if before >= 0 and i0 < len(seqs) and seqs[i0] == before and i1 < len(seqs):
+            assert self.integrator is not None
+            return merge_allowance_m(self._window.col("left")[i0 : i1 + 1].astype(np.int64),
+                                     self._window.col("right")[i0 : i1 + 1].astype(np.int64),
+                                     self.geometry, self.counter_bits, self.integrator)
+        now = self._abs_at.get(after)
+        if self._abs_last is None or now is None:
+            return math.inf
+        return path_bound_m(now[0] - self._abs_last[0], now[1] - self._abs_last[1],
+                            self.geometry)
 
     def on_truth(
         self, part: int, enc_counter: int, value: float
@@ -462,6 +506,7 @@ class PoseTracker:
         )
         self.reference_starts += 1
         self._ref_at = {}
+        self._shift, self._budget_m = (0.0, 0.0), 0.0
         self._gate = StepGate(self.geometry, self.counter_bits)
         for seq, counter, left, right in counts:
             step = self._gate.step(counter, left, right)  # the first primes: stays at pose
@@ -488,7 +533,8 @@ class PoseTracker:
             "pose": pose_dict(self.pose),
             "reference": {**(pose_dict(self.reference) or {}), "integrator": self.integrator,
                           "starts": self.reference_starts,
-                          "counter_restarts": self.counter_restarts, "stalls": self.stalls},
+                          "counter_restarts": self.counter_restarts, "stalls": self.stalls,
+                          "breaks": self.placements.as_dict()},
             "truth": pose_dict(self.truth),
             "error": {
                 "pose_vs_reference": self._vs_reference_dict(),

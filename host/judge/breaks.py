@@ -1,0 +1,169 @@
+"""The bound on the reference's re-placement after a firmware stall or hold (rule 5: a PASS must
+never hide a wrong pose), shared by the whole-log, the streamed and the live judge.
+
+After a stall (silent while the encoder frames came on time) or a hold (it kept naming one
+frame), the firmware took the frames it missed as one step, or as several: which frames it took
+the log cannot say (its CAN FIFO and mailbox kept some, dropped others, refused some by E2E).
+The reference follows the fine steps, so the on-board position may leave it there by the merge
+error of the steps the firmware did take. The placement after such a break may move the
+reference by no more than the worst of them (``merge_allowance_m``: over every set of runs of
+frames lost between the last frame the firmware is known to have taken before the break and the
+first one after it, the largest sum of the runs' merge errors, ``losses.merge_error``; their
+errors are vectors, the heading after each run exact, so the sum of lengths bounds them), summed
+over the breaks since the reference's position was last free (its start, or a gap of the log:
+the motion across a gap the logger missed is unknowable), plus the pose tolerance (the rounding
+of the samples the placement rests on). A larger offset is not absorbed: the placement stops at
+the bound and the samples after the break show the rest (``bound_offsets``, ``clamp_offset``).
+
+Spans of more than ``MAX_MERGE_FRAMES`` frames take a cheaper bound: twice the path length
+(``path_bound_m``: a run's merge error is at most its fine path plus its merged step)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from odocan.host.judge.losses import OneSteps, merge_error
+from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.samples import FloatArray, IntArray
+
+MAX_MERGE_FRAMES = 480  # frames between the ends beyond which the path bound is used (4.8 s)
+
+
+def merge_allowance_m(
+    left: IntArray, right: IntArray, geometry: Geometry, bits: int, integrator: str
+) -> float:
+    """The worst merge error (m) across a break: ``left``, ``right`` are the wire counts of the
+    encoder frames from the last one the firmware is known to have taken before it to the first
+    one after it (both taken, any between may be lost, in runs; ``bits``: the wire counter
+    width). Dynamic programming over the frame last taken (module docstring)."""
+    n = len(left)
+    if n < 3:
+        return 0.0
+    dl: IntArray = wrap_delta(np.diff(np.asarray(left, dtype=np.int64)).astype(np.int64), bits)
+    dr: IntArray = wrap_delta(np.diff(np.asarray(right, dtype=np.int64)).astype(np.int64), bits)
+    if n - 2 > MAX_MERGE_FRAMES:
+        return path_bound_m(int(np.sum(np.abs(dl))), int(np.sum(np.abs(dr))), geometry)
+    steps = OneSteps.of_deltas(dl, dr, geometry, integrator)
+    best = np.zeros(n)  # best[t]: the largest sum with frame t taken (runs before it)
+    for t in range(1, n):
+        a = np.arange(t)
+        best[t] = float(np.max(best[:t] + merge_error(steps, a, t)))
+    return float(best[-1])
+
+
+def path_bound_m(counts_left: int, counts_right: int, geometry: Geometry) -> float:
+    """A bound (m) on any merge error across steps of ``counts_*`` counts in all (the sums of
+    their absolute values, exact in any order): a run's merged step and its fine path are each
+    at most its path, and twice a step's travel |dS_L + dS_R| is at most |dS_L| + |dS_R|."""
+    return counts_left * geometry.m_per_count_left + counts_right * geometry.m_per_count_right
+
+
+def clamp_offset(dx_m: float, dy_m: float, limit_m: float) -> tuple[float, float]:
+    """The offset (m) shortened to ``limit_m`` when it is longer (its direction kept)."""
+    length = math.hypot(dx_m, dy_m)
+    if length <= limit_m:
+        return dx_m, dy_m
+    scale = limit_m / length
+    return dx_m * scale, dy_m * scale
+
+
+@dataclass
+class BreakSummary:
+    """What the placements after stalls and holds (and after gaps) absorbed, for the report."""
+
+    stalls: int = 0  # placements after a stall or hold (segments with a sample)
+    max_absorbed_m: float = 0.0  # the longest offset such a placement asked for (m)
+    allowance_m: float = 0.0  # that placement's bound (merge allowance + tolerance, m)
+    max_beyond_m: float = 0.0  # the most an offset went beyond its bound, not absorbed (m)
+    gaps: int = 0  # placements after a gap of the log (unbounded: not checked)
+    max_gap_absorbed_m: float = 0.0  # the longest offset a gap's placement absorbed (m)
+
+    def add_stall(self, asked_m: float, limit_m: float) -> None:
+        self.stalls += 1
+        if asked_m >= self.max_absorbed_m:
+            self.max_absorbed_m, self.allowance_m = asked_m, limit_m
+        self.max_beyond_m = max(self.max_beyond_m, asked_m - limit_m)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The report's ``reference_breaks``."""
+        return {
+            "stall_placements": self.stalls,
+            "max_offset_absorbed_m": self.max_absorbed_m,
+            "offset_allowance_m": self.allowance_m,
+            "max_offset_beyond_allowance_m": self.max_beyond_m,
+            "gap_placements": self.gaps,
+            "max_gap_offset_absorbed_m": self.max_gap_absorbed_m,
+        }
+
+
+def merged_breaks(parts: list[dict[str, Any]]) -> dict[str, Any]:
+    """``reference_breaks`` of several lives in one (counts summed, the worst kept)."""
+    out = dict(parts[0])
+    for part in parts[1:]:
+        out["stall_placements"] += part["stall_placements"]
+        out["gap_placements"] += part["gap_placements"]
+        if part["max_offset_absorbed_m"] >= out["max_offset_absorbed_m"]:
+            out["max_offset_absorbed_m"] = part["max_offset_absorbed_m"]
+            out["offset_allowance_m"] = part["offset_allowance_m"]
+        for key in ("max_offset_beyond_allowance_m", "max_gap_offset_absorbed_m"):
+            out[key] = max(out[key], part[key])
+    return out
+
+
+def bound_offsets(
+    raw_x_m: FloatArray, raw_y_m: FloatArray, gap: IntArray, allowance_m: FloatArray,
+    slack_m: float,
+) -> tuple[FloatArray, FloatArray, BreakSummary]:
+    """The segments' position offsets (m) as placed: per segment, the offset its samples ask for
+    (``raw_*``: NaN for a segment without a sample, which keeps the previous one; segment 0 is
+    0), whether a gap of the log opened it (``gap``, nonzero: free) or a stall or hold
+    (``allowance_m``: its ``merge_allowance_m``), and the tolerance ``slack_m``. A stall's
+    offset from the last free placement is kept within the allowances summed since plus
+    ``slack_m`` (module docstring)."""
+    n = len(raw_x_m)
+    x, y = np.zeros(n), np.zeros(n)
+    summary = BreakSummary()
+    anchor = (0.0, 0.0)
+    budget = 0.0
+    free = False  # a gap since the last placement with a sample: the next one is free
+    for k in range(1, n):
+        if gap[k]:
+            free = True
+        else:
+            budget += float(allowance_m[k])
+        if math.isnan(raw_x_m[k]):
+            x[k], y[k] = x[k - 1], y[k - 1]
+            continue
+        if free:
+            summary.gaps += 1
+            moved_m = math.hypot(raw_x_m[k] - x[k - 1], raw_y_m[k] - y[k - 1])
+            summary.max_gap_absorbed_m = max(summary.max_gap_absorbed_m, moved_m)
+            anchor, budget, free = (float(raw_x_m[k]), float(raw_y_m[k])), 0.0, False
+            x[k], y[k] = anchor
+            continue
+        dx, dy = float(raw_x_m[k]) - anchor[0], float(raw_y_m[k]) - anchor[1]
+        limit = budget + slack_m
+        summary.add_stall(math.hypot(dx, dy), limit)
+        dx, dy = clamp_offset(dx, dy, limit)
+        x[k], y[k] = anchor[0] + dx, anchor[1] + dy
+    return x, y, summary
+
+
+def placed_offsets(
+    raw_x_m: FloatArray, raw_y_m: FloatArray, openings: list[tuple[int, bool]],
+    allowance_of: Callable[[int], float], slack_m: float,
+) -> tuple[FloatArray, FloatArray, BreakSummary]:
+    """``bound_offsets`` of segments 1, 2, ... opened at ``openings`` (their first encoder
+    frame, and whether a gap of the log opened it), a stall's allowance by ``allowance_of``
+    (its first frame): the whole-log and the streamed judge's one way."""
+    allowance = np.zeros(len(raw_x_m))
+    gap = np.zeros(len(raw_x_m), dtype=np.int64)
+    for k, (first, by_gap) in enumerate(openings, start=1):
+        gap[k] = by_gap
+        allowance[k] = 0.0 if by_gap else allowance_of(first)
+    return bound_offsets(raw_x_m, raw_y_m, gap, allowance, slack_m)
