@@ -157,13 +157,14 @@ def twinned_encoder_frames(
     decoder: BulkDecoder,
 ) -> npt.NDArray[np.bool_]:
     """Which accepted WHEEL_ENCODERS frames (``rows``: every one decoded, ``keep``: those E2E
-    accepted) have a twin: a later frame of the same COUNTER before the next accepted one, its
-    CRC right but its counts different (E2E refused it as REPEATED). A forger's frame (random
-    payloads pass Profile 2's CRC about once in 256) or a second sender's; either may have come
-    first. The firmware took whichever reached its mailbox first and was kept, and a full
-    mailbox drops frames the bus log holds, so a pose naming that COUNTER cannot be told to
-    belong to either: ``match_encoder`` names none (the pose is left out, not guessed one
-    period off). An exact repetition (the same counts) is no twin."""
+    accepted) have a twin: a later frame of the same COUNTER before the next accepted one, less
+    than half a COUNTER cycle (8 periods) after it, its CRC right but its counts different (E2E
+    refused it as REPEATED; 16 lost frames later the same COUNTER is the sender's next cycle).
+    A forger's frame (random payloads pass Profile 2's CRC about once in 256) or a second
+    sender's; either may have come first. The firmware took whichever reached its mailbox first
+    and was kept, and a full mailbox drops frames the bus log holds, so a pose naming that
+    COUNTER cannot be told to belong to either: ``match_encoder`` names none (the pose is left
+    out, not guessed one period off). An exact repetition (the same counts) is no twin."""
     twinned = np.zeros(int(np.count_nonzero(keep)), dtype=bool)
     refused = np.flatnonzero(~keep)
     if len(refused) == 0 or len(twinned) == 0:
@@ -175,6 +176,9 @@ def twinned_encoder_frames(
     same = (rows["COUNTER"][refused] == rows["COUNTER"][prev]) & (
         (rows["LEFT_COUNT"][refused] != rows["LEFT_COUNT"][prev])
         | (rows["RIGHT_COUNT"][refused] != rows["RIGHT_COUNT"][prev]))
+    cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS")
+    if cycle_s is not None:  # 16 periods on, the same COUNTER is the sender's next cycle
+        same &= rows["timestamp_s"][refused] - rows["timestamp_s"][prev] < 8 * cycle_s
     if not same.any():
         return twinned
     config = next(m for m in e2e_messages(decoder.db).values() if m.name == "WHEEL_ENCODERS")
