@@ -448,8 +448,9 @@ class PoseTracker:
         elif self._rebase_pending and self._boot is not None and self._last_truth is not None:
             self._boot_truths.append(self._last_truth)
         if self.truth_origin is not None:
-            rx, ry, rh = rebase_truth(x_m, y_m, wrapped_rad, self.truth_origin)
-            x_m, y_m, wrapped_rad = float(rx), float(ry), float(rh)
+            rx, ry, rh = rebase_truth(np.array([x_m]), np.array([y_m]), np.array([wrapped_rad]),
+                                      self.truth_origin)
+            x_m, y_m, wrapped_rad = float(rx[0]), float(ry[0]), float(rh[0])
         heading = truth_heading(wrapped_rad, ref if ref is not None else self.truth)
         truth = self.truth = FramePose(ref.seq if ref else -1, x_m, y_m, heading)
         if ref is None:
