@@ -23,12 +23,14 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.stream_analysis import analyze_file
 from odocan.sim.board import FirmwareBoard
+from odocan.sim.contract import database
 from tests.fault_rig import FaultRig
 from tests.test_health_rig import Watch, circle_rig
 from tests.test_live_reboot import bridge_of, monitor_of
 
 REBOOT_TICK = 500  # 5 s into the circle
 RUN_S = 8.0
+STATUS_ID = database().get_message_by_name("ODOM_STATUS").frame_id
 FEW_MM = 5e-3  # pose vs truth before the reboot: about 1 mm on pmir's circle
 
 
@@ -153,3 +155,45 @@ def test_the_monitor_and_the_bridge_compare_the_new_life_with_the_truth_in_its_f
         assert math.hypot(x0 - origin[0], y0 - origin[1]) < 1e-3
         assert abs(math.remainder(h0 - origin[2], 2 * math.pi)) < 1e-3
     assert watch.monitor.health(RUN_S)["state"] == "OK"  # OK, and now the pose it shows is right
+
+
+def test_without_the_boot_summaries_every_judge_still_compares_in_the_new_life_frame(
+    reboot_run: tuple[Record, Watch, Path], tmp_path: Path,
+) -> None:
+    """The recorder missed the new firmware's summaries of its first second (all UPTIME 0):
+    the reboot is told at UPTIME 1, the life's start fitted (analyze) or adopted at the next
+    pose (the live judges); the truth is still re-based at the life's first truth sample on
+    the reference (the same ``life_origin``), not compared in the simulator's frame."""
+    record, _, _ = reboot_run
+    profile = record.rig.profile
+    origin, worst_m, _ = independent(record, min(profile.counter_bits, 24))
+    t0 = float(record.frames[0].timestamp)
+    first_second = (REBOOT_TICK * 0.01, REBOOT_TICK * 0.01 + 1.0)
+    path = tmp_path / "missed.log"
+    with can.Logger(str(path)) as logger:
+        for msg in record.frames:
+            summary = msg.arbitration_id == STATUS_ID and msg.data[1] >> 4 == 0
+            if not (summary and first_second[0] <= msg.timestamp - t0 < first_second[1]):
+                logger.on_message_received(msg)
+    analysis = analyze(read_log(path), profile)
+    (boot,) = analysis.report["reboots"]
+    assert boot["reference_start"] == "fitted"
+    after = analysis.series["truth_t_s"] >= boot["t_s"] - t0 - 1.0
+    assert np.count_nonzero(after) > 20
+    assert float(np.max(analysis.series["truth_position_error_m"][after])) < FEW_MM
+    at = boot["truth_origin"]
+    assert math.hypot(at["x_m"] - origin[0], at["y_m"] - origin[1]) < 1e-3
+    streamed = analyze_file(path, profile, chunk_frames=997)
+    assert streamed["onboard_vs_truth"] == analysis.report["onboard_vs_truth"]
+    assert streamed["reboots"] == analysis.report["reboots"]
+    for tracker in (monitor_of(path, profile.name, "exact").tracker,
+                    bridge_of(path, profile.name, "exact").tracker):
+        assert tracker.reference_starts == 2
+        # until UPTIME 1 tells the reboot, the live judges compare the new life's poses with
+        # the old life (their max shows it, against the reference too); from then on, its frame
+        assert tracker.vs_truth.latest["dpos_m"] < FEW_MM
+        assert tracker.truth_origin is not None
+        x0, y0, _ = tracker.truth_origin
+        # adopted ~1 s later: carried back along the reference from the pose it adopted
+        assert math.hypot(x0 - origin[0], y0 - origin[1]) < FEW_MM
+    assert worst_m < FEW_MM

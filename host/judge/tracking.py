@@ -355,17 +355,23 @@ class PoseTracker:
         the next one. No pose is adopted, so a firmware that comes up wrong shows its error.
         Without a known integrator it falls back to ``restart_reference`` (the next pose is
         adopted)."""
-        self.restart_reference()
+        self.new_life()
         self._losses.lost_page = None  # the new firmware counts from 0
-        # the new firmware's first tick sends its pose frames before its summary: the truth
-        # sample of the frame it primed on may have come before the reboot was told
-        self.truth_origin, self._rebase_pending = None, True
-        self._boot_truths = [self._last_truth] if self._last_truth is not None else []
         if self.integrator is None:
             return
         guess = self.enc_seq if primed_now else self.enc_seq + 1
         self._boot = (guess, self._now_s + BOOT_COUNT_WAIT_S)
         self._boot_poses = []
+
+    def new_life(self) -> None:
+        """A new firmware life (a reboot): the reference starts again at the next pose, and
+        the truth is compared in the new life's frame, its origin taken at the life's first
+        truth sample (``compare.life_origin``, as ``analyze``)."""
+        self.restart_reference()
+        # the new firmware's first tick sends its pose frames before its summary: the truth
+        # sample of the frame it primed on may have come before the reboot was told
+        self.truth_origin, self._rebase_pending = None, True
+        self._boot_truths = [self._last_truth] if self._last_truth is not None else []
 
     @property
     def awaiting_boot(self) -> bool:
