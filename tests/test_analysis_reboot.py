@@ -246,5 +246,6 @@ def test_a_reboot_at_the_end_of_the_log_is_reported_without_samples(tmp_path: Pa
     assert analysis.passed, analysis.report["onboard_vs_reference"]
     assert analysis.report["reboots"] == [
         {"t_s": pytest.approx(REBOOT * ENCODER_PERIOD_S, abs=0.002), "uptime_before_s": 9,
-         "reference_start": None, "onboard_samples": 0, "life": None}]
+         "reference_start": None, "onboard_samples": 0, "life": None,
+         "truth_origin": None}]
     assert analysis.report["samples"]["onboard"] == REBOOT // 2

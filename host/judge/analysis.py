@@ -100,6 +100,7 @@ from odocan.host.judge.compare import (
     error_summary,
     plot_series,
     pose_errors,
+    rebased_at_start,
     versus_truth,
 )
 from odocan.host.judge.losses import firmware_losses, loss_allowance
@@ -199,6 +200,7 @@ def analyze(
         try:
             result = _analyze_life(part, robot, integrator, tolerance=tolerance, db=db,
                                    decoder=BulkDecoder(db), boot=life.boot,
+                                   rebase=life.t_s is not None,
                                    max_wheel_speed_mm_s=max_wheel_speed_mm_s)
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
@@ -235,13 +237,15 @@ def _analyze_life(
     db: DatabaseSpec,
     decoder: BulkDecoder,
     boot: bool = False,
+    rebase: bool = False,
     scenario: str | None = None,
     seed: int | None = None,
     wall_seconds: float | None = None,
     max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
 ) -> Analysis:
     """``analyze`` of one firmware life (``host.judge.reboots``); ``boot``: the frames start at
-    a reboot, the firmware's pose 0 at their first encoder frame."""
+    a reboot, the firmware's pose 0 at their first encoder frame; ``rebase``: the frames are a
+    life after a reboot, the truth is compared in its frame (``compare.life_origin``)."""
     e2e, accepted = check_frames(frames, db)
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
     enc = encoder_frames(frames, accepted, decoder)
@@ -257,6 +261,9 @@ def _analyze_life(
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
                          slack_m=tolerance.position_m)
     ref = ref_all.at(onboard.enc)
+    truth_origin = None
+    if rebase:  # a new firmware life: its own origin, the truth re-based there
+        truth, truth_origin = rebased_at_start(truth, ref_all)
     pos_err, head_err = pose_errors(onboard, ref)
     vs_ref = error_summary(pos_err, head_err)
     vs_truth, truth_series = versus_truth(onboard, truth, ref_all)
@@ -329,6 +336,8 @@ def _analyze_life(
         "tolerance": {"position_m": tolerance.position_m, "heading_rad": tolerance.heading_rad},
         "passed": passed,
     }
+    if rebase:
+        report["truth_origin"] = truth_origin
     truth_enc = truth_series.pop("truth_enc")
     series = {
         "timestamp_s": frames.timestamp_s[enc.index[onboard.enc]],  # of the encoder frame

@@ -4,6 +4,7 @@ docstring, step 5)."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -49,6 +50,70 @@ def error_summary(position: FloatArray, heading: FloatArray) -> dict[str, Any]:
         "final_position_error_m": float(position[-1]),
         "final_heading_error_rad": float(heading[-1]),
     }
+
+
+# --- the truth in a firmware life's frame ----------------------------------------------------
+
+
+def life_origin(
+    truth: tuple[float, float, float], ref: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """Where a firmware life's origin lies in the truth's frame: x (m), y (m), heading (rad).
+
+    A rebooted firmware starts its pose at 0 at the encoder frame it primed on, so its frame is
+    the truth's pose there. SIM_TRUTH comes every 100 ms, seldom at that very frame: the origin
+    is taken at the life's first truth sample (``truth``: x, y, heading) carried back to the
+    reference's start along the reference (``ref``: its pose at that sample's frame), the
+    pose ``truth - ref`` composed: heading ``h_t - h_r``, position the truth's less the
+    reference's rotated by that heading. At power-up (reference 0 at the primed frame) it is
+    the truth at that frame, to within the odometry error of the few frames carried; where the
+    life's start was fitted (its boot summary missed) it places the truth on the reference
+    there, as the reference is placed on the on-board pose.
+    """
+    heading = truth[2] - ref[2]
+    c, s = math.cos(heading), math.sin(heading)
+    return (truth[0] - (c * ref[0] - s * ref[1]), truth[1] - (s * ref[0] + c * ref[1]), heading)
+
+
+def rebase_truth(
+    x_m: FloatArray, y_m: FloatArray, heading_rad: FloatArray,
+    origin: tuple[float, float, float],
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The truth in the life's frame whose origin is ``origin`` (``life_origin``): its
+    position less the origin's, rotated by minus the origin's heading; its heading less the
+    origin's (rad). Element by element: the whole-log, streamed and live judges agree bit for
+    bit on the same samples."""
+    x0, y0, h0 = origin
+    c, s = math.cos(h0), math.sin(h0)
+    dx, dy = np.asarray(x_m, dtype=np.float64) - x0, np.asarray(y_m, dtype=np.float64) - y0
+    return c * dx + s * dy, c * dy - s * dx, np.asarray(heading_rad, dtype=np.float64) - h0
+
+
+def origin_dict(origin: tuple[float, float, float], truth_enc: int, ref_start: int
+                ) -> dict[str, Any]:
+    """The report's form of a life's truth origin (``life_origin``): the truth's pose taken
+    as the life's (0, 0, 0), the life's encoder frame of the truth sample it came from and how
+    many frames the reference carried it back."""
+    return {"x_m": origin[0], "y_m": origin[1], "heading_rad": origin[2],
+            "truth_encoder_frame": truth_enc, "carried_frames": truth_enc - ref_start}
+
+
+def rebased_at_start(truth: Poses, ref: Reference) -> tuple[Poses, dict[str, Any] | None]:
+    """``truth`` in the frame of the life whose reference is ``ref`` (``life_origin`` at its
+    first truth sample from the reference's start on) and the origin's report; unchanged and
+    None without such a sample."""
+    first = np.flatnonzero(truth.enc >= ref.start)
+    if len(first) == 0:
+        return truth, None
+    k = int(first[0])
+    at = ref.at(truth.enc[k : k + 1])
+    origin = life_origin(
+        (float(truth.x_m[k]), float(truth.y_m[k]), float(truth.heading_rad[k])),
+        (float(at.x_m[0]), float(at.y_m[0]), float(at.heading_rad[0])),
+    )
+    x, y, h = rebase_truth(truth.x_m, truth.y_m, truth.heading_rad, origin)
+    rebased = Poses(enc=truth.enc, x_m=x, y_m=y, heading_rad=h, heading_raw=truth.heading_raw)
+    return rebased, origin_dict(origin, int(truth.enc[k]), ref.start)
 
 
 def versus_truth(

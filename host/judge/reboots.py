@@ -30,6 +30,12 @@ Known limit: without that page (other firmwares need not send it) and without th
 in the log, the life is taken to start at the next summary's frame and its first poses fall in
 the life before (and fail there).
 
+Each new life has its own origin, so its pose is compared with the truth in that frame: the
+truth re-based at the life's power-up frame (``host.judge.compare.life_origin``, the same in the
+streamed and the live judges), reported per reboot as ``truth_origin`` (None: no truth sample
+in the life). The log's first life is compared in the truth's own frame: its firmware came up
+with the simulator (a log that starts mid-drive has its reference start fitted, its truth kept).
+
 ``merge`` makes one report and one set of series of the lives' (``host.judge.analysis``).
 """
 
@@ -219,14 +225,15 @@ def merge(
     report["e2e"] = _summed_counts([r["e2e"] for r in reports])
     report["unknown_frames"] = _summed_counts([{"u": r["unknown_frames"]} for r in reports])["u"]
     events = [dict(e, life=k) for k, r in enumerate(reports) for e in r["events"]]
+    report.pop("truth_origin", None)
     reboots = [
         {"t_s": life.t_s, "uptime_before_s": life.uptime_before_s,
          "reference_start": r["reference_start"], "onboard_samples": r["samples"]["onboard"],
-         "life": k}
+         "life": k, "truth_origin": r.get("truth_origin")}
         for k, (life, r) in enumerate(zip(lives, reports, strict=True)) if life.t_s is not None
     ] + [
         {"t_s": life.t_s, "uptime_before_s": life.uptime_before_s, "reference_start": None,
-         "onboard_samples": 0, "life": None}
+         "onboard_samples": 0, "life": None, "truth_origin": None}
         for life in silent or [] if life.t_s is not None
     ]
     reboots.sort(key=lambda b: b["t_s"])
@@ -234,7 +241,9 @@ def merge(
         {"kind": "reboot", "t_s": b["t_s"], "life": b["life"],
          "detail": f"the firmware restarted (UPTIME {b['uptime_before_s']} s -> 0): "
                    + (f"the reference restarts from its {b['reference_start']} pose"
-                      if b["reference_start"] else "no on-board pose after it to compare")}
+                      if b["reference_start"] else "no on-board pose after it to compare")
+                   + (", the truth is compared in the new life's frame (truth_origin)"
+                      if b["truth_origin"] else "")}
         for b in reboots
     ]
     report["events"] = sorted(events, key=lambda e: e["t_s"])

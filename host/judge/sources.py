@@ -121,5 +121,5 @@ def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
     if uptime_s == 0:
         tracker.power_up(primed_now=state != "INIT")
         return "reference restarted at the power-up pose"
-    tracker.restart_reference()
+    tracker.new_life()
     return "reference restarted"

@@ -162,7 +162,7 @@ def _analyze_lives(
     for span in spans:
         try:
             report, t_first = _life(frames_of(span), robot, integrator, tolerance=tolerance,
-                                    db=db, boot=span.boot,
+                                    db=db, boot=span.boot, rebase=span.t_s is not None,
                                     max_wheel_speed_mm_s=max_wheel_speed_mm_s)
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
@@ -232,7 +232,8 @@ class FrameSpill:
 def _life(
     frames: Frames, robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
     db: DatabaseSpec, boot: bool, max_wheel_speed_mm_s: int | None,
-    scenario: str | None = None, seed: int | None = None, wall_seconds: float | None = None,
+    rebase: bool = False, scenario: str | None = None, seed: int | None = None,
+    wall_seconds: float | None = None,
 ) -> tuple[dict[str, Any], float]:
     """``analysis._analyze_life``'s report of one life, and its first frame's time."""
     first = _first_pass(frames, db, robot)
@@ -271,7 +272,7 @@ def _life(
     off_x, off_y, placements = placed_offsets(*raw, info.openings, across.allowance,
                                               tolerance.position_m)
     offsets = (off_x, off_y)
-    truth = TruthCompare((x0, y0, h0), offsets)
+    truth = TruthCompare((x0, y0, h0), offsets, rebase=rebase, e0=e0)
     last: list[PlacedChunk] = []
     wanted = (frozenset(info.reprimed) | frozenset(breaks.tolist())
               | frozenset(first for first, _, _ in spans))
@@ -351,6 +352,8 @@ def _life(
         "tolerance": {"position_m": tolerance.position_m, "heading_rad": tolerance.heading_rad},
         "passed": passed,
     }
+    if rebase:  # a life after a reboot: the truth compared in its frame
+        report["truth_origin"] = truth.origin
     return report, first.t_first_s
 
 

@@ -4,7 +4,9 @@ on-board sample's carried back along the placed reference), its summary bit for 
 
 A truth sample waits for the first on-board sample at or after its encoder frame; on-board
 samples are kept while a truth sample to come may need them (from ``TruthChunk.floor`` on).
-Both arrive in encoder order, so the truth samples are compared in the whole log's order."""
+Both arrive in encoder order, so the truth samples are compared in the whole log's order.
+In a life after a reboot (``rebase``) the truth is re-based at the life's first truth sample
+(``compare.life_origin``, as ``compare.rebased_at_start``)."""
 
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from odocan.host.judge.compare import error_summary
+from odocan.host.judge.compare import error_summary, life_origin, origin_dict, rebase_truth
 from odocan.host.judge.reference_path import wrap_pi
 from odocan.host.judge.samples import HEADING_LSB_RAD, FloatArray
 from odocan.host.judge.stream_life import TruthChunk
@@ -30,6 +32,9 @@ class TruthCompare:
 
     start: tuple[float, float, float]
     offsets: tuple[FloatArray, FloatArray]
+    rebase: bool = False  # a life after a reboot: the truth in its frame
+    e0: int = 0  # the encoder frame the reference starts at
+    origin: dict[str, Any] | None = None  # the truth's origin once re-based (``origin_dict``)
     compared: int = 0
     _onboard: Placed = field(default_factory=dict)  # enc, x, y, heading (raw), ref x, y, h
     _waiting: Placed = field(default_factory=dict)  # enc, truth x, y, h, ref x, y, h
@@ -56,8 +61,16 @@ class TruthCompare:
             "rx": ref_x, "ry": ref_y, "rh": ref_h})
         here = self._reference(truth.rel_x_m, truth.rel_y_m, truth.rel_heading_rad,
                                truth.segment)
+        tx, ty, th = truth.x_m, truth.y_m, truth.heading_rad
+        if self.rebase and len(truth.enc):
+            if self.origin is None:
+                origin = life_origin((float(tx[0]), float(ty[0]), float(th[0])),
+                                     (float(here[0][0]), float(here[1][0]), float(here[2][0])))
+                self.origin = origin_dict(origin, int(truth.enc[0]), self.e0)
+            at = self.origin
+            tx, ty, th = rebase_truth(tx, ty, th, (at["x_m"], at["y_m"], at["heading_rad"]))
         self._waiting = _cat(self._waiting, {
-            "enc": truth.enc, "x": truth.x_m, "y": truth.y_m, "h": truth.heading_rad,
+            "enc": truth.enc, "x": tx, "y": ty, "h": th,
             "rx": here[0], "ry": here[1], "rh": here[2]})
         self._resolve()
         if self._onboard and truth.floor != math.inf:

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from odocan.host.judge.breaks import BreakSummary, clamp_offset, merge_allowance_m, path_bound_m
+from odocan.host.judge.compare import life_origin, rebase_truth
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livepose import (
     RING,
@@ -120,6 +121,12 @@ class PoseTracker:
         self.vs_reference = ErrorStats()
         self.vs_truth = ErrorStats()
         self.reference_vs_truth = ErrorStats()
+        # a new firmware life's origin in the truth's frame (``compare.life_origin``): None in
+        # the first life (it came up with the simulator), else set at its first truth sample
+        self.truth_origin: tuple[float, float, float] | None = None
+        self._rebase_pending = False  # after a reboot: the next truth sample sets the origin
+        self._boot_truths: list[tuple[int, float, float, float]] = []  # seq, x, y, h meanwhile
+        self._last_truth: tuple[int, float, float, float] | None = None  # as heard (seq known)
 
     fast_path = True  # False: every half by ``match_encoder`` over the window (tests compare)
 
@@ -366,13 +373,23 @@ class PoseTracker:
         the next one. No pose is adopted, so a firmware that comes up wrong shows its error.
         Without a known integrator it falls back to ``restart_reference`` (the next pose is
         adopted)."""
-        self.restart_reference()
+        self.new_life()
         self._losses.lost_page = None  # the new firmware counts from 0
         if self.integrator is None:
             return
         guess = self.enc_seq if primed_now else self.enc_seq + 1
         self._boot = (guess, self._now_s + BOOT_COUNT_WAIT_S)
         self._boot_poses = []
+
+    def new_life(self) -> None:
+        """A new firmware life (a reboot): the reference starts again at the next pose, and
+        the truth is compared in the new life's frame, its origin taken at the life's first
+        truth sample (``compare.life_origin``, as ``analyze``)."""
+        self.restart_reference()
+        # the new firmware's first tick sends its pose frames before its summary: the truth
+        # sample of the frame it primed on may have come before the reboot was told
+        self.truth_origin, self._rebase_pending = None, True
+        self._boot_truths = [self._last_truth] if self._last_truth is not None else []
 
     @property
     def awaiting_boot(self) -> bool:
@@ -395,6 +412,11 @@ class PoseTracker:
                           self._window.col("left")[keep].astype(int).tolist(),
                           self._window.col("right")[keep].astype(int).tolist(), strict=True))
         self._start_reference(FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
+        truths, self._boot_truths = self._boot_truths, []
+        for seq, x_m, y_m, wrapped_rad in truths:  # the life's first truth sample: its origin
+            ref = self._ref_at.get(seq)
+            if seq >= primed and ref is not None and self._rebase_pending:
+                self._set_origin(x_m, y_m, wrapped_rad, ref)
 
     def on_enc_counts(self, ok: int, lost: int) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS: the firmware's ENC_E2E_OK (encoder frames it
@@ -468,8 +490,19 @@ class PoseTracker:
         self._truth_parts = {}
         named = self._recent(self._counts[enc_counter])
         ref = self._ref_at.get(named[0]) if named is not None else None
-        heading = truth_heading(parts[2][1], ref if ref is not None else self.truth)
-        truth = self.truth = FramePose(ref.seq if ref else -1, parts[0][1], parts[1][1], heading)
+        x_m, y_m, wrapped_rad = parts[0][1], parts[1][1], parts[2][1]
+        if named is not None:
+            self._last_truth = (int(named[0]), x_m, y_m, wrapped_rad)
+        if self._rebase_pending and ref is not None:
+            self._set_origin(x_m, y_m, wrapped_rad, ref)
+        elif self._rebase_pending and self._boot is not None and self._last_truth is not None:
+            self._boot_truths.append(self._last_truth)
+        if self.truth_origin is not None:
+            rx, ry, rh = rebase_truth(np.array([x_m]), np.array([y_m]), np.array([wrapped_rad]),
+                                      self.truth_origin)
+            x_m, y_m, wrapped_rad = float(rx[0]), float(ry[0]), float(rh[0])
+        heading = truth_heading(wrapped_rad, ref if ref is not None else self.truth)
+        truth = self.truth = FramePose(ref.seq if ref else -1, x_m, y_m, heading)
         if ref is None:
             return truth, None
         self.reference_vs_truth.add(ref, truth)
@@ -481,6 +514,13 @@ class PoseTracker:
             )
             self.vs_truth.add(estimate, truth)
         return truth, ref
+
+    def _set_origin(self, x_m: float, y_m: float, wrapped_rad: float, ref: FramePose) -> None:
+        """The new life's origin from its first truth sample (x, y m, SIM_TRUTH's heading rad)
+        and the reference at its encoder frame (``compare.life_origin``, as ``analyze``)."""
+        self.truth_origin = life_origin((x_m, y_m, wrapped_rad),
+                                        (ref.x_m, ref.y_m, ref.heading_rad))
+        self._rebase_pending = False
 
     @property
     def counter_restarts(self) -> int:
@@ -527,6 +567,13 @@ class PoseTracker:
         return {**stats, "loss_allowance_m": self.allowance_m(),
                 "max_dpos_beyond_allowance_m": self.max_beyond_allowance_m}
 
+    def _origin_dict(self) -> dict[str, float] | None:
+        """The current life's origin in the truth's frame (None: the truth's own frame)."""
+        if self.truth_origin is None:
+            return None
+        x_m, y_m, heading_rad = self.truth_origin
+        return {"x_m": x_m, "y_m": y_m, "heading_rad": heading_rad}
+
     def snapshot(self) -> dict[str, Any]:
         """``pose``, ``reference``, ``truth`` (None until known) and ``error``."""
         return {
@@ -536,6 +583,7 @@ class PoseTracker:
                           "counter_restarts": self.counter_restarts, "stalls": self.stalls,
                           "breaks": self.placements.as_dict()},
             "truth": pose_dict(self.truth),
+            "truth_origin": self._origin_dict(),
             "error": {
                 "pose_vs_reference": self._vs_reference_dict(),
                 "pose_vs_truth": self.vs_truth.as_dict(),
