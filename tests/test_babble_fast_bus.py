@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from odocan.firmware import frames as fr
@@ -267,10 +267,14 @@ def test_the_merge_error_of_a_run_of_lost_frames_is_the_checkers(
     every, lost = _Odometry(robot, integrator), _Odometry(robot, integrator)
     merged = [0, 0]
     for k, (d_left, d_right) in enumerate(steps):
+        assume(abs(d_right * every.m_right - d_left * every.m_left) / every.b < 0.9 * math.pi)
         every.step(d_left, d_right)
         merged = [merged[0] + d_left, merged[1] + d_right]
         if j - 1 <= k < j + r - 1:
             continue  # frame k + 1 lost: its step waits for the next one
+        # a merged step of half a turn or more: the firmware reads its turn wrapped, which this
+        # plain checker does not (tests/test_stall_bound.py has that case's own regression test)
+        assume(abs(merged[1] * lost.m_right - merged[0] * lost.m_left) / lost.b < 0.9 * math.pi)
         lost.step(*merged)
         merged = [0, 0]
     want = math.hypot(every.x - lost.x, every.y - lost.y)

@@ -127,7 +127,7 @@ def test_a_jump_at_a_stall_fails_every_judge(tmp_path: Path, kind: str, bias_lsb
         assert breaks["max_offset_beyond_allowance_m"] == 0.0
         assert breaks["max_offset_absorbed_m"] < 0.75 * POSITION_LSB_M
         for tracker in lives:
-            assert tracker.placements.max_beyond_m == 0.0
+            assert tracker.placer.placements.max_beyond_m == 0.0
             assert tracker.vs_reference.max_dpos_m < 1.5 * POSITION_LSB_M
         assert monitor.health(end_s)["state"] == "OK"
         return
@@ -141,7 +141,7 @@ def test_a_jump_at_a_stall_fails_every_judge(tmp_path: Path, kind: str, bias_lsb
     for tracker in lives:  # the live judges: the same rest, within the first pose's rounding
         assert tracker.vs_reference.max_dpos_m > POSITION_LSB_M
         assert tracker.vs_reference.max_dpos_m == pytest.approx(got, abs=1.5 * POSITION_LSB_M)
-        assert tracker.placements.max_beyond_m > 0.0
+        assert tracker.placer.placements.max_beyond_m > 0.0
     state = monitor.health(end_s)["state"]
     assert state == ("POSE WRONG" if bias_m > 1e-3 + POSITION_LSB_M else "OK"), state
 
@@ -191,7 +191,7 @@ def test_a_correct_firmware_on_a_curve_passes_with_its_merge_error_absorbed(
     assert breaks["offset_allowance_m"] >= want + POSITION_LSB_M - 1e-12  # an honest bound
     monitor, bridge, _ = _live(KOBUKI, integrator, path)
     for tracker in (monitor.tracker, bridge.tracker):
-        assert tracker.placements.max_beyond_m == 0.0
+        assert tracker.placer.placements.max_beyond_m == 0.0
         assert tracker.vs_reference.max_dpos_m < 1.5 * POSITION_LSB_M
     _streamed_alike(path, KOBUKI, result.report, integrator)
     jump = round((breaks["offset_allowance_m"] + 0.01) / POSITION_LSB_M)  # 1 cm beyond it

@@ -149,8 +149,8 @@ def test_the_monitor_and_the_bridge_compare_the_new_life_with_the_truth_in_its_f
         assert tracker.reference_starts == 2
         assert tracker.vs_truth.max_dpos_m < FEW_MM
         assert tracker.vs_truth.latest["dpos_m"] == pytest.approx(last_m, abs=1.5e-3)
-        assert tracker.truth_origin is not None
-        x0, y0, h0 = tracker.truth_origin
+        assert tracker.life_truth.origin is not None
+        x0, y0, h0 = tracker.life_truth.origin
         assert (x0, y0, h0) == (whole["x_m"], whole["y_m"], whole["heading_rad"])  # one function
         assert math.hypot(x0 - origin[0], y0 - origin[1]) < 1e-3
         assert abs(math.remainder(h0 - origin[2], 2 * math.pi)) < 1e-3
@@ -192,8 +192,8 @@ def test_without_the_boot_summaries_every_judge_still_compares_in_the_new_life_f
         # until UPTIME 1 tells the reboot, the live judges compare the new life's poses with
         # the old life (their max shows it, against the reference too); from then on, its frame
         assert tracker.vs_truth.latest["dpos_m"] < FEW_MM
-        assert tracker.truth_origin is not None
-        x0, y0, _ = tracker.truth_origin
+        assert tracker.life_truth.origin is not None
+        x0, y0, _ = tracker.life_truth.origin
         # adopted ~1 s later: carried back along the reference from the pose it adopted
         assert math.hypot(x0 - origin[0], y0 - origin[1]) < FEW_MM
     assert worst_m < FEW_MM

@@ -199,3 +199,27 @@ def named_in_window(halves: Columns, w: Columns, pos: int) -> tuple[int, bool]:
     queued = clocked and bool(queued_frames(t_s, CYCLE_S)[k])
     found = int(named[k])
     return (int(w.col("seq")[found]) if found >= 0 else -1), queued
+
+
+def window_counts(window: Columns, first: int) -> list[tuple[int, int, int, int]]:
+    """The encoder frames of the window from seq ``first`` on: (seq, counter, left, right)."""
+    keep = window.col("seq") >= first
+    return list(zip(*(window.col(name)[keep].astype(int).tolist()
+                      for name in ("seq", "counter", "left", "right")), strict=True))
+
+
+def silent_since(last_s: float | None, t_s: float, ys: Columns, window: Columns) -> bool:
+    """The firmware was silent before a sample whose ODOM_POSE_Y came at ``t_s`` (not let out
+    in a burst; ``last_s``: the previous sample's), the rule of ``stalls.after_stalls``:
+    ``SILENCE_CYCLES`` from the last ODOM_POSE_Y sent (``ys``), with encoder frames on time
+    meanwhile (``window``)."""
+    if last_s is None or t_s - last_s < (SILENCE_CYCLES - 0.5) * CYCLE_S:
+        return False  # the last, decided without numpy (the common case): talked >= last
+    sent = ys.col("t_s")[: int(np.searchsorted(ys.col("t_s"), t_s, side="left"))]
+    talked = max(last_s, float(sent[-1])) if len(sent) else last_s
+    if t_s - talked < (SILENCE_CYCLES - 0.5) * CYCLE_S:
+        return False
+    stamps = window.col("t_s")
+    on_time = ~queued_frames(stamps, CYCLE_S)
+    lo, hi = np.searchsorted(stamps, talked), np.searchsorted(stamps, t_s)
+    return int(np.count_nonzero(on_time[lo:hi])) >= SILENCE_CYCLES - 1

@@ -16,11 +16,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import numpy as np
-
-from odocan.host.judge.breaks import BreakSummary, clamp_offset, merge_allowance_m, path_bound_m
-from odocan.host.judge.compare import life_origin, rebase_truth
 from odocan.host.judge.livelosses import LiveAllowance
+from odocan.host.judge.liveplace import StallPlacer
 from odocan.host.judge.livepose import (
     RING,
     ErrorStats,
@@ -30,8 +27,8 @@ from odocan.host.judge.livepose import (
     pose_dict,
     truth_heading,
 )
+from odocan.host.judge.livetruth import LifeTruth
 from odocan.host.judge.livewindow import (
-    CYCLE_S,
     ENC_WINDOW,
     HALF_WINDOW,
     QUEUED_GAP_S,
@@ -39,9 +36,11 @@ from odocan.host.judge.livewindow import (
     Half,
     named_in_window,
     named_plain,
+    silent_since,
+    window_counts,
 )
-from odocan.host.judge.reference import Geometry, ReferenceOdometry, wrap_delta
-from odocan.host.judge.samples import POSITION_LSB_M, SILENCE_CYCLES, queued_frames
+from odocan.host.judge.reference import Geometry, ReferenceOdometry
+from odocan.host.judge.samples import SILENCE_CYCLES
 from odocan.sim.pose import TURN_RAD
 
 WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
@@ -103,13 +102,7 @@ class PoseTracker:
         self._last_compared = -1  # the encoder frame of the last sample compared
         self._place_at_next = False  # after a stall or a held pose: place the position again
         self._losses = LiveAllowance()
-        self.position_tolerance_m = POSITION_LSB_M  # the slack of a placement after a stall
-        self.placements = BreakSummary()  # what the placements after stalls absorbed
-        self._shift = (0.0, 0.0)  # the placements' offset of the reference since its start (m)
-        self._budget_m = 0.0  # the stalls' merge allowances summed since its start (m)
-        self._abs_at: dict[int, tuple[int, int]] = {}  # per recent frame: |count steps| summed
-        self._abs_counts = (0, 0)  # ... up to the latest encoder frame
-        self._abs_last: tuple[int, int] | None = None  # ... at the last sample compared
+        self.placer = StallPlacer()  # the placements after stalls (host.judge.liveplace)
         self._now_s = 0.0  # the latest bus time (s)
         self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
         self._boot_poses: list[FramePose] = []  # the new life's samples while it waits
@@ -123,10 +116,7 @@ class PoseTracker:
         self.reference_vs_truth = ErrorStats()
         # a new firmware life's origin in the truth's frame (``compare.life_origin``): None in
         # the first life (it came up with the simulator), else set at its first truth sample
-        self.truth_origin: tuple[float, float, float] | None = None
-        self._rebase_pending = False  # after a reboot: the next truth sample sets the origin
-        self._boot_truths: list[tuple[int, float, float, float]] = []  # seq, x, y, h meanwhile
-        self._last_truth: tuple[int, float, float, float] | None = None  # as heard (seq known)
+        self.life_truth = LifeTruth()
 
     fast_path = True  # False: every half by ``match_encoder`` over the window (tests compare)
 
@@ -151,12 +141,9 @@ class PoseTracker:
         self.enc_seq += 1
         self._pos += 1
         prev = self._window.rows[-1] if len(self._window) else None
-        if prev is not None:
-            bits = self.counter_bits
-            self._abs_counts = (self._abs_counts[0] + abs(wrap_delta(left - int(prev[4]), bits)),
-                                self._abs_counts[1] + abs(wrap_delta(right - int(prev[5]), bits)))
-        self._abs_at[self.enc_seq] = self._abs_counts
-        self._abs_at.pop(self.enc_seq - ENC_WINDOW, None)
+        self.placer.on_encoders(self.enc_seq, left, right,
+                                None if prev is None else (int(prev[4]), int(prev[5])),
+                                self.counter_bits)
         self._window.append(self.enc_seq, self._pos, counter, t_s, left, right)
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
@@ -179,7 +166,7 @@ class PoseTracker:
         self._ys = {seq: half for seq, half in self._ys.items() if seq >= before}
         self._sampled = {seq for seq in self._sampled if seq >= before}
         self._ref_at = {seq: ref for seq, ref in self._ref_at.items() if seq >= before}
-        self._abs_at = {seq: sums for seq, sums in self._abs_at.items() if seq >= before}
+        self.placer.forget(before)
 
     def _keep_ref(self, ref: FramePose) -> None:
         self._ref_at[ref.seq] = ref
@@ -251,26 +238,12 @@ class PoseTracker:
         ref = self._compare(pose, y, queued)
         self.settled.append(Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
 
-    def _silent_before(self, y: Half, queued: bool) -> bool:
-        """The firmware was silent before this sample, not let out in a burst: the rule of
-        ``stalls.after_stalls`` (from the last ODOM_POSE_Y sent, encoder frames on time)."""
-        last, self._last_sample_t = self._last_sample_t, y.t_s
-        if last is None or queued or y.t_s - last < (SILENCE_CYCLES - 0.5) * CYCLE_S:
-            return False  # the last, decided without numpy (the common case): talked >= last
-        ys = self._halves["y"].col("t_s")[: int(np.searchsorted(self._halves["y"].col("t_s"),
-                                                                 y.t_s, side="left"))]
-        talked = max(last, float(ys[-1])) if len(ys) else last
-        if y.t_s - talked < (SILENCE_CYCLES - 0.5) * CYCLE_S:
-            return False
-        stamps = self._window.col("t_s")
-        on_time = ~queued_frames(stamps, CYCLE_S)
-        lo, hi = np.searchsorted(stamps, talked), np.searchsorted(stamps, y.t_s)
-        return int(np.count_nonzero(on_time[lo:hi])) >= SILENCE_CYCLES - 1
-
     def _compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
         """Judge one on-board sample; the reference at its encoder frame, None when unknown."""
         seq = pose.seq
-        if self._silent_before(y, queued) and self._ref is not None:
+        last, self._last_sample_t = self._last_sample_t, y.t_s
+        silent = not queued and silent_since(last, y.t_s, self._halves["y"], self._window)
+        if silent and self._ref is not None:  # stalls.after_stalls' rule
             # The firmware was stalled: this pose names a backlog frame, and it took the
             # frames it missed as one step: the reference's position is placed again at the
             # next pose (its heading, a function of the counts, goes on).
@@ -289,13 +262,7 @@ class PoseTracker:
         if self._ref is None:
             if self._pending is None:
                 self._pending = pose
-                seqs = self._window.col("seq")
-                keep = seqs >= seq
-                self._backlog_counts = list(zip(
-                    seqs[keep].astype(int).tolist(),
-                    self._window.col("counter")[keep].astype(int).tolist(),
-                    self._window.col("left")[keep].astype(int).tolist(),
-                    self._window.col("right")[keep].astype(int).tolist(), strict=True))
+                self._backlog_counts = window_counts(self._window, seq)
             if self.integrator is None:
                 self._backlog_poses.append(pose)
                 return None
@@ -310,7 +277,7 @@ class PoseTracker:
         return ref
 
     def _record(self, pose: FramePose, ref: FramePose) -> None:
-        self._abs_last = self._abs_at.get(pose.seq)
+        self.placer.compared(pose.seq)
         self.reference = ref
         self._last_pair = (pose, ref)
         self._last_compared = pose.seq
@@ -357,7 +324,7 @@ class PoseTracker:
         self._last_sample_t = None
         self._place_at_next = False
         self._ref_at = {}
-        self._shift, self._budget_m = (0.0, 0.0), 0.0
+        self.placer.restart()
         self._losses.restart(self.enc_seq, self.fast_path)
         self._drop_backlog()
 
@@ -388,8 +355,7 @@ class PoseTracker:
         self.restart_reference()
         # the new firmware's first tick sends its pose frames before its summary: the truth
         # sample of the frame it primed on may have come before the reboot was told
-        self.truth_origin, self._rebase_pending = None, True
-        self._boot_truths = [self._last_truth] if self._last_truth is not None else []
+        self.life_truth.new_life()
 
     @property
     def awaiting_boot(self) -> bool:
@@ -402,21 +368,12 @@ class PoseTracker:
         judge the samples heard since the reboot; adopt the next pose when that frame is not
         known (not heard yet, or no longer in the window)."""
         poses, self._boot, self._boot_poses = self._boot_poses, None, []
-        seqs = self._window.col("seq")
-        keep = seqs >= primed
-        if not keep.any() or int(seqs[keep][0]) != primed:
+        counts = window_counts(self._window, primed)
+        if not counts or counts[0][0] != primed:
             self.restart_reference()
             return
-        counts = list(zip(seqs[keep].astype(int).tolist(),
-                          self._window.col("counter")[keep].astype(int).tolist(),
-                          self._window.col("left")[keep].astype(int).tolist(),
-                          self._window.col("right")[keep].astype(int).tolist(), strict=True))
         self._start_reference(FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
-        truths, self._boot_truths = self._boot_truths, []
-        for seq, x_m, y_m, wrapped_rad in truths:  # the life's first truth sample: its origin
-            ref = self._ref_at.get(seq)
-            if seq >= primed and ref is not None and self._rebase_pending:
-                self._set_origin(x_m, y_m, wrapped_rad, ref)
+        self.life_truth.booted(primed, self._ref_at)
 
     def on_enc_counts(self, ok: int, lost: int) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS: the firmware's ENC_E2E_OK (encoder frames it
@@ -427,9 +384,7 @@ class PoseTracker:
         self.on_enc_lost(lost)
 
     def _drop_backlog(self) -> None:
-        self._pending = None
-        self._backlog_counts = []
-        self._backlog_poses = []
+        self._pending, self._backlog_counts, self._backlog_poses = None, [], []
 
     def set_geometry(self, geometry: Geometry, counter_bits: int) -> None:
         """New robot parameters (a config command); the reference restarts at the next pose."""
@@ -438,43 +393,18 @@ class PoseTracker:
         self.restart_reference()
 
     def _place(self, pose: FramePose, ref: FramePose) -> FramePose:
-        """Move the reference's position (now and at the frames heard since ``ref``) by
-        ``pose - ref``: it starts again where the firmware is, within the pose's rounding (so
-        within about 1.4 LSB after), while its heading goes on exact; no further from where it
-        started than the stalls' merge allowances since plus the tolerance
-        (``host.judge.breaks``, as ``analyze`` places it). Returns the moved ``ref``."""
-        assert self._ref is not None
-        self._budget_m += self._break_allowance_m(self._last_compared, pose.seq)
-        sx, sy = self._shift
-        want_x, want_y = sx + pose.x_m - ref.x_m, sy + pose.y_m - ref.y_m
-        limit = self._budget_m + self.position_tolerance_m
-        self.placements.add_stall(math.hypot(want_x, want_y), limit)
-        self._shift = clamp_offset(want_x, want_y, limit)
-        dx, dy = self._shift[0] - sx, self._shift[1] - sy
+        """Move the reference's position (now and at the frames heard since ``ref``) to where
+        the firmware is, within the pose's rounding, while its heading goes on exact; bounded
+        as ``analyze`` places it (``liveplace.StallPlacer``). Returns the moved ``ref``."""
+        assert self._ref is not None and self.integrator is not None
+        dx, dy = self.placer.shift(pose, ref, self._last_compared, self._window,
+                                   (self.geometry, self.counter_bits, self.integrator))
         self._ref.x_m += dx
         self._ref.y_m += dy
         self._ref_at = {seq: r if seq < ref.seq else r._replace(x_m=r.x_m + dx, y_m=r.y_m + dy)
                         for seq, r in self._ref_at.items()}
         self._place_at_next = False
         return ref._replace(x_m=ref.x_m + dx, y_m=ref.y_m + dy)
-
-    def _break_allowance_m(self, before: int, after: int) -> float:
-        """``breaks.merge_allowance_m`` from encoder frame ``before`` (the last sample compared)
-        to ``after`` (seq), from the window's counts, or the path bound from the sums of the
-        count steps when ``before`` left the window; inf when neither is known."""
-        seqs = self._window.col("seq")
-        i0 = int(np.searchsorted(seqs, before))
-        i1 = int(np.searchsorted(seqs, after))
-        if before >= 0 and i0 < len(seqs) and seqs[i0] == before and i1 < len(seqs):
-            assert self.integrator is not None
-            return merge_allowance_m(self._window.col("left")[i0 : i1 + 1].astype(np.int64),
-                                     self._window.col("right")[i0 : i1 + 1].astype(np.int64),
-                                     self.geometry, self.counter_bits, self.integrator)
-        now = self._abs_at.get(after)
-        if self._abs_last is None or now is None:
-            return math.inf
-        return path_bound_m(now[0] - self._abs_last[0], now[1] - self._abs_last[1],
-                            self.geometry)
 
     def on_truth(
         self, part: int, enc_counter: int, value: float
@@ -491,16 +421,9 @@ class PoseTracker:
         named = self._recent(self._counts[enc_counter])
         ref = self._ref_at.get(named[0]) if named is not None else None
         x_m, y_m, wrapped_rad = parts[0][1], parts[1][1], parts[2][1]
-        if named is not None:
-            self._last_truth = (int(named[0]), x_m, y_m, wrapped_rad)
-        if self._rebase_pending and ref is not None:
-            self._set_origin(x_m, y_m, wrapped_rad, ref)
-        elif self._rebase_pending and self._boot is not None and self._last_truth is not None:
-            self._boot_truths.append(self._last_truth)
-        if self.truth_origin is not None:
-            rx, ry, rh = rebase_truth(np.array([x_m]), np.array([y_m]), np.array([wrapped_rad]),
-                                      self.truth_origin)
-            x_m, y_m, wrapped_rad = float(rx[0]), float(ry[0]), float(rh[0])
+        x_m, y_m, wrapped_rad = self.life_truth.heard(
+            None if named is None else int(named[0]), x_m, y_m, wrapped_rad, ref,
+            self._boot is not None)
         heading = truth_heading(wrapped_rad, ref if ref is not None else self.truth)
         truth = self.truth = FramePose(ref.seq if ref else -1, x_m, y_m, heading)
         if ref is None:
@@ -515,13 +438,6 @@ class PoseTracker:
             self.vs_truth.add(estimate, truth)
         return truth, ref
 
-    def _set_origin(self, x_m: float, y_m: float, wrapped_rad: float, ref: FramePose) -> None:
-        """The new life's origin from its first truth sample (x, y m, SIM_TRUTH's heading rad)
-        and the reference at its encoder frame (``compare.life_origin``, as ``analyze``)."""
-        self.truth_origin = life_origin((x_m, y_m, wrapped_rad),
-                                        (ref.x_m, ref.y_m, ref.heading_rad))
-        self._rebase_pending = False
-
     @property
     def counter_restarts(self) -> int:
         """Counter restarts the current reference re-primed on (as the firmware does)."""
@@ -529,9 +445,7 @@ class PoseTracker:
 
     def _recent(self, entry: Any) -> Any:
         """A ring entry if it is one of the last 8 encoder frames (not one 16 frames older)."""
-        if entry is None or self.enc_seq - entry[0] >= RING // 2:
-            return None
-        return entry
+        return None if entry is None or self.enc_seq - entry[0] >= RING // 2 else entry
 
     def _start_reference(
         self, pose: FramePose, counts: list[tuple[int, int, int, int]], poses: list[FramePose]
@@ -546,7 +460,7 @@ class PoseTracker:
         )
         self.reference_starts += 1
         self._ref_at = {}
-        self._shift, self._budget_m = (0.0, 0.0), 0.0
+        self.placer.restart()
         self._gate = StepGate(self.geometry, self.counter_bits)
         for seq, counter, left, right in counts:
             step = self._gate.step(counter, left, right)  # the first primes: stays at pose
@@ -567,13 +481,6 @@ class PoseTracker:
         return {**stats, "loss_allowance_m": self.allowance_m(),
                 "max_dpos_beyond_allowance_m": self.max_beyond_allowance_m}
 
-    def _origin_dict(self) -> dict[str, float] | None:
-        """The current life's origin in the truth's frame (None: the truth's own frame)."""
-        if self.truth_origin is None:
-            return None
-        x_m, y_m, heading_rad = self.truth_origin
-        return {"x_m": x_m, "y_m": y_m, "heading_rad": heading_rad}
-
     def snapshot(self) -> dict[str, Any]:
         """``pose``, ``reference``, ``truth`` (None until known) and ``error``."""
         return {
@@ -581,9 +488,9 @@ class PoseTracker:
             "reference": {**(pose_dict(self.reference) or {}), "integrator": self.integrator,
                           "starts": self.reference_starts,
                           "counter_restarts": self.counter_restarts, "stalls": self.stalls,
-                          "breaks": self.placements.as_dict()},
+                          "breaks": self.placer.placements.as_dict()},
             "truth": pose_dict(self.truth),
-            "truth_origin": self._origin_dict(),
+            "truth_origin": self.life_truth.as_dict(),
             "error": {
                 "pose_vs_reference": self._vs_reference_dict(),
                 "pose_vs_truth": self.vs_truth.as_dict(),

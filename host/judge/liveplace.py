@@ -1,0 +1,82 @@
+"""The live judge's placement of the reference after a firmware stall or hold
+(``host.judge.tracking``), bounded as ``analyze`` bounds it (``host.judge.breaks``): the position
+moves to where the firmware is, no further from where the reference started than the stalls'
+merge allowances since plus the tolerance."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from odocan.host.judge.breaks import BreakSummary, clamp_offset, merge_allowance_m, path_bound_m
+from odocan.host.judge.livepose import FramePose
+from odocan.host.judge.livewindow import ENC_WINDOW, Columns
+from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.samples import POSITION_LSB_M
+
+
+class StallPlacer:
+    """The placements of one reference (``restart`` with it) and what they absorbed."""
+
+    def __init__(self) -> None:
+        self.position_tolerance_m = POSITION_LSB_M  # the slack of a placement after a stall
+        self.placements = BreakSummary()  # what the placements after stalls absorbed
+        self._shift = (0.0, 0.0)  # the placements' offset of the reference since its start (m)
+        self._budget_m = 0.0  # the stalls' merge allowances summed since its start (m)
+        self._abs_at: dict[int, tuple[int, int]] = {}  # per recent frame: |count steps| summed
+        self._abs_counts = (0, 0)  # ... up to the latest encoder frame
+        self._abs_last: tuple[int, int] | None = None  # ... at the last sample compared
+
+    def restart(self) -> None:
+        """A new reference: no offset, no allowance yet."""
+        self._shift, self._budget_m = (0.0, 0.0), 0.0
+
+    def on_encoders(self, seq: int, left: int, right: int, prev: tuple[int, int] | None,
+                    bits: int) -> None:
+        """Encoder frame ``seq`` (counts ``left``, ``right``; ``prev``: the frame before's)."""
+        if prev is not None:
+            self._abs_counts = (self._abs_counts[0] + abs(wrap_delta(left - prev[0], bits)),
+                                self._abs_counts[1] + abs(wrap_delta(right - prev[1], bits)))
+        self._abs_at[seq] = self._abs_counts
+        self._abs_at.pop(seq - ENC_WINDOW, None)
+
+    def forget(self, before: int) -> None:
+        """Drop the sums of the encoder frames before ``before`` (seq)."""
+        self._abs_at = {seq: sums for seq, sums in self._abs_at.items() if seq >= before}
+
+    def compared(self, seq: int) -> None:
+        """A sample of encoder frame ``seq`` was compared."""
+        self._abs_last = self._abs_at.get(seq)
+
+    def shift(self, pose: FramePose, ref: FramePose, last_compared: int, window: Columns,
+              reference: tuple[Geometry, int, str]) -> tuple[float, float]:
+        """How far (dx, dy m) to move the reference's position so that it starts again where
+        the firmware is (``pose`` against ``ref``), bounded (module docstring): the merge
+        allowance from ``last_compared`` to ``pose`` (``reference``: geometry, counter bits,
+        integrator) joins the budget."""
+        self._budget_m += self._allowance_m(last_compared, pose.seq, window, reference)
+        sx, sy = self._shift
+        want_x, want_y = sx + pose.x_m - ref.x_m, sy + pose.y_m - ref.y_m
+        limit = self._budget_m + self.position_tolerance_m
+        self.placements.add_stall(math.hypot(want_x, want_y), limit)
+        self._shift = clamp_offset(want_x, want_y, limit)
+        return self._shift[0] - sx, self._shift[1] - sy
+
+    def _allowance_m(self, before: int, after: int, window: Columns,
+                     reference: tuple[Geometry, int, str]) -> float:
+        """``breaks.merge_allowance_m`` from encoder frame ``before`` (the last sample compared)
+        to ``after`` (seq), from the window's counts, or the path bound from the sums of the
+        count steps when ``before`` left the window; inf when neither is known."""
+        geometry, counter_bits, integrator = reference
+        seqs = window.col("seq")
+        i0 = int(np.searchsorted(seqs, before))
+        i1 = int(np.searchsorted(seqs, after))
+        if before >= 0 and i0 < len(seqs) and seqs[i0] == before and i1 < len(seqs):
+            return merge_allowance_m(window.col("left")[i0 : i1 + 1].astype(np.int64),
+                                     window.col("right")[i0 : i1 + 1].astype(np.int64),
+                                     geometry, counter_bits, integrator)
+        now = self._abs_at.get(after)
+        if self._abs_last is None or now is None:
+            return math.inf
+        return path_bound_m(now[0] - self._abs_last[0], now[1] - self._abs_last[1], geometry)

@@ -1,0 +1,65 @@
+"""The live judge's truth in the current firmware life's frame (``host.judge.tracking``): after a
+reboot the new life's origin, in the truth's frame, is taken at its first truth sample
+(``compare.life_origin``, as ``analyze``), and every truth sample is re-based into it
+(``compare.rebase_truth``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from odocan.host.judge.compare import life_origin, rebase_truth
+from odocan.host.judge.livepose import FramePose
+
+TruthSample = tuple[int, float, float, float]  # seq, x m, y m, SIM_TRUTH's heading rad
+
+
+class LifeTruth:
+    """The current life's origin (None in the first life: it came up with the simulator)."""
+
+    def __init__(self) -> None:
+        self.origin: tuple[float, float, float] | None = None
+        self._pending = False  # after a reboot: the next truth sample sets the origin
+        self._boot: list[TruthSample] = []  # heard while the new life waits for its frame
+        self._last: TruthSample | None = None  # the latest heard (its encoder frame known)
+
+    def new_life(self) -> None:
+        """A reboot: the new firmware's first tick sends its pose frames before its summary,
+        so the truth sample of the frame it primed on may have come before it was told."""
+        self.origin, self._pending = None, True
+        self._boot = [self._last] if self._last is not None else []
+
+    def heard(self, seq: int | None, x_m: float, y_m: float, wrapped_rad: float,
+              ref: FramePose | None, booting: bool) -> tuple[float, float, float]:
+        """A truth sample (of encoder frame ``seq``, None: not known; ``ref``: the reference
+        there, ``booting``: the new life waits for its frame), in the life's frame."""
+        if seq is not None:
+            self._last = (seq, x_m, y_m, wrapped_rad)
+        if self._pending and ref is not None:
+            self._set((x_m, y_m, wrapped_rad), ref)
+        elif self._pending and booting and self._last is not None:
+            self._boot.append(self._last)
+        if self.origin is None:
+            return x_m, y_m, wrapped_rad
+        rx, ry, rh = rebase_truth(np.array([x_m]), np.array([y_m]), np.array([wrapped_rad]),
+                                  self.origin)
+        return float(rx[0]), float(ry[0]), float(rh[0])
+
+    def booted(self, primed: int, ref_at: dict[int, FramePose]) -> None:
+        """The new life started at encoder frame ``primed``: its first truth sample heard
+        meanwhile sets its origin (``ref_at``: the reference by encoder frame)."""
+        truths, self._boot = self._boot, []
+        for seq, x_m, y_m, wrapped_rad in truths:
+            ref = ref_at.get(seq)
+            if seq >= primed and ref is not None and self._pending:
+                self._set((x_m, y_m, wrapped_rad), ref)
+
+    def _set(self, truth: tuple[float, float, float], ref: FramePose) -> None:
+        self.origin = life_origin(truth, (ref.x_m, ref.y_m, ref.heading_rad))
+        self._pending = False
+
+    def as_dict(self) -> dict[str, float] | None:
+        """The origin in the truth's frame (None: the truth's own frame)."""
+        if self.origin is None:
+            return None
+        x_m, y_m, heading_rad = self.origin
+        return {"x_m": x_m, "y_m": y_m, "heading_rad": heading_rad}
