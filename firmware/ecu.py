@@ -128,7 +128,7 @@ class OdomEcu:
         if not self.mailbox.put(can_id, data):
             self.errors.set(ErrorFlag.MAILBOX_OVERFLOW)
             if can_id == fr.WHEEL_ENCODERS_ID:
-                self.encoders.isr_dropped()
+                self.encoders.isr_dropped(data)
 
     def isr_rx_overrun(self) -> None:
         """CAN controller overrun interrupt: its receive FIFO dropped frames (counted as one

@@ -20,6 +20,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import random
 import subprocess
 import sys
 import uuid
@@ -327,9 +328,9 @@ def test_a_babblers_frames_on_the_encoder_id_are_not_taken_for_dropped_encoder_f
 ) -> None:
     """A babbler on the WHEEL_ENCODERS ID fills the mailbox with frames E2E refuses (a bad CRC)
     and the ring drops ``foreign`` more of them, with ``real`` encoder frames: the ISR counts
-    them all on the ID. Taken for encoder frames, one forged drop made the next step 17 periods
-    instead of 1 (the twist 17 times too low: kobuki 60 s under babble=8000 FAILed on it). The
-    advance nearest to the count is taken: the twist stays steady, ENC_E2E_LOST counts the real
+    only the dropped frames whose CRC holds (``isr_dropped``). Taken for encoder frames, one
+    forged drop made the next step 17 periods instead of 1 (the twist 17 times too low: kobuki
+    60 s under babble=8000 FAILed on it). The twist stays steady, ENC_E2E_LOST counts the real
     drops only."""
     steady = Rig()
     steady.drive(60 + real, *STEADY)
@@ -350,5 +351,66 @@ def test_a_babblers_frames_on_the_encoder_id_are_not_taken_for_dropped_encoder_f
         speeds.append(rig.ecu.twist.linear_mm_s)
     assert speeds == [steady.ecu.twist.linear_mm_s] * len(speeds)
     assert rig.ecu.encoders.rx.lost_frames == real
+    assert rig.ecu.encoders.frames_dropped == real  # the babbler's bad CRCs are not counted
+    assert rig.ecu.odometry.heading_bam64 == steady.ecu.odometry.heading_bam64
+
+
+@pytest.mark.parametrize(("foreign", "real"), [(1, 0), (1, 1), (7, 0), (3, 17)])
+def test_forged_frames_whose_crc_holds_dropped_on_the_encoder_id_are_absorbed(
+    foreign: int, real: int
+) -> None:
+    """The ring full of frames E2E refuses, then ``foreign`` forged frames whose CRC holds (a
+    copy of the next encoder frame: ``isr_dropped`` cannot tell them) and ``real`` encoder
+    frames are dropped: d counts both, the advance nearest to d + 1 with the COUNTER is the
+    real one while the forged ones number 7 or fewer (``_counter_advance``)."""
+    steady = Rig()
+    steady.drive(60 + real, *STEADY)
+    rig = Rig()
+    rig.drive(20, *STEADY)
+    for _ in range(MAILBOX_SLOTS):
+        rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, bytes(8))  # a CRC the E2E check refuses
+    for _ in range(foreign):
+        forged = rig.encoders(*STEADY)
+        rig.counter = (rig.counter - 1) % 16  # not the motor controller's frame: no COUNTER
+        rig.left, rig.right = rig.left - STEADY[0], rig.right - STEADY[1]
+        rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, forged)  # dropped, counted
+    for _ in range(real):
+        rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, rig.encoders(*STEADY))  # dropped
+    rig.ecu.tick()
+    speeds = []
+    for _ in range(40):
+        rig.drive(1, *STEADY)
+        speeds.append(rig.ecu.twist.linear_mm_s)
+    assert speeds == [steady.ecu.twist.linear_mm_s] * len(speeds)
+    assert rig.ecu.encoders.rx.lost_frames == real
     assert rig.ecu.encoders.frames_dropped == foreign + real
     assert rig.ecu.odometry.heading_bam64 == steady.ecu.odometry.heading_bam64
+
+
+def test_a_flood_of_random_payloads_dropped_on_the_encoder_id_leaves_the_twist_steady() -> None:
+    """Each tick: the encoder frame, the ring filled with frames E2E refuses, then 45 random
+    payloads on the ID, all dropped (the 8 000 frames/s flood of tests/test_health_rig.py
+    ``run_forgery``). Counted as encoder frames, the 45 drops made each one-period step span ~45
+    periods (LINEAR_VEL ~1/45 of the truth); only the ~1 in 256 whose CRC holds are counted
+    (``isr_dropped``), fewer than the 8 of miscount the nearest COUNTER advance absorbs: the
+    twist and the pose are those of the same drive without the flood, tick by tick."""
+    rng = random.Random(11)
+    ticks, per_tick = 200, 45
+    steady = Rig()
+    steady.drive(20, *STEADY)
+    rig = Rig()
+    rig.drive(20, *STEADY)
+    for _ in range(ticks):
+        rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, rig.encoders(*STEADY))
+        for _ in range(MAILBOX_SLOTS - 1):
+            rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, bytes(8))  # CRC of zeros: refused
+        for _ in range(per_tick):
+            rig.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, rng.randbytes(8))  # dropped
+        rig.ecu.tick()
+        steady.drive(1, *STEADY)
+        assert rig.ecu.twist.linear_mm_s == steady.ecu.twist.linear_mm_s
+        assert rig.ecu.twist.angular_mrad_s == steady.ecu.twist.angular_mrad_s
+    counted = rig.ecu.encoders.frames_dropped
+    assert 0 < counted < ticks * per_tick // 64  # ~35 expected: the CRC path is exercised
+    assert rig.ecu.odometry.heading_bam64 == steady.ecu.odometry.heading_bam64
+    assert rig.ecu.encoders.rx.lost_frames == 0

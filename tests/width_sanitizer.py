@@ -710,6 +710,7 @@ BURST_SCENARIOS = "tests.test_babble_fast_bus"  # runs the mailbox dropped, a ba
 BURST_TESTS = (
     "test_after_frames_its_mailbox_dropped_the_twist_is_right_and_every_one_is_counted",
     "test_a_babblers_frames_on_the_encoder_id_are_not_taken_for_dropped_encoder_frames",
+    "test_forged_frames_whose_crc_holds_dropped_on_the_encoder_id_are_absorbed",
 )
 
 

@@ -167,7 +167,10 @@ void ecu_isr_can_rx(struct odom_ecu *ecu, uint32_t can_id, const uint8_t *data, 
 {
     if (!mailbox_put(&ecu->mailbox, can_id, data, len)) {
         ecu->errors |= ERROR_MAILBOX_OVERFLOW;
-        if (can_id == WHEEL_ENCODERS_ID) {
+        /* counted when it could be an encoder frame: its Profile 2 CRC holds (random payloads
+         * pass 1 in 256; encoders.py isr_dropped) */
+        if (can_id == WHEEL_ENCODERS_ID && len == FRAME_LEN
+            && data[0] == p02_crc(data, ecu->rx_encoders.data_ids[data[1] & COUNTER_MASK])) {
             ecu->enc_frames_dropped++;
         }
     }
@@ -443,9 +446,9 @@ static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
 
 /* The frames from the last accepted one to this one (0: none accepted yet): the COUNTER advance
  * (mod 16, 1..16), or, when the mailbox dropped d frames on the WHEEL_ENCODERS ID between them,
- * the advance with that COUNTER nearest to d + 1 (d - 7 .. d + 8 frames between): d counts a
- * babbler's frames on the ID too, and frames may also have been lost on the wire or refused
- * after the drops (encoders.py _counter_advance). At most STEP_PERIODS_MAX + 16. */
+ * the advance with that COUNTER nearest to d + 1 (d - 7 .. d + 8 frames between): d counts
+ * only dropped frames whose CRC holds, yet a forged one that passes it (1 in 256) too, and
+ * frames may also have been lost on the wire or refused after the drops (encoders.py _counter_advance). At most STEP_PERIODS_MAX + 16. */
 static uint32_t counter_advance(const struct odom_ecu *ecu, uint8_t counter)
 {
     int prev = ecu->enc_prev_counter;
