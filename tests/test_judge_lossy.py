@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from odocan.host.judge.losses import drop_errors
@@ -58,11 +58,15 @@ def test_the_merge_error_of_a_lost_frame_is_the_checkers(
     j = data.draw(st.integers(1, n - 2), label="lost frame")
     every, lost = _Odometry(robot, integrator), _Odometry(robot, integrator)
     for k, (d_left, d_right) in enumerate(steps):
+        assume(abs(d_right * every.m_right - d_left * every.m_left) / every.b < 0.9 * math.pi)
         every.step(d_left, d_right)
         if k == j - 1:
             continue
         if k == j:
             d_left, d_right = d_left + steps[k - 1][0], d_right + steps[k - 1][1]
+        # a step of half a turn or more: the firmware reads its turn wrapped, which this plain
+        # checker does not (tests/test_stall_bound.py has that case's own regression test)
+        assume(abs(d_right * lost.m_right - d_left * lost.m_left) / lost.b < 0.9 * math.pi)
         lost.step(d_left, d_right)
     want = math.hypot(every.x - lost.x, every.y - lost.y)
     scale = sum(abs(a) + abs(b) for a, b in steps) * every.m_left

@@ -177,13 +177,15 @@ def test_10e5_random_frames_are_each_counted_and_the_poses_still_come() -> None:
             baseline = 0
             for start in range(0, len(fuzz), 64):  # in batches, as BusReader hands them over
                 bridge._handle([(0, m) for m in fuzz[start:start + 64]])
-                if start < N_FUZZ // 10:
+                # from when the live judge's windows are full (512 encoder frames: about 60 %
+                # of the fuzz passes as them), growth would be state that is not bounded
+                if start < N_FUZZ * 7 // 10:
                     baseline = tracemalloc.get_traced_memory()[0]
             grown_bytes = tracemalloc.get_traced_memory()[0] - baseline
         finally:
             tracemalloc.stop()
         got.clear()
-        assert grown_bytes < 64 * 1024  # the bridge's state is bounded, whatever the bus says
+        assert grown_bytes < 32 * 1024  # the bridge's state is bounded, whatever the bus says
         telemetry = bridge.robots[0].telemetry
         assert bridge.frames_failed == 0  # no frame reached the catch-all
         kinds = telemetry.e2e.counts()

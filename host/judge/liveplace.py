@@ -11,9 +11,11 @@ import numpy as np
 
 from odocan.host.judge.breaks import BreakSummary, clamp_offset, merge_allowance_m, path_bound_m
 from odocan.host.judge.livepose import FramePose
-from odocan.host.judge.livewindow import ENC_WINDOW, Columns
+from odocan.host.judge.livewindow import Columns
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import POSITION_LSB_M
+
+ABS_KEPT = 128  # the latest encoder frames whose count-step sums are kept (a sample names one)
 
 
 class StallPlacer:
@@ -24,7 +26,8 @@ class StallPlacer:
         self.placements = BreakSummary()  # what the placements after stalls absorbed
         self._shift = (0.0, 0.0)  # the placements' offset of the reference since its start (m)
         self._budget_m = 0.0  # the stalls' merge allowances summed since its start (m)
-        self._abs_at: dict[int, tuple[int, int]] = {}  # per recent frame: |count steps| summed
+        # per recent frame (seq mod ABS_KEPT): its seq and the |count steps| summed up to it
+        self._abs_ring = np.full((ABS_KEPT, 3), -1, dtype=np.int64)
         self._abs_counts = (0, 0)  # ... up to the latest encoder frame
         self._abs_last: tuple[int, int] | None = None  # ... at the last sample compared
 
@@ -38,16 +41,16 @@ class StallPlacer:
         if prev is not None:
             self._abs_counts = (self._abs_counts[0] + abs(wrap_delta(left - prev[0], bits)),
                                 self._abs_counts[1] + abs(wrap_delta(right - prev[1], bits)))
-        self._abs_at[seq] = self._abs_counts
-        self._abs_at.pop(seq - ENC_WINDOW, None)
-
-    def forget(self, before: int) -> None:
-        """Drop the sums of the encoder frames before ``before`` (seq)."""
-        self._abs_at = {seq: sums for seq, sums in self._abs_at.items() if seq >= before}
+        self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)  # preallocated: no growth
 
     def compared(self, seq: int) -> None:
         """A sample of encoder frame ``seq`` was compared."""
-        self._abs_last = self._abs_at.get(seq)
+        self._abs_last = self._abs_at(seq)
+
+    def _abs_at(self, seq: int) -> tuple[int, int] | None:
+        """The |count steps| summed up to encoder frame ``seq``, None when no longer kept."""
+        kept = self._abs_ring[seq % ABS_KEPT]
+        return (int(kept[1]), int(kept[2])) if int(kept[0]) == seq else None
 
     def shift(self, pose: FramePose, ref: FramePose, last_compared: int, window: Columns,
               reference: tuple[Geometry, int, str]) -> tuple[float, float]:
@@ -76,7 +79,7 @@ class StallPlacer:
             return merge_allowance_m(window.col("left")[i0 : i1 + 1].astype(np.int64),
                                      window.col("right")[i0 : i1 + 1].astype(np.int64),
                                      geometry, counter_bits, integrator)
-        now = self._abs_at.get(after)
+        now = self._abs_at(after)
         if self._abs_last is None or now is None:
             return math.inf
         return path_bound_m(now[0] - self._abs_last[0], now[1] - self._abs_last[1], geometry)

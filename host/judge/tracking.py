@@ -166,7 +166,6 @@ class PoseTracker:
         self._ys = {seq: half for seq, half in self._ys.items() if seq >= before}
         self._sampled = {seq for seq in self._sampled if seq >= before}
         self._ref_at = {seq: ref for seq, ref in self._ref_at.items() if seq >= before}
-        self.placer.forget(before)
 
     def _keep_ref(self, ref: FramePose) -> None:
         self._ref_at[ref.seq] = ref
