@@ -138,13 +138,48 @@ class PlannedVehicle(Vehicle):
 
     def truth(self) -> TruthPose:
         """The true pose now (the block's folds at this substep)."""
-        block = self._block
-        if block is None:
+        if self._block is None:
             return super().truth()
-        j = self._now - block.truth_s0
+        return self.truth_at(self._now)
+
+    # --- what a planner of the sim's frames reads (sim.simplan) ---------------------------------
+
+    def block_ahead(self, k: int, t_s: float) -> tuple[object, list[tuple[int, int]]] | None:
+        """The block that serves tick ``k`` at ``t_s`` (started as the rig's first call at
+        ``t_s`` would start it) and the encoder counts it recorded at tick ``k`` and each tick
+        after it to its end; None: the plain vehicle serves (no forecast, it fell back, or
+        ``t_s`` is not tick ``k``'s time). The block is a token: ``serves(token)`` tells it
+        still holds."""
+        if t_s != self._start_s + k * self._tick_s:
+            return None
+        served = self._served(t_s)
+        if served is None or served[1] not in served[0].index:
+            return None
+        block, n = served
+        return block, block.counts[block.index[n] :]
+
+    def serves(self, token: object) -> bool:
+        """True while the block ``token`` (``block_ahead``) serves the rig's calls."""
+        return self._block is token
+
+    def tick_times(self, k: int, ticks: int) -> list[float]:
+        """The times (s) of ticks ``k .. k + ticks - 1`` (``start_s + k * tick_s``: the same
+        IEEE operations, in numpy)."""
+        return (self._start_s + np.arange(k, k + ticks) * self._tick_s).tolist()  # type: ignore[no-any-return]
+
+    def truth_at_time(self, t_s: float) -> TruthPose:
+        """The current block's true pose at ``t_s`` (on the tick grid: what ``truth`` gives
+        after ``advance_to(t_s)``)."""
+        return self.truth_at(self._grid_substep(t_s))
+
+    def truth_at(self, n: int) -> TruthPose:
+        """The current block's true pose at substep ``n`` (what ``truth`` gives then)."""
+        block = self._block
+        assert block is not None
+        j = n - block.truth_s0
         folds = block.folds
         return TruthPose(
-            t_s=self._now / self.substep_hz,
+            t_s=n / self.substep_hz,
             x_m=folds.item(0, j),
             y_m=folds.item(1, j),
             heading_rad=wrap_angle(block.heading.item(j)),

@@ -24,9 +24,12 @@ from odocan.sim.clock import Clock
 from odocan.sim.contract import cycle_ticks
 from odocan.sim.errors import ErrorModel
 from odocan.sim.frames import SimTruthPart, pack_sim_truth, pack_wheel_encoders, unpack_motor_cmd
+from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.node import BusNode
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import Scenario, get_scenario
+from odocan.sim.simplan import PlannedTick, TickPlan, plan_ticks
+from odocan.sim.transport import OdocanBus
 from odocan.sim.vehicle import Vehicle
 
 _U24 = 0xFF_FFFF
@@ -45,14 +48,15 @@ class MotorController(BusNode):
         self.commands_applied = 0
         self._count_offset = (0, 0)  # the vehicle's counts at the last restart
 
-    def deliver(self, data: bytes) -> None:
-        """One received ``MOTOR_CMD`` payload: applied when its E2E check passes."""
+    def deliver(self, data: bytes, speeds_mps: tuple[float, float] | None = None) -> None:
+        """One received ``MOTOR_CMD`` payload: applied when its E2E check passes (``speeds_mps``:
+        its speeds already decoded, m/s, as here: ``sim.simplan``'s)."""
         status = self.rx_motor_cmd.check(data)
         if status is E2EStatus.OK or status is E2EStatus.OKSOMELOST:
-            cmd = unpack_motor_cmd(data)
-            self.vehicle.command(
-                cmd.left_speed_mm_s / 1000.0, cmd.right_speed_mm_s / 1000.0, self.clock.now_s()
-            )
+            if speeds_mps is None:
+                cmd = unpack_motor_cmd(data)
+                speeds_mps = (cmd.left_speed_mm_s / 1000.0, cmd.right_speed_mm_s / 1000.0)
+            self.vehicle.command(speeds_mps[0], speeds_mps[1], self.clock.now_s())
             self.commands_applied += 1
 
     def service_rx(self) -> None:
@@ -174,6 +178,7 @@ class SimNode:
         self.truth_phase_ticks = truth_phase_ticks
         self._driver_ticks = cycle_ticks("MOTOR_CMD", TICK_S)
         self._truth_ticks = cycle_ticks("SIM_TRUTH", TICK_S)
+        self._plan: TickPlan | None = None  # the current block's frames (sim.simplan)
 
     @classmethod
     def build(
@@ -203,13 +208,57 @@ class SimNode:
         )
 
     def tick(self, k: int) -> None:
-        """Tick ``k`` (10 ms each), in the order of the class docstring."""
+        """Tick ``k`` (10 ms each), in the order of the class docstring: from the plan of the
+        vehicle's block when it holds (``sim.simplan``: the same frames, computed at once)."""
+        plan = self._plan
+        planned = None if plan is None else plan.at(self, k)
+        if planned is None and self._can_plan(k):
+            plan = self._plan = plan_ticks(self, self.vehicle, k)  # type: ignore[arg-type]
+            planned = None if plan is None else plan.at(self, k)
+        if planned is not None:
+            self._send_planned(planned)
+            return
         self.motor_controller.service_rx()
         if self.driver is not None and k % self._driver_ticks == 0:
             self.driver.send()
         enc_counter = self.motor_controller.sample_and_send()
         if (k - self.truth_phase_ticks) % self._truth_ticks == 0:
             self.truth.send(enc_counter)
+
+    def _can_plan(self, k: int) -> bool:
+        """A plan may be made at tick ``k``: the vehicle runs ahead, the bus is the lean
+        transport's instant handle, and no plan of the vehicle's current block failed."""
+        vehicle = self.vehicle
+        if not isinstance(vehicle, PlannedVehicle) or vehicle.fell_back:
+            return False
+        bus = self.bus
+        if type(bus) is not OdocanBus or bus.timing is not None or not bus._open:
+            return False
+        plan = self._plan  # one that failed at a tick of its own stays failed (no retry)
+        return plan is None or not plan.first <= k < plan.first + len(plan.ticks)
+
+    def _send_planned(self, tick: PlannedTick) -> None:
+        """Tick ``k`` from the plan: the frames and every state change of the plain tick."""
+        send, t_s = self.bus.send_data, tick.t_s  # type: ignore[attr-defined]
+        mc, driver = self.motor_controller, self.driver
+        if tick.motor_cmd is not None:
+            assert driver is not None
+            data, speeds_mps = tick.motor_cmd
+            driver._ahead.pop(t_s, None)
+            driver.counter = (driver.counter + 1) & 0xF
+            send(fr.MOTOR_CMD_ID, data, t_s + driver.tx_latency_s)
+            driver.frames_sent += 1
+            mc.deliver(data, speeds_mps)
+        self.vehicle.advance_to(t_s)
+        mc.counter = (mc.counter + 1) & 0xF
+        send(fr.WHEEL_ENCODERS_ID, tick.wheel_encoders, t_s + mc.tx_latency_s)
+        mc.frames_sent += 1
+        if tick.sim_truth:
+            truth = self.truth
+            for data in tick.sim_truth:
+                send(fr.SIM_TRUTH_ID, data, t_s + truth.tx_latency_s)
+            truth.counter = (truth.counter + 3) & 0xF
+            truth.frames_sent += 3
 
     def planned_command(self, k: int, t_s: float) -> tuple[float, float] | None:
         """The rim speeds (m/s) the motor controller will apply from the driver at tick ``k``
