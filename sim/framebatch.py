@@ -20,7 +20,14 @@ class FrameBatchListener(can.Listener):
     returns them (``sim.tickloop.deliver`` hands them so when every listener is one): the same
     frames in the same order as ``on_message_received`` one by one, without a ``Message`` per
     ``DataFrame``. A ``Message`` in the batch belongs to the listener (the receiver's own copy);
-    no one changes it afterwards."""
+    no one changes it afterwards.
+
+    ``passive`` (a class attribute, False here): the listener only keeps what it hears, sending
+    nothing and read by no one while a rig runs; ``sim.tickloop.TickLoop.run`` may then hand it
+    the frames once per simulated second instead of every tick (the same frames, in the same
+    order, in bigger batches; all of them before a progress call and when the run ends)."""
+
+    passive = False
 
     def on_frames(self, frames: list[Received]) -> None:
         """The frames, in bus order (the list may be kept: the caller does not reuse it)."""

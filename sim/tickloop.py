@@ -33,6 +33,7 @@ from odocan.sim.framebatch import FrameBatchListener
 from odocan.sim.transport import OdocanBus
 
 Work = Callable[[int], None]  # the nodes' work in tick k
+_SECOND_TICKS = 100  # ticks between progress calls: a simulated second
 
 
 def deliver(bus: can.BusABC, listeners: Sequence[can.Listener]) -> int:
@@ -117,14 +118,43 @@ class TickLoop:
 
     def run(self, total_ticks: int, progress: Callable[[int, int], None] | None = None) -> None:
         """``total_ticks`` ticks; ``progress(done, total)`` every 100 ticks (a simulated second)
-        and once at the end."""
-        step = self.step
-        for k in range(total_ticks):
-            step()
-            if progress is not None and k % 100 == 99:
-                progress(k + 1, total_ticks)
+        and once at the end. When every listener is passive (``FrameBatchListener.passive``)
+        and the host's handle an instant ``odocan`` one, the host's frames go out once per
+        simulated second (``_run_quietly``), else every tick (``step``)."""
+        done = 0
+        while done < total_ticks:
+            ticks = min(_SECOND_TICKS, total_ticks - done)
+            if self._all_passive():
+                self._run_quietly(ticks)
+            else:
+                for _ in range(ticks):
+                    self.step()
+            done += ticks
+            if progress is not None and ticks == _SECOND_TICKS:
+                progress(done, total_ticks)
         if progress is not None:
             progress(total_ticks, total_ticks)
+
+    def _all_passive(self) -> bool:
+        """Every listener takes a run's frames late (``FrameBatchListener.passive``) and the
+        host's handle queues them (an instant ``odocan`` one)."""
+        bus = self.host_bus
+        if type(bus) is not OdocanBus or bus.timing is not None:
+            return False
+        return all(getattr(type(li), "passive", False) is True for li in self.listeners)
+
+    def _run_quietly(self, ticks: int) -> None:
+        """``ticks`` ticks as ``step`` runs them, the host's frames delivered once after them
+        (also when a tick raises, e.g. Ctrl-C: what ran is heard)."""
+        clock, work, start_s = self.clock, self.work, self.start_s
+        try:
+            for k in range(self.ticks, self.ticks + ticks):
+                if clock is not None:
+                    clock.advance_to(start_s + k * TICK_S)
+                work(k)
+                self.ticks = k + 1
+        finally:
+            deliver(self.host_bus, self.listeners)
 
     def run_to(self, stop_tick: int) -> None:
         """Tick until ``ticks`` is ``stop_tick`` (none when it already is, or is past it)."""

@@ -170,3 +170,50 @@ def test_with_any_plain_listener_each_frame_goes_to_every_listener_as_a_message(
     assert deliver(host, [_Batches(log), Answering("a", heard)]) == 3
     assert log == [("msg", 0x100), ("msg", 0x200), ("msg", 0x101)]
     assert heard == [("a", 0x100), ("a", 0x200), ("a", 0x101)]
+
+
+class _Passive(_Batches):
+    passive = True
+
+
+def test_passive_listeners_hear_a_run_once_per_simulated_second_the_same_frames(
+    lean: tuple[OdocanBus, OdocanBus],
+) -> None:
+    sender, host = lean
+    log: list[object] = []
+    heard_at_progress: list[int] = []
+
+    def frames_heard() -> int:
+        return sum(len(entry[1]) for entry in log if isinstance(entry, tuple))
+
+    loop = TickLoop(lambda k: sender.send_data(k, b"\x00", 0.0), host, [_Passive(log)])
+    loop.run(250, lambda done, _total: heard_at_progress.append(frames_heard()))
+    assert loop.ticks == 250
+    assert log == [("batch", list(range(0, 100))), ("batch", list(range(100, 200))),
+                   ("batch", list(range(200, 250)))]
+    assert heard_at_progress == [100, 200, 250]  # all of them before each progress call
+    # Next to a plain listener, it hears every tick (as a Message, as before).
+    log.clear()
+    heard: list[tuple[str, int]] = []
+    TickLoop(lambda k: sender.send_data(k, b"\x00", 0.0), host,
+             [_Passive(log), _Heard("h", heard)]).run(3)
+    assert log == [("msg", 0), ("msg", 1), ("msg", 2)]
+    assert heard == [("h", 0), ("h", 1), ("h", 2)]
+
+
+def test_a_run_that_raises_still_hands_passive_listeners_what_ran(
+    lean: tuple[OdocanBus, OdocanBus],
+) -> None:
+    sender, host = lean
+    log: list[object] = []
+
+    def work(k: int) -> None:
+        if k == 42:
+            raise KeyboardInterrupt
+        sender.send_data(k, b"\x00", 0.0)
+
+    loop = TickLoop(work, host, [_Passive(log)])
+    with pytest.raises(KeyboardInterrupt):
+        loop.run(100)
+    assert loop.ticks == 42
+    assert log == [("batch", list(range(42)))]

@@ -30,8 +30,11 @@ class FrameCollector(FrameBatchListener):
 
     No ``can.Message`` is kept: each one costs a few appends to typed arrays. The lockstep rig's
     batches (``on_frames``, ``sim.tickloop.deliver``) wait in a list and go into the arrays
-    ``_FLUSH_FRAMES`` at a time, column by column.
+    ``_FLUSH_FRAMES`` at a time, column by column. Passive (``FrameBatchListener.passive``):
+    ``arrays()`` is read after a run, so a run may hand it a simulated second of frames at once.
     """
+
+    passive = True
 
     def __init__(self) -> None:
         self._timestamp = array("d")
