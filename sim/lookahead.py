@@ -167,10 +167,15 @@ class PlannedVehicle(Vehicle):
         IEEE operations, in numpy)."""
         return (self._start_s + np.arange(k, k + ticks) * self._tick_s).tolist()  # type: ignore[no-any-return]
 
-    def truth_at_time(self, t_s: float) -> TruthPose:
-        """The current block's true pose at ``t_s`` (on the tick grid: what ``truth`` gives
-        after ``advance_to(t_s)``)."""
-        return self.truth_at(self._grid_substep(t_s))
+    def truths_at(self, times: list[float]) -> tuple[list[float], list[float], list[float]]:
+        """The current block's true x, y (m) and heading (rad, wrapped) at each of ``times`` (on
+        the tick grid: what ``truth`` gives after ``advance_to`` then), read at once."""
+        block = self._block
+        assert block is not None
+        at = np.array([self._grid_substep(t_s) for t_s in times], dtype=np.int64) - block.truth_s0
+        folds = block.folds
+        headings = [wrap_angle(h) for h in block.heading[at].tolist()]
+        return folds[0, at].tolist(), folds[1, at].tolist(), headings
 
     def truth_at(self, n: int) -> TruthPose:
         """The current block's true pose at substep ``n`` (what ``truth`` gives then)."""

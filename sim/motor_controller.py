@@ -28,7 +28,7 @@ from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.node import BusNode
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import Scenario, get_scenario
-from odocan.sim.simplan import PlannedTick, TickPlan, plan_ticks
+from odocan.sim.simplan import TickPlan, plan_ticks
 from odocan.sim.transport import OdocanBus
 from odocan.sim.vehicle import Vehicle
 
@@ -211,12 +211,13 @@ class SimNode:
         """Tick ``k`` (10 ms each), in the order of the class docstring: from the plan of the
         vehicle's block when it holds (``sim.simplan``: the same frames, computed at once)."""
         plan = self._plan
-        planned = None if plan is None else plan.at(self, k)
-        if planned is None and self._can_plan(k):
+        i = -1 if plan is None else plan.at(self, k)
+        if i < 0 and self._can_plan(k):
             plan = self._plan = plan_ticks(self, self.vehicle, k)  # type: ignore[arg-type]
-            planned = None if plan is None else plan.at(self, k)
-        if planned is not None:
-            self._send_planned(planned)
+            i = -1 if plan is None else plan.at(self, k)
+        if i >= 0:
+            assert plan is not None
+            self._send_planned(plan, i)
             return
         self.motor_controller.service_rx()
         if self.driver is not None and k % self._driver_ticks == 0:
@@ -235,15 +236,17 @@ class SimNode:
         if type(bus) is not OdocanBus or bus.timing is not None or not bus._open:
             return False
         plan = self._plan  # one that failed at a tick of its own stays failed (no retry)
-        return plan is None or not plan.first <= k < plan.first + len(plan.ticks)
+        return plan is None or not plan.first <= k < plan.first + len(plan.times)
 
-    def _send_planned(self, tick: PlannedTick) -> None:
-        """Tick ``k`` from the plan: the frames and every state change of the plain tick."""
-        send, t_s = self.bus.send_data, tick.t_s  # type: ignore[attr-defined]
+    def _send_planned(self, plan: TickPlan, i: int) -> None:
+        """The plan's tick at index ``i``: its frames and every state change of the plain
+        tick."""
+        send, t_s = self.bus.send_data, plan.times[i]  # type: ignore[attr-defined]
         mc, driver = self.motor_controller, self.driver
-        if tick.motor_cmd is not None:
+        motor_cmd = plan.motor_cmds[i]
+        if motor_cmd is not None:
             assert driver is not None
-            data, speeds_mps = tick.motor_cmd
+            data, speeds_mps = motor_cmd
             driver._ahead.pop(t_s, None)
             driver.counter = (driver.counter + 1) & 0xF
             send(fr.MOTOR_CMD_ID, data, t_s + driver.tx_latency_s)
@@ -251,11 +254,12 @@ class SimNode:
             mc.deliver(data, speeds_mps)
         self.vehicle.advance_to(t_s)
         mc.counter = (mc.counter + 1) & 0xF
-        send(fr.WHEEL_ENCODERS_ID, tick.wheel_encoders, t_s + mc.tx_latency_s)
+        send(fr.WHEEL_ENCODERS_ID, plan.encoders[i], t_s + mc.tx_latency_s)
         mc.frames_sent += 1
-        if tick.sim_truth:
+        sim_truth = plan.truths[i]
+        if sim_truth:
             truth = self.truth
-            for data in tick.sim_truth:
+            for data in sim_truth:
                 send(fr.SIM_TRUTH_ID, data, t_s + truth.tx_latency_s)
             truth.counter = (truth.counter + 3) & 0xF
             truth.frames_sent += 3

@@ -23,7 +23,8 @@ A value a packer would saturate (a command beyond the i16 mm/s range, a truth be
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, NamedTuple
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -41,21 +42,12 @@ _BAM16_PER_RAD = 65536 / (2 * math.pi)  # as sim.motor_controller's TruthSender
 _CRC_TABLE = np.array(CRC8H2F_TABLE, dtype=np.uint8)
 
 
-class PlannedTick(NamedTuple):
-    """One tick's frames and the node counters it starts from."""
-
-    t_s: float  # the clock's time at the tick
-    counters: tuple[int, int, int]  # (driver, motor controller, truth) COUNTER before the tick
-    # the driver's MOTOR_CMD payload and its speeds as the motor controller decodes them (m/s)
-    motor_cmd: tuple[bytes, tuple[float, float]] | None
-    wheel_encoders: bytes
-    sim_truth: tuple[bytes, ...]  # the SIM_TRUTH parts X, Y, HEADING (empty: none this tick)
-
-
 class TickPlan:
-    """Ticks ``first ..`` of one vehicle block (``ticks[k - first]``)."""
+    """Ticks ``first .. first + len(times) - 1`` of one vehicle block, tick ``k`` at index
+    ``k - first`` of each list."""
 
-    __slots__ = ("block", "driver", "first", "offset", "scenario", "ticks")
+    __slots__ = ("block", "counters", "driver", "encoders", "first", "motor_cmds", "offset",
+                 "scenario", "times", "truths")
 
     def __init__(self, node: SimNode, block: object, first: int) -> None:
         self.block = block
@@ -63,14 +55,19 @@ class TickPlan:
         self.scenario = None if node.driver is None else node.driver.scenario
         self.offset = node.motor_controller._count_offset
         self.first = first
-        self.ticks: list[PlannedTick] = []
+        self.times: list[float] = []  # the clock's time at the tick
+        # (driver, motor controller, truth) COUNTER before the tick (-1: none sent yet)
+        self.counters: list[tuple[int, int, int]] = []
+        # the driver's MOTOR_CMD payload and its speeds as the motor controller decodes them (m/s)
+        self.motor_cmds: list[tuple[bytes, tuple[float, float]] | None] = []
+        self.encoders: list[bytes] = []  # WHEEL_ENCODERS
+        self.truths: list[tuple[bytes, ...]] = []  # SIM_TRUTH X, Y, HEADING (empty: none)
 
-    def at(self, node: SimNode, k: int) -> PlannedTick | None:
-        """Tick ``k``'s frames when the plan holds for it (module docstring), else None."""
+    def at(self, node: SimNode, k: int) -> int:
+        """The index of tick ``k`` when the plan holds for it (module docstring), else -1."""
         i = k - self.first
-        if not 0 <= i < len(self.ticks):
-            return None
-        tick = self.ticks[i]
+        if not 0 <= i < len(self.times):
+            return -1
         driver, mc = node.driver, node.motor_controller
         vehicle: PlannedVehicle = node.vehicle  # type: ignore[assignment]
         if (
@@ -78,13 +75,13 @@ class TickPlan:
             or (driver is not None and driver.scenario is not self.scenario)
             or mc._count_offset is not self.offset
             or not vehicle.serves(self.block)
-            or node.clock.now_s() != tick.t_s
+            or node.clock.now_s() != self.times[i]
             or node.bus._queue  # type: ignore[attr-defined]
             or (-1 if driver is None else driver.counter, mc.counter, node.truth.counter)
-            != tick.counters
+            != self.counters[i]
         ):
-            return None
-        return tick
+            return -1
+        return i
 
 
 def seal_words(words: np.ndarray | list[int], data_ids: tuple[int, ...]) -> list[bytes]:
@@ -99,97 +96,117 @@ def seal_words(words: np.ndarray | list[int], data_ids: tuple[int, ...]) -> list
         crc = table[crc ^ raw[:, column]]
     ids = np.array(data_ids, dtype=np.uint8)[raw[:, 1] & 0x0F]
     raw[:, 0] = table[crc ^ ids] ^ CRC8H2F_XOR_OUT
-    flat = raw.tobytes()
-    return [flat[i : i + 8] for i in range(0, len(flat), 8)]
+    return raw.view("V8").ravel().tolist()  # bytes each
 
 
 def plan_ticks(node: SimNode, vehicle: PlannedVehicle, k: int) -> TickPlan | None:
-    """The sim node's frames from tick ``k`` to the end of the vehicle's block (None: the
-    vehicle does not run ahead at tick ``k``, or no tick can be planned)."""
+    """The sim node's frames from tick ``k`` to the end of the vehicle's block, or to the first
+    value a packer would saturate (None: the vehicle does not run ahead at tick ``k``, or no
+    tick can be planned)."""
     ahead = vehicle.block_ahead(k, node.clock.now_s())
     if ahead is None:
         return None
     block, counts = ahead
-    plan = TickPlan(node, block, k)
     times = vehicle.tick_times(k, len(counts))
-    cmds, truths = _commands(node, k, times), _truths(node, vehicle, k, times)
-    ticks = min(len(cmds), len(truths))  # up to the first value a packer would saturate
+    cmd_at = [] if node.driver is None else _due(k, len(times), node._driver_ticks, 0)
+    truth_at = _due(k, len(times), node._truth_ticks, node.truth_phase_ticks)
+    cmds = _commands(node, [times[i] for i in cmd_at])
+    truths = _truths(node, vehicle, k, truth_at, times)
+    ticks = min([len(times), *cmd_at[len(cmds) :][:1], *truth_at[len(truths) :][:1]])
     if ticks == 0:
         return None
+    cmd_at, truth_at = cmd_at[: len(cmds)], truth_at[: len(truths)]
     mc = node.motor_controller
-    encs = seal_words(_encoder_words(mc, vehicle, counts[:ticks]), fr.WHEEL_ENCODERS_DATA_IDS)
-    cmd_words = [c[0] for c in cmds[:ticks] if c is not None]
-    cmd_frames = iter(seal_words(cmd_words, fr.MOTOR_CMD_DATA_IDS))
-    truth_words = [w for t in truths[:ticks] for w in t]
-    truth_frames = iter(seal_words(truth_words, fr.SIM_TRUTH_DATA_IDS))
-    c_drv = -1 if node.driver is None else node.driver.counter
-    c_mc, c_truth = mc.counter, node.truth.counter
-    for i in range(ticks):
-        command = cmds[i]
-        cmd = None if command is None else (next(cmd_frames), command[1])
-        parts = (next(truth_frames), next(truth_frames), next(truth_frames)) if truths[i] else ()
-        plan.ticks.append(PlannedTick(times[i], (c_drv, c_mc, c_truth), cmd, encs[i], parts))
-        c_drv = c_drv if cmd is None else (c_drv + 1) & 0xF
-        c_mc = (c_mc + 1) & 0xF
-        c_truth = (c_truth + 3) & 0xF if parts else c_truth
+    plan = TickPlan(node, block, k)
+    plan.times = times[:ticks]
+    plan.encoders = seal_words(_encoder_words(mc, vehicle, counts[:ticks]),
+                               fr.WHEEL_ENCODERS_DATA_IDS)
+    plan.motor_cmds = [None] * ticks
+    sealed = seal_words([word for word, _ in cmds], fr.MOTOR_CMD_DATA_IDS)
+    for i, (_, speeds), data in zip(cmd_at, cmds, sealed, strict=True):
+        plan.motor_cmds[i] = (data, speeds)
+    plan.truths = [()] * ticks
+    sealed = seal_words([word for words in truths for word in words], fr.SIM_TRUTH_DATA_IDS)
+    for j, i in enumerate(truth_at):
+        plan.truths[i] = tuple(sealed[3 * j : 3 * j + 3])
+    driver_counter = -1 if node.driver is None else node.driver.counter
+    plan.counters = list(zip(
+        _counters_before(driver_counter, ticks, cmd_at, 1),
+        _counters_before(mc.counter, ticks, range(ticks), 1),
+        _counters_before(node.truth.counter, ticks, truth_at, 3),
+        strict=True,
+    ))
     return plan
+
+
+def _due(k: int, ticks: int, every: int, phase: int) -> list[int]:
+    """The indices ``i < ticks`` of the ticks ``k + i`` of a cycle of ``every`` ticks that
+    falls on ticks ``k = phase`` (mod ``every``)."""
+    return list(range((phase - k) % every, ticks, every))
+
+
+def _counters_before(counter: int, ticks: int, sends: Sequence[int], per_send: int) -> list[int]:
+    """A node's COUNTER before each of ``ticks`` ticks, from ``counter`` (-1: none sent yet),
+    when it sends ``per_send`` frames in each tick of ``sends`` (each frame advances it)."""
+    sent = np.zeros(ticks, dtype=np.int64)
+    sent[list(sends)] = per_send
+    before = np.cumsum(sent) - sent
+    advanced = (counter + before) & 0xF
+    return np.where(before == 0, counter, advanced).tolist()  # type: ignore[no-any-return]
 
 
 _Command = tuple[int, tuple[float, float]] | None
 
 
-def _commands(node: SimNode, k: int, times: list[float]) -> list[_Command]:
-    """Per tick from ``k``: the driver's MOTOR_CMD word (None: none this tick) and its speeds as
-    ``MotorController.deliver`` decodes them (m/s), until one the plan cannot make (the
-    forecast did not take it, or a speed would saturate)."""
+def _commands(node: SimNode, times: list[float]) -> list[tuple[int, tuple[float, float]]]:
+    """The driver's MOTOR_CMD word at each of ``times`` (its ticks) and the speeds as
+    ``MotorController.deliver`` decodes them (m/s), up to one the plan cannot make (the
+    forecast did not take it, or a speed would saturate): ``ScenarioDriver.send``'s
+    ``round(speed * 1000)`` (half to even, as ``np.rint``) and ``i16 / 1000.0``, in numpy."""
     driver = node.driver
-    if driver is None:
-        return [None] * len(times)
+    assert driver is not None
     ahead = driver._ahead if driver._ahead_of is driver.scenario else {}
-    every = node._driver_ticks
-    counter = driver.counter
-    out: list[_Command] = []
-    for i, t_s in enumerate(times):
-        if (k + i) % every:
-            out.append(None)
-            continue
+    commands = []
+    for t_s in times:
         command = ahead.get(t_s)
         if command is None:
-            return out
-        left, right = round(command[0] * 1000), round(command[1] * 1000)
-        if not (I16_MIN <= left <= I16_MAX and I16_MIN <= right <= I16_MAX):
-            return out
-        counter = (counter + 1) & 0xF
-        word = (counter << 8) | ((left & 0xFFFF) << 16) | ((right & 0xFFFF) << 32)
-        out.append((word, (left / 1000.0, right / 1000.0)))
-    return out
+            break
+        commands.append(command)
+    if not commands:
+        return []
+    mm_s = np.rint(np.array(commands, dtype=np.float64) * 1000)
+    fits = (np.isfinite(mm_s) & (mm_s >= I16_MIN) & (mm_s <= I16_MAX)).all(axis=1)
+    count = len(commands) if fits.all() else int(np.argmin(fits))
+    raw = mm_s[:count].astype(np.int64)
+    counters = (driver.counter + 1 + np.arange(count)) & 0xF
+    words = (counters << 8) | ((raw[:, 0] & 0xFFFF) << 16) | ((raw[:, 1] & 0xFFFF) << 32)
+    speeds = (raw / 1000.0).tolist()
+    return [(word, (left, right)) for word, (left, right) in zip(words.tolist(), speeds,
+                                                                 strict=True)]
 
 
 def _truths(
-    node: SimNode, vehicle: PlannedVehicle, k: int, times: list[float]
-) -> list[tuple[int, ...]]:
-    """Per tick from ``k``: SIM_TRUTH's three words as ``TruthSender.send`` packs them (none
-    off its cycle), until a tick whose X or Y would saturate."""
-    every, phase = node._truth_ticks, node.truth_phase_ticks
+    node: SimNode, vehicle: PlannedVehicle, k: int, due: list[int], times: list[float]
+) -> list[tuple[int, int, int]]:
+    """SIM_TRUTH's three words at ticks ``k + i`` for ``i`` in ``due``, as ``TruthSender.send``
+    packs them, up to a tick whose X or Y would saturate."""
     counter, enc_counter = node.truth.counter, node.motor_controller.counter
-    out: list[tuple[int, ...]] = []
-    for i, t_s in enumerate(times):
-        enc_counter = (enc_counter + 1) & 0xF  # this tick's WHEEL_ENCODERS COUNTER
-        if (k + i - phase) % every:
-            out.append(())
-            continue
-        pose = vehicle.truth_at_time(t_s)
-        x, y = round(pose.x_m * 1e4), round(pose.y_m * 1e4)
+    xs, ys, headings = vehicle.truths_at([times[i] for i in due])
+    out: list[tuple[int, int, int]] = []
+    for i, x_m, y_m, heading_rad in zip(due, xs, ys, headings, strict=True):
+        x, y = round(x_m * 1e4), round(y_m * 1e4)
         if not (I32_MIN <= x <= I32_MAX and I32_MIN <= y <= I32_MAX):
             return out
-        heading = round(pose.heading_rad * _BAM16_PER_RAD) & 0xFFFF
-        raws = (x & 0xFFFF_FFFF, y & 0xFFFF_FFFF, heading)
-        words = []
-        parts = (SimTruthPart.X, SimTruthPart.Y, SimTruthPart.HEADING)
-        for part, raw in zip(parts, raws, strict=True):
-            counter = (counter + 1) & 0xF
-            words.append((int(part) << 12) | (counter << 8) | (enc_counter << 16) | (raw << 24))
-        out.append(tuple(words))
+        heading = round(heading_rad * _BAM16_PER_RAD) & 0xFFFF
+        head = ((enc_counter + 1 + i) & 0xF) << 16  # the tick's WHEEL_ENCODERS COUNTER
+        x_word = (SimTruthPart.X << 12) | (((counter + 1) & 0xF) << 8) | head | (
+            (x & 0xFFFF_FFFF) << 24)
+        y_word = (SimTruthPart.Y << 12) | (((counter + 2) & 0xF) << 8) | head | (
+            (y & 0xFFFF_FFFF) << 24)
+        h_word = (SimTruthPart.HEADING << 12) | (((counter + 3) & 0xF) << 8) | head | (
+            heading << 24)
+        out.append((x_word, y_word, h_word))
+        counter = (counter + 3) & 0xF
     return out
 
 

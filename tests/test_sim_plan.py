@@ -30,9 +30,9 @@ def run(lookahead: bool, ticks: int, events: dict[int, Event]) -> tuple[list[obj
     served = [0]
     plain = motor_controller.SimNode._send_planned
 
-    def counted(node: motor_controller.SimNode, tick: object) -> None:
+    def counted(node: motor_controller.SimNode, plan: object, i: int) -> None:
         served[0] += 1
-        plain(node, tick)  # type: ignore[arg-type]
+        plain(node, plan, i)  # type: ignore[arg-type]
 
     collector = FrameCollector()
     config = RigConfig(
