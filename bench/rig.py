@@ -9,7 +9,12 @@
    own cost, measured on a no-op, is taken out of "the rest"). Each part's share of the timed run
    is then applied to the CPU time per tick of the plain run (1.), so the µs add up to it. The
    scenario's drive runs ahead in blocks (``sim.lookahead``): a block's drivetrain, encoder counts
-   and truth are one part, the checks of the rig's calls against it "motors and encoders".
+   and truth are one part, the checks of the rig's calls against it "motors and encoders"; the
+   sim node's frames of a block are packed at once (``sim.simplan``: one part) and sent from
+   that plan a tick at a time (another: the sends' own cost is the transport's, the motor
+   controller's E2E check of MOTOR_CMD is in "E2E", the vehicle's checks in "motors and
+   encoders"). The host's FrameCollector hears the frames once per simulated second
+   (``sim.tickloop``: it is passive).
 3. **The transport, µs per frame per receiver** (CPU time). The frames the rig put on the bus
    are replayed through three fresh handles with no simulation (per tick the sim handle drains
    and sends, the firmware handle drains and sends, the host handle drains: each frame reaches
@@ -45,6 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from odocan.firmware import frames as fr
 from odocan.firmware.e2e import E2EReceiver
 from odocan.host.io.logs import FrameCollector
+from odocan.sim import motor_controller
 from odocan.sim.board import TICK_S
 from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.rig import LockstepRig, RigConfig
@@ -196,6 +202,9 @@ def budget(seconds: float) -> dict[str, float]:
         b.wrap(vehicle, "truth", "vehicle: ground truth (vehicle.truth)")
         if isinstance(vehicle, PlannedVehicle):  # the scenario's drive, run a block ahead
             b.wrap(vehicle, "_start_block", "vehicle: a block run ahead (sim.lookahead)")
+        # The sim node's frames of a block packed at once, then sent a tick at a time.
+        b.wrap(motor_controller, "plan_ticks", "sim: a block's frames packed (sim.simplan)")
+        b.wrap(rig.sim, "_send_planned", "sim: a planned tick (sends, E2E, vehicle)")
         for name in dir(fr):  # both sides call them through the module
             if name.startswith(("pack_", "unpack_")):
                 b.wrap(fr, name, "codecs: pack/unpack (E2E CRC included)")

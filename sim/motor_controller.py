@@ -28,7 +28,7 @@ from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.node import BusNode
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import Scenario, get_scenario
-from odocan.sim.simplan import TickPlan, plan_ticks
+from odocan.sim.simplan import TickPlan, node_counters, plan_ticks
 from odocan.sim.transport import OdocanBus
 from odocan.sim.vehicle import Vehicle
 
@@ -263,6 +263,8 @@ class SimNode:
                 send(fr.SIM_TRUTH_ID, data, t_s + truth.tx_latency_s)
             truth.counter = (truth.counter + 3) & 0xF
             truth.frames_sent += 3
+        plan.next = i + 1
+        plan.counters = node_counters(self)
 
     def planned_command(self, k: int, t_s: float) -> tuple[float, float] | None:
         """The rim speeds (m/s) the motor controller will apply from the driver at tick ``k``

@@ -23,7 +23,6 @@ A value a packer would saturate (a command beyond the i16 mm/s range, a truth be
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -46,8 +45,8 @@ class TickPlan:
     """Ticks ``first .. first + len(times) - 1`` of one vehicle block, tick ``k`` at index
     ``k - first`` of each list."""
 
-    __slots__ = ("block", "counters", "driver", "encoders", "first", "motor_cmds", "offset",
-                 "scenario", "times", "truths")
+    __slots__ = ("block", "counters", "driver", "encoders", "first", "motor_cmds", "next",
+                 "offset", "scenario", "times", "truths")
 
     def __init__(self, node: SimNode, block: object, first: int) -> None:
         self.block = block
@@ -55,9 +54,10 @@ class TickPlan:
         self.scenario = None if node.driver is None else node.driver.scenario
         self.offset = node.motor_controller._count_offset
         self.first = first
+        self.next = 0  # the index of the next tick to send: the plan's ticks go in a row
+        # (driver, motor controller, truth) COUNTER before the next tick (-1: none sent yet)
+        self.counters = node_counters(node)
         self.times: list[float] = []  # the clock's time at the tick
-        # (driver, motor controller, truth) COUNTER before the tick (-1: none sent yet)
-        self.counters: list[tuple[int, int, int]] = []
         # the driver's MOTOR_CMD payload and its speeds as the motor controller decodes them (m/s)
         self.motor_cmds: list[tuple[bytes, tuple[float, float]] | None] = []
         self.encoders: list[bytes] = []  # WHEEL_ENCODERS
@@ -66,7 +66,7 @@ class TickPlan:
     def at(self, node: SimNode, k: int) -> int:
         """The index of tick ``k`` when the plan holds for it (module docstring), else -1."""
         i = k - self.first
-        if not 0 <= i < len(self.times):
+        if i != self.next or i >= len(self.times):
             return -1
         driver, mc = node.driver, node.motor_controller
         vehicle: PlannedVehicle = node.vehicle  # type: ignore[assignment]
@@ -77,11 +77,20 @@ class TickPlan:
             or not vehicle.serves(self.block)
             or node.clock.now_s() != self.times[i]
             or node.bus._queue  # type: ignore[attr-defined]
-            or (-1 if driver is None else driver.counter, mc.counter, node.truth.counter)
-            != self.counters[i]
+            or node_counters(node) != self.counters
         ):
             return -1
         return i
+
+
+def node_counters(node: SimNode) -> tuple[int, int, int]:
+    """The (driver, motor controller, truth) E2E COUNTERs of ``node`` (-1: none sent yet)."""
+    driver = node.driver
+    return (
+        -1 if driver is None else driver.counter,
+        node.motor_controller.counter,
+        node.truth.counter,
+    )
 
 
 def seal_words(words: np.ndarray | list[int], data_ids: tuple[int, ...]) -> list[bytes]:
@@ -129,13 +138,6 @@ def plan_ticks(node: SimNode, vehicle: PlannedVehicle, k: int) -> TickPlan | Non
     sealed = seal_words([word for words in truths for word in words], fr.SIM_TRUTH_DATA_IDS)
     for j, i in enumerate(truth_at):
         plan.truths[i] = tuple(sealed[3 * j : 3 * j + 3])
-    driver_counter = -1 if node.driver is None else node.driver.counter
-    plan.counters = list(zip(
-        _counters_before(driver_counter, ticks, cmd_at, 1),
-        _counters_before(mc.counter, ticks, range(ticks), 1),
-        _counters_before(node.truth.counter, ticks, truth_at, 3),
-        strict=True,
-    ))
     return plan
 
 
@@ -143,19 +145,6 @@ def _due(k: int, ticks: int, every: int, phase: int) -> list[int]:
     """The indices ``i < ticks`` of the ticks ``k + i`` of a cycle of ``every`` ticks that
     falls on ticks ``k = phase`` (mod ``every``)."""
     return list(range((phase - k) % every, ticks, every))
-
-
-def _counters_before(counter: int, ticks: int, sends: Sequence[int], per_send: int) -> list[int]:
-    """A node's COUNTER before each of ``ticks`` ticks, from ``counter`` (-1: none sent yet),
-    when it sends ``per_send`` frames in each tick of ``sends`` (each frame advances it)."""
-    sent = np.zeros(ticks, dtype=np.int64)
-    sent[list(sends)] = per_send
-    before = np.cumsum(sent) - sent
-    advanced = (counter + before) & 0xF
-    return np.where(before == 0, counter, advanced).tolist()  # type: ignore[no-any-return]
-
-
-_Command = tuple[int, tuple[float, float]] | None
 
 
 def _commands(node: SimNode, times: list[float]) -> list[tuple[int, tuple[float, float]]]:
