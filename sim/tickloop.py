@@ -144,17 +144,26 @@ class TickLoop:
         return all(getattr(type(li), "passive", False) is True for li in self.listeners)
 
     def _run_quietly(self, ticks: int) -> None:
-        """``ticks`` ticks as ``step`` runs them, the host's frames delivered once after them
-        (also when a tick raises, e.g. Ctrl-C: what ran is heard)."""
+        """``ticks`` ticks as ``step`` runs them, the host's frames delivered once after them.
+        When a tick raises (e.g. Ctrl-C), the frames of the ticks before it are delivered and
+        its own stay queued, as ``step`` leaves them."""
         clock, work, start_s = self.clock, self.work, self.start_s
+        bus = cast("OdocanBus", self.host_bus)
+        queue = bus._queue
+        heard = len(queue)  # frames queued by the ticks done
         try:
             for k in range(self.ticks, self.ticks + ticks):
                 if clock is not None:
                     clock.advance_to(start_s + k * TICK_S)
                 work(k)
                 self.ticks = k + 1
-        finally:
-            deliver(self.host_bus, self.listeners)
+                heard = len(queue)
+        except BaseException:
+            unfinished = [queue.pop() for _ in range(len(queue) - heard)]
+            deliver(bus, self.listeners)
+            queue.extend(reversed(unfinished))
+            raise
+        deliver(bus, self.listeners)
 
     def run_to(self, stop_tick: int) -> None:
         """Tick until ``ticks`` is ``stop_tick`` (none when it already is, or is past it)."""

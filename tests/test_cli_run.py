@@ -280,14 +280,14 @@ def test_run_interrupted_checks_what_ran(
 ) -> None:
     from odocan.sim.rig import LockstepRig
 
-    step = LockstepRig.step
+    work = LockstepRig._work  # each tick's, however the run steps (a second at once or not)
 
-    def step_until_ctrl_c(rig: LockstepRig) -> None:
+    def work_until_ctrl_c(rig: LockstepRig, k: int) -> None:
         if rig.ticks == 150:
             raise KeyboardInterrupt
-        step(rig)
+        work(rig, k)
 
-    monkeypatch.setattr(LockstepRig, "step", step_until_ctrl_c)
+    monkeypatch.setattr(LockstepRig, "_work", work_until_ctrl_c)
     code, out, err = run_cli(capsys, "run", "--duration", "100")
     assert (code, err) == (0, "interrupted after 1.5 s simulated\n")
     assert re.search(r"\n  WHEEL_ENCODERS +150 +150 ", out), out

@@ -208,12 +208,13 @@ def test_a_run_that_raises_still_hands_passive_listeners_what_ran(
     log: list[object] = []
 
     def work(k: int) -> None:
-        if k == 42:
-            raise KeyboardInterrupt
         sender.send_data(k, b"\x00", 0.0)
+        if k == 42:
+            raise KeyboardInterrupt  # tick 42 sent a frame, then stopped
 
     loop = TickLoop(work, host, [_Passive(log)])
     with pytest.raises(KeyboardInterrupt):
         loop.run(100)
     assert loop.ticks == 42
     assert log == [("batch", list(range(42)))]
+    assert deliver(host, [_Passive(log)]) == 1  # tick 42's frame stays queued, as step leaves it

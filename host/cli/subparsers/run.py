@@ -277,21 +277,32 @@ def _run(
     ticks (a second signal, or any KeyboardInterrupt, at once), a progress line on a terminal."""
     total = round(duration_s / TICK_S)
     stop = StopRequest()
-    step = rig.step
+    done = 0
     with stop_on_signals(stop), progress(f"simulating {duration_s:g} s", total) as bar:
         try:
-            for k in range(total):
-                step()
-                if on_tick is not None:
-                    on_tick()
-                if k % PROGRESS_EVERY_TICKS == 0:
+            while done < total:  # a check after the first tick, then every simulated second
+                ticks = min(PROGRESS_EVERY_TICKS if done else 1, total - done)
+                _run_ticks(rig, ticks, on_tick)
+                done += ticks
+                if (done - 1) % PROGRESS_EVERY_TICKS == 0:
                     if stop.stop_requested:
                         break
-                    bar.update(k)
+                    bar.update(done - 1)
         except KeyboardInterrupt:
             pass
     if rig.ticks < total:
         print(f"interrupted after {rig.ticks * TICK_S:g} s simulated", file=sys.stderr)
+
+
+def _run_ticks(rig: LockstepRig, ticks: int, on_tick: Callable[[], None] | None) -> None:
+    """``ticks`` ticks: ``on_tick()`` after each one, or, with none, in one ``TickLoop.run``
+    (which hands passive listeners, the collector, the host's frames once, not every tick)."""
+    if on_tick is None:
+        rig.loop.run(ticks)
+        return
+    for _ in range(ticks):
+        rig.step()
+        on_tick()
 
 
 def _open_log(path: Path) -> can.Listener:
