@@ -4,17 +4,19 @@ While ``sim.lookahead.PlannedVehicle`` runs a scenario's open-loop drive a block
 everything the sim node (``sim.motor_controller.SimNode``) will send in those ticks is known: the
 driver's MOTOR_CMD (the forecast's commands), WHEEL_ENCODERS (the block's counts) and SIM_TRUTH
 (the block's truth), each with the COUNTER its node will have reached. ``plan_ticks`` computes
-their payloads for the rest of the block in one batch (the words in Python, the Profile 2 CRCs
-and the bytes in numpy: ``seal_words``), and ``SimNode.tick`` sends a tick's frames from the plan
-while it holds, making the same calls on the vehicle and the motor controller's E2E receiver as
-the plain tick (``MotorController.deliver``, ``Vehicle.advance_to``).
+their payloads for the rest of the block in one batch (the encoder and command words, the
+Profile 2 CRCs and the bytes in numpy: ``seal_words``; the truth's words, 3 per 10 ticks, in
+Python), and ``SimNode.tick`` sends a tick's frames from the plan while it holds, making the
+same calls on the vehicle and the motor controller's E2E receiver as the plain tick
+(``MotorController.deliver``, ``Vehicle.advance_to``).
 
-A plan holds for tick k only as the plain tick would have computed its frames: the same driver,
-scenario and vehicle block, the clock at the tick's time, the nodes' counters where the plan
-left them (a restart or any send in between shows there), and nothing waiting on the sim's bus
-handle (a MOTOR_CMD from elsewhere). Otherwise the plain tick runs and the plan is dropped for
-the rest of its block (a miss costs time, never a bit); ``tests/test_sim_plan.py`` compares the
-logs of rigs with and without it, across a miss.
+A plan holds for tick k only as the plain tick would have computed its frames: its ticks in a
+row, the same driver, scenario, restart offset and vehicle block, the clock at the tick's time,
+the nodes' counters where its last tick left them (a restart or any send in between shows
+there), and nothing waiting on the sim's bus handle (a MOTOR_CMD from elsewhere). Otherwise
+the plain tick runs and the plan is dropped for the rest of its block (a miss costs time, never
+a bit); ``tests/test_sim_plan.py`` compares the logs of rigs with and without it, across a miss
+and a restart.
 
 A value a packer would saturate (a command beyond the i16 mm/s range, a truth beyond the i32
 0.1 mm range) ends the plan before its tick: the plain tick then sets the node's SATURATION bit.
