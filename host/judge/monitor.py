@@ -58,6 +58,7 @@ from cantools.database.can import Database, Message
 from odocan.firmware.errors import ErrorFlag
 from odocan.host.jsonutil import finite
 from odocan.host.judge.busstats import LoadWindow
+from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import (
     CONFLICT_HOLD_S,
@@ -198,6 +199,9 @@ class BusMonitor:
         self.tracker.advance(timestamp_s)  # settles the pose halves heard half a cycle before
         if status in ACCEPTED:
             self._use(message, stats, data)
+        elif status in CRC_RIGHT_REFUSED and message.name == "WHEEL_ENCODERS":
+            refused_encoders(self.tracker.twins, message.decode(data, decode_choices=False),
+                             timestamp_s)  # a twin of the latest accepted one, or not
         self.tracker.take_samples()  # judged in ``tracker.vs_reference``
 
     def _count_unknown_id(self, can_id: int) -> None:

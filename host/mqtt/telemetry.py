@@ -45,6 +45,7 @@ from cantools.database.can import Database, Message
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
+from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.tracking import PoseTracker
@@ -203,6 +204,9 @@ class RobotTelemetry:
         tracker = self.tracker
         tracker.advance(t_s)  # settles the pose halves heard half a cycle before
         if route is None or status not in ACCEPTED_E2E:
+            if status in CRC_RIGHT_REFUSED and route is not None \
+                    and route.name == "WHEEL_ENCODERS":  # a twin of the latest accepted one?
+                refused_encoders(tracker.twins, route.decode(data), t_s)
             message = self._by_id.get(can_id)
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
             return self._samples() if tracker.settled else []
