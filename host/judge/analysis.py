@@ -121,6 +121,7 @@ from odocan.host.judge.samples import (
     truth_samples,
 )
 from odocan.host.judge.stalls import after_stalls
+from odocan.host.judge.statuslatch import firmware_events
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import UNKNOWN, check_frames
@@ -322,6 +323,7 @@ def _analyze_life(
                        f"{allowed * 1e3:.4f} mm from here (loss_allowance_m)"}
             for (first, last, n), allowed in zip(losses, after_span.tolist(), strict=True)
         ],
+        "firmware_events": firmware_events(frames, accepted, decoder),
         "reboots": [],
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,

@@ -67,6 +67,7 @@ from odocan.host.judge.sources import (
     boot_summary,
     start_new_life,
 )
+from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import (
@@ -165,6 +166,8 @@ class BusMonitor:
         self.started_monotonic_s = time.monotonic()
         self.sources = SourceWatch()
         self.events: deque[dict[str, Any]] = deque(maxlen=MAX_EVENTS)
+        self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
+        self.firmware_events: deque[dict[str, Any]] = deque(maxlen=4 * MAX_EVENTS)
         self._bus_time_s = 0.0  # the latest bus timestamp heard
         # SecOC (docs/secoc.md): the firmware's AUTH_* refusals, and ODOM_AUTH frames that
         # follow no command frame (a forger's, or a command lost on the way)
@@ -287,9 +290,12 @@ class BusMonitor:
         page = str(shown.get("PAGE", s.get("PAGE")))
         if page == "SUMMARY":
             mask = int(s["ERROR_MASK"])
+            self.firmware_events += self.latch.observe(self._bus_time_s, int(s["STATE"]),
+                                                       int(s["REASON"]), mask)
             self.status.update(
                 state=shown["STATE"], integrator=shown["INTEGRATOR"], error_mask=mask,
-                errors=error_names(mask), uptime_s=int(s["UPTIME"]),
+                errors=error_names(mask), latched_errors=self.latch.latched_names(),
+                uptime_s=int(s["UPTIME"]),
                 reason=str(shown.get("REASON", "NONE")),
             )
             integrator = str(shown["INTEGRATOR"]).lower()
@@ -343,7 +349,8 @@ class BusMonitor:
         now_s = time.monotonic() if now_s is None else now_s
         nodes = self.node_ages(now_s)
         state, why = self._verdict(nodes.get(FIRMWARE_NODE))
-        return {"state": state, "why": why, "nodes": nodes, "events": list(self.events)}
+        return {"state": state, "why": why, "nodes": nodes, "events": list(self.events),
+                "firmware_events": list(self.firmware_events)}
 
     def _verdict(self, firmware: dict[str, Any] | None) -> tuple[str, list[str]]:
         if firmware is None:

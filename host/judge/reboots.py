@@ -225,6 +225,8 @@ def merge(
     report["e2e"] = _summed_counts([r["e2e"] for r in reports])
     report["unknown_frames"] = _summed_counts([{"u": r["unknown_frames"]} for r in reports])["u"]
     events = [dict(e, life=k) for k, r in enumerate(reports) for e in r["events"]]
+    report["firmware_events"] = [dict(e, life=k) for k, r in enumerate(reports)
+                                 for e in r.get("firmware_events", [])]
     report.pop("truth_origin", None)
     reboots = [
         {"t_s": life.t_s, "uptime_before_s": life.uptime_before_s,

@@ -25,6 +25,7 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses
+from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 SUMMARY_PAGE = 0  # ODOM_STATUS page with UPTIME and INTEGRATOR
@@ -74,6 +75,8 @@ class StreamFacts:
     _enc_ok: _Signal = field(default_factory=_Signal)
     _has_status: bool = True  # the DBC's ODOM_STATUS is multiplexed
     _accepted_encoders: int = 0  # accepted WHEEL_ENCODERS frames before the first count page
+    latch: StatusLatch = field(default_factory=StatusLatch)  # host.judge.statuslatch
+    firmware_events: list[dict[str, Any]] = field(default_factory=list)  # ... its events
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's facts."""
@@ -110,6 +113,7 @@ class StreamFacts:
             self._has_status = False
             return
         keep = accepted[summary["index"]]
+        self.firmware_events += latch_summaries(self.latch, summary, keep)
         self._uptime.feed(summary, "UPTIME", keep, self._offset)
         self._integrator.feed(summary, "INTEGRATOR", keep, self._offset)
         before = self._enc_ok.first is None

@@ -48,9 +48,10 @@ from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
+from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.livedecode import LiveDecoder
-from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
+from odocan.host.mqtt.topics import EVENTS_LEAF, RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor, e2e_messages
 from odocan.sim.contract import database
 from odocan.sim.framebatch import Received
@@ -170,6 +171,7 @@ class RobotTelemetry:
         self._page_names = {int(v): str(n).lower()
                             for v, n in (status.get_signal_by_name("PAGE").choices or {}).items()}
         self.sources = SourceWatch()  # reboots, as the monitor tells them (host.judge.sources)
+        self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         self.reboots = 0
 
     # --- frames ---
@@ -338,6 +340,10 @@ class RobotTelemetry:
         self.firmware[name] = fields
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
             self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]))
+        elif name == "summary":  # a short DEGRADED or a new ERROR_MASK bit: never lost
+            events = self.latch.observe(t_s, int(s["STATE"]), int(s["REASON"]),
+                                        int(s["ERROR_MASK"]))
+            return [(EVENTS_LEAF, stamp({"robot": self.name, **e})) for e in events]
         return []
 
     def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
@@ -396,7 +402,7 @@ class RobotTelemetry:
         self.status_seq += 1
         return ("status", status_payload(
             self.name, state, seq=self.status_seq, firmware=self.firmware,
-            frames_total=sum(self.frames.values()),
+            latched_errors=self.latch.latched_names(), frames_total=sum(self.frames.values()),
         ))
 
 
