@@ -35,6 +35,7 @@ window). Times: ``t_s`` is the frame's bus timestamp (s), ``unix_s`` the wall cl
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections import Counter
 from dataclasses import dataclass, field
@@ -45,6 +46,7 @@ from cantools.database.can import Database, Message
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
+from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
@@ -172,6 +174,10 @@ class RobotTelemetry:
                             for v, n in (status.get_signal_by_name("PAGE").choices or {}).items()}
         self.sources = SourceWatch()  # reboots, as the monitor tells them (host.judge.sources)
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
+        self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
+        set_pose = self.db.get_message_by_name("ODOM_SET_POSE")
+        self._set_pose_id = set_pose.frame_id
+        self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {}
         self.reboots = 0
 
     # --- frames ---
@@ -346,7 +352,41 @@ class RobotTelemetry:
             return [(EVENTS_LEAF, stamp({"robot": self.name, **e})) for e in events]
         return []
 
+    def _on_set_pose(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        """An ODOM_SET_POSE frame on the bus (another tool's; the bridge's own go through
+        ``command_sent``): staged and applied as the firmware ACKs it."""
+        field = str(_named_value(self._set_pose_fields, s["FIELD"]))
+        self.set_pose.on_frame(int(s["COUNTER"]), field, s.get(field), self.tracker.enc_seq)
+        return []
+
+    def _on_auth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        if int(s["REQUEST"]) == 1:  # ODOM_SET_POSE (the DBC's VAL_): the firmware acts now
+            self.set_pose.on_auth(self.tracker.enc_seq)
+        return []
+
+    def command_sent(self, can_id: int, data: bytes) -> None:
+        """A command frame the bridge itself sent (not heard back from its bus)."""
+        route = self._routes.get(can_id)
+        if route is not None and route.name in ("ODOM_SET_POSE", "ODOM_AUTH"):
+            with contextlib.suppress(DecodeError, KeyError, ValueError):
+                route.handler(self, route.decode(data), 0.0)
+
+    def _followed_set_pose(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        """ODOM_ACK of an ODOM_SET_POSE frame: an applied APPLY restarts the reference at
+        the set pose (``host.judge.livesetpose``), published as a ``set_pose`` event."""
+        applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
+        if applied is None:
+            return []
+        event = set_pose_event(t_s, apply_set_pose(self.tracker, *applied), applied[1])
+        return [(EVENTS_LEAF, stamp({"robot": self.name, **event}))]
+
     def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        if int(s["REQUEST_ID"]) == self._set_pose_id:
+            return self._followed_set_pose(s, t_s) + self._answered(s, t_s)
+        return self._answered(s, t_s)
+
+    def _answered(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        """ODOM_ACK of a command the bridge sent: its ``cmd/result``."""
         key = (int(s["REQUEST_ID"]), int(s["REQUEST_COUNTER"]))
         pending = self.pending.pop(key, None)
         if pending is None:
@@ -356,7 +396,7 @@ class RobotTelemetry:
             return []
         if nack:  # forget the rest of this command: one answer per command
             self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
-        elif pending.command in ("set_pose", "config"):
+        elif pending.command == "config":  # (a set-pose is followed: ``_followed_set_pose``)
             self.tracker.restart_reference()
         reason = _choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
         payload = {"id": pending.cmd_id, "command": pending.command,
@@ -380,6 +420,8 @@ class RobotTelemetry:
         "SIM_TRUTH": _on_truth,
         "ODOM_STATUS": _on_status,
         "ODOM_ACK": _on_ack,
+        "ODOM_SET_POSE": _on_set_pose,
+        "ODOM_AUTH": _on_auth,
     }
 
     # --- periodic ---
