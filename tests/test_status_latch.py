@@ -1,7 +1,7 @@
 """Sticky errors latched (issue #11, ``host.judge.statuslatch``): every ERROR_MASK bit newly set
 and every STATE change the host sees in ODOM_STATUS summaries becomes an event with its time and
-name, in the monitor model (``firmware_events``), on MQTT (the bridge's ``events`` leaf and
-``status``' ``latched_errors``) and in the ``analyze`` report (whole and streamed), so a short
+name, in the monitor model (``firmware_events``), on MQTT (the bridge's retained ``status``:
+``events``, ``latched_errors``) and in the ``analyze`` report (whole and streamed), so a short
 DEGRADED (TIME_LOST lasts 50 ms, the summary goes out every 100 ms) is never lost.
 
 The expected times come from the test's own decoding of the summaries with cantools (not the
@@ -25,6 +25,7 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_analysis import analyze_file
 from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.host.mqtt.topics import TELEMETRY_LEAVES
 from odocan.sim.contract import database
 from odocan.sim.robot import load
 from tests.test_forged_pairing import RecordingWatch, written
@@ -101,10 +102,10 @@ def test_a_stall_leaves_a_time_lost_event_live_on_mqtt_and_in_the_report(
     states = [e["state"] for e in health["firmware_events"] if e["kind"] == "state"]
     assert states == ([] if drop_degraded else ["DEGRADED", "OK"])
     assert "TIME_LOST" in monitor.status["latched_errors"]
-    mqtt = [payload for leaf, payload in published if leaf == "events"]
-    assert _time_lost(mqtt) == [pytest.approx(want_s, abs=1e-9)]
-    assert all(p["robot"] == "r1" for p in mqtt)
-    assert "TIME_LOST" in bridge.status()[1]["latched_errors"]
+    status = bridge.status()[1]  # retained on MQTT: the latest events and every bit seen
+    assert _time_lost(status["events"]) == [pytest.approx(want_s, abs=1e-9)]
+    assert "TIME_LOST" in status["latched_errors"]
+    assert not [leaf for leaf, _ in published if leaf not in (*TELEMETRY_LEAVES, "status")]
     whole = analyze(frames, PMIR, "exact").report
     assert _time_lost(whole["firmware_events"]) == [pytest.approx(want_s, abs=1e-9)]
     log = written(frames, tmp_path / "stall.log")  # its times in whole microseconds

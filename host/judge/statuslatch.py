@@ -4,9 +4,10 @@ every STATE change seen in ODOM_STATUS summaries, with its bus time and its name
 The firmware's DEGRADED for TIME_LOST lasts 50 ms and the summary goes out every 100 ms, so a
 summary may never say DEGRADED; the sticky ERROR_MASK keeps the bit, and the host latches it
 here the first time it sees it set. The same ``StatusLatch`` serves the monitor model
-(``host.judge.monitor``: ``firmware_events``), the MQTT bridge (``host.mqtt.telemetry``: the
-``events`` leaf and ``status``) and ``analyze`` (the report's ``firmware_events``, whole and
-streamed: ``latch_summaries`` over a page's decoded columns), so they say the same things.
+(``host.judge.monitor``: ``firmware_events``), the MQTT bridge (``host.mqtt.telemetry``: its
+retained ``status`` carries the latest events and ``latched_errors``) and ``analyze`` (the
+report's ``firmware_events``, whole and streamed: ``latch_summaries`` over a page's decoded
+columns), so they say the same things.
 
 Kept apart from the judge's own events (reboots, stalls, set-pose, losses), which say what the
 host did with the reference; these say what the firmware reported. A bit the firmware clears

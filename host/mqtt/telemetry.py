@@ -23,7 +23,11 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
   one socket write), or alone at most ``publish_hz`` times a second while no pose was published
   for two periods;
 * ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result`` (enums by
-  their DBC names: ``"state": "OK"``).
+  their DBC names: ``"state": "OK"``); every STATE change and ERROR_MASK bit newly set
+  (``host.judge.statuslatch``) and every set-pose applied (``host.judge.livesetpose``, which
+  the reference follows) is an event: ``status`` carries the latest ``STATUS_EVENTS`` and
+  ``latched_errors`` (every bit seen set), retained, so a short DEGRADED is never lost (not a
+  QoS-1 publication each: a babbling bus would fill the bridge's reliable queue).
 
 Headings: ``heading_rad`` wrapped to (-pi, pi] and ``heading_unwrapped_rad`` cumulative, on
 ``pose``, ``reference`` and ``truth`` (SIM_TRUTH's [0, 2 pi) made cumulative at the reference's
@@ -37,7 +41,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -53,7 +57,7 @@ from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.livedecode import LiveDecoder
-from odocan.host.mqtt.topics import EVENTS_LEAF, RESULT_LEAF, stamp, status_payload
+from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor, e2e_messages
 from odocan.sim.contract import database
 from odocan.sim.framebatch import Received
@@ -61,6 +65,7 @@ from odocan.sim.framebatch import Received
 Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # foreign CAN IDs counted by name in ``rejected``; the rest as ``other``
+STATUS_EVENTS = 16  # the latest firmware events and set-poses carried by ``status``
 
 
 @dataclass
@@ -174,6 +179,7 @@ class RobotTelemetry:
                             for v, n in (status.get_signal_by_name("PAGE").choices or {}).items()}
         self.sources = SourceWatch()  # reboots, as the monitor tells them (host.judge.sources)
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
+        self.events: deque[dict[str, Any]] = deque(maxlen=STATUS_EVENTS)  # ... and set-poses
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
         set_pose = self.db.get_message_by_name("ODOM_SET_POSE")
         self._set_pose_id = set_pose.frame_id
@@ -347,9 +353,8 @@ class RobotTelemetry:
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
             self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]))
         elif name == "summary":  # a short DEGRADED or a new ERROR_MASK bit: never lost
-            events = self.latch.observe(t_s, int(s["STATE"]), int(s["REASON"]),
-                                        int(s["ERROR_MASK"]))
-            return [(EVENTS_LEAF, stamp({"robot": self.name, **e})) for e in events]
+            self.events += self.latch.observe(t_s, int(s["STATE"]), int(s["REASON"]),
+                                              int(s["ERROR_MASK"]))
         return []
 
     def _on_set_pose(self, s: dict[str, Any], t_s: float) -> list[Publication]:
@@ -371,18 +376,17 @@ class RobotTelemetry:
             with contextlib.suppress(DecodeError, KeyError, ValueError):
                 route.handler(self, route.decode(data), 0.0)
 
-    def _followed_set_pose(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+    def _followed_set_pose(self, s: dict[str, Any], t_s: float) -> None:
         """ODOM_ACK of an ODOM_SET_POSE frame: an applied APPLY restarts the reference at
-        the set pose (``host.judge.livesetpose``), published as a ``set_pose`` event."""
+        the set pose (``host.judge.livesetpose``), a ``set_pose`` event in ``status``."""
         applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
-        if applied is None:
-            return []
-        event = set_pose_event(t_s, apply_set_pose(self.tracker, *applied), applied[1])
-        return [(EVENTS_LEAF, stamp({"robot": self.name, **event}))]
+        if applied is not None:
+            self.events.append(set_pose_event(t_s, apply_set_pose(self.tracker, *applied),
+                                              applied[1]))
 
     def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         if int(s["REQUEST_ID"]) == self._set_pose_id:
-            return self._followed_set_pose(s, t_s) + self._answered(s, t_s)
+            self._followed_set_pose(s, t_s)
         return self._answered(s, t_s)
 
     def _answered(self, s: dict[str, Any], t_s: float) -> list[Publication]:
@@ -444,7 +448,8 @@ class RobotTelemetry:
         self.status_seq += 1
         return ("status", status_payload(
             self.name, state, seq=self.status_seq, firmware=self.firmware,
-            latched_errors=self.latch.latched_names(), frames_total=sum(self.frames.values()),
+            latched_errors=self.latch.latched_names(), events=list(self.events),
+            frames_total=sum(self.frames.values()),
         ))
 
 

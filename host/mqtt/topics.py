@@ -11,7 +11,6 @@ truth              bridge -> you    0     no      SIM_TRUTH (simulated robots on
 error              bridge -> you    0     no      pose - reference, pose - truth
 rates              bridge -> you    0     no      frames/s per message, E2E counts
 status             bridge -> you    1     yes     online/offline (last will), firmware state
-events             bridge -> you    1     no      a firmware STATE change or ERROR_MASK bit set
 cmd/nav_goal       you -> bridge    1     no      a navigation goal (NAV_GOAL frames)
 cmd/set_pose       you -> bridge    1     no      set the on-board pose (ODOM_SET_POSE)
 cmd/config         you -> bridge    1     no      robot parameters (ODOM_CONFIG)
@@ -38,7 +37,6 @@ from odocan.host.jsonutil import finite
 PREFIX: Final = "odocan"
 TELEMETRY_LEAVES: Final = ("pose", "reference", "truth", "error", "rates")
 STATUS_LEAF: Final = "status"
-EVENTS_LEAF: Final = "events"  # host.judge.statuslatch: each latched firmware event, QoS 1
 COMMANDS: Final = ("nav_goal", "set_pose", "config")
 RESULT_LEAF: Final = "cmd/result"
 QOS_TELEMETRY: Final = 0
