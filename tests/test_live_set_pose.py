@@ -1,5 +1,5 @@
-"""ODOM_SET_POSE followed by the live judge (issue #11, ``host.judge.livesetpose``): after an
-applied set-pose the reference restarts at the pose set, at the encoder frame the firmware
+"""ODOM_SET_POSE followed by the judges (issue #11, ``host.judge.livesetpose``, ``.setposes``):
+after an applied set-pose the reference restarts at the pose set, at the encoder frame the firmware
 applied it after, and the truth is compared in the new frame; a ``set_pose`` event says when and
 what, in the monitor model and in the bridge's ``status`` (``events``).
 
@@ -11,18 +11,24 @@ encoder frame before the APPLY (the firmware drains its mailbox in bus order).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import can
+import pytest
 
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorMask
+from odocan.host.io.logs import FrameCollector
+from odocan.host.judge.analysis import analyze
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.board import TICK_S
 from odocan.sim.contract import database
 from tests import host_frames as hf
 from tests.fault_rig import open_virtual
+from tests.test_forged_pairing import written
 from tests.test_health_rig import Watch, circle_rig
 
 DB = database()
@@ -132,3 +138,31 @@ def test_an_applied_set_pose_restarts_the_reference_there_and_the_truth_follows(
     assert math.hypot(firmware.x_q40_m / 2**40 - fx, firmware.y_q40_m / 2**40 - fy) < 1e-6
     assert "POSE WRONG" not in {v for _, v in watch.verdicts}
     assert watch.verdicts[-1][1] == "OK"
+
+
+def test_analyze_cuts_the_log_at_an_applied_set_pose(tmp_path: Path) -> None:
+    """``analyze`` of the same frames (``host.judge.setposes``): the part after the set-pose is
+    a new life whose reference starts exactly at the pose set (the float64 path of the test),
+    its truth compared in the new frame; PASS, a ``set_pose`` event. The streamed analysis
+    refuses such a log (analysed whole)."""
+    watch, frames = _run()
+    start, expected = _independent(frames, watch.rig.profile)
+    collector = FrameCollector()
+    for msg in frames:
+        collector.on_message_received(msg)
+    result = analyze(collector.arrays(), watch.rig.profile, "exact")
+    report, series = result.report, result.series
+    enc_t = [m.timestamp for m in frames if m.arbitration_id == fr.WHEEL_ENCODERS_ID]
+    last = enc_t.index(float(series["timestamp_s"][-1]))  # the last sample's encoder frame
+    x, y, _ = expected[last - start]
+    assert math.hypot(series["reference_x_m"][-1] - x, series["reference_y_m"][-1] - y) < 1e-9
+    assert report["onboard_vs_reference"]["max_position_error_m"] < 1e-4
+    assert report["onboard_vs_truth"]["max_position_error_m"] < 5e-3  # not the 1.2 m jump
+    assert result.passed
+    events = [e for e in report["events"] if e["kind"] == "set_pose"]
+    assert [(e["x_m"], e["y_m"]) for e in events] == [
+        (pytest.approx(X_RAW * 1e-4, abs=1e-12), pytest.approx(Y_RAW * 1e-4, abs=1e-12))]
+    assert report["reboots"] == []
+    with pytest.raises(NotStreamable):
+        analyze_file(written(collector.arrays(), tmp_path / "set_pose.log"),
+                     watch.rig.profile, "exact", chunk_frames=257)

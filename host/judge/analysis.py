@@ -120,6 +120,7 @@ from odocan.host.judge.samples import (
     starts_at_power_up,
     truth_samples,
 )
+from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.stalls import after_stalls
 from odocan.host.judge.statuslatch import firmware_events
 from odocan.host.protocol.dbcplan import default_plan
@@ -186,7 +187,7 @@ def analyze(
     db = db if db is not None else default_plan()
     decoder = BulkDecoder(db)
     require_messages(decoder)
-    lives = split_lives(frames, decoder)
+    lives = cut_lives(split_lives(frames, decoder), set_pose_cuts(frames, decoder))
     if len(lives) == 1:
         return _analyze_life(frames, robot, integrator, tolerance=tolerance, db=db,
                              decoder=decoder, scenario=scenario, seed=seed,
@@ -202,7 +203,8 @@ def analyze(
             result = _analyze_life(part, robot, integrator, tolerance=tolerance, db=db,
                                    decoder=BulkDecoder(db), boot=life.boot,
                                    rebase=life.t_s is not None,
-                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s,
+                                   start_pose=life.set_pose and life.set_pose.start_pose())
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
             silent.append(life)
@@ -243,10 +245,13 @@ def _analyze_life(
     seed: int | None = None,
     wall_seconds: float | None = None,
     max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    start_pose: tuple[float, float, float] | None = None,
 ) -> Analysis:
     """``analyze`` of one firmware life (``host.judge.reboots``); ``boot``: the frames start at
     a reboot, the firmware's pose 0 at their first encoder frame; ``rebase``: the frames are a
-    life after a reboot, the truth is compared in its frame (``compare.life_origin``)."""
+    life after a reboot or a set-pose, the truth is compared in its frame
+    (``compare.life_origin``); ``start_pose``: a set-pose's, exact at the first encoder frame
+    (``host.judge.setposes``)."""
     e2e, accepted = check_frames(frames, db)
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
     enc = encoder_frames(frames, accepted, decoder)
@@ -260,7 +265,7 @@ def _analyze_life(
         power_up = starts_at_power_up(frames, accepted, decoder, onboard)
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
-                         slack_m=tolerance.position_m)
+                         slack_m=tolerance.position_m, start_pose=start_pose)
     ref = ref_all.at(onboard.enc)
     truth_origin = None
     if rebase:  # a new firmware life: its own origin, the truth re-based there
@@ -286,7 +291,8 @@ def _analyze_life(
         "robot": _robot_dict(robot),
         "integrator": integrator,
         "integrator_source": source,
-        "reference_start": "power-up" if ref_all.exact_start else "fitted",
+        "reference_start": "set pose" if start_pose else (
+            "power-up" if ref_all.exact_start else "fitted"),
         "scenario": scenario,
         "seed": seed,
         "sim_seconds": _covered_s(frames, db),

@@ -135,6 +135,8 @@ def analyze_file_counted(
             lives.feed(chunk, accepted)
             facts.feed(chunk, accepted)
         spill.close()
+        if facts.set_pose_applied:  # cut into lives there: host.judge.setposes, whole only
+            raise NotStreamable("an ODOM_SET_POSE was applied: the reference restarts there")
         return _analyze_lives(
             lives.finish(), facts, lambda span: lambda: spill.read(span.start, span.stop,
                                                                     chunk_frames),
