@@ -187,7 +187,8 @@ def analyze(
     db = db if db is not None else default_plan()
     decoder = BulkDecoder(db)
     require_messages(decoder)
-    lives = cut_lives(split_lives(frames, decoder), set_pose_cuts(frames, decoder))
+    firmware_lives = split_lives(frames, decoder)
+    lives = cut_lives(firmware_lives, set_pose_cuts(frames, decoder))
     if len(lives) == 1:
         return _analyze_life(frames, robot, integrator, tolerance=tolerance, db=db,
                              decoder=decoder, scenario=scenario, seed=seed,
@@ -215,6 +216,8 @@ def analyze(
         raise failure
     report, series = merge([d[1].report for d in done], [d[1].series for d in done],
                            [d[0] for d in done], [d[2] for d in done], silent=silent)
+    if len(lives) != len(firmware_lives):  # a set-pose is no reboot: one latch per firmware
+        report["firmware_events"] = _latched_per_firmware(frames, firmware_lives, db)
     covered_s = _covered_s(frames, db)
     report.update(
         integrator_source=source, scenario=scenario, seed=seed, sim_seconds=covered_s,
@@ -229,6 +232,18 @@ def analyze(
         and report["onboard_twist_vs_reference"]["passed"]
     )
     return Analysis(report=report, series=series, passed=report["passed"])
+
+
+def _latched_per_firmware(frames: FrameArrays, lives: list[Life],
+                          db: DatabaseSpec) -> list[dict[str, Any]]:
+    """``firmware_events`` of each firmware life (a reboot's), its mask latched from its start
+    (a set-pose's cut does not clear the firmware's sticky bits: not reported again there)."""
+    events = []
+    for k, life in enumerate(lives):
+        part = frames.select(life.index)
+        events += [dict(e, firmware_life=k) for e in firmware_events(
+            part, check_frames(part, db)[1], BulkDecoder(db))]
+    return events
 
 
 def _analyze_life(
