@@ -181,8 +181,8 @@ def test_a_bare_apply_after_a_counter_reset_rebases_the_truth_and_latches_once(
     monkeypatch.setattr("tests.test_health_rig.Watch", RecordingWatch)
     watch, _ = run_counter_reset()
     tracker = watch.monitor.tracker
-    assert [e["kind"] for e in watch.monitor.events] == ["set_pose"]
     assert tracker.vs_truth.latest["dpos_m"] < 2e-3
+    assert [e["kind"] for e in watch.monitor.events] == ["set_pose"]
     report = analyze(collector.arrays(), watch.rig.profile, "exact").report
     assert report["onboard_vs_truth"]["final_position_error_m"] < 2e-3
     assert [e["kind"] for e in report["events"]] == ["counter_restart", "set_pose"]

@@ -79,8 +79,9 @@ The code: this module runs the steps and writes the report; ``host.judge.samples
 the plot series), ``host.judge.reboots`` step 6.
 
 The on-board pose is the decoded signals: X, Y * 1e-4 m, HEADING * 2 pi/65536 rad
-(``TURNS * 2 pi + HEADING`` unwrapped). ODOM_SET_POSE jumps are not followed (the reference would
-have to restart there).
+(``TURNS * 2 pi + HEADING`` unwrapped). An applied ODOM_SET_POSE cuts the log into a new life
+whose reference starts at the pose set (``host.judge.setposes``); ``firmware_events`` latches every
+STATE change and ERROR_MASK bit set in the ODOM_STATUS summaries (``host.judge.statuslatch``).
 """
 
 from __future__ import annotations
