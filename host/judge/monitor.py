@@ -169,7 +169,8 @@ class BusMonitor:
         self.events: deque[dict[str, Any]] = deque(maxlen=MAX_EVENTS)
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
-        self._set_pose_id = self.db.get_message_by_name("ODOM_SET_POSE").frame_id
+        self._set_pose_id = next((m.frame_id for m in self.db.messages
+                                  if m.name == "ODOM_SET_POSE"), -1)  # -1: a DBC without it
         self.firmware_events: deque[dict[str, Any]] = deque(maxlen=4 * MAX_EVENTS)
         self._bus_time_s = 0.0  # the latest bus timestamp heard
         # SecOC (docs/secoc.md): the firmware's AUTH_* refusals, and ODOM_AUTH frames that

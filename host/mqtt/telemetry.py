@@ -181,9 +181,10 @@ class RobotTelemetry:
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         self.events: deque[dict[str, Any]] = deque(maxlen=STATUS_EVENTS)  # ... and set-poses
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
-        set_pose = self.db.get_message_by_name("ODOM_SET_POSE")
-        self._set_pose_id = set_pose.frame_id
-        self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {}
+        set_pose = next((m for m in self.db.messages if m.name == "ODOM_SET_POSE"), None)
+        self._set_pose_id = set_pose.frame_id if set_pose is not None else -1
+        self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {} \
+            if set_pose is not None else {}
         self.reboots = 0
 
     # --- frames ---
