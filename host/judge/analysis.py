@@ -79,8 +79,9 @@ The code: this module runs the steps and writes the report; ``host.judge.samples
 the plot series), ``host.judge.reboots`` step 6.
 
 The on-board pose is the decoded signals: X, Y * 1e-4 m, HEADING * 2 pi/65536 rad
-(``TURNS * 2 pi + HEADING`` unwrapped). ODOM_SET_POSE jumps are not followed (the reference would
-have to restart there).
+(``TURNS * 2 pi + HEADING`` unwrapped). An applied ODOM_SET_POSE cuts the log into a new life
+whose reference starts at the pose set (``host.judge.setposes``); ``firmware_events`` latches every
+STATE change and ERROR_MASK bit set in the ODOM_STATUS summaries (``host.judge.statuslatch``).
 """
 
 from __future__ import annotations
@@ -120,7 +121,9 @@ from odocan.host.judge.samples import (
     starts_at_power_up,
     truth_samples,
 )
+from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.stalls import after_stalls
+from odocan.host.judge.statuslatch import firmware_events
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import UNKNOWN, check_frames
@@ -185,7 +188,8 @@ def analyze(
     db = db if db is not None else default_plan()
     decoder = BulkDecoder(db)
     require_messages(decoder)
-    lives = split_lives(frames, decoder)
+    firmware_lives = split_lives(frames, decoder)
+    lives = cut_lives(firmware_lives, set_pose_cuts(frames, decoder))
     if len(lives) == 1:
         return _analyze_life(frames, robot, integrator, tolerance=tolerance, db=db,
                              decoder=decoder, scenario=scenario, seed=seed,
@@ -201,7 +205,8 @@ def analyze(
             result = _analyze_life(part, robot, integrator, tolerance=tolerance, db=db,
                                    decoder=BulkDecoder(db), boot=life.boot,
                                    rebase=life.t_s is not None,
-                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s,
+                                   start_pose=life.set_pose and life.set_pose.start_pose())
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
             silent.append(life)
@@ -212,6 +217,8 @@ def analyze(
         raise failure
     report, series = merge([d[1].report for d in done], [d[1].series for d in done],
                            [d[0] for d in done], [d[2] for d in done], silent=silent)
+    if len(lives) != len(firmware_lives):  # a set-pose is no reboot: one latch per firmware
+        report["firmware_events"] = _latched_per_firmware(frames, firmware_lives, db)
     covered_s = _covered_s(frames, db)
     report.update(
         integrator_source=source, scenario=scenario, seed=seed, sim_seconds=covered_s,
@@ -228,6 +235,18 @@ def analyze(
     return Analysis(report=report, series=series, passed=report["passed"])
 
 
+def _latched_per_firmware(frames: FrameArrays, lives: list[Life],
+                          db: DatabaseSpec) -> list[dict[str, Any]]:
+    """``firmware_events`` of each firmware life (a reboot's), its mask latched from its start
+    (a set-pose's cut does not clear the firmware's sticky bits: not reported again there)."""
+    events = []
+    for k, life in enumerate(lives):
+        part = frames.select(life.index)
+        events += [dict(e, firmware_life=k) for e in firmware_events(
+            part, check_frames(part, db)[1], BulkDecoder(db))]
+    return events
+
+
 def _analyze_life(
     frames: FrameArrays,
     robot: RobotProfile,
@@ -242,10 +261,13 @@ def _analyze_life(
     seed: int | None = None,
     wall_seconds: float | None = None,
     max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    start_pose: tuple[float, float, float] | None = None,
 ) -> Analysis:
     """``analyze`` of one firmware life (``host.judge.reboots``); ``boot``: the frames start at
     a reboot, the firmware's pose 0 at their first encoder frame; ``rebase``: the frames are a
-    life after a reboot, the truth is compared in its frame (``compare.life_origin``)."""
+    life after a reboot or a set-pose, the truth is compared in its frame
+    (``compare.life_origin``); ``start_pose``: a set-pose's, exact at the first encoder frame
+    (``host.judge.setposes``)."""
     e2e, accepted = check_frames(frames, db)
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
     enc = encoder_frames(frames, accepted, decoder)
@@ -259,7 +281,7 @@ def _analyze_life(
         power_up = starts_at_power_up(frames, accepted, decoder, onboard)
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
-                         slack_m=tolerance.position_m)
+                         slack_m=tolerance.position_m, start_pose=start_pose)
     ref = ref_all.at(onboard.enc)
     truth_origin = None
     if rebase:  # a new firmware life: its own origin, the truth re-based there
@@ -285,7 +307,8 @@ def _analyze_life(
         "robot": _robot_dict(robot),
         "integrator": integrator,
         "integrator_source": source,
-        "reference_start": "power-up" if ref_all.exact_start else "fitted",
+        "reference_start": "set pose" if start_pose else (
+            "power-up" if ref_all.exact_start else "fitted"),
         "scenario": scenario,
         "seed": seed,
         "sim_seconds": _covered_s(frames, db),
@@ -322,6 +345,7 @@ def _analyze_life(
                        f"{allowed * 1e3:.4f} mm from here (loss_allowance_m)"}
             for (first, last, n), allowed in zip(losses, after_span.tolist(), strict=True)
         ],
+        "firmware_events": firmware_events(frames, accepted, decoder),
         "reboots": [],
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,

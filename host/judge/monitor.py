@@ -58,6 +58,8 @@ from cantools.database.can import Database, Message
 from odocan.firmware.errors import ErrorFlag
 from odocan.host.jsonutil import finite
 from odocan.host.judge.busstats import LoadWindow
+from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
+from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import (
     CONFLICT_HOLD_S,
@@ -66,6 +68,7 @@ from odocan.host.judge.sources import (
     boot_summary,
     start_new_life,
 )
+from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import (
@@ -164,6 +167,11 @@ class BusMonitor:
         self.started_monotonic_s = time.monotonic()
         self.sources = SourceWatch()
         self.events: deque[dict[str, Any]] = deque(maxlen=MAX_EVENTS)
+        self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
+        self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
+        self._set_pose_id = next((m.frame_id for m in self.db.messages
+                                  if m.name == "ODOM_SET_POSE"), -1)  # -1: a DBC without it
+        self.firmware_events: deque[dict[str, Any]] = deque(maxlen=4 * MAX_EVENTS)
         self._bus_time_s = 0.0  # the latest bus timestamp heard
         # SecOC (docs/secoc.md): the firmware's AUTH_* refusals, and ODOM_AUTH frames that
         # follow no command frame (a forger's, or a command lost on the way)
@@ -198,6 +206,9 @@ class BusMonitor:
         self.tracker.advance(timestamp_s)  # settles the pose halves heard half a cycle before
         if status in ACCEPTED:
             self._use(message, stats, data)
+        elif status in CRC_RIGHT_REFUSED and message.name == "WHEEL_ENCODERS":
+            refused_encoders(self.tracker.twins, message.decode(data, decode_choices=False),
+                             timestamp_s)  # a twin of the latest accepted one, or not
         self.tracker.take_samples()  # judged in ``tracker.vs_reference``
 
     def _count_unknown_id(self, can_id: int) -> None:
@@ -225,14 +236,18 @@ class BusMonitor:
                 self.undecodable += 1
 
     def _on_pose_request(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        """ODOM_SET_POSE or ODOM_CONFIG APPLY: the on-board pose restarts from what the host
-        gave, so the reference restarts at the next on-board pose (an event)."""
-        if shown.get("FIELD", shown.get("PARAM")) != "APPLY":
+        """ODOM_SET_POSE: staged and applied as the firmware acknowledges it
+        (``host.judge.livesetpose``); ODOM_CONFIG APPLY: the reference restarts at the next
+        on-board pose (an event)."""
+        if "FIELD" in shown:
+            field = str(shown["FIELD"])
+            self.set_pose.on_frame(int(s["COUNTER"]), field, s.get(field), self.tracker.enc_seq)
+            return
+        if shown.get("PARAM") != "APPLY":
             return
         self.tracker.restart_reference()
-        name = "set pose" if "FIELD" in shown else "config"
-        self.events.append({"t_s": self._bus_time_s, "kind": name,
-                            "detail": f"{name} applied: reference restarted"})
+        self.events.append({"t_s": self._bus_time_s, "kind": "config",
+                            "detail": "config applied: reference restarted"})
 
     def _on_command(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         """ODOM_SET_POSE or ODOM_CONFIG: its ODOM_AUTH may follow, and APPLY restarts."""
@@ -246,13 +261,22 @@ class BusMonitor:
         """ODOM_AUTH: it authenticates the last command frame of the message it names (as the
         firmware's held slot does), or none: counted as an ODOM_AUTH without a command."""
         request = str(shown.get("REQUEST", "?"))
+        if request == "ODOM_SET_POSE" and request in self._held:
+            self.set_pose.on_auth(self.tracker.enc_seq)  # the firmware acts on it now
         if request in self._held:
             self._held.discard(request)
         else:
             self.auth["auth_without_command"] += 1
 
     def _on_ack(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        """ODOM_ACK: a NACK with an AUTH_* reason is an authentication failure (an event)."""
+        """ODOM_ACK: of an ODOM_SET_POSE frame, to ``set_pose`` (an applied APPLY restarts
+        the reference at the set pose: a ``set_pose`` event); a NACK with an AUTH_* reason is an
+        authentication failure (an event)."""
+        if int(s["REQUEST_ID"]) == self._set_pose_id:
+            applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
+            if applied is not None:
+                pose = apply_set_pose(self.tracker, *applied)
+                self.events.append(set_pose_event(self._bus_time_s, pose, applied[1]))
         reason = str(shown.get("REASON", ""))
         if not reason.startswith("AUTH_"):
             return
@@ -283,9 +307,12 @@ class BusMonitor:
         page = str(shown.get("PAGE", s.get("PAGE")))
         if page == "SUMMARY":
             mask = int(s["ERROR_MASK"])
+            self.firmware_events += self.latch.observe(self._bus_time_s, int(s["STATE"]),
+                                                       int(s["REASON"]), mask)
             self.status.update(
                 state=shown["STATE"], integrator=shown["INTEGRATOR"], error_mask=mask,
-                errors=error_names(mask), uptime_s=int(s["UPTIME"]),
+                errors=error_names(mask), latched_errors=self.latch.latched_names(),
+                uptime_s=int(s["UPTIME"]),
                 reason=str(shown.get("REASON", "NONE")),
             )
             integrator = str(shown["INTEGRATOR"]).lower()
@@ -339,7 +366,8 @@ class BusMonitor:
         now_s = time.monotonic() if now_s is None else now_s
         nodes = self.node_ages(now_s)
         state, why = self._verdict(nodes.get(FIRMWARE_NODE))
-        return {"state": state, "why": why, "nodes": nodes, "events": list(self.events)}
+        return {"state": state, "why": why, "nodes": nodes, "events": list(self.events),
+                "firmware_events": list(self.firmware_events)}
 
     def _verdict(self, firmware: dict[str, Any] | None) -> tuple[str, list[str]]:
         if firmware is None:

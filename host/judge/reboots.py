@@ -65,6 +65,7 @@ class Life:
     boot: bool  # starts at the firmware's power-up (pose 0 at its first encoder frame)
     t_s: float | None = None  # bus time of the boot summary (None: the log's first life)
     uptime_before_s: int | None = None  # the last UPTIME the previous firmware reported
+    set_pose: Any = None  # a set-pose's life (``host.judge.setposes.SetPoseCut``), not a reboot
 
 
 def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
@@ -225,17 +226,22 @@ def merge(
     report["e2e"] = _summed_counts([r["e2e"] for r in reports])
     report["unknown_frames"] = _summed_counts([{"u": r["unknown_frames"]} for r in reports])["u"]
     events = [dict(e, life=k) for k, r in enumerate(reports) for e in r["events"]]
+    report["firmware_events"] = [dict(e, life=k) for k, r in enumerate(reports)
+                                 for e in r.get("firmware_events", [])]
     report.pop("truth_origin", None)
     reboots = [
         {"t_s": life.t_s, "uptime_before_s": life.uptime_before_s,
          "reference_start": r["reference_start"], "onboard_samples": r["samples"]["onboard"],
          "life": k, "truth_origin": r.get("truth_origin")}
-        for k, (life, r) in enumerate(zip(lives, reports, strict=True)) if life.t_s is not None
+        for k, (life, r) in enumerate(zip(lives, reports, strict=True))
+        if life.t_s is not None and life.set_pose is None
     ] + [
         {"t_s": life.t_s, "uptime_before_s": life.uptime_before_s, "reference_start": None,
          "onboard_samples": 0, "life": None, "truth_origin": None}
-        for life in silent or [] if life.t_s is not None
+        for life in silent or [] if life.t_s is not None and life.set_pose is None
     ]
+    events += [set_pose_event(life, k, r) for k, (life, r)
+               in enumerate(zip(lives, reports, strict=True)) if life.set_pose is not None]
     reboots.sort(key=lambda b: b["t_s"])
     events += [
         {"kind": "reboot", "t_s": b["t_s"], "life": b["life"],
@@ -301,3 +307,17 @@ def _joined(
             pieces.setdefault(key, []).append(values)
         distance += float(reports[k]["onboard_vs_truth"]["distance_travelled_m"])
     return {key: np.concatenate(values) for key, values in pieces.items()}
+
+
+def set_pose_event(life: Life, k: int, report: dict[str, Any]) -> dict[str, Any]:
+    """The ``set_pose`` event of a set-pose's life (``host.judge.setposes``): its time, the
+    fields set (None: kept by the firmware), how its reference started."""
+    staged = life.set_pose.staged
+    start = report["reference_start"]
+    return {"kind": "set_pose", "t_s": life.t_s, "life": k, "x_m": staged.get("X"),
+            "y_m": staged.get("Y"), "heading_rad": staged.get("HEADING"),
+            "truth_origin": report.get("truth_origin"),
+            "detail": "set pose applied: the reference restarts "
+                      + ("at the pose set" if start == "set pose" else
+                         f"from a {start} start (not every field was set)")
+                      + ", the truth is compared in the new frame (truth_origin)"}

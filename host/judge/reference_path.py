@@ -60,12 +60,15 @@ def build_reference(
     max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
     breaks: IntArray | None = None,
     slack_m: float = POSITION_LSB_M,
+    start_pose: tuple[float, float, float] | None = None,
 ) -> Reference:
     """Integrate the encoder deltas from the first on-board sample on; the position placed
     again after gaps and after the stalls' ``breaks`` (within ``breaks.bound_offsets``' bound,
-    ``slack_m``: the position tolerance)."""
+    ``slack_m``: the position tolerance). ``start_pose``: the exact start at the first encoder
+    frame (x m, y m, heading rad: a set-pose's, ``host.judge.setposes``), as at power-up."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
-    e0 = 0 if power_up else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
+    exact_at_first = power_up or start_pose is not None
+    e0 = 0 if exact_at_first else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
     geometry = Geometry.of(robot)
     steps = firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s)
     d_left, d_right = steps.d_left, steps.d_right
@@ -80,7 +83,7 @@ def build_reference(
         inside = breaks[(breaks > e0) & (breaks < len(enc.seq))] - e0
         starts[inside] = True
     segment = np.cumsum(starts)
-    x0, y0, h0, exact = _start_pose(
+    x0, y0, h0, exact = (*start_pose, True) if start_pose is not None else _start_pose(
         onboard, _Relative(rel_x[at], rel_y[at], rel_h[at], segment[at]), power_up=power_up
     )
     cos0, sin0 = math.cos(h0), math.sin(h0)

@@ -135,6 +135,8 @@ def analyze_file_counted(
             lives.feed(chunk, accepted)
             facts.feed(chunk, accepted)
         spill.close()
+        if facts.set_pose_applied:  # cut into lives there: host.judge.setposes, whole only
+            raise NotStreamable("an ODOM_SET_POSE was applied: the reference restarts there")
         return _analyze_lives(
             lives.finish(), facts, lambda span: lambda: spill.read(span.start, span.stop,
                                                                     chunk_frames),
@@ -338,6 +340,7 @@ def _life(
                        f"{allowed * 1e3:.4f} mm from here (loss_allowance_m)"}
             for (begin, end, n), allowed in zip(spans, after_span.tolist(), strict=True)
         ],
+        "firmware_events": first.facts.firmware_events,
         "reboots": [],
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,

@@ -25,9 +25,11 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses
+from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 SUMMARY_PAGE = 0  # ODOM_STATUS page with UPTIME and INTEGRATOR
+APPLY_FIELD = 15  # ODOM_ACK REQUEST_FIELD of an APPLY (the DBC's ODOM_SET_POSE FIELD comment)
 
 
 @dataclass
@@ -74,6 +76,9 @@ class StreamFacts:
     _enc_ok: _Signal = field(default_factory=_Signal)
     _has_status: bool = True  # the DBC's ODOM_STATUS is multiplexed
     _accepted_encoders: int = 0  # accepted WHEEL_ENCODERS frames before the first count page
+    latch: StatusLatch = field(default_factory=StatusLatch)  # host.judge.statuslatch
+    firmware_events: list[dict[str, Any]] = field(default_factory=list)  # ... its events
+    set_pose_applied: bool = False  # an ODOM_SET_POSE APPLY ACKed (host.judge.setposes)
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's facts."""
@@ -90,6 +95,8 @@ class StreamFacts:
         self.frame_counts = counts
         self._feed_encoder_span(chunk)
         self._feed_status(chunk, accepted)
+        self.set_pose_applied = self.set_pose_applied or _applies_set_pose(
+            chunk, accepted, self.decoder)
         self._offset += len(chunk)
 
     def _feed_encoder_span(self, chunk: FrameArrays) -> None:
@@ -110,6 +117,7 @@ class StreamFacts:
             self._has_status = False
             return
         keep = accepted[summary["index"]]
+        self.firmware_events += latch_summaries(self.latch, summary, keep)
         self._uptime.feed(summary, "UPTIME", keep, self._offset)
         self._integrator.feed(summary, "INTEGRATOR", keep, self._offset)
         before = self._enc_ok.first is None
@@ -166,3 +174,15 @@ class StreamFacts:
         if not self._has_status or not self._uptime.present:
             return False
         return self._uptime.first == 0 and self.saw_only_the_log()
+
+
+def _applies_set_pose(chunk: FrameArrays, accepted: npt.NDArray[np.bool_],
+                      decoder: BulkDecoder) -> bool:
+    """Whether the chunk has an accepted ODOM_ACK saying ACK to an ODOM_SET_POSE APPLY."""
+    try:
+        acks = decoder.decode(chunk, "ODOM_ACK")
+        set_pose_id = decoder.message("ODOM_SET_POSE").frame_id
+    except (DecodeError, KeyError):
+        return False
+    return bool((accepted[acks["index"]] & (acks["REQUEST_ID"] == set_pose_id)
+                 & (acks["REQUEST_FIELD"] == APPLY_FIELD) & (acks["RESULT"] == 0)).any())

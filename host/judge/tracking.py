@@ -28,6 +28,7 @@ from odocan.host.judge.livepose import (
     truth_heading,
 )
 from odocan.host.judge.livetruth import LifeTruth
+from odocan.host.judge.livetwins import TwinWatch
 from odocan.host.judge.livewindow import (
     ENC_WINDOW,
     HALF_WINDOW,
@@ -83,6 +84,7 @@ class PoseTracker:
         self._pos = 0  # frames fed so far (the order of encoder frames and pose halves)
         self._counts: list[tuple[int, int, int] | None] = [None] * RING  # seq, left, right
         self._window = Columns(("seq", "pos", "counter", "t_s", "left", "right"), ENC_WINDOW)
+        self.twins = TwinWatch(self._window.rows)  # frames with a twin: their poses left out
         self._halves = {"x": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW),
                         "y": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW)}
         self._unsettled: dict[str, Half] = {}  # per message, the latest half heard
@@ -200,7 +202,7 @@ class PoseTracker:
         """Resolve the encoder frame the unsettled half of ``name`` names, and pair it."""
         half = self._unsettled.pop(name)
         seq, queued = self._named(self._halves[name], half.pos)
-        if seq < 0:
+        if seq < 0 or self.twins.twinned(seq):
             return  # left out, as analyze leaves it out (unmatched)
         if name == "x":
             self._xs.setdefault(seq, half)

@@ -142,6 +142,7 @@ class _Robot:
         for frame in command.frames:
             ack = PendingAck(command.cmd_id, command.name, frame.final)
             self.telemetry.expect_ack(frame.can_id, frame.counter, ack)
+            self.telemetry.command_sent(frame.can_id, frame.data)  # a set-pose is followed
             try:
                 bus.send(can.Message(arbitration_id=frame.can_id, is_extended_id=False,
                                      data=frame.data))
@@ -152,6 +153,7 @@ class _Robot:
                 try:
                     bus.send(can.Message(arbitration_id=signer.auth_frame_id,
                                          is_extended_id=False, data=auth))
+                    self.telemetry.command_sent(signer.auth_frame_id, auth)
                 except can.CanError as exc:
                     raise CommandRejected(f"bus refused ODOM_AUTH: {exc}",
                                           command.cmd_id) from None

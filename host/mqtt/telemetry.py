@@ -23,7 +23,11 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
   one socket write), or alone at most ``publish_hz`` times a second while no pose was published
   for two periods;
 * ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result`` (enums by
-  their DBC names: ``"state": "OK"``).
+  their DBC names: ``"state": "OK"``); every STATE change and ERROR_MASK bit newly set
+  (``host.judge.statuslatch``) and every set-pose applied (``host.judge.livesetpose``, which
+  the reference follows) is an event: ``status`` carries the latest ``STATUS_EVENTS`` and
+  ``latched_errors`` (every bit seen set), retained, so a short DEGRADED is never lost (not a
+  QoS-1 publication each: a babbling bus would fill the bridge's reliable queue).
 
 Headings: ``heading_rad`` wrapped to (-pi, pi] and ``heading_unwrapped_rad`` cumulative, on
 ``pose``, ``reference`` and ``truth`` (SIM_TRUTH's [0, 2 pi) made cumulative at the reference's
@@ -35,8 +39,9 @@ window). Times: ``t_s`` is the frame's bus timestamp (s), ``unix_s`` the wall cl
 
 from __future__ import annotations
 
+import contextlib
 import math
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -45,8 +50,11 @@ from cantools.database.can import Database, Message
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
+from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
+from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
+from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.livedecode import LiveDecoder
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
@@ -57,6 +65,7 @@ from odocan.sim.framebatch import Received
 Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # foreign CAN IDs counted by name in ``rejected``; the rest as ``other``
+STATUS_EVENTS = 16  # the latest firmware events and set-poses carried by ``status``
 
 
 @dataclass
@@ -169,6 +178,13 @@ class RobotTelemetry:
         self._page_names = {int(v): str(n).lower()
                             for v, n in (status.get_signal_by_name("PAGE").choices or {}).items()}
         self.sources = SourceWatch()  # reboots, as the monitor tells them (host.judge.sources)
+        self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
+        self.events: deque[dict[str, Any]] = deque(maxlen=STATUS_EVENTS)  # ... and set-poses
+        self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
+        set_pose = next((m for m in self.db.messages if m.name == "ODOM_SET_POSE"), None)
+        self._set_pose_id = set_pose.frame_id if set_pose is not None else -1
+        self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {} \
+            if set_pose is not None else {}
         self.reboots = 0
 
     # --- frames ---
@@ -203,6 +219,9 @@ class RobotTelemetry:
         tracker = self.tracker
         tracker.advance(t_s)  # settles the pose halves heard half a cycle before
         if route is None or status not in ACCEPTED_E2E:
+            if status in CRC_RIGHT_REFUSED and route is not None \
+                    and route.name == "WHEEL_ENCODERS":  # a twin of the latest accepted one?
+                refused_encoders(tracker.twins, route.decode(data), t_s)
             message = self._by_id.get(can_id)
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
             return self._samples() if tracker.settled else []
@@ -334,9 +353,45 @@ class RobotTelemetry:
         self.firmware[name] = fields
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
             self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]))
+        elif name == "summary":  # a short DEGRADED or a new ERROR_MASK bit: never lost
+            self.events += self.latch.observe(t_s, int(s["STATE"]), int(s["REASON"]),
+                                              int(s["ERROR_MASK"]))
         return []
 
+    def _on_set_pose(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        """An ODOM_SET_POSE frame on the bus (another tool's; the bridge's own go through
+        ``command_sent``): staged and applied as the firmware ACKs it."""
+        field = str(_named_value(self._set_pose_fields, s["FIELD"]))
+        self.set_pose.on_frame(int(s["COUNTER"]), field, s.get(field), self.tracker.enc_seq)
+        return []
+
+    def _on_auth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        if int(s["REQUEST"]) == 1:  # ODOM_SET_POSE (the DBC's VAL_): the firmware acts now
+            self.set_pose.on_auth(self.tracker.enc_seq)
+        return []
+
+    def command_sent(self, can_id: int, data: bytes) -> None:
+        """A command frame the bridge itself sent (not heard back from its bus)."""
+        route = self._routes.get(can_id)
+        if route is not None and route.name in ("ODOM_SET_POSE", "ODOM_AUTH"):
+            with contextlib.suppress(DecodeError, KeyError, ValueError):
+                route.handler(self, route.decode(data), 0.0)
+
+    def _followed_set_pose(self, s: dict[str, Any], t_s: float) -> None:
+        """ODOM_ACK of an ODOM_SET_POSE frame: an applied APPLY restarts the reference at
+        the set pose (``host.judge.livesetpose``), a ``set_pose`` event in ``status``."""
+        applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
+        if applied is not None:
+            self.events.append(set_pose_event(t_s, apply_set_pose(self.tracker, *applied),
+                                              applied[1]))
+
     def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        if int(s["REQUEST_ID"]) == self._set_pose_id:
+            self._followed_set_pose(s, t_s)
+        return self._answered(s, t_s)
+
+    def _answered(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        """ODOM_ACK of a command the bridge sent: its ``cmd/result``."""
         key = (int(s["REQUEST_ID"]), int(s["REQUEST_COUNTER"]))
         pending = self.pending.pop(key, None)
         if pending is None:
@@ -346,7 +401,7 @@ class RobotTelemetry:
             return []
         if nack:  # forget the rest of this command: one answer per command
             self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
-        elif pending.command in ("set_pose", "config"):
+        elif pending.command == "config":  # (a set-pose is followed: ``_followed_set_pose``)
             self.tracker.restart_reference()
         reason = _choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
         payload = {"id": pending.cmd_id, "command": pending.command,
@@ -370,6 +425,8 @@ class RobotTelemetry:
         "SIM_TRUTH": _on_truth,
         "ODOM_STATUS": _on_status,
         "ODOM_ACK": _on_ack,
+        "ODOM_SET_POSE": _on_set_pose,
+        "ODOM_AUTH": _on_auth,
     }
 
     # --- periodic ---
@@ -392,6 +449,7 @@ class RobotTelemetry:
         self.status_seq += 1
         return ("status", status_payload(
             self.name, state, seq=self.status_seq, firmware=self.firmware,
+            latched_errors=self.latch.latched_names(), events=list(self.events),
             frames_total=sum(self.frames.values()),
         ))
 

@@ -1,0 +1,96 @@
+"""ODOM_SET_POSE followed by the live judge (issue #11; ``host.judge.tracking``): an applied
+set-pose is the on-board pose's new origin, as a reboot's power-up pose is.
+
+The firmware (firmware/commands.py) stages X, Y and HEADING frames it accepted (ACK), and APPLY
+overwrites its pose with the staged fields, keeping the others (TURNS start again at 0: the
+heading is then within [0, 2 pi)). It acts on a frame when it drains it from its mailbox, in bus
+order, after the encoder frames heard before it (with SecOC, when its ODOM_AUTH arrives), and
+answers it with ODOM_ACK. So ``SetPoseFollower`` stages a field when its ACK is heard, notes the
+latest accepted encoder frame when the APPLY (or its ODOM_AUTH) is heard, and on the APPLY's
+ACK (RESULT ACK) ``apply_set_pose`` restarts the reference there: at the staged fields, the
+others carried from the reference at that frame (what the firmware kept, if it was right), the
+encoder frames since stepped again; the truth is compared in the new frame from the next truth
+sample on (``livetruth.LifeTruth``, as after a reboot). A NACKed APPLY changes nothing. Without
+the reference at that frame (not started, or out of the window) the reference restarts at the
+next on-board pose, as before.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+from odocan.host.judge.livepose import FramePose
+from odocan.host.judge.livewindow import window_counts
+
+if TYPE_CHECKING:
+    from odocan.host.judge.tracking import PoseTracker
+
+FIELDS = ("X", "Y", "HEADING")  # ODOM_SET_POSE's staged fields (FIELD's names in the DBC)
+_TURN = 2.0 * math.pi
+
+
+class SetPoseFollower:
+    """The staged fields and the pending APPLY of ODOM_SET_POSE as the bus shows them."""
+
+    def __init__(self) -> None:
+        self.staged: dict[str, float] = {}  # X m, Y m, HEADING rad, as ACKed
+        self._sent: dict[int, tuple[str, float]] = {}  # by E2E COUNTER: field, value heard
+        self._apply: tuple[int, int] | None = None  # APPLY's COUNTER, the encoder seq then
+
+    def on_frame(self, counter: int, field: str, value: float | None, enc_seq: int) -> None:
+        """An ODOM_SET_POSE frame heard (its E2E COUNTER, FIELD name, value in m or rad);
+        ``enc_seq``: the latest accepted encoder frame's seq."""
+        if field == "APPLY":
+            self._apply = (counter, enc_seq)
+        elif field in FIELDS and value is not None:
+            self._sent[counter] = (field, float(value))
+
+    def on_auth(self, enc_seq: int) -> None:
+        """An ODOM_AUTH naming ODOM_SET_POSE: the firmware acts on the held frame now."""
+        if self._apply is not None:
+            self._apply = (self._apply[0], enc_seq)
+
+    def on_ack(self, request_counter: int, acked: bool) -> tuple[int, dict[str, float]] | None:
+        """ODOM_ACK of an ODOM_SET_POSE frame: a field ACKed is staged; the APPLY's ACK
+        returns (the encoder seq it took effect after, the staged fields) and clears them."""
+        sent = self._sent.pop(request_counter, None)
+        if sent is not None and acked:
+            self.staged[sent[0]] = sent[1]
+            return None
+        if self._apply is None or self._apply[0] != request_counter:
+            return None
+        seq, staged = self._apply[1], self.staged
+        self._apply = None
+        if not acked:
+            return None
+        self.staged = {}
+        return seq, staged
+
+
+def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float]) -> FramePose | None:
+    """Restart ``tracker``'s reference at the set pose at encoder frame ``seq`` (module
+    docstring); returns that pose, None when it restarts at the next on-board pose instead."""
+    at = tracker._ref_at.get(seq)  # the tracker's own state: tracking.py is at its size limit
+    counts = window_counts(tracker._window, seq)
+    ref_known = tracker._ref is not None and tracker.integrator is not None
+    tracker.new_life()  # the reference restarts, the truth is compared in the new frame
+    if at is None or not ref_known or not counts or counts[0][0] != seq:
+        return None
+    pose = FramePose(seq, staged.get("X", at.x_m), staged.get("Y", at.y_m),
+                     staged.get("HEADING", at.heading_rad % _TURN))
+    tracker._start_reference(pose, counts, [])
+    return pose
+
+
+def set_pose_event(t_s: float, pose: FramePose | None, staged: dict[str, Any]) -> dict[str, Any]:
+    """The ``set_pose`` event: bus time of the ACK, the pose set (None fields: not known)."""
+    if pose is None:
+        return {"t_s": t_s, "kind": "set_pose", "x_m": staged.get("X"), "y_m": staged.get("Y"),
+                "heading_rad": staged.get("HEADING"), "encoder_frame": None,
+                "detail": "set pose applied: reference restarted at the next on-board pose"}
+    return {"t_s": t_s, "kind": "set_pose", "x_m": pose.x_m, "y_m": pose.y_m,
+            "heading_rad": pose.heading_rad, "encoder_frame": pose.seq,
+            "detail": f"set pose applied (x {pose.x_m:.4f} m, y {pose.y_m:.4f} m, heading "
+                      f"{pose.heading_rad:.5f} rad): the reference restarts there, the truth "
+                      "is compared in the new frame"}

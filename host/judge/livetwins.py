@@ -1,0 +1,67 @@
+"""The live judge's twin rule (``host.judge.tracking``): ``samples.twinned_encoder_frames``
+applied frame by frame, in O(1) memory.
+
+A WHEEL_ENCODERS frame E2E refused with its CRC right (REPEATED or WRONG_SEQUENCE) that carries
+the COUNTER of the latest accepted one, different counts, and comes less than half a COUNTER
+cycle (8 periods) after it is that accepted frame's *twin*: a forgery that passed Profile 2's
+1-in-256 CRC, or a second sender's frame. The firmware may have taken either (a full mailbox
+drops frames the bus carries), so a pose naming that frame is left out, as ``analyze`` leaves
+it out (``samples.match_encoder``), never guessed.
+
+The live judge decides a pose half when it settles (half a cycle after it is heard, or at the
+next half of its message). A twin heard later than that is not known then; it cannot matter:
+the firmware can only have taken a frame that reached it before it sent the pose, so a pose
+whose named frame has no twin on the bus before the pose was made from that frame (``analyze``,
+which knows the whole log, leaves such a pose out too; the live judge keeps it, and it agrees).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+from odocan.host.judge.livewindow import CYCLE_S
+
+TWIN_SLOTS = 64  # recent encoder frames whose twin is remembered (a ring by seq)
+TWIN_GAP_S = 8 * CYCLE_S  # 8 periods on, the same COUNTER is the sender's next cycle
+CRC_RIGHT_REFUSED = frozenset({"repeated", "wrong_sequence"})  # E2EMonitor.check's statuses
+
+
+class TwinWatch:
+    """Which of the latest ``TWIN_SLOTS`` accepted encoder frames (by seq) have a twin.
+
+    A ring of seq numbers, one slot per seq modulo ``TWIN_SLOTS``: no allocation per frame.
+    """
+
+    def __init__(self, accepted: deque[tuple[float, ...]]) -> None:
+        """``accepted``: the latest accepted encoder frames' rows (seq, pos, COUNTER, bus time
+        s, left, right; the live judge's window, ``livewindow.Columns.rows``), read only."""
+        self._accepted = accepted
+        self._ring = [-1] * TWIN_SLOTS
+        self.found = 0  # twins heard so far
+
+    def refused(self, counter: int, left: int, right: int, t_s: float) -> None:
+        """A WHEEL_ENCODERS frame refused with its CRC right (raw COUNTER, 24-bit counts, bus
+        time s): a twin of the latest accepted one, or not. Runs per refused frame: no
+        allocation."""
+        if not self._accepted:
+            return
+        seq, _, latest_counter, latest_t_s, latest_left, latest_right = self._accepted[-1]
+        if counter != latest_counter or (left == latest_left and right == latest_right):
+            return  # another COUNTER, or an exact repetition (no twin)
+        if t_s - latest_t_s >= TWIN_GAP_S:
+            return
+        self._ring[int(seq) % TWIN_SLOTS] = int(seq)
+        self.found += 1
+
+    def twinned(self, seq: int) -> bool:
+        """Whether accepted encoder frame ``seq`` has a twin heard so far."""
+        return seq >= 0 and self._ring[seq % TWIN_SLOTS] == seq
+
+
+def refused_encoders(twins: TwinWatch, signals: Any, t_s: float) -> None:
+    """A WHEEL_ENCODERS frame E2E refused with its CRC right, decoded (``signals``: COUNTER,
+    LEFT_COUNT, RIGHT_COUNT raw: a mapping, as cantools decodes it), heard at bus time
+    ``t_s``: to ``twins``."""
+    twins.refused(int(signals["COUNTER"]), int(signals["LEFT_COUNT"]),
+                  int(signals["RIGHT_COUNT"]), t_s)
