@@ -27,7 +27,7 @@ from odocan.host.judge.livepose import (
     pose_dict,
     truth_heading,
 )
-from odocan.host.judge.livetruth import LifeTruth
+from odocan.host.judge.livetruth import LifeTruth, TruthParts, carried_to
 from odocan.host.judge.livewindow import (
     ENC_WINDOW,
     HALF_WINDOW,
@@ -96,7 +96,7 @@ class PoseTracker:
         self._pending: FramePose | None = None  # the first pose, heard before the integrator
         self._backlog_counts: list[tuple[int, int, int, int]] = []  # seq, counter, left, right
         self._backlog_poses: list[FramePose] = []
-        self._truth_parts: dict[int, tuple[int, float]] = {}
+        self._truth_parts = TruthParts()
         self._last_pair: tuple[FramePose, FramePose] | None = None  # on-board, reference
         self._last_sample_t: float | None = None  # bus time of the last sample's ODOM_POSE_Y
         self._last_compared = -1  # the encoder frame of the last sample compared
@@ -412,29 +412,20 @@ class PoseTracker:
 
         Returns (truth, reference at that encoder frame or None) once the sample is complete.
         """
-        self._truth_parts[part] = (enc_counter, value)
-        parts = self._truth_parts
-        if len(parts) < 3 or len({p[0] for p in parts.values()}) != 1:
+        heard = self._truth_parts.add(part, enc_counter, value)
+        if heard is None:
             return None
-        self._truth_parts = {}
         named = self._recent(self._counts[enc_counter])
         ref = self._ref_at.get(named[0]) if named is not None else None
-        x_m, y_m, wrapped_rad = parts[0][1], parts[1][1], parts[2][1]
         x_m, y_m, wrapped_rad = self.life_truth.heard(
-            None if named is None else int(named[0]), x_m, y_m, wrapped_rad, ref,
-            self._boot is not None)
+            None if named is None else int(named[0]), *heard, ref, self._boot is not None)
         heading = truth_heading(wrapped_rad, ref if ref is not None else self.truth)
         truth = self.truth = FramePose(ref.seq if ref else -1, x_m, y_m, heading)
         if ref is None:
             return truth, None
         self.reference_vs_truth.add(ref, truth)
         if self._last_pair is not None:  # the on-board pose carried to this frame
-            pose, at = self._last_pair
-            estimate = FramePose(
-                ref.seq, pose.x_m - at.x_m + ref.x_m, pose.y_m - at.y_m + ref.y_m,
-                pose.heading_rad - at.heading_rad + ref.heading_rad,
-            )
-            self.vs_truth.add(estimate, truth)
+            self.vs_truth.add(carried_to(*self._last_pair, ref), truth)
         return truth, ref
 
     @property
