@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import can
 import pytest
@@ -43,7 +44,7 @@ def _messages(lines: list[str]) -> list[can.Message]:
 
 
 def _judge_live(robot: Robot, integrator: str, messages: list[can.Message]) -> tuple[
-        BusMonitor, RobotTelemetry, list[dict[str, object]]]:
+        BusMonitor, RobotTelemetry, list[dict[str, Any]]]:
     """The monitor model and the bridge fed the frames; the bridge's error publications."""
     profile = profile_of(robot)
     monitor = BusMonitor(profile)
