@@ -30,7 +30,7 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from tests.independent_checker import Robot, _Odometry
-from tests.synth_log import Synth, synthesize
+from tests.synth_log import Synth, synthesize, synthesize_stalled
 from tests.test_judge_campaign import profile_of, robots, slow_drive
 
 KOBUKI = Robot(2_578, 35_000_000, 35_000_000, 230_000_000, 16)  # kobuki's geometry
@@ -135,3 +135,27 @@ def test_the_live_judge_passes_a_correct_firmware_started_mid_drive(
     assert monitor.health((steps + 1) * 0.01)["state"] == "OK"
     dl, dr = d_left.tolist(), d_right.tolist()
     assert _own_error_lsb(synth, robot, integrator, cut, dl, dr, monitor) < 0.05
+
+
+@pytest.mark.parametrize("cut", [0, 400])
+@pytest.mark.parametrize("seed", [0, 2])
+def test_the_live_judge_places_a_stalled_correct_firmware_within_one_lsb(
+    tmp_path: Path, cut: int, seed: int
+) -> None:
+    """Two stalls and a hold of a correct firmware, from power-up and mid-drive: analyze PASSes
+    and every live sample stays within its one-LSB limit. The placements after a stall carry the
+    start fit and narrow the placed position as the start (``livefit.rebase``); before, the live
+    reference kept the first pose's rounding after each: 1.1-1.8 LSB, and 0.83 LSB of heading
+    from a rounded mid-drive start."""
+    d_left, d_right = slow_drive(KOBUKI, 3_000, seed)
+    synth = synthesize_stalled(profile_of(KOBUKI), "exact", d_left, d_right,
+                               stalls={1_200: 50, 2_200: 120}, holds={1_701: 16}, late={1_700})
+    result = analyze(read_log(synth.write(tmp_path / "d.log", cut)), profile_of(KOBUKI))
+    assert result.passed
+    monitor, bridge, errors = _judge_live(KOBUKI, "exact", _messages(synth.lines(cut)))
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.stalls == 3
+        assert tracker.reference_starts == 1
+        assert tracker.vs_reference.max_dpos_m <= POSITION_LSB_M
+        assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD
+    assert not any(e["pose_wrong"] for e in errors)

@@ -20,14 +20,17 @@ it judges):
   no lever arm;
 * ``s`` the least-squares position given ``d``, kept within the running overlap of the samples'
   position rounding intervals, each widened by what the heading interval of its time could turn
-  it (``|q| (hi - lo)``): every interval holds a correct firmware's start, so their overlap does.
+  it (``|q| (hi - lo) / 2``): every interval holds a correct firmware's start, so their overlap
+  does.
 
 Each interval is widened by the firmware's own drift from float64 along the path fed
 (``POSITION_DRIFT_PER_M``, ``HEADING_DRIFT_RAD_PER_M``: 0.1 um and 2e-15 rad per metre). A sample
 whose intervals leave no overlap cannot come from a correct firmware: it is not fed, and
 the fit stays frozen from then on (it never absorbs an error bigger than the rounding). Running
 sums only: O(1) memory and a few dozen float operations per sample. A reference that starts at
-the power-up pose (0, 0, 0) is exact (``C`` the identity), as ``analyze`` takes it.
+the power-up pose (0, 0, 0) is exact (``C`` the identity), as ``analyze`` takes it. After a
+stall's placement (``rebase``) the correction is taken into the reference and the fit goes on
+from the placed pose: the heading interval carried, the position within a pose's rounding of it.
 
 ``pose_wrong`` is the verdict's rule, ``analyze``'s: beyond one LSB of position (after the loss
 allowance) or of heading.
