@@ -67,7 +67,8 @@ class PoseTracker:
     start at the same pose and judge the same samples as ``analyze``. The reference starts again
     when ODOM_STATUS reports another integrator. At power-up the first pose is exactly (0, 0, 0),
     the start ``analyze`` uses; mid-drive the start inherits the pose signals' rounding (0.1 mm,
-    2 pi/65536 rad; ``analyze`` fits it instead), so the difference stays within about one LSB.
+    2 pi/65536 rad), which ``fit`` narrows sample by sample as ``analyze`` fits it over the
+    whole log (``host.judge.livefit``): each sample is judged against the corrected reference.
     """
 
     def __init__(
