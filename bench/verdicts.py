@@ -92,11 +92,13 @@ def section_judge(quick: bool) -> None:
     steps = 5_610 if quick else LONG_STEPS
     print(f"\n1. The judge's own error (bench/judge_error.py --steps {steps}; LSB = 0.1 mm)")
     print(f"  {'robot':8} {'integrator':10} {'start':9} {'km':>6} {'own error':>11} "
-          f"{'on-board vs ref':>15}  verdict")
+          f"{'on-board vs ref':>15}  verdict | {'live own error':>14} {'on-board vs ref':>15}  "
+          f"live verdict")
     for r in judge_error_rows(steps):
         print(f"  {r.robot:8} {r.integrator:10} {r.start:9} {r.km:6.1f} "
               f"{r.own_error_lsb:7.4f} LSB {r.vs_reference_lsb:11.3f} LSB  "
-              f"{'PASS' if r.passed else 'FAIL'}")
+              f"{'PASS' if r.passed else 'FAIL':7} | {r.live_own_error_lsb:10.4f} LSB "
+              f"{r.live_vs_reference_lsb:11.3f} LSB  {r.live_state}")
 
 
 # --- 2. calibrate ------------------------------------------------------------------------------

@@ -101,12 +101,14 @@ def synthesize(
     counts0: tuple[int, int] = (0, 0),
     t0_s: float = 0.0,
     x_bias_100um: dict[int, int] | None = None,
+    heading_bias_lsb: dict[int, int] | None = None,
     counter_jumps: dict[int, int] | None = None,
     reboot_at: int | None = None,
     boot_in_init: bool = False,
 ) -> Synth:
     """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
-    ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB.
+    ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB;
+    ``heading_bias_lsb``: ... whose HEADING (and TURNS) at encoder frame k is off by that many.
     ``counter_jumps``: {encoder frame: offset in counts} where both counters restart (the jumps
     at least ``RESYNC_FRAMES`` frames apart and beyond the plausibility bound).
     ``reboot_at``: the encoder frame the firmware restarts on (module docstring);
@@ -155,7 +157,8 @@ def synthesize(
             group.insert(0, _line(t_s - 0.005, fr.ODOM_STATUS_ID, init))
             status_counter = 1
         if life % 2 == 0:
-            group += _pose_lines(odo, t_s + 0.001, pose_counter, named, errors, bias.get(k, 0))
+            group += _pose_lines(odo, t_s + 0.001, pose_counter, named, errors, bias.get(k, 0),
+                                 (heading_bias_lsb or {}).get(k, 0))
             pose_counter += 1
         if life % 10 == 0 and not (boot_in_init and k == reboot_at):
             uptime_s = int(life * ENCODER_PERIOD_S + (t0_s if boot == 0 else 0.0))
@@ -180,12 +183,14 @@ def synthesize(
 
 
 def _pose_lines(
-    odo: Odometry, t_s: float, counter: int, enc: int, errors: ErrorMask, x_bias_100um: int = 0
+    odo: Odometry, t_s: float, counter: int, enc: int, errors: ErrorMask, x_bias_100um: int = 0,
+    heading_bias_lsb: int = 0,
 ) -> list[str]:
-    """ODOM_POSE_X and ODOM_POSE_Y, rounded as the ECU rounds them (X off by ``x_bias_100um``)."""
+    """ODOM_POSE_X and ODOM_POSE_Y, rounded as the ECU rounds them (X off by ``x_bias_100um``,
+    the heading by ``heading_bias_lsb``)."""
     x_100um = mul_shr_round_i64(odo.x_q40_m, 10_000, 40, errors) + x_bias_100um
     y_100um = mul_shr_round_i64(odo.y_q40_m, 10_000, 40, errors)
-    heading_rounded = odo.heading_bam64 + (1 << 47)
+    heading_rounded = odo.heading_bam64 + (1 << 47) + (heading_bias_lsb << 48)
     heading_bam16 = (heading_rounded >> 48) & 0xFFFF
     turns = wrap_i32(odo.heading_turns + (heading_rounded >> 64))
     pose_x = fr.pack_odom_pose_x(counter, enc, x_100um, heading_bam16, errors)

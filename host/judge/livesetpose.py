@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
+from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livewindow import window_counts
 
@@ -80,6 +81,8 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float]) -> 
     pose = FramePose(seq, staged.get("X", at.x_m), staged.get("Y", at.y_m),
                      staged.get("HEADING", at.heading_rad % _TURN))
     tracker._start_reference(pose, counts, [])
+    if all(name in staged for name in ("X", "Y", "HEADING")):
+        tracker.fit = LiveFit(pose.x_m, pose.y_m, exact=True)  # the pose set: nothing to fit
     return pose
 
 

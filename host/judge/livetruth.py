@@ -63,3 +63,27 @@ class LifeTruth:
             return None
         x_m, y_m, heading_rad = self.origin
         return {"x_m": x_m, "y_m": y_m, "heading_rad": heading_rad}
+
+
+class TruthParts:
+    """SIM_TRUTH's parts (0 X m, 1 Y m, 2 HEADING rad) gathered until three name one frame."""
+
+    def __init__(self) -> None:
+        self._parts: dict[int, tuple[int, float]] = {}
+
+    def add(self, part: int, enc_counter: int, value: float) -> tuple[float, float, float] | None:
+        """One part of the encoder frame ``enc_counter``; (x m, y m, heading rad) once the three
+        parts name one frame."""
+        parts = self._parts
+        parts[part] = (enc_counter, value)
+        if len(parts) < 3 or len({p[0] for p in parts.values()}) != 1:
+            return None
+        self._parts = {}
+        return parts[0][1], parts[1][1], parts[2][1]
+
+
+def carried_to(pose: FramePose, at: FramePose, ref: FramePose) -> FramePose:
+    """The on-board ``pose``, judged against the reference ``at``, carried to the reference
+    ``ref`` of a later frame (by the reference's own motion since)."""
+    return FramePose(ref.seq, pose.x_m - at.x_m + ref.x_m, pose.y_m - at.y_m + ref.y_m,
+                     pose.heading_rad - at.heading_rad + ref.heading_rad)

@@ -29,8 +29,9 @@ its age. UPTIME against bus time tells a **reboot** (UPTIME going back, or INIT 
 the reference restarts and the E2E sequences of the node start afresh, reported as an event, not
 as lost frames) from **two sources** on one ID (two UPTIME offsets interleaving). The verdict, in
 order: NO FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (with its REASON),
-POSE WRONG (on-board vs reference beyond ``POSE_TOLERANCE_M`` / ``_RAD``), UNVERIFIED (nothing
-compared yet), OK.
+POSE WRONG (the latest on-board sample vs reference beyond ``analyze``'s limit, one LSB of
+position after the loss allowance or of heading: ``host.judge.livefit.pose_wrong``, the reference's
+start narrowed as ``analyze`` fits it), UNVERIFIED (nothing compared yet), OK.
 
 ``bus_load`` (``host.judge.busstats.LoadWindow``): bits on the wire per second over the last
 second of bus time, from every frame's exact stuffed length, and the load as a fraction when the
@@ -58,9 +59,11 @@ from cantools.database.can import Database, Message
 from odocan.firmware.errors import ErrorFlag
 from odocan.host.jsonutil import finite
 from odocan.host.judge.busstats import LoadWindow
+from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.judge.sources import (
     CONFLICT_HOLD_S,
     FIRMWARE_NODE,
@@ -85,8 +88,6 @@ ACCEPTED = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # distinct unknown identifiers listed (all are counted)
 _HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
 NODE_TIMEOUT_CYCLES = 10  # a node is stale after 10 x its fastest cycle time (opendbc)
-POSE_TOLERANCE_M = 1e-3  # on-board vs reference beyond this: POSE WRONG (10 LSB of X/Y)
-POSE_TOLERANCE_RAD = 1e-3  # ... or this (about 10 LSB of HEADING)
 MAX_EVENTS = 16  # events kept (the latest)
 
 
@@ -388,12 +389,12 @@ class BusMonitor:
         if self.tracker.awaiting_boot:
             return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
         allowed_m = self.tracker.allowance_m()  # for encoder frames the firmware lost
-        if (error["dpos_m"] - allowed_m > POSE_TOLERANCE_M
-                or abs(error["dheading_rad"]) > POSE_TOLERANCE_RAD):
-            plus = f" (allowed {allowed_m * 1e3:.1f} mm for lost frames)" if allowed_m else ""
+        if pose_wrong(error["dpos_m"], error["dheading_rad"], allowed_m):
+            plus = f" (allowed {allowed_m * 1e3:.4f} mm for lost frames)" if allowed_m else ""
             return "POSE WRONG", [
-                f"on-board vs reference {error['dpos_m'] * 1e3:.1f} mm{plus}, "
-                f"{error['dheading_rad'] * 1e3:.2f} mrad"
+                f"on-board vs reference {error['dpos_m'] * 1e3:.4f} mm{plus}, "
+                f"{error['dheading_rad'] * 1e3:.4f} mrad (limit one LSB: "
+                f"{POSITION_LSB_M * 1e3:.1f} mm, {HEADING_LSB_RAD * 1e3:.4f} mrad)"
             ]
         return "OK", []
 

@@ -107,6 +107,11 @@ class ReferenceOdometry:
         """Unwrapped heading (rad)."""
         return self._heading_at(self._cum_left, self._cum_right)
 
+    def place(self, x_m: float, y_m: float, heading_rad: float) -> None:
+        """Move the pose to (``x_m``, ``y_m``, ``heading_rad``); the steps go on from it."""
+        self.x_m, self.y_m = x_m, y_m
+        self._heading0_rad += heading_rad - self.heading_rad
+
     def _heading_at(self, cum_left: int, cum_right: int) -> float:
         return self._heading0_rad + self._k_right * cum_right - self._k_left * cum_left
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from odocan.host.judge.livefit import LiveFit, rebase
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.liveplace import StallPlacer
 from odocan.host.judge.livepose import (
@@ -27,7 +28,7 @@ from odocan.host.judge.livepose import (
     pose_dict,
     truth_heading,
 )
-from odocan.host.judge.livetruth import LifeTruth
+from odocan.host.judge.livetruth import LifeTruth, TruthParts, carried_to
 from odocan.host.judge.livetwins import TwinWatch
 from odocan.host.judge.livewindow import (
     ENC_WINDOW,
@@ -67,7 +68,8 @@ class PoseTracker:
     start at the same pose and judge the same samples as ``analyze``. The reference starts again
     when ODOM_STATUS reports another integrator. At power-up the first pose is exactly (0, 0, 0),
     the start ``analyze`` uses; mid-drive the start inherits the pose signals' rounding (0.1 mm,
-    2 pi/65536 rad; ``analyze`` fits it instead), so the difference stays within about one LSB.
+    2 pi/65536 rad), which ``fit`` narrows sample by sample as ``analyze`` fits it over the
+    whole log (``host.judge.livefit``): each sample is judged against the corrected reference.
     """
 
     def __init__(
@@ -93,12 +95,13 @@ class PoseTracker:
         self._sampled: set[int] = set()  # encoder frames an on-board sample was made of
         self.settled: list[Sample] = []  # samples settled since ``take_samples``
         self._ref_at: dict[int, FramePose] = {}  # the reference at the latest encoder frames
-        self._ref: ReferenceOdometry | None = None
+        self._ref: ReferenceOdometry | None = None  # raw: ``fit`` corrects its start
+        self.fit = LiveFit(0.0, 0.0, exact=True)  # the start narrowed (host.judge.livefit)
         self._gate = StepGate(geometry, self.counter_bits)
         self._pending: FramePose | None = None  # the first pose, heard before the integrator
         self._backlog_counts: list[tuple[int, int, int, int]] = []  # seq, counter, left, right
         self._backlog_poses: list[FramePose] = []
-        self._truth_parts: dict[int, tuple[int, float]] = {}
+        self._truth_parts = TruthParts()
         self._last_pair: tuple[FramePose, FramePose] | None = None  # on-board, reference
         self._last_sample_t: float | None = None  # bus time of the last sample's ODOM_POSE_Y
         self._last_compared = -1  # the encoder frame of the last sample compared
@@ -274,16 +277,20 @@ class PoseTracker:
             return None
         if self._place_at_next:
             ref = self._place(pose, ref)
-        self._record(pose, ref)
-        return ref
+        return self._record(pose, ref)
 
-    def _record(self, pose: FramePose, ref: FramePose) -> None:
+    def _record(self, pose: FramePose, raw: FramePose) -> FramePose:
+        """Judge ``pose`` against the raw reference ``raw`` at its frame, corrected by the start
+        fit (which the sample narrows first); returns the corrected reference."""
+        self.fit.feed(pose, raw)
+        ref = self.fit.correct(raw)
         self.placer.compared(pose.seq)
         self.reference = ref
         self._last_pair = (pose, ref)
         self._last_compared = pose.seq
         self.vs_reference.add(pose, ref)
         self._losses.record(pose.seq, self.vs_reference.latest["dpos_m"], self.fast_path)
+        return ref
 
     # --- encoder frames the firmware lost that the bus carried (host.judge.livelosses) ---
 
@@ -393,19 +400,19 @@ class PoseTracker:
         self.counter_bits = min(counter_bits, WIRE_COUNTER_BITS)
         self.restart_reference()
 
-    def _place(self, pose: FramePose, ref: FramePose) -> FramePose:
-        """Move the reference's position (now and at the frames heard since ``ref``) to where
+    def _place(self, pose: FramePose, raw: FramePose) -> FramePose:
+        """Move the reference's position (now and at the frames heard since ``raw``) to where
         the firmware is, within the pose's rounding, while its heading goes on exact; bounded
-        as ``analyze`` places it (``liveplace.StallPlacer``). Returns the moved ``ref``."""
+        as ``analyze`` places it (``liveplace.StallPlacer``); the start fit's correction is
+        taken into the reference first and the fit goes on (``livefit.rebase``). Returns the
+        moved reference at ``raw``'s frame."""
         assert self._ref is not None and self.integrator is not None
-        dx, dy = self.placer.shift(pose, ref, self._last_compared, self._window,
-                                   (self.geometry, self.counter_bits, self.integrator))
-        self._ref.x_m += dx
-        self._ref.y_m += dy
-        self._ref_at = {seq: r if seq < ref.seq else r._replace(x_m=r.x_m + dx, y_m=r.y_m + dy)
-                        for seq, r in self._ref_at.items()}
+        ref = self.fit.correct(raw)
+        shift = self.placer.shift(pose, ref, self._last_compared, self._window,
+                                  (self.geometry, self.counter_bits, self.integrator))
+        self._ref_at, self.fit = rebase(self.fit, self._ref, self._ref_at, ref, shift)
         self._place_at_next = False
-        return ref._replace(x_m=ref.x_m + dx, y_m=ref.y_m + dy)
+        return ref._replace(x_m=ref.x_m + shift[0], y_m=ref.y_m + shift[1])
 
     def on_truth(
         self, part: int, enc_counter: int, value: float
@@ -414,29 +421,21 @@ class PoseTracker:
 
         Returns (truth, reference at that encoder frame or None) once the sample is complete.
         """
-        self._truth_parts[part] = (enc_counter, value)
-        parts = self._truth_parts
-        if len(parts) < 3 or len({p[0] for p in parts.values()}) != 1:
+        heard = self._truth_parts.add(part, enc_counter, value)
+        if heard is None:
             return None
-        self._truth_parts = {}
         named = self._recent(self._counts[enc_counter])
-        ref = self._ref_at.get(named[0]) if named is not None else None
-        x_m, y_m, wrapped_rad = parts[0][1], parts[1][1], parts[2][1]
+        raw = self._ref_at.get(named[0]) if named is not None else None
+        ref = None if raw is None else self.fit.correct(raw)
         x_m, y_m, wrapped_rad = self.life_truth.heard(
-            None if named is None else int(named[0]), x_m, y_m, wrapped_rad, ref,
-            self._boot is not None)
+            None if named is None else int(named[0]), *heard, ref, self._boot is not None)
         heading = truth_heading(wrapped_rad, ref if ref is not None else self.truth)
         truth = self.truth = FramePose(ref.seq if ref else -1, x_m, y_m, heading)
         if ref is None:
             return truth, None
         self.reference_vs_truth.add(ref, truth)
         if self._last_pair is not None:  # the on-board pose carried to this frame
-            pose, at = self._last_pair
-            estimate = FramePose(
-                ref.seq, pose.x_m - at.x_m + ref.x_m, pose.y_m - at.y_m + ref.y_m,
-                pose.heading_rad - at.heading_rad + ref.heading_rad,
-            )
-            self.vs_truth.add(estimate, truth)
+            self.vs_truth.add(carried_to(*self._last_pair, ref), truth)
         return truth, ref
 
     @property
@@ -460,6 +459,7 @@ class PoseTracker:
             x_m=pose.x_m, y_m=pose.y_m, heading_rad=pose.heading_rad,
         )
         self.reference_starts += 1
+        self.fit = LiveFit.start(pose)
         self._ref_at = {}
         self.placer.restart()
         self._gate = StepGate(self.geometry, self.counter_bits)

@@ -14,7 +14,8 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
   wrapping counts); the reference pose after each frame is kept by the frame's E2E ``COUNTER``;
 * ``ODOM_POSE_X`` + ``ODOM_POSE_Y`` with the same ``ENC_COUNTER`` make the on-board pose, compared
   with the reference of that very encoder frame: ``pose``, ``reference`` and ``error`` at most
-  ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic),
+  ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic;
+  ``error.pose_wrong``: beyond ``analyze``'s limit, ``host.judge.livefit.pose_wrong``),
   the first ``publish_phase_s`` of bus time after the first sample (a fleet spreads its robots'
   publications over the ticks of a period);
 * ``SIM_TRUTH``'s three parts of one encoder frame make ``truth``, compared with the reference of
@@ -49,6 +50,7 @@ import can
 from cantools.database.can import Database, Message
 from cantools.database.errors import DecodeError
 
+from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
@@ -310,7 +312,9 @@ class RobotTelemetry:
         if ref is None or ref.seq != pose.seq:
             return self._with_truth(pubs, t_s)
         pubs.append(("reference", stamp({**head, **_pose_dict(ref)})))
-        error: dict[str, Any] = {**head, "pose_vs_reference": difference(pose, ref)}
+        vs_ref = difference(pose, ref)
+        error: dict[str, Any] = {**head, "pose_vs_reference": vs_ref, "pose_wrong": pose_wrong(
+            vs_ref["dpos_m"], vs_ref["dheading_rad"], self.tracker.allowance_m(pose.seq))}
         if self._truth_error is not None:
             error["reference_vs_truth"] = self._truth_error
         pubs.append(("error", stamp(error)))
