@@ -191,8 +191,9 @@ def test_replay_interrupted_checks_what_ran(
 
     monkeypatch.setattr(FirmwareBoard, "run_tick", tick_until_ctrl_c)
     code, out, err = run_cli(capsys, "replay", str(recorded["log"]))
-    assert (code, err) == (0, "interrupted after 1.5 s of the log\n")
+    assert (code, err) == (130, "interrupted after 1.5 s of the log\n")
     assert "on-board vs the log's at 75 encoder frames: 75 identical" in out
+    assert re.search(r"\nSTOPPED by SIGINT at 1\.5 s of \d+(\.\d+)? s: partial drive PASS", out)
 
 
 @pytest.mark.parametrize(

@@ -48,6 +48,7 @@ from odocan.host.report.ci import (
 )
 from odocan.host.report.progress import progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
+from odocan.host.stopped import EXIT_SIGNAL_BASE, stop_code
 from odocan.sim import contract, robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import INTEGRATORS
@@ -127,7 +128,8 @@ def _do_replay(args: argparse.Namespace) -> int:
             print(f"  - {reason}")
         code = 1
     write_checks(args, "replay", analysis_checks(analysis.report))
-    return code
+    stopped = analysis.report.get("stopped")
+    return code if stopped is None else stop_code(stopped)
 
 
 def _check_options(args: argparse.Namespace) -> None:
@@ -175,13 +177,13 @@ def _play_realtime(frames: FrameArrays, args: argparse.Namespace) -> int:
     start = time.monotonic()
     try:
         with progress(f"playing {len(selection)} frames", len(selection)) as bar:
-            sent, interrupted = play(bus, frames, selection, args.speed, bar)
+            sent, stopped_by = play(bus, frames, selection, args.speed, bar)
     finally:
         bus.shutdown()
     wall_s = time.monotonic() - start
-    print(f"replay: {'interrupted, ' if interrupted else ''}{sent} of {len(selection)} frames "
+    print(f"replay: {'interrupted, ' if stopped_by else ''}{sent} of {len(selection)} frames "
           f"played in {wall_s:.2f} s ({args.speed:g}x the recorded timing)")
-    return 0
+    return 0 if stopped_by is None else EXIT_SIGNAL_BASE + stopped_by
 
 
 def _selection(frames: FrameArrays, only: str | None) -> IntArray:
