@@ -13,6 +13,7 @@ It lives at host/ level, below every room, so judge/ and report/ use it too.
 from __future__ import annotations
 
 import signal
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -77,3 +78,15 @@ def signum_of(exc: BaseException | None, default: int = signal.SIGINT) -> int:
     from odocan.sim.exceptions import Terminated
 
     return int(signal.SIGTERM) if isinstance(exc, Terminated) else int(default)
+
+
+def early_stop(signum: int | None, started_s: float, duration_s: float | None) -> Stopped | None:
+    """A ``--duration`` command (monitor, bridge) that signal ``signum`` ended before its time,
+    ``started_s`` on ``time.monotonic``; None when it ran its time, or ran without one (a signal
+    is then its normal end)."""
+    if signum is None or duration_s is None:
+        return None
+    elapsed_s = time.monotonic() - started_s
+    if elapsed_s >= duration_s:
+        return None
+    return Stopped(signum, round(elapsed_s, 1), duration_s)
