@@ -83,3 +83,17 @@ def test_a_bridge_stopped_before_its_duration_exits_143(tmp_path: Path) -> None:
     last = err.splitlines()[-1]
     assert last.startswith("bridge robot001: STOPPED by SIGTERM at "), err
     assert last.endswith(" s of 600 s"), err
+
+
+@pytest.mark.parametrize("node", ["sim", "firmware"])
+def test_a_real_time_node_stopped_before_its_duration_exits_143(node: str) -> None:
+    proc = _start(node, "-i", "virtual", "-c", f"stopped-{node}-{os.getpid()}",
+                  "--duration", "600")
+    time.sleep(4.0)  # its loop under way (a signal before it is 143 as well, by main)
+    code, _, err = _stop(proc, signal.SIGTERM)
+    assert code == 143, err
+    assert "Traceback" not in err
+    last = err.splitlines()[-1]
+    stopped = last.startswith(f"odocan {node}: STOPPED by SIGTERM at ") and last.endswith(
+        " s of 600 s")
+    assert stopped or last == f"interrupted (SIGTERM): odocan {node} stopped before it finished"
