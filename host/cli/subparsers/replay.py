@@ -25,10 +25,7 @@ from rich.console import Console
 from odocan.host.cli.options import add_robot_argument, check_log_path, float_in
 from odocan.host.cli.subparsers.analyze import log_inputs
 from odocan.host.io.buses import add_bus_arguments, open_bus
-from odocan.host.io.logs import (
-    FrameArrays,
-    read_log,
-)
+from odocan.host.io.logs import FrameArrays, read_log, warn_on_stderr
 from odocan.host.io.player import play
 from odocan.host.jsonutil import write_report
 from odocan.host.judge.replay import (
@@ -105,7 +102,12 @@ def _do_replay(args: argparse.Namespace) -> int:
                     ("--junit", args.junit)], [("LOG", args.log)])
     frames = read_log(args.log)
     feed = ReplayInput.from_log(frames)
-    integrator = args.integrator or logged_integrator(frames, feed.accepted) or "exact"
+    logged = logged_integrator(frames, feed.accepted)
+    integrator = args.integrator or logged or "exact"
+    if logged is not None and logged != integrator:  # a replay of another firmware: say so
+        warn_on_stderr(f"integrator mismatch: {args.log}'s ODOM_STATUS reports {logged}, "
+                       f"--integrator asks {integrator}: this replays a firmware other than "
+                       "the one that recorded it")
     analysis = replay_and_analyze(
         frames, feed, profile, integrator, tolerance=args.tolerance, log=args.log,
         log_out=args.log_out,
