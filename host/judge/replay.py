@@ -40,6 +40,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.firmware.config import RobotParams
+from odocan.host.io.listeners import Recording
 from odocan.host.io.logs import (
     FrameArrays,
     FrameCollector,
@@ -344,8 +345,8 @@ def replay_and_analyze(
     analyse the replayed bus, add the ``replay`` section."""
     collector = FrameCollector()
     listeners: list[can.Listener] = [collector]
-    if log_out is not None:
-        listeners.append(can.Logger(log_out))
+    if log_out is not None:  # a full disk stops the recording, not the replay (path named)
+        listeners.append(Recording(can.Logger(log_out)))
     channel = f"odocan-replay-{next(_REPLAY_CHANNELS)}"
     replay = LockstepReplay(firmware_params(profile, integrator), listeners, channel)
     start = time.perf_counter()
