@@ -13,7 +13,8 @@ Every key is optional, comma-separated::
                     a babbling node at RATE frames per second of the sender's time, as a Poisson
                     process: random frames (11/29-bit IDs, DLC 0-8, random payloads, 10% error
                     frames, 10% remote frames); with ID (0x050 or 80) a stuck node sending data
-                    frames of 8 random bytes on that one ID (29-bit above 0x7FF), which on a
+                    frames of 8 random bytes on that one ID (29-bit above 0x7FF, written with
+                    more than 3 hex digits: 0x00000900, not 0x900), which on a
                     bit-timed bus wins arbitration against every higher ID; with T:DUR it
                     babbles only from T s for DUR s (else from the first frame, for ever)
     busoff=T:DUR    at T s the transmitter's error counter climbs past 255 (32 failed attempts,
@@ -143,7 +144,7 @@ def _babble_text(spec: FaultSpec) -> str:
     """RATE[:ID[:T:DUR]] of ``babble=``."""
     text = _num(spec.babble)
     if spec.babble_id is not None:
-        text += f":0x{spec.babble_id:03X}"
+        text += f":0x{spec.babble_id:0{3 if spec.babble_id <= 0x7FF else 8}X}"
         if spec.babble_window is not None:
             window = spec.babble_window
             text += f":{_num(window.at_s)}:{_num(window.duration_s)}"
@@ -248,10 +249,23 @@ def _parse_babble(value: str) -> dict[str, Any]:
             fields["babble_id"] = int(parts[1], 0)
         except ValueError:
             raise _fail("babble", value, "ID is not an integer (0x050 or 80)") from None
+        _check_id_width(value, parts[1].strip(), fields["babble_id"])
     if len(parts) == 4:
         at_s = _number("babble", parts[2], "T")
         fields["babble_window"] = BusOff(at_s, _number("babble", parts[3], "DUR"))
     return fields
+
+
+def _check_id_width(value: str, text: str, can_id: int) -> None:
+    """An ID above 0x7FF is a 29-bit ID, but written as an 11-bit one (at most 3 hex digits, or
+    a decimal under 4096: ``0x900``) it is most likely a typo for one: refused, with how to
+    write the 29-bit ID it would be (``babble=100:0x900`` babbled 29-bit frames without a
+    word, losing arbitration to every 11-bit ID)."""
+    digits = text[2:] if text.lower().startswith("0x") else None
+    looks_11_bit = len(digits) <= 3 if digits is not None else can_id < 0x1000
+    if can_id > 0x7FF and looks_11_bit:
+        raise _fail("babble", value, f"ID {text} is above 0x7FF, the largest 11-bit ID; for a "
+                    f"29-bit ID write its 8 hex digits (0x{can_id:08X})")
 
 
 __all__ = ["FAULT_KINDS", "BusOff", "FaultSpec", "exclusive_edges"]

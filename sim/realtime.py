@@ -39,8 +39,8 @@ _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 class Stoppable(Protocol):
     """What ``stop_on_signals`` asks to stop."""
 
-    def request_stop(self) -> None:
-        """Stop at the next safe point (called from a signal handler)."""
+    def request_stop(self, signum: int | None = None) -> None:
+        """Stop at the next safe point (called from a signal handler, ``signum`` its signal)."""
 
     @property
     def stop_requested(self) -> bool:
@@ -48,14 +48,18 @@ class Stoppable(Protocol):
 
 
 class StopRequest:
-    """A stop flag for loops that poll it between steps (``Stoppable``)."""
+    """A stop flag for loops that poll it between steps (``Stoppable``); ``signum``: the
+    signal that asked first (None: none, or asked by code)."""
 
     def __init__(self) -> None:
         self._requested = False
+        self.signum: int | None = None
 
-    def request_stop(self) -> None:
-        """Ask the loop to stop (safe from a signal handler)."""
+    def request_stop(self, signum: int | None = None) -> None:
+        """Ask the loop to stop (safe from a signal handler); the first signal is kept."""
         self._requested = True
+        if self.signum is None:
+            self.signum = signum
 
     @property
     def stop_requested(self) -> bool:
@@ -114,10 +118,13 @@ class PeriodicLoop:
         self.clock = clock or RealTimeClock()
         self.stats = DeadlineStats(period_s, period_s / 2 if late_after_s is None else late_after_s)
         self._stop_requested = False
+        self.signum: int | None = None  # the signal that asked it to stop first, if one did
 
-    def request_stop(self) -> None:
+    def request_stop(self, signum: int | None = None) -> None:
         """Stop after the tick under way (safe from a signal handler)."""
         self._stop_requested = True
+        if self.signum is None:
+            self.signum = signum
 
     @property
     def stop_requested(self) -> bool:
@@ -162,7 +169,7 @@ def stop_on_signals(loop: Stoppable) -> Iterator[None]:
     def handler(signum: int, frame: FrameType | None) -> None:
         if loop.stop_requested:
             raise KeyboardInterrupt
-        loop.request_stop()
+        loop.request_stop(signum)
 
     if threading.current_thread() is not threading.main_thread():
         yield  # only the main thread may install handlers: the caller's own stay in force

@@ -1,4 +1,5 @@
-"""Every test leaves the logging configuration as it found it.
+"""Every test leaves the logging configuration as it found it, and the session caches the DBC
+plan in a temporary ``ODOCAN_CACHE_DIR`` (never the user's ``~/.cache/odocan``).
 
 ``odocan bridge``/``fleet``/``monitor`` run in-process here call ``configure_logging``, which sets
 the levels and handlers of odocan's and the libraries' loggers for the life of a CLI process; in a
@@ -13,6 +14,17 @@ from collections.abc import Iterator
 import pytest
 
 from odocan.host.mqtt.options import LIBRARY_LOGGERS, MQTT_LOGGERS
+from odocan.host.protocol.dbcplan import CACHE_ENV
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _session_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """The whole session (and the processes it starts, which inherit the environment) caches
+    DBC plans in a temporary directory; a test that sets its own (``monkeypatch.setenv``) wins
+    for its duration."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv(CACHE_ENV, str(tmp_path_factory.mktemp("odocan-cache")))
+        yield
 
 
 @pytest.fixture(autouse=True)

@@ -289,8 +289,10 @@ def test_run_interrupted_checks_what_ran(
 
     monkeypatch.setattr(LockstepRig, "_work", work_until_ctrl_c)
     code, out, err = run_cli(capsys, "run", "--duration", "100")
-    assert (code, err) == (0, "interrupted after 1.5 s simulated\n")
+    assert (code, err) == (130, "interrupted after 1.5 s simulated\n")
     assert re.search(r"\n  WHEEL_ENCODERS +150 +150 ", out), out
+    verdict = out.splitlines()[-1]
+    assert verdict.startswith("STOPPED by SIGINT at 1.5 s of 100 s: partial drive PASS"), verdict
 
 
 def test_run_random_drives_for_a_longer_duration(

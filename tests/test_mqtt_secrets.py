@@ -62,6 +62,18 @@ def artefacts(capsys: pytest.CaptureFixture[str], *roots: Path) -> str:
     return "\n".join([out, err, *(p.read_text(errors="replace") for p in files)])
 
 
+def only_late(report: dict[str, object]) -> bool:
+    """Whether a fleet report fails only by real time: the loop fell behind on a loaded machine
+    (deadline misses, releases skipped, so robots unjudged), never a pose out of tolerance.
+    Exit 1 then says nothing of the password, what these tests check (they ran ``--duration
+    1`` with ``--max-miss-ratio 1`` and still failed under load: 10-13 releases skipped)."""
+    robots = report["per_robot"]
+    assert isinstance(robots, dict)
+    return all(r["verdict"] == "PASS" or (r["verdict"] == "UNJUDGED" and "releases skipped (the "
+                                           "loop fell behind)" in r["reason"])
+               for r in robots.values())
+
+
 def clean_run_dir(tmp_path: Path) -> Path:
     """A directory for what the run writes (not the broker's files, which hold the hash)."""
     run = tmp_path / "run"
@@ -87,7 +99,10 @@ def test_the_password_never_shows_in_any_artefact(
         argv[url] = argv[url].replace("bridge@", f"bridge:{SECRET}@")
     code = main(argv)
     text = artefacts(capsys, run)
-    assert code == 0, text
+    if command == "fleet" and code == 1:  # a loaded machine: the fleet ran, late (not our check)
+        assert only_late(json.loads(report.read_text())), text
+    else:
+        assert code == 0, text
     assert "DEBUG: Sending CONNECT" in text  # --debug: paho's own log lines are in there too
     assert SECRET not in text
     warnings = [line for line in text.splitlines() if "visible to other users" in line]

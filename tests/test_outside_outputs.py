@@ -69,6 +69,23 @@ def test_run_log_on_a_full_disk_names_the_path_and_keeps_the_summary(
     assert "Traceback" not in err
 
 
+def test_replay_log_on_a_full_disk_names_the_path(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``odocan replay --log`` on a full disk said ``error: [Errno 28] No space left on
+    device``: no path (found on a 64 kB tmpfs)."""
+    drive, log = tmp_path / "drive.log", tmp_path / "replayed.log"
+    assert main(["run", "--duration", "2", "--log", str(drive)]) == 0
+    capsys.readouterr()
+    monkeypatch.setattr(can, "Logger", _logger_on_a_full_disk(4000))
+    code = main(["replay", str(drive), "--log", str(log)])
+    _, err = capsys.readouterr()
+    assert code == 2, err
+    assert err.splitlines()[-1].startswith(f"error: --log {log}: No space left on device "
+                                           "(recording stopped after "), err
+    assert "Traceback" not in err
+
+
 class _BusThenCtrlC(can.BusABC):
     """A bus that hears ``frames`` encoder frames, then gets Ctrl-C."""
 

@@ -25,6 +25,7 @@ from odocan.host.io.logs import read_log, to_message
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.stream import StreamEncoders
 from odocan.host.judge.stream_analysis import (
+    FrameCount,
     NotStreamable,
     analyze_file,
     stream_above_bytes,
@@ -102,6 +103,20 @@ def test_the_streamed_report_is_the_whole_logs(
         assert vs_ref["loss_allowance_m"] > 0
         assert (vs_ref["max_position_error_beyond_allowance_m"]
                 < vs_ref["max_position_error_m"])
+
+
+@pytest.mark.parametrize("chunk_frames", [7, 1 << 20])
+def test_the_streamed_report_counts_the_logs_frames_when_asked(
+    tmp_path: Path, chunk_frames: int
+) -> None:
+    """One function, the count optional (``odocan analyze`` of many logs shows it): every frame
+    the log holds, whatever the chunk size, and the same report as without it."""
+    path = log_of(tmp_path, "awkward")
+    profile = load("pmir")
+    count = FrameCount()
+    got = analyze_file(path, profile, "rk2", chunk_frames=chunk_frames, count=count)
+    assert count.frames == len(read_log(path)) > 0
+    assert json.dumps(got) == json.dumps(analyze_file(path, profile, "rk2"))
 
 
 def test_a_babble_run_is_refused_for_streaming_and_analysed_whole(tmp_path: Path) -> None:

@@ -264,6 +264,24 @@ def test_pause_freezes_the_trace_and_keys_edit_the_filter(healthy: Fed) -> None:
         app.bus.shutdown()
 
 
+class _UntilDrained:
+    """A bus that ends the app's receive loop (``quit``, as ``q`` does) at its first empty
+    ``recv``: every frame of the test is queued before the loop starts."""
+
+    def __init__(self, bus: can.BusABC) -> None:
+        self.bus = bus
+        self.app: MonitorApp | None = None
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        msg = self.bus.recv(timeout)
+        if msg is None and self.app is not None:
+            self.app.quit = True
+        return msg
+
+    def shutdown(self) -> None:
+        self.bus.shutdown()
+
+
 @pytest.mark.parametrize("suffix", [".log", ".asc", ".blf"])
 def test_log_records_every_frame_heard(suffix: str, tmp_path: Path, healthy: Fed) -> None:
     """Frames over a real python-can bus pair, received by the app, read back by python-can."""
@@ -276,10 +294,16 @@ def test_log_records_every_frame_heard(suffix: str, tmp_path: Path, healthy: Fed
             for k, line in enumerate(list(healthy.trace.lines)[-60:])]
     recorder = FrameLog(path)
     try:
-        app = MonitorApp(receiver, model, Trace(model.db), View(source="x"), recorder)
+        drained = _UntilDrained(receiver)
+        app = MonitorApp(drained, model, Trace(model.db), View(source="x"),  # type: ignore[arg-type]
+                         recorder)
+        drained.app = app
         for msg in sent:
             sender.send(msg)
-        app.receive(time.monotonic() + 0.5)
+        # every frame is queued before: the loop ends once the bus is drained (a 0.5 s deadline
+        # on the wall clock cut a loaded machine's receiving short); the deadline only bounds it
+        app.receive(time.monotonic() + 60.0)
+        assert app.quit, "the bus was not drained within 60 s"
     finally:
         recorder.close()
         receiver.shutdown()

@@ -50,7 +50,8 @@ def add_bus_arguments(parser: argparse.ArgumentParser, *, required: bool = False
         "derived from the group unless --bus-arg port=N) (default: python-can's config)",
     )
     group.add_argument(
-        "-b", "--bitrate", type=int, help="bitrate in bit/s (default: python-can's config)"
+        "-b", "--bitrate", type=bus_bitrate, metavar="BIT/S",
+        help=f"bitrate in bit/s, 1 .. {MAX_BITRATE} (default: python-can's config)",
     )
     group.add_argument(
         "--bus-arg",
@@ -59,6 +60,22 @@ def add_bus_arguments(parser: argparse.ArgumentParser, *, required: bool = False
         metavar="KEY=VALUE",
         help="extra keyword for can.Bus (repeatable), e.g. receive_own_messages=1",
     )
+
+
+MAX_BITRATE = 1_000_000  # ISO 11898-1: CAN's nominal (arbitration) bitrate is at most 1 Mbit/s
+
+
+def bus_bitrate(text: str) -> int:
+    """``-b/--bitrate`` of a live bus: a whole number of bit/s, 1 .. ``MAX_BITRATE`` (an
+    interface such as ``virtual`` ignores it: ``-b -5`` was taken without a word)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of bit/s") from None
+    if not 0 < value <= MAX_BITRATE:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: a CAN bitrate is 1 .. {MAX_BITRATE} bit/s (ISO 11898-1)")
+    return value
 
 
 def add_fault_argument(parser: argparse.ArgumentParser) -> None:

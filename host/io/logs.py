@@ -23,12 +23,16 @@ other frames of its ID) is read without that line, with a one-line warning that 
 
 from __future__ import annotations
 
+import locale
+import math
 import mmap
 import os
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+import numpy as np
 
 from odocan.host.io.candump import (
     CHUNK_BYTES,
@@ -53,6 +57,9 @@ from odocan.host.io.frames import (
 )
 
 if TYPE_CHECKING:
+    import can
+
+    from odocan.host.io.asc import AscLines
     from odocan.host.io.collector import FrameCollector as FrameCollector
 
 
@@ -107,10 +114,49 @@ def read_log(path: str | Path, *, warn: Callable[[str], None] = warn_on_stderr) 
                 "a recorder killed while writing?)"
             )
     else:
-        frames = _read_with_python_can(path)
+        frames = _read_with_python_can(path, warn)
     if len(frames) == 0:
         raise LogFormatError(f"{path}: empty log (not a single CAN frame)")
+    order = TimeOrder()
+    order.feed(frames)
+    order.report(path, warn)
     return frames
+
+
+class TimeOrder:
+    """Counts the frames of a log, fed in order a chunk at a time, whose time is before the
+    frame's before them: a merged, edited or clock-stepped log. Its times are kept as recorded
+    (they order nothing: the frames are judged in log order), but a report's duration from
+    them can be wrong (``-4.99 s simulated``), so it is said, with the first such frame."""
+
+    def __init__(self) -> None:
+        self.back = 0
+        self.frames = 0
+        self.last_s = -math.inf
+        self.first: tuple[int, float, float] | None = None  # (frame number, time, before it)
+
+    def feed(self, chunk: FrameArrays) -> None:
+        """Account the next frames of the log."""
+        if len(chunk) == 0:
+            return
+        times = chunk.timestamp_s
+        previous = np.concatenate(([self.last_s], times[:-1]))
+        back = np.flatnonzero(times < previous)
+        if len(back) and self.first is None:
+            k = int(back[0])
+            self.first = (self.frames + k + 1, float(times[k]), float(previous[k]))
+        self.back += len(back)
+        self.frames += len(chunk)
+        self.last_s = float(times[-1])
+
+    def report(self, path: Path, warn: Callable[[str], None]) -> None:
+        """One warning when any frame's time went back."""
+        if self.first is None:
+            return
+        number, t_s, before_s = self.first
+        warn(f"{path}: {self.back} frame{'s' if self.back > 1 else ''} of {self.frames} "
+             f"earlier than the frame before (first: frame {number}, {t_s:.6f} s after "
+             f"{before_s:.6f} s): times kept as recorded; the log's duration may be wrong")
 
 
 def _read_candump_file(path: Path) -> tuple[FrameArrays, int, int]:
@@ -153,13 +199,14 @@ def iter_log(
     path = Path(path)
     require_log_file(path)
     parts = _candump_file_parts(path, warn) if path.suffix.lower() == ".log" else (
-        _python_can_parts(path, chunk_frames))
-    total = 0
+        _python_can_parts(path, chunk_frames, warn))
+    order = TimeOrder()
     for chunk in _rechunk(parts, chunk_frames):
-        total += len(chunk)
+        order.feed(chunk)
         yield chunk
-    if total == 0:
+    if order.frames == 0:
         raise LogFormatError(f"{path}: empty log (not a single CAN frame)")
+    order.report(path, warn)
 
 
 def _candump_file_parts(path: Path, warn: Callable[[str], None]) -> Iterator[FrameArrays]:
@@ -204,22 +251,26 @@ def _rechunk(parts: Iterable[FrameArrays], size: int) -> Iterator[FrameArrays]:
 
 
 
-def _read_with_python_can(path: Path) -> FrameArrays:
+def _read_with_python_can(path: Path, warn: Callable[[str], None]) -> FrameArrays:
     """Any format python-can reads, through ``can.LogReader``."""
-    return concat_frames(list(_python_can_parts(path, 1 << 62)))
+    return concat_frames(list(_python_can_parts(path, 1 << 62, warn)))
 
 
-def _python_can_parts(path: Path, chunk_frames: int) -> Iterator[FrameArrays]:
+def _python_can_parts(
+    path: Path, chunk_frames: int, warn: Callable[[str], None]
+) -> Iterator[FrameArrays]:
     """Any format python-can reads, through ``can.LogReader`` (which streams), at most
-    ``chunk_frames`` frames at a time."""
-    import can  # python-can's readers: imported for the formats that need them
+    ``chunk_frames`` frames at a time; an ``.asc``'s garbage lines and a ``.blf`` cut short
+    are skipped with a warning (``host.io.asc``, ``blf_warning``)."""
 
     from odocan.host.io.collector import FrameCollector
 
     collector = FrameCollector()
     count = 0
+    lines = None
     try:
-        for msg in can.LogReader(path):
+        reader, lines = _reader(path)
+        for msg in reader:
             count += 1
             if len(msg.data) > MAX_DLC:
                 raise LogFormatError(
@@ -240,6 +291,53 @@ def _python_can_parts(path: Path, chunk_frames: int) -> Iterator[FrameArrays]:
         ) from None
     if len(collector):
         yield collector.arrays()
+    _format_warnings(path, lines, count, warn)
+
+
+def _reader(path: Path) -> tuple[Iterable[can.Message], AscLines | None]:
+    """python-can's reader of ``path``; an ``.asc``'s through ``AscLines`` (returned too)."""
+    import can
+
+    if path.suffix.lower() != ".asc":
+        return can.LogReader(path), None
+    from odocan.host.io.asc import AscLines
+
+    lines = AscLines(path.open(encoding=locale.getpreferredencoding(False)))
+    return can.ASCReader(lines), lines  # type: ignore[arg-type]
+
+
+def _format_warnings(
+    path: Path, lines: AscLines | None, frames: int, warn: Callable[[str], None]
+) -> None:
+    """An ``.asc``'s skipped lines, a ``.blf`` cut short, said after its frames were read."""
+    if lines is not None and lines.skipped:
+        warn(f"{path}: skipped {lines.skipped} line{'s' if lines.skipped > 1 else ''} that "
+             f"{'are' if lines.skipped > 1 else 'is'} no ASC frame or event (first: line "
+             f"{lines.first_skipped})")
+    if path.suffix.lower() == ".blf" and (note := blf_warning(path, frames)) is not None:
+        warn(note)
+
+
+def blf_warning(path: Path, frames: int) -> str | None:
+    """What a ``.blf``'s header says against the file: shorter than the header's size (cut:
+    python-can stops at the cut without a word), or a header never finished (a recorder
+    killed before it closed the file); None when they agree."""
+    import can
+
+    try:
+        with path.open("rb") as file:
+            reader = can.BLFReader(file)
+            size_in_header, objects = reader.file_size, reader.object_count
+    except Exception:  # the frames were read: a header python-can cannot read is said there
+        return None
+    actual = path.stat().st_size
+    if 0 < actual < size_in_header:
+        return (f"{path}: cut short: {actual} of the {size_in_header} bytes its header gives "
+                f"({frames} frames read up to the cut; a copy or a disk that ran out?)")
+    if objects == 0 and frames > 0:
+        return (f"{path}: its header was never finished (0 objects; {frames} frames read): "
+                "a recorder killed before it closed the file?")
+    return None
 
 
 def _first_line(exc: BaseException) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import time
 
 import can
@@ -10,6 +11,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FLAG_ERROR, FrameArrays, to_message
 from odocan.host.report.progress import Progress
+from odocan.host.stopped import signum_of
 from odocan.sim.realtime import StopRequest, stop_on_signals
 
 IntArray = npt.NDArray[np.int64]
@@ -19,15 +21,16 @@ POLL_S = 0.1  # a stop request is seen within this while waiting for a frame's t
 def play(
     bus: can.BusABC, frames: FrameArrays, selection: IntArray, speed: float,
     bar: Progress | None = None,
-) -> tuple[int, bool]:
+) -> tuple[int, int | None]:
     """Send ``frames[selection]`` on ``bus`` at their timestamps (relative to the first one)
-    divided by ``speed`` (error frames are skipped); returns (frames sent, interrupted).
+    divided by ``speed`` (error frames are skipped); returns (frames sent, the number of the
+    signal that stopped it before the last frame, or None).
 
     Ctrl-C and SIGTERM stop it between two frames (within ``POLL_S`` while waiting), never in
     the middle of a send; a second signal at once. ``bar`` is told the frames played so far."""
     sent = 0
     if len(selection) == 0:
-        return sent, False
+        return sent, None
     t_first = float(frames.timestamp_s[selection[0]])
     start = time.monotonic()
     stop = StopRequest()
@@ -40,12 +43,12 @@ def play(
                 while not stop.stop_requested and (delay := due - time.monotonic()) > 0:
                     time.sleep(min(delay, POLL_S))
                 if stop.stop_requested:
-                    return sent, True
+                    return sent, stop.signum or int(signal.SIGINT)
                 if not frames.flags[i] & FLAG_ERROR:
                     bus.send(to_message(frames, i))
                     sent += 1
-    except KeyboardInterrupt:
-        return sent, True
-    return sent, False
+    except KeyboardInterrupt as exc:
+        return sent, stop.signum or signum_of(exc)
+    return sent, None
 
 

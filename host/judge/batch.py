@@ -93,7 +93,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import Tolerance, analyze
     from odocan.host.judge.samples import AnalysisError
-    from odocan.host.judge.stream_analysis import NotStreamable, analyze_file_counted, streams
+    from odocan.host.judge.stream_analysis import FrameCount, NotStreamable, analyze_file, streams
     from odocan.sim import robot
 
     log = Path(path)
@@ -101,16 +101,16 @@ def analyze_one(path: str, job: Job) -> LogResult:
         profile = robot.load(job.robot)
         tolerance = Tolerance(job.tolerance_position_m, job.tolerance_heading_rad)
         db = load_dbc(Path(job.dbc)) if job.dbc is not None else None
-        streamed: tuple[dict[str, Any], int] | None = None
+        streamed: dict[str, Any] | None = None
+        count = FrameCount()
         if streams(log, job.stream):  # in bounded memory (host.judge.stream_analysis)
             try:
-                streamed = analyze_file_counted(log, profile, job.integrator,
-                                                tolerance=tolerance, db=db,
-                                                warn=lambda message: None)
+                streamed = analyze_file(log, profile, job.integrator, tolerance=tolerance,
+                                        db=db, warn=lambda message: None, count=count)
             except (AnalysisError, NotStreamable):  # refused: the whole log's path says why
                 streamed = None
         if streamed is not None:
-            report, n_frames = streamed
+            report, n_frames = streamed, count.frames
         else:  # the whole log: the same report
             frames = read_log(log, warn=lambda message: None)
             n_frames = len(frames)

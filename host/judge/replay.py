@@ -40,6 +40,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.firmware.config import RobotParams
+from odocan.host.io.listeners import Recording
 from odocan.host.io.logs import (
     FrameArrays,
     FrameCollector,
@@ -50,11 +51,13 @@ from odocan.host.judge.diagnosis import fitting_profiles
 from odocan.host.outputs import OutputError
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
+from odocan.host.stopped import Stopped, signum_of
 from odocan.sim import contract
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.clock import LockstepClock
 from odocan.sim.closing import release_all
 from odocan.sim.exceptions import OdocanError
+from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import INTEGRATORS, firmware_params
 from odocan.sim.robot import RobotProfile, list_profiles
 from odocan.sim.tickloop import TickLoop, deliver
@@ -178,7 +181,7 @@ class LockstepReplay:
         self.board = FirmwareBoard(fw_bus, params, self.clock)
         self.listeners = listeners
         self.loop = TickLoop(self._work, host_bus, listeners, self.clock)
-        self.interrupted = False
+        self.stopped: Stopped | None = None  # by a signal, before the log's end
 
     @property
     def ticks(self) -> int:
@@ -191,25 +194,36 @@ class LockstepReplay:
 
     def run(self, frames: FrameArrays, feed: ReplayInput) -> None:
         """Feed every encoder frame at its tick (the log's truth frames where they were);
-        Ctrl-C stops early (``interrupted``)."""
+        Ctrl-C or SIGTERM stops it between two encoder frames, a second one at once
+        (``stopped``: how far it got)."""
         enc = feed.encoders
         t0 = float(frames.timestamp_s[enc.index[0]])
         self.loop.start_s = t0
         events = _events(enc.index, feed.truth)
         due: int | None = None  # the tick whose encoder frame is on the bus, not yet run
+        stop = StopRequest()
+        interrupt: KeyboardInterrupt | None = None
         try:
-            for position, which in events:
-                if which >= 0:  # an encoder frame: first run the ticks before its own
-                    tick = int(enc.tick[which])
+            with stop_on_signals(stop):
+                for position, which in events:
+                    if which >= 0:  # an encoder frame: first run the ticks before its own
+                        if stop.stop_requested:
+                            break
+                        tick = int(enc.tick[which])
+                        if due is not None:
+                            self.loop.run_to(tick)
+                        self.clock.advance_to(t0 + tick * TICK_S)
+                        due = tick
+                    self._log_bus.send(to_message(frames, position))
+                else:
                     if due is not None:
-                        self.loop.run_to(tick)
-                    self.clock.advance_to(t0 + tick * TICK_S)
-                    due = tick
-                self._log_bus.send(to_message(frames, position))
-            if due is not None:
-                self.loop.run_to(due + 1)
-        except KeyboardInterrupt:
-            self.interrupted = True
+                        self.loop.run_to(due + 1)
+        except KeyboardInterrupt as exc:
+            interrupt = exc
+        if stop.stop_requested or interrupt is not None:
+            asked_s = (int(enc.tick[-1]) + 1) * TICK_S
+            self.stopped = Stopped(stop.signum or signum_of(interrupt),
+                                   round(self.ticks * TICK_S, 6), round(asked_s, 6))
             print(f"interrupted after {self.ticks * TICK_S:g} s of the log", file=sys.stderr)
 
     def _drain(self) -> None:
@@ -331,8 +345,8 @@ def replay_and_analyze(
     analyse the replayed bus, add the ``replay`` section."""
     collector = FrameCollector()
     listeners: list[can.Listener] = [collector]
-    if log_out is not None:
-        listeners.append(can.Logger(log_out))
+    if log_out is not None:  # a full disk stops the recording, not the replay (path named)
+        listeners.append(Recording(can.Logger(log_out)))
     channel = f"odocan-replay-{next(_REPLAY_CHANNELS)}"
     replay = LockstepReplay(firmware_params(profile, integrator), listeners, channel)
     start = time.perf_counter()
@@ -354,9 +368,11 @@ def replay_and_analyze(
         "truth_frames": len(feed.truth),
         "ticks": replay.ticks,
         "ticks_without_frame": replay.ticks - min(replay.ticks, len(feed.encoders.index)),
-        "interrupted": replay.interrupted,
+        "interrupted": replay.stopped is not None,
         "onboard_vs_log": versus_log(frames, feed.accepted, replayed),
     }
+    if replay.stopped is not None:
+        analysis.report["stopped"] = replay.stopped.as_dict()
     return analysis
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
 
@@ -83,6 +84,13 @@ class NotStreamable(OdocanError):
 DEFAULT_TOLERANCE = Tolerance()
 
 
+@dataclass
+class FrameCount:
+    """How many frames ``analyze_file`` read from the log (filled in as it reads)."""
+
+    frames: int = 0
+
+
 def analyze_file(
     path: str | Path,
     robot: RobotProfile,
@@ -96,40 +104,21 @@ def analyze_file(
     max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
     chunk_frames: int = CHUNK_FRAMES,
     warn: Callable[[str], None] = warn_on_stderr,
+    count: FrameCount | None = None,
 ) -> dict[str, Any]:
     """``analyze(read_log(path), ...).report``, the log read ``chunk_frames`` at a time
-    (``warn``: where ``iter_log`` says it skipped a partial last line)."""
-    return analyze_file_counted(
-        path, robot, integrator, tolerance=tolerance, db=db, scenario=scenario, seed=seed,
-        wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s,
-        chunk_frames=chunk_frames, warn=warn)[0]
-
-
-def analyze_file_counted(
-    path: str | Path,
-    robot: RobotProfile,
-    integrator: str | None = None,
-    *,
-    tolerance: Tolerance = DEFAULT_TOLERANCE,
-    db: DatabaseSpec | None = None,
-    scenario: str | None = None,
-    seed: int | None = None,
-    wall_seconds: float | None = None,
-    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
-    chunk_frames: int = CHUNK_FRAMES,
-    warn: Callable[[str], None] = warn_on_stderr,
-) -> tuple[dict[str, Any], int]:
-    """``analyze_file``'s report and the number of frames in the log."""
+    (``warn``: where ``iter_log`` says it skipped a partial last line; ``count``, when given:
+    the number of frames in the log, counted as they are read)."""
     db = db if db is not None else default_plan()
+    count = count if count is not None else FrameCount()
     decoder = BulkDecoder(db)
     require_messages(decoder)
     with tempfile.TemporaryDirectory(prefix="odocan-analyze-") as tmp:
         spill = FrameSpill(Path(tmp))
         e2e, lives = StreamE2E(db), StreamLives(decoder)  # one decoder: its cache too
         facts = StreamFacts(decoder)
-        n_frames = 0
         for chunk in iter_log(path, chunk_frames=chunk_frames, warn=warn):
-            n_frames += len(chunk)
+            count.frames += len(chunk)
             spill.write(chunk)
             accepted = e2e.feed(chunk)
             lives.feed(chunk, accepted)
@@ -141,7 +130,7 @@ def analyze_file_counted(
             lives.finish(), facts, lambda span: lambda: spill.read(span.start, span.stop,
                                                                     chunk_frames),
             robot, integrator, tolerance=tolerance, db=db, scenario=scenario, seed=seed,
-            wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s), n_frames
+            wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s)
 
 
 def _analyze_lives(

@@ -4,7 +4,8 @@
   cannot be written before the work starts; ``write_checks(args, suite, checks)`` writes it.
 * ``analysis_checks(report)``: the two checks behind ``run``/``analyze``/``replay``'s verdict
   (on-board vs float64 reference, position and heading, against the tolerance), plus the
-  replay's own comparison with the logged firmware when the report has it.
+  replay's own comparison with the logged firmware when the report has it, and a failed
+  ``completed`` when a signal stopped the command before it finished (``host.stopped``).
 * ``umbmark_checks``/``calibration_checks``/``experiment_checks``: the figures of the benchmark
   and, when the report carries a verdict (``passed``, ``faults``), a ``verdict`` testcase that
   fails with its reasons.
@@ -21,6 +22,7 @@ from typing import Any
 
 from odocan.host.outputs import check_writable, write_text
 from odocan.host.report.junit import Check, junit_xml
+from odocan.host.stopped import stopped_text
 
 
 def add_junit_argument(parser: argparse.ArgumentParser) -> None:
@@ -60,6 +62,9 @@ def analysis_checks(report: dict[str, Any]) -> list[Check]:
     if isinstance(versus, dict) and "passed" in versus:
         checks.append(Check("replay_vs_logged_firmware", bool(versus["passed"]),
                             "the replayed firmware departs from the logged one", dict(versus)))
+    stopped = report.get("stopped")
+    if stopped:  # a signal ended it before what it was asked: that is no pass
+        checks.append(Check("completed", False, stopped_text(stopped), dict(stopped)))
     if not report.get("passed") and all(check.passed for check in checks):
         checks.append(Check("verdict", False, "the command's verdict is FAIL",
                             {"reasons": report.get("faults")}))

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 from odocan.host.jsonutil import write_report
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.outputs import OutputError, check_writable
+from odocan.host.stopped import stopped_text
 from odocan.sim.exceptions import ConfigurationError
 
 if TYPE_CHECKING:  # rich is imported where a summary is printed, not by the options above
@@ -138,6 +139,9 @@ def print_summary(
         console.print(Padding(table, (0, 0, 0, 2), expand=False))
     console.print()
     verdict, style = ("PASS", "green") if report["passed"] else ("FAIL", "bold red")
+    if report.get("stopped"):  # a signal ended it early: never a plain PASS
+        verdict = f"{stopped_text(report['stopped'])}: partial drive {verdict}"
+        style = "bold yellow" if report["passed"] else style
     twist = report.get("onboard_twist_vs_reference") or {"passed": True}
     pose_met = _pose_within(report, tolerance)
     console.print(

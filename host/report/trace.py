@@ -22,6 +22,9 @@ PAGE_WINDOW = 32  # frames per page for a page's rate
 _HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
 
 
+MAX_CAN_ID = 0x1FFFFFFF  # the largest 29-bit identifier
+
+
 @dataclass(frozen=True)
 class FrameFilter:
     """Which frames the trace shows: by message name or by CAN ID (empty: all)."""
@@ -39,9 +42,13 @@ class FrameFilter:
         for item in items:
             if item.lower().startswith("0x"):
                 try:
-                    ids.add(int(item, 16))
+                    can_id = int(item, 16)
                 except ValueError:
                     raise ConfigurationError(f"--filter {item}: not a hexadecimal CAN ID") from None
+                if can_id > MAX_CAN_ID:  # no frame can match: the trace would stay empty
+                    raise ConfigurationError(
+                        f"--filter {item}: beyond the 29-bit CAN IDs (at most 0x{MAX_CAN_ID:X})")
+                ids.add(can_id)
             elif item.upper() in known:
                 names.add(item.upper())
             else:

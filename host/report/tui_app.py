@@ -24,6 +24,7 @@ from rich.live import Live
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.report.trace import FrameFilter, Trace
 from odocan.host.report.tui import View, screen
+from odocan.host.stopped import signum_of
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 
 REFRESH_S = 0.25  # screen redraws
@@ -89,9 +90,11 @@ class MonitorApp:
         self.recorder = recorder
         self.publish = publish
         self.quit = False
+        self.stopped_by: int | None = None  # the signal (Ctrl-C, SIGTERM) that ended it
 
     def receive(self, deadline_s: float, redraw: Any | None = None) -> None:
-        """Until ``deadline_s`` (monotonic), ``q`` or Ctrl-C; ``redraw()`` every ``REFRESH_S``."""
+        """Until ``deadline_s`` (monotonic), ``q`` or Ctrl-C/SIGTERM (``stopped_by``);
+        ``redraw()`` every ``REFRESH_S``."""
         next_draw = 0.0
         try:
             while not self.quit and (now := time.monotonic()) < deadline_s:
@@ -103,8 +106,8 @@ class MonitorApp:
                     self.on_frame(msg)
                 if redraw is not None:
                     self.on_keys(_read_keys())
-        except KeyboardInterrupt:
-            pass
+        except KeyboardInterrupt as exc:
+            self.stopped_by = signum_of(exc)
 
     def on_frame(self, msg: can.Message) -> None:
         """One frame heard: log it, feed the model and the trace."""

@@ -204,16 +204,20 @@ def _streamed(
 ) -> Analysis | None:
     """The streamed analysis of ``args.log``; None when it refuses the log (the whole log's
     path then says why, in the log's terms)."""
-    from odocan.host.io.logs import CHUNK_FRAMES
+    from odocan.host.io.logs import CHUNK_FRAMES, warn_on_stderr
     from odocan.host.judge.analysis import Analysis
     from odocan.host.judge.samples import AnalysisError
     from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
 
+    warnings: list[str] = []  # said once the stream is taken (else the whole log's read says)
     try:
         report = analyze_file(args.log, profile, args.integrator, tolerance=args.tolerance,
-                              db=db, chunk_frames=args.chunk_frames or CHUNK_FRAMES)
+                              db=db, chunk_frames=args.chunk_frames or CHUNK_FRAMES,
+                              warn=warnings.append)
     except (AnalysisError, NotStreamable):
         return None
+    for message in warnings:
+        warn_on_stderr(message)
     return Analysis(report=report, passed=report["passed"])
 
 

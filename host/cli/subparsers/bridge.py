@@ -4,7 +4,8 @@ The bus (python-can's ``-i/-c/-b`` options) is read in a thread; frames are E2E-
 with the DBC, compared with the float64 reference and published under ``odocan/<name>/`` (see
 ``host.mqtt.topics``); ``odocan/<name>/cmd/*`` commands are validated against the DBC before a
 frame is sent. Without ``--broker`` an embedded amqtt broker is started on a free loopback port.
-Runs until Ctrl-C (or ``--duration``).
+Runs until Ctrl-C or SIGTERM (exit 0), or ``--duration``: a signal before that ends it with
+130/143, never 0 (it did not bridge for the time it was asked).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import argparse
 import asyncio
 import signal
 import sys
+import time
 from pathlib import Path
 
 import can
@@ -31,6 +33,7 @@ from odocan.host.mqtt.options import (
 )
 from odocan.host.mqtt.topics import check_robot_name
 from odocan.host.protocol.secoc import SecocSigner, load_secoc_key
+from odocan.host.stopped import early_stop
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import INTEGRATORS
@@ -83,11 +86,16 @@ def _do_bridge(args: argparse.Namespace) -> int:
     geometry = Geometry.of(profile)
     signer = None if args.secoc_key is None else SecocSigner(load_secoc_key(args.secoc_key))
     bus = open_bus(args)
+    started_s = time.monotonic()
     try:
-        asyncio.run(_bridge(args, name, url, bus, geometry, profile.counter_bits, signer))
+        signum = asyncio.run(_bridge(args, name, url, bus, geometry, profile.counter_bits, signer))
     finally:
         bus.shutdown()
-    return 0
+    stopped = early_stop(signum, started_s, args.duration)
+    if stopped is None:
+        return 0
+    print(f"bridge {name}: {stopped.text()}", file=sys.stderr)
+    return stopped.exit_code
 
 
 async def _bridge(
@@ -98,7 +106,14 @@ async def _bridge(
     geometry: Geometry,
     counter_bits: int,
     signer: SecocSigner | None = None,
-) -> None:
+) -> int | None:
+    """Bridge until ``--duration`` or Ctrl-C/SIGTERM; the signal that stopped it, if one did."""
+    signals: list[int] = []
+
+    def on_signal(signum: int, stop: asyncio.Event) -> None:
+        signals.append(signum)
+        stop.set()
+
     async with broker_for(url) as (broker, embedded):
         print(f"bridge {name}: {broker}{' (embedded)' if embedded else ''}", file=sys.stderr)
         config = BridgeConfig(broker=broker, **bridge_options(args))
@@ -107,7 +122,7 @@ async def _bridge(
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, stop.set)
+            loop.add_signal_handler(sig, on_signal, int(sig), stop)
         reader = BusReader(bus, bridge, loop)
         reader.start()
         if args.duration is not None:
@@ -117,3 +132,4 @@ async def _bridge(
         finally:
             reader.stop()
         print(f"bridge {name}: {bridge.summary()}", file=sys.stderr)
+    return signals[0] if signals else None

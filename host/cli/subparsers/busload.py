@@ -114,7 +114,9 @@ def _do_busload(args: argparse.Namespace) -> int:
         raise ConfigurationError(f"--report {args.report}: directory {args.report.parent} missing")
     db = load_dbc(args.dbc) if args.dbc is not None else database()
     messages = messages_from_dbc(db, sporadic_ms=args.sporadic_ms)
-    messages += [parse_added(text) for text in args.add]
+    nodes = {node.name for node in getattr(db, "nodes", [])}
+    nodes |= {sender for message in messages for sender in message.senders}
+    messages += [parse_added(text, nodes) for text in args.add]
     _check_unique(messages)
     ticks = parse_ticks(args.tick_ms, messages)
     queue_jitter_ns = ms_to_ns(args.queue_jitter_ms, "--queue-jitter-ms", allow_zero=True)
@@ -129,11 +131,12 @@ def _do_busload(args: argparse.Namespace) -> int:
     return 0 if load.schedulable else 1
 
 
-def parse_added(text: str) -> BusMessage:
+def parse_added(text: str, nodes: set[str] | None = None) -> BusMessage:
     """``NAME:ID:DLC:CYCLE_MS[:SENDER]`` as a cyclic message; malformed text is a one-line error.
 
     Without SENDER the message has a node of its own, ``(NAME)``, ticking at its cycle (J = 0).
-    An ID above 0x7FF is a 29-bit ID.
+    SENDER must be one of ``nodes`` (the DBC's, when given): a typo would otherwise be a node
+    of its own, analysed without a word. An ID above 0x7FF is a 29-bit ID.
     """
     what = f"--add {text!r}"
     fields = [field.strip() for field in text.split(":")]
@@ -149,6 +152,10 @@ def parse_added(text: str) -> BusMessage:
     if not 0 <= dlc <= MAX_DLC:
         raise ConfigurationError(f"{what}: DLC {dlc} is not a CAN 2.0 data length (0..8)")
     period_ns = ms_to_ns(raw_cycle, what)
+    if len(fields) == 5 and nodes is not None and fields[4] not in nodes:
+        raise ConfigurationError(
+            f"{what}: {fields[4]} is no node of the DBC ({', '.join(sorted(nodes))}); leave "
+            "SENDER out for a node of its own")
     return BusMessage(
         name=name,
         can_id=can_id,

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 from odocan.host.cli.options import (
@@ -26,6 +27,7 @@ from odocan.host.cli.options import (
     check_duration,
 )
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
+from odocan.host.stopped import early_stop
 from odocan.sim import robot
 from odocan.sim.board import FileNvm, NvmCell
 from odocan.sim.cboard import board_maker
@@ -84,6 +86,7 @@ def _do_firmware(args: argparse.Namespace) -> int:
                            nvm=nvm)
         if isinstance(nvm, FileNvm) and nvm.error is not None:  # the boot's EPOCH write
             raise ConfigurationError(f"--nvm: {nvm.error}")
+        started_s = time.monotonic()
         with stop_on_signals(loop):
             stats = loop.run(lambda _k: board.run_tick(), args.duration)
     finally:
@@ -95,7 +98,11 @@ def _do_firmware(args: argparse.Namespace) -> int:
         f"state {ecu.state.name}, {stats.summary()}",
         file=sys.stderr,
     )
-    return 0
+    stopped = early_stop(loop.signum, started_s, args.duration)
+    if stopped is None:
+        return 0
+    print(f"odocan firmware: {stopped.text()}", file=sys.stderr)
+    return stopped.exit_code
 
 
 def _nvm(path: Path | None, key: bytes | None) -> NvmCell | None:

@@ -7,7 +7,8 @@ jitter, E2E counts, the firmware's status, and the on-board pose against the flo
 a second until Ctrl-C or ``q`` (exit 0) or ``--duration``, with a decoded trace (``--filter``,
 pause with space or ``p``); ``--log PATH`` records every frame heard.
 With ``--json`` there is no screen: at the end (``--duration`` or Ctrl-C) the
-model is printed as one JSON object, for scripts.
+model is printed as one JSON object, for scripts. A ``--duration`` watch that Ctrl-C or SIGTERM
+ends early says so (``stopped`` in the JSON, a line on stderr) and exits 130/143, never 0.
 
 ``--broker [URL]`` (alias ``--mqtt``, the name it had) shows the fleet instead: one row per
 robot that ``odocan bridge``/``odocan fleet`` publish (``host.mqtt.fleetview.fleet_states``),
@@ -54,6 +55,7 @@ from odocan.host.report.live import render_fleet, with_staleness
 from odocan.host.report.trace import FrameFilter, Trace
 from odocan.host.report.tui import View
 from odocan.host.report.tui_app import FrameLog, MonitorApp, RecordingError, run_screen
+from odocan.host.stopped import early_stop, signum_of
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 
@@ -144,22 +146,31 @@ def _do_monitor(args: argparse.Namespace) -> int:
     view = View(_source(args), interface=args.interface, log_path=args.log,
                 started_s=time.monotonic())
     live = _foxglove(args, profile, model)
-    failure = _watch_bus(args, model, trace, view, recorder, live)
+    started_s = time.monotonic()
+    failure, signum = _watch_bus(args, model, trace, view, recorder, live)
+    stopped = early_stop(signum, started_s, args.duration)
     if args.json:
-        print(to_json(model.snapshot()))
+        snapshot = model.snapshot()
+        if stopped is not None:
+            snapshot["stopped"] = stopped.as_dict()
+        print(to_json(snapshot))
+    if stopped is not None:
+        print(f"monitor: {stopped.text()}", file=sys.stderr)
     if failure is not None:
         raise failure
-    return 0
+    return 0 if stopped is None else stopped.exit_code
 
 
 def _watch_bus(
     args: argparse.Namespace, model: BusMonitor, trace: Trace, view: View,
     recorder: FrameLog | None, live: FoxgloveLive | None,
-) -> RecordingError | None:
+) -> tuple[RecordingError | None, int | None]:
     """Watch the bus until the deadline, ``q``, Ctrl-C or SIGTERM (even one that comes before
     the receive loop runs); the recording's error, returned so that what was heard is still
-    shown (``--json``) before the command ends with it."""
+    shown (``--json``) before the command ends with it, and the signal that ended it, if one
+    did."""
     failure: RecordingError | None = None
+    signum: int | None = None
     try:
         bus = open_bus(args)
         try:
@@ -169,10 +180,11 @@ def _watch_bus(
                 app.receive(_deadline(args.duration))
             else:
                 run_screen(app, _deadline(args.duration))
+            signum = app.stopped_by
         finally:
             bus.shutdown()
-    except KeyboardInterrupt:  # before the loop took it: quit the same way
-        pass
+    except KeyboardInterrupt as exc:  # before the loop took it: quit the same way
+        signum = signum_of(exc)
     finally:
         if recorder is not None:
             try:
@@ -181,7 +193,7 @@ def _watch_bus(
                 failure = exc
         if live is not None:
             live.close()
-    return failure
+    return failure, signum
 
 
 def _foxglove(
@@ -213,21 +225,28 @@ def _deadline(duration_s: float | None) -> float:
 def _watch_fleet(url: BrokerURL, args: argparse.Namespace) -> int:
     """The fleet table until the deadline or Ctrl-C; ``--json``: one object at the end."""
     watch = _FleetWatch(url, args.duration)
+    signum: int | None = None
     try:
         if args.json:
             asyncio.run(watch.run(None))
         else:
             with Live(console=Console(file=sys.stdout), auto_refresh=False) as live:
                 asyncio.run(watch.run(lambda: live.update(watch.render(), refresh=True)))
-    except KeyboardInterrupt:
-        pass
+    except KeyboardInterrupt as exc:
+        signum = signum_of(exc)
     except BaseExceptionGroup as group:  # the watch's TaskGroup: its one-line error, not a tree
         raise first_error(group) from None
     if not watch.connected_once:
         raise BrokerUnreachable(f"cannot reach the MQTT broker {url}: {watch.last_error}")
+    stopped = early_stop(signum, watch.started, args.duration)
     if args.json:
-        print(to_json(watch.snapshot()))
-    return 0
+        snapshot = watch.snapshot()
+        if stopped is not None:
+            snapshot["stopped"] = stopped.as_dict()
+        print(to_json(snapshot))
+    if stopped is not None:
+        print(f"monitor: {stopped.text()}", file=sys.stderr)
+    return 0 if stopped is None else stopped.exit_code
 
 
 class _FleetWatch:

@@ -25,10 +25,7 @@ from rich.console import Console
 from odocan.host.cli.options import add_robot_argument, check_log_path, float_in
 from odocan.host.cli.subparsers.analyze import log_inputs
 from odocan.host.io.buses import add_bus_arguments, open_bus
-from odocan.host.io.logs import (
-    FrameArrays,
-    read_log,
-)
+from odocan.host.io.logs import FrameArrays, read_log, warn_on_stderr
 from odocan.host.io.player import play
 from odocan.host.jsonutil import write_report
 from odocan.host.judge.replay import (
@@ -48,6 +45,7 @@ from odocan.host.report.ci import (
 )
 from odocan.host.report.progress import progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
+from odocan.host.stopped import EXIT_SIGNAL_BASE, stop_code
 from odocan.sim import contract, robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import INTEGRATORS
@@ -104,7 +102,12 @@ def _do_replay(args: argparse.Namespace) -> int:
                     ("--junit", args.junit)], [("LOG", args.log)])
     frames = read_log(args.log)
     feed = ReplayInput.from_log(frames)
-    integrator = args.integrator or logged_integrator(frames, feed.accepted) or "exact"
+    logged = logged_integrator(frames, feed.accepted)
+    integrator = args.integrator or logged or "exact"
+    if logged is not None and logged != integrator:  # a replay of another firmware: say so
+        warn_on_stderr(f"integrator mismatch: {args.log}'s ODOM_STATUS reports {logged}, "
+                       f"--integrator asks {integrator}: this replays a firmware other than "
+                       "the one that recorded it")
     analysis = replay_and_analyze(
         frames, feed, profile, integrator, tolerance=args.tolerance, log=args.log,
         log_out=args.log_out,
@@ -127,7 +130,8 @@ def _do_replay(args: argparse.Namespace) -> int:
             print(f"  - {reason}")
         code = 1
     write_checks(args, "replay", analysis_checks(analysis.report))
-    return code
+    stopped = analysis.report.get("stopped")
+    return code if stopped is None else stop_code(stopped)
 
 
 def _check_options(args: argparse.Namespace) -> None:
@@ -175,13 +179,13 @@ def _play_realtime(frames: FrameArrays, args: argparse.Namespace) -> int:
     start = time.monotonic()
     try:
         with progress(f"playing {len(selection)} frames", len(selection)) as bar:
-            sent, interrupted = play(bus, frames, selection, args.speed, bar)
+            sent, stopped_by = play(bus, frames, selection, args.speed, bar)
     finally:
         bus.shutdown()
     wall_s = time.monotonic() - start
-    print(f"replay: {'interrupted, ' if interrupted else ''}{sent} of {len(selection)} frames "
+    print(f"replay: {'interrupted, ' if stopped_by else ''}{sent} of {len(selection)} frames "
           f"played in {wall_s:.2f} s ({args.speed:g}x the recorded timing)")
-    return 0
+    return 0 if stopped_by is None else EXIT_SIGNAL_BASE + stopped_by
 
 
 def _selection(frames: FrameArrays, only: str | None) -> IntArray:

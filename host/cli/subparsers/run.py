@@ -61,6 +61,7 @@ from odocan.host.report.summary import (
     check_output_paths,
     finish,
 )
+from odocan.host.stopped import Stopped, signum_of
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
 from odocan.sim.cboard import board_maker
@@ -182,7 +183,7 @@ def _do_run(args: argparse.Namespace) -> int:
         title += f", {config.firmware} firmware"
     with foxglove_session(args, config.robot, config.integrator) as live:
         extra: list[can.Listener] = [] if live is None else [Isolated(live)]
-        analysis, log_error = _run_and_analyze(config, args, extra)
+        analysis, log_error, stopped = _run_and_analyze(config, args, extra)
         analysis.report["inputs"] = run_inputs(config, args.errors)
         code = finish(analysis, args, title=title)
     write_checks(args, "run", analysis_checks(analysis.report))
@@ -196,7 +197,7 @@ def _do_run(args: argparse.Namespace) -> int:
             raise OutputError(f"--latency-plot {path}: {exc.strerror or exc}") from None
     if log_error is not None:
         raise log_error
-    return code
+    return code if stopped is None else stopped.exit_code
 
 
 def check_latency_plot(path: Path | None, bitrate: int | None) -> None:
@@ -214,10 +215,11 @@ def check_latency_plot(path: Path | None, bitrate: int | None) -> None:
 
 def _run_and_analyze(
     config: RigConfig, args: argparse.Namespace, extra: list[can.Listener]
-) -> tuple[Analysis, OutputError | None]:
+) -> tuple[Analysis, OutputError | None, Stopped | None]:
     """Run the rig with its listeners (and ``extra``; the wall time measured around the run
     only) and analyse what the host heard. A log or an export that could not be finished is
-    returned, not raised, so that the summary is still printed."""
+    returned, not raised, so that the summary is still printed; so is the stop of a run a
+    signal ended early (in the report too: ``stopped``)."""
     collector = FrameCollector()
     listeners: list[can.Listener] = [collector, *extra]
     wants_mirror = args.interface is not None or args.channel is not None
@@ -234,7 +236,8 @@ def _run_and_analyze(
         wire = getattr(rig.host_bus, "timing", None)  # bit-timed: the wire's own records
         try:
             start = time.perf_counter()
-            _run(rig, rig.default_duration_s, None if trace is None else trace.record)
+            stopped = _run(rig, rig.default_duration_s,
+                           None if trace is None else trace.record)
             wall_s = time.perf_counter() - start
             still_queued = None if wire is None else busstats.pending_by_id(wire)
         finally:
@@ -258,6 +261,8 @@ def _run_and_analyze(
             seed=config.seed,
             wall_seconds=wall_s,
         )
+    if stopped is not None:
+        analysis.report["stopped"] = stopped.as_dict()
     if trace is not None and len(frames):
         analysis.series.update(trace.series(float(frames.timestamp_s[0])))
     if wire is not None:
@@ -267,17 +272,19 @@ def _run_and_analyze(
         write_exports(args, frames, analysis)
     except OutputError as exc:  # as a log: raised once the summary is out
         log_error = log_error or exc
-    return analysis, log_error
+    return analysis, log_error, stopped
 
 
 def _run(
     rig: LockstepRig, duration_s: float, on_tick: Callable[[], None] | None = None
-) -> None:
+) -> Stopped | None:
     """Step the rig for ``duration_s`` simulated seconds; SIGINT/SIGTERM stop it between two
-    ticks (a second signal, or any KeyboardInterrupt, at once), a progress line on a terminal."""
+    ticks (a second signal, or any KeyboardInterrupt, at once), a progress line on a terminal.
+    Returns how far it got when a signal stopped it before the end, else None."""
     total = round(duration_s / TICK_S)
     stop = StopRequest()
     done = 0
+    interrupt: KeyboardInterrupt | None = None
     with stop_on_signals(stop), progress(f"simulating {duration_s:g} s", total) as bar:
         try:
             while done < total:  # a check after the first tick, then every simulated second
@@ -288,10 +295,13 @@ def _run(
                     if stop.stop_requested:
                         break
                     bar.update(done - 1)
-        except KeyboardInterrupt:
-            pass
-    if rig.ticks < total:
-        print(f"interrupted after {rig.ticks * TICK_S:g} s simulated", file=sys.stderr)
+        except KeyboardInterrupt as exc:
+            interrupt = exc
+    if rig.ticks >= total:
+        return None
+    done_s = rig.ticks * TICK_S
+    print(f"interrupted after {done_s:g} s simulated", file=sys.stderr)
+    return Stopped(stop.signum or signum_of(interrupt), round(done_s, 6), duration_s)
 
 
 def _run_ticks(rig: LockstepRig, ticks: int, on_tick: Callable[[], None] | None) -> None:

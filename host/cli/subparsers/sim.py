@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 from odocan.host.cli.options import (
     add_duration_argument,
@@ -22,6 +23,7 @@ from odocan.host.cli.options import (
     check_duration,
 )
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
+from odocan.host.stopped import early_stop
 from odocan.sim import errors, robot
 from odocan.sim.motor_controller import SimNode
 from odocan.sim.realtime import PeriodicLoop, stop_on_signals
@@ -63,6 +65,7 @@ def _do_sim(args: argparse.Namespace) -> int:
         node = SimNode.build(
             bus, profile, loop.clock, scenario=args.scenario, seed=args.seed, errors=error_model
         )
+        started_s = time.monotonic()
         with stop_on_signals(loop):
             stats = loop.run(node.tick, args.duration)
     finally:
@@ -71,4 +74,8 @@ def _do_sim(args: argparse.Namespace) -> int:
         f"odocan sim: {node.frames_sent} frames sent ({node.tx_errors} refused), {stats.summary()}",
         file=sys.stderr,
     )
-    return 0
+    stopped = early_stop(loop.signum, started_s, args.duration)
+    if stopped is None:
+        return 0
+    print(f"odocan sim: {stopped.text()}", file=sys.stderr)
+    return stopped.exit_code

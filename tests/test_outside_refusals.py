@@ -1,0 +1,157 @@
+"""Bad input found from outside that was taken without a word; each now is one ``error: ...``
+line and exit 2, or a warning with a count, and every case here was accepted silently before its
+fix: a filter no frame can match, a sender no DBC node is, a negative bitrate, an ambiguous
+babble ID, a log whose times go back, garbage lines in an ``.asc``, a ``.blf`` cut short, and a
+replay with another integrator than the log's firmware ran."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from odocan.host.cli.app import main
+from odocan.host.io.logs import iter_log, read_log
+from odocan.sim.faultspec import FaultSpec
+
+
+def _one_error_line(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
+    code = main(argv)
+    out, err = capsys.readouterr()
+    assert code == 2, (out, err)
+    assert err.count("\n") == 1, err
+    assert err.startswith("error: "), err
+    return err
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """One 3 s drive logged as .log, .asc and .blf (the same frames)."""
+    out = tmp_path_factory.mktemp("drive")
+    logs = {suffix: out / f"drive{suffix}" for suffix in (".log", ".asc", ".blf")}
+    for path in logs.values():
+        assert main(["run", "--duration", "3", "--log", str(path)]) == 0
+    return logs
+
+
+def test_a_filter_beyond_29_bit_ids_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    err = _one_error_line(capsys, ["monitor", "-i", "virtual", "-c", "refusals",
+                                   "--filter", "0x800000000", "--duration", "0.1"])
+    assert "--filter 0x800000000: beyond the 29-bit CAN IDs" in err
+
+
+def test_busload_refuses_a_sender_that_is_no_node(capsys: pytest.CaptureFixture[str]) -> None:
+    err = _one_error_line(capsys, ["busload", "--add", "HOG:0x050:8:2:NOBODY"])
+    assert "NOBODY is no node of the DBC (HOST, MOTOR_CTRL, ODOM_MCU, SIM)" in err
+
+
+@pytest.mark.parametrize("command", [["monitor"], ["sim"], ["firmware"], ["bridge"]])
+@pytest.mark.parametrize("bitrate", ["-5", "0", "5000000000"])
+def test_a_live_bus_bitrate_out_of_range_is_refused(
+    command: list[str], bitrate: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    err = _one_error_line(capsys, [*command, "-i", "virtual", "-c", "refusals", "-b", bitrate,
+                                   "--duration", "0.1"])
+    assert f"argument -b/--bitrate: '{bitrate}': a CAN bitrate is 1 .. 1000000 bit/s" in err
+
+
+@pytest.mark.parametrize("text", ["0x900", "2304"])
+def test_a_babble_id_above_0x7ff_written_as_an_11_bit_one_is_refused(
+    text: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    err = _one_error_line(capsys, ["run", "--duration", "1", "--faults", f"babble=100:{text}"])
+    assert f"ID {text} is above 0x7FF, the largest 11-bit ID" in err
+    assert "0x00000900" in err
+
+
+def test_a_29_bit_babble_id_reads_back_from_its_own_text() -> None:
+    spec = FaultSpec.parse("babble=100:0x00000900")
+    assert spec.babble_id == 0x900
+    assert FaultSpec.parse(str(spec)) == spec  # printed with its 8 digits
+
+
+def _times_going_back(source: Path, target: Path) -> None:
+    """``source`` with frame 501's time one second back."""
+    lines = source.read_text().splitlines(keepends=True)
+    stamp = lines[500].split(")")[0][1:]
+    lines[500] = lines[500].replace(stamp, f"{float(stamp) - 1.0:.6f}", 1)
+    target.write_text("".join(lines))
+
+
+def test_a_log_whose_times_go_back_is_warned_with_a_count(
+    drive: dict[str, Path], tmp_path: Path
+) -> None:
+    path = tmp_path / "back.log"
+    _times_going_back(drive[".log"], path)
+    told: list[str] = []
+    frames = read_log(path, warn=told.append)
+    assert len(told) == 1, told
+    assert f"{path}: 1 frame of {len(frames)} earlier than the frame before (first: frame 501, "\
+        in told[0]
+    chunked: list[str] = []
+    assert sum(len(c) for c in iter_log(path, chunk_frames=7, warn=chunked.append)) == len(frames)
+    assert chunked == told
+    clean: list[str] = []
+    read_log(drive[".log"], warn=clean.append)
+    assert clean == []
+
+
+def test_analyze_says_once_that_times_go_back(
+    drive: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "back.log"
+    _times_going_back(drive[".log"], path)
+    main(["analyze", str(path), "--stream", "always"])
+    err = capsys.readouterr().err
+    assert err.count("earlier than the frame before") == 1, err
+
+
+def test_garbage_lines_in_an_asc_are_skipped_with_a_count(
+    drive: dict[str, Path], tmp_path: Path
+) -> None:
+    lines = drive[".asc"].read_text().splitlines(keepends=True)
+    lines.insert(300, "garbage here !!\n")  # python-can skipped it without a word
+    lines.insert(600, "   0.500000 1  1X0             Rx   d 8 zz zz 00 00 00 00 00 00\n")
+    path = tmp_path / "garbage.asc"
+    path.write_text("".join(lines))  # the second one stopped the whole read
+    told: list[str] = []
+    frames = read_log(path, warn=told.append)
+    assert told == [f"{path}: skipped 2 lines that are no ASC frame or event (first: line 301)"]
+    clean = read_log(drive[".asc"])
+    assert np.array_equal(frames.timestamp_s, clean.timestamp_s)
+    assert np.array_equal(frames.data, clean.data)
+    chunked: list[str] = []
+    assert sum(len(c) for c in iter_log(path, chunk_frames=64, warn=chunked.append)) == len(clean)
+    assert chunked == told
+
+
+def test_a_blf_cut_short_is_warned(drive: dict[str, Path], tmp_path: Path) -> None:
+    data = drive[".blf"].read_bytes()
+    path = tmp_path / "cut.blf"
+    path.write_bytes(data[: len(data) * 2 // 3])
+    told: list[str] = []
+    frames = read_log(path, warn=told.append)
+    assert 0 < len(frames) < len(read_log(drive[".blf"]))
+    assert len(told) == 1, told
+    assert told[0].startswith(f"{path}: cut short: {path.stat().st_size} of the {len(data)} "
+                              "bytes its header gives")
+    whole: list[str] = []
+    read_log(drive[".blf"], warn=whole.append)
+    assert whole == []
+    assert can.BLFReader(drive[".blf"]).file_size == len(data)
+
+
+def test_replay_names_an_integrator_other_than_the_logs(
+    drive: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    report = tmp_path / "replay.json"
+    main(["replay", str(drive[".log"]), "--integrator", "rk2", "--report", str(report)])
+    err = capsys.readouterr().err
+    assert (f"warning: integrator mismatch: {drive['.log']}'s ODOM_STATUS reports exact, "
+            "--integrator asks rk2") in err
+    assert json.loads(report.read_text())["integrator"] == "rk2"
+    main(["replay", str(drive[".log"]), "--integrator", "exact"])
+    assert "mismatch" not in capsys.readouterr().err
