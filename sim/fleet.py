@@ -9,6 +9,12 @@ frames are collected, tagged with the robot's index, for ``take_batch``: on the 
 transport as the ``(t, id, payload)`` tuples it queued (``sim.framebatch``; ``frame_fields``
 reads either kind), a tick's at once, without a ``can.Message`` per frame.
 
+Each robot's scenario drive runs ahead in blocks (``sim.lookahead``, ``FleetConfig.lookahead``:
+the same frames for less CPU). A block's work comes at once (~2 ms), so the first blocks run when
+the fleet is built, before any clock, and each robot's first block has its own length
+(``first_block_ticks``): the later blocks of a worker's robots fall on different ticks, one robot's
+block in a tick (two in a fleet of more than 143 robots), never all at once.
+
 ``run_realtime`` paces ``Fleet.step`` to the wall clock as one asyncio task: at each release
 ``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
 tick starting more than half a period after its release is late; releases a whole period or more
@@ -32,6 +38,7 @@ from odocan.sim.clock import RealTimeClock
 from odocan.sim.closing import Closing
 from odocan.sim.contract import cycle_ticks, database
 from odocan.sim.framebatch import DataFrame, FrameBatchListener, Received
+from odocan.sim.lookahead import BLOCK_TICKS, PlannedVehicle
 from odocan.sim.provision import robot_key
 from odocan.sim.realtime import DeadlineStats
 from odocan.sim.rig import LockstepRig, RigConfig
@@ -62,6 +69,7 @@ class FleetConfig:
     seed: int = 0
     transport: str = "odocan"  # the rigs' python-can interface (sim.rig.TRANSPORTS)
     firmware: str = "python"  # every board's firmware (sim.cboard.FIRMWARES): python or c
+    lookahead: bool = True  # the scenario drives run ahead in staggered blocks (sim.lookahead)
     first: int = 0  # fleet-wide index of this shard's first robot (names and seeds count on)
     # SecOC fleet key (None: no SecOC): each firmware gets its own key, sim.provision.robot_key
     secoc_key: bytes | None = field(default=None, repr=False)
@@ -115,6 +123,8 @@ class Fleet(Closing):
                     truth_phase_ticks=_truth_phase(config.first + i),
                     transport=config.transport,
                     firmware=config.firmware,
+                    lookahead=config.lookahead,
+                    first_block_ticks=first_block_ticks(config.first + i),
                     secoc_key=None if config.secoc_key is None
                     else robot_key(config.secoc_key, self.names[i]),
                 ),
@@ -122,6 +132,9 @@ class Fleet(Closing):
             )
             for i in range(config.robots)
         ]
+        for rig in self.rigs:  # every first block now, before any clock runs
+            if isinstance(rig.vehicle, PlannedVehicle):
+                rig.vehicle.start()
 
     def step(self, k: int) -> None:
         """Tick ``k`` of every robot (simulated time ``k * TICK_S``)."""
@@ -168,6 +181,17 @@ def _tick_offset(index: int) -> int:
     tick out of phase, so the pose, twist and MOTOR_CMD frames (every 2nd tick) of half the fleet
     fall on the other ticks. Each robot's own timeline is an ordinary rig's."""
     return index % 2
+
+
+BLOCK_STRIDE_TICKS = 7  # prime to BLOCK_TICKS' factors: robots' block ticks step by 7 (mod it)
+
+
+def first_block_ticks(index: int) -> int:
+    """The length (ticks, 1 .. ``BLOCK_TICKS``) of robot ``index``'s (fleet-wide) first block of
+    its drive run ahead: every later block starts ``BLOCK_TICKS`` after, so robots ``i`` and
+    ``i + 1`` start theirs 7 ticks (+/- their one tick of phase) apart, and no two of any 143
+    consecutive robots on the same tick."""
+    return BLOCK_TICKS - index * BLOCK_STRIDE_TICKS % BLOCK_TICKS
 
 
 def _truth_phase(index: int) -> int:

@@ -1,0 +1,47 @@
+"""The fleet runs its robots' drives ahead in blocks (``sim.lookahead``) without changing a byte,
+and spreads the blocks' work: the first ones before the clock, the later ones one robot a tick."""
+
+from __future__ import annotations
+
+from odocan.sim.fleet import Fleet, FleetConfig, frame_fields
+from odocan.sim.lookahead import BLOCK_TICKS, PlannedVehicle
+from odocan.sim.robot import load
+
+
+def fleet_frames(lookahead: bool, robots: int, ticks: int) -> list[object]:
+    """Every robot's frames (index, t, id, payload) of ``ticks`` fleet ticks."""
+    seen: list[object] = []
+    with Fleet(FleetConfig(robots=robots, robot=load("pmir"), lookahead=lookahead)) as fleet:
+        for k in range(ticks):
+            fleet.step(k)
+            seen.extend((i, frame_fields(frame)) for i, frame in fleet.take_batch())
+        for rig in fleet.rigs:
+            vehicle = rig.vehicle
+            assert isinstance(vehicle, PlannedVehicle) is lookahead
+            assert not isinstance(vehicle, PlannedVehicle) or not vehicle.fell_back  # it held
+    return seen
+
+
+def test_the_fleet_sends_the_same_frames_with_and_without_the_lookahead() -> None:
+    ticks = BLOCK_TICKS + 300  # past every robot's first block and into its second
+    with_blocks = fleet_frames(True, 5, ticks)
+    assert len(with_blocks) > 5 * ticks  # an encoder frame a tick at least
+    assert with_blocks == fleet_frames(False, 5, ticks)
+
+
+def test_the_blocks_run_before_the_clock_then_one_robot_a_tick() -> None:
+    robots = 24
+    with Fleet(FleetConfig(robots=robots, robot=load("pmir"))) as fleet:
+        vehicles = [rig.vehicle for rig in fleet.rigs]
+        assert all(isinstance(v, PlannedVehicle) for v in vehicles)
+        blocks = [v.blocks for v in vehicles]  # type: ignore[attr-defined]
+        assert blocks == [1] * robots  # the first ones when the fleet is built
+        per_tick = []
+        for k in range(BLOCK_TICKS + 2):  # every robot's second block starts in these ticks
+            fleet.step(k)
+            now = [v.blocks for v in vehicles]  # type: ignore[attr-defined]
+            per_tick.append(sum(b - a for a, b in zip(blocks, now, strict=True)))
+            blocks = now
+    assert blocks == [2] * robots
+    assert max(per_tick) == 1
+    assert per_tick[0] == 0  # the clock's first tick runs no block
