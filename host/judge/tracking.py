@@ -131,11 +131,8 @@ class PoseTracker:
             self._finish_boot(self._boot[0])
         if not self._unsettled:
             return
-        due = [(half.pos, name) for name, half in self._unsettled.items()
-               if t_s - half.t_s >= QUEUED_GAP_S]  # most frames: none (no sort, no generator)
-        if len(due) > 1:
-            due.sort()  # in the order heard
-        for _, name in due:
+        for _, name in sorted((half.pos, name) for name, half in self._unsettled.items()
+                              if t_s - half.t_s >= QUEUED_GAP_S):  # due, in the order heard
             self._settle(name)
 
     def on_encoders(self, counter: int, left: int, right: int, t_s: float) -> None:

@@ -416,19 +416,14 @@ def _check_message(
 
 
 class _Live:
-    """What ``E2EMonitor.check`` needs of a protected message heard: its configuration's
-    fields, its sequence state and the bus time of its previous frame (s; None: unknown)."""
+    """A protected message heard (``E2EMonitor.check``): its fields, state, last frame's time s."""
 
     __slots__ = ("cycle_s", "data_ids", "last_s", "length", "min_periods", "state")
 
-    def __init__(self, config: E2EMessage, state: SequenceState) -> None:
-        assert config.data_ids is not None
-        self.length = config.length
-        self.data_ids = config.data_ids
-        self.cycle_s = config.cycle_s
-        self.min_periods = config.min_periods
-        self.state = state
-        self.last_s: float | None = None
+    def __init__(self, config: E2EMessage, state: SequenceState, data_ids: tuple[int, ...],
+                 last_s: float | None) -> None:
+        self.length, self.data_ids, self.state = config.length, data_ids, state
+        self.cycle_s, self.min_periods, self.last_s = config.cycle_s, config.min_periods, last_s
 
 
 class E2EMonitor:
@@ -450,10 +445,8 @@ class E2EMonitor:
     def check(
         self, can_id: int, data: bytes, *, extended: bool = False, timestamp_s: float | None = None
     ) -> str:
-        """Judge one data frame (identifier, payload); count and return its status.
-
-        Runs per frame of every robot of a fleet: a message already heard with its DLC goes by
-        its ``_Live`` record (one lookup), the rest by ``_check_first``."""
+        """Judge one data frame (identifier, payload); count and return its status (a message
+        heard before, with its DLC, by its ``_Live``: one lookup a frame of a fleet's robots)."""
         live = self._live.get(frame_key(can_id, True) if extended else can_id)
         if live is None or len(data) != live.length:
             return self._check_first(frame_key(can_id, extended), data, timestamp_s)
@@ -467,8 +460,7 @@ class E2EMonitor:
         return live.state.check(crc_ok, counter, periods)
 
     def _check_first(self, key: int, data: bytes, timestamp_s: float | None) -> str:
-        """``check`` of a frame of a message not heard yet, of an unknown or unprotected one,
-        or with the wrong DLC; the first protected frame of a message makes its ``_Live``."""
+        """``check`` of a message not heard yet (makes its ``_Live``), unknown, or off its DLC."""
         config = self._configs.get(key)
         if config is None:
             self._unknown["unknown_id"] += 1
@@ -482,8 +474,7 @@ class E2EMonitor:
         state = self._states.get(key)
         if state is None:
             state = self._states[key] = SequenceState(config.max_delta_init)
-        live = self._live[key] = _Live(config, state)
-        live.last_s = timestamp_s  # the first frame: one period
+        self._live[key] = _Live(config, state, config.data_ids, timestamp_s)  # one period
         counter = data[1] & COUNTER_MASK
         crc_ok = crc8h2f_p02_one(data, config.data_ids[counter]) == data[0]
         return state.check(crc_ok, counter, 1)
