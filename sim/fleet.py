@@ -10,10 +10,11 @@ transport as the ``(t, id, payload)`` tuples it queued (``sim.framebatch``; ``fr
 reads either kind), a tick's at once, without a ``can.Message`` per frame.
 
 Each robot's scenario drive runs ahead in blocks (``sim.lookahead``, ``FleetConfig.lookahead``:
-the same frames for less CPU). A block's work comes at once (~2 ms), so the first blocks run when
-the fleet is built, before any clock, and each robot's first block has its own length
-(``first_block_ticks``): the later blocks of a worker's robots fall on different ticks, one robot's
-block in a tick (two in a fleet of more than 143 robots), never all at once.
+the same frames for less CPU). A block's work comes at once, so a fleet's blocks are short
+(``BLOCK_TICKS``: ~0.4 ms of CPU), the first blocks run when the fleet is built, before any clock,
+and each robot's first block has its own length (``first_block_ticks``): robot ``i``'s later
+blocks start on the fleet ticks ``i`` (mod ``BLOCK_TICKS``), one robot's block in a tick for
+up to ``BLOCK_TICKS`` robots, never all at once.
 
 ``run_realtime`` paces ``Fleet.step`` to the wall clock as one asyncio task: at each release
 ``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
@@ -38,7 +39,7 @@ from odocan.sim.clock import RealTimeClock
 from odocan.sim.closing import Closing
 from odocan.sim.contract import cycle_ticks, database
 from odocan.sim.framebatch import DataFrame, FrameBatchListener, Received
-from odocan.sim.lookahead import BLOCK_TICKS, PlannedVehicle
+from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.provision import robot_key
 from odocan.sim.realtime import DeadlineStats
 from odocan.sim.rig import LockstepRig, RigConfig
@@ -124,6 +125,7 @@ class Fleet(Closing):
                     transport=config.transport,
                     firmware=config.firmware,
                     lookahead=config.lookahead,
+                    block_ticks=BLOCK_TICKS,
                     first_block_ticks=first_block_ticks(config.first + i),
                     secoc_key=None if config.secoc_key is None
                     else robot_key(config.secoc_key, self.names[i]),
@@ -183,15 +185,14 @@ def _tick_offset(index: int) -> int:
     return index % 2
 
 
-BLOCK_STRIDE_TICKS = 7  # prime to BLOCK_TICKS' factors: robots' block ticks step by 7 (mod it)
+BLOCK_TICKS = 100  # a fleet's blocks run ahead (sim.lookahead: ~4 us of CPU a tick, at once)
 
 
 def first_block_ticks(index: int) -> int:
     """The length (ticks, 1 .. ``BLOCK_TICKS``) of robot ``index``'s (fleet-wide) first block of
-    its drive run ahead: every later block starts ``BLOCK_TICKS`` after, so robots ``i`` and
-    ``i + 1`` start theirs 7 ticks (+/- their one tick of phase) apart, and no two of any 143
-    consecutive robots on the same tick."""
-    return BLOCK_TICKS - index * BLOCK_STRIDE_TICKS % BLOCK_TICKS
+    its drive run ahead, such that its later blocks start on the fleet ticks ``index`` (mod
+    ``BLOCK_TICKS``): its own tick plus its phase (``_tick_offset``)."""
+    return (index - _tick_offset(index) - 1) % BLOCK_TICKS + 1
 
 
 def _truth_phase(index: int) -> int:

@@ -3,8 +3,8 @@ and spreads the blocks' work: the first ones before the clock, the later ones on
 
 from __future__ import annotations
 
-from odocan.sim.fleet import Fleet, FleetConfig, frame_fields
-from odocan.sim.lookahead import BLOCK_TICKS, PlannedVehicle
+from odocan.sim.fleet import BLOCK_TICKS, Fleet, FleetConfig, frame_fields
+from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.robot import load
 
 
