@@ -134,16 +134,25 @@ class Fleet(Closing):
             )
             for i in range(config.robots)
         ]
-        for rig in self.rigs:  # every first block now, before any clock runs
-            if isinstance(rig.vehicle, PlannedVehicle):
-                rig.vehicle.start()
+        self._planned = [rig.vehicle if isinstance(rig.vehicle, PlannedVehicle) else None
+                         for rig in self.rigs]
+        for vehicle in self._planned:  # every first block now, before any clock runs
+            if vehicle is not None:
+                vehicle.start()
 
     def step(self, k: int) -> None:
-        """Tick ``k`` of every robot (simulated time ``k * TICK_S``)."""
+        """Tick ``k`` of every robot (simulated time ``k * TICK_S``). A robot whose drive fell
+        back from running ahead (ticks skipped: its predicted commands never came) runs ahead
+        again from its next block tick (``PlannedVehicle.replan``)."""
         first = self.config.first
+        planned = self._planned
         for index, rig in enumerate(self.rigs):
             own_k = k - _tick_offset(first + index)
             if own_k >= 0:
+                vehicle = planned[index]
+                if vehicle is not None and vehicle.fell_back \
+                        and (k - first - index) % BLOCK_TICKS == 0:
+                    vehicle.replan(own_k * TICK_S, BLOCK_TICKS)
                 rig.ticks = own_k
                 rig.step()
 

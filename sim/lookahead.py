@@ -113,6 +113,20 @@ class PlannedVehicle(Vehicle):
             return False
         return self._start_first(self.drivetrain.substep / self.substep_hz)
 
+    def replan(self, t_s: float, first_block_ticks: int) -> bool:
+        """After a fall back (e.g. a real-time loop skipped ticks, so predicted commands never
+        came): run ahead again from the rig's next tick, at ``t_s``, before any of its calls,
+        the first block ``first_block_ticks`` long. The plain vehicle advances to ``t_s`` and
+        syncs its truth first (as its own calls would: not a bit changes). False when it cannot
+        (it did not fall back, no forecast, off the tick grid: a plain ``Vehicle`` still)."""
+        if not self.fell_back or self._forecast is None:
+            return False
+        Vehicle.advance_to(self, t_s)
+        self._sync_truth()
+        self.fell_back = False
+        self._first_block_ticks = first_block_ticks
+        return self._start_first(t_s)
+
     # --- the rig's calls ----------------------------------------------------------------------
 
     @property

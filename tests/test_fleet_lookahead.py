@@ -45,3 +45,24 @@ def test_the_blocks_run_before_the_clock_then_one_robot_a_tick() -> None:
     assert blocks == [2] * robots
     assert max(per_tick) == 1
     assert per_tick[0] == 0  # the clock's first tick runs no block
+
+
+def skipping_frames(lookahead: bool, robots: int) -> tuple[list[object], list[int]]:
+    """Frames of a fleet whose loop skips ticks 150-152 (a release a whole period late: the
+    robots' predicted commands of those ticks never come), and each drive's blocks run."""
+    seen: list[object] = []
+    with Fleet(FleetConfig(robots=robots, robot=load("pmir"), lookahead=lookahead)) as fleet:
+        for k in [*range(150), *range(153, 2 * BLOCK_TICKS + 200)]:
+            fleet.step(k)
+            seen.extend((i, frame_fields(frame)) for i, frame in fleet.take_batch())
+        vehicles = [rig.vehicle for rig in fleet.rigs]
+        blocks = [v.blocks if isinstance(v, PlannedVehicle) else 0 for v in vehicles]
+        assert not any(isinstance(v, PlannedVehicle) and v.fell_back for v in vehicles)
+    return seen, blocks
+
+
+def test_after_skipped_ticks_the_drives_run_ahead_again_with_the_same_frames() -> None:
+    with_blocks, blocks = skipping_frames(True, 4)
+    # before the skip: the first block and one or two more; after it: every 100 ticks again
+    assert min(blocks) >= (2 * BLOCK_TICKS + 200 - 150) // BLOCK_TICKS + 1
+    assert with_blocks == skipping_frames(False, 4)[0]
