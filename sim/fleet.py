@@ -139,18 +139,25 @@ class Fleet(Closing):
         for vehicle in self._planned:  # every first block now, before any clock runs
             if vehicle is not None:
                 vehicle.start()
+        self._last_k = -1  # the latest tick stepped
+        self._calm_since = 0  # the first tick stepped after the latest skip
 
     def step(self, k: int) -> None:
         """Tick ``k`` of every robot (simulated time ``k * TICK_S``). A robot whose drive fell
         back from running ahead (ticks skipped: its predicted commands never came) runs ahead
-        again from its next block tick (``PlannedVehicle.replan``)."""
+        again from its next block tick (``PlannedVehicle.replan``) once ``BLOCK_TICKS`` ticks
+        ran without a skip: a loop that keeps skipping would pay blocks and fall backs for
+        nothing."""
+        if k != self._last_k + 1:
+            self._calm_since = k
+        self._last_k = k
         first = self.config.first
-        planned = self._planned
+        planned, calm = self._planned, k - self._calm_since >= BLOCK_TICKS
         for index, rig in enumerate(self.rigs):
             own_k = k - _tick_offset(first + index)
             if own_k >= 0:
                 vehicle = planned[index]
-                if vehicle is not None and vehicle.fell_back \
+                if calm and vehicle is not None and vehicle.fell_back \
                         and (k - first - index) % BLOCK_TICKS == 0:
                     vehicle.replan(own_k * TICK_S, BLOCK_TICKS)
                 rig.ticks = own_k

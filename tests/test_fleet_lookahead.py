@@ -66,3 +66,22 @@ def test_after_skipped_ticks_the_drives_run_ahead_again_with_the_same_frames() -
     # before the skip: the first block and one or two more; after it: every 100 ticks again
     assert min(blocks) >= (2 * BLOCK_TICKS + 200 - 150) // BLOCK_TICKS + 1
     assert with_blocks == skipping_frames(False, 4)[0]
+
+
+def test_a_loop_that_keeps_skipping_does_not_plan_again_and_again() -> None:
+    """Two releases skipped every 30 ticks: a new plan would miss again before its block ends, so
+    the drives stay plain until the loop has run a block's ticks without a skip."""
+    with Fleet(FleetConfig(robots=3, robot=load("pmir"))) as fleet:
+        vehicles = [rig.vehicle for rig in fleet.rigs]
+        blocks: list[int] = []
+        for k in [k for k in range(6 * BLOCK_TICKS) if k % 30 not in (28, 29)]:
+            if k == 30:  # the first skip was just before: the blocks run so far
+                blocks = [v.blocks for v in vehicles]  # type: ignore[attr-defined]
+            fleet.step(k)
+            fleet.take_batch()
+        assert all(isinstance(v, PlannedVehicle) and v.fell_back for v in vehicles)
+        assert [v.blocks for v in vehicles] == blocks  # type: ignore[attr-defined]
+        for k in range(6 * BLOCK_TICKS, 8 * BLOCK_TICKS):  # calm again: planned again
+            fleet.step(k)
+            fleet.take_batch()
+        assert not any(v.fell_back for v in vehicles)  # type: ignore[attr-defined]
