@@ -78,7 +78,7 @@ def main() -> int:
     parser.add_argument("--ticks", type=int, default=600)
     parser.add_argument("--repeat", type=int, default=1)
     args = parser.parse_args()
-    sim_fleet.RealTimeClock = NeverLate  # type: ignore[misc, assignment]
+    sim_fleet.RealTimeClock = NeverLate  # type: ignore[attr-defined, assignment]
     for _ in range(args.repeat):
         print(one_run(args.robots, args.ticks), flush=True)
     return 0
