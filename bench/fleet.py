@@ -13,6 +13,9 @@ robots per core is about 10 000 / (us per robot-tick).
     .venv/bin/python bench/fleet.py --robots 50,75,100 --workers 2 --broker mosquitto \
         --trial-s 20 [--repeat 2]     # a sweep, unattended, ends with one table
 
+``--lookahead off`` runs the robots' drives tick by tick instead of ahead in staggered blocks
+(``sim.lookahead``, the fleet's default): a pair of sweeps shows what the blocks save.
+
 ``--robots`` (or ``--fixed``) replaces the search by one trial per size; the table's "2 cores"
 column is 20 000 us / (fleet + bridge + broker CPU per robot-tick): what two idle cores would
 hold at the trial's measured cost (the steadier figure on a shared machine).
@@ -41,6 +44,7 @@ from odocan.sim import robot
 from odocan.sim.fleet import FleetConfig
 
 LIMIT = 0.001
+OPTIONS = argparse.Namespace(lookahead=True)  # FleetConfig.lookahead of every trial (--lookahead)
 TICKS_PER_S = os.sysconf("SC_CLK_TCK")
 
 
@@ -58,7 +62,9 @@ def proc_cpu_s(pid: int | None) -> float:
 def trial(n: int, seconds: float, bridge: bool, broker: BrokerURL | None, workers: int,
           broker_pid: int | None) -> dict[str, Any]:
     """One run of ``n`` robots; prints its figures and returns them (a row of the table)."""
-    run = FleetRun(fleet=FleetConfig(robots=n, robot=robot.load("pmir")), duration_s=seconds,
+    run = FleetRun(fleet=FleetConfig(robots=n, robot=robot.load("pmir"),
+                                     lookahead=OPTIONS.lookahead),
+                   duration_s=seconds,
                    bridge=bridge, broker=broker, client_prefix=f"bench-{n}-{time.time_ns()}")
     broker0 = proc_cpu_s(broker_pid)
     report = run_sharded(run, min(workers, n)) if bridge else asyncio.run(run_fleet(run))
@@ -134,7 +140,7 @@ def cpu_cost_us(n: int = 10, ticks: int = 300) -> tuple[float, float]:
 
     p = robot.load("pmir")
     geometry = Geometry.of(p)
-    with Fleet(FleetConfig(robots=n, robot=p)) as fleet:
+    with Fleet(FleetConfig(robots=n, robot=p, lookahead=OPTIONS.lookahead)) as fleet:
         telemetry = [RobotTelemetry(name, geometry, "exact", counter_bits=p.counter_bits)
                      for name in fleet.names]
         step_s = bridge_s = 0.0
@@ -168,11 +174,15 @@ def main() -> None:
                         "fleet without a bridge)")
     parser.add_argument("--repeat", type=int, default=1, metavar="R",
                         help="with --robots/--fixed: run each size R times (default: 1)")
+    parser.add_argument("--lookahead", choices=("on", "off"), default="on",
+                        help="the robots' drives ahead in staggered blocks (default: on)")
     args = parser.parse_args()
+    OPTIONS.lookahead = args.lookahead == "on"
     sweep = [n for n in (args.robots or []) + (args.fixed or []) for _ in range(args.repeat)]
     rows: list[tuple[str, dict[str, Any]]] = []
     print(f"fleet bench: {os.cpu_count()} CPUs, {args.trial_s:.0f} s per trial, "
-          f"limit deadline_miss_ratio <= {LIMIT}, {args.workers} workers, "
+          f"limit deadline_miss_ratio <= {LIMIT}, {args.workers} workers, lookahead "
+          f"{args.lookahead}, "
           f"load {os.getloadavg()[0]:.2f}")
     step_us, bridge_us = cpu_cost_us()
     print(f"CPU per robot and 10 ms tick, in process: step {step_us:.0f} us, bridge frame "

@@ -9,6 +9,13 @@ frames are collected, tagged with the robot's index, for ``take_batch``: on the 
 transport as the ``(t, id, payload)`` tuples it queued (``sim.framebatch``; ``frame_fields``
 reads either kind), a tick's at once, without a ``can.Message`` per frame.
 
+Each robot's scenario drive runs ahead in blocks (``sim.lookahead``, ``FleetConfig.lookahead``:
+the same frames for less CPU). A block's work comes at once, so a fleet's blocks are short
+(``BLOCK_TICKS``: ~0.4 ms of CPU), the first blocks run when the fleet is built, before any clock,
+and each robot's first block has its own length (``first_block_ticks``): robot ``i``'s later
+blocks start on the fleet ticks ``i`` (mod ``BLOCK_TICKS``), one robot's block in a tick for
+up to ``BLOCK_TICKS`` robots, never all at once.
+
 ``run_realtime`` paces ``Fleet.step`` to the wall clock as one asyncio task: at each release
 ``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
 tick starting more than half a period after its release is late; releases a whole period or more
@@ -32,6 +39,7 @@ from odocan.sim.clock import RealTimeClock
 from odocan.sim.closing import Closing
 from odocan.sim.contract import cycle_ticks, database
 from odocan.sim.framebatch import DataFrame, FrameBatchListener, Received
+from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.provision import robot_key
 from odocan.sim.realtime import DeadlineStats
 from odocan.sim.rig import LockstepRig, RigConfig
@@ -62,6 +70,7 @@ class FleetConfig:
     seed: int = 0
     transport: str = "odocan"  # the rigs' python-can interface (sim.rig.TRANSPORTS)
     firmware: str = "python"  # every board's firmware (sim.cboard.FIRMWARES): python or c
+    lookahead: bool = True  # the scenario drives run ahead in staggered blocks (sim.lookahead)
     first: int = 0  # fleet-wide index of this shard's first robot (names and seeds count on)
     # SecOC fleet key (None: no SecOC): each firmware gets its own key, sim.provision.robot_key
     secoc_key: bytes | None = field(default=None, repr=False)
@@ -115,6 +124,9 @@ class Fleet(Closing):
                     truth_phase_ticks=_truth_phase(config.first + i),
                     transport=config.transport,
                     firmware=config.firmware,
+                    lookahead=config.lookahead,
+                    block_ticks=BLOCK_TICKS,
+                    first_block_ticks=first_block_ticks(config.first + i),
                     secoc_key=None if config.secoc_key is None
                     else robot_key(config.secoc_key, self.names[i]),
                 ),
@@ -122,13 +134,32 @@ class Fleet(Closing):
             )
             for i in range(config.robots)
         ]
+        self._planned = [rig.vehicle if isinstance(rig.vehicle, PlannedVehicle) else None
+                         for rig in self.rigs]
+        for vehicle in self._planned:  # every first block now, before any clock runs
+            if vehicle is not None:
+                vehicle.start()
+        self._last_k = -1  # the latest tick stepped
+        self._calm_since = 0  # the first tick stepped after the latest skip
 
     def step(self, k: int) -> None:
-        """Tick ``k`` of every robot (simulated time ``k * TICK_S``)."""
+        """Tick ``k`` of every robot (simulated time ``k * TICK_S``). A robot whose drive fell
+        back from running ahead (ticks skipped: its predicted commands never came) runs ahead
+        again from its next block tick (``PlannedVehicle.replan``) once ``BLOCK_TICKS`` ticks
+        ran without a skip: a loop that keeps skipping would pay blocks and fall backs for
+        nothing."""
+        if k != self._last_k + 1:
+            self._calm_since = k
+        self._last_k = k
         first = self.config.first
+        planned, calm = self._planned, k - self._calm_since >= BLOCK_TICKS
         for index, rig in enumerate(self.rigs):
             own_k = k - _tick_offset(first + index)
             if own_k >= 0:
+                vehicle = planned[index]
+                if calm and vehicle is not None and vehicle.fell_back \
+                        and (k - first - index) % BLOCK_TICKS == 0:
+                    vehicle.replan(own_k * TICK_S, BLOCK_TICKS)
                 rig.ticks = own_k
                 rig.step()
 
@@ -168,6 +199,16 @@ def _tick_offset(index: int) -> int:
     tick out of phase, so the pose, twist and MOTOR_CMD frames (every 2nd tick) of half the fleet
     fall on the other ticks. Each robot's own timeline is an ordinary rig's."""
     return index % 2
+
+
+BLOCK_TICKS = 100  # a fleet's blocks run ahead (sim.lookahead: ~4 us of CPU a tick, at once)
+
+
+def first_block_ticks(index: int) -> int:
+    """The length (ticks, 1 .. ``BLOCK_TICKS``) of robot ``index``'s (fleet-wide) first block of
+    its drive run ahead, such that its later blocks start on the fleet ticks ``index`` (mod
+    ``BLOCK_TICKS``): its own tick plus its phase (``_tick_offset``)."""
+    return (index - _tick_offset(index) - 1) % BLOCK_TICKS + 1
 
 
 def _truth_phase(index: int) -> int:

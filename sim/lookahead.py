@@ -20,7 +20,10 @@ calls actually made since, then carries on as a plain ``Vehicle``. A forecast ca
 never a bit: the encoder counts and poses are those of the plain vehicle, call for call.
 
 A block's work comes at once (~2 ms for 500 ticks): the rig uses it when asked
-(``RigConfig(lookahead=True)``: ``odocan run``, ``bench/rig.py``), never in real time (the fleet).
+(``RigConfig(lookahead=True)``: ``odocan run``, ``bench/rig.py``). In real time (the fleet)
+the blocks are shorter (``plan(block_ticks=...)``: a block's CPU is nearly all per tick), the
+first is run before the clock starts (``start``) and its length differs per robot
+(``first_block_ticks``), so the robots' later blocks fall on different ticks.
 """
 
 from __future__ import annotations
@@ -82,14 +85,47 @@ class PlannedVehicle(Vehicle):
         self._start_s = 0.0
         self._block: _Block | None = None
         self._next_tick = 0  # the first tick of the next block
+        self._block_ticks = BLOCK_TICKS  # a block's length (ticks)
+        self._first_block_ticks = BLOCK_TICKS  # the first block's
+        self.blocks = 0  # blocks run ahead so far
         self._now = 0  # the substep the rig has reached (the drivetrain runs ahead)
         self._checkpoint: tuple[Any, ...] = ()
         self._calls: list[_Call] = []  # the rig's calls since the block's start
         self.fell_back = False  # the forecast missed once: a plain Vehicle since
 
-    def plan(self, forecast: Forecast, tick_s: float, start_s: float = 0.0) -> None:
-        """Run ahead from now on with ``forecast``; ticks every ``tick_s`` from ``start_s``."""
+    def plan(self, forecast: Forecast, tick_s: float, start_s: float = 0.0, *,
+             block_ticks: int = BLOCK_TICKS, first_block_ticks: int | None = None) -> None:
+        """Run ahead from now on with ``forecast``; ticks every ``tick_s`` from ``start_s``, in
+        blocks of ``block_ticks`` ticks, the first of ``first_block_ticks`` (None: the same).
+        A block costs ~3.5-4 us of CPU a tick: shorter blocks, smaller bursts (real time)."""
+        first = block_ticks if first_block_ticks is None else first_block_ticks
+        if min(block_ticks, first) < 1:
+            raise ValueError(f"a block runs at least one tick, got {min(block_ticks, first)}")
         self._forecast, self._tick_s, self._start_s = forecast, tick_s, start_s
+        self._block_ticks, self._first_block_ticks = block_ticks, first
+
+    def start(self) -> bool:
+        """Run the first block now, from the tick the vehicle stands at (``start_s`` when it has
+        not moved), instead of at the rig's first call: a real-time loop does it before its
+        clock starts. False (a plain ``Vehicle`` from now) when it cannot (no forecast, off the
+        tick grid, already running)."""
+        if self._block is not None or self.fell_back or self._forecast is None:
+            return False
+        return self._start_first(self.drivetrain.substep / self.substep_hz)
+
+    def replan(self, t_s: float, first_block_ticks: int) -> bool:
+        """After a fall back (e.g. a real-time loop skipped ticks, so predicted commands never
+        came): run ahead again from the rig's next tick, at ``t_s``, before any of its calls,
+        the first block ``first_block_ticks`` long. The plain vehicle advances to ``t_s`` and
+        syncs its truth first (as its own calls would: not a bit changes). False when it cannot
+        (it did not fall back, no forecast, off the tick grid: a plain ``Vehicle`` still)."""
+        if not self.fell_back or self._forecast is None:
+            return False
+        Vehicle.advance_to(self, t_s)
+        self._sync_truth()
+        self.fell_back = False
+        self._first_block_ticks = first_block_ticks
+        return self._start_first(t_s)
 
     # --- the rig's calls ----------------------------------------------------------------------
 
@@ -220,7 +256,7 @@ class PlannedVehicle(Vehicle):
             if block.next_command < len(block.commands):
                 self._fall_back()
                 return None
-            self._start_block()
+            self._start_block(self._block_ticks)
             block = self._block
             assert block is not None
         return block, n
@@ -243,11 +279,11 @@ class PlannedVehicle(Vehicle):
             return False
         self._next_tick = tick
         self._now = at
-        self._start_block()
+        self._start_block(self._first_block_ticks)
         return True
 
-    def _start_block(self) -> None:
-        """Run the next ``BLOCK_TICKS`` ticks with the forecast's commands, then their truth."""
+    def _start_block(self, ticks: int) -> None:
+        """Run the next ``ticks`` ticks with the forecast's commands, then their truth."""
         assert self._forecast is not None
         self._checkpoint = self._snapshot()
         self._calls = []
@@ -257,7 +293,7 @@ class PlannedVehicle(Vehicle):
         advance, counts, hz = drivetrain.advance, drivetrain.encoder_counts, self.substep_hz
         floor = math.floor
         first = self._next_tick
-        for k in range(first, first + BLOCK_TICKS):  # Vehicle.command and advance_to, unchecked
+        for k in range(first, first + ticks):  # Vehicle.command and advance_to, unchecked
             t_s = start_s + k * tick_s
             n = floor(t_s * hz + _TIME_EPS)  # _grid_substep: t_s is finite here
             advance(n)
@@ -278,8 +314,9 @@ class PlannedVehicle(Vehicle):
             truth = self._truth
             block.folds = np.array([[truth.x_m], [truth.y_m], [truth.distance_m]])
             block.heading = np.array([truth.heading_unwrapped_rad])
-        self._next_tick = first + BLOCK_TICKS
+        self._next_tick = first + ticks
         self._block = block
+        self.blocks += 1
 
     def _snapshot(self) -> tuple[Any, ...]:
         """What the block changes: the drivetrain's state, the truth's, the noise generator's."""

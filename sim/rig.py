@@ -46,7 +46,7 @@ from odocan.sim.closing import Closing, release_all
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import DEFAULT_BITRATE, FaultInjectingBus, FaultSpec
-from odocan.sim.lookahead import PlannedVehicle
+from odocan.sim.lookahead import BLOCK_TICKS, PlannedVehicle
 from odocan.sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import get_scenario
@@ -92,8 +92,13 @@ class RigConfig:
     firmware: str = "python"  # "python": firmware/, "c": firmware/c (sim.cboard)
     secoc_key: bytes | None = field(default=None, repr=False)  # SecOC key (None: none); secret
     # A scenario's open-loop drive run ahead in blocks (sim.lookahead): the same frames, less CPU,
-    # but a block's ~2 ms come at once: for a rig run flat out (odocan run), not in real time.
+    # but a block's CPU (~3.5-4 us a tick: ~1.8 ms for 500) comes at once: a rig run flat out
+    # (odocan run), or a fleet with short blocks that runs every robot's first one before its
+    # clock starts (PlannedVehicle.start) and staggers the later ones by giving each robot's first
+    # block its own length (ticks)
     lookahead: bool = False
+    block_ticks: int = BLOCK_TICKS  # a block's length (ticks)
+    first_block_ticks: int | None = None  # the first block's (None: block_ticks)
 
 
 def _check_bitrate(config: RigConfig) -> None:
@@ -156,7 +161,8 @@ class LockstepRig(Closing):
             sim_bus, vehicle, self.clock, scenario, truth_phase_ticks=config.truth_phase_ticks
         )
         if isinstance(vehicle, PlannedVehicle):  # the clock of tick k: 0.0 + k * TICK_S
-            vehicle.plan(self.sim.planned_command, TICK_S)
+            vehicle.plan(self.sim.planned_command, TICK_S, block_ticks=config.block_ticks,
+                         first_block_ticks=config.first_block_ticks)
         self.board = make_board(fw_bus, params, self.clock, None, secoc_key=config.secoc_key)
         self.loop = TickLoop(self._work, self.host_bus, list(listeners), self.clock)
 

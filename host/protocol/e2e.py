@@ -415,6 +415,17 @@ def _check_message(
 # --- live -------------------------------------------------------------------------------------
 
 
+class _Live:
+    """A protected message heard (``E2EMonitor.check``): its fields, state, last frame's time s."""
+
+    __slots__ = ("cycle_s", "data_ids", "last_s", "length", "min_periods", "state")
+
+    def __init__(self, config: E2EMessage, state: SequenceState, data_ids: tuple[int, ...],
+                 last_s: float | None) -> None:
+        self.length, self.data_ids, self.state = config.length, data_ids, state
+        self.cycle_s, self.min_periods, self.last_s = config.cycle_s, config.min_periods, last_s
+
+
 class E2EMonitor:
     """The same rules, one frame at a time, for live monitoring.
 
@@ -428,14 +439,28 @@ class E2EMonitor:
     def __init__(self, db: DatabaseSpec | None = None) -> None:
         self._configs = e2e_messages(db if db is not None else contract.database())
         self._states: dict[int, SequenceState] = {}
-        self._last_time: dict[int, float] = {}
+        self._live: dict[int, _Live] = {}  # protected messages heard: what ``check`` needs
         self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
 
     def check(
         self, can_id: int, data: bytes, *, extended: bool = False, timestamp_s: float | None = None
     ) -> str:
-        """Judge one data frame (identifier, payload); count and return its status."""
-        key = frame_key(can_id, extended)
+        """Judge one data frame (identifier, payload); count and return its status (a message
+        heard before, with its DLC, by its ``_Live``: one lookup a frame of a fleet's robots)."""
+        live = self._live.get(frame_key(can_id, True) if extended else can_id)
+        if live is None or len(data) != live.length:
+            return self._check_first(frame_key(can_id, extended), data, timestamp_s)
+        periods = 1
+        if timestamp_s is not None:
+            last, live.last_s = live.last_s, timestamp_s
+            if last is not None:
+                periods = period_count(timestamp_s - last, live.cycle_s, live.min_periods)
+        counter = data[1] & COUNTER_MASK
+        crc_ok = crc8h2f_p02_one(data, live.data_ids[counter]) == data[0]
+        return live.state.check(crc_ok, counter, periods)
+
+    def _check_first(self, key: int, data: bytes, timestamp_s: float | None) -> str:
+        """``check`` of a message not heard yet (makes its ``_Live``), unknown, or off its DLC."""
         config = self._configs.get(key)
         if config is None:
             self._unknown["unknown_id"] += 1
@@ -446,13 +471,13 @@ class E2EMonitor:
         if config.data_ids is None:
             self._unknown["unprotected"] += 1
             return UNPROTECTED
-        periods = self._periods(key, config, timestamp_s)
+        state = self._states.get(key)
+        if state is None:
+            state = self._states[key] = SequenceState(config.max_delta_init)
+        self._live[key] = _Live(config, state, config.data_ids, timestamp_s)  # one period
         counter = data[1] & COUNTER_MASK
         crc_ok = crc8h2f_p02_one(data, config.data_ids[counter]) == data[0]
-        state = self._states.get(key)
-        if state is None:  # not setdefault: it would build a state (and its counts) per frame
-            state = self._states[key] = SequenceState(config.max_delta_init)
-        return state.check(crc_ok, counter, periods)
+        return state.check(crc_ok, counter, 1)
 
     def restart_sequence(self, can_id: int, *, extended: bool = False) -> None:
         """The sender of this message restarted (a reboot: its COUNTER starts again): its next
@@ -460,15 +485,6 @@ class E2EMonitor:
         state = self._states.get(frame_key(can_id, extended))
         if state is not None:
             state.waiting = True
-
-    def _periods(self, key: int, config: E2EMessage, timestamp_s: float | None) -> int:
-        if timestamp_s is None:
-            return 1
-        last = self._last_time.get(key)
-        self._last_time[key] = timestamp_s
-        if last is None:
-            return 1
-        return period_count(timestamp_s - last, config.cycle_s, config.min_periods)
 
     def count_frame_kind(self, *, error: bool = False, remote: bool = False) -> None:
         """Count an error or remote frame (they are never checked)."""

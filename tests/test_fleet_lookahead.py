@@ -1,0 +1,87 @@
+"""The fleet runs its robots' drives ahead in blocks (``sim.lookahead``) without changing a byte,
+and spreads the blocks' work: the first ones before the clock, the later ones one robot a tick."""
+
+from __future__ import annotations
+
+from odocan.sim.fleet import BLOCK_TICKS, Fleet, FleetConfig, frame_fields
+from odocan.sim.lookahead import PlannedVehicle
+from odocan.sim.robot import load
+
+
+def fleet_frames(lookahead: bool, robots: int, ticks: int) -> list[object]:
+    """Every robot's frames (index, t, id, payload) of ``ticks`` fleet ticks."""
+    seen: list[object] = []
+    with Fleet(FleetConfig(robots=robots, robot=load("pmir"), lookahead=lookahead)) as fleet:
+        for k in range(ticks):
+            fleet.step(k)
+            seen.extend((i, frame_fields(frame)) for i, frame in fleet.take_batch())
+        for rig in fleet.rigs:
+            vehicle = rig.vehicle
+            assert isinstance(vehicle, PlannedVehicle) is lookahead
+            assert not isinstance(vehicle, PlannedVehicle) or not vehicle.fell_back  # it held
+    return seen
+
+
+def test_the_fleet_sends_the_same_frames_with_and_without_the_lookahead() -> None:
+    ticks = BLOCK_TICKS + 300  # past every robot's first block and into its second
+    with_blocks = fleet_frames(True, 5, ticks)
+    assert len(with_blocks) > 5 * ticks  # an encoder frame a tick at least
+    assert with_blocks == fleet_frames(False, 5, ticks)
+
+
+def test_the_blocks_run_before_the_clock_then_one_robot_a_tick() -> None:
+    robots = 24
+    with Fleet(FleetConfig(robots=robots, robot=load("pmir"))) as fleet:
+        vehicles = [rig.vehicle for rig in fleet.rigs]
+        assert all(isinstance(v, PlannedVehicle) for v in vehicles)
+        blocks = [v.blocks for v in vehicles]  # type: ignore[attr-defined]
+        assert blocks == [1] * robots  # the first ones when the fleet is built
+        per_tick = []
+        for k in range(BLOCK_TICKS + 2):  # every robot's second block starts in these ticks
+            fleet.step(k)
+            now = [v.blocks for v in vehicles]  # type: ignore[attr-defined]
+            per_tick.append(sum(b - a for a, b in zip(blocks, now, strict=True)))
+            blocks = now
+    assert blocks == [2] * robots
+    assert max(per_tick) == 1
+    assert per_tick[0] == 0  # the clock's first tick runs no block
+
+
+def skipping_frames(lookahead: bool, robots: int) -> tuple[list[object], list[int]]:
+    """Frames of a fleet whose loop skips ticks 150-152 (a release a whole period late: the
+    robots' predicted commands of those ticks never come), and each drive's blocks run."""
+    seen: list[object] = []
+    with Fleet(FleetConfig(robots=robots, robot=load("pmir"), lookahead=lookahead)) as fleet:
+        for k in [*range(150), *range(153, 2 * BLOCK_TICKS + 200)]:
+            fleet.step(k)
+            seen.extend((i, frame_fields(frame)) for i, frame in fleet.take_batch())
+        vehicles = [rig.vehicle for rig in fleet.rigs]
+        blocks = [v.blocks if isinstance(v, PlannedVehicle) else 0 for v in vehicles]
+        assert not any(isinstance(v, PlannedVehicle) and v.fell_back for v in vehicles)
+    return seen, blocks
+
+
+def test_after_skipped_ticks_the_drives_run_ahead_again_with_the_same_frames() -> None:
+    with_blocks, blocks = skipping_frames(True, 4)
+    # before the skip: the first block and one or two more; after it: every 100 ticks again
+    assert min(blocks) >= (2 * BLOCK_TICKS + 200 - 150) // BLOCK_TICKS + 1
+    assert with_blocks == skipping_frames(False, 4)[0]
+
+
+def test_a_loop_that_keeps_skipping_does_not_plan_again_and_again() -> None:
+    """Two releases skipped every 30 ticks: a new plan would miss again before its block ends, so
+    the drives stay plain until the loop has run a block's ticks without a skip."""
+    with Fleet(FleetConfig(robots=3, robot=load("pmir"))) as fleet:
+        vehicles = [rig.vehicle for rig in fleet.rigs]
+        blocks: list[int] = []
+        for k in [k for k in range(6 * BLOCK_TICKS) if k % 30 not in (28, 29)]:
+            if k == 30:  # the first skip was just before: the blocks run so far
+                blocks = [v.blocks for v in vehicles]  # type: ignore[attr-defined]
+            fleet.step(k)
+            fleet.take_batch()
+        assert all(isinstance(v, PlannedVehicle) and v.fell_back for v in vehicles)
+        assert [v.blocks for v in vehicles] == blocks  # type: ignore[attr-defined]
+        for k in range(6 * BLOCK_TICKS, 8 * BLOCK_TICKS):  # calm again: planned again
+            fleet.step(k)
+            fleet.take_batch()
+        assert not any(v.fell_back for v in vehicles)  # type: ignore[attr-defined]
