@@ -60,6 +60,7 @@ from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
 from odocan.host.mqtt.options import broker_for
 from odocan.host.protocol.secoc import SecocSigner
+from odocan.host.stopped import Stopped
 from odocan.sim.board import TICK_S
 from odocan.sim.contract import cycle_ticks
 from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
@@ -103,9 +104,11 @@ async def run_fleet(
     ``on_progress(deadline stats so far)`` every ``PROGRESS_PERIOD_S`` while it runs."""
     with Fleet(run.fleet) as fleet:
         if not run.bridge:
-            stats, cpu_s = await _paced(fleet, run.duration_s, None,
-                                        lambda: _started(on_start, fleet, None), on_progress)
-            return {**_report(run, fleet, stats, None, None, False), "cpu_s": cpu_s}
+            stats, cpu_s, stopped = await _paced(fleet, run.duration_s, None,
+                                                 lambda: _started(on_start, fleet, None),
+                                                 on_progress)
+            return {**_report(run, fleet, stats, None, None, False), "cpu_s": cpu_s,
+                    "stopped": stopped}
         async with broker_for(run.broker) as (url, embedded):
             bridge = Bridge(_endpoints(fleet, run), config=BridgeConfig(
                 broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix,
@@ -115,13 +118,14 @@ async def run_fleet(
                 async with asyncio.TaskGroup() as tg:
                     tg.create_task(bridge.run(stop=stop), name="bridge")
                     await _all_connected(bridge, run.connect_timeout_s + 5.0)
-                    stats, cpu_s = await _paced(fleet, run.duration_s, bridge.offer,
-                                                lambda: _started(on_start, fleet, url),
-                                                on_progress)
+                    stats, cpu_s, stopped = await _paced(
+                        fleet, run.duration_s, bridge.offer,
+                        lambda: _started(on_start, fleet, url), on_progress)
                     stop.set()
             except BaseExceptionGroup as group:
                 raise first_error(group) from None
-            return {**_report(run, fleet, stats, bridge, url, embedded), "cpu_s": cpu_s}
+            return {**_report(run, fleet, stats, bridge, url, embedded), "cpu_s": cpu_s,
+                    "stopped": stopped}
 
 
 def _started(on_start: StartHook | None, fleet: Fleet, url: BrokerURL | None) -> None:
@@ -132,13 +136,20 @@ def _started(on_start: StartHook | None, fleet: Fleet, url: BrokerURL | None) ->
 async def _paced(
     fleet: Fleet, duration_s: float, on_batch: Any, started: Callable[[], None],
     on_progress: ProgressHook | None = None,
-) -> tuple[DeadlineStats, float]:
+) -> tuple[DeadlineStats, float, dict[str, Any] | None]:
     """Run the fleet until ``duration_s`` or SIGINT/SIGTERM, whichever comes first: a signal ends
-    the run like its duration does, so the report is still written. Returns the deadline figures
-    and the CPU seconds this process spent meanwhile (every thread: loop, bridge, MQTT I/O)."""
+    the run early, and the report is still written. Returns the deadline figures, the CPU seconds
+    this process spent meanwhile (every thread: loop, bridge, MQTT I/O), and the report's
+    ``stopped`` (``host.stopped``) when a signal ended it before ``duration_s``."""
     stop = asyncio.Event()
+    signals: list[int] = []
     loop = asyncio.get_running_loop()
-    handled = _on_stop_signals(loop, stop.set)
+
+    def on_signal(signum: int) -> None:
+        signals.append(signum)
+        stop.set()
+
+    handled = _on_stop_signals(loop, on_signal)
     started()
     gc.collect()
     gc.freeze()  # the long-lived set-up objects leave the collector's generations
@@ -150,7 +161,10 @@ async def _paced(
     try:
         await run_realtime(fleet, duration_s=duration_s, on_batch=on_batch, stop=stop,
                            stats=stats)
-        return stats, time.process_time() - cpu0_s
+        done_s = stats.ticks * TICK_S
+        stopped = (Stopped(signals[0], round(done_s, 6), duration_s).as_dict()
+                   if signals and done_s < duration_s else None)
+        return stats, time.process_time() - cpu0_s, stopped
     finally:
         if watcher is not None:
             watcher.cancel()
@@ -167,13 +181,14 @@ async def _watch(stats: DeadlineStats, on_progress: ProgressHook) -> None:
 
 
 def _on_stop_signals(
-    loop: asyncio.AbstractEventLoop, callback: Callable[[], None]
+    loop: asyncio.AbstractEventLoop, callback: Callable[[int], None]
 ) -> list[signal.Signals]:
-    """SIGINT and SIGTERM call ``callback`` (main thread only; elsewhere nothing is installed)."""
+    """SIGINT and SIGTERM call ``callback(signum)`` (main thread only; elsewhere nothing is
+    installed)."""
     handled: list[signal.Signals] = []
     for signum in (signal.SIGINT, signal.SIGTERM):
         try:
-            loop.add_signal_handler(signum, callback)
+            loop.add_signal_handler(signum, callback, int(signum))
         except (RuntimeError, ValueError, NotImplementedError):
             continue
         handled.append(signum)

@@ -343,4 +343,5 @@ def aggregate(reports: list[dict[str, Any]]) -> dict[str, Any]:
         "workers": [{k: r[k] for k in _WORKER_FIELDS} for r in reports],
         "bridge": bridge,
         "per_robot": per_robot,
+        "stopped": next((r["stopped"] for r in reports if r.get("stopped")), None),
     }

@@ -43,6 +43,7 @@ from odocan.host.outputs import check_writable, write_text
 from odocan.host.protocol.secoc import load_secoc_key
 from odocan.host.report.foxglove_options import HOST, port_number
 from odocan.host.report.progress import Progress, wall_clock_progress
+from odocan.host.stopped import stop_code, stopped_text
 from odocan.sim import robot
 from odocan.sim.cboard import FIRMWARES
 from odocan.sim.exceptions import ConfigurationError
@@ -201,6 +202,8 @@ def _do_fleet(args: argparse.Namespace) -> int:
     _print_summary(report, broken)
     if args.report is not None:
         write_text(args.report, json.dumps(report, indent=2) + "\n", "--report")
+    if report.get("stopped"):
+        return stop_code(report["stopped"])  # not the fleet it was asked for: never 0
     return 1 if broken else 0
 
 
@@ -263,7 +266,10 @@ def _print_summary(report: dict[str, Any], broken: list[str]) -> None:
         f"(worst {report['max_lateness_ms']:.1f} ms), broker {report['broker']}"
     )
     print("poses: " + ", ".join(f"{n} {v}" for v, n in sorted(verdicts.items())))
-    print("FAIL: " + "; ".join(broken) if broken else "PASS")
+    verdict = "FAIL: " + "; ".join(broken) if broken else "PASS"
+    if report.get("stopped"):
+        verdict = f"{stopped_text(report['stopped'])}: partial run {verdict}"
+    print(verdict)
     sys.stdout.flush()
 
 
