@@ -1,7 +1,9 @@
 """The live judge's placement of the reference after a firmware stall or hold
 (``host.judge.tracking``), bounded as ``analyze`` bounds it (``host.judge.breaks``): the position
 moves to where the firmware is, no further from where the reference started than the stalls'
-merge allowances since plus the tolerance."""
+merge allowances since plus the tolerance. A gap of the encoder sequence (frames the judge
+did not hear, which the firmware may have integrated one by one) places it again too, within
+its ``gapbound`` allowance, as ``analyze`` places it."""
 
 from __future__ import annotations
 
@@ -9,11 +11,13 @@ import math
 
 import numpy as np
 
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.judge.breaks import BreakSummary, clamp_offset, merge_allowance_m, path_bound_m
+from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.livepose import FramePose
-from odocan.host.judge.livewindow import Columns
+from odocan.host.judge.livewindow import CYCLE_S, Columns
 from odocan.host.judge.reference import Geometry, wrap_delta
-from odocan.host.judge.samples import POSITION_LSB_M
+from odocan.host.judge.samples import POSITION_LSB_M, sender_seq
 
 ABS_KEPT = 128  # the latest encoder frames whose count-step sums are kept (a sample names one)
 
@@ -30,18 +34,37 @@ class StallPlacer:
         self._abs_ring = np.full((ABS_KEPT, 3), -1, dtype=np.int64)
         self._abs_counts = (0, 0)  # ... up to the latest encoder frame
         self._abs_last: tuple[int, int] | None = None  # ... at the last sample compared
+        self.stalled = False  # a stall or hold since the last placement (the tracker sets it)
+        self._gaps: list[tuple[tuple[int, int], tuple[int, int], int]] = []  # since then
+        self.max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S  # the gaps' bound
 
     def restart(self) -> None:
         """A new reference: no offset, no allowance yet."""
         self._shift, self._budget_m = (0.0, 0.0), 0.0
+        self.stalled, self._gaps = False, []
 
-    def on_encoders(self, seq: int, left: int, right: int, prev: tuple[int, int] | None,
-                    bits: int) -> None:
-        """Encoder frame ``seq`` (counts ``left``, ``right``; ``prev``: the frame before's)."""
-        if prev is not None:
-            self._abs_counts = (self._abs_counts[0] + abs(wrap_delta(left - prev[0], bits)),
-                                self._abs_counts[1] + abs(wrap_delta(right - prev[1], bits)))
+    def on_encoders(self, seq: int, frame: tuple[int, int, int, float],
+                    prev: tuple[int, ...] | None, bits: int) -> bool:
+        """Encoder frame ``seq`` (``frame``: COUNTER, counts left and right, bus time s;
+        ``prev``: the window's row of the frame before: seq, pos, COUNTER, time, left, right).
+        True after a gap of the sender's sequence (``samples.sender_seq``): the reference is to
+        be placed again at the next sample."""
+        counter, left, right, t_s = frame
+        if prev is None:
+            self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)
+            return False
+        self._abs_counts = (self._abs_counts[0] + abs(wrap_delta(left - int(prev[4]), bits)),
+                            self._abs_counts[1] + abs(wrap_delta(right - int(prev[5]), bits)))
         self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)  # preallocated: no growth
+        periods = (counter - int(prev[2])) & 0xF
+        if periods == 1 and t_s - float(prev[3]) < 8.0 * CYCLE_S:
+            return False  # the next frame (the fast path: no arrays)
+        periods = int(sender_seq(np.array([int(prev[2]), counter]),
+                                 np.array([float(prev[3]), t_s]), CYCLE_S)[1])
+        if periods <= 1:
+            return False
+        self._gaps.append(((int(prev[4]), int(prev[5])), (left, right), periods))
+        return True
 
     def compared(self, seq: int) -> None:
         """A sample of encoder frame ``seq`` was compared."""
@@ -57,12 +80,19 @@ class StallPlacer:
         """How far (dx, dy m) to move the reference's position so that it starts again where
         the firmware is (``pose`` against ``ref``), bounded (module docstring): the merge
         allowance from ``last_compared`` to ``pose`` (``reference``: geometry, counter bits,
-        integrator) joins the budget."""
-        self._budget_m += self._allowance_m(last_compared, pose.seq, window, reference)
+        integrator) joins the budget after a stall, and each gap's since (``gapbound``)."""
+        geometry, bits, integrator = reference
+        if self.stalled:
+            self._budget_m += self._allowance_m(last_compared, pose.seq, window, reference)
+        gaps, self._gaps, self.stalled = self._gaps, [], False
+        for before, after, periods in gaps:
+            self._budget_m += gap_allowance_of_counts(before, after, periods, geometry, bits,
+                                                      integrator, self.max_wheel_speed_mm_s)
         sx, sy = self._shift
         want_x, want_y = sx + pose.x_m - ref.x_m, sy + pose.y_m - ref.y_m
         limit = self._budget_m + self.position_tolerance_m
-        self.placements.add_stall(math.hypot(want_x, want_y), limit)
+        add = self.placements.add_gap if gaps else self.placements.add_stall
+        add(math.hypot(want_x, want_y), limit)
         self._shift = clamp_offset(want_x, want_y, limit)
         return self._shift[0] - sx, self._shift[1] - sy
 
