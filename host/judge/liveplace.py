@@ -37,6 +37,7 @@ class StallPlacer:
         self.stalled = False  # a stall or hold since the last placement (the tracker sets it)
         self._gaps: list[tuple[tuple[int, int], tuple[int, int], int]] = []  # since then
         self.max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S  # the gaps' bound
+        self.periods = 1  # encoder periods from the frame heard before to the latest
 
     def restart(self) -> None:
         """A new reference: no offset, no allowance yet."""
@@ -44,12 +45,13 @@ class StallPlacer:
         self.stalled, self._gaps = False, []
 
     def on_encoders(self, seq: int, frame: tuple[int, int, int, float],
-                    prev: tuple[int, ...] | None, bits: int) -> bool:
+                    prev: tuple[float, ...] | None, bits: int) -> bool:
         """Encoder frame ``seq`` (``frame``: COUNTER, counts left and right, bus time s;
         ``prev``: the window's row of the frame before: seq, pos, COUNTER, time, left, right).
         True after a gap of the sender's sequence (``samples.sender_seq``): the reference is to
         be placed again at the next sample."""
         counter, left, right, t_s = frame
+        self.periods = 1
         if prev is None:
             self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)
             return False
@@ -59,8 +61,8 @@ class StallPlacer:
         periods = (counter - int(prev[2])) & 0xF
         if periods == 1 and t_s - float(prev[3]) < 8.0 * CYCLE_S:
             return False  # the next frame (the fast path: no arrays)
-        periods = int(sender_seq(np.array([int(prev[2]), counter]),
-                                 np.array([float(prev[3]), t_s]), CYCLE_S)[1])
+        periods = self.periods = int(sender_seq(np.array([int(prev[2]), counter]),
+                                                np.array([float(prev[3]), t_s]), CYCLE_S)[1])
         if periods <= 1:
             return False
         self._gaps.append(((int(prev[4]), int(prev[5])), (left, right), periods))
