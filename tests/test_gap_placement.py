@@ -117,12 +117,14 @@ def _merge_error_m(robot: Robot, integrator: str, d_left: npt.NDArray[np.int64],
 
 def _drive(robot: Robot, steps: int, seed: int, speed_m: float, turn: float
            ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Count deltas: ``speed_m`` per period (within the firmware's 4 m/s), turning by up to
+    """Count deltas: ``speed_m`` per period (within the firmware's 4 m/s, and below a 16th of
+    the wire counter's range, so that a gap of a few frames stays readable), turning by up to
     ``turn`` rad a period, the turn changing now and then (straight runs among them)."""
     rng = np.random.default_rng(seed)
     m_left = 2 * math.pi * robot.wheel_radius_left_nm * 1e-9 / robot.counts_per_rev
     m_right = 2 * math.pi * robot.wheel_radius_right_nm * 1e-9 / robot.counts_per_rev
     b_m = robot.wheelbase_nm * 1e-9
+    speed_m = min(speed_m, (1 << (min(robot.counter_bits, 24) - 5)) * min(m_left, m_right))
     pieces = rng.integers(30, 300, size=steps // 30 + 2)
     turns = rng.choice([0.0, turn, -turn, 0.3 * turn], size=len(pieces))
     half_diff = 0.5 * b_m * np.repeat(turns, pieces)[:steps]
@@ -149,11 +151,12 @@ def test_a_correct_firmware_with_random_recorder_gaps_passes(
     steps = 800
     d_left, d_right = _drive(robot, steps, seed, speed_m, turn)
     m_left = 2 * math.pi * robot.wheel_radius_left_nm * 1e-9 / robot.counts_per_rev
-    wire_half = 1 << (min(robot.counter_bits, 24) - 1)
+    wire_half = 1 << (min(robot.counter_bits, 24) - 1)  # the count jump a gap can carry
     cut: list[tuple[int, int]] = []
     for where, n in sorted(gaps):
         first = 50 + int(where * (steps - 260))
-        n = min(n, max(1, wire_half // max(1, int(np.max(np.abs(d_left))) + 1) - 2))
+        step_max = int(max(np.max(np.abs(d_left)), np.max(np.abs(d_right)))) + 1
+        n = min(n, wire_half // step_max - 2)  # the gap's count jump below half the range
         if not cut or first > cut[-1][0] + cut[-1][1] + 4:  # apart, a pose between
             cut.append((first, n))
     synth = synthesize(profile, integrator, d_left, d_right)
