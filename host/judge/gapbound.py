@@ -43,7 +43,8 @@ from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import FloatArray
 
 DP_PERIODS = 256  # gaps longer than this take the path bound (2.56 s at 100 Hz)
-DP_WORK = 4_000_000  # bins^2 * periods^2 / 2: the dynamic programme's size (about 30 ms)
+MAX_BINS = 160  # heading bins of a short gap (0.75 of their width per step: the slack)
+DP_WORK = 1_000_000  # bins^2 * periods^2 / 2: the dynamic programme's size (a few ms)
 SIGMA_SLOPE = 0.22  # max |d sinc(x / 2) / dx| (0.2174): sigma's change per rad of dtheta
 BIN_SLACK = 0.5 + SIGMA_SLOPE  # g's change across the bins, per bin width (rad)
 SINC_MIN = -0.2173  # the least value of sin(y) / y
@@ -99,7 +100,7 @@ def _programme(n: int, wheels: tuple[float, float, float], turn: float, r: tuple
     a_m, c_m, b_m = wheels
     turn_1 = (a_m + c_m) / b_m  # the most one period can turn (rad)
     lo = 0.5 * (turn - n * turn_1)
-    bins = int(min(512, max(16, math.sqrt(2.0 * DP_WORK) / n)))
+    bins = int(min(MAX_BINS, max(16, math.sqrt(2.0 * DP_WORK) / n)))
     width = n * turn_1 / bins
     if width <= 0.0:
         return 0.0
