@@ -22,11 +22,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import POSITION_LSB_M, analyze
+from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile, load
 from tests.independent_checker import Robot, _Odometry
 from tests.synth_log import Synth, synthesize
+from tests.test_babble_firmware import _biased_x
 from tests.test_judge_campaign import profile_of, robots
 from tests.test_stall_bound import _live, _streamed_alike
 
@@ -175,3 +178,50 @@ def test_a_correct_firmware_with_random_recorder_gaps_passes(
     assert monitor.health(end_s)["state"] != "POSE WRONG", (monitor.health(end_s), cut)
     for tracker in (monitor.tracker, bridge.tracker):
         assert tracker.placer.placements.max_beyond_m == 0.0
+
+
+def _lockstep_with_gaps(tmp_path: Path, gaps_s: list[tuple[float, float]]) -> Path:
+    """A lockstep rig's log (kobuki, figure 8, seed 3) less the WHEEL_ENCODERS and ODOM_*
+    lines within each interval of bus time (s): what a recorder that missed them holds."""
+    log = tmp_path / "rig.log"
+    assert main(["run", "--robot", "kobuki", "--scenario", "figure8", "--duration", "6",
+                 "--seed", "3", "--log", str(log)]) == 0
+    db = database()
+    ids = {m.frame_id for m in db.messages
+           if m.name == "WHEEL_ENCODERS" or m.name.startswith("ODOM_")}
+    kept = []
+    for line in log.read_text().splitlines(keepends=True):
+        stamp, _, frame = line.split()[:3]
+        t_s = float(stamp.strip("()"))
+        if int(frame.split("#")[0], 16) in ids and any(a <= t_s < b for a, b in gaps_s):
+            continue
+        kept.append(line)
+    out = tmp_path / "gaps.log"
+    out.write_text("".join(kept))
+    return out
+
+
+def test_a_lockstep_log_with_recorder_gaps_and_a_jump(tmp_path: Path) -> None:
+    """The rig's correct firmware with recorder gaps of 1, 2 and 25 frames passes every judge;
+    the same firmware's X off by 3 cm from the first pose after the short gap at 2.0 s fails
+    them (before: PASS in analyze, whole and streamed)."""
+    gaps_s = [(1.0, 1.0095), (2.0, 2.0195), (4.0, 4.2495)]
+    path = _lockstep_with_gaps(tmp_path, gaps_s)
+    kobuki = load("kobuki")
+    result = analyze(read_log(path), kobuki)
+    breaks = result.report["reference_breaks"]
+    assert breaks["gap_placements"] == 3
+    assert result.passed, (result.report["onboard_vs_reference"], breaks)
+    _streamed_alike(path, kobuki, result.report, chunks=(333,))
+    monitor, _, end_s = _live(kobuki, "exact", path)
+    assert monitor.health(end_s)["state"] == "OK", monitor.health(end_s)
+    wrong = tmp_path / "wrong.log"
+    assert _biased_x(path, wrong, lambda _k, t_s: 2.0 < t_s < 4.0, 300) > 50
+    bad = analyze(read_log(wrong), kobuki)
+    assert not bad.passed
+    _streamed_alike(wrong, kobuki, bad.report, chunks=(333,))
+    upto = tmp_path / "upto.log"  # the monitor's state while the jump lasts (to 4 s)
+    upto.write_text("".join(line for line in wrong.read_text().splitlines(keepends=True)
+                            if float(line.split()[0].strip("()")) < 3.9))
+    monitor, _, end_s = _live(kobuki, "exact", upto)
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
