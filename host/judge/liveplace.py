@@ -20,6 +20,7 @@ from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import POSITION_LSB_M, sender_seq
 
 ABS_KEPT = 128  # the latest encoder frames whose count-step sums are kept (a sample names one)
+GAPS_KEPT = 64  # gaps of the encoder sequence kept between two placements (no growth)
 
 
 class StallPlacer:
@@ -65,7 +66,10 @@ class StallPlacer:
                                                 np.array([float(prev[3]), t_s]), CYCLE_S)[1])
         if periods <= 1:
             return False
-        self._gaps.append(((int(prev[4]), int(prev[5])), (left, right), periods))
+        if len(self._gaps) < GAPS_KEPT:  # more before a sample: no bound (free, counted)
+            self._gaps.append(((int(prev[4]), int(prev[5])), (left, right), periods))
+        else:
+            self._gaps[-1] = ((0, 0), (0, 0), -1)
         return True
 
     def compared(self, seq: int) -> None:
@@ -88,13 +92,16 @@ class StallPlacer:
             self._budget_m += self._allowance_m(last_compared, pose.seq, window, reference)
         gaps, self._gaps, self.stalled = self._gaps, [], False
         for before, after, periods in gaps:
-            self._budget_m += gap_allowance_of_counts(before, after, periods, geometry, bits,
-                                                      integrator, self.max_wheel_speed_mm_s)
+            self._budget_m += (math.inf if periods < 0 else gap_allowance_of_counts(
+                before, after, periods, geometry, bits, integrator, self.max_wheel_speed_mm_s))
         sx, sy = self._shift
         want_x, want_y = sx + pose.x_m - ref.x_m, sy + pose.y_m - ref.y_m
         limit = self._budget_m + self.position_tolerance_m
-        add = self.placements.add_gap if gaps else self.placements.add_stall
-        add(math.hypot(want_x, want_y), limit)
+        if math.isinf(limit):  # no bound known (a stall left the window, 64 gaps): free
+            self.placements.free += 1
+        else:
+            add = self.placements.add_gap if gaps else self.placements.add_stall
+            add(math.hypot(want_x, want_y), limit)
         self._shift = clamp_offset(want_x, want_y, limit)
         return self._shift[0] - sx, self._shift[1] - sy
 
