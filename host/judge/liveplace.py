@@ -23,6 +23,30 @@ ABS_KEPT = 128  # the latest encoder frames whose count-step sums are kept (a sa
 GAPS_KEPT = 64  # gaps of the encoder sequence kept between two placements (no growth)
 
 
+Gap = tuple[int, tuple[int, int], tuple[int, int], int]  # seq after, counts before, after, periods
+
+
+def _confirmed(gaps: list[Gap], window: Columns) -> list[Gap]:
+    """The gaps still gaps by ``samples.sender_seq`` over the window from the frame before each
+    (the frames heard since tell a burst after a busy bus, whose first frame only looked 16
+    periods late, from frames lost); a gap whose frames left the window is kept as heard."""
+    if not gaps:
+        return gaps
+    seqs = window.col("seq")
+    kept = []
+    for gap in gaps:
+        i = int(np.searchsorted(seqs, gap[0] - 1))
+        if gap[3] < 0 or i >= len(seqs) or int(seqs[i]) != gap[0] - 1:
+            kept.append(gap)
+            continue
+        numbered = sender_seq(window.col("counter")[i:].astype(np.int64),
+                              window.col("t_s")[i:], CYCLE_S)
+        periods = int(numbered[1] - numbered[0])
+        if periods > 1:
+            kept.append((gap[0], gap[1], gap[2], periods))
+    return kept
+
+
 class StallPlacer:
     """The placements of one reference (``restart`` with it) and what they absorbed."""
 
@@ -36,7 +60,7 @@ class StallPlacer:
         self._abs_counts = (0, 0)  # ... up to the latest encoder frame
         self._abs_last: tuple[int, int] | None = None  # ... at the last sample compared
         self.stalled = False  # a stall or hold since the last placement (the tracker sets it)
-        self._gaps: list[tuple[tuple[int, int], tuple[int, int], int]] = []  # since then
+        self._gaps: list[Gap] = []  # since then
         self.max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S  # the gaps' bound
         self.periods = 1  # encoder periods from the frame heard before to the latest
 
@@ -67,9 +91,9 @@ class StallPlacer:
         if periods <= 1:
             return False
         if len(self._gaps) < GAPS_KEPT:  # more before a sample: no bound (free, counted)
-            self._gaps.append(((int(prev[4]), int(prev[5])), (left, right), periods))
+            self._gaps.append((seq, (int(prev[4]), int(prev[5])), (left, right), periods))
         else:
-            self._gaps[-1] = ((0, 0), (0, 0), -1)
+            self._gaps[-1] = (seq, (0, 0), (0, 0), -1)
         return True
 
     def compared(self, seq: int) -> None:
@@ -88,10 +112,13 @@ class StallPlacer:
         allowance from ``last_compared`` to ``pose`` (``reference``: geometry, counter bits,
         integrator) joins the budget after a stall, and each gap's since (``gapbound``)."""
         geometry, bits, integrator = reference
-        if self.stalled:
+        stalled = self.stalled
+        if stalled:
             self._budget_m += self._allowance_m(last_compared, pose.seq, window, reference)
-        gaps, self._gaps, self.stalled = self._gaps, [], False
-        for before, after, periods in gaps:
+        gaps, self._gaps, self.stalled = _confirmed(self._gaps, window), [], False
+        if not gaps and not stalled:
+            return 0.0, 0.0  # a burst after a busy bus, not a gap: nothing to place
+        for _, before, after, periods in gaps:
             self._budget_m += (math.inf if periods < 0 else gap_allowance_of_counts(
                 before, after, periods, geometry, bits, integrator, self.max_wheel_speed_mm_s))
         sx, sy = self._shift
