@@ -55,10 +55,12 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    That placement is bounded (``host.judge.breaks``): it may move the position by no more than
    the worst merge error of the frames the firmware may have missed there, summed over the
    stalls since the last free placement, plus the position tolerance; a larger offset is not
-   absorbed, the samples after the stall show the rest. Only a gap of the log's encoder
-   sequence (frames the logger missed: the path across it is unknowable) places it freely.
-   ``reference_breaks`` in the report counts both and gives the largest offset a stall's
-   placement asked for, its allowance, and the largest offset a gap's absorbed (not checked).
+   absorbed, the samples after the stall show the rest. A gap of the log's encoder sequence
+   (frames the logger missed, which the firmware may have integrated one by one, each within
+   its plausibility bound) places it too, within the worst merge error of any such split of
+   the merged step (``host.judge.gapbound``), summed with the stalls' since the start.
+   ``reference_breaks`` in the report counts both and gives the largest offset a stall's and
+   a gap's placement asked for, with its allowance, and the most any went beyond it.
 5. **Errors**: position errors are Euclidean distances (m), heading errors wrapped to [-pi, pi).
    On-board vs reference at every on-board sample; on-board vs truth at every truth sample that
    has an on-board sample of the same encoder frame. Where the firmware reports encoder frames

@@ -10,10 +10,14 @@ reference by no more than the worst of them (``merge_allowance_m``: over every s
 frames lost between the last frame the firmware is known to have taken before the break and the
 first one after it, the largest sum of the runs' merge errors, ``losses.merge_error``; their
 errors are vectors, the heading after each run exact, so the sum of lengths bounds them), summed
-over the breaks since the reference's position was last free (its start, or a gap of the log:
-the motion across a gap the logger missed is unknowable), plus the pose tolerance (the rounding
-of the samples the placement rests on). A larger offset is not absorbed: the placement stops at
-the bound and the samples after the break show the rest (``bound_offsets``, ``clamp_offset``).
+over the breaks since the reference's position was last free (its start), plus the pose
+tolerance (the rounding of the samples the placement rests on). A gap of the log (frames the
+logger missed, which the firmware may have integrated one by one) is such a break too, its
+allowance the worst merge error of any split of the merged step into the gap's periods within
+the plausibility bound (``host.judge.gapbound``); only a gap whose bound is unknown (inf: no
+plausibility bound configured) still places freely. A larger offset is not absorbed: the
+placement stops at the bound and the samples after the break show the rest (``bound_offsets``,
+``clamp_offset``).
 
 Spans of more than ``MAX_MERGE_FRAMES`` frames take a cheaper bound: twice the path length
 (``path_bound_m``: a run's merge error is at most its fine path plus its merged step)."""
@@ -80,13 +84,21 @@ class BreakSummary:
     max_absorbed_m: float = 0.0  # the longest offset such a placement asked for (m)
     allowance_m: float = 0.0  # that placement's bound (merge allowance + tolerance, m)
     max_beyond_m: float = 0.0  # the most an offset went beyond its bound, not absorbed (m)
-    gaps: int = 0  # placements after a gap of the log (unbounded: not checked)
-    max_gap_absorbed_m: float = 0.0  # the longest offset a gap's placement absorbed (m)
+    gaps: int = 0  # placements after a gap of the log (bounded as a stall's)
+    max_gap_absorbed_m: float = 0.0  # the longest offset such a placement asked for (m)
+    gap_allowance_m: float = 0.0  # that placement's bound (gap and merge allowances + tolerance)
+    free: int = 0  # placements after a gap without a bound (none configured: not checked)
 
     def add_stall(self, asked_m: float, limit_m: float) -> None:
         self.stalls += 1
         if asked_m >= self.max_absorbed_m:
             self.max_absorbed_m, self.allowance_m = asked_m, limit_m
+        self.max_beyond_m = max(self.max_beyond_m, asked_m - limit_m)
+
+    def add_gap(self, asked_m: float, limit_m: float) -> None:
+        self.gaps += 1
+        if asked_m >= self.max_gap_absorbed_m:
+            self.max_gap_absorbed_m, self.gap_allowance_m = asked_m, limit_m
         self.max_beyond_m = max(self.max_beyond_m, asked_m - limit_m)
 
     def as_dict(self) -> dict[str, Any]:
@@ -98,6 +110,8 @@ class BreakSummary:
             "max_offset_beyond_allowance_m": self.max_beyond_m,
             "gap_placements": self.gaps,
             "max_gap_offset_absorbed_m": self.max_gap_absorbed_m,
+            "gap_offset_allowance_m": self.gap_allowance_m,
+            "free_gap_placements": self.free,
         }
 
 
@@ -107,11 +121,13 @@ def merged_breaks(parts: list[dict[str, Any]]) -> dict[str, Any]:
     for part in parts[1:]:
         out["stall_placements"] += part["stall_placements"]
         out["gap_placements"] += part["gap_placements"]
-        if part["max_offset_absorbed_m"] >= out["max_offset_absorbed_m"]:
-            out["max_offset_absorbed_m"] = part["max_offset_absorbed_m"]
-            out["offset_allowance_m"] = part["offset_allowance_m"]
-        for key in ("max_offset_beyond_allowance_m", "max_gap_offset_absorbed_m"):
-            out[key] = max(out[key], part[key])
+        out["free_gap_placements"] += part["free_gap_placements"]
+        for asked, limit in (("max_offset_absorbed_m", "offset_allowance_m"),
+                             ("max_gap_offset_absorbed_m", "gap_offset_allowance_m")):
+            if part[asked] >= out[asked]:
+                out[asked], out[limit] = part[asked], part[limit]
+        out["max_offset_beyond_allowance_m"] = max(out["max_offset_beyond_allowance_m"],
+                                                   part["max_offset_beyond_allowance_m"])
     return out
 
 
@@ -121,34 +137,35 @@ def bound_offsets(
 ) -> tuple[FloatArray, FloatArray, BreakSummary]:
     """The segments' position offsets (m) as placed: per segment, the offset its samples ask for
     (``raw_*``: NaN for a segment without a sample, which keeps the previous one; segment 0 is
-    0), whether a gap of the log opened it (``gap``, nonzero: free) or a stall or hold
-    (``allowance_m``: its ``merge_allowance_m``), and the tolerance ``slack_m``. A stall's
-    offset from the last free placement is kept within the allowances summed since plus
-    ``slack_m`` (module docstring)."""
+    0), whether a gap of the log opened it (``gap``, nonzero) or a stall or hold, its allowance
+    (``allowance_m``: a stall's ``merge_allowance_m``, a gap's ``gapbound.gap_allowance_m``
+    plus that if a stall ended there too; inf: unknown, the placement is free), and the
+    tolerance ``slack_m``. An offset from the last free placement is kept within the allowances
+    summed since plus ``slack_m`` (module docstring)."""
     n = len(raw_x_m)
     x, y = np.zeros(n), np.zeros(n)
     summary = BreakSummary()
     anchor = (0.0, 0.0)
     budget = 0.0
-    free = False  # a gap since the last placement with a sample: the next one is free
+    opened_by_gap = False  # a gap since the last placement with a sample
     for k in range(1, n):
-        if gap[k]:
-            free = True
-        else:
-            budget += float(allowance_m[k])
+        opened_by_gap = opened_by_gap or bool(gap[k])
+        budget += float(allowance_m[k])
         if math.isnan(raw_x_m[k]):
             x[k], y[k] = x[k - 1], y[k - 1]
             continue
-        if free:
-            summary.gaps += 1
-            moved_m = math.hypot(raw_x_m[k] - x[k - 1], raw_y_m[k] - y[k - 1])
-            summary.max_gap_absorbed_m = max(summary.max_gap_absorbed_m, moved_m)
-            anchor, budget, free = (float(raw_x_m[k]), float(raw_y_m[k])), 0.0, False
+        if math.isinf(budget):  # a gap without a bound: free
+            summary.free += 1
+            anchor, budget, opened_by_gap = (float(raw_x_m[k]), float(raw_y_m[k])), 0.0, False
             x[k], y[k] = anchor
             continue
         dx, dy = float(raw_x_m[k]) - anchor[0], float(raw_y_m[k]) - anchor[1]
         limit = budget + slack_m
-        summary.add_stall(math.hypot(dx, dy), limit)
+        if opened_by_gap:
+            summary.add_gap(math.hypot(dx, dy), limit)
+        else:
+            summary.add_stall(math.hypot(dx, dy), limit)
+        opened_by_gap = False
         dx, dy = clamp_offset(dx, dy, limit)
         x[k], y[k] = anchor[0] + dx, anchor[1] + dy
     return x, y, summary
@@ -156,14 +173,16 @@ def bound_offsets(
 
 def placed_offsets(
     raw_x_m: FloatArray, raw_y_m: FloatArray, openings: list[tuple[int, bool]],
-    allowance_of: Callable[[int], float], slack_m: float,
+    allowance_of: Callable[[int], float], gap_allowance_of: Callable[[int], float],
+    slack_m: float,
 ) -> tuple[FloatArray, FloatArray, BreakSummary]:
     """``bound_offsets`` of segments 1, 2, ... opened at ``openings`` (their first encoder
     frame, and whether a gap of the log opened it), a stall's allowance by ``allowance_of``
-    (its first frame): the whole-log and the streamed judge's one way."""
+    (its first frame; 0 where no stall ended), a gap's by ``gap_allowance_of`` (the frame after
+    it) plus ``allowance_of``: the whole-log and the streamed judge's one way."""
     allowance = np.zeros(len(raw_x_m))
     gap = np.zeros(len(raw_x_m), dtype=np.int64)
     for k, (first, by_gap) in enumerate(openings, start=1):
         gap[k] = by_gap
-        allowance[k] = 0.0 if by_gap else allowance_of(first)
+        allowance[k] = allowance_of(first) + (gap_allowance_of(first) if by_gap else 0.0)
     return bound_offsets(raw_x_m, raw_y_m, gap, allowance, slack_m)

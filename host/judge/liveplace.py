@@ -1,7 +1,9 @@
 """The live judge's placement of the reference after a firmware stall or hold
 (``host.judge.tracking``), bounded as ``analyze`` bounds it (``host.judge.breaks``): the position
 moves to where the firmware is, no further from where the reference started than the stalls'
-merge allowances since plus the tolerance."""
+merge allowances since plus the tolerance. A gap of the encoder sequence (frames the judge
+did not hear, which the firmware may have integrated one by one) places it again too, within
+its ``gapbound`` allowance, as ``analyze`` places it."""
 
 from __future__ import annotations
 
@@ -9,13 +11,40 @@ import math
 
 import numpy as np
 
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.judge.breaks import BreakSummary, clamp_offset, merge_allowance_m, path_bound_m
+from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.livepose import FramePose
-from odocan.host.judge.livewindow import Columns
+from odocan.host.judge.livewindow import CYCLE_S, Columns
 from odocan.host.judge.reference import Geometry, wrap_delta
-from odocan.host.judge.samples import POSITION_LSB_M
+from odocan.host.judge.samples import POSITION_LSB_M, sender_seq
 
 ABS_KEPT = 128  # the latest encoder frames whose count-step sums are kept (a sample names one)
+GAPS_KEPT = 64  # gaps of the encoder sequence kept between two placements (no growth)
+
+
+Gap = tuple[int, tuple[int, int], tuple[int, int], int]  # seq after, counts before, after, periods
+
+
+def _confirmed(gaps: list[Gap], window: Columns) -> list[Gap]:
+    """The gaps still gaps by ``samples.sender_seq`` over the window from the frame before each
+    (the frames heard since tell a burst after a busy bus, whose first frame only looked 16
+    periods late, from frames lost); a gap whose frames left the window is kept as heard."""
+    if not gaps:
+        return gaps
+    seqs = window.col("seq")
+    kept = []
+    for gap in gaps:
+        i = int(np.searchsorted(seqs, gap[0] - 1))
+        if gap[3] < 0 or i >= len(seqs) or int(seqs[i]) != gap[0] - 1:
+            kept.append(gap)
+            continue
+        numbered = sender_seq(window.col("counter")[i:].astype(np.int64),
+                              window.col("t_s")[i:], CYCLE_S)
+        periods = int(numbered[1] - numbered[0])
+        if periods > 1:
+            kept.append((gap[0], gap[1], gap[2], periods))
+    return kept
 
 
 class StallPlacer:
@@ -30,18 +59,42 @@ class StallPlacer:
         self._abs_ring = np.full((ABS_KEPT, 3), -1, dtype=np.int64)
         self._abs_counts = (0, 0)  # ... up to the latest encoder frame
         self._abs_last: tuple[int, int] | None = None  # ... at the last sample compared
+        self.stalled = False  # a stall or hold since the last placement (the tracker sets it)
+        self._gaps: list[Gap] = []  # since then
+        self.max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S  # the gaps' bound
+        self.periods = 1  # encoder periods from the frame heard before to the latest
 
     def restart(self) -> None:
         """A new reference: no offset, no allowance yet."""
         self._shift, self._budget_m = (0.0, 0.0), 0.0
+        self.stalled, self._gaps = False, []
 
-    def on_encoders(self, seq: int, left: int, right: int, prev: tuple[int, int] | None,
-                    bits: int) -> None:
-        """Encoder frame ``seq`` (counts ``left``, ``right``; ``prev``: the frame before's)."""
-        if prev is not None:
-            self._abs_counts = (self._abs_counts[0] + abs(wrap_delta(left - prev[0], bits)),
-                                self._abs_counts[1] + abs(wrap_delta(right - prev[1], bits)))
+    def on_encoders(self, seq: int, frame: tuple[int, int, int, float],
+                    prev: tuple[float, ...] | None, bits: int) -> bool:
+        """Encoder frame ``seq`` (``frame``: COUNTER, counts left and right, bus time s;
+        ``prev``: the window's row of the frame before: seq, pos, COUNTER, time, left, right).
+        True after a gap of the sender's sequence (``samples.sender_seq``): the reference is to
+        be placed again at the next sample."""
+        counter, left, right, t_s = frame
+        self.periods = 1
+        if prev is None:
+            self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)
+            return False
+        self._abs_counts = (self._abs_counts[0] + abs(wrap_delta(left - int(prev[4]), bits)),
+                            self._abs_counts[1] + abs(wrap_delta(right - int(prev[5]), bits)))
         self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)  # preallocated: no growth
+        periods = (counter - int(prev[2])) & 0xF
+        if periods == 1 and t_s - float(prev[3]) < 8.0 * CYCLE_S:
+            return False  # the next frame (the fast path: no arrays)
+        periods = self.periods = int(sender_seq(np.array([int(prev[2]), counter]),
+                                                np.array([float(prev[3]), t_s]), CYCLE_S)[1])
+        if periods <= 1:
+            return False
+        if len(self._gaps) < GAPS_KEPT:  # more before a sample: no bound (free, counted)
+            self._gaps.append((seq, (int(prev[4]), int(prev[5])), (left, right), periods))
+        else:
+            self._gaps[-1] = (seq, (0, 0), (0, 0), -1)
+        return True
 
     def compared(self, seq: int) -> None:
         """A sample of encoder frame ``seq`` was compared."""
@@ -57,12 +110,25 @@ class StallPlacer:
         """How far (dx, dy m) to move the reference's position so that it starts again where
         the firmware is (``pose`` against ``ref``), bounded (module docstring): the merge
         allowance from ``last_compared`` to ``pose`` (``reference``: geometry, counter bits,
-        integrator) joins the budget."""
-        self._budget_m += self._allowance_m(last_compared, pose.seq, window, reference)
+        integrator) joins the budget after a stall, and each gap's since (``gapbound``)."""
+        geometry, bits, integrator = reference
+        stalled = self.stalled
+        if stalled:
+            self._budget_m += self._allowance_m(last_compared, pose.seq, window, reference)
+        gaps, self._gaps, self.stalled = _confirmed(self._gaps, window), [], False
+        if not gaps and not stalled:
+            return 0.0, 0.0  # a burst after a busy bus, not a gap: nothing to place
+        for _, before, after, periods in gaps:
+            self._budget_m += (math.inf if periods < 0 else gap_allowance_of_counts(
+                before, after, periods, geometry, bits, integrator, self.max_wheel_speed_mm_s))
         sx, sy = self._shift
         want_x, want_y = sx + pose.x_m - ref.x_m, sy + pose.y_m - ref.y_m
         limit = self._budget_m + self.position_tolerance_m
-        self.placements.add_stall(math.hypot(want_x, want_y), limit)
+        if math.isinf(limit):  # no bound known (a stall left the window, 64 gaps): free
+            self.placements.free += 1
+        else:
+            add = self.placements.add_gap if gaps else self.placements.add_stall
+            add(math.hypot(want_x, want_y), limit)
         self._shift = clamp_offset(want_x, want_y, limit)
         return self._shift[0] - sx, self._shift[1] - sy
 

@@ -42,6 +42,7 @@ class StepGate:
         self.bits = counter_bits
         self.prev: tuple[int, int, int] | None = None  # counter, left, right of the last accepted
         self._refused: list[tuple[int, int, int]] = []
+        self._seq = self._prev_seq = 0  # periods heard, at the latest frame and at ``prev``
         self.counter_restarts = 0
 
     def _delta(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[int, int]:
@@ -52,19 +53,24 @@ class StepGate:
         d = self._delta(a, b)
         return abs(d[0]) <= periods * self.bound[0] and abs(d[1]) <= periods * self.bound[1]
 
-    def step(self, counter: int, left: int, right: int) -> tuple[int, int] | None:
-        """The count step to integrate for this frame; None when it primes or is refused."""
+    def step(self, counter: int, left: int, right: int, heard: int | None = None
+             ) -> tuple[int, int] | None:
+        """The count step to integrate for this frame; None when it primes or is refused.
+        ``heard``: the periods since the frame heard before (``samples.sender_seq``, widened by
+        the bus times past 16 periods); without it the COUNTER's advance (mod 16)."""
+        self._seq += heard or 0
         frame = (counter, left, right)
         prev, self.prev = self.prev, frame
+        prev_seq, self._prev_seq = self._prev_seq, self._seq
         if prev is None:
             return None
         delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
-        periods = ((counter - prev[0]) % RING) or RING
+        periods = self._seq - prev_seq if heard else ((counter - prev[0]) % RING) or RING
         if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
             if self._refused:
                 self._refused = []
             return delta
-        self.prev = prev  # refused: the base stays
+        self.prev, self._prev_seq = prev, prev_seq  # refused: the base stays
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
         self._refused = [*self._refused, frame] if consistent else [frame]
         if len(self._refused) < RESYNC_FRAMES:

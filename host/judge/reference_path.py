@@ -13,6 +13,7 @@ import numpy as np
 from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
 from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.breaks import BreakSummary, merge_allowance_m, placed_offsets
+from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.reference import Geometry, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -64,8 +65,9 @@ def build_reference(
 ) -> Reference:
     """Integrate the encoder deltas from the first on-board sample on; the position placed
     again after gaps and after the stalls' ``breaks`` (within ``breaks.bound_offsets``' bound,
-    ``slack_m``: the position tolerance). ``start_pose``: the exact start at the first encoder
-    frame (x m, y m, heading rad: a set-pose's, ``host.judge.setposes``), as at power-up."""
+    ``slack_m``: the position tolerance; a gap's allowance from ``max_wheel_speed_mm_s``).
+    ``start_pose``: the exact start at the first encoder frame (x m, y m, heading rad: a
+    set-pose's, ``host.judge.setposes``), as at power-up."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     exact_at_first = power_up or start_pose is not None
     e0 = 0 if exact_at_first else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
@@ -90,11 +92,20 @@ def build_reference(
     x_m = x0 + cos0 * rel_x - sin0 * rel_y
     y_m = y0 + sin0 * rel_x + cos0 * rel_y
     opened = np.flatnonzero(starts)  # the first frame (from e0) of segments 1, 2, ...
+    stalled = frozenset(breaks.tolist()) if breaks is not None else frozenset()
+
+    def gap_allowance(b: int) -> float:
+        return gap_allowance_of_counts(
+            (int(enc.left[b - 1]), int(enc.right[b - 1])), (int(enc.left[b]), int(enc.right[b])),
+            int(enc.seq[b] - enc.seq[b - 1]), geometry, bits, integrator, max_wheel_speed_mm_s)
+
     off_x, off_y, placed = placed_offsets(
         raw_segment_offsets(segment, at, onboard.x_m - x_m[at]),
         raw_segment_offsets(segment, at, onboard.y_m - y_m[at]),
         list(zip((opened + e0).tolist(), gaps[opened].tolist(), strict=True)),
-        lambda b: break_allowance(enc, b, onboard.enc, geometry, bits, integrator), slack_m)
+        lambda b: (break_allowance(enc, b, onboard.enc, geometry, bits, integrator)
+                   if b in stalled else 0.0),
+        gap_allowance, slack_m)
     x_m += off_x[segment]
     y_m += off_y[segment]
     return Reference(

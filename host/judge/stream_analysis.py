@@ -31,6 +31,7 @@ from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance, _realtime, _robot_dict
 from odocan.host.judge.breaks import placed_offsets
+from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import (
@@ -236,11 +237,9 @@ def _life(
     e0 = 0 if power_up else int(first.head.enc[0])
     breaks = first.breaks
     spans = first.losses.spans()
-    drops = SpanDrops(spans, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
-                      integrator)
-
-    across = StreamBreakCounts(breaks[breaks > e0].tolist(), Geometry.of(robot),
-                               min(robot.counter_bits, WIRE_COUNTER_BITS), integrator)
+    geometry, bits = Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS)
+    drops = SpanDrops(spans, geometry, bits, integrator)
+    across = StreamBreakCounts(breaks[breaks > e0].tolist(), geometry, bits, integrator)
 
     def on_encoders(enc: Encoders) -> None:
         drops.feed(enc)
@@ -260,8 +259,11 @@ def _life(
     # the offsets' pass also weighs the lossy spans (losses.loss_allowance) and keeps the
     # counts across the stalls' breaks (their allowance)
     raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
-    off_x, off_y, placements = placed_offsets(*raw, info.openings, across.allowance,
-                                              tolerance.position_m)
+    off_x, off_y, placements = placed_offsets(
+        *raw, info.openings, across.allowance,
+        lambda b: gap_allowance_of_counts(*info.gap_steps[b], geometry, bits, integrator,
+                                          max_wheel_speed_mm_s),
+        tolerance.position_m)
     offsets = (off_x, off_y)
     truth = TruthCompare((x0, y0, h0), offsets, rebase=rebase, e0=e0)
     last: list[PlacedChunk] = []

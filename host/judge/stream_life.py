@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -33,6 +33,15 @@ if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
     from odocan.host.protocol.dbcplan import DatabaseSpec
 
 
+class GapStep(NamedTuple):
+    """A gap of the encoder sequence: the wire counts (left, right) of the frames either side
+    and the encoder periods between them (``gapbound.gap_allowance_of_counts``' input)."""
+
+    before: tuple[int, int]
+    after: tuple[int, int]
+    periods: int
+
+
 @dataclass
 class _Rows:
     """The reference's rows from e0 not yet matched to a sample: encoder frame number g,
@@ -43,11 +52,14 @@ class _Rows:
     segment: int = 0  # the last row's
     openings: list[tuple[int, bool]] = field(default_factory=list)  # per segment from 1: its
     # first encoder frame and whether a gap of the sequence opened it (else a stall's break)
+    gap_steps: dict[int, GapStep] = field(default_factory=dict)  # per gap: its frame after
+    last_counts: tuple[int, int] = (0, 0)  # of the last encoder frame from e0
 
-    def add(self, g: npt.NDArray[np.int64], seq: npt.NDArray[np.int64],
+    def add(self, g: npt.NDArray[np.int64], enc: Encoders,
             increments: dict[str, np.ndarray], breaks: npt.NDArray[np.int64]) -> None:
         if len(g) == 0:
             return
+        seq = enc.seq
         prior = np.concatenate(([self.last_seq if self.last_seq is not None else seq[0]],
                                 seq))
         gaps = np.diff(prior) > 1
@@ -56,11 +68,22 @@ class _Rows:
         starts = gaps | np.isin(g, breaks)  # breaks after e0 only: e0 itself opens segment 0
         opened = np.flatnonzero(starts)
         self.openings += zip(g[opened].tolist(), gaps[opened].tolist(), strict=True)
+        self._gap_steps(g, enc, prior, np.flatnonzero(gaps))
         segment = self.segment + np.cumsum(starts)
         new = {"g": g, "segment": segment, **increments}
         self.columns = ({k: np.concatenate((self.columns[k], v)) for k, v in new.items()}
                         if self.columns else new)
         self.last_seq, self.segment = int(seq[-1]), int(segment[-1])
+        self.last_counts = (int(enc.left[-1]), int(enc.right[-1]))
+
+    def _gap_steps(self, g: npt.NDArray[np.int64], enc: Encoders, prior: npt.NDArray[np.int64],
+                   gaps: npt.NDArray[np.int64]) -> None:
+        """Keep the counts either side of each gap and its periods (its allowance's input)."""
+        for k in gaps.tolist():
+            before = ((int(enc.left[k - 1]), int(enc.right[k - 1])) if k > 0
+                      else self.last_counts)
+            self.gap_steps[int(g[k])] = GapStep(before, (int(enc.left[k]), int(enc.right[k])),
+                                                int(prior[k + 1] - prior[k]))
 
     def at(self, g: npt.NDArray[np.int64]) -> dict[str, np.ndarray]:
         """The rows of encoder frames ``g`` (sorted, all present)."""
@@ -86,6 +109,7 @@ class LifeInfo:
     reprimed: list[int] = field(default_factory=list)
     segments: int = 0  # the last encoder frame's segment (reference_path's ``restarts``)
     openings: list[tuple[int, bool]] = field(default_factory=list)  # ``_Rows.openings``
+    gap_steps: dict[int, GapStep] = field(default_factory=dict)  # ``_Rows.gap_steps``
     times_s: dict[int, float] = field(default_factory=dict)
 
 
@@ -137,8 +161,9 @@ def life_chunks(
         asked = np.isin(g, wanted)
         info.times_s.update(zip(g[asked].tolist(), enc.timestamp_s[asked].tolist(), strict=True))
         from_e0 = g >= e0
-        increments = reference.feed(_take(enc, from_e0))
-        rows.add(g[from_e0], enc.seq[from_e0], increments, inside)
+        taken = _take(enc, from_e0)
+        increments = reference.feed(taken)
+        rows.add(g[from_e0], taken, increments, inside)
         samples, sent = poses.feed(chunk, accepted, enc)
         watermark = min(float(chunk.timestamp_s[-1]), poses.open_sent_s())
         pose_y = decoder.select(chunk, "ODOM_POSE_Y")
@@ -156,6 +181,7 @@ def life_chunks(
     yield placed, _truth(truth.finish()[0], rows, e0, np.inf)
     yield _placed(stalls.finish(), rows), _truth(_no_truth(), rows, e0, np.inf)
     info.refused, info.segments, info.openings = reference.refused, rows.segment, rows.openings
+    info.gap_steps = rows.gap_steps
     info.reprimed = [e0 + k for k in reference.reprimed]
 
 

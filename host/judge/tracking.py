@@ -146,16 +146,16 @@ class PoseTracker:
         self.enc_seq += 1
         self._pos += 1
         prev = self._window.rows[-1] if len(self._window) else None
-        self.placer.on_encoders(self.enc_seq, left, right,
-                                None if prev is None else (int(prev[4]), int(prev[5])),
-                                self.counter_bits)
+        if self.placer.on_encoders(self.enc_seq, (counter, left, right, t_s), prev,
+                                   self.counter_bits) and self._ref is not None:
+            self._place_at_next = True  # a gap: placed again, bounded (liveplace.StallPlacer)
         self._window.append(self.enc_seq, self._pos, counter, t_s, left, right)
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
         self._counts[counter] = (self.enc_seq, left, right)
         ref = self._ref
         if ref is not None:
-            step = self._gate.step(counter, left, right)
+            step = self._gate.step(counter, left, right, self.placer.periods)
             if step is not None:
                 ref.step_deltas(*step)
             self._keep_ref(FramePose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad))
@@ -252,14 +252,14 @@ class PoseTracker:
             # frames it missed as one step: the reference's position is placed again at the
             # next pose (its heading, a function of the counts, goes on).
             self.stalls += 1
-            self._place_at_next = True
+            self._place_at_next = self.placer.stalled = True
             return None
         held = 0 <= self._last_compared <= seq - SILENCE_FRAMES and not queued
         if self._ref is not None and held and not self._place_at_next:
             # The firmware held its pose that long, then took the frames since as one step,
             # which a fine reference cannot follow on a curve: placed again, as after a stall.
             self.stalls += 1
-            self._place_at_next = True
+            self._place_at_next = self.placer.stalled = True
         if self._boot is not None:  # a new life waiting for the frame it primed on
             self._boot_poses.append(pose)
             return None
