@@ -174,11 +174,15 @@ class LiveFit:
 
 
 def rebase(fit: LiveFit, odometry: ReferenceOdometry, kept: dict[int, FramePose],
-           at: FramePose, shift: tuple[float, float]) -> tuple[dict[int, FramePose], LiveFit]:
-    """A placement after a stall at ``at`` (the corrected reference at the sample's frame): the
-    reference (``odometry`` now, ``kept`` at the latest frames) corrected by ``fit`` and moved by
-    ``shift`` (dx, dy m) from that frame on. Returns the new ``kept`` and the fit carried on from
-    the placed pose."""
+           at: FramePose, shift: tuple[float, float] | None
+           ) -> tuple[dict[int, FramePose], LiveFit, FramePose]:
+    """A placement after a stall or gap at ``at`` (the corrected reference at the sample's
+    frame): the reference (``odometry`` now, ``kept`` at the latest frames) corrected by ``fit``
+    and moved by ``shift`` (dx, dy m) from that frame on. Returns the new ``kept``, the fit
+    carried on from the placed pose, and the placed pose. ``shift`` None: nothing placed (the
+    fit goes on as it was: a placement would cut its power-up exactness or its sums)."""
+    if shift is None:
+        return kept, fit, at
     dx, dy = shift
     now = fit.correct(FramePose(-1, odometry.x_m, odometry.y_m, odometry.heading_rad))
     odometry.place(now.x_m + dx, now.y_m + dy, now.heading_rad)
@@ -186,4 +190,5 @@ def rebase(fit: LiveFit, odometry: ReferenceOdometry, kept: dict[int, FramePose]
     for k, raw in kept.items():
         pose = fit.correct(raw)
         moved[k] = pose if k < at.seq else pose._replace(x_m=pose.x_m + dx, y_m=pose.y_m + dy)
-    return moved, fit.carried(at.x_m + dx, at.y_m + dy)
+    return moved, fit.carried(at.x_m + dx, at.y_m + dy), at._replace(x_m=at.x_m + dx,
+                                                                     y_m=at.y_m + dy)

@@ -106,18 +106,19 @@ class StallPlacer:
         return (int(kept[1]), int(kept[2])) if int(kept[0]) == seq else None
 
     def shift(self, pose: FramePose, ref: FramePose, last_compared: int, window: Columns,
-              reference: tuple[Geometry, int, str]) -> tuple[float, float]:
+              reference: tuple[Geometry, int, str]) -> tuple[float, float] | None:
         """How far (dx, dy m) to move the reference's position so that it starts again where
         the firmware is (``pose`` against ``ref``), bounded (module docstring): the merge
         allowance from ``last_compared`` to ``pose`` (``reference``: geometry, counter bits,
-        integrator) joins the budget after a stall, and each gap's since (``gapbound``)."""
+        integrator) joins the budget after a stall, and each gap's since (``gapbound``). None:
+        nothing to place (no stall, and the gaps suspected were a burst after a busy bus)."""
         geometry, bits, integrator = reference
         stalled = self.stalled
         if stalled:
             self._budget_m += self._allowance_m(last_compared, pose.seq, window, reference)
         gaps, self._gaps, self.stalled = _confirmed(self._gaps, window), [], False
         if not gaps and not stalled:
-            return 0.0, 0.0  # a burst after a busy bus, not a gap: nothing to place
+            return None  # a burst after a busy bus, not a gap: nothing to place
         for _, before, after, periods in gaps:
             self._budget_m += (math.inf if periods < 0 else gap_allowance_of_counts(
                 before, after, periods, geometry, bits, integrator, self.max_wheel_speed_mm_s))

@@ -410,9 +410,9 @@ class PoseTracker:
         ref = self.fit.correct(raw)
         shift = self.placer.shift(pose, ref, self._last_compared, self._window,
                                   (self.geometry, self.counter_bits, self.integrator))
-        self._ref_at, self.fit = rebase(self.fit, self._ref, self._ref_at, ref, shift)
+        self._ref_at, self.fit, placed = rebase(self.fit, self._ref, self._ref_at, ref, shift)
         self._place_at_next = False
-        return ref._replace(x_m=ref.x_m + shift[0], y_m=ref.y_m + shift[1])
+        return placed
 
     def on_truth(
         self, part: int, enc_counter: int, value: float
