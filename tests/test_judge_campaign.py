@@ -247,10 +247,13 @@ def bound_counts(robot: Robot) -> int:
 def slow_drive(
     robot: Robot, steps: int, seed: int
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Wheel steps within half the plausibility bound and turning at most ``MAX_DHEADING_RAD``
-    per step (segments of constant wheel speeds)."""
+    """Wheel steps within half the plausibility bound, and within half the wire counter's range
+    (a larger step reads wrapped, on board and on the host alike: a robot of 2^24 counts per 35 mm
+    turn at 1.8 m/s is unreadable on the wire), turning at most ``MAX_DHEADING_RAD`` per step
+    (segments of constant wheel speeds)."""
     rng = np.random.default_rng(seed)
-    half = max(1, bound_counts(robot) // 2 - 1)
+    wire_half = (1 << (min(robot.counter_bits, 24) - 1)) - 1
+    half = max(1, min(bound_counts(robot) // 2 - 1, wire_half // 2))
     m_per_count = 2 * math.pi * max(robot.wheel_radius_left_nm, robot.wheel_radius_right_nm) \
         * 1e-9 / robot.counts_per_rev
     turn = int(0.9 * MAX_DHEADING_RAD * robot.wheelbase_nm * 1e-9 / m_per_count)

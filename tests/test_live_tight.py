@@ -115,6 +115,8 @@ def _own_error_lsb(synth: Synth, robot: Robot, integrator: str, cut: int,
 @example(robot=Robot(1_000, 5_000_000, 5_100_000, 10_000_000, 16), integrator="exact",
          cut=777, seed=1)  # a 1 cm wheelbase, unequal radii, a 16-bit counter
 @example(robot=KOBUKI, integrator="rk2", cut=1_500, seed=8)
+@example(robot=Robot(16_291_980, 5_623_960, 5_623_960, 1_000_000_000, 32), integrator="euler",
+         cut=393, seed=3653)  # a 35 mm turn of 2^24 counts: the drive kept readable on the wire
 def test_the_live_judge_passes_a_correct_firmware_started_mid_drive(
     robot: Robot, integrator: str, cut: int, seed: int
 ) -> None:
