@@ -28,6 +28,8 @@ import math
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -96,10 +98,17 @@ def judge_error_rows(steps: int = LONG_STEPS) -> list[JudgeErrorRow]:
     return rows
 
 
-def _unbounded_live_gate() -> None:
+@contextmanager
+def _unbounded_live_gate() -> Iterator[None]:
     """The live judge's step gate (``livepose.StepGate``) without the firmware's speed bound
-    (module docstring): 2 m per period is beyond any ECU build's."""
+    (module docstring): 2 m per period is beyond any ECU build's. Restored after: a caller
+    judging real drives next (bench/verdicts.py) must get the bound back."""
+    saved = livepose.MAX_WHEEL_SPEED_MM_S
     livepose.MAX_WHEEL_SPEED_MM_S = 10**12
+    try:
+        yield
+    finally:
+        livepose.MAX_WHEEL_SPEED_MM_S = saved
 
 
 def _live_error(robot: RobotProfile, lines: list[str], exact: Any) -> tuple[float, float, str,
@@ -107,13 +116,13 @@ def _live_error(robot: RobotProfile, lines: list[str], exact: Any) -> tuple[floa
     """The monitor model fed ``lines``: its reference's own error at its latest sample against
     ``exact`` (the float64 odometry from the true start, element k: after k steps), its largest
     on-board vs reference error (LSB), its verdict, and its CPU per frame (us)."""
-    _unbounded_live_gate()
     messages = [m for m in (parse_candump_line(line.encode()) for line in lines) if m]
-    monitor = BusMonitor(robot)
-    start = time.process_time()
-    for msg in messages:
-        monitor.feed(msg, now_s=msg.timestamp)
-    cpu_s = time.process_time() - start
+    with _unbounded_live_gate():
+        monitor = BusMonitor(robot)
+        start = time.process_time()
+        for msg in messages:
+            monitor.feed(msg, now_s=msg.timestamp)
+        cpu_s = time.process_time() - start
     ref = monitor.tracker.reference
     assert ref is not None and ref.seq >= 1
     own = math.hypot(ref.x_m - exact.x_m[ref.seq - 1], ref.y_m - exact.y_m[ref.seq - 1])
