@@ -15,6 +15,7 @@ from odocan.host.protocol.pose import heading_fields, unwrap_near
 from odocan.sim.pose import wrap_angle
 
 RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
+ENCODER_PERIOD_S = ENCODER_PERIOD_US * 1e-6
 
 
 class Sample(NamedTuple):
@@ -33,7 +34,14 @@ class StepGate:
     """The firmware's plausibility rule on the reference's steps (firmware/ecu.py, the same as
     ``host.judge.analysis``): a frame beyond ``MAX_WHEEL_SPEED_MM_S`` over the periods its COUNTER
     advanced since the last accepted one is refused; ``RESYNC_FRAMES`` refused frames plausible
-    among themselves are a counter restart: one step from the first of them, never the jump."""
+    among themselves are a counter restart: one step from the first of them, never the jump.
+
+    The periods of a step are the COUNTER advance plus the whole COUNTER cycles nearest to the
+    bus time since the last accepted frame (``step_periods``), as the firmware counts them with
+    its clock (``firmware.encoders._step_periods``): after a silence of the encoder node (its
+    bus off, a sim SIGSTOPped) the first frame carries the distance driven meanwhile, which the
+    firmware integrates as one long step; bounded by the COUNTER advance alone, that step was
+    refused and taken for a counter restart (the distance dropped, a false POSE WRONG)."""
 
     def __init__(self, geometry: Geometry, counter_bits: int) -> None:
         travel_m = MAX_WHEEL_SPEED_MM_S * 1e-3 * ENCODER_PERIOD_US * 1e-6
@@ -41,6 +49,7 @@ class StepGate:
                       math.ceil(travel_m / geometry.m_per_count_right) + 1)
         self.bits = counter_bits
         self.prev: tuple[int, int, int] | None = None  # counter, left, right of the last accepted
+        self.prev_t_s: float | None = None  # bus time of the last accepted frame (s)
         self._refused: list[tuple[int, int, int]] = []
         self.counter_restarts = 0
 
@@ -52,26 +61,41 @@ class StepGate:
         d = self._delta(a, b)
         return abs(d[0]) <= periods * self.bound[0] and abs(d[1]) <= periods * self.bound[1]
 
-    def step(self, counter: int, left: int, right: int) -> tuple[int, int] | None:
-        """The count step to integrate for this frame; None when it primes or is refused."""
+    def step(self, counter: int, left: int, right: int,
+             t_s: float | None = None) -> tuple[int, int] | None:
+        """The count step to integrate for this frame, heard at bus time ``t_s`` (s; None: the
+        COUNTER advance alone); None when it primes or is refused."""
         frame = (counter, left, right)
         prev, self.prev = self.prev, frame
+        prev_t_s, self.prev_t_s = self.prev_t_s, t_s
         if prev is None:
             return None
         delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
-        periods = ((counter - prev[0]) % RING) or RING
+        periods = step_periods(((counter - prev[0]) % RING) or RING, prev_t_s, t_s)
         if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
             if self._refused:
                 self._refused = []
             return delta
-        self.prev = prev  # refused: the base stays
+        self.prev, self.prev_t_s = prev, prev_t_s  # refused: the base stays
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
         self._refused = [*self._refused, frame] if consistent else [frame]
         if len(self._refused) < RESYNC_FRAMES:
             return None
-        first, self._refused, self.prev = self._refused[0], [], frame
+        first, self._refused, self.prev, self.prev_t_s = self._refused[0], [], frame, t_s
         self.counter_restarts += 1
         return self._delta(first, frame)
+
+
+def step_periods(advance: int, prev_t_s: float | None, t_s: float | None) -> int:
+    """The encoder periods between two frames: the COUNTER ``advance`` (1..16) plus the whole
+    COUNTER cycles that bring it nearest to the bus time between them (``prev_t_s``, ``t_s``,
+    s), the firmware's ``_step_periods`` on bus time; ``advance`` without both times."""
+    if prev_t_s is None or t_s is None:
+        return advance
+    budget = round((t_s - prev_t_s) / ENCODER_PERIOD_S) + RING // 2
+    if budget <= advance:
+        return advance
+    return advance + (budget - advance) // RING * RING
 
 
 def difference(a: FramePose, b: FramePose) -> dict[str, float]:

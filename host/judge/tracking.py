@@ -155,7 +155,7 @@ class PoseTracker:
         self._counts[counter] = (self.enc_seq, left, right)
         ref = self._ref
         if ref is not None:
-            step = self._gate.step(counter, left, right)
+            step = self._gate.step(counter, left, right, t_s)
             if step is not None:
                 ref.step_deltas(*step)
             self._keep_ref(FramePose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad))
