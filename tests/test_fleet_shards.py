@@ -159,9 +159,11 @@ def _stats(*errors: tuple[float, float]) -> ErrorStats:
 
 def test_a_jump_of_the_loop_leaves_a_correct_firmware_unjudged_not_failed() -> None:
     """The real-time loop skips releases when it falls a period behind: the robots' time jumps.
-    After a jump of 17 ticks the reference's heading leaves a correct firmware's (its 4-bit
-    COUNTER wrapped: the step gate saw one period and refused a step the firmware took); the
-    fleet's verdict is then UNJUDGED (the run fails, saying why), never FAIL."""
+    After a jump of 17 ticks the 4-bit COUNTER has wrapped; the reference's step gate counts the
+    whole cycles from the frames' times as the firmware's clock does, so its heading follows the
+    firmware's (before, it saw one period and refused the step: 0.26-0.57 rad off). The fleet's
+    verdict is still UNJUDGED (the run fails, saying why), never FAIL: steps over several cycles
+    were seen to move a correct firmware's position a few LSB off the reference."""
     from odocan.host.mqtt.telemetry import RobotTelemetry
 
     profile = robot.load("pmir")
@@ -173,7 +175,7 @@ def test_a_jump_of_the_loop_leaves_a_correct_firmware_unjudged_not_failed() -> N
             for i, frame in fleet.take_batch():
                 telemetry[i].feed_frame(frame)
     trackers = [t.tracker for t in telemetry]
-    assert max(t.vs_reference.max_dheading_rad for t in trackers) > 0.1  # the judge's artefact
+    assert max(t.vs_reference.max_dheading_rad for t in trackers) <= HEADING_LSB_RAD
     for tracker in trackers:
         verdict = judge_robot(tracker.vs_reference, tracker.vs_truth, releases_skipped=17)
         assert verdict["verdict"] == "UNJUDGED"

@@ -296,9 +296,9 @@ def judge_robot(
     some encoder steps spanned several 10 ms cycles: the pose is not judged (UNJUDGED, which
     fails the run without blaming the firmware). The position: the firmware is specified for
     10 ms steps, longer ones were seen to move a correct firmware's position 2-3 LSB off the
-    reference. The heading too: a step over 16 cycles or more (one jump of the loop) wraps the
-    4-bit COUNTER, so the reference's plausibility gate sees one period and refuses a step the
-    firmware took (a correct firmware was seen 0.26-0.57 rad off after a jump of 17-40 ticks)."""
+    reference. (A jump of 16 cycles or more wraps the 4-bit COUNTER: the reference's gate counts
+    the whole cycles from the frames' bus time, ``livepose.step_periods``, as the firmware's clock
+    does; before, it refused the step and a correct firmware was seen 0.26-0.57 rad off.)"""
     beyond_m = vs_reference.max_dpos_m if beyond_allowance_m is None else beyond_allowance_m
     entry: dict[str, Any] = {"pose_vs_reference": _errors(vs_reference),
                              "pose_vs_truth": _errors(vs_truth),
