@@ -16,6 +16,7 @@ from odocan.sim.pose import wrap_angle
 
 RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
 ENCODER_PERIOD_S = ENCODER_PERIOD_US * 1e-6
+CYCLES_AFTER_S = (RING // 2) * ENCODER_PERIOD_S  # below, ``step_periods`` adds no cycle
 
 
 class Sample(NamedTuple):
@@ -71,7 +72,9 @@ class StepGate:
         if prev is None:
             return None
         delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
-        periods = step_periods(((counter - prev[0]) % RING) or RING, prev_t_s, t_s)
+        periods = ((counter - prev[0]) % RING) or RING
+        if t_s is not None and prev_t_s is not None and t_s - prev_t_s > CYCLES_AFTER_S:
+            periods = step_periods(periods, prev_t_s, t_s)
         if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
             if self._refused:
                 self._refused = []
