@@ -21,9 +21,10 @@ the fleet's frames offered to it each tick), runs for ``duration_s`` and returns
 
 Per robot, the on-board pose is judged against the float64 reference the bridge's tracker steps
 with the robot's own accepted encoder frames (``host.judge.tracking.PoseTracker``, paired by
-ENC_COUNTER): PASS within ``FleetRun.tolerance`` (the position limit widened by the path run, as
-the reference starts at the rounded pose: ``position_tolerance_m``), FAIL beyond it or with no
-pose at all. When the loop fell a whole period behind (skipped releases), some encoder steps
+ENC_COUNTER, its start fitted by ``host.judge.livefit``), by the live judge's rule, ``analyze``'s
+(``livefit.pose_wrong``): FAIL when a sample's position error beyond its loss allowance exceeds
+one LSB (0.1 mm) or its heading error one LSB of HEADING, or with no pose at all; else PASS.
+When the loop fell a whole period behind (skipped releases), some encoder steps
 spanned several cycles: the pose is not judged then (UNJUDGED, ``judge_robot``). The error
 against the ground truth (SIM_TRUTH) is reported, never judged: it is the odometry's own drift, not
 the firmware's arithmetic. When the bridge dropped frames (queue full), the references miss encoder
@@ -53,9 +54,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance
+from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livepose import ErrorStats
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
 from odocan.host.mqtt.options import broker_for
@@ -66,11 +68,6 @@ from odocan.sim.contract import cycle_ticks
 from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
 from odocan.sim.provision import robot_key
 from odocan.sim.realtime import DeadlineStats
-
-# pose vs reference, in LSBs of the pose signals: the live reference starts at the rounded
-# on-board pose (half an LSB) and is compared with rounded poses (another half)
-TOLERANCE_LSB = 2
-FLEET_TOLERANCE = Tolerance(TOLERANCE_LSB * POSITION_LSB_M, TOLERANCE_LSB * HEADING_LSB_RAD)
 
 
 @dataclass(frozen=True)
@@ -85,7 +82,6 @@ class FleetRun:
     client_prefix: str = "odocan-bridge"
     connect_timeout_s: float = 5.0
     command_expiry_s: float = 5.0
-    tolerance: Tolerance = FLEET_TOLERANCE
     # SecOC (fleet.secoc_key): robots whose bridge is given no key (a misprovisioned bridge: the
     # firmware refuses their secured commands, NACK AUTH_MISSING); every other bridge signs
     secoc_unsigned: frozenset[str] = frozenset()
@@ -253,11 +249,10 @@ def _report(
             entry["commands_accepted"] = robot.commands_sent
             entry["commands_rejected"] = robot.commands_rejected
             tracker = robot.telemetry.tracker
-            reference = getattr(tracker, "_ref", None)  # the live reference, since its start
             entry.update(judge_robot(
-                tracker.vs_reference, tracker.vs_truth, run.tolerance, frames_dropped=dropped,
+                tracker.vs_reference, tracker.vs_truth, frames_dropped=dropped,
                 releases_skipped=stats.skipped_releases,
-                distance_m=0.0 if reference is None else float(reference.distance_m)))
+                beyond_allowance_m=tracker.max_beyond_allowance_m))
         else:
             entry.update(pose_vs_reference=None, pose_vs_truth=None, verdict=None,
                          reason="no bridge: the poses were not watched")
@@ -276,8 +271,7 @@ def _report(
         "max_lateness_ms": round(stats.max_lateness_s * 1e3, 3),
         "broker": str(url) if url is not None else None,
         "embedded_broker": embedded,
-        "tolerance": {"position_m": run.tolerance.position_m,
-                      "heading_rad": run.tolerance.heading_rad},
+        "tolerance": {"position_m": POSITION_LSB_M, "heading_rad": HEADING_LSB_RAD},
         "bridge": None if bridge is None else bridge.counters(),
         "per_robot": per_robot,
     }
@@ -291,33 +285,24 @@ def _errors(stats: ErrorStats) -> dict[str, Any] | None:
             "samples": stats.samples}
 
 
-def position_tolerance_m(tolerance: Tolerance, distance_m: float) -> float:
-    """The position limit after the reference has run ``distance_m`` (path length, m).
-
-    The live reference starts at the on-board pose as sent, its heading rounded to the signal's
-    LSB: a start off by at most half an LSB turns the whole path by that much, which moves the
-    end by at most ``distance_m * HEADING_LSB_RAD / 2`` (a chord is no longer than its arc) on top
-    of the fixed ``tolerance.position_m``."""
-    return tolerance.position_m + distance_m * HEADING_LSB_RAD / 2
-
-
 def judge_robot(
-    vs_reference: ErrorStats, vs_truth: ErrorStats, tolerance: Tolerance, *,
-    frames_dropped: int = 0, releases_skipped: int = 0, distance_m: float = 0.0,
+    vs_reference: ErrorStats, vs_truth: ErrorStats, *, frames_dropped: int = 0,
+    releases_skipped: int = 0, beyond_allowance_m: float | None = None,
 ) -> dict[str, Any]:
-    """One robot's pose errors and verdict (see the module docstring); ``distance_m``: the path
-    the reference has run since it started (widens the position limit, see
-    ``position_tolerance_m``); ``releases_skipped``: the worker fell a whole period behind, so
+    """One robot's pose errors and verdict (see the module docstring): ``livefit.pose_wrong``
+    on the largest position error beyond its loss allowance (m; ``beyond_allowance_m``, the
+    tracker's ``max_beyond_allowance_m``; default ``vs_reference.max_dpos_m``: no frame lost)
+    and the largest heading error; ``releases_skipped``: the worker fell a whole period behind, so
     some encoder steps spanned several 10 ms cycles: the pose is not judged (UNJUDGED, which
     fails the run without blaming the firmware). The position: the firmware is specified for
     10 ms steps, longer ones were seen to move a correct firmware's position 2-3 LSB off the
-    reference. The heading too: a step over 16 cycles or more (one jump of the loop) wraps the
-    4-bit COUNTER, so the reference's plausibility gate sees one period and refuses a step the
-    firmware took (a correct firmware was seen 0.26-0.57 rad off after a jump of 17-40 ticks)."""
-    limit_m = position_tolerance_m(tolerance, distance_m)
+    reference. (A jump of 16 cycles or more wraps the 4-bit COUNTER: the reference's gate counts
+    the whole cycles from the frames' bus time, ``livepose.step_periods``, as the firmware's clock
+    does; before, it refused the step and a correct firmware was seen 0.26-0.57 rad off.)"""
+    beyond_m = vs_reference.max_dpos_m if beyond_allowance_m is None else beyond_allowance_m
     entry: dict[str, Any] = {"pose_vs_reference": _errors(vs_reference),
                              "pose_vs_truth": _errors(vs_truth),
-                             "position_tolerance_m": limit_m}
+                             "max_dpos_beyond_allowance_m": beyond_m}
     if frames_dropped:
         return {**entry, "verdict": "UNJUDGED",
                 "reason": f"the bridge dropped {frames_dropped} frames: the reference is not "
@@ -326,17 +311,17 @@ def judge_robot(
         return {**entry, "verdict": "FAIL",
                 "reason": "no on-board pose paired with the reference"}
     reasons = []
-    if vs_reference.max_dheading_rad > tolerance.heading_rad:
+    if pose_wrong(0.0, vs_reference.max_dheading_rad):
         reasons.append(f"heading vs reference {vs_reference.max_dheading_rad * 1e3:.4g} mrad > "
-                       f"{tolerance.heading_rad * 1e3:.4g} mrad")
+                       f"{HEADING_LSB_RAD * 1e3:.4g} mrad")
     if releases_skipped:
         seen = f" ({reasons[0]})" if reasons else ""
         return {**entry, "verdict": "UNJUDGED",
                 "reason": f"{releases_skipped} releases skipped (the loop fell behind): encoder "
                           f"steps longer than 10 ms, the pose is not judged{seen}"}
-    if vs_reference.max_dpos_m > limit_m:
-        reasons.append(f"position vs reference {vs_reference.max_dpos_m * 1e3:.4g} mm > "
-                       f"{limit_m * 1e3:.4g} mm")
+    if pose_wrong(beyond_m, 0.0):
+        reasons.append(f"position vs reference {beyond_m * 1e3:.4g} mm (beyond the loss "
+                       f"allowance) > {POSITION_LSB_M * 1e3:.4g} mm")
     return {**entry, "verdict": "FAIL" if reasons else "PASS",
             "reason": "; ".join(reasons) or None}
 
