@@ -124,6 +124,7 @@ from odocan.host.judge.samples import (
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.stalls import after_stalls
 from odocan.host.judge.statuslatch import firmware_events
+from odocan.host.judge.twins import twin_allowance_of
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import UNKNOWN, check_frames
@@ -297,7 +298,9 @@ def _analyze_life(
     after_span = loss_allowance(enc, robot, integrator, losses,
                                 np.array([last + 1 for _, last, _ in losses], dtype=np.int64),
                                 onboard.enc)
-    vs_ref["max_position_error_beyond_allowance_m"] = float(np.max(pos_err - allowance))
+    twin_allowed = twin_allowance_of(enc, robot, integrator, ref_all, onboard.enc)
+    vs_ref["max_position_error_beyond_allowance_m"] = float(
+        np.max(pos_err - allowance - twin_allowed))
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad

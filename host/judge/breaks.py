@@ -82,6 +82,8 @@ class BreakSummary:
     max_beyond_m: float = 0.0  # the most an offset went beyond its bound, not absorbed (m)
     gaps: int = 0  # placements after a gap of the log (unbounded: not checked)
     max_gap_absorbed_m: float = 0.0  # the longest offset a gap's placement absorbed (m)
+    twins: int = 0  # encoder frames with a twin after the reference's start (host.judge.twins)
+    twin_allowance_m: float = 0.0  # their detours summed: the largest twin allowance (m)
 
     def add_stall(self, asked_m: float, limit_m: float) -> None:
         self.stalls += 1
@@ -98,6 +100,8 @@ class BreakSummary:
             "max_offset_beyond_allowance_m": self.max_beyond_m,
             "gap_placements": self.gaps,
             "max_gap_offset_absorbed_m": self.max_gap_absorbed_m,
+            "twins": self.twins,
+            "twin_allowance_m": self.twin_allowance_m,
         }
 
 
@@ -107,10 +111,12 @@ def merged_breaks(parts: list[dict[str, Any]]) -> dict[str, Any]:
     for part in parts[1:]:
         out["stall_placements"] += part["stall_placements"]
         out["gap_placements"] += part["gap_placements"]
+        out["twins"] += part["twins"]
         if part["max_offset_absorbed_m"] >= out["max_offset_absorbed_m"]:
             out["max_offset_absorbed_m"] = part["max_offset_absorbed_m"]
             out["offset_allowance_m"] = part["offset_allowance_m"]
-        for key in ("max_offset_beyond_allowance_m", "max_gap_offset_absorbed_m"):
+        for key in ("max_offset_beyond_allowance_m", "max_gap_offset_absorbed_m",
+                    "twin_allowance_m"):
             out[key] = max(out[key], part[key])
     return out
 

@@ -21,6 +21,8 @@ from collections import deque
 from typing import Any
 
 from odocan.host.judge.livewindow import CYCLE_S
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.twins import Counts, twin_detour_m
 
 TWIN_SLOTS = 64  # recent encoder frames whose twin is remembered (a ring by seq)
 TWIN_GAP_S = 8 * CYCLE_S  # 8 periods on, the same COUNTER is the sender's next cycle
@@ -39,6 +41,8 @@ class TwinWatch:
         self._accepted = accepted
         self._ring = [-1] * TWIN_SLOTS
         self.found = 0  # twins heard so far
+        self._counts: dict[int, list[Counts]] = {}  # the twins' counts by seq (the latest)
+        self._pending: list[int] = []  # twinned seqs whose detour waits for the next frame
 
     def refused(self, counter: int, left: int, right: int, t_s: float) -> None:
         """A WHEEL_ENCODERS frame refused with its CRC right (raw COUNTER, 24-bit counts, bus
@@ -53,6 +57,33 @@ class TwinWatch:
             return
         self._ring[int(seq) % TWIN_SLOTS] = int(seq)
         self.found += 1
+        self._counts.setdefault(int(seq), []).append((left, right))
+        if not self._pending or self._pending[-1] != int(seq):
+            self._pending.append(int(seq))
+
+    def resolve(self, geometry: Geometry, bits: int, integrator: str | None
+                ) -> list[tuple[int, float]]:
+        """(seq, ``twins.twin_detour_m``) of the twinned frames whose next accepted frame has
+        come since the last call (the whole log's ``twins.twin_spans``, the window's frames
+        numbered by seq one apart); twins whose frames left the window are dropped."""
+        rows = self._accepted
+        if not self._pending or not rows or integrator is None:
+            return []
+        latest = int(rows[-1][0])
+        spans = []
+        waiting = [seq for seq in self._pending if seq >= latest]
+        for seq in (s for s in self._pending if s < latest):
+            i = len(rows) - 1 - (latest - seq)  # its row: the window's seqs are consecutive
+            if i < 1:
+                continue
+            counts = [(int(rows[j][4]), int(rows[j][5])) for j in (i - 1, i, i + 1)]
+            prevs = [counts[0], *self._counts.get(seq - 1, [])]
+            spans.append((seq, twin_detour_m(prevs, counts[1], self._counts[seq], counts[2],
+                                             geometry, bits, integrator)))
+        self._pending = waiting
+        for old in [s for s in self._counts if s < latest - TWIN_SLOTS]:
+            del self._counts[old]
+        return spans
 
     def twinned(self, seq: int) -> bool:
         """Whether accepted encoder frame ``seq`` has a twin heard so far."""

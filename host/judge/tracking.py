@@ -285,10 +285,10 @@ class PoseTracker:
         self.fit.feed(pose, raw)
         ref = self.fit.correct(raw)
         self.placer.compared(pose.seq)
-        self.reference = ref
-        self._last_pair = (pose, ref)
+        self.reference, self._last_pair = ref, (pose, ref)
         self._last_compared = pose.seq
         self.vs_reference.add(pose, ref)
+        self._losses.spans += self.twins.resolve(self.geometry, self.counter_bits, self.integrator)
         self._losses.record(pose.seq, self.vs_reference.latest["dpos_m"], self.fast_path)
         return ref
 
