@@ -102,6 +102,11 @@ def test_the_flood_gives_the_live_judge_the_samples_and_errors_of_analyze(
     assert bridge.tracker.vs_reference.max_dpos_m == monitor.tracker.vs_reference.max_dpos_m
     assert monitor.tracker.stalls == 1  # the one placement (analyze: one stall placement)
     assert result.report["reference_breaks"]["stall_placements"] == 1
+    # the flood's random forgeries are implausible steps, which no firmware takes: their twin
+    # allowance stays below a millimetre (taken as steps, they would open it to metres)
+    assert result.report["reference_breaks"]["twins"] > 0
+    assert result.report["reference_breaks"]["twin_allowance_m"] < 1e-3
+    assert monitor.tracker.allowance_m() < 1e-3
     # the placement's constant: the first difference after it; before it, none
     first_placed = next(k for k, s in enumerate(judged)  # live places the reference onto it
                         if got[_key(s.pose.x_m, s.pose.y_m)] == (0.0, 0.0)

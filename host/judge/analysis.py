@@ -67,6 +67,10 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    reference by the sum of the largest such merge errors (``losses.loss_allowance``, reported
    as ``loss_allowance_m`` and an ``encoder_frames_lost_on_board`` event per span), which the
    verdict allows on top of the tolerance; the heading stays exact (a function of the counts).
+   Likewise an encoder frame with a twin (``samples.twinned_encoder_frames``): the firmware may
+   have integrated the twin, a detour the reference did not take; each twin's worst detour
+   (``host.judge.twins``) is allowed from its frame on, summed (``reference_breaks``' ``twins``
+   and ``twin_allowance_m``).
 
 6. **Reboots** (``host.judge.reboots``): a firmware restart inside the log (UPTIME going back,
    or INIT after running: the live monitor's ``host.judge.sources.SourceWatch``) cuts the log

@@ -78,8 +78,10 @@ class TwinWatch:
                 continue
             counts = [(int(rows[j][4]), int(rows[j][5])) for j in (i - 1, i, i + 1)]
             prevs = [counts[0], *self._counts.get(seq - 1, [])]
+            periods = (max(1, int(rows[i][2] - rows[i - 1][2]) & 0xF),  # COUNTER steps
+                       max(1, int(rows[i + 1][2] - rows[i][2]) & 0xF))
             spans.append((seq, twin_detour_m(prevs, counts[1], self._counts[seq], counts[2],
-                                             geometry, bits, integrator)))
+                                             periods, geometry, bits, integrator)))
         self._pending = waiting
         for old in [s for s in self._counts if s < latest - TWIN_SLOTS]:
             del self._counts[old]

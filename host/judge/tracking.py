@@ -302,7 +302,7 @@ class PoseTracker:
         self._losses.settle(self.enc_seq, self.fast_path)  # later spans start at this frame
 
     def allowance_m(self, seq: int | None = None) -> float:
-        """The loss allowance (m) at encoder frame ``seq`` (default: the latest sample's)."""
+        """The loss and twin allowance (m) at frame ``seq`` (default: the latest sample's)."""
         return self._losses.at_m(self._last_compared if seq is None else seq)
 
     @property

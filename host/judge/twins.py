@@ -16,10 +16,13 @@ must never blame a correct firmware; a real error beyond the sum still fails).""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
+from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.losses import _step_vector, heading_steps
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.reference_path import Reference
@@ -52,14 +55,39 @@ def _two_steps(a: Counts, mid: Counts | None, b: Counts, g: Geometry, bits: int,
     return dx1 + dx2, dy1 + dy2
 
 
+def counts_bound(g: Geometry) -> Counts:
+    """The most counts per period each wheel may step for the firmware to take it: the
+    reference's plausibility bound (``reference_path.firmware_steps``)."""
+    travel_m = MAX_WHEEL_SPEED_MM_S * 1e-3 * ENCODER_PERIOD_US * 1e-6
+    return (math.ceil(travel_m / g.m_per_count_left) + 1,
+            math.ceil(travel_m / g.m_per_count_right) + 1)
+
+
+def _plausible(a: Counts, b: Counts, periods: int, g: Geometry, bits: int) -> bool:
+    """Whether the firmware takes a step from counts ``a`` to ``b`` over ``periods``."""
+    left, right = counts_bound(g)
+    return (abs(int(wrap_delta(b[0] - a[0], bits))) <= periods * left
+            and abs(int(wrap_delta(b[1] - a[1], bits))) <= periods * right)
+
+
 def twin_detour_m(prevs: Sequence[Counts], accepted: Counts, twins: Sequence[Counts],
-                  nxt: Counts, g: Geometry, bits: int, integrator: str) -> float:
+                  nxt: Counts, periods: tuple[int, int], g: Geometry, bits: int,
+                  integrator: str) -> float:
     """The worst position difference (m) after ``nxt`` between taking ``accepted`` and taking
-    one of its ``twins`` (or neither), from any of ``prevs`` (the frame before and its twins)."""
+    one of its ``twins`` (or neither), from any of ``prevs`` (the frame before and its twins).
+    A twin the firmware would refuse as implausible (a step from prev or to ``nxt`` beyond the
+    reference's bound over ``periods``: the COUNTER steps before and after the frame) counts
+    as neither taken (a random forgery's counts: its detour would be meters); so does a twin
+    of the frame before that the firmware could not have gone on from to ``accepted``. An
+    implausible ``accepted`` is refused by the reference too (``firmware_steps``): one step."""
     worst = 0.0
-    for prev in prevs:
-        ax, ay = _two_steps(prev, accepted, nxt, g, bits, integrator)
+    for prev in prevs[:1] + [p for p in prevs[1:] if _plausible(p, accepted, periods[0], g, bits)]:
+        taken = accepted if _plausible(prev, accepted, periods[0], g, bits) else None
+        ax, ay = _two_steps(prev, taken, nxt, g, bits, integrator)  # the reference refuses it
         for mid in (*twins, None):
+            if mid is not None and not (_plausible(prev, mid, periods[0], g, bits)
+                                        and _plausible(mid, nxt, periods[1], g, bits)):
+                continue
             tx, ty = _two_steps(prev, mid, nxt, g, bits, integrator)
             worst = max(worst, float(np.hypot(tx - ax, ty - ay)))
     return worst
@@ -80,7 +108,9 @@ def twin_spans(enc: Encoders, g: Geometry, bits: int, integrator: str, after: in
         if k <= max(after, 0) or k + 1 >= len(counts):
             continue
         prevs = [counts[k - 1], *of.get(k - 1, [])]
-        spans.append((k, twin_detour_m(prevs, counts[k], of[k], counts[k + 1], g, bits,
+        periods = (max(1, int(enc.seq[k] - enc.seq[k - 1])),
+                   max(1, int(enc.seq[k + 1] - enc.seq[k])))
+        spans.append((k, twin_detour_m(prevs, counts[k], of[k], counts[k + 1], periods, g, bits,
                                        integrator)))
     return spans
 
