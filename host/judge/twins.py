@@ -81,7 +81,7 @@ def twin_detour_m(prevs: Sequence[Counts], accepted: Counts, twins: Sequence[Cou
     of the frame before that the firmware could not have gone on from to ``accepted``. An
     implausible ``accepted`` is refused by the reference too (``firmware_steps``): one step."""
     worst = 0.0
-    for prev in prevs[:1] + [p for p in prevs[1:] if _plausible(p, accepted, periods[0], g, bits)]:
+    for prev in [prevs[0], *(p for p in prevs[1:] if _plausible(p, accepted, periods[0], g, bits))]:
         taken = accepted if _plausible(prev, accepted, periods[0], g, bits) else None
         ax, ay = _two_steps(prev, taken, nxt, g, bits, integrator)  # the reference refuses it
         for mid in (*twins, None):
