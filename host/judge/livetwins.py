@@ -13,6 +13,11 @@ next half of its message). A twin heard later than that is not known then; it ca
 the firmware can only have taken a frame that reached it before it sent the pose, so a pose
 whose named frame has no twin on the bus before the pose was made from that frame (``analyze``,
 which knows the whole log, leaves such a pose out too; the live judge keeps it, and it agrees).
+
+Each twin's detour (``host.judge.twins``) is allowed from its frame on (``resolve``, into the
+loss allowance's spans), weighing at most ``TWIN_CAP`` distinct twins of one frame (each costs
+its steps from every prev choice: a forger of many CRC-right twins must not stall the judge;
+``analyze`` weighs them all, so past the cap the live allowance may be the smaller).
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from odocan.host.judge.twins import Counts, twin_detour_m
 
 TWIN_SLOTS = 64  # recent encoder frames whose twin is remembered (a ring by seq)
 TWIN_GAP_S = 8 * CYCLE_S  # 8 periods on, the same COUNTER is the sender's next cycle
+TWIN_CAP = 16  # distinct twins per frame weighed in its detour (each costs prevs x 2 steps)
 CRC_RIGHT_REFUSED = frozenset({"repeated", "wrong_sequence"})  # E2EMonitor.check's statuses
 
 
@@ -57,9 +63,13 @@ class TwinWatch:
             return
         self._ring[int(seq) % TWIN_SLOTS] = int(seq)
         self.found += 1
-        self._counts.setdefault(int(seq), []).append((left, right))
+        twins = self._counts.setdefault(int(seq), [])
+        if len(twins) < TWIN_CAP and (left, right) not in twins:
+            twins.append((left, right))
         if not self._pending or self._pending[-1] != int(seq):
             self._pending.append(int(seq))
+            if len(self._pending) > TWIN_SLOTS:  # no reference to resolve them: the oldest go
+                self._counts.pop(self._pending.pop(0), None)
 
     def resolve(self, geometry: Geometry, bits: int, integrator: str | None
                 ) -> list[tuple[int, float]]:

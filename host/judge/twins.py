@@ -101,7 +101,9 @@ def twin_spans(enc: Encoders, g: Geometry, bits: int, integrator: str, after: in
         return []
     of: dict[int, list[Counts]] = {}
     for k, left, right in zip(*(a.tolist() for a in enc.twins), strict=True):
-        of.setdefault(k, []).append((left, right))
+        twins = of.setdefault(k, [])
+        if (left, right) not in twins:  # a twin repeated is one option
+            twins.append((left, right))
     counts = list(zip(enc.left.tolist(), enc.right.tolist(), strict=True))
     spans = []
     for k in sorted(of):
