@@ -15,21 +15,24 @@ errors come from ``analyze``'s per-sample series or from the clean log.
 
 from __future__ import annotations
 
+import io
 import math
 from typing import Any
 
 import can
 import pytest
+from rich.console import Console
 
 from odocan.firmware.frames import ODOM_POSE_X_DATA_IDS, seal_frame
 from odocan.host.io.frames import to_message
 from odocan.host.io.logs import FrameCollector
-from odocan.host.judge.analysis import analyze
+from odocan.host.judge.analysis import Tolerance, analyze
 from odocan.host.judge.livepose import Sample
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.host.report.summary import print_summary
 from odocan.sim import frames as sf
 from odocan.sim.robot import load
 from tests.test_forged_pairing import RecordingWatch
@@ -202,6 +205,11 @@ def test_forged_twins_ahead_of_genuine_frames_leave_their_poses_out(
     assert breaks["twin_allowance_m"] >= want - POSITION_LSB_M
     assert result.passed
     assert monitor.tracker.max_beyond_allowance_m <= POSITION_LSB_M
+    out = io.StringIO()
+    print_summary(result.report, Tolerance(), Console(file=out, width=80), title="twins")
+    allowed_mm = breaks["twin_allowance_m"] * 1e3
+    assert f"PASS: on-board vs reference within 0.1 mm and 0.09587 mrad (plus {allowed_mm:.4g} mm " \
+        "for encoder frames with a twin)" in out.getvalue()
 
 
 def _shifted_x(messages: list[can.Message], from_s: float, lsb: int) -> list[can.Message]:
