@@ -208,8 +208,8 @@ def test_forged_twins_ahead_of_genuine_frames_leave_their_poses_out(
     out = io.StringIO()
     print_summary(result.report, Tolerance(), Console(file=out, width=80), title="twins")
     allowed_mm = breaks["twin_allowance_m"] * 1e3
-    assert f"PASS: on-board vs reference within 0.1 mm and 0.09587 mrad (plus {allowed_mm:.4g} mm " \
-        "for encoder frames with a twin)" in out.getvalue()
+    assert (f"PASS: on-board vs reference within 0.1 mm and 0.09587 mrad (plus {allowed_mm:.4g}"
+            " mm for encoder frames with a twin)") in out.getvalue()
 
 
 def _shifted_x(messages: list[can.Message], from_s: float, lsb: int) -> list[can.Message]:
