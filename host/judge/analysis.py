@@ -69,6 +69,10 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    reference by the sum of the largest such merge errors (``losses.loss_allowance``, reported
    as ``loss_allowance_m`` and an ``encoder_frames_lost_on_board`` event per span), which the
    verdict allows on top of the tolerance; the heading stays exact (a function of the counts).
+   Likewise an encoder frame with a twin (``samples.twinned_encoder_frames``): the firmware may
+   have integrated the twin, a detour the reference did not take; each twin's worst detour
+   (``host.judge.twins``) is allowed from its frame on, summed (``reference_breaks``' ``twins``
+   and ``twin_allowance_m``).
 
 6. **Reboots** (``host.judge.reboots``): a firmware restart inside the log (UPTIME going back,
    or INIT after running: the live monitor's ``host.judge.sources.SourceWatch``) cuts the log
@@ -126,6 +130,7 @@ from odocan.host.judge.samples import (
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.stalls import after_stalls
 from odocan.host.judge.statuslatch import firmware_events
+from odocan.host.judge.twins import twin_allowance_of
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import UNKNOWN, check_frames
@@ -299,7 +304,9 @@ def _analyze_life(
     after_span = loss_allowance(enc, robot, integrator, losses,
                                 np.array([last + 1 for _, last, _ in losses], dtype=np.int64),
                                 onboard.enc)
-    vs_ref["max_position_error_beyond_allowance_m"] = float(np.max(pos_err - allowance))
+    twin_allowed = twin_allowance_of(enc, robot, integrator, ref_all, onboard.enc)
+    vs_ref["max_position_error_beyond_allowance_m"] = float(
+        np.max(pos_err - allowance - twin_allowed))
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad

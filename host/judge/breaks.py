@@ -88,6 +88,8 @@ class BreakSummary:
     max_gap_absorbed_m: float = 0.0  # the longest offset such a placement asked for (m)
     gap_allowance_m: float = 0.0  # that placement's bound (gap and merge allowances + tolerance)
     free: int = 0  # placements after a gap without a bound (none configured: not checked)
+    twins: int = 0  # encoder frames with a twin after the reference's start (host.judge.twins)
+    twin_allowance_m: float = 0.0  # their detours summed: the largest twin allowance (m)
 
     def add_stall(self, asked_m: float, limit_m: float) -> None:
         self.stalls += 1
@@ -112,6 +114,8 @@ class BreakSummary:
             "max_gap_offset_absorbed_m": self.max_gap_absorbed_m,
             "gap_offset_allowance_m": self.gap_allowance_m,
             "free_gap_placements": self.free,
+            "twins": self.twins,
+            "twin_allowance_m": self.twin_allowance_m,
         }
 
 
@@ -122,12 +126,13 @@ def merged_breaks(parts: list[dict[str, Any]]) -> dict[str, Any]:
         out["stall_placements"] += part["stall_placements"]
         out["gap_placements"] += part["gap_placements"]
         out["free_gap_placements"] += part["free_gap_placements"]
+        out["twins"] += part["twins"]
         for asked, limit in (("max_offset_absorbed_m", "offset_allowance_m"),
                              ("max_gap_offset_absorbed_m", "gap_offset_allowance_m")):
             if part[asked] >= out[asked]:
                 out[asked], out[limit] = part[asked], part[limit]
-        out["max_offset_beyond_allowance_m"] = max(out["max_offset_beyond_allowance_m"],
-                                                   part["max_offset_beyond_allowance_m"])
+        for key in ("max_offset_beyond_allowance_m", "twin_allowance_m"):
+            out[key] = max(out[key], part[key])
     return out
 
 

@@ -21,7 +21,7 @@ class LiveAllowance:
 
     def __init__(self) -> None:
         self.lost_page: tuple[int, int] | None = None  # ENC_E2E_LOST, latest frame then
-        self.spans: list[tuple[int, float]] = []  # (first frame, m) per lossy span
+        self.spans: list[tuple[int, float]] = []  # (first frame, m) per lossy span or twin
         self._revisable: deque[tuple[int, float]] = deque()  # (frame, m) of samples since
         self._in_order = True  # ``_revisable`` by frame (then settled from its head)
         self._beyond_settled_m = 0.0  # largest error beyond its allowance of the other samples

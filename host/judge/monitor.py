@@ -388,9 +388,9 @@ class BusMonitor:
             return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
         if self.tracker.awaiting_boot:
             return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
-        allowed_m = self.tracker.allowance_m()  # for encoder frames the firmware lost
+        allowed_m = self.tracker.allowance_m()  # for frames the firmware lost, and twins
         if pose_wrong(error["dpos_m"], error["dheading_rad"], allowed_m):
-            plus = f" (allowed {allowed_m * 1e3:.4f} mm for lost frames)" if allowed_m else ""
+            plus = f" (allowed {allowed_m * 1e3:.4f} mm: lost frames, twins)" if allowed_m else ""
             return "POSE WRONG", [
                 f"on-board vs reference {error['dpos_m'] * 1e3:.4f} mm{plus}, "
                 f"{error['dheading_rad'] * 1e3:.4f} mrad (limit one LSB: "

@@ -52,6 +52,7 @@ class Encoders:
     timestamp_s: FloatArray
     cycle_s: float | None  # the DBC cycle time
     twinned: npt.NDArray[np.bool_] | None = None  # ``twinned_encoder_frames``; None: none
+    twins: tuple[IntArray, IntArray, IntArray] | None = None  # ``encoder_twins``; None: none
 
 
 @dataclass(frozen=True)
@@ -139,7 +140,8 @@ def encoder_frames(
     came in a burst (``queued_frames``); and which have a twin (``twinned_encoder_frames``)."""
     rows = decoder.decode(frames, "WHEEL_ENCODERS")
     keep = accepted[rows["index"]]
-    twinned = twinned_encoder_frames(frames, rows, keep, decoder)
+    twins = encoder_twins(frames, rows, keep, decoder)
+    twinned = np.isin(np.arange(int(np.count_nonzero(keep))), twins[0])
     enc = accepted_rows(frames, accepted, decoder, "WHEEL_ENCODERS")
     counter = enc["COUNTER"].astype(np.int64)
     cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS")
@@ -148,7 +150,7 @@ def encoder_frames(
         seq=sender_seq(counter, enc["timestamp_s"], cycle_s),
         left=enc["LEFT_COUNT"].astype(np.int64), right=enc["RIGHT_COUNT"].astype(np.int64),
         timestamp_s=enc["timestamp_s"], cycle_s=cycle_s,
-        twinned=twinned if twinned.any() else None,
+        twinned=twinned if twinned.any() else None, twins=twins if twinned.any() else None,
     )
 
 
@@ -165,10 +167,20 @@ def twinned_encoder_frames(
     and was kept, and a full mailbox drops frames the bus log holds, so a pose naming that
     COUNTER cannot be told to belong to either: ``match_encoder`` names none (the pose is left
     out, not guessed one period off). An exact repetition (the same counts) is no twin."""
-    twinned = np.zeros(int(np.count_nonzero(keep)), dtype=bool)
+    return np.isin(np.arange(int(np.count_nonzero(keep))), encoder_twins(frames, rows, keep,
+                                                                         decoder)[0])
+
+
+def encoder_twins(
+    frames: FrameArrays, rows: dict[str, np.ndarray], keep: npt.NDArray[np.bool_],
+    decoder: BulkDecoder,
+) -> tuple[IntArray, IntArray, IntArray]:
+    """``twinned_encoder_frames``' twins, one element each: the accepted frame it twins (its
+    index among the accepted ones) and its LEFT_COUNT, RIGHT_COUNT (``host.judge.twins``)."""
+    none = np.zeros(0, dtype=np.int64)
     refused = np.flatnonzero(~keep)
-    if len(refused) == 0 or len(twinned) == 0:
-        return twinned
+    if len(refused) == 0 or not keep.any():
+        return none, none, none
     kept = np.flatnonzero(keep)
     before = np.searchsorted(kept, refused) - 1  # the latest accepted frame before each
     refused, before = refused[before >= 0], before[before >= 0]
@@ -179,16 +191,15 @@ def twinned_encoder_frames(
     cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS")
     if cycle_s is not None:  # 16 periods on, the same COUNTER is the sender's next cycle
         same &= rows["timestamp_s"][refused] - rows["timestamp_s"][prev] < 8 * cycle_s
-    if not same.any():
-        return twinned
     config = next(m for m in e2e_messages(decoder.db).values() if m.name == "WHEEL_ENCODERS")
-    if config.data_ids is None:
-        return twinned
+    if not same.any() or config.data_ids is None:
+        return none, none, none
     data = frames.data[rows["index"][refused[same]]]
     ids = np.asarray(config.data_ids, dtype=np.uint8)[rows["COUNTER"][refused[same]] & 0xF]
     crc_right = crc8h2f_p02(data, ids) == data[:, 0]
-    twinned[before[same][crc_right]] = True
-    return twinned
+    twin = refused[same][crc_right]
+    return (before[same][crc_right].astype(np.int64), rows["LEFT_COUNT"][twin].astype(np.int64),
+            rows["RIGHT_COUNT"][twin].astype(np.int64))
 
 
 def sender_seq(counter: IntArray, timestamp_s: FloatArray, cycle_s: float | None) -> IntArray:

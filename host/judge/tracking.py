@@ -285,10 +285,10 @@ class PoseTracker:
         self.fit.feed(pose, raw)
         ref = self.fit.correct(raw)
         self.placer.compared(pose.seq)
-        self.reference = ref
-        self._last_pair = (pose, ref)
+        self.reference, self._last_pair = ref, (pose, ref)
         self._last_compared = pose.seq
         self.vs_reference.add(pose, ref)
+        self._losses.spans += self.twins.resolve(self.geometry, self.counter_bits, self.integrator)
         self._losses.record(pose.seq, self.vs_reference.latest["dpos_m"], self.fast_path)
         return ref
 
@@ -302,7 +302,7 @@ class PoseTracker:
         self._losses.settle(self.enc_seq, self.fast_path)  # later spans start at this frame
 
     def allowance_m(self, seq: int | None = None) -> float:
-        """The loss allowance (m) at encoder frame ``seq`` (default: the latest sample's)."""
+        """The loss and twin allowance (m) at frame ``seq`` (default: the latest sample's)."""
         return self._losses.at_m(self._last_compared if seq is None else seq)
 
     @property

@@ -150,6 +150,8 @@ def print_summary(
         + ("" if pose_met else ": not met")
         + (f" (plus {allowance * 1e3:.4g} mm for encoder frames the firmware lost)"
            if (allowance := report["onboard_vs_reference"].get("loss_allowance_m")) else "")
+        + (f" (plus {twins * 1e3:.4g} mm for encoder frames with a twin)"
+           if (twins := (report.get("reference_breaks") or {}).get("twin_allowance_m")) else "")
         + (
             ""
             if twist["passed"]
