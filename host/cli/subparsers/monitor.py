@@ -55,7 +55,7 @@ from odocan.host.report.live import render_fleet, with_staleness
 from odocan.host.report.trace import FrameFilter, Trace
 from odocan.host.report.tui import View
 from odocan.host.report.tui_app import FrameLog, MonitorApp, RecordingError, run_screen
-from odocan.host.stopped import early_stop, signum_of
+from odocan.host.stopped import Stopped, early_stop, signum_of
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 
@@ -148,16 +148,23 @@ def _do_monitor(args: argparse.Namespace) -> int:
     live = _foxglove(args, profile, model)
     started_s = time.monotonic()
     failure, signum = _watch_bus(args, model, trace, view, recorder, live)
-    stopped = early_stop(signum, started_s, args.duration)
-    if args.json:
-        snapshot = model.snapshot()
-        if stopped is not None:
-            snapshot["stopped"] = stopped.as_dict()
-        print(to_json(snapshot))
-    if stopped is not None:
-        print(f"monitor: {stopped.text()}", file=sys.stderr)
+    code = _end(args, model.snapshot, early_stop(signum, started_s, args.duration))
     if failure is not None:
         raise failure
+    return code
+
+
+def _end(args: argparse.Namespace, snapshot: Callable[[], dict[str, Any]],
+         stopped: Stopped | None) -> int:
+    """The watch's end: its JSON snapshot when asked (with ``stopped``: a signal ended it before
+    ``--duration``), the early stop said on stderr; returns the exit code (0, or the signal's)."""
+    if args.json:
+        data = snapshot()
+        if stopped is not None:
+            data["stopped"] = stopped.as_dict()
+        print(to_json(data))
+    if stopped is not None:
+        print(f"monitor: {stopped.text()}", file=sys.stderr)
     return 0 if stopped is None else stopped.exit_code
 
 
@@ -238,15 +245,7 @@ def _watch_fleet(url: BrokerURL, args: argparse.Namespace) -> int:
         raise first_error(group) from None
     if not watch.connected_once:
         raise BrokerUnreachable(f"cannot reach the MQTT broker {url}: {watch.last_error}")
-    stopped = early_stop(signum, watch.started, args.duration)
-    if args.json:
-        snapshot = watch.snapshot()
-        if stopped is not None:
-            snapshot["stopped"] = stopped.as_dict()
-        print(to_json(snapshot))
-    if stopped is not None:
-        print(f"monitor: {stopped.text()}", file=sys.stderr)
-    return 0 if stopped is None else stopped.exit_code
+    return _end(args, watch.snapshot, early_stop(signum, watch.started, args.duration))
 
 
 class _FleetWatch:
