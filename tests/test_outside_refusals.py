@@ -16,15 +16,7 @@ import pytest
 from odocan.host.cli.app import main
 from odocan.host.io.logs import iter_log, read_log
 from odocan.sim.faultspec import FaultSpec
-
-
-def _one_error_line(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
-    code = main(argv)
-    out, err = capsys.readouterr()
-    assert code == 2, (out, err)
-    assert err.count("\n") == 1, err
-    assert err.startswith("error: "), err
-    return err
+from tests.test_outside_inputs import _one_error_line
 
 
 @pytest.fixture(scope="module")
