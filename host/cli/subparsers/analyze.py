@@ -30,7 +30,7 @@ memory whatever its size; those four read the whole log (their series and frames
 a log the analysis refuses (to explain why in the log's terms) or fails (to look for a wrong
 ``--robot``), or that the stream cannot judge exactly (``stream_analysis.NotStreamable``: frame
 times going back around a stall, frames let out in a burst after a busy bus). ``odocan analyze
-LOG…`` chooses the same way for each log (``host.judge.batch.analyze_one``).
+LOG…`` chooses the same way for each log (``host.cli.batch.analyze_one``).
 """
 
 from __future__ import annotations
@@ -51,9 +51,9 @@ from odocan.sim.exceptions import ConfigurationError
 if TYPE_CHECKING:  # imported where used: a command pays only for what it runs
     import cantools
 
+    from odocan.host.cli.batch import LogResult
     from odocan.host.io.logs import FrameArrays
     from odocan.host.judge.analysis import Analysis
-    from odocan.host.judge.batch import LogResult
     from odocan.sim import robot
 
 MAX_JOBS = 1024
@@ -236,7 +236,7 @@ def _analyze_many(args: argparse.Namespace) -> int:
 
     Exit 2 when any log is unreadable or names nothing (the others are analysed all the same),
     else 1 when any log fails its check, else 0; the logs at fault are named on stderr."""
-    from odocan.host.judge import batch
+    from odocan.host.cli import batch
     from odocan.sim import robot
 
     single_only = [
@@ -294,8 +294,8 @@ def check_report_dir(directory: Path) -> None:
 
 def write_reports(results: list[LogResult], directory: Path) -> None:
     """One JSON report per analysed log in ``directory`` (names from ``batch.report_names``)."""
+    from odocan.host.cli.batch import report_names
     from odocan.host.jsonutil import write_report
-    from odocan.host.judge.batch import report_names
     from odocan.host.outputs import OutputError
 
     names = report_names([Path(r.path) for r in results])
