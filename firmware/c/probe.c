@@ -8,6 +8,7 @@
  *   muldiv A B C             -> quotient errors       (u64 each)
  *   mulshr A B S             -> result errors         (i64, i64, shift)
  *   div_round N D            -> result
+ *   div_q62 N HI LO          -> result                (i64, i64, u64: N / (HI * 2^64 + LO))
  *   isqrt N                  -> result
  *   wrap_signed V BITS       -> result                (V: u32)
  *   config PPV RL RR B BITS I -> reason [m_l m_r k_l k_r errors]
@@ -200,6 +201,10 @@ int main(void)
             uint64_t b = arg_u64();
             uint64_t q = muldiv_round_u64(a, b, arg_u64(), &errors);
             printf("%" PRIu64 " %" PRIu32 "\n", q, errors);
+        } else if (strcmp(cmd, "div_q62") == 0) {
+            int64_t num = arg_i64();
+            int64_t hi = arg_i64();
+            printf("%" PRId64 "\n", div_q62_i128(num, hi, arg_u64()));
         } else if (strcmp(cmd, "mulshr") == 0) {
             int64_t a = arg_i64();
             int64_t b = arg_i64();
