@@ -11,12 +11,12 @@ by the firmware time since the last sample before it, as the backlog's sample ti
 
 from __future__ import annotations
 
+from odocan.firmware.config import ENCODER_PERIOD_US as ENCODER_PERIOD_US
 from odocan.firmware.config import TWO_PI_Q60
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.fixmath import U16_MAX, div_round_i64, mul_shr_round_i64, sat_range
 from odocan.firmware.odometry import Odometry
 
-ENCODER_PERIOD_US = 10_000  # WHEEL_ENCODERS GenMsgCycleTime
 TWIST_SUM_MAX = 1 << 32  # one tick's summed steps saturate at 4096 m (Q20) and 4 rad (Q30)
 PERIODS_MAX = U16_MAX  # the speeds' dt saturates here (655 s; encoders.STEP_PERIODS_MAX)
 

@@ -330,6 +330,9 @@ def _config_probes(rng: random.Random, ask: Callable[..., None]) -> None:
                 counter_bits=rng.choice((16, 32)),
                 integrator=rng.choice((0, 1, 2)),
             )
+        speed_mm_s = rng.choice((4_000, 500, 65_535, rng.randrange(1, 65_536)))
+        ask(f"config_speed {speed_mm_s} " + " ".join(str(v) for v in dataclasses.astuple(params)),
+            int(config.validate_at_speed(params, speed_mm_s)))
         cmd = "config " + " ".join(str(v) for v in dataclasses.astuple(params))
         reason = config.validate(params)
         if reason != config.ConfigReason.OK:

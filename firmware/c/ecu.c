@@ -122,7 +122,7 @@ void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
     ecu->errors = 0u;
     ecu->state = STATE_INIT;
     ecu->reason = REASON_NONE;
-    if (validate(params) != CONFIG_OK) {
+    if (validate_at_speed(params, MAX_WHEEL_SPEED_MM_S) != CONFIG_OK) {
         ecu->errors |= ERROR_CONFIG_INVALID;
         ecu->state = STATE_FAULT;
         ecu->reason = REASON_CONFIG_INVALID;
@@ -795,11 +795,12 @@ static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame)
         }
     }
     ecu->staged_config = 0u;
-    enum config_reason reason = validate(&candidate);
+    enum config_reason reason = validate_at_speed(&candidate, ecu->max_wheel_speed_mm_s);
     if (reason != CONFIG_OK) {
         ecu->errors |= ERROR_CONFIG_INVALID;
-        enum ack_reason ack_reason =
-            reason == CONFIG_GEOMETRY_ABSURD ? ACK_INCONSISTENT : ACK_OUT_OF_RANGE;
+        enum ack_reason ack_reason = reason == CONFIG_GEOMETRY_ABSURD || reason == CONFIG_WIRE_RANGE
+                                         ? ACK_INCONSISTENT
+                                         : ACK_OUT_OF_RANGE;
         ack(ecu, ODOM_CONFIG_ID, frame, ACK_RESULT_NACK, ack_reason);
         return;
     }
