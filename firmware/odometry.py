@@ -80,6 +80,7 @@ class Odometry:
         "heading_bam64",
         "heading_turns",
         "last_dheading_bam64",
+        "last_dheading_turns",
         "last_ds_q49_m",
         "x_q40_m",
         "y_q40_m",
@@ -98,6 +99,7 @@ class Odometry:
         self.distance_q40_m = 0
         self.last_ds_q49_m = 0  # i64, dS of the last step (for the twist)
         self.last_dheading_bam64 = 0  # i64, signed dtheta of the last step (for the twist)
+        self.last_dheading_turns = 0  # i32, the whole turns of that step beyond it (|.| < 2^29)
 
     @property
     def consts(self) -> OdomConstants:
@@ -160,6 +162,7 @@ class Odometry:
             self.heading_turns = wrap_i32(self.heading_turns + (heading_sum >> 64) + turns)
         self.last_ds_q49_m = ds_q49_m
         self.last_dheading_bam64 = dheading
+        self.last_dheading_turns = turns
         if ds_q49_m == 0:
             return
         self.distance_q40_m = (

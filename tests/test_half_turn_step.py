@@ -22,6 +22,7 @@ from odocan.firmware.odometry import Odometry
 from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.reference import ReferenceOdometry
 from tests.odo_helpers import firmware, geometry, params
+from tests.test_ecu import Rig
 
 ONE_CM = {"wheelbase_nm": 10_000_000}  # pmir's wheels on a 1 cm wheelbase
 INTEGRATORS = ("euler", "rk2", "exact")
@@ -124,3 +125,20 @@ def test_a_step_of_whole_turns_on_the_spot_leaves_the_position(turns: int) -> No
     odo.step_deltas(0, 200 * turns)  # one wheel only: the arc about the other wheel, n turns
     assert cumulative_heading_rad(odo) == pytest.approx(2 * math.pi * turns, abs=1e-12)
     assert off_m(odo, 0.0, 0.0) < TOLERANCE_M
+
+
+@pytest.mark.parametrize(("d_left", "d_right"), [(-20, 20), (22, -14)])  # 3.8, -3.4 rad
+def test_the_twist_of_a_step_turning_more_than_half_a_turn_is_the_whole_turn(
+    d_left: int, d_right: int
+) -> None:
+    """ODOM_TWIST's angular speed (before its i16 saturation) of one such step in one period:
+    dtheta / 10 ms, not the wrapped angle's (which has the other sign)."""
+    p = params("exact", **ONE_CM)
+    rig = Rig(p)
+    rig.drive(3, 0, 0)
+    rig.drive(1, d_left, d_right)
+    check = FloatOdometry(p, "exact")
+    check.step(d_left, d_right)
+    assert abs(check.heading_rad()) > math.pi
+    want_mrad_s = check.heading_rad() / (ENCODER_PERIOD_US * 1e-6) * 1e3
+    assert rig.ecu.twist.angular_mrad_s == pytest.approx(want_mrad_s, abs=1.0)

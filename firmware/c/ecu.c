@@ -596,12 +596,14 @@ static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32
 }
 
 /* Add the step just integrated to this tick's sums (Q20 m, Q30 rad; i64, saturated). Each term
- * is below 2^34 (dS >> 29) and 2^32 (the heading), each sum below 2^32 before: no overflow. */
+ * is below 2^34 (dS >> 29) and 2^62 (the heading: its signed read plus its whole turns), each
+ * sum below 2^32 before: no overflow. */
 static void sum_step(struct odom_ecu *ecu)
 {
     const struct odometry *odo = &ecu->odometry;
     int64_t dheading_q30_rad =
-        mul_shr_round_i64(odo->last_dheading_bam64, TWO_PI_Q60, 94u, &ecu->errors);
+        mul_shr_round_i64(odo->last_dheading_bam64, TWO_PI_Q60, 94u, &ecu->errors)
+        + (int64_t)odo->last_dheading_turns * TWO_PI_Q30;
     ecu->tick_ds_q20_m = sat_range(ecu->tick_ds_q20_m + asr_i64(odo->last_ds_q49_m, 29u),
                                    -TWIST_SUM_MAX, TWIST_SUM_MAX, &ecu->errors);
     ecu->tick_dheading_q30_rad = sat_range(ecu->tick_dheading_q30_rad + dheading_q30_rad,

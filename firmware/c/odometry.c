@@ -35,6 +35,7 @@ void odometry_init(struct odometry *odo, const struct odom_constants *consts, ui
     odo->distance_q40_m = 0u;
     odo->last_ds_q49_m = 0;
     odo->last_dheading_bam64 = 0;
+    odo->last_dheading_turns = 0;
 }
 
 /* Use new constants from the next step on; the pose and the counter history are kept. */
@@ -109,6 +110,7 @@ void odometry_step_deltas(struct odometry *odo, int32_t d_left, int32_t d_right)
     }
     odo->last_ds_q49_m = ds_q49_m;
     odo->last_dheading_bam64 = dheading;
+    odo->last_dheading_turns = (int32_t)turns; /* |turns| < 2^29 */
     if (ds_q49_m == 0) {
         return;
     }
