@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import random
+from pathlib import Path
 
 import pytest
 
@@ -24,6 +25,7 @@ from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.firmware.errors import ErrorFlag, State
 from tests.odo_helpers import params
 from tests.test_ecu import Rig, _config
+from tests.test_outside_inputs import _one_error_line
 
 # 2^24 counts per 35 mm of wheel circumference (radius 5.57 mm), 32-bit counters
 FINE = params("exact", counts_per_rev=1 << 24, wheel_radius_left_nm=5_570_423,
@@ -114,3 +116,16 @@ def test_the_shipped_robots_and_the_issue_ranges_stay_usable(bits: int) -> None:
     big = dataclasses.replace(kobuki, counts_per_rev=1 << 24, wheelbase_nm=10_000_000,
                               counter_bits=32)
     assert validate_at_speed(big, MAX_WHEEL_SPEED_MM_S) is ConfigReason.OK
+
+
+@pytest.mark.parametrize("command", [["run", "--duration", "1"], ["analyze", "x.log"],
+                                     ["vectors", "--out", "v"]])
+def test_the_cli_refuses_such_a_robot_file_in_one_line(
+    command: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "fine.toml"
+    path.write_text("counts_per_rev = 16777216\nwheel_radius_left_m = 0.005570423\n"
+                    "wheel_radius_right_m = 0.005570423\nwheelbase_m = 0.01\ncounter_bits = 32\n")
+    err = _one_error_line(capsys, [*command, "--robot", str(path)])
+    assert "read wrapped above 0.875 m/s" in err
+    assert "below the firmware's 4 m/s bound" in err
