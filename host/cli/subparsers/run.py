@@ -249,7 +249,7 @@ def _run_and_analyze(
         if mirror is not None:
             mirror.shutdown()
     frames = collector.arrays()
-    cause = _why_no_frames(config.faults)
+    cause = _why_no_frames(config.faults, config.bitrate, still_queued)
     require_frames(frames, "the run", cause)
     with explained(lambda: frames, "the run", cause), progress(f"analysing {len(frames)}", None):
         analysis = analyze(
@@ -325,9 +325,21 @@ def _open_log(path: Path) -> can.Listener:
         raise OutputError(f"--log {path}: {exc.strerror or exc}") from None
 
 
-def _why_no_frames(faults: FaultSpec | None) -> str:
+def _why_no_frames(
+    faults: FaultSpec | None,
+    bitrate: int | None,
+    still_queued: dict[tuple[int, bool], int] | None,
+) -> str:
+    """Why a message the check needs has no frame: the faults asked for, a bit-timed bus too
+    slow for the rig's traffic (frames left in its transmit buffers), else a bug."""
     if faults is not None and faults.active:
         return f"under --faults {faults}"
+    queued = sum((still_queued or {}).values())
+    if bitrate is not None and queued:
+        return (
+            f"at {bitrate} bit/s the bus cannot carry the rig's traffic: {queued} frames still "
+            f"queued at the end; see odocan busload -b {bitrate}, use a higher -b/--bitrate"
+        )
     return "the rig sent none: a bug, please report it"
 
 
