@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
+from odocan.host.cli.app import main
 from tests.test_outside_inputs import _one_error_line
 
 
@@ -17,3 +20,37 @@ def test_a_bus_too_slow_for_the_rig_is_named_not_called_a_bug(
     assert "a bug" not in err
     assert f"at {bitrate} bit/s the bus cannot carry the rig's traffic" in err
     assert "frames still queued at the end" in err
+
+
+@pytest.fixture(scope="module")
+def pmir_vectors(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """pmir's vectors (exact integrator), 0.5 s of the random scenario."""
+    out = tmp_path_factory.mktemp("vectors")
+    assert main(["vectors", "--out", str(out), "--duration", "0.5"]) == 0
+    return out
+
+
+@pytest.mark.parametrize(
+    ("options", "why"),
+    [
+        (["--robot", "kobuki"], "is for robot pmir"),
+        (["--integrator", "rk2"], "is for integrator exact"),
+        (["--seed", "3"], "--seed: the cases are the vector file's"),
+        (["--scenario", "spin", "--duration", "2"], "--scenario, --duration: the cases are"),
+    ],
+)
+def test_vectors_check_refuses_options_it_would_ignore(
+    pmir_vectors: Path, options: list[str], why: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``vectors --check --robot kobuki`` of pmir's vectors said 'reproduced bit for bit' (exit
+    0): --check re-runs the file's robot, integrator and cases and ignored the options."""
+    err = _one_error_line(capsys, ["vectors", "--out", str(pmir_vectors), "--check", *options])
+    assert why in err
+
+
+@pytest.mark.parametrize("options", [[], ["--robot", "pmir"], ["--integrator", "exact"]])
+def test_vectors_check_takes_options_that_match_the_file(
+    pmir_vectors: Path, options: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["vectors", "--out", str(pmir_vectors), "--check", *options]) == 0
+    assert "reproduced bit for bit" in capsys.readouterr().out
