@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import shlex
 from pathlib import Path
 
 import pytest
@@ -54,3 +56,22 @@ def test_vectors_check_takes_options_that_match_the_file(
 ) -> None:
     assert main(["vectors", "--out", str(pmir_vectors), "--check", *options]) == 0
     assert "reproduced bit for bit" in capsys.readouterr().out
+
+
+def test_calibrate_prints_the_umbmark_that_keeps_its_promise(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """calibrate --write-robot said 'use --robot kept.toml': with the same --errors that makes
+    the corrected profile the simulated robot too, errors on top (kobuki: E_max 574 mm, not
+    calibrate's 0.1 mm). The command it prints now gives calibrate's E_max after exactly."""
+    kept, cal, check = tmp_path / "kept.toml", tmp_path / "cal.json", tmp_path / "check.json"
+    assert main(["calibrate", "--robot", "kobuki", "--runs", "1", "--side", "2", "--errors",
+                 "ed=1.002,eb=1.01", "--write-robot", str(kept), "--report", str(cal)]) == 0
+    out = capsys.readouterr().out
+    lines = [line.strip() for line in out.splitlines() if line.strip().startswith("odocan ")]
+    assert len(lines) == 1, out
+    argv = shlex.split(lines[0])[1:]
+    assert main([*argv, "--report", str(check)]) == 0
+    promised = json.loads(cal.read_text())["emax_after_m"]
+    assert json.loads(check.read_text())["emax_syst_m"] == promised
+    assert promised < json.loads(cal.read_text())["emax_before_m"] / 100
