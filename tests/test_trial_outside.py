@@ -75,3 +75,12 @@ def test_calibrate_prints_the_umbmark_that_keeps_its_promise(
     promised = json.loads(cal.read_text())["emax_after_m"]
     assert json.loads(check.read_text())["emax_syst_m"] == promised
     assert promised < json.loads(cal.read_text())["emax_before_m"] / 100
+
+
+def test_run_refuses_a_bus_arg_without_a_bus_to_give_it_to(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``run --bus-arg foo`` (not even KEY=VALUE) ran and PASSed: the rig's own bus is
+    in-process and takes no python-can arguments; only the -i/-c copy does."""
+    err = _one_error_line(capsys, ["run", "--duration", "1", "--bus-arg", "port=47999"])
+    assert "--bus-arg port=47999: only for the -i/-c bus" in err

@@ -172,6 +172,7 @@ def _do_run(args: argparse.Namespace) -> int:
     check_log_path(args.log)
     check_output_paths(args)
     check_latency_plot(args.latency_plot, config.bitrate)
+    check_bus_args(args)
     check_export_paths(args.parquet, args.mcap)
     check_junit_path(args)
     check_distinct([("--log", args.log), ("--report", args.report), ("--plot", args.plot),
@@ -198,6 +199,16 @@ def _do_run(args: argparse.Namespace) -> int:
     if log_error is not None:
         raise log_error
     return code if stopped is None else stopped.exit_code
+
+
+def check_bus_args(args: argparse.Namespace) -> None:
+    """``--bus-arg`` configures the -i/-c bus the frames are mirrored to; without one it did
+    nothing, silently (``run --bus-arg port=N`` ran on the in-process bus, port unused)."""
+    if args.bus_arg and args.interface is None and args.channel is None:
+        raise ConfigurationError(
+            f"--bus-arg {args.bus_arg[0]}: only for the -i/-c bus the frames are copied to "
+            "(the rig's own bus is in-process; -b makes it bit-timed): give -i/-c"
+        )
 
 
 def check_latency_plot(path: Path | None, bitrate: int | None) -> None:
