@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import json
+import re
 import shlex
+from decimal import Decimal
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from odocan.host.cli.app import main
+from odocan.host.io.logs import read_log
 from tests.test_outside_inputs import _one_error_line
 
 
@@ -84,3 +88,32 @@ def test_run_refuses_a_bus_arg_without_a_bus_to_give_it_to(
     in-process and takes no python-can arguments; only the -i/-c copy does."""
     err = _one_error_line(capsys, ["run", "--duration", "1", "--bus-arg", "port=47999"])
     assert "--bus-arg port=47999: only for the -i/-c bus" in err
+
+
+def _relative_asc(absolute: Path, out: Path) -> None:
+    """``absolute`` (python-can's ASC, ``timestamps absolute``) rewritten as CANalyzer writes
+    with ``timestamps relative``: each event's time after the previous event's."""
+    lines, previous = [], Decimal(0)
+    for line in absolute.read_text().splitlines(keepends=True):
+        if line.startswith("base "):
+            line = line.replace("timestamps absolute", "timestamps relative")
+        stamp = re.match(r"(\s*)(\d+\.\d+)(\s.*)", line, re.DOTALL)
+        if stamp is not None:
+            now = Decimal(stamp.group(2))
+            line, previous = f"{stamp.group(1)}{now - previous:f}{stamp.group(3)}", now
+        lines.append(line)
+    out.write_text("".join(lines))
+
+
+def test_an_asc_with_relative_timestamps_reads_as_its_absolute_twin(tmp_path: Path) -> None:
+    """CANalyzer's 'timestamps relative' ASC was read as absolute times (python-can ignores the
+    header): 499 of 1800 frames went back in time and analyze found no pose to pair."""
+    absolute, relative = tmp_path / "abs.asc", tmp_path / "rel.asc"
+    assert main(["run", "--duration", "2", "--log", str(absolute)]) == 0
+    _relative_asc(absolute, relative)
+    assert "timestamps relative" in relative.read_text()
+    want, got = read_log(absolute), read_log(relative)
+    assert len(got) == len(want) > 0
+    assert np.array_equal(got.timestamp_s, want.timestamp_s)
+    assert np.array_equal(got.can_id, want.can_id)
+    assert main(["analyze", str(relative)]) == 0
