@@ -59,3 +59,22 @@ def test_analyze_with_the_wrong_integrator_and_robot_names_both(
     out = capsys.readouterr().out
     assert "integrator mismatch: the log's ODOM_STATUS reports exact, not rk2" in out
     assert "robot mismatch: the log's poses fit robot 'kobuki', not 'pmir' (--robot)" in out
+
+
+def test_a_batch_names_the_robot_mismatch_of_each_log(
+    kobuki_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``analyze a.log b.log`` FAILed both with no word of why (the single-log path named the
+    robot that fits; the batch did not look)."""
+    second = tmp_path / "again.log"
+    second.write_bytes(kobuki_log.read_bytes())
+    reports = tmp_path / "reports"
+    capsys.readouterr()
+    assert main(["analyze", str(kobuki_log), str(second), "--report-dir", str(reports)]) == 1
+    out = capsys.readouterr().out
+    hint = "robot mismatch: the log's poses fit robot 'kobuki', not 'pmir' (--robot)"
+    assert f"{second}: {hint}" in out
+    assert f"{kobuki_log}: {hint}" in out
+    for report in reports.glob("*.json"):
+        assert json.loads(report.read_text())["diagnosis"] == [hint]
+    assert len(list(reports.glob("*.json"))) == 2

@@ -336,6 +336,9 @@ def print_batch_summary(results: list[LogResult]) -> None:
     console = Console(file=sys.stdout, highlight=False, width=max(80, longest + 72))
     console.print(f"[bold]odocan analyze: {len(results)} logs[/bold]")
     console.print(table)
+    for result in results:  # why a log may fail without its firmware's fault
+        for hint in (result.report or {}).get("diagnosis", []):
+            console.print(f"  - {result.path}: {hint}", soft_wrap=True)
     passed = sum(r.passed for r in results)
     failed = sum(r.report is not None and not r.passed for r in results)
     errors = sum(r.report is None for r in results)
