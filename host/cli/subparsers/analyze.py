@@ -173,16 +173,18 @@ def _analyze_single(args: argparse.Namespace) -> int:
         analysis.report["bus"] = busstats.from_frames(frames, args.bitrate).as_dict()
     analysis.report["inputs"] = log_inputs(args.log, profile, analysis.report["integrator"],
                                            args.dbc)
-    hint = None
+    hints: list[str] = []
     if not analysis.passed and db is None:  # a wrong --robot must not read as a firmware fault
-        from odocan.host.judge.diagnosis import robot_mismatch
+        from odocan.host.judge.diagnosis import mismatches
 
         frames = frames if frames is not None else read_log(args.log)  # a failed verdict only
-        hint = robot_mismatch(frames, profile, analysis.report["integrator"], args.tolerance)
-        if hint is not None:
-            analysis.report["diagnosis"] = [hint]
+        report = analysis.report
+        hints = mismatches(frames, profile, report["integrator"], report["integrator_source"],
+                           args.tolerance)
+        if hints:
+            analysis.report["diagnosis"] = hints
     code = finish(analysis, args, title=f"odocan analyze: {args.log}")
-    if hint is not None:
+    for hint in hints:
         print(f"  - {hint}")
     write_checks(args, "analyze", analysis_checks(analysis.report))
     if whole_log is not None:
@@ -334,6 +336,9 @@ def print_batch_summary(results: list[LogResult]) -> None:
     console = Console(file=sys.stdout, highlight=False, width=max(80, longest + 72))
     console.print(f"[bold]odocan analyze: {len(results)} logs[/bold]")
     console.print(table)
+    for result in results:  # why a log may fail without its firmware's fault
+        for hint in (result.report or {}).get("diagnosis", []):
+            console.print(f"  - {result.path}: {hint}", soft_wrap=True)
     passed = sum(r.passed for r in results)
     failed = sum(r.report is not None and not r.passed for r in results)
     errors = sum(r.report is None for r in results)
