@@ -4,10 +4,11 @@ rule 5: a FAIL must never blame a correct firmware; ``host.judge.gapbound``).
 Across a gap the log holds one merged step; the firmware may have integrated the gap's frames
 one by one, or merged some (frames the bus lost too), each step within its plausibility bound.
 ``gap_allowance_m`` must be at least the distance between any such firmware's position and the
-merged step's, and near it. Checked with this file's own float64 odometry (a step of half a turn
-or more read wrapped, as the firmware reads its BAM heading): by brute force over every split
-and every merge of small gaps, and over random splits (extreme and smooth) of gaps up to 200
-periods on random robots.
+merged step's, and near it. Checked with this file's own float64 odometry (a step of more than
+half a turn taken whole, as the firmware takes it since it reads the whole turns beyond its
+signed BAM64 step): by brute force over every split and every merge of small gaps (a 1 cm
+wheelbase at up to 4 m/s among them: 8 rad a period), and over random splits (extreme and
+smooth) of gaps up to 200 periods on random robots.
 """
 
 from __future__ import annotations
@@ -32,14 +33,13 @@ def _step(dl: int, dr: int, heading: float, g: Geometry, integrator: str
     m_left, m_right = g.m_per_count_left, g.m_per_count_right
     ds = 0.5 * (dl * m_left + dr * m_right)
     turn = (dr * m_right - dl * m_left) / g.wheelbase_m
-    read = turn if abs(turn) < math.pi else (turn + math.pi) % (2.0 * math.pi) - math.pi
     if integrator == "euler":
         direction, factor = heading + turn, 1.0
     else:
-        direction = heading + 0.5 * read
+        direction = heading + 0.5 * turn
         factor = 1.0
-        if integrator == "exact" and read != 0.0:
-            factor = math.sin(0.5 * read) / (0.5 * read)
+        if integrator == "exact" and turn != 0.0:
+            factor = math.sin(0.5 * turn) / (0.5 * turn)
     return ds * factor * math.cos(direction), ds * factor * math.sin(direction), heading + turn
 
 
@@ -74,8 +74,11 @@ def _compositions(n: int) -> Iterator[list[int]]:
 
 CASES = [  # geometry (counts/rev, radii m, wheelbase m), periods, counts per period per wheel
     (Geometry(12, 0.05, 0.05, 0.1), 2, (2, 2)),
-    (Geometry(12, 0.05, 0.05, 0.02), 3, (1, 1)),  # a turn of 3 rad a period: wrapped steps
+    (Geometry(12, 0.05, 0.05, 0.02), 3, (1, 1)),  # 2.6 rad a period, up to 7.9 rad merged
     (Geometry(40, 0.05, 0.06, 0.3), 3, (1, 1)),  # unequal radii
+    # 1 cm wheelbase, 15.7 mm a count: up to 3.1 m/s and 6.3 rad a period, 18.8 rad a merge
+    (Geometry(20, 0.05, 0.05, 0.01), 2, (2, 2)),
+    (Geometry(20, 0.05, 0.05, 0.01), 3, (2, 2)),
 ]
 
 
@@ -144,3 +147,26 @@ def test_random_float64_splits_stay_within_the_allowance(
     got = gap_allowance_m(dl, dr, len(split), g, integrator, bounds)
     travel = sum(abs(a) * g.m_per_count_left + abs(b) * g.m_per_count_right for a, b in split)
     assert got >= error - 1e-12 * (1.0 + travel), (got, error)
+
+
+@pytest.mark.parametrize("integrator", ["euler", "rk2", "exact"])
+def test_a_1_cm_robot_at_4_m_s_stays_within_the_allowance(integrator: str) -> None:
+    """pmir's wheels on a 1 cm wheelbase (0.094 rad a count), the firmware's own per-period
+    bound (4 m/s: 8 rad a period): 300 random gaps of 2 and 3 periods, each wheel turning one
+    way at 2 to 4 m/s (steps of 4 to 24 rad, taken whole), the firmware's every merge of them."""
+    g = Geometry(500, 0.075, 0.075, 0.01)
+    bounds = period_bounds(g)
+    firmware = (bounds[0] - 1, bounds[1] - 1)
+    rng = np.random.default_rng(11)
+    worst = 0.0
+    for _ in range(300):
+        n = int(rng.integers(2, 4))
+        left = rng.choice([-1, 1]) * rng.integers(firmware[0] // 2, firmware[0] + 1, n)
+        right = rng.choice([-1, 1]) * rng.integers(firmware[1] // 2, firmware[1] + 1, n)
+        split = list(zip(left.tolist(), right.tolist(), strict=True))
+        got = gap_allowance_m(int(left.sum()), int(right.sum()), n, g, integrator, bounds)
+        for parts in _compositions(n):
+            error = _error_m(split, parts, g, integrator)
+            assert got >= error - 1e-12, (split, parts, got, error)
+            worst = max(worst, error)
+    assert worst > 0.05  # merges that move the robot by centimetres, not 0 <= 0

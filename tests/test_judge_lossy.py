@@ -14,13 +14,15 @@ from __future__ import annotations
 
 import json
 import math
+import random
 import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from hypothesis import HealthCheck, assume, given, settings
+import pytest
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from odocan.host.judge.losses import drop_errors
@@ -32,6 +34,9 @@ from tests.test_judge_campaign import profile_of, robots
 DURATION_S = 10
 BABBLE = "babble=8000"
 LSB_M = 1e-4
+
+
+ONE_CM = Robot(500, 75_000_000, 75_000_000, 10_000_000, 16)  # pmir's wheels, 1 cm wheelbase
 
 
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -47,6 +52,23 @@ def test_the_merge_error_of_a_lost_frame_is_the_checkers(
 ) -> None:
     """``drop_errors[j]``: how far the pose ends when frame j is lost (its step and the next one
     taken as one), against the checker's float64 odometry driving the same counts both ways."""
+    _check_drop(robot, integrator, steps, data.draw(st.integers(1, len(steps) - 1),
+                                                    label="lost frame"))
+
+
+@pytest.mark.parametrize("integrator", ["euler", "rk2", "exact"])
+def test_a_lost_frame_of_a_1_cm_robot_at_4_m_s_is_the_checkers(integrator: str) -> None:
+    """pmir's wheels on a 1 cm wheelbase at up to 4 m/s (42 counts, 8 rad a period): the merged
+    step of a lost frame turns up to 16 rad, taken whole by the firmware and the checker."""
+    rng = random.Random(5)
+    for _ in range(200):
+        steps = [(rng.randint(-42, 42), rng.randint(-42, 42)) for _ in range(rng.randint(3, 8))]
+        _check_drop(ONE_CM, integrator, steps, rng.randint(1, len(steps) - 1))
+
+
+def _check_drop(robot: Robot, integrator: str, steps: list[tuple[int, int]], j: int) -> None:
+    """``drop_errors[j]`` of ``steps`` (count deltas) is the checker's: frame j lost, the pose
+    after every step one by one against the pose with steps j - 1 and j taken as one."""
     wire = 1 << min(robot.counter_bits, 24)
     left = np.concatenate(([0], np.cumsum([s[0] for s in steps])))
     right = np.concatenate(([0], np.cumsum([s[1] for s in steps])))
@@ -55,19 +77,14 @@ def test_the_merge_error_of_a_lost_frame_is_the_checkers(
                    left=left % wire, right=right % wire,
                    timestamp_s=np.arange(n, dtype=np.float64) * 0.01, cycle_s=0.01)
     got = drop_errors(enc, profile_of(robot), integrator)
-    j = data.draw(st.integers(1, n - 2), label="lost frame")
     every, lost = _Odometry(robot, integrator), _Odometry(robot, integrator)
     for k, (d_left, d_right) in enumerate(steps):
-        assume(abs(d_right * every.m_right - d_left * every.m_left) / every.b < 0.9 * math.pi)
         every.step(d_left, d_right)
         if k == j - 1:
             continue
         if k == j:
             d_left, d_right = d_left + steps[k - 1][0], d_right + steps[k - 1][1]
-        # a step of half a turn or more: the firmware reads its turn wrapped, which this plain
-        # checker does not (tests/test_stall_bound.py has that case's own regression test)
-        assume(abs(d_right * lost.m_right - d_left * lost.m_left) / lost.b < 0.9 * math.pi)
-        lost.step(d_left, d_right)
+        lost.step(d_left, d_right)  # a step of more than half a turn: whole, as the firmware
     want = math.hypot(every.x - lost.x, every.y - lost.y)
     scale = sum(abs(a) + abs(b) for a, b in steps) * every.m_left
     assert got[0] == got[-1] == 0.0

@@ -10,10 +10,10 @@ of its steps over k periods within k times the plausibility bound per period tha
 How far can its position after the gap lie from the merged step's? Write a step of left and
 right wheel travel a, c (m) as ds = (a + c) / 2 and a heading change dtheta = (c - a) / b, taken
 by the integrator as ds sigma(dtheta) u(dir) (``losses.step_vector``: u the unit vector, dir
-the end heading (euler) or the middle (rk2, exact; a step of half a turn or more read wrapped, as
-the firmware reads it), sigma = sinc(dtheta / 2) for exact, else 1). The merged step is
-S r with S = sum ds_i and r = sigma_ref u(dir_ref) of the merged counts, so the firmware's
-position differs from it by
+the end heading (euler) or the middle (rk2, exact), sigma = sinc(dtheta / 2) for exact, else 1;
+a step of more than half a turn taken whole, as the firmware and the reference take it). The
+merged step is S r with S = sum ds_i and r = sigma_ref u(dir_ref) of the merged counts, so the
+firmware's position differs from it by
 
     E = sum_i ds_i (sigma_i u(dir_i) - r),  |E| <= sum_i |ds_i| g_i,  g_i = |sigma_i u(dir_i) - r|.
 
@@ -23,10 +23,10 @@ programming over the heading at each period boundary, kept in G bins of width de
 reachable range: a step from bin s to bin e over k periods is worth the largest |ds| any
 dtheta within (c_e - c_s) +- delta allows over k periods (the travel is then free: dropping
 sum ds_i = S only enlarges the set) times g at the bins' centres plus 0.75 delta (dir moves by
-at most delta / 2 within the bins, sigma by at most 0.22 delta), or 1 + |r| where that interval
-of dtheta holds a half turn (the wrapped reading jumps there; |sigma| <= 1 always). Every real
-sequence of steps lies in some sequence of bins and earns no more there, so the result bounds
-|E|: a true upper bound, proven against brute force and random splits in tests/test_gap_bound.py.
+at most delta / 2 within the bins, sigma by at most 0.22 delta), at most 1 + |r| (|sigma| <= 1
+always). Every real sequence of steps lies in some sequence of bins and earns no more there, so
+the result bounds |E|: a true upper bound, proven against brute force and random splits in
+tests/test_gap_bound.py.
 It is also at most the path bound N (A + C) / 2 + |S r| (A, C: the wheels' travel bounds per
 period), which it takes beyond ``DP_PERIODS`` periods. The firmware's own rounding is the
 placement's tolerance (``breaks.bound_offsets``' slack)."""
@@ -63,14 +63,12 @@ def period_bounds(geometry: Geometry, max_wheel_speed_mm_s: int = MAX_WHEEL_SPEE
 def step_response(turn_rad: FloatArray, h_old_rad: FloatArray, integrator: str
                   ) -> tuple[FloatArray, FloatArray]:
     """(sigma, dir rad) of steps turning ``turn_rad`` from heading ``h_old_rad``: the
-    displacement is ds sigma u(dir) (``losses.step_vector``'s rule, the turn of half a turn
-    or more read wrapped to [-pi, pi))."""
-    read = np.where(np.abs(turn_rad) >= np.pi, (turn_rad + np.pi) % (2.0 * np.pi) - np.pi,
-                    turn_rad)
+    displacement is ds sigma u(dir) (``losses.step_vector``'s rule: the whole turn, even one of
+    more than half a turn)."""
     if integrator == "euler":
-        return np.ones_like(read), h_old_rad + turn_rad
-    sigma = np.sinc(read / (2.0 * np.pi)) if integrator == "exact" else np.ones_like(read)
-    return sigma, h_old_rad + 0.5 * read
+        return np.ones_like(turn_rad), h_old_rad + turn_rad
+    sigma = np.sinc(turn_rad / (2.0 * np.pi)) if integrator == "exact" else np.ones_like(turn_rad)
+    return sigma, h_old_rad + 0.5 * turn_rad
 
 
 def gap_allowance_m(d_left: int, d_right: int, periods: int, geometry: Geometry,
@@ -128,11 +126,7 @@ def _worth(k: int, centre: FloatArray, width: float, wheels: tuple[float, float,
     sigma, direction = step_response(turn_c, np.broadcast_to(centre[:, None], turn_c.shape),
                                      integrator)
     g = np.hypot(sigma * np.cos(direction) - r[0], sigma * np.sin(direction) - r[1])
-    cap = 1.0 + math.hypot(*r)
-    if integrator != "euler":  # a half turn within the interval: the wrapped reading jumps
-        odd = np.floor((t_hi + np.pi) / (2.0 * np.pi)) > np.floor((t_lo + np.pi) / (2.0 * np.pi))
-        g = np.where(odd, cap, g)
-    g = np.minimum(g + BIN_SLACK * width, cap)
+    g = np.minimum(g + BIN_SLACK * width, 1.0 + math.hypot(*r))
     worth: FloatArray = np.where(t_lo <= t_hi, ds * g, -np.inf)
     return worth
 

@@ -264,19 +264,12 @@ def merge_errors(
 def step_vector(
     dl: IntArray, dr: IntArray, h_old: FloatArray, h_new: FloatArray, g: Geometry, integrator: str
 ) -> tuple[FloatArray, FloatArray]:
-    """The displacement (m) of one step of ``integrator`` from heading ``h_old`` to ``h_new``.
-    A step turning half a turn or more is taken as the firmware takes it: its heading change
-    read as a signed BAM, wrapped to [-pi, pi) (firmware/odometry.py), so a merged step of a
-    spin may point the other way."""
+    """The displacement (m) of one step of ``integrator`` from heading ``h_old`` to ``h_new``,
+    as the firmware takes it (firmware/odometry.py) and the reference does
+    (``host.judge.reference.integrate``): the whole turn, even one of more than half a turn (a
+    merged step of a spin), never its wrapped reading."""
     ds = 0.5 * (dl * g.m_per_count_left + dr * g.m_per_count_right)
-    turn = h_new - h_old
-    wide = np.abs(turn) >= np.pi
-    if np.any(wide):
-        turn = np.where(wide, (turn + np.pi) % (2.0 * np.pi) - np.pi, turn)
-        h_mid = np.where(wide, h_old + 0.5 * turn, 0.5 * (h_old + h_new))
-    else:
-        h_mid = 0.5 * (h_old + h_new)
-    direction = h_new if integrator == "euler" else h_mid
+    direction = h_new if integrator == "euler" else 0.5 * (h_old + h_new)
     if integrator == "exact":
-        ds = ds * np.sinc(turn / (2.0 * np.pi))
+        ds = ds * np.sinc((h_new - h_old) / (2.0 * np.pi))
     return ds * np.cos(direction), ds * np.sin(direction)
