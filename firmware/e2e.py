@@ -199,8 +199,9 @@ class E2EReceiver:
         counter = frame[1] & COUNTER_MASK
         if frame[0] != p02_crc(frame, self.data_ids[counter]):
             return self._error()
-        self.status = self._sequence(counter)
-        return self.status
+        status = self._sequence(counter)
+        self.status = status
+        return status
 
     def accepted(self) -> u32:
         """Frames accepted (OK or OKSOMELOST), u32 wrapping: the ``*_E2E_OK`` status signal."""
