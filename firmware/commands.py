@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from odocan.firmware import frames as fr
-from odocan.firmware.config import ConfigReason, RobotParams, derive_constants, validate
+from odocan.firmware.config import ConfigReason, RobotParams, derive_constants, validate_at_speed
 from odocan.firmware.e2e import E2EReceiver
 from odocan.firmware.errors import ErrorFlag, State
 from odocan.firmware.fixmath import U64_MAX
@@ -123,12 +123,12 @@ class Commands:
             values[_CONFIG_FIELDS[fr.ConfigParam(param)]] = value
         self._staged_config.clear()
         candidate = RobotParams(**values)
-        reason = validate(candidate)
+        reason = validate_at_speed(candidate, ecu.max_wheel_speed_mm_s)
         if reason is not ConfigReason.OK:
             ecu.errors.set(ErrorFlag.CONFIG_INVALID)
             ack_reason = (
                 fr.AckReason.INCONSISTENT
-                if reason is ConfigReason.GEOMETRY_ABSURD
+                if reason in (ConfigReason.GEOMETRY_ABSURD, ConfigReason.WIRE_RANGE)
                 else fr.AckReason.OUT_OF_RANGE
             )
             self.ack(fr.ODOM_CONFIG_ID, frame, fr.AckResult.NACK, ack_reason)

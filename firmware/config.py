@@ -33,6 +33,10 @@ WHEELBASE_MAX_NM = 4_000_000_000  # 4 m (u32 holds 4.29 m)
 COUNTER_BITS_ALLOWED = (16, 32)
 # One encoder count may turn the robot by at most 1/16 turn: beyond that the parameters are absurd.
 BAM64_PER_COUNT_MAX = 1 << 60
+ENCODER_PERIOD_US = 10_000  # WHEEL_ENCODERS GenMsgCycleTime (twist.py re-exports it)
+WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter (encoders.py)
+# A step of this many periods (one late sample) at the maximum wheel speed must read unwrapped.
+READABLE_PERIODS = 2
 
 
 class Integrator(IntEnum):
@@ -53,6 +57,7 @@ class ConfigReason(IntEnum):
     COUNTER_BITS_INVALID = 4
     INTEGRATOR_INVALID = 5
     GEOMETRY_ABSURD = 6  # one count would turn the robot by more than 1/16 turn
+    WIRE_RANGE = 7  # a step at the maximum wheel speed could wrap the counters as read
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,6 +102,40 @@ def validate(params: RobotParams) -> ConfigReason:
         if _bam64_per_count(radius_nm, params, scratch) >= BAM64_PER_COUNT_MAX:
             return ConfigReason.GEOMETRY_ABSURD
     return ConfigReason.OK
+
+
+def validate_at_speed(params: RobotParams, max_wheel_speed_mm_s: int) -> ConfigReason:
+    """``validate``, then the counters' readable range at ``max_wheel_speed_mm_s`` (the ECU's
+    plausibility bound, u16 mm/s): ``WIRE_RANGE`` when a step of ``READABLE_PERIODS`` periods
+    at that speed could move a wheel half the range its counters are read with (the hardware
+    width, at most the wire's 24 bits) or more. Such a step is read wrapped (``wrap_signed``),
+    as a smaller or backward one that the plausibility bound cannot tell from a true step: the
+    pose would go wrong silently, so the configuration is refused (e.g. 2^24 counts per 35 mm
+    of wheel circumference: one period reads wrapped above 1.75 m/s, two above 0.87 m/s)."""
+    reason = validate(params)
+    if reason is not ConfigReason.OK:
+        return reason
+    half_range = 1 << (min(params.counter_bits, WIRE_COUNTER_BITS) - 1)
+    scratch = ErrorMask()
+    for radius_nm in (params.wheel_radius_left_nm, params.wheel_radius_right_nm):
+        per_count_q48_m = _m_per_count_q48(radius_nm, params, scratch)
+        most = max_counts_per_period(per_count_q48_m, max_wheel_speed_mm_s, scratch)
+        if READABLE_PERIODS * most >= half_range:
+            return ConfigReason.WIRE_RANGE
+    return ConfigReason.OK
+
+
+def max_counts_per_period(
+    per_count_q48_m: int, max_wheel_speed_mm_s: int, errors: ErrorMask
+) -> int:
+    """The most counts one encoder period can hold at ``max_wheel_speed_mm_s``: ceil(v_max * T /
+    travel per count) + 1 (a count edge may fall either side of a sample), as
+    ``EncoderInput.step_bounds``. Configuration time: a 128-bit muldiv (travel < 2^44), then u64
+    division (``per_count_q48_m`` >= 1 for valid parameters)."""
+    travel_q48_m = muldiv_round_u64(
+        max_wheel_speed_mm_s * ENCODER_PERIOD_US, 1 << 48, NM_PER_M, errors
+    )
+    return (travel_q48_m + per_count_q48_m - 1) // per_count_q48_m + 1
 
 
 def derive_constants(params: RobotParams, errors: ErrorMask) -> OdomConstants:

@@ -55,7 +55,7 @@ from odocan.firmware.clock import TICKS_PER_SECOND as TICKS_PER_SECOND
 from odocan.firmware.clock import WATCHDOG_TICKS as WATCHDOG_TICKS
 from odocan.firmware.clock import FirmwareClock
 from odocan.firmware.commands import Commands
-from odocan.firmware.config import ConfigReason, RobotParams, derive_constants, validate
+from odocan.firmware.config import ConfigReason, RobotParams, derive_constants, validate_at_speed
 from odocan.firmware.e2e import E2EReceiver
 from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S as MAX_WHEEL_SPEED_MM_S
 from odocan.firmware.encoders import RESYNC_FRAMES as RESYNC_FRAMES
@@ -108,7 +108,7 @@ class OdomEcu:
         self.errors = ErrorMask()
         self.clock = FirmwareClock()
         self.health = Health(self.errors, self.clock)
-        if validate(params) is not ConfigReason.OK:
+        if validate_at_speed(params, max_wheel_speed_mm_s) is not ConfigReason.OK:
             self.health.config_fault()
         self.params = params
         self.odometry = Odometry(derive_constants(params, self.errors), self.errors)

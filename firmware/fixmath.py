@@ -13,6 +13,7 @@ for on a 32-bit two's-complement MCU with a 64-bit multiply (Cortex-M3/M4: ``SMU
   (floor, or rounded half up), read back as an i64.
 * ``mul_add_hi_i64``: the high 64 bits of ``a*b + c*d`` (a 2x2 rotation's rows in Q126).
 * ``mul_sat_i64``, ``mul_shr_round_i64``: the product, or its rounded shift, saturated to i64.
+* ``div_q62_i128``: ``num / den`` in Q62 for an i64 ``num`` and an i128 ``den`` (hi, lo words).
 * ``muldiv_round_u64``: round(a*b/c) for u64 a, b, c with a 128-bit intermediate, as Linux's
   ``mul_u64_u64_div_u64`` (plus rounding). Configuration time only, never in the loop.
 * ``isqrt_u64``: floor(sqrt(n)) of a u64 by Newton's method (navigation distances).
@@ -186,6 +187,28 @@ def mul_shr_round_i64(a: i64, b: i64, shift: int, errors: ErrorMask) -> i64:
     """
     result = (a * b + (1 << (shift - 1))) >> shift
     return result if I64_MIN <= result <= I64_MAX else sat_i64(result, errors)
+
+
+def div_q62_i128(num: i64, den_hi: i64, den_lo: u64) -> i64:
+    """``num * 2^62 / den`` rounded half away from zero, for an i64 ``num`` and the i128
+    ``den = den_hi * 2^64 + den_lo`` (``den_lo`` the u64 low word), ``2^63 <= |den| < 2^126`` and
+    ``|num| <= |den|``: the result is in [-2^62, 2^62] (a ratio in (-1, 1] as Q62).
+
+    |den| is normalized to its top 64 bits (``sh`` the bit length of its high word, ``top = |den|
+    >> sh``, truncated: relative error below 2^-63, ``top >= 2^63``), the numerator scaled by
+    ``2^(62 - sh)``: the quotient then fits u64 (<= 2^62). In the loop only when a step turns more
+    than half a turn (a software 128/64 division).
+    C: ``wide128_t d = {(uint64_t)den_hi, den_lo}; if (den_hi < 0) d = wide_sub(wide_from_u64(0),
+    d); sh = bit_length_u64(d.hi); top = sh ? (d.hi << (64 - sh)) | (d.lo >> sh) : d.lo;``
+    ``q = muldiv_round_u64(abs_u64(num), (uint64_t)1 << (62 - sh), top, &scratch)`` (no
+    saturation: q <= 2^62), negated when ``(num < 0) != (den_hi < 0)``.
+    """
+    den = (den_hi << 64) | den_lo
+    magnitude = -den if den < 0 else den
+    shift = max(magnitude.bit_length() - 64, 0)
+    top = magnitude >> shift
+    quotient = (abs(num) * (1 << (62 - shift)) + (top >> 1)) // top
+    return -quotient if (num < 0) != (den < 0) else quotient
 
 
 def muldiv_round_u64(a: u64, b: u64, c: u64, errors: ErrorMask) -> u64:

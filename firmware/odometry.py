@@ -23,6 +23,15 @@ Per step, with dS_L, dS_R the wheel travels (Q48 m, exact products of counts and
   the factor differs from 1 by less than 2^-44 and is taken as exactly 1; *spin in place*
   (dS_R ~ -dS_L) when |dS| < 2^-41 m, where the increment is below half an LSB of x and the
   position is left unchanged.
+
+A step turning more than half a turn (a late sample on a narrow robot: 1 cm wheelbase at 4 m/s
+turns 8 rad a period) is integrated whole, never along its wrapped angle: the exact difference
+k_R dR - k_L dL is 97 bits wide, its low word the signed BAM64 dtheta_w (in [-pi, pi)) and its
+high word the whole turns beyond it, dtheta = dtheta_w + 2 pi n. The heading and ``heading_turns``
+take all of it; RK2's midpoint phi + dtheta/2 moves by n pi; EXACT's chord is sin(u)/u cos(phi +
+u) with u = dtheta/2 = u_w + n pi, i.e. sinc(u_w) (dtheta_w / dtheta) cos(phi + u_w): the wrapped
+chord scaled by the ratio of the two angles (``div_q62_i128``), so a step of whole turns does not
+move the robot. EULER (phi_new) is exact mod 2 pi already.
 """
 
 from __future__ import annotations
@@ -34,6 +43,8 @@ from odocan.firmware.fixmath import (
     I64_MIN,
     U32_MAX,
     U64_MAX,
+    div_q62_i128,
+    mul_add_hi_i64,
     mul_round_i64,
     mul_sat_i64,
     mul_shr_i64,
@@ -46,6 +57,7 @@ from odocan.firmware.trig import sincos_q30
 
 ONE_Q62 = 1 << 62
 ONE_Q60 = 1 << 60
+HALF_TURN_BAM64 = 1 << 63  # pi
 STRAIGHT_LIMIT_Q60 = 1 << 39  # |u| < 2^-21 rad: the factor is 1 to within 2^-44 (straight case)
 SERIES_SHORT_LIMIT_Q60 = 1 << 57  # |u| <= 1/8 rad: three series terms suffice
 # (2k)(2k+1): the Horner denominators of sin(u)/u = 1 - u^2/(2*3) (1 - u^2/(4*5) (...)).
@@ -72,6 +84,7 @@ class Odometry:
         "heading_bam64",
         "heading_turns",
         "last_dheading_bam64",
+        "last_dheading_turns",
         "last_ds_q49_m",
         "x_q40_m",
         "y_q40_m",
@@ -90,6 +103,7 @@ class Odometry:
         self.distance_q40_m = 0
         self.last_ds_q49_m = 0  # i64, dS of the last step (for the twist)
         self.last_dheading_bam64 = 0  # i64, signed dtheta of the last step (for the twist)
+        self.last_dheading_turns = 0  # i32, the whole turns of that step beyond it (|.| < 2^29)
 
     @property
     def consts(self) -> OdomConstants:
@@ -139,13 +153,20 @@ class Odometry:
         dheading = mul_sub_wrap_i64(  # exact mod 2^64, read as i64
             d_right, c.bam64_per_count_right, d_left, c.bam64_per_count_left
         )
+        # The high word of the exact difference (< 2^93): the whole turns beyond the signed read
+        # (``turns``, |.| < 2^29), non-zero only for a step turning more than half a turn.
+        dheading_hi = mul_add_hi_i64(
+            d_right, c.bam64_per_count_right, -d_left, c.bam64_per_count_left
+        )
+        turns = dheading_hi + 1 if dheading < 0 else dheading_hi
         heading_old = self.heading_bam64
         heading_sum = heading_old + dheading
         self.heading_bam64 = heading_sum & U64_MAX
-        if heading_sum != self.heading_bam64:  # C: the unsigned add's carry or borrow
-            self.heading_turns = wrap_i32(self.heading_turns + (heading_sum >> 64))
+        if heading_sum != self.heading_bam64 or turns:  # C: the unsigned add's carry or borrow
+            self.heading_turns = wrap_i32(self.heading_turns + (heading_sum >> 64) + turns)
         self.last_ds_q49_m = ds_q49_m
         self.last_dheading_bam64 = dheading
+        self.last_dheading_turns = turns
         if ds_q49_m == 0:
             return
         self.distance_q40_m = (
@@ -159,7 +180,13 @@ class Odometry:
         if integrator is _EXACT:
             if -SPIN_LIMIT_Q49 < ds_q49_m < SPIN_LIMIT_Q49:
                 return
-            ds_q49_m = _scale_q62(ds_q49_m, chord_factor_q62(dheading))
+            factor_q62 = chord_factor_q62(dheading)
+            if turns:  # the arc of the whole step: the wrapped chord scaled by dtheta_w / dtheta
+                ratio_q62 = div_q62_i128(dheading, dheading_hi, dheading & U64_MAX)
+                factor_q62 = _scale_q62(factor_q62, ratio_q62)
+            ds_q49_m = _scale_q62(ds_q49_m, factor_q62)
+        elif turns & 1:  # RK2: each whole turn beyond the signed read moves the midpoint by pi
+            midpoint_bam64 ^= HALF_TURN_BAM64
         self._advance(ds_q49_m, midpoint_bam64)
 
     def _advance(self, ds_q49_m: int, direction_bam64: int) -> None:
@@ -197,8 +224,8 @@ def chord_factor_q62(dheading_bam64: int) -> int:
 
 
 def _scale_q62(value: int, factor_q62: int) -> int:
-    """``value * factor`` for a Q62 factor in [0, 1]: rounds, never leaves the width of value
-    (the 126-bit product is ``mul_round_i64``'s)."""
+    """``value * factor`` for a Q62 factor in (-1, 1]: rounds (half up), never leaves the width
+    of value (the 126-bit product is ``mul_round_i64``'s)."""
     if factor_q62 == ONE_Q62:
         return value
     return mul_round_i64(value, factor_q62, 62)

@@ -11,12 +11,13 @@ by the firmware time since the last sample before it, as the backlog's sample ti
 
 from __future__ import annotations
 
+from odocan.firmware.config import ENCODER_PERIOD_US as ENCODER_PERIOD_US
 from odocan.firmware.config import TWO_PI_Q60
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.fixmath import U16_MAX, div_round_i64, mul_shr_round_i64, sat_range
 from odocan.firmware.odometry import Odometry
 
-ENCODER_PERIOD_US = 10_000  # WHEEL_ENCODERS GenMsgCycleTime
+TWO_PI_Q30 = (TWO_PI_Q60 + (1 << 29)) >> 30  # one turn in Q30 rad (< 2^33)
 TWIST_SUM_MAX = 1 << 32  # one tick's summed steps saturate at 4096 m (Q20) and 4 rad (Q30)
 TWIST_SUM_MIN = -TWIST_SUM_MAX
 PERIODS_MAX = U16_MAX  # the speeds' dt saturates here (655 s; encoders.STEP_PERIODS_MAX)
@@ -41,7 +42,10 @@ class Twist:
         (Q20 m, Q30 rad; i64, saturated: ``sat_range`` only when a sum leaves +-TWIST_SUM_MAX)."""
         odo = self._odometry
         errors = self._errors
-        dheading_q30_rad = mul_shr_round_i64(odo.last_dheading_bam64, TWO_PI_Q60, 94, errors)
+        dheading_q30_rad = (  # the signed read, plus the step's whole turns (< 2^62)
+            mul_shr_round_i64(odo.last_dheading_bam64, TWO_PI_Q60, 94, errors)
+            + odo.last_dheading_turns * TWO_PI_Q30
+        )
         ds_q20_m = self.tick_ds_q20_m + (odo.last_ds_q49_m >> 29)
         if not TWIST_SUM_MIN <= ds_q20_m <= TWIST_SUM_MAX:
             ds_q20_m = sat_range(ds_q20_m, TWIST_SUM_MIN, TWIST_SUM_MAX, errors)

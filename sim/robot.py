@@ -27,6 +27,15 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from odocan.firmware.config import (
+    ENCODER_PERIOD_US,
+    READABLE_PERIODS,
+    WIRE_COUNTER_BITS,
+    ConfigReason,
+    RobotParams,
+    validate_at_speed,
+)
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.sim.exceptions import ConfigurationError
 
 ROBOTS_DIR = Path(str(resources.files("odocan.sim").joinpath("robots")))
@@ -210,3 +219,26 @@ def _check_values(table: dict[str, Any], source: str) -> None:
     if table["counter_bits"] not in _COUNTER_BITS:
         value = table["counter_bits"]
         raise ProfileError(f"{source}: 'counter_bits' must be 16 or 32, got {value}")
+    _check_readable(table, source)
+
+
+def _check_readable(table: dict[str, Any], source: str) -> None:
+    """The firmware's ``validate_at_speed``: at its maximum wheel speed a step of
+    ``READABLE_PERIODS`` periods must stay below half the counters' readable range (their width,
+    at most the wire's 24 bits), or its counts read wrapped on board and on the host alike."""
+    nm = {key: _nm(table[key]) for key in _FLOAT_KEYS}
+    params = RobotParams(table["counts_per_rev"], nm["wheel_radius_left_m"],
+                         nm["wheel_radius_right_m"], nm["wheelbase_m"], table["counter_bits"], 0)
+    if validate_at_speed(params, MAX_WHEEL_SPEED_MM_S) is not ConfigReason.WIRE_RANGE:
+        return
+    bits = min(table["counter_bits"], WIRE_COUNTER_BITS)
+    radius_m = min(table["wheel_radius_left_m"], table["wheel_radius_right_m"])
+    readable_m_s = ((1 << (bits - 1)) * 2 * math.pi * radius_m / table["counts_per_rev"]
+                    / (READABLE_PERIODS * ENCODER_PERIOD_US * 1e-6))
+    cures = "fewer counts_per_rev, larger wheels" + (
+        " or 32-bit counters" if table["counter_bits"] < WIRE_COUNTER_BITS else "")
+    raise ProfileError(
+        f"{source}: {table['counts_per_rev']} counts per turn of a {radius_m * 1e3:.4g} mm wheel "
+        f"on {bits}-bit counters read wrapped above {readable_m_s:.3g} m/s (a step of "
+        f"{READABLE_PERIODS} encoder periods), below the firmware's "
+        f"{MAX_WHEEL_SPEED_MM_S / 1000:g} m/s bound ({cures})")

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from odocan.host.cli import batch
 from odocan.host.cli.app import main
 from odocan.host.io.logs import (
     FrameArrays,
@@ -26,7 +27,6 @@ from odocan.host.io.logs import (
     parse_candump_chunks,
     read_log,
 )
-from odocan.host.judge import batch
 from tests.test_cli_run import assert_usage_error, run_cli
 
 SAME = ("robot", "integrator", "frames", "onboard_vs_reference", "onboard_vs_truth",

@@ -279,6 +279,9 @@ def _fixmath_probes(rng: random.Random, ask: Callable[..., None]) -> None:
         shift = rng.randrange(1, 128)
         errors = ErrorMask()
         ask(f"mulshr {a} {b} {shift}", fixmath.mul_shr_round_i64(a, b, shift, errors), errors.bits)
+    for num, den in _div_q62_operands(rng):
+        ask(f"div_q62 {num} {den >> 64} {den & U64_MAX}", fixmath.div_q62_i128(num, den >> 64,
+                                                                       den & U64_MAX))
     for v in [rng.randrange(I64_MIN, I64_MAX + 1) for _ in range(2_000)] + [I64_MIN, I64_MAX]:
         d = rng.choice([1, 2, 3, 10, rng.randrange(1, I64_MAX)])
         ask(f"div_round {v} {d}", fixmath.div_round_i64(v, d))
@@ -287,6 +290,21 @@ def _fixmath_probes(rng: random.Random, ask: Callable[..., None]) -> None:
     for _ in range(2_000):
         v, bits = rng.getrandbits(32), rng.choice((16, 32))
         ask(f"wrap_signed {v} {bits}", fixmath.wrap_signed(v, bits))
+
+
+def _div_q62_operands(rng: random.Random) -> list[tuple[int, int]]:
+    """(num, den) in div_q62_i128's domain: 2^63 <= |den| < 2^126, |num| <= |den|, num an i64;
+    the steps' own (den = dtheta_w + n 2^64) and the edges of the normalization."""
+    pairs = [(I64_MIN, 1 << 63), (I64_MIN, -(1 << 63)), (I64_MAX, 1 << 63), (0, 1 << 64),
+             (1 << 62, (1 << 64) - 1), (-1, (1 << 126) - 1), (I64_MAX, -(1 << 125))]
+    for _ in range(3_000):
+        wrapped = rng.randrange(I64_MIN, I64_MAX + 1)
+        turns = rng.choice([1, -1, 2, -3, rng.randrange(-(1 << 29), 1 << 29) or 5])
+        pairs.append((wrapped, wrapped + (turns << 64)))
+    for _ in range(1_000):
+        den = rng.choice([1, -1]) * rng.randrange(1 << 63, 1 << rng.randrange(64, 127))
+        pairs.append((rng.randrange(-min(abs(den), 1 << 63), min(abs(den), I64_MAX + 1)), den))
+    return pairs
 
 
 def _config_probes(rng: random.Random, ask: Callable[..., None]) -> None:
@@ -312,6 +330,9 @@ def _config_probes(rng: random.Random, ask: Callable[..., None]) -> None:
                 counter_bits=rng.choice((16, 32)),
                 integrator=rng.choice((0, 1, 2)),
             )
+        speed_mm_s = rng.choice((4_000, 500, 65_535, rng.randrange(1, 65_536)))
+        ask(f"config_speed {speed_mm_s} " + " ".join(str(v) for v in dataclasses.astuple(params)),
+            int(config.validate_at_speed(params, speed_mm_s)))
         cmd = "config " + " ".join(str(v) for v in dataclasses.astuple(params))
         reason = config.validate(params)
         if reason != config.ConfigReason.OK:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Iterator
+from fractions import Fraction
 
 import pytest
 from hypothesis import given, settings
@@ -22,6 +23,7 @@ from odocan.firmware.fixmath import (
     I64_MAX,
     I64_MIN,
     U64_MAX,
+    div_q62_i128,
     mul_add_hi_i64,
     mul_round_i64,
     mul_sat_i64,
@@ -157,6 +159,29 @@ def c_muldiv_round_u64(a: int, b: int, c: int) -> tuple[int, bool]:
     return quotient, False
 
 
+def _bit_length_u64(value: int) -> int:
+    """``bit_length_u64`` of fixmath.c: halving steps on a u64."""
+    bits = 0
+    for step in (32, 16, 8, 4, 2, 1):
+        if value >> step:
+            value >>= step
+            bits += step
+    return bits + value
+
+
+def c_div_q62_i128(num: int, den_hi: int, den_lo: int) -> int:
+    """div_q62_i128's C: negate the two-word divisor, normalize it to its top word, muldiv."""
+    hi, lo = _u64(den_hi), den_lo
+    if den_hi < 0:
+        hi = _u64((~hi & M64) + int(lo == 0))  # 0 - (hi, lo): ~x + 1 with the carry of lo
+        lo = _u64(-lo)
+    shift = _bit_length_u64(hi)
+    top = lo if shift == 0 else (((hi << (64 - shift)) & M64) | (lo >> shift))
+    quotient, saturated = c_muldiv_round_u64(_u64(abs(num)), 1 << (62 - shift), top)
+    assert not saturated
+    return -quotient if (num < 0) != (den_hi < 0) else quotient
+
+
 # --- the reference itself, against Python's exact integers (so it cannot be wrong in step) -----
 
 
@@ -286,3 +311,30 @@ def test_the_round_is_half_up_as_the_firmware_wrote_it(shift: int) -> None:
             assert mul_round_i64(a, b, shift) == (a * b + half) >> shift
     assert mul_round_i64(unit, b, shift) == 1
     assert mul_round_i64(-unit, b, shift) == 0
+
+
+DIV_Q62_DENS = [1 << 63, (1 << 64) - 1, 1 << 64, (1 << 64) + 1, (1 << 92) + 12345, (1 << 126) - 1]
+
+
+@pytest.mark.parametrize("den", DIV_Q62_DENS + [-d for d in DIV_Q62_DENS])
+def test_div_q62_i128_edges(den: int) -> None:
+    for num in [0, 1, -1, I64_MAX, I64_MIN, 1 << 62, -(1 << 62) - 1]:
+        if abs(num) > abs(den):
+            continue
+        got = div_q62_i128(num, den >> 64, den & M64)
+        assert got == c_div_q62_i128(num, den >> 64, den & M64), (num, den)
+        exact_q62 = Fraction(num << 62, den)
+        assert abs(got - exact_q62) <= 1 + abs(exact_q62) / 2**62
+
+
+@settings(max_examples=3000)
+@given(I64, st.integers(-(1 << 29), 1 << 29).filter(bool))
+def test_div_q62_i128_property(wrapped: int, turns: int) -> None:
+    """The ratio a step turning n whole turns beyond its signed read takes: dtheta_w / dtheta,
+    within one LSB plus the normalization's 2^-63 of the exact quotient."""
+    den = wrapped + (turns << 64)
+    got = div_q62_i128(wrapped, den >> 64, den & M64)
+    assert got == c_div_q62_i128(wrapped, den >> 64, den & M64)
+    exact_q62 = Fraction(wrapped << 62, den)
+    assert abs(got - exact_q62) <= 1 + abs(exact_q62) / 2**62
+    assert abs(got) <= 1 << 62

@@ -62,7 +62,7 @@ def _slow_analyze_one(path: str, job: object) -> object:
     ``LONG_S`` (drive00 none: its result comes at once)."""
     import time
 
-    from odocan.host.judge.batch import LogResult
+    from odocan.host.cli.batch import LogResult
 
     with open(os.environ[MARKS], "a") as marks:
         marks.write(f"{os.getpid()} {path}\n")
@@ -87,7 +87,7 @@ def test_ctrl_c_in_a_batch_stops_its_workers_at_once(
     log under way is ended too (a 1 GB log is half a minute)."""
     import time
 
-    from odocan.host.judge import batch
+    from odocan.host.cli import batch
 
     marks = tmp_path / "marks"
     monkeypatch.setenv(MARKS, str(marks))

@@ -19,7 +19,7 @@ def test_a_shipped_profile_round_trips(name: str, tmp_path: Path) -> None:
 
 
 def test_an_odd_profile_round_trips_on_the_nanometre_grid(tmp_path: Path) -> None:
-    odd = RobotProfile("odd \"one\"", 2**24, 0.012345679, 1.999999999, 0.010000001, 32)
+    odd = RobotProfile("odd \"one\"", 2**24, 0.032345679, 1.999999999, 0.010000001, 32)
     path = tmp_path / "odd.toml"
     path.write_text(to_toml(odd))
     loaded = load(path)

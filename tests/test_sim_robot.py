@@ -164,5 +164,44 @@ def test_out_of_range(tmp_path: Path, key: str, value: str, expected: str) -> No
     ],
 )
 def test_range_limits_are_inclusive(tmp_path: Path, key: str, value: str) -> None:
-    profile = load(write_profile(tmp_path, **{key: value}))
+    wide = {"counter_bits": "32"} if key == "counts_per_rev" else {}  # 2^24 counts: 24-bit read
+    profile = load(write_profile(tmp_path, **{**wide, key: value}))
     assert getattr(profile, key) == type(getattr(profile, key))(value)
+
+
+@pytest.mark.parametrize(
+    ("counts_per_rev", "radius_m", "bits", "readable_m_s"),
+    [
+        (2**24, 35e-3 / (2 * math.pi), 32, 0.875),  # 2^24 counts per 35 mm of circumference
+        (2**24, 0.035, 16, 0.0215),  # a 16-bit counter wraps 1/256 of a turn
+        (200_000, 0.035, 16, 1.8),
+    ],
+)
+def test_a_robot_whose_steps_the_counters_cannot_read_is_refused(
+    tmp_path: Path, counts_per_rev: int, radius_m: float, bits: int, readable_m_s: float
+) -> None:
+    """At the firmware's 4 m/s bound a step of two periods would wrap the counters as read (the
+    hardware width, at most the wire's 24 bits): on board and on the host it would read as a
+    smaller or backward step, so the profile is refused, naming the speed the counters read."""
+    path = write_profile(tmp_path, counts_per_rev=str(counts_per_rev), counter_bits=str(bits),
+                         wheel_radius_left_m=repr(radius_m), wheel_radius_right_m=repr(radius_m))
+    message = load_error(path)
+    # independent: two 10 ms periods at v move 2 v T / (2 pi r / counts) counts, < 2^(bits-1)
+    limit_m_s = 2 ** (min(bits, 24) - 1) * 2 * math.pi * radius_m / counts_per_rev / 0.02
+    assert limit_m_s == pytest.approx(readable_m_s, rel=2e-3)
+    assert f"read wrapped above {readable_m_s:.3g} m/s" in message
+    assert "below the firmware's 4 m/s bound" in message
+
+
+@pytest.mark.parametrize(
+    ("counts_per_rev", "radius_m", "bits"),
+    [(2**24, 0.026, 32), (180_000, 0.035, 32), (90_000, 0.035, 16), (2578, 0.002, 16)],
+)
+def test_a_robot_the_counters_read_at_4_m_s_is_accepted(
+    tmp_path: Path, counts_per_rev: int, radius_m: float, bits: int
+) -> None:
+    """Two periods at 4 m/s stay below half the range read: 2 * 0.04 m * counts / (2 pi r)."""
+    assert 0.08 * counts_per_rev / (2 * math.pi * radius_m) < 2 ** (min(bits, 24) - 1) - 2
+    path = write_profile(tmp_path, counts_per_rev=str(counts_per_rev), counter_bits=str(bits),
+                         wheel_radius_left_m=repr(radius_m), wheel_radius_right_m=repr(radius_m))
+    assert load(path).counts_per_rev == counts_per_rev

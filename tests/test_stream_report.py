@@ -207,8 +207,8 @@ def test_a_batch_worker_streams_the_same_report(tmp_path: Path) -> None:
     """``odocan analyze LOG…``'s worker (``batch.analyze_one``) streams too: the report and
     the frame count of the whole-log path; a log the analysis refuses still gets its one-line
     reason."""
+    from odocan.host.cli.batch import Job, analyze_one
     from odocan.host.judge.analysis import Tolerance
-    from odocan.host.judge.batch import Job, analyze_one
 
     path = log_of(tmp_path, "rig")
     tolerance = Tolerance()

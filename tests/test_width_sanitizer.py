@@ -133,6 +133,7 @@ def test_the_audited_fixmath_helpers_are_the_reviewed_set() -> None:
         "mul_add_hi_i64",
         "mul_sat_i64",
         "mul_shr_round_i64",
+        "div_q62_i128",
         "muldiv_round_u64",
     }
 

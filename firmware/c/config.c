@@ -44,6 +44,45 @@ enum config_reason validate(const struct robot_params *params)
     return CONFIG_OK;
 }
 
+/* validate, then the counters' readable range at max_wheel_speed_mm_s (the ECU's plausibility
+ * bound): CONFIG_WIRE_RANGE when a step of READABLE_PERIODS periods at that speed could move a
+ * wheel half the range its counters are read with (min(counter_bits, 24) bits) or more: it would
+ * read wrapped, silently (config.py validate_at_speed). */
+enum config_reason validate_at_speed(const struct robot_params *params,
+                                     uint32_t max_wheel_speed_mm_s)
+{
+    enum config_reason reason = validate(params);
+    if (reason != CONFIG_OK) {
+        return reason;
+    }
+    unsigned bits = params->counter_bits < WIRE_COUNTER_BITS ? params->counter_bits
+                                                             : WIRE_COUNTER_BITS;
+    uint64_t half_range = UINT64_C(1) << (bits - 1u);
+    const uint32_t radii_nm[2] = {params->wheel_radius_left_nm, params->wheel_radius_right_nm};
+    uint32_t scratch = 0u;
+    for (unsigned wheel = 0u; wheel < 2u; ++wheel) {
+        uint64_t per_count = (uint64_t)m_per_count_q48(radii_nm[wheel], params, &scratch);
+        if (READABLE_PERIODS * max_counts_per_period(per_count, max_wheel_speed_mm_s, &scratch)
+            >= half_range) {
+            return CONFIG_WIRE_RANGE;
+        }
+    }
+    return CONFIG_OK;
+}
+
+/* The most counts one encoder period can hold at max_wheel_speed_mm_s: ceil(v_max * T / travel
+ * per count) + 1, as the ECU's step_bounds. Configuration time: a 128-bit muldiv (travel <
+ * 2^44), then u64 division (per_count_q48_m >= 1 for valid parameters); the ceiling as quotient
+ * + (remainder != 0), Python's (a + m - 1) // m. */
+uint64_t max_counts_per_period(uint64_t per_count_q48_m, uint32_t max_wheel_speed_mm_s,
+                               uint32_t *errors)
+{
+    uint64_t travel_q48_m = muldiv_round_u64((uint64_t)max_wheel_speed_mm_s * ENCODER_PERIOD_US,
+                                             UINT64_C(1) << 48, NM_PER_M, errors);
+    return travel_q48_m / per_count_q48_m + (travel_q48_m % per_count_q48_m != 0u ? 1u : 0u)
+           + 1u;
+}
+
 /* Q constants of a validated params (call validate first: ranges keep every width). */
 void derive_constants(const struct robot_params *params, uint32_t *errors,
                       struct odom_constants *out)

@@ -17,6 +17,9 @@
 #define WHEELBASE_MAX_NM 4000000000u       /* 4 m (u32 holds 4.29 m) */
 /* One encoder count may turn the robot by at most 1/16 turn: beyond that the parameters are absurd. */
 #define BAM64_PER_COUNT_MAX (UINT64_C(1) << 60)
+#define ENCODER_PERIOD_US 10000 /* WHEEL_ENCODERS GenMsgCycleTime */
+#define WIRE_COUNTER_BITS 24u   /* WHEEL_ENCODERS carries the low 24 bits of each counter */
+#define READABLE_PERIODS 2u /* a step of this many periods at the maximum speed reads unwrapped */
 
 /* Odometry integrator (the INTEGRATOR signal). */
 enum integrator {
@@ -33,7 +36,8 @@ enum config_reason {
     CONFIG_WHEELBASE_OUT_OF_RANGE = 3,
     CONFIG_COUNTER_BITS_INVALID = 4,
     CONFIG_INTEGRATOR_INVALID = 5,
-    CONFIG_GEOMETRY_ABSURD = 6 /* one count would turn the robot by more than 1/16 turn */
+    CONFIG_GEOMETRY_ABSURD = 6, /* one count would turn the robot by more than 1/16 turn */
+    CONFIG_WIRE_RANGE = 7       /* a step at the maximum wheel speed could wrap the counters */
 };
 
 /* Robot parameters as raw integers (u32 each), exactly as ODOM_CONFIG carries them. */
@@ -57,6 +61,10 @@ struct odom_constants {
 };
 
 enum config_reason validate(const struct robot_params *params);
+enum config_reason validate_at_speed(const struct robot_params *params,
+                                     uint32_t max_wheel_speed_mm_s);
+uint64_t max_counts_per_period(uint64_t per_count_q48_m, uint32_t max_wheel_speed_mm_s,
+                               uint32_t *errors);
 void derive_constants(const struct robot_params *params, uint32_t *errors,
                       struct odom_constants *out);
 

@@ -122,7 +122,7 @@ void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
     ecu->errors = 0u;
     ecu->state = STATE_INIT;
     ecu->reason = REASON_NONE;
-    if (validate(params) != CONFIG_OK) {
+    if (validate_at_speed(params, MAX_WHEEL_SPEED_MM_S) != CONFIG_OK) {
         ecu->errors |= ERROR_CONFIG_INVALID;
         ecu->state = STATE_FAULT;
         ecu->reason = REASON_CONFIG_INVALID;
@@ -596,12 +596,14 @@ static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32
 }
 
 /* Add the step just integrated to this tick's sums (Q20 m, Q30 rad; i64, saturated). Each term
- * is below 2^34 (dS >> 29) and 2^32 (the heading), each sum below 2^32 before: no overflow. */
+ * is below 2^34 (dS >> 29) and 2^62 (the heading: its signed read plus its whole turns), each
+ * sum below 2^32 before: no overflow. */
 static void sum_step(struct odom_ecu *ecu)
 {
     const struct odometry *odo = &ecu->odometry;
     int64_t dheading_q30_rad =
-        mul_shr_round_i64(odo->last_dheading_bam64, TWO_PI_Q60, 94u, &ecu->errors);
+        mul_shr_round_i64(odo->last_dheading_bam64, TWO_PI_Q60, 94u, &ecu->errors)
+        + (int64_t)odo->last_dheading_turns * TWO_PI_Q30;
     ecu->tick_ds_q20_m = sat_range(ecu->tick_ds_q20_m + asr_i64(odo->last_ds_q49_m, 29u),
                                    -TWIST_SUM_MAX, TWIST_SUM_MAX, &ecu->errors);
     ecu->tick_dheading_q30_rad = sat_range(ecu->tick_dheading_q30_rad + dheading_q30_rad,
@@ -795,11 +797,12 @@ static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame)
         }
     }
     ecu->staged_config = 0u;
-    enum config_reason reason = validate(&candidate);
+    enum config_reason reason = validate_at_speed(&candidate, ecu->max_wheel_speed_mm_s);
     if (reason != CONFIG_OK) {
         ecu->errors |= ERROR_CONFIG_INVALID;
-        enum ack_reason ack_reason =
-            reason == CONFIG_GEOMETRY_ABSURD ? ACK_INCONSISTENT : ACK_OUT_OF_RANGE;
+        enum ack_reason ack_reason = reason == CONFIG_GEOMETRY_ABSURD || reason == CONFIG_WIRE_RANGE
+                                         ? ACK_INCONSISTENT
+                                         : ACK_OUT_OF_RANGE;
         ack(ecu, ODOM_CONFIG_ID, frame, ACK_RESULT_NACK, ack_reason);
         return;
     }

@@ -16,7 +16,6 @@
 #include "odometry.h"
 #include "secoc.h"
 
-#define ENCODER_PERIOD_US 10000
 #define POSE_PERIOD_TICKS 2u
 #define STATUS_PERIOD_TICKS 10u
 #define WATCHDOG_TICKS 10u
@@ -26,8 +25,8 @@
 #define MAX_WHEEL_SPEED_MM_S 4000u /* build-time maximum rim speed of either wheel */
 #define RESYNC_FRAMES 3 /* frames consistent with each other, not with the last: restarted */
 #define STEP_PERIODS_MAX 0xFFFFu /* the twist's dt and the plausibility bound saturate (655 s) */
+#define TWO_PI_Q30 ((TWO_PI_Q60 + (INT64_C(1) << 29)) >> 30) /* one turn in Q30 rad (< 2^33) */
 #define TWIST_SUM_MAX (INT64_C(1) << 32) /* one tick's summed steps: 4096 m (Q20), 4 rad (Q30) */
-#define WIRE_COUNTER_BITS 24u
 #define TX_IDS 8u /* the messages this node sends: one E2E counter each */
 
 /* Firmware state (the STATE signal of ODOM_STATUS). */

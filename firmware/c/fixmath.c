@@ -56,6 +56,25 @@ int64_t mul_shr_round_i64(int64_t a, int64_t b, unsigned shift, uint32_t *errors
     return wide_sat_i64(rounded, errors);
 }
 
+/* num * 2^62 / den rounded half away from zero, for the i128 den = den_hi * 2^64 + den_lo with
+ * 2^63 <= |den| < 2^126 and |num| <= |den|: the result is in [-2^62, 2^62]. |den| normalized to
+ * its top 64 bits (truncated: relative error below 2^-63), the numerator scaled by 2^(62 - sh):
+ * the quotient fits (<= 2^62), so the muldiv never saturates. */
+int64_t div_q62_i128(int64_t num, int64_t den_hi, uint64_t den_lo)
+{
+    wide128_t den;
+    den.hi = (uint64_t)den_hi;
+    den.lo = den_lo;
+    if (den_hi < 0) {
+        den = wide_sub(wide_from_u64(0u), den);
+    }
+    unsigned sh = bit_length_u64(den.hi);
+    uint64_t top = sh == 0u ? den.lo : (den.hi << (64u - sh)) | (den.lo >> sh);
+    uint32_t scratch = 0u;
+    uint64_t quotient = muldiv_round_u64(abs_u64(num), (uint64_t)1u << (62u - sh), top, &scratch);
+    return (num < 0) != (den_hi < 0) ? -(int64_t)quotient : (int64_t)quotient;
+}
+
 /* round(a * b / c) with a 128-bit intermediate; saturates to u64; c == 0 gives U64_MAX.
  * Configuration time only: a bit-serial 128/64 restoring division (64 steps), as Linux's
  * mul_u64_u64_div_u64 plus rounding. a * b + c/2 < 2^128, so the dividend never overflows. */

@@ -177,6 +177,7 @@ int32_t wrap_i32(int64_t value);
 int32_t wrap_signed(uint32_t value, unsigned bits);
 int64_t sat_range(int64_t value, int64_t low, int64_t high, uint32_t *errors);
 int64_t mul_shr_round_i64(int64_t a, int64_t b, unsigned shift, uint32_t *errors);
+int64_t div_q62_i128(int64_t num, int64_t den_hi, uint64_t den_lo);
 uint64_t muldiv_round_u64(uint64_t a, uint64_t b, uint64_t c, uint32_t *errors);
 int64_t div_round_i64(int64_t numerator, int64_t denominator);
 unsigned bit_length_u64(uint64_t value);

@@ -5,7 +5,10 @@
  * as the Q48 sum dS_R + dS_L (dS in Q49, unrounded), dtheta = k_R dR - k_L dL in BAM64 (exact mod
  * 2^64). EULER: heading first, then x += dS cos(phi). RK2: x += dS cos(phi + dtheta/2). EXACT:
  * the RK2 step scaled by the chord factor sin(u)/u, u = dtheta/2, with the straight (|u| < 2^-21
- * rad: factor 1) and spin (|dS| < 2^-41 m: no move) cases. See the Python module's docstring.
+ * rad: factor 1) and spin (|dS| < 2^-41 m: no move) cases. A step turning more than half a turn
+ * is integrated whole: the exact 97-bit dtheta's high word gives the whole turns n beyond the
+ * signed read; heading_turns takes them, RK2's midpoint moves by n pi, EXACT's chord is scaled by
+ * dtheta_w / dtheta. See the Python module's docstring.
  */
 #include "odometry.h"
 
@@ -32,6 +35,7 @@ void odometry_init(struct odometry *odo, const struct odom_constants *consts, ui
     odo->distance_q40_m = 0u;
     odo->last_ds_q49_m = 0;
     odo->last_dheading_bam64 = 0;
+    odo->last_dheading_turns = 0;
 }
 
 /* Use new constants from the next step on; the pose and the counter history are kept. */
@@ -87,15 +91,26 @@ void odometry_step_deltas(struct odometry *odo, int32_t d_left, int32_t d_right)
     /* (u64)d * k wraps mod 2^64 exactly as Python's wrap_i64 of the exact products */
     int64_t dheading = to_i64((uint64_t)(int64_t)d_right * c->bam64_per_count_right
                               - (uint64_t)(int64_t)d_left * c->bam64_per_count_left);
+    /* the high word of the exact difference (< 2^93): the whole turns beyond the signed read
+     * (|turns| < 2^29), non-zero only for a step turning more than half a turn */
+    wide128_t exact = wide_sub(wide_mul_i64(d_right, (int64_t)c->bam64_per_count_right),
+                               wide_mul_i64(d_left, (int64_t)c->bam64_per_count_left));
+    int64_t dheading_hi = to_i64(exact.hi);
+    int64_t turns = dheading < 0 ? dheading_hi + 1 : dheading_hi;
     uint64_t heading_old = odo->heading_bam64;
     odo->heading_bam64 = heading_old + (uint64_t)dheading;
+    int64_t carry = 0;
     if (dheading >= 0 && odo->heading_bam64 < heading_old) { /* the unsigned add's carry */
-        odo->heading_turns = wrap_i32((int64_t)odo->heading_turns + 1);
+        carry = 1;
     } else if (dheading < 0 && odo->heading_bam64 > heading_old) { /* its borrow */
-        odo->heading_turns = wrap_i32((int64_t)odo->heading_turns - 1);
+        carry = -1;
+    }
+    if (carry != 0 || turns != 0) {
+        odo->heading_turns = wrap_i32((int64_t)odo->heading_turns + carry + turns);
     }
     odo->last_ds_q49_m = ds_q49_m;
     odo->last_dheading_bam64 = dheading;
+    odo->last_dheading_turns = (int32_t)turns; /* |turns| < 2^29 */
     if (ds_q49_m == 0) {
         return;
     }
@@ -109,7 +124,13 @@ void odometry_step_deltas(struct odometry *odo, int32_t d_left, int32_t d_right)
         if (-SPIN_LIMIT_Q49 < ds_q49_m && ds_q49_m < SPIN_LIMIT_Q49) {
             return;
         }
-        ds_q49_m = scale_q62(ds_q49_m, chord_factor_q62(dheading));
+        int64_t factor_q62 = chord_factor_q62(dheading);
+        if (turns != 0) { /* the arc of the whole step: the wrapped chord times dtheta_w/dtheta */
+            factor_q62 = scale_q62(factor_q62, div_q62_i128(dheading, dheading_hi, exact.lo));
+        }
+        ds_q49_m = scale_q62(ds_q49_m, factor_q62);
+    } else if (((uint64_t)turns & 1u) != 0u) { /* RK2: each whole turn moves the midpoint by pi */
+        midpoint_bam64 ^= UINT64_C(1) << 63;
     }
     advance(odo, ds_q49_m, midpoint_bam64);
 }
@@ -154,7 +175,7 @@ int64_t chord_factor_q62(int64_t dheading_bam64)
     return (int64_t)(acc_q60 << 2);
 }
 
-/* value * factor for a Q62 factor in [0, 1]: rounds, never leaves the width of value. */
+/* value * factor for a Q62 factor in (-1, 1]: rounds (half up), never leaves the width of value. */
 static int64_t scale_q62(int64_t value, int64_t factor_q62)
 {
     if (factor_q62 == ONE_Q62) {

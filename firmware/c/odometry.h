@@ -30,6 +30,7 @@ struct odometry {
     uint64_t distance_q40_m;
     int64_t last_ds_q49_m;       /* dS of the last step (for the twist) */
     int64_t last_dheading_bam64; /* signed dtheta of the last step (for the twist) */
+    int32_t last_dheading_turns; /* the whole turns of that step beyond it (|.| < 2^29) */
 };
 
 void odometry_init(struct odometry *odo, const struct odom_constants *consts, uint32_t *errors);

@@ -8,9 +8,11 @@
  *   muldiv A B C             -> quotient errors       (u64 each)
  *   mulshr A B S             -> result errors         (i64, i64, shift)
  *   div_round N D            -> result
+ *   div_q62 N HI LO          -> result                (i64, i64, u64: N / (HI * 2^64 + LO))
  *   isqrt N                  -> result
  *   wrap_signed V BITS       -> result                (V: u32)
  *   config PPV RL RR B BITS I -> reason [m_l m_r k_l k_r errors]
+ *   config_speed V PPV RL RR B BITS I -> validate_at_speed's reason (V: mm/s)
  *   crc HEX                  -> crc8h2f of the bytes ("-" for none)
  *   table                    -> the 256 CRC8H2F table entries
  *   rx IDS_HEX INIT WPP      -> ok                    (a new receiver: 16 data IDs)
@@ -200,6 +202,10 @@ int main(void)
             uint64_t b = arg_u64();
             uint64_t q = muldiv_round_u64(a, b, arg_u64(), &errors);
             printf("%" PRIu64 " %" PRIu32 "\n", q, errors);
+        } else if (strcmp(cmd, "div_q62") == 0) {
+            int64_t num = arg_i64();
+            int64_t hi = arg_i64();
+            printf("%" PRId64 "\n", div_q62_i128(num, hi, arg_u64()));
         } else if (strcmp(cmd, "mulshr") == 0) {
             int64_t a = arg_i64();
             int64_t b = arg_i64();
@@ -231,6 +237,16 @@ int main(void)
             printf("0 %" PRId64 " %" PRId64 " %" PRIu64 " %" PRIu64 " %" PRIu32 "\n",
                    k.m_per_count_left_q48_m, k.m_per_count_right_q48_m, k.bam64_per_count_left,
                    k.bam64_per_count_right, errors);
+        } else if (strcmp(cmd, "config_speed") == 0) {
+            uint32_t speed_mm_s = (uint32_t)arg_u64();
+            struct robot_params p;
+            p.counts_per_rev = (uint32_t)arg_u64();
+            p.wheel_radius_left_nm = (uint32_t)arg_u64();
+            p.wheel_radius_right_nm = (uint32_t)arg_u64();
+            p.wheelbase_nm = (uint32_t)arg_u64();
+            p.counter_bits = (uint32_t)arg_u64();
+            p.integrator = (uint32_t)arg_u64();
+            printf("%d\n", (int)validate_at_speed(&p, speed_mm_s));
         } else if (strcmp(cmd, "crc") == 0) {
             long n = arg_bytes(bytes);
             printf("%u\n", (unsigned)crc8h2f(bytes, n < 0 ? 0u : (size_t)n));

@@ -7,12 +7,18 @@ every line but those two kinds -- a frame line that would not parse, and a line 
 a timestamped event, a header or footer line, nor a comment -- and counts them, as the cut last
 line of a candump log is counted (``host.io.logs``): the caller warns with the count and the
 first one's line number.
+
+python-can reads every timestamp as absolute; a log written with ``timestamps relative``
+(CANalyzer's option: each event's time after the previous event's) came out as a jumble of
+deltas, times going back, no pose pairing the judge could use. ``AscLines`` hands such lines on
+with their absolute time (the running sum, exact in decimal).
 """
 
 from __future__ import annotations
 
 import re
 from collections.abc import Iterator
+from decimal import Decimal
 from typing import TextIO
 
 _FRAME = re.compile(r"\s*\d+\.\d+\s+(\d+)\s+(\S+)\s+(Tx|Rx)\b(.*)$")
@@ -21,7 +27,8 @@ _EVENT = re.compile(r"\s*\d+\.\d+\s")  # a timestamped line python-can reads or 
 _HEADER = re.compile(
     r"\s*(date\s|base\s|(no\s+)?internal\s+events|begin\s+triggerblock|end\s+triggerblock|//)",
     re.IGNORECASE)
-_BASE = re.compile(r"\s*base\s+(hex|dec)\b", re.IGNORECASE)
+_BASE = re.compile(r"\s*base\s+(hex|dec)\b(?:\s+timestamps\s+(\w+))?", re.IGNORECASE)
+_STAMP = re.compile(r"(\s*)(\d+\.\d+)(\s.*)", re.DOTALL)
 _DLC_BYTES = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)  # python-can's dlc2len
 
 
@@ -32,6 +39,7 @@ class AscLines:
     def __init__(self, file: TextIO) -> None:
         self.file = file
         self.base = 16
+        self.relative_s: Decimal | None = None  # the running time of a relative log
         self.line = 0
         self.skipped = 0
         self.first_skipped = 0
@@ -45,12 +53,22 @@ class AscLines:
             self.line += 1
             if (base := _BASE.match(text)) is not None:
                 self.base = 16 if base.group(1).lower() == "hex" else 10
+                relative = (base.group(2) or "").lower() == "relative"
+                self.relative_s = Decimal(0) if relative else None
             if _is_garbage(text, self.base):
                 self.skipped += 1
                 self.first_skipped = self.first_skipped or self.line
                 continue
-            return text
+            return text if self.relative_s is None else self._absolute(text)
         raise StopIteration
+
+    def _absolute(self, text: str) -> str:
+        """A timestamped line of a relative log with its time made absolute."""
+        stamp = _STAMP.match(text)
+        if stamp is None or self.relative_s is None:
+            return text
+        self.relative_s += Decimal(stamp.group(2))
+        return f"{stamp.group(1)}{self.relative_s:f}{stamp.group(3)}"
 
     def close(self) -> None:
         """Close the file (``ASCReader.stop``)."""

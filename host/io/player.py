@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import signal
 import time
+from collections.abc import Callable
 
 import can
 import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FLAG_ERROR, FrameArrays, to_message
-from odocan.host.report.progress import Progress
 from odocan.host.stopped import signum_of
 from odocan.sim.realtime import StopRequest, stop_on_signals
 
@@ -20,14 +20,15 @@ POLL_S = 0.1  # a stop request is seen within this while waiting for a frame's t
 
 def play(
     bus: can.BusABC, frames: FrameArrays, selection: IntArray, speed: float,
-    bar: Progress | None = None,
+    played: Callable[[int], None] | None = None,
 ) -> tuple[int, int | None]:
     """Send ``frames[selection]`` on ``bus`` at their timestamps (relative to the first one)
     divided by ``speed`` (error frames are skipped); returns (frames sent, the number of the
     signal that stopped it before the last frame, or None).
 
     Ctrl-C and SIGTERM stop it between two frames (within ``POLL_S`` while waiting), never in
-    the middle of a send; a second signal at once. ``bar`` is told the frames played so far."""
+    the middle of a send; a second signal at once. ``played`` is told the frames played so far
+    (a progress line's ``update``)."""
     sent = 0
     if len(selection) == 0:
         return sent, None
@@ -37,8 +38,8 @@ def play(
     try:
         with stop_on_signals(stop):
             for done, i in enumerate(selection.tolist()):
-                if bar is not None:
-                    bar.update(done)
+                if played is not None:
+                    played(done)
                 due = start + (float(frames.timestamp_s[i]) - t_first) / speed
                 while not stop.stop_requested and (delay := due - time.monotonic()) > 0:
                     time.sleep(min(delay, POLL_S))

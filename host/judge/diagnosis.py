@@ -3,13 +3,18 @@
 A wrong ``--robot`` makes every sample depart from the reference, and the verdict would read like
 a firmware fault (pose and twist out of tolerance). Before blaming the firmware, the judge checks
 which profiles — the one given first, then the shipped ones — the logged on-board poses follow
-within the tolerance; a log that fits another profile is a robot mismatch, said by name.
+within the tolerance; a log that fits another profile is a robot mismatch, said by name. So is
+an ``--integrator`` other than the one the log's ODOM_STATUS reports.
 """
 
 from __future__ import annotations
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.analysis import Tolerance, analyze
+from odocan.host.judge.analysis import AnalysisError, Tolerance, analyze
+from odocan.host.judge.samples import pick_integrator
+from odocan.host.protocol.dbcplan import default_plan
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.e2e import check_frames
 from odocan.sim import robot
 from odocan.sim.exceptions import OdocanError
 from odocan.sim.robot import RobotProfile, list_profiles
@@ -41,3 +46,27 @@ def robot_mismatch(
         return None
     return (f"robot mismatch: the log's poses fit robot {', '.join(map(repr, fits))}, "
             f"not {given.name!r} (--robot)")
+
+
+def logged_integrator(log: FrameArrays) -> str | None:
+    """The integrator the log's ODOM_STATUS reports (None: none reported)."""
+    _, accepted = check_frames(log)
+    try:
+        return pick_integrator(log, accepted, BulkDecoder(default_plan()), None)[0]
+    except AnalysisError:
+        return None
+
+
+def mismatches(
+    log: FrameArrays, given: RobotProfile, integrator: str, source: str, tolerance: Tolerance
+) -> list[str]:
+    """Why a failed log may not be the firmware's fault: an ``--integrator`` (``source``
+    "argument") other than the one the log's ODOM_STATUS reports, then ``robot_mismatch``
+    with the log's own integrator."""
+    hints = []
+    logged = logged_integrator(log) if source == "argument" else None
+    if logged is not None and logged != integrator:
+        hints.append(f"integrator mismatch: the log's ODOM_STATUS reports {logged}, "
+                     f"not {integrator} (--integrator)")
+    robot_hint = robot_mismatch(log, given, logged or integrator, tolerance)
+    return hints + ([] if robot_hint is None else [robot_hint])

@@ -9,7 +9,7 @@ of its steps over k periods within k times the plausibility bound per period tha
 (``MAX_WHEEL_SPEED_MM_S``, firmware/encoders.py ``step_bounds``; one count of margin more here).
 How far can its position after the gap lie from the merged step's? Write a step of left and
 right wheel travel a, c (m) as ds = (a + c) / 2 and a heading change dtheta = (c - a) / b, taken
-by the integrator as ds sigma(dtheta) u(dir) (``losses._step_vector``: u the unit vector, dir
+by the integrator as ds sigma(dtheta) u(dir) (``losses.step_vector``: u the unit vector, dir
 the end heading (euler) or the middle (rk2, exact; a step of half a turn or more read wrapped, as
 the firmware reads it), sigma = sinc(dtheta / 2) for exact, else 1). The merged step is
 S r with S = sum ds_i and r = sigma_ref u(dir_ref) of the merged counts, so the firmware's
@@ -63,7 +63,7 @@ def period_bounds(geometry: Geometry, max_wheel_speed_mm_s: int = MAX_WHEEL_SPEE
 def step_response(turn_rad: FloatArray, h_old_rad: FloatArray, integrator: str
                   ) -> tuple[FloatArray, FloatArray]:
     """(sigma, dir rad) of steps turning ``turn_rad`` from heading ``h_old_rad``: the
-    displacement is ds sigma u(dir) (``losses._step_vector``'s rule, the turn of half a turn
+    displacement is ds sigma u(dir) (``losses.step_vector``'s rule, the turn of half a turn
     or more read wrapped to [-pi, pi))."""
     read = np.where(np.abs(turn_rad) >= np.pi, (turn_rad + np.pi) % (2.0 * np.pi) - np.pi,
                     turn_rad)

@@ -50,7 +50,7 @@ def firmware_losses(
                               upto[1:] - upto[:-1], at_most=upto[1:] - made[:-1])
     spans = [(int(made[k]), int(upto[k + 1]), int(excess[k])) for k in np.flatnonzero(excess > 0)]
     tail = int(upto[-1]) if len(upto) else 0
-    if _overflow_reported_after(frames, accepted, decoder, int(index[-1]) if len(index) else -1):
+    if overflow_reported_after(frames, accepted, decoder, int(index[-1]) if len(index) else -1):
         spans.append((tail, len(enc.seq) - 1, len(enc.seq) - 1 - tail))
     return spans
 
@@ -96,7 +96,7 @@ def _made_from(
     return made
 
 
-def _overflow_reported_after(
+def overflow_reported_after(
     frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, after: int
 ) -> bool:
     """Whether an ODOM_STATUS summary after frame ``after`` says DEGRADED for MAILBOX_OVERFLOW."""
@@ -196,7 +196,7 @@ class OneSteps:
     def of_deltas(dl: IntArray, dr: IntArray, g: Geometry, integrator: str) -> OneSteps:
         """``of`` for the count steps between consecutive frames (from the first frame on)."""
         heading = np.concatenate(([0.0], np.cumsum(heading_steps(dl, dr, g))))
-        one_x, one_y = _step_vector(dl, dr, heading[:-1], heading[1:], g, integrator)
+        one_x, one_y = step_vector(dl, dr, heading[:-1], heading[1:], g, integrator)
         zero = np.zeros(1, dtype=np.int64)
         return OneSteps(
             g, integrator, np.concatenate((zero, np.cumsum(dl))),
@@ -219,7 +219,7 @@ def merge_error(steps: OneSteps, a: IntArray, b: IntArray | int) -> FloatArray:
     dr = steps.cum_right[b] - steps.cum_right[a]
     one_x = steps.cum_x[b] - steps.cum_x[a]
     one_y = steps.cum_y[b] - steps.cum_y[a]
-    two_x, two_y = _step_vector(dl, dr, steps.heading[a], steps.heading[b], steps.geometry,
+    two_x, two_y = step_vector(dl, dr, steps.heading[a], steps.heading[b], steps.geometry,
                                 steps.integrator)
     error: FloatArray = np.hypot(one_x - two_x, one_y - two_y)
     return error
@@ -254,14 +254,14 @@ def merge_errors(
     """``drop_errors`` of the frames between consecutive steps: step k (``dl[k]``, ``dr[k]``)
     goes from ``heading[k]`` to ``heading[k + 1]``; element k is the error of taking steps k
     and k + 1 as one (elementwise: any window of steps gives the same values)."""
-    one_x, one_y = _step_vector(dl, dr, heading[:-1], heading[1:], g, integrator)
-    two_x, two_y = _step_vector(dl[:-1] + dl[1:], dr[:-1] + dr[1:], heading[:-2], heading[2:],
+    one_x, one_y = step_vector(dl, dr, heading[:-1], heading[1:], g, integrator)
+    two_x, two_y = step_vector(dl[:-1] + dl[1:], dr[:-1] + dr[1:], heading[:-2], heading[2:],
                                 g, integrator)
     error: FloatArray = np.hypot(one_x[:-1] + one_x[1:] - two_x, one_y[:-1] + one_y[1:] - two_y)
     return error
 
 
-def _step_vector(
+def step_vector(
     dl: IntArray, dr: IntArray, h_old: FloatArray, h_new: FloatArray, g: Geometry, integrator: str
 ) -> tuple[FloatArray, FloatArray]:
     """The displacement (m) of one step of ``integrator`` from heading ``h_old`` to ``h_new``.

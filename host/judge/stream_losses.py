@@ -4,7 +4,7 @@
 Carried: the last ENC_E2E_LOST page (its count, the latest encoder frame before it and that
 frame's sequence number: ``losses.lost_beyond_gaps`` runs on it and the chunk's pages), the
 encoder frames counted so far with the last one's sequence number, and whether a summary saying
-MAILBOX_OVERFLOW came after the last page (``losses._overflow_reported_after`` per chunk).
+MAILBOX_OVERFLOW came after the last page (``losses.overflow_reported_after`` per chunk).
 
 The streamed analysis does not place the allowance itself (its per-sample sums of the largest
 merge errors): a life with a span is refused (``stream_analysis.NotStreamable``) and analysed
@@ -22,10 +22,10 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.losses import (
     LOST_PAGE,
     OneSteps,
-    _overflow_reported_after,
-    _step_vector,
     heading_steps,
     lost_beyond_gaps,
+    overflow_reported_after,
+    step_vector,
     worst_runs_m,
 )
 from odocan.host.judge.reference import Geometry, wrap_delta
@@ -72,7 +72,7 @@ class StreamLosses:
         if len(index):
             self._add_pages(index + self._offset, page["ENC_E2E_LOST"][keep].astype(np.int64),
                             chunk.timestamp_s[index], enc)
-        reported = _overflow_reported_after(chunk, accepted, self.decoder,
+        reported = overflow_reported_after(chunk, accepted, self.decoder,
                                             int(index[-1]) if len(index) else -1)
         self._overflow_after = reported if len(index) else (self._overflow_after or reported)
         self._add_summaries(chunk, accepted, enc)
@@ -195,7 +195,7 @@ class SpanDrops:
         dr = wrap_delta(np.diff(right), self.bits)
         start = (0, 0, 0.0, 0.0, 0.0) if last is None else last[2:]
         heading = np.cumsum(np.concatenate(([start[2]], heading_steps(dl, dr, g))))
-        one_x, one_y = _step_vector(dl, dr, heading[:-1], heading[1:], g, self.integrator)
+        one_x, one_y = step_vector(dl, dr, heading[:-1], heading[1:], g, self.integrator)
         cum_l = np.cumsum(np.concatenate(([start[0]], dl)))
         cum_r = np.cumsum(np.concatenate(([start[1]], dr)))
         cum_x = np.cumsum(np.concatenate(([start[3]], one_x)))

@@ -6,7 +6,7 @@ The host integrates the frame it accepted; the firmware may have taken the twin 
 mailbox keeps whichever it was given), or lost both. The heading is exact for every integrator
 (a function of the cumulative counts), so after the next accepted frame only the position differs,
 and by a constant vector from then on: the difference between the steps prev -> accepted -> next
-and prev -> twin -> next (or prev -> next, both lost), as ``losses._step_vector`` takes them.
+and prev -> twin -> next (or prev -> next, both lost), as ``losses.step_vector`` takes them.
 Its length does not depend on the heading at prev (a rotation of both paths), so it is computed
 from heading 0. With twins on consecutive frames the firmware's prev may itself be a twin: the
 path's difference telescopes into one term per twinned frame, each with the prev the firmware
@@ -23,7 +23,7 @@ import numpy as np
 
 from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.firmware.twist import ENCODER_PERIOD_US
-from odocan.host.judge.losses import _step_vector, heading_steps
+from odocan.host.judge.losses import heading_steps, step_vector
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.reference_path import Reference
 from odocan.host.judge.samples import WIRE_COUNTER_BITS, Encoders, FloatArray, IntArray
@@ -39,7 +39,7 @@ def _step(a: Counts, b: Counts, h_m: float, g: Geometry, bits: int, integrator: 
     dl = np.array([int(wrap_delta(b[0] - a[0], bits))], dtype=np.int64)
     dr = np.array([int(wrap_delta(b[1] - a[1], bits))], dtype=np.int64)
     h_new = h_m + float(heading_steps(dl, dr, g)[0])
-    dx, dy = _step_vector(dl, dr, np.array([h_m]), np.array([h_new]), g, integrator)
+    dx, dy = step_vector(dl, dr, np.array([h_m]), np.array([h_new]), g, integrator)
     return float(dx[0]), float(dy[0]), h_new
 
 

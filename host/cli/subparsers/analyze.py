@@ -30,7 +30,7 @@ memory whatever its size; those four read the whole log (their series and frames
 a log the analysis refuses (to explain why in the log's terms) or fails (to look for a wrong
 ``--robot``), or that the stream cannot judge exactly (``stream_analysis.NotStreamable``: frame
 times going back around a stall, frames let out in a burst after a busy bus). ``odocan analyze
-LOG…`` chooses the same way for each log (``host.judge.batch.analyze_one``).
+LOG…`` chooses the same way for each log (``host.cli.batch.analyze_one``).
 """
 
 from __future__ import annotations
@@ -51,9 +51,9 @@ from odocan.sim.exceptions import ConfigurationError
 if TYPE_CHECKING:  # imported where used: a command pays only for what it runs
     import cantools
 
+    from odocan.host.cli.batch import LogResult
     from odocan.host.io.logs import FrameArrays
     from odocan.host.judge.analysis import Analysis
-    from odocan.host.judge.batch import LogResult
     from odocan.sim import robot
 
 MAX_JOBS = 1024
@@ -173,16 +173,18 @@ def _analyze_single(args: argparse.Namespace) -> int:
         analysis.report["bus"] = busstats.from_frames(frames, args.bitrate).as_dict()
     analysis.report["inputs"] = log_inputs(args.log, profile, analysis.report["integrator"],
                                            args.dbc)
-    hint = None
+    hints: list[str] = []
     if not analysis.passed and db is None:  # a wrong --robot must not read as a firmware fault
-        from odocan.host.judge.diagnosis import robot_mismatch
+        from odocan.host.judge.diagnosis import mismatches
 
         frames = frames if frames is not None else read_log(args.log)  # a failed verdict only
-        hint = robot_mismatch(frames, profile, analysis.report["integrator"], args.tolerance)
-        if hint is not None:
-            analysis.report["diagnosis"] = [hint]
+        report = analysis.report
+        hints = mismatches(frames, profile, report["integrator"], report["integrator_source"],
+                           args.tolerance)
+        if hints:
+            analysis.report["diagnosis"] = hints
     code = finish(analysis, args, title=f"odocan analyze: {args.log}")
-    if hint is not None:
+    for hint in hints:
         print(f"  - {hint}")
     write_checks(args, "analyze", analysis_checks(analysis.report))
     if whole_log is not None:
@@ -236,7 +238,7 @@ def _analyze_many(args: argparse.Namespace) -> int:
 
     Exit 2 when any log is unreadable or names nothing (the others are analysed all the same),
     else 1 when any log fails its check, else 0; the logs at fault are named on stderr."""
-    from odocan.host.judge import batch
+    from odocan.host.cli import batch
     from odocan.sim import robot
 
     single_only = [
@@ -294,8 +296,8 @@ def check_report_dir(directory: Path) -> None:
 
 def write_reports(results: list[LogResult], directory: Path) -> None:
     """One JSON report per analysed log in ``directory`` (names from ``batch.report_names``)."""
+    from odocan.host.cli.batch import report_names
     from odocan.host.jsonutil import write_report
-    from odocan.host.judge.batch import report_names
     from odocan.host.outputs import OutputError
 
     names = report_names([Path(r.path) for r in results])
@@ -334,6 +336,9 @@ def print_batch_summary(results: list[LogResult]) -> None:
     console = Console(file=sys.stdout, highlight=False, width=max(80, longest + 72))
     console.print(f"[bold]odocan analyze: {len(results)} logs[/bold]")
     console.print(table)
+    for result in results:  # why a log may fail without its firmware's fault
+        for hint in (result.report or {}).get("diagnosis", []):
+            console.print(f"  - {result.path}: {hint}", soft_wrap=True)
     passed = sum(r.passed for r in results)
     failed = sum(r.report is not None and not r.passed for r in results)
     errors = sum(r.report is None for r in results)

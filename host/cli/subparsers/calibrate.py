@@ -13,6 +13,7 @@ are valid, the estimate is plausible and E_max,syst falls at least ``--min-impro
 from __future__ import annotations
 
 import argparse
+import shlex
 from pathlib import Path
 
 from odocan.host.cli.subparsers.umbmark import add_arguments, header
@@ -31,6 +32,17 @@ from odocan.host.report.progress import counted_progress
 from odocan.sim import errors, robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.robot import profile_sha256
+
+
+def check_command(args: argparse.Namespace) -> str:
+    """The umbmark that re-runs the 'after' squares with the written profile on the firmware
+    only: ``--robot`` the written file would also make the simulated robot the corrected one,
+    its ``--errors`` applied on top (kobuki ed=1.002,eb=1.01: E_max 574 mm, not 0.1 mm)."""
+    argv = ["odocan", "umbmark", "--robot", args.robot, "--firmware-robot", str(args.write_robot),
+            "--side", f"{args.side:g}", "--runs", str(args.runs), "--seed", str(args.seed)]
+    if args.errors:
+        argv += ["--errors", args.errors]
+    return shlex.join(argv)
 
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -106,8 +118,10 @@ def _do_calibrate(args: argparse.Namespace) -> int:
           f"{ros2_yaml(multipliers)}", end="")
     if args.write_robot is not None and not reasons:
         write_robot(args.write_robot, kept)
+        kept_path = shlex.quote(str(args.write_robot))
         print(f"corrected profile written to {args.write_robot} (sha256 "
-              f"{profile_sha256(kept)[:12]}): use --robot {args.write_robot}")
+              f"{profile_sha256(kept)[:12]}): the firmware's geometry (--robot {kept_path} for "
+              f"this robot's logs); check it, the real robot kept:\n  {check_command(args)}")
     elif args.write_robot is not None:
         print(f"{args.write_robot} not written: the calibration failed")
     write_report(args.report, report)

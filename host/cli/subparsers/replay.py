@@ -179,7 +179,7 @@ def _play_realtime(frames: FrameArrays, args: argparse.Namespace) -> int:
     start = time.monotonic()
     try:
         with progress(f"playing {len(selection)} frames", len(selection)) as bar:
-            sent, stopped_by = play(bus, frames, selection, args.speed, bar)
+            sent, stopped_by = play(bus, frames, selection, args.speed, bar.update)
     finally:
         bus.shutdown()
     wall_s = time.monotonic() - start

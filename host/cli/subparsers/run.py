@@ -172,6 +172,7 @@ def _do_run(args: argparse.Namespace) -> int:
     check_log_path(args.log)
     check_output_paths(args)
     check_latency_plot(args.latency_plot, config.bitrate)
+    check_bus_args(args)
     check_export_paths(args.parquet, args.mcap)
     check_junit_path(args)
     check_distinct([("--log", args.log), ("--report", args.report), ("--plot", args.plot),
@@ -198,6 +199,16 @@ def _do_run(args: argparse.Namespace) -> int:
     if log_error is not None:
         raise log_error
     return code if stopped is None else stopped.exit_code
+
+
+def check_bus_args(args: argparse.Namespace) -> None:
+    """``--bus-arg`` configures the -i/-c bus the frames are mirrored to; without one it did
+    nothing, silently (``run --bus-arg port=N`` ran on the in-process bus, port unused)."""
+    if args.bus_arg and args.interface is None and args.channel is None:
+        raise ConfigurationError(
+            f"--bus-arg {args.bus_arg[0]}: only for the -i/-c bus the frames are copied to "
+            "(the rig's own bus is in-process; -b makes it bit-timed): give -i/-c"
+        )
 
 
 def check_latency_plot(path: Path | None, bitrate: int | None) -> None:
@@ -249,7 +260,7 @@ def _run_and_analyze(
         if mirror is not None:
             mirror.shutdown()
     frames = collector.arrays()
-    cause = _why_no_frames(config.faults)
+    cause = _why_no_frames(config.faults, config.bitrate, still_queued)
     require_frames(frames, "the run", cause)
     with explained(lambda: frames, "the run", cause), progress(f"analysing {len(frames)}", None):
         analysis = analyze(
@@ -325,9 +336,21 @@ def _open_log(path: Path) -> can.Listener:
         raise OutputError(f"--log {path}: {exc.strerror or exc}") from None
 
 
-def _why_no_frames(faults: FaultSpec | None) -> str:
+def _why_no_frames(
+    faults: FaultSpec | None,
+    bitrate: int | None,
+    still_queued: dict[tuple[int, bool], int] | None,
+) -> str:
+    """Why a message the check needs has no frame: the faults asked for, a bit-timed bus too
+    slow for the rig's traffic (frames left in its transmit buffers), else a bug."""
     if faults is not None and faults.active:
         return f"under --faults {faults}"
+    queued = sum((still_queued or {}).values())
+    if bitrate is not None and queued:
+        return (
+            f"at {bitrate} bit/s the bus cannot carry the rig's traffic: {queued} frames still "
+            f"queued at the end; see odocan busload -b {bitrate}, use a higher -b/--bitrate"
+        )
     return "the rig sent none: a bug, please report it"
 
 

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import argparse
 import os
+from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 from odocan.host.cli.options import add_robot_argument, add_seed_argument, float_in, int_in
 from odocan.host.judge import vectors
 from odocan.host.outputs import OutputError
 from odocan.sim.exceptions import ConfigurationError
-from odocan.sim.rig import INTEGRATORS
+from odocan.sim.rig import INTEGRATORS, firmware_params
 from odocan.sim.robot import load
 from odocan.sim.scenarios import SCENARIOS
 
@@ -53,12 +55,37 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     parser.add_argument(
         "--check", action="store_true", help="verify the vectors in --out instead of writing them"
     )
-    parser.set_defaults(func=_do_vectors)
+    parser.set_defaults(func=_do_vectors, defaults_of=parser.get_default)
+
+
+_CASE_OPTIONS = ("scenario", "duration", "seed", "random_steps")
+
+
+def check_options_apply(args: argparse.Namespace, vector_set: dict[str, Any]) -> None:
+    """``--check`` re-runs the robot, integrator and cases the vector file holds: a --robot or
+    --integrator other than the file's, or any case option, is refused, not silently ignored
+    (``--check --robot kobuki`` of pmir's vectors said 'reproduced bit for bit')."""
+    given = [name for name in _CASE_OPTIONS if getattr(args, name) != args.defaults_of(name)]
+    if given:
+        options = ", ".join(f"--{name.replace('_', '-')}" for name in given)
+        raise ConfigurationError(f"--check: {options}: the cases are the vector file's")
+    path, integrator = args.out / "vectors.json", vector_set["integrator"]
+    if args.integrator not in (integrator, args.defaults_of("integrator")):
+        raise ConfigurationError(
+            f"--integrator {args.integrator}: {path} is for integrator {integrator}"
+        )
+    if args.robot != args.defaults_of("robot") and (
+        asdict(firmware_params(load(args.robot), integrator)) != vector_set["params"]
+    ):
+        raise ConfigurationError(
+            f"--robot {args.robot}: {path} is for robot {vector_set['robot']}, other parameters"
+        )
 
 
 def _do_vectors(args: argparse.Namespace) -> int:
     if args.check:
         vector_set = vectors.read_json(args.out / "vectors.json")
+        check_options_apply(args, vector_set)
         mismatched = vectors.verify(vector_set) + vectors.verify_csv(vector_set, args.out)
         if mismatched:
             print(f"mismatch in: {', '.join(mismatched)}")

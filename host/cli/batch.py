@@ -124,6 +124,14 @@ def analyze_one(path: str, job: Job) -> LogResult:
         report["inputs"] = log_inputs(
             log, profile, report["integrator"], None if job.dbc is None else Path(job.dbc)
         )
+        if not report["passed"] and db is None:  # as analyze LOG: a wrong --robot is named
+            from odocan.host.judge.diagnosis import mismatches
+
+            whole = read_log(log, warn=lambda message: None)
+            hints = mismatches(whole, profile, report["integrator"],
+                               report["integrator_source"], tolerance)
+            if hints:
+                report["diagnosis"] = hints
     except (OdocanError, OSError) as exc:
         return LogResult(path, error=_one_line(exc))
     except Exception as exc:  # a log no check foresaw: this log's error, the batch goes on
