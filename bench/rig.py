@@ -56,7 +56,7 @@ from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from odocan.sim.scenarios import RandomScenario
-from odocan.sim.transport import OdocanBus
+from odocan.sim.transport import OdocanBus, _Wire
 
 SIM_IDS = frozenset({fr.WHEEL_ENCODERS_ID, fr.MOTOR_CMD_ID, fr.SIM_TRUTH_ID})
 CLOCK = time.perf_counter  # the budget's timer (cheap; CPU clocks are system calls)
@@ -187,6 +187,8 @@ def budget(seconds: float) -> dict[str, float]:
             b.wrap(bus, "recv", "transport: recv")
             if isinstance(bus, OdocanBus):  # the board's and the host's tick at once
                 b.wrap(bus, "drain", "transport: recv")
+        # The wire's delivery itself (the board's HAL transmit goes straight to it).
+        b.wrap(_Wire, "deliver_data", "transport: send (a copy per receiver)")
         b.wrap(rig, "step", "rig and node glue (the rest)")
         b.wrap(rig.motor_controller, "send_frame", "node send glue (BusNode.send_frame)")
         b.wrap(rig.truth, "send_frame", "node send glue (BusNode.send_frame)")

@@ -46,19 +46,20 @@ class FirmwareClock:
         periods = 1
         if now_us is not None:
             if self._timer_prev_us is not None:
-                elapsed_us = wrap_u32(now_us - self._timer_prev_us) + self._timer_rest_us
+                elapsed_us = ((now_us - self._timer_prev_us) & U32_MAX) + self._timer_rest_us
                 periods = (elapsed_us + TICK_PERIOD_US // 2) // TICK_PERIOD_US
                 self._timer_rest_us = elapsed_us - periods * TICK_PERIOD_US
             self._timer_prev_us = now_us & U32_MAX
-        self.time_periods = wrap_u32(self.time_periods + periods)
-        self.time_lost_now = periods >= LOST_TIME_PERIODS
-        if self.time_lost_now:
+        self.time_periods = (self.time_periods + periods) & U32_MAX  # (uint32_t)
+        time_lost_now = periods >= LOST_TIME_PERIODS
+        self.time_lost_now = time_lost_now
+        if time_lost_now:
             self.periods_lost = wrap_u32(self.periods_lost + periods - 1)
         return periods
 
     def end_tick(self) -> None:
         """The tick is done: count it (u32, wrapping)."""
-        self.ticks = wrap_u32(self.ticks + 1)
+        self.ticks = (self.ticks + 1) & U32_MAX  # (uint32_t)
 
     def uptime_s(self) -> int:
         """Whole seconds of firmware time since reset (u32)."""

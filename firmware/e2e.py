@@ -25,7 +25,7 @@ from __future__ import annotations
 from enum import IntEnum
 from typing import Final
 
-from odocan.firmware.fixmath import U8_MAX, u8, u32, wrap_u32
+from odocan.firmware.fixmath import U8_MAX, U32_MAX, u8, u32, wrap_u32
 
 CRC8H2F_POLY: Final = 0x2F
 CRC8H2F_INIT: Final = 0xFF
@@ -172,8 +172,16 @@ class E2EReceiver:
 
     def new_period(self) -> None:
         """Start a receive period: the window widens by one (up to 15)."""
-        if self.max_delta_counter < MAX_DELTA_COUNTER_LIMIT:
-            self.max_delta_counter += 1
+        self.new_periods(1)
+
+    def new_periods(self, periods: int) -> None:
+        """Start ``periods`` (>= 0) receive periods at once: ``new_period`` that many times (C:
+        one saturating add instead of the loop)."""
+        widened = self.max_delta_counter + periods
+        if widened > MAX_DELTA_COUNTER_LIMIT:
+            widened = MAX_DELTA_COUNTER_LIMIT
+        if widened > self.max_delta_counter:
+            self.max_delta_counter = widened
 
     def check(self, frame: bytes | bytearray | None) -> E2EStatus:
         """Check one received frame (``None``: the period ended with none); count and return.
@@ -191,8 +199,9 @@ class E2EReceiver:
         counter = frame[1] & COUNTER_MASK
         if frame[0] != p02_crc(frame, self.data_ids[counter]):
             return self._error()
-        self.status = self._sequence(counter)
-        return self.status
+        status = self._sequence(counter)
+        self.status = status
+        return status
 
     def accepted(self) -> u32:
         """Frames accepted (OK or OKSOMELOST), u32 wrapping: the ``*_E2E_OK`` status signal."""
@@ -227,6 +236,6 @@ class E2EReceiver:
         self.last_valid_counter = counter
         self.max_delta_counter = self.max_delta_counter_init
         self.lost_data = lost
-        if status == _OK:
-            self.count_ok = wrap_u32(self.count_ok + 1)
+        if status is _OK:
+            self.count_ok = (self.count_ok + 1) & U32_MAX  # (uint32_t)
         return status

@@ -63,7 +63,7 @@ from odocan.firmware.encoders import STEP_PERIODS_MAX as STEP_PERIODS_MAX
 from odocan.firmware.encoders import WIRE_COUNTER_BITS as WIRE_COUNTER_BITS
 from odocan.firmware.encoders import EncoderInput
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
-from odocan.firmware.fixmath import wrap_u32
+from odocan.firmware.fixmath import U32_MAX
 from odocan.firmware.hal import CanTx, FreshnessNvm
 from odocan.firmware.health import RECOVERY_FRAMES as RECOVERY_FRAMES
 from odocan.firmware.health import Health
@@ -79,6 +79,15 @@ from odocan.firmware.transmit import Transmitter
 from odocan.firmware.twist import ENCODER_PERIOD_US as ENCODER_PERIOD_US
 from odocan.firmware.twist import TWIST_SUM_MAX as TWIST_SUM_MAX
 from odocan.firmware.twist import Twist
+
+# Module constants for the tick's hot path (C: #defines and enumerators; in CPython 3.11 an enum
+# attribute read costs ~0.14 us, a module attribute ~0.03 us).
+_OK = State.OK
+_WHEEL_ENCODERS_ID = fr.WHEEL_ENCODERS_ID
+_ODOM_SET_POSE_ID = fr.ODOM_SET_POSE_ID
+_ODOM_CONFIG_ID = fr.ODOM_CONFIG_ID
+_NAV_GOAL_ID = fr.NAV_GOAL_ID
+_ODOM_AUTH_ID = fr.ODOM_AUTH_ID
 
 
 class OdomEcu:
@@ -148,39 +157,43 @@ class OdomEcu:
 
         ``now_us``: the board's free-running u32 microsecond timer when the tick was released
         (None: no timer, one period has passed)."""
-        self.health.check_overflows(self.mailbox.overflows)
-        periods = self.clock.advance(now_us)  # after: a stall's overrun is TIME_LOST
-        if self.clock.time_lost_now:
-            self.health.time_lost()
-        self.encoders.start_tick(periods)
+        health, clock, encoders = self.health, self.clock, self.encoders
+        health.check_overflows(self.mailbox.overflows)
+        periods = clock.advance(now_us)  # after: a stall's overrun is TIME_LOST
+        time_lost_now = clock.time_lost_now
+        if time_lost_now:
+            health.time_lost()
+        encoders.start_tick(periods)
         self._drain_mailbox()
-        self.auth.expire_held()
-        self.twist.end_drain(self.clock.time_lost_now, self.encoders.tick_budget)
+        if self.auth.secoc is not None:  # C: the SecOC steps compiled in when provisioned
+            self.auth.expire_held()
+        self.twist.end_drain(time_lost_now, encoders.tick_budget)
         motor_cmd_due = self._navigate()
         self.reports.transmit_scheduled(motor_cmd_due)
-        self.health.watchdog(self.encoders.periods_since_frame)
-        self.clock.end_tick()
+        health.watchdog(encoders.periods_since_frame)
+        clock.end_tick()
 
     def _drain_mailbox(self) -> None:
         """Steps 1-3: every frame in arrival order, to its handler."""
         encoder_seen = False
-        frame = self.mailbox.get()
+        get = self.mailbox.get
+        frame = get()
         while frame is not None:
             can_id, data = frame
-            if can_id == fr.WHEEL_ENCODERS_ID:
+            if can_id == _WHEEL_ENCODERS_ID:
                 encoder_seen = True
                 self.encoders.on_frame(data)
-            elif can_id == fr.ODOM_SET_POSE_ID:
+            elif can_id == _ODOM_SET_POSE_ID:
                 self.commands.on_set_pose(data)
-            elif can_id == fr.ODOM_CONFIG_ID:
+            elif can_id == _ODOM_CONFIG_ID:
                 self.commands.on_config(data)
-            elif can_id == fr.NAV_GOAL_ID:
+            elif can_id == _NAV_GOAL_ID:
                 self.commands.on_nav_goal(data)
-            elif can_id == fr.ODOM_AUTH_ID and self.auth.secoc is not None:
+            elif can_id == _ODOM_AUTH_ID and self.auth.secoc is not None:
                 self.auth.on_auth(data)
             else:
-                self.frames_filtered = wrap_u32(self.frames_filtered + 1)
-            frame = self.mailbox.get()
+                self.frames_filtered = (self.frames_filtered + 1) & U32_MAX  # (uint32_t)
+            frame = get()
         if not encoder_seen:
             self.encoders.no_frame()
 
@@ -195,7 +208,7 @@ class OdomEcu:
             odo.y_q40_m,
             odo.heading_bam64,
             self.params.wheelbase_nm,
-            self.health.state is State.OK,
+            self.health.state is _OK,
         )
 
     # --- what the board, the rig and the tests read ------------------------------------------

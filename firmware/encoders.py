@@ -29,6 +29,7 @@ STEP_PERIODS_MAX = U16_MAX  # the twist's dt and the plausibility bound saturate
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 
 Counts = tuple[int, int]  # (left, right) counter values
+_FAULT = State.FAULT  # the enumerator as a module constant (a 3.11 enum attribute read: ~0.14 us)
 
 
 class EncoderInput:
@@ -112,14 +113,19 @@ class EncoderInput:
         their count, not the window, bounds the step) and fix this tick's period budget."""
         self._dropped_before = self._dropped_seen
         self._dropped_seen = self.frames_dropped
-        self.periods_since_frame = min(self.periods_since_frame + periods, STEP_PERIODS_MAX)
-        self._periods_since_sample = min(self._periods_since_sample + periods, STEP_PERIODS_MAX)
+        since_frame = self.periods_since_frame + periods  # u32, then saturated to u16
+        if since_frame > STEP_PERIODS_MAX:
+            since_frame = STEP_PERIODS_MAX
+        self.periods_since_frame = since_frame
+        since_sample = self._periods_since_sample + periods
+        if since_sample > STEP_PERIODS_MAX:
+            since_sample = STEP_PERIODS_MAX
+        self._periods_since_sample = since_sample
         self._tick_late = periods - 1 if periods > 0 else 0  # its frames may have queued so long
         stale = self._samples_stale or self._mailbox_dropped()
-        widen = COUNTER_MASK if stale else min(periods, COUNTER_MASK)
-        for _ in range(widen):
-            self.rx.new_period()
-        self.tick_budget = self._periods_since_sample
+        widen = COUNTER_MASK if stale or periods > COUNTER_MASK else periods
+        self.rx.new_periods(widen)  # C: one saturating add, as ``widen`` calls of new_period
+        self.tick_budget = since_sample
 
     def no_frame(self) -> None:
         """No WHEEL_ENCODERS in this tick's drain: the E2E receiver counts the missing frame."""
@@ -156,7 +162,7 @@ class EncoderInput:
     def _accept(self, counter: int, wire: Counts, counts: Counts) -> None:
         """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
         self._commit_counters(wire, counts)
-        if self._health.state is not State.FAULT and self._odometry.step_counts(
+        if self._health.state is not _FAULT and self._odometry.step_counts(
             counts[0], counts[1]
         ):
             self._twist.sum_step(self._this_step_periods)

@@ -128,7 +128,7 @@ def mul_sub_wrap_i64(a: i64, b: i64, c: i64, d: i64) -> i64:
     C: ``(int64_t)((uint64_t)a * (uint64_t)b - (uint64_t)c * (uint64_t)d)``; on a 32-bit MCU each
     product mod 2^64 is ``a0*b0`` (``UMULL``) plus ``(a0*b1 + a1*b0) << 32`` (two ``MLA``).
     """
-    return wrap_i64(a * b - c * d)
+    return ((a * b - c * d + 0x8000_0000_0000_0000) & U64_MAX) - 0x8000_0000_0000_0000  # wrap_i64
 
 
 def mul_shr_i64(a: i64, b: i64, shift: int) -> i64:
@@ -185,7 +185,8 @@ def mul_shr_round_i64(a: i64, b: i64, shift: int, errors: ErrorMask) -> i64:
     extension of ``lo`` (``hi == (uint64_t)((int64_t)lo >> 63)``), else it clamps by the sign
     of ``hi``. For ``shift >= 64`` the shifted value is ``(int64_t)hi >> (shift - 64)``: it fits.
     """
-    return sat_i64((a * b + (1 << (shift - 1))) >> shift, errors)
+    result = (a * b + (1 << (shift - 1))) >> shift
+    return result if I64_MIN <= result <= I64_MAX else sat_i64(result, errors)
 
 
 def div_q62_i128(num: i64, den_hi: i64, den_lo: u64) -> i64:

@@ -227,11 +227,15 @@ def frame_word(data: bytes | bytearray) -> u64:
 
 def i32_field(value: int, errors: ErrorMask) -> u32:
     """An i32 signal as its 32 raw bits: saturated to the i32 range, then two's complement."""
+    if I32_MIN <= value <= I32_MAX:  # in range: the (uint32_t) cast alone
+        return value & U32_MAX
     return wrap_u32(sat_range(value, I32_MIN, I32_MAX, errors))
 
 
 def _i16_field(value: int, errors: ErrorMask) -> u16:
     """An i16 signal as its 16 raw bits: saturated to the i16 range, then two's complement."""
+    if I16_MIN <= value <= I16_MAX:  # in range: the (uint16_t) cast alone
+        return value & U16_MAX
     return wrap_u16(sat_range(value, I16_MIN, I16_MAX, errors))
 
 

@@ -62,9 +62,13 @@ STRAIGHT_LIMIT_Q60 = 1 << 39  # |u| < 2^-21 rad: the factor is 1 to within 2^-44
 SERIES_SHORT_LIMIT_Q60 = 1 << 57  # |u| <= 1/8 rad: three series terms suffice
 # (2k)(2k+1): the Horner denominators of sin(u)/u = 1 - u^2/(2*3) (1 - u^2/(4*5) (...)).
 SINC_DENOMINATORS = (6, 20, 42, 72, 110, 156, 210, 272)
+_SINC_HORNER_SHORT = SINC_DENOMINATORS[2::-1]  # Horner's order (innermost first): three terms
+_SINC_HORNER_LONG = SINC_DENOMINATORS[::-1]  # all eight
 SPIN_LIMIT_Q49 = 1 << 8  # |dS| < 2^-41 m: below half an LSB of x (spin-in-place case)
 Q49_TO_Q40_SHIFT = 9
 DS_COS_TO_Q40_SHIFT = 39  # Q49 * Q30 = Q79 -> Q40
+_EULER = Integrator.EULER  # the enumerators as module constants (a 3.11 enum attribute
+_EXACT = Integrator.EXACT  # read costs ~0.14 us, a global ~0.01 us)
 
 
 class Odometry:
@@ -168,11 +172,12 @@ class Odometry:
         self.distance_q40_m = (
             self.distance_q40_m + ((abs(ds_q49_m) + (1 << 8)) >> Q49_TO_Q40_SHIFT)
         ) & U64_MAX
-        if c.integrator == Integrator.EULER:
+        integrator = c.integrator
+        if integrator is _EULER:
             self._advance(ds_q49_m, self.heading_bam64)
             return
         midpoint_bam64 = (heading_old + (dheading >> 1)) & U64_MAX
-        if c.integrator == Integrator.EXACT:
+        if integrator is _EXACT:
             if -SPIN_LIMIT_Q49 < ds_q49_m < SPIN_LIMIT_Q49:
                 return
             factor_q62 = chord_factor_q62(dheading)
@@ -191,12 +196,10 @@ class Odometry:
         Q40 (|.| < 2^55); the sum with x is then saturated to i64.
         """
         sin_q30, cos_q30 = sincos_q30(((direction_bam64 + (1 << 31)) >> 32) & U32_MAX)
-        self.x_q40_m = _sat(
-            self.x_q40_m + mul_round_i64(ds_q49_m, cos_q30, DS_COS_TO_Q40_SHIFT), self._errors
-        )
-        self.y_q40_m = _sat(
-            self.y_q40_m + mul_round_i64(ds_q49_m, sin_q30, DS_COS_TO_Q40_SHIFT), self._errors
-        )
+        x_q40_m = self.x_q40_m + mul_round_i64(ds_q49_m, cos_q30, DS_COS_TO_Q40_SHIFT)
+        self.x_q40_m = x_q40_m if I64_MIN <= x_q40_m <= I64_MAX else _sat(x_q40_m, self._errors)
+        y_q40_m = self.y_q40_m + mul_round_i64(ds_q49_m, sin_q30, DS_COS_TO_Q40_SHIFT)
+        self.y_q40_m = y_q40_m if I64_MIN <= y_q40_m <= I64_MAX else _sat(y_q40_m, self._errors)
 
 
 def chord_factor_q62(dheading_bam64: int) -> int:
@@ -213,9 +216,9 @@ def chord_factor_q62(dheading_bam64: int) -> int:
     if u_q60 < STRAIGHT_LIMIT_Q60:
         return ONE_Q62
     u2_q60 = mul_round_i64(u_q60, u_q60, 60)
-    terms = 3 if u_q60 <= SERIES_SHORT_LIMIT_Q60 else len(SINC_DENOMINATORS)
+    denominators = _SINC_HORNER_SHORT if u_q60 <= SERIES_SHORT_LIMIT_Q60 else _SINC_HORNER_LONG
     acc_q60 = ONE_Q60
-    for denominator in SINC_DENOMINATORS[terms - 1 :: -1]:
+    for denominator in denominators:
         acc_q60 = ONE_Q60 - mul_shr_i64(u2_q60, acc_q60, 60) // denominator
     return acc_q60 << 2
 

@@ -12,6 +12,10 @@ from odocan.firmware.errors import ErrorFlag, ErrorMask
 from odocan.firmware.fixmath import wrap_u32
 
 FRAME_BYTES = 8  # every odocan frame is a classic CAN frame of 8 bytes
+_OK = E2EStatus.OK  # the enumerators as module constants: a 3.11 enum attribute read is ~0.14 us
+_OKSOMELOST = E2EStatus.OKSOMELOST
+_REPEATED = E2EStatus.REPEATED
+_E2E_ERROR = ErrorFlag.E2E_ERROR
 
 
 class Reception:
@@ -30,8 +34,8 @@ class Reception:
             self._errors.set(ErrorFlag.E2E_ERROR)
             return False
         status = receiver.check(data)
-        if status is E2EStatus.OK or status is E2EStatus.OKSOMELOST:
+        if status is _OK or status is _OKSOMELOST:
             return True
-        if status is not E2EStatus.REPEATED:
-            self._errors.set(ErrorFlag.E2E_ERROR)
+        if status is not _REPEATED:
+            self._errors.set(_E2E_ERROR)
         return False

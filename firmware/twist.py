@@ -19,6 +19,7 @@ from odocan.firmware.odometry import Odometry
 
 TWO_PI_Q30 = (TWO_PI_Q60 + (1 << 29)) >> 30  # one turn in Q30 rad (< 2^33)
 TWIST_SUM_MAX = 1 << 32  # one tick's summed steps saturate at 4096 m (Q20) and 4 rad (Q30)
+TWIST_SUM_MIN = -TWIST_SUM_MAX
 PERIODS_MAX = U16_MAX  # the speeds' dt saturates here (655 s; encoders.STEP_PERIODS_MAX)
 
 
@@ -38,26 +39,24 @@ class Twist:
 
     def sum_step(self, periods: int) -> None:
         """Add the step just integrated, spanning ``periods`` sample periods, to this tick's sums
-        (Q20 m, Q30 rad; i64, saturated)."""
+        (Q20 m, Q30 rad; i64, saturated: ``sat_range`` only when a sum leaves +-TWIST_SUM_MAX)."""
         odo = self._odometry
+        errors = self._errors
         dheading_q30_rad = (  # the signed read, plus the step's whole turns (< 2^62)
-            mul_shr_round_i64(odo.last_dheading_bam64, TWO_PI_Q60, 94, self._errors)
+            mul_shr_round_i64(odo.last_dheading_bam64, TWO_PI_Q60, 94, errors)
             + odo.last_dheading_turns * TWO_PI_Q30
         )
-        self.tick_ds_q20_m = sat_range(
-            self.tick_ds_q20_m + (odo.last_ds_q49_m >> 29),
-            -TWIST_SUM_MAX,
-            TWIST_SUM_MAX,
-            self._errors,
-        )
-        self.tick_dheading_q30_rad = sat_range(
-            self.tick_dheading_q30_rad + dheading_q30_rad,
-            -TWIST_SUM_MAX,
-            TWIST_SUM_MAX,
-            self._errors,
-        )
+        ds_q20_m = self.tick_ds_q20_m + (odo.last_ds_q49_m >> 29)
+        if not TWIST_SUM_MIN <= ds_q20_m <= TWIST_SUM_MAX:
+            ds_q20_m = sat_range(ds_q20_m, TWIST_SUM_MIN, TWIST_SUM_MAX, errors)
+        self.tick_ds_q20_m = ds_q20_m
+        dheading_q30_rad += self.tick_dheading_q30_rad
+        if not TWIST_SUM_MIN <= dheading_q30_rad <= TWIST_SUM_MAX:
+            dheading_q30_rad = sat_range(dheading_q30_rad, TWIST_SUM_MIN, TWIST_SUM_MAX, errors)
+        self.tick_dheading_q30_rad = dheading_q30_rad
         self.steps += 1
-        self.tick_periods = min(self.tick_periods + periods, PERIODS_MAX)
+        tick_periods = self.tick_periods + periods
+        self.tick_periods = tick_periods if tick_periods < PERIODS_MAX else PERIODS_MAX
 
     def end_drain(self, time_lost_now: bool, periods_since_sample: int) -> None:
         """After the drain: the speeds of this tick's steps, unless the tick lost time (a stall's

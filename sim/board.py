@@ -196,19 +196,30 @@ class FirmwareBoard(BusNode):
         self.ecu = self._start_firmware()
         self._last_run_s = None
 
-    # The HAL's transmit (``firmware.hal.CanTx``): ``send_frame`` itself, one call less a frame.
-    transmit = BusNode.send_frame
+    def transmit(self, can_id: int, data: bytes) -> bool:
+        """The HAL's transmit (``firmware.hal.CanTx``): ``send_frame``; on the lean transport's
+        open, instant, simulated-time handle straight onto its wire (``OdocanBus.send_data``'s
+        own path, two calls less a frame: the firmware sends ~2 frames a tick)."""
+        bus = self.bus
+        if type(bus) is OdocanBus and bus.timing is None and bus._open and bus.preserve_timestamps:
+            bus._wire.deliver_data(bus, self.clock.now_s() + self.tx_latency_s, can_id, data)
+            self.frames_sent += 1
+            return True
+        return self.send_frame(can_id, data)
 
     def service_rx(self, fifo_frames: int | None = None) -> None:
         """Deliver the frames waiting on the bus to the firmware's receive ISR: all of them, or
         (after a halt) the first ``fifo_frames`` that pass the filter, the rest overrun."""
         bus = self.bus
-        if type(bus) is OdocanBus and bus.timing is None:
-            frames: Iterable[Received] = bus.drain()  # the lean transport: no Message built
-        else:
-            frames = iter(lambda: bus.recv(0), None)
         isr = self.ecu.isr_can_rx
         accept = self.accept_ids
+        if type(bus) is OdocanBus and bus.timing is None:
+            frames: Iterable[Received] = bus.drain()  # the lean transport: no Message built
+            if accept is None and fifo_frames is None:  # the common tick: every frame, no FIFO
+                self._deliver_all(frames)
+                return
+        else:
+            frames = iter(lambda: bus.recv(0), None)
         overrun = 0
         for frame in frames:
             if isinstance(frame, tuple):  # a classic 11-bit data frame (``send_data``'s)
@@ -230,13 +241,26 @@ class FirmwareBoard(BusNode):
             self.frames_overrun += overrun
             self.ecu.isr_rx_overrun()
 
+    def _deliver_all(self, frames: Iterable[Received]) -> None:
+        """``service_rx`` with no acceptance filter and no FIFO limit: every classic data frame
+        to the receive ISR, the others dropped (counted) as the filter would."""
+        isr = self.ecu.isr_can_rx
+        for frame in frames:
+            if isinstance(frame, tuple):  # a classic 11-bit data frame (``send_data``'s)
+                isr(frame[1], frame[2])
+            elif frame.is_error_frame or frame.is_remote_frame or frame.is_extended_id:
+                self.frames_dropped_by_filter += 1
+            else:
+                isr(frame.arbitration_id, bytes(frame.data))
+
     def run_tick(self) -> None:
         """One timer period: the pending interrupts (status, receive), then the firmware's tick
         with the timer's microseconds (the clock's, wrapped to u32)."""
         now_s = self.clock.now_s()
         halted = self._last_run_s is not None and now_s - self._last_run_s >= HALT_AFTER_S
         self._last_run_s = now_s
-        self._service_bus_state()
+        if self._bus_off or type(self.bus) is not OdocanBus:  # the lean handle is never bus-off
+            self._service_bus_state()
         self.service_rx(HW_RX_FIFO_FRAMES if halted else None)
         self.ecu.tick(round(now_s * 1e6) & _U32)
 

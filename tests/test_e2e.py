@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from odocan.firmware.e2e import (
     CRC8H2F_CHECK,
     CRC8H2F_TABLE,
+    MAX_DELTA_COUNTER_LIMIT,
     E2EReceiver,
     E2EStatus,
     crc8h2f,
@@ -253,3 +254,20 @@ def test_receiver_follows_the_autosar_rules(events: list[tuple[str, int]], init:
             assert got is E2EStatus.WRONGSEQUENCE
         if got in (E2EStatus.OK, E2EStatus.OKSOMELOST):
             first, last, window = False, sent, init
+
+
+def test_new_periods_is_that_many_new_period_calls() -> None:
+    """The ECU widens its encoder window once a tick by ``new_periods(n)`` (one saturating add);
+    it must leave the receiver exactly as ``n`` calls of ``new_period`` would, from every window
+    a receiver can hold (0..15) and for any count of periods, none included."""
+    for window in range(MAX_DELTA_COUNTER_LIMIT + 1):
+        for periods in range(2 * MAX_DELTA_COUNTER_LIMIT + 3):
+            once = E2EReceiver(DATA_IDS, max_delta_counter_init=0, window_per_period=True)
+            looped = E2EReceiver(DATA_IDS, max_delta_counter_init=0, window_per_period=True)
+            once.max_delta_counter = looped.max_delta_counter = window
+            once.new_periods(periods)
+            for _ in range(periods):
+                looped.new_period()
+            assert once.max_delta_counter == looped.max_delta_counter == min(
+                window + periods, MAX_DELTA_COUNTER_LIMIT
+            ), (window, periods)
