@@ -8,6 +8,12 @@ refused (DEGRADED, IMPLAUSIBLE_STEP). ``RESYNC_FRAMES`` refused frames consisten
 but not with the last accepted one are a counter restart (COUNTER_RESET): the odometry is
 re-primed on the first of them and the jump itself is never integrated. The counters are absolute,
 so the first frame after a gap carries the distance driven meanwhile.
+
+No rule on the counts alone tells a restart whose jump fits the bound (a controller silent long
+enough) from motion, so the controller says its age: a frame whose CTRL_UPTIME is below the last
+accepted frame's (both reported, non-zero) comes from a restarted controller, its counters from 0:
+COUNTER_RESET, the odometry re-primed on that frame. A controller that reports 0 (an old one) is
+judged by the counts alone, as before.
 """
 
 from __future__ import annotations
@@ -61,6 +67,8 @@ class EncoderInput:
         self._wire_prev: Counts | None = None
         self._counts_u32 = (0, 0)
         self._counts_prev: Counts | None = None  # counters of the last accepted frame
+        self._uptime_prev = 0  # u8: CTRL_UPTIME of the last accepted frame (0: not reported)
+        self._uptime_now = 0  # u8: CTRL_UPTIME of the frame being handled
         self.frames_implausible = 0  # u32: WHEEL_ENCODERS refused by the plausibility bound
         # Refused frames consistent among themselves: (left, right, COUNTER) of the first, last.
         self._resync_first: tuple[int, int, int] | None = None
@@ -134,6 +142,10 @@ class EncoderInput:
         frame = fr.unpack_wheel_encoders(data)
         wire = (frame.left_count, frame.right_count)
         counts = self._extend_counters(wire)
+        self._uptime_now = frame.ctrl_uptime_s
+        if self._controller_restarted(frame.ctrl_uptime_s):
+            self._reprime(frame.counter, wire, counts)
+            return
         advance = self._counter_advance(frame.counter)
         periods = self._step_periods(advance)
         if not self._plausible(self._counts_prev, counts, self._bound_periods(periods)):
@@ -156,6 +168,7 @@ class EncoderInput:
     def _accept(self, counter: int, wire: Counts, counts: Counts) -> None:
         """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
         self._commit_counters(wire, counts)
+        self._uptime_prev = self._uptime_now
         if self._health.state is not State.FAULT and self._odometry.step_counts(
             counts[0], counts[1]
         ):
@@ -303,6 +316,25 @@ class EncoderInput:
         self._odometry.step_counts(first[0], first[1])
         self._enc_prev_counter = None
         self._this_step_periods = ((counter - first[2]) & COUNTER_MASK) or COUNTER_VALUES
+        self._accept(counter, wire, counts)
+
+    def _controller_restarted(self, uptime: int) -> bool:
+        """True when ``uptime`` (this frame's CTRL_UPTIME, u4) is below the last accepted
+        frame's, both reported (non-zero): the controller restarted, its counters from 0."""
+        prev = self._uptime_prev
+        return uptime != 0 and prev != 0 and uptime < prev
+
+    def _reprime(self, counter: int, wire: Counts, counts: Counts) -> None:
+        """The controller restarted (CTRL_UPTIME went down): COUNTER_RESET as
+        ``_restart_counters`` sets it, the odometry re-primed on this frame (its step from the
+        last accepted frame, the restart's jump, is never integrated)."""
+        self._errors.set(ErrorFlag.COUNTER_RESET)
+        self._health.degrade(Reason.COUNTER_RESET)
+        self._resync_first = None
+        self._resync_frames = 0
+        self._odometry.unprime()
+        self._enc_prev_counter = None
+        self._this_step_periods = 1
         self._accept(counter, wire, counts)
 
     # --- configuration ---

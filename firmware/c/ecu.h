@@ -73,6 +73,8 @@ struct odom_ecu {
     uint32_t counts_u32[2];
     bool counts_prev_valid;
     uint32_t counts_prev[2];  /* counters of the last accepted frame */
+    uint8_t uptime_prev;      /* CTRL_UPTIME of the last accepted frame (0: not reported) */
+    uint8_t uptime_now;       /* CTRL_UPTIME of the frame being handled */
     uint32_t time_periods;    /* 10 ms periods since reset, by the timer (ticks run or not) */
     bool timer_prev_valid;
     uint32_t timer_prev_us;   /* the timer at the previous tick */
