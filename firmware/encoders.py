@@ -12,8 +12,10 @@ so the first frame after a gap carries the distance driven meanwhile.
 No rule on the counts alone tells a restart whose jump fits the bound (a controller silent long
 enough) from motion, so the controller says its age: a frame whose CTRL_UPTIME is below the last
 accepted frame's (both reported, non-zero) comes from a restarted controller, its counters from 0:
-COUNTER_RESET, the odometry re-primed on that frame. A controller that reports 0 (an old one) is
-judged by the counts alone, as before.
+COUNTER_RESET, the odometry re-primed on that frame, if its counts are ones such a young controller
+can hold (each wheel within CTRL_UPTIME seconds of its per-period bound of 0: a forged frame that
+passes E2E is refused as before, not taken for a restart). A controller that reports 0 (an old one)
+is judged by the counts alone, as before.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ RESYNC_FRAMES = 3  # frames consistent with each other, not with the last one: c
 COUNTER_VALUES = 16  # E2E COUNTER values (4 bits): one whole counter cycle
 STEP_PERIODS_MAX = U16_MAX  # the twist's dt and the plausibility bound saturate here (655 s)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+PERIODS_PER_S = 100  # encoder periods in one second (1 s / ENCODER_PERIOD_US)
 
 Counts = tuple[int, int]  # (left, right) counter values
 
@@ -143,7 +146,7 @@ class EncoderInput:
         wire = (frame.left_count, frame.right_count)
         counts = self._extend_counters(wire)
         self._uptime_now = frame.ctrl_uptime_s
-        if self._controller_restarted(frame.ctrl_uptime_s):
+        if self._controller_restarted(frame.ctrl_uptime_s, wire):
             self._reprime(frame.counter, wire, counts)
             return
         advance = self._counter_advance(frame.counter)
@@ -318,11 +321,25 @@ class EncoderInput:
         self._this_step_periods = ((counter - first[2]) & COUNTER_MASK) or COUNTER_VALUES
         self._accept(counter, wire, counts)
 
-    def _controller_restarted(self, uptime: int) -> bool:
+    def _controller_restarted(self, uptime: int, wire: Counts) -> bool:
         """True when ``uptime`` (this frame's CTRL_UPTIME, u4) is below the last accepted
-        frame's, both reported (non-zero): the controller restarted, its counters from 0."""
+        frame's, both reported (non-zero), and ``wire`` (its counts) near enough 0 for that age:
+        the controller restarted, its counters from 0."""
         prev = self._uptime_prev
-        return uptime != 0 and prev != 0 and uptime < prev
+        if uptime == 0 or prev == 0 or uptime >= prev:
+            return False
+        return self._young_counts(wire, uptime)
+
+    def _young_counts(self, wire: Counts, uptime: int) -> bool:
+        """True when each wheel's count, read signed in the wire's bits, is within the counts a
+        controller ``uptime`` seconds old can have run from 0 (it powered up less than that
+        long ago): ``uptime * PERIODS_PER_S`` periods of its per-period bound (u64: at most
+        1500 * 2^44)."""
+        bits = min(self._odometry.consts.counter_bits, WIRE_COUNTER_BITS)
+        periods = uptime * PERIODS_PER_S
+        left_max, right_max = self._max_counts_per_period
+        left, right = wrap_signed(wire[0], bits), wrap_signed(wire[1], bits)
+        return abs(left) <= periods * left_max and abs(right) <= periods * right_max
 
     def _reprime(self, counter: int, wire: Counts, counts: Counts) -> None:
         """The controller restarted (CTRL_UPTIME went down): COUNTER_RESET as

@@ -567,7 +567,7 @@ def _ecu_session(
     corrupt, short and foreign frames, silence, mailbox overflow, bus-off, a full TX queue), and
     the health paths: forged steps beyond the maximum wheel speed (IMPLAUSIBLE_STEP), a motor
     controller reboot (counters and COUNTER restart: COUNTER_RESET, then ODOM_SET_POSE APPLY),
-    and a second one only its CTRL_UPTIME going back tells (COUNTER_RESET again).
+    and a second one its CTRL_UPTIME going back tells (its counters from 0: COUNTER_RESET again).
 
     ``timed``: every tick gets the board's u32 microsecond timer (``tick(now_us)``), released
     with jitter and wrapping during the session, and the MCU stalls now and then for 3 to 40
@@ -676,9 +676,8 @@ class _EcuSession:
             offset = self.rng.choice((-1, 1)) * self.rng.randrange(5_000, 20_000)
             self.counts[:] = [self.counts[0] + offset, self.counts[1] + offset]
             self.enc_counter = 15
-        if tick == self.reboot_tick + 250:  # a reboot only CTRL_UPTIME tells (a plausible jump)
-            offset = self.rng.choice((-1, 1)) * self.rng.randrange(1, 8)
-            self.counts[:] = [self.counts[0] + offset, self.counts[1] - offset]
+        if tick == self.reboot_tick + 250:  # a reboot told by CTRL_UPTIME: counters from 0
+            self.counts[:] = [float(self.rng.randrange(8)), float(self.rng.randrange(8))]
             self.enc_counter = 15
         if tick >= self.reboot_tick:  # from here the controller reports its age
             since = tick - self.reboot_tick - (250 if tick >= self.reboot_tick + 250 else 0)
@@ -992,7 +991,7 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
         for before, after in itertools.pairwise(states)
         if after == (State.DEGRADED, Reason.COUNTER_RESET) and before != after
     ]
-    assert len(resets) >= 2 * 5, "5 driving sessions: a reboot by the counts, one by CTRL_UPTIME"
+    assert len(resets) >= 2 * 5, "5 driving sessions: a reboot by the counts, one CTRL_UPTIME tells"
     lost = [
         i
         for i in range(1, len(ticks))

@@ -89,7 +89,9 @@ static void on_implausible(struct odom_ecu *ecu, uint8_t counter, const uint32_t
                            const uint32_t counts[2]);
 static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                              const uint32_t counts[2]);
-static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime);
+static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime,
+                                 const uint32_t wire[2]);
+static bool young_counts(const struct odom_ecu *ecu, const uint32_t wire[2], uint8_t uptime);
 static void reprime(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                     const uint32_t counts[2]);
 static void sum_step(struct odom_ecu *ecu);
@@ -365,7 +367,7 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
     uint32_t counts[2];
     extend_counters(ecu, wire, counts);
     ecu->uptime_now = uptime;
-    if (controller_restarted(ecu, uptime)) {
+    if (controller_restarted(ecu, uptime, wire)) {
         reprime(ecu, counter, wire, counts);
         return;
     }
@@ -607,11 +609,35 @@ static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32
 }
 
 /* True when uptime (this frame's CTRL_UPTIME, u4) is below the last accepted frame's, both
- * reported (non-zero): the controller restarted, its counters from 0. */
-static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime)
+ * reported (non-zero), and wire (its counts) near enough 0 for that age: the controller
+ * restarted, its counters from 0 (encoders.py _controller_restarted). */
+static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime,
+                                 const uint32_t wire[2])
 {
     uint8_t prev = ecu->uptime_prev;
-    return uptime != 0u && prev != 0u && uptime < prev;
+    if (uptime == 0u || prev == 0u || uptime >= prev) {
+        return false;
+    }
+    return young_counts(ecu, wire, uptime);
+}
+
+/* True when each wheel's count, read signed in the wire's bits, is within the counts a controller
+ * uptime seconds old can have run from 0: uptime * PERIODS_PER_S periods of its per-period bound
+ * (at most 1500 * 2^44 < 2^55). */
+static bool young_counts(const struct odom_ecu *ecu, const uint32_t wire[2], uint8_t uptime)
+{
+    unsigned bits = (unsigned)ecu->odometry.consts.counter_bits;
+    if (bits > WIRE_COUNTER_BITS) {
+        bits = WIRE_COUNTER_BITS;
+    }
+    uint64_t periods = (uint64_t)uptime * PERIODS_PER_S;
+    for (unsigned side = 0u; side < 2u; ++side) {
+        int32_t count = wrap_signed(wire[side], bits);
+        if (abs_u64(count) > periods * ecu->max_counts_per_period[side]) {
+            return false;
+        }
+    }
+    return true;
 }
 
 /* The controller restarted (CTRL_UPTIME went down): COUNTER_RESET as restart_counters sets it,

@@ -28,6 +28,7 @@
 #define STEP_PERIODS_MAX 0xFFFFu /* the twist's dt and the plausibility bound saturate (655 s) */
 #define TWIST_SUM_MAX (INT64_C(1) << 32) /* one tick's summed steps: 4096 m (Q20), 4 rad (Q30) */
 #define WIRE_COUNTER_BITS 24u
+#define PERIODS_PER_S 100u /* encoder periods in one second (1 s / ENCODER_PERIOD_US) */
 #define TX_IDS 8u /* the messages this node sends: one E2E counter each */
 
 /* Firmware state (the STATE signal of ODOM_STATUS). */
