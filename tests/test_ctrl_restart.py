@@ -10,15 +10,28 @@ C bit for bit.
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
+from typing import Any
 
 import can
+import pytest
 
+from odocan.firmware import frames as fr
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.stream_analysis import analyze_file
 from odocan.sim.board import TICK_S
 from odocan.sim.contract import database
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests.dbc_typed import decode
+from tests.independent_checker import Robot, check
+from tests.synth_log import Synth, synthesize, wandering_drive
+from tests.test_realtime import START_TIMEOUT_S, _listen, _start, _stop, udp_bus
+
+__all__ = ["udp_bus"]  # the fixture of tests/test_realtime.py (a channel of this test's own)
 
 DB = database()
 STATUS = DB.get_message_by_name("ODOM_STATUS")
@@ -75,3 +88,136 @@ def test_python_and_c_firmwares_reprime_on_a_controller_restart_bit_for_bit(
     after = [(state, reason) for t, state, reason in summaries(python) if t > restart_s + 0.05]
     assert after
     assert set(after) == {("DEGRADED", "COUNTER_RESET")}
+
+
+# --- the judges, on hand-made logs ------------------------------------------------------------
+
+STEPS = 1200  # 12 s of driving
+RESTART = 600  # the encoder frame the restarted controller speaks again on (CTRL_UPTIME 6 -> 1)
+JUMP = (30, -12)  # its counters' jump (counts): within the plausibility bound of one period
+
+
+def restart_drive(robot: str, *, ctrl_uptime: bool = True, integrates: bool = False) -> Synth:
+    """A wandering drive whose motor controller restarts at ``RESTART`` (``tests.synth_log``):
+    ``ctrl_uptime`` False, an old controller (CTRL_UPTIME 0); ``integrates``: a firmware that
+    takes the jump as motion."""
+    profile = load(robot)
+    d_left, d_right = wandering_drive(profile, STEPS, 0.004, seed=7)
+    return synthesize(profile, "exact", d_left, d_right, ctrl_restarts={RESTART: JUMP},
+                      ctrl_uptime=ctrl_uptime, integrates_restarts=integrates)
+
+
+def judged(path: Path, robot: str) -> dict[str, Any]:
+    """The independent checker's verdict, ``analyze``'s (whole and streamed, with their
+    counter-restart events) and the live monitor's (its worst error vs its reference within
+    one LSB, and its verdict at the end)."""
+    profile = load(robot)
+    p = profile.firmware_params()
+    checker = Robot(p["counts_per_rev"], p["wheel_radius_left_nm"], p["wheel_radius_right_nm"],
+                    p["wheelbase_nm"], p["counter_bits"])
+    whole = analyze(read_log(path), profile).report
+    streamed = analyze_file(path, profile, chunk_frames=256)
+    monitor = BusMonitor(profile)
+    last_s = 0.0
+    for msg in can.LogReader(path):
+        monitor.feed(msg, now_s=msg.timestamp)
+        last_s = msg.timestamp
+    error = monitor.tracker.vs_reference
+    return {
+        "independent": check(path, checker, "exact", lambda _t: (0.0, 0.0, 0.0)).passed,
+        "whole": whole["passed"], "streamed": streamed["passed"],
+        "live": error.max_dpos_m <= POSITION_LSB_M and error.max_dheading_rad <= HEADING_LSB_RAD,
+        "live_verdict": monitor.health(last_s)["state"],
+        "events": [[(e["encoder_frame"], e["detail"]) for e in r["events"]
+                    if e["kind"] == "counter_restart"] for r in (whole, streamed)],
+    }
+
+
+@pytest.mark.parametrize("robot", ["kobuki", "pmir"])
+def test_a_firmware_that_reprimed_on_the_restart_passes_every_judge(
+    tmp_path: Path, robot: str
+) -> None:
+    path = restart_drive(robot).write(tmp_path / "reprimed.log")
+    heard = uptimes(path)
+    assert heard[RESTART - 1] == 6  # the age went back: 1 + 5 whole seconds ...
+    assert heard[RESTART] == 1  # ... to 1
+    verdict = judged(path, robot)
+    assert verdict["independent"]
+    assert verdict["whole"]
+    assert verdict["streamed"]
+    assert verdict["live"]
+    assert verdict["live_verdict"] == "OK"
+    for events in verdict["events"]:  # named, whole and streamed alike
+        assert len(events) == 1
+        frame, detail = events[0]
+        assert frame == RESTART
+        assert "CTRL_UPTIME went back" in detail
+
+
+@pytest.mark.parametrize("robot", ["kobuki", "pmir"])
+def test_a_firmware_that_integrated_the_restart_fails_every_judge(
+    tmp_path: Path, robot: str
+) -> None:
+    path = restart_drive(robot, integrates=True).write(tmp_path / "integrated.log")
+    verdict = judged(path, robot)
+    assert not verdict["independent"]
+    assert not verdict["whole"]
+    assert not verdict["streamed"]
+    assert not verdict["live"]
+    assert verdict["live_verdict"] == "POSE WRONG"
+
+
+def test_an_old_controller_is_judged_by_the_counts_alone(tmp_path: Path) -> None:
+    """CTRL_UPTIME always 0: the same jump cannot be told from motion; the firmware that
+    integrates it (what it must do without the age) passes, as before the signal."""
+    path = restart_drive("kobuki", ctrl_uptime=False, integrates=True).write(tmp_path / "old.log")
+    assert set(uptimes(path)) == {0}
+    verdict = judged(path, "kobuki")
+    assert verdict["independent"]
+    assert verdict["whole"]
+    assert verdict["streamed"]
+    assert verdict["live"]
+    assert verdict["events"] == [[], []]
+
+
+# --- as processes: ``odocan sim`` killed and started again -------------------------------------
+
+
+def test_a_sim_process_killed_and_restarted_is_a_counter_reset_never_ok(
+    udp_bus: tuple[list[str], can.BusABC],
+) -> None:
+    """``odocan firmware`` and ``odocan sim`` on a loopback udp_multicast channel of their own;
+    the sim is killed (SIGKILL) after 1.6 s of driving and started again: its counters, COUNTER
+    and CTRL_UPTIME from 0. The firmware's summaries after it say DEGRADED COUNTER_RESET, never
+    OK, and the monitor's model of the frames heard never says OK or POSE WRONG after it."""
+    bus_argv, listener = udp_bus
+    firmware = _start(["firmware", *bus_argv])
+    sims = [_start(["sim", "--scenario", "circle", "--duration", "30", *bus_argv])]
+    try:
+        first = _listen(listener, lambda c: len(c.of(fr.WHEEL_ENCODERS_ID)) >= 160,
+                        START_TIMEOUT_S + 5)
+        sims[0].kill()
+        sims.append(_start(["sim", "--scenario", "circle", "--duration", "30", *bus_argv]))
+        again = _listen(listener, lambda c: len(c.of(fr.WHEEL_ENCODERS_ID)) >= 200,
+                        START_TIMEOUT_S + 5)
+    finally:
+        for sim in sims:
+            _stop(sim, signal.SIGTERM)
+        _stop(firmware, signal.SIGTERM)
+    assert len(first.of(fr.WHEEL_ENCODERS_ID)) >= 160
+    assert len(again.of(fr.WHEEL_ENCODERS_ID)) >= 200
+    back_s = again.of(fr.WHEEL_ENCODERS_ID)[0].timestamp  # the restarted sim's first frame
+    monitor = BusMonitor(load("pmir"))
+    verdicts: list[str] = []
+    status: list[tuple[str, str]] = []
+    for msg in [*first.frames, *again.frames]:
+        monitor.feed(msg, now_s=msg.timestamp)
+        if msg.timestamp > back_s + 0.2:
+            verdicts.append(monitor.health(msg.timestamp)["state"])
+            if msg.arbitration_id == STATUS.frame_id and msg.data[1] >> 4 == 0:
+                s = decode(DB, STATUS.frame_id, msg.data)
+                status.append((str(s["STATE"]), str(s["REASON"])))
+    assert status
+    assert set(status) == {("DEGRADED", "COUNTER_RESET")}
+    assert "OK" not in verdicts
+    assert "POSE WRONG" not in verdicts
