@@ -8,6 +8,14 @@ refused (DEGRADED, IMPLAUSIBLE_STEP). ``RESYNC_FRAMES`` refused frames consisten
 but not with the last accepted one are a counter restart (COUNTER_RESET): the odometry is
 re-primed on the first of them and the jump itself is never integrated. The counters are absolute,
 so the first frame after a gap carries the distance driven meanwhile.
+
+No rule on the counts alone tells a restart whose jump fits the bound (a controller silent long
+enough) from motion, so the controller says its age: a frame whose CTRL_UPTIME is below the last
+accepted frame's (both reported, non-zero) comes from a restarted controller, its counters from 0:
+COUNTER_RESET, the odometry re-primed on that frame, if its counts are ones such a young controller
+can hold (each wheel within CTRL_UPTIME seconds of its per-period bound of 0: a forged frame that
+passes E2E is refused as before, not taken for a restart). A controller that reports 0 (an old one)
+is judged by the counts alone, as before.
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ RESYNC_FRAMES = 3  # frames consistent with each other, not with the last one: c
 COUNTER_VALUES = 16  # E2E COUNTER values (4 bits): one whole counter cycle
 STEP_PERIODS_MAX = U16_MAX  # the twist's dt and the plausibility bound saturate here (655 s)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+PERIODS_PER_S = 100  # encoder periods in one second (1 s / ENCODER_PERIOD_US)
 
 Counts = tuple[int, int]  # (left, right) counter values
 _FAULT = State.FAULT  # the enumerator as a module constant (a 3.11 enum attribute read: ~0.14 us)
@@ -62,6 +71,8 @@ class EncoderInput:
         self._wire_prev: Counts | None = None
         self._counts_u32 = (0, 0)
         self._counts_prev: Counts | None = None  # counters of the last accepted frame
+        self._uptime_prev = 0  # u8: CTRL_UPTIME of the last accepted frame (0: not reported)
+        self._uptime_now = 0  # u8: CTRL_UPTIME of the frame being handled
         self.frames_implausible = 0  # u32: WHEEL_ENCODERS refused by the plausibility bound
         # Refused frames consistent among themselves: (left, right, COUNTER) of the first, last.
         self._resync_first: tuple[int, int, int] | None = None
@@ -140,6 +151,10 @@ class EncoderInput:
         frame = fr.unpack_wheel_encoders(data)
         wire = (frame.left_count, frame.right_count)
         counts = self._extend_counters(wire)
+        self._uptime_now = frame.ctrl_uptime_s
+        if self._controller_restarted(frame.ctrl_uptime_s, wire):
+            self._reprime(frame.counter, wire, counts)
+            return
         advance = self._counter_advance(frame.counter)
         periods = self._step_periods(advance)
         if not self._plausible(self._counts_prev, counts, self._bound_periods(periods)):
@@ -162,6 +177,7 @@ class EncoderInput:
     def _accept(self, counter: int, wire: Counts, counts: Counts) -> None:
         """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
         self._commit_counters(wire, counts)
+        self._uptime_prev = self._uptime_now
         if self._health.state is not _FAULT and self._odometry.step_counts(
             counts[0], counts[1]
         ):
@@ -309,6 +325,39 @@ class EncoderInput:
         self._odometry.step_counts(first[0], first[1])
         self._enc_prev_counter = None
         self._this_step_periods = ((counter - first[2]) & COUNTER_MASK) or COUNTER_VALUES
+        self._accept(counter, wire, counts)
+
+    def _controller_restarted(self, uptime: int, wire: Counts) -> bool:
+        """True when ``uptime`` (this frame's CTRL_UPTIME, u4) is below the last accepted
+        frame's, both reported (non-zero), and ``wire`` (its counts) near enough 0 for that age:
+        the controller restarted, its counters from 0."""
+        prev = self._uptime_prev
+        if uptime == 0 or prev == 0 or uptime >= prev:
+            return False
+        return self._young_counts(wire, uptime)
+
+    def _young_counts(self, wire: Counts, uptime: int) -> bool:
+        """True when each wheel's count, read signed in the wire's bits, is within the counts a
+        controller ``uptime`` seconds old can have run from 0 (it powered up less than that
+        long ago): ``uptime * PERIODS_PER_S`` periods of its per-period bound (u64: at most
+        1500 * 2^44)."""
+        bits = min(self._odometry.consts.counter_bits, WIRE_COUNTER_BITS)
+        periods = uptime * PERIODS_PER_S
+        left_max, right_max = self._max_counts_per_period
+        left, right = wrap_signed(wire[0], bits), wrap_signed(wire[1], bits)
+        return abs(left) <= periods * left_max and abs(right) <= periods * right_max
+
+    def _reprime(self, counter: int, wire: Counts, counts: Counts) -> None:
+        """The controller restarted (CTRL_UPTIME went down): COUNTER_RESET as
+        ``_restart_counters`` sets it, the odometry re-primed on this frame (its step from the
+        last accepted frame, the restart's jump, is never integrated)."""
+        self._errors.set(ErrorFlag.COUNTER_RESET)
+        self._health.degrade(Reason.COUNTER_RESET)
+        self._resync_first = None
+        self._resync_frames = 0
+        self._odometry.unprime()
+        self._enc_prev_counter = None
+        self._this_step_periods = 1
         self._accept(counter, wire, counts)
 
     # --- configuration ---

@@ -177,6 +177,7 @@ class WheelEncoders(NamedTuple):
     counter: int  # u4 E2E counter
     left_count: int  # u24: low 24 bits of the left hardware counter
     right_count: int  # u24
+    ctrl_uptime_s: int = 0  # u4: 1 + the controller's whole seconds since power-up (0: unknown)
 
 
 class OdomSetPose(NamedTuple):
@@ -242,9 +243,12 @@ def _i16_field(value: int, errors: ErrorMask) -> u16:
 # === what the ECU receives ===
 # --- WHEEL_ENCODERS (MOTOR_CTRL -> ODOM_MCU, HOST; 10 ms) ---
 def unpack_wheel_encoders(data: bytes | bytearray) -> WheelEncoders:
-    """WHEEL_ENCODERS: u24 counts; extend them with the delta of the low 24 bits."""
+    """WHEEL_ENCODERS: u24 counts (extend them with the delta of the low 24 bits) and the
+    controller's CTRL_UPTIME (u4 s, saturated at 15; 0: not reported)."""
     w = frame_word(data)
-    return WheelEncoders((w >> 8) & U4_MAX, (w >> 16) & U24_MAX, (w >> 40) & U24_MAX)
+    return WheelEncoders(
+        (w >> 8) & U4_MAX, (w >> 16) & U24_MAX, (w >> 40) & U24_MAX, (w >> 12) & U4_MAX
+    )
 
 
 # --- ODOM_SET_POSE, ODOM_CONFIG, NAV_GOAL (HOST -> ODOM_MCU; events; multiplexed) ---

@@ -11,11 +11,12 @@ cantools over every raw range.
 
 from __future__ import annotations
 
+import math
 from enum import IntEnum
 from typing import NamedTuple
 
 from odocan.firmware.errors import ErrorMask
-from odocan.firmware.fixmath import i16, wrap_i16, wrap_u16, wrap_u32
+from odocan.firmware.fixmath import i16, sat_range, wrap_i16, wrap_u16, wrap_u32
 from odocan.firmware.frames import (
     SIM_TRUTH_DATA_IDS,
     U4_MAX,
@@ -42,11 +43,34 @@ class SimTruthPart(IntEnum):
     HEADING = 2
 
 
+CTRL_UPTIME_MAX_S = 15  # CTRL_UPTIME saturates here (u4)
+
+
+def ctrl_uptime_code(age_s: float) -> int:
+    """CTRL_UPTIME of a controller ``age_s`` seconds after its power-up (>= 0): 1 + its whole
+    seconds, saturated at 15 (the DBC's comment)."""
+    return min(CTRL_UPTIME_MAX_S, 1 + math.floor(age_s))
+
+
 # --- WHEEL_ENCODERS (MOTOR_CTRL -> ODOM_MCU, HOST; 10 ms) ---
-def pack_wheel_encoders(counter: int, left_count: int, right_count: int) -> bytes:
+def pack_wheel_encoders(
+    counter: int,
+    left_count: int,
+    right_count: int,
+    ctrl_uptime_s: int = 0,
+    errors: ErrorMask | None = None,
+) -> bytes:
     """WHEEL_ENCODERS: the low 24 bits of each hardware counter (any width: wrapping, never
-    saturated)."""
-    word = e2e_head(counter, 0) | ((left_count & U24_MAX) << 16) | ((right_count & U24_MAX) << 40)
+    saturated) and CTRL_UPTIME, the controller's age code (u4: ``ctrl_uptime_code``; 0, the
+    default: not reported, as an old controller sends), saturated to 0..15 (SATURATION in
+    ``errors`` when given)."""
+    if not 0 <= ctrl_uptime_s <= CTRL_UPTIME_MAX_S:
+        ctrl_uptime_s = sat_range(ctrl_uptime_s, 0, CTRL_UPTIME_MAX_S, errors or ErrorMask())
+    word = (
+        e2e_head(counter, ctrl_uptime_s)
+        | ((left_count & U24_MAX) << 16)
+        | ((right_count & U24_MAX) << 40)
+    )
     return seal_frame(word, WHEEL_ENCODERS_DATA_IDS)
 
 

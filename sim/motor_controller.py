@@ -23,7 +23,13 @@ from odocan.sim.board import TICK_S
 from odocan.sim.clock import Clock
 from odocan.sim.contract import cycle_ticks
 from odocan.sim.errors import ErrorModel
-from odocan.sim.frames import SimTruthPart, pack_sim_truth, pack_wheel_encoders, unpack_motor_cmd
+from odocan.sim.frames import (
+    SimTruthPart,
+    ctrl_uptime_code,
+    pack_sim_truth,
+    pack_wheel_encoders,
+    unpack_motor_cmd,
+)
 from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.node import BusNode
 from odocan.sim.robot import RobotProfile
@@ -47,6 +53,7 @@ class MotorController(BusNode):
         self.counter = -1
         self.commands_applied = 0
         self._count_offset = (0, 0)  # the vehicle's counts at the last restart
+        self.powered_up_s = clock.now_s()  # the clock's time at the last power-up (CTRL_UPTIME)
 
     def deliver(self, data: bytes, speeds_mps: tuple[float, float] | None = None) -> None:
         """One received ``MOTOR_CMD`` payload: applied when its E2E check passes (``speeds_mps``:
@@ -68,23 +75,28 @@ class MotorController(BusNode):
             msg = self.bus.recv(0)
 
     def restart(self) -> None:
-        """A reboot of this node: the encoder counters and the E2E counter start again from 0
-        (the robot stays where it is)."""
+        """A reboot of this node: the encoder counters and the E2E counter start again from 0,
+        its age (CTRL_UPTIME) from 1 (the robot stays where it is)."""
         self.vehicle.advance_to(self.clock.now_s())
+        self.powered_up_s = self.clock.now_s()
         self._count_offset = self.vehicle.encoder_counts()
         self.counter = -1
         self.rx_motor_cmd.reset()
 
     def sample_and_send(self) -> int:
-        """Advance the motors to now, send WHEEL_ENCODERS; returns the frame's COUNTER."""
-        self.vehicle.advance_to(self.clock.now_s())
+        """Advance the motors to now, send WHEEL_ENCODERS (with CTRL_UPTIME, this node's age
+        by its clock: deterministic in lockstep); returns the frame's COUNTER."""
+        now_s = self.clock.now_s()
+        self.vehicle.advance_to(now_s)
         mask = (1 << self.vehicle.profile.counter_bits) - 1
         left, right = self.vehicle.encoder_counts()
         left = (left - self._count_offset[0]) & mask
         right = (right - self._count_offset[1]) & mask
         self.counter = (self.counter + 1) & 0xF
+        uptime = ctrl_uptime_code(now_s - self.powered_up_s)
         self.send_frame(
-            fr.WHEEL_ENCODERS_ID, pack_wheel_encoders(self.counter, left & _U24, right & _U24)
+            fr.WHEEL_ENCODERS_ID,
+            pack_wheel_encoders(self.counter, left & _U24, right & _U24, uptime),
         )
         return self.counter
 

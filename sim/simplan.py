@@ -32,7 +32,7 @@ import numpy as np
 from odocan.firmware import frames as fr
 from odocan.firmware.e2e import CRC8H2F_INIT, CRC8H2F_TABLE, CRC8H2F_XOR_OUT
 from odocan.firmware.fixmath import I16_MAX, I16_MIN, I32_MAX, I32_MIN
-from odocan.sim.frames import SimTruthPart
+from odocan.sim.frames import CTRL_UPTIME_MAX_S, SimTruthPart
 
 if TYPE_CHECKING:
     from odocan.sim.lookahead import PlannedVehicle
@@ -48,13 +48,14 @@ class TickPlan:
     ``k - first`` of each list."""
 
     __slots__ = ("block", "counters", "driver", "encoders", "first", "motor_cmds", "next",
-                 "offset", "scenario", "times", "truths")
+                 "offset", "powered_up_s", "scenario", "times", "truths")
 
     def __init__(self, node: SimNode, block: object, first: int) -> None:
         self.block = block
         self.driver = node.driver
         self.scenario = None if node.driver is None else node.driver.scenario
         self.offset = node.motor_controller._count_offset
+        self.powered_up_s = node.motor_controller.powered_up_s  # CTRL_UPTIME's origin
         self.first = first
         self.next = 0  # the index of the next tick to send: the plan's ticks go in a row
         # (driver, motor controller, truth) COUNTER before the next tick (-1: none sent yet)
@@ -76,6 +77,7 @@ class TickPlan:
             driver is not self.driver
             or (driver is not None and driver.scenario is not self.scenario)
             or mc._count_offset is not self.offset
+            or mc.powered_up_s != self.powered_up_s
             or not vehicle.serves(self.block)
             or node.clock.now_s() != self.times[i]
             or node.bus._queue  # type: ignore[attr-defined]
@@ -130,7 +132,7 @@ def plan_ticks(node: SimNode, vehicle: PlannedVehicle, k: int) -> TickPlan | Non
     mc = node.motor_controller
     plan = TickPlan(node, block, k)
     plan.times = times[:ticks]
-    plan.encoders = seal_words(_encoder_words(mc, vehicle, counts[:ticks]),
+    plan.encoders = seal_words(_encoder_words(mc, vehicle, counts[:ticks], plan.times),
                                fr.WHEEL_ENCODERS_DATA_IDS)
     plan.motor_cmds = [None] * ticks
     sealed = seal_words([word for word, _ in cmds], fr.MOTOR_CMD_DATA_IDS)
@@ -202,18 +204,23 @@ def _truths(
 
 
 def _encoder_words(
-    mc: MotorController, vehicle: PlannedVehicle, counts: list[tuple[int, int]]
+    mc: MotorController, vehicle: PlannedVehicle, counts: list[tuple[int, int]],
+    times: list[float],
 ) -> np.ndarray:
-    """WHEEL_ENCODERS' words of ``counts`` as ``MotorController.sample_and_send`` packs them
-    (its COUNTER from the next one on; the counts less the restart offset, to the counter's
-    width and the wire's 24 bits)."""
+    """WHEEL_ENCODERS' words of ``counts`` at ``times`` as ``MotorController.sample_and_send``
+    packs them (its COUNTER from the next one on; the counts less the restart offset, to the
+    counter's width and the wire's 24 bits; CTRL_UPTIME as ``sim.frames.ctrl_uptime_code``: the
+    same IEEE subtraction, floor and saturation)."""
     mask = ((1 << vehicle.profile.counter_bits) - 1) & _U24
     raw = np.array(counts, dtype=np.int64)
     offset = np.array(mc._count_offset, dtype=np.int64)
     masked = ((raw - offset) & mask).astype(np.uint64)
     counters = ((mc.counter + 1 + np.arange(len(counts))) & 0xF).astype(np.uint64)
+    age_s = np.array(times, dtype=np.float64) - mc.powered_up_s
+    uptime = np.minimum(CTRL_UPTIME_MAX_S, 1 + np.floor(age_s)).astype(np.uint64)
     words: np.ndarray = (
         (counters << np.uint64(8))
+        | (uptime << np.uint64(12))
         | (masked[:, 0] << np.uint64(16))
         | (masked[:, 1] << np.uint64(40))
     )

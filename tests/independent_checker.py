@@ -26,7 +26,10 @@ written again here: a step from the last accepted frame beyond ceil(v_max T / tr
 + 1 counts per period elapsed on either wheel (v_max = 4 m/s, T = 10 ms) is refused, not
 integrated, and the on-board pose keeps naming the last accepted frame; ``RESYNC`` refused frames
 in a row, each plausible from the one before, are a counter restart: the odometry restarts from
-the first of them and takes one step to the last (the jump itself is lost).
+the first of them and takes one step to the last (the jump itself is lost). A frame whose
+CTRL_UPTIME (the motor controller's age) is below the last accepted frame's, both non-zero, comes
+from a restarted controller, when its counts are within its age's travel at v_max of 0: the
+odometry restarts on it, no step into it (the DBC's comment).
 
 A stalled firmware (no ODOM_POSE frame for ``SILENCE_PERIODS`` periods or more while at least
 ``SILENCE_PERIODS - 1`` encoder frames went by, firmware/ecu.py TIME_LOST): its first pose
@@ -193,6 +196,7 @@ class _Follower:
         self.heard_since_pose = 0  # encoder frames since it
         self.resumed_t: float | None = None  # a stall ended: pose frames at this time are skipped
         self.place_next = False  # ... and the position starts again at the next encoder frame
+        self.uptime = 0  # CTRL_UPTIME of the last accepted frame
 
     def pose_frame(self, t: float) -> bool:
         """Whether a pose frame at ``t`` s may be compared (False: the first after a stall)."""
@@ -208,6 +212,12 @@ class _Follower:
         return ((b[1] - a[1] + wire // 2) % wire - wire // 2,
                 (b[2] - a[2] + wire // 2) % wire - wire // 2)
 
+    def _young(self, frame: _Stamp, uptime: int) -> bool:
+        """A restarted controller's counts: from 0, at most ``uptime`` s of travel at v_max."""
+        wire = self.wire
+        return all(abs((c + wire // 2) % wire - wire // 2) <= uptime * 100 * b
+                   for c, b in zip(frame[1:], self.bound, strict=True))
+
     def plausible(self, a: _Stamp, b: _Stamp) -> bool:
         periods = max(1, round((b[0] - a[0]) / PERIOD_S))
         d = self.deltas(a, b)
@@ -221,6 +231,11 @@ class _Follower:
         self.halves.clear()
         if round(t * 1e6) in self.reboots_us:  # a new firmware: primed on this frame
             self.prev, self.refused = None, []
+        uptime = int(s.get("CTRL_UPTIME", 0))
+        if self.prev is not None and 0 < uptime < self.uptime and self._young(frame, uptime):
+            self.refused = []
+            self._accept(frame, s)  # the odometry restarts here: no step
+            return
         if self.prev is not None and not self.plausible(self.prev, frame):
             self._refuse(frame, s)
             return
@@ -253,6 +268,7 @@ class _Follower:
 
     def _accept(self, frame: _Stamp, s: dict[str, float | int]) -> None:
         self.prev = frame
+        self.uptime = int(s.get("CTRL_UPTIME", 0))
         odo = self.odo
         self.recent = [(int(s["COUNTER"]), (odo.x, odo.y, odo.heading)), *self.recent][:16]
 

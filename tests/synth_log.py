@@ -21,6 +21,11 @@ in its first tick, as on the rig) follows that frame; or, ``boot_in_init``, its 
 (STATE INIT, UPTIME 0) comes 5 ms before that frame. ``Synth.lines(start)`` cuts the log at
 an encoder frame to make a log that starts mid-drive; ``Synth.state[k]`` is the firmware's
 internal pose after encoder frame k (Q40 metres, BAM64 + whole turns) to compare against.
+``ctrl_restarts`` restarts the motor controller at an encoder frame with a jump of its counters
+that fits the plausibility bound: with ``ctrl_uptime`` its frames carry CTRL_UPTIME (its age, 1
+from the restart) and the firmware re-primes on that frame (COUNTER_RESET, the jump never
+integrated), unless ``integrates_restarts`` (a wrong firmware, or an old controller's 0: the
+counts alone cannot tell).
 """
 
 from __future__ import annotations
@@ -105,6 +110,9 @@ def synthesize(
     counter_jumps: dict[int, int] | None = None,
     reboot_at: int | None = None,
     boot_in_init: bool = False,
+    ctrl_restarts: dict[int, tuple[int, int]] | None = None,
+    ctrl_uptime: bool = False,
+    integrates_restarts: bool = False,
 ) -> Synth:
     """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
     ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB;
@@ -112,7 +120,10 @@ def synthesize(
     ``counter_jumps``: {encoder frame: offset in counts} where both counters restart (the jumps
     at least ``RESYNC_FRAMES`` frames apart and beyond the plausibility bound).
     ``reboot_at``: the encoder frame the firmware restarts on (module docstring);
-    ``boot_in_init``: it booted 5 ms before that frame, its first summary saying INIT."""
+    ``boot_in_init``: it booted 5 ms before that frame, its first summary saying INIT.
+    ``ctrl_restarts``: {encoder frame: (left, right) jump in counts} where the motor controller
+    restarted (module docstring); ``ctrl_uptime``: its frames carry CTRL_UPTIME (else 0);
+    ``integrates_restarts``: the firmware integrates the jump."""
     bias = x_bias_100um or {}
     jumps = counter_jumps or {}
     named = 0  # the COUNTER of the last encoder frame the firmware accepted
@@ -128,6 +139,7 @@ def synthesize(
     out = Synth()
     pose_counter = status_counter = 0
     boot = 0  # the encoder frame the running firmware primed on
+    controller = _Controller(ctrl_restarts or {}, ctrl_uptime, integrates_restarts)
     for k in range(len(dl)):
         if k == reboot_at:  # a new firmware: pose 0, E2E counters and UPTIME from 0
             errors = ErrorMask()
@@ -138,6 +150,7 @@ def synthesize(
         if k in jumps:  # the motor controller restarts its counters
             left, right = (left + jumps[k]) & mask, (right + jumps[k]) & mask
             resync_first, resync_until = (left, right), k + RESYNC_FRAMES - 1
+        (left, right), uptime = controller.frame(k, (left, right), mask, odo)
         if k < resync_until:
             pass  # refused: beyond the plausibility bound from the last accepted frame
         elif k == resync_until and resync_first is not None:  # COUNTER_RESET: re-prime
@@ -150,7 +163,7 @@ def synthesize(
             named = k & 0xF
         t_s = t0_s + k * ENCODER_PERIOD_S
         group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
-                       sf.pack_wheel_encoders(k, left & wire_mask, right & wire_mask))]
+                       sf.pack_wheel_encoders(k, left & wire_mask, right & wire_mask, uptime))]
         life = k - boot  # frames since the firmware primed
         if boot_in_init and k == reboot_at:  # booted before the frame: INIT, no pose yet
             init = fr.pack_odom_status_summary(0, State.INIT, odo.consts.integrator, 0, 0, errors)
@@ -180,6 +193,30 @@ def synthesize(
         out.left_counts.append(left)
         out.right_counts.append(right)
     return out
+
+
+@dataclass
+class _Controller:
+    """The motor controller's restarts (``synthesize``'s ``ctrl_restarts``, ``ctrl_uptime``,
+    ``integrates_restarts``) and the frame it (re)started at."""
+
+    restarts: dict[int, tuple[int, int]]
+    reports_uptime: bool
+    integrates: bool
+    powered_up: int = 0
+
+    def frame(self, k: int, counts: tuple[int, int], mask: int, odo: Odometry
+              ) -> tuple[tuple[int, int], int]:
+        """Encoder frame ``k``'s counters (jumped at a restart; the firmware re-primes ``odo``
+        when CTRL_UPTIME goes back from 2+ to 1) and its CTRL_UPTIME."""
+        jump = self.restarts.get(k)
+        if jump is not None:
+            counts = (counts[0] + jump[0]) & mask, (counts[1] + jump[1]) & mask
+            if self.reports_uptime and k - self.powered_up >= 100 and not self.integrates:
+                odo.unprime()
+            self.powered_up = k
+        age_s = (k - self.powered_up) // 100
+        return counts, min(15, 1 + age_s) if self.reports_uptime else 0
 
 
 def _pose_lines(

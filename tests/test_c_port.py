@@ -587,7 +587,8 @@ def _ecu_session(
     MOTOR_CMDs, navigation goals, pose and configuration writes, and faults (lost, repeated,
     corrupt, short and foreign frames, silence, mailbox overflow, bus-off, a full TX queue), and
     the health paths: forged steps beyond the maximum wheel speed (IMPLAUSIBLE_STEP), a motor
-    controller reboot (counters and COUNTER restart: COUNTER_RESET, then ODOM_SET_POSE APPLY).
+    controller reboot (counters and COUNTER restart: COUNTER_RESET, then ODOM_SET_POSE APPLY),
+    and a second one its CTRL_UPTIME going back tells (its counters from 0: COUNTER_RESET again).
 
     ``timed``: every tick gets the board's u32 microsecond timer (``tick(now_us)``), released
     with jitter and wrapping during the session, and the MCU stalls now and then for 3 to 40
@@ -630,6 +631,7 @@ class _EcuSession:
             rng.randrange(100, 2900): rng.choice((3, 8, 9, 10, 14, 25, 40)) for _ in range(6)
         }
         self.reboot_tick = rng.randrange(1500, 2500)
+        self.uptime = 0  # CTRL_UPTIME: 0 (not reported) until the reboot, then the age
         self.host_counters = {
             frames.NAV_GOAL_ID: 0, frames.ODOM_SET_POSE_ID: 0, frames.ODOM_CONFIG_ID: 0
         }
@@ -662,7 +664,7 @@ class _EcuSession:
     def next_encoders(self, wire: list[int]) -> bytes:
         """The next WHEEL_ENCODERS frame (next COUNTER) carrying ``wire``."""
         self.enc_counter = (self.enc_counter + 1) & 15
-        return sf.pack_wheel_encoders(self.enc_counter, *wire)
+        return sf.pack_wheel_encoders(self.enc_counter, wire[0], wire[1], self.uptime)
 
     def period(self, tick: int) -> None:
         """One encoder period: a stall, the motor controller's life, the frame, the host, a tick."""
@@ -695,6 +697,12 @@ class _EcuSession:
             offset = self.rng.choice((-1, 1)) * self.rng.randrange(5_000, 20_000)
             self.counts[:] = [self.counts[0] + offset, self.counts[1] + offset]
             self.enc_counter = 15
+        if tick == self.reboot_tick + 250:  # a reboot told by CTRL_UPTIME: counters from 0
+            self.counts[:] = [float(self.rng.randrange(8)), float(self.rng.randrange(8))]
+            self.enc_counter = 15
+        if tick >= self.reboot_tick:  # from here the controller reports its age
+            since = tick - self.reboot_tick - (250 if tick >= self.reboot_tick + 250 else 0)
+            self.uptime = min(15, 1 + since // 100)
         if tick in (self.reboot_tick - 600, self.reboot_tick - 300):
             # A bus that held the encoder frames back lets them out back to back: the mailbox
             # keeps 32, drops the rest (18 and 35 with the period's own: whole COUNTER cycles).
@@ -737,7 +745,8 @@ class _EcuSession:
             self.enc_counter = (self.enc_counter + 1) & 15
             jump = rng.choice((-1, 1)) * rng.randrange(200, 30_000)
             forged = [(w + jump) % (1 << 32) for w in wire]
-            self.rx(frames.WHEEL_ENCODERS_ID, sf.pack_wheel_encoders(self.enc_counter, *forged))
+            self.rx(frames.WHEEL_ENCODERS_ID,
+                    sf.pack_wheel_encoders(self.enc_counter, forged[0], forged[1], self.uptime))
 
     def set_pose_field(self) -> None:
         field = self.rng.choice((0, 1, 2, 15, 15, 7))
@@ -807,9 +816,10 @@ def _frames(rng: random.Random, ask: Callable[..., None]) -> None:
         counter, left, right = rng.randrange(16), rng.getrandbits(32), rng.getrandbits(32)
         frame = sf.pack_wheel_encoders(counter, left, right)
         ask(f"enc_pack {counter} {left} {right}", frame.hex().upper())
+        aged = sf.pack_wheel_encoders(counter, left, right, rng.randrange(16))
         junk = rng.randbytes(8)
-        for data in (frame, junk):
-            ask(f"enc_unpack {data.hex()}", *frames.unpack_wheel_encoders(data)[:3])
+        for data in (frame, aged, junk):
+            ask(f"enc_unpack {data.hex()}", *frames.unpack_wheel_encoders(data))
         speeds = [rng.randrange(I16_MIN, I16_MAX + 1) for _ in range(2)]
         motor = frames.pack_motor_cmd(counter, speeds[0], speeds[1], ErrorMask())
         ask(f"motor_pack {counter} {speeds[0]} {speeds[1]}", motor.hex().upper())
@@ -997,6 +1007,12 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
     ]
     assert recovered
     assert all(after == (State.OK, Reason.NONE) for after in recovered)
+    resets = [
+        after
+        for before, after in itertools.pairwise(states)
+        if after == (State.DEGRADED, Reason.COUNTER_RESET) and before != after
+    ]
+    assert len(resets) >= 2 * 5, "5 driving sessions: a reboot by the counts, one CTRL_UPTIME tells"
     lost = [
         i
         for i in range(1, len(ticks))

@@ -170,8 +170,8 @@ def test_monitor_json_on_a_live_bus(source: Source, capsys: pytest.CaptureFixtur
     assert enc["count"] == TICKS
     assert enc["e2e"] == {"ok": TICKS, "lost": 0, "repeated": 0, "crc_errors": 0,
                           "wrong_sequence": 0}
-    assert set(enc["last"]) == {"LEFT_COUNT", "RIGHT_COUNT"}
-    assert enc["units"] == {"LEFT_COUNT": "count", "RIGHT_COUNT": "count"}
+    assert set(enc["last"]) == {"CTRL_UPTIME", "LEFT_COUNT", "RIGHT_COUNT"}
+    assert enc["units"] == {"CTRL_UPTIME": "s", "LEFT_COUNT": "count", "RIGHT_COUNT": "count"}
     pose_y = messages["ODOM_POSE_Y"]
     assert pose_y["count"] == TICKS // 2 + rounds
     assert pose_y["e2e"]["crc_errors"] == rounds

@@ -153,8 +153,10 @@ KINDS = [
     Kind(
         "WHEEL_ENCODERS",
         None,
-        lambda c, v, _e: sf.pack_wheel_encoders(c, v["LEFT_COUNT"], v["RIGHT_COUNT"]),
-        lambda d: as_signals(f.unpack_wheel_encoders(d), {}),
+        lambda c, v, e: sf.pack_wheel_encoders(
+            c, v["LEFT_COUNT"], v["RIGHT_COUNT"], v["CTRL_UPTIME"], e
+        ),
+        lambda d: as_signals(f.unpack_wheel_encoders(d), {"ctrl_uptime_s": "CTRL_UPTIME"}),
     ),
     Kind(
         "MOTOR_CMD",

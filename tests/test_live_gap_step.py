@@ -13,11 +13,16 @@ right to a nanometre of float64 dead reckoning written here (``test_health_rig.r
 
 from __future__ import annotations
 
+import math
+
+import can
 import pytest
 
+from odocan.host.io.logs import FrameCollector
+from odocan.host.judge.analysis import analyze
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.sim.board import TICK_S
-from tests.test_health_rig import Watch, circle_rig, verdicts_between
+from tests.test_health_rig import Watch, circle_rig, reference_xy, verdicts_between
 
 SILENT_FROM = 500  # tick (5 s)
 SILENT_TICKS = 200  # 2 s: the firmware's ENCODER_TIMEOUT, and 12 whole COUNTER cycles
@@ -54,25 +59,49 @@ def test_a_silent_encoder_node_is_never_pose_wrong_on_a_correct_firmware() -> No
     assert watch.monitor.tracker.counter_restarts == 0  # the step was taken, not a restart
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the firmware's limit, not the judge's: a counter restart inside the silence whose jump "
-    "fits the time-widened bound is integrated as motion (the counters are taken as absolute); "
-    "firmware, analyze and the live judge agree on the bus's frames and say OK / PASS while the "
-    "pose is ~2 m off the robot's own motion (only SIM_TRUTH shows it, never judged)"))
 def test_a_counter_restart_inside_the_silence_is_never_called_ok() -> None:
-    """As above, but the motor controller restarts (counters from 0) as it speaks again."""
+    """As above, but the motor controller restarts (counters, COUNTER and CTRL_UPTIME from 0) as
+    it speaks again. Its jump fits the time-widened bound, so the counts alone took it for motion
+    (the pose ~2 m off the robot's, OK / PASS everywhere); its CTRL_UPTIME going back (6 -> 1)
+    tells the firmware, which re-primes on that frame (DEGRADED COUNTER_RESET until a set-pose),
+    and every judge models the same rule."""
+    restart = SILENT_FROM + SILENT_TICKS
     with circle_rig() as rig:
         watch = Watch(rig)
+        collector = FrameCollector()
+
+        def record(_tick: int, frames: list[can.Message]) -> None:
+            for msg in frames:
+                collector.on_message_received(msg)
+
+        rig.observers.append(record)
         send = rig.sim.tick
 
         def tick(k: int) -> None:
-            if k == SILENT_FROM + SILENT_TICKS:
+            if k == restart:
                 rig.sim.motor_controller.restart()
-            if not SILENT_FROM <= k < SILENT_FROM + SILENT_TICKS:
+            if not SILENT_FROM <= k < restart:
                 send(k)
 
         rig.sim.tick = tick  # type: ignore[method-assign]
-        rig.run((SILENT_FROM + SILENT_TICKS + 500) * TICK_S)
-        assert watch.pose_error_m() > 1.0  # the firmware integrated the restart's jump
-        after = (SILENT_FROM + SILENT_TICKS) * TICK_S
-        assert "OK" not in verdicts_between(watch, after + 0.5, after + 5.0)
+        rig.run((restart + 500) * TICK_S)
+        # float64 dead reckoning re-primed at the restart: the motion of the silence dropped
+        counts = watch.counts
+        jump = [counts[restart][i] - counts[SILENT_FROM - 1][i] for i in (0, 1)]
+        reprimed = counts[:SILENT_FROM] + [(a - jump[0], b - jump[1]) for a, b in counts[restart:]]
+        x, y = reference_xy(reprimed, rig)
+        odo = rig.ecu.odometry
+        assert math.hypot(odo.x_q40_m / 2**40 - x, odo.y_q40_m / 2**40 - y) < 1e-6
+        assert watch.pose_error_m() > 0.1  # the silence's motion: unknowable, not integrated
+    assert watch.states()[-2:] == [("DEGRADED", "ENCODER_TIMEOUT"), ("DEGRADED", "COUNTER_RESET")]
+    assert "OK" not in verdicts_between(watch, restart * TICK_S, (restart + 500) * TICK_S)
+    assert "POSE WRONG" not in {v for _, v in watch.verdicts}
+    tracker = watch.monitor.tracker
+    assert tracker.counter_restarts == 1
+    assert tracker.vs_reference.max_dpos_m <= POSITION_LSB_M
+    assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD
+    result = analyze(collector.arrays(), rig.profile, "exact")
+    assert result.passed, result.report["onboard_vs_reference"]
+    events = [e for e in result.report["events"] if e["kind"] == "counter_restart"]
+    assert [e["t_s"] for e in events] == [pytest.approx(restart * TICK_S, abs=0.002)]
+    assert "CTRL_UPTIME went back" in events[0]["detail"]

@@ -112,12 +112,15 @@ _FAULTS = FaultSpec.parse("drop=0.02,dup=0.01,delay=0.05:15,flip=0.01,seed=3")
 # learned the periods between two samples from the nearest counter cycle (a frame held 15 ms lands
 # two ticks late: the genuine step after it was refused as implausible at 4.64 s, and the poses
 # from there differ by rounding) and its twist came to span those periods instead of the ticks
-# (21 ODOM_TWIST frames were up to 0.18 m/s off; the host's check now passes this log); the
-# fault-free logs are still those of df15d82.
+# (21 ODOM_TWIST frames were up to 0.18 m/s off; the host's check now passes this log). All three
+# were made again when WHEEL_ENCODERS came to carry CTRL_UPTIME (issue #11, a restart of the
+# motor controller): only that nibble and the CHECKSUM of the encoder frames changed; every other
+# frame, every time stamp and every decoded COUNTER, LEFT_COUNT, RIGHT_COUNT is that of df15d82
+# (the fault-free logs) and of the previous faults log.
 GOLDEN_LOGS = {
     "random-slip": (
         RigConfig(robot=PMIR, scenario="random", seed=3, errors=ErrorModel(slip=0.01)),
-        "226b9808225e9ead7b05dd35b43af29e78d0ddce900ab419eb4c3ac5a6f52a5e",
+        "8a4c6ba0e0464e49308e310c2c255667dbaf42a25777c7eee1e1d85fa11f0d2a",
     ),
     "quadrature-euler-figure8": (
         RigConfig(
@@ -129,7 +132,7 @@ GOLDEN_LOGS = {
             errors=ErrorModel(ed=1.002, eb=0.998, slip=0.02),
             truth_phase_ticks=2,
         ),
-        "6dd5988aec98fa38bdbdce57dbc42ec79f5f0d65744ab5f43712c3d74ccd41ba",
+        "a6ef1d851194c94ca1799c8f1a9531eb5fd03ad1b5335dda2c1b8f985355980c",
     ),
     "faults": (
         RigConfig(
@@ -140,7 +143,7 @@ GOLDEN_LOGS = {
             faults=_FAULTS,
             fw_faults=dataclasses.replace(_FAULTS, seed=4),
         ),
-        "8c47e9b891a737e8d8e83c3b402e21988210ab626285dd630a5a9a6e2120016d",
+        "692788e2e2aa4b8d442eec8afbc66806458bfaa869b5cadb6005fa088ef7ff3c",
     ),
 }
 

@@ -412,8 +412,9 @@ class _Unpacker(can.Listener):
 
 
 def _lockstep_drives(duration_s: float, ears: _Unpacker) -> None:
-    """Random drives of every integrator on both shipped robots, through the whole rig; on pmir
-    a second round with dropped, duplicated and bit-flipped frames (E2E, gaps)."""
+    """Random drives of every integrator on both shipped robots, through the whole rig (on pmir
+    the motor controller restarted at the end, CTRL_UPTIME going back); on pmir a second round
+    with dropped, duplicated and bit-flipped frames (E2E, gaps)."""
     rig_mod = importlib.import_module("odocan.sim.rig")
     robot = importlib.import_module("odocan.sim.robot")
     faults = importlib.import_module("odocan.sim.faults")
@@ -434,6 +435,9 @@ def _lockstep_drives(duration_s: float, ears: _Unpacker) -> None:
             )
             with contextlib.closing(rig_mod.LockstepRig(config, [ears])) as rig:
                 rig.run()
+                if index == 0:  # the motor controller restarts: CTRL_UPTIME goes back
+                    rig.motor_controller.restart()
+                    rig.run(1.0)
                 rig.listeners = []  # closing the rig must not stop the shared listener
 
 

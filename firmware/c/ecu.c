@@ -8,8 +8,9 @@
  * LOST_TIME_PERIODS or more late sets TIME_LOST and goes DEGRADED. DEGRADED always carries a
  * reason: ENCODER_TIMEOUT, TIME_LOST, MAILBOX_OVERFLOW, IMPLAUSIBLE_STEP (a step beyond
  * MAX_WHEEL_SPEED_MM_S, not integrated) or COUNTER_RESET (RESYNC_FRAMES refused frames consistent
- * with each other: re-primed on the first of them, the jump never integrated; it stays until
- * ODOM_SET_POSE APPLY). The module docstring of firmware/ecu.py says why.
+ * with each other: re-primed on the first of them, the jump never integrated; or a frame whose
+ * CTRL_UPTIME is below the last accepted one's, both non-zero: the motor controller restarted,
+ * re-primed on that frame; it stays until ODOM_SET_POSE APPLY). The module docstring of firmware/ecu.py says why.
  *
  * One file here, one Python module per job there (firmware/ecu.py composes them); each section
  * below names its module: mailbox.py, clock.py (advance_time), health.py (check_overflows,
@@ -88,6 +89,11 @@ static void on_implausible(struct odom_ecu *ecu, uint8_t counter, const uint32_t
                            const uint32_t counts[2]);
 static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                              const uint32_t counts[2]);
+static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime,
+                                 const uint32_t wire[2]);
+static bool young_counts(const struct odom_ecu *ecu, const uint32_t wire[2], uint8_t uptime);
+static void reprime(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                    const uint32_t counts[2]);
 static void sum_step(struct odom_ecu *ecu);
 static void update_twist(struct odom_ecu *ecu, uint32_t periods);
 static bool secured(struct odom_ecu *ecu, enum auth_request request, const uint8_t *data);
@@ -355,10 +361,16 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
         return;
     }
     uint8_t counter;
+    uint8_t uptime;
     uint32_t wire[2];
-    unpack_wheel_encoders(data, &counter, &wire[0], &wire[1]);
+    unpack_wheel_encoders(data, &counter, &wire[0], &wire[1], &uptime);
     uint32_t counts[2];
     extend_counters(ecu, wire, counts);
+    ecu->uptime_now = uptime;
+    if (controller_restarted(ecu, uptime, wire)) {
+        reprime(ecu, counter, wire, counts);
+        return;
+    }
     uint32_t advance = counter_advance(ecu, counter);
     uint32_t periods = step_periods(ecu, advance);
     if (!plausible(ecu, ecu->counts_prev_valid ? ecu->counts_prev : NULL, counts,
@@ -393,6 +405,7 @@ static void accept_encoders(struct odom_ecu *ecu, uint8_t counter, const uint32_
                             const uint32_t counts[2])
 {
     commit_counters(ecu, wire, counts);
+    ecu->uptime_prev = ecu->uptime_now;
     if (ecu->state != STATE_FAULT
         && odometry_step_counts(&ecu->odometry, counts[0], counts[1])) {
         sum_step(ecu);
@@ -592,6 +605,54 @@ static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32
     if (ecu->this_step_periods == 0u) {
         ecu->this_step_periods = COUNTER_MASK + 1u;
     }
+    accept_encoders(ecu, counter, wire, counts);
+}
+
+/* True when uptime (this frame's CTRL_UPTIME, u4) is below the last accepted frame's, both
+ * reported (non-zero), and wire (its counts) near enough 0 for that age: the controller
+ * restarted, its counters from 0 (encoders.py _controller_restarted). */
+static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime,
+                                 const uint32_t wire[2])
+{
+    uint8_t prev = ecu->uptime_prev;
+    if (uptime == 0u || prev == 0u || uptime >= prev) {
+        return false;
+    }
+    return young_counts(ecu, wire, uptime);
+}
+
+/* True when each wheel's count, read signed in the wire's bits, is within the counts a controller
+ * uptime seconds old can have run from 0: uptime * PERIODS_PER_S periods of its per-period bound
+ * (at most 1500 * 2^44 < 2^55). */
+static bool young_counts(const struct odom_ecu *ecu, const uint32_t wire[2], uint8_t uptime)
+{
+    unsigned bits = (unsigned)ecu->odometry.consts.counter_bits;
+    if (bits > WIRE_COUNTER_BITS) {
+        bits = WIRE_COUNTER_BITS;
+    }
+    uint64_t periods = (uint64_t)uptime * PERIODS_PER_S;
+    for (unsigned side = 0u; side < 2u; ++side) {
+        int32_t count = wrap_signed(wire[side], bits);
+        if (abs_u64(count) > periods * ecu->max_counts_per_period[side]) {
+            return false;
+        }
+    }
+    return true;
+}
+
+/* The controller restarted (CTRL_UPTIME went down): COUNTER_RESET as restart_counters sets it,
+ * the odometry re-primed on this frame (its step from the last accepted frame, the restart's
+ * jump, is never integrated). */
+static void reprime(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                    const uint32_t counts[2])
+{
+    ecu->errors |= ERROR_COUNTER_RESET;
+    degrade(ecu, REASON_COUNTER_RESET);
+    ecu->resync_first_valid = false;
+    ecu->resync_frames = 0;
+    odometry_unprime(&ecu->odometry);
+    ecu->enc_prev_counter = -1;
+    ecu->this_step_periods = 1u;
     accept_encoders(ecu, counter, wire, counts);
 }
 

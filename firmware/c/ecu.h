@@ -27,6 +27,7 @@
 #define STEP_PERIODS_MAX 0xFFFFu /* the twist's dt and the plausibility bound saturate (655 s) */
 #define TWO_PI_Q30 ((TWO_PI_Q60 + (INT64_C(1) << 29)) >> 30) /* one turn in Q30 rad (< 2^33) */
 #define TWIST_SUM_MAX (INT64_C(1) << 32) /* one tick's summed steps: 4096 m (Q20), 4 rad (Q30) */
+#define PERIODS_PER_S 100u /* encoder periods in one second (1 s / ENCODER_PERIOD_US) */
 #define TX_IDS 8u /* the messages this node sends: one E2E counter each */
 
 /* Firmware state (the STATE signal of ODOM_STATUS). */
@@ -72,6 +73,8 @@ struct odom_ecu {
     uint32_t counts_u32[2];
     bool counts_prev_valid;
     uint32_t counts_prev[2];  /* counters of the last accepted frame */
+    uint8_t uptime_prev;      /* CTRL_UPTIME of the last accepted frame (0: not reported) */
+    uint8_t uptime_now;       /* CTRL_UPTIME of the frame being handled */
     uint32_t time_periods;    /* 10 ms periods since reset, by the timer (ticks run or not) */
     bool timer_prev_valid;
     uint32_t timer_prev_us;   /* the timer at the previous tick */

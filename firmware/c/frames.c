@@ -41,15 +41,16 @@ static int16_t sat_i16_field(int64_t value, uint32_t *errors)
     return (int16_t)sat_range(value, I16_MIN, I16_MAX, errors);
 }
 
-/* WHEEL_ENCODERS: u24 counts. */
+/* WHEEL_ENCODERS: u24 counts and CTRL_UPTIME (u4 s, saturated at 15; 0: not reported). */
 void unpack_wheel_encoders(const uint8_t data[8], uint8_t *counter, uint32_t *left_count,
-                           uint32_t *right_count)
+                           uint32_t *right_count, uint8_t *ctrl_uptime_s)
 {
     struct odocan_wheel_encoders_t m;
     (void)odocan_wheel_encoders_unpack(&m, data, 8u);
     *counter = m.counter;
     *left_count = m.left_count;
     *right_count = m.right_count;
+    *ctrl_uptime_s = m.ctrl_uptime;
 }
 
 /* ODOM_SET_POSE: value i32 for X/Y, u16 for HEADING, 0 for APPLY, raw u32 otherwise. */

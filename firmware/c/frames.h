@@ -66,7 +66,7 @@ void pack_odom_freshness(uint8_t out[8], uint8_t counter, int64_t cause, uint64_
                          uint32_t *errors);
 
 void unpack_wheel_encoders(const uint8_t data[8], uint8_t *counter, uint32_t *left_count,
-                           uint32_t *right_count);
+                           uint32_t *right_count, uint8_t *ctrl_uptime_s);
 void unpack_odom_set_pose(const uint8_t data[8], struct mux_record *out);
 void unpack_odom_config(const uint8_t data[8], struct mux_record *out);
 void unpack_nav_goal(const uint8_t data[8], struct mux_record *out, uint8_t *mode,

@@ -28,7 +28,7 @@
  *   nav_req FIELD VALUE MODE APPEND NO_FINAL GOAL_ID RUNNING -> ack reason
  *   nav_step X Y H64 B RUNNING -> sent left right state goal_id depth distance_um
  *                               heading_error changed errors   (then changed is cleared)
- *   enc_unpack HEX           -> counter left right    (cantools-generated dbc/odocan.c)
+ *   enc_unpack HEX           -> counter left right ctrl_uptime (cantools-generated dbc/odocan.c)
  *   enc_pack COUNTER L R | motor_pack COUNTER L R -> the sealed frame (generated pack + E2E)
  *   goal_unpack HEX          -> counter field value mode append no_final_heading goal_id
  *   ecu_new PPV RL RR B BITS I -> ok                  (a new ECU)
@@ -351,8 +351,8 @@ int main(void)
             long n = arg_bytes(bytes);
             struct odocan_wheel_encoders_t m;
             odocan_wheel_encoders_unpack(&m, bytes, n < 0 ? 0u : (size_t)n);
-            printf("%u %" PRIu32 " %" PRIu32 "\n", (unsigned)m.counter, m.left_count,
-                   m.right_count);
+            printf("%u %" PRIu32 " %" PRIu32 " %u\n", (unsigned)m.counter, m.left_count,
+                   m.right_count, (unsigned)m.ctrl_uptime);
         } else if (strcmp(cmd, "enc_pack") == 0 || strcmp(cmd, "motor_pack") == 0) {
             uint8_t frame[FRAME_LEN];
             uint8_t ids[DATA_ID_COUNT];

@@ -112,7 +112,7 @@ from odocan.host.judge.compare import (
 )
 from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.reboots import Life, merge, split_lives
-from odocan.host.judge.reference_path import build_reference, wrap_pi
+from odocan.host.judge.reference_path import build_reference, restart_detail, wrap_pi
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
@@ -337,8 +337,7 @@ def _analyze_life(
         "events": [
             {"kind": "counter_restart", "t_s": float(frames.timestamp_s[enc.index[e]]),
              "encoder_frame": int(e),
-             "detail": "the firmware re-primes here (COUNTER_RESET): the reference restarts "
-                       "with it; the motion across the restart is unknowable"}
+             "detail": restart_detail(e in ref_all.ctrl_restarts)}
             for e in ref_all.counter_restarts
         ] + [
             {"kind": "firmware_stall", "t_s": float(frames.timestamp_s[enc.index[e]]),

@@ -12,7 +12,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import Geometry, wrap_delta
-from odocan.host.judge.reference_path import Reference, wrap_pi
+from odocan.host.judge.reference_path import Reference, ctrl_restarts, wrap_pi
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     WIRE_COUNTER_BITS,
@@ -261,6 +261,9 @@ def _step_speeds(
     waited = 1 + np.flatnonzero(np.diff(enc.timestamp_s) > late_s)
     gap_v[waited] = np.maximum(gap_v[waited], np.abs(v[waited]))
     gap_w[waited] = np.maximum(gap_w[waited], np.abs(w[waited]))
+    if enc.uptime is not None:  # CTRL_UPTIME went back: a firmware may re-prime there, no step
+        restarted = 1 + np.flatnonzero(ctrl_restarts(enc.uptime, np.ones(len(v), dtype=bool)))
+        v[restarted] = w[restarted] = np.nan  # a twist over it is not judged
     return (v, w), (gap_v, gap_w)
 
 

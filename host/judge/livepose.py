@@ -8,7 +8,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, PERIODS_PER_S, RESYNC_FRAMES
 from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.protocol.pose import heading_fields, unwrap_near
@@ -33,9 +33,13 @@ class StepGate:
     """The firmware's plausibility rule on the reference's steps (firmware/ecu.py, the same as
     ``host.judge.analysis``): a frame beyond ``MAX_WHEEL_SPEED_MM_S`` over the periods its COUNTER
     advanced since the last accepted one is refused; ``RESYNC_FRAMES`` refused frames plausible
-    among themselves are a counter restart: one step from the first of them, never the jump."""
+    among themselves are a counter restart: one step from the first of them, never the jump; a
+    frame whose CTRL_UPTIME is below the last accepted one's (both non-zero) re-primes it (the
+    motor controller restarted): no step into it."""
 
-    def __init__(self, geometry: Geometry, counter_bits: int) -> None:
+    def __init__(self, geometry: Geometry, counter_bits: int, uptime: int = 0) -> None:
+        """``uptime``: CTRL_UPTIME of the last accepted frame, when the frames it starts on are
+        replayed without theirs (``step``'s ``uptime`` None)."""
         travel_m = MAX_WHEEL_SPEED_MM_S * 1e-3 * ENCODER_PERIOD_US * 1e-6
         self.bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
                       math.ceil(travel_m / geometry.m_per_count_right) + 1)
@@ -44,38 +48,54 @@ class StepGate:
         self._refused: list[tuple[int, int, int]] = []
         self._seq = self._prev_seq = 0  # periods heard, at the latest frame and at ``prev``
         self.counter_restarts = 0
+        self.uptime = uptime  # CTRL_UPTIME of the last accepted frame (0: not reported)
 
     def _delta(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[int, int]:
         return wrap_delta(b[1] - a[1], self.bits), wrap_delta(b[2] - a[2], self.bits)
+
+    def _young(self, frame: tuple[int, int, int], uptime: int) -> bool:
+        """The counts a controller ``uptime`` seconds old can have run from 0 (a restart's)."""
+        bits, periods = min(self.bits, 24), uptime * PERIODS_PER_S
+        return (abs(wrap_delta(frame[1], bits)) <= periods * self.bound[0]
+                and abs(wrap_delta(frame[2], bits)) <= periods * self.bound[1])
 
     def _plausible(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> bool:
         periods = ((b[0] - a[0]) % RING) or RING
         d = self._delta(a, b)
         return abs(d[0]) <= periods * self.bound[0] and abs(d[1]) <= periods * self.bound[1]
 
-    def step(self, counter: int, left: int, right: int, heard: int | None = None
-             ) -> tuple[int, int] | None:
-        """The count step to integrate for this frame; None when it primes or is refused.
-        ``heard``: the periods since the frame heard before (``samples.sender_seq``, widened by
-        the bus times past 16 periods); without it the COUNTER's advance (mod 16)."""
+    def step(self, counter: int, left: int, right: int, heard: int | None = None,
+             uptime: int | None = None) -> tuple[int, int] | None:
+        """The count step to integrate for this frame; None when it primes or is refused, (0, 0)
+        when it re-primes on a controller restart. ``heard``: the periods since the frame heard
+        before (``samples.sender_seq``, widened by the bus times past 16 periods); without it
+        the COUNTER's advance (mod 16). ``uptime``: its CTRL_UPTIME (None: unknown, kept)."""
         self._seq += heard or 0
         frame = (counter, left, right)
         prev, self.prev = self.prev, frame
         prev_seq, self._prev_seq = self._prev_seq, self._seq
+        last_uptime = self.uptime
+        if uptime is not None:
+            self.uptime = uptime
         if prev is None:
             return None
+        if uptime and last_uptime and uptime < last_uptime and self._young(frame, uptime):
+            self._refused = []
+            self.counter_restarts += 1
+            return 0, 0
         delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
         periods = self._seq - prev_seq if heard else ((counter - prev[0]) % RING) or RING
         if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
             if self._refused:
                 self._refused = []
             return delta
-        self.prev, self._prev_seq = prev, prev_seq  # refused: the base stays
+        self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # refused: kept
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
         self._refused = [*self._refused, frame] if consistent else [frame]
         if len(self._refused) < RESYNC_FRAMES:
             return None
         first, self._refused, self.prev = self._refused[0], [], frame
+        self.uptime = last_uptime if uptime is None else uptime
         self.counter_restarts += 1
         return self._delta(first, frame)
 

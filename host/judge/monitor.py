@@ -288,7 +288,7 @@ class BusMonitor:
 
     def _on_encoders(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]),
-                                 self._bus_time_s)
+                                 self._bus_time_s, int(s.get("CTRL_UPTIME", 0)))
 
     def _on_pose_x(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]),

@@ -9,8 +9,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, RESYNC_FRAMES
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, PERIODS_PER_S, RESYNC_FRAMES
 from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.breaks import BreakSummary, merge_allowance_m, placed_offsets
 from odocan.host.judge.gapbound import gap_allowance_of_counts
@@ -43,6 +44,7 @@ class Reference:
     counter_restarts: tuple[int, ...] = ()  # encoder frames the firmware re-primed on
     implausible_frames: int = 0  # encoder frames the firmware refuses (not integrated)
     placements: BreakSummary = field(default_factory=BreakSummary)  # after stalls and gaps
+    ctrl_restarts: frozenset[int] = frozenset()  # counter restarts told by CTRL_UPTIME
 
     def at(self, enc: IntArray) -> Reference:
         """The reference at the encoder frames ``enc`` (all >= start)."""
@@ -50,7 +52,7 @@ class Reference:
         return Reference(
             self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
             self.restarts, self.exact_start, self.counter_restarts, self.implausible_frames,
-            self.placements,
+            self.placements, self.ctrl_restarts,
         )
 
 
@@ -119,7 +121,17 @@ def build_reference(
         counter_restarts=tuple(e0 + k for k in steps.reprimed),
         implausible_frames=steps.refused,
         placements=placed,
+        ctrl_restarts=frozenset(e0 + k for k in steps.by_uptime),
     )
+
+
+def restart_detail(by_uptime: bool) -> str:
+    """The report's words for an encoder frame the firmware re-primes on (COUNTER_RESET):
+    ``by_uptime``, the motor controller said it restarted (CTRL_UPTIME went back)."""
+    cause = ("the motor controller restarted (CTRL_UPTIME went back): " if by_uptime
+             else "")
+    return (f"{cause}the firmware re-primes here (COUNTER_RESET): the reference restarts with "
+            "it; the motion across the restart is unknowable")
 
 
 def break_allowance(enc: Encoders, b: int, sample_enc: IntArray, geometry: Geometry, bits: int,
@@ -144,6 +156,7 @@ class Steps:
     d_right: IntArray
     refused: int = 0  # frames beyond the plausibility bound, not integrated
     reprimed: list[int] = field(default_factory=list)  # frames (from e0) a counter restart primed
+    by_uptime: list[int] = field(default_factory=list)  # of them, a controller restart's
     open_from: int | None = None  # the last accepted frame when the log ends in a refusal run
 
 
@@ -154,16 +167,21 @@ def firmware_steps(
     exceeds ``MAX_WHEEL_SPEED_MM_S`` over its periods is refused (IMPLAUSIBLE_STEP, not
     integrated); ``RESYNC_FRAMES`` refused frames plausible among themselves are a counter restart
     (COUNTER_RESET): the odometry re-primes on the first of them and integrates one step from it to
-    the last. Vectorised; a short state machine runs only from each refused frame on. The bound is
+    the last. A frame whose CTRL_UPTIME is below the last accepted frame's (both non-zero: the
+    motor controller restarted) re-primes it whatever its counts (COUNTER_RESET, no step into
+    it). Vectorised; a short state machine runs only from each refused frame on. The bound is
     computed in float (the firmware's Q48 integer bound may differ by a count at the limit)."""
     left, right = enc.left[e0:], enc.right[e0:]
     seq = enc.seq[e0:]
     steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
+    uptime = enc.uptime[e0:] if enc.uptime is not None else np.zeros(len(left), dtype=np.int64)
     if max_wheel_speed_mm_s is None:
-        return steps
+        return _reprime_all(steps, ctrl_restarts(uptime, np.ones(len(left), dtype=np.bool_)))
     travel_m = max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
     bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
              math.ceil(travel_m / geometry.m_per_count_right) + 1)
+    young = young_counts(left, right, uptime, bits, bound)
+    restart = ctrl_restarts(uptime, young)
 
     def delta(a: int, b: int) -> tuple[int, int]:
         return (int(wrap_delta(int(left[b]) - int(left[a]), bits)),
@@ -174,15 +192,56 @@ def firmware_steps(
         d = delta(a, b)
         return abs(d[0]) <= periods * bound[0] and abs(d[1]) <= periods * bound[1]
 
+    def restarted(a: int, b: int) -> bool:
+        return bool(uptime[b] != 0 and uptime[a] != 0 and uptime[b] < uptime[a] and young[b])
+
     periods = np.maximum(1, np.diff(seq))
     bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])
     k = 0
-    for first_bad in np.flatnonzero(bad).tolist():
+    for first_bad in np.flatnonzero(bad | restart).tolist():
         if first_bad + 1 <= k:
             continue  # handled by the state machine of an earlier refusal
-        k = _refusals(steps, first_bad, len(left), plausible, delta)
+        if restart[first_bad]:  # frame first_bad accepted: the next one re-primes
+            k = _reprime(steps, first_bad + 1)
+            continue
+        k = _refusals(steps, first_bad, len(left), plausible, delta, restarted)
         if k == len(left):
             steps.open_from = first_bad
+    return steps
+
+
+def ctrl_restarts(uptime: IntArray, young: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+    """Per step (into frame k + 1 of ``uptime``, CTRL_UPTIME of consecutive accepted frames):
+    the motor controller restarted, its age below the frame before's, both reported (non-zero),
+    and the frame's counts ``young`` (``young_counts``)."""
+    before, after = uptime[:-1], uptime[1:]
+    restarted: npt.NDArray[np.bool_] = (after != 0) & (before != 0) & (after < before)
+    return restarted & young[1:]
+
+
+def young_counts(left: IntArray, right: IntArray, uptime: IntArray, bits: int,
+                 bound: tuple[int, int]) -> npt.NDArray[np.bool_]:
+    """Per frame: each wheel's count (read signed in ``bits``) within what a controller
+    ``uptime`` seconds old can have run from 0, ``uptime * PERIODS_PER_S`` periods of
+    ``bound`` (firmware/encoders.py ``_young_counts``)."""
+    periods = uptime * PERIODS_PER_S
+    young: npt.NDArray[np.bool_] = ((np.abs(wrap_delta(left, bits)) <= periods * bound[0])
+                                    & (np.abs(wrap_delta(right, bits)) <= periods * bound[1]))
+    return young
+
+
+def _reprime(steps: Steps, k: int) -> int:
+    """The firmware re-primes on frame ``k`` (a controller restart): no step into it."""
+    steps.d_left[k - 1] = steps.d_right[k - 1] = 0
+    steps.reprimed.append(k)
+    steps.by_uptime.append(k)
+    return k
+
+
+def _reprime_all(steps: Steps, restart: npt.NDArray[np.bool_]) -> Steps:
+    """Without a plausibility rule every frame is accepted: each restart re-primes."""
+    for i in np.flatnonzero(restart).tolist():
+        _reprime(steps, i + 1)
     return steps
 
 
@@ -192,13 +251,17 @@ def _refusals(
     n_frames: int,
     plausible: Any,
     delta: Any,
+    restarted: Any,
 ) -> int:
     """Run the firmware's refusal logic from frame ``prev + 1`` (``prev`` accepted) until a frame
-    is accepted again; return that frame (``n_frames`` at the end of the log)."""
+    is accepted again (``restarted(prev, k)``: it re-primes on frame k, a controller restart);
+    return that frame (``n_frames`` at the end of the log)."""
     resync_first: int | None = None
     resync_last = 0
     resync_frames = 0
     for k in range(prev + 1, n_frames):
+        if restarted(prev, k):
+            return _reprime(steps, k)
         if plausible(prev, k):
             steps.d_left[k - 1], steps.d_right[k - 1] = delta(prev, k)
             return k

@@ -53,6 +53,7 @@ class Encoders:
     cycle_s: float | None  # the DBC cycle time
     twinned: npt.NDArray[np.bool_] | None = None  # ``twinned_encoder_frames``; None: none
     twins: tuple[IntArray, IntArray, IntArray] | None = None  # ``encoder_twins``; None: none
+    uptime: IntArray | None = None  # CTRL_UPTIME (0: not reported); None: the DBC has none
 
 
 @dataclass(frozen=True)
@@ -151,7 +152,7 @@ def encoder_frames(
         left=enc["LEFT_COUNT"].astype(np.int64), right=enc["RIGHT_COUNT"].astype(np.int64),
         timestamp_s=enc["timestamp_s"], cycle_s=cycle_s,
         twinned=twinned if twinned.any() else None, twins=twins if twinned.any() else None,
-    )
+        uptime=enc["CTRL_UPTIME"].astype(np.int64) if "CTRL_UPTIME" in enc else None)
 
 
 def twinned_encoder_frames(

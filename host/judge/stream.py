@@ -154,6 +154,7 @@ class StreamEncoders:
             left=rows["LEFT_COUNT"][keep].astype(np.int64),
             right=rows["RIGHT_COUNT"][keep].astype(np.int64),
             timestamp_s=stamps, cycle_s=cycle_s,
+            uptime=rows["CTRL_UPTIME"][keep].astype(np.int64) if "CTRL_UPTIME" in rows else None,
         )
         self._offset += len(chunk)
         if len(counter):
@@ -419,7 +420,8 @@ class StreamReference:
     max_wheel_speed_mm_s: int | None
     refused: int = 0
     reprimed: list[int] = field(default_factory=list)  # encoder frames a counter restart primed
-    _window: dict[str, np.ndarray] = field(default_factory=dict)  # left, right, seq, g
+    by_uptime: list[int] = field(default_factory=list)  # of them, CTRL_UPTIME went back
+    _window: dict[str, np.ndarray] = field(default_factory=dict)  # left, right, seq, g, uptime
     _sums: tuple[int, int, float, float, float, float] = (0, 0, 0.0, 0.0, 0.0, 0.0)
     _count: int = 0  # encoder frames fed
 
@@ -428,7 +430,8 @@ class StreamReference:
         g = self._count + np.arange(len(enc.index), dtype=np.int64)
         first_chunk = self._count == 0
         self._count += len(enc.index)
-        new = {"left": enc.left, "right": enc.right, "seq": enc.seq, "g": g}
+        new = {"left": enc.left, "right": enc.right, "seq": enc.seq, "g": g,
+               "uptime": enc.uptime if enc.uptime is not None else np.zeros_like(g)}
         win = ({k: np.concatenate((self._window[k], v)) for k, v in new.items()}
                if self._window else new)
         carried = len(win["g"]) - len(g)
@@ -436,10 +439,11 @@ class StreamReference:
             return {k: np.zeros(0) for k in ("x_m", "y_m", "heading_rad", "distance_m")}
         window = Encoders(index=win["g"], counter=win["g"] & 0xF, seq=win["seq"],
                           left=win["left"], right=win["right"],
-                          timestamp_s=np.zeros(len(win["g"])), cycle_s=None)
+                          timestamp_s=np.zeros(len(win["g"])), cycle_s=None, uptime=win["uptime"])
         steps = firmware_steps(window, 0, self.geometry, self.bits, self.max_wheel_speed_mm_s)
         self.refused += steps.refused - max(0, carried - 1)  # carried refusals counted before
         self.reprimed += [int(win["g"][k]) for k in steps.reprimed]  # decided in this window
+        self.by_uptime += [int(win["g"][k]) for k in steps.by_uptime]
         skip = max(carried, 1) - 1  # step k leads into window frame k + 1
         out = self._integrate(steps.d_left[skip:], steps.d_right[skip:])
         last = steps.open_from if steps.open_from is not None else len(win["g"]) - 1

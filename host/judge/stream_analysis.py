@@ -34,6 +34,7 @@ from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.reference_path import restart_detail
 from odocan.host.judge.samples import (
     REQUIRED,
     WIRE_COUNTER_BITS,
@@ -315,8 +316,7 @@ def _life(
         "reference_breaks": placements.as_dict(),
         "events": [
             {"kind": "counter_restart", "t_s": final.times_s[e], "encoder_frame": int(e),
-             "detail": "the firmware re-primes here (COUNTER_RESET): the reference restarts "
-                       "with it; the motion across the restart is unknowable"}
+             "detail": restart_detail(e in info.by_uptime)}
             for e in info.reprimed
         ] + [
             {"kind": "firmware_stall", "t_s": final.times_s[e], "encoder_frame": int(e),

@@ -107,6 +107,7 @@ class LifeInfo:
 
     refused: int = 0
     reprimed: list[int] = field(default_factory=list)
+    by_uptime: list[int] = field(default_factory=list)  # of them, CTRL_UPTIME went back
     segments: int = 0  # the last encoder frame's segment (reference_path's ``restarts``)
     openings: list[tuple[int, bool]] = field(default_factory=list)  # ``_Rows.openings``
     gap_steps: dict[int, GapStep] = field(default_factory=dict)  # ``_Rows.gap_steps``
@@ -183,6 +184,7 @@ def life_chunks(
     info.refused, info.segments, info.openings = reference.refused, rows.segment, rows.openings
     info.gap_steps = rows.gap_steps
     info.reprimed = [e0 + k for k in reference.reprimed]
+    info.by_uptime = [e0 + k for k in reference.by_uptime]
 
 
 def _truth_floor(truth: StreamTruth, top: int) -> float:
@@ -226,7 +228,8 @@ def placed_chunks(
 def _take(enc: Encoders, keep: npt.NDArray[np.bool_]) -> Encoders:
     return Encoders(index=enc.index[keep], counter=enc.counter[keep], seq=enc.seq[keep],
                     left=enc.left[keep], right=enc.right[keep],
-                    timestamp_s=enc.timestamp_s[keep], cycle_s=enc.cycle_s)
+                    timestamp_s=enc.timestamp_s[keep], cycle_s=enc.cycle_s,
+                    uptime=None if enc.uptime is None else enc.uptime[keep])
 
 
 def _placed(samples: dict[str, np.ndarray], rows: _Rows) -> PlacedChunk:

@@ -49,12 +49,16 @@ def _joined(a: Encoders, b: Encoders, last: int | None = None) -> Encoders:
     if last is not None:
         return Encoders(index=b.index[-last:], counter=b.counter[-last:], seq=b.seq[-last:],
                         left=b.left[-last:], right=b.right[-last:],
-                        timestamp_s=b.timestamp_s[-last:], cycle_s=b.cycle_s)
+                        timestamp_s=b.timestamp_s[-last:], cycle_s=b.cycle_s,
+                        uptime=None if b.uptime is None else b.uptime[-last:])
+    uptime = None if a.uptime is None or b.uptime is None else np.concatenate((a.uptime,
+                                                                              b.uptime))
     return Encoders(
         index=np.concatenate((a.index, b.index)), counter=np.concatenate((a.counter, b.counter)),
         seq=np.concatenate((a.seq, b.seq)), left=np.concatenate((a.left, b.left)),
         right=np.concatenate((a.right, b.right)),
-        timestamp_s=np.concatenate((a.timestamp_s, b.timestamp_s)), cycle_s=b.cycle_s)
+        timestamp_s=np.concatenate((a.timestamp_s, b.timestamp_s)), cycle_s=b.cycle_s,
+        uptime=uptime)
 
 
 def _join(a: tuple[Band, Band], b: tuple[Band, Band]) -> tuple[Band, Band]:

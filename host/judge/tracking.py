@@ -13,7 +13,6 @@ half of its message is heard: only then is it known whether it came out in a bur
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from odocan.host.judge.livefit import LiveFit, rebase
@@ -49,7 +48,6 @@ WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
 SILENCE_FRAMES = SILENCE_CYCLES  # encoder cycles without a pose: the firmware was stalled
 BACKLOG_FRAMES = 6_000  # encoder frames kept while waiting for the integrator (60 s at 100 Hz)
 BOOT_COUNT_WAIT_S = 1.0  # after a reboot, how long the count page is waited for (s of bus time)
-_TURN = 2.0 * math.pi
 
 
 class PoseTracker:
@@ -124,6 +122,7 @@ class PoseTracker:
         self.life_truth = LifeTruth()
 
     fast_path = True  # False: every half by ``match_encoder`` over the window (tests compare)
+    enc_uptime = 0  # CTRL_UPTIME of the latest encoder frame heard (0: not reported)
 
     # --- frames ---
 
@@ -140,9 +139,10 @@ class PoseTracker:
                               if t_s - half.t_s >= QUEUED_GAP_S):  # due, in the order heard
             self._settle(name)
 
-    def on_encoders(self, counter: int, left: int, right: int, t_s: float) -> None:
-        """An accepted WHEEL_ENCODERS frame (raw 24-bit counts) heard at bus time ``t_s``."""
+    def on_encoders(self, counter: int, left: int, right: int, t_s: float, uptime: int = 0) -> None:
+        """An accepted WHEEL_ENCODERS frame (raw 24-bit counts, CTRL_UPTIME) at bus time ``t_s``."""
         self.advance(t_s)
+        self.enc_uptime = uptime
         self.enc_seq += 1
         self._pos += 1
         prev = self._window.rows[-1] if len(self._window) else None
@@ -155,7 +155,7 @@ class PoseTracker:
         self._counts[counter] = (self.enc_seq, left, right)
         ref = self._ref
         if ref is not None:
-            step = self._gate.step(counter, left, right, self.placer.periods)
+            step = self._gate.step(counter, left, right, self.placer.periods, uptime)
             if step is not None:
                 ref.step_deltas(*step)
             self._keep_ref(FramePose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad))
@@ -462,7 +462,7 @@ class PoseTracker:
         self.fit = LiveFit.start(pose)
         self._ref_at = {}
         self.placer.restart()
-        self._gate = StepGate(self.geometry, self.counter_bits)
+        self._gate = StepGate(self.geometry, self.counter_bits, self.enc_uptime)  # the latest's
         for seq, counter, left, right in counts:
             step = self._gate.step(counter, left, right)  # the first primes: stays at pose
             if step is not None:

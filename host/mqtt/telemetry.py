@@ -265,7 +265,7 @@ class RobotTelemetry:
 
     def _on_encoders(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]),
-                                 t_s)
+                                 t_s, int(s.get("CTRL_UPTIME", 0)))
         return []
 
     def _on_pose_x(self, s: dict[str, Any], t_s: float) -> list[Publication]:

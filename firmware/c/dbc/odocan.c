@@ -126,6 +126,7 @@ int odocan_wheel_encoders_pack(
 
     dst_p[0] |= pack_left_shift_u8(src_p->checksum, 0u, 0xffu);
     dst_p[1] |= pack_left_shift_u8(src_p->counter, 0u, 0x0fu);
+    dst_p[1] |= pack_left_shift_u8(src_p->ctrl_uptime, 4u, 0xf0u);
     dst_p[2] |= pack_left_shift_u32(src_p->left_count, 0u, 0xffu);
     dst_p[3] |= pack_right_shift_u32(src_p->left_count, 8u, 0xffu);
     dst_p[4] |= pack_right_shift_u32(src_p->left_count, 16u, 0xffu);
@@ -147,6 +148,7 @@ int odocan_wheel_encoders_unpack(
 
     dst_p->checksum = unpack_right_shift_u8(src_p[0], 0u, 0xffu);
     dst_p->counter = unpack_right_shift_u8(src_p[1], 0u, 0x0fu);
+    dst_p->ctrl_uptime = unpack_right_shift_u8(src_p[1], 4u, 0xf0u);
     dst_p->left_count = unpack_right_shift_u32(src_p[2], 0u, 0xffu);
     dst_p->left_count |= unpack_left_shift_u32(src_p[3], 8u, 0xffu);
     dst_p->left_count |= unpack_left_shift_u32(src_p[4], 16u, 0xffu);
@@ -174,6 +176,11 @@ bool odocan_wheel_encoders_checksum_is_in_range(uint8_t value)
 }
 
 bool odocan_wheel_encoders_counter_is_in_range(uint8_t value)
+{
+    return (value <= 15u);
+}
+
+bool odocan_wheel_encoders_ctrl_uptime_is_in_range(uint8_t value)
 {
     return (value <= 15u);
 }

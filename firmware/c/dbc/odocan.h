@@ -220,6 +220,7 @@ extern "C" {
 /* Signal Names. */
 #define ODOCAN_WHEEL_ENCODERS_CHECKSUM_NAME "CHECKSUM"
 #define ODOCAN_WHEEL_ENCODERS_COUNTER_NAME "COUNTER"
+#define ODOCAN_WHEEL_ENCODERS_CTRL_UPTIME_NAME "CTRL_UPTIME"
 #define ODOCAN_WHEEL_ENCODERS_LEFT_COUNT_NAME "LEFT_COUNT"
 #define ODOCAN_WHEEL_ENCODERS_RIGHT_COUNT_NAME "RIGHT_COUNT"
 #define ODOCAN_MOTOR_CMD_CHECKSUM_NAME "CHECKSUM"
@@ -355,6 +356,15 @@ struct odocan_wheel_encoders_t {
      * Offset: 0
      */
     uint8_t counter;
+
+    /**
+     * u4: the motor controller's age, 1 + whole seconds since its power-up, saturating at 15; 0 = not reported. It never goes down within one controller life: a value below the last frame's means the controller restarted and its counters restarted from 0.
+     *
+     * Range: 0..15 (0..15 s)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t ctrl_uptime;
 
     /**
      * u24: the low 24 bits of the left wheel's wrapping hardware counter (counts, forward positive). The receiver extends it: delta = ((now - prev) mod 2^24) read as i24.
@@ -1509,6 +1519,15 @@ bool odocan_wheel_encoders_checksum_is_in_range(uint8_t value);
  * @return true if in range, false otherwise.
  */
 bool odocan_wheel_encoders_counter_is_in_range(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_wheel_encoders_ctrl_uptime_is_in_range(uint8_t value);
 
 /**
  * Check that given signal is in allowed range.

@@ -1,0 +1,254 @@
+"""A restart of the motor controller is never integrated as motion (issue #11, item 5).
+
+The controller (node MOTOR_CTRL) says its age in WHEEL_ENCODERS' CTRL_UPTIME (1 + whole seconds
+since its power-up, saturating at 15; 0: an old controller that does not say). When it restarts
+after a silence long enough, the jump of its counters (from 0) fits the firmware's time-widened
+speed bound, and no rule on the counts alone tells it from motion; CTRL_UPTIME going down does.
+The firmware re-primes on that frame (DEGRADED COUNTER_RESET until a set-pose), in Python and in
+C bit for bit.
+"""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+from typing import Any
+
+import can
+import pytest
+
+from odocan.firmware import frames as fr
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.stream_analysis import analyze_file
+from odocan.sim.board import TICK_S
+from odocan.sim.contract import database
+from odocan.sim.rig import LockstepRig, RigConfig
+from odocan.sim.robot import load
+from tests.dbc_typed import decode
+from tests.independent_checker import Robot, check
+from tests.synth_log import Synth, synthesize, wandering_drive
+from tests.test_realtime import START_TIMEOUT_S, _listen, _start, _stop, udp_bus
+
+__all__ = ["udp_bus"]  # the fixture of tests/test_realtime.py (a channel of this test's own)
+
+DB = database()
+STATUS = DB.get_message_by_name("ODOM_STATUS")
+ENCODERS = DB.get_message_by_name("WHEEL_ENCODERS")
+SILENT_FROM = 500  # tick (5 s): the controller falls silent
+SILENT_TICKS = 200  # 2 s; it restarts as it speaks again
+END_TICKS = SILENT_FROM + SILENT_TICKS + 300
+
+
+def restart_log(path: Path, firmware: str) -> Path:
+    """pmir on a circle; the motor controller silent 2 s from 5 s, then restarted (counters,
+    COUNTER and CTRL_UPTIME from 0); 3 s more. The candump log of the whole run."""
+    config = RigConfig(robot=load("pmir"), scenario="circle", firmware=firmware, duration_s=60.0)
+    with LockstepRig(config, [can.Logger(path)]) as rig:
+        send = rig.sim.tick
+
+        def tick(k: int) -> None:
+            if k == SILENT_FROM + SILENT_TICKS:
+                rig.sim.motor_controller.restart()
+            if not SILENT_FROM <= k < SILENT_FROM + SILENT_TICKS:
+                send(k)
+
+        rig.sim.tick = tick  # type: ignore[method-assign]
+        rig.run(END_TICKS * TICK_S)
+    return path
+
+
+def summaries(path: Path) -> list[tuple[float, str, str]]:
+    """(bus time s, STATE, REASON) of every ODOM_STATUS summary, decoded by cantools."""
+    out = []
+    for msg in can.LogReader(path):
+        if msg.arbitration_id == STATUS.frame_id and msg.data[1] >> 4 == 0:
+            s = decode(DB, STATUS.frame_id, msg.data)
+            out.append((msg.timestamp, str(s["STATE"]), str(s["REASON"])))
+    return out
+
+
+def uptimes(path: Path) -> list[int]:
+    """CTRL_UPTIME of every WHEEL_ENCODERS frame, decoded by cantools."""
+    return [int(str(decode(DB, ENCODERS.frame_id, m.data)["CTRL_UPTIME"]))
+            for m in can.LogReader(path) if m.arbitration_id == ENCODERS.frame_id]
+
+
+def test_python_and_c_firmwares_reprime_on_a_controller_restart_bit_for_bit(
+    tmp_path: Path,
+) -> None:
+    python = restart_log(tmp_path / "python.log", "python")
+    c = restart_log(tmp_path / "c.log", "c")
+    assert python.read_bytes() == c.read_bytes()
+    heard = uptimes(python)
+    assert heard[SILENT_FROM - 1] == 5
+    assert heard[SILENT_FROM] == 1
+    restart_s = (SILENT_FROM + SILENT_TICKS) * TICK_S
+    after = [(state, reason) for t, state, reason in summaries(python) if t > restart_s + 0.05]
+    assert after
+    assert set(after) == {("DEGRADED", "COUNTER_RESET")}
+
+
+# --- the judges, on hand-made logs ------------------------------------------------------------
+
+STEPS = 1200  # 12 s of driving
+RESTART = 600  # the encoder frame the restarted controller speaks again on (CTRL_UPTIME 6 -> 1)
+JUMP = (30, -12)  # its counters' jump (counts): within the plausibility bound of one period
+
+
+def restart_drive(robot: str, *, ctrl_uptime: bool = True, integrates: bool = False) -> Synth:
+    """A wandering drive whose motor controller restarts at ``RESTART`` (``tests.synth_log``):
+    ``ctrl_uptime`` False, an old controller (CTRL_UPTIME 0); ``integrates``: a firmware that
+    takes the jump as motion."""
+    profile = load(robot)
+    d_left, d_right = wandering_drive(profile, STEPS, 0.004, seed=7)
+    return synthesize(profile, "exact", d_left, d_right, ctrl_restarts={RESTART: JUMP},
+                      ctrl_uptime=ctrl_uptime, integrates_restarts=integrates)
+
+
+def judged(path: Path, robot: str) -> dict[str, Any]:
+    """The independent checker's verdict, ``analyze``'s (whole and streamed, with their
+    counter-restart events) and the live monitor's (its worst error vs its reference within
+    one LSB, and its verdict at the end)."""
+    profile = load(robot)
+    p = profile.firmware_params()
+    checker = Robot(p["counts_per_rev"], p["wheel_radius_left_nm"], p["wheel_radius_right_nm"],
+                    p["wheelbase_nm"], p["counter_bits"])
+    whole = analyze(read_log(path), profile).report
+    streamed = analyze_file(path, profile, chunk_frames=256)
+    monitor = BusMonitor(profile)
+    last_s = 0.0
+    for msg in can.LogReader(path):
+        monitor.feed(msg, now_s=msg.timestamp)
+        last_s = msg.timestamp
+    error = monitor.tracker.vs_reference
+    return {
+        "independent": check(path, checker, "exact", lambda _t: (0.0, 0.0, 0.0)).passed,
+        "whole": whole["passed"], "streamed": streamed["passed"],
+        "live": error.max_dpos_m <= POSITION_LSB_M and error.max_dheading_rad <= HEADING_LSB_RAD,
+        "live_verdict": monitor.health(last_s)["state"],
+        "events": [[(e["encoder_frame"], e["detail"]) for e in r["events"]
+                    if e["kind"] == "counter_restart"] for r in (whole, streamed)],
+    }
+
+
+@pytest.mark.parametrize("robot", ["kobuki", "pmir"])
+def test_a_firmware_that_reprimed_on_the_restart_passes_every_judge(
+    tmp_path: Path, robot: str
+) -> None:
+    path = restart_drive(robot).write(tmp_path / "reprimed.log")
+    heard = uptimes(path)
+    assert heard[RESTART - 1] == 6  # the age went back: 1 + 5 whole seconds ...
+    assert heard[RESTART] == 1  # ... to 1
+    verdict = judged(path, robot)
+    assert verdict["independent"]
+    assert verdict["whole"]
+    assert verdict["streamed"]
+    assert verdict["live"]
+    assert verdict["live_verdict"] == "OK"
+    for events in verdict["events"]:  # named, whole and streamed alike
+        assert len(events) == 1
+        frame, detail = events[0]
+        assert frame == RESTART
+        assert "CTRL_UPTIME went back" in detail
+
+
+@pytest.mark.parametrize("robot", ["kobuki", "pmir"])
+def test_a_firmware_that_integrated_the_restart_fails_every_judge(
+    tmp_path: Path, robot: str
+) -> None:
+    path = restart_drive(robot, integrates=True).write(tmp_path / "integrated.log")
+    verdict = judged(path, robot)
+    assert not verdict["independent"]
+    assert not verdict["whole"]
+    assert not verdict["streamed"]
+    assert not verdict["live"]
+    assert verdict["live_verdict"] == "POSE WRONG"
+
+
+def test_an_old_controller_is_judged_by_the_counts_alone(tmp_path: Path) -> None:
+    """CTRL_UPTIME always 0: the same jump cannot be told from motion; the firmware that
+    integrates it (what it must do without the age) passes, as before the signal."""
+    path = restart_drive("kobuki", ctrl_uptime=False, integrates=True).write(tmp_path / "old.log")
+    assert set(uptimes(path)) == {0}
+    verdict = judged(path, "kobuki")
+    assert verdict["independent"]
+    assert verdict["whole"]
+    assert verdict["streamed"]
+    assert verdict["live"]
+    assert verdict["events"] == [[], []]
+
+
+# --- as processes: ``odocan sim`` killed and started again -------------------------------------
+
+
+def test_a_sim_process_killed_and_restarted_is_a_counter_reset_never_ok(
+    udp_bus: tuple[list[str], can.BusABC],
+) -> None:
+    """``odocan firmware`` and ``odocan sim`` on a loopback udp_multicast channel of their own;
+    the sim is killed (SIGKILL) after 1.6 s of driving and started again: its counters, COUNTER
+    and CTRL_UPTIME from 0. The firmware's summaries after it say DEGRADED COUNTER_RESET, never
+    OK, and the monitor's model of the frames heard never says OK or POSE WRONG after it."""
+    bus_argv, listener = udp_bus
+    firmware = _start(["firmware", *bus_argv])
+    sims = [_start(["sim", "--scenario", "circle", "--duration", "30", *bus_argv])]
+    try:
+        first = _listen(listener, lambda c: len(c.of(fr.WHEEL_ENCODERS_ID)) >= 160,
+                        START_TIMEOUT_S + 5)
+        sims[0].kill()
+        sims.append(_start(["sim", "--scenario", "circle", "--duration", "30", *bus_argv]))
+        again = _listen(listener, lambda c: len(c.of(fr.WHEEL_ENCODERS_ID)) >= 200,
+                        START_TIMEOUT_S + 5)
+    finally:
+        for sim in sims:
+            _stop(sim, signal.SIGTERM)
+        _stop(firmware, signal.SIGTERM)
+    assert len(first.of(fr.WHEEL_ENCODERS_ID)) >= 160
+    assert len(again.of(fr.WHEEL_ENCODERS_ID)) >= 200
+    back_s = again.of(fr.WHEEL_ENCODERS_ID)[0].timestamp  # the restarted sim's first frame
+    monitor = BusMonitor(load("pmir"))
+    verdicts: list[tuple[float, str]] = []
+    status: list[tuple[float, str, str]] = []
+    for msg in [*first.frames, *again.frames]:
+        monitor.feed(msg, now_s=msg.timestamp)
+        if msg.timestamp > back_s:
+            verdicts.append((msg.timestamp, monitor.health(msg.timestamp)["state"]))
+            if msg.arbitration_id == STATUS.frame_id and msg.data[1] >> 4 == 0:
+                s = decode(DB, STATUS.frame_id, msg.data)
+                status.append((msg.timestamp, str(s["STATE"]), str(s["REASON"])))
+    reset_s = next(t for t, state, reason in status if reason == "COUNTER_RESET")  # noticed
+    assert {(st, r) for t, st, r in status if t >= reset_s} == {("DEGRADED", "COUNTER_RESET")}
+    assert "OK" not in {v for t, v in verdicts if t >= reset_s}
+    assert "POSE WRONG" not in {v for _, v in verdicts}
+
+
+@pytest.mark.parametrize(("robot", "scenario"), [("pmir", "circle"), ("kobuki", "random")])
+def test_a_restart_without_a_silence_passes_on_a_correct_firmware(
+    tmp_path: Path, robot: str, scenario: str
+) -> None:
+    """The controller restarts between two periods: the firmware re-primes on the first frame
+    it takes after it (E2E refuses the restarted COUNTERs a while) and its twist there holds the
+    last value; analyze, whole and streamed (the twist included), and the monitor pass it."""
+    path = tmp_path / "restart.log"
+    config = RigConfig(robot=load(robot), scenario=scenario, duration_s=60.0, seed=2)
+    with LockstepRig(config, [can.Logger(path)]) as rig:
+        send = rig.sim.tick
+
+        def tick(k: int) -> None:
+            if k == 300:
+                rig.sim.motor_controller.restart()
+            send(k)
+
+        rig.sim.tick = tick  # type: ignore[method-assign]
+        rig.run(8.0)
+    assert ("DEGRADED", "COUNTER_RESET") in {(s, r) for _, s, r in summaries(path)}
+    whole = analyze(read_log(path), load(robot)).report
+    assert whole["passed"], (whole["onboard_vs_reference"], whole["onboard_twist_vs_reference"])
+    assert [e["kind"] for e in whole["events"]] == ["counter_restart"]
+    assert analyze_file(path, load(robot), chunk_frames=300)["passed"]
+    monitor = BusMonitor(load(robot))
+    for msg in can.LogReader(path):
+        monitor.feed(msg, now_s=msg.timestamp)
+    assert monitor.tracker.counter_restarts == 1
+    assert monitor.tracker.vs_reference.max_dpos_m <= POSITION_LSB_M
