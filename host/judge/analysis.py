@@ -44,8 +44,10 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    Without that, a start heading off by its residual (7e-8 rad) grows as residual x distance,
    enough to fail a correct firmware after 600 m.
    The reference takes the steps the firmware is specified to take (firmware/ecu.py): a frame
-   beyond the plausibility bound (``MAX_WHEEL_SPEED_MM_S``) is refused, ``RESYNC_FRAMES`` refused
-   frames consistent among themselves are a counter restart, re-primed on the first of them (a
+   beyond the plausibility bound (``MAX_WHEEL_SPEED_MM_S`` over its periods, widened by the bus
+   time as the firmware widens them by its clock's: ``step_periods``) is refused,
+   ``RESYNC_FRAMES`` refused frames consistent among themselves are a counter restart,
+   re-primed on the first of them (a
    ``counter_restart`` event; the motion across it is lost on board and in the reference alike).
    After the firmware was silent for ``SILENCE_CYCLES`` cycles (a stalled MCU) its first pose,
    naming a backlog frame ENC_COUNTER cannot resolve, is left out, and the position is placed

@@ -26,6 +26,7 @@ from odocan.host.judge.samples import (
     IntArray,
     Poses,
 )
+from odocan.host.judge.step_periods import pair_bound_periods, step_bound_periods
 from odocan.sim.robot import RobotProfile
 
 
@@ -164,8 +165,9 @@ def firmware_steps(
     enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: int | None
 ) -> Steps:
     """The steps as firmware/ecu.py takes them: a frame whose step from the last accepted one
-    exceeds ``MAX_WHEEL_SPEED_MM_S`` over its periods is refused (IMPLAUSIBLE_STEP, not
-    integrated); ``RESYNC_FRAMES`` refused frames plausible among themselves are a counter restart
+    exceeds ``MAX_WHEEL_SPEED_MM_S`` over its periods (``step_periods``: widened by the bus time,
+    as the firmware widens them by its clock's) is refused (IMPLAUSIBLE_STEP, not integrated);
+    ``RESYNC_FRAMES`` refused frames plausible among themselves are a counter restart
     (COUNTER_RESET): the odometry re-primes on the first of them and integrates one step from it to
     the last. A frame whose CTRL_UPTIME is below the last accepted frame's (both non-zero: the
     motor controller restarted) re-primes it whatever its counts (COUNTER_RESET, no step into
@@ -187,16 +189,30 @@ def firmware_steps(
         return (int(wrap_delta(int(left[b]) - int(left[a]), bits)),
                 int(wrap_delta(int(right[b]) - int(right[a]), bits)))
 
-    def plausible(a: int, b: int) -> bool:
-        periods = max(1, int(seq[b] - seq[a]))
+    def within(a: int, b: int, periods: int) -> bool:
         d = delta(a, b)
         return abs(d[0]) <= periods * bound[0] and abs(d[1]) <= periods * bound[1]
+
+    def plausible(a: int, b: int) -> bool:  # from the last accepted frame: periods widened
+        return within(a, b, pair_bound_periods(seq, stamps, enc.cycle_s, a, b))
+
+    def consistent(a: int, b: int) -> bool:  # among refused frames: the sequence's periods
+        return within(a, b, max(1, int(seq[b] - seq[a])))
 
     def restarted(a: int, b: int) -> bool:
         return bool(uptime[b] != 0 and uptime[a] != 0 and uptime[b] < uptime[a] and young[b])
 
-    periods = np.maximum(1, np.diff(seq))
+    stamps = enc.timestamp_s[e0:]
+    periods = step_bound_periods(seq, stamps, enc.cycle_s)
     bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])
+    return _walk(steps, bad, restart, ((plausible, consistent), delta, restarted))
+
+
+def _walk(steps: Steps, bad: Any, restart: Any, rules: tuple[Any, Any, Any]) -> Steps:
+    """From each refused step (``bad``) or controller restart on, the firmware's state machine
+    (``rules``: the plausibility rules, the step between two frames, the restart test)."""
+    plausibility, delta, restarted = rules
+    n_frames = len(steps.d_left) + 1
     k = 0
     for first_bad in np.flatnonzero(bad | restart).tolist():
         if first_bad + 1 <= k:
@@ -204,8 +220,8 @@ def firmware_steps(
         if restart[first_bad]:  # frame first_bad accepted: the next one re-primes
             k = _reprime(steps, first_bad + 1)
             continue
-        k = _refusals(steps, first_bad, len(left), plausible, delta, restarted)
-        if k == len(left):
+        k = _refusals(steps, first_bad, n_frames, plausibility, delta, restarted)
+        if k == n_frames:
             steps.open_from = first_bad
     return steps
 
@@ -249,13 +265,15 @@ def _refusals(
     steps: Steps,
     prev: int,
     n_frames: int,
-    plausible: Any,
+    rules: tuple[Any, Any],
     delta: Any,
     restarted: Any,
 ) -> int:
     """Run the firmware's refusal logic from frame ``prev + 1`` (``prev`` accepted) until a frame
     is accepted again (``restarted(prev, k)``: it re-primes on frame k, a controller restart);
-    return that frame (``n_frames`` at the end of the log)."""
+    return that frame (``n_frames`` at the end of the log). ``rules``: whether a step from the
+    last accepted frame is plausible, whether one between refused frames is."""
+    plausible, consistent = rules
     resync_first: int | None = None
     resync_last = 0
     resync_frames = 0
@@ -267,7 +285,7 @@ def _refusals(
             return k
         steps.refused += 1
         steps.d_left[k - 1] = steps.d_right[k - 1] = 0
-        if resync_first is not None and plausible(resync_last, k):
+        if resync_first is not None and consistent(resync_last, k):
             resync_frames += 1
         else:
             resync_first, resync_frames = k, 1

@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -421,7 +421,7 @@ class StreamReference:
     refused: int = 0
     reprimed: list[int] = field(default_factory=list)  # encoder frames a counter restart primed
     by_uptime: list[int] = field(default_factory=list)  # of them, CTRL_UPTIME went back
-    _window: dict[str, np.ndarray] = field(default_factory=dict)  # left, right, seq, g, uptime
+    _window: dict[str, np.ndarray] = field(default_factory=dict)  # left, right, seq, g, t, uptime
     _sums: tuple[int, int, float, float, float, float] = (0, 0, 0.0, 0.0, 0.0, 0.0)
     _count: int = 0  # encoder frames fed
 
@@ -430,8 +430,9 @@ class StreamReference:
         g = self._count + np.arange(len(enc.index), dtype=np.int64)
         first_chunk = self._count == 0
         self._count += len(enc.index)
-        new = {"left": enc.left, "right": enc.right, "seq": enc.seq, "g": g,
-               "uptime": enc.uptime if enc.uptime is not None else np.zeros_like(g)}
+        new: dict[str, npt.NDArray[Any]] = {
+            "left": enc.left, "right": enc.right, "seq": enc.seq, "g": g, "t": enc.timestamp_s,
+            "uptime": enc.uptime if enc.uptime is not None else np.zeros_like(g)}
         win = ({k: np.concatenate((self._window[k], v)) for k, v in new.items()}
                if self._window else new)
         carried = len(win["g"]) - len(g)
@@ -439,7 +440,7 @@ class StreamReference:
             return {k: np.zeros(0) for k in ("x_m", "y_m", "heading_rad", "distance_m")}
         window = Encoders(index=win["g"], counter=win["g"] & 0xF, seq=win["seq"],
                           left=win["left"], right=win["right"],
-                          timestamp_s=np.zeros(len(win["g"])), cycle_s=None, uptime=win["uptime"])
+                          timestamp_s=win["t"], cycle_s=enc.cycle_s, uptime=win["uptime"])
         steps = firmware_steps(window, 0, self.geometry, self.bits, self.max_wheel_speed_mm_s)
         self.refused += steps.refused - max(0, carried - 1)  # carried refusals counted before
         self.reprimed += [int(win["g"][k]) for k in steps.reprimed]  # decided in this window
