@@ -13,12 +13,15 @@ the on-board unwrapped heading TURNS * 2 pi + HEADING must lie within one LSB of
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import Any
 
 import can
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorMask
@@ -31,7 +34,9 @@ from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import RobotProfile, load
 from tests.dbc_typed import load_can_dbc, numbers
+from tests.independent_checker import Robot
 from tests.synth_log import ENCODER_PERIOD_S, Synth, synthesize
+from tests.test_judge_campaign import profile_of, robots
 
 HEADING_LSB_RAD = 2.0 * math.pi / 65536.0
 DB = load_can_dbc(DBC_PATH)
@@ -242,3 +247,67 @@ def test_headings_at_a_multiple_of_two_pi_are_judged_either_side(tmp_path: Path)
     assert not checker_passes(checker(wrong, profile, [0.0]))
     assert not analyze(read_log(wrong), profile).passed
     assert not analyze_file(wrong, profile, chunk_frames=1_000)["passed"]
+
+
+# --- a campaign on random robots ----------------------------------------------------------------
+
+
+def random_spin(robot: Robot, steps: int, seed: int) -> tuple[list[int], list[int]]:
+    """Spins of both senses (switching every 50 .. 400 steps, creeping a little), each step
+    within the firmware's plausibility bound, below 0.45 turn and half the wire's range."""
+    rng = np.random.default_rng(seed)
+    m_left = 2 * math.pi * robot.wheel_radius_left_nm * 1e-9 / robot.counts_per_rev
+    m_right = 2 * math.pi * robot.wheel_radius_right_nm * 1e-9 / robot.counts_per_rev
+    b_m = robot.wheelbase_nm * 1e-9
+    most = min(0.8 * 4.0 * ENCODER_PERIOD_S / max(m_left, m_right),
+               0.45 * 2 * math.pi * b_m / (m_left + m_right),
+               0.4 * (1 << (min(robot.counter_bits, 24) - 1)))
+    spin = max(1, int(most))
+    runs = rng.integers(50, 400, size=steps // 50 + 2)
+    sense = np.repeat(rng.choice([-1, 1], size=len(runs)), runs)[:steps]
+    size = rng.integers(max(1, spin // 2), spin + 1, size=steps)
+    creep = rng.integers(0, max(1, spin // 20) + 1, size=steps)
+    return (creep - sense * size).tolist(), (creep + sense * size).tolist()
+
+
+@settings(max_examples=int(os.environ.get("ODOCAN_CAMPAIGN_EXAMPLES", "12")) // 2 + 2,
+          deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
+                                                HealthCheck.function_scoped_fixture])
+@given(robot=robots(), integrator=st.sampled_from(["euler", "rk2", "exact"]),
+       reboot=st.booleans(), delta=st.sampled_from([0, 0, 1, 3, -7, -1, 12_345]),
+       edit_at=st.floats(0.2, 0.9), seed=st.integers(0, 2**32 - 1))
+def test_random_robots_spinning_agree_with_the_checker(
+    tmp_path_factory: pytest.TempPathFactory, robot: Robot, integrator: str, reboot: bool,
+    delta: int, edit_at: float, seed: int,
+) -> None:
+    """Random robots spinning both ways (through a reboot or not): a correct firmware PASSes
+    every judge; TURNS off by ``delta`` from some time FAILs every judge, live never before it;
+    the checker agrees each time."""
+    steps = 2_000
+    profile = profile_of(robot)
+    d_left, d_right = random_spin(robot, steps, seed)
+    reboot_at = steps // 2 if reboot else None
+    synth = synthesize(profile, integrator, d_left, d_right, reboot_at=reboot_at)
+    from_t_s = round(edit_at * steps) * ENCODER_PERIOD_S + 0.0005
+    lines = turns_edited(synth.lines(), from_t_s, delta) if delta else synth.lines()
+    path = tmp_path_factory.mktemp("spin") / "spin.log"
+    path.write_text("".join(lines))
+    lives = [0.0] + ([reboot_at * ENCODER_PERIOD_S] if reboot_at else [])
+    right = checker_passes(checker(path, profile, lives))
+    assert right == (delta == 0)
+    whole = analyze(read_log(path), profile, integrator)
+    assert whole.passed == right, whole.report["onboard_vs_reference"]
+    assert analyze_file(path, profile, integrator, chunk_frames=2_000)["passed"] == right
+    end_s = steps * ENCODER_PERIOD_S
+    monitor = BusMonitor(profile, integrator)
+    bridge = RobotTelemetry("r", Geometry.of(profile), integrator,
+                            counter_bits=profile.counter_bits, publish_hz=1_000)
+    flagged = []
+    for line in lines:
+        msg = parse_candump_line(line.encode())
+        if msg is not None:
+            monitor.feed(msg, now_s=msg.timestamp)
+            flagged += [p for leaf, p in bridge.feed(msg) if leaf == "error" and p["pose_wrong"]]
+    assert monitor.health(end_s + 0.005)["state"] == ("OK" if right else "POSE WRONG")
+    assert bool(flagged) != right
+    assert all(p["t_s"] >= from_t_s for p in flagged)
