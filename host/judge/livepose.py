@@ -85,9 +85,11 @@ def difference(a: FramePose, b: FramePose) -> dict[str, float]:
     """a - b: position (m), distance (m) and heading (rad): wrapped to (-pi, pi], plus 2 pi per
     whole turn the cumulative headings differ beyond it (``host.judge.turns``: a TURNS off)."""
     dx, dy = a.x_m - b.x_m, a.y_m - b.y_m
-    wrapped = wrap_angle(a.heading_rad - b.heading_rad)
-    return {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy),
-            "dheading_rad": unwrapped_error(a.heading_rad, b.heading_rad, wrapped)}
+    d = a.heading_rad - b.heading_rad
+    dheading = wrap_angle(d)
+    if not -math.pi < d <= math.pi:  # beyond half a turn: TURNS may be off (else it is not)
+        dheading = unwrapped_error(a.heading_rad, b.heading_rad, dheading)
+    return {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy), "dheading_rad": dheading}
 
 
 class FramePose(NamedTuple):
