@@ -23,6 +23,7 @@ from odocan.host.judge.samples import (
     contract_cycle_s,
     match_encoder,
 )
+from odocan.host.judge.turns import unwrapped_errors
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
 
@@ -30,11 +31,12 @@ from odocan.sim.robot import RobotProfile
 
 
 def pose_errors(onboard: Poses, ref: Reference) -> tuple[FloatArray, FloatArray]:
-    """Position (m) and wrapped heading (rad) errors, on-board minus reference (at the same
-    encoder frames), per sample."""
+    """Position (m) and heading (rad) errors, on-board minus reference (at the same encoder
+    frames), per sample: the heading's wrapped to (-pi, pi] plus 2 pi per whole turn TURNS is
+    off (``host.judge.turns``)."""
     position = np.hypot(onboard.x_m - ref.x_m, onboard.y_m - ref.y_m)
     heading = wrap_pi(onboard.heading_raw * HEADING_LSB_RAD - ref.heading_rad)
-    return position, heading
+    return position, unwrapped_errors(onboard.heading_rad, ref.heading_rad, heading)
 
 
 def error_summary(position: FloatArray, heading: FloatArray) -> dict[str, Any]:

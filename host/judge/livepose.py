@@ -11,6 +11,7 @@ from typing import Any, NamedTuple
 from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, PERIODS_PER_S, RESYNC_FRAMES
 from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.turns import unwrapped_error
 from odocan.host.protocol.pose import heading_fields, unwrap_near
 from odocan.sim.pose import wrap_angle
 
@@ -101,10 +102,14 @@ class StepGate:
 
 
 def difference(a: FramePose, b: FramePose) -> dict[str, float]:
-    """a - b: position (m), distance (m) and heading wrapped to (-pi, pi] (rad)."""
+    """a - b: position (m), distance (m) and heading (rad): wrapped to (-pi, pi], plus 2 pi per
+    whole turn the cumulative headings differ beyond it (``host.judge.turns``: a TURNS off)."""
     dx, dy = a.x_m - b.x_m, a.y_m - b.y_m
-    return {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy),
-            "dheading_rad": wrap_angle(a.heading_rad - b.heading_rad)}
+    d = a.heading_rad - b.heading_rad
+    dheading = wrap_angle(d)
+    if not -math.pi < d <= math.pi:  # beyond half a turn: TURNS may be off (else it is not)
+        dheading = unwrapped_error(a.heading_rad, b.heading_rad, dheading)
+    return {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy), "dheading_rad": dheading}
 
 
 class FramePose(NamedTuple):

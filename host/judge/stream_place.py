@@ -33,6 +33,7 @@ from odocan.host.judge.samples import (
     IntArray,
 )
 from odocan.host.judge.stream_fit import BlockDot, SegmentSums
+from odocan.host.judge.turns import unwrapped_errors
 
 
 @dataclass(frozen=True)
@@ -195,7 +196,9 @@ def reference_errors(
         ref_y = y0 + sin0 * chunk.rel_x_m + cos0 * chunk.rel_y_m
         ref_y += offsets[1][chunk.segment]
         position = np.hypot(chunk.x_m - ref_x, chunk.y_m - ref_y)
-        heading = wrap_pi(chunk.heading_raw * HEADING_LSB_RAD - (h0 + chunk.rel_heading_rad))
+        ref_h = h0 + chunk.rel_heading_rad
+        heading = unwrapped_errors(chunk.heading_rad, ref_h,
+                                   wrap_pi(chunk.heading_raw * HEADING_LSB_RAD - ref_h))
         top_position = max(top_position, float(np.max(position)))
         top_heading = max(top_heading, float(np.max(np.abs(heading))))
         allowed = allowance(chunk.enc) if allowance is not None else np.zeros(0)
