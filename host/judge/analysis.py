@@ -111,6 +111,7 @@ from odocan.host.judge.compare import (
     versus_truth,
 )
 from odocan.host.judge.losses import firmware_losses, loss_allowance
+from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import Life, merge, split_lives
 from odocan.host.judge.reference_path import build_reference, wrap_pi
 from odocan.host.judge.samples import (
@@ -123,8 +124,6 @@ from odocan.host.judge.samples import (
     onboard_samples,
     pick_integrator,
     require_messages,
-    saw_only_the_log,
-    starts_at_power_up,
     truth_samples,
 )
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
