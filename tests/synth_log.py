@@ -113,10 +113,12 @@ def synthesize(
     ctrl_restarts: dict[int, tuple[int, int]] | None = None,
     ctrl_uptime: bool = False,
     integrates_restarts: bool = False,
+    y_bias_100um: dict[int, int] | None = None,
 ) -> Synth:
     """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
     ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB;
-    ``heading_bias_lsb``: ... whose HEADING (and TURNS) at encoder frame k is off by that many.
+    ``heading_bias_lsb``: ... whose HEADING (and TURNS) at encoder frame k is off by that many;
+    ``y_bias_100um``: ... whose Y at encoder frame k is off by that many LSB.
     ``counter_jumps``: {encoder frame: offset in counts} where both counters restart (the jumps
     at least ``RESYNC_FRAMES`` frames apart and beyond the plausibility bound).
     ``reboot_at``: the encoder frame the firmware restarts on (module docstring);
@@ -171,7 +173,8 @@ def synthesize(
             status_counter = 1
         if life % 2 == 0:
             group += _pose_lines(odo, t_s + 0.001, pose_counter, named, errors, bias.get(k, 0),
-                                 (heading_bias_lsb or {}).get(k, 0))
+                                 (heading_bias_lsb or {}).get(k, 0),
+                                 (y_bias_100um or {}).get(k, 0))
             pose_counter += 1
         if life % 10 == 0 and not (boot_in_init and k == reboot_at):
             uptime_s = int(life * ENCODER_PERIOD_S + (t0_s if boot == 0 else 0.0))
@@ -221,12 +224,12 @@ class _Controller:
 
 def _pose_lines(
     odo: Odometry, t_s: float, counter: int, enc: int, errors: ErrorMask, x_bias_100um: int = 0,
-    heading_bias_lsb: int = 0,
+    heading_bias_lsb: int = 0, y_bias_100um: int = 0,
 ) -> list[str]:
     """ODOM_POSE_X and ODOM_POSE_Y, rounded as the ECU rounds them (X off by ``x_bias_100um``,
-    the heading by ``heading_bias_lsb``)."""
+    the heading by ``heading_bias_lsb``, Y by ``y_bias_100um``)."""
     x_100um = mul_shr_round_i64(odo.x_q40_m, 10_000, 40, errors) + x_bias_100um
-    y_100um = mul_shr_round_i64(odo.y_q40_m, 10_000, 40, errors)
+    y_100um = mul_shr_round_i64(odo.y_q40_m, 10_000, 40, errors) + y_bias_100um
     heading_rounded = odo.heading_bam64 + (1 << 47) + (heading_bias_lsb << 48)
     heading_bam16 = (heading_rounded >> 48) & 0xFFFF
     turns = wrap_i32(odo.heading_turns + (heading_rounded >> 64))

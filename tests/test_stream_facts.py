@@ -17,6 +17,7 @@ import pytest
 from odocan.host.io.logs import FrameArrays, FrameCollector, iter_log, read_log, to_message
 from odocan.host.judge.analysis import _covered_s, _frame_counts
 from odocan.host.judge.compare import _outside_band, check_twist
+from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import split_lives
 from odocan.host.judge.reference_path import DOT_BLOCK, block_dot
 from odocan.host.judge.samples import (
@@ -24,8 +25,6 @@ from odocan.host.judge.samples import (
     encoder_frames,
     onboard_samples,
     pick_integrator,
-    saw_only_the_log,
-    starts_at_power_up,
     truth_samples,
 )
 from odocan.host.judge.stalls import after_stalls

@@ -22,14 +22,17 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    make one truth sample (named by the simulator, whenever its encoder frame reaches the bus).
 4. **Reference**: ``host.reference.integrate`` over the count deltas of the accepted encoder frames
    (mod 2^min(counter_bits, 24), what the wire carries), started at the first on-board sample.
-   The start pose is exact when the log starts at power-up: the firmware starts at pose 0 on the
-   first encoder frame it accepts, so a log whose first on-board sample names its first accepted
-   encoder frame, reads exactly 0 (X, Y, HEADING, TURNS) and whose first ODOM_STATUS summary says
-   UPTIME 0 starts the reference at exactly (0, 0, 0) -- provided, when the log has one, that the
-   first ODOM_STATUS page of encoder E2E counts says the firmware had accepted exactly the log's
-   encoder frames (it primed on the log's first: a recorder started late is not a power-up). The
-   exact start is not checked against the samples: a wrong firmware drifting from the start must
-   be judged from it, not from a start fitted to its drift. Without that page, a recorder
+   The start pose is exact when the log starts at power-up (``host.judge.powerup``): the
+   firmware starts at pose 0 on the first encoder frame it accepts (by contract; a set-pose is
+   the only other start), so a log whose first ODOM_STATUS summary says UPTIME 0 and whose first
+   ODOM_STATUS page of encoder E2E counts says the firmware had accepted exactly the log's
+   encoder frames (it primed on the log's first: a recorder started late is not a power-up)
+   starts the reference at exactly (0, 0, 0) on its first encoder frame, whatever its first
+   on-board sample reads: a firmware that powers up off (0, 0, 0), by one LSB or by 0.1 m, FAILs.
+   The exact start is not checked against the samples: a wrong firmware drifting from the start
+   must be judged from it, not from a start fitted to its drift. Without that page (other
+   firmwares need not send it) the first sample must also name the first accepted encoder frame
+   and read exactly 0 (X, Y, HEADING, TURNS); then a recorder
    started in the firmware's first second after the robot moved less than half an LSB would be
    taken for a power-up. Any other log (mid-drive) has its start fitted to below its resolution: the
    on-board values are rounded to 0.1 mm and 2 pi/65536 rad, so the start heading is the middle
@@ -113,6 +116,7 @@ from odocan.host.judge.compare import (
     versus_truth,
 )
 from odocan.host.judge.losses import firmware_losses, loss_allowance
+from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import Life, merge, split_lives
 from odocan.host.judge.reference_path import build_reference, restart_detail, wrap_pi
 from odocan.host.judge.samples import (
@@ -125,8 +129,6 @@ from odocan.host.judge.samples import (
     onboard_samples,
     pick_integrator,
     require_messages,
-    saw_only_the_log,
-    starts_at_power_up,
     truth_samples,
 )
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts

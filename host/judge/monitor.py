@@ -320,7 +320,8 @@ class BusMonitor:
             if integrator in ("euler", "rk2", "exact"):
                 self.tracker.on_integrator(integrator)
         elif page == "E2E_WHEEL_ENCODERS":
-            self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]))
+            self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]),
+                                       self.sources.first_life_page())
         elif page == "FRAME_TOTALS":
             self.status.update({k.lower(): int(v) for k, v in s.items() if k.endswith("_FRAMES")})
 

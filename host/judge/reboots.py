@@ -22,7 +22,7 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
   (ENC_E2E_OK: encoder frames accepted since its boot) follows, it names the frame it primed
   on exactly: the ENC_E2E_OK-th accepted encoder frame back from the page. That holds when the
   log missed the boot summary (UPTIME counts whole seconds: the summaries of the first second
-  all say 0) and is checked again on the life (``host.judge.samples.saw_only_the_log``).
+  all say 0) and is checked again on the life (``host.judge.powerup.saw_only_the_log``).
 
 A life with no on-board sample (a reboot at the very end) is reported, not compared.
 

@@ -1,7 +1,7 @@
 """The inputs of the analysis, from the frames: E2E-accepted rows decoded with the DBC, the
 encoder sequence, the exact alignment of the pose and truth frames to the encoder frames they name,
 and whether the log starts at the firmware's power-up (``host.judge.analysis`` module docstring,
-steps 1 to 3 and the power-up rule of step 4)."""
+steps 1 to 3; the power-up rule of step 4 is ``host.judge.powerup``)."""
 
 from __future__ import annotations
 
@@ -456,45 +456,3 @@ def truth_samples(
 def empty_poses() -> Poses:
     empty_f, empty_i = np.zeros(0), np.zeros(0, dtype=np.int64)
     return Poses(empty_i, empty_f, empty_f, empty_f, empty_i)
-
-
-
-def starts_at_power_up(
-    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, onboard: Poses
-) -> bool:
-    """The log starts at the firmware's power-up (module docstring, step 4): its first on-board
-    sample names the first accepted encoder frame and reads exactly 0, and the first accepted
-    ODOM_STATUS summary says UPTIME 0."""
-    if int(onboard.enc[0]) != 0 or int(onboard.heading_raw[0]) != 0:
-        return False
-    if onboard.x_m[0] != 0.0 or onboard.y_m[0] != 0.0 or onboard.heading_rad[0] != 0.0:
-        return False
-    try:
-        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
-    except DecodeError:
-        return False
-    if "UPTIME" not in page:
-        return False
-    uptime = page["UPTIME"][accepted[page["index"]]]
-    return len(uptime) > 0 and int(uptime[0]) == 0 and saw_only_the_log(frames, accepted, decoder)
-
-
-def saw_only_the_log(
-    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
-) -> bool:
-    """Whether the firmware had accepted exactly the log's encoder frames when it sent its first
-    ODOM_STATUS page of WHEEL_ENCODERS E2E counts (ENC_E2E_OK): then it primed on the log's first
-    encoder frame. True when the log has no such page (other firmwares need not send it)."""
-    try:
-        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
-    except DecodeError:
-        return True
-    if "ENC_E2E_OK" not in page or not accepted[page["index"]].any():
-        return True
-    keep = accepted[page["index"]]
-    first, ok = int(page["index"][keep][0]), int(page["ENC_E2E_OK"][keep][0])
-    encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < first)))
-    return ok == in_log & 0xFFFF
-
-

@@ -40,6 +40,15 @@ class SourceWatch:
     last_uptime_s: int = 0
     last_state: str = ""
     conflict_until_s: float = -math.inf
+    first_uptime_s: int | None = None  # the first summary's UPTIME
+    page_pending: bool = True  # the first life's first ENC_E2E_OK page not heard yet
+
+    def first_life_page(self) -> bool:
+        """Called at each ENC_E2E_OK page: whether it is the first life's first and the first
+        summary said UPTIME 0 (with the frames heard, a power-up's evidence:
+        ``PoseTracker.on_enc_counts``). True once."""
+        first, self.page_pending = self.page_pending, False
+        return first and self.first_uptime_s == 0
 
     def observe(self, t_s: float, uptime_s: int, state: str) -> str | None:
         """One ODOM_STATUS summary; returns ``"reboot"``, ``"two sources"``, ``"uptime jump"``
@@ -47,7 +56,7 @@ class SourceWatch:
         offset = uptime_s - t_s
         kind = None
         if self.offset_s is None:
-            self.offset_s = offset
+            self.offset_s, self.first_uptime_s = offset, uptime_s
         elif abs(offset - self.offset_s) <= UPTIME_MATCH_S:
             if (state == "INIT" and self.last_state not in ("", "INIT")) or (
                 uptime_s < self.last_uptime_s  # one source's UPTIME never goes back
@@ -62,6 +71,7 @@ class SourceWatch:
             kind = "reboot" if uptime_s < self.last_uptime_s or state == "INIT" else "uptime jump"
             self.offset_s, self.other_s = offset, self.offset_s
         self.last_uptime_s, self.last_state = uptime_s, state
+        self.page_pending = self.page_pending and kind != "reboot"
         return kind
 
     def observe_quiet(

@@ -5,7 +5,7 @@ equal to what ``host.judge.analysis`` takes from the whole log (issue #14.1):
   covers (``analysis._covered_s``: first to last WHEEL_ENCODERS frame plus one cycle, or the
   first to the last frame);
 * the integrator ODOM_STATUS reports (``samples.pick_integrator``: the last accepted summary's);
-* the power-up rule's inputs (``samples.starts_at_power_up`` and ``saw_only_the_log``): the
+* the power-up rule's inputs (``powerup.starts_at_power_up`` and ``saw_only_the_log``): the
   first accepted summary's UPTIME, and the first accepted page of WHEEL_ENCODERS E2E counts
   (ENC_E2E_OK) with the number of accepted encoder frames before it.
 
@@ -23,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.powerup import zero_first_sample
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses
 from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
@@ -160,20 +161,21 @@ class StreamFacts:
 
     def saw_only_the_log(self) -> bool:
         """``samples.saw_only_the_log`` of the frames fed."""
+        return self._counted_only_the_log() is not False
+
+    def _counted_only_the_log(self) -> bool | None:
+        """``samples.counted_only_the_log`` of the frames fed."""
         if not self._has_status or not self._enc_ok.present or self._enc_ok.first is None:
-            return True
+            return None
         return self._enc_ok.first == self._accepted_encoders & 0xFFFF
 
     def starts_at_power_up(self, first: Poses) -> bool:
         """``samples.starts_at_power_up``, given the log's first on-board sample (``first``:
         its columns, at least one element)."""
-        if int(first.enc[0]) != 0 or int(first.heading_raw[0]) != 0:
+        if not self._has_status or not self._uptime.present or self._uptime.first != 0:
             return False
-        if first.x_m[0] != 0.0 or first.y_m[0] != 0.0 or first.heading_rad[0] != 0.0:
-            return False
-        if not self._has_status or not self._uptime.present:
-            return False
-        return self._uptime.first == 0 and self.saw_only_the_log()
+        counted = self._counted_only_the_log()
+        return zero_first_sample(first) if counted is None else counted
 
 
 def _applies_set_pose(chunk: FrameArrays, accepted: npt.NDArray[np.bool_],

@@ -1,14 +1,13 @@
 """Live alignment of what a robot's bus says: the on-board pose against a float64 reference and
 the ground truth, each paired at the very encoder frame it names (ENC_COUNTER), never by time.
 
-Used by ``odocan monitor`` and the MQTT bridge. The offline, bulk version is
-``host.judge.analysis``; the live judge resolves the encoder frame a pose half names with the
-very same functions (``host.judge.samples.match_encoder``, with its held and queued rules, and
-``sender_seq``) applied to a window of the latest frames (``HALF_WINDOW`` halves, ``ENC_WINDOW``
-encoder frames). A half is settled once bus time is half an encoder cycle past it or the next
-half of its message is heard: only then is it known whether it came out in a burst
-(``samples.queued_frames``), so a sample is judged at most half a cycle after its ODOM_POSE_Y
-(``take_samples``).
+Used by ``odocan monitor`` and the MQTT bridge; the offline version is ``host.judge.analysis``.
+The encoder frame a pose half names is resolved with the same functions
+(``samples.match_encoder``, its held and queued rules, ``sender_seq``) on a window of the latest
+frames (``HALF_WINDOW`` halves, ``ENC_WINDOW`` encoder frames). A half is settled once bus time
+is half an encoder cycle past it or the next half of its message is heard: only then is it
+known whether it came out in a burst (``samples.queued_frames``), so a sample is judged at most
+half a cycle after its ODOM_POSE_Y (``take_samples``).
 """
 
 from __future__ import annotations
@@ -58,16 +57,13 @@ class PoseTracker:
     cycle after it is heard); an ODOM_POSE_X and an ODOM_POSE_Y naming one encoder frame make one
     on-board sample (the first of each, as ``host.judge.samples.onboard_samples``).
 
-    The reference starts at the first on-board pose heard, primed with the counts of the
-    encoder frame that pose names and stepped with every accepted WHEEL_ENCODERS frame after it.
-    When the integrator is not known yet (``integrator`` None: the one ODOM_STATUS reports), the
-    poses and encoder frames heard meanwhile are kept (up to ``BACKLOG_FRAMES``) and compared
-    once it is, so the monitor (which waits for ODOM_STATUS) and the bridge (told the integrator)
-    start at the same pose and judge the same samples as ``analyze``. The reference starts again
-    when ODOM_STATUS reports another integrator. At power-up the first pose is exactly (0, 0, 0),
-    the start ``analyze`` uses; mid-drive the start inherits the pose signals' rounding (0.1 mm,
-    2 pi/65536 rad), which ``fit`` narrows sample by sample as ``analyze`` fits it over the
-    whole log (``host.judge.livefit``): each sample is judged against the corrected reference.
+    The reference starts at the first on-board pose heard, primed with the counts of the frame
+    it names, stepped with every accepted WHEEL_ENCODERS frame after it. Until the integrator is
+    known (``integrator`` None: ODOM_STATUS's) the poses and frames heard are kept (up to
+    ``BACKLOG_FRAMES``) and compared once it is, so the monitor and the bridge judge the samples
+    ``analyze`` judges; another integrator restarts it. Its start inherits the pose signals'
+    rounding, narrowed sample by sample as ``analyze`` fits it (``host.judge.livefit``), until
+    a power-up is proven (``on_enc_counts``): then exactly (0, 0, 0), as ``analyze`` starts it.
     """
 
     def __init__(
@@ -337,17 +333,13 @@ class PoseTracker:
         self._drop_backlog()
 
     def power_up(self, primed_now: bool) -> None:
-        """A firmware reboot (``host.judge.sources``): the new firmware's life starts at its
-        power-up pose, (0, 0, 0) at the encoder frame it primed on, as ``analyze`` starts it
-        (``host.judge.reboots``). That frame is the one its first page of WHEEL_ENCODERS E2E
-        counts names (``on_enc_counts``: the ENC_E2E_OK-th encoder frame back), whatever the
-        summary said (the recorder may have missed the boot summary: those of the first second
-        all say UPTIME 0); until that page, or ``BOOT_COUNT_WAIT_S`` without one, the new
-        life's samples wait. Without the page: the latest accepted encoder frame when the boot
-        summary says UPTIME 0 and not INIT (``primed_now``: it primed in its first tick), else
-        the next one. No pose is adopted, so a firmware that comes up wrong shows its error.
-        Without a known integrator it falls back to ``restart_reference`` (the next pose is
-        adopted)."""
+        """A reboot (``sources``): the new life starts at (0, 0, 0) at the encoder frame it
+        primed on, as ``analyze`` starts it: the one its first ENC_E2E_OK page names
+        (``on_enc_counts``), whatever the summary said; its samples wait for that page, or
+        ``BOOT_COUNT_WAIT_S``; without it, the latest frame when the boot summary says UPTIME 0
+        and not INIT (``primed_now``: primed in its first tick), else the next. No pose is
+        adopted, so a firmware that comes up wrong shows its error. Without a known integrator:
+        ``restart_reference`` (the next pose is adopted)."""
         self.new_life()
         self._losses.lost_page = None  # the new firmware counts from 0
         if self.integrator is None:
@@ -371,24 +363,32 @@ class PoseTracker:
         yet)."""
         return self._boot is not None
 
-    def _finish_boot(self, primed: int) -> None:
+    def _finish_boot(self, primed: int, first_life: bool = False) -> None:
         """Start the new life's reference at (0, 0, 0) at encoder frame ``primed`` (seq) and
         judge the samples heard since the reboot; adopt the next pose when that frame is not
-        known (not heard yet, or no longer in the window)."""
+        known (not heard yet, or no longer in the window). ``first_life``: the log's first, its
+        reference started again (one start), its truth in the truth's own frame."""
         poses, self._boot, self._boot_poses = self._boot_poses, None, []
         counts = window_counts(self._window, primed)
         if not counts or counts[0][0] != primed:
-            self.restart_reference()
+            if not first_life:  # a first life keeps its fitted start
+                self.restart_reference()
             return
+        self.reference_starts -= first_life and self.reference_starts > 0
         self._start_reference(FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
-        self.life_truth.booted(primed, self._ref_at)
+        if not first_life:
+            self.life_truth.booted(primed, self._ref_at)
 
-    def on_enc_counts(self, ok: int, lost: int) -> None:
-        """ODOM_STATUS page E2E_WHEEL_ENCODERS: the firmware's ENC_E2E_OK (encoder frames it
-        accepted since its boot, u16 wrapping) and ENC_E2E_LOST. The first page after a reboot
-        names the frame it primed on (``power_up``); then ``on_enc_lost``."""
+    def on_enc_counts(self, ok: int, lost: int, first_life_page: bool = False) -> None:
+        """ODOM_STATUS page E2E_WHEEL_ENCODERS: ENC_E2E_OK (frames accepted since boot, u16)
+        and ENC_E2E_LOST. The first page after a reboot names the frame it primed on
+        (``power_up``); the first life's first, after a first summary of UPTIME 0
+        (``first_life_page``), counting exactly the frames heard proves a power-up: (0, 0, 0)
+        on frame 0, whatever the first pose said (``analyze``'s rule); then ``on_enc_lost``."""
         if self._boot is not None and 0 < ok <= self.enc_seq + 1:
             self._finish_boot(self.enc_seq - ok + 1)
+        elif first_life_page and ok == self.enc_seq + 1 and self.integrator is not None:
+            self._finish_boot(0, first_life=True)  # the samples judged before keep their errors
         self.on_enc_lost(lost)
 
     def _drop_backlog(self) -> None:

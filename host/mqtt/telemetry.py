@@ -356,7 +356,8 @@ class RobotTelemetry:
         name = self._page_names.get(page) or _page_name(self.db, page)
         self.firmware[name] = fields
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
-            self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]))
+            self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]),
+                                       self.sources.first_life_page())
         elif name == "summary":  # a short DEGRADED or a new ERROR_MASK bit: never lost
             self.events += self.latch.observe(t_s, int(s["STATE"]), int(s["REASON"]),
                                               int(s["ERROR_MASK"]))

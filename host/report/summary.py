@@ -172,8 +172,16 @@ def _pose_within(report: dict[str, Any], tolerance: Tolerance) -> bool:
     )
 
 
+_START_TEXT = {  # the reference's start (host.judge.powerup, reference_path, setposes)
+    "power-up": "exact from power-up: (0, 0, 0) at the frame the firmware primed on",
+    "fitted": "fitted to the samples (no power-up in the log: a start offset cannot be told)",
+    "set pose": "exact from the set-pose applied",
+}
+
+
 def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
-    """(label, text) lines: robot, geometry, run, time, distance, frames not checked, pose."""
+    """(label, text) lines: robot, geometry, run, time, the reference's start, distance, frames
+    not checked, pose."""
     robot = report["robot"]
     pose = report["final_onboard_pose"]
     truth = report.get("onboard_vs_truth") or {}
@@ -199,6 +207,9 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
     if inputs.get("errors") or inputs.get("faults"):  # what the run injected (a log: unknown)
         facts.append(("injected", f"errors {inputs.get('errors') or 'none'}, "
                                   f"faults {inputs.get('faults') or 'none'}"))
+    if report.get("reference_start"):
+        facts.append(("start", _START_TEXT.get(report["reference_start"],
+                                               str(report["reference_start"]))))
     if truth.get("distance_travelled_m") is not None:
         facts.append(("distance", f"{truth['distance_travelled_m']:.3f} m travelled"))
     reboots = report.get("reboots") or []

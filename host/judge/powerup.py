@@ -1,0 +1,74 @@
+"""The power-up rule (``host.judge.analysis`` module docstring, step 4): whether a log, or a
+firmware life in it, starts at the firmware's power-up, so that its reference starts exactly at
+(0, 0, 0) on the encoder frame the firmware primed on, whatever its first pose says (a firmware
+that powers up off (0, 0, 0) is wrong, and is judged from (0, 0, 0)). The evidence is the
+firmware's own: the first ODOM_STATUS summary (UPTIME 0) and its first ENC_E2E_OK page (it had
+accepted exactly the log's encoder frames). A log cut after the power-up lacks the second, so
+its start is fitted (``host.judge.reference_path``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.samples import ENC_E2E_PAGE, Poses
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+
+
+def starts_at_power_up(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, onboard: Poses
+) -> bool:
+    """The log starts at the firmware's power-up (module docstring, step 4): the first accepted
+    ODOM_STATUS summary says UPTIME 0 and the first ENC_E2E_OK page says the firmware had
+    accepted exactly the log's encoder frames (it primed on the log's first), whatever the
+    first on-board sample reads: a firmware whose power-up pose is not (0, 0, 0) is judged from
+    (0, 0, 0). Without that page, ``zero_first_sample`` stands in for it."""
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
+    except DecodeError:
+        return False
+    if "UPTIME" not in page:
+        return False
+    uptime = page["UPTIME"][accepted[page["index"]]]
+    if len(uptime) == 0 or int(uptime[0]) != 0:
+        return False
+    counted = counted_only_the_log(frames, accepted, decoder)
+    return zero_first_sample(onboard) if counted is None else counted
+
+
+def zero_first_sample(onboard: Poses) -> bool:
+    """The first on-board sample names the first accepted encoder frame and reads exactly 0:
+    the power-up rule's last evidence when the firmware sends no ENC_E2E_OK page (a recorder
+    started in its first second after the robot moved less than half an LSB passes it too, and
+    an offset from power-up is then fitted, not failed)."""
+    if int(onboard.enc[0]) != 0 or int(onboard.heading_raw[0]) != 0:
+        return False
+    return bool(onboard.x_m[0] == 0.0 and onboard.y_m[0] == 0.0 and onboard.heading_rad[0] == 0.0)
+
+
+def saw_only_the_log(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
+) -> bool:
+    """``counted_only_the_log``, True when the log has no such page (other firmwares need not
+    send it)."""
+    return counted_only_the_log(frames, accepted, decoder) is not False
+
+
+def counted_only_the_log(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
+) -> bool | None:
+    """Whether the firmware had accepted exactly the log's encoder frames when it sent its first
+    ODOM_STATUS page of WHEEL_ENCODERS E2E counts (ENC_E2E_OK): then it primed on the log's first
+    encoder frame. None when the log has no such page."""
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+    except DecodeError:
+        return None
+    if "ENC_E2E_OK" not in page or not accepted[page["index"]].any():
+        return None
+    keep = accepted[page["index"]]
+    first, ok = int(page["index"][keep][0]), int(page["ENC_E2E_OK"][keep][0])
+    encoders = decoder.select(frames, "WHEEL_ENCODERS")
+    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < first)))
+    return ok == in_log & 0xFFFF
