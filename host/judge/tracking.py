@@ -2,13 +2,12 @@
 the ground truth, each paired at the very encoder frame it names (ENC_COUNTER), never by time.
 
 Used by ``odocan monitor`` and the MQTT bridge. The offline, bulk version is
-``host.judge.analysis``; the live judge resolves the encoder frame a pose half names with the
-very same functions (``host.judge.samples.match_encoder``, with its held and queued rules, and
-``sender_seq``) applied to a window of the latest frames (``HALF_WINDOW`` halves, ``ENC_WINDOW``
-encoder frames). A half is settled once bus time is half an encoder cycle past it or the next
-half of its message is heard: only then is it known whether it came out in a burst
-(``samples.queued_frames``), so a sample is judged at most half a cycle after its ODOM_POSE_Y
-(``take_samples``).
+``host.judge.analysis``; the live judge resolves the encoder frame a pose half names with the same
+functions (``host.judge.samples.match_encoder``, with its held and queued rules, and ``sender_seq``)
+applied to a window of the latest frames (``HALF_WINDOW`` halves, ``ENC_WINDOW`` encoder frames). A
+half is settled once bus time is half an encoder cycle past it or the next half of its message is
+heard: only then is it known whether it came out in a burst (``samples.queued_frames``), so a sample
+is judged at most half a cycle after its ODOM_POSE_Y (``take_samples``).
 """
 
 from __future__ import annotations
@@ -107,6 +106,7 @@ class PoseTracker:
         self._last_compared = -1  # the encoder frame of the last sample compared
         self._place_at_next = False  # after a stall or a held pose: place the position again
         self._losses = LiveAllowance()
+        self.wrongs = self._losses.wrongs  # POSE WRONG episodes latched (host.judge.posewrongs)
         self.placer = StallPlacer()  # the placements after stalls (host.judge.liveplace)
         self._now_s = 0.0  # the latest bus time (s)
         self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
@@ -289,7 +289,7 @@ class PoseTracker:
         self._last_compared = pose.seq
         self.vs_reference.add(pose, ref)
         self._losses.spans += self.twins.resolve(self.geometry, self.counter_bits, self.integrator)
-        self._losses.record(pose.seq, self.vs_reference.latest["dpos_m"], self.fast_path)
+        self._losses.record(pose.seq, self.vs_reference.latest, self.fast_path, self.pose_t_s)
         return ref
 
     # --- encoder frames the firmware lost that the bus carried (host.judge.livelosses) ---
