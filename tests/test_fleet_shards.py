@@ -26,7 +26,9 @@ from odocan.host.mqtt.bridge import RobotEndpoint
 from odocan.host.mqtt.broker import LOOPBACK, free_loopback_port
 from odocan.host.mqtt.fleetrun import failures, judge_robot
 from odocan.host.mqtt.shards import Shard, aggregate, split
+from odocan.sim import fleet as sim_fleet
 from odocan.sim import robot
+from odocan.sim.board import TICK_S
 from odocan.sim.fleet import Fleet, FleetConfig, frame_fields
 from tests.requires import require_executables
 
@@ -125,10 +127,16 @@ def test_fleet_on_python_cans_virtual_runs_and_judges_every_robot(
     assert list(robots) == ["robot001", "robot002"]
     skipped = data["skipped_releases"] > 0  # a loaded machine: the positions are not judged
     assert code == (1 if skipped else 0), out + err
+    # the run took its 2 s: every release of it was run or counted as skipped (on a loaded
+    # machine fewer ticks run than the 200 of an idle one: 93 were seen)
+    assert data["ticks"] + data["skipped_releases"] >= 200
     for r in robots.values():
         assert r["verdict"] == ("UNJUDGED" if skipped else "PASS"), r["reason"]
-        assert r["pose_vs_reference"]["samples"] > 20
-        assert r["frames"]["WHEEL_ENCODERS"] > 100
+        # one encoder frame per tick run (odd robots a tick out of phase), and every pose the
+        # robot sent judged but the last, whose successor never came
+        assert data["ticks"] - 1 <= r["frames"]["WHEEL_ENCODERS"] <= data["ticks"]
+        assert r["frames"]["ODOM_POSE_Y"] > 0
+        assert r["pose_vs_reference"]["samples"] >= r["frames"]["ODOM_POSE_Y"] - 1
 
 
 def test_fleet_with_the_c_firmware_runs_and_judges_every_robot(
@@ -285,11 +293,28 @@ def test_fleet_on_two_workers_reports_every_robot(
         assert 0.0 <= r["deadline_miss_ratio"] <= 1.0
 
 
+class _NeverLate:
+    """``sim.fleet.run_realtime``'s clock, never late: its two reads of tick k (the delay
+    before the release, the lateness after) both say ``k * TICK_S`` (as bench/fleet_flat.py's),
+    so no release is skipped however loaded the machine."""
+
+    def __init__(self) -> None:
+        self.reads = 0
+
+    def now_s(self) -> float:
+        self.reads += 1
+        return (self.reads - 1) // 2 * TICK_S
+
+
 def test_a_wrong_pose_fails_the_run_and_says_why(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The judge's reference on a 2 % longer wheelbase than the firmware's: every robot's
-    heading departs, the exit line says FAIL and which threshold."""
+    heading departs, the exit line says FAIL and which threshold. The fleet runs on a clock that
+    is never late (``_NeverLate``): on a loaded machine the real clock skipped releases, and a
+    run that skipped one leaves its poses UNJUDGED (``fleetrun.judge_robot``), which is not the
+    verdict this test is about."""
+    monkeypatch.setattr(sim_fleet, "RealTimeClock", _NeverLate)
     real = fleetrun._endpoints
 
     def skewed(fleet: Fleet, run: fleetrun.FleetRun) -> list[RobotEndpoint]:
@@ -302,6 +327,7 @@ def test_a_wrong_pose_fails_the_run_and_says_why(
                  "--max-miss-ratio", "1"])
     out = capsys.readouterr().out.splitlines()
     assert code == 1
+    assert "200 ticks, deadline_miss_ratio 0.0000 " in out[0], out[0]  # none skipped
     assert out[1] == "poses: 2 FAIL"
     assert out[2].startswith("FAIL: 2 of 2 robots pose vs reference out of tolerance (robot001:")
 

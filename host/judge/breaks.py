@@ -20,7 +20,18 @@ placement stops at the bound and the samples after the break show the rest (``bo
 ``clamp_offset``).
 
 Spans of more than ``MAX_MERGE_FRAMES`` frames take a cheaper bound: twice the path length
-(``path_bound_m``: a run's merge error is at most its fine path plus its merged step)."""
+(``path_bound_m``: a run's merge error is at most its fine path plus its merged step).
+
+A stall whose span holds a gap of the log (``overlap_allowance_m``): the firmware's steps may
+start or end inside the gap (a step from before it to one of its frames), which neither the
+merge allowance (runs of the log's frames, the gap one step) nor the gap's (splits of the gap's
+own counts) covers: their sum was seen 7.3 times short by brute force. The firmware's position
+P there is within ``gap_allowance_m`` of the whole span as one merged step M (every step of it
+within the plausibility bound, however split and merged), and M within the span's merge
+allowance of the reference R (the run of every frame of the span lost is one of the sets it
+maximises over): |P - R| <= |P - M| + |M - R|. So such a stall's allowance is its merge
+allowance plus the gap allowance of the whole span; the gap's own allowance is still added (a
+bound, not tight: proven by brute force in tests/test_break_overlap.py)."""
 
 from __future__ import annotations
 
@@ -31,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.losses import OneSteps, merge_error
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import FloatArray, IntArray
@@ -58,6 +70,21 @@ def merge_allowance_m(
         a = np.arange(t)
         best[t] = float(np.max(best[:t] + merge_error(steps, a, t)))
     return float(best[-1])
+
+
+def overlap_allowance_m(
+    first: tuple[int, int, int], last: tuple[int, int, int], frames: int, geometry: Geometry,
+    bits: int, integrator: str, max_wheel_speed_mm_s: int | None,
+) -> float:
+    """What a stall's span that holds a gap of the log adds to its merge allowance (m; module
+    docstring): ``first`` and ``last`` the (sender's sequence number, left, right wire counts) of
+    its ends, ``frames`` the log's encoder frames in it (both ends counted); 0 when its periods
+    are its frames' (no gap), inf without a plausibility bound."""
+    periods = last[0] - first[0]
+    if periods <= frames - 1:
+        return 0.0
+    return gap_allowance_of_counts(first[1:], last[1:], periods, geometry, bits, integrator,
+                                   max_wheel_speed_mm_s)
 
 
 def path_bound_m(counts_left: int, counts_right: int, geometry: Geometry) -> float:

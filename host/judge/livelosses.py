@@ -3,7 +3,8 @@ the window of the latest encoder frames. Where the firmware's ENC_E2E_LOST grew 
 bus's own gaps since its previous page, it lost frames the bus carried (``losses.firmware_losses``):
 the position may leave the fine reference by the worst error that many frames lost in runs make
 there (``losses.worst_runs_m``), from the frame of the previous page on, as ``analyze`` allows
-it. A sample's error beyond its allowance is settled once no later page can reach its frame."""
+it. A sample's error beyond its allowance is settled once no later page can reach its frame;
+then ``wrongs`` (``host.judge.posewrongs``) latches it when it was beyond the limit."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import numpy as np
 
 from odocan.host.judge.livewindow import ENC_WINDOW, Columns, window_encoders
 from odocan.host.judge.losses import OneSteps, lost_beyond_gaps, worst_runs_m
+from odocan.host.judge.posewrongs import PoseWrongs
 from odocan.host.judge.reference import Geometry
 
 
@@ -25,9 +27,13 @@ class LiveAllowance:
         self._revisable: deque[tuple[int, float]] = deque()  # (frame, m) of samples since
         self._in_order = True  # ``_revisable`` by frame (then settled from its head)
         self._beyond_settled_m = 0.0  # largest error beyond its allowance of the other samples
+        self.wrongs = PoseWrongs()  # the samples beyond the limit, latched once settled
 
-    def record(self, seq: int, dpos_m: float, fast: bool) -> None:
-        """A sample at encoder frame ``seq``, ``dpos_m`` from the reference."""
+    def record(self, seq: int, error: dict[str, float], fast: bool, t_s: float) -> None:
+        """A sample at encoder frame ``seq`` (its ODOM_POSE_Y at bus time ``t_s``), ``error``
+        from the reference (``dpos_m``, ``dheading_rad``)."""
+        dpos_m = error["dpos_m"]
+        self.wrongs.sample(seq, t_s, dpos_m, error["dheading_rad"])
         revisable = self._revisable
         if revisable and seq < revisable[-1][0]:
             self._in_order = False
@@ -48,12 +54,14 @@ class LiveAllowance:
             frames = [f for f, _ in self._revisable]
             self._in_order = frames == sorted(frames)
         if settled:
-            self._beyond_settled_m = max([self._beyond_settled_m,
-                                          *(e - self.at_m(f) for f, e in settled)])
+            beyond = [(f, e - self.at_m(f)) for f, e in settled]
+            self._beyond_settled_m = max([self._beyond_settled_m, *(b for _, b in beyond)])
+            self.wrongs.judged(beyond)
 
     def restart(self, upto: int, fast: bool) -> None:
         """A new reference: the samples so far are settled, no span reaches past it."""
         self.settle(upto, fast)
+        self.wrongs.close()  # an episode does not run on into another reference
         self.spans = []
 
     def at_m(self, seq: int) -> float:

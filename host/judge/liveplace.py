@@ -12,7 +12,13 @@ import math
 import numpy as np
 
 from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
-from odocan.host.judge.breaks import BreakSummary, clamp_offset, merge_allowance_m, path_bound_m
+from odocan.host.judge.breaks import (
+    BreakSummary,
+    clamp_offset,
+    merge_allowance_m,
+    overlap_allowance_m,
+    path_bound_m,
+)
 from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livewindow import CYCLE_S, Columns
@@ -136,16 +142,22 @@ class StallPlacer:
     def _allowance_m(self, before: int, after: int, window: Columns,
                      reference: tuple[Geometry, int, str]) -> float:
         """``breaks.merge_allowance_m`` from encoder frame ``before`` (the last sample compared)
-        to ``after`` (seq), from the window's counts, or the path bound from the sums of the
+        to ``after`` (seq), from the window's counts (plus ``breaks.overlap_allowance_m`` when a
+        gap of the sender's sequence lies between), or the path bound from the sums of the
         count steps when ``before`` left the window; inf when neither is known."""
         geometry, counter_bits, integrator = reference
         seqs = window.col("seq")
         i0 = int(np.searchsorted(seqs, before))
         i1 = int(np.searchsorted(seqs, after))
         if before >= 0 and i0 < len(seqs) and seqs[i0] == before and i1 < len(seqs):
-            return merge_allowance_m(window.col("left")[i0 : i1 + 1].astype(np.int64),
-                                     window.col("right")[i0 : i1 + 1].astype(np.int64),
-                                     geometry, counter_bits, integrator)
+            left = window.col("left")[i0 : i1 + 1].astype(np.int64)
+            right = window.col("right")[i0 : i1 + 1].astype(np.int64)
+            periods = sender_seq(window.col("counter")[i0 : i1 + 1].astype(np.int64),
+                                 window.col("t_s")[i0 : i1 + 1], CYCLE_S)  # a gap within
+            ends = [(int(periods[k]), int(left[k]), int(right[k])) for k in (0, -1)]
+            return merge_allowance_m(left, right, geometry, counter_bits, integrator) + \
+                overlap_allowance_m(ends[0], ends[1], len(left), geometry, counter_bits,
+                                    integrator, self.max_wheel_speed_mm_s)
         now = self._abs_at(after)
         if self._abs_last is None or now is None:
             return math.inf

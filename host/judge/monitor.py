@@ -1,5 +1,4 @@
-"""The live view of a CAN bus (``odocan monitor``): the state model fed frame by frame (its
-rendering is ``host.report.live`` and ``host.report.tui``).
+"""The live view of a CAN bus (``odocan monitor``): the state model fed frame by frame.
 
 ``BusMonitor.feed(msg)`` takes every frame heard, in bus order, and never raises on what a bus
 carries: frames of unknown IDs, of the wrong DLC, error and remote frames are counted (the
@@ -369,7 +368,8 @@ class BusMonitor:
         nodes = self.node_ages(now_s)
         state, why = self._verdict(nodes.get(FIRMWARE_NODE))
         return {"state": state, "why": why, "nodes": nodes, "events": list(self.events),
-                "firmware_events": list(self.firmware_events)}
+                "firmware_events": list(self.firmware_events),
+                "pose_wrongs": self.tracker.wrongs.as_dict()}  # latched: host.judge.posewrongs
 
     def _verdict(self, firmware: dict[str, Any] | None) -> tuple[str, list[str]]:
         if firmware is None:

@@ -13,7 +13,12 @@ import numpy.typing as npt
 
 from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, PERIODS_PER_S, RESYNC_FRAMES
 from odocan.firmware.twist import ENCODER_PERIOD_US
-from odocan.host.judge.breaks import BreakSummary, merge_allowance_m, placed_offsets
+from odocan.host.judge.breaks import (
+    BreakSummary,
+    merge_allowance_m,
+    overlap_allowance_m,
+    placed_offsets,
+)
 from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.reference import Geometry, integrate, wrap_delta
 from odocan.host.judge.samples import (
@@ -106,7 +111,8 @@ def build_reference(
         raw_segment_offsets(segment, at, onboard.x_m - x_m[at]),
         raw_segment_offsets(segment, at, onboard.y_m - y_m[at]),
         list(zip((opened + e0).tolist(), gaps[opened].tolist(), strict=True)),
-        lambda b: (break_allowance(enc, b, onboard.enc, geometry, bits, integrator)
+        lambda b: (break_allowance(enc, b, onboard.enc, geometry, bits, integrator,
+                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s)
                    if b in stalled else 0.0),
         gap_allowance, slack_m)
     x_m += off_x[segment]
@@ -136,16 +142,20 @@ def restart_detail(by_uptime: bool) -> str:
 
 
 def break_allowance(enc: Encoders, b: int, sample_enc: IntArray, geometry: Geometry, bits: int,
-                    integrator: str) -> float:
+                    integrator: str, *, max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S
+                    ) -> float:
     """``breaks.merge_allowance_m`` of the break at encoder frame ``b``: from frame b - 1 (the
     last the firmware named before it) to the first frame a kept sample names at or after b (0
-    without one: nothing after it is compared)."""
+    without one: nothing after it is compared); plus ``breaks.overlap_allowance_m`` when a gap
+    of the log lies in that span."""
     k = int(np.searchsorted(sample_enc, b))
     if k == len(sample_enc):
         return 0.0
     j = int(sample_enc[k])
+    ends = [(int(enc.seq[i]), int(enc.left[i]), int(enc.right[i])) for i in (b - 1, j)]
     return merge_allowance_m(enc.left[b - 1 : j + 1], enc.right[b - 1 : j + 1], geometry, bits,
-                             integrator)
+                             integrator) + overlap_allowance_m(
+        ends[0], ends[1], j - b + 2, geometry, bits, integrator, max_wheel_speed_mm_s)
 
 
 @dataclass

@@ -240,7 +240,8 @@ def _life(
     spans = first.losses.spans()
     geometry, bits = Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS)
     drops = SpanDrops(spans, geometry, bits, integrator)
-    across = StreamBreakCounts(breaks[breaks > e0].tolist(), geometry, bits, integrator)
+    across = StreamBreakCounts(breaks[breaks > e0].tolist(), geometry, bits, integrator,
+                               max_wheel_speed_mm_s)
 
     def on_encoders(enc: Encoders) -> None:
         drops.feed(enc)

@@ -25,7 +25,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from odocan.host.judge.breaks import MAX_MERGE_FRAMES, merge_allowance_m, path_bound_m
+from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
+from odocan.host.judge.breaks import (
+    MAX_MERGE_FRAMES,
+    merge_allowance_m,
+    overlap_allowance_m,
+    path_bound_m,
+)
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import Encoders
 from odocan.host.judge.stalls import frozen_breaks, silent
@@ -171,13 +177,16 @@ class StreamBreakCounts:
     feeds the encoder frames (``feed``, from the life's first), of which only those from the
     frame before each break to that sample are kept (or, for a span beyond
     ``breaks.MAX_MERGE_FRAMES``, only the sums of their steps' absolute counts, exact in any
-    chunking); ``allowance`` then gives ``breaks.merge_allowance_m`` bit for bit."""
+    chunking); ``allowance`` then gives ``breaks.merge_allowance_m`` bit for bit (plus
+    ``breaks.overlap_allowance_m`` from the span's ends, as ``reference_path.break_allowance``)."""
 
     breaks: list[int]
     geometry: Geometry
     bits: int
     integrator: str
+    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S  # a gap in a span's bound
     _ends: dict[int, int] = field(default_factory=dict)  # break -> the first sample after
+    _edges: dict[int, dict[int, tuple[int, int, int]]] = field(default_factory=dict)  # seq, l, r
     _count: int = 0  # encoder frames fed
     _left: dict[int, list[np.ndarray]] = field(default_factory=dict)
     _right: dict[int, list[np.ndarray]] = field(default_factory=dict)
@@ -202,6 +211,10 @@ class StreamBreakCounts:
             a0, a1 = max(b - 1, lo), min(j + 1, hi)
             if a1 <= a0:
                 continue
+            for at in (b - 1, j):  # the span's ends: a gap within it (overlap_allowance_m)
+                if a0 <= at < a1:
+                    self._edges.setdefault(b, {})[at] = (
+                        int(enc.seq[at - lo]), int(enc.left[at - lo]), int(enc.right[at - lo]))
             left = enc.left[a0 - lo : a1 - lo].astype(np.int64)
             right = enc.right[a0 - lo : a1 - lo].astype(np.int64)
             if j - (b - 1) - 1 <= MAX_MERGE_FRAMES:
@@ -220,8 +233,13 @@ class StreamBreakCounts:
     def allowance(self, b: int) -> float:
         """The allowance (m) of the break at encoder frame ``b`` (0 without a sample after)."""
         if b in self._sums:
-            return path_bound_m(self._sums[b][0], self._sums[b][1], self.geometry)
-        if b not in self._left:
+            merged = path_bound_m(self._sums[b][0], self._sums[b][1], self.geometry)
+        elif b in self._left:
+            merged = merge_allowance_m(np.concatenate(self._left[b]),
+                                       np.concatenate(self._right[b]), self.geometry, self.bits,
+                                       self.integrator)
+        else:
             return 0.0
-        return merge_allowance_m(np.concatenate(self._left[b]), np.concatenate(self._right[b]),
-                                 self.geometry, self.bits, self.integrator)
+        j, edges = self._ends[b], self._edges[b]
+        return merged + overlap_allowance_m(edges[b - 1], edges[j], j - b + 2, self.geometry,
+                                            self.bits, self.integrator, self.max_wheel_speed_mm_s)

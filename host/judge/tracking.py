@@ -5,9 +5,8 @@ Used by ``odocan monitor`` and the MQTT bridge; the offline version is ``host.ju
 The encoder frame a pose half names is resolved with the same functions
 (``samples.match_encoder``, its held and queued rules, ``sender_seq``) on a window of the latest
 frames (``HALF_WINDOW`` halves, ``ENC_WINDOW`` encoder frames). A half is settled once bus time
-is half an encoder cycle past it or the next half of its message is heard: only then is it
-known whether it came out in a burst (``samples.queued_frames``), so a sample is judged at most
-half a cycle after its ODOM_POSE_Y (``take_samples``).
+is half an encoder cycle past it or the next half of its message is heard (then its burst is
+known: ``samples.queued_frames``): a sample is judged <= half a cycle after its ODOM_POSE_Y.
 """
 
 from __future__ import annotations
@@ -101,6 +100,7 @@ class PoseTracker:
         self._last_compared = -1  # the encoder frame of the last sample compared
         self._place_at_next = False  # after a stall or a held pose: place the position again
         self._losses = LiveAllowance()
+        self.wrongs = self._losses.wrongs  # POSE WRONG episodes latched (host.judge.posewrongs)
         self.placer = StallPlacer()  # the placements after stalls (host.judge.liveplace)
         self._now_s = 0.0  # the latest bus time (s)
         self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
@@ -285,7 +285,7 @@ class PoseTracker:
         self._last_compared = pose.seq
         self.vs_reference.add(pose, ref)
         self._losses.spans += self.twins.resolve(self.geometry, self.counter_bits, self.integrator)
-        self._losses.record(pose.seq, self.vs_reference.latest["dpos_m"], self.fast_path)
+        self._losses.record(pose.seq, self.vs_reference.latest, self.fast_path, self.pose_t_s)
         return ref
 
     # --- encoder frames the firmware lost that the bus carried (host.judge.livelosses) ---

@@ -28,7 +28,9 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
   (``host.judge.statuslatch``) and every set-pose applied (``host.judge.livesetpose``, which
   the reference follows) is an event: ``status`` carries the latest ``STATUS_EVENTS`` and
   ``latched_errors`` (every bit seen set), retained, so a short DEGRADED is never lost (not a
-  QoS-1 publication each: a babbling bus would fill the bridge's reliable queue).
+  QoS-1 publication each: a babbling bus would fill the bridge's reliable queue); likewise
+  ``pose_wrongs``, the judge's own POSE WRONG episodes latched (``host.judge.posewrongs``: the
+  count, the worst and the latest), so an ``error`` with ``pose_wrong`` missed is never lost.
 
 Headings: ``heading_rad`` wrapped to (-pi, pi] and ``heading_unwrapped_rad`` cumulative, on
 ``pose``, ``reference`` and ``truth`` (SIM_TRUTH's [0, 2 pi) made cumulative at the reference's
@@ -455,7 +457,7 @@ class RobotTelemetry:
         return ("status", status_payload(
             self.name, state, seq=self.status_seq, firmware=self.firmware,
             latched_errors=self.latch.latched_names(), events=list(self.events),
-            frames_total=sum(self.frames.values()),
+            pose_wrongs=self.tracker.wrongs.as_dict(), frames_total=sum(self.frames.values()),
         ))
 
 

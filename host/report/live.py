@@ -120,7 +120,18 @@ def health_line(health: dict[str, Any] | None) -> Text:
     why = f": {'; '.join(health['why'])}" if health["why"] else ""
     events = health["events"]
     last = f"   event: {events[-1]['kind']} ({events[-1]['detail']})" if events else ""
-    return Text.assemble(("verdict ", "bold"), (state, colour), why + age + last)
+    wrongs = health.get("pose_wrongs") or {}
+    was = f"  {was_wrong_text(wrongs)}" if wrongs.get("episodes") else ""
+    return Text.assemble(("verdict ", "bold"), (state, colour), (was, "bold red"),
+                         why + age + last)
+
+
+def was_wrong_text(wrongs: dict[str, Any]) -> str:
+    """The POSE WRONG episodes latched (``health.pose_wrongs``), short for 80 columns:
+    ``WAS WRONG 2x, worst 2.05 mm 0.048 mrad at 3.0 s``."""
+    worst = wrongs["worst"]
+    return (f"WAS WRONG {wrongs['episodes']}x, worst {worst['dpos_mm']:.3g} mm "
+            f"{worst['dheading_mrad']:.3g} mrad at {worst['t_s']:.1f} s")
 
 
 def pose_table(snapshot: dict[str, Any], *, decimals: int = 4) -> Table:

@@ -12,7 +12,8 @@ cbreak mode between frames.
 The screen, top to bottom (rows on 80×24)::
 
     header       source, time, frames, bus load, PAUSED, the trace filter             1
-    verdict      the judge's verdict (OK, STALE, CONFLICT, DEGRADED, POSE WRONG) and why 1
+    verdict      the judge's verdict (OK, STALE, CONFLICT, DEGRADED, POSE WRONG), WAS WRONG
+                 (the pose was wrong earlier: latched, the worst episode) and why         1
     firmware     STATE, AUTH refusals (SecOC), reason, status age, integrator, uptime 1
     pose         on-board / reference / truth, on-board minus each (latest and max)   4
     alert        nothing heard for 2 s and why, node events, frames not checked       1
@@ -50,6 +51,7 @@ from odocan.host.report.live import (
     pose_table,
     unknown_line,
     values_text,
+    was_wrong_text,
 )
 from odocan.host.report.trace import PageRate, PageRates, Trace
 
@@ -152,6 +154,9 @@ def verdict_line(snapshot: dict[str, Any]) -> Text:
     verdict = str(health["state"])
     line.append(verdict, style="bold green" if verdict == "OK" else "bold red"
                 if verdict in BAD_VERDICTS else "bold yellow")
+    wrongs = health.get("pose_wrongs") or {}
+    if wrongs.get("episodes"):  # latched: shown even when the pose is right again
+        line.append(f"  {was_wrong_text(wrongs)}", style="bold reverse red")
     if health["why"]:
         line.append(f": {'; '.join(health['why'])}", style="yellow")
     return line

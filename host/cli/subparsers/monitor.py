@@ -9,6 +9,10 @@ pause with space or ``p``); ``--log PATH`` records every frame heard.
 With ``--json`` there is no screen: at the end (``--duration`` or Ctrl-C) the
 model is printed as one JSON object, for scripts. A ``--duration`` watch that Ctrl-C or SIGTERM
 ends early says so (``stopped`` in the JSON, a line on stderr) and exits 130/143, never 0.
+A watch that saw the on-board pose wrong (``health.pose_wrongs``: every POSE WRONG episode
+latched, ``host.judge.posewrongs``), even if it was right again by the end, says so on stderr
+(``monitor: FAIL: the on-board pose was wrong in ...``) and exits 1 (or 130/143 when a signal
+ended it early); else 0.
 
 ``--broker [URL]`` (alias ``--mqtt``, the name it had) shows the fleet instead: one row per
 robot that ``odocan bridge``/``odocan fleet`` publish (``host.mqtt.fleetview.fleet_states``),
@@ -79,7 +83,8 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="watch a live CAN bus (or an MQTT fleet) in the terminal",
         description="Decode a live CAN bus with the DBC: per message the latest signal values, "
         "rate, period jitter and E2E counts; the firmware's status; the on-board pose against "
-        "the float64 reference and the ground truth. Ctrl-C quits (exit 0).",
+        "the float64 reference and the ground truth. Ctrl-C quits: exit 0, or 1 when the "
+        "on-board pose was wrong at any time of the watch.",
         epilog="Example: odocan monitor -i socketcan -c vcan0; "
         "odocan monitor -i virtual -c vcan0 --duration 5 --json; "
         "odocan monitor --broker mqtt://127.0.0.1:1883",
@@ -148,10 +153,14 @@ def _do_monitor(args: argparse.Namespace) -> int:
     live = _foxglove(args, profile, model)
     started_s = time.monotonic()
     failure, signum = _watch_bus(args, model, trace, view, recorder, live)
+    wrongs = model.tracker.wrongs
+    wrongs.finish(model.tracker.allowance_m)  # the samples still waiting for a later page
     code = _end(args, model.snapshot, early_stop(signum, started_s, args.duration))
     if failure is not None:
         raise failure
-    return code
+    if wrongs.count:  # the pose was wrong at some time, even if right again since: FAIL
+        print(f"monitor: FAIL: {wrongs.summary()}", file=sys.stderr)
+    return 1 if wrongs.count and code == 0 else code
 
 
 def _end(args: argparse.Namespace, snapshot: Callable[[], dict[str, Any]],
