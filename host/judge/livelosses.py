@@ -85,6 +85,9 @@ class LiveAllowance:
         i0, i1 = int(np.searchsorted(seqs, before[1])), len(seqs) - 1
         if i0 >= len(seqs) or seqs[i0] != before[1]:
             return  # the previous page's frame left the window: not judged
+        counters = window.col("counter")[i0:]
+        if (lost - before[0]) & 0xFF == 0 and bool(np.all(counters[1:] != counters[:-1])):
+            return  # no loss told, and no sender step of 0 (each >= 1: no negative gap)
         enc = window_encoders(window)
         sent = enc.seq
         n = int(lost_beyond_gaps(np.array(before[0]), np.array(lost), sent[i0], sent[i1],

@@ -62,7 +62,7 @@ class StallPlacer:
         self._shift = (0.0, 0.0)  # the placements' offset of the reference since its start (m)
         self._budget_m = 0.0  # the stalls' merge allowances summed since its start (m)
         # per recent frame (seq mod ABS_KEPT): its seq and the |count steps| summed up to it
-        self._abs_ring = np.full((ABS_KEPT, 3), -1, dtype=np.int64)
+        self._abs_ring = [(-1, -1, -1)] * ABS_KEPT  # a list: one store per frame, no numpy
         self._abs_counts = (0, 0)  # ... up to the latest encoder frame
         self._abs_last: tuple[int, int] | None = None  # ... at the last sample compared
         self.stalled = False  # a stall or hold since the last placement (the tracker sets it)
@@ -86,9 +86,10 @@ class StallPlacer:
         if prev is None:
             self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)
             return False
-        self._abs_counts = (self._abs_counts[0] + abs(wrap_delta(left - int(prev[4]), bits)),
-                            self._abs_counts[1] + abs(wrap_delta(right - int(prev[5]), bits)))
-        self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)  # preallocated: no growth
+        abs_left, abs_right = self._abs_counts
+        self._abs_counts = (abs_left + abs(wrap_delta(left - int(prev[4]), bits)),
+                            abs_right + abs(wrap_delta(right - int(prev[5]), bits)))
+        self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)  # a fixed ring: no growth
         periods = (counter - int(prev[2])) & 0xF
         if periods == 1 and t_s - float(prev[3]) < 8.0 * CYCLE_S:
             return False  # the next frame (the fast path: no arrays)
@@ -108,8 +109,8 @@ class StallPlacer:
 
     def _abs_at(self, seq: int) -> tuple[int, int] | None:
         """The |count steps| summed up to encoder frame ``seq``, None when no longer kept."""
-        kept = self._abs_ring[seq % ABS_KEPT]
-        return (int(kept[1]), int(kept[2])) if int(kept[0]) == seq else None
+        kept_seq, abs_left, abs_right = self._abs_ring[seq % ABS_KEPT]
+        return (abs_left, abs_right) if kept_seq == seq else None
 
     def shift(self, pose: FramePose, ref: FramePose, last_compared: int, window: Columns,
               reference: tuple[Geometry, int, str]) -> tuple[float, float] | None:

@@ -83,6 +83,7 @@ class PoseTracker:
         self._halves = {"x": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW),
                         "y": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW)}
         self._unsettled: dict[str, Half] = {}  # per message, the latest half heard
+        self._unsettled_from_s = math.inf  # the earliest bus time among them (s)
         self._xs: dict[int, Half] = {}  # settled X halves by the encoder frame they name
         self._ys: dict[int, tuple[Half, bool]] = {}  # settled Y halves (and queued) waiting
         self._sampled: set[int] = set()  # encoder frames an on-board sample was made of
@@ -110,9 +111,8 @@ class PoseTracker:
         self.reference: FramePose | None = None
         self.truth: FramePose | None = None
         self.reference_starts = 0
-        self.vs_reference = ErrorStats()
-        self.vs_truth = ErrorStats()
-        self.reference_vs_truth = ErrorStats()
+        self.vs_reference, self.vs_truth, self.reference_vs_truth = (ErrorStats(), ErrorStats(),
+                                                                     ErrorStats())
         # a new firmware life's origin in the truth's frame (``compare.life_origin``): None in
         # the first life (it came up with the simulator), else set at its first truth sample
         self.life_truth = LifeTruth()
@@ -124,13 +124,12 @@ class PoseTracker:
 
     def advance(self, t_s: float) -> None:
         """Bus time is now ``t_s`` (any frame heard): pose halves heard half an encoder cycle or
-        more before are settled (no half of their message can come close after them); a new
-        life that waited ``BOOT_COUNT_WAIT_S`` for its count page starts without it."""
+        more before are settled; a new life waiting ``BOOT_COUNT_WAIT_S`` starts without it."""
         self._now_s = t_s
         if self._boot is not None and t_s > self._boot[1]:
             self._finish_boot(self._boot[0])
-        if not self._unsettled:
-            return
+        if t_s - self._unsettled_from_s < QUEUED_GAP_S:
+            return  # none due (nor any later half: t_s - t is monotone in t); none heard: inf
         for _, name in sorted((half.pos, name) for name, half in self._unsettled.items()
                               if t_s - half.t_s >= QUEUED_GAP_S):  # due, in the order heard
             self._settle(name)
@@ -161,8 +160,7 @@ class PoseTracker:
                 self._drop_backlog()
 
     def _forget(self, before: int) -> None:
-        """Drop what is kept of the encoder frames before ``before`` (seq): the state stays
-        bounded whatever the bus says."""
+        """Drop what is kept of the encoder frames before ``before`` (seq): bounded state."""
         self._xs = {seq: half for seq, half in self._xs.items() if seq >= before}
         self._ys = {seq: half for seq, half in self._ys.items() if seq >= before}
         self._sampled = {seq for seq in self._sampled if seq >= before}
@@ -196,10 +194,12 @@ class PoseTracker:
         if name in self._unsettled:  # its successor is heard: it is known whether it queued
             self._settle(name)
         self._unsettled[name] = half
+        self._unsettled_from_s = min(self._unsettled_from_s, half.t_s)  # (NaN: never due)
 
     def _settle(self, name: str) -> None:
         """Resolve the encoder frame the unsettled half of ``name`` names, and pair it."""
         half = self._unsettled.pop(name)
+        self._unsettled_from_s = min([h.t_s for h in self._unsettled.values()], default=math.inf)
         seq, queued = self._named(self._halves[name], half.pos)
         if seq < 0 or self.twins.twinned(seq):
             return  # left out, as analyze leaves it out (unmatched)

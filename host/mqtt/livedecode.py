@@ -6,7 +6,9 @@ call; ``LiveDecoder`` reads the same tree once (cantools' own ``_codecs``: signa
 their selected sub-trees) and decodes a frame as one little-endian integer, a shift and a mask per
 signal, a sign extension, and the signal's own cantools conversion (``raw_to_scaled``: the very
 same arithmetic, so the same ints and floats; an identity conversion, which returns the raw
-integer, is not called). Multiplexed messages select their sub-tree by the
+integer, is not called; a linear one is written out as its ``raw * scale + offset``, the
+constants by their exact ``repr``: a message without multiplexers is decoded by one function
+made for it, one dict display of its signals). Multiplexed messages select their sub-tree by the
 multiplexer's value as cantools does; a value the DBC does not define is cantools'
 ``DecodeError``, and so is a payload shorter than the message (a longer one is cut, as cantools'
 ``allow_excess``). A message this form does not cover (a big-endian or float signal, a container)
@@ -21,7 +23,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from cantools.database.can import Message
-from cantools.database.conversion import IdentityConversion
+from cantools.database.conversion import (
+    IdentityConversion,
+    LinearConversion,
+    LinearIntegerConversion,
+)
 from cantools.database.errors import DecodeError
 
 # name, shift, mask, sign, scale (None: cantools' IdentityConversion, whose scaling is the raw
@@ -38,16 +44,20 @@ class _Node:
 
 
 class LiveDecoder:
-    """``decode(data)`` == ``message.decode(data, decode_choices=False)`` (module docstring)."""
+    """``decode(data)`` == ``message.decode(data, decode_choices=False)`` (module docstring):
+    the frame's signal values by name (raw numbers scaled, enums as numbers)."""
 
     def __init__(self, message: Message) -> None:
         self.message = message
         self.length = message.length
         codecs = message._codecs
         self._root = None if codecs is None or not _covered(message) else _compile(codecs)
+        self.decode: Callable[[bytes], dict[str, Any]] = self._decode_tree
+        if self._root is not None and not self._root.muxes:  # one function, made for it
+            self.decode = _flat_decoder(self._root.fields, self.length)
 
-    def decode(self, data: bytes) -> dict[str, Any]:
-        """The frame's signal values by name (raw numbers scaled, enums as numbers)."""
+    def _decode_tree(self, data: bytes) -> dict[str, Any]:
+        """``decode`` by the codec tree (multiplexers), or by cantools itself."""
         root = self._root
         if root is None:
             return dict(self.message.decode_simple(data, decode_choices=False))
@@ -88,3 +98,39 @@ def _decode(node: _Node, word: int, out: dict[str, Any]) -> None:
             raise DecodeError(f"expected multiplexer id {sorted(by_value)}, but got "
                               f"{int(out[name])}")
         _decode(sub, word, out)
+
+
+def _flat_decoder(fields: tuple[Field, ...], length: int) -> Callable[[bytes], dict[str, Any]]:
+    """``LiveDecoder.decode`` of a message without multiplexers, as one function made for it:
+    per signal ``(word >> shift) & mask``, a sign extended as ``(raw ^ sign) - sign``, then
+    cantools' linear conversion written out (``raw * scale + offset``, as ``raw_to_scaled``
+    computes it) or called (any other conversion)."""
+    namespace: dict[str, Any] = {"DecodeError": DecodeError}
+    items = []
+    for k, (name, shift, mask, sign, scale) in enumerate(fields):
+        raw = f"(word >> {shift}) & {mask}" if shift else f"word & {mask}"
+        if sign:
+            raw = f"(({raw}) ^ {sign}) - {sign}"
+        items.append(f"{name!r}: {_scaled(raw, scale, k, namespace)}")
+    source = (f"def decode(data):\n"
+              f"    if len(data) < {length}:\n"
+              f"        raise DecodeError(f'Wrong data size: {{len(data)}} instead of {length} "
+              f"bytes')\n"
+              f"    word = int.from_bytes(data[:{length}], 'little')\n"
+              f"    return {{{', '.join(items)}}}\n")
+    exec(compile(source, f"<livedecode {length} bytes>", "exec"), namespace)
+    decode: Callable[[bytes], dict[str, Any]] = namespace["decode"]
+    return decode
+
+
+def _scaled(raw: str, scale: Callable[[int, bool], Any] | None, k: int,
+            namespace: dict[str, Any]) -> str:
+    """The expression of a signal's value from its ``raw`` expression (see ``_flat_decoder``)."""
+    if scale is None:
+        return raw
+    conversion: Any = getattr(scale, "__self__", None)
+    if type(conversion) in (LinearConversion, LinearIntegerConversion) \
+            and type(conversion.scale) in (int, float) and type(conversion.offset) in (int, float):
+        return f"({raw}) * {conversion.scale!r} + {conversion.offset!r}"
+    namespace[f"scale_{k}"] = scale
+    return f"scale_{k}({raw}, False)"

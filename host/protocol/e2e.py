@@ -135,12 +135,11 @@ def crc8h2f_p02(
 
 
 def crc8h2f_p02_one(data: bytes, data_id: int) -> int:
-    """The same for one frame (live monitoring)."""
-    table = _TABLE_LIST
-    crc = CRC8H2F_INIT
-    for byte in data[1:P02_LENGTH]:
-        crc = table[crc ^ byte]
-    return int(table[crc ^ data_id] ^ CRC8H2F_XOR_OUT)
+    """The same for one frame of ``P02_LENGTH`` bytes (live monitoring, per frame of every robot:
+    the eight lookups written out, no loop; callers check the length first)."""
+    t = _TABLE_LIST
+    return int(t[t[t[t[t[t[t[t[CRC8H2F_INIT ^ data[1]] ^ data[2]] ^ data[3]] ^ data[4]]
+                       ^ data[5]] ^ data[6]] ^ data[7]] ^ data_id] ^ CRC8H2F_XOR_OUT)
 
 
 @dataclass(frozen=True)
@@ -194,7 +193,7 @@ def _parse_data_ids(name: str, text: str) -> tuple[int, ...]:
 # --- one message's sequence (AUTOSAR E2E_P02Check), shared by both APIs ---------------------------
 
 
-@dataclass
+@dataclass(slots=True)
 class SequenceState:
     """The Profile 2 check state of one message: last valid counter and the delta window."""
 
@@ -206,7 +205,8 @@ class SequenceState:
 
     def check(self, crc_ok: bool, counter: int, periods: int = 1) -> str:
         """Judge one frame ``periods`` receive periods after the previous one; count it."""
-        self.window = min(MAX_DELTA_COUNTER, self.window + periods)
+        window = self.window + periods  # at most MAX_DELTA_COUNTER (no min(): per frame)
+        self.window = window if window < MAX_DELTA_COUNTER else MAX_DELTA_COUNTER
         if not crc_ok:
             self.counts["crc_errors"] += 1
             return CRC_ERROR
