@@ -11,6 +11,7 @@ known: ``samples.queued_frames``): a sample is judged <= half a cycle after its 
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from odocan.host.judge.livefit import LiveFit, rebase
@@ -39,10 +40,9 @@ from odocan.host.judge.livewindow import (
     window_counts,
 )
 from odocan.host.judge.reference import Geometry, ReferenceOdometry
-from odocan.host.judge.samples import SILENCE_CYCLES
+from odocan.host.judge.samples import SILENCE_CYCLES, WIRE_COUNTER_BITS
 from odocan.sim.pose import TURN_RAD
 
-WIRE_COUNTER_BITS = 24  # LEFT_COUNT / RIGHT_COUNT carry the low 24 bits
 SILENCE_FRAMES = SILENCE_CYCLES  # encoder cycles without a pose: the firmware was stalled
 BACKLOG_FRAMES = 6_000  # encoder frames kept while waiting for the integrator (60 s at 100 Hz)
 BOOT_COUNT_WAIT_S = 1.0  # after a reboot, how long the count page is waited for (s of bus time)
