@@ -61,7 +61,8 @@ def the_error(lines: list[str]) -> str:
     """The one line a refusal prints: beside warnings about the command line, nothing else (no
     banner naming a broker never reached)."""
     said = [line for line in lines if not line.startswith("warning:")]
-    assert len(said) == 1 and said[0].startswith("error:"), lines
+    assert len(said) == 1, lines
+    assert said[0].startswith("error:"), lines
     return said[0]
 
 
