@@ -11,7 +11,11 @@ robots x ticks is the CPU per robot-tick of everything a worker does. Verdicts a
 (every robot judged: no skip). Pair trees in alternation:
 
     .venv/bin/python bench/fleet_flat.py [--robots 50] [--ticks 600] [--repeat 3] \
-        [--publish-hz 10]
+        [--publish-hz 10] [--parts]
+
+``--parts`` adds the CPU per robot-tick of the fleet step (``Fleet.step``) and of the bridge's
+frame handling (``Bridge._handle``: E2E, decode, live judge, publications queued), the rest
+(JSON, paho, the socket writes, the loop, the GC) and the socket writes per robot-tick.
 
 The script runs unchanged on trees since the bridge's ``run_fleet`` (copy it there to pair).
 Before, the clock released every tick at once (a ``NeverLate`` clock in ``run_realtime``): the
@@ -83,6 +87,54 @@ def _bridge_of(on_batch: Any) -> Bridge | None:
     return None
 
 
+class Parts:
+    """Process time spent in ``Fleet.step`` and ``Bridge._handle``; the links' socket writes."""
+
+    def __init__(self) -> None:
+        self.step_s = self.handle_s = 0.0
+        self.senders: list[Any] = []
+
+    def install(self) -> None:
+        """Wrap the two parts and count every link's ``CoalescedSend``."""
+        from odocan.host.mqtt import client
+
+        parts = self
+        step, handle, made = Fleet.step, Bridge._handle, client.CoalescedSend.__init__
+
+        def timed_step(fleet: Fleet, k: int) -> None:
+            t0_s = time.process_time()
+            step(fleet, k)
+            parts.step_s += time.process_time() - t0_s
+
+        def timed_handle(bridge: Bridge, batch: Any) -> None:
+            t0_s = time.process_time()
+            handle(bridge, batch)
+            parts.handle_s += time.process_time() - t0_s
+
+        def making(sender: Any, paho: Any) -> None:
+            made(sender, paho)
+            parts.senders.append(sender)
+
+        setattr(Fleet, "step", timed_step)  # noqa: B010 (a bench's patch)
+        setattr(Bridge, "_handle", timed_handle)  # noqa: B010
+        setattr(client.CoalescedSend, "__init__", making)  # noqa: B010
+
+    def line(self, cpu_s: float, robot_ticks: int) -> str:
+        """The parts in us per robot-tick, and the socket writes per robot-tick."""
+        per = robot_ticks / 1e6
+        rest = (cpu_s - self.step_s - self.handle_s) / per
+        writes = sum(sender.writes for sender in self.senders) / robot_ticks
+        line = (f"  step {self.step_s / per:.1f}, bridge frame handling "
+                f"{self.handle_s / per:.1f}, the rest {rest:.1f} us; {writes:.3f} socket writes "
+                f"per robot-tick (the whole run)")
+        self.step_s = self.handle_s = 0.0
+        self.senders.clear()
+        return line
+
+
+PARTS: Parts | None = None  # --parts
+
+
 def one_run(robots: int, ticks: int, publish_hz: float = 10.0) -> str:
     """One flat-out run of ``robots`` for ``ticks`` ticks; its line of figures."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -100,9 +152,12 @@ def one_run(robots: int, ticks: int, publish_hz: float = 10.0) -> str:
             proc.wait()
     verdicts = Counter(r["verdict"] for r in report["per_robot"].values())
     per_us = report["cpu_s"] / (report["robots"] * report["ticks"]) * 1e6
-    return (f"{robots} robots, {report['ticks']} ticks flat out: {per_us:.1f} us CPU per "
+    line = (f"{robots} robots, {report['ticks']} ticks flat out: {per_us:.1f} us CPU per "
             f"robot-tick (fleet + bridge + MQTT), {report['skipped_releases']} skipped, "
             f"verdicts {dict(verdicts)}, load {os.getloadavg()[0]:.2f}")
+    if PARTS is not None:
+        line += "\n" + PARTS.line(report["cpu_s"], report["robots"] * report["ticks"])
+    return line
 
 
 def main() -> int:
@@ -112,8 +167,14 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--publish-hz", type=float, default=10.0,
                         help="the bridge's pose telemetry rate per robot (FleetRun.publish_hz)")
+    parser.add_argument("--parts", action="store_true",
+                        help="the CPU of the step, of the bridge's frame handling, the rest")
     args = parser.parse_args()
-    fleetrun.run_realtime = run_flat  # type: ignore[assignment]
+    setattr(fleetrun, "run_realtime", run_flat)  # noqa: B010 (a bench's patch)
+    if args.parts:
+        global PARTS
+        PARTS = Parts()
+        PARTS.install()
     for _ in range(args.repeat):
         print(one_run(args.robots, args.ticks, args.publish_hz), flush=True)
     return 0
