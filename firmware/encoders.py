@@ -135,10 +135,7 @@ class EncoderInput:
             since_sample = STEP_PERIODS_MAX
         self._periods_since_sample = since_sample
         self._tick_late = periods - 1 if periods > 0 else 0  # its frames may have queued so long
-        # The mailbox dropped frames (any, or an overrun) after the last accepted encoder frame
-        # and before this tick's frames: the overflow count moved since that frame's tick.
-        dropped = self._overflows_at_accept != self._health.overflows_before
-        stale = self._samples_stale or dropped
+        stale = self._samples_stale or self._mailbox_dropped()
         widen = COUNTER_MASK if stale or periods > COUNTER_MASK else periods
         self.rx.new_periods(widen)  # C: one saturating add, as ``widen`` calls of new_period
         self.tick_budget = since_sample
@@ -158,7 +155,7 @@ class EncoderInput:
         wire = (left, right)
         counts = self._extend_counters(wire) if self._wide_counters else wire
         self._uptime_now = uptime
-        if uptime < self._uptime_prev and self._controller_restarted(uptime, wire):
+        if self._controller_restarted(uptime, wire):
             self._reprime(counter, wire, counts)
             return
         advance = self._counter_advance(counter)
@@ -172,7 +169,7 @@ class EncoderInput:
         # firmware time cannot see (they all waited): bounded by ``periods`` such a step was
         # refused and the next frames taken for a counter restart (COUNTER_RESET, the dropped
         # distance never integrated). The counters are absolute, so the wide step is exact.
-        dropped = self._overflows_at_accept != self._health.overflows_before  # as start_tick's
+        dropped = self._overflows_at_accept != self._health.overflows_before  # _mailbox_dropped
         bound = STEP_PERIODS_MAX if dropped else periods
         if not self._plausible(self._counts_prev, counts, bound):
             self._on_implausible(counter, wire, counts)
@@ -243,6 +240,11 @@ class EncoderInput:
         if beyond >= COUNTER_VALUES // 2 and advance > COUNTER_VALUES:
             return advance - COUNTER_VALUES  # d counted frames that were not the encoders'
         return advance
+
+    def _mailbox_dropped(self) -> bool:
+        """The mailbox dropped frames (any, or an overrun) after the last accepted encoder
+        frame and before this tick's frames (on_frame reads it in line, once a frame)."""
+        return self._overflows_at_accept != self._health.overflows_before
 
     def _step_periods(self, advance: int) -> int:
         """The encoder periods between this frame's sample and the last accepted one's: the
