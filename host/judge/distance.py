@@ -1,0 +1,251 @@
+"""ODOM_TWIST DISTANCE against the reference's path length (issue #11, rule 5), one judge for the
+whole-log and the streamed analyze (``DistanceJudge``: fed encoder frames and samples in order,
+in one call or chunk by chunk, with the same result bit for bit).
+
+The signal: u16, 1 mm per LSB, the low 16 bits of the firmware's path length of the wheel-axis
+midpoint (sum of |dS| over its steps). The firmware (firmware/odometry.py, firmware/reports.py):
+
+* per integrated step, ``distance_q40_m += (|dS_q49| + 2^8) >> 9``: |dS| rounded half up to Q40,
+  an error e_i with |e_i| <= 2^-41 m; no step for a refused frame, none into a frame it re-primed
+  on (a counter restart), 0 at power-up (a reboot restarts it); a set-pose keeps it;
+* dS_q49 = dL k_L + dR k_R exactly, k = round(round(2 pi R_nm 2^48 / 10^9) / PPV) (config.py,
+  R in whole nm as ODOM_CONFIG carries it): k differs from 2 pi R_nm / PPV (m) by at most
+  (0.5 / PPV + 0.5 + 0.001) Q48 LSB < 2^-48 m per count, so dS by < (|dL| + |dR|) 2^-49 m;
+* on the wire ``(distance_q40_m * 1000 + 2^39) >> 40``: within 0.5 mm of the Q40 sum.
+
+The reference: per step of the firmware's (``reference_path.firmware_steps``, from the life's
+start frame e0) |dS| = |dL m_L + dR m_R| / 2 in float64 with the nm-rounded radii the firmware
+runs with (``firmware_m_per_count``), rounded to a whole 2^-40 m (an error <= 2^-41 m plus the
+float's, < 2^-60 m for any step below 2^-8 m ... 10^3 m) and summed exactly in int64 (no float
+sum drifting over 100 km). So at a sample naming encoder frame e, after N frames and C counts
+(both wheels, absolute) from e0,
+
+    |firmware - reference| <= 0.5 mm + N 2^-39 m + C 2^-48 m     (``base_slack_m``)
+
+(N 2^-39 covers both roundings per step with a factor 2 to spare for the float; C 2^-48 twice
+the constants' bound). 100 km of kobuki-like driving (10^7 frames, 2.4 * 10^9 counts) add
+0.02 mm; a 2^24 counts/rev robot's 10^13 counts add up to 40 mm there: the Q48 constant's
+resolution, which the firmware's own sum carries.
+
+Where the firmware's steps are not the reference's:
+
+* a gap of the log (N > 1 periods): the firmware may have taken the frames the log missed one by
+  one, and sum |dS_i| >= |sum dS_i| (a robot reversing inside the gap): it may lie above the
+  merged step's |dS| by up to the gap's path bound (``breaks.path_bound_m`` of N times the per-
+  period count bounds ``gapbound.period_bounds``, halved: |dS| <= (|dS_L| + |dS_R|) / 2) less
+  |dS|, from that frame on (``upper``); unbounded without a plausibility bound;
+* a stall or hold (``stall_breaks``) and the spans where the firmware lost frames the log holds
+  (``loss_spans``, ENC_E2E_LOST grew): it took several fine steps as one, |sum dS_i| <= sum
+  |dS_i|, so it may lie below by up to the fine path of the span (the reference's own sum over
+  it), from the span's first frame on (``lower``). A stall's span ends at the first sample that
+  names a frame after its break.
+
+Verdict: every sample's offset interval [r - upper, r + lower] (r the wire minus the reference,
+mm, read mod 2^16 nearest the reference: the wire's u16 extended against it) holds one common
+offset o, and at power-up (``exact``) o = 0: the firmware starts at 0. A log that starts mid-drive
+takes any o (the distance before the log is unknowable). Exact in any order (a max and a min),
+so the whole and the streamed analyze agree. A firmware off by exactly a multiple of 65.536 m
+cannot be told on the wire; one that wraps elsewhere (at 65.535 m) or saturates is.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.breaks import path_bound_m
+from odocan.host.judge.gapbound import period_bounds
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.samples import Encoders, FloatArray, IntArray, match_encoder
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.sim.robot import NM_PER_M, RobotProfile
+
+WIRE_MM = 1 << 16  # DISTANCE wraps every 65.536 m
+UNITS_PER_M = float(1 << 40)  # the reference's path unit: 2^-40 m, summed in int64
+WIRE_SLACK_MM = 0.5 + 1e-6  # the wire's rounding, and the float of the mm conversion
+STEP_SLACK_M = 2.0**-39  # per frame: the firmware's and the reference's Q40 rounding, x2
+COUNT_SLACK_M = 2.0**-48  # per count of either wheel: the firmware's Q48 constant
+
+
+def firmware_m_per_count(robot: RobotProfile) -> tuple[float, float]:
+    """Travel per count (m; left, right) from the radii the firmware runs with: whole nm."""
+    def per_count(radius_m: float) -> float:
+        return 2.0 * math.pi * (round(radius_m * NM_PER_M) / NM_PER_M) / robot.counts_per_rev
+    return per_count(robot.wheel_radius_left_m), per_count(robot.wheel_radius_right_m)
+
+
+def twist_samples(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+                  enc: Encoders) -> tuple[IntArray, IntArray]:
+    """The accepted ODOM_TWIST frames naming an accepted encoder frame at or after every
+    earlier one's (``compare.check_twist``' samples): the encoder frame (index into ``enc``)
+    and the raw DISTANCE (mm mod 2^16)."""
+    try:
+        rows = decoder.decode(frames, "ODOM_TWIST")
+    except DecodeError:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    keep = accepted[rows["index"]] if len(rows["index"]) else np.zeros(0, dtype=bool)
+    if not keep.any():
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    index = rows["index"][keep]
+    e = match_encoder(enc, index, rows["ENC_COUNTER"][keep].astype(np.int64),
+                      frames.timestamp_s[index], rows["COUNTER"][keep].astype(np.int64))
+    ok = (e >= 0) & (e >= np.maximum.accumulate(e))
+    return e[ok].astype(np.int64), rows["DISTANCE"][keep][ok].astype(np.int64)
+
+
+@dataclass
+class DistanceJudge:
+    """The judge (module docstring). ``feed_frames`` the encoder frames from e0 in order with the
+    firmware's step into each, ``feed_samples`` the samples naming frames already fed, in order;
+    ``result`` at the end."""
+
+    robot: RobotProfile
+    max_wheel_speed_mm_s: int | None
+    exact: bool  # the log starts at the firmware's power-up: offset 0
+    stall_breaks: list[int] = field(default_factory=list)  # frames the firmware resumed on
+    loss_spans: list[tuple[int, int]] = field(default_factory=list)  # (first, last) frames
+    _cols: dict[str, np.ndarray] = field(default_factory=dict)  # frames kept: g, units, n, c, up
+    _carry: tuple[int, int, int, float, int | None] = (0, 0, 0, 0.0, None)  # sums, last seq
+    _anchors: dict[int, int] = field(default_factory=dict)  # frame -> path units at it
+    _stall_ends: dict[int, int] = field(default_factory=dict)  # break -> frame its span ends
+    _r0: float | None = None
+    _lo: float = -math.inf  # max of r - upper (mm)
+    _hi: float = math.inf  # min of r + lower (mm)
+    samples: int = 0
+
+    def feed_frames(self, g: IntArray, d_left: IntArray, d_right: IntArray, seq: IntArray
+                    ) -> None:
+        """Encoder frames ``g`` (consecutive numbers) with the step into each (0: none) and
+        their sender's sequence numbers."""
+        if len(g) == 0:
+            return
+        m_left, m_right = firmware_m_per_count(self.robot)
+        units0, n0, c0, up0, last_seq = self._carry
+        ds_m = np.abs(0.5 * (d_left * m_left + d_right * m_right))
+        units = units0 + np.cumsum(np.rint(ds_m * UNITS_PER_M).astype(np.int64))
+        counts = c0 + np.cumsum(np.abs(d_left) + np.abs(d_right))
+        n = n0 + np.arange(1, len(g) + 1, dtype=np.int64)
+        periods = np.diff(np.concatenate(([seq[0] if last_seq is None else last_seq], seq)))
+        up = up0 + np.cumsum(self._gap_extra_m(periods, ds_m))
+        new = {"g": g, "units": units, "n": n, "c": counts, "up": up}
+        self._cols = ({k: np.concatenate((self._cols[k], v)) for k, v in new.items()}
+                      if self._cols else new)
+        self._carry = (int(units[-1]), int(n[-1]), int(counts[-1]), float(up[-1]), int(seq[-1]))
+        for frame in self._wanted():
+            k = frame - int(g[0])
+            if 0 <= k < len(g):
+                self._anchors[frame] = int(units[k])
+
+    def _wanted(self) -> list[int]:
+        """Frames whose path is needed later: the spans' ends."""
+        return ([b - 1 for b in self.stall_breaks] + [a for a, _ in self.loss_spans]
+                + [z for _, z in self.loss_spans] + list(self._stall_ends.values()))
+
+    def _gap_extra_m(self, periods: IntArray, ds_m: FloatArray) -> FloatArray:
+        """Per frame: how far above the merged step the firmware's path may be (a gap)."""
+        extra = np.zeros(len(periods))
+        gaps = np.flatnonzero(periods > 1)
+        if len(gaps) == 0:
+            return extra
+        if self.max_wheel_speed_mm_s is None:
+            extra[gaps] = math.inf
+            return extra
+        m_left, m_right = firmware_m_per_count(self.robot)
+        geometry = Geometry(self.robot.counts_per_rev, self.robot.wheel_radius_left_m,
+                            self.robot.wheel_radius_right_m, self.robot.wheelbase_m)
+        bound = period_bounds(geometry, self.max_wheel_speed_mm_s)
+        for k in gaps.tolist():
+            n = int(periods[k])
+            path = path_bound_m(n * bound[0], n * bound[1], geometry)
+            path = max(path, n * (bound[0] * m_left + bound[1] * m_right))  # nm radii
+            extra[k] = max(0.0, 0.5 * path - float(ds_m[k]))
+        return extra
+
+    def feed_samples(self, e: IntArray, raw_mm: IntArray) -> None:
+        """Samples naming encoder frames ``e`` (fed already; those before the first frame fed
+        are left out) with their raw DISTANCE."""
+        if len(e) == 0 or not self._cols:
+            return
+        g0 = int(self._cols["g"][0])
+        keep = e >= g0
+        e, raw_mm = e[keep], raw_mm[keep]
+        if len(e) == 0:
+            return
+        k = e - g0
+        cols = self._cols
+        ref_mm = cols["units"][k] * (1000.0 / UNITS_PER_M)
+        diff = raw_mm - ref_mm
+        r = diff - WIRE_MM * np.round(diff / WIRE_MM)
+        if self._r0 is None:
+            self._r0 = 0.0 if self.exact else float(r[0])
+        r = self._r0 + (r - self._r0) - WIRE_MM * np.round((r - self._r0) / WIRE_MM)
+        base = WIRE_SLACK_MM + 1e3 * (cols["n"][k] * STEP_SLACK_M + cols["c"][k] * COUNT_SLACK_M)
+        upper = base + 1e3 * cols["up"][k]
+        lower = base + 1e3 * self._lower_m(e, cols["units"][k])
+        self._lo = max(self._lo, float(np.max(r - upper)))
+        self._hi = min(self._hi, float(np.min(r + lower)))
+        self.samples += len(e)
+        self._trim(int(e[-1]))
+
+    def _lower_m(self, e: IntArray, units: IntArray) -> FloatArray:
+        """Per sample: how far below the reference the firmware's merged steps may put it."""
+        lower = np.zeros(len(e))
+        for b in self.stall_breaks:
+            if b - 1 not in self._anchors:
+                continue
+            if b not in self._stall_ends:
+                after = np.flatnonzero(e >= b)
+                if len(after) == 0:
+                    continue
+                self._stall_ends[b] = int(e[after[0]])
+                self._anchors[int(e[after[0]])] = int(units[after[0]])
+            end = self._stall_ends[b]
+            self._add_span(lower, e, units, b - 1, end)
+        for a, z in self.loss_spans:
+            if a in self._anchors:
+                self._add_span(lower, e, units, a, z)
+        return lower
+
+    def _add_span(self, lower: FloatArray, e: IntArray, units: IntArray, a: int, z: int
+                  ) -> None:
+        """Add the fine path over frames (a, min(e, z)] to the samples after ``a``."""
+        inside = e > a
+        if not inside.any():
+            return
+        top = np.where(e <= z, units, self._anchors.get(z, 0))
+        lower[inside] += (top[inside] - self._anchors[a]) / UNITS_PER_M
+
+    def _trim(self, last_e: int) -> None:
+        """Drop the frames before the last sample's: no sample to come names them."""
+        k = last_e - int(self._cols["g"][0])
+        if k > 0:
+            self._cols = {key: v[k:] for key, v in self._cols.items()}
+
+    def result(self) -> dict[str, Any]:
+        """The report's ``onboard_distance_vs_reference``."""
+        lo, hi = (max(self._lo, 0.0), min(self._hi, 0.0)) if self.exact else (self._lo, self._hi)
+        excess_mm = max(0.0, lo - hi) if self.samples else 0.0
+        return {
+            "samples": self.samples,
+            "start": "power-up" if self.exact else "fitted",
+            "max_excess_m": excess_mm * 1e-3,
+            "passed": excess_mm == 0.0,
+        }
+
+
+def check_distance(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+                   enc: Encoders, steps: tuple[IntArray, IntArray], e0: int,
+                   judge: DistanceJudge) -> dict[str, Any]:
+    """The whole log's judgement: ``steps`` (d_left, d_right into frames e0 + 1, ...: the
+    firmware's, ``reference_path.firmware_steps``) and the ODOM_TWIST samples."""
+    zero = np.zeros(1, dtype=np.int64)
+    judge.feed_frames(np.arange(e0, len(enc.seq), dtype=np.int64),
+                      np.concatenate((zero, steps[0])), np.concatenate((zero, steps[1])),
+                      enc.seq[e0:])
+    judge.feed_samples(*twist_samples(frames, accepted, decoder, enc))
+    return judge.result()
