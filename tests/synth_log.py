@@ -167,12 +167,10 @@ def synthesize(
         elif k == resync_until and resync_first is not None:  # COUNTER_RESET: re-prime
             odo.unprime()
             odo.step_counts(*resync_first)
-            if odo.step_counts(left, right):
-                speeds.sum_step(1)
+            _integrate(odo, speeds, left, right)
             named = k & 0xF
         else:
-            if odo.step_counts(left, right):
-                speeds.sum_step(1)
+            _integrate(odo, speeds, left, right)
             named = k & 0xF
         t_s = t0_s + k * ENCODER_PERIOD_S
         group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
@@ -186,9 +184,8 @@ def synthesize(
             group += _pose_lines(odo, t_s + 0.001, pose_counter, named, errors, bias.get(k, 0),
                                  (heading_bias_lsb or {}).get(k, 0),
                                  (y_bias_100um or {}).get(k, 0))
-            if twist:
-                group.append(_twist_line(odo, speeds, t_s + 0.001, pose_counter, named, errors,
-                                         k, distance_of))
+            group += [_twist_line(odo, speeds, t_s + 0.001, pose_counter, named, errors, k,
+                                  distance_of)] if twist else []
             pose_counter += 1
         if life % 10 == 0 and not (boot_in_init and k == reboot_at):
             uptime_s = int(life * ENCODER_PERIOD_S + (t0_s if boot == 0 else 0.0))
@@ -234,6 +231,12 @@ class _Controller:
             self.powered_up = k
         age_s = (k - self.powered_up) // 100
         return counts, min(15, 1 + age_s) if self.reports_uptime else 0
+
+
+def _integrate(odo: Odometry, speeds: Twist, left: int, right: int) -> None:
+    """One step of the counters, summed into the twist when integrated."""
+    if odo.step_counts(left, right):
+        speeds.sum_step(1)
 
 
 def _twist_line(odo: Odometry, speeds: Twist, t_s: float, counter: int, enc: int,

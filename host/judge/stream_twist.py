@@ -17,6 +17,7 @@ against the band of the per-step speeds over the two segments (E[k-2], E[k-1]] a
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,7 +26,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.compare import TWIST_LSB, TWIST_RANGE, TWIST_RELATIVE, _step_speeds
-from odocan.host.judge.samples import Encoders, _held, contract_cycle_s, match_encoder
+from odocan.host.judge.samples import Encoders, IntArray, _held, contract_cycle_s, match_encoder
 from odocan.host.judge.stream import known_encoders
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
@@ -98,6 +99,7 @@ class StreamTwist:
     _prev_band: tuple[Band, Band] = (EMPTY, EMPTY)  # segment (E[k-2], E[k-1]]: linear, angular
     _folded: tuple[Band, Band] = (EMPTY, EMPTY)  # steps after the last E no longer kept
     samples: int = 0
+    on_distance: Callable[[IntArray, IntArray], None] | None = None  # told (E, DISTANCE raw)
     max_linear_excess_mps: float = 0.0
     max_angular_excess_rad_s: float = 0.0
 
@@ -116,7 +118,8 @@ class StreamTwist:
                    "counter": rows["COUNTER"][keep].astype(np.int64),
                    "t": chunk.timestamp_s[rows["index"][keep]],
                    "linear": rows["LINEAR_VEL"][keep] * TWIST_LSB,
-                   "angular": rows["ANGULAR_VEL"][keep] * TWIST_LSB}
+                   "angular": rows["ANGULAR_VEL"][keep] * TWIST_LSB,
+                   "distance": rows["DISTANCE"][keep].astype(np.int64)}
             self._pending = ({k: np.concatenate((self._pending[k], v)) for k, v in new.items()}
                              if self._pending else new)
         self._resolve(known)
@@ -195,7 +198,7 @@ class StreamTwist:
             e = np.where(at >= 0, known["g"][np.maximum(at, 0)], -1).astype(np.int64)
         if cycle_s is not None:
             e = self._held(e, cycle_s)
-        self._take_all(e, p["linear"], p["angular"])
+        self._take_all(e, p["linear"], p["angular"], p["distance"])
         self._pending = {}
 
     def _held(self, e: npt.NDArray[np.int64], cycle_s: float) -> npt.NDArray[np.int64]:
@@ -211,7 +214,7 @@ class StreamTwist:
         return held[len(held) - len(p["index"]):]
 
     def _take_all(self, e: npt.NDArray[np.int64], linear: FloatArray,
-                  angular: FloatArray) -> None:
+                  angular: FloatArray, distance: IntArray) -> None:
         """Twist frames naming encoder frames ``e`` (-1: none), in bus order: those at or after
         every earlier one's are taken and judged from the third on (``compare._outside_band``,
         its segments' bands from the steps kept and the band carried)."""
@@ -221,6 +224,8 @@ class StreamTwist:
         self._running_max = int(running[-1])
         ok = (e >= 0) & (e >= running)
         e, linear, angular = e[ok], linear[ok], angular[ok]
+        if self.on_distance is not None:  # the samples of distance.twist_samples
+            self.on_distance(e, distance[ok])
         if self._count == 0 and len(e):
             self._ok = [_Twist(int(e[0]), float(linear[0]), float(angular[0]))]
             self._count = 1
