@@ -79,6 +79,22 @@ def firmware_m_per_count(robot: RobotProfile) -> tuple[float, float]:
     return per_count(robot.wheel_radius_left_m), per_count(robot.wheel_radius_right_m)
 
 
+def gap_extra_m(robot: RobotProfile, max_wheel_speed_mm_s: int | None, periods: int,
+                ds_m: float) -> float:
+    """How far (m) above a merged step of |dS| ``ds_m`` over ``periods`` encoder periods the
+    firmware's path may lie (it may have taken the frames one by one): half the gap's path
+    bound (``breaks.path_bound_m`` of the per-period count bounds, ``gapbound.period_bounds``)
+    less |dS|; inf without a plausibility bound."""
+    if max_wheel_speed_mm_s is None:
+        return math.inf
+    geometry = Geometry.of(robot)
+    bound = period_bounds(geometry, max_wheel_speed_mm_s)
+    m_left, m_right = firmware_m_per_count(robot)
+    path = max(path_bound_m(periods * bound[0], periods * bound[1], geometry),
+               periods * (bound[0] * m_left + bound[1] * m_right))  # either radii
+    return max(0.0, 0.5 * path - ds_m)
+
+
 def twist_samples(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
                   enc: Encoders) -> tuple[IntArray, IntArray]:
     """The accepted ODOM_TWIST frames naming an accepted encoder frame at or after every
@@ -149,21 +165,9 @@ class DistanceJudge:
     def _gap_extra_m(self, periods: IntArray, ds_m: FloatArray) -> FloatArray:
         """Per frame: how far above the merged step the firmware's path may be (a gap)."""
         extra = np.zeros(len(periods))
-        gaps = np.flatnonzero(periods > 1)
-        if len(gaps) == 0:
-            return extra
-        if self.max_wheel_speed_mm_s is None:
-            extra[gaps] = math.inf
-            return extra
-        m_left, m_right = firmware_m_per_count(self.robot)
-        geometry = Geometry(self.robot.counts_per_rev, self.robot.wheel_radius_left_m,
-                            self.robot.wheel_radius_right_m, self.robot.wheelbase_m)
-        bound = period_bounds(geometry, self.max_wheel_speed_mm_s)
-        for k in gaps.tolist():
-            n = int(periods[k])
-            path = path_bound_m(n * bound[0], n * bound[1], geometry)
-            path = max(path, n * (bound[0] * m_left + bound[1] * m_right))  # nm radii
-            extra[k] = max(0.0, 0.5 * path - float(ds_m[k]))
+        for k in np.flatnonzero(periods > 1).tolist():
+            extra[k] = gap_extra_m(self.robot, self.max_wheel_speed_mm_s, int(periods[k]),
+                                   float(ds_m[k]))
         return extra
 
     def feed_samples(self, e: IntArray, raw_mm: IntArray) -> None:

@@ -31,8 +31,8 @@ from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance, _realtime, _robot_dict
 from odocan.host.judge.breaks import placed_offsets
-from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.distance import DistanceJudge
+from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.reference_path import restart_detail
