@@ -115,6 +115,43 @@ def twist_samples(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder:
 
 
 @dataclass
+class Feasible:
+    """The firmware's path less the reference's (mm, before the wire's rounding) that the
+    samples so far allow at the latest: an interval, moved by the allowances (``up``, ``down``:
+    cumulative, mm) between samples and narrowed by each sample's own interval. Found empty, it
+    is kept as it is (lo > hi): ``excess_mm``, the most lo - hi reached, is then the same however
+    the samples are grouped (within a run of equal allowances lo - hi only grows)."""
+
+    lo: float
+    hi: float
+    up: float = 0.0
+    down: float = 0.0
+    excess_mm: float = 0.0
+
+    def take(self, lo: FloatArray, hi: FloatArray, up: FloatArray, down: FloatArray) -> None:
+        """Samples in order: their intervals and the allowances at each (runs of equal
+        allowances met at once: max and min are exact in any grouping)."""
+        if len(lo) == 0:
+            return
+        starts = np.concatenate(([0], 1 + np.flatnonzero((np.diff(up) != 0)
+                                                          | (np.diff(down) != 0))))
+        lo_run, hi_run = np.maximum.reduceat(lo, starts), np.minimum.reduceat(hi, starts)
+        for j, k in enumerate(starts.tolist()):
+            self.take_one(float(lo_run[j]), float(hi_run[j]), float(up[k]), float(down[k]))
+
+    def take_one(self, lo: float, hi: float, up: float, down: float) -> None:
+        """One sample (or a run of samples with the same allowances)."""
+        if down != self.down:  # inf - inf: an unbounded allowance moves it once
+            self.lo = -math.inf if math.isinf(down) else self.lo - (down - self.down)
+        if up != self.up:
+            self.hi = math.inf if math.isinf(up) else self.hi + (up - self.up)
+        self.up, self.down = up, down
+        self.lo, self.hi = max(self.lo, lo), min(self.hi, hi)
+        if self.lo > self.hi:  # empty: it stays so (lo - hi only grows until a jump)
+            self.excess_mm = max(self.excess_mm, self.lo - self.hi)
+
+
+@dataclass
 class DistanceJudge:
     """The judge (module docstring). ``feed_frames`` the encoder frames from e0 in order with the
     firmware's step into each, ``feed_samples`` the samples naming frames already fed, in order;
@@ -130,9 +167,12 @@ class DistanceJudge:
     _anchors: dict[int, int] = field(default_factory=dict)  # frame -> path units at it
     _stall_ends: dict[int, int] = field(default_factory=dict)  # break -> frame its span ends
     _r0: float | None = None
-    _lo: float = -math.inf  # max of r - upper (mm)
-    _hi: float = math.inf  # min of r + lower (mm)
+    feasible: Feasible = field(default_factory=lambda: Feasible(-math.inf, math.inf))
     samples: int = 0
+
+    def __post_init__(self) -> None:
+        if self.exact:  # at power-up: 0 at the first frame
+            self.feasible = Feasible(0.0, 0.0)
 
     def feed_frames(self, g: IntArray, d_left: IntArray, d_right: IntArray, seq: IntArray
                     ) -> None:
@@ -189,10 +229,8 @@ class DistanceJudge:
             self._r0 = 0.0 if self.exact else float(r[0])
         r = self._r0 + (r - self._r0) - WIRE_MM * np.round((r - self._r0) / WIRE_MM)
         base = WIRE_SLACK_MM + 1e3 * (cols["n"][k] * STEP_SLACK_M + cols["c"][k] * COUNT_SLACK_M)
-        upper = base + 1e3 * cols["up"][k]
-        lower = base + 1e3 * self._lower_m(e, cols["units"][k])
-        self._lo = max(self._lo, float(np.max(r - upper)))
-        self._hi = min(self._hi, float(np.min(r + lower)))
+        self.feasible.take(r - base, r + base, 1e3 * cols["up"][k],
+                           1e3 * self._lower_m(e, cols["units"][k]))
         self.samples += len(e)
         self._trim(int(e[-1]))
 
@@ -232,8 +270,7 @@ class DistanceJudge:
 
     def result(self) -> dict[str, Any]:
         """The report's ``onboard_distance_vs_reference``."""
-        lo, hi = (max(self._lo, 0.0), min(self._hi, 0.0)) if self.exact else (self._lo, self._hi)
-        excess_mm = max(0.0, lo - hi) if self.samples else 0.0
+        excess_mm = self.feasible.excess_mm
         return {
             "samples": self.samples,
             "start": "power-up" if self.exact else "fitted",

@@ -30,6 +30,7 @@ from odocan.host.judge.distance import (
     UNITS_PER_M,
     WIRE_MM,
     WIRE_SLACK_MM,
+    Feasible,
     firmware_m_per_count,
     gap_extra_m,
 )
@@ -66,7 +67,7 @@ class LiveDistance:
         self._page_units: int | None = None
         self._lost: int | None = None
         self._r0: float | None = None
-        self._lo, self._hi = -math.inf, math.inf
+        self._feasible: Feasible | None = None
         self._wrong = False
         self.first_seq: int | None = None
         self.power_up = False  # the first life, heard from the firmware's power-up
@@ -98,6 +99,9 @@ class LiveDistance:
         the fine path since the page before may have been merged on board."""
         if first_life_page and ok == tracker.enc_seq + 1 and self.first_seq == 0:
             self.power_up = True
+            f = self._feasible  # judged as fitted so far: from 0, with the allowances since
+            if f is not None:
+                f.take_one(-f.down, f.up, f.up, f.down)
         units = self._sums[0]
         if self._lost is not None and (lost - self._lost) % 256 and self._page_units is not None:
             self._lower_m += (units - self._page_units) / UNITS_PER_M
@@ -119,22 +123,19 @@ class LiveDistance:
         units, n, c, up = at
         diff = raw_mm - units * (1000.0 / UNITS_PER_M)
         r = diff - WIRE_MM * round(diff / WIRE_MM)
-        if self._r0 is None:
-            self._r0 = r
-        r = self._r0 + (r - self._r0) - WIRE_MM * round((r - self._r0) / WIRE_MM)
+        if self._feasible is None:  # the offset: 0 from a power-up, else free
+            self._r0 = 0.0 if self.power_up else r
+            self._feasible = Feasible(0.0, 0.0) if self.power_up else Feasible(-math.inf,
+                                                                               math.inf)
+        r0 = self._r0 or 0.0
+        r = r0 + (r - r0) - WIRE_MM * round((r - r0) / WIRE_MM)
         base = WIRE_SLACK_MM + 1e3 * (n * STEP_SLACK_M + c * COUNT_SLACK_M)
-        self._lo = max(self._lo, r - base - 1e3 * up)
-        self._hi = min(self._hi, r + base + 1e3 * self._lower_m)
+        self._feasible.take_one(r - base, r + base, 1e3 * up, 1e3 * self._lower_m)
         self.samples += 1
-
-    def excess_m(self, exact: bool) -> float:
-        """How far this life's intervals miss a common offset (0 at power-up: ``exact``)."""
-        lo, hi = (max(self._lo, 0.0), min(self._hi, 0.0)) if exact else (self._lo, self._hi)
-        return max(0.0, lo - hi) * 1e-3 if self._r0 is not None else 0.0
 
     def verdict(self) -> list[str]:
         """Why DISTANCE is wrong (empty: it is not), latched once found."""
-        excess = self.excess_m(self.power_up)
+        excess = self._feasible.excess_mm * 1e-3 if self._feasible is not None else 0.0
         if excess > 0.0 and not self._wrong:
             self._wrong = True
             self.wrong_lives += 1
