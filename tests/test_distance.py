@@ -28,7 +28,9 @@ from odocan.firmware.odometry import Odometry
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_analysis import analyze_file
+from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import RobotProfile, load
 from tests.synth_log import Synth, synthesize, wandering_drive
@@ -163,16 +165,21 @@ def manhattan() -> Wrong:
 def verdicts(path: Path, robot: RobotProfile, *, speed: int | None = 4000
              ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
     """The DISTANCE judgement of the whole analyze, the streamed one (small chunks) and the
-    monitor fed the log frame by frame."""
+    monitor (and the MQTT bridge, its verdict alike) fed the log frame by frame."""
     whole = analyze(read_log(path), robot, max_wheel_speed_mm_s=speed)
     streamed = analyze_file(path, robot, chunk_frames=977, max_wheel_speed_mm_s=speed)
     monitor = BusMonitor(robot)
-    monitor.distance.max_wheel_speed_mm_s = speed
+    bridge = RobotTelemetry("r", Geometry.of(robot), whole.report["integrator"],
+                            counter_bits=robot.counter_bits)
+    monitor.distance.max_wheel_speed_mm_s = bridge.distance.max_wheel_speed_mm_s = speed
     msg = None
     for msg in can.LogReader(path):
         monitor.feed(msg, now_s=msg.timestamp)
+        bridge.feed(msg)
     assert msg is not None
     live = monitor.snapshot(now_s=msg.timestamp)
+    live["bridge"] = bridge.status()[1]["distance"]  # the bridge's retained status
+    assert live["bridge"]["passed"] == live["distance"]["passed"]
     assert whole.report["onboard_distance_vs_reference"] == streamed[
         "onboard_distance_vs_reference"]
     return whole.report, streamed, live

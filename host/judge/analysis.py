@@ -115,7 +115,7 @@ from odocan.host.judge.compare import (
     rebased_at_start,
     versus_truth,
 )
-from odocan.host.judge.distance import DistanceJudge, check_distance
+from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
 from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import Life, merge, split_lives
@@ -322,7 +322,8 @@ def _analyze_life(
     distance = _distance(frames, accepted, decoder, enc, robot, ref_all.start,
                          DistanceJudge(robot, max_wheel_speed_mm_s, power_up and not start_pose,
                                        [b for b in stalls.tolist() if b > ref_all.start],
-                                       [(a, z) for a, z, _ in losses]))
+                                       [(a, z) for a, z, _ in losses],
+                                       twin_paths(enc, robot, ref_all.start)))
     vs_ref["max_position_error_beyond_allowance_m"] = float(
         np.max(pos_err - allowance - twin_allowed))
     passed = bool(

@@ -15,37 +15,50 @@ midpoint (sum of |dS| over its steps). The firmware (firmware/odometry.py, firmw
 
 The reference: per step of the firmware's (``reference_path.firmware_steps``, from the life's
 start frame e0) |dS| = |dL m_L + dR m_R| / 2 in float64 with the nm-rounded radii the firmware
-runs with (``firmware_m_per_count``), rounded to a whole 2^-40 m (an error <= 2^-41 m plus the
-float's, < 2^-60 m for any step below 2^-8 m ... 10^3 m) and summed exactly in int64 (no float
-sum drifting over 100 km). So at a sample naming encoder frame e, after N frames and C counts
-(both wheels, absolute) from e0,
+runs with (``firmware_m_per_count``), rounded to a whole 2^-40 m (an error <= 2^-41 m, plus the
+float's relative 2^-52: below 2^-42 m for any step under 1 km) and summed exactly in int64 (no
+float sum drifting over 100 km). So at a sample naming encoder frame e, after N frames and C
+counts (both wheels, absolute) from e0, the firmware's wire value lies within
 
-    |firmware - reference| <= 0.5 mm + N 2^-39 m + C 2^-48 m     (``base_slack_m``)
+    s = 0.5 mm + N 2^-39 m + C 2^-48 m
 
-(N 2^-39 covers both roundings per step with a factor 2 to spare for the float; C 2^-48 twice
-the constants' bound). 100 km of kobuki-like driving (10^7 frames, 2.4 * 10^9 counts) add
-0.02 mm; a 2^24 counts/rev robot's 10^13 counts add up to 40 mm there: the Q48 constant's
-resolution, which the firmware's own sum carries.
+of the reference's sum (N 2^-39 m covers the two Q40 roundings and the float per step, 2^-41 +
+2^-41 + 2^-42 < 2^-39; C 2^-48 m twice the constants' bound). 100 km of kobuki-like driving
+(10^7 frames, 2.4 * 10^9 counts) add 0.03 mm; a 2^24 counts/rev robot's 1.5 * 10^13 counts add
+54 mm there: the Q48 constant's resolution, which the firmware's own sum carries (the DBC does
+not carry the constant, so a judge can only bound it).
 
 Where the firmware's steps are not the reference's:
 
 * a gap of the log (N > 1 periods): the firmware may have taken the frames the log missed one by
-  one, and sum |dS_i| >= |sum dS_i| (a robot reversing inside the gap): it may lie above the
-  merged step's |dS| by up to the gap's path bound (``breaks.path_bound_m`` of N times the per-
-  period count bounds ``gapbound.period_bounds``, halved: |dS| <= (|dS_L| + |dS_R|) / 2) less
-  |dS|, from that frame on (``upper``); unbounded without a plausibility bound;
+  one, and sum |dS_i| >= |sum dS_i| (a robot reversing inside the gap): its path may grow by up
+  to the gap's path bound (``breaks.path_bound_m`` of N times the per-period count bounds
+  ``gapbound.period_bounds``, halved: |dS| <= (|dS_L| + |dS_R|) / 2) less the merged |dS| more
+  than the reference's there (``up``); unbounded without a plausibility bound;
 * a stall or hold (``stall_breaks``) and the spans where the firmware lost frames the log holds
   (``loss_spans``, ENC_E2E_LOST grew): it took several fine steps as one, |sum dS_i| <= sum
-  |dS_i|, so it may lie below by up to the fine path of the span (the reference's own sum over
-  it), from the span's first frame on (``lower``). A stall's span ends at the first sample that
-  names a frame after its break.
+  |dS_i|, so its path may grow less, by up to the fine path of the span (the reference's own
+  sum over it; ``down``). A stall's span ends at the first sample naming a frame after it;
+* an encoder frame with a twin (``twin_paths``): the firmware may have stepped through the
+  twin (``up``: the steps into and out of it) or taken it for the frame (``down``: the
+  reference's steps into and out of the frame).
 
-Verdict: every sample's offset interval [r - upper, r + lower] (r the wire minus the reference,
-mm, read mod 2^16 nearest the reference: the wire's u16 extended against it) holds one common
-offset o, and at power-up (``exact``) o = 0: the firmware starts at 0. A log that starts mid-drive
-takes any o (the distance before the log is unknowable). Exact in any order (a max and a min),
-so the whole and the streamed analyze agree. A firmware off by exactly a multiple of 65.536 m
-cannot be told on the wire; one that wraps elsewhere (at 65.535 m) or saturates is.
+Verdict (``Feasible``): the firmware's path less the reference's (mm, before the wire's
+rounding) is a value that only those allowances move. Each sample bounds it, [r - s, r + s] (r
+the wire minus the reference, read mod 2^16 nearest the reference: the wire's u16 extended
+against it; s the slack above); between two samples it may move down by the ``down`` and up by
+the ``up`` that came between them. The interval of the values the samples allow is carried
+sample to sample (moved, then narrowed); found empty, DISTANCE is wrong (``max_excess_m``: by how
+much). At power-up (``exact``) it starts at 0 (the firmware counts from 0); a log that starts
+mid-drive starts it free (the distance before the log is unknowable). So a wrong value is seen
+even after a gap: the samples between two gaps pin the value, and 2 mm off after the gap
+leave that pin. Whole and streamed give the same result: max and min are exact in any grouping.
+A firmware off by exactly a multiple of 65.536 m cannot be told on the wire; one that wraps
+elsewhere (at 65.535 m) or saturates can.
+
+Not modelled (left looser, never tighter): a gap whose frames the firmware missed too (its
+ENC_E2E_LOST grew by them) still takes the path bound, though the firmware took the merged step
+exactly.
 """
 
 from __future__ import annotations
@@ -60,7 +73,7 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import path_bound_m
 from odocan.host.judge.gapbound import period_bounds
-from odocan.host.judge.reference import Geometry
+from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import Encoders, FloatArray, IntArray, match_encoder
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import NM_PER_M, RobotProfile
@@ -162,6 +175,7 @@ class DistanceJudge:
     exact: bool  # the log starts at the firmware's power-up: offset 0
     stall_breaks: list[int] = field(default_factory=list)  # frames the firmware resumed on
     loss_spans: list[tuple[int, int]] = field(default_factory=list)  # (first, last) frames
+    twins: dict[int, tuple[float, float]] = field(default_factory=dict)  # frame: up, down (m)
     _cols: dict[str, np.ndarray] = field(default_factory=dict)  # frames kept: g, units, n, c, up
     _carry: tuple[int, int, int, float, int | None] = (0, 0, 0, 0.0, None)  # sums, last seq
     _anchors: dict[int, int] = field(default_factory=dict)  # frame -> path units at it
@@ -187,7 +201,11 @@ class DistanceJudge:
         counts = c0 + np.cumsum(np.abs(d_left) + np.abs(d_right))
         n = n0 + np.arange(1, len(g) + 1, dtype=np.int64)
         periods = np.diff(np.concatenate(([seq[0] if last_seq is None else last_seq], seq)))
-        up = up0 + np.cumsum(self._gap_extra_m(periods, ds_m))
+        extra = self._gap_extra_m(periods, ds_m)
+        for frame, (up_m, _) in self.twins.items():
+            if 0 <= frame - int(g[0]) < len(g):
+                extra[frame - int(g[0])] += up_m
+        up = up0 + np.cumsum(extra)
         new = {"g": g, "units": units, "n": n, "c": counts, "up": up}
         self._cols = ({k: np.concatenate((self._cols[k], v)) for k, v in new.items()}
                       if self._cols else new)
@@ -251,6 +269,8 @@ class DistanceJudge:
         for a, z in self.loss_spans:
             if a in self._anchors:
                 self._add_span(lower, e, units, a, z)
+        for frame, (_, down_m) in self.twins.items():
+            lower[e >= frame] += down_m
         return lower
 
     def _add_span(self, lower: FloatArray, e: IntArray, units: IntArray, a: int, z: int
@@ -277,6 +297,32 @@ class DistanceJudge:
             "max_excess_m": excess_mm * 1e-3,
             "passed": excess_mm == 0.0,
         }
+
+
+def twin_paths(enc: Encoders, robot: RobotProfile, after: int) -> dict[int, tuple[float, float]]:
+    """Per accepted encoder frame k > ``after`` with a twin (``samples.encoder_twins``): how far
+    (m) the firmware's path may lie above the reference's from k on (it may have stepped through
+    the twin: the steps from the frame before to it, from it to k and to the frame after) and
+    below (it may have taken the twin for k: the reference's steps into and out of k)."""
+    if enc.twins is None:
+        return {}
+    m_left, m_right = firmware_m_per_count(robot)
+    bits = min(robot.counter_bits, 24)
+
+    def step_m(a: tuple[int, int], b: tuple[int, int]) -> float:
+        d_left, d_right = (int(wrap_delta(b[i] - a[i], bits)) for i in (0, 1))
+        return abs(0.5 * (d_left * m_left + d_right * m_right))
+
+    counts = list(zip(enc.left.tolist(), enc.right.tolist(), strict=True))
+    out: dict[int, tuple[float, float]] = {}
+    for k, left, right in zip(*(a.tolist() for a in enc.twins), strict=True):
+        if k <= after or k + 1 >= len(counts):
+            continue
+        twin, up, down = (left, right), *out.get(k, (0.0, 0.0))
+        out[k] = (up + step_m(counts[k - 1], twin) + step_m(twin, counts[k])
+                  + step_m(twin, counts[k + 1]),
+                  down + step_m(counts[k - 1], counts[k]) + step_m(counts[k], counts[k + 1]))
+    return out
 
 
 def check_distance(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
