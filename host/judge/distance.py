@@ -70,11 +70,18 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import path_bound_m
 from odocan.host.judge.gapbound import period_bounds
 from odocan.host.judge.reference import Geometry, wrap_delta
-from odocan.host.judge.samples import Encoders, FloatArray, IntArray, match_encoder
+from odocan.host.judge.samples import (
+    SILENCE_CYCLES,
+    Encoders,
+    FloatArray,
+    IntArray,
+    match_encoder,
+)
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import NM_PER_M, RobotProfile
 
@@ -109,22 +116,24 @@ def gap_extra_m(robot: RobotProfile, max_wheel_speed_mm_s: int | None, periods: 
 
 
 def twist_samples(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
-                  enc: Encoders) -> tuple[IntArray, IntArray]:
-    """The accepted ODOM_TWIST frames naming an accepted encoder frame at or after every
-    earlier one's (``compare.check_twist``' samples): the encoder frame (index into ``enc``)
-    and the raw DISTANCE (mm mod 2^16)."""
+                  enc: Encoders) -> tuple[IntArray, IntArray, FloatArray, IntArray]:
+    """The accepted ODOM_TWIST frames in bus order (``compare.check_twist``' pairing): the
+    encoder frame each names (index into ``enc``, -1: none), its raw DISTANCE (mm mod 2^16),
+    its bus time and the accepted encoder frames logged before it (``DistanceJudge.take``)."""
+    empty = np.zeros(0, dtype=np.int64)
     try:
         rows = decoder.decode(frames, "ODOM_TWIST")
     except DecodeError:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        return empty, empty, np.zeros(0), empty
     keep = accepted[rows["index"]] if len(rows["index"]) else np.zeros(0, dtype=bool)
     if not keep.any():
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        return empty, empty, np.zeros(0), empty
     index = rows["index"][keep]
-    e = match_encoder(enc, index, rows["ENC_COUNTER"][keep].astype(np.int64),
-                      frames.timestamp_s[index], rows["COUNTER"][keep].astype(np.int64))
-    ok = (e >= 0) & (e >= np.maximum.accumulate(e))
-    return e[ok].astype(np.int64), rows["DISTANCE"][keep][ok].astype(np.int64)
+    t_s = frames.timestamp_s[index]
+    e = match_encoder(enc, index, rows["ENC_COUNTER"][keep].astype(np.int64), t_s,
+                      rows["COUNTER"][keep].astype(np.int64))
+    heard = np.searchsorted(enc.timestamp_s, t_s).astype(np.int64)
+    return e.astype(np.int64), rows["DISTANCE"][keep].astype(np.int64), t_s, heard
 
 
 @dataclass
@@ -181,6 +190,8 @@ class DistanceJudge:
     _anchors: dict[int, int] = field(default_factory=dict)  # frame -> path units at it
     _stall_ends: dict[int, int] = field(default_factory=dict)  # break -> frame its span ends
     _r0: float | None = None
+    _running: int = -1  # the largest encoder frame named so far
+    _last: tuple[float, int] = (math.nan, 0)  # the last twist frame: bus time, frames before
     feasible: Feasible = field(default_factory=lambda: Feasible(-math.inf, math.inf))
     samples: int = 0
 
@@ -227,6 +238,23 @@ class DistanceJudge:
             extra[k] = gap_extra_m(self.robot, self.max_wheel_speed_mm_s, int(periods[k]),
                                    float(ds_m[k]))
         return extra
+
+    def take(self, e: IntArray, raw_mm: IntArray, t_s: FloatArray, heard: IntArray) -> None:
+        """ODOM_TWIST frames in bus order (``twist_samples``; ``heard``: the encoder frames
+        logged before each): those naming a frame (e >= 0) at or after every earlier one's are
+        judged, but the first after the firmware was silent for ``SILENCE_CYCLES`` cycles while
+        the encoder frames went on (a stall: it names a frame of its backlog that ENC_COUNTER
+        cannot resolve, as ``stalls.after_stalls`` leaves the pose out)."""
+        if len(e) == 0:
+            return
+        running = np.maximum.accumulate(np.concatenate(([self._running], e)))[1:]
+        prev_t = np.concatenate(([self._last[0]], t_s[:-1]))
+        prev_heard = np.concatenate(([self._last[1]], heard[:-1]))
+        self._running, self._last = int(running[-1]), (float(t_s[-1]), int(heard[-1]))
+        quiet = ((t_s - prev_t >= (SILENCE_CYCLES - 0.5) * ENCODER_PERIOD_US * 1e-6)
+                 & (heard - prev_heard >= SILENCE_CYCLES - 1))
+        ok = (e >= 0) & (e >= running) & ~quiet
+        self.feed_samples(e[ok], raw_mm[ok])
 
     def feed_samples(self, e: IntArray, raw_mm: IntArray) -> None:
         """Samples naming encoder frames ``e`` (fed already; those before the first frame fed
@@ -334,5 +362,5 @@ def check_distance(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder
     judge.feed_frames(np.arange(e0, len(enc.seq), dtype=np.int64),
                       np.concatenate((zero, steps[0])), np.concatenate((zero, steps[1])),
                       enc.seq[e0:])
-    judge.feed_samples(*twist_samples(frames, accepted, decoder, enc))
+    judge.take(*twist_samples(frames, accepted, decoder, enc))
     return judge.result()

@@ -35,6 +35,7 @@ from odocan.host.judge.distance import (
     gap_extra_m,
 )
 from odocan.host.judge.livepose import RING, StepGate
+from odocan.host.judge.samples import SILENCE_CYCLES
 from odocan.host.judge.tracking import PoseTracker
 from odocan.sim.robot import RobotProfile
 
@@ -62,6 +63,7 @@ class LiveDistance:
         self._gate: StepGate | None = None
         self._latest: tuple[int, int, float] | None = None  # seq, counter, t_s
         self._last_e = -1
+        self._last_twist: tuple[float, int] = (math.nan, 0)  # bus time, frames heard before
         self._lower_m = 0.0
         self._stalls = -1
         self._page_units: int | None = None
@@ -108,7 +110,13 @@ class LiveDistance:
         self._lost, self._page_units = lost, units
 
     def on_twist(self, tracker: PoseTracker, enc_counter: int, raw_mm: int, t_s: float) -> None:
-        """An accepted ODOM_TWIST: judge its DISTANCE at the encoder frame it names."""
+        """An accepted ODOM_TWIST: judge its DISTANCE at the encoder frame it names (not the
+        first after a stall: ``distance.DistanceJudge.take``)."""
+        last_t, last_heard = self._last_twist
+        self._last_twist = (t_s, tracker.enc_seq + 1)
+        if (t_s - last_t >= (SILENCE_CYCLES - 0.5) * CYCLE_S
+                and tracker.enc_seq + 1 - last_heard >= SILENCE_CYCLES - 1):
+            return
         if self._latest is None:
             return
         seq, counter, latest_t = self._latest

@@ -14,7 +14,7 @@ import numpy as np
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.reference import Geometry
-from odocan.host.judge.samples import WIRE_COUNTER_BITS
+from odocan.host.judge.samples import WIRE_COUNTER_BITS, FloatArray, IntArray
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamReference
 from odocan.host.judge.stream_life import _take
 from odocan.host.judge.stream_twist import StreamTwist
@@ -35,13 +35,18 @@ def stream_distance(frames: Callable[[], Iterable[FrameArrays]], db: DatabaseSpe
     reference = StreamReference(Geometry.of(robot), integrator,
                                 min(robot.counter_bits, WIRE_COUNTER_BITS),
                                 judge.max_wheel_speed_mm_s)
-    twist = StreamTwist(decoder, robot, on_distance=judge.feed_samples)
     count = 0
+    enc_t = np.zeros(0)
+
+    def take(e: IntArray, raw_mm: IntArray, t_s: FloatArray) -> None:  # this chunk's twists
+        judge.take(e, raw_mm, t_s, count - len(enc_t) + np.searchsorted(enc_t, t_s))
+
+    twist = StreamTwist(decoder, robot, on_distance=take)
     for chunk in frames():
         accepted = e2e.feed(chunk)
         enc = numbering.feed(chunk, accepted)
         g = count + np.arange(len(enc.index), dtype=np.int64)
-        count += len(g)
+        count, enc_t = count + len(g), enc.timestamp_s
         from_e0 = g >= e0
         if from_e0.any():
             taken = _take(enc, from_e0)

@@ -99,7 +99,8 @@ class StreamTwist:
     _prev_band: tuple[Band, Band] = (EMPTY, EMPTY)  # segment (E[k-2], E[k-1]]: linear, angular
     _folded: tuple[Band, Band] = (EMPTY, EMPTY)  # steps after the last E no longer kept
     samples: int = 0
-    on_distance: Callable[[IntArray, IntArray], None] | None = None  # told (E, DISTANCE raw)
+    # told every twist frame in bus order: E (-1: none), DISTANCE raw, bus time (s)
+    on_distance: Callable[[IntArray, IntArray, FloatArray], None] | None = None
     max_linear_excess_mps: float = 0.0
     max_angular_excess_rad_s: float = 0.0
 
@@ -198,7 +199,9 @@ class StreamTwist:
             e = np.where(at >= 0, known["g"][np.maximum(at, 0)], -1).astype(np.int64)
         if cycle_s is not None:
             e = self._held(e, cycle_s)
-        self._take_all(e, p["linear"], p["angular"], p["distance"])
+        if self.on_distance is not None:
+            self.on_distance(e, p["distance"], p["t"])
+        self._take_all(e, p["linear"], p["angular"])
         self._pending = {}
 
     def _held(self, e: npt.NDArray[np.int64], cycle_s: float) -> npt.NDArray[np.int64]:
@@ -214,7 +217,7 @@ class StreamTwist:
         return held[len(held) - len(p["index"]):]
 
     def _take_all(self, e: npt.NDArray[np.int64], linear: FloatArray,
-                  angular: FloatArray, distance: IntArray) -> None:
+                  angular: FloatArray) -> None:
         """Twist frames naming encoder frames ``e`` (-1: none), in bus order: those at or after
         every earlier one's are taken and judged from the third on (``compare._outside_band``,
         its segments' bands from the steps kept and the band carried)."""
@@ -224,8 +227,6 @@ class StreamTwist:
         self._running_max = int(running[-1])
         ok = (e >= 0) & (e >= running)
         e, linear, angular = e[ok], linear[ok], angular[ok]
-        if self.on_distance is not None:  # the samples of distance.twist_samples
-            self.on_distance(e, distance[ok])
         if self._count == 0 and len(e):
             self._ok = [_Twist(int(e[0]), float(linear[0]), float(angular[0]))]
             self._count = 1
