@@ -221,6 +221,8 @@ class DistanceJudge:
         self._cols = ({k: np.concatenate((self._cols[k], v)) for k, v in new.items()}
                       if self._cols else new)
         self._carry = (int(units[-1]), int(n[-1]), int(counts[-1]), float(up[-1]), int(seq[-1]))
+        if not self._anchors:
+            self._anchors[int(g[0])] = int(units[0])
         for frame in self._wanted():
             k = frame - int(g[0])
             if 0 <= k < len(g):
@@ -294,9 +296,10 @@ class DistanceJudge:
                 self._anchors[int(e[after[0]])] = int(units[after[0]])
             end = self._stall_ends[b]
             self._add_span(lower, e, units, b - 1, end)
-        for a, z in self.loss_spans:
-            if a in self._anchors:
-                self._add_span(lower, e, units, a, z)
+        first = min(self._anchors, default=0)  # the first frame fed is anchored
+        for a, z in self.loss_spans:  # a span begun before the first frame: from it
+            if max(a, first) in self._anchors and z > first:
+                self._add_span(lower, e, units, max(a, first), z)
         for frame, (_, down_m) in self.twins.items():
             lower[e >= frame] += down_m
         return lower
