@@ -126,7 +126,7 @@ def twist_samples(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder:
     except DecodeError:
         return empty, empty, np.zeros(0), empty
     keep = accepted[rows["index"]] if len(rows["index"]) else np.zeros(0, dtype=bool)
-    if not keep.any():
+    if not keep.any() or "DISTANCE" not in rows:  # a DBC without it: nothing to judge
         return empty, empty, np.zeros(0), empty
     index = rows["index"][keep]
     t_s = frames.timestamp_s[index]

@@ -39,6 +39,8 @@ def stream_distance(frames: Callable[[], Iterable[FrameArrays]], db: DatabaseSpe
     enc_t = np.zeros(0)
 
     def take(e: IntArray, raw_mm: IntArray, t_s: FloatArray) -> None:  # this chunk's twists
+        if len(raw_mm) and raw_mm[0] < 0:  # a DBC without DISTANCE (-1): nothing to judge
+            return
         judge.take(e, raw_mm, t_s, count - len(enc_t) + np.searchsorted(enc_t, t_s))
 
     twist = StreamTwist(decoder, robot, on_distance=take)

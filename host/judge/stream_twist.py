@@ -120,7 +120,8 @@ class StreamTwist:
                    "t": chunk.timestamp_s[rows["index"][keep]],
                    "linear": rows["LINEAR_VEL"][keep] * TWIST_LSB,
                    "angular": rows["ANGULAR_VEL"][keep] * TWIST_LSB,
-                   "distance": rows["DISTANCE"][keep].astype(np.int64)}
+                   "distance": rows.get("DISTANCE", np.full(len(keep), -1))[keep].astype(
+                       np.int64)}
             self._pending = ({k: np.concatenate((self._pending[k], v)) for k, v in new.items()}
                              if self._pending else new)
         self._resolve(known)
