@@ -35,6 +35,7 @@ from odocan.host.judge.distance import (
     gap_extra_m,
 )
 from odocan.host.judge.livepose import RING, StepGate
+from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import SILENCE_CYCLES
 from odocan.host.judge.tracking import PoseTracker
 from odocan.sim.robot import RobotProfile
@@ -52,9 +53,25 @@ class LiveDistance:
         self.max_wheel_speed_mm_s = max_wheel_speed_mm_s
         self._m = firmware_m_per_count(robot)
         self.samples = 0
+        self.suspended = False  # a config applied with parameters not known here
         self.wrong_lives = 0  # lives whose intervals did not meet (latched)
         self.worst_excess_m = 0.0
         self.new_life()
+
+    def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
+        """New robot parameters (a config command): the firmware's DISTANCE goes on with its
+        new constants from a value this judge cannot know: judged from here as a new life."""
+        self.robot = RobotProfile(self.robot.name, geometry.counts_per_rev,
+                                  geometry.wheel_radius_left_m, geometry.wheel_radius_right_m,
+                                  geometry.wheelbase_m, counter_bits)
+        self._m = firmware_m_per_count(self.robot)
+        self.suspended = False
+        self.new_life()
+
+    def suspend(self) -> None:
+        """A config applied whose parameters this judge does not know: DISTANCE is no longer
+        judged (what was found wrong stays latched)."""
+        self.suspended = True
 
     def new_life(self) -> None:
         """A reboot: the firmware's DISTANCE restarts; so does the judgement (offset free)."""
@@ -114,6 +131,8 @@ class LiveDistance:
         first after a stall: ``distance.DistanceJudge.take``)."""
         last_t, last_heard = self._last_twist
         self._last_twist = (t_s, tracker.enc_seq + 1)
+        if self.suspended:
+            return
         if (t_s - last_t >= (SILENCE_CYCLES - 0.5) * CYCLE_S
                 and tracker.enc_seq + 1 - last_heard >= SILENCE_CYCLES - 1):
             return
@@ -157,5 +176,6 @@ class LiveDistance:
         """``distance`` in ``monitor --json``."""
         self.verdict()
         return {"samples": self.samples, "start": "power-up" if self.power_up else "fitted",
+                "suspended": self.suspended,
                 "max_excess_m": self.worst_excess_m, "wrong_lives": self.wrong_lives,
                 "passed": self.wrong_lives == 0}

@@ -234,6 +234,7 @@ class BusMonitor:
         if shown.get("PARAM") != "APPLY":
             return
         self.tracker.restart_reference()
+        self.distance.suspend()  # its new parameters are not known here: DISTANCE not judged
         self.events.append({"t_s": self._bus_time_s, "kind": "config",
                             "detail": "config applied: reference restarted"})
 

@@ -436,6 +436,7 @@ class RobotTelemetry:
         """New robot parameters (a config command): the reference restarts at the next pose."""
         self.tracker.integrator = integrator
         self.tracker.set_geometry(geometry, counter_bits)
+        self.distance.reconfigure(geometry, counter_bits)
 
     _handlers: ClassVar[dict[str, Any]] = {
         "WHEEL_ENCODERS": _on_encoders,
