@@ -161,7 +161,10 @@ def _do_monitor(args: argparse.Namespace) -> int:
     if wrongs.count:  # the pose was wrong at some time, even if right again since: FAIL
         print(f"monitor: FAIL: {wrongs.summary()}; judged as robot {profile.name!r} (--robot)"
               f"{_robot_hint(args, profile)}", file=sys.stderr)
-    return 1 if wrongs.count and code == 0 else code
+    distance = model.distance.verdict()  # ODOM_TWIST DISTANCE wrong in some life: FAIL
+    if distance:
+        print(f"monitor: FAIL: {distance[0]}", file=sys.stderr)
+    return 1 if (wrongs.count or distance) and code == 0 else code
 
 
 def _robot_hint(args: argparse.Namespace, profile: robot.RobotProfile) -> str:
