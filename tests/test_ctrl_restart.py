@@ -130,6 +130,9 @@ def judged(path: Path, robot: str) -> dict[str, Any]:
         "live_verdict": monitor.health(last_s)["state"],
         "events": [[(e["encoder_frame"], e["detail"]) for e in r["events"]
                     if e["kind"] == "counter_restart"] for r in (whole, streamed)],
+        "live_events": [(e["t_s"], e["detail"]) for e in monitor.health(last_s)["events"]
+                        if e["kind"] == "counter_restart"],
+        "restart_t_s": [e["t_s"] for e in whole["events"] if e["kind"] == "counter_restart"],
     }
 
 
@@ -152,6 +155,9 @@ def test_a_firmware_that_reprimed_on_the_restart_passes_every_judge(
         frame, detail = events[0]
         assert frame == RESTART
         assert "CTRL_UPTIME went back" in detail
+    live = verdict["live_events"]  # the monitor names it too, at the same frame's time
+    assert [t_s for t_s, _ in live] == verdict["restart_t_s"]
+    assert "the motor controller restarted (CTRL_UPTIME went back)" in live[0][1]
 
 
 @pytest.mark.parametrize("robot", ["kobuki", "pmir"])
@@ -221,6 +227,11 @@ def test_a_sim_process_killed_and_restarted_is_a_counter_reset_never_ok(
     assert {(st, r) for t, st, r in status if t >= reset_s} == {("DEGRADED", "COUNTER_RESET")}
     assert "OK" not in {v for t, v in verdicts if t >= reset_s}
     assert "POSE WRONG" not in {v for _, v in verdicts}
+    told = [e for e in monitor.health(again.frames[-1].timestamp)["events"]
+            if e["kind"] == "counter_restart"]  # the monitor names the restart
+    assert told
+    assert "the motor controller restarted (CTRL_UPTIME went back)" in told[0]["detail"]
+    assert told[0]["t_s"] >= back_s
 
 
 @pytest.mark.parametrize(("robot", "scenario"), [("pmir", "circle"), ("kobuki", "random")])

@@ -21,19 +21,24 @@ from odocan.host.judge.livepose import (
     RING,
     ErrorStats,
     FramePose,
+    RestartLog,
     Sample,
     StepGate,
     pose_dict,
+    recent,
     truth_heading,
 )
 from odocan.host.judge.livetruth import LifeTruth, TruthParts, carried_to
 from odocan.host.judge.livetwins import TwinWatch
 from odocan.host.judge.livewindow import (
+    ENC_COLUMNS,
     ENC_WINDOW,
     HALF_WINDOW,
     QUEUED_GAP_S,
     Columns,
+    Counted,
     Half,
+    counted,
     named_in_window,
     named_plain,
     silent_since,
@@ -78,7 +83,7 @@ class PoseTracker:
         self.stalls = 0  # firmware silences after which the reference restarted
         self._pos = 0  # frames fed so far (the order of encoder frames and pose halves)
         self._counts: list[tuple[int, int, int] | None] = [None] * RING  # seq, left, right
-        self._window = Columns(("seq", "pos", "counter", "t_s", "left", "right"), ENC_WINDOW)
+        self._window = Columns(ENC_COLUMNS, ENC_WINDOW)
         self.twins = TwinWatch(self._window.rows)  # frames with a twin: their poses left out
         self._halves = {"x": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW),
                         "y": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW)}
@@ -91,9 +96,10 @@ class PoseTracker:
         self._ref_at: dict[int, FramePose] = {}  # the reference at the latest encoder frames
         self._ref: ReferenceOdometry | None = None  # raw: ``fit`` corrects its start
         self.fit = LiveFit(0.0, 0.0, exact=True)  # the start narrowed (host.judge.livefit)
-        self._gate = StepGate(geometry, self.counter_bits)
+        self.restarts = RestartLog()  # counter restarts told (the owner takes ``events``)
+        self._gate = StepGate(geometry, self.counter_bits, self.restarts)
         self._pending: FramePose | None = None  # the first pose, heard before the integrator
-        self._backlog_counts: list[tuple[int, int, int, int]] = []  # seq, counter, left, right
+        self._backlog_counts: list[Counted] = []  # the frames since the pending pose's
         self._backlog_poses: list[FramePose] = []
         self._truth_parts = TruthParts()
         self._last_pair: tuple[FramePose, FramePose] | None = None  # on-board, reference
@@ -118,7 +124,6 @@ class PoseTracker:
         self.life_truth = LifeTruth()
 
     fast_path = True  # False: every half by ``match_encoder`` over the window (tests compare)
-    enc_uptime = 0  # CTRL_UPTIME of the latest encoder frame heard (0: not reported)
 
     # --- frames ---
 
@@ -137,25 +142,25 @@ class PoseTracker:
     def on_encoders(self, counter: int, left: int, right: int, t_s: float, uptime: int = 0) -> None:
         """An accepted WHEEL_ENCODERS frame (raw 24-bit counts, CTRL_UPTIME) at bus time ``t_s``."""
         self.advance(t_s)
-        self.enc_uptime = uptime
         self.enc_seq += 1
         self._pos += 1
         prev = self._window.rows[-1] if len(self._window) else None
         if self.placer.on_encoders(self.enc_seq, (counter, left, right, t_s), prev,
                                    self.counter_bits) and self._ref is not None:
             self._place_at_next = True  # a gap: placed again, bounded (liveplace.StallPlacer)
-        self._window.append(self.enc_seq, self._pos, counter, t_s, left, right)
+        row = (self.enc_seq, self._pos, counter, t_s, left, right, self.placer.periods, uptime)
+        self._window.append(*row)
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
         self._counts[counter] = (self.enc_seq, left, right)
         ref = self._ref
         if ref is not None:
-            step = self._gate.step(counter, left, right, self.placer.periods, uptime)
+            step = self._gate.step(counted(row))
             if step is not None:
                 ref.step_deltas(*step)
             self._keep_ref(FramePose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad))
         elif self._pending is not None:
-            self._backlog_counts.append((self.enc_seq, counter, left, right))
+            self._backlog_counts.append(counted(row))
             if len(self._backlog_counts) > BACKLOG_FRAMES:  # too long: start at a later pose
                 self._drop_backlog()
 
@@ -424,7 +429,7 @@ class PoseTracker:
         heard = self._truth_parts.add(part, enc_counter, value)
         if heard is None:
             return None
-        named = self._recent(self._counts[enc_counter])
+        named = recent(self._counts[enc_counter], self.enc_seq)
         raw = self._ref_at.get(named[0]) if named is not None else None
         ref = None if raw is None else self.fit.correct(raw)
         x_m, y_m, wrapped_rad = self.life_truth.heard(
@@ -443,16 +448,10 @@ class PoseTracker:
         """Counter restarts the current reference re-primed on (as the firmware does)."""
         return self._gate.counter_restarts
 
-    def _recent(self, entry: Any) -> Any:
-        """A ring entry if it is one of the last 8 encoder frames (not one 16 frames older)."""
-        return None if entry is None or self.enc_seq - entry[0] >= RING // 2 else entry
-
-    def _start_reference(
-        self, pose: FramePose, counts: list[tuple[int, int, int, int]], poses: list[FramePose]
-    ) -> None:
-        """Start the reference at ``pose``, primed on the first of ``counts`` (seq, counter,
-        left, right: the encoder frame ``pose`` names and those after it), catch up, and compare
-        the ``poses`` heard meanwhile."""
+    def _start_reference(self, pose: FramePose, counts: list[Counted],
+                         poses: list[FramePose]) -> None:
+        """Start the reference at ``pose``, primed on the first of ``counts`` (the frame ``pose``
+        names on, stepped as heard: ``Counted``), catch up, compare the ``poses`` heard since."""
         assert self.integrator is not None
         ref = self._ref = ReferenceOdometry(
             self.geometry, self.integrator, self.counter_bits,
@@ -462,12 +461,12 @@ class PoseTracker:
         self.fit = LiveFit.start(pose)
         self._ref_at = {}
         self.placer.restart()
-        self._gate = StepGate(self.geometry, self.counter_bits, self.enc_uptime)  # the latest's
-        for seq, counter, left, right in counts:
-            step = self._gate.step(counter, left, right)  # the first primes: stays at pose
+        self._gate = StepGate(self.geometry, self.counter_bits, self.restarts)
+        for frame in counts:
+            step = self._gate.step(frame)  # the first primes: stays at pose
             if step is not None:
                 ref.step_deltas(*step)
-            self._keep_ref(FramePose(seq, ref.x_m, ref.y_m, ref.heading_rad))
+            self._keep_ref(FramePose(frame[0], ref.x_m, ref.y_m, ref.heading_rad))
         for heard in poses:
             at = self._ref_at.get(heard.seq)
             if at is not None:
