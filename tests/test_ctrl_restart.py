@@ -18,6 +18,7 @@ import can
 import pytest
 
 from odocan.firmware import frames as fr
+from odocan.firmware.encoders import EncoderInput
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.host.judge.monitor import BusMonitor
@@ -263,3 +264,81 @@ def test_a_restart_without_a_silence_passes_on_a_correct_firmware(
         monitor.feed(msg, now_s=msg.timestamp)
     assert monitor.tracker.counter_restarts == 1
     assert monitor.tracker.vs_reference.max_dpos_m <= POSITION_LSB_M
+
+
+# --- a restart inside a silence, the controller back older than it was before it ----------------
+
+AGED_RESTART = 900  # tick (9 s): the controller restarts while silent (500 .. 1500)
+AGED_SILENT_TICKS = 1000  # 10 s: it speaks again 6 s after its restart, CTRL_UPTIME 7 > 5
+
+
+def aged_restart_log(path: Path, firmware: str) -> Path:
+    """pmir on a circle; the motor controller silent 10 s from 5 s, restarted 4 s into the
+    silence: it speaks again with CTRL_UPTIME 7, above the 5 it said before the silence (the old
+    rule, CTRL_UPTIME below the last, cannot tell it) but below the 5 + 9 whole seconds of the
+    silence. 3 s more. The candump log of the whole run."""
+    config = RigConfig(robot=load("pmir"), scenario="circle", firmware=firmware, duration_s=60.0)
+    with LockstepRig(config, [can.Logger(path)]) as rig:
+        send = rig.sim.tick
+
+        def tick(k: int) -> None:
+            if k == AGED_RESTART:
+                rig.sim.motor_controller.restart()
+            if not SILENT_FROM <= k < SILENT_FROM + AGED_SILENT_TICKS:
+                send(k)
+
+        rig.sim.tick = tick  # type: ignore[method-assign]
+        rig.run((SILENT_FROM + AGED_SILENT_TICKS + 300) * TICK_S)
+    return path
+
+
+def test_a_controller_back_older_than_before_a_silence_is_a_restart_in_python_and_c(
+    tmp_path: Path,
+) -> None:
+    """The jump to the restarted counters fits the bound widened by 10 s of silence: without
+    the rule "aged less than the silence" the firmware integrated it as motion and went back to
+    OK; now it re-primes (DEGRADED COUNTER_RESET, never OK), Python and C bit for bit, and every
+    judge passes it, naming the restart."""
+    python = aged_restart_log(tmp_path / "python.log", "python")
+    c = aged_restart_log(tmp_path / "c.log", "c")
+    assert python.read_bytes() == c.read_bytes()
+    heard = uptimes(python)
+    assert heard[SILENT_FROM - 1] == 5
+    assert heard[SILENT_FROM] == 7
+    back_s = (SILENT_FROM + AGED_SILENT_TICKS) * TICK_S
+    after = [(state, reason) for t, state, reason in summaries(python) if t > back_s + 0.05]
+    assert after
+    assert set(after) == {("DEGRADED", "COUNTER_RESET")}
+    profile = load("pmir")
+    whole = analyze(read_log(python), profile).report
+    assert whole["passed"], whole["onboard_vs_reference"]
+    assert [e["kind"] for e in whole["events"]] == ["counter_restart"]
+    assert analyze_file(python, profile, chunk_frames=256)["passed"]
+    monitor = BusMonitor(profile)
+    for msg in can.LogReader(python):
+        monitor.feed(msg, now_s=msg.timestamp)
+    assert monitor.tracker.vs_reference.max_dpos_m <= POSITION_LSB_M
+    told = [e for e in monitor.health(msg.timestamp)["events"] if e["kind"] == "counter_restart"]
+    assert [e["t_s"] for e in told] == [e["t_s"] for e in whole["events"]]
+
+
+def test_a_firmware_that_integrated_the_aged_restart_fails_every_judge(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The same drive on a firmware without the rule (its ``_aged_uptime`` the last CTRL_UPTIME
+    alone, as before): it integrates the restart's jump, and analyze (whole and streamed) and
+    the monitor fail it."""
+    monkeypatch.setattr(EncoderInput, "_aged_uptime", lambda self, prev: prev)
+    path = aged_restart_log(tmp_path / "integrated.log", "python")
+    after = [(s, r) for t, s, r in summaries(path)
+             if t > (SILENT_FROM + AGED_SILENT_TICKS) * TICK_S + 2.0]
+    assert ("OK", "NONE") in set(after)  # it recovered: OK with the jump in its pose
+    profile = load("pmir")
+    assert not analyze(read_log(path), profile).report["passed"]
+    assert not analyze_file(path, profile, chunk_frames=256)["passed"]
+    monitor = BusMonitor(profile)
+    for msg in can.LogReader(path):
+        monitor.feed(msg, now_s=msg.timestamp)
+    assert monitor.tracker.vs_reference.max_dheading_rad > HEADING_LSB_RAD  # its position is
+    # placed again after the gap (bounded), its heading goes on
+

@@ -9,9 +9,15 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, PERIODS_PER_S, RESYNC_FRAMES
+from odocan.firmware.encoders import (
+    CTRL_UPTIME_MAX,
+    MAX_WHEEL_SPEED_MM_S,
+    PERIODS_PER_S,
+    RESTART_SLACK_PERIODS,
+    RESYNC_FRAMES,
+)
 from odocan.firmware.twist import ENCODER_PERIOD_US
-from odocan.host.judge.livewindow import Counted
+from odocan.host.judge.livewindow import CYCLE_S, Counted
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.reference_path import restart_detail
 from odocan.host.judge.turns import unwrapped_error
@@ -38,8 +44,9 @@ class StepGate:
     ``host.judge.analysis``): a frame beyond ``MAX_WHEEL_SPEED_MM_S`` over the periods its COUNTER
     advanced since the last accepted one is refused; ``RESYNC_FRAMES`` refused frames plausible
     among themselves are a counter restart: one step from the first of them, never the jump; a
-    frame whose CTRL_UPTIME is below the last accepted one's (both non-zero) re-primes it (the
-    motor controller restarted): no step into it. Each restart is told to ``told``."""
+    frame whose CTRL_UPTIME is below the last accepted one's (both non-zero), or below what it
+    aged to over a silence (``aged``), re-primes it (the motor controller restarted): no step
+    into it. Each restart is told to ``told``."""
 
     def __init__(self, geometry: Geometry, counter_bits: int, told: RestartLog) -> None:
         travel_m = MAX_WHEEL_SPEED_MM_S * 1e-3 * ENCODER_PERIOD_US * 1e-6
@@ -51,6 +58,7 @@ class StepGate:
         self._seq = self._prev_seq = 0  # periods heard, at the latest frame and at ``prev``
         self.counter_restarts = 0
         self.uptime = 0  # CTRL_UPTIME of the last accepted frame (0: not reported)
+        self._prev_t = 0.0  # its bus time (s)
         self._told = told
 
     def _delta(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[int, int]:
@@ -78,9 +86,11 @@ class StepGate:
         prev, self.prev = self.prev, frame
         prev_seq, self._prev_seq = self._prev_seq, self._seq
         last_uptime, self.uptime = self.uptime, uptime
+        last_t, self._prev_t = self._prev_t, t_s
         if prev is None:
             return None
-        if uptime and last_uptime and uptime < last_uptime and self._young(frame, uptime):
+        if uptime and last_uptime and uptime < aged(last_uptime, t_s - last_t) \
+                and self._young(frame, uptime):
             self._refused = []
             self._restarted(seq, t_s, by_uptime=True)
             return 0, 0
@@ -91,6 +101,7 @@ class StepGate:
                 self._refused = []
             return delta
         self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # refused: kept
+        self._prev_t = last_t
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
         self._refused = [*self._refused, frame] if consistent else [frame]
         if len(self._refused) < RESYNC_FRAMES:
@@ -120,6 +131,14 @@ class RestartLog:
         self._told = seq
         self.events.append({"t_s": t_s, "kind": "counter_restart", "encoder_frame": seq,
                             "detail": restart_detail(by_uptime)})
+
+
+def aged(uptime: int, elapsed_s: float) -> int:
+    """``reference_path.aged_uptime`` of one step (plain Python: it runs per frame)."""
+    periods = round(elapsed_s / CYCLE_S) - RESTART_SLACK_PERIODS
+    if periods < PERIODS_PER_S:
+        return uptime
+    return min(CTRL_UPTIME_MAX, uptime + periods // PERIODS_PER_S)
 
 
 def recent(entry: tuple[int, int, int] | None, enc_seq: int) -> tuple[int, int, int] | None:
