@@ -342,3 +342,32 @@ def test_a_firmware_that_integrated_the_aged_restart_fails_every_judge(
     assert monitor.tracker.vs_reference.max_dheading_rad > HEADING_LSB_RAD  # its position is
     # placed again after the gap (bounded), its heading goes on
 
+
+def test_a_firmware_whose_position_jumps_at_a_restart_inside_a_gap_fails_every_judge(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The controller silent 2 s, restarted as it speaks again: a firmware that re-primes but
+    moves its X by 39 mm there (2^-5 m: a wrong re-prime). The judges placed the reference's
+    position again after the gap, bounded by the counts across it, which across a restart are
+    its jump, not motion: the wrong pose passed every judge (whole, streamed, live; its heading,
+    never placed, was right). Across a restart the firmware integrates nothing, so the position
+    goes on exactly: 39 mm off FAILs; the correct firmware still passes (the tests above)."""
+    reprime = EncoderInput._reprime
+
+    def jumped(self: EncoderInput, counter: int, wire: tuple[int, int],
+               counts: tuple[int, int]) -> None:
+        reprime(self, counter, wire, counts)
+        self._odometry.x_q40_m += 1 << 35  # 2^-5 m
+
+    monkeypatch.setattr(EncoderInput, "_reprime", jumped)
+    path = restart_log(tmp_path / "jumped.log", "python")
+    profile = load("pmir")
+    whole = analyze(read_log(path), profile).report
+    assert whole["onboard_vs_reference"]["max_position_error_m"] > 0.03
+    assert whole["onboard_vs_reference"]["max_heading_error_rad"] <= HEADING_LSB_RAD
+    assert not whole["passed"]
+    assert not analyze_file(path, profile, chunk_frames=256)["passed"]
+    monitor = BusMonitor(profile)
+    for msg in can.LogReader(path):
+        monitor.feed(msg, now_s=msg.timestamp)
+    assert monitor.tracker.vs_reference.max_dpos_m > 0.03

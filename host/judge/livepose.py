@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -121,11 +122,15 @@ class RestartLog:
     ``events`` (the monitor's, the bridge's); a frame stepped again (a reference started again
     over frames already gated) is told once."""
 
-    def __init__(self) -> None:
+    def __init__(self, reprimed: Callable[[int], None]) -> None:
+        """``reprimed``: called with the frame of each restart told by CTRL_UPTIME."""
         self.events: deque[dict[str, Any]] = deque(maxlen=16)  # the owner's deque replaces it
         self._told = -1  # the latest encoder frame (seq) told
+        self._reprimed = reprimed
 
     def add(self, seq: int, t_s: float, by_uptime: bool) -> None:
+        if by_uptime:
+            self._reprimed(seq)
         if seq <= self._told:
             return
         self._told = seq

@@ -108,7 +108,11 @@ def build_reference(
     opened = np.flatnonzero(starts)  # the first frame (from e0) of segments 1, 2, ...
     stalled = frozenset(breaks.tolist()) if breaks is not None else frozenset()
 
+    uptime_reprimed = frozenset(e0 + k for k in steps.by_uptime)
+
     def gap_allowance(b: int) -> float:
+        if b in uptime_reprimed:  # the gap ends in a controller restart: nothing integrated
+            return 0.0  # across it on board (re-primed), the position goes on exactly
         return gap_allowance_of_counts(
             (int(enc.left[b - 1]), int(enc.right[b - 1])), (int(enc.left[b]), int(enc.right[b])),
             int(enc.seq[b] - enc.seq[b - 1]), geometry, bits, integrator, max_wheel_speed_mm_s)
@@ -134,7 +138,7 @@ def build_reference(
         counter_restarts=tuple(e0 + k for k in steps.reprimed),
         implausible_frames=steps.refused,
         placements=placed,
-        ctrl_restarts=frozenset(e0 + k for k in steps.by_uptime),
+        ctrl_restarts=uptime_reprimed,
     )
 
 

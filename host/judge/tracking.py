@@ -96,7 +96,8 @@ class PoseTracker:
         self._ref_at: dict[int, FramePose] = {}  # the reference at the latest encoder frames
         self._ref: ReferenceOdometry | None = None  # raw: ``fit`` corrects its start
         self.fit = LiveFit(0.0, 0.0, exact=True)  # the start narrowed (host.judge.livefit)
-        self.restarts = RestartLog()  # counter restarts told (the owner takes ``events``)
+        self.placer = StallPlacer()  # the placements after stalls (host.judge.liveplace)
+        self.restarts = RestartLog(self.placer.reprimed)  # counter restarts told (``events``)
         self._gate = StepGate(geometry, self.counter_bits, self.restarts)
         self._pending: FramePose | None = None  # the first pose, heard before the integrator
         self._backlog_counts: list[Counted] = []  # the frames since the pending pose's
@@ -108,7 +109,6 @@ class PoseTracker:
         self._place_at_next = False  # after a stall or a held pose: place the position again
         self._losses = LiveAllowance()
         self.wrongs = self._losses.wrongs  # POSE WRONG episodes latched (host.judge.posewrongs)
-        self.placer = StallPlacer()  # the placements after stalls (host.judge.liveplace)
         self._now_s = 0.0  # the latest bus time (s)
         self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
         self._boot_poses: list[FramePose] = []  # the new life's samples while it waits
