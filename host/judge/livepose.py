@@ -90,7 +90,8 @@ class StepGate:
         last_t, self._prev_t = self._prev_t, t_s
         if prev is None:
             return None
-        if uptime and last_uptime and uptime < aged(last_uptime, t_s - last_t) \
+        if uptime and last_uptime and (uptime < last_uptime or (t_s - last_t > AGED_AFTER_S
+                                       and uptime < aged(last_uptime, t_s - last_t))) \
                 and self._young(frame, uptime):
             self._refused = []
             self._restarted(seq, t_s, by_uptime=True)
@@ -136,6 +137,10 @@ class RestartLog:
         self._told = seq
         self.events.append({"t_s": t_s, "kind": "counter_restart", "encoder_frame": seq,
                             "detail": restart_detail(by_uptime)})
+
+
+# below this silence ``aged`` is the last CTRL_UPTIME itself (the per-frame test skips it)
+AGED_AFTER_S = (PERIODS_PER_S + RESTART_SLACK_PERIODS - 0.5) * CYCLE_S
 
 
 def aged(uptime: int, elapsed_s: float) -> int:

@@ -33,6 +33,7 @@ REPEAT_S = SILENCE_CYCLES * CYCLE_S  # a repeated ENC_COUNTER closer than this i
 ENC_COLUMNS = ("seq", "pos", "counter", "t_s", "left", "right", "periods", "uptime")
 # seq, COUNTER, left, right, periods, CTRL_UPTIME, bus time s
 Counted = tuple[int, int, int, int, int, int, float]
+Row = tuple[int, int, int, float, int, int, int, int]  # a row of ``ENC_COLUMNS`` as appended
 
 
 def named_plain(halves: deque[tuple[float, ...]], columns: Columns, pos: int) -> int | None:
@@ -208,10 +209,11 @@ def named_in_window(halves: Columns, w: Columns, pos: int) -> tuple[int, bool]:
     return (int(w.col("seq")[found]) if found >= 0 else -1), queued
 
 
-def counted(row: tuple[float, ...]) -> Counted:
-    """A row of ``ENC_COLUMNS`` as the reference replays it (``Counted``)."""
+def counted(row: Row) -> Counted:
+    """A row of ``ENC_COLUMNS`` as the reference steps it (``Counted``; no conversion: per
+    frame)."""
     seq, _, counter, t_s, left, right, periods, uptime = row
-    return int(seq), int(counter), int(left), int(right), int(periods), int(uptime), t_s
+    return seq, counter, left, right, periods, uptime, t_s
 
 
 def window_counts(window: Columns, first: int) -> list[Counted]:
