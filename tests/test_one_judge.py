@@ -182,3 +182,25 @@ def test_the_three_follow_a_controller_restart_in_the_live_backlog_alike(
         told = [(e["t_s"], e["detail"]) for e in events if e["kind"] == "counter_restart"]
         assert told == offline
         assert "the motor controller restarted (CTRL_UPTIME went back)" in told[0][1]
+
+
+def test_the_samples_before_the_power_up_page_are_judged_from_power_up_live_too() -> None:
+    """A firmware whose first five poses (0 .. 80 ms) are 3 mm off in X, right after: analyze
+    judges the log from power-up (its first ENC_E2E_OK page, at 100 ms, proves it) and fails
+    it. The live judges started their reference fitted at the first pose (its 3 mm adopted),
+    judged those samples so, then restarted exactly at the page: 0.07 mm, OK. Now the first
+    life's samples wait for that page and are judged from (0, 0, 0), as analyze judges them."""
+    profile = robot.load("kobuki")
+    d_left, d_right = wandering_drive(profile, 600, 0.004, seed=7)
+    synth = synthesize(profile, "exact", d_left, d_right,
+                       x_bias_100um={k: 30 for k in range(0, 9, 2)})
+    messages = _messages(synth.lines())
+    result = analyze(parse_candump(_candump(messages)), profile)
+    assert result.report["reference_start"] == "power-up"
+    offline = result.report["onboard_vs_reference"]
+    assert not result.passed
+    monitor, bridge = _live(profile, "exact", messages)
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.vs_reference.max_dpos_m == pytest.approx(
+            offline["max_position_error_m"], abs=1e-12)
+        assert tracker.wrongs.as_dict()["wrong_samples"] == 5

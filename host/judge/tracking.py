@@ -24,10 +24,10 @@ from odocan.host.judge.livepose import (
     RestartLog,
     Sample,
     StepGate,
-    pose_dict,
     recent,
     truth_heading,
 )
+from odocan.host.judge.livesnapshot import tracker_snapshot
 from odocan.host.judge.livetruth import LifeTruth, TruthParts, carried_to
 from odocan.host.judge.livetwins import TwinWatch
 from odocan.host.judge.livewindow import (
@@ -68,6 +68,8 @@ class PoseTracker:
     ``analyze`` judges; another integrator restarts it. Its start inherits the pose signals'
     rounding, narrowed sample by sample as ``analyze`` fits it (``host.judge.livefit``), until
     a power-up is proven (``on_enc_counts``): then exactly (0, 0, 0), as ``analyze`` starts it.
+    The first life's samples wait for its first ENC_E2E_OK page (up to ``BOOT_COUNT_WAIT_S``),
+    so that a power-up's are all judged from (0, 0, 0), as ``analyze`` judges them.
     """
 
     def __init__(
@@ -112,6 +114,7 @@ class PoseTracker:
         self._now_s = 0.0  # the latest bus time (s)
         self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
         self._boot_poses: list[FramePose] = []  # the new life's samples while it waits
+        self._held: dict[int, Sample] = {}  # ... as settled (unjudged), by encoder frame
         self.pose: FramePose | None = None
         self.pose_t_s = 0.0  # bus time of the ODOM_POSE_Y of ``pose`` (s)
         self.reference: FramePose | None = None
@@ -125,14 +128,12 @@ class PoseTracker:
 
     fast_path = True  # False: every half by ``match_encoder`` over the window (tests compare)
 
-    # --- frames ---
-
     def advance(self, t_s: float) -> None:
         """Bus time is now ``t_s`` (any frame heard): pose halves heard half an encoder cycle or
         more before are settled; a new life waiting ``BOOT_COUNT_WAIT_S`` starts without it."""
         self._now_s = t_s
         if self._boot is not None and t_s > self._boot[1]:
-            self._finish_boot(self._boot[0])
+            self._finish_boot(self._boot[0]) if self._boot[0] >= 0 else self._finish_first(False)
         if t_s - self._unsettled_from_s < QUEUED_GAP_S:
             return  # none due (nor any later half: t_s - t is monotone in t); none heard: inf
         for _, name in sorted((half.pos, name) for name, half in self._unsettled.items()
@@ -230,8 +231,6 @@ class PoseTracker:
                 return plain, False
         return named_in_window(halves, self._window, pos)
 
-    # --- samples ---
-
     def _pair(self, seq: int, x: Half, y: Half, queued: bool) -> None:
         """The X and Y halves naming encoder frame ``seq``: one on-board sample (the first)."""
         self._ys.pop(seq, None)
@@ -241,7 +240,9 @@ class PoseTracker:
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
         self.pose_t_s = y.t_s
         ref = self._compare(pose, y, queued)
-        self.settled.append(Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
+        self.settled.append(sample := Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
+        if self._boot is not None:  # held: settled again once judged (``_start_reference``)
+            self._held[seq] = sample
 
     def _compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
         """Judge one on-board sample; the reference at its encoder frame, None when unknown."""
@@ -261,6 +262,8 @@ class PoseTracker:
             # which a fine reference cannot follow on a curve: placed again, as after a stall.
             self.stalls += 1
             self._place_at_next = self.placer.stalled = True
+        if self._ref is None and self._pending is None and not self.reference_starts:
+            self._boot = self._boot or (-1, self._now_s + BOOT_COUNT_WAIT_S)  # the first life's
         if self._boot is not None:  # a new life waiting for the frame it primed on
             self._boot_poses.append(pose)
             return None
@@ -351,7 +354,7 @@ class PoseTracker:
             return
         guess = self.enc_seq if primed_now else self.enc_seq + 1
         self._boot = (guess, self._now_s + BOOT_COUNT_WAIT_S)
-        self._boot_poses = []
+        self._boot_poses, self._held = [], {}
 
     def new_life(self) -> None:
         """A new firmware life (a reboot): the reference starts again at the next pose, and
@@ -384,13 +387,30 @@ class PoseTracker:
         if not first_life:
             self.life_truth.booted(primed, self._ref_at)
 
+    def _finish_first(self, proven: bool) -> None:
+        """The first life's samples waited for its first ENC_E2E_OK page (``powerup``'s
+        evidence): ``proven``, judged from (0, 0, 0) on frame 0, as ``analyze`` judges them;
+        else (a log cut after the power-up, no page within ``BOOT_COUNT_WAIT_S``) from the first
+        of them, fitted, as before."""
+        if proven and self.integrator is not None:
+            self._finish_boot(0, first_life=True)
+            return
+        poses, self._boot, self._boot_poses = self._boot_poses, None, []
+        self._pending, self._backlog_poses = poses[0], poses
+        self._backlog_counts = window_counts(self._window, poses[0].seq)
+        if self.integrator is not None:
+            self._start_reference(self._pending, self._backlog_counts, poses)
+            self._drop_backlog()
+
     def on_enc_counts(self, ok: int, lost: int, first_life_page: bool = False) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS: ENC_E2E_OK (frames accepted since boot, u16)
         and ENC_E2E_LOST. The first page after a reboot names the frame it primed on
         (``power_up``); the first life's first, after a first summary of UPTIME 0
         (``first_life_page``), counting exactly the frames heard proves a power-up: (0, 0, 0)
         on frame 0, whatever the first pose said (``analyze``'s rule); then ``on_enc_lost``."""
-        if self._boot is not None and 0 < ok <= self.enc_seq + 1:
+        if self._boot is not None and self._boot[0] < 0:  # the first life's samples wait
+            self._finish_first(first_life_page and ok == self.enc_seq + 1)
+        elif self._boot is not None and 0 < ok <= self.enc_seq + 1:
             self._finish_boot(self.enc_seq - ok + 1)
         elif first_life_page and ok == self.enc_seq + 1 and self.integrator is not None:
             self._finish_boot(0, first_life=True)  # the samples judged before keep their errors
@@ -469,31 +489,12 @@ class PoseTracker:
             self._keep_ref(FramePose(frame[0], ref.x_m, ref.y_m, ref.heading_rad))
         for heard in poses:
             at = self._ref_at.get(heard.seq)
-            if at is not None:
+            held = self._held.pop(heard.seq, None)
+            if at is not None and held is not None:  # settled again, judged now
+                self.settled.append(held._replace(reference=self._record(heard, at)))
+            elif at is not None:
                 self._record(heard, at)
 
-    def _vs_reference_dict(self) -> dict[str, Any] | None:
-        """``vs_reference`` with ``loss_allowance_m`` (at the latest sample) and
-        ``max_dpos_beyond_allowance_m``."""
-        stats = self.vs_reference.as_dict()
-        if stats is None:
-            return None
-        return {**stats, "loss_allowance_m": self.allowance_m(),
-                "max_dpos_beyond_allowance_m": self.max_beyond_allowance_m}
-
     def snapshot(self) -> dict[str, Any]:
-        """``pose``, ``reference``, ``truth`` (None until known) and ``error``."""
-        return {
-            "pose": pose_dict(self.pose),
-            "reference": {**(pose_dict(self.reference) or {}), "integrator": self.integrator,
-                          "starts": self.reference_starts,
-                          "counter_restarts": self.counter_restarts, "stalls": self.stalls,
-                          "breaks": self.placer.placements.as_dict()},
-            "truth": pose_dict(self.truth),
-            "truth_origin": self.life_truth.as_dict(),
-            "error": {
-                "pose_vs_reference": self._vs_reference_dict(),
-                "pose_vs_truth": self.vs_truth.as_dict(),
-                "reference_vs_truth": self.reference_vs_truth.as_dict(),
-            },
-        }
+        """``pose``, ``reference``, ``truth``, ``error`` (``livesnapshot.tracker_snapshot``)."""
+        return tracker_snapshot(self)
