@@ -15,7 +15,11 @@ accepted frame's (both reported, non-zero) comes from a restarted controller, it
 COUNTER_RESET, the odometry re-primed on that frame, if its counts are ones such a young controller
 can hold (each wheel within CTRL_UPTIME seconds of its per-period bound of 0: a forged frame that
 passes E2E is refused as before, not taken for a restart). A controller that reports 0 (an old one)
-is judged by the counts alone, as before.
+is judged by the counts alone, as before. After a silence of S s the last frame's CTRL_UPTIME has
+aged by at least floor(S) (``_aged_uptime``): a frame below that is a restart too, one that came
+during the silence and has been up longer than the controller was before it. The firmware needs
+this rule, not only the judges: without it such a restart's jump fits the time-widened bound, is
+integrated as motion, and the firmware recovers to OK with a phantom jump in its pose.
 """
 
 from __future__ import annotations
@@ -36,6 +40,8 @@ COUNTER_VALUES = 16  # E2E COUNTER values (4 bits): one whole counter cycle
 STEP_PERIODS_MAX = U16_MAX  # the twist's dt and the plausibility bound saturate here (655 s)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 PERIODS_PER_S = 100  # encoder periods in one second (1 s / ENCODER_PERIOD_US)
+CTRL_UPTIME_MAX = 15  # CTRL_UPTIME saturates here (u4)
+RESTART_SLACK_PERIODS = 16  # periods two frames' queueing may shorten the gap between samples
 
 Counts = tuple[int, int]  # (left, right) counter values
 _FAULT = State.FAULT  # the enumerator as a module constant (a 3.11 enum attribute read: ~0.14 us)
@@ -323,13 +329,29 @@ class EncoderInput:
         self._accept(counter, wire, counts)
 
     def _controller_restarted(self, uptime: int, wire: Counts) -> bool:
-        """True when ``uptime`` (this frame's CTRL_UPTIME, u4) is below the last accepted
-        frame's, both reported (non-zero), and ``wire`` (its counts) near enough 0 for that age:
-        the controller restarted, its counters from 0."""
+        """True when ``uptime`` (this frame's CTRL_UPTIME, u4) is below what the last accepted
+        frame's has aged to since (``_aged_uptime``), both reported (non-zero), and ``wire``
+        (its counts) near enough 0 for that age: the controller restarted, its counters from 0."""
         prev = self._uptime_prev
-        if uptime == 0 or prev == 0 or uptime >= prev:
+        if uptime == 0 or prev == 0 or uptime >= self._aged_uptime(prev):  # aged >= prev
             return False
         return self._young_counts(wire, uptime)
+
+    def _aged_uptime(self, prev: int) -> int:
+        """The least CTRL_UPTIME (u4) a controller that did not restart can report now, ``prev``
+        at the last accepted frame: ``prev`` plus the whole seconds of firmware time since that
+        frame, less the periods this tick came late and ``RESTART_SLACK_PERIODS`` (the frames'
+        queueing: the gap between their samples is at least that), saturated at
+        ``CTRL_UPTIME_MAX``; ``prev`` after a tick that lost time or frames the mailbox dropped
+        (a backlog's frames were sampled at unknown times). A controller silent S s reports at
+        least ``prev`` + floor(S) (1 + whole s of its age); less is a restart even when it is not
+        below ``prev`` (it restarted during the silence and has been up longer than before)."""
+        since = self.periods_since_frame  # u16
+        late = self._tick_late + RESTART_SLACK_PERIODS  # u32: < 2^19 + 16
+        if since <= late or self._clock.time_lost_now or self._mailbox_dropped():
+            return prev
+        aged = prev + (since - late) // PERIODS_PER_S  # u16: at most 15 + 655
+        return aged if aged < CTRL_UPTIME_MAX else CTRL_UPTIME_MAX
 
     def _young_counts(self, wire: Counts, uptime: int) -> bool:
         """True when each wheel's count, read signed in the wire's bits, is within the counts a

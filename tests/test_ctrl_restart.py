@@ -18,6 +18,7 @@ import can
 import pytest
 
 from odocan.firmware import frames as fr
+from odocan.firmware.encoders import EncoderInput
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.host.judge.monitor import BusMonitor
@@ -130,6 +131,9 @@ def judged(path: Path, robot: str) -> dict[str, Any]:
         "live_verdict": monitor.health(last_s)["state"],
         "events": [[(e["encoder_frame"], e["detail"]) for e in r["events"]
                     if e["kind"] == "counter_restart"] for r in (whole, streamed)],
+        "live_events": [(e["t_s"], e["detail"]) for e in monitor.health(last_s)["events"]
+                        if e["kind"] == "counter_restart"],
+        "restart_t_s": [e["t_s"] for e in whole["events"] if e["kind"] == "counter_restart"],
     }
 
 
@@ -152,6 +156,9 @@ def test_a_firmware_that_reprimed_on_the_restart_passes_every_judge(
         frame, detail = events[0]
         assert frame == RESTART
         assert "CTRL_UPTIME went back" in detail
+    live = verdict["live_events"]  # the monitor names it too, at the same frame's time
+    assert [t_s for t_s, _ in live] == verdict["restart_t_s"]
+    assert "the motor controller restarted (CTRL_UPTIME went back)" in live[0][1]
 
 
 @pytest.mark.parametrize("robot", ["kobuki", "pmir"])
@@ -221,6 +228,11 @@ def test_a_sim_process_killed_and_restarted_is_a_counter_reset_never_ok(
     assert {(st, r) for t, st, r in status if t >= reset_s} == {("DEGRADED", "COUNTER_RESET")}
     assert "OK" not in {v for t, v in verdicts if t >= reset_s}
     assert "POSE WRONG" not in {v for _, v in verdicts}
+    told = [e for e in monitor.health(again.frames[-1].timestamp)["events"]
+            if e["kind"] == "counter_restart"]  # the monitor names the restart
+    assert told
+    assert "the motor controller restarted (CTRL_UPTIME went back)" in told[0]["detail"]
+    assert told[0]["t_s"] >= back_s
 
 
 @pytest.mark.parametrize(("robot", "scenario"), [("pmir", "circle"), ("kobuki", "random")])
@@ -252,3 +264,110 @@ def test_a_restart_without_a_silence_passes_on_a_correct_firmware(
         monitor.feed(msg, now_s=msg.timestamp)
     assert monitor.tracker.counter_restarts == 1
     assert monitor.tracker.vs_reference.max_dpos_m <= POSITION_LSB_M
+
+
+# --- a restart inside a silence, the controller back older than it was before it ----------------
+
+AGED_RESTART = 900  # tick (9 s): the controller restarts while silent (500 .. 1500)
+AGED_SILENT_TICKS = 1000  # 10 s: it speaks again 6 s after its restart, CTRL_UPTIME 7 > 5
+
+
+def aged_restart_log(path: Path, firmware: str) -> Path:
+    """pmir on a circle; the motor controller silent 10 s from 5 s, restarted 4 s into the
+    silence: it speaks again with CTRL_UPTIME 7, above the 5 it said before the silence (the old
+    rule, CTRL_UPTIME below the last, cannot tell it) but below the 5 + 9 whole seconds of the
+    silence. 3 s more. The candump log of the whole run."""
+    config = RigConfig(robot=load("pmir"), scenario="circle", firmware=firmware, duration_s=60.0)
+    with LockstepRig(config, [can.Logger(path)]) as rig:
+        send = rig.sim.tick
+
+        def tick(k: int) -> None:
+            if k == AGED_RESTART:
+                rig.sim.motor_controller.restart()
+            if not SILENT_FROM <= k < SILENT_FROM + AGED_SILENT_TICKS:
+                send(k)
+
+        rig.sim.tick = tick  # type: ignore[method-assign]
+        rig.run((SILENT_FROM + AGED_SILENT_TICKS + 300) * TICK_S)
+    return path
+
+
+def test_a_controller_back_older_than_before_a_silence_is_a_restart_in_python_and_c(
+    tmp_path: Path,
+) -> None:
+    """The jump to the restarted counters fits the bound widened by 10 s of silence: without
+    the rule "aged less than the silence" the firmware integrated it as motion and went back to
+    OK; now it re-primes (DEGRADED COUNTER_RESET, never OK), Python and C bit for bit, and every
+    judge passes it, naming the restart."""
+    python = aged_restart_log(tmp_path / "python.log", "python")
+    c = aged_restart_log(tmp_path / "c.log", "c")
+    assert python.read_bytes() == c.read_bytes()
+    heard = uptimes(python)
+    assert heard[SILENT_FROM - 1] == 5
+    assert heard[SILENT_FROM] == 7
+    back_s = (SILENT_FROM + AGED_SILENT_TICKS) * TICK_S
+    after = [(state, reason) for t, state, reason in summaries(python) if t > back_s + 0.05]
+    assert after
+    assert set(after) == {("DEGRADED", "COUNTER_RESET")}
+    profile = load("pmir")
+    whole = analyze(read_log(python), profile).report
+    assert whole["passed"], whole["onboard_vs_reference"]
+    assert [e["kind"] for e in whole["events"]] == ["counter_restart"]
+    assert analyze_file(python, profile, chunk_frames=256)["passed"]
+    monitor = BusMonitor(profile)
+    for msg in can.LogReader(python):
+        monitor.feed(msg, now_s=msg.timestamp)
+    assert monitor.tracker.vs_reference.max_dpos_m <= POSITION_LSB_M
+    told = [e for e in monitor.health(msg.timestamp)["events"] if e["kind"] == "counter_restart"]
+    assert [e["t_s"] for e in told] == [e["t_s"] for e in whole["events"]]
+
+
+def test_a_firmware_that_integrated_the_aged_restart_fails_every_judge(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The same drive on a firmware without the rule (its ``_aged_uptime`` the last CTRL_UPTIME
+    alone, as before): it integrates the restart's jump, and analyze (whole and streamed) and
+    the monitor fail it."""
+    monkeypatch.setattr(EncoderInput, "_aged_uptime", lambda self, prev: prev)
+    path = aged_restart_log(tmp_path / "integrated.log", "python")
+    after = [(s, r) for t, s, r in summaries(path)
+             if t > (SILENT_FROM + AGED_SILENT_TICKS) * TICK_S + 2.0]
+    assert ("OK", "NONE") in set(after)  # it recovered: OK with the jump in its pose
+    profile = load("pmir")
+    assert not analyze(read_log(path), profile).report["passed"]
+    assert not analyze_file(path, profile, chunk_frames=256)["passed"]
+    monitor = BusMonitor(profile)
+    for msg in can.LogReader(path):
+        monitor.feed(msg, now_s=msg.timestamp)
+    assert monitor.tracker.vs_reference.max_dheading_rad > HEADING_LSB_RAD  # its position is
+    # placed again after the gap (bounded), its heading goes on
+
+
+def test_a_firmware_whose_position_jumps_at_a_restart_inside_a_gap_fails_every_judge(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The controller silent 2 s, restarted as it speaks again: a firmware that re-primes but
+    moves its X by 39 mm there (2^-5 m: a wrong re-prime). The judges placed the reference's
+    position again after the gap, bounded by the counts across it, which across a restart are
+    its jump, not motion: the wrong pose passed every judge (whole, streamed, live; its heading,
+    never placed, was right). Across a restart the firmware integrates nothing, so the position
+    goes on exactly: 39 mm off FAILs; the correct firmware still passes (the tests above)."""
+    reprime = EncoderInput._reprime
+
+    def jumped(self: EncoderInput, counter: int, wire: tuple[int, int],
+               counts: tuple[int, int]) -> None:
+        reprime(self, counter, wire, counts)
+        self._odometry.x_q40_m += 1 << 35  # 2^-5 m
+
+    monkeypatch.setattr(EncoderInput, "_reprime", jumped)
+    path = restart_log(tmp_path / "jumped.log", "python")
+    profile = load("pmir")
+    whole = analyze(read_log(path), profile).report
+    assert whole["onboard_vs_reference"]["max_position_error_m"] > 0.03
+    assert whole["onboard_vs_reference"]["max_heading_error_rad"] <= HEADING_LSB_RAD
+    assert not whole["passed"]
+    assert not analyze_file(path, profile, chunk_frames=256)["passed"]
+    monitor = BusMonitor(profile)
+    for msg in can.LogReader(path):
+        monitor.feed(msg, now_s=msg.timestamp)
+    assert monitor.tracker.vs_reference.max_dpos_m > 0.03

@@ -25,7 +25,7 @@ from odocan.sim.board import TICK_S
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.scenarios import get_scenario
 from tests.fault_rig import FaultRig
-from tests.synth_log import synthesize
+from tests.synth_log import synthesize, wandering_drive
 
 
 def _drive(name: str, seed: int, seconds: float) -> list[can.Message]:
@@ -142,3 +142,65 @@ def test_the_three_pass_a_correct_firmware_across_a_stall() -> None:
         assert tracker.reference_starts == 1  # placed again, not restarted
         assert tracker.vs_reference.max_dpos_m < POSITION_LSB_M
         assert tracker.vs_reference.max_dheading_rad < HEADING_LSB_RAD
+
+
+CTRL_JUMP = (30, -12)  # a restarted controller's counts: within one period's plausibility bound
+
+
+@pytest.mark.parametrize("name", ["kobuki", "pmir"])
+@pytest.mark.parametrize("case", ["reboot", "cut"])
+def test_the_three_follow_a_controller_restart_in_the_live_backlog_alike(
+    name: str, case: str
+) -> None:
+    """The motor controller restarts (CTRL_UPTIME 7 -> 1, counts within one period's bound)
+    among the frames the live judges keep before they can start their reference: ``reboot``,
+    5 frames after the firmware rebooted (its reference waits for the ENC_E2E_OK page that names
+    the frame it primed on, 10 frames on); ``cut``, a log that starts 4 frames before it (the
+    monitor waits for the integrator of the next summary). The firmware re-primes there;
+    analyze passes it, and the live judges, replaying those frames, must gate them by
+    CTRL_UPTIME as they gate the frames they hear (they integrated the jump: POSE WRONG, 0.30 m
+    on pmir), and tell it as analyze tells it: a ``counter_restart`` event at that frame's time
+    (in the monitor's events, ``--json`` and the screen's, and the bridge's ``status``)."""
+    profile = robot.load(name)
+    d_left, d_right = wandering_drive(profile, 1_000, 0.004, seed=7)
+    synth = synthesize(profile, "exact", d_left, d_right, ctrl_restarts={605: CTRL_JUMP},
+                       ctrl_uptime=True, reboot_at=600 if case == "reboot" else None)
+    messages = _messages(synth.lines(601 if case == "cut" else 0))
+    result = analyze(parse_candump(_candump(messages)), profile)
+    assert result.passed
+    assert "counter_restart" in [e["kind"] for e in result.report["events"]]
+    monitor, bridge = _live(profile, "exact", messages)
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.vs_reference.max_dpos_m <= POSITION_LSB_M
+        assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD
+        assert tracker.counter_restarts == 1
+    health = monitor.health(messages[-1].timestamp)
+    assert health["state"] == "OK"
+    offline = [(e["t_s"], e["detail"]) for e in result.report["events"]
+               if e["kind"] == "counter_restart"]
+    for events in (health["events"], bridge.status()[1]["events"]):  # named as analyze names it
+        told = [(e["t_s"], e["detail"]) for e in events if e["kind"] == "counter_restart"]
+        assert told == offline
+        assert "the motor controller restarted (CTRL_UPTIME went back)" in told[0][1]
+
+
+def test_the_samples_before_the_power_up_page_are_judged_from_power_up_live_too() -> None:
+    """A firmware whose first five poses (0 .. 80 ms) are 3 mm off in X, right after: analyze
+    judges the log from power-up (its first ENC_E2E_OK page, at 100 ms, proves it) and fails
+    it. The live judges started their reference fitted at the first pose (its 3 mm adopted),
+    judged those samples so, then restarted exactly at the page: 0.07 mm, OK. Now the first
+    life's samples wait for that page and are judged from (0, 0, 0), as analyze judges them."""
+    profile = robot.load("kobuki")
+    d_left, d_right = wandering_drive(profile, 600, 0.004, seed=7)
+    synth = synthesize(profile, "exact", d_left, d_right,
+                       x_bias_100um={k: 30 for k in range(0, 9, 2)})
+    messages = _messages(synth.lines())
+    result = analyze(parse_candump(_candump(messages)), profile)
+    assert result.report["reference_start"] == "power-up"
+    offline = result.report["onboard_vs_reference"]
+    assert not result.passed
+    monitor, bridge = _live(profile, "exact", messages)
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.vs_reference.max_dpos_m == pytest.approx(
+            offline["max_position_error_m"], abs=1e-12)
+        assert tracker.wrongs.as_dict()["wrong_samples"] == 5

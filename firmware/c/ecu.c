@@ -92,6 +92,7 @@ static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32
 static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime,
                                  const uint32_t wire[2]);
 static bool young_counts(const struct odom_ecu *ecu, const uint32_t wire[2], uint8_t uptime);
+static uint8_t aged_uptime(const struct odom_ecu *ecu, uint8_t prev);
 static void reprime(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                     const uint32_t counts[2]);
 static void sum_step(struct odom_ecu *ecu);
@@ -608,17 +609,33 @@ static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32
     accept_encoders(ecu, counter, wire, counts);
 }
 
-/* True when uptime (this frame's CTRL_UPTIME, u4) is below the last accepted frame's, both
- * reported (non-zero), and wire (its counts) near enough 0 for that age: the controller
- * restarted, its counters from 0 (encoders.py _controller_restarted). */
+/* True when uptime (this frame's CTRL_UPTIME, u4) is below what the last accepted frame's has
+ * aged to since (aged_uptime), both reported (non-zero), and wire (its counts) near enough 0 for
+ * that age: the controller restarted, its counters from 0 (encoders.py _controller_restarted). */
 static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime,
                                  const uint32_t wire[2])
 {
     uint8_t prev = ecu->uptime_prev;
-    if (uptime == 0u || prev == 0u || uptime >= prev) {
+    if (uptime == 0u || prev == 0u || uptime >= aged_uptime(ecu, prev)) { /* aged >= prev */
         return false;
     }
     return young_counts(ecu, wire, uptime);
+}
+
+/* The least CTRL_UPTIME (u4) a controller that did not restart can report now, prev at the last
+ * accepted frame: prev plus the whole seconds of firmware time since that frame, less the periods
+ * this tick came late and RESTART_SLACK_PERIODS (the frames' queueing), saturated at
+ * CTRL_UPTIME_MAX; prev after a tick that lost time or frames the mailbox dropped (a backlog's
+ * frames were sampled at unknown times) (encoders.py _aged_uptime). */
+static uint8_t aged_uptime(const struct odom_ecu *ecu, uint8_t prev)
+{
+    uint32_t since = ecu->ticks_since_encoder;                   /* u16, saturated */
+    uint32_t late = ecu->tick_late + RESTART_SLACK_PERIODS;      /* < 2^19 + 16 */
+    if (since <= late || ecu->time_lost_now || mailbox_dropped(ecu)) {
+        return prev;
+    }
+    uint32_t aged = prev + (since - late) / PERIODS_PER_S;      /* at most 15 + 655 */
+    return aged < CTRL_UPTIME_MAX ? (uint8_t)aged : (uint8_t)CTRL_UPTIME_MAX;
 }
 
 /* True when each wheel's count, read signed in the wire's bits, is within the counts a controller

@@ -28,6 +28,8 @@
 #define TWO_PI_Q30 ((TWO_PI_Q60 + (INT64_C(1) << 29)) >> 30) /* one turn in Q30 rad (< 2^33) */
 #define TWIST_SUM_MAX (INT64_C(1) << 32) /* one tick's summed steps: 4096 m (Q20), 4 rad (Q30) */
 #define PERIODS_PER_S 100u /* encoder periods in one second (1 s / ENCODER_PERIOD_US) */
+#define CTRL_UPTIME_MAX 15u /* CTRL_UPTIME saturates here (u4) */
+#define RESTART_SLACK_PERIODS 16u /* periods two frames' queueing may shorten their samples' gap */
 #define TX_IDS 8u /* the messages this node sends: one E2E counter each */
 
 /* Firmware state (the STATE signal of ODOM_STATUS). */

@@ -34,7 +34,7 @@ from odocan.host.judge.distance import (
     firmware_m_per_count,
     gap_extra_m,
 )
-from odocan.host.judge.livepose import RING, StepGate
+from odocan.host.judge.livepose import RING, RestartLog, StepGate
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import SILENCE_CYCLES
 from odocan.host.judge.tracking import PoseTracker
@@ -96,10 +96,12 @@ class LiveDistance:
         """An accepted WHEEL_ENCODERS frame, after ``tracker.on_encoders`` numbered it."""
         seq = tracker.enc_seq
         if self._gate is None:
-            self._gate = StepGate(tracker.geometry, tracker.counter_bits)
+            # its own gate: the restarts it re-primes on are the tracker's to tell
+            self._gate = StepGate(tracker.geometry, tracker.counter_bits,
+                                  RestartLog(lambda _seq: None))
             self.first_seq = seq
         periods = tracker.placer.periods
-        step = self._gate.step(counter, left, right, periods, uptime)
+        step = self._gate.step((seq, counter, left, right, periods, uptime, t_s))
         d_left, d_right = step if step is not None else (0, 0)
         ds_m = abs(0.5 * (d_left * self._m[0] + d_right * self._m[1]))
         units, n, c, up = self._sums

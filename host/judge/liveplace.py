@@ -103,6 +103,12 @@ class StallPlacer:
             self._gaps[-1] = (seq, (0, 0), (0, 0), -1)
         return True
 
+    def reprimed(self, seq: int) -> None:
+        """The reference re-primed on encoder frame ``seq`` (a controller restart told by
+        CTRL_UPTIME): a gap that ends there carried no motion on board (the firmware integrates
+        nothing across it), so it allows no placement (``reference_path``'s rule)."""
+        self._gaps = [gap for gap in self._gaps if gap[0] != seq]
+
     def compared(self, seq: int) -> None:
         """A sample of encoder frame ``seq`` was compared."""
         self._abs_last = self._abs_at(seq)

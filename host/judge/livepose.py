@@ -5,12 +5,22 @@ the running error statistics."""
 from __future__ import annotations
 
 import math
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, PERIODS_PER_S, RESYNC_FRAMES
+from odocan.firmware.encoders import (
+    CTRL_UPTIME_MAX,
+    MAX_WHEEL_SPEED_MM_S,
+    PERIODS_PER_S,
+    RESTART_SLACK_PERIODS,
+    RESYNC_FRAMES,
+)
 from odocan.firmware.twist import ENCODER_PERIOD_US
+from odocan.host.judge.livewindow import CYCLE_S, Counted
 from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.reference_path import restart_detail
 from odocan.host.judge.turns import unwrapped_error
 from odocan.host.protocol.pose import heading_fields, unwrap_near
 from odocan.sim.pose import wrap_angle
@@ -35,12 +45,11 @@ class StepGate:
     ``host.judge.analysis``): a frame beyond ``MAX_WHEEL_SPEED_MM_S`` over the periods its COUNTER
     advanced since the last accepted one is refused; ``RESYNC_FRAMES`` refused frames plausible
     among themselves are a counter restart: one step from the first of them, never the jump; a
-    frame whose CTRL_UPTIME is below the last accepted one's (both non-zero) re-primes it (the
-    motor controller restarted): no step into it."""
+    frame whose CTRL_UPTIME is below the last accepted one's (both non-zero), or below what it
+    aged to over a silence (``aged``), re-primes it (the motor controller restarted): no step
+    into it. Each restart is told to ``told``."""
 
-    def __init__(self, geometry: Geometry, counter_bits: int, uptime: int = 0) -> None:
-        """``uptime``: CTRL_UPTIME of the last accepted frame, when the frames it starts on are
-        replayed without theirs (``step``'s ``uptime`` None)."""
+    def __init__(self, geometry: Geometry, counter_bits: int, told: RestartLog) -> None:
         travel_m = MAX_WHEEL_SPEED_MM_S * 1e-3 * ENCODER_PERIOD_US * 1e-6
         self.bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
                       math.ceil(travel_m / geometry.m_per_count_right) + 1)
@@ -49,7 +58,9 @@ class StepGate:
         self._refused: list[tuple[int, int, int]] = []
         self._seq = self._prev_seq = 0  # periods heard, at the latest frame and at ``prev``
         self.counter_restarts = 0
-        self.uptime = uptime  # CTRL_UPTIME of the last accepted frame (0: not reported)
+        self.uptime = 0  # CTRL_UPTIME of the last accepted frame (0: not reported)
+        self._prev_t = 0.0  # its bus time (s)
+        self._told = told
 
     def _delta(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[int, int]:
         return wrap_delta(b[1] - a[1], self.bits), wrap_delta(b[2] - a[2], self.bits)
@@ -65,40 +76,85 @@ class StepGate:
         d = self._delta(a, b)
         return abs(d[0]) <= periods * self.bound[0] and abs(d[1]) <= periods * self.bound[1]
 
-    def step(self, counter: int, left: int, right: int, heard: int | None = None,
-             uptime: int | None = None) -> tuple[int, int] | None:
-        """The count step to integrate for this frame; None when it primes or is refused, (0, 0)
-        when it re-primes on a controller restart. ``heard``: the periods since the frame heard
-        before (``samples.sender_seq``, widened by the bus times past 16 periods); without it
-        the COUNTER's advance (mod 16). ``uptime``: its CTRL_UPTIME (None: unknown, kept)."""
-        self._seq += heard or 0
+    def step(self, heard_frame: Counted) -> tuple[int, int] | None:
+        """The count step to integrate for this frame (``livewindow.Counted``: its seq, COUNTER,
+        counts, the periods since the frame heard before, ``samples.sender_seq``'s, widened by
+        the bus times past 16 periods, its CTRL_UPTIME and bus time); None when it primes or is
+        refused, (0, 0) when it re-primes on a controller restart."""
+        seq, counter, left, right, heard, uptime, t_s = heard_frame
+        self._seq += heard
         frame = (counter, left, right)
         prev, self.prev = self.prev, frame
         prev_seq, self._prev_seq = self._prev_seq, self._seq
-        last_uptime = self.uptime
-        if uptime is not None:
-            self.uptime = uptime
+        last_uptime, self.uptime = self.uptime, uptime
+        last_t, self._prev_t = self._prev_t, t_s
         if prev is None:
             return None
-        if uptime and last_uptime and uptime < last_uptime and self._young(frame, uptime):
+        if uptime and last_uptime and (uptime < last_uptime or (t_s - last_t > AGED_AFTER_S
+                                       and uptime < aged(last_uptime, t_s - last_t))) \
+                and self._young(frame, uptime):
             self._refused = []
-            self.counter_restarts += 1
+            self._restarted(seq, t_s, by_uptime=True)
             return 0, 0
         delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
-        periods = self._seq - prev_seq if heard else ((counter - prev[0]) % RING) or RING
+        periods = self._seq - prev_seq
         if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
             if self._refused:
                 self._refused = []
             return delta
         self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # refused: kept
+        self._prev_t = last_t
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
         self._refused = [*self._refused, frame] if consistent else [frame]
         if len(self._refused) < RESYNC_FRAMES:
             return None
-        first, self._refused, self.prev = self._refused[0], [], frame
-        self.uptime = last_uptime if uptime is None else uptime
-        self.counter_restarts += 1
+        first, self._refused, self.prev, self.uptime = self._refused[0], [], frame, uptime
+        self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
+
+    def _restarted(self, seq: int, t_s: float, *, by_uptime: bool) -> None:
+        self.counter_restarts += 1
+        self._told.add(seq, t_s, by_uptime)
+
+
+class RestartLog:
+    """The counter restarts the live reference re-primed on, as ``analyze``'s
+    ``counter_restart`` events (the same detail: ``reference_path.restart_detail``), appended to
+    ``events`` (the monitor's, the bridge's); a frame stepped again (a reference started again
+    over frames already gated) is told once."""
+
+    def __init__(self, reprimed: Callable[[int], None]) -> None:
+        """``reprimed``: called with the frame of each restart told by CTRL_UPTIME."""
+        self.events: deque[dict[str, Any]] = deque(maxlen=16)  # the owner's deque replaces it
+        self._told = -1  # the latest encoder frame (seq) told
+        self._reprimed = reprimed
+
+    def add(self, seq: int, t_s: float, by_uptime: bool) -> None:
+        if by_uptime:
+            self._reprimed(seq)
+        if seq <= self._told:
+            return
+        self._told = seq
+        self.events.append({"t_s": t_s, "kind": "counter_restart", "encoder_frame": seq,
+                            "detail": restart_detail(by_uptime)})
+
+
+# below this silence ``aged`` is the last CTRL_UPTIME itself (the per-frame test skips it)
+AGED_AFTER_S = (PERIODS_PER_S + RESTART_SLACK_PERIODS - 0.5) * CYCLE_S
+
+
+def aged(uptime: int, elapsed_s: float) -> int:
+    """``reference_path.aged_uptime`` of one step (plain Python: it runs per frame)."""
+    periods = round(elapsed_s / CYCLE_S) - RESTART_SLACK_PERIODS
+    if periods < PERIODS_PER_S:
+        return uptime
+    return min(CTRL_UPTIME_MAX, uptime + periods // PERIODS_PER_S)
+
+
+def recent(entry: tuple[int, int, int] | None, enc_seq: int) -> tuple[int, int, int] | None:
+    """A ring entry (seq, left, right) if it is one of the last 8 encoder frames up to
+    ``enc_seq`` (not one 16 frames older)."""
+    return None if entry is None or enc_seq - entry[0] >= RING // 2 else entry
 
 
 def difference(a: FramePose, b: FramePose) -> dict[str, float]:

@@ -43,7 +43,8 @@ class TwinWatch:
 
     def __init__(self, accepted: deque[tuple[float, ...]]) -> None:
         """``accepted``: the latest accepted encoder frames' rows (seq, pos, COUNTER, bus time
-        s, left, right; the live judge's window, ``livewindow.Columns.rows``), read only."""
+        s, left, right, ...: ``livewindow.ENC_COLUMNS``, the live judge's window's rows), read
+        only."""
         self._accepted = accepted
         self._ring = [-1] * TWIN_SLOTS
         self.found = 0  # twins heard so far
@@ -56,7 +57,7 @@ class TwinWatch:
         allocation."""
         if not self._accepted:
             return
-        seq, _, latest_counter, latest_t_s, latest_left, latest_right = self._accepted[-1]
+        seq, _, latest_counter, latest_t_s, latest_left, latest_right = self._accepted[-1][:6]
         if counter != latest_counter or (left == latest_left and right == latest_right):
             return  # another COUNTER, or an exact repetition (no twin)
         if t_s - latest_t_s >= TWIN_GAP_S:

@@ -26,6 +26,14 @@ CYCLE_S = float(default_plan().get_message_by_name("WHEEL_ENCODERS").cycle_time 
 RECENT = 32  # latest rows of a window kept as tuples for the fast path (``named_plain``)
 QUEUED_GAP_S = QUEUED_GAP_CYCLES * CYCLE_S  # closer sends of one message waited (queued)
 REPEAT_S = SILENCE_CYCLES * CYCLE_S  # a repeated ENC_COUNTER closer than this is held
+# The window's encoder frames: the tracker's seq, the order fed, COUNTER, bus time s, the counts,
+# the periods heard since the frame before (``liveplace.StallPlacer.periods``) and CTRL_UPTIME:
+# what ``livepose.StepGate.step`` takes, so a reference started late (a backlog, a boot, a set
+# pose) steps the frames as the live one stepped them, a controller restart among them included.
+ENC_COLUMNS = ("seq", "pos", "counter", "t_s", "left", "right", "periods", "uptime")
+# seq, COUNTER, left, right, periods, CTRL_UPTIME, bus time s
+Counted = tuple[int, int, int, int, int, int, float]
+Row = tuple[int, int, int, float, int, int, int, int]  # a row of ``ENC_COLUMNS`` as appended
 
 
 def named_plain(halves: deque[tuple[float, ...]], columns: Columns, pos: int) -> int | None:
@@ -201,11 +209,19 @@ def named_in_window(halves: Columns, w: Columns, pos: int) -> tuple[int, bool]:
     return (int(w.col("seq")[found]) if found >= 0 else -1), queued
 
 
-def window_counts(window: Columns, first: int) -> list[tuple[int, int, int, int]]:
-    """The encoder frames of the window from seq ``first`` on: (seq, counter, left, right)."""
+def counted(row: Row) -> Counted:
+    """A row of ``ENC_COLUMNS`` as the reference steps it (``Counted``; no conversion: per
+    frame)."""
+    seq, _, counter, t_s, left, right, periods, uptime = row
+    return seq, counter, left, right, periods, uptime, t_s
+
+
+def window_counts(window: Columns, first: int) -> list[Counted]:
+    """The encoder frames of the window from seq ``first`` on (``Counted``)."""
     keep = window.col("seq") >= first
-    return list(zip(*(window.col(name)[keep].astype(int).tolist()
-                      for name in ("seq", "counter", "left", "right")), strict=True))
+    names = ("seq", "counter", "left", "right", "periods", "uptime")
+    columns = [window.col(name)[keep].astype(int).tolist() for name in names]
+    return list(zip(*columns, window.col("t_s")[keep].tolist(), strict=True))
 
 
 def silent_since(last_s: float | None, t_s: float, ys: Columns, window: Columns) -> bool:

@@ -25,12 +25,12 @@ Health (``health`` in the snapshot): the verdict never says OK while the pose sh
 A node is **stale** once none of its cyclic messages was heard for ``NODE_TIMEOUT_CYCLES`` times
 the fastest one's DBC cycle (opendbc's rule: 10 x 20 ms = 0.2 s for ODOM_MCU); every node carries
 its age. UPTIME against bus time tells a **reboot** (UPTIME going back, or INIT after running:
-the reference restarts and the E2E sequences of the node start afresh, reported as an event, not
-as lost frames) from **two sources** on one ID (two UPTIME offsets interleaving). The verdict, in
-order: NO FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (with its REASON),
-POSE WRONG (the latest on-board sample vs reference beyond ``analyze``'s limit, one LSB of
-position after the loss allowance or of heading: ``host.judge.livefit.pose_wrong``, the reference's
-start narrowed as ``analyze`` fits it), UNVERIFIED (nothing compared yet), OK.
+the reference restarts, the node's E2E sequences afresh: an event, not lost frames) from **two
+sources** (two UPTIME offsets interleaving); a motor controller restart the reference re-primes
+on is a ``counter_restart`` event, as analyze tells it. The verdict, in order: NO FIRMWARE,
+STALE, CONFLICT, the firmware's own state when not OK (its REASON), POSE WRONG (the latest sample
+vs reference beyond ``analyze``'s limit, one LSB of position after the loss allowance or of
+heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it), UNVERIFIED, OK.
 
 ``bus_load`` (``host.judge.busstats.LoadWindow``): bits on the wire per second over the last
 second of bus time, from every frame's exact stuffed length, and the load as a fraction when the
@@ -154,7 +154,7 @@ class BusMonitor:
         self.undecodable = 0
         self.started_monotonic_s = time.monotonic()
         self.sources = SourceWatch()
-        self.events: deque[dict[str, Any]] = deque(maxlen=MAX_EVENTS)
+        self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=MAX_EVENTS)
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
         self._set_pose_id = next((m.frame_id for m in self.db.messages

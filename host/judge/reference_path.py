@@ -11,7 +11,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, PERIODS_PER_S, RESYNC_FRAMES
+from odocan.firmware.encoders import (
+    CTRL_UPTIME_MAX,
+    MAX_WHEEL_SPEED_MM_S,
+    PERIODS_PER_S,
+    RESTART_SLACK_PERIODS,
+    RESYNC_FRAMES,
+)
 from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.breaks import (
     BreakSummary,
@@ -102,7 +108,11 @@ def build_reference(
     opened = np.flatnonzero(starts)  # the first frame (from e0) of segments 1, 2, ...
     stalled = frozenset(breaks.tolist()) if breaks is not None else frozenset()
 
+    uptime_reprimed = frozenset(e0 + k for k in steps.by_uptime)
+
     def gap_allowance(b: int) -> float:
+        if b in uptime_reprimed:  # the gap ends in a controller restart: nothing integrated
+            return 0.0  # across it on board (re-primed), the position goes on exactly
         return gap_allowance_of_counts(
             (int(enc.left[b - 1]), int(enc.right[b - 1])), (int(enc.left[b]), int(enc.right[b])),
             int(enc.seq[b] - enc.seq[b - 1]), geometry, bits, integrator, max_wheel_speed_mm_s)
@@ -128,7 +138,7 @@ def build_reference(
         counter_restarts=tuple(e0 + k for k in steps.reprimed),
         implausible_frames=steps.refused,
         placements=placed,
-        ctrl_restarts=frozenset(e0 + k for k in steps.by_uptime),
+        ctrl_restarts=uptime_reprimed,
     )
 
 
@@ -180,20 +190,23 @@ def firmware_steps(
     ``RESYNC_FRAMES`` refused frames plausible among themselves are a counter restart
     (COUNTER_RESET): the odometry re-primes on the first of them and integrates one step from it to
     the last. A frame whose CTRL_UPTIME is below the last accepted frame's (both non-zero: the
-    motor controller restarted) re-primes it whatever its counts (COUNTER_RESET, no step into
-    it). Vectorised; a short state machine runs only from each refused frame on. The bound is
-    computed in float (the firmware's Q48 integer bound may differ by a count at the limit)."""
+    motor controller restarted), or below what it aged to over a silence (``aged_uptime``),
+    re-primes it if its counts are young (COUNTER_RESET, no step into it). Vectorised; a short
+    state machine runs only from each refused frame on. The bound is computed in float (the
+    firmware's Q48 integer bound may differ by a count at the limit)."""
     left, right = enc.left[e0:], enc.right[e0:]
     seq = enc.seq[e0:]
     steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
     uptime = enc.uptime[e0:] if enc.uptime is not None else np.zeros(len(left), dtype=np.int64)
+    stamps = enc.timestamp_s[e0:]
     if max_wheel_speed_mm_s is None:
-        return _reprime_all(steps, ctrl_restarts(uptime, np.ones(len(left), dtype=np.bool_)))
+        return _reprime_all(steps, ctrl_restarts(uptime, np.ones(len(left), dtype=np.bool_),
+                                                 np.diff(stamps), enc.cycle_s))
     travel_m = max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
     bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
              math.ceil(travel_m / geometry.m_per_count_right) + 1)
     young = young_counts(left, right, uptime, bits, bound)
-    restart = ctrl_restarts(uptime, young)
+    restart = ctrl_restarts(uptime, young, np.diff(stamps), enc.cycle_s)
 
     def delta(a: int, b: int) -> tuple[int, int]:
         return (int(wrap_delta(int(left[b]) - int(left[a]), bits)),
@@ -210,9 +223,9 @@ def firmware_steps(
         return within(a, b, max(1, int(seq[b] - seq[a])))
 
     def restarted(a: int, b: int) -> bool:
-        return bool(uptime[b] != 0 and uptime[a] != 0 and uptime[b] < uptime[a] and young[b])
+        aged = aged_uptime(uptime[a : a + 1], stamps[b : b + 1] - stamps[a], enc.cycle_s)
+        return bool(uptime[b] != 0 and uptime[a] != 0 and uptime[b] < aged[0] and young[b])
 
-    stamps = enc.timestamp_s[e0:]
     periods = step_bound_periods(seq, stamps, enc.cycle_s)
     bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])
     return _walk(steps, bad, restart, ((plausible, consistent), delta, restarted))
@@ -236,13 +249,32 @@ def _walk(steps: Steps, bad: Any, restart: Any, rules: tuple[Any, Any, Any]) -> 
     return steps
 
 
-def ctrl_restarts(uptime: IntArray, young: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
-    """Per step (into frame k + 1 of ``uptime``, CTRL_UPTIME of consecutive accepted frames):
-    the motor controller restarted, its age below the frame before's, both reported (non-zero),
-    and the frame's counts ``young`` (``young_counts``)."""
+def ctrl_restarts(uptime: IntArray, young: npt.NDArray[np.bool_], elapsed_s: FloatArray,
+                  cycle_s: float | None) -> npt.NDArray[np.bool_]:
+    """Per step (into frame k + 1 of ``uptime``, CTRL_UPTIME of consecutive accepted frames,
+    ``elapsed_s`` bus time apart): the motor controller restarted, its age below what the frame
+    before's aged to (``aged_uptime``), both reported (non-zero), and the frame's counts
+    ``young`` (``young_counts``)."""
     before, after = uptime[:-1], uptime[1:]
-    restarted: npt.NDArray[np.bool_] = (after != 0) & (before != 0) & (after < before)
+    aged = aged_uptime(before, elapsed_s, cycle_s)
+    restarted: npt.NDArray[np.bool_] = (after != 0) & (before != 0) & (after < aged)
     return restarted & young[1:]
+
+
+def aged_uptime(before: IntArray, elapsed_s: FloatArray, cycle_s: float | None) -> IntArray:
+    """The least CTRL_UPTIME a controller that did not restart reports ``elapsed_s`` (bus time)
+    after a frame of CTRL_UPTIME ``before`` (firmware/encoders.py ``_aged_uptime``): ``before``
+    plus the whole seconds of the periods between them less ``RESTART_SLACK_PERIODS``, saturated
+    at ``CTRL_UPTIME_MAX``; ``before`` without bus times. The bus's clock, not the firmware's:
+    the two may differ by a period, so at an elapsed time within a period of a whole second
+    (plus the slack) the firmware may have decided the other way (a known limit, docs/bus.md);
+    the firmware's exceptions (a tick that lost time, a mailbox that dropped frames) are not
+    seen here either."""
+    if cycle_s is None:
+        return before
+    periods = np.rint(np.asarray(elapsed_s) / cycle_s).astype(np.int64) - RESTART_SLACK_PERIODS
+    aged: IntArray = np.minimum(CTRL_UPTIME_MAX, before + np.maximum(0, periods) // PERIODS_PER_S)
+    return aged
 
 
 def young_counts(left: IntArray, right: IntArray, uptime: IntArray, bits: int,

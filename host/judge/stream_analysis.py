@@ -266,8 +266,8 @@ def _life(
     raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
     off_x, off_y, placements = placed_offsets(
         *raw, info.openings, across.allowance,
-        lambda b: gap_allowance_of_counts(*info.gap_steps[b], geometry, bits, integrator,
-                                          max_wheel_speed_mm_s),
+        lambda b: 0.0 if b in info.by_uptime else gap_allowance_of_counts(  # as reference_path
+            *info.gap_steps[b], geometry, bits, integrator, max_wheel_speed_mm_s),
         tolerance.position_m)
     offsets = (off_x, off_y)
     truth = TruthCompare((x0, y0, h0), offsets, rebase=rebase, e0=e0)

@@ -21,19 +21,24 @@ from odocan.host.judge.livepose import (
     RING,
     ErrorStats,
     FramePose,
+    RestartLog,
     Sample,
     StepGate,
-    pose_dict,
+    recent,
     truth_heading,
 )
+from odocan.host.judge.livesnapshot import tracker_snapshot
 from odocan.host.judge.livetruth import LifeTruth, TruthParts, carried_to
 from odocan.host.judge.livetwins import TwinWatch
 from odocan.host.judge.livewindow import (
+    ENC_COLUMNS,
     ENC_WINDOW,
     HALF_WINDOW,
     QUEUED_GAP_S,
     Columns,
+    Counted,
     Half,
+    counted,
     named_in_window,
     named_plain,
     silent_since,
@@ -63,6 +68,8 @@ class PoseTracker:
     ``analyze`` judges; another integrator restarts it. Its start inherits the pose signals'
     rounding, narrowed sample by sample as ``analyze`` fits it (``host.judge.livefit``), until
     a power-up is proven (``on_enc_counts``): then exactly (0, 0, 0), as ``analyze`` starts it.
+    The first life's samples wait for its first ENC_E2E_OK page (up to ``BOOT_COUNT_WAIT_S``),
+    so that a power-up's are all judged from (0, 0, 0), as ``analyze`` judges them.
     """
 
     def __init__(
@@ -78,7 +85,7 @@ class PoseTracker:
         self.stalls = 0  # firmware silences after which the reference restarted
         self._pos = 0  # frames fed so far (the order of encoder frames and pose halves)
         self._counts: list[tuple[int, int, int] | None] = [None] * RING  # seq, left, right
-        self._window = Columns(("seq", "pos", "counter", "t_s", "left", "right"), ENC_WINDOW)
+        self._window = Columns(ENC_COLUMNS, ENC_WINDOW)
         self.twins = TwinWatch(self._window.rows)  # frames with a twin: their poses left out
         self._halves = {"x": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW),
                         "y": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW)}
@@ -91,9 +98,11 @@ class PoseTracker:
         self._ref_at: dict[int, FramePose] = {}  # the reference at the latest encoder frames
         self._ref: ReferenceOdometry | None = None  # raw: ``fit`` corrects its start
         self.fit = LiveFit(0.0, 0.0, exact=True)  # the start narrowed (host.judge.livefit)
-        self._gate = StepGate(geometry, self.counter_bits)
+        self.placer = StallPlacer()  # the placements after stalls (host.judge.liveplace)
+        self.restarts = RestartLog(self.placer.reprimed)  # counter restarts told (``events``)
+        self._gate = StepGate(geometry, self.counter_bits, self.restarts)
         self._pending: FramePose | None = None  # the first pose, heard before the integrator
-        self._backlog_counts: list[tuple[int, int, int, int]] = []  # seq, counter, left, right
+        self._backlog_counts: list[Counted] = []  # the frames since the pending pose's
         self._backlog_poses: list[FramePose] = []
         self._truth_parts = TruthParts()
         self._last_pair: tuple[FramePose, FramePose] | None = None  # on-board, reference
@@ -102,10 +111,10 @@ class PoseTracker:
         self._place_at_next = False  # after a stall or a held pose: place the position again
         self._losses = LiveAllowance()
         self.wrongs = self._losses.wrongs  # POSE WRONG episodes latched (host.judge.posewrongs)
-        self.placer = StallPlacer()  # the placements after stalls (host.judge.liveplace)
         self._now_s = 0.0  # the latest bus time (s)
         self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
         self._boot_poses: list[FramePose] = []  # the new life's samples while it waits
+        self._held: dict[int, Sample] = {}  # ... as settled (unjudged), by encoder frame
         self.pose: FramePose | None = None
         self.pose_t_s = 0.0  # bus time of the ODOM_POSE_Y of ``pose`` (s)
         self.reference: FramePose | None = None
@@ -118,16 +127,13 @@ class PoseTracker:
         self.life_truth = LifeTruth()
 
     fast_path = True  # False: every half by ``match_encoder`` over the window (tests compare)
-    enc_uptime = 0  # CTRL_UPTIME of the latest encoder frame heard (0: not reported)
-
-    # --- frames ---
 
     def advance(self, t_s: float) -> None:
         """Bus time is now ``t_s`` (any frame heard): pose halves heard half an encoder cycle or
         more before are settled; a new life waiting ``BOOT_COUNT_WAIT_S`` starts without it."""
         self._now_s = t_s
         if self._boot is not None and t_s > self._boot[1]:
-            self._finish_boot(self._boot[0])
+            self._finish_boot(self._boot[0]) if self._boot[0] >= 0 else self._finish_first(False)
         if t_s - self._unsettled_from_s < QUEUED_GAP_S:
             return  # none due (nor any later half: t_s - t is monotone in t); none heard: inf
         for _, name in sorted((half.pos, name) for name, half in self._unsettled.items()
@@ -137,25 +143,25 @@ class PoseTracker:
     def on_encoders(self, counter: int, left: int, right: int, t_s: float, uptime: int = 0) -> None:
         """An accepted WHEEL_ENCODERS frame (raw 24-bit counts, CTRL_UPTIME) at bus time ``t_s``."""
         self.advance(t_s)
-        self.enc_uptime = uptime
         self.enc_seq += 1
         self._pos += 1
         prev = self._window.rows[-1] if len(self._window) else None
         if self.placer.on_encoders(self.enc_seq, (counter, left, right, t_s), prev,
                                    self.counter_bits) and self._ref is not None:
             self._place_at_next = True  # a gap: placed again, bounded (liveplace.StallPlacer)
-        self._window.append(self.enc_seq, self._pos, counter, t_s, left, right)
+        row = (self.enc_seq, self._pos, counter, t_s, left, right, self.placer.periods, uptime)
+        self._window.append(*row)
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
         self._counts[counter] = (self.enc_seq, left, right)
         ref = self._ref
         if ref is not None:
-            step = self._gate.step(counter, left, right, self.placer.periods, uptime)
+            step = self._gate.step(counted(row))
             if step is not None:
                 ref.step_deltas(*step)
             self._keep_ref(FramePose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad))
         elif self._pending is not None:
-            self._backlog_counts.append((self.enc_seq, counter, left, right))
+            self._backlog_counts.append(counted(row))
             if len(self._backlog_counts) > BACKLOG_FRAMES:  # too long: start at a later pose
                 self._drop_backlog()
 
@@ -225,8 +231,6 @@ class PoseTracker:
                 return plain, False
         return named_in_window(halves, self._window, pos)
 
-    # --- samples ---
-
     def _pair(self, seq: int, x: Half, y: Half, queued: bool) -> None:
         """The X and Y halves naming encoder frame ``seq``: one on-board sample (the first)."""
         self._ys.pop(seq, None)
@@ -236,7 +240,9 @@ class PoseTracker:
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
         self.pose_t_s = y.t_s
         ref = self._compare(pose, y, queued)
-        self.settled.append(Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
+        self.settled.append(sample := Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
+        if self._boot is not None:  # held: settled again once judged (``_start_reference``)
+            self._held[seq] = sample
 
     def _compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
         """Judge one on-board sample; the reference at its encoder frame, None when unknown."""
@@ -256,6 +262,8 @@ class PoseTracker:
             # which a fine reference cannot follow on a curve: placed again, as after a stall.
             self.stalls += 1
             self._place_at_next = self.placer.stalled = True
+        if self._ref is None and self._pending is None and not self.reference_starts:
+            self._boot = self._boot or (-1, self._now_s + BOOT_COUNT_WAIT_S)  # the first life's
         if self._boot is not None:  # a new life waiting for the frame it primed on
             self._boot_poses.append(pose)
             return None
@@ -346,7 +354,7 @@ class PoseTracker:
             return
         guess = self.enc_seq if primed_now else self.enc_seq + 1
         self._boot = (guess, self._now_s + BOOT_COUNT_WAIT_S)
-        self._boot_poses = []
+        self._boot_poses, self._held = [], {}
 
     def new_life(self) -> None:
         """A new firmware life (a reboot): the reference starts again at the next pose, and
@@ -379,13 +387,30 @@ class PoseTracker:
         if not first_life:
             self.life_truth.booted(primed, self._ref_at)
 
+    def _finish_first(self, proven: bool) -> None:
+        """The first life's samples waited for its first ENC_E2E_OK page (``powerup``'s
+        evidence): ``proven``, judged from (0, 0, 0) on frame 0, as ``analyze`` judges them;
+        else (a log cut after the power-up, no page within ``BOOT_COUNT_WAIT_S``) from the first
+        of them, fitted, as before."""
+        if proven and self.integrator is not None:
+            self._finish_boot(0, first_life=True)
+            return
+        poses, self._boot, self._boot_poses = self._boot_poses, None, []
+        self._pending, self._backlog_poses = poses[0], poses
+        self._backlog_counts = window_counts(self._window, poses[0].seq)
+        if self.integrator is not None:
+            self._start_reference(self._pending, self._backlog_counts, poses)
+            self._drop_backlog()
+
     def on_enc_counts(self, ok: int, lost: int, first_life_page: bool = False) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS: ENC_E2E_OK (frames accepted since boot, u16)
         and ENC_E2E_LOST. The first page after a reboot names the frame it primed on
         (``power_up``); the first life's first, after a first summary of UPTIME 0
         (``first_life_page``), counting exactly the frames heard proves a power-up: (0, 0, 0)
         on frame 0, whatever the first pose said (``analyze``'s rule); then ``on_enc_lost``."""
-        if self._boot is not None and 0 < ok <= self.enc_seq + 1:
+        if self._boot is not None and self._boot[0] < 0:  # the first life's samples wait
+            self._finish_first(first_life_page and ok == self.enc_seq + 1)
+        elif self._boot is not None and 0 < ok <= self.enc_seq + 1:
             self._finish_boot(self.enc_seq - ok + 1)
         elif first_life_page and ok == self.enc_seq + 1 and self.integrator is not None:
             self._finish_boot(0, first_life=True)  # the samples judged before keep their errors
@@ -424,7 +449,7 @@ class PoseTracker:
         heard = self._truth_parts.add(part, enc_counter, value)
         if heard is None:
             return None
-        named = self._recent(self._counts[enc_counter])
+        named = recent(self._counts[enc_counter], self.enc_seq)
         raw = self._ref_at.get(named[0]) if named is not None else None
         ref = None if raw is None else self.fit.correct(raw)
         x_m, y_m, wrapped_rad = self.life_truth.heard(
@@ -443,16 +468,10 @@ class PoseTracker:
         """Counter restarts the current reference re-primed on (as the firmware does)."""
         return self._gate.counter_restarts
 
-    def _recent(self, entry: Any) -> Any:
-        """A ring entry if it is one of the last 8 encoder frames (not one 16 frames older)."""
-        return None if entry is None or self.enc_seq - entry[0] >= RING // 2 else entry
-
-    def _start_reference(
-        self, pose: FramePose, counts: list[tuple[int, int, int, int]], poses: list[FramePose]
-    ) -> None:
-        """Start the reference at ``pose``, primed on the first of ``counts`` (seq, counter,
-        left, right: the encoder frame ``pose`` names and those after it), catch up, and compare
-        the ``poses`` heard meanwhile."""
+    def _start_reference(self, pose: FramePose, counts: list[Counted],
+                         poses: list[FramePose]) -> None:
+        """Start the reference at ``pose``, primed on the first of ``counts`` (the frame ``pose``
+        names on, stepped as heard: ``Counted``), catch up, compare the ``poses`` heard since."""
         assert self.integrator is not None
         ref = self._ref = ReferenceOdometry(
             self.geometry, self.integrator, self.counter_bits,
@@ -462,39 +481,20 @@ class PoseTracker:
         self.fit = LiveFit.start(pose)
         self._ref_at = {}
         self.placer.restart()
-        self._gate = StepGate(self.geometry, self.counter_bits, self.enc_uptime)  # the latest's
-        for seq, counter, left, right in counts:
-            step = self._gate.step(counter, left, right)  # the first primes: stays at pose
+        self._gate = StepGate(self.geometry, self.counter_bits, self.restarts)
+        for frame in counts:
+            step = self._gate.step(frame)  # the first primes: stays at pose
             if step is not None:
                 ref.step_deltas(*step)
-            self._keep_ref(FramePose(seq, ref.x_m, ref.y_m, ref.heading_rad))
+            self._keep_ref(FramePose(frame[0], ref.x_m, ref.y_m, ref.heading_rad))
         for heard in poses:
             at = self._ref_at.get(heard.seq)
-            if at is not None:
+            held = self._held.pop(heard.seq, None)
+            if at is not None and held is not None:  # settled again, judged now
+                self.settled.append(held._replace(reference=self._record(heard, at)))
+            elif at is not None:
                 self._record(heard, at)
 
-    def _vs_reference_dict(self) -> dict[str, Any] | None:
-        """``vs_reference`` with ``loss_allowance_m`` (at the latest sample) and
-        ``max_dpos_beyond_allowance_m``."""
-        stats = self.vs_reference.as_dict()
-        if stats is None:
-            return None
-        return {**stats, "loss_allowance_m": self.allowance_m(),
-                "max_dpos_beyond_allowance_m": self.max_beyond_allowance_m}
-
     def snapshot(self) -> dict[str, Any]:
-        """``pose``, ``reference``, ``truth`` (None until known) and ``error``."""
-        return {
-            "pose": pose_dict(self.pose),
-            "reference": {**(pose_dict(self.reference) or {}), "integrator": self.integrator,
-                          "starts": self.reference_starts,
-                          "counter_restarts": self.counter_restarts, "stalls": self.stalls,
-                          "breaks": self.placer.placements.as_dict()},
-            "truth": pose_dict(self.truth),
-            "truth_origin": self.life_truth.as_dict(),
-            "error": {
-                "pose_vs_reference": self._vs_reference_dict(),
-                "pose_vs_truth": self.vs_truth.as_dict(),
-                "reference_vs_truth": self.reference_vs_truth.as_dict(),
-            },
-        }
+        """``pose``, ``reference``, ``truth``, ``error`` (``livesnapshot.tracker_snapshot``)."""
+        return tracker_snapshot(self)

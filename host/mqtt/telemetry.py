@@ -25,21 +25,20 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
   for two periods;
 * ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result`` (enums by
   their DBC names: ``"state": "OK"``); every STATE change and ERROR_MASK bit newly set
-  (``host.judge.statuslatch``) and every set-pose applied (``host.judge.livesetpose``, which
-  the reference follows) is an event: ``status`` carries the latest ``STATUS_EVENTS`` and
-  ``latched_errors`` (every bit seen set), retained, so a short DEGRADED is never lost (not a
-  QoS-1 publication each: a babbling bus would fill the bridge's reliable queue); likewise
-  ``pose_wrongs``, the judge's own POSE WRONG episodes latched (``host.judge.posewrongs``: the
-  count, the worst and the latest), so an ``error`` with ``pose_wrong`` missed is never lost;
-  and ``distance``, ODOM_TWIST DISTANCE judged (``host.judge.livedistance``, latched).
+  (``host.judge.statuslatch``), every set-pose applied (``host.judge.livesetpose``, which the
+  reference follows) and every counter restart it re-primes on (``counter_restart``, a motor
+  controller's told by CTRL_UPTIME, as analyze names it) is an event: ``status`` carries the
+  latest ``STATUS_EVENTS`` and ``latched_errors`` (every bit seen set), retained, so a short
+  DEGRADED is never lost (not a QoS-1 publication each); likewise ``pose_wrongs``, the judge's
+  own POSE WRONG episodes latched (``host.judge.posewrongs``), and ``distance``, ODOM_TWIST
+  DISTANCE judged (``host.judge.livedistance``, latched).
 
 Headings: ``heading_rad`` wrapped to (-pi, pi] and ``heading_unwrapped_rad`` cumulative, on
 ``pose``, ``reference`` and ``truth`` (SIM_TRUTH's [0, 2 pi) made cumulative at the reference's
 turn); ``dheading_rad`` wrapped to (-pi, pi].
 
-``periodic(now_s)`` returns ``status`` and ``rates`` (frames per second per message over the last
-window). Times: ``t_s`` is the frame's bus timestamp (s), ``unix_s`` the wall clock at publication.
-"""
+``periodic(now_s)`` returns ``status`` and ``rates`` (frames per second per message, last window).
+Times: ``t_s`` the frame's bus timestamp (s), ``unix_s`` the wall clock at publication."""
 
 from __future__ import annotations
 
@@ -189,7 +188,8 @@ class RobotTelemetry:
                             for v, n in (status.get_signal_by_name("PAGE").choices or {}).items()}
         self.sources = SourceWatch()  # reboots, as the monitor tells them (host.judge.sources)
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
-        self.events: deque[dict[str, Any]] = deque(maxlen=STATUS_EVENTS)  # ... and set-poses
+        # ... set-poses and the counter restarts the reference follows (its ``RestartLog``)
+        self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=STATUS_EVENTS)
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
         set_pose = next((m for m in self.db.messages if m.name == "ODOM_SET_POSE"), None)
         self._set_pose_id = set_pose.frame_id if set_pose is not None else -1
