@@ -319,6 +319,7 @@ def _config_probes(rng: random.Random, ask: Callable[..., None]) -> None:
             rng.randrange(0, U32_MAX),
             rng.choice((16, 32, 8)),
             rng.choice((0, 1, 2, 3)),
+            rng.choice((0, 1, 700, 4_000, 65_535, 65_536, rng.randrange(0, 1 << 32))),
         )
         if rng.random() < 0.7:  # mostly in range, so that the constants are derived
             params = dataclasses.replace(
@@ -329,6 +330,7 @@ def _config_probes(rng: random.Random, ask: Callable[..., None]) -> None:
                 wheelbase_nm=rng.randrange(10_000_000, 4_000_000_001),
                 counter_bits=rng.choice((16, 32)),
                 integrator=rng.choice((0, 1, 2)),
+                max_wheel_speed_mm_s=rng.randrange(1, 65_536),
             )
         speed_mm_s = rng.choice((4_000, 500, 65_535, rng.randrange(1, 65_536)))
         ask(f"config_speed {speed_mm_s} " + " ".join(str(v) for v in dataclasses.astuple(params)),
@@ -758,11 +760,12 @@ class _EcuSession:
 
     def config_param(self) -> None:
         rng = self.rng
-        param = rng.choice((0, 0, 1, 2, 3, 4, 5, 15, 15, 15, 9))
+        param = rng.choice((0, 0, 1, 2, 3, 4, 5, 6, 6, 15, 15, 15, 9))
         by_param = {
             0: rng.choice((500, 2578, 0, 500)),
             4: rng.choice((16, 32)),
             5: rng.randrange(3),
+            6: rng.choice((700, 1_200, 4_000, 0, 65_535)),  # MAX_WHEEL_SPEED, mm/s (0: NACK)
         }
         by_param.update({1: 75_000_000, 2: rng.choice((75_000_000, 35_000_000)), 3: 300_000_000})
         v = by_param.get(param, 0)
