@@ -1003,10 +1003,16 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
     health = ErrorFlag.TIME_LOST | ErrorFlag.IMPLAUSIBLE_STEP | ErrorFlag.COUNTER_RESET
     assert all(any(int(t[2]) & flag for t in ticks) for flag in health)
     states = [(int(t[0]), int(t[1])) for t in ticks]
+    # one ECU's ticks: an ecu_new between two ticks starts another (FAULT for invalid params)
+    born = list(itertools.accumulate(
+        c.startswith("ecu_new") for c in cmds))
+    lives = [born[i] for i, c in enumerate(cmds) if c.startswith("ecu_tick")]
     recovered = [
         after
-        for before, after in itertools.pairwise(states)
-        if before == (State.DEGRADED, Reason.COUNTER_RESET) and after[0] != State.DEGRADED
+        for (before, after), (a, b) in zip(itertools.pairwise(states),
+                                           itertools.pairwise(lives), strict=True)
+        if a == b and before == (State.DEGRADED, Reason.COUNTER_RESET)
+        and after[0] != State.DEGRADED
     ]
     assert recovered
     assert all(after == (State.OK, Reason.NONE) for after in recovered)
