@@ -8,7 +8,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S, PERIODS_PER_S, RESYNC_FRAMES
+from odocan.firmware.encoders import PERIODS_PER_S, RESYNC_FRAMES
 from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.turns import unwrapped_error
@@ -32,8 +32,9 @@ class Sample(NamedTuple):
 
 class StepGate:
     """The firmware's plausibility rule on the reference's steps (firmware/ecu.py, the same as
-    ``host.judge.analysis``): a frame beyond ``MAX_WHEEL_SPEED_MM_S`` over the periods its COUNTER
-    advanced since the last accepted one is refused; ``RESYNC_FRAMES`` refused frames plausible
+    ``host.judge.analysis``): a frame beyond the robot's maximum wheel speed
+    (``Geometry.max_wheel_speed_mm_s``) over the periods its COUNTER advanced since the last
+    accepted one is refused; ``RESYNC_FRAMES`` refused frames plausible
     among themselves are a counter restart: one step from the first of them, never the jump; a
     frame whose CTRL_UPTIME is below the last accepted one's (both non-zero) re-primes it (the
     motor controller restarted): no step into it."""
@@ -41,7 +42,7 @@ class StepGate:
     def __init__(self, geometry: Geometry, counter_bits: int, uptime: int = 0) -> None:
         """``uptime``: CTRL_UPTIME of the last accepted frame, when the frames it starts on are
         replayed without theirs (``step``'s ``uptime`` None)."""
-        travel_m = MAX_WHEEL_SPEED_MM_S * 1e-3 * ENCODER_PERIOD_US * 1e-6
+        travel_m = geometry.max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
         self.bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
                       math.ceil(travel_m / geometry.m_per_count_right) + 1)
         self.bits = counter_bits
