@@ -14,7 +14,7 @@ Shipped profiles live in ``sim/robots/<name>.toml``::
     wheel_radius_right_m = 0.075
     wheelbase_m = 0.30           # distance between the wheel contact points, 0.01 .. 4 m
     counter_bits = 16            # width of the free-running encoder counters: 16 or 32
-    max_wheel_speed_m_s = 1.2    # optional: the fastest rim speed either wheel can reach,
+    max_wheel_speed_m_s = 4.0    # optional: the fastest rim speed either wheel can reach,
                                  # 0.001 .. 65.535 m/s on the 1 mm/s grid (default 4.0)
 
 ``max_wheel_speed_m_s`` is the firmware's plausibility bound (an encoder step beyond it over its

@@ -290,4 +290,4 @@ def test_a_profile_without_a_speed_keeps_the_old_4_m_s(tmp_path: Path) -> None:
     assert "max_wheel_speed" not in path.read_text()
     assert load(path).firmware_params()["max_wheel_speed_mm_s"] == 4_000
     assert KOBUKI.firmware_params()["max_wheel_speed_mm_s"] == 700
-    assert load("pmir").firmware_params()["max_wheel_speed_mm_s"] == 1_200
+    assert load("pmir").firmware_params()["max_wheel_speed_mm_s"] == 4_000  # no source: kept

@@ -43,7 +43,7 @@ def test_list_profiles() -> None:
 
 def test_pmir_is_seed_002_robot() -> None:
     p = load("pmir")
-    assert p == RobotProfile("pmir", 500, 0.075, 0.075, 0.3, 16, 1.2)
+    assert p == RobotProfile("pmir", 500, 0.075, 0.075, 0.3, 16, 4.0)
     # seed 002 eq. 4: pi * 15 cm / 500 = 0.094 cm per pulse (0.09425, truncated in the paper)
     metres_per_pulse = 2 * math.pi * p.wheel_radius_left_m / p.counts_per_rev
     assert metres_per_pulse == pytest.approx(0.00094, abs=3e-6)
