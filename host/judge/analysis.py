@@ -407,6 +407,7 @@ def _robot_dict(robot: RobotProfile) -> dict[str, Any]:
         "wheel_radius_right_m": robot.wheel_radius_right_m,
         "wheelbase_m": robot.wheelbase_m,
         "counter_bits": robot.counter_bits,
+        "max_wheel_speed_m_s": robot.max_wheel_speed_m_s,  # the steps' and gaps' bound
     }
 
 
