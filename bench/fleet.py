@@ -13,8 +13,11 @@ robots per core is about 10 000 / (us per robot-tick).
     .venv/bin/python bench/fleet.py --robots 50,75,100 --workers 2 --broker mosquitto \
         --trial-s 20 [--repeat 2]     # a sweep, unattended, ends with one table
 
-``--lookahead off`` runs the robots' drives tick by tick instead of ahead in staggered blocks
-(``sim.lookahead``, the fleet's default): a pair of sweeps shows what the blocks save.
+``--publish-hz`` sets the bridge's pose telemetry rate per robot (``odocan fleet --publish-hz``,
+default 10: pose, reference, error and truth, four publications in one socket write per robot
+and period; every frame is judged whatever the rate). ``--lookahead off`` runs the robots'
+drives tick by tick instead of ahead in staggered blocks (``sim.lookahead``, the fleet's
+default): a pair of sweeps shows what the blocks save.
 
 ``--robots`` (or ``--fixed``) replaces the search by one trial per size; the table's "2 cores"
 column is 20 000 us / (fleet + bridge + broker CPU per robot-tick): what two idle cores would
@@ -44,7 +47,8 @@ from odocan.sim import robot
 from odocan.sim.fleet import FleetConfig
 
 LIMIT = 0.001
-OPTIONS = argparse.Namespace(lookahead=True)  # FleetConfig.lookahead of every trial (--lookahead)
+# FleetConfig.lookahead (--lookahead) and FleetRun.publish_hz (--publish-hz) of every trial
+OPTIONS = argparse.Namespace(lookahead=True, publish_hz=10.0)
 TICKS_PER_S = os.sysconf("SC_CLK_TCK")
 
 
@@ -65,7 +69,8 @@ def trial(n: int, seconds: float, bridge: bool, broker: BrokerURL | None, worker
     run = FleetRun(fleet=FleetConfig(robots=n, robot=robot.load("pmir"),
                                      lookahead=OPTIONS.lookahead),
                    duration_s=seconds,
-                   bridge=bridge, broker=broker, client_prefix=f"bench-{n}-{time.time_ns()}")
+                   bridge=bridge, broker=broker, client_prefix=f"bench-{n}-{time.time_ns()}",
+                   publish_hz=OPTIONS.publish_hz)
     broker0 = proc_cpu_s(broker_pid)
     report = run_sharded(run, min(workers, n)) if bridge else asyncio.run(run_fleet(run))
     broker_cpu = proc_cpu_s(broker_pid) - broker0  # includes the workers' connect and goodbye
@@ -176,13 +181,17 @@ def main() -> None:
                         help="with --robots/--fixed: run each size R times (default: 1)")
     parser.add_argument("--lookahead", choices=("on", "off"), default="on",
                         help="the robots' drives ahead in staggered blocks (default: on)")
+    parser.add_argument("--publish-hz", type=float, default=10.0, metavar="HZ",
+                        help="the bridge's pose telemetry per robot, as odocan fleet's "
+                             "--publish-hz (default: 10)")
     args = parser.parse_args()
     OPTIONS.lookahead = args.lookahead == "on"
+    OPTIONS.publish_hz = args.publish_hz
     sweep = [n for n in (args.robots or []) + (args.fixed or []) for _ in range(args.repeat)]
     rows: list[tuple[str, dict[str, Any]]] = []
     print(f"fleet bench: {os.cpu_count()} CPUs, {args.trial_s:.0f} s per trial, "
           f"limit deadline_miss_ratio <= {LIMIT}, {args.workers} workers, lookahead "
-          f"{args.lookahead}, "
+          f"{args.lookahead}, telemetry {args.publish_hz:g} Hz, "
           f"load {os.getloadavg()[0]:.2f}")
     step_us, bridge_us = cpu_cost_us()
     print(f"CPU per robot and 10 ms tick, in process: step {step_us:.0f} us, bridge frame "

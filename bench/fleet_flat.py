@@ -4,14 +4,23 @@
 releases (a period or more behind), and a skip changes the work (steps spanning several ticks, a
 drive run ahead falling back), so its CPU figures drift with the load. Here ``run_fleet`` (one
 worker: the fleet, the bridge with its live judge, one MQTT connection per robot to a mosquitto
-on loopback) runs under a clock that is never late: every tick is released at once, the MQTT
-tasks get their loop turn between ticks as in real time, and the report's ``cpu_s`` (this
-process, while the clock ran) over robots x ticks is the CPU per robot-tick of everything a
-worker does. Verdicts are printed too (every robot judged: no skip). Pair trees in alternation:
+on loopback) runs under a clock that is never late: every tick is released as soon as the bridge
+handled the previous tick's frames (its slices, a loop turn each, as in real time) and the MQTT
+tasks had their loop turn, and the report's ``cpu_s`` (this process, while the clock ran) over
+robots x ticks is the CPU per robot-tick of everything a worker does. Verdicts are printed too
+(every robot judged: no skip). Pair trees in alternation:
 
-    .venv/bin/python bench/fleet_flat.py [--robots 50] [--ticks 600] [--repeat 3]
+    .venv/bin/python bench/fleet_flat.py [--robots 50] [--ticks 600] [--repeat 3] \
+        [--publish-hz 10] [--parts]
+
+``--parts`` adds the CPU per robot-tick of the fleet step (``Fleet.step``) and of the bridge's
+frame handling (``Bridge._handle``: E2E, decode, live judge, publications queued), the rest
+(JSON, paho, the socket writes, the loop, the GC) and the socket writes per robot-tick.
 
 The script runs unchanged on trees since the bridge's ``run_fleet`` (copy it there to pair).
+Before, the clock released every tick at once (a ``NeverLate`` clock in ``run_realtime``): the
+bridge, one 64-frame slice a loop turn, fell behind and handled most of the frames in its final
+drain, after ``cpu_s`` stopped, so the figure was too low (and lower for a slower bridge).
 """
 
 from __future__ import annotations
@@ -23,34 +32,110 @@ import sys
 import tempfile
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from fleet import start_mosquitto  # bench/fleet.py
 
-import odocan.sim.fleet as sim_fleet
+import odocan.host.mqtt.fleetrun as fleetrun
+from odocan.host.mqtt.bridge import Bridge
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
 from odocan.sim import robot
-from odocan.sim.fleet import FleetConfig
+from odocan.sim.fleet import Fleet, FleetConfig
+from odocan.sim.realtime import DeadlineStats
 
 TICK_S = 0.01
 
 
-class NeverLate:
-    """``run_realtime``'s clock, never late: its two reads of tick k (the delay before the
-    release, the lateness after) both say ``k * TICK_S``."""
+async def run_flat(
+    fleet: Fleet, *, duration_s: float, on_batch: Callable[[Any], None] | None = None,
+    stop: asyncio.Event | None = None, stats: DeadlineStats | None = None, **_: Any,
+) -> DeadlineStats:
+    """``fleetrun``'s ``run_realtime`` without a clock: tick k is stepped once the bridge
+    handled every frame offered before it (``Bridge._consume``'s slices, a loop turn each) and
+    the links had a loop turn to write; no tick is late, none skipped."""
+    stats = stats if stats is not None else DeadlineStats(TICK_S, TICK_S / 2)
+    bridge = _bridge_of(on_batch)
+    k = 0
+    while k * TICK_S < duration_s - 1e-9 and (stop is None or not stop.is_set()):
+        await asyncio.sleep(0)  # the links' writes, the periodic task
+        while isinstance(bridge, Bridge) and (bridge._pending or not bridge.queue.empty()):
+            await asyncio.sleep(0)
+        stats.record(0.0)
+        fleet.step(k)
+        batch = fleet.take_batch()
+        if on_batch is not None:
+            on_batch(batch)
+        k += 1
+    while isinstance(bridge, Bridge) and (bridge._pending or not bridge.queue.empty()):
+        await asyncio.sleep(0)  # the last tick's frames inside the clock too
+    await asyncio.sleep(0)
+    return stats
+
+
+def _bridge_of(on_batch: Any) -> Bridge | None:
+    """The bridge whose ``offer`` ``on_batch`` is, or calls (``fleetrun.TickCollector``)."""
+    for _ in range(3):
+        owner = getattr(on_batch, "__self__", None)
+        if isinstance(owner, Bridge) or owner is None:
+            return owner
+        on_batch = getattr(owner, "on_batch", None)
+    return None
+
+
+class Parts:
+    """Process time spent in ``Fleet.step`` and ``Bridge._handle``; the links' socket writes."""
 
     def __init__(self) -> None:
-        self.reads = 0
+        self.step_s = self.handle_s = 0.0
+        self.senders: list[Any] = []
 
-    def now_s(self) -> float:
-        self.reads += 1
-        return (self.reads - 1) // 2 * TICK_S
+    def install(self) -> None:
+        """Wrap the two parts and count every link's ``CoalescedSend``."""
+        from odocan.host.mqtt import client
+
+        parts = self
+        step, handle, made = Fleet.step, Bridge._handle, client.CoalescedSend.__init__
+
+        def timed_step(fleet: Fleet, k: int) -> None:
+            t0_s = time.process_time()
+            step(fleet, k)
+            parts.step_s += time.process_time() - t0_s
+
+        def timed_handle(bridge: Bridge, batch: Any) -> None:
+            t0_s = time.process_time()
+            handle(bridge, batch)
+            parts.handle_s += time.process_time() - t0_s
+
+        def making(sender: Any, paho: Any) -> None:
+            made(sender, paho)
+            parts.senders.append(sender)
+
+        setattr(Fleet, "step", timed_step)  # noqa: B010 (a bench's patch)
+        setattr(Bridge, "_handle", timed_handle)  # noqa: B010
+        setattr(client.CoalescedSend, "__init__", making)  # noqa: B010
+
+    def line(self, cpu_s: float, robot_ticks: int) -> str:
+        """The parts in us per robot-tick, and the socket writes per robot-tick."""
+        per = robot_ticks / 1e6
+        rest = (cpu_s - self.step_s - self.handle_s) / per
+        writes = sum(sender.writes for sender in self.senders) / robot_ticks
+        line = (f"  step {self.step_s / per:.1f}, bridge frame handling "
+                f"{self.handle_s / per:.1f}, the rest {rest:.1f} us; {writes:.3f} socket writes "
+                f"per robot-tick (the whole run)")
+        self.step_s = self.handle_s = 0.0
+        self.senders.clear()
+        return line
 
 
-def one_run(robots: int, ticks: int) -> str:
+PARTS: Parts | None = None  # --parts
+
+
+def one_run(robots: int, ticks: int, publish_hz: float = 10.0) -> str:
     """One flat-out run of ``robots`` for ``ticks`` ticks; its line of figures."""
     with tempfile.TemporaryDirectory() as tmp:
         started = start_mosquitto(Path(tmp))
@@ -59,7 +144,7 @@ def one_run(robots: int, ticks: int) -> str:
         proc, url = started
         try:
             run = FleetRun(fleet=FleetConfig(robots=robots, robot=robot.load("pmir")),
-                           duration_s=ticks * TICK_S, broker=url,
+                           duration_s=ticks * TICK_S, broker=url, publish_hz=publish_hz,
                            client_prefix=f"bench-flat-{time.time_ns()}")
             report = asyncio.run(run_fleet(run))
         finally:
@@ -67,9 +152,12 @@ def one_run(robots: int, ticks: int) -> str:
             proc.wait()
     verdicts = Counter(r["verdict"] for r in report["per_robot"].values())
     per_us = report["cpu_s"] / (report["robots"] * report["ticks"]) * 1e6
-    return (f"{robots} robots, {report['ticks']} ticks flat out: {per_us:.1f} us CPU per "
+    line = (f"{robots} robots, {report['ticks']} ticks flat out: {per_us:.1f} us CPU per "
             f"robot-tick (fleet + bridge + MQTT), {report['skipped_releases']} skipped, "
             f"verdicts {dict(verdicts)}, load {os.getloadavg()[0]:.2f}")
+    if PARTS is not None:
+        line += "\n" + PARTS.line(report["cpu_s"], report["robots"] * report["ticks"])
+    return line
 
 
 def main() -> int:
@@ -77,10 +165,18 @@ def main() -> int:
     parser.add_argument("--robots", type=int, default=50)
     parser.add_argument("--ticks", type=int, default=600)
     parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--publish-hz", type=float, default=10.0,
+                        help="the bridge's pose telemetry rate per robot (FleetRun.publish_hz)")
+    parser.add_argument("--parts", action="store_true",
+                        help="the CPU of the step, of the bridge's frame handling, the rest")
     args = parser.parse_args()
-    sim_fleet.RealTimeClock = NeverLate  # type: ignore[attr-defined, assignment]
+    setattr(fleetrun, "run_realtime", run_flat)  # noqa: B010 (a bench's patch)
+    if args.parts:
+        global PARTS
+        PARTS = Parts()
+        PARTS.install()
     for _ in range(args.repeat):
-        print(one_run(args.robots, args.ticks), flush=True)
+        print(one_run(args.robots, args.ticks, args.publish_hz), flush=True)
     return 0
 
 

@@ -49,6 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from fleet import start_mosquitto  # bench/fleet.py
+from fleet_flat import run_flat  # bench/fleet_flat.py
 
 import odocan.host.mqtt.bridge as bridge_module
 import odocan.host.mqtt.client as client
@@ -59,7 +60,7 @@ import odocan.sim.realtime as realtime
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
 from odocan.sim import robot
 from odocan.sim.board import TICK_S
-from odocan.sim.fleet import Batch, Fleet, FleetConfig
+from odocan.sim.fleet import Fleet, FleetConfig
 
 LATE_S = 0.005  # a tick is late after half a 10 ms period (sim.realtime.DeadlineStats)
 
@@ -135,22 +136,12 @@ async def flat_out(
     fleet: Fleet, *, duration_s: float | None, on_batch: Any = None, stop: Any = None,
     period_s: float = TICK_S, stats: realtime.DeadlineStats | None = None,
 ) -> realtime.DeadlineStats:
-    """``sim.fleet.run_realtime`` without the clock: every tick of ``duration_s`` back to back,
-    with ``TURNS`` event-loop turns after each (the bridge, the links' sends, the socket)."""
-    stats = stats if stats is not None else realtime.DeadlineStats(period_s, period_s / 2)
+    """``sim.fleet.run_realtime`` without the clock: ``bench/fleet_flat.py``'s ``run_flat`` (a
+    tick once the bridge handled the previous one's frames; before, four loop turns a tick let
+    the bridge fall behind from ~75 robots a worker and drain after the clock stopped)."""
     assert duration_s is not None
-    for k in range(round(duration_s / period_s)):
-        stats.record(0.0)
-        fleet.step(k)
-        batch: Batch = fleet.take_batch()
-        if on_batch is not None:
-            on_batch(batch)
-        for _ in range(TURNS):
-            await asyncio.sleep(0)
-    return stats
-
-
-TURNS = 4
+    return await run_flat(fleet, duration_s=duration_s, on_batch=on_batch, stop=stop,
+                          stats=stats)
 
 
 def percentile_ms(sorted_s: list[float], q: float) -> float:
@@ -188,7 +179,8 @@ def show(probe: Probe, report: dict[str, Any], robots: int) -> None:
     gcs = [g for g in probe.gcs if g[0] >= start_s]
     per_gen = Counter(gen for _, _, gen in gcs)
     print(f"gc while running: {dict(sorted(per_gen.items()))} collections by generation, "
-          f"longest {max((p for _, p, _ in gcs), default=0.0) * 1e3:.2f} ms")
+          f"longest {max((p for _, p, _ in gcs), default=0.0) * 1e3:.2f} ms (with the full "
+          f"pass after the clock, fleetrun.TickCollector)")
     late_ticks = [(i, t) for i, (t, lateness) in enumerate(probe.ticks) if lateness > LATE_S]
     with_gc = sum(any(t - 0.02 <= g <= t for g, _, _ in gcs) for _, t in late_ticks)
     print(f"late ticks: {len(late_ticks)}, {with_gc} with a collection in the 20 ms before")

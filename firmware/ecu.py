@@ -170,7 +170,7 @@ class OdomEcu:
         if self.auth.secoc is not None:  # C: the SecOC steps compiled in when provisioned
             self.auth.expire_held()
         self.twist.end_drain(time_lost_now, encoders.tick_budget)
-        motor_cmd_due = self._navigate()
+        motor_cmd_due = self.clock.ticks % NAV_PERIOD_TICKS == 0 and self._navigate()
         self.reports.transmit_scheduled(motor_cmd_due)
         health.watchdog(encoders.periods_since_frame)
         clock.end_tick()
@@ -200,10 +200,8 @@ class OdomEcu:
             self.encoders.no_frame()
 
     def _navigate(self) -> bool:
-        """Step 4: navigation every NAV_PERIOD_TICKS, from the on-board pose; True when it
+        """Step 4 (every NAV_PERIOD_TICKS): navigation from the on-board pose; True when it
         decided a MOTOR_CMD."""
-        if self.clock.ticks % NAV_PERIOD_TICKS != 0:
-            return False
         odo = self.odometry
         return self.nav.step(
             odo.x_q40_m,

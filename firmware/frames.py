@@ -246,10 +246,15 @@ def _i16_field(value: int, errors: ErrorMask) -> u16:
 def unpack_wheel_encoders(data: bytes | bytearray) -> WheelEncoders:
     """WHEEL_ENCODERS: u24 counts (extend them with the delta of the low 24 bits) and the
     controller's CTRL_UPTIME (u4 s, saturated at 15; 0: not reported)."""
+    return WheelEncoders(*unpack_wheel_encoders_fields(data))
+
+
+def unpack_wheel_encoders_fields(data: bytes | bytearray) -> tuple[int, int, int, int]:
+    """``unpack_wheel_encoders`` as a plain tuple (counter, left_count, right_count,
+    ctrl_uptime_s): the firmware's read of every frame (building the record costs ~0.3 us more
+    in CPython; C: the same struct)."""
     w = frame_word(data)
-    return WheelEncoders(
-        (w >> 8) & U4_MAX, (w >> 16) & U24_MAX, (w >> 40) & U24_MAX, (w >> 12) & U4_MAX
-    )
+    return (w >> 8) & U4_MAX, (w >> 16) & U24_MAX, (w >> 40) & U24_MAX, (w >> 12) & U4_MAX
 
 
 # --- ODOM_SET_POSE, ODOM_CONFIG, NAV_GOAL (HOST -> ODOM_MCU; events; multiplexed) ---

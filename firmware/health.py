@@ -31,11 +31,11 @@ class Health:
 
     __slots__ = (
         "_clock",
-        "_overflows_before",
         "_overflows_seen",
         "_reason_tick",
         "errors",
         "good_in_a_row",
+        "overflows_before",
         "reason",
         "state",
     )
@@ -48,7 +48,11 @@ class Health:
         self.good_in_a_row = 0  # accepted encoder frames since the last cause (<= RECOVERY_FRAMES)
         self._reason_tick = 0  # u32: the tick that set ``reason``
         self._overflows_seen = 0  # u32: the mailbox's overflow count at the previous tick
-        self._overflows_before = 0  # u32: the count ``_overflows_seen`` held before that
+        # u32: the mailbox's overflow count as of the previous tick's start (the count
+        # ``_overflows_seen`` held before this tick's). Frames dropped by then came after every
+        # frame the previous tick drained (a full ring drops the newest). A field, not a
+        # property: the encoder input reads it on every frame.
+        self.overflows_before = 0
 
     def config_fault(self) -> None:
         """The configuration is invalid: FAULT (CONFIG_INVALID) until a valid one is applied."""
@@ -84,16 +88,10 @@ class Health:
         self.errors.set(ErrorFlag.TIME_LOST)
         self.degrade(Reason.TIME_LOST)
 
-    @property
-    def overflows_before(self) -> int:
-        """The mailbox's u32 overflow count as of the previous tick's start. Frames dropped by
-        then came after every frame the previous tick drained (a full ring drops the newest)."""
-        return self._overflows_before
-
     def check_overflows(self, overflows: int) -> None:
         """Frames the receive ISR dropped since the previous tick (``overflows``: the mailbox's
         u32 count): DEGRADED (MAILBOX_OVERFLOW)."""
-        self._overflows_before = self._overflows_seen
+        self.overflows_before = self._overflows_seen
         if overflows != self._overflows_seen:
             self._overflows_seen = overflows
             self.degrade(Reason.MAILBOX_OVERFLOW)

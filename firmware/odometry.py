@@ -51,7 +51,6 @@ from odocan.firmware.fixmath import (
     mul_sub_wrap_i64,
     sat_i64,
     wrap_i32,
-    wrap_signed,
 )
 from odocan.firmware.trig import sincos_q30
 
@@ -76,6 +75,7 @@ class Odometry:
 
     __slots__ = (
         "_consts",
+        "_count_half",
         "_errors",
         "_left_prev",
         "_primed",
@@ -92,6 +92,7 @@ class Odometry:
 
     def __init__(self, consts: OdomConstants, errors: ErrorMask) -> None:
         self._consts = consts
+        self._count_half = 1 << (consts.counter_bits - 1)  # half the counters' range
         self._errors = errors
         self._primed = False
         self._left_prev = 0
@@ -113,6 +114,7 @@ class Odometry:
     def reconfigure(self, consts: OdomConstants) -> None:
         """Use new constants from the next step on; the pose and the counter history are kept."""
         self._consts = consts
+        self._count_half = 1 << (consts.counter_bits - 1)
 
     def set_pose(self, x_q40_m: int, y_q40_m: int, heading_bam64: int) -> None:
         """Overwrite the pose (``ODOM_SET_POSE``); distance travelled and counters are kept."""
@@ -132,12 +134,14 @@ class Odometry:
         ODrive way: ``wrap_signed(now - prev, bits)``, exact while the true per-step delta is below
         half the counter range. Returns True when a step was integrated.
         """
-        bits = self._consts.counter_bits
         if not self._primed:
             self._left_prev, self._right_prev, self._primed = left_count, right_count, True
             return False
-        d_left = wrap_signed(left_count - self._left_prev, bits)
-        d_right = wrap_signed(right_count - self._right_prev, bits)
+        # wrap_signed(now - prev, bits) in line: (int16_t)(uint16_t) or (int32_t)(uint32_t)
+        half = self._count_half
+        mask = half + half - 1
+        d_left = ((left_count - self._left_prev + half) & mask) - half
+        d_right = ((right_count - self._right_prev + half) & mask) - half
         self._left_prev, self._right_prev = left_count, right_count
         self.step_deltas(d_left, d_right)
         return True
@@ -145,11 +149,13 @@ class Odometry:
     def step_deltas(self, d_left: int, d_right: int) -> None:
         """Integrate one step of count deltas (i32 each) with the configured integrator."""
         c = self._consts
-        ds_q49_m = _sat(  # i32 x i64 products (up to 2^83 for a wild 32-bit step), saturated
-            mul_sat_i64(d_left, c.m_per_count_left_q48_m, self._errors)
-            + mul_sat_i64(d_right, c.m_per_count_right_q48_m, self._errors),
-            self._errors,
+        errors = self._errors
+        ds_q49_m = (  # i32 x i64 products (up to 2^83 for a wild 32-bit step), saturated
+            mul_sat_i64(d_left, c.m_per_count_left_q48_m, errors)
+            + mul_sat_i64(d_right, c.m_per_count_right_q48_m, errors)
         )
+        if not I64_MIN <= ds_q49_m <= I64_MAX:  # ``_sat``'s test first (the sum rarely leaves)
+            ds_q49_m = _sat(ds_q49_m, errors)
         dheading = mul_sub_wrap_i64(  # exact mod 2^64, read as i64
             d_right, c.bam64_per_count_right, d_left, c.bam64_per_count_left
         )
@@ -184,7 +190,8 @@ class Odometry:
             if turns:  # the arc of the whole step: the wrapped chord scaled by dtheta_w / dtheta
                 ratio_q62 = div_q62_i128(dheading, dheading_hi, dheading & U64_MAX)
                 factor_q62 = _scale_q62(factor_q62, ratio_q62)
-            ds_q49_m = _scale_q62(ds_q49_m, factor_q62)
+            if factor_q62 != ONE_Q62:  # ``_scale_q62``, in line
+                ds_q49_m = mul_round_i64(ds_q49_m, factor_q62, 62)
         elif turns & 1:  # RK2: each whole turn beyond the signed read moves the midpoint by pi
             midpoint_bam64 ^= HALF_TURN_BAM64
         self._advance(ds_q49_m, midpoint_bam64)
@@ -217,8 +224,10 @@ def chord_factor_q62(dheading_bam64: int) -> int:
         return ONE_Q62
     u2_q60 = mul_round_i64(u_q60, u_q60, 60)
     denominators = _SINC_HORNER_SHORT if u_q60 <= SERIES_SHORT_LIMIT_Q60 else _SINC_HORNER_LONG
-    acc_q60 = ONE_Q60
-    for denominator in denominators:
+    # The innermost term's product is u^2 * 1.0, i.e. u^2 itself (floor(u2 * 2^60 / 2^60) is
+    # exact): taken as it is, the rest by ``mul_shr_i64`` (the C port's loop gives the same).
+    acc_q60 = ONE_Q60 - u2_q60 // denominators[0]
+    for denominator in denominators[1:]:
         acc_q60 = ONE_Q60 - mul_shr_i64(u2_q60, acc_q60, 60) // denominator
     return acc_q60 << 2
 

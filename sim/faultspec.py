@@ -102,9 +102,10 @@ class FaultSpec:
         """A spec from ``--faults`` text such as ``drop=0.01,burst=0.001:5,seed=3`` ("" = none)."""
         values: dict[str, Any] = {}
         seen: set[str] = set()
-        for item in (part.strip() for part in text.split(",")):
+        items = [part.strip() for part in text.split(",")] if text.strip() else []
+        for item in items:
             if not item:
-                continue
+                raise ConfigurationError(f"faults: {text!r}: an empty item (a comma too many?)")
             key, sep, value = (s.strip() for s in item.partition("="))
             if not sep:
                 raise ConfigurationError(f"faults: {item!r}: expected KEY=VALUE")

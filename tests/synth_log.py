@@ -31,6 +31,7 @@ counts alone cannot tell).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -43,6 +44,7 @@ from odocan.firmware.ecu import RECOVERY_FRAMES, RESYNC_FRAMES, WATCHDOG_TICKS
 from odocan.firmware.errors import ErrorMask, Reason, State
 from odocan.firmware.fixmath import mul_shr_round_i64, wrap_i32
 from odocan.firmware.odometry import Odometry
+from odocan.firmware.twist import Twist
 from odocan.sim import frames as sf
 from odocan.sim.robot import RobotProfile
 
@@ -114,6 +116,8 @@ def synthesize(
     ctrl_uptime: bool = False,
     integrates_restarts: bool = False,
     y_bias_100um: dict[int, int] | None = None,
+    twist: bool = False,
+    distance_of: Callable[[int, int, Odometry], int] | None = None,
 ) -> Synth:
     """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
     ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB;
@@ -125,7 +129,10 @@ def synthesize(
     ``boot_in_init``: it booted 5 ms before that frame, its first summary saying INIT.
     ``ctrl_restarts``: {encoder frame: (left, right) jump in counts} where the motor controller
     restarted (module docstring); ``ctrl_uptime``: its frames carry CTRL_UPTIME (else 0);
-    ``integrates_restarts``: the firmware integrates the jump."""
+    ``integrates_restarts``: the firmware integrates the jump.
+    ``twist``: ODOM_TWIST with each pose pair (speeds from the firmware's ``Twist``, DISTANCE
+    rounded as ``reports._send_pose_and_twist`` does); ``distance_of(k, distance_mm, odo)``: a
+    wrong firmware's DISTANCE (mm) at encoder frame k instead."""
     bias = x_bias_100um or {}
     jumps = counter_jumps or {}
     named = 0  # the COUNTER of the last encoder frame the firmware accepted
@@ -142,10 +149,12 @@ def synthesize(
     pose_counter = status_counter = 0
     boot = 0  # the encoder frame the running firmware primed on
     controller = _Controller(ctrl_restarts or {}, ctrl_uptime, integrates_restarts)
+    speeds = Twist(odo, errors)
     for k in range(len(dl)):
         if k == reboot_at:  # a new firmware: pose 0, E2E counters and UPTIME from 0
             errors = ErrorMask()
             odo = Odometry(derive_constants(params_of(robot, integrator), errors), errors)
+            speeds = Twist(odo, errors)
             pose_counter = status_counter = 0
             boot = k
         left, right = (left + int(dl[k])) & mask, (right + int(dr[k])) & mask
@@ -158,10 +167,10 @@ def synthesize(
         elif k == resync_until and resync_first is not None:  # COUNTER_RESET: re-prime
             odo.unprime()
             odo.step_counts(*resync_first)
-            odo.step_counts(left, right)
+            _integrate(odo, speeds, left, right)
             named = k & 0xF
         else:
-            odo.step_counts(left, right)
+            _integrate(odo, speeds, left, right)
             named = k & 0xF
         t_s = t0_s + k * ENCODER_PERIOD_S
         group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
@@ -175,6 +184,8 @@ def synthesize(
             group += _pose_lines(odo, t_s + 0.001, pose_counter, named, errors, bias.get(k, 0),
                                  (heading_bias_lsb or {}).get(k, 0),
                                  (y_bias_100um or {}).get(k, 0))
+            group += [_twist_line(odo, speeds, t_s + 0.001, pose_counter, named, errors, k,
+                                  distance_of)] if twist else []
             pose_counter += 1
         if life % 10 == 0 and not (boot_in_init and k == reboot_at):
             uptime_s = int(life * ENCODER_PERIOD_S + (t0_s if boot == 0 else 0.0))
@@ -220,6 +231,26 @@ class _Controller:
             self.powered_up = k
         age_s = (k - self.powered_up) // 100
         return counts, min(15, 1 + age_s) if self.reports_uptime else 0
+
+
+def _integrate(odo: Odometry, speeds: Twist, left: int, right: int) -> None:
+    """One step of the counters, summed into the twist when integrated."""
+    if odo.step_counts(left, right):
+        speeds.sum_step(1)
+
+
+def _twist_line(odo: Odometry, speeds: Twist, t_s: float, counter: int, enc: int,
+                errors: ErrorMask, k: int,
+                distance_of: Callable[[int, int, Odometry], int] | None) -> str:
+    """ODOM_TWIST as the ECU sends it (its speeds over the steps since the last one)."""
+    if speeds.steps:
+        speeds.update(max(speeds.tick_periods, 1))
+    distance_mm = (odo.distance_q40_m * 1000 + (1 << 39)) >> 40
+    if distance_of is not None:
+        distance_mm = distance_of(k, distance_mm, odo)
+    data = fr.pack_odom_twist(counter, enc, speeds.linear_mm_s, speeds.angular_mrad_s,
+                              distance_mm, errors)
+    return _line(t_s, fr.ODOM_TWIST_ID, data)
 
 
 def _pose_lines(

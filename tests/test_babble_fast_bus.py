@@ -12,7 +12,7 @@ periods for what were 17 to 19), refused it as implausible, took the next three 
 among themselves) for a counter restart (COUNTER_RESET), re-primed on them and never integrated
 the distance the dropped frames carried: the pose ended 114 mm from the truth, FAIL. The counts
 are absolute, so the step itself is exact: after frames dropped from the mailbox, the step's
-plausibility bound is STEP_PERIODS_MAX periods (``EncoderInput._bound_periods``).
+plausibility bound is STEP_PERIODS_MAX periods (``EncoderInput.on_frame``).
 """
 
 from __future__ import annotations

@@ -11,12 +11,13 @@ import json
 import math
 import re
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from odocan.host.cli.app import main
-from odocan.host.experiments.keep import corrected_profile, ros2_multipliers
+from odocan.host.experiments.keep import corrected_profile, ros2_multipliers, ros2_yaml
 from odocan.host.experiments.umbmark import Correction
 from odocan.sim import robot
 
@@ -134,3 +135,22 @@ def test_firmware_robot_with_other_encoders_is_refused(
     assert err.startswith("error: --firmware-robot")
     assert "16-bit" in err
     assert len(err.splitlines()) == 1
+
+
+def test_ros2_parameters_of_a_robot_with_unequal_nominal_radii() -> None:
+    """diff_drive_controller has one wheel_radius: for a robot whose nominal radii differ
+    (0.10 / 0.09 m), wheel_radius x each multiplier must give that side's corrected radius (the
+    multipliers against each side's own nominal radius configured the right wheel 10 % too
+    large on a controller set to the left one; found in a user trial)."""
+    nominal = replace(robot.load("pmir"), name="unequal", wheel_radius_left_m=0.10,
+                      wheel_radius_right_m=0.09, wheelbase_m=2.0)
+    kept = corrected_profile(nominal, Correction(0.1005025400, 0.0895477140, 2.0999962290))
+    m = ros2_multipliers(nominal, kept)
+    assert m["wheel_separation"] * m["wheel_separation_multiplier"] == pytest.approx(
+        kept.wheelbase_m, rel=1e-12)
+    assert m["wheel_radius"] * m["left_wheel_radius_multiplier"] == pytest.approx(
+        kept.wheel_radius_left_m, rel=1e-12)
+    assert m["wheel_radius"] * m["right_wheel_radius_multiplier"] == pytest.approx(
+        kept.wheel_radius_right_m, rel=1e-12)
+    lines = ros2_yaml(m).splitlines()
+    assert lines[2:4] == ["    wheel_separation: 2.000000000", "    wheel_radius: 0.095000000"]

@@ -91,6 +91,9 @@ def test_spec_parses_every_key_and_prints_back() -> None:
         ("busoff=-1:2", "T must be a finite number >= 0"),
         ("seed=x", "N is not an integer"),
         ("drop=0.6,dup=0.5", "> 1 (a frame suffers at most one of them)"),
+        (",,,", "an empty item"),
+        ("drop=0.1,", "an empty item"),
+        ("drop=0.1,,seed=2", "an empty item"),
     ],
 )
 def test_spec_refuses_bad_text_with_one_line(text: str, expected: str) -> None:

@@ -295,7 +295,7 @@ def test_fleet_on_two_workers_reports_every_robot(
 
 class _NeverLate:
     """``sim.fleet.run_realtime``'s clock, never late: its two reads of tick k (the delay
-    before the release, the lateness after) both say ``k * TICK_S`` (as bench/fleet_flat.py's),
+    before the release, the lateness after) both say ``k * TICK_S`` (as bench/fleet_flat.py's did),
     so no release is skipped however loaded the machine."""
 
     def __init__(self) -> None:

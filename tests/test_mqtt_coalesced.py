@@ -170,3 +170,76 @@ def test_aiomqtts_own_qos0_publish_still_completes(mosquitto: Mosquitto) -> None
             return quiet_before, link.quiet_writes
 
     assert asyncio.run(scenario()) == (True, False)
+
+
+def _refusing(real: Any) -> Any:
+    """A socket send that refuses two calls of three (EAGAIN), then sends."""
+    calls = [0]
+
+    def send(buf: bytes | bytearray) -> int:
+        calls[0] += 1
+        if calls[0] % 3:
+            raise BlockingIOError
+        return int(real(buf))
+
+    return send
+
+
+def _count_writers(loop: asyncio.AbstractEventLoop, fd: int) -> list[int]:
+    """Each ``add_writer`` for ``fd`` from now on, appended to the list returned."""
+    writers: list[int] = []
+    add_writer = loop.add_writer
+
+    def counted(fileno: Any, callback: Any, *args: Any) -> None:
+        if fileno == fd:
+            writers.append(fileno)
+        add_writer(fileno, callback, *args)
+
+    setattr(loop, "add_writer", counted)  # noqa: B010 (this loop's own attribute)
+    return writers
+
+
+async def _bursts_and_a_qos1(broker: Mosquitto, busy: bool) -> tuple[int, list[int]]:
+    """Three bursts of ten QoS-0 publications, each flushed at once, then one QoS-1 through
+    aiomqtt; the loop writers registered for the link's socket, what the subscriber got."""
+    async with client(broker.url("robot001")) as sub, \
+            _link_client(broker.url("bridge"), "writer-test") as link:
+        await sub.subscribe(TOPIC, qos=1)
+        await asyncio.sleep(0.2)
+        sock = link._client.socket()
+        assert sock is not None
+        writers = _count_writers(asyncio.get_running_loop(), sock.fileno())
+        if busy:
+            link.coalesced.send = _refusing(link.coalesced.send)
+        for burst in range(3):
+            last = None
+            for i in range(10):
+                last = link.publish_now(TOPIC, json.dumps({"i": burst * 10 + i}).encode())
+            link.flush()
+            assert last is not None
+            async with asyncio.timeout(5):
+                await link.written(last)
+        async with asyncio.timeout(5):
+            await link.publish(TOPIC, json.dumps({"i": 30}).encode(), qos=1)
+        got: list[int] = []
+        async with asyncio.timeout(10):
+            async for message in sub.messages:
+                assert isinstance(message.payload, bytes)
+                got.append(json.loads(message.payload)["i"])
+                if len(got) == 31:
+                    break
+        return len(writers), got
+
+
+def test_a_burst_written_at_once_registers_no_loop_writer(
+    mosquitto: Mosquitto,  # noqa: F811
+) -> None:
+    """A telemetry burst flushed at once, and a QoS-1 publication through aiomqtt, are written
+    without the loop's writer (``add_writer``/``remove_writer`` per burst: two ``epoll_ctl``);
+    a socket that is not ready (EAGAIN) still gets one, and every message arrives."""
+    writers, got = asyncio.run(_bursts_and_a_qos1(mosquitto, busy=False))
+    assert got == list(range(31))
+    assert writers == 0  # before: one add_writer per burst and per QoS-1 publication
+    writers, got = asyncio.run(_bursts_and_a_qos1(mosquitto, busy=True))
+    assert got == list(range(31))
+    assert writers > 0  # what the socket did not take waits for the loop's writer

@@ -58,9 +58,12 @@ def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, l
 
 
 def the_error(lines: list[str]) -> str:
-    errors = [line for line in lines if line.startswith("error:")]
-    assert len(errors) == 1, lines
-    return errors[0]
+    """The one line a refusal prints: beside warnings about the command line, nothing else (no
+    banner naming a broker never reached)."""
+    said = [line for line in lines if not line.startswith("warning:")]
+    assert len(said) == 1, lines
+    assert said[0].startswith("error:"), lines
+    return said[0]
 
 
 @pytest.mark.parametrize("command", COMMANDS)

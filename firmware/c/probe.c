@@ -71,6 +71,20 @@ static uint64_t arg_u64(void)
     return tok == NULL ? 0u : (uint64_t)strtoull(tok, NULL, 10);
 }
 
+/* The six robot parameters in struct robot_params order, from the rest of the line. */
+static struct robot_params read_params(void)
+{
+    struct robot_params p;
+    p.counts_per_rev = (uint32_t)arg_u64();
+    p.wheel_radius_left_nm = (uint32_t)arg_u64();
+    p.wheel_radius_right_nm = (uint32_t)arg_u64();
+    p.wheelbase_nm = (uint32_t)arg_u64();
+    p.counter_bits = (uint32_t)arg_u64();
+    p.integrator = (uint32_t)arg_u64();
+    p.max_wheel_speed_mm_s = (uint32_t)arg_u64();
+    return p;
+}
+
 /* Hex bytes into out; returns the count, or -1 for "-" (no frame) or a missing argument. */
 static long arg_bytes(uint8_t *out)
 {
@@ -221,14 +235,7 @@ int main(void)
             uint32_t v = (uint32_t)arg_u64();
             printf("%" PRId32 "\n", wrap_signed(v, (unsigned)arg_u64()));
         } else if (strcmp(cmd, "config") == 0) {
-            struct robot_params p;
-            p.counts_per_rev = (uint32_t)arg_u64();
-            p.wheel_radius_left_nm = (uint32_t)arg_u64();
-            p.wheel_radius_right_nm = (uint32_t)arg_u64();
-            p.wheelbase_nm = (uint32_t)arg_u64();
-            p.counter_bits = (uint32_t)arg_u64();
-            p.integrator = (uint32_t)arg_u64();
-            p.max_wheel_speed_mm_s = (uint32_t)arg_u64();
+            struct robot_params p = read_params();
             enum config_reason reason = validate(&p);
             if (reason != CONFIG_OK) {
                 printf("%d\n", (int)reason);
@@ -241,14 +248,7 @@ int main(void)
                    k.bam64_per_count_right, errors);
         } else if (strcmp(cmd, "config_speed") == 0) {
             uint32_t speed_mm_s = (uint32_t)arg_u64();
-            struct robot_params p;
-            p.counts_per_rev = (uint32_t)arg_u64();
-            p.wheel_radius_left_nm = (uint32_t)arg_u64();
-            p.wheel_radius_right_nm = (uint32_t)arg_u64();
-            p.wheelbase_nm = (uint32_t)arg_u64();
-            p.counter_bits = (uint32_t)arg_u64();
-            p.integrator = (uint32_t)arg_u64();
-            p.max_wheel_speed_mm_s = (uint32_t)arg_u64();
+            struct robot_params p = read_params();
             printf("%d\n", (int)validate_at_speed(&p, speed_mm_s));
         } else if (strcmp(cmd, "crc") == 0) {
             long n = arg_bytes(bytes);

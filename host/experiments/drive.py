@@ -187,7 +187,8 @@ class NavSession(Closing):
         for goal_id, point in enumerate(path, start=1):
             self._goal(goal_id, point)
         if not self._finished and not self.rig.run_until(self._take_marks, timeout_s):
-            raise ExperimentError(f"path of {len(path)} goals not reached within {timeout_s:g} s")
+            raise ExperimentError(f"path of {len(path)} goals not reached within {timeout_s:g} s"
+                                  f"{self._where_stuck()}")
         self.rig.run(SETTLE_S)
         onboard = self.heard.latest_pose()
         if onboard is None:
@@ -195,6 +196,22 @@ class NavSession(Closing):
         return DriveResult(
             tuple(self.marks), self.rig.vehicle.truth(), onboard, self._encoder_counts()
         )
+
+    def _where_stuck(self) -> str:
+        """Where a path that timed out stands, from the last NAV_STATUS and pose heard: the
+        goal and its state, the distance and heading error left, the on-board pose."""
+        status = self.heard.decoded("NAV_STATUS")
+        if not status:
+            return " (no NAV_STATUS heard from the firmware)"
+        last = status[-1]
+        text = (f": goal {last['GOAL_ID']} of {self._last_goal} still {last['STATE']}, "
+                f"{float(last['DISTANCE']) * 1e3:.1f} mm and "
+                f"{float(last['HEADING_ERROR']) * 1e3:.1f} mrad from it by the firmware's own "
+                "odometry")
+        pose = self.heard.latest_pose()
+        if pose is not None:
+            text += f" (on-board pose x {pose.x_m:.4f} m, y {pose.y_m:.4f} m)"
+        return text
 
     def _goal(self, goal_id: int, point: Waypoint) -> None:
         """Goal ``goal_id`` (the first replaces the path, the others are appended), ACKed."""

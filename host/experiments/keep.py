@@ -5,8 +5,12 @@ to the whole nanometre the firmware is configured with (what ``calibrate`` sent 
 file written by ``sim.robot.to_toml`` and read back by ``--robot PATH`` configures the very same
 firmware. ``ros2_multipliers`` says the same in ROS 2 ``diff_drive_controller`` terms: its
 ``wheel_separation_multiplier``, ``left_wheel_radius_multiplier`` and
-``right_wheel_radius_multiplier`` scale the nominal ``wheel_separation`` / ``wheel_radius``
-parameters, so each is corrected / nominal.
+``right_wheel_radius_multiplier`` scale its ``wheel_separation`` / ``wheel_radius``
+parameters, so each is corrected / nominal. The controller has ONE ``wheel_radius`` for both
+wheels: the multipliers are given against the mean of the nominal radii, and the YAML carries
+that ``wheel_radius`` and the nominal ``wheel_separation`` they refer to (a robot with unequal
+nominal radii is then configured right; with equal ones the multipliers are corrected / nominal
+per side, as before).
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.robot import NM_PER_M, RobotProfile, to_toml
 
 ROS2_KEYS = (
+    "wheel_separation",
+    "wheel_radius",
     "wheel_separation_multiplier",
     "left_wheel_radius_multiplier",
     "right_wheel_radius_multiplier",
@@ -43,13 +49,16 @@ def corrected_profile(nominal: RobotProfile, corrected: Correction) -> RobotProf
 
 
 def ros2_multipliers(nominal: RobotProfile, corrected: RobotProfile) -> dict[str, float]:
-    """diff_drive_controller's multipliers (dimensionless): corrected / nominal."""
+    """diff_drive_controller's parameters: the nominal ``wheel_separation`` and the one
+    ``wheel_radius`` (the mean of the nominal radii), in metres, and the multipliers
+    (dimensionless) that scale them to the corrected geometry."""
+    radius_m = (nominal.wheel_radius_left_m + nominal.wheel_radius_right_m) / 2
     return {
+        "wheel_separation": nominal.wheelbase_m,
+        "wheel_radius": radius_m,
         "wheel_separation_multiplier": corrected.wheelbase_m / nominal.wheelbase_m,
-        "left_wheel_radius_multiplier": corrected.wheel_radius_left_m
-        / nominal.wheel_radius_left_m,
-        "right_wheel_radius_multiplier": corrected.wheel_radius_right_m
-        / nominal.wheel_radius_right_m,
+        "left_wheel_radius_multiplier": corrected.wheel_radius_left_m / radius_m,
+        "right_wheel_radius_multiplier": corrected.wheel_radius_right_m / radius_m,
     }
 
 

@@ -267,6 +267,7 @@ def _python_can_parts(
 
     collector = FrameCollector()
     count = 0
+    short: list[int] = []  # frames with fewer data bytes than their DLC (a line cut mid-frame)
     lines = None
     try:
         reader, lines = _reader(path)
@@ -277,6 +278,9 @@ def _python_can_parts(
                     f"{path}: frame {count}: {len(msg.data)} data bytes (more than 8: CAN FD "
                     "frames of more than 8 bytes are not supported)"
                 )
+            if len(msg.data) < msg.dlc and not (msg.is_remote_frame or msg.is_error_frame):
+                short.append(count)
+                continue
             collector.on_message_received(msg)
             if len(collector) >= chunk_frames:
                 yield collector.arrays()
@@ -291,6 +295,10 @@ def _python_can_parts(
         ) from None
     if len(collector):
         yield collector.arrays()
+    if short:
+        warn(f"{path}: skipped {len(short)} frame{'s' if len(short) > 1 else ''} with fewer data "
+             f"bytes than {'their' if len(short) > 1 else 'its'} DLC (first: frame {short[0]} of "
+             f"{count}; a line cut mid-frame: a recorder killed while writing?)")
     _format_warnings(path, lines, count, warn)
 
 

@@ -115,16 +115,24 @@ from odocan.host.judge.compare import (
     rebased_at_start,
     versus_truth,
 )
+from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
 from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import Life, merge, split_lives
-from odocan.host.judge.reference import PROFILE_SPEED, SpeedBound
-from odocan.host.judge.reference_path import build_reference, restart_detail, wrap_pi
+from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
+from odocan.host.judge.reference_path import (
+    build_reference,
+    firmware_steps,
+    restart_detail,
+    wrap_pi,
+)
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
     REQUIRED,
+    WIRE_COUNTER_BITS,
     AnalysisError,
+    Encoders,
     accepted_rows,
     encoder_frames,
     onboard_samples,
@@ -243,6 +251,7 @@ def analyze(
         and all(d[1].passed for d in done)  # each life within its tolerance and allowance
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
         and report["onboard_twist_vs_reference"]["passed"]
+        and report["onboard_distance_vs_reference"]["passed"]
     )
     return Analysis(report=report, series=series, passed=report["passed"])
 
@@ -310,12 +319,18 @@ def _analyze_life(
                                 np.array([last + 1 for _, last, _ in losses], dtype=np.int64),
                                 onboard.enc)
     twin_allowed = twin_allowance_of(enc, robot, integrator, ref_all, onboard.enc)
+    distance = _distance(frames, accepted, decoder, enc, robot, ref_all.start,
+                         DistanceJudge(robot, max_wheel_speed_mm_s, power_up and not start_pose,
+                                       [b for b in stalls.tolist() if b > ref_all.start],
+                                       [(a, z) for a, z, _ in losses],
+                                       twin_paths(enc, robot, ref_all.start)))
     vs_ref["max_position_error_beyond_allowance_m"] = float(
         np.max(pos_err - allowance - twin_allowed))
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
         and twist["passed"]
+        and distance["passed"]
     )
     report = {
         "robot": _robot_dict(robot),
@@ -363,6 +378,7 @@ def _analyze_life(
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,
         "onboard_twist_vs_reference": twist,
+        "onboard_distance_vs_reference": distance,
         "final_onboard_pose": {  # heading_rad in (-pi, pi], heading_unwrapped_rad cumulative
             "x_m": float(onboard.x_m[-1]),
             "y_m": float(onboard.y_m[-1]),
@@ -394,6 +410,15 @@ def _analyze_life(
     }
     series.update(plot_series(frames, enc, onboard, truth, ref_all))
     return Analysis(report=report, series=series, passed=passed)
+
+
+def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, enc: Encoders,
+              robot: RobotProfile, e0: int, judge: DistanceJudge) -> dict[str, Any]:
+    """``distance.check_distance`` over the firmware's steps from ``e0``."""
+    steps = firmware_steps(enc, e0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
+                           judge.max_wheel_speed_mm_s)
+    return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right), e0,
+                          judge)
 
 
 # --- the report's facts ------------------------------------------------------------------

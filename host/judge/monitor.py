@@ -57,27 +57,19 @@ from cantools.database.can import Database, Message
 
 from odocan.firmware.errors import ErrorFlag
 from odocan.host.jsonutil import finite
+from odocan.host.judge import sources as src  # boot_summary, start_new_life
 from odocan.host.judge.busstats import LoadWindow
+from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
-from odocan.host.judge.sources import (
-    CONFLICT_HOLD_S,
-    FIRMWARE_NODE,
-    SourceWatch,
-    boot_summary,
-    start_new_life,
-)
+from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatch
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.decode import frame_key
-from odocan.host.protocol.e2e import (
-    UNKNOWN,
-    E2EMonitor,
-    e2e_messages,
-)
+from odocan.host.protocol.e2e import UNKNOWN, E2EMonitor, e2e_messages
 from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile
 
@@ -133,13 +125,8 @@ class MessageStats:
 
 # SecOC counts shown by the monitor: ODOM_ACK NACK reasons AUTH_*, and ODOM_AUTH frames that
 # follow no secured command frame.
-AUTH_COUNTS = (
-    "auth_failed",
-    "auth_freshness",
-    "auth_missing",
-    "auth_unavailable",
-    "auth_without_command",
-)
+AUTH_COUNTS = ("auth_failed", "auth_freshness", "auth_missing", "auth_unavailable",
+               "auth_without_command")
 
 
 class BusMonitor:
@@ -159,6 +146,7 @@ class BusMonitor:
         self.e2e = E2EMonitor(self.db)
         self._e2e_configs = e2e_messages(self.db)
         self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
+        self.distance = LiveDistance(robot)  # ODOM_TWIST DISTANCE (host.judge.livedistance)
         self.messages: dict[str, MessageStats] = {}
         self.unknown_ids: Counter[str] = Counter()
         self.status: dict[str, Any] = {}
@@ -246,6 +234,7 @@ class BusMonitor:
         if shown.get("PARAM") != "APPLY":
             return
         self.tracker.restart_reference()
+        self.distance.suspend()  # its new parameters are not known here: DISTANCE not judged
         self.events.append({"t_s": self._bus_time_s, "kind": "config",
                             "detail": "config applied: reference restarted"})
 
@@ -286,8 +275,14 @@ class BusMonitor:
                             "detail": f"{request} refused: {reason}"})
 
     def _on_encoders(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]),
-                                 self._bus_time_s, int(s.get("CTRL_UPTIME", 0)))
+        frame = (int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]), self._bus_time_s,
+                 int(s.get("CTRL_UPTIME", 0)))
+        self.tracker.on_encoders(*frame)
+        self.distance.on_encoders(self.tracker, *frame)
+
+    def _on_twist(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        self.distance.on_twist(self.tracker, int(s["ENC_COUNTER"]), round(s["DISTANCE"] * 1000),
+                               self._bus_time_s)
 
     def _on_pose_x(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]),
@@ -319,8 +314,9 @@ class BusMonitor:
             if integrator in ("euler", "rk2", "exact"):
                 self.tracker.on_integrator(integrator)
         elif page == "E2E_WHEEL_ENCODERS":
-            self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]),
-                                       self.sources.first_life_page())
+            counts = (int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]), self.sources.first_life_page())
+            self.distance.on_counts(self.tracker, *counts)  # before the tracker moves on
+            self.tracker.on_enc_counts(*counts)
         elif page == "FRAME_TOTALS":
             self.status.update({k.lower(): int(v) for k, v in s.items() if k.endswith("_FRAMES")})
 
@@ -332,7 +328,8 @@ class BusMonitor:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
-            detail += ": " + start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
+            detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
+            self.distance.new_life()
         elif kind == "two sources":
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
             last = self.events[-1] if self.events else None
@@ -344,7 +341,7 @@ class BusMonitor:
     def _summary(self, message: Message, data: bytes) -> tuple[int, str] | None:
         """(UPTIME, STATE) of an ODOM_STATUS summary whose CRC holds, whatever its sequence."""
         config = self._e2e_configs.get(frame_key(message.frame_id, message.is_extended_frame))
-        return boot_summary(message, data, config.data_ids if config is not None else None)
+        return src.boot_summary(message, data, config.data_ids if config is not None else None)
 
     def node_ages(self, now_s: float) -> dict[str, dict[str, Any]]:
         """Per sending node heard: ``age_s`` since its last cyclic message, ``timeout_s``
@@ -397,7 +394,8 @@ class BusMonitor:
                 f"{error['dheading_rad'] * 1e3:.4f} mrad (limit one LSB: "
                 f"{POSITION_LSB_M * 1e3:.1f} mm, {HEADING_LSB_RAD * 1e3:.4f} mrad)"
             ]
-        return "OK", []
+        why = self.distance.verdict()  # latched: a wrong DISTANCE once is wrong
+        return ("DISTANCE WRONG", why) if why else ("OK", [])
 
     def snapshot(self, now_s: float | None = None) -> dict[str, Any]:
         """The whole model as JSON-ready data (``odocan monitor --json``); ``now_s``: local
@@ -430,6 +428,7 @@ class BusMonitor:
             "status": dict(self.status) or None,
             "health": self.health(now_s),
             **self.tracker.snapshot(),
+            "distance": self.distance.as_dict(),
             "unknown": {**e2e[UNKNOWN], "ids": dict(self.unknown_ids),
                         "undecodable": self.undecodable},
             "auth": dict(self.auth),
@@ -445,6 +444,7 @@ _HANDLERS = {
     "WHEEL_ENCODERS": BusMonitor._on_encoders,
     "ODOM_POSE_X": BusMonitor._on_pose_x,
     "ODOM_POSE_Y": BusMonitor._on_pose_y,
+    "ODOM_TWIST": BusMonitor._on_twist,
     "SIM_TRUTH": BusMonitor._on_truth,
     "ODOM_STATUS": BusMonitor._on_status,
 }

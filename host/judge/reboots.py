@@ -222,6 +222,8 @@ def merge(
         sum(t["distance_travelled_m"] for t in truths))
     report["onboard_twist_vs_reference"] = _twist(
         [r["onboard_twist_vs_reference"] for r in reports])
+    report["onboard_distance_vs_reference"] = _distance(
+        [r["onboard_distance_vs_reference"] for r in reports])
     report["final_onboard_pose"] = last["final_onboard_pose"]
     report["e2e"] = _summed_counts([r["e2e"] for r in reports])
     report["unknown_frames"] = _summed_counts([{"u": r["unknown_frames"]} for r in reports])["u"]
@@ -275,6 +277,16 @@ def _twist(parts: list[dict[str, Any]]) -> dict[str, Any]:
         "samples": sum(p["samples"] for p in parts),
         "max_linear_excess_mps": max(p["max_linear_excess_mps"] for p in parts),
         "max_angular_excess_rad_s": max(p["max_angular_excess_rad_s"] for p in parts),
+        "passed": all(p["passed"] for p in parts),
+    }
+
+
+def _distance(parts: list[dict[str, Any]]) -> dict[str, Any]:
+    """Each life judged from its own start (a reboot restarts the firmware's DISTANCE)."""
+    return {
+        "samples": sum(p["samples"] for p in parts),
+        "start": parts[0]["start"] if parts else "fitted",
+        "max_excess_m": max((p["max_excess_m"] for p in parts), default=0.0),
         "passed": all(p["passed"] for p in parts),
     }
 

@@ -326,8 +326,12 @@ def diagnose(
     fits = fitting_profiles(log, profile, logged or integrator, tolerance)
     if profile.name in fits:
         if logged is None or logged == integrator:
+            lived = unreplayable(analyze(log, profile, integrator, tolerance=tolerance).report)
             reasons.append(f"the log fits robot {profile.name!r} with the {integrator} "
-                           "integrator: the firmware build differs from the one that recorded it")
+                           + ("integrator, but its firmware lived what a lockstep replay does "
+                              f"not reproduce: {'; '.join(lived)}" if lived else
+                              "integrator: the firmware build differs from the one that "
+                              "recorded it"))
     elif fits:
         reasons.append(f"robot mismatch: the log's poses fit robot {', '.join(map(repr, fits))}, "
                        f"not {profile.name!r} (--robot)")
@@ -335,6 +339,36 @@ def diagnose(
         reasons.append(f"the log's poses fit no known robot profile ({profile.name!r} given, "
                        f"{', '.join(list_profiles())} shipped): give its profile with --robot")
     return reasons
+
+
+# ERROR_MASK bits that say the recording firmware's timing was not one frame per tick
+_TIMING_BITS = ("TIME_LOST", "MAILBOX_OVERFLOW")
+
+
+def unreplayable(report: dict[str, Any]) -> list[str]:
+    """What the firmware that recorded a log lived and a lockstep replay does not reproduce,
+    from ``analyze``'s report of the log: reboots (the replay runs one life), lost time or
+    dropped frames (the replay feeds every frame on its tick), encoder frames out of sequence
+    (late or repeated: the replay feeds only those the host's E2E check accepts, in order, and
+    the recording firmware may have taken a late one). Empty: nothing of the kind, so a
+    departure points at the build."""
+    causes = []
+    reboots = report.get("reboots") or []
+    if reboots:
+        causes.append(f"{len(reboots)} firmware reboot{'s' if len(reboots) > 1 else ''} (first "
+                      f"at {float(reboots[0]['t_s']):.2f} s; a replay runs one firmware life)")
+    bits = sorted({str(e.get("bit")) for e in report.get("firmware_events", [])
+                   if e.get("kind") == "error_bit" and e.get("bit") in _TIMING_BITS})
+    if bits:
+        causes.append(f"its ERROR_MASK reports {', '.join(bits)} (a replay runs every tick on "
+                      "time)")
+    e2e = (report.get("e2e") or {}).get("WHEEL_ENCODERS") or {}
+    out_of_sequence = int(e2e.get("wrong_sequence", 0)) + int(e2e.get("repeated", 0))
+    if out_of_sequence:
+        causes.append(f"{out_of_sequence} WHEEL_ENCODERS frames out of sequence (late or "
+                      "repeated: the replay feeds the accepted ones in order, the recording "
+                      "firmware may have taken a late one)")
+    return causes
 
 
 def replay_and_analyze(

@@ -424,6 +424,8 @@ class StreamReference:
     _window: dict[str, np.ndarray] = field(default_factory=dict)  # left, right, seq, g, t, uptime
     _sums: tuple[int, int, float, float, float, float] = (0, 0, 0.0, 0.0, 0.0, 0.0)
     _count: int = 0  # encoder frames fed
+    last_steps: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None  # the
+    # firmware's step into each frame of the last chunk fed (d_left, d_right; host.judge.distance)
 
     def feed(self, enc: Encoders) -> dict[str, np.ndarray]:
         """The increments at this chunk's encoder frames: x_m, y_m, heading_rad, distance_m."""
@@ -449,6 +451,9 @@ class StreamReference:
         out = self._integrate(steps.d_left[skip:], steps.d_right[skip:])
         last = steps.open_from if steps.open_from is not None else len(win["g"]) - 1
         self._window = {k: v[last:] for k, v in win.items()}
+        first = np.zeros(1 if first_chunk else 0, dtype=np.int64)  # no step into frame 0
+        self.last_steps = (np.concatenate((first, steps.d_left[skip:])),
+                           np.concatenate((first, steps.d_right[skip:])))
         if first_chunk:  # the very first frame: pose 0 before any step
             out = {k: np.concatenate(([0.0], v)) for k, v in out.items()}
         return out

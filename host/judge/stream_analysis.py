@@ -30,6 +30,7 @@ import numpy as np
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance, _realtime, _robot_dict
 from odocan.host.judge.breaks import placed_offsets
+from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
@@ -52,6 +53,7 @@ from odocan.host.judge.stream_choice import WHOLE_RSS_MB as WHOLE_RSS_MB
 from odocan.host.judge.stream_choice import stream_above_bytes as stream_above_bytes
 from odocan.host.judge.stream_choice import streams as streams
 from odocan.host.judge.stream_compare import TruthCompare
+from odocan.host.judge.stream_distance import stream_distance
 from odocan.host.judge.stream_facts import StreamFacts
 from odocan.host.judge.stream_life import LifeInfo, life_chunks
 from odocan.host.judge.stream_lives import LifeSpan, StreamLives
@@ -178,6 +180,7 @@ def _analyze_lives(
         and all(d[1]["passed"] for d in done)  # each life within its tolerance and allowance
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
         and report["onboard_twist_vs_reference"]["passed"]
+        and report["onboard_distance_vs_reference"]["passed"]
     )
     return report
 
@@ -285,11 +288,14 @@ def _life(
     vs_truth = truth.summary()
     vs_truth["distance_travelled_m"] = float(last[0].rel_distance_m[-1])
     twist = first.twist.finish()
+    distance = stream_distance(frames, db, robot, integrator, e0, DistanceJudge(
+        robot, max_wheel_speed_mm_s, power_up, [b for b in breaks.tolist() if b > e0],
+        [(a, z) for a, z, _ in spans]))
     after_span = drops.allowance(np.array([last + 1 for _, last, _ in spans], dtype=np.int64))
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
-        and twist["passed"]
+        and twist["passed"] and distance["passed"]
     )
     covered_s = facts.covered_s()
     counts = first.e2e.counts
@@ -336,6 +342,7 @@ def _life(
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,
         "onboard_twist_vs_reference": twist,
+        "onboard_distance_vs_reference": distance,
         "final_onboard_pose": {
             "x_m": float(first.tail.x_m[-1]),
             "y_m": float(first.tail.y_m[-1]),

@@ -17,6 +17,7 @@ against the band of the per-step speeds over the two segments (E[k-2], E[k-1]] a
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,7 +26,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.compare import TWIST_LSB, TWIST_RANGE, TWIST_RELATIVE, _step_speeds
-from odocan.host.judge.samples import Encoders, _held, contract_cycle_s, match_encoder
+from odocan.host.judge.samples import Encoders, IntArray, _held, contract_cycle_s, match_encoder
 from odocan.host.judge.stream import known_encoders
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
@@ -98,6 +99,8 @@ class StreamTwist:
     _prev_band: tuple[Band, Band] = (EMPTY, EMPTY)  # segment (E[k-2], E[k-1]]: linear, angular
     _folded: tuple[Band, Band] = (EMPTY, EMPTY)  # steps after the last E no longer kept
     samples: int = 0
+    # told every twist frame in bus order: E (-1: none), DISTANCE raw, bus time (s)
+    on_distance: Callable[[IntArray, IntArray, FloatArray], None] | None = None
     max_linear_excess_mps: float = 0.0
     max_angular_excess_rad_s: float = 0.0
 
@@ -116,7 +119,9 @@ class StreamTwist:
                    "counter": rows["COUNTER"][keep].astype(np.int64),
                    "t": chunk.timestamp_s[rows["index"][keep]],
                    "linear": rows["LINEAR_VEL"][keep] * TWIST_LSB,
-                   "angular": rows["ANGULAR_VEL"][keep] * TWIST_LSB}
+                   "angular": rows["ANGULAR_VEL"][keep] * TWIST_LSB,
+                   "distance": rows.get("DISTANCE", np.full(len(keep), -1))[keep].astype(
+                       np.int64)}
             self._pending = ({k: np.concatenate((self._pending[k], v)) for k, v in new.items()}
                              if self._pending else new)
         self._resolve(known)
@@ -195,6 +200,8 @@ class StreamTwist:
             e = np.where(at >= 0, known["g"][np.maximum(at, 0)], -1).astype(np.int64)
         if cycle_s is not None:
             e = self._held(e, cycle_s)
+        if self.on_distance is not None:
+            self.on_distance(e, p["distance"], p["t"])
         self._take_all(e, p["linear"], p["angular"])
         self._pending = {}
 

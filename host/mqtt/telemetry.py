@@ -30,7 +30,8 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
   ``latched_errors`` (every bit seen set), retained, so a short DEGRADED is never lost (not a
   QoS-1 publication each: a babbling bus would fill the bridge's reliable queue); likewise
   ``pose_wrongs``, the judge's own POSE WRONG episodes latched (``host.judge.posewrongs``: the
-  count, the worst and the latest), so an ``error`` with ``pose_wrong`` missed is never lost.
+  count, the worst and the latest), so an ``error`` with ``pose_wrong`` missed is never lost;
+  and ``distance``, ODOM_TWIST DISTANCE judged (``host.judge.livedistance``, latched).
 
 Headings: ``heading_rad`` wrapped to (-pi, pi] and ``heading_unwrapped_rad`` cumulative, on
 ``pose``, ``reference`` and ``truth`` (SIM_TRUTH's [0, 2 pi) made cumulative at the reference's
@@ -52,6 +53,7 @@ import can
 from cantools.database.can import Database, Message
 from cantools.database.errors import DecodeError
 
+from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
@@ -65,6 +67,7 @@ from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor, e2e_messages
 from odocan.sim.contract import database
 from odocan.sim.framebatch import Received
+from odocan.sim.robot import RobotProfile
 
 Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
@@ -160,6 +163,10 @@ class RobotTelemetry:
         self._routes = _routes(self.db)
         self.e2e = E2EMonitor(self.db)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
+        self.distance = LiveDistance(RobotProfile(  # ODOM_TWIST DISTANCE judged
+            name, geometry.counts_per_rev, geometry.wheel_radius_left_m,
+            geometry.wheel_radius_right_m, geometry.wheelbase_m, counter_bits,
+            geometry.max_wheel_speed_mm_s / 1000))
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
         self._publish_phase_s = publish_phase_s  # the first pose waits this long (bus time)
         self.frames: dict[str, int] = {}  # accepted frames by message name
@@ -256,6 +263,7 @@ class RobotTelemetry:
             return
         self.reboots += 1
         start_new_life(self.tracker, self.e2e, self.db, *summary)
+        self.distance.new_life()
 
     def _unknown_key(self, can_id: int) -> str:
         """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
@@ -267,8 +275,10 @@ class RobotTelemetry:
         return "other"
 
     def _on_encoders(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        self.tracker.on_encoders(int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]),
-                                 t_s, int(s.get("CTRL_UPTIME", 0)))
+        frame = (int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]), t_s,
+                 int(s.get("CTRL_UPTIME", 0)))
+        self.tracker.on_encoders(*frame)
+        self.distance.on_encoders(self.tracker, *frame)
         return []
 
     def _on_pose_x(self, s: dict[str, Any], t_s: float) -> list[Publication]:
@@ -282,6 +292,8 @@ class RobotTelemetry:
             "angular_vel_rad_s": s["ANGULAR_VEL"],
             "distance_m": s["DISTANCE"],
         }
+        self.distance.on_twist(self.tracker, int(s["ENC_COUNTER"]), round(s["DISTANCE"] * 1e3),
+                               t_s)
         return []
 
     def _on_pose_y(self, s: dict[str, Any], t_s: float) -> list[Publication]:
@@ -359,8 +371,9 @@ class RobotTelemetry:
         name = self._page_names.get(page) or _page_name(self.db, page)
         self.firmware[name] = fields
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
-            self.tracker.on_enc_counts(int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]),
-                                       self.sources.first_life_page())
+            counts = (int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]), self.sources.first_life_page())
+            self.distance.on_counts(self.tracker, *counts)
+            self.tracker.on_enc_counts(*counts)
         elif name == "summary":  # a short DEGRADED or a new ERROR_MASK bit: never lost
             self.events += self.latch.observe(t_s, int(s["STATE"]), int(s["REASON"]),
                                               int(s["ERROR_MASK"]))
@@ -424,6 +437,7 @@ class RobotTelemetry:
         """New robot parameters (a config command): the reference restarts at the next pose."""
         self.tracker.integrator = integrator
         self.tracker.set_geometry(geometry, counter_bits)
+        self.distance.reconfigure(geometry, counter_bits)
 
     _handlers: ClassVar[dict[str, Any]] = {
         "WHEEL_ENCODERS": _on_encoders,
@@ -459,6 +473,7 @@ class RobotTelemetry:
             self.name, state, seq=self.status_seq, firmware=self.firmware,
             latched_errors=self.latch.latched_names(), events=list(self.events),
             pose_wrongs=self.tracker.wrongs.as_dict(), frames_total=sum(self.frames.values()),
+            distance=self.distance.as_dict(),
         ))
 
 

@@ -55,6 +55,11 @@ def analysis_checks(report: dict[str, Any]) -> list[Check]:
         _within("onboard_vs_reference_heading", ref.get("max_heading_error_rad"),
                 tol["heading_rad"], "rad"),
     ]
+    distance = report.get("onboard_distance_vs_reference")
+    if isinstance(distance, dict) and "passed" in distance:  # ODOM_TWIST DISTANCE
+        checks.append(Check("onboard_distance_vs_reference", bool(distance["passed"]),
+                            f"DISTANCE beyond the reference's path length by "
+                            f"{distance['max_excess_m']} m", dict(distance)))
     # on-board vs truth has no limit (the robot's own errors are not the firmware's fault): it
     # is no testcase, so a green CI page never stands for a pose far from the truth
     replay = report.get("replay")

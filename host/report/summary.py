@@ -143,6 +143,7 @@ def print_summary(
         verdict = f"{stopped_text(report['stopped'])}: partial drive {verdict}"
         style = "bold yellow" if report["passed"] else style
     twist = report.get("onboard_twist_vs_reference") or {"passed": True}
+    distance = report.get("onboard_distance_vs_reference") or {"passed": True}
     pose_met = _pose_within(report, tolerance)
     console.print(
         f"[{style}]{verdict}[/{style}]: on-board vs reference within "
@@ -158,6 +159,12 @@ def print_summary(
             else "; ODOM_TWIST outside the reference's speeds by up to "
             f"{twist['max_linear_excess_mps']:.3f} m/s, "
             f"{twist['max_angular_excess_rad_s']:.3f} rad/s"
+        )
+        + (
+            ""
+            if distance["passed"]
+            else "; ODOM_TWIST DISTANCE off the reference's path length by "
+            f"{distance['max_excess_m'] * 1e3:.3f} mm beyond its tolerance"
         ),
         soft_wrap=True,
     )

@@ -115,7 +115,6 @@ async def _bridge(
         stop.set()
 
     async with broker_for(url) as (broker, embedded):
-        print(f"bridge {name}: {broker}{' (embedded)' if embedded else ''}", file=sys.stderr)
         config = BridgeConfig(broker=broker, **bridge_options(args))
         endpoint = RobotEndpoint(name, bus, geometry, args.integrator, counter_bits, signer)
         bridge = Bridge([endpoint], config=config)
@@ -127,9 +126,19 @@ async def _bridge(
         reader.start()
         if args.duration is not None:
             loop.call_later(args.duration, stop.set)
+        banner = f"bridge {name}: {broker}{' (embedded)' if embedded else ''}"
+        announced = asyncio.create_task(_announce_when_connected(bridge, banner))
         try:
             await bridge.run(stop=stop)
         finally:
+            announced.cancel()
             reader.stop()
         print(f"bridge {name}: {bridge.summary()}", file=sys.stderr)
     return signals[0] if signals else None
+
+
+async def _announce_when_connected(bridge: Bridge, banner: str) -> None:
+    """Print the banner once the broker took the connection (an unreachable broker gets only
+    its ``error:`` line)."""
+    await bridge.links[0].connected.wait()
+    print(banner, file=sys.stderr)

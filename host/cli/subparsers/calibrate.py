@@ -114,7 +114,7 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     report["inputs"] = experiment_inputs(profile, args)
     reasons = umbmark.calibration_faults(cal, profile, args.min_improvement)
     report.update(passed=not reasons, faults=reasons)
-    print(f"\nROS 2 diff_drive_controller multipliers (corrected / nominal):\n"
+    print(f"\nROS 2 diff_drive_controller parameters (multipliers: corrected / these):\n"
           f"{ros2_yaml(multipliers)}", end="")
     if args.write_robot is not None and not reasons:
         write_robot(args.write_robot, kept)

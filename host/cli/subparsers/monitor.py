@@ -159,8 +159,30 @@ def _do_monitor(args: argparse.Namespace) -> int:
     if failure is not None:
         raise failure
     if wrongs.count:  # the pose was wrong at some time, even if right again since: FAIL
-        print(f"monitor: FAIL: {wrongs.summary()}", file=sys.stderr)
-    return 1 if wrongs.count and code == 0 else code
+        print(f"monitor: FAIL: {wrongs.summary()}; judged as robot {profile.name!r} (--robot)"
+              f"{_robot_hint(args, profile)}", file=sys.stderr)
+    distance = model.distance.verdict()  # ODOM_TWIST DISTANCE wrong in some life: FAIL
+    if distance:
+        print(f"monitor: FAIL: {distance[0]}", file=sys.stderr)
+    return 1 if (wrongs.count or distance) and code == 0 else code
+
+
+def _robot_hint(args: argparse.Namespace, profile: robot.RobotProfile) -> str:
+    """With ``--log``: ``; robot mismatch: ...`` when the heard poses fit another shipped
+    profile and not ``profile`` (a firmware set up for another robot reads as wrong)."""
+    if args.log is None:
+        return ""
+    from odocan.host.io.logs import read_log
+    from odocan.host.judge.analysis import Tolerance
+    from odocan.host.judge.diagnosis import logged_integrator, robot_mismatch
+
+    try:
+        heard = read_log(args.log, warn=lambda _text: None)
+    except OdocanError:
+        return ""
+    integrator = args.integrator or logged_integrator(heard) or "exact"
+    hint = robot_mismatch(heard, profile, integrator, Tolerance())
+    return "" if hint is None else "; " + hint.replace("the log's poses", "the heard poses")
 
 
 def _end(args: argparse.Namespace, snapshot: Callable[[], dict[str, Any]],

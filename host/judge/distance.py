@@ -1,0 +1,370 @@
+"""ODOM_TWIST DISTANCE against the reference's path length (issue #11, rule 5), one judge for the
+whole-log and the streamed analyze (``DistanceJudge``: fed encoder frames and samples in order,
+in one call or chunk by chunk, with the same result bit for bit).
+
+The signal: u16, 1 mm per LSB, the low 16 bits of the firmware's path length of the wheel-axis
+midpoint (sum of |dS| over its steps). The firmware (firmware/odometry.py, firmware/reports.py):
+
+* per integrated step, ``distance_q40_m += (|dS_q49| + 2^8) >> 9``: |dS| rounded half up to Q40,
+  an error e_i with |e_i| <= 2^-41 m; no step for a refused frame, none into a frame it re-primed
+  on (a counter restart), 0 at power-up (a reboot restarts it); a set-pose keeps it;
+* dS_q49 = dL k_L + dR k_R exactly, k = round(round(2 pi R_nm 2^48 / 10^9) / PPV) (config.py,
+  R in whole nm as ODOM_CONFIG carries it): k differs from 2 pi R_nm / PPV (m) by at most
+  (0.5 / PPV + 0.5 + 0.001) Q48 LSB < 2^-48 m per count, so dS by < (|dL| + |dR|) 2^-49 m;
+* on the wire ``(distance_q40_m * 1000 + 2^39) >> 40``: within 0.5 mm of the Q40 sum.
+
+The reference: per step of the firmware's (``reference_path.firmware_steps``, from the life's
+start frame e0) |dS| = |dL m_L + dR m_R| / 2 in float64 with the nm-rounded radii the firmware
+runs with (``firmware_m_per_count``), rounded to a whole 2^-40 m (an error <= 2^-41 m, plus the
+float's relative 2^-52: below 2^-42 m for any step under 1 km) and summed exactly in int64 (no
+float sum drifting over 100 km). So at a sample naming encoder frame e, after N frames and C
+counts (both wheels, absolute) from e0, the firmware's wire value lies within
+
+    s = 0.5 mm + N 2^-39 m + C 2^-48 m
+
+of the reference's sum (N 2^-39 m covers the two Q40 roundings and the float per step, 2^-41 +
+2^-41 + 2^-42 < 2^-39; C 2^-48 m twice the constants' bound). 100 km of kobuki-like driving
+(10^7 frames, 2.4 * 10^9 counts) add 0.03 mm; a 2^24 counts/rev robot's 1.5 * 10^13 counts add
+54 mm there: the Q48 constant's resolution, which the firmware's own sum carries (the DBC does
+not carry the constant, so a judge can only bound it).
+
+Where the firmware's steps are not the reference's:
+
+* a gap of the log (N > 1 periods): the firmware may have taken the frames the log missed one by
+  one, and sum |dS_i| >= |sum dS_i| (a robot reversing inside the gap): its path may grow by up
+  to the gap's path bound (``breaks.path_bound_m`` of N times the per-period count bounds
+  ``gapbound.period_bounds``, halved: |dS| <= (|dS_L| + |dS_R|) / 2) less the merged |dS| more
+  than the reference's there (``up``); unbounded without a plausibility bound;
+* a stall or hold (``stall_breaks``) and the spans where the firmware lost frames the log holds
+  (``loss_spans``, ENC_E2E_LOST grew): it took several fine steps as one, |sum dS_i| <= sum
+  |dS_i|, so its path may grow less, by up to the fine path of the span (the reference's own
+  sum over it; ``down``). A stall's span ends at the first sample naming a frame after it;
+* an encoder frame with a twin (``twin_paths``): the firmware may have stepped through the
+  twin (``up``: the steps into and out of it) or taken it for the frame (``down``: the
+  reference's steps into and out of the frame).
+
+Verdict (``Feasible``): the firmware's path less the reference's (mm, before the wire's
+rounding) is a value that only those allowances move. Each sample bounds it, [r - s, r + s] (r
+the wire minus the reference, read mod 2^16 nearest the reference: the wire's u16 extended
+against it; s the slack above); between two samples it may move down by the ``down`` and up by
+the ``up`` that came between them. The interval of the values the samples allow is carried
+sample to sample (moved, then narrowed); found empty, DISTANCE is wrong (``max_excess_m``: by how
+much). At power-up (``exact``) it starts at 0 (the firmware counts from 0); a log that starts
+mid-drive starts it free (the distance before the log is unknowable). So a wrong value is seen
+even after a gap: the samples between two gaps pin the value, and 2 mm off after the gap
+leave that pin. Whole and streamed give the same result: max and min are exact in any grouping.
+A firmware off by exactly a multiple of 65.536 m cannot be told on the wire; one that wraps
+elsewhere (at 65.535 m) or saturates can.
+
+Not modelled (left looser, never tighter): a gap whose frames the firmware missed too (its
+ENC_E2E_LOST grew by them) still takes the path bound, though the firmware took the merged step
+exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.firmware.twist import ENCODER_PERIOD_US
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.breaks import path_bound_m
+from odocan.host.judge.gapbound import period_bounds
+from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
+from odocan.host.judge.samples import (
+    SILENCE_CYCLES,
+    Encoders,
+    FloatArray,
+    IntArray,
+    match_encoder,
+)
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.sim.robot import NM_PER_M, RobotProfile
+
+WIRE_MM = 1 << 16  # DISTANCE wraps every 65.536 m
+UNITS_PER_M = float(1 << 40)  # the reference's path unit: 2^-40 m, summed in int64
+WIRE_SLACK_MM = 0.5 + 1e-6  # the wire's rounding, and the float of the mm conversion
+STEP_SLACK_M = 2.0**-39  # per frame: the firmware's and the reference's Q40 rounding, x2
+COUNT_SLACK_M = 2.0**-48  # per count of either wheel: the firmware's Q48 constant
+
+
+def firmware_m_per_count(robot: RobotProfile) -> tuple[float, float]:
+    """Travel per count (m; left, right) from the radii the firmware runs with: whole nm."""
+    def per_count(radius_m: float) -> float:
+        return 2.0 * math.pi * (round(radius_m * NM_PER_M) / NM_PER_M) / robot.counts_per_rev
+    return per_count(robot.wheel_radius_left_m), per_count(robot.wheel_radius_right_m)
+
+
+def gap_extra_m(robot: RobotProfile, max_wheel_speed_mm_s: SpeedBound, periods: int,
+                ds_m: float) -> float:
+    """How far (m) above a merged step of |dS| ``ds_m`` over ``periods`` encoder periods the
+    firmware's path may lie (it may have taken the frames one by one): half the gap's path
+    bound (``breaks.path_bound_m`` of the per-period count bounds, ``gapbound.period_bounds``)
+    less |dS|; inf without a plausibility bound."""
+    geometry = Geometry.of(robot)
+    speed_mm_s = geometry.speed_bound_mm_s(max_wheel_speed_mm_s)  # PROFILE_SPEED: the robot's
+    if speed_mm_s is None:
+        return math.inf
+    bound = period_bounds(geometry, speed_mm_s)
+    m_left, m_right = firmware_m_per_count(robot)
+    path = max(path_bound_m(periods * bound[0], periods * bound[1], geometry),
+               periods * (bound[0] * m_left + bound[1] * m_right))  # either radii
+    return max(0.0, 0.5 * path - ds_m)
+
+
+def twist_samples(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+                  enc: Encoders) -> tuple[IntArray, IntArray, FloatArray, IntArray]:
+    """The accepted ODOM_TWIST frames in bus order (``compare.check_twist``' pairing): the
+    encoder frame each names (index into ``enc``, -1: none), its raw DISTANCE (mm mod 2^16),
+    its bus time and the accepted encoder frames logged before it (``DistanceJudge.take``)."""
+    empty = np.zeros(0, dtype=np.int64)
+    try:
+        rows = decoder.decode(frames, "ODOM_TWIST")
+    except DecodeError:
+        return empty, empty, np.zeros(0), empty
+    keep = accepted[rows["index"]] if len(rows["index"]) else np.zeros(0, dtype=bool)
+    if not keep.any() or "DISTANCE" not in rows:  # a DBC without it: nothing to judge
+        return empty, empty, np.zeros(0), empty
+    index = rows["index"][keep]
+    t_s = frames.timestamp_s[index]
+    e = match_encoder(enc, index, rows["ENC_COUNTER"][keep].astype(np.int64), t_s,
+                      rows["COUNTER"][keep].astype(np.int64))
+    heard = np.searchsorted(enc.timestamp_s, t_s).astype(np.int64)
+    return e.astype(np.int64), rows["DISTANCE"][keep].astype(np.int64), t_s, heard
+
+
+@dataclass
+class Feasible:
+    """The firmware's path less the reference's (mm, before the wire's rounding) that the
+    samples so far allow at the latest: an interval, moved by the allowances (``up``, ``down``:
+    cumulative, mm) between samples and narrowed by each sample's own interval. Found empty, it
+    is kept as it is (lo > hi): ``excess_mm``, the most lo - hi reached, is then the same however
+    the samples are grouped (within a run of equal allowances lo - hi only grows)."""
+
+    lo: float
+    hi: float
+    up: float = 0.0
+    down: float = 0.0
+    excess_mm: float = 0.0
+
+    def take(self, lo: FloatArray, hi: FloatArray, up: FloatArray, down: FloatArray) -> None:
+        """Samples in order: their intervals and the allowances at each (runs of equal
+        allowances met at once: max and min are exact in any grouping)."""
+        if len(lo) == 0:
+            return
+        starts = np.concatenate(([0], 1 + np.flatnonzero((np.diff(up) != 0)
+                                                          | (np.diff(down) != 0))))
+        lo_run, hi_run = np.maximum.reduceat(lo, starts), np.minimum.reduceat(hi, starts)
+        for j, k in enumerate(starts.tolist()):
+            self.take_one(float(lo_run[j]), float(hi_run[j]), float(up[k]), float(down[k]))
+
+    def take_one(self, lo: float, hi: float, up: float, down: float) -> None:
+        """One sample (or a run of samples with the same allowances)."""
+        if down != self.down:  # inf - inf: an unbounded allowance moves it once
+            self.lo = -math.inf if math.isinf(down) else self.lo - (down - self.down)
+        if up != self.up:
+            self.hi = math.inf if math.isinf(up) else self.hi + (up - self.up)
+        self.up, self.down = up, down
+        self.lo, self.hi = max(self.lo, lo), min(self.hi, hi)
+        if self.lo > self.hi:  # empty: it stays so (lo - hi only grows until a jump)
+            self.excess_mm = max(self.excess_mm, self.lo - self.hi)
+
+
+@dataclass
+class DistanceJudge:
+    """The judge (module docstring). ``feed_frames`` the encoder frames from e0 in order with the
+    firmware's step into each, ``feed_samples`` the samples naming frames already fed, in order;
+    ``result`` at the end."""
+
+    robot: RobotProfile
+    max_wheel_speed_mm_s: SpeedBound
+    exact: bool  # the log starts at the firmware's power-up: offset 0
+    stall_breaks: list[int] = field(default_factory=list)  # frames the firmware resumed on
+    loss_spans: list[tuple[int, int]] = field(default_factory=list)  # (first, last) frames
+    twins: dict[int, tuple[float, float]] = field(default_factory=dict)  # frame: up, down (m)
+    _cols: dict[str, np.ndarray] = field(default_factory=dict)  # frames kept: g, units, n, c, up
+    _carry: tuple[int, int, int, float, int | None] = (0, 0, 0, 0.0, None)  # sums, last seq
+    _anchors: dict[int, int] = field(default_factory=dict)  # frame -> path units at it
+    _stall_ends: dict[int, int] = field(default_factory=dict)  # break -> frame its span ends
+    _r0: float | None = None
+    _running: int = -1  # the largest encoder frame named so far
+    _last: tuple[float, int] = (math.nan, 0)  # the last twist frame: bus time, frames before
+    feasible: Feasible = field(default_factory=lambda: Feasible(-math.inf, math.inf))
+    samples: int = 0
+
+    def __post_init__(self) -> None:
+        if self.exact:  # at power-up: 0 at the first frame
+            self.feasible = Feasible(0.0, 0.0)
+
+    def feed_frames(self, g: IntArray, d_left: IntArray, d_right: IntArray, seq: IntArray
+                    ) -> None:
+        """Encoder frames ``g`` (consecutive numbers) with the step into each (0: none) and
+        their sender's sequence numbers."""
+        if len(g) == 0:
+            return
+        m_left, m_right = firmware_m_per_count(self.robot)
+        units0, n0, c0, up0, last_seq = self._carry
+        ds_m = np.abs(0.5 * (d_left * m_left + d_right * m_right))
+        units = units0 + np.cumsum(np.rint(ds_m * UNITS_PER_M).astype(np.int64))
+        counts = c0 + np.cumsum(np.abs(d_left) + np.abs(d_right))
+        n = n0 + np.arange(1, len(g) + 1, dtype=np.int64)
+        periods = np.diff(np.concatenate(([seq[0] if last_seq is None else last_seq], seq)))
+        extra = self._gap_extra_m(periods, ds_m)
+        for frame, (up_m, _) in self.twins.items():
+            if 0 <= frame - int(g[0]) < len(g):
+                extra[frame - int(g[0])] += up_m
+        up = up0 + np.cumsum(extra)
+        new = {"g": g, "units": units, "n": n, "c": counts, "up": up}
+        self._cols = ({k: np.concatenate((self._cols[k], v)) for k, v in new.items()}
+                      if self._cols else new)
+        self._carry = (int(units[-1]), int(n[-1]), int(counts[-1]), float(up[-1]), int(seq[-1]))
+        if not self._anchors:
+            self._anchors[int(g[0])] = int(units[0])
+        for frame in self._wanted():
+            k = frame - int(g[0])
+            if 0 <= k < len(g):
+                self._anchors[frame] = int(units[k])
+
+    def _wanted(self) -> list[int]:
+        """Frames whose path is needed later: the spans' ends."""
+        return ([b - 1 for b in self.stall_breaks] + [a for a, _ in self.loss_spans]
+                + [z for _, z in self.loss_spans] + list(self._stall_ends.values()))
+
+    def _gap_extra_m(self, periods: IntArray, ds_m: FloatArray) -> FloatArray:
+        """Per frame: how far above the merged step the firmware's path may be (a gap)."""
+        extra = np.zeros(len(periods))
+        for k in np.flatnonzero(periods > 1).tolist():
+            extra[k] = gap_extra_m(self.robot, self.max_wheel_speed_mm_s, int(periods[k]),
+                                   float(ds_m[k]))
+        return extra
+
+    def take(self, e: IntArray, raw_mm: IntArray, t_s: FloatArray, heard: IntArray) -> None:
+        """ODOM_TWIST frames in bus order (``twist_samples``; ``heard``: the encoder frames
+        logged before each): those naming a frame (e >= 0) at or after every earlier one's are
+        judged, but the first after the firmware was silent for ``SILENCE_CYCLES`` cycles while
+        the encoder frames went on (a stall: it names a frame of its backlog that ENC_COUNTER
+        cannot resolve, as ``stalls.after_stalls`` leaves the pose out)."""
+        if len(e) == 0:
+            return
+        running = np.maximum.accumulate(np.concatenate(([self._running], e)))[1:]
+        prev_t = np.concatenate(([self._last[0]], t_s[:-1]))
+        prev_heard = np.concatenate(([self._last[1]], heard[:-1]))
+        self._running, self._last = int(running[-1]), (float(t_s[-1]), int(heard[-1]))
+        quiet = ((t_s - prev_t >= (SILENCE_CYCLES - 0.5) * ENCODER_PERIOD_US * 1e-6)
+                 & (heard - prev_heard >= SILENCE_CYCLES - 1))
+        ok = (e >= 0) & (e >= running) & ~quiet
+        self.feed_samples(e[ok], raw_mm[ok])
+
+    def feed_samples(self, e: IntArray, raw_mm: IntArray) -> None:
+        """Samples naming encoder frames ``e`` (fed already; those before the first frame fed
+        are left out) with their raw DISTANCE."""
+        if len(e) == 0 or not self._cols:
+            return
+        g0 = int(self._cols["g"][0])
+        keep = e >= g0
+        e, raw_mm = e[keep], raw_mm[keep]
+        if len(e) == 0:
+            return
+        k = e - g0
+        cols = self._cols
+        ref_mm = cols["units"][k] * (1000.0 / UNITS_PER_M)
+        diff = raw_mm - ref_mm
+        r = diff - WIRE_MM * np.round(diff / WIRE_MM)
+        if self._r0 is None:
+            self._r0 = 0.0 if self.exact else float(r[0])
+        r = self._r0 + (r - self._r0) - WIRE_MM * np.round((r - self._r0) / WIRE_MM)
+        base = WIRE_SLACK_MM + 1e3 * (cols["n"][k] * STEP_SLACK_M + cols["c"][k] * COUNT_SLACK_M)
+        self.feasible.take(r - base, r + base, 1e3 * cols["up"][k],
+                           1e3 * self._lower_m(e, cols["units"][k]))
+        self.samples += len(e)
+        self._trim(int(e[-1]))
+
+    def _lower_m(self, e: IntArray, units: IntArray) -> FloatArray:
+        """Per sample: how far below the reference the firmware's merged steps may put it."""
+        lower = np.zeros(len(e))
+        for b in self.stall_breaks:
+            if b - 1 not in self._anchors:
+                continue
+            if b not in self._stall_ends:
+                after = np.flatnonzero(e >= b)
+                if len(after) == 0:
+                    continue
+                self._stall_ends[b] = int(e[after[0]])
+                self._anchors[int(e[after[0]])] = int(units[after[0]])
+            end = self._stall_ends[b]
+            self._add_span(lower, e, units, b - 1, end)
+        first = min(self._anchors, default=0)  # the first frame fed is anchored
+        for a, z in self.loss_spans:  # a span begun before the first frame: from it
+            if max(a, first) in self._anchors and z > first:
+                self._add_span(lower, e, units, max(a, first), z)
+        for frame, (_, down_m) in self.twins.items():
+            lower[e >= frame] += down_m
+        return lower
+
+    def _add_span(self, lower: FloatArray, e: IntArray, units: IntArray, a: int, z: int
+                  ) -> None:
+        """Add the fine path over frames (a, min(e, z)] to the samples after ``a``."""
+        inside = e > a
+        if not inside.any():
+            return
+        top = np.where(e <= z, units, self._anchors.get(z, 0))
+        lower[inside] += (top[inside] - self._anchors[a]) / UNITS_PER_M
+
+    def _trim(self, last_e: int) -> None:
+        """Drop the frames before the last sample's: no sample to come names them."""
+        k = last_e - int(self._cols["g"][0])
+        if k > 0:
+            self._cols = {key: v[k:] for key, v in self._cols.items()}
+
+    def result(self) -> dict[str, Any]:
+        """The report's ``onboard_distance_vs_reference``."""
+        excess_mm = self.feasible.excess_mm
+        return {
+            "samples": self.samples,
+            "start": "power-up" if self.exact else "fitted",
+            "max_excess_m": excess_mm * 1e-3,
+            "passed": excess_mm == 0.0,
+        }
+
+
+def twin_paths(enc: Encoders, robot: RobotProfile, after: int) -> dict[int, tuple[float, float]]:
+    """Per accepted encoder frame k > ``after`` with a twin (``samples.encoder_twins``): how far
+    (m) the firmware's path may lie above the reference's from k on (it may have stepped through
+    the twin: the steps from the frame before to it, from it to k and to the frame after) and
+    below (it may have taken the twin for k: the reference's steps into and out of k)."""
+    if enc.twins is None:
+        return {}
+    m_left, m_right = firmware_m_per_count(robot)
+    bits = min(robot.counter_bits, 24)
+
+    def step_m(a: tuple[int, int], b: tuple[int, int]) -> float:
+        d_left, d_right = (int(wrap_delta(b[i] - a[i], bits)) for i in (0, 1))
+        return abs(0.5 * (d_left * m_left + d_right * m_right))
+
+    counts = list(zip(enc.left.tolist(), enc.right.tolist(), strict=True))
+    out: dict[int, tuple[float, float]] = {}
+    for k, left, right in zip(*(a.tolist() for a in enc.twins), strict=True):
+        if k <= after or k + 1 >= len(counts):
+            continue
+        twin, up, down = (left, right), *out.get(k, (0.0, 0.0))
+        out[k] = (up + step_m(counts[k - 1], twin) + step_m(twin, counts[k])
+                  + step_m(twin, counts[k + 1]),
+                  down + step_m(counts[k - 1], counts[k]) + step_m(counts[k], counts[k + 1]))
+    return out
+
+
+def check_distance(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+                   enc: Encoders, steps: tuple[IntArray, IntArray], e0: int,
+                   judge: DistanceJudge) -> dict[str, Any]:
+    """The whole log's judgement: ``steps`` (d_left, d_right into frames e0 + 1, ...: the
+    firmware's, ``reference_path.firmware_steps``) and the ODOM_TWIST samples."""
+    zero = np.zeros(1, dtype=np.int64)
+    judge.feed_frames(np.arange(e0, len(enc.seq), dtype=np.int64),
+                      np.concatenate((zero, steps[0])), np.concatenate((zero, steps[1])),
+                      enc.seq[e0:])
+    judge.take(*twist_samples(frames, accepted, decoder, enc))
+    return judge.result()

@@ -1,0 +1,181 @@
+"""ODOM_TWIST DISTANCE judged live (``odocan monitor``): ``host.judge.distance``'s rule frame by
+frame, beside ``host.judge.tracking.PoseTracker`` (whose numbering of the encoder frames and
+periods between them it reads, and whose stalls it follows).
+
+Per accepted encoder frame the firmware's step (its own ``livepose.StepGate``: refusals,
+counter restarts) adds |dS| rounded to 2^-40 m to an exact int sum, as the whole-log judge does,
+with the same slack (``distance.base_slack``: the wire's 0.5 mm, 2^-39 m a frame, 2^-48 m a
+count) and the same gap allowance above (the firmware may have taken a gap's frames one by one:
+``distance.gap_extra_m``). Below: after a stall the tracker tells (the firmware merged the frames
+it missed) the fine path since the last sample; after an ODOM_STATUS page whose ENC_E2E_LOST grew
+(the firmware lost frames: merged steps) the fine path since the page before.
+
+A sample (ODOM_TWIST) names its encoder frame by ENC_COUNTER against the latest accepted one
+(-8..+7, the latest less than 8 cycles old; else left out, as a sample naming a frame before the
+last named is). Its offset interval [r - upper, r + lower] must meet every earlier one of the
+life (``distance`` module docstring); in the first life, once the tracker has proven a power-up
+at frame 0 (its reference's exact start), the offset must be 0. A reboot starts a new life
+(its offset free again); an interval found empty is latched (``wrong_lives``): the verdict
+DISTANCE WRONG, and the watch's exit 1."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from odocan.host.judge.distance import (
+    COUNT_SLACK_M,
+    STEP_SLACK_M,
+    UNITS_PER_M,
+    WIRE_MM,
+    WIRE_SLACK_MM,
+    Feasible,
+    firmware_m_per_count,
+    gap_extra_m,
+)
+from odocan.host.judge.livepose import RING, StepGate
+from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
+from odocan.host.judge.samples import SILENCE_CYCLES
+from odocan.host.judge.tracking import PoseTracker
+from odocan.sim.robot import RobotProfile
+
+KEPT_FRAMES = 64  # encoder frames kept for the samples to name (a sample names -8..+7)
+CYCLE_S = 0.01  # WHEEL_ENCODERS' cycle
+
+
+class LiveDistance:
+    """The live DISTANCE judge (module docstring)."""
+
+    def __init__(self, robot: RobotProfile,
+                 max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED) -> None:
+        self.robot = robot
+        self.max_wheel_speed_mm_s = max_wheel_speed_mm_s
+        self._m = firmware_m_per_count(robot)
+        self.samples = 0
+        self.suspended = False  # a config applied with parameters not known here
+        self.wrong_lives = 0  # lives whose intervals did not meet (latched)
+        self.worst_excess_m = 0.0
+        self.new_life()
+
+    def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
+        """New robot parameters (a config command): the firmware's DISTANCE goes on with its
+        new constants from a value this judge cannot know: judged from here as a new life."""
+        self.robot = RobotProfile(self.robot.name, geometry.counts_per_rev,
+                                  geometry.wheel_radius_left_m, geometry.wheel_radius_right_m,
+                                  geometry.wheelbase_m, counter_bits,
+                                  geometry.max_wheel_speed_mm_s / 1000)
+        self._m = firmware_m_per_count(self.robot)
+        self.suspended = False
+        self.new_life()
+
+    def suspend(self) -> None:
+        """A config applied whose parameters this judge does not know: DISTANCE is no longer
+        judged (what was found wrong stays latched)."""
+        self.suspended = True
+
+    def new_life(self) -> None:
+        """A reboot: the firmware's DISTANCE restarts; so does the judgement (offset free)."""
+        self._frames: dict[int, tuple[int, int, int, float]] = {}  # seq: units, n, c, up
+        self._sums: tuple[int, int, int, float] = (0, 0, 0, 0.0)
+        self._gate: StepGate | None = None
+        self._latest: tuple[int, int, float] | None = None  # seq, counter, t_s
+        self._last_e = -1
+        self._last_twist: tuple[float, int] = (math.nan, 0)  # bus time, frames heard before
+        self._lower_m = 0.0
+        self._stalls = -1
+        self._page_units: int | None = None
+        self._lost: int | None = None
+        self._r0: float | None = None
+        self._feasible: Feasible | None = None
+        self._wrong = False
+        self.first_seq: int | None = None
+        self.power_up = False  # the first life, heard from the firmware's power-up
+
+    def on_encoders(self, tracker: PoseTracker, counter: int, left: int, right: int,
+                    t_s: float, uptime: int) -> None:
+        """An accepted WHEEL_ENCODERS frame, after ``tracker.on_encoders`` numbered it."""
+        seq = tracker.enc_seq
+        if self._gate is None:
+            self._gate = StepGate(tracker.geometry, tracker.counter_bits)
+            self.first_seq = seq
+        periods = tracker.placer.periods
+        step = self._gate.step(counter, left, right, periods, uptime)
+        d_left, d_right = step if step is not None else (0, 0)
+        ds_m = abs(0.5 * (d_left * self._m[0] + d_right * self._m[1]))
+        units, n, c, up = self._sums
+        extra = gap_extra_m(self.robot, self.max_wheel_speed_mm_s, periods, ds_m) if (
+            periods > 1 and len(self._frames)) else 0.0
+        self._sums = (units + round(ds_m * UNITS_PER_M), n + 1, c + abs(d_left) + abs(d_right),
+                      up + extra)
+        self._frames[seq] = self._sums
+        self._frames.pop(seq - KEPT_FRAMES, None)
+        self._latest = (seq, counter, t_s)
+
+    def on_counts(self, tracker: PoseTracker, ok: int, lost: int, first_life_page: bool) -> None:
+        """ODOM_STATUS page E2E_WHEEL_ENCODERS. The first life's first page, after a first
+        summary of UPTIME 0, counting exactly the frames heard: a power-up at the first frame
+        heard (``analyze``'s and the tracker's rule), the offset 0. ENC_E2E_LOST (u8) grown:
+        the fine path since the page before may have been merged on board."""
+        if first_life_page and ok == tracker.enc_seq + 1 and self.first_seq == 0:
+            self.power_up = True
+            f = self._feasible  # judged as fitted so far: from 0, with the allowances since
+            if f is not None:
+                f.take_one(-f.down, f.up, f.up, f.down)
+        units = self._sums[0]
+        if self._lost is not None and (lost - self._lost) % 256 and self._page_units is not None:
+            self._lower_m += (units - self._page_units) / UNITS_PER_M
+        self._lost, self._page_units = lost, units
+
+    def on_twist(self, tracker: PoseTracker, enc_counter: int, raw_mm: int, t_s: float) -> None:
+        """An accepted ODOM_TWIST: judge its DISTANCE at the encoder frame it names (not the
+        first after a stall: ``distance.DistanceJudge.take``)."""
+        last_t, last_heard = self._last_twist
+        self._last_twist = (t_s, tracker.enc_seq + 1)
+        if self.suspended:
+            return
+        if (t_s - last_t >= (SILENCE_CYCLES - 0.5) * CYCLE_S
+                and tracker.enc_seq + 1 - last_heard >= SILENCE_CYCLES - 1):
+            return
+        if self._latest is None:
+            return
+        seq, counter, latest_t = self._latest
+        e = seq + ((enc_counter - counter + 8) % RING) - 8
+        at = self._frames.get(e)
+        if at is None or t_s - latest_t >= 8 * CYCLE_S or e < self._last_e:
+            return
+        if self._stalls >= 0 and tracker.stalls > self._stalls and self._last_e >= 0:
+            before = self._frames.get(self._last_e)  # merged since the last sample
+            self._lower_m += (at[0] - before[0]) / UNITS_PER_M if before else math.inf
+        self._stalls, self._last_e = tracker.stalls, e
+        units, n, c, up = at
+        diff = raw_mm - units * (1000.0 / UNITS_PER_M)
+        r = diff - WIRE_MM * round(diff / WIRE_MM)
+        if self._feasible is None:  # the offset: 0 from a power-up, else free
+            self._r0 = 0.0 if self.power_up else r
+            self._feasible = Feasible(0.0, 0.0) if self.power_up else Feasible(-math.inf,
+                                                                               math.inf)
+        r0 = self._r0 or 0.0
+        r = r0 + (r - r0) - WIRE_MM * round((r - r0) / WIRE_MM)
+        base = WIRE_SLACK_MM + 1e3 * (n * STEP_SLACK_M + c * COUNT_SLACK_M)
+        self._feasible.take_one(r - base, r + base, 1e3 * up, 1e3 * self._lower_m)
+        self.samples += 1
+
+    def verdict(self) -> list[str]:
+        """Why DISTANCE is wrong (empty: it is not), latched once found."""
+        excess = self._feasible.excess_mm * 1e-3 if self._feasible is not None else 0.0
+        if excess > 0.0 and not self._wrong:
+            self._wrong = True
+            self.wrong_lives += 1
+        self.worst_excess_m = max(self.worst_excess_m, excess)
+        if not self.wrong_lives:
+            return []
+        return [f"ODOM_TWIST DISTANCE off the reference's path length by "
+                f"{self.worst_excess_m * 1e3:.3f} mm beyond its tolerance"]
+
+    def as_dict(self) -> dict[str, Any]:
+        """``distance`` in ``monitor --json``."""
+        self.verdict()
+        return {"samples": self.samples, "start": "power-up" if self.power_up else "fitted",
+                "suspended": self.suspended,
+                "max_excess_m": self.worst_excess_m, "wrong_lives": self.wrong_lives,
+                "passed": self.wrong_lives == 0}

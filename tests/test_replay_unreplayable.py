@@ -1,0 +1,69 @@
+"""``odocan replay`` of a log whose firmware lived what a lockstep replay cannot reproduce.
+
+A replay runs one firmware life from the log's first encoder frame and feeds, one per tick, the
+encoder frames the host's E2E check accepts. A log with a firmware reboot (two drives recorded
+one after the other), or with encoder frames that came late and out of sequence (``--faults
+delay=``), departs from the replay although the firmware build is the same: the FAIL may stand
+(the replay does depart), but its reason must name what the replay could not reproduce, never
+"the firmware build differs" (found in a user trial: both logs below said so).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from odocan.host.cli.app import main
+from tests.test_cli_run import run_cli
+
+BUILD_DIFFERS = "the firmware build differs"
+
+
+def _run(log: Path, *extra: str) -> None:
+    assert main(["run", "--robot", "kobuki", "--duration", "10", "--log", str(log),
+                 *extra]) == 0
+
+
+def _rebooted_log(folder: Path) -> Path:
+    """Two 10 s drives, the second recorded after the first (times shifted by 11 s)."""
+    first, second = folder / "first.log", folder / "second.log"
+    _run(first, "--seed", "1")
+    _run(second, "--seed", "2")
+    both = folder / "rebooted.log"
+    lines = first.read_text().splitlines(keepends=True)
+    for line in second.read_text().splitlines(keepends=True):
+        stamp, rest = line.split(" ", 1)
+        lines.append(f"({float(stamp[1:-1]) + 11.0:.6f}) {rest}")
+    both.write_text("".join(lines))
+    return both
+
+
+def _replay_reasons(capsys: pytest.CaptureFixture[str], log: Path) -> list[str]:
+    code, out, _ = run_cli(capsys, "replay", str(log), "--robot", "kobuki")
+    assert code == 1
+    lines = out.splitlines()
+    at = lines.index("FAIL: the replayed firmware departs from the log's")
+    return [line for line in lines[at + 1:] if line.startswith("  - ")]
+
+
+def test_a_reboot_in_the_log_is_named_not_the_build(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = _rebooted_log(tmp_path)
+    assert main(["analyze", str(log), "--robot", "kobuki"]) == 0  # the log itself is right
+    capsys.readouterr()
+    reasons = _replay_reasons(capsys, log)
+    assert not any(BUILD_DIFFERS in r for r in reasons), reasons
+    assert any("1 firmware reboot" in r and "at 11.00 s" in r for r in reasons), reasons
+
+
+def test_late_encoder_frames_are_named_not_the_build(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = tmp_path / "late.log"
+    _run(log, "--seed", "1", "--faults", "delay=0.1:15,seed=1")
+    capsys.readouterr()
+    reasons = _replay_reasons(capsys, log)
+    assert not any(BUILD_DIFFERS in r for r in reasons), reasons
+    assert any("WHEEL_ENCODERS frames out of sequence" in r for r in reasons), reasons
