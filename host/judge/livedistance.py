@@ -43,6 +43,13 @@ KEPT_FRAMES = 64  # encoder frames kept for the samples to name (a sample names 
 CYCLE_S = 0.01  # WHEEL_ENCODERS' cycle
 
 
+def robot_of(name: str, geometry: Geometry, counter_bits: int) -> RobotProfile:
+    """The robot profile of a geometry (its speed bound included) and counter width."""
+    return RobotProfile(name, geometry.counts_per_rev, geometry.wheel_radius_left_m,
+                        geometry.wheel_radius_right_m, geometry.wheelbase_m, counter_bits,
+                        geometry.max_wheel_speed_mm_s / 1000)
+
+
 class LiveDistance:
     """The live DISTANCE judge (module docstring)."""
 
@@ -60,10 +67,7 @@ class LiveDistance:
     def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
         """New robot parameters (a config command): the firmware's DISTANCE goes on with its
         new constants from a value this judge cannot know: judged from here as a new life."""
-        self.robot = RobotProfile(self.robot.name, geometry.counts_per_rev,
-                                  geometry.wheel_radius_left_m, geometry.wheel_radius_right_m,
-                                  geometry.wheelbase_m, counter_bits,
-                                  geometry.max_wheel_speed_mm_s / 1000)
+        self.robot = robot_of(self.robot.name, geometry, counter_bits)
         self._m = firmware_m_per_count(self.robot)
         self.suspended = False
         self.new_life()
