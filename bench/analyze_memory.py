@@ -112,7 +112,6 @@ def whole_process(
 def stream_stages(log: Path) -> None:
     """The streaming stages over ``log`` (run in the child process, the whole log as one
     life): prints what they found."""
-    from odocan.firmware.ecu import MAX_WHEEL_SPEED_MM_S
     from odocan.host.io.logs import iter_log
     from odocan.host.judge.reference import Geometry
     from odocan.host.judge.stream import (
@@ -133,7 +132,7 @@ def stream_stages(log: Path) -> None:
     e2e, numbering, poses = StreamE2E(db), StreamEncoders(BulkDecoder(db)), StreamPoses(
         BulkDecoder(db))
     reference = StreamReference(Geometry.of(profile), "exact", min(profile.counter_bits, 24),
-                                MAX_WHEEL_SPEED_MM_S)
+                                profile.max_wheel_speed_mm_s)
     truth, twist = StreamTruth(BulkDecoder(db)), StreamTwist(BulkDecoder(db), profile)
     facts, lives = StreamFacts(BulkDecoder(db)), StreamLives(BulkDecoder(db))
     stalls: StreamStalls | None = None

@@ -15,7 +15,7 @@ odometry; with its largest on-board vs reference error and its verdict at the en
 2 m per 10 ms is faster than any ECU build allows, so the judge runs without the firmware's
 plausibility bound (``analyze(max_wheel_speed_mm_s=None)``, as tests/test_analysis.py does);
 with it, the judge would refuse every step, as the firmware built with that bound would. The
-live judge's step gate is widened alike (``_unbounded_live_gate``).
+live judge's step gate is widened alike (``_unbounded``).
 
 Run: ``.venv/bin/python bench/judge_error.py [--steps N]``; ``bench/verdicts.py`` calls
 ``judge_error_rows``.
@@ -24,12 +24,11 @@ Run: ``.venv/bin/python bench/judge_error.py [--steps N]``; ``bench/verdicts.py`
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,7 +38,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from odocan.host.io.logs import parse_candump_line, read_log
-from odocan.host.judge import livepose
 from odocan.host.judge.analysis import POSITION_LSB_M, analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry, integrate
@@ -98,17 +96,10 @@ def judge_error_rows(steps: int = LONG_STEPS) -> list[JudgeErrorRow]:
     return rows
 
 
-@contextmanager
-def _unbounded_live_gate() -> Iterator[None]:
-    """The live judge's step gate (``livepose.StepGate``) without the firmware's speed bound
-    (module docstring): 2 m per period is beyond any ECU build's. Restored after: a caller
-    judging real drives next (bench/verdicts.py) must get the bound back."""
-    saved = livepose.MAX_WHEEL_SPEED_MM_S
-    livepose.MAX_WHEEL_SPEED_MM_S = 10**12
-    try:
-        yield
-    finally:
-        livepose.MAX_WHEEL_SPEED_MM_S = saved
+def _unbounded(robot: RobotProfile) -> RobotProfile:
+    """``robot`` as the live judge's step gate (``livepose.StepGate``) sees it without the
+    firmware's speed bound (module docstring): 2 m per period is beyond any robot's."""
+    return dataclasses.replace(robot, max_wheel_speed_m_s=1e9)
 
 
 def _live_error(robot: RobotProfile, lines: list[str], exact: Any) -> tuple[float, float, str,
@@ -117,12 +108,11 @@ def _live_error(robot: RobotProfile, lines: list[str], exact: Any) -> tuple[floa
     ``exact`` (the float64 odometry from the true start, element k: after k steps), its largest
     on-board vs reference error (LSB), its verdict, and its CPU per frame (us)."""
     messages = [m for m in (parse_candump_line(line.encode()) for line in lines) if m]
-    with _unbounded_live_gate():
-        monitor = BusMonitor(robot)
-        start = time.process_time()
-        for msg in messages:
-            monitor.feed(msg, now_s=msg.timestamp)
-        cpu_s = time.process_time() - start
+    monitor = BusMonitor(_unbounded(robot))
+    start = time.process_time()
+    for msg in messages:
+        monitor.feed(msg, now_s=msg.timestamp)
+    cpu_s = time.process_time() - start
     ref = monitor.tracker.reference
     assert ref is not None and ref.seq >= 1
     own = math.hypot(ref.x_m - exact.x_m[ref.seq - 1], ref.y_m - exact.y_m[ref.seq - 1])

@@ -32,6 +32,7 @@ _CONFIG_FIELDS = {
     fr.ConfigParam.WHEELBASE: "wheelbase_nm",
     fr.ConfigParam.COUNTER_BITS: "counter_bits",
     fr.ConfigParam.INTEGRATOR: "integrator",
+    fr.ConfigParam.MAX_WHEEL_SPEED: "max_wheel_speed_mm_s",
 }
 
 
@@ -123,7 +124,7 @@ class Commands:
             values[_CONFIG_FIELDS[fr.ConfigParam(param)]] = value
         self._staged_config.clear()
         candidate = RobotParams(**values)
-        reason = validate_at_speed(candidate, ecu.max_wheel_speed_mm_s)
+        reason = validate_at_speed(candidate, candidate.max_wheel_speed_mm_s)
         if reason is not ConfigReason.OK:
             ecu.errors.set(ErrorFlag.CONFIG_INVALID)
             ack_reason = (
@@ -138,6 +139,7 @@ class Commands:
             ecu.odometry.unprime()
         ecu.params = candidate
         ecu.odometry.reconfigure(derive_constants(candidate, ecu.errors))
+        ecu.encoders.max_wheel_speed_mm_s = candidate.max_wheel_speed_mm_s
         ecu.encoders.reconfigure(bits_changed)
         ecu.health.config_applied()
         self.ack(fr.ODOM_CONFIG_ID, frame, fr.AckResult.ACK, fr.AckReason.OK)

@@ -31,6 +31,11 @@ WHEEL_RADIUS_MAX_NM = 2_000_000_000  # 2 m
 WHEELBASE_MIN_NM = 10_000_000  # 10 mm
 WHEELBASE_MAX_NM = 4_000_000_000  # 4 m (u32 holds 4.29 m)
 COUNTER_BITS_ALLOWED = (16, 32)
+# The fastest rim speed either wheel can reach (u16 mm/s, ODOM_CONFIG MAX_WHEEL_SPEED): an encoder
+# step beyond it is implausible. A robot that states none is bounded at the default.
+MAX_WHEEL_SPEED_DEFAULT_MM_S = 4_000
+MAX_WHEEL_SPEED_MIN_MM_S = 1
+MAX_WHEEL_SPEED_MAX_MM_S = 65_535  # the signal's u16
 # One encoder count may turn the robot by at most 1/16 turn: beyond that the parameters are absurd.
 BAM64_PER_COUNT_MAX = 1 << 60
 ENCODER_PERIOD_US = 10_000  # WHEEL_ENCODERS GenMsgCycleTime (twist.py re-exports it)
@@ -58,11 +63,13 @@ class ConfigReason(IntEnum):
     INTEGRATOR_INVALID = 5
     GEOMETRY_ABSURD = 6  # one count would turn the robot by more than 1/16 turn
     WIRE_RANGE = 7  # a step at the maximum wheel speed could wrap the counters as read
+    MAX_WHEEL_SPEED_OUT_OF_RANGE = 8  # outside MAX_WHEEL_SPEED_MIN_MM_S .. _MAX_MM_S
 
 
 @dataclass(frozen=True, slots=True)
 class RobotParams:
-    """Robot parameters as raw integers (u32 each), exactly as ``ODOM_CONFIG`` carries them."""
+    """Robot parameters as raw integers (u32 each), exactly as ``ODOM_CONFIG`` carries them;
+    ``max_wheel_speed_mm_s`` (u16 on the wire) bounds a plausible encoder step."""
 
     counts_per_rev: int
     wheel_radius_left_nm: int
@@ -70,6 +77,7 @@ class RobotParams:
     wheelbase_nm: int
     counter_bits: int
     integrator: int
+    max_wheel_speed_mm_s: int = MAX_WHEEL_SPEED_DEFAULT_MM_S
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,6 +105,8 @@ def validate(params: RobotParams) -> ConfigReason:
         return ConfigReason.COUNTER_BITS_INVALID
     if params.integrator not in (0, 1, 2):
         return ConfigReason.INTEGRATOR_INVALID
+    if not MAX_WHEEL_SPEED_MIN_MM_S <= params.max_wheel_speed_mm_s <= MAX_WHEEL_SPEED_MAX_MM_S:
+        return ConfigReason.MAX_WHEEL_SPEED_OUT_OF_RANGE
     scratch = ErrorMask()
     for radius_nm in (params.wheel_radius_left_nm, params.wheel_radius_right_nm):
         if _bam64_per_count(radius_nm, params, scratch) >= BAM64_PER_COUNT_MAX:

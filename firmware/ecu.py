@@ -99,18 +99,18 @@ class OdomEcu:
         self,
         hal: CanTx,
         params: RobotParams,
-        max_wheel_speed_mm_s: int = MAX_WHEEL_SPEED_MM_S,
         *,
         secoc_key: bytes | None = None,
         nvm: FreshnessNvm | None = None,
     ) -> None:
-        """``max_wheel_speed_mm_s``: the fastest rim speed either wheel can reach (u16 mm/s); an
-        encoder step beyond it is refused as implausible. ``secoc_key`` (16 bytes; None: no
-        SecOC) and ``nvm`` (the EPOCH cell; None with a key: secured commands unavailable)."""
+        """``params.max_wheel_speed_mm_s``: the fastest rim speed either wheel can reach (u16
+        mm/s, the robot's profile); an encoder step beyond it is refused as implausible.
+        ``secoc_key`` (16 bytes; None: no SecOC) and ``nvm`` (the EPOCH cell; None with a key:
+        secured commands unavailable)."""
         self.errors = ErrorMask()
         self.clock = FirmwareClock()
         self.health = Health(self.errors, self.clock)
-        if validate_at_speed(params, max_wheel_speed_mm_s) is not ConfigReason.OK:
+        if validate_at_speed(params, params.max_wheel_speed_mm_s) is not ConfigReason.OK:
             self.health.config_fault()
         self.params = params
         self.odometry = Odometry(derive_constants(params, self.errors), self.errors)
@@ -123,7 +123,7 @@ class OdomEcu:
             self.clock,
             self.twist,
             self.reception,
-            max_wheel_speed_mm_s,
+            params.max_wheel_speed_mm_s,
         )
         self.commands = Commands(self)
         self.nav = Navigator(self.errors)
@@ -263,6 +263,7 @@ class OdomEcu:
 
     @property
     def max_wheel_speed_mm_s(self) -> int:
+        """u16 mm/s: the plausibility bound in use (the configured robot's)."""
         return self.encoders.max_wheel_speed_mm_s
 
     @property

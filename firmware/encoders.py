@@ -1,13 +1,13 @@
 """Step 3 for WHEEL_ENCODERS: from the wire's 24-bit counts to an integrated, plausible step.
 
 Every frame that passes its E2E check is extended to the hardware counters' width (16 or 32 bits,
-ODrive style), then checked against the build-time maximum rim speed (``MAX_WHEEL_SPEED_MM_S``)
-over the most encoder periods that can separate it from the last accepted sample. A plausible
-step is integrated (``firmware.odometry``) and summed into the twist; an implausible one is
-refused (DEGRADED, IMPLAUSIBLE_STEP). ``RESYNC_FRAMES`` refused frames consistent with each other
-but not with the last accepted one are a counter restart (COUNTER_RESET): the odometry is
-re-primed on the first of them and the jump itself is never integrated. The counters are absolute,
-so the first frame after a gap carries the distance driven meanwhile.
+ODrive style), then checked against the robot's maximum rim speed
+(``RobotParams.max_wheel_speed_mm_s``) over the most encoder periods that can separate it from the
+last accepted sample. A plausible step is integrated (``firmware.odometry``) and summed into the
+twist; an implausible one is refused (DEGRADED, IMPLAUSIBLE_STEP). ``RESYNC_FRAMES`` refused frames
+consistent with each other but not with the last accepted one are a counter restart (COUNTER_RESET):
+the odometry is re-primed on the first of them and the jump itself is never integrated. The counters
+are absolute, so the first frame after a gap carries the distance driven meanwhile.
 
 No rule on the counts alone tells a restart whose jump fits the bound (a controller silent long
 enough) from motion, so the controller says its age: a frame whose CTRL_UPTIME is below the last
@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from odocan.firmware import frames as fr
 from odocan.firmware.clock import FirmwareClock
+from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
 from odocan.firmware.e2e import COUNTER_MASK, FRAME_LEN, E2EReceiver, p02_crc
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.fixmath import U16_MAX, U32_MAX, muldiv_round_u64, wrap_signed, wrap_u32
@@ -34,7 +35,8 @@ from odocan.firmware.odometry import Odometry
 from odocan.firmware.reception import Reception
 from odocan.firmware.twist import ENCODER_PERIOD_US, Twist
 
-MAX_WHEEL_SPEED_MM_S = 4_000  # build-time maximum rim speed of either wheel (a #define)
+# The plausibility bound of a robot whose parameters state none (RobotParams.max_wheel_speed_mm_s)
+MAX_WHEEL_SPEED_MM_S = MAX_WHEEL_SPEED_DEFAULT_MM_S
 RESYNC_FRAMES = 3  # frames consistent with each other, not with the last one: counters restarted
 COUNTER_VALUES = 16  # E2E COUNTER values (4 bits): one whole counter cycle
 STEP_PERIODS_MAX = U16_MAX  # the twist's dt and the plausibility bound saturate here (655 s)

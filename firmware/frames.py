@@ -106,6 +106,7 @@ class ConfigParam(IntEnum):
     WHEELBASE = 3
     COUNTER_BITS = 4
     INTEGRATOR = 5
+    MAX_WHEEL_SPEED = 6  # u16 mm/s
     APPLY = 15
 
 
@@ -189,7 +190,7 @@ class OdomSetPose(NamedTuple):
 class OdomConfig(NamedTuple):
     counter: int
     param: int  # ConfigParam
-    value: u32  # u32 parameters; u8 for COUNTER_BITS / INTEGRATOR; raw u32 otherwise
+    value: u32  # u32 parameters; u8 COUNTER_BITS / INTEGRATOR; u16 MAX_WHEEL_SPEED; raw u32 else
 
 
 class NavGoal(NamedTuple):
@@ -286,6 +287,8 @@ def unpack_odom_config(data: bytes | bytearray) -> OdomConfig:
     value = (w >> 16) & U32_MAX
     if param in CONFIG_U8_LIMITS:
         value &= 0xFF
+    elif param == ConfigParam.MAX_WHEEL_SPEED:
+        value &= U16_MAX
     elif param == ConfigParam.APPLY:
         value = 0
     return OdomConfig((w >> 8) & U4_MAX, param, value)

@@ -15,6 +15,10 @@ SecOC (ABI 2, docs/secoc.md): a board with a key provisions it with
 ``odocan_fw_provision_secoc`` right after ``odocan_fw_init``, with the board's EPOCH cell
 (``NvmCell``, or a file: ``sim.board.FileNvm``) behind two C callbacks. A library of ABI 1 (a
 team's firmware built before) still runs without a key; asked for one, it is refused in one line.
+
+ABI 3: ``odocan_fw_init`` takes seven parameters, the robot's ``max_wheel_speed_mm_s`` last. A
+library of ABI 1 or 2 reads six and bounds steps at its build-time 4 m/s: it runs a robot whose
+profile says 4 m/s and is refused, in one line, any other.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from typing import Protocol, TypeVar
 
 import can
 
-from odocan.firmware.config import RobotParams
+from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S, RobotParams
 from odocan.firmware.errors import ErrorFlag, ErrorMask, State
 from odocan.firmware.hal import TICK_PERIOD_US, CanTx, FreshnessNvm
 from odocan.sim.board import FirmwareBoard, NvmCell
@@ -38,9 +42,11 @@ from odocan.sim.clock import Clock
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 
 FIRMWARES = ("python", "c")
-ABI_VERSION = 2  # ODOCAN_FW_ABI_VERSION of firmware/c/odocan_fw.h
-ABI_VERSIONS = (1, 2)  # what this board speaks: 1 without SecOC, 2 with odocan_fw_provision_secoc
+ABI_VERSION = 3  # ODOCAN_FW_ABI_VERSION of firmware/c/odocan_fw.h
+# what this board speaks: 1 without SecOC, 2 with odocan_fw_provision_secoc, 3 with the speed bound
+ABI_VERSIONS = (1, 2, 3)
 SECOC_ABI = 2
+SPEED_ABI = 3  # odocan_fw_init's seventh parameter, max_wheel_speed_mm_s
 FIRMWARE_C_DIR = Path(__file__).resolve().parent.parent / "firmware" / "c"
 
 
@@ -139,6 +145,18 @@ def check_secoc_abi(lib: ctypes.CDLL) -> None:
         )
 
 
+def check_speed_abi(lib: ctypes.CDLL, params: RobotParams) -> None:
+    """``ConfigurationError`` (one line) when ``lib`` predates ABI 3 (its bound is a build-time 4
+    m/s) and the robot states another maximum wheel speed."""
+    version = lib.odocan_fw_abi_version()
+    if version < SPEED_ABI and params.max_wheel_speed_mm_s != MAX_WHEEL_SPEED_DEFAULT_MM_S:
+        raise ConfigurationError(
+            f"the C firmware {lib._name} has ABI version {version}, bounded at "
+            f"{MAX_WHEEL_SPEED_DEFAULT_MM_S} mm/s; the robot's max_wheel_speed is "
+            f"{params.max_wheel_speed_mm_s} mm/s (ABI {SPEED_ABI}): rebuild it"
+        )
+
+
 def _declare_secoc(lib: ctypes.CDLL) -> None:
     """ABI 2's odocan_fw_provision_secoc (missing from the library: FirmwareBuildError)."""
     try:
@@ -191,6 +209,7 @@ class CEcu:
         self._lib = lib = load_library()
         if secoc_key is not None:
             check_secoc_abi(lib)
+        check_speed_abi(lib, params)
         size = lib.odocan_fw_state_size()
         self._mem = ctypes.create_string_buffer(size)  # malloc'ed: aligned for uint64_t
         self._fw = ctypes.cast(self._mem, ctypes.c_void_p)
@@ -198,13 +217,14 @@ class CEcu:
         self._clock = clock
         self._pending: BaseException | None = None
         self._tx = _TxFn(self._transmit)  # kept alive as long as the firmware holds it
-        raw = (ctypes.c_uint32 * 6)(
+        raw = (ctypes.c_uint32 * 7)(
             params.counts_per_rev,
             params.wheel_radius_left_nm,
             params.wheel_radius_right_nm,
             params.wheelbase_nm,
             params.counter_bits,
             params.integrator,
+            params.max_wheel_speed_mm_s,  # ABI 3 (an older library reads the first six)
         )
         if lib.odocan_fw_init(self._fw, size, raw, self._tx, None) != 0:
             raise FirmwareBuildError("--firmware c: odocan_fw_init refused its state buffer")

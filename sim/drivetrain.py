@@ -1,9 +1,11 @@
 """Two DC wheel motors with speed controllers, the wheels, and their incremental encoders.
 
 Motor model (each wheel). The motor controller receives a rim-speed setpoint v_sp (m/s, from
-MOTOR_CMD) and regulates the wheel *angular* speed to w_sp = v_sp / r_nom (the NOMINAL radius,
-all the controller knows). The response is first order with time constant tau, its rate limited
-to the acceleration limit a (m/s^2 at the nominal rim, i.e. alpha = a / r_nom in rad/s^2):
+MOTOR_CMD) and regulates the wheel *angular* speed to w_sp = v_sp / r_nom (the NOMINAL radius, all
+the controller knows), v_sp saturated at the profile's +-max_wheel_speed_m_s (the response below
+never overshoots, so no wheel's counts outrun the firmware's plausibility bound). The response is
+first order with time constant tau, its rate limited to the acceleration limit a (m/s^2 at the
+nominal rim, i.e. alpha = a / r_nom in rad/s^2):
 
     dw/dt = clip((w_sp - w) / tau, -alpha, +alpha)
 
@@ -140,6 +142,7 @@ class Drivetrain:
         self.quadrature = quadrature
         self.counter_offset = counter_offset
         self.nominal_radii_m = (profile.wheel_radius_left_m, profile.wheel_radius_right_m)
+        self._top_mps = profile.max_wheel_speed_m_s  # the motor controller's saturation
         self.actual_radii_m = actual_radii_m
         self._alpha = np.array([self.config.accel_limit_mps2 / r for r in self.nominal_radii_m])
         self._radii = np.array(actual_radii_m)
@@ -155,9 +158,14 @@ class Drivetrain:
         self._local_times_cache: dict[int, FloatArray] = {}
 
     def command(self, left_mps: float, right_mps: float) -> None:
-        """Latch rim-speed setpoints (m/s) at the current substep and restart the timeout."""
+        """Latch rim-speed setpoints (m/s) at the current substep and restart the timeout. A
+        setpoint beyond the profile's ``max_wheel_speed_m_s`` is clamped to it (the controller
+        saturates): the wheels never outrun the firmware's plausibility bound."""
         if not (math.isfinite(left_mps) and math.isfinite(right_mps)):
             raise ValueError(f"wheel speed setpoints must be finite, got {left_mps}, {right_mps}")
+        top = self._top_mps
+        left_mps = min(max(left_mps, -top), top)
+        right_mps = min(max(right_mps, -top), top)
         self.setpoint = [left_mps / self.nominal_radii_m[0], right_mps / self.nominal_radii_m[1]]
         self._timeout_at = self.substep + self._timeout_substeps
 

@@ -14,6 +14,12 @@ Shipped profiles live in ``sim/robots/<name>.toml``::
     wheel_radius_right_m = 0.075
     wheelbase_m = 0.30           # distance between the wheel contact points, 0.01 .. 4 m
     counter_bits = 16            # width of the free-running encoder counters: 16 or 32
+    max_wheel_speed_m_s = 4.0    # optional: the fastest rim speed either wheel can reach,
+                                 # 0.001 .. 65.535 m/s on the 1 mm/s grid (default 4.0)
+
+``max_wheel_speed_m_s`` is the firmware's plausibility bound (an encoder step beyond it over its
+periods is refused), the judges' bound on what a gap or a stall may hide, and the simulated motor
+controller's saturation (a setpoint beyond it is clamped, as a real controller saturates).
 """
 
 from __future__ import annotations
@@ -29,13 +35,15 @@ from typing import Any
 
 from odocan.firmware.config import (
     ENCODER_PERIOD_US,
+    MAX_WHEEL_SPEED_DEFAULT_MM_S,
+    MAX_WHEEL_SPEED_MAX_MM_S,
+    MAX_WHEEL_SPEED_MIN_MM_S,
     READABLE_PERIODS,
     WIRE_COUNTER_BITS,
     ConfigReason,
     RobotParams,
     validate_at_speed,
 )
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.sim.exceptions import ConfigurationError
 
 ROBOTS_DIR = Path(str(resources.files("odocan.sim").joinpath("robots")))
@@ -48,7 +56,10 @@ _COUNTER_BITS = (16, 32)
 _FLOAT_KEYS = ("wheel_radius_left_m", "wheel_radius_right_m", "wheelbase_m")
 _INT_KEYS = ("counts_per_rev", "counter_bits")
 _REQUIRED_KEYS = frozenset(_FLOAT_KEYS + _INT_KEYS)
-_OPTIONAL_KEYS = frozenset({"name"})
+_OPTIONAL_KEYS = frozenset({"name", "max_wheel_speed_m_s"})
+MM_PER_M = 1000
+DEFAULT_MAX_WHEEL_SPEED_M_S = MAX_WHEEL_SPEED_DEFAULT_MM_S / MM_PER_M  # 4.0 m/s
+_SPEED_RANGE_M_S = (MAX_WHEEL_SPEED_MIN_MM_S / MM_PER_M, MAX_WHEEL_SPEED_MAX_MM_S / MM_PER_M)
 
 
 class ProfileError(ConfigurationError):
@@ -76,6 +87,8 @@ class RobotProfile:
             exactly ``nm / 1e9`` for an integer ``nm``.
         wheelbase_m: nominal distance between the wheel contact points, 0.01 .. 4 m, on the nm grid.
         counter_bits: width of the free-running unsigned encoder counters, 16 or 32.
+        max_wheel_speed_m_s: the fastest rim speed either wheel can reach, 0.001 .. 65.535 m/s,
+            exactly ``mm / 1e3`` for an integer ``mm`` (default 4.0).
     """
 
     name: str
@@ -84,6 +97,12 @@ class RobotProfile:
     wheel_radius_right_m: float
     wheelbase_m: float
     counter_bits: int
+    max_wheel_speed_m_s: float = DEFAULT_MAX_WHEEL_SPEED_M_S
+
+    @property
+    def max_wheel_speed_mm_s(self) -> int:
+        """The speed bound as the firmware holds it (u16 mm/s)."""
+        return round(self.max_wheel_speed_m_s * MM_PER_M)
 
     def firmware_params(self) -> dict[str, int]:
         """The integers the firmware is configured with (lengths in nanometres)."""
@@ -93,6 +112,7 @@ class RobotProfile:
             "wheel_radius_right_nm": _nm(self.wheel_radius_right_m),
             "wheelbase_nm": _nm(self.wheelbase_m),
             "counter_bits": self.counter_bits,
+            "max_wheel_speed_mm_s": self.max_wheel_speed_mm_s,
         }
 
 
@@ -106,6 +126,7 @@ def to_toml(profile: RobotProfile) -> str:
         f"wheel_radius_right_m = {profile.wheel_radius_right_m!r}\n"
         f"wheelbase_m = {profile.wheelbase_m!r}\n"
         f"counter_bits = {profile.counter_bits}\n"
+        f"max_wheel_speed_m_s = {profile.max_wheel_speed_m_s!r}\n"
     )
 
 
@@ -164,7 +185,10 @@ def _from_table(table: dict[str, Any], default_name: str, source: str) -> RobotP
         _check_int(table[key], key, source)
     for key in _FLOAT_KEYS:
         _check_float(table[key], key, source)
-    _check_values(table, source)
+    speed_m_s = table.get("max_wheel_speed_m_s", DEFAULT_MAX_WHEEL_SPEED_M_S)
+    _check_float(speed_m_s, "max_wheel_speed_m_s", source)
+    _check_speed(speed_m_s, source)
+    _check_values(table, source, speed_m_s)
     return RobotProfile(
         name=name,
         counts_per_rev=table["counts_per_rev"],
@@ -172,7 +196,16 @@ def _from_table(table: dict[str, Any], default_name: str, source: str) -> RobotP
         wheel_radius_right_m=_metres(_nm(table["wheel_radius_right_m"])),
         wheelbase_m=_metres(_nm(table["wheelbase_m"])),
         counter_bits=table["counter_bits"],
+        max_wheel_speed_m_s=round(speed_m_s * MM_PER_M) / MM_PER_M,
     )
+
+
+def _check_speed(speed_m_s: float, source: str) -> None:
+    """The speed bound within the firmware's u16 mm/s range, once on its 1 mm/s grid."""
+    lo, hi = _SPEED_RANGE_M_S
+    if not lo <= round(speed_m_s * MM_PER_M) / MM_PER_M <= hi:
+        raise ProfileError(f"{source}: 'max_wheel_speed_m_s' = {speed_m_s} m/s is outside "
+                           f"{lo:g}..{hi:g} m/s")
 
 
 def _check_keys(table: dict[str, Any], source: str) -> None:
@@ -199,7 +232,7 @@ def _check_float(value: object, key: str, source: str) -> None:
         raise ProfileError(f"{source}: {key!r} must be finite, got {value}")
 
 
-def _check_values(table: dict[str, Any], source: str) -> None:
+def _check_values(table: dict[str, Any], source: str, speed_m_s: float) -> None:
     """Range checks, one clear message per failure."""
     lo, hi = _RADIUS_RANGE_M
     for key in ("wheel_radius_left_m", "wheel_radius_right_m"):
@@ -219,17 +252,19 @@ def _check_values(table: dict[str, Any], source: str) -> None:
     if table["counter_bits"] not in _COUNTER_BITS:
         value = table["counter_bits"]
         raise ProfileError(f"{source}: 'counter_bits' must be 16 or 32, got {value}")
-    _check_readable(table, source)
+    _check_readable(table, source, speed_m_s)
 
 
-def _check_readable(table: dict[str, Any], source: str) -> None:
+def _check_readable(table: dict[str, Any], source: str, speed_m_s: float) -> None:
     """The firmware's ``validate_at_speed``: at its maximum wheel speed a step of
     ``READABLE_PERIODS`` periods must stay below half the counters' readable range (their width,
     at most the wire's 24 bits), or its counts read wrapped on board and on the host alike."""
     nm = {key: _nm(table[key]) for key in _FLOAT_KEYS}
+    speed_mm_s = round(speed_m_s * MM_PER_M)
     params = RobotParams(table["counts_per_rev"], nm["wheel_radius_left_m"],
-                         nm["wheel_radius_right_m"], nm["wheelbase_m"], table["counter_bits"], 0)
-    if validate_at_speed(params, MAX_WHEEL_SPEED_MM_S) is not ConfigReason.WIRE_RANGE:
+                         nm["wheel_radius_right_m"], nm["wheelbase_m"], table["counter_bits"], 0,
+                         speed_mm_s)
+    if validate_at_speed(params, speed_mm_s) is not ConfigReason.WIRE_RANGE:
         return
     bits = min(table["counter_bits"], WIRE_COUNTER_BITS)
     radius_m = min(table["wheel_radius_left_m"], table["wheel_radius_right_m"])
@@ -241,4 +276,4 @@ def _check_readable(table: dict[str, Any], source: str) -> None:
         f"{source}: {table['counts_per_rev']} counts per turn of a {radius_m * 1e3:.4g} mm wheel "
         f"on {bits}-bit counters read wrapped above {readable_m_s:.3g} m/s (a step of "
         f"{READABLE_PERIODS} encoder periods), below the firmware's "
-        f"{MAX_WHEEL_SPEED_MM_S / 1000:g} m/s bound ({cures})")
+        f"{speed_mm_s / MM_PER_M:g} m/s bound ({cures}, or a lower max_wheel_speed_m_s)")

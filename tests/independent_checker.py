@@ -47,6 +47,7 @@ import re
 from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import cantools
 from cantools.database.can import Database
@@ -57,7 +58,7 @@ from tests.dbc_typed import dbc_attribute
 POSITION_LSB_M = 1e-4
 HEADING_LSB_RAD = 2.0 * math.pi / 65536.0
 PERIOD_S = 0.01
-MAX_WHEEL_SPEED_M_S = 4.0  # the firmware's build-time maximum rim speed
+MAX_WHEEL_SPEED_M_S = 4.0  # the firmware's maximum rim speed when the robot states none
 RESYNC = 3  # refused frames consistent among themselves: the counters restarted
 SILENCE_PERIODS = 8  # no pose for this many periods while the encoder frames went on: a stall
 _LINE = re.compile(r"\((\d+\.\d+)\) \S+ ([0-9A-Fa-f]+)#([0-9A-Fa-f]*)")
@@ -72,6 +73,7 @@ class Robot:
     wheel_radius_right_nm: int
     wheelbase_nm: int
     counter_bits: int
+    max_wheel_speed_mm_s: int = round(MAX_WHEEL_SPEED_M_S * 1000)
 
 
 @dataclass(frozen=True)
@@ -276,14 +278,17 @@ class _Follower:
 def check(
     path: Path, robot: Robot, integrator: str,
     starts: Callable[[float], tuple[float, float, float]],
-    max_wheel_speed_m_s: float | None = MAX_WHEEL_SPEED_M_S,
+    max_wheel_speed_m_s: float | Literal["robot"] | None = "robot",
     reboots_t_s: Collection[float] = (),
 ) -> Verdict:
     """Compare the on-board poses of the log at ``path`` with this checker's odometry started
     at ``starts(timestamp of the segment's first encoder frame)`` (module docstring);
     ``max_wheel_speed_m_s`` None: no plausibility rule (drives faster than any ECU allows);
+    "robot": the robot's own (``Robot.max_wheel_speed_mm_s``);
     ``reboots_t_s``: encoder frames (their times) a rebooted firmware primed on."""
     frames = _Frames(path)
+    if max_wheel_speed_m_s == "robot":
+        max_wheel_speed_m_s = robot.max_wheel_speed_mm_s / 1000
     walk = _Follower(robot, integrator, starts, max_wheel_speed_m_s, reboots_t_s)
     for t, name, s in frames.rows:
         if name == "WHEEL_ENCODERS":

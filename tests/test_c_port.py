@@ -319,6 +319,7 @@ def _config_probes(rng: random.Random, ask: Callable[..., None]) -> None:
             rng.randrange(0, U32_MAX),
             rng.choice((16, 32, 8)),
             rng.choice((0, 1, 2, 3)),
+            rng.choice((0, 1, 700, 4_000, 65_535, 65_536, rng.randrange(0, 1 << 32))),
         )
         if rng.random() < 0.7:  # mostly in range, so that the constants are derived
             params = dataclasses.replace(
@@ -329,6 +330,7 @@ def _config_probes(rng: random.Random, ask: Callable[..., None]) -> None:
                 wheelbase_nm=rng.randrange(10_000_000, 4_000_000_001),
                 counter_bits=rng.choice((16, 32)),
                 integrator=rng.choice((0, 1, 2)),
+                max_wheel_speed_mm_s=rng.randrange(1, 65_536),
             )
         speed_mm_s = rng.choice((4_000, 500, 65_535, rng.randrange(1, 65_536)))
         ask(f"config_speed {speed_mm_s} " + " ".join(str(v) for v in dataclasses.astuple(params)),
@@ -758,11 +760,12 @@ class _EcuSession:
 
     def config_param(self) -> None:
         rng = self.rng
-        param = rng.choice((0, 0, 1, 2, 3, 4, 5, 15, 15, 15, 9))
+        param = rng.choice((0, 0, 1, 2, 3, 4, 5, 6, 6, 15, 15, 15, 9))
         by_param = {
             0: rng.choice((500, 2578, 0, 500)),
             4: rng.choice((16, 32)),
             5: rng.randrange(3),
+            6: rng.choice((700, 1_200, 4_000, 0, 65_535)),  # MAX_WHEEL_SPEED, mm/s (0: NACK)
         }
         by_param.update({1: 75_000_000, 2: rng.choice((75_000_000, 35_000_000)), 3: 300_000_000})
         v = by_param.get(param, 0)
@@ -1000,10 +1003,16 @@ def test_the_probe_script_reaches_every_state_and_reason() -> None:
     health = ErrorFlag.TIME_LOST | ErrorFlag.IMPLAUSIBLE_STEP | ErrorFlag.COUNTER_RESET
     assert all(any(int(t[2]) & flag for t in ticks) for flag in health)
     states = [(int(t[0]), int(t[1])) for t in ticks]
+    # one ECU's ticks: an ecu_new between two ticks starts another (FAULT for invalid params)
+    born = list(itertools.accumulate(
+        c.startswith("ecu_new") for c in cmds))
+    lives = [born[i] for i, c in enumerate(cmds) if c.startswith("ecu_tick")]
     recovered = [
         after
-        for before, after in itertools.pairwise(states)
-        if before == (State.DEGRADED, Reason.COUNTER_RESET) and after[0] != State.DEGRADED
+        for (before, after), (a, b) in zip(itertools.pairwise(states),
+                                           itertools.pairwise(lives), strict=True)
+        if a == b and before == (State.DEGRADED, Reason.COUNTER_RESET)
+        and after[0] != State.DEGRADED
     ]
     assert recovered
     assert all(after == (State.OK, Reason.NONE) for after in recovered)

@@ -113,6 +113,7 @@ def test_corrected_profile_and_multipliers_by_hand() -> None:
     assert kept.firmware_params() == {
         "counts_per_rev": 500, "wheel_radius_left_nm": 74924344,
         "wheel_radius_right_nm": 75075656, "wheelbase_nm": 302965940, "counter_bits": 16,
+        "max_wheel_speed_mm_s": 4000,  # the nominal profile's, kept
     }
     m = ros2_multipliers(nominal, kept)
     exact = 1e-15  # the ratio of two doubles on the nm grid vs the ratio of the integers

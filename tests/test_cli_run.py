@@ -28,6 +28,7 @@ ROBOT_KEYS = {
     "wheel_radius_right_m": float,
     "wheelbase_m": float,
     "counter_bits": int,
+    "max_wheel_speed_m_s": float,
 }
 ERROR_KEYS = (
     "max_position_error_m",

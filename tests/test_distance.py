@@ -10,6 +10,7 @@ with ``distance_of`` changing what it reports.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Callable
@@ -47,7 +48,9 @@ from tests.test_judge_campaign import robots as campaign_robots
 
 Wrong = Callable[[int, int, Odometry], int]
 IntArray = npt.NDArray[np.int64]
-KOBUKI = load("kobuki")
+# The synthesized drives run at 1 to 3.9 m/s (and 2 m a period for the long one): a kobuki
+# bounded at 4 m/s, as before profiles carried a speed (its own 0.7 m/s refuses those steps).
+KOBUKI = dataclasses.replace(load("kobuki"), max_wheel_speed_m_s=4.0)
 ODD = RobotProfile("odd", 1 << 24, 0.0350000004, 0.0351234567, 0.01, 16)  # nm-inexact radii
 SHORT = 3_000  # encoder periods (30 s)
 

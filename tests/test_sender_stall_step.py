@@ -15,6 +15,7 @@ still FAILs in every judge. The distance is checked by this file's own float64 o
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -32,13 +33,14 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import POSITION_LSB_M, analyze
 from odocan.sim.board import TICK_S
 from odocan.sim.contract import DBC_PATH
-from odocan.sim.robot import load
+from odocan.sim.robot import load, to_toml
 from tests.independent_checker import Robot, _Odometry
 from tests.synth_log import synthesize
 from tests.test_health_rig import Watch, circle_rig
 from tests.test_stall_bound import _live
 
 KOBUKI = load("kobuki")
+FAST_KOBUKI = dataclasses.replace(KOBUKI, max_wheel_speed_m_s=4.0)  # before the 0.7 m/s profile
 EVIDENCE = Path(__file__).parent / "files" / "sim_sigstop_1s.blf"
 STEPS = 600
 STALL_AT = 301  # odd: the resumed frame has no pose of its own (the catch-up frame's names it on)
@@ -126,17 +128,21 @@ def _streamed(path: Path, tmp_path: Path, robot: str = "kobuki") -> dict[str, fl
     return streamed
 
 
-def test_the_evidence_log_of_a_sim_stopped_1_s_passes(capsys: pytest.CaptureFixture[str]
-                                                      ) -> None:
+def test_the_evidence_log_of_a_sim_stopped_1_s_passes(capsys: pytest.CaptureFixture[str],
+                                                      tmp_path: Path) -> None:
     """odocan sim SIGSTOPped 1 s (udp_multicast, kobuki): before, analyze said counter_restart
     and FAIL at 1644.9 mm (whole and --stream always); the firmware was within 6 mm of the
-    truth."""
+    truth. The log was recorded before kobuki's profile said 0.7 m/s: its wheels ran at up to
+    1.0 m/s (117 counts a period) under a firmware bounded at 4 m/s, so it is judged as that
+    robot (``FAST_KOBUKI``)."""
+    robot = tmp_path / "kobuki_4m_s.toml"
+    robot.write_text(to_toml(FAST_KOBUKI))
     for stream in ("never", "always"):
-        code = main(["analyze", str(EVIDENCE), "--robot", "kobuki", "--stream", stream])
+        code = main(["analyze", str(EVIDENCE), "--robot", str(robot), "--stream", stream])
         out = capsys.readouterr().out
         assert code == 0, out
         assert "PASS" in out
-    result = analyze(read_log(EVIDENCE), KOBUKI)
+    result = analyze(read_log(EVIDENCE), FAST_KOBUKI)
     assert result.passed
     assert not [e for e in result.report["events"] if e["kind"] == "counter_restart"]
     assert result.report["onboard_vs_reference"]["max_position_error_m"] <= POSITION_LSB_M

@@ -43,14 +43,14 @@ def test_list_profiles() -> None:
 
 def test_pmir_is_seed_002_robot() -> None:
     p = load("pmir")
-    assert p == RobotProfile("pmir", 500, 0.075, 0.075, 0.3, 16)
+    assert p == RobotProfile("pmir", 500, 0.075, 0.075, 0.3, 16, 4.0)
     # seed 002 eq. 4: pi * 15 cm / 500 = 0.094 cm per pulse (0.09425, truncated in the paper)
     metres_per_pulse = 2 * math.pi * p.wheel_radius_left_m / p.counts_per_rev
     assert metres_per_pulse == pytest.approx(0.00094, abs=3e-6)
 
 
 def test_kobuki() -> None:
-    assert load("kobuki") == RobotProfile("kobuki", 2578, 0.035, 0.035, 0.23, 16)
+    assert load("kobuki") == RobotProfile("kobuki", 2578, 0.035, 0.035, 0.23, 16, 0.7)
 
 
 def test_firmware_params_are_integers_in_nm() -> None:
@@ -61,6 +61,7 @@ def test_firmware_params_are_integers_in_nm() -> None:
         "wheel_radius_right_nm": 35_000_000,
         "wheelbase_nm": 230_000_000,
         "counter_bits": 16,
+        "max_wheel_speed_mm_s": 700,
     }
     assert all(type(v) is int for v in params.values())
 

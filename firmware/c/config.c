@@ -35,6 +35,10 @@ enum config_reason validate(const struct robot_params *params)
     if (params->integrator > 2u) {
         return CONFIG_INTEGRATOR_INVALID;
     }
+    if (params->max_wheel_speed_mm_s < MAX_WHEEL_SPEED_MIN_MM_S
+        || params->max_wheel_speed_mm_s > MAX_WHEEL_SPEED_MAX_MM_S) {
+        return CONFIG_MAX_WHEEL_SPEED_OUT_OF_RANGE;
+    }
     uint32_t scratch = 0u;
     for (unsigned wheel = 0u; wheel < 2u; ++wheel) {
         if (bam64_per_count(radii_nm[wheel], params, &scratch) >= BAM64_PER_COUNT_MAX) {

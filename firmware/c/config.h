@@ -15,6 +15,11 @@
 #define WHEEL_RADIUS_MAX_NM 2000000000u    /* 2 m */
 #define WHEELBASE_MIN_NM 10000000u         /* 10 mm */
 #define WHEELBASE_MAX_NM 4000000000u       /* 4 m (u32 holds 4.29 m) */
+/* The fastest rim speed either wheel can reach (u16 mm/s, ODOM_CONFIG MAX_WHEEL_SPEED): an encoder
+ * step beyond it is implausible. A robot that states none is bounded at the default. */
+#define MAX_WHEEL_SPEED_DEFAULT_MM_S 4000u
+#define MAX_WHEEL_SPEED_MIN_MM_S 1u
+#define MAX_WHEEL_SPEED_MAX_MM_S 65535u /* the signal's u16 */
 /* One encoder count may turn the robot by at most 1/16 turn: beyond that the parameters are absurd. */
 #define BAM64_PER_COUNT_MAX (UINT64_C(1) << 60)
 #define ENCODER_PERIOD_US 10000 /* WHEEL_ENCODERS GenMsgCycleTime */
@@ -37,10 +42,12 @@ enum config_reason {
     CONFIG_COUNTER_BITS_INVALID = 4,
     CONFIG_INTEGRATOR_INVALID = 5,
     CONFIG_GEOMETRY_ABSURD = 6, /* one count would turn the robot by more than 1/16 turn */
-    CONFIG_WIRE_RANGE = 7       /* a step at the maximum wheel speed could wrap the counters */
+    CONFIG_WIRE_RANGE = 7,      /* a step at the maximum wheel speed could wrap the counters */
+    CONFIG_MAX_WHEEL_SPEED_OUT_OF_RANGE = 8 /* outside MAX_WHEEL_SPEED_MIN_MM_S .. _MAX_MM_S */
 };
 
-/* Robot parameters as raw integers (u32 each), exactly as ODOM_CONFIG carries them. */
+/* Robot parameters as raw integers (u32 each), exactly as ODOM_CONFIG carries them;
+ * max_wheel_speed_mm_s (u16 on the wire) bounds a plausible encoder step. */
 struct robot_params {
     uint32_t counts_per_rev;
     uint32_t wheel_radius_left_nm;
@@ -48,6 +55,7 @@ struct robot_params {
     uint32_t wheelbase_nm;
     uint32_t counter_bits;
     uint32_t integrator;
+    uint32_t max_wheel_speed_mm_s;
 };
 
 /* Fixed-point constants derived once from robot_params. */

@@ -129,7 +129,7 @@ void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
     ecu->errors = 0u;
     ecu->state = STATE_INIT;
     ecu->reason = REASON_NONE;
-    if (validate_at_speed(params, MAX_WHEEL_SPEED_MM_S) != CONFIG_OK) {
+    if (validate_at_speed(params, params->max_wheel_speed_mm_s) != CONFIG_OK) {
         ecu->errors |= ERROR_CONFIG_INVALID;
         ecu->state = STATE_FAULT;
         ecu->reason = REASON_CONFIG_INVALID;
@@ -138,7 +138,7 @@ void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
     struct odom_constants consts;
     derive_constants(params, &ecu->errors, &consts);
     odometry_init(&ecu->odometry, &consts, &ecu->errors);
-    ecu->max_wheel_speed_mm_s = MAX_WHEEL_SPEED_MM_S;
+    ecu->max_wheel_speed_mm_s = params->max_wheel_speed_mm_s;
     ecu->this_step_periods = 1u;
     step_bounds(ecu);
     data_ids_of_slot(WHEEL_ENCODERS_E2E_SLOT, ecu->data_ids[0]);
@@ -851,7 +851,7 @@ static void act_config(struct odom_ecu *ecu, const uint8_t *data)
     unpack_odom_config(data, &frame);
     if (frame.field == PARAM_APPLY) {
         apply_config(ecu, &frame);
-    } else if (frame.field <= PARAM_INTEGRATOR) {
+    } else if (frame.field <= PARAM_MAX_WHEEL_SPEED) {
         ecu->staged_config_value[frame.field] = (uint32_t)frame.value;
         ecu->staged_config |= 1u << frame.field;
         ack(ecu, ODOM_CONFIG_ID, &frame, ACK_RESULT_ACK, ACK_OK);
@@ -864,18 +864,18 @@ static void act_config(struct odom_ecu *ecu, const uint8_t *data)
 static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame)
 {
     struct robot_params candidate = ecu->params;
-    uint32_t *fields[6] = {
+    uint32_t *fields[7] = {
         &candidate.counts_per_rev, &candidate.wheel_radius_left_nm,
         &candidate.wheel_radius_right_nm, &candidate.wheelbase_nm,
-        &candidate.counter_bits, &candidate.integrator,
+        &candidate.counter_bits, &candidate.integrator, &candidate.max_wheel_speed_mm_s,
     };
-    for (unsigned param = 0u; param < 6u; ++param) {
+    for (unsigned param = 0u; param < 7u; ++param) {
         if ((ecu->staged_config & (1u << param)) != 0u) {
             *fields[param] = ecu->staged_config_value[param];
         }
     }
     ecu->staged_config = 0u;
-    enum config_reason reason = validate_at_speed(&candidate, ecu->max_wheel_speed_mm_s);
+    enum config_reason reason = validate_at_speed(&candidate, candidate.max_wheel_speed_mm_s);
     if (reason != CONFIG_OK) {
         ecu->errors |= ERROR_CONFIG_INVALID;
         enum ack_reason ack_reason = reason == CONFIG_GEOMETRY_ABSURD || reason == CONFIG_WIRE_RANGE
@@ -893,6 +893,7 @@ static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame)
     struct odom_constants consts;
     derive_constants(&candidate, &ecu->errors, &consts);
     odometry_reconfigure(&ecu->odometry, &consts);
+    ecu->max_wheel_speed_mm_s = candidate.max_wheel_speed_mm_s;
     step_bounds(ecu);
     if (ecu->state == STATE_FAULT) {
         ecu->state = STATE_INIT;

@@ -22,7 +22,8 @@
 #define RECOVERY_FRAMES 5
 #define TICKS_PER_SECOND (1000000u / TICK_PERIOD_US)
 #define LOST_TIME_PERIODS WATCHDOG_TICKS /* a tick this many periods after the last: time lost */
-#define MAX_WHEEL_SPEED_MM_S 4000u /* build-time maximum rim speed of either wheel */
+/* The plausibility bound of a robot whose parameters state none (robot_params) */
+#define MAX_WHEEL_SPEED_MM_S MAX_WHEEL_SPEED_DEFAULT_MM_S
 #define RESYNC_FRAMES 3 /* frames consistent with each other, not with the last: restarted */
 #define STEP_PERIODS_MAX 0xFFFFu /* the twist's dt and the plausibility bound saturate (655 s) */
 #define TWO_PI_Q30 ((TWO_PI_Q60 + (INT64_C(1) << 29)) >> 30) /* one turn in Q30 rad (< 2^33) */
@@ -122,7 +123,7 @@ struct odom_ecu {
     unsigned staged_pose;      /* bit per SET_POSE field */
     int64_t staged_pose_value[3];
     unsigned staged_config;    /* bit per CONFIG parameter */
-    uint32_t staged_config_value[6];
+    uint32_t staged_config_value[7];
     /* SecOC (firmware/secoc.py, docs/secoc.md): off unless ecu_provision_secoc was called */
     bool secoc_on;
     struct secoc_receiver secoc_rx;

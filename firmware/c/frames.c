@@ -83,6 +83,7 @@ void unpack_odom_config(const uint8_t data[8], struct mux_record *out)
     case PARAM_WHEELBASE: out->value = m.wheelbase; break;
     case PARAM_COUNTER_BITS: out->value = m.counter_bits; break;
     case PARAM_INTEGRATOR: out->value = m.integrator; break;
+    case PARAM_MAX_WHEEL_SPEED: out->value = m.max_wheel_speed; break;
     case PARAM_APPLY: out->value = 0; break;
     default: out->value = raw_u32(data); break;
     }

@@ -45,7 +45,8 @@
 enum set_pose_field { SET_POSE_X = 0, SET_POSE_Y = 1, SET_POSE_HEADING = 2, SET_POSE_APPLY = 15 };
 enum config_param { PARAM_COUNTS_PER_REV = 0, PARAM_WHEEL_RADIUS_LEFT = 1,
                     PARAM_WHEEL_RADIUS_RIGHT = 2, PARAM_WHEELBASE = 3, PARAM_COUNTER_BITS = 4,
-                    PARAM_INTEGRATOR = 5, PARAM_APPLY = 15 };
+                    PARAM_INTEGRATOR = 5, PARAM_MAX_WHEEL_SPEED = 6 /* u16 mm/s */,
+                    PARAM_APPLY = 15 };
 enum ack_result { ACK_RESULT_ACK = 0, ACK_RESULT_NACK = 1 };
 enum status_page { PAGE_SUMMARY = 0, PAGE_FRAME_TOTALS = 1, PAGE_E2E_WHEEL_ENCODERS = 2,
                    PAGE_E2E_ODOM_SET_POSE = 3, PAGE_E2E_ODOM_CONFIG = 4, PAGE_E2E_NAV_GOAL = 5 };

@@ -14,7 +14,7 @@ size_t odocan_fw_state_size(void)
     return sizeof(struct odom_ecu);
 }
 
-int odocan_fw_init(void *fw, size_t size, const uint32_t params[6], odocan_fw_tx_fn tx,
+int odocan_fw_init(void *fw, size_t size, const uint32_t params[7], odocan_fw_tx_fn tx,
                    void *tx_ctx)
 {
     if (size < sizeof(struct odom_ecu)) {
@@ -27,6 +27,7 @@ int odocan_fw_init(void *fw, size_t size, const uint32_t params[6], odocan_fw_tx
         .wheelbase_nm = params[3],
         .counter_bits = params[4],
         .integrator = params[5],
+        .max_wheel_speed_mm_s = params[6],
     };
     ecu_init((struct odom_ecu *)fw, tx, tx_ctx, &p);
     return 0;

@@ -17,7 +17,8 @@
  * Versioning: ODOCAN_FW_ABI_VERSION changes whenever a function, an argument or a meaning below
  * changes; a host checks odocan_fw_abi_version() before any other call.
  *   1: init, rx_isr, bus_state, rx_overrun, tick, state, errors, ticks (no SecOC).
- *   2: 1 + odocan_fw_provision_secoc (a host with a key refuses a version-1 library). */
+ *   2: 1 + odocan_fw_provision_secoc (a host with a key refuses a version-1 library).
+ *   3: 2 + odocan_fw_init's seventh parameter, max_wheel_speed_mm_s. */
 #ifndef ODOCAN_FW_H
 #define ODOCAN_FW_H
 
@@ -25,7 +26,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define ODOCAN_FW_ABI_VERSION 2u
+#define ODOCAN_FW_ABI_VERSION 3u
 
 /* The firmware's transmit: queue one classic CAN data frame (11-bit ID, 8 bytes), called from
  * inside odocan_fw_tick. Return false when the frame could not be queued (TX queue full,
@@ -41,10 +42,11 @@ size_t odocan_fw_state_size(void);
 
 /* Power-on reset of the instance at `fw` (`size` bytes) with the robot's integer parameters, in
  * the order of ODOM_CONFIG / RobotParams: counts_per_rev, wheel_radius_left_nm,
- * wheel_radius_right_nm, wheelbase_nm, counter_bits, integrator (0 euler, 1 rk2, 2 exact).
+ * wheel_radius_right_nm, wheelbase_nm, counter_bits, integrator (0 euler, 1 rk2, 2 exact),
+ * max_wheel_speed_mm_s (ABI 3: the plausibility bound of an encoder step, 1..65535).
  * Invalid parameters start the firmware in FAULT (state 3) until an ODOM_CONFIG fixes them.
  * Returns 0, or -1 (nothing done) when `size` is smaller than odocan_fw_state_size(). */
-int odocan_fw_init(void *fw, size_t size, const uint32_t params[6], odocan_fw_tx_fn tx,
+int odocan_fw_init(void *fw, size_t size, const uint32_t params[7], odocan_fw_tx_fn tx,
                    void *tx_ctx);
 
 /* The SecOC EPOCH cell of non-volatile memory (data flash, EEPROM; docs/secoc.md): read the

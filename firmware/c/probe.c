@@ -81,6 +81,7 @@ static struct robot_params read_params(void)
     p.wheelbase_nm = (uint32_t)arg_u64();
     p.counter_bits = (uint32_t)arg_u64();
     p.integrator = (uint32_t)arg_u64();
+    p.max_wheel_speed_mm_s = (uint32_t)arg_u64();
     return p;
 }
 
@@ -188,7 +189,8 @@ int main(void)
     e2e_receiver_init(&rx, data_ids, 1u, false);
     static struct odom_ecu ecu;
     static struct tx_log tx_log;
-    static struct robot_params ecu_params = {500u, 75000000u, 75000000u, 300000000u, 16u, 2u};
+    static struct robot_params ecu_params = {500u, 75000000u, 75000000u, 300000000u, 16u, 2u,
+                                                MAX_WHEEL_SPEED_DEFAULT_MM_S};
     ecu_init(&ecu, probe_transmit, &tx_log, &ecu_params);
     static struct navigator nav;
     static uint32_t nav_errors;
@@ -456,6 +458,7 @@ int main(void)
             ecu_params.wheelbase_nm = (uint32_t)arg_u64();
             ecu_params.counter_bits = (uint32_t)arg_u64();
             ecu_params.integrator = (uint32_t)arg_u64();
+            ecu_params.max_wheel_speed_mm_s = (uint32_t)arg_u64();
             tx_log.full = false;
             ecu_init(&ecu, probe_transmit, &tx_log, &ecu_params);
             printf("ok\n");

@@ -145,10 +145,11 @@ static const char *const HEADER_KEYS[] = {
     "counts_per_rev",         "wheel_radius_left_nm",    "wheel_radius_right_nm",
     "wheelbase_nm",           "counter_bits",            "integrator",
     "m_per_count_left_q48_m", "m_per_count_right_q48_m", "bam64_per_count_left",
-    "bam64_per_count_right",
+    "bam64_per_count_right",  "max_wheel_speed_mm_s",
 };
-#define HEADER_KEY_COUNT 10
-#define HEADER_ALL ((1u << HEADER_KEY_COUNT) - 1u)
+#define HEADER_KEY_COUNT 11
+#define HEADER_OPTIONAL (1u << 10) /* max_wheel_speed_mm_s: absent in older vector sets */
+#define HEADER_ALL ((1u << HEADER_KEY_COUNT) - 1u - HEADER_OPTIONAL)
 
 static void header_set(struct vector_header *h, const char *key, int64_t v)
 {
@@ -168,6 +169,7 @@ static void header_set(struct vector_header *h, const char *key, int64_t v)
     case 7: h->constants.m_per_count_right_q48_m = v; break;
     case 8: h->constants.bam64_per_count_left = (uint64_t)v; break;
     case 9: h->constants.bam64_per_count_right = (uint64_t)v; break;
+    case 10: h->params.max_wheel_speed_mm_s = v32; break;
     default: return;
     }
     h->seen |= 1u << k;
@@ -177,7 +179,7 @@ static void header_set(struct vector_header *h, const char *key, int64_t v)
 static bool header_constants(const struct vector_header *h, const char *path,
                              struct odom_constants *out)
 {
-    if (h->seen != HEADER_ALL) {
+    if ((h->seen & HEADER_ALL) != HEADER_ALL) {
         fprintf(stderr, "%s: the parameters or constants are missing\n", path);
         return false;
     }
@@ -246,6 +248,7 @@ static bool check_json(const char *path, struct odom_constants *consts)
     static struct replay r;
     struct vector_header header;
     memset(&header, 0, sizeof header);
+    header.params.max_wheel_speed_mm_s = MAX_WHEEL_SPEED_DEFAULT_MM_S; /* unless the file says */
     struct row row;
     memset(&row, 0, sizeof row);
     char key[TOKEN_LEN] = "";

@@ -214,7 +214,7 @@ def candidate_geometry(robot: RobotProfile, base: Correction, ed: float, eb: flo
     fixed = base.corrected(ed, eb)
     return Geometry(
         robot.counts_per_rev, fixed.wheel_radius_left_m, fixed.wheel_radius_right_m,
-        fixed.wheelbase_m,
+        fixed.wheelbase_m, robot.max_wheel_speed_mm_s,
     )
 
 
@@ -307,7 +307,8 @@ def faults(result: UmbmarkResult, robot: RobotProfile) -> list[str]:
     of every run: back at the origin, on-board end = float64 reference); empty when valid."""
     firmware = result.geometry or Correction.nominal(robot)
     geometry = Geometry(robot.counts_per_rev, firmware.wheel_radius_left_m,
-                        firmware.wheel_radius_right_m, firmware.wheelbase_m)
+                        firmware.wheel_radius_right_m, firmware.wheelbase_m,
+                        robot.max_wheel_speed_mm_s)
     reasons = []
     for direction in DIRECTIONS:
         for k, run in enumerate(result.of(direction), start=1):

@@ -47,8 +47,9 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    Without that, a start heading off by its residual (7e-8 rad) grows as residual x distance,
    enough to fail a correct firmware after 600 m.
    The reference takes the steps the firmware is specified to take (firmware/ecu.py): a frame
-   beyond the plausibility bound (``MAX_WHEEL_SPEED_MM_S`` over its periods, widened by the bus
-   time as the firmware widens them by its clock's: ``step_periods``) is refused,
+   beyond the plausibility bound (the profile's ``max_wheel_speed_m_s`` over its periods,
+   widened by the bus time as the firmware widens them by its clock's: ``step_periods``) is
+   refused,
    ``RESYNC_FRAMES`` refused frames consistent among themselves are a counter restart,
    re-primed on the first of them (a
    ``counter_restart`` event; the motion across it is lost on board and in the reference alike).
@@ -105,7 +106,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S  # not ecu: its secoc, nav, ...
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.compare import (
     check_twist,
@@ -119,7 +119,7 @@ from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
 from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import Life, merge, split_lives
-from odocan.host.judge.reference import Geometry
+from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.reference_path import (
     build_reference,
     firmware_steps,
@@ -193,7 +193,7 @@ def analyze(
     scenario: str | None = None,
     seed: int | None = None,
     wall_seconds: float | None = None,
-    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED,
 ) -> Analysis:
     """Check the on-board odometry in ``frames`` (see the module docstring).
 
@@ -281,7 +281,7 @@ def _analyze_life(
     scenario: str | None = None,
     seed: int | None = None,
     wall_seconds: float | None = None,
-    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED,
     start_pose: tuple[float, float, float] | None = None,
 ) -> Analysis:
     """``analyze`` of one firmware life (``host.judge.reboots``); ``boot``: the frames start at
@@ -432,6 +432,7 @@ def _robot_dict(robot: RobotProfile) -> dict[str, Any]:
         "wheel_radius_right_m": robot.wheel_radius_right_m,
         "wheelbase_m": robot.wheelbase_m,
         "counter_bits": robot.counter_bits,
+        "max_wheel_speed_m_s": robot.max_wheel_speed_m_s,  # the steps' and gaps' bound
     }
 
 

@@ -44,7 +44,7 @@ import numpy as np
 
 from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.losses import OneSteps, merge_error
-from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import FloatArray, IntArray
 
 MAX_MERGE_FRAMES = 480  # frames between the ends beyond which the path bound is used (4.8 s)
@@ -74,7 +74,7 @@ def merge_allowance_m(
 
 def overlap_allowance_m(
     first: tuple[int, int, int], last: tuple[int, int, int], frames: int, geometry: Geometry,
-    bits: int, integrator: str, max_wheel_speed_mm_s: int | None,
+    bits: int, integrator: str, max_wheel_speed_mm_s: SpeedBound,
 ) -> float:
     """What a stall's span that holds a gap of the log adds to its merge allowance (m; module
     docstring): ``first`` and ``last`` the (sender's sequence number, left, right wire counts) of

@@ -74,7 +74,7 @@ from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import path_bound_m
 from odocan.host.judge.gapbound import period_bounds
-from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import (
     SILENCE_CYCLES,
     Encoders,
@@ -99,16 +99,17 @@ def firmware_m_per_count(robot: RobotProfile) -> tuple[float, float]:
     return per_count(robot.wheel_radius_left_m), per_count(robot.wheel_radius_right_m)
 
 
-def gap_extra_m(robot: RobotProfile, max_wheel_speed_mm_s: int | None, periods: int,
+def gap_extra_m(robot: RobotProfile, max_wheel_speed_mm_s: SpeedBound, periods: int,
                 ds_m: float) -> float:
     """How far (m) above a merged step of |dS| ``ds_m`` over ``periods`` encoder periods the
     firmware's path may lie (it may have taken the frames one by one): half the gap's path
     bound (``breaks.path_bound_m`` of the per-period count bounds, ``gapbound.period_bounds``)
     less |dS|; inf without a plausibility bound."""
-    if max_wheel_speed_mm_s is None:
-        return math.inf
     geometry = Geometry.of(robot)
-    bound = period_bounds(geometry, max_wheel_speed_mm_s)
+    speed_mm_s = geometry.speed_bound_mm_s(max_wheel_speed_mm_s)  # PROFILE_SPEED: the robot's
+    if speed_mm_s is None:
+        return math.inf
+    bound = period_bounds(geometry, speed_mm_s)
     m_left, m_right = firmware_m_per_count(robot)
     path = max(path_bound_m(periods * bound[0], periods * bound[1], geometry),
                periods * (bound[0] * m_left + bound[1] * m_right))  # either radii
@@ -180,7 +181,7 @@ class DistanceJudge:
     ``result`` at the end."""
 
     robot: RobotProfile
-    max_wheel_speed_mm_s: int | None
+    max_wheel_speed_mm_s: SpeedBound
     exact: bool  # the log starts at the firmware's power-up: offset 0
     stall_breaks: list[int] = field(default_factory=list)  # frames the firmware resumed on
     loss_spans: list[tuple[int, int]] = field(default_factory=list)  # (first, last) frames

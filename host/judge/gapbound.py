@@ -6,7 +6,7 @@ Across a gap of N encoder periods the log holds one merged step (its cumulative 
 total travel of each wheel is known, and so the heading after it, exactly); the firmware may
 have integrated the N frames one by one, or some of them merged (frames the bus lost too), each
 of its steps over k periods within k times the plausibility bound per period that it enforces
-(``MAX_WHEEL_SPEED_MM_S``, firmware/encoders.py ``step_bounds``; one count of margin more here).
+(the robot's ``max_wheel_speed_mm_s``, firmware/encoders.py ``step_bounds``; one count more here).
 How far can its position after the gap lie from the merged step's? Write a step of left and
 right wheel travel a, c (m) as ds = (a + c) / 2 and a heading change dtheta = (c - a) / b, taken
 by the integrator as ds sigma(dtheta) u(dir) (``losses.step_vector``: u the unit vector, dir
@@ -37,9 +37,8 @@ import math
 
 import numpy as np
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.firmware.twist import ENCODER_PERIOD_US
-from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import FloatArray
 
 DP_PERIODS = 256  # gaps longer than this take the path bound (2.56 s at 100 Hz)
@@ -50,11 +49,14 @@ BIN_SLACK = 0.5 + SIGMA_SLOPE  # g's change across the bins, per bin width (rad)
 SINC_MIN = -0.2173  # the least value of sin(y) / y
 
 
-def period_bounds(geometry: Geometry, max_wheel_speed_mm_s: int = MAX_WHEEL_SPEED_MM_S
+def period_bounds(geometry: Geometry, max_wheel_speed_mm_s: int | None = None
                   ) -> tuple[int, int]:
     """Per wheel, the most counts the firmware accepts in one encoder period: its
     ``step_bounds`` (ceil(v_max T / travel per count) + 1) computed in float, plus one count
-    (its Q48 bound may differ by one at the limit)."""
+    (its Q48 bound may differ by one at the limit). ``max_wheel_speed_mm_s`` None: the robot's
+    (``geometry.max_wheel_speed_mm_s``, its profile's)."""
+    if max_wheel_speed_mm_s is None:
+        max_wheel_speed_mm_s = geometry.max_wheel_speed_mm_s
     travel_m = max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
     return (math.ceil(travel_m / geometry.m_per_count_left) + 2,
             math.ceil(travel_m / geometry.m_per_count_right) + 2)
@@ -153,14 +155,16 @@ def _ds_max(a_m: float, c_m: float, x_lo: FloatArray, x_hi: FloatArray) -> Float
 
 def gap_allowance_of_counts(
     before: tuple[int, int], after: tuple[int, int], periods: int, geometry: Geometry,
-    bits: int, integrator: str, max_wheel_speed_mm_s: int | None,
+    bits: int, integrator: str, max_wheel_speed_mm_s: SpeedBound,
 ) -> float:
     """``gap_allowance_m`` of a gap from the wire counts ``before`` (left, right) to ``after``
     over ``periods`` encoder periods (``bits``: the wire counter width); inf without a
-    plausibility bound (``max_wheel_speed_mm_s`` None: the firmware's steps are not bounded)."""
-    if max_wheel_speed_mm_s is None:
+    plausibility bound (``max_wheel_speed_mm_s`` None: the firmware's steps are not bounded;
+    ``PROFILE_SPEED``: the robot's)."""
+    speed_mm_s = geometry.speed_bound_mm_s(max_wheel_speed_mm_s)
+    if speed_mm_s is None:
         return math.inf
     d_left = int(wrap_delta(after[0] - before[0], bits))
     d_right = int(wrap_delta(after[1] - before[1], bits))
     return gap_allowance_m(d_left, d_right, periods, geometry, integrator,
-                           period_bounds(geometry, max_wheel_speed_mm_s))
+                           period_bounds(geometry, speed_mm_s))

@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.judge.distance import (
     COUNT_SLACK_M,
     STEP_SLACK_M,
@@ -35,7 +34,7 @@ from odocan.host.judge.distance import (
     gap_extra_m,
 )
 from odocan.host.judge.livepose import RING, RestartLog, StepGate
-from odocan.host.judge.reference import Geometry
+from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.samples import SILENCE_CYCLES
 from odocan.host.judge.tracking import PoseTracker
 from odocan.sim.robot import RobotProfile
@@ -44,11 +43,18 @@ KEPT_FRAMES = 64  # encoder frames kept for the samples to name (a sample names 
 CYCLE_S = 0.01  # WHEEL_ENCODERS' cycle
 
 
+def robot_of(name: str, geometry: Geometry, counter_bits: int) -> RobotProfile:
+    """The robot profile of a geometry (its speed bound included) and counter width."""
+    return RobotProfile(name, geometry.counts_per_rev, geometry.wheel_radius_left_m,
+                        geometry.wheel_radius_right_m, geometry.wheelbase_m, counter_bits,
+                        geometry.max_wheel_speed_mm_s / 1000)
+
+
 class LiveDistance:
     """The live DISTANCE judge (module docstring)."""
 
     def __init__(self, robot: RobotProfile,
-                 max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S) -> None:
+                 max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED) -> None:
         self.robot = robot
         self.max_wheel_speed_mm_s = max_wheel_speed_mm_s
         self._m = firmware_m_per_count(robot)
@@ -61,9 +67,7 @@ class LiveDistance:
     def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
         """New robot parameters (a config command): the firmware's DISTANCE goes on with its
         new constants from a value this judge cannot know: judged from here as a new life."""
-        self.robot = RobotProfile(self.robot.name, geometry.counts_per_rev,
-                                  geometry.wheel_radius_left_m, geometry.wheel_radius_right_m,
-                                  geometry.wheelbase_m, counter_bits)
+        self.robot = robot_of(self.robot.name, geometry, counter_bits)
         self._m = firmware_m_per_count(self.robot)
         self.suspended = False
         self.new_life()

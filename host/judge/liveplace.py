@@ -11,7 +11,6 @@ import math
 
 import numpy as np
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.judge.breaks import (
     BreakSummary,
     clamp_offset,
@@ -22,7 +21,7 @@ from odocan.host.judge.breaks import (
 from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livewindow import CYCLE_S, Columns
-from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import POSITION_LSB_M, sender_seq
 
 ABS_KEPT = 128  # the latest encoder frames whose count-step sums are kept (a sample names one)
@@ -67,7 +66,7 @@ class StallPlacer:
         self._abs_last: tuple[int, int] | None = None  # ... at the last sample compared
         self.stalled = False  # a stall or hold since the last placement (the tracker sets it)
         self._gaps: list[Gap] = []  # since then
-        self.max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S  # the gaps' bound
+        self.max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED  # the gaps' bound
         self.periods = 1  # encoder periods from the frame heard before to the latest
 
     def restart(self) -> None:

@@ -12,7 +12,6 @@ from typing import Any, NamedTuple
 
 from odocan.firmware.encoders import (
     CTRL_UPTIME_MAX,
-    MAX_WHEEL_SPEED_MM_S,
     PERIODS_PER_S,
     RESTART_SLACK_PERIODS,
     RESYNC_FRAMES,
@@ -42,15 +41,16 @@ class Sample(NamedTuple):
 
 class StepGate:
     """The firmware's plausibility rule on the reference's steps (firmware/ecu.py, the same as
-    ``host.judge.analysis``): a frame beyond ``MAX_WHEEL_SPEED_MM_S`` over the periods its COUNTER
-    advanced since the last accepted one is refused; ``RESYNC_FRAMES`` refused frames plausible
+    ``host.judge.analysis``): a frame beyond the robot's maximum wheel speed
+    (``Geometry.max_wheel_speed_mm_s``) over the periods its COUNTER advanced since the last
+    accepted one is refused; ``RESYNC_FRAMES`` refused frames plausible
     among themselves are a counter restart: one step from the first of them, never the jump; a
     frame whose CTRL_UPTIME is below the last accepted one's (both non-zero), or below what it
     aged to over a silence (``aged``), re-primes it (the motor controller restarted): no step
     into it. Each restart is told to ``told``."""
 
     def __init__(self, geometry: Geometry, counter_bits: int, told: RestartLog) -> None:
-        travel_m = MAX_WHEEL_SPEED_MM_S * 1e-3 * ENCODER_PERIOD_US * 1e-6
+        travel_m = geometry.max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
         self.bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
                       math.ceil(travel_m / geometry.m_per_count_right) + 1)
         self.bits = counter_bits

@@ -20,33 +20,44 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Final, Literal, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
+from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
 from odocan.sim.robot import RobotProfile
 
 INTEGRATORS = ("euler", "rk2", "exact")
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 D = TypeVar("D", int, IntArray)
+# A judge's plausibility bound on an encoder step: the robot profile's maximum wheel speed
+# (PROFILE_SPEED), another one in mm/s (tests), or None: the steps are not bounded.
+SpeedBound = int | None | Literal["profile"]
+PROFILE_SPEED: Final = "profile"
 
 
 @dataclass(frozen=True)
 class Geometry:
-    """Robot parameters in SI units (float64)."""
+    """Robot parameters in SI units (float64); ``max_wheel_speed_mm_s``: the firmware's
+    plausibility bound on a wheel's rim speed, as the profile gives it (u16 mm/s)."""
 
     counts_per_rev: int
     wheel_radius_left_m: float
     wheel_radius_right_m: float
     wheelbase_m: float
+    max_wheel_speed_mm_s: int = MAX_WHEEL_SPEED_DEFAULT_MM_S
 
     @classmethod
     def of(cls, robot: RobotProfile) -> Geometry:
         """The float parameters of a robot profile."""
         return cls(robot.counts_per_rev, robot.wheel_radius_left_m,
-                   robot.wheel_radius_right_m, robot.wheelbase_m)
+                   robot.wheel_radius_right_m, robot.wheelbase_m, robot.max_wheel_speed_mm_s)
+
+    def speed_bound_mm_s(self, bound: SpeedBound) -> int | None:
+        """``bound`` resolved: this robot's maximum wheel speed for ``PROFILE_SPEED``."""
+        return self.max_wheel_speed_mm_s if isinstance(bound, str) else bound
 
     @property
     def m_per_count_left(self) -> float:

@@ -13,7 +13,6 @@ import numpy.typing as npt
 
 from odocan.firmware.encoders import (
     CTRL_UPTIME_MAX,
-    MAX_WHEEL_SPEED_MM_S,
     PERIODS_PER_S,
     RESTART_SLACK_PERIODS,
     RESYNC_FRAMES,
@@ -26,7 +25,7 @@ from odocan.host.judge.breaks import (
     placed_offsets,
 )
 from odocan.host.judge.gapbound import gap_allowance_of_counts
-from odocan.host.judge.reference import Geometry, integrate, wrap_delta
+from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
@@ -72,7 +71,7 @@ class Reference:
 
 def build_reference(
     enc: Encoders, onboard: Poses, robot: RobotProfile, integrator: str, *, power_up: bool,
-    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED,
     breaks: IntArray | None = None,
     slack_m: float = POSITION_LSB_M,
     start_pose: tuple[float, float, float] | None = None,
@@ -152,7 +151,7 @@ def restart_detail(by_uptime: bool) -> str:
 
 
 def break_allowance(enc: Encoders, b: int, sample_enc: IntArray, geometry: Geometry, bits: int,
-                    integrator: str, *, max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S
+                    integrator: str, *, max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED
                     ) -> float:
     """``breaks.merge_allowance_m`` of the break at encoder frame ``b``: from frame b - 1 (the
     last the firmware named before it) to the first frame a kept sample names at or after b (0
@@ -182,11 +181,12 @@ class Steps:
 
 
 def firmware_steps(
-    enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: int | None
+    enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: SpeedBound
 ) -> Steps:
     """The steps as firmware/ecu.py takes them: a frame whose step from the last accepted one
-    exceeds ``MAX_WHEEL_SPEED_MM_S`` over its periods (``step_periods``: widened by the bus time,
-    as the firmware widens them by its clock's) is refused (IMPLAUSIBLE_STEP, not integrated);
+    exceeds the robot's maximum wheel speed (``max_wheel_speed_mm_s``; ``PROFILE_SPEED``: the
+    profile's) over its periods (``step_periods``: widened by the bus time, as the firmware
+    widens them by its clock's) is refused (IMPLAUSIBLE_STEP, not integrated);
     ``RESYNC_FRAMES`` refused frames plausible among themselves are a counter restart
     (COUNTER_RESET): the odometry re-primes on the first of them and integrates one step from it to
     the last. A frame whose CTRL_UPTIME is below the last accepted frame's (both non-zero: the
@@ -199,10 +199,11 @@ def firmware_steps(
     steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
     uptime = enc.uptime[e0:] if enc.uptime is not None else np.zeros(len(left), dtype=np.int64)
     stamps = enc.timestamp_s[e0:]
-    if max_wheel_speed_mm_s is None:
+    speed_mm_s = geometry.speed_bound_mm_s(max_wheel_speed_mm_s)
+    if speed_mm_s is None:
         return _reprime_all(steps, ctrl_restarts(uptime, np.ones(len(left), dtype=np.bool_),
                                                  np.diff(stamps), enc.cycle_s))
-    travel_m = max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
+    travel_m = speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
     bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
              math.ceil(travel_m / geometry.m_per_count_right) + 1)
     young = young_counts(left, right, uptime, bits, bound)

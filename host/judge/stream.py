@@ -59,7 +59,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays, concat_frames, empty_frames
-from odocan.host.judge.reference import Geometry
+from odocan.host.judge.reference import Geometry, SpeedBound
 from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -417,7 +417,7 @@ class StreamReference:
     geometry: Geometry
     integrator: str
     bits: int
-    max_wheel_speed_mm_s: int | None
+    max_wheel_speed_mm_s: SpeedBound
     refused: int = 0
     reprimed: list[int] = field(default_factory=list)  # encoder frames a counter restart primed
     by_uptime: list[int] = field(default_factory=list)  # of them, CTRL_UPTIME went back

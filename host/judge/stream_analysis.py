@@ -27,14 +27,13 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance, _realtime, _robot_dict
 from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.reboots import Life, merge
-from odocan.host.judge.reference import Geometry
+from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.reference_path import restart_detail
 from odocan.host.judge.samples import (
     REQUIRED,
@@ -105,7 +104,7 @@ def analyze_file(
     scenario: str | None = None,
     seed: int | None = None,
     wall_seconds: float | None = None,
-    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S,
+    max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED,
     chunk_frames: int = CHUNK_FRAMES,
     warn: Callable[[str], None] = warn_on_stderr,
     count: FrameCount | None = None,
@@ -141,7 +140,7 @@ def _analyze_lives(
     spans: list[LifeSpan], facts: StreamFacts, frames_of: Callable[[LifeSpan], Frames],
     robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
     db: DatabaseSpec, scenario: str | None, seed: int | None,
-    wall_seconds: float | None, max_wheel_speed_mm_s: int | None,
+    wall_seconds: float | None, max_wheel_speed_mm_s: SpeedBound,
 ) -> dict[str, Any]:
     """``analysis.analyze`` over the lives found (``frames_of``: a life's frames, each call
     from its first)."""
@@ -227,7 +226,7 @@ class FrameSpill:
 
 def _life(
     frames: Frames, robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
-    db: DatabaseSpec, boot: bool, max_wheel_speed_mm_s: int | None,
+    db: DatabaseSpec, boot: bool, max_wheel_speed_mm_s: SpeedBound,
     rebase: bool = False, scenario: str | None = None, seed: int | None = None,
     wall_seconds: float | None = None,
 ) -> tuple[dict[str, Any], float]:

@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.reference import Geometry
+from odocan.host.judge.reference import Geometry, SpeedBound
 from odocan.host.judge.samples import WIRE_COUNTER_BITS, Encoders
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses, StreamReference
 from odocan.host.judge.stream_place import PlacedChunk
@@ -134,7 +134,7 @@ class TruthChunk:
 def life_chunks(
     chunks: Iterable[FrameArrays], db: DatabaseSpec, robot: RobotProfile,
     integrator: str, *, e0: int, breaks: npt.NDArray[np.int64],
-    max_wheel_speed_mm_s: int | None, info: LifeInfo | None = None,
+    max_wheel_speed_mm_s: SpeedBound, info: LifeInfo | None = None,
     times_of: frozenset[int] = frozenset(),
     on_encoders: Callable[[Encoders], None] | None = None,
 ) -> Iterator[tuple[PlacedChunk, TruthChunk]]:
@@ -215,7 +215,7 @@ def _truth(samples: dict[str, np.ndarray], rows: _Rows, e0: int, floor: float) -
 def placed_chunks(
     chunks: Iterable[FrameArrays], db: DatabaseSpec, robot: RobotProfile,
     integrator: str, *, e0: int, breaks: npt.NDArray[np.int64],
-    max_wheel_speed_mm_s: int | None, info: LifeInfo | None = None,
+    max_wheel_speed_mm_s: SpeedBound, info: LifeInfo | None = None,
 ) -> Iterator[PlacedChunk]:
     """The placement's input over one life's frames (module docstring); ``e0``: the encoder
     frame the reference starts at, ``breaks``: the stalls' (``StreamStalls.breaks`` of a first

@@ -25,14 +25,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.judge.breaks import (
     MAX_MERGE_FRAMES,
     merge_allowance_m,
     overlap_allowance_m,
     path_bound_m,
 )
-from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import Encoders
 from odocan.host.judge.stalls import frozen_breaks, silent
 
@@ -184,7 +183,7 @@ class StreamBreakCounts:
     geometry: Geometry
     bits: int
     integrator: str
-    max_wheel_speed_mm_s: int | None = MAX_WHEEL_SPEED_MM_S  # a gap in a span's bound
+    max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED  # a gap in a span's bound
     _ends: dict[int, int] = field(default_factory=dict)  # break -> the first sample after
     _edges: dict[int, dict[int, tuple[int, int, int]]] = field(default_factory=dict)  # seq, l, r
     _count: int = 0  # encoder frames fed

@@ -21,7 +21,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.losses import heading_steps, step_vector
 from odocan.host.judge.reference import Geometry, wrap_delta
@@ -58,7 +57,7 @@ def _two_steps(a: Counts, mid: Counts | None, b: Counts, g: Geometry, bits: int,
 def counts_bound(g: Geometry) -> Counts:
     """The most counts per period each wheel may step for the firmware to take it: the
     reference's plausibility bound (``reference_path.firmware_steps``)."""
-    travel_m = MAX_WHEEL_SPEED_MM_S * 1e-3 * ENCODER_PERIOD_US * 1e-6
+    travel_m = g.max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
     return (math.ceil(travel_m / g.m_per_count_left) + 1,
             math.ceil(travel_m / g.m_per_count_right) + 1)
 

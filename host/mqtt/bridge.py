@@ -159,9 +159,12 @@ class _Robot:
                                           command.cmd_id) from None
         if command.name == "config":
             v = command.values
+            speed = v.get("max_wheel_speed_m_s")  # absent: the firmware keeps its bound
             self.telemetry.set_geometry(
                 Geometry(v["counts_per_rev"], v["wheel_radius_left_m"],
-                         v["wheel_radius_right_m"], v["wheelbase_m"]),
+                         v["wheel_radius_right_m"], v["wheelbase_m"],
+                         self.telemetry.tracker.geometry.max_wheel_speed_mm_s if speed is None
+                         else round(speed * 1000)),
                 str(v["integrator"]).lower() if isinstance(v["integrator"], str)
                 else ("euler", "rk2", "exact")[v["integrator"]],
                 v["counter_bits"],

@@ -52,7 +52,7 @@ import can
 from cantools.database.can import Database, Message
 from cantools.database.errors import DecodeError
 
-from odocan.host.judge.livedistance import LiveDistance
+from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
@@ -66,7 +66,6 @@ from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor, e2e_messages
 from odocan.sim.contract import database
 from odocan.sim.framebatch import Received
-from odocan.sim.robot import RobotProfile
 
 Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
@@ -162,9 +161,7 @@ class RobotTelemetry:
         self._routes = _routes(self.db)
         self.e2e = E2EMonitor(self.db)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
-        self.distance = LiveDistance(RobotProfile(  # ODOM_TWIST DISTANCE judged
-            name, geometry.counts_per_rev, geometry.wheel_radius_left_m,
-            geometry.wheel_radius_right_m, geometry.wheelbase_m, counter_bits))
+        self.distance = LiveDistance(robot_of(name, geometry, counter_bits))  # DISTANCE judged
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
         self._publish_phase_s = publish_phase_s  # the first pose waits this long (bus time)
         self.frames: dict[str, int] = {}  # accepted frames by message name

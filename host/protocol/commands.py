@@ -13,8 +13,8 @@ command    message         keys (unit in the name)
 =========  ==============  =================================================================
 set_pose   ODOM_SET_POSE   x_m, y_m, heading_rad -> frames X, Y, HEADING, APPLY
 config     ODOM_CONFIG     counts_per_rev, wheel_radius_left_m, wheel_radius_right_m,
-                           wheelbase_m, counter_bits (16|32), integrator (euler|rk2|exact)
-                           -> one frame per parameter, then APPLY
+                           wheelbase_m, counter_bits (16|32), integrator (euler|rk2|exact),
+                           [max_wheel_speed_m_s] -> one frame per parameter, then APPLY
 nav_goal   NAV_GOAL        x_m, y_m, [heading_rad], [mode], [append], [goal_id]
                            -> X, Y, [HEADING], GO (NO_FINAL_HEADING when no heading_rad)
 =========  ==============  =================================================================
@@ -108,6 +108,8 @@ SPECS: Final[dict[str, CommandSpec]] = {
         _one("WHEELBASE", "wheelbase_m", "WHEELBASE", "float"),
         _one("COUNTER_BITS", "counter_bits", "COUNTER_BITS", "int"),
         _one("INTEGRATOR", "integrator", "INTEGRATOR", "enum"),
+        Step("MAX_WHEEL_SPEED", (Field("max_wheel_speed_m_s", "MAX_WHEEL_SPEED", "float",
+                                       required=False),), when="max_wheel_speed_m_s"),
         Step("APPLY"),
     )),
     "nav_goal": CommandSpec("nav_goal", "NAV_GOAL", "FIELD", (

@@ -131,16 +131,21 @@ class CommandSession:
         wheelbase_m: float,
         counter_bits: int,
         integrator: str,
+        max_wheel_speed_m_s: float | None = None,
     ) -> dict[str, Any]:
-        """Write the robot's parameters (ODOM_CONFIG staged writes, then APPLY); the ACK."""
-        return self.command("config", {
+        """Write the robot's parameters (ODOM_CONFIG staged writes, then APPLY); the ACK.
+        ``max_wheel_speed_m_s`` None: the firmware keeps the bound it has."""
+        values: dict[str, Any] = {
             "counts_per_rev": counts_per_rev,
             "wheel_radius_left_m": wheel_radius_left_m,
             "wheel_radius_right_m": wheel_radius_right_m,
             "wheelbase_m": wheelbase_m,
             "counter_bits": counter_bits,
             "integrator": integrator,
-        })
+        }
+        if max_wheel_speed_m_s is not None:
+            values["max_wheel_speed_m_s"] = max_wheel_speed_m_s
+        return self.command("config", values)
 
     def goal(
         self,

@@ -1058,6 +1058,11 @@ int odocan_odom_config_pack(
         dst_p[2] |= pack_left_shift_u8(src_p->integrator, 0u, 0xffu);
         break;
 
+    case 6:
+        dst_p[2] |= pack_left_shift_u16(src_p->max_wheel_speed, 0u, 0xffu);
+        dst_p[3] |= pack_right_shift_u16(src_p->max_wheel_speed, 8u, 0xffu);
+        break;
+
     case 15:
         break;
 
@@ -1117,6 +1122,11 @@ int odocan_odom_config_unpack(
 
     case 5:
         dst_p->integrator = unpack_right_shift_u8(src_p[2], 0u, 0xffu);
+        break;
+
+    case 6:
+        dst_p->max_wheel_speed = unpack_right_shift_u16(src_p[2], 0u, 0xffu);
+        dst_p->max_wheel_speed |= unpack_left_shift_u16(src_p[3], 8u, 0xffu);
         break;
 
     case 15:
@@ -1191,6 +1201,11 @@ bool odocan_odom_config_counter_bits_is_in_range(uint8_t value)
 bool odocan_odom_config_integrator_is_in_range(uint8_t value)
 {
     return (value <= 2u);
+}
+
+bool odocan_odom_config_max_wheel_speed_is_in_range(uint16_t value)
+{
+    return (value >= 1u);
 }
 
 int odocan_odom_ack_pack(

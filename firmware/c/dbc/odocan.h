@@ -138,6 +138,7 @@ extern "C" {
 #define ODOCAN_ODOM_CONFIG_PARAM_WHEELBASE_CHOICE (3u)
 #define ODOCAN_ODOM_CONFIG_PARAM_COUNTER_BITS_CHOICE (4u)
 #define ODOCAN_ODOM_CONFIG_PARAM_INTEGRATOR_CHOICE (5u)
+#define ODOCAN_ODOM_CONFIG_PARAM_MAX_WHEEL_SPEED_CHOICE (6u)
 #define ODOCAN_ODOM_CONFIG_PARAM_APPLY_CHOICE (15u)
 
 #define ODOCAN_ODOM_CONFIG_INTEGRATOR_EULER_CHOICE (0u)
@@ -275,6 +276,7 @@ extern "C" {
 #define ODOCAN_ODOM_CONFIG_WHEELBASE_NAME "WHEELBASE"
 #define ODOCAN_ODOM_CONFIG_COUNTER_BITS_NAME "COUNTER_BITS"
 #define ODOCAN_ODOM_CONFIG_INTEGRATOR_NAME "INTEGRATOR"
+#define ODOCAN_ODOM_CONFIG_MAX_WHEEL_SPEED_NAME "MAX_WHEEL_SPEED"
 #define ODOCAN_ODOM_ACK_CHECKSUM_NAME "CHECKSUM"
 #define ODOCAN_ODOM_ACK_COUNTER_NAME "COUNTER"
 #define ODOCAN_ODOM_ACK_REQUEST_COUNTER_NAME "REQUEST_COUNTER"
@@ -923,6 +925,15 @@ struct odocan_odom_config_t {
      * Offset: 0
      */
     uint8_t integrator;
+
+    /**
+     * u16, 1 mm/s per LSB: the fastest rim speed either wheel can reach (the robot profile's max_wheel_speed_m_s; 4000 until written); an encoder step beyond it over its periods is implausible, refused (IMPLAUSIBLE_STEP). 0 is answered OUT_OF_RANGE.
+     *
+     * Range: 1..65535 (0.001..65.535 m/s)
+     * Scale: 0.001
+     * Offset: 0
+     */
+    uint16_t max_wheel_speed;
 };
 
 /**
@@ -2310,6 +2321,15 @@ bool odocan_odom_config_counter_bits_is_in_range(uint8_t value);
  * @return true if in range, false otherwise.
  */
 bool odocan_odom_config_integrator_is_in_range(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_config_max_wheel_speed_is_in_range(uint16_t value);
 
 /**
  * Pack message ODOM_ACK.
