@@ -8,6 +8,7 @@ analyze's 0.069 mm on this drive), and to pair pose halves its own way.
 
 from __future__ import annotations
 
+import dataclasses
 import random
 
 import can
@@ -160,8 +161,10 @@ def test_the_three_follow_a_controller_restart_in_the_live_backlog_alike(
     analyze passes it, and the live judges, replaying those frames, must gate them by
     CTRL_UPTIME as they gate the frames they hear (they integrated the jump: POSE WRONG, 0.30 m
     on pmir), and tell it as analyze tells it: a ``counter_restart`` event at that frame's time
-    (in the monitor's events, ``--json`` and the screen's, and the bridge's ``status``)."""
-    profile = robot.load(name)
+    (in the monitor's events, ``--json`` and the screen's, and the bridge's ``status``). The
+    synthesized restart keeps counting from ~28 000 counts, young only for a 4 m/s controller
+    one second old: kobuki's 0.7 m/s (its profile) would rightly not take it for a restart."""
+    profile = dataclasses.replace(robot.load(name), max_wheel_speed_m_s=4.0)
     d_left, d_right = wandering_drive(profile, 1_000, 0.004, seed=7)
     synth = synthesize(profile, "exact", d_left, d_right, ctrl_restarts={605: CTRL_JUMP},
                        ctrl_uptime=True, reboot_at=600 if case == "reboot" else None)

@@ -435,10 +435,21 @@ def _lockstep_drives(duration_s: float, ears: _Unpacker) -> None:
             )
             with contextlib.closing(rig_mod.LockstepRig(config, [ears])) as rig:
                 rig.run()
-                if index == 0:  # the motor controller restarts: CTRL_UPTIME goes back
+                if index == 0:  # the controller silent 1.5 s (its CTRL_UPTIME ages), then
+                    _silence_controller(rig, 1.5)  # it restarts: CTRL_UPTIME goes back
                     rig.motor_controller.restart()
                     rig.run(1.0)
                 rig.listeners = []  # closing the rig must not stop the shared listener
+
+
+def _silence_controller(rig: Any, seconds: float) -> None:
+    """Run ``seconds`` with the motor controller sending nothing, then 0.5 s of it speaking
+    again: the firmware ages the last CTRL_UPTIME over the silence (``_aged_uptime``)."""
+    send = rig.sim.tick
+    rig.sim.tick = lambda _k: None
+    rig.run(seconds)
+    rig.sim.tick = send
+    rig.run(0.5)
 
 
 def _closed_loop_drive(goal_s: float, ears: _Unpacker) -> None:
