@@ -172,9 +172,16 @@ def square_path(side_m: float, direction: str) -> list[Waypoint]:
     ]
 
 
-def square_timeout_s(side_m: float) -> float:
-    """Simulated seconds a square may take: 4 sides at 0.3 m/s and 5 s per corner."""
-    return 4.0 * (side_m / 0.3 + 5.0)
+TURN_RIM_SPEED_M_S = 0.3  # the firmware turns in place at most 0.3 m/s at the rims (firmware.nav)
+
+
+def square_timeout_s(side_m: float, wheelbase_m: float = 0.3) -> float:
+    """Simulated seconds a square may take: 4 sides at 0.3 m/s and 5 s per corner, plus, on a
+    wheelbase wider than 0.3 m, twice a quarter turn at the firmware's rim turn speed (a 2 m
+    robot turns at 0.3 rad/s: 5 s per quarter turn)."""
+    wider_m = max(wheelbase_m - 0.3, 0.0)
+    turn_s = 2.0 * (math.pi / 2.0) * (wider_m / 2.0) / TURN_RIM_SPEED_M_S
+    return 4.0 * (side_m / 0.3 + 5.0 + turn_s)
 
 
 def centre_of_gravity(errors: Sequence[tuple[float, float]]) -> CentreOfGravity:
@@ -295,7 +302,8 @@ def run_umbmark(
                     geometry.wheel_radius_left_m, geometry.wheel_radius_right_m,
                     geometry.wheelbase_m,
                 )
-            drive = session.drive(square_path(side_m, direction), square_timeout_s(side_m))
+            timeout_s = square_timeout_s(side_m, robot.wheelbase_m)
+            drive = session.drive(square_path(side_m, direction), timeout_s)
         runs.append(UmbmarkRun(direction, *return_error(drive), drive))
         if on_run is not None:
             on_run()
