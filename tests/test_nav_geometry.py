@@ -89,3 +89,18 @@ def test_umbmark_passes_on_any_wheelbase_and_ends_on_its_heading(
         off_rad = math.remainder(heading_rad - goal.heading_rad, 2 * math.pi)
         assert abs(off_rad) < tolerance_rad, (direction, heading_rad, goal.heading_rad)
 
+
+def test_a_path_not_reached_is_a_failed_experiment_exit_1(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A firmware that does not reach its path is a failed experiment (exit 1, one line), not
+    bad input (exit 2): here the square is given 2 s instead of its time."""
+    from odocan.host.cli.app import main
+
+    monkeypatch.setattr(umbmark, "square_timeout_s", lambda side_m, wheelbase_m=0.3: 2.0)
+    code = main(["umbmark", "--runs", "1", "--side", "0.5"])
+    _, err = capsys.readouterr()
+    assert code == 1, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("FAIL: path of 4 goals not reached"), err
