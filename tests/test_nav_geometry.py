@@ -104,3 +104,21 @@ def test_a_path_not_reached_is_a_failed_experiment_exit_1(
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
     assert lines[0].startswith("FAIL: path of 4 goals not reached"), err
+
+
+def test_a_correction_the_firmware_refuses_is_a_failed_calibration_exit_1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """On a 1 cm wheelbase with the default errors, UMBmark's E_max is metres and Borenstein's
+    E_b comes out near 0.7: a 0.7 cm wheelbase, below the firmware's 1 cm minimum, NACKed. The
+    calibration failed (exit 1, one line naming the geometry), nothing typed was wrong."""
+    from odocan.host.cli.app import main
+
+    robot = _profile(tmp_path, 0.01, RADII_M[0])
+    code = main(["calibrate", "--robot", str(robot), "--runs", "1", "--method", "borenstein"])
+    _, err = capsys.readouterr()
+    assert code == 1, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("FAIL: the firmware refused the corrected geometry"), err
+    assert "NACK (OUT_OF_RANGE)" in lines[0], err

@@ -58,6 +58,7 @@ import numpy as np
 
 from odocan.host.experiments.drive import (
     DriveResult,
+    ExperimentError,
     NavSession,
     Waypoint,
     dead_reckon,
@@ -350,6 +351,13 @@ class Calibration:
         return self.model
 
 
+class CorrectionRefused(ExperimentError):
+    """The calibration's estimate is a geometry the firmware refuses (e.g. a 1 cm wheelbase times
+    E_b 0.7, below its 1 cm minimum): the calibration failed, exit 1, not bad input."""
+
+    exit_code = 1
+
+
 def calibrate(
     robot: RobotProfile,
     errors: ErrorModel,
@@ -377,10 +385,20 @@ def calibrate(
     fit_residual_m = float(np.sqrt(np.mean(residual * residual)) * math.sqrt(2.0))
     chosen = (estimate.ed, estimate.eb) if method == "borenstein" else fitted
     corrected = nominal.corrected(*chosen)
-    after = run_umbmark(
-        robot, errors, seed, side_m=side_m, runs_per_direction=runs, geometry=corrected, phase=1,
-        on_run=on_run,
-    )
+    try:
+        after = run_umbmark(
+            robot, errors, seed, side_m=side_m, runs_per_direction=runs, geometry=corrected,
+            phase=1, on_run=on_run,
+        )
+    except ExperimentError as exc:
+        if not str(exc).startswith("config:"):
+            raise
+        raise CorrectionRefused(
+            f"the firmware refused the corrected geometry (E_d {chosen[0]:.6g}, E_b "
+            f"{chosen[1]:.6g}: radii {corrected.wheel_radius_left_m:.6g}/"
+            f"{corrected.wheel_radius_right_m:.6g} m, wheelbase {corrected.wheelbase_m:.6g} m), "
+            f"{exc}"
+        ) from None
     return Calibration(
         before, estimate, fitted, method, nominal, corrected, after, fit_residual_m
     )
