@@ -83,7 +83,18 @@ def test_umbmark_passes_on_any_wheelbase_and_ends_on_its_heading(
     tolerance_rad = _heading_tolerance_rad(wheelbase_m, radii_m) + 0.002  # + coasting to rest
     for direction in umbmark.DIRECTIONS:
         (run,) = result.of(direction)
-        goal = umbmark.square_path(0.5, direction)[-1]
+        path = umbmark.square_path(0.5, direction)
+        reached = [m for m in run.drive.marks if m.state == "REACHED"]
+        assert [m.goal_id for m in reached] == [1, 2, 3, 4]
+        # the true heading: no errors, so the odometry's but for what the encoders cannot see,
+        # less than a count at each wheel (two counts' heading steps)
+        count_rad = 2 * math.pi * max(radii_m) / (COUNTS_PER_REV * wheelbase_m)
+        for mark in reached:
+            want_rad = path[mark.goal_id - 1].heading_rad
+            assert want_rad is not None
+            off_rad = math.remainder(mark.pose.heading_rad - want_rad, 2 * math.pi)
+            assert abs(off_rad) < tolerance_rad + 2 * count_rad, (direction, mark.goal_id, off_rad)
+        goal = path[-1]
         assert goal.heading_rad is not None
         heading_rad = run.drive.onboard_end[2]
         off_rad = math.remainder(heading_rad - goal.heading_rad, 2 * math.pi)
