@@ -17,8 +17,8 @@
 #define WHEEL_STEP_MM_S (ACCEL_MM_S2 * NAV_PERIOD_MS / 1000) /* 20 mm/s per period */
 #define POSITION_TOL_UM 5000
 #define HEADING_TOL_BAM32 5965232 /* (1 << 32) // 720: 0.5 degree */
-#define RIM_TURN_MAX_MM_S 300 /* |omega b/2| at most 0.3 m/s: OMEGA_MAX's rim speed at b = 0.30 m */
-#define MIN_RIM_MM_S 1        /* the least turn in place that moves the wheels: one MOTOR_CMD step */
+#define RIM_TURN_MAX_MM_S 300 /* |omega b/2| <= 0.3 m/s: OMEGA_MAX's rim speed at b = 0.30 m */
+#define MIN_RIM_MM_S 1 /* the least turn in place that moves the wheels: one MOTOR_CMD step */
 #define HOLD_MIN_DISTANCE_UM 20000
 
 #define K_TURN_MILLI_PER_S 3000
