@@ -47,11 +47,12 @@ def check_writable(path: Path | None, option: str) -> None:
             raise ConfigurationError(f"{where}: not a regular file (a device, pipe or socket)")
         _probe(path, os.O_WRONLY | os.O_APPEND, where)
         return
-    parent = path.parent
+    target = Path(os.path.realpath(path))  # a dangling symlink: the file it will create
+    parent = target.parent
     if not parent.is_dir():
         raise ConfigurationError(f"{where}: directory {parent} does not exist")
-    _probe(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, where)
-    path.unlink(missing_ok=True)
+    _probe(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, where)
+    target.unlink(missing_ok=True)
 
 
 def check_writable_dir(directory: Path, option: str, shown: Path | None = None) -> None:

@@ -74,3 +74,17 @@ def test_a_new_file_in_proc_and_a_proc_directory_are_refused() -> None:
         check_writable(Path(UNWRITABLE), "--report")
     with pytest.raises(ConfigurationError, match="--parquet /proc"):
         check_writable_dir(Path("/proc"), "--parquet")
+
+
+def test_a_dangling_symlink_is_probed_at_its_target(tmp_path: Path) -> None:
+    """The writer follows the link and creates its target: so does the probe (and removes it);
+    a link into a missing directory is refused naming that directory."""
+    link = tmp_path / "report.json"
+    link.symlink_to(tmp_path / "target.json")
+    check_writable(link, "--report")
+    assert link.is_symlink()
+    assert not (tmp_path / "target.json").exists()
+    away = tmp_path / "away.json"
+    away.symlink_to(tmp_path / "nowhere" / "target.json")
+    with pytest.raises(ConfigurationError, match="nowhere does not exist"):
+        check_writable(away, "--report")
