@@ -208,6 +208,7 @@ class OdomEcu:
             odo.y_q40_m,
             odo.heading_bam64,
             self.params.wheelbase_nm,
+            max(odo.consts.bam64_per_count_left, odo.consts.bam64_per_count_right),
             self.health.state is _OK,
         )
 

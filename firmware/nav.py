@@ -22,10 +22,17 @@ e = phi_r - phi (i32 BAM32, wrapped to [-pi, pi)):
 * FINAL_TURN: omega = K_TURN (heading_goal - phi) until within HEADING_TOL (skipped with
   NO_FINAL_HEADING); then REACHED. A position within POSITION_TOL ends DRIVING (and TURNING).
 
-Limits: |v| <= V_MAX, |omega| <= OMEGA_MAX; the wheel speeds v -+ omega b/2 are then rate-limited
-to ACCEL (each wheel changes by at most WHEEL_STEP per period). The gains keep the deceleration a
-P law asks for under the limits: K_DRIVE V_MAX = 0.75 m/s^2 < ACCEL, and K_TURN OMEGA_MAX b/2 =
-0.9 m/s^2 at the rim for b = 0.30 m; K1 > 4 K2 / pi, so go-to-goal spirals in instead of circling.
+Limits, at the wheels whatever the wheelbase b: |v| <= V_MAX, |omega| <= OMEGA_MAX and the turn's
+share of the rim speed |omega b/2| <= RIM_TURN_MAX (so omega <= 2 rad/s up to b = 0.30 m, 0.3 rad/s
+at b = 2 m); the wheel speeds v -+ omega b/2 are then rate-limited to ACCEL (each wheel changes by
+at most WHEEL_STEP per period). The gains keep the deceleration a P law asks for under the limits
+on any robot: K_DRIVE V_MAX = 0.75 m/s^2 < ACCEL, and K_TURN RIM_TURN_MAX = 0.9 m/s^2 at the rim
+(at b = 2 m the old omega-only limit asked 6 m/s^2 and the turn overshot by 0.38 rad); K1 > 4 K2
+/ pi, so go-to-goal spirals in instead of circling. Turning in place (v = 0), a turn that rounds
+to 0 mm/s at the rim is sent as MIN_RIM (one MOTOR_CMD step): at b = 1 cm the final turn asked
+0.4 mm/s and the wheels never moved. The heading tolerance is HEADING_TOL or one encoder count's
+heading step, whichever is larger (``heading_tol_bam32``): a 1 cm robot with 500-count encoders
+turns in 94 mrad steps, and a tolerance finer than the odometry can see is never met.
 
 **Commands.** While a goal is active, MOTOR_CMD every period. When a goal is reached, stopped or
 aborted (the odometry left OK: encoders silent, fault), the setpoints drop to 0 at once (the motor
@@ -70,6 +77,8 @@ ACCEL_MM_S2 = 1000  # 1 m/s^2 at each wheel rim
 WHEEL_STEP_MM_S = ACCEL_MM_S2 * NAV_PERIOD_MS // 1000  # 20 mm/s per period
 POSITION_TOL_UM = 5000  # 5 mm
 HEADING_TOL_BAM32 = (1 << 32) // 720  # 0.5 degree (8.73 mrad)
+RIM_TURN_MAX_MM_S = 300  # |omega b/2| at most 0.3 m/s: OMEGA_MAX's rim speed at b = 0.30 m
+MIN_RIM_MM_S = 1  # the least turn in place that moves the wheels: one MOTOR_CMD step
 HOLD_MIN_DISTANCE_UM = 20_000  # turn-go-turn: no bearing correction within 20 mm of the goal
 
 K_TURN_MILLI_PER_S = 3000  # turning in place: omega = 3.0/s * e
@@ -155,9 +164,19 @@ def speed_mm_s(distance_um_: i64, gain_milli_per_s: int) -> i32:
 
 
 def wheel_speeds_mm_s(v_mm_s: i32, omega_mrad_s: i32, wheelbase_nm: u32) -> tuple[i32, i32]:
-    """(left, right) rim speeds v -+ omega b/2 in mm/s (rounded; |omega b| < 2^44)."""
-    half_mm_s = div_round_i64(omega_mrad_s * wheelbase_nm, HALF_WHEEL_DIVISOR)
+    """(left, right) rim speeds v -+ omega b/2 in mm/s (rounded; |omega b| < 2^44), the turn's
+    share clamped to +-RIM_TURN_MAX and, turning in place, at least MIN_RIM when omega != 0."""
+    half_mm_s = _clamp(div_round_i64(omega_mrad_s * wheelbase_nm, HALF_WHEEL_DIVISOR),
+                       RIM_TURN_MAX_MM_S)
+    if v_mm_s == 0 and half_mm_s == 0 and omega_mrad_s != 0:
+        half_mm_s = _clamp(omega_mrad_s, MIN_RIM_MM_S)  # omega != 0: +-MIN_RIM, its sign
     return v_mm_s - half_mm_s, v_mm_s + half_mm_s
+
+
+def heading_tol_bam32(count_bam64: u64) -> u32:
+    """The heading tolerance: HEADING_TOL or one encoder count's heading step (BAM64, < 2^60,
+    rounded up to BAM32 by the + 1), whichever is larger (u32)."""
+    return max(HEADING_TOL_BAM32, (count_bam64 >> 32) + 1)
 
 
 def go_to_goal_law(dist_um: i64, bearing_error: i32, errors: ErrorMask) -> tuple[i32, i32]:
@@ -203,6 +222,7 @@ class Navigator:
         "distance_um",
         "goal_id",
         "heading_error_bam32",
+        "heading_tol_bam32",
         "left_mm_s",
         "right_mm_s",
         "state",
@@ -217,6 +237,7 @@ class Navigator:
         self.goal_id = 0  # u8: the active or last goal
         self.distance_um: i64 = 0
         self.heading_error_bam32: i32 = 0
+        self.heading_tol_bam32: u32 = HEADING_TOL_BAM32  # from the geometry, every period
         self.left_mm_s: i32 = 0  # the last setpoints (the rate limiter's memory)
         self.right_mm_s: i32 = 0
         self.changed = True  # STATE or GOAL_ID changed since NAV_STATUS was last sent
@@ -315,10 +336,18 @@ class Navigator:
         self._halt(NavState.REACHED)
 
     def step(
-        self, x_q40_m: i64, y_q40_m: i64, heading_bam64: u64, wheelbase_nm: u32, running: bool
+        self,
+        x_q40_m: i64,
+        y_q40_m: i64,
+        heading_bam64: u64,
+        wheelbase_nm: u32,
+        count_bam64: u64,
+        running: bool,
     ) -> bool:
         """One control period (step 4, every NAV_PERIOD_TICKS). True when a MOTOR_CMD with
-        (``left_mm_s``, ``right_mm_s``) is to be sent this period. ``running``: odometry OK."""
+        (``left_mm_s``, ``right_mm_s``) is to be sent this period. ``count_bam64``: the larger
+        wheel's heading step per encoder count; ``running``: odometry OK."""
+        self.heading_tol_bam32 = heading_tol_bam32(count_bam64)
         if self.state in _ACTIVE and not running:
             self._clear_path()
             self._halt(NavState.ABORTED)
@@ -350,13 +379,13 @@ class Navigator:
         bearing_error = bearing_error_bam32(dx, dy, heading_bam32)
         final_error = wrap_i32(goal.heading_bam32 - heading_bam32)
         self.distance_um = dist_um
-        if self.state is NavState.TURNING and abs(bearing_error) < HEADING_TOL_BAM32:
+        if self.state is NavState.TURNING and abs(bearing_error) < self.heading_tol_bam32:
             self._set_state(NavState.DRIVING)
         if self.state is not NavState.FINAL_TURN and dist_um < POSITION_TOL_UM:
             self._set_state(NavState.FINAL_TURN)
         if self.state is NavState.FINAL_TURN:
             self.heading_error_bam32 = final_error if goal.final_turn else 0
-            if abs(self.heading_error_bam32) < HEADING_TOL_BAM32:
+            if abs(self.heading_error_bam32) < self.heading_tol_bam32:
                 self._finish()
                 return 0, 0
             return 0, turn_rate_mrad_s(final_error, K_TURN_MILLI_PER_S, e)

@@ -6,6 +6,11 @@ device such as ``/dev/full`` or a terminal, a read-only file -- is refused at on
 option and the path named, so an hour of simulation is never lost to a report that cannot be
 written. A write that still fails at the end names its path too (``write_text``).
 
+The check opens the path for real (an existing file for appending, without truncating it; a new
+one created and removed at once), because permission bits do not answer it: as root
+``os.access`` says yes to ``/proc/x.json`` and to a read-only ``/proc`` or ``/sys`` file, and
+``odocan run --report /proc/x.json`` drove the whole run, printed PASS, then failed.
+
 It lives at host/ level, below every room, so io/ and judge/ use ``OutputError`` without
 importing report/.
 """
@@ -14,6 +19,7 @@ from __future__ import annotations
 
 import os
 import stat
+import tempfile
 from pathlib import Path
 
 from odocan.sim.exceptions import ConfigurationError, OdocanError
@@ -39,14 +45,35 @@ def check_writable(path: Path | None, option: str) -> None:
             raise ConfigurationError(f"{where}: is a directory")
         if not stat.S_ISREG(mode):
             raise ConfigurationError(f"{where}: not a regular file (a device, pipe or socket)")
-        if not os.access(path, os.W_OK):
-            raise ConfigurationError(f"{where}: permission denied")
+        _probe(path, os.O_WRONLY | os.O_APPEND, where)
         return
-    parent = path.parent
+    target = Path(os.path.realpath(path))  # a dangling symlink: the file it will create
+    parent = target.parent
     if not parent.is_dir():
         raise ConfigurationError(f"{where}: directory {parent} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise ConfigurationError(f"{where}: directory {parent} is not writable")
+    _probe(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, where)
+    target.unlink(missing_ok=True)
+
+
+def check_writable_dir(directory: Path, option: str, shown: Path | None = None) -> None:
+    """Refuse ``directory`` unless it exists and a file can be created in it (a probe file,
+    removed at once); the error names ``shown`` (default: the directory) after the option."""
+    where = f"{option} {shown if shown is not None else directory}"
+    if not directory.is_dir():
+        raise ConfigurationError(f"{where}: directory {directory} does not exist")
+    try:
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except OSError as exc:
+        raise ConfigurationError(f"{where}: directory {directory}: {exc.strerror or exc}") from None
+
+
+def _probe(path: Path, flags: int, where: str) -> None:
+    """Open ``path`` with ``flags`` and close it; an OSError becomes one line naming it."""
+    try:
+        os.close(os.open(path, flags, 0o666))
+    except OSError as exc:
+        raise ConfigurationError(f"{where}: {exc.strerror or exc}") from None
 
 
 def write_text(path: Path, text: str, option: str) -> None:

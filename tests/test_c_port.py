@@ -867,6 +867,11 @@ def _nav_functions(rng: random.Random, ask: Callable[..., None]) -> None:
         ask(f"q40 {q}", nav.q40_from_100um(q))
     for q in (I32_MIN, I32_MAX, -1, -10_000, -10_001, 9_999, 10_000, 5_000, -5_000):
         ask(f"q40 {q}", nav.q40_from_100um(q))
+    # the rim limits at the extremes: a 1 cm turn in place at one step, a 2 m and 4 m one capped
+    for v, w, b in ((0, 1, 10_000_000), (0, -3, 10_000_000), (3, 1, 10_000_000),
+                    (0, 2000, 2_000_000_000), (0, -2500, 4_000_000_000),
+                    (500, -2000, 2_000_000_000)):
+        ask(f"wheels {v} {w} {b}", *nav.wheel_speeds_mm_s(v, w, b))
 
 
 def _nav_session(rng: random.Random, ask: Callable[..., None]) -> None:
@@ -877,7 +882,10 @@ def _nav_session(rng: random.Random, ask: Callable[..., None]) -> None:
     navigator = nav.Navigator(ErrorMask())
     ask("nav_new", "ok")
     x_m = y_m = th_rad = 0.0
-    b_nm = rng.choice((300_000_000, 230_000_000, rng.randrange(100_000_000, 1_000_000_000)))
+    b_nm = rng.choice((300_000_000, 230_000_000, rng.randrange(100_000_000, 1_000_000_000),
+                       10_000_000, 2_000_000_000, rng.randrange(10_000_000, 4_000_000_001)))
+    # one encoder count's heading step: pmir's (2^64 / 2000), a 1 cm robot's, any up to 2^60
+    count_bam64 = rng.choice(((1 << 64) // 2000, 1 << 58, rng.randrange(1 << 60)))
     running = True
 
     def send(field: NavGoalField | int, value: int, go: tuple[int, int, int, int] = (0,) * 4):
@@ -905,9 +913,9 @@ def _nav_session(rng: random.Random, ask: Callable[..., None]) -> None:
             running = True
         x, y = round(x_m * 2**40), round(y_m * 2**40)
         h = round(th_rad / (2 * math.pi) * 2**64) % 2**64
-        sent = navigator.step(x, y, h, b_nm, running)
+        sent = navigator.step(x, y, h, b_nm, count_bam64, running)
         ask(
-            f"nav_step {x} {y} {h} {b_nm} {int(running)}",
+            f"nav_step {x} {y} {h} {b_nm} {count_bam64} {int(running)}",
             int(sent),
             navigator.left_mm_s,
             navigator.right_mm_s,

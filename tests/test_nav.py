@@ -51,6 +51,7 @@ DB = _load_dbc()
 TWO_PI = 2 * math.pi
 Q40 = float(1 << 40)
 PMIR_WHEELBASE_NM = 300_000_000
+PMIR_COUNT_BAM64 = (1 << 64) // 2000  # one count's heading step: r / (N b) = 0.075 / 150 turn
 TOL_M = nav.POSITION_TOL_UM * 1e-6  # 5 mm
 TOL_RAD = nav.HEADING_TOL_BAM32 * TWO_PI / 2**32  # 0.5 degree
 # The ground truth of the error-free robot differs from the on-board pose by the encoders'
@@ -162,10 +163,15 @@ def test_drive_straight_law_goes_along_the_track(dist_um: int, bearing_error: in
 
 @given(st.integers(-2000, 2000), st.integers(-2000, 2000), st.integers(10**7, 4 * 10**9))
 def test_wheel_speeds_are_v_minus_plus_omega_half_b(v: int, omega: int, wheelbase_nm: int) -> None:
+    """The turn's share omega b/2 is limited to 0.3 m/s at the rims (any wheelbase); turning in
+    place, a nonzero omega moves the rims by at least one MOTOR_CMD step (1 mm/s)."""
     left, right = nav.wheel_speeds_mm_s(v, omega, wheelbase_nm)
-    half = omega / 1000 * wheelbase_nm * 1e-9 / 2 * 1000
-    assert abs(left - (v - half)) <= 0.5
-    assert abs(right - (v + half)) <= 0.5
+    half = clamp(omega / 1000 * wheelbase_nm * 1e-9 / 2 * 1000, 300.0)
+    if v == 0 and omega != 0 and abs(half) < 0.5:
+        assert right == (1 if omega > 0 else -1)
+    else:
+        assert abs(right - (v + half)) <= 0.5
+    assert abs(left - (v - half)) <= 0.5 or v == 0
     assert left + right == 2 * v  # the same rounded half on both sides: no drift of v
 
 
@@ -186,8 +192,9 @@ def test_gains_respect_the_limits_they_must() -> None:
     (go-to-goal spirals in: its turning radius at e = pi/2 stays below d/2)."""
     assert nav.K_DRIVE_MILLI_PER_S * nav.V_MAX_MM_S // 1000 < nav.ACCEL_MM_S2
     assert nav.K2_MILLI_PER_S * nav.V_MAX_MM_S // 1000 < nav.ACCEL_MM_S2
-    rim = nav.K_TURN_MILLI_PER_S / 1000 * nav.OMEGA_MAX_MRAD_S * PMIR_WHEELBASE_NM * 1e-12 / 2
-    assert rim * 1000 < nav.ACCEL_MM_S2
+    rim_m_s = min(nav.OMEGA_MAX_MRAD_S * PMIR_WHEELBASE_NM * 1e-12 / 2, 0.3)
+    assert nav.K_TURN_MILLI_PER_S / 1000 * rim_m_s * 1000 < nav.ACCEL_MM_S2
+    assert nav.K_TURN_MILLI_PER_S * nav.RIM_TURN_MAX_MM_S // 1000 < nav.ACCEL_MM_S2  # any b
     assert 4 * nav.K2_MILLI_PER_S / math.pi < nav.K1_MILLI_PER_S
 
 
@@ -233,7 +240,8 @@ class Pose:
     def step(self, navigator: nav.Navigator, running: bool = True) -> bool:
         heading_bam64 = round(self.heading_deg / 360 * 2**64) % 2**64
         return navigator.step(
-            to_q40(self.x_m), to_q40(self.y_m), heading_bam64, PMIR_WHEELBASE_NM, running
+            to_q40(self.x_m), to_q40(self.y_m), heading_bam64, PMIR_WHEELBASE_NM,
+            PMIR_COUNT_BAM64, running,
         )
 
 

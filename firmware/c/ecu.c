@@ -943,8 +943,12 @@ static void navigate(struct odom_ecu *ecu)
     ecu->motor_cmd_due = false;
     if (ecu->ticks % NAV_PERIOD_TICKS == 0u) {
         const struct odometry *odo = &ecu->odometry;
+        uint64_t count_left = odo->consts.bam64_per_count_left;
+        uint64_t count_right = odo->consts.bam64_per_count_right;
         ecu->motor_cmd_due = nav_step(&ecu->nav, odo->x_q40_m, odo->y_q40_m, odo->heading_bam64,
-                                      ecu->params.wheelbase_nm, ecu->state == STATE_OK);
+                                      ecu->params.wheelbase_nm,
+                                      count_left > count_right ? count_left : count_right,
+                                      ecu->state == STATE_OK);
     }
 }
 

@@ -70,12 +70,16 @@ int32_t speed_mm_s(int64_t distance_um_, int32_t gain_milli_per_s)
                           V_MAX_MM_S);
 }
 
-/* (left, right) rim speeds v -+ omega b/2 in mm/s (rounded; |omega b| < 2^44). */
+/* (left, right) rim speeds v -+ omega b/2 in mm/s (rounded; |omega b| < 2^44), the turn's share
+ * clamped to +-RIM_TURN_MAX and, turning in place, at least MIN_RIM when omega != 0. */
 void wheel_speeds_mm_s(int32_t v_mm_s, int32_t omega_mrad_s, uint32_t wheelbase_nm,
                        int32_t *left_mm_s, int32_t *right_mm_s)
 {
-    int32_t half_mm_s =
-        (int32_t)div_round_i64((int64_t)omega_mrad_s * wheelbase_nm, HALF_WHEEL_DIVISOR);
+    int32_t half_mm_s = (int32_t)clamp(
+        div_round_i64((int64_t)omega_mrad_s * wheelbase_nm, HALF_WHEEL_DIVISOR), RIM_TURN_MAX_MM_S);
+    if (v_mm_s == 0 && half_mm_s == 0 && omega_mrad_s != 0) {
+        half_mm_s = (int32_t)clamp(omega_mrad_s, MIN_RIM_MM_S); /* omega != 0: its sign */
+    }
     *left_mm_s = v_mm_s - half_mm_s;
     *right_mm_s = v_mm_s + half_mm_s;
 }
@@ -100,6 +104,14 @@ void drive_straight_law(int64_t dist_um, int32_t bearing_error, uint32_t *errors
     }
     *v_mm_s = speed_mm_s(along_um, K_DRIVE_MILLI_PER_S);
     *omega_mrad_s = omega;
+}
+
+/* The heading tolerance: HEADING_TOL or one encoder count's heading step (BAM64, < 2^60,
+ * rounded up to BAM32 by the + 1), whichever is larger. */
+uint32_t heading_tol_bam32(uint64_t count_bam64)
+{
+    uint64_t count_bam32 = (count_bam64 >> 32) + 1u;
+    return count_bam32 > HEADING_TOL_BAM32 ? (uint32_t)count_bam32 : HEADING_TOL_BAM32;
 }
 
 /* The wheel setpoint moved from previous toward target by at most WHEEL_STEP. */
@@ -140,6 +152,7 @@ void navigator_init(struct navigator *nav, uint32_t *errors)
     nav->goal_id = 0u;
     nav->distance_um = 0;
     nav->heading_error_bam32 = 0;
+    nav->heading_tol_bam32 = HEADING_TOL_BAM32;
     nav->left_mm_s = 0;
     nav->right_mm_s = 0;
     nav->changed = true;
@@ -272,8 +285,9 @@ static void nav_finish(struct navigator *nav)
 /* One control period (step 4, every NAV_PERIOD_TICKS). True when a MOTOR_CMD with
  * (left_mm_s, right_mm_s) is to be sent this period. running: odometry OK. */
 bool nav_step(struct navigator *nav, int64_t x_q40_m, int64_t y_q40_m, uint64_t heading_bam64,
-              uint32_t wheelbase_nm, bool running)
+              uint32_t wheelbase_nm, uint64_t count_bam64, bool running)
 {
+    nav->heading_tol_bam32 = heading_tol_bam32(count_bam64);
     if (is_active(nav->state) && !running) {
         nav_clear_path(nav);
         nav_halt(nav, NAV_ABORTED);
@@ -323,7 +337,7 @@ static void nav_control(struct navigator *nav, int64_t x_q40_m, int64_t y_q40_m,
     int32_t bearing_error = bearing_error_bam32(dx, dy, heading_bam32);
     int32_t final_error = wrap_i32((int64_t)goal->heading_bam32 - (int64_t)heading_bam32);
     nav->distance_um = dist_um;
-    if (nav->state == NAV_TURNING && abs_i64(bearing_error) < HEADING_TOL_BAM32) {
+    if (nav->state == NAV_TURNING && abs_i64(bearing_error) < (int64_t)nav->heading_tol_bam32) {
         nav_set_state(nav, NAV_DRIVING);
     }
     if (nav->state != NAV_FINAL_TURN && dist_um < POSITION_TOL_UM) {
@@ -332,7 +346,7 @@ static void nav_control(struct navigator *nav, int64_t x_q40_m, int64_t y_q40_m,
     *v_mm_s = 0;
     if (nav->state == NAV_FINAL_TURN) {
         nav->heading_error_bam32 = goal->final_turn ? final_error : 0;
-        if (abs_i64(nav->heading_error_bam32) < HEADING_TOL_BAM32) {
+        if (abs_i64(nav->heading_error_bam32) < (int64_t)nav->heading_tol_bam32) {
             nav_finish(nav);
             *omega_mrad_s = 0;
             return;

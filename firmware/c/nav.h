@@ -17,6 +17,8 @@
 #define WHEEL_STEP_MM_S (ACCEL_MM_S2 * NAV_PERIOD_MS / 1000) /* 20 mm/s per period */
 #define POSITION_TOL_UM 5000
 #define HEADING_TOL_BAM32 5965232 /* (1 << 32) // 720: 0.5 degree */
+#define RIM_TURN_MAX_MM_S 300 /* |omega b/2| <= 0.3 m/s: OMEGA_MAX's rim speed at b = 0.30 m */
+#define MIN_RIM_MM_S 1 /* the least turn in place that moves the wheels: one MOTOR_CMD step */
 #define HOLD_MIN_DISTANCE_UM 20000
 
 #define K_TURN_MILLI_PER_S 3000
@@ -74,6 +76,7 @@ struct navigator {
     uint8_t goal_id;
     int64_t distance_um;
     int32_t heading_error_bam32;
+    uint32_t heading_tol_bam32; /* from the geometry, every period */
     int32_t left_mm_s; /* the last setpoints (the rate limiter's memory) */
     int32_t right_mm_s;
     bool changed; /* STATE or GOAL_ID changed since NAV_STATUS was last sent */
@@ -96,12 +99,13 @@ void go_to_goal_law(int64_t dist_um, int32_t bearing_error, uint32_t *errors, in
 void drive_straight_law(int64_t dist_um, int32_t bearing_error, uint32_t *errors,
                         int32_t *v_mm_s, int32_t *omega_mrad_s);
 int32_t rate_limit(int32_t target_mm_s, int32_t previous_mm_s);
+uint32_t heading_tol_bam32(uint64_t count_bam64);
 
 void navigator_init(struct navigator *nav, uint32_t *errors);
 enum ack_reason nav_request(struct navigator *nav, const struct nav_goal_frame *frame,
                             bool running);
 bool nav_step(struct navigator *nav, int64_t x_q40_m, int64_t y_q40_m, uint64_t heading_bam64,
-              uint32_t wheelbase_nm, bool running);
+              uint32_t wheelbase_nm, uint64_t count_bam64, bool running);
 int64_t q40_from_100um(int32_t value_100um);
 
 #endif

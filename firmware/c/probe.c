@@ -26,7 +26,7 @@
  *   | straight D E | rate T P | q40 V  -> the nav.c function's results (and errors)
  *   nav_new                  -> ok                    (a new navigator)
  *   nav_req FIELD VALUE MODE APPEND NO_FINAL GOAL_ID RUNNING -> ack reason
- *   nav_step X Y H64 B RUNNING -> sent left right state goal_id depth distance_um
+ *   nav_step X Y H64 B COUNT64 RUNNING -> sent left right state goal_id depth distance_um
  *                               heading_error changed errors   (then changed is cleared)
  *   enc_unpack HEX           -> counter left right ctrl_uptime (cantools-generated dbc/odocan.c)
  *   enc_pack COUNTER L R | motor_pack COUNTER L R -> the sealed frame (generated pack + E2E)
@@ -344,7 +344,8 @@ int main(void)
             int64_t y = arg_i64();
             uint64_t h = arg_u64();
             uint32_t b = (uint32_t)arg_u64();
-            bool sent = nav_step(&nav, x, y, h, b, arg_u64() != 0u);
+            uint64_t count = arg_u64();
+            bool sent = nav_step(&nav, x, y, h, b, count, arg_u64() != 0u);
             printf("%d %" PRId32 " %" PRId32 " %d %u %u %" PRId64 " %" PRId32 " %d %" PRIu32 "\n",
                    (int)sent, nav.left_mm_s, nav.right_mm_s, (int)nav.state,
                    (unsigned)nav.goal_id, nav.depth, nav.distance_um, nav.heading_error_bam32,

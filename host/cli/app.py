@@ -188,8 +188,9 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:
         if debug or not is_usage_error(exc):
             raise
-        print(f"error: {_one_line(exc)}", file=sys.stderr)
-        return EXIT_USAGE
+        code = int(getattr(exc, "exit_code", EXIT_USAGE))  # 1: an experiment that failed
+        print(f"{'error' if code == EXIT_USAGE else 'FAIL'}: {_one_line(exc)}", file=sys.stderr)
+        return code
 
 
 def _interrupted(exc: KeyboardInterrupt, command: str | None) -> int:

@@ -58,6 +58,13 @@ class ExperimentError(OdocanError):
     """An experiment could not run as planned (a NACK, a goal not reached in time)."""
 
 
+class PathNotReached(ExperimentError):
+    """The firmware did not reach its path in time: the experiment ran and failed, exit 1 (not
+    2: nothing the person typed was wrong)."""
+
+    exit_code = 1
+
+
 @dataclass(frozen=True)
 class Waypoint:
     """One goal of a path, in the odometry (start) frame: metres, and the final heading in
@@ -187,7 +194,7 @@ class NavSession(Closing):
         for goal_id, point in enumerate(path, start=1):
             self._goal(goal_id, point)
         if not self._finished and not self.rig.run_until(self._take_marks, timeout_s):
-            raise ExperimentError(f"path of {len(path)} goals not reached within {timeout_s:g} s"
+            raise PathNotReached(f"path of {len(path)} goals not reached within {timeout_s:g} s"
                                   f"{self._where_stuck()}")
         self.rig.run(SETTLE_S)
         onboard = self.heard.latest_pose()

@@ -58,6 +58,7 @@ import numpy as np
 
 from odocan.host.experiments.drive import (
     DriveResult,
+    ExperimentError,
     NavSession,
     Waypoint,
     dead_reckon,
@@ -172,9 +173,16 @@ def square_path(side_m: float, direction: str) -> list[Waypoint]:
     ]
 
 
-def square_timeout_s(side_m: float) -> float:
-    """Simulated seconds a square may take: 4 sides at 0.3 m/s and 5 s per corner."""
-    return 4.0 * (side_m / 0.3 + 5.0)
+TURN_RIM_SPEED_M_S = 0.3  # the firmware turns in place at most 0.3 m/s at the rims (firmware.nav)
+
+
+def square_timeout_s(side_m: float, wheelbase_m: float = 0.3) -> float:
+    """Simulated seconds a square may take: 4 sides at 0.3 m/s and 5 s per corner, plus, on a
+    wheelbase wider than 0.3 m, twice a quarter turn at the firmware's rim turn speed (a 2 m
+    robot turns at 0.3 rad/s: 5 s per quarter turn)."""
+    wider_m = max(wheelbase_m - 0.3, 0.0)
+    turn_s = 2.0 * (math.pi / 2.0) * (wider_m / 2.0) / TURN_RIM_SPEED_M_S
+    return 4.0 * (side_m / 0.3 + 5.0 + turn_s)
 
 
 def centre_of_gravity(errors: Sequence[tuple[float, float]]) -> CentreOfGravity:
@@ -295,7 +303,8 @@ def run_umbmark(
                     geometry.wheel_radius_left_m, geometry.wheel_radius_right_m,
                     geometry.wheelbase_m,
                 )
-            drive = session.drive(square_path(side_m, direction), square_timeout_s(side_m))
+            timeout_s = square_timeout_s(side_m, robot.wheelbase_m)
+            drive = session.drive(square_path(side_m, direction), timeout_s)
         runs.append(UmbmarkRun(direction, *return_error(drive), drive))
         if on_run is not None:
             on_run()
@@ -343,6 +352,13 @@ class Calibration:
         return self.model
 
 
+class CorrectionRefused(ExperimentError):
+    """The calibration's estimate is a geometry the firmware refuses (e.g. a 1 cm wheelbase times
+    E_b 0.7, below its 1 cm minimum): the calibration failed, exit 1, not bad input."""
+
+    exit_code = 1
+
+
 def calibrate(
     robot: RobotProfile,
     errors: ErrorModel,
@@ -370,10 +386,20 @@ def calibrate(
     fit_residual_m = float(np.sqrt(np.mean(residual * residual)) * math.sqrt(2.0))
     chosen = (estimate.ed, estimate.eb) if method == "borenstein" else fitted
     corrected = nominal.corrected(*chosen)
-    after = run_umbmark(
-        robot, errors, seed, side_m=side_m, runs_per_direction=runs, geometry=corrected, phase=1,
-        on_run=on_run,
-    )
+    try:
+        after = run_umbmark(
+            robot, errors, seed, side_m=side_m, runs_per_direction=runs, geometry=corrected,
+            phase=1, on_run=on_run,
+        )
+    except ExperimentError as exc:
+        if not str(exc).startswith("config:"):
+            raise
+        raise CorrectionRefused(
+            f"the firmware refused the corrected geometry (E_d {chosen[0]:.6g}, E_b "
+            f"{chosen[1]:.6g}: radii {corrected.wheel_radius_left_m:.6g}/"
+            f"{corrected.wheel_radius_right_m:.6g} m, wheelbase {corrected.wheelbase_m:.6g} m), "
+            f"{exc}"
+        ) from None
     return Calibration(
         before, estimate, fitted, method, nominal, corrected, after, fit_residual_m
     )

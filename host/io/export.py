@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -96,10 +95,9 @@ def check_export_paths(parquet_dir: Path | None, mcap_path: Path | None) -> None
 
 
 def _check_writable_dir(option: str, path: Path, directory: Path) -> None:
-    if not directory.is_dir():
-        raise ConfigurationError(f"{option} {path}: directory {directory} does not exist")
-    if not os.access(directory, os.W_OK | os.X_OK):
-        raise ConfigurationError(f"{option} {path}: directory {directory} is not writable")
+    from odocan.host.outputs import check_writable_dir
+
+    check_writable_dir(directory, option, path)
 
 
 # --- Foxglove messages (JSON, field names of foxglove's schemas) ------------------------------
