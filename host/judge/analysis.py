@@ -115,6 +115,7 @@ from odocan.host.judge.compare import (
     rebased_at_start,
     versus_truth,
 )
+from odocan.host.judge.gapseen import seen_in_log
 from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import Life, merge, split_lives
@@ -292,7 +293,8 @@ def _analyze_life(
         power_up = starts_at_power_up(frames, accepted, decoder, onboard)
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
-                         slack_m=tolerance.position_m, start_pose=start_pose)
+                         slack_m=tolerance.position_m, start_pose=start_pose,
+                         seen=seen_in_log(frames, decoder, enc, power_up=power_up))
     ref = ref_all.at(onboard.enc)
     truth_origin = None
     if rebase:  # a new firmware life: its own origin, the truth re-based there
