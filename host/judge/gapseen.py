@@ -217,6 +217,7 @@ class PageEvidence:
     cycle_s: float | None = None  # WHEEL_ENCODERS' cycle time
     first_s: float | None = None  # the first encoder frame's time
     _enc_count: int = 0  # encoder frames fed
+    _offset: int = 0  # frames fed
     _last_seq: int | None = None
     _last_enc_s: float = -math.inf
     _prev: Status | None = None  # the last status frame
@@ -230,7 +231,7 @@ class PageEvidence:
     _usable: bool = True  # the DBC has the signals
 
     def feed(self, chunk: FrameArrays, enc: Encoders) -> None:
-        """The next chunk and its accepted encoder frames (``index`` in the chunk)."""
+        """The next chunk and its accepted encoder frames (``index``: in the frames fed)."""
         self.cycle_s = enc.cycle_s
         if self.first_s is None and len(enc.seq):
             self.first_s = float(enc.timestamp_s[0])
@@ -238,6 +239,7 @@ class PageEvidence:
         if self._usable:
             self._add_status(chunk, enc)
         self._enc_count += len(enc.seq)
+        self._offset += len(chunk)
         if len(enc.seq):
             self._last_enc_s = float(enc.timestamp_s[-1])
 
@@ -283,7 +285,7 @@ class PageEvidence:
             return
         rows = np.asarray(self.decoder.select(chunk, "ODOM_STATUS"), dtype=np.int64)
         crc = crc_holds(chunk, self.decoder, rows)
-        before = np.searchsorted(enc.index, rows)
+        before = np.searchsorted(enc.index, rows + self._offset)  # enc.index: in the log
         last_s = np.where(before > 0, enc.timestamp_s[np.maximum(before - 1, 0)]
                           if len(enc.seq) else 0.0, self._last_enc_s)
         status = [(int(b1 >> 4), int(b1 & 0xF), float(t), bool(ok), self._enc_count + int(n),
