@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import can
 import pytest
 
 import odocan.firmware.odometry as odometry
@@ -49,7 +50,7 @@ def _silent_no_burst(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, silent_tic
                 whole(self, d_left, d_right)
 
         monkeypatch.setattr(odometry.Odometry, "step_deltas", step_deltas)
-    heard: list = []
+    heard: list[can.Message] = []
     robot = tmp_path / "pmir1cm.toml"
     robot.write_text(ONE_CM_TOML)
     with FaultRig(robot=str(robot), scenario=straight(load(robot), 6.0)) as rig:
