@@ -63,7 +63,10 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    absorbed, the samples after the stall show the rest. A gap of the log's encoder sequence
    (frames the logger missed, which the firmware may have integrated one by one, each within
    its plausibility bound) places it too, within the worst merge error of any such split of
-   the merged step (``host.judge.gapbound``), summed with the stalls' since the start.
+   the merged step (``host.judge.gapbound``), summed with the stalls' since the start. Where
+   the firmware's own ODOM_STATUS E2E pages prove it accepted exactly the log's encoder frames
+   (every one the log holds, none it lacks: ``host.judge.gapseen``), it took the reference's
+   steps there: a gap or a stall there is placed with no allowance but the tolerance.
    ``reference_breaks`` in the report counts both and gives the largest offset a stall's and
    a gap's placement asked for, with its allowance, and the most any went beyond it.
 5. **Errors**: position errors are Euclidean distances (m), heading errors wrapped to [-pi, pi).
