@@ -283,15 +283,17 @@ class PageEvidence:
         if "ENC_E2E_LOST" not in lost or "OVERFLOWED_FRAMES" not in totals:
             self._usable = False
             return
-        rows = np.asarray(self.decoder.select(chunk, "ODOM_STATUS"), dtype=np.int64)
+        head = self.decoder.decode(chunk, "ODOM_STATUS")  # PAGE and COUNTER by the DBC
+        rows = np.asarray(head["index"], dtype=np.int64)
         crc = crc_holds(chunk, self.decoder, rows)
         before = np.searchsorted(enc.index, rows + self._offset)  # enc.index: in the log
         last_s = np.where(before > 0, enc.timestamp_s[np.maximum(before - 1, 0)]
                           if len(enc.seq) else 0.0, self._last_enc_s)
-        status = [(int(b1 >> 4), int(b1 & 0xF), float(t), bool(ok), self._enc_count + int(n),
-                   float(ls)) for b1, t, ok, n, ls in zip(
-                       chunk.data[rows, 1].tolist(), chunk.timestamp_s[rows].tolist(),
-                       crc.tolist(), before.tolist(), last_s.tolist(), strict=True)]
+        status = [(int(p), int(c), float(t), bool(ok), self._enc_count + int(n), float(ls))
+                  for p, c, t, ok, n, ls in zip(
+                      head["PAGE"].tolist(), head["COUNTER"].tolist(),
+                      chunk.timestamp_s[rows].tolist(), crc.tolist(), before.tolist(),
+                      last_s.tolist(), strict=True)]
         values = {int(r): (int(a), int(b)) for r, a, b in zip(
             lost["index"], lost["ENC_E2E_OK"], lost["ENC_E2E_LOST"], strict=True)}
         values.update({int(r): (int(a), int(b)) for r, a, b in zip(
