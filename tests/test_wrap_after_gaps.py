@@ -86,8 +86,6 @@ def test_the_wrapping_firmware_is_wrong_in_its_pose_only(
     assert result["onboard_twist_vs_reference"]["passed"] is True
 
 
-@pytest.mark.xfail(strict=True, reason="the gap placement absorbs it: the allowance does not "
-                   "use ENC_E2E_LOST to see that the firmware lost the gap frames too")
 def test_a_wrapping_firmware_behind_burst_gaps_fails(
     drive: tuple[int, dict[str, Any], int]
 ) -> None:

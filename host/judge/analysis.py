@@ -64,7 +64,10 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    absorbed, the samples after the stall show the rest. A gap of the log's encoder sequence
    (frames the logger missed, which the firmware may have integrated one by one, each within
    its plausibility bound) places it too, within the worst merge error of any such split of
-   the merged step (``host.judge.gapbound``), summed with the stalls' since the start.
+   the merged step (``host.judge.gapbound``), summed with the stalls' since the start. Where
+   the firmware's own ODOM_STATUS E2E pages prove it accepted exactly the log's encoder frames
+   (every one the log holds, none it lacks: ``host.judge.gapseen``), it took the reference's
+   steps there: a gap or a stall there is placed with no allowance but the tolerance.
    ``reference_breaks`` in the report counts both and gives the largest offset a stall's and
    a gap's placement asked for, with its allowance, and the most any went beyond it.
 5. **Errors**: position errors are Euclidean distances (m), heading errors wrapped to [-pi, pi).
@@ -116,6 +119,7 @@ from odocan.host.judge.compare import (
     versus_truth,
 )
 from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
+from odocan.host.judge.gapseen import seen_in_log
 from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import Life, merge, split_lives
@@ -302,7 +306,8 @@ def _analyze_life(
         power_up = starts_at_power_up(frames, accepted, decoder, onboard)
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
-                         slack_m=tolerance.position_m, start_pose=start_pose)
+                         slack_m=tolerance.position_m, start_pose=start_pose,
+                         seen=seen_in_log(frames, decoder, enc, power_up=power_up))
     ref = ref_all.at(onboard.enc)
     truth_origin = None
     if rebase:  # a new firmware life: its own origin, the truth re-based there

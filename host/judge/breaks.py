@@ -15,9 +15,10 @@ tolerance (the rounding of the samples the placement rests on). A gap of the log
 logger missed, which the firmware may have integrated one by one) is such a break too, its
 allowance the worst merge error of any split of the merged step into the gap's periods within
 the plausibility bound (``host.judge.gapbound``); only a gap whose bound is unknown (inf: no
-plausibility bound configured) still places freely. A larger offset is not absorbed: the
-placement stops at the bound and the samples after the break show the rest (``bound_offsets``,
-``clamp_offset``).
+plausibility bound configured) still places freely. Where the firmware's E2E pages prove
+it took exactly the log's frames (``host.judge.gapseen``) a gap or a stall earns no allowance.
+A larger offset is not absorbed: the placement stops at the bound and the samples after the
+break show the rest (``bound_offsets``, ``clamp_offset``).
 
 Spans of more than ``MAX_MERGE_FRAMES`` frames take a cheaper bound: twice the path length
 (``path_bound_m``: a run's merge error is at most its fine path plus its merged step).

@@ -25,6 +25,7 @@ from odocan.host.judge.breaks import (
     placed_offsets,
 )
 from odocan.host.judge.gapbound import gap_allowance_of_counts
+from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -75,12 +76,15 @@ def build_reference(
     breaks: IntArray | None = None,
     slack_m: float = POSITION_LSB_M,
     start_pose: tuple[float, float, float] | None = None,
+    seen: Seen = NOTHING,
 ) -> Reference:
     """Integrate the encoder deltas from the first on-board sample on; the position placed
     again after gaps and after the stalls' ``breaks`` (within ``breaks.bound_offsets``' bound,
     ``slack_m``: the position tolerance; a gap's allowance from ``max_wheel_speed_mm_s``).
     ``start_pose``: the exact start at the first encoder frame (x m, y m, heading rad: a
-    set-pose's, ``host.judge.setposes``), as at power-up."""
+    set-pose's, ``host.judge.setposes``), as at power-up. ``seen``: what the firmware's E2E pages
+    prove it took (``host.judge.gapseen``): a gap it missed too, a stall over which it took
+    exactly the log's frames, is placed with no allowance."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     exact_at_first = power_up or start_pose is not None
     e0 = 0 if exact_at_first else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
@@ -108,10 +112,13 @@ def build_reference(
     stalled = frozenset(breaks.tolist()) if breaks is not None else frozenset()
 
     uptime_reprimed = frozenset(e0 + k for k in steps.by_uptime)
+    reprimed = frozenset(e0 + k for k in steps.reprimed)
 
     def gap_allowance(b: int) -> float:
         if b in uptime_reprimed:  # the gap ends in a controller restart: nothing integrated
             return 0.0  # across it on board (re-primed), the position goes on exactly
+        if seen.gap_missed(b, reprimed):
+            return 0.0  # the firmware took the gap as the reference's one step
         return gap_allowance_of_counts(
             (int(enc.left[b - 1]), int(enc.right[b - 1])), (int(enc.left[b]), int(enc.right[b])),
             int(enc.seq[b] - enc.seq[b - 1]), geometry, bits, integrator, max_wheel_speed_mm_s)
@@ -122,7 +129,8 @@ def build_reference(
         list(zip((opened + e0).tolist(), gaps[opened].tolist(), strict=True)),
         lambda b: (break_allowance(enc, b, onboard.enc, geometry, bits, integrator,
                                    max_wheel_speed_mm_s=max_wheel_speed_mm_s)
-                   if b in stalled else 0.0),
+                   if b in stalled and not seen_whole(seen, b, onboard.enc, reprimed)
+                   else 0.0),
         gap_allowance, slack_m)
     x_m += off_x[segment]
     y_m += off_y[segment]
@@ -165,6 +173,15 @@ def break_allowance(enc: Encoders, b: int, sample_enc: IntArray, geometry: Geome
     return merge_allowance_m(enc.left[b - 1 : j + 1], enc.right[b - 1 : j + 1], geometry, bits,
                              integrator) + overlap_allowance_m(
         ends[0], ends[1], j - b + 2, geometry, bits, integrator, max_wheel_speed_mm_s)
+
+
+def seen_whole(seen: Seen, b: int, sample_enc: IntArray, reprimed: frozenset[int]) -> bool:
+    """Whether the firmware took exactly the log's frames across the break at encoder frame
+    ``b`` (``break_allowance``'s span: frame b - 1 to the first frame a kept sample names at or
+    after b), as its E2E pages prove (``host.judge.gapseen``): then it took the reference's
+    steps there and the break earns no allowance."""
+    k = int(np.searchsorted(sample_enc, b))
+    return k < len(sample_enc) and seen.took_all(b - 1, int(sample_enc[k]), reprimed)
 
 
 @dataclass

@@ -32,6 +32,7 @@ from odocan.host.judge.analysis import STALL_DETAIL, Tolerance, _realtime, _robo
 from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapbound import gap_allowance_of_counts
+from odocan.host.judge.gapseen import PageEvidence
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.reference_path import restart_detail
@@ -263,9 +264,11 @@ def _life(
     # the offsets' pass also weighs the lossy spans (losses.loss_allowance) and keeps the
     # counts across the stalls' breaks (their allowance)
     raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
+    seen, reprimed = first.pages.seen(power_up), frozenset(info.reprimed)  # gapseen
     off_x, off_y, placements = placed_offsets(
-        *raw, info.openings, across.allowance,
-        lambda b: 0.0 if b in info.by_uptime else gap_allowance_of_counts(  # as reference_path
+        *raw, info.openings, lambda b: across.allowance(b, seen, reprimed),
+        lambda b: 0.0 if b in info.by_uptime or seen.gap_missed(b, reprimed)  # reference_path's
+        else gap_allowance_of_counts(
             *info.gap_steps[b], geometry, bits, integrator, max_wheel_speed_mm_s),
         tolerance.position_m)
     offsets = (off_x, off_y)
@@ -370,6 +373,7 @@ class _FirstPass:
         self.twist = StreamTwist(self.decoder, robot)
         self.facts = StreamFacts(self.decoder)
         self.losses = StreamLosses(self.decoder)
+        self.pages = PageEvidence(self.decoder)  # what the firmware took (gapseen)
         self.queued = False  # frames of a periodic sender let out in a burst (queued_frames)
         self.twins = False  # an encoder frame with a twin (samples.twinned_encoder_frames)
         self._last_enc: dict[str, np.ndarray] | None = None  # the last accepted encoder row
@@ -401,6 +405,7 @@ class _FirstPass:
         self.twist.feed(chunk, accepted, enc)
         self.facts.feed(chunk, accepted)
         self.losses.feed(chunk, accepted, enc)
+        self.pages.feed(chunk, enc)
         if enc.cycle_s is not None:
             self._bursts(chunk, accepted, enc.cycle_s)
         self._twins(chunk, accepted)

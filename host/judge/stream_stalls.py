@@ -31,6 +31,7 @@ from odocan.host.judge.breaks import (
     overlap_allowance_m,
     path_bound_m,
 )
+from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import Encoders
 from odocan.host.judge.stalls import frozen_breaks, silent
@@ -229,8 +230,13 @@ class StreamBreakCounts:
             sums[1] += int(np.sum(np.abs(wrap_delta(np.diff(right), self.bits))))
             sums[2], sums[3] = int(left[-1]), int(right[-1])
 
-    def allowance(self, b: int) -> float:
-        """The allowance (m) of the break at encoder frame ``b`` (0 without a sample after)."""
+    def allowance(self, b: int, seen: Seen = NOTHING,
+                  reprimed: frozenset[int] = frozenset()) -> float:
+        """The allowance (m) of the break at encoder frame ``b`` (0 without a sample after,
+        and where the firmware's pages prove it took exactly the log's frames across it:
+        ``seen``, ``reference_path.seen_whole``)."""
+        if b in self._ends and seen.took_all(b - 1, self._ends[b], reprimed):
+            return 0.0
         if b in self._sums:
             merged = path_bound_m(self._sums[b][0], self._sums[b][1], self.geometry)
         elif b in self._left:

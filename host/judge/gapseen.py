@@ -1,0 +1,362 @@
+"""What the firmware's own E2E counts prove it took (issue #11, rule 5: a PASS must never hide
+a wrong pose): where ODOM_STATUS shows the firmware accepted exactly the encoder frames the log
+holds (every one, and none the log lacks), it took the reference's steps there, so a gap of the
+log (``host.judge.gapbound``'s allowance: frames the firmware saw and the log did not) or a
+stall (``host.judge.breaks``' merge allowance: frames the log holds and the firmware missed)
+there earns no re-placement allowance; the firmware's rounding stays the tolerance. Shared by
+the whole-log and the streamed judge (``reference_path.build_reference``, ``stream_analysis``).
+
+The evidence. Page 2 of ODOM_STATUS carries ENC_E2E_OK (u16) and ENC_E2E_LOST (u8): the encoder
+frames the firmware's E2E check accepted, and those it saw skipped between them (plus whole
+COUNTER cycles of frames its mailbox dropped); page 1 carries REJECTED_FRAMES and
+OVERFLOWED_FRAMES (u16): every frame refused by a check (E2E CRC, REPEATED, WRONG_SEQUENCE,
+length, plausibility) or dropped by a full mailbox. A page counts as evidence only when it came
+in its tick, right after that tick's summary (CRC good, COUNTER one less, within half an
+encoder cycle, the summary on time: not ``queued_frames``); it was made then. A page held back
+or sent again carries older counts at a later place: no evidence. The host's E2E window may
+refuse a good page after the bus lost a few status frames: its CRC suffices.
+
+For two such pages p, q of one firmware life (at most ``PAIR_PAGES`` apart), let S_p, S_q be the
+sender's sequence numbers of the last encoder frames the firmware had accepted when it made
+them, W the sender's frames in (S_p, S_q], F those the firmware accepted, L those the log holds.
+
+* lo(p): the last encoder frame logged at or before p's summary (``losses._made_from``): the
+  firmware had it, seq(lo(p)) <= S_p. hi(p): the first logged after p: it came on the bus after
+  p was made, S_p < seq(hi(p)). So the log's frames hi(p) .. lo(q) are surely in W.
+* Quiet: the last page 1 sent before frame lo(p) (made before the firmware took any frame of W)
+  and the first sent at or after q count the same rejected and overflowed frames, less than
+  ``WRAP_SAFE_S`` apart (65536 frames cannot pass in that time on a 1 Mbit/s bus, so the u16
+  counts did not wrap). A frame of L in W reached the firmware (CAN delivers every frame on the
+  wire to every node; a fault takes a frame off the bus for all), was not dropped nor refused:
+  L and W  is within F. Every frame of W the firmware did not accept is missing from the log.
+* By OK: g_ok = (OK(q) - OK(p)) mod 65536 is exact (fewer than 65536 frames in the window) and
+  equals |L and W| + a, a the frames of W the firmware accepted that the log lacks; |L and W|
+  >= lo(q) - hi(p) + 1. If g_ok <= lo(q) - hi(p) + 1 then a = 0: on W the firmware accepted
+  exactly L.
+* By LOST: the true growth G of ENC_E2E_LOST counts frames of W not accepted, never more (a
+  COUNTER skip of 16 or more counts short; the cycles term counts mailbox drops only: none
+  here); g = G mod 256 <= G. M, the frames the log lacks between frames lo(p) and hi(q) (the
+  gaps into frames lo(p) + 1 .. hi(q)), is at least those of W. If g >= M > 0: M <= g <= G <=
+  |W - F| <= M, all equal: every missing frame between lo(p) and hi(q) is in W and was not
+  accepted, and again on W the firmware accepted exactly L.
+* Windows proven either way whose pages overlap or meet join (their W's are contiguous): on
+  the union the firmware accepted exactly the log's frames, surely for the log's frames from
+  hi of the first page to lo of the last (``Seen.same``); the gaps into frames lo(p) + 1 ..
+  hi(q) of a window proven by LOST were missed whole (``Seen.missed``).
+* At power-up (``host.judge.powerup``: the firmware primed on the log's first encoder frame) its
+  boot is a page before the log: every count 0 (``with_boot``).
+
+Then a gap whose frames are all in such a stretch was taken as one step from the frame before
+it to the frame after it, the reference's merged step; a stall whose span (the frame before it
+to the first frame a sample names after it) lies in one was taken frame by frame, the
+reference's steps. A frame the firmware accepted that is not the sender's (a forgery whose CRC
+holds) is the one thing the counts cannot tell; a forger's other frames fail the CRC, which
+REJECTED counts (the window is not quiet). Every other way to blame a correct firmware keeps the
+allowance: a page missing, held back or sent again (no evidence); a mailbox overflow or a
+refusal (a stall's backlog, a late frame's WRONG_SEQUENCE, a forgery, an implausible step); a
+counter restart re-primed in the stretch (a restarted COUNTER can make OKSOMELOST count frames
+that never existed: ``Seen.gap_missed`` and ``took_all`` leave such stretches out); a gap
+straddling a page (its frames before lo or after hi are not proven); a reboot (each life has
+its own pages: ``host.judge.reboots``); a sender that stalled (the sender's sequence then
+counts periods it did not send: M too large, never too small). The counts can only prove
+frames missed and frames taken, never a split of a gap the firmware saw: such a gap keeps its
+allowance.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.samples import QUEUED_GAP_CYCLES, Encoders, FloatArray, IntArray
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
+
+LOST_PAGE = 2  # ODOM_STATUS page with ENC_E2E_OK and ENC_E2E_LOST
+TOTALS_PAGE = 1  # ODOM_STATUS page with REJECTED_FRAMES and OVERFLOWED_FRAMES
+PAIR_PAGES = 8  # pages paired up to this many apart (4 s of pages: a window per pair)
+WRAP_SAFE_S = 7.0  # 65536 frames take longer than this on a 1 Mbit/s bus (~9 000 frames/s)
+Span = tuple[int, int]  # encoder frames (first, last), both included
+Status = tuple[int, int, float, bool, int, float]  # a status frame: page, COUNTER, time, CRC
+# good, encoder frames before it, the last one's time
+
+
+@dataclass(frozen=True)
+class LostPages:
+    """The accepted ENC_E2E pages of a life, in log order (module docstring)."""
+
+    lo: IntArray  # the earliest encoder frame the firmware had when it made the page
+    lo_s: FloatArray  # that frame's bus time (s)
+    hi: IntArray  # the first encoder frame logged after the page (n: none)
+    ok: IntArray  # ENC_E2E_OK (u16)
+    lost: IntArray  # ENC_E2E_LOST (u8)
+    sent_s: FloatArray  # its bus time (s)
+
+
+@dataclass(frozen=True)
+class TotalsPages:
+    """The accepted FRAME_TOTALS pages of a life, in log order."""
+
+    sent_s: FloatArray
+    rejected: IntArray  # REJECTED_FRAMES (u16)
+    overflowed: IntArray  # OVERFLOWED_FRAMES (u16)
+
+
+@dataclass(frozen=True)
+class Seen:
+    """What the pages prove (module docstring): ``same``, runs of encoder frames over which the
+    firmware accepted exactly the log's frames (every one, and no frame the log lacks);
+    ``missed``, spans whose gaps (into frames first + 1 .. last) it missed whole."""
+
+    same: list[Span]
+    missed: list[Span]
+
+    def gap_missed(self, frame: int, reprimed: frozenset[int] = frozenset()) -> bool:
+        """Whether the firmware missed every frame of the gap into encoder ``frame`` (no
+        counter restart re-primed in the span that proves it: ``reprimed``)."""
+        return any(lo < frame <= hi and _clear(lo, hi, reprimed)
+                   for lo, hi in self.missed + self.same)
+
+    def took_all(self, first: int, last: int, reprimed: frozenset[int] = frozenset()) -> bool:
+        """Whether the firmware took exactly the log's frames ``first`` .. ``last``."""
+        return any(lo <= first and last <= hi and _clear(lo, hi, reprimed)
+                   for lo, hi in self.same)
+
+
+NOTHING = Seen([], [])
+
+
+def _clear(lo: int, hi: int, reprimed: frozenset[int]) -> bool:
+    return not any(lo < r <= hi for r in reprimed)
+
+
+def seen_by_pages(pages: LostPages, totals: TotalsPages, gap_frames: IntArray,
+                  gap_missing: IntArray) -> Seen:
+    """``Seen`` of a life's pages (module docstring), over every pair of pages up to
+    ``PAIR_PAGES`` apart: ``gap_frames`` the frames after the log's gaps (sorted),
+    ``gap_missing`` the frames each lacks (its sender-sequence step less one)."""
+    n = len(pages.lo)
+    if n < 2 or len(totals.sent_s) < 2:
+        return NOTHING
+    cum = np.concatenate(([0], np.cumsum(gap_missing, dtype=np.int64)))
+    missed: list[Span] = []
+    windows: list[tuple[int, int]] = []  # proven pairs of pages (i, j)
+    for d in range(1, min(PAIR_PAGES, n - 1) + 1):
+        i = np.arange(n - d)
+        j = i + d
+        lo, hi = pages.lo[i], pages.hi[j]
+        missing = (cum[np.searchsorted(gap_frames, hi, side="right")]
+                   - cum[np.searchsorted(gap_frames, lo, side="right")])
+        quiet = _quiet(totals, pages.lo_s[i], pages.sent_s[j])
+        grew = (pages.lost[j] - pages.lost[i]) & 0xFF
+        by_lost = quiet & (missing > 0) & (grew >= missing)
+        sure = pages.lo[j] - pages.hi[i] + 1  # the log's frames surely among those counted
+        by_ok = quiet & (sure > 0) & (((pages.ok[j] - pages.ok[i]) & 0xFFFF) <= sure)
+        missed += zip(lo[by_lost].tolist(), hi[by_lost].tolist(), strict=True)
+        windows += zip(i[by_lost | by_ok].tolist(), j[by_lost | by_ok].tolist(), strict=True)
+    return Seen(_runs(windows, pages), missed)
+
+
+def _runs(windows: list[tuple[int, int]], pages: LostPages) -> list[Span]:
+    """Proven windows (pairs of pages) whose counted frames meet or overlap joined (their
+    union is counted frames too): from the first page's ``hi`` to the last page's ``lo``."""
+    runs: list[Span] = []
+    start, end = -1, -1
+    for i, j in sorted(windows):
+        if i > end:  # a counted stretch not proven lies between
+            if end > start:
+                runs.append((int(pages.hi[start]), int(pages.lo[end])))
+            start, end = i, j
+        else:
+            end = max(end, j)
+    if end > start:
+        runs.append((int(pages.hi[start]), int(pages.lo[end])))
+    return [(a, b) for a, b in runs if a <= b]
+
+
+def _quiet(totals: TotalsPages, from_s: FloatArray, to_s: FloatArray) -> npt.NDArray[np.bool_]:
+    """Per window: the last FRAME_TOTALS page sent before ``from_s`` and the first at or after
+    ``to_s`` exist, are less than ``WRAP_SAFE_S`` apart and count the same frames rejected and
+    overflowed."""
+    a = np.searchsorted(totals.sent_s, from_s, side="left") - 1
+    b = np.searchsorted(totals.sent_s, to_s, side="left")
+    n = len(totals.sent_s)
+    have = (a >= 0) & (b < n)
+    a, b = np.maximum(a, 0), np.minimum(b, n - 1)
+    same = ((totals.rejected[a] == totals.rejected[b])
+            & (totals.overflowed[a] == totals.overflowed[b]))
+    quiet: npt.NDArray[np.bool_] = have & same & (
+        totals.sent_s[b] - totals.sent_s[a] < WRAP_SAFE_S)
+    return quiet
+
+
+def with_boot(pages: LostPages, totals: TotalsPages, first_s: float, boot_s: float
+              ) -> tuple[LostPages, TotalsPages]:
+    """The pages with the firmware's power-up before them, at ``boot_s`` (before the log's first
+    encoder frame, at ``first_s``, on which it primed, ``host.judge.powerup``): every count 0
+    and no frame taken, so the first encoder frame logged after it is frame 0 (its ``lo``, 0,
+    bounds no missing frame: none lies before frame 0)."""
+    zero, now = np.zeros(1, dtype=np.int64), np.array([boot_s])
+    return (LostPages(np.r_[zero, pages.lo], np.r_[[first_s], pages.lo_s], np.r_[zero, pages.hi],
+                      np.r_[zero, pages.ok], np.r_[zero, pages.lost], np.r_[now, pages.sent_s]),
+            TotalsPages(np.r_[now, totals.sent_s], np.r_[zero, totals.rejected],
+                        np.r_[zero, totals.overflowed]))
+
+
+@dataclass
+class PageEvidence:
+    """The evidence of a life's frames fed in chunks (the whole log: one chunk), the same for
+    the whole-log and the streamed judge: the pages made with their tick's summary
+    (``LostPages``, ``TotalsPages``: module docstring) and the log's gaps; ``seen`` then."""
+
+    decoder: BulkDecoder
+    cycle_s: float | None = None  # WHEEL_ENCODERS' cycle time
+    first_s: float | None = None  # the first encoder frame's time
+    _enc_count: int = 0  # encoder frames fed
+    _offset: int = 0  # frames fed
+    _last_seq: int | None = None
+    _last_enc_s: float = -math.inf
+    _prev: Status | None = None  # the last status frame
+    _summary_s: float = -math.inf  # the last summary whose CRC holds: its time
+    _queued: bool = False  # and whether it came within QUEUED_GAP_CYCLES of the one before
+    _pending: list[tuple[int, tuple[int | float, ...]]] = field(default_factory=list)
+    # pages made with the last summary, kept when the next one is not close (or at the end)
+    _pages: list[tuple[int, float, int, int, int, float]] = field(default_factory=list)
+    _totals: list[tuple[float, int, int]] = field(default_factory=list)
+    _gaps: list[tuple[int, int]] = field(default_factory=list)  # frame after, frames missing
+    _usable: bool = True  # the DBC has the signals
+
+    def feed(self, chunk: FrameArrays, enc: Encoders) -> None:
+        """The next chunk and its accepted encoder frames (``index``: in the frames fed)."""
+        self.cycle_s = enc.cycle_s
+        if self.first_s is None and len(enc.seq):
+            self.first_s = float(enc.timestamp_s[0])
+        self._add_gaps(enc)
+        if self._usable:
+            self._add_status(chunk, enc)
+        self._enc_count += len(enc.seq)
+        self._offset += len(chunk)
+        if len(enc.seq):
+            self._last_enc_s = float(enc.timestamp_s[-1])
+
+    def seen(self, power_up: bool) -> Seen:
+        """``seen_by_pages`` of what was fed; ``power_up``: the firmware primed on the first
+        encoder frame fed (``with_boot``)."""
+        self._keep_pending(True)  # no summary after the last: not let out in a burst
+        if not self._usable or self.cycle_s is None or not self._pages:
+            return NOTHING
+        col = list(zip(*self._pages, strict=True))
+        ints = [np.array(col[k], dtype=np.int64) for k in (0, 2, 3, 4)]
+        pages = LostPages(ints[0], np.array(col[1], dtype=np.float64), ints[1], ints[2],
+                          ints[3], np.array(col[5], dtype=np.float64))
+        tcol = list(zip(*self._totals, strict=True)) if self._totals else [(), (), ()]
+        totals = TotalsPages(np.array(tcol[0], dtype=np.float64),
+                             np.array(tcol[1], dtype=np.int64), np.array(tcol[2], dtype=np.int64))
+        if power_up and self.first_s is not None:
+            pages, totals = with_boot(pages, totals, self.first_s, self.first_s - self.cycle_s)
+        gcol = list(zip(*self._gaps, strict=True)) if self._gaps else [(), ()]
+        return seen_by_pages(pages, totals, np.array(gcol[0], dtype=np.int64),
+                             np.array(gcol[1], dtype=np.int64))
+
+    def _add_gaps(self, enc: Encoders) -> None:
+        if len(enc.seq) == 0:
+            return
+        prior = np.concatenate(([enc.seq[0] if self._last_seq is None else self._last_seq],
+                                enc.seq))
+        step = np.diff(prior)
+        k = np.flatnonzero(step > 1)
+        self._gaps += zip((self._enc_count + k).tolist(), (step[k] - 1).tolist(), strict=True)
+        self._last_seq = int(enc.seq[-1])
+
+    def _add_status(self, chunk: FrameArrays, enc: Encoders) -> None:
+        """The chunk's status frames: each page that follows its tick's summary kept."""
+        try:
+            lost = self.decoder.decode_page(chunk, "ODOM_STATUS", LOST_PAGE)
+            totals = self.decoder.decode_page(chunk, "ODOM_STATUS", TOTALS_PAGE)
+        except DecodeError:
+            self._usable = False
+            return
+        if "ENC_E2E_LOST" not in lost or "OVERFLOWED_FRAMES" not in totals:
+            self._usable = False
+            return
+        head = self.decoder.decode(chunk, "ODOM_STATUS")  # PAGE and COUNTER by the DBC
+        rows = np.asarray(head["index"], dtype=np.int64)
+        crc = crc_holds(chunk, self.decoder, rows)
+        before = np.searchsorted(enc.index, rows + self._offset)  # enc.index: in the log
+        last_s = np.where(before > 0, enc.timestamp_s[np.maximum(before - 1, 0)]
+                          if len(enc.seq) else 0.0, self._last_enc_s)
+        status = [(int(p), int(c), float(t), bool(ok), self._enc_count + int(n), float(ls))
+                  for p, c, t, ok, n, ls in zip(
+                      head["PAGE"].tolist(), head["COUNTER"].tolist(),
+                      chunk.timestamp_s[rows].tolist(), crc.tolist(), before.tolist(),
+                      last_s.tolist(), strict=True)]
+        values = {int(r): (int(a), int(b)) for r, a, b in zip(
+            lost["index"], lost["ENC_E2E_OK"], lost["ENC_E2E_LOST"], strict=True)}
+        values.update({int(r): (int(a), int(b)) for r, a, b in zip(
+            totals["index"], totals["REJECTED_FRAMES"], totals["OVERFLOWED_FRAMES"],
+            strict=True)})
+        for row, frame in zip(rows.tolist(), status, strict=True):
+            prev, self._prev = self._prev, frame
+            if frame[0] == 0 and frame[3]:
+                self._summary(frame[2])
+            if prev is None or not self._made_in_tick(prev, frame) or row not in values:
+                continue
+            a, b = values[row]
+            if frame[0] == LOST_PAGE and prev[4] > 0:  # a frame before its summary: S_p known
+                self._pending.append((LOST_PAGE, (prev[4] - 1, prev[5], frame[4], a, b,
+                                                  frame[2])))
+            elif frame[0] == TOTALS_PAGE:
+                self._pending.append((TOTALS_PAGE, (frame[2], a, b)))
+
+    def _summary(self, sent_s: float) -> None:
+        """A summary whose CRC holds, sent at ``sent_s``: the pages pending on the one before
+        it are kept unless this one came within ``QUEUED_GAP_CYCLES`` of it (both let out in a
+        burst: ``queued_frames``); its own pages wait for the next."""
+        assert self.cycle_s is not None
+        close = sent_s - self._summary_s < QUEUED_GAP_CYCLES * self.cycle_s
+        self._keep_pending(not close)
+        self._queued = close
+        self._summary_s = sent_s
+
+    def _keep_pending(self, keep: bool) -> None:
+        for kind, row in self._pending if keep else []:
+            if kind == LOST_PAGE:
+                self._pages.append(row)  # type: ignore[arg-type]
+            else:
+                self._totals.append(row)  # type: ignore[arg-type]
+        self._pending = []
+
+    def _made_in_tick(self, summary: Status, page: Status) -> bool:
+        """Whether ``page`` came right after its tick's ``summary`` (module docstring; the
+        summary on time so far: not within ``QUEUED_GAP_CYCLES`` of the summary before)."""
+        assert self.cycle_s is not None
+        return (summary[0] == 0 and summary[3] and not self._queued and page[3]
+                and page[0] != 0 and page[1] == (summary[1] + 1) & 0xF
+                and page[2] - summary[2] < 0.5 * self.cycle_s)
+
+
+def crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: IntArray
+              ) -> npt.NDArray[np.bool_]:
+    """Which ODOM_STATUS frames at ``rows`` carry a right CRC, whatever their sequence (a page
+    the host's E2E window refused after the bus lost a few is as good evidence)."""
+    message = decoder.message("ODOM_STATUS")
+    config = e2e_messages(decoder.db).get(message.frame_id)
+    if config is None or config.data_ids is None:
+        return np.ones(len(rows), dtype=bool)
+    data = frames.data[rows]
+    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & 0xF]
+    good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
+    return good
+
+
+def seen_in_log(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders, *,
+                power_up: bool = False) -> Seen:
+    """``PageEvidence.seen`` of a whole log (one life); ``power_up``: the log starts at the
+    firmware's power-up, it primed on the log's first encoder frame (``with_boot``)."""
+    evidence = PageEvidence(decoder)
+    evidence.feed(frames, enc)
+    return evidence.seen(power_up)
