@@ -9,10 +9,9 @@ Passes: the whole log once (E2E, the firmware lives, the report's facts); then p
    the firmware lost encoder frames the log holds (``stream_losses.StreamLosses``) -> the start
    frame e0 (power-up or the first sample's), the stalls' breaks;
 2. (and 3, 4 when the heading samples agree) the start pose (``stream_place.start_pose``);
-5. the segment offsets, and the lossy spans' weights (``stream_losses.SpanDrops``);
-6. the errors against the reference (and beyond the loss allowance) and the truth, the
-   distance, the events' times. Memory: the chunk and the stages' carried state, never the log.
-
+5. the segment offsets, and the lossy spans' weights (``stream_losses.SpanDrops``); 6. the errors
+   against the reference (and beyond the loss allowance) and the truth, the distance, the events'
+   times. Memory: the chunk and the stages' carried state, never the log.
 A life whose pose, twist or encoder frames came in a burst after a busy bus is refused
 (``NotStreamable``): ``samples._queued`` pairs them by the median send period of the whole life.
 ``streams`` says when to stream at all: the whole-log path is about 3x cheaper in CPU."""
