@@ -327,13 +327,13 @@ class BusMonitor:
     def _watch_source(self, uptime_s: int, state: str) -> None:
         """Reboots and a second source, from the summary's UPTIME and STATE (module docstring)."""
         before = self.status.get("uptime_s")
-        kind = self.sources.observe(self._bus_time_s, uptime_s, state)
-        if kind is None:
+        if (kind := self.sources.observe(self._bus_time_s, uptime_s, state)) is None:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
             detail += ": " + start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
-        elif kind == "two sources":
+        elif kind == "two sources":  # no pose is judged from the second one's first summary
+            self.tracker.wrongs.unjudgeable_from(self.sources.conflict_from_s or self._bus_time_s)
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
             last = self.events[-1] if self.events else None
             if last and last["kind"] == kind and self._bus_time_s - last["t_s"] < CONFLICT_HOLD_S:

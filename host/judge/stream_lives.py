@@ -12,6 +12,7 @@ page, at the next reboot or at the end of the log; lives are contiguous ranges o
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -59,6 +60,8 @@ class StreamLives:
     _waiting: _Boot | None = None  # the last reboot, before its first count page
     _boots: list[tuple[_Boot, int]] = field(default_factory=list)  # with their final start
     _summaries: bool = True  # the DBC's ODOM_STATUS has UPTIME and STATE on its summary page
+    _changed: tuple[int, float] = (0, 0.0)  # the summary of the last new UPTIME offset
+    conflict: tuple[int, float] | None = None  # ``reboots.two_sources``: position, bus time
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
@@ -89,6 +92,18 @@ class StreamLives:
             lives.append(LifeSpan(start, end, boot=boot.uptime_s == 0, t_s=boot.t_s,
                                   uptime_before_s=boot.before_s))
         return lives
+
+    def finish_one_source(self, n_frames: int | None = None) -> tuple[list[LifeSpan], int | None]:
+        """``finish``, the lives cut where a second firmware came (``conflict``), and where
+        (``analysis._before_two_sources``: the start of the life its first summary was taken
+        to begin, else that summary); None: one source at a time."""
+        spans = self.finish(n_frames)
+        if self.conflict is None:
+            return spans, None
+        position, t_s = self.conflict
+        cut = min([position, *(s.start for s in spans if s.t_s == t_s and s.stop > s.start)])
+        kept = [s for s in spans if s.start < cut]
+        return [*kept[:-1], dataclasses.replace(kept[-1], stop=cut)] if kept else [], cut
 
     def _decide(self, page: tuple[int, int] | None) -> None:
         """The waiting reboot's start, from its first count page (position, ENC_E2E_OK) or
@@ -131,8 +146,13 @@ class StreamLives:
         ):
             name = str(choices.get(int(state), int(state)))
             before = self._watch.last_uptime_s
-            if self._watch.observe(float(t_s), int(uptime_s), name) == "reboot":
-                at = int(position) + self._offset
+            kind = self._watch.observe(float(t_s), int(uptime_s), name)
+            at = int(position) + self._offset
+            if self._watch.changed_at_s == float(t_s):
+                self._changed = (at, float(t_s))
+            if kind == "two sources" and self.conflict is None:
+                self.conflict = self._changed
+            if kind == "reboot":
                 earlier = self._encoders[self._encoders < at]
                 start = (int(earlier[-1]) if int(uptime_s) == 0 and name != "INIT"
                          and len(earlier) else at)
