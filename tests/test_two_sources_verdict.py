@@ -135,13 +135,18 @@ def test_the_cli_names_the_two_firmwares(
 
 
 def test_the_monitor_names_the_two_firmwares(tmp_path: Path) -> None:
-    """The live judge fed the same log: a ``two sources`` event from B's first summary on, and
-    no pose latched wrong from there."""
+    """The live judge fed the same log: CONFLICT while both answer, then no pose judged (never
+    POSE WRONG or OK), no pose latched wrong from B's first summary on, and the reason."""
     path = two_firmwares(tmp_path)
     t_b = first_summary_of_b(path)
     monitor = BusMonitor(PMIR, "exact")
+    verdicts = set()
     for msg in can.LogReader(str(path)):
         monitor.feed(msg, now_s=msg.timestamp)
+        if msg.timestamp > t_b + 0.5:  # B heard twice: CONFLICT, then no pose judged
+            verdicts.add(monitor.health(msg.timestamp)["state"])
+    assert verdicts == {"CONFLICT", "UNVERIFIED"}
+    assert monitor.health(msg.timestamp)["why"] == [monitor.sources.conflict_text()]
     monitor.tracker.wrongs.finish(monitor.tracker.allowance_m)
     assert monitor.sources.conflict_from_s == pytest.approx(t_b, abs=1e-6)
     assert monitor.tracker.wrongs.count == 0

@@ -30,7 +30,8 @@ as lost frames) from **two sources** on one ID (two UPTIME offsets interleaving)
 order: NO FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (with its REASON),
 POSE WRONG (the latest on-board sample vs reference beyond ``analyze``'s limit, one LSB of
 position after the loss allowance or of heading: ``host.judge.livefit.pose_wrong``, the reference's
-start narrowed as ``analyze`` fits it), UNVERIFIED (nothing compared yet), OK.
+start narrowed as ``analyze`` fits it), UNVERIFIED (nothing compared yet; or, for good, two
+firmwares were heard: whose pose is it?), OK.
 
 ``bus_load`` (``host.judge.busstats.LoadWindow``): bits on the wire per second over the last
 second of bus time, from every frame's exact stuffed length, and the load as a fraction when the
@@ -73,11 +74,7 @@ from odocan.host.judge.sources import (
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.decode import frame_key
-from odocan.host.protocol.e2e import (
-    UNKNOWN,
-    E2EMonitor,
-    e2e_messages,
-)
+from odocan.host.protocol.e2e import UNKNOWN, E2EMonitor, e2e_messages
 from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile
 
@@ -384,6 +381,8 @@ class BusMonitor:
         reported = str(self.status.get("state", "?"))
         if reported != "OK":
             return reported, [f"firmware reports {reported} ({self.status.get('reason', '?')})"]
+        if self.sources.conflict_from_s is not None:  # whose pose is it? (posewrongs: none judged)
+            return "UNVERIFIED", [self.sources.conflict_text()]
         error = self.tracker.vs_reference.latest
         if not error:
             return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
