@@ -117,7 +117,14 @@ from odocan.host.judge.compare import (
 )
 from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
-from odocan.host.judge.reboots import Life, mark_two_sources, merge, split_lives, two_sources
+from odocan.host.judge.reboots import (
+    Life,
+    before_two_sources,
+    mark_two_sources,
+    merge,
+    split_lives,
+    two_sources,
+)
 from odocan.host.judge.reference_path import build_reference, restart_detail, wrap_pi
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -201,7 +208,7 @@ def analyze(
     require_messages(decoder)
     conflict = two_sources(frames, decoder)
     if conflict is not None:  # judged up to where the second firmware came, then a FAIL
-        cut = _before_two_sources(frames, decoder, conflict)
+        cut = before_two_sources(frames, decoder, conflict)
         one = analyze(frames.select(np.arange(cut)), robot, integrator, tolerance=tolerance,
                       db=db, scenario=scenario, seed=seed, wall_seconds=wall_seconds,
                       max_wheel_speed_mm_s=max_wheel_speed_mm_s)
@@ -252,21 +259,6 @@ def analyze(
         and report["onboard_twist_vs_reference"]["passed"]
     )
     return Analysis(report=report, series=series, passed=report["passed"])
-
-
-def _before_two_sources(frames: FrameArrays, decoder: BulkDecoder,
-                        conflict: tuple[int, float]) -> int:
-    """Where the frames of one firmware end (``reboots.two_sources``): the start of the life the
-    second firmware's first summary was taken to begin (its first pose frames come before that
-    summary), else that summary. Raises ``AnalysisError`` when no frame comes before it."""
-    position, t_s = conflict
-    starts = [int(life.index[0]) for life in split_lives(frames, decoder)
-              if life.t_s == t_s and len(life.index)]
-    cut = min([position, *starts])
-    if cut == 0:
-        raise AnalysisError(f"two firmwares answered on one node ID from t={t_s:.3f} s, the "
-                            "log's start: no pose can be judged")
-    return cut
 
 
 def _latched_per_firmware(frames: FrameArrays, lives: list[Life],

@@ -49,7 +49,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import merged_breaks
-from odocan.host.judge.samples import ENC_E2E_PAGE
+from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames, crc8h2f_p02, e2e_messages
@@ -208,6 +208,20 @@ def _watch_summaries(
             conflict = (int(positions[changed]), float(times_s[changed]))
         k += 1
     return boots, conflict
+
+
+def before_two_sources(frames: FrameArrays, decoder: BulkDecoder,
+                       conflict: tuple[int, float]) -> int:
+    """Where the frames of one firmware end (``two_sources``): the start of the life the second
+    firmware's first summary was taken to begin (its first pose frames come before that
+    summary), else that summary. Raises ``AnalysisError`` when no frame comes before it."""
+    position, t_s = conflict
+    starts = [int(life.index[0]) for life in split_lives(frames, decoder)
+              if life.t_s == t_s and len(life.index)]
+    cut = min([position, *starts])
+    if cut == 0:
+        raise AnalysisError(f"{two_sources_text(t_s)}, from the log's start")
+    return cut
 
 
 def mark_two_sources(report: dict[str, Any], t_s: float, frames_not_judged: int) -> None:

@@ -32,7 +32,7 @@ from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_std
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance, _realtime, _robot_dict
 from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.gapbound import gap_allowance_of_counts
-from odocan.host.judge.reboots import Life, mark_two_sources, merge
+from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.reference_path import restart_detail
 from odocan.host.judge.samples import (
@@ -128,16 +128,11 @@ def analyze_file(
         spill.close()
         if facts.set_pose_applied:  # cut into lives there: host.judge.setposes, whole only
             raise NotStreamable("an ODOM_SET_POSE was applied: the reference restarts there")
-        spans, cut = lives.finish_one_source()  # two firmwares from ``cut``: not judged
-        if cut == 0:  # the whole log's path says why nothing is judged
-            raise NotStreamable("two firmwares answered on one node ID from the log's start")
-        report = _analyze_lives(
-            spans, facts, lambda span: lambda: spill.read(span.start, span.stop, chunk_frames),
+        return lives.marked(_analyze_lives(  # two firmwares: not judged from there, a FAIL
+            lives.finish_one_source(), facts, lambda span: lambda: spill.read(
+                span.start, span.stop, chunk_frames),
             robot, integrator, tolerance=tolerance, db=db, scenario=scenario, seed=seed,
-            wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s)
-        if cut is not None and lives.conflict is not None:  # (one implies the other)
-            mark_two_sources(report, lives.conflict[1], count.frames - cut)
-        return report
+            wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s), count.frames)
 
 
 def _analyze_lives(
