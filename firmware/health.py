@@ -4,9 +4,12 @@ DEGRADED always carries a ``Reason`` (ODOM_STATUS ``REASON``): ENCODER_TIMEOUT (
 WHEEL_ENCODERS for ``WATCHDOG_TICKS`` periods), TIME_LOST (a tick released that late),
 MAILBOX_OVERFLOW (a received frame was dropped), IMPLAUSIBLE_STEP or COUNTER_RESET (both from
 ``firmware.encoders``). ``RECOVERY_FRAMES`` accepted encoder frames in a row with no new cause
-bring it back to OK. The motion between the last frame before a counter restart and the first
-after it is unknowable, so COUNTER_RESET stays until the host sets the pose again (ODOM_SET_POSE
-APPLY): no later cause replaces it as the reason. Errors are state, never exceptions: each cause
+bring it back to OK, but never before an ODOM_STATUS summary page has carried the episode
+(DEGRADED and its reason) onto the bus: recovery takes 50 ms and the summary comes every 100 ms,
+so without this hold a short episode would only ever show in the sticky ERROR_MASK. The motion
+between the last frame before a counter restart and the first after it is unknowable, so
+COUNTER_RESET stays until the host sets the pose again (ODOM_SET_POSE APPLY): no later cause
+replaces it as the reason. Errors are state, never exceptions: each cause
 also sets its sticky bit in the u32 error mask.
 """
 
@@ -33,6 +36,7 @@ class Health:
         "_clock",
         "_overflows_seen",
         "_reason_tick",
+        "_unreported",
         "errors",
         "good_in_a_row",
         "overflows_before",
@@ -47,6 +51,7 @@ class Health:
         self.reason = Reason.NONE
         self.good_in_a_row = 0  # accepted encoder frames since the last cause (<= RECOVERY_FRAMES)
         self._reason_tick = 0  # u32: the tick that set ``reason``
+        self._unreported = False  # bool: no summary page has carried the last cause yet
         self._overflows_seen = 0  # u32: the mailbox's overflow count at the previous tick
         # u32: the mailbox's overflow count as of the previous tick's start (the count
         # ``_overflows_seen`` held before this tick's). Frames dropped by then came after every
@@ -82,6 +87,13 @@ class Health:
                 self.reason = reason
             self.good_in_a_row = 0
             self._reason_tick = self._clock.ticks
+            self._unreported = True
+
+    def summary_sent(self, carried: bool) -> None:
+        """An ODOM_STATUS summary page was handed to the driver (``carried``: it took the frame)
+        with the current state and reason: a DEGRADED episode it carried may now recover."""
+        if carried and self.state is _DEGRADED:
+            self._unreported = False
 
     def time_lost(self) -> None:
         """This tick was released ``LOST_TIME_PERIODS`` or more late: TIME_LOST, DEGRADED."""
@@ -105,7 +117,8 @@ class Health:
 
     def watchdog(self, periods_since_encoder: int) -> None:
         """Step 6. Encoders silent for WATCHDOG_TICKS periods of firmware time -> DEGRADED; back
-        to OK after RECOVERY_FRAMES accepted frames with no new cause."""
+        to OK after RECOVERY_FRAMES accepted frames with no new cause, once a summary page has
+        carried the episode."""
         if self.state is _INIT or self.state is _FAULT:
             return
         if periods_since_encoder >= WATCHDOG_TICKS:
@@ -119,6 +132,7 @@ class Health:
             self.state is _DEGRADED
             and self.good_in_a_row >= RECOVERY_FRAMES
             and self.reason is not _COUNTER_RESET  # the pose lost its continuity
+            and not self._unreported  # the bus has seen DEGRADED and why
         ):
             self.state = _OK
             self.reason = Reason.NONE

@@ -113,7 +113,8 @@ class Reports:
         tx.send(fr.ODOM_TWIST_ID, data)
 
     def _send_status(self) -> None:
-        """ODOM_STATUS: the summary page, then the next rotating page."""
+        """ODOM_STATUS: the summary page (a DEGRADED episode it carries may then recover),
+        then the next rotating page."""
         ecu = self._ecu
         summary = fr.pack_odom_status_summary(
             ecu.tx.next_counter(fr.ODOM_STATUS_ID),
@@ -124,7 +125,7 @@ class Reports:
             ecu.errors,
             ecu.health.reason,
         )
-        ecu.tx.send(fr.ODOM_STATUS_ID, summary)
+        ecu.health.summary_sent(ecu.tx.send(fr.ODOM_STATUS_ID, summary))
         page = _ROTATING_PAGES[self._page_index]
         self._page_index = (self._page_index + 1) % len(_ROTATING_PAGES)
         ecu.tx.send(fr.ODOM_STATUS_ID, self._status_page(page))

@@ -29,7 +29,9 @@ class Transmitter:
         self._counters[can_id] = counter
         return counter
 
-    def send(self, can_id: int, data: bytes) -> None:
-        """Hand one frame to the driver; count it when refused."""
-        if not self._hal.transmit(can_id, data):
-            self.tx_dropped = wrap_u32(self.tx_dropped + 1)
+    def send(self, can_id: int, data: bytes) -> bool:
+        """Hand one frame to the driver; count it when refused. True: the driver took it."""
+        if self._hal.transmit(can_id, data):
+            return True
+        self.tx_dropped = wrap_u32(self.tx_dropped + 1)
+        return False

@@ -28,6 +28,7 @@ from odocan.firmware.hal import MAILBOX_SLOTS
 from odocan.host.judge.reference import deltas_from_counts, integrate
 from odocan.sim import frames as sf
 from odocan.sim.board import TICK_S, FirmwareBoard
+from odocan.sim.cboard import board_maker
 from odocan.sim.clock import LockstepClock
 from odocan.sim.contract import database
 from odocan.sim.faults import FaultInjectingBus, FaultSpec
@@ -73,6 +74,7 @@ class FaultRig:
         robot: str = "pmir",
         integrator: str = "exact",
         seed: int = 0,
+        firmware: str = "python",
     ) -> None:
         self.channel = unique_channel()
         self.clock = LockstepClock()
@@ -85,7 +87,8 @@ class FaultRig:
         self.sim_bus = FaultInjectingBus(sim_raw, sim_faults) if sim_faults else sim_raw
         self.fw_bus = FaultInjectingBus(fw_raw, fw_faults) if fw_faults else fw_raw
         self.sim = SimNode(self.sim_bus, self.vehicle, self.clock, scenario or RandomScenario(seed))
-        self.board = FirmwareBoard(self.fw_bus, self.params, self.clock)
+        board = board_maker(firmware)  # the C port: the same board around firmware/c
+        self.board: FirmwareBoard = board(self.fw_bus, self.params, self.clock)
         self.observers: list[Observer] = []
         self.before_board: list[Hook] = []
         self._heard: list[can.Message] = []

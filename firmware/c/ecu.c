@@ -117,7 +117,7 @@ static void send_nav_status(struct odom_ecu *ecu);
 static void send_pose_and_twist(struct odom_ecu *ecu);
 static void send_status(struct odom_ecu *ecu);
 static uint8_t next_counter(struct odom_ecu *ecu, enum tx_index which);
-static void send(struct odom_ecu *ecu, uint32_t can_id, const uint8_t data[8]);
+static bool send(struct odom_ecu *ecu, uint32_t can_id, const uint8_t data[8]);
 static void watchdog(struct odom_ecu *ecu);
 
 void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
@@ -331,6 +331,7 @@ static void degrade(struct odom_ecu *ecu, enum reason reason)
         }
         ecu->good_in_a_row = 0;
         ecu->reason_tick = ecu->ticks;
+        ecu->unreported = true;
     }
 }
 
@@ -1023,7 +1024,9 @@ static void send_status(struct odom_ecu *ecu)
     pack_odom_status_summary(data, next_counter(ecu, TX_STATUS), ecu->state,
                              ecu->odometry.consts.integrator, error_bits,
                              ecu->time_periods / TICKS_PER_SECOND, &ecu->errors, ecu->reason);
-    send(ecu, ODOM_STATUS_ID, data);
+    if (send(ecu, ODOM_STATUS_ID, data) && ecu->state == STATE_DEGRADED) {
+        ecu->unreported = false; /* the bus has seen the episode: it may recover (health.py) */
+    }
     enum status_page page = ROTATING_PAGES[ecu->page_index];
     ecu->page_index = (ecu->page_index + 1u) % 5u;
     uint8_t counter = next_counter(ecu, TX_STATUS);
@@ -1059,17 +1062,20 @@ static uint8_t next_counter(struct odom_ecu *ecu, enum tx_index which)
     return ecu->tx_counters[which];
 }
 
-static void send(struct odom_ecu *ecu, uint32_t can_id, const uint8_t data[8])
+/* Hand one frame to the driver; count it when refused. True: the driver took it. */
+static bool send(struct odom_ecu *ecu, uint32_t can_id, const uint8_t data[8])
 {
-    if (!ecu->transmit(ecu->tx_ctx, can_id, data)) {
-        ecu->tx_dropped++;
+    if (ecu->transmit(ecu->tx_ctx, can_id, data)) {
+        return true;
     }
+    ecu->tx_dropped++;
+    return false;
 }
 
 /* --- step 6: the watchdog (firmware/health.py) --- */
 
 /* Encoders silent for WATCHDOG_TICKS periods of firmware time -> DEGRADED; back to OK after
- * RECOVERY_FRAMES accepted frames with no new cause. */
+ * RECOVERY_FRAMES accepted frames with no new cause, once a summary page carried the episode. */
 static void watchdog(struct odom_ecu *ecu)
 {
     if (ecu->state == STATE_INIT || ecu->state == STATE_FAULT) {
@@ -1083,7 +1089,8 @@ static void watchdog(struct odom_ecu *ecu)
         }
         ecu->good_in_a_row = 0;
     } else if (ecu->state == STATE_DEGRADED && ecu->good_in_a_row >= RECOVERY_FRAMES
-               && ecu->reason != REASON_COUNTER_RESET) { /* the pose lost its continuity */
+               && ecu->reason != REASON_COUNTER_RESET /* the pose lost its continuity */
+               && !ecu->unreported) {                 /* the bus has seen DEGRADED and why */
         ecu->state = STATE_OK;
         ecu->reason = REASON_NONE;
     }

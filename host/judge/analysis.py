@@ -122,7 +122,14 @@ from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
 from odocan.host.judge.gapseen import seen_in_log
 from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
-from odocan.host.judge.reboots import Life, merge, split_lives
+from odocan.host.judge.reboots import (
+    Life,
+    before_two_sources,
+    mark_two_sources,
+    merge,
+    split_lives,
+    two_sources,
+)
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.reference_path import (
     build_reference,
@@ -212,6 +219,14 @@ def analyze(
     db = db if db is not None else default_plan()
     decoder = BulkDecoder(db)
     require_messages(decoder)
+    conflict = two_sources(frames, decoder)
+    if conflict is not None:  # judged up to where the second firmware came, then a FAIL
+        cut = before_two_sources(frames, decoder, conflict)
+        one = analyze(frames.select(np.arange(cut)), robot, integrator, tolerance=tolerance,
+                      db=db, scenario=scenario, seed=seed, wall_seconds=wall_seconds,
+                      max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+        mark_two_sources(one.report, conflict[1], len(frames) - cut)
+        return Analysis(report=one.report, series=one.series, passed=False)
     firmware_lives = split_lives(frames, decoder)
     lives = cut_lives(firmware_lives, set_pose_cuts(frames, decoder))
     if len(lives) == 1:

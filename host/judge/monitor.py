@@ -26,20 +26,18 @@ A node is **stale** once none of its cyclic messages was heard for ``NODE_TIMEOU
 the fastest one's DBC cycle (opendbc's rule: 10 x 20 ms = 0.2 s for ODOM_MCU); every node carries
 its age. UPTIME against bus time tells a **reboot** (UPTIME going back, or INIT after running:
 the reference restarts, the node's E2E sequences afresh: an event, not lost frames) from **two
-sources** (two UPTIME offsets interleaving); a motor controller restart the reference re-primes
-on is a ``counter_restart`` event, as analyze tells it. The verdict, in order: NO FIRMWARE,
-STALE, CONFLICT, the firmware's own state when not OK (its REASON), POSE WRONG (the latest sample
-vs reference beyond ``analyze``'s limit, one LSB of position after the loss allowance or of
-heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it), UNVERIFIED, OK.
+sources** on one ID (two UPTIME offsets interleaving); a motor controller restart the reference
+re-primes on is a ``counter_restart`` event, as analyze tells it. The verdict, in order: NO
+FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (its REASON), POSE WRONG (the
+latest sample vs reference beyond ``analyze``'s limit, one LSB of position after the loss
+allowance or of heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it),
+UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), OK.
 
-``bus_load`` (``host.judge.busstats.LoadWindow``): bits on the wire per second over the last
-second of bus time, from every frame's exact stuffed length, and the load as a fraction when the
-monitor is given the bitrate.
-
+``bus_load`` (``busstats.LoadWindow``): bits per second over the last second of bus time, from
+every frame's exact stuffed length; the load as a fraction when given the bitrate.
 ``snapshot()`` is the whole model as JSON-ready data (``odocan monitor --json``);
-``fleet_snapshot`` is the MQTT fleet's (``odocan monitor --mqtt``). ``render`` and
-``render_fleet`` are re-exported from ``host.report.live``, where they now live.
-"""
+``fleet_snapshot`` the MQTT fleet's (``odocan monitor --mqtt``); ``render`` and ``render_fleet``
+are re-exported from ``host.report.live``."""
 
 from __future__ import annotations
 
@@ -323,14 +321,14 @@ class BusMonitor:
     def _watch_source(self, uptime_s: int, state: str) -> None:
         """Reboots and a second source, from the summary's UPTIME and STATE (module docstring)."""
         before = self.status.get("uptime_s")
-        kind = self.sources.observe(self._bus_time_s, uptime_s, state)
-        if kind is None:
+        if (kind := self.sources.observe(self._bus_time_s, uptime_s, state)) is None:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
             detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
             self.distance.new_life()
-        elif kind == "two sources":
+        elif kind == "two sources":  # no pose is judged from the second one's first summary
+            self.tracker.wrongs.unjudgeable_from(self.sources.conflict_from_s or self._bus_time_s)
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
             last = self.events[-1] if self.events else None
             if last and last["kind"] == kind and self._bus_time_s - last["t_s"] < CONFLICT_HOLD_S:
@@ -381,6 +379,8 @@ class BusMonitor:
         reported = str(self.status.get("state", "?"))
         if reported != "OK":
             return reported, [f"firmware reports {reported} ({self.status.get('reason', '?')})"]
+        if self.sources.conflict_from_s is not None:  # whose pose is it? (posewrongs: none judged)
+            return "UNVERIFIED", [self.sources.conflict_text()]
         error = self.tracker.vs_reference.latest
         if not error:
             return "UNVERIFIED", ["no on-board pose compared with the reference yet"]

@@ -27,6 +27,7 @@ counts kept for ever.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -78,6 +79,21 @@ class PoseWrongs:
         self.wrong_samples = 0
         self.worst: Episode | None = None
         self._open: Episode | None = None
+        self.judged_until_s = math.inf  # two firmwares from then: no later sample is judged
+
+    def unjudgeable_from(self, t_s: float) -> None:
+        """Two firmwares answered on one node ID from bus time ``t_s``: their pose frames cannot
+        be told apart, so the samples from then are not judged, and the episodes latched from
+        then are forgotten (the worst among those kept is the worst)."""
+        self.judged_until_s = min(self.judged_until_s, t_s)
+        self.close()
+        gone = [e for e in self.latest if e.t_s >= t_s]
+        self.count -= len(gone)
+        self.wrong_samples -= sum(e.samples for e in gone)
+        kept = [e for e in self.latest if e.t_s < t_s]
+        self.latest = deque(kept, maxlen=MAX_EPISODES)
+        if self.worst is not None and self.worst.t_s >= t_s:
+            self.worst = max(kept, key=lambda e: e.size_lsb, default=None)
 
     def sample(self, seq: int, t_s: float, dpos_m: float, dheading_rad: float) -> None:
         """A sample of encoder frame ``seq`` (its ODOM_POSE_Y at bus time ``t_s``) was compared:
@@ -93,6 +109,8 @@ class PoseWrongs:
 
     def _judge(self, seq: int, kept: tuple[float, float, float], beyond_m: float) -> None:
         t_s, dpos_m, dheading_rad = kept
+        if t_s >= self.judged_until_s:
+            return
         if beyond_m <= POSITION_LSB_M and abs(dheading_rad) <= HEADING_LSB_RAD:
             self.close()
             return

@@ -49,8 +49,8 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import merged_breaks
-from odocan.host.judge.samples import ENC_E2E_PAGE
-from odocan.host.judge.sources import SourceWatch
+from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
+from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames, crc8h2f_p02, e2e_messages
 
@@ -152,18 +152,32 @@ def _crc_holds(
     return good
 
 
+def two_sources(frames: FrameArrays, decoder: BulkDecoder) -> tuple[int, float] | None:
+    """Where two firmwares began to answer on one node ID (``SourceWatch``: two UPTIME offsets
+    interleave): (position, bus time) of the summary that brought the second offset; None when
+    the log has one source at a time."""
+    return _watch_summaries(frames, decoder)[1]
+
+
 def _boot_summaries(
     frames: FrameArrays, decoder: BulkDecoder
 ) -> list[tuple[int, int, str, int]]:
     """(position, UPTIME s, STATE, previous UPTIME s) of each summary that starts a new
     firmware (module docstring)."""
+    return _watch_summaries(frames, decoder)[0]
+
+
+def _watch_summaries(
+    frames: FrameArrays, decoder: BulkDecoder
+) -> tuple[list[tuple[int, int, str, int]], tuple[int, float] | None]:
+    """``_boot_summaries`` and ``two_sources`` from one pass of ``SourceWatch``."""
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", SUMMARY_PAGE)
         message = decoder.message("ODOM_STATUS")
     except DecodeError:
-        return []
+        return [], None
     if "UPTIME" not in page or "STATE" not in page or len(page["index"]) == 0:
-        return []
+        return [], None
     index = page["index"]
     good = _crc_holds(frames, decoder, index)
     choices = dict(message.get_signal_by_name("STATE").choices or {})
@@ -174,6 +188,7 @@ def _boot_summaries(
     uptimes_s = page["UPTIME"][good].astype(np.int64)
     watch = SourceWatch()
     boots = []
+    changed, conflict = 0, None  # the summary of the last new offset; where two sources began
     k, window = 0, _FIRST_WINDOW
     while k < len(positions):  # quiet stretches at once (observe_quiet), the others one by one
         end = min(len(positions), k + window)
@@ -184,10 +199,42 @@ def _boot_summaries(
         window = _FIRST_WINDOW
         before = watch.last_uptime_s
         name = str(states[k])
-        if watch.observe(float(times_s[k]), int(uptimes_s[k]), name) == "reboot":
+        kind = watch.observe(float(times_s[k]), int(uptimes_s[k]), name)
+        if kind == "reboot":
             boots.append((int(positions[k]), int(uptimes_s[k]), name, int(before)))
+        if watch.changed_at_s == float(times_s[k]):
+            changed = k
+        if kind == "two sources" and conflict is None:
+            conflict = (int(positions[changed]), float(times_s[changed]))
         k += 1
-    return boots
+    return boots, conflict
+
+
+def before_two_sources(frames: FrameArrays, decoder: BulkDecoder,
+                       conflict: tuple[int, float]) -> int:
+    """Where the frames of one firmware end (``two_sources``): the start of the life the second
+    firmware's first summary was taken to begin (its first pose frames come before that
+    summary), else that summary. Raises ``AnalysisError`` when no frame comes before it."""
+    position, t_s = conflict
+    starts = [int(life.index[0]) for life in split_lives(frames, decoder)
+              if life.t_s == t_s and len(life.index)]
+    cut = min([position, *starts])
+    if cut == 0:
+        raise AnalysisError(f"{two_sources_text(t_s)}, from the log's start")
+    return cut
+
+
+def mark_two_sources(report: dict[str, Any], t_s: float, frames_not_judged: int) -> None:
+    """A FAIL of its own in ``report`` (``two_sources``, an event): from ``t_s`` two firmwares
+    answered on one node ID. Their pose frames interleave with nothing to tell whose each is,
+    so no pose from there is judged (a pose error there would blame a firmware that may be
+    right); what came before is judged as usual, and a wrong pose there fails as well."""
+    detail = two_sources_text(t_s)
+    report["two_sources"] = {"t_s": t_s, "frames_not_judged": frames_not_judged,
+                             "detail": detail}
+    report["events"] = sorted([*report["events"], {"kind": "two sources", "t_s": t_s,
+                                                    "detail": detail}], key=lambda e: e["t_s"])
+    report["passed"] = False
 
 
 _FIRST_WINDOW = 64  # summaries tried at once after one that was not quiet (doubles while quiet)

@@ -42,6 +42,8 @@ class SourceWatch:
     conflict_until_s: float = -math.inf
     first_uptime_s: int | None = None  # the first summary's UPTIME
     page_pending: bool = True  # the first life's first ENC_E2E_OK page not heard yet
+    changed_at_s: float | None = None  # when the offset followed last changed to a new one
+    conflict_from_s: float | None = None  # two sources: when the second offset first came
 
     def first_life_page(self) -> bool:
         """Called at each ENC_E2E_OK page: whether it is the first life's first and the first
@@ -66,13 +68,20 @@ class SourceWatch:
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
             kind = "two sources"
             self.conflict_until_s = t_s + CONFLICT_HOLD_S
+            if self.conflict_from_s is None:  # it began when the second offset first came
+                self.conflict_from_s = self.changed_at_s
             self.offset_s, self.other_s = self.other_s, self.offset_s
         else:
             kind = "reboot" if uptime_s < self.last_uptime_s or state == "INIT" else "uptime jump"
             self.offset_s, self.other_s = offset, self.offset_s
+            self.changed_at_s = t_s
         self.last_uptime_s, self.last_state = uptime_s, state
         self.page_pending = self.page_pending and kind != "reboot"
         return kind
+
+    def conflict_text(self) -> str:
+        """The verdict's reason once two sources were seen (``two_sources_text``); "" before."""
+        return "" if self.conflict_from_s is None else two_sources_text(self.conflict_from_s)
 
     def observe_quiet(
         self, t_s: npt.NDArray[np.float64], uptime_s: npt.NDArray[np.int64],
@@ -98,6 +107,11 @@ class SourceWatch:
         if count:
             self.last_uptime_s, self.last_state = int(uptime_s[count - 1]), str(states[count - 1])
         return count
+
+
+def two_sources_text(t_s: float) -> str:
+    """Why a verdict FAILs when two firmwares answered on one node ID from bus time ``t_s``."""
+    return f"two firmwares answered on one node ID from t={t_s:.3f} s: the pose cannot be judged"
 
 
 def boot_summary(message: Message, data: bytes, data_ids: Any) -> tuple[int, str] | None:

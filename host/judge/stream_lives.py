@@ -12,15 +12,17 @@ page, at the next reboot or at the end of the log; lives are contiguous ranges o
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.reboots import SUMMARY_PAGE, _crc_holds
-from odocan.host.judge.samples import ENC_E2E_PAGE
-from odocan.host.judge.sources import SourceWatch
+from odocan.host.judge.reboots import SUMMARY_PAGE, _crc_holds, mark_two_sources
+from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
+from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 ENCODERS_KEPT = 1 << 16  # accepted encoder frames remembered (ENC_E2E_OK is a u16)
@@ -59,6 +61,9 @@ class StreamLives:
     _waiting: _Boot | None = None  # the last reboot, before its first count page
     _boots: list[tuple[_Boot, int]] = field(default_factory=list)  # with their final start
     _summaries: bool = True  # the DBC's ODOM_STATUS has UPTIME and STATE on its summary page
+    _changed: tuple[int, float] = (0, 0.0)  # the summary of the last new UPTIME offset
+    conflict: tuple[int, float] | None = None  # ``reboots.two_sources``: position, bus time
+    _cut: int = 0  # where the lives were cut for it (``finish_one_source``)
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
@@ -89,6 +94,27 @@ class StreamLives:
             lives.append(LifeSpan(start, end, boot=boot.uptime_s == 0, t_s=boot.t_s,
                                   uptime_before_s=boot.before_s))
         return lives
+
+    def finish_one_source(self) -> list[LifeSpan]:
+        """``finish``, the lives cut where a second firmware came (``conflict``: at the start of
+        the life its first summary was taken to begin, else that summary, as
+        ``reboots.before_two_sources``). Raises ``AnalysisError`` when that is the log's start."""
+        spans = self.finish()
+        if self.conflict is None:
+            return spans
+        position, t_s = self.conflict
+        self._cut = min([position, *(s.start for s in spans if s.t_s == t_s and s.stop > s.start)])
+        kept = [s for s in spans if s.start < self._cut]
+        if not kept:
+            raise AnalysisError(f"{two_sources_text(t_s)}, from the log's start")
+        return [*kept[:-1], dataclasses.replace(kept[-1], stop=self._cut)]
+
+    def marked(self, report: dict[str, Any], n_frames: int) -> dict[str, Any]:
+        """``report`` with the FAIL of two firmwares (``reboots.mark_two_sources``) when the
+        lives were cut for them (``n_frames``: the log's)."""
+        if self.conflict is not None:
+            mark_two_sources(report, self.conflict[1], n_frames - self._cut)
+        return report
 
     def _decide(self, page: tuple[int, int] | None) -> None:
         """The waiting reboot's start, from its first count page (position, ENC_E2E_OK) or
@@ -131,8 +157,13 @@ class StreamLives:
         ):
             name = str(choices.get(int(state), int(state)))
             before = self._watch.last_uptime_s
-            if self._watch.observe(float(t_s), int(uptime_s), name) == "reboot":
-                at = int(position) + self._offset
+            kind = self._watch.observe(float(t_s), int(uptime_s), name)
+            at = int(position) + self._offset
+            if self._watch.changed_at_s == float(t_s):
+                self._changed = (at, float(t_s))
+            if kind == "two sources" and self.conflict is None:
+                self.conflict = self._changed
+            if kind == "reboot":
                 earlier = self._encoders[self._encoders < at]
                 start = (int(earlier[-1]) if int(uptime_s) == 0 and name != "INIT"
                          and len(earlier) else at)

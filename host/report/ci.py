@@ -89,6 +89,8 @@ def verdict_check(report: dict[str, Any]) -> list[Check]:
     if "passed" not in report:
         return []
     reasons = [str(r) for r in report.get("faults") or []]
+    if report.get("two_sources"):  # two firmwares on one ID: the pose there is not judged
+        reasons.append(str(report["two_sources"]["detail"]))
     return [Check("verdict", bool(report["passed"]), "; ".join(reasons) or "FAIL",
                   {f"reason_{i + 1}": r for i, r in enumerate(reasons)})]
 

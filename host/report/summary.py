@@ -145,6 +145,10 @@ def print_summary(
     twist = report.get("onboard_twist_vs_reference") or {"passed": True}
     distance = report.get("onboard_distance_vs_reference") or {"passed": True}
     pose_met = _pose_within(report, tolerance)
+    conflict = report.get("two_sources")
+    if conflict:  # a FAIL of its own; the pose before it is judged as usual
+        console.print(f"[{style}]{verdict}[/{style}]: {conflict['detail']}", soft_wrap=True)
+        verdict, style = "before it", "bold" if pose_met and twist["passed"] else style
     console.print(
         f"[{style}]{verdict}[/{style}]: on-board vs reference within "
         f"{tolerance.position_m * 1e3:.4g} mm and {tolerance.heading_rad * 1e3:.4g} mrad"

@@ -1152,7 +1152,7 @@ struct odocan_odom_status_t {
     uint8_t page;
 
     /**
-     * u2 enum: firmware state.
+     * u2 enum: firmware state. A DEGRADED episode, however short, is carried with its REASON by at least one summary page before STATE goes back to OK.
      *
      * Range: 0..3 (0..3 -)
      * Scale: 1

@@ -158,13 +158,16 @@ def _do_monitor(args: argparse.Namespace) -> int:
     code = _end(args, model.snapshot, early_stop(signum, started_s, args.duration))
     if failure is not None:
         raise failure
+    conflict = model.sources.conflict_text()  # two firmwares: a FAIL, no pose judged after
+    if conflict:
+        print(f"monitor: FAIL: {conflict}", file=sys.stderr)
     if wrongs.count:  # the pose was wrong at some time, even if right again since: FAIL
         print(f"monitor: FAIL: {wrongs.summary()}; judged as robot {profile.name!r} (--robot)"
               f"{_robot_hint(args, profile)}", file=sys.stderr)
     distance = model.distance.verdict()  # ODOM_TWIST DISTANCE wrong in some life: FAIL
     if distance:
         print(f"monitor: FAIL: {distance[0]}", file=sys.stderr)
-    return 1 if (wrongs.count or distance) and code == 0 else code
+    return 1 if (wrongs.count or conflict or distance) and code == 0 else code
 
 
 def _robot_hint(args: argparse.Namespace, profile: robot.RobotProfile) -> str:
