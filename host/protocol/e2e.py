@@ -49,9 +49,13 @@ from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import frame_groups, frame_key
 from odocan.host.protocol.e2e_periods import (
     frame_periods,
-    period_count,
-    periods_between,  # noqa: F401  (re-exported: tests, callers of the old home)
     receive_period_count,
+)
+from odocan.host.protocol.e2e_periods import (
+    period_count as period_count,  # re-exported (their old home)
+)
+from odocan.host.protocol.e2e_periods import (
+    periods_between as periods_between,
 )
 from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError

@@ -68,7 +68,8 @@ def receive_periods(
     np.maximum(late, 0.0, out=late)
     periods = s + np.sign(e) * late
     np.maximum(periods, 0.0, out=periods)
-    return periods.astype(np.int64)
+    result: npt.NDArray[np.int64] = periods.astype(np.int64)
+    return result
 
 
 def receive_period_count(dt_s: float, step: int, cycle_s: float) -> int:
