@@ -164,6 +164,11 @@ class FaultInjectingBus(BusABC):
         """Frames held back by ``delay`` and not yet released."""
         return len(self._held)
 
+    @property
+    def next_release_s(self) -> float:
+        """When the earliest frame held back by ``delay`` is due (inf: none held)."""
+        return self._held[0][0] if self._held else math.inf
+
     def poll(self, now_s: float, timeout: float | None = None) -> None:
         """Bring the faults up to ``now_s``: bus-off transitions, babble, delayed releases.
 

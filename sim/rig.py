@@ -233,9 +233,33 @@ class LockstepRig(Closing):
         self.loop.step()
 
     def _work(self, k: int) -> None:
-        """The nodes' work in tick ``k``: the sim node, then the firmware's board."""
+        """The nodes' work in tick ``k``: the faults brought up to the tick's start, the sim
+        node, then the firmware's board.
+
+        A frame held back by ``delay`` goes on the bus at its release time, before anything sent
+        later, as a recorder on a real bus would see it: the faulted handles are polled at the
+        start of every tick, not only when their node sends next (a firmware sending every 20 ms
+        would otherwise let a frame released at t + 26 ms out at t + 41 ms, stamped t + 26 ms,
+        after the encoder frame of t + 30 ms: times going back in the log)."""
+        self._release_held(self.clock.now_s())
         self.sim.tick(k)
         self.board.run_tick()
+
+    def _release_held(self, now_s: float) -> None:
+        """Bring the faulted handles up to ``now_s``, their held frames in time order across
+        both handles (the sim's and the firmware's), as they reach the bus."""
+        faulted = [b for b in self._buses[:2] if isinstance(b, FaultInjectingBus)]
+        while faulted:
+            first = min(faulted, key=lambda b: b.next_release_s)
+            due_s = first.next_release_s
+            if due_s > now_s:
+                break
+            first.poll(due_s)
+            if first.next_release_s == due_s:  # bus-off: its held frames wait for recovery
+                faulted.remove(first)
+        for bus in self._buses[:2]:
+            if isinstance(bus, FaultInjectingBus):
+                bus.poll(now_s)
 
     def run(
         self, duration_s: float | None = None, progress: Callable[[int, int], None] | None = None

@@ -4,6 +4,7 @@ half (not in a burst, not a repeat) the answer ``match_encoder`` would, without 
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -85,14 +86,14 @@ def plain_half(halves: deque[tuple[float, ...]], pos: int) -> tuple[float, float
         k = -1
     elif n_halves > 1 and halves[-2][0] == pos:
         k = -2
-        if halves[-1][3] - halves[-2][3] < QUEUED_GAP_S:
+        if _close(halves[-1][3] - halves[-2][3]):
             return None
     else:
         return None
     _, enc_counter, counter, t_s = halves[k]
     if n_halves > -k:
         _, prev_enc, prev_counter, prev_t = halves[k - 1]
-        if t_s - prev_t < QUEUED_GAP_S:
+        if _close(t_s - prev_t):
             return None
         if (prev_enc == enc_counter and (int(counter - prev_counter) & 0xF) == 1
                 and t_s - prev_t < REPEAT_S):
@@ -108,10 +109,15 @@ def _sender_step(window: deque[tuple[float, ...]], j: int) -> int:
     _, _, prev_counter, prev_t = window[j - 1][:4]
     step = int(counter - prev_counter) & 0xF
     dt = t_s - prev_t
-    if dt < QUEUED_GAP_S or (j < -1 and window[j + 1][3] - t_s < QUEUED_GAP_S):
+    if _close(dt) or (j < -1 and _close(window[j + 1][3] - t_s)):
         return step
-    periods = round(dt / CYCLE_S)
-    return step + 16 * max(0, round((periods - step) / 16))
+    return step + 16 * max(0, math.floor((dt / CYCLE_S - step) / 16 + 0.5))
+
+
+def _close(gap_s: float) -> bool:
+    """``samples.queued_frames``' test of one gap: 0 <= gap < ``QUEUED_GAP_CYCLES`` (a gap
+    going back is a frame reordered, not queued)."""
+    return 0 <= gap_s < QUEUED_GAP_S
 
 
 class Columns:

@@ -26,7 +26,7 @@ POSITION_LSB_M = float(_POSE_X.get_signal_by_name("X").scale)
 HEADING_LSB_RAD = float(_POSE_X.get_signal_by_name("HEADING").scale)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 SILENCE_CYCLES = 8  # pose frames this many encoder cycles apart: the firmware was stalled
-QUEUED_GAP_CYCLES = 0.5  # two sends of one message closer than this waited to be sent
+QUEUED_GAP_CYCLES = 0.35  # two sends of one message closer than this waited (``queued_frames``)
 START_FIT_SAMPLES = 256  # on-board samples used to place the reference start (5 s at 50 Hz)
 ENC_E2E_PAGE = 2  # ODOM_STATUS page with the firmware's WHEEL_ENCODERS E2E counts
 REQUIRED = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y")
@@ -214,10 +214,9 @@ def sender_seq(counter: IntArray, timestamp_s: FloatArray, cycle_s: float | None
     if cycle_s is not None and len(step):  # in place: the same operations, fewer temporaries
         gap_periods = np.diff(timestamp_s)
         gap_periods /= cycle_s
-        periods = np.rint(gap_periods, out=gap_periods).astype(np.int64)
-        periods -= step
-        lost_16 = np.rint(periods / 16)
-        np.maximum(0, lost_16, out=lost_16)
+        gap_periods -= step  # the sends more than the COUNTER step, 16 a lap (a real number)
+        lost_16 = np.floor(gap_periods / 16 + 0.5)  # the lap nearest: an edge 8 periods off,
+        np.maximum(0, lost_16, out=lost_16)  # never at half a period (frames late by 0.5)
         lost = lost_16.astype(np.int64)
         lost *= 16
         # a frame let out in a burst after the gap waited in the sender's buffer: the gap is
@@ -283,8 +282,16 @@ def queued_frames(timestamp_s: FloatArray, cycle_s: float) -> npt.NDArray[np.boo
     than ``QUEUED_GAP_CYCLES`` encoder cycles from the one before or after them. A firmware
     sends each pose and twist message at most once per encoder period, so two of them that
     close on the bus were not sent when they were made (a busy bus, e.g. a babbling node of
-    higher priority, held them back and then let them out in a burst)."""
-    close = np.diff(timestamp_s) < QUEUED_GAP_CYCLES * cycle_s
+    higher priority, held them back and then let them out in a burst).
+
+    A frame whose time goes back (a negative gap: it reached the bus after a later one, a frame
+    late on the bus, reordered) is not queued by that gap. The band: a burst's frames follow
+    each other by one frame's length (about 0.27 ms at 500 kbit/s, 2.7 ms at 50 kbit/s: 0.27
+    encoder cycle), while a frame late by half a cycle (a 15 ms ``delay`` of a 20 ms message
+    sent 1 ms after a 10 ms slot) lands 0.5 cycle from its neighbour: the edge at 0.35 cycle
+    is neither, so no decision hinges on half a cycle (at 0.5, 1 ns of rounding did)."""
+    gap_s = np.diff(timestamp_s)
+    close = (gap_s >= 0) & (gap_s < QUEUED_GAP_CYCLES * cycle_s)
     queued: npt.NDArray[np.bool_] = (
         np.concatenate(([False], close)) | np.concatenate((close, [False]))
     )

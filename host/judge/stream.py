@@ -173,8 +173,8 @@ class StreamEncoders:
             stamps = np.concatenate(([self._last[1]], stamps))
         step = (np.diff(counter) & 0xF).astype(np.int64)
         if cycle_s is not None and len(step):
-            periods = np.rint(np.diff(stamps) / cycle_s).astype(np.int64)
-            step = step + 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
+            laps = np.floor((np.diff(stamps) / cycle_s - step) / 16 + 0.5)  # as sender_seq
+            step = step + 16 * np.maximum(0, laps).astype(np.int64)
         if self._last is None:
             return np.concatenate(([0], np.cumsum(step))).astype(np.int64)
         return (self._last[2] + np.cumsum(step)).astype(np.int64)

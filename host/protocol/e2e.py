@@ -21,6 +21,10 @@ The host's own implementation of what the firmware does in ``firmware.e2e`` (dbc
   ``round(dt / cycle)`` periods, none within half a period: a babbler's or a forger's frame
   sent with a genuine one cannot open the window to itself. (Messages sent several frames per
   cycle, the pages of ODOM_STATUS and SIM_TRUTH, keep at least one period a frame.)
+  A frame of those messages late on the bus (a ``delay`` fault, a frame reordered) is not
+  rounded: between two frames whose CRCs are right, the periods are the sender's COUNTER step
+  plus the ticks the late one waited (``receive_periods``), so a frame late by exactly half a
+  period is no tie (round-half-even flipped on 1 ns of timestamp).
   *Intended difference*: two frames of one of those messages within one period add two periods
   in the firmware (two checks) and in the host (two frames), but a frame with the wrong DLC,
   which the firmware drops before the check (no ``check(None)`` for that tick either), leaves
@@ -34,7 +38,6 @@ fatal; messages without ``E2EDataIDs`` are taken unchecked and counted there as 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -44,6 +47,16 @@ import numpy.typing as npt
 from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import frame_groups, frame_key
+from odocan.host.protocol.e2e_periods import (
+    frame_periods,
+    receive_period_count,
+)
+from odocan.host.protocol.e2e_periods import (
+    period_count as period_count,  # re-exported (their old home)
+)
+from odocan.host.protocol.e2e_periods import (
+    periods_between as periods_between,
+)
 from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 
@@ -229,28 +242,6 @@ class SequenceState:
         return status
 
 
-def periods_between(
-    dt_s: npt.NDArray[np.float64], cycle_s: float | None, min_periods: int = 1
-) -> npt.NDArray[np.int64]:
-    """Receive periods that a frame ``dt_s`` after the previous one closes: ``round(dt /
-    cycle)``, at least ``min_periods`` (0: a second frame in one period widens no window); 1
-    each without a cycle time."""
-    if cycle_s is None:
-        return np.ones(dt_s.shape, dtype=np.int64)
-    quotient = np.divide(dt_s, cycle_s, out=np.empty(np.shape(dt_s), dtype=np.float64))
-    np.rint(quotient, out=quotient)  # in place: one temporary, not three
-    np.maximum(quotient, min_periods, out=quotient)
-    return quotient.astype(np.int64)
-
-
-def period_count(dt_s: float, cycle_s: float | None, min_periods: int = 1) -> int:
-    """``periods_between`` for one frame, without numpy (the live check runs it per frame):
-    the same round-half-even of the same float64 quotient; a NaN or infinite gap counts 1."""
-    if cycle_s is None or not math.isfinite(dt_s):
-        return 1
-    return max(min_periods, round(dt_s / cycle_s))
-
-
 def sequence_statuses(
     crc_ok: npt.NDArray[np.bool_],
     counter: npt.NDArray[np.int64],
@@ -389,9 +380,8 @@ def _check_message(
     the accepted ones."""
     assert config.data_ids is not None
     counter = (frames.data[index, 1] & COUNTER_MASK).astype(np.int64)
-    timestamp_s = frames.timestamp_s[index]
-    dt = np.diff(timestamp_s, prepend=timestamp_s[:1])
-    periods = periods_between(dt, config.cycle_s, config.min_periods)
+    periods = frame_periods(frames.timestamp_s[index], counter, crc_ok[index], config.cycle_s,
+                            config.min_periods)
     status = sequence_statuses(crc_ok[index], counter, periods, config.max_delta_init)
     good = (status == _S_OK) | (status == _S_LOST)
     if good.all():  # the usual case: no gathers
@@ -418,12 +408,13 @@ def _check_message(
 class _Live:
     """A protected message heard (``E2EMonitor.check``): its fields, state, last frame's time s."""
 
-    __slots__ = ("cycle_s", "data_ids", "last_s", "length", "min_periods", "state")
+    __slots__ = ("cycle_s", "data_ids", "last", "last_s", "length", "min_periods", "state")
 
     def __init__(self, config: E2EMessage, state: SequenceState, data_ids: tuple[int, ...],
-                 last_s: float | None) -> None:
+                 last_s: float | None, last: int) -> None:
         self.length, self.data_ids, self.state = config.length, data_ids, state
         self.cycle_s, self.min_periods, self.last_s = config.cycle_s, config.min_periods, last_s
+        self.last = last  # the last frame's COUNTER, -1 when its CRC was wrong
 
 
 class E2EMonitor:
@@ -450,13 +441,18 @@ class E2EMonitor:
         live = self._live.get(frame_key(can_id, True) if extended else can_id)
         if live is None or len(data) != live.length:
             return self._check_first(frame_key(can_id, extended), data, timestamp_s)
+        counter = data[1] & COUNTER_MASK
+        crc_ok = crc8h2f_p02_one(data, live.data_ids[counter]) == data[0]
         periods = 1
         if timestamp_s is not None:
             last, live.last_s = live.last_s, timestamp_s
-            if last is not None:
+            if last is not None and crc_ok and live.last >= 0 and live.min_periods == 0 and (
+                    live.cycle_s is not None):  # as ``frame_periods``
+                periods = receive_period_count(timestamp_s - last,
+                                               (counter - live.last) & COUNTER_MASK, live.cycle_s)
+            elif last is not None:
                 periods = period_count(timestamp_s - last, live.cycle_s, live.min_periods)
-        counter = data[1] & COUNTER_MASK
-        crc_ok = crc8h2f_p02_one(data, live.data_ids[counter]) == data[0]
+        live.last = counter if crc_ok else -1
         return live.state.check(crc_ok, counter, periods)
 
     def _check_first(self, key: int, data: bytes, timestamp_s: float | None) -> str:
@@ -474,9 +470,10 @@ class E2EMonitor:
         state = self._states.get(key)
         if state is None:
             state = self._states[key] = SequenceState(config.max_delta_init)
-        self._live[key] = _Live(config, state, config.data_ids, timestamp_s)  # one period
         counter = data[1] & COUNTER_MASK
         crc_ok = crc8h2f_p02_one(data, config.data_ids[counter]) == data[0]
+        self._live[key] = _Live(config, state, config.data_ids, timestamp_s,  # one period
+                                counter if crc_ok else -1)
         return state.check(crc_ok, counter, 1)
 
     def restart_sequence(self, can_id: int, *, extended: bool = False) -> None:

@@ -1,0 +1,171 @@
+"""Frames late on the bus (``--faults delay``: reordered) never flip a verdict (issue #11, rule 5).
+
+An outside trial found, on 10 to 20 s kobuki drives: ``run`` PASS but ``analyze`` of its
+``.log`` FAIL (227 mrad), the ``.blf`` of the same drive PASS (223 times 1 ns apart); ``run``
+FAIL (365 mrad) on a firmware an independent checker found right; ``analyze`` of a ``.blf``
+FAIL where ``run`` PASSed. The cause: the host's model of the firmware's E2E window counted the
+periods between an encoder frame and one 15 ms late (half a period off its slot) by rounding
+half to even, so 1 ns of timestamp decided whether the firmware's window had widened; the two
+then disagreed on which encoder frames the firmware had taken, and a pose was paired with a
+frame 16 periods away. And the rig wrote a frame held back by ``delay`` after frames later than
+it (times going back in its log).
+
+Here, on the trial's three drives: the log is in bus order; ``run``, the whole-log ``analyze``,
+the streamed ``analyze`` (the CLI's) and the live judge (the monitor model) PASS in every log
+format; the same drives by a firmware whose pose is off by 2 LSB (X or HEADING) FAIL in all of
+them; and no verdict changes when every timestamp is moved by up to 1 us.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import replace
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, example, given, settings
+from hypothesis import strategies as st
+
+import odocan.firmware.frames as fw_frames
+from odocan.firmware.errors import ErrorMask
+from odocan.host.cli.app import main
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
+from odocan.host.judge.monitor import BusMonitor
+from odocan.sim.robot import load
+
+# (duration s, seed or None: the default, faults) of the trial's reproductions
+DRIVES = [
+    (10, 2, "delay=0.1:15,seed=2"),
+    (10, 2, "delay=0.1:25,seed=2"),
+    (20, None, "delay=0.05:25,seed=4"),
+]
+FORMATS = (".log", ".blf", ".asc")
+KOBUKI = load("kobuki")
+
+
+@contextmanager
+def _off_by_two(signal: str | None) -> Iterator[None]:
+    """The Python firmware with its ODOM_POSE_X ``X`` or ``HEADING`` 2 LSB off (None: right)."""
+    if signal is None:
+        yield
+        return
+    right = fw_frames.pack_odom_pose_x
+
+    def wrong(counter: int, enc_counter: int, x_100um: int, heading_bam16: int,
+              errors: ErrorMask) -> bytes:
+        return right(counter, enc_counter, x_100um + 2 * (signal == "X"),
+                     heading_bam16 + 2 * (signal == "HEADING"), errors)
+
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        monkeypatch.setattr(fw_frames, "pack_odom_pose_x", wrong)
+        yield
+
+
+def _run(path: Path, drive: tuple[int, int | None, str], wrong: str | None) -> int:
+    duration, seed, faults = drive
+    argv = ["run", "--robot", "kobuki", "--duration", str(duration), "--faults", faults,
+            "--log", str(path)]
+    argv += ["--seed", str(seed)] if seed is not None else []
+    with _off_by_two(wrong):
+        return main(argv)
+
+
+def _live_passes(path: Path) -> bool:
+    """The monitor model's verdict: its pose vs its reference within one LSB each."""
+    monitor = BusMonitor(KOBUKI)
+    with can.LogReader(path) as reader:
+        for msg in reader:
+            monitor.feed(msg, now_s=msg.timestamp)
+    ref = monitor.tracker.vs_reference
+    return bool(ref.max_dpos_m <= POSITION_LSB_M and ref.max_dheading_rad <= HEADING_LSB_RAD)
+
+
+def _verdicts(path: Path, run_code: int) -> dict[str, bool]:
+    return {
+        "run": run_code == 0,
+        "analyze (streamed, CLI)": main(["analyze", str(path), "--robot", "kobuki"]) == 0,
+        "analyze (whole log)": analyze(read_log(path), KOBUKI).passed,
+        "live": _live_passes(path),
+    }
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize("drive", DRIVES, ids=[d[2] for d in DRIVES])
+def test_a_delayed_drive_passes_everywhere(
+    tmp_path: Path, drive: tuple[int, int | None, str], fmt: str
+) -> None:
+    path = tmp_path / f"drive{fmt}"
+    verdicts = _verdicts(path, _run(path, drive, None))
+    assert all(verdicts.values()), verdicts
+
+
+@pytest.mark.parametrize("wrong", ["X", "HEADING"])
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize("drive", DRIVES, ids=[d[2] for d in DRIVES])
+def test_a_pose_two_lsb_off_fails_everywhere(
+    tmp_path: Path, drive: tuple[int, int | None, str], fmt: str, wrong: str
+) -> None:
+    path = tmp_path / f"drive{fmt}"
+    verdicts = _verdicts(path, _run(path, drive, wrong))
+    assert not any(verdicts.values()), verdicts
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_the_rigs_log_is_in_bus_order(tmp_path: Path, fmt: str) -> None:
+    """A frame held back goes on the bus at its release time, before anything sent later."""
+    path = tmp_path / f"drive{fmt}"
+    assert _run(path, DRIVES[1], None) == 0
+    times = read_log(path).timestamp_s
+    assert np.all(np.diff(times) >= 0), int(np.count_nonzero(np.diff(times) < 0))
+
+
+# Delays in whole ms, not 1 ms past a 10 ms boundary: that lands an encoder frame exactly on the
+# firmware's tick (1 ms after the slot in the rig), the one edge the firmware has too
+# (``host.protocol.e2e_periods.receive_periods``), where 1 us decides what it took.
+DELAYS_MS = [d for d in range(2, 40) if d % 10 != 1]
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 1000), delay_ms=st.sampled_from(DELAYS_MS),
+       share=st.sampled_from([0.05, 0.1, 0.2]), wrong=st.sampled_from([None, "X", "HEADING"]),
+       jitter_seed=st.integers(0, 2**32 - 1), duration_s=st.just(4))
+@example(seed=2, delay_ms=15, share=0.1, wrong=None, jitter_seed=1, duration_s=10)
+@example(seed=2, delay_ms=25, share=0.1, wrong=None, jitter_seed=2, duration_s=10)
+def test_a_microsecond_never_flips_the_verdict(
+    tmp_path: Path, seed: int, delay_ms: int, share: float, wrong: str | None, jitter_seed: int,
+    duration_s: int,
+) -> None:
+    """Every timestamp moved by up to 1 us: the same verdict, whole log and streamed alike; a
+    right firmware PASSes. (A wrong one is not required to FAIL here: see the xfail below.)
+    Drawn: 4 s drives; the examples: two of the trial's 10 s drives (they failed before)."""
+    path = tmp_path / f"d{seed}_{delay_ms}_{share}_{wrong}.blf"
+    code = _run(path, (duration_s, seed, f"delay={share}:{delay_ms},seed={seed}"), wrong)
+    frames = read_log(path)
+    jitter = np.random.default_rng(jitter_seed).uniform(-1e-6, 1e-6, len(frames))
+    moved = replace(frames, timestamp_s=frames.timestamp_s + jitter)
+    report = tmp_path / "report.json"
+    main(["analyze", str(path), "--robot", "kobuki", "--report", str(report)])
+    verdicts = {"run": code == 0, "whole": analyze(frames, KOBUKI).passed,
+                "streamed": json.loads(report.read_text())["passed"],
+                "whole, 1 us moved": analyze(moved, KOBUKI).passed}
+    assert len(set(verdicts.values())) == 1, verdicts
+    if wrong is None:
+        assert verdicts["run"], verdicts
+
+
+@pytest.mark.xfail(strict=True, reason="open: the power-up rule under delay (see docstring)")
+def test_a_late_first_status_page_still_tells_the_power_up(tmp_path: Path) -> None:
+    """Found by the test above, left open: 4 s, ``delay=0.05:10,seed=48``, a firmware whose X is
+    2 LSB off PASSes. Its first ENC_E2E_OK page, made at 0.101 s with 11 encoder frames counted,
+    was held 10 ms and reached the bus after the 12th, so ``powerup.counted_only_the_log`` says
+    the log does not start at power-up, and the start fitted to the samples takes the constant
+    offset in. The rule must count the frames on the bus when the page was made, not when it
+    came (``powerup``, ``stream_facts``, and the live judge alike)."""
+    path = tmp_path / "late_page.blf"
+    assert _run(path, (4, 48, "delay=0.05:10,seed=48"), "X") == 1
