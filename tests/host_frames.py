@@ -23,6 +23,7 @@ from __future__ import annotations
 from enum import IntEnum
 from typing import Final, NamedTuple
 
+from odocan.firmware.config import MAX_WHEEL_SPEED_MAX_MM_S, MAX_WHEEL_SPEED_MIN_MM_S
 from odocan.firmware.e2e import COUNTER_MASK, p02_crc
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.fixmath import (
@@ -238,12 +239,16 @@ def pack_odom_set_pose(counter: int, field: int, value: int, errors: ErrorMask) 
 
 def pack_odom_config(counter: int, param: int, value: int, errors: ErrorMask) -> bytes:
     """ODOM_CONFIG: one staged parameter. u32 parameters saturate to u32, COUNTER_BITS to
-    [16, 32], INTEGRATOR to [0, 2]; APPLY carries nothing (``value`` ignored); an unknown
-    ``param`` sends ``value`` as raw u32 (tests)."""
+    [16, 32], INTEGRATOR to [0, 2], MAX_WHEEL_SPEED to its DBC range [1, 65535] mm/s; APPLY
+    carries nothing (``value`` ignored); an unknown ``param`` sends ``value`` as raw u32
+    (tests). A value the DBC's range excludes (MAX_WHEEL_SPEED 0) goes through
+    ``pack_odom_config_raw``."""
     param &= U4_MAX
     limits = CONFIG_U8_LIMITS.get(param)
     if limits is not None:
         raw = sat_range(value, limits[0], limits[1], errors)
+    elif param == ConfigParam.MAX_WHEEL_SPEED:
+        raw = sat_range(value, MAX_WHEEL_SPEED_MIN_MM_S, MAX_WHEEL_SPEED_MAX_MM_S, errors)
     elif param == ConfigParam.APPLY:
         raw = 0
     elif param <= ConfigParam.WHEELBASE:
@@ -251,6 +256,13 @@ def pack_odom_config(counter: int, param: int, value: int, errors: ErrorMask) ->
     else:
         raw = wrap_u32(value)
     return seal_frame(e2e_head(counter, param) | (raw << 16), ODOM_CONFIG_DATA_IDS)
+
+
+def pack_odom_config_raw(counter: int, param: int, raw: int) -> bytes:
+    """ODOM_CONFIG with ``raw`` (u32, wrapped) as the payload, unsaturated: a value outside the
+    DBC's range, sent so that the receiver's refusal (NACK OUT_OF_RANGE) is exercised."""
+    payload = wrap_u32(raw)
+    return seal_frame(e2e_head(counter, param & U4_MAX) | (payload << 16), ODOM_CONFIG_DATA_IDS)
 
 
 def pack_nav_goal(counter: int, field: int, value: int, errors: ErrorMask) -> bytes:

@@ -769,6 +769,9 @@ class _EcuSession:
         }
         by_param.update({1: 75_000_000, 2: rng.choice((75_000_000, 35_000_000)), 3: 300_000_000})
         v = by_param.get(param, 0)
+        if (param, v) == (6, 0):  # outside the DBC's range: sent raw, the firmware NACKs it
+            self.host(frames.ODOM_CONFIG_ID, partial(hf.pack_odom_config_raw, param=6, raw=0))
+            return
         self.host(
             frames.ODOM_CONFIG_ID,
             partial(hf.pack_odom_config, param=param, value=v, errors=ErrorMask()),

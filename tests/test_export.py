@@ -5,8 +5,10 @@ with cantools' own per-frame decoder, the Foxglove messages with the Foxglove SD
 
 from __future__ import annotations
 
+import errno
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -318,10 +320,24 @@ def test_unwritable_outputs_fail_before_the_run(
 
 
 def test_read_only_directory_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """``os.access`` says no (as for any user but root on a read-only directory)."""
-    monkeypatch.setattr("os.access", lambda path, mode: False)
-    with pytest.raises(ConfigurationError, match="is not writable"):
-        check_export_paths(None, tmp_path / "x.mcap")
+    """Creating the file is refused, as for any user but root in a read-only directory.
+
+    The check proves a path writable by opening it (host/outputs.py, since permission bits
+    lied to root about /proc), so the refusal is made at that open: ``os.open`` of the target
+    raises EACCES, and the error is one line naming the option, the path and the reason."""
+    target = tmp_path / "x.mcap"
+    real_open = os.open
+
+    def refusing_open(path: Any, flags: int, mode: int = 0o777) -> int:
+        if Path(path) == target:
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+        return real_open(path, flags, mode)
+
+    monkeypatch.setattr("odocan.host.outputs.os.open", refusing_open)
+    with pytest.raises(ConfigurationError) as refused:
+        check_export_paths(None, target)
+    assert str(refused.value) == f"--mcap {target}: {os.strerror(errno.EACCES)}"
+    assert not target.exists()
 
 
 def test_mcap_is_written_in_log_time_order(run_outputs: tuple[dict[str, Any], Path, Path]) -> None:

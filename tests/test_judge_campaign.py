@@ -8,9 +8,13 @@ log lacks), and sometimes a wrong firmware (an X off by a few LSB at one sample,
 other than the profile's). ``tests/independent_checker.py`` (float64 odometry of its own,
 cantools decoding, the true start from the synthesizer) gives the expected verdict; ``analyze``
 must agree, and for a right firmware its maximum errors must match the checker's to a quarter
-LSB (up to 4 LSB; beyond, both must fail). Where the checker's error lies within a quarter LSB of
-the tolerance, the verdict is too close to call and only the errors are compared. For a wrong
-firmware, a checker PASS must be a PASS, and a checker FAIL a FAIL unless the error is within the
+LSB (up to 4 LSB; beyond, both must fail), never above them, and below them, for a log starting
+mid-drive, by no more than the freedom of a start not told (below): a fitted start's rotation
+takes in a right firmware's own arithmetic drift too (found: 91.7 km of rk2 steps of ~4 m, a
+drift of 1.1 LSB by the told start, 0.76 by a start heading 4e-9 rad off it). Where the
+checker's error lies within a quarter LSB of the tolerance, the verdict is too close to call
+and only the errors are compared. For a wrong firmware, a checker PASS must be a PASS, and a
+checker FAIL a FAIL unless the error is within the
 freedom any judge has that is not told the start: a fitted start (a log starting mid-drive, a
 segment after a gap) is placed within half an LSB of its samples (which can take up to half an
 LSB off one wrong sample), and a start heading within half a heading LSB (which can turn a slow
@@ -43,12 +47,12 @@ from odocan.firmware.config import ConfigReason, RobotParams, validate_at_speed
 from odocan.firmware.ecu import RESYNC_FRAMES, OdomEcu
 from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S
 from odocan.host.io.logs import FrameArrays, parse_candump, read_log
-from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Analysis, analyze
 from odocan.sim.board import TICK_S
 from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import get_scenario
 from tests.fault_rig import FaultRig
-from tests.independent_checker import Robot, check
+from tests.independent_checker import Robot, Verdict, check
 from tests.synth_log import ENCODER_PERIOD_S, Synth, params_of, synthesize
 from tests.test_ecu import RecordingHal
 
@@ -157,6 +161,11 @@ def with_gaps(synth: Synth, start: int, gaps: list[tuple[float, int]], step_max:
     steps=200, distance_m=1121.0844869420985, cut=0, gaps=[], fault="radius",
     radius_error_nm=2000, seed=200,
 ).via("found by the campaign")
+@example(  # mid-drive, three gaps at one place (one frame lost: 4e6 counts a step): 91.7 km
+    robot=Robot(449962, 68_530_999, 68_873_654, 299_191_720, 32), integrator="rk2", steps=19020,
+    distance_m=91738.88955103185, cut=6, gaps=[(1e-87, 26), (1e-128, 25), (5e-301, 37)],
+    fault="none", radius_error_nm=30, seed=449962,
+).via("found by the campaign")
 @given(
     robot=robots(),
     integrator=st.sampled_from(["euler", "rk2", "exact"]),
@@ -207,12 +216,7 @@ def test_analyze_agrees_with_the_independent_checker(
             assert not analysis.passed, (got, expected)
             assert not expected.passed, (got, expected)
             return
-        assert abs(got["max_position_error_m"] / POSITION_LSB_M - position_lsb) <= CLOSE_CALL, (
-            got, expected)
-        assert abs(got["max_heading_error_rad"] / HEADING_LSB_RAD - heading_lsb) <= CLOSE_CALL, (
-            got, expected)
-        if abs(position_lsb - 1) >= CLOSE_CALL and abs(heading_lsb - 1) >= CLOSE_CALL:
-            assert analysis.passed == expected.passed, (got, expected)
+        assert_right_firmware_agrees(analysis, expected, synth, cut)
     else:  # a wrong firmware: a start the log does not give is fitted (module docstring)
         freedom_position, freedom_heading = WRONG_SAMPLE_FREEDOM, 0.0
         if cut:
@@ -226,6 +230,31 @@ def test_analyze_agrees_with_the_independent_checker(
     if fault == "x_bias" and not bias.keys() & dropped:
         assert not analysis.passed
         assert not expected.passed
+
+
+def assert_right_firmware_agrees(
+    analysis: Analysis, expected: Verdict, synth: Synth, cut: int
+) -> None:
+    """A right firmware's maximum errors by ``analyze`` against the checker's: never above them
+    by more than a quarter LSB (a FAIL must not blame a right firmware); below them by a quarter
+    LSB from power-up, mid-drive (``cut``) by the freedom of a start not told (docstring)."""
+    got = analysis.report["onboard_vs_reference"]
+    position_lsb = expected.max_position_error_m / POSITION_LSB_M
+    heading_lsb = expected.max_heading_error_rad / HEADING_LSB_RAD
+    below_position, below_heading = CLOSE_CALL, CLOSE_CALL
+    if cut:
+        below_position += WRONG_SAMPLE_FREEDOM + (
+            0.5 * HEADING_LSB_RAD * displacement_m(synth, cut) / POSITION_LSB_M)
+        below_heading += 0.5
+    off_position = got["max_position_error_m"] / POSITION_LSB_M - position_lsb
+    off_heading = got["max_heading_error_rad"] / HEADING_LSB_RAD - heading_lsb
+    assert -below_position <= off_position <= CLOSE_CALL, (got, expected)
+    assert -below_heading <= off_heading <= CLOSE_CALL, (got, expected)
+    if abs(position_lsb - 1) >= CLOSE_CALL and abs(heading_lsb - 1) >= CLOSE_CALL:
+        if not cut:
+            assert analysis.passed == expected.passed, (got, expected)
+        elif expected.passed:  # a fitted start never blames what the checker passes
+            assert analysis.passed, (got, expected)
 
 
 def displacement_m(synth: Synth, start: int) -> float:

@@ -159,7 +159,8 @@ def test_the_bound_travels_in_odom_config_and_out_of_range_is_refused(kind: str)
     param = {name: raw for raw, name in choices(DB, "ODOM_CONFIG", "PARAM").items()}
     speed, apply = param["MAX_WHEEL_SPEED"], param["APPLY"]
     for counter, (p, value) in enumerate(((speed, 0), (apply, 0), (speed, 700), (apply, 0))):
-        rig.command(fr.ODOM_CONFIG_ID, hf.pack_odom_config(counter, p, value, rig.ecu.errors))
+        # raw: 0 is outside the DBC's range, which pack_odom_config would saturate to 1
+        rig.command(fr.ODOM_CONFIG_ID, hf.pack_odom_config_raw(counter, p, value))
     acks = [(str(a["RESULT"]), str(a["REASON"])) for a in rig.acks()]
     assert acks == [("ACK", "OK"), ("NACK", "OUT_OF_RANGE"), ("ACK", "OK"), ("ACK", "OK")]
     rig.to_summary_tick()
