@@ -163,7 +163,7 @@ class EncoderInput:
         wire = (left, right)
         counts = self._extend_counters(wire) if self._wide_counters else wire
         self._uptime_now = uptime
-        if self._controller_restarted(uptime, wire):
+        if self._controller_restarted(uptime, wire, counter):
             self._reprime(counter, wire, counts)
             return
         advance = self._counter_advance(counter)
@@ -330,16 +330,17 @@ class EncoderInput:
         self._this_step_periods = ((counter - first[2]) & COUNTER_MASK) or COUNTER_VALUES
         self._accept(counter, wire, counts)
 
-    def _controller_restarted(self, uptime: int, wire: Counts) -> bool:
+    def _controller_restarted(self, uptime: int, wire: Counts, counter: int) -> bool:
         """True when ``uptime`` (this frame's CTRL_UPTIME, u4) is below what the last accepted
-        frame's has aged to since (``_aged_uptime``), both reported (non-zero), and ``wire``
-        (its counts) near enough 0 for that age: the controller restarted, its counters from 0."""
+        frame's has aged to since (``_aged_uptime``; ``counter``: this frame's COUNTER), both
+        reported (non-zero), and ``wire`` (its counts) near enough 0 for that age: the
+        controller restarted, its counters from 0."""
         prev = self._uptime_prev
-        if uptime == 0 or prev == 0 or uptime >= self._aged_uptime(prev):  # aged >= prev
+        if uptime == 0 or prev == 0 or uptime >= self._aged_uptime(prev, counter):  # aged >= prev
             return False
         return self._young_counts(wire, uptime)
 
-    def _aged_uptime(self, prev: int) -> int:
+    def _aged_uptime(self, prev: int, counter: int) -> int:
         """The least CTRL_UPTIME (u4) a controller that did not restart can report now, ``prev``
         at the last accepted frame: ``prev`` plus the whole seconds of firmware time since that
         frame, less the periods this tick came late and ``RESTART_SLACK_PERIODS`` (the frames'
@@ -347,10 +348,25 @@ class EncoderInput:
         ``CTRL_UPTIME_MAX``; ``prev`` after a tick that lost time or frames the mailbox dropped
         (a backlog's frames were sampled at unknown times). A controller silent S s reports at
         least ``prev`` + floor(S) (1 + whole s of its age); less is a restart even when it is not
-        below ``prev`` (it restarted during the silence and has been up longer than before)."""
+        below ``prev`` (it restarted during the silence and has been up longer than before).
+
+        ``prev`` too when ``counter`` is the E2E successor of the last accepted frame's (its
+        COUNTER + 1 mod 16): the silence may be the bus's, not the controller's (a babbler held
+        it; the frames waited in the controller's transmit buffer), and the first frame after it
+        was then sampled right after the last accepted one, its CTRL_UPTIME as old. Proof that a
+        controller that did not restart is never taken for one: it numbers its frames 0..15 in
+        turn, so if none of them was lost this frame is the successor (this rule does not apply),
+        and if some were lost (on the bus: ENC_E2E_LOST) their samples lie between, so
+        the silence is the controller's own and it aged by it (the rule as before). What the rule
+        gives up: a restarted controller numbers afresh (sim ``MotorController.restart``: COUNTER
+        0 first), so a restart whose heard COUNTER happens to be the successor (1 in 16 over the
+        silence's unheard frames) is not told by its age here; it is still told if its
+        CTRL_UPTIME is below ``prev`` (it went back), else its jump is judged by the counts'
+        plausibility bound (widened by the silence) as before this rule."""
         since = self.periods_since_frame  # u16
         late = self._tick_late + RESTART_SLACK_PERIODS  # u32: < 2^19 + 16
-        if since <= late or self._clock.time_lost_now or self._mailbox_dropped():
+        successor = counter == ((self.enc_counter + 1) & COUNTER_MASK)
+        if since <= late or successor or self._clock.time_lost_now or self._mailbox_dropped():
             return prev
         aged = prev + (since - late) // PERIODS_PER_S  # u16: at most 15 + 655
         return aged if aged < CTRL_UPTIME_MAX else CTRL_UPTIME_MAX

@@ -337,7 +337,7 @@ def test_a_firmware_that_integrated_the_aged_restart_fails_every_judge(
     """The same drive on a firmware without the rule (its ``_aged_uptime`` the last CTRL_UPTIME
     alone, as before): it integrates the restart's jump, and analyze (whole and streamed) and
     the monitor fail it."""
-    monkeypatch.setattr(EncoderInput, "_aged_uptime", lambda self, prev: prev)
+    monkeypatch.setattr(EncoderInput, "_aged_uptime", lambda self, prev, counter: prev)
     path = aged_restart_log(tmp_path / "integrated.log", "python")
     after = [(s, r) for t, s, r in summaries(path)
              if t > (SILENT_FROM + AGED_SILENT_TICKS) * TICK_S + 2.0]

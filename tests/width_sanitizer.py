@@ -443,10 +443,16 @@ def _lockstep_drives(duration_s: float, ears: _Unpacker) -> None:
 
 
 def _silence_controller(rig: Any, seconds: float) -> None:
-    """Run ``seconds`` with the motor controller sending nothing, then 0.5 s of it speaking
-    again: the firmware ages the last CTRL_UPTIME over the silence (``_aged_uptime``)."""
-    send = rig.sim.tick
-    rig.sim.tick = lambda _k: None
+    """Run ``seconds`` with the motor controller's frames lost (its E2E COUNTER goes on, one a
+    tick), then 0.5 s of it speaking again: the firmware ages the last CTRL_UPTIME over the
+    silence (``_aged_uptime``; a frame that is the E2E successor of the last one, as after a
+    silence that lost nothing, is not aged)."""
+    send, controller = rig.sim.tick, rig.motor_controller
+
+    def lost(_k: int) -> None:
+        controller.counter = (controller.counter + 1) & 0xF
+
+    rig.sim.tick = lost
     rig.run(seconds)
     rig.sim.tick = send
     rig.run(0.5)

@@ -90,9 +90,9 @@ static void on_implausible(struct odom_ecu *ecu, uint8_t counter, const uint32_t
 static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                              const uint32_t counts[2]);
 static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime,
-                                 const uint32_t wire[2]);
+                                 const uint32_t wire[2], uint8_t counter);
 static bool young_counts(const struct odom_ecu *ecu, const uint32_t wire[2], uint8_t uptime);
-static uint8_t aged_uptime(const struct odom_ecu *ecu, uint8_t prev);
+static uint8_t aged_uptime(const struct odom_ecu *ecu, uint8_t prev, uint8_t counter);
 static void reprime(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                     const uint32_t counts[2]);
 static void sum_step(struct odom_ecu *ecu);
@@ -369,7 +369,7 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
     uint32_t counts[2];
     extend_counters(ecu, wire, counts);
     ecu->uptime_now = uptime;
-    if (controller_restarted(ecu, uptime, wire)) {
+    if (controller_restarted(ecu, uptime, wire, counter)) {
         reprime(ecu, counter, wire, counts);
         return;
     }
@@ -611,13 +611,14 @@ static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32
 }
 
 /* True when uptime (this frame's CTRL_UPTIME, u4) is below what the last accepted frame's has
- * aged to since (aged_uptime), both reported (non-zero), and wire (its counts) near enough 0 for
- * that age: the controller restarted, its counters from 0 (encoders.py _controller_restarted). */
+ * aged to since (aged_uptime; counter: this frame's COUNTER), both reported (non-zero), and wire
+ * (its counts) near enough 0 for that age: the controller restarted, its counters from 0
+ * (encoders.py _controller_restarted). */
 static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime,
-                                 const uint32_t wire[2])
+                                 const uint32_t wire[2], uint8_t counter)
 {
     uint8_t prev = ecu->uptime_prev;
-    if (uptime == 0u || prev == 0u || uptime >= aged_uptime(ecu, prev)) { /* aged >= prev */
+    if (uptime == 0u || prev == 0u || uptime >= aged_uptime(ecu, prev, counter)) { /* >= prev */
         return false;
     }
     return young_counts(ecu, wire, uptime);
@@ -627,12 +628,15 @@ static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime,
  * accepted frame: prev plus the whole seconds of firmware time since that frame, less the periods
  * this tick came late and RESTART_SLACK_PERIODS (the frames' queueing), saturated at
  * CTRL_UPTIME_MAX; prev after a tick that lost time or frames the mailbox dropped (a backlog's
- * frames were sampled at unknown times) (encoders.py _aged_uptime). */
-static uint8_t aged_uptime(const struct odom_ecu *ecu, uint8_t prev)
+ * frames were sampled at unknown times), and when counter is the E2E successor of the last
+ * accepted frame's (it waited behind the silence, sampled as old: no frame lost, no restart
+ * told by age; the proof and what it gives up: encoders.py _aged_uptime). */
+static uint8_t aged_uptime(const struct odom_ecu *ecu, uint8_t prev, uint8_t counter)
 {
     uint32_t since = ecu->ticks_since_encoder;                   /* u16, saturated */
     uint32_t late = ecu->tick_late + RESTART_SLACK_PERIODS;      /* < 2^19 + 16 */
-    if (since <= late || ecu->time_lost_now || mailbox_dropped(ecu)) {
+    bool successor = counter == (uint8_t)((ecu->enc_counter + 1u) & COUNTER_MASK);
+    if (since <= late || successor || ecu->time_lost_now || mailbox_dropped(ecu)) {
         return prev;
     }
     uint32_t aged = prev + (since - late) / PERIODS_PER_S;      /* at most 15 + 655 */

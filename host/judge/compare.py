@@ -265,7 +265,8 @@ def _step_speeds(
     gap_w[waited] = np.maximum(gap_w[waited], np.abs(w[waited]))
     if enc.uptime is not None:  # CTRL_UPTIME went back: a firmware may re-prime there, no step
         restarted = 1 + np.flatnonzero(ctrl_restarts(enc.uptime, np.ones(len(v), dtype=bool),
-                                                     np.diff(enc.timestamp_s), enc.cycle_s))
+                                                     np.diff(enc.timestamp_s), enc.cycle_s,
+                                                     enc.counter))
         v[restarted] = w[restarted] = np.nan  # a twist over it is not judged
     return (v, w), (gap_v, gap_w)
 

@@ -46,7 +46,8 @@ class StepGate:
     accepted one is refused; ``RESYNC_FRAMES`` refused frames plausible
     among themselves are a counter restart: one step from the first of them, never the jump; a
     frame whose CTRL_UPTIME is below the last accepted one's (both non-zero), or below what it
-    aged to over a silence (``aged``), re-primes it (the motor controller restarted): no step
+    aged to over a silence (``aged``) when it is not that one's E2E successor (a successor may
+    have waited behind the silence), re-primes it (the motor controller restarted): no step
     into it. Each restart is told to ``told``."""
 
     def __init__(self, geometry: Geometry, counter_bits: int, told: RestartLog) -> None:
@@ -90,8 +91,9 @@ class StepGate:
         last_t, self._prev_t = self._prev_t, t_s
         if prev is None:
             return None
-        if uptime and last_uptime and (uptime < last_uptime or (t_s - last_t > AGED_AFTER_S
-                                       and uptime < aged(last_uptime, t_s - last_t))) \
+        if uptime and last_uptime and (uptime < last_uptime or (
+                t_s - last_t > AGED_AFTER_S and (counter - prev[0]) & 0xF != 1  # not waited
+                and uptime < aged(last_uptime, t_s - last_t))) \
                 and self._young(frame, uptime):
             self._refused = []
             self._restarted(seq, t_s, by_uptime=True)

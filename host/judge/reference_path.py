@@ -216,15 +216,16 @@ def firmware_steps(
     steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
     uptime = enc.uptime[e0:] if enc.uptime is not None else np.zeros(len(left), dtype=np.int64)
     stamps = enc.timestamp_s[e0:]
+    counter = enc.counter[e0:]
     speed_mm_s = geometry.speed_bound_mm_s(max_wheel_speed_mm_s)
     if speed_mm_s is None:
         return _reprime_all(steps, ctrl_restarts(uptime, np.ones(len(left), dtype=np.bool_),
-                                                 np.diff(stamps), enc.cycle_s))
+                                                 np.diff(stamps), enc.cycle_s, counter))
     travel_m = speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
     bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
              math.ceil(travel_m / geometry.m_per_count_right) + 1)
     young = young_counts(left, right, uptime, bits, bound)
-    restart = ctrl_restarts(uptime, young, np.diff(stamps), enc.cycle_s)
+    restart = ctrl_restarts(uptime, young, np.diff(stamps), enc.cycle_s, counter)
 
     def delta(a: int, b: int) -> tuple[int, int]:
         return (int(wrap_delta(int(left[b]) - int(left[a]), bits)),
@@ -241,7 +242,8 @@ def firmware_steps(
         return within(a, b, max(1, int(seq[b] - seq[a])))
 
     def restarted(a: int, b: int) -> bool:
-        aged = aged_uptime(uptime[a : a + 1], stamps[b : b + 1] - stamps[a], enc.cycle_s)
+        aged = aged_uptime(uptime[a : a + 1], stamps[b : b + 1] - stamps[a], enc.cycle_s,
+                           successors(counter[a : a + 1], counter[b : b + 1]))
         return bool(uptime[b] != 0 and uptime[a] != 0 and uptime[b] < aged[0] and young[b])
 
     periods = step_bound_periods(seq, stamps, enc.cycle_s)
@@ -268,18 +270,25 @@ def _walk(steps: Steps, bad: Any, restart: Any, rules: tuple[Any, Any, Any]) -> 
 
 
 def ctrl_restarts(uptime: IntArray, young: npt.NDArray[np.bool_], elapsed_s: FloatArray,
-                  cycle_s: float | None) -> npt.NDArray[np.bool_]:
+                  cycle_s: float | None, counter: IntArray) -> npt.NDArray[np.bool_]:
     """Per step (into frame k + 1 of ``uptime``, CTRL_UPTIME of consecutive accepted frames,
-    ``elapsed_s`` bus time apart): the motor controller restarted, its age below what the frame
-    before's aged to (``aged_uptime``), both reported (non-zero), and the frame's counts
-    ``young`` (``young_counts``)."""
+    ``elapsed_s`` bus time apart, ``counter`` their COUNTERs): the motor controller restarted,
+    its age below what the frame before's aged to (``aged_uptime``), both reported (non-zero),
+    and the frame's counts ``young`` (``young_counts``)."""
     before, after = uptime[:-1], uptime[1:]
-    aged = aged_uptime(before, elapsed_s, cycle_s)
+    aged = aged_uptime(before, elapsed_s, cycle_s, successors(counter[:-1], counter[1:]))
     restarted: npt.NDArray[np.bool_] = (after != 0) & (before != 0) & (after < aged)
     return restarted & young[1:]
 
 
-def aged_uptime(before: IntArray, elapsed_s: FloatArray, cycle_s: float | None) -> IntArray:
+def successors(before: IntArray, after: IntArray) -> npt.NDArray[np.bool_]:
+    """Per pair: ``after`` (a COUNTER) is the E2E successor of ``before`` (+ 1 mod 16)."""
+    found: npt.NDArray[np.bool_] = ((np.asarray(after) - np.asarray(before)) & 0xF) == 1
+    return found
+
+
+def aged_uptime(before: IntArray, elapsed_s: FloatArray, cycle_s: float | None,
+                successor: npt.NDArray[np.bool_]) -> IntArray:
     """The least CTRL_UPTIME a controller that did not restart reports ``elapsed_s`` (bus time)
     after a frame of CTRL_UPTIME ``before`` (firmware/encoders.py ``_aged_uptime``): ``before``
     plus the whole seconds of the periods between them less ``RESTART_SLACK_PERIODS``, saturated
@@ -287,11 +296,14 @@ def aged_uptime(before: IntArray, elapsed_s: FloatArray, cycle_s: float | None) 
     the two may differ by a period, so at an elapsed time within a period of a whole second
     (plus the slack) the firmware may have decided the other way (a known limit, docs/bus.md);
     the firmware's exceptions (a tick that lost time, a mailbox that dropped frames) are not
-    seen here either."""
+    seen here either. ``before`` where the frame is the E2E successor of the one before
+    (``successor``: it may have waited behind a silence of the bus, sampled as old; the proof and
+    what it gives up: ``_aged_uptime``)."""
     if cycle_s is None:
         return before
     periods = np.rint(np.asarray(elapsed_s) / cycle_s).astype(np.int64) - RESTART_SLACK_PERIODS
-    aged: IntArray = np.minimum(CTRL_UPTIME_MAX, before + np.maximum(0, periods) // PERIODS_PER_S)
+    periods = np.where(successor, 0, np.maximum(0, periods))
+    aged: IntArray = np.minimum(CTRL_UPTIME_MAX, before + periods // PERIODS_PER_S)
     return aged
 
 

@@ -434,13 +434,14 @@ class StreamReference:
         self._count += len(enc.index)
         new: dict[str, npt.NDArray[Any]] = {
             "left": enc.left, "right": enc.right, "seq": enc.seq, "g": g, "t": enc.timestamp_s,
+            "counter": enc.counter,
             "uptime": enc.uptime if enc.uptime is not None else np.zeros_like(g)}
         win = ({k: np.concatenate((self._window[k], v)) for k, v in new.items()}
                if self._window else new)
         carried = len(win["g"]) - len(g)
         if len(g) == 0:
             return {k: np.zeros(0) for k in ("x_m", "y_m", "heading_rad", "distance_m")}
-        window = Encoders(index=win["g"], counter=win["g"] & 0xF, seq=win["seq"],
+        window = Encoders(index=win["g"], counter=win["counter"], seq=win["seq"],
                           left=win["left"], right=win["right"],
                           timestamp_s=win["t"], cycle_s=enc.cycle_s, uptime=win["uptime"])
         steps = firmware_steps(window, 0, self.geometry, self.bits, self.max_wheel_speed_mm_s)
