@@ -244,19 +244,23 @@ class DistanceJudge:
 
     def take(self, e: IntArray, raw_mm: IntArray, t_s: FloatArray, heard: IntArray) -> None:
         """ODOM_TWIST frames in bus order (``twist_samples``; ``heard``: the encoder frames
-        logged before each): those naming a frame (e >= 0) at or after every earlier one's are
-        judged, but the first after the firmware was silent for ``SILENCE_CYCLES`` cycles while
-        the encoder frames went on (a stall: it names a frame of its backlog that ENC_COUNTER
-        cannot resolve, as ``stalls.after_stalls`` leaves the pose out)."""
+        logged before each): those naming a frame (e >= 0) after every earlier one's are
+        judged, the first naming each (``samples.onboard_samples``' rule for the pose: a later
+        one may name by ``samples._held`` a frame 16 periods before the one it carries, after a
+        delay let the firmware take a new frame of that ENC_COUNTER), but the first after the
+        firmware was silent for ``SILENCE_CYCLES`` cycles while the encoder frames went on (a
+        stall: it names a frame of its backlog that ENC_COUNTER cannot resolve, as
+        ``stalls.after_stalls`` leaves the pose out)."""
         if len(e) == 0:
             return
-        running = np.maximum.accumulate(np.concatenate(([self._running], e)))[1:]
+        running = np.maximum.accumulate(np.concatenate(([self._running], e)))
+        before = running[:-1]  # the largest frame named by the earlier ones
         prev_t = np.concatenate(([self._last[0]], t_s[:-1]))
         prev_heard = np.concatenate(([self._last[1]], heard[:-1]))
         self._running, self._last = int(running[-1]), (float(t_s[-1]), int(heard[-1]))
         quiet = ((t_s - prev_t >= (SILENCE_CYCLES - 0.5) * ENCODER_PERIOD_US * 1e-6)
                  & (heard - prev_heard >= SILENCE_CYCLES - 1))
-        ok = (e >= 0) & (e >= running) & ~quiet
+        ok = (e >= 0) & (e > before) & ~quiet
         self.feed_samples(e[ok], raw_mm[ok])
 
     def feed_samples(self, e: IntArray, raw_mm: IntArray) -> None:

@@ -10,13 +10,15 @@ count) and the same gap allowance above (the firmware may have taken a gap's fra
 it missed) the fine path since the last sample; after an ODOM_STATUS page whose ENC_E2E_LOST grew
 (the firmware lost frames: merged steps) the fine path since the page before.
 
-A sample (ODOM_TWIST) names its encoder frame by ENC_COUNTER against the latest accepted one
-(-8..+7, the latest less than 8 cycles old; else left out, as a sample naming a frame before the
-last named is). Its offset interval [r - upper, r + lower] must meet every earlier one of the
-life (``distance`` module docstring); in the first life, once the tracker has proven a power-up
-at frame 0 (its reference's exact start), the offset must be 0. A reboot starts a new life
-(its offset free again); an interval found empty is latched (``wrong_lives``): the verdict
-DISTANCE WRONG, and the watch's exit 1."""
+A sample (ODOM_TWIST) names its encoder frame by the tracker's rule for a pose half
+(``samples.match_encoder`` over its window: the sender's steps, the age bound, the held and
+queued rules, resolved when the sample is heard), and only the first naming each frame is judged
+(as ``analyze`` judges the pose; a sample naming none, or a frame before the last named, or a
+frame with a twin, is left out). Its offset interval [r - upper, r + lower] must meet every
+earlier one of the life (``distance`` module docstring); in the first life, once the tracker
+has proven a power-up at frame 0 (its reference's exact start), the offset must be 0. A reboot
+starts a new life (its offset free again); an interval found empty is latched
+(``wrong_lives``): the verdict DISTANCE WRONG, and the watch's exit 1."""
 
 from __future__ import annotations
 
@@ -33,13 +35,14 @@ from odocan.host.judge.distance import (
     firmware_m_per_count,
     gap_extra_m,
 )
-from odocan.host.judge.livepose import RING, RestartLog, StepGate
+from odocan.host.judge.livepose import RestartLog, StepGate
+from odocan.host.judge.livewindow import HALF_WINDOW, Columns
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.samples import SILENCE_CYCLES
 from odocan.host.judge.tracking import PoseTracker
 from odocan.sim.robot import RobotProfile
 
-KEPT_FRAMES = 64  # encoder frames kept for the samples to name (a sample names -8..+7)
+KEPT_FRAMES = 64  # encoder frames kept for the samples to name (less than 8 cycles old)
 CYCLE_S = 0.01  # WHEEL_ENCODERS' cycle
 
 
@@ -82,8 +85,9 @@ class LiveDistance:
         self._frames: dict[int, tuple[int, int, int, float]] = {}  # seq: units, n, c, up
         self._sums: tuple[int, int, int, float] = (0, 0, 0, 0.0)
         self._gate: StepGate | None = None
-        self._latest: tuple[int, int, float] | None = None  # seq, counter, t_s
-        self._last_e = -1
+        self._twists = Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW)
+        self._last_e = -1  # the last frame judged
+        self._running = -1  # the largest frame named
         self._last_twist: tuple[float, int] = (math.nan, 0)  # bus time, frames heard before
         self._lower_m = 0.0
         self._stalls = -1
@@ -91,6 +95,7 @@ class LiveDistance:
         self._lost: int | None = None
         self._r0: float | None = None
         self._feasible: Feasible | None = None
+        self._zero = Feasible(0.0, 0.0)  # the same samples judged from 0 at the first frame
         self._wrong = False
         self.first_seq: int | None = None
         self.power_up = False  # the first life, heard from the firmware's power-up
@@ -115,7 +120,6 @@ class LiveDistance:
                       up + extra)
         self._frames[seq] = self._sums
         self._frames.pop(seq - KEPT_FRAMES, None)
-        self._latest = (seq, counter, t_s)
 
     def on_counts(self, tracker: PoseTracker, ok: int, lost: int, first_life_page: bool) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS. The first life's first page, after a first
@@ -124,30 +128,29 @@ class LiveDistance:
         the fine path since the page before may have been merged on board."""
         if first_life_page and ok == tracker.enc_seq + 1 and self.first_seq == 0:
             self.power_up = True
-            f = self._feasible  # judged as fitted so far: from 0, with the allowances since
-            if f is not None:
-                f.take_one(-f.down, f.up, f.up, f.down)
+            if self._feasible is not None:  # judged from 0 all along, as the whole log is
+                self._zero.excess_mm = max(self._zero.excess_mm, self._feasible.excess_mm)
+                self._feasible, self._r0 = self._zero, 0.0
         units = self._sums[0]
         if self._lost is not None and (lost - self._lost) % 256 and self._page_units is not None:
             self._lower_m += (units - self._page_units) / UNITS_PER_M
         self._lost, self._page_units = lost, units
 
-    def on_twist(self, tracker: PoseTracker, enc_counter: int, raw_mm: int, t_s: float) -> None:
-        """An accepted ODOM_TWIST: judge its DISTANCE at the encoder frame it names (not the
-        first after a stall: ``distance.DistanceJudge.take``)."""
+    def on_twist(self, tracker: PoseTracker, enc_counter: int, raw_mm: int, t_s: float,
+                 counter: int) -> None:
+        """An accepted ODOM_TWIST (``counter``: its own E2E COUNTER): judge its DISTANCE at the
+        encoder frame it names (not the first after a stall: ``distance.DistanceJudge.take``)."""
+        tracker._pos += 1  # its place among the frames heard (tracking.py: at its size limit)
+        self._twists.append(tracker._pos, enc_counter, counter, t_s)
+        e = tracker._named(self._twists, tracker._pos)[0]
+        e = -1 if e >= 0 and tracker.twins.twinned(e) else e
+        first, self._running = e > self._running, max(self._running, e)
         last_t, last_heard = self._last_twist
         self._last_twist = (t_s, tracker.enc_seq + 1)
-        if self.suspended:
-            return
-        if (t_s - last_t >= (SILENCE_CYCLES - 0.5) * CYCLE_S
-                and tracker.enc_seq + 1 - last_heard >= SILENCE_CYCLES - 1):
-            return
-        if self._latest is None:
-            return
-        seq, counter, latest_t = self._latest
-        e = seq + ((enc_counter - counter + 8) % RING) - 8
+        quiet = (t_s - last_t >= (SILENCE_CYCLES - 0.5) * CYCLE_S
+                 and tracker.enc_seq + 1 - last_heard >= SILENCE_CYCLES - 1)
         at = self._frames.get(e)
-        if at is None or t_s - latest_t >= 8 * CYCLE_S or e < self._last_e:
+        if self.suspended or quiet or not first or at is None:
             return
         if self._stalls >= 0 and tracker.stalls > self._stalls and self._last_e >= 0:
             before = self._frames.get(self._last_e)  # merged since the last sample
@@ -158,11 +161,12 @@ class LiveDistance:
         r = diff - WIRE_MM * round(diff / WIRE_MM)
         if self._feasible is None:  # the offset: 0 from a power-up, else free
             self._r0 = 0.0 if self.power_up else r
-            self._feasible = Feasible(0.0, 0.0) if self.power_up else Feasible(-math.inf,
-                                                                               math.inf)
+            self._feasible = self._zero if self.power_up else Feasible(-math.inf, math.inf)
+        base = WIRE_SLACK_MM + 1e3 * (n * STEP_SLACK_M + c * COUNT_SLACK_M)
+        if self._feasible is not self._zero:  # a power-up proven later (a page held back)
+            self._zero.take_one(r - base, r + base, 1e3 * up, 1e3 * self._lower_m)
         r0 = self._r0 or 0.0
         r = r0 + (r - r0) - WIRE_MM * round((r - r0) / WIRE_MM)
-        base = WIRE_SLACK_MM + 1e3 * (n * STEP_SLACK_M + c * COUNT_SLACK_M)
         self._feasible.take_one(r - base, r + base, 1e3 * up, 1e3 * self._lower_m)
         self.samples += 1
 

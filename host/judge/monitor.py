@@ -280,7 +280,7 @@ class BusMonitor:
 
     def _on_twist(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.distance.on_twist(self.tracker, int(s["ENC_COUNTER"]), round(s["DISTANCE"] * 1000),
-                               self._bus_time_s)
+                               self._bus_time_s, int(s["COUNTER"]))
 
     def _on_pose_x(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]),

@@ -289,7 +289,7 @@ class RobotTelemetry:
             "distance_m": s["DISTANCE"],
         }
         self.distance.on_twist(self.tracker, int(s["ENC_COUNTER"]), round(s["DISTANCE"] * 1e3),
-                               t_s)
+                               t_s, int(s["COUNTER"]))
         return []
 
     def _on_pose_y(self, s: dict[str, Any], t_s: float) -> list[Publication]:
