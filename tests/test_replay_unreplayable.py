@@ -61,8 +61,10 @@ def test_a_reboot_in_the_log_is_named_not_the_build(
 def test_late_encoder_frames_are_named_not_the_build(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """Since the rig puts held frames on the bus at their release time, a 10 % share held 15 ms
+    replays faithfully; a 20 % share still makes the recording firmware take late frames."""
     log = tmp_path / "late.log"
-    _run(log, "--seed", "1", "--faults", "delay=0.1:15,seed=1")
+    _run(log, "--seed", "1", "--faults", "delay=0.2:15,seed=1")
     capsys.readouterr()
     reasons = _replay_reasons(capsys, log)
     assert not any(BUILD_DIFFERS in r for r in reasons), reasons
