@@ -152,6 +152,7 @@ class LockstepRig(Closing):
             if spec is not None and spec.active:  # bus-off recovery: 128 x 11 bits at the bitrate
                 self._buses[index] = FaultInjectingBus(self._buses[index], spec, bitrate=bitrate)
         sim_bus, fw_bus, self.host_bus = self._buses
+        self._faulted = tuple(b for b in self._buses[:2] if isinstance(b, FaultInjectingBus))
         ahead = scenario is not None and config.lookahead
         vehicle_class = PlannedVehicle if ahead else Vehicle
         vehicle = vehicle_class(
@@ -241,14 +242,15 @@ class LockstepRig(Closing):
         start of every tick, not only when their node sends next (a firmware sending every 20 ms
         would otherwise let a frame released at t + 26 ms out at t + 41 ms, stamped t + 26 ms,
         after the encoder frame of t + 30 ms: times going back in the log)."""
-        self._release_held(self.clock.now_s())
+        if self._faulted:
+            self._release_held(self.clock.now_s())
         self.sim.tick(k)
         self.board.run_tick()
 
     def _release_held(self, now_s: float) -> None:
         """Bring the faulted handles up to ``now_s``, their held frames in time order across
         both handles (the sim's and the firmware's), as they reach the bus."""
-        faulted = [b for b in self._buses[:2] if isinstance(b, FaultInjectingBus)]
+        faulted = list(self._faulted)
         while faulted:
             first = min(faulted, key=lambda b: b.next_release_s)
             due_s = first.next_release_s
@@ -257,9 +259,8 @@ class LockstepRig(Closing):
             first.poll(due_s)
             if first.next_release_s == due_s:  # bus-off: its held frames wait for recovery
                 faulted.remove(first)
-        for bus in self._buses[:2]:
-            if isinstance(bus, FaultInjectingBus):
-                bus.poll(now_s)
+        for bus in self._faulted:
+            bus.poll(now_s)
 
     def run(
         self, duration_s: float | None = None, progress: Callable[[int, int], None] | None = None
