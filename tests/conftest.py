@@ -4,17 +4,26 @@ plan in a temporary ``ODOCAN_CACHE_DIR`` (never the user's ``~/.cache/odocan``).
 ``odocan bridge``/``fleet``/``monitor`` run in-process here call ``configure_logging``, which sets
 the levels and handlers of odocan's and the libraries' loggers for the life of a CLI process; in a
 test session that would leak into later tests' stderr.
+
+Under ``CI`` (set by the CI runner) hypothesis draws are derandomized: a CI verdict must not
+depend on the luck of a draw; local runs keep exploring (what they find becomes an ``@example``).
 """
 
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Iterator
 
 import pytest
+from hypothesis import settings
 
 from odocan.host.mqtt.options import LIBRARY_LOGGERS, MQTT_LOGGERS
 from odocan.host.protocol.dbcplan import CACHE_ENV
+
+settings.register_profile("ci", derandomize=True)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
 
 
 @pytest.fixture(autouse=True, scope="session")
