@@ -49,10 +49,11 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import merged_breaks
+from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
-from odocan.host.protocol.e2e import check_frames, crc8h2f_p02, e2e_messages
+from odocan.host.protocol.e2e import check_frames
 
 SUMMARY_PAGE = 0  # ODOM_STATUS page with STATE and UPTIME
 
@@ -134,22 +135,8 @@ def _encoder_count_pages(
         return none
     if "ENC_E2E_OK" not in page:
         return none
-    good = _crc_holds(frames, decoder, page["index"])
+    good = crc_holds(frames, decoder, page["index"])
     return page["index"][good].astype(np.int64), page["ENC_E2E_OK"][good].astype(np.int64)
-
-
-def _crc_holds(
-    frames: FrameArrays, decoder: BulkDecoder, index: npt.NDArray[np.int64]
-) -> npt.NDArray[np.bool_]:
-    """Which ODOM_STATUS frames at ``index`` carry a right CRC, whatever their sequence."""
-    message = decoder.message("ODOM_STATUS")
-    config = e2e_messages(decoder.db).get(message.frame_id)
-    if config is None or config.data_ids is None:
-        return np.ones(len(index), dtype=bool)
-    data = frames.data[index]
-    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & 0xF]
-    good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
-    return good
 
 
 def two_sources(frames: FrameArrays, decoder: BulkDecoder) -> tuple[int, float] | None:
@@ -179,7 +166,7 @@ def _watch_summaries(
     if "UPTIME" not in page or "STATE" not in page or len(page["index"]) == 0:
         return [], None
     index = page["index"]
-    good = _crc_holds(frames, decoder, index)
+    good = crc_holds(frames, decoder, index)
     choices = dict(message.get_signal_by_name("STATE").choices or {})
     codes, which = np.unique(page["STATE"][good], return_inverse=True)
     names = [str(choices.get(int(code), int(code))) for code in codes.tolist()]

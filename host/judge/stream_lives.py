@@ -20,7 +20,8 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.reboots import SUMMARY_PAGE, _crc_holds, mark_two_sources
+from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -148,7 +149,7 @@ class StreamLives:
             self._summaries = False
             return []
         index = page["index"]
-        good = _crc_holds(chunk, self.decoder, index)
+        good = crc_holds(chunk, self.decoder, index)
         choices = dict(message.get_signal_by_name("STATE").choices or {})
         events: list[tuple[int, _Boot | int]] = []
         for position, t_s, uptime_s, state in zip(
@@ -178,7 +179,7 @@ class StreamLives:
             return []
         if "ENC_E2E_OK" not in page or len(page["index"]) == 0:
             return []
-        good = _crc_holds(chunk, self.decoder, page["index"])
+        good = crc_holds(chunk, self.decoder, page["index"])
         return [(int(p) + self._offset, int(ok)) for p, ok in
                 zip(page["index"][good].tolist(), page["ENC_E2E_OK"][good].tolist(),
                     strict=True)]
