@@ -1,0 +1,52 @@
+"""A C firmware library older than ABI 3 has its wheel speed bound built in (4 m/s).
+
+The board must refuse it, in one line naming the ABI and both speeds, for a robot that states
+another maximum wheel speed (kobuki: 0.7 m/s), and take it for a robot at the old bound (pmir).
+The library is a stub of ABI 1 (the SecOC test's), built with the system's C compiler.
+Skips with the reason when a C compiler is missing, and fails instead under CI=true.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from odocan.host.cli.app import main
+from odocan.sim import cboard
+from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.robot import load
+from tests.requires import require_executables
+from tests.test_c_secoc import STUB_ABI1
+
+
+@pytest.fixture
+def old_library(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """An ABI 1 library, the one the board loads (``cboard.LIBRARY_ENV``)."""
+    require_executables("cc", install="apt-get install gcc")
+    source, lib = tmp_path / "abi1.c", tmp_path / "libabi1.so"
+    source.write_text(STUB_ABI1)
+    subprocess.run(["cc", "-shared", "-fPIC", str(source), "-o", str(lib)], check=True)
+    monkeypatch.setenv(cboard.LIBRARY_ENV, str(lib))
+    return lib
+
+
+def test_an_old_library_is_refused_for_a_robot_with_another_speed_bound(
+    old_library: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    kobuki = load("kobuki")
+    assert kobuki.max_wheel_speed_mm_s != cboard.MAX_WHEEL_SPEED_DEFAULT_MM_S
+    with pytest.raises(ConfigurationError, match="ABI version 1, bounded at 4000 mm/s"):
+        cboard.check_speed_abi(cboard.load_library(), kobuki)
+    assert main(["run", "--firmware", "c", "--robot", "kobuki", "--duration", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: the C firmware {old_library} has ABI version 1, bounded at "
+                          "4000 mm/s; the robot's max_wheel_speed is 700 mm/s (ABI 3)")
+    assert err.count("\n") == 1
+
+
+def test_an_old_library_is_taken_for_a_robot_at_the_old_bound(old_library: Path) -> None:
+    pmir = load("pmir")
+    assert pmir.max_wheel_speed_mm_s == cboard.MAX_WHEEL_SPEED_DEFAULT_MM_S
+    cboard.check_speed_abi(cboard.load_library(), pmir)  # no refusal
