@@ -219,6 +219,11 @@ class SimNode:
             else ScenarioDriver(self.bus, scenario, self.clock, self.motor_controller)
         )
 
+    def sample_skipped(self) -> None:
+        """A skipped real-time release: the motor controller's encoder sample at the clock's
+        time, sent now (``sim.realtime.paced_sim_tick``); nothing else of the tick runs."""
+        self.motor_controller.sample_and_send()
+
     def tick(self, k: int) -> None:
         """Tick ``k`` (10 ms each), in the order of the class docstring: from the plan of the
         vehicle's block when it holds (``sim.simplan``: the same frames, computed at once)."""

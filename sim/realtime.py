@@ -160,6 +160,56 @@ class PeriodicLoop:
         return stats
 
 
+class ReleaseClock:
+    """The release time of the tick under way (``Clock``): a real-time node that reads it samples
+    its world at the instant its timer fired, as a hardware timer does, not when the OS let the
+    process run. ``release_s`` is set by ``paced_sim_tick`` before each tick."""
+
+    def __init__(self) -> None:
+        self.release_s = 0.0
+
+    def now_s(self) -> float:
+        """The current tick's release time (s since the loop's first release)."""
+        return self.release_s
+
+
+class SampledNode(Protocol):
+    """What ``paced_sim_tick`` drives: the sim node (``sim.motor_controller.SimNode``)."""
+
+    def tick(self, k: int) -> None:
+        """Tick ``k``."""
+
+    def sample_skipped(self) -> None:
+        """The encoder sample of a skipped release, at the clock's time, sent late."""
+
+
+def paced_sim_tick(
+    node: SampledNode, clock: ReleaseClock, period_s: float = TICK_S
+) -> Callable[[int], None]:
+    """``PeriodicLoop.run``'s tick for the real-time sim node built on ``clock``.
+
+    The motor controller samples its encoders every period in hardware, whatever the process
+    does: a late tick samples at its release time (not up to a period of motion later), and the
+    samples of releases the loop skipped are sent first, each taken at its own release, back to
+    back as a CAN controller sends a queue that waited (their COUNTERs +1 each, as the DBC
+    says: no jump, no step beyond a period's motion). Sampling when the process got the CPU put
+    up to several periods of motion under one COUNTER step, which the firmware rightly refused
+    as faster than the robot can go (kobuki on a loaded machine: hundreds of frames refused,
+    DEGRADED COUNTER_RESET, the pose 0.3 m off, every judge FAILing a correct firmware). Only
+    the encoder samples are made up: the skipped ticks' commands and truth are not sent."""
+    last = [-1]
+
+    def tick(k: int) -> None:
+        for j in range(last[0] + 1, k):
+            clock.release_s = j * period_s
+            node.sample_skipped()
+        last[0] = k
+        clock.release_s = k * period_s
+        node.tick(k)
+
+    return tick
+
+
 @contextmanager
 def stop_on_signals(loop: Stoppable) -> Iterator[None]:
     """While inside: SIGINT and SIGTERM ask ``loop`` to stop; a second one raises

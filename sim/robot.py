@@ -264,7 +264,10 @@ def _check_readable(table: dict[str, Any], source: str, speed_m_s: float) -> Non
     params = RobotParams(table["counts_per_rev"], nm["wheel_radius_left_m"],
                          nm["wheel_radius_right_m"], nm["wheelbase_m"], table["counter_bits"], 0,
                          speed_mm_s)
-    if validate_at_speed(params, speed_mm_s) is not ConfigReason.WIRE_RANGE:
+    reason = validate_at_speed(params, speed_mm_s)
+    if reason is ConfigReason.GEOMETRY_ABSURD:
+        _refuse_absurd_geometry(table, source)
+    if reason is not ConfigReason.WIRE_RANGE:
         return
     bits = min(table["counter_bits"], WIRE_COUNTER_BITS)
     radius_m = min(table["wheel_radius_left_m"], table["wheel_radius_right_m"])
@@ -277,3 +280,16 @@ def _check_readable(table: dict[str, Any], source: str, speed_m_s: float) -> Non
         f"on {bits}-bit counters read wrapped above {readable_m_s:.3g} m/s (a step of "
         f"{READABLE_PERIODS} encoder periods), below the firmware's "
         f"{speed_mm_s / MM_PER_M:g} m/s bound ({cures}, or a lower max_wheel_speed_m_s)")
+
+
+def _refuse_absurd_geometry(table: dict[str, Any], source: str) -> None:
+    """The firmware's ``GEOMETRY_ABSURD``: one count of a wheel would turn the robot by 1/16 turn
+    or more, so the board refuses the profile at boot (FAULT, CONFIG_INVALID) and never runs."""
+    radius_m = max(table["wheel_radius_left_m"], table["wheel_radius_right_m"])
+    turn_rad = 2 * math.pi * radius_m / table["counts_per_rev"] / table["wheelbase_m"]
+    turn_deg = math.degrees(turn_rad)
+    raise ProfileError(
+        f"{source}: one count of a {radius_m * 1e3:.4g} mm wheel ({table['counts_per_rev']} counts "
+        f"per turn) on a {table['wheelbase_m'] * 1e3:.4g} mm wheelbase turns the robot "
+        f"{turn_deg:.3g} deg, the firmware refuses 1/16 turn (22.5 deg) or more (more "
+        f"counts_per_rev, smaller wheels or a wider wheelbase)")

@@ -78,3 +78,39 @@ def test_a_batch_names_the_robot_mismatch_of_each_log(
     for report in reports.glob("*.json"):
         assert json.loads(report.read_text())["diagnosis"] == [hint]
     assert len(list(reports.glob("*.json"))) == 2
+
+
+def _crc8h2f(data: bytes, data_id: int) -> int:
+    """AUTOSAR E2E Profile 2's CRC (the DBC's comment): CRC8H2F over bytes 1..7, then DataID."""
+    crc = 0xFF
+    for byte in [*data[1:8], data_id]:
+        crc ^= byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x2F) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc ^ 0xFF
+
+
+def test_replay_of_a_log_with_one_pose_off_does_not_blame_only_the_profile(
+    kobuki_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One ODOM_POSE_X of a kobuki log moved by 2 LSB (its E2E CRC made good again): replay with
+    the right --robot FAILs, and said only "the log's poses fit no known robot profile: give its
+    profile with --robot", sending the user after a profile that was right. It must also name
+    the other cause: the recording firmware itself off the reference (analyze says where)."""
+    lines = kobuki_log.read_text().splitlines()
+    index = [i for i, line in enumerate(lines) if " 200#" in line][100]
+    stamp, channel, frame = lines[index].split(" ")[:3]
+    data = bytearray.fromhex(frame.split("#")[1])
+    x_lsb = int.from_bytes(data[2:6], "little", signed=True) + 2  # X: i32 at byte 2, 0.1 mm
+    data[2:6] = x_lsb.to_bytes(4, "little", signed=True)
+    data[0] = _crc8h2f(bytes(data), (3 << 4) | (data[1] & 0xF))  # ODOM_POSE_X: E2E slot 3
+    rest = lines[index].split(" ")[3:]
+    lines[index] = " ".join([stamp, channel, f"200#{data.hex().upper()}", *rest])
+    edited = tmp_path / "edited.log"
+    edited.write_text("\n".join(lines) + "\n")
+    capsys.readouterr()
+    assert main(["replay", str(edited), "--robot", "kobuki"]) == 1
+    out = capsys.readouterr().out
+    assert "its position differs from the log's by up to 0.2000 mm" in out
+    assert "the firmware that recorded it was off the float64 reference" in out
+    assert f"odocan analyze {edited} --robot kobuki" in out

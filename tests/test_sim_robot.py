@@ -166,6 +166,8 @@ def test_out_of_range(tmp_path: Path, key: str, value: str, expected: str) -> No
 )
 def test_range_limits_are_inclusive(tmp_path: Path, key: str, value: str) -> None:
     wide = {"counter_bits": "32"} if key == "counts_per_rev" else {}  # 2^24 counts: 24-bit read
+    if (key, value) == ("counts_per_rev", "1"):  # one count of a 75 mm wheel on 0.3 m: 90 deg
+        wide |= {"wheel_radius_left_m": "0.001", "wheel_radius_right_m": "0.001"}
     profile = load(write_profile(tmp_path, **{**wide, key: value}))
     assert getattr(profile, key) == type(getattr(profile, key))(value)
 
@@ -206,3 +208,31 @@ def test_a_robot_the_counters_read_at_4_m_s_is_accepted(
     path = write_profile(tmp_path, counts_per_rev=str(counts_per_rev), counter_bits=str(bits),
                          wheel_radius_left_m=repr(radius_m), wheel_radius_right_m=repr(radius_m))
     assert load(path).counts_per_rev == counts_per_rev
+
+
+@pytest.mark.parametrize(
+    ("counts_per_rev", "radius_m", "wheelbase_m"),
+    [(12, 0.021, 0.01), (4, 0.075, 0.30), (1, 0.002, 0.01)],
+)
+def test_a_robot_one_count_turns_by_more_than_a_sixteenth_turn_is_refused(
+    tmp_path: Path, counts_per_rev: int, radius_m: float, wheelbase_m: float
+) -> None:
+    """The firmware refuses such a profile at boot (FAULT, CONFIG_INVALID: one count would turn
+    the robot by more than 1/16 turn), so the host must refuse it too instead of driving a board
+    that never runs and calling its silent pose a FAIL. Independent: one count of one wheel turns
+    the robot by (2 pi r / counts) / b rad."""
+    turn_per_count = (2 * math.pi * radius_m / counts_per_rev) / wheelbase_m / (2 * math.pi)
+    assert turn_per_count >= 1 / 16
+    path = write_profile(tmp_path, counts_per_rev=str(counts_per_rev),
+                         wheel_radius_left_m=repr(radius_m), wheel_radius_right_m=repr(radius_m),
+                         wheelbase_m=repr(wheelbase_m))
+    message = load_error(path)
+    assert "1/16 turn" in message
+    assert f"{turn_per_count * 360:.3g} deg" in message
+
+
+def test_a_robot_one_count_turns_by_less_than_a_sixteenth_turn_is_accepted(tmp_path: Path) -> None:
+    """(2 pi 0.005 / 24) / 0.01 rad = 0.13 rad, 1/48 turn: the firmware runs it."""
+    path = write_profile(tmp_path, counts_per_rev="24", wheel_radius_left_m="0.005",
+                         wheel_radius_right_m="0.005", wheelbase_m="0.01")
+    assert load(path).counts_per_rev == 24

@@ -314,10 +314,12 @@ def departures(vs_log: dict[str, Any], tolerance: Tolerance) -> list[str]:
 
 def diagnose(
     log: FrameArrays, accepted: npt.NDArray[np.bool_], profile: RobotProfile, integrator: str,
-    tolerance: Tolerance,
+    tolerance: Tolerance, *, source: str = "LOG", robot_arg: str | None = None,
 ) -> list[str]:
     """The likely cause of a departure, by name: an integrator other than the log's, a robot
-    profile other than the one the logged poses fit (module docstring, "Verdict")."""
+    profile other than the one the logged poses fit (module docstring, "Verdict"); when none
+    fits, either the profile or the recording firmware (``source``: the log's name, and
+    ``robot_arg``: the --robot given, for the command that says which poses are off)."""
     reasons = []
     logged = logged_integrator(log, accepted)
     if logged is not None and logged != integrator:
@@ -336,8 +338,12 @@ def diagnose(
         reasons.append(f"robot mismatch: the log's poses fit robot {', '.join(map(repr, fits))}, "
                        f"not {profile.name!r} (--robot)")
     else:
+        robot = robot_arg or profile.name
         reasons.append(f"the log's poses fit no known robot profile ({profile.name!r} given, "
-                       f"{', '.join(list_profiles())} shipped): give its profile with --robot")
+                       f"{', '.join(list_profiles())} shipped): either its robot is another "
+                       "(give its profile with --robot) or the firmware that recorded it was "
+                       f"off the float64 reference (odocan analyze {source} --robot {robot} "
+                       "says which poses)")
     return reasons
 
 

@@ -117,7 +117,8 @@ def _do_replay(args: argparse.Namespace) -> int:
     analysis.report["inputs"] = log_inputs(args.log, profile, integrator, None)
     reasons = departures(section["onboard_vs_log"], args.tolerance)
     if reasons:
-        reasons += diagnose(frames, feed.accepted, profile, integrator, args.tolerance)
+        reasons += diagnose(frames, feed.accepted, profile, integrator, args.tolerance,
+                            source=str(args.log), robot_arg=args.robot)
     section.update(passed=not reasons, faults=reasons)
     title = f"odocan replay: {args.log} on {profile.name}, {integrator} integrator"
     code = finish(analysis, args, title=title)  # prints the run's verdict (vs the reference)

@@ -26,7 +26,7 @@ from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
 from odocan.host.stopped import early_stop
 from odocan.sim import errors, robot
 from odocan.sim.motor_controller import SimNode
-from odocan.sim.realtime import PeriodicLoop, stop_on_signals
+from odocan.sim.realtime import PeriodicLoop, ReleaseClock, paced_sim_tick, stop_on_signals
 from odocan.sim.scenarios import SCENARIOS
 
 
@@ -62,12 +62,13 @@ def _do_sim(args: argparse.Namespace) -> int:
     bus = open_bus(args)
     try:
         loop = PeriodicLoop()
+        release = ReleaseClock()  # the node samples at its tick's release, not when it ran
         node = SimNode.build(
-            bus, profile, loop.clock, scenario=args.scenario, seed=args.seed, errors=error_model
+            bus, profile, release, scenario=args.scenario, seed=args.seed, errors=error_model
         )
         started_s = time.monotonic()
         with stop_on_signals(loop):
-            stats = loop.run(node.tick, args.duration)
+            stats = loop.run(paced_sim_tick(node, release, loop.period_s), args.duration)
     finally:
         bus.shutdown()
     print(
