@@ -14,8 +14,10 @@ from pathlib import Path
 import pytest
 
 from odocan.host.cli.app import main
+from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
 from odocan.sim import cboard
 from odocan.sim.exceptions import ConfigurationError
+from odocan.sim.rig import firmware_params
 from odocan.sim.robot import load
 from tests.requires import require_executables
 from tests.test_c_secoc import STUB_ABI1
@@ -35,8 +37,8 @@ def old_library(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 def test_an_old_library_is_refused_for_a_robot_with_another_speed_bound(
     old_library: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    kobuki = load("kobuki")
-    assert kobuki.max_wheel_speed_mm_s != cboard.MAX_WHEEL_SPEED_DEFAULT_MM_S
+    kobuki = firmware_params(load("kobuki"), "exact")
+    assert kobuki.max_wheel_speed_mm_s != MAX_WHEEL_SPEED_DEFAULT_MM_S
     with pytest.raises(ConfigurationError, match="ABI version 1, bounded at 4000 mm/s"):
         cboard.check_speed_abi(cboard.load_library(), kobuki)
     assert main(["run", "--firmware", "c", "--robot", "kobuki", "--duration", "1"]) == 2
@@ -47,6 +49,6 @@ def test_an_old_library_is_refused_for_a_robot_with_another_speed_bound(
 
 
 def test_an_old_library_is_taken_for_a_robot_at_the_old_bound(old_library: Path) -> None:
-    pmir = load("pmir")
-    assert pmir.max_wheel_speed_mm_s == cboard.MAX_WHEEL_SPEED_DEFAULT_MM_S
+    pmir = firmware_params(load("pmir"), "exact")
+    assert pmir.max_wheel_speed_mm_s == MAX_WHEEL_SPEED_DEFAULT_MM_S
     cboard.check_speed_abi(cboard.load_library(), pmir)  # no refusal
