@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from odocan.host.cli.app import main
 from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
+from odocan.host.cli.app import main
 from odocan.sim import cboard
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import firmware_params
