@@ -186,7 +186,8 @@ def _do_run(args: argparse.Namespace) -> int:
         title += f", {config.firmware} firmware"
     with foxglove_session(args, config.robot, config.integrator) as live:
         extra: list[can.Listener] = [] if live is None else [Isolated(live)]
-        analysis, log_error, stopped = _run_and_analyze(config, args, extra)
+        with _rare_collections():
+            analysis, log_error, stopped = _run_and_analyze(config, args, extra)
         analysis.report["inputs"] = run_inputs(config, args.errors)
         code = finish(analysis, args, title=title)
     write_checks(args, "run", analysis_checks(analysis.report))
@@ -298,9 +299,7 @@ def _run(
     stop = StopRequest()
     done = 0
     interrupt: KeyboardInterrupt | None = None
-    with stop_on_signals(stop), _rare_collections(), progress(
-        f"simulating {duration_s:g} s", total
-    ) as bar:
+    with stop_on_signals(stop), progress(f"simulating {duration_s:g} s", total) as bar:
         try:
             while done < total:  # a check after the first tick, then every simulated second
                 ticks = min(PROGRESS_EVERY_TICKS if done else 1, total - done)
@@ -319,17 +318,18 @@ def _run(
     return Stopped(stop.signum or signum_of(interrupt), round(done_s, 6), duration_s)
 
 
-# The cyclic collector's young-generation threshold during the run (CPython's default: 700). A
-# lockstep run allocates few cycles, yet at 700 the collector ran ~1150 times in a 3600 s run
-# (0.3-0.4 s of CPU); at 20 000 some 40 times. The bytes are the same: no cycle holds a frame.
+# The cyclic collector's young-generation threshold during the run and its analysis (CPython's
+# default: 700). A lockstep run allocates few cycles, yet at 700 the collector ran ~1500 times in
+# a 3600 s run and its analysis (0.4 s of CPU); at 20 000 some 50 times. The bytes are the same:
+# no cycle holds a frame.
 _RUN_GC_THRESHOLD = 20_000
 
 
 @contextmanager
 def _rare_collections() -> Iterator[None]:
-    """The run with the objects of the start-up frozen (``gc.freeze``: never scanned again) and
-    the young generation collected every ``_RUN_GC_THRESHOLD`` net allocations; both undone
-    after it."""
+    """The run and its analysis with the objects of the start-up frozen (``gc.freeze``: never
+    scanned again) and the young generation collected every ``_RUN_GC_THRESHOLD`` net
+    allocations; both undone after them."""
     threshold = gc.get_threshold()
     gc.freeze()
     gc.set_threshold(_RUN_GC_THRESHOLD, *threshold[1:])
