@@ -34,7 +34,7 @@ from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.node import BusNode
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import Scenario, get_scenario
-from odocan.sim.simplan import TickPlan, node_counters, plan_ticks
+from odocan.sim.simplan import TickPlan, plan_ticks
 from odocan.sim.transport import OdocanBus
 from odocan.sim.vehicle import Vehicle
 
@@ -258,7 +258,10 @@ class SimNode:
     def _send_planned(self, plan: TickPlan, i: int) -> None:
         """The plan's tick at index ``i``: its frames and every state change of the plain
         tick."""
-        send, t_s = self.bus.send_data, plan.times[i]  # type: ignore[attr-defined]
+        bus: OdocanBus = self.bus  # type: ignore[assignment]  # a plan's bus (``_can_plan``)
+        t_s = plan.times[i]
+        # ``OdocanBus.send_data``'s own path on the open instant handle: one call less a frame
+        send = bus._wire.deliver_data if bus._open and bus.preserve_timestamps else _send_data
         mc, driver = self.motor_controller, self.driver
         motor_cmd = plan.motor_cmds[i]
         if motor_cmd is not None:
@@ -266,22 +269,22 @@ class SimNode:
             data, speeds_mps = motor_cmd
             driver._ahead.pop(t_s, None)
             driver.counter = (driver.counter + 1) & 0xF
-            send(fr.MOTOR_CMD_ID, data, t_s + driver.tx_latency_s)
+            send(bus, t_s + driver.tx_latency_s, fr.MOTOR_CMD_ID, data)
             driver.frames_sent += 1
             mc.deliver(data, speeds_mps)
         self.vehicle.advance_to(t_s)
         mc.counter = (mc.counter + 1) & 0xF
-        send(fr.WHEEL_ENCODERS_ID, plan.encoders[i], t_s + mc.tx_latency_s)
+        send(bus, t_s + mc.tx_latency_s, fr.WHEEL_ENCODERS_ID, plan.encoders[i])
         mc.frames_sent += 1
         sim_truth = plan.truths[i]
+        truth = self.truth
         if sim_truth:
-            truth = self.truth
             for data in sim_truth:
-                send(fr.SIM_TRUTH_ID, data, t_s + truth.tx_latency_s)
+                send(bus, t_s + truth.tx_latency_s, fr.SIM_TRUTH_ID, data)
             truth.counter = (truth.counter + 3) & 0xF
             truth.frames_sent += 3
         plan.next = i + 1
-        plan.counters = node_counters(self)
+        plan.counters = (-1 if driver is None else driver.counter, mc.counter, truth.counter)
 
     def planned_command(self, k: int, t_s: float) -> tuple[float, float] | None:
         """The rim speeds (m/s) the motor controller will apply from the driver at tick ``k``
@@ -307,3 +310,9 @@ class SimNode:
     def tx_errors(self) -> int:
         """Frames the bus refused."""
         return sum(node.tx_errors for node in self._nodes())
+
+
+def _send_data(bus: OdocanBus, stamp_s: float, can_id: int, data: bytes) -> None:
+    """``bus.send_data`` with ``_Wire.deliver_data``'s arguments (a closed handle refuses it,
+    one not preserving timestamps stamps the wall clock's time)."""
+    bus.send_data(can_id, data, stamp_s)

@@ -85,18 +85,10 @@ class _Wire:
         one shared, immutable ``DataFrame`` (its ``Message`` is built only if ``recv`` asks);
         the sender's own echo, when asked for, is a ``Message`` (``is_rx=False``)."""
         frame: DataFrame = (timestamp, can_id, bytes(data))
-        for handle in self.handles:
-            if handle is sender:
-                if sender.receive_own_messages:
-                    echo = sender.as_message(frame)
-                    echo.is_rx = False
-                    if sender._filters is None or sender._matches_filters(echo):
-                        sender._put(echo)
-                continue
-            if handle._filters is not None:  # the receiver's acceptance filter (cached per id)
-                accepts = handle._data_accepts.get(can_id)
-                if not (handle._accepts_data(can_id) if accepts is None else accepts):
-                    continue  # refused: the frame never enters its queue
+        route = sender._routes.get(can_id)
+        if route is None:
+            route = self._route(sender, can_id)
+        for handle in route:
             queue = handle._queue  # handle._put(frame), inlined: two receivers per frame
             if queue.maxlen is not None and len(queue) == queue.maxlen:
                 handle.rx_overruns += 1
@@ -104,6 +96,34 @@ class _Wire:
             if handle._waiting:
                 with handle._ready:
                     handle._ready.notify()
+        if sender.receive_own_messages:
+            echo = sender.as_message(frame)
+            echo.is_rx = False
+            if sender._filters is None or sender._matches_filters(echo):
+                sender._put(echo)
+
+    def _route(self, sender: OdocanBus, can_id: int) -> tuple[OdocanBus, ...]:
+        """The handles other than ``sender`` whose acceptance filter passes a data frame of
+        ``can_id``, in the wire's order; kept in ``sender._routes`` until a handle opens or
+        closes or a filter changes (``forget_routes``)."""
+        route = tuple(
+            h for h in self.handles
+            if h is not sender and (h._filters is None or h._accepts_data(can_id))
+        )
+        sender._routes[can_id] = route
+        return route
+
+    def set_handles(self, handles: tuple[OdocanBus, ...]) -> None:
+        """The handles on the wire from now on (under ``_wires_lock``); every route forgotten."""
+        before = self.handles
+        self.handles = handles
+        for handle in (*before, *handles):
+            handle._routes = {}
+
+    def forget_routes(self) -> None:
+        """Every handle's routes, computed again at its next send (a filter changed)."""
+        for handle in self.handles:
+            handle._routes = {}
 
     def deliver(self, sender: OdocanBus, msg: Message, timestamp: float) -> None:
         """A fresh copy of ``msg``, stamped ``timestamp``, into every handle that hears it."""
@@ -281,6 +301,8 @@ class OdocanBus(BusABC):
         self._ready = threading.Condition(threading.Lock())
         self._open = True
         self._data_accepts: dict[int, bool] = {}  # can_id -> the filters pass its data frame
+        # can_id -> the other handles a data frame this handle sends reaches (_Wire._route)
+        self._routes: dict[int, tuple[OdocanBus, ...]] = {}
         with _wires_lock:
             wire = _wires.get(channel)
             if wire is None:
@@ -290,7 +312,7 @@ class OdocanBus(BusABC):
                 raise CanInitializationError(
                     f"channel {channel!r} is already open {have}, not {bitrate} bit/s"
                 )
-            wire.handles = (*wire.handles, self)
+            wire.set_handles((*wire.handles, self))
         self._wire = wire
         self.timing = wire.timing
         super().__init__(channel=channel, can_filters=can_filters, **kwargs)
@@ -385,6 +407,7 @@ class OdocanBus(BusABC):
     def _apply_filters(self, filters: CanFilters | None) -> None:
         """New filters (``BusABC.set_filters``): forget the identifiers they were checked for."""
         self._data_accepts = {}
+        self._wire.forget_routes()
 
     def as_message(self, item: Received) -> Message:
         """A queued frame as a ``Message``: a ``DataFrame``'s built fresh, as ``send`` of
@@ -443,7 +466,7 @@ class OdocanBus(BusABC):
         self.flush_tx_buffer()
         with _wires_lock:
             wire = self._wire
-            wire.handles = tuple(h for h in wire.handles if h is not self)
+            wire.set_handles(tuple(h for h in wire.handles if h is not self))
             if not wire.handles and _wires.get(wire.name) is wire:
                 del _wires[wire.name]
         with self._ready:
