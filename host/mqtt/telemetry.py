@@ -220,7 +220,7 @@ class RobotTelemetry:
         route = None if extended else self._routes.get(can_id)
         if route is not None and route.status_page is not None \
                 and route.is_summary(data):  # before E2E: a reboot fails it
-            self._watch_source(route.message, data, t_s)
+            self._watch_source(route, data, t_s)
         status = self.e2e.check(can_id, data, extended=extended,
                                 timestamp_s=t_s)  # the window widens with time
         tracker = self.tracker
@@ -250,11 +250,11 @@ class RobotTelemetry:
             return publications + self._samples() if publications else self._samples()
         return publications
 
-    def _watch_source(self, message: Any, data: bytes, t_s: float) -> None:
+    def _watch_source(self, route: _Route, data: bytes, t_s: float) -> None:
         """A reboot (UPTIME going back, INIT after running) starts the firmware's new life at
         its power-up pose, as the monitor and ``analyze`` do (``host.judge.sources``)."""
         ids = self._status_ids.data_ids if self._status_ids is not None else None
-        summary = boot_summary(message, data, ids)
+        summary = boot_summary(route.message, data, ids, route.decode)
         if summary is None or self.sources.observe(t_s, *summary) != "reboot":
             return
         self.reboots += 1
