@@ -144,12 +144,8 @@ def _flat_decoder(fields: tuple[Field, ...], length: int) -> Callable[[bytes], d
     cantools' linear conversion written out (``raw * scale + offset``, as ``raw_to_scaled``
     computes it) or called (any other conversion)."""
     namespace: dict[str, Any] = {"DecodeError": DecodeError}
-    items = []
-    for k, (name, shift, mask, sign, scale) in enumerate(fields):
-        raw = f"(word >> {shift}) & {mask}" if shift else f"word & {mask}"
-        if sign:
-            raw = f"(({raw}) ^ {sign}) - {sign}"
-        items.append(f"{name!r}: {_scaled(raw, scale, k, namespace)}")
+    items = [f"{field[0]!r}: {_field_expression(field, k, namespace)}"
+             for k, field in enumerate(fields)]
     source = (f"def decode(data):\n"
               f"    if len(data) < {length}:\n"
               f"        raise DecodeError(f'Wrong data size: {{len(data)}} instead of {length} "
@@ -159,6 +155,15 @@ def _flat_decoder(fields: tuple[Field, ...], length: int) -> Callable[[bytes], d
     exec(compile(source, f"<livedecode {length} bytes>", "exec"), namespace)
     decode: Callable[[bytes], dict[str, Any]] = namespace["decode"]
     return decode
+
+
+def _field_expression(field: Field, k: int, namespace: dict[str, Any]) -> str:
+    """The expression of one signal's value from ``word`` (see ``_flat_decoder``)."""
+    _, shift, mask, sign, scale = field
+    raw = f"(word >> {shift}) & {mask}" if shift else f"word & {mask}"
+    if sign:
+        raw = f"(({raw}) ^ {sign}) - {sign}"
+    return _scaled(raw, scale, k, namespace)
 
 
 def _scaled(raw: str, scale: Callable[[int, bool], Any] | None, k: int,
@@ -172,3 +177,39 @@ def _scaled(raw: str, scale: Callable[[int, bool], Any] | None, k: int,
         return f"({raw}) * {conversion.scale!r} + {conversion.offset!r}"
     namespace[f"scale_{k}"] = scale
     return f"scale_{k}({raw}, False)"
+
+
+def values_decoder(message: Message, names: tuple[str, ...],
+                   defaults: dict[str, Any]) -> Callable[[bytes], tuple[Any, ...]]:
+    """The values of the signals ``names`` of a frame of ``message``, as a tuple in that order
+    (``defaults``: the value of a name the message lacks; any other missing is ``KeyError``):
+    ``tuple(decode(data)[n] for n in names)`` of ``LiveDecoder.decode``, without its dict (the
+    bridge's handlers of its most frequent frames take only these). A message without
+    multiplexers is read by one function made for it (``_flat_decoder``'s expressions, the
+    other signals not computed); any other picks them from ``LiveDecoder.decode``."""
+    live = LiveDecoder(message)
+    root = live._root
+    by_name = {} if root is None or root.muxes else {f[0]: (k, f) for k, f in
+                                                      enumerate(root.fields)}
+    if root is None or root.muxes or not all(n in by_name or n in defaults for n in names):
+        decode = live.decode
+
+        def picked(data: bytes) -> tuple[Any, ...]:
+            signals = decode(data)
+            return tuple(signals[n] if n in signals or n not in defaults else defaults[n]
+                         for n in names)
+
+        return picked
+    namespace: dict[str, Any] = {"DecodeError": DecodeError}
+    items = [_field_expression(by_name[n][1], by_name[n][0], namespace) if n in by_name
+             else repr(defaults[n]) for n in names]
+    length = live.length
+    source = (f"def values(data):\n"
+              f"    if len(data) < {length}:\n"
+              f"        raise DecodeError(f'Wrong data size: {{len(data)}} instead of {length} "
+              f"bytes')\n"
+              f"    word = int.from_bytes(data[:{length}], 'little')\n"
+              f"    return ({', '.join(items)},)\n")
+    exec(compile(source, f"<livedecode values {message.name}>", "exec"), namespace)
+    values: Callable[[bytes], tuple[Any, ...]] = namespace["values"]
+    return values
