@@ -11,7 +11,7 @@ from cantools.database.errors import DecodeError
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from odocan.host.mqtt.livedecode import LiveDecoder
+from odocan.host.mqtt.livedecode import LiveDecoder, values_decoder
 from odocan.sim.contract import database
 
 DB = database()
@@ -75,3 +75,32 @@ def test_a_big_endian_or_float_message_is_decoded_by_cantools() -> None:
     data = bytes([0, 0, 0x80, 0x3F, 7, 0, 0, 0])
     assert LiveDecoder(message).decode(data) == message.decode(data, decode_choices=False)
     assert LiveDecoder(message).decode(data)["F"] == 1.0
+
+
+@pytest.mark.parametrize("name", MESSAGES)
+@settings(max_examples=200, deadline=None)
+@given(data=st.binary(min_size=0, max_size=12), order=st.randoms(use_true_random=False))
+def test_the_values_decoder_gives_cantools_values_in_the_order_asked(
+    name: str, data: bytes, order: Any
+) -> None:
+    """Every signal of the message outside its multiplexed pages, in a drawn order, and one it
+    lacks (its default): the tuple is cantools' values, of the same types; an undecodable
+    payload is its DecodeError."""
+    message = DB.get_message_by_name(name)
+    names = [s.name for s in message.signals if not s.multiplexer_ids]
+    order.shuffle(names)
+    names.insert(order.randrange(len(names) + 1), "NOT_A_SIGNAL")
+    expected = _cantools(name, data)
+    try:
+        got: tuple[str, Any] = ("ok", values_decoder(message, tuple(names),
+                                                     {"NOT_A_SIGNAL": 7})(data))
+    except DecodeError:
+        got = ("DecodeError", None)
+    assert got[0] == expected[0]
+    if expected[1] is None:
+        return
+    want = tuple(7 if n == "NOT_A_SIGNAL" else expected[1][n] for n in names)
+    assert len(got[1]) == len(want)
+    for value, wanted in zip(got[1], want, strict=True):
+        assert type(value) is type(wanted)
+        assert value == wanted or (math.isnan(value) and math.isnan(wanted))

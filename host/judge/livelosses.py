@@ -66,6 +66,8 @@ class LiveAllowance:
 
     def at_m(self, seq: int) -> float:
         """The allowance (m) at encoder frame ``seq``."""
+        if not self.spans:  # the usual case (per sample settled): ``sum`` of nothing
+            return 0
         return sum(a for first, a in self.spans if seq > first)
 
     def max_beyond_m(self) -> float:

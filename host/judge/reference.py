@@ -138,13 +138,15 @@ class ReferenceOdometry:
         return True
 
     def step_deltas(self, d_left: int, d_right: int) -> None:
-        """Integrate one step of count deltas."""
+        """Integrate one step of count deltas (per encoder frame of every robot a live judge
+        follows: the headings as ``_heading_at`` computes them, written out)."""
         g = self.geometry
-        ds = 0.5 * (d_left * g.m_per_count_left + d_right * g.m_per_count_right)
-        heading_old = self.heading_rad
-        self._cum_left += d_left
-        self._cum_right += d_right
-        heading_new = self.heading_rad
+        ds = path_m = 0.5 * (d_left * g.m_per_count_left + d_right * g.m_per_count_right)
+        heading0, k_left, k_right = self._heading0_rad, self._k_left, self._k_right
+        heading_old = heading0 + k_right * self._cum_right - k_left * self._cum_left
+        cum_left = self._cum_left = self._cum_left + d_left
+        cum_right = self._cum_right = self._cum_right + d_right
+        heading_new = heading0 + k_right * cum_right - k_left * cum_left
         if self.integrator == "euler":
             direction = heading_new
         else:
@@ -153,7 +155,7 @@ class ReferenceOdometry:
                 ds *= chord_factor(heading_new - heading_old)
         self.x_m += ds * math.cos(direction)
         self.y_m += ds * math.sin(direction)
-        self.distance_m += abs(0.5 * (d_left * g.m_per_count_left + d_right * g.m_per_count_right))
+        self.distance_m += abs(path_m)
 
 
 def integrate(

@@ -12,6 +12,7 @@ after the previous one that does not say INIT cannot be told from UPTIME (0 agai
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -114,22 +115,39 @@ def two_sources_text(t_s: float) -> str:
     return f"two firmwares answered on one node ID from t={t_s:.3f} s: the pose cannot be judged"
 
 
-def boot_summary(message: Message, data: bytes, data_ids: Any) -> tuple[int, str] | None:
+def boot_summary(message: Message, data: bytes, data_ids: Any,
+                 decode: Callable[[bytes], dict[str, Any]] | None = None) -> tuple[int, str] | None:
     """(UPTIME s, STATE) of an ODOM_STATUS summary whose CRC holds, whatever its E2E sequence
-    (a rebooted firmware restarts it); ``data_ids``: the message's E2E DataIDs. None otherwise."""
+    (a rebooted firmware restarts it); ``data_ids``: the message's E2E DataIDs. None otherwise.
+    ``decode``: ``message``'s ``decode(data, decode_choices=False)`` compiled (the bridge's
+    ``LiveDecoder``, per summary of every robot); PAGE and STATE named by their DBC choices
+    here, as cantools names them (a value without one as its number)."""
     if message.name != "ODOM_STATUS" or len(data) != 8:
         return None
     if not data_ids or data[0] != crc8h2f_p02_one(data, data_ids[data[1] & 0xF]):
         return None
     try:
-        signals = message.decode(data)
+        signals = (decode or _plain_decoder(message))(data)
     except Exception:  # not decodable: the E2E check and the caller count it
         return None
-    assert isinstance(signals, dict)
     values: dict[str, Any] = dict(signals)
-    if str(values.get("PAGE")) != "SUMMARY":
+    if _choice_name(message, "PAGE", values.get("PAGE")) != "SUMMARY":
         return None
-    return int(values["UPTIME"]), str(values["STATE"])
+    return int(values["UPTIME"]), _choice_name(message, "STATE", values["STATE"])
+
+
+def _plain_decoder(message: Message) -> Callable[[bytes], dict[str, Any]]:
+    def decode(data: bytes) -> dict[str, Any]:
+        signals = message.decode(data, decode_choices=False)
+        assert isinstance(signals, dict)
+        return signals
+    return decode
+
+
+def _choice_name(message: Message, signal: str, value: Any) -> str:
+    """``str`` of ``value`` decoded with its choices, as cantools' ``decode_choices`` gives it."""
+    choices = message.get_signal_by_name(signal).choices if value is not None else None
+    return str(choices[value]) if choices and value in choices else str(value)
 
 
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,

@@ -9,11 +9,12 @@ same arithmetic, so the same ints and floats; an identity conversion, which retu
 integer, is not called; a linear one is written out as its ``raw * scale + offset``, the
 constants by their exact ``repr``: a message without multiplexers is decoded by one function
 made for it, one dict display of its signals). Multiplexed messages select their sub-tree by the
-multiplexer's value as cantools does; a value the DBC does not define is cantools'
-``DecodeError``, and so is a payload shorter than the message (a longer one is cut, as cantools'
-``allow_excess``). A message this form does not cover (a big-endian or float signal, a container)
-is decoded by cantools itself. tests/test_mqtt_livedecode.py holds it to cantools on random
-payloads of every message of the DBC.
+multiplexer's value as cantools does (one multiplexer with plain pages, as ODOM_STATUS and
+SIM_TRUTH: one such function per page, picked by the multiplexer's value); a value the DBC
+does not define is cantools' ``DecodeError``, and so is a payload shorter than the message (a
+longer one is cut, as cantools' ``allow_excess``). A message this form does not cover (a
+big-endian or float signal, a container) is decoded by cantools itself.
+tests/test_mqtt_livedecode.py holds it to cantools on random payloads of every message of the DBC.
 """
 
 from __future__ import annotations
@@ -55,6 +56,8 @@ class LiveDecoder:
         self.decode: Callable[[bytes], dict[str, Any]] = self._decode_tree
         if self._root is not None and not self._root.muxes:  # one function, made for it
             self.decode = _flat_decoder(self._root.fields, self.length)
+        elif self._root is not None and _one_level(self._root):  # one function per page
+            self.decode = _paged_decoder(self._root, self.length)
 
     def _decode_tree(self, data: bytes) -> dict[str, Any]:
         """``decode`` by the codec tree (multiplexers), or by cantools itself."""
@@ -100,18 +103,49 @@ def _decode(node: _Node, word: int, out: dict[str, Any]) -> None:
         _decode(sub, word, out)
 
 
+def _one_level(root: _Node) -> bool:
+    """One multiplexer, among the root's signals, selecting sub-trees without multiplexers of
+    their own (ODOM_STATUS's PAGE, SIM_TRUTH's PART)."""
+    if len(root.muxes) != 1:
+        return False
+    name, by_value = root.muxes[0]
+    return any(f[0] == name for f in root.fields) and not any(n.muxes for n in by_value.values())
+
+
+def _paged_decoder(root: _Node, length: int) -> Callable[[bytes], dict[str, Any]]:
+    """``LiveDecoder.decode`` of a message with one multiplexer (``_one_level``): its value
+    (``int`` of its scaled value, as ``_decode`` selects) picks a function made for its page
+    (the root's signals then the page's, as ``_decode`` orders them, each as ``_flat_decoder``
+    writes it); a value the DBC does not define is ``_decode``'s ``DecodeError``."""
+    name, by_value = root.muxes[0]
+    _, shift, mask, sign, scale = next(f for f in root.fields if f[0] == name)
+    pages = {value: _flat_decoder(root.fields + sub.fields, length)
+             for value, sub in by_value.items()}
+    known = sorted(by_value)
+
+    def decode(data: bytes) -> dict[str, Any]:
+        if len(data) < length:
+            raise DecodeError(f"Wrong data size: {len(data)} instead of {length} bytes")
+        raw = (int.from_bytes(data[:length], "little") >> shift) & mask
+        if sign:
+            raw = (raw ^ sign) - sign
+        value = int(raw if scale is None else scale(raw, False))
+        page = pages.get(value)
+        if page is None:
+            raise DecodeError(f"expected multiplexer id {known}, but got {value}")
+        return page(data)
+
+    return decode
+
+
 def _flat_decoder(fields: tuple[Field, ...], length: int) -> Callable[[bytes], dict[str, Any]]:
     """``LiveDecoder.decode`` of a message without multiplexers, as one function made for it:
     per signal ``(word >> shift) & mask``, a sign extended as ``(raw ^ sign) - sign``, then
     cantools' linear conversion written out (``raw * scale + offset``, as ``raw_to_scaled``
     computes it) or called (any other conversion)."""
     namespace: dict[str, Any] = {"DecodeError": DecodeError}
-    items = []
-    for k, (name, shift, mask, sign, scale) in enumerate(fields):
-        raw = f"(word >> {shift}) & {mask}" if shift else f"word & {mask}"
-        if sign:
-            raw = f"(({raw}) ^ {sign}) - {sign}"
-        items.append(f"{name!r}: {_scaled(raw, scale, k, namespace)}")
+    items = [f"{field[0]!r}: {_field_expression(field, k, namespace)}"
+             for k, field in enumerate(fields)]
     source = (f"def decode(data):\n"
               f"    if len(data) < {length}:\n"
               f"        raise DecodeError(f'Wrong data size: {{len(data)}} instead of {length} "
@@ -121,6 +155,15 @@ def _flat_decoder(fields: tuple[Field, ...], length: int) -> Callable[[bytes], d
     exec(compile(source, f"<livedecode {length} bytes>", "exec"), namespace)
     decode: Callable[[bytes], dict[str, Any]] = namespace["decode"]
     return decode
+
+
+def _field_expression(field: Field, k: int, namespace: dict[str, Any]) -> str:
+    """The expression of one signal's value from ``word`` (see ``_flat_decoder``)."""
+    _, shift, mask, sign, scale = field
+    raw = f"(word >> {shift}) & {mask}" if shift else f"word & {mask}"
+    if sign:
+        raw = f"(({raw}) ^ {sign}) - {sign}"
+    return _scaled(raw, scale, k, namespace)
 
 
 def _scaled(raw: str, scale: Callable[[int, bool], Any] | None, k: int,
@@ -134,3 +177,39 @@ def _scaled(raw: str, scale: Callable[[int, bool], Any] | None, k: int,
         return f"({raw}) * {conversion.scale!r} + {conversion.offset!r}"
     namespace[f"scale_{k}"] = scale
     return f"scale_{k}({raw}, False)"
+
+
+def values_decoder(message: Message, names: tuple[str, ...],
+                   defaults: dict[str, Any]) -> Callable[[bytes], tuple[Any, ...]]:
+    """The values of the signals ``names`` of a frame of ``message``, as a tuple in that order
+    (``defaults``: the value of a name the message lacks; any other missing is ``KeyError``):
+    ``tuple(decode(data)[n] for n in names)`` of ``LiveDecoder.decode``, without its dict (the
+    bridge's handlers of its most frequent frames take only these). A message without
+    multiplexers is read by one function made for it (``_flat_decoder``'s expressions, the
+    other signals not computed); any other picks them from ``LiveDecoder.decode``."""
+    live = LiveDecoder(message)
+    root = live._root
+    by_name = {} if root is None or root.muxes else {f[0]: (k, f) for k, f in
+                                                      enumerate(root.fields)}
+    if root is None or root.muxes or not all(n in by_name or n in defaults for n in names):
+        decode = live.decode
+
+        def picked(data: bytes) -> tuple[Any, ...]:
+            signals = decode(data)
+            return tuple(signals[n] if n in signals or n not in defaults else defaults[n]
+                         for n in names)
+
+        return picked
+    namespace: dict[str, Any] = {"DecodeError": DecodeError}
+    items = [_field_expression(by_name[n][1], by_name[n][0], namespace) if n in by_name
+             else repr(defaults[n]) for n in names]
+    length = live.length
+    source = (f"def values(data):\n"
+              f"    if len(data) < {length}:\n"
+              f"        raise DecodeError(f'Wrong data size: {{len(data)}} instead of {length} "
+              f"bytes')\n"
+              f"    word = int.from_bytes(data[:{length}], 'little')\n"
+              f"    return ({', '.join(items)},)\n")
+    exec(compile(source, f"<livedecode values {message.name}>", "exec"), namespace)
+    values: Callable[[bytes], tuple[Any, ...]] = namespace["values"]
+    return values

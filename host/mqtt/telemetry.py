@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import can
-from cantools.database.can import Database, Message
+from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.livedistance import LiveDistance, robot_of
@@ -61,7 +61,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
-from odocan.host.mqtt.livedecode import LiveDecoder
+from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor, e2e_messages
 from odocan.sim.contract import database
@@ -82,52 +82,9 @@ class PendingAck:
     final: bool  # the APPLY / GO frame: its ACK completes the command
 
 
-@dataclass(frozen=True, slots=True)
-class _Route:
-    """What ``RobotTelemetry`` does with an 11-bit frame of one message of the DBC: its name, its
-    handler (None: counted only, never decoded), its compiled decoder; for ODOM_STATUS the
-    PAGE signal's place (``status_page``: shift, mask, SUMMARY's value) to pass only its
-    summaries to the reboot watch (``host.judge.sources.boot_summary`` reads nothing else)."""
-
-    message: Message
-    name: str
-    handler: Any
-    decode: Any
-    status_page: tuple[int, int, int] | None
-
-    @classmethod
-    def of(cls, message: Message, handler: Any) -> _Route:
-        page = None
-        if message.name == "ODOM_STATUS":
-            signal = message.get_signal_by_name("PAGE")
-            summary = next((v for v, n in (signal.choices or {}).items() if str(n) == "SUMMARY"),
-                           None)
-            if signal.byte_order == "little_endian" and summary is not None:
-                page = (signal.start, (1 << signal.length) - 1, int(summary))
-            else:  # another layout: every frame goes to the reboot watch
-                page = (0, 0, 0)
-        return cls(message, message.name, handler, LiveDecoder(message).decode, page)
-
-    def is_summary(self, data: bytes) -> bool:
-        """Whether an ODOM_STATUS payload may be a SUMMARY page (its raw PAGE says so)."""
-        assert self.status_page is not None
-        shift, mask, summary = self.status_page
-        return (int.from_bytes(data, "little") >> shift) & mask == summary
-
-
-_ROUTES: dict[int, tuple[Database, dict[int, _Route]]] = {}  # by id(db), with db kept alive
-
-
-def _routes(db: Database) -> dict[int, _Route]:
-    """The routes of ``db``'s 11-bit messages by identifier, built once per database and shared
-    by every robot (read only: a fleet's robots share one compiled decoder per message, not
-    one each, which keeps a worker's working set small)."""
-    entry = _ROUTES.get(id(db))
-    if entry is None or entry[0] is not db:
-        routes = {m.frame_id: _Route.of(m, RobotTelemetry._handlers.get(m.name))
-                  for m in db.messages if not m.is_extended_frame}
-        entry = _ROUTES[id(db)] = (db, routes)
-    return entry[1]
+def _routes(db: Database) -> dict[int, Route]:
+    """The routes of ``db``'s 11-bit messages (``host.mqtt.liveroutes``), shared by every robot."""
+    return routes(db, RobotTelemetry._handlers)
 
 
 @dataclass
@@ -220,7 +177,7 @@ class RobotTelemetry:
         route = None if extended else self._routes.get(can_id)
         if route is not None and route.status_page is not None \
                 and route.is_summary(data):  # before E2E: a reboot fails it
-            self._watch_source(route.message, data, t_s)
+            self._watch_source(route, data, t_s)
         status = self.e2e.check(can_id, data, extended=extended,
                                 timestamp_s=t_s)  # the window widens with time
         tracker = self.tracker
@@ -228,7 +185,7 @@ class RobotTelemetry:
         if route is None or status not in ACCEPTED_E2E:
             if status in CRC_RIGHT_REFUSED and route is not None \
                     and route.name == "WHEEL_ENCODERS":  # a twin of the latest accepted one?
-                refused_encoders(tracker.twins, route.decode(data), t_s)
+                refused_encoders(tracker.twins, route.signals(data), t_s)
             message = self._by_id.get(can_id)
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
             return self._samples() if tracker.settled else []
@@ -239,7 +196,7 @@ class RobotTelemetry:
             counts[name] = counts.get(name, 0) + 1
             return self._samples() if tracker.settled else []
         try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
-            signals = route.decode(data)  # cantools' decode, compiled
+            signals = route.decode(data)  # compiled: a tuple for a ``takes`` handler
         except DecodeError:
             self.rejected[name] += 1
             return self._samples() if tracker.settled else []
@@ -250,11 +207,11 @@ class RobotTelemetry:
             return publications + self._samples() if publications else self._samples()
         return publications
 
-    def _watch_source(self, message: Any, data: bytes, t_s: float) -> None:
+    def _watch_source(self, route: Route, data: bytes, t_s: float) -> None:
         """A reboot (UPTIME going back, INIT after running) starts the firmware's new life at
         its power-up pose, as the monitor and ``analyze`` do (``host.judge.sources``)."""
         ids = self._status_ids.data_ids if self._status_ids is not None else None
-        summary = boot_summary(message, data, ids)
+        summary = boot_summary(route.message, data, ids, route.signals)
         if summary is None or self.sources.observe(t_s, *summary) != "reboot":
             return
         self.reboots += 1
@@ -270,31 +227,30 @@ class RobotTelemetry:
             return key
         return "other"
 
-    def _on_encoders(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        frame = (int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]), t_s,
-                 int(s.get("CTRL_UPTIME", 0)))
+    @takes("COUNTER", "LEFT_COUNT", "RIGHT_COUNT", "CTRL_UPTIME")
+    def _on_encoders(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
+        frame = (int(s[0]), int(s[1]), int(s[2]), t_s, int(s[3]))
         self.tracker.on_encoders(*frame)
         self.distance.on_encoders(self.tracker, *frame)
         return []
 
-    def _on_pose_x(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        self.tracker.on_pose_x(int(s["ENC_COUNTER"]), s["X"], s["HEADING"],
-                               counter=int(s["COUNTER"]), t_s=t_s)
+    @takes("ENC_COUNTER", "X", "HEADING", "COUNTER")
+    def _on_pose_x(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
+        self.tracker.on_pose_x(int(s[0]), s[1], s[2], counter=int(s[3]), t_s=t_s)
         return []
 
-    def _on_twist(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        self._twist = {
-            "linear_vel_m_s": s["LINEAR_VEL"],
-            "angular_vel_rad_s": s["ANGULAR_VEL"],
-            "distance_m": s["DISTANCE"],
-        }
-        self.distance.on_twist(self.tracker, int(s["ENC_COUNTER"]), round(s["DISTANCE"] * 1e3),
-                               t_s, int(s["COUNTER"]))
+    @takes("ENC_COUNTER", "LINEAR_VEL", "ANGULAR_VEL", "DISTANCE", "COUNTER")
+    def _on_twist(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
+        enc_counter, linear, angular, distance, counter = s
+        self._twist = {"linear_vel_m_s": linear, "angular_vel_rad_s": angular,
+                       "distance_m": distance}
+        self.distance.on_twist(self.tracker, int(enc_counter), round(distance * 1e3), t_s,
+                               int(counter))
         return []
 
-    def _on_pose_y(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        self.tracker.on_pose_y(int(s["ENC_COUNTER"]), s["Y"], int(s["TURNS"]),
-                               counter=int(s["COUNTER"]), t_s=t_s)
+    @takes("ENC_COUNTER", "Y", "TURNS", "COUNTER")
+    def _on_pose_y(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
+        self.tracker.on_pose_y(int(s[0]), s[1], int(s[2]), counter=int(s[3]), t_s=t_s)
         return []
 
     def _samples(self) -> list[Publication]:
