@@ -72,6 +72,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.gapfill import Counts, LateFrames, late_in_chunk
 from odocan.host.judge.samples import QUEUED_GAP_CYCLES, Encoders, FloatArray, IntArray
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
@@ -114,6 +115,14 @@ class Seen:
 
     same: list[Span]
     missed: list[Span]
+    fills: dict[int, list[Counts]] = field(default_factory=dict)  # ``host.judge.gapfill``: per
+    # gap (its frame after) the log fills with frames refused, their counts
+
+    def filled(self, frame: int, reprimed: frozenset[int] = frozenset()) -> list[Counts] | None:
+        """The counts of the frames the gap into encoder ``frame`` lacks, when the log holds
+        every one (refused by E2E: held back on the bus) and no counter restart re-primed at
+        it; else None."""
+        return None if frame in reprimed else self.fills.get(frame)
 
     def gap_missed(self, frame: int, reprimed: frozenset[int] = frozenset()) -> bool:
         """Whether the firmware missed every frame of the gap into encoder ``frame`` (no
@@ -228,6 +237,8 @@ class PageEvidence:
     _pages: list[tuple[int, float, int, int, int, float]] = field(default_factory=list)
     _totals: list[tuple[float, int, int]] = field(default_factory=list)
     _gaps: list[tuple[int, int]] = field(default_factory=list)  # frame after, frames missing
+    _gap_seq: dict[int, int] = field(default_factory=dict)  # per gap: the sequence number before
+    late: LateFrames = field(default_factory=LateFrames)  # encoder frames refused (gapfill)
     _usable: bool = True  # the DBC has the signals
 
     def feed(self, chunk: FrameArrays, enc: Encoders) -> None:
@@ -235,6 +246,8 @@ class PageEvidence:
         self.cycle_s = enc.cycle_s
         if self.first_s is None and len(enc.seq):
             self.first_s = float(enc.timestamp_s[0])
+        last = None if self._last_seq is None else (self._last_seq, self._last_enc_s)
+        self.late.add(*late_in_chunk(chunk, self.decoder, enc, self._offset, last))
         self._add_gaps(enc)
         if self._usable:
             self._add_status(chunk, enc)
@@ -247,8 +260,10 @@ class PageEvidence:
         """``seen_by_pages`` of what was fed; ``power_up``: the firmware primed on the first
         encoder frame fed (``with_boot``)."""
         self._keep_pending(True)  # no summary after the last: not let out in a burst
+        fills = {b: f for b, missing in self._gaps
+                 if (f := self.late.fill(self._gap_seq[b], missing + 1)) is not None}
         if not self._usable or self.cycle_s is None or not self._pages:
-            return NOTHING
+            return Seen([], [], fills)
         col = list(zip(*self._pages, strict=True))
         ints = [np.array(col[k], dtype=np.int64) for k in (0, 2, 3, 4)]
         pages = LostPages(ints[0], np.array(col[1], dtype=np.float64), ints[1], ints[2],
@@ -259,8 +274,9 @@ class PageEvidence:
         if power_up and self.first_s is not None:
             pages, totals = with_boot(pages, totals, self.first_s, self.first_s - self.cycle_s)
         gcol = list(zip(*self._gaps, strict=True)) if self._gaps else [(), ()]
-        return seen_by_pages(pages, totals, np.array(gcol[0], dtype=np.int64),
+        seen = seen_by_pages(pages, totals, np.array(gcol[0], dtype=np.int64),
                              np.array(gcol[1], dtype=np.int64))
+        return Seen(seen.same, seen.missed, fills)
 
     def _add_gaps(self, enc: Encoders) -> None:
         if len(enc.seq) == 0:
@@ -270,6 +286,7 @@ class PageEvidence:
         step = np.diff(prior)
         k = np.flatnonzero(step > 1)
         self._gaps += zip((self._enc_count + k).tolist(), (step[k] - 1).tolist(), strict=True)
+        self._gap_seq.update(zip((self._enc_count + k).tolist(), prior[k].tolist(), strict=True))
         self._last_seq = int(enc.seq[-1])
 
     def _add_status(self, chunk: FrameArrays, enc: Encoders) -> None:

@@ -24,7 +24,7 @@ from odocan.host.judge.breaks import (
     overlap_allowance_m,
     placed_offsets,
 )
-from odocan.host.judge.gapbound import gap_allowance_of_counts
+from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, integrate, wrap_delta
 from odocan.host.judge.samples import (
@@ -119,9 +119,8 @@ def build_reference(
             return 0.0  # across it on board (re-primed), the position goes on exactly
         if seen.gap_missed(b, reprimed):
             return 0.0  # the firmware took the gap as the reference's one step
-        return gap_allowance_of_counts(
-            (int(enc.left[b - 1]), int(enc.right[b - 1])), (int(enc.left[b]), int(enc.right[b])),
-            int(enc.seq[b] - enc.seq[b - 1]), geometry, bits, integrator, max_wheel_speed_mm_s)
+        return gap_allowance_at(enc, b, seen.filled(b, reprimed), geometry, bits, integrator,
+                                max_wheel_speed_mm_s)  # gapbound's, or gapfill's known counts
 
     off_x, off_y, placed = placed_offsets(
         raw_segment_offsets(segment, at, onboard.x_m - x_m[at]),

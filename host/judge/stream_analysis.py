@@ -29,7 +29,7 @@ from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_std
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance, _realtime, _robot_dict
 from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.distance import DistanceJudge
-from odocan.host.judge.gapbound import gap_allowance_of_counts
+from odocan.host.judge.gapfill import gap_or_fill_allowance
 from odocan.host.judge.gapseen import PageEvidence
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
@@ -266,7 +266,7 @@ def _life(
     off_x, off_y, placements = placed_offsets(
         *raw, info.openings, lambda b: across.allowance(b, seen, reprimed),
         lambda b: 0.0 if b in info.by_uptime or seen.gap_missed(b, reprimed)  # reference_path's
-        else gap_allowance_of_counts(
+        else gap_or_fill_allowance(seen.filled(b, reprimed),  # gapfill: the log's late frames
             *info.gap_steps[b], geometry, bits, integrator, max_wheel_speed_mm_s),
         tolerance.position_m)
     offsets = (off_x, off_y)

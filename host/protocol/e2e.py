@@ -13,14 +13,16 @@ The host's own implementation of what the firmware does in ``firmware.e2e`` (dbc
 * **MaxDeltaCounter**: as in the firmware, it restarts from ``MaxDeltaCounterInit`` at each accepted
   frame and grows by one per receive period (up to 15) before a frame is judged. The firmware
   counts its periods with ``check(None)`` calls; the host counts them from the timestamps:
-  a frame ``dt`` after the message's previous frame adds ``max(1, round(dt / cycle))`` periods
-  (``GenMsgCycleTime``). MaxDeltaCounterInit is 1 for ``Cyclic`` messages and 15 for the others
+  a frame ``dt`` after the message's previous frame adds ``max(1, round(dt / period))`` periods,
+  the period ``GenMsgCycleTime`` over ``E2EFramesPerCycle`` (ODOM_STATUS's summary and page, the
+  three parts of SIM_TRUTH: a COUNTER step a frame, as AUTOSAR's receiver checks once per frame
+  it expects; one a cycle let a burst leave every later page WRONG_SEQUENCE till the window hit
+  15). MaxDeltaCounterInit is 1 for ``Cyclic`` messages and 15 for the others
   (event messages, ``CyclicIfActive`` MOTOR_CMD), as the firmware and the motor controller use,
   except WHEEL_ENCODERS (``PER_PERIOD_WINDOW``): the firmware checks them with init 0 and a
   window widened once per tick (``window_per_period``), so a frame there adds
   ``round(dt / cycle)`` periods, none within half a period: a babbler's or a forger's frame
-  sent with a genuine one cannot open the window to itself. (Messages sent several frames per
-  cycle, the pages of ODOM_STATUS and SIM_TRUTH, keep at least one period a frame.)
+  sent with a genuine one cannot open the window to itself.
   A frame of those messages late on the bus (a ``delay`` fault, a frame reordered) is not
   rounded: between two frames whose CRCs are right, the periods are the sender's COUNTER step
   plus the ticks the late one waited (``receive_periods``), so a frame late by exactly half a
@@ -164,7 +166,7 @@ class E2EMessage:
     length: int  # DLC, bytes
     data_ids: tuple[int, ...] | None  # E2EDataIDs (16), None: not protected
     max_delta_init: int  # MaxDeltaCounterInit
-    cycle_s: float | None  # GenMsgCycleTime (None: not cyclic)
+    cycle_s: float | None  # receive period: GenMsgCycleTime / E2EFramesPerCycle (None: none)
     min_periods: int = 1  # periods a frame adds at least (0: the window widens with time only)
 
 
@@ -182,13 +184,14 @@ def _e2e_message(message: MessageSpec) -> E2EMessage:
             raise E2EConfigError(f"{message.name}: E2E Profile 2 needs 8-byte frames")
     cyclic = bool(message.cycle_time) and message.send_type in (None, "Cyclic")
     per_period = message.name in PER_PERIOD_WINDOW
+    frames = int(attributes["E2EFramesPerCycle"].value) if "E2EFramesPerCycle" in attributes else 1
     return E2EMessage(
         name=message.name,
         key=frame_key(message.frame_id, message.is_extended_frame),
         length=message.length,
         data_ids=data_ids,
         max_delta_init=0 if per_period else 1 if cyclic else MAX_DELTA_COUNTER,
-        cycle_s=message.cycle_time / 1000.0 if message.cycle_time else None,
+        cycle_s=message.cycle_time / 1000.0 / max(frames, 1) if message.cycle_time else None,
         min_periods=0 if per_period else 1,
     )
 
