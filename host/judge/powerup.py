@@ -58,17 +58,49 @@ def saw_only_the_log(
 def counted_only_the_log(
     frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
 ) -> bool | None:
-    """Whether the firmware had accepted exactly the log's encoder frames when it sent its first
+    """Whether the firmware had accepted exactly the log's encoder frames when it made its first
     ODOM_STATUS page of WHEEL_ENCODERS E2E counts (ENC_E2E_OK): then it primed on the log's first
-    encoder frame. None when the log has no such page."""
+    encoder frame. None when the log has no such page. The frames counted are those before the
+    page was made (``made_at``), not before it reached the bus (a page held back comes after
+    encoder frames it could not count)."""
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+        summary = decoder.decode_page(frames, "ODOM_STATUS", 0)
     except DecodeError:
         return None
     if "ENC_E2E_OK" not in page or not accepted[page["index"]].any():
         return None
     keep = accepted[page["index"]]
     first, ok = int(page["index"][keep][0]), int(page["ENC_E2E_OK"][keep][0])
+    heard = accepted[summary["index"]] & (summary["index"] < first)
+    last = (int(summary["index"][heard][-1]), int(summary["COUNTER"][heard][-1])) \
+        if heard.any() and "COUNTER" in summary else None
+    made = made_at(first, int(page["COUNTER"][keep][0]) if "COUNTER" in page else None, last,
+                   status_counter_modulo(decoder))
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < first)))
+    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < made)))
     return ok == in_log & 0xFFFF
+
+
+def made_at(page_at: int, page_counter: int | None, summary: tuple[int, int] | None,
+            modulo: int) -> int:
+    """Where in the log the first count page was made: the firmware sends it in the tick of the
+    summary page just before it in its ODOM_STATUS send order (COUNTER one less), so when the
+    latest summary heard before the page (``summary``: its position and COUNTER) is that one,
+    its position (the page may have been held back on the bus after it), else the page's own
+    (``page_at``). Both are on the bus no earlier than the tick that made the page, so the
+    frames before either are never fewer than the firmware had counted: a log cut after the
+    power-up (the firmware counted frames the log lacks) is not taken for a power-up unless
+    both frames of that tick came late, each past as many encoder frames as were cut."""
+    if summary is None or page_counter is None:
+        return page_at
+    at, counter = summary
+    return at if counter == (page_counter - 1) % modulo else page_at
+
+
+def status_counter_modulo(decoder: BulkDecoder) -> int:
+    """2 ** the bit length of ODOM_STATUS ``COUNTER`` in the DBC (16 when it has none)."""
+    try:
+        return 1 << int(decoder.message("ODOM_STATUS").get_signal_by_name("COUNTER").length)
+    except (DecodeError, KeyError):
+        return 16

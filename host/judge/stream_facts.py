@@ -7,7 +7,8 @@ equal to what ``host.judge.analysis`` takes from the whole log (issue #14.1):
 * the integrator ODOM_STATUS reports (``samples.pick_integrator``: the last accepted summary's);
 * the power-up rule's inputs (``powerup.starts_at_power_up`` and ``saw_only_the_log``): the
   first accepted summary's UPTIME, and the first accepted page of WHEEL_ENCODERS E2E counts
-  (ENC_E2E_OK) with the number of accepted encoder frames before it.
+  (ENC_E2E_OK) with the number of accepted encoder frames before it was made
+  (``powerup.made_at``: before it, or before the summary of its tick).
 
 Carried: running counts, first and last times, the last INTEGRATOR value, the first UPTIME,
 the first ENC_E2E_OK page. Whether a page's signal is in the log is decided as
@@ -23,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.powerup import zero_first_sample
+from odocan.host.judge.powerup import made_at, status_counter_modulo, zero_first_sample
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses
 from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
@@ -77,6 +78,8 @@ class StreamFacts:
     _enc_ok: _Signal = field(default_factory=_Signal)
     _has_status: bool = True  # the DBC's ODOM_STATUS is multiplexed
     _accepted_encoders: int = 0  # accepted WHEEL_ENCODERS frames before the first count page
+    _summary: tuple[int, int] | None = None  # ... before the latest summary ahead of it, COUNTER
+    _page_counter: int | None = None  # the first count page's COUNTER
     latch: StatusLatch = field(default_factory=StatusLatch)  # host.judge.statuslatch
     firmware_events: list[dict[str, Any]] = field(default_factory=list)  # ... its events
     set_pose_applied: bool = False  # an ODOM_SET_POSE APPLY ACKed (host.judge.setposes)
@@ -123,12 +126,26 @@ class StreamFacts:
         self._integrator.feed(summary, "INTEGRATOR", keep, self._offset)
         before = self._enc_ok.first is None
         self._enc_ok.feed(counts, "ENC_E2E_OK", accepted[counts["index"]], self._offset)
-        if before:  # count the accepted encoder frames up to the first count page
-            encoders = self.decoder.select(chunk, "WHEEL_ENCODERS")
-            limit = (len(chunk) if self._enc_ok.first_at is None
-                     else self._enc_ok.first_at - self._offset)
-            self._accepted_encoders += int(np.count_nonzero(
-                accepted[encoders] & (encoders < limit)))
+        if before:
+            self._feed_until_counts(chunk, accepted, summary, counts)
+
+    def _feed_until_counts(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_],
+                           summary: dict[str, np.ndarray], counts: dict[str, np.ndarray]) -> None:
+        """Up to the first count page: the accepted encoder frames before it and before the
+        latest accepted summary ahead of it, that summary's COUNTER, the page's COUNTER
+        (``powerup.made_at``)."""
+        limit = (len(chunk) if self._enc_ok.first_at is None
+                 else self._enc_ok.first_at - self._offset)
+        encoders = self.decoder.select(chunk, "WHEEL_ENCODERS")
+        encoders = encoders[accepted[encoders]]
+        heard = accepted[summary["index"]] & (summary["index"] < limit)
+        if heard.any() and "COUNTER" in summary:
+            at = int(summary["index"][heard][-1])
+            self._summary = (self._accepted_encoders + int(np.count_nonzero(encoders < at)),
+                             int(summary["COUNTER"][heard][-1]))
+        self._accepted_encoders += int(np.count_nonzero(encoders < limit))
+        if self._enc_ok.first_at is not None and "COUNTER" in counts:
+            self._page_counter = int(counts["COUNTER"][accepted[counts["index"]]][0])
 
     def covered_s(self) -> float:
         """``analysis._covered_s`` of the frames fed."""
@@ -167,7 +184,9 @@ class StreamFacts:
         """``samples.counted_only_the_log`` of the frames fed."""
         if not self._has_status or not self._enc_ok.present or self._enc_ok.first is None:
             return None
-        return self._enc_ok.first == self._accepted_encoders & 0xFFFF
+        made = made_at(self._accepted_encoders, self._page_counter, self._summary,
+                       status_counter_modulo(self.decoder))
+        return self._enc_ok.first == made & 0xFFFF
 
     def starts_at_power_up(self, first: Poses) -> bool:
         """``samples.starts_at_power_up``, given the log's first on-board sample (``first``:
