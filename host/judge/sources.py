@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.judge.powerup import made_at
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.e2e import E2EMonitor, crc8h2f_p02_one
 
@@ -27,6 +28,7 @@ if TYPE_CHECKING:  # the live judges' (a log's analysis imports this module, not
 FIRMWARE_NODE = "ODOM_MCU"  # the DBC node that sends the firmware's frames (ODOM_STATUS, ...)
 UPTIME_MATCH_S = 2.0  # one source's UPTIME (whole s) minus bus time stays within this
 CONFLICT_HOLD_S = 2.0  # CONFLICT is shown this long after two sources last interleaved
+STATUS_COUNTER_MODULO = 16  # ODOM_STATUS's E2E COUNTER (4 bits, as the live E2E check's)
 
 
 @dataclass
@@ -45,12 +47,25 @@ class SourceWatch:
     changed_at_s: float | None = None  # when the offset followed last changed to a new one
     conflict_from_s: float | None = None  # two sources: when the second offset first came
 
-    def first_life_page(self) -> bool:
-        """Called at each ENC_E2E_OK page: whether it is the first life's first and the first
-        summary said UPTIME 0 (with the frames heard, a power-up's evidence:
-        ``PoseTracker.on_enc_counts``). True once."""
+    summary: tuple[int, int] | None = None  # the latest accepted summary: its COUNTER, frames
+
+    def on_page(self, page: str, signals: dict[str, Any], heard: int) -> int | None:
+        """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...;
+        ``heard``: the encoder frames heard so far). At the first life's first ENC_E2E_OK page,
+        after a first summary of UPTIME 0: the encoder frames heard when the firmware made it
+        (``powerup.made_at``: at the summary of its tick when that is the latest heard, for the
+        page may have been held back past frames it could not count; else now), the power-up's
+        evidence when ENC_E2E_OK counts exactly those (``PoseTracker.on_enc_counts``,
+        ``LiveDistance.on_counts``). Else None; not None once."""
+        if page == "summary":
+            self.summary = (int(signals["COUNTER"]), heard)
+        if page != "e2e_wheel_encoders":
+            return None
         first, self.page_pending = self.page_pending, False
-        return first and self.first_uptime_s == 0
+        if not first or self.first_uptime_s != 0:
+            return None
+        at_summary = None if self.summary is None else (self.summary[1], self.summary[0])
+        return made_at(heard, int(signals["COUNTER"]), at_summary, STATUS_COUNTER_MODULO)
 
     def observe(self, t_s: float, uptime_s: int, state: str) -> str | None:
         """One ODOM_STATUS summary; returns ``"reboot"``, ``"two sources"``, ``"uptime jump"``
