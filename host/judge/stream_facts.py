@@ -24,7 +24,14 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.powerup import made_at, status_counter_modulo, zero_first_sample
+from odocan.host.judge.powerup import (
+    NAMED_SPAN,
+    made_at,
+    named_count,
+    same_tick,
+    status_counter_modulo,
+    zero_first_sample,
+)
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses
 from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
@@ -80,6 +87,8 @@ class StreamFacts:
     _accepted_encoders: int = 0  # accepted WHEEL_ENCODERS frames before the first count page
     _summary: tuple[int, int] | None = None  # ... before the latest summary ahead of it, COUNTER
     _page_counter: int | None = None  # the first count page's COUNTER
+    _named: tuple[int | None, int | None] = (None, None)  # powerup.pose_named: summary's, page's
+    _tail: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     latch: StatusLatch = field(default_factory=StatusLatch)  # host.judge.statuslatch
     firmware_events: list[dict[str, Any]] = field(default_factory=list)  # ... its events
     set_pose_applied: bool = False  # an ODOM_SET_POSE APPLY ACKed (host.judge.setposes)
@@ -138,11 +147,15 @@ class StreamFacts:
                  else self._enc_ok.first_at - self._offset)
         encoders = self.decoder.select(chunk, "WHEEL_ENCODERS")
         encoders = encoders[accepted[encoders]]
+        named = _NamedBefore(chunk, accepted, self.decoder, (self._tail, self._accepted_encoders))
         heard = accepted[summary["index"]] & (summary["index"] < limit)
         if heard.any() and "COUNTER" in summary:
             at = int(summary["index"][heard][-1])
             self._summary = (self._accepted_encoders + int(np.count_nonzero(encoders < at)),
                              int(summary["COUNTER"][heard][-1]))
+            self._named = (named.count(at, self._named[1]), self._named[1])
+        self._named = (self._named[0], named.count(limit, self._named[1]))
+        self._tail = named.tail(limit)
         self._accepted_encoders += int(np.count_nonzero(encoders < limit))
         if self._enc_ok.first_at is not None and "COUNTER" in counts:
             self._page_counter = int(counts["COUNTER"][accepted[counts["index"]]][0])
@@ -184,9 +197,12 @@ class StreamFacts:
         """``samples.counted_only_the_log`` of the frames fed."""
         if not self._has_status or not self._enc_ok.present or self._enc_ok.first is None:
             return None
-        made = made_at(self._accepted_encoders, self._page_counter, self._summary,
-                       status_counter_modulo(self.decoder))
-        return self._enc_ok.first == made & 0xFFFF
+        modulo = status_counter_modulo(self.decoder)
+        made = made_at(self._accepted_encoders, self._page_counter, self._summary, modulo)
+        at_summary = self._summary is not None and same_tick(self._page_counter,
+                                                             self._summary[1], modulo)
+        named = self._named[0] if at_summary else self._named[1]
+        return self._enc_ok.first in (made & 0xFFFF, named)
 
     def starts_at_power_up(self, first: Poses) -> bool:
         """``samples.starts_at_power_up``, given the log's first on-board sample (``first``:
@@ -207,3 +223,39 @@ def _applies_set_pose(chunk: FrameArrays, accepted: npt.NDArray[np.bool_],
         return False
     return bool((accepted[acks["index"]] & (acks["REQUEST_ID"] == set_pose_id)
                  & (acks["REQUEST_FIELD"] == APPLY_FIELD) & (acks["RESULT"] == 0)).any())
+
+
+class _NamedBefore:
+    """``powerup.pose_named`` over a chunk, from the accepted encoder frames before it
+    (``before``: the last ``NAMED_SPAN`` COUNTERs of them, how many in all)."""
+
+    def __init__(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_],
+                 decoder: BulkDecoder, before: tuple[npt.NDArray[np.int64], int]) -> None:
+        try:
+            self.poses = decoder.decode(chunk, "ODOM_POSE_X")
+            encoders = decoder.decode(chunk, "WHEEL_ENCODERS")
+        except DecodeError:
+            self.poses, encoders = {}, {}
+        if "ENC_COUNTER" not in self.poses or "COUNTER" not in encoders:
+            self.poses = {}
+            encoders = {"index": np.zeros(0, np.int64), "COUNTER": np.zeros(0, np.int64)}
+        keep = accepted[encoders["index"]]
+        self.index, self.counters = encoders["index"][keep], encoders["COUNTER"][keep]
+        self.accepted, (self.before, self.heard) = accepted, before
+
+    def count(self, at: int, earlier: int | None) -> int | None:
+        """``named_count`` of the latest accepted pose before chunk position ``at``; ``earlier``
+        (a previous chunk's) when there is none in the chunk."""
+        if not self.poses:
+            return None
+        keep = self.accepted[self.poses["index"]] & (self.poses["index"] < at)
+        if not keep.any():
+            return earlier
+        n = int(np.count_nonzero(self.index < int(self.poses["index"][keep][-1])))
+        counters = np.concatenate((self.before, self.counters[:n]))
+        return named_count(counters, self.heard + n, int(self.poses["ENC_COUNTER"][keep][-1]))
+
+    def tail(self, at: int) -> npt.NDArray[np.int64]:
+        """The last ``NAMED_SPAN`` accepted encoder COUNTERs before chunk position ``at``."""
+        n = int(np.count_nonzero(self.index < at))
+        return np.concatenate((self.before, self.counters[:n]))[-NAMED_SPAN:].astype(np.int64)

@@ -403,13 +403,12 @@ class PoseTracker:
             self._start_reference(self._pending, self._backlog_counts, poses)
             self._drop_backlog()
 
-    def on_enc_counts(self, ok: int, lost: int, made_heard: int | None = None) -> None:
+    def on_enc_counts(self, ok: int, lost: int, proven: bool = False) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS: ENC_E2E_OK (u16) and ENC_E2E_LOST. A reboot's
         first page names the frame it primed on (``power_up``); the first life's first, after a
         first summary of UPTIME 0, counting exactly the frames heard when it was made
-        (``made_heard``, ``SourceWatch.on_page``) proves a power-up: (0, 0, 0) on frame 0,
+        (``proven``: ``SourceWatch.on_page``) proves a power-up: (0, 0, 0) on frame 0,
         whatever the first pose said (``analyze``'s rule); then ``on_enc_lost``."""
-        proven = made_heard is not None and ok == made_heard & 0xFFFF
         if self._boot is not None and self._boot[0] < 0:  # the first life's samples wait
             self._finish_first(proven)
         elif self._boot is not None and 0 < ok <= self.enc_seq + 1:

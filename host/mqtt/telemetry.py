@@ -366,9 +366,9 @@ class RobotTelemetry:
                   if k not in ("CHECKSUM", "COUNTER", "PAGE")}
         name = self._page_names.get(page) or _page_name(self.db, page)
         self.firmware[name] = fields
-        made = self.sources.on_page(name, s, self.tracker.enc_seq + 1)  # the power-up rule
+        proven = self.sources.on_page(name, s, self.tracker)  # the power-up rule
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
-            counts = (int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]), made)
+            counts = (int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]), proven)
             self.distance.on_counts(self.tracker, *counts)
             self.tracker.on_enc_counts(*counts)
         elif name == "summary":  # a short DEGRADED or a new ERROR_MASK bit: never lost
