@@ -8,12 +8,14 @@ equal to what ``host.judge.analysis`` takes from the whole log (issue #14.1):
 * the power-up rule's inputs (``powerup.starts_at_power_up`` and ``saw_only_the_log``): the
   first accepted summary's UPTIME, and the first accepted page of WHEEL_ENCODERS E2E counts
   (ENC_E2E_OK) with the number of accepted encoder frames before it was made
-  (``powerup.made_at``: before it, or before the summary of its tick).
+  (``powerup.made_at``: before it, or before the summary of its tick), and up to the frame
+  the latest pose before that names (``powerup.pose_named``).
 
 Carried: running counts, first and last times, the last INTEGRATOR value, the first UPTIME,
-the first ENC_E2E_OK page. Whether a page's signal is in the log is decided as
-``BulkDecoder.decode_page`` decides it over the whole log: present in every chunk that holds
-frames of that page (a page with no frame at all in the log has every signal)."""
+the first ENC_E2E_OK page, until it the last ``NAMED_SPAN`` accepted encoder COUNTERs.
+Whether a page's signal is in the log is decided as ``BulkDecoder.decode_page`` decides it
+over the whole log: present in every chunk that holds frames of that page (a page with no
+frame at all in the log has every signal)."""
 
 from __future__ import annotations
 
