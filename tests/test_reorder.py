@@ -37,6 +37,7 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.robot import load
+from tests.test_powerup_delay import first_count_page
 
 # (duration s, seed or None: the default, faults) of the trial's reproductions
 DRIVES = [
@@ -148,15 +149,20 @@ def _live_distance_passes(path: Path) -> bool:
     return not monitor.distance.verdict()
 
 
+# the drive whose first count page came late (``test_a_late_first_status_page_...``)
+LATE_PAGE = (4, 48, "delay=0.05:10,seed=48")
+
+
 @pytest.mark.parametrize("off_mm", [0, 1, 2])
-@pytest.mark.parametrize("drive", DRIVES, ids=[d[2] for d in DRIVES])
+@pytest.mark.parametrize("drive", [*DRIVES, LATE_PAGE], ids=[d[2] for d in [*DRIVES, LATE_PAGE]])
 def test_distance_under_delays_passes_right_and_fails_off_by_a_mm(
     tmp_path: Path, drive: tuple[int, int | None, str], off_mm: int
 ) -> None:
     """DISTANCE under the trial's delays: a right firmware's PASSes in run, the streamed and
     the whole-log analyze and the live judge (the first failed in all but live: a twist naming
     by its repeated ENC_COUNTER a frame 16 periods before the one it carried was judged); one
-    1 or 2 mm off FAILs in all four. Checked against the report's own DISTANCE verdict, so
+    1 or 2 mm off FAILs in all four (``LATE_PAGE``: 1 mm off PASSed in all four, its first
+    count page taken for a cut log's). Checked against the report's own DISTANCE verdict, so
     the pose's verdict does not mask it."""
     path = tmp_path / "drive.blf"
     duration, seed, faults = drive
@@ -196,7 +202,7 @@ def test_a_microsecond_never_flips_the_verdict(
     duration_s: int,
 ) -> None:
     """Every timestamp moved by up to 1 us: the same verdict, whole log and streamed alike; a
-    right firmware PASSes. (A wrong one is not required to FAIL here: see the xfail below.)
+    right firmware PASSes. (That a wrong one FAILs: ``test_powerup_delay``, drawn the same way.)
     Drawn: 4 s drives; the examples: two of the trial's 10 s drives (they failed before)."""
     path = tmp_path / f"d{seed}_{delay_ms}_{share}_{wrong}.blf"
     code = _run(path, (duration_s, seed, f"delay={share}:{delay_ms},seed={seed}"), wrong)
@@ -213,16 +219,21 @@ def test_a_microsecond_never_flips_the_verdict(
         assert verdicts["run"], verdicts
 
 
-@pytest.mark.xfail(strict=True, reason="open: the power-up rule under delay (see docstring)")
 def test_a_late_first_status_page_still_tells_the_power_up(tmp_path: Path) -> None:
-    """Found by the test above, left open: 4 s, ``delay=0.05:10,seed=48``, a firmware whose X is
-    2 LSB off PASSes. Its first ENC_E2E_OK page, made at 0.101 s with 11 encoder frames counted,
-    was held 10 ms and reached the bus after the 12th, so ``powerup.counted_only_the_log`` says
-    the log does not start at power-up, and the start fitted to the samples takes the constant
-    offset in. The rule must count the frames on the bus when the page was made, not when it
-    came (``powerup``, ``stream_facts``, and the live judge alike)."""
-    path = tmp_path / "late_page.blf"
-    assert _run(path, (4, 48, "delay=0.05:10,seed=48"), "X") == 1
+    """Found by the test above: 4 s, ``delay=0.05:10,seed=48``, a firmware whose X is 2 LSB off
+    PASSed. Its first ENC_E2E_OK page, made at 0.101 s with 11 encoder frames counted (as many as
+    were before the summary sent in its tick), was held 10 ms and reached the bus after the 12th,
+    so the judges took the log for one that does not start at power-up, and the start fitted to
+    the samples took the constant offset in. Now they count the frames on the bus when the page
+    was made (``powerup.made_at``): the wrong firmware FAILs everywhere, the right one PASSes
+    (more drives: ``test_powerup_delay``)."""
+    right, wrong = tmp_path / "right.blf", tmp_path / "wrong.blf"
+    drive = LATE_PAGE
+    assert _run(right, drive, None) == 0
+    assert first_count_page(right) == (11, 11, 12)
+    assert all(_verdicts(right, 0).values())
+    verdicts = _verdicts(wrong, _run(wrong, drive, "X"))
+    assert not any(verdicts.values()), verdicts
 
 
 @pytest.mark.xfail(strict=True, reason="open: frames held exactly two periods can still make the "

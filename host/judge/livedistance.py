@@ -121,12 +121,13 @@ class LiveDistance:
         self._frames[seq] = self._sums
         self._frames.pop(seq - KEPT_FRAMES, None)
 
-    def on_counts(self, tracker: PoseTracker, ok: int, lost: int, first_life_page: bool) -> None:
+    def on_counts(self, tracker: PoseTracker, ok: int, lost: int, proven: bool) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS. The first life's first page, after a first
-        summary of UPTIME 0, counting exactly the frames heard: a power-up at the first frame
-        heard (``analyze``'s and the tracker's rule), the offset 0. ENC_E2E_LOST (u8) grown:
-        the fine path since the page before may have been merged on board."""
-        if first_life_page and ok == tracker.enc_seq + 1 and self.first_seq == 0:
+        summary of UPTIME 0, counting exactly the frames heard when it was made (``proven``:
+        ``SourceWatch.on_page``): a power-up at the first frame heard (``analyze``'s and the
+        tracker's rule), the offset 0. ENC_E2E_LOST (u8) grown: the fine path since the page
+        before may have been merged on board."""
+        if proven and self.first_seq == 0:
             self.power_up = True
             if self._feasible is not None:  # judged from 0 all along, as the whole log is
                 self._zero.excess_mm = max(self._zero.excess_mm, self._feasible.excess_mm)

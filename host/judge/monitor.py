@@ -298,6 +298,7 @@ class BusMonitor:
 
     def _on_status(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         page = str(shown.get("PAGE", s.get("PAGE")))
+        proven = self.sources.on_page(page.lower(), s, self.tracker)  # the power-up rule
         if page == "SUMMARY":
             mask = int(s["ERROR_MASK"])
             self.firmware_events += self.latch.observe(self._bus_time_s, int(s["STATE"]),
@@ -305,14 +306,13 @@ class BusMonitor:
             self.status.update(
                 state=shown["STATE"], integrator=shown["INTEGRATOR"], error_mask=mask,
                 errors=error_names(mask), latched_errors=self.latch.latched_names(),
-                uptime_s=int(s["UPTIME"]),
-                reason=str(shown.get("REASON", "NONE")),
+                uptime_s=int(s["UPTIME"]), reason=str(shown.get("REASON", "NONE")),
             )
             integrator = str(shown["INTEGRATOR"]).lower()
             if integrator in ("euler", "rk2", "exact"):
                 self.tracker.on_integrator(integrator)
         elif page == "E2E_WHEEL_ENCODERS":
-            counts = (int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]), self.sources.first_life_page())
+            counts = (int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]), proven)
             self.distance.on_counts(self.tracker, *counts)  # before the tracker moves on
             self.tracker.on_enc_counts(*counts)
         elif page == "FRAME_TOTALS":

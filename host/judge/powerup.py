@@ -15,6 +15,8 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.samples import ENC_E2E_PAGE, Poses
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
+NAMED_SPAN = 8  # a pose names one of the latest 8 encoder frames (``livepose.recent``)
+
 
 def starts_at_power_up(
     frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, onboard: Poses
@@ -58,17 +60,87 @@ def saw_only_the_log(
 def counted_only_the_log(
     frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
 ) -> bool | None:
-    """Whether the firmware had accepted exactly the log's encoder frames when it sent its first
+    """Whether the firmware had accepted exactly the log's encoder frames when it made its first
     ODOM_STATUS page of WHEEL_ENCODERS E2E counts (ENC_E2E_OK): then it primed on the log's first
-    encoder frame. None when the log has no such page."""
+    encoder frame. None when the log has no such page. The frames counted are those before the
+    page was made (``made_at``), not before it reached the bus (a page held back comes after
+    encoder frames it could not count); or those up to the frame the latest pose before that
+    point names (``pose_named``: an encoder frame held back past the tick that made the page
+    came before it on the bus all the same). A log cut by some frames after the power-up (the
+    firmware counted them too) matches neither unless its page's tick came late past as many
+    frames, both its summary and the poses before it (a later tick's pose)."""
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+        summary = decoder.decode_page(frames, "ODOM_STATUS", 0)
     except DecodeError:
         return None
     if "ENC_E2E_OK" not in page or not accepted[page["index"]].any():
         return None
     keep = accepted[page["index"]]
     first, ok = int(page["index"][keep][0]), int(page["ENC_E2E_OK"][keep][0])
+    heard = accepted[summary["index"]] & (summary["index"] < first)
+    last = (int(summary["index"][heard][-1]), int(summary["COUNTER"][heard][-1])) \
+        if heard.any() and "COUNTER" in summary else None
+    made = made_at(first, int(page["COUNTER"][keep][0]) if "COUNTER" in page else None, last,
+                   status_counter_modulo(decoder))
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < first)))
-    return ok == in_log & 0xFFFF
+    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < made)))
+    return ok == in_log & 0xFFFF or ok == pose_named(frames, accepted, decoder, made)
+
+
+def pose_named(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+               before: int) -> int | None:
+    """``named_count`` of the latest accepted ODOM_POSE_X before position ``before`` (where the
+    first count page was made, ``made_at``): the frames the firmware had counted in the tick
+    that sent that pose, whatever came late around it. None when there is none."""
+    try:
+        poses = decoder.decode(frames, "ODOM_POSE_X")
+        encoders = decoder.decode(frames, "WHEEL_ENCODERS")
+    except DecodeError:
+        return None
+    keep = accepted[poses["index"]] & (poses["index"] < before)
+    if "ENC_COUNTER" not in poses or "COUNTER" not in encoders or not keep.any():
+        return None
+    heard = accepted[encoders["index"]] & (encoders["index"] < int(poses["index"][keep][-1]))
+    return named_count(encoders["COUNTER"][heard], int(np.count_nonzero(heard)),
+                       int(poses["ENC_COUNTER"][keep][-1]))
+
+
+def named_count(counters: npt.NDArray[np.int64], heard: int, named: int) -> int | None:
+    """The accepted encoder frames up to and including the one a pose names: its ENC_COUNTER
+    (``named``) is the COUNTER of the latest of the last ``NAMED_SPAN`` accepted before it
+    (``counters``: theirs, or more; ``heard``: how many in all) with that COUNTER (a pose is
+    made after the frame it names). None when none has it. Never more of the log's frames
+    than the firmware had counted in the tick of the first count page, unless the pose is
+    stale by ``NAMED_SPAN`` frames or came from a later tick (``counted_only_the_log``)."""
+    tail = counters[-NAMED_SPAN:]
+    hits = np.flatnonzero(tail == named)
+    return None if len(hits) == 0 else heard - len(tail) + int(hits[-1]) + 1
+
+
+def made_at(page_at: int, page_counter: int | None, summary: tuple[int, int] | None,
+            modulo: int) -> int:
+    """Where in the log the first count page was made: the firmware sends it in the tick of the
+    summary page just before it in its ODOM_STATUS send order (COUNTER one less), so when the
+    latest summary heard before the page (``summary``: its position and COUNTER) is that one,
+    its position (the page may have been held back on the bus after it), else the page's own
+    (``page_at``). Both are on the bus no earlier than the tick that made the page, so the
+    frames before either are never fewer than the firmware had counted: a log cut after the
+    power-up (the firmware counted frames the log lacks) is not taken for a power-up unless
+    both frames of that tick came late, each past as many encoder frames as were cut."""
+    if summary is None or not same_tick(page_counter, summary[1], modulo):
+        return page_at
+    return summary[0]
+
+
+def same_tick(page_counter: int | None, summary_counter: int, modulo: int) -> bool:
+    """The summary was sent in the tick of the count page (``made_at``): COUNTER one less."""
+    return page_counter is not None and summary_counter == (page_counter - 1) % modulo
+
+
+def status_counter_modulo(decoder: BulkDecoder) -> int:
+    """2 ** the bit length of ODOM_STATUS ``COUNTER`` in the DBC (16 when it has none)."""
+    try:
+        return 1 << int(decoder.message("ODOM_STATUS").get_signal_by_name("COUNTER").length)
+    except (DecodeError, KeyError):
+        return 16

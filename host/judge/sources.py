@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.judge.powerup import NAMED_SPAN, same_tick
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.e2e import E2EMonitor, crc8h2f_p02_one
 
@@ -28,6 +29,7 @@ if TYPE_CHECKING:  # the live judges' (a log's analysis imports this module, not
 FIRMWARE_NODE = "ODOM_MCU"  # the DBC node that sends the firmware's frames (ODOM_STATUS, ...)
 UPTIME_MATCH_S = 2.0  # one source's UPTIME (whole s) minus bus time stays within this
 CONFLICT_HOLD_S = 2.0  # CONFLICT is shown this long after two sources last interleaved
+STATUS_COUNTER_MODULO = 16  # ODOM_STATUS's E2E COUNTER (4 bits, as the live E2E check's)
 
 
 @dataclass
@@ -46,12 +48,32 @@ class SourceWatch:
     changed_at_s: float | None = None  # when the offset followed last changed to a new one
     conflict_from_s: float | None = None  # two sources: when the second offset first came
 
-    def first_life_page(self) -> bool:
-        """Called at each ENC_E2E_OK page: whether it is the first life's first and the first
-        summary said UPTIME 0 (with the frames heard, a power-up's evidence:
-        ``PoseTracker.on_enc_counts``). True once."""
-        first, self.page_pending = self.page_pending, False
-        return first and self.first_uptime_s == 0
+    summary: tuple[int, int, int | None] | None = None  # the latest accepted one: COUNTER,
+    # the encoder frames heard, those up to the frame the latest pose names (pose_named_live)
+
+    def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
+        """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
+        whether it is the first life's first ENC_E2E_OK page, after a first summary of UPTIME
+        0, and proves a power-up (``PoseTracker.on_enc_counts``, ``LiveDistance.on_counts``):
+        its ENC_E2E_OK counts the encoder frames heard when the firmware made it, as
+        ``powerup.counted_only_the_log`` counts them (before the summary of its tick when that
+        is the latest heard, for the page may have been held back past frames it could not
+        count, else before it; or up to the frame the latest pose before that names). Once."""
+        if not self.page_pending:  # heard, or a reboot came first: nothing to count
+            return False
+        heard = (tracker.enc_seq + 1, pose_named_live(tracker))
+        if page == "summary":
+            self.summary = (int(signals["COUNTER"]), *heard)
+        if page != "e2e_wheel_encoders":
+            return False
+        self.page_pending = False
+        if self.first_uptime_s != 0:
+            return False
+        if self.summary is not None and same_tick(int(signals["COUNTER"]), self.summary[0],
+                                                  STATUS_COUNTER_MODULO):
+            heard = self.summary[1:]
+        ok = int(signals["ENC_E2E_OK"])
+        return ok == heard[0] & 0xFFFF or ok == heard[1]
 
     def observe(self, t_s: float, uptime_s: int, state: str) -> str | None:
         """One ODOM_STATUS summary; returns ``"reboot"``, ``"two sources"``, ``"uptime jump"``
@@ -165,3 +187,16 @@ def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
         return "reference restarted at the power-up pose"
     tracker.new_life()
     return "reference restarted"
+
+
+def pose_named_live(tracker: PoseTracker) -> int | None:
+    """``powerup.pose_named`` live: the encoder frames heard up to the one the latest pose
+    heard names (its ENC_COUNTER: the latest of the last ``NAMED_SPAN`` frames heard before it
+    with that COUNTER). None when none."""
+    halves = tracker._halves["x"].rows  # (pos, enc_counter, ...) of the latest X halves heard
+    if not halves:
+        return None
+    pos, named = halves[-1][0], int(halves[-1][1])
+    before = [row for row in tracker._window.rows if row[1] < pos][-NAMED_SPAN:]
+    seqs = [int(row[0]) for row in before if int(row[2]) == named]
+    return seqs[-1] + 1 if seqs else None

@@ -7,12 +7,15 @@ equal to what ``host.judge.analysis`` takes from the whole log (issue #14.1):
 * the integrator ODOM_STATUS reports (``samples.pick_integrator``: the last accepted summary's);
 * the power-up rule's inputs (``powerup.starts_at_power_up`` and ``saw_only_the_log``): the
   first accepted summary's UPTIME, and the first accepted page of WHEEL_ENCODERS E2E counts
-  (ENC_E2E_OK) with the number of accepted encoder frames before it.
+  (ENC_E2E_OK) with the number of accepted encoder frames before it was made
+  (``powerup.made_at``: before it, or before the summary of its tick), and up to the frame
+  the latest pose before that names (``powerup.pose_named``).
 
 Carried: running counts, first and last times, the last INTEGRATOR value, the first UPTIME,
-the first ENC_E2E_OK page. Whether a page's signal is in the log is decided as
-``BulkDecoder.decode_page`` decides it over the whole log: present in every chunk that holds
-frames of that page (a page with no frame at all in the log has every signal)."""
+the first ENC_E2E_OK page, until it the last ``NAMED_SPAN`` accepted encoder COUNTERs.
+Whether a page's signal is in the log is decided as ``BulkDecoder.decode_page`` decides it
+over the whole log: present in every chunk that holds frames of that page (a page with no
+frame at all in the log has every signal)."""
 
 from __future__ import annotations
 
@@ -23,7 +26,14 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.powerup import zero_first_sample
+from odocan.host.judge.powerup import (
+    NAMED_SPAN,
+    made_at,
+    named_count,
+    same_tick,
+    status_counter_modulo,
+    zero_first_sample,
+)
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses
 from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
@@ -77,6 +87,10 @@ class StreamFacts:
     _enc_ok: _Signal = field(default_factory=_Signal)
     _has_status: bool = True  # the DBC's ODOM_STATUS is multiplexed
     _accepted_encoders: int = 0  # accepted WHEEL_ENCODERS frames before the first count page
+    _summary: tuple[int, int] | None = None  # ... before the latest summary ahead of it, COUNTER
+    _page_counter: int | None = None  # the first count page's COUNTER
+    _named: tuple[int | None, int | None] = (None, None)  # powerup.pose_named: summary's, page's
+    _tail: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     latch: StatusLatch = field(default_factory=StatusLatch)  # host.judge.statuslatch
     firmware_events: list[dict[str, Any]] = field(default_factory=list)  # ... its events
     set_pose_applied: bool = False  # an ODOM_SET_POSE APPLY ACKed (host.judge.setposes)
@@ -123,12 +137,30 @@ class StreamFacts:
         self._integrator.feed(summary, "INTEGRATOR", keep, self._offset)
         before = self._enc_ok.first is None
         self._enc_ok.feed(counts, "ENC_E2E_OK", accepted[counts["index"]], self._offset)
-        if before:  # count the accepted encoder frames up to the first count page
-            encoders = self.decoder.select(chunk, "WHEEL_ENCODERS")
-            limit = (len(chunk) if self._enc_ok.first_at is None
-                     else self._enc_ok.first_at - self._offset)
-            self._accepted_encoders += int(np.count_nonzero(
-                accepted[encoders] & (encoders < limit)))
+        if before:
+            self._feed_until_counts(chunk, accepted, summary, counts)
+
+    def _feed_until_counts(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_],
+                           summary: dict[str, np.ndarray], counts: dict[str, np.ndarray]) -> None:
+        """Up to the first count page: the accepted encoder frames before it and before the
+        latest accepted summary ahead of it, that summary's COUNTER, the page's COUNTER
+        (``powerup.made_at``)."""
+        limit = (len(chunk) if self._enc_ok.first_at is None
+                 else self._enc_ok.first_at - self._offset)
+        encoders = self.decoder.select(chunk, "WHEEL_ENCODERS")
+        encoders = encoders[accepted[encoders]]
+        named = _NamedBefore(chunk, accepted, self.decoder, (self._tail, self._accepted_encoders))
+        heard = accepted[summary["index"]] & (summary["index"] < limit)
+        if heard.any() and "COUNTER" in summary:
+            at = int(summary["index"][heard][-1])
+            self._summary = (self._accepted_encoders + int(np.count_nonzero(encoders < at)),
+                             int(summary["COUNTER"][heard][-1]))
+            self._named = (named.count(at, self._named[1]), self._named[1])
+        self._named = (self._named[0], named.count(limit, self._named[1]))
+        self._tail = named.tail(limit)
+        self._accepted_encoders += int(np.count_nonzero(encoders < limit))
+        if self._enc_ok.first_at is not None and "COUNTER" in counts:
+            self._page_counter = int(counts["COUNTER"][accepted[counts["index"]]][0])
 
     def covered_s(self) -> float:
         """``analysis._covered_s`` of the frames fed."""
@@ -167,7 +199,12 @@ class StreamFacts:
         """``samples.counted_only_the_log`` of the frames fed."""
         if not self._has_status or not self._enc_ok.present or self._enc_ok.first is None:
             return None
-        return self._enc_ok.first == self._accepted_encoders & 0xFFFF
+        modulo = status_counter_modulo(self.decoder)
+        made = made_at(self._accepted_encoders, self._page_counter, self._summary, modulo)
+        at_summary = self._summary is not None and same_tick(self._page_counter,
+                                                             self._summary[1], modulo)
+        named = self._named[0] if at_summary else self._named[1]
+        return self._enc_ok.first in (made & 0xFFFF, named)
 
     def starts_at_power_up(self, first: Poses) -> bool:
         """``samples.starts_at_power_up``, given the log's first on-board sample (``first``:
@@ -188,3 +225,39 @@ def _applies_set_pose(chunk: FrameArrays, accepted: npt.NDArray[np.bool_],
         return False
     return bool((accepted[acks["index"]] & (acks["REQUEST_ID"] == set_pose_id)
                  & (acks["REQUEST_FIELD"] == APPLY_FIELD) & (acks["RESULT"] == 0)).any())
+
+
+class _NamedBefore:
+    """``powerup.pose_named`` over a chunk, from the accepted encoder frames before it
+    (``before``: the last ``NAMED_SPAN`` COUNTERs of them, how many in all)."""
+
+    def __init__(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_],
+                 decoder: BulkDecoder, before: tuple[npt.NDArray[np.int64], int]) -> None:
+        try:
+            self.poses = decoder.decode(chunk, "ODOM_POSE_X")
+            encoders = decoder.decode(chunk, "WHEEL_ENCODERS")
+        except DecodeError:
+            self.poses, encoders = {}, {}
+        if "ENC_COUNTER" not in self.poses or "COUNTER" not in encoders:
+            self.poses = {}
+            encoders = {"index": np.zeros(0, np.int64), "COUNTER": np.zeros(0, np.int64)}
+        keep = accepted[encoders["index"]]
+        self.index, self.counters = encoders["index"][keep], encoders["COUNTER"][keep]
+        self.accepted, (self.before, self.heard) = accepted, before
+
+    def count(self, at: int, earlier: int | None) -> int | None:
+        """``named_count`` of the latest accepted pose before chunk position ``at``; ``earlier``
+        (a previous chunk's) when there is none in the chunk."""
+        if not self.poses:
+            return None
+        keep = self.accepted[self.poses["index"]] & (self.poses["index"] < at)
+        if not keep.any():
+            return earlier
+        n = int(np.count_nonzero(self.index < int(self.poses["index"][keep][-1])))
+        counters = np.concatenate((self.before, self.counters[:n]))
+        return named_count(counters, self.heard + n, int(self.poses["ENC_COUNTER"][keep][-1]))
+
+    def tail(self, at: int) -> npt.NDArray[np.int64]:
+        """The last ``NAMED_SPAN`` accepted encoder COUNTERs before chunk position ``at``."""
+        n = int(np.count_nonzero(self.index < at))
+        return np.concatenate((self.before, self.counters[:n]))[-NAMED_SPAN:].astype(np.int64)

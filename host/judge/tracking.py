@@ -367,15 +367,13 @@ class PoseTracker:
 
     @property
     def awaiting_boot(self) -> bool:
-        """A new firmware life waits for the frame it primed on (its samples are not judged
-        yet)."""
+        """A new life waits for the frame it primed on (its samples are not judged yet)."""
         return self._boot is not None
 
     def _finish_boot(self, primed: int, first_life: bool = False) -> None:
-        """Start the new life's reference at (0, 0, 0) at encoder frame ``primed`` (seq) and
-        judge the samples heard since the reboot; adopt the next pose when that frame is not
-        known (not heard yet, or no longer in the window). ``first_life``: the log's first, its
-        reference started again (one start), its truth in the truth's own frame."""
+        """Start the new life's reference at (0, 0, 0) at encoder frame ``primed`` (seq), judge
+        the samples heard since the reboot; adopt the next pose when that frame is not known (not
+        heard yet, or left the window). ``first_life``: the log's first (one start)."""
         poses, self._boot, self._boot_poses = self._boot_poses, None, []
         counts = window_counts(self._window, primed)
         if not counts or counts[0][0] != primed:
@@ -389,30 +387,33 @@ class PoseTracker:
 
     def _finish_first(self, proven: bool) -> None:
         """The first life's samples waited for its first ENC_E2E_OK page (``powerup``'s
-        evidence): ``proven``, judged from (0, 0, 0) on frame 0, as ``analyze`` judges them;
-        else (a log cut after the power-up, no page within ``BOOT_COUNT_WAIT_S``) from the first
-        of them, fitted, as before."""
+        evidence): ``proven``, judged from (0, 0, 0) on frame 0 as ``analyze`` judges them (once
+        the integrator is known); else (a cut log, no page within ``BOOT_COUNT_WAIT_S``) from
+        the first of them, fitted."""
         if proven and self.integrator is not None:
             self._finish_boot(0, first_life=True)
             return
         poses, self._boot, self._boot_poses = self._boot_poses, None, []
-        self._pending, self._backlog_poses = poses[0], poses
-        self._backlog_counts = window_counts(self._window, poses[0].seq)
+        counts = window_counts(self._window, 0) if proven else []
+        zero = bool(counts) and counts[0][0] == 0  # frame 0 still in the window
+        self._pending = FramePose(0, 0.0, 0.0, 0.0) if zero else poses[0]
+        self._backlog_poses = poses
+        self._backlog_counts = counts if zero else window_counts(self._window, poses[0].seq)
         if self.integrator is not None:
             self._start_reference(self._pending, self._backlog_counts, poses)
             self._drop_backlog()
 
-    def on_enc_counts(self, ok: int, lost: int, first_life_page: bool = False) -> None:
-        """ODOM_STATUS page E2E_WHEEL_ENCODERS: ENC_E2E_OK (frames accepted since boot, u16)
-        and ENC_E2E_LOST. The first page after a reboot names the frame it primed on
-        (``power_up``); the first life's first, after a first summary of UPTIME 0
-        (``first_life_page``), counting exactly the frames heard proves a power-up: (0, 0, 0)
-        on frame 0, whatever the first pose said (``analyze``'s rule); then ``on_enc_lost``."""
+    def on_enc_counts(self, ok: int, lost: int, proven: bool = False) -> None:
+        """ODOM_STATUS page E2E_WHEEL_ENCODERS: ENC_E2E_OK (u16) and ENC_E2E_LOST. A reboot's
+        first page names the frame it primed on (``power_up``); the first life's first, after a
+        first summary of UPTIME 0, counting exactly the frames heard when it was made
+        (``proven``: ``SourceWatch.on_page``) proves a power-up: (0, 0, 0) on frame 0,
+        whatever the first pose said (``analyze``'s rule); then ``on_enc_lost``."""
         if self._boot is not None and self._boot[0] < 0:  # the first life's samples wait
-            self._finish_first(first_life_page and ok == self.enc_seq + 1)
+            self._finish_first(proven)
         elif self._boot is not None and 0 < ok <= self.enc_seq + 1:
             self._finish_boot(self.enc_seq - ok + 1)
-        elif first_life_page and ok == self.enc_seq + 1 and self.integrator is not None:
+        elif proven and self.integrator is not None:
             self._finish_boot(0, first_life=True)  # the samples judged before keep their errors
         self.on_enc_lost(lost)
 
@@ -442,10 +443,8 @@ class PoseTracker:
     def on_truth(
         self, part: int, enc_counter: int, value: float
     ) -> tuple[FramePose, FramePose | None] | None:
-        """A SIM_TRUTH part (0 X m, 1 Y m, 2 HEADING rad); three of one encoder frame: a sample.
-
-        Returns (truth, reference at that encoder frame or None) once the sample is complete.
-        """
+        """A SIM_TRUTH part (0 X m, 1 Y m, 2 HEADING rad); three of one encoder frame: a sample,
+        returned once complete as (truth, reference at that encoder frame or None)."""
         heard = self._truth_parts.add(part, enc_counter, value)
         if heard is None:
             return None

@@ -322,8 +322,9 @@ class RobotTelemetry:
                   if k not in ("CHECKSUM", "COUNTER", "PAGE")}
         name = self._page_names.get(page) or _page_name(self.db, page)
         self.firmware[name] = fields
+        proven = self.sources.on_page(name, s, self.tracker)  # the power-up rule
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
-            counts = (int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]), self.sources.first_life_page())
+            counts = (int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]), proven)
             self.distance.on_counts(self.tracker, *counts)
             self.tracker.on_enc_counts(*counts)
         elif name == "summary":  # a short DEGRADED or a new ERROR_MASK bit: never lost
