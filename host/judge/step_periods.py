@@ -25,13 +25,15 @@ COUNTER_VALUES = 16  # E2E COUNTER values of WHEEL_ENCODERS (4 bits)
 def widened_periods(seq_periods: IntArray, elapsed_s: FloatArray, cycle_s: float | None
                     ) -> IntArray:
     """Per step: ``seq_periods`` (the sender's sequence step, at least 1) plus the whole COUNTER
-    cycles nearest to the periods ``elapsed_s`` (bus time, s) shows beyond it (never fewer), as
-    the firmware's ``_step_periods`` adds them from its clock. ``seq_periods`` alone without a
-    cycle time (a log with no bus times)."""
+    cycles nearest to the periods ``elapsed_s`` (bus time, s) shows beyond it (never fewer; half
+    a cycle rounds up), as the firmware's ``_step_periods`` adds them from its clock.
+    ``seq_periods`` alone without a cycle time (a log with no bus times)."""
     periods: IntArray = np.maximum(1, seq_periods).astype(np.int64)
     if cycle_s is None or len(periods) == 0:
         return periods
-    beyond = np.rint((np.rint(elapsed_s / cycle_s) - periods) / COUNTER_VALUES)
+    # Half a cycle (8 periods beyond) rounds up, as the firmware's ``(budget - advance) >> 4``
+    # (``budget`` 8 more) does; np.rint (half to even) gave 0 there, and 2 at 40 beyond.
+    beyond = np.floor((np.rint(elapsed_s / cycle_s) - periods) / COUNTER_VALUES + 0.5)
     periods += COUNTER_VALUES * np.maximum(0, beyond).astype(np.int64)
     return periods
 
