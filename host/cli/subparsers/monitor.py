@@ -158,6 +158,9 @@ def _do_monitor(args: argparse.Namespace) -> int:
     code = _end(args, model.snapshot, early_stop(signum, started_s, args.duration))
     if failure is not None:
         raise failure
+    said = model.status.get("profile_mismatch")  # the firmware's PROFILE page vs --robot
+    if said:
+        print(f"monitor: {said}", file=sys.stderr)
     conflict = model.sources.conflict_text()  # two firmwares: a FAIL, no pose judged after
     if conflict:
         print(f"monitor: FAIL: {conflict}", file=sys.stderr)
