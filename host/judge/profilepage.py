@@ -18,14 +18,16 @@ import struct
 import zlib
 from collections import deque
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
-from odocan.host.io.logs import FrameArrays
+from odocan.host.io.logs import FrameArrays, iter_log
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02_one, e2e_messages
 from odocan.sim import robot as robots
+from odocan.sim.exceptions import OdocanError
 from odocan.sim.robot import MM_PER_M, RobotProfile, list_profiles
 
 if TYPE_CHECKING:
@@ -35,6 +37,7 @@ if TYPE_CHECKING:
 PROFILE_PAGE = 6  # ODOM_STATUS PAGE "PROFILE"
 _LAYOUT = "<IIIIBBH"  # the DBC comment's 20 bytes, little-endian
 NM_PER_M = 1_000_000_000
+HEAD_FRAMES = 1 << 13  # frames of a streamed log's head read for the page (~23 s of the rig's bus)
 
 
 @dataclass(frozen=True)
@@ -83,6 +86,18 @@ def running_profile(
         if frames.dlc[int(page["index"][row])] == 8 and data[0] == crc8h2f_p02_one(
                 data, data_ids[data[1] & 0x0F]):
             return RunningProfile(int(page["MAX_WHEEL_SPEED"][row]), int(page["PROFILE_CRC"][row]))
+    return None
+
+
+def head_profile(path: Path, head_frames: int = HEAD_FRAMES) -> RunningProfile | None:
+    """``running_profile`` of a log's first ``head_frames`` frames (a streamed analysis: the
+    page comes every 600 ms, so the head of a log holds it); None when they hold none or the
+    log cannot be read (the analysis says why)."""
+    try:
+        for chunk in iter_log(path, chunk_frames=head_frames, warn=lambda _text: None):
+            return running_profile(chunk)
+    except (OdocanError, OSError):
+        return None
     return None
 
 

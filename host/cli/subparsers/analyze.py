@@ -138,7 +138,12 @@ def _analyze_single(args: argparse.Namespace) -> int:
     from odocan.host.cli.inputs import explained, require_frames
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import analyze
-    from odocan.host.judge.profilepage import profile_mismatch, running_profile, with_bus_speed
+    from odocan.host.judge.profilepage import (
+        head_profile,
+        profile_mismatch,
+        running_profile,
+        with_bus_speed,
+    )
     from odocan.host.outputs import check_distinct
     from odocan.host.report.ci import analysis_checks, write_checks
     from odocan.host.report.progress import wall_clock_progress
@@ -153,9 +158,10 @@ def _analyze_single(args: argparse.Namespace) -> int:
                     ("--mcap", args.mcap)], [("LOG", args.log), ("--dbc", args.dbc)])
     db = load_dbc(args.dbc) if args.dbc is not None else None
     with wall_clock_progress(f"analysing {args.log}", None):
-        analysis = _streamed(args, profile, db) if _streams(args) else None
+        streams = _streams(args)
+        running = head_profile(args.log) if streams and db is None else None
+        analysis = _streamed(args, with_bus_speed(profile, running), db) if streams else None
         frames: FrameArrays | None = None
-        running = None
         if analysis is None:
             frames = whole = read_log(args.log)
             if db is not None:  # another DBC: its own checks say whether it matches the log
