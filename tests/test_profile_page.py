@@ -196,6 +196,8 @@ def test_the_monitor_model_names_another_robots_profile(kobuki_log: Path) -> Non
     for msg in can.LogReader(str(kobuki_log)):
         right.feed(msg)
     assert right.status["profile_mismatch"] is None
+    assert right.status["max_wheel_speed_m_s"] == 0.7  # the bus's bound, which the judges take
+    assert right.tracker.geometry.max_wheel_speed_mm_s == 700
 
 
 def test_a_log_without_the_page_is_judged_as_before(

@@ -315,7 +315,7 @@ class BusMonitor:
         elif page == "FRAME_TOTALS":
             self.status.update({k.lower(): int(v) for k, v in s.items() if k.endswith("_FRAMES")})
         elif page == "PROFILE":  # what the firmware runs with, against --robot (profilepage)
-            follow_profile(self, self._bus_time_s, int(s["MAX_WHEEL_SPEED"]), int(s["PROFILE_CRC"]))
+            follow_profile(self, self._bus_time_s, s["MAX_WHEEL_SPEED"], int(s["PROFILE_CRC"]))
 
     def _watch_source(self, uptime_s: int, state: str) -> None:
         """Reboots and a second source, from the summary's UPTIME and STATE (module docstring)."""

@@ -165,21 +165,26 @@ class _Model(Protocol):
     distance: LiveDistance
 
 
-def follow_profile(model: _Model, t_s: float, max_wheel_speed_mm_s: int, crc: int) -> None:
-    """The live side (monitor, bridge): a PROFILE page heard at ``t_s``. When it says something
+def follow_profile(model: _Model, t_s: float, max_wheel_speed_m_s: float, crc: int) -> None:
+    """The live side (monitor): a PROFILE page heard at ``t_s`` (MAX_WHEEL_SPEED decoded, in
+    m/s; PROFILE_CRC). When it says something
     new, the status shows the firmware's CRC and bound, the live judges take that bound (the
     step gate from its next reference start), and a mismatch with the robot the model was built
-    for becomes one ``profile`` event and ``status["profile_mismatch"]``."""
+    for, run with the integrator the firmware reports (``--integrator`` is the judge's choice),
+    becomes one ``profile`` event and ``status["profile_mismatch"]``."""
     shown = f"0x{crc:08X}"
     if model.status.get("profile_crc") == shown:
         return
+    max_wheel_speed_mm_s = round(max_wheel_speed_m_s * MM_PER_M)
     running = RunningProfile(max_wheel_speed_mm_s, crc)
     model.status.update(profile_crc=shown, max_wheel_speed_m_s=running.max_wheel_speed_m_s)
     tracker = model.tracker
     tracker.geometry = dataclasses.replace(tracker.geometry,
                                            max_wheel_speed_mm_s=max_wheel_speed_mm_s)
     model.distance.max_wheel_speed_mm_s = max_wheel_speed_mm_s
-    said = profile_mismatch(running, model.distance.robot, tracker.integrator or "exact")
+    reported = str(model.status.get("integrator", "")).lower()  # the firmware's own: a judge's
+    integrator = reported if reported in INTEGRATORS else tracker.integrator or "exact"  # choice
+    said = profile_mismatch(running, model.distance.robot, integrator)  # is no mismatch
     model.status["profile_mismatch"] = said
     if said is not None:
         model.events.append({"t_s": t_s, "kind": "profile", "detail": said})

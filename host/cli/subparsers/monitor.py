@@ -158,9 +158,6 @@ def _do_monitor(args: argparse.Namespace) -> int:
     code = _end(args, model.snapshot, early_stop(signum, started_s, args.duration))
     if failure is not None:
         raise failure
-    said = model.status.get("profile_mismatch")  # the firmware's PROFILE page vs --robot
-    if said:
-        print(f"monitor: {said}", file=sys.stderr)
     conflict = model.sources.conflict_text()  # two firmwares: a FAIL, no pose judged after
     if conflict:
         print(f"monitor: FAIL: {conflict}", file=sys.stderr)
@@ -170,6 +167,9 @@ def _do_monitor(args: argparse.Namespace) -> int:
     distance = model.distance.verdict()  # ODOM_TWIST DISTANCE wrong in some life: FAIL
     if distance:
         print(f"monitor: FAIL: {distance[0]}", file=sys.stderr)
+    said = model.status.get("profile_mismatch")  # the firmware's PROFILE page vs --robot
+    if said:
+        print(f"monitor: {said}", file=sys.stderr)
     return 1 if (wrongs.count or conflict or distance) and code == 0 else code
 
 
