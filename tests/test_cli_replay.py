@@ -317,7 +317,8 @@ def test_replay_on_the_wrong_robot_fails_and_names_the_right_one(
     at = lines.index("FAIL: the replayed firmware departs from the log's")
     assert lines[at + 1].startswith("  - its position differs from the log's by up to ")
     assert lines[at + 2].startswith("  - its heading differs from the log's by up to ")
-    assert lines[at + 3:] == [f"  - {said}"]
+    assert lines[at + 3:] == [f"  - {said}", "  - robot mismatch: the log's poses fit robot "
+                              "'kobuki', not 'pmir' (--robot)"]
     report = json.loads(report_path.read_text())
     assert report["passed"] is False
     assert report["replay"]["faults"] == [
@@ -337,9 +338,10 @@ def test_replay_on_a_custom_robot_names_the_shipped_one_that_fits(
     code, out, _ = run_cli(capsys, "replay", str(kobuki_log), "--robot", str(custom),
                            "--integrator", "exact")
     assert code == 1
-    assert out.splitlines()[-1] == ("  - profile mismatch: profile hash differs: the log's "
-                                    "firmware runs with the parameters of robot 'kobuki', not "
-                                    "'odd' (--robot)")
+    assert out.splitlines()[-2:] == [
+        "  - profile mismatch: profile hash differs: the log's firmware runs with the parameters "
+        "of robot 'kobuki', not 'odd' (--robot)",
+        "  - robot mismatch: the log's poses fit robot 'kobuki', not 'odd' (--robot)"]
 
 
 def test_replay_reproduces_a_log_written_with_the_firmwares_integers(

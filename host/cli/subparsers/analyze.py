@@ -184,13 +184,13 @@ def _analyze_single(args: argparse.Namespace) -> int:
                                            args.dbc)
     said = profile_mismatch(running, profile, analysis.report["integrator"])
     hints: list[str] = [] if said is None else [said]  # the firmware's PROFILE page names it
-    if not analysis.passed and db is None and said is None:  # a wrong --robot must not read
-        from odocan.host.judge.diagnosis import mismatches  # as a firmware fault
+    if not analysis.passed and db is None:  # a wrong --robot must not read as a firmware fault
+        from odocan.host.judge.diagnosis import mismatches
 
         frames = frames if frames is not None else read_log(args.log)  # a failed verdict only
         report = analysis.report
-        hints = mismatches(frames, with_bus_speed(profile, running), report["integrator"],
-                           report["integrator_source"], args.tolerance)
+        hints += mismatches(frames, with_bus_speed(profile, running), report["integrator"],
+                            report["integrator_source"], args.tolerance)
     if hints:
         analysis.report["diagnosis"] = hints
     code = finish(analysis, args, title=f"odocan analyze: {args.log}")

@@ -121,8 +121,8 @@ def _do_replay(args: argparse.Namespace) -> int:
     _print_versus_log(section)
     analysis.report["inputs"] = log_inputs(args.log, profile, integrator, None)
     reasons = departures(section["onboard_vs_log"], args.tolerance)
-    if reasons:  # the firmware's own word on its profile first, else the poses' fit
-        reasons += [said] if said is not None else diagnose(
+    if reasons:  # the firmware's own word on its profile first, then the poses' fit
+        reasons += ([] if said is None else [said]) + diagnose(
             frames, feed.accepted, with_bus_speed(profile, running), integrator, args.tolerance)
     section.update(passed=not reasons, faults=reasons)
     title = f"odocan replay: {args.log} on {profile.name}, {integrator} integrator"
