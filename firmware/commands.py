@@ -13,7 +13,13 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from odocan.firmware import frames as fr
-from odocan.firmware.config import ConfigReason, RobotParams, derive_constants, validate_at_speed
+from odocan.firmware.config import (
+    ConfigReason,
+    RobotParams,
+    derive_constants,
+    profile_crc32,
+    validate_at_speed,
+)
 from odocan.firmware.e2e import E2EReceiver
 from odocan.firmware.errors import ErrorFlag, State
 from odocan.firmware.fixmath import U64_MAX
@@ -138,6 +144,7 @@ class Commands:
         if bits_changed:
             ecu.odometry.unprime()
         ecu.params = candidate
+        ecu.profile_crc = profile_crc32(candidate)
         ecu.odometry.reconfigure(derive_constants(candidate, ecu.errors))
         ecu.encoders.max_wheel_speed_mm_s = candidate.max_wheel_speed_mm_s
         ecu.encoders.reconfigure(bits_changed)

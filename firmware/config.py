@@ -148,6 +148,44 @@ def max_counts_per_period(
     return (travel_q48_m + per_count_q48_m - 1) // per_count_q48_m + 1
 
 
+CRC32_POLY_REFLECTED = 0xEDB88320  # CRC-32/ISO-HDLC (zlib's), bit-reversed 0x04C11DB7
+U32_ALL_ONES = 0xFFFFFFFF
+
+
+def profile_bytes(params: RobotParams) -> bytes:
+    """The 20-byte parameter set ODOM_STATUS PROFILE_CRC covers (the DBC comment): each field
+    little-endian in ODOM_CONFIG PARAM order, COUNTS_PER_REV u32, WHEEL_RADIUS_LEFT u32 nm,
+    WHEEL_RADIUS_RIGHT u32 nm, WHEELBASE u32 nm, COUNTER_BITS u8, INTEGRATOR u8, MAX_WHEEL_SPEED
+    u16 mm/s (C: a uint8_t[20] filled byte by byte, so the MCU's own byte order does not matter).
+    Each value keeps its field's width, as the configuration stores it."""
+    fields = (
+        (params.counts_per_rev, 4),
+        (params.wheel_radius_left_nm, 4),
+        (params.wheel_radius_right_nm, 4),
+        (params.wheelbase_nm, 4),
+        (params.counter_bits, 1),
+        (params.integrator, 1),
+        (params.max_wheel_speed_mm_s, 2),
+    )
+    out = bytearray()
+    for value, size in fields:
+        for k in range(size):
+            out.append((value >> (8 * k)) & 0xFF)
+    return bytes(out)
+
+
+def profile_crc32(params: RobotParams) -> int:
+    """u32: CRC-32/ISO-HDLC of ``profile_bytes(params)``, bit by bit (configuration time only:
+    160 shift-and-xor steps, no table in flash). C: ``crc ^= byte; for 8 bits: crc = (crc >> 1)
+    ^ (crc & 1u ? 0xEDB88320u : 0u);`` from ``crc = 0xFFFFFFFFu``, then ``crc ^ 0xFFFFFFFFu``."""
+    crc = U32_ALL_ONES
+    for byte in profile_bytes(params):
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ (CRC32_POLY_REFLECTED if crc & 1 else 0)
+    return crc ^ U32_ALL_ONES
+
+
 def derive_constants(params: RobotParams, errors: ErrorMask) -> OdomConstants:
     """Q constants of a validated ``params`` (call ``validate`` first: ranges keep every width)."""
     return OdomConstants(

@@ -57,7 +57,13 @@ from odocan.firmware.clock import TICKS_PER_SECOND as TICKS_PER_SECOND
 from odocan.firmware.clock import WATCHDOG_TICKS as WATCHDOG_TICKS
 from odocan.firmware.clock import FirmwareClock
 from odocan.firmware.commands import Commands
-from odocan.firmware.config import ConfigReason, RobotParams, derive_constants, validate_at_speed
+from odocan.firmware.config import (
+    ConfigReason,
+    RobotParams,
+    derive_constants,
+    profile_crc32,
+    validate_at_speed,
+)
 from odocan.firmware.e2e import E2EReceiver
 from odocan.firmware.encoders import MAX_WHEEL_SPEED_MM_S as MAX_WHEEL_SPEED_MM_S
 from odocan.firmware.encoders import RESYNC_FRAMES as RESYNC_FRAMES
@@ -113,6 +119,7 @@ class OdomEcu:
         if validate_at_speed(params, params.max_wheel_speed_mm_s) is not ConfigReason.OK:
             self.health.config_fault()
         self.params = params
+        self.profile_crc = profile_crc32(params)  # u32: ODOM_STATUS PROFILE_CRC
         self.odometry = Odometry(derive_constants(params, self.errors), self.errors)
         self.mailbox = Mailbox()
         self.reception = Reception(self.errors)

@@ -134,7 +134,8 @@ class AckReason(IntEnum):
 
 
 class StatusPage(IntEnum):
-    """ODOM_STATUS multiplexer ``PAGE``: 0 summary, 1 totals, 2.. E2E counts of one message each."""
+    """ODOM_STATUS multiplexer ``PAGE``: 0 summary, 1 totals, 2..5 E2E counts of one message
+    each, 6 the running profile."""
 
     SUMMARY = 0
     FRAME_TOTALS = 1
@@ -142,6 +143,7 @@ class StatusPage(IntEnum):
     E2E_ODOM_SET_POSE = 3
     E2E_ODOM_CONFIG = 4
     E2E_NAV_GOAL = 5
+    PROFILE = 6  # the robot parameters the firmware runs with: MAX_WHEEL_SPEED, PROFILE_CRC
 
 
 class NavGoalField(IntEnum):
@@ -480,5 +482,17 @@ def pack_odom_status_e2e(
         | ((repeated & 0xFF) << 40)
         | ((crc_error & 0xFF) << 48)
         | ((wrong_sequence & 0xFF) << 56)
+    )
+    return seal_frame(word, ODOM_STATUS_DATA_IDS)
+
+
+def pack_odom_status_profile(counter: int, max_wheel_speed_mm_s: int, profile_crc: int) -> bytes:
+    """ODOM_STATUS page 6: the plausibility bound in use (u16 mm/s, as configured: an invalid
+    configuration's value is shown as it is) and the CRC-32 of the parameter set the firmware
+    runs with (``config.profile_crc32``)."""
+    word = (
+        e2e_head(counter, StatusPage.PROFILE)
+        | (wrap_u16(max_wheel_speed_mm_s) << 16)
+        | (wrap_u32(profile_crc) << 32)
     )
     return seal_frame(word, ODOM_STATUS_DATA_IDS)

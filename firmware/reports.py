@@ -1,9 +1,10 @@
 """Step 5 of the tick: the scheduled transmissions, at the DBC's cycle times.
 
 ODOM_POSE_X/Y and ODOM_TWIST every 20 ms (once out of INIT), ODOM_STATUS every 100 ms (the
-summary page, then one rotating page of counts), MOTOR_CMD every 20 ms while navigating,
-NAV_STATUS every 100 ms and in the tick its STATE or GOAL_ID changes, ODOM_FRESHNESS when SecOC
-has one due (``firmware.auth``). Each reads the ECU's state; none changes it.
+summary page, then one rotating page of counts or the running profile), MOTOR_CMD every 20 ms
+while navigating, NAV_STATUS every 100 ms and in the tick its STATE or GOAL_ID changes,
+ODOM_FRESHNESS when SecOC has one due (``firmware.auth``).
+Each reads the ECU's state; none changes it.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ _ROTATING_PAGES = (
     fr.StatusPage.E2E_ODOM_SET_POSE,
     fr.StatusPage.E2E_ODOM_CONFIG,
     fr.StatusPage.E2E_NAV_GOAL,
+    fr.StatusPage.PROFILE,
 )
 
 
@@ -131,9 +133,14 @@ class Reports:
         ecu.tx.send(fr.ODOM_STATUS_ID, self._status_page(page))
 
     def _status_page(self, page: fr.StatusPage) -> bytes:
-        """One rotating page: the frame totals, or one received message's E2E counts."""
+        """One rotating page: the frame totals, one received message's E2E counts, or the
+        profile the firmware runs with."""
         ecu = self._ecu
         counter = ecu.tx.next_counter(fr.ODOM_STATUS_ID)
+        if page is fr.StatusPage.PROFILE:
+            return fr.pack_odom_status_profile(
+                counter, ecu.params.max_wheel_speed_mm_s, ecu.profile_crc
+            )
         if page is fr.StatusPage.FRAME_TOTALS:
             return fr.pack_odom_status_frame_totals(
                 counter, ecu.rx_encoders.lost_frames, ecu.frames_rejected, ecu.mailbox.overflows

@@ -259,6 +259,9 @@ def _firmware_packers() -> dict[tuple[str, int | None], Callable[[int], bytes]]:
             fr.pack_odom_status_e2e, page=page, ok=1000, lost=1, repeated=2, crc_error=3,
             wrong_sequence=4,
         )
+    packers["ODOM_STATUS", int(fr.StatusPage.PROFILE)] = lambda c: fr.pack_odom_status_profile(
+        c, 4000, 0x12345678
+    )
     for part in sf.SimTruthPart:
         packers["SIM_TRUTH", int(part)] = partial(
             sf.pack_sim_truth, part=part, enc_counter=9, value=-4321, errors=e

@@ -190,6 +190,13 @@ class OdomStatusE2E(NamedTuple):
     wrong_sequence: u8
 
 
+class OdomStatusProfile(NamedTuple):
+    counter: int
+    page: int  # StatusPage.PROFILE
+    max_wheel_speed: u16  # mm/s
+    profile_crc: u32
+
+
 class SimTruth(NamedTuple):
     counter: int
     part: int  # SimTruthPart
@@ -369,8 +376,8 @@ def unpack_odom_freshness(data: bytes | bytearray) -> OdomFreshness:
 
 def unpack_odom_status(
     data: bytes | bytearray,
-) -> OdomStatusSummary | OdomStatusFrameTotals | OdomStatusE2E:
-    """ODOM_STATUS: the record of the page carried (pages >= 2 all share the E2E layout)."""
+) -> OdomStatusSummary | OdomStatusFrameTotals | OdomStatusE2E | OdomStatusProfile:
+    """ODOM_STATUS: the record of the page carried (pages 2..5 share the E2E layout)."""
     w = frame_word(data)
     counter = (w >> 8) & U4_MAX
     page = (w >> 12) & U4_MAX
@@ -385,6 +392,8 @@ def unpack_odom_status(
         )
     if page == StatusPage.FRAME_TOTALS:
         return OdomStatusFrameTotals(counter, (w >> 16) & U16_MAX, (w >> 32) & U16_MAX, w >> 48)
+    if page == StatusPage.PROFILE:
+        return OdomStatusProfile(counter, page, (w >> 16) & U16_MAX, w >> 32)
     return OdomStatusE2E(
         counter,
         page,

@@ -310,13 +310,15 @@ def test_replay_on_the_wrong_robot_fails_and_names_the_right_one(
     """Issue #11: a kobuki log replayed on the default pmir used to print PASS, 14 m off."""
     report_path = tmp_path / "replay.json"
     code, out, err = run_cli(capsys, "replay", str(kobuki_log), "--report", str(report_path))
-    assert (code, err) == (1, "")
+    said = ("profile mismatch: profile hash differs: the log's firmware runs with the parameters "
+            "of robot 'kobuki', not 'pmir' (--robot)")  # its ODOM_STATUS PROFILE page says so
+    assert (code, err) == (1, f"warning: {said}\n")  # up front, then as the departure's cause
     lines = out.splitlines()
     at = lines.index("FAIL: the replayed firmware departs from the log's")
     assert lines[at + 1].startswith("  - its position differs from the log's by up to ")
     assert lines[at + 2].startswith("  - its heading differs from the log's by up to ")
-    assert lines[at + 3:] == ["  - robot mismatch: the log's poses fit robot 'kobuki', not "
-                              "'pmir' (--robot)"]
+    assert lines[at + 3:] == [f"  - {said}", "  - robot mismatch: the log's poses fit robot "
+                              "'kobuki', not 'pmir' (--robot)"]
     report = json.loads(report_path.read_text())
     assert report["passed"] is False
     assert report["replay"]["faults"] == [
@@ -336,8 +338,10 @@ def test_replay_on_a_custom_robot_names_the_shipped_one_that_fits(
     code, out, _ = run_cli(capsys, "replay", str(kobuki_log), "--robot", str(custom),
                            "--integrator", "exact")
     assert code == 1
-    assert out.splitlines()[-1] == ("  - robot mismatch: the log's poses fit robot 'kobuki', not "
-                                    "'odd' (--robot)")
+    assert out.splitlines()[-2:] == [
+        "  - profile mismatch: profile hash differs: the log's firmware runs with the parameters "
+        "of robot 'kobuki', not 'odd' (--robot)",
+        "  - robot mismatch: the log's poses fit robot 'kobuki', not 'odd' (--robot)"]
 
 
 def test_replay_reproduces_a_log_written_with_the_firmwares_integers(

@@ -26,7 +26,9 @@ def test_analyze_with_the_wrong_robot_names_the_robot_that_fits(
     out = capsys.readouterr().out
     hint = "robot mismatch: the log's poses fit robot 'kobuki', not 'pmir' (--robot)"
     assert hint in out
-    assert json.loads(report.read_text())["diagnosis"] == [hint]
+    said = ("profile mismatch: profile hash differs: the log's firmware runs with the parameters "
+            "of robot 'kobuki', not 'pmir' (--robot)")  # its ODOM_STATUS PROFILE page, first
+    assert json.loads(report.read_text())["diagnosis"] == [said, hint]
 
 
 def test_analyze_with_the_right_robot_says_nothing_of_the_kind(
@@ -48,7 +50,8 @@ def test_analyze_with_the_wrong_integrator_names_the_logged_one(
                  "--report", str(report)]) == 1
     hint = "integrator mismatch: the log's ODOM_STATUS reports exact, not euler (--integrator)"
     assert hint in capsys.readouterr().out
-    assert json.loads(report.read_text())["diagnosis"] == [hint]
+    said = "profile mismatch: the log's firmware runs with integrator exact, not euler"
+    assert json.loads(report.read_text())["diagnosis"] == [said, hint]
 
 
 def test_analyze_with_the_wrong_integrator_and_robot_names_both(

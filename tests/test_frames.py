@@ -278,6 +278,12 @@ KINDS = [
     status_e2e_kind(3, "SET_POSE"),
     status_e2e_kind(4, "CONFIG"),
     status_e2e_kind(5, "NAV_GOAL"),
+    Kind(
+        "ODOM_STATUS",
+        6,
+        lambda c, v, _e: f.pack_odom_status_profile(c, v["MAX_WHEEL_SPEED"], v["PROFILE_CRC"]),
+        lambda d: as_signals(hf.unpack_odom_status(d), {}),
+    ),
     *(
         nav_goal_kind(int(field), field.name if field <= f.NavGoalField.HEADING else None)
         for field in f.NavGoalField
@@ -442,6 +448,8 @@ WRAPPING = [
     ("NAV_GOAL", 2, "HEADING", 16),
     ("NAV_STATUS", None, "HEADING_ERROR", 16),
     ("ODOM_STATUS", 5, "NAV_GOAL_E2E_WRONG_SEQ", 8),
+    ("ODOM_STATUS", 6, "MAX_WHEEL_SPEED", 16),
+    ("ODOM_STATUS", 6, "PROFILE_CRC", 32),
 ]
 
 

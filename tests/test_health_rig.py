@@ -388,8 +388,8 @@ def test_multiplexed_messages_have_per_page_rates_and_jitter() -> None:
     assert status["jitter_ms"] is None
     assert truth["jitter_ms"] is None
     assert status["pages"]["SUMMARY"]["rate_hz"] == pytest.approx(10.0)
-    for page in ("FRAME_TOTALS", "E2E_WHEEL_ENCODERS", "E2E_NAV_GOAL"):
-        assert status["pages"][page]["rate_hz"] == pytest.approx(2.0)
+    for page in ("FRAME_TOTALS", "E2E_WHEEL_ENCODERS", "E2E_NAV_GOAL", "PROFILE"):
+        assert status["pages"][page]["rate_hz"] == pytest.approx(10.0 / 6)  # six rotate
     for part in ("X", "Y", "HEADING"):
         assert truth["pages"][part]["rate_hz"] == pytest.approx(10.0)
     for pages in (status["pages"], truth["pages"]):

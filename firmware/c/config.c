@@ -115,3 +115,26 @@ static uint64_t bam64_per_count(uint32_t radius_nm, const struct robot_params *p
     return muldiv_round_u64((uint64_t)radius_nm << 32, UINT64_C(1) << 32,
                             (uint64_t)params->counts_per_rev * params->wheelbase_nm, errors);
 }
+
+/* CRC-32/ISO-HDLC of the 20-byte parameter set ODOM_STATUS PROFILE_CRC covers (the DBC comment):
+ * each field little-endian in ODOM_CONFIG PARAM order, filled byte by byte (the MCU's own byte
+ * order does not matter); bit by bit, configuration time only (config.py profile_crc32). */
+uint32_t profile_crc32(const struct robot_params *params)
+{
+    const uint32_t values[7] = {
+        params->counts_per_rev, params->wheel_radius_left_nm, params->wheel_radius_right_nm,
+        params->wheelbase_nm,   params->counter_bits,         params->integrator,
+        params->max_wheel_speed_mm_s,
+    };
+    static const unsigned sizes[7] = {4u, 4u, 4u, 4u, 1u, 1u, 2u};
+    uint32_t crc = 0xFFFFFFFFu;
+    for (unsigned f = 0u; f < 7u; ++f) {
+        for (unsigned k = 0u; k < sizes[f]; ++k) {
+            crc ^= (values[f] >> (8u * k)) & 0xFFu;
+            for (unsigned bit = 0u; bit < 8u; ++bit) {
+                crc = (crc >> 1) ^ ((crc & 1u) != 0u ? 0xEDB88320u : 0u);
+            }
+        }
+    }
+    return crc ^ 0xFFFFFFFFu;
+}

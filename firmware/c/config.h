@@ -75,5 +75,6 @@ uint64_t max_counts_per_period(uint64_t per_count_q48_m, uint32_t max_wheel_spee
                                uint32_t *errors);
 void derive_constants(const struct robot_params *params, uint32_t *errors,
                       struct odom_constants *out);
+uint32_t profile_crc32(const struct robot_params *params);
 
 #endif

@@ -27,9 +27,10 @@
 enum tx_index { TX_MOTOR_CMD, TX_POSE_X, TX_POSE_Y, TX_TWIST, TX_ACK, TX_STATUS, TX_NAV_STATUS,
                 TX_FRESHNESS };
 
-static const enum status_page ROTATING_PAGES[5] = {
-    PAGE_FRAME_TOTALS, PAGE_E2E_WHEEL_ENCODERS, PAGE_E2E_ODOM_SET_POSE, PAGE_E2E_ODOM_CONFIG,
-    PAGE_E2E_NAV_GOAL,
+#define ROTATING_PAGE_COUNT 6u
+static const enum status_page ROTATING_PAGES[ROTATING_PAGE_COUNT] = {
+    PAGE_FRAME_TOTALS,    PAGE_E2E_WHEEL_ENCODERS, PAGE_E2E_ODOM_SET_POSE, PAGE_E2E_ODOM_CONFIG,
+    PAGE_E2E_NAV_GOAL,    PAGE_PROFILE,
 };
 
 /* --- the mailbox (firmware/mailbox.py) --- */
@@ -135,6 +136,7 @@ void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
         ecu->reason = REASON_CONFIG_INVALID;
     }
     ecu->params = *params;
+    ecu->profile_crc = profile_crc32(params);
     struct odom_constants consts;
     derive_constants(params, &ecu->errors, &consts);
     odometry_init(&ecu->odometry, &consts, &ecu->errors);
@@ -895,6 +897,7 @@ static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame)
         ecu->counts_prev_valid = false;
     }
     ecu->params = candidate;
+    ecu->profile_crc = profile_crc32(&candidate);
     struct odom_constants consts;
     derive_constants(&candidate, &ecu->errors, &consts);
     odometry_reconfigure(&ecu->odometry, &consts);
@@ -1032,9 +1035,12 @@ static void send_status(struct odom_ecu *ecu)
         ecu->unreported = false; /* the bus has seen the episode: it may recover (health.py) */
     }
     enum status_page page = ROTATING_PAGES[ecu->page_index];
-    ecu->page_index = (ecu->page_index + 1u) % 5u;
+    ecu->page_index = (ecu->page_index + 1u) % ROTATING_PAGE_COUNT;
     uint8_t counter = next_counter(ecu, TX_STATUS);
-    if (page == PAGE_FRAME_TOTALS) {
+    if (page == PAGE_PROFILE) {
+        pack_odom_status_profile(data, counter, ecu->params.max_wheel_speed_mm_s,
+                                 ecu->profile_crc);
+    } else if (page == PAGE_FRAME_TOTALS) {
         pack_odom_status_frame_totals(data, counter, ecu->rx_encoders.lost_frames,
                                       ecu_frames_rejected(ecu), ecu->mailbox.overflows);
     } else {

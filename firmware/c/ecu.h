@@ -53,6 +53,7 @@ struct odom_ecu {
     enum ecu_state state;
     enum reason reason;
     struct robot_params params;
+    uint32_t profile_crc; /* ODOM_STATUS PROFILE_CRC of params */
     struct odometry odometry;
     uint32_t max_wheel_speed_mm_s;     /* u16: an encoder step beyond it is implausible */
     uint64_t max_counts_per_period[2]; /* per wheel, at max_wheel_speed_mm_s */

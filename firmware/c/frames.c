@@ -301,3 +301,18 @@ void pack_odom_freshness(uint8_t out[8], uint8_t counter, int64_t cause, uint64_
     (void)odocan_odom_freshness_pack(out, &m, 8u);
     seal(out, ODOM_FRESHNESS_E2E_SLOT);
 }
+
+/* ODOM_STATUS page 6: the plausibility bound in use (u16 mm/s, as configured) and the CRC-32 of
+ * the parameter set the firmware runs with (config.c profile_crc32). */
+void pack_odom_status_profile(uint8_t out[8], uint8_t counter, uint32_t max_wheel_speed_mm_s,
+                              uint32_t profile_crc)
+{
+    struct odocan_odom_status_t m;
+    (void)odocan_odom_status_init(&m);
+    m.counter = (uint8_t)(counter & COUNTER_MASK);
+    m.page = PAGE_PROFILE;
+    m.max_wheel_speed = (uint16_t)max_wheel_speed_mm_s;
+    m.profile_crc = profile_crc;
+    (void)odocan_odom_status_pack(out, &m, 8u);
+    seal(out, ODOM_STATUS_E2E_SLOT);
+}

@@ -49,7 +49,8 @@ enum config_param { PARAM_COUNTS_PER_REV = 0, PARAM_WHEEL_RADIUS_LEFT = 1,
                     PARAM_APPLY = 15 };
 enum ack_result { ACK_RESULT_ACK = 0, ACK_RESULT_NACK = 1 };
 enum status_page { PAGE_SUMMARY = 0, PAGE_FRAME_TOTALS = 1, PAGE_E2E_WHEEL_ENCODERS = 2,
-                   PAGE_E2E_ODOM_SET_POSE = 3, PAGE_E2E_ODOM_CONFIG = 4, PAGE_E2E_NAV_GOAL = 5 };
+                   PAGE_E2E_ODOM_SET_POSE = 3, PAGE_E2E_ODOM_CONFIG = 4, PAGE_E2E_NAV_GOAL = 5,
+                   PAGE_PROFILE = 6 };
 
 /* A multiplexed request's record: counter, multiplexer, value read per field. */
 struct mux_record {
@@ -92,6 +93,8 @@ void pack_odom_status_summary(uint8_t out[8], uint8_t counter, int64_t state, in
                               int64_t reason);
 void pack_odom_status_frame_totals(uint8_t out[8], uint8_t counter, uint32_t lost,
                                    uint32_t rejected, uint32_t overflowed);
+void pack_odom_status_profile(uint8_t out[8], uint8_t counter, uint32_t max_wheel_speed_mm_s,
+                              uint32_t profile_crc);
 void pack_odom_status_e2e(uint8_t out[8], uint8_t counter, enum status_page page, uint32_t ok,
                           uint32_t lost, uint32_t repeated, uint32_t crc_error,
                           uint32_t wrong_sequence);

@@ -16,10 +16,11 @@ cantools cannot decode are counted as ``undecodable``. Per DBC message it keeps:
   ``last_frame``, the signals of its latest frame alone, is what the screen shows).
 
 From the decoded frames it follows the firmware: ``status`` (ODOM_STATUS: STATE, INTEGRATOR,
-ERROR_MASK with the bits named after ``firmware.errors.ErrorFlag``, UPTIME, frame totals) and the
-pose (``PoseTracker``): the on-board pose (ODOM_POSE_X + ODOM_POSE_Y naming one encoder frame)
-against a float64 ``ReferenceOdometry`` fed WHEEL_ENCODERS, compared at the very encoder frame the
-pose names (ENC_COUNTER), and against SIM_TRUTH when the bus carries it.
+ERROR_MASK with the bits named after ``firmware.errors.ErrorFlag``, UPTIME, frame totals, the
+PROFILE page: CRC, bound, a mismatch with the robot, ``host.judge.profilepage``) and the pose
+(``PoseTracker``): the on-board pose (ODOM_POSE_X + ODOM_POSE_Y naming one encoder frame) against
+a float64 ``ReferenceOdometry`` fed WHEEL_ENCODERS, compared at the very encoder frame the pose
+names (ENC_COUNTER), and against SIM_TRUTH when the bus carries it.
 
 Health (``health`` in the snapshot): the verdict never says OK while the pose shown may be wrong.
 A node is **stale** once none of its cyclic messages was heard for ``NODE_TIMEOUT_CYCLES`` times
@@ -61,6 +62,7 @@ from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
+from odocan.host.judge.profilepage import follow_profile
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatch
@@ -130,13 +132,8 @@ AUTH_COUNTS = ("auth_failed", "auth_freshness", "auth_missing", "auth_unavailabl
 class BusMonitor:
     """The state model of ``odocan monitor`` (see the module docstring)."""
 
-    def __init__(
-        self,
-        robot: RobotProfile,
-        integrator: str | None = None,
-        db: Database | None = None,
-        bitrate: int | None = None,
-    ) -> None:
+    def __init__(self, robot: RobotProfile, integrator: str | None = None,
+                 db: Database | None = None, bitrate: int | None = None) -> None:
         self.db = db if db is not None else database()
         self.bitrate = bitrate  # bit/s, for bus_load's fraction (None: bits/s only)
         self.load = LoadWindow()
@@ -317,6 +314,8 @@ class BusMonitor:
             self.tracker.on_enc_counts(*counts)
         elif page == "FRAME_TOTALS":
             self.status.update({k.lower(): int(v) for k, v in s.items() if k.endswith("_FRAMES")})
+        elif page == "PROFILE":  # what the firmware runs with, against --robot (profilepage)
+            follow_profile(self, self._bus_time_s, s["MAX_WHEEL_SPEED"], int(s["PROFILE_CRC"]))
 
     def _watch_source(self, uptime_s: int, state: str) -> None:
         """Reboots and a second source, from the summary's UPTIME and STATE (module docstring)."""

@@ -1541,6 +1541,15 @@ int odocan_odom_status_pack(
         dst_p[7] |= pack_left_shift_u8(src_p->nav_goal_e2_e_wrong_seq, 0u, 0xffu);
         break;
 
+    case 6:
+        dst_p[2] |= pack_left_shift_u16(src_p->max_wheel_speed, 0u, 0xffu);
+        dst_p[3] |= pack_right_shift_u16(src_p->max_wheel_speed, 8u, 0xffu);
+        dst_p[4] |= pack_left_shift_u32(src_p->profile_crc, 0u, 0xffu);
+        dst_p[5] |= pack_right_shift_u32(src_p->profile_crc, 8u, 0xffu);
+        dst_p[6] |= pack_right_shift_u32(src_p->profile_crc, 16u, 0xffu);
+        dst_p[7] |= pack_right_shift_u32(src_p->profile_crc, 24u, 0xffu);
+        break;
+
     default:
         break;
     }
@@ -1619,6 +1628,15 @@ int odocan_odom_status_unpack(
         dst_p->nav_goal_e2_e_wrong_seq = unpack_right_shift_u8(src_p[7], 0u, 0xffu);
         break;
 
+    case 6:
+        dst_p->max_wheel_speed = unpack_right_shift_u16(src_p[2], 0u, 0xffu);
+        dst_p->max_wheel_speed |= unpack_left_shift_u16(src_p[3], 8u, 0xffu);
+        dst_p->profile_crc = unpack_right_shift_u32(src_p[4], 0u, 0xffu);
+        dst_p->profile_crc |= unpack_left_shift_u32(src_p[5], 8u, 0xffu);
+        dst_p->profile_crc |= unpack_left_shift_u32(src_p[6], 16u, 0xffu);
+        dst_p->profile_crc |= unpack_left_shift_u32(src_p[7], 24u, 0xffu);
+        break;
+
     default:
         break;
     }
@@ -1692,6 +1710,11 @@ bool odocan_odom_status_nav_goal_e2_e_ok_is_in_range(uint16_t value)
     return (true);
 }
 
+bool odocan_odom_status_max_wheel_speed_is_in_range(uint16_t value)
+{
+    return (value >= 1u);
+}
+
 bool odocan_odom_status_integrator_is_in_range(uint8_t value)
 {
     return (value <= 2u);
@@ -1738,6 +1761,13 @@ bool odocan_odom_status_config_e2_e_lost_is_in_range(uint8_t value)
 }
 
 bool odocan_odom_status_nav_goal_e2_e_lost_is_in_range(uint8_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool odocan_odom_status_profile_crc_is_in_range(uint32_t value)
 {
     (void)value;
 

@@ -180,6 +180,7 @@ extern "C" {
 #define ODOCAN_ODOM_STATUS_PAGE_E2_E_ODOM_SET_POSE_CHOICE (3u)
 #define ODOCAN_ODOM_STATUS_PAGE_E2_E_ODOM_CONFIG_CHOICE (4u)
 #define ODOCAN_ODOM_STATUS_PAGE_E2_E_NAV_GOAL_CHOICE (5u)
+#define ODOCAN_ODOM_STATUS_PAGE_PROFILE_CHOICE (6u)
 
 #define ODOCAN_ODOM_STATUS_STATE_INIT_CHOICE (0u)
 #define ODOCAN_ODOM_STATUS_STATE_OK_CHOICE (1u)
@@ -303,6 +304,7 @@ extern "C" {
 #define ODOCAN_ODOM_STATUS_SET_POSE_E2_E_OK_NAME "SET_POSE_E2E_OK"
 #define ODOCAN_ODOM_STATUS_CONFIG_E2_E_OK_NAME "CONFIG_E2E_OK"
 #define ODOCAN_ODOM_STATUS_NAV_GOAL_E2_E_OK_NAME "NAV_GOAL_E2E_OK"
+#define ODOCAN_ODOM_STATUS_MAX_WHEEL_SPEED_NAME "MAX_WHEEL_SPEED"
 #define ODOCAN_ODOM_STATUS_INTEGRATOR_NAME "INTEGRATOR"
 #define ODOCAN_ODOM_STATUS_REASON_NAME "REASON"
 #define ODOCAN_ODOM_STATUS_ERROR_MASK_NAME "ERROR_MASK"
@@ -311,6 +313,7 @@ extern "C" {
 #define ODOCAN_ODOM_STATUS_SET_POSE_E2_E_LOST_NAME "SET_POSE_E2E_LOST"
 #define ODOCAN_ODOM_STATUS_CONFIG_E2_E_LOST_NAME "CONFIG_E2E_LOST"
 #define ODOCAN_ODOM_STATUS_NAV_GOAL_E2_E_LOST_NAME "NAV_GOAL_E2E_LOST"
+#define ODOCAN_ODOM_STATUS_PROFILE_CRC_NAME "PROFILE_CRC"
 #define ODOCAN_ODOM_STATUS_UPTIME_NAME "UPTIME"
 #define ODOCAN_ODOM_STATUS_ENC_E2_E_REPEATED_NAME "ENC_E2E_REPEATED"
 #define ODOCAN_ODOM_STATUS_SET_POSE_E2_E_REPEATED_NAME "SET_POSE_E2E_REPEATED"
@@ -1119,7 +1122,7 @@ struct odocan_odom_freshness_t {
 /**
  * Signals in message ODOM_STATUS.
  *
- * Firmware status: every 100 ms the summary (page 0), then one of pages 1.. in rotation. Page 0 summary, page 1 frame totals, pages 2.. the E2E counters of one received message each (2 WHEEL_ENCODERS, 3 ODOM_SET_POSE, 4 ODOM_CONFIG, 5 NAV_GOAL). All counters wrap; the receiver extends them by difference. E2E slot 9 (data IDs 144..159).
+ * Firmware status: every 100 ms the summary (page 0), then one of pages 1.. in rotation. Page 0 summary, page 1 frame totals, pages 2.. the E2E counters of one received message each (2 WHEEL_ENCODERS, 3 ODOM_SET_POSE, 4 ODOM_CONFIG, 5 NAV_GOAL), page 6 the robot parameters the firmware runs with (PROFILE). All counters wrap; the receiver extends them by difference. E2E slot 9 (data IDs 144..159).
  *
  * All signal values are as on the CAN bus.
  */
@@ -1206,6 +1209,15 @@ struct odocan_odom_status_t {
     uint16_t nav_goal_e2_e_ok;
 
     /**
+     * u16, 1 mm/s per LSB: the plausibility bound on a wheel's rim speed the firmware runs with (ODOM_CONFIG MAX_WHEEL_SPEED; 4000 until written).
+     *
+     * Range: 1..65535 (0.001..65.535 m/s)
+     * Scale: 0.001
+     * Offset: 0
+     */
+    uint16_t max_wheel_speed;
+
+    /**
      * u2 enum: the pose integration scheme in use.
      *
      * Range: 0..2 (0..2 -)
@@ -1276,6 +1288,15 @@ struct odocan_odom_status_t {
      * Offset: 0
      */
     uint8_t nav_goal_e2_e_lost;
+
+    /**
+     * u32: CRC-32 (ISO-HDLC: reflected poly 0xEDB88320, init 0xFFFFFFFF, xorout 0xFFFFFFFF; check value of '123456789' 0xCBF43926) of the 20-byte parameter set the firmware runs with, each field little-endian in ODOM_CONFIG PARAM order: COUNTS_PER_REV u32, WHEEL_RADIUS_LEFT u32 (nm), WHEEL_RADIUS_RIGHT u32 (nm), WHEELBASE u32 (nm), COUNTER_BITS u8, INTEGRATOR u8, MAX_WHEEL_SPEED u16 (mm/s). A host computes it from its own profile: equal, the firmware runs with that profile.
+     *
+     * Range: 0..4294967295 (0..4294967295 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint32_t profile_crc;
 
     /**
      * u24, 1 s per LSB: time since reset; saturates at 16777215 s (194 days).
@@ -2720,6 +2741,15 @@ bool odocan_odom_status_nav_goal_e2_e_ok_is_in_range(uint16_t value);
  *
  * @return true if in range, false otherwise.
  */
+bool odocan_odom_status_max_wheel_speed_is_in_range(uint16_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
 bool odocan_odom_status_integrator_is_in_range(uint8_t value);
 
 /**
@@ -2784,6 +2814,15 @@ bool odocan_odom_status_config_e2_e_lost_is_in_range(uint8_t value);
  * @return true if in range, false otherwise.
  */
 bool odocan_odom_status_nav_goal_e2_e_lost_is_in_range(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool odocan_odom_status_profile_crc_is_in_range(uint32_t value);
 
 /**
  * Check that given signal is in allowed range.

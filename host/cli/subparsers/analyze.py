@@ -138,6 +138,12 @@ def _analyze_single(args: argparse.Namespace) -> int:
     from odocan.host.cli.inputs import explained, require_frames
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import analyze
+    from odocan.host.judge.profilepage import (
+        head_profile,
+        profile_mismatch,
+        running_profile,
+        with_bus_speed,
+    )
     from odocan.host.outputs import check_distinct
     from odocan.host.report.ci import analysis_checks, write_checks
     from odocan.host.report.progress import wall_clock_progress
@@ -152,7 +158,9 @@ def _analyze_single(args: argparse.Namespace) -> int:
                     ("--mcap", args.mcap)], [("LOG", args.log), ("--dbc", args.dbc)])
     db = load_dbc(args.dbc) if args.dbc is not None else None
     with wall_clock_progress(f"analysing {args.log}", None):
-        analysis = _streamed(args, profile, db) if _streams(args) else None
+        streams = _streams(args)
+        running = head_profile(args.log) if streams and db is None else None
+        analysis = _streamed(args, with_bus_speed(profile, running), db) if streams else None
         frames: FrameArrays | None = None
         if analysis is None:
             frames = whole = read_log(args.log)
@@ -161,8 +169,9 @@ def _analyze_single(args: argparse.Namespace) -> int:
                                    db=db)
             else:  # odocan's DBC: say plainly when the log holds none of its frames
                 require_frames(whole, str(args.log))
+                running = running_profile(whole)  # the firmware's own speed bound judges
                 with explained(lambda: whole, str(args.log)):
-                    analysis = analyze(whole, profile, args.integrator,
+                    analysis = analyze(whole, with_bus_speed(profile, running), args.integrator,
                                        tolerance=args.tolerance)
     assert analysis is not None
     whole_log = frames  # --parquet/--mcap read the whole log: written after the summary
@@ -173,16 +182,17 @@ def _analyze_single(args: argparse.Namespace) -> int:
         analysis.report["bus"] = busstats.from_frames(frames, args.bitrate).as_dict()
     analysis.report["inputs"] = log_inputs(args.log, profile, analysis.report["integrator"],
                                            args.dbc)
-    hints: list[str] = []
+    said = profile_mismatch(running, profile, analysis.report["integrator"])
+    hints: list[str] = [] if said is None else [said]  # the firmware's PROFILE page names it
     if not analysis.passed and db is None:  # a wrong --robot must not read as a firmware fault
         from odocan.host.judge.diagnosis import mismatches
 
         frames = frames if frames is not None else read_log(args.log)  # a failed verdict only
         report = analysis.report
-        hints = mismatches(frames, profile, report["integrator"], report["integrator_source"],
-                           args.tolerance)
-        if hints:
-            analysis.report["diagnosis"] = hints
+        hints += mismatches(frames, with_bus_speed(profile, running), report["integrator"],
+                            report["integrator_source"], args.tolerance)
+    if hints:
+        analysis.report["diagnosis"] = hints
     code = finish(analysis, args, title=f"odocan analyze: {args.log}")
     for hint in hints:
         print(f"  - {hint}")

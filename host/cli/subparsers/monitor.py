@@ -167,6 +167,9 @@ def _do_monitor(args: argparse.Namespace) -> int:
     distance = model.distance.verdict()  # ODOM_TWIST DISTANCE wrong in some life: FAIL
     if distance:
         print(f"monitor: FAIL: {distance[0]}", file=sys.stderr)
+    said = model.status.get("profile_mismatch")  # the firmware's PROFILE page vs --robot
+    if said:
+        print(f"monitor: {said}", file=sys.stderr)
     return 1 if (wrongs.count or conflict or distance) and code == 0 else code
 
 

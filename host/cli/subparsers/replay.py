@@ -28,6 +28,7 @@ from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.logs import FrameArrays, read_log, warn_on_stderr
 from odocan.host.io.player import play
 from odocan.host.jsonutil import write_report
+from odocan.host.judge.profilepage import profile_mismatch, running_profile, with_bus_speed
 from odocan.host.judge.replay import (
     ReplayInput,
     departures,
@@ -108,17 +109,22 @@ def _do_replay(args: argparse.Namespace) -> int:
         warn_on_stderr(f"integrator mismatch: {args.log}'s ODOM_STATUS reports {logged}, "
                        f"--integrator asks {integrator}: this replays a firmware other than "
                        "the one that recorded it")
+    running = running_profile(frames)  # ODOM_STATUS PROFILE: what the recording firmware ran
+    said = profile_mismatch(running, profile, logged or integrator)
+    if said is not None:
+        warn_on_stderr(said)
     analysis = replay_and_analyze(
-        frames, feed, profile, integrator, tolerance=args.tolerance, log=args.log,
-        log_out=args.log_out,
+        frames, feed, with_bus_speed(profile, running), integrator, tolerance=args.tolerance,
+        log=args.log, log_out=args.log_out,
     )
     section = analysis.report["replay"]
     _print_versus_log(section)
     analysis.report["inputs"] = log_inputs(args.log, profile, integrator, None)
     reasons = departures(section["onboard_vs_log"], args.tolerance)
-    if reasons:
-        reasons += diagnose(frames, feed.accepted, profile, integrator, args.tolerance,
-                            source=str(args.log), robot_arg=args.robot)
+    if reasons:  # the firmware's own word on its profile first, then the poses' fit
+        reasons += ([] if said is None else [said]) + diagnose(
+            frames, feed.accepted, with_bus_speed(profile, running), integrator, args.tolerance,
+            source=str(args.log), robot_arg=args.robot)
     section.update(passed=not reasons, faults=reasons)
     title = f"odocan replay: {args.log} on {profile.name}, {integrator} integrator"
     code = finish(analysis, args, title=title)  # prints the run's verdict (vs the reference)

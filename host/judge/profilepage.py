@@ -1,0 +1,190 @@
+"""What the firmware says it runs with: ODOM_STATUS page 6 (PROFILE), against ``--robot``.
+
+The firmware sends the plausibility bound in use (MAX_WHEEL_SPEED, u16 mm/s) and PROFILE_CRC, the
+CRC-32/ISO-HDLC of its 20-byte parameter set (the DBC comment gives the bytes: COUNTS_PER_REV,
+WHEEL_RADIUS_LEFT, WHEEL_RADIUS_RIGHT, WHEELBASE as u32, COUNTER_BITS, INTEGRATOR as u8,
+MAX_WHEEL_SPEED as u16, little-endian, in ODOM_CONFIG PARAM order). The host computes the same
+CRC from a profile here, from the DBC's definition (not from the firmware's code), so a log made
+with other parameters than ``--robot`` is said by name, in one line, before any pose is fitted:
+which parameter differs when the CRC and the bound tell it (the speed bound, the integrator, a
+shipped profile), else "profile hash differs". A log without the page (older firmware) has
+nothing to say here: the judges keep the profile's bound and the pose fit keeps diagnosing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import struct
+import zlib
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+from odocan.host.io.logs import FrameArrays, iter_log
+from odocan.host.judge.reference import INTEGRATORS
+from odocan.host.protocol.dbcplan import default_plan
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.e2e import crc8h2f_p02_one, e2e_messages
+from odocan.sim import robot as robots
+from odocan.sim.exceptions import OdocanError
+from odocan.sim.robot import MM_PER_M, RobotProfile, list_profiles
+
+if TYPE_CHECKING:
+    from odocan.host.judge.livedistance import LiveDistance
+    from odocan.host.judge.tracking import PoseTracker
+
+PROFILE_PAGE = 6  # ODOM_STATUS PAGE "PROFILE"
+_LAYOUT = "<IIIIBBH"  # the DBC comment's 20 bytes, little-endian
+NM_PER_M = 1_000_000_000
+HEAD_FRAMES = 1 << 13  # frames of a streamed log's head read for the page (~23 s of the rig's bus)
+
+
+@dataclass(frozen=True)
+class RunningProfile:
+    """The last accepted PROFILE page of a log: what the firmware ran with."""
+
+    max_wheel_speed_mm_s: int  # u16
+    profile_crc: int  # u32
+
+    @property
+    def max_wheel_speed_m_s(self) -> float:
+        return self.max_wheel_speed_mm_s / MM_PER_M
+
+
+def profile_crc(profile: RobotProfile, integrator: str) -> int:
+    """PROFILE_CRC of a firmware configured with ``profile`` and ``integrator``, from the DBC."""
+    data = struct.pack(
+        _LAYOUT,
+        profile.counts_per_rev,
+        round(profile.wheel_radius_left_m * NM_PER_M),
+        round(profile.wheel_radius_right_m * NM_PER_M),
+        round(profile.wheelbase_m * NM_PER_M),
+        profile.counter_bits,
+        INTEGRATORS.index(integrator),
+        profile.max_wheel_speed_mm_s,
+    )
+    return zlib.crc32(data)
+
+
+def running_profile(
+    frames: FrameArrays, decoder: BulkDecoder | None = None
+) -> RunningProfile | None:
+    """The last PROFILE page of ``frames`` whose E2E CRC holds (None: the log has none); raw
+    values, MAX_WHEEL_SPEED in its 1 mm/s LSB. Only these pages are checked (a handful per
+    minute), so a caller need not run the whole log's E2E check for it."""
+    decoder = decoder if decoder is not None else BulkDecoder(default_plan())
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", PROFILE_PAGE)
+        data_ids = _status_data_ids()
+    except (DecodeError, KeyError):
+        return None
+    if "PROFILE_CRC" not in page or data_ids is None:
+        return None
+    for row in range(len(page["index"]) - 1, -1, -1):
+        data = bytes(frames.data[int(page["index"][row])])
+        if frames.dlc[int(page["index"][row])] == 8 and data[0] == crc8h2f_p02_one(
+                data, data_ids[data[1] & 0x0F]):
+            return RunningProfile(int(page["MAX_WHEEL_SPEED"][row]), int(page["PROFILE_CRC"][row]))
+    return None
+
+
+def head_profile(path: Path, head_frames: int = HEAD_FRAMES) -> RunningProfile | None:
+    """``running_profile`` of a log's first ``head_frames`` frames (a streamed analysis: the
+    page comes every 600 ms, so the head of a log holds it); None when they hold none or the
+    log cannot be read (the analysis says why)."""
+    try:
+        for chunk in iter_log(path, chunk_frames=head_frames, warn=lambda _text: None):
+            return running_profile(chunk)
+    except (OdocanError, OSError):
+        return None
+    return None
+
+
+def _status_data_ids() -> tuple[int, ...] | None:
+    """ODOM_STATUS's E2EDataIDs, from the contract."""
+    for message in e2e_messages(default_plan()).values():
+        if message.name == "ODOM_STATUS":
+            return message.data_ids
+    raise KeyError("ODOM_STATUS")
+
+
+def with_bus_speed(profile: RobotProfile, running: RunningProfile | None) -> RobotProfile:
+    """``profile`` with the bus's speed bound when the log reports one (the judges' bound on
+    what a gap or a stall may hide is the firmware's, not the command line's)."""
+    if running is None or running.max_wheel_speed_mm_s == profile.max_wheel_speed_mm_s:
+        return profile
+    return dataclasses.replace(profile, max_wheel_speed_m_s=running.max_wheel_speed_m_s)
+
+
+def profile_mismatch(
+    running: RunningProfile | None, given: RobotProfile, integrator: str
+) -> str | None:
+    """One line naming how the firmware's parameters differ from ``given`` (``--robot``) run
+    with ``integrator``; None when they are the same or the log has no PROFILE page."""
+    if running is None or running.profile_crc == profile_crc(given, integrator):
+        return None
+    bus_speed = with_bus_speed(given, running)
+    speed_said = (f"the log's firmware runs with max wheel speed {running.max_wheel_speed_m_s:g}"
+                  f" m/s, --robot {given.name} says {given.max_wheel_speed_m_s:g} m/s")
+    if running.profile_crc == profile_crc(bus_speed, integrator):
+        return f"profile mismatch: {speed_said}"
+    for other in INTEGRATORS:
+        if running.profile_crc == profile_crc(bus_speed, other):
+            extra = "" if bus_speed is given else f"; {speed_said}"
+            return (f"profile mismatch: the log's firmware runs with integrator {other}, "
+                    f"not {integrator}{extra}")
+    fits = _shipped_fits(running, given)
+    if fits:
+        return (f"profile mismatch: profile hash differs: the log's firmware runs with the "
+                f"parameters of robot {fits!r}, not {given.name!r} (--robot)")
+    return (f"profile mismatch: profile hash differs (log 0x{running.profile_crc:08X}, --robot "
+            f"{given.name} 0x{profile_crc(given, integrator):08X})"
+            + ("" if bus_speed is given else f"; {speed_said}"))
+
+
+def _shipped_fits(running: RunningProfile, given: RobotProfile) -> str | None:
+    """The shipped profile (any integrator, the bus's speed bound or its own) whose CRC is the
+    log's; None when none is."""
+    for name in list_profiles():
+        if name == given.name:
+            continue
+        shipped = robots.load(name)
+        for candidate in (shipped, with_bus_speed(shipped, running)):
+            if any(running.profile_crc == profile_crc(candidate, i) for i in INTEGRATORS):
+                return name
+    return None
+
+
+class _Model(Protocol):
+    """What ``follow_profile`` needs of ``host.judge.monitor.BusMonitor``."""
+
+    status: dict[str, Any]
+    events: deque[dict[str, Any]]
+    tracker: PoseTracker
+    distance: LiveDistance
+
+
+def follow_profile(model: _Model, t_s: float, max_wheel_speed_m_s: float, crc: int) -> None:
+    """The live side (monitor): a PROFILE page heard at ``t_s`` (MAX_WHEEL_SPEED decoded, in
+    m/s; PROFILE_CRC). When it says something
+    new, the status shows the firmware's CRC and bound, the live judges take that bound (the
+    step gate from its next reference start), and a mismatch with the robot the model was built
+    for, run with the integrator the firmware reports (``--integrator`` is the judge's choice),
+    becomes one ``profile`` event and ``status["profile_mismatch"]``."""
+    shown = f"0x{crc:08X}"
+    if model.status.get("profile_crc") == shown:
+        return
+    max_wheel_speed_mm_s = round(max_wheel_speed_m_s * MM_PER_M)
+    running = RunningProfile(max_wheel_speed_mm_s, crc)
+    model.status.update(profile_crc=shown, max_wheel_speed_m_s=running.max_wheel_speed_m_s)
+    tracker = model.tracker
+    tracker.geometry = dataclasses.replace(tracker.geometry,
+                                           max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+    model.distance.max_wheel_speed_mm_s = max_wheel_speed_mm_s
+    reported = str(model.status.get("integrator", "")).lower()  # the firmware's own: a judge's
+    integrator = reported if reported in INTEGRATORS else tracker.integrator or "exact"  # choice
+    said = profile_mismatch(running, model.distance.robot, integrator)  # is no mismatch
+    model.status["profile_mismatch"] = said
+    if said is not None:
+        model.events.append({"t_s": t_s, "kind": "profile", "detail": said})
