@@ -3,7 +3,9 @@
 moves to where the firmware is, no further from where the reference started than the stalls'
 merge allowances since plus the tolerance. A gap of the encoder sequence (frames the judge
 did not hear, which the firmware may have integrated one by one) places it again too, within
-its ``gapbound`` allowance, as ``analyze`` places it."""
+its ``gapbound`` allowance, as ``analyze`` places it. A part of the latest placement that the
+firmware's pages later prove it took as the reference did (``host.judge.livegapseen``) has its
+allowance withdrawn (``withdraw``), as ``analyze`` gives it none."""
 
 from __future__ import annotations
 
@@ -19,6 +21,8 @@ from odocan.host.judge.breaks import (
     path_bound_m,
 )
 from odocan.host.judge.gapbound import gap_allowance_of_counts
+from odocan.host.judge.gapseen import Seen
+from odocan.host.judge.livegapseen import LiveSeen
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livewindow import CYCLE_S, Columns
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
@@ -26,9 +30,13 @@ from odocan.host.judge.samples import POSITION_LSB_M, sender_seq
 
 ABS_KEPT = 128  # the latest encoder frames whose count-step sums are kept (a sample names one)
 GAPS_KEPT = 64  # gaps of the encoder sequence kept between two placements (no growth)
+REPRIMED_KEPT = 64  # counter restarts kept (no page proves a span across one)
+PARTS_KEPT = 64  # placements' gaps and stalls waiting for the pages (older ones keep theirs)
 
 
 Gap = tuple[int, tuple[int, int], tuple[int, int], int]  # seq after, counts before, after, periods
+Part = tuple[bool, int, int, float]  # a placement's gap (True: seq after) or stall (its span)
+# first and last frame, and the allowance it added (m)
 
 
 def _confirmed(gaps: list[Gap], window: Columns) -> list[Gap]:
@@ -68,14 +76,27 @@ class StallPlacer:
         self._gaps: list[Gap] = []  # since then
         self.max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED  # the gaps' bound
         self.periods = 1  # encoder periods from the frame heard before to the latest
+        self.seen = LiveSeen()  # what the firmware's pages prove it took (its life's)
+        self._reprimed: tuple[int, ...] = ()  # the latest counter restarts re-primed on
+        self._parts: list[Part] = []  # the placements' parts whose allowance pages may withdraw
+        self._placed = (0.0, 0.0)  # its wanted offset of the reference (m)
+        self._owed = (0.0, 0.0)  # the offset withdrawn, not applied yet (m)
+        self.withdrawn = 0  # placements whose allowance the pages withdrew
 
     def restart(self) -> None:
         """A new reference: no offset, no allowance yet."""
         self._shift, self._budget_m = (0.0, 0.0), 0.0
-        self.stalled, self._gaps = False, []
+        self.stalled, self._gaps, self._parts, self._owed = False, [], [], (0.0, 0.0)
 
     def on_encoders(self, seq: int, frame: tuple[int, int, int, float],
                     prev: tuple[float, ...] | None, bits: int) -> bool:
+        """``_on_encoders``, and the frame to ``seen``."""
+        gap = self._on_encoders(seq, frame, prev, bits)
+        self.seen.on_encoders(seq, frame[3], self.periods)
+        return gap
+
+    def _on_encoders(self, seq: int, frame: tuple[int, int, int, float],
+                     prev: tuple[float, ...] | None, bits: int) -> bool:
         """Encoder frame ``seq`` (``frame``: COUNTER, counts left and right, bus time s;
         ``prev``: the window's row of the frame before: seq, pos, COUNTER, time, left, right).
         True after a gap of the sender's sequence (``samples.sender_seq``): the reference is to
@@ -102,11 +123,15 @@ class StallPlacer:
             self._gaps[-1] = (seq, (0, 0), (0, 0), -1)
         return True
 
-    def reprimed(self, seq: int) -> None:
-        """The reference re-primed on encoder frame ``seq`` (a controller restart told by
-        CTRL_UPTIME): a gap that ends there carried no motion on board (the firmware integrates
-        nothing across it), so it allows no placement (``reference_path``'s rule)."""
-        self._gaps = [gap for gap in self._gaps if gap[0] != seq]
+    def reprimed(self, seq: int, by_uptime: bool = True) -> None:
+        """The reference re-primed on encoder frame ``seq`` (a counter restart): no page proves
+        a span across it (``gapseen.Seen``'s ``reprimed``). A controller restart told by
+        CTRL_UPTIME (``by_uptime``): a gap that ends there carried no motion on board (the
+        firmware integrates nothing across it), so it allows no placement
+        (``reference_path``'s rule)."""
+        self._reprimed = (*self._reprimed[-REPRIMED_KEPT + 1:], seq)
+        if by_uptime:
+            self._gaps = [gap for gap in self._gaps if gap[0] != seq]
 
     def compared(self, seq: int) -> None:
         """A sample of encoder frame ``seq`` was compared."""
@@ -125,17 +150,21 @@ class StallPlacer:
         integrator) joins the budget after a stall, and each gap's since (``gapbound``). None:
         nothing to place (no stall, and the gaps suspected were a burst after a busy bus)."""
         geometry, bits, integrator = reference
-        stalled = self.stalled
+        stalled, parts = self.stalled, []
         if stalled:
-            self._budget_m += self._allowance_m(last_compared, pose.seq, window, reference)
+            allowance = self._allowance_m(last_compared, pose.seq, window, reference)
+            parts.append((False, last_compared, pose.seq, allowance))
         gaps, self._gaps, self.stalled = _confirmed(self._gaps, window), [], False
-        if not gaps and not stalled:
-            return None  # a burst after a busy bus, not a gap: nothing to place
-        for _, before, after, periods in gaps:
-            self._budget_m += (math.inf if periods < 0 else gap_allowance_of_counts(
-                before, after, periods, geometry, bits, integrator, self.max_wheel_speed_mm_s))
-        sx, sy = self._shift
+        sx, sy = self._shift[0] - self._owed[0], self._shift[1] - self._owed[1]  # applied
+        owed, self._owed = self._owed, (0.0, 0.0)
+        if not gaps and not stalled:  # a burst after a busy bus, not a gap: nothing to place
+            return None if owed == (0.0, 0.0) else owed  # but an allowance withdrawn
+        for seq, before, after, periods in gaps:
+            parts.append((True, seq, seq, math.inf if periods < 0 else gap_allowance_of_counts(
+                before, after, periods, geometry, bits, integrator, self.max_wheel_speed_mm_s)))
+        self._budget_m += sum(part[3] for part in parts)
         want_x, want_y = sx + pose.x_m - ref.x_m, sy + pose.y_m - ref.y_m
+        self._parts, self._placed = (self._parts + parts)[-PARTS_KEPT:], (want_x, want_y)
         limit = self._budget_m + self.position_tolerance_m
         if math.isinf(limit):  # no bound known (a stall left the window, 64 gaps): free
             self.placements.free += 1
@@ -144,6 +173,33 @@ class StallPlacer:
             add(math.hypot(want_x, want_y), limit)
         self._shift = clamp_offset(want_x, want_y, limit)
         return self._shift[0] - sx, self._shift[1] - sy
+
+    def withdraw(self, seen: Seen) -> bool:
+        """The parts of the placements (since the reference started, the latest
+        ``PARTS_KEPT``) that ``seen`` proves the firmware took as the reference did (a gap it
+        missed too, a stall over which it took exactly the log's frames: ``gapseen.Seen``) lose
+        their allowance: the budget shrinks by it and the latest placement is clamped again
+        within it; the difference is owed: the reference moves by it at the next sample
+        (``shift``). True when it moves."""
+        reprimed = frozenset(self._reprimed)
+        proven = [part for part in self._parts if not math.isinf(part[3]) and (
+            seen.gap_missed(part[1], reprimed) if part[0]
+            else seen.took_all(part[1] - 1, part[2], reprimed))]
+        if not proven:
+            return False
+        self._parts = [part for part in self._parts if part not in proven]
+        self._budget_m -= sum(part[3] for part in proven)
+        sx, sy = self._shift
+        self._shift = clamp_offset(*self._placed, self._budget_m + self.position_tolerance_m)
+        self._owed = (self._owed[0] + self._shift[0] - sx, self._owed[1] + self._shift[1] - sy)
+        self.withdrawn += 1
+        return self._owed != (0.0, 0.0)
+
+    @property
+    def owed(self) -> bool:
+        """An allowance was withdrawn (``withdraw``): the reference is to move at the next
+        sample (``shift`` gives how far)."""
+        return self._owed != (0.0, 0.0)
 
     def _allowance_m(self, before: int, after: int, window: Columns,
                      reference: tuple[Geometry, int, str]) -> float:

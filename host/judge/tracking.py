@@ -122,8 +122,7 @@ class PoseTracker:
         self.reference_starts = 0
         self.vs_reference, self.vs_truth, self.reference_vs_truth = (ErrorStats(), ErrorStats(),
                                                                      ErrorStats())
-        # a new firmware life's origin in the truth's frame (``compare.life_origin``): None in
-        # the first life (it came up with the simulator), else set at its first truth sample
+        # a new life's origin in the truth's frame (``compare.life_origin``; None in the first)
         self.life_truth = LifeTruth()
 
     fast_path = True  # False: every half by ``match_encoder`` over the window (tests compare)
@@ -279,7 +278,7 @@ class PoseTracker:
         ref = self._ref_at.get(seq)
         if ref is None:
             return None
-        if self._place_at_next:
+        if self._place_at_next or self.placer.owed:  # owed: an allowance withdrawn
             ref = self._place(pose, ref)
         return self._record(pose, ref)
 
@@ -383,6 +382,7 @@ class PoseTracker:
                 self.restart_reference()
             return
         self.reference_starts -= first_life and self.reference_starts > 0
+        self.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
         self._start_reference(FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
         if not first_life:
             self.life_truth.booted(primed, self._ref_at)
