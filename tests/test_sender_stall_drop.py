@@ -28,6 +28,7 @@ import pytest
 import odocan.firmware.odometry as odometry
 from odocan.host.io.logs import parse_candump_line, read_log
 from odocan.host.judge.analysis import analyze
+from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import POSITION_LSB_M
@@ -90,8 +91,9 @@ def _analyzed(path: Path) -> tuple[bool, dict[str, float]]:
 
 def live_judges(path: Path, robot: Path, integrator: str = "exact"
                 ) -> list[tuple[str, PoseTracker]]:
-    """The monitor's model and the bridge fed ``path`` frame by frame, to the end (the samples
-    still waiting judged with the allowance they have, as ``odocan monitor`` ends): their
+    """The monitor's model and the bridge fed ``path`` frame by frame, to the end (the last
+    pages' proof, the samples still waiting judged with the allowance they have, as ``odocan
+    monitor`` ends): their
     trackers, the monitor's health state first ("monitor <state>", "bridge")."""
     profile = load(robot)
     monitor = BusMonitor(profile)  # the integrator from ODOM_STATUS, as `odocan monitor`
@@ -106,6 +108,7 @@ def live_judges(path: Path, robot: Path, integrator: str = "exact"
             last = msg.timestamp
     state = monitor.health(now_s=last)["state"]
     for tracker in (monitor.tracker, bridge.tracker):
+        end_of_watch(tracker)
         tracker.wrongs.finish(tracker.allowance_m)
     return [(f"monitor {state}", monitor.tracker), ("bridge", bridge.tracker)]
 

@@ -14,10 +14,12 @@ back by the difference at the next sample (``StallPlacer.shift``), so the sample
 then show the error the allowance hid, as ``analyze`` shows it. Bounded: the last ``KEPT_PAGES``
 pages, the totals and gaps they reach, the spans proven over the last ``KEPT_FRAMES`` frames.
 
-A proof that comes after later placements still shrinks the budget (the allowances summed since
-the reference started, ``breaks``' rule) and clamps the latest placement again; the samples
-judged before the proof keep their errors (those after show what the allowance hid): the live
-judge latches a wrong pose up to a page cycle or two (0.5 to 1 s) after ``analyze`` would.
+The samples judged since that placement are judged again then (``LiveAllowance.rejudge``): a
+wrong pose is latched a page cycle or two (0.5 to 1 s) after its sample, as a lost frame's
+allowance is settled (``host.judge.livelosses``). A proof that comes after later placements still
+shrinks the budget (the allowances summed since the reference started, ``breaks``' rule) and
+clamps the latest placement again. At the end of a watch (``end_of_watch``) the pages made with
+the last summary are kept, as the whole-log judge keeps them at the end of a log.
 """
 
 from __future__ import annotations
@@ -94,6 +96,15 @@ class LiveSeen:
         self._prove()
         return True
 
+    def flush(self) -> bool:
+        """The end of a watch: the pages made with the last summary kept (no summary after it:
+        not let out in a burst, ``PageEvidence.seen``'s rule); True when one was."""
+        self.keeper.keep_pending(True)
+        if (len(self.keeper.pages), len(self.keeper.totals)) == self._kept:
+            return False
+        self._prove()
+        return True
+
     def _prove(self) -> None:
         """``seen_of`` the pages kept (the oldest beyond ``KEPT_PAGES`` let go, and the totals
         and gaps only they reached), joined with the spans proven before."""
@@ -155,3 +166,11 @@ def heard_status(tracker: PoseTracker, message: Any, data: bytes, data_ids: Any,
     placer = tracker.placer
     if placer.seen.on_status(page, counter, t_s, crc_ok, value):
         placer.withdraw(placer.seen.seen)  # the reference moves at the next sample
+
+
+def end_of_watch(tracker: PoseTracker) -> None:
+    """The watch ends (no later frame comes): ``LiveSeen.flush`` and what it proves withdrawn,
+    before the samples still waiting are judged (``posewrongs.PoseWrongs.finish``)."""
+    placer = tracker.placer
+    if placer.seen.flush():
+        placer.withdraw(placer.seen.seen)

@@ -23,6 +23,7 @@ from odocan.host.judge.breaks import (
 from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.gapseen import Seen
 from odocan.host.judge.livegapseen import LiveSeen
+from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livewindow import CYCLE_S, Columns
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
@@ -35,8 +36,8 @@ PARTS_KEPT = 64  # placements' gaps and stalls waiting for the pages (older ones
 
 
 Gap = tuple[int, tuple[int, int], tuple[int, int], int]  # seq after, counts before, after, periods
-Part = tuple[bool, int, int, float]  # a placement's gap (True: seq after) or stall (its span)
-# first and last frame, and the allowance it added (m)
+Part = tuple[bool, int, int, float, int]  # a placement's gap (True: seq after) or stall (its
+# span): first and last frame, the allowance it added (m), the placement's frame
 
 
 def _confirmed(gaps: list[Gap], window: Columns) -> list[Gap]:
@@ -79,7 +80,9 @@ class StallPlacer:
         self.seen = LiveSeen()  # what the firmware's pages prove it took (its life's)
         self._reprimed: tuple[int, ...] = ()  # the latest counter restarts re-primed on
         self._parts: list[Part] = []  # the placements' parts whose allowance pages may withdraw
-        self._placed = (0.0, 0.0)  # its wanted offset of the reference (m)
+        # the latest placements: frame, offset wanted, offset placed (m), budget then (m)
+        self._history: list[list[float]] = []
+        self.losses: LiveAllowance | None = None  # the tracker's: samples judged again
         self._owed = (0.0, 0.0)  # the offset withdrawn, not applied yet (m)
         self.withdrawn = 0  # placements whose allowance the pages withdrew
 
@@ -87,6 +90,7 @@ class StallPlacer:
         """A new reference: no offset, no allowance yet."""
         self._shift, self._budget_m = (0.0, 0.0), 0.0
         self.stalled, self._gaps, self._parts, self._owed = False, [], [], (0.0, 0.0)
+        self._history = []
 
     def on_encoders(self, seq: int, frame: tuple[int, int, int, float],
                     prev: tuple[float, ...] | None, bits: int) -> bool:
@@ -153,7 +157,7 @@ class StallPlacer:
         stalled, parts = self.stalled, []
         if stalled:
             allowance = self._allowance_m(last_compared, pose.seq, window, reference)
-            parts.append((False, last_compared, pose.seq, allowance))
+            parts.append((False, last_compared, pose.seq, allowance, pose.seq))
         gaps, self._gaps, self.stalled = _confirmed(self._gaps, window), [], False
         sx, sy = self._shift[0] - self._owed[0], self._shift[1] - self._owed[1]  # applied
         owed, self._owed = self._owed, (0.0, 0.0)
@@ -161,10 +165,11 @@ class StallPlacer:
             return None if owed == (0.0, 0.0) else owed  # but an allowance withdrawn
         for seq, before, after, periods in gaps:
             parts.append((True, seq, seq, math.inf if periods < 0 else gap_allowance_of_counts(
-                before, after, periods, geometry, bits, integrator, self.max_wheel_speed_mm_s)))
+                before, after, periods, geometry, bits, integrator, self.max_wheel_speed_mm_s),
+                pose.seq))
         self._budget_m += sum(part[3] for part in parts)
         want_x, want_y = sx + pose.x_m - ref.x_m, sy + pose.y_m - ref.y_m
-        self._parts, self._placed = (self._parts + parts)[-PARTS_KEPT:], (want_x, want_y)
+        self._parts = (self._parts + parts)[-PARTS_KEPT:]
         limit = self._budget_m + self.position_tolerance_m
         if math.isinf(limit):  # no bound known (a stall left the window, 64 gaps): free
             self.placements.free += 1
@@ -172,15 +177,17 @@ class StallPlacer:
             add = self.placements.add_gap if gaps else self.placements.add_stall
             add(math.hypot(want_x, want_y), limit)
         self._shift = clamp_offset(want_x, want_y, limit)
+        self._history = [*self._history[1 - PARTS_KEPT:],
+                         [pose.seq, want_x, want_y, *self._shift, self._budget_m]]
         return self._shift[0] - sx, self._shift[1] - sy
 
     def withdraw(self, seen: Seen) -> bool:
         """The parts of the placements (since the reference started, the latest
         ``PARTS_KEPT``) that ``seen`` proves the firmware took as the reference did (a gap it
         missed too, a stall over which it took exactly the log's frames: ``gapseen.Seen``) lose
-        their allowance: the budget shrinks by it and the latest placement is clamped again
-        within it; the difference is owed: the reference moves by it at the next sample
-        (``shift``). True when it moves."""
+        their allowance: the budget of every placement from theirs on shrinks by it, and each
+        is clamped again within it, as ``breaks.bound_offsets`` places them (``_replace``).
+        True when the reference is to move at the next sample."""
         reprimed = frozenset(self._reprimed)
         proven = [part for part in self._parts if not math.isinf(part[3]) and (
             seen.gap_missed(part[1], reprimed) if part[0]
@@ -188,12 +195,31 @@ class StallPlacer:
         if not proven:
             return False
         self._parts = [part for part in self._parts if part not in proven]
-        self._budget_m -= sum(part[3] for part in proven)
-        sx, sy = self._shift
-        self._shift = clamp_offset(*self._placed, self._budget_m + self.position_tolerance_m)
-        self._owed = (self._owed[0] + self._shift[0] - sx, self._owed[1] + self._shift[1] - sy)
+        for part in proven:
+            self._budget_m -= part[3]
+            for placed in self._history:
+                placed[5] -= part[3] if placed[0] >= part[4] else 0.0
+        self._replace()
         self.withdrawn += 1
-        return self._owed != (0.0, 0.0)
+        return self.owed
+
+    def _replace(self) -> None:
+        """Each placement kept clamped again within its budget: the samples judged from it to
+        the next judged again by the difference (``livelosses.LiveAllowance.rejudge``); the
+        latest's difference is owed: the reference moves by it at the next sample
+        (``shift``)."""
+        for k, placed in enumerate(self._history):
+            seq, want_x, want_y, old_x, old_y, budget_m = placed
+            new_x, new_y = clamp_offset(want_x, want_y, budget_m + self.position_tolerance_m)
+            if (new_x, new_y) == (old_x, old_y):
+                continue
+            placed[3], placed[4] = new_x, new_y
+            until = int(self._history[k + 1][0]) if k + 1 < len(self._history) else None
+            if self.losses is not None:
+                self.losses.rejudge(int(seq), until, (new_x - old_x, new_y - old_y))
+            if until is None:
+                self._owed = (self._owed[0] + new_x - old_x, self._owed[1] + new_y - old_y)
+                self._shift = (new_x, new_y)
 
     @property
     def owed(self) -> bool:

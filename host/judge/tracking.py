@@ -109,7 +109,7 @@ class PoseTracker:
         self._last_sample_t: float | None = None  # bus time of the last sample's ODOM_POSE_Y
         self._last_compared = -1  # the encoder frame of the last sample compared
         self._place_at_next = False  # after a stall or a held pose: place the position again
-        self._losses = LiveAllowance()
+        self._losses = self.placer.losses = LiveAllowance()  # (livegapseen re-judges)
         self.wrongs = self._losses.wrongs  # POSE WRONG episodes latched (host.judge.posewrongs)
         self._now_s = 0.0  # the latest bus time (s)
         self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
