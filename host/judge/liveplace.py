@@ -80,7 +80,8 @@ class StallPlacer:
         self.seen = LiveSeen()  # what the firmware's pages prove it took (its life's)
         self._reprimed: tuple[int, ...] = ()  # the latest counter restarts re-primed on
         self._parts: list[Part] = []  # the placements' parts whose allowance pages may withdraw
-        # the latest placements: frame, offset wanted, offset placed (m), budget then (m)
+        # the latest placements: frame, the offset its sample asked (from the reference then),
+        # the step it made, the budget then (m)
         self._history: list[list[float]] = []
         self.losses: LiveAllowance | None = None  # the tracker's: samples judged again
         self._owed = (0.0, 0.0)  # the offset withdrawn, not applied yet (m)
@@ -177,8 +178,9 @@ class StallPlacer:
             add = self.placements.add_gap if gaps else self.placements.add_stall
             add(math.hypot(want_x, want_y), limit)
         self._shift = clamp_offset(want_x, want_y, limit)
-        self._history = [*self._history[1 - PARTS_KEPT:],
-                         [pose.seq, want_x, want_y, *self._shift, self._budget_m]]
+        self._history = [*self._history[1 - PARTS_KEPT:], [
+            pose.seq, want_x - sx, want_y - sy, self._shift[0] - sx, self._shift[1] - sy,
+            self._budget_m]]
         return self._shift[0] - sx, self._shift[1] - sy
 
     def withdraw(self, seen: Seen) -> bool:
@@ -204,22 +206,25 @@ class StallPlacer:
         return self.owed
 
     def _replace(self) -> None:
-        """Each placement kept clamped again within its budget: the samples judged from it to
-        the next judged again by the difference (``livelosses.LiveAllowance.rejudge``); the
-        latest's difference is owed: the reference moves by it at the next sample
-        (``shift``)."""
+        """Each placement kept made again, in order, within its budget now: the offset its
+        sample asked, less what the placements before it moved less, clamped (each step
+        bounded, not the offset from the start: the start fit's corrections taken into the
+        reference at each placement, within a pose's rounding, are not the placements'). The
+        samples judged from each to the next are judged again by how much less the reference
+        moved (``livelosses.LiveAllowance.rejudge``); the latest's difference is owed: the
+        reference moves by it at the next sample (``shift``)."""
+        less_x, less_y = 0.0, 0.0  # how much less the placements so far moved the reference
         for k, placed in enumerate(self._history):
-            seq, want_x, want_y, old_x, old_y, budget_m = placed
-            new_x, new_y = clamp_offset(want_x, want_y, budget_m + self.position_tolerance_m)
-            if (new_x, new_y) == (old_x, old_y):
-                continue
-            placed[3], placed[4] = new_x, new_y
+            seq, asked_x, asked_y, old_x, old_y, budget_m = placed
+            asked_x, asked_y = asked_x - less_x, asked_y - less_y
+            new_x, new_y = clamp_offset(asked_x, asked_y, budget_m + self.position_tolerance_m)
+            placed[1:5] = asked_x, asked_y, new_x, new_y
+            less_x, less_y = less_x + new_x - old_x, less_y + new_y - old_y
             until = int(self._history[k + 1][0]) if k + 1 < len(self._history) else None
-            if self.losses is not None:
-                self.losses.rejudge(int(seq), until, (new_x - old_x, new_y - old_y))
-            if until is None:
-                self._owed = (self._owed[0] + new_x - old_x, self._owed[1] + new_y - old_y)
-                self._shift = (new_x, new_y)
+            if self.losses is not None and (less_x, less_y) != (0.0, 0.0):
+                self.losses.rejudge(int(seq), until, (less_x, less_y))
+        self._owed = (self._owed[0] + less_x, self._owed[1] + less_y)
+        self._shift = (self._shift[0] + less_x, self._shift[1] + less_y)
 
     @property
     def owed(self) -> bool:
