@@ -44,6 +44,7 @@ if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
 
 KEPT_PAGES = 4 * PAIR_PAGES  # ENC_E2E pages kept (16 s of pages): runs joined over them
+KEPT_GAPS = 4_096  # gaps kept while no page comes (a firmware without them): bounded
 KEPT_FRAMES = 4_096  # spans proven over the latest encoder frames kept (41 s at 100 Hz)
 _VALUES = {LOST_PAGE: ("ENC_E2E_OK", "ENC_E2E_LOST"),
            TOTALS_PAGE: ("REJECTED_FRAMES", "OVERFLOWED_FRAMES")}
@@ -61,7 +62,8 @@ class LiveSeen:
         self._boot: tuple[float, float] | None = None  # with_boot's times while its page is kept
         self._first: tuple[int, float] | None = None  # the life's first frame heard (seq, s)
         self.keeper = PageKeeper(cycle_s)
-        self._kept = (0, 0)  # pages and totals kept when last proven
+        self._kept = (0, 0)  # pages and totals kept when last looked at
+        self._dirty = False  # a page kept since ``proven`` last ran
 
     def new_life(self) -> None:
         """A reboot: the new life's pages count from 0 (``host.judge.reboots``); the summary
@@ -83,32 +85,43 @@ class LiveSeen:
             self._first = (seq, t_s)
         elif periods > 1:
             self._gaps.append((seq - self._first[0], periods - 1))
+            del self._gaps[: max(len(self._gaps) - KEPT_GAPS, 0)]  # no page came for long
         self._enc_count, self._last_enc_s = seq - self._first[0] + 1, t_s
 
     def on_status(self, page: int, counter: int, t_s: float, crc_ok: bool,
                   value: tuple[int, int] | None) -> bool:
         """An ODOM_STATUS frame (PAGE, COUNTER, bus time, its CRC holds, its page's two
-        counts); True when a page was kept (``seen`` proven again)."""
+        counts); True when a FRAME_TOTALS page was kept: ``proven`` may prove more (a window
+        is proven only once the first FRAME_TOTALS page after its last page is kept)."""
         keeper = self.keeper
         keeper.status((page, counter, t_s, crc_ok, self._enc_count, self._last_enc_s), value)
-        if (len(keeper.pages), len(keeper.totals)) == self._kept:
-            return False
-        self._prove()
-        return True
+        grew = len(keeper.totals) > self._kept[1]  # (a window ends in one)
+        return self._kept_more() and grew
 
     def flush(self) -> bool:
         """The end of a watch: the pages made with the last summary kept (no summary after it:
         not let out in a burst, ``PageEvidence.seen``'s rule); True when one was."""
         self.keeper.keep_pending(True)
-        if (len(self.keeper.pages), len(self.keeper.totals)) == self._kept:
-            return False
-        self._prove()
-        return True
+        return self._kept_more()
 
-    def _prove(self) -> None:
-        """``seen_of`` the pages kept (the oldest beyond ``KEPT_PAGES`` let go, and the totals
-        and gaps only they reached), joined with the spans proven before."""
+    def proven(self) -> Seen:
+        """What the pages kept prove, with the spans proven before (``seen_of`` run only when
+        asked after a page was kept: a clean drive asks nothing)."""
+        if self._dirty:
+            self._dirty = False
+            new = seen_of(self.keeper.pages, self.keeper.totals, self._gaps, self._boot)
+            base = self._first[0] if self._first is not None else 0
+            horizon = base + self._enc_count - KEPT_FRAMES
+            self.seen = Seen(_joined(self.seen.same, new.same, base, horizon),
+                             _joined(self.seen.missed, new.missed, base, horizon))
+        return self.seen
+
+    def _kept_more(self) -> bool:
+        """Whether a page was kept since last asked; the oldest beyond ``KEPT_PAGES`` let go,
+        and the totals and gaps only they reached (bounded memory)."""
         keeper = self.keeper
+        if (len(keeper.pages), len(keeper.totals)) == self._kept:
+            return False
         if len(keeper.pages) > KEPT_PAGES:
             del keeper.pages[: len(keeper.pages) - KEPT_PAGES]
             self._boot = None  # its page went with the oldest
@@ -116,12 +129,9 @@ class LiveSeen:
             before = sum(1 for sent_s, _, _ in keeper.totals if sent_s < from_s)
             del keeper.totals[: max(before - 1, 0)]  # the last one before the first page kept
             self._gaps = [gap for gap in self._gaps if gap[0] > keeper.pages[0][0]]
-        self._kept = (len(keeper.pages), len(keeper.totals))
-        new = seen_of(keeper.pages, keeper.totals, self._gaps, self._boot)
-        base = self._first[0] if self._first is not None else 0
-        horizon = base + self._enc_count - KEPT_FRAMES
-        self.seen = Seen(_joined(self.seen.same, new.same, base, horizon),
-                         _joined(self.seen.missed, new.missed, base, horizon))
+        del keeper.totals[: max(len(keeper.totals) - 2 * KEPT_PAGES, 0)]  # no ENC page kept
+        self._kept, self._dirty = (len(keeper.pages), len(keeper.totals)), True
+        return True
 
 
 def _joined(old: list[Span], new: list[Span], base: int, horizon: int) -> list[Span]:
@@ -164,13 +174,13 @@ def heard_status(tracker: PoseTracker, message: Any, data: bytes, data_ids: Any,
         return
     page, counter, crc_ok, value = values
     placer = tracker.placer
-    if placer.seen.on_status(page, counter, t_s, crc_ok, value):
-        placer.withdraw(placer.seen.seen)  # the reference moves at the next sample
+    if placer.seen.on_status(page, counter, t_s, crc_ok, value) and placer.waiting:
+        placer.withdraw(placer.seen.proven())  # the reference moves at the next sample
 
 
 def end_of_watch(tracker: PoseTracker) -> None:
     """The watch ends (no later frame comes): ``LiveSeen.flush`` and what it proves withdrawn,
     before the samples still waiting are judged (``posewrongs.PoseWrongs.finish``)."""
     placer = tracker.placer
-    if placer.seen.flush():
-        placer.withdraw(placer.seen.seen)
+    if placer.seen.flush() and placer.waiting:
+        placer.withdraw(placer.seen.proven())

@@ -227,6 +227,11 @@ class StallPlacer:
         self._shift = (self._shift[0] + less_x, self._shift[1] + less_y)
 
     @property
+    def waiting(self) -> bool:
+        """Placements' parts wait for the pages (``withdraw``)."""
+        return bool(self._parts)
+
+    @property
     def owed(self) -> bool:
         """An allowance was withdrawn (``withdraw``): the reference is to move at the next
         sample (``shift`` gives how far)."""
