@@ -11,7 +11,9 @@ stalled (silent, then on with or without a catch-up frame), drawn from a seed:
   seed, the same frames; the correct firmware's own pose is not dead reckoning of every count,
   it merges the steps the bus lost for it too); behind frames lost only (no frame refused:
   the firmware's pages then prove what it took), its position alone FAILs it. Before the rule
-  the gaps' allowances absorbed it (its TURNS still failed a wrapping one).
+  the gaps' allowances absorbed it (its TURNS still failed a wrapping one);
+* the live judge (the monitor's model and the bridge, ``host.judge.livegapseen``) fed the same
+  log says what ``analyze`` says: a POSE WRONG latched exactly when it FAILs.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from odocan.sim.faultspec import FaultSpec
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
 from tests.fault_rig import FaultRig
+from tests.test_sender_stall_drop import live_judges
 from tests.test_sender_stall_step import _streamed
 from tests.test_wrap_after_gaps import ONE_CM_TOML, _wrapping_firmware
 
@@ -110,10 +113,14 @@ def _drive(tmp_path: Path, seed: int, firmware: str,
 def _verdicts(path: Path, robot: Path) -> tuple[bool, float, bool]:
     """analyze's verdict and its position error beyond the allowance (m), whole log, and
     whether the streamed judge (``--stream always``: a life the stream cannot judge goes to the
-    whole-log judge) says the same."""
+    whole-log judge) and the live judges (no POSE WRONG latched: a pass) say the same."""
     result = analyze(read_log(path), load(robot), "exact")
     onboard = result.report["onboard_vs_reference"]
     same = _streamed(path, path.parent, str(robot)) == onboard
+    for name, tracker in live_judges(path, robot):
+        live = (tracker.wrongs.count == 0, tracker.max_beyond_allowance_m > POSITION_LSB_M)
+        assert live == (result.passed, onboard["max_position_error_beyond_allowance_m"]
+                        > POSITION_LSB_M), (name, tracker.wrongs.summary(), onboard)
     return result.passed, onboard["max_position_error_beyond_allowance_m"], same
 
 

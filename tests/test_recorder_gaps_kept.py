@@ -4,7 +4,8 @@ them one by one, its ENC_E2E_OK counts them and its ENC_E2E_LOST does not grow, 
 prove nothing there and the gaps keep ``gapbound``'s allowance: the correct firmware on a 1 cm
 robot (steps of a spin merged by the log: centimetres of merge error) PASSes. The same log
 judged with the rule made unsafe (every gap taken as missed by the firmware) FAILs: the guard
-has teeth.
+has teeth. The live judge (the monitor's model and the bridge: ``host.judge.livegapseen``) keeps
+the allowance too, and with the unsafe rule withdraws it and FAILs alike.
 """
 
 from __future__ import annotations
@@ -19,7 +20,9 @@ from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.gapseen import Seen
+from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.sim.robot import load
+from tests.test_sender_stall_drop import live_judges
 from tests.test_sender_stall_step import _streamed
 from tests.test_wrap_after_gaps import ONE_CM_TOML
 
@@ -61,6 +64,14 @@ def test_gaps_the_firmware_saw_keep_their_allowance(
     assert result.passed, (onboard, breaks)
     assert breaks["gap_placements"] >= 10
     assert _streamed(path, tmp_path, str(robot)) == onboard
+    for name, tracker in live_judges(path, robot):
+        assert "POSE WRONG" not in name
+        assert tracker.placer.placements.gaps >= 10, name
+        assert tracker.wrongs.count == 0, (name, tracker.wrongs.summary())
     monkeypatch.setattr(Seen, "gap_missed", lambda *_: True)  # an unsafe rule
     unsafe = analyze(read_log(path), load(robot), "exact")
     assert not unsafe.passed
+    for name, tracker in live_judges(path, robot):
+        assert tracker.placer.withdrawn >= 10, name  # the live judge asks the same rule
+        assert tracker.max_beyond_allowance_m > POSITION_LSB_M, name
+        assert tracker.wrongs.count >= 1, name

@@ -11,6 +11,11 @@ placed where it stood and PASSed. Its own ODOM_STATUS pages say it accepted ever
 holds and none it lacks (``host.judge.gapseen``): no re-placement is due, and it FAILs by the
 step it dropped, measured here by float64 dead reckoning of the robot's own counts (the rig's
 ``Watch``), not by the judges' reference. The correct firmware still PASSes.
+
+The live judge (the monitor's model and the MQTT bridge, ``host.judge.livegapseen``) learns the
+same from the pages, which come after the gap: it placed its reference at the next sample with
+the gap's allowance, then withdraws it once they prove the firmware took the frames; before, it
+said OK (no POSE WRONG latched) on the 190-tick log while ``analyze`` FAILed by 0.31 m.
 """
 
 from __future__ import annotations
@@ -21,8 +26,14 @@ import can
 import pytest
 
 import odocan.firmware.odometry as odometry
-from odocan.host.io.logs import read_log
+from odocan.host.io.logs import parse_candump_line, read_log
 from odocan.host.judge.analysis import analyze
+from odocan.host.judge.livegapseen import end_of_watch
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.samples import POSITION_LSB_M
+from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.board import TICK_S
 from odocan.sim.robot import load
 from odocan.sim.scenarios import straight
@@ -78,6 +89,30 @@ def _analyzed(path: Path) -> tuple[bool, dict[str, float]]:
     return result.passed, onboard
 
 
+def live_judges(path: Path, robot: Path, integrator: str = "exact"
+                ) -> list[tuple[str, PoseTracker]]:
+    """The monitor's model and the bridge fed ``path`` frame by frame, to the end (the last
+    pages' proof, the samples still waiting judged with the allowance they have, as ``odocan
+    monitor`` ends): their
+    trackers, the monitor's health state first ("monitor <state>", "bridge")."""
+    profile = load(robot)
+    monitor = BusMonitor(profile)  # the integrator from ODOM_STATUS, as `odocan monitor`
+    bridge = RobotTelemetry("r", Geometry.of(profile), integrator,
+                            counter_bits=profile.counter_bits, publish_hz=10)
+    last = 0.0
+    for line in path.read_bytes().splitlines(keepends=True):
+        msg = parse_candump_line(line)
+        if msg is not None:
+            monitor.feed(msg, now_s=msg.timestamp)
+            bridge.feed(msg)
+            last = msg.timestamp
+    state = monitor.health(now_s=last)["state"]
+    for tracker in (monitor.tracker, bridge.tracker):
+        end_of_watch(tracker)
+        tracker.wrongs.finish(tracker.allowance_m)
+    return [(f"monitor {state}", monitor.tracker), ("bridge", bridge.tracker)]
+
+
 @pytest.mark.parametrize("silent_ticks", [50, 190])
 def test_a_correct_firmware_across_a_stall_without_burst_passes(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, silent_ticks: int
@@ -86,6 +121,10 @@ def test_a_correct_firmware_across_a_stall_without_burst_passes(
     assert firmware_error_m < 1e-6
     passed, onboard = _analyzed(path)
     assert passed, onboard
+    for name, tracker in live_judges(path, path.parent / "pmir1cm.toml"):
+        assert "POSE WRONG" not in name
+        assert tracker.wrongs.count == 0, (name, tracker.wrongs.summary())
+        assert tracker.max_beyond_allowance_m < POSITION_LSB_M, name
 
 
 @pytest.mark.parametrize("silent_ticks", [50, 190])
@@ -99,3 +138,8 @@ def test_a_firmware_that_dropped_the_step_fails(
     assert not passed
     assert onboard["max_position_error_beyond_allowance_m"] == pytest.approx(
         firmware_error_m, rel=0.05)
+    judges = live_judges(path, path.parent / "pmir1cm.toml")
+    assert judges[0][0] == "monitor POSE WRONG"
+    for name, tracker in judges:
+        assert tracker.wrongs.count >= 1, name  # before: 0, and the monitor said OK
+        assert tracker.max_beyond_allowance_m == pytest.approx(firmware_error_m, rel=0.05), name

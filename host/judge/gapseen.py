@@ -216,26 +216,103 @@ def with_boot(pages: LostPages, totals: TotalsPages, first_s: float, boot_s: flo
                         np.r_[zero, totals.overflowed]))
 
 
-@dataclass
-class PageEvidence:
-    """The evidence of a life's frames fed in chunks (the whole log: one chunk), the same for
-    the whole-log and the streamed judge: the pages made with their tick's summary
-    (``LostPages``, ``TotalsPages``: module docstring) and the log's gaps; ``seen`` then."""
+Page = tuple[int, float, int, int, int, float]  # lo, lo_s, hi, ENC_E2E_OK, LOST, sent_s
+Totals = tuple[float, int, int]  # sent_s, REJECTED_FRAMES, OVERFLOWED_FRAMES
 
-    decoder: BulkDecoder
+
+@dataclass
+class PageKeeper:
+    """The pages made with their tick's summary (module docstring), kept from status frames
+    fed one at a time in bus order: the core of the whole-log, streamed and live evidence."""
+
     cycle_s: float | None = None  # WHEEL_ENCODERS' cycle time
-    first_s: float | None = None  # the first encoder frame's time
-    _enc_count: int = 0  # encoder frames fed
-    _offset: int = 0  # frames fed
-    _last_seq: int | None = None
-    _last_enc_s: float = -math.inf
+    pages: list[Page] = field(default_factory=list)  # ENC_E2E pages kept, in bus order
+    totals: list[Totals] = field(default_factory=list)  # FRAME_TOTALS pages kept
     _prev: Status | None = None  # the last status frame
     _summary_s: float = -math.inf  # the last summary whose CRC holds: its time
     _queued: bool = False  # and whether it came within QUEUED_GAP_CYCLES of the one before
     _pending: list[tuple[int, tuple[int | float, ...]]] = field(default_factory=list)
     # pages made with the last summary, kept when the next one is not close (or at the end)
-    _pages: list[tuple[int, float, int, int, int, float]] = field(default_factory=list)
-    _totals: list[tuple[float, int, int]] = field(default_factory=list)
+
+    def status(self, frame: Status, value: tuple[int, int] | None) -> None:
+        """One ODOM_STATUS frame (``Status``) and its page's two counts (None: not decoded)."""
+        prev, self._prev = self._prev, frame
+        if frame[0] == 0 and frame[3]:
+            self._summary(frame[2])
+        if prev is None or value is None or not self._made_in_tick(prev, frame):
+            return
+        a, b = value
+        if frame[0] == LOST_PAGE and prev[4] > 0:  # a frame before its summary: S_p known
+            self._pending.append((LOST_PAGE, (prev[4] - 1, prev[5], frame[4], a, b, frame[2])))
+        elif frame[0] == TOTALS_PAGE:
+            self._pending.append((TOTALS_PAGE, (frame[2], a, b)))
+
+    def new_life(self) -> PageKeeper:
+        """A keeper for a new firmware life whose first frame (a summary) was the last fed."""
+        keeper = PageKeeper(self.cycle_s, _prev=self._prev, _summary_s=self._summary_s)
+        return keeper
+
+    def _summary(self, sent_s: float) -> None:
+        """A summary whose CRC holds, sent at ``sent_s``: the pages pending on the one before
+        it are kept unless this one came within ``QUEUED_GAP_CYCLES`` of it (both let out in a
+        burst: ``queued_frames``); its own pages wait for the next."""
+        assert self.cycle_s is not None
+        close = sent_s - self._summary_s < QUEUED_GAP_CYCLES * self.cycle_s
+        self.keep_pending(not close)
+        self._queued = close
+        self._summary_s = sent_s
+
+    def keep_pending(self, keep: bool) -> None:
+        """The pages pending on the last summary kept (``keep``) or dropped."""
+        for kind, row in self._pending if keep else []:
+            if kind == LOST_PAGE:
+                self.pages.append(row)  # type: ignore[arg-type]
+            else:
+                self.totals.append(row)  # type: ignore[arg-type]
+        self._pending = []
+
+    def _made_in_tick(self, summary: Status, page: Status) -> bool:
+        """Whether ``page`` came right after its tick's ``summary`` (module docstring; the
+        summary on time so far: not within ``QUEUED_GAP_CYCLES`` of the summary before)."""
+        assert self.cycle_s is not None
+        return (summary[0] == 0 and summary[3] and not self._queued and page[3]
+                and page[0] != 0 and page[1] == (summary[1] + 1) & 0xF
+                and page[2] - summary[2] < 0.5 * self.cycle_s)
+
+
+def seen_of(pages: list[Page], totals: list[Totals], gaps: list[tuple[int, int]],
+            boot: tuple[float, float] | None = None) -> Seen:
+    """``seen_by_pages`` of pages, totals and gaps (frame after, frames missing) kept as rows;
+    ``boot``: the log's first encoder frame's time and the power-up's (``with_boot``)."""
+    if not pages:
+        return NOTHING
+    col = list(zip(*pages, strict=True))
+    ints = [np.array(col[k], dtype=np.int64) for k in (0, 2, 3, 4)]
+    lost = LostPages(ints[0], np.array(col[1], dtype=np.float64), ints[1], ints[2], ints[3],
+                     np.array(col[5], dtype=np.float64))
+    tcol = list(zip(*totals, strict=True)) if totals else [(), (), ()]
+    counts = TotalsPages(np.array(tcol[0], dtype=np.float64), np.array(tcol[1], dtype=np.int64),
+                         np.array(tcol[2], dtype=np.int64))
+    if boot is not None:
+        lost, counts = with_boot(lost, counts, *boot)
+    gcol = list(zip(*gaps, strict=True)) if gaps else [(), ()]
+    return seen_by_pages(lost, counts, np.array(gcol[0], dtype=np.int64),
+                         np.array(gcol[1], dtype=np.int64))
+
+
+@dataclass
+class PageEvidence:
+    """The evidence of a life's frames fed in chunks (the whole log: one chunk), the same for
+    the whole-log and the streamed judge: the pages made with their tick's summary
+    (``PageKeeper``) and the log's gaps; ``seen`` then."""
+
+    decoder: BulkDecoder
+    first_s: float | None = None  # the first encoder frame's time
+    keeper: PageKeeper = field(default_factory=PageKeeper)
+    _enc_count: int = 0  # encoder frames fed
+    _offset: int = 0  # frames fed
+    _last_seq: int | None = None
+    _last_enc_s: float = -math.inf
     _gaps: list[tuple[int, int]] = field(default_factory=list)  # frame after, frames missing
     _gap_seq: dict[int, int] = field(default_factory=dict)  # per gap: the sequence number before
     late: LateFrames = field(default_factory=LateFrames)  # encoder frames refused (gapfill)
@@ -243,7 +320,7 @@ class PageEvidence:
 
     def feed(self, chunk: FrameArrays, enc: Encoders) -> None:
         """The next chunk and its accepted encoder frames (``index``: in the frames fed)."""
-        self.cycle_s = enc.cycle_s
+        self.keeper.cycle_s = enc.cycle_s
         if self.first_s is None and len(enc.seq):
             self.first_s = float(enc.timestamp_s[0])
         last = None if self._last_seq is None else (self._last_seq, self._last_enc_s)
@@ -259,23 +336,15 @@ class PageEvidence:
     def seen(self, power_up: bool) -> Seen:
         """``seen_by_pages`` of what was fed; ``power_up``: the firmware primed on the first
         encoder frame fed (``with_boot``)."""
-        self._keep_pending(True)  # no summary after the last: not let out in a burst
+        keeper = self.keeper
+        keeper.keep_pending(True)  # no summary after the last: not let out in a burst
         fills = {b: f for b, missing in self._gaps
                  if (f := self.late.fill(self._gap_seq[b], missing + 1)) is not None}
-        if not self._usable or self.cycle_s is None or not self._pages:
+        if not self._usable or keeper.cycle_s is None:
             return Seen([], [], fills)
-        col = list(zip(*self._pages, strict=True))
-        ints = [np.array(col[k], dtype=np.int64) for k in (0, 2, 3, 4)]
-        pages = LostPages(ints[0], np.array(col[1], dtype=np.float64), ints[1], ints[2],
-                          ints[3], np.array(col[5], dtype=np.float64))
-        tcol = list(zip(*self._totals, strict=True)) if self._totals else [(), (), ()]
-        totals = TotalsPages(np.array(tcol[0], dtype=np.float64),
-                             np.array(tcol[1], dtype=np.int64), np.array(tcol[2], dtype=np.int64))
-        if power_up and self.first_s is not None:
-            pages, totals = with_boot(pages, totals, self.first_s, self.first_s - self.cycle_s)
-        gcol = list(zip(*self._gaps, strict=True)) if self._gaps else [(), ()]
-        seen = seen_by_pages(pages, totals, np.array(gcol[0], dtype=np.int64),
-                             np.array(gcol[1], dtype=np.int64))
+        boot = (None if not power_up or self.first_s is None
+                else (self.first_s, self.first_s - keeper.cycle_s))
+        seen = seen_of(keeper.pages, keeper.totals, self._gaps, boot)
         return Seen(seen.same, seen.missed, fills)
 
     def _add_gaps(self, enc: Encoders) -> None:
@@ -290,7 +359,7 @@ class PageEvidence:
         self._last_seq = int(enc.seq[-1])
 
     def _add_status(self, chunk: FrameArrays, enc: Encoders) -> None:
-        """The chunk's status frames: each page that follows its tick's summary kept."""
+        """The chunk's status frames, each to the ``PageKeeper`` with its page's counts."""
         try:
             lost = self.decoder.decode_page(chunk, "ODOM_STATUS", LOST_PAGE)
             totals = self.decoder.decode_page(chunk, "ODOM_STATUS", TOTALS_PAGE)
@@ -317,43 +386,7 @@ class PageEvidence:
             totals["index"], totals["REJECTED_FRAMES"], totals["OVERFLOWED_FRAMES"],
             strict=True)})
         for row, frame in zip(rows.tolist(), status, strict=True):
-            prev, self._prev = self._prev, frame
-            if frame[0] == 0 and frame[3]:
-                self._summary(frame[2])
-            if prev is None or not self._made_in_tick(prev, frame) or row not in values:
-                continue
-            a, b = values[row]
-            if frame[0] == LOST_PAGE and prev[4] > 0:  # a frame before its summary: S_p known
-                self._pending.append((LOST_PAGE, (prev[4] - 1, prev[5], frame[4], a, b,
-                                                  frame[2])))
-            elif frame[0] == TOTALS_PAGE:
-                self._pending.append((TOTALS_PAGE, (frame[2], a, b)))
-
-    def _summary(self, sent_s: float) -> None:
-        """A summary whose CRC holds, sent at ``sent_s``: the pages pending on the one before
-        it are kept unless this one came within ``QUEUED_GAP_CYCLES`` of it (both let out in a
-        burst: ``queued_frames``); its own pages wait for the next."""
-        assert self.cycle_s is not None
-        close = sent_s - self._summary_s < QUEUED_GAP_CYCLES * self.cycle_s
-        self._keep_pending(not close)
-        self._queued = close
-        self._summary_s = sent_s
-
-    def _keep_pending(self, keep: bool) -> None:
-        for kind, row in self._pending if keep else []:
-            if kind == LOST_PAGE:
-                self._pages.append(row)  # type: ignore[arg-type]
-            else:
-                self._totals.append(row)  # type: ignore[arg-type]
-        self._pending = []
-
-    def _made_in_tick(self, summary: Status, page: Status) -> bool:
-        """Whether ``page`` came right after its tick's ``summary`` (module docstring; the
-        summary on time so far: not within ``QUEUED_GAP_CYCLES`` of the summary before)."""
-        assert self.cycle_s is not None
-        return (summary[0] == 0 and summary[3] and not self._queued and page[3]
-                and page[0] != 0 and page[1] == (summary[1] + 1) & 0xF
-                and page[2] - summary[2] < 0.5 * self.cycle_s)
+            self.keeper.status(frame, values.get(row))
 
 
 def crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: IntArray

@@ -107,7 +107,7 @@ class LiveDistance:
         if self._gate is None:
             # its own gate: the restarts it re-primes on are the tracker's to tell
             self._gate = StepGate(tracker.geometry, tracker.counter_bits,
-                                  RestartLog(lambda _seq: None))
+                                  RestartLog(lambda _seq, _by_uptime: None))
             self.first_seq = seq
         periods = tracker.placer.periods
         step = self._gate.step((seq, counter, left, right, periods, uptime, t_s))

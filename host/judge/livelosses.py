@@ -8,6 +8,7 @@ then ``wrongs`` (``host.judge.posewrongs``) latches it when it was beyond the li
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -28,11 +29,14 @@ class LiveAllowance:
         self._in_order = True  # ``_revisable`` by frame (then settled from its head)
         self._beyond_settled_m = 0.0  # largest error beyond its allowance of the other samples
         self.wrongs = PoseWrongs()  # the samples beyond the limit, latched once settled
+        # the latest samples' errors (frame, dx, dy m, dheading rad, t s): ``rejudge``
+        self._errors: deque[tuple[int, float, float, float, float]] = deque(maxlen=ENC_WINDOW)
 
     def record(self, seq: int, error: dict[str, float], fast: bool, t_s: float) -> None:
         """A sample at encoder frame ``seq`` (its ODOM_POSE_Y at bus time ``t_s``), ``error``
         from the reference (``dpos_m``, ``dheading_rad``)."""
         dpos_m = error["dpos_m"]
+        self._errors.append((seq, error["dx_m"], error["dy_m"], error["dheading_rad"], t_s))
         self.wrongs.sample(seq, t_s, dpos_m, error["dheading_rad"])
         revisable = self._revisable
         if revisable and seq < revisable[-1][0]:
@@ -40,6 +44,21 @@ class LiveAllowance:
         revisable.append((seq, dpos_m))
         if revisable[0][0] < seq - ENC_WINDOW:  # beyond any span's reach
             self.settle(seq - ENC_WINDOW, fast)
+
+    def rejudge(self, from_seq: int, until: int | None, shift: tuple[float, float]) -> None:
+        """The reference was wrong by ``shift`` (dx, dy m) from encoder frame ``from_seq`` on
+        (before ``until``, None: to the latest; a placement's allowance withdrawn:
+        ``host.judge.livegapseen``): the latest samples there are judged again with the
+        reference moved by it (a sample already judged right may now be latched wrong)."""
+        errors = list(self._errors)
+        self._errors.clear()
+        for seq, dx, dy, dheading, t_s in errors:
+            if from_seq <= seq and (until is None or seq < until):
+                dx, dy = dx - shift[0], dy - shift[1]
+                self.record(seq, {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy),
+                                  "dheading_rad": dheading}, False, t_s)
+            else:
+                self._errors.append((seq, dx, dy, dheading, t_s))
 
     def settle(self, upto: int, fast: bool) -> None:
         """The samples up to encoder frame ``upto`` can get no more allowance."""

@@ -3,7 +3,9 @@
 moves to where the firmware is, no further from where the reference started than the stalls'
 merge allowances since plus the tolerance. A gap of the encoder sequence (frames the judge
 did not hear, which the firmware may have integrated one by one) places it again too, within
-its ``gapbound`` allowance, as ``analyze`` places it."""
+its ``gapbound`` allowance, as ``analyze`` places it. A part of the latest placement that the
+firmware's pages later prove it took as the reference did (``host.judge.livegapseen``) has its
+allowance withdrawn (``withdraw``), as ``analyze`` gives it none."""
 
 from __future__ import annotations
 
@@ -19,6 +21,9 @@ from odocan.host.judge.breaks import (
     path_bound_m,
 )
 from odocan.host.judge.gapbound import gap_allowance_of_counts
+from odocan.host.judge.gapseen import Seen
+from odocan.host.judge.livegapseen import LiveSeen
+from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livewindow import CYCLE_S, Columns
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
@@ -26,9 +31,13 @@ from odocan.host.judge.samples import POSITION_LSB_M, sender_seq
 
 ABS_KEPT = 128  # the latest encoder frames whose count-step sums are kept (a sample names one)
 GAPS_KEPT = 64  # gaps of the encoder sequence kept between two placements (no growth)
+REPRIMED_KEPT = 64  # counter restarts kept (no page proves a span across one)
+PARTS_KEPT = 64  # placements' gaps and stalls waiting for the pages (older ones keep theirs)
 
 
 Gap = tuple[int, tuple[int, int], tuple[int, int], int]  # seq after, counts before, after, periods
+Part = tuple[bool, int, int, float, int]  # a placement's gap (True: seq after) or stall (its
+# span): first and last frame, the allowance it added (m), the placement's frame
 
 
 def _confirmed(gaps: list[Gap], window: Columns) -> list[Gap]:
@@ -68,14 +77,31 @@ class StallPlacer:
         self._gaps: list[Gap] = []  # since then
         self.max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED  # the gaps' bound
         self.periods = 1  # encoder periods from the frame heard before to the latest
+        self.seen = LiveSeen()  # what the firmware's pages prove it took (its life's)
+        self._reprimed: tuple[int, ...] = ()  # the latest counter restarts re-primed on
+        self._parts: list[Part] = []  # the placements' parts whose allowance pages may withdraw
+        # the latest placements: frame, the offset its sample asked (from the reference then),
+        # the step it made, the budget then (m)
+        self._history: list[list[float]] = []
+        self.losses: LiveAllowance | None = None  # the tracker's: samples judged again
+        self._owed = (0.0, 0.0)  # the offset withdrawn, not applied yet (m)
+        self.withdrawn = 0  # placements whose allowance the pages withdrew
 
     def restart(self) -> None:
         """A new reference: no offset, no allowance yet."""
         self._shift, self._budget_m = (0.0, 0.0), 0.0
-        self.stalled, self._gaps = False, []
+        self.stalled, self._gaps, self._parts, self._owed = False, [], [], (0.0, 0.0)
+        self._history = []
 
     def on_encoders(self, seq: int, frame: tuple[int, int, int, float],
                     prev: tuple[float, ...] | None, bits: int) -> bool:
+        """``_on_encoders``, and the frame to ``seen``."""
+        gap = self._on_encoders(seq, frame, prev, bits)
+        self.seen.on_encoders(seq, frame[3], self.periods)
+        return gap
+
+    def _on_encoders(self, seq: int, frame: tuple[int, int, int, float],
+                     prev: tuple[float, ...] | None, bits: int) -> bool:
         """Encoder frame ``seq`` (``frame``: COUNTER, counts left and right, bus time s;
         ``prev``: the window's row of the frame before: seq, pos, COUNTER, time, left, right).
         True after a gap of the sender's sequence (``samples.sender_seq``): the reference is to
@@ -102,11 +128,15 @@ class StallPlacer:
             self._gaps[-1] = (seq, (0, 0), (0, 0), -1)
         return True
 
-    def reprimed(self, seq: int) -> None:
-        """The reference re-primed on encoder frame ``seq`` (a controller restart told by
-        CTRL_UPTIME): a gap that ends there carried no motion on board (the firmware integrates
-        nothing across it), so it allows no placement (``reference_path``'s rule)."""
-        self._gaps = [gap for gap in self._gaps if gap[0] != seq]
+    def reprimed(self, seq: int, by_uptime: bool = True) -> None:
+        """The reference re-primed on encoder frame ``seq`` (a counter restart): no page proves
+        a span across it (``gapseen.Seen``'s ``reprimed``). A controller restart told by
+        CTRL_UPTIME (``by_uptime``): a gap that ends there carried no motion on board (the
+        firmware integrates nothing across it), so it allows no placement
+        (``reference_path``'s rule)."""
+        self._reprimed = (*self._reprimed[-REPRIMED_KEPT + 1:], seq)
+        if by_uptime:
+            self._gaps = [gap for gap in self._gaps if gap[0] != seq]
 
     def compared(self, seq: int) -> None:
         """A sample of encoder frame ``seq`` was compared."""
@@ -125,17 +155,22 @@ class StallPlacer:
         integrator) joins the budget after a stall, and each gap's since (``gapbound``). None:
         nothing to place (no stall, and the gaps suspected were a burst after a busy bus)."""
         geometry, bits, integrator = reference
-        stalled = self.stalled
+        stalled, parts = self.stalled, []
         if stalled:
-            self._budget_m += self._allowance_m(last_compared, pose.seq, window, reference)
+            allowance = self._allowance_m(last_compared, pose.seq, window, reference)
+            parts.append((False, last_compared, pose.seq, allowance, pose.seq))
         gaps, self._gaps, self.stalled = _confirmed(self._gaps, window), [], False
-        if not gaps and not stalled:
-            return None  # a burst after a busy bus, not a gap: nothing to place
-        for _, before, after, periods in gaps:
-            self._budget_m += (math.inf if periods < 0 else gap_allowance_of_counts(
-                before, after, periods, geometry, bits, integrator, self.max_wheel_speed_mm_s))
-        sx, sy = self._shift
+        sx, sy = self._shift[0] - self._owed[0], self._shift[1] - self._owed[1]  # applied
+        owed, self._owed = self._owed, (0.0, 0.0)
+        if not gaps and not stalled:  # a burst after a busy bus, not a gap: nothing to place
+            return None if owed == (0.0, 0.0) else owed  # but an allowance withdrawn
+        for seq, before, after, periods in gaps:
+            parts.append((True, seq, seq, math.inf if periods < 0 else gap_allowance_of_counts(
+                before, after, periods, geometry, bits, integrator, self.max_wheel_speed_mm_s),
+                pose.seq))
+        self._budget_m += sum(part[3] for part in parts)
         want_x, want_y = sx + pose.x_m - ref.x_m, sy + pose.y_m - ref.y_m
+        self._parts = (self._parts + parts)[-PARTS_KEPT:]
         limit = self._budget_m + self.position_tolerance_m
         if math.isinf(limit):  # no bound known (a stall left the window, 64 gaps): free
             self.placements.free += 1
@@ -143,7 +178,64 @@ class StallPlacer:
             add = self.placements.add_gap if gaps else self.placements.add_stall
             add(math.hypot(want_x, want_y), limit)
         self._shift = clamp_offset(want_x, want_y, limit)
+        self._history = [*self._history[1 - PARTS_KEPT:], [
+            pose.seq, want_x - sx, want_y - sy, self._shift[0] - sx, self._shift[1] - sy,
+            self._budget_m]]
         return self._shift[0] - sx, self._shift[1] - sy
+
+    def withdraw(self, seen: Seen) -> bool:
+        """The parts of the placements (since the reference started, the latest
+        ``PARTS_KEPT``) that ``seen`` proves the firmware took as the reference did (a gap it
+        missed too, a stall over which it took exactly the log's frames: ``gapseen.Seen``) lose
+        their allowance: the budget of every placement from theirs on shrinks by it, and each
+        is clamped again within it, as ``breaks.bound_offsets`` places them (``_replace``).
+        True when the reference is to move at the next sample."""
+        reprimed = frozenset(self._reprimed)
+        proven = [part for part in self._parts if not math.isinf(part[3]) and (
+            seen.gap_missed(part[1], reprimed) if part[0]
+            else seen.took_all(part[1] - 1, part[2], reprimed))]
+        if not proven:
+            return False
+        self._parts = [part for part in self._parts if part not in proven]
+        for part in proven:
+            self._budget_m -= part[3]
+            for placed in self._history:
+                placed[5] -= part[3] if placed[0] >= part[4] else 0.0
+        self._replace()
+        self.withdrawn += 1
+        return self.owed
+
+    def _replace(self) -> None:
+        """Each placement kept made again, in order, within its budget now: the offset its
+        sample asked, less what the placements before it moved less, clamped (each step
+        bounded, not the offset from the start: the start fit's corrections taken into the
+        reference at each placement, within a pose's rounding, are not the placements'). The
+        samples judged from each to the next are judged again by how much less the reference
+        moved (``livelosses.LiveAllowance.rejudge``); the latest's difference is owed: the
+        reference moves by it at the next sample (``shift``)."""
+        less_x, less_y = 0.0, 0.0  # how much less the placements so far moved the reference
+        for k, placed in enumerate(self._history):
+            seq, asked_x, asked_y, old_x, old_y, budget_m = placed
+            asked_x, asked_y = asked_x - less_x, asked_y - less_y
+            new_x, new_y = clamp_offset(asked_x, asked_y, budget_m + self.position_tolerance_m)
+            placed[1:5] = asked_x, asked_y, new_x, new_y
+            less_x, less_y = less_x + new_x - old_x, less_y + new_y - old_y
+            until = int(self._history[k + 1][0]) if k + 1 < len(self._history) else None
+            if self.losses is not None and (less_x, less_y) != (0.0, 0.0):
+                self.losses.rejudge(int(seq), until, (less_x, less_y))
+        self._owed = (self._owed[0] + less_x, self._owed[1] + less_y)
+        self._shift = (self._shift[0] + less_x, self._shift[1] + less_y)
+
+    @property
+    def waiting(self) -> bool:
+        """Placements' parts wait for the pages (``withdraw``)."""
+        return bool(self._parts)
+
+    @property
+    def owed(self) -> bool:
+        """An allowance was withdrawn (``withdraw``): the reference is to move at the next
+        sample (``shift`` gives how far)."""
+        return self._owed != (0.0, 0.0)
 
     def _allowance_m(self, before: int, after: int, window: Columns,
                      reference: tuple[Geometry, int, str]) -> float:

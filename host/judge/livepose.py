@@ -125,15 +125,15 @@ class RestartLog:
     ``events`` (the monitor's, the bridge's); a frame stepped again (a reference started again
     over frames already gated) is told once."""
 
-    def __init__(self, reprimed: Callable[[int], None]) -> None:
-        """``reprimed``: called with the frame of each restart told by CTRL_UPTIME."""
+    def __init__(self, reprimed: Callable[[int, bool], None]) -> None:
+        """``reprimed``: called with the frame of each restart and whether CTRL_UPTIME told
+        it."""
         self.events: deque[dict[str, Any]] = deque(maxlen=16)  # the owner's deque replaces it
         self._told = -1  # the latest encoder frame (seq) told
         self._reprimed = reprimed
 
     def add(self, seq: int, t_s: float, by_uptime: bool) -> None:
-        if by_uptime:
-            self._reprimed(seq)
+        self._reprimed(seq, by_uptime)
         if seq <= self._told:
             return
         self._told = seq

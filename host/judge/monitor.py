@@ -56,7 +56,7 @@ from cantools.database.can import Database, Message
 
 from odocan.firmware.errors import ErrorFlag
 from odocan.host.jsonutil import finite
-from odocan.host.judge import sources as src  # boot_summary, start_new_life
+from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
@@ -336,9 +336,9 @@ class BusMonitor:
         self.events.append({"t_s": self._bus_time_s, "kind": kind, "detail": detail})
 
     def _summary(self, message: Message, data: bytes) -> tuple[int, str] | None:
-        """(UPTIME, STATE) of an ODOM_STATUS summary whose CRC holds, whatever its sequence."""
+        """(UPTIME, STATE) of a summary whose CRC holds, any sequence (``src.status_frame``)."""
         config = self._e2e_configs.get(frame_key(message.frame_id, message.is_extended_frame))
-        return src.boot_summary(message, data, config.data_ids if config is not None else None)
+        return src.status_frame(self.tracker, message, data, config, self._bus_time_s)
 
     def node_ages(self, now_s: float) -> dict[str, dict[str, Any]]:
         """Per sending node heard: ``age_s`` since its last cyclic message, ``timeout_s``

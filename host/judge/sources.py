@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.powerup import NAMED_SPAN, same_tick
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.e2e import E2EMonitor, crc8h2f_p02_one
@@ -172,6 +173,16 @@ def _choice_name(message: Message, signal: str, value: Any) -> str:
     return str(choices[value]) if choices and value in choices else str(value)
 
 
+def status_frame(tracker: PoseTracker, message: Message, data: bytes, e2e: Any, t_s: float
+                 ) -> tuple[int, str] | None:
+    """Any ODOM_STATUS frame heard at bus time ``t_s``, whatever its E2E sequence (``e2e``: the
+    message's ``E2EMessage`` or None): each page to the live gapseen
+    (``livegapseen.heard_status``); a summary's ``boot_summary``."""
+    data_ids = e2e.data_ids if e2e is not None else None
+    heard_status(tracker, message, data, data_ids, t_s)
+    return boot_summary(message, data, data_ids)
+
+
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
                    uptime_s: int, state: str) -> str:
     """A reboot told by ``SourceWatch``: the reference starts at the power-up pose when the
@@ -179,6 +190,7 @@ def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
     second after the boot: its page of encoder E2E counts may be gone too) at the next pose;
     the E2E sequences of the messages ``FIRMWARE_NODE`` sends in ``db`` start afresh (a reboot
     is not frames lost). Returns what was done (text)."""
+    tracker.placer.seen.new_life()  # its pages count from 0 (host.judge.livegapseen)
     for message in db.messages:
         if FIRMWARE_NODE in message.senders:  # the counts stay; the next frame starts afresh
             e2e.restart_sequence(message.frame_id, extended=message.is_extended_frame)

@@ -109,7 +109,7 @@ class PoseTracker:
         self._last_sample_t: float | None = None  # bus time of the last sample's ODOM_POSE_Y
         self._last_compared = -1  # the encoder frame of the last sample compared
         self._place_at_next = False  # after a stall or a held pose: place the position again
-        self._losses = LiveAllowance()
+        self._losses = self.placer.losses = LiveAllowance()  # (livegapseen re-judges)
         self.wrongs = self._losses.wrongs  # POSE WRONG episodes latched (host.judge.posewrongs)
         self._now_s = 0.0  # the latest bus time (s)
         self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
@@ -122,8 +122,7 @@ class PoseTracker:
         self.reference_starts = 0
         self.vs_reference, self.vs_truth, self.reference_vs_truth = (ErrorStats(), ErrorStats(),
                                                                      ErrorStats())
-        # a new firmware life's origin in the truth's frame (``compare.life_origin``): None in
-        # the first life (it came up with the simulator), else set at its first truth sample
+        # a new life's origin in the truth's frame (``compare.life_origin``; None in the first)
         self.life_truth = LifeTruth()
 
     fast_path = True  # False: every half by ``match_encoder`` over the window (tests compare)
@@ -279,7 +278,7 @@ class PoseTracker:
         ref = self._ref_at.get(seq)
         if ref is None:
             return None
-        if self._place_at_next:
+        if self._place_at_next or self.placer.owed:  # owed: an allowance withdrawn
             ref = self._place(pose, ref)
         return self._record(pose, ref)
 
@@ -381,6 +380,7 @@ class PoseTracker:
                 self.restart_reference()
             return
         self.reference_starts -= first_life and self.reference_starts > 0
+        self.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
         self._start_reference(FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
         if not first_life:
             self.life_truth.booted(primed, self._ref_at)

@@ -54,6 +54,7 @@ from cantools.database.errors import DecodeError
 
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
+from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
@@ -175,8 +176,7 @@ class RobotTelemetry:
         Runs per frame of every robot (the fleet's hot path): one lookup of the frame's route
         (message, handler, decoder), the sample check only when the tracker settled one."""
         route = None if extended else self._routes.get(can_id)
-        if route is not None and route.status_page is not None \
-                and route.is_summary(data):  # before E2E: a reboot fails it
+        if route is not None and route.status_page is not None:  # before E2E: a reboot fails it
             self._watch_source(route, data, t_s)
         status = self.e2e.check(can_id, data, extended=extended,
                                 timestamp_s=t_s)  # the window widens with time
@@ -209,9 +209,12 @@ class RobotTelemetry:
 
     def _watch_source(self, route: Route, data: bytes, t_s: float) -> None:
         """A reboot (UPTIME going back, INIT after running) starts the firmware's new life at
-        its power-up pose, as the monitor and ``analyze`` do (``host.judge.sources``)."""
+        its power-up pose, as the monitor and ``analyze`` do (``host.judge.sources``); every
+        page to the live gapseen (``livegapseen.heard_status``)."""
         ids = self._status_ids.data_ids if self._status_ids is not None else None
-        summary = boot_summary(route.message, data, ids, route.signals)
+        heard_status(self.tracker, route.message, data, ids, t_s)
+        summary = (boot_summary(route.message, data, ids, route.signals)
+                   if route.is_summary(data) else None)
         if summary is None or self.sources.observe(t_s, *summary) != "reboot":
             return
         self.reboots += 1

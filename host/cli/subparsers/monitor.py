@@ -45,6 +45,7 @@ from odocan.host.cli.options import (
 from odocan.host.cli.subparsers.analyze import load_dbc
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.export import FOXGLOVE_PORT
+from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.monitor import BusMonitor, to_json
 from odocan.host.mqtt.broker import (
     BrokerError,
@@ -154,6 +155,7 @@ def _do_monitor(args: argparse.Namespace) -> int:
     started_s = time.monotonic()
     failure, signum = _watch_bus(args, model, trace, view, recorder, live)
     wrongs = model.tracker.wrongs
+    end_of_watch(model.tracker)  # the last pages' proof (host.judge.livegapseen)
     wrongs.finish(model.tracker.allowance_m)  # the samples still waiting for a later page
     code = _end(args, model.snapshot, early_stop(signum, started_s, args.duration))
     if failure is not None:
