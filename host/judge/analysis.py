@@ -371,13 +371,14 @@ def _analyze_life(
             "unmatched_poses": unmatched,
             "encoder_frames": len(enc.index),
             "reference_restarts": ref_all.restarts,
+            "unseen_restarts": len(ref_all.unseen_restarts),  # new starts: unseenrestart
             "implausible_encoder_frames": ref_all.implausible_frames,
         },
         "reference_breaks": ref_all.placements.as_dict(),
         "events": [
             {"kind": "counter_restart", "t_s": float(frames.timestamp_s[enc.index[e]]),
              "encoder_frame": int(e),
-             "detail": restart_detail(e in ref_all.ctrl_restarts)}
+             "detail": restart_detail(e in ref_all.ctrl_restarts, e in ref_all.unseen_restarts)}
             for e in ref_all.counter_restarts
         ] + [
             {"kind": "firmware_stall", "t_s": float(frames.timestamp_s[enc.index[e]]),

@@ -66,7 +66,7 @@ allowance.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -80,6 +80,8 @@ from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 LOST_PAGE = 2  # ODOM_STATUS page with ENC_E2E_OK and ENC_E2E_LOST
 TOTALS_PAGE = 1  # ODOM_STATUS page with REJECTED_FRAMES and OVERFLOWED_FRAMES
 PAIR_PAGES = 8  # pages paired up to this many apart (4 s of pages: a window per pair)
+DARK_CYCLES = 3  # a log without any frame this many encoder cycles (the firmware sends a pose
+# every 2): the recorder lost frames
 WRAP_SAFE_S = 7.0  # 65536 frames take longer than this on a 1 Mbit/s bus (~9 000 frames/s)
 Span = tuple[int, int]  # encoder frames (first, last), both included
 Status = tuple[int, int, float, bool, int, float]  # a status frame: page, COUNTER, time, CRC
@@ -123,6 +125,16 @@ class Seen:
         every one (refused by E2E: held back on the bus) and no counter restart re-primed at
         it; else None."""
         return None if frame in reprimed else self.fills.get(frame)
+    counted: list[Span] = field(default_factory=list)  # the runs of ``same`` proven by OK alone
+    holes: frozenset[int] = frozenset()  # encoder frames after a hole of the log's encoder
+    # frames (refused ones included): the sender silent or the recorder lost frames
+
+    def took_across(self, frame: int) -> bool:
+        """Whether ENC_E2E_OK alone proves the firmware took exactly the log's frames from
+        ``frame - 1`` to ``frame`` (none the log lacks), a controller restart re-primed at
+        ``frame`` or not: OK counts the frames it accepted, whatever their COUNTER (the LOST
+        proof does not hold across a restarted COUNTER)."""
+        return any(lo <= frame - 1 and frame <= hi for lo, hi in self.counted)
 
     def gap_missed(self, frame: int, reprimed: frozenset[int] = frozenset()) -> bool:
         """Whether the firmware missed every frame of the gap into encoder ``frame`` (no
@@ -154,6 +166,7 @@ def seen_by_pages(pages: LostPages, totals: TotalsPages, gap_frames: IntArray,
     cum = np.concatenate(([0], np.cumsum(gap_missing, dtype=np.int64)))
     missed: list[Span] = []
     windows: list[tuple[int, int]] = []  # proven pairs of pages (i, j)
+    counted: list[tuple[int, int]] = []  # of them, those proven by OK
     for d in range(1, min(PAIR_PAGES, n - 1) + 1):
         i = np.arange(n - d)
         j = i + d
@@ -167,7 +180,8 @@ def seen_by_pages(pages: LostPages, totals: TotalsPages, gap_frames: IntArray,
         by_ok = quiet & (sure > 0) & (((pages.ok[j] - pages.ok[i]) & 0xFFFF) <= sure)
         missed += zip(lo[by_lost].tolist(), hi[by_lost].tolist(), strict=True)
         windows += zip(i[by_lost | by_ok].tolist(), j[by_lost | by_ok].tolist(), strict=True)
-    return Seen(_runs(windows, pages), missed)
+        counted += zip(i[by_ok].tolist(), j[by_ok].tolist(), strict=True)
+    return Seen(_runs(windows, pages), missed, counted=_runs(counted, pages))
 
 
 def _runs(windows: list[tuple[int, int]], pages: LostPages) -> list[Span]:
@@ -317,6 +331,9 @@ class PageEvidence:
     _gap_seq: dict[int, int] = field(default_factory=dict)  # per gap: the sequence number before
     late: LateFrames = field(default_factory=LateFrames)  # encoder frames refused (gapfill)
     _usable: bool = True  # the DBC has the signals
+    _holes: list[int] = field(default_factory=list)  # ``Seen.holes``
+    _last_raw_s: float | None = None  # the last frame's time
+    _dark: int = 0  # dark gaps of the log since its last encoder frame (refused ones too)
 
     def feed(self, chunk: FrameArrays, enc: Encoders) -> None:
         """The next chunk and its accepted encoder frames (``index``: in the frames fed)."""
@@ -326,6 +343,7 @@ class PageEvidence:
         last = None if self._last_seq is None else (self._last_seq, self._last_enc_s)
         self.late.add(*late_in_chunk(chunk, self.decoder, enc, self._offset, last))
         self._add_gaps(enc)
+        self._add_holes(chunk, enc)
         if self._usable:
             self._add_status(chunk, enc)
         self._enc_count += len(enc.seq)
@@ -340,12 +358,34 @@ class PageEvidence:
         keeper.keep_pending(True)  # no summary after the last: not let out in a burst
         fills = {b: f for b, missing in self._gaps
                  if (f := self.late.fill(self._gap_seq[b], missing + 1)) is not None}
+        holes = frozenset(self._holes)
         if not self._usable or keeper.cycle_s is None:
-            return Seen([], [], fills)
+            return Seen([], [], fills, holes=holes)
         boot = (None if not power_up or self.first_s is None
                 else (self.first_s, self.first_s - keeper.cycle_s))
-        seen = seen_of(keeper.pages, keeper.totals, self._gaps, boot)
-        return Seen(seen.same, seen.missed, fills)
+        return replace(seen_of(keeper.pages, keeper.totals, self._gaps, boot), fills=fills,
+                       holes=holes)
+
+    def _add_holes(self, chunk: FrameArrays, enc: Encoders) -> None:
+        """``Seen.holes``: the accepted encoder frames at or after an encoder frame of the chunk
+        (refused or not) since which, after the encoder frame before it, the log went dark
+        (no frame of any message for ``DARK_CYCLES`` encoder cycles: the recorder lost them)."""
+        try:
+            rows = self.decoder.select(chunk, "WHEEL_ENCODERS")
+        except (DecodeError, KeyError):
+            return
+        cycle_s = self.keeper.cycle_s
+        if cycle_s is None or len(chunk) == 0:
+            return
+        prior = np.concatenate(([chunk.timestamp_s[0] if self._last_raw_s is None
+                                 else self._last_raw_s], chunk.timestamp_s))
+        dark = np.cumsum(np.diff(prior) > DARK_CYCLES * cycle_s)  # dark gaps up to a row
+        since = np.diff(np.concatenate(([0], dark[rows])))  # since the encoder frame before
+        since[:1] += self._dark
+        after = rows[since > 0] + self._offset
+        self._holes += (self._enc_count + np.searchsorted(enc.index, after)).tolist()
+        self._dark = int(dark[-1] - dark[rows[-1]]) if len(rows) else self._dark + int(dark[-1])
+        self._last_raw_s = float(chunk.timestamp_s[-1])
 
     def _add_gaps(self, enc: Encoders) -> None:
         if len(enc.seq) == 0:

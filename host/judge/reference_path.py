@@ -38,6 +38,8 @@ from odocan.host.judge.samples import (
     Poses,
 )
 from odocan.host.judge.step_periods import pair_bound_periods, step_bound_periods
+from odocan.host.judge.unseenrestart import heading_offsets, restarted_path, unseen_restarts
+from odocan.host.judge.unseenrestart import restart_detail as restart_detail
 from odocan.sim.robot import RobotProfile
 
 
@@ -57,6 +59,7 @@ class Reference:
     implausible_frames: int = 0  # encoder frames the firmware refuses (not integrated)
     placements: BreakSummary = field(default_factory=BreakSummary)  # after stalls and gaps
     ctrl_restarts: frozenset[int] = frozenset()  # counter restarts told by CTRL_UPTIME
+    unseen_restarts: frozenset[int] = frozenset()  # of them, new starts (``unseenrestart``)
 
     def at(self, enc: IntArray) -> Reference:
         """The reference at the encoder frames ``enc`` (all >= start)."""
@@ -64,10 +67,8 @@ class Reference:
         return Reference(
             self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
             self.restarts, self.exact_start, self.counter_restarts, self.implausible_frames,
-            self.placements, self.ctrl_restarts,
+            self.placements, self.ctrl_restarts, self.unseen_restarts,
         )
-
-
 
 
 def build_reference(
@@ -96,6 +97,9 @@ def build_reference(
     rel_x, rel_y = np.concatenate((zero, rel.x_m)), np.concatenate((zero, rel.y_m))
     rel_h = np.concatenate((zero, rel.heading_rad))
     at = onboard.enc - e0
+    unseen = unseen_restarts(enc, e0, steps.by_uptime, seen)
+    rel_x, rel_y, rel_h = restarted_path(unseen, rel_x, rel_y, rel_h, heading_offsets(
+        unseen, rel_h, HEADING_LSB_RAD * onboard.heading_raw.astype(np.float64), at))
     gaps = np.concatenate(([False], np.diff(enc.seq[e0:]) > 1))
     starts = gaps.copy()
     if breaks is not None:  # encoder frames where the firmware resumed after a stall
@@ -115,6 +119,8 @@ def build_reference(
     reprimed = frozenset(e0 + k for k in steps.reprimed)
 
     def gap_allowance(b: int) -> float:
+        if b - e0 in unseen:  # frames lost before a restart: a new start, placed freely
+            return math.inf
         if b in uptime_reprimed:  # the gap ends in a controller restart: nothing integrated
             return 0.0  # across it on board (re-primed), the position goes on exactly
         if seen.gap_missed(b, reprimed):
@@ -144,17 +150,8 @@ def build_reference(
         counter_restarts=tuple(e0 + k for k in steps.reprimed),
         implausible_frames=steps.refused,
         placements=placed,
-        ctrl_restarts=uptime_reprimed,
+        ctrl_restarts=uptime_reprimed, unseen_restarts=frozenset(e0 + k for k in unseen),
     )
-
-
-def restart_detail(by_uptime: bool) -> str:
-    """The report's words for an encoder frame the firmware re-primes on (COUNTER_RESET):
-    ``by_uptime``, the motor controller said it restarted (CTRL_UPTIME went back)."""
-    cause = ("the motor controller restarted (CTRL_UPTIME went back): " if by_uptime
-             else "")
-    return (f"{cause}the firmware re-primes here (COUNTER_RESET): the reference restarts with "
-            "it; the motion across the restart is unknowable")
 
 
 def break_allowance(enc: Encoders, b: int, sample_enc: IntArray, geometry: Geometry, bits: int,

@@ -33,7 +33,6 @@ from odocan.host.judge.gapfill import gap_or_fill_allowance
 from odocan.host.judge.gapseen import PageEvidence
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
-from odocan.host.judge.reference_path import restart_detail
 from odocan.host.judge.samples import (
     REQUIRED,
     WIRE_COUNTER_BITS,
@@ -62,6 +61,7 @@ from odocan.host.judge.stream_place import start_pose as place_start
 from odocan.host.judge.stream_stalls import StreamBreakCounts, StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
 from odocan.host.judge.stream_twist import StreamTwist
+from odocan.host.judge.unseenrestart import restart_detail, whole_only
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import UNKNOWN
@@ -262,7 +262,7 @@ def _life(
     # the offsets' pass also weighs the lossy spans (losses.loss_allowance) and keeps the
     # counts across the stalls' breaks (their allowance)
     raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
-    seen, reprimed = first.pages.seen(power_up), frozenset(info.reprimed)  # gapseen
+    seen, reprimed = whole_only(first.pages.seen(power_up), info, NotStreamable)  # gapseen
     off_x, off_y, placements = placed_offsets(
         *raw, info.openings, lambda b: across.allowance(b, seen, reprimed),
         lambda b: 0.0 if b in info.by_uptime or seen.gap_missed(b, reprimed)  # reference_path's
@@ -317,7 +317,7 @@ def _life(
             "truth_compared": truth.compared,
             "unmatched_poses": first.poses.unmatched,
             "encoder_frames": first.encoders,
-            "reference_restarts": info.segments,
+            "reference_restarts": info.segments, "unseen_restarts": 0,  # else: whole_only
             "implausible_encoder_frames": info.refused,
         },
         "reference_breaks": placements.as_dict(),

@@ -1,0 +1,131 @@
+"""A gap of the log that ends in a controller restart (issue #11, rule 5: a FAIL must never blame
+a correct firmware).
+
+The firmware re-primes on the restarted controller's first frame (COUNTER_RESET, no step into
+it: ``reference_path.firmware_steps``), so when it took exactly the log's frames up to the
+restart, nothing it integrated is missing from the log and the reference goes on exactly across
+the gap (no allowance: a firmware that integrated the restart's jump, or is off, FAILs). That is
+so when ENC_E2E_OK proves it (``gapseen.Seen.took_across``: the firmware accepted no frame the
+log lacks from the frame before the gap to the restart's first).
+
+Otherwise, where the log went dark before the restart (no frame of any message for
+``gapseen.DARK_CYCLES`` encoder cycles since the encoder frame before: the recorder lost frames,
+``Seen.holes``), the firmware may have integrated frames the log does not hold (with or without
+pages to tell: the pages of the dark span are lost too), and across the restarted counters
+their counts are unknowable: neither its position nor its heading after the restart follow
+from the log. The reference then restarts there as a new life with a placed start: its heading
+the middle of the overlap of the heading rounding intervals of the on-board samples from the
+restart to the next such restart (``heading_offsets``), its path from the restart on rotated by
+that, and its position placed freely (``gapbound`` allowance inf: ``breaks.bound_offsets``).
+A gap of the encoder frames alone, the firmware's frames logged across it, is the controller's
+silence (or frames E2E refused, held in the log): the exact rule stays there, as before (a
+recorder that drops encoder frames only is not modelled: a known limit).
+
+What a wrong firmware can hide there: one wrong pose jump at the restart (position and heading
+at once), as a log that starts mid-drive hides a wrong start pose. What it cannot: any wrong
+step before or after it (the reference integrates every step of the log on both sides, the
+placed start uses every sample of the new life, which must agree within their rounding), nor
+a restart the pages prove it took exactly (the exact rule). Each such restart is an event of the
+report (``DETAIL``) and counted (``samples.unseen_restarts``). The streamed judge does not fit
+the new start: it refuses such a life (``whole_only``) and ``odocan analyze`` judges it whole.
+The live judge (``host.judge.tracking``) does not yet: it keeps the exact rule there.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from odocan.host.judge.gapseen import Seen
+from odocan.host.judge.samples import Encoders, FloatArray, IntArray
+
+if TYPE_CHECKING:
+    from odocan.host.judge.stream_life import LifeInfo
+
+DETAIL = ("frames the recorder lost before a controller restart: the firmware may have taken "
+          "frames the log lacks and their counts are unknowable across the restarted counters; "
+          "the reference restarts from the on-board pose after it (heading included)")
+
+
+def unseen_restarts(enc: Encoders, e0: int, by_uptime: list[int], seen: Seen) -> list[int]:
+    """The controller restarts (frames from ``e0`` the firmware re-primed on, ``by_uptime``)
+    that end a gap of the log where it went dark (``Seen.holes``) and that the pages do not
+    prove the firmware took exactly (module docstring), ascending."""
+    return sorted(k for k in by_uptime
+                  if k > 0 and int(enc.seq[e0 + k] - enc.seq[e0 + k - 1]) > 1
+                  and e0 + k in seen.holes and not seen.took_across(e0 + k))
+
+
+def whole_only(seen: Seen, info: LifeInfo, refusal: type[Exception]
+               ) -> tuple[Seen, frozenset[int]]:
+    """The streamed judge's ``seen`` and re-primed frames of a life (``info``: its first
+    placement pass's); ``refusal`` (``stream_analysis.NotStreamable``: the whole log's judge
+    then) when a controller restart there is a new start (``unseen_restarts``): the stream
+    does not fit the new start's heading."""
+    if any(b in info.gap_steps and b in seen.holes and not seen.took_across(b)
+           for b in info.by_uptime):
+        raise refusal(DETAIL)
+    return seen, frozenset(info.reprimed)
+
+
+def heading_offsets(unseen: list[int], rel_h: FloatArray, heading_rad: FloatArray,
+                    at: IntArray) -> FloatArray:
+    """Per frame of the reference (from ``e0``: ``rel_h`` its heading from the start), the
+    heading (rad) each restart of ``unseen`` adds from it on: the middle of the overlap of the
+    heading intervals of the on-board samples (``heading_rad`` at frames ``at``) after it, less
+    that of the samples of the life before it (0 for a life without samples: nothing to
+    compare there)."""
+    cuts = [0, *unseen, len(rel_h)]
+    mids = []
+    for a, b in itertools.pairwise(cuts):
+        inside = (at >= a) & (at < b)
+        offsets = _wrap(heading_rad[inside] - rel_h[at[inside]])
+        mids.append(_middle(offsets) if len(offsets) else math.nan)
+    add = np.zeros(len(rel_h))
+    known = mids[0] if not math.isnan(mids[0]) else 0.0
+    for k, mid in zip(unseen, mids[1:], strict=True):
+        if not math.isnan(mid):
+            add[k:] += float(_wrap(np.array([mid - known]))[0])
+            known = mid
+    return add
+
+
+def restarted_path(unseen: list[int], rel_x: FloatArray, rel_y: FloatArray, rel_h: FloatArray,
+                   add_h: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The reference's path from the start (``rel_*``, m and rad) with each restart of
+    ``unseen`` a new start: the path after it rotated about its frame by the heading it adds
+    (``add_h``: ``heading_offsets``); its position is placed later (allowance inf)."""
+    x, y = rel_x.copy(), rel_y.copy()
+    for k in unseen:
+        turn = float(add_h[k] - (add_h[k - 1] if k > 0 else 0.0))
+        cos_t, sin_t = math.cos(turn), math.sin(turn)
+        dx, dy = x[k:] - x[k], y[k:] - y[k]
+        x[k:], y[k:] = x[k] + cos_t * dx - sin_t * dy, y[k] + sin_t * dx + cos_t * dy
+    return x, y, rel_h + add_h
+
+
+def _middle(offsets: FloatArray) -> float:
+    """The middle of the overlap of [o - lsb/2, o + lsb/2] over ``offsets`` (unwrapped about
+    the first); the middle of the extremes when they do not overlap (a wrong firmware)."""
+    around = offsets[0] + _wrap(offsets - offsets[0])
+    return 0.5 * (float(np.max(around)) + float(np.min(around)))
+
+
+def _wrap(angle: FloatArray) -> FloatArray:
+    wrapped: FloatArray = math.pi - (math.pi - angle) % (2 * math.pi)
+    return wrapped
+
+
+def restart_detail(by_uptime: bool, unseen: bool = False) -> str:
+    """The report's words for an encoder frame the firmware re-primes on (COUNTER_RESET):
+    ``by_uptime``, the motor controller said it restarted (CTRL_UPTIME went back); ``unseen``:
+    after frames the recorder lost (``unseenrestart.DETAIL``)."""
+    if unseen:
+        return DETAIL
+    cause = ("the motor controller restarted (CTRL_UPTIME went back): " if by_uptime
+             else "")
+    return (f"{cause}the firmware re-primes here (COUNTER_RESET): the reference restarts with "
+            "it; the motion across the restart is unknowable")
