@@ -11,6 +11,8 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.gapbound import period_bounds
+from odocan.host.judge.lossgate import gated_counts
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import (
     WIRE_COUNTER_BITS,
@@ -188,8 +190,11 @@ class OneSteps:
 
     @staticmethod
     def of_geometry(enc: Encoders, g: Geometry, bits: int, integrator: str) -> OneSteps:
-        """``of`` for a geometry and wire counter width (``bits``): the live judge's form."""
-        dl, dr = wrap_delta(np.diff(enc.left), bits), wrap_delta(np.diff(enc.right), bits)
+        """``of`` for a geometry and wire counter width (``bits``): the live judge's form. The
+        counts are the firmware's (``lossgate.gated_counts``: a frame it refuses as implausible
+        takes the last accepted frame's counts)."""
+        left, right, _ = gated_counts(enc.left, enc.right, enc.seq, period_bounds(g), bits)
+        dl, dr = wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits)
         return OneSteps.of_deltas(dl, dr, g, integrator)
 
     @staticmethod
