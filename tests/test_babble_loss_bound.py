@@ -23,10 +23,12 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.judge.analysis import POSITION_LSB_M
+from odocan.host.judge.lossgate import gated_counts
 from odocan.sim.robot import load
 from tests.independent_checker import _Frames
 from tests.test_babble_firmware import _biased_x
@@ -107,20 +109,20 @@ def _checker_bound_m(log: Path, robot: str) -> tuple[float, int]:
     n = lost[-1]
     cum = _accepted_counts(frames, robot)
     profile = load(robot)
-    m = tuple(2.0 * math.pi * r / profile.counts_per_rev
-              for r in (profile.wheel_radius_left_m, profile.wheel_radius_right_m))
+    m = (2.0 * math.pi * profile.wheel_radius_left_m / profile.counts_per_rev,
+         2.0 * math.pi * profile.wheel_radius_right_m / profile.counts_per_rev)
     worst = 0.0
     for a in range(len(cum) - 1):
         h = (cum[a][1] * m[1] - cum[a][0] * m[0]) / profile.wheelbase_m
         one = (0.0, 0.0, h)
         for r in range(1, min(n, len(cum) - 2 - a) + 1):  # frames a+1 .. a+r lost
             one = _step(one, cum[a + r][0] - cum[a + r - 1][0], cum[a + r][1] - cum[a + r - 1][1],
-                        m, profile.wheelbase_m)  # type: ignore[arg-type]
+                        m, profile.wheelbase_m)
             b = a + r + 1
             stepped = _step(one, cum[b][0] - cum[b - 1][0], cum[b][1] - cum[b - 1][1], m,
-                            profile.wheelbase_m)  # type: ignore[arg-type]
+                            profile.wheelbase_m)
             merged = _step((0.0, 0.0, h), cum[b][0] - cum[a][0], cum[b][1] - cum[a][1], m,
-                           profile.wheelbase_m)  # type: ignore[arg-type]
+                           profile.wheelbase_m)
             worst = max(worst, math.hypot(stepped[0] - merged[0], stepped[1] - merged[1]))
     return n * worst, n
 
@@ -159,3 +161,25 @@ def test_a_pose_off_after_the_babble_fails_whole_streamed_and_live(
         assert main(["analyze", str(wrong), "--robot", "kobuki", "--stream", stream]) == 1
     monitor = monitor_of(wrong, "kobuki", "exact")
     assert monitor.tracker.max_beyond_allowance_m > POSITION_LSB_M
+
+
+def test_the_gate_refuses_forged_counts_alike_in_any_chunks() -> None:
+    """``lossgate.gated_counts``: a forged frame (counts far beyond the bound) takes the last
+    accepted frame's counts, a run of ``RESYNC_FRAMES`` is taken raw (the counters restarted),
+    a frame after a gap of the sender's sequence gets its periods; chunked as the stream feeds
+    it, the same counts, bit for bit."""
+    left = np.array([0, 10, 20, 900_000, 40, 50, 70_000, 70_010, 70_020, 70_030, 70_200],
+                    dtype=np.int64)
+    right = -left
+    seq = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12], dtype=np.int64)
+    want_l = [0, 10, 20, 20, 40, 50, 50, 50, 70_020, 70_030, 70_200]
+    got_l, got_r, _ = gated_counts(left, right, seq, (60, 60), 24)
+    assert got_l.tolist() == want_l
+    assert got_r.tolist() == [-x for x in want_l]
+    for size in (1, 2, 3, 4):
+        gate, parts = None, []
+        for k in range(0, len(left), size):
+            part, _, gate = gated_counts(left[k:k + size], right[k:k + size], seq[k:k + size],
+                                         (60, 60), 24, gate)
+            parts.extend(part.tolist())
+        assert parts == want_l
