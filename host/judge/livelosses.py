@@ -115,6 +115,6 @@ class LiveAllowance:
                                  np.array(i1 - i0)))
         geometry, bits, integrator = steps_of
         if n > 0 and integrator is not None:
-            steps = OneSteps.of_geometry(enc, geometry, bits, integrator)
+            steps = OneSteps.of_firmware(enc, geometry, bits, integrator)
             lost_ok = ~np.isin(seqs.astype(np.int64), list(sampled))  # named: not lost
             self.spans.append((before[1], worst_runs_m(steps, lost_ok, i0, i1, n)))

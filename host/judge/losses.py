@@ -11,6 +11,8 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.gapbound import period_bounds
+from odocan.host.judge.lossgate import gated_counts
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import (
     WIRE_COUNTER_BITS,
@@ -123,11 +125,14 @@ def loss_allowance(
     began before the frame. A run of lost frames only changes the one step that merges it (the
     heading after it is exact, a function of the counts), so the errors add up as vectors: their
     sum of lengths bounds them. A run of r frames merged into one step errs far more than r
-    single frames (about r^3 on a curve: a mailbox drops 10 to 35 frames in a row)."""
+    single frames (about r^3 on a curve: a mailbox drops 10 to 35 frames in a row). The steps
+    are the firmware's (``OneSteps.of_firmware``: a forger's frame it refused merges as the
+    real frames around it do)."""
     allowance = np.zeros(len(at))
     if not spans:
         return allowance
-    steps = OneSteps.of(enc, robot, integrator)
+    steps = OneSteps.of_firmware(enc, Geometry.of(robot),
+                                 min(robot.counter_bits, WIRE_COUNTER_BITS), integrator)
     lost_ok = np.ones(len(enc.seq), dtype=bool)
     lost_ok[named[named < len(lost_ok)]] = False  # a frame an on-board sample names was not lost
     for first, last, n in spans:
@@ -190,6 +195,15 @@ class OneSteps:
     def of_geometry(enc: Encoders, g: Geometry, bits: int, integrator: str) -> OneSteps:
         """``of`` for a geometry and wire counter width (``bits``): the live judge's form."""
         dl, dr = wrap_delta(np.diff(enc.left), bits), wrap_delta(np.diff(enc.right), bits)
+        return OneSteps.of_deltas(dl, dr, g, integrator)
+
+    @staticmethod
+    def of_firmware(enc: Encoders, g: Geometry, bits: int, integrator: str) -> OneSteps:
+        """``of_geometry`` on the counts the firmware integrates (``lossgate.gated_counts``: a
+        frame it refuses as implausible, a forger's, takes the last accepted frame's counts):
+        the steps a loss merges (``loss_allowance``, the live judge's)."""
+        left, right, _ = gated_counts(enc.left, enc.right, enc.seq, period_bounds(g), bits)
+        dl, dr = wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits)
         return OneSteps.of_deltas(dl, dr, g, integrator)
 
     @staticmethod

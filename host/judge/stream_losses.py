@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.gapbound import period_bounds
 from odocan.host.judge.losses import (
     LOST_PAGE,
     OneSteps,
@@ -28,6 +29,7 @@ from odocan.host.judge.losses import (
     step_vector,
     worst_runs_m,
 )
+from odocan.host.judge.lossgate import Gate, gated_counts
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import (
     Encoders,
@@ -166,9 +168,10 @@ class StreamLosses:
 class SpanDrops:
     """``losses.loss_allowance`` for the spans of a life (``StreamLosses.spans``) from a pass
     over its encoder frames (``feed``) and its kept on-board samples (``named``): each frame's
-    cumulative counts, heading and single-step displacement (``losses.OneSteps``: continued
-    cumulative sums, bit for bit the whole life's), kept only from the frame before each span to
-    the frame after it; then each span's weight (``losses.worst_runs_m`` on them, the frames a
+    cumulative counts (the firmware's: ``lossgate.gated_counts``, carried across chunks),
+    heading and single-step displacement (``losses.OneSteps``: continued cumulative sums,
+    bit for bit the whole life's), kept only from the frame before each span to the frame
+    after it; then each span's weight (``losses.worst_runs_m`` on them, the frames a
     sample names excepted) and the allowance at any encoder frame (the weights of the spans
     that began before it, added in the same order)."""
 
@@ -177,8 +180,9 @@ class SpanDrops:
     bits: int
     integrator: str
     _count: int = 0  # encoder frames fed
-    _last: tuple[int, int, int, int, float, float, float] | None = None  # raw l, r; cum l, r;
-    # heading, cum x, cum y of the last frame fed
+    _last: tuple[int, int, int, int, float, float, float] | None = None  # gated l, r; cum l,
+    # r; heading, cum x, cum y of the last frame fed
+    _gate: Gate | None = None  # ``lossgate.gated_counts``' state after the frames fed
     _kept: dict[int, tuple[int, int, float, float, float]] = field(default_factory=dict)
     _named: set[int] = field(default_factory=set)  # frames near a span a sample names
     _sums: FloatArray | None = None  # weights added up, span by span
@@ -188,7 +192,9 @@ class SpanDrops:
         if len(enc.index) == 0:
             return
         g, last = self.geometry, self._last
-        left, right = enc.left.astype(np.int64), enc.right.astype(np.int64)
+        left, right, self._gate = gated_counts(enc.left.astype(np.int64),
+                                               enc.right.astype(np.int64), enc.seq,
+                                               period_bounds(g), self.bits, self._gate)
         if last is not None:
             left, right = np.r_[last[0], left], np.r_[last[1], right]
         dl = wrap_delta(np.diff(left), self.bits)
