@@ -19,7 +19,8 @@ up to ``BLOCK_TICKS`` robots, never all at once.
 ``run_realtime`` paces ``Fleet.step`` to the wall clock as one asyncio task: at each release
 ``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
 tick starting more than half a period after its release is late; releases a whole period or more
-behind are skipped, never run in a burst), steps every robot, and hands the tick's frames to
+behind are skipped, never run in a burst: each robot sends their encoder samples late, each taken
+at its own release, ``Fleet.step``), steps every robot, and hands the tick's frames to
 ``on_batch`` (e.g. the MQTT bridge). Between ticks the event loop runs the other tasks (MQTT I/O):
 one thread, no lock, no GIL contention with the timer.
 """
@@ -41,7 +42,7 @@ from odocan.sim.contract import cycle_ticks, database
 from odocan.sim.framebatch import DataFrame, FrameBatchListener, Received
 from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.provision import robot_key
-from odocan.sim.realtime import DeadlineStats
+from odocan.sim.realtime import DeadlineStats, send_skipped_samples
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import RobotProfile
 
@@ -147,9 +148,11 @@ class Fleet(Closing):
         back from running ahead (ticks skipped: its predicted commands never came) runs ahead
         again from its next block tick (``PlannedVehicle.replan``) once ``BLOCK_TICKS`` ticks
         ran without a skip: a loop that keeps skipping would pay blocks and fall backs for
-        nothing."""
+        nothing. After skipped releases each robot first sends their encoder samples
+        (``_sample_skipped``)."""
         if k != self._last_k + 1:
             self._calm_since = k
+            self._sample_skipped(k)
         self._last_k = k
         first = self.config.first
         planned, calm = self._planned, k - self._calm_since >= BLOCK_TICKS
@@ -162,6 +165,19 @@ class Fleet(Closing):
                     vehicle.replan(own_k * TICK_S, BLOCK_TICKS)
                 rig.ticks = own_k
                 rig.step()
+
+    def _sample_skipped(self, k: int) -> None:
+        """Releases ``_last_k + 1 .. k - 1`` were skipped: each robot's motor controller sampled
+        its encoders at each of them in hardware, so their frames go out now, each taken at its
+        own release, back to back (COUNTER +1 each: ``sim.realtime.send_skipped_samples``, as
+        ``odocan sim`` does). Stepped straight to ``k``, a robot put several periods of motion
+        under one COUNTER step, which its firmware rightly refused as faster than the robot
+        can go (kobuki: IMPLAUSIBLE_STEP, COUNTER_RESET) or integrated as one long step."""
+        first = self.config.first
+        for index, rig in enumerate(self.rigs):
+            offset = _tick_offset(first + index)
+            skipped = range(max(self._last_k + 1 - offset, 0), max(k - offset, 0))
+            send_skipped_samples(rig.sim, rig.clock, skipped)
 
     def take_batch(self) -> Batch:
         """The frames the host observers saw since the last call, in bus order per robot."""

@@ -172,15 +172,43 @@ class ReleaseClock:
         """The current tick's release time (s since the loop's first release)."""
         return self.release_s
 
+    def advance_to(self, t_s: float) -> None:
+        """The release under way is at ``t_s`` (``SettableClock``)."""
+        self.release_s = t_s
 
-class SampledNode(Protocol):
+
+class SettableClock(Protocol):
+    """A clock a loop sets to each release: a ``ReleaseClock`` or a rig's ``LockstepClock``."""
+
+    def advance_to(self, t_s: float) -> None:
+        """Now is ``t_s``."""
+
+
+class SkippedSampler(Protocol):
+    """What ``send_skipped_samples`` drives: the sim node (``sim.motor_controller.SimNode``)."""
+
+    def sample_skipped(self) -> None:
+        """The encoder sample of a skipped release, at the clock's time, sent late."""
+
+
+class SampledNode(SkippedSampler, Protocol):
     """What ``paced_sim_tick`` drives: the sim node (``sim.motor_controller.SimNode``)."""
 
     def tick(self, k: int) -> None:
         """Tick ``k``."""
 
-    def sample_skipped(self) -> None:
-        """The encoder sample of a skipped release, at the clock's time, sent late."""
+
+def send_skipped_samples(
+    node: SkippedSampler, clock: SettableClock, releases: range, period_s: float = TICK_S
+) -> None:
+    """The encoder samples of the skipped ``releases`` (k = ``releases``, at ``k * period_s`` on
+    ``clock``), each taken at its own release and sent now, back to back, in order: the rule of
+    ``paced_sim_tick``, shared by every real-time loop that drives a sim node (``odocan sim``,
+    the fleet's robots: ``sim.fleet.Fleet.step``). The caller then runs the tick it got to,
+    which sets the clock to its own release."""
+    for j in releases:
+        clock.advance_to(j * period_s)
+        node.sample_skipped()
 
 
 def paced_sim_tick(
@@ -200,9 +228,7 @@ def paced_sim_tick(
     last = [-1]
 
     def tick(k: int) -> None:
-        for j in range(last[0] + 1, k):
-            clock.release_s = j * period_s
-            node.sample_skipped()
+        send_skipped_samples(node, clock, range(last[0] + 1, k), period_s)
         last[0] = k
         clock.release_s = k * period_s
         node.tick(k)

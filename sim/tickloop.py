@@ -8,7 +8,8 @@ Every rig runs the same 10 ms cycle; only the nodes' work in it differs:
   from the log's first encoder frame;
 * ``host.testkit.backends.ExternalBackend``: the HOST's queued frames then the sim node around an
   external firmware, in real time (``sim.realtime.PeriodicLoop`` calls ``tick(k)``; no clock
-  to move).
+  to move: ``sim.realtime.paced_sim_tick`` sets the sim's release clock and sends the samples
+  of skipped releases first).
 
 Tick k (``TickLoop.tick``):
 

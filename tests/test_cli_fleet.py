@@ -21,8 +21,9 @@ def test_fleet_runs_and_reports(
                  "--max-miss-ratio", "1", "--report", str(report)])
     out, err = capsys.readouterr()
     data = json.loads(report.read_text())
-    # 0, or 1 only because a loaded machine made the loop skip releases (positions not judged)
-    assert code == (1 if data["skipped_releases"] else 0), out + err
+    # 0 even when a loaded machine made the loop skip releases: their samples are sent late
+    # (sim.fleet.Fleet.step), the poses judged all the same
+    assert code == 0, out + err
     assert out.startswith("fleet: 2 robots, ")
     assert data["robots"] == 2
     assert data["duration_s"] == 1.0

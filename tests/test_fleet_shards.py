@@ -125,16 +125,17 @@ def test_fleet_on_python_cans_virtual_runs_and_judges_every_robot(
     assert data["transport"] == "virtual"
     robots = data["per_robot"]
     assert list(robots) == ["robot001", "robot002"]
-    skipped = data["skipped_releases"] > 0  # a loaded machine: the positions are not judged
-    assert code == (1 if skipped else 0), out + err
+    # a loaded machine's skipped releases leave no robot unjudged (their samples sent late)
+    assert code == 0, out + err
     # the run took its 2 s: every release of it was run or counted as skipped (on a loaded
     # machine fewer ticks run than the 200 of an idle one: 93 were seen)
-    assert data["ticks"] + data["skipped_releases"] >= 200
+    releases = data["ticks"] + data["skipped_releases"]
+    assert releases >= 200
     for r in robots.values():
-        assert r["verdict"] == ("UNJUDGED" if skipped else "PASS"), r["reason"]
-        # one encoder frame per tick run (odd robots a tick out of phase), and every pose the
-        # robot sent judged but the last, whose successor never came
-        assert data["ticks"] - 1 <= r["frames"]["WHEEL_ENCODERS"] <= data["ticks"]
+        assert r["verdict"] == "PASS", r["reason"]
+        # one encoder frame per release, run or skipped (odd robots a tick out of phase), and
+        # every pose the robot sent judged but the last, whose successor never came
+        assert releases - 1 <= r["frames"]["WHEEL_ENCODERS"] <= releases
         assert r["frames"]["ODOM_POSE_Y"] > 0
         assert r["pose_vs_reference"]["samples"] >= r["frames"]["ODOM_POSE_Y"] - 1
 
@@ -150,10 +151,9 @@ def test_fleet_with_the_c_firmware_runs_and_judges_every_robot(
     data = json.loads(report.read_text())
     assert (data["firmware"], data["transport"]) == ("c", "odocan")
     robots = data["per_robot"]
-    skipped = data["skipped_releases"] > 0  # a loaded machine: the positions are not judged
-    assert code == (1 if skipped else 0), out + err
+    assert code == 0, out + err  # skipped releases too (their samples are sent late)
     for r in robots.values():
-        assert r["verdict"] == ("UNJUDGED" if skipped else "PASS"), r["reason"]
+        assert r["verdict"] == "PASS", r["reason"]
         assert r["pose_vs_reference"]["samples"] > 20
 
 
@@ -165,13 +165,13 @@ def _stats(*errors: tuple[float, float]) -> ErrorStats:
     return stats
 
 
-def test_a_jump_of_the_loop_leaves_a_correct_firmware_unjudged_not_failed() -> None:
-    """The real-time loop skips releases when it falls a period behind: the robots' time jumps.
-    After a jump of 17 ticks the 4-bit COUNTER has wrapped; the reference's step gate counts the
-    whole cycles from the frames' times as the firmware's clock does, so its heading follows the
-    firmware's (before, it saw one period and refused the step: 0.26-0.57 rad off). The fleet's
-    verdict is still UNJUDGED (the run fails, saying why), never FAIL: steps over several cycles
-    were seen to move a correct firmware's position a few LSB off the reference."""
+def test_a_jump_of_the_loop_judges_a_correct_firmware_pass() -> None:
+    """The real-time loop skips releases when it falls a period behind: here 17 at once. Each
+    robot sends the skipped releases' encoder samples late, each at its own release
+    (``Fleet.step``): 17 frames back to back, COUNTER +1 each, which the firmware takes as a
+    backlog of 10 ms steps and the reference steps alike. The verdict is PASS (before the samples
+    were sent, one step held 18 periods of motion: the fleet left the robots UNJUDGED, as steps
+    over several cycles moved a correct firmware's position a few LSB off the reference)."""
     from odocan.host.mqtt.telemetry import RobotTelemetry
 
     profile = robot.load("pmir")
@@ -182,12 +182,14 @@ def test_a_jump_of_the_loop_leaves_a_correct_firmware_unjudged_not_failed() -> N
             fleet.step(k)
             for i, frame in fleet.take_batch():
                 telemetry[i].feed_frame(frame)
+        # one encoder frame per release, the 17 skipped ones' too (robot002 a tick out of phase)
+        assert [fleet.frame_counts(i)["WHEEL_ENCODERS"] for i in range(2)] == [217, 216]
     trackers = [t.tracker for t in telemetry]
     assert max(t.vs_reference.max_dheading_rad for t in trackers) <= HEADING_LSB_RAD
     for tracker in trackers:
-        verdict = judge_robot(tracker.vs_reference, tracker.vs_truth, releases_skipped=17)
-        assert verdict["verdict"] == "UNJUDGED"
-        assert "17 releases skipped" in verdict["reason"]
+        verdict = judge_robot(tracker.vs_reference, tracker.vs_truth,
+                              beyond_allowance_m=tracker.max_beyond_allowance_m)
+        assert verdict["verdict"] == "PASS", verdict["reason"]
 
 
 def test_judge_robot_passes_within_one_lsb_and_fails_beyond_it() -> None:
@@ -214,13 +216,6 @@ def test_judge_robot_passes_within_one_lsb_and_fails_beyond_it() -> None:
     assert "no on-board pose" in silent["reason"]
     assert silent["pose_vs_reference"] is None
     assert silent["pose_vs_truth"] is None
-    behind = judge_robot(_stats((8e-4, 1e-5)), truth, releases_skipped=3)
-    assert behind["verdict"] == "UNJUDGED"
-    assert "3 releases skipped" in behind["reason"]
-    behind_turned = judge_robot(_stats((8e-4, 5e-4)), truth, releases_skipped=3)
-    assert behind_turned["verdict"] == "UNJUDGED"  # a jump of the loop turns the reference too
-    assert "heading vs reference 0.5 mrad" in behind_turned["reason"]
-    assert "position" not in behind_turned["reason"]
     blind = judge_robot(_stats((3e-4, 0.0)), truth, frames_dropped=7)
     assert blind["verdict"] == "UNJUDGED"
     assert "dropped 7 frames" in blind["reason"]
@@ -269,26 +264,20 @@ def test_fleet_on_two_workers_reports_every_robot(
     lines = out.splitlines()
     assert lines[0].startswith("fleet: 2 robots, robot003..robot004, 2 worker(s), ")
     data = json.loads(report.read_text())
-    behind = [w["skipped_releases"] > 0 for w in data["workers"]]  # a loaded machine
-    if not any(behind):
-        assert code == 0, out + err
-        assert lines[1:] == ["poses: 2 PASS", "PASS"]
-    else:
-        assert code == 1
-        assert lines[-1].startswith("FAIL: ")
-        assert "releases skipped" in lines[-1]
+    # a loaded machine's skipped releases too: their samples are sent late (sim.fleet)
+    assert code == 0, out + err
+    assert lines[1:] == ["poses: 2 PASS", "PASS"]
     assert data["embedded_broker"]
     assert data["broker"] == f"mqtt://127.0.0.1:{port}"
     assert [w["first_robot"] for w in data["workers"]] == ["robot003", "robot004"]
     robots = data["per_robot"]
     assert list(robots) == ["robot003", "robot004"]
     assert [r["seed"] for r in robots.values()] == [7, 8]
-    for r, skipped in zip(robots.values(), behind, strict=True):
-        assert r["verdict"] == ("UNJUDGED" if skipped else "PASS"), r["reason"]
+    for r in robots.values():
+        assert r["verdict"] == "PASS", r["reason"]
         assert r["pose_vs_reference"]["max_dheading_rad"] <= 2 * HEADING_LSB_RAD
         assert r["pose_vs_reference"]["samples"] > 20
-        if not skipped:
-            assert r["pose_vs_reference"]["max_dpos_m"] <= 2 * POSITION_LSB_M
+        assert r["max_dpos_beyond_allowance_m"] <= 2 * POSITION_LSB_M
         assert r["pose_vs_truth"]["samples"] > 0
         assert 0.0 <= r["deadline_miss_ratio"] <= 1.0
 
@@ -311,9 +300,7 @@ def test_a_wrong_pose_fails_the_run_and_says_why(
 ) -> None:
     """The judge's reference on a 2 % longer wheelbase than the firmware's: every robot's
     heading departs, the exit line says FAIL and which threshold. The fleet runs on a clock that
-    is never late (``_NeverLate``): on a loaded machine the real clock skipped releases, and a
-    run that skipped one leaves its poses UNJUDGED (``fleetrun.judge_robot``), which is not the
-    verdict this test is about."""
+    is never late (``_NeverLate``): the summary's tick count is exact."""
     monkeypatch.setattr(sim_fleet, "RealTimeClock", _NeverLate)
     real = fleetrun._endpoints
 
@@ -363,10 +350,7 @@ def test_sigterm_stops_every_worker_and_the_report_is_written(tmp_path: Path) ->
     assert proc.returncode == 143, err  # stopped before its 120 s: never 0
     last = out.splitlines()[-1]
     assert last.startswith("STOPPED by SIGTERM at "), last
-    if any(w["skipped_releases"] for w in data["workers"]):  # a loaded machine
-        assert "releases skipped" in last
-    else:
-        assert last.endswith(": partial run PASS"), last
+    assert last.endswith(": partial run PASS"), last  # skipped releases too (sent late)
     assert data["stopped"]["signal"] == "SIGTERM"
     assert list(data["per_robot"]) == ["robot001", "robot002", "robot003"]
     assert len(data["workers"]) == 2

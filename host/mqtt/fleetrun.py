@@ -24,8 +24,12 @@ with the robot's own accepted encoder frames (``host.judge.tracking.PoseTracker`
 ENC_COUNTER, its start fitted by ``host.judge.livefit``), by the live judge's rule, ``analyze``'s
 (``livefit.pose_wrong``): FAIL when a sample's position error beyond its loss allowance exceeds
 one LSB (0.1 mm) or its heading error one LSB of HEADING, or with no pose at all; else PASS.
-When the loop fell a whole period behind (skipped releases), some encoder steps
-spanned several cycles: the pose is not judged then (UNJUDGED, ``judge_robot``). The error
+When the loop fell a whole period behind (skipped releases), each robot still sent one
+encoder frame per release, the skipped ones' late, each sampled at its own release
+(``sim.fleet.Fleet.step``, as ``odocan sim`` does): no step spans several cycles, so the pose
+is judged as any other (a firmware that lost frames or time meanwhile has the judges' loss
+allowance; before, a skip put several periods under one COUNTER step, which kobuki's firmware
+refused, and the robot was UNJUDGED). The error
 against the ground truth (SIM_TRUTH) is reported, never judged: it is the odometry's own drift, not
 the firmware's arithmetic. When the bridge dropped frames (queue full), the references miss encoder
 steps, so no robot is judged (UNJUDGED) and the run fails for that reason instead of blaming a
@@ -294,7 +298,6 @@ def _report(
             tracker = robot.telemetry.tracker
             entry.update(judge_robot(
                 tracker.vs_reference, tracker.vs_truth, frames_dropped=dropped,
-                releases_skipped=stats.skipped_releases,
                 beyond_allowance_m=tracker.max_beyond_allowance_m))
         else:
             entry.update(pose_vs_reference=None, pose_vs_truth=None, verdict=None,
@@ -330,18 +333,15 @@ def _errors(stats: ErrorStats) -> dict[str, Any] | None:
 
 def judge_robot(
     vs_reference: ErrorStats, vs_truth: ErrorStats, *, frames_dropped: int = 0,
-    releases_skipped: int = 0, beyond_allowance_m: float | None = None,
+    beyond_allowance_m: float | None = None,
 ) -> dict[str, Any]:
     """One robot's pose errors and verdict (see the module docstring): ``livefit.pose_wrong``
     on the largest position error beyond its loss allowance (m; ``beyond_allowance_m``, the
     tracker's ``max_beyond_allowance_m``; default ``vs_reference.max_dpos_m``: no frame lost)
-    and the largest heading error; ``releases_skipped``: the worker fell a whole period behind, so
-    some encoder steps spanned several 10 ms cycles: the pose is not judged (UNJUDGED, which
-    fails the run without blaming the firmware). The position: the firmware is specified for
-    10 ms steps, longer ones were seen to move a correct firmware's position 2-3 LSB off the
-    reference. (A jump of 16 cycles or more wraps the 4-bit COUNTER: the reference's gate counts
-    the whole cycles from the frames' bus time, ``livepose.step_periods``, as the firmware's clock
-    does; before, it refused the step and a correct firmware was seen 0.26-0.57 rad off.)"""
+    and the largest heading error. Skipped releases of the worker's loop are no reason to leave
+    a robot unjudged: their encoder samples were sent late, one 10 ms step each (module
+    docstring); before, steps over several cycles moved a correct firmware's position 2-3 LSB off
+    the reference and the robot was UNJUDGED."""
     beyond_m = vs_reference.max_dpos_m if beyond_allowance_m is None else beyond_allowance_m
     entry: dict[str, Any] = {"pose_vs_reference": _errors(vs_reference),
                              "pose_vs_truth": _errors(vs_truth),
@@ -357,11 +357,6 @@ def judge_robot(
     if pose_wrong(0.0, vs_reference.max_dheading_rad):
         reasons.append(f"heading vs reference {vs_reference.max_dheading_rad * 1e3:.4g} mrad > "
                        f"{HEADING_LSB_RAD * 1e3:.4g} mrad")
-    if releases_skipped:
-        seen = f" ({reasons[0]})" if reasons else ""
-        return {**entry, "verdict": "UNJUDGED",
-                "reason": f"{releases_skipped} releases skipped (the loop fell behind): encoder "
-                          f"steps longer than 10 ms, the pose is not judged{seen}"}
     if pose_wrong(beyond_m, 0.0):
         reasons.append(f"position vs reference {beyond_m * 1e3:.4g} mm (beyond the loss "
                        f"allowance) > {POSITION_LSB_M * 1e3:.4g} mm")

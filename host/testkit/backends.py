@@ -28,7 +28,7 @@ from odocan.sim.clock import RealTimeClock
 from odocan.sim.exceptions import BusSetupError
 from odocan.sim.faults import FaultInjectingBus
 from odocan.sim.motor_controller import SimNode
-from odocan.sim.realtime import PeriodicLoop
+from odocan.sim.realtime import PeriodicLoop, ReleaseClock, paced_sim_tick
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.scenarios import Scenario
 from odocan.sim.tickloop import TickLoop
@@ -197,10 +197,14 @@ class ExternalBackend:
             sim_bus = FaultInjectingBus(sim_bus, spec, clock=self.clock.now_s)
         self._host_bus = host_bus
         vehicle = Vehicle(options.profile(), options.error_model(), seed=options.seed)
-        self.sim = SimNode(sim_bus, vehicle, self.clock, None)
+        # The sim samples at its tick's release, not when the thread got the CPU, and sends a
+        # skipped release's sample late (``sim.realtime.paced_sim_tick``, as ``odocan sim``).
+        self._release = ReleaseClock()
+        self.sim = SimNode(sim_bus, vehicle, self._release, None)
         self._outbox: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
         self._lock = threading.Lock()  # the vehicle and the driver
-        self._tick_loop = TickLoop(self._work, host_bus, [self.recorder])  # real time: no clock
+        paced = paced_sim_tick(self, self._release, TICK_S)
+        self._tick_loop = TickLoop(paced, host_bus, [self.recorder])  # real time: no clock
         self._loop = PeriodicLoop(TICK_S, self.clock)
         self._failure: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="odocan-sim", daemon=True)
@@ -212,9 +216,16 @@ class ExternalBackend:
         except BaseException as exc:  # reported to the test thread at its next wait
             self._failure = exc
 
-    def _work(self, k: int) -> None:
-        """Host frames out; then MOTOR_CTRL, driver, encoders, truth (``sim.tickloop`` then
-        hands what the host heard to the recorder)."""
+    def sample_skipped(self) -> None:
+        """A skipped release's encoder sample, at the release clock's time, sent now (run by
+        ``paced_sim_tick`` before the tick the loop got to)."""
+        with self._lock:
+            self.sim.sample_skipped()
+
+    def tick(self, k: int) -> None:
+        """Tick ``k`` (``paced_sim_tick`` set the release clock to it): host frames out; then
+        MOTOR_CTRL, driver, encoders, truth (``sim.tickloop`` then hands what the host heard
+        to the recorder)."""
         while True:
             try:
                 can_id, data = self._outbox.get_nowait()
@@ -255,8 +266,8 @@ class ExternalBackend:
     def set_scenario(self, scenario: Scenario | None) -> None:
         """A scenario driver on the sim's handle from now on (None: none)."""
         with self._lock:
-            self.sim.set_scenario(
-                None if scenario is None else _Shifted(scenario, self.clock.now_s())
+            self.sim.set_scenario(  # on the sim's clock: its latest release
+                None if scenario is None else _Shifted(scenario, self._release.now_s())
             )
 
     def truth(self) -> Pose:
