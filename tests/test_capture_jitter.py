@@ -21,6 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import can
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
@@ -31,6 +32,7 @@ from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.host.judge.monitor import BusMonitor
+from odocan.host.protocol.e2e_periods import receive_period_count, receive_periods
 from odocan.sim.robot import load
 
 JITTER_MAX_S = 0.003  # each stamp late by up to this (uniform)
@@ -127,3 +129,14 @@ def test_a_pose_two_lsb_off_fails_a_jittered_capture(
     fitted to the samples and took the constant 2 LSB in."""
     verdicts = _verdicts(tmp_path, drive, wrong, jitter_seed)
     assert not any(verdicts.values()), verdicts
+
+
+def test_a_first_frame_stamped_late_within_the_tolerance_narrows_no_window() -> None:
+    """Two encoder frames (10 ms, COUNTER step 1) whose first stamp came 3 ms late: 1 period
+    (was 0: the second frame refused). Beyond the tolerance (6 ms), on the firmware's grid
+    (a second frame in the same tick) and a second frame late: the exact rule's periods."""
+    dt_s = [0.007, 0.004, 0.010, 0.0, 0.013]
+    expected = [1, 0, 1, 0, 2]
+    periods = receive_periods(np.array(dt_s), np.ones(len(dt_s), dtype=np.int64), 0.01)
+    assert periods.tolist() == expected
+    assert [receive_period_count(dt, 1, 0.01) for dt in dt_s] == expected
