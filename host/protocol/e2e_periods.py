@@ -13,6 +13,11 @@ import numpy.typing as npt
 # The firmware's tick after the encoder frame's slot, in periods (``receive_periods``).
 RECEIVE_LAG_CYCLES = 0.1
 COUNTER_MODULO = 16
+# How far two frames' receive timestamps may be off each other, in periods (``receive_periods``):
+# a live capture (candump on a loaded host, the monitor's own recording) stamps each frame up to a
+# few ms late, so 4.5 ms at 100 Hz. A first frame that looks late by no more than this may have
+# been on time: timing alone cannot refuse the second (``receive_periods``).
+CAPTURE_TOLERANCE_CYCLES = 0.45
 
 
 def periods_between(
@@ -38,7 +43,8 @@ def period_count(dt_s: float, cycle_s: float | None, min_periods: int = 1) -> in
 
 
 def receive_periods(
-    dt_s: npt.NDArray[np.float64], step: npt.NDArray[np.int64], cycle_s: float
+    dt_s: npt.NDArray[np.float64], step: npt.NDArray[np.int64], cycle_s: float,
+    tolerance_cycles: float = CAPTURE_TOLERANCE_CYCLES,
 ) -> npt.NDArray[np.int64]:
     """Receive periods (the firmware's ticks, >= 0) between two frames of one periodic sender,
     ``dt_s`` apart on the bus, the second ``step`` sends after the first (their COUNTER
@@ -60,10 +66,26 @@ def receive_periods(
     of the same drive. The one edge left is a frame late by exactly the lag: the receiver's own
     tick, an edge the firmware has too (it takes a frame that ended exactly at its tick, not
     one that ended later). Both frames on time: ``|e|`` is bus jitter, below the lag: ``s``,
-    what ``round(x)`` gives."""
+    what ``round(x)`` gives.
+
+    Timestamps are trusted to ``tolerance_cycles`` only (``CAPTURE_TOLERANCE_CYCLES``; a
+    capture stamps each frame up to a few ms late, each its own). Where the first frame looks
+    late (``e < 0``), it is taken late by ``|e| - tolerance_cycles`` only (on time within the
+    tolerance): the window is then never narrower than the firmware's, so the host never
+    refuses an encoder frame the firmware took (a pose naming it would be paired with the frame
+    16 periods before: the trial's 363 mrad on a correct firmware). What this allows is
+    bounded: one period more than the exact-time rule, for a pair whose first frame looks late
+    by up to the tolerance; a frame the firmware refused and the host took costs the reference
+    only the split of one arc in two. Exact stamps on the firmware's grid (``e`` a whole
+    number) give what the exact rule gives: ``ceil(k - tolerance - lag) = k``. Where the second
+    frame looks late (``e > 0``), the exact rule stands: a stamp late by jitter only adds
+    periods (a wider window), and a frame truly late, seen less late, is the sender's next
+    COUNTER, within the window either way. Edges: ``|e|`` = ``lag + tolerance + k`` (5.5 ms
+    at 100 Hz), between the rig's whole-ms frame times."""
     x = dt_s / cycle_s
     s = step + COUNTER_MODULO * np.floor((x - step + COUNTER_MODULO // 2) / COUNTER_MODULO)
     e = x - s
+    np.copyto(e, np.minimum(e + tolerance_cycles, 0.0), where=e < 0)
     late = np.ceil(np.abs(e) - RECEIVE_LAG_CYCLES)
     np.maximum(late, 0.0, out=late)
     periods = s + np.sign(e) * late
@@ -72,7 +94,8 @@ def receive_periods(
     return result
 
 
-def receive_period_count(dt_s: float, step: int, cycle_s: float) -> int:
+def receive_period_count(dt_s: float, step: int, cycle_s: float,
+                         tolerance_cycles: float = CAPTURE_TOLERANCE_CYCLES) -> int:
     """``receive_periods`` for one pair of frames, without numpy (the live check), the same
     float64 operations; a NaN or infinite gap counts 1."""
     if not math.isfinite(dt_s):
@@ -80,6 +103,8 @@ def receive_period_count(dt_s: float, step: int, cycle_s: float) -> int:
     x = dt_s / cycle_s
     s = step + COUNTER_MODULO * math.floor((x - step + COUNTER_MODULO // 2) / COUNTER_MODULO)
     e = x - s
+    if e < 0:
+        e = min(e + tolerance_cycles, 0.0)
     late = max(math.ceil(abs(e) - RECEIVE_LAG_CYCLES), 0)
     return max(int(s + (late if e > 0 else -late if e < 0 else 0)), 0)
 
