@@ -61,7 +61,8 @@ PERIOD_S = 0.01
 MAX_WHEEL_SPEED_M_S = 4.0  # the firmware's maximum rim speed when the robot states none
 RESYNC = 3  # refused frames consistent among themselves: the counters restarted
 SILENCE_PERIODS = 8  # no pose for this many periods while the encoder frames went on: a stall
-_LINE = re.compile(r"\((\d+\.\d+)\) \S+ ([0-9A-Fa-f]+)#([0-9A-Fa-f]*)")
+# a candump line; python-can's writer adds the direction (" R" or " T")
+_LINE = re.compile(r"\((\d+\.\d+)\) \S+ ([0-9A-Fa-f]+)#([0-9A-Fa-f]*)(?: [RT])?")
 
 
 @dataclass(frozen=True)

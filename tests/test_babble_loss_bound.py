@@ -101,9 +101,7 @@ def _step(pose: tuple[float, float, float], dl: int, dr: int, m: tuple[float, fl
 def _checker_bound_m(log: Path, robot: str) -> tuple[float, int]:
     """N times the worst error (m) of merging a run of at most N real frames into one step,
     N the firmware's ENC_E2E_LOST at the end; and N."""
-    plain = log.with_suffix(".plain")  # _Frames reads candump lines without the direction
-    plain.write_text("".join(" ".join(x.split()[:3]) + "\n" for x in log.read_text().splitlines()))
-    frames = _Frames(plain)
+    frames = _Frames(log)
     lost = [int(s["ENC_E2E_LOST"]) for _, name, s in frames.rows
             if name == "ODOM_STATUS" and int(s["PAGE"]) == 2 and "ENC_E2E_LOST" in s]
     n = lost[-1]
