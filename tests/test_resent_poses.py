@@ -14,6 +14,12 @@ from pathlib import Path
 import pytest
 
 from odocan.host.cli.app import main
+from odocan.host.io.logs import parse_candump, parse_candump_line
+from odocan.host.judge.analysis import analyze
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.sim import robot
 from tests.test_trial_judge_holes import _crc
 
 POSE_IDS = {"X": 0x200, "Y": 0x201, "HEADING": 0x200}
@@ -109,3 +115,30 @@ def test_a_moved_resent_y_fails_the_replay(logs: dict[str, tuple[Path, str]],
     path.write_text("\n".join(lines) + "\n")
     assert _verdicts(log, robot, [["replay"]]) == [0]
     assert _verdicts(path, robot, [["replay"]]) == [1]
+
+
+@pytest.mark.parametrize("field", ["X", "Y"])
+def test_the_live_judge_sees_a_moved_resend_as_analyze_does(
+        logs: dict[str, tuple[Path, str]], field: str) -> None:
+    """The monitor and the bridge (one tracker each, ``host.judge.liveresent``) see the resend
+    20 mm off, as large as ``analyze`` sees it, and count the samples ``analyze`` counts."""
+    log, robot_name = logs["drop"]
+    lines = log.read_text().splitlines()
+    k = _resends(lines, POSE_IDS[field])[3]
+    lines[k] = _moved(lines[k], field)
+    messages = [m for m in (parse_candump_line(x.encode()) for x in lines) if m is not None]
+    profile = robot.load(robot_name)
+    result = analyze(parse_candump(("\n".join(lines) + "\n").encode()), profile)
+    offline = result.report["onboard_vs_reference"]
+    assert offline["max_position_error_m"] > 0.015  # the 20 mm seen
+    monitor = BusMonitor(profile)
+    bridge = RobotTelemetry("r", Geometry.of(profile), result.report["integrator"],
+                            counter_bits=profile.counter_bits, publish_hz=10)
+    for msg in messages:
+        monitor.feed(msg, now_s=msg.timestamp)
+        bridge.feed(msg)
+    for live in (monitor.tracker.vs_reference, bridge.tracker.vs_reference):
+        assert live.samples == result.report["samples"]["onboard"]
+        assert live.max_dpos_m == pytest.approx(offline["max_position_error_m"], abs=1e-12)
+        assert live.max_dheading_rad == pytest.approx(offline["max_heading_error_rad"],
+                                                      abs=1e-12)
