@@ -19,7 +19,9 @@ reports (else exact); Ctrl-C stops early and checks what ran.
 reference (as ``odocan run``), and within ``--tolerance`` of the firmware that recorded the log
 (the logged on-board poses at the same encoder frames; positions up to the log's first gap of the
 encoder sequence, since across a gap the recording firmware may have had frames the log lacks,
-headings everywhere, since they are exact across gaps). When the replay departs, the cause is
+headings everywhere, since they are exact across gaps; every pose the log sent for a frame, a
+resend too, and the log's resent positions against its first at the same frame everywhere:
+one firmware's poses at one frame agree). When the replay departs, the cause is
 looked for by name (``diagnose``): the integrator the log's ODOM_STATUS reports against the one
 replayed, and which robot profile (the one given and every shipped one) the logged poses fit
 (``analyze`` of the log itself, no replay: the profile whose float64 odometry of the logged
@@ -262,11 +264,13 @@ def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dic
         keep = accepted[d["index"]]
         ticks = track.named(d["index"][keep], d["ENC_COUNTER"][keep].astype(np.int64))
         half: dict[int, list[tuple[int, int]]] = {}
+        previous = -1  # a resend names its predecessor's frame (one naming an earlier one
         for tick, v, e in zip(ticks.tolist(), d[value][keep].tolist(), d[extra][keep].tolist(),
-                              strict=True):
+                              strict=True):  # after a gap of the log's frames is no resend)
             sent = half.setdefault(tick, []) if tick >= 0 else []
-            if (int(v), int(e)) not in sent:
+            if (not sent or tick == previous) and (int(v), int(e)) not in sent:
                 sent.append((int(v), int(e)))
+            previous = tick
         halves.append(half)
     px, py = halves
     return {t: [(x, py[t][0][0], py[t][0][1] * 65536 + h) for x, h in px[t]]
