@@ -119,8 +119,6 @@ def test_capture_jitter_does_not_fail_a_correct_firmware(drop_log: Path, tmp_pat
     assert main(["analyze", str(jittered), "--robot", "kobuki"]) == 0
 
 
-@pytest.mark.xfail(strict=True, reason="only the first pose naming an encoder frame is judged: "
-                   "a resent pose 20 mm off PASSes")
 @pytest.mark.parametrize("command", [["analyze"], ["analyze", "--stream", "always"], ["replay"]])
 def test_a_resent_pose_moved_20_mm_fails(drop_log: Path, tmp_path: Path,
                                           command: list[str]) -> None:

@@ -137,6 +137,7 @@ from odocan.host.judge.reference_path import (
     restart_detail,
     wrap_pi,
 )
+from odocan.host.judge.resent import worst_sent
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
@@ -148,6 +149,7 @@ from odocan.host.judge.samples import (
     encoder_frames,
     onboard_samples,
     pick_integrator,
+    pose_halves,
     require_messages,
     truth_samples,
 )
@@ -311,7 +313,8 @@ def _analyze_life(
     e2e, accepted = check_frames(frames, db)
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
     enc = encoder_frames(frames, accepted, decoder)
-    onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc)
+    halves = pose_halves(frames, accepted, decoder, enc)
+    onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc, halves)
     pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
     onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s)
     truth = truth_samples(frames, accepted, decoder, enc)
@@ -323,6 +326,7 @@ def _analyze_life(
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
                          slack_m=tolerance.position_m, start_pose=start_pose,
                          seen=seen_in_log(frames, decoder, enc, power_up=power_up))
+    onboard = worst_sent(onboard, halves, ref_all, tolerance.position_m, tolerance.heading_rad)
     ref = ref_all.at(onboard.enc)
     truth_origin = None
     if rebase:  # a new firmware life: its own origin, the truth re-based there

@@ -19,7 +19,9 @@ reports (else exact); Ctrl-C stops early and checks what ran.
 reference (as ``odocan run``), and within ``--tolerance`` of the firmware that recorded the log
 (the logged on-board poses at the same encoder frames; positions up to the log's first gap of the
 encoder sequence, since across a gap the recording firmware may have had frames the log lacks,
-headings everywhere, since they are exact across gaps). When the replay departs, the cause is
+headings everywhere, since they are exact across gaps; every pose the log sent for a frame, a
+resend too, and the log's resent positions against its first at the same frame everywhere:
+one firmware's poses at one frame agree). When the replay departs, the cause is
 looked for by name (``diagnose``): the integrator the log's ODOM_STATUS reports against the one
 replayed, and which robot profile (the one given and every shipped one) the logged poses fit
 (``analyze`` of the log itself, no replay: the profile whose float64 odometry of the logged
@@ -29,6 +31,7 @@ counts the logged poses follow within tolerance).
 from __future__ import annotations
 
 import itertools
+import math
 import sys
 import time
 from dataclasses import dataclass
@@ -247,10 +250,12 @@ def _events(encoders: IntArray, truth: IntArray) -> list[tuple[int, int]]:
 # --- the replayed firmware against the logged one ----------------------------------------------
 
 
-def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dict[int, tuple[
-        int, int, int]]:
+def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dict[int, list[
+        tuple[int, int, int]]]:
     """The on-board poses of ``frames`` by the tick of the encoder frame they name:
-    (X raw, Y raw, heading in BAM16 units unwrapped = TURNS * 65536 + HEADING)."""
+    (X raw, Y raw, heading in BAM16 units unwrapped = TURNS * 65536 + HEADING); the first X
+    with the first Y, then each other X and Y sent naming it (a resend: every pose frame is
+    compared, each half with the first of the other kind, as ``host.judge.resent``)."""
     decoder = BulkDecoder(contract.database())
     track = EncoderTrack.of(frames, accepted, decoder)
     halves = []
@@ -258,43 +263,64 @@ def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dic
         d = decoder.decode(frames, name)
         keep = accepted[d["index"]]
         ticks = track.named(d["index"][keep], d["ENC_COUNTER"][keep].astype(np.int64))
-        half: dict[int, tuple[int, int]] = {}
+        half: dict[int, list[tuple[int, int]]] = {}
+        previous = -1  # a resend names its predecessor's frame (one naming an earlier one
         for tick, v, e in zip(ticks.tolist(), d[value][keep].tolist(), d[extra][keep].tolist(),
-                              strict=True):
-            if tick >= 0:
-                half.setdefault(tick, (int(v), int(e)))
+                              strict=True):  # after a gap of the log's frames is no resend)
+            sent = half.setdefault(tick, []) if tick >= 0 else []
+            if (not sent or tick == previous) and (int(v), int(e)) not in sent:
+                sent.append((int(v), int(e)))
+            previous = tick
         halves.append(half)
     px, py = halves
-    return {t: (px[t][0], py[t][0], py[t][1] * 65536 + px[t][1]) for t in px.keys() & py.keys()}
+    return {t: [(x, py[t][0][0], py[t][0][1] * 65536 + h) for x, h in px[t]]
+            + [(px[t][0][0], y, turns * 65536 + px[t][0][1]) for y, turns in py[t][1:]]
+            for t in px.keys() & py.keys()}
 
 
 def versus_log(
     log: FrameArrays, log_accepted: npt.NDArray[np.bool_], replayed: FrameArrays
 ) -> dict[str, Any]:
-    """The replayed on-board poses against the logged ones at the same encoder frames."""
+    """The replayed on-board poses against the logged ones at the same encoder frames (at each,
+    the largest difference between any pose sent naming it in the log and in the replay)."""
     _, accepted = check_frames(replayed)
     old, new = onboard_by_tick(log, log_accepted), onboard_by_tick(replayed, accepted)
     common = sorted(old.keys() & new.keys())
     if not common:
         return {"samples": 0, "identical": 0, "max_position_diff_m": None,
                 "max_heading_diff_rad": None, "before_first_gap": 0,
-                "max_position_diff_before_gap_m": None}
-    a = np.array([old[t] for t in common], dtype=np.int64)
-    b = np.array([new[t] for t in common], dtype=np.int64)
-    position = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]) * POSITION_LSB_M
-    heading = np.abs(a[:, 2] - b[:, 2]) * HEADING_LSB_RAD
+                "max_position_diff_before_gap_m": None,
+                "max_resent_position_diff_m": resent_position_diff_m(old)}
+    pairs = [(t, a, b) for t in common for a, b in itertools.product(old[t], new[t])]
+    at = np.searchsorted(np.array(common), [t for t, _, _ in pairs])
+    a = np.array([p[1] for p in pairs], dtype=np.int64)
+    b = np.array([p[2] for p in pairs], dtype=np.int64)
+    position, heading, differs = (np.zeros(len(common)) for _ in range(3))
+    np.maximum.at(position, at, np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]) * POSITION_LSB_M)
+    np.maximum.at(heading, at, np.abs(a[:, 2] - b[:, 2]) * HEADING_LSB_RAD)
+    np.maximum.at(differs, at, (a != b).any(axis=1).astype(np.float64))
     ticks = EncoderTrack.of(log, log_accepted, BulkDecoder(contract.database())).tick
     gaps = np.flatnonzero(np.diff(ticks) > 1)
     first_gap = int(ticks[gaps[0]]) if len(gaps) else int(ticks[-1])  # last tick before it
     before = int(np.searchsorted(np.array(common), first_gap, side="right"))
     return {
         "samples": len(common),
-        "identical": int(np.count_nonzero((a == b).all(axis=1))),
+        "identical": int(np.count_nonzero(differs == 0)),
         "max_position_diff_m": float(position.max()),
         "max_heading_diff_rad": float(heading.max()),
         "before_first_gap": before,
         "max_position_diff_before_gap_m": float(position[:before].max()) if before else None,
+        "max_resent_position_diff_m": resent_position_diff_m(old),
     }
+
+
+def resent_position_diff_m(poses: dict[int, list[tuple[int, int, int]]]) -> float:
+    """The largest position difference between a pose resent naming an encoder frame and the
+    first naming it, in one log (``onboard_by_tick``): across a gap the log's positions are not
+    compared with the replay's, but one firmware's poses at one frame must agree anyway."""
+    diff = [math.hypot(x - sent[0][0], y - sent[0][1])
+            for sent in poses.values() for x, y, _ in sent[1:]]
+    return max(diff, default=0.0) * POSITION_LSB_M
 
 
 def departures(vs_log: dict[str, Any], tolerance: Tolerance) -> list[str]:
@@ -304,6 +330,11 @@ def departures(vs_log: dict[str, Any], tolerance: Tolerance) -> list[str]:
     position = vs_log["max_position_diff_before_gap_m"]
     if position is not None and position > tolerance.position_m:
         reasons.append(f"its position differs from the log's by up to {position * 1e3:.4f} mm "
+                       f"(tolerance {tolerance.position_m * 1e3:.4g} mm)")
+    resent = vs_log.get("max_resent_position_diff_m")
+    if resent is not None and resent > tolerance.position_m:
+        reasons.append(f"the log's resent positions differ from its first at the same encoder "
+                       f"frame by up to {resent * 1e3:.4f} mm "
                        f"(tolerance {tolerance.position_m * 1e3:.4g} mm)")
     heading = vs_log["max_heading_diff_rad"]
     if heading is not None and heading > tolerance.heading_rad:

@@ -395,17 +395,40 @@ def _first_per_encoder(enc_idx: IntArray) -> tuple[IntArray, IntArray]:
     return values[new], named[new]
 
 
-def onboard_samples(
+@dataclass(frozen=True)
+class PoseHalves:
+    """Every accepted ODOM_POSE_X and ODOM_POSE_Y frame (decoded rows) and the encoder frame
+    each names (``match_encoder``; -1: none): the samples' source, and the resent poses'
+    (``host.judge.resent``: every pose frame is judged, not only the first naming a frame)."""
+
+    px: dict[str, np.ndarray]
+    py: dict[str, np.ndarray]
+    ex: IntArray
+    ey: IntArray
+
+
+def pose_halves(
     frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders
-) -> tuple[Poses, int, FloatArray]:
-    """On-board samples (X and Y frames of one encoder frame); the poses left unmatched; and
-    when each sample's ODOM_POSE_Y was sent (s)."""
+) -> PoseHalves:
+    """The accepted pose frames and the encoder frame each names."""
     px = accepted_rows(frames, accepted, decoder, "ODOM_POSE_X")
     py = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")
     ex = match_encoder(enc, px["index"], px["ENC_COUNTER"], px["timestamp_s"],
                        px["COUNTER"].astype(np.int64))
     ey = match_encoder(enc, py["index"], py["ENC_COUNTER"], py["timestamp_s"],
                        py["COUNTER"].astype(np.int64))
+    return PoseHalves(px, py, ex, ey)
+
+
+def onboard_samples(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders,
+    halves: PoseHalves | None = None,
+) -> tuple[Poses, int, FloatArray]:
+    """On-board samples (X and Y frames of one encoder frame, the first of each); the poses
+    left unmatched; and when each sample's ODOM_POSE_Y was sent (s). ``halves``: the frames'
+    ``pose_halves`` when the caller has them already."""
+    h = halves or pose_halves(frames, accepted, decoder, enc)
+    px, py, ex, ey = h.px, h.py, h.ex, h.ey
     unmatched = int(np.count_nonzero(ex < 0) + np.count_nonzero(ey < 0))
     ux, fx = _first_per_encoder(ex)
     uy, fy = _first_per_encoder(ey)

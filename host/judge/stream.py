@@ -61,6 +61,7 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays, concat_frames, empty_frames
 from odocan.host.judge.reference import Geometry, SpeedBound
 from odocan.host.judge.reference_path import firmware_steps
+from odocan.host.judge.resent import resent_differs
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
@@ -250,6 +251,8 @@ class StreamPoses:
     _last_row: dict[str, tuple[int, int, float, int, int]] = field(default_factory=dict)
     _given_below: float = -np.inf  # samples of sequence numbers below this are given out
     causal: bool = True  # a frame names only an encoder frame before it (held ones carried)
+    resent: set[int] = field(default_factory=set)  # frames a differing resend names (resent.py)
+    _last_pose: dict[str, tuple[int, dict[str, float]]] = field(default_factory=dict)
 
     def feed(
         self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_], enc: Encoders
@@ -327,14 +330,23 @@ class StreamPoses:
     def _keep_first(
         self, name: str, halves: _Halves, g: npt.NDArray[np.int64], seq: npt.NDArray[np.int64]
     ) -> None:
-        """The first frame of ``halves`` naming each encoder frame not given out yet."""
+        """The first frame of ``halves`` naming each encoder frame not given out yet; and in
+        ``resent`` the frame when a later one naming it differs from it, -1 when one naming
+        what its kind's last frame named (given out) differs from that (``host.judge.resent``)."""
         firsts = self._first[name]
-        hits = np.flatnonzero((g >= 0) & (seq >= self._given_below))
+        hits = np.flatnonzero(g >= 0)
         columns = {k: v[hits].tolist() for k, v in halves.values.items()}  # plain Python values
+        last = self._last_pose.get(name, (-1, {}))
         for i, (gi, si, t) in enumerate(zip(g[hits].tolist(), seq[hits].tolist(),
                                             halves.timestamp_s[hits].tolist(), strict=True)):
-            if gi not in firsts:
-                firsts[gi] = (si, {k: v[i] for k, v in columns.items()}, t)
+            row = {k: v[i] for k, v in columns.items()}
+            if si >= self._given_below and gi not in firsts:
+                firsts[gi] = (si, row, t)
+            elif (gi in firsts or last[0] == gi) and resent_differs(
+                    firsts[gi][1] if gi in firsts else last[1], row):
+                self.resent.add(gi if gi in firsts else -1)
+            last = (gi, row)
+        self._last_pose[name] = last
 
     def _named(
         self, halves: _Halves, known: dict[str, np.ndarray]

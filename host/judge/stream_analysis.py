@@ -58,6 +58,7 @@ from odocan.host.judge.stream_lives import LifeSpan, StreamLives
 from odocan.host.judge.stream_losses import SpanDrops, StreamLosses
 from odocan.host.judge.stream_place import PlacedChunk, reference_errors, segment_offsets
 from odocan.host.judge.stream_place import start_pose as place_start
+from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
 from odocan.host.judge.stream_stalls import StreamBreakCounts, StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
 from odocan.host.judge.stream_twist import StreamTwist
@@ -66,7 +67,6 @@ from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import UNKNOWN
 from odocan.host.protocol.pose import heading_fields
-from odocan.sim.exceptions import OdocanError
 from odocan.sim.robot import RobotProfile
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
@@ -75,12 +75,6 @@ if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
 Frames = Callable[[], Iterable[FrameArrays]]  # a life's frames, from its first, each call
 QUEUED_MESSAGES = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y", "ODOM_TWIST")
 
-
-class NotStreamable(OdocanError):
-    """The streamed report could differ from the whole log's: analyse the whole log instead.
-    A life is refused when its frames' times go back where the stall detection looks
-    (``StreamStalls.exact``), when a pose, twist or encoder frame came in a burst after a busy
-    bus (``samples.queued_frames``: their pairing takes a median over the whole life)."""
 
 
 DEFAULT_TOLERANCE = Tolerance()
@@ -374,6 +368,7 @@ class _FirstPass:
         self.pages = PageEvidence(self.decoder)  # what the firmware took (gapseen)
         self.queued = False  # frames of a periodic sender let out in a burst (queued_frames)
         self.twins = False  # an encoder frame with a twin (samples.twinned_encoder_frames)
+        self.resent_kept = False  # a sample kept whose resend differs (StreamPoses.resent)
         self._last_enc: dict[str, np.ndarray] | None = None  # the last accepted encoder row
         self._last_t: dict[str, float] = {}  # per such message, its last accepted frame's time
         self.stalls: StreamStalls | None = None
@@ -446,6 +441,8 @@ class _FirstPass:
 
     def _kept(self, kept: dict[str, np.ndarray], fed: dict[str, np.ndarray]) -> None:
         self.samples += len(fed["enc"])
+        self.resent_kept |= -1 in self.poses.resent or bool(  # a sample kept, a resend differs
+            np.isin(kept["enc"], sorted(self.poses.resent)).any())
         if len(kept["enc"]):
             if self.kept == 0:
                 self.head = _poses({k: v[:1] for k, v in kept.items()})
@@ -462,6 +459,8 @@ class _FirstPass:
             raise NotStreamable("the log's status times go back against its encoder frames")
         if self.queued:  # samples._queued pairs them by a median over the whole life
             raise NotStreamable("frames let out in a burst after a busy bus (queued pairing)")
+        if self.resent_kept:  # judged whole (host.judge.resent), as the sample is out already
+            raise NotStreamable("a resent pose differs from the first naming its encoder frame")
 
     @property
     def breaks(self) -> np.ndarray:

@@ -27,6 +27,7 @@ from odocan.host.judge.livepose import (
     recent,
     truth_heading,
 )
+from odocan.host.judge.liveresent import judge_resend
 from odocan.host.judge.livesnapshot import tracker_snapshot
 from odocan.host.judge.livetruth import LifeTruth, TruthParts, carried_to
 from odocan.host.judge.livetwins import TwinWatch
@@ -79,8 +80,7 @@ class PoseTracker:
         bus); ``integrator`` None: the one ODOM_STATUS reports."""
         self.geometry = geometry
         self.counter_bits = min(counter_bits, WIRE_COUNTER_BITS)
-        self.forced = integrator is not None
-        self.integrator = integrator
+        self.forced, self.integrator = integrator is not None, integrator
         self.enc_seq = -1
         self.stalls = 0  # firmware silences after which the reference restarted
         self._pos = 0  # frames fed so far (the order of encoder frames and pose halves)
@@ -206,8 +206,8 @@ class PoseTracker:
         half = self._unsettled.pop(name)
         self._unsettled_from_s = min([h.t_s for h in self._unsettled.values()], default=math.inf)
         seq, queued = self._named(self._halves[name], half.pos)
-        if seq < 0 or self.twins.twinned(seq):
-            return  # left out, as analyze leaves it out (unmatched)
+        if seq < 0 or self.twins.twinned(seq) or judge_resend(name, seq, half, self):
+            return  # left out, as analyze leaves it out (unmatched); a resend judged
         if name == "x":
             self._xs.setdefault(seq, half)
             waiting = self._ys.pop(seq, None)

@@ -1,0 +1,41 @@
+"""Resent poses in the live judge (``host.judge.tracking``), as ``analyze`` judges them
+(``host.judge.resent``): a pose half naming the encoder frame of the latest sample judged again
+(the firmware ticked without a new frame and sent its pose again) is judged with the sample's
+other half against the same reference. Its error counts in the largest errors and the loss
+allowance's (``LiveAllowance.record``), not as a sample of its own: ``analyze`` puts the worst
+pose sent for a frame in its one sample. A resend equal to the sample changes nothing."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from odocan.host.judge.livepose import FramePose, difference
+from odocan.host.judge.livewindow import Half
+from odocan.sim.pose import TURN_RAD
+
+if TYPE_CHECKING:
+    from odocan.host.judge.tracking import PoseTracker
+
+
+def judge_resend(name: str, seq: int, half: Half, tracker: PoseTracker) -> bool:
+    """Judge half ``name`` ("x" or "y") naming frame ``seq`` when the latest sample judged is of
+    that frame; whether it was (then it is no new sample's half)."""
+    last = tracker._last_pair
+    if last is None or last[0].seq != seq:
+        return False
+    pose, ref = last
+    turns = math.floor(pose.heading_rad / TURN_RAD)  # the sample's TURNS and HEADING
+    heading_rad = pose.heading_rad - turns * TURN_RAD
+    if name == "x":
+        resent = FramePose(seq, half.value, pose.y_m, turns * TURN_RAD + half.extra)
+    else:
+        resent = FramePose(seq, pose.x_m, half.value, half.extra * TURN_RAD + heading_rad)
+    if resent == pose:
+        return True
+    error = difference(resent, ref)
+    stats = tracker.vs_reference
+    stats.max_dpos_m = max(stats.max_dpos_m, error["dpos_m"])
+    stats.max_dheading_rad = max(stats.max_dheading_rad, abs(error["dheading_rad"]))
+    tracker._losses.record(seq, error, tracker.fast_path, half.t_s)
+    return True

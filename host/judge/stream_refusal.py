@@ -1,0 +1,14 @@
+"""The streamed analysis' refusal (``host.judge.stream_analysis``), in a module of its own."""
+
+from __future__ import annotations
+
+from odocan.sim.exceptions import OdocanError
+
+
+class NotStreamable(OdocanError):
+    """The streamed report could differ from the whole log's: analyse the whole log instead.
+    A life is refused when its frames' times go back where the stall detection looks
+    (``StreamStalls.exact``), when a pose, twist or encoder frame came in a burst after a busy
+    bus (``samples.queued_frames``: their pairing takes a median over the whole life), when a
+    resent pose differs from the first naming its encoder frame (``host.judge.resent``: the
+    sample may have been given out chunks before)."""
