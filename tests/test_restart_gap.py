@@ -27,11 +27,14 @@ from odocan.firmware.odometry import Odometry
 from odocan.host.cli import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
+from odocan.host.judge.livegapseen import end_of_watch
+from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
 from odocan.sim.board import TICK_S
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests.independent_checker import Robot, check
+from tests.test_live_reboot import bridge_of, monitor_of
 
 SILENT_FROM = 500  # tick (5 s): the controller falls silent ...
 SILENT_TICKS = 50  # ... 0.5 s; it restarts as it speaks again
@@ -181,3 +184,74 @@ def test_a_firmware_wrong_after_the_restart_fails_the_cut_log(
     judged = _judged(_cut(full, tmp_path / "cut.log", no_status=no_status))
     assert not judged["whole"]["passed"]
     assert judged["whole"]["samples"]["unseen_restarts"] == 1
+
+
+def _live(path: Path) -> list[dict[str, Any]]:
+    """The live judges' verdicts on the log fed frame by frame, the monitor model's and the
+    MQTT bridge's (``host.judge.livedark``): ``wrong``, a POSE WRONG episode latched (the
+    firmware itself says DEGRADED after the restart, whatever the judge finds), at the end of
+    the watch (without pages, the samples wait for it)."""
+    monitor, bridge = monitor_of(path, "pmir", "exact"), bridge_of(path, "pmir", "exact")
+    verdicts = []
+    for tracker, events in ((monitor.tracker, monitor.events), (bridge.tracker, bridge.events)):
+        end_of_watch(tracker)  # the end of the watch, as ``odocan monitor`` ends it
+        tracker.wrongs.finish(tracker.allowance_m)
+        verdicts.append({"wrong": tracker.wrongs.as_dict()["episodes"] > 0,
+                         "beyond_m": tracker.max_beyond_allowance_m,
+                         "starts": tracker.reference_starts,
+                         "unseen": tracker.snapshot()["reference"]["unseen_restarts"],
+                         "restarts": [e["detail"] for e in events
+                                      if e["kind"] == "counter_restart"]})
+    return verdicts
+
+
+@pytest.mark.parametrize("no_status", [False, True])
+def test_the_live_judges_restart_on_the_cut_log_and_stay_exact_on_the_whole(
+    tmp_path: Path, no_status: bool
+) -> None:
+    """The monitor model and the bridge said POSE WRONG (156 mm, 154 mrad) on the cut log where
+    analyze PASSes; now they restart the reference at the restart, the event says why, and the
+    correct firmware is OK within one LSB. The whole log keeps the exact rule (no new start)."""
+    full = _restart_log(tmp_path / "full.log")
+    cut = _cut(full, tmp_path / "cut.log", no_status=no_status)
+    for live in _live(cut):
+        assert not live["wrong"]
+        assert live["beyond_m"] <= POSITION_LSB_M
+        assert (live["starts"], live["unseen"]) == (2, 1)  # analyze's ``unseen_restarts``
+        assert [d.startswith("frames the recorder lost before a controller restart")
+                for d in live["restarts"]] == [True]
+    for live in _live(full):
+        assert not live["wrong"]
+        assert (live["starts"], live["unseen"]) == (1, 0)
+        assert ["CTRL_UPTIME went back" in d for d in live["restarts"]] == [True]
+
+
+@pytest.mark.parametrize("no_status", [False, True])
+@pytest.mark.usefixtures("drifts_after_restart")
+def test_a_firmware_wrong_after_the_restart_is_pose_wrong_live_as_analyze_says(
+    tmp_path: Path, no_status: bool
+) -> None:
+    """The new start hides no wrong step after it live either: POSE WRONG, by at least what
+    analyze finds (the live start is the first pose after the restart, analyze's the middle of
+    the samples' overlap: the live error is the larger, about twice here)."""
+    cut = _cut(_restart_log(tmp_path / "full.log"), tmp_path / "cut.log", no_status=no_status)
+    offline = analyze(read_log(cut), load("pmir"), "exact").report["onboard_vs_reference"]
+    for live in _live(cut):
+        assert live["wrong"]
+        assert live["starts"] == 2
+        assert live["beyond_m"] >= offline["max_position_error_m"] > 0.1
+
+
+@pytest.mark.usefixtures("jumped_at_restart")
+def test_a_2_lsb_jump_at_the_restart_is_pose_wrong_live_on_the_whole_log(tmp_path: Path) -> None:
+    """The full log: the exact rule live (the pages prove the firmware took the log's frames):
+    a firmware that moves 2 LSB at the restart is POSE WRONG, no new start; on the cut log the
+    live judges agree with analyze (the new start hides that one jump, as it does offline)."""
+    full = _restart_log(tmp_path / "full.log")
+    for live in _live(full):
+        assert live["wrong"]
+        assert live["starts"] == 1
+        assert live["beyond_m"] > 1.5 * POSITION_LSB_M
+    cut = _cut(full, tmp_path / "cut.log")
+    passed = analyze(read_log(cut), load("pmir"), "exact").passed
+    assert [live["wrong"] for live in _live(cut)] == [not passed, not passed]

@@ -22,6 +22,7 @@ from odocan.host.judge.breaks import (
 )
 from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.gapseen import Seen
+from odocan.host.judge.livedark import DarkRestarts
 from odocan.host.judge.livegapseen import LiveSeen
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livepose import FramePose
@@ -78,6 +79,7 @@ class StallPlacer:
         self.max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED  # the gaps' bound
         self.periods = 1  # encoder periods from the frame heard before to the latest
         self.seen = LiveSeen()  # what the firmware's pages prove it took (its life's)
+        self.dark = DarkRestarts()  # restarts after the input went dark (host.judge.livedark)
         self._reprimed: tuple[int, ...] = ()  # the latest counter restarts re-primed on
         self._parts: list[Part] = []  # the placements' parts whose allowance pages may withdraw
         # the latest placements: frame, the offset its sample asked (from the reference then),
@@ -98,6 +100,7 @@ class StallPlacer:
         """``_on_encoders``, and the frame to ``seen``."""
         gap = self._on_encoders(seq, frame, prev, bits)
         self.seen.on_encoders(seq, frame[3], self.periods)
+        self.dark.on_encoders(seq, self.periods)
         return gap
 
     def _on_encoders(self, seq: int, frame: tuple[int, int, int, float],
@@ -128,7 +131,7 @@ class StallPlacer:
             self._gaps[-1] = (seq, (0, 0), (0, 0), -1)
         return True
 
-    def reprimed(self, seq: int, by_uptime: bool = True) -> None:
+    def reprimed(self, seq: int, by_uptime: bool = True) -> bool:
         """The reference re-primed on encoder frame ``seq`` (a counter restart): no page proves
         a span across it (``gapseen.Seen``'s ``reprimed``). A controller restart told by
         CTRL_UPTIME (``by_uptime``): a gap that ends there carried no motion on board (the
@@ -137,6 +140,7 @@ class StallPlacer:
         self._reprimed = (*self._reprimed[-REPRIMED_KEPT + 1:], seq)
         if by_uptime:
             self._gaps = [gap for gap in self._gaps if gap[0] != seq]
+        return self.dark.restarted(seq, by_uptime, self.seen)  # a new start (livedark)
 
     def compared(self, seq: int) -> None:
         """A sample of encoder frame ``seq`` was compared."""

@@ -125,20 +125,20 @@ class RestartLog:
     ``events`` (the monitor's, the bridge's); a frame stepped again (a reference started again
     over frames already gated) is told once."""
 
-    def __init__(self, reprimed: Callable[[int, bool], None]) -> None:
+    def __init__(self, reprimed: Callable[[int, bool], bool | None]) -> None:
         """``reprimed``: called with the frame of each restart and whether CTRL_UPTIME told
-        it."""
+        it; True: a new start after frames the host never heard (``host.judge.livedark``)."""
         self.events: deque[dict[str, Any]] = deque(maxlen=16)  # the owner's deque replaces it
         self._told = -1  # the latest encoder frame (seq) told
         self._reprimed = reprimed
 
     def add(self, seq: int, t_s: float, by_uptime: bool) -> None:
-        self._reprimed(seq, by_uptime)
+        unseen = bool(self._reprimed(seq, by_uptime))
         if seq <= self._told:
             return
         self._told = seq
         self.events.append({"t_s": t_s, "kind": "counter_restart", "encoder_frame": seq,
-                            "detail": restart_detail(by_uptime)})
+                            "detail": restart_detail(by_uptime, unseen)})
 
 
 # below this silence ``aged`` is the last CTRL_UPTIME itself (the per-frame test skips it)

@@ -24,6 +24,7 @@ def tracker_snapshot(tracker: PoseTracker) -> dict[str, Any]:
         "reference": {**(pose_dict(tracker.reference) or {}), "integrator": tracker.integrator,
                       "starts": tracker.reference_starts,
                       "counter_restarts": tracker.counter_restarts, "stalls": tracker.stalls,
+                      "unseen_restarts": tracker.placer.dark.new_starts,  # host.judge.livedark
                       "breaks": tracker.placer.placements.as_dict()},
         "truth": pose_dict(tracker.truth),
         "truth_origin": tracker.life_truth.as_dict(),

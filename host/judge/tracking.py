@@ -130,7 +130,7 @@ class PoseTracker:
     def advance(self, t_s: float) -> None:
         """Bus time is now ``t_s`` (any frame heard): pose halves heard half an encoder cycle or
         more before are settled; a new life waiting ``BOOT_COUNT_WAIT_S`` starts without it."""
-        self._now_s = t_s
+        self._now_s = self.placer.dark.heard(t_s)  # (and whether the input went dark)
         if self._boot is not None and t_s > self._boot[1]:
             self._finish_boot(self._boot[0]) if self._boot[0] >= 0 else self._finish_first(False)
         if t_s - self._unsettled_from_s < QUEUED_GAP_S:
@@ -238,6 +238,7 @@ class PoseTracker:
         self._sampled.add(seq)
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
         self.pose_t_s = y.t_s
+        self.placer.dark.due(seq, self.restart_reference)  # after a dark restart: livedark
         ref = self._compare(pose, y, queued)
         self.settled.append(sample := Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
         if self._boot is not None:  # held: settled again once judged (``_start_reference``)

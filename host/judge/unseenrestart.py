@@ -28,7 +28,8 @@ placed start uses every sample of the new life, which must agree within their ro
 a restart the pages prove it took exactly (the exact rule). Each such restart is an event of the
 report (``DETAIL``) and counted (``samples.unseen_restarts``). The streamed judge does not fit
 the new start: it refuses such a life (``whole_only``) and ``odocan analyze`` judges it whole.
-The live judge (``host.judge.tracking``) does not yet: it keeps the exact rule there.
+The live judge (``host.judge.tracking``) restarts its reference there from the next on-board
+pose when its input went dark before the restart (``host.judge.livedark``), with this event.
 """
 
 from __future__ import annotations
