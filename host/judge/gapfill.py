@@ -33,10 +33,14 @@ refuses them as the firmware does, so the gap is filled like one of held-back fr
 firmware's step over it is the merge of frames of known counts, never a split of the gap's
 travel. Placing them from the last accepted frame (the late one: 2 periods late at 20 ms) put
 their COUNTER 16 periods back, out of (est - 8, est + 1], and the gap kept ``gapbound``'s
-worst case (100.6 mm summed on seed 305: a pose 2 LSB off passed). Counted from the least late
-accepted frame, est is within a rounding of the frame's own slot whenever one of the last 64
-accepted frames was on time; when none was, est is too low by that one's lateness, the COUNTER
-lands 16 back or unplaced, and the gap keeps ``gapbound``'s allowance (never less than due).
+worst case (135 mm on kobuki, seed 305, ``delay=0.1:20``, 10 s: a firmware adding 1 mm of X
+after each lock-out passed; ``tests/test_lockout_fill``). Counted from the least late accepted
+frame (late by L periods, 0 <= L < 8), est = s + (d - L) for a frame of number s late by d
+periods (0 <= d < 8), within a rounding: when L <= d + 1 (always when one of the last 64
+accepted frames was on time) s is in (est - 8, est + 1] and is found; otherwise s lies above
+est + 1 and s - 16 below est - 8, so the frame is left unplaced and its gap keeps
+``gapbound``'s allowance: a frame is never given a wrong number. The live judge applies the
+same rule frame by frame (``host.judge.livefill``).
 """
 
 from __future__ import annotations
