@@ -276,32 +276,49 @@ def test_held_frames_pass_a_right_firmware(
     assert all(verdicts.values()), verdicts
 
 
-@pytest.mark.parametrize("held", [(703, 10, 0.2), (703, 20, 0.1), (703, 30, 0.2), (1, 40, 0.2),
-                                  (42, 15, 0.1), (1, 5, 0.2)], ids=str)
+@settings(max_examples=4, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(seed=st.sampled_from([305, 703]), delay_ms=st.sampled_from(HELD_MS),
+       share=st.sampled_from([0.1, 0.2]))
+@example(seed=305, delay_ms=17, share=0.1)
+@example(seed=305, delay_ms=40, share=0.1)
+@example(seed=703, delay_ms=20, share=0.1)
+@example(seed=703, delay_ms=30, share=0.2)
+@example(seed=1, delay_ms=40, share=0.2)
+@example(seed=42, delay_ms=15, share=0.1)
+@example(seed=1, delay_ms=5, share=0.2)
+@example(seed=703, delay_ms=10, share=0.2)
 def test_held_frames_fail_a_pose_two_lsb_off(
-    tmp_path: Path, held: tuple[int, int, float]
+    tmp_path: Path, seed: int, delay_ms: int, share: float
 ) -> None:
-    """The same drives by a firmware whose X is 2 LSB off FAIL in all four (drawn, this fails on
-    some drives: the open case below)."""
-    seed, delay_ms, share = held
+    """The same drives by a firmware whose X is 2 LSB off FAIL in all four; the draws sweep the
+    delays on the two seeds whose drives lock the firmware out most (other seeds: the last four
+    examples; a draw whose start the judges fit, not proven at power-up, may absorb a constant
+    offset: seed 670, ``delay=0.2:24``, ``test_powerup_delay``'s business). The first two
+    examples were reported to PASS run, the whole-log and the streamed analyze (the live judge
+    FAILed them); on this branch's base they FAIL already (the constant offset shows before the
+    first lock-out): ``test_lockout_fill`` shows the gaps' allowance itself:
+    the firmware refuses the on-time frame that follows a late one it took (its window, reset
+    to 0 on the late frame, widens one a tick while the COUNTER runs one a tick ahead), and so
+    every frame until its COUNTER comes round: up to 16 periods on one pose (``delay=0.1:20``
+    on seed 703: 176 of 400 encoder frames refused). ``gapfill`` placed those refused frames
+    from the last accepted frame, the late one, so their COUNTER fell 16 periods back and the
+    judges kept ``gapbound``'s worst case for each such gap (seed 305, 20 ms: 35 gaps, 100.6 mm
+    summed), which swallowed the offset although every frame of those gaps is on the log and
+    their own E2E model refuses it as the firmware did. Now a refused frame is placed on the
+    sender's grid (from the least late recent accepted frame): the gaps are filled."""
     path = tmp_path / "held.blf"
     verdicts = _verdicts(path, _run(path, (4, seed, f"delay={share}:{delay_ms},seed={seed}"), "X"))
     assert not any(verdicts.values()), verdicts
 
 
-@pytest.mark.xfail(strict=True, reason="open: the gap placements after the firmware's E2E "
-                   "lock-outs absorb a constant 2 LSB offset (rule 3)")
 def test_lock_outs_do_not_absorb_a_pose_two_lsb_off(tmp_path: Path) -> None:
-    """Found by the draws above (seed 305, frames held 17..40 ms, 4 s): a firmware whose X is
-    2 LSB off PASSes run, the whole-log and the streamed analyze (the live judge FAILs it).
-    The firmware refuses the on-time frame that follows a late one it took (its window, reset
-    to 0 on the late frame, widens one a tick while the COUNTER runs one a tick ahead), and so
-    every frame until its COUNTER comes round: up to 16 periods on one pose (``delay=0.1:20``
-    on seed 703: 176 of 400 encoder frames refused). The judges take each such lock-out for a
-    gap of the log (``reference_breaks``: 35 ``gap_placements``, allowance 100.6 mm summed,
-    ``host.judge.gapbound``) and re-place the reference there, so the offset never shows,
-    although every frame of those gaps is on the log and their own E2E model refuses it as the
-    firmware did (the firmware's step over the gap is the reference's: no allowance is due)."""
-    path = tmp_path / "held.blf"
-    verdicts = _verdicts(path, _run(path, (4, 305, "delay=0.1:20,seed=305"), "X"))
+    """The case the draws above found (seed 305, frames held 20 ms, 4 s), kept by name: a
+    firmware whose X is 2 LSB off FAILs run, the whole-log and the streamed analyze and the
+    live judge; the same drive by the right firmware PASSes all four."""
+    wrong, right = tmp_path / "wrong.blf", tmp_path / "right.blf"
+    drive = (4, 305, "delay=0.1:20,seed=305")
+    verdicts = _verdicts(wrong, _run(wrong, drive, "X"))
     assert not any(verdicts.values()), verdicts
+    verdicts = _verdicts(right, _run(right, drive, None))
+    assert all(verdicts.values()), verdicts

@@ -18,10 +18,29 @@ been narrower), its steps are the fine path's merged in runs over frames of know
 over any runs merged, the reference's one merged step among them). Premises, as everywhere in
 the judge: a frame whose CRC holds is the sender's (a forgery is ``samples``' twins' business:
 a filled frame must also be a plausible step from its neighbours, else the gap keeps its
-``gapbound`` allowance); a frame is held back fewer than 8 periods (``e2e_periods``' rule), so
-its sequence number is the one of its COUNTER in (est - 8, est + 1], est the periods since the
-last accepted frame before it on the bus; two frames of one number must agree (else unknown);
-the firmware takes its frames in sequence order (E2E: never one behind one it took).
+``gapbound`` allowance); a frame is held back fewer than 8 periods (``e2e_periods``' rule) and
+never sent early, so its sequence number is the one of its COUNTER in (est - 8, est + 1], est
+its periods on the sender's grid: counted from the least late of the last ``ANCHOR_FRAMES``
+accepted frames before it on the bus (time - sequence number * cycle the least); two frames of
+one number must agree (else unknown); the firmware takes its frames in sequence order (E2E:
+never one behind one it took).
+
+One rule covers the firmware's E2E lock-out too (seed 305, frames held 17..40 ms): after taking
+a late frame its window restarts while the COUNTER runs one ahead, so it refuses the on-time
+frames that follow (delta = window + 1) until the COUNTER comes round, up to 16 periods. Those
+frames are not held back: they are on the bus, CRC good, and the host's copy of the E2E check
+refuses them as the firmware does, so the gap is filled like one of held-back frames: the
+firmware's step over it is the merge of frames of known counts, never a split of the gap's
+travel. Placing them from the last accepted frame (the late one: 2 periods late at 20 ms) put
+their COUNTER 16 periods back, out of (est - 8, est + 1], and the gap kept ``gapbound``'s
+worst case (135 mm on kobuki, seed 305, ``delay=0.1:20``, 10 s: a firmware adding 1 mm of X
+after each lock-out passed; ``tests/test_lockout_fill``). Counted from the least late accepted
+frame (late by L periods, 0 <= L < 8), est = s + (d - L) for a frame of number s late by d
+periods (0 <= d < 8), within a rounding: when L <= d + 1 (always when one of the last 64
+accepted frames was on time) s is in (est - 8, est + 1] and is found; otherwise s lies above
+est + 1 and s - 16 below est - 8, so the frame is left unplaced and its gap keeps
+``gapbound``'s allowance: a frame is never given a wrong number. The live judge applies the
+same rule frame by frame (``host.judge.livefill``).
 """
 
 from __future__ import annotations
@@ -30,6 +49,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
+from numpy.lib.stride_tricks import sliding_window_view
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import merge_allowance_m
@@ -41,7 +61,10 @@ from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 
 COUNTER_MODULO = 16
 MAX_LATE_PERIODS = 8  # a frame held back fewer periods than this (half a COUNTER cycle)
+ANCHOR_FRAMES = 64  # accepted frames an anchor is chosen among (the least late on the grid)
 Counts = tuple[int, int]  # (left, right) wire counts
+# accepted frames: sequence numbers, bus times, COUNTERs
+Anchors = tuple[IntArray, npt.NDArray[np.float64], IntArray]
 
 
 @dataclass
@@ -66,22 +89,24 @@ class LateFrames:
         return None if any(c is None for c in found) else found  # type: ignore[return-value]
 
 
-def late_seq(counter: IntArray, sent_s: np.ndarray, anchor_seq: IntArray, anchor_s: np.ndarray,
-             cycle_s: float) -> IntArray:
+def late_seq(counter: IntArray, sent_s: np.ndarray, anchor: Anchors, cycle_s: float) -> IntArray:
     """Sender sequence numbers of refused frames (COUNTER, bus time) after accepted frames
-    (sequence number, bus time): the number of their COUNTER in (est - 8, est + 1]; -1 where
-    it lies further back (held back too long to be placed)."""
+    (``anchor``: sequence number, bus time, COUNTER; a number is its COUNTER's residue shifted
+    as the anchor's, the first accepted frame being number 0 whatever its COUNTER): the number
+    of their COUNTER in (est - 8, est + 1]; -1 where it lies further back (held back too long
+    to be placed)."""
+    anchor_seq, anchor_s, anchor_counter = anchor
     est = anchor_seq + np.floor((sent_s - anchor_s) / cycle_s + 0.5).astype(np.int64)
     top = est + 1  # the highest number allowed
-    seq: IntArray = top - ((top - counter) % COUNTER_MODULO)
+    seq: IntArray = top - ((top - anchor_seq - counter + anchor_counter) % COUNTER_MODULO)
     return np.where(seq > est - MAX_LATE_PERIODS, seq, -1)
 
 
 def late_in_chunk(chunk: FrameArrays, decoder: BulkDecoder, enc: Encoders, offset: int,
-                  last: tuple[int, float] | None) -> tuple[IntArray, IntArray, IntArray]:
+                  prior: Anchors) -> tuple[IntArray, IntArray, IntArray]:
     """(sequence numbers, left, right) of the chunk's encoder frames the host refused whose CRC
     holds (``enc``: the accepted ones, ``index`` in the log; the chunk starts at ``offset``;
-    ``last``: the last accepted frame before it, sequence number and bus time)."""
+    ``prior``: the last accepted frames before it, ``recent_anchors``)."""
     empty = np.zeros(0, dtype=np.int64)
     try:
         rows = decoder.select(chunk, "WHEEL_ENCODERS")
@@ -92,17 +117,38 @@ def late_in_chunk(chunk: FrameArrays, decoder: BulkDecoder, enc: Encoders, offse
         return empty, empty, empty
     decoded = decoder.decode(chunk, "WHEEL_ENCODERS")
     pick = np.flatnonzero(refused & _crc_holds(chunk, decoder, rows))
-    k = np.searchsorted(enc.index, rows[pick] + offset) - 1
-    if last is None:  # none accepted before: nothing to place them after
-        pick, k = pick[k >= 0], k[k >= 0]
-    seq_a = np.where(k >= 0, enc.seq[np.maximum(k, 0)] if len(enc.seq) else 0,
-                     last[0] if last else 0)
-    time_a = np.where(k >= 0, enc.timestamp_s[np.maximum(k, 0)] if len(enc.seq) else 0.0,
-                      last[1] if last else 0.0)
+    k = np.searchsorted(enc.index, rows[pick] + offset) - 1 + len(prior[0])
+    pick, k = pick[k >= 0], k[k >= 0]  # none accepted before: nothing to place them after
+    seq_a, time_a, counter_a = on_time_anchors(recent_anchors(prior, enc, None), enc.cycle_s)
     seq = late_seq(decoded["COUNTER"][pick].astype(np.int64), decoded["timestamp_s"][pick],
-                   seq_a.astype(np.int64), time_a, enc.cycle_s)
+                   (seq_a[k], time_a[k], counter_a[k]), enc.cycle_s)
     return (seq, decoded["LEFT_COUNT"][pick].astype(np.int64),
             decoded["RIGHT_COUNT"][pick].astype(np.int64))
+
+
+def on_time_anchors(frames: Anchors, cycle_s: float) -> Anchors:
+    """Per accepted frame (sequence number, bus time, COUNTER): the least late on the sender's
+    grid (the least time - number * cycle) of it and the ``ANCHOR_FRAMES`` - 1 before it."""
+    seq, time_s, counter = frames
+    if len(seq) == 0:
+        return frames
+    late_s = time_s - seq * cycle_s
+    padded = np.concatenate((np.full(ANCHOR_FRAMES - 1, np.inf), late_s))
+    best = (np.argmin(sliding_window_view(padded, ANCHOR_FRAMES), axis=1)
+            + np.arange(len(seq)) - (ANCHOR_FRAMES - 1))
+    return seq[best], time_s[best], counter[best]
+
+
+def recent_anchors(prior: Anchors, enc: Encoders, kept: int | None = ANCHOR_FRAMES) -> Anchors:
+    """The last ``kept`` (None: all) accepted frames of ``prior`` then ``enc``."""
+    start = -kept if kept else 0
+    return (np.concatenate((prior[0], enc.seq)).astype(np.int64)[start:],
+            np.concatenate((prior[1], enc.timestamp_s)).astype(np.float64)[start:],
+            np.concatenate((prior[2], enc.counter)).astype(np.int64)[start:])
+
+
+NO_ANCHORS: Anchors = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float64),
+                       np.zeros(0, dtype=np.int64))
 
 
 def _crc_holds(chunk: FrameArrays, decoder: BulkDecoder, rows: IntArray

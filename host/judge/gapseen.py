@@ -72,7 +72,14 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.gapfill import Counts, LateFrames, late_in_chunk
+from odocan.host.judge.gapfill import (
+    NO_ANCHORS,
+    Anchors,
+    Counts,
+    LateFrames,
+    late_in_chunk,
+    recent_anchors,
+)
 from odocan.host.judge.samples import QUEUED_GAP_CYCLES, Encoders, FloatArray, IntArray
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
@@ -330,6 +337,7 @@ class PageEvidence:
     _gaps: list[tuple[int, int]] = field(default_factory=list)  # frame after, frames missing
     _gap_seq: dict[int, int] = field(default_factory=dict)  # per gap: the sequence number before
     late: LateFrames = field(default_factory=LateFrames)  # encoder frames refused (gapfill)
+    _anchors: Anchors = NO_ANCHORS  # the last accepted encoder frames (gapfill's anchors)
     _usable: bool = True  # the DBC has the signals
     _holes: list[int] = field(default_factory=list)  # ``Seen.holes``
     _last_raw_s: float | None = None  # the last frame's time
@@ -340,8 +348,8 @@ class PageEvidence:
         self.keeper.cycle_s = enc.cycle_s
         if self.first_s is None and len(enc.seq):
             self.first_s = float(enc.timestamp_s[0])
-        last = None if self._last_seq is None else (self._last_seq, self._last_enc_s)
-        self.late.add(*late_in_chunk(chunk, self.decoder, enc, self._offset, last))
+        self.late.add(*late_in_chunk(chunk, self.decoder, enc, self._offset, self._anchors))
+        self._anchors = recent_anchors(self._anchors, enc)
         self._add_gaps(enc)
         self._add_holes(chunk, enc)
         if self._usable:

@@ -3,9 +3,11 @@
 moves to where the firmware is, no further from where the reference started than the stalls'
 merge allowances since plus the tolerance. A gap of the encoder sequence (frames the judge
 did not hear, which the firmware may have integrated one by one) places it again too, within
-its ``gapbound`` allowance, as ``analyze`` places it. A part of the latest placement that the
-firmware's pages later prove it took as the reference did (``host.judge.livegapseen``) has its
-allowance withdrawn (``withdraw``), as ``analyze`` gives it none."""
+its ``gapbound`` allowance, as ``analyze`` places it; or twice the merge allowance over its
+frames when every frame it lacks was heard refused by E2E (``gapfill``; ``livefill``). A part of
+the latest placement that the firmware's pages later prove it took as the reference did
+(``host.judge.livegapseen``) has its allowance withdrawn (``withdraw``), as ``analyze`` gives it
+none."""
 
 from __future__ import annotations
 
@@ -20,9 +22,10 @@ from odocan.host.judge.breaks import (
     overlap_allowance_m,
     path_bound_m,
 )
-from odocan.host.judge.gapbound import gap_allowance_of_counts
+from odocan.host.judge.gapfill import gap_or_fill_allowance
 from odocan.host.judge.gapseen import Seen
 from odocan.host.judge.livedark import DarkRestarts
+from odocan.host.judge.livefill import LiveFill
 from odocan.host.judge.livegapseen import LiveSeen
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livepose import FramePose
@@ -88,12 +91,15 @@ class StallPlacer:
         self.losses: LiveAllowance | None = None  # the tracker's: samples judged again
         self._owed = (0.0, 0.0)  # the offset withdrawn, not applied yet (m)
         self.withdrawn = 0  # placements whose allowance the pages withdrew
+        self.fill = LiveFill()  # the refused frames heard, by sender number (gapfill)
+        self._gap_sender: dict[int, int] = {}  # per gap (seq after): the sender number before
 
     def restart(self) -> None:
         """A new reference: no offset, no allowance yet."""
         self._shift, self._budget_m = (0.0, 0.0), 0.0
         self.stalled, self._gaps, self._parts, self._owed = False, [], [], (0.0, 0.0)
         self._history = []
+        self._gap_sender = {}
 
     def on_encoders(self, seq: int, frame: tuple[int, int, int, float],
                     prev: tuple[float, ...] | None, bits: int) -> bool:
@@ -113,6 +119,7 @@ class StallPlacer:
         self.periods = 1
         if prev is None:
             self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)
+            self.fill.accepted(1, counter, t_s)
             return False
         abs_left, abs_right = self._abs_counts
         self._abs_counts = (abs_left + abs(wrap_delta(left - int(prev[4]), bits)),
@@ -120,13 +127,17 @@ class StallPlacer:
         self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)  # a fixed ring: no growth
         periods = (counter - int(prev[2])) & 0xF
         if periods == 1 and t_s - float(prev[3]) < 8.0 * CYCLE_S:
+            self.fill.accepted(1, counter, t_s)
             return False  # the next frame (the fast path: no arrays)
         periods = self.periods = int(sender_seq(np.array([int(prev[2]), counter]),
                                                 np.array([float(prev[3]), t_s]), CYCLE_S)[1])
+        sender_before = self.fill.sender
+        self.fill.accepted(periods, counter, t_s)
         if periods <= 1:
             return False
         if len(self._gaps) < GAPS_KEPT:  # more before a sample: no bound (free, counted)
             self._gaps.append((seq, (int(prev[4]), int(prev[5])), (left, right), periods))
+            self._gap_sender[seq] = sender_before
         else:
             self._gaps[-1] = (seq, (0, 0), (0, 0), -1)
         return True
@@ -164,14 +175,17 @@ class StallPlacer:
             allowance = self._allowance_m(last_compared, pose.seq, window, reference)
             parts.append((False, last_compared, pose.seq, allowance, pose.seq))
         gaps, self._gaps, self.stalled = _confirmed(self._gaps, window), [], False
+        senders, self._gap_sender = self._gap_sender, {}
         sx, sy = self._shift[0] - self._owed[0], self._shift[1] - self._owed[1]  # applied
         owed, self._owed = self._owed, (0.0, 0.0)
         if not gaps and not stalled:  # a burst after a busy bus, not a gap: nothing to place
             return None if owed == (0.0, 0.0) else owed  # but an allowance withdrawn
         for seq, before, after, periods in gaps:
-            parts.append((True, seq, seq, math.inf if periods < 0 else gap_allowance_of_counts(
-                before, after, periods, geometry, bits, integrator, self.max_wheel_speed_mm_s),
-                pose.seq))
+            filled = (self.fill.fill(senders[seq], periods) if seq in senders and periods > 1
+                      else None)
+            parts.append((True, seq, seq, math.inf if periods < 0 else gap_or_fill_allowance(
+                filled, before, after, periods, geometry, bits, integrator,
+                self.max_wheel_speed_mm_s), pose.seq))
         self._budget_m += sum(part[3] for part in parts)
         want_x, want_y = sx + pose.x_m - ref.x_m, sy + pose.y_m - ref.y_m
         self._parts = (self._parts + parts)[-PARTS_KEPT:]

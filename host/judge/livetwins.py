@@ -23,11 +23,14 @@ its steps from every prev choice: a forger of many CRC-right twins must not stal
 from __future__ import annotations
 
 from collections import deque
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from odocan.host.judge.livewindow import CYCLE_S
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.twins import Counts, twin_detour_m
+
+if TYPE_CHECKING:
+    from odocan.host.judge.livefill import LiveFill
 
 TWIN_SLOTS = 64  # recent encoder frames whose twin is remembered (a ring by seq)
 TWIN_GAP_S = 8 * CYCLE_S  # 8 periods on, the same COUNTER is the sender's next cycle
@@ -103,9 +106,12 @@ class TwinWatch:
         return seq >= 0 and self._ring[seq % TWIN_SLOTS] == seq
 
 
-def refused_encoders(twins: TwinWatch, signals: Any, t_s: float) -> None:
+def refused_encoders(twins: TwinWatch, signals: Any, t_s: float,
+                     fill: LiveFill | None = None) -> None:
     """A WHEEL_ENCODERS frame E2E refused with its CRC right, decoded (``signals``: COUNTER,
     LEFT_COUNT, RIGHT_COUNT raw: a mapping, as cantools decodes it), heard at bus time
-    ``t_s``: to ``twins``."""
-    twins.refused(int(signals["COUNTER"]), int(signals["LEFT_COUNT"]),
-                  int(signals["RIGHT_COUNT"]), t_s)
+    ``t_s``: to ``twins``, and to ``fill`` (a gap's frame, ``livefill``)."""
+    frame = (int(signals["COUNTER"]), int(signals["LEFT_COUNT"]), int(signals["RIGHT_COUNT"]))
+    twins.refused(*frame, t_s)
+    if fill is not None:
+        fill.refused(*frame, t_s)

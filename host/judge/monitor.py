@@ -191,7 +191,7 @@ class BusMonitor:
             self._use(message, stats, data)
         elif status in CRC_RIGHT_REFUSED and message.name == "WHEEL_ENCODERS":
             refused_encoders(self.tracker.twins, message.decode(data, decode_choices=False),
-                             timestamp_s)  # a twin of the latest accepted one, or not
+                             timestamp_s, self.tracker.placer.fill)  # a twin, or a gap's frame
         self.tracker.take_samples()  # judged in ``tracker.vs_reference``
 
     def _count_unknown_id(self, can_id: int) -> None:

@@ -185,7 +185,7 @@ class RobotTelemetry:
         if route is None or status not in ACCEPTED_E2E:
             if status in CRC_RIGHT_REFUSED and route is not None \
                     and route.name == "WHEEL_ENCODERS":  # a twin of the latest accepted one?
-                refused_encoders(tracker.twins, route.signals(data), t_s)
+                refused_encoders(tracker.twins, route.signals(data), t_s, tracker.placer.fill)
             message = self._by_id.get(can_id)
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
             return self._samples() if tracker.settled else []

@@ -1,0 +1,62 @@
+"""The live judge's gap fills (``host.judge.gapfill``'s rule, one frame at a time): encoder
+frames the host's E2E model refused with their CRC right, placed on the sender's grid, so that a
+gap of the accepted sequence whose every missing frame was heard (held back on the bus, or
+refused by the firmware's E2E lock-out after it took a late frame) is bounded by the merge
+errors over its known counts, not by ``gapbound``'s worst split of its travel.
+
+The sender numbers are the live judge's own: the accepted frames' periods summed
+(``liveplace.StallPlacer.on_encoders``). A refused frame is numbered as ``gapfill.late_seq``
+numbers it: from the least late on the sender's grid of the last ``gapfill.ANCHOR_FRAMES``
+accepted frames, the number of its COUNTER in (est - 8, est + 1]. A frame heard after the sample
+that placed the reference past its gap fills nothing (the gap kept ``gapbound``'s allowance)."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from odocan.host.judge.gapfill import (
+    ANCHOR_FRAMES,
+    COUNTER_MODULO,
+    MAX_LATE_PERIODS,
+    Counts,
+)
+from odocan.host.judge.livewindow import CYCLE_S
+
+KEPT_PERIODS = 64  # refused frames kept this many periods behind the latest accepted one
+
+
+class LiveFill:
+    """Refused encoder frames with their CRC right, by sender number (bounded state)."""
+
+    def __init__(self) -> None:
+        self.sender = 0  # the latest accepted frame's sender number
+        self._anchors: deque[tuple[int, float, int]] = deque(maxlen=ANCHOR_FRAMES)
+        self._counts: dict[int, Counts | None] = {}  # None: two frames of a number disagreed
+
+    def accepted(self, periods: int, counter: int, t_s: float) -> None:
+        """An accepted frame ``periods`` after the one before it (COUNTER, bus time s)."""
+        self.sender += max(periods, 1)
+        self._anchors.append((self.sender, t_s, counter))
+        if len(self._counts) > 2 * KEPT_PERIODS:
+            oldest = self.sender - KEPT_PERIODS
+            self._counts = {s: c for s, c in self._counts.items() if s > oldest}
+
+    def refused(self, counter: int, left: int, right: int, t_s: float) -> None:
+        """A WHEEL_ENCODERS frame the host's E2E check refused with its CRC right."""
+        if not self._anchors:
+            return
+        seq_a, t_a, counter_a = min(self._anchors, key=lambda a: a[1] - a[0] * CYCLE_S)
+        est = seq_a + math.floor((t_s - t_a) / CYCLE_S + 0.5)
+        top = est + 1
+        seq = top - ((top - seq_a - counter + counter_a) % COUNTER_MODULO)
+        if seq <= est - MAX_LATE_PERIODS:
+            return  # held back too long to be placed
+        known = self._counts.get(seq, (left, right))
+        self._counts[seq] = (left, right) if known == (left, right) else None
+
+    def fill(self, seq_before: int, periods: int) -> list[Counts] | None:
+        """The counts of the frames a gap of ``periods`` after sender number ``seq_before``
+        lacks, when every one was heard refused; else None."""
+        found = [self._counts.get(s) for s in range(seq_before + 1, seq_before + periods)]
+        return None if any(c is None for c in found) else found  # type: ignore[return-value]
