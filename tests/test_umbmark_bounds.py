@@ -134,3 +134,21 @@ def test_a_refused_correction_is_named(
     assert named is not None, err
     assert "small-angle model" in err  # why the estimate is wrong, and the way out
     assert float(named[1]) == pytest.approx(wheelbase_mm, rel=1e-5)
+
+
+def test_a_square_scaled_to_a_1cm_robot_calibrates_it(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """Control (passes before the bound too): the way out the verdict names works. On a 0.4 m
+    square the 1 cm robot's E_d 1.01, E_b 1.02 come back within 10 % of their deviation and
+    E_max,syst (computed here from the raw ends) falls at least 5x: PASS."""
+    robot = robot_file(tmp_path, 0.01, 32)
+    code, out = main(tmp_path, capsys, "calibrate", "--robot", robot, "--side", "0.4",
+                     "--errors", "ed=1.01,eb=1.02", "--runs", "1")
+    report = json.loads((tmp_path / "report.json").read_text())
+    before, _, _ = independent(report["before"], 0.01)
+    after, _, _ = independent(report["after"], 0.01)
+    assert abs(report["estimated"]["ed"] - 1.01) <= 0.1 * 0.01
+    assert abs(report["estimated"]["eb"] - 1.02) <= 0.1 * 0.02
+    assert before >= 5 * after
+    assert code == 0, out
