@@ -152,3 +152,20 @@ def test_a_square_scaled_to_a_1cm_robot_calibrates_it(
     assert abs(report["estimated"]["eb"] - 1.02) <= 0.1 * 0.02
     assert before >= 5 * after
     assert code == 0, out
+
+
+def test_a_failed_model_fit_beyond_the_bound_names_the_small_angle_model(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A 3 cm wheelbase on the 4 m square (E_max,syst 3.6 L): the model fit, started from
+    Borenstein's estimate, lands on E_b 0.45 for 1.02 and fails on its residual; the verdict also
+    says why (the small-angle model) and the way out (a smaller --side)."""
+    robot = robot_file(tmp_path, 0.03, 32)
+    code, _ = main(tmp_path, capsys, "calibrate", "--robot", robot, "--errors", "ed=1.01,eb=1.02",
+                   "--runs", "1")
+    report = json.loads((tmp_path / "report.json").read_text())
+    ratio, _, _ = independent(report["before"], 0.03)
+    assert ratio > BOUND
+    assert abs(report["estimated"]["eb"] - 1.02) > 0.1 * 0.02
+    assert code == 1
+    assert any("small-angle model" in f and "--side" in f for f in report["faults"])
