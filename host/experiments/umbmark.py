@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 
 import numpy as np
 
@@ -65,6 +65,7 @@ from odocan.host.experiments.drive import (
     drive_faults,
 )
 from odocan.host.experiments.seeding import run_seed
+from odocan.host.experiments.umbmark_bounds import refused_parameters, small_angle_faults
 from odocan.host.judge.reference import Geometry
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
@@ -398,7 +399,8 @@ def calibrate(
             f"the firmware refused the corrected geometry (E_d {chosen[0]:.6g}, E_b "
             f"{chosen[1]:.6g}: radii {corrected.wheel_radius_left_m:.6g}/"
             f"{corrected.wheel_radius_right_m:.6g} m, wheelbase {corrected.wheelbase_m:.6g} m), "
-            f"{exc}"
+            f"{exc}: " + "; ".join(refused_parameters(*astuple(corrected)) or ["the whole set"])
+            + "".join(f"; {r}" for r in small_angle_faults(before.emax_m, side_m))
         ) from None
     return Calibration(
         before, estimate, fitted, method, nominal, corrected, after, fit_residual_m
@@ -428,6 +430,8 @@ def calibration_faults(
             f"the correction does not cut E_max,syst {min_improvement:g}x "
             f"({before * 1e3:.1f} mm -> {after * 1e3:.1f} mm)"
         )
+    if cal.method == "borenstein" or reasons:  # a model fit that passes needs no small angles
+        reasons += [f"before: {r}" for r in small_angle_faults(before, cal.before.side_m)]
     return reasons
 
 

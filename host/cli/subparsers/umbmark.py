@@ -27,6 +27,7 @@ from odocan.host.experiments.outputs import (
     write_scatter,
 )
 from odocan.host.experiments.umbmark import Correction
+from odocan.host.experiments.umbmark_bounds import small_angle_faults
 from odocan.host.report.ci import umbmark_checks, write_checks
 from odocan.host.report.progress import counted_progress
 from odocan.sim import errors, robot
@@ -128,7 +129,7 @@ def _do_umbmark(args: argparse.Namespace) -> int:
         "error_model": {"ed": model.ed, "eb": model.eb, "slip": model.slip},
         **umbmark.umbmark_report(result),
     }
-    reasons = umbmark.faults(result, profile)
+    reasons = umbmark.faults(result, profile) + small_angle_faults(result.emax_m, result.side_m)
     if args.max_emax is not None and result.emax_m * 1e3 > args.max_emax:
         reasons.append(f"E_max,syst {result.emax_m * 1e3:.1f} mm exceeds --max-emax "
                        f"{args.max_emax:g} mm")
@@ -139,6 +140,6 @@ def _do_umbmark(args: argparse.Namespace) -> int:
                   header(args, model, "UMBmark"))
     write_checks(args, "umbmark", umbmark_checks(report))
     code = verdict("UMBmark", reasons)
-    if args.max_emax is None:  # a PASS says only that every run was valid: say what it is not
+    if args.max_emax is None and not reasons:  # a PASS says only that every run was valid
         print("  (every run valid; E_max,syst is judged only with --max-emax MM)")
     return code
