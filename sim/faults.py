@@ -169,6 +169,14 @@ class FaultInjectingBus(BusABC):
         """When the earliest frame held back by ``delay`` is due (inf: none held)."""
         return self._held[0][0] if self._held else math.inf
 
+    def next_event_s(self, now_s: float) -> float:
+        """When this handle next puts a frame on the bus by itself (s): its babbler's next
+        frame or its earliest held frame (inf: neither); ``now_s`` wakes a babbler not yet
+        awake, as ``poll`` would."""
+        with self._lock:
+            babble_s = self._babbler.next_s(now_s)
+            return min(babble_s, self.next_release_s if not self.counters.bus_off else math.inf)
+
     def poll(self, now_s: float, timeout: float | None = None) -> None:
         """Bring the faults up to ``now_s``: bus-off transitions, babble, delayed releases.
 

@@ -93,7 +93,9 @@ def test_the_correct_firmware_passes_at_1_mbit_and_a_3_lsb_wrong_one_fails(
     log, report = _run(tmp_path, 1_000_000)
     print(f"\n{report['onboard_vs_reference']}\n{report['onboard_vs_truth']}")
     assert report["passed"] is True
-    assert report["onboard_vs_truth"]["final_position_error_m"] < 1e-3
+    # 1.8 mm: the babble now reaches the bus (and the firmware) at its own time, not up to a
+    # tick late, and the mailbox drops 37 encoder frames, not 19 (loss allowance 1.84 mm)
+    assert report["onboard_vs_truth"]["final_position_error_m"] < 3e-3
     wrong = tmp_path / "wrong.log"
     assert _biased_x(log, wrong, lambda k, t: t > 2.0, 3) > 100
     code, wrong_report = _analyze(wrong, tmp_path)

@@ -43,8 +43,9 @@ from typing import Any
 
 import numpy as np
 
-from odocan.host.judge.gapbound import gap_allowance_of_counts
+from odocan.host.judge.gapbound import gap_allowance_of_counts, period_bounds
 from odocan.host.judge.losses import OneSteps, merge_error
+from odocan.host.judge.lossgate import gated_counts
 from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import FloatArray, IntArray
 
@@ -52,15 +53,24 @@ MAX_MERGE_FRAMES = 480  # frames between the ends beyond which the path bound is
 
 
 def merge_allowance_m(
-    left: IntArray, right: IntArray, geometry: Geometry, bits: int, integrator: str
+    left: IntArray, right: IntArray, geometry: Geometry, bits: int, integrator: str,
+    seq: IntArray | None = None,
 ) -> float:
     """The worst merge error (m) across a break: ``left``, ``right`` are the wire counts of the
     encoder frames from the last one the firmware is known to have taken before it to the first
     one after it (both taken, any between may be lost, in runs; ``bits``: the wire counter
-    width). Dynamic programming over the frame last taken (module docstring)."""
+    width). With the frames' sender sequence numbers ``seq``, the counts are the firmware's
+    (``lossgate.gated_counts`` from the first frame: a forger's frame it refuses as implausible
+    takes the last accepted frame's counts, so it cannot widen the allowance). Dynamic
+    programming over the frame last taken (module docstring)."""
     n = len(left)
     if n < 3:
         return 0.0
+    if seq is not None:
+        left, right, _ = gated_counts(np.asarray(left, dtype=np.int64),
+                                      np.asarray(right, dtype=np.int64),
+                                      np.asarray(seq, dtype=np.int64), period_bounds(geometry),
+                                      bits)
     dl: IntArray = wrap_delta(np.diff(np.asarray(left, dtype=np.int64)).astype(np.int64), bits)
     dr: IntArray = wrap_delta(np.diff(np.asarray(right, dtype=np.int64)).astype(np.int64), bits)
     if n - 2 > MAX_MERGE_FRAMES:

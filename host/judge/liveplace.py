@@ -271,7 +271,8 @@ class StallPlacer:
             periods = sender_seq(window.col("counter")[i0 : i1 + 1].astype(np.int64),
                                  window.col("t_s")[i0 : i1 + 1], CYCLE_S)  # a gap within
             ends = [(int(periods[k]), int(left[k]), int(right[k])) for k in (0, -1)]
-            return merge_allowance_m(left, right, geometry, counter_bits, integrator) + \
+            return merge_allowance_m(left, right, geometry, counter_bits, integrator,
+                                     periods) + \
                 overlap_allowance_m(ends[0], ends[1], len(left), geometry, counter_bits,
                                     integrator, self.max_wheel_speed_mm_s)
         now = self._abs_at(after)

@@ -167,7 +167,7 @@ def break_allowance(enc: Encoders, b: int, sample_enc: IntArray, geometry: Geome
     j = int(sample_enc[k])
     ends = [(int(enc.seq[i]), int(enc.left[i]), int(enc.right[i])) for i in (b - 1, j)]
     return merge_allowance_m(enc.left[b - 1 : j + 1], enc.right[b - 1 : j + 1], geometry, bits,
-                             integrator) + overlap_allowance_m(
+                             integrator, enc.seq[b - 1 : j + 1]) + overlap_allowance_m(
         ends[0], ends[1], j - b + 2, geometry, bits, integrator, max_wheel_speed_mm_s)
 
 

@@ -31,7 +31,9 @@ from odocan.host.judge.breaks import (
     overlap_allowance_m,
     path_bound_m,
 )
+from odocan.host.judge.gapbound import period_bounds
 from odocan.host.judge.gapseen import NOTHING, Seen
+from odocan.host.judge.lossgate import Gate, gated_counts
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import Encoders
 from odocan.host.judge.stalls import frozen_breaks, silent
@@ -190,7 +192,9 @@ class StreamBreakCounts:
     _count: int = 0  # encoder frames fed
     _left: dict[int, list[np.ndarray]] = field(default_factory=dict)
     _right: dict[int, list[np.ndarray]] = field(default_factory=dict)
+    _seq: dict[int, list[np.ndarray]] = field(default_factory=dict)
     _sums: dict[int, list[int]] = field(default_factory=dict)  # |dl|, |dr| sums, last l, r
+    _gates: dict[int, Gate | None] = field(default_factory=dict)  # a long span's gate state
 
     def named(self, sample_enc: npt.NDArray[np.int64]) -> None:
         """Kept samples' encoder frames (in encoder order over the passes)."""
@@ -217,10 +221,14 @@ class StreamBreakCounts:
                         int(enc.seq[at - lo]), int(enc.left[at - lo]), int(enc.right[at - lo]))
             left = enc.left[a0 - lo : a1 - lo].astype(np.int64)
             right = enc.right[a0 - lo : a1 - lo].astype(np.int64)
+            seq = enc.seq[a0 - lo : a1 - lo].astype(np.int64)
             if j - (b - 1) - 1 <= MAX_MERGE_FRAMES:
                 self._left.setdefault(b, []).append(left)
                 self._right.setdefault(b, []).append(right)
+                self._seq.setdefault(b, []).append(seq)
                 continue
+            left, right, self._gates[b] = gated_counts(  # the firmware's counts, as whole
+                left, right, seq, period_bounds(self.geometry), self.bits, self._gates.get(b))
             sums = self._sums.get(b)
             if sums is not None:
                 left, right = np.r_[sums[2], left], np.r_[sums[3], right]
@@ -242,7 +250,7 @@ class StreamBreakCounts:
         elif b in self._left:
             merged = merge_allowance_m(np.concatenate(self._left[b]),
                                        np.concatenate(self._right[b]), self.geometry, self.bits,
-                                       self.integrator)
+                                       self.integrator, np.concatenate(self._seq[b]))
         else:
             return 0.0
         j, edges = self._ends[b], self._edges[b]
