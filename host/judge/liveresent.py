@@ -10,8 +10,11 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from odocan.host.judge.livepose import FramePose, difference
-from odocan.host.judge.livewindow import Half
+from odocan.host.judge.livewindow import CYCLE_S, Half
+from odocan.host.judge.resendalias import ALIAS_CYCLES
 from odocan.sim.pose import TURN_RAD
 
 if TYPE_CHECKING:
@@ -22,7 +25,7 @@ def judge_resend(name: str, seq: int, half: Half, tracker: PoseTracker) -> bool:
     """Judge half ``name`` ("x" or "y") naming frame ``seq`` when the latest sample judged is of
     that frame; whether it was (then it is no new sample's half)."""
     last = tracker._last_pair
-    if last is None or last[0].seq != seq:
+    if last is None or last[0].seq != seq or _may_alias(seq, half.t_s, tracker):
         return False
     pose, ref = last
     turns = math.floor(pose.heading_rad / TURN_RAD)  # the sample's TURNS and HEADING
@@ -39,3 +42,15 @@ def judge_resend(name: str, seq: int, half: Half, tracker: PoseTracker) -> bool:
     stats.max_dheading_rad = max(stats.max_dheading_rad, abs(error["dheading_rad"]))
     tracker._losses.record(seq, error, tracker.fast_path, half.t_s)
     return True
+
+
+def _may_alias(seq: int, t_s: float, tracker: PoseTracker) -> bool:
+    """Whether a half heard at ``t_s`` may name a later frame with frame ``seq``'s COUNTER
+    (``host.judge.resendalias``: ``ALIAS_CYCLES`` encoder cycles since frame ``seq`` came, or
+    the frame left the window)."""
+    window = tracker._window
+    seqs = window.col("seq")
+    k = int(np.searchsorted(seqs, seq))
+    if k >= len(seqs) or seqs[k] != seq:
+        return True
+    return bool(t_s - window.col("t_s")[k] >= ALIAS_CYCLES * CYCLE_S)

@@ -57,8 +57,8 @@ def worst_sent(onboard: Poses, halves: PoseHalves, ref_all: Reference,
 def resent_poses(onboard: Poses, halves: PoseHalves) -> Poses:
     """The pose frames naming a sample's encoder frame that differ from the sample's half of
     their kind, each with the sample's other half (in frame order, X frames first)."""
-    k_x, same_x = _differing(onboard, halves.ex)
-    k_y, same_y = _differing(onboard, halves.ey)
+    k_x, same_x = _differing(onboard, _unaliased(halves.ex, halves.ax))
+    k_y, same_y = _differing(onboard, _unaliased(halves.ey, halves.ay))
     x_raw = halves.px["X"][same_x].astype(np.int64)
     heading_raw = halves.px["HEADING"][same_x].astype(np.int64)
     keep_x = (x_raw * POSITION_LSB_M != onboard.x_m[k_x]) | (heading_raw
@@ -90,6 +90,12 @@ def _differing(onboard: Poses, named: npt.NDArray[np.int64]) -> tuple[
         hit &= onboard.enc[k] == named
     frames = np.flatnonzero(hit)
     return k[frames].astype(np.int64), frames.astype(np.int64)
+
+
+def _unaliased(named: npt.NDArray[np.int64], alias: npt.NDArray[np.bool_] | None
+               ) -> npt.NDArray[np.int64]:
+    """``named`` with -1 where the half may name another frame (``host.judge.resendalias``)."""
+    return named if alias is None else np.where(alias, -1, named)
 
 
 def _turns(onboard: Poses) -> npt.NDArray[np.int64]:

@@ -14,6 +14,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import INTEGRATORS
+from odocan.host.judge.resendalias import may_alias
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
@@ -405,6 +406,8 @@ class PoseHalves:
     py: dict[str, np.ndarray]
     ex: IntArray
     ey: IntArray
+    ax: npt.NDArray[np.bool_] | None = None  # per half: may name another frame (resendalias)
+    ay: npt.NDArray[np.bool_] | None = None
 
 
 def pose_halves(
@@ -417,7 +420,8 @@ def pose_halves(
                        px["COUNTER"].astype(np.int64))
     ey = match_encoder(enc, py["index"], py["ENC_COUNTER"], py["timestamp_s"],
                        py["COUNTER"].astype(np.int64))
-    return PoseHalves(px, py, ex, ey)
+    return PoseHalves(px, py, ex, ey, may_alias(frames, decoder, enc, px["index"], ex),
+                      may_alias(frames, decoder, enc, py["index"], ey))
 
 
 def onboard_samples(
