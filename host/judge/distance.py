@@ -75,6 +75,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import path_bound_m
 from odocan.host.judge.gapbound import period_bounds
 from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
+from odocan.host.judge.resentdistance import resends_too
 from odocan.host.judge.samples import (
     SILENCE_CYCLES,
     Encoders,
@@ -193,6 +194,7 @@ class DistanceJudge:
     _r0: float | None = None
     _running: int = -1  # the largest encoder frame named so far
     _last: tuple[float, int] = (math.nan, 0)  # the last twist frame: bus time, frames before
+    _judged_last: bool = False  # the last twist frame was judged (a resend of it is too)
     feasible: Feasible = field(default_factory=lambda: Feasible(-math.inf, math.inf))
     samples: int = 0
 
@@ -250,7 +252,8 @@ class DistanceJudge:
         delay let the firmware take a new frame of that ENC_COUNTER), but the first after the
         firmware was silent for ``SILENCE_CYCLES`` cycles while the encoder frames went on (a
         stall: it names a frame of its backlog that ENC_COUNTER cannot resolve, as
-        ``stalls.after_stalls`` leaves the pose out)."""
+        ``stalls.after_stalls`` leaves the pose out); and each resend of a judged one (naming
+        its frame again: ``resentdistance.resends_too``)."""
         if len(e) == 0:
             return
         running = np.maximum.accumulate(np.concatenate(([self._running], e)))
@@ -260,7 +263,9 @@ class DistanceJudge:
         self._running, self._last = int(running[-1]), (float(t_s[-1]), int(heard[-1]))
         quiet = ((t_s - prev_t >= (SILENCE_CYCLES - 0.5) * ENCODER_PERIOD_US * 1e-6)
                  & (heard - prev_heard >= SILENCE_CYCLES - 1))
-        ok = (e >= 0) & (e > before) & ~quiet
+        ok = resends_too((e >= 0) & (e > before) & ~quiet, (e >= 0) & (e == before) & ~quiet,
+                         self._judged_last)
+        self._judged_last = bool(ok[-1])
         self.feed_samples(e[ok], raw_mm[ok])
 
     def feed_samples(self, e: IntArray, raw_mm: IntArray) -> None:

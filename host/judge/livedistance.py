@@ -12,13 +12,14 @@ it missed) the fine path since the last sample; after an ODOM_STATUS page whose 
 
 A sample (ODOM_TWIST) names its encoder frame by the tracker's rule for a pose half
 (``samples.match_encoder`` over its window: the sender's steps, the age bound, the held and
-queued rules, resolved when the sample is heard), and only the first naming each frame is judged
-(as ``analyze`` judges the pose; a sample naming none, or a frame before the last named, or a
-frame with a twin, is left out). Its offset interval [r - upper, r + lower] must meet every
-earlier one of the life (``distance`` module docstring); in the first life, once the tracker
-has proven a power-up at frame 0 (its reference's exact start), the offset must be 0. A reboot
-starts a new life (its offset free again); an interval found empty is latched
-(``wrong_lives``): the verdict DISTANCE WRONG, and the watch's exit 1."""
+queued rules, resolved when the sample is heard): the first naming each frame is judged, and
+each resend right after it (``host.judge.resentdistance``; a sample naming none, or a frame
+before the last named, or a frame with a twin, is left out). Its offset interval
+[r - upper, r + lower] must meet every earlier one of the life (``distance`` module
+docstring); in the first life, once the tracker has proven a power-up at frame 0 (its
+reference's exact start), the offset must be 0. A reboot starts a new life (its offset free
+again); an interval found empty is latched (``wrong_lives``): the verdict DISTANCE WRONG, and
+the watch's exit 1."""
 
 from __future__ import annotations
 
@@ -88,6 +89,7 @@ class LiveDistance:
         self._twists = Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW)
         self._last_e = -1  # the last frame judged
         self._running = -1  # the largest frame named
+        self._judged_last = False  # the last twist was judged (a resend of it is too)
         self._last_twist: tuple[float, int] = (math.nan, 0)  # bus time, frames heard before
         self._lower_m = 0.0
         self._stalls = -1
@@ -145,13 +147,15 @@ class LiveDistance:
         self._twists.append(tracker._pos, enc_counter, counter, t_s)
         e = tracker._named(self._twists, tracker._pos)[0]
         e = -1 if e >= 0 and tracker.twins.twinned(e) else e
+        resend = e >= 0 and e == self._running and self._judged_last  # resentdistance.py
         first, self._running = e > self._running, max(self._running, e)
         last_t, last_heard = self._last_twist
         self._last_twist = (t_s, tracker.enc_seq + 1)
         quiet = (t_s - last_t >= (SILENCE_CYCLES - 0.5) * CYCLE_S
                  and tracker.enc_seq + 1 - last_heard >= SILENCE_CYCLES - 1)
         at = self._frames.get(e)
-        if self.suspended or quiet or not first or at is None:
+        self._judged_last = not (self.suspended or quiet or not (first or resend) or at is None)
+        if not self._judged_last or at is None:
             return
         if self._stalls >= 0 and tracker.stalls > self._stalls and self._last_e >= 0:
             before = self._frames.get(self._last_e)  # merged since the last sample
