@@ -75,6 +75,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import path_bound_m
 from odocan.host.judge.gapbound import period_bounds
 from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
+from odocan.host.judge.resendalias import ALIAS_CYCLES
 from odocan.host.judge.resentdistance import resends_too
 from odocan.host.judge.samples import (
     SILENCE_CYCLES,
@@ -244,7 +245,8 @@ class DistanceJudge:
                                    float(ds_m[k]))
         return extra
 
-    def take(self, e: IntArray, raw_mm: IntArray, t_s: FloatArray, heard: IntArray) -> None:
+    def take(self, e: IntArray, raw_mm: IntArray, t_s: FloatArray, heard: IntArray,
+             named_t_s: FloatArray | None = None) -> None:
         """ODOM_TWIST frames in bus order (``twist_samples``; ``heard``: the encoder frames
         logged before each): those naming a frame (e >= 0) after every earlier one's are
         judged, the first naming each (``samples.onboard_samples``' rule for the pose: a later
@@ -253,7 +255,9 @@ class DistanceJudge:
         firmware was silent for ``SILENCE_CYCLES`` cycles while the encoder frames went on (a
         stall: it names a frame of its backlog that ENC_COUNTER cannot resolve, as
         ``stalls.after_stalls`` leaves the pose out); and each resend of a judged one (naming
-        its frame again: ``resentdistance.resends_too``)."""
+        its frame again: ``resentdistance.resends_too``) within ``ALIAS_CYCLES`` of its frame's
+        bus time ``named_t_s`` (NaN: unknown; None: not checked), past which it may name a later
+        frame of that COUNTER (``host.judge.resendalias``)."""
         if len(e) == 0:
             return
         running = np.maximum.accumulate(np.concatenate(([self._running], e)))
@@ -263,8 +267,10 @@ class DistanceJudge:
         self._running, self._last = int(running[-1]), (float(t_s[-1]), int(heard[-1]))
         quiet = ((t_s - prev_t >= (SILENCE_CYCLES - 0.5) * ENCODER_PERIOD_US * 1e-6)
                  & (heard - prev_heard >= SILENCE_CYCLES - 1))
-        ok = resends_too((e >= 0) & (e > before) & ~quiet, (e >= 0) & (e == before) & ~quiet,
-                         self._judged_last)
+        resend = (e >= 0) & (e == before) & ~quiet
+        if named_t_s is not None:
+            resend &= t_s - named_t_s < ALIAS_CYCLES * ENCODER_PERIOD_US * 1e-6
+        ok = resends_too((e >= 0) & (e > before) & ~quiet, resend, self._judged_last)
         self._judged_last = bool(ok[-1])
         self.feed_samples(e[ok], raw_mm[ok])
 
@@ -375,5 +381,8 @@ def check_distance(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder
     judge.feed_frames(np.arange(e0, len(enc.seq), dtype=np.int64),
                       np.concatenate((zero, steps[0])), np.concatenate((zero, steps[1])),
                       enc.seq[e0:])
-    judge.take(*twist_samples(frames, accepted, decoder, enc))
+    e, raw_mm, t_s, heard = twist_samples(frames, accepted, decoder, enc)
+    named_t_s = np.where(e >= 0, enc.timestamp_s[np.maximum(e, 0)], np.nan) if len(enc.seq) \
+        else None
+    judge.take(e, raw_mm, t_s, heard, named_t_s)
     return judge.result()

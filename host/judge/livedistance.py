@@ -37,6 +37,7 @@ from odocan.host.judge.distance import (
     gap_extra_m,
 )
 from odocan.host.judge.livepose import RestartLog, StepGate
+from odocan.host.judge.liveresent import may_alias_live
 from odocan.host.judge.livewindow import HALF_WINDOW, Columns
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.samples import SILENCE_CYCLES
@@ -147,7 +148,8 @@ class LiveDistance:
         self._twists.append(tracker._pos, enc_counter, counter, t_s)
         e = tracker._named(self._twists, tracker._pos)[0]
         e = -1 if e >= 0 and tracker.twins.twinned(e) else e
-        resend = e >= 0 and e == self._running and self._judged_last  # resentdistance.py
+        resend = (e >= 0 and e == self._running and self._judged_last  # resentdistance.py
+                  and not may_alias_live(e, t_s, tracker))
         first, self._running = e > self._running, max(self._running, e)
         last_t, last_heard = self._last_twist
         self._last_twist = (t_s, tracker.enc_seq + 1)

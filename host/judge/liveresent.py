@@ -25,7 +25,7 @@ def judge_resend(name: str, seq: int, half: Half, tracker: PoseTracker) -> bool:
     """Judge half ``name`` ("x" or "y") naming frame ``seq`` when the latest sample judged is of
     that frame; whether it was (then it is no new sample's half)."""
     last = tracker._last_pair
-    if last is None or last[0].seq != seq or _may_alias(seq, half.t_s, tracker):
+    if last is None or last[0].seq != seq or may_alias_live(seq, half.t_s, tracker):
         return False
     pose, ref = last
     turns = math.floor(pose.heading_rad / TURN_RAD)  # the sample's TURNS and HEADING
@@ -44,7 +44,7 @@ def judge_resend(name: str, seq: int, half: Half, tracker: PoseTracker) -> bool:
     return True
 
 
-def _may_alias(seq: int, t_s: float, tracker: PoseTracker) -> bool:
+def may_alias_live(seq: int, t_s: float, tracker: PoseTracker) -> bool:
     """Whether a half heard at ``t_s`` may name a later frame with frame ``seq``'s COUNTER
     (``host.judge.resendalias``: ``ALIAS_CYCLES`` encoder cycles since frame ``seq`` came, or
     the frame left the window)."""

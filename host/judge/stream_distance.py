@@ -25,6 +25,9 @@ if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
     from odocan.host.protocol.dbcplan import DatabaseSpec
 
 
+KEPT_TIMES = 256  # encoder frames' bus times kept from the chunks before (a twist names one)
+
+
 def stream_distance(frames: Callable[[], Iterable[FrameArrays]], db: DatabaseSpec,
                     robot: RobotProfile, integrator: str, e0: int, judge: DistanceJudge
                     ) -> dict[str, Any]:
@@ -41,14 +44,18 @@ def stream_distance(frames: Callable[[], Iterable[FrameArrays]], db: DatabaseSpe
     def take(e: IntArray, raw_mm: IntArray, t_s: FloatArray) -> None:  # this chunk's twists
         if len(raw_mm) and raw_mm[0] < 0:  # a DBC without DISTANCE (-1): nothing to judge
             return
-        judge.take(e, raw_mm, t_s, count - len(enc_t) + np.searchsorted(enc_t, t_s))
+        k = e - (count - len(enc_t))  # the named frame among the latest kept
+        kept = (k >= 0) & (k < len(enc_t))
+        named_t = (np.where(kept, enc_t[np.clip(k, 0, len(enc_t) - 1)], np.nan) if len(enc_t)
+                   else np.full(len(e), np.nan))
+        judge.take(e, raw_mm, t_s, count - len(enc_t) + np.searchsorted(enc_t, t_s), named_t)
 
     twist = StreamTwist(decoder, robot, on_distance=take)
     for chunk in frames():
         accepted = e2e.feed(chunk)
         enc = numbering.feed(chunk, accepted)
         g = count + np.arange(len(enc.index), dtype=np.int64)
-        count, enc_t = count + len(g), enc.timestamp_s
+        count, enc_t = count + len(g), np.concatenate((enc_t[-KEPT_TIMES:], enc.timestamp_s))
         from_e0 = g >= e0
         if from_e0.any():
             taken = _take(enc, from_e0)
