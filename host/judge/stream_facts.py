@@ -32,8 +32,10 @@ from odocan.host.judge.powerup import (
     named_count,
     same_tick,
     status_counter_modulo,
+    tick_bound_s,
     zero_first_sample,
 )
+from odocan.host.judge.powerup_times import TickTimes
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses
 from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
@@ -91,6 +93,7 @@ class StreamFacts:
     _page_counter: int | None = None  # the first count page's COUNTER
     _named: tuple[int | None, int | None] = (None, None)  # powerup.pose_named: summary's, page's
     _tail: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    _times: TickTimes = field(default_factory=TickTimes)  # powerup.heard_by_tick's evidence
     latch: StatusLatch = field(default_factory=StatusLatch)  # host.judge.statuslatch
     firmware_events: list[dict[str, Any]] = field(default_factory=list)  # ... its events
     set_pose_applied: bool = False  # an ODOM_SET_POSE APPLY ACKed (host.judge.setposes)
@@ -159,6 +162,7 @@ class StreamFacts:
         self._named = (self._named[0], named.count(limit, self._named[1]))
         self._tail = named.tail(limit)
         self._accepted_encoders += int(np.count_nonzero(encoders < limit))
+        self._times.feed(chunk, summary, heard, encoders[encoders < limit])
         if self._enc_ok.first_at is not None and "COUNTER" in counts:
             self._page_counter = int(counts["COUNTER"][accepted[counts["index"]]][0])
 
@@ -204,7 +208,13 @@ class StreamFacts:
         at_summary = self._summary is not None and same_tick(self._page_counter,
                                                              self._summary[1], modulo)
         named = self._named[0] if at_summary else self._named[1]
-        return self._enc_ok.first in (made & 0xFFFF, named)
+        if self._enc_ok.first in (made & 0xFFFF, named):
+            return True
+        cycle_ms = self.decoder.message("ODOM_STATUS").cycle_time
+        if self._page_counter is None or not cycle_ms:
+            return False
+        bound_s = tick_bound_s(self._page_counter, self._times.summaries, modulo, cycle_ms)
+        return bound_s is not None and self._enc_ok.first == self._times.before(bound_s, made)
 
     def starts_at_power_up(self, first: Poses) -> bool:
         """``samples.starts_at_power_up``, given the log's first on-board sample (``first``:
