@@ -329,3 +329,26 @@ def test_two_lsb_off_fails_under_delays_of_two_periods_and_more(
                or ok in (before_summary, before_page, named_in_its_tick(path)))
     verdicts = {"run": code == 0, **_verdicts(path)}
     assert verdicts == dict.fromkeys(verdicts, wrong is None), verdicts
+
+
+@pytest.mark.parametrize("cut", range(1, 7))
+def test_cuts_of_the_late_tick_drive_are_fitted(tmp_path: Path, cut: int) -> None:
+    """The right firmware's ``delay=0.2:24,seed=670`` drive (4 s), its log cut before its
+    ``cut``-th encoder frame on the bus: the judge fits its start and it PASSes whole, streamed
+    and live. Before, cut 3 was taken for a power-up (main too): the firmware counted 2 frames
+    the log lacks (of 3: one it refused), and the count page's tick came late past 2 more, so
+    the 8 accepted of the 10 before its summary (cantools: ``first_count_page``) matched, and
+    the right firmware FAILed from (0, 0, 0). The log's first status frame is then not of the
+    firmware's first cycle (COUNTER 2: ``powerup.holds_first_cycle``)."""
+    whole_log, cut_log = tmp_path / "whole.blf", tmp_path / "cut.blf"
+    assert _run(whole_log, 4, 670, "delay=0.2:24,seed=670") == 0
+    left = cut
+    with can.LogReader(whole_log) as reader, can.BLFWriter(cut_log) as writer:
+        for msg in reader:
+            left -= msg.arbitration_id == ENCODERS_ID
+            if left < 0:
+                writer.on_message_received(msg)
+    if cut == 3:
+        assert first_count_page(cut_log) == (8, 10, 10)
+    assert analyze(read_log(cut_log), KOBUKI).report["reference_start"] == "fitted"
+    assert _verdicts(cut_log) == {"whole": True, "streamed": True, "live": True}

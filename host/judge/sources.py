@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.judge.livegapseen import heard_status
-from odocan.host.judge.powerup import NAMED_SPAN, same_tick, tick_bound_s
+from odocan.host.judge.powerup import NAMED_SPAN, holds_first_cycle, same_tick, tick_bound_s
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.e2e import E2EMonitor, crc8h2f_p02_one
 
@@ -53,6 +53,7 @@ class SourceWatch:
 
     summary: tuple[int, int, int | None] | None = None  # the latest accepted one: COUNTER,
     # the encoder frames heard, those up to the frame the latest pose names (pose_named_live)
+    first_counter: int | None = None  # the first accepted page's COUNTER, any page
     summary_times: list[tuple[int, float]] = field(default_factory=list)  # the latest
     # summaries' COUNTER and bus time (``powerup.tick_bound_s``)
 
@@ -67,6 +68,8 @@ class SourceWatch:
         if not self.page_pending:  # heard, or a reboot came first: nothing to count
             return False
         heard = (tracker.enc_seq + 1, pose_named_live(tracker))
+        if self.first_counter is None:
+            self.first_counter = int(signals["COUNTER"])
         if page == "summary":
             self.summary = (int(signals["COUNTER"]), *heard)
             self.summary_times = [*self.summary_times[-TIMES_KEPT + 1:],
@@ -74,7 +77,7 @@ class SourceWatch:
         if page != "e2e_wheel_encoders":
             return False
         self.page_pending = False
-        if self.first_uptime_s != 0:
+        if self.first_uptime_s != 0 or not holds_first_cycle(self.first_counter):
             return False
         if self.summary is not None and same_tick(int(signals["COUNTER"]), self.summary[0],
                                                   STATUS_COUNTER_MODULO):

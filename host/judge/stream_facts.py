@@ -28,6 +28,7 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.powerup import (
     NAMED_SPAN,
+    holds_first_cycle,
     made_at,
     named_count,
     same_tick,
@@ -85,6 +86,7 @@ class StreamFacts:
     _enc_first_s: float | None = None  # every frame of WHEEL_ENCODERS' ID, accepted or not
     _enc_last_s: float | None = None
     _uptime: _Signal = field(default_factory=_Signal)
+    _first_counter: _Signal = field(default_factory=_Signal)  # ODOM_STATUS's COUNTER, any page
     _integrator: _Signal = field(default_factory=_Signal)
     _enc_ok: _Signal = field(default_factory=_Signal)
     _has_status: bool = True  # the DBC's ODOM_STATUS is multiplexed
@@ -137,6 +139,8 @@ class StreamFacts:
         keep = accepted[summary["index"]]
         self.firmware_events += latch_summaries(self.latch, summary, keep)
         self._uptime.feed(summary, "UPTIME", keep, self._offset)
+        status = self.decoder.decode(chunk, "ODOM_STATUS")
+        self._first_counter.feed(status, "COUNTER", accepted[status["index"]], self._offset)
         self._integrator.feed(summary, "INTEGRATOR", keep, self._offset)
         before = self._enc_ok.first is None
         self._enc_ok.feed(counts, "ENC_E2E_OK", accepted[counts["index"]], self._offset)
@@ -222,7 +226,10 @@ class StreamFacts:
         if not self._has_status or not self._uptime.present or self._uptime.first != 0:
             return False
         counted = self._counted_only_the_log()
-        return zero_first_sample(first) if counted is None else counted
+        if counted is None:
+            return zero_first_sample(first)
+        counter = self._first_counter.first if self._first_counter.present else None
+        return counted and holds_first_cycle(counter)
 
 
 def _applies_set_pose(chunk: FrameArrays, accepted: npt.NDArray[np.bool_],
