@@ -25,7 +25,8 @@ def starts_at_power_up(
     ODOM_STATUS summary says UPTIME 0 and the first ENC_E2E_OK page says the firmware had
     accepted exactly the log's encoder frames (it primed on the log's first), whatever the
     first on-board sample reads: a firmware whose power-up pose is not (0, 0, 0) is judged from
-    (0, 0, 0). Without that page, ``zero_first_sample`` stands in for it."""
+    (0, 0, 0), and the log's first accepted ODOM_STATUS frame is of the firmware's first cycle
+    (``holds_first_cycle``). Without that page, ``zero_first_sample`` stands in for it."""
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", 0)
     except DecodeError:
