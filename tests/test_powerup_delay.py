@@ -253,3 +253,102 @@ def test_a_cut_log_under_delay_passes_a_right_firmware(
                 writer.on_message_received(msg)
     assert analyze(read_log(cut_log), KOBUKI).report["reference_start"] == "fitted"
     assert _verdicts(cut_log) == {"whole": True, "streamed": True, "live": True}
+
+
+def heard_by_its_tick(path: Path) -> tuple[int, int]:
+    """With cantools: the encoder frames the firmware had received when it made its first count
+    page, by its own counts (ENC_E2E_OK + REPEATED + CRC_ERROR + WRONG_SEQ), and the encoder
+    frames on the bus before that page's tick bound: the least, over the summaries before it, of
+    the summary's time plus 100 ms (the DBC's ODOM_STATUS cycle) per cycle its COUNTER is behind
+    the page's summary (two frames a cycle)."""
+    db = load_can_dbc(DBC)
+    stamps: list[float] = []
+    summaries: list[tuple[int, float]] = []
+    with can.LogReader(path) as reader:
+        for msg in reader:
+            if msg.arbitration_id == ENCODERS_ID:
+                stamps.append(msg.timestamp)
+            elif msg.arbitration_id == STATUS_ID:
+                signals = numbers(db, STATUS_ID, msg.data)
+                if signals["PAGE"] == 0:
+                    summaries.append((int(signals["COUNTER"]), msg.timestamp))
+                elif signals["PAGE"] == 2:
+                    behind = [(int(signals["COUNTER"]) - 1 - c) % 16 for c, _ in summaries]
+                    bound = min(t + 0.1 * (b // 2) for (_, t), b in zip(summaries, behind,
+                                                                      strict=True) if b % 2 == 0)
+                    received = sum(int(signals[f"ENC_E2E_{k}"])
+                                   for k in ("OK", "REPEATED", "CRC_ERROR", "WRONG_SEQ"))
+                    return received, sum(t < bound for t in stamps)
+    raise AssertionError("no count page")
+
+
+def test_a_page_whose_whole_tick_came_late_counts_the_frames_before_its_tick(
+    tmp_path: Path,
+) -> None:
+    """Kobuki, 4 s, ``delay=0.2:24,seed=670`` (the lockout work's find; test_reorder's helpers):
+    the first encoder frame (COUNTER 0) came 24 ms late, after COUNTER 1, so the firmware primed
+    on COUNTER 1; the summary and the count page of the 100 ms tick came 24 ms late, after two
+    encoder frames the firmware could not count, and so did the poses of the 120 ms tick. So
+    the frames before the page's summary (13) and up to the frame the latest pose before it
+    names (13) are not the firmware's ENC_E2E_OK (8, of 11 frames received: 3 out of
+    sequence), and the log was not proven to start at power-up: its start fitted to the
+    samples took a firmware's constant 2 LSB in X, which PASSed whole, streamed, live and
+    ``run``. The summary of the tick before (the firmware's first, at 1 ms) bounds the page's
+    tick to 101 ms: the 11 frames before it are the ones the firmware had received (cantools,
+    ``heard_by_its_tick``), the judge counts 8 of them accepted, and the 2 LSB FAIL all four;
+    the right firmware PASSes all four from (0, 0, 0)."""
+    wrong, right = tmp_path / "wrong.blf", tmp_path / "right.blf"
+    code = _run(wrong, 4, 670, "delay=0.2:24,seed=670", ("X", 2))
+    assert first_count_page(wrong) == (8, 13, 13)
+    assert named_in_its_tick(wrong) == 13
+    assert heard_by_its_tick(wrong) == (11, 11)
+    verdicts = {"run": code == 0, **_verdicts(wrong)}
+    assert not any(verdicts.values()), verdicts
+    code = _run(right, 4, 670, "delay=0.2:24,seed=670")
+    assert {"run": code == 0, **_verdicts(right)} == dict.fromkeys(verdicts, True)
+    assert analyze(read_log(right), KOBUKI).report["reference_start"] == "power-up"
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[
+    HealthCheck.too_slow, HealthCheck.function_scoped_fixture, HealthCheck.filter_too_much])
+@given(seed=st.integers(0, 1000), delay_ms=st.sampled_from([d for d in DELAYS_MS if d >= 20]),
+       share=st.sampled_from([0.1, 0.2]), wrong=st.sampled_from([None, "X"]))
+def test_two_lsb_off_fails_under_delays_of_two_periods_and_more(
+    tmp_path: Path, seed: int, delay_ms: int, share: float, wrong: str | None
+) -> None:
+    """2 s drives, delays of 20-39 ms drawn: the right firmware PASSes whole, streamed, live
+    and ``run``; X 2 LSB off FAILs them all where (cantools) the frames before the first count
+    page's tick bound are those the firmware had received, or its ENC_E2E_OK is one of the
+    counts ``test_two_lsb_off_from_power_up_fails_under_delay`` checks."""
+    path = tmp_path / "drive.blf"
+    code = _run(path, 2, seed, f"delay={share}:{delay_ms},seed={seed}", (wrong, 2))
+    if wrong is not None:
+        ok, before_summary, before_page = first_count_page(path)
+        received, before_tick = heard_by_its_tick(path)
+        assume(received == before_tick
+               or ok in (before_summary, before_page, named_in_its_tick(path)))
+    verdicts = {"run": code == 0, **_verdicts(path)}
+    assert verdicts == dict.fromkeys(verdicts, wrong is None), verdicts
+
+
+@pytest.mark.parametrize("cut", range(1, 7))
+def test_cuts_of_the_late_tick_drive_are_fitted(tmp_path: Path, cut: int) -> None:
+    """The right firmware's ``delay=0.2:24,seed=670`` drive (4 s), its log cut before its
+    ``cut``-th encoder frame on the bus: the judge fits its start and it PASSes whole, streamed
+    and live. Before, cut 3 was taken for a power-up (main too): the firmware counted 2 frames
+    the log lacks (of 3: one it refused), and the count page's tick came late past 2 more, so
+    the 8 accepted of the 10 before its summary (cantools: ``first_count_page``) matched, and
+    the right firmware FAILed from (0, 0, 0). The log's first status frame is then not of the
+    firmware's first cycle (COUNTER 2: ``powerup.holds_first_cycle``)."""
+    whole_log, cut_log = tmp_path / "whole.blf", tmp_path / "cut.blf"
+    assert _run(whole_log, 4, 670, "delay=0.2:24,seed=670") == 0
+    left = cut
+    with can.LogReader(whole_log) as reader, can.BLFWriter(cut_log) as writer:
+        for msg in reader:
+            left -= msg.arbitration_id == ENCODERS_ID
+            if left < 0:
+                writer.on_message_received(msg)
+    if cut == 3:
+        assert first_count_page(cut_log) == (8, 10, 10)
+    assert analyze(read_log(cut_log), KOBUKI).report["reference_start"] == "fitted"
+    assert _verdicts(cut_log) == {"whole": True, "streamed": True, "live": True}

@@ -25,7 +25,8 @@ def starts_at_power_up(
     ODOM_STATUS summary says UPTIME 0 and the first ENC_E2E_OK page says the firmware had
     accepted exactly the log's encoder frames (it primed on the log's first), whatever the
     first on-board sample reads: a firmware whose power-up pose is not (0, 0, 0) is judged from
-    (0, 0, 0). Without that page, ``zero_first_sample`` stands in for it."""
+    (0, 0, 0), and the log's first accepted ODOM_STATUS frame is of the firmware's first cycle
+    (``holds_first_cycle``). Without that page, ``zero_first_sample`` stands in for it."""
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", 0)
     except DecodeError:
@@ -36,7 +37,25 @@ def starts_at_power_up(
     if len(uptime) == 0 or int(uptime[0]) != 0:
         return False
     counted = counted_only_the_log(frames, accepted, decoder)
-    return zero_first_sample(onboard) if counted is None else counted
+    if counted is None:
+        return zero_first_sample(onboard)
+    try:
+        status = decoder.decode(frames, "ODOM_STATUS")
+    except DecodeError:
+        return counted
+    first = status["COUNTER"][accepted[status["index"]]][:1] if "COUNTER" in status else None
+    return counted and holds_first_cycle(None if first is None else int(first[0]))
+
+
+def holds_first_cycle(counter: int | None) -> bool:
+    """The log's first accepted ODOM_STATUS frame (its ``counter``) is of the firmware's first
+    cycle (E2E counters start at 0 at power-up; two frames a cycle: the summary, then one
+    page): else the log lacks the firmware's first frames, and a count page whose tick came
+    late past as many encoder frames as the log lacks would pass for a power-up (kobuki 4 s,
+    ``delay=0.2:24,seed=670`` cut before its 3rd encoder frame). The summary of the first cycle
+    may be refused, held back behind its page (``delay=0.1:15,seed=2``). True when the frames
+    have no COUNTER."""
+    return counter is None or counter < 2
 
 
 def zero_first_sample(onboard: Poses) -> bool:
@@ -85,7 +104,57 @@ def counted_only_the_log(
                    status_counter_modulo(decoder))
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
     in_log = int(np.count_nonzero(accepted[encoders] & (encoders < made)))
-    return ok == in_log & 0xFFFF or ok == pose_named(frames, accepted, decoder, made)
+    if ok == in_log & 0xFFFF or ok == pose_named(frames, accepted, decoder, made):
+        return True
+    return ok == heard_by_tick(frames, accepted, decoder, (first, made))
+
+
+def heard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+                  page: tuple[int, int]) -> int | None:
+    """The accepted encoder frames before the first count page was made (``page``: its position
+    and ``made_at``'s) that reached the bus before the page's tick bound (``tick_bound_s`` of the
+    accepted summaries before it): the count when the page's tick frames were held back past
+    encoder frames it could not count, its poses too. None without the evidence."""
+    try:
+        summary = decoder.decode_page(frames, "ODOM_STATUS", 0)
+        counts = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+        cycle_ms = decoder.message("ODOM_STATUS").cycle_time
+    except DecodeError:
+        return None
+    keep = accepted[summary["index"]] & (summary["index"] < page[0])
+    if "COUNTER" not in summary or "COUNTER" not in counts or not cycle_ms:
+        return None
+    page_counter = int(counts["COUNTER"][counts["index"] == page[0]][0])
+    heard = list(zip(summary["COUNTER"][keep].tolist(),
+                     frames.timestamp_s[summary["index"][keep]].tolist(), strict=True))
+    bound_s = tick_bound_s(page_counter, heard, status_counter_modulo(decoder), cycle_ms)
+    if bound_s is None:
+        return None
+    encoders = decoder.select(frames, "WHEEL_ENCODERS")
+    before = accepted[encoders] & (encoders < page[1]) & (frames.timestamp_s[encoders] < bound_s)
+    return int(np.count_nonzero(before))
+
+
+def tick_bound_s(page_counter: int, summaries: list[tuple[int, float]], modulo: int,
+                 cycle_ms: int) -> float | None:
+    """A bus time after the tick that made the first count page (COUNTER ``page_counter``) and
+    before any frame sent past it: the least over the summaries heard before it (COUNTER, bus
+    time) of its time plus as many ODOM_STATUS cycles (``cycle_ms``, two frames each: the
+    summary, then one page) as its COUNTER is behind the page's summary. A summary reaches the
+    bus after its tick, so each bound is after the page's tick (a COUNTER wrapped past the
+    modulo only makes it earlier: fewer frames counted, never a cut log taken for a power-up);
+    it is later than that tick by as long as that summary was held back. None when none."""
+    bounds = [time_s + ticks * cycle_ms * 0.001 for counter, time_s in summaries
+              if (ticks := status_ticks_behind(page_counter, counter, modulo)) is not None]
+    return min(bounds) if bounds else None
+
+
+def status_ticks_behind(page_counter: int, summary_counter: int, modulo: int) -> int | None:
+    """How many ODOM_STATUS cycles a summary of COUNTER ``summary_counter`` is before the tick
+    of the count page of COUNTER ``page_counter`` (modulo the COUNTER's wrap); None when its
+    COUNTER is not a summary's in that send order (two frames a cycle)."""
+    behind = (page_counter - 1 - summary_counter) % modulo
+    return None if behind % 2 else behind // 2
 
 
 def pose_named(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,

@@ -13,14 +13,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from odocan.host.judge.livegapseen import heard_status
-from odocan.host.judge.powerup import NAMED_SPAN, same_tick
+from odocan.host.judge.powerup import NAMED_SPAN, holds_first_cycle, same_tick, tick_bound_s
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.e2e import E2EMonitor, crc8h2f_p02_one
 
@@ -31,6 +31,8 @@ FIRMWARE_NODE = "ODOM_MCU"  # the DBC node that sends the firmware's frames (ODO
 UPTIME_MATCH_S = 2.0  # one source's UPTIME (whole s) minus bus time stays within this
 CONFLICT_HOLD_S = 2.0  # CONFLICT is shown this long after two sources last interleaved
 STATUS_COUNTER_MODULO = 16  # ODOM_STATUS's E2E COUNTER (4 bits, as the live E2E check's)
+STATUS_CYCLE_MS = 100  # ODOM_STATUS's cycle (the DBC's GenMsgCycleTime)
+TIMES_KEPT = 8  # summaries kept for ``powerup.tick_bound_s`` (a wrap of STATUS_COUNTER_MODULO)
 
 
 @dataclass
@@ -51,6 +53,9 @@ class SourceWatch:
 
     summary: tuple[int, int, int | None] | None = None  # the latest accepted one: COUNTER,
     # the encoder frames heard, those up to the frame the latest pose names (pose_named_live)
+    first_counter: int | None = None  # the first accepted page's COUNTER, any page
+    summary_times: list[tuple[int, float]] = field(default_factory=list)  # the latest
+    # summaries' COUNTER and bus time (``powerup.tick_bound_s``)
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -63,18 +68,25 @@ class SourceWatch:
         if not self.page_pending:  # heard, or a reboot came first: nothing to count
             return False
         heard = (tracker.enc_seq + 1, pose_named_live(tracker))
+        if self.first_counter is None:
+            self.first_counter = int(signals["COUNTER"])
         if page == "summary":
             self.summary = (int(signals["COUNTER"]), *heard)
+            self.summary_times = [*self.summary_times[-TIMES_KEPT + 1:],
+                                  (int(signals["COUNTER"]), tracker._now_s)]
         if page != "e2e_wheel_encoders":
             return False
         self.page_pending = False
-        if self.first_uptime_s != 0:
+        if self.first_uptime_s != 0 or not holds_first_cycle(self.first_counter):
             return False
         if self.summary is not None and same_tick(int(signals["COUNTER"]), self.summary[0],
                                                   STATUS_COUNTER_MODULO):
             heard = self.summary[1:]
         ok = int(signals["ENC_E2E_OK"])
-        return ok == heard[0] & 0xFFFF or ok == heard[1]
+        bound_s = tick_bound_s(int(signals["COUNTER"]), self.summary_times, STATUS_COUNTER_MODULO,
+                               STATUS_CYCLE_MS)
+        by_tick = None if bound_s is None else heard_before_live(tracker, bound_s, heard[0])
+        return ok in (heard[0] & 0xFFFF, heard[1], by_tick)
 
     def observe(self, t_s: float, uptime_s: int, state: str) -> str | None:
         """One ODOM_STATUS summary; returns ``"reboot"``, ``"two sources"``, ``"uptime jump"``
@@ -212,3 +224,13 @@ def pose_named_live(tracker: PoseTracker) -> int | None:
     before = [row for row in tracker._window.rows if row[1] < pos][-NAMED_SPAN:]
     seqs = [int(row[0]) for row in before if int(row[2]) == named]
     return seqs[-1] + 1 if seqs else None
+
+
+def heard_before_live(tracker: PoseTracker, bound_s: float, made: int) -> int | None:
+    """``powerup.heard_by_tick`` live: the encoder frames heard before bus time ``bound_s`` and
+    among the first ``made``; None when the window no longer holds the frames to tell."""
+    rows = [row for row in tracker._window.rows if row[3] < bound_s]
+    if rows:
+        return min(int(rows[-1][0]) + 1, made)
+    first = tracker._window.rows[0] if tracker._window.rows else None
+    return 0 if first is None or int(first[0]) == 0 else None

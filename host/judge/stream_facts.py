@@ -28,12 +28,15 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.powerup import (
     NAMED_SPAN,
+    holds_first_cycle,
     made_at,
     named_count,
     same_tick,
     status_counter_modulo,
+    tick_bound_s,
     zero_first_sample,
 )
+from odocan.host.judge.powerup_times import TickTimes
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses
 from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
@@ -83,6 +86,7 @@ class StreamFacts:
     _enc_first_s: float | None = None  # every frame of WHEEL_ENCODERS' ID, accepted or not
     _enc_last_s: float | None = None
     _uptime: _Signal = field(default_factory=_Signal)
+    _first_counter: _Signal = field(default_factory=_Signal)  # ODOM_STATUS's COUNTER, any page
     _integrator: _Signal = field(default_factory=_Signal)
     _enc_ok: _Signal = field(default_factory=_Signal)
     _has_status: bool = True  # the DBC's ODOM_STATUS is multiplexed
@@ -91,6 +95,7 @@ class StreamFacts:
     _page_counter: int | None = None  # the first count page's COUNTER
     _named: tuple[int | None, int | None] = (None, None)  # powerup.pose_named: summary's, page's
     _tail: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    _times: TickTimes = field(default_factory=TickTimes)  # powerup.heard_by_tick's evidence
     latch: StatusLatch = field(default_factory=StatusLatch)  # host.judge.statuslatch
     firmware_events: list[dict[str, Any]] = field(default_factory=list)  # ... its events
     set_pose_applied: bool = False  # an ODOM_SET_POSE APPLY ACKed (host.judge.setposes)
@@ -134,6 +139,8 @@ class StreamFacts:
         keep = accepted[summary["index"]]
         self.firmware_events += latch_summaries(self.latch, summary, keep)
         self._uptime.feed(summary, "UPTIME", keep, self._offset)
+        status = self.decoder.decode(chunk, "ODOM_STATUS")
+        self._first_counter.feed(status, "COUNTER", accepted[status["index"]], self._offset)
         self._integrator.feed(summary, "INTEGRATOR", keep, self._offset)
         before = self._enc_ok.first is None
         self._enc_ok.feed(counts, "ENC_E2E_OK", accepted[counts["index"]], self._offset)
@@ -159,6 +166,7 @@ class StreamFacts:
         self._named = (self._named[0], named.count(limit, self._named[1]))
         self._tail = named.tail(limit)
         self._accepted_encoders += int(np.count_nonzero(encoders < limit))
+        self._times.feed(chunk, summary, heard, encoders[encoders < limit])
         if self._enc_ok.first_at is not None and "COUNTER" in counts:
             self._page_counter = int(counts["COUNTER"][accepted[counts["index"]]][0])
 
@@ -204,7 +212,13 @@ class StreamFacts:
         at_summary = self._summary is not None and same_tick(self._page_counter,
                                                              self._summary[1], modulo)
         named = self._named[0] if at_summary else self._named[1]
-        return self._enc_ok.first in (made & 0xFFFF, named)
+        if self._enc_ok.first in (made & 0xFFFF, named):
+            return True
+        cycle_ms = self.decoder.message("ODOM_STATUS").cycle_time
+        if self._page_counter is None or not cycle_ms:
+            return False
+        bound_s = tick_bound_s(self._page_counter, self._times.summaries, modulo, cycle_ms)
+        return bound_s is not None and self._enc_ok.first == self._times.before(bound_s, made)
 
     def starts_at_power_up(self, first: Poses) -> bool:
         """``samples.starts_at_power_up``, given the log's first on-board sample (``first``:
@@ -212,7 +226,10 @@ class StreamFacts:
         if not self._has_status or not self._uptime.present or self._uptime.first != 0:
             return False
         counted = self._counted_only_the_log()
-        return zero_first_sample(first) if counted is None else counted
+        if counted is None:
+            return zero_first_sample(first)
+        counter = self._first_counter.first if self._first_counter.present else None
+        return counted and holds_first_cycle(counter)
 
 
 def _applies_set_pose(chunk: FrameArrays, accepted: npt.NDArray[np.bool_],
