@@ -40,7 +40,7 @@ import can
 from odocan.firmware import frames as fr
 from odocan.firmware.config import Integrator, RobotParams
 from odocan.sim.board import TICK_S, TX_LATENCY_S
-from odocan.sim.cboard import board_maker
+from odocan.sim.cboard import BoardMaker, board_maker
 from odocan.sim.clock import LockstepClock
 from odocan.sim.closing import Closing, release_all
 from odocan.sim.errors import ErrorModel
@@ -49,7 +49,7 @@ from odocan.sim.faults import DEFAULT_BITRATE, FaultInjectingBus, FaultSpec
 from odocan.sim.lookahead import BLOCK_TICKS, PlannedVehicle
 from odocan.sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
 from odocan.sim.robot import RobotProfile
-from odocan.sim.scenarios import get_scenario
+from odocan.sim.scenarios import Scenario, get_scenario
 from odocan.sim.tickloop import TickLoop
 from odocan.sim.transport import OdocanBus, data_frame
 from odocan.sim.vehicle import Vehicle
@@ -147,6 +147,16 @@ class LockstepRig(Closing):
             self._open_bus(lambda: now_s() + TX_LATENCY_S),
             self._open_bus(lambda: (self.ticks + 1) * TICK_S, own=True),  # the whole tick
         ]
+        try:  # a board that refuses (a C library's ABI, a key) releases the buses opened
+            self._assemble(config, scenario, (make_board, params), listeners)
+        except BaseException:
+            release_all([b.shutdown for b in self._buses])
+            raise
+
+    def _assemble(self, config: RigConfig, scenario: Scenario | None,
+                  board: tuple[BoardMaker, RobotParams], listeners: Sequence[can.Listener]
+                  ) -> None:
+        """The nodes on the buses just opened: faults, the simulator, the board, the tick loop."""
         bitrate = DEFAULT_BITRATE if config.bitrate is None else config.bitrate
         for index, spec in ((0, config.faults), (1, config.fw_faults)):
             if spec is not None and spec.active:  # bus-off recovery: 128 x 11 bits at the bitrate
@@ -164,6 +174,7 @@ class LockstepRig(Closing):
         if isinstance(vehicle, PlannedVehicle):  # the clock of tick k: 0.0 + k * TICK_S
             vehicle.plan(self.sim.planned_command, TICK_S, block_ticks=config.block_ticks,
                          first_block_ticks=config.first_block_ticks)
+        make_board, params = board
         self.board = make_board(fw_bus, params, self.clock, None, secoc_key=config.secoc_key)
         self.loop = TickLoop(self._work, self.host_bus, list(listeners), self.clock)
 

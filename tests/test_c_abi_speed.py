@@ -15,7 +15,7 @@ import pytest
 
 from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
 from odocan.host.cli.app import main
-from odocan.sim import cboard
+from odocan.sim import cboard, transport
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import firmware_params
 from odocan.sim.robot import load
@@ -46,6 +46,8 @@ def test_an_old_library_is_refused_for_a_robot_with_another_speed_bound(
     assert err.startswith(f"error: the C firmware {old_library} has ABI version 1, bounded at "
                           "4000 mm/s; the robot's max_wheel_speed is 700 mm/s (ABI 3)")
     assert err.count("\n") == 1
+    wire = transport._wires.get("vcan0")  # the rig released the buses it had opened
+    assert wire is None or not wire.handles
 
 
 def test_an_old_library_is_taken_for_a_robot_at_the_old_bound(old_library: Path) -> None:
