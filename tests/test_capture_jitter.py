@@ -16,8 +16,6 @@ whose pose is 2 LSB off (X or HEADING).
 from __future__ import annotations
 
 import random
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import can
@@ -26,14 +24,13 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-import odocan.firmware.frames as fw_frames
-from odocan.firmware.errors import ErrorMask
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.protocol.e2e_periods import receive_period_count, receive_periods
 from odocan.sim.robot import load
+from tests.test_reorder import _off_by_two
 
 JITTER_MAX_S = 0.003  # each stamp late by up to this (uniform)
 FAULTS = ["", "drop=0.3", "burst=0.05:3", "delay=0.1:15", "delay=0.05:25", "drop=0.1"]
@@ -42,24 +39,6 @@ faults_drawn = st.builds(lambda f, seed: f"{f},seed={seed}" if f else "",
                          st.sampled_from(FAULTS), st.integers(0, 1000))
 drives = st.tuples(st.sampled_from(["kobuki", "pmir"]), st.just(4), st.integers(0, 1000),
                    faults_drawn)
-
-
-@contextmanager
-def _off_by_two(signal: str | None) -> Iterator[None]:
-    """The Python firmware with its ODOM_POSE_X ``X`` or ``HEADING`` 2 LSB off (None: right)."""
-    if signal is None:
-        yield
-        return
-    right = fw_frames.pack_odom_pose_x
-
-    def wrong(counter: int, enc_counter: int, x_100um: int, heading_bam16: int,
-              errors: ErrorMask) -> bytes:
-        return right(counter, enc_counter, x_100um + 2 * (signal == "X"),
-                     heading_bam16 + 2 * (signal == "HEADING"), errors)
-
-    with pytest.MonkeyPatch.context() as monkeypatch:
-        monkeypatch.setattr(fw_frames, "pack_odom_pose_x", wrong)
-        yield
 
 
 def _jittered(log: Path, out: Path, seed: int) -> None:

@@ -34,10 +34,10 @@ import odocan.firmware.frames as fw_frames
 from odocan.firmware.errors import ErrorMask
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
-from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
+from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.robot import load
-from tests.test_powerup_delay import first_count_page
+from tests.test_powerup_delay import _live_passes, first_count_page
 
 # (duration s, seed or None: the default, faults) of the trial's reproductions
 DRIVES = [
@@ -74,16 +74,6 @@ def _run(path: Path, drive: tuple[int, int | None, str], wrong: str | None) -> i
     argv += ["--seed", str(seed)] if seed is not None else []
     with _off_by_two(wrong):
         return main(argv)
-
-
-def _live_passes(path: Path) -> bool:
-    """The monitor model's verdict: its pose vs its reference within one LSB each."""
-    monitor = BusMonitor(KOBUKI)
-    with can.LogReader(path) as reader:
-        for msg in reader:
-            monitor.feed(msg, now_s=msg.timestamp)
-    ref = monitor.tracker.vs_reference
-    return bool(ref.max_dpos_m <= POSITION_LSB_M and ref.max_dheading_rad <= HEADING_LSB_RAD)
 
 
 def _verdicts(path: Path, run_code: int) -> dict[str, bool]:
