@@ -1,14 +1,14 @@
 """One fleet worker bridged to mosquitto, stepped flat out: CPU per robot-tick with MQTT, no skips.
 
 ``bench/fleet.py`` measures the fleet in real time; on a shared, loaded machine its trials skip
-releases (a period or more behind), and a skip changes the work (steps spanning several ticks, a
-drive run ahead falling back), so its CPU figures drift with the load. Here ``run_fleet`` (one
-worker: the fleet, the bridge with its live judge, one MQTT connection per robot to a mosquitto
-on loopback) runs under a clock that is never late: every tick is released as soon as the bridge
-handled the previous tick's frames (its slices, a loop turn each, as in real time) and the MQTT
-tasks had their loop turn, and the report's ``cpu_s`` (this process, while the clock ran) over
-robots x ticks is the CPU per robot-tick of everything a worker does. Verdicts are printed too
-(every robot judged: no skip). Pair trees in alternation:
+releases (a period or more behind), and a skip changes the work (the skipped releases' samples sent
+late, back to back; a drive run ahead falling back), so its CPU figures drift with the load. Here
+``run_fleet`` (one worker: the fleet, the bridge with its live judge, one MQTT connection per robot
+to a mosquitto on loopback) runs under a clock that is never late: every tick is released as soon
+as the bridge handled the previous tick's frames (its slices, a loop turn each, as in real time)
+and the MQTT tasks had their loop turn, and the report's ``cpu_s`` (this process, while the clock
+ran) over robots x ticks is the CPU per robot-tick of everything a worker does. Verdicts are
+printed too. Pair trees in alternation:
 
     .venv/bin/python bench/fleet_flat.py [--robots 50] [--ticks 600] [--repeat 3] \
         [--publish-hz 10] [--parts]
