@@ -44,22 +44,32 @@ SILENT_TICKS = 200  # 2 s; it restarts as it speaks again
 END_TICKS = SILENT_FROM + SILENT_TICKS + 300
 
 
-def restart_log(path: Path, firmware: str) -> Path:
-    """pmir on a circle; the motor controller silent 2 s from 5 s, then restarted (counters,
-    COUNTER and CTRL_UPTIME from 0); 3 s more. The candump log of the whole run."""
+def silenced_log(path: Path, firmware: str, silent: tuple[int, int], restart_tick: int,
+                 end_ticks: int) -> Path:
+    """pmir on a circle; the motor controller silent for ``silent`` (first tick, ticks) and
+    restarted (counters, COUNTER and CTRL_UPTIME from 0) at ``restart_tick``; the run ends at
+    tick ``end_ticks``. The candump log of the whole run."""
+    first, ticks = silent
     config = RigConfig(robot=load("pmir"), scenario="circle", firmware=firmware, duration_s=60.0)
     with LockstepRig(config, [can.Logger(path)]) as rig:
         send = rig.sim.tick
 
         def tick(k: int) -> None:
-            if k == SILENT_FROM + SILENT_TICKS:
+            if k == restart_tick:
                 rig.sim.motor_controller.restart()
-            if not SILENT_FROM <= k < SILENT_FROM + SILENT_TICKS:
+            if not first <= k < first + ticks:
                 send(k)
 
         rig.sim.tick = tick  # type: ignore[method-assign]
-        rig.run(END_TICKS * TICK_S)
+        rig.run(end_ticks * TICK_S)
     return path
+
+
+def restart_log(path: Path, firmware: str) -> Path:
+    """pmir on a circle; the motor controller silent 2 s from 5 s, then restarted (counters,
+    COUNTER and CTRL_UPTIME from 0); 3 s more. The candump log of the whole run."""
+    return silenced_log(path, firmware, (SILENT_FROM, SILENT_TICKS), SILENT_FROM + SILENT_TICKS,
+                        END_TICKS)
 
 
 def summaries(path: Path) -> list[tuple[float, str, str]]:
@@ -290,19 +300,8 @@ def aged_restart_log(path: Path, firmware: str) -> Path:
     silence: it speaks again with CTRL_UPTIME 7, above the 5 it said before the silence (the old
     rule, CTRL_UPTIME below the last, cannot tell it) but below the 5 + 9 whole seconds of the
     silence. 3 s more. The candump log of the whole run."""
-    config = RigConfig(robot=load("pmir"), scenario="circle", firmware=firmware, duration_s=60.0)
-    with LockstepRig(config, [can.Logger(path)]) as rig:
-        send = rig.sim.tick
-
-        def tick(k: int) -> None:
-            if k == AGED_RESTART:
-                rig.sim.motor_controller.restart()
-            if not SILENT_FROM <= k < SILENT_FROM + AGED_SILENT_TICKS:
-                send(k)
-
-        rig.sim.tick = tick  # type: ignore[method-assign]
-        rig.run((SILENT_FROM + AGED_SILENT_TICKS + 300) * TICK_S)
-    return path
+    return silenced_log(path, firmware, (SILENT_FROM, AGED_SILENT_TICKS), AGED_RESTART,
+                        SILENT_FROM + AGED_SILENT_TICKS + 300)
 
 
 def test_a_controller_back_older_than_before_a_silence_is_a_restart_in_python_and_c(

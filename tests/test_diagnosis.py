@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from odocan.host.cli.app import main
+from tests.independent_checker import crc8h2f
 
 
 @pytest.fixture(scope="module")
@@ -85,12 +86,7 @@ def test_a_batch_names_the_robot_mismatch_of_each_log(
 
 def _crc8h2f(data: bytes, data_id: int) -> int:
     """AUTOSAR E2E Profile 2's CRC (the DBC's comment): CRC8H2F over bytes 1..7, then DataID."""
-    crc = 0xFF
-    for byte in [*data[1:8], data_id]:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x2F) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
+    return crc8h2f(bytes(data[1:8]) + bytes([data_id]))
 
 
 def test_replay_of_a_log_with_one_pose_off_does_not_blame_only_the_profile(

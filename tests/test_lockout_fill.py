@@ -35,12 +35,8 @@ import pytest
 import odocan.firmware.e2e as fw_e2e
 import odocan.firmware.odometry as odometry
 from odocan.host.cli.app import main
-from odocan.host.io.logs import read_log
-from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
-from odocan.host.judge.monitor import BusMonitor
-from odocan.sim.robot import load
 from tests.dbc_typed import dbc_attribute, load_can_dbc
-from tests.test_gap_fill import DBC, X_LSB_Q40
+from tests.test_gap_fill import DBC, X_LSB_Q40, _verdicts
 
 DRIVE = ["--duration", "10", "--seed", "305", "--faults", "delay=0.1:20,seed=305"]
 LOCKED_OUT = 4  # refusals in a row that only a lock-out makes here (a frame held back: one)
@@ -92,24 +88,6 @@ def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[int, dict[str, Any]
     """The drive by the right firmware (0) and by one adding WRONG_LSB after lock-outs."""
     tmp = tmp_path_factory.mktemp("lockout")
     return {lsb: _drive(tmp, lsb) for lsb in (0, WRONG_LSB)}
-
-
-def _verdicts(drive: dict[str, Any]) -> dict[str, bool]:
-    """PASS (True) or FAIL of run, the streamed and the whole-log analyze and the live judge."""
-    log, robot = drive["log"], str(drive["robot"])
-    monitor = BusMonitor(load(robot))
-    with can.LogReader(str(log)) as reader:
-        for msg in reader:
-            monitor.feed(msg, now_s=msg.timestamp)
-    live = monitor.tracker.vs_reference
-    return {
-        "run": drive["run"] == 0,
-        "analyze (streamed)": main(["analyze", str(log), "--robot", robot,
-                                    "--stream", "always"]) == 0,
-        "analyze (whole log)": analyze(read_log(log), load(robot)).passed,
-        "live": bool(live.max_dpos_m <= POSITION_LSB_M
-                     and live.max_dheading_rad <= HEADING_LSB_RAD),
-    }
 
 
 def _lock_out_gaps(log: Path) -> tuple[int, int]:

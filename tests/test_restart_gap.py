@@ -19,7 +19,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import can
 import pytest
 
 from odocan.firmware.encoders import EncoderInput
@@ -30,10 +29,9 @@ from odocan.host.judge.analysis import analyze
 from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
-from odocan.sim.board import TICK_S
-from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests.independent_checker import Robot, check
+from tests.test_ctrl_restart import silenced_log
 from tests.test_live_reboot import bridge_of, monitor_of
 
 SILENT_FROM = 500  # tick (5 s): the controller falls silent ...
@@ -45,19 +43,8 @@ Q40_LSB2 = (1 << 40) // 5000  # 0.2 mm (2 position LSB) in Q40 metres
 
 
 def _restart_log(path: Path) -> Path:
-    config = RigConfig(robot=load("pmir"), scenario="circle", firmware="python", duration_s=60.0)
-    with LockstepRig(config, [can.Logger(str(path))]) as rig:
-        send = rig.sim.tick
-
-        def tick(k: int) -> None:
-            if k == SILENT_FROM + SILENT_TICKS:
-                rig.sim.motor_controller.restart()
-            if not SILENT_FROM <= k < SILENT_FROM + SILENT_TICKS:
-                send(k)
-
-        rig.sim.tick = tick  # type: ignore[method-assign]
-        rig.run(END_TICKS * TICK_S)
-    return path
+    return silenced_log(path, "python", (SILENT_FROM, SILENT_TICKS), SILENT_FROM + SILENT_TICKS,
+                        END_TICKS)
 
 
 def _cut(path: Path, out: Path, *, no_status: bool = False) -> Path:

@@ -19,7 +19,6 @@ import threading
 import can
 import pytest
 
-from odocan.firmware import frames as fr
 from odocan.host.testkit import backends
 from odocan.host.testkit.options import RigOptions
 from odocan.sim.board import TICK_S
@@ -27,6 +26,7 @@ from odocan.sim.clock import LockstepClock
 from odocan.sim.motor_controller import SimNode
 from odocan.sim.scenarios import get_scenario
 from odocan.sim.vehicle import Vehicle
+from tests.test_sim_late_ticks import _encoder_frames
 
 SEED = 5
 RELEASES = 300
@@ -59,16 +59,6 @@ class LateClock:
         self.calls += 1
         self.t = max(self.t, t_s + late)
         return 0.0
-
-
-def _encoder_frames(bus: can.BusABC) -> list[bytes]:
-    out = []
-    msg = bus.recv(0)
-    while msg is not None:
-        if msg.arbitration_id == fr.WHEEL_ENCODERS_ID:
-            out.append(bytes(msg.data))
-        msg = bus.recv(0)
-    return out
 
 
 def _lockstep_frames(options: RigOptions, channel: str) -> list[bytes]:

@@ -22,6 +22,7 @@ import pytest
 
 from odocan.host.cli.app import main
 from tests.dbc_typed import load_can_dbc, numbers
+from tests.independent_checker import crc8h2f
 
 DBC = Path(__file__).resolve().parents[1] / "dbc" / "odocan.dbc"
 PERIOD_S = 0.01
@@ -30,13 +31,8 @@ KOBUKI = (2578, 0.035, 0.035, 0.230)  # counts/rev, radii (m), wheelbase (m): 16
 
 
 def _crc(data: bytes, data_id: int) -> int:
-    """E2E Profile 2's CRC8H2F over bytes 1..7 then the data ID (the DBC's comment)."""
-    crc = 0xFF
-    for byte in [*data[1:8], data_id]:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x2F) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
+    """AUTOSAR E2E Profile 2's CRC (the DBC's comment): CRC8H2F over bytes 1..7, then DataID."""
+    return crc8h2f(bytes(data[1:8]) + bytes([data_id]))
 
 
 def _rows(log: Path) -> list[tuple[float, int, bytes]]:
