@@ -1,14 +1,20 @@
 """The live judge's truth in the current firmware life's frame (``host.judge.tracking``): after a
 reboot the new life's origin, in the truth's frame, is taken at its first truth sample
 (``compare.life_origin``, as ``analyze``), and every truth sample is re-based into it
-(``compare.rebase_truth``)."""
+(``compare.rebase_truth``). ``judge_truth``: a SIM_TRUTH part heard by the tracker; three of one
+encoder frame are judged against the reference there."""
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from odocan.host.judge.compare import life_origin, rebase_truth
-from odocan.host.judge.livepose import FramePose
+from odocan.host.judge.livepose import FramePose, recent, truth_heading
+
+if TYPE_CHECKING:
+    from odocan.host.judge.tracking import PoseTracker
 
 TruthSample = tuple[int, float, float, float]  # seq, x m, y m, SIM_TRUTH's heading rad
 
@@ -87,3 +93,28 @@ def carried_to(pose: FramePose, at: FramePose, ref: FramePose) -> FramePose:
     ``ref`` of a later frame (by the reference's own motion since)."""
     return FramePose(ref.seq, pose.x_m - at.x_m + ref.x_m, pose.y_m - at.y_m + ref.y_m,
                      pose.heading_rad - at.heading_rad + ref.heading_rad)
+
+
+def judge_truth(
+    tracker: PoseTracker, part: int, enc_counter: int, value: float
+) -> tuple[FramePose, FramePose | None] | None:
+    """``PoseTracker.on_truth``: a SIM_TRUTH part (0 X m, 1 Y m, 2 HEADING rad); three of one
+    encoder frame make a truth sample in the life's frame, judged against the reference at that
+    frame and against the on-board pose carried to it; returned once complete as (truth,
+    reference at that encoder frame or None)."""
+    heard = tracker._truth_parts.add(part, enc_counter, value)
+    if heard is None:
+        return None
+    named = recent(tracker._counts[enc_counter], tracker.enc_seq)
+    raw = tracker._ref_at.get(named[0]) if named is not None else None
+    ref = None if raw is None else tracker.fit.correct(raw)
+    x_m, y_m, wrapped_rad = tracker.life_truth.heard(
+        None if named is None else int(named[0]), *heard, ref, tracker._boot is not None)
+    heading = truth_heading(wrapped_rad, ref if ref is not None else tracker.truth)
+    truth = tracker.truth = FramePose(ref.seq if ref else -1, x_m, y_m, heading)
+    if ref is None:
+        return truth, None
+    tracker.reference_vs_truth.add(ref, truth)
+    if tracker._last_pair is not None:  # the on-board pose carried to this frame
+        tracker.vs_truth.add(carried_to(*tracker._last_pair, ref), truth)
+    return truth, ref

@@ -24,12 +24,10 @@ from odocan.host.judge.livepose import (
     RestartLog,
     Sample,
     StepGate,
-    recent,
-    truth_heading,
 )
 from odocan.host.judge.liveresent import judge_resend
 from odocan.host.judge.livesnapshot import tracker_snapshot
-from odocan.host.judge.livetruth import LifeTruth, TruthParts, carried_to
+from odocan.host.judge.livetruth import LifeTruth, TruthParts, judge_truth
 from odocan.host.judge.livetwins import TwinWatch
 from odocan.host.judge.livewindow import (
     ENC_COLUMNS,
@@ -445,23 +443,9 @@ class PoseTracker:
         self, part: int, enc_counter: int, value: float
     ) -> tuple[FramePose, FramePose | None] | None:
         """A SIM_TRUTH part (0 X m, 1 Y m, 2 HEADING rad); three of one encoder frame: a sample,
-        returned once complete as (truth, reference at that encoder frame or None)."""
-        heard = self._truth_parts.add(part, enc_counter, value)
-        if heard is None:
-            return None
-        named = recent(self._counts[enc_counter], self.enc_seq)
-        raw = self._ref_at.get(named[0]) if named is not None else None
-        ref = None if raw is None else self.fit.correct(raw)
-        x_m, y_m, wrapped_rad = self.life_truth.heard(
-            None if named is None else int(named[0]), *heard, ref, self._boot is not None)
-        heading = truth_heading(wrapped_rad, ref if ref is not None else self.truth)
-        truth = self.truth = FramePose(ref.seq if ref else -1, x_m, y_m, heading)
-        if ref is None:
-            return truth, None
-        self.reference_vs_truth.add(ref, truth)
-        if self._last_pair is not None:  # the on-board pose carried to this frame
-            self.vs_truth.add(carried_to(*self._last_pair, ref), truth)
-        return truth, ref
+        returned once complete as (truth, reference at that encoder frame or None)
+        (``livetruth.judge_truth``)."""
+        return judge_truth(self, part, enc_counter, value)
 
     @property
     def counter_restarts(self) -> int:
