@@ -11,6 +11,7 @@ before.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import can
@@ -18,6 +19,7 @@ import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.sim import robot
 from odocan.sim.robot import RobotProfile
 from tests.dbc_typed import load_can_dbc, numbers
@@ -64,7 +66,7 @@ def profile_pages(log: Path) -> list[dict[str, float | int]]:
         if msg.arbitration_id == status.frame_id:
             signals = numbers(DB, status.frame_id, msg.data)
             if signals["PAGE"] == 6:
-                pages.append(signals)
+                pages.append({**signals, "t_s": msg.timestamp})
     return pages
 
 
@@ -154,17 +156,28 @@ def test_analyze_names_the_speed_bound_and_the_integrator(
     assert "mismatch" not in out
 
 
+@pytest.fixture(scope="module")
+def pmir_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("profile") / "pmir.log"
+    assert main(["run", "--robot", "pmir", "--duration", "5", "--log", str(path)]) == 0
+    return path
+
+
+def slow_pmir(tmp_path: Path, max_wheel_speed_m_s: float) -> Path:
+    """pmir's profile with another speed bound, named ``slow``."""
+    slow = tmp_path / "slow.toml"
+    pmir = (ROOT / "odocan" / "sim" / "robots" / "pmir.toml").read_text()
+    slow.write_text(pmir.replace('name = "pmir"', 'name = "slow"').replace(
+        "max_wheel_speed_m_s = 4.0", f"max_wheel_speed_m_s = {max_wheel_speed_m_s}"))
+    return slow
+
+
 def test_the_judge_takes_the_buss_speed_bound(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    pmir_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A pmir firmware (4 m/s bound) judged with a profile that says 0.1 m/s: the judge's own
     bound would refuse the genuine steps and FAIL a correct firmware; the bus's bound is used."""
-    log = tmp_path / "pmir.log"
-    assert main(["run", "--robot", "pmir", "--duration", "5", "--log", str(log)]) == 0
-    slow = tmp_path / "slow.toml"
-    pmir = (ROOT / "odocan" / "sim" / "robots" / "pmir.toml").read_text()
-    slow.write_text(pmir.replace('name = "pmir"', 'name = "slow"')
-                    .replace("max_wheel_speed_m_s = 4.0", "max_wheel_speed_m_s = 0.1"))
+    log, slow = pmir_log, slow_pmir(tmp_path, 0.1)
     for stream in ("never", "always"):  # the streamed judge reads the page from the log's head
         code, out = analyze_output(log, str(slow), capsys, "--stream", stream)
         assert code == 0, out
@@ -198,6 +211,51 @@ def test_the_monitor_model_names_another_robots_profile(kobuki_log: Path) -> Non
     assert right.status["profile_mismatch"] is None
     assert right.status["max_wheel_speed_m_s"] == 0.7  # the bus's bound, which the judges take
     assert right.tracker.geometry.max_wheel_speed_mm_s == 700
+
+
+def first_step_beyond(log: Path, profile: RobotProfile) -> float:
+    """Bus time (s) of the first WHEEL_ENCODERS step beyond ``profile``'s speed bound over one
+    10 ms period (its travel in counts, one count of slack, as the firmware's gate; the counts
+    wrapping at the wire's width), by cantools."""
+    encoders = DB.get_message_by_name("WHEEL_ENCODERS")
+    bounds = [math.ceil(profile.max_wheel_speed_m_s * 0.01 * profile.counts_per_rev
+                        / (2 * math.pi * radius_m)) + 1
+              for radius_m in (profile.wheel_radius_left_m, profile.wheel_radius_right_m)]
+    half = 1 << (min(profile.counter_bits, 24) - 1)  # the counts wrap at the wire's width
+    prev: tuple[int, int] | None = None
+    for msg in can.LogReader(str(log)):
+        if msg.arbitration_id == encoders.frame_id:
+            s = numbers(DB, encoders.frame_id, msg.data)
+            counts = (int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
+            if prev is not None and any(abs((c - p + half) % (2 * half) - half) > b
+                                        for c, p, b in zip(counts, prev, bounds, strict=True)):
+                return float(msg.timestamp)
+            prev = counts
+    return math.inf
+
+
+def test_the_monitor_takes_the_buss_bound_when_the_page_comes(
+    pmir_log: Path, tmp_path: Path
+) -> None:
+    """A pmir firmware (4 m/s bound) watched by a monitor built for 0.25 m/s: the drive stays
+    within 0.25 m/s until after the first PROFILE page (0.5 s) and goes beyond it then. The
+    monitor's step gate kept the command line's bound until its next reference start (none on
+    this drive): it refused the genuine steps from 0.58 s, re-primed on them 11 times, and
+    said POSE WRONG, 253 mm, on a correct firmware. The gate takes the page's bound at once."""
+    slow = robot.load(str(slow_pmir(tmp_path, 0.25)))
+    pages = profile_pages(pmir_log)
+    page_t_s = min(float(p["t_s"]) for p in pages)
+    assert page_t_s < first_step_beyond(pmir_log, slow) < 1.0  # mid-drive, after the page
+    model = BusMonitor(slow)
+    last_t_s = 0.0
+    for msg in can.LogReader(str(pmir_log)):
+        model.feed(msg, now_s=msg.timestamp)
+        last_t_s = msg.timestamp
+    assert model.status["profile_mismatch"] == ("profile mismatch: the log's firmware runs with "
+                                                "max wheel speed 4 m/s, --robot slow says 0.25 m/s")
+    assert model.tracker.counter_restarts == 0
+    assert model.tracker.vs_reference.max_dpos_m < POSITION_LSB_M
+    assert model.health(last_t_s)["state"] == "OK"
 
 
 def test_a_log_without_the_page_is_judged_as_before(

@@ -77,6 +77,13 @@ class LiveDistance:
         self.suspended = False
         self.new_life()
 
+    def take_speed_bound(self, geometry: Geometry) -> None:
+        """The firmware's plausibility bound (its PROFILE page, ``geometry``'s): this judge's
+        step gate and its gaps' allowance take it from the next frame on."""
+        self.max_wheel_speed_mm_s = geometry.max_wheel_speed_mm_s
+        if self._gate is not None:
+            self._gate.rebound(geometry)
+
     def suspend(self) -> None:
         """A config applied whose parameters this judge does not know: DISTANCE is no longer
         judged (what was found wrong stays latched)."""

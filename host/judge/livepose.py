@@ -51,9 +51,8 @@ class StepGate:
     into it. Each restart is told to ``told``."""
 
     def __init__(self, geometry: Geometry, counter_bits: int, told: RestartLog) -> None:
-        travel_m = geometry.max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
-        self.bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
-                      math.ceil(travel_m / geometry.m_per_count_right) + 1)
+        self.bound = (0, 0)  # counts per period, left and right (``rebound``)
+        self.rebound(geometry)
         self.bits = counter_bits
         self.prev: tuple[int, int, int] | None = None  # counter, left, right of the last accepted
         self._refused: list[tuple[int, int, int]] = []
@@ -62,6 +61,14 @@ class StepGate:
         self.uptime = 0  # CTRL_UPTIME of the last accepted frame (0: not reported)
         self._prev_t = 0.0  # its bus time (s)
         self._told = told
+
+    def rebound(self, geometry: Geometry) -> None:
+        """Gate the next frames with ``geometry``'s speed bound (the firmware's, from its PROFILE
+        page): the frames accepted so far stay, the next one is judged against the last of them
+        over the periods since."""
+        travel_m = geometry.max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
+        self.bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
+                      math.ceil(travel_m / geometry.m_per_count_right) + 1)
 
     def _delta(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[int, int]:
         return wrap_delta(b[1] - a[1], self.bits), wrap_delta(b[2] - a[2], self.bits)

@@ -167,11 +167,12 @@ class _Model(Protocol):
 
 def follow_profile(model: _Model, t_s: float, max_wheel_speed_m_s: float, crc: int) -> None:
     """The live side (monitor): a PROFILE page heard at ``t_s`` (MAX_WHEEL_SPEED decoded, in
-    m/s; PROFILE_CRC). When it says something
-    new, the status shows the firmware's CRC and bound, the live judges take that bound (the
-    step gate from its next reference start), and a mismatch with the robot the model was built
-    for, run with the integrator the firmware reports (``--integrator`` is the judge's choice),
-    becomes one ``profile`` event and ``status["profile_mismatch"]``."""
+    m/s; PROFILE_CRC). When it says something new, the status shows the firmware's CRC and
+    bound, the live judges take that bound (their step gates from the next encoder frame on:
+    ``PoseTracker.take_speed_bound``, ``LiveDistance.take_speed_bound``), and a mismatch with
+    the robot the model was built for, run with the integrator the firmware reports
+    (``--integrator`` is the judge's choice), becomes one ``profile`` event and
+    ``status["profile_mismatch"]``."""
     shown = f"0x{crc:08X}"
     if model.status.get("profile_crc") == shown:
         return
@@ -179,9 +180,8 @@ def follow_profile(model: _Model, t_s: float, max_wheel_speed_m_s: float, crc: i
     running = RunningProfile(max_wheel_speed_mm_s, crc)
     model.status.update(profile_crc=shown, max_wheel_speed_m_s=running.max_wheel_speed_m_s)
     tracker = model.tracker
-    tracker.geometry = dataclasses.replace(tracker.geometry,
-                                           max_wheel_speed_mm_s=max_wheel_speed_mm_s)
-    model.distance.max_wheel_speed_mm_s = max_wheel_speed_mm_s
+    tracker.take_speed_bound(max_wheel_speed_mm_s)  # their step gates at once
+    model.distance.take_speed_bound(tracker.geometry)
     reported = str(model.status.get("integrator", "")).lower()  # the firmware's own: a judge's
     integrator = reported if reported in INTEGRATORS else tracker.integrator or "exact"  # choice
     said = profile_mismatch(running, model.distance.robot, integrator)  # is no mismatch

@@ -12,6 +12,7 @@ known: ``samples.queued_frames``): a sample is judged <= half a cycle after its 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 from odocan.host.judge.livefit import LiveFit, rebase
@@ -424,6 +425,12 @@ class PoseTracker:
         self.geometry = geometry
         self.counter_bits = min(counter_bits, WIRE_COUNTER_BITS)
         self.restart_reference()
+
+    def take_speed_bound(self, max_wheel_speed_mm_s: int) -> None:
+        """The firmware's plausibility bound (u16 mm/s, its PROFILE page): the step gate takes it
+        from the next frame on, as the firmware's gate runs with it; the reference goes on."""
+        self.geometry = replace(self.geometry, max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+        self._gate.rebound(self.geometry)
 
     def _place(self, pose: FramePose, raw: FramePose) -> FramePose:
         """Move the reference's position (now and at the frames heard since ``raw``) to where
