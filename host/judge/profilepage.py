@@ -117,30 +117,52 @@ def with_bus_speed(profile: RobotProfile, running: RunningProfile | None) -> Rob
     return dataclasses.replace(profile, max_wheel_speed_m_s=running.max_wheel_speed_m_s)
 
 
+@dataclass(frozen=True)
+class Mismatch:
+    """How the firmware's parameters differ from a profile: ``text``, one line; ``parameters``,
+    the ODOM_CONFIG PARAM names the CRC and the bound tell (empty when they cannot tell);
+    ``robot``, the shipped profile whose parameters the firmware runs with (None: none)."""
+
+    text: str
+    parameters: tuple[str, ...] = ()
+    robot: str | None = None
+
+
 def profile_mismatch(
     running: RunningProfile | None, given: RobotProfile, integrator: str
 ) -> str | None:
     """One line naming how the firmware's parameters differ from ``given`` (``--robot``) run
     with ``integrator``; None when they are the same or the log has no PROFILE page."""
+    said = diagnose_profile(running, given, integrator)
+    return None if said is None else said.text
+
+
+def diagnose_profile(
+    running: RunningProfile | None, given: RobotProfile, integrator: str
+) -> Mismatch | None:
+    """``profile_mismatch``'s line with the parameters it names; None when the firmware's
+    parameters are ``given``'s run with ``integrator`` or the log has no PROFILE page."""
     if running is None or running.profile_crc == profile_crc(given, integrator):
         return None
     bus_speed = with_bus_speed(given, running)
+    speed = () if bus_speed is given else ("MAX_WHEEL_SPEED",)
     speed_said = (f"the log's firmware runs with max wheel speed {running.max_wheel_speed_m_s:g}"
                   f" m/s, --robot {given.name} says {given.max_wheel_speed_m_s:g} m/s")
     if running.profile_crc == profile_crc(bus_speed, integrator):
-        return f"profile mismatch: {speed_said}"
+        return Mismatch(f"profile mismatch: {speed_said}", speed)
     for other in INTEGRATORS:
         if running.profile_crc == profile_crc(bus_speed, other):
             extra = "" if bus_speed is given else f"; {speed_said}"
-            return (f"profile mismatch: the log's firmware runs with integrator {other}, "
-                    f"not {integrator}{extra}")
+            return Mismatch(f"profile mismatch: the log's firmware runs with integrator {other}, "
+                            f"not {integrator}{extra}", ("INTEGRATOR", *speed))
     fits = _shipped_fits(running, given)
     if fits:
-        return (f"profile mismatch: profile hash differs: the log's firmware runs with the "
-                f"parameters of robot {fits!r}, not {given.name!r} (--robot)")
-    return (f"profile mismatch: profile hash differs (log 0x{running.profile_crc:08X}, --robot "
-            f"{given.name} 0x{profile_crc(given, integrator):08X})"
-            + ("" if bus_speed is given else f"; {speed_said}"))
+        return Mismatch(f"profile mismatch: profile hash differs: the log's firmware runs with "
+                        f"the parameters of robot {fits!r}, not {given.name!r} (--robot)",
+                        robot=fits)
+    return Mismatch(f"profile mismatch: profile hash differs (log 0x{running.profile_crc:08X}, "
+                    f"--robot {given.name} 0x{profile_crc(given, integrator):08X})"
+                    + ("" if bus_speed is given else f"; {speed_said}"), speed)
 
 
 def _shipped_fits(running: RunningProfile, given: RobotProfile) -> str | None:
@@ -156,32 +178,43 @@ def _shipped_fits(running: RunningProfile, given: RobotProfile) -> str | None:
     return None
 
 
-class _Model(Protocol):
+class _Judges(Protocol):
+    """The live judges of a monitor's model or a bridge's robot."""
+
+    tracker: PoseTracker
+    distance: LiveDistance
+
+
+class _Model(_Judges, Protocol):
     """What ``follow_profile`` needs of ``host.judge.monitor.BusMonitor``."""
 
     status: dict[str, Any]
     events: deque[dict[str, Any]]
-    tracker: PoseTracker
-    distance: LiveDistance
+
+
+def take_page(model: _Judges, max_wheel_speed_m_s: float, crc: int) -> RunningProfile:
+    """A PROFILE page heard live (MAX_WHEEL_SPEED decoded, in m/s; PROFILE_CRC): the live
+    judges take its bound, their step gates from the next encoder frame on
+    (``PoseTracker.take_speed_bound``, ``LiveDistance.take_speed_bound``), as the firmware's
+    gate runs with it; returns the page's raw values."""
+    running = RunningProfile(round(max_wheel_speed_m_s * MM_PER_M), crc)
+    model.tracker.take_speed_bound(running.max_wheel_speed_mm_s)
+    model.distance.take_speed_bound(model.tracker.geometry)
+    return running
 
 
 def follow_profile(model: _Model, t_s: float, max_wheel_speed_m_s: float, crc: int) -> None:
     """The live side (monitor): a PROFILE page heard at ``t_s`` (MAX_WHEEL_SPEED decoded, in
     m/s; PROFILE_CRC). When it says something new, the status shows the firmware's CRC and
-    bound, the live judges take that bound (their step gates from the next encoder frame on:
-    ``PoseTracker.take_speed_bound``, ``LiveDistance.take_speed_bound``), and a mismatch with
-    the robot the model was built for, run with the integrator the firmware reports
-    (``--integrator`` is the judge's choice), becomes one ``profile`` event and
-    ``status["profile_mismatch"]``."""
+    bound, the live judges take that bound (``take_page``), and a mismatch with the robot the
+    model was built for, run with the integrator the firmware reports (``--integrator`` is the
+    judge's choice), becomes one ``profile`` event and ``status["profile_mismatch"]``."""
     shown = f"0x{crc:08X}"
     if model.status.get("profile_crc") == shown:
         return
-    max_wheel_speed_mm_s = round(max_wheel_speed_m_s * MM_PER_M)
-    running = RunningProfile(max_wheel_speed_mm_s, crc)
+    running = take_page(model, max_wheel_speed_m_s, crc)
     model.status.update(profile_crc=shown, max_wheel_speed_m_s=running.max_wheel_speed_m_s)
     tracker = model.tracker
-    tracker.take_speed_bound(max_wheel_speed_mm_s)  # their step gates at once
-    model.distance.take_speed_bound(tracker.geometry)
     reported = str(model.status.get("integrator", "")).lower()  # the firmware's own: a judge's
     integrator = reported if reported in INTEGRATORS else tracker.integrator or "exact"  # choice
     said = profile_mismatch(running, model.distance.robot, integrator)  # is no mismatch

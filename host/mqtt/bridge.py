@@ -60,6 +60,7 @@ class RobotEndpoint:
     # SecOC (docs/secoc.md): an ODOM_AUTH after each secured frame; None: commands unsigned
     signer: SecocSigner | None = field(default=None, repr=False)
     publish_phase_s: float = 0.0  # its first pose published this long after the first sample
+    profile_name: str | None = None  # its robot profile's (--robot), said in a profile mismatch
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,7 @@ class _Robot:
             endpoint.name, endpoint.geometry, endpoint.integrator,
             counter_bits=endpoint.counter_bits, publish_hz=config.publish_hz,
             publish_phase_s=endpoint.publish_phase_s,
-            now_s=time.monotonic(),
+            now_s=time.monotonic(), profile_name=endpoint.profile_name,
         )
         self.encoder = CommandEncoder(self.telemetry.db)
         self.link = RobotLink(

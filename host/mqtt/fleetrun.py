@@ -254,7 +254,7 @@ def _endpoints(fleet: Fleet, run: FleetRun) -> list[RobotEndpoint]:
     p = run.fleet.robot
     geometry = Geometry.of(p)
     return [RobotEndpoint(name, fleet.host_bus(i), geometry, run.fleet.integrator, p.counter_bits,
-                          signer=_signer(run, name),
+                          signer=_signer(run, name), profile_name=p.name,
                           publish_phase_s=publish_phase_s(run.fleet.first + i, run.publish_hz))
             for i, name in enumerate(fleet.names)]
 

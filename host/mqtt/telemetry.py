@@ -62,6 +62,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.liveprofile import ProfileStatus
 from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
 from odocan.host.protocol.e2e import E2EMonitor, e2e_messages
@@ -110,9 +111,12 @@ class RobotTelemetry:
         publish_phase_s: float = 0.0,
         db: Database | None = None,
         now_s: float = 0.0,
+        profile_name: str | None = None,
     ) -> None:
         """``geometry``/``integrator``/``counter_bits``: the robot's parameters for the float64
-        reference (a 16-bit hardware counter wraps at 16 bits within the 24 on the bus)."""
+        reference (a 16-bit hardware counter wraps at 16 bits within the 24 on the bus);
+        ``profile_name``: their robot profile's name (``--robot``), said when the firmware's
+        PROFILE page differs (default: ``name``)."""
         self.name = name
         self.db = db if db is not None else database()
         self._by_id = {m.frame_id: m for m in self.db.messages}
@@ -151,6 +155,7 @@ class RobotTelemetry:
         self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {} \
             if set_pose is not None else {}
         self.reboots = 0
+        self.profile = ProfileStatus(profile_name)  # ODOM_STATUS PROFILE vs these parameters
 
     # --- frames ---
     def feed(self, msg: can.Message) -> list[Publication]:
@@ -333,6 +338,8 @@ class RobotTelemetry:
         elif name == "summary":  # a short DEGRADED or a new ERROR_MASK bit: never lost
             self.events += self.latch.observe(t_s, int(s["STATE"]), int(s["REASON"]),
                                               int(s["ERROR_MASK"]))
+        elif name == "profile":  # the bus's speed bound judges; a mismatch is said
+            self.profile.on_page(self, s, t_s)
         return []
 
     def _on_set_pose(self, s: dict[str, Any], t_s: float) -> list[Publication]:
@@ -394,6 +401,7 @@ class RobotTelemetry:
         self.tracker.integrator = integrator
         self.tracker.set_geometry(geometry, counter_bits)
         self.distance.reconfigure(geometry, counter_bits)
+        self.profile.forget()  # the firmware's next page is judged against them
 
     _handlers: ClassVar[dict[str, Any]] = {
         "WHEEL_ENCODERS": _on_encoders,
@@ -429,7 +437,7 @@ class RobotTelemetry:
             self.name, state, seq=self.status_seq, firmware=self.firmware,
             latched_errors=self.latch.latched_names(), events=list(self.events),
             pose_wrongs=self.tracker.wrongs.as_dict(), frames_total=sum(self.frames.values()),
-            distance=self.distance.as_dict(),
+            distance=self.distance.as_dict(), profile=self.profile.section,
         ))
 
 

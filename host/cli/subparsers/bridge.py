@@ -88,7 +88,7 @@ def _do_bridge(args: argparse.Namespace) -> int:
     bus = open_bus(args)
     started_s = time.monotonic()
     try:
-        signum = asyncio.run(_bridge(args, name, url, bus, geometry, profile.counter_bits, signer))
+        signum = asyncio.run(_bridge(args, name, url, bus, geometry, profile, signer))
     finally:
         bus.shutdown()
     stopped = early_stop(signum, started_s, args.duration)
@@ -104,7 +104,7 @@ async def _bridge(
     url: BrokerURL | None,
     bus: can.BusABC,
     geometry: Geometry,
-    counter_bits: int,
+    profile: robot.RobotProfile,
     signer: SecocSigner | None = None,
 ) -> int | None:
     """Bridge until ``--duration`` or Ctrl-C/SIGTERM; the signal that stopped it, if one did."""
@@ -116,7 +116,8 @@ async def _bridge(
 
     async with broker_for(url) as (broker, embedded):
         config = BridgeConfig(broker=broker, **bridge_options(args))
-        endpoint = RobotEndpoint(name, bus, geometry, args.integrator, counter_bits, signer)
+        endpoint = RobotEndpoint(name, bus, geometry, args.integrator, profile.counter_bits,
+                                 signer, profile_name=profile.name)
         bridge = Bridge([endpoint], config=config)
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()

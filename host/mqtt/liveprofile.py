@@ -1,0 +1,88 @@
+"""The firmware's PROFILE page in the MQTT bridge (``host.mqtt.telemetry``), as the monitor
+follows it (``host.judge.profilepage``).
+
+Each new PROFILE_CRC heard on a robot's bus: its live judges take the bus's speed bound
+(``profilepage.take_page``: the step gates from the next encoder frame on), and the page is
+compared with the robot profile the bridge runs (``--robot``; after a config command, the
+parameters it sent) with the integrator its reference runs. ``status`` then carries
+``profile``::
+
+    {"verdict": "OK" | "MISMATCH", "profile_crc": "0x4D6D1875", "expected_crc": "0x...",
+     "max_wheel_speed_m_s": 4.0, "parameters": ["MAX_WHEEL_SPEED"], "robot": null,
+     "detail": "profile mismatch: ..."}
+
+``parameters``: the ODOM_CONFIG PARAM names the CRC and the bound tell apart (empty when they
+cannot); ``robot``: the shipped profile whose parameters the firmware runs with; ``detail``: the
+one line ``analyze`` prints (None when OK). A mismatch is also one ``profile`` event. Before any
+page (an older firmware's bus) ``profile`` is None and the profile's own bound stays.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import deque
+from typing import Any, Protocol
+
+from odocan.host.judge.livedistance import LiveDistance
+from odocan.host.judge.profilepage import diagnose_profile, profile_crc, take_page
+from odocan.host.judge.reference import INTEGRATORS
+from odocan.host.judge.tracking import PoseTracker
+
+
+class _Robot(Protocol):
+    """What ``ProfileStatus`` needs of ``RobotTelemetry``."""
+
+    tracker: PoseTracker
+    distance: LiveDistance
+    events: deque[dict[str, Any]]
+    firmware: dict[str, Any]
+
+
+class ProfileStatus:
+    """One robot's PROFILE page judged (module docstring); ``section`` is its ``status`` entry."""
+
+    def __init__(self, profile_name: str | None = None) -> None:
+        """``profile_name``: the name of the robot profile the bridge runs (``--robot``), said
+        in the mismatch; None: the robot's own name."""
+        self.section: dict[str, Any] | None = None
+        self._profile_name = profile_name
+        self._crc: int | None = None  # the page judged last
+
+    def forget(self) -> None:
+        """New parameters sent (a config command): the next page is judged against them."""
+        self._crc = None
+
+    def on_page(self, robot: _Robot, s: dict[str, Any], t_s: float) -> None:
+        """An accepted PROFILE page (decoded signals ``s``) heard at bus time ``t_s`` (s)."""
+        crc = int(s["PROFILE_CRC"])
+        if crc == self._crc:
+            return
+        self._crc = crc
+        running = take_page(robot, float(s["MAX_WHEEL_SPEED"]), crc)
+        given = robot.distance.robot
+        if self._profile_name is not None:
+            given = dataclasses.replace(given, name=self._profile_name)
+        integrator = _integrator(robot)
+        said = diagnose_profile(running, given, integrator)
+        self.section = {
+            "verdict": "OK" if said is None else "MISMATCH",
+            "profile_crc": f"0x{crc:08X}",
+            "expected_crc": f"0x{profile_crc(given, integrator):08X}",
+            "max_wheel_speed_m_s": running.max_wheel_speed_m_s,
+            "parameters": [] if said is None else list(said.parameters),
+            "robot": None if said is None else said.robot,
+            "detail": None if said is None else said.text,
+        }
+        if said is not None:
+            robot.events.append({"t_s": t_s, "kind": "profile", "detail": said.text})
+
+
+def _integrator(robot: _Robot) -> str:
+    """The integrator the bridge's reference runs (``--integrator``), else the one the
+    firmware's summary reports, else exact."""
+    tracker = robot.tracker
+    if tracker.forced and tracker.integrator is not None:
+        return tracker.integrator
+    summary = robot.firmware.get("summary") or {}
+    reported = str(summary.get("integrator", "")).lower()
+    return reported if reported in INTEGRATORS else tracker.integrator or "exact"
