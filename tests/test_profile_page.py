@@ -11,7 +11,9 @@ before.
 
 from __future__ import annotations
 
+import json
 import math
+import shutil
 from pathlib import Path
 
 import can
@@ -183,6 +185,55 @@ def test_the_judge_takes_the_buss_speed_bound(
         assert code == 0, out
         assert out.splitlines()[-1] == ("  - profile mismatch: the log's firmware runs with max "
                                         "wheel speed 4 m/s, --robot slow says 0.1 m/s")
+
+
+def batch_output(folder: Path, robot_arg: str, capsys: pytest.CaptureFixture[str],
+                 *extra: str) -> tuple[int, list[str]]:
+    """``analyze FOLDER`` (the batch, in this process): exit code and the summary's lines."""
+    capsys.readouterr()
+    code = main(["analyze", str(folder), "--robot", robot_arg, "--jobs", "1", *extra])
+    return code, capsys.readouterr().out.splitlines()
+
+
+def test_a_batch_names_the_one_log_of_another_robot(
+    kobuki_log: Path, pmir_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``analyze logs/ --robot pmir`` over a pmir drive and a kobuki drive: the kobuki log's
+    PROFILE page names it, as ``analyze LOG`` does (the batch used to say only what the pose
+    fit found), in the summary and in its JSON report; the pmir log has nothing to say."""
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    shutil.copy(kobuki_log, folder / "kobuki.log")
+    shutil.copy(pmir_log, folder / "pmir.log")
+    code, lines = batch_output(folder, "pmir", capsys, "--report-dir", str(tmp_path / "json"))
+    assert code == 1
+    said = ("profile mismatch: profile hash differs: the log's firmware runs with the parameters "
+            "of robot 'kobuki', not 'pmir' (--robot)")
+    assert [line for line in lines if "profile mismatch" in line] == [
+        f"  - {folder / 'kobuki.log'}: {said}"]
+    reports = {Path(r["inputs"]["log"]["path"]).name: r for r in
+               (json.loads(p.read_text()) for p in (tmp_path / "json").glob("*.json"))}
+    assert reports["kobuki.log"]["diagnosis"][0] == said
+    assert not reports["kobuki.log"]["passed"]
+    assert reports["pmir.log"]["passed"]
+    assert "diagnosis" not in reports["pmir.log"]
+
+
+@pytest.mark.parametrize("stream", ["never", "always"])
+def test_a_batch_takes_each_logs_speed_bound(
+    pmir_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], stream: str
+) -> None:
+    """A pmir drive (4 m/s bound) in a folder judged with a 0.1 m/s profile: the batch judged
+    it with the command line's bound, refused the genuine steps and failed a correct firmware;
+    it takes the log's bound and says the mismatch, as ``analyze LOG`` does."""
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    shutil.copy(pmir_log, folder / "pmir.log")
+    code, lines = batch_output(folder, str(slow_pmir(tmp_path, 0.1)), capsys, "--stream", stream)
+    assert code == 0, lines
+    assert lines[-2:] == [f"  - {folder / 'pmir.log'}: profile mismatch: the log's firmware runs "
+                          "with max wheel speed 4 m/s, --robot slow says 0.1 m/s",
+                          "1 PASS, 0 FAIL, 0 unreadable"]
 
 
 def test_replay_names_another_robots_profile(

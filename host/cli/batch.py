@@ -19,9 +19,14 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from odocan.sim.exceptions import OdocanError
+
+if TYPE_CHECKING:
+    from odocan.host.judge.analysis import Tolerance
+    from odocan.host.judge.profilepage import RunningProfile
+    from odocan.sim.robot import RobotProfile
 
 LOG_SUFFIXES = (".log", ".asc", ".blf")
 
@@ -87,11 +92,14 @@ def _under_cwd(path: Path) -> bool:
 
 
 def analyze_one(path: str, job: Job) -> LogResult:
-    """Read and analyse one log (runs in a worker process); never raises for a bad log."""
+    """Read and analyse one log (runs in a worker process); never raises for a bad log. As
+    ``analyze LOG``: the firmware's PROFILE page gives the judges its speed bound and names a
+    wrong ``--robot`` (``host.judge.profilepage``), then a failed verdict's pose fit does."""
     from odocan.host.cli.inputs import explained, require_frames
     from odocan.host.cli.subparsers.analyze import load_dbc, log_inputs
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import Tolerance, analyze
+    from odocan.host.judge.profilepage import head_profile, running_profile, with_bus_speed
     from odocan.host.judge.samples import AnalysisError
     from odocan.host.judge.stream_analysis import FrameCount, NotStreamable, analyze_file, streams
     from odocan.sim import robot
@@ -103,10 +111,13 @@ def analyze_one(path: str, job: Job) -> LogResult:
         db = load_dbc(Path(job.dbc)) if job.dbc is not None else None
         streamed: dict[str, Any] | None = None
         count = FrameCount()
+        running = None  # the log's PROFILE page (odocan's DBC only)
         if streams(log, job.stream):  # in bounded memory (host.judge.stream_analysis)
+            running = head_profile(log) if db is None else None
             try:
-                streamed = analyze_file(log, profile, job.integrator, tolerance=tolerance,
-                                        db=db, warn=lambda message: None, count=count)
+                streamed = analyze_file(log, with_bus_speed(profile, running), job.integrator,
+                                        tolerance=tolerance, db=db, warn=lambda message: None,
+                                        count=count)
             except (AnalysisError, NotStreamable):  # refused: the whole log's path says why
                 streamed = None
         if streamed is not None:
@@ -118,25 +129,39 @@ def analyze_one(path: str, job: Job) -> LogResult:
                 analysis = analyze(frames, profile, job.integrator, tolerance=tolerance, db=db)
             else:
                 require_frames(frames, path)
+                running = running_profile(frames)  # the firmware's own speed bound judges
                 with explained(lambda: frames, path):
-                    analysis = analyze(frames, profile, job.integrator, tolerance=tolerance)
+                    analysis = analyze(frames, with_bus_speed(profile, running),
+                                       job.integrator, tolerance=tolerance)
             report = analysis.report
         report["inputs"] = log_inputs(
             log, profile, report["integrator"], None if job.dbc is None else Path(job.dbc)
         )
-        if not report["passed"] and db is None:  # as analyze LOG: a wrong --robot is named
-            from odocan.host.judge.diagnosis import mismatches
-
-            whole = read_log(log, warn=lambda message: None)
-            hints = mismatches(whole, profile, report["integrator"],
-                               report["integrator_source"], tolerance)
-            if hints:
-                report["diagnosis"] = hints
+        _diagnose(log, report, profile, running, tolerance, db is None)
     except (OdocanError, OSError) as exc:
         return LogResult(path, error=_one_line(exc))
     except Exception as exc:  # a log no check foresaw: this log's error, the batch goes on
         return LogResult(path, error=f"cannot analyse: {type(exc).__name__}: {_one_line(exc)}")
     return LogResult(path, report=_plain(report), frames=n_frames)
+
+
+def _diagnose(log: Path, report: dict[str, Any], profile: RobotProfile,
+              running: RunningProfile | None, tolerance: Tolerance, own_dbc: bool) -> None:
+    """``report["diagnosis"]`` as ``analyze LOG`` makes it: the PROFILE page's line naming a
+    wrong ``--robot``, then, for a failed verdict on odocan's DBC, the pose fit's."""
+    from odocan.host.io.logs import read_log
+    from odocan.host.judge.profilepage import profile_mismatch, with_bus_speed
+
+    said = profile_mismatch(running, profile, report["integrator"])
+    hints = [] if said is None else [said]
+    if not report["passed"] and own_dbc:  # a wrong --robot must not read as a firmware fault
+        from odocan.host.judge.diagnosis import mismatches
+
+        whole = read_log(log, warn=lambda message: None)
+        hints += mismatches(whole, with_bus_speed(profile, running), report["integrator"],
+                            report["integrator_source"], tolerance)
+    if hints:
+        report["diagnosis"] = hints
 
 
 def _plain(value: Any) -> Any:
