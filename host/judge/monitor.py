@@ -6,7 +6,7 @@ carries: frames of unknown IDs, of the wrong DLC, error and remote frames are co
 cantools cannot decode are counted as ``undecodable``. Per DBC message it keeps:
 
 * ``count``, ``rate_hz`` and ``jitter_ms``: frames heard, and the rate and the standard deviation of
-  the inter-frame period over the last ``RATE_WINDOW`` frames (bus timestamps, ``msg.timestamp``);
+  the inter-frame period over the last ``messagestats.RATE_WINDOW`` frames (bus timestamps);
   for a multiplexed message the period jitter is per page (``pages``: count, rate and jitter of
   each multiplexer value), as pages sent together have no common period;
 * ``e2e``: the Profile 2 counts (``ok``, ``lost``, ``repeated``, ``crc_errors``,
@@ -44,11 +44,8 @@ from __future__ import annotations
 
 import json
 import math
-import statistics
 import time
 from collections import Counter, deque
-from dataclasses import dataclass, field
-from itertools import pairwise
 from typing import Any
 
 import can
@@ -62,6 +59,7 @@ from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
+from odocan.host.judge.messagestats import MessageStats
 from odocan.host.judge.profilepage import follow_profile
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
@@ -73,54 +71,12 @@ from odocan.host.protocol.e2e import UNKNOWN, E2EMonitor, e2e_messages
 from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile
 
-RATE_WINDOW = 128  # frames per message for rate and jitter (1.28 s of WHEEL_ENCODERS)
 STALE_S = 1.0  # a message not heard for this long is shown dimmed
 ACCEPTED = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # distinct unknown identifiers listed (all are counted)
 _HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
 NODE_TIMEOUT_CYCLES = 10  # a node is stale after 10 x its fastest cycle time (opendbc)
 MAX_EVENTS = 16  # events kept (the latest)
-
-
-@dataclass
-class MessageStats:
-    """What the monitor knows of one DBC message."""
-
-    name: str
-    frame_id: int
-    count: int = 0
-    times: deque[float] = field(default_factory=lambda: deque(maxlen=RATE_WINDOW))
-    last: dict[str, Any] = field(default_factory=dict)  # every signal's latest value
-    last_frame: dict[str, Any] = field(default_factory=dict)  # the latest frame's signals
-    heard_monotonic_s: float = 0.0
-    pages: dict[str, MessageStats] = field(default_factory=dict)  # per multiplexer value
-
-    def heard(self, timestamp_s: float, now_s: float, page: str | None = None) -> None:
-        """Count one frame of this message (bus timestamp, local monotonic time, its page)."""
-        self.count += 1
-        self.times.append(timestamp_s)
-        self.heard_monotonic_s = now_s
-        if page is not None:
-            stats = self.pages.get(page)
-            if stats is None:
-                stats = self.pages[page] = MessageStats(page, self.frame_id)
-            stats.heard(timestamp_s, now_s)
-
-    def timing(self) -> dict[str, Any]:
-        """``count``, ``rate_hz``, ``jitter_ms``."""
-        return {"count": self.count, "rate_hz": self.rate_hz(), "jitter_ms": self.jitter_ms()}
-
-    def rate_hz(self) -> float | None:
-        """Frames per second over the window (None before two frames)."""
-        if len(self.times) < 2 or self.times[-1] <= self.times[0]:
-            return None
-        return (len(self.times) - 1) / (self.times[-1] - self.times[0])
-
-    def jitter_ms(self) -> float | None:
-        """Standard deviation of the inter-frame period over the window (ms)."""
-        if len(self.times) < 3:
-            return None
-        return 1e3 * statistics.pstdev(b - a for a, b in pairwise(self.times))
 
 
 # SecOC counts shown by the monitor: ODOM_ACK NACK reasons AUTH_*, and ODOM_AUTH frames that
