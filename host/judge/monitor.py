@@ -55,6 +55,7 @@ from odocan.firmware.errors import ErrorFlag
 from odocan.host.jsonutil import finite
 from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
+from odocan.host.judge.liveconfig import ConfigFollower, apply_config
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
@@ -108,6 +109,9 @@ class BusMonitor:
         self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=MAX_EVENTS)
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
+        self.config = ConfigFollower()  # ODOM_CONFIG likewise
+        self._config_id = next((m.frame_id for m in self.db.messages
+                                if m.name == "ODOM_CONFIG"), -1)
         self._set_pose_id = next((m.frame_id for m in self.db.messages
                                   if m.name == "ODOM_SET_POSE"), -1)  # -1: a DBC without it
         self.firmware_events: deque[dict[str, Any]] = deque(maxlen=4 * MAX_EVENTS)
@@ -175,19 +179,14 @@ class BusMonitor:
                 self.undecodable += 1
 
     def _on_pose_request(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        """ODOM_SET_POSE: staged and applied as the firmware acknowledges it
-        (``host.judge.livesetpose``); ODOM_CONFIG APPLY: the reference restarts at the next
-        on-board pose (an event)."""
+        """ODOM_SET_POSE and ODOM_CONFIG: staged and applied as the firmware acknowledges them
+        (``host.judge.livesetpose``, ``host.judge.liveconfig``)."""
         if "FIELD" in shown:
             field = str(shown["FIELD"])
             self.set_pose.on_frame(int(s["COUNTER"]), field, s.get(field), self.tracker.enc_seq)
             return
-        if shown.get("PARAM") != "APPLY":
-            return
-        self.tracker.restart_reference()
-        self.distance.suspend()  # its new parameters are not known here: DISTANCE not judged
-        self.events.append({"t_s": self._bus_time_s, "kind": "config",
-                            "detail": "config applied: reference restarted"})
+        param = str(shown.get("PARAM"))
+        self.config.on_frame(int(s["COUNTER"]), param, s.get(param))
 
     def _on_command(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         """ODOM_SET_POSE or ODOM_CONFIG: its ODOM_AUTH may follow, and APPLY restarts."""
@@ -217,6 +216,12 @@ class BusMonitor:
             if applied is not None:
                 pose = apply_set_pose(self.tracker, *applied)
                 self.events.append(set_pose_event(self._bus_time_s, pose, applied[1]))
+        elif int(s["REQUEST_ID"]) == self._config_id:
+            config = self.config.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
+            if config is not None:  # the firmware's new robot: the reference's too
+                detail = apply_config(self.tracker, config)
+                self.distance.reconfigure(self.tracker.geometry, self.tracker.counter_bits)
+                self.events.append({"t_s": self._bus_time_s, "kind": "config", "detail": detail})
         reason = str(shown.get("REASON", ""))
         if not reason.startswith("AUTH_"):
             return
