@@ -68,7 +68,7 @@ def test_replay_reproduces_the_run(
     assert section["onboard_vs_log"] == {
         "samples": 300, "identical": 300, "max_position_diff_m": 0.0, "max_heading_diff_rad": 0.0,
         "before_first_gap": 300, "max_position_diff_before_gap_m": 0.0,
-        "max_resent_position_diff_m": 0.0,
+        "max_resent_position_diff_m": 0.0, "max_position_drift_between_gaps_m": 0.0,
     }
     assert (section["passed"], section["faults"]) == (True, [])
     # Bit-identical pose and twist frames, at the same times; the log's truth frames kept.

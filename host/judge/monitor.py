@@ -6,7 +6,7 @@ carries: frames of unknown IDs, of the wrong DLC, error and remote frames are co
 cantools cannot decode are counted as ``undecodable``. Per DBC message it keeps:
 
 * ``count``, ``rate_hz`` and ``jitter_ms``: frames heard, and the rate and the standard deviation of
-  the inter-frame period over the last ``RATE_WINDOW`` frames (bus timestamps, ``msg.timestamp``);
+  the inter-frame period over the last ``messagestats.RATE_WINDOW`` frames (bus timestamps);
   for a multiplexed message the period jitter is per page (``pages``: count, rate and jitter of
   each multiplexer value), as pages sent together have no common period;
 * ``e2e``: the Profile 2 counts (``ok``, ``lost``, ``repeated``, ``crc_errors``,
@@ -44,11 +44,8 @@ from __future__ import annotations
 
 import json
 import math
-import statistics
 import time
 from collections import Counter, deque
-from dataclasses import dataclass, field
-from itertools import pairwise
 from typing import Any
 
 import can
@@ -58,10 +55,12 @@ from odocan.firmware.errors import ErrorFlag
 from odocan.host.jsonutil import finite
 from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
+from odocan.host.judge.liveconfig import ConfigFollower, apply_config
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
+from odocan.host.judge.messagestats import MessageStats
 from odocan.host.judge.profilepage import follow_profile
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
@@ -73,54 +72,12 @@ from odocan.host.protocol.e2e import UNKNOWN, E2EMonitor, e2e_messages
 from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile
 
-RATE_WINDOW = 128  # frames per message for rate and jitter (1.28 s of WHEEL_ENCODERS)
 STALE_S = 1.0  # a message not heard for this long is shown dimmed
 ACCEPTED = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # distinct unknown identifiers listed (all are counted)
 _HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
 NODE_TIMEOUT_CYCLES = 10  # a node is stale after 10 x its fastest cycle time (opendbc)
 MAX_EVENTS = 16  # events kept (the latest)
-
-
-@dataclass
-class MessageStats:
-    """What the monitor knows of one DBC message."""
-
-    name: str
-    frame_id: int
-    count: int = 0
-    times: deque[float] = field(default_factory=lambda: deque(maxlen=RATE_WINDOW))
-    last: dict[str, Any] = field(default_factory=dict)  # every signal's latest value
-    last_frame: dict[str, Any] = field(default_factory=dict)  # the latest frame's signals
-    heard_monotonic_s: float = 0.0
-    pages: dict[str, MessageStats] = field(default_factory=dict)  # per multiplexer value
-
-    def heard(self, timestamp_s: float, now_s: float, page: str | None = None) -> None:
-        """Count one frame of this message (bus timestamp, local monotonic time, its page)."""
-        self.count += 1
-        self.times.append(timestamp_s)
-        self.heard_monotonic_s = now_s
-        if page is not None:
-            stats = self.pages.get(page)
-            if stats is None:
-                stats = self.pages[page] = MessageStats(page, self.frame_id)
-            stats.heard(timestamp_s, now_s)
-
-    def timing(self) -> dict[str, Any]:
-        """``count``, ``rate_hz``, ``jitter_ms``."""
-        return {"count": self.count, "rate_hz": self.rate_hz(), "jitter_ms": self.jitter_ms()}
-
-    def rate_hz(self) -> float | None:
-        """Frames per second over the window (None before two frames)."""
-        if len(self.times) < 2 or self.times[-1] <= self.times[0]:
-            return None
-        return (len(self.times) - 1) / (self.times[-1] - self.times[0])
-
-    def jitter_ms(self) -> float | None:
-        """Standard deviation of the inter-frame period over the window (ms)."""
-        if len(self.times) < 3:
-            return None
-        return 1e3 * statistics.pstdev(b - a for a, b in pairwise(self.times))
 
 
 # SecOC counts shown by the monitor: ODOM_ACK NACK reasons AUTH_*, and ODOM_AUTH frames that
@@ -152,6 +109,9 @@ class BusMonitor:
         self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=MAX_EVENTS)
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
+        self.config = ConfigFollower()  # ODOM_CONFIG likewise
+        self._config_id = next((m.frame_id for m in self.db.messages
+                                if m.name == "ODOM_CONFIG"), -1)
         self._set_pose_id = next((m.frame_id for m in self.db.messages
                                   if m.name == "ODOM_SET_POSE"), -1)  # -1: a DBC without it
         self.firmware_events: deque[dict[str, Any]] = deque(maxlen=4 * MAX_EVENTS)
@@ -219,19 +179,14 @@ class BusMonitor:
                 self.undecodable += 1
 
     def _on_pose_request(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        """ODOM_SET_POSE: staged and applied as the firmware acknowledges it
-        (``host.judge.livesetpose``); ODOM_CONFIG APPLY: the reference restarts at the next
-        on-board pose (an event)."""
+        """ODOM_SET_POSE and ODOM_CONFIG: staged and applied as the firmware acknowledges them
+        (``host.judge.livesetpose``, ``host.judge.liveconfig``)."""
         if "FIELD" in shown:
             field = str(shown["FIELD"])
             self.set_pose.on_frame(int(s["COUNTER"]), field, s.get(field), self.tracker.enc_seq)
             return
-        if shown.get("PARAM") != "APPLY":
-            return
-        self.tracker.restart_reference()
-        self.distance.suspend()  # its new parameters are not known here: DISTANCE not judged
-        self.events.append({"t_s": self._bus_time_s, "kind": "config",
-                            "detail": "config applied: reference restarted"})
+        param = str(shown.get("PARAM"))
+        self.config.on_frame(int(s["COUNTER"]), param, s.get(param))
 
     def _on_command(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         """ODOM_SET_POSE or ODOM_CONFIG: its ODOM_AUTH may follow, and APPLY restarts."""
@@ -261,6 +216,12 @@ class BusMonitor:
             if applied is not None:
                 pose = apply_set_pose(self.tracker, *applied)
                 self.events.append(set_pose_event(self._bus_time_s, pose, applied[1]))
+        elif int(s["REQUEST_ID"]) == self._config_id:
+            config = self.config.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
+            if config is not None:  # the firmware's new robot: the reference's too
+                detail = apply_config(self.tracker, config)
+                self.distance.reconfigure(self.tracker.geometry, self.tracker.counter_bits)
+                self.events.append({"t_s": self._bus_time_s, "kind": "config", "detail": detail})
         reason = str(shown.get("REASON", ""))
         if not reason.startswith("AUTH_"):
             return

@@ -19,6 +19,8 @@ reports (else exact); Ctrl-C stops early and checks what ran.
 reference (as ``odocan run``), and within ``--tolerance`` of the firmware that recorded the log
 (the logged on-board poses at the same encoder frames; positions up to the log's first gap of the
 encoder sequence, since across a gap the recording firmware may have had frames the log lacks,
+after it their offset between two gaps, which one firmware keeps (``drift_between_gaps_m``;
+checked when the log says its firmware took its frames on time, ``replayable``),
 headings everywhere, since they are exact across gaps; every pose the log sent for a frame, a
 resend too, and the log's resent positions against its first at the same frame everywhere:
 one firmware's poses at one frame agree). When the replay departs, the cause is
@@ -43,6 +45,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.firmware.config import RobotParams
+from odocan.firmware.errors import ErrorFlag
 from odocan.host.io.listeners import Recording
 from odocan.host.io.logs import (
     FrameArrays,
@@ -290,7 +293,8 @@ def versus_log(
         return {"samples": 0, "identical": 0, "max_position_diff_m": None,
                 "max_heading_diff_rad": None, "before_first_gap": 0,
                 "max_position_diff_before_gap_m": None,
-                "max_resent_position_diff_m": resent_position_diff_m(old)}
+                "max_resent_position_diff_m": resent_position_diff_m(old),
+                "max_position_drift_between_gaps_m": None}
     pairs = [(t, a, b) for t in common for a, b in itertools.product(old[t], new[t])]
     at = np.searchsorted(np.array(common), [t for t, _, _ in pairs])
     a = np.array([p[1] for p in pairs], dtype=np.int64)
@@ -303,6 +307,8 @@ def versus_log(
     gaps = np.flatnonzero(np.diff(ticks) > 1)
     first_gap = int(ticks[gaps[0]]) if len(gaps) else int(ticks[-1])  # last tick before it
     before = int(np.searchsorted(np.array(common), first_gap, side="right"))
+    first = np.array([(old[t][0][0] - new[t][0][0], old[t][0][1] - new[t][0][1])
+                      for t in common], dtype=np.int64)
     return {
         "samples": len(common),
         "identical": int(np.count_nonzero(differs == 0)),
@@ -311,7 +317,45 @@ def versus_log(
         "before_first_gap": before,
         "max_position_diff_before_gap_m": float(position[:before].max()) if before else None,
         "max_resent_position_diff_m": resent_position_diff_m(old),
+        "max_position_drift_between_gaps_m": drift_between_gaps_m(
+            np.array(common), first, ticks[gaps + 1]) if replayable(log, log_accepted) else None,
     }
+
+
+def replayable(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> bool:
+    """True when the recording firmware took exactly the log's accepted encoder frames, each on
+    its tick, as far as the log tells: no ODOM_STATUS summary reports TIME_LOST or
+    MAILBOX_OVERFLOW (frames merged on board) and the host's E2E check refused no encoder frame
+    (a late one the firmware may have taken). Else a drift between gaps is no departure."""
+    encoders = frames.can_id == contract.database().get_message_by_name("WHEEL_ENCODERS").frame_id
+    if (encoders & ~accepted).any():
+        return False
+    try:
+        page = BulkDecoder(contract.database()).decode_page(frames, "ODOM_STATUS", 0)
+    except DecodeError:
+        return True
+    masks = page["ERROR_MASK"][accepted[page["index"]]].astype(np.int64)
+    return not (masks & (ErrorFlag.TIME_LOST | ErrorFlag.MAILBOX_OVERFLOW)).any()
+
+
+def drift_between_gaps_m(
+    common: npt.NDArray[np.int64], offset: npt.NDArray[np.int64], gap_ends: npt.NDArray[np.int64]
+) -> float:
+    """How far the logged and the replayed positions move apart between two gaps of the log's
+    encoder sequence after its first (m; before it they are compared as they are): ``offset``
+    (log - replay, raw LSB, at the ``common`` ticks) less its value at the first common tick of
+    its segment (``gap_ends``: the first tick after each gap), less one LSB per axis. Across a
+    gap the recording firmware may have had frames the log lacks, so the offset may jump there;
+    between gaps both firmwares take the same frames from the same heading (exact everywhere),
+    so one firmware's offset stays put: on the bus, rounded to the LSB, within one LSB per axis
+    of it."""
+    if len(common) == 0:
+        return 0.0
+    segment = np.searchsorted(gap_ends, common, side="right")
+    first = np.r_[True, segment[1:] != segment[:-1]]  # a segment's first common tick
+    anchor = offset[np.flatnonzero(first)][np.cumsum(first) - 1]
+    moved = np.maximum(np.abs(offset - anchor) - 1, 0)[segment > 0]
+    return float(np.hypot(moved[:, 0], moved[:, 1]).max(initial=0.0)) * POSITION_LSB_M
 
 
 def resent_position_diff_m(poses: dict[int, list[tuple[int, int, int]]]) -> float:
@@ -331,6 +375,10 @@ def departures(vs_log: dict[str, Any], tolerance: Tolerance) -> list[str]:
     if position is not None and position > tolerance.position_m:
         reasons.append(f"its position differs from the log's by up to {position * 1e3:.4f} mm "
                        f"(tolerance {tolerance.position_m * 1e3:.4g} mm)")
+    drift = vs_log.get("max_position_drift_between_gaps_m")
+    if drift is not None and drift > tolerance.position_m:
+        reasons.append(f"between gaps of the log its position moves off the log's by up to "
+                       f"{drift * 1e3:.4f} mm (tolerance {tolerance.position_m * 1e3:.4g} mm)")
     resent = vs_log.get("max_resent_position_diff_m")
     if resent is not None and resent > tolerance.position_m:
         reasons.append(f"the log's resent positions differ from its first at the same encoder "

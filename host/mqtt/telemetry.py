@@ -137,6 +137,7 @@ class RobotTelemetry:
         self._truth_pub_t = -math.inf  # bus time of the last truth published (s)
         self.firmware: dict[str, Any] = {}
         self.pending: dict[tuple[int, int], PendingAck] = {}
+        self._staged_config: tuple[Geometry, str, int] | None = None  # until its APPLY's ACK
         self.status_seq = 0
         self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
         self._status_ids = e2e_messages(self.db).get(self._status_id)
@@ -385,7 +386,10 @@ class RobotTelemetry:
             return []
         if nack:  # forget the rest of this command: one answer per command
             self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
+            if pending.command == "config":  # the firmware keeps its parameters: so does the
+                self._staged_config = None  # reference
         elif pending.command == "config":  # (a set-pose is followed: ``_followed_set_pose``)
+            self._apply_config()
             self.tracker.restart_reference()
         reason = _choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
         payload = {"id": pending.cmd_id, "command": pending.command,
@@ -397,7 +401,17 @@ class RobotTelemetry:
         self.pending[(can_id, counter)] = ack
 
     def set_geometry(self, geometry: Geometry, integrator: str, counter_bits: int) -> None:
-        """New robot parameters (a config command): the reference restarts at the next pose."""
+        """New robot parameters (a config command sent): the reference takes them when the
+        firmware ACKs the APPLY (``_answered``; it restarts at the next pose), never on a NACK
+        (the firmware keeps its own: a refused robot must not become the reference's)."""
+        self._staged_config = (geometry, integrator, counter_bits)
+
+    def _apply_config(self) -> None:
+        """The staged config command's parameters, now the firmware's (its APPLY ACKed)."""
+        if self._staged_config is None:
+            return
+        geometry, integrator, counter_bits = self._staged_config
+        self._staged_config = None
         self.tracker.integrator = integrator
         self.tracker.set_geometry(geometry, counter_bits)
         self.distance.reconfigure(geometry, counter_bits)

@@ -1,0 +1,77 @@
+"""ODOM_CONFIG followed by the live judge (``odocan monitor``; the bridge follows its own commands
+in ``host.mqtt.telemetry``): an applied config is the firmware's new robot, so it is the
+reference's too.
+
+The firmware (firmware/commands.py) stages each parameter frame it accepted (ACK), and APPLY
+validates its current parameters overwritten by the staged ones, all or nothing (ACK, or NACK
+with the reason), and clears the staged set either way. So ``ConfigFollower`` stages a parameter
+when its ACK is heard, and the APPLY's ACK returns the staged set (``apply_config`` makes it the
+tracker's geometry, integrator and counter width; the reference restarts at the next on-board
+pose). A NACKed APPLY changes nothing: the firmware keeps its parameters. Found by the trial: the
+monitor restarted its reference at every APPLY heard but kept the old parameters, so after an
+accepted config (kobuki, wheelbase 0.23 -> 0.25 m) it said POSE WRONG, 938 mm, exit 1, while the
+firmware was right with its new wheelbase.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from odocan.host.judge.reference import Geometry
+
+if TYPE_CHECKING:
+    from odocan.host.judge.tracking import PoseTracker
+
+PARAMS = ("COUNTS_PER_REV", "WHEEL_RADIUS_LEFT", "WHEEL_RADIUS_RIGHT", "WHEELBASE", "COUNTER_BITS",
+          "INTEGRATOR", "MAX_WHEEL_SPEED")  # ODOM_CONFIG's staged PARAMs (names in the DBC)
+INTEGRATORS = ("euler", "rk2", "exact")  # INTEGRATOR's raw values 0, 1, 2
+
+
+class ConfigFollower:
+    """The staged parameters and the pending APPLY of ODOM_CONFIG as the bus shows them."""
+
+    def __init__(self) -> None:
+        self.staged: dict[str, float] = {}  # PARAM: value (m, m/s, counts, raw enum), as ACKed
+        self._sent: dict[int, tuple[str, float]] = {}  # by E2E COUNTER: PARAM, value heard
+        self._apply: int | None = None  # the APPLY frame's COUNTER
+
+    def on_frame(self, counter: int, param: str, value: Any) -> None:
+        """An ODOM_CONFIG frame heard (its E2E COUNTER, PARAM name, the value in DBC units)."""
+        if param == "APPLY":
+            self._apply = counter
+        elif param in PARAMS and value is not None:
+            self._sent[counter] = (param, float(value))
+
+    def on_ack(self, request_counter: int, acked: bool) -> dict[str, float] | None:
+        """ODOM_ACK of an ODOM_CONFIG frame: a parameter ACKed is staged; the APPLY's ACK
+        returns the staged set (None when NACKed) and clears it, as the firmware does."""
+        sent = self._sent.pop(request_counter, None)
+        if sent is not None:
+            if acked:
+                self.staged[sent[0]] = sent[1]
+            return None
+        if self._apply is None or self._apply != request_counter:
+            return None
+        self._apply = None
+        staged, self.staged = self.staged, {}
+        return staged if acked else None
+
+
+def apply_config(tracker: PoseTracker, staged: dict[str, float]) -> str:
+    """Make ``staged`` (an applied config) ``tracker``'s robot, the parameters it lacks kept;
+    the reference restarts at the next on-board pose. Returns the event's detail."""
+    g = tracker.geometry
+    speed = staged.get("MAX_WHEEL_SPEED")
+    geometry = Geometry(
+        int(staged.get("COUNTS_PER_REV", g.counts_per_rev)),
+        staged.get("WHEEL_RADIUS_LEFT", g.wheel_radius_left_m),
+        staged.get("WHEEL_RADIUS_RIGHT", g.wheel_radius_right_m),
+        staged.get("WHEELBASE", g.wheelbase_m),
+        g.max_wheel_speed_mm_s if speed is None else round(speed * 1000),
+    )
+    if "INTEGRATOR" in staged and 0 <= int(staged["INTEGRATOR"]) < len(INTEGRATORS):
+        tracker.integrator = INTEGRATORS[int(staged["INTEGRATOR"])]
+    tracker.set_geometry(geometry, int(staged.get("COUNTER_BITS", tracker.counter_bits)))
+    return (f"config applied: {geometry.counts_per_rev} counts/rev, wheel radii "
+            f"{geometry.wheel_radius_left_m:.6g}/{geometry.wheel_radius_right_m:.6g} m, wheelbase "
+            f"{geometry.wheelbase_m:.6g} m, {tracker.integrator}: reference restarted")

@@ -1,0 +1,141 @@
+"""A config command the firmware NACKs must not change the bridge's reference (found by the trial).
+
+The bridge took a `cmd/config`'s parameters for its live reference when it SENT the frames, not
+when the firmware acknowledged the APPLY: `cmd/config` with a robot the firmware refuses
+(result `nacked`, reason INCONSISTENT) left the firmware on its old parameters (right, its pose
+on the truth) while the bridge's reference drove on with the refused ones: `pose_wrong` true,
+1.7 m off, a correct firmware blamed. Here a real Python firmware answers the bridge's frames;
+an independent float64 dead reckoning of the counts (written here) says where the pose must be.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import can
+
+from odocan.firmware import frames as fr
+from odocan.firmware.ecu import OdomEcu
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt import topics
+from odocan.host.mqtt.bridge import BridgeConfig, RobotEndpoint, _Robot
+from odocan.host.mqtt.broker import BrokerURL
+from odocan.sim import frames as sf
+from odocan.sim import robot
+from odocan.sim.rig import firmware_params
+
+KOBUKI = robot.load("kobuki")
+PERIOD_S = 0.01
+D_LEFT, D_RIGHT = 40, 55  # counts per period: a left curve at ~0.4 m/s
+# A robot the firmware refuses as a whole (one count turns it 450 deg): NACK INCONSISTENT
+REFUSED = {"id": "c2", "counts_per_rev": 4, "wheel_radius_left_m": 0.05,
+           "wheel_radius_right_m": 0.05, "wheelbase_m": 0.01, "counter_bits": 16,
+           "integrator": "exact"}
+
+
+class _Hal:
+    def __init__(self) -> None:
+        self.sent: list[tuple[int, bytes]] = []
+
+    def transmit(self, can_id: int, data: bytes) -> bool:
+        self.sent.append((can_id, data))
+        return True
+
+
+class _Board:
+    """The firmware on kobuki, fed one encoder frame a period; its frames go to the bridge."""
+
+    def __init__(self, bridge: _Robot) -> None:
+        self.hal = _Hal()
+        self.ecu = OdomEcu(self.hal, firmware_params(KOBUKI, "exact"))
+        self.bridge = bridge
+        self.t_s = 0.0
+        self.counter = self.left = self.right = 0
+        self.results: list[dict[str, object]] = []
+
+    def period(self, commands: list[can.Message] = ()) -> None:  # type: ignore[assignment]
+        self.left = (self.left + D_LEFT) & 0xFFFF
+        self.right = (self.right + D_RIGHT) & 0xFFFF
+        frame = sf.pack_wheel_encoders(self.counter, self.left, self.right)
+        self.counter = (self.counter + 1) & 0xF
+        self._to_bridge(fr.WHEEL_ENCODERS_ID, frame)
+        self.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, frame)
+        for msg in commands:
+            self.ecu.isr_can_rx(msg.arbitration_id, bytes(msg.data))
+        self.ecu.tick()
+        for can_id, data in self.hal.sent:
+            self._to_bridge(can_id, data)
+        self.hal.sent.clear()
+        self.t_s += PERIOD_S
+
+    def _to_bridge(self, can_id: int, data: bytes) -> None:
+        published = self.bridge.telemetry.feed(can.Message(
+            timestamp=self.t_s, arbitration_id=can_id, is_extended_id=False, data=data))
+        self.results += [p for leaf, p in published if leaf == topics.RESULT_LEAF]
+
+
+def _dead_reckoned(periods: int) -> tuple[float, float]:
+    """Independent float64: the exact arc of a constant step, ``periods`` times from (0, 0, 0)."""
+    per_count_l = 2 * math.pi * KOBUKI.wheel_radius_left_m / KOBUKI.counts_per_rev
+    per_count_r = 2 * math.pi * KOBUKI.wheel_radius_right_m / KOBUKI.counts_per_rev
+    ds = (D_LEFT * per_count_l + D_RIGHT * per_count_r) / 2
+    dth = (D_RIGHT * per_count_r - D_LEFT * per_count_l) / KOBUKI.wheelbase_m
+    x = y = th = 0.0
+    for _ in range(periods):
+        x += ds / dth * (math.sin(th + dth) - math.sin(th))
+        y -= ds / dth * (math.cos(th + dth) - math.cos(th))
+        th += dth
+    return x, y
+
+
+def _drive_with_config(config: dict[str, object], channel: str) -> tuple[_Robot, _Board]:
+    """100 periods, ``config`` sent through the bridge to the firmware, 300 periods more."""
+    send_bus = can.Bus(interface="virtual", channel=channel)
+    listener = can.Bus(interface="virtual", channel=channel)
+    try:
+        bridge = _Robot(RobotEndpoint("robot001", send_bus, Geometry.of(KOBUKI),
+                                      counter_bits=16),
+                        BridgeConfig(broker=BrokerURL("127.0.0.1", 1883)))
+        board = _Board(bridge)
+        for _ in range(100):
+            board.period()
+        answer = bridge.on_command("config", json.dumps(config).encode())
+        assert answer[0][1]["result"] == "accepted", answer
+        frames = []
+        while (msg := listener.recv(0)) is not None:
+            frames.append(msg)
+        assert any(m.arbitration_id == fr.ODOM_CONFIG_ID for m in frames)
+        board.period(frames)  # the firmware answers the APPLY: ODOM_ACK
+        for _ in range(299):
+            board.period()
+    finally:
+        send_bus.shutdown()
+        listener.shutdown()
+    return bridge, board
+
+
+def test_a_nacked_config_leaves_the_reference_on_the_firmware_s_parameters() -> None:
+    bridge, board = _drive_with_config(REFUSED, "test-bridge-config-nack")
+    assert [(r["id"], r["result"], r["reason"]) for r in board.results] == [
+        ("c2", "nacked", "INCONSISTENT")]
+    x_m, y_m = _dead_reckoned(399)  # the first frame primes the firmware: 399 steps
+    pose = board.ecu.odometry
+    assert abs(pose.x_q40_m / 2.0**40 - x_m) < 1e-4
+    assert abs(pose.y_q40_m / 2.0**40 - y_m) < 1e-4
+    tracker = bridge.telemetry.tracker
+    assert tracker.geometry == Geometry.of(KOBUKI)
+    wrongs = tracker.wrongs.as_dict()
+    assert wrongs["episodes"] == 0, wrongs
+
+    # and parameters the firmware ACKs are the reference's from then on
+    wider = {**REFUSED, "id": "c1", "counts_per_rev": KOBUKI.counts_per_rev,
+             "wheel_radius_left_m": KOBUKI.wheel_radius_left_m,
+             "wheel_radius_right_m": KOBUKI.wheel_radius_right_m, "wheelbase_m": 0.25,
+             "integrator": "rk2"}
+    bridge, board = _drive_with_config(wider, "test-bridge-config-ack")
+    assert [(r["id"], r["result"]) for r in board.results] == [("c1", "acked")]
+    tracker = bridge.telemetry.tracker
+    assert tracker.geometry.wheelbase_m == 0.25
+    assert tracker.integrator == "rk2"
+    assert tracker.wrongs.as_dict()["episodes"] == 0
