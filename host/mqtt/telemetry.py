@@ -35,7 +35,8 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
 
 Headings: ``heading_rad`` wrapped to (-pi, pi] and ``heading_unwrapped_rad`` cumulative, on
 ``pose``, ``reference`` and ``truth`` (SIM_TRUTH's [0, 2 pi) made cumulative at the reference's
-turn); ``dheading_rad`` wrapped to (-pi, pi].
+turn); ``dheading_rad`` wrapped to (-pi, pi], plus 2 pi per whole turn TURNS is off (the judged
+error: beyond pi only then).
 
 ``periodic(now_s)`` returns ``status`` and ``rates`` (frames per second per message, last window).
 Times: ``t_s`` the frame's bus timestamp (s), ``unix_s`` the wall clock at publication."""
