@@ -23,7 +23,7 @@ Every key is optional, comma-separated::
     seed=N          the seed of every random draw (the same seed gives the same faults)
 
 P in [0, 1]; LEN >= 1; MS >= 0; 1 <= BITS <= 64; RATE >= 0 frames/s; 0 <= ID <= 0x1FFFFFFF;
-T, DUR >= 0 s. A frame
+T, DUR >= 0 s (a bus-off's DUR > 0). A frame
 suffers at most one of drop, burst, dup, delay, flip: one uniform draw per frame is split into
 intervals of those widths (``exclusive_edges``: each has exactly its probability; their sum must
 be <= 1). ``sim.faults.FaultInjectingBus`` injects what a spec says.
@@ -95,6 +95,9 @@ class FaultSpec:
         if self.busoff is not None:
             _check_float("busoff", self.busoff.at_s, "T")
             _check_float("busoff", self.busoff.duration_s, "DUR")
+            if self.busoff.duration_s == 0:  # only the recovery time: no bus-off at all
+                raise _fail("busoff", f"{_num(self.busoff.at_s)}:0",
+                            "DUR must be > 0 s (a bus-off of no length; leave busoff out)")
         _check_int("seed", self.seed, None, None, "N")
 
     @classmethod

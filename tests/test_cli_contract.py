@@ -38,6 +38,7 @@ BAD: list[tuple[str, tuple[str, ...]]] = [
     ("run --faults delay=0.1:1e9", ("delay", "60000")),
     ("run --faults seed=-3", ("seed",)),
     ("run --faults bogus=1", ("bogus",)),
+    ("run --faults busoff=3:0", ("busoff=3:0", "DUR", "> 0")),
     ("run --report /dev/full", ("--report /dev/full", "not a regular file")),
     ("run --report /proc/x/f.json", ("--report /proc/x/f.json", "/proc/x")),
     ("run --report {tmp}", ("--report", "is a directory")),
