@@ -16,7 +16,8 @@ Every key is optional, comma-separated::
                     frames of 8 random bytes on that one ID (29-bit above 0x7FF, written with
                     more than 3 hex digits: 0x00000900, not 0x900), which on a
                     bit-timed bus wins arbitration against every higher ID; with T:DUR it
-                    babbles only from T s for DUR s (else from the first frame, for ever)
+                    babbles only from T s for DUR s (else from the first frame, for ever).
+                    RATE is on the wire: ``two_handles`` splits it between the rig's handles
     busoff=T:DUR    at T s the transmitter's error counter climbs past 255 (32 failed attempts,
                     +8 each, through the warning and error-passive limits): bus-off for DUR s,
                     then recovery after 128 occurrences of 11 recessive bits (at ``bitrate``)
@@ -32,7 +33,7 @@ be <= 1). ``sim.faults.FaultInjectingBus`` injects what a spec says.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from odocan.sim.exceptions import ConfigurationError
@@ -228,6 +229,16 @@ def _parse_value(key: str, value: str) -> dict[str, Any]:
         return {"flip": _number(key, parts[0], "P"), "flip_bits": bits}
     at, duration = _fields(key, value, "T:DURATION")
     return {"busoff": BusOff(_number(key, at, "T"), _number(key, duration, "DURATION"))}
+
+
+def two_handles(spec: FaultSpec) -> tuple[FaultSpec, FaultSpec]:
+    """One ``--faults`` spec as the rig's two faulted handles take it (``odocan run``: the
+    motor controller's and the firmware's sends): the frame faults and bus-off on each (the
+    firmware's drawn from ``seed + 1``), the babbling node's RATE split in half between them, so
+    that RATE is what reaches the wire, as a CAN tool's interactive generator means it (two
+    Poisson streams of RATE / 2 are one of RATE; halving a float is exact)."""
+    half = replace(spec, babble=spec.babble / 2)
+    return half, replace(half, seed=spec.seed + 1)
 
 
 def exclusive_edges(spec: FaultSpec) -> list[tuple[float, str]]:

@@ -279,7 +279,7 @@ class LockstepRig(Closing):
         reach the bus. Polled one handle after the other, each handle's babble up to ``now_s``
         went out before the next handle's earlier frames: 1144 frames written earlier than the
         frame before them (``odocan run --robot kobuki --duration 8 --seed 3 --faults
-        babble=2000:0x100,seed=1``)."""
+        babble=4000:0x100,seed=1``, 2000/s from each handle)."""
         faulted = list(self._faulted)
         while faulted:
             first = min(faulted, key=lambda b: b.next_event_s(now_s))

@@ -34,7 +34,7 @@ BAD: list[tuple[str, tuple[str, ...]]] = [
     ("run --duration 1 --faults drop=1", ("no frame", "--faults drop=1")),
     ("run --duration 1 --faults flip=1", ("no ODOM_POSE_X frame", "--faults flip=1")),
     ("run --faults drop=2", ("drop", "[0, 1]")),
-    ("run --faults babble=1e9", ("babble", "10000")),
+    ("run --faults babble=1e9", ("babble", "20000")),
     ("run --faults delay=0.1:1e9", ("delay", "60000")),
     ("run --faults seed=-3", ("seed",)),
     ("run --faults bogus=1", ("bogus",)),
