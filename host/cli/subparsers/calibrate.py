@@ -18,6 +18,7 @@ from pathlib import Path
 
 from odocan.host.cli.subparsers.umbmark import add_arguments, header
 from odocan.host.experiments import render, umbmark
+from odocan.host.experiments.calreport import calibration_report
 from odocan.host.experiments.keep import (
     check_robot_path,
     corrected_profile,
@@ -108,7 +109,7 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         render.umbmark_table(cal.after, "After"),
         render.improvement_line(cal),
     )
-    report = {"robot": profile.name, "seed": args.seed, **umbmark.calibration_report(cal, model)}
+    report = {"robot": profile.name, "seed": args.seed, **calibration_report(cal, model)}
     kept = corrected_profile(profile, cal.corrected)
     report["ros2_diff_drive"] = multipliers = ros2_multipliers(profile, kept)
     report["inputs"] = experiment_inputs(profile, args)
