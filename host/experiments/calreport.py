@@ -4,13 +4,31 @@ from __future__ import annotations
 
 import math
 
-from odocan.host.experiments.umbmark import Calibration, Correction, umbmark_report
+from odocan.host.experiments.umbmark import (
+    Calibration,
+    Correction,
+    Refusal,
+    UmbmarkResult,
+    umbmark_report,
+)
 from odocan.sim.errors import ErrorModel
 
 
 def calibration_report(cal: Calibration, errors: ErrorModel) -> dict[str, object]:
     """The ``odocan calibrate --report`` JSON contract (README, "UMBmark and calibration")."""
-    ed, eb = cal.estimated
+    return _report(cal, cal.estimated, errors, cal.after)
+
+
+def refused_report(refusal: Refusal, errors: ErrorModel) -> dict[str, object]:
+    """``calibration_report``'s keys for a calibration whose correction the firmware refused
+    (``umbmark.CorrectionRefused``): no benchmark after ran, so ``after``, ``emax_after_m`` and
+    ``improvement`` are null."""
+    return _report(refusal, refusal.estimated, errors, None)
+
+
+def _report(cal: Calibration | Refusal, estimated: tuple[float, float], errors: ErrorModel,
+            after: UmbmarkResult | None) -> dict[str, object]:
+    ed, eb = estimated
     b = cal.borenstein
     return {
         "injected": {"ed": errors.ed, "eb": errors.eb, "slip": errors.slip},
@@ -23,10 +41,11 @@ def calibration_report(cal: Calibration, errors: ErrorModel) -> dict[str, object
         "nominal": _geometry(cal.nominal),
         "corrected": _geometry(cal.corrected),
         "emax_before_m": cal.before.emax_m,
-        "emax_after_m": cal.after.emax_m,
-        "improvement": cal.before.emax_m / cal.after.emax_m if cal.after.emax_m else None,
+        "emax_after_m": None if after is None else after.emax_m,
+        "improvement": (cal.before.emax_m / after.emax_m
+                        if after is not None and after.emax_m else None),
         "before": umbmark_report(cal.before),
-        "after": umbmark_report(cal.after),
+        "after": None if after is None else umbmark_report(after),
     }
 
 

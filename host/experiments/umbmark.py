@@ -353,11 +353,31 @@ class Calibration:
         return self.model
 
 
+@dataclass(frozen=True)
+class Refusal:
+    """A calibration whose corrected geometry the firmware refused: all of it but the benchmark
+    after, which never ran."""
+
+    before: UmbmarkResult
+    borenstein: BorensteinEstimate
+    model: tuple[float, float]
+    method: str
+    nominal: Correction
+    corrected: Correction
+    fit_residual_m: float
+    estimated: tuple[float, float]  # the (E_d, E_b) applied
+
+
 class CorrectionRefused(ExperimentError):
     """The calibration's estimate is a geometry the firmware refuses (e.g. a 1 cm wheelbase times
-    E_b 0.7, below its 1 cm minimum): the calibration failed, exit 1, not bad input."""
+    E_b 0.7, below its 1 cm minimum): the calibration failed, exit 1, not bad input. ``refusal``:
+    what the calibration found up to it (for its report)."""
 
     exit_code = 1
+
+    def __init__(self, message: str, refusal: Refusal) -> None:
+        super().__init__(message)
+        self.refusal = refusal
 
 
 def calibrate(
@@ -400,7 +420,8 @@ def calibrate(
             f"{chosen[1]:.6g}: radii {corrected.wheel_radius_left_m:.6g}/"
             f"{corrected.wheel_radius_right_m:.6g} m, wheelbase {corrected.wheelbase_m:.6g} m), "
             f"{exc}: " + "; ".join(refused_parameters(*astuple(corrected)) or ["the whole set"])
-            + "".join(f"; {r}" for r in small_angle_faults(before.emax_m, side_m))
+            + "".join(f"; {r}" for r in small_angle_faults(before.emax_m, side_m)),
+            Refusal(before, estimate, fitted, method, nominal, corrected, fit_residual_m, chosen),
         ) from None
     return Calibration(
         before, estimate, fitted, method, nominal, corrected, after, fit_residual_m
