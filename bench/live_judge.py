@@ -31,7 +31,7 @@ from odocan.sim.robot import load
 
 RUNS = {
     "clean": [],
-    "babble": ["-b", "125000", "--faults", "babble=1500:0x050:2:0.5,seed=3"],
+    "babble": ["-b", "125000", "--faults", "babble=3000:0x050:2:0.5,seed=3"],
 }
 
 

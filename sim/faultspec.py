@@ -16,14 +16,15 @@ Every key is optional, comma-separated::
                     frames of 8 random bytes on that one ID (29-bit above 0x7FF, written with
                     more than 3 hex digits: 0x00000900, not 0x900), which on a
                     bit-timed bus wins arbitration against every higher ID; with T:DUR it
-                    babbles only from T s for DUR s (else from the first frame, for ever)
+                    babbles only from T s for DUR s (else from the first frame, for ever).
+                    RATE is on the wire: ``two_handles`` splits it between the rig's handles
     busoff=T:DUR    at T s the transmitter's error counter climbs past 255 (32 failed attempts,
                     +8 each, through the warning and error-passive limits): bus-off for DUR s,
                     then recovery after 128 occurrences of 11 recessive bits (at ``bitrate``)
     seed=N          the seed of every random draw (the same seed gives the same faults)
 
 P in [0, 1]; LEN >= 1; MS >= 0; 1 <= BITS <= 64; RATE >= 0 frames/s; 0 <= ID <= 0x1FFFFFFF;
-T, DUR >= 0 s. A frame
+T, DUR >= 0 s (a bus-off's DUR > 0). A frame
 suffers at most one of drop, burst, dup, delay, flip: one uniform draw per frame is split into
 intervals of those widths (``exclusive_edges``: each has exactly its probability; their sum must
 be <= 1). ``sim.faults.FaultInjectingBus`` injects what a spec says.
@@ -32,7 +33,7 @@ be <= 1). ``sim.faults.FaultInjectingBus`` injects what a spec says.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from odocan.sim.exceptions import ConfigurationError
@@ -95,6 +96,9 @@ class FaultSpec:
         if self.busoff is not None:
             _check_float("busoff", self.busoff.at_s, "T")
             _check_float("busoff", self.busoff.duration_s, "DUR")
+            if self.busoff.duration_s == 0:  # only the recovery time: no bus-off at all
+                raise _fail("busoff", f"{_num(self.busoff.at_s)}:0",
+                            "DUR must be > 0 s (a bus-off of no length; leave busoff out)")
         _check_int("seed", self.seed, None, None, "N")
 
     @classmethod
@@ -225,6 +229,16 @@ def _parse_value(key: str, value: str) -> dict[str, Any]:
         return {"flip": _number(key, parts[0], "P"), "flip_bits": bits}
     at, duration = _fields(key, value, "T:DURATION")
     return {"busoff": BusOff(_number(key, at, "T"), _number(key, duration, "DURATION"))}
+
+
+def two_handles(spec: FaultSpec) -> tuple[FaultSpec, FaultSpec]:
+    """One ``--faults`` spec as the rig's two faulted handles take it (``odocan run``: the
+    motor controller's and the firmware's sends): the frame faults and bus-off on each (the
+    firmware's drawn from ``seed + 1``), the babbling node's RATE split in half between them, so
+    that RATE is what reaches the wire, as a CAN tool's interactive generator means it (two
+    Poisson streams of RATE / 2 are one of RATE; halving a float is exact)."""
+    half = replace(spec, babble=spec.babble / 2)
+    return half, replace(half, seed=spec.seed + 1)
 
 
 def exclusive_edges(spec: FaultSpec) -> list[tuple[float, str]]:

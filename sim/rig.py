@@ -45,7 +45,13 @@ from odocan.sim.clock import LockstepClock
 from odocan.sim.closing import Closing, release_all
 from odocan.sim.errors import ErrorModel
 from odocan.sim.exceptions import ConfigurationError
-from odocan.sim.faults import DEFAULT_BITRATE, FaultInjectingBus, FaultSpec
+from odocan.sim.faults import (
+    DEFAULT_BITRATE,
+    FaultInjectingBus,
+    FaultSpec,
+    catch_up,
+    release_due,
+)
 from odocan.sim.lookahead import BLOCK_TICKS, PlannedVehicle
 from odocan.sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
 from odocan.sim.robot import RobotProfile
@@ -260,35 +266,11 @@ class LockstepRig(Closing):
         judges, which read the log, counted its E2E window one period wider than the firmware's
         (a right firmware FAILed: seed 703, ``delay=0.1:20``)."""
         if self._faulted:
-            self._release_held(self.clock.now_s())
+            catch_up(self._faulted, self.clock.now_s())
         self.sim.tick(k)
-        if self._faulted:
-            self._release_due(self.clock.now_s() + TX_LATENCY_S)
+        if self._faulted:  # in time order across both handles (``sim.faults.release_due``)
+            release_due(self._faulted, self.clock.now_s() + TX_LATENCY_S)
         self.board.run_tick()
-
-    def _release_held(self, now_s: float) -> None:
-        """Bring the faulted handles up to ``now_s``: the held frames due (``_release_due``),
-        then bus-off transitions and babble."""
-        self._release_due(now_s)
-        for bus in self._faulted:
-            bus.poll(now_s)
-
-    def _release_due(self, now_s: float) -> None:
-        """Put on the bus the held frames and the babble due by ``now_s``, in time order across
-        both faulted handles (the sim's and the firmware's: each has its babbler), as they
-        reach the bus. Polled one handle after the other, each handle's babble up to ``now_s``
-        went out before the next handle's earlier frames: 1144 frames written earlier than the
-        frame before them (``odocan run --robot kobuki --duration 8 --seed 3 --faults
-        babble=2000:0x100,seed=1``)."""
-        faulted = list(self._faulted)
-        while faulted:
-            first = min(faulted, key=lambda b: b.next_event_s(now_s))
-            due_s = first.next_event_s(now_s)
-            if due_s > now_s:
-                break
-            first.poll(due_s)
-            if first.next_event_s(now_s) == due_s:  # bus-off: its held frames wait for recovery
-                faulted.remove(first)
 
     def run(
         self, duration_s: float | None = None, progress: Callable[[int, int], None] | None = None

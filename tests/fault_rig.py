@@ -27,11 +27,11 @@ from odocan.firmware.errors import ErrorMask
 from odocan.firmware.hal import MAILBOX_SLOTS
 from odocan.host.judge.reference import deltas_from_counts, integrate
 from odocan.sim import frames as sf
-from odocan.sim.board import TICK_S, FirmwareBoard
+from odocan.sim.board import TICK_S, TX_LATENCY_S, FirmwareBoard
 from odocan.sim.cboard import board_maker
 from odocan.sim.clock import LockstepClock
 from odocan.sim.contract import database
-from odocan.sim.faults import FaultInjectingBus, FaultSpec
+from odocan.sim.faults import FaultInjectingBus, FaultSpec, catch_up, release_due
 from odocan.sim.motor_controller import SimNode
 from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import RandomScenario, Scenario
@@ -117,7 +117,13 @@ class FaultRig:
             observer(k, frames)
 
     def _work(self, k: int) -> None:
+        """As ``LockstepRig._work``: the faulted handles' babble and held frames go on the bus
+        when due, in time order across both (``sim.faults.catch_up``, ``release_due``), not when
+        their node next sends (babble then went out after the other node's later frames)."""
+        faulted = [b for b in (self.sim_bus, self.fw_bus) if isinstance(b, FaultInjectingBus)]
+        catch_up(faulted, self.clock.now_s())
         self.sim.tick(k)
+        release_due(faulted, self.clock.now_s() + TX_LATENCY_S)
         for hook in self.before_board:
             hook(k)
         if not self.halted(k):

@@ -13,7 +13,6 @@ silence: 3.5 mm off the truth, a correct firmware FAILed).
 from __future__ import annotations
 
 import itertools
-from dataclasses import replace
 from pathlib import Path
 
 import can
@@ -29,6 +28,7 @@ from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamReference
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.contract import database
 from odocan.sim.faults import FaultSpec
+from odocan.sim.faultspec import two_handles
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests.dbc_typed import decode, number
@@ -43,11 +43,11 @@ SILENCE_S = 1.2  # a bus gap the old rule aged by 1 s or more ((120 - 16) // 100
 
 
 def babble_log(path: Path, firmware: str, babble_s: float) -> Path:
-    """pmir's random drive on a 125 kbit/s bus with a babbler on ID 0x050 (1500 frames/s from
-    2 s, ``babble_s`` long), as ``odocan run --faults`` drives it (the drive run ahead, the
-    firmware's handle faulted with the next seed): the candump log."""
-    spec = FaultSpec.parse(f"babble=1500:0x050:2:{babble_s},seed=3")
-    config = RigConfig(load("pmir"), faults=spec, fw_faults=replace(spec, seed=spec.seed + 1),
+    """pmir's random drive on a 125 kbit/s bus with a babbler on ID 0x050 (1500 frames/s from each
+    controller from 2 s, ``babble_s`` long), as ``odocan run --faults`` drives it (the drive run
+    ahead, the firmware's handle faulted with the next seed): the candump log."""
+    spec, fw_spec = two_handles(FaultSpec.parse(f"babble=3000:0x050:2:{babble_s},seed=3"))
+    config = RigConfig(load("pmir"), faults=spec, fw_faults=fw_spec,
                        bitrate=BITRATE, seed=3, lookahead=True,
                        firmware=firmware, duration_s=DURATION_S)
     with LockstepRig(config, [can.Logger(path)]) as rig:

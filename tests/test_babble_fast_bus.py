@@ -1,6 +1,7 @@
 """A babbler on a fast bit-timed bus (issue #11): its burst overflows the firmware's mailbox.
 
-``babble=6000:0x050:2:0.5,seed=0`` on pmir (seed 0): 6000 data frames per second on ID 0x050,
+``babble=12000:0x050:2:0.5,seed=0`` on pmir (seed 0): 6000 data frames per second from each
+controller on ID 0x050,
 below WHEEL_ENCODERS, from 2.0 to 2.5 s. At 1 Mbit/s the babbler's backlog holds the bus until
 about 2.7 s; then the encoder frames that waited come out back to back (about 240 us apart), far
 faster than the firmware drains its 32-slot mailbox once per 10 ms tick, so the mailbox drops
@@ -24,7 +25,6 @@ import random
 import subprocess
 import sys
 import uuid
-from dataclasses import replace
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -40,6 +40,7 @@ from odocan.firmware.hal import MAILBOX_SLOTS
 from odocan.host.judge.losses import OneSteps, drop_errors, run_errors, worst_runs_m
 from odocan.host.judge.samples import Encoders
 from odocan.sim.faults import FaultSpec
+from odocan.sim.faultspec import two_handles
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests.independent_checker import Robot, _Odometry
@@ -47,16 +48,16 @@ from tests.test_babble_firmware import _analyze, _biased_x
 from tests.test_ecu import Rig
 from tests.test_judge_campaign import profile_of, robots
 
-BABBLE = "babble=6000:0x050:2:0.5,seed=0"
+BABBLE = "babble=12000:0x050:2:0.5,seed=0"  # on the wire
 DURATION_S = 6.0
 
 
 def _firmware_at(bitrate: int) -> tuple[int, int, int]:
     """The firmware's error mask, mailbox overflows and rejected-as-implausible frames after the
     babble drive on a bus of ``bitrate`` bit/s."""
-    faults = FaultSpec.parse(BABBLE)  # on both handles, as ``odocan run`` puts it
+    faults, fw_faults = two_handles(FaultSpec.parse(BABBLE))  # as ``odocan run`` puts it
     config = RigConfig(load("pmir"), channel=f"fastbabble-{uuid.uuid4().hex}", faults=faults,
-                       fw_faults=replace(faults, seed=faults.seed + 1), bitrate=bitrate, seed=0)
+                       fw_faults=fw_faults, bitrate=bitrate, seed=0)
     with LockstepRig(config, []) as rig:
         for _ in range(round(DURATION_S * 100)):
             rig.step()

@@ -52,7 +52,8 @@ from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests.dbc_typed import decode, number
 
-BABBLE = "babble=1500:0x050:2:0.5,seed=3"
+BABBLE = "babble=1500:0x050:2:0.5,seed=3"  # one handle (the motor controller's)
+BABBLE_RUN = "babble=3000:0x050:2:0.5,seed=3"  # ``odocan run``: 1500/s from each controller
 BITRATE = 125_000
 DURATION_S = 4.5
 
@@ -117,7 +118,7 @@ def test_babble_starves_the_encoders_but_loses_neither_frames_nor_distance(tmp_p
     report_path = tmp_path / "babble.json"
     done = subprocess.run(
         [sys.executable, "-m", "odocan", "run", "-b", str(BITRATE), "--seed", "3",
-         "--duration", str(DURATION_S), "--faults", BABBLE, "--report", str(report_path)],
+         "--duration", str(DURATION_S), "--faults", BABBLE_RUN, "--report", str(report_path)],
         capture_output=True, text=True, timeout=300,
     )
     assert done.returncode in (0, 1), done.stderr
@@ -201,7 +202,7 @@ def test_the_judge_passes_a_firmware_whose_pose_only_lagged(tmp_path: Path) -> N
     report_path = tmp_path / "babble.json"
     subprocess.run(
         [sys.executable, "-m", "odocan", "run", "-b", str(BITRATE), "--seed", "3",
-         "--duration", str(DURATION_S), "--faults", BABBLE, "--report", str(report_path)],
+         "--duration", str(DURATION_S), "--faults", BABBLE_RUN, "--report", str(report_path)],
         capture_output=True, text=True, timeout=300, check=False,
     )
     report = json.loads(report_path.read_text())
@@ -218,7 +219,7 @@ def _run_log(tmp_path: Path) -> Path:
     log = tmp_path / "babble.log"
     subprocess.run(
         [sys.executable, "-m", "odocan", "run", "-b", str(BITRATE), "--seed", "3",
-         "--duration", str(DURATION_S), "--faults", BABBLE, "--log", str(log)],
+         "--duration", str(DURATION_S), "--faults", BABBLE_RUN, "--log", str(log)],
         capture_output=True, text=True, timeout=300, check=False,
     )
     return log

@@ -83,9 +83,10 @@ def _periodic_releases(
         phase_ns = rng.randrange(max(1, m.period_ns // TICK_NS)) * TICK_NS
         for nominal_ns in range(phase_ns, duration_ns, m.period_ns):
             release_ns = nominal_ns + rng.randrange(jitter_ns + 1)
-            data = rng.randbytes(m.dlc)
-            msg = can.Message(arbitration_id=m.can_id, is_extended_id=m.extended, data=data)
-            out.append((release_ns, m.senders[0], msg))
+            for _ in range(m.frames_per_cycle):  # ODOM_STATUS 2, SIM_TRUTH 3: queued at once
+                data = rng.randbytes(m.dlc)
+                msg = can.Message(arbitration_id=m.can_id, is_extended_id=m.extended, data=data)
+                out.append((release_ns, m.senders[0], msg))
     return out
 
 

@@ -1,10 +1,11 @@
 """A babbling node on a bit-timed bus: which messages starve, and what the report says of it.
 
-``odocan run -b 125000 --faults babble=1500`` for 3 simulated s: both the sim's and the firmware's
-controllers babble (random IDs, 10 % error frames, which win every arbitration) at 1500 frames/s
-each, which with odocan.dbc's own traffic asks more than the 125 kbit/s wire can carry. Arbitration
-then serves the low identifiers: WHEEL_ENCODERS (0x100) still gets nearly every frame through,
-the low-priority status and truth messages (0x380, 0x700) starve in their transmit buffers.
+``odocan run -b 125000 --faults babble=3000`` for 3 simulated s: 3000 frames/s on the wire, 1500
+from each of the sim's and the firmware's controllers (random IDs, 10 % error frames, which win
+every arbitration), which with odocan.dbc's own traffic asks more than the 125 kbit/s wire can
+carry. Arbitration then serves the low identifiers: WHEEL_ENCODERS (0x100) still gets nearly
+every frame through, the low-priority status and truth messages (0x380, 0x700) starve in their
+transmit buffers.
 
 The report names them (``bus.starved``, a STARVED line in the summary, frames late and never
 sent per message). The E2E layer cannot: a frame that waits is not lost, so its sequence counters
@@ -25,7 +26,7 @@ def test_babble_starves_the_low_priorities_and_the_report_says_so(tmp_path: Path
     report_path = tmp_path / "babble.json"
     done = subprocess.run(
         [sys.executable, "-m", "odocan", "run", "-b", "125000", "--duration", str(DURATION_S),
-         "--faults", "babble=1500", "--report", str(report_path)],
+         "--faults", "babble=3000", "--report", str(report_path)],
         capture_output=True, text=True, timeout=300,
     )
     assert done.returncode in (0, 1), done.stderr

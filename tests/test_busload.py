@@ -247,8 +247,8 @@ def test_bound_is_tight_up_to_the_tau_window(seed: int) -> None:
 def test_bound_reached_on_odocan_dbc(bitrate: int) -> None:
     messages = sched.messages_from_dbc(database())
     load = sched.analyse_bus(messages, bitrate)
-    assert_reached_from_critical_instant(
-        [r.flow for r in load.responses], sched.bit_time_ns(bitrate)
+    assert_reached_from_critical_instant(  # every frame: ODOM_STATUS's 2, SIM_TRUTH's 3
+        [r.flow for r in load.frames], sched.bit_time_ns(bitrate)
     )
 
 
@@ -359,13 +359,14 @@ def test_shared_identifier_is_refused() -> None:
 
 
 def test_odocan_dbc_utilization_by_hand() -> None:
-    """14 frames of 8 bytes, 135 bits each: 1 at 10 ms, 4 at 20 ms, 3 at 100 ms, 1 at 1000 ms
-    (ODOM_FRESHNESS), and 5 event messages taken as sporadic at the DBC's shortest cycle."""
+    """17 frames of 8 bytes, 135 bits each: 1 at 10 ms, 4 at 20 ms, 6 at 100 ms (NAV_STATUS, 2 of
+    ODOM_STATUS and 3 of SIM_TRUTH: their E2EFramesPerCycle), 1 at 1000 ms (ODOM_FRESHNESS), and
+    5 event messages taken as sporadic at the DBC's shortest cycle."""
     messages = sched.messages_from_dbc(database())
     load = sched.analyse_bus(messages, 500_000)
     frame_ms = 135 * 2e-3
     assert load.utilization == pytest.approx(
-        frame_ms * (6 / 10 + 4 / 20 + 3 / 100 + 1 / 1000), rel=1e-12)
+        frame_ms * (6 / 10 + 4 / 20 + 6 / 100 + 1 / 1000), rel=1e-12)
     sporadic = [m.name for m in messages if not m.cyclic]
     assert sporadic == ["NAV_GOAL", "ODOM_SET_POSE", "ODOM_CONFIG", "ODOM_ACK", "ODOM_AUTH"]
     assert all("shortest cycle" in m.assumption for m in messages if not m.cyclic)

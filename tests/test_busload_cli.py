@@ -18,6 +18,7 @@ from tests.test_cli_run import assert_usage_error, run_cli
 EXPECTED_500K = """\
 odocan busload: dbc/odocan.dbc at 500000 bit/s (Davis et al. 2007 analysis)
 times in ms: T period, D deadline, C frame, J queuing jitter, B blocking, R worst response; * sporadic
+xN: N frames each cycle (E2EFramesPerCycle), queued at once: C per frame, R the last frame's
 
     ID   message           sender          DLC   bits        T        D       C       J       B       R     slack
  ────────────────────────────────────────────────────────────────────────────────────────────────────────────────
@@ -33,10 +34,10 @@ times in ms: T period, D deadline, C frame, J queuing jitter, B blocking, R wors
  0x302   ODOM_ACK *        ODOM_MCU          8    135     10.0     10.0   0.270   0.000   0.270   2.970     7.030
  0x303   ODOM_AUTH *       HOST              8    135     10.0     10.0   0.270   0.000   0.270   3.240     6.760
  0x304   ODOM_FRESHNESS    ODOM_MCU          8    135   1000.0   1000.0   0.270   0.000   0.270   3.510   996.490
- 0x380   ODOM_STATUS       ODOM_MCU          8    135    100.0    100.0   0.270   0.000   0.270   3.780    96.220
- 0x700   SIM_TRUTH         SIM               8    135    100.0    100.0   0.270   0.000   0.000   3.780    96.220
+ 0x380   ODOM_STATUS x2    ODOM_MCU          8    135    100.0    100.0   0.270   0.000   0.270   4.050    95.950
+ 0x700   SIM_TRUTH x3      SIM               8    135    100.0    100.0   0.270   0.000   0.000   4.590    95.410
 
-utilization 22.4% (cyclic messages 8.9%)
+utilization 23.2% (cyclic messages 9.7%)
 sender ticks: HOST 20 ms, MOTOR_CTRL 10 ms, ODOM_MCU 20 ms, SIM 100 ms; queue jitter 0 ms
 - NAV_GOAL: no cycle time: sporadic, min inter-arrival = the DBC's shortest cycle time (10 ms)
 - ODOM_SET_POSE: no cycle time: sporadic, min inter-arrival = the DBC's shortest cycle time (10 ms)
@@ -110,10 +111,11 @@ def test_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert report["schedulable"] is True
     assert report["bitrate"] == 500_000
     assert report["bit_time_us"] == 2.0
-    # 14 frames of 135 bits (0.27 ms): 6 at 10 ms (5 sporadic), 4 at 20, 3 at 100, 1 at 1000 ms
-    assert report["utilization"] == pytest.approx(0.27 * (6 / 10 + 4 / 20 + 3 / 100 + 1 / 1000))
+    # 17 frames of 135 bits (0.27 ms): 6 at 10 ms (5 sporadic), 4 at 20, 6 at 100 (NAV_STATUS,
+    # ODOM_STATUS's summary and page, SIM_TRUTH's three parts: E2EFramesPerCycle), 1 at 1000 ms
+    assert report["utilization"] == pytest.approx(0.27 * (6 / 10 + 4 / 20 + 6 / 100 + 1 / 1000))
     assert report["utilization_cyclic"] == pytest.approx(
-        0.27 * (1 / 10 + 4 / 20 + 3 / 100 + 1 / 1000))
+        0.27 * (1 / 10 + 4 / 20 + 6 / 100 + 1 / 1000))
     # ODOM_AUTH (0x303) is the lowest-priority sporadic message: 12 frames ahead of and with it
     assert (report["worst_slack_message"], report["worst_slack_ms"]) == ("ODOM_AUTH", 6.76)
     wheel = report["messages"][0]
@@ -121,6 +123,11 @@ def test_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
         "name": "WHEEL_ENCODERS", "id": 0x100, "bits": 135,
         "c_ms": 0.27, "j_ms": 0.0, "b_ms": 0.27, "r_ms": 0.54,
     }  # fmt: skip
+    # ODOM_STATUS's second frame: one lower frame blocks, 12 other messages' frames and its own
+    # first go before it (14 x 0.27 ms), then itself; SIM_TRUTH's third: all 16 other frames
+    rows = {m["name"]: m for m in report["messages"]}
+    assert [(rows[n]["frames_per_cycle"], rows[n]["b_ms"], rows[n]["r_ms"])
+            for n in ("ODOM_STATUS", "SIM_TRUTH")] == [(2, 0.27, 4.05), (3, 0.0, 4.59)]
     ack = next(m for m in report["messages"] if m["name"] == "ODOM_ACK")
     assert ack["kind"] == "sporadic"
     assert "shortest cycle time" in ack["assumption"]
@@ -168,7 +175,7 @@ def test_tick_option_sets_the_jitter(tmp_path: Path, capsys: pytest.CaptureFixtu
     messages = {m["name"]: m for m in json.loads(path.read_text())["messages"]}
     assert messages["SIM_TRUTH"]["j_ms"] == 20.5
     assert messages["WHEEL_ENCODERS"]["j_ms"] == 0.5
-    assert messages["SIM_TRUTH"]["r_ms"] == pytest.approx(20.5 + 14 * 0.27)  # all 14 frames
+    assert messages["SIM_TRUTH"]["r_ms"] == pytest.approx(20.5 + 17 * 0.27)  # all 17 frames
 
 
 def test_another_dbc(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -58,7 +58,7 @@ PMIR_CONFIG = {
 DURATION_S = 20  # simulated seconds per compared run
 # every kind of fault on what MOTOR_CTRL and SIM send (and, seeded apart, on what ODOM_MCU sends):
 # loss, bursts, duplicates, delays, bit flips, babbling and a bus-off the firmware must notice
-FAULTS = "drop=0.05,burst=0.01:3,dup=0.02,delay=0.02:5,flip=0.02,babble=50,busoff=5:1,seed=3"
+FAULTS = "drop=0.05,burst=0.01:3,dup=0.02,delay=0.02:5,flip=0.02,babble=100,busoff=5:1,seed=3"
 
 
 @pytest.fixture(scope="module", autouse=True)

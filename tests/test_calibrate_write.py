@@ -154,3 +154,32 @@ def test_ros2_parameters_of_a_robot_with_unequal_nominal_radii() -> None:
         kept.wheel_radius_right_m, rel=1e-12)
     lines = ros2_yaml(m).splitlines()
     assert lines[2:4] == ["    wheel_separation: 2.000000000", "    wheel_radius: 0.095000000"]
+
+
+def test_a_refused_correction_still_writes_the_report_and_the_junit(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """The firmware NACKs the corrected geometry (a 1 cm wheelbase times Borenstein's E_b near
+    0.7, ``test_nav_geometry``): FAIL, exit 1, one line on stderr as before, and the --report
+    and --junit asked for are written with the verdict, the reason and the benchmark before (no
+    benchmark after ran: null). They were not written at all."""
+    robot_path = tmp_path / "b1cm.toml"
+    robot_path.write_text('name = "b1cm"\ncounts_per_rev = 500\nwheel_radius_left_m = 0.075\n'
+                          "wheel_radius_right_m = 0.075\nwheelbase_m = 0.01\ncounter_bits = 16\n")
+    report_path, junit = tmp_path / "cal.json", tmp_path / "cal.xml"
+    code = main(["calibrate", "--robot", str(robot_path), "--runs", "1", "--method", "borenstein",
+                 "--report", str(report_path), "--junit", str(junit)])
+    _, err = capsys.readouterr()
+    assert code == 1, err
+    assert len(err.splitlines()) == 1
+    assert err.startswith("FAIL: the firmware refused the corrected geometry"), err
+    report = json.loads(report_path.read_text())
+    assert report["passed"] is False
+    assert report["faults"] == [err.removeprefix("FAIL: ").strip()]
+    assert (report["robot"], report["estimated"]["method"]) == ("b1cm", "borenstein")
+    assert report["corrected"]["wheelbase_m"] < 0.01  # the geometry the firmware refused
+    assert report["emax_before_m"] == report["before"]["emax_syst_m"] > 0
+    assert (report["after"], report["emax_after_m"], report["improvement"]) == (None, None, None)
+    cases = {c.get("name"): c for c in ET.parse(junit).getroot().iter("testcase")}
+    assert cases["verdict"].find("failure") is not None
+    assert any(str(name).startswith("before_") for name in cases), cases

@@ -143,6 +143,31 @@ def test_replay_keeps_gaps_as_ticks_without_a_frame(
     assert vs_log["max_heading_diff_rad"] == 0.0  # the heading is exact across the gap
 
 
+def test_a_hole_of_16_periods_in_the_recording_names_no_frame_before_it(
+    recorded: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A recording that lost every frame for 16 encoder periods (2.0015 s to 2.1605 s): the
+    first frame after the hole is a pose naming the encoder frame 16 periods after the one the
+    last pose before it named, with the same 4-bit COUNTER. Resolved against the latest encoder
+    frame in the log (2.000 s, 16 periods old) it landed on that frame: the replay compared a
+    pose with the one 160 ms before it, called it a resend that moved 10 mm, and blamed the
+    build (FAIL). The judges' age rule (``samples.named_targets``) names no frame for it."""
+    lines = recorded["log"].read_text().splitlines()
+    stamp = [float(line.split(")")[0][1:]) for line in lines]
+    hole_log = tmp_path / "hole.log"
+    hole_log.write_text("".join(ln + "\n" for ln, t in zip(lines, stamp, strict=True)
+                                if not 2.0015 < t < 2.1605))
+    kept = [ln for ln, t in zip(lines, stamp, strict=True) if t > 2.1605]
+    assert kept[0].startswith("(2.161000) vcan0 200#")  # a pose comes first after the hole
+    report_path = tmp_path / "replay.json"
+    code, out, err = run_cli(capsys, "replay", str(hole_log), "--report", str(report_path))
+    assert (code, err) == (0, ""), out
+    vs_log = json.loads(report_path.read_text())["replay"]["onboard_vs_log"]
+    assert (vs_log["before_first_gap"], vs_log["identical"]) == (101, 101)
+    assert vs_log["max_position_diff_before_gap_m"] == vs_log["max_resent_position_diff_m"] == 0
+    assert vs_log["max_heading_diff_rad"] == 0.0
+
+
 def test_replay_feeds_only_frames_that_pass_e2e(
     recorded: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -32,7 +32,7 @@ from tests.test_babble_firmware import _biased_x
 from tests.test_judge_campaign import profile_of, robots
 
 DURATION_S = 10
-BABBLE = "babble=8000"
+BABBLE = "babble=16000"  # on the wire: 8000/s from each controller
 LSB_M = 1e-4
 
 

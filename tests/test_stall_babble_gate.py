@@ -53,8 +53,7 @@ def _stall_babble_log(path: Path) -> Path:
         rig.observers.append(lambda tick, frames: messages.extend(frames))
         rig.halted = lambda k: HALT_AT <= k < HALT_AT + HALT_TICKS
         rig.run((HALT_AT + HALT_TICKS + 300) * TICK_S)
-    messages.sort(key=lambda m: m.timestamp)  # in bus order: the fault rig polls the babbler
-    path.write_text("".join(  # only when its node sends, one handle after the other
+    path.write_text("".join(  # in bus order, as the fault rig hears it
         f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#{bytes(m.data).hex().upper()}\n"
         for m in messages))
     return path

@@ -43,16 +43,16 @@ ROBOT = {"awkward": "pmir", "rig": "pmir", "lossy": "kobuki", "babble": "pmir"}
 
 @cache
 def run_lines(which: str) -> tuple[str, ...]:
-    """``odocan run --log``'s lines of a lossy run (kobuki, babble=8000 on the instant bus, 3 s:
+    """``odocan run --log``'s lines of a lossy run (kobuki, babble=16000 on the instant bus, 3 s:
     the firmware's mailbox overflows; only the lines of the DBC's IDs, so that chunks of one
     frame stay quick; the firmware's reports of what it lost are all there) or of the babble
     run of tests/test_babble_firmware.py (125 kbit/s: frames wait and come in a burst)."""
     from tempfile import TemporaryDirectory
 
-    argv = (["--robot", "kobuki", "--duration", "3", "--faults", "babble=8000"]
+    argv = (["--robot", "kobuki", "--duration", "3", "--faults", "babble=16000"]
             if which == "lossy" else
             ["-b", "125000", "--seed", "3", "--duration", "4.5", "--faults",
-             "babble=1500:0x050:2:0.5,seed=3"])
+             "babble=3000:0x050:2:0.5,seed=3"])
     with TemporaryDirectory() as tmp:
         log = Path(tmp) / "run.log"
         subprocess.run([sys.executable, "-m", "odocan", "run", *argv, "--log", str(log)],

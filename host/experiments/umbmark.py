@@ -353,11 +353,31 @@ class Calibration:
         return self.model
 
 
+@dataclass(frozen=True)
+class Refusal:
+    """A calibration whose corrected geometry the firmware refused: all of it but the benchmark
+    after, which never ran."""
+
+    before: UmbmarkResult
+    borenstein: BorensteinEstimate
+    model: tuple[float, float]
+    method: str
+    nominal: Correction
+    corrected: Correction
+    fit_residual_m: float
+    estimated: tuple[float, float]  # the (E_d, E_b) applied
+
+
 class CorrectionRefused(ExperimentError):
     """The calibration's estimate is a geometry the firmware refuses (e.g. a 1 cm wheelbase times
-    E_b 0.7, below its 1 cm minimum): the calibration failed, exit 1, not bad input."""
+    E_b 0.7, below its 1 cm minimum): the calibration failed, exit 1, not bad input. ``refusal``:
+    what the calibration found up to it (for its report)."""
 
     exit_code = 1
+
+    def __init__(self, message: str, refusal: Refusal) -> None:
+        super().__init__(message)
+        self.refusal = refusal
 
 
 def calibrate(
@@ -400,7 +420,8 @@ def calibrate(
             f"{chosen[1]:.6g}: radii {corrected.wheel_radius_left_m:.6g}/"
             f"{corrected.wheel_radius_right_m:.6g} m, wheelbase {corrected.wheelbase_m:.6g} m), "
             f"{exc}: " + "; ".join(refused_parameters(*astuple(corrected)) or ["the whole set"])
-            + "".join(f"; {r}" for r in small_angle_faults(before.emax_m, side_m))
+            + "".join(f"; {r}" for r in small_angle_faults(before.emax_m, side_m)),
+            Refusal(before, estimate, fitted, method, nominal, corrected, fit_residual_m, chosen),
         ) from None
     return Calibration(
         before, estimate, fitted, method, nominal, corrected, after, fit_residual_m
@@ -461,30 +482,3 @@ def _run_report(run: UmbmarkRun) -> dict[str, float]:
     return {"x_m": run.error_x_m, "y_m": run.error_y_m,
             "true_end_x_m": d.end.x_m, "true_end_y_m": d.end.y_m,
             "onboard_end_x_m": d.onboard_end[0], "onboard_end_y_m": d.onboard_end[1]}
-
-
-def _geometry(c: Correction) -> dict[str, float]:
-    return {"wheel_radius_left_m": c.wheel_radius_left_m,
-            "wheel_radius_right_m": c.wheel_radius_right_m, "wheelbase_m": c.wheelbase_m}
-
-
-def calibration_report(cal: Calibration, errors: ErrorModel) -> dict[str, object]:
-    """The ``odocan calibrate --report`` JSON contract (README, "UMBmark and calibration")."""
-    ed, eb = cal.estimated
-    b = cal.borenstein
-    return {
-        "injected": {"ed": errors.ed, "eb": errors.eb, "slip": errors.slip},
-        "estimated": {"ed": ed, "eb": eb, "method": cal.method},
-        "borenstein": {"alpha_deg": math.degrees(b.alpha_rad), "beta_deg": math.degrees(b.beta_rad),
-                       "radius_m": b.radius_m if math.isfinite(b.radius_m) else None,
-                       "ed": b.ed, "eb": b.eb},
-        "model": {"ed": cal.model[0], "eb": cal.model[1],
-                  "fit_residual_rms_m": cal.fit_residual_m},
-        "nominal": _geometry(cal.nominal),
-        "corrected": _geometry(cal.corrected),
-        "emax_before_m": cal.before.emax_m,
-        "emax_after_m": cal.after.emax_m,
-        "improvement": cal.before.emax_m / cal.after.emax_m if cal.after.emax_m else None,
-        "before": umbmark_report(cal.before),
-        "after": umbmark_report(cal.after),
-    }

@@ -27,7 +27,8 @@ from odocan.sim.faults import FaultInjectingBus, FaultSpec
 
 UDP_PORT_BASE, UDP_PORT_SPAN = 20000, 10000  # derived udp_multicast ports: 20000..29999
 UDP_DEFAULT_GROUP = "ff15:7079:7468:6f6e:6465:6d6f:6d63:6173"  # python-can's default channel
-BABBLE_MAX_PER_S = 10_000.0  # a babbling node: more than a 1 Mbit/s bus carries of 8-byte frames
+BABBLE_MAX_PER_S = 20_000.0  # on the wire: 10 000 from each of the rig's two handles, more
+# than a 1 Mbit/s bus carries of 8-byte frames
 DELAY_MAX_MS = 60_000.0
 BUSOFF_MAX_S = 86_400.0
 FAULT_SEED_LIMIT = 2**32
@@ -85,7 +86,8 @@ def add_fault_argument(parser: argparse.ArgumentParser) -> None:
         default="",
         metavar="SPEC",
         help="faults on this node's sends: drop=P,burst=P:LEN,dup=P,delay=P:MS,flip=P,"
-        "babble=RATE[:ID[:T:DUR]],busoff=T:DUR,seed=N (docs/bus.md, 'Faults on the bus')",
+        "babble=RATE[:ID[:T:DUR]],busoff=T:DUR,seed=N (babble's RATE: frames/s on the wire; "
+        "docs/bus.md, 'Faults on the bus')",
     )
 
 

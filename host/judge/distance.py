@@ -75,7 +75,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import path_bound_m
 from odocan.host.judge.gapbound import period_bounds
 from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
-from odocan.host.judge.resendalias import ALIAS_CYCLES
+from odocan.host.judge.resendalias import aged_past_alias
 from odocan.host.judge.resentdistance import resends_too
 from odocan.host.judge.samples import (
     SILENCE_CYCLES,
@@ -255,9 +255,10 @@ class DistanceJudge:
         firmware was silent for ``SILENCE_CYCLES`` cycles while the encoder frames went on (a
         stall: it names a frame of its backlog that ENC_COUNTER cannot resolve, as
         ``stalls.after_stalls`` leaves the pose out); and each resend of a judged one (naming
-        its frame again: ``resentdistance.resends_too``) within ``ALIAS_CYCLES`` of its frame's
-        bus time ``named_t_s`` (NaN: unknown; None: not checked), past which it may name a later
-        frame of that COUNTER (``host.judge.resendalias``)."""
+        its frame again: ``resentdistance.resends_too``) unless past the alias time rule
+        (``host.judge.resendalias.aged_past_alias``) since its frame's bus time ``named_t_s``
+        (NaN: unknown, past it; None: not checked): then it may name a later frame of that
+        COUNTER."""
         if len(e) == 0:
             return
         running = np.maximum.accumulate(np.concatenate(([self._running], e)))
@@ -269,7 +270,7 @@ class DistanceJudge:
                  & (heard - prev_heard >= SILENCE_CYCLES - 1))
         resend = (e >= 0) & (e == before) & ~quiet
         if named_t_s is not None:
-            resend &= t_s - named_t_s < ALIAS_CYCLES * ENCODER_PERIOD_US * 1e-6
+            resend &= ~aged_past_alias(t_s - named_t_s, ENCODER_PERIOD_US * 1e-6)
         ok = resends_too((e >= 0) & (e > before) & ~quiet, resend, self._judged_last)
         self._judged_last = bool(ok[-1])
         self.feed_samples(e[ok], raw_mm[ok])

@@ -14,7 +14,7 @@ import numpy as np
 
 from odocan.host.judge.livepose import FramePose, difference
 from odocan.host.judge.livewindow import CYCLE_S, Half
-from odocan.host.judge.resendalias import ALIAS_CYCLES
+from odocan.host.judge.resendalias import aged_past_alias
 from odocan.sim.pose import TURN_RAD
 
 if TYPE_CHECKING:
@@ -46,11 +46,11 @@ def judge_resend(name: str, seq: int, half: Half, tracker: PoseTracker) -> bool:
 
 def may_alias_live(seq: int, t_s: float, tracker: PoseTracker) -> bool:
     """Whether a half heard at ``t_s`` may name a later frame with frame ``seq``'s COUNTER
-    (``host.judge.resendalias``: ``ALIAS_CYCLES`` encoder cycles since frame ``seq`` came, or
-    the frame left the window)."""
+    (``host.judge.resendalias.aged_past_alias`` since frame ``seq`` came, or the frame left the
+    window)."""
     window = tracker._window
     seqs = window.col("seq")
     k = int(np.searchsorted(seqs, seq))
     if k >= len(seqs) or seqs[k] != seq:
         return True
-    return bool(t_s - window.col("t_s")[k] >= ALIAS_CYCLES * CYCLE_S)
+    return aged_past_alias(t_s - float(window.col("t_s")[k]), CYCLE_S)

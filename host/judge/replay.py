@@ -54,6 +54,7 @@ from odocan.host.io.logs import (
 )
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Analysis, Tolerance, analyze
 from odocan.host.judge.diagnosis import fitting_profiles
+from odocan.host.judge.samples import Encoders, contract_cycle_s, named_targets
 from odocan.host.outputs import OutputError
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -89,6 +90,8 @@ class EncoderTrack:
     index: IntArray  # positions in the frames
     counter: IntArray  # E2E COUNTER
     tick: IntArray  # 10 ms periods since the first one, strictly increasing
+    timestamp_s: npt.NDArray[np.float64]  # bus times
+    cycle_s: float | None  # the DBC cycle time
 
     @classmethod
     def of(cls, frames: FrameArrays, accepted: npt.NDArray[np.bool_],
@@ -98,17 +101,24 @@ class EncoderTrack:
         keep = accepted[enc["index"]]
         counter = enc["COUNTER"][keep].astype(np.int64)
         ticks = encoder_ticks(enc["timestamp_s"][keep], counter)
-        return cls(enc["index"][keep], counter, ticks)
+        return cls(enc["index"][keep], counter, ticks, enc["timestamp_s"][keep],
+                   contract_cycle_s(decoder, "WHEEL_ENCODERS"))
 
-    def named(self, index: IntArray, enc_counter: IntArray) -> IntArray:
-        """The tick of the encoder frame that frames at ``index`` name by ``enc_counter``
-        (resolved against the latest accepted encoder frame before each); -1 when that frame is
-        not in the track."""
-        latest = np.searchsorted(self.index, index) - 1
+    def named(self, index: IntArray, enc_counter: IntArray,
+              timestamp_s: npt.NDArray[np.float64]) -> IntArray:
+        """The tick of the encoder frame that frames at ``index`` (sent at ``timestamp_s``)
+        name by ``enc_counter``, resolved against the latest accepted encoder frame before each
+        when it is less than 8 cycles older (``samples.named_targets``, the judges' rule: across
+        a longer gap of the log the 4-bit COUNTER cannot tell the frame named from one 16
+        periods away); -1 when that frame is not in the track."""
         result = np.full(len(index), -1, dtype=np.int64)
-        has = np.flatnonzero(latest >= 0)
-        last = latest[has]
-        target = self.tick[last] + ((enc_counter[has] - self.counter[last] + 8) & 0xF) - 8
+        if len(self.tick) == 0:
+            return result
+        none = np.zeros(len(self.tick), dtype=np.int64)
+        as_encoders = Encoders(index=self.index, counter=self.counter, seq=self.tick, left=none,
+                               right=none, timestamp_s=self.timestamp_s, cycle_s=self.cycle_s)
+        has, target = named_targets(as_encoders, index, enc_counter, timestamp_s)
+        target = target[has]
         found = np.minimum(np.searchsorted(self.tick, target), len(self.tick) - 1)
         result[has] = np.where(self.tick[found] == target, target, -1)
         return result
@@ -265,7 +275,8 @@ def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dic
     for name, value, extra in (("ODOM_POSE_X", "X", "HEADING"), ("ODOM_POSE_Y", "Y", "TURNS")):
         d = decoder.decode(frames, name)
         keep = accepted[d["index"]]
-        ticks = track.named(d["index"][keep], d["ENC_COUNTER"][keep].astype(np.int64))
+        ticks = track.named(d["index"][keep], d["ENC_COUNTER"][keep].astype(np.int64),
+                            d["timestamp_s"][keep])
         half: dict[int, list[tuple[int, int]]] = {}
         previous = -1  # a resend names its predecessor's frame (one naming an earlier one
         for tick, v, e in zip(ticks.tolist(), d[value][keep].tolist(), d[extra][keep].tolist(),

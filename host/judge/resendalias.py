@@ -14,7 +14,7 @@ right after the frame (it ticks without a new one), well inside both."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -27,6 +27,19 @@ if TYPE_CHECKING:
 
 ALIAS_CYCLES = 12  # 16 frames a COUNTER round, less 4 cycles a frame may be held back
 COUNTER_MODULO = 16  # the E2E COUNTER of WHEEL_ENCODERS (byte 1, low nibble)
+
+
+@overload
+def aged_past_alias(since_s: float, cycle_s: float) -> bool: ...
+@overload
+def aged_past_alias(since_s: npt.NDArray[np.float64], cycle_s: float) -> npt.NDArray[np.bool_]: ...
+def aged_past_alias(since_s: float | npt.NDArray[np.float64], cycle_s: float
+                    ) -> bool | npt.NDArray[np.bool_]:
+    """The time rule (module docstring), the one every judge applies: a half heard ``since_s``
+    after the frame it was matched to may name a later frame of that COUNTER when
+    ``ALIAS_CYCLES`` encoder cycles of ``cycle_s`` passed, or when the time is unknown (NaN)."""
+    aged = np.logical_not(np.less(since_s, ALIAS_CYCLES * cycle_s))
+    return bool(aged) if np.ndim(aged) == 0 else aged
 
 
 def may_alias(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders,
@@ -44,7 +57,7 @@ def may_alias(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders,
         return out
     at = named[hit]
     since_s = frames.timestamp_s[rows[hit]] - enc.timestamp_s[at]
-    alias = since_s >= ALIAS_CYCLES * enc.cycle_s
+    alias = aged_past_alias(since_s, enc.cycle_s)
     counters = frames.data[every, 1] & 0xF
     for c in range(COUNTER_MODULO):
         mine = enc.counter[at] == c

@@ -37,7 +37,7 @@ is the same on every machine.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from decimal import Decimal, InvalidOperation
 from typing import TYPE_CHECKING, Any
 
@@ -54,6 +54,7 @@ STUFFED_BITS_STANDARD = 34  # g: SOF 1, ID 11, RTR 1, IDE 1, r0 1, DLC 4, CRC 15
 STUFFED_BITS_EXTENDED = 54  # g: SOF 1, ID 11, SRR 1, IDE 1, ID 18, RTR 1, r1 1, r0 1, DLC 4, CRC 15
 UNSTUFFED_BITS = 13  # CRC delimiter 1, ACK slot 1, ACK delimiter 1, EOF 7, interframe space 3
 MAX_DLC = 8
+MAX_FRAMES_PER_CYCLE = 16  # the DBC's E2EFramesPerCycle range (a 4-bit COUNTER's steps)
 # A fixed point past this much bus time, or not reached in this many steps, is called unbounded
 # and its message reported as one that can miss its deadline. Below 100 % utilization every busy
 # period ends; at exactly 100 % one with blocking never does, and the analysis gives no bound.
@@ -204,6 +205,7 @@ class BusMessage:
     deadline_ns: int
     cyclic: bool = True
     assumption: str = ""
+    frames_per_cycle: int = 1  # frames queued at once each period (the DBC's E2EFramesPerCycle)
 
 
 def jitter_ns(message: BusMessage, ticks_ns: dict[str, int], queue_jitter_ns: int) -> int:
@@ -244,14 +246,15 @@ class BusLoad:
 
     bitrate: int
     messages: list[BusMessage]  # highest priority first
-    responses: list[Response]  # same order
+    responses: list[Response]  # same order; a message of several frames: its last frame's
     ticks_ns: dict[str, int]
     queue_jitter_ns: int
+    frames: list[Response] = field(default_factory=list)  # every frame of a cycle, by priority
 
     @property
     def utilization(self) -> float:
-        """Sum of C/T over every message, sporadic ones at their minimum inter-arrival time."""
-        return utilization([response.flow for response in self.responses])
+        """Sum of C/T over every frame, sporadic ones at their minimum inter-arrival time."""
+        return utilization([response.flow for response in self.frames])
 
     @property
     def schedulable(self) -> bool:
@@ -266,6 +269,9 @@ class BusLoad:
         worst = min(self.responses, key=lambda r: r.slack_ns or 0)
         return worst.flow.name, worst.slack_ns
 
+    def _cyclic_names(self) -> set[str]:
+        return {m.name for m in self.messages if m.cyclic}
+
     def as_dict(self) -> dict[str, Any]:
         """The JSON report: times in ms, the assumptions spelled out."""
         name, slack_ns = self.worst_slack()
@@ -274,7 +280,7 @@ class BusLoad:
             "bit_time_us": bit_time_ns(self.bitrate) / 1000,
             "utilization": self.utilization,
             "utilization_cyclic": utilization(
-                [r.flow for m, r in zip(self.messages, self.responses, strict=True) if m.cyclic]
+                [r.flow for r in self.frames if r.flow.name in self._cyclic_names()]
             ),
             "schedulable": self.schedulable,
             "worst_slack_message": name,
@@ -301,6 +307,7 @@ def _message_dict(message: BusMessage, response: Response) -> dict[str, Any]:
         "senders": list(message.senders),
         "dlc": message.dlc,
         "bits": frame_bits(message.dlc, extended=message.extended),
+        "frames_per_cycle": message.frames_per_cycle,
         "kind": "cyclic" if message.cyclic else "sporadic",
         "assumption": message.assumption or None,
         "period_ms": _ms(flow.t_ns),
@@ -326,27 +333,37 @@ def analyse_bus(
 ) -> BusLoad:
     """The revised analysis of ``messages`` at ``bitrate``; utilization over 100 % is an error.
 
-    ``ticks_ns`` overrides the senders' tick periods (default: ``default_ticks_ns``).
+    ``ticks_ns`` overrides the senders' tick periods (default: ``default_ticks_ns``). A message of
+    ``frames_per_cycle`` n > 1 is n flows: its frames are queued at once each period and leave
+    in order, the k-th behind the k - 1 before it (its priority just below theirs, above every
+    other identifier's), each with the message's period, deadline and jitter; the message's
+    response is its last frame's (every frame's in ``BusLoad.frames``).
     """
     tau_ns = bit_time_ns(bitrate)
     ticks = default_ticks_ns(messages) | (ticks_ns or {})
-    flows = {m.name: _flow(m, tau_ns, ticks, queue_jitter_ns) for m in messages}
-    load = utilization(list(flows.values()))
+    flows = [_flow(m, k, tau_ns, ticks, queue_jitter_ns)
+             for m in messages for k in range(m.frames_per_cycle)]
+    load = utilization(flows)
     if load > 1.0:
         raise ConfigurationError(
             f"utilization {load:.1%} > 100 % at {bitrate} bit/s: the bus cannot carry these "
             "messages (use a higher --bitrate)"
         )
-    responses = response_times(list(flows.values()), tau_ns)
+    frames = response_times(flows, tau_ns)
     by_name = {m.name: m for m in messages}
-    ordered = [by_name[r.flow.name] for r in responses]
-    return BusLoad(bitrate, ordered, responses, ticks, queue_jitter_ns)
+    last = [r for r in frames if r.flow.priority % MAX_FRAMES_PER_CYCLE
+            == by_name[r.flow.name].frames_per_cycle - 1]
+    ordered = [by_name[r.flow.name] for r in last]
+    return BusLoad(bitrate, ordered, last, ticks, queue_jitter_ns, frames)
 
 
-def _flow(message: BusMessage, tau_ns: int, ticks: dict[str, int], queue_jitter_ns: int) -> Flow:
+def _flow(message: BusMessage, k: int, tau_ns: int, ticks: dict[str, int],
+          queue_jitter_ns: int) -> Flow:
+    """Frame ``k`` of ``message``'s cycle as a flow."""
+    key = arbitration_key(message.can_id, extended=message.extended)
     return Flow(
         name=message.name,
-        priority=arbitration_key(message.can_id, extended=message.extended),
+        priority=key * MAX_FRAMES_PER_CYCLE + k,
         c_ns=frame_bits(message.dlc, extended=message.extended) * tau_ns,
         t_ns=message.period_ns,
         d_ns=message.deadline_ns,
@@ -357,6 +374,7 @@ def _flow(message: BusMessage, tau_ns: int, ticks: dict[str, int], queue_jitter_
 # --- reading the messages from a DBC -----------------------------------------------------------
 
 DEADLINE_ATTRIBUTE = "GenMsgDeadlineTime"  # ms; odocan's convention, default: the cycle time
+FRAMES_ATTRIBUTE = "E2EFramesPerCycle"  # frames sent each cycle (dbc/README.md), default 1
 DELAY_ATTRIBUTE = "GenMsgDelayTime"  # ms; Vector's minimum time between two sends
 
 
@@ -423,4 +441,17 @@ def _bus_message(message: Message, fallback_ns: int, source: str) -> BusMessage:
         deadline_ns=deadline_ns,
         cyclic=cyclic,
         assumption=assumption,
+        frames_per_cycle=_frames_per_cycle(message.name, attributes),
     )
+
+
+def _frames_per_cycle(name: str, attributes: dict[str, Any]) -> int:
+    """The message's ``E2EFramesPerCycle`` (1 without it); 1 .. 16, else a one-line error."""
+    if FRAMES_ATTRIBUTE not in attributes:
+        return 1
+    value = attributes[FRAMES_ATTRIBUTE].value
+    if isinstance(value, bool) or not isinstance(value, int) or not (
+            1 <= value <= MAX_FRAMES_PER_CYCLE):
+        raise ConfigurationError(f"{name} {FRAMES_ATTRIBUTE}: {value!r} is not a whole number "
+                                 f"of frames in 1..{MAX_FRAMES_PER_CYCLE}")
+    return value

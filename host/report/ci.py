@@ -115,7 +115,10 @@ def umbmark_checks(report: dict[str, Any], prefix: str = "") -> list[Check]:
 
 
 def calibration_checks(report: dict[str, Any]) -> list[Check]:
-    """Both benchmarks' figures, E_max,syst smaller after than before, and the verdict."""
+    """Both benchmarks' figures, E_max,syst smaller after than before, and the verdict (the
+    benchmark before and the verdict alone when the firmware refused the correction: no after)."""
+    if report["after"] is None:
+        return [*umbmark_checks(report["before"], "before_"), *verdict_check(report)]
     before, after = report["emax_before_m"], report["emax_after_m"]
     improved = math.isfinite(after) and after < before
     figures = {"emax_before_mm": before * 1e3, "emax_after_mm": after * 1e3,

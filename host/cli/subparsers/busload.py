@@ -214,7 +214,8 @@ def busload_table(load: BusLoad) -> Table:
         style = "" if response.meets_deadline else "bold red"
         table.add_row(
             f"{message.can_id:#010x}" if message.extended else f"{message.can_id:#05x}",
-            message.name + ("" if message.cyclic else " *"),
+            message.name + ("" if message.cyclic else " *")
+            + (f" x{message.frames_per_cycle}" if message.frames_per_cycle > 1 else ""),
             ",".join(message.senders),
             str(message.dlc),
             str(frame_bits(message.dlc, extended=message.extended)),
@@ -237,6 +238,9 @@ def print_busload(load: BusLoad, console: Console, *, title: str) -> None:
         "times in ms: T period, D deadline, C frame, J queuing jitter, B blocking, "
         "R worst response; * sporadic"
     )
+    if any(message.frames_per_cycle > 1 for message in load.messages):
+        console.print("xN: N frames each cycle (E2EFramesPerCycle), queued at once: C per frame, "
+                      "R the last frame's")
     console.print(busload_table(load))
     console.print(
         f"utilization {report['utilization']:.1%} "

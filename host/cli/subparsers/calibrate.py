@@ -18,6 +18,7 @@ from pathlib import Path
 
 from odocan.host.cli.subparsers.umbmark import add_arguments, header
 from odocan.host.experiments import render, umbmark
+from odocan.host.experiments.calreport import calibration_report, refused_report
 from odocan.host.experiments.keep import (
     check_robot_path,
     corrected_profile,
@@ -91,15 +92,19 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     profile, model = robot.load(args.robot), errors.parse(args.errors)
     squares = 4 * args.runs
     with counted_progress(f"calibrate: 2 x UMBmark of 2 x {args.runs} squares", squares) as one:
-        cal = umbmark.calibrate(
-            profile,
-            model,
-            args.seed,
-            side_m=args.side,
-            runs_per_direction=args.runs,
-            method=args.method,
-            on_run=one,
-        )
+        try:
+            cal = umbmark.calibrate(
+                profile,
+                model,
+                args.seed,
+                side_m=args.side,
+                runs_per_direction=args.runs,
+                method=args.method,
+                on_run=one,
+            )
+        except umbmark.CorrectionRefused as exc:  # FAIL on stderr, exit 1; the outputs written
+            _write_refused(args, exc)
+            raise
     print(header(args, model, "calibrate"))
     render.show(
         render.umbmark_table(cal.before, "Before"),
@@ -108,7 +113,7 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         render.umbmark_table(cal.after, "After"),
         render.improvement_line(cal),
     )
-    report = {"robot": profile.name, "seed": args.seed, **umbmark.calibration_report(cal, model)}
+    report = {"robot": profile.name, "seed": args.seed, **calibration_report(cal, model)}
     kept = corrected_profile(profile, cal.corrected)
     report["ros2_diff_drive"] = multipliers = ros2_multipliers(profile, kept)
     report["inputs"] = experiment_inputs(profile, args)
@@ -130,3 +135,14 @@ def _do_calibrate(args: argparse.Namespace) -> int:
                   header(args, model, "calibrate"))
     write_checks(args, "calibrate", calibration_checks(report))
     return verdict("calibrate", reasons)
+
+
+def _write_refused(args: argparse.Namespace, exc: umbmark.CorrectionRefused) -> None:
+    """``--report`` and ``--junit`` of a calibration whose correction the firmware refused: the
+    verdict, its reason, the benchmark before and the estimate refused (no benchmark after)."""
+    profile = robot.load(args.robot)
+    report = {"robot": profile.name, "seed": args.seed,
+              **refused_report(exc.refusal, errors.parse(args.errors)),
+              "inputs": experiment_inputs(profile, args), "passed": False, "faults": [str(exc)]}
+    write_report(args.report, report)
+    write_checks(args, "calibrate", calibration_checks(report))

@@ -26,7 +26,6 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import replace
 from pathlib import Path
 
 import can
@@ -70,6 +69,7 @@ from odocan.sim.cboard import board_maker
 from odocan.sim.contract import database
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultSpec
+from odocan.sim.faultspec import two_handles
 from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import TRANSPORTS, LockstepRig, RigConfig
 from odocan.sim.scenarios import SCENARIOS
@@ -161,8 +161,8 @@ def _do_run(args: argparse.Namespace) -> int:
         scenario=args.scenario,
         seed=args.seed,
         errors=errors.parse(args.errors),
-        faults=faults,
-        fw_faults=None if faults is None else replace(faults, seed=faults.seed + 1),
+        faults=None if faults is None else two_handles(faults)[0],
+        fw_faults=None if faults is None else two_handles(faults)[1],
         duration_s=args.duration,
         transport=args.transport,
         bitrate=args.bitrate,
@@ -188,7 +188,7 @@ def _do_run(args: argparse.Namespace) -> int:
         extra: list[can.Listener] = [] if live is None else [Isolated(live)]
         with _rare_collections():
             analysis, log_error, stopped = _run_and_analyze(config, args, extra)
-        analysis.report["inputs"] = run_inputs(config, args.errors)
+        analysis.report["inputs"] = run_inputs(config, args.errors, faults)
         code = finish(analysis, args, title=title)
     write_checks(args, "run", analysis_checks(analysis.report))
     if args.latency_plot is not None:
@@ -398,9 +398,11 @@ class PacedRedirect(can.Listener):
         self.bus.send(msg)
 
 
-def run_inputs(config: RigConfig, errors_text: str) -> dict[str, object]:
-    """The report's ``inputs``: profile (hash), integrator, errors, faults, seeds, version, DBC."""
-    faults = config.faults
+def run_inputs(
+    config: RigConfig, errors_text: str, faults: FaultSpec | None
+) -> dict[str, object]:
+    """The report's ``inputs``: profile (hash), integrator, errors, the ``--faults`` given,
+    seeds, version, DBC."""
     seeds = {"rig": config.seed}
     if faults is not None and faults.active:
         seeds["faults"], seeds["firmware_faults"] = faults.seed, faults.seed + 1
