@@ -151,6 +151,8 @@ def load(name_or_path: str | Path) -> RobotProfile:
     text = str(name_or_path)
     if isinstance(name_or_path, Path) or text.endswith(".toml") or "/" in text or "\\" in text:
         path = Path(name_or_path)
+        if path.is_dir():
+            raise ProfileError(f"robot profile {path} is a directory, not a TOML file")
         if not path.is_file():
             raise ProfileError(f"robot profile file not found: {path}")
     else:

@@ -104,6 +104,11 @@ def test_missing_file(tmp_path: Path) -> None:
     assert "not found" in load_error(tmp_path / "absent.toml")
 
 
+def test_a_directory_is_named_as_one(tmp_path: Path) -> None:
+    """``--robot /tmp`` once said "file not found" for a directory that is there."""
+    assert load_error(tmp_path) == f"robot profile {tmp_path} is a directory, not a TOML file"
+
+
 def test_malformed_toml(tmp_path: Path) -> None:
     path = tmp_path / "bad.toml"
     path.write_text("counts_per_rev = = 3\n")
