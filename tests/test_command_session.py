@@ -86,6 +86,21 @@ def test_an_invalid_command_is_rejected_before_anything_is_sent() -> None:
     assert sent == []
 
 
+@pytest.mark.parametrize("heading_rad", [1e300, -3e11])
+def test_a_heading_too_large_to_wrap_is_rejected(heading_rad: float) -> None:
+    """1e300 rad was accepted and ACKed (found by the trial): float64's ulp there is ~1e284 rad,
+    so its wrap to [0, 2 pi) is an arbitrary heading. The limit: half HEADING's LSB of ulp."""
+    sent: list[tuple[int, bytes]] = []
+    session = CommandSession(Recorder(database()), lambda i, d: sent.append((i, d)),
+                             lambda done, t: True, ack_timeout_s=0.5)
+    with pytest.raises(CommandRejected, match=r"heading_rad=.* too large to wrap"):
+        session.set_pose(0.0, 0.0, heading_rad)
+    assert sent == []
+    lsb_rad = 2 * math.pi / 65536
+    ulp_at_limit_rad = math.ulp(lsb_rad * 2.0**51)
+    assert ulp_at_limit_rad <= lsb_rad / 2  # the largest accepted heading still wraps exactly
+
+
 def test_a_goal_is_followed_from_its_ack_to_reached(
     rig_and_session: tuple[LockstepRig, CommandSession],
 ) -> None:

@@ -19,8 +19,9 @@ nav_goal   NAV_GOAL        x_m, y_m, [heading_rad], [mode], [append], [goal_id]
                            -> X, Y, [HEADING], GO (NO_FINAL_HEADING when no heading_rad)
 =========  ==============  =================================================================
 
-Headings are angles: any finite value is wrapped to [0, 2 pi) before the range check. A DBC
-without the message (or one of its signals) rejects with "unsupported by this DBC".
+Headings are angles: any finite value is wrapped to [0, 2 pi) before the range check, if float64
+can place it within half the signal's LSB (|heading| <= scale * 2^51, ~2.2e11 rad for HEADING).
+A DBC without the message (or one of its signals) rejects with "unsupported by this DBC".
 """
 
 from __future__ import annotations
@@ -313,6 +314,15 @@ def _check_type(key: str, kind: Kind, value: Any) -> None:
         raise CommandRejected(f"{key} must be a name or an integer")
 
 
+def _check_angle_resolution(signal: Signal, key: str, value_rad: float) -> None:
+    """An angle so large that float64 cannot place it within half the signal's LSB (its ulp
+    beyond scale / 2: |value| > scale * 2^51) wraps to an arbitrary heading: rejected."""
+    limit_rad = signal.scale * 2.0**51
+    if abs(value_rad) > limit_rad:
+        raise CommandRejected(f"{key}={_short(str(value_rad), 24)} too large to wrap to the "
+                              f"signal's resolution (|{key}| <= {limit_rad:.3g} rad)")
+
+
 def _to_raw(signal: Signal, f: Field, value: Any, message: str) -> int:
     """A checked JSON value -> the signal's raw integer, within the DBC's [min|max]."""
     if f.kind == "enum":
@@ -320,6 +330,7 @@ def _to_raw(signal: Signal, f: Field, value: Any, message: str) -> int:
     if f.kind == "bool":
         value = int(value)
     if f.kind == "angle":
+        _check_angle_resolution(signal, f.key, float(value))
         value = float(value) % _TURN
         raw: int = round(value / signal.scale) % (1 << signal.length)
         return raw
