@@ -42,3 +42,17 @@ def test_a_frame_line_cut_short_is_skipped_with_a_warning(tmp_path: Path) -> Non
     streamed: list[str] = []
     assert sum(len(chunk) for chunk in iter_log(cut, chunk_frames=2, warn=streamed.append)) == 4
     assert streamed == warnings
+
+
+def test_a_last_line_cut_before_its_frame_is_counted(tmp_path: Path) -> None:
+    """``head -c`` that ends on `` 1.981000 1  `` (found by the trial): python-can skips the
+    stump as an unknown event, so the lost frame went without a word; a timestamped last line
+    without its newline is now counted as cut."""
+    whole = _asc_cut_in_last_frame(tmp_path).read_text()
+    last = [line for line in whole.splitlines() if " 100 " in line][-1]
+    stump = tmp_path / "stump.asc"
+    stump.write_text(whole[: whole.index(last)] + last[: last.index(" 100 ")])
+    warnings: list[str] = []
+    assert len(read_log(stump, warn=warnings.append)) == 4
+    assert len(warnings) == 1, warnings
+    assert "skipped 1 line that is no ASC frame or event" in warnings[0]

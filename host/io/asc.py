@@ -76,11 +76,15 @@ class AscLines:
 
 
 def _is_garbage(text: str, base: int) -> bool:
-    """A line python-can would fail on, or skip although it is no ASC line at all."""
+    """A line python-can would fail on, or skip although it is no ASC line at all (an event
+    line without its newline is the file's last, cut by a killed recorder before it was whole:
+    ``1.981000 1  ``)."""
     if not text.strip():
         return False
     if _FRAME_LIKE.match(text):
         return not _frame_parses(text, base)
+    if not text.endswith("\n") and _EVENT.match(text):  # the last line, cut before its frame
+        return True
     return not (_EVENT.match(text) or _HEADER.match(text))
 
 
