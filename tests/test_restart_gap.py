@@ -129,7 +129,7 @@ def test_a_correct_firmware_passes_a_log_cut_before_the_restart(
     whole = judged["whole"]
     assert whole["passed"], whole["onboard_vs_reference"]
     assert whole["samples"]["unseen_restarts"] == 1
-    assert [d.startswith("frames the recorder lost before a controller restart")
+    assert [d.startswith("a controller restart (CTRL_UPTIME went back) behind a silence")
             for d in _restart_events(whole)] == [True]
     assert judged["streamed"] is None  # refused: ``odocan analyze`` judges it whole
     assert main(["analyze", str(cut), "--robot", "pmir", "--stream", "always",
@@ -205,7 +205,7 @@ def test_the_live_judges_restart_on_the_cut_log_and_stay_exact_on_the_whole(
         assert not live["wrong"]
         assert live["beyond_m"] <= POSITION_LSB_M
         assert (live["starts"], live["unseen"]) == (2, 1)  # analyze's ``unseen_restarts``
-        assert [d.startswith("frames the recorder lost before a controller restart")
+        assert [d.startswith("a controller restart (CTRL_UPTIME went back) behind a silence")
                 for d in live["restarts"]] == [True]
     for live in _live(full):
         assert not live["wrong"]

@@ -46,7 +46,8 @@ from odocan.host.judge.samples import Encoders, FloatArray, IntArray
 if TYPE_CHECKING:
     from odocan.host.judge.stream_life import LifeInfo
 
-DETAIL = ("frames the recorder lost before a controller restart: the firmware may have taken "
+DETAIL = ("a controller restart (CTRL_UPTIME went back) behind a silence of the log (frames the "
+          "recorder lost, or a controller that stopped sending): the firmware may have taken "
           "frames the log lacks and their counts are unknowable across the restarted counters; "
           "the reference restarts from the on-board pose after it (heading included)")
 
