@@ -42,7 +42,6 @@ are re-exported from ``host.report.live``."""
 
 from __future__ import annotations
 
-import json
 import math
 import statistics
 import time
@@ -54,14 +53,21 @@ from typing import Any
 import can
 from cantools.database.can import Database, Message
 
-from odocan.firmware.errors import ErrorFlag
-from odocan.host.jsonutil import finite
 from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
+from odocan.host.judge.monitorvalues import (
+    NODE_TIMEOUT_CYCLES,
+    error_names,
+    message_stale,
+    page_of,
+    shown_value,
+    to_json,
+    unit_of,
+)
 from odocan.host.judge.profilepage import follow_profile
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
@@ -78,7 +84,6 @@ STALE_S = 1.0  # a message not heard for this long is shown dimmed
 ACCEPTED = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # distinct unknown identifiers listed (all are counted)
 _HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
-NODE_TIMEOUT_CYCLES = 10  # a node is stale after 10 x its fastest cycle time (opendbc)
 MAX_EVENTS = 16  # events kept (the latest)
 
 
@@ -185,7 +190,7 @@ class BusMonitor:
         stats = self.messages.get(message.name)
         if stats is None:
             stats = self.messages[message.name] = MessageStats(message.name, message.frame_id)
-        stats.heard(timestamp_s, now_s, _page(message, data))
+        stats.heard(timestamp_s, now_s, page_of(message, data))
         self.tracker.advance(timestamp_s)  # settles the pose halves heard half a cycle before
         if status in ACCEPTED:
             self._use(message, stats, data)
@@ -412,9 +417,9 @@ class BusMonitor:
                 "jitter_ms": None if stats.pages else stats.jitter_ms(),
                 "e2e": e2e.get(name, {}),
                 "age_s": now_s - stats.heard_monotonic_s,
-                "stale": _message_stale(message, now_s - stats.heard_monotonic_s),
+                "stale": message_stale(message, now_s - stats.heard_monotonic_s),
                 "last": dict(stats.last),
-                "units": {sig: _unit(message, sig) for sig in stats.last},
+                "units": {sig: unit_of(message, sig) for sig in stats.last},
             }
             if message.is_multiplexed():  # the latest page alone
                 messages[name]["last_frame"] = dict(stats.last_frame)
@@ -447,51 +452,6 @@ _HANDLERS = {
     "SIM_TRUTH": BusMonitor._on_truth,
     "ODOM_STATUS": BusMonitor._on_status,
 }
-
-
-def _page(message: Message, data: bytes) -> str | None:
-    """The multiplexer value of a frame of a multiplexed message (its enum name when it has
-    one), read from the payload before any decoding; None for a plain message."""
-    if not message.is_multiplexed():
-        return None
-    mux = next((s for s in message.signals if s.is_multiplexer), None)
-    if mux is None or mux.byte_order != "little_endian":
-        return None
-    value = (int.from_bytes(data, "little") >> mux.start) & ((1 << mux.length) - 1)
-    choices: dict[Any, Any] = dict(mux.choices or {})
-    return str(choices[value]) if value in choices else str(value)
-
-
-def _message_stale(message: Message, age_s: float) -> bool:
-    """Not heard for ``NODE_TIMEOUT_CYCLES`` cycles (event messages never go stale)."""
-    cycle_ms = message.cycle_time
-    return cycle_ms is not None and cycle_ms > 0 and age_s > NODE_TIMEOUT_CYCLES * cycle_ms / 1e3
-
-
-def to_json(snapshot: dict[str, Any]) -> str:
-    """Indented JSON of a snapshot; non-finite floats become null (JSON has no NaN)."""
-    return json.dumps(finite(snapshot), indent=2, default=str)
-
-
-def error_names(mask: int) -> list[str]:
-    """The ``ErrorFlag`` names of the bits set in ``mask`` (``BIT<n>`` for an unnamed bit)."""
-    named = {int(flag).bit_length() - 1: str(flag.name) for flag in ErrorFlag if flag}
-    return [named.get(bit, f"BIT{bit}") for bit in range(mask.bit_length()) if mask >> bit & 1]
-
-
-def shown_value(message: Message, name: str, value: Any) -> Any:
-    """A signal's value as shown: the enum name when it has one, else the number."""
-    choices = message.get_signal_by_name(name).choices
-    if isinstance(value, str):  # already the name (the bridge publishes enums by name)
-        return value
-    if choices and int(value) in choices:
-        return str(choices[int(value)])
-    return value
-
-
-def _unit(message: Message, name: str) -> str:
-    unit = message.get_signal_by_name(name).unit
-    return "" if unit in (None, "-") else str(unit)
 
 
 # --- the MQTT fleet -------------------------------------------------------------------------
