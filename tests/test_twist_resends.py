@@ -25,9 +25,10 @@ import can
 import pytest
 
 from odocan.firmware.ecu import OdomEcu
-from odocan.host.io.logs import FrameArrays, iter_log, parse_candump, read_log
+from odocan.host.io.logs import FrameArrays, iter_log, parse_candump, parse_candump_line, read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.compare import check_twist
+from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.samples import encoder_frames
 from odocan.host.judge.stream import StreamE2E, StreamEncoders
 from odocan.host.judge.stream_twist import StreamTwist
@@ -58,6 +59,19 @@ def _deep(lines: list[str]) -> list[int]:
 
 def _twist_result(frames: FrameArrays, profile: robot.RobotProfile) -> dict[str, Any]:
     twist: dict[str, Any] = analyze(frames, profile).report["onboard_twist_vs_reference"]
+    return twist
+
+
+def _monitor_twist(lines: list[str]) -> dict[str, Any]:
+    """The monitor fed the log frame by frame: its ``twist`` (``host.judge.livetwist``)."""
+    monitor = BusMonitor(KOBUKI)
+    msg = None
+    for line in lines:
+        msg = parse_candump_line(line.encode())
+        if msg is not None:
+            monitor.feed(msg, now_s=msg.timestamp)
+    assert msg is not None
+    twist: dict[str, Any] = monitor.snapshot(now_s=msg.timestamp)["twist"]
     return twist
 
 
@@ -93,10 +107,14 @@ def test_every_resend_of_a_resend_is_judged(logs: dict[str, Path],  # noqa: F811
             twist = _twist_result(frames, KOBUKI)
             assert twist["max_linear_excess_mps"] > 0.5, (run, k)
             edited_count += 1
-            if edited_count == 1:  # streamed alike
+            if edited_count % 4 == 1:  # streamed and live alike
                 path = tmp_path / "edited.log"
                 path.write_text("\n".join(edited) + "\n")
                 assert not _streamed_is_whole(path, KOBUKI)["passed"]
+                live = _monitor_twist(edited)
+                assert live["max_linear_excess_mps"] == pytest.approx(
+                    twist["max_linear_excess_mps"], abs=1e-12)
+                assert live["samples"] == twist["samples"]
     assert edited_count >= 10  # the premise: 13 such resends on these two drives
 
 

@@ -32,7 +32,8 @@ re-primes on is a ``counter_restart`` event, as analyze tells it. The verdict, i
 FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (its REASON), POSE WRONG (the
 latest sample vs reference beyond ``analyze``'s limit, one LSB of position after the loss
 allowance or of heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it),
-UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), OK.
+UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), DISTANCE WRONG and
+TWIST WRONG (ODOM_TWIST's DISTANCE and speeds, latched: ``livedistance``, ``livetwist``), OK.
 
 ``bus_load`` (``busstats.LoadWindow``): bits per second over the last second of bus time, from
 every frame's exact stuffed length; the load as a fraction when given the bitrate.
@@ -59,6 +60,7 @@ from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
+from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.monitorvalues import (
     NODE_TIMEOUT_CYCLES,
     error_names,
@@ -147,6 +149,7 @@ class BusMonitor:
         self._e2e_configs = e2e_messages(self.db)
         self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
         self.distance = LiveDistance(robot)  # ODOM_TWIST DISTANCE (host.judge.livedistance)
+        self.twist = LiveTwist(Geometry.of(robot), robot.counter_bits)  # its speeds (livetwist)
         self.messages: dict[str, MessageStats] = {}
         self.unknown_ids: Counter[str] = Counter()
         self.status: dict[str, Any] = {}
@@ -235,6 +238,7 @@ class BusMonitor:
             return
         self.tracker.restart_reference()
         self.distance.suspend()  # its new parameters are not known here: DISTANCE not judged
+        self.twist.suspend()  # ... nor the speeds
         self.events.append({"t_s": self._bus_time_s, "kind": "config",
                             "detail": "config applied: reference restarted"})
 
@@ -279,10 +283,13 @@ class BusMonitor:
                  int(s.get("CTRL_UPTIME", 0)))
         self.tracker.on_encoders(*frame)
         self.distance.on_encoders(self.tracker, *frame)
+        self.twist.on_encoders(self.tracker, *frame)
 
     def _on_twist(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.distance.on_twist(self.tracker, int(s["ENC_COUNTER"]), round(s["DISTANCE"] * 1000),
                                self._bus_time_s, int(s["COUNTER"]))
+        self.twist.on_twist(self.distance.named, round(s["LINEAR_VEL"] * 1000),
+                            round(s["ANGULAR_VEL"] * 1000), self._bus_time_s)
 
     def _on_pose_x(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]),
@@ -331,6 +338,7 @@ class BusMonitor:
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
             detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
             self.distance.new_life()
+            self.twist.new_life()
         elif kind == "two sources":  # no pose is judged from the second one's first summary
             self.tracker.wrongs.unjudgeable_from(self.sources.conflict_from_s or self._bus_time_s)
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
@@ -399,7 +407,10 @@ class BusMonitor:
                 f"{POSITION_LSB_M * 1e3:.1f} mm, {HEADING_LSB_RAD * 1e3:.4f} mrad)"
             ]
         why = self.distance.verdict()  # latched: a wrong DISTANCE once is wrong
-        return ("DISTANCE WRONG", why) if why else ("OK", [])
+        if why:
+            return "DISTANCE WRONG", why
+        why = self.twist.verdict()  # latched: LINEAR_VEL / ANGULAR_VEL beyond their band
+        return ("TWIST WRONG", why) if why else ("OK", [])
 
     def snapshot(self, now_s: float | None = None) -> dict[str, Any]:
         """The whole model as JSON-ready data (``odocan monitor --json``); ``now_s``: local
@@ -433,6 +444,7 @@ class BusMonitor:
             "health": self.health(now_s),
             **self.tracker.snapshot(),
             "distance": self.distance.as_dict(),
+            "twist": self.twist.as_dict(),
             "unknown": {**e2e[UNKNOWN], "ids": dict(self.unknown_ids),
                         "undecodable": self.undecodable},
             "auth": dict(self.auth),
