@@ -41,7 +41,7 @@ from odocan.sim.scenarios import get_scenario
 from tests.dbc_typed import numbers
 from tests.fault_rig import FaultRig
 from tests.test_one_judge import _candump
-from tests.test_resent_distance import _moved, _payload, _resends, logs  # noqa: F401
+from tests.test_resent_distance import TWIST, _moved, _payload, _resends, logs  # noqa: F401
 
 KOBUKI, PMIR = robot.load("kobuki"), robot.load("pmir")
 MOVED_LSB = 1000  # LINEAR_VEL + 1 m/s: beyond the band's slack (15 mm/s; 0.3 m/s after a
@@ -189,3 +189,16 @@ def test_a_wrong_carried_update_fails(tmp_path: Path) -> None:
     twist = _streamed_is_whole(path, PMIR)
     assert not twist["passed"]
     assert twist["max_linear_excess_mps"] == pytest.approx(0.0065, abs=0.002)
+
+
+def test_no_twist_frame_is_left_unjudged_but_the_first_two(
+        logs: dict[str, Path]) -> None:  # noqa: F811
+    """On the drop, burst and bus-off drives every ODOM_TWIST on the bus is judged but the first
+    two (their window holds the steps before the log's first named encoder frame, which the log
+    lacks): 2 of 288, 299, 284 (it was 3, 14, 2 of them, resends of resends)."""
+    for run in ("drop", "burst", "busoff"):
+        lines = logs[run].read_text().splitlines()
+        sent = sum(1 for line in lines if line.split()[2].startswith(f"{TWIST:03X}#"))
+        twist = _twist_result(read_log(logs[run]), KOBUKI)
+        assert twist["samples"] == sent - 2, run
+        assert twist["passed"]
