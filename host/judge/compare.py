@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from odocan.firmware.clock import LOST_TIME_PERIODS
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.reference_path import Reference, ctrl_restarts, wrap_pi
@@ -167,6 +168,8 @@ TWIST_LSB = 1e-3  # LINEAR_VEL 1 mm/s, ANGULAR_VEL 1 mrad/s
 TWIST_RELATIVE = 0.02  # the firmware's dt is its own tick time: a late frame may shift it a bit
 TWIST_RANGE = (-32.768, 32.767)  # both signals: i16 LSBs, saturated by the sender
 TWIST_GAP_ACCEL_MPS2 = 5.0  # rim acceleration bound inside a step the log holds only in part
+# twist frames this far apart (bus time): the firmware may have lost time between them
+TWIST_SILENCE_S = (LOST_TIME_PERIODS - 0.5) * 0.01
 
 
 def check_twist(
@@ -186,8 +189,10 @@ def check_twist(
     twist from a wrong dt (e.g. 17 x the speed after 16 lost frames) falls far outside. Where
     the log lacks encoder frames the firmware may have had, a step of n periods only gives the
     mean of its periods: the band widens there by one count per period (quantisation) and
-    ``TWIST_GAP_ACCEL_MPS2`` over the n - 1 periods. A log without ODOM_TWIST passes with 0
-    samples.
+    ``TWIST_GAP_ACCEL_MPS2`` over the n - 1 periods. A resend (the same encoder frame named
+    again) has the window of the frame that first named it, at any depth (``_outside_band``);
+    after a silence of the firmware the band reaches 0 (``after_silence``: a stall's carried
+    steps). A log without ODOM_TWIST passes with 0 samples.
     """
     try:
         twist = decoder.decode(frames, "ODOM_TWIST")
@@ -209,9 +214,11 @@ def check_twist(
     e = e[ok]
     linear = twist["LINEAR_VEL"][keep][ok] * TWIST_LSB
     angular = twist["ANGULAR_VEL"][keep][ok] * TWIST_LSB
+    t_s = frames.timestamp_s[index][ok]
+    silent = np.concatenate(([False], np.diff(t_s) >= TWIST_SILENCE_S))
     (v_ref, w_ref), (v_gap, w_gap) = _step_speeds(enc, robot, decoder)
-    excess_v = _outside_band(linear, e, v_ref, v_gap)
-    excess_w = _outside_band(angular, e, w_ref, w_gap)
+    excess_v = _outside_band(linear, e, v_ref, v_gap, silent)
+    excess_w = _outside_band(angular, e, w_ref, w_gap, silent)
     judged = ~np.isnan(excess_v)
     result["samples"] = int(np.count_nonzero(judged))
     if result["samples"]:
@@ -271,10 +278,18 @@ def _step_speeds(
     return (v, w), (gap_v, gap_w)
 
 
-def _outside_band(value: FloatArray, e: IntArray, step: FloatArray, gap: FloatArray) -> FloatArray:
+def _outside_band(value: FloatArray, e: IntArray, step: FloatArray, gap: FloatArray,
+                  silent: npt.NDArray[np.bool_] | None = None) -> FloatArray:
     """How far each ``value`` (at encoder frame ``e``) lies outside the band of ``step`` over
-    (e two samples back, e], widened by the largest ``gap`` there: 0 inside, NaN where the
-    window is empty."""
+    its window, widened by the largest ``gap`` there: 0 inside, NaN where the window is empty.
+
+    The window of a twist frame naming D[i], the i-th distinct encoder frame named
+    (``carried_windows``): (D[i - 2], D[i]], the steps over the last two twist periods that
+    brought a new encoder frame. A resend (naming the frame the one before named, at any depth)
+    has the window of the first naming that frame: the firmware's speeds then hold either the
+    speeds it sent before or, after a tick that lost time, the mean over steps it carried, all
+    within that window (``firmware.twist``: a stall's backlog, accepted before the frame the
+    resends name); a resend of a resend is judged too."""
     out = np.full(len(value), np.nan)
     if len(e) < 3:
         return out
@@ -292,15 +307,64 @@ def _outside_band(value: FloatArray, e: IntArray, step: FloatArray, gap: FloatAr
     seg_lo = np.where(empty, np.inf, np.minimum.reduceat(step, starts)[:-1])
     seg_hi = np.where(empty, -np.inf, np.maximum.reduceat(step, starts)[:-1])
     seg_gap = np.where(empty, 0.0, np.maximum.reduceat(gap, starts)[:-1])
-    lo = np.minimum(seg_lo[:-1], seg_lo[1:])
-    hi = np.maximum(seg_hi[:-1], seg_hi[1:])
+    # per frame k: its own segment (e[k - 1], e[k]] (frame 0: none, an empty band)
+    own = tuple(np.concatenate(([first], seg)) for first, seg in
+                ((np.inf, seg_lo), (-np.inf, seg_hi), (0.0, seg_gap)))
+    head, before = carried_windows(np.concatenate(([False], empty)))
+    a: tuple[FloatArray, ...] = tuple(np.where(before >= 0, x[np.maximum(before, 0)], first)
+                                      for x, first in zip(own, (np.inf, -np.inf, 0.0),
+                                                          strict=True))
+    b: tuple[FloatArray, ...] = tuple(x[head] for x in own)
+    zero = None if silent is None else after_silence(silent, head)
+    excess = band_excess(value, a, b, zero)
+    out[2:] = excess[2:]
+    return out
+
+
+def carried_windows(resent: npt.NDArray[np.bool_]) -> tuple[IntArray, IntArray]:
+    """Per twist frame (``resent``: it names the frame the one before named; frame 0 never
+    is): the frame that first named its encoder frame (the head of its chain of resends), and
+    the head of the chain before (-1: none). A frame's window is its head's segment joined to
+    that head's (``_outside_band``)."""
+    n = len(resent)
+    at = np.arange(n)
+    head = np.maximum.accumulate(np.where(resent, 0, at))
+    before_head = np.where(head >= 1, head[np.maximum(head - 1, 0)], -1)
+    return head, before_head
+
+
+def after_silence(silent: npt.NDArray[np.bool_], head: IntArray) -> npt.NDArray[np.bool_]:
+    """Per twist frame: it is in the chain of resends of the first frame after a silence of the
+    firmware (``silent``), or in the chain after it. A tick that lost time (a stall: the
+    firmware silent ``LOST_TIME_PERIODS``) sums its steps on and divides them, in the first
+    tick after it, by the firmware time since its last sample before the stall
+    (``firmware.twist``): the backlog's frames may span less (a full mailbox drops the newest),
+    so that speed lies between 0 and the steps' mean. The frames sending it: the chain of the
+    frame after the silence (the update under its ENC_COUNTER, ``carried_windows``) or the
+    chain after (the update with the next frames)."""
+    at = np.arange(len(head))
+    last = np.maximum.accumulate(np.where(silent, at, -1))
+    heads = np.cumsum(head == at)
+    found: npt.NDArray[np.bool_] = (last >= 0) & (heads - heads[np.maximum(last, 0)] <= 1)
+    return found
+
+
+def band_excess(value: FloatArray, a: tuple[FloatArray, ...], b: tuple[FloatArray, ...],
+                zero: npt.NDArray[np.bool_] | None = None) -> FloatArray:
+    """The excess of each value over the band of its window's two segments' bands ``a`` and
+    ``b`` (lowest, highest speed, widest gap slack), the band reaching 0 where ``zero``
+    (``after_silence``): 0 inside, NaN where neither holds a step (``host.judge.stream_twist``
+    and ``host.judge.livetwist`` do these operations in this order: the same bits)."""
+    lo = np.minimum(a[0], b[0])
+    hi = np.maximum(a[1], b[1])
     known = np.isfinite(lo) & np.isfinite(hi)  # the window holds a step
+    if zero is not None:
+        lo, hi = np.where(zero, np.minimum(lo, 0.0), lo), np.where(zero, np.maximum(hi, 0.0), hi)
     lo, hi = np.clip(lo, *TWIST_RANGE), np.clip(hi, *TWIST_RANGE)
     slack = TWIST_LSB + TWIST_RELATIVE * np.maximum(np.abs(lo), np.abs(hi))
-    slack += np.maximum(seg_gap[:-1], seg_gap[1:])
-    v = value[2:]
-    excess = np.maximum(0.0, np.maximum(v - hi - slack, lo - slack - v))
-    out[2:] = np.where(known, excess, np.nan)
+    slack += np.maximum(a[2], b[2])
+    excess = np.maximum(0.0, np.maximum(value - hi - slack, lo - slack - value))
+    out: FloatArray = np.where(known, excess, np.nan)
     return out
 
 

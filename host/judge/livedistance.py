@@ -95,6 +95,7 @@ class LiveDistance:
         self._sums: tuple[int, int, int, float] = (0, 0, 0, 0.0)
         self._gate: StepGate | None = None
         self._twists = Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW)
+        self.named = -1  # the encoder frame the last twist named (-1: none)
         self._last_e = -1  # the last frame judged
         self._running = -1  # the largest frame named
         self._judged_last = False  # the last twist was judged (a resend of it is too)
@@ -153,7 +154,7 @@ class LiveDistance:
         encoder frame it names (not the first after a stall: ``distance.DistanceJudge.take``)."""
         tracker._pos += 1  # its place among the frames heard (tracking.py: at its size limit)
         self._twists.append(tracker._pos, enc_counter, counter, t_s)
-        e = tracker._named(self._twists, tracker._pos)[0]
+        e = self.named = tracker._named(self._twists, tracker._pos)[0]  # (livetwist takes it)
         e = -1 if e >= 0 and tracker.twins.twinned(e) else e
         resend = (e >= 0 and e == self._running and self._judged_last  # resentdistance.py
                   and not may_alias_live(e, t_s, tracker))

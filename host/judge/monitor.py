@@ -32,7 +32,8 @@ re-primes on is a ``counter_restart`` event, as analyze tells it. The verdict, i
 FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (its REASON), POSE WRONG (the
 latest sample vs reference beyond ``analyze``'s limit, one LSB of position after the loss
 allowance or of heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it),
-UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), OK.
+UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), DISTANCE WRONG and
+TWIST WRONG (ODOM_TWIST's DISTANCE and speeds, latched: ``livedistance``, ``livetwist``), OK.
 
 ``bus_load`` (``busstats.LoadWindow``): bits per second over the last second of bus time, from
 every frame's exact stuffed length; the load as a fraction when given the bitrate.
@@ -42,7 +43,6 @@ are re-exported from ``host.report.live``."""
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections import Counter, deque
@@ -51,8 +51,6 @@ from typing import Any
 import can
 from cantools.database.can import Database, Message
 
-from odocan.firmware.errors import ErrorFlag
-from odocan.host.jsonutil import finite
 from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.liveconfig import ConfigFollower, apply_config
@@ -60,7 +58,17 @@ from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
+from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.messagestats import MessageStats
+from odocan.host.judge.monitorvalues import (
+    NODE_TIMEOUT_CYCLES,
+    error_names,
+    message_stale,
+    page_of,
+    shown_value,
+    to_json,
+    unit_of,
+)
 from odocan.host.judge.profilepage import follow_profile
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
@@ -76,7 +84,6 @@ STALE_S = 1.0  # a message not heard for this long is shown dimmed
 ACCEPTED = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # distinct unknown identifiers listed (all are counted)
 _HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
-NODE_TIMEOUT_CYCLES = 10  # a node is stale after 10 x its fastest cycle time (opendbc)
 MAX_EVENTS = 16  # events kept (the latest)
 
 
@@ -99,6 +106,7 @@ class BusMonitor:
         self._e2e_configs = e2e_messages(self.db)
         self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
         self.distance = LiveDistance(robot)  # ODOM_TWIST DISTANCE (host.judge.livedistance)
+        self.twist = LiveTwist(Geometry.of(robot), robot.counter_bits)  # its speeds (livetwist)
         self.messages: dict[str, MessageStats] = {}
         self.unknown_ids: Counter[str] = Counter()
         self.status: dict[str, Any] = {}
@@ -145,7 +153,7 @@ class BusMonitor:
         stats = self.messages.get(message.name)
         if stats is None:
             stats = self.messages[message.name] = MessageStats(message.name, message.frame_id)
-        stats.heard(timestamp_s, now_s, _page(message, data))
+        stats.heard(timestamp_s, now_s, page_of(message, data))
         self.tracker.advance(timestamp_s)  # settles the pose halves heard half a cycle before
         if status in ACCEPTED:
             self._use(message, stats, data)
@@ -221,6 +229,7 @@ class BusMonitor:
             if config is not None:  # the firmware's new robot: the reference's too
                 detail = apply_config(self.tracker, config)
                 self.distance.reconfigure(self.tracker.geometry, self.tracker.counter_bits)
+                self.twist.reconfigure(self.tracker.geometry, self.tracker.counter_bits)
                 self.events.append({"t_s": self._bus_time_s, "kind": "config", "detail": detail})
         reason = str(shown.get("REASON", ""))
         if not reason.startswith("AUTH_"):
@@ -235,10 +244,13 @@ class BusMonitor:
                  int(s.get("CTRL_UPTIME", 0)))
         self.tracker.on_encoders(*frame)
         self.distance.on_encoders(self.tracker, *frame)
+        self.twist.on_encoders(self.tracker, *frame)
 
     def _on_twist(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.distance.on_twist(self.tracker, int(s["ENC_COUNTER"]), round(s["DISTANCE"] * 1000),
                                self._bus_time_s, int(s["COUNTER"]))
+        self.twist.on_twist(self.distance.named, round(s["LINEAR_VEL"] * 1000),
+                            round(s["ANGULAR_VEL"] * 1000), self._bus_time_s)
 
     def _on_pose_x(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]),
@@ -287,6 +299,7 @@ class BusMonitor:
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
             detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
             self.distance.new_life()
+            self.twist.new_life()
         elif kind == "two sources":  # no pose is judged from the second one's first summary
             self.tracker.wrongs.unjudgeable_from(self.sources.conflict_from_s or self._bus_time_s)
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
@@ -355,7 +368,10 @@ class BusMonitor:
                 f"{POSITION_LSB_M * 1e3:.1f} mm, {HEADING_LSB_RAD * 1e3:.4f} mrad)"
             ]
         why = self.distance.verdict()  # latched: a wrong DISTANCE once is wrong
-        return ("DISTANCE WRONG", why) if why else ("OK", [])
+        if why:
+            return "DISTANCE WRONG", why
+        why = self.twist.verdict()  # latched: LINEAR_VEL / ANGULAR_VEL beyond their band
+        return ("TWIST WRONG", why) if why else ("OK", [])
 
     def snapshot(self, now_s: float | None = None) -> dict[str, Any]:
         """The whole model as JSON-ready data (``odocan monitor --json``); ``now_s``: local
@@ -373,9 +389,9 @@ class BusMonitor:
                 "jitter_ms": None if stats.pages else stats.jitter_ms(),
                 "e2e": e2e.get(name, {}),
                 "age_s": now_s - stats.heard_monotonic_s,
-                "stale": _message_stale(message, now_s - stats.heard_monotonic_s),
+                "stale": message_stale(message, now_s - stats.heard_monotonic_s),
                 "last": dict(stats.last),
-                "units": {sig: _unit(message, sig) for sig in stats.last},
+                "units": {sig: unit_of(message, sig) for sig in stats.last},
             }
             if message.is_multiplexed():  # the latest page alone
                 messages[name]["last_frame"] = dict(stats.last_frame)
@@ -389,6 +405,7 @@ class BusMonitor:
             "health": self.health(now_s),
             **self.tracker.snapshot(),
             "distance": self.distance.as_dict(),
+            "twist": self.twist.as_dict(),
             "unknown": {**e2e[UNKNOWN], "ids": dict(self.unknown_ids),
                         "undecodable": self.undecodable},
             "auth": dict(self.auth),
@@ -408,51 +425,6 @@ _HANDLERS = {
     "SIM_TRUTH": BusMonitor._on_truth,
     "ODOM_STATUS": BusMonitor._on_status,
 }
-
-
-def _page(message: Message, data: bytes) -> str | None:
-    """The multiplexer value of a frame of a multiplexed message (its enum name when it has
-    one), read from the payload before any decoding; None for a plain message."""
-    if not message.is_multiplexed():
-        return None
-    mux = next((s for s in message.signals if s.is_multiplexer), None)
-    if mux is None or mux.byte_order != "little_endian":
-        return None
-    value = (int.from_bytes(data, "little") >> mux.start) & ((1 << mux.length) - 1)
-    choices: dict[Any, Any] = dict(mux.choices or {})
-    return str(choices[value]) if value in choices else str(value)
-
-
-def _message_stale(message: Message, age_s: float) -> bool:
-    """Not heard for ``NODE_TIMEOUT_CYCLES`` cycles (event messages never go stale)."""
-    cycle_ms = message.cycle_time
-    return cycle_ms is not None and cycle_ms > 0 and age_s > NODE_TIMEOUT_CYCLES * cycle_ms / 1e3
-
-
-def to_json(snapshot: dict[str, Any]) -> str:
-    """Indented JSON of a snapshot; non-finite floats become null (JSON has no NaN)."""
-    return json.dumps(finite(snapshot), indent=2, default=str)
-
-
-def error_names(mask: int) -> list[str]:
-    """The ``ErrorFlag`` names of the bits set in ``mask`` (``BIT<n>`` for an unnamed bit)."""
-    named = {int(flag).bit_length() - 1: str(flag.name) for flag in ErrorFlag if flag}
-    return [named.get(bit, f"BIT{bit}") for bit in range(mask.bit_length()) if mask >> bit & 1]
-
-
-def shown_value(message: Message, name: str, value: Any) -> Any:
-    """A signal's value as shown: the enum name when it has one, else the number."""
-    choices = message.get_signal_by_name(name).choices
-    if isinstance(value, str):  # already the name (the bridge publishes enums by name)
-        return value
-    if choices and int(value) in choices:
-        return str(choices[int(value)])
-    return value
-
-
-def _unit(message: Message, name: str) -> str:
-    unit = message.get_signal_by_name(name).unit
-    return "" if unit in (None, "-") else str(unit)
 
 
 # --- the MQTT fleet -------------------------------------------------------------------------

@@ -3,15 +3,17 @@
 
 ``check_twist`` takes the twist frames naming an accepted encoder frame, in bus order, each at
 or after every earlier one's (their encoder frames E, non-decreasing), and judges twist k >= 2
-against the band of the per-step speeds over the two segments (E[k-2], E[k-1]] and
-(E[k-1], E[k]]. Carried here:
+against the band of the per-step speeds over its window: the two segments (E[h-2], E[h-1]] and
+(E[h-1], E[h]] of the frame h that first named its E (``compare.carried_windows``: a resend,
+at any depth, has the window of its chain's head). Carried here:
 
 * the last 16 accepted encoder frames (a twist frame names one -8..+7 from the latest before
   it, and only one before it: ``samples.match_encoder`` is causal) and the last twist frame
   (a repeat of its ENC_COUNTER names what it named: ``samples._held``, with its COUNTER);
 * the per-step speeds from the last taken twist frame's encoder frame on (those no twist frame
   to come can name only as their band: min, max and widest gap are exact in any order), the
-  previous segment's band, and the last encoder frame (for the next step's speed);
+  last frame's window (its two segments' bands), and the last encoder frame (for the next
+  step's speed);
 * the maxima and the count of the judgments."""
 
 from __future__ import annotations
@@ -25,7 +27,13 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.compare import TWIST_LSB, TWIST_RANGE, TWIST_RELATIVE, _step_speeds
+from odocan.host.judge.compare import (
+    TWIST_LSB,
+    TWIST_SILENCE_S,
+    _step_speeds,
+    band_excess,
+    carried_windows,
+)
 from odocan.host.judge.samples import Encoders, IntArray, _held, contract_cycle_s, match_encoder
 from odocan.host.judge.stream import known_encoders
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -96,7 +104,12 @@ class StreamTwist:
     _running_max: int = -1  # of every E named so far (-1 for a frame naming none)
     _ok: list[_Twist] = field(default_factory=list)  # the last two judged-order twist frames
     _count: int = 0  # twist frames taken (E non-decreasing)
-    _prev_band: tuple[Band, Band] = (EMPTY, EMPTY)  # segment (E[k-2], E[k-1]]: linear, angular
+    # the last frame's window (``compare.carried_windows``): its head's segment and the one
+    # before it (linear, angular)
+    _prev_band: tuple[Band, Band] = (EMPTY, EMPTY)
+    _prev_a: tuple[Band, Band] = (EMPTY, EMPTY)
+    _last_t: float = math.nan  # bus time of the last frame taken (s)
+    _since: int = 2  # chains of resends from the last silence to the last frame (2: more)
     _folded: tuple[Band, Band] = (EMPTY, EMPTY)  # steps after the last E no longer kept
     samples: int = 0
     # told every twist frame in bus order: E (-1: none), DISTANCE raw, bus time (s)
@@ -202,7 +215,7 @@ class StreamTwist:
             e = self._held(e, cycle_s)
         if self.on_distance is not None:
             self.on_distance(e, p["distance"], p["t"])
-        self._take_all(e, p["linear"], p["angular"])
+        self._take_all(e, p["linear"], p["angular"], p["t"])
         self._pending = {}
 
     def _held(self, e: npt.NDArray[np.int64], cycle_s: float) -> npt.NDArray[np.int64]:
@@ -218,7 +231,7 @@ class StreamTwist:
         return held[len(held) - len(p["index"]):]
 
     def _take_all(self, e: npt.NDArray[np.int64], linear: FloatArray,
-                  angular: FloatArray) -> None:
+                  angular: FloatArray, t_s: FloatArray) -> None:
         """Twist frames naming encoder frames ``e`` (-1: none), in bus order: those at or after
         every earlier one's are taken and judged from the third on (``compare._outside_band``,
         its segments' bands from the steps kept and the band carried)."""
@@ -227,24 +240,33 @@ class StreamTwist:
         running = np.maximum.accumulate(np.concatenate(([self._running_max], e)))[1:]
         self._running_max = int(running[-1])
         ok = (e >= 0) & (e >= running)
-        e, linear, angular = e[ok], linear[ok], angular[ok]
+        e, linear, angular, t_s = e[ok], linear[ok], angular[ok], t_s[ok]
         if self._count == 0 and len(e):
             self._ok = [_Twist(int(e[0]), float(linear[0]), float(angular[0]))]
-            self._count = 1
-            e, linear, angular = e[1:], linear[1:], angular[1:]
+            self._count, self._last_t = 1, float(t_s[0])
+            e, linear, angular, t_s = e[1:], linear[1:], angular[1:], t_s[1:]
         if len(e) == 0:
             return
         prev_e = self._ok[-1].e
         bands = self._segments(prev_e, e)  # per new frame: lo, hi, gap (linear), (angular)
+        resent = np.concatenate(([False], e <= np.concatenate(([prev_e], e[:-1]))))
+        head, before = carried_windows(resent)  # index 0: the frame taken before these
+        zero = self._after_silence(t_s, head)
         k = self._count + np.arange(len(e))
-        for value, (lo_b, hi_b, gap_b), (lo_a0, hi_a0, gap_a0), best in (
-            (linear, bands[0], self._prev_band[0], "linear"),
-            (angular, bands[1], self._prev_band[1], "angular"),
+        carried: list[tuple[tuple[FloatArray, ...], tuple[FloatArray, ...]]] = []
+        for value, own, (a0, b0), best in (
+            (linear, bands[0], (self._prev_a[0], self._prev_band[0]), "linear"),
+            (angular, bands[1], (self._prev_a[1], self._prev_band[1]), "angular"),
         ):
-            lo_a = np.concatenate(([lo_a0], lo_b[:-1]))
-            hi_a = np.concatenate(([hi_a0], hi_b[:-1]))
-            gap_a = np.concatenate(([gap_a0], gap_b[:-1]))
-            excess = _outside(value, (lo_a, hi_a, gap_a), (lo_b, hi_b, gap_b))
+            # the frame before as index 0: its own band is the window's head segment it had
+            heads: tuple[FloatArray, ...] = tuple(
+                np.concatenate(([x0], x)) for x0, x in zip(b0, own, strict=True))
+            a: tuple[FloatArray, ...] = tuple(
+                np.where(before >= 0, x[np.maximum(before, 0)], x0)[1:]
+                for x, x0 in zip(heads, a0, strict=True))
+            b: tuple[FloatArray, ...] = tuple(x[head][1:] for x in heads)
+            carried.append((a, b))
+            excess = band_excess(value, a, b, zero)
             judged = ~np.isnan(excess) & (k >= 2)
             if best == "linear":
                 self.samples += int(np.count_nonzero(judged))
@@ -254,14 +276,26 @@ class StreamTwist:
                     self.max_linear_excess_mps = max(self.max_linear_excess_mps, top)
                 else:
                     self.max_angular_excess_rad_s = max(self.max_angular_excess_rad_s, top)
-        self._prev_band = ((float(bands[0][0][-1]), float(bands[0][1][-1]),
-                            float(bands[0][2][-1])),
-                           (float(bands[1][0][-1]), float(bands[1][1][-1]),
-                            float(bands[1][2][-1])))
+        self._prev_a = tuple(_last(a) for a, _ in carried)  # type: ignore[assignment]
+        self._prev_band = tuple(_last(b) for _, b in carried)  # type: ignore[assignment]
         if int(e[-1]) > prev_e:
             self._folded = (EMPTY, EMPTY)  # every folded step lies before the new E
         self._ok = [_Twist(int(e[-1]), float(linear[-1]), float(angular[-1]))]
         self._count += len(e)
+
+    def _after_silence(self, t_s: FloatArray, head: npt.NDArray[np.int64]
+                       ) -> npt.NDArray[np.bool_]:
+        """``compare.after_silence`` of the new frames (``head``: with the frame before as
+        index 0), the chains since the last silence carried (``_since``)."""
+        silent = np.diff(np.concatenate(([self._last_t], t_s))) >= TWIST_SILENCE_S
+        self._last_t = float(t_s[-1])
+        at = np.arange(1, len(head))
+        last = np.maximum.accumulate(np.where(silent, at, 0))  # 0: none among these
+        heads = np.cumsum(head == np.arange(len(head)))  # index 0 counts 1
+        since = np.where(last > 0, heads[1:] - heads[last], self._since + heads[1:] - 1)
+        self._since = min(int(since[-1]), 2)
+        zero: npt.NDArray[np.bool_] = since <= 1
+        return zero
 
     def _segments(
         self, prev_e: int, e: npt.NDArray[np.int64]
@@ -289,18 +323,6 @@ class StreamTwist:
         return tuple(out)
 
 
-def _outside(
-    value: FloatArray, a: tuple[FloatArray, FloatArray, FloatArray],
-    b: tuple[FloatArray, FloatArray, FloatArray],
-) -> FloatArray:
-    """``compare._outside_band``'s excess of each value over its two segments' bands ``a``
-    and ``b`` (NaN: no step in either), with the same operations in the same order."""
-    lo = np.minimum(a[0], b[0])
-    hi = np.maximum(a[1], b[1])
-    known = np.isfinite(lo) & np.isfinite(hi)
-    lo, hi = np.clip(lo, *TWIST_RANGE), np.clip(hi, *TWIST_RANGE)
-    slack = TWIST_LSB + TWIST_RELATIVE * np.maximum(np.abs(lo), np.abs(hi))
-    slack += np.maximum(a[2], b[2])
-    excess = np.maximum(0.0, np.maximum(value - hi - slack, lo - slack - value))
-    out: FloatArray = np.where(known, excess, np.nan)
-    return out
+def _last(band: tuple[FloatArray, ...]) -> Band:
+    """The band of the last frame of a batch."""
+    return float(band[0][-1]), float(band[1][-1]), float(band[2][-1])

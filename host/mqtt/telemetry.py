@@ -30,8 +30,9 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
   controller's told by CTRL_UPTIME, as analyze names it) is an event: ``status`` carries the
   latest ``STATUS_EVENTS`` and ``latched_errors`` (every bit seen set), retained, so a short
   DEGRADED is never lost (not a QoS-1 publication each); likewise ``pose_wrongs``, the judge's
-  own POSE WRONG episodes latched (``host.judge.posewrongs``), and ``distance``, ODOM_TWIST
-  DISTANCE judged (``host.judge.livedistance``, latched).
+  own POSE WRONG episodes latched (``host.judge.posewrongs``), ``distance``, ODOM_TWIST
+  DISTANCE judged (``host.judge.livedistance``, latched), and ``twist``, its LINEAR_VEL and
+  ANGULAR_VEL judged (``host.judge.livetwist``, latched: ``passed`` false is TWIST WRONG).
 
 Headings: ``heading_rad`` wrapped to (-pi, pi] and ``heading_unwrapped_rad`` cumulative, on
 ``pose``, ``reference`` and ``truth`` (SIM_TRUTH's [0, 2 pi) made cumulative at the reference's
@@ -59,6 +60,7 @@ from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
+from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.statuslatch import StatusLatch
@@ -125,6 +127,7 @@ class RobotTelemetry:
         self.e2e = E2EMonitor(self.db)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
         self.distance = LiveDistance(robot_of(name, geometry, counter_bits))  # DISTANCE judged
+        self.twist = LiveTwist(geometry, counter_bits)  # LINEAR_VEL, ANGULAR_VEL judged
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
         self._publish_phase_s = publish_phase_s  # the first pose waits this long (bus time)
         self.frames: dict[str, int] = {}  # accepted frames by message name
@@ -227,6 +230,7 @@ class RobotTelemetry:
         self.reboots += 1
         start_new_life(self.tracker, self.e2e, self.db, *summary)
         self.distance.new_life()
+        self.twist.new_life()
 
     def _unknown_key(self, can_id: int) -> str:
         """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
@@ -242,6 +246,7 @@ class RobotTelemetry:
         frame = (int(s[0]), int(s[1]), int(s[2]), t_s, int(s[3]))
         self.tracker.on_encoders(*frame)
         self.distance.on_encoders(self.tracker, *frame)
+        self.twist.on_encoders(self.tracker, *frame)
         return []
 
     @takes("ENC_COUNTER", "X", "HEADING", "COUNTER")
@@ -256,6 +261,7 @@ class RobotTelemetry:
                        "distance_m": distance}
         self.distance.on_twist(self.tracker, int(enc_counter), round(distance * 1e3), t_s,
                                int(counter))
+        self.twist.on_twist(self.distance.named, round(linear * 1e3), round(angular * 1e3), t_s)
         return []
 
     @takes("ENC_COUNTER", "Y", "TURNS", "COUNTER")
@@ -416,6 +422,7 @@ class RobotTelemetry:
         self.tracker.integrator = integrator
         self.tracker.set_geometry(geometry, counter_bits)
         self.distance.reconfigure(geometry, counter_bits)
+        self.twist.reconfigure(geometry, counter_bits)
         self.profile.forget()  # the firmware's next page is judged against them
 
     _handlers: ClassVar[dict[str, Any]] = {
@@ -452,7 +459,8 @@ class RobotTelemetry:
             self.name, state, seq=self.status_seq, firmware=self.firmware,
             latched_errors=self.latch.latched_names(), events=list(self.events),
             pose_wrongs=self.tracker.wrongs.as_dict(), frames_total=sum(self.frames.values()),
-            distance=self.distance.as_dict(), profile=self.profile.section,
+            distance=self.distance.as_dict(), twist=self.twist.as_dict(),
+            profile=self.profile.section,
         ))
 
 

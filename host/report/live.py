@@ -106,8 +106,8 @@ def status_line(status: dict[str, Any] | None) -> Text:
     )
 
 
-BAD_VERDICTS = frozenset({"STALE", "CONFLICT", "POSE WRONG", "DISTANCE WRONG", "FAULT",
-                          "NO FIRMWARE"})
+BAD_VERDICTS = frozenset({"STALE", "CONFLICT", "POSE WRONG", "DISTANCE WRONG", "TWIST WRONG",
+                          "FAULT", "NO FIRMWARE"})
 
 
 def health_line(health: dict[str, Any] | None) -> Text:

@@ -169,10 +169,13 @@ def _do_monitor(args: argparse.Namespace) -> int:
     distance = model.distance.verdict()  # ODOM_TWIST DISTANCE wrong in some life: FAIL
     if distance:
         print(f"monitor: FAIL: {distance[0]}", file=sys.stderr)
+    speeds = model.twist.verdict()  # ODOM_TWIST LINEAR_VEL / ANGULAR_VEL wrong once: FAIL
+    if speeds:
+        print(f"monitor: FAIL: {speeds[0]}", file=sys.stderr)
     said = model.status.get("profile_mismatch")  # the firmware's PROFILE page vs --robot
     if said:
         print(f"monitor: {said}", file=sys.stderr)
-    return 1 if (wrongs.count or conflict or distance) and code == 0 else code
+    return 1 if (wrongs.count or conflict or distance or speeds) and code == 0 else code
 
 
 def _robot_hint(args: argparse.Namespace, profile: robot.RobotProfile) -> str:

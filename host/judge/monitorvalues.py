@@ -1,0 +1,60 @@
+"""How ``odocan monitor`` shows what it heard (``host.judge.monitor``): a frame's multiplexer
+page, a message's staleness, signal values by their enum names and units, ERROR_MASK bits by
+name, the snapshot as JSON."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from cantools.database.can import Message
+
+from odocan.firmware.errors import ErrorFlag
+from odocan.host.jsonutil import finite
+
+NODE_TIMEOUT_CYCLES = 10  # a node is stale after 10 x its fastest cycle time (opendbc)
+
+
+def page_of(message: Message, data: bytes) -> str | None:
+    """The multiplexer value of a frame of a multiplexed message (its enum name when it has
+    one), read from the payload before any decoding; None for a plain message."""
+    if not message.is_multiplexed():
+        return None
+    mux = next((s for s in message.signals if s.is_multiplexer), None)
+    if mux is None or mux.byte_order != "little_endian":
+        return None
+    value = (int.from_bytes(data, "little") >> mux.start) & ((1 << mux.length) - 1)
+    choices: dict[Any, Any] = dict(mux.choices or {})
+    return str(choices[value]) if value in choices else str(value)
+
+
+def message_stale(message: Message, age_s: float) -> bool:
+    """Not heard for ``NODE_TIMEOUT_CYCLES`` cycles (event messages never go stale)."""
+    cycle_ms = message.cycle_time
+    return cycle_ms is not None and cycle_ms > 0 and age_s > NODE_TIMEOUT_CYCLES * cycle_ms / 1e3
+
+
+def to_json(snapshot: dict[str, Any]) -> str:
+    """Indented JSON of a snapshot; non-finite floats become null (JSON has no NaN)."""
+    return json.dumps(finite(snapshot), indent=2, default=str)
+
+
+def error_names(mask: int) -> list[str]:
+    """The ``ErrorFlag`` names of the bits set in ``mask`` (``BIT<n>`` for an unnamed bit)."""
+    named = {int(flag).bit_length() - 1: str(flag.name) for flag in ErrorFlag if flag}
+    return [named.get(bit, f"BIT{bit}") for bit in range(mask.bit_length()) if mask >> bit & 1]
+
+
+def shown_value(message: Message, name: str, value: Any) -> Any:
+    """A signal's value as shown: the enum name when it has one, else the number."""
+    choices = message.get_signal_by_name(name).choices
+    if isinstance(value, str):  # already the name (the bridge publishes enums by name)
+        return value
+    if choices and int(value) in choices:
+        return str(choices[int(value)])
+    return value
+
+
+def unit_of(message: Message, name: str) -> str:
+    unit = message.get_signal_by_name(name).unit
+    return "" if unit in (None, "-") else str(unit)
