@@ -11,11 +11,12 @@ ran) over robots x ticks is the CPU per robot-tick of everything a worker does. 
 printed too. Pair trees in alternation:
 
     .venv/bin/python bench/fleet_flat.py [--robots 50] [--ticks 600] [--repeat 3] \
-        [--publish-hz 10] [--parts]
+        [--publish-hz 10] [--firmware python] [--parts]
 
-``--parts`` adds the CPU per robot-tick of the fleet step (``Fleet.step``) and of the bridge's
-frame handling (``Bridge._handle``: E2E, decode, live judge, publications queued), the rest
-(JSON, paho, the socket writes, the loop, the GC) and the socket writes per robot-tick.
+``--firmware c`` runs the C port on every board (``odocan fleet --firmware c``). ``--parts`` adds
+the CPU per robot-tick of the fleet step (``Fleet.step``) and of the bridge's frame handling
+(``Bridge._handle``: E2E, decode, live judge, publications queued), the rest (JSON, paho, the
+socket writes, the loop, the GC) and the socket writes per robot-tick.
 
 The script runs unchanged on trees since the bridge's ``run_fleet`` (copy it there to pair).
 Before, the clock released every tick at once (a ``NeverLate`` clock in ``run_realtime``): the
@@ -45,6 +46,7 @@ import odocan.host.mqtt.fleetrun as fleetrun
 from odocan.host.mqtt.bridge import Bridge
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
 from odocan.sim import robot
+from odocan.sim.cboard import FIRMWARES
 from odocan.sim.fleet import Fleet, FleetConfig
 from odocan.sim.realtime import DeadlineStats
 
@@ -135,7 +137,8 @@ class Parts:
 PARTS: Parts | None = None  # --parts
 
 
-def one_run(robots: int, ticks: int, publish_hz: float = 10.0) -> str:
+def one_run(robots: int, ticks: int, publish_hz: float = 10.0,
+            firmware: str = "python") -> str:
     """One flat-out run of ``robots`` for ``ticks`` ticks; its line of figures."""
     with tempfile.TemporaryDirectory() as tmp:
         started = start_mosquitto(Path(tmp))
@@ -143,7 +146,8 @@ def one_run(robots: int, ticks: int, publish_hz: float = 10.0) -> str:
             raise SystemExit("mosquitto is not installed")
         proc, url = started
         try:
-            run = FleetRun(fleet=FleetConfig(robots=robots, robot=robot.load("pmir")),
+            run = FleetRun(fleet=FleetConfig(robots=robots, robot=robot.load("pmir"),
+                                             firmware=firmware),
                            duration_s=ticks * TICK_S, broker=url, publish_hz=publish_hz,
                            client_prefix=f"bench-flat-{time.time_ns()}")
             report = asyncio.run(run_fleet(run))
@@ -154,7 +158,7 @@ def one_run(robots: int, ticks: int, publish_hz: float = 10.0) -> str:
     per_us = report["cpu_s"] / (report["robots"] * report["ticks"]) * 1e6
     line = (f"{robots} robots, {report['ticks']} ticks flat out: {per_us:.1f} us CPU per "
             f"robot-tick (fleet + bridge + MQTT), {report['skipped_releases']} skipped, "
-            f"verdicts {dict(verdicts)}, load {os.getloadavg()[0]:.2f}")
+            f"verdicts {dict(verdicts)}, {firmware} firmware, load {os.getloadavg()[0]:.2f}")
     if PARTS is not None:
         line += "\n" + PARTS.line(report["cpu_s"], report["robots"] * report["ticks"])
     return line
@@ -167,6 +171,8 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--publish-hz", type=float, default=10.0,
                         help="the bridge's pose telemetry rate per robot (FleetRun.publish_hz)")
+    parser.add_argument("--firmware", choices=FIRMWARES, default="python",
+                        help="every board's firmware (FleetConfig.firmware)")
     parser.add_argument("--parts", action="store_true",
                         help="the CPU of the step, of the bridge's frame handling, the rest")
     args = parser.parse_args()
@@ -176,7 +182,7 @@ def main() -> int:
         PARTS = Parts()
         PARTS.install()
     for _ in range(args.repeat):
-        print(one_run(args.robots, args.ticks, args.publish_hz), flush=True)
+        print(one_run(args.robots, args.ticks, args.publish_hz, args.firmware), flush=True)
     return 0
 
 
