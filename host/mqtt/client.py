@@ -23,7 +23,7 @@ from __future__ import annotations
 import asyncio
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import aiomqtt
@@ -74,6 +74,48 @@ class CoalescedSend:
             self.credit, self.sock = sent - len(buf), client._sock
             return len(buf)
         return sent
+
+
+MAX_PACKET_BYTES = 268_435_455  # MQTT's largest remaining length (four bytes of varint)
+
+
+def publish_packets(
+    messages: Sequence[tuple[str, bytes]], *, v5: bool, prefixes: dict[str, bytes] | None = None
+) -> bytearray:
+    """The QoS-0 PUBLISH packets (no retain, no DUP; MQTT v5: no properties) of ``messages``
+    back to back, as paho's ``_send_publish`` builds each: the fixed header ``0x30``, the
+    remaining length as a varint (7 bits a byte, least significant first), the topic as a UTF-8
+    string with its 16-bit length, in v5 a zero property length, then the body. ``prefixes``
+    caches each topic's encoded part. A topic with a wildcard, empty or over 65 535 bytes, or
+    a packet over MQTT's limit is a ``ValueError``, as in paho."""
+    cache: dict[str, bytes] = prefixes if prefixes is not None else {}
+    packet = bytearray()
+    for topic, body in messages:
+        prefix = cache.get(topic)
+        if prefix is None:
+            prefix = cache[topic] = _topic_prefix(topic, v5)
+        size = len(prefix) + len(body)
+        if size > MAX_PACKET_BYTES:
+            raise ValueError("Payload too large.")
+        packet.append(0x30)
+        while size > 0x7F:
+            packet.append(size & 0x7F | 0x80)
+            size >>= 7
+        packet.append(size)
+        packet += prefix
+        packet += body
+    return packet
+
+
+def _topic_prefix(topic: str, v5: bool) -> bytes:
+    """A PUBLISH packet's variable header without a packet id (QoS 0): the topic's length and
+    bytes, and in v5 an empty property list."""
+    encoded = topic.encode()
+    if b"+" in encoded or b"#" in encoded:
+        raise ValueError(f"publish topic {topic!r} cannot contain wildcards")
+    if not 0 < len(encoded) <= 0xFFFF:
+        raise ValueError(f"publish topic of {len(encoded)} bytes: 1 to 65535")
+    return len(encoded).to_bytes(2, "big") + encoded + (b"\x00" if v5 else b"")
 
 
 class Arrived(aiomqtt.Message):
@@ -130,6 +172,7 @@ class LinkClient(aiomqtt.Client):
         self._loop_thread = threading.get_ident()  # made in the event loop's thread
         self._write_soon_due = False  # a ``_write_soon`` is scheduled
         self._writer_on = False  # the loop's writer is registered for the socket
+        self._topic_prefixes: dict[str, bytes] = {}  # ``publish_packets``' cache per topic
 
     def flush(self) -> None:
         """Write what paho has queued now, from the event loop (one coalesced send), instead of
@@ -200,6 +243,22 @@ class LinkClient(aiomqtt.Client):
         info = self._paho_publish(topic, body, 0)  # not the wrapper: quiet writes stay on
         if info.rc != paho.MQTT_ERR_SUCCESS:
             raise aiomqtt.MqttCodeError(info.rc, "Could not publish message")
+        return info
+
+    def publish_batch(self, messages: Sequence[tuple[str, bytes]]) -> paho.MQTTMessageInfo:
+        """QoS-0 ``(topic, body)`` messages, in order, as ONE entry of paho's outgoing queue:
+        their PUBLISH packets built here back to back (``publish_packets``: the bytes paho's
+        ``publish`` builds for each) under one message id and one ``MQTTMessageInfo``, instead
+        of paho's per-message topic checks, packet, queue entry, info (a ``Condition`` each)
+        and write bookkeeping: a robot's telemetry of one period is one publication for paho.
+        ``MqttCodeError`` when paho has no connection; ``written(info)`` waits for the socket."""
+        client = self._client
+        if client._sock is None:
+            raise aiomqtt.MqttCodeError(paho.MQTT_ERR_NO_CONN, "Could not publish message")
+        packet = publish_packets(messages, v5=client._protocol == paho.MQTTv5,
+                                 prefixes=self._topic_prefixes)
+        info = paho.MQTTMessageInfo(client._mid_generate())
+        client._packet_queue(paho.PUBLISH, packet, info.mid, 0, info)
         return info
 
     async def written(self, info: paho.MQTTMessageInfo) -> None:
