@@ -14,9 +14,10 @@ printed too. Pair trees in alternation:
         [--publish-hz 10] [--firmware python] [--parts]
 
 ``--firmware c`` runs the C port on every board (``odocan fleet --firmware c``). ``--parts`` adds
-the CPU per robot-tick of the fleet step (``Fleet.step``) and of the bridge's frame handling
-(``Bridge._handle``: E2E, decode, live judge, publications queued), the rest (JSON, paho, the
-socket writes, the loop, the GC) and the socket writes per robot-tick.
+the CPU per robot-tick of the fleet step (``Fleet.step``), of the bridge's frame handling
+(``Bridge._handle``: E2E, decode, live judge, publications and their JSON queued), of the young
+GC passes (one after each tick, ``fleetrun.TickCollector``), the rest (paho, the socket writes,
+the loop, status and rates) and the socket writes per robot-tick.
 
 The script runs unchanged on trees since the bridge's ``run_fleet`` (copy it there to pair).
 Before, the clock released every tick at once (a ``NeverLate`` clock in ``run_realtime``): the
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import gc
 import os
 import sys
 import tempfile
@@ -90,11 +92,21 @@ def _bridge_of(on_batch: Any) -> Bridge | None:
 
 
 class Parts:
-    """Process time spent in ``Fleet.step`` and ``Bridge._handle``; the links' socket writes."""
+    """Process time spent in ``Fleet.step`` and ``Bridge._handle``, and in the young GC passes
+    (``fleetrun.TickCollector``'s, one a tick: ``gc.callbacks``); the links' socket writes."""
 
     def __init__(self) -> None:
-        self.step_s = self.handle_s = 0.0
+        self.step_s = self.handle_s = self.young_gc_s = 0.0
+        self._gc_t0_s = 0.0
         self.senders: list[Any] = []
+
+    def _on_gc(self, phase: str, info: dict[str, Any]) -> None:
+        if info["generation"] != 0:
+            return
+        if phase == "start":
+            self._gc_t0_s = time.process_time()
+        else:
+            self.young_gc_s += time.process_time() - self._gc_t0_s
 
     def install(self) -> None:
         """Wrap the two parts and count every link's ``CoalescedSend``."""
@@ -120,16 +132,17 @@ class Parts:
         setattr(Fleet, "step", timed_step)  # noqa: B010 (a bench's patch)
         setattr(Bridge, "_handle", timed_handle)  # noqa: B010
         setattr(client.CoalescedSend, "__init__", making)  # noqa: B010
+        gc.callbacks.append(self._on_gc)
 
     def line(self, cpu_s: float, robot_ticks: int) -> str:
         """The parts in us per robot-tick, and the socket writes per robot-tick."""
         per = robot_ticks / 1e6
-        rest = (cpu_s - self.step_s - self.handle_s) / per
+        rest = (cpu_s - self.step_s - self.handle_s - self.young_gc_s) / per
         writes = sum(sender.writes for sender in self.senders) / robot_ticks
         line = (f"  step {self.step_s / per:.1f}, bridge frame handling "
-                f"{self.handle_s / per:.1f}, the rest {rest:.1f} us; {writes:.3f} socket writes "
-                f"per robot-tick (the whole run)")
-        self.step_s = self.handle_s = 0.0
+                f"{self.handle_s / per:.1f}, young GC passes {self.young_gc_s / per:.1f}, the "
+                f"rest {rest:.1f} us; {writes:.3f} socket writes per robot-tick (the whole run)")
+        self.step_s = self.handle_s = self.young_gc_s = 0.0
         self.senders.clear()
         return line
 
