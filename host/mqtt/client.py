@@ -6,8 +6,10 @@ aiomqtt drops.
 * the CONNACK's session-present flag (a broker that lost our session is noticed);
 * a connection the broker closes before its CONNACK (amqtt, to some v5 CONNECTs) as an error
   instead of a wait for ever;
-* QoS-0 telemetry straight into paho's queue (``publish_now``), and a wait for its socket write
-  (``written``), instead of aiomqtt's coroutine, task and event per message;
+* QoS-0 telemetry straight into paho's queue, a robot's burst as one queue entry of PUBLISH
+  packets built here (``publish_batch``; ``publish_now`` for one message), and a wait for its
+  socket write (``written``), instead of aiomqtt's coroutine, task and event per message and
+  paho's packet, info and write bookkeeping per message;
 * one socket write for every packet queued (``CoalescedSend``; paho writes each packet with a send
   of its own, ~1.4 syscalls per publication, each a wake-up of the broker), and a batch written at
   once from the event loop (``flush``) instead of a writer callback a loop turn later, without
@@ -166,7 +168,6 @@ class LinkClient(aiomqtt.Client):
             return info
 
         setattr(self._client, "publish", publish)  # noqa: B010 (an instance's own attribute)
-        self._paho_publish = paho_publish
         self.coalesced = CoalescedSend(self._client)
         setattr(self._client, "_sock_send", self.coalesced)  # noqa: B010
         self._loop_thread = threading.get_ident()  # made in the event loop's thread
@@ -182,8 +183,8 @@ class LinkClient(aiomqtt.Client):
         While ``quiet_writes``, paho's ``on_publish`` is off for the write: paho calls it for
         every QoS-0 packet written (a QoS-1 one's comes with its PUBACK, read elsewhere), with a
         ``ReasonCode`` and a ``Properties`` built for each (a tenth of a fleet worker's MQTT
-        CPU), and the only QoS-0 packets are ``publish_now``'s, whose writes ``written`` learns
-        from their infos here instead."""
+        CPU), and the only QoS-0 packets are ``publish_batch``'s, whose writes ``written``
+        learns from their infos here instead."""
         client = self._client
         quiet = self.quiet_writes
         on_publish = client._on_publish
@@ -237,13 +238,11 @@ class LinkClient(aiomqtt.Client):
             super()._on_socket_unregister_write(client, userdata, sock)
 
     def publish_now(self, topic: str, body: bytes) -> paho.MQTTMessageInfo:
-        """QoS 0 straight into paho's outgoing queue (no coroutine, no task, no event per
-        message, as aiomqtt's ``publish`` makes them); ``MqttCodeError`` when paho refuses (the
-        connection is gone). ``written(info)`` waits until the socket took it."""
-        info = self._paho_publish(topic, body, 0)  # not the wrapper: quiet writes stay on
-        if info.rc != paho.MQTT_ERR_SUCCESS:
-            raise aiomqtt.MqttCodeError(info.rc, "Could not publish message")
-        return info
+        """One QoS-0 message straight into paho's outgoing queue (``publish_batch`` of one: no
+        coroutine, no task, no event per message, as aiomqtt's ``publish`` makes them);
+        ``MqttCodeError`` when the connection is gone. ``written(info)`` waits until the socket
+        took it."""
+        return self.publish_batch(((topic, body),))
 
     def publish_batch(self, messages: Sequence[tuple[str, bytes]]) -> paho.MQTTMessageInfo:
         """QoS-0 ``(topic, body)`` messages, in order, as ONE entry of paho's outgoing queue:
