@@ -23,6 +23,7 @@ aiomqtt drops.
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -257,6 +258,11 @@ class LinkClient(aiomqtt.Client):
         packet = publish_packets(messages, v5=client._protocol == paho.MQTTv5,
                                  prefixes=self._topic_prefixes)
         info = paho.MQTTMessageInfo(client._mid_generate())
+        logger = client._logger
+        if logger is not None and logger.isEnabledFor(logging.DEBUG):  # paho's line per message
+            for topic, body in messages:
+                logger.debug("Sending PUBLISH (d0, q0, r0, m%d), '%s', ... (%d bytes) [batch]",
+                             info.mid, topic, len(body))
         client._packet_queue(paho.PUBLISH, packet, info.mid, 0, info)
         return info
 
