@@ -17,7 +17,9 @@ robots per core is about 10 000 / (us per robot-tick).
 default 10: pose, reference, error and truth, four publications in one socket write per robot
 and period; every frame is judged whatever the rate). ``--lookahead off`` runs the robots'
 drives tick by tick instead of ahead in staggered blocks (``sim.lookahead``, the fleet's
-default): a pair of sweeps shows what the blocks save.
+default): a pair of sweeps shows what the blocks save. ``--firmware c`` puts the C port
+(``firmware/c``, bit-exact, a shared library through ctypes: ``odocan fleet --firmware c``) on
+every board instead of the Python firmware (the default, as ``odocan fleet``'s).
 
 ``--robots`` (or ``--fixed``) replaces the search by one trial per size; the table's "2 cores"
 column is 20 000 us / (fleet + bridge + broker CPU per robot-tick): what two idle cores would
@@ -44,11 +46,13 @@ from odocan.host.mqtt.broker import LOOPBACK, BrokerURL, free_loopback_port
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
 from odocan.host.mqtt.shards import BrokerProcess, run_sharded
 from odocan.sim import robot
+from odocan.sim.cboard import FIRMWARES
 from odocan.sim.fleet import FleetConfig
 
 LIMIT = 0.001
-# FleetConfig.lookahead (--lookahead) and FleetRun.publish_hz (--publish-hz) of every trial
-OPTIONS = argparse.Namespace(lookahead=True, publish_hz=10.0)
+# FleetConfig.lookahead (--lookahead), .firmware (--firmware) and FleetRun.publish_hz
+# (--publish-hz) of every trial
+OPTIONS = argparse.Namespace(lookahead=True, publish_hz=10.0, firmware="python")
 TICKS_PER_S = os.sysconf("SC_CLK_TCK")
 
 
@@ -67,7 +71,7 @@ def trial(n: int, seconds: float, bridge: bool, broker: BrokerURL | None, worker
           broker_pid: int | None) -> dict[str, Any]:
     """One run of ``n`` robots; prints its figures and returns them (a row of the table)."""
     run = FleetRun(fleet=FleetConfig(robots=n, robot=robot.load("pmir"),
-                                     lookahead=OPTIONS.lookahead),
+                                     lookahead=OPTIONS.lookahead, firmware=OPTIONS.firmware),
                    duration_s=seconds,
                    bridge=bridge, broker=broker, client_prefix=f"bench-{n}-{time.time_ns()}",
                    publish_hz=OPTIONS.publish_hz)
@@ -145,7 +149,8 @@ def cpu_cost_us(n: int = 10, ticks: int = 300) -> tuple[float, float]:
 
     p = robot.load("pmir")
     geometry = Geometry.of(p)
-    with Fleet(FleetConfig(robots=n, robot=p, lookahead=OPTIONS.lookahead)) as fleet:
+    with Fleet(FleetConfig(robots=n, robot=p, lookahead=OPTIONS.lookahead,
+                           firmware=OPTIONS.firmware)) as fleet:
         telemetry = [RobotTelemetry(name, geometry, "exact", counter_bits=p.counter_bits)
                      for name in fleet.names]
         step_s = bridge_s = 0.0
@@ -184,14 +189,18 @@ def main() -> None:
     parser.add_argument("--publish-hz", type=float, default=10.0, metavar="HZ",
                         help="the bridge's pose telemetry per robot, as odocan fleet's "
                              "--publish-hz (default: 10)")
+    parser.add_argument("--firmware", choices=FIRMWARES, default="python",
+                        help="every board's firmware, as odocan fleet's --firmware (default: "
+                             "python; c: firmware/c as a shared library)")
     args = parser.parse_args()
     OPTIONS.lookahead = args.lookahead == "on"
+    OPTIONS.firmware = args.firmware
     OPTIONS.publish_hz = args.publish_hz
     sweep = [n for n in (args.robots or []) + (args.fixed or []) for _ in range(args.repeat)]
     rows: list[tuple[str, dict[str, Any]]] = []
     print(f"fleet bench: {os.cpu_count()} CPUs, {args.trial_s:.0f} s per trial, "
           f"limit deadline_miss_ratio <= {LIMIT}, {args.workers} workers, lookahead "
-          f"{args.lookahead}, telemetry {args.publish_hz:g} Hz, "
+          f"{args.lookahead}, telemetry {args.publish_hz:g} Hz, {args.firmware} firmware, "
           f"load {os.getloadavg()[0]:.2f}")
     step_us, bridge_us = cpu_cost_us()
     print(f"CPU per robot and 10 ms tick, in process: step {step_us:.0f} us, bridge frame "

@@ -6,8 +6,10 @@ aiomqtt drops.
 * the CONNACK's session-present flag (a broker that lost our session is noticed);
 * a connection the broker closes before its CONNACK (amqtt, to some v5 CONNECTs) as an error
   instead of a wait for ever;
-* QoS-0 telemetry straight into paho's queue (``publish_now``), and a wait for its socket write
-  (``written``), instead of aiomqtt's coroutine, task and event per message;
+* QoS-0 telemetry straight into paho's queue, a robot's burst as one queue entry of PUBLISH
+  packets built here (``publish_batch``; ``publish_now`` for one message), and a wait for its
+  socket write (``written``), instead of aiomqtt's coroutine, task and event per message and
+  paho's packet, info and write bookkeeping per message;
 * one socket write for every packet queued (``CoalescedSend``; paho writes each packet with a send
   of its own, ~1.4 syscalls per publication, each a wake-up of the broker), and a batch written at
   once from the event loop (``flush``) instead of a writer callback a loop turn later, without
@@ -21,9 +23,10 @@ aiomqtt drops.
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import aiomqtt
@@ -76,6 +79,48 @@ class CoalescedSend:
         return sent
 
 
+MAX_PACKET_BYTES = 268_435_455  # MQTT's largest remaining length (four bytes of varint)
+
+
+def publish_packets(
+    messages: Sequence[tuple[str, bytes]], *, v5: bool, prefixes: dict[str, bytes] | None = None
+) -> bytearray:
+    """The QoS-0 PUBLISH packets (no retain, no DUP; MQTT v5: no properties) of ``messages``
+    back to back, as paho's ``_send_publish`` builds each: the fixed header ``0x30``, the
+    remaining length as a varint (7 bits a byte, least significant first), the topic as a UTF-8
+    string with its 16-bit length, in v5 a zero property length, then the body. ``prefixes``
+    caches each topic's encoded part. A topic with a wildcard, empty or over 65 535 bytes, or
+    a packet over MQTT's limit is a ``ValueError``, as in paho."""
+    cache: dict[str, bytes] = prefixes if prefixes is not None else {}
+    packet = bytearray()
+    for topic, body in messages:
+        prefix = cache.get(topic)
+        if prefix is None:
+            prefix = cache[topic] = _topic_prefix(topic, v5)
+        size = len(prefix) + len(body)
+        if size > MAX_PACKET_BYTES:
+            raise ValueError("Payload too large.")
+        packet.append(0x30)
+        while size > 0x7F:
+            packet.append(size & 0x7F | 0x80)
+            size >>= 7
+        packet.append(size)
+        packet += prefix
+        packet += body
+    return packet
+
+
+def _topic_prefix(topic: str, v5: bool) -> bytes:
+    """A PUBLISH packet's variable header without a packet id (QoS 0): the topic's length and
+    bytes, and in v5 an empty property list."""
+    encoded = topic.encode()
+    if b"+" in encoded or b"#" in encoded:
+        raise ValueError(f"publish topic {topic!r} cannot contain wildcards")
+    if not 0 < len(encoded) <= 0xFFFF:
+        raise ValueError(f"publish topic of {len(encoded)} bytes: 1 to 65535")
+    return len(encoded).to_bytes(2, "big") + encoded + (b"\x00" if v5 else b"")
+
+
 class Arrived(aiomqtt.Message):
     """aiomqtt's message plus when paho read it (``time.monotonic`` s) and its expiry (s)."""
 
@@ -124,12 +169,12 @@ class LinkClient(aiomqtt.Client):
             return info
 
         setattr(self._client, "publish", publish)  # noqa: B010 (an instance's own attribute)
-        self._paho_publish = paho_publish
         self.coalesced = CoalescedSend(self._client)
         setattr(self._client, "_sock_send", self.coalesced)  # noqa: B010
         self._loop_thread = threading.get_ident()  # made in the event loop's thread
         self._write_soon_due = False  # a ``_write_soon`` is scheduled
         self._writer_on = False  # the loop's writer is registered for the socket
+        self._topic_prefixes: dict[str, bytes] = {}  # ``publish_packets``' cache per topic
 
     def flush(self) -> None:
         """Write what paho has queued now, from the event loop (one coalesced send), instead of
@@ -139,8 +184,8 @@ class LinkClient(aiomqtt.Client):
         While ``quiet_writes``, paho's ``on_publish`` is off for the write: paho calls it for
         every QoS-0 packet written (a QoS-1 one's comes with its PUBACK, read elsewhere), with a
         ``ReasonCode`` and a ``Properties`` built for each (a tenth of a fleet worker's MQTT
-        CPU), and the only QoS-0 packets are ``publish_now``'s, whose writes ``written`` learns
-        from their infos here instead."""
+        CPU), and the only QoS-0 packets are ``publish_batch``'s, whose writes ``written``
+        learns from their infos here instead."""
         client = self._client
         quiet = self.quiet_writes
         on_publish = client._on_publish
@@ -194,12 +239,31 @@ class LinkClient(aiomqtt.Client):
             super()._on_socket_unregister_write(client, userdata, sock)
 
     def publish_now(self, topic: str, body: bytes) -> paho.MQTTMessageInfo:
-        """QoS 0 straight into paho's outgoing queue (no coroutine, no task, no event per
-        message, as aiomqtt's ``publish`` makes them); ``MqttCodeError`` when paho refuses (the
-        connection is gone). ``written(info)`` waits until the socket took it."""
-        info = self._paho_publish(topic, body, 0)  # not the wrapper: quiet writes stay on
-        if info.rc != paho.MQTT_ERR_SUCCESS:
-            raise aiomqtt.MqttCodeError(info.rc, "Could not publish message")
+        """One QoS-0 message straight into paho's outgoing queue (``publish_batch`` of one: no
+        coroutine, no task, no event per message, as aiomqtt's ``publish`` makes them);
+        ``MqttCodeError`` when the connection is gone. ``written(info)`` waits until the socket
+        took it."""
+        return self.publish_batch(((topic, body),))
+
+    def publish_batch(self, messages: Sequence[tuple[str, bytes]]) -> paho.MQTTMessageInfo:
+        """QoS-0 ``(topic, body)`` messages, in order, as ONE entry of paho's outgoing queue:
+        their PUBLISH packets built here back to back (``publish_packets``: the bytes paho's
+        ``publish`` builds for each) under one message id and one ``MQTTMessageInfo``, instead
+        of paho's per-message topic checks, packet, queue entry, info (a ``Condition`` each)
+        and write bookkeeping: a robot's telemetry of one period is one publication for paho.
+        ``MqttCodeError`` when paho has no connection; ``written(info)`` waits for the socket."""
+        client = self._client
+        if client._sock is None:
+            raise aiomqtt.MqttCodeError(paho.MQTT_ERR_NO_CONN, "Could not publish message")
+        packet = publish_packets(messages, v5=client._protocol == paho.MQTTv5,
+                                 prefixes=self._topic_prefixes)
+        info = paho.MQTTMessageInfo(client._mid_generate())
+        logger = client._logger
+        if logger is not None and logger.isEnabledFor(logging.DEBUG):  # paho's line per message
+            for topic, body in messages:
+                logger.debug("Sending PUBLISH (d0, q0, r0, m%d), '%s', ... (%d bytes) [batch]",
+                             info.mid, topic, len(body))
+        client._packet_queue(paho.PUBLISH, packet, info.mid, 0, info)
         return info
 
     async def written(self, info: paho.MQTTMessageInfo) -> None:

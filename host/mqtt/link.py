@@ -352,20 +352,20 @@ class RobotLink:
 
     async def _send_telemetry(self, client: LinkClient) -> None:
         """QoS 0, in batches: awaits only the socket writes, never an acknowledgement. A batch
-        goes to paho at once and the next waits until the socket took its last message, so
-        while the socket is slow the telemetry waits in the bounded deque (drop-oldest), not
-        in paho's unbounded queue. The batch is written at once, in one send
+        goes to paho at once, as one queue entry of back-to-back PUBLISH packets
+        (``LinkClient.publish_batch``), and the next waits until the socket took it, so while
+        the socket is slow the telemetry waits in the bounded deque (drop-oldest), not in
+        paho's unbounded queue. The batch is written at once, in one send
         (``LinkClient.flush``)."""
         while True:
             await self._telemetry_wake.wait()
             self._telemetry_wake.clear()
             while self.telemetry:
-                last = None
-                for _ in range(len(self.telemetry)):
-                    last = client.publish_now(*self.telemetry.popleft())
+                batch = list(self.telemetry)
+                self.telemetry.clear()
+                last = client.publish_batch(batch)  # one entry of paho's queue
                 client.flush()  # the batch in one socket write, now
-                if last is not None:
-                    await client.written(last)
+                await client.written(last)
 
     async def _send_reliable(self, client: LinkClient) -> None:
         """QoS 1, up to ``inflight`` at once; each entry leaves the buffer once acknowledged."""
