@@ -4,13 +4,13 @@ the judge through a bounded queue (``odocan monitor``'s receive side).
 The monitor's one loop used to read a frame, write it to ``--log``, judge it and redraw the
 screen; while it judged, drew or was not scheduled, the frames waited in the socket's buffer and
 the kernel dropped what did not fit: a 20 s drive replayed onto udp_multicast on a loaded machine
-left a recording without 1 298 to 3 337 of its 7 200 frames (the kernel's count of drops on the
-monitor's socket agreed: ``host.io.rxsocket``). Here the reading and the recording do not wait
-for the judge: the reader thread does nothing else (python-can's ``Notifier`` does the same, but
-stops its listeners with it and wants a whole ``BusABC``; this one reads any object with
-``recv``). The judge takes the frames from a queue of at most ``capacity``; when it falls that
-far behind, the frames it cannot take are still recorded, counted in ``judge_skipped`` and said
-(the judge may fall behind or skip, the log must not).
+with three busy loops left recordings without up to 3 337 of its 7 200 frames (the kernel's
+count of drops on the monitor's socket agreed: ``host.io.rxsocket``). Here the reading and the
+recording do not wait for the judge: the reader thread does nothing else (python-can's
+``Notifier`` does the same, but stops its listeners with it and wants a whole ``BusABC``; this
+one reads any object with ``recv``). The judge takes the frames from a queue of at most
+``capacity``; when it falls that far behind, the frames it cannot take are still recorded,
+counted in ``judge_skipped`` and said (the judge may fall behind or skip, the log must not).
 
 Threads: the reader thread calls ``bus.recv`` and ``record``; the caller's thread calls ``get``,
 ``stop`` and ``drain``. An error of ``bus.recv`` ends the reading and is raised by ``get`` in the
