@@ -29,11 +29,12 @@ import pytest
 
 import odocan.host.cli.subparsers.monitor as monitor_cmd
 from odocan.host.cli.app import build_parser
+from odocan.host.io import busreader
 from odocan.host.io.buses import open_bus
 from odocan.host.io.busreader import BusReader, lost_here_text
 from odocan.host.io.rxsocket import SocketDrops, bus_socket_fd
 from odocan.host.judge.monitor import BusMonitor
-from odocan.host.report.tui_app import MonitorApp
+from odocan.host.report.tui_app import FrameLog, MonitorApp
 from tests.test_cli_run import run_cli
 
 BURST = 3000  # > 10x what Linux's default receive buffer holds (256 udp_multicast frames)
@@ -94,18 +95,21 @@ class _EndsAfterBurst:
         return self.bus.fileno()
 
 
-def test_the_log_holds_every_frame_of_a_burst_while_the_judge_is_held(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
-) -> None:
+def _watch_burst(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+                 path: Path, held: Any) -> tuple[int, dict[str, Any], str, list[int]]:
+    """``odocan monitor --log path --json`` on a fresh udp_multicast group while the burst is
+    sent, ``held`` (a class and the name of its method taking one frame) held on its first
+    frame until the burst was sent; (exit code, the JSON, stderr, the tags in the log)."""
     build_parser()
     group, port = _group_and_port()
     burst = _Burst(group, port)
-    plain_feed = BusMonitor.feed
+    owner, name = held
+    plain = getattr(owner, name)
 
-    def slow_feed(model: BusMonitor, msg: can.Message) -> Any:
+    def slow(self: Any, msg: can.Message) -> Any:
         if not burst.sent.is_set():
-            burst.sent.wait(60)  # the judge is busy for as long as the burst lasts
-        return plain_feed(model, msg)
+            burst.sent.wait(60)  # busy for as long as the burst lasts
+        return plain(self, msg)
 
     def open_and_start(args: Any, **overrides: Any) -> can.BusABC:
         try:
@@ -120,12 +124,11 @@ def test_the_log_holds_every_frame_of_a_burst_while_the_judge_is_held(
             super().__init__(_EndsAfterBurst(bus, burst, self), *args,  # type: ignore[arg-type]
                              **kwargs)
 
-    monkeypatch.setattr(BusMonitor, "feed", slow_feed)
+    monkeypatch.setattr(owner, name, slow)
     monkeypatch.setattr(monitor_cmd, "open_bus", open_and_start)
     monkeypatch.setattr(monitor_cmd, "MonitorApp", EndsAfterBurst)
     sender = threading.Thread(target=burst.run, name="burst")
     sender.start()
-    path = tmp_path / "watch.log"
     try:
         code, out, err = run_cli(capsys, "monitor", "-i", "udp_multicast", "-c", group,
                                  "--bus-arg", "hop_limit=0", "--bus-arg", f"port={port}",
@@ -135,13 +138,53 @@ def test_the_log_holds_every_frame_of_a_burst_while_the_judge_is_held(
         sender.join(60)
     logged = [int.from_bytes(m.data, "little") for m in can.LogReader(path)
               if m.arbitration_id == UNKNOWN_ID]
+    return code, json.loads(out), err, logged
+
+
+def test_the_log_holds_every_frame_of_a_burst_while_the_judge_is_held(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+) -> None:
+    code, model, err, logged = _watch_burst(monkeypatch, capsys, tmp_path / "watch.log",
+                                            (BusMonitor, "feed"))
     assert logged == list(range(BURST)), f"the log lost {BURST - len(logged)} of {BURST}"
     assert (code, err) == (0, "")
-    model = json.loads(out)
     assert model["frames_total"] == BURST  # the judge caught up on every frame
     assert model["receive"]["read"] == model["receive"]["recorded"] == BURST
     assert model["receive"]["judge_skipped"] == 0
     assert model["receive"]["socket_dropped"] == 0
+
+
+def _tiny_buffer(bus: object, wanted_bytes: int = 0) -> int | None:
+    """Instead of widening: a 4 KiB receive buffer (the kernel's minimum, a few frames)."""
+    fd = bus_socket_fd(bus)
+    assert fd is not None
+    with socket.socket(fileno=fd) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        granted: int = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        sock.detach()  # the bus keeps its socket
+    return granted
+
+
+def test_frames_the_kernel_dropped_are_said_apart_and_add_up_with_the_log(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """The recorder itself held during the burst on a tiny socket buffer: the kernel drops most
+    of the burst. The monitor says so on stderr and in its JSON, and what it read plus what the
+    kernel dropped is every frame the sender sent; the log has exactly what was read."""
+    monkeypatch.setattr(busreader, "widen_receive_buffer", _tiny_buffer)
+    code, model, err, logged = _watch_burst(monkeypatch, capsys, tmp_path / "watch.log",
+                                            (FrameLog, "record"))
+    received = model["receive"]
+    dropped = received["socket_dropped"]
+    assert dropped is not None
+    assert dropped > 0
+    assert received["read"] + dropped == BURST
+    assert received["read"] == received["recorded"] == len(logged) == model["frames_total"]
+    assert logged == sorted(logged)
+    assert code == 0
+    assert err == (f"monitor: lost here: {dropped} frames dropped by the kernel before they "
+                   f"were read (socket receive buffer of {received['socket_buffer_bytes'] >> 10}"
+                   " KiB full): in neither the log nor the judge\n")
 
 
 class _Virtual:
