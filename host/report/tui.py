@@ -5,9 +5,10 @@ are rich renderables (``host.report.live``); a ``Layout`` gives every region a h
 so what matters (firmware state, pose against reference and truth) is placed first and can never
 be pushed off the screen by a long table, and the screen stays a pure function
 ``screen(snapshot, trace, ...)`` that a test renders on a fixed-size ``Console`` and that records
-to SVG as it is. The receive loop stays the plain synchronous python-can loop it was (no second
-event loop next to ``bus.recv``); the few keys (pause, filter, quit) are read from the terminal in
-cbreak mode between frames.
+to SVG as it is. The judging loop stays a plain synchronous loop (no event loop): it takes the
+frames that a reader thread (``host.io.busreader``) read and already wrote to ``--log``, so a slow
+judge or screen never makes the recording lose a frame; the few keys (pause, filter, quit) are
+read from the terminal in cbreak mode between frames.
 
 The screen, top to bottom (rows on 80×24)::
 
@@ -19,7 +20,8 @@ The screen, top to bottom (rows on 80×24)::
     alert        nothing heard for 2 s and why, node events, frames not checked       1
     messages     rate, jitter, E2E, and per-page rates of multiplexed messages      ≥ 4
     trace        the latest decoded frames, filtered, frozen while paused          the rest
-    keys         space/p pause, f filter, q quit; the --log file and its count        1
+    keys         space/p pause, f filter, q quit; the --log file and its count; the
+                 frames lost here (dropped by the socket, not judged), if any         1
 
 A terminal of 40 rows or more also shows the latest signal values of every message; one of
 150 columns or more puts the trace beside the message table.
@@ -77,6 +79,7 @@ class View:
     log_path: Path | None = None
     logged: int = 0
     log_error: str = ""
+    lost_here: str = ""  # frames this process lost itself (``host.io.busreader.lost_here_text``)
     editing: str | None = None  # the filter being typed (None: not editing)
     note: str = ""  # a one-off message (e.g. a refused filter)
 
@@ -363,4 +366,6 @@ def _keys_line(trace: Trace, view: View) -> Text:
         line.append(f"  log {view.logged} frames to {view.log_path}", style="cyan")
     if view.log_error:
         line.append(f"  log stopped: {view.log_error}", style="bold red")
+    if view.lost_here:
+        line.append(f"  lost here: {view.lost_here}", style="bold red")
     return line

@@ -1,6 +1,7 @@
-"""The app behind ``odocan monitor``'s screen: the receive loop (model, trace, ``--log``, live
-Foxglove), the keys (pause, filter, quit) read in cbreak mode between frames, and the live screen
-on the terminal. The screen itself is ``host.report.tui``; the trace ``host.report.trace``.
+"""The app behind ``odocan monitor``'s screen: the receive loop (the bus read and ``--log``
+written on a reader thread, ``host.io.busreader``; the model, trace and live Foxglove fed), the
+keys (pause, filter, quit) read in cbreak mode between frames, and the live screen on the
+terminal. The screen itself is ``host.report.tui``; the trace ``host.report.trace``.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from rich.console import Console
 from rich.layout import Layout
 from rich.live import Live
 
+from odocan.host.io.busreader import BusReader, lost_here_text
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.report.trace import FrameFilter, Trace
 from odocan.host.report.tui import View, screen
@@ -28,6 +30,7 @@ from odocan.host.stopped import signum_of
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 
 REFRESH_S = 0.25  # screen redraws
+LOST_CHECK_S = 1.0  # the kernel's drop count read at most this often (a /proc file)
 
 
 class RecordingError(OdocanError):
@@ -80,7 +83,8 @@ class FrameLog:
 
 
 class MonitorApp:
-    """The receive loop behind the screen: feed the model, the trace and the log; read keys."""
+    """The receive loop behind the screen: the log written as frames are read, the model and
+    the trace fed; keys read."""
 
     def __init__(self, bus: can.BusABC, model: BusMonitor, trace: Trace, view: View,
                  recorder: FrameLog | None = None,
@@ -91,29 +95,42 @@ class MonitorApp:
         self.publish = publish
         self.quit = False
         self.stopped_by: int | None = None  # the signal (Ctrl-C, SIGTERM) that ended it
+        self.reader: BusReader | None = None  # the bus's reader, once ``receive`` ran
+        self._lost_checked_s = -LOST_CHECK_S
 
     def receive(self, deadline_s: float, redraw: Any | None = None) -> None:
         """Until ``deadline_s`` (monotonic), ``q`` or Ctrl-C/SIGTERM (``stopped_by``);
-        ``redraw()`` every ``REFRESH_S``."""
-        next_draw = 0.0
+        ``redraw()`` every ``REFRESH_S``. The bus is read and ``--log`` written on the reader's
+        own thread (``host.io.busreader``), so neither waits for the judge or the screen; the
+        frames read before the end are judged before it returns (not after a signal: those
+        are ``reader.pending``)."""
+        reader = self.reader = BusReader(
+            self.bus, None if self.recorder is None else self.recorder.record).start()
         try:
-            while not self.quit and (now := time.monotonic()) < deadline_s:
-                if redraw is not None and now >= next_draw:
-                    redraw()
-                    next_draw = now + REFRESH_S
-                msg = self.bus.recv(timeout=max(0.0, min(REFRESH_S, deadline_s - now)))
-                if msg is not None:
-                    self.on_frame(msg)
-                if redraw is not None:
-                    self.on_keys(_read_keys())
+            self._judge(reader, deadline_s, redraw)
+            reader.stop()
+            for msg in reader.drain():
+                self.on_frame(msg)
         except KeyboardInterrupt as exc:
             self.stopped_by = signum_of(exc)
+        finally:
+            reader.stop()
+
+    def _judge(self, reader: BusReader, deadline_s: float, redraw: Any | None) -> None:
+        next_draw = 0.0
+        while not self.quit and (now := time.monotonic()) < deadline_s:
+            if redraw is not None and now >= next_draw:
+                redraw()
+                next_draw = now + REFRESH_S
+            msg = reader.get(max(0.0, min(REFRESH_S, deadline_s - now)))
+            if msg is not None:
+                self.on_frame(msg)
+            if redraw is not None:
+                self.on_keys(_read_keys())
 
     def on_frame(self, msg: can.Message) -> None:
-        """One frame heard: log it, feed the model and the trace."""
+        """One frame to judge (already in ``--log``): feed the model and the trace."""
         self.view.last_frame_s = time.monotonic()
-        if self.recorder is not None:
-            self.recorder.record(msg)
         self.model.feed(msg)
         self.trace.feed(msg)
         if self.publish is not None:
@@ -154,6 +171,9 @@ class MonitorApp:
         self.view.heard_s = {n: now - s.heard_monotonic_s for n, s in self.model.messages.items()}
         if self.recorder is not None:
             self.view.logged, self.view.log_error = self.recorder.count, self.recorder.error
+        if self.reader is not None and now >= self._lost_checked_s + LOST_CHECK_S:
+            self.view.lost_here = lost_here_text(self.reader.stats(), short=True)
+            self._lost_checked_s = now
 
 
 def run_screen(app: MonitorApp, deadline_s: float, console: Console | None = None) -> None:

@@ -5,7 +5,11 @@ On any python-can bus (``-i/-c/-b``, or python-can's configuration) every frame 
 jitter, E2E counts, the firmware's status, and the on-board pose against the float64 reference
 (and SIM_TRUTH when present). The screen (``host.report.tui``, fits 80×24) redraws it a few times
 a second until Ctrl-C or ``q`` (exit 0) or ``--duration``, with a decoded trace (``--filter``,
-pause with space or ``p``); ``--log PATH`` records every frame heard.
+pause with space or ``p``); ``--log PATH`` records every frame heard, on a thread that reads the
+bus before any judging (``host.io.busreader``: a slow judge or screen never costs the log a
+frame). What this process itself lost (frames the kernel dropped on its socket, frames recorded
+that the judge skipped) is said apart from what the bus lost (the E2E ``lost`` counts, which
+include both): a ``lost here:`` line on stderr and on the screen, ``receive`` in the JSON.
 With ``--json`` there is no screen: at the end (``--duration`` or Ctrl-C) the
 model is printed as one JSON object, for scripts. A ``--duration`` watch that Ctrl-C or SIGTERM
 ends early says so (``stopped`` in the JSON, a line on stderr) and exits 130/143, never 0.
@@ -44,6 +48,7 @@ from odocan.host.cli.options import (
 )
 from odocan.host.cli.subparsers.analyze import load_dbc
 from odocan.host.io.buses import add_bus_arguments, open_bus
+from odocan.host.io.busreader import lost_here_text
 from odocan.host.io.export import FOXGLOVE_PORT
 from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.monitor import BusMonitor, to_json
@@ -153,11 +158,14 @@ def _do_monitor(args: argparse.Namespace) -> int:
                 started_s=time.monotonic())
     live = _foxglove(args, profile, model)
     started_s = time.monotonic()
-    failure, signum = _watch_bus(args, model, trace, view, recorder, live)
+    failure, signum, received = _watch_bus(args, model, trace, view, recorder, live)
     wrongs = model.tracker.wrongs
     end_of_watch(model.tracker)  # the last pages' proof (host.judge.livegapseen)
     wrongs.finish(model.tracker.allowance_m)  # the samples still waiting for a later page
-    code = _end(args, model.snapshot, early_stop(signum, started_s, args.duration))
+    code = _end(args, lambda: {**model.snapshot(), "receive": received},
+                early_stop(signum, started_s, args.duration))
+    if lost := lost_here_text(received):  # this process's own losses, not the bus's
+        print(f"monitor: lost here: {lost}", file=sys.stderr)
     if failure is not None:
         raise failure
     conflict = model.sources.conflict_text()  # two firmwares: a FAIL, no pose judged after
@@ -213,13 +221,15 @@ def _end(args: argparse.Namespace, snapshot: Callable[[], dict[str, Any]],
 def _watch_bus(
     args: argparse.Namespace, model: BusMonitor, trace: Trace, view: View,
     recorder: FrameLog | None, live: FoxgloveLive | None,
-) -> tuple[RecordingError | None, int | None]:
+) -> tuple[RecordingError | None, int | None, dict[str, int | None]]:
     """Watch the bus until the deadline, ``q``, Ctrl-C or SIGTERM (even one that comes before
     the receive loop runs); the recording's error, returned so that what was heard is still
-    shown (``--json``) before the command ends with it, and the signal that ended it, if one
-    did."""
+    shown (``--json``) before the command ends with it, the signal that ended it, if one
+    did, and what was read and lost here (``BusReader.stats``, with ``recorded``: the frames
+    in ``--log``, None without)."""
     failure: RecordingError | None = None
     signum: int | None = None
+    received: dict[str, int | None] = {}
     try:
         bus = open_bus(args)
         try:
@@ -230,6 +240,7 @@ def _watch_bus(
             else:
                 run_screen(app, _deadline(args.duration))
             signum = app.stopped_by
+            received = {} if app.reader is None else app.reader.stats()
         finally:
             bus.shutdown()
     except KeyboardInterrupt as exc:  # before the loop took it: quit the same way
@@ -242,7 +253,8 @@ def _watch_bus(
                 failure = exc
         if live is not None:
             live.close()
-    return failure, signum
+    received["recorded"] = None if recorder is None else recorder.count
+    return failure, signum, received
 
 
 def _foxglove(
