@@ -31,11 +31,11 @@ from odocan.host.jsonutil import write_report
 from odocan.host.judge.profilepage import profile_mismatch, running_profile, with_bus_speed
 from odocan.host.judge.replay import (
     ReplayInput,
-    departures,
     diagnose,
     logged_integrator,
     replay_and_analyze,
 )
+from odocan.host.judge.replay_compare import departures
 from odocan.host.outputs import check_distinct
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.report.ci import (
