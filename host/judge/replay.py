@@ -23,7 +23,10 @@ after it their offset between two gaps, which one firmware keeps (``drift_betwee
 checked when the log says its firmware took its frames on time, ``replayable``),
 headings everywhere, since they are exact across gaps; every pose the log sent for a frame, a
 resend too, and the log's resent positions against its first at the same frame everywhere:
-one firmware's poses at one frame agree). When the replay departs, the cause is
+one firmware's poses at one frame agree; a log cut mid-drive, and after each hole of the log,
+compared from their first common frame: ``replay_compare``). The firmware runs as many ticks
+without a frame before the log's first as put its poses in the log's phase
+(``replay_compare.pose_phase_ticks``). When the replay departs, the cause is
 looked for by name (``diagnose``): the integrator the log's ODOM_STATUS reports against the one
 replayed, and which robot profile (the one given and every shipped one) the logged poses fit
 (``analyze`` of the log itself, no replay: the profile whose float64 odometry of the logged
@@ -52,7 +55,7 @@ from odocan.host.io.logs import (
 )
 from odocan.host.judge.analysis import Analysis, Tolerance, analyze
 from odocan.host.judge.diagnosis import fitting_profiles
-from odocan.host.judge.replay_compare import versus_log
+from odocan.host.judge.replay_compare import pose_phase_ticks, versus_log
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.outputs import OutputError
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -153,13 +156,15 @@ class LockstepReplay:
         """The nodes' work in a tick: the firmware's board alone (the log is the rest)."""
         self.board.run_tick()
 
-    def run(self, frames: FrameArrays, feed: ReplayInput) -> None:
-        """Feed every encoder frame at its tick (the log's truth frames where they were);
-        Ctrl-C or SIGTERM stops it between two encoder frames, a second one at once
-        (``stopped``: how far it got)."""
+    def run(self, frames: FrameArrays, feed: ReplayInput, phase_ticks: int = 0) -> None:
+        """Feed every encoder frame at its tick (the log's truth frames where they were), after
+        ``phase_ticks`` ticks without a frame (``replay_compare.pose_phase_ticks``); Ctrl-C or
+        SIGTERM stops it between two encoder frames, a second one at once (``stopped``: how
+        far it got)."""
         enc = feed.encoders
         t0 = float(frames.timestamp_s[enc.index[0]])
-        self.loop.start_s = t0
+        self.loop.start_s = t0 - phase_ticks * TICK_S
+        self.loop.run_to(phase_ticks)
         events = _events(enc.index, feed.truth)
         due: int | None = None  # the tick whose encoder frame is on the bus, not yet run
         stop = StopRequest()
@@ -170,10 +175,10 @@ class LockstepReplay:
                     if which >= 0:  # an encoder frame: first run the ticks before its own
                         if stop.stop_requested:
                             break
-                        tick = int(enc.tick[which])
+                        tick = int(enc.tick[which]) + phase_ticks
                         if due is not None:
                             self.loop.run_to(tick)
-                        self.clock.advance_to(t0 + tick * TICK_S)
+                        self.clock.advance_to(self.loop.start_s + tick * TICK_S)
                         due = tick
                     self._log_bus.send(to_message(frames, position))
                 else:
@@ -182,7 +187,7 @@ class LockstepReplay:
         except KeyboardInterrupt as exc:
             interrupt = exc
         if stop.stop_requested or interrupt is not None:
-            asked_s = (int(enc.tick[-1]) + 1) * TICK_S
+            asked_s = (int(enc.tick[-1]) + 1 + phase_ticks) * TICK_S
             self.stopped = Stopped(stop.signum or signum_of(interrupt),
                                    round(self.ticks * TICK_S, 6), round(asked_s, 6))
             print(f"interrupted after {self.ticks * TICK_S:g} s of the log", file=sys.stderr)
@@ -284,7 +289,7 @@ def replay_and_analyze(
     replay = LockstepReplay(firmware_params(profile, integrator), listeners, channel)
     start = time.perf_counter()
     try:
-        replay.run(frames, feed)
+        replay.run(frames, feed, pose_phase_ticks(frames, feed.accepted))
     finally:
         try:
             replay.close()
