@@ -69,8 +69,9 @@ def test_replay_reproduces_the_run(
         "samples": 300, "identical": 300, "max_position_diff_m": 0.0, "max_heading_diff_rad": 0.0,
         "before_first_gap": 300, "max_position_diff_before_gap_m": 0.0,
         "max_resent_position_diff_m": 0.0, "max_position_drift_between_gaps_m": 0.0,
+        "logged": 300, "log_starts_mid_drive": False, "holes": [], "heading_offsets_bam16": [],
     }
-    assert (section["passed"], section["faults"]) == (True, [])
+    assert (section["passed"], section["faults"], section["unjudged"]) == (True, [], None)
     # Bit-identical pose and twist frames, at the same times; the log's truth frames kept.
     assert frames_of(log_out, POSE_IDS) == frames_of(recorded["log"], POSE_IDS)
     assert frames_of(log_out, {0x700}) == frames_of(recorded["log"], {0x700})

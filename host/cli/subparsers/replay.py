@@ -31,11 +31,11 @@ from odocan.host.jsonutil import write_report
 from odocan.host.judge.profilepage import profile_mismatch, running_profile, with_bus_speed
 from odocan.host.judge.replay import (
     ReplayInput,
-    departures,
     diagnose,
     logged_integrator,
     replay_and_analyze,
 )
+from odocan.host.judge.replay_compare import departures, not_comparable, unjudged
 from odocan.host.outputs import check_distinct
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.report.ci import (
@@ -121,20 +121,23 @@ def _do_replay(args: argparse.Namespace) -> int:
     _print_versus_log(section)
     analysis.report["inputs"] = log_inputs(args.log, profile, integrator, None)
     reasons = departures(section["onboard_vs_log"], args.tolerance)
+    blind = unjudged(section["onboard_vs_log"])
     if reasons:  # the firmware's own word on its profile first, then the poses' fit
         reasons += ([] if said is None else [said]) + diagnose(
             frames, feed.accepted, with_bus_speed(profile, running), integrator, args.tolerance,
             source=str(args.log), robot_arg=args.robot)
-    section.update(passed=not reasons, faults=reasons)
+    section.update(passed=not reasons and blind is None, faults=reasons,
+                   unjudged=blind)
     title = f"odocan replay: {args.log} on {profile.name}, {integrator} integrator"
     code = finish(analysis, args, title=title)  # prints the run's verdict (vs the reference)
-    if reasons:
+    verdict = (["FAIL: the replayed firmware departs from the log's",
+                *(f"  - {reason}" for reason in reasons)] if reasons
+               else [] if blind is None else [blind])
+    if verdict:  # a departure, or nothing compared (UNJUDGED): never a PASS
         analysis.report["passed"] = analysis.passed = False
         if args.report is not None:
             write_report(args.report, analysis.report)
-        print("FAIL: the replayed firmware departs from the log's")
-        for reason in reasons:
-            print(f"  - {reason}")
+        print("\n".join(verdict))
         code = 1
     write_checks(args, "replay", analysis_checks(analysis.report))
     stopped = analysis.report.get("stopped")
@@ -161,19 +164,24 @@ def _check_options(args: argparse.Namespace) -> None:
 
 
 def _print_versus_log(section: dict[str, Any]) -> None:
-    """One line: how the replayed firmware's poses compare with the log's."""
+    """How the replayed firmware's poses compare with the log's: one line, then one for a log
+    that starts mid-drive and one for each hole of the log (what is not comparable there)."""
     vs = section["onboard_vs_log"]
     console = Console(file=sys.stdout, highlight=False)
     if not vs["samples"]:
-        console.print("replay: the log has no on-board pose to compare with", soft_wrap=True)
+        console.print("replay: the log has no on-board pose to compare with" if not vs["logged"]
+                      else f"replay: none of the log's {vs['logged']} on-board poses could be "
+                      "paired with the replayed firmware's: nothing compared",
+                      soft_wrap=True)
         return
+    position = ("" if vs["max_position_diff_m"] is None
+                else f"max difference {vs['max_position_diff_m'] * 1e3:.4f} mm, ")
     console.print(
         f"replay: {section['encoder_frames_fed']} encoder frames fed in {section['ticks']} "
         f"ticks; on-board vs the log's at {vs['samples']} encoder frames: {vs['identical']} "
-        f"identical, max difference {vs['max_position_diff_m'] * 1e3:.4f} mm, "
-        f"{vs['max_heading_diff_rad'] * 1e3:.4f} mrad",
-        soft_wrap=True,
-    )
+        f"identical, {position}{vs['max_heading_diff_rad'] * 1e3:.4f} mrad", soft_wrap=True)
+    for line in not_comparable(vs):
+        console.print(f"replay: {line}", soft_wrap=True)
 
 
 # --- real time ---------------------------------------------------------------------------------

@@ -1,0 +1,312 @@
+"""The replayed firmware's on-board poses against the logged ones (``host.judge.replay``'s
+``onboard_vs_log`` section, and the departures that fail a replay).
+
+At each encoder frame both firmwares' poses name, the largest difference between any pose sent
+naming it in the log and in the replay: positions up to the log's first gap of the encoder
+sequence, after it their offset's drift between two gaps (when the log says its firmware took
+its frames on time, ``replayable``), headings everywhere, and the log's resent positions against
+its first at the same frame (one firmware's poses at one frame agree).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.firmware.errors import ErrorFlag
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance
+from odocan.host.judge.powerup import starts_at_power_up
+from odocan.host.judge.replay_track import EncoderTrack
+from odocan.host.judge.samples import Poses
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.e2e import check_frames
+from odocan.sim import contract
+
+IntArray = npt.NDArray[np.int64]
+HOLE_CYCLES = 3  # no frame at all for longer than 3 encoder cycles: a hole of the log
+SAID_HOLES = 3  # holes named one by one in the summary
+
+def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dict[int, list[
+        tuple[int, int, int]]]:
+    """The on-board poses of ``frames`` by the tick of the encoder frame they name:
+    (X raw, Y raw, heading in BAM16 units unwrapped = TURNS * 65536 + HEADING); the first X
+    with the first Y, then each other X and Y sent naming it (a resend: every pose frame is
+    compared, each half with the first of the other kind, as ``host.judge.resent``)."""
+    decoder = BulkDecoder(contract.database())
+    track = EncoderTrack.of(frames, accepted, decoder)
+    halves = []
+    for name, value, extra in (("ODOM_POSE_X", "X", "HEADING"), ("ODOM_POSE_Y", "Y", "TURNS")):
+        d = decoder.decode(frames, name)
+        keep = accepted[d["index"]]
+        ticks = track.named(d["index"][keep], d["ENC_COUNTER"][keep].astype(np.int64),
+                            d["timestamp_s"][keep])
+        half: dict[int, list[tuple[int, int]]] = {}
+        previous = -1  # a resend names its predecessor's frame (one naming an earlier one
+        for tick, v, e in zip(ticks.tolist(), d[value][keep].tolist(), d[extra][keep].tolist(),
+                              strict=True):  # after a gap of the log's frames is no resend)
+            sent = half.setdefault(tick, []) if tick >= 0 else []
+            if (not sent or tick == previous) and (int(v), int(e)) not in sent:
+                sent.append((int(v), int(e)))
+            previous = tick
+        halves.append(half)
+    px, py = halves
+    return {t: [(x, py[t][0][0], py[t][0][1] * 65536 + h) for x, h in px[t]]
+            + [(px[t][0][0], y, turns * 65536 + px[t][0][1]) for y, turns in py[t][1:]]
+            for t in px.keys() & py.keys()}
+
+
+def versus_log(
+    log: FrameArrays, log_accepted: npt.NDArray[np.bool_], replayed: FrameArrays
+) -> dict[str, Any]:
+    """The replayed on-board poses against the logged ones at the same encoder frames (at each,
+    the largest difference between any pose sent naming it in the log and in the replay).
+
+    Where the replay cannot live what the recording firmware lived, the comparison re-anchors:
+    a log that starts mid-drive (``starts_mid_drive``: the replay starts from (0, 0, 0) on its
+    first encoder frame) and after each hole of the log (``recorder_holes``: the recording
+    firmware took frames the replay is not fed, e.g. a step its counters wrapped over), the
+    heading offset at the first frame both name (``anchors``) is taken off the headings that
+    follow, less one LSB of rounding, and the replayed positions are turned by it and compared
+    by their drift (``drift_between_gaps_m``)."""
+    _, accepted = check_frames(replayed)
+    old, new = onboard_by_tick(log, log_accepted), onboard_by_tick(replayed, accepted)
+    common = np.array(sorted(old.keys() & new.keys()), dtype=np.int64)
+    decoder = BulkDecoder(contract.database())
+    track = EncoderTrack.of(log, log_accepted, decoder)
+    mid = starts_mid_drive(log, log_accepted, old, track)
+    holes = recorder_holes(log)
+    logged = int(np.count_nonzero(log_accepted[decoder.select(log, "ODOM_POSE_X")]))
+    facts: dict[str, Any] = {"logged": logged, "log_starts_mid_drive": mid, "holes": holes,
+                             "max_resent_position_diff_m": resent_position_diff_m(old)}
+    if len(common) == 0:
+        return {"samples": 0, "identical": 0, "max_position_diff_m": None,
+                "max_heading_diff_rad": None, "before_first_gap": 0,
+                "max_position_diff_before_gap_m": None, "heading_offsets_bam16": [],
+                "max_position_drift_between_gaps_m": None, **facts}
+    after = np.searchsorted(track.index, [int(h["before"]) for h in holes], "right")
+    hole_ends = track.tick[after[after < len(track.tick)]]  # a hole ending the log: none
+    turn, anchored, offsets = anchors(common, old, new, hole_ends, mid)
+    position, heading, differs = _differences(common, old, new, turn, anchored)
+    ticks = track.tick
+    gaps = np.flatnonzero(np.diff(ticks) > 1)
+    first_gap = int(ticks[gaps[0]]) if len(gaps) else int(ticks[-1])  # last tick before it
+    before = 0 if mid else int(np.searchsorted(common, first_gap, side="right"))
+    log_xy, replay_xy = (np.array([poses[t][0][:2] for t in common.tolist()], dtype=np.int64)
+                         for poses in (old, new))
+    gap_ends = np.r_[common[0], ticks[gaps + 1]] if mid else ticks[gaps + 1]
+    drift = drift_between_gaps_m(common, log_xy, replay_xy, gap_ends, turn, anchored) \
+        if replayable(log, log_accepted) else None
+    return {
+        "samples": len(common),
+        "identical": int(np.count_nonzero(differs == 0)),
+        "max_position_diff_m": None if mid else float(position.max()),
+        "max_heading_diff_rad": float(heading.max()),
+        "before_first_gap": before,
+        "max_position_diff_before_gap_m": float(position[:before].max()) if before else None,
+        "heading_offsets_bam16": offsets,
+        "max_position_drift_between_gaps_m": drift,
+        **facts,
+    }
+
+
+Poses3 = dict[int, list[tuple[int, int, int]]]
+
+
+def anchors(common: IntArray, old: Poses3, new: Poses3, hole_ends: IntArray,
+            mid: bool) -> tuple[IntArray, npt.NDArray[np.bool_], list[int]]:
+    """At each ``common`` tick: the heading offset (log - replay, BAM16) taken off the replay's
+    and whether it is an anchor's (measured on the bus: known to one LSB) rather than 0 by
+    construction (a log from power-up, before its first hole); and every anchor's offset. A
+    segment starts at the log's start and after each hole (``hole_ends``: the first tick after
+    it); its anchor is its first common tick."""
+    segment = np.searchsorted(hole_ends, common, side="right")
+    starts = np.flatnonzero(np.r_[True, segment[1:] != segment[:-1]])
+    anchored = segment > 0 if not mid else np.ones(len(common), dtype=np.bool_)
+    offset = np.array([0 if not anchored[i] else
+                       old[int(common[i])][0][2] - new[int(common[i])][0][2]
+                       for i in starts.tolist()], dtype=np.int64)
+    turn = offset[np.cumsum(np.r_[True, segment[1:] != segment[:-1]]) - 1]
+    return turn, anchored, [int(o) for o, i in zip(offset, starts, strict=True) if anchored[i]]
+
+
+def _differences(common: IntArray, old: Poses3, new: Poses3, turn: IntArray,
+                 anchored: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.float64], ...]:
+    """Per common tick: the largest position difference (m, as they are), heading difference
+    (rad, less its anchor's offset and, anchored, one LSB of rounding) and 1.0 where any pose
+    pair differs at all."""
+    pairs = [(t, a, b) for t in common.tolist() for a, b in itertools.product(old[t], new[t])]
+    at = np.searchsorted(common, [t for t, _, _ in pairs])
+    a = np.array([p[1] for p in pairs], dtype=np.int64)
+    b = np.array([p[2] for p in pairs], dtype=np.int64)
+    position, heading, differs = (np.zeros(len(common)) for _ in range(3))
+    np.maximum.at(position, at, np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]) * POSITION_LSB_M)
+    beyond = np.maximum(np.abs(a[:, 2] - b[:, 2] - turn[at]) - anchored[at], 0)
+    np.maximum.at(heading, at, beyond * HEADING_LSB_RAD)
+    np.maximum.at(differs, at, (a != b).any(axis=1).astype(np.float64))
+    return position, heading, differs
+
+
+def starts_mid_drive(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                     poses: dict[int, list[tuple[int, int, int]]], track: EncoderTrack) -> bool:
+    """The log does not start at its firmware's power-up (``powerup.starts_at_power_up``, the
+    judges' rule): its poses are then off the replay's, which starts from (0, 0, 0) on the
+    log's first encoder frame, by the pose the recording firmware had there."""
+    if not poses:
+        return False
+    first = min(poses)
+    x, y, h = poses[first][0]
+    onboard = Poses(enc=np.array([int(np.searchsorted(track.tick, first))], dtype=np.int64),
+                    x_m=np.array([x * POSITION_LSB_M]), y_m=np.array([y * POSITION_LSB_M]),
+                    heading_rad=np.array([h * HEADING_LSB_RAD]),
+                    heading_raw=np.array([h & 0xFFFF], dtype=np.int64))
+    decoder = BulkDecoder(contract.database())
+    return not starts_at_power_up(frames, accepted, decoder, onboard)
+
+
+def recorder_holes(frames: FrameArrays) -> list[dict[str, float]]:
+    """Where the log has no frame at all for more than ``HOLE_CYCLES`` encoder cycles (its
+    recorder lost them, or the whole bus was silent): ``t_s`` the log's time before the hole
+    (from its first frame) and ``length_s``. Across one the recording firmware may have had
+    frames the replay is not fed, so its positions are compared only by their drift after.
+    ``before``: the position of the log's last frame before it."""
+    if len(frames) < 2:
+        return []
+    times = np.asarray(frames.timestamp_s, dtype=np.float64)
+    step = np.diff(times)
+    at = np.flatnonzero(step > HOLE_CYCLES * contract.cycle_time_s("WHEEL_ENCODERS"))
+    return [{"t_s": round(float(times[i] - times[0]), 3), "length_s": round(float(step[i]), 3),
+             "before": i} for i in at.tolist()]
+
+
+def replayable(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> bool:
+    """True when the recording firmware took exactly the log's accepted encoder frames, each on
+    its tick, as far as the log tells: no ODOM_STATUS summary reports TIME_LOST or
+    MAILBOX_OVERFLOW (frames merged on board) and the host's E2E check refused no encoder frame
+    (a late one the firmware may have taken). Else a drift between gaps is no departure."""
+    encoders = frames.can_id == contract.database().get_message_by_name("WHEEL_ENCODERS").frame_id
+    if (encoders & ~accepted).any():
+        return False
+    try:
+        page = BulkDecoder(contract.database()).decode_page(frames, "ODOM_STATUS", 0)
+    except DecodeError:
+        return True
+    masks = page["ERROR_MASK"][accepted[page["index"]]].astype(np.int64)
+    return not (masks & (ErrorFlag.TIME_LOST | ErrorFlag.MAILBOX_OVERFLOW)).any()
+
+
+def drift_between_gaps_m(
+    common: IntArray, log_xy: IntArray, replay_xy: IntArray, gap_ends: IntArray,
+    turn: IntArray | None = None, anchored: npt.NDArray[np.bool_] | None = None,
+) -> float:
+    """How far the logged and the replayed positions move apart between two gaps of the log's
+    encoder sequence after its first (m; before it they are compared as they are): the offset
+    (log - replay, raw LSB, at the ``common`` ticks; the replay's positions turned by ``turn``
+    first, the heading offset of its anchor, ``anchors``) less its value at the first common
+    tick of its segment (``gap_ends``: the first tick after each gap), less the rounding.
+    Across a gap the recording firmware may have had frames the log lacks, so the offset may
+    jump there; between gaps both firmwares take the same frames from the same heading (exact
+    everywhere, up to the anchor's offset), so one firmware's offset stays put: on the bus,
+    rounded to the LSB, within one LSB per axis of it; turned by an anchor's offset, known to
+    one BAM16 LSB, within 2.5 LSB per axis (0.5 + 0.5 * sqrt 2, twice) plus that LSB's angle
+    times the replay's travel since the segment's first tick."""
+    if len(common) == 0:
+        return 0.0
+    angle = (np.zeros(len(common)) if turn is None else turn * HEADING_LSB_RAD)[:, None]
+    loose = np.zeros(len(common), dtype=np.bool_) if anchored is None else anchored
+    x, y = replay_xy[:, :1].astype(np.float64), replay_xy[:, 1:].astype(np.float64)
+    offset = log_xy - np.c_[np.cos(angle) * x - np.sin(angle) * y,
+                            np.sin(angle) * x + np.cos(angle) * y]
+    segment = np.searchsorted(gap_ends, common, side="right")
+    first = np.r_[True, segment[1:] != segment[:-1]]  # a segment's first common tick
+    start = np.flatnonzero(first)[np.cumsum(first) - 1]
+    travel = np.hypot(*(replay_xy - replay_xy[start]).T.astype(np.float64))
+    rounding = np.where(loose, 2.5 + HEADING_LSB_RAD * travel, 1.0)[:, None]
+    moved = np.maximum(np.abs(offset - offset[start]) - rounding, 0)[segment > 0]
+    return float(np.hypot(moved[:, 0], moved[:, 1]).max(initial=0.0)) * POSITION_LSB_M
+
+
+def resent_position_diff_m(poses: dict[int, list[tuple[int, int, int]]]) -> float:
+    """The largest position difference between a pose resent naming an encoder frame and the
+    first naming it, in one log (``onboard_by_tick``): across a gap the log's positions are not
+    compared with the replay's, but one firmware's poses at one frame must agree anyway."""
+    diff = [math.hypot(x - sent[0][0], y - sent[0][1])
+            for sent in poses.values() for x, y, _ in sent[1:]]
+    return max(diff, default=0.0) * POSITION_LSB_M
+
+
+def departures(vs_log: dict[str, Any], tolerance: Tolerance) -> list[str]:
+    """Why the replayed firmware departs from the recorded one (module docstring, "Verdict"):
+    empty when it does not (or when the log has no on-board pose to compare with)."""
+    reasons = []
+    position = vs_log["max_position_diff_before_gap_m"]
+    if position is not None and position > tolerance.position_m:
+        reasons.append(f"its position differs from the log's by up to {position * 1e3:.4f} mm "
+                       f"(tolerance {tolerance.position_m * 1e3:.4g} mm)")
+    drift = vs_log.get("max_position_drift_between_gaps_m")
+    if drift is not None and drift > tolerance.position_m:
+        reasons.append(f"between gaps of the log its position moves off the log's by up to "
+                       f"{drift * 1e3:.4f} mm (tolerance {tolerance.position_m * 1e3:.4g} mm)")
+    resent = vs_log.get("max_resent_position_diff_m")
+    if resent is not None and resent > tolerance.position_m:
+        reasons.append(f"the log's resent positions differ from its first at the same encoder "
+                       f"frame by up to {resent * 1e3:.4f} mm "
+                       f"(tolerance {tolerance.position_m * 1e3:.4g} mm)")
+    heading = vs_log["max_heading_diff_rad"]
+    if heading is not None and heading > tolerance.heading_rad:
+        reasons.append(f"its heading differs from the log's by up to {heading * 1e3:.4f} mrad "
+                       f"(tolerance {tolerance.heading_rad * 1e3:.4g} mrad)")
+    return reasons
+
+
+def pose_phase_ticks(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> int:
+    """The ticks the replay runs its firmware before the log's first encoder frame so that its
+    poses name the encoder frames the log's name: the log's pose ticks (from its first encoder
+    frame) mod the pose period, the most common (0 for a log from power-up; a log cut at an odd
+    frame has its poses on odd ticks, and a replay out of phase has no frame in common)."""
+    period = round(contract.cycle_time_s("ODOM_POSE_X") / contract.cycle_time_s("WHEEL_ENCODERS"))
+    ticks = np.array(sorted(onboard_by_tick(frames, accepted)), dtype=np.int64)
+    if period < 2 or len(ticks) == 0:
+        return 0
+    return int(np.bincount(ticks % period, minlength=period).argmax())
+
+
+def not_comparable(vs_log: dict[str, Any]) -> list[str]:
+    """What the comparison with the log could not reproduce, in words: a start mid-drive, and
+    each hole of the log (the first ``SAID_HOLES``, then how many more)."""
+    lines = []
+    drift = vs_log.get("max_position_drift_between_gaps_m") is not None
+    if vs_log.get("log_starts_mid_drive"):
+        offset = (vs_log.get("heading_offsets_bam16") or [0])[0] * HEADING_LSB_RAD
+        lines.append("the log starts mid-drive, not at its firmware's power-up: the replayed "
+                     "firmware starts from (0, 0, 0) on the log's first encoder frame, so its "
+                     "headings are compared less the log's offset at the first frame both "
+                     f"name ({offset:.4f} rad), "
+                     + ("its positions by their drift, turned by that offset" if drift else
+                        "its positions not (the log's firmware did not take its frames on time)"))
+    holes = vs_log.get("holes") or []
+    for hole in holes[:SAID_HOLES]:
+        lines.append(f"the log has a hole at t={hole['t_s']:.2f} s ({hole['length_s']:.2f} s "
+                     "without a frame): the recording firmware took frames there the replay "
+                     "is not fed, so its poses are not comparable as they are after it: "
+                     "headings are compared less their offset at the first frame both name "
+                     "after it, " + ("positions by their drift between gaps" if drift else
+                                     "positions not"))
+    if len(holes) > SAID_HOLES:
+        lines.append(f"... and {len(holes) - SAID_HOLES} more holes")
+    return lines
+
+
+def unjudged(vs_log: dict[str, Any]) -> str | None:
+    """Why a replay compared nothing although the log has on-board poses (a verdict no CI may
+    take for a PASS: exit 1), else None (a log without poses has nothing to compare: the
+    replay is judged against its float64 reference alone)."""
+    if vs_log["samples"] or not vs_log.get("logged"):
+        return None
+    return (f"UNJUDGED: none of the log's {vs_log['logged']} on-board poses could be paired "
+            "with the replayed firmware's (by the encoder frame each names): the replay was not "
+            "compared with the firmware that recorded the log")

@@ -1,0 +1,76 @@
+"""The encoder frames a replay feeds, and the tick of each (``host.judge.replay``'s input).
+
+A log's accepted WHEEL_ENCODERS frames are numbered by the sender's period: the E2E COUNTER's
+steps mod 16, widened by 16 where the timestamps say that many periods passed (as
+``host.judge.analysis`` does); gaps longer than ``MAX_GAP_TICKS`` are shortened to it. A pose
+frame names its encoder frame by ENC_COUNTER, resolved with the judges' age rule
+(``samples.named_targets``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.samples import Encoders, contract_cycle_s, named_targets
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.sim import contract
+
+IntArray = npt.NDArray[np.int64]
+MAX_GAP_TICKS = 6000  # a gap in the log longer than 60 s is replayed as 60 s
+
+
+@dataclass(frozen=True)
+class EncoderTrack:
+    """The accepted WHEEL_ENCODERS frames of a FrameArrays and the tick of each."""
+
+    index: IntArray  # positions in the frames
+    counter: IntArray  # E2E COUNTER
+    tick: IntArray  # 10 ms periods since the first one, strictly increasing
+    timestamp_s: npt.NDArray[np.float64]  # bus times
+    cycle_s: float | None  # the DBC cycle time
+
+    @classmethod
+    def of(cls, frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+           decoder: BulkDecoder) -> EncoderTrack:
+        """The track of ``frames`` (empty when none is accepted)."""
+        enc = decoder.decode(frames, "WHEEL_ENCODERS")
+        keep = accepted[enc["index"]]
+        counter = enc["COUNTER"][keep].astype(np.int64)
+        ticks = encoder_ticks(enc["timestamp_s"][keep], counter)
+        return cls(enc["index"][keep], counter, ticks, enc["timestamp_s"][keep],
+                   contract_cycle_s(decoder, "WHEEL_ENCODERS"))
+
+    def named(self, index: IntArray, enc_counter: IntArray,
+              timestamp_s: npt.NDArray[np.float64]) -> IntArray:
+        """The tick of the encoder frame that frames at ``index`` (sent at ``timestamp_s``)
+        name by ``enc_counter``, resolved against the latest accepted encoder frame before each
+        when it is less than 8 cycles older (``samples.named_targets``, the judges' rule: across
+        a longer gap of the log the 4-bit COUNTER cannot tell the frame named from one 16
+        periods away); -1 when that frame is not in the track."""
+        result = np.full(len(index), -1, dtype=np.int64)
+        if len(self.tick) == 0:
+            return result
+        none = np.zeros(len(self.tick), dtype=np.int64)
+        as_encoders = Encoders(index=self.index, counter=self.counter, seq=self.tick, left=none,
+                               right=none, timestamp_s=self.timestamp_s, cycle_s=self.cycle_s)
+        has, target = named_targets(as_encoders, index, enc_counter, timestamp_s)
+        target = target[has]
+        found = np.minimum(np.searchsorted(self.tick, target), len(self.tick) - 1)
+        result[has] = np.where(self.tick[found] == target, target, -1)
+        return result
+
+
+def encoder_ticks(timestamp_s: npt.NDArray[np.float64], counter: IntArray) -> IntArray:
+    """The sender's period of each frame: COUNTER steps mod 16, widened by 16 where the
+    timestamps say that many periods passed; gaps capped at ``MAX_GAP_TICKS``."""
+    if len(counter) == 0:
+        return np.zeros(0, dtype=np.int64)
+    step = np.maximum(1, np.diff(counter) & 0xF).astype(np.int64)
+    periods = np.rint(np.diff(timestamp_s) / contract.cycle_time_s("WHEEL_ENCODERS"))
+    step += 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
+    step = np.minimum(step, MAX_GAP_TICKS)
+    return np.concatenate(([0], np.cumsum(step))).astype(np.int64)
