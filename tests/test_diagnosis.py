@@ -79,8 +79,10 @@ def test_a_batch_names_the_robot_mismatch_of_each_log(
     hint = "robot mismatch: the log's poses fit robot 'kobuki', not 'pmir' (--robot)"
     assert f"{second}: {hint}" in out
     assert f"{kobuki_log}: {hint}" in out
+    page = ("profile mismatch: profile hash differs: the log's firmware runs with the parameters "
+            "of robot 'kobuki', not 'pmir' (--robot)")  # its PROFILE page first, as analyze LOG
     for report in reports.glob("*.json"):
-        assert json.loads(report.read_text())["diagnosis"] == [hint]
+        assert json.loads(report.read_text())["diagnosis"] == [page, hint]
     assert len(list(reports.glob("*.json"))) == 2
 
 
