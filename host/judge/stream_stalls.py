@@ -173,14 +173,14 @@ class StreamStalls:
 
 @dataclass
 class StreamBreakCounts:
-    """``reference_path.break_allowance`` of every break after e0 (``breaks``, sorted), from
+    """``breakspan.break_allowance`` of every break after e0 (``breaks``, sorted), from
     two passes over a life: the first tells each break the first kept sample at or after it
     (``named``, the samples in encoder order, as often as asked: the same answer); the second
     feeds the encoder frames (``feed``, from the life's first), of which only those from the
     frame before each break to that sample are kept (or, for a span beyond
     ``breaks.MAX_MERGE_FRAMES``, only the sums of their steps' absolute counts, exact in any
     chunking); ``allowance`` then gives ``breaks.merge_allowance_m`` bit for bit (plus
-    ``breaks.overlap_allowance_m`` from the span's ends, as ``reference_path.break_allowance``)."""
+    ``breaks.overlap_allowance_m`` from the span's ends, as ``breakspan.break_allowance``)."""
 
     breaks: list[int]
     geometry: Geometry
@@ -242,7 +242,7 @@ class StreamBreakCounts:
                   reprimed: frozenset[int] = frozenset()) -> float:
         """The allowance (m) of the break at encoder frame ``b`` (0 without a sample after,
         and where the firmware's pages prove it took exactly the log's frames across it:
-        ``seen``, ``reference_path.seen_whole``)."""
+        ``seen``, ``breakspan.seen_whole``)."""
         if b in self._ends and seen.took_all(b - 1, self._ends[b], reprimed):
             return 0.0
         if b in self._sums:
