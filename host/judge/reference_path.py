@@ -130,7 +130,8 @@ def build_reference(
         raw_segment_offsets(segment, at, onboard.y_m - y_m[at]),
         list(zip((opened + e0).tolist(), gaps[opened].tolist(), strict=True)),
         lambda b: (break_allowance(enc, b, onboard.enc, geometry, bits, integrator,
-                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s,
+                                   fills=lambda i: seen.filled(i, reprimed))  # spanfill
                    if b in stalled and not seen_whole(seen, b, onboard.enc, reprimed)
                    else 0.0),
         gap_allowance, slack_m)

@@ -36,6 +36,7 @@ from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.lossgate import Gate, gated_counts
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import Encoders
+from odocan.host.judge.spanfill import filled_span_allowance_m
 from odocan.host.judge.stalls import frozen_breaks, silent
 
 COLUMNS = ("enc", "x_m", "y_m", "heading_rad", "heading_raw", "seq")
@@ -248,9 +249,15 @@ class StreamBreakCounts:
         if b in self._sums:
             merged = path_bound_m(self._sums[b][0], self._sums[b][1], self.geometry)
         elif b in self._left:
-            merged = merge_allowance_m(np.concatenate(self._left[b]),
-                                       np.concatenate(self._right[b]), self.geometry, self.bits,
-                                       self.integrator, np.concatenate(self._seq[b]))
+            left, right = np.concatenate(self._left[b]), np.concatenate(self._right[b])
+            seq = np.concatenate(self._seq[b])
+            filled = filled_span_allowance_m(  # the log fills its gaps: spanfill
+                left, right, seq, lambda k: seen.filled(b - 1 + k, reprimed), self.geometry,
+                self.bits, self.integrator, self.max_wheel_speed_mm_s)
+            if filled is not None:
+                return filled
+            merged = merge_allowance_m(left, right, self.geometry, self.bits, self.integrator,
+                                       seq)
         else:
             return 0.0
         j, edges = self._ends[b], self._edges[b]
