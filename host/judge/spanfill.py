@@ -16,7 +16,7 @@ frames until its COUNTER comes round, but the host's window, widened by the tole
 few of them; the firmware holds its pose over them (a hold: ``stalls._frozen``), and the
 break's span holds the lock-out's gaps before and after them. With ``gapbound``'s allowance
 there a firmware adding 1 mm of X after each lock-out passed the whole-log judge
-(tests/test_capture_jitter.py)."""
+(tests/test_live_jitter_lockout.py)."""
 
 from __future__ import annotations
 
