@@ -172,10 +172,23 @@ def gap_or_fill_allowance(
     if filled is not None:
         left = np.array([before[0], *(c[0] for c in filled), after[0]], dtype=np.int64)
         right = np.array([before[1], *(c[1] for c in filled), after[1]], dtype=np.int64)
-        if _plausible(left, right, geometry, bits, max_wheel_speed_mm_s):
-            return 2.0 * merge_allowance_m(left, right, geometry, bits, integrator)
+        allowance = known_counts_allowance_m(left, right, geometry, bits, integrator,
+                                             max_wheel_speed_mm_s)
+        if allowance is not None:
+            return allowance
     return gap_allowance_of_counts(before, after, periods, geometry, bits, integrator,
                                    max_wheel_speed_mm_s)
+
+
+def known_counts_allowance_m(left: IntArray, right: IntArray, geometry: Geometry, bits: int,
+                             integrator: str, max_wheel_speed_mm_s: SpeedBound) -> float | None:
+    """Twice the merge allowance (m) over frames of known counts, one a period (``left``,
+    ``right``: the firmware and the reference each took a subset of them in sequence order, so
+    each is within the merge allowance of the fine path); None when a step is implausible
+    (module docstring: then a frame may be a forgery)."""
+    if not _plausible(left, right, geometry, bits, max_wheel_speed_mm_s):
+        return None
+    return 2.0 * merge_allowance_m(left, right, geometry, bits, integrator)
 
 
 def _plausible(left: IntArray, right: IntArray, geometry: Geometry, bits: int,

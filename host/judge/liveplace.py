@@ -4,10 +4,10 @@ moves to where the firmware is, no further from where the reference started than
 merge allowances since plus the tolerance. A gap of the encoder sequence (frames the judge
 did not hear, which the firmware may have integrated one by one) places it again too, within
 its ``gapbound`` allowance, as ``analyze`` places it; or twice the merge allowance over its
-frames when every frame it lacks was heard refused by E2E (``gapfill``; ``livefill``). A part of
-the latest placement that the firmware's pages later prove it took as the reference did
-(``host.judge.livegapseen``) has its allowance withdrawn (``withdraw``), as ``analyze`` gives it
-none."""
+frames when every frame it lacks was heard refused by E2E (``gapfill``; ``livefill``; a stall's
+span holding such gaps: ``spanfill``). A part of the latest placement that the firmware's pages
+later prove it took as the reference did (``host.judge.livegapseen``) has its allowance
+withdrawn (``withdraw``), as ``analyze`` gives it none."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from odocan.host.judge.breaks import (
     overlap_allowance_m,
     path_bound_m,
 )
-from odocan.host.judge.gapfill import gap_or_fill_allowance
+from odocan.host.judge.gapfill import Counts, gap_or_fill_allowance
 from odocan.host.judge.gapseen import Seen
 from odocan.host.judge.livedark import DarkRestarts
 from odocan.host.judge.livefill import LiveFill
@@ -32,6 +32,7 @@ from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livewindow import CYCLE_S, Columns
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import POSITION_LSB_M, sender_seq
+from odocan.host.judge.spanfill import filled_span_allowance_m
 
 ABS_KEPT = 128  # the latest encoder frames whose count-step sums are kept (a sample names one)
 GAPS_KEPT = 64  # gaps of the encoder sequence kept between two placements (no growth)
@@ -92,7 +93,9 @@ class StallPlacer:
         self._owed = (0.0, 0.0)  # the offset withdrawn, not applied yet (m)
         self.withdrawn = 0  # placements whose allowance the pages withdrew
         self.fill = LiveFill()  # the refused frames heard, by sender number (gapfill)
-        self._gap_sender: dict[int, int] = {}  # per gap (seq after): the sender number before
+        # per recent gap (seq after; the latest GAPS_KEPT, placed or not: a stall's span may
+        # hold one placed before it): the sender number before, its periods
+        self._gap_sender: dict[int, tuple[int, int]] = {}
 
     def restart(self) -> None:
         """A new reference: no offset, no allowance yet."""
@@ -137,7 +140,9 @@ class StallPlacer:
             return False
         if len(self._gaps) < GAPS_KEPT:  # more before a sample: no bound (free, counted)
             self._gaps.append((seq, (int(prev[4]), int(prev[5])), (left, right), periods))
-            self._gap_sender[seq] = sender_before
+            self._gap_sender[seq] = (sender_before, periods)
+            if len(self._gap_sender) > GAPS_KEPT:
+                del self._gap_sender[next(iter(self._gap_sender))]  # the oldest
         else:
             self._gaps[-1] = (seq, (0, 0), (0, 0), -1)
         return True
@@ -175,14 +180,13 @@ class StallPlacer:
             allowance = self._allowance_m(last_compared, pose.seq, window, reference)
             parts.append((False, last_compared, pose.seq, allowance, pose.seq))
         gaps, self._gaps, self.stalled = _confirmed(self._gaps, window), [], False
-        senders, self._gap_sender = self._gap_sender, {}
         sx, sy = self._shift[0] - self._owed[0], self._shift[1] - self._owed[1]  # applied
         owed, self._owed = self._owed, (0.0, 0.0)
         if not gaps and not stalled:  # a burst after a busy bus, not a gap: nothing to place
             return None if owed == (0.0, 0.0) else owed  # but an allowance withdrawn
         for seq, before, after, periods in gaps:
-            filled = (self.fill.fill(senders[seq], periods) if seq in senders and periods > 1
-                      else None)
+            sender = self._gap_sender.get(seq)
+            filled = self.fill.fill(sender[0], periods) if sender and periods > 1 else None
             parts.append((True, seq, seq, math.inf if periods < 0 else gap_or_fill_allowance(
                 filled, before, after, periods, geometry, bits, integrator,
                 self.max_wheel_speed_mm_s), pose.seq))
@@ -259,8 +263,9 @@ class StallPlacer:
                      reference: tuple[Geometry, int, str]) -> float:
         """``breaks.merge_allowance_m`` from encoder frame ``before`` (the last sample compared)
         to ``after`` (seq), from the window's counts (plus ``breaks.overlap_allowance_m`` when a
-        gap of the sender's sequence lies between), or the path bound from the sums of the
-        count steps when ``before`` left the window; inf when neither is known."""
+        gap of the sender's sequence lies between, or ``spanfill``'s when the refused frames
+        heard fill every such gap), or the path bound from the sums of the count steps when
+        ``before`` left the window; inf when neither is known."""
         geometry, counter_bits, integrator = reference
         seqs = window.col("seq")
         i0 = int(np.searchsorted(seqs, before))
@@ -270,6 +275,12 @@ class StallPlacer:
             right = window.col("right")[i0 : i1 + 1].astype(np.int64)
             periods = sender_seq(window.col("counter")[i0 : i1 + 1].astype(np.int64),
                                  window.col("t_s")[i0 : i1 + 1], CYCLE_S)  # a gap within
+            filled = filled_span_allowance_m(  # the fills heard for its gaps: spanfill
+                left, right, periods, lambda k: self._gap_fill(
+                    before + k, int(periods[k] - periods[k - 1])), geometry, counter_bits,
+                integrator, self.max_wheel_speed_mm_s)
+            if filled is not None:
+                return filled
             ends = [(int(periods[k]), int(left[k]), int(right[k])) for k in (0, -1)]
             return merge_allowance_m(left, right, geometry, counter_bits, integrator,
                                      periods) + \
@@ -279,3 +290,10 @@ class StallPlacer:
         if self._abs_last is None or now is None:
             return math.inf
         return path_bound_m(now[0] - self._abs_last[0], now[1] - self._abs_last[1], geometry)
+
+    def _gap_fill(self, seq: int, periods: int) -> list[Counts] | None:
+        """The counts of the frames the gap of ``periods`` into encoder frame ``seq`` lacks,
+        when every one was heard refused (``livefill``) and the gap is the one recorded; else
+        None."""
+        sender, recorded = self._gap_sender.get(seq, (0, 0))
+        return self.fill.fill(sender, periods) if recorded == periods else None

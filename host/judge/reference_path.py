@@ -18,12 +18,9 @@ from odocan.firmware.encoders import (
     RESYNC_FRAMES,
 )
 from odocan.firmware.twist import ENCODER_PERIOD_US
-from odocan.host.judge.breaks import (
-    BreakSummary,
-    merge_allowance_m,
-    overlap_allowance_m,
-    placed_offsets,
-)
+from odocan.host.judge.breaks import BreakSummary, placed_offsets
+from odocan.host.judge.breakspan import break_allowance as break_allowance
+from odocan.host.judge.breakspan import seen_whole
 from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, integrate, wrap_delta
@@ -133,7 +130,8 @@ def build_reference(
         raw_segment_offsets(segment, at, onboard.y_m - y_m[at]),
         list(zip((opened + e0).tolist(), gaps[opened].tolist(), strict=True)),
         lambda b: (break_allowance(enc, b, onboard.enc, geometry, bits, integrator,
-                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s,
+                                   fills=lambda i: seen.filled(i, reprimed))  # spanfill
                    if b in stalled and not seen_whole(seen, b, onboard.enc, reprimed)
                    else 0.0),
         gap_allowance, slack_m)
@@ -152,32 +150,6 @@ def build_reference(
         placements=placed,
         ctrl_restarts=uptime_reprimed, unseen_restarts=frozenset(e0 + k for k in unseen),
     )
-
-
-def break_allowance(enc: Encoders, b: int, sample_enc: IntArray, geometry: Geometry, bits: int,
-                    integrator: str, *, max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED
-                    ) -> float:
-    """``breaks.merge_allowance_m`` of the break at encoder frame ``b``: from frame b - 1 (the
-    last the firmware named before it) to the first frame a kept sample names at or after b (0
-    without one: nothing after it is compared); plus ``breaks.overlap_allowance_m`` when a gap
-    of the log lies in that span."""
-    k = int(np.searchsorted(sample_enc, b))
-    if k == len(sample_enc):
-        return 0.0
-    j = int(sample_enc[k])
-    ends = [(int(enc.seq[i]), int(enc.left[i]), int(enc.right[i])) for i in (b - 1, j)]
-    return merge_allowance_m(enc.left[b - 1 : j + 1], enc.right[b - 1 : j + 1], geometry, bits,
-                             integrator, enc.seq[b - 1 : j + 1]) + overlap_allowance_m(
-        ends[0], ends[1], j - b + 2, geometry, bits, integrator, max_wheel_speed_mm_s)
-
-
-def seen_whole(seen: Seen, b: int, sample_enc: IntArray, reprimed: frozenset[int]) -> bool:
-    """Whether the firmware took exactly the log's frames across the break at encoder frame
-    ``b`` (``break_allowance``'s span: frame b - 1 to the first frame a kept sample names at or
-    after b), as its E2E pages prove (``host.judge.gapseen``): then it took the reference's
-    steps there and the break earns no allowance."""
-    k = int(np.searchsorted(sample_enc, b))
-    return k < len(sample_enc) and seen.took_all(b - 1, int(sample_enc[k]), reprimed)
 
 
 @dataclass

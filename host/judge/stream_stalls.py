@@ -36,6 +36,7 @@ from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.lossgate import Gate, gated_counts
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import Encoders
+from odocan.host.judge.spanfill import filled_span_allowance_m
 from odocan.host.judge.stalls import frozen_breaks, silent
 
 COLUMNS = ("enc", "x_m", "y_m", "heading_rad", "heading_raw", "seq")
@@ -173,14 +174,14 @@ class StreamStalls:
 
 @dataclass
 class StreamBreakCounts:
-    """``reference_path.break_allowance`` of every break after e0 (``breaks``, sorted), from
+    """``breakspan.break_allowance`` of every break after e0 (``breaks``, sorted), from
     two passes over a life: the first tells each break the first kept sample at or after it
     (``named``, the samples in encoder order, as often as asked: the same answer); the second
     feeds the encoder frames (``feed``, from the life's first), of which only those from the
     frame before each break to that sample are kept (or, for a span beyond
     ``breaks.MAX_MERGE_FRAMES``, only the sums of their steps' absolute counts, exact in any
     chunking); ``allowance`` then gives ``breaks.merge_allowance_m`` bit for bit (plus
-    ``breaks.overlap_allowance_m`` from the span's ends, as ``reference_path.break_allowance``)."""
+    ``breaks.overlap_allowance_m`` from the span's ends, as ``breakspan.break_allowance``)."""
 
     breaks: list[int]
     geometry: Geometry
@@ -242,15 +243,21 @@ class StreamBreakCounts:
                   reprimed: frozenset[int] = frozenset()) -> float:
         """The allowance (m) of the break at encoder frame ``b`` (0 without a sample after,
         and where the firmware's pages prove it took exactly the log's frames across it:
-        ``seen``, ``reference_path.seen_whole``)."""
+        ``seen``, ``breakspan.seen_whole``)."""
         if b in self._ends and seen.took_all(b - 1, self._ends[b], reprimed):
             return 0.0
         if b in self._sums:
             merged = path_bound_m(self._sums[b][0], self._sums[b][1], self.geometry)
         elif b in self._left:
-            merged = merge_allowance_m(np.concatenate(self._left[b]),
-                                       np.concatenate(self._right[b]), self.geometry, self.bits,
-                                       self.integrator, np.concatenate(self._seq[b]))
+            left, right = np.concatenate(self._left[b]), np.concatenate(self._right[b])
+            seq = np.concatenate(self._seq[b])
+            filled = filled_span_allowance_m(  # the log fills its gaps: spanfill
+                left, right, seq, lambda k: seen.filled(b - 1 + k, reprimed), self.geometry,
+                self.bits, self.integrator, self.max_wheel_speed_mm_s)
+            if filled is not None:
+                return filled
+            merged = merge_allowance_m(left, right, self.geometry, self.bits, self.integrator,
+                                       seq)
         else:
             return 0.0
         j, edges = self._ends[b], self._edges[b]

@@ -256,9 +256,9 @@ class PoseTracker:
             self._place_at_next = self.placer.stalled = True
             return None
         held = 0 <= self._last_compared <= seq - SILENCE_FRAMES and not queued
-        if self._ref is not None and held and not self._place_at_next:
-            # The firmware held its pose that long, then took the frames since as one step,
-            # which a fine reference cannot follow on a curve: placed again, as after a stall.
+        if self._ref is not None and held and not self.placer.stalled:
+            # The firmware held its pose that long, then took the frames since as one step: placed
+            # again with a stall's allowance, also where a gap opened it (``stalls._frozen``).
             self.stalls += 1
             self._place_at_next = self.placer.stalled = True
         if self._ref is None and self._pending is None and not self.reference_starts:
