@@ -70,6 +70,12 @@ from odocan.host.protocol.e2e_crc import (
 from odocan.host.protocol.e2e_crc import (
     crc8h2f_p02_one as crc8h2f_p02_one,
 )
+from odocan.host.protocol.e2e_evidence import (
+    evidence_frames,
+    pose_evidence,
+    readings,
+    settle,
+)
 from odocan.host.protocol.e2e_periods import (
     frame_periods,
     receive_period_count,
@@ -292,6 +298,9 @@ def check_frames(
         np.count_nonzero((frames.flags[of_none] & (FLAG_ERROR | FLAG_REMOTE)) == 0))
     protected = [c.data_ids is not None for c in in_order]
     crc_ok = _crc_ok(frames, groups.numbers, in_order) if any(protected) else None
+    poses = None if crc_ok is None else evidence_frames(
+        frames, [groups.of(k) for k in range(len(in_order))],
+        [(c.name, c.length) for c in in_order], crc_ok)
     for number, config in enumerate(in_order):
         of_id = groups.of(number)
         if len(of_id) == 0:
@@ -302,7 +311,7 @@ def check_frames(
             unknown["unprotected"] += len(right_dlc)
             accepted[right_dlc] = True
             continue
-        counts[config.name] = _check_message(frames, right_dlc, config, accepted, crc_ok)
+        counts[config.name] = _check_message(frames, right_dlc, config, accepted, crc_ok, poses)
     counts[UNKNOWN] = unknown
     return counts, accepted
 
@@ -329,14 +338,17 @@ def _check_message(
     config: E2EMessage,
     accepted: npt.NDArray[np.bool_],
     crc_ok: npt.NDArray[np.bool_],
+    poses: list[npt.NDArray[np.intp]] | None = None,
 ) -> dict[str, int]:
     """Check the frames ``index`` of one protected message (``crc_ok``: of every frame); mark
-    the accepted ones."""
+    the accepted ones. ``poses``: the evidence frames' positions (``e2e_evidence``)."""
     assert config.data_ids is not None
     counter = (frames.data[index, 1] & COUNTER_MASK).astype(np.int64)
     periods = frame_periods(frames.timestamp_s[index], counter, crc_ok[index], config.cycle_s,
                             config.min_periods)
     status = sequence_statuses(crc_ok[index], counter, periods, config.max_delta_init)
+    if config.name in PER_PERIOD_WINDOW and config.cycle_s is not None and poses is not None:
+        status = _settled(frames, index, counter, crc_ok[index], periods, status, config, poses)
     good = (status == _S_OK) | (status == _S_LOST)
     if good.all():  # the usual case: no gathers
         accepted[index] = True
@@ -354,6 +366,23 @@ def _check_message(
         "crc_errors": int(np.count_nonzero(status == _S_CRC)),
         "wrong_sequence": int(np.count_nonzero(status == _S_WRONG)),
     }
+
+
+def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDArray[np.int64],
+             crc_ok: npt.NDArray[np.bool_], periods: npt.NDArray[np.int64],
+             status: npt.NDArray[np.int8], config: E2EMessage,
+             poses: list[npt.NDArray[np.intp]]) -> npt.NDArray[np.int8]:
+    """``status`` where the capture's stamps decide every frame; else settled from the
+    firmware's poses (``e2e_evidence``)."""
+    assert config.cycle_s is not None
+    wide, narrow = readings(frames.timestamp_s[index], counter, crc_ok, config.cycle_s, periods)
+    if all(np.array_equal(status, sequence_statuses(crc_ok, counter, p, config.max_delta_init))
+           for p in (wide, narrow)):
+        return status
+    evidence = pose_evidence(frames, index, counter, crc_ok, poses)
+    settled, _ = settle(crc_ok, counter, (periods, wide, narrow), evidence,
+                        config.max_delta_init)
+    return settled
 
 
 # --- live -------------------------------------------------------------------------------------
