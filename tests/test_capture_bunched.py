@@ -23,11 +23,13 @@ import math
 import random
 from pathlib import Path
 
+import can
 import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
+from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import load
 from tests.dbc_typed import dbc_attribute, load_can_dbc, numbers
@@ -154,8 +156,8 @@ def _verdicts(tmp_path: Path, drive: tuple[str, int, str, int], wrong: str | Non
 def test_a_correct_firmware_passes_a_starved_capture(
     tmp_path: Path, drive: tuple[str, int, str, int]
 ) -> None:
-    """Before: each of the faulted drives FAILed whole and streamed (the host refused 31 of the
-    kobuki burst drive's 333 encoder frames the firmware took, 240 poses unpaired)."""
+    """Before: each FAILed whole and streamed (the host refused 31 of the kobuki burst drive's
+    333 encoder frames the firmware took, 240 poses unpaired, 36 mm / 0.32 rad)."""
     right, verdicts = _verdicts(tmp_path, drive, None)
     assert right
     assert all(verdicts.values()), verdicts
@@ -171,3 +173,35 @@ def test_a_pose_two_lsb_off_fails_a_starved_capture(
     right, verdicts = _verdicts(tmp_path, drive, wrong)
     assert not right
     assert not any(verdicts.values()), verdicts
+
+
+@pytest.mark.xfail(strict=True, reason="open: a starved capture of a drive with frames late on "
+                   "the bus: the firmware's lock-outs outlast what its poses can name")
+def test_a_correct_firmware_passes_a_starved_capture_of_a_delayed_drive(tmp_path: Path) -> None:
+    """kobuki, ``delay=0.1:15,seed=7``: the firmware took 262 encoder frames (a late frame
+    locks its E2E window out for up to 15 periods); on the capture the host takes 362: where
+    the stamps cannot decide, the poses hold one frame's name through a lock-out, which no
+    longer tells one frame from the one 16 later, and the wide reading after the recorder's
+    releases takes the frames. FAIL at 38 mm / 0.45 rad (before: 27 mm / 0.45 rad). The hold
+    and stall rules (``samples.queued_frames``) also read the recorder's bursts as a busy
+    bus's."""
+    right, verdicts = _verdicts(tmp_path, ("kobuki", 3, "delay=0.1:15,seed=7", 1), None)
+    assert right
+    assert all(verdicts.values()), verdicts
+
+
+@pytest.mark.xfail(strict=True, reason="open: the live judge (E2EMonitor) has no look-ahead for "
+                   "the poses' evidence: it still refuses frames the firmware took")
+def test_the_live_judge_passes_a_starved_capture(tmp_path: Path) -> None:
+    """The monitor model on the kobuki burst drive's capture: FAIL (30 mm, 0.32 rad)."""
+    log, capture = tmp_path / "drive.log", tmp_path / "capture.log"
+    main(["run", "--robot", "kobuki", "--duration", "4", "--seed", "3", "--faults",
+          "burst=0.05:3,seed=3", "--log", str(log)])
+    _starved(log, capture, 2)
+    monitor = BusMonitor(load("kobuki"))
+    with can.LogReader(str(capture)) as reader:
+        for msg in reader:
+            monitor.feed(msg, now_s=msg.timestamp)
+    ref = monitor.tracker.vs_reference
+    assert ref.max_dpos_m <= POSITION_LSB_M
+    assert ref.max_dheading_rad <= HEADING_LSB_RAD

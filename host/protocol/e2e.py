@@ -48,7 +48,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
 from odocan.host.protocol.dbcplan import default_plan
-from odocan.host.protocol.decode import frame_groups, frame_key
+from odocan.host.protocol.decode import frame_groups, frame_key, frame_keys
 from odocan.host.protocol.e2e_crc import (  # re-exported (their old home)
     CRC8H2F_INIT as CRC8H2F_INIT,
 )
@@ -74,6 +74,7 @@ from odocan.host.protocol.e2e_evidence import (
     evidence_frames,
     pose_evidence,
     readings,
+    recorder_releases,
     settle,
 )
 from odocan.host.protocol.e2e_periods import (
@@ -380,9 +381,10 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
            for p in (wide, narrow)):
         return status
     evidence = pose_evidence(frames, index, counter, crc_ok, poses)
-    settled, _ = settle(crc_ok, counter, (periods, wide, narrow), evidence,
-                        config.max_delta_init)
-    return settled
+    released = recorder_releases(frames.timestamp_s, frame_keys(frames) == config.key,
+                                 config.cycle_s)[index]
+    return settle(crc_ok, counter, (periods, wide, narrow), evidence, config.max_delta_init,
+                  released)
 
 
 # --- live -------------------------------------------------------------------------------------

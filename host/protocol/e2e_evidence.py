@@ -14,14 +14,18 @@ one where the second's may (narrower). Where the three give one verdict, the tim
 Where they differ, the firmware's poses do:
 
 * **taken**: an ODOM_POSE_X or _Y frame's ENC_COUNTER names the encoder frame the firmware
-  integrated last before it sent the pose: the latest encoder frame before the pose with that
-  COUNTER (the firmware moved on since its previous send of that message, fewer than 16
-  encoder frames before: the name is unique).
-* **skipped**: a frame on the bus before the firmware's previous send of that message (so in
-  its mailbox before this pose's tick) and after the frame this pose names was refused.
+  integrated last before it sent the pose. Where the firmware moved on since the previous send
+  of that message heard (a later one: COUNTER 1..7 on, at most ``NEAR_FRAMES`` encoder frames
+  before), the named frame came after that send (less ``RACE_FRAMES``): it is the one frame
+  of that COUNTER there, else no proof. A send naming the ENC_COUNTER of that send names what
+  it named, unless another frame of that COUNTER came since (after a lock-out the firmware
+  can move on by 16 frames in one send period: a frame 15 on, then the next).
+* **skipped**: a frame on the bus before that previous send (so in the firmware's mailbox
+  before this pose's tick) and after the frame this pose names was refused.
 
-Neither: the frame is taken (the host integrates the finer path) and returned as undecided, for
-a bounded allowance (the firmware may have taken its step merged with the next one).
+Neither: the strict reading stands (its verdict is exact on a capture whose stamps are the
+bus's, e.g. the lockstep rig's logs, where a firmware locked out by a late frame refuses the
+frames on time after it).
 
 The status codes are ``host.protocol.e2e``'s (``_STATUS`` order: ok, oksomelost, repeated,
 wrong_sequence, crc_error).
@@ -46,7 +50,14 @@ from odocan.host.protocol.e2e_periods import (
 CAPTURE_HOLD_CYCLES = 4.5
 EVIDENCE_MESSAGES = ("ODOM_POSE_X", "ODOM_POSE_Y")
 S_OK, S_LOST, S_REPEATED, S_WRONG, S_CRC = range(5)
+# Encoder frames at most between two sends of a pose message for the second's ENC_COUNTER to
+# name a frame found unambiguously (16 would allow a name 16 frames off; 2 of margin for a
+# frame on the bus before a send that the firmware drained after it).
+NEAR_FRAMES = 14
+RACE_FRAMES = 2  # frames before a send that the firmware may have drained only after it
 _MAX_WINDOW = 15
+SILENCE_CYCLES = 1.5  # the recorder heard nothing (a bus is never that quiet in a drive)
+BURST_CYCLES = 0.1  # then stamped what it held this close
 IntArray = npt.NDArray[np.int64]
 
 
@@ -115,43 +126,47 @@ def pose_evidence(frames: FrameArrays, enc_pos: npt.NDArray[np.intp],
         counter = (frames.data[at, 1] & 0x0F).astype(np.int64)
         named = (frames.data[at, 1] >> 4).astype(np.int64)
         before = np.searchsorted(enc_pos[good], at)  # good encoder frames before each pose
+        found: int | None = None  # the place in ``good`` of the frame the last send named
         for k in range(1, len(at)):
-            if (counter[k] - counter[k - 1]) & 0x0F != 1 or named[k] == named[k - 1]:
-                continue  # not the next send, or the firmware did not move on: no proof
-            if before[k] - before[k - 1] >= COUNTER_MODULO:
+            later = 0 < (counter[k] - counter[k - 1]) & 0x0F < COUNTER_MODULO // 2
+            if not later or before[k] - before[k - 1] > NEAR_FRAMES:
+                found = None  # a send again or a long silence: no proof until the next pair
                 continue
-            found = _named_frame(enc_counter, good, int(before[k]), int(named[k]))
+            if named[k] != named[k - 1]:  # moved on: its only frame of that COUNTER since
+                found = _only_named(enc_counter, good, int(before[k - 1]) - RACE_FRAMES,
+                                    int(before[k]), int(named[k]))
+            elif found is not None and _only_named(enc_counter, good, found, int(before[k]),
+                                                   int(named[k])) != found:
+                found = None  # held, unless a newer frame of that COUNTER came: ambiguous
             if found is None:
                 continue
             taken.add(int(good[found]))
-            last_seen = int(before[k - 1])  # good frames before the previous send
-            skipped.update(good[found + 1 : last_seen].tolist())
+            skipped.update(good[found + 1 : int(before[k - 1])].tolist())
     return Evidence(frozenset(taken), frozenset(skipped - taken))
 
 
-def _named_frame(enc_counter: IntArray, good: npt.NDArray[np.intp], before: int,
-                 named: int) -> int | None:
-    """The place in ``good`` of the latest good encoder frame among the ``before`` first with
-    COUNTER ``named`` (at most 15 back), or None."""
-    for back in range(before - 1, max(before - COUNTER_MODULO, -1), -1):
-        if int(enc_counter[good[back]]) == named:
-            return back
-    return None
+def _only_named(enc_counter: IntArray, good: npt.NDArray[np.intp], lo: int, hi: int,
+                named: int) -> int | None:
+    """The place in ``good`` of the one good encoder frame with COUNTER ``named`` among places
+    ``lo`` .. ``hi`` - 1; None when there is none or more than one."""
+    places = [k for k in range(max(lo, 0), hi) if int(enc_counter[good[k]]) == named]
+    return places[0] if len(places) == 1 else None
 
 
 def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
            periods: tuple[IntArray, IntArray, IntArray], evidence: Evidence,
-           max_delta_init: int) -> tuple[npt.NDArray[np.int8], list[int]]:
+           max_delta_init: int, released: npt.NDArray[np.bool_]) -> npt.NDArray[np.int8]:
     """One message's statuses (bus order) judged with the three readings' ``periods`` (strict,
-    wide, narrow) and, where they differ, with ``evidence``; and the frames neither decided
-    (taken). The Profile 2 check of ``host.protocol.e2e.SequenceState`` with three windows."""
+    wide, narrow) and, where they differ, with ``evidence``, else by the strict reading, or
+    the wide one after a frame a stalled recorder ``released``. The Profile 2 check of
+    ``host.protocol.e2e.SequenceState`` with three windows."""
     n = len(counter)
     status = np.full(n, S_CRC, dtype=np.int8)
     windows = [0, 0, 0]
     waiting, last = True, 0
-    undecided: list[int] = []
     columns = [p.tolist() for p in periods]
     ok, counters = crc_ok.tolist(), (counter & 0x0F).tolist()
+    late = released.tolist()
     for j in range(n):
         windows = [min(w + c[j], _MAX_WINDOW) for w, c in zip(windows, columns, strict=True)]
         if not ok[j]:
@@ -163,22 +178,44 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
             status[j] = S_REPEATED
             continue
         else:
-            code = _by_window_or_evidence(j, delta, windows, evidence, undecided)
+            wide = late[j - 1] if j else False
+            code = _by_window_or_evidence(j, delta, windows, evidence, wide)
         status[j] = code
         if code != S_WRONG:
             waiting, last, windows = False, counters[j], [max_delta_init] * 3
-    return status, undecided
+    return status
 
 
 def _by_window_or_evidence(j: int, delta: int, windows: list[int], evidence: Evidence,
-                           undecided: list[int]) -> int:
-    """OKSOMELOST or WRONG_SEQUENCE for a frame ``delta`` after the last taken one."""
-    verdicts = {delta <= w for w in windows}
-    if len(verdicts) == 1:
-        return S_LOST if verdicts.pop() else S_WRONG
-    if j in evidence.taken:
-        return S_LOST
-    if j in evidence.skipped:
-        return S_WRONG
-    undecided.append(j)
-    return S_LOST
+                           wide: bool) -> int:
+    """OKSOMELOST or WRONG_SEQUENCE for a frame ``delta`` after the last taken one
+    (``windows``: the strict, wide and narrow readings'; ``wide``: the wide one's verdict
+    where the evidence is silent)."""
+    if len({delta <= w for w in windows}) > 1:
+        if j in evidence.taken:
+            return S_LOST
+        if j in evidence.skipped:
+            return S_WRONG
+    return S_LOST if delta <= windows[1 if wide else 0] else S_WRONG
+
+
+def recorder_releases(timestamp_s: npt.NDArray[np.float64], is_encoder: npt.NDArray[np.bool_],
+                      cycle_s: float) -> npt.NDArray[np.bool_]:
+    """Frames a stalled recorder stamped on its release: the log (every ID) silent for
+    ``SILENCE_CYCLES`` periods, then a burst (frames less than ``BURST_CYCLES`` apart) of an
+    encoder frame and more. A bus that held frames back (a sender's bus-off, a babbler) leaves
+    the firmware's own frames, or the babbler's, in the log meanwhile. A lockstep log whose
+    every frame was lost for that long (``drop``) may look so too: there the wide reading
+    differs from the strict one only for a frame late on the bus right after the silence."""
+    if len(timestamp_s) == 0:
+        return np.zeros(0, dtype=bool)
+    gap_s = np.diff(timestamp_s, prepend=timestamp_s[:1])  # the log's start: no silence
+    starts = np.flatnonzero(gap_s >= SILENCE_CYCLES * cycle_s)
+    released = np.zeros(len(timestamp_s), dtype=bool)
+    apart = np.flatnonzero(gap_s >= BURST_CYCLES * cycle_s)  # where each burst ends (next)
+    for first in starts.tolist():
+        k = int(np.searchsorted(apart, first, side="right"))
+        end = int(apart[k]) if k < len(apart) else len(timestamp_s)
+        if end - first >= 2 and bool(is_encoder[first:end].any()):
+            released[first:end] = True
+    return released
