@@ -377,7 +377,8 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
     firmware's poses (``e2e_evidence``)."""
     assert config.cycle_s is not None
     wide, narrow = readings(frames.timestamp_s[index], counter, crc_ok, config.cycle_s, periods)
-    if all(np.array_equal(status, sequence_statuses(crc_ok, counter, p, config.max_delta_init))
+    if all(np.array_equal(p, periods) or np.array_equal(
+            status, sequence_statuses(crc_ok, counter, p, config.max_delta_init))
            for p in (wide, narrow)):
         return status
     evidence = pose_evidence(frames, index, counter, crc_ok, poses)
