@@ -71,6 +71,8 @@ from odocan.host.protocol.e2e_crc import (
     crc8h2f_p02_one as crc8h2f_p02_one,
 )
 from odocan.host.protocol.e2e_evidence import (
+    CAPTURE_HOLD_CYCLES,
+    ReleaseWatch,
     evidence_frames,
     pose_evidence,
     readings,
@@ -78,6 +80,7 @@ from odocan.host.protocol.e2e_evidence import (
     settle,
 )
 from odocan.host.protocol.e2e_periods import (
+    CAPTURE_TOLERANCE_CYCLES,
     frame_periods,
     receive_period_count,
 )
@@ -418,12 +421,16 @@ class E2EMonitor:
         self._states: dict[int, SequenceState] = {}
         self._live: dict[int, _Live] = {}  # protected messages heard: what ``check`` needs
         self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
+        self._releases = ReleaseWatch(min((c.cycle_s for c in self._configs.values()
+                                           if c.min_periods == 0 and c.cycle_s), default=0.01))
 
     def check(
         self, can_id: int, data: bytes, *, extended: bool = False, timestamp_s: float | None = None
     ) -> str:
         """Judge one data frame (identifier, payload); count and return its status (a message
         heard before, with its DLC, by its ``_Live``: one lookup a frame of a fleet's robots)."""
+        if timestamp_s is not None:
+            self._releases.seen(timestamp_s)
         live = self._live.get(frame_key(can_id, True) if extended else can_id)
         if live is None or len(data) != live.length:
             return self._check_first(frame_key(can_id, extended), data, timestamp_s)
@@ -434,8 +441,10 @@ class E2EMonitor:
             last, live.last_s = live.last_s, timestamp_s
             if last is not None and crc_ok and live.last >= 0 and live.min_periods == 0 and (
                     live.cycle_s is not None):  # as ``frame_periods``
-                periods = receive_period_count(timestamp_s - last,
-                                               (counter - live.last) & COUNTER_MASK, live.cycle_s)
+                periods = receive_period_count(  # the wide reading after a release
+                    timestamp_s - last, (counter - live.last) & COUNTER_MASK, live.cycle_s,
+                    CAPTURE_HOLD_CYCLES if self._releases.released(last)
+                    else CAPTURE_TOLERANCE_CYCLES)
             elif last is not None:
                 periods = period_count(timestamp_s - last, live.cycle_s, live.min_periods)
         live.last = counter if crc_ok else -1

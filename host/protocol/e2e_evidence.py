@@ -57,7 +57,7 @@ NEAR_FRAMES = 14
 RACE_FRAMES = 2  # frames before a send that the firmware may have drained only after it
 _MAX_WINDOW = 15
 SILENCE_CYCLES = 1.5  # the recorder heard nothing (a bus is never that quiet in a drive)
-BURST_CYCLES = 0.1  # then stamped what it held this close
+BURST_S = 40e-6  # then stamped what it held this close (closer than a bus delivers frames)
 IntArray = npt.NDArray[np.int64]
 
 
@@ -202,20 +202,55 @@ def _by_window_or_evidence(j: int, delta: int, windows: list[int], evidence: Evi
 def recorder_releases(timestamp_s: npt.NDArray[np.float64], is_encoder: npt.NDArray[np.bool_],
                       cycle_s: float) -> npt.NDArray[np.bool_]:
     """Frames a stalled recorder stamped on its release: the log (every ID) silent for
-    ``SILENCE_CYCLES`` periods, then a burst (frames less than ``BURST_CYCLES`` apart) of an
-    encoder frame and more. A bus that held frames back (a sender's bus-off, a babbler) leaves
-    the firmware's own frames, or the babbler's, in the log meanwhile. A lockstep log whose
-    every frame was lost for that long (``drop``) may look so too: there the wide reading
-    differs from the strict one only for a frame late on the bus right after the silence."""
-    if len(timestamp_s) == 0:
-        return np.zeros(0, dtype=bool)
-    gap_s = np.diff(timestamp_s, prepend=timestamp_s[:1])  # the log's start: no silence
-    starts = np.flatnonzero(gap_s >= SILENCE_CYCLES * cycle_s)
+    ``SILENCE_CYCLES`` periods, then a burst of an encoder frame and more, each stamped after
+    the one before it by less than ``BURST_S`` but not at once. No bus delivers two frames
+    that close (a classic CAN frame takes 47 us or more at 1 Mbit/s), and the lockstep rig
+    stamps the frames of one instant alike (a gap of 0), so a silent stretch of its log (a
+    20 ms pose period whose encoder frames were late or lost) is never taken for one."""
     released = np.zeros(len(timestamp_s), dtype=bool)
-    apart = np.flatnonzero(gap_s >= BURST_CYCLES * cycle_s)  # where each burst ends (next)
-    for first in starts.tolist():
+    if len(timestamp_s) < 2:
+        return released
+    gap_s = np.diff(timestamp_s, prepend=timestamp_s[:1])  # the log's start: no silence
+    close = (gap_s > 0) & (gap_s < BURST_S)
+    apart = np.flatnonzero(~close)  # where each burst ends (the frame after it)
+    for first in np.flatnonzero(gap_s >= SILENCE_CYCLES * cycle_s).tolist():
         k = int(np.searchsorted(apart, first, side="right"))
         end = int(apart[k]) if k < len(apart) else len(timestamp_s)
         if end - first >= 2 and bool(is_encoder[first:end].any()):
             released[first:end] = True
     return released
+
+
+class ReleaseWatch:
+    """``recorder_releases`` live, one frame (of any ID) at a time: ``seen`` notes a frame,
+    ``released`` says whether the frame heard at a time came in a release (known once the frame
+    after it came: a release is a silence then frames less than ``BURST_S`` apart, not at once).
+    The encoder frames ask it for their pair's first frame, when the second comes."""
+
+    __slots__ = ("_last_s", "_lone_s", "_releases", "_silence_s")
+
+    def __init__(self, cycle_s: float) -> None:
+        self._silence_s = SILENCE_CYCLES * cycle_s
+        self._last_s: float | None = None
+        self._lone_s: float | None = None  # a frame after a silence, its burst not seen yet
+        self._releases: list[tuple[float, float]] = []  # the recent ones (first, last s)
+
+    def seen(self, timestamp_s: float) -> None:
+        """Note a frame heard at ``timestamp_s`` s."""
+        last, self._last_s = self._last_s, timestamp_s
+        if last is None:
+            return
+        gap_s = timestamp_s - last
+        if gap_s >= BURST_S or gap_s <= 0:  # the usual case: no burst
+            self._lone_s = timestamp_s if gap_s >= self._silence_s else None
+            return
+        if self._releases and self._releases[-1][1] == last:
+            self._releases[-1] = (self._releases[-1][0], timestamp_s)  # the burst goes on
+        elif self._lone_s == last:
+            self._releases = [*self._releases[-3:], (last, timestamp_s)]  # a burst: a release
+        self._lone_s = None
+
+    def released(self, timestamp_s: float | None) -> bool:
+        """Whether the frame heard at ``timestamp_s`` s came in a release."""
+        return timestamp_s is not None and any(
+            first <= timestamp_s <= last for first, last in self._releases)
