@@ -58,6 +58,7 @@ RACE_FRAMES = 2  # frames before a send that the firmware may have drained only 
 _MAX_WINDOW = 15
 SILENCE_CYCLES = 1.5  # the recorder heard nothing (a bus is never that quiet in a drive)
 BURST_S = 40e-6  # then stamped what it held this close (closer than a bus delivers frames)
+ALIKE_S = 0.5e-6  # but not at once: frames of one instant (the rig's, float noise included)
 IntArray = npt.NDArray[np.int64]
 
 
@@ -203,15 +204,15 @@ def recorder_releases(timestamp_s: npt.NDArray[np.float64], is_encoder: npt.NDAr
                       cycle_s: float) -> npt.NDArray[np.bool_]:
     """Frames a stalled recorder stamped on its release: the log (every ID) silent for
     ``SILENCE_CYCLES`` periods, then a burst of an encoder frame and more, each stamped after
-    the one before it by less than ``BURST_S`` but not at once. No bus delivers two frames
-    that close (a classic CAN frame takes 47 us or more at 1 Mbit/s), and the lockstep rig
+    the one before it by less than ``BURST_S`` but not at once (``ALIKE_S``). No bus delivers
+    two frames that close (a classic CAN frame takes 47 us or more at 1 Mbit/s), and the rig
     stamps the frames of one instant alike (a gap of 0), so a silent stretch of its log (a
     20 ms pose period whose encoder frames were late or lost) is never taken for one."""
     released = np.zeros(len(timestamp_s), dtype=bool)
     if len(timestamp_s) < 2:
         return released
     gap_s = np.diff(timestamp_s, prepend=timestamp_s[:1])  # the log's start: no silence
-    close = (gap_s > 0) & (gap_s < BURST_S)
+    close = (gap_s > ALIKE_S) & (gap_s < BURST_S)
     apart = np.flatnonzero(~close)  # where each burst ends (the frame after it)
     for first in np.flatnonzero(gap_s >= SILENCE_CYCLES * cycle_s).tolist():
         k = int(np.searchsorted(apart, first, side="right"))
@@ -241,7 +242,7 @@ class ReleaseWatch:
         if last is None:
             return
         gap_s = timestamp_s - last
-        if gap_s >= BURST_S or gap_s <= 0:  # the usual case: no burst
+        if gap_s >= BURST_S or gap_s <= ALIKE_S:  # the usual case: no burst
             self._lone_s = timestamp_s if gap_s >= self._silence_s else None
             return
         if self._releases and self._releases[-1][1] == last:
