@@ -4,7 +4,7 @@ The host's own implementation of what the firmware does in ``firmware.e2e`` (dbc
 
 * **CRC8H2F** (polynomial 0x2F, initial value 0xFF, final XOR 0xFF) over bytes 1..7 and then the
   data ID ``E2EDataIDs[COUNTER]``, the 16-entry list of the DBC message attribute ``E2EDataIDs``.
-  Over a whole log: one table lookup per byte column for all frames at once.
+  Over a whole log: one table lookup per byte column for all frames at once (``e2e_crc``).
 * **Sequence** (``E2E_P02Check``), per message in bus order, on the frames whose CRC is right:
   ``delta = (COUNTER - last_valid) mod 16``: 1 OK; 0 REPEATED (dropped); 2..MaxDeltaCounter
   OKSOMELOST (used, ``delta - 1`` frames lost); beyond WRONGSEQUENCE (dropped, the reference counter
@@ -48,8 +48,39 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
 from odocan.host.protocol.dbcplan import default_plan
-from odocan.host.protocol.decode import frame_groups, frame_key
+from odocan.host.protocol.decode import frame_groups, frame_key, frame_keys
+from odocan.host.protocol.e2e_crc import (  # re-exported (their old home)
+    CRC8H2F_INIT as CRC8H2F_INIT,
+)
+from odocan.host.protocol.e2e_crc import (
+    CRC8H2F_POLY as CRC8H2F_POLY,
+)
+from odocan.host.protocol.e2e_crc import (
+    CRC8H2F_TABLE as CRC8H2F_TABLE,
+)
+from odocan.host.protocol.e2e_crc import (
+    CRC8H2F_XOR_OUT as CRC8H2F_XOR_OUT,
+)
+from odocan.host.protocol.e2e_crc import (
+    P02_LENGTH as P02_LENGTH,
+)
+from odocan.host.protocol.e2e_crc import (
+    crc8h2f_p02 as crc8h2f_p02,
+)
+from odocan.host.protocol.e2e_crc import (
+    crc8h2f_p02_one as crc8h2f_p02_one,
+)
+from odocan.host.protocol.e2e_evidence import (
+    CAPTURE_HOLD_CYCLES,
+    ReleaseWatch,
+    evidence_frames,
+    pose_evidence,
+    readings,
+    recorder_releases,
+    settle,
+)
 from odocan.host.protocol.e2e_periods import (
+    CAPTURE_TOLERANCE_CYCLES,
     frame_periods,
     receive_period_count,
 )
@@ -76,85 +107,15 @@ UNKNOWN_ID, WRONG_DLC, UNPROTECTED = "unknown_id", "wrong_dlc", "unprotected"
 _STATUS = (OK, OKSOMELOST, REPEATED, WRONG_SEQUENCE, CRC_ERROR)
 _S_OK, _S_LOST, _S_REPEATED, _S_WRONG, _S_CRC = range(5)
 
-CRC8H2F_POLY = 0x2F
-CRC8H2F_INIT = 0xFF
-CRC8H2F_XOR_OUT = 0xFF
 COUNTER_MASK = 0x0F
 MAX_DELTA_COUNTER = 15
 # Messages the firmware checks with MaxDeltaCounterInit 0 and a window widened once per period
 # (firmware/encoders.py ``EncoderInput.rx``): only +1 passes without time having passed.
 PER_PERIOD_WINDOW = frozenset({"WHEEL_ENCODERS"})
-P02_LENGTH = 8  # bytes: Profile 2 over classic CAN frames
 
 
 class E2EConfigError(OdocanError):
     """The DBC's E2E attributes cannot be used (a list that is not 16 data IDs of 0..255)."""
-
-
-def _crc_table() -> npt.NDArray[np.uint8]:
-    """The MSB-first CRC8H2F table (256 entries), built with numpy: 8 shift/xor rounds."""
-    crc: npt.NDArray[np.int64] = np.arange(256, dtype=np.int64)
-    for _ in range(8):
-        crc = np.where(crc & 0x80, (crc << 1) ^ CRC8H2F_POLY, crc << 1) & 0xFF
-    return crc.astype(np.uint8)
-
-
-CRC8H2F_TABLE = _crc_table()
-_TABLE_LIST = CRC8H2F_TABLE.tolist()
-
-
-def _pair_tables() -> tuple[npt.NDArray[np.uint8], ...]:
-    """CRC8H2F is linear in its register and bytes: the register after the 8 bytes of Profile 2
-    (bytes 1..7, the data ID) is ``_CRC_ZEROS`` (those of zero bytes) XOR each byte's own
-    contribution at its place. These 4 tables (65536 entries) give the contributions of two
-    neighbouring places at once, indexed by the two bytes as one little-endian uint16."""
-    byte = np.arange(256)
-    places = []
-    for place in range(P02_LENGTH):
-        register = CRC8H2F_TABLE[byte]
-        for _ in range(place + 1, P02_LENGTH):
-            register = CRC8H2F_TABLE[register]
-        places.append(register)
-    return tuple(
-        np.bitwise_xor.outer(places[2 * k + 1], places[2 * k]).ravel() for k in range(4)
-    )
-
-
-def _crc_of_zeros() -> int:
-    register = CRC8H2F_INIT
-    for _ in range(P02_LENGTH):
-        register = int(CRC8H2F_TABLE[register])
-    return register
-
-
-_CRC_PAIRS = _pair_tables()
-_CRC_ZEROS = _crc_of_zeros() ^ CRC8H2F_XOR_OUT
-_U16_LE = np.dtype("<u2")
-
-
-def crc8h2f_p02(
-    data: npt.NDArray[np.uint8], data_ids: npt.NDArray[np.uint8]
-) -> npt.NDArray[np.uint8]:
-    """Profile 2 CRCs of N 8-byte frames: CRC8H2F over bytes 1..7 then each frame's data ID
-    (four lookups a frame in ``_CRC_PAIRS``: bytes 1-2, 3-4, 5-6 read in place as uint16)."""
-    data = np.ascontiguousarray(data, dtype=np.uint8)
-    if data.shape[0] == 0:
-        return np.zeros(0, dtype=np.uint8)
-    pairs = np.ndarray((data.shape[0], 3), dtype=_U16_LE, buffer=data, offset=1, strides=(8, 2))
-    last = data[:, 7].astype(np.uint16) | (data_ids.astype(np.uint16) << 8)
-    crc = np.take(_CRC_PAIRS[3], last) ^ np.uint8(_CRC_ZEROS)
-    for k in range(3):
-        crc ^= np.take(_CRC_PAIRS[k], pairs[:, k])
-    result: npt.NDArray[np.uint8] = crc
-    return result
-
-
-def crc8h2f_p02_one(data: bytes, data_id: int) -> int:
-    """The same for one frame of ``P02_LENGTH`` bytes (live monitoring, per frame of every robot:
-    the eight lookups written out, no loop; callers check the length first)."""
-    t = _TABLE_LIST
-    return int(t[t[t[t[t[t[t[t[CRC8H2F_INIT ^ data[1]] ^ data[2]] ^ data[3]] ^ data[4]]
-                       ^ data[5]] ^ data[6]] ^ data[7]] ^ data_id] ^ CRC8H2F_XOR_OUT)
 
 
 @dataclass(frozen=True)
@@ -341,6 +302,9 @@ def check_frames(
         np.count_nonzero((frames.flags[of_none] & (FLAG_ERROR | FLAG_REMOTE)) == 0))
     protected = [c.data_ids is not None for c in in_order]
     crc_ok = _crc_ok(frames, groups.numbers, in_order) if any(protected) else None
+    poses = None if crc_ok is None else evidence_frames(
+        frames, [groups.of(k) for k in range(len(in_order))],
+        [(c.name, c.length) for c in in_order], crc_ok)
     for number, config in enumerate(in_order):
         of_id = groups.of(number)
         if len(of_id) == 0:
@@ -351,7 +315,7 @@ def check_frames(
             unknown["unprotected"] += len(right_dlc)
             accepted[right_dlc] = True
             continue
-        counts[config.name] = _check_message(frames, right_dlc, config, accepted, crc_ok)
+        counts[config.name] = _check_message(frames, right_dlc, config, accepted, crc_ok, poses)
     counts[UNKNOWN] = unknown
     return counts, accepted
 
@@ -378,14 +342,17 @@ def _check_message(
     config: E2EMessage,
     accepted: npt.NDArray[np.bool_],
     crc_ok: npt.NDArray[np.bool_],
+    poses: list[npt.NDArray[np.intp]] | None = None,
 ) -> dict[str, int]:
     """Check the frames ``index`` of one protected message (``crc_ok``: of every frame); mark
-    the accepted ones."""
+    the accepted ones. ``poses``: the evidence frames' positions (``e2e_evidence``)."""
     assert config.data_ids is not None
     counter = (frames.data[index, 1] & COUNTER_MASK).astype(np.int64)
     periods = frame_periods(frames.timestamp_s[index], counter, crc_ok[index], config.cycle_s,
                             config.min_periods)
     status = sequence_statuses(crc_ok[index], counter, periods, config.max_delta_init)
+    if config.name in PER_PERIOD_WINDOW and config.cycle_s is not None and poses is not None:
+        status = _settled(frames, index, counter, crc_ok[index], periods, status, config, poses)
     good = (status == _S_OK) | (status == _S_LOST)
     if good.all():  # the usual case: no gathers
         accepted[index] = True
@@ -403,6 +370,25 @@ def _check_message(
         "crc_errors": int(np.count_nonzero(status == _S_CRC)),
         "wrong_sequence": int(np.count_nonzero(status == _S_WRONG)),
     }
+
+
+def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDArray[np.int64],
+             crc_ok: npt.NDArray[np.bool_], periods: npt.NDArray[np.int64],
+             status: npt.NDArray[np.int8], config: E2EMessage,
+             poses: list[npt.NDArray[np.intp]]) -> npt.NDArray[np.int8]:
+    """``status`` where the capture's stamps decide every frame; else settled from the
+    firmware's poses (``e2e_evidence``)."""
+    assert config.cycle_s is not None
+    wide, narrow = readings(frames.timestamp_s[index], counter, crc_ok, config.cycle_s, periods)
+    if all(np.array_equal(p, periods) or np.array_equal(
+            status, sequence_statuses(crc_ok, counter, p, config.max_delta_init))
+           for p in (wide, narrow)):
+        return status
+    evidence = pose_evidence(frames, index, counter, crc_ok, poses)
+    released = recorder_releases(frames.timestamp_s, frame_keys(frames) == config.key,
+                                 config.cycle_s)[index]
+    return settle(crc_ok, counter, (periods, wide, narrow), evidence, config.max_delta_init,
+                  released)
 
 
 # --- live -------------------------------------------------------------------------------------
@@ -435,12 +421,16 @@ class E2EMonitor:
         self._states: dict[int, SequenceState] = {}
         self._live: dict[int, _Live] = {}  # protected messages heard: what ``check`` needs
         self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
+        self._releases = ReleaseWatch(min((c.cycle_s for c in self._configs.values()
+                                           if c.min_periods == 0 and c.cycle_s), default=0.01))
 
     def check(
         self, can_id: int, data: bytes, *, extended: bool = False, timestamp_s: float | None = None
     ) -> str:
         """Judge one data frame (identifier, payload); count and return its status (a message
         heard before, with its DLC, by its ``_Live``: one lookup a frame of a fleet's robots)."""
+        if timestamp_s is not None:
+            self._releases.seen(timestamp_s)
         live = self._live.get(frame_key(can_id, True) if extended else can_id)
         if live is None or len(data) != live.length:
             return self._check_first(frame_key(can_id, extended), data, timestamp_s)
@@ -451,8 +441,10 @@ class E2EMonitor:
             last, live.last_s = live.last_s, timestamp_s
             if last is not None and crc_ok and live.last >= 0 and live.min_periods == 0 and (
                     live.cycle_s is not None):  # as ``frame_periods``
-                periods = receive_period_count(timestamp_s - last,
-                                               (counter - live.last) & COUNTER_MASK, live.cycle_s)
+                periods = receive_period_count(  # the wide reading after a release
+                    timestamp_s - last, (counter - live.last) & COUNTER_MASK, live.cycle_s,
+                    CAPTURE_HOLD_CYCLES if self._releases.released(last)
+                    else CAPTURE_TOLERANCE_CYCLES)
             elif last is not None:
                 periods = period_count(timestamp_s - last, live.cycle_s, live.min_periods)
         live.last = counter if crc_ok else -1

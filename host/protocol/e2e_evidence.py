@@ -1,0 +1,257 @@
+"""Encoder-frame refusals the capture's timing cannot decide, settled from the firmware's own
+evidence on the bus (issue #11: a live capture on a loaded machine FAILed a correct firmware).
+
+A starved recorder (candump or the monitor on a loaded host) holds the frames it hears for up
+to a few periods and stamps them in a burst, bus order kept: the stamps of two WHEEL_ENCODERS
+frames no longer say how many of the firmware's ticks passed between them, and the host's model
+of the firmware's E2E window (``e2e_periods.receive_periods``, which trusts stamps to
+``CAPTURE_TOLERANCE_CYCLES``) refused frames the firmware took (a pose naming one was paired
+with nothing, the reference split there) or took frames it refused.
+
+Three readings of the stamps per pair of frames: the strict one (``receive_periods``), one
+where the first frame's stamp may be up to ``CAPTURE_HOLD_CYCLES`` late (the window wider) and
+one where the second's may (narrower). Where the three give one verdict, the timing decides.
+Where they differ, the firmware's poses do:
+
+* **taken**: an ODOM_POSE_X or _Y frame's ENC_COUNTER names the encoder frame the firmware
+  integrated last before it sent the pose. Where the firmware moved on since the previous send
+  of that message heard (a later one: COUNTER 1..7 on, at most ``NEAR_FRAMES`` encoder frames
+  before), the named frame came after that send (less ``RACE_FRAMES``): it is the one frame
+  of that COUNTER there, else no proof. A send naming the ENC_COUNTER of that send names what
+  it named, unless another frame of that COUNTER came since (after a lock-out the firmware
+  can move on by 16 frames in one send period: a frame 15 on, then the next).
+* **skipped**: a frame on the bus before that previous send (so in the firmware's mailbox
+  before this pose's tick) and after the frame this pose names was refused.
+
+Neither: the strict reading stands (its verdict is exact on a capture whose stamps are the
+bus's, e.g. the lockstep rig's logs, where a firmware locked out by a late frame refuses the
+frames on time after it).
+
+The status codes are ``host.protocol.e2e``'s (``_STATUS`` order: ok, oksomelost, repeated,
+wrong_sequence, crc_error).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.protocol.e2e_periods import (
+    COUNTER_MODULO,
+    RECEIVE_LAG_CYCLES,
+    receive_periods,
+)
+
+# How late a starved recorder may stamp a frame, in periods: held 1..4 periods (the trial's
+# lateness reached +3.9), plus the stamp jitter of ``CAPTURE_TOLERANCE_CYCLES``.
+CAPTURE_HOLD_CYCLES = 4.5
+EVIDENCE_MESSAGES = ("ODOM_POSE_X", "ODOM_POSE_Y")
+S_OK, S_LOST, S_REPEATED, S_WRONG, S_CRC = range(5)
+# Encoder frames at most between two sends of a pose message for the second's ENC_COUNTER to
+# name a frame found unambiguously (16 would allow a name 16 frames off; 2 of margin for a
+# frame on the bus before a send that the firmware drained after it).
+NEAR_FRAMES = 14
+RACE_FRAMES = 2  # frames before a send that the firmware may have drained only after it
+_MAX_WINDOW = 15
+SILENCE_CYCLES = 1.5  # the recorder heard nothing (a bus is never that quiet in a drive)
+BURST_S = 40e-6  # then stamped what it held this close (closer than a bus delivers frames)
+ALIKE_S = 0.5e-6  # but not at once: frames of one instant (the rig's, float noise included)
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """Encoder frames (indices into one message's frames) the firmware's poses prove it took
+    or skipped."""
+
+    taken: frozenset[int]
+    skipped: frozenset[int]
+
+
+def narrow_periods(dt_s: npt.NDArray[np.float64], step: IntArray, cycle_s: float,
+                   hold_cycles: float = CAPTURE_HOLD_CYCLES) -> IntArray:
+    """``receive_periods`` with the second frame's stamp taken late by capture (up to
+    ``hold_cycles``): a second frame that looks late adds only the sender's step."""
+    x = dt_s / cycle_s
+    s = step + COUNTER_MODULO * np.floor((x - step + COUNTER_MODULO // 2) / COUNTER_MODULO)
+    e = x - s
+    np.copyto(e, np.maximum(e - hold_cycles, 0.0), where=e > 0)
+    late = np.maximum(np.ceil(np.abs(e) - RECEIVE_LAG_CYCLES), 0.0)
+    periods = np.maximum(s + np.sign(e) * late, 0.0)
+    result: IntArray = periods.astype(np.int64)
+    return result
+
+
+def readings(timestamp_s: npt.NDArray[np.float64], counter: IntArray,
+             crc_ok: npt.NDArray[np.bool_], cycle_s: float,
+             strict: IntArray) -> tuple[IntArray, IntArray]:
+    """The wide and narrow readings' periods of each frame (``strict``: ``frame_periods``'),
+    differing from it only between two frames with a right CRC."""
+    wide, narrow = strict.copy(), strict.copy()
+    if len(timestamp_s) > 1:
+        both = np.flatnonzero(crc_ok[1:] & crc_ok[:-1]) + 1
+        dt = timestamp_s[both] - timestamp_s[both - 1]
+        step = (counter[both] - counter[both - 1]) & (COUNTER_MODULO - 1)
+        wide[both] = receive_periods(dt, step, cycle_s, CAPTURE_HOLD_CYCLES)
+        narrow[both] = narrow_periods(dt, step, cycle_s)
+    return wide, narrow
+
+
+def evidence_frames(frames: FrameArrays, of_message: list[npt.NDArray[np.intp]],
+                    messages: list[tuple[str, int]],
+                    crc_ok: npt.NDArray[np.bool_]) -> list[npt.NDArray[np.intp]]:
+    """The bus positions of each ``EVIDENCE_MESSAGES`` message's frames of its DLC with a right
+    CRC (``of_message``: each message's positions; ``messages``: their names and DLCs)."""
+    found = []
+    for (name, length), at in zip(messages, of_message, strict=True):
+        if name in EVIDENCE_MESSAGES:
+            at = at[frames.dlc[at] == length]
+            found.append(at[crc_ok[at]])
+    return found
+
+
+def pose_evidence(frames: FrameArrays, enc_pos: npt.NDArray[np.intp],
+                  enc_counter: IntArray, enc_crc_ok: npt.NDArray[np.bool_],
+                  poses: list[npt.NDArray[np.intp]]) -> Evidence:
+    """What the pose frames ``poses`` (per message, bus positions of those with a right CRC)
+    prove of the encoder frames at ``enc_pos`` (module docstring)."""
+    good = np.flatnonzero(enc_crc_ok)
+    taken: set[int] = set()
+    skipped: set[int] = set()
+    for at in poses:
+        if len(at) < 2:
+            continue
+        counter = (frames.data[at, 1] & 0x0F).astype(np.int64)
+        named = (frames.data[at, 1] >> 4).astype(np.int64)
+        before = np.searchsorted(enc_pos[good], at)  # good encoder frames before each pose
+        found: int | None = None  # the place in ``good`` of the frame the last send named
+        for k in range(1, len(at)):
+            later = 0 < (counter[k] - counter[k - 1]) & 0x0F < COUNTER_MODULO // 2
+            if not later or before[k] - before[k - 1] > NEAR_FRAMES:
+                found = None  # a send again or a long silence: no proof until the next pair
+                continue
+            if named[k] != named[k - 1]:  # moved on: its only frame of that COUNTER since
+                found = _only_named(enc_counter, good, int(before[k - 1]) - RACE_FRAMES,
+                                    int(before[k]), int(named[k]))
+            elif found is not None and _only_named(enc_counter, good, found, int(before[k]),
+                                                   int(named[k])) != found:
+                found = None  # held, unless a newer frame of that COUNTER came: ambiguous
+            if found is None:
+                continue
+            taken.add(int(good[found]))
+            skipped.update(good[found + 1 : int(before[k - 1])].tolist())
+    return Evidence(frozenset(taken), frozenset(skipped - taken))
+
+
+def _only_named(enc_counter: IntArray, good: npt.NDArray[np.intp], lo: int, hi: int,
+                named: int) -> int | None:
+    """The place in ``good`` of the one good encoder frame with COUNTER ``named`` among places
+    ``lo`` .. ``hi`` - 1; None when there is none or more than one."""
+    places = [k for k in range(max(lo, 0), hi) if int(enc_counter[good[k]]) == named]
+    return places[0] if len(places) == 1 else None
+
+
+def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
+           periods: tuple[IntArray, IntArray, IntArray], evidence: Evidence,
+           max_delta_init: int, released: npt.NDArray[np.bool_]) -> npt.NDArray[np.int8]:
+    """One message's statuses (bus order) judged with the three readings' ``periods`` (strict,
+    wide, narrow) and, where they differ, with ``evidence``, else by the strict reading, or
+    the wide one after a frame a stalled recorder ``released``. The Profile 2 check of
+    ``host.protocol.e2e.SequenceState`` with three windows."""
+    n = len(counter)
+    status = np.full(n, S_CRC, dtype=np.int8)
+    windows = [0, 0, 0]
+    waiting, last = True, 0
+    columns = [p.tolist() for p in periods]
+    ok, counters = crc_ok.tolist(), (counter & 0x0F).tolist()
+    late = released.tolist()
+    for j in range(n):
+        windows = [min(w + c[j], _MAX_WINDOW) for w, c in zip(windows, columns, strict=True)]
+        if not ok[j]:
+            continue
+        delta = (counters[j] - last) & 0x0F
+        if waiting or delta == 1:
+            code = S_OK
+        elif delta == 0:
+            status[j] = S_REPEATED
+            continue
+        else:
+            wide = late[j - 1] if j else False
+            code = _by_window_or_evidence(j, delta, windows, evidence, wide)
+        status[j] = code
+        if code != S_WRONG:
+            waiting, last, windows = False, counters[j], [max_delta_init] * 3
+    return status
+
+
+def _by_window_or_evidence(j: int, delta: int, windows: list[int], evidence: Evidence,
+                           wide: bool) -> int:
+    """OKSOMELOST or WRONG_SEQUENCE for a frame ``delta`` after the last taken one
+    (``windows``: the strict, wide and narrow readings'; ``wide``: the wide one's verdict
+    where the evidence is silent)."""
+    if len({delta <= w for w in windows}) > 1:
+        if j in evidence.taken:
+            return S_LOST
+        if j in evidence.skipped:
+            return S_WRONG
+    return S_LOST if delta <= windows[1 if wide else 0] else S_WRONG
+
+
+def recorder_releases(timestamp_s: npt.NDArray[np.float64], is_encoder: npt.NDArray[np.bool_],
+                      cycle_s: float) -> npt.NDArray[np.bool_]:
+    """Frames a stalled recorder stamped on its release: the log (every ID) silent for
+    ``SILENCE_CYCLES`` periods, then a burst of an encoder frame and more, each stamped after
+    the one before it by less than ``BURST_S`` but not at once (``ALIKE_S``). No bus delivers
+    two frames that close (a classic CAN frame takes 47 us or more at 1 Mbit/s), and the rig
+    stamps the frames of one instant alike (a gap of 0), so a silent stretch of its log (a
+    20 ms pose period whose encoder frames were late or lost) is never taken for one."""
+    released = np.zeros(len(timestamp_s), dtype=bool)
+    if len(timestamp_s) < 2:
+        return released
+    gap_s = np.diff(timestamp_s, prepend=timestamp_s[:1])  # the log's start: no silence
+    close = (gap_s > ALIKE_S) & (gap_s < BURST_S)
+    apart = np.flatnonzero(~close)  # where each burst ends (the frame after it)
+    for first in np.flatnonzero(gap_s >= SILENCE_CYCLES * cycle_s).tolist():
+        k = int(np.searchsorted(apart, first, side="right"))
+        end = int(apart[k]) if k < len(apart) else len(timestamp_s)
+        if end - first >= 2 and bool(is_encoder[first:end].any()):
+            released[first:end] = True
+    return released
+
+
+class ReleaseWatch:
+    """``recorder_releases`` live, one frame (of any ID) at a time: ``seen`` notes a frame,
+    ``released`` says whether the frame heard at a time came in a release (known once the frame
+    after it came: a release is a silence then frames less than ``BURST_S`` apart, not at once).
+    The encoder frames ask it for their pair's first frame, when the second comes."""
+
+    __slots__ = ("_last_s", "_lone_s", "_releases", "_silence_s")
+
+    def __init__(self, cycle_s: float) -> None:
+        self._silence_s = SILENCE_CYCLES * cycle_s
+        self._last_s: float | None = None
+        self._lone_s: float | None = None  # a frame after a silence, its burst not seen yet
+        self._releases: list[tuple[float, float]] = []  # the recent ones (first, last s)
+
+    def seen(self, timestamp_s: float) -> None:
+        """Note a frame heard at ``timestamp_s`` s."""
+        last, self._last_s = self._last_s, timestamp_s
+        if last is None:
+            return
+        gap_s = timestamp_s - last
+        if gap_s >= BURST_S or gap_s <= ALIKE_S:  # the usual case: no burst
+            self._lone_s = timestamp_s if gap_s >= self._silence_s else None
+            return
+        if self._releases and self._releases[-1][1] == last:
+            self._releases[-1] = (self._releases[-1][0], timestamp_s)  # the burst goes on
+        elif self._lone_s == last:
+            self._releases = [*self._releases[-3:], (last, timestamp_s)]  # a burst: a release
+        self._lone_s = None
+
+    def released(self, timestamp_s: float | None) -> bool:
+        """Whether the frame heard at ``timestamp_s`` s came in a release."""
+        return timestamp_s is not None and any(
+            first <= timestamp_s <= last for first, last in self._releases)
