@@ -137,6 +137,7 @@ from odocan.host.judge.reference_path import (
     restart_detail,
     wrap_pi,
 )
+from odocan.host.judge.reportfacts import covered_s, frame_counts, realtime, robot_dict
 from odocan.host.judge.resent import worst_sent
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -260,11 +261,11 @@ def analyze(
                            [d[0] for d in done], [d[2] for d in done], silent=silent)
     if len(lives) != len(firmware_lives):  # a set-pose is no reboot: one latch per firmware
         report["firmware_events"] = _latched_per_firmware(frames, firmware_lives, db)
-    covered_s = _covered_s(frames, db)
+    seconds = covered_s(frames, db)
     report.update(
-        integrator_source=source, scenario=scenario, seed=seed, sim_seconds=covered_s,
-        wall_seconds=wall_seconds, realtime_factor=_realtime(covered_s, wall_seconds),
-        frames=_frame_counts(frames, decoder),
+        integrator_source=source, scenario=scenario, seed=seed, sim_seconds=seconds,
+        wall_seconds=wall_seconds, realtime_factor=realtime(seconds, wall_seconds),
+        frames=frame_counts(frames, decoder),
     )
     vs_ref = report["onboard_vs_reference"]
     report["passed"] = bool(
@@ -357,17 +358,17 @@ def _analyze_life(
         and distance["passed"]
     )
     report = {
-        "robot": _robot_dict(robot),
+        "robot": robot_dict(robot),
         "integrator": integrator,
         "integrator_source": source,
         "reference_start": "set pose" if start_pose else (
             "power-up" if ref_all.exact_start else "fitted"),
         "scenario": scenario,
         "seed": seed,
-        "sim_seconds": _covered_s(frames, db),
+        "sim_seconds": covered_s(frames, db),
         "wall_seconds": wall_seconds,
-        "realtime_factor": _realtime(_covered_s(frames, db), wall_seconds),
-        "frames": _frame_counts(frames, decoder),
+        "realtime_factor": realtime(covered_s(frames, db), wall_seconds),
+        "frames": frame_counts(frames, decoder),
         "samples": {
             "onboard": len(onboard.enc),
             "truth": len(truth.enc),
@@ -444,57 +445,3 @@ def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, e
                            judge.max_wheel_speed_mm_s)
     return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right), e0,
                           judge)
-
-
-# --- the report's facts ------------------------------------------------------------------
-
-
-def _robot_dict(robot: RobotProfile) -> dict[str, Any]:
-    return {
-        "name": robot.name,
-        "counts_per_rev": robot.counts_per_rev,
-        "wheel_radius_left_m": robot.wheel_radius_left_m,
-        "wheel_radius_right_m": robot.wheel_radius_right_m,
-        "wheelbase_m": robot.wheelbase_m,
-        "counter_bits": robot.counter_bits,
-        "max_wheel_speed_m_s": robot.max_wheel_speed_m_s,  # the steps' and gaps' bound
-    }
-
-
-def _covered_s(frames: FrameArrays, db: DatabaseSpec) -> float:
-    """Seconds of bus time the log covers: its encoder periods (first to last encoder frame,
-    plus one cycle), or the plain frame span when it has no encoder frame."""
-    message = db.get_message_by_name("WHEEL_ENCODERS")
-    is_encoder = frames.can_id == message.frame_id
-    if not is_encoder.any() or not message.cycle_time:
-        return _span(frames)
-    first = int(np.argmax(is_encoder))  # argmax stops at the first True: no gather of them all
-    last = len(frames) - 1 - int(np.argmax(is_encoder[::-1]))
-    stamps = frames.timestamp_s
-    return float(stamps[last] - stamps[first]) + message.cycle_time / 1000.0
-
-
-def _span(frames: FrameArrays) -> float:
-    """Seconds from the first to the last frame."""
-    if len(frames) == 0:
-        return 0.0
-    return float(frames.timestamp_s[-1] - frames.timestamp_s[0])
-
-
-def _realtime(sim_s: float, wall_s: float | None) -> float | None:
-    """Simulated seconds per wall-clock second."""
-    if wall_s is None or wall_s <= 0:
-        return None
-    return sim_s / wall_s
-
-
-def _frame_counts(frames: FrameArrays, decoder: BulkDecoder) -> dict[str, int]:
-    """Frames per DBC message in the log (whatever their E2E status)."""
-    counts = {}
-    for message in decoder.db.messages:
-        n = len(decoder.select(frames, message.name))
-        if n:
-            counts[message.name] = n
-    return counts
-
-
