@@ -118,6 +118,7 @@ from odocan.host.judge.compare import (
     rebased_at_start,
     versus_truth,
 )
+from odocan.host.judge.configs import config_cuts, cut_configs, in_force
 from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
 from odocan.host.judge.gapseen import seen_in_log
 from odocan.host.judge.losses import firmware_losses, loss_allowance
@@ -231,7 +232,8 @@ def analyze(
         mark_two_sources(one.report, conflict[1], len(frames) - cut)
         return Analysis(report=one.report, series=one.series, passed=False)
     firmware_lives = split_lives(frames, decoder)
-    lives = cut_lives(firmware_lives, set_pose_cuts(frames, decoder))
+    lives = cut_configs(cut_lives(firmware_lives, set_pose_cuts(frames, decoder)),
+                        config_cuts(frames, decoder, robot.counter_bits))
     if len(lives) == 1:
         return _analyze_life(frames, robot, integrator, tolerance=tolerance, db=db,
                              decoder=decoder, scenario=scenario, seed=seed,
@@ -241,13 +243,16 @@ def analyze(
     done: list[tuple[Life, Analysis, float]] = []
     failure: AnalysisError | None = None
     silent: list[Life] = []
-    for life in lives:
+    for life, (life_robot, life_integrator, bound) in zip(
+            lives, in_force(lives, robot, _first_integrator(frames, lives, decoder, integrator,
+                                                            source), max_wheel_speed_mm_s),
+            strict=True):
         part = frames.select(life.index)
         try:
-            result = _analyze_life(part, robot, integrator, tolerance=tolerance, db=db,
+            result = _analyze_life(part, life_robot, life_integrator, tolerance=tolerance, db=db,
                                    decoder=BulkDecoder(db), boot=life.boot,
-                                   rebase=life.t_s is not None,
-                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s,
+                                   rebase=life.t_s is not None and life.config is None,
+                                   max_wheel_speed_mm_s=bound,
                                    start_pose=life.set_pose and life.set_pose.start_pose())
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
@@ -276,6 +281,20 @@ def analyze(
         and report["onboard_distance_vs_reference"]["passed"]
     )
     return Analysis(report=report, series=series, passed=report["passed"])
+
+
+def _first_integrator(frames: FrameArrays, lives: list[Life], decoder: BulkDecoder,
+                      integrator: str, source: str) -> str:
+    """The integrator ODOM_STATUS reports before the first applied config (a config may
+    change it: ``pick_integrator`` tells the last); ``integrator`` when given or no config."""
+    cut = next((life.config for life in lives if life.config is not None), None)
+    if cut is None or source != "ODOM_STATUS":
+        return integrator
+    head = frames.select(np.arange(cut.apply_position))
+    try:
+        return pick_integrator(head, check_frames(head, decoder.db)[1], decoder, None)[0]
+    except AnalysisError:  # no summary before it: the last one reported
+        return integrator
 
 
 def _latched_per_firmware(frames: FrameArrays, lives: list[Life],

@@ -121,8 +121,8 @@ def analyze_file(
             lives.feed(chunk, accepted)
             facts.feed(chunk, accepted)
         spill.close()
-        if facts.set_pose_applied:  # cut into lives there: host.judge.setposes, whole only
-            raise NotStreamable("an ODOM_SET_POSE was applied: the reference restarts there")
+        if facts.applied:  # cut into lives there: host.judge.setposes and configs, whole only
+            raise NotStreamable(f"an {facts.applied} was applied: the reference restarts there")
         return lives.marked(_analyze_lives(  # two firmwares: not judged from there, a FAIL
             lives.finish_one_source(), facts, lambda span: lambda: spill.read(
                 span.start, span.stop, chunk_frames),
