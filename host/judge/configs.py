@@ -191,7 +191,7 @@ def later_mismatches(frames: FrameArrays, robot: RobotProfile, integrator: str) 
     differs."""
     decoder = BulkDecoder(default_plan())
     cuts = config_cuts(frames, decoder, robot.counter_bits)
-    ends = [c.apply_position for c in cuts[1:]] + [len(frames)]
+    ends = [c.apply_position for c in cuts[1:]] + [len(frames)] * bool(cuts)
     said = []
     for cut, end in zip(cuts, ends, strict=True):
         robot, integrator = cut.robot(robot), cut.integrator(integrator)
