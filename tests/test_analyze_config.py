@@ -199,3 +199,16 @@ def test_the_monitor_agrees(logs: dict[bool, Path]) -> None:
         details = [e["detail"] for e in health["events"] if e["kind"] == "config"]
         assert details == ["config applied: 2578 counts/rev, wheel radii 0.035/0.035 m, "
                            "wheelbase 0.25 m, exact: reference restarted"]
+
+
+def test_a_batch_judges_both_logs_alike(logs: dict[bool, Path], tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """``analyze`` of several logs (``host.cli.batch``): the same verdicts, no mismatch said."""
+    assert main(["analyze", str(logs[False]), str(logs[True]), "--robot", "kobuki",
+                 "--jobs", "1", "--report-dir", str(tmp_path)]) == 1
+    for ignores in (False, True):
+        said = json.loads((tmp_path / f"{logs[ignores].name}.json").read_text())
+        assert said["passed"] is not ignores
+        assert not any("profile" in hint for hint in said.get("diagnosis", [])), said["diagnosis"]
+        assert [e["kind"] for e in said["events"]] == ["config"]
+    capsys.readouterr()
