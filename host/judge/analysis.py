@@ -95,7 +95,8 @@ the plot series), ``host.judge.reboots`` step 6.
 
 The on-board pose is the decoded signals: X, Y * 1e-4 m, HEADING * 2 pi/65536 rad
 (``TURNS * 2 pi + HEADING`` unwrapped). An applied ODOM_SET_POSE cuts the log into a new life
-whose reference starts at the pose set (``host.judge.setposes``); ``firmware_events`` latches every
+whose reference starts at the pose set (``host.judge.setposes``), an applied ODOM_CONFIG one judged
+with the robot it applied (``host.judge.configs``); ``firmware_events`` latches every
 STATE change and ERROR_MASK bit set in the ODOM_STATUS summaries (``host.judge.statuslatch``).
 """
 
