@@ -16,12 +16,14 @@ import math
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
+from typing import cast
 
 import can
-import cantools
 import pytest
+from cantools.database.can import Database
 
 import odocan.firmware.commands as fw_commands
+from odocan.firmware.config import derive_constants
 from odocan.host.cli.app import main
 from odocan.host.io.logs import parse_candump
 from odocan.host.judge.analysis import analyze
@@ -29,7 +31,7 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.protocol.heard import Recorder
 from odocan.host.protocol.session import CommandNotAcked, CommandSession
 from odocan.sim import robot
-from odocan.sim.contract import DBC_PATH, database
+from odocan.sim.contract import database
 from odocan.sim.rig import LockstepRig, RigConfig
 
 KOBUKI = robot.load("kobuki")
@@ -66,7 +68,7 @@ def _drive(ignores_config: bool, monkeypatch: pytest.MonkeyPatch) -> list[can.Me
             session.configure(**_config(counts_per_rev=4, wheelbase_m=0.01))  # type: ignore[arg-type]
         rig.run(1.0)
         if ignores_config:
-            derive, built = fw_commands.derive_constants, rig.board.ecu.params
+            derive, built = derive_constants, rig.board.ecu.params
             monkeypatch.setattr(fw_commands, "derive_constants",
                                 lambda _params, errors: derive(built, errors))
         assert session.configure(**_config(wheelbase_m=WIDER_M))["RESULT"] == "ACK"  # type: ignore[arg-type]
@@ -97,7 +99,7 @@ def _independent_worst_m(path: Path) -> float:
     after the APPLY its ACK accepts: the firmware drains its mailbox in bus order; pose 0 where
     the firmware primes, on the first encoder frame), each pose paired with the latest encoder
     frame of its ENC_COUNTER."""
-    db = cantools.database.load_file(str(DBC_PATH))
+    db = database()
     messages = list(parse_candump_messages(path))
     applied = _acked_apply(db, messages)
     per_count_m = 2 * math.pi * KOBUKI.wheel_radius_left_m / KOBUKI.counts_per_rev
@@ -108,7 +110,7 @@ def _independent_worst_m(path: Path) -> float:
     worst_m = 0.0
     for k, m in enumerate(messages):
         name = db.get_message_by_frame_id(m.arbitration_id).name
-        s = db.decode_message(m.arbitration_id, m.data, decode_choices=False)
+        s = _decoded(db, m)
         wheelbase_m = WIDER_M if k > applied else wheelbase_m
         if name == "WHEEL_ENCODERS":
             counts = (int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]))
@@ -133,17 +135,23 @@ def _independent_worst_m(path: Path) -> float:
     return worst_m
 
 
-def _acked_apply(db: cantools.database.can.Database, messages: list[can.Message]) -> int:
+def _acked_apply(db: Database, messages: list[can.Message]) -> int:
     """The place of the ODOM_CONFIG APPLY (PARAM 15) that an ODOM_ACK accepts (RESULT 0)."""
     apply_at = -1
     for k, m in enumerate(messages):
         name = db.get_message_by_frame_id(m.arbitration_id).name
-        s = db.decode_message(m.arbitration_id, m.data, decode_choices=False)
+        s = _decoded(db, m)
         if name == "ODOM_CONFIG" and s["PARAM"] == 15:
             apply_at = k
         elif name == "ODOM_ACK" and s["REQUEST_FIELD"] == 15 and s["RESULT"] == 0:
             return apply_at
     raise AssertionError("no ACKed APPLY")
+
+
+def _decoded(db: Database, m: can.Message) -> dict[str, float]:
+    """The frame's raw signals (cantools)."""
+    return cast(dict[str, float], db.decode_message(m.arbitration_id, bytes(m.data),
+                                                    decode_choices=False))
 
 
 def parse_candump_messages(path: Path) -> Iterator[can.Message]:
