@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from odocan.host.io.logs import FrameArrays, FrameCollector, iter_log, read_log, to_message
-from odocan.host.judge.analysis import _covered_s, _frame_counts
 from odocan.host.judge.compare import _outside_band, check_twist
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import split_lives
 from odocan.host.judge.reference_path import DOT_BLOCK, block_dot
+from odocan.host.judge.reportfacts import covered_s, frame_counts
 from odocan.host.judge.samples import (
     Poses,
     encoder_frames,
@@ -118,8 +118,8 @@ def test_streamed_truth_and_facts_are_the_whole_logs(
     got = pose_columns(truth_parts)
     for name in POSE_COLUMNS:
         np.testing.assert_array_equal(got[name], getattr(want_truth, name), err_msg=name)
-    assert facts.frame_counts == _frame_counts(whole, decoder)
-    assert facts.covered_s() == _covered_s(whole, db)
+    assert facts.frame_counts == frame_counts(whole, decoder)
+    assert facts.covered_s() == covered_s(whole, db)
     assert facts.integrator(None) == pick_integrator(whole, accepted_all, decoder, None)
     assert facts.saw_only_the_log() == saw_only_the_log(whole, accepted_all, decoder)
     first = pose_columns(first_sample)

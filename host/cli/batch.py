@@ -99,7 +99,8 @@ def analyze_one(path: str, job: Job) -> LogResult:
     from odocan.host.cli.subparsers.analyze import load_dbc, log_inputs
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import Tolerance, analyze
-    from odocan.host.judge.profilepage import head_profile, running_profile, with_bus_speed
+    from odocan.host.judge.configs import later_mismatches, running_before_configs
+    from odocan.host.judge.profilepage import head_profile, with_bus_speed
     from odocan.host.judge.samples import AnalysisError
     from odocan.host.judge.stream_analysis import FrameCount, NotStreamable, analyze_file, streams
     from odocan.sim import robot
@@ -112,6 +113,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
         streamed: dict[str, Any] | None = None
         count = FrameCount()
         running = None  # the log's PROFILE page (odocan's DBC only)
+        later: list[str] = []  # its pages after an applied config, against the config's robot
         if streams(log, job.stream):  # in bounded memory (host.judge.stream_analysis)
             running = head_profile(log) if db is None else None
             try:
@@ -129,15 +131,16 @@ def analyze_one(path: str, job: Job) -> LogResult:
                 analysis = analyze(frames, profile, job.integrator, tolerance=tolerance, db=db)
             else:
                 require_frames(frames, path)
-                running = running_profile(frames)  # the firmware's own speed bound judges
+                running = running_before_configs(frames, profile.counter_bits)  # its bound
                 with explained(lambda: frames, path):
                     analysis = analyze(frames, with_bus_speed(profile, running),
                                        job.integrator, tolerance=tolerance)
+                later = later_mismatches(frames, profile, analysis.report["integrator"])
             report = analysis.report
         report["inputs"] = log_inputs(
             log, profile, report["integrator"], None if job.dbc is None else Path(job.dbc)
         )
-        _diagnose(log, report, profile, running, tolerance, db is None)
+        _diagnose(log, report, profile, running, tolerance, db is None, later)
     except (OdocanError, OSError) as exc:
         return LogResult(path, error=_one_line(exc))
     except Exception as exc:  # a log no check foresaw: this log's error, the batch goes on
@@ -146,14 +149,16 @@ def analyze_one(path: str, job: Job) -> LogResult:
 
 
 def _diagnose(log: Path, report: dict[str, Any], profile: RobotProfile,
-              running: RunningProfile | None, tolerance: Tolerance, own_dbc: bool) -> None:
+              running: RunningProfile | None, tolerance: Tolerance, own_dbc: bool,
+              later: list[str]) -> None:
     """``report["diagnosis"]`` as ``analyze LOG`` makes it: the PROFILE page's line naming a
-    wrong ``--robot``, then, for a failed verdict on odocan's DBC, the pose fit's."""
+    wrong ``--robot``, ``later`` (the pages after an applied config, host.judge.configs),
+    then, for a failed verdict on odocan's DBC, the pose fit's."""
     from odocan.host.io.logs import read_log
     from odocan.host.judge.profilepage import profile_mismatch, with_bus_speed
 
     said = profile_mismatch(running, profile, report["integrator"])
-    hints = [] if said is None else [said]
+    hints = ([] if said is None else [said]) + later
     if not report["passed"] and own_dbc:  # a wrong --robot must not read as a firmware fault
         from odocan.host.judge.diagnosis import mismatches
 

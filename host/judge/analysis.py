@@ -95,7 +95,8 @@ the plot series), ``host.judge.reboots`` step 6.
 
 The on-board pose is the decoded signals: X, Y * 1e-4 m, HEADING * 2 pi/65536 rad
 (``TURNS * 2 pi + HEADING`` unwrapped). An applied ODOM_SET_POSE cuts the log into a new life
-whose reference starts at the pose set (``host.judge.setposes``); ``firmware_events`` latches every
+whose reference starts at the pose set (``host.judge.setposes``), an applied ODOM_CONFIG one judged
+with the robot it applied (``host.judge.configs``); ``firmware_events`` latches every
 STATE change and ERROR_MASK bit set in the ODOM_STATUS summaries (``host.judge.statuslatch``).
 """
 
@@ -118,6 +119,7 @@ from odocan.host.judge.compare import (
     rebased_at_start,
     versus_truth,
 )
+from odocan.host.judge.configs import config_cuts, cut_configs, in_force
 from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
 from odocan.host.judge.gapseen import seen_in_log
 from odocan.host.judge.losses import firmware_losses, loss_allowance
@@ -137,6 +139,7 @@ from odocan.host.judge.reference_path import (
     restart_detail,
     wrap_pi,
 )
+from odocan.host.judge.reportfacts import covered_s, frame_counts, realtime, robot_dict
 from odocan.host.judge.resent import worst_sent
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -230,7 +233,8 @@ def analyze(
         mark_two_sources(one.report, conflict[1], len(frames) - cut)
         return Analysis(report=one.report, series=one.series, passed=False)
     firmware_lives = split_lives(frames, decoder)
-    lives = cut_lives(firmware_lives, set_pose_cuts(frames, decoder))
+    lives = cut_configs(cut_lives(firmware_lives, set_pose_cuts(frames, decoder)),
+                        config_cuts(frames, decoder, robot.counter_bits))
     if len(lives) == 1:
         return _analyze_life(frames, robot, integrator, tolerance=tolerance, db=db,
                              decoder=decoder, scenario=scenario, seed=seed,
@@ -240,13 +244,16 @@ def analyze(
     done: list[tuple[Life, Analysis, float]] = []
     failure: AnalysisError | None = None
     silent: list[Life] = []
-    for life in lives:
+    for life, (life_robot, life_integrator, bound) in zip(
+            lives, in_force(lives, robot, _first_integrator(frames, lives, decoder, integrator,
+                                                            source), max_wheel_speed_mm_s),
+            strict=True):
         part = frames.select(life.index)
         try:
-            result = _analyze_life(part, robot, integrator, tolerance=tolerance, db=db,
+            result = _analyze_life(part, life_robot, life_integrator, tolerance=tolerance, db=db,
                                    decoder=BulkDecoder(db), boot=life.boot,
-                                   rebase=life.t_s is not None,
-                                   max_wheel_speed_mm_s=max_wheel_speed_mm_s,
+                                   rebase=life.t_s is not None and life.config is None,
+                                   max_wheel_speed_mm_s=bound,
                                    start_pose=life.set_pose and life.set_pose.start_pose())
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
@@ -260,11 +267,11 @@ def analyze(
                            [d[0] for d in done], [d[2] for d in done], silent=silent)
     if len(lives) != len(firmware_lives):  # a set-pose is no reboot: one latch per firmware
         report["firmware_events"] = _latched_per_firmware(frames, firmware_lives, db)
-    covered_s = _covered_s(frames, db)
+    seconds = covered_s(frames, db)
     report.update(
-        integrator_source=source, scenario=scenario, seed=seed, sim_seconds=covered_s,
-        wall_seconds=wall_seconds, realtime_factor=_realtime(covered_s, wall_seconds),
-        frames=_frame_counts(frames, decoder),
+        integrator_source=source, scenario=scenario, seed=seed, sim_seconds=seconds,
+        wall_seconds=wall_seconds, realtime_factor=realtime(seconds, wall_seconds),
+        frames=frame_counts(frames, decoder),
     )
     vs_ref = report["onboard_vs_reference"]
     report["passed"] = bool(
@@ -275,6 +282,20 @@ def analyze(
         and report["onboard_distance_vs_reference"]["passed"]
     )
     return Analysis(report=report, series=series, passed=report["passed"])
+
+
+def _first_integrator(frames: FrameArrays, lives: list[Life], decoder: BulkDecoder,
+                      integrator: str, source: str) -> str:
+    """The integrator ODOM_STATUS reports before the first applied config (a config may
+    change it: ``pick_integrator`` tells the last); ``integrator`` when given or no config."""
+    cut = next((life.config for life in lives if life.config is not None), None)
+    if cut is None or source != "ODOM_STATUS":
+        return integrator
+    head = frames.select(np.arange(cut.apply_position))
+    try:
+        return pick_integrator(head, check_frames(head, decoder.db)[1], decoder, None)[0]
+    except AnalysisError:  # no summary before it: the last one reported
+        return integrator
 
 
 def _latched_per_firmware(frames: FrameArrays, lives: list[Life],
@@ -357,17 +378,17 @@ def _analyze_life(
         and distance["passed"]
     )
     report = {
-        "robot": _robot_dict(robot),
+        "robot": robot_dict(robot),
         "integrator": integrator,
         "integrator_source": source,
         "reference_start": "set pose" if start_pose else (
             "power-up" if ref_all.exact_start else "fitted"),
         "scenario": scenario,
         "seed": seed,
-        "sim_seconds": _covered_s(frames, db),
+        "sim_seconds": covered_s(frames, db),
         "wall_seconds": wall_seconds,
-        "realtime_factor": _realtime(_covered_s(frames, db), wall_seconds),
-        "frames": _frame_counts(frames, decoder),
+        "realtime_factor": realtime(covered_s(frames, db), wall_seconds),
+        "frames": frame_counts(frames, decoder),
         "samples": {
             "onboard": len(onboard.enc),
             "truth": len(truth.enc),
@@ -444,57 +465,3 @@ def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, e
                            judge.max_wheel_speed_mm_s)
     return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right), e0,
                           judge)
-
-
-# --- the report's facts ------------------------------------------------------------------
-
-
-def _robot_dict(robot: RobotProfile) -> dict[str, Any]:
-    return {
-        "name": robot.name,
-        "counts_per_rev": robot.counts_per_rev,
-        "wheel_radius_left_m": robot.wheel_radius_left_m,
-        "wheel_radius_right_m": robot.wheel_radius_right_m,
-        "wheelbase_m": robot.wheelbase_m,
-        "counter_bits": robot.counter_bits,
-        "max_wheel_speed_m_s": robot.max_wheel_speed_m_s,  # the steps' and gaps' bound
-    }
-
-
-def _covered_s(frames: FrameArrays, db: DatabaseSpec) -> float:
-    """Seconds of bus time the log covers: its encoder periods (first to last encoder frame,
-    plus one cycle), or the plain frame span when it has no encoder frame."""
-    message = db.get_message_by_name("WHEEL_ENCODERS")
-    is_encoder = frames.can_id == message.frame_id
-    if not is_encoder.any() or not message.cycle_time:
-        return _span(frames)
-    first = int(np.argmax(is_encoder))  # argmax stops at the first True: no gather of them all
-    last = len(frames) - 1 - int(np.argmax(is_encoder[::-1]))
-    stamps = frames.timestamp_s
-    return float(stamps[last] - stamps[first]) + message.cycle_time / 1000.0
-
-
-def _span(frames: FrameArrays) -> float:
-    """Seconds from the first to the last frame."""
-    if len(frames) == 0:
-        return 0.0
-    return float(frames.timestamp_s[-1] - frames.timestamp_s[0])
-
-
-def _realtime(sim_s: float, wall_s: float | None) -> float | None:
-    """Simulated seconds per wall-clock second."""
-    if wall_s is None or wall_s <= 0:
-        return None
-    return sim_s / wall_s
-
-
-def _frame_counts(frames: FrameArrays, decoder: BulkDecoder) -> dict[str, int]:
-    """Frames per DBC message in the log (whatever their E2E status)."""
-    counts = {}
-    for message in decoder.db.messages:
-        n = len(decoder.select(frames, message.name))
-        if n:
-            counts[message.name] = n
-    return counts
-
-

@@ -72,6 +72,13 @@ def apply_config(tracker: PoseTracker, staged: dict[str, float]) -> str:
     if "INTEGRATOR" in staged and 0 <= int(staged["INTEGRATOR"]) < len(INTEGRATORS):
         tracker.integrator = INTEGRATORS[int(staged["INTEGRATOR"])]
     tracker.set_geometry(geometry, int(staged.get("COUNTER_BITS", tracker.counter_bits)))
-    return (f"config applied: {geometry.counts_per_rev} counts/rev, wheel radii "
-            f"{geometry.wheel_radius_left_m:.6g}/{geometry.wheel_radius_right_m:.6g} m, wheelbase "
-            f"{geometry.wheelbase_m:.6g} m, {tracker.integrator}: reference restarted")
+    return config_text(geometry.counts_per_rev, geometry.wheel_radius_left_m,
+                       geometry.wheel_radius_right_m, geometry.wheelbase_m, tracker.integrator)
+
+
+def config_text(counts_per_rev: int, wheel_radius_left_m: float, wheel_radius_right_m: float,
+                wheelbase_m: float, integrator: str | None) -> str:
+    """The ``config`` event's words (the monitor's and ``analyze``'s, host.judge.configs)."""
+    return (f"config applied: {counts_per_rev} counts/rev, wheel radii "
+            f"{wheel_radius_left_m:.6g}/{wheel_radius_right_m:.6g} m, wheelbase "
+            f"{wheelbase_m:.6g} m, {integrator}: reference restarted")

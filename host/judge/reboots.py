@@ -50,6 +50,7 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -67,6 +68,7 @@ class Life:
     t_s: float | None = None  # bus time of the boot summary (None: the log's first life)
     uptime_before_s: int | None = None  # the last UPTIME the previous firmware reported
     set_pose: Any = None  # a set-pose's life (``host.judge.setposes.SetPoseCut``), not a reboot
+    config: Any = None  # an applied config's life (``host.judge.configs.ConfigCut``), no reboot
 
 
 def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
@@ -270,14 +272,17 @@ def merge(
          "reference_start": r["reference_start"], "onboard_samples": r["samples"]["onboard"],
          "life": k, "truth_origin": r.get("truth_origin")}
         for k, (life, r) in enumerate(zip(lives, reports, strict=True))
-        if life.t_s is not None and life.set_pose is None
+        if life.t_s is not None and life.set_pose is None and life.config is None
     ] + [
         {"t_s": life.t_s, "uptime_before_s": life.uptime_before_s, "reference_start": None,
          "onboard_samples": 0, "life": None, "truth_origin": None}
-        for life in silent or [] if life.t_s is not None and life.set_pose is None
+        for life in silent or []
+        if life.t_s is not None and life.set_pose is None and life.config is None
     ]
     events += [set_pose_event(life, k, r) for k, (life, r)
                in enumerate(zip(lives, reports, strict=True)) if life.set_pose is not None]
+    events += [config_event(life, k, r) for k, (life, r)
+               in enumerate(zip(lives, reports, strict=True)) if life.config is not None]
     reboots.sort(key=lambda b: b["t_s"])
     events += [
         {"kind": "reboot", "t_s": b["t_s"], "life": b["life"],
@@ -367,3 +372,13 @@ def set_pose_event(life: Life, k: int, report: dict[str, Any]) -> dict[str, Any]
                       + ("at the pose set" if start == "set pose" else
                          f"from a {start} start (not every field was set)")
                       + ", the truth is compared in the new frame (truth_origin)"}
+
+
+def config_event(life: Life, k: int, report: dict[str, Any]) -> dict[str, Any]:
+    """The ``config`` event of an applied config's life (``host.judge.configs``): its time (the
+    ACK's), the parameters applied, the monitor's words with the robot the life was judged with."""
+    robot = report["robot"]
+    return {"kind": "config", "t_s": life.t_s, "life": k, "parameters": dict(life.config.staged),
+            "detail": config_text(robot["counts_per_rev"], robot["wheel_radius_left_m"],
+                                  robot["wheel_radius_right_m"], robot["wheelbase_m"],
+                                  report["integrator"])}

@@ -26,13 +26,14 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 import numpy as np
 
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
-from odocan.host.judge.analysis import STALL_DETAIL, Tolerance, _realtime, _robot_dict
+from odocan.host.judge.analysis import STALL_DETAIL, Tolerance
 from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
 from odocan.host.judge.gapseen import PageEvidence
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
+from odocan.host.judge.reportfacts import realtime, robot_dict
 from odocan.host.judge.samples import (
     REQUIRED,
     WIRE_COUNTER_BITS,
@@ -120,8 +121,8 @@ def analyze_file(
             lives.feed(chunk, accepted)
             facts.feed(chunk, accepted)
         spill.close()
-        if facts.set_pose_applied:  # cut into lives there: host.judge.setposes, whole only
-            raise NotStreamable("an ODOM_SET_POSE was applied: the reference restarts there")
+        if facts.applied:  # cut into lives there: host.judge.setposes and configs, whole only
+            raise NotStreamable(f"an {facts.applied} was applied: the reference restarts there")
         return lives.marked(_analyze_lives(  # two firmwares: not judged from there, a FAIL
             lives.finish_one_source(), facts, lambda span: lambda: spill.read(
                 span.start, span.stop, chunk_frames),
@@ -164,7 +165,7 @@ def _analyze_lives(
     covered_s = facts.covered_s()
     report.update(
         integrator_source=source, scenario=scenario, seed=seed, sim_seconds=covered_s,
-        wall_seconds=wall_seconds, realtime_factor=_realtime(covered_s, wall_seconds),
+        wall_seconds=wall_seconds, realtime_factor=realtime(covered_s, wall_seconds),
         frames=facts.frame_counts,
     )
     vs_ref = report["onboard_vs_reference"]
@@ -295,7 +296,7 @@ def _life(
     covered_s = facts.covered_s()
     counts = first.e2e.counts
     report = {
-        "robot": _robot_dict(robot),
+        "robot": robot_dict(robot),
         "integrator": integrator,
         "integrator_source": source,
         "reference_start": "power-up" if exact else "fitted",
@@ -303,7 +304,7 @@ def _life(
         "seed": seed,
         "sim_seconds": covered_s,
         "wall_seconds": wall_seconds,
-        "realtime_factor": _realtime(covered_s, wall_seconds),
+        "realtime_factor": realtime(covered_s, wall_seconds),
         "frames": facts.frame_counts,
         "samples": {
             "onboard": first.kept,

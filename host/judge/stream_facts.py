@@ -43,7 +43,7 @@ from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 SUMMARY_PAGE = 0  # ODOM_STATUS page with UPTIME and INTEGRATOR
-APPLY_FIELD = 15  # ODOM_ACK REQUEST_FIELD of an APPLY (the DBC's ODOM_SET_POSE FIELD comment)
+APPLY_FIELD = 15  # ODOM_ACK REQUEST_FIELD of an APPLY (the DBC's FIELD and PARAM comments)
 
 
 @dataclass
@@ -98,7 +98,8 @@ class StreamFacts:
     _times: TickTimes = field(default_factory=TickTimes)  # powerup.heard_by_tick's evidence
     latch: StatusLatch = field(default_factory=StatusLatch)  # host.judge.statuslatch
     firmware_events: list[dict[str, Any]] = field(default_factory=list)  # ... its events
-    set_pose_applied: bool = False  # an ODOM_SET_POSE APPLY ACKed (host.judge.setposes)
+    applied: str = ""  # the first command whose APPLY was ACKed: ODOM_SET_POSE or ODOM_CONFIG
+    # (the whole log's lives are cut there: host.judge.setposes, host.judge.configs)
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's facts."""
@@ -115,8 +116,8 @@ class StreamFacts:
         self.frame_counts = counts
         self._feed_encoder_span(chunk)
         self._feed_status(chunk, accepted)
-        self.set_pose_applied = self.set_pose_applied or _applies_set_pose(
-            chunk, accepted, self.decoder)
+        self.applied = self.applied or next(
+            (name for name in _APPLIED if _applies(chunk, accepted, self.decoder, name)), "")
         self._offset += len(chunk)
 
     def _feed_encoder_span(self, chunk: FrameArrays) -> None:
@@ -232,15 +233,18 @@ class StreamFacts:
         return counted and holds_first_cycle(counter)
 
 
-def _applies_set_pose(chunk: FrameArrays, accepted: npt.NDArray[np.bool_],
-                      decoder: BulkDecoder) -> bool:
-    """Whether the chunk has an accepted ODOM_ACK saying ACK to an ODOM_SET_POSE APPLY."""
+_APPLIED = ("ODOM_SET_POSE", "ODOM_CONFIG")  # staged commands whose APPLY starts a new life
+
+
+def _applies(chunk: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+             name: str) -> bool:
+    """Whether the chunk has an accepted ODOM_ACK saying ACK to an APPLY of ``name``."""
     try:
         acks = decoder.decode(chunk, "ODOM_ACK")
-        set_pose_id = decoder.message("ODOM_SET_POSE").frame_id
+        request_id = decoder.message(name).frame_id
     except (DecodeError, KeyError):
         return False
-    return bool((accepted[acks["index"]] & (acks["REQUEST_ID"] == set_pose_id)
+    return bool((accepted[acks["index"]] & (acks["REQUEST_ID"] == request_id)
                  & (acks["REQUEST_FIELD"] == APPLY_FIELD) & (acks["RESULT"] == 0)).any())
 
 

@@ -138,12 +138,8 @@ def _analyze_single(args: argparse.Namespace) -> int:
     from odocan.host.cli.inputs import explained, require_frames
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import analyze
-    from odocan.host.judge.profilepage import (
-        head_profile,
-        profile_mismatch,
-        running_profile,
-        with_bus_speed,
-    )
+    from odocan.host.judge.configs import later_mismatches, running_before_configs
+    from odocan.host.judge.profilepage import head_profile, profile_mismatch, with_bus_speed
     from odocan.host.outputs import check_distinct
     from odocan.host.report.ci import analysis_checks, write_checks
     from odocan.host.report.progress import wall_clock_progress
@@ -169,7 +165,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
                                    db=db)
             else:  # odocan's DBC: say plainly when the log holds none of its frames
                 require_frames(whole, str(args.log))
-                running = running_profile(whole)  # the firmware's own speed bound judges
+                running = running_before_configs(whole, profile.counter_bits)  # its own bound
                 with explained(lambda: whole, str(args.log)):
                     analysis = analyze(whole, with_bus_speed(profile, running), args.integrator,
                                        tolerance=args.tolerance)
@@ -184,6 +180,8 @@ def _analyze_single(args: argparse.Namespace) -> int:
                                            args.dbc)
     said = profile_mismatch(running, profile, analysis.report["integrator"])
     hints: list[str] = [] if said is None else [said]  # the firmware's PROFILE page names it
+    if frames is not None and db is None:  # the pages after an applied config: its robot's
+        hints += later_mismatches(frames, profile, analysis.report["integrator"])
     if not analysis.passed and db is None:  # a wrong --robot must not read as a firmware fault
         from odocan.host.judge.diagnosis import mismatches
 
