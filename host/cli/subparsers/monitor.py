@@ -168,22 +168,28 @@ def _do_monitor(args: argparse.Namespace) -> int:
         print(f"monitor: lost here: {lost}", file=sys.stderr)
     if failure is not None:
         raise failure
+    failed = _say_failures(args, model, profile)
+    return 1 if failed and code == 0 else code
+
+
+def _say_failures(args: argparse.Namespace, model: BusMonitor, profile: robot.RobotProfile) -> bool:
+    """Print the watch's FAIL lines (and the PROFILE page's mismatch) on stderr; whether any."""
+    wrongs = model.tracker.wrongs
+    fails: list[str] = []
     conflict = model.sources.conflict_text()  # two firmwares: a FAIL, no pose judged after
     if conflict:
-        print(f"monitor: FAIL: {conflict}", file=sys.stderr)
+        fails.append(conflict)
     if wrongs.count:  # the pose was wrong at some time, even if right again since: FAIL
-        print(f"monitor: FAIL: {wrongs.summary()}; judged as robot {profile.name!r} (--robot)"
-              f"{_robot_hint(args, profile)}", file=sys.stderr)
-    distance = model.distance.verdict()  # ODOM_TWIST DISTANCE wrong in some life: FAIL
-    if distance:
-        print(f"monitor: FAIL: {distance[0]}", file=sys.stderr)
-    speeds = model.twist.verdict()  # ODOM_TWIST LINEAR_VEL / ANGULAR_VEL wrong once: FAIL
-    if speeds:
-        print(f"monitor: FAIL: {speeds[0]}", file=sys.stderr)
+        fails.append(f"{wrongs.summary()}; judged as robot {profile.name!r} (--robot)"
+                     f"{_robot_hint(args, profile)}")
+    fails += model.distance.verdict()[:1]  # ODOM_TWIST DISTANCE wrong in some life
+    fails += model.twist.verdict()[:1]  # ODOM_TWIST LINEAR_VEL / ANGULAR_VEL wrong once
+    for line in fails:
+        print(f"monitor: FAIL: {line}", file=sys.stderr)
     said = model.status.get("profile_mismatch")  # the firmware's PROFILE page vs --robot
     if said:
         print(f"monitor: {said}", file=sys.stderr)
-    return 1 if (wrongs.count or conflict or distance or speeds) and code == 0 else code
+    return bool(fails)
 
 
 def _robot_hint(args: argparse.Namespace, profile: robot.RobotProfile) -> str:
