@@ -8,12 +8,14 @@ The sender numbers are the live judge's own: the accepted frames' periods summed
 (``liveplace.StallPlacer.on_encoders``). A refused frame is numbered as ``gapfill.late_seq``
 numbers it: from the least late on the sender's grid of the last ``gapfill.ANCHOR_FRAMES``
 accepted frames, the number of its COUNTER in (est - 8, est + 1]. A frame heard after the sample
-that placed the reference past its gap fills nothing (the gap kept ``gapbound``'s allowance)."""
+that placed the reference past its gap fills it then: ``heard`` tells the placer, which places
+that gap again within its fill allowance (``liveplace.StallPlacer``)."""
 
 from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 
 from odocan.host.judge.gapfill import (
     ANCHOR_FRAMES,
@@ -33,6 +35,7 @@ class LiveFill:
         self.sender = 0  # the latest accepted frame's sender number
         self._anchors: deque[tuple[int, float, int]] = deque(maxlen=ANCHOR_FRAMES)
         self._counts: dict[int, Counts | None] = {}  # None: two frames of a number disagreed
+        self.heard: Callable[[], None] | None = None  # told of every frame placed (liveplace)
 
     def accepted(self, periods: int, counter: int, t_s: float) -> None:
         """An accepted frame ``periods`` after the one before it (COUNTER, bus time s)."""
@@ -54,6 +57,8 @@ class LiveFill:
             return  # held back too long to be placed
         known = self._counts.get(seq, (left, right))
         self._counts[seq] = (left, right) if known == (left, right) else None
+        if self.heard is not None:
+            self.heard()
 
     def fill(self, seq_before: int, periods: int) -> list[Counts] | None:
         """The counts of the frames a gap of ``periods`` after sender number ``seq_before``

@@ -7,7 +7,10 @@ its ``gapbound`` allowance, as ``analyze`` places it; or twice the merge allowan
 frames when every frame it lacks was heard refused by E2E (``gapfill``; ``livefill``; a stall's
 span holding such gaps: ``spanfill``). A part of the latest placement that the firmware's pages
 later prove it took as the reference did (``host.judge.livegapseen``) has its allowance
-withdrawn (``withdraw``), as ``analyze`` gives it none."""
+withdrawn (``withdraw``), as ``analyze`` gives it none. Each placement's step from the one before
+is bounded too, by its own parts' allowances (``breaks.placed_step``); a gap placed before its
+held-back frame was heard takes the fill's allowance for its step when the frame comes
+(``_refill``), as ``analyze``, which knows the frames past the sample, bounds it."""
 
 from __future__ import annotations
 
@@ -21,6 +24,8 @@ from odocan.host.judge.breaks import (
     merge_allowance_m,
     overlap_allowance_m,
     path_bound_m,
+    placed_step,
+    step_slack_m,
 )
 from odocan.host.judge.gapfill import Counts, gap_or_fill_allowance
 from odocan.host.judge.gapseen import Seen
@@ -96,12 +101,17 @@ class StallPlacer:
         # per recent gap (seq after; the latest GAPS_KEPT, placed or not: a stall's span may
         # hold one placed before it): the sender number before, its periods
         self._gap_sender: dict[int, tuple[int, int]] = {}
+        self.fill.heard = self._refill  # a frame heard late may fill a gap placed already
+        # gaps placed before their frames were all heard: seq after -> (sender number before,
+        # counts before, after, periods, the placement's frame, the bound's arguments)
+        self._unfilled: dict[int, tuple[int, Gap, int, tuple[Geometry, int, str]]] = {}
 
     def restart(self) -> None:
         """A new reference: no offset, no allowance yet."""
         self._shift, self._budget_m = (0.0, 0.0), 0.0
         self.stalled, self._gaps, self._parts, self._owed = False, [], [], (0.0, 0.0)
         self._history = []
+        self._unfilled = {}
         self._gap_sender = {}
 
     def on_encoders(self, seq: int, frame: tuple[int, int, int, float],
@@ -187,10 +197,15 @@ class StallPlacer:
         for seq, before, after, periods in gaps:
             sender = self._gap_sender.get(seq)
             filled = self.fill.fill(sender[0], periods) if sender and periods > 1 else None
+            if filled is None and sender and periods > 1:
+                self._unfilled = dict(list(self._unfilled.items())[1 - PARTS_KEPT:])
+                self._unfilled[seq] = (sender[0], (seq, before, after, periods), pose.seq,
+                                       reference)
             parts.append((True, seq, seq, math.inf if periods < 0 else gap_or_fill_allowance(
                 filled, before, after, periods, geometry, bits, integrator,
                 self.max_wheel_speed_mm_s), pose.seq))
-        self._budget_m += sum(part[3] for part in parts)
+        step_m = sum(part[3] for part in parts)  # this placement's parts (its step's bound)
+        self._budget_m += step_m
         want_x, want_y = sx + pose.x_m - ref.x_m, sy + pose.y_m - ref.y_m
         self._parts = (self._parts + parts)[-PARTS_KEPT:]
         limit = self._budget_m + self.position_tolerance_m
@@ -199,10 +214,14 @@ class StallPlacer:
         else:
             add = self.placements.add_gap if gaps else self.placements.add_stall
             add(math.hypot(want_x, want_y), limit)
-        self._shift = clamp_offset(want_x, want_y, limit)
+        px, py = self._shift  # the placement before, as made again (an owed part folded in)
+        self._shift = placed_step(self._shift, clamp_offset(want_x, want_y, limit),
+                                  (want_x, want_y),
+                                  step_m + step_slack_m(self.position_tolerance_m),
+                                  self.placements)
         self._history = [*self._history[1 - PARTS_KEPT:], [
-            pose.seq, want_x - sx, want_y - sy, self._shift[0] - sx, self._shift[1] - sy,
-            self._budget_m]]
+            pose.seq, want_x - px, want_y - py, self._shift[0] - px, self._shift[1] - py,
+            self._budget_m, step_m]]
         return self._shift[0] - sx, self._shift[1] - sy
 
     def withdraw(self, seen: Seen) -> bool:
@@ -219,13 +238,45 @@ class StallPlacer:
         if not proven:
             return False
         self._parts = [part for part in self._parts if part not in proven]
-        for part in proven:
-            self._budget_m -= part[3]
-            for placed in self._history:
-                placed[5] -= part[3] if placed[0] >= part[4] else 0.0
+        for part in proven:  # the budgets only: its step's bound stays (the whole-log
+            # judge's proof may not reach as far, and the judges say one thing)
+            self._lower(part, part[3], 0.0)
         self._replace()
         self.withdrawn += 1
         return self.owed
+
+    def _lower(self, part: Part, by_m: float, step_by_m: float) -> None:
+        """The allowance of a placement's ``part`` lowered: by ``by_m`` in the budget of every
+        placement from its own on, by ``step_by_m`` in its own step's bound (``_replace``
+        places them again)."""
+        self._budget_m -= by_m
+        for placed in self._history:
+            placed[5] -= by_m if placed[0] >= part[4] else 0.0
+            placed[6] -= step_by_m if placed[0] == part[4] else 0.0
+
+    def _refill(self) -> None:
+        """A refused frame was heard (``LiveFill.heard``): a gap placed before every frame it
+        lacks was heard, now filled, takes ``gapfill``'s allowance over its known counts instead
+        of ``gapbound``'s (the whole-log judge's, which knows the frames held back past the
+        sample), and its placement is made again within it (``_replace``): a firmware that
+        moved at such a gap is not absorbed by the worst split of a travel the log knows."""
+        lowered = False
+        for seq, (sender, gap, at, reference) in list(self._unfilled.items()):
+            filled = self.fill.fill(sender, gap[3])
+            if filled is None:
+                continue
+            del self._unfilled[seq]
+            part = next((p for p in self._parts if p[0] and p[1] == seq and p[4] == at), None)
+            if part is None:
+                continue
+            allowance = gap_or_fill_allowance(filled, gap[1], gap[2], gap[3], *reference,
+                                              self.max_wheel_speed_mm_s)
+            if allowance < part[3]:  # the step's bound only: the budget from the start keeps
+                # it (the live offset from the start holds the start fit's corrections too)
+                self._lower(part, 0.0, part[3] - allowance)
+                lowered = True
+        if lowered:
+            self._replace()
 
     def _replace(self) -> None:
         """Each placement kept made again, in order, within its budget now: the offset its
@@ -237,9 +288,11 @@ class StallPlacer:
         reference moves by it at the next sample (``shift``)."""
         less_x, less_y = 0.0, 0.0  # how much less the placements so far moved the reference
         for k, placed in enumerate(self._history):
-            seq, asked_x, asked_y, old_x, old_y, budget_m = placed
+            seq, asked_x, asked_y, old_x, old_y, budget_m, step_m = placed
             asked_x, asked_y = asked_x - less_x, asked_y - less_y
-            new_x, new_y = clamp_offset(asked_x, asked_y, budget_m + self.position_tolerance_m)
+            new_x, new_y = clamp_offset(asked_x, asked_y, min(
+                budget_m + self.position_tolerance_m,
+                max(0.0, step_m) + step_slack_m(self.position_tolerance_m)))
             placed[1:5] = asked_x, asked_y, new_x, new_y
             less_x, less_y = less_x + new_x - old_x, less_y + new_y - old_y
             until = int(self._history[k + 1][0]) if k + 1 < len(self._history) else None
