@@ -70,6 +70,12 @@ from odocan.host.protocol.e2e_crc import (
 from odocan.host.protocol.e2e_crc import (
     crc8h2f_p02_one as crc8h2f_p02_one,
 )
+from odocan.host.protocol.e2e_cycles import (
+    COUNTER_CYCLE,
+    new_cycle_frames,
+    new_cycle_s,
+    new_cycles,
+)
 from odocan.host.protocol.e2e_periods import (
     frame_periods,
     receive_period_count,
@@ -162,16 +168,31 @@ def _parse_data_ids(name: str, text: str) -> tuple[int, ...]:
 
 @dataclass(slots=True)
 class SequenceState:
-    """The Profile 2 check state of one message: last valid counter and the delta window."""
+    """The Profile 2 check state of one message: last valid counter and the delta window.
+
+    ``cycle_s`` (set for the messages checked per period, ``PER_PERIOD_WINDOW``; frames judged
+    with their bus time ``timestamp_s``): a frame of the last valid COUNTER that comes half a
+    COUNTER cycle or more after the last valid frame is not a repeat but the sender's frame
+    16 * k periods on (``host.protocol.e2e_cycles``), accepted as OKSOMELOST with 16 * k - 1
+    lost: a repeat comes within a period, a gap of 16 * k frames the log lacks (a recorder's
+    kernel buffer dropped a chunk) brings the COUNTER round. A firmware that had the frames
+    between took it; refused here as REPEATED, it left the reference and the pose pairing one
+    frame short of the firmware's (``tests/test_recorder_gap16.py``). The time is the bus time
+    from the last valid frame, as ``samples.sender_seq`` numbers the frame, not the sum of the
+    periods each frame adds (a capture's burst of stamps adds its tolerance per frame)."""
 
     max_delta_init: int
     waiting: bool = True  # no valid frame yet
     last_valid: int = 0
     window: int = 0  # MaxDeltaCounter
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(E2E_KEYS, 0))
+    cycle_s: float | None = None  # the receive period when a same COUNTER may be a new cycle
+    last_valid_s: float | None = None  # the last valid frame's bus time (s), when given
 
-    def check(self, crc_ok: bool, counter: int, periods: int = 1) -> str:
-        """Judge one frame ``periods`` receive periods after the previous one; count it."""
+    def check(self, crc_ok: bool, counter: int, periods: int = 1,
+              timestamp_s: float | None = None) -> str:
+        """Judge one frame ``periods`` receive periods after the previous one, at bus time
+        ``timestamp_s`` (s, optional); count it."""
         window = self.window + periods  # at most MAX_DELTA_COUNTER (no min(): per frame)
         self.window = window if window < MAX_DELTA_COUNTER else MAX_DELTA_COUNTER
         if not crc_ok:
@@ -180,6 +201,9 @@ class SequenceState:
         delta = (counter - self.last_valid) & COUNTER_MASK
         if self.waiting or delta == 1:
             status = OK
+        elif delta == 0 and (cycles := self._new_cycles(timestamp_s)):
+            status = OKSOMELOST
+            self.counts["lost"] += COUNTER_CYCLE * cycles - 1
         elif delta == 0:
             self.counts["repeated"] += 1
             return REPEATED
@@ -192,8 +216,17 @@ class SequenceState:
         self.waiting = False
         self.last_valid = counter
         self.window = self.max_delta_init
+        self.last_valid_s = timestamp_s
         self.counts["ok"] += 1
         return status
+
+    def _new_cycles(self, timestamp_s: float | None) -> int:
+        """The whole COUNTER cycles since the last valid frame (``e2e_cycles``; 0: none or
+        not known)."""
+        last, cycle_s = self.last_valid_s, self.cycle_s
+        if cycle_s is None or timestamp_s is None or last is None:
+            return 0
+        return new_cycles(timestamp_s - last, cycle_s)
 
 
 def sequence_statuses(
@@ -201,6 +234,8 @@ def sequence_statuses(
     counter: npt.NDArray[np.int64],
     periods: npt.NDArray[np.int64],
     max_delta_init: int,
+    timestamp_s: npt.NDArray[np.float64] | None = None,
+    cycle_s: float | None = None,
 ) -> npt.NDArray[np.int8]:
     """Status codes (``_STATUS`` order) of one message's frames in bus order.
 
@@ -214,6 +249,7 @@ def sequence_statuses(
     if valid is not None and len(valid) == 0:
         return status
     c = ((counter if valid is None else counter[valid]) & COUNTER_MASK).astype(np.int8)
+    t = timestamp_s if timestamp_s is None or valid is None else timestamp_s[valid]
     naive = np.full(len(c), _S_OK, dtype=np.int8)
     delta = (c[1:] - c[:-1]) & COUNTER_MASK  # int8: 0..15, the step mod 16
     cum_valid = None if valid is None else np.cumsum(periods)[valid]
@@ -234,7 +270,7 @@ def sequence_statuses(
             break
         start = int(bad[k])  # its predecessor (start - 1) was accepted
         assert cum_valid is not None
-        j = _rejudge(naive, c, cum_valid, start, max_delta_init)
+        j = _rejudge(naive, c, cum_valid, start, max_delta_init, t, cycle_s)
     if valid is None:
         return naive
     status[valid] = naive
@@ -247,13 +283,19 @@ def _rejudge(
     cum: npt.NDArray[np.int64],
     start: int,
     max_delta_init: int,
+    t: npt.NDArray[np.float64] | None,
+    cycle_s: float | None,
 ) -> int:
-    """Re-judge valid frames from ``start`` until one is accepted; returns the next index."""
+    """Re-judge valid frames (bus times ``t``, if known) from ``start`` until one is accepted;
+    returns the next index."""
     last, last_cum = int(c[start - 1]), int(cum[start - 1])
+    last_s = None if t is None else float(t[start - 1])
     codes = {OK: _S_OK, OKSOMELOST: _S_LOST, REPEATED: _S_REPEATED, WRONG_SEQUENCE: _S_WRONG}
     for j in range(start, len(c)):
-        state = SequenceState(max_delta_init, False, last, window=max_delta_init)
-        result = state.check(True, int(c[j]), int(cum[j]) - last_cum)
+        state = SequenceState(max_delta_init, False, last, window=max_delta_init,
+                              cycle_s=cycle_s, last_valid_s=last_s)
+        result = state.check(True, int(c[j]), int(cum[j]) - last_cum,
+                             None if t is None else float(t[j]))
         naive[j] = codes[result]
         if result in (OK, OKSOMELOST):
             return j + 1
@@ -336,10 +378,14 @@ def _check_message(
     counter = (frames.data[index, 1] & COUNTER_MASK).astype(np.int64)
     periods = frame_periods(frames.timestamp_s[index], counter, crc_ok[index], config.cycle_s,
                             config.min_periods)
-    status = sequence_statuses(crc_ok[index], counter, periods, config.max_delta_init)
+    cycle_s = new_cycle_s(config)
+    t_s = frames.timestamp_s[index]
+    status = sequence_statuses(crc_ok[index], counter, periods, config.max_delta_init, t_s,
+                               cycle_s)
     good = (status == _S_OK) | (status == _S_LOST)
     if good.all():  # the usual case: no gathers
         accepted[index] = True
+        valid = None
         count, steps = len(good), counter[1:] - counter[:-1]
     else:
         accepted[index[good]] = True
@@ -347,6 +393,8 @@ def _check_message(
         count, steps = len(valid), counter[valid[1:]] - counter[valid[:-1]]
     steps &= COUNTER_MASK
     lost = int(np.sum(steps) - count + 1)
+    if cycle_s is not None and count > 1:
+        lost += new_cycle_frames(steps, t_s if valid is None else t_s[valid], cycle_s)
     return {
         "ok": count,
         "lost": lost if count else 0,
@@ -407,7 +455,7 @@ class E2EMonitor:
             elif last is not None:
                 periods = period_count(timestamp_s - last, live.cycle_s, live.min_periods)
         live.last = counter if crc_ok else -1
-        return live.state.check(crc_ok, counter, periods)
+        return live.state.check(crc_ok, counter, periods, timestamp_s)
 
     def _check_first(self, key: int, data: bytes, timestamp_s: float | None) -> str:
         """``check`` of a message not heard yet (makes its ``_Live``), unknown, or off its DLC."""
@@ -423,12 +471,13 @@ class E2EMonitor:
             return UNPROTECTED
         state = self._states.get(key)
         if state is None:
-            state = self._states[key] = SequenceState(config.max_delta_init)
+            state = self._states[key] = SequenceState(config.max_delta_init,
+                                                      cycle_s=new_cycle_s(config))
         counter = data[1] & COUNTER_MASK
         crc_ok = crc8h2f_p02_one(data, config.data_ids[counter]) == data[0]
         self._live[key] = _Live(config, state, config.data_ids, timestamp_s,  # one period
                                 counter if crc_ok else -1)
-        return state.check(crc_ok, counter, 1)
+        return state.check(crc_ok, counter, 1, timestamp_s)
 
     def restart_sequence(self, can_id: int, *, extended: bool = False) -> None:
         """The sender of this message restarted (a reboot: its COUNTER starts again): its next
