@@ -171,15 +171,14 @@ class SequenceState:
     """The Profile 2 check state of one message: last valid counter and the delta window.
 
     ``cycle_s`` (set for the messages checked per period, ``PER_PERIOD_WINDOW``; frames judged
-    with their bus time ``timestamp_s``): a frame of the last valid COUNTER that comes half a
-    COUNTER cycle or more after the last valid frame is not a repeat but the sender's frame
-    16 * k periods on (``host.protocol.e2e_cycles``), accepted as OKSOMELOST with 16 * k - 1
-    lost: a repeat comes within a period, a gap of 16 * k frames the log lacks (a recorder's
-    kernel buffer dropped a chunk) brings the COUNTER round. A firmware that had the frames
-    between took it; refused here as REPEATED, it left the reference and the pose pairing one
-    frame short of the firmware's (``tests/test_recorder_gap16.py``). The time is the bus time
-    from the last valid frame, as ``samples.sender_seq`` numbers the frame, not the sum of the
-    periods each frame adds (a capture's burst of stamps adds its tolerance per frame)."""
+    with their bus time ``timestamp_s``): a frame of the last valid COUNTER half a COUNTER
+    cycle or more (the bus time from the last valid frame, as ``samples.sender_seq`` counts it)
+    after it is no repeat but the sender's frame 16 * k periods on (``host.protocol.e2e_cycles``):
+    OKSOMELOST, 16 * k - 1 lost. A firmware that had the frames between (a recorder's kernel
+    buffer dropped them) took it; refused here as REPEATED, it left the reference and the pose
+    pairing a frame short of the firmware's (``tests/test_recorder_gap16.py``). The window is
+    kept: had the firmware lost those frames too, it refused this one (its window saw no frame)
+    and the frames after are judged as it judges them, never narrower."""
 
     max_delta_init: int
     waiting: bool = True  # no valid frame yet
@@ -202,8 +201,10 @@ class SequenceState:
         if self.waiting or delta == 1:
             status = OK
         elif delta == 0 and (cycles := self._new_cycles(timestamp_s)):
-            status = OKSOMELOST
             self.counts["lost"] += COUNTER_CYCLE * cycles - 1
+            self.counts["ok"] += 1
+            self.last_valid_s = timestamp_s
+            return OKSOMELOST  # the window kept (the docstring)
         elif delta == 0:
             self.counts["repeated"] += 1
             return REPEATED
@@ -221,8 +222,7 @@ class SequenceState:
         return status
 
     def _new_cycles(self, timestamp_s: float | None) -> int:
-        """The whole COUNTER cycles since the last valid frame (``e2e_cycles``; 0: none or
-        not known)."""
+        """Whole COUNTER cycles since the last valid frame (``e2e_cycles``; 0: not known)."""
         last, cycle_s = self.last_valid_s, self.cycle_s
         if cycle_s is None or timestamp_s is None or last is None:
             return 0
@@ -286,18 +286,18 @@ def _rejudge(
     t: npt.NDArray[np.float64] | None,
     cycle_s: float | None,
 ) -> int:
-    """Re-judge valid frames (bus times ``t``, if known) from ``start`` until one is accepted;
-    returns the next index."""
+    """Re-judge valid frames (bus times ``t``, if known) from ``start`` until one is accepted
+    with its window restarted (not a new COUNTER cycle); returns the next index."""
     last, last_cum = int(c[start - 1]), int(cum[start - 1])
-    last_s = None if t is None else float(t[start - 1])
+    state = SequenceState(max_delta_init, False, last, window=max_delta_init, cycle_s=cycle_s,
+                          last_valid_s=None if t is None else float(t[start - 1]))
     codes = {OK: _S_OK, OKSOMELOST: _S_LOST, REPEATED: _S_REPEATED, WRONG_SEQUENCE: _S_WRONG}
     for j in range(start, len(c)):
-        state = SequenceState(max_delta_init, False, last, window=max_delta_init,
-                              cycle_s=cycle_s, last_valid_s=last_s)
         result = state.check(True, int(c[j]), int(cum[j]) - last_cum,
                              None if t is None else float(t[j]))
+        last_cum = int(cum[j])
         naive[j] = codes[result]
-        if result in (OK, OKSOMELOST):
+        if result in (OK, OKSOMELOST) and int(c[j]) != last:
             return j + 1
     return len(c)
 
