@@ -125,12 +125,14 @@ def firmware_statuses(events: list[tuple[int, bytes]]) -> list[str]:
 
 def host_view(events: list[tuple[int, bytes]], statuses: list[str]) -> list[str]:
     """The firmware's ``statuses`` of ``events`` as the host gives them: a frame the firmware
-    refused as REPEATED 8 ticks or more after the last frame the host accepted is the sender's
-    frame 16 * k periods on to the host (``host.protocol.e2e.SequenceState.cycle_s``: a
-    recorder that lost the frames between, which the firmware had, would otherwise leave the
-    host a frame short of it); the intended difference, the only one (its window is kept).
-    Exactly 8 ticks is the edge: decided on the float64 stamps as ``samples.sender_seq`` does."""
-    result, last_tick = [], None
+    refused as REPEATED 8 ticks or more after the last frame the host accepted, with no frame
+    refused (its CRC right) between, is the sender's frame 16 * k periods on to the host
+    (``host.protocol.e2e.SequenceState.cycle_s``: a recorder that lost the frames between,
+    which the firmware had, would otherwise leave the host a frame short of it); the intended
+    difference, the only one (its window is kept). Exactly 8 ticks is the edge: decided on the
+    float64 stamps as ``samples.sender_seq`` does."""
+    result: list[str] = []
+    last_tick: int | None = None  # the last accepted frame's, None after a refused one
     for (tick, _), status in zip(events, statuses, strict=True):
         if status == "repeated" and last_tick is not None and (
                 tick - last_tick > 8 or (tick - last_tick == 8 and new_cycles(
@@ -138,6 +140,8 @@ def host_view(events: list[tuple[int, bytes]], statuses: list[str]) -> list[str]
             status = "oksomelost"
         if status in ("ok", "oksomelost"):
             last_tick = tick
+        elif status in ("repeated", "wrong_sequence"):
+            last_tick = None
         result.append(status)
     return result
 

@@ -172,13 +172,14 @@ class SequenceState:
 
     ``cycle_s`` (set for the messages checked per period, ``PER_PERIOD_WINDOW``; frames judged
     with their bus time ``timestamp_s``): a frame of the last valid COUNTER half a COUNTER
-    cycle or more (the bus time from the last valid frame, as ``samples.sender_seq`` counts it)
-    after it is no repeat but the sender's frame 16 * k periods on (``host.protocol.e2e_cycles``):
-    OKSOMELOST, 16 * k - 1 lost. A firmware that had the frames between (a recorder's kernel
-    buffer dropped them) took it; refused here as REPEATED, it left the reference and the pose
-    pairing a frame short of the firmware's (``tests/test_recorder_gap16.py``). The window is
-    kept: had the firmware lost those frames too, it refused this one (its window saw no frame)
-    and the frames after are judged as it judges them, never narrower."""
+    cycle or more (the bus time, as ``samples.sender_seq`` counts it) after the last valid
+    frame, with no frame of a right CRC between in the log, is no repeat but the sender's frame
+    16 * k periods on (``host.protocol.e2e_cycles``): OKSOMELOST, 16 * k - 1 lost. A firmware
+    that had the frames between (a recorder's kernel buffer dropped them) took it; refused as
+    REPEATED, it left the reference and the pairing a frame short (``tests/test_recorder_gap16``).
+    Frames between (refused: a lock-out after a late frame, ``gapfill``) are the firmware's too,
+    so it refused this one: so does the host. The window is kept: had the firmware lost the
+    frames too, it refused this one and the frames after are judged as it judges them."""
 
     max_delta_init: int
     waiting: bool = True  # no valid frame yet
@@ -205,15 +206,13 @@ class SequenceState:
             self.counts["ok"] += 1
             self.last_valid_s = timestamp_s
             return OKSOMELOST  # the window kept (the docstring)
-        elif delta == 0:
-            self.counts["repeated"] += 1
-            return REPEATED
-        elif delta <= self.window:
+        elif delta == 0 or delta > self.window:
+            self.last_valid_s = None  # a frame between: no new cycle till the next accepted
+            self.counts["repeated" if delta == 0 else "wrong_sequence"] += 1
+            return REPEATED if delta == 0 else WRONG_SEQUENCE
+        else:
             status = OKSOMELOST
             self.counts["lost"] += delta - 1
-        else:
-            self.counts["wrong_sequence"] += 1
-            return WRONG_SEQUENCE
         self.waiting = False
         self.last_valid = counter
         self.window = self.max_delta_init
