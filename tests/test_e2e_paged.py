@@ -26,7 +26,8 @@ import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
-from odocan.host.protocol.e2e import E2EMonitor, check_frames
+from odocan.host.protocol.e2e import check_frames
+from odocan.host.protocol.e2e_live import E2EMonitor
 from tests.dbc_typed import dbc_attribute, load_can_dbc, number
 
 DBC = Path(__file__).resolve().parents[1] / "odocan" / "dbc" / "odocan.dbc"

@@ -15,7 +15,8 @@ from odocan.host.io.logs import FrameCollector, read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.protocol.decode import BulkDecoder
-from odocan.host.protocol.e2e import E2EMonitor, check_frames
+from odocan.host.protocol.e2e import check_frames
+from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.sim.contract import database
 from odocan.sim.exceptions import OdocanError
 from odocan.sim.robot import load

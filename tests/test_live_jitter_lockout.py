@@ -89,18 +89,13 @@ def test_a_firmware_hiding_1_mm_after_each_lock_out_fails_everywhere(
     assert not any(verdicts.values()), verdicts
 
 
-@pytest.mark.xfail(strict=True, reason="open: a gap whose held-back frame comes after the "
-                   "frame that ends it is placed live before that frame is heard, with "
-                   "gapbound's allowance (24.9 mm here); analyze fills it")
 def test_a_firmware_hiding_1_mm_fails_live_where_the_last_frame_of_a_gap_is_late(
         tmp_path: Path) -> None:
-    """Found by the sweep's domain, on main too (the capture as recorded): ``analyze`` FAILs
-    the wrong firmware, the live judge PASSes it. Shrinking the gap's allowance to its fill's
-    when the frame comes (as ``withdraw`` shrinks one) made it FAIL live, but then the correct
-    firmware FAILed live on ``test_reorder``'s ``delay=0.1:25`` drive (0.116 mm): the offset
-    the live placements ask grew to 0.35 mm over 60 gaps where ``analyze``'s segments ask under
-    0.06 mm (suspect: the start fit's position corrections, within a pose's rounding each,
-    taken into the reference at every placement and counted in no allowance)."""
+    """Found by the sweep's domain (the capture as recorded): ``analyze`` FAILed the wrong
+    firmware, the live judge PASSed it: the gap was placed before its held-back frame was heard,
+    with gapbound's allowance (24.9 mm). The live placer's late refill (``liveplace._refill``:
+    the step's bound takes the fill's allowance when the frame comes; the budget from the start
+    keeps the old one, which the start fit's corrections need) makes it FAIL live."""
     verdicts, _ = _verdicts(tmp_path, ("kobuki", 7, 15), True, None)
     assert not verdicts["live"], verdicts
 

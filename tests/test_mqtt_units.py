@@ -14,7 +14,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.host.protocol.commands import CommandEncoder, CommandRejected
-from odocan.host.protocol.e2e import E2EMonitor
+from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.sim import robot
 from odocan.sim.contract import DBC_PATH, database
 from odocan.sim.fleet import Fleet, FleetConfig, frame_fields

@@ -104,13 +104,14 @@ def plain_half(halves: deque[tuple[float, ...]], pos: int) -> tuple[float, float
 def _sender_step(window: deque[tuple[float, ...]], j: int) -> int:
     """``samples.sender_seq``'s step from frame ``j - 1`` to frame ``j`` (negative indices into
     the window, ``j`` > -len): COUNTER step mod 16, widened by 16 per 16 periods more the bus
-    times show unless frame ``j`` queued (less than ``QUEUED_GAP_CYCLES`` from a neighbour)."""
+    times show unless frame ``j`` queued (less than ``QUEUED_GAP_CYCLES`` from a neighbour)
+    with a step other than 0."""
     _, _, counter, t_s = window[j][:4]
     _, _, prev_counter, prev_t = window[j - 1][:4]
     step = int(counter - prev_counter) & 0xF
     dt = t_s - prev_t
-    if _close(dt) or (j < -1 and _close(window[j + 1][3] - t_s)):
-        return step
+    if step and (_close(dt) or (j < -1 and _close(window[j + 1][3] - t_s))):
+        return step  # a step of 0 is widened by the time alone, as ``sender_seq`` widens it
     return step + 16 * max(0, math.floor((dt / CYCLE_S - step) / 16 + 0.5))
 
 

@@ -76,7 +76,8 @@ from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatc
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.decode import frame_key
-from odocan.host.protocol.e2e import UNKNOWN, E2EMonitor, e2e_messages
+from odocan.host.protocol.e2e import UNKNOWN, e2e_messages
+from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile
 

@@ -221,8 +221,9 @@ def sender_seq(counter: IntArray, timestamp_s: FloatArray, cycle_s: float | None
         lost = lost_16.astype(np.int64)
         lost *= 16
         # a frame let out in a burst after the gap waited in the sender's buffer: the gap is
-        # a busy bus, not lost frames (the COUNTER step is the whole step)
-        lost[queued_frames(timestamp_s, cycle_s)[1:]] = 0
+        # a busy bus, not lost frames (the COUNTER step is the whole step), but for a step of
+        # 0, which E2E takes by the time alone (``host.protocol.e2e_cycles``)
+        lost[queued_frames(timestamp_s, cycle_s)[1:] & (step != 0)] = 0
         step += lost
     seq: IntArray = np.empty(len(step) + 1, dtype=np.int64)
     seq[0] = 0

@@ -22,7 +22,8 @@ import numpy.typing as npt
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.powerup import NAMED_SPAN, holds_first_cycle, same_tick, tick_bound_s
 from odocan.host.judge.tracking import PoseTracker
-from odocan.host.protocol.e2e import E2EMonitor, crc8h2f_p02_one
+from odocan.host.protocol.e2e import crc8h2f_p02_one
+from odocan.host.protocol.e2e_live import E2EMonitor
 
 if TYPE_CHECKING:  # the live judges' (a log's analysis imports this module, not cantools)
     from cantools.database.can import Database, Message

@@ -68,7 +68,8 @@ from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.liveprofile import ProfileStatus
 from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
-from odocan.host.protocol.e2e import E2EMonitor, e2e_messages
+from odocan.host.protocol.e2e import e2e_messages
+from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.sim.contract import database
 from odocan.sim.framebatch import Received
 

@@ -70,9 +70,13 @@ from odocan.host.protocol.e2e_crc import (
 from odocan.host.protocol.e2e_crc import (
     crc8h2f_p02_one as crc8h2f_p02_one,
 )
+from odocan.host.protocol.e2e_cycles import (
+    COUNTER_CYCLE,
+    new_cycle_frames,
+    new_cycle_s,
+    new_cycles,
+)
 from odocan.host.protocol.e2e_evidence import (
-    CAPTURE_HOLD_CYCLES,
-    ReleaseWatch,
     evidence_frames,
     pose_evidence,
     readings,
@@ -80,9 +84,7 @@ from odocan.host.protocol.e2e_evidence import (
     settle,
 )
 from odocan.host.protocol.e2e_periods import (
-    CAPTURE_TOLERANCE_CYCLES,
     frame_periods,
-    receive_period_count,
 )
 from odocan.host.protocol.e2e_periods import (
     period_count as period_count,  # re-exported (their old home)
@@ -90,7 +92,6 @@ from odocan.host.protocol.e2e_periods import (
 from odocan.host.protocol.e2e_periods import (
     periods_between as periods_between,
 )
-from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
@@ -172,16 +173,31 @@ def _parse_data_ids(name: str, text: str) -> tuple[int, ...]:
 
 @dataclass(slots=True)
 class SequenceState:
-    """The Profile 2 check state of one message: last valid counter and the delta window."""
+    """The Profile 2 check state of one message: last valid counter and the delta window.
+
+    ``cycle_s`` (set for the messages checked per period, ``PER_PERIOD_WINDOW``; frames judged
+    with their bus time ``timestamp_s``): a frame of the last valid COUNTER half a COUNTER
+    cycle or more (the bus time, as ``samples.sender_seq`` counts it) after the last valid
+    frame, with no frame of a right CRC between in the log, is no repeat but the sender's frame
+    16 * k periods on (``host.protocol.e2e_cycles``): OKSOMELOST, 16 * k - 1 lost. A firmware
+    that had the frames between (a recorder's kernel buffer dropped them) took it; refused as
+    REPEATED, it left the reference and the pairing a frame short (``tests/test_recorder_gap16``).
+    Frames between (refused: a lock-out after a late frame, ``gapfill``) are the firmware's too,
+    so it refused this one: so does the host. The window is kept: had the firmware lost the
+    frames too, it refused this one and the frames after are judged as it judges them."""
 
     max_delta_init: int
     waiting: bool = True  # no valid frame yet
     last_valid: int = 0
     window: int = 0  # MaxDeltaCounter
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(E2E_KEYS, 0))
+    cycle_s: float | None = None  # the receive period when a same COUNTER may be a new cycle
+    last_valid_s: float | None = None  # the last valid frame's bus time (s), when given
 
-    def check(self, crc_ok: bool, counter: int, periods: int = 1) -> str:
-        """Judge one frame ``periods`` receive periods after the previous one; count it."""
+    def check(self, crc_ok: bool, counter: int, periods: int = 1,
+              timestamp_s: float | None = None) -> str:
+        """Judge one frame ``periods`` receive periods after the previous one, at bus time
+        ``timestamp_s`` (s, optional); count it."""
         window = self.window + periods  # at most MAX_DELTA_COUNTER (no min(): per frame)
         self.window = window if window < MAX_DELTA_COUNTER else MAX_DELTA_COUNTER
         if not crc_ok:
@@ -190,20 +206,31 @@ class SequenceState:
         delta = (counter - self.last_valid) & COUNTER_MASK
         if self.waiting or delta == 1:
             status = OK
-        elif delta == 0:
-            self.counts["repeated"] += 1
-            return REPEATED
-        elif delta <= self.window:
+        elif delta == 0 and (cycles := self._new_cycles(timestamp_s)):
+            self.counts["lost"] += COUNTER_CYCLE * cycles - 1
+            self.counts["ok"] += 1
+            self.last_valid_s = timestamp_s
+            return OKSOMELOST  # the window kept (the docstring)
+        elif delta == 0 or delta > self.window:
+            self.last_valid_s = None  # a frame between: no new cycle till the next accepted
+            self.counts["repeated" if delta == 0 else "wrong_sequence"] += 1
+            return REPEATED if delta == 0 else WRONG_SEQUENCE
+        else:
             status = OKSOMELOST
             self.counts["lost"] += delta - 1
-        else:
-            self.counts["wrong_sequence"] += 1
-            return WRONG_SEQUENCE
         self.waiting = False
         self.last_valid = counter
         self.window = self.max_delta_init
+        self.last_valid_s = timestamp_s
         self.counts["ok"] += 1
         return status
+
+    def _new_cycles(self, timestamp_s: float | None) -> int:
+        """Whole COUNTER cycles since the last valid frame (``e2e_cycles``; 0: not known)."""
+        last, cycle_s = self.last_valid_s, self.cycle_s
+        if cycle_s is None or timestamp_s is None or last is None:
+            return 0
+        return new_cycles(timestamp_s - last, cycle_s)
 
 
 def sequence_statuses(
@@ -211,6 +238,8 @@ def sequence_statuses(
     counter: npt.NDArray[np.int64],
     periods: npt.NDArray[np.int64],
     max_delta_init: int,
+    timestamp_s: npt.NDArray[np.float64] | None = None,
+    cycle_s: float | None = None,
 ) -> npt.NDArray[np.int8]:
     """Status codes (``_STATUS`` order) of one message's frames in bus order.
 
@@ -224,6 +253,7 @@ def sequence_statuses(
     if valid is not None and len(valid) == 0:
         return status
     c = ((counter if valid is None else counter[valid]) & COUNTER_MASK).astype(np.int8)
+    t = timestamp_s if timestamp_s is None or valid is None else timestamp_s[valid]
     naive = np.full(len(c), _S_OK, dtype=np.int8)
     delta = (c[1:] - c[:-1]) & COUNTER_MASK  # int8: 0..15, the step mod 16
     cum_valid = None if valid is None else np.cumsum(periods)[valid]
@@ -244,7 +274,7 @@ def sequence_statuses(
             break
         start = int(bad[k])  # its predecessor (start - 1) was accepted
         assert cum_valid is not None
-        j = _rejudge(naive, c, cum_valid, start, max_delta_init)
+        j = _rejudge(naive, c, cum_valid, start, max_delta_init, t, cycle_s)
     if valid is None:
         return naive
     status[valid] = naive
@@ -257,15 +287,21 @@ def _rejudge(
     cum: npt.NDArray[np.int64],
     start: int,
     max_delta_init: int,
+    t: npt.NDArray[np.float64] | None,
+    cycle_s: float | None,
 ) -> int:
-    """Re-judge valid frames from ``start`` until one is accepted; returns the next index."""
+    """Re-judge valid frames (bus times ``t``, if known) from ``start`` until one is accepted
+    with its window restarted (not a new COUNTER cycle); returns the next index."""
     last, last_cum = int(c[start - 1]), int(cum[start - 1])
+    state = SequenceState(max_delta_init, False, last, window=max_delta_init, cycle_s=cycle_s,
+                          last_valid_s=None if t is None else float(t[start - 1]))
     codes = {OK: _S_OK, OKSOMELOST: _S_LOST, REPEATED: _S_REPEATED, WRONG_SEQUENCE: _S_WRONG}
     for j in range(start, len(c)):
-        state = SequenceState(max_delta_init, False, last, window=max_delta_init)
-        result = state.check(True, int(c[j]), int(cum[j]) - last_cum)
+        result = state.check(True, int(c[j]), int(cum[j]) - last_cum,
+                             None if t is None else float(t[j]))
+        last_cum = int(cum[j])
         naive[j] = codes[result]
-        if result in (OK, OKSOMELOST):
+        if result in (OK, OKSOMELOST) and int(c[j]) != last:
             return j + 1
     return len(c)
 
@@ -350,12 +386,16 @@ def _check_message(
     counter = (frames.data[index, 1] & COUNTER_MASK).astype(np.int64)
     periods = frame_periods(frames.timestamp_s[index], counter, crc_ok[index], config.cycle_s,
                             config.min_periods)
-    status = sequence_statuses(crc_ok[index], counter, periods, config.max_delta_init)
+    cycle_s = new_cycle_s(config)
+    t_s = frames.timestamp_s[index]
+    status = sequence_statuses(crc_ok[index], counter, periods, config.max_delta_init, t_s,
+                               cycle_s)
     if config.name in PER_PERIOD_WINDOW and config.cycle_s is not None and poses is not None:
         status = _settled(frames, index, counter, crc_ok[index], periods, status, config, poses)
     good = (status == _S_OK) | (status == _S_LOST)
     if good.all():  # the usual case: no gathers
         accepted[index] = True
+        valid = None
         count, steps = len(good), counter[1:] - counter[:-1]
     else:
         accepted[index[good]] = True
@@ -363,6 +403,8 @@ def _check_message(
         count, steps = len(valid), counter[valid[1:]] - counter[valid[:-1]]
     steps &= COUNTER_MASK
     lost = int(np.sum(steps) - count + 1)
+    if cycle_s is not None and count > 1:
+        lost += new_cycle_frames(steps, t_s if valid is None else t_s[valid], cycle_s)
     return {
         "ok": count,
         "lost": lost if count else 0,
@@ -379,114 +421,14 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
     """``status`` where the capture's stamps decide every frame; else settled from the
     firmware's poses (``e2e_evidence``)."""
     assert config.cycle_s is not None
-    wide, narrow = readings(frames.timestamp_s[index], counter, crc_ok, config.cycle_s, periods)
+    t_s, cycle_s = frames.timestamp_s[index], new_cycle_s(config)
+    wide, narrow = readings(t_s, counter, crc_ok, config.cycle_s, periods)
     if all(np.array_equal(p, periods) or np.array_equal(
-            status, sequence_statuses(crc_ok, counter, p, config.max_delta_init))
+            status, sequence_statuses(crc_ok, counter, p, config.max_delta_init, t_s, cycle_s))
            for p in (wide, narrow)):
         return status
     evidence = pose_evidence(frames, index, counter, crc_ok, poses)
     released = recorder_releases(frames.timestamp_s, frame_keys(frames) == config.key,
                                  config.cycle_s)[index]
     return settle(crc_ok, counter, (periods, wide, narrow), evidence, config.max_delta_init,
-                  released)
-
-
-# --- live -------------------------------------------------------------------------------------
-
-
-class _Live:
-    """A protected message heard (``E2EMonitor.check``): its fields, state, last frame's time s."""
-
-    __slots__ = ("cycle_s", "data_ids", "last", "last_s", "length", "min_periods", "state")
-
-    def __init__(self, config: E2EMessage, state: SequenceState, data_ids: tuple[int, ...],
-                 last_s: float | None, last: int) -> None:
-        self.length, self.data_ids, self.state = config.length, data_ids, state
-        self.cycle_s, self.min_periods, self.last_s = config.cycle_s, config.min_periods, last_s
-        self.last = last  # the last frame's COUNTER, -1 when its CRC was wrong
-
-
-class E2EMonitor:
-    """The same rules, one frame at a time, for live monitoring.
-
-    ``check`` returns one of ``"ok"``, ``"oksomelost"``, ``"repeated"``, ``"wrong_sequence"``,
-    ``"crc_error"`` (E2E statuses), ``"unprotected"`` (a message without E2EDataIDs, taken as it
-    is), ``"unknown_id"`` or ``"wrong_dlc"`` (not checked). Give ``timestamp_s`` (seconds, e.g.
-    ``msg.timestamp``) to widen the window with time as ``check_frames`` does; without it each
-    frame counts as one period.
-    """
-
-    def __init__(self, db: DatabaseSpec | None = None) -> None:
-        self._configs = e2e_messages(db if db is not None else contract.database())
-        self._states: dict[int, SequenceState] = {}
-        self._live: dict[int, _Live] = {}  # protected messages heard: what ``check`` needs
-        self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
-        self._releases = ReleaseWatch(min((c.cycle_s for c in self._configs.values()
-                                           if c.min_periods == 0 and c.cycle_s), default=0.01))
-
-    def check(
-        self, can_id: int, data: bytes, *, extended: bool = False, timestamp_s: float | None = None
-    ) -> str:
-        """Judge one data frame (identifier, payload); count and return its status (a message
-        heard before, with its DLC, by its ``_Live``: one lookup a frame of a fleet's robots)."""
-        if timestamp_s is not None:
-            self._releases.seen(timestamp_s)
-        live = self._live.get(frame_key(can_id, True) if extended else can_id)
-        if live is None or len(data) != live.length:
-            return self._check_first(frame_key(can_id, extended), data, timestamp_s)
-        counter = data[1] & COUNTER_MASK
-        crc_ok = crc8h2f_p02_one(data, live.data_ids[counter]) == data[0]
-        periods = 1
-        if timestamp_s is not None:
-            last, live.last_s = live.last_s, timestamp_s
-            if last is not None and crc_ok and live.last >= 0 and live.min_periods == 0 and (
-                    live.cycle_s is not None):  # as ``frame_periods``
-                periods = receive_period_count(  # the wide reading after a release
-                    timestamp_s - last, (counter - live.last) & COUNTER_MASK, live.cycle_s,
-                    CAPTURE_HOLD_CYCLES if self._releases.released(last)
-                    else CAPTURE_TOLERANCE_CYCLES)
-            elif last is not None:
-                periods = period_count(timestamp_s - last, live.cycle_s, live.min_periods)
-        live.last = counter if crc_ok else -1
-        return live.state.check(crc_ok, counter, periods)
-
-    def _check_first(self, key: int, data: bytes, timestamp_s: float | None) -> str:
-        """``check`` of a message not heard yet (makes its ``_Live``), unknown, or off its DLC."""
-        config = self._configs.get(key)
-        if config is None:
-            self._unknown["unknown_id"] += 1
-            return UNKNOWN_ID
-        if len(data) != config.length:
-            self._unknown["wrong_dlc"] += 1
-            return WRONG_DLC
-        if config.data_ids is None:
-            self._unknown["unprotected"] += 1
-            return UNPROTECTED
-        state = self._states.get(key)
-        if state is None:
-            state = self._states[key] = SequenceState(config.max_delta_init)
-        counter = data[1] & COUNTER_MASK
-        crc_ok = crc8h2f_p02_one(data, config.data_ids[counter]) == data[0]
-        self._live[key] = _Live(config, state, config.data_ids, timestamp_s,  # one period
-                                counter if crc_ok else -1)
-        return state.check(crc_ok, counter, 1)
-
-    def restart_sequence(self, can_id: int, *, extended: bool = False) -> None:
-        """The sender of this message restarted (a reboot: its COUNTER starts again): its next
-        frame starts the sequence afresh, as the first frame heard does. The counts stay."""
-        state = self._states.get(frame_key(can_id, extended))
-        if state is not None:
-            state.waiting = True
-
-    def count_frame_kind(self, *, error: bool = False, remote: bool = False) -> None:
-        """Count an error or remote frame (they are never checked)."""
-        if error:
-            self._unknown["error_frames"] += 1
-        elif remote:
-            self._unknown["remote_frames"] += 1
-
-    def counts(self) -> dict[str, dict[str, int]]:
-        """Counts per message name seen so far (``E2E_KEYS``) and the ``"unknown"`` section."""
-        result = {self._configs[key].name: dict(s.counts) for key, s in self._states.items()}
-        result[UNKNOWN] = dict(self._unknown)
-        return result
+                  released, None if cycle_s is None else (t_s, cycle_s))

@@ -33,12 +33,14 @@ wrong_sequence, crc_error).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.protocol.e2e_cycles import new_cycles
 from odocan.host.protocol.e2e_periods import (
     COUNTER_MODULO,
     RECEIVE_LAG_CYCLES,
@@ -156,18 +158,21 @@ def _only_named(enc_counter: IntArray, good: npt.NDArray[np.intp], lo: int, hi: 
 
 def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
            periods: tuple[IntArray, IntArray, IntArray], evidence: Evidence,
-           max_delta_init: int, released: npt.NDArray[np.bool_]) -> npt.NDArray[np.int8]:
+           max_delta_init: int, released: npt.NDArray[np.bool_],
+           new_cycle: tuple[npt.NDArray[np.float64], float] | None = None) -> npt.NDArray[np.int8]:
     """One message's statuses (bus order) judged with the three readings' ``periods`` (strict,
     wide, narrow) and, where they differ, with ``evidence``, else by the strict reading, or
     the wide one after a frame a stalled recorder ``released``. The Profile 2 check of
-    ``host.protocol.e2e.SequenceState`` with three windows."""
+    ``host.protocol.e2e.SequenceState`` with three windows, its new-cycle rule included
+    (``new_cycle``: the frames' bus times and the message's period; ``e2e_cycles``)."""
     n = len(counter)
     status = np.full(n, S_CRC, dtype=np.int8)
     windows = [0, 0, 0]
-    waiting, last = True, 0
+    waiting, last, last_s = True, 0, math.nan
     columns = [p.tolist() for p in periods]
     ok, counters = crc_ok.tolist(), (counter & 0x0F).tolist()
     late = released.tolist()
+    stamps, cycle_s = (new_cycle[0].tolist(), new_cycle[1]) if new_cycle else ([], 0.0)
     for j in range(n):
         windows = [min(w + c[j], _MAX_WINDOW) for w, c in zip(windows, columns, strict=True)]
         if not ok[j]:
@@ -176,7 +181,10 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
         if waiting or delta == 1:
             code = S_OK
         elif delta == 0:
-            status[j] = S_REPEATED
+            if stamps and not waiting and new_cycles(stamps[j] - last_s, cycle_s):
+                status[j], last_s = S_LOST, stamps[j]  # the sender's frame 16 k on: window kept
+                continue
+            status[j], last_s = S_REPEATED, math.nan  # a frame between: no new cycle till next
             continue
         else:
             wide = late[j - 1] if j else False
@@ -184,6 +192,9 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
         status[j] = code
         if code != S_WRONG:
             waiting, last, windows = False, counters[j], [max_delta_init] * 3
+            last_s = stamps[j] if stamps else math.nan
+        else:
+            last_s = math.nan
     return status
 
 

@@ -18,7 +18,8 @@ import cantools
 from cantools.database.namedsignalvalue import NamedSignalValue
 
 from odocan.host.io.logs import FrameArrays, FrameCollector
-from odocan.host.protocol.e2e import OK, OKSOMELOST, UNPROTECTED, E2EMonitor
+from odocan.host.protocol.e2e import OK, OKSOMELOST, UNPROTECTED
+from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.host.protocol.pose import Pose, latest_pose
 from odocan.sim.exceptions import OdocanError
 
