@@ -22,6 +22,7 @@ from odocan.host.judge.breaks import (
 from odocan.host.judge.ctrlrestart import aged_uptime, ctrl_restarts, successors, young_counts
 from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
+from odocan.host.judge.lossgate import beyond_width
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -200,7 +201,8 @@ def firmware_steps(
     (COUNTER_RESET): the odometry re-primes on the first of them and integrates one step from it to
     the last. A frame whose CTRL_UPTIME is below the last accepted frame's (both non-zero: the
     motor controller restarted), or below what it aged to over a silence (``aged_uptime``),
-    re-primes it if its counts are young (COUNTER_RESET, no step into it). Vectorised; a short
+    re-primes it if its counts are young (COUNTER_RESET, no step into it). A frame whose counts
+    set wire bits above a 16-bit counter's width is refused outright. Vectorised; a short
     state machine runs only from each refused frame on. The bound is computed in float (the
     firmware's Q48 integer bound may differ by a count at the limit)."""
     left, right = enc.left[e0:], enc.right[e0:]
@@ -216,7 +218,8 @@ def firmware_steps(
     travel_m = speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
     bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
              math.ceil(travel_m / geometry.m_per_count_right) + 1)
-    young = young_counts(left, right, uptime, bits, bound)
+    foreign = beyond_width(left, right, bits)  # refused outright (IMPLAUSIBLE_STEP)
+    young = young_counts(left, right, uptime, bits, bound) & ~foreign
     restart = ctrl_restarts(uptime, young, np.diff(stamps), enc.cycle_s, counter)
 
     def delta(a: int, b: int) -> tuple[int, int]:
@@ -240,7 +243,8 @@ def firmware_steps(
 
     periods = step_bound_periods(seq, stamps, enc.cycle_s)
     bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])
-    return _walk(steps, bad, restart, ((plausible, consistent), delta, restarted))
+    bad |= foreign[1:]
+    return _walk(steps, bad, restart, ((plausible, consistent, foreign), delta, restarted))
 
 
 def _walk(steps: Steps, bad: Any, restart: Any, rules: tuple[Any, Any, Any]) -> Steps:
@@ -280,19 +284,24 @@ def _refusals(
     steps: Steps,
     prev: int,
     n_frames: int,
-    rules: tuple[Any, Any],
+    rules: tuple[Any, Any, Any],
     delta: Any,
     restarted: Any,
 ) -> int:
     """Run the firmware's refusal logic from frame ``prev + 1`` (``prev`` accepted) until a frame
     is accepted again (``restarted(prev, k)``: it re-primes on frame k, a controller restart);
     return that frame (``n_frames`` at the end of the log). ``rules``: whether a step from the
-    last accepted frame is plausible, whether one between refused frames is."""
-    plausible, consistent = rules
+    last accepted frame is plausible, whether one between refused frames is, and per frame
+    whether its counts lie beyond the counters' width (``lossgate.beyond_width``)."""
+    plausible, consistent, foreign = rules
     resync_first: int | None = None
     resync_last = 0
     resync_frames = 0
     for k in range(prev + 1, n_frames):
+        if foreign[k]:  # counts beyond the counters' width: refused, no part of the run
+            steps.refused += 1
+            steps.d_left[k - 1] = steps.d_right[k - 1] = 0
+            continue
         if restarted(prev, k):
             return _reprime(steps, k)
         if plausible(prev, k):
