@@ -25,7 +25,9 @@ import numpy.typing as npt
 
 from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.host.judge.reference import wrap_delta
-from odocan.host.judge.samples import IntArray
+from odocan.host.judge.samples import WIRE_COUNTER_BITS, IntArray
+
+WIRE_MASK = (1 << WIRE_COUNTER_BITS) - 1  # the wire's 24 count bits
 
 
 def beyond_width(left: IntArray, right: IntArray, bits: int) -> npt.NDArray[np.bool_]:
@@ -33,7 +35,9 @@ def beyond_width(left: IntArray, right: IntArray, bits: int) -> npt.NDArray[np.b
     24), which no counter of that width sends: the firmware refuses the frame before any other
     rule (firmware/encoders.py ``_refuse_unused_bits``; a forged payload that passed Profile 2's
     CRC, 255 in 256 of them on a 16-bit robot). All False for 24 bits."""
-    found: npt.NDArray[np.bool_] = ((np.asarray(left) | np.asarray(right)) >> bits) != 0
+    found: npt.NDArray[np.bool_] = np.zeros(len(left), dtype=np.bool_)
+    if bits < WIRE_COUNTER_BITS:
+        found = (((np.asarray(left) | np.asarray(right)) & WIRE_MASK) >> bits) != 0
     return found
 
 
