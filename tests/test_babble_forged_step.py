@@ -21,6 +21,11 @@ from typing import Any
 
 import pytest
 
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
+from odocan.sim.robot import load
+from tests.test_live_reboot import bridge_of, monitor_of
+
 BABBLE = "babble=2000:0x100"
 
 
@@ -45,3 +50,20 @@ def test_forged_frames_under_babble_are_not_integrated(tmp_path: Path, seed: int
     assert report["passed"] is True
     c_log, _ = _run(tmp_path, seed, "c")
     assert c_log.read_bytes() == log.read_bytes()
+
+
+def test_the_live_judges_refuse_the_forged_frames_as_analyze_does(tmp_path: Path) -> None:
+    """The monitor's and the bridge's step gate (``livepose.StepGate``) refuse the frames whose
+    counts lie beyond a 16-bit counter as the firmware and analyze do: the same error against
+    the reference (without it the live reference integrated them: ~73 mm off at seed 0)."""
+    log, _ = _run(tmp_path, 0, "python")
+    analysis = analyze(read_log(log), load("kobuki"), "exact")
+    offline = analysis.report["onboard_vs_reference"]
+    assert analysis.passed
+    for tracker in (monitor_of(log, "kobuki", "exact").tracker,
+                    bridge_of(log, "kobuki", "exact").tracker):
+        print(f"\nanalyze {offline['max_position_error_m']}, live "
+              f"{tracker.vs_reference.max_dpos_m}")
+        assert tracker.vs_reference.max_dpos_m == pytest.approx(
+            offline["max_position_error_m"], abs=POSITION_LSB_M)
+        assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD
