@@ -9,6 +9,11 @@ consistent with each other but not with the last accepted one are a counter rest
 the odometry is re-primed on the first of them and the jump itself is never integrated. The counters
 are absolute, so the first frame after a gap carries the distance driven meanwhile.
 
+A forged payload that passes E2E (1 in 256 pass Profile 2's CRC under a flood on the encoder ID)
+meets the same bound, also after the mailbox dropped frames (``_dropped_bound_periods``), and on a
+robot with 16-bit counters it is refused first when it sets the wire's top 8 bits, which no
+genuine frame does (``_refuse_unused_bits``): neither its step nor a restart is taken from it.
+
 No rule on the counts alone tells a restart whose jump fits the bound (a controller silent long
 enough) from motion, so the controller says its age: a frame whose CTRL_UPTIME is below the last
 accepted frame's (both reported, non-zero) comes from a restarted controller, its counters from 0:
