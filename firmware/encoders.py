@@ -9,6 +9,11 @@ consistent with each other but not with the last accepted one are a counter rest
 the odometry is re-primed on the first of them and the jump itself is never integrated. The counters
 are absolute, so the first frame after a gap carries the distance driven meanwhile.
 
+A forged payload that passes E2E (1 in 256 pass Profile 2's CRC under a flood on the encoder ID)
+meets the same bound, also after the mailbox dropped frames (``_dropped_bound_periods``), and on a
+robot with 16-bit counters it is refused first when it sets the wire's top 8 bits, which no
+genuine frame does (``_refuse_unused_bits``): neither its step nor a restart is taken from it.
+
 No rule on the counts alone tells a restart whose jump fits the bound (a controller silent long
 enough) from motion, so the controller says its age: a frame whose CTRL_UPTIME is below the last
 accepted frame's (both reported, non-zero) comes from a restarted controller, its counters from 0:
@@ -71,6 +76,7 @@ class EncoderInput:
         self.max_wheel_speed_mm_s = max_wheel_speed_mm_s
         self._counter_bits = odometry.consts.counter_bits  # u8: the counters' width (16 or 32)
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS  # wider than the wire's
+        self._wire_unused_mask = self._unused_wire_bits()  # u32: wire bits a counter never sets
         self._max_counts_per_period = self.step_bounds()
         # The window widens once per tick (not per frame): a replay cannot widen it.
         self.rx = E2EReceiver(
@@ -160,6 +166,9 @@ class EncoderInput:
         if not self._reception.usable(self.rx, data):
             return
         counter, left, right, uptime = fr.unpack_wheel_encoders_fields(data)
+        if (left | right) & self._wire_unused_mask:
+            self._refuse_unused_bits()
+            return
         wire = (left, right)
         counts = self._extend_counters(wire) if self._wide_counters else wire
         self._uptime_now = uptime
@@ -168,17 +177,17 @@ class EncoderInput:
             return
         advance = self._counter_advance(counter)
         periods = self._step_periods(advance)
-        # The periods the plausibility bound allows this step: ``periods``, or STEP_PERIODS_MAX
-        # when the mailbox may have dropped frames between the last accepted frame and this one
-        # (drops seen at a tick's start from the accepting tick on, before this frame's tick: a
-        # full ring drops the newest, so they came after that tick's frames). A queued burst (a
-        # babbler held the bus) that overflows the mailbox can drop 16 or more encoder frames,
-        # which the 4-bit COUNTER cannot count (E2E takes the 17th for the next one) and
-        # firmware time cannot see (they all waited): bounded by ``periods`` such a step was
-        # refused and the next frames taken for a counter restart (COUNTER_RESET, the dropped
-        # distance never integrated). The counters are absolute, so the wide step is exact.
+        # The periods the plausibility bound allows this step: ``periods``, or, when the mailbox
+        # may have dropped frames between the last accepted frame and this one (drops seen at a
+        # tick's start from the accepting tick on, before this frame's tick: a full ring drops
+        # the newest, so they came after that tick's frames), ``_dropped_bound_periods``. A
+        # queued burst (a babbler held the bus) that overflows the mailbox can drop 16 or more
+        # encoder frames, which the 4-bit COUNTER cannot count (E2E takes the 17th for the next
+        # one) and firmware time cannot see (they all waited); bounded by ``periods`` alone such
+        # a step was refused and the next frames taken for a counter restart. The counters are
+        # absolute, so the wider step is exact.
         dropped = self._overflows_at_accept != self._health.overflows_before  # _mailbox_dropped
-        bound = STEP_PERIODS_MAX if dropped else periods
+        bound = self._dropped_bound_periods(periods) if dropped else periods
         if not self._plausible(self._counts_prev, counts, bound):
             self._on_implausible(counter, wire, counts)
             return
@@ -248,6 +257,27 @@ class EncoderInput:
         if beyond >= COUNTER_VALUES // 2 and advance > COUNTER_VALUES:
             return advance - COUNTER_VALUES  # d counted frames that were not the encoders'
         return advance
+
+    def _dropped_bound_periods(self, periods: int) -> int:
+        """The periods a step may span after the mailbox dropped frames (u32, saturated at
+        ``STEP_PERIODS_MAX``): ``periods`` (the advance counts the dropped frames whose CRC
+        holds, ``isr_dropped``, to within the nearest-advance rule's half cycle), plus a whole
+        COUNTER cycle (frames lost on the wire beyond the drops: the rule may have taken 16
+        off), plus the firmware's own periods since the last accepted frame's sample (frames
+        no one counted: an overrun, a silence). Was STEP_PERIODS_MAX (655 s of motion): any
+        forged frame passing Profile 2's CRC (1 in 256) passed it too and was integrated
+        (``odocan run --faults babble=2000:0x100``: 2.29 m off at seed 0)."""
+        bound = periods + COUNTER_VALUES + self._periods_since_sample  # < 2^18
+        return bound if bound < STEP_PERIODS_MAX else STEP_PERIODS_MAX
+
+    def _refuse_unused_bits(self) -> None:
+        """Refuse a frame whose counts set wire bits above the counters' width (a 16-bit
+        counter's top 8 of the wire's 24): no controller sends it, a forged payload that passed
+        Profile 2's CRC does (255 in 256 of them on a 16-bit robot). DEGRADED, IMPLAUSIBLE_STEP,
+        as a step beyond the bound, but no part of a restart (the resync state is untouched)."""
+        self.frames_implausible = wrap_u32(self.frames_implausible + 1)
+        self._errors.set(ErrorFlag.IMPLAUSIBLE_STEP)
+        self._health.degrade(Reason.IMPLAUSIBLE_STEP)
 
     def _mailbox_dropped(self) -> bool:
         """The mailbox dropped frames (any, or an overrun) after the last accepted encoder
@@ -405,4 +435,12 @@ class EncoderInput:
             self._counts_prev = None
         self._counter_bits = self._odometry.consts.counter_bits
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS
+        self._wire_unused_mask = self._unused_wire_bits()
         self._max_counts_per_period = self.step_bounds()
+
+    def _unused_wire_bits(self) -> int:
+        """The wire's count bits above the counters' width (0 for counters of 24 bits or more):
+        (2^24 - 1) less (2^bits - 1)."""
+        if self._counter_bits >= WIRE_COUNTER_BITS:
+            return 0
+        return ((1 << WIRE_COUNTER_BITS) - 1) ^ ((1 << self._counter_bits) - 1)

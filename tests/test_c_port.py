@@ -625,6 +625,7 @@ class _EcuSession:
             2 * math.pi * params.wheel_radius_left_nm * 1e-9 / (params.counts_per_rev or 500)
         )
         wraps = params.counter_bits != 16  # the 24-bit wire wraps during the session
+        self.counter_range = 1 << params.counter_bits  # a 16-bit counter sends 16 bits
         self.counts = [(1 << 24) - 300.0] * 2 if wraps else [0.0, 0.0]
         self.speeds = [0, 0]
         self.enc_counter = 0
@@ -661,7 +662,7 @@ class _EcuSession:
         """10 ms of the wheels at the last MOTOR_CMD; the counters' wire value."""
         for side in range(2):
             self.counts[side] += self.speeds[side] * 1e-5 / self.m_per_count
-        return [round(c) % (1 << 32) for c in self.counts]
+        return [round(c) % self.counter_range for c in self.counts]
 
     def next_encoders(self, wire: list[int]) -> bytes:
         """The next WHEEL_ENCODERS frame (next COUNTER) carrying ``wire``."""

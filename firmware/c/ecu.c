@@ -88,6 +88,8 @@ static bool plausible(const struct odom_ecu *ecu, const uint32_t prev[2], const 
                       uint32_t periods);
 static void on_implausible(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                            const uint32_t counts[2]);
+static bool beyond_width(const struct odom_ecu *ecu, const uint32_t wire[2]);
+static void refuse_unused_bits(struct odom_ecu *ecu);
 static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                              const uint32_t counts[2]);
 static bool controller_restarted(const struct odom_ecu *ecu, uint8_t uptime,
@@ -368,6 +370,10 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
     uint8_t uptime;
     uint32_t wire[2];
     unpack_wheel_encoders(data, &counter, &wire[0], &wire[1], &uptime);
+    if (beyond_width(ecu, wire)) {
+        refuse_unused_bits(ecu);
+        return;
+    }
     uint32_t counts[2];
     extend_counters(ecu, wire, counts);
     ecu->uptime_now = uptime;
@@ -510,17 +516,37 @@ static uint32_t step_periods(const struct odom_ecu *ecu, uint32_t advance)
     return advance + (((budget - advance) >> 4) << 4);
 }
 
-/* The periods the plausibility bound allows this step (encoders.py _bound_periods): periods, or
- * STEP_PERIODS_MAX when the mailbox may have dropped frames between the last accepted frame and
- * this one (drops seen at a tick's start from the accepting tick on, before this frame's tick: a
- * full ring drops the newest). A burst that overflows the mailbox can drop 16 or more encoder
- * frames, which the 4-bit COUNTER cannot count: the counters are absolute, the wide step exact. */
+/* The periods the plausibility bound allows this step: periods, or, when the mailbox may have
+ * dropped frames between the last accepted frame and this one (drops seen at a tick's start from
+ * the accepting tick on, before this frame's tick: a full ring drops the newest), periods plus a
+ * whole COUNTER cycle plus the periods since the last accepted frame's sample, saturated at
+ * STEP_PERIODS_MAX (encoders.py _dropped_bound_periods: the advance counts the dropped frames
+ * whose CRC holds; the cycle, frames lost on the wire beyond them; the time, frames no one
+ * counted). Was STEP_PERIODS_MAX: any forged frame passing the CRC was integrated. */
 static uint32_t bound_periods(const struct odom_ecu *ecu, uint32_t periods)
 {
-    if (mailbox_dropped(ecu)) {
-        return STEP_PERIODS_MAX;
+    if (!mailbox_dropped(ecu)) {
+        return periods;
     }
-    return periods;
+    uint32_t bound = periods + (COUNTER_MASK + 1u) + ecu->periods_since_sample; /* < 2^18 */
+    return bound < STEP_PERIODS_MAX ? bound : STEP_PERIODS_MAX;
+}
+
+/* True when the wire counts set bits above the counters' width (a 16-bit counter's top 8 of the
+ * wire's 24): no controller sends them (encoders.py _unused_wire_bits). */
+static bool beyond_width(const struct odom_ecu *ecu, const uint32_t wire[2])
+{
+    unsigned bits = (unsigned)ecu->odometry.consts.counter_bits;
+    return bits < WIRE_COUNTER_BITS && ((wire[0] | wire[1]) >> bits) != 0u;
+}
+
+/* Refuse a frame beyond the counters' width: DEGRADED, IMPLAUSIBLE_STEP, the resync state
+ * untouched (encoders.py _refuse_unused_bits). */
+static void refuse_unused_bits(struct odom_ecu *ecu)
+{
+    ecu->frames_implausible++;
+    ecu->errors |= ERROR_IMPLAUSIBLE_STEP;
+    degrade(ecu, REASON_IMPLAUSIBLE_STEP);
 }
 
 /* Per wheel, the most counts one encoder period can hold at max_wheel_speed_mm_s:

@@ -12,8 +12,9 @@ import numpy.typing as npt
 
 from odocan.firmware.clock import LOST_TIME_PERIODS
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.ctrlrestart import ctrl_restarts
 from odocan.host.judge.reference import Geometry, wrap_delta
-from odocan.host.judge.reference_path import Reference, ctrl_restarts, wrap_pi
+from odocan.host.judge.reference_path import Reference, wrap_pi
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     WIRE_COUNTER_BITS,

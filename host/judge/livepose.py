@@ -25,6 +25,8 @@ from odocan.host.protocol.pose import heading_fields, unwrap_near
 from odocan.sim.pose import wrap_angle
 
 RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
+WIRE_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+WIRE_MASK = (1 << WIRE_BITS) - 1
 
 
 class Sample(NamedTuple):
@@ -91,6 +93,8 @@ class StepGate:
         refused, (0, 0) when it re-primes on a controller restart."""
         seq, counter, left, right, heard, uptime, t_s = heard_frame
         self._seq += heard
+        if self.bits < WIRE_BITS and ((left | right) & WIRE_MASK) >> self.bits:
+            return None  # beyond the counters' width: refused outright (lossgate.beyond_width)
         frame = (counter, left, right)
         prev, self.prev = self.prev, frame
         prev_seq, self._prev_seq = self._prev_seq, self._seq

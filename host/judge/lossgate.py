@@ -10,7 +10,9 @@ Here a refused frame takes the counts of the last accepted frame (a step of 0 in
 next accepted frame's step from the last accepted one), as ``reference_path.firmware_steps``
 takes it. The bound is ``gapbound.period_bounds`` (one count more than the firmware's, so a
 frame the firmware may accept is never refused here) over the sender's periods between the
-frames. ``RESYNC_FRAMES`` refusals in a row: the counters restarted (the firmware re-primes);
+frames. A frame whose counts set wire bits above a 16-bit counter's width (``beyond_width``) is
+refused outright, as the firmware refuses it, and is no part of a refusal run.
+``RESYNC_FRAMES`` refusals in a row: the counters restarted (the firmware re-primes);
 the gate accepts the frame raw, and the allowance across it keeps the raw counts' (wide, never
 short) merge error."""
 
@@ -19,10 +21,24 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.host.judge.reference import wrap_delta
-from odocan.host.judge.samples import IntArray
+from odocan.host.judge.samples import WIRE_COUNTER_BITS, IntArray
+
+WIRE_MASK = (1 << WIRE_COUNTER_BITS) - 1  # the wire's 24 count bits
+
+
+def beyond_width(left: IntArray, right: IntArray, bits: int) -> npt.NDArray[np.bool_]:
+    """Per frame: its wire counts set bits at or above ``bits`` (the wire counter width, 16 or
+    24), which no counter of that width sends: the firmware refuses the frame before any other
+    rule (firmware/encoders.py ``_refuse_unused_bits``; a forged payload that passed Profile 2's
+    CRC, 255 in 256 of them on a 16-bit robot). All False for 24 bits."""
+    found: npt.NDArray[np.bool_] = np.zeros(len(left), dtype=np.bool_)
+    if bits < WIRE_COUNTER_BITS:
+        found = (((np.asarray(left) | np.asarray(right)) & WIRE_MASK) >> bits) != 0
+    return found
 
 
 @dataclass(frozen=True)
@@ -54,8 +70,9 @@ def gated_counts(
     all_r = np.concatenate(([gate.right], right)).astype(np.int64)
     all_s = np.concatenate(([gate.seq], seq)).astype(np.int64)
     periods = np.maximum(np.diff(all_s), 1)
+    foreign = beyond_width(all_l, all_r, bits)  # refused outright, no part of a run
     bad = ((np.abs(wrap_delta(np.diff(all_l), bits)) > periods * bounds[0])
-           | (np.abs(wrap_delta(np.diff(all_r), bits)) > periods * bounds[1]))
+           | (np.abs(wrap_delta(np.diff(all_r), bits)) > periods * bounds[1]) | foreign[1:])
     if gate.refused:
         bad[0] = True  # within a refusal run: the loop decides from the first frame
     if not bad.any():
@@ -65,8 +82,12 @@ def gated_counts(
     acc_l, acc_r, acc_s = gate.left, gate.right, gate.seq  # the last accepted frame's
     i = int(np.flatnonzero(bad)[0]) + 1
     while i < len(all_l):
-        if refused == 0:  # the frames up to i - 1 accepted: i - 1 the last
+        if refused == 0 and not foreign[i - 1]:  # the frames up to i - 1 accepted: i - 1 the last
             acc_l, acc_r, acc_s = int(all_l[i - 1]), int(all_r[i - 1]), int(all_s[i - 1])
+        if foreign[i]:
+            out_l[i], out_r[i] = acc_l, acc_r
+            i += 1
+            continue
         span = max(int(all_s[i]) - acc_s, 1)
         if (abs(int(wrap_delta(int(all_l[i]) - acc_l, bits))) <= span * bounds[0]
                 and abs(int(wrap_delta(int(all_r[i]) - acc_r, bits))) <= span * bounds[1]) \
@@ -78,6 +99,6 @@ def gated_counts(
         refused += 1
         out_l[i], out_r[i] = acc_l, acc_r
         i += 1
-    if refused == 0:  # the last frame accepted
+    if refused == 0 and not foreign[-1]:  # the last frame accepted
         acc_l, acc_r, acc_s = int(all_l[-1]), int(all_r[-1]), int(all_s[-1])
     return out_l[1:], out_r[1:], Gate(acc_l, acc_r, acc_s, refused)

@@ -11,18 +11,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from odocan.firmware.encoders import (
-    CTRL_UPTIME_MAX,
-    PERIODS_PER_S,
-    RESTART_SLACK_PERIODS,
-    RESYNC_FRAMES,
-)
+from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.breaks import BreakSummary, placed_offsets
 from odocan.host.judge.breakspan import break_allowance as break_allowance
 from odocan.host.judge.breakspan import seen_whole
+from odocan.host.judge.ctrlrestart import aged_uptime, ctrl_restarts, successors, young_counts
 from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
+from odocan.host.judge.lossgate import beyond_width
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -176,7 +173,8 @@ def firmware_steps(
     (COUNTER_RESET): the odometry re-primes on the first of them and integrates one step from it to
     the last. A frame whose CTRL_UPTIME is below the last accepted frame's (both non-zero: the
     motor controller restarted), or below what it aged to over a silence (``aged_uptime``),
-    re-primes it if its counts are young (COUNTER_RESET, no step into it). Vectorised; a short
+    re-primes it if its counts are young (COUNTER_RESET, no step into it). A frame whose counts
+    set wire bits above a 16-bit counter's width is refused outright. Vectorised; a short
     state machine runs only from each refused frame on. The bound is computed in float (the
     firmware's Q48 integer bound may differ by a count at the limit)."""
     left, right = enc.left[e0:], enc.right[e0:]
@@ -192,7 +190,8 @@ def firmware_steps(
     travel_m = speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
     bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
              math.ceil(travel_m / geometry.m_per_count_right) + 1)
-    young = young_counts(left, right, uptime, bits, bound)
+    foreign = beyond_width(left, right, bits)  # refused outright (IMPLAUSIBLE_STEP)
+    young = young_counts(left, right, uptime, bits, bound) & ~foreign
     restart = ctrl_restarts(uptime, young, np.diff(stamps), enc.cycle_s, counter)
 
     def delta(a: int, b: int) -> tuple[int, int]:
@@ -216,7 +215,8 @@ def firmware_steps(
 
     periods = step_bound_periods(seq, stamps, enc.cycle_s)
     bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])
-    return _walk(steps, bad, restart, ((plausible, consistent), delta, restarted))
+    bad |= foreign[1:]
+    return _walk(steps, bad, restart, ((plausible, consistent, foreign), delta, restarted))
 
 
 def _walk(steps: Steps, bad: Any, restart: Any, rules: tuple[Any, Any, Any]) -> Steps:
@@ -235,55 +235,6 @@ def _walk(steps: Steps, bad: Any, restart: Any, rules: tuple[Any, Any, Any]) -> 
         if k == n_frames:
             steps.open_from = first_bad
     return steps
-
-
-def ctrl_restarts(uptime: IntArray, young: npt.NDArray[np.bool_], elapsed_s: FloatArray,
-                  cycle_s: float | None, counter: IntArray) -> npt.NDArray[np.bool_]:
-    """Per step (into frame k + 1 of ``uptime``, CTRL_UPTIME of consecutive accepted frames,
-    ``elapsed_s`` bus time apart, ``counter`` their COUNTERs): the motor controller restarted,
-    its age below what the frame before's aged to (``aged_uptime``), both reported (non-zero),
-    and the frame's counts ``young`` (``young_counts``)."""
-    before, after = uptime[:-1], uptime[1:]
-    aged = aged_uptime(before, elapsed_s, cycle_s, successors(counter[:-1], counter[1:]))
-    restarted: npt.NDArray[np.bool_] = (after != 0) & (before != 0) & (after < aged)
-    return restarted & young[1:]
-
-
-def successors(before: IntArray, after: IntArray) -> npt.NDArray[np.bool_]:
-    """Per pair: ``after`` (a COUNTER) is the E2E successor of ``before`` (+ 1 mod 16)."""
-    found: npt.NDArray[np.bool_] = ((np.asarray(after) - np.asarray(before)) & 0xF) == 1
-    return found
-
-
-def aged_uptime(before: IntArray, elapsed_s: FloatArray, cycle_s: float | None,
-                successor: npt.NDArray[np.bool_]) -> IntArray:
-    """The least CTRL_UPTIME a controller that did not restart reports ``elapsed_s`` (bus time)
-    after a frame of CTRL_UPTIME ``before`` (firmware/encoders.py ``_aged_uptime``): ``before``
-    plus the whole seconds of the periods between them less ``RESTART_SLACK_PERIODS``, saturated
-    at ``CTRL_UPTIME_MAX``; ``before`` without bus times. The bus's clock, not the firmware's:
-    the two may differ by a period, so at an elapsed time within a period of a whole second
-    (plus the slack) the firmware may have decided the other way (a known limit, docs/bus.md);
-    the firmware's exceptions (a tick that lost time, a mailbox that dropped frames) are not
-    seen here either. ``before`` where the frame is the E2E successor of the one before
-    (``successor``: it may have waited behind a silence of the bus, sampled as old; the proof and
-    what it gives up: ``_aged_uptime``)."""
-    if cycle_s is None:
-        return before
-    periods = np.rint(np.asarray(elapsed_s) / cycle_s).astype(np.int64) - RESTART_SLACK_PERIODS
-    periods = np.where(successor, 0, np.maximum(0, periods))
-    aged: IntArray = np.minimum(CTRL_UPTIME_MAX, before + periods // PERIODS_PER_S)
-    return aged
-
-
-def young_counts(left: IntArray, right: IntArray, uptime: IntArray, bits: int,
-                 bound: tuple[int, int]) -> npt.NDArray[np.bool_]:
-    """Per frame: each wheel's count (read signed in ``bits``) within what a controller
-    ``uptime`` seconds old can have run from 0, ``uptime * PERIODS_PER_S`` periods of
-    ``bound`` (firmware/encoders.py ``_young_counts``)."""
-    periods = uptime * PERIODS_PER_S
-    young: npt.NDArray[np.bool_] = ((np.abs(wrap_delta(left, bits)) <= periods * bound[0])
-                                    & (np.abs(wrap_delta(right, bits)) <= periods * bound[1]))
-    return young
 
 
 def _reprime(steps: Steps, k: int) -> int:
@@ -305,19 +256,24 @@ def _refusals(
     steps: Steps,
     prev: int,
     n_frames: int,
-    rules: tuple[Any, Any],
+    rules: tuple[Any, Any, Any],
     delta: Any,
     restarted: Any,
 ) -> int:
     """Run the firmware's refusal logic from frame ``prev + 1`` (``prev`` accepted) until a frame
     is accepted again (``restarted(prev, k)``: it re-primes on frame k, a controller restart);
     return that frame (``n_frames`` at the end of the log). ``rules``: whether a step from the
-    last accepted frame is plausible, whether one between refused frames is."""
-    plausible, consistent = rules
+    last accepted frame is plausible, whether one between refused frames is, and per frame
+    whether its counts lie beyond the counters' width (``lossgate.beyond_width``)."""
+    plausible, consistent, foreign = rules
     resync_first: int | None = None
     resync_last = 0
     resync_frames = 0
     for k in range(prev + 1, n_frames):
+        if foreign[k]:  # counts beyond the counters' width: refused, no part of the run
+            steps.refused += 1
+            steps.d_left[k - 1] = steps.d_right[k - 1] = 0
+            continue
         if restarted(prev, k):
             return _reprime(steps, k)
         if plausible(prev, k):

@@ -1,0 +1,62 @@
+"""The motor controller's restarts as the firmware tells them from CTRL_UPTIME (firmware/
+encoders.py ``_controller_restarted``), from a log: a frame whose CTRL_UPTIME is below what the
+last accepted frame's aged to, both reported, and whose counts are young enough for that age.
+Used by the reference's step walk (``reference_path.firmware_steps``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.firmware.encoders import CTRL_UPTIME_MAX, PERIODS_PER_S, RESTART_SLACK_PERIODS
+from odocan.host.judge.reference import wrap_delta
+from odocan.host.judge.samples import FloatArray, IntArray
+
+
+def ctrl_restarts(uptime: IntArray, young: npt.NDArray[np.bool_], elapsed_s: FloatArray,
+                  cycle_s: float | None, counter: IntArray) -> npt.NDArray[np.bool_]:
+    """Per step (into frame k + 1 of ``uptime``, CTRL_UPTIME of consecutive accepted frames,
+    ``elapsed_s`` bus time apart, ``counter`` their COUNTERs): the motor controller restarted,
+    its age below what the frame before's aged to (``aged_uptime``), both reported (non-zero),
+    and the frame's counts ``young`` (``young_counts``)."""
+    before, after = uptime[:-1], uptime[1:]
+    aged = aged_uptime(before, elapsed_s, cycle_s, successors(counter[:-1], counter[1:]))
+    restarted: npt.NDArray[np.bool_] = (after != 0) & (before != 0) & (after < aged)
+    return restarted & young[1:]
+
+
+def successors(before: IntArray, after: IntArray) -> npt.NDArray[np.bool_]:
+    """Per pair: ``after`` (a COUNTER) is the E2E successor of ``before`` (+ 1 mod 16)."""
+    found: npt.NDArray[np.bool_] = ((np.asarray(after) - np.asarray(before)) & 0xF) == 1
+    return found
+
+
+def aged_uptime(before: IntArray, elapsed_s: FloatArray, cycle_s: float | None,
+                successor: npt.NDArray[np.bool_]) -> IntArray:
+    """The least CTRL_UPTIME a controller that did not restart reports ``elapsed_s`` (bus time)
+    after a frame of CTRL_UPTIME ``before`` (firmware/encoders.py ``_aged_uptime``): ``before``
+    plus the whole seconds of the periods between them less ``RESTART_SLACK_PERIODS``, saturated
+    at ``CTRL_UPTIME_MAX``; ``before`` without bus times. The bus's clock, not the firmware's:
+    the two may differ by a period, so at an elapsed time within a period of a whole second
+    (plus the slack) the firmware may have decided the other way (a known limit, docs/bus.md);
+    the firmware's exceptions (a tick that lost time, a mailbox that dropped frames) are not
+    seen here either. ``before`` where the frame is the E2E successor of the one before
+    (``successor``: it may have waited behind a silence of the bus, sampled as old; the proof and
+    what it gives up: ``_aged_uptime``)."""
+    if cycle_s is None:
+        return before
+    periods = np.rint(np.asarray(elapsed_s) / cycle_s).astype(np.int64) - RESTART_SLACK_PERIODS
+    periods = np.where(successor, 0, np.maximum(0, periods))
+    aged: IntArray = np.minimum(CTRL_UPTIME_MAX, before + periods // PERIODS_PER_S)
+    return aged
+
+
+def young_counts(left: IntArray, right: IntArray, uptime: IntArray, bits: int,
+                 bound: tuple[int, int]) -> npt.NDArray[np.bool_]:
+    """Per frame: each wheel's count (read signed in ``bits``) within what a controller
+    ``uptime`` seconds old can have run from 0, ``uptime * PERIODS_PER_S`` periods of
+    ``bound`` (firmware/encoders.py ``_young_counts``)."""
+    periods = uptime * PERIODS_PER_S
+    young: npt.NDArray[np.bool_] = ((np.abs(wrap_delta(left, bits)) <= periods * bound[0])
+                                    & (np.abs(wrap_delta(right, bits)) <= periods * bound[1]))
+    return young
