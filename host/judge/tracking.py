@@ -441,7 +441,8 @@ class PoseTracker:
         assert self._ref is not None and self.integrator is not None
         ref = self.fit.correct(raw)
         shift = self.placer.shift(pose, ref, self._last_compared, self._window,
-                                  (self.geometry, self.counter_bits, self.integrator))
+                                  (self.geometry, self.counter_bits, self.integrator),
+                                  self.fit.placed_shift_m())
         self._ref_at, self.fit, placed = rebase(self.fit, self._ref, self._ref_at, ref, shift)
         self._place_at_next = False
         return placed
