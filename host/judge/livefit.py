@@ -64,14 +64,17 @@ class LiveFit:
     """The start fit of one live reference (module docstring); ``exact``: nothing to fit."""
 
     __slots__ = ("_fit", "_last_q", "ax", "ay", "d_hi", "d_lo", "exact", "frozen", "n",
-                 "path_m", "sbx", "sby", "scross", "sdot", "sqq", "sqx", "sqy", "x_hi", "x_lo",
-                 "y_hi", "y_lo")
+                 "path_m", "placed", "sbx", "sby", "scross", "sdot", "sqq", "sqx", "sqy", "x_hi",
+                 "x_lo", "y_hi", "y_lo")
 
     def __init__(self, anchor_x_m: float, anchor_y_m: float, *, exact: bool = False,
-                 heading_rad: tuple[float, float] = (-HALF_HEADING_RAD, HALF_HEADING_RAD)) -> None:
+                 heading_rad: tuple[float, float] = (-HALF_HEADING_RAD, HALF_HEADING_RAD),
+                 placed: bool = False) -> None:
         """Anchored at the raw reference position (m) where it started; ``heading_rad``: the
-        interval ``d`` is known to lie in (a correct firmware's)."""
+        interval ``d`` is known to lie in (a correct firmware's); ``placed``: anchored at a
+        placement (``carried``), not at the reference's start."""
         self.ax, self.ay, self.exact, self.frozen = anchor_x_m, anchor_y_m, exact, exact
+        self.placed = placed
         self.d_lo, self.d_hi = (0.0, 0.0) if exact else heading_rad
         h = 0.0 if exact else HALF_POSITION_M
         self.x_lo, self.x_hi, self.y_lo, self.y_hi = -h, h, -h, h
@@ -168,9 +171,20 @@ class LiveFit:
         at ``anchor`` (after a stall): the heading interval goes on, less the ``d`` taken; the
         position is the placement's, within a pose's rounding (``liveplace.StallPlacer``)."""
         if self.exact:  # the heading is exact across a stall: only the position is placed
-            return LiveFit(anchor_x_m, anchor_y_m, heading_rad=(0.0, 0.0))
+            return LiveFit(anchor_x_m, anchor_y_m, heading_rad=(0.0, 0.0), placed=True)
         d = self.solve()[0]
-        return LiveFit(anchor_x_m, anchor_y_m, heading_rad=(self.d_lo - d, self.d_hi - d))
+        return LiveFit(anchor_x_m, anchor_y_m, heading_rad=(self.d_lo - d, self.d_hi - d),
+                       placed=True)
+
+    def placed_shift_m(self) -> tuple[float, float]:
+        """The position this fit moves the reference by at its anchor (``s``: dx, dy m) when
+        it was anchored at a placement (``carried``): taken into the reference at the next
+        placement (``rebase``), it is part of the placements' offset, bounded as they are
+        (``liveplace.StallPlacer.shift``); (0, 0) for the reference's start fit, which
+        ``analyze`` fits apart from the placements (``reference_path``)."""
+        if not self.placed or self.exact:
+            return 0.0, 0.0
+        return self.solve()[1:]
 
 
 def rebase(fit: LiveFit, odometry: ReferenceOdometry, kept: dict[int, FramePose],

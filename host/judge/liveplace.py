@@ -178,12 +178,19 @@ class StallPlacer:
         return (abs_left, abs_right) if kept_seq == seq else None
 
     def shift(self, pose: FramePose, ref: FramePose, last_compared: int, window: Columns,
-              reference: tuple[Geometry, int, str]) -> tuple[float, float] | None:
+              reference: tuple[Geometry, int, str],
+              folded: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float] | None:
         """How far (dx, dy m) to move the reference's position so that it starts again where
         the firmware is (``pose`` against ``ref``), bounded (module docstring): the merge
         allowance from ``last_compared`` to ``pose`` (``reference``: geometry, counter bits,
         integrator) joins the budget after a stall, and each gap's since (``gapbound``). None:
-        nothing to place (no stall, and the gaps suspected were a burst after a busy bus)."""
+        nothing to place (no stall, and the gaps suspected were a burst after a busy bus).
+        ``folded``: what the fit anchored at the previous placement moved the reference by
+        (``livefit.LiveFit.placed_shift_m``), taken into it with this placement
+        (``livefit.rebase``): counted in the placements' offset, so the bound is on the offset
+        from the reference as started, as ``breaks.bound_offsets`` bounds it (uncounted, up to
+        half an LSB on each axis per placement walked the reference away: 0.24 mm after 20
+        stalls of a correct firmware's loaded capture, beyond a budget of 0)."""
         geometry, bits, integrator = reference
         stalled, parts = self.stalled, []
         if stalled:
@@ -192,8 +199,12 @@ class StallPlacer:
         gaps, self._gaps, self.stalled = _confirmed(self._gaps, window), [], False
         sx, sy = self._shift[0] - self._owed[0], self._shift[1] - self._owed[1]  # applied
         owed, self._owed = self._owed, (0.0, 0.0)
-        if not gaps and not stalled:  # a burst after a busy bus, not a gap: nothing to place
-            return None if owed == (0.0, 0.0) else owed  # but an allowance withdrawn
+        if not gaps and not stalled and owed == (0.0, 0.0):  # a burst after a busy bus, not a
+            return None  # gap: nothing to place (and nothing of the fit taken into it)
+        self._shift = (self._shift[0] + folded[0], self._shift[1] + folded[1])
+        sx, sy = sx + folded[0], sy + folded[1]
+        if not gaps and not stalled:
+            return owed  # an allowance withdrawn
         for seq, before, after, periods in gaps:
             sender = self._gap_sender.get(seq)
             filled = self.fill.fill(sender[0], periods) if sender and periods > 1 else None

@@ -246,3 +246,16 @@ def silent_since(last_s: float | None, t_s: float, ys: Columns, window: Columns)
     on_time = ~queued_frames(stamps, CYCLE_S)
     lo, hi = np.searchsorted(stamps, talked), np.searchsorted(stamps, t_s)
     return int(np.count_nonzero(on_time[lo:hi])) >= SILENCE_CYCLES - 1
+
+
+def held_on_time(window: Columns, last_seq: int, seq: int) -> bool:
+    """``stalls.frozen_breaks``' test of a hold between the samples of encoder frames
+    ``last_seq`` and ``seq``: ``SILENCE_CYCLES`` or more of the frames after ``last_seq`` up to
+    ``seq`` came on time (not ``queued_frames``: frames a busy bus, or a starved recorder's
+    stamps, let out at once tell no hold: a firmware draining them in its next tick missed
+    none). The live judge takes the window's frames (the one after ``seq`` when heard)."""
+    seqs = window.col("seq")
+    lo = int(np.searchsorted(seqs, last_seq, side="right"))
+    hi = int(np.searchsorted(seqs, seq, side="right"))
+    on_time = ~queued_frames(window.col("t_s"), CYCLE_S)
+    return int(np.count_nonzero(on_time[lo:hi])) >= SILENCE_CYCLES

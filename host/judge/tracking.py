@@ -39,6 +39,7 @@ from odocan.host.judge.livewindow import (
     Counted,
     Half,
     counted,
+    held_on_time,
     named_in_window,
     named_plain,
     silent_since,
@@ -255,7 +256,8 @@ class PoseTracker:
             self.stalls += 1
             self._place_at_next = self.placer.stalled = True
             return None
-        held = 0 <= self._last_compared <= seq - SILENCE_FRAMES and not queued
+        held = (0 <= self._last_compared <= seq - SILENCE_FRAMES and not queued
+                and held_on_time(self._window, self._last_compared, seq))  # (stalls._frozen)
         if self._ref is not None and held and not self.placer.stalled:
             # The firmware held its pose that long, then took the frames since as one step: placed
             # again with a stall's allowance, also where a gap opened it (``stalls._frozen``).
@@ -441,7 +443,8 @@ class PoseTracker:
         assert self._ref is not None and self.integrator is not None
         ref = self.fit.correct(raw)
         shift = self.placer.shift(pose, ref, self._last_compared, self._window,
-                                  (self.geometry, self.counter_bits, self.integrator))
+                                  (self.geometry, self.counter_bits, self.integrator),
+                                  self.fit.placed_shift_m())
         self._ref_at, self.fit, placed = rebase(self.fit, self._ref, self._ref_at, ref, shift)
         self._place_at_next = False
         return placed
