@@ -24,6 +24,7 @@ from odocan.host.mqtt.broker import BrokerURL
 from odocan.sim import frames as sf
 from odocan.sim import robot
 from odocan.sim.rig import firmware_params
+from tests.test_monitor_config import _Hal
 
 KOBUKI = robot.load("kobuki")
 PERIOD_S = 0.01
@@ -32,15 +33,6 @@ D_LEFT, D_RIGHT = 40, 55  # counts per period: a left curve at ~0.4 m/s
 REFUSED = {"id": "c2", "counts_per_rev": 4, "wheel_radius_left_m": 0.05,
            "wheel_radius_right_m": 0.05, "wheelbase_m": 0.01, "counter_bits": 16,
            "integrator": "exact"}
-
-
-class _Hal:
-    def __init__(self) -> None:
-        self.sent: list[tuple[int, bytes]] = []
-
-    def transmit(self, can_id: int, data: bytes) -> bool:
-        self.sent.append((can_id, data))
-        return True
 
 
 class _Board:

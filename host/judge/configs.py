@@ -32,6 +32,7 @@ from odocan.host.judge.liveconfig import INTEGRATORS, PARAMS, ConfigFollower
 from odocan.host.judge.profilepage import RunningProfile, profile_mismatch, running_profile
 from odocan.host.judge.reboots import Life
 from odocan.host.judge.reference import PROFILE_SPEED, SpeedBound
+from odocan.host.judge.setposes import optional_rows
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -73,16 +74,6 @@ class ConfigCut:
         return INTEGRATORS[raw] if 0 <= raw < len(INTEGRATORS) else before
 
 
-def _accepted_rows(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
-                   name: str) -> dict[str, np.ndarray]:
-    try:
-        rows = decoder.decode(frames, name)
-    except (DecodeError, KeyError):
-        return {"index": np.zeros(0, dtype=np.int64)}
-    keep = accepted[rows["index"]]
-    return {key: value[keep] for key, value in rows.items()}
-
-
 def config_cuts(frames: FrameArrays, decoder: BulkDecoder, counter_bits: int) -> list[ConfigCut]:
     """The applied configs of the log, in bus order (module docstring; ``counter_bits``: the
     log's robot's, to tell a new width). The E2E check runs only when an ODOM_ACK of an
@@ -95,9 +86,9 @@ def config_cuts(frames: FrameArrays, decoder: BulkDecoder, counter_bits: int) ->
     if not ((raw["REQUEST_ID"] == config_id) & (raw["REQUEST_FIELD"] == APPLY_PARAM)).any():
         return []
     _, accepted = check_frames(frames, decoder.db)
-    acks = _accepted_rows(frames, accepted, decoder, "ODOM_ACK")
-    commands = _accepted_rows(frames, accepted, decoder, "ODOM_CONFIG")
-    auths = _accepted_rows(frames, accepted, decoder, "ODOM_AUTH")
+    acks = optional_rows(frames, accepted, decoder, "ODOM_ACK")
+    commands = optional_rows(frames, accepted, decoder, "ODOM_CONFIG")
+    auths = optional_rows(frames, accepted, decoder, "ODOM_AUTH")
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
     steps = sorted(
         [(int(i), "cmd", k) for k, i in enumerate(commands["index"].tolist())]

@@ -48,9 +48,10 @@ class SetPoseCut:
         return self.staged["X"], self.staged["Y"], self.staged["HEADING"]
 
 
-def _rows(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
-          name: str) -> dict[str, np.ndarray]:
-    """The accepted decoded frames of ``name`` (none when the DBC lacks it)."""
+def optional_rows(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+                  name: str) -> dict[str, np.ndarray]:
+    """The accepted decoded frames of ``name`` (none when the DBC lacks it; the set-pose and
+    config cuts' ``samples.accepted_rows``, which refuses a log without them)."""
     try:
         rows = decoder.decode(frames, name)
     except (DecodeError, KeyError):
@@ -70,10 +71,10 @@ def set_pose_cuts(frames: FrameArrays, decoder: BulkDecoder) -> list[SetPoseCut]
     if not ((raw["REQUEST_ID"] == set_pose_id) & (raw["REQUEST_FIELD"] == APPLY_FIELD)).any():
         return []
     _, accepted = check_frames(frames, decoder.db)
-    acks = _rows(frames, accepted, decoder, "ODOM_ACK")
+    acks = optional_rows(frames, accepted, decoder, "ODOM_ACK")
     mine = acks["REQUEST_ID"] == set_pose_id
-    commands = _rows(frames, accepted, decoder, "ODOM_SET_POSE")
-    auths = _rows(frames, accepted, decoder, "ODOM_AUTH")
+    commands = optional_rows(frames, accepted, decoder, "ODOM_SET_POSE")
+    auths = optional_rows(frames, accepted, decoder, "ODOM_AUTH")
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
     encoders = encoders[accepted[encoders]]
     steps: list[tuple[int, str, int]] = (
