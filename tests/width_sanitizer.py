@@ -728,6 +728,7 @@ def _secured_rig_drive(ears: _Unpacker) -> None:
 
 HEALTH_SCENARIOS = "tests.test_health_firmware"  # stalls, overflows, forgeries, restarts, gaps
 BURST_SCENARIOS = "tests.test_babble_fast_bus"  # runs the mailbox dropped, a babbler on its ID
+FORGED_SCENARIOS = "tests.test_forged_step_gate"  # counts beyond a 16-bit counter's width
 BURST_TESTS = (
     "test_after_frames_its_mailbox_dropped_the_twist_is_right_and_every_one_is_counted",
     "test_a_babblers_frames_on_the_encoder_id_are_not_taken_for_dropped_encoder_frames",
@@ -752,9 +753,10 @@ def _call_each_case(test: Callable[..., None]) -> None:
 def _health_drive() -> None:
     """The firmware-level health scenarios (lost time, FIFO overrun, mailbox overflow, forged and
     implausible steps, counter restarts and their recovery, twist after 16/31/100-period gaps,
-    runs of frames the mailbox dropped, a babbler's frames on the encoder ID),
+    runs of frames the mailbox dropped, a babbler's frames on the encoder ID, a forged frame
+    setting a 16-bit robot's unused wire bits),
     run from a fresh import of their test module so that it binds the instrumented firmware."""
-    fresh = (HEALTH_SCENARIOS, BURST_SCENARIOS, "tests.test_ecu")
+    fresh = (HEALTH_SCENARIOS, BURST_SCENARIOS, FORGED_SCENARIOS, "tests.test_ecu")
     saved = {name: sys.modules.pop(name) for name in fresh if name in sys.modules}
     try:
         scenarios = importlib.import_module(HEALTH_SCENARIOS)
@@ -765,6 +767,11 @@ def _health_drive() -> None:
         bursts = importlib.import_module(BURST_SCENARIOS)
         for name in BURST_TESTS:
             _call_each_case(getattr(bursts, name))
+        forged = importlib.import_module(FORGED_SCENARIOS)  # a 16-bit robot's wire top bits set
+        ecu = forged.OdomEcu(forged.RecordingHal(), forged.firmware_params(forged.load("kobuki"),
+                                                                           "exact"))
+        forged._run(ecu, forged._script(20, (0x3D0000 | 250, 0x3E0000 | 240), flood=False))
+        assert ecu.encoders.frames_implausible == 1
         rig = scenarios.TimedRig()
         for _ in range(3):
             rig.step()
