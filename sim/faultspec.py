@@ -93,6 +93,10 @@ class FaultSpec:
         if self.babble_window is not None:
             _check_float("babble", self.babble_window.at_s, "T")
             _check_float("babble", self.babble_window.duration_s, "DUR")
+            if self.babble_window.duration_s == 0:  # a window of no length: no babble at all
+                raise _fail("babble", f"{_num(self.babble)}:0x{self.babble_id or 0:03X}:"
+                            f"{_num(self.babble_window.at_s)}:0",
+                            "DUR must be > 0 s (a babble window of no length; leave babble out)")
         if self.busoff is not None:
             _check_float("busoff", self.busoff.at_s, "T")
             _check_float("busoff", self.busoff.duration_s, "DUR")

@@ -90,6 +90,7 @@ def test_spec_parses_every_key_and_prints_back() -> None:
         ("busoff=2", "expected busoff=T:DURATION"),
         ("busoff=-1:2", "T must be a finite number >= 0"),
         ("busoff=3:0", "busoff=3:0: DUR must be > 0 s"),
+        ("babble=100:0x050:2:0", "babble=100:0x050:2:0: DUR must be > 0 s"),
         ("seed=x", "N is not an integer"),
         ("drop=0.6,dup=0.5", "> 1 (a frame suffers at most one of them)"),
         (",,,", "an empty item"),
