@@ -109,7 +109,8 @@ async def feed(bridge: Bridge, ticks: list[list[can.Message]], stop: asyncio.Eve
 @asynccontextmanager
 async def bridged(url: BrokerURL, ticks: list[list[can.Message]]) -> AsyncIterator[Bridge]:
     with can.Bus(interface="virtual", channel=f"bench-bridge-cmd-{time.time_ns()}") as bus:
-        bridge = Bridge([RobotEndpoint(ROBOT, bus, Geometry.of(PMIR))], config=BridgeConfig(
+        endpoint = RobotEndpoint(ROBOT, bus, Geometry.of(PMIR), counter_bits=PMIR.counter_bits)
+        bridge = Bridge([endpoint], config=BridgeConfig(
             broker=url, client_prefix=f"bench-{time.time_ns()}"))
         stop = asyncio.Event()
         task = asyncio.create_task(bridge.run(stop=stop))

@@ -21,7 +21,8 @@ Every key is optional, comma-separated::
     busoff=T:DUR    at T s the transmitter's error counter climbs past 255 (32 failed attempts,
                     +8 each, through the warning and error-passive limits): bus-off for DUR s,
                     then recovery after 128 occurrences of 11 recessive bits (at ``bitrate``)
-    seed=N          the seed of every random draw (the same seed gives the same faults)
+    seed=N          the seed of every random draw (the same seed gives the same faults);
+                    without it, the command's ``--seed`` (``parse(text, seed=...)``), else 0
 
 P in [0, 1]; LEN >= 1; MS >= 0; 1 <= BITS <= 64; RATE >= 0 frames/s; 0 <= ID <= 0x1FFFFFFF;
 T, DUR >= 0 s (a bus-off's DUR > 0). A frame
@@ -106,9 +107,11 @@ class FaultSpec:
         _check_int("seed", self.seed, None, None, "N")
 
     @classmethod
-    def parse(cls, text: str) -> FaultSpec:
-        """A spec from ``--faults`` text such as ``drop=0.01,burst=0.001:5,seed=3`` ("" = none)."""
-        values: dict[str, Any] = {}
+    def parse(cls, text: str, *, seed: int = 0) -> FaultSpec:
+        """A spec from ``--faults`` text such as ``drop=0.01,burst=0.001:5,seed=3`` ("" = none);
+        ``seed``: the spec's seed when the text sets none (a command's ``--seed``: runs at several
+        seeds draw several fault streams, not the one stream of seed 0)."""
+        values: dict[str, Any] = {"seed": seed}
         seen: set[str] = set()
         items = [part.strip() for part in text.split(",")] if text.strip() else []
         for item in items:

@@ -9,6 +9,10 @@ drop is bounded by its periods, a COUNTER cycle and the firmware's own time sinc
 sample, and a 16-bit robot refuses wire counts that set the top 8 of the wire's 24 bits: each
 drive ends on the truth (0.1 mm at most), the judges (which mirror the refusal) PASS it, and the
 C port's log is the Python firmware's, byte for byte.
+
+Those seeds 0-3 were the drives' (--seed): the babble itself was fault seed 0's in all four (the
+spec's seed defaulted to 0). The spec's seed now follows --seed (``tests/test_faults_seed``), so
+the four drives meet four babble streams.
 """
 
 from __future__ import annotations

@@ -36,7 +36,8 @@ from tests.requires import require_executables
 
 README = Path(__file__).resolve().parents[1] / "docs" / "mqtt.md"  # its security section
 USERS = {"robot001": "pw-r1", "robot002": "pw-r2", "operator": "pw-op", "viewer": "pw-view"}
-GEOMETRY = Geometry.of(robot.load("pmir"))
+PMIR = robot.load("pmir")
+GEOMETRY = Geometry.of(PMIR)
 SET_POSE = {"x_m": 1.0, "y_m": 2.0, "heading_rad": 0.5}
 _channels = count()
 
@@ -90,7 +91,7 @@ async def bridge_of(url: BrokerURL, name: str) -> AsyncIterator[can.BusABC]:
     channel = f"test-acl-{os.getpid()}-{next(_channels)}"
     send_bus = can.Bus(interface="virtual", channel=channel)
     listener = can.Bus(interface="virtual", channel=channel)
-    bridge = Bridge([RobotEndpoint(name, send_bus, GEOMETRY)],
+    bridge = Bridge([RobotEndpoint(name, send_bus, GEOMETRY, counter_bits=PMIR.counter_bits)],
                     config=BridgeConfig(broker=url, client_prefix=f"acl-{channel}"))
     stop = asyncio.Event()
     task = asyncio.create_task(bridge.run(stop=stop), name="bridge")

@@ -59,7 +59,7 @@ async def running_bridge(
     channel = f"test-mqtt-{os.getpid()}-{next(_channels)}"
     send_bus = can.Bus(interface="virtual", channel=channel)
     listener = can.Bus(interface="virtual", channel=channel)
-    bridge = Bridge([RobotEndpoint(ROBOT, send_bus, GEOMETRY)],
+    bridge = Bridge([RobotEndpoint(ROBOT, send_bus, GEOMETRY, counter_bits=PMIR.counter_bits)],
                     config=BridgeConfig(broker=url, client_prefix=f"test-{channel}", **config))
     stop = asyncio.Event()
     task = asyncio.create_task(bridge.run(stop=stop), name="bridge")
@@ -498,7 +498,8 @@ def test_a_cancelled_bridge_publishes_offline_first(kind: str, tmp_path: Path) -
         async with broker_of(kind, tmp_path) as brokers, client(brokers.operator) as sub:
             await sub.subscribe(topics.topic(ROBOT, "status"), qos=1)
             with can.Bus(interface="virtual", channel=f"test-cancel-{next(_channels)}") as bus:
-                bridge = Bridge([RobotEndpoint(ROBOT, bus, GEOMETRY)],
+                endpoint = RobotEndpoint(ROBOT, bus, GEOMETRY, counter_bits=PMIR.counter_bits)
+                bridge = Bridge([endpoint],
                                 config=BridgeConfig(broker=brokers.bridge,
                                                     client_prefix=f"test-cancel-{kind}"))
                 task = asyncio.create_task(bridge.run(stop=asyncio.Event()))

@@ -16,7 +16,7 @@ from odocan.host.mqtt.bridge import Batch, Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import LOOPBACK, BrokerURL
 from odocan.host.mqtt.client import CoalescedSend, LinkClient
 from tests.conftest_mqtt import Mosquitto, client, mosquitto  # noqa: F401 (fixtures)
-from tests.test_mqtt_bridge import GEOMETRY, ROBOT, rig_ticks
+from tests.test_mqtt_bridge import GEOMETRY, PMIR, ROBOT, rig_ticks
 
 TOPIC = "odocan/robot001/pose"
 BURST = 30
@@ -116,7 +116,7 @@ def test_a_large_batch_is_handled_in_slices_with_loop_turns_between() -> None:
 
     def bridge(slice_frames: int) -> Bridge:
         bus = can.Bus(interface="virtual", channel="coalesced-slices")
-        return Bridge([RobotEndpoint(ROBOT, bus, GEOMETRY)],
+        return Bridge([RobotEndpoint(ROBOT, bus, GEOMETRY, counter_bits=PMIR.counter_bits)],
                       config=BridgeConfig(broker=url, slice_frames=slice_frames))
 
     async def sliced() -> tuple[list[int], Bridge]:

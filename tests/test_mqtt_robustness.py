@@ -38,7 +38,8 @@ KEYS = ("x_m", "y_m", "heading_rad", "id", "counts_per_rev", "wheel_radius_left_
 
 
 def _bridge(bus: can.BusABC) -> Bridge:
-    return Bridge([RobotEndpoint("robot001", bus, GEOMETRY)], config=BridgeConfig(broker=URL))
+    endpoint = RobotEndpoint("robot001", bus, GEOMETRY, counter_bits=PMIR.counter_bits)
+    return Bridge([endpoint], config=BridgeConfig(broker=URL))
 
 
 def _value(rng: random.Random, depth: int = 0) -> Any:
@@ -277,7 +278,7 @@ def test_an_expired_or_busy_command_is_answered_with_its_id_and_not_sent() -> No
 def test_a_bus_of_random_ids_does_not_grow_the_rates_payload() -> None:
     from odocan.host.mqtt.telemetry import MAX_UNKNOWN_IDS, RobotTelemetry
 
-    telemetry = RobotTelemetry("r", GEOMETRY, "exact")
+    telemetry = RobotTelemetry("r", GEOMETRY, "exact", counter_bits=PMIR.counter_bits)
     rng = random.Random(5)
     for k in range(20_000):
         telemetry.feed(can.Message(arbitration_id=rng.getrandbits(29), is_extended_id=True,

@@ -264,7 +264,8 @@ def test_the_periodic_publications_of_a_fleet_are_spread_over_the_period() -> No
 
     period_s = 0.5
     with can.Bus(interface="virtual", channel="test-mqtt-periodic") as bus:
-        bridge = Bridge([RobotEndpoint(f"robot{i:03d}", bus, GEOMETRY) for i in range(20)],
+        bridge = Bridge([RobotEndpoint(f"robot{i:03d}", bus, GEOMETRY,
+                                       counter_bits=PMIR.counter_bits) for i in range(20)],
                         config=BridgeConfig(broker=BrokerURL.parse("mqtt://127.0.0.1"),
                                             status_period_s=period_s, rates_period_s=period_s))
         sent: list[tuple[float, str, str]] = []

@@ -28,8 +28,9 @@ from tests.test_secoc import KEY, MemoryNvm
 
 
 def bridge_robot(bus: can.BusABC, signer: SecocSigner | None) -> _Robot:
-    geometry = Geometry.of(robot.load("pmir"))
-    endpoint = RobotEndpoint("r1", bus, geometry, signer=signer)
+    pmir = robot.load("pmir")
+    endpoint = RobotEndpoint("r1", bus, Geometry.of(pmir), counter_bits=pmir.counter_bits,
+                             signer=signer)
     return _Robot(endpoint, BridgeConfig(broker=BrokerURL("127.0.0.1", 1883)))
 
 

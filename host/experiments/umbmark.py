@@ -332,9 +332,10 @@ METHODS = ("model", "borenstein")
 
 
 @dataclass(frozen=True)
-class Calibration:
-    """A calibration: the benchmark before, both estimates, the one applied, the geometry written
-    to the firmware over CAN and the benchmark after."""
+class Findings:
+    """What a calibration found before the benchmark after: the benchmark before, both estimates,
+    the one applied (``method``) and the geometry written to the firmware. ``Calibration`` and
+    ``Refusal`` share these fields, first and in this order (positional construction as before)."""
 
     before: UmbmarkResult
     borenstein: BorensteinEstimate
@@ -342,6 +343,12 @@ class Calibration:
     method: str
     nominal: Correction
     corrected: Correction
+
+
+@dataclass(frozen=True)
+class Calibration(Findings):
+    """A calibration: its ``Findings``, the benchmark after and the model fit's residual."""
+
     after: UmbmarkResult
     fit_residual_m: float = 0.0  # RMS of true end - dead-reckoned end at the model fit
 
@@ -354,16 +361,10 @@ class Calibration:
 
 
 @dataclass(frozen=True)
-class Refusal:
-    """A calibration whose corrected geometry the firmware refused: all of it but the benchmark
-    after, which never ran."""
+class Refusal(Findings):
+    """A calibration whose corrected geometry the firmware refused: its ``Findings`` but the
+    benchmark after, which never ran."""
 
-    before: UmbmarkResult
-    borenstein: BorensteinEstimate
-    model: tuple[float, float]
-    method: str
-    nominal: Correction
-    corrected: Correction
     fit_residual_m: float
     estimated: tuple[float, float]  # the (E_d, E_b) applied
 

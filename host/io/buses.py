@@ -87,17 +87,19 @@ def add_fault_argument(parser: argparse.ArgumentParser) -> None:
         metavar="SPEC",
         help="faults on this node's sends: drop=P,burst=P:LEN,dup=P,delay=P:MS,flip=P,"
         "babble=RATE[:ID[:T:DUR]],busoff=T:DUR,seed=N (babble's RATE: frames/s on the wire; "
-        "docs/bus.md, 'Faults on the bus')",
+        "seed: default --seed where the command has one, else 0; docs/bus.md, 'Faults on the "
+        "bus')",
     )
 
 
 def parse_faults(args: argparse.Namespace) -> FaultSpec | None:
     """The ``--faults`` option as a spec (None when absent or empty), within the limits a run
-    can honour (``check_fault_limits``); one-line errors."""
+    can honour (``check_fault_limits``); one-line errors. Its seed, unless the text sets one:
+    the command's ``--seed`` (0 for a command without one)."""
     text = getattr(args, "faults", "") or ""
     if not text:
         return None
-    spec = FaultSpec.parse(text)
+    spec = FaultSpec.parse(text, seed=getattr(args, "seed", 0))
     check_fault_limits(spec)
     return spec
 

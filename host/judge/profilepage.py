@@ -9,6 +9,12 @@ with other parameters than ``--robot`` is said by name, in one line, before any 
 which parameter differs when the CRC and the bound tell it (the speed bound, the integrator, a
 shipped profile), else "profile hash differs". A log without the page (older firmware) has
 nothing to say here: the judges keep the profile's bound and the pose fit keeps diagnosing.
+
+A page with MAX_WHEEL_SPEED 0 (a firmware in FAULT, or one that lost its configuration) gives
+no bound: a 0 mm/s gate would refuse every step beyond one count and fail a correct pose. The
+judges keep the bound they have (the last page's, else ``--robot``'s), the offline judges take
+the last page with a bound, the CRC is compared with the profile's parameters at bound 0, and
+``profile_mismatch`` says so (``UNBOUNDED``).
 """
 
 from __future__ import annotations
@@ -38,6 +44,9 @@ PROFILE_PAGE = 6  # ODOM_STATUS PAGE "PROFILE"
 _LAYOUT = "<IIIIBBH"  # the DBC comment's 20 bytes, little-endian
 NM_PER_M = 1_000_000_000
 HEAD_FRAMES = 1 << 13  # frames of a streamed log's head read for the page (~23 s of the rig's bus)
+UNBOUNDED = ("the firmware's PROFILE page gives max wheel speed 0 (no bound: a firmware in "
+             "FAULT?); the judges keep {kept_m_s:g} m/s (the last page's bound, else --robot "
+             "{name}'s)")
 
 
 @dataclass(frozen=True)
@@ -50,6 +59,11 @@ class RunningProfile:
     @property
     def max_wheel_speed_m_s(self) -> float:
         return self.max_wheel_speed_mm_s / MM_PER_M
+
+    @property
+    def bounded(self) -> bool:
+        """False for a page with MAX_WHEEL_SPEED 0: no bound (module docstring)."""
+        return self.max_wheel_speed_mm_s > 0
 
 
 def profile_crc(profile: RobotProfile, integrator: str) -> int:
@@ -70,9 +84,10 @@ def profile_crc(profile: RobotProfile, integrator: str) -> int:
 def running_profile(
     frames: FrameArrays, decoder: BulkDecoder | None = None
 ) -> RunningProfile | None:
-    """The last PROFILE page of ``frames`` whose E2E CRC holds (None: the log has none); raw
-    values, MAX_WHEEL_SPEED in its 1 mm/s LSB. Only these pages are checked (a handful per
-    minute), so a caller need not run the whole log's E2E check for it."""
+    """The last PROFILE page of ``frames`` whose E2E CRC holds and that gives a bound, else the
+    last one that holds (MAX_WHEEL_SPEED 0: no bound); None: the log has none. Raw values,
+    MAX_WHEEL_SPEED in its 1 mm/s LSB. Only these pages are checked (a handful per minute), so a
+    caller need not run the whole log's E2E check for it."""
     decoder = decoder if decoder is not None else BulkDecoder(default_plan())
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", PROFILE_PAGE)
@@ -81,12 +96,17 @@ def running_profile(
         return None
     if "PROFILE_CRC" not in page or data_ids is None:
         return None
+    unbounded = None
     for row in range(len(page["index"]) - 1, -1, -1):
         data = bytes(frames.data[int(page["index"][row])])
         if frames.dlc[int(page["index"][row])] == 8 and data[0] == crc8h2f_p02_one(
                 data, data_ids[data[1] & 0x0F]):
-            return RunningProfile(int(page["MAX_WHEEL_SPEED"][row]), int(page["PROFILE_CRC"][row]))
-    return None
+            running = RunningProfile(int(page["MAX_WHEEL_SPEED"][row]),
+                                     int(page["PROFILE_CRC"][row]))
+            if running.bounded:
+                return running
+            unbounded = unbounded or running
+    return unbounded
 
 
 def head_profile(path: Path, head_frames: int = HEAD_FRAMES) -> RunningProfile | None:
@@ -111,8 +131,10 @@ def _status_data_ids() -> tuple[int, ...] | None:
 
 def with_bus_speed(profile: RobotProfile, running: RunningProfile | None) -> RobotProfile:
     """``profile`` with the bus's speed bound when the log reports one (the judges' bound on
-    what a gap or a stall may hide is the firmware's, not the command line's)."""
-    if running is None or running.max_wheel_speed_mm_s == profile.max_wheel_speed_mm_s:
+    what a gap or a stall may hide is the firmware's, not the command line's); a page without a
+    bound (MAX_WHEEL_SPEED 0) leaves ``profile``'s."""
+    if running is None or not running.bounded or \
+            running.max_wheel_speed_mm_s == profile.max_wheel_speed_mm_s:
         return profile
     return dataclasses.replace(profile, max_wheel_speed_m_s=running.max_wheel_speed_m_s)
 
@@ -132,9 +154,18 @@ def profile_mismatch(
     running: RunningProfile | None, given: RobotProfile, integrator: str
 ) -> str | None:
     """One line naming how the firmware's parameters differ from ``given`` (``--robot``) run
-    with ``integrator``; None when they are the same or the log has no PROFILE page."""
+    with ``integrator``, or that its page gives no bound (``UNBOUNDED``); None when they are the
+    same or the log has no PROFILE page."""
     said = diagnose_profile(running, given, integrator)
-    return None if said is None else said.text
+    texts = [] if said is None else [said.text]
+    if running is not None and not running.bounded:
+        texts.insert(0, unbounded_text(given, given.max_wheel_speed_mm_s))
+    return "; ".join(texts) or None
+
+
+def unbounded_text(given: RobotProfile, kept_mm_s: int) -> str:
+    """``UNBOUNDED`` said for ``given`` (``--robot``), the judges keeping ``kept_mm_s``."""
+    return UNBOUNDED.format(kept_m_s=kept_mm_s / MM_PER_M, name=given.name)
 
 
 def diagnose_profile(
@@ -144,6 +175,9 @@ def diagnose_profile(
     parameters are ``given``'s run with ``integrator`` or the log has no PROFILE page."""
     if running is None or running.profile_crc == profile_crc(given, integrator):
         return None
+    if not running.bounded and running.profile_crc == profile_crc(
+            dataclasses.replace(given, max_wheel_speed_m_s=0.0), integrator):
+        return None  # given's parameters, without a bound (``profile_mismatch`` says that)
     bus_speed = with_bus_speed(given, running)
     speed = () if bus_speed is given else ("MAX_WHEEL_SPEED",)
     speed_said = (f"the log's firmware runs with max wheel speed {running.max_wheel_speed_m_s:g}"
@@ -196,28 +230,36 @@ def take_page(model: _Judges, max_wheel_speed_m_s: float, crc: int) -> RunningPr
     """A PROFILE page heard live (MAX_WHEEL_SPEED decoded, in m/s; PROFILE_CRC): the live
     judges take its bound, their step gates from the next encoder frame on
     (``PoseTracker.take_speed_bound``, ``LiveDistance.take_speed_bound``), as the firmware's
-    gate runs with it; returns the page's raw values."""
+    gate runs with it; returns the page's raw values. A page without a bound (0) is not taken:
+    the judges keep theirs (module docstring)."""
     running = RunningProfile(round(max_wheel_speed_m_s * MM_PER_M), crc)
-    model.tracker.take_speed_bound(running.max_wheel_speed_mm_s)
-    model.distance.take_speed_bound(model.tracker.geometry)
+    if running.bounded:
+        model.tracker.take_speed_bound(running.max_wheel_speed_mm_s)
+        model.distance.take_speed_bound(model.tracker.geometry)
     return running
 
 
 def follow_profile(model: _Model, t_s: float, max_wheel_speed_m_s: float, crc: int) -> None:
     """The live side (monitor): a PROFILE page heard at ``t_s`` (MAX_WHEEL_SPEED decoded, in
     m/s; PROFILE_CRC). When it says something new, the status shows the firmware's CRC and
-    bound, the live judges take that bound (``take_page``), and a mismatch with the robot the
+    the bound the live judges take (``take_page``: the page's, unless it gives none), and a
+    page without a bound (said first) or a mismatch with the robot the
     model was built for, run with the integrator the firmware reports (``--integrator`` is the
     judge's choice), becomes one ``profile`` event and ``status["profile_mismatch"]``."""
     shown = f"0x{crc:08X}"
     if model.status.get("profile_crc") == shown:
         return
     running = take_page(model, max_wheel_speed_m_s, crc)
-    model.status.update(profile_crc=shown, max_wheel_speed_m_s=running.max_wheel_speed_m_s)
     tracker = model.tracker
+    kept_mm_s = tracker.geometry.max_wheel_speed_mm_s  # the page's, unless it gave none
+    model.status.update(profile_crc=shown, max_wheel_speed_m_s=kept_mm_s / MM_PER_M)
     reported = str(model.status.get("integrator", "")).lower()  # the firmware's own: a judge's
     integrator = reported if reported in INTEGRATORS else tracker.integrator or "exact"  # choice
-    said = profile_mismatch(running, model.distance.robot, integrator)  # is no mismatch
+    found = diagnose_profile(running, model.distance.robot, integrator)  # is no mismatch
+    texts = [] if found is None else [found.text]
+    if not running.bounded:
+        texts.insert(0, unbounded_text(model.distance.robot, kept_mm_s))
+    said = "; ".join(texts) or None
     model.status["profile_mismatch"] = said
     if said is not None:
         model.events.append({"t_s": t_s, "kind": "profile", "detail": said})

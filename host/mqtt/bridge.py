@@ -50,13 +50,16 @@ Batch = list[tuple[int, Received]]
 
 @dataclass(frozen=True)
 class RobotEndpoint:
-    """One robot as the bridge sees it: a name, the bus to send its commands on, its geometry."""
+    """One robot as the bridge sees it: a name, the bus to send its commands on, its geometry
+    and ``counter_bits``, its hardware encoder counters' width (16 or 32; its robot profile's),
+    keyword-only and required: a default width made a 16-bit robot's expected PROFILE CRC and its
+    counter wraps wrong without a word."""
 
     name: str
     bus: can.BusABC
     geometry: Geometry
     integrator: str = "exact"
-    counter_bits: int = 32  # the robot's hardware encoder counters (16 or 32)
+    counter_bits: int = field(kw_only=True)
     # SecOC (docs/secoc.md): an ODOM_AUTH after each secured frame; None: commands unsigned
     signer: SecocSigner | None = field(default=None, repr=False)
     publish_phase_s: float = 0.0  # its first pose published this long after the first sample

@@ -253,8 +253,9 @@ async def _all_connected(bridge: Bridge, timeout_s: float) -> None:
 def _endpoints(fleet: Fleet, run: FleetRun) -> list[RobotEndpoint]:
     p = run.fleet.robot
     geometry = Geometry.of(p)
-    return [RobotEndpoint(name, fleet.host_bus(i), geometry, run.fleet.integrator, p.counter_bits,
-                          signer=_signer(run, name), profile_name=p.name,
+    return [RobotEndpoint(name, fleet.host_bus(i), geometry, run.fleet.integrator,
+                          counter_bits=p.counter_bits, signer=_signer(run, name),
+                          profile_name=p.name,
                           publish_phase_s=publish_phase_s(run.fleet.first + i, run.publish_hz))
             for i, name in enumerate(fleet.names)]
 

@@ -29,9 +29,14 @@
   verdict)``, which returns the publications that answer it (``cmd/result``). ``verdict`` is
   ``"run"``, or ``"expired"`` when the message is older than its MQTT v5 message expiry (the
   remaining interval the broker passed on) or, without one, than ``command_expiry_s`` since it
-  arrived, or ``"busy"`` when ``command_queue`` messages already wait (answered at once, not run),
-  or ``"retained"`` for a command the broker kept as retained (its age is unknown, and it would
-  run again at every reconnect).
+  arrived, or, when it carries ``sent_unix_s`` (``host.protocol.commands``), more than
+  ``command_expiry_s`` older than that by this host's wall clock. The broker's expiry stops at
+  the delivery into our socket and paho stamps the arrival when it reads the socket, so a
+  message that waited in the socket (the bridge stopped, SIGSTOP, or starved) looks fresh to
+  both rules: only its send time tells its age (a stamp ahead of our clock counts as age 0:
+  the arrival rule still bounds it); or ``"busy"`` when ``command_queue`` messages already
+  wait (answered at once, not run), or ``"retained"`` for a command the broker kept as
+  retained (its age is unknown, and it would run again at every reconnect).
 """
 
 from __future__ import annotations
@@ -62,6 +67,7 @@ from odocan.host.mqtt.broker import (
     protocol_unsupported,
 )
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient
+from odocan.host.protocol.commands import command_sent_unix_s
 
 log = logging.getLogger("odocan.mqtt")
 CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
@@ -333,6 +339,9 @@ class RobotLink:
         if message.retain:  # kept by the broker from whenever: would run again each reconnect
             return self.on_command(name, _payload(message), "retained")
         expired = time.monotonic() - message.arrival_s > expiry_s
+        sent_unix_s = command_sent_unix_s(_payload(message))
+        if sent_unix_s is not None:  # its age since it was sent, wherever it waited
+            expired = expired or time.time() - sent_unix_s > self.command_expiry_s
         self.commands_expired += expired
         return self.on_command(name, _payload(message), "expired" if expired else "run")
 

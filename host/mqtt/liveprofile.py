@@ -13,8 +13,11 @@ parameters it sent) with the integrator its reference runs. ``status`` then carr
 
 ``parameters``: the ODOM_CONFIG PARAM names the CRC and the bound tell apart (empty when they
 cannot); ``robot``: the shipped profile whose parameters the firmware runs with; ``detail``: the
-one line ``analyze`` prints (None when OK). A mismatch is also one ``profile`` event. Before any
-page (an older firmware's bus) ``profile`` is None and the profile's own bound stays.
+one line ``analyze`` prints (None when OK). ``max_wheel_speed_m_s`` is the bound the live judges
+take: the page's, except from a page with MAX_WHEEL_SPEED 0 (no bound: they keep theirs, and
+``detail`` says so with the verdict OK when the other parameters are ``--robot``'s). A mismatch
+(or a page without a bound) is also one ``profile`` event. Before any page (an older firmware's
+bus) ``profile`` is None and the profile's own bound stays.
 """
 
 from __future__ import annotations
@@ -24,9 +27,10 @@ from collections import deque
 from typing import Any, Protocol
 
 from odocan.host.judge.livedistance import LiveDistance
-from odocan.host.judge.profilepage import diagnose_profile, profile_crc, take_page
+from odocan.host.judge.profilepage import diagnose_profile, profile_crc, take_page, unbounded_text
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.tracking import PoseTracker
+from odocan.sim.robot import MM_PER_M
 
 
 class _Robot(Protocol):
@@ -64,17 +68,21 @@ class ProfileStatus:
             given = dataclasses.replace(given, name=self._profile_name)
         integrator = _integrator(robot)
         said = diagnose_profile(running, given, integrator)
+        kept_mm_s = robot.tracker.geometry.max_wheel_speed_mm_s  # the page's, unless it gave none
+        texts = [] if said is None else [said.text]
+        if not running.bounded:
+            texts.insert(0, unbounded_text(given, kept_mm_s))
         self.section = {
             "verdict": "OK" if said is None else "MISMATCH",
             "profile_crc": f"0x{crc:08X}",
             "expected_crc": f"0x{profile_crc(given, integrator):08X}",
-            "max_wheel_speed_m_s": running.max_wheel_speed_m_s,
+            "max_wheel_speed_m_s": kept_mm_s / MM_PER_M,
             "parameters": [] if said is None else list(said.parameters),
             "robot": None if said is None else said.robot,
-            "detail": None if said is None else said.text,
+            "detail": "; ".join(texts) or None,
         }
-        if said is not None:
-            robot.events.append({"t_s": t_s, "kind": "profile", "detail": said.text})
+        if texts:
+            robot.events.append({"t_s": t_s, "kind": "profile", "detail": "; ".join(texts)})
 
 
 def _integrator(robot: _Robot) -> str:

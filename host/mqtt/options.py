@@ -54,7 +54,8 @@ def add_mqtt_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--command-expiry", type=float, default=5.0, metavar="SECONDS",
         help="a command without its own MQTT v5 message expiry is refused ('expired') when "
-        "older than this (default: 5)",
+        "older than this since it arrived, and one with sent_unix_s when sent longer ago "
+        "(default: 5)",
     )
 
 

@@ -110,7 +110,7 @@ class RobotTelemetry:
         geometry: Geometry,
         integrator: str,
         *,
-        counter_bits: int = 32,
+        counter_bits: int,
         publish_hz: float = 10.0,
         publish_phase_s: float = 0.0,
         db: Database | None = None,
@@ -118,7 +118,8 @@ class RobotTelemetry:
         profile_name: str | None = None,
     ) -> None:
         """``geometry``/``integrator``/``counter_bits``: the robot's parameters for the float64
-        reference (a 16-bit hardware counter wraps at 16 bits within the 24 on the bus);
+        reference (a 16-bit hardware counter wraps at 16 bits within the 24 on the bus; no
+        default: the robot profile's width, or the expected PROFILE CRC is another robot's);
         ``profile_name``: their robot profile's name (``--robot``), said when the firmware's
         PROFILE page differs (default: ``name``)."""
         self.name = name

@@ -1,7 +1,10 @@
 """MQTT commands -> E2E-protected CAN frames, validated against a schema and the DBC first.
 
 A command is a JSON object on ``odocan/<robot>/cmd/<name>``; ``"id"`` (string or integer,
-optional) is echoed in the answer on ``cmd/result``. Every key is checked (no unknown keys, no
+optional) is echoed in the answer on ``cmd/result``; ``"sent_unix_s"`` (number, optional: when
+the sender sent it, UNIX seconds of its wall clock, as a ROS 2 ``header.stamp``) lets the bridge
+refuse a command that waited too long anywhere on its way (``command_sent_unix_s``; the link's
+expiry rule, ``host.mqtt.link``). Every key is checked (no unknown keys, no
 missing required ones, the right JSON type), then every value against its signal's range in the DBC
 (``[min|max]`` in the signal's unit, the key's unit). Only when the whole command is valid are its
 frames built (cantools ``encode``, strict; Profile 2 CRC by ``cantools.autosar`` with the
@@ -42,6 +45,7 @@ MAX_COMMAND_BYTES: Final = 4096  # a command's JSON payload, at most
 MAX_ID_CHARS: Final = 64  # a string id, at most
 MAX_ABS_INT_ID: Final = 2**63 - 1  # an integer id fits an int64 (every JSON peer can read it back)
 MAX_ABS_NUMBER: Final = 1e300  # an integer value beyond this is out of every signal's range
+SENT_KEY: Final = "sent_unix_s"  # optional in every command: its send time (UNIX s)
 
 Kind = Literal["float", "angle", "int", "enum", "bool", "absent"]
 _TURN = 2.0 * math.pi
@@ -165,6 +169,12 @@ class CommandEncoder:
                 f"id must be a string of at most {MAX_ID_CHARS} characters or an integer "
                 "within int64"
             )
+        if SENT_KEY in obj:  # judged by the link before the command came here
+            try:
+                _check_type(SENT_KEY, "float", obj.pop(SENT_KEY))
+            except CommandRejected as exc:
+                exc.cmd_id = cmd_id
+                raise
         return self._build(spec, obj, cmd_id)
 
     def build(self, name: str, values: Mapping[str, Any]) -> Command:
@@ -246,6 +256,20 @@ def command_id(payload: bytes) -> Any:
     return cmd_id if cmd_id is not None and _valid_id(cmd_id) else None
 
 
+def command_sent_unix_s(payload: bytes) -> float | None:
+    """A command's ``sent_unix_s`` (its sender's wall clock, UNIX s), None when it has none or
+    not a finite number (``encode`` then rejects it); never raises."""
+    try:
+        obj = _parse(payload)
+    except CommandRejected:
+        return None
+    sent = obj.get(SENT_KEY)
+    if isinstance(sent, bool) or not isinstance(sent, int | float) or \
+            abs(sent) > MAX_ABS_NUMBER or not math.isfinite(sent):
+        return None
+    return float(sent)
+
+
 def _data_ids(message: Message) -> list[int] | None:
     """The message's E2EDataIDs attribute (16 data IDs), None when absent or malformed."""
     attribute = message.dbc.attributes.get("E2EDataIDs") if message.dbc else None
@@ -287,6 +311,7 @@ def _check_schema(spec: CommandSpec, obj: dict[str, Any]) -> dict[str, Any]:
     unknown = sorted(set(obj) - spec.keys)
     if unknown:
         raise CommandRejected(f"unknown field {_short(repr(unknown[0]), 40)} (accepted: id, "
+                              f"{SENT_KEY}, "
                               f"{', '.join(sorted(spec.keys))})")
     fields = {f.key: f for s in spec.steps for f in s.fields if f.kind != "absent"}
     for key, f in fields.items():

@@ -6,6 +6,8 @@ terminal. The screen itself is ``host.report.tui``; the trace ``host.report.trac
 
 from __future__ import annotations
 
+import copy
+import math
 import os
 import select
 import sys
@@ -43,11 +45,18 @@ class FrameLog:
     A write error stops the recording (the keys line says so) but never the monitor; ``close()``
     then raises ``RecordingError`` naming the path and the frames written, so the command ends
     with one ``error:`` line and exit code 2 rather than a recording silently cut short.
+
+    The recorded stamps never go back: a frame read with a stamp earlier than the frame
+    recorded before it (the receive stamps of a socket's frames can be 1 us out of order, and
+    ``analyze`` then warned that the log's times went back) is written with that frame's stamp
+    (``stamps_raised`` counts them; the judge keeps the frame's own stamp).
     """
 
     def __init__(self, path: Path) -> None:
         self.path = path
         self.count = 0
+        self.stamps_raised = 0  # frames written with the stamp before theirs (theirs was earlier)
+        self._last_s = -math.inf
         self.failure: Exception | None = None
         try:
             self._logger = can.Logger(path)
@@ -58,6 +67,11 @@ class FrameLog:
         """Write one frame (counted when written); after a failure, nothing more."""
         if self.failure is not None:
             return
+        if msg.timestamp < self._last_s:
+            msg = copy.copy(msg)  # the judge's frame keeps its own stamp
+            msg.timestamp = self._last_s
+            self.stamps_raised += 1
+        self._last_s = msg.timestamp
         try:
             self._logger.on_message_received(msg)
         except Exception as exc:  # any writer's error stops the recording, not the monitor

@@ -116,8 +116,9 @@ async def _bridge(
 
     async with broker_for(url) as (broker, embedded):
         config = BridgeConfig(broker=broker, **bridge_options(args))
-        endpoint = RobotEndpoint(name, bus, geometry, args.integrator, profile.counter_bits,
-                                 signer, profile_name=profile.name)
+        endpoint = RobotEndpoint(name, bus, geometry, args.integrator,
+                                 counter_bits=profile.counter_bits, signer=signer,
+                                 profile_name=profile.name)
         bridge = Bridge([endpoint], config=config)
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
