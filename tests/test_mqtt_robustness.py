@@ -320,14 +320,14 @@ def _queued(bridge: Bridge) -> int:
 def test_the_bus_reader_reads_on_after_bus_errors() -> None:
     import asyncio
 
-    from odocan.host.mqtt.bridge import BusReader
+    from odocan.host.mqtt.busfeed import BusFeed
 
     channel = f"fuzz-flaky-{time.monotonic_ns()}"
 
     async def scenario() -> tuple[int, int]:
         with _FlakyBus(channel) as bus, can.Bus(interface="virtual", channel=channel) as tx:
             bridge = _bridge(bus)
-            reader = BusReader(bus, bridge, asyncio.get_running_loop())
+            reader = BusFeed(bus, bridge, asyncio.get_running_loop())
             reader.start()
             try:
                 for k in range(50):

@@ -44,9 +44,12 @@ class BusReader:
     for the judge (``get``)."""
 
     def __init__(self, bus: Receiver, record: Callable[[can.Message], None] | None = None,
-                 capacity: int = JUDGE_QUEUE_FRAMES) -> None:
-        """Widens the receive buffer of a bus over a socket at once (``host.io.rxsocket``)."""
-        self.bus, self.record = bus, record
+                 capacity: int = JUDGE_QUEUE_FRAMES,
+                 notify: Callable[[], None] | None = None) -> None:
+        """Widens the receive buffer of a bus over a socket at once (``host.io.rxsocket``).
+        ``notify()`` is called on the reader thread after each frame queued for the judge (a
+        consumer that waits elsewhere than in ``get``, e.g. an event loop, is woken by it)."""
+        self.bus, self.record, self.notify = bus, record, notify
         self.socket_buffer_bytes = widen_receive_buffer(bus)
         self.socket_drops = SocketDrops(bus)
         self.read = 0  # frames read from the bus
@@ -78,6 +81,9 @@ class BusReader:
             self._queue.put_nowait(msg)
         except queue.Full:
             self.judge_skipped += 1
+            return
+        if self.notify is not None:
+            self.notify()
 
     def get(self, timeout_s: float) -> can.Message | None:
         """The next frame for the judge, waiting up to ``timeout_s``; None when none came. Raises

@@ -4,8 +4,9 @@ Frames reach the bridge as batches of ``(robot index, frame)`` in a bounded ``as
 frame being a ``can.Message`` or, from the lockstep fleet, the ``(t, id, payload)`` tuple its
 transport queued (``sim.framebatch.Received``: no ``Message`` built per frame):
 
-* from a live bus, ``BusReader`` runs python-can's blocking ``recv`` in a thread and hands each
-  batch to the event loop with ``loop.call_soon_threadsafe`` (the only thread crossing);
+* from a live bus, ``host.mqtt.busfeed.BusFeed`` reads it on a thread (``host.io.busreader``,
+  as the monitor does) and its task ``can-feed`` puts the frames here, waiting for room (what
+  this process lost of the bus is ``status``'s ``receive``);
 * from the in-process fleet (``sim.fleet``), the fleet's timer task offers its batches directly.
 
 A full queue drops the batch and counts it (``frames_dropped``): the bus never waits for MQTT.
@@ -25,10 +26,9 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import threading
 import time
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -107,6 +107,16 @@ class _Robot:
             telemetry_buffer=config.telemetry_buffer, reliable_buffer=config.reliable_buffer,
         )
         self.commands_sent = self.commands_rejected = self.commands_failed = 0
+        # what this process lost of the robot's live bus, for ``status`` (``host.mqtt.busfeed``)
+        self.receive: Callable[[], dict[str, Any]] | None = None
+
+    def status(self) -> Publication:
+        """``status``, with ``receive`` when the robot's frames come from a live bus."""
+        if self.receive is None:
+            return self.telemetry.status()
+        receive = self.receive()  # first: its ``lost_here`` event goes out with this status
+        leaf, payload = self.telemetry.status()
+        return leaf, {**payload, "receive": receive}
 
     def on_command(self, name: str, payload: bytes, verdict: Verdict = "run") -> list[Publication]:
         """Validate, then send; always the one answer for ``cmd/result``, never an exception."""
@@ -310,7 +320,7 @@ class Bridge:
         which would hold back the fleet's next tick."""
         cfg = self.config
         for robot in self.robots:  # online as soon as the link connects (retained)
-            robot.link.publish(*robot.telemetry.status())
+            robot.link.publish(*robot.status())
         slots = max(1, min(PERIODIC_SLOTS, len(self.robots)))
         groups = [self.robots[slot::slots] for slot in range(slots)]
         start = time.monotonic()
@@ -329,57 +339,5 @@ class Bridge:
                 if now >= due_status[slot] - 1e-3:
                     due_status[slot] = max(due_status[slot] + cfg.status_period_s, now)
                     for robot in group:
-                        robot.link.publish(*robot.telemetry.status())
+                        robot.link.publish(*robot.status())
 
-
-class BusReader:
-    """python-can ``recv`` in a thread, batches handed to the bridge's loop thread-safely.
-
-    ``robot_index(msg)`` says whose frame it is (0 for a one-robot bus).
-    """
-
-    def __init__(
-        self, bus: can.BusABC, bridge: Bridge, loop: asyncio.AbstractEventLoop, *,
-        robot_index: int = 0, max_batch: int = 256,
-    ) -> None:
-        self.bus, self.bridge, self.loop = bus, bridge, loop
-        self.robot_index = robot_index
-        self.max_batch = max_batch
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="can-reader", daemon=True)
-        self.errors = 0  # bus errors while reading (counted, logged once)
-
-    def start(self) -> None:
-        """Start the reader thread."""
-        self._thread.start()
-
-    def stop(self) -> None:
-        """Stop the thread (within the 0.1 s recv timeout)."""
-        self._stop.set()
-        self._thread.join(timeout=2.0)
-
-    def _run(self) -> None:
-        index = self.robot_index
-        while not self._stop.is_set():
-            msg = self._recv(0.1)
-            if msg is None:
-                continue
-            batch: Batch = [(index, msg)]
-            while len(batch) < self.max_batch and (msg := self._recv(0)) is not None:
-                batch.append((index, msg))
-            try:
-                self.loop.call_soon_threadsafe(self.bridge.offer, batch)
-            except RuntimeError:  # the loop is closed: we are shutting down
-                return
-
-    def _recv(self, timeout_s: float) -> can.Message | None:
-        """One frame, or None; a bus error is counted and logged once, and the reader goes on
-        (after ``timeout_s`` or 0.1 s: a bus that is down must not spin a core)."""
-        try:
-            return self.bus.recv(timeout_s)
-        except (can.CanError, OSError, ValueError) as exc:
-            if self.errors == 0:
-                log.warning("CAN bus %s: %s (reading on)", self.bus.channel_info, exc)
-            self.errors += 1
-            self._stop.wait(max(timeout_s, 0.1))
-            return None

@@ -1,11 +1,12 @@
 """``odocan bridge``: one robot's CAN bus <-> MQTT (telemetry out, validated commands in).
 
-The bus (python-can's ``-i/-c/-b`` options) is read in a thread; frames are E2E-checked, decoded
-with the DBC, compared with the float64 reference and published under ``odocan/<name>/`` (see
-``host.mqtt.topics``); ``odocan/<name>/cmd/*`` commands are validated against the DBC before a
-frame is sent. Without ``--broker`` an embedded amqtt broker is started on a free loopback port.
-Runs until Ctrl-C or SIGTERM (exit 0), or ``--duration``: a signal before that ends it with
-130/143, never 0 (it did not bridge for the time it was asked).
+The bus (python-can's ``-i/-c/-b`` options) is read in a thread (``host.mqtt.busfeed``: what
+this process lost of it is ``status``'s ``receive`` and said when the bridge stops); frames are
+E2E-checked, decoded with the DBC, compared with the float64 reference and published under
+``odocan/<name>/`` (see ``host.mqtt.topics``); ``odocan/<name>/cmd/*`` commands are validated
+against the DBC before a frame is sent. Without ``--broker`` an embedded amqtt broker is
+started on a free loopback port. Runs until Ctrl-C or SIGTERM (exit 0), or ``--duration``: a
+signal before that ends it with 130/143, never 0 (it did not bridge for the time it was asked).
 """
 
 from __future__ import annotations
@@ -21,9 +22,11 @@ import can
 
 from odocan.host.cli.options import add_duration_argument, add_robot_argument
 from odocan.host.io.buses import add_bus_arguments, open_bus
+from odocan.host.io.busreader import lost_here_text
 from odocan.host.judge.reference import Geometry
-from odocan.host.mqtt.bridge import Bridge, BridgeConfig, BusReader, RobotEndpoint
+from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.busfeed import BusFeed
 from odocan.host.mqtt.options import (
     add_mqtt_arguments,
     bridge_options,
@@ -124,7 +127,7 @@ async def _bridge(
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, on_signal, int(sig), stop)
-        reader = BusReader(bus, bridge, loop)
+        reader = BusFeed(bus, bridge, loop)
         reader.start()
         if args.duration is not None:
             loop.call_later(args.duration, stop.set)
@@ -136,6 +139,8 @@ async def _bridge(
             announced.cancel()
             reader.stop()
         print(f"bridge {name}: {bridge.summary()}", file=sys.stderr)
+        if lost := lost_here_text(reader.reader.stats()):
+            print(f"bridge {name}: lost here: {lost}", file=sys.stderr)
     return signals[0] if signals else None
 
 
