@@ -38,7 +38,7 @@ from __future__ import annotations
 import itertools
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -55,7 +55,12 @@ from odocan.host.io.logs import (
 )
 from odocan.host.judge.analysis import Analysis, Tolerance, analyze
 from odocan.host.judge.diagnosis import fitting_profiles
-from odocan.host.judge.replay_compare import pose_phase_ticks, versus_log
+from odocan.host.judge.replay_compare import (
+    onboard_by_tick,
+    pose_phase_ticks,
+    starts_mid_drive,
+    versus_log,
+)
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.outputs import OutputError
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -280,16 +285,22 @@ def replay_and_analyze(
     tolerance: Tolerance, log: Path, log_out: Path | None = None,
 ) -> Analysis:
     """Run the replay (every frame it puts on its bus written to ``log_out`` when given),
-    analyse the replayed bus, add the ``replay`` section."""
+    analyse the replayed bus, add the ``replay`` section. A log that starts mid-drive has its
+    SIM_TRUTH frames left off the replayed bus (``truth_compared`` False): the replayed firmware
+    starts from (0, 0, 0) on the log's first encoder frame, the truth from where the drive was,
+    so their difference is the cut's pose, no error of the firmware (the trial: 1563 mm)."""
     collector = FrameCollector()
     listeners: list[can.Listener] = [collector]
     if log_out is not None:  # a full disk stops the recording, not the replay (path named)
         listeners.append(Recording(can.Logger(log_out)))
     channel = f"odocan-replay-{next(_REPLAY_CHANNELS)}"
     replay = LockstepReplay(firmware_params(profile, integrator), listeners, channel)
+    truth_compared = not starts_mid_drive(
+        frames, feed.accepted, onboard_by_tick(frames, feed.accepted), feed.encoders)
     start = time.perf_counter()
-    try:
-        replay.run(frames, feed, pose_phase_ticks(frames, feed.accepted))
+    try:  # mid-drive the replay starts from (0, 0, 0), the log's truth elsewhere: left out
+        replay.run(frames, feed if truth_compared else replace(feed, truth=feed.truth[:0]),
+                   pose_phase_ticks(frames, feed.accepted))
     finally:
         try:
             replay.close()
@@ -304,6 +315,7 @@ def replay_and_analyze(
         "encoder_frames_fed": len(feed.encoders.index),
         "encoder_frames_rejected": feed.rejected_encoders,
         "truth_frames": len(feed.truth),
+        "truth_compared": truth_compared,
         "ticks": replay.ticks,
         "ticks_without_frame": replay.ticks - min(replay.ticks, len(feed.encoders.index)),
         "interrupted": replay.stopped is not None,
