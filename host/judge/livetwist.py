@@ -216,8 +216,8 @@ class LiveTwist:
         if not self.wrong:
             return []
         return [f"ODOM_TWIST outside the reference's speeds by up to "
-                f"{self.max_linear_excess_mps * 1e3:.1f} mm/s, "
-                f"{self.max_angular_excess_rad_s * 1e3:.1f} mrad/s"]
+                f"{self.max_linear_excess_mps * 1e3:.3g} mm/s, "  # as analyze's verdict
+                f"{self.max_angular_excess_rad_s * 1e3:.3g} mrad/s"]
 
     def as_dict(self) -> dict[str, Any]:
         """``twist`` in ``monitor --json`` and the bridge's ``status``."""

@@ -160,9 +160,9 @@ def print_summary(
         + (
             ""
             if twist["passed"]
-            else "; ODOM_TWIST outside the reference's speeds by up to "
-            f"{twist['max_linear_excess_mps']:.3f} m/s, "
-            f"{twist['max_angular_excess_rad_s']:.3f} rad/s"
+            else "; ODOM_TWIST outside the reference's speeds by up to "  # 0.18 mm/s was 0.000 m/s
+            f"{twist['max_linear_excess_mps'] * 1e3:.3g} mm/s, "
+            f"{twist['max_angular_excess_rad_s'] * 1e3:.3g} mrad/s"
         )
         + (
             ""

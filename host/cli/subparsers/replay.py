@@ -182,6 +182,10 @@ def _print_versus_log(section: dict[str, Any]) -> None:
         f"identical, {position}{vs['max_heading_diff_rad'] * 1e3:.4f} mrad", soft_wrap=True)
     for line in not_comparable(vs):
         console.print(f"replay: {line}", soft_wrap=True)
+    if not section["truth_compared"]:
+        console.print("replay: the truth is not compared: the replayed firmware starts from "
+                      "(0, 0, 0) mid-drive, the log's SIM_TRUTH from where the drive was",
+                      soft_wrap=True)
 
 
 # --- real time ---------------------------------------------------------------------------------
