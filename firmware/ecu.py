@@ -26,8 +26,8 @@ MAILBOX_OVERFLOW (a received frame was dropped), IMPLAUSIBLE_STEP (a step beyond
 ``max_wheel_speed_mm_s``, not integrated) or COUNTER_RESET (the encoder counters restarted: after
 ``RESYNC_FRAMES`` frames consistent with each other but not with the last accepted one, the
 odometry is re-primed on the first of them; or a frame whose CTRL_UPTIME is below the last
-accepted one's, both non-zero: the motor controller restarted, re-primed on that frame; the jump
-itself is never integrated). The motion
+accepted one's, both non-zero: the motor controller restarted, re-primed on that frame once the
+next frame confirms it, ``firmware.restarthold``; the jump itself is never integrated). The motion
 between the last frame before a counter restart and the first after it is unknowable, so
 COUNTER_RESET stays until the host sets the pose again (ODOM_SET_POSE APPLY): no later cause
 replaces it as the reason.

@@ -19,12 +19,14 @@ enough) from motion, so the controller says its age: a frame whose CTRL_UPTIME i
 accepted frame's (both reported, non-zero) comes from a restarted controller, its counters from 0:
 COUNTER_RESET, the odometry re-primed on that frame, if its counts are ones such a young controller
 can hold (each wheel within CTRL_UPTIME seconds of its per-period bound of 0: a forged frame that
-passes E2E is refused as before, not taken for a restart). A controller that reports 0 (an old one)
-is judged by the counts alone, as before. After a silence of S s the last frame's CTRL_UPTIME has
-aged by at least floor(S) (``_aged_uptime``): a frame below that is a restart too, one that came
-during the silence and has been up longer than the controller was before it. The firmware needs
-this rule, not only the judges: without it such a restart's jump fits the time-widened bound, is
-integrated as motion, and the firmware recovers to OK with a phantom jump in its pose.
+passes E2E is refused as before, not taken for a restart) and the next frame confirms it
+(``firmware.restarthold``: held until then; on a 32-bit robot a forged frame is often "young"). A
+controller that reports 0 (an old one) is judged by the counts alone, as before. After a silence of
+S s the last frame's CTRL_UPTIME has aged by at least floor(S) (``_aged_uptime``): a frame below
+that is a restart too, one that came during the silence and has been up longer than the controller
+was before it. The firmware needs this rule, not only the judges: without it such a restart's jump
+fits the time-widened bound, is integrated as motion, and the firmware recovers to OK with a phantom
+jump in its pose.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from odocan.firmware.fixmath import U16_MAX, U32_MAX, muldiv_round_u64, wrap_sig
 from odocan.firmware.health import Health
 from odocan.firmware.odometry import Odometry
 from odocan.firmware.reception import Reception
+from odocan.firmware.restarthold import RestartHold
 from odocan.firmware.twist import ENCODER_PERIOD_US, Twist
 
 # The plausibility bound of a robot whose parameters state none (RobotParams.max_wheel_speed_mm_s)
@@ -94,6 +97,7 @@ class EncoderInput:
         self._resync_first: tuple[int, int, int] | None = None
         self._resync_last: tuple[int, int, int] = (0, 0, 0)
         self._resync_frames = 0
+        self._hold = RestartHold()  # a frame saying its controller restarted, until the next
         self.periods_since_frame = 0  # periods (of firmware time) since the last accepted frame
         # Periods since the last accepted frame's sample is known to have been taken (frames
         # taken in a tick that lost time were sampled at unknown times during the stall).
@@ -172,8 +176,10 @@ class EncoderInput:
         wire = (left, right)
         counts = self._extend_counters(wire) if self._wide_counters else wire
         self._uptime_now = uptime
+        if self._hold.held:
+            counts = self._release_held(counter, wire, counts)
         if self._controller_restarted(uptime, wire, counter):
-            self._reprime(counter, wire, counts)
+            self._hold.hold(counter, wire, uptime)  # taken when the next frame confirms it
             return
         advance = self._counter_advance(counter)
         periods = self._step_periods(advance)
@@ -274,7 +280,8 @@ class EncoderInput:
         """Refuse a frame whose counts set wire bits above the counters' width (a 16-bit
         counter's top 8 of the wire's 24): no controller sends it, a forged payload that passed
         Profile 2's CRC does (255 in 256 of them on a 16-bit robot). DEGRADED, IMPLAUSIBLE_STEP,
-        as a step beyond the bound, but no part of a restart (the resync state is untouched)."""
+        as a step beyond the bound, but no part of a restart (the resync state is untouched).
+        A held restart frame the next frame does not confirm is refused so too."""
         self.frames_implausible = wrap_u32(self.frames_implausible + 1)
         self._errors.set(ErrorFlag.IMPLAUSIBLE_STEP)
         self._health.degrade(Reason.IMPLAUSIBLE_STEP)
@@ -412,6 +419,26 @@ class EncoderInput:
         left, right = wrap_signed(wire[0], bits), wrap_signed(wire[1], bits)
         return abs(left) <= periods * left_max and abs(right) <= periods * right_max
 
+    def _release_held(self, counter: int, wire: Counts, counts: Counts) -> Counts:
+        """The frame after a held one (``counter``, ``wire``, ``counts`` from the last accepted
+        frame; ``_uptime_now`` its CTRL_UPTIME): if it confirms the held frame
+        (``RestartHold.confirms``, its counts young), re-prime on the held frame and return
+        this frame's counts from it; else refuse the held frame and return ``counts``."""
+        hold = self._hold
+        hold.held = False
+        uptime = self._uptime_now
+        bits = WIRE_COUNTER_BITS if self._wide_counters else self._counter_bits
+        if not hold.confirms(counter, wire, uptime, bits, self._max_counts_per_period) or (
+            not self._young_counts(wire, uptime)
+        ):
+            self._refuse_unused_bits()
+            return counts
+        held = hold.wire
+        self._uptime_now = hold.uptime
+        self._reprime(hold.counter, held, self._extend_counters(held))
+        self._uptime_now = uptime
+        return self._extend_counters(wire)
+
     def _reprime(self, counter: int, wire: Counts, counts: Counts) -> None:
         """The controller restarted (CTRL_UPTIME went down): COUNTER_RESET as
         ``_restart_counters`` sets it, the odometry re-primed on this frame (its step from the
@@ -433,6 +460,7 @@ class EncoderInput:
         if counter_bits_changed:
             self._wire_prev = None
             self._counts_prev = None
+            self._hold.held = False
         self._counter_bits = self._odometry.consts.counter_bits
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS
         self._wire_unused_mask = self._unused_wire_bits()

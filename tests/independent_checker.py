@@ -28,8 +28,11 @@ integrated, and the on-board pose keeps naming the last accepted frame; ``RESYNC
 in a row, each plausible from the one before, are a counter restart: the odometry restarts from
 the first of them and takes one step to the last (the jump itself is lost). A frame whose
 CTRL_UPTIME (the motor controller's age) is below the last accepted frame's, both non-zero, comes
-from a restarted controller, when its counts are within its age's travel at v_max of 0: the
-odometry restarts on it, no step into it (the DBC's comment).
+from a restarted controller, when its counts are within its age's travel at v_max of 0 and the
+next frame confirms it (its COUNTER n = 1..15 ahead, its CTRL_UPTIME the same or one more, its
+counts young too and within n periods' travel at v_max of the first's; a forged frame passing
+the CRC is not confirmed and is refused): the odometry restarts on it, no step into it (the
+DBC's comment), then goes on with the confirming frame.
 
 A stalled firmware (no ODOM_POSE frame for ``SILENCE_PERIODS`` periods or more while at least
 ``SILENCE_PERIODS - 1`` encoder frames went by, firmware/ecu.py TIME_LOST): its first pose
@@ -200,6 +203,7 @@ class _Follower:
         self.resumed_t: float | None = None  # a stall ended: pose frames at this time are skipped
         self.place_next = False  # ... and the position starts again at the next encoder frame
         self.uptime = 0  # CTRL_UPTIME of the last accepted frame
+        self.held: tuple[_Stamp, dict[str, float | int]] | None = None  # a restart's first frame
 
     def pose_frame(self, t: float) -> bool:
         """Whether a pose frame at ``t`` s may be compared (False: the first after a stall)."""
@@ -221,6 +225,16 @@ class _Follower:
         return all(abs((c + wire // 2) % wire - wire // 2) <= uptime * 100 * b
                    for c, b in zip(frame[1:], self.bound, strict=True))
 
+    def _confirms(self, held: tuple[_Stamp, dict[str, float | int]], frame: _Stamp,
+                  s: dict[str, float | int]) -> bool:
+        """``frame`` (signals ``s``) confirms the ``held`` restart frame."""
+        first, first_s = held
+        n = (int(s["COUNTER"]) - int(first_s["COUNTER"])) % 16
+        age, first_age = int(s.get("CTRL_UPTIME", 0)), int(first_s.get("CTRL_UPTIME", 0))
+        d = self.deltas(first, frame)
+        return (n > 0 and first_age <= age <= first_age + 1 and self._young(frame, age)
+                and abs(d[0]) <= n * self.bound[0] and abs(d[1]) <= n * self.bound[1])
+
     def plausible(self, a: _Stamp, b: _Stamp) -> bool:
         periods = max(1, round((b[0] - a[0]) / PERIOD_S))
         d = self.deltas(a, b)
@@ -233,11 +247,16 @@ class _Follower:
         self.heard_since_pose += 1
         self.halves.clear()
         if round(t * 1e6) in self.reboots_us:  # a new firmware: primed on this frame
-            self.prev, self.refused = None, []
+            self.prev, self.refused, self.held = None, [], None
         uptime = int(s.get("CTRL_UPTIME", 0))
-        if self.prev is not None and 0 < uptime < self.uptime and self._young(frame, uptime):
+        held, self.held = self.held, None
+        if held is not None and self._confirms(held, frame, s):
             self.refused = []
-            self._accept(frame, s)  # the odometry restarts here: no step
+            self._accept(*held)  # the odometry restarts on the held frame: no step into it
+        elif self.prev is not None and 0 < uptime < self.uptime and self._young(frame, uptime):
+            self.held = (frame, s)  # a restart if the next frame confirms it: a pose naming
+            odo = self.odo  # it is the pose before (no step into it), as the firmware's would be
+            self.recent = [(int(s["COUNTER"]), (odo.x, odo.y, odo.heading)), *self.recent][:16]
             return
         if self.prev is not None and not self.plausible(self.prev, frame):
             self._refuse(frame, s)

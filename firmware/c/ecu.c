@@ -10,7 +10,8 @@
  * MAX_WHEEL_SPEED_MM_S, not integrated) or COUNTER_RESET (RESYNC_FRAMES refused frames consistent
  * with each other: re-primed on the first of them, the jump never integrated; or a frame whose
  * CTRL_UPTIME is below the last accepted one's, both non-zero: the motor controller restarted,
- * re-primed on that frame; it stays until ODOM_SET_POSE APPLY). The module docstring of firmware/ecu.py says why.
+ * re-primed on that frame when the next one confirms it (restarthold.py); it stays until
+ * ODOM_SET_POSE APPLY). The module docstring of firmware/ecu.py says why.
  *
  * One file here, one Python module per job there (firmware/ecu.py composes them); each section
  * below names its module: mailbox.py, clock.py (advance_time), health.py (check_overflows,
@@ -98,6 +99,10 @@ static bool young_counts(const struct odom_ecu *ecu, const uint32_t wire[2], uin
 static uint8_t aged_uptime(const struct odom_ecu *ecu, uint8_t prev, uint8_t counter);
 static void reprime(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                     const uint32_t counts[2]);
+static void release_held(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                         uint8_t uptime, uint32_t counts[2]);
+static bool hold_confirmed(const struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                           uint8_t uptime);
 static void sum_step(struct odom_ecu *ecu);
 static void update_twist(struct odom_ecu *ecu, uint32_t periods);
 static bool secured(struct odom_ecu *ecu, enum auth_request request, const uint8_t *data);
@@ -377,8 +382,15 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
     uint32_t counts[2];
     extend_counters(ecu, wire, counts);
     ecu->uptime_now = uptime;
+    if (ecu->hold_valid) {
+        release_held(ecu, counter, wire, uptime, counts);
+    }
     if (controller_restarted(ecu, uptime, wire, counter)) {
-        reprime(ecu, counter, wire, counts);
+        ecu->hold_valid = true; /* taken when the next frame confirms it */
+        ecu->hold_counter = counter;
+        ecu->hold_uptime = uptime;
+        ecu->hold_wire[0] = wire[0];
+        ecu->hold_wire[1] = wire[1];
         return;
     }
     uint32_t advance = counter_advance(ecu, counter);
@@ -540,7 +552,8 @@ static bool beyond_width(const struct odom_ecu *ecu, const uint32_t wire[2])
     return bits < WIRE_COUNTER_BITS && ((wire[0] | wire[1]) >> bits) != 0u;
 }
 
-/* Refuse a frame beyond the counters' width: DEGRADED, IMPLAUSIBLE_STEP, the resync state
+/* Refuse a frame beyond the counters' width, or a held restart frame the next one does not
+ * confirm: DEGRADED, IMPLAUSIBLE_STEP, the resync state
  * untouched (encoders.py _refuse_unused_bits). */
 static void refuse_unused_bits(struct odom_ecu *ecu)
 {
@@ -704,6 +717,51 @@ static void reprime(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2
     ecu->enc_prev_counter = -1;
     ecu->this_step_periods = 1u;
     accept_encoders(ecu, counter, wire, counts);
+}
+
+/* The frame after a held one (counts: from the last accepted frame): if it confirms the held
+ * frame, re-prime on the held frame and rebuild counts from it; else refuse the held frame
+ * (encoders.py _release_held). */
+static void release_held(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                         uint8_t uptime, uint32_t counts[2])
+{
+    ecu->hold_valid = false;
+    if (!hold_confirmed(ecu, counter, wire, uptime)) {
+        refuse_unused_bits(ecu);
+        return;
+    }
+    uint32_t held[2] = {ecu->hold_wire[0], ecu->hold_wire[1]};
+    uint32_t held_counts[2];
+    extend_counters(ecu, held, held_counts);
+    ecu->uptime_now = ecu->hold_uptime;
+    reprime(ecu, ecu->hold_counter, held, held_counts);
+    ecu->uptime_now = uptime;
+    extend_counters(ecu, wire, counts);
+}
+
+/* True when a frame confirms the held one: a COUNTER advance of n = 1..15 from it, CTRL_UPTIME
+ * the held one's or one more, each wheel within n periods' bound of the held frame's (read signed
+ * in the wire's bits; at most 15 * 2^44) and its counts young (restarthold.py
+ * RestartHold.confirms). */
+static bool hold_confirmed(const struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
+                           uint8_t uptime)
+{
+    uint64_t periods = ((uint32_t)counter - (uint32_t)ecu->hold_counter) & COUNTER_MASK;
+    if (periods == 0u || uptime < ecu->hold_uptime
+        || (uint32_t)uptime > (uint32_t)ecu->hold_uptime + 1u) {
+        return false;
+    }
+    unsigned bits = (unsigned)ecu->odometry.consts.counter_bits;
+    if (bits > WIRE_COUNTER_BITS) {
+        bits = WIRE_COUNTER_BITS;
+    }
+    for (unsigned side = 0u; side < 2u; ++side) {
+        int32_t delta = wrap_signed(wire[side] - ecu->hold_wire[side], bits);
+        if (abs_u64(delta) > periods * ecu->max_counts_per_period[side]) {
+            return false;
+        }
+    }
+    return young_counts(ecu, wire, uptime);
 }
 
 /* Add the step just integrated to this tick's sums (Q20 m, Q30 rad; i64, saturated). Each term
@@ -921,6 +979,7 @@ static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame)
         odometry_unprime(&ecu->odometry);
         ecu->wire_prev_valid = false;
         ecu->counts_prev_valid = false;
+        ecu->hold_valid = false;
     }
     ecu->params = candidate;
     ecu->profile_crc = profile_crc32(&candidate);

@@ -102,6 +102,12 @@ struct odom_ecu {
     uint32_t resync_last[2];
     uint8_t resync_last_counter;
     int resync_frames;
+    /* A frame saying its controller restarted, held until the next one confirms it
+     * (restarthold.py): its COUNTER, CTRL_UPTIME and wire counts. */
+    bool hold_valid;
+    uint8_t hold_counter;
+    uint8_t hold_uptime;
+    uint32_t hold_wire[2];
     uint32_t ticks_since_encoder; /* periods (firmware time) since the last accepted frame, sat. */
     uint32_t reason_tick;         /* the tick that set reason */
     bool unreported; /* no ODOM_STATUS summary has carried the last cause yet (health.py) */

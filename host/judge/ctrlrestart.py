@@ -1,7 +1,8 @@
 """The motor controller's restarts as the firmware tells them from CTRL_UPTIME (firmware/
 encoders.py ``_controller_restarted``), from a log: a frame whose CTRL_UPTIME is below what the
-last accepted frame's aged to, both reported, and whose counts are young enough for that age.
-Used by the reference's step walk (``reference_path.firmware_steps``)."""
+last accepted frame's aged to, both reported, and whose counts are young enough for that age,
+when the next frame confirms it (``confirmed_holds``). Used by the reference's step walk
+(``reference_path.firmware_steps``)."""
 
 from __future__ import annotations
 
@@ -60,3 +61,28 @@ def young_counts(left: IntArray, right: IntArray, uptime: IntArray, bits: int,
     young: npt.NDArray[np.bool_] = ((np.abs(wrap_delta(left, bits)) <= periods * bound[0])
                                     & (np.abs(wrap_delta(right, bits)) <= periods * bound[1]))
     return young
+
+
+def confirmed_holds(enc: tuple[IntArray, IntArray, IntArray, IntArray],
+                    young: npt.NDArray[np.bool_], foreign: npt.NDArray[np.bool_], bits: int,
+                    bound: tuple[int, int] | None) -> npt.NDArray[np.bool_]:
+    """Per frame of ``enc`` (left, right counts, CTRL_UPTIME and COUNTER of consecutive frames):
+    the next frame not ``foreign`` (refused outright before the hold is looked at) confirms it
+    as the first of a controller restart (firmware/restarthold.py ``RestartHold.confirms``):
+    a COUNTER advance n of 1..15, CTRL_UPTIME the same or one more, its counts ``young`` and
+    within n periods' ``bound`` of this frame's (read in ``bits``; None: the bound is unknown,
+    the counts are not looked at). False for the last frame (no next one: the firmware holds it)."""
+    left, right, uptime, counter = enc
+    n = len(left)
+    kept = np.flatnonzero(~foreign)
+    at = np.searchsorted(kept, np.arange(n), side="right")
+    has_next = at < len(kept)
+    nxt = kept[np.minimum(at, len(kept) - 1)] if len(kept) else np.zeros(n, dtype=np.intp)
+    periods = (counter[nxt] - counter) & 0xF
+    ok = has_next & (periods != 0) & (uptime[nxt] >= uptime) & (uptime[nxt] <= uptime + 1)
+    if bound is not None:
+        ok &= young[nxt]
+        ok &= np.abs(wrap_delta(left[nxt] - left, bits)) <= periods * bound[0]
+        ok &= np.abs(wrap_delta(right[nxt] - right, bits)) <= periods * bound[1]
+    confirmed: npt.NDArray[np.bool_] = ok
+    return confirmed

@@ -41,6 +41,9 @@ class Sample(NamedTuple):
     t_s: float
 
 
+Held = tuple[tuple[int, int, int], int, int, float]  # (COUNTER, left, right), seq, uptime, t (s)
+
+
 class StepGate:
     """The firmware's plausibility rule on the reference's steps (firmware/ecu.py, the same as
     ``host.judge.analysis``): a frame beyond the robot's maximum wheel speed
@@ -49,8 +52,12 @@ class StepGate:
     among themselves are a counter restart: one step from the first of them, never the jump; a
     frame whose CTRL_UPTIME is below the last accepted one's (both non-zero), or below what it
     aged to over a silence (``aged``) when it is not that one's E2E successor (a successor may
-    have waited behind the silence), re-primes it (the motor controller restarted): no step
-    into it. Each restart is told to ``told``."""
+    have waited behind the silence), is held: if the next frame confirms it
+    (firmware/restarthold.py: CTRL_UPTIME the same or one more, its counts young and within the
+    bound of the held frame's over their COUNTER advance) the reference re-primes on the held
+    frame (the motor controller restarted) and steps from it to the next; else the held frame is
+    refused and the next judged against the last accepted one. Each restart is told to
+    ``told``."""
 
     def __init__(self, geometry: Geometry, counter_bits: int, told: RestartLog) -> None:
         self.bound = (0, 0)  # counts per period, left and right (``rebound``)
@@ -63,6 +70,7 @@ class StepGate:
         self.uptime = 0  # CTRL_UPTIME of the last accepted frame (0: not reported)
         self._prev_t = 0.0  # its bus time (s)
         self._told = told
+        self._held: Held | None = None  # a restart's first frame, until the next confirms it
 
     def rebound(self, geometry: Geometry) -> None:
         """Gate the next frames with ``geometry``'s speed bound (the firmware's, from its PROFILE
@@ -96,6 +104,9 @@ class StepGate:
         if self.bits < WIRE_BITS and ((left | right) & WIRE_MASK) >> self.bits:
             return None  # beyond the counters' width: refused outright (lossgate.beyond_width)
         frame = (counter, left, right)
+        if self._held is not None and self._confirms(self._held, frame, uptime):
+            return self._confirmed(self._held, frame, uptime, t_s)
+        self._held = None  # refused, if one was held: this frame is judged on its own
         prev, self.prev = self.prev, frame
         prev_seq, self._prev_seq = self._prev_seq, self._seq
         last_uptime, self.uptime = self.uptime, uptime
@@ -106,9 +117,10 @@ class StepGate:
                 t_s - last_t > AGED_AFTER_S and (counter - prev[0]) & 0xF != 1  # not waited
                 and uptime < aged(last_uptime, t_s - last_t))) \
                 and self._young(frame, uptime):
-            self._refused = []
-            self._restarted(seq, t_s, by_uptime=True)
-            return 0, 0
+            self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # held
+            self._prev_t = last_t
+            self._held = (frame, seq, uptime, t_s)
+            return None
         delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
         periods = self._seq - prev_seq
         if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
@@ -123,6 +135,25 @@ class StepGate:
             return None
         first, self._refused, self.prev, self.uptime = self._refused[0], [], frame, uptime
         self._restarted(seq, t_s, by_uptime=False)
+        return self._delta(first, frame)
+
+    def _confirms(self, held: Held, frame: tuple[int, int, int], uptime: int) -> bool:
+        """``frame`` (its CTRL_UPTIME ``uptime``) confirms the ``held`` restart frame
+        (firmware/restarthold.py ``RestartHold.confirms``)."""
+        first, _, held_uptime, _ = held
+        bits, periods = min(self.bits, WIRE_BITS), (frame[0] - first[0]) & 0xF
+        return (periods != 0 and held_uptime <= uptime <= held_uptime + 1
+                and abs(wrap_delta(frame[1] - first[1], bits)) <= periods * self.bound[0]
+                and abs(wrap_delta(frame[2] - first[2], bits)) <= periods * self.bound[1]
+                and self._young(frame, uptime))
+
+    def _confirmed(self, held: Held, frame: tuple[int, int, int], uptime: int,
+                   t_s: float) -> tuple[int, int]:
+        """Re-prime on the ``held`` frame (told at its seq and time), then one step from it."""
+        first, seq, _, held_t = held
+        self._held, self._refused = None, []
+        self._restarted(seq, held_t, by_uptime=True)
+        self.prev, self._prev_seq, self.uptime, self._prev_t = frame, self._seq, uptime, t_s
         return self._delta(first, frame)
 
     def _restarted(self, seq: int, t_s: float, *, by_uptime: bool) -> None:

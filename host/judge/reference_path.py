@@ -16,7 +16,13 @@ from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.breaks import BreakSummary, placed_offsets
 from odocan.host.judge.breakspan import break_allowance as break_allowance
 from odocan.host.judge.breakspan import seen_whole
-from odocan.host.judge.ctrlrestart import aged_uptime, ctrl_restarts, successors, young_counts
+from odocan.host.judge.ctrlrestart import (
+    aged_uptime,
+    confirmed_holds,
+    ctrl_restarts,
+    successors,
+    young_counts,
+)
 from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.lossgate import beyond_width
@@ -173,7 +179,8 @@ def firmware_steps(
     (COUNTER_RESET): the odometry re-primes on the first of them and integrates one step from it to
     the last. A frame whose CTRL_UPTIME is below the last accepted frame's (both non-zero: the
     motor controller restarted), or below what it aged to over a silence (``aged_uptime``),
-    re-primes it if its counts are young (COUNTER_RESET, no step into it). A frame whose counts
+    re-primes it if its counts are young and the next frame confirms it (``confirmed_holds``;
+    COUNTER_RESET, no step into it), else it is refused outright. A frame whose counts
     set wire bits above a 16-bit counter's width is refused outright. Vectorised; a short
     state machine runs only from each refused frame on. The bound is computed in float (the
     firmware's Q48 integer bound may differ by a count at the limit)."""
@@ -185,14 +192,19 @@ def firmware_steps(
     counter = enc.counter[e0:]
     speed_mm_s = geometry.speed_bound_mm_s(max_wheel_speed_mm_s)
     if speed_mm_s is None:
-        return _reprime_all(steps, ctrl_restarts(uptime, np.ones(len(left), dtype=np.bool_),
-                                                 np.diff(stamps), enc.cycle_s, counter))
+        ones = np.ones(len(left), dtype=np.bool_)
+        held = confirmed_holds((left, right, uptime, counter), ones, ~ones, bits, None)
+        return _reprime_all(steps, ctrl_restarts(uptime, ones, np.diff(stamps), enc.cycle_s,
+                                                 counter) & held[1:])
     travel_m = speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
     bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
              math.ceil(travel_m / geometry.m_per_count_right) + 1)
     foreign = beyond_width(left, right, bits)  # refused outright (IMPLAUSIBLE_STEP)
     young = young_counts(left, right, uptime, bits, bound) & ~foreign
     restart = ctrl_restarts(uptime, young, np.diff(stamps), enc.cycle_s, counter)
+    confirmed = confirmed_holds((left, right, uptime, counter), young, foreign, bits, bound)
+    unconfirmed = restart & ~confirmed[1:]  # held, then refused: the state machine from it
+    restart &= confirmed[1:]
 
     def delta(a: int, b: int) -> tuple[int, int]:
         return (int(wrap_delta(int(left[b]) - int(left[a]), bits)),
@@ -208,14 +220,16 @@ def firmware_steps(
     def consistent(a: int, b: int) -> bool:  # among refused frames: the sequence's periods
         return within(a, b, max(1, int(seq[b] - seq[a])))
 
-    def restarted(a: int, b: int) -> bool:
+    def restarted(a: int, b: int) -> bool | None:  # None: held, not confirmed (refused)
         aged = aged_uptime(uptime[a : a + 1], stamps[b : b + 1] - stamps[a], enc.cycle_s,
                            successors(counter[a : a + 1], counter[b : b + 1]))
-        return bool(uptime[b] != 0 and uptime[a] != 0 and uptime[b] < aged[0] and young[b])
+        if not (uptime[b] != 0 and uptime[a] != 0 and uptime[b] < aged[0] and young[b]):
+            return False
+        return True if confirmed[b] else None
 
     periods = step_bound_periods(seq, stamps, enc.cycle_s)
     bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])
-    bad |= foreign[1:]
+    bad |= foreign[1:] | unconfirmed
     return _walk(steps, bad, restart, ((plausible, consistent, foreign), delta, restarted))
 
 
@@ -264,17 +278,19 @@ def _refusals(
     is accepted again (``restarted(prev, k)``: it re-primes on frame k, a controller restart);
     return that frame (``n_frames`` at the end of the log). ``rules``: whether a step from the
     last accepted frame is plausible, whether one between refused frames is, and per frame
-    whether its counts lie beyond the counters' width (``lossgate.beyond_width``)."""
+    whether its counts lie beyond the counters' width (``lossgate.beyond_width``);
+    ``restarted``: None for a restart frame the next one did not confirm (refused outright)."""
     plausible, consistent, foreign = rules
     resync_first: int | None = None
     resync_last = 0
     resync_frames = 0
     for k in range(prev + 1, n_frames):
-        if foreign[k]:  # counts beyond the counters' width: refused, no part of the run
-            steps.refused += 1
+        told = False if foreign[k] else restarted(prev, k)
+        if told is None or foreign[k]:  # counts beyond the counters' width, or a held restart
+            steps.refused += 1  # frame the next did not confirm: refused, no part of the run
             steps.d_left[k - 1] = steps.d_right[k - 1] = 0
             continue
-        if restarted(prev, k):
+        if told:
             return _reprime(steps, k)
         if plausible(prev, k):
             steps.d_left[k - 1], steps.d_right[k - 1] = delta(prev, k)
