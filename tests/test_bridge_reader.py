@@ -75,7 +75,8 @@ async def _burst_into_bridge(rx: can.BusABC, tx: can.BusABC, *, hold_loop: bool,
     """The burst sent while the feed runs (``sent`` set once it was); the loop held busy until
     then when ``hold_loop``; returns once every frame was queued, dropped by the bridge's queue
     or by the kernel (the kernel's count on the reader's socket: ``host.io.rxsocket``)."""
-    bridge = Bridge([RobotEndpoint("robot001", rx, Geometry.of(robot.load("pmir")))],
+    bridge = Bridge([RobotEndpoint("robot001", rx, Geometry.of(robot.load("pmir")),
+                                    counter_bits=robot.load("pmir").counter_bits)],
                     config=BridgeConfig(broker=URL))
     feed = BusFeed(rx, bridge, asyncio.get_running_loop())
     kernel = SocketDrops(rx)
