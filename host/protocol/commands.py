@@ -160,8 +160,13 @@ class CommandEncoder:
         self._counters: dict[int, int] = {}
 
     def encode(self, name: str, payload: bytes) -> Command:
-        """``payload`` of ``cmd/<name>`` -> its frames; ``CommandRejected`` with the reason."""
-        spec = _spec(name)
+        """``payload`` of ``cmd/<name>`` -> its frames; ``CommandRejected`` with the reason (and
+        the payload's id, whenever it has a valid one, for the answer on ``cmd/result``)."""
+        try:
+            spec = _spec(name)
+        except CommandRejected as exc:
+            exc.cmd_id = command_id(payload)
+            raise
         obj = _parse(payload)
         cmd_id = obj.pop("id", None)
         if cmd_id is not None and not _valid_id(cmd_id):
