@@ -128,6 +128,7 @@ class Arrived(aiomqtt.Message):
 
     arrival_s: float = 0.0
     expiry_s: float | None = None
+    dup: bool = False  # the broker's DUP flag: a QoS-1 message sent again
 
 
 class ClosedBeforeConnack(aiomqtt.MqttError):
@@ -328,6 +329,7 @@ class LinkClient(aiomqtt.Client):
                     message: paho.MQTTMessage) -> None:
         arrived = Arrived._from_paho_message(message)
         arrived.arrival_s = time.monotonic()
+        arrived.dup = bool(message.dup)
         expiry = getattr(message.properties, "MessageExpiryInterval", None)
         arrived.expiry_s = float(expiry) if expiry is not None else None
         if self._queue.qsize() >= self._max_waiting:
