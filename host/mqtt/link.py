@@ -67,6 +67,7 @@ from odocan.host.mqtt.broker import (
     protocol_unsupported,
 )
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient
+from odocan.host.mqtt.redelivery import Redeliveries
 from odocan.host.protocol.commands import command_sent_unix_s
 
 log = logging.getLogger("odocan.mqtt")
@@ -127,6 +128,7 @@ class RobotLink:
         self.connects = 0
         self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
         self.connected = asyncio.Event()
+        self.redeliveries = Redeliveries()  # a DUP copy of a command handled is not run again
         self._taken: list[aiomqtt.Message] = []  # off paho's queue, not answered (cancelled)
         self._telemetry_wake = asyncio.Event()
         self._reliable_wake = asyncio.Event()
@@ -170,6 +172,7 @@ class RobotLink:
             "commands_busy": self.commands_busy,
             "reconnects": max(self.connects - 1, 0),
             "sessions_lost": self.sessions_lost,
+            "commands_redelivered": self.redeliveries.skipped,
         }
 
     # --- the connection ---
@@ -338,6 +341,8 @@ class RobotLink:
         expiry_s = message.expiry_s if message.expiry_s is not None else self.command_expiry_s
         if message.retain:  # kept by the broker from whenever: would run again each reconnect
             return self.on_command(name, _payload(message), "retained")
+        if self.redeliveries.is_repeat(name, _payload(message), dup=message.dup):
+            return []  # sent again after a reconnect: run and answered at its first delivery
         expired = time.monotonic() - message.arrival_s > expiry_s
         sent_unix_s = command_sent_unix_s(_payload(message))
         if sent_unix_s is not None:  # its age since it was sent, wherever it waited

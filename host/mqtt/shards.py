@@ -88,8 +88,11 @@ def split(total: int, parts: int) -> list[tuple[int, int]]:
 
 
 def check_port_free(port: int) -> None:
-    """``ConfigurationError`` when 127.0.0.1:``port`` cannot be listened on (in use)."""
+    """``ConfigurationError`` when 127.0.0.1:``port`` cannot be listened on (in use). With
+    SO_REUSEADDR, as the broker's own listener (asyncio's) binds: connections of a run that just
+    ended, in TIME_WAIT for a minute, do not keep a port from the next run; a listener does."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             sock.bind((LOOPBACK, port))
         except OSError as exc:

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Final, Literal
@@ -46,6 +47,7 @@ MAX_ID_CHARS: Final = 64  # a string id, at most
 MAX_ABS_INT_ID: Final = 2**63 - 1  # an integer id fits an int64 (every JSON peer can read it back)
 MAX_ABS_NUMBER: Final = 1e300  # an integer value beyond this is out of every signal's range
 SENT_KEY: Final = "sent_unix_s"  # optional in every command: its send time (UNIX s)
+MAX_SENT_AHEAD_S: Final = 86_400.0  # a sent_unix_s this far ahead of our clock is not seconds
 
 Kind = Literal["float", "angle", "int", "enum", "bool", "absent"]
 _TURN = 2.0 * math.pi
@@ -160,8 +162,13 @@ class CommandEncoder:
         self._counters: dict[int, int] = {}
 
     def encode(self, name: str, payload: bytes) -> Command:
-        """``payload`` of ``cmd/<name>`` -> its frames; ``CommandRejected`` with the reason."""
-        spec = _spec(name)
+        """``payload`` of ``cmd/<name>`` -> its frames; ``CommandRejected`` with the reason (and
+        the payload's id, whenever it has a valid one, for the answer on ``cmd/result``)."""
+        try:
+            spec = _spec(name)
+        except CommandRejected as exc:
+            exc.cmd_id = command_id(payload)
+            raise
         obj = _parse(payload)
         cmd_id = obj.pop("id", None)
         if cmd_id is not None and not _valid_id(cmd_id):
@@ -171,7 +178,7 @@ class CommandEncoder:
             )
         if SENT_KEY in obj:  # judged by the link before the command came here
             try:
-                _check_type(SENT_KEY, "float", obj.pop(SENT_KEY))
+                _check_sent(obj.pop(SENT_KEY))
             except CommandRejected as exc:
                 exc.cmd_id = cmd_id
                 raise
@@ -268,6 +275,18 @@ def command_sent_unix_s(payload: bytes) -> float | None:
             abs(sent) > MAX_ABS_NUMBER or not math.isfinite(sent):
         return None
     return float(sent)
+
+
+def _check_sent(sent: Any) -> None:
+    """``sent_unix_s`` is a number, and not a day or more ahead of this host's clock: such a
+    stamp is in other units (JavaScript's ``Date.now()`` is ms: 1000 times the seconds), and
+    counted as age 0 it would never expire. A stamp less ahead is a clock a little off."""
+    _check_type(SENT_KEY, "float", sent)
+    ahead_s = float(sent) - time.time()
+    if ahead_s >= MAX_SENT_AHEAD_S:
+        raise CommandRejected(
+            f"{SENT_KEY} is {ahead_s:.3g} s ahead of this host's clock: not UNIX seconds? "
+            "(in JavaScript: Date.now() / 1000)")
 
 
 def _data_ids(message: Message) -> list[int] | None:

@@ -303,8 +303,10 @@ def _watch_fleet(url: BrokerURL, args: argparse.Namespace) -> int:
         signum = signum_of(exc)
     except BaseExceptionGroup as group:  # the watch's TaskGroup: its one-line error, not a tree
         raise first_error(group) from None
-    if not watch.connected_once:
-        raise BrokerUnreachable(f"cannot reach the MQTT broker {url}: {watch.last_error}")
+    if not watch.connected_once:  # no error at all: something took the TCP connection, silent
+        reason = watch.last_error or (f"no MQTT answer in {time.monotonic() - watch.started:.1f}"
+                                      " s (is it an MQTT broker?)")
+        raise BrokerUnreachable(f"cannot reach the MQTT broker {url}: {reason}")
     return _end(args, watch.snapshot, early_stop(signum, watch.started, args.duration))
 
 
