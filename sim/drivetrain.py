@@ -214,7 +214,7 @@ class Drivetrain:
         segments = self._segments
         self._segments = []
         self._pending = 0
-        counts = [n for n, *_ in segments]
+        counts = [segment[0] for segment in segments]
         if len(segments) > _MANY_SEGMENTS:  # a block run ahead: the segments as one array
             theta = self._many_angles(segments, counts)
         elif self._all_unlimited(segments):
@@ -237,7 +237,9 @@ class Drivetrain:
         """``_unlimited_angles`` or ``_angles`` of many segments, bit for bit: the per-segment
         scalars (the rate-limit test, e0 * 0, e0 * tau) as whole columns, the same IEEE
         operations on the same doubles as the Python floats there."""
-        seg = np.array(segments)
+        # np.array(segments), the same doubles, without a Python object per row (5 columns)
+        seg = np.fromiter(itertools.chain.from_iterable(segments), np.float64,
+                          count=5 * len(segments)).reshape(-1, 5)
         w0, wsp = seg[:, 1::2], seg[:, 2::2]  # columns (left, right)
         e0 = w0 - wsp
         tau = self.config.time_constant_s

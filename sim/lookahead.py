@@ -326,17 +326,19 @@ class PlannedVehicle(Vehicle):
         advance, counts, hz = drivetrain.advance, drivetrain.encoder_counts, self.substep_hz
         floor = math.floor
         first = self._next_tick
-        for k in range(first, first + ticks):  # Vehicle.command and advance_to, unchecked
-            t_s = start_s + k * tick_s
+        index, substeps, recorded = block.index, block.substeps, block.counts
+        command, commands = drivetrain.command, block.commands
+        for i, k in enumerate(range(first, first + ticks)):  # Vehicle.command and advance_to,
+            t_s = start_s + k * tick_s  # unchecked
             n = floor(t_s * hz + _TIME_EPS)  # _grid_substep: t_s is finite here
             advance(n)
             speeds = forecast(k, t_s)
             if speeds is not None:
-                drivetrain.command(speeds[0], speeds[1])
-                block.commands.append((n, speeds[0], speeds[1]))
-            block.index[n] = len(block.counts)
-            block.substeps.append(n)
-            block.counts.append(counts())
+                command(speeds[0], speeds[1])
+                commands.append((n, speeds[0], speeds[1]))
+            index[n] = i
+            substeps.append(n)
+            recorded.append(counts())
         block.end = drivetrain.substep
         block.truth_s0 = self._truth.substep
         ds = self.drivetrain.take_travel()
