@@ -47,8 +47,8 @@ class TickPlan:
     """Ticks ``first .. first + len(times) - 1`` of one vehicle block, tick ``k`` at index
     ``k - first`` of each list."""
 
-    __slots__ = ("block", "counters", "driver", "encoders", "first", "motor_cmds", "next",
-                 "offset", "powered_up_s", "scenario", "substeps", "times", "truths")
+    __slots__ = ("after", "block", "counters", "driver", "encoders", "first", "motor_cmds",
+                 "next", "offset", "powered_up_s", "scenario", "substeps", "times", "truths")
 
     def __init__(self, node: SimNode, block: object, first: int) -> None:
         self.block = block
@@ -66,6 +66,7 @@ class TickPlan:
         self.motor_cmds: list[tuple[bytes, tuple[float, float]] | None] = []
         self.encoders: list[bytes] = []  # WHEEL_ENCODERS
         self.truths: list[tuple[bytes, ...]] = []  # SIM_TRUTH X, Y, HEADING (empty: none)
+        self.after: list[tuple[int, int, int]] = []  # ``counters`` after each tick's sends
 
     def at(self, node: SimNode, k: int) -> int:
         """The index of tick ``k`` when the plan holds for it (module docstring), else -1. Runs
@@ -150,7 +151,24 @@ def plan_ticks(node: SimNode, vehicle: PlannedVehicle, k: int) -> TickPlan | Non
     sealed = seal_words([word for words in truths for word in words], fr.SIM_TRUTH_DATA_IDS)
     for j, i in enumerate(truth_at):
         plan.truths[i] = tuple(sealed[3 * j : 3 * j + 3])
+    plan.after = _counters_after(plan)
     return plan
+
+
+def _counters_after(plan: TickPlan) -> list[tuple[int, int, int]]:
+    """The (driver, motor controller, truth) COUNTERs after each tick of ``plan``, as the nodes'
+    sends step them: the driver's by one a MOTOR_CMD, the motor controller's by one a tick, the
+    truth's by three a SIM_TRUTH tick (4-bit)."""
+    driver, mc, truth = plan.counters
+    after = []
+    for motor_cmd, sim_truth in zip(plan.motor_cmds, plan.truths, strict=True):
+        if motor_cmd is not None:
+            driver = (driver + 1) & 0xF
+        mc = (mc + 1) & 0xF
+        if sim_truth:
+            truth = (truth + 3) & 0xF
+        after.append((driver, mc, truth))
+    return after
 
 
 def _due(k: int, ticks: int, every: int, phase: int) -> list[int]:
