@@ -185,8 +185,10 @@ def budget(seconds: float) -> dict[str, float]:
             if isinstance(bus, OdocanBus):  # the nodes' sends (BusNode.send_frame)
                 b.wrap(bus, "send_data", "transport: send (a copy per receiver)")
             b.wrap(bus, "recv", "transport: recv")
-            if isinstance(bus, OdocanBus):  # the board's and the host's tick at once
+            if isinstance(bus, OdocanBus):  # the host's tick at once
                 b.wrap(bus, "drain", "transport: recv")
+        # The board's common tick takes its frames from its handle's queue (no drain).
+        b.wrap(rig.board, "_take_lean", "transport: recv")
         # The wire's delivery itself (the board's HAL transmit goes straight to it).
         b.wrap(_Wire, "deliver_data", "transport: send (a copy per receiver)")
         b.wrap(rig, "step", "rig and node glue (the rest)")
@@ -204,6 +206,9 @@ def budget(seconds: float) -> dict[str, float]:
         b.wrap(vehicle, "truth", "vehicle: ground truth (vehicle.truth)")
         if isinstance(vehicle, PlannedVehicle):  # the scenario's drive, run a block ahead
             b.wrap(vehicle, "_start_block", "vehicle: a block run ahead (sim.lookahead)")
+            # a planned tick's calls, by its substep
+            b.wrap(vehicle, "served_command", "vehicle: motors and encoders")
+            b.wrap(vehicle, "served_advance", "vehicle: motors and encoders")
         # The sim node's frames of a block packed at once, then sent a tick at a time.
         b.wrap(motor_controller, "plan_ticks", "sim: a block's frames packed (sim.simplan)")
         b.wrap(rig.sim, "_send_planned", "sim: a planned tick (sends, E2E, vehicle)")

@@ -259,10 +259,32 @@ class FirmwareBoard(BusNode):
         now_s = self.clock.now_s()
         halted = self._last_run_s is not None and now_s - self._last_run_s >= HALT_AFTER_S
         self._last_run_s = now_s
-        if self._bus_off or type(self.bus) is not OdocanBus:  # the lean handle is never bus-off
+        bus = self.bus
+        if type(bus) is not OdocanBus or self._bus_off:  # the lean handle is never bus-off
             self._service_bus_state()
+        elif not halted and self.accept_ids is None and self._take_lean(bus):
+            self.ecu.tick(round(now_s * 1e6) & _U32)
+            return
         self.service_rx(HW_RX_FIFO_FRAMES if halted else None)
         self.ecu.tick(round(now_s * 1e6) & _U32)
+
+    def _take_lean(self, bus: OdocanBus) -> bool:
+        """``service_rx()`` of the common tick on the lean transport's open, instant, unfiltered
+        handle, from its queue: the frames waiting now, in bus order, to the receive ISR (a
+        ``DataFrame`` by its fields, a ``Message`` as ``_deliver_all`` takes it); no list, no
+        ``drain`` call (it runs every tick). False, nothing taken: ``service_rx`` does it."""
+        if bus.timing is not None or not bus._open or bus._filters is not None:
+            return False
+        queue = bus._queue
+        if queue:
+            isr, popleft = self.ecu.isr_can_rx, queue.popleft
+            for _ in range(len(queue)):  # those queued now: as ``drain``, whatever comes after
+                frame = popleft()
+                if type(frame) is tuple:
+                    isr(frame[1], frame[2])
+                else:
+                    self._deliver_all((frame,))
+        return True
 
     def _service_bus_state(self) -> None:
         """The controller's status interrupt: report entering and leaving bus-off."""

@@ -40,6 +40,7 @@ from odocan.sim.robot import RobotProfile
 FloatArray = npt.NDArray[np.float64]
 TAU_RAD = 2.0 * math.pi
 _MANY_SEGMENTS = 32  # take_travel handles more segments than this as one array
+_CACHED_SEGMENT_LENGTHS = 64  # segment lengths whose _run_segment constants are kept
 _CACHED_SEGMENT_SUBSTEPS = 256  # take_travel keeps the time columns of segments up to this long
 
 
@@ -156,6 +157,7 @@ class Drivetrain:
         self._segments: list[tuple[int, float, float, float, float]] = []
         self._pending = 0
         self._local_times_cache: dict[int, FloatArray] = {}
+        self._segment_constants: dict[int, tuple[float, float, float, float, float]] = {}
 
     def command(self, left_mps: float, right_mps: float) -> None:
         """Latch rim-speed setpoints (m/s) at the current substep and restart the timeout. A
@@ -182,17 +184,17 @@ class Drivetrain:
 
     def _run_segment(self, n: int) -> None:
         """Evolve ``n`` substeps at constant setpoints and log the segment for ``take_travel``."""
-        t = n / self.substep_hz
         tau = self.config.time_constant_s
+        # t, decay and keep of n substeps: the same doubles each time (most segments are ticks)
+        t, decay, keep, limit_l, limit_r = self._segment_constants.get(n) or self._constants(n)
         w0l, w0r = self.omega
         spl, spr = self.setpoint
         el, er = w0l - spl, w0r - spr
-        if abs(el) - self._alpha_l * tau > 0.0 or abs(er) - self._alpha_r * tau > 0.0:
+        if abs(el) - limit_l > 0.0 or abs(er) - limit_r > 0.0:
             wl, dl = evolve(w0l, spl, self._alpha_l, tau, t)
             wr, dr = evolve(w0r, spr, self._alpha_r, tau, t)
         else:  # neither wheel rate-limited: evolve's own operations with t1 = s = tr = 0
-            decay = -math.expm1(-t / tau)  # te = t - 0.0 = t, the same for both wheels
-            keep = 1.0 - decay
+            # decay = -expm1(-t / tau): te = t - 0.0 = t, the same for both wheels; keep = 1 - it
             wl, wr = spl + el * keep, spr + er * keep  # e1 = e0 - 0.0 * 0.0 = e0
             dl = (spl * t + el * 0.0) + el * tau * decay  # "- 0.5 * s * tr * tr" = "- 0.0"
             dr = (spr * t + er * 0.0) + er * tau * decay
@@ -201,6 +203,18 @@ class Drivetrain:
         self.omega = [wl, wr]
         self.angle = [self.angle[0] + dl, self.angle[1] + dr]
         self.substep += n
+
+    def _constants(self, n: int) -> tuple[float, float, float, float, float]:
+        """``_run_segment``'s constants of a segment of ``n`` substeps, computed as it did
+        (t = n / hz, decay = -expm1(-t / tau), keep = 1 - decay, alpha * tau per wheel), kept
+        for the next one (a few lengths: a tick's, a timeout's remainder)."""
+        tau = self.config.time_constant_s
+        t = n / self.substep_hz
+        decay = -math.expm1(-t / tau)
+        constants = (t, decay, 1.0 - decay, self._alpha_l * tau, self._alpha_r * tau)
+        if len(self._segment_constants) < _CACHED_SEGMENT_LENGTHS:
+            self._segment_constants[n] = constants
+        return constants
 
     @property
     def pending_substeps(self) -> int:
@@ -214,7 +228,7 @@ class Drivetrain:
         segments = self._segments
         self._segments = []
         self._pending = 0
-        counts = [n for n, *_ in segments]
+        counts = [segment[0] for segment in segments]
         if len(segments) > _MANY_SEGMENTS:  # a block run ahead: the segments as one array
             theta = self._many_angles(segments, counts)
         elif self._all_unlimited(segments):
@@ -237,7 +251,9 @@ class Drivetrain:
         """``_unlimited_angles`` or ``_angles`` of many segments, bit for bit: the per-segment
         scalars (the rate-limit test, e0 * 0, e0 * tau) as whole columns, the same IEEE
         operations on the same doubles as the Python floats there."""
-        seg = np.array(segments)
+        # np.array(segments), the same doubles, without a Python object per row (5 columns)
+        seg = np.fromiter(itertools.chain.from_iterable(segments), np.float64,
+                          count=5 * len(segments)).reshape(-1, 5)
         w0, wsp = seg[:, 1::2], seg[:, 2::2]  # columns (left, right)
         e0 = w0 - wsp
         tau = self.config.time_constant_s

@@ -50,10 +50,11 @@ class _Block:
     """The ticks ``first .. first + BLOCK_TICKS - 1`` run ahead: what each call will read."""
 
     __slots__ = ("commands", "counts", "end", "folds", "heading", "index", "next_command",
-                 "truth_s0")
+                 "substeps", "truth_s0")
 
     def __init__(self) -> None:
         self.index: dict[int, int] = {}  # a tick's substep -> its position in ``counts``
+        self.substeps: list[int] = []  # each tick's substep, in ``counts``' order
         self.counts: list[tuple[int, int]] = []  # encoder counts at each tick's substep
         self.commands: list[tuple[int, float, float]] = []  # (substep, left, right) predicted
         self.next_command = 0  # the first predicted command not yet made
@@ -178,21 +179,53 @@ class PlannedVehicle(Vehicle):
             return super().truth()
         return self.truth_at(self._now)
 
+    # --- the planned ticks' calls (sim.simplan: the block and the tick's substep known) ----------
+
+    def served_command(self, n: int, left_mps: float, right_mps: float, t_s: float) -> None:
+        """``command(left_mps, right_mps, t_s)`` from a plan of the current block: ``t_s`` is a
+        tick of it and ``n`` its substep (``block_ahead``'s), so ``_served`` has nothing to find;
+        the same checks against the forecast and the same record, else ``command`` itself."""
+        block = self._block
+        assert block is not None
+        nxt = block.next_command
+        commands = block.commands
+        if n < self._now or nxt >= len(commands) or commands[nxt] != (n, left_mps, right_mps):
+            self.command(left_mps, right_mps, t_s)
+            return
+        block.next_command = nxt + 1
+        self._now = n
+        self._calls.append((left_mps, right_mps, t_s))
+
+    def served_advance(self, n: int, t_s: float) -> None:
+        """``advance_to(t_s)`` from a plan of the current block (as ``served_command``)."""
+        block = self._block
+        assert block is not None
+        nxt = block.next_command
+        commands = block.commands
+        if n < self._now or (nxt < len(commands) and commands[nxt][0] < n):
+            self.advance_to(t_s)
+            return
+        self._now = n
+        self._calls.append(t_s)
+
     # --- what a planner of the sim's frames reads (sim.simplan) ---------------------------------
 
-    def block_ahead(self, k: int, t_s: float) -> tuple[object, list[tuple[int, int]]] | None:
+    def block_ahead(
+        self, k: int, t_s: float
+    ) -> tuple[object, list[tuple[int, int]], list[int]] | None:
         """The block that serves tick ``k`` at ``t_s`` (started as the rig's first call at
-        ``t_s`` would start it) and the encoder counts it recorded at tick ``k`` and each tick
-        after it to its end; None: the plain vehicle serves (no forecast, it fell back, or
-        ``t_s`` is not tick ``k``'s time). The block is a token: ``serves(token)`` tells it
-        still holds."""
+        ``t_s`` would start it), the encoder counts it recorded at tick ``k`` and each tick
+        after it to its end, and those ticks' substeps; None: the plain vehicle serves (no
+        forecast, it fell back, or ``t_s`` is not tick ``k``'s time). The block is a token:
+        ``serves(token)`` tells it still holds."""
         if t_s != self._start_s + k * self._tick_s:
             return None
         served = self._served(t_s)
         if served is None or served[1] not in served[0].index:
             return None
         block, n = served
-        return block, block.counts[block.index[n] :]
+        at = block.index[n]
+        return block, block.counts[at:], block.substeps[at:]
 
     def serves(self, token: object) -> bool:
         """True while the block ``token`` (``block_ahead``) serves the rig's calls."""
@@ -293,16 +326,19 @@ class PlannedVehicle(Vehicle):
         advance, counts, hz = drivetrain.advance, drivetrain.encoder_counts, self.substep_hz
         floor = math.floor
         first = self._next_tick
-        for k in range(first, first + ticks):  # Vehicle.command and advance_to, unchecked
-            t_s = start_s + k * tick_s
+        index, substeps, recorded = block.index, block.substeps, block.counts
+        command, commands = drivetrain.command, block.commands
+        for i, k in enumerate(range(first, first + ticks)):  # Vehicle.command and advance_to,
+            t_s = start_s + k * tick_s  # unchecked
             n = floor(t_s * hz + _TIME_EPS)  # _grid_substep: t_s is finite here
             advance(n)
             speeds = forecast(k, t_s)
             if speeds is not None:
-                drivetrain.command(speeds[0], speeds[1])
-                block.commands.append((n, speeds[0], speeds[1]))
-            block.index[n] = len(block.counts)
-            block.counts.append(counts())
+                command(speeds[0], speeds[1])
+                commands.append((n, speeds[0], speeds[1]))
+            index[n] = i
+            substeps.append(n)
+            recorded.append(counts())
         block.end = drivetrain.substep
         block.truth_s0 = self._truth.substep
         ds = self.drivetrain.take_travel()

@@ -257,34 +257,42 @@ class SimNode:
 
     def _send_planned(self, plan: TickPlan, i: int) -> None:
         """The plan's tick at index ``i``: its frames and every state change of the plain
-        tick."""
+        tick. The vehicle's calls go by the tick's substep (``PlannedVehicle.served_command``,
+        ``served_advance``: the plan holds, so its block serves them), the MOTOR_CMD is
+        ``MotorController.deliver``'s (E2E check, then the command at the clock's time,
+        ``t_s``)."""
         bus: OdocanBus = self.bus  # type: ignore[assignment]  # a plan's bus (``_can_plan``)
-        t_s = plan.times[i]
+        vehicle: PlannedVehicle = self.vehicle  # type: ignore[assignment]  # and vehicle
+        t_s, n = plan.times[i], plan.substeps[i]
         # ``OdocanBus.send_data``'s own path on the open instant handle: one call less a frame
         send = bus._wire.deliver_data if bus._open and bus.preserve_timestamps else _send_data
-        mc, driver = self.motor_controller, self.driver
+        mc, counters = self.motor_controller, plan.after[i]  # the COUNTERs after the tick
         motor_cmd = plan.motor_cmds[i]
         if motor_cmd is not None:
+            driver = self.driver
             assert driver is not None
-            data, speeds_mps = motor_cmd
+            data, (left_mps, right_mps) = motor_cmd
             driver._ahead.pop(t_s, None)
-            driver.counter = (driver.counter + 1) & 0xF
+            driver.counter = counters[0]
             send(bus, t_s + driver.tx_latency_s, fr.MOTOR_CMD_ID, data)
             driver.frames_sent += 1
-            mc.deliver(data, speeds_mps)
-        self.vehicle.advance_to(t_s)
-        mc.counter = (mc.counter + 1) & 0xF
+            status = mc.rx_motor_cmd.check(data)
+            if status is E2EStatus.OK or status is E2EStatus.OKSOMELOST:
+                vehicle.served_command(n, left_mps, right_mps, t_s)
+                mc.commands_applied += 1
+        vehicle.served_advance(n, t_s)
+        mc.counter = counters[1]
         send(bus, t_s + mc.tx_latency_s, fr.WHEEL_ENCODERS_ID, plan.encoders[i])
         mc.frames_sent += 1
         sim_truth = plan.truths[i]
-        truth = self.truth
         if sim_truth:
+            truth = self.truth
             for data in sim_truth:
                 send(bus, t_s + truth.tx_latency_s, fr.SIM_TRUTH_ID, data)
-            truth.counter = (truth.counter + 3) & 0xF
+            truth.counter = counters[2]
             truth.frames_sent += 3
         plan.next = i + 1
-        plan.counters = (-1 if driver is None else driver.counter, mc.counter, truth.counter)
+        plan.counters = counters
 
     def planned_command(self, k: int, t_s: float) -> tuple[float, float] | None:
         """The rim speeds (m/s) the motor controller will apply from the driver at tick ``k``

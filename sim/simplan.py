@@ -47,8 +47,8 @@ class TickPlan:
     """Ticks ``first .. first + len(times) - 1`` of one vehicle block, tick ``k`` at index
     ``k - first`` of each list."""
 
-    __slots__ = ("block", "counters", "driver", "encoders", "first", "motor_cmds", "next",
-                 "offset", "powered_up_s", "scenario", "times", "truths")
+    __slots__ = ("after", "block", "counters", "driver", "encoders", "first", "motor_cmds",
+                 "next", "offset", "powered_up_s", "scenario", "substeps", "times", "truths")
 
     def __init__(self, node: SimNode, block: object, first: int) -> None:
         self.block = block
@@ -61,27 +61,35 @@ class TickPlan:
         # (driver, motor controller, truth) COUNTER before the next tick (-1: none sent yet)
         self.counters = node_counters(node)
         self.times: list[float] = []  # the clock's time at the tick
+        self.substeps: list[int] = []  # the vehicle's substep at the tick (the block's)
         # the driver's MOTOR_CMD payload and its speeds as the motor controller decodes them (m/s)
         self.motor_cmds: list[tuple[bytes, tuple[float, float]] | None] = []
         self.encoders: list[bytes] = []  # WHEEL_ENCODERS
         self.truths: list[tuple[bytes, ...]] = []  # SIM_TRUTH X, Y, HEADING (empty: none)
+        self.after: list[tuple[int, int, int]] = []  # ``counters`` after each tick's sends
 
     def at(self, node: SimNode, k: int) -> int:
-        """The index of tick ``k`` when the plan holds for it (module docstring), else -1."""
+        """The index of tick ``k`` when the plan holds for it (module docstring), else -1. Runs
+        every tick: the counters compared one by one (no tuple), the block by identity
+        (``PlannedVehicle.serves``, inlined), the driver's checks only when there is one."""
         i = k - self.first
         if i != self.next or i >= len(self.times):
             return -1
         driver, mc = node.driver, node.motor_controller
-        vehicle: PlannedVehicle = node.vehicle  # type: ignore[assignment]
+        driver_counter, mc_counter, truth_counter = self.counters
         if (
             driver is not self.driver
-            or (driver is not None and driver.scenario is not self.scenario)
             or mc._count_offset is not self.offset
             or mc.powered_up_s != self.powered_up_s
-            or not vehicle.serves(self.block)
+            or node.vehicle._block is not self.block  # type: ignore[attr-defined]
             or node.clock.now_s() != self.times[i]
             or node.bus._queue  # type: ignore[attr-defined]
-            or node_counters(node) != self.counters
+            or mc.counter != mc_counter
+            or node.truth.counter != truth_counter
+        ):
+            return -1
+        if driver is not None and (
+            driver.scenario is not self.scenario or driver.counter != driver_counter
         ):
             return -1
         return i
@@ -119,7 +127,7 @@ def plan_ticks(node: SimNode, vehicle: PlannedVehicle, k: int) -> TickPlan | Non
     ahead = vehicle.block_ahead(k, node.clock.now_s())
     if ahead is None:
         return None
-    block, counts = ahead
+    block, counts, substeps = ahead
     times = vehicle.tick_times(k, len(counts))
     cmd_at = [] if node.driver is None else _due(k, len(times), node._driver_ticks, 0)
     truth_at = _due(k, len(times), node._truth_ticks, node.truth_phase_ticks)
@@ -132,6 +140,7 @@ def plan_ticks(node: SimNode, vehicle: PlannedVehicle, k: int) -> TickPlan | Non
     mc = node.motor_controller
     plan = TickPlan(node, block, k)
     plan.times = times[:ticks]
+    plan.substeps = substeps[:ticks]
     plan.encoders = seal_words(_encoder_words(mc, vehicle, counts[:ticks], plan.times),
                                fr.WHEEL_ENCODERS_DATA_IDS)
     plan.motor_cmds = [None] * ticks
@@ -142,7 +151,24 @@ def plan_ticks(node: SimNode, vehicle: PlannedVehicle, k: int) -> TickPlan | Non
     sealed = seal_words([word for words in truths for word in words], fr.SIM_TRUTH_DATA_IDS)
     for j, i in enumerate(truth_at):
         plan.truths[i] = tuple(sealed[3 * j : 3 * j + 3])
+    plan.after = _counters_after(plan)
     return plan
+
+
+def _counters_after(plan: TickPlan) -> list[tuple[int, int, int]]:
+    """The (driver, motor controller, truth) COUNTERs after each tick of ``plan``, as the nodes'
+    sends step them: the driver's by one a MOTOR_CMD, the motor controller's by one a tick, the
+    truth's by three a SIM_TRUTH tick (4-bit)."""
+    driver, mc, truth = plan.counters
+    after = []
+    for motor_cmd, sim_truth in zip(plan.motor_cmds, plan.truths, strict=True):
+        if motor_cmd is not None:
+            driver = (driver + 1) & 0xF
+        mc = (mc + 1) & 0xF
+        if sim_truth:
+            truth = (truth + 3) & 0xF
+        after.append((driver, mc, truth))
+    return after
 
 
 def _due(k: int, ticks: int, every: int, phase: int) -> list[int]:

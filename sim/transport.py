@@ -64,6 +64,9 @@ from odocan.sim.framebatch import DataFrame, Received
 INTERFACE: Final = "odocan"
 _POLL_S: Final = 0.001  # a bit-timed receiver blocked in recv looks at the wire this often
 _new_message = Message.__new__
+# A data frame's receivers (``_Wire._route``): each handle with its queue's ``append`` (None:
+# bounded, through ``OdocanBus._put``).
+_Route = tuple[tuple["OdocanBus", Callable[[Received], None] | None], ...]
 
 
 class _Wire:
@@ -88,11 +91,11 @@ class _Wire:
         route = sender._routes.get(can_id)
         if route is None:
             route = self._route(sender, can_id)
-        for handle in route:
-            queue = handle._queue  # handle._put(frame), inlined: two receivers per frame
-            if queue.maxlen is not None and len(queue) == queue.maxlen:
-                handle.rx_overruns += 1
-            queue.append(frame)
+        for handle, append in route:
+            if append is None:  # a bounded queue: the oldest frame may have to go
+                handle._put(frame)
+                continue
+            append(frame)  # handle._put(frame), inlined: two receivers a frame in the rig
             if handle._waiting:
                 with handle._ready:
                     handle._ready.notify()
@@ -102,12 +105,14 @@ class _Wire:
             if sender._filters is None or sender._matches_filters(echo):
                 sender._put(echo)
 
-    def _route(self, sender: OdocanBus, can_id: int) -> tuple[OdocanBus, ...]:
+    def _route(self, sender: OdocanBus, can_id: int) -> _Route:
         """The handles other than ``sender`` whose acceptance filter passes a data frame of
-        ``can_id``, in the wire's order; kept in ``sender._routes`` until a handle opens or
-        closes or a filter changes (``forget_routes``)."""
+        ``can_id``, in the wire's order, each with its queue's ``append`` (None when the queue
+        is bounded: ``_put`` counts the overrun); kept in ``sender._routes`` until a handle
+        opens or closes or a filter changes (``forget_routes``)."""
         route = tuple(
-            h for h in self.handles
+            (h, None if h._queue.maxlen is not None else h._queue.append)
+            for h in self.handles
             if h is not sender and (h._filters is None or h._accepts_data(can_id))
         )
         sender._routes[can_id] = route
@@ -302,7 +307,7 @@ class OdocanBus(BusABC):
         self._open = True
         self._data_accepts: dict[int, bool] = {}  # can_id -> the filters pass its data frame
         # can_id -> the other handles a data frame this handle sends reaches (_Wire._route)
-        self._routes: dict[int, tuple[OdocanBus, ...]] = {}
+        self._routes: dict[int, _Route] = {}
         with _wires_lock:
             wire = _wires.get(channel)
             if wire is None:
