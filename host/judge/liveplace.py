@@ -64,7 +64,8 @@ def _confirmed(gaps: list[Gap], window: Columns) -> list[Gap]:
             kept.append(gap)
             continue
         numbered = sender_seq(window.col("counter")[i:].astype(np.int64),
-                              window.col("t_s")[i:], CYCLE_S)
+                              window.col("t_s")[i:], CYCLE_S,
+                              window.col("pos")[i:].astype(np.int64))
         periods = int(numbered[1] - numbered[0])
         if periods > 1:
             kept.append((gap[0], gap[1], gap[2], periods))
@@ -338,7 +339,8 @@ class StallPlacer:
             left = window.col("left")[i0 : i1 + 1].astype(np.int64)
             right = window.col("right")[i0 : i1 + 1].astype(np.int64)
             periods = sender_seq(window.col("counter")[i0 : i1 + 1].astype(np.int64),
-                                 window.col("t_s")[i0 : i1 + 1], CYCLE_S)  # a gap within
+                                 window.col("t_s")[i0 : i1 + 1], CYCLE_S,  # a gap within
+                                 window.col("pos")[i0 : i1 + 1].astype(np.int64))
             filled = filled_span_allowance_m(  # the fills heard for its gaps: spanfill
                 left, right, periods, lambda k: self._gap_fill(
                     before + k, int(periods[k] - periods[k - 1])), geometry, counter_bits,

@@ -19,6 +19,7 @@ from odocan.host.judge.samples import (
     queued_frames,
     sender_seq,
 )
+from odocan.host.judge.senderseq import HOLE_FRAMES_PER_PERIOD
 from odocan.host.protocol.dbcplan import default_plan
 
 HALF_WINDOW = 256  # pose halves of each message kept to resolve the frame one names (5 s)
@@ -106,13 +107,26 @@ def _sender_step(window: deque[tuple[float, ...]], j: int) -> int:
     the window, ``j`` > -len): COUNTER step mod 16, widened by 16 per 16 periods more the bus
     times show unless frame ``j`` queued (less than ``QUEUED_GAP_CYCLES`` from a neighbour)
     with a step other than 0."""
-    _, _, counter, t_s = window[j][:4]
-    _, _, prev_counter, prev_t = window[j - 1][:4]
+    _, pos, counter, t_s = window[j][:4]
+    _, prev_pos, prev_counter, prev_t = window[j - 1][:4]
     step = int(counter - prev_counter) & 0xF
     dt = t_s - prev_t
+    laps = max(0, math.floor((dt / CYCLE_S - step) / 16 + 0.5))
     if step and (_close(dt) or (j < -1 and _close(window[j + 1][3] - t_s))):
+        if laps and pos - prev_pos - 1 < HOLE_FRAMES_PER_PERIOD * dt / CYCLE_S:
+            return _hole_step(window, j)  # a hole of the log: ``senderseq.log_holes``
         return step  # a step of 0 is widened by the time alone, as ``sender_seq`` widens it
-    return step + 16 * max(0, math.floor((dt / CYCLE_S - step) / 16 + 0.5))
+    return step + 16 * laps
+
+
+def _hole_step(window: deque[tuple[float, ...]], j: int) -> int:
+    """``_sender_step`` into frame ``j`` after a hole of the log that a burst follows:
+    ``sender_seq`` over the rows from frame ``j - 1`` on (rare: no fast path)."""
+    rows = list(window)[len(window) + j - 1 :]
+    numbered = sender_seq(np.array([int(r[2]) for r in rows], dtype=np.int64),
+                          np.array([float(r[3]) for r in rows]), CYCLE_S,
+                          np.array([int(r[1]) for r in rows], dtype=np.int64))
+    return int(numbered[1] - numbered[0])
 
 
 def _close(gap_s: float) -> bool:
@@ -186,7 +200,8 @@ def window_encoders(window: Columns) -> Encoders:
     ``samples.sender_seq``, as ``samples.encoder_frames`` numbers a log's)."""
     counter = window.col("counter").astype(np.int64)
     return Encoders(index=window.col("pos").astype(np.int64), counter=counter,
-                    seq=sender_seq(counter, window.col("t_s"), CYCLE_S),
+                    seq=sender_seq(counter, window.col("t_s"), CYCLE_S,
+                                   window.col("pos").astype(np.int64)),
                     left=window.col("left").astype(np.int64),
                     right=window.col("right").astype(np.int64),
                     timestamp_s=window.col("t_s"), cycle_s=CYCLE_S)

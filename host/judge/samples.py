@@ -151,7 +151,7 @@ def encoder_frames(
     cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS")
     return Encoders(
         index=enc["index"], counter=counter,
-        seq=sender_seq(counter, enc["timestamp_s"], cycle_s),
+        seq=sender_seq(counter, enc["timestamp_s"], cycle_s, enc["index"].astype(np.int64)),
         left=enc["LEFT_COUNT"].astype(np.int64), right=enc["RIGHT_COUNT"].astype(np.int64),
         timestamp_s=enc["timestamp_s"], cycle_s=cycle_s,
         twinned=twinned if twinned.any() else None, twins=twins if twinned.any() else None,
