@@ -16,6 +16,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.resendalias import may_alias
 from odocan.host.judge.senderseq import QUEUED_GAP_CYCLES as QUEUED_GAP_CYCLES
+from odocan.host.judge.senderseq import pose_skips
 from odocan.host.judge.senderseq import queued_frames as queued_frames
 from odocan.host.judge.senderseq import sender_seq as sender_seq
 from odocan.host.protocol.dbcplan import default_plan
@@ -151,11 +152,21 @@ def encoder_frames(
     cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS")
     return Encoders(
         index=enc["index"], counter=counter,
-        seq=sender_seq(counter, enc["timestamp_s"], cycle_s, enc["index"].astype(np.int64)),
+        seq=sender_seq(counter, enc["timestamp_s"], cycle_s, _holes(frames, accepted, decoder,
+                                                                   enc["index"])),
         left=enc["LEFT_COUNT"].astype(np.int64), right=enc["RIGHT_COUNT"].astype(np.int64),
         timestamp_s=enc["timestamp_s"], cycle_s=cycle_s,
         twinned=twinned if twinned.any() else None, twins=twins if twinned.any() else None,
         uptime=enc["CTRL_UPTIME"].astype(np.int64) if "CTRL_UPTIME" in enc else None)
+
+
+def _holes(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+           enc_index: IntArray) -> npt.NDArray[np.bool_]:
+    """``senderseq.pose_skips`` of the encoder frames at ``enc_index``, from the accepted
+    ODOM_POSE_X frames."""
+    poses = accepted_rows(frames, accepted, decoder, "ODOM_POSE_X")
+    return pose_skips(enc_index.astype(np.int64), poses["index"].astype(np.int64),
+                      poses["COUNTER"].astype(np.int64))
 
 
 def twinned_encoder_frames(

@@ -11,7 +11,6 @@ import numpy as np
 import numpy.typing as npt
 
 QUEUED_GAP_CYCLES = 0.35  # two sends of one message closer than this waited (``queued_frames``)
-HOLE_FRAMES_PER_PERIOD = 1  # fewer frames of the log than this a period of a gap: a hole
 BURST_END_CYCLES = 1.5  # a step this long ends a recorder's burst (``burst_laps``)
 
 FloatArray = npt.NDArray[np.float64]
@@ -19,13 +18,14 @@ IntArray = npt.NDArray[np.int64]
 
 
 def sender_seq(counter: IntArray, timestamp_s: FloatArray, cycle_s: float | None,
-               position: IntArray | None = None) -> IntArray:
+               holes: npt.NDArray[np.bool_] | None = None) -> IntArray:
     """The sender's sequence numbers of encoder frames (bus order; ``counter``: their E2E
     COUNTER, ``timestamp_s``: bus times): COUNTER steps mod 16, widened by 16 where the time
     stamps say that many more periods passed, unless the frame after the gap came in a burst
-    (``queued_frames``) over a gap the log fills with other frames (``position``: the frames'
-    places among every frame of the log; ``log_holes``). Shared by ``encoder_frames`` and the
-    live judge (``host.judge.tracking``), which applies it to its window of recent frames."""
+    (``queued_frames``) and the gap is no hole of the log (``holes``, per step: the log lost
+    the firmware's frames there too, ``pose_skips``; None: none known): a hole's burst is
+    numbered by ``burst_laps``. Shared by ``encoder_frames`` and the live judge
+    (``host.judge.tracking``), which applies it to its window of recent frames."""
     step = np.diff(counter).astype(np.int64, copy=False)
     step &= 0xF
     if cycle_s is not None and len(step):  # in place: the same operations, fewer temporaries
@@ -39,19 +39,41 @@ def sender_seq(counter: IntArray, timestamp_s: FloatArray, cycle_s: float | None
         # a frame let out in a burst after the gap waited in the sender's buffer: the gap is
         # a busy bus, not lost frames (the COUNTER step is the whole step), but for a step of
         # 0, which E2E takes by the time alone (``host.protocol.e2e_cycles``); and but for a
-        # hole of the log, whose burst is the recorder's backlog (``log_holes``)
+        # hole of the log, whose burst is the recorder's backlog (``burst_laps``)
         queued = queued_frames(timestamp_s, cycle_s)
         held = queued[1:] & (step != 0)
-        holes = np.flatnonzero(held & (lost > 0) & log_holes(position, timestamp_s, cycle_s)
-                               ) if position is not None else np.zeros(0, dtype=np.int64)
+        in_holes: list[int] = (np.flatnonzero(held & (lost > 0) & holes).tolist()
+                               if holes is not None else [])
         lost[held] = 0
-        for k in holes.tolist():
+        for k in in_holes:
             lost[k] = burst_laps(k, step, queued, timestamp_s, cycle_s)
         step += lost
     seq: IntArray = np.empty(len(step) + 1, dtype=np.int64)
     seq[0] = 0
     np.cumsum(step, out=seq[1:])
     return seq
+
+
+def pose_skips(enc_position: IntArray, pose_position: IntArray, pose_counter: IntArray
+               ) -> npt.NDArray[np.bool_]:
+    """Per step between consecutive encoder frames (``enc_position``: their places in the
+    log): whether the log lost pose frames around the later one, a hole of the log. The
+    firmware sends a pose (``pose_position``, its E2E COUNTER ``pose_counter``) every other
+    period whatever the encoder frames do, so the last pose before the later frame and the
+    first after it follow each other (COUNTER + 1) unless the log lost frames of every message
+    there: a recorder's kernel buffer dropped a chunk (issue #11, rule 5: the evidence
+    recordings of a correct firmware, numbered 16 periods short after such chunks read in a
+    burst, FAILed at 0.31 and 0.53 mm). A busy bus (the poses queued, then let out), a stalled
+    sender (the firmware went on) or a silent bus (nothing was sent) keeps the poses' COUNTER
+    going one by one. (A chunk of 32 k periods brings the poses' COUNTER round: not told.)"""
+    if len(pose_position) < 2:
+        return np.zeros(max(len(enc_position) - 1, 0), dtype=bool)
+    after = np.searchsorted(pose_position, enc_position[1:])
+    known = (after > 0) & (after < len(pose_position))
+    at = np.minimum(after, len(pose_position) - 1)
+    skips: npt.NDArray[np.bool_] = known & (
+        ((pose_counter[at] - pose_counter[np.maximum(at - 1, 0)]) & 0xF) != 1)
+    return skips
 
 
 def queued_frames(timestamp_s: FloatArray, cycle_s: float) -> npt.NDArray[np.bool_]:
@@ -75,26 +97,9 @@ def queued_frames(timestamp_s: FloatArray, cycle_s: float) -> npt.NDArray[np.boo
     return queued
 
 
-def log_holes(position: IntArray, timestamp_s: FloatArray, cycle_s: float) -> npt.NDArray[np.bool_]:
-    """Per step between consecutive frames of one periodic sender (``position``: their places
-    among every frame of the log, ``timestamp_s``: their bus times): the log holds fewer frames
-    of any message between the two than ``HOLE_FRAMES_PER_PERIOD`` a period of the time
-    between them. A bus is never that quiet while its nodes run (the firmware alone sends
-    2.6 frames a period): that gap is a hole of the log, a chunk of every message the recorder
-    dropped (its kernel buffer full), not a busy bus (the babbler's frames fill it) nor a
-    stalled sender (the firmware's fill it). Its sender went on sending, so the frame after it
-    is numbered by the time, even where the recorder read its backlog in a burst and stamped it
-    late (issue #11, rule 5: the evidence recordings of a correct firmware, numbered 16
-    periods short, FAILed at 0.31 and 0.53 mm)."""
-    between = np.diff(position) - 1
-    periods = np.diff(timestamp_s) / cycle_s
-    holes: npt.NDArray[np.bool_] = between < HOLE_FRAMES_PER_PERIOD * periods
-    return holes
-
-
 def burst_laps(k: int, step: IntArray, queued: npt.NDArray[np.bool_], timestamp_s: FloatArray,
                cycle_s: float) -> int:
-    """The sends (16 a lap) lost in the hole of the log (``log_holes``) before frame ``k + 1``,
+    """The sends (16 a lap) lost in the hole of the log (``pose_skips``) before frame ``k + 1``,
     the first of a burst (``queued``). A recorder that stalled reads its kernel buffer at once
     and stamps the backlog as it reads it: its stamps are late, never early. So each frame
     ``b`` of the burst, and the first one after it (on time again, unless another gap comes
