@@ -239,13 +239,14 @@ class ReleaseWatch:
     after it came: a release is a silence then frames less than ``BURST_S`` apart, not at once).
     The encoder frames ask it for their pair's first frame, when the second comes."""
 
-    __slots__ = ("_last_s", "_lone_s", "_releases", "_silence_s")
+    __slots__ = ("_last_s", "_lone_s", "_releases", "_silence_s", "_woke_s")
 
     def __init__(self, cycle_s: float) -> None:
         self._silence_s = SILENCE_CYCLES * cycle_s
         self._last_s: float | None = None
         self._lone_s: float | None = None  # a frame after a silence, its burst not seen yet
         self._releases: list[tuple[float, float]] = []  # the recent ones (first, last s)
+        self._woke_s = -math.inf  # the latest frame heard after a silence (s)
 
     def seen(self, timestamp_s: float) -> None:
         """Note a frame heard at ``timestamp_s`` s."""
@@ -253,6 +254,8 @@ class ReleaseWatch:
         if last is None:
             return
         gap_s = timestamp_s - last
+        if gap_s >= self._silence_s:
+            self._woke_s = timestamp_s
         if gap_s >= BURST_S or gap_s <= ALIKE_S:  # the usual case: no burst
             self._lone_s = timestamp_s if gap_s >= self._silence_s else None
             return
@@ -266,3 +269,11 @@ class ReleaseWatch:
         """Whether the frame heard at ``timestamp_s`` s came in a release."""
         return timestamp_s is not None and any(
             first <= timestamp_s <= last for first, last in self._releases)
+
+    def silent_after(self, timestamp_s: float | None) -> bool:
+        """Whether the recorder heard nothing for ``SILENCE_CYCLES`` or more after the frame
+        heard at ``timestamp_s`` s, up to the frame just seen: it held the frames of both ends
+        (issue #11, rule 5: the live recordings of a correct firmware, whose frames before such
+        a hole were stamped 3.8 periods late, each of them released less than ``BURST_S``
+        apart, had the frames after it refused as WRONG_SEQUENCE and FAILed at 0.16 mm)."""
+        return timestamp_s is not None and self._woke_s > timestamp_s

@@ -84,6 +84,7 @@ class E2EMonitor:
                 periods = receive_period_count(  # the wide reading after a release
                     timestamp_s - last, (counter - live.last) & COUNTER_MASK, live.cycle_s,
                     CAPTURE_HOLD_CYCLES if self._releases.released(last)
+                    or self._releases.silent_after(last)
                     else CAPTURE_TOLERANCE_CYCLES)
             elif last is not None:
                 periods = period_count(timestamp_s - last, live.cycle_s, live.min_periods)
