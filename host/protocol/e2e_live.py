@@ -70,7 +70,7 @@ class E2EMonitor:
         """Judge one data frame (identifier, payload); count and return its status (a message
         heard before, with its DLC, by its ``_Live``: one lookup a frame of a fleet's robots)."""
         if timestamp_s is not None:
-            self._releases.seen(timestamp_s)
+            self._releases.seen(timestamp_s, can_id)
         live = self._live.get(frame_key(can_id, True) if extended else can_id)
         if live is None or len(data) != live.length:
             return self._check_first(frame_key(can_id, extended), data, timestamp_s)
