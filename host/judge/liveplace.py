@@ -34,7 +34,7 @@ from odocan.host.judge.livefill import LiveFill
 from odocan.host.judge.livegapseen import LiveSeen
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livepose import FramePose
-from odocan.host.judge.livewindow import CYCLE_S, Columns
+from odocan.host.judge.livewindow import CYCLE_S, Columns, window_holes
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import POSITION_LSB_M, sender_seq
 from odocan.host.judge.spanfill import filled_span_allowance_m
@@ -50,7 +50,7 @@ Part = tuple[bool, int, int, float, int]  # a placement's gap (True: seq after) 
 # span): first and last frame, the allowance it added (m), the placement's frame
 
 
-def _confirmed(gaps: list[Gap], window: Columns) -> list[Gap]:
+def _confirmed(gaps: list[Gap], window: Columns, halves: Columns | None) -> list[Gap]:
     """The gaps still gaps by ``samples.sender_seq`` over the window from the frame before each
     (the frames heard since tell a burst after a busy bus, whose first frame only looked 16
     periods late, from frames lost); a gap whose frames left the window is kept as heard."""
@@ -64,7 +64,7 @@ def _confirmed(gaps: list[Gap], window: Columns) -> list[Gap]:
             kept.append(gap)
             continue
         numbered = sender_seq(window.col("counter")[i:].astype(np.int64),
-                              window.col("t_s")[i:], CYCLE_S)
+                              window.col("t_s")[i:], CYCLE_S, window_holes(window, halves, i))
         periods = int(numbered[1] - numbered[0])
         if periods > 1:
             kept.append((gap[0], gap[1], gap[2], periods))
@@ -76,6 +76,7 @@ class StallPlacer:
 
     def __init__(self) -> None:
         self.position_tolerance_m = POSITION_LSB_M  # the slack of a placement after a stall
+        self.halves: Columns | None = None  # the tracker's ODOM_POSE_X halves (its holes)
         self.placements = BreakSummary()  # what the placements after stalls absorbed
         self._shift = (0.0, 0.0)  # the placements' offset of the reference since its start (m)
         self._budget_m = 0.0  # the stalls' merge allowances summed since its start (m)
@@ -196,7 +197,7 @@ class StallPlacer:
         if stalled:
             allowance = self._allowance_m(last_compared, pose.seq, window, reference)
             parts.append((False, last_compared, pose.seq, allowance, pose.seq))
-        gaps, self._gaps, self.stalled = _confirmed(self._gaps, window), [], False
+        gaps, self._gaps, self.stalled = _confirmed(self._gaps, window, self.halves), [], False
         sx, sy = self._shift[0] - self._owed[0], self._shift[1] - self._owed[1]  # applied
         owed, self._owed = self._owed, (0.0, 0.0)
         if not gaps and not stalled and owed == (0.0, 0.0):  # a burst after a busy bus, not a
@@ -338,7 +339,8 @@ class StallPlacer:
             left = window.col("left")[i0 : i1 + 1].astype(np.int64)
             right = window.col("right")[i0 : i1 + 1].astype(np.int64)
             periods = sender_seq(window.col("counter")[i0 : i1 + 1].astype(np.int64),
-                                 window.col("t_s")[i0 : i1 + 1], CYCLE_S)  # a gap within
+                                 window.col("t_s")[i0 : i1 + 1], CYCLE_S,  # a gap within
+                                 window_holes(window, self.halves, i0, i1 + 1))
             filled = filled_span_allowance_m(  # the fills heard for its gaps: spanfill
                 left, right, periods, lambda k: self._gap_fill(
                     before + k, int(periods[k] - periods[k - 1])), geometry, counter_bits,

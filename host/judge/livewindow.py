@@ -9,6 +9,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from odocan.host.judge.samples import (
     QUEUED_GAP_CYCLES,
@@ -19,6 +20,7 @@ from odocan.host.judge.samples import (
     queued_frames,
     sender_seq,
 )
+from odocan.host.judge.senderseq import pose_skips
 from odocan.host.protocol.dbcplan import default_plan
 
 HALF_WINDOW = 256  # pose halves of each message kept to resolve the frame one names (5 s)
@@ -66,6 +68,8 @@ def named_plain(halves: deque[tuple[float, ...]], columns: Columns, pos: int) ->
     j, back = latest, 0
     while j > -n:
         step = _sender_step(window, j)
+        if step is None:
+            return None  # a burst after a gap, perhaps a hole of the log: match_encoder judges
         if back + step > -offset:
             break
         back += step
@@ -101,18 +105,21 @@ def plain_half(halves: deque[tuple[float, ...]], pos: int) -> tuple[float, float
     return enc_counter, t_s
 
 
-def _sender_step(window: deque[tuple[float, ...]], j: int) -> int:
+def _sender_step(window: deque[tuple[float, ...]], j: int) -> int | None:
     """``samples.sender_seq``'s step from frame ``j - 1`` to frame ``j`` (negative indices into
     the window, ``j`` > -len): COUNTER step mod 16, widened by 16 per 16 periods more the bus
     times show unless frame ``j`` queued (less than ``QUEUED_GAP_CYCLES`` from a neighbour)
-    with a step other than 0."""
+    with a step other than 0; None where it queued after such a gap: whether that gap is a hole
+    of the log (``senderseq.pose_skips``) the rows kept here cannot tell."""
     _, _, counter, t_s = window[j][:4]
     _, _, prev_counter, prev_t = window[j - 1][:4]
     step = int(counter - prev_counter) & 0xF
     dt = t_s - prev_t
+    laps = max(0, math.floor((dt / CYCLE_S - step) / 16 + 0.5))
     if step and (_close(dt) or (j < -1 and _close(window[j + 1][3] - t_s))):
-        return step  # a step of 0 is widened by the time alone, as ``sender_seq`` widens it
-    return step + 16 * max(0, math.floor((dt / CYCLE_S - step) / 16 + 0.5))
+        # a step of 0 is widened by the time alone, as ``sender_seq`` widens it
+        return None if laps else step
+    return step + 16 * laps
 
 
 def _close(gap_s: float) -> bool:
@@ -181,15 +188,28 @@ class Half:
     extra: float
 
 
-def window_encoders(window: Columns) -> Encoders:
+def window_encoders(window: Columns, halves: Columns | None = None) -> Encoders:
     """The window's encoder frames as ``samples.Encoders`` (sequence numbers by
-    ``samples.sender_seq``, as ``samples.encoder_frames`` numbers a log's)."""
+    ``samples.sender_seq``, as ``samples.encoder_frames`` numbers a log's; the holes of the
+    log told by the pose ``halves`` heard, ``window_holes``)."""
     counter = window.col("counter").astype(np.int64)
     return Encoders(index=window.col("pos").astype(np.int64), counter=counter,
-                    seq=sender_seq(counter, window.col("t_s"), CYCLE_S),
+                    seq=sender_seq(counter, window.col("t_s"), CYCLE_S,
+                                   window_holes(window, halves)),
                     left=window.col("left").astype(np.int64),
                     right=window.col("right").astype(np.int64),
                     timestamp_s=window.col("t_s"), cycle_s=CYCLE_S)
+
+
+def window_holes(window: Columns, halves: Columns | None, first: int = 0,
+                 last: int | None = None) -> npt.NDArray[np.bool_] | None:
+    """``senderseq.pose_skips`` of the window's encoder frames ``first`` .. ``last`` (slice
+    bounds), from the pose ``halves`` heard (one kind: each has its own COUNTER); None without
+    them."""
+    if halves is None:
+        return None
+    return pose_skips(window.col("pos")[first:last].astype(np.int64),
+                      halves.col("pos").astype(np.int64), halves.col("counter").astype(np.int64))
 
 
 def named_in_window(halves: Columns, w: Columns, pos: int) -> tuple[int, bool]:
@@ -198,7 +218,7 @@ def named_in_window(halves: Columns, w: Columns, pos: int) -> tuple[int, bool]:
     queued rules, the age bound, the causal rule)."""
     if not len(w):
         return -1, False
-    enc = window_encoders(w)
+    enc = window_encoders(w, halves)
     at = halves.col("pos").astype(np.int64)
     k = int(np.searchsorted(at, pos))
     stop = k + 2  # the half and the one after it, if heard

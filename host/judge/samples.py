@@ -15,6 +15,10 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.resendalias import may_alias
+from odocan.host.judge.senderseq import QUEUED_GAP_CYCLES as QUEUED_GAP_CYCLES
+from odocan.host.judge.senderseq import pose_skips
+from odocan.host.judge.senderseq import queued_frames as queued_frames
+from odocan.host.judge.senderseq import sender_seq as sender_seq
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
@@ -27,7 +31,6 @@ POSITION_LSB_M = float(_POSE_X.get_signal_by_name("X").scale)
 HEADING_LSB_RAD = float(_POSE_X.get_signal_by_name("HEADING").scale)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 SILENCE_CYCLES = 8  # pose frames this many encoder cycles apart: the firmware was stalled
-QUEUED_GAP_CYCLES = 0.35  # two sends of one message closer than this waited (``queued_frames``)
 START_FIT_SAMPLES = 256  # on-board samples used to place the reference start (5 s at 50 Hz)
 ENC_E2E_PAGE = 2  # ODOM_STATUS page with the firmware's WHEEL_ENCODERS E2E counts
 REQUIRED = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y")
@@ -149,11 +152,21 @@ def encoder_frames(
     cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS")
     return Encoders(
         index=enc["index"], counter=counter,
-        seq=sender_seq(counter, enc["timestamp_s"], cycle_s),
+        seq=sender_seq(counter, enc["timestamp_s"], cycle_s, _holes(frames, accepted, decoder,
+                                                                   enc["index"])),
         left=enc["LEFT_COUNT"].astype(np.int64), right=enc["RIGHT_COUNT"].astype(np.int64),
         timestamp_s=enc["timestamp_s"], cycle_s=cycle_s,
         twinned=twinned if twinned.any() else None, twins=twins if twinned.any() else None,
         uptime=enc["CTRL_UPTIME"].astype(np.int64) if "CTRL_UPTIME" in enc else None)
+
+
+def _holes(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+           enc_index: IntArray) -> npt.NDArray[np.bool_]:
+    """``senderseq.pose_skips`` of the encoder frames at ``enc_index``, from the accepted
+    ODOM_POSE_X frames."""
+    poses = accepted_rows(frames, accepted, decoder, "ODOM_POSE_X")
+    return pose_skips(enc_index.astype(np.int64), poses["index"].astype(np.int64),
+                      poses["COUNTER"].astype(np.int64))
 
 
 def twinned_encoder_frames(
@@ -204,33 +217,6 @@ def encoder_twins(
             rows["RIGHT_COUNT"][twin].astype(np.int64))
 
 
-def sender_seq(counter: IntArray, timestamp_s: FloatArray, cycle_s: float | None) -> IntArray:
-    """The sender's sequence numbers of encoder frames (bus order; ``counter``: their E2E
-    COUNTER, ``timestamp_s``: bus times): COUNTER steps mod 16, widened by 16 where the time
-    stamps say that many more periods passed, unless the frame after the gap came in a burst
-    (``queued_frames``). Shared by ``encoder_frames`` and the live judge
-    (``host.judge.tracking``), which applies it to its window of recent frames."""
-    step = np.diff(counter).astype(np.int64, copy=False)
-    step &= 0xF
-    if cycle_s is not None and len(step):  # in place: the same operations, fewer temporaries
-        gap_periods = np.diff(timestamp_s)
-        gap_periods /= cycle_s
-        gap_periods -= step  # the sends more than the COUNTER step, 16 a lap (a real number)
-        lost_16 = np.floor(gap_periods / 16 + 0.5)  # the lap nearest: an edge 8 periods off,
-        np.maximum(0, lost_16, out=lost_16)  # never at half a period (frames late by 0.5)
-        lost = lost_16.astype(np.int64)
-        lost *= 16
-        # a frame let out in a burst after the gap waited in the sender's buffer: the gap is
-        # a busy bus, not lost frames (the COUNTER step is the whole step), but for a step of
-        # 0, which E2E takes by the time alone (``host.protocol.e2e_cycles``)
-        lost[queued_frames(timestamp_s, cycle_s)[1:] & (step != 0)] = 0
-        step += lost
-    seq: IntArray = np.empty(len(step) + 1, dtype=np.int64)
-    seq[0] = 0
-    np.cumsum(step, out=seq[1:])
-    return seq
-
-
 def contract_cycle_s(decoder: BulkDecoder, name: str) -> float | None:
     """A message's cycle time in seconds (None when it has none)."""
     cycle_ms = decoder.message(name).cycle_time
@@ -277,27 +263,6 @@ def named_targets(
         has &= timestamp_s - enc.timestamp_s[last] < 8 * enc.cycle_s
     target: IntArray = enc.seq[last] + (((enc_counter - enc.counter[last] + 8) & 0xF) - 8)
     return has, target
-
-
-def queued_frames(timestamp_s: FloatArray, cycle_s: float) -> npt.NDArray[np.bool_]:
-    """Frames of one periodic sender (in bus order) that waited in its transmit buffer: less
-    than ``QUEUED_GAP_CYCLES`` encoder cycles from the one before or after them. A firmware
-    sends each pose and twist message at most once per encoder period, so two of them that
-    close on the bus were not sent when they were made (a busy bus, e.g. a babbling node of
-    higher priority, held them back and then let them out in a burst).
-
-    A frame whose time goes back (a negative gap: it reached the bus after a later one, a frame
-    late on the bus, reordered) is not queued by that gap. The band: a burst's frames follow
-    each other by one frame's length (about 0.27 ms at 500 kbit/s, 2.7 ms at 50 kbit/s: 0.27
-    encoder cycle), while a frame late by half a cycle (a 15 ms ``delay`` of a 20 ms message
-    sent 1 ms after a 10 ms slot) lands 0.5 cycle from its neighbour: the edge at 0.35 cycle
-    is neither, so no decision hinges on half a cycle (at 0.5, 1 ns of rounding did)."""
-    gap_s = np.diff(timestamp_s)
-    close = (gap_s >= 0) & (gap_s < QUEUED_GAP_CYCLES * cycle_s)
-    queued: npt.NDArray[np.bool_] = (
-        np.concatenate(([False], close)) | np.concatenate((close, [False]))
-    )
-    return queued
 
 
 def _queued(

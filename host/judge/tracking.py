@@ -99,6 +99,7 @@ class PoseTracker:
         self._ref: ReferenceOdometry | None = None  # raw: ``fit`` corrects its start
         self.fit = LiveFit(0.0, 0.0, exact=True)  # the start narrowed (host.judge.livefit)
         self.placer = StallPlacer()  # the placements after stalls (host.judge.liveplace)
+        self.placer.halves = self._halves["x"]  # the holes of the log its gaps are told by
         self.restarts = RestartLog(self.placer.reprimed)  # counter restarts told (``events``)
         self._gate = StepGate(geometry, self.counter_bits, self.restarts)
         self._pending: FramePose | None = None  # the first pose, heard before the integrator

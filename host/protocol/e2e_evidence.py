@@ -239,20 +239,27 @@ class ReleaseWatch:
     after it came: a release is a silence then frames less than ``BURST_S`` apart, not at once).
     The encoder frames ask it for their pair's first frame, when the second comes."""
 
-    __slots__ = ("_last_s", "_lone_s", "_releases", "_silence_s")
+    __slots__ = ("_key", "_last_s", "_lone_s", "_mixed", "_releases", "_silence_s", "_woke_s")
 
     def __init__(self, cycle_s: float) -> None:
         self._silence_s = SILENCE_CYCLES * cycle_s
         self._last_s: float | None = None
         self._lone_s: float | None = None  # a frame after a silence, its burst not seen yet
         self._releases: list[tuple[float, float]] = []  # the recent ones (first, last s)
+        self._woke_s = -math.inf  # the latest frame heard after a silence of a drive's bus (s)
+        self._key = -1  # the message of the last frame heard
+        self._mixed = False  # frames of two messages heard: a drive's bus, never that quiet
 
-    def seen(self, timestamp_s: float) -> None:
-        """Note a frame heard at ``timestamp_s`` s."""
+    def seen(self, timestamp_s: float, key: int = -1) -> None:
+        """Note a frame heard at ``timestamp_s`` s (``key``: its message's)."""
         last, self._last_s = self._last_s, timestamp_s
+        self._mixed = self._mixed or (last is not None and key != self._key)
+        self._key = key
         if last is None:
             return
         gap_s = timestamp_s - last
+        if gap_s >= self._silence_s and self._mixed:
+            self._woke_s = timestamp_s
         if gap_s >= BURST_S or gap_s <= ALIKE_S:  # the usual case: no burst
             self._lone_s = timestamp_s if gap_s >= self._silence_s else None
             return
@@ -266,3 +273,14 @@ class ReleaseWatch:
         """Whether the frame heard at ``timestamp_s`` s came in a release."""
         return timestamp_s is not None and any(
             first <= timestamp_s <= last for first, last in self._releases)
+
+    def silent_after(self, timestamp_s: float | None) -> bool:
+        """Whether the recorder heard nothing for ``SILENCE_CYCLES`` or more after the frame
+        heard at ``timestamp_s`` s, up to the frame just seen, on a bus that carried frames of
+        two messages or more (a drive's bus, never that quiet): it held the frames of both
+        ends (issue #11, rule 5: the live recordings of a correct firmware, whose frames before
+        such a hole were stamped 3.8 periods late, 50 to 100 us apart, no release, had the
+        frames after it refused as WRONG_SEQUENCE and FAILed at 0.16 mm, and at 32.99 mm once a
+        pose naming one was paired 16 periods off). A log of one sender's frames (its own gaps
+        on a quiet bus) has no such silence."""
+        return timestamp_s is not None and self._woke_s > timestamp_s

@@ -70,7 +70,7 @@ class E2EMonitor:
         """Judge one data frame (identifier, payload); count and return its status (a message
         heard before, with its DLC, by its ``_Live``: one lookup a frame of a fleet's robots)."""
         if timestamp_s is not None:
-            self._releases.seen(timestamp_s)
+            self._releases.seen(timestamp_s, can_id)
         live = self._live.get(frame_key(can_id, True) if extended else can_id)
         if live is None or len(data) != live.length:
             return self._check_first(frame_key(can_id, extended), data, timestamp_s)
@@ -84,6 +84,7 @@ class E2EMonitor:
                 periods = receive_period_count(  # the wide reading after a release
                     timestamp_s - last, (counter - live.last) & COUNTER_MASK, live.cycle_s,
                     CAPTURE_HOLD_CYCLES if self._releases.released(last)
+                    or self._releases.silent_after(last)
                     else CAPTURE_TOLERANCE_CYCLES)
             elif last is not None:
                 periods = period_count(timestamp_s - last, live.cycle_s, live.min_periods)
