@@ -136,6 +136,24 @@ def test_a_blf_cut_short_is_warned(drive: dict[str, Path], tmp_path: Path) -> No
     assert can.BLFReader(drive[".blf"]).file_size == len(data)
 
 
+@pytest.mark.parametrize("command", ["analyze", "replay"])
+def test_a_corrupt_blf_is_one_clean_error_line(
+    drive: dict[str, Path], tmp_path: Path, command: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A ``.blf`` whose compressed container is corrupt read "error: ...: cannot read frame 1:
+    error: Error -3 while decompressing data: ..." (two "error:", zlib's class name taken for
+    the cause): one line naming the path and the cause (issue #11, rule 6)."""
+    data = bytearray(drive[".blf"].read_bytes())
+    for i in range(400, 600):
+        data[i] ^= 0x55
+    path = tmp_path / "corrupt.blf"
+    path.write_bytes(bytes(data))
+    err = _one_error_line(capsys, [command, str(path)])
+    assert err.lower().count("error") == 2, err  # "error: " and "zlib error", no other
+    assert err.startswith(f"error: {path}: cannot read frame 1: zlib error -3 (compressed data "
+                          "corrupt): "), err
+
+
 def test_replay_names_an_integrator_other_than_the_logs(
     drive: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

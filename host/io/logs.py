@@ -290,9 +290,7 @@ def _python_can_parts(
     except ValueError as exc:  # python-can: unknown suffix, bad file contents
         raise LogFormatError(f"{path}: {_first_line(exc)}") from None
     except Exception as exc:  # readers raise anything from struct.error to IndexError
-        raise LogFormatError(
-            f"{path}: cannot read frame {count + 1}: {type(exc).__name__}: {_first_line(exc)}"
-        ) from None
+        raise LogFormatError(f"{path}: cannot read frame {count + 1}: {_cause(exc)}") from None
     if len(collector):
         yield collector.arrays()
     if short:
@@ -346,6 +344,29 @@ def blf_warning(path: Path, frames: int) -> str | None:
         return (f"{path}: its header was never finished (0 objects; {frames} frames read): "
                 "a recorder killed before it closed the file?")
     return None
+
+
+def _cause(exc: BaseException) -> str:
+    """A reader's exception in words, without its ``error`` class name: zlib's ``error: Error -3
+    while decompressing data: ...`` (a ``.blf``'s compressed container) is "zlib error -3
+    (compressed data corrupt): ...", struct's ``error`` "struct error: ..."."""
+    import zlib
+
+    text = _first_line(exc)
+    if isinstance(exc, zlib.error):
+        code, _, why = text.partition(" while decompressing data: ")
+        number = code.removeprefix("Error ").strip()
+        if why and number.lstrip("-").isdigit():
+            what = _ZLIB_ERRORS.get(int(number), "compressed data unreadable")
+            return f"zlib error {number} ({what}): {why}"
+        return f"zlib error: {text}"
+    name = type(exc).__name__
+    kind = f"{type(exc).__module__} error" if name == "error" else name
+    return f"{kind}: {text}"
+
+
+_ZLIB_ERRORS = {-2: "stream state inconsistent", -3: "compressed data corrupt",
+                -4: "out of memory", -5: "compressed data cut short"}
 
 
 def _first_line(exc: BaseException) -> str:
