@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 from odocan.host.jsonutil import write_report
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.outputs import OutputError, check_writable
+from odocan.host.protocol.e2e_silence import lost_text, silence_caption
 from odocan.host.stopped import stopped_text
 from odocan.sim.exceptions import ConfigurationError
 
@@ -261,7 +262,9 @@ def frames_table(report: dict[str, Any]) -> Table:
     e2e: dict[str, dict[str, Any]] = report.get("e2e", {})
     for name, count in frames.items():
         counts = e2e.get(name, {})
-        table.add_row(name, str(count), *(_or_dash(counts.get(key)) for key in _E2E_COLUMNS))
+        table.add_row(name, str(count), *(lost_text(counts, cell=True) if key == "lost" and counts
+                                          else _or_dash(counts.get(key)) for key in _E2E_COLUMNS))
+    table.caption, table.caption_justify = silence_caption(e2e), "left"
     table.add_row("total", str(sum(frames.values())), *("" for _ in _E2E_COLUMNS), style="bold")
     return table
 
