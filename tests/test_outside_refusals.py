@@ -91,6 +91,43 @@ def test_a_log_whose_times_go_back_is_warned_with_a_count(
     assert clean == []
 
 
+def _stamps_back(source: Path, target: Path, back_s: float, every: int) -> int:
+    """``source`` with every ``every``-th frame stamped ``back_s`` before the frame before it
+    (what a recorder reading two senders' frames stamps); returns how many."""
+    lines = source.read_text().splitlines(keepends=True)
+    moved = 0
+    for k in range(every, len(lines), every):
+        before = float(lines[k - 1].split(")")[0][1:])
+        stamp = lines[k].split(")")[0][1:]
+        lines[k] = lines[k].replace(stamp, f"{before - back_s:.6f}", 1)
+        moved += 1
+    target.write_text("".join(lines))
+    return moved
+
+
+def test_a_recorders_us_inversions_are_not_warned_a_ms_one_is(
+    drive: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The trial (issue #11, rule 6): a recording with ~3 us inversions between senders made
+    analyze warn "13 frames earlier than the frame before ... the log's duration may be wrong":
+    a recorder's stamping, which can change no verdict nor duration, is not warned; an
+    inversion beyond 1 ms is."""
+    path = tmp_path / "stamped.log"
+    assert _stamps_back(drive[".log"], path, 3e-6, 97) > 10
+    told: list[str] = []
+    read_log(path, warn=told.append)
+    assert told == []
+    capsys.readouterr()
+    assert main(["analyze", str(path)]) == 0
+    assert "earlier than the frame before" not in capsys.readouterr().err
+    moved = _stamps_back(drive[".log"], path, 0.0015, 97)
+    read_log(path, warn=told.append)
+    assert len(told) == 1, told
+    assert told[0].startswith(
+        f"{path}: {moved} frames of {len(read_log(drive['.log']))} earlier than the frame before"
+    ), told
+
+
 def test_analyze_says_once_that_times_go_back(
     drive: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -134,6 +171,24 @@ def test_a_blf_cut_short_is_warned(drive: dict[str, Path], tmp_path: Path) -> No
     read_log(drive[".blf"], warn=whole.append)
     assert whole == []
     assert can.BLFReader(drive[".blf"]).file_size == len(data)
+
+
+@pytest.mark.parametrize("command", ["analyze", "replay"])
+def test_a_corrupt_blf_is_one_clean_error_line(
+    drive: dict[str, Path], tmp_path: Path, command: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A ``.blf`` whose compressed container is corrupt read "error: ...: cannot read frame 1:
+    error: Error -3 while decompressing data: ..." (two "error:", zlib's class name taken for
+    the cause): one line naming the path and the cause (issue #11, rule 6)."""
+    data = bytearray(drive[".blf"].read_bytes())
+    for i in range(400, 600):
+        data[i] ^= 0x55
+    path = tmp_path / "corrupt.blf"
+    path.write_bytes(bytes(data))
+    err = _one_error_line(capsys, [command, str(path)])
+    assert err.lower().count("error") == 2, err  # "error: " and "zlib error", no other
+    assert err.startswith(f"error: {path}: cannot read frame 1: zlib error -3 (compressed data "
+                          "corrupt): "), err
 
 
 def test_replay_names_an_integrator_other_than_the_logs(

@@ -20,6 +20,7 @@ not follow exact odometry (so the exact firmware replayed on it departs from it)
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -128,3 +129,30 @@ def test_a_replay_that_pairs_none_of_the_logs_poses_is_unjudged(
     out = capsys.readouterr().out
     assert (code, vs_log["samples"]) == (1, 0), out
     assert out.splitlines()[-1].startswith("UNJUDGED: none of the log's 1000 on-board poses")
+
+
+def test_the_first_line_says_what_was_compared_as_the_verdict_judges_it(
+    drives: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The trial (issue #11, rule 6): a log with a recorder hole printed "max difference
+    220.4108 mm" (the raw difference across the hole, which no verdict judges) and then PASS;
+    a log cut mid-drive printed "0 identical". The first line now names what was compared: the
+    positions up to the first gap as they are, after it by their drift, the headings less
+    their offset; every figure on it of a PASS is within the tolerance (0.1 mm)."""
+    lines = _lines(drives["exact"])
+    holed = tmp_path / "hole.log"
+    holed.write_text("".join(lines[:2999] + lines[6999:]))
+    cut = tmp_path / "mid.log"
+    cut.write_text("".join(lines[999:]))
+    for log, says in ((holed, "up to the log's first gap as they are"),
+                      (cut, "of a log cut mid-drive by their position drift")):
+        capsys.readouterr()
+        code, vs_log = _replay(log, tmp_path / "r.json")
+        first = capsys.readouterr().out.splitlines()[0]
+        assert code == 0, first
+        assert says in first
+        assert " 0 identical" not in first
+        figures_mm = [float(v) for v in re.findall(r"max(?: difference)? ([0-9.]+) mm", first)]
+        assert figures_mm, first
+        assert max(figures_mm) <= 0.1, first
+    assert vs_log["max_position_diff_m"] is None  # the cut: no raw position compared

@@ -123,16 +123,25 @@ def read_log(path: str | Path, *, warn: Callable[[str], None] = warn_on_stderr) 
     return frames
 
 
+# A frame stamped earlier than a frame before it by no more than this is a recorder's stamping
+# (a reader thread's or a socket's receive stamps of two senders' frames, a few us apart), not a
+# clock problem: it can change no verdict (the judges read a capture's stamps within 0.45 of a
+# 10 ms period, ``e2e_periods.CAPTURE_TOLERANCE_CYCLES``, and judge frames in log order) nor a
+# duration (said to 10 ms); a clock set back or logs merged go back by far more.
+STAMPING_S = 0.001
+
+
 class TimeOrder:
-    """Counts the frames of a log, fed in order a chunk at a time, whose time is before the
-    frame's before them: a merged, edited or clock-stepped log. Its times are kept as recorded
-    (they order nothing: the frames are judged in log order), but a report's duration from
-    them can be wrong (``-4.99 s simulated``), so it is said, with the first such frame."""
+    """Counts the frames of a log, fed in order a chunk at a time, whose time is before a
+    frame's before them by more than ``STAMPING_S``: a merged, edited or clock-stepped log. Its
+    times are kept as recorded (they order nothing: the frames are judged in log order), but a
+    report's duration from them can be wrong (``-4.99 s simulated``), so it is said, with the
+    first such frame. Less is a recorder's stamping, said nothing of."""
 
     def __init__(self) -> None:
         self.back = 0
         self.frames = 0
-        self.last_s = -math.inf
+        self.last_s = -math.inf  # the latest time so far
         self.first: tuple[int, float, float] | None = None  # (frame number, time, before it)
 
     def feed(self, chunk: FrameArrays) -> None:
@@ -140,23 +149,25 @@ class TimeOrder:
         if len(chunk) == 0:
             return
         times = chunk.timestamp_s
-        previous = np.concatenate(([self.last_s], times[:-1]))
-        back = np.flatnonzero(times < previous)
+        latest = np.maximum.accumulate(np.concatenate(([self.last_s], times)))
+        previous = latest[:-1]  # the latest time before each frame
+        back = np.flatnonzero(times < previous - STAMPING_S)
         if len(back) and self.first is None:
             k = int(back[0])
             self.first = (self.frames + k + 1, float(times[k]), float(previous[k]))
         self.back += len(back)
         self.frames += len(chunk)
-        self.last_s = float(times[-1])
+        self.last_s = float(latest[-1])
 
     def report(self, path: Path, warn: Callable[[str], None]) -> None:
-        """One warning when any frame's time went back."""
+        """One warning when any frame's time went back beyond the recorder's stamping."""
         if self.first is None:
             return
         number, t_s, before_s = self.first
         warn(f"{path}: {self.back} frame{'s' if self.back > 1 else ''} of {self.frames} "
              f"earlier than the frame before (first: frame {number}, {t_s:.6f} s after "
-             f"{before_s:.6f} s): times kept as recorded; the log's duration may be wrong")
+             f"{before_s:.6f} s; by {STAMPING_S * 1e3:g} ms or less, a recorder's stamping, "
+             "not counted): times kept as recorded; the log's duration may be wrong")
 
 
 def _read_candump_file(path: Path) -> tuple[FrameArrays, int, int]:
@@ -290,9 +301,7 @@ def _python_can_parts(
     except ValueError as exc:  # python-can: unknown suffix, bad file contents
         raise LogFormatError(f"{path}: {_first_line(exc)}") from None
     except Exception as exc:  # readers raise anything from struct.error to IndexError
-        raise LogFormatError(
-            f"{path}: cannot read frame {count + 1}: {type(exc).__name__}: {_first_line(exc)}"
-        ) from None
+        raise LogFormatError(f"{path}: cannot read frame {count + 1}: {_cause(exc)}") from None
     if len(collector):
         yield collector.arrays()
     if short:
@@ -346,6 +355,29 @@ def blf_warning(path: Path, frames: int) -> str | None:
         return (f"{path}: its header was never finished (0 objects; {frames} frames read): "
                 "a recorder killed before it closed the file?")
     return None
+
+
+def _cause(exc: BaseException) -> str:
+    """A reader's exception in words, without its ``error`` class name: zlib's ``error: Error -3
+    while decompressing data: ...`` (a ``.blf``'s compressed container) is "zlib error -3
+    (compressed data corrupt): ...", struct's ``error`` "struct error: ..."."""
+    import zlib
+
+    text = _first_line(exc)
+    if isinstance(exc, zlib.error):
+        code, _, why = text.partition(" while decompressing data: ")
+        number = code.removeprefix("Error ").strip()
+        if why and number.lstrip("-").isdigit():
+            what = _ZLIB_ERRORS.get(int(number), "compressed data unreadable")
+            return f"zlib error {number} ({what}): {why}"
+        return f"zlib error: {text}"
+    name = type(exc).__name__
+    kind = f"{type(exc).__module__} error" if name == "error" else name
+    return f"{kind}: {text}"
+
+
+_ZLIB_ERRORS = {-2: "stream state inconsistent", -3: "compressed data corrupt",
+                -4: "out of memory", -5: "compressed data cut short"}
 
 
 def _first_line(exc: BaseException) -> str:

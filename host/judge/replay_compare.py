@@ -84,7 +84,8 @@ def versus_log(
     facts: dict[str, Any] = {"logged": logged, "log_starts_mid_drive": mid, "holes": holes,
                              "max_resent_position_diff_m": resent_position_diff_m(old)}
     if len(common) == 0:
-        return {"samples": 0, "identical": 0, "max_position_diff_m": None,
+        return {"samples": 0, "identical": 0, "identical_before_gap": 0,
+                "max_position_diff_m": None,
                 "max_heading_diff_rad": None, "before_first_gap": 0,
                 "max_position_diff_before_gap_m": None, "heading_offsets_bam16": [],
                 "max_position_drift_between_gaps_m": None, **facts}
@@ -104,6 +105,7 @@ def versus_log(
     return {
         "samples": len(common),
         "identical": int(np.count_nonzero(differs == 0)),
+        "identical_before_gap": int(np.count_nonzero(differs[:before] == 0)),
         "max_position_diff_m": None if mid else float(position.max()),
         "max_heading_diff_rad": float(heading.max()),
         "before_first_gap": before,
@@ -273,6 +275,34 @@ def pose_phase_ticks(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> in
     if period < 2 or len(ticks) == 0:
         return 0
     return int(np.bincount(ticks % period, minlength=period).argmax())
+
+
+def compared(vs_log: dict[str, Any]) -> str:
+    """What was compared with the log, in the words of the verdict (``departures``): a log from
+    power-up without a gap, every pose as it is; else the positions up to the first gap as they
+    are, after it (or all of them, from a log cut mid-drive) by their drift between gaps, and
+    the headings less their offset at each anchor. Never the raw difference across a hole,
+    which the verdict does not judge."""
+    samples, before = int(vs_log["samples"]), int(vs_log["before_first_gap"])
+    heading = f"{vs_log['max_heading_diff_rad'] * 1e3:.4f} mrad"
+    if before == samples and not vs_log.get("log_starts_mid_drive"):
+        return (f"{vs_log['identical']} identical, max difference "
+                f"{vs_log['max_position_diff_m'] * 1e3:.4f} mm, {heading}")
+    parts = []
+    if before:
+        parts.append(f"{before} up to the log's first gap as they are "
+                     f"({vs_log['identical_before_gap']} identical, max difference "
+                     f"{vs_log['max_position_diff_before_gap_m'] * 1e3:.4f} mm)")
+    where = (f"{samples - before} after it" if before
+             else f"all {samples} of a log cut mid-drive")
+    drift = vs_log.get("max_position_drift_between_gaps_m")
+    parts.append(f"{where} by their position drift between gaps (max {drift * 1e3:.4f} mm)"
+                 if drift is not None else
+                 f"{where}: positions not compared (the log's firmware did not take its "
+                 "frames on time)")
+    anchored = bool(vs_log.get("heading_offsets_bam16"))
+    parts.append(f"heading {heading}" + (" less its offset where re-anchored" if anchored else ""))
+    return "; ".join(parts)
 
 
 def not_comparable(vs_log: dict[str, Any]) -> list[str]:

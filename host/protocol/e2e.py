@@ -92,6 +92,7 @@ from odocan.host.protocol.e2e_periods import (
 from odocan.host.protocol.e2e_periods import (
     periods_between as periods_between,
 )
+from odocan.host.protocol.e2e_silence import add_silence, is_silence, silences
 from odocan.sim.exceptions import OdocanError
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
@@ -193,6 +194,8 @@ class SequenceState:
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(E2E_KEYS, 0))
     cycle_s: float | None = None  # the receive period when a same COUNTER may be a new cycle
     last_valid_s: float | None = None  # the last valid frame's bus time (s), when given
+    period_s: float | None = None  # the receive period, for the silences (``e2e_silence``)
+    last_ok_s: float | None = None  # the last accepted frame's bus time (s), when given
 
     def check(self, crc_ok: bool, counter: int, periods: int = 1,
               timestamp_s: float | None = None) -> str:
@@ -210,6 +213,7 @@ class SequenceState:
             self.counts["lost"] += COUNTER_CYCLE * cycles - 1
             self.counts["ok"] += 1
             self.last_valid_s = timestamp_s
+            self._heard(timestamp_s)
             return OKSOMELOST  # the window kept (the docstring)
         elif delta == 0 or delta > self.window:
             self.last_valid_s = None  # a frame between: no new cycle till the next accepted
@@ -223,7 +227,17 @@ class SequenceState:
         self.window = self.max_delta_init
         self.last_valid_s = timestamp_s
         self.counts["ok"] += 1
+        self._heard(timestamp_s)
         return status
+
+    def _heard(self, timestamp_s: float | None) -> None:
+        """An accepted frame at ``timestamp_s``: count the silence before it, if one."""
+        if timestamp_s is None:
+            return
+        if self.last_ok_s is not None and is_silence(timestamp_s - self.last_ok_s,
+                                                     self.period_s):
+            add_silence(self.counts, timestamp_s - self.last_ok_s)
+        self.last_ok_s = timestamp_s
 
     def _new_cycles(self, timestamp_s: float | None) -> int:
         """Whole COUNTER cycles since the last valid frame (``e2e_cycles``; 0: not known)."""
@@ -411,6 +425,7 @@ def _check_message(
         "repeated": int(np.count_nonzero(status == _S_REPEATED)),
         "crc_errors": int(np.count_nonzero(status == _S_CRC)),
         "wrong_sequence": int(np.count_nonzero(status == _S_WRONG)),
+        **silences(t_s if valid is None else t_s[valid], config.cycle_s),
     }
 
 

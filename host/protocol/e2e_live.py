@@ -106,7 +106,8 @@ class E2EMonitor:
         state = self._states.get(key)
         if state is None:
             state = self._states[key] = SequenceState(config.max_delta_init,
-                                                      cycle_s=new_cycle_s(config))
+                                                      cycle_s=new_cycle_s(config),
+                                                      period_s=config.cycle_s)
         counter = data[1] & COUNTER_MASK
         crc_ok = crc8h2f_p02_one(data, config.data_ids[counter]) == data[0]
         self._live[key] = _Live(config, state, config.data_ids, timestamp_s,  # one period

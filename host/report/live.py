@@ -21,6 +21,7 @@ from rich.text import Text
 from odocan.host.jsonutil import real
 from odocan.host.judge.sources import FIRMWARE_NODE
 from odocan.host.protocol.e2e import E2E_KEYS
+from odocan.host.protocol.e2e_silence import lost_text, silence_caption
 
 STALE_S = 1.0  # a message not heard for this long is shown dimmed
 FLEET_STALE_S = 3.0  # a robot whose last MQTT message is older than this is marked stale
@@ -63,11 +64,16 @@ def messages_table(snapshot: dict[str, Any], heard: dict[str, float]) -> Table:
         dim = "dim" if m.get("stale") or heard.get(name, 0.0) > STALE_S else None
         table.add_row(
             name, m["id"], str(m["count"]), num(m["rate_hz"], ".1f"),
-            num(m["jitter_ms"], ".2f"), *(num(e2e.get(k), "d") for k in E2E_KEYS), style=dim,
+            num(m["jitter_ms"], ".2f"),
+            *(lost_text(e2e, cell=True) if k == "lost" and e2e else num(e2e.get(k), "d")
+              for k in E2E_KEYS),
+            style=dim,
         )
         for page, stats in m.get("pages", {}).items():
             table.add_row(f"  {page}", "", str(stats["count"]), num(stats["rate_hz"], ".1f"),
                           num(stats["jitter_ms"], ".2f"), *("" for _ in E2E_KEYS), style=dim)
+    table.caption = silence_caption({n: m["e2e"] for n, m in snapshot["messages"].items()})
+    table.caption_justify = "left"
     return table
 
 

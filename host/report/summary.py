@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 from odocan.host.jsonutil import write_report
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.outputs import OutputError, check_writable
+from odocan.host.protocol.e2e_silence import lost_text, silence_caption
 from odocan.host.stopped import stopped_text
 from odocan.sim.exceptions import ConfigurationError
 
@@ -149,29 +150,33 @@ def print_summary(
     if conflict:  # a FAIL of its own; the pose before it is judged as usual
         console.print(f"[{style}]{verdict}[/{style}]: {conflict['detail']}", soft_wrap=True)
         verdict, style = "before it", "bold" if pose_met and twist["passed"] else style
-    console.print(
-        f"[{style}]{verdict}[/{style}]: on-board vs reference within "
+    pose = (
+        f"on-board vs reference within "
         f"{tolerance.position_m * 1e3:.4g} mm and {tolerance.heading_rad * 1e3:.4g} mrad"
-        + ("" if pose_met else ": not met")
         + (f" (plus {allowance * 1e3:.4g} mm for encoder frames the firmware lost)"
            if (allowance := report["onboard_vs_reference"].get("loss_allowance_m")) else "")
         + (f" (plus {twins * 1e3:.4g} mm for encoder frames with a twin)"
            if (twins := (report.get("reference_breaks") or {}).get("twin_allowance_m")) else "")
-        + (
-            ""
-            if twist["passed"]
-            else "; ODOM_TWIST outside the reference's speeds by up to "  # 0.18 mm/s was 0.000 m/s
-            f"{twist['max_linear_excess_mps'] * 1e3:.3g} mm/s, "
-            f"{twist['max_angular_excess_rad_s'] * 1e3:.3g} mrad/s"
-        )
-        + (
-            ""
-            if distance["passed"]
-            else "; ODOM_TWIST DISTANCE off the reference's path length by "
-            f"{distance['max_excess_m'] * 1e3:.3f} mm beyond its tolerance"
-        ),
-        soft_wrap=True,
     )
+    failed = _twist_failures(twist, distance)
+    if pose_met and failed:  # name what failed first: the pose did not
+        line = "; ".join(failed) + f" (the pose criterion is met: {pose})"
+    else:
+        line = "; ".join([pose + ("" if pose_met else ": not met"), *failed])
+    console.print(f"[{style}]{verdict}[/{style}]: {line}", soft_wrap=True)
+
+
+def _twist_failures(twist: dict[str, Any], distance: dict[str, Any]) -> list[str]:
+    """The ODOM_TWIST criteria not met (speeds, DISTANCE), in words."""
+    failed = []
+    if not twist["passed"]:  # 0.18 mm/s was 0.000 m/s
+        failed.append("ODOM_TWIST outside the reference's speeds by up to "
+                      f"{twist['max_linear_excess_mps'] * 1e3:.3g} mm/s, "
+                      f"{twist['max_angular_excess_rad_s'] * 1e3:.3g} mrad/s")
+    if not distance["passed"]:
+        failed.append("ODOM_TWIST DISTANCE off the reference's path length by "
+                      f"{distance['max_excess_m'] * 1e3:.3f} mm beyond its tolerance")
+    return failed
 
 
 def _pose_within(report: dict[str, Any], tolerance: Tolerance) -> bool:
@@ -257,7 +262,9 @@ def frames_table(report: dict[str, Any]) -> Table:
     e2e: dict[str, dict[str, Any]] = report.get("e2e", {})
     for name, count in frames.items():
         counts = e2e.get(name, {})
-        table.add_row(name, str(count), *(_or_dash(counts.get(key)) for key in _E2E_COLUMNS))
+        table.add_row(name, str(count), *(lost_text(counts, cell=True) if key == "lost" and counts
+                                          else _or_dash(counts.get(key)) for key in _E2E_COLUMNS))
+    table.caption, table.caption_justify = silence_caption(e2e), "left"
     table.add_row("total", str(sum(frames.values())), *("" for _ in _E2E_COLUMNS), style="bold")
     return table
 

@@ -45,6 +45,7 @@ from rich.segment import Segment
 from rich.table import Table
 from rich.text import Text
 
+from odocan.host.protocol.e2e_silence import SILENCE_KEYS, lost_text
 from odocan.host.report.live import (
     BAD_VERDICTS,
     STALE_S,
@@ -297,7 +298,9 @@ def values_table(snapshot: dict[str, Any], heard_s: dict[str, float]) -> Table:
 
 
 def _e2e_text(e2e: dict[str, Any]) -> Text:
-    bad = {k: v for k, v in e2e.items() if k != "ok" and v}
+    bad = {k: v for k, v in e2e.items() if k not in ("ok", *SILENCE_KEYS) and v}
+    if e2e.get("silences"):  # a silence: "lost ≥ 1 (silence 20.0 s)" even with lost 0
+        bad["lost"] = lost_text(e2e)
     if not e2e:
         return Text("-", style="dim")
     if not bad:

@@ -35,7 +35,7 @@ from odocan.host.judge.replay import (
     logged_integrator,
     replay_and_analyze,
 )
-from odocan.host.judge.replay_compare import departures, not_comparable, unjudged
+from odocan.host.judge.replay_compare import compared, departures, not_comparable, unjudged
 from odocan.host.outputs import check_distinct
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.report.ci import (
@@ -174,12 +174,10 @@ def _print_versus_log(section: dict[str, Any]) -> None:
                       "paired with the replayed firmware's: nothing compared",
                       soft_wrap=True)
         return
-    position = ("" if vs["max_position_diff_m"] is None
-                else f"max difference {vs['max_position_diff_m'] * 1e3:.4f} mm, ")
     console.print(
         f"replay: {section['encoder_frames_fed']} encoder frames fed in {section['ticks']} "
-        f"ticks; on-board vs the log's at {vs['samples']} encoder frames: {vs['identical']} "
-        f"identical, {position}{vs['max_heading_diff_rad'] * 1e3:.4f} mrad", soft_wrap=True)
+        f"ticks; on-board vs the log's at {vs['samples']} encoder frames: {compared(vs)}",
+        soft_wrap=True)
     for line in not_comparable(vs):
         console.print(f"replay: {line}", soft_wrap=True)
     if not section["truth_compared"]:
