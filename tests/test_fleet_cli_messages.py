@@ -15,7 +15,8 @@ from odocan.host.report.progress import Progress
 def _fleet_parser() -> argparse.ArgumentParser:
     parser = build_parser()
     action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    return action.choices["fleet"]
+    sub: argparse.ArgumentParser = action.choices["fleet"]
+    return sub
 
 
 def test_fleet_help_says_workers_shards_and_the_default_transport() -> None:

@@ -34,7 +34,8 @@
   the delivery into our socket and paho stamps the arrival when it reads the socket, so a
   message that waited in the socket (the bridge stopped, SIGSTOP, or starved) looks fresh to
   both rules: only its send time tells its age (a stamp ahead of our clock counts as age 0:
-  the arrival rule still bounds it); or ``"busy"`` when ``command_queue`` messages already
+  the arrival rule still bounds it; the verdict, ``host.mqtt.expiry.Expired``, says which rule
+  applied); or ``"busy"`` when ``command_queue`` messages already
   wait (answered at once, not run), or ``"retained"`` for a command the broker kept as
   retained (its age is unknown, and it would run again at every reconnect).
 """
@@ -67,14 +68,14 @@ from odocan.host.mqtt.broker import (
     protocol_unsupported,
 )
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient
+from odocan.host.mqtt.expiry import Expired, expired_by
 from odocan.host.mqtt.redelivery import Redeliveries
-from odocan.host.protocol.commands import command_sent_unix_s
 
 log = logging.getLogger("odocan.mqtt")
 CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
 Publication = tuple[str, dict[str, Any]]
 Verdict = Literal["run", "expired", "busy", "retained"]
-CommandHandler = Callable[[str, bytes, Verdict], list[Publication]]
+CommandHandler = Callable[[str, bytes, Verdict | Expired], list[Publication]]
 
 
 @dataclass(eq=False)
@@ -338,17 +339,13 @@ class RobotLink:
             self._handle(client._queue.get_nowait())
 
     def _answer(self, name: str, message: Arrived) -> list[Publication]:
-        expiry_s = message.expiry_s if message.expiry_s is not None else self.command_expiry_s
         if message.retain:  # kept by the broker from whenever: would run again each reconnect
             return self.on_command(name, _payload(message), "retained")
         if self.redeliveries.is_repeat(name, _payload(message), dup=message.dup):
             return []  # sent again after a reconnect: run and answered at its first delivery
-        expired = time.monotonic() - message.arrival_s > expiry_s
-        sent_unix_s = command_sent_unix_s(_payload(message))
-        if sent_unix_s is not None:  # its age since it was sent, wherever it waited
-            expired = expired or time.time() - sent_unix_s > self.command_expiry_s
-        self.commands_expired += expired
-        return self.on_command(name, _payload(message), "expired" if expired else "run")
+        expired = expired_by(message, _payload(message), self.command_expiry_s)
+        self.commands_expired += expired is not None
+        return self.on_command(name, _payload(message), expired or "run")
 
     def _overflow(self, message: Arrived) -> None:
         """Too many commands waiting: answer this one at once (it is not run)."""
