@@ -22,7 +22,8 @@
   results) have their own buffers and their own sender tasks. Telemetry is a bounded deque that
   drops the oldest (``telemetry_dropped``); while disconnected it is not kept at all
   (``telemetry_offline``: no stale pose is replayed after an outage). QoS-1 publications stay
-  queued until the broker acknowledged them (at least once across broker restarts), up to
+  queued until the broker acknowledged them (at least once across broker restarts; a ``status``
+  queued while disconnected replaces the queued ones, ``status_superseded``), up to
   ``reliable_buffer`` entries: beyond, the oldest ``status`` (superseded) goes first, then the
   oldest entry (``reliable_dropped``);
 * commands arrive on ``odocan/<robot>/cmd/<name>`` and go to ``on_command(name, payload,
@@ -124,7 +125,7 @@ class RobotLink:
         self.command_queue = command_queue
         self.v5 = broker.v5
         self.telemetry_dropped = self.telemetry_offline = self.reliable_dropped = 0
-        self.commands_expired = self.commands_busy = 0
+        self.commands_expired = self.commands_busy = self.status_superseded = 0
         self.refused: Counter[str] = Counter()  # topic -> publications the broker refused
         self.connects = 0
         self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
@@ -147,10 +148,19 @@ class RobotLink:
             self.telemetry.append((topic, body))
             self._telemetry_wake.set()
             return
+        if leaf == topics.STATUS_LEAF and not self.connected.is_set():
+            self._supersede_status(topic)
         if len(self.reliable) >= self.reliable_buffer:
             self._drop_reliable()
         self.reliable.append(_Outgoing(topic, body, topics.retained(leaf)))
         self._reliable_wake.set()
+
+    def _supersede_status(self, topic: str) -> None:
+        """Offline, a new ``status`` (retained: the broker keeps only the latest) supersedes
+        the queued ones: not replayed in a burst when the broker is back (``status_superseded``)."""
+        kept = deque(p for p in self.reliable if p.topic != topic)
+        self.status_superseded += len(self.reliable) - len(kept)
+        self.reliable = kept
 
     def _drop_reliable(self) -> None:
         status = topics.topic(self.robot, topics.STATUS_LEAF)
@@ -168,6 +178,7 @@ class RobotLink:
             "telemetry_offline": self.telemetry_offline,
             "reliable_dropped": self.reliable_dropped,
             "reliable_queued": len(self.reliable),
+            "status_superseded": self.status_superseded,
             "refused": sum(self.refused.values()),
             "commands_expired": self.commands_expired,
             "commands_busy": self.commands_busy,
