@@ -227,6 +227,7 @@ def test_telemetry_buffer_drops_the_oldest_and_nothing_while_offline() -> None:
 
 def test_qos1_buffer_drops_superseded_statuses_first() -> None:
     link = _link(reliable_buffer=10)
+    link.connected.set()  # offline, a status replaces the queued ones before any buffer fills
     for k in range(5):
         link.publish(topics.RESULT_LEAF, {"id": k})
     for k in range(10):

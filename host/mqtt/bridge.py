@@ -37,6 +37,7 @@ import can
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL, first_error
+from odocan.host.mqtt.expiry import Expired
 from odocan.host.mqtt.link import RobotLink, Verdict
 from odocan.host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
 from odocan.host.protocol.commands import Command, CommandEncoder, CommandRejected, command_id
@@ -118,13 +119,16 @@ class _Robot:
         leaf, payload = self.telemetry.status()
         return leaf, {**payload, "receive": receive}
 
-    def on_command(self, name: str, payload: bytes, verdict: Verdict = "run") -> list[Publication]:
+    def on_command(
+        self, name: str, payload: bytes, verdict: Verdict | Expired = "run"
+    ) -> list[Publication]:
         """Validate, then send; always the one answer for ``cmd/result``, never an exception."""
         name = name[:64]  # a topic level is up to 64 KiB: the answer echoes a bounded name
         if verdict == "expired":
             self.commands_rejected += 1
-            return [_result(command_id(payload), name, "expired",
-                            "older than its expiry: not run")]
+            reason = (verdict.reason if isinstance(verdict, Expired) else
+                      "older than its expiry: not run")  # the rule, when the link said it
+            return [_result(command_id(payload), name, "expired", reason)]
         if verdict in ("busy", "retained"):
             self.commands_rejected += 1
             reason = ("bridge busy: not run" if verdict == "busy" else

@@ -5,7 +5,7 @@ the fleet's frames offered to it each tick), runs for ``duration_s`` and returns
 
 ```
 {"robots": N, "transport": "odocan" | "virtual", "firmware": "python" | "c",
- "duration_s": ..., "period_s": 0.01,
+ "duration_s": ..., "duration_asked_s": ..., "period_s": 0.01,
  "deadline_miss_ratio": ...,
  "ticks": ..., "late_ticks": ..., "skipped_releases": ..., "max_lateness_ms": ...,
  "broker": "mqtt://127.0.0.1:PORT" | null, "embedded_broker": bool,
@@ -108,7 +108,7 @@ async def run_fleet(
                                                  lambda: _started(on_start, fleet, None),
                                                  on_progress)
             return {**_report(run, fleet, stats, None, None, False), "cpu_s": cpu_s,
-                    "stopped": stopped}
+                    "stopped": stopped, **durations(run.duration_s, stopped)}
         async with broker_for(run.broker) as (url, embedded):
             bridge = Bridge(_endpoints(fleet, run), config=BridgeConfig(
                 broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix,
@@ -125,7 +125,14 @@ async def run_fleet(
             except BaseExceptionGroup as group:
                 raise first_error(group) from None
             return {**_report(run, fleet, stats, bridge, url, embedded), "cpu_s": cpu_s,
-                    "stopped": stopped}
+                    "stopped": stopped, **durations(run.duration_s, stopped)}
+
+
+def durations(asked_s: float, stopped: dict[str, Any] | None) -> dict[str, float]:
+    """The report's ``duration_s``, the wall-clock seconds that ran (``stopped.done`` when a
+    signal ended the run early), and ``duration_asked_s``, the ``--duration`` asked for."""
+    done_s = asked_s if stopped is None else float(stopped["done"])
+    return {"duration_s": done_s, "duration_asked_s": asked_s}
 
 
 def _started(on_start: StartHook | None, fleet: Fleet, url: BrokerURL | None) -> None:
@@ -309,7 +316,6 @@ def _report(
         "first_robot": fleet.names[0],
         "transport": run.fleet.transport,
         "firmware": run.fleet.firmware,
-        "duration_s": run.duration_s,
         "period_s": stats.period_s,
         "deadline_miss_ratio": stats.deadline_miss_ratio,
         "ticks": stats.ticks,

@@ -22,7 +22,8 @@
   results) have their own buffers and their own sender tasks. Telemetry is a bounded deque that
   drops the oldest (``telemetry_dropped``); while disconnected it is not kept at all
   (``telemetry_offline``: no stale pose is replayed after an outage). QoS-1 publications stay
-  queued until the broker acknowledged them (at least once across broker restarts), up to
+  queued until the broker acknowledged them (at least once across broker restarts; a ``status``
+  queued while disconnected replaces the queued ones, ``status_superseded``), up to
   ``reliable_buffer`` entries: beyond, the oldest ``status`` (superseded) goes first, then the
   oldest entry (``reliable_dropped``);
 * commands arrive on ``odocan/<robot>/cmd/<name>`` and go to ``on_command(name, payload,
@@ -34,7 +35,8 @@
   the delivery into our socket and paho stamps the arrival when it reads the socket, so a
   message that waited in the socket (the bridge stopped, SIGSTOP, or starved) looks fresh to
   both rules: only its send time tells its age (a stamp ahead of our clock counts as age 0:
-  the arrival rule still bounds it); or ``"busy"`` when ``command_queue`` messages already
+  the arrival rule still bounds it; the verdict, ``host.mqtt.expiry.Expired``, says which rule
+  applied); or ``"busy"`` when ``command_queue`` messages already
   wait (answered at once, not run), or ``"retained"`` for a command the broker kept as
   retained (its age is unknown, and it would run again at every reconnect).
 """
@@ -67,14 +69,14 @@ from odocan.host.mqtt.broker import (
     protocol_unsupported,
 )
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient
+from odocan.host.mqtt.expiry import Expired, expired_by
 from odocan.host.mqtt.redelivery import Redeliveries
-from odocan.host.protocol.commands import command_sent_unix_s
 
 log = logging.getLogger("odocan.mqtt")
 CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
 Publication = tuple[str, dict[str, Any]]
 Verdict = Literal["run", "expired", "busy", "retained"]
-CommandHandler = Callable[[str, bytes, Verdict], list[Publication]]
+CommandHandler = Callable[[str, bytes, Verdict | Expired], list[Publication]]
 
 
 @dataclass(eq=False)
@@ -123,7 +125,7 @@ class RobotLink:
         self.command_queue = command_queue
         self.v5 = broker.v5
         self.telemetry_dropped = self.telemetry_offline = self.reliable_dropped = 0
-        self.commands_expired = self.commands_busy = 0
+        self.commands_expired = self.commands_busy = self.status_superseded = 0
         self.refused: Counter[str] = Counter()  # topic -> publications the broker refused
         self.connects = 0
         self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
@@ -146,10 +148,19 @@ class RobotLink:
             self.telemetry.append((topic, body))
             self._telemetry_wake.set()
             return
+        if leaf == topics.STATUS_LEAF and not self.connected.is_set():
+            self._supersede_status(topic)
         if len(self.reliable) >= self.reliable_buffer:
             self._drop_reliable()
         self.reliable.append(_Outgoing(topic, body, topics.retained(leaf)))
         self._reliable_wake.set()
+
+    def _supersede_status(self, topic: str) -> None:
+        """Offline, a new ``status`` (retained: the broker keeps only the latest) supersedes
+        the queued ones: not replayed in a burst when the broker is back (``status_superseded``)."""
+        kept = deque(p for p in self.reliable if p.topic != topic)
+        self.status_superseded += len(self.reliable) - len(kept)
+        self.reliable = kept
 
     def _drop_reliable(self) -> None:
         status = topics.topic(self.robot, topics.STATUS_LEAF)
@@ -167,6 +178,7 @@ class RobotLink:
             "telemetry_offline": self.telemetry_offline,
             "reliable_dropped": self.reliable_dropped,
             "reliable_queued": len(self.reliable),
+            "status_superseded": self.status_superseded,
             "refused": sum(self.refused.values()),
             "commands_expired": self.commands_expired,
             "commands_busy": self.commands_busy,
@@ -338,17 +350,13 @@ class RobotLink:
             self._handle(client._queue.get_nowait())
 
     def _answer(self, name: str, message: Arrived) -> list[Publication]:
-        expiry_s = message.expiry_s if message.expiry_s is not None else self.command_expiry_s
         if message.retain:  # kept by the broker from whenever: would run again each reconnect
             return self.on_command(name, _payload(message), "retained")
         if self.redeliveries.is_repeat(name, _payload(message), dup=message.dup):
             return []  # sent again after a reconnect: run and answered at its first delivery
-        expired = time.monotonic() - message.arrival_s > expiry_s
-        sent_unix_s = command_sent_unix_s(_payload(message))
-        if sent_unix_s is not None:  # its age since it was sent, wherever it waited
-            expired = expired or time.time() - sent_unix_s > self.command_expiry_s
-        self.commands_expired += expired
-        return self.on_command(name, _payload(message), "expired" if expired else "run")
+        expired = expired_by(message, _payload(message), self.command_expiry_s)
+        self.commands_expired += expired is not None
+        return self.on_command(name, _payload(message), expired or "run")
 
     def _overflow(self, message: Arrived) -> None:
         """Too many commands waiting: answer this one at once (it is not run)."""

@@ -337,6 +337,7 @@ def aggregate(reports: list[dict[str, Any]]) -> dict[str, Any]:
     return {
         **{k: v for k, v in reports[0].items() if k not in ("per_robot", "bridge")},
         "robots": sum(r["robots"] for r in reports),
+        "duration_s": max(r["duration_s"] for r in reports),  # what ran: the longest worker
         "deadline_miss_ratio": worst["deadline_miss_ratio"],
         "ticks": sum(r["ticks"] for r in reports),
         "late_ticks": sum(r["late_ticks"] for r in reports),

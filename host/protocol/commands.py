@@ -4,9 +4,10 @@ A command is a JSON object on ``odocan/<robot>/cmd/<name>``; ``"id"`` (string or
 optional) is echoed in the answer on ``cmd/result``; ``"sent_unix_s"`` (number, optional: when
 the sender sent it, UNIX seconds of its wall clock, as a ROS 2 ``header.stamp``) lets the bridge
 refuse a command that waited too long anywhere on its way (``command_sent_unix_s``; the link's
-expiry rule, ``host.mqtt.link``). Every key is checked (no unknown keys, no
-missing required ones, the right JSON type), then every value against its signal's range in the DBC
-(``[min|max]`` in the signal's unit, the key's unit). Only when the whole command is valid are its
+expiry rule, ``host.mqtt.link``). A JSON ``null`` for an optional key is its absence (as most
+clients write an unset one). Every key is checked (no unknown keys, no missing required ones,
+the right JSON type), then every value against its signal's range in the DBC (``[min|max]`` in
+the signal's unit, the key's unit). Only when the whole command is valid are its
 frames built (cantools ``encode``, strict; Profile 2 CRC by ``cantools.autosar`` with the
 message's ``E2EDataIDs``) and handed back; otherwise ``CommandRejected`` carries the reason and
 nothing is sent.
@@ -176,9 +177,10 @@ class CommandEncoder:
                 f"id must be a string of at most {MAX_ID_CHARS} characters or an integer "
                 "within int64"
             )
-        if SENT_KEY in obj:  # judged by the link before the command came here
+        sent = obj.pop(SENT_KEY, None)  # null: absent, as a JSON null for "id"
+        if sent is not None:  # judged by the link before the command came here
             try:
-                _check_sent(obj.pop(SENT_KEY))
+                _check_sent(sent)
             except CommandRejected as exc:
                 exc.cmd_id = cmd_id
                 raise
@@ -326,13 +328,15 @@ def _valid_id(cmd_id: Any) -> bool:
 
 
 def _check_schema(spec: CommandSpec, obj: dict[str, Any]) -> dict[str, Any]:
-    """Keys and JSON types; returns the values given."""
+    """Keys and JSON types; returns the values given. A JSON null for an optional field is
+    its absence (as most clients write an unset optional field); for a required one, wrong."""
     unknown = sorted(set(obj) - spec.keys)
     if unknown:
         raise CommandRejected(f"unknown field {_short(repr(unknown[0]), 40)} (accepted: id, "
                               f"{SENT_KEY}, "
                               f"{', '.join(sorted(spec.keys))})")
     fields = {f.key: f for s in spec.steps for f in s.fields if f.kind != "absent"}
+    obj = {k: v for k, v in obj.items() if v is not None or (k in fields and fields[k].required)}
     for key, f in fields.items():
         if key not in obj:
             if f.required:

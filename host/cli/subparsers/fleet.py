@@ -66,8 +66,11 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     parser = subparsers.add_parser(
         "fleet",
         help="run N robots in real time, bridged to MQTT",
-        description="Run N independent robots (motor controller, truth, scenario, firmware on "
-        "their own virtual CAN channels) in real time in one process, bridged to MQTT.",
+        description="Run N independent robots (motor controller, truth, scenario, firmware, "
+        "each robot on its own bus of the in-process odocan transport; --transport virtual: "
+        "python-can's) in real time, bridged to MQTT, spread over --workers processes (one "
+        "real-time loop and MQTT connections each); --shard K/N runs this machine's part of a "
+        "fleet of N machines on one --broker.",
     )
     _add_arguments(parser)
     parser.set_defaults(func=_do_fleet)
@@ -231,7 +234,7 @@ def _foxglove(
 def _run(run: FleetRun, workers: int, debug: bool) -> dict[str, Any]:
     """The fleet under a live progress line (elapsed, ETA, the late ticks so far), drawn from
     when the clock starts (the start line first), not while the workers and broker start."""
-    label = f"fleet of {run.fleet.robots}"
+    label = f"fleet of {robots_text(run.fleet.robots)}"
     with wall_clock_progress(label, run.duration_s) as bar:
         drawn, bar.enabled = bar.enabled, False
 
@@ -250,20 +253,24 @@ def _run(run: FleetRun, workers: int, debug: bool) -> dict[str, Any]:
 
 
 def _relabel(bar: Progress, label: str, ticks: int, late: int) -> None:
-    """The progress line's label with the deadline figures so far."""
-    bar.label = f"{label}, {late} of {ticks} ticks late ({late / max(ticks, 1):.4f})"
+    """The progress line's label with the deadline figures so far, summed over every worker
+    (the summary's ``deadline_miss_ratio`` is the worst worker's: it names both)."""
+    bar.label = (f"{label}, all workers {late} of {ticks} ticks late "
+                 f"({late / max(ticks, 1):.4f} overall)")
 
 
 def _print_summary(report: dict[str, Any], broken: list[str]) -> None:
     """The summary line, per-robot verdict counts, then PASS or FAIL with every reason."""
     verdicts = Counter(str(r.get("verdict")) for r in report["per_robot"].values())
     workers = len(report.get("workers", [])) or 1
+    overall = report["late_ticks"] / max(report["ticks"], 1)
     last = list(report["per_robot"])[-1]
     print(
-        f"fleet: {report['robots']} robots, {report['first_robot']}..{last}, "
+        f"fleet: {robots_text(report['robots'])}, {report['first_robot']}..{last}, "
         f"{workers} worker(s), "
         f"{report['ticks']} ticks, deadline_miss_ratio {report['deadline_miss_ratio']:.4f} "
-        f"(worst {report['max_lateness_ms']:.1f} ms), broker {report['broker']}"
+        f"(the worst worker's, the verdict's; overall {overall:.4f}; worst tick "
+        f"{report['max_lateness_ms']:.1f} ms late), broker {report['broker']}"
     )
     print("poses: " + ", ".join(f"{n} {v}" for v, n in sorted(verdicts.items())))
     verdict = "FAIL: " + "; ".join(broken) if broken else "PASS"
@@ -278,7 +285,12 @@ def _say_started(robots: int, url: BrokerURL | None) -> None:
     (``odocan monitor --broker URL``)."""
     where = f", telemetry on {url}" if url is not None else ""
     print(
-        f"fleet: {robots} robots running{where}; Ctrl-C or SIGTERM stops and reports",
+        f"fleet: {robots_text(robots)} running{where}; Ctrl-C or SIGTERM stops and reports",
         file=sys.stderr,
         flush=True,
     )
+
+
+def robots_text(robots: int) -> str:
+    """``1 robot``, ``3 robots``."""
+    return f"{robots} robot{'' if robots == 1 else 's'}"
