@@ -75,6 +75,7 @@ class EncoderInput:
         self._reception = reception
         self.max_wheel_speed_mm_s = max_wheel_speed_mm_s
         self._counter_bits = odometry.consts.counter_bits  # u8: the counters' width (16 or 32)
+        self._count_half = 1 << (self._counter_bits - 1)  # u32: half the counters' range
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS  # wider than the wire's
         self._wire_unused_mask = self._unused_wire_bits()  # u32: wire bits a counter never sets
         self._max_counts_per_period = self.step_bounds()
@@ -149,7 +150,9 @@ class EncoderInput:
             since_sample = STEP_PERIODS_MAX
         self._periods_since_sample = since_sample
         self._tick_late = periods - 1 if periods > 0 else 0  # its frames may have queued so long
-        stale = self._samples_stale or self._mailbox_dropped()
+        stale = (  # or _mailbox_dropped(), in line: once a tick
+            self._samples_stale or self._overflows_at_accept != self._health.overflows_before
+        )
         widen = COUNTER_MASK if stale or periods > COUNTER_MASK else periods
         self.rx.new_periods(widen)  # C: one saturating add, as ``widen`` calls of new_period
         self.tick_budget = since_sample
@@ -172,7 +175,9 @@ class EncoderInput:
         wire = (left, right)
         counts = self._extend_counters(wire) if self._wide_counters else wire
         self._uptime_now = uptime
-        if self._controller_restarted(uptime, wire, counter):
+        # A saturated CTRL_UPTIME (the controller up 15 s or more: nearly every frame) is never
+        # below ``_aged_uptime`` (at most CTRL_UPTIME_MAX): no restart, the test not run.
+        if uptime != CTRL_UPTIME_MAX and self._controller_restarted(uptime, wire, counter):
             self._reprime(counter, wire, counts)
             return
         advance = self._counter_advance(counter)
@@ -319,11 +324,14 @@ class EncoderInput:
         most 2^16 * 2^32) since ``prev`` (None: nothing to compare, plausible)."""
         if prev is None:
             return True
-        bits = self._counter_bits
+        # wrap_signed(now - prev, bits) in line: (int16_t)(uint16_t) or (int32_t)(uint32_t)
+        half = self._count_half
+        mask = half + half - 1
+        d_left = ((counts[0] - prev[0] + half) & mask) - half
+        d_right = ((counts[1] - prev[1] + half) & mask) - half
         left_max, right_max = self._max_counts_per_period
-        d_left = wrap_signed(counts[0] - prev[0], bits)
-        d_right = wrap_signed(counts[1] - prev[1], bits)
-        return abs(d_left) <= periods * left_max and abs(d_right) <= periods * right_max
+        bound_left, bound_right = periods * left_max, periods * right_max  # |d| <= bound
+        return -bound_left <= d_left <= bound_left and -bound_right <= d_right <= bound_right
 
     def _on_implausible(self, counter: int, wire: Counts, counts: Counts) -> None:
         """Refuse the step (DEGRADED, IMPLAUSIBLE_STEP); ``RESYNC_FRAMES`` refused frames in a row
@@ -434,6 +442,7 @@ class EncoderInput:
             self._wire_prev = None
             self._counts_prev = None
         self._counter_bits = self._odometry.consts.counter_bits
+        self._count_half = 1 << (self._counter_bits - 1)
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS
         self._wire_unused_mask = self._unused_wire_bits()
         self._max_counts_per_period = self.step_bounds()

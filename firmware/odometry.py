@@ -63,6 +63,10 @@ SERIES_SHORT_LIMIT_Q60 = 1 << 57  # |u| <= 1/8 rad: three series terms suffice
 SINC_DENOMINATORS = (6, 20, 42, 72, 110, 156, 210, 272)
 _SINC_HORNER_SHORT = SINC_DENOMINATORS[2::-1]  # Horner's order (innermost first): three terms
 _SINC_HORNER_LONG = SINC_DENOMINATORS[::-1]  # all eight
+# Each series as (innermost denominator, the outer ones): no tuple sliced per step.
+_SINC_SHORT_INNER, _SINC_LONG_INNER = _SINC_HORNER_SHORT[0], _SINC_HORNER_LONG[0]
+_SINC_SHORT_OUTER: tuple[int, ...] = _SINC_HORNER_SHORT[1:]
+_SINC_LONG_OUTER: tuple[int, ...] = _SINC_HORNER_LONG[1:]
 SPIN_LIMIT_Q49 = 1 << 8  # |dS| < 2^-41 m: below half an LSB of x (spin-in-place case)
 Q49_TO_Q40_SHIFT = 9
 DS_COS_TO_Q40_SHIFT = 39  # Q49 * Q30 = Q79 -> Q40
@@ -223,11 +227,14 @@ def chord_factor_q62(dheading_bam64: int) -> int:
     if u_q60 < STRAIGHT_LIMIT_Q60:
         return ONE_Q62
     u2_q60 = mul_round_i64(u_q60, u_q60, 60)
-    denominators = _SINC_HORNER_SHORT if u_q60 <= SERIES_SHORT_LIMIT_Q60 else _SINC_HORNER_LONG
+    if u_q60 <= SERIES_SHORT_LIMIT_Q60:
+        inner, outer = _SINC_SHORT_INNER, _SINC_SHORT_OUTER
+    else:
+        inner, outer = _SINC_LONG_INNER, _SINC_LONG_OUTER
     # The innermost term's product is u^2 * 1.0, i.e. u^2 itself (floor(u2 * 2^60 / 2^60) is
     # exact): taken as it is, the rest by ``mul_shr_i64`` (the C port's loop gives the same).
-    acc_q60 = ONE_Q60 - u2_q60 // denominators[0]
-    for denominator in denominators[1:]:
+    acc_q60 = ONE_Q60 - u2_q60 // inner
+    for denominator in outer:
         acc_q60 = ONE_Q60 - mul_shr_i64(u2_q60, acc_q60, 60) // denominator
     return acc_q60 << 2
 
