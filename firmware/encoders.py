@@ -35,7 +35,7 @@ from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
 from odocan.firmware.e2e import COUNTER_MASK, FRAME_LEN, E2EReceiver, p02_crc
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.fixmath import U16_MAX, U32_MAX, muldiv_round_u64, wrap_signed, wrap_u32
-from odocan.firmware.health import Health
+from odocan.firmware.health import RECOVERY_FRAMES, Health
 from odocan.firmware.odometry import Odometry
 from odocan.firmware.reception import Reception
 from odocan.firmware.twist import ENCODER_PERIOD_US, Twist
@@ -51,7 +51,8 @@ CTRL_UPTIME_MAX = 15  # CTRL_UPTIME saturates here (u4)
 RESTART_SLACK_PERIODS = 16  # periods two frames' queueing may shorten the gap between samples
 
 Counts = tuple[int, int]  # (left, right) counter values
-_FAULT = State.FAULT  # the enumerator as a module constant (a 3.11 enum attribute read: ~0.14 us)
+_FAULT = State.FAULT  # the enumerators as module constants (a 3.11 enum attribute read: ~0.14 us)
+_INIT = State.INIT
 
 
 class EncoderInput:
@@ -226,7 +227,8 @@ class EncoderInput:
             self._periods_since_sample = 0
         self._overflows_at_accept = health.overflows_before
         self._dropped_at_accept = self._dropped_before
-        health.encoder_accepted()
+        if health.good_in_a_row < RECOVERY_FRAMES or health.state is _INIT:  # else a no-op
+            health.encoder_accepted()
 
     def _extend_counters(self, wire: Counts) -> Counts:
         """The hardware counters from their low 24 bits on the wire (nothing is stored).

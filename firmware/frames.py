@@ -23,7 +23,7 @@ from enum import IntEnum
 from typing import Final, NamedTuple
 
 from odocan.firmware.config import Integrator
-from odocan.firmware.e2e import COUNTER_MASK, DATA_ID_COUNT, p02_crc
+from odocan.firmware.e2e import COUNTER_MASK, DATA_ID_COUNT, p02_seal
 from odocan.firmware.errors import ErrorMask, Reason
 from odocan.firmware.fixmath import (
     I16_MAX,
@@ -213,15 +213,12 @@ class OdomAuth(NamedTuple):
 
 
 # --- the E2E header ---
+seal_frame = p02_seal  # the frame of a word with its Profile 2 CRC in byte 0 (firmware.e2e)
+
+
 def e2e_head(counter: int, nibble: int) -> u64:
     """Bits 8..15 of the word: COUNTER (bits 8-11) and byte 1's high nibble (bits 12-15)."""
     return ((nibble & U4_MAX) << 12) | ((counter & COUNTER_MASK) << 8)
-
-
-def seal_frame(word: u64, data_ids: tuple[u8, ...]) -> bytes:
-    """The frame of ``word`` (CHECKSUM bits still 0) with its Profile 2 CRC in byte 0."""
-    crc = p02_crc(word.to_bytes(8, "little"), data_ids[(word >> 8) & COUNTER_MASK])
-    return (word | crc).to_bytes(8, "little")
 
 
 def frame_word(data: bytes | bytearray) -> u64:

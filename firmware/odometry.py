@@ -80,6 +80,7 @@ class Odometry:
     __slots__ = (
         "_consts",
         "_count_half",
+        "_delta_fits",
         "_errors",
         "_left_prev",
         "_primed",
@@ -97,6 +98,7 @@ class Odometry:
     def __init__(self, consts: OdomConstants, errors: ErrorMask) -> None:
         self._consts = consts
         self._count_half = 1 << (consts.counter_bits - 1)  # half the counters' range
+        self._delta_fits = _delta_fits(consts)
         self._errors = errors
         self._primed = False
         self._left_prev = 0
@@ -119,6 +121,7 @@ class Odometry:
         """Use new constants from the next step on; the pose and the counter history are kept."""
         self._consts = consts
         self._count_half = 1 << (consts.counter_bits - 1)
+        self._delta_fits = _delta_fits(consts)
 
     def set_pose(self, x_q40_m: int, y_q40_m: int, heading_bam64: int) -> None:
         """Overwrite the pose (``ODOM_SET_POSE``); distance travelled and counters are kept."""
@@ -154,12 +157,15 @@ class Odometry:
         """Integrate one step of count deltas (i32 each) with the configured integrator."""
         c = self._consts
         errors = self._errors
-        ds_q49_m = (  # i32 x i64 products (up to 2^83 for a wild 32-bit step), saturated
-            mul_sat_i64(d_left, c.m_per_count_left_q48_m, errors)
-            + mul_sat_i64(d_right, c.m_per_count_right_q48_m, errors)
-        )
-        if not I64_MIN <= ds_q49_m <= I64_MAX:  # ``_sat``'s test first (the sum rarely leaves)
-            ds_q49_m = _sat(ds_q49_m, errors)
+        fits = self._delta_fits
+        if -fits <= d_left <= fits and -fits <= d_right <= fits:  # products and sum fit i64
+            ds_q49_m = d_left * c.m_per_count_left_q48_m + d_right * c.m_per_count_right_q48_m
+        else:  # i32 x i64 products (up to 2^83 for a wild 32-bit step), saturated, as the sum
+            ds_q49_m = _sat(
+                mul_sat_i64(d_left, c.m_per_count_left_q48_m, errors)
+                + mul_sat_i64(d_right, c.m_per_count_right_q48_m, errors),
+                errors,
+            )
         dheading = mul_sub_wrap_i64(  # exact mod 2^64, read as i64
             d_right, c.bam64_per_count_right, d_left, c.bam64_per_count_left
         )
@@ -237,6 +243,14 @@ def chord_factor_q62(dheading_bam64: int) -> int:
     for denominator in outer:
         acc_q60 = ONE_Q60 - mul_shr_i64(u2_q60, acc_q60, 60) // denominator
     return acc_q60 << 2
+
+
+def _delta_fits(consts: OdomConstants) -> int:
+    """The largest count delta (u32) whose product with either wheel's travel per count fits
+    2^62 (< 2^62 each: their sum fits i64): up to it neither ``mul_sat_i64`` nor the sum's
+    saturation can clamp, the plain 64-bit products give the same (C: two compares instead of
+    two 128-bit products). Configuration time: one u64 division."""
+    return ((1 << 62) - 1) // max(consts.m_per_count_left_q48_m, consts.m_per_count_right_q48_m, 1)
 
 
 def _scale_q62(value: int, factor_q62: int) -> int:
