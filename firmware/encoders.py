@@ -58,6 +58,47 @@ _INIT = State.INIT
 class EncoderInput:
     """The WHEEL_ENCODERS receiver: E2E state, the counters' base, plausibility and restarts."""
 
+    # Fixed fields (C: the struct; 35 would outgrow CPython 3.11's shared-key instance dicts and
+    # every read would be a dict lookup); ``__dict__`` kept for tests that plant a method.
+    __slots__ = (
+        "__dict__",
+        "_clock",
+        "_count_half",
+        "_counter_bits",
+        "_counts_prev",
+        "_counts_u32",
+        "_dropped_at_accept",
+        "_dropped_before",
+        "_dropped_seen",
+        "_enc_prev_counter",
+        "_errors",
+        "_health",
+        "_max_counts_per_period",
+        "_odometry",
+        "_overflows_at_accept",
+        "_periods_since_sample",
+        "_reception",
+        "_resync_first",
+        "_resync_frames",
+        "_resync_last",
+        "_samples_stale",
+        "_this_step_periods",
+        "_tick_late",
+        "_twist",
+        "_uptime_now",
+        "_uptime_prev",
+        "_wide_counters",
+        "_wire_prev",
+        "_wire_unused_mask",
+        "enc_counter",
+        "frames_dropped",
+        "frames_implausible",
+        "max_wheel_speed_mm_s",
+        "periods_since_frame",
+        "rx",
+        "tick_budget",
+    )
+
     def __init__(
         self,
         odometry: Odometry,

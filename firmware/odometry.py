@@ -156,25 +156,13 @@ class Odometry:
     def step_deltas(self, d_left: int, d_right: int) -> None:
         """Integrate one step of count deltas (i32 each) with the configured integrator."""
         c = self._consts
-        errors = self._errors
         fits = self._delta_fits
-        if -fits <= d_left <= fits and -fits <= d_right <= fits:  # products and sum fit i64
+        if -fits <= d_left <= fits and -fits <= d_right <= fits:  # products and sums fit i64
             ds_q49_m = d_left * c.m_per_count_left_q48_m + d_right * c.m_per_count_right_q48_m
-        else:  # i32 x i64 products (up to 2^83 for a wild 32-bit step), saturated, as the sum
-            ds_q49_m = _sat(
-                mul_sat_i64(d_left, c.m_per_count_left_q48_m, errors)
-                + mul_sat_i64(d_right, c.m_per_count_right_q48_m, errors),
-                errors,
-            )
-        dheading = mul_sub_wrap_i64(  # exact mod 2^64, read as i64
-            d_right, c.bam64_per_count_right, d_left, c.bam64_per_count_left
-        )
-        # The high word of the exact difference (< 2^93): the whole turns beyond the signed read
-        # (``turns``, |.| < 2^29), non-zero only for a step turning more than half a turn.
-        dheading_hi = mul_add_hi_i64(
-            d_right, c.bam64_per_count_right, -d_left, c.bam64_per_count_left
-        )
-        turns = dheading_hi + 1 if dheading < 0 else dheading_hi
+            dheading = d_right * c.bam64_per_count_right - d_left * c.bam64_per_count_left
+            turns = dheading_hi = 0  # |dheading| < 2^63: no whole turn (the high word unused)
+        else:
+            ds_q49_m, dheading, dheading_hi, turns = self._wide_step(d_left, d_right)
         heading_old = self.heading_bam64
         heading_sum = heading_old + dheading
         self.heading_bam64 = heading_sum & U64_MAX
@@ -205,6 +193,28 @@ class Odometry:
         elif turns & 1:  # RK2: each whole turn beyond the signed read moves the midpoint by pi
             midpoint_bam64 ^= HALF_TURN_BAM64
         self._advance(ds_q49_m, midpoint_bam64)
+
+    def _wide_step(self, d_left: int, d_right: int) -> tuple[int, int, int, int]:
+        """``step_deltas``' products for deltas beyond ``_delta_fits`` (a wild or long step):
+        (dS Q49 saturated to i64, dtheta BAM64 read as i64, the high word of dtheta's exact
+        value, the whole turns beyond the signed read)."""
+        c = self._consts
+        errors = self._errors
+        ds_q49_m = _sat(  # i32 x i64 products (up to 2^83 for a wild 32-bit step), saturated
+            mul_sat_i64(d_left, c.m_per_count_left_q48_m, errors)
+            + mul_sat_i64(d_right, c.m_per_count_right_q48_m, errors),
+            errors,
+        )
+        dheading = mul_sub_wrap_i64(  # exact mod 2^64, read as i64
+            d_right, c.bam64_per_count_right, d_left, c.bam64_per_count_left
+        )
+        # The high word of the exact difference (< 2^93): the whole turns beyond the signed read
+        # (``turns``, |.| < 2^29), non-zero only for a step turning more than half a turn.
+        dheading_hi = mul_add_hi_i64(
+            d_right, c.bam64_per_count_right, -d_left, c.bam64_per_count_left
+        )
+        turns = dheading_hi + 1 if dheading < 0 else dheading_hi
+        return ds_q49_m, dheading, dheading_hi, turns
 
     def _advance(self, ds_q49_m: int, direction_bam64: int) -> None:
         """x += dS cos(direction), y += dS sin(direction); direction rounded to BAM32 for sincos.
@@ -246,11 +256,19 @@ def chord_factor_q62(dheading_bam64: int) -> int:
 
 
 def _delta_fits(consts: OdomConstants) -> int:
-    """The largest count delta (u32) whose product with either wheel's travel per count fits
-    2^62 (< 2^62 each: their sum fits i64): up to it neither ``mul_sat_i64`` nor the sum's
-    saturation can clamp, the plain 64-bit products give the same (C: two compares instead of
-    two 128-bit products). Configuration time: one u64 division."""
-    return ((1 << 62) - 1) // max(consts.m_per_count_left_q48_m, consts.m_per_count_right_q48_m, 1)
+    """The largest count delta (u32) whose products with either wheel's travel and heading per
+    count stay below 2^62 (their sum and difference then fit i64): up to it ``mul_sat_i64`` and
+    the sum's saturation cannot clamp, ``mul_sub_wrap_i64`` does not wrap and the high word of
+    dtheta is its sign (no whole turn), so plain 64-bit products give the same (C: four compares
+    instead of four 128-bit products). Configuration time: one u64 division."""
+    largest = max(
+        consts.m_per_count_left_q48_m,
+        consts.m_per_count_right_q48_m,
+        consts.bam64_per_count_left,
+        consts.bam64_per_count_right,
+        1,
+    )
+    return ((1 << 62) - 1) // largest
 
 
 def _scale_q62(value: int, factor_q62: int) -> int:
