@@ -185,10 +185,10 @@ class OdomEcu:
     def _drain_mailbox(self) -> None:
         """Steps 1-3: every frame in arrival order, to its handler."""
         encoder_seen = False
-        get = self.mailbox.get
-        frame = get()
-        while frame is not None:
-            can_id, data = frame
+        mailbox = self.mailbox
+        get = mailbox.get
+        while mailbox.count:  # C: while (mailbox.count != 0u)
+            can_id, data = get()
             if can_id == _WHEEL_ENCODERS_ID:
                 encoder_seen = True
                 self.encoders.on_frame(data)
@@ -202,7 +202,6 @@ class OdomEcu:
                 self.auth.on_auth(data)
             else:
                 self.frames_filtered = (self.frames_filtered + 1) & U32_MAX  # (uint32_t)
-            frame = get()
         if not encoder_seen:
             self.encoders.no_frame()
 
@@ -210,12 +209,13 @@ class OdomEcu:
         """Step 4 (every NAV_PERIOD_TICKS): navigation from the on-board pose; True when it
         decided a MOTOR_CMD."""
         odo = self.odometry
+        consts = odo.consts
         return self.nav.step(
             odo.x_q40_m,
             odo.y_q40_m,
             odo.heading_bam64,
             self.params.wheelbase_nm,
-            max(odo.consts.bam64_per_count_left, odo.consts.bam64_per_count_right),
+            max(consts.bam64_per_count_left, consts.bam64_per_count_right),
             self.health.state is _OK,
         )
 

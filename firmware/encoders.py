@@ -37,7 +37,7 @@ from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
 from odocan.firmware.e2e import COUNTER_MASK, FRAME_LEN, E2EReceiver, p02_crc
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.fixmath import U16_MAX, U32_MAX, muldiv_round_u64, wrap_signed, wrap_u32
-from odocan.firmware.health import Health
+from odocan.firmware.health import RECOVERY_FRAMES, Health
 from odocan.firmware.odometry import Odometry
 from odocan.firmware.reception import Reception
 from odocan.firmware.restarthold import RestartHold
@@ -54,11 +54,53 @@ CTRL_UPTIME_MAX = 15  # CTRL_UPTIME saturates here (u4)
 RESTART_SLACK_PERIODS = 16  # periods two frames' queueing may shorten the gap between samples
 
 Counts = tuple[int, int]  # (left, right) counter values
-_FAULT = State.FAULT  # the enumerator as a module constant (a 3.11 enum attribute read: ~0.14 us)
+_FAULT = State.FAULT  # the enumerators as module constants (a 3.11 enum attribute read: ~0.14 us)
+_INIT = State.INIT
 
 
 class EncoderInput:
     """The WHEEL_ENCODERS receiver: E2E state, the counters' base, plausibility and restarts."""
+
+    # Fixed fields (C: the struct; 35 would outgrow CPython 3.11's shared-key instance dicts and
+    # every read would be a dict lookup); ``__dict__`` kept for tests that plant a method.
+    __slots__ = (
+        "__dict__",
+        "_clock",
+        "_count_half",
+        "_counter_bits",
+        "_counts_prev",
+        "_counts_u32",
+        "_dropped_at_accept",
+        "_dropped_before",
+        "_dropped_seen",
+        "_enc_prev_counter",
+        "_errors",
+        "_health",
+        "_max_counts_per_period",
+        "_odometry",
+        "_overflows_at_accept",
+        "_periods_since_sample",
+        "_reception",
+        "_resync_first",
+        "_resync_frames",
+        "_resync_last",
+        "_samples_stale",
+        "_this_step_periods",
+        "_tick_late",
+        "_twist",
+        "_uptime_now",
+        "_uptime_prev",
+        "_wide_counters",
+        "_wire_prev",
+        "_wire_unused_mask",
+        "enc_counter",
+        "frames_dropped",
+        "frames_implausible",
+        "max_wheel_speed_mm_s",
+        "periods_since_frame",
+        "rx",
+        "tick_budget",
+    )
 
     def __init__(
         self,
@@ -78,6 +120,7 @@ class EncoderInput:
         self._reception = reception
         self.max_wheel_speed_mm_s = max_wheel_speed_mm_s
         self._counter_bits = odometry.consts.counter_bits  # u8: the counters' width (16 or 32)
+        self._count_half = 1 << (self._counter_bits - 1)  # u32: half the counters' range
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS  # wider than the wire's
         self._wire_unused_mask = self._unused_wire_bits()  # u32: wire bits a counter never sets
         self._max_counts_per_period = self.step_bounds()
@@ -153,7 +196,9 @@ class EncoderInput:
             since_sample = STEP_PERIODS_MAX
         self._periods_since_sample = since_sample
         self._tick_late = periods - 1 if periods > 0 else 0  # its frames may have queued so long
-        stale = self._samples_stale or self._mailbox_dropped()
+        stale = (  # or _mailbox_dropped(), in line: once a tick
+            self._samples_stale or self._overflows_at_accept != self._health.overflows_before
+        )
         widen = COUNTER_MASK if stale or periods > COUNTER_MASK else periods
         self.rx.new_periods(widen)  # C: one saturating add, as ``widen`` calls of new_period
         self.tick_budget = since_sample
@@ -178,7 +223,9 @@ class EncoderInput:
         self._uptime_now = uptime
         if self._hold.held:
             counts = self._release_held(counter, wire, counts)
-        if self._controller_restarted(uptime, wire, counter):
+        # A saturated CTRL_UPTIME (the controller up 15 s or more: nearly every frame) is never
+        # below ``_aged_uptime`` (at most CTRL_UPTIME_MAX): no restart, the test not run.
+        if uptime != CTRL_UPTIME_MAX and self._controller_restarted(uptime, wire, counter):
             self._hold.hold(counter, wire, uptime)  # taken when the next frame confirms it
             return
         advance = self._counter_advance(counter)
@@ -227,7 +274,8 @@ class EncoderInput:
             self._periods_since_sample = 0
         self._overflows_at_accept = health.overflows_before
         self._dropped_at_accept = self._dropped_before
-        health.encoder_accepted()
+        if health.good_in_a_row < RECOVERY_FRAMES or health.state is _INIT:  # else a no-op
+            health.encoder_accepted()
 
     def _extend_counters(self, wire: Counts) -> Counts:
         """The hardware counters from their low 24 bits on the wire (nothing is stored).
@@ -326,11 +374,14 @@ class EncoderInput:
         most 2^16 * 2^32) since ``prev`` (None: nothing to compare, plausible)."""
         if prev is None:
             return True
-        bits = self._counter_bits
+        # wrap_signed(now - prev, bits) in line: (int16_t)(uint16_t) or (int32_t)(uint32_t)
+        half = self._count_half
+        mask = half + half - 1
+        d_left = ((counts[0] - prev[0] + half) & mask) - half
+        d_right = ((counts[1] - prev[1] + half) & mask) - half
         left_max, right_max = self._max_counts_per_period
-        d_left = wrap_signed(counts[0] - prev[0], bits)
-        d_right = wrap_signed(counts[1] - prev[1], bits)
-        return abs(d_left) <= periods * left_max and abs(d_right) <= periods * right_max
+        bound_left, bound_right = periods * left_max, periods * right_max  # |d| <= bound
+        return -bound_left <= d_left <= bound_left and -bound_right <= d_right <= bound_right
 
     def _on_implausible(self, counter: int, wire: Counts, counts: Counts) -> None:
         """Refuse the step (DEGRADED, IMPLAUSIBLE_STEP); ``RESYNC_FRAMES`` refused frames in a row
@@ -462,6 +513,7 @@ class EncoderInput:
             self._counts_prev = None
             self._hold.held = False
         self._counter_bits = self._odometry.consts.counter_bits
+        self._count_half = 1 << (self._counter_bits - 1)
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS
         self._wire_unused_mask = self._unused_wire_bits()
         self._max_counts_per_period = self.step_bounds()

@@ -23,7 +23,7 @@ from enum import IntEnum
 from typing import Final, NamedTuple
 
 from odocan.firmware.config import Integrator
-from odocan.firmware.e2e import COUNTER_MASK, DATA_ID_COUNT, p02_crc
+from odocan.firmware.e2e import COUNTER_MASK, DATA_ID_COUNT, p02_seal
 from odocan.firmware.errors import ErrorMask, Reason
 from odocan.firmware.fixmath import (
     I16_MAX,
@@ -213,15 +213,12 @@ class OdomAuth(NamedTuple):
 
 
 # --- the E2E header ---
+seal_frame = p02_seal  # the frame of a word with its Profile 2 CRC in byte 0 (firmware.e2e)
+
+
 def e2e_head(counter: int, nibble: int) -> u64:
     """Bits 8..15 of the word: COUNTER (bits 8-11) and byte 1's high nibble (bits 12-15)."""
     return ((nibble & U4_MAX) << 12) | ((counter & COUNTER_MASK) << 8)
-
-
-def seal_frame(word: u64, data_ids: tuple[u8, ...]) -> bytes:
-    """The frame of ``word`` (CHECKSUM bits still 0) with its Profile 2 CRC in byte 0."""
-    crc = p02_crc(word.to_bytes(8, "little"), data_ids[(word >> 8) & COUNTER_MASK])
-    return (word | crc).to_bytes(8, "little")
 
 
 def frame_word(data: bytes | bytearray) -> u64:
@@ -254,8 +251,8 @@ def unpack_wheel_encoders(data: bytes | bytearray) -> WheelEncoders:
 def unpack_wheel_encoders_fields(data: bytes | bytearray) -> tuple[int, int, int, int]:
     """``unpack_wheel_encoders`` as a plain tuple (counter, left_count, right_count,
     ctrl_uptime_s): the firmware's read of every frame (building the record costs ~0.3 us more
-    in CPython; C: the same struct)."""
-    w = frame_word(data)
+    in CPython; C: the same struct). ``frame_word`` in line: every encoder frame."""
+    w = int.from_bytes(data, "little")
     return (w >> 8) & U4_MAX, (w >> 16) & U24_MAX, (w >> 40) & U24_MAX, (w >> 12) & U4_MAX
 
 
@@ -339,15 +336,15 @@ def pack_motor_cmd(
 
 
 # --- ODOM_POSE_X / ODOM_POSE_Y / ODOM_TWIST (ODOM_MCU -> HOST; 20 ms) ---
+# Sent every 20 ms: the header and the fields in range are packed in line (e2e_head, wrap_u16,
+# i32_field's and _i16_field's casts: C's static inline functions); out of range, the helpers.
 def pack_odom_pose_x(
     counter: int, enc_counter: int, x_100um: int, heading_bam16: int, errors: ErrorMask
 ) -> bytes:
     """ODOM_POSE_X: x (0.1 mm, saturated to i32) and heading (u16 binary angle, wraps)."""
-    word = (
-        e2e_head(counter, enc_counter)
-        | (i32_field(x_100um, errors) << 16)
-        | (wrap_u16(heading_bam16) << 48)
-    )
+    x_raw = x_100um & U32_MAX if I32_MIN <= x_100um <= I32_MAX else i32_field(x_100um, errors)
+    head = ((enc_counter & U4_MAX) << 12) | ((counter & COUNTER_MASK) << 8)
+    word = head | (x_raw << 16) | ((heading_bam16 & U16_MAX) << 48)
     return seal_frame(word, ODOM_POSE_X_DATA_IDS)
 
 
@@ -355,11 +352,9 @@ def pack_odom_pose_y(
     counter: int, enc_counter: int, y_100um: int, turns: int, errors: ErrorMask
 ) -> bytes:
     """ODOM_POSE_Y: y (0.1 mm, saturated to i32) and whole heading turns (i16, wraps)."""
-    word = (
-        e2e_head(counter, enc_counter)
-        | (i32_field(y_100um, errors) << 16)
-        | (wrap_u16(turns) << 48)
-    )
+    y_raw = y_100um & U32_MAX if I32_MIN <= y_100um <= I32_MAX else i32_field(y_100um, errors)
+    head = ((enc_counter & U4_MAX) << 12) | ((counter & COUNTER_MASK) << 8)
+    word = head | (y_raw << 16) | ((turns & U16_MAX) << 48)
     return seal_frame(word, ODOM_POSE_Y_DATA_IDS)
 
 
@@ -372,12 +367,11 @@ def pack_odom_twist(
     errors: ErrorMask,
 ) -> bytes:
     """ODOM_TWIST: velocities saturated to i16; distance (mm, any width) keeps its low 16 bits."""
-    word = (
-        e2e_head(counter, enc_counter)
-        | (_i16_field(linear_vel_mm_s, errors) << 16)
-        | (_i16_field(angular_vel_mrad_s, errors) << 32)
-        | (wrap_u16(distance_mm) << 48)
-    )
+    v, w = linear_vel_mm_s, angular_vel_mrad_s
+    v_raw = v & U16_MAX if I16_MIN <= v <= I16_MAX else _i16_field(v, errors)
+    w_raw = w & U16_MAX if I16_MIN <= w <= I16_MAX else _i16_field(w, errors)
+    head = ((enc_counter & U4_MAX) << 12) | ((counter & COUNTER_MASK) << 8)
+    word = head | (v_raw << 16) | (w_raw << 32) | ((distance_mm & U16_MAX) << 48)
     return seal_frame(word, ODOM_TWIST_DATA_IDS)
 
 

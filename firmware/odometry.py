@@ -63,6 +63,10 @@ SERIES_SHORT_LIMIT_Q60 = 1 << 57  # |u| <= 1/8 rad: three series terms suffice
 SINC_DENOMINATORS = (6, 20, 42, 72, 110, 156, 210, 272)
 _SINC_HORNER_SHORT = SINC_DENOMINATORS[2::-1]  # Horner's order (innermost first): three terms
 _SINC_HORNER_LONG = SINC_DENOMINATORS[::-1]  # all eight
+# Each series as (innermost denominator, the outer ones): no tuple sliced per step.
+_SINC_SHORT_INNER, _SINC_LONG_INNER = _SINC_HORNER_SHORT[0], _SINC_HORNER_LONG[0]
+_SINC_SHORT_OUTER: tuple[int, ...] = _SINC_HORNER_SHORT[1:]
+_SINC_LONG_OUTER: tuple[int, ...] = _SINC_HORNER_LONG[1:]
 SPIN_LIMIT_Q49 = 1 << 8  # |dS| < 2^-41 m: below half an LSB of x (spin-in-place case)
 Q49_TO_Q40_SHIFT = 9
 DS_COS_TO_Q40_SHIFT = 39  # Q49 * Q30 = Q79 -> Q40
@@ -76,6 +80,7 @@ class Odometry:
     __slots__ = (
         "_consts",
         "_count_half",
+        "_delta_fits",
         "_errors",
         "_left_prev",
         "_primed",
@@ -93,6 +98,7 @@ class Odometry:
     def __init__(self, consts: OdomConstants, errors: ErrorMask) -> None:
         self._consts = consts
         self._count_half = 1 << (consts.counter_bits - 1)  # half the counters' range
+        self._delta_fits = _delta_fits(consts)
         self._errors = errors
         self._primed = False
         self._left_prev = 0
@@ -115,6 +121,7 @@ class Odometry:
         """Use new constants from the next step on; the pose and the counter history are kept."""
         self._consts = consts
         self._count_half = 1 << (consts.counter_bits - 1)
+        self._delta_fits = _delta_fits(consts)
 
     def set_pose(self, x_q40_m: int, y_q40_m: int, heading_bam64: int) -> None:
         """Overwrite the pose (``ODOM_SET_POSE``); distance travelled and counters are kept."""
@@ -149,22 +156,13 @@ class Odometry:
     def step_deltas(self, d_left: int, d_right: int) -> None:
         """Integrate one step of count deltas (i32 each) with the configured integrator."""
         c = self._consts
-        errors = self._errors
-        ds_q49_m = (  # i32 x i64 products (up to 2^83 for a wild 32-bit step), saturated
-            mul_sat_i64(d_left, c.m_per_count_left_q48_m, errors)
-            + mul_sat_i64(d_right, c.m_per_count_right_q48_m, errors)
-        )
-        if not I64_MIN <= ds_q49_m <= I64_MAX:  # ``_sat``'s test first (the sum rarely leaves)
-            ds_q49_m = _sat(ds_q49_m, errors)
-        dheading = mul_sub_wrap_i64(  # exact mod 2^64, read as i64
-            d_right, c.bam64_per_count_right, d_left, c.bam64_per_count_left
-        )
-        # The high word of the exact difference (< 2^93): the whole turns beyond the signed read
-        # (``turns``, |.| < 2^29), non-zero only for a step turning more than half a turn.
-        dheading_hi = mul_add_hi_i64(
-            d_right, c.bam64_per_count_right, -d_left, c.bam64_per_count_left
-        )
-        turns = dheading_hi + 1 if dheading < 0 else dheading_hi
+        fits = self._delta_fits
+        if -fits <= d_left <= fits and -fits <= d_right <= fits:  # products and sums fit i64
+            ds_q49_m = d_left * c.m_per_count_left_q48_m + d_right * c.m_per_count_right_q48_m
+            dheading = d_right * c.bam64_per_count_right - d_left * c.bam64_per_count_left
+            turns = dheading_hi = 0  # |dheading| < 2^63: no whole turn (the high word unused)
+        else:
+            ds_q49_m, dheading, dheading_hi, turns = self._wide_step(d_left, d_right)
         heading_old = self.heading_bam64
         heading_sum = heading_old + dheading
         self.heading_bam64 = heading_sum & U64_MAX
@@ -196,6 +194,28 @@ class Odometry:
             midpoint_bam64 ^= HALF_TURN_BAM64
         self._advance(ds_q49_m, midpoint_bam64)
 
+    def _wide_step(self, d_left: int, d_right: int) -> tuple[int, int, int, int]:
+        """``step_deltas``' products for deltas beyond ``_delta_fits`` (a wild or long step):
+        (dS Q49 saturated to i64, dtheta BAM64 read as i64, the high word of dtheta's exact
+        value, the whole turns beyond the signed read)."""
+        c = self._consts
+        errors = self._errors
+        ds_q49_m = _sat(  # i32 x i64 products (up to 2^83 for a wild 32-bit step), saturated
+            mul_sat_i64(d_left, c.m_per_count_left_q48_m, errors)
+            + mul_sat_i64(d_right, c.m_per_count_right_q48_m, errors),
+            errors,
+        )
+        dheading = mul_sub_wrap_i64(  # exact mod 2^64, read as i64
+            d_right, c.bam64_per_count_right, d_left, c.bam64_per_count_left
+        )
+        # The high word of the exact difference (< 2^93): the whole turns beyond the signed read
+        # (``turns``, |.| < 2^29), non-zero only for a step turning more than half a turn.
+        dheading_hi = mul_add_hi_i64(
+            d_right, c.bam64_per_count_right, -d_left, c.bam64_per_count_left
+        )
+        turns = dheading_hi + 1 if dheading < 0 else dheading_hi
+        return ds_q49_m, dheading, dheading_hi, turns
+
     def _advance(self, ds_q49_m: int, direction_bam64: int) -> None:
         """x += dS cos(direction), y += dS sin(direction); direction rounded to BAM32 for sincos.
 
@@ -223,13 +243,32 @@ def chord_factor_q62(dheading_bam64: int) -> int:
     if u_q60 < STRAIGHT_LIMIT_Q60:
         return ONE_Q62
     u2_q60 = mul_round_i64(u_q60, u_q60, 60)
-    denominators = _SINC_HORNER_SHORT if u_q60 <= SERIES_SHORT_LIMIT_Q60 else _SINC_HORNER_LONG
+    if u_q60 <= SERIES_SHORT_LIMIT_Q60:
+        inner, outer = _SINC_SHORT_INNER, _SINC_SHORT_OUTER
+    else:
+        inner, outer = _SINC_LONG_INNER, _SINC_LONG_OUTER
     # The innermost term's product is u^2 * 1.0, i.e. u^2 itself (floor(u2 * 2^60 / 2^60) is
     # exact): taken as it is, the rest by ``mul_shr_i64`` (the C port's loop gives the same).
-    acc_q60 = ONE_Q60 - u2_q60 // denominators[0]
-    for denominator in denominators[1:]:
+    acc_q60 = ONE_Q60 - u2_q60 // inner
+    for denominator in outer:
         acc_q60 = ONE_Q60 - mul_shr_i64(u2_q60, acc_q60, 60) // denominator
     return acc_q60 << 2
+
+
+def _delta_fits(consts: OdomConstants) -> int:
+    """The largest count delta (u32) whose products with either wheel's travel and heading per
+    count stay below 2^62 (their sum and difference then fit i64): up to it ``mul_sat_i64`` and
+    the sum's saturation cannot clamp, ``mul_sub_wrap_i64`` does not wrap and the high word of
+    dtheta is its sign (no whole turn), so plain 64-bit products give the same (C: four compares
+    instead of four 128-bit products). Configuration time: one u64 division."""
+    largest = max(
+        consts.m_per_count_left_q48_m,
+        consts.m_per_count_right_q48_m,
+        consts.bam64_per_count_left,
+        consts.bam64_per_count_right,
+        1,
+    )
+    return ((1 << 62) - 1) // largest
 
 
 def _scale_q62(value: int, factor_q62: int) -> int:

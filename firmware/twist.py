@@ -14,7 +14,7 @@ from __future__ import annotations
 from odocan.firmware.config import ENCODER_PERIOD_US as ENCODER_PERIOD_US
 from odocan.firmware.config import TWO_PI_Q60
 from odocan.firmware.errors import ErrorMask
-from odocan.firmware.fixmath import U16_MAX, div_round_i64, mul_shr_round_i64, sat_range
+from odocan.firmware.fixmath import U16_MAX, mul_shr_round_i64, sat_range
 from odocan.firmware.odometry import Odometry
 
 TWO_PI_Q30 = (TWO_PI_Q60 + (1 << 29)) >> 30  # one turn in Q30 rad (< 2^33)
@@ -74,8 +74,13 @@ class Twist:
         """Speeds over this tick's steps, which cover ``periods`` (1 .. PERIODS_MAX). Products
         < 2^32 * 10^9 < 2^63. The sums restart."""
         dt_us = periods * ENCODER_PERIOD_US
-        self.linear_mm_s = div_round_i64(self.tick_ds_q20_m * 1_000_000_000, dt_us << 20)
-        self.angular_mrad_s = div_round_i64(self.tick_dheading_q30_rad * 1_000_000_000, dt_us << 30)
+        # div_round_i64 in line (every tick with steps): |num| + half rounded down, signed back
+        num, den = self.tick_ds_q20_m * 1_000_000_000, dt_us << 20
+        speed = (abs(num) + (den >> 1)) // den
+        self.linear_mm_s = speed if num >= 0 else -speed
+        num, den = self.tick_dheading_q30_rad * 1_000_000_000, dt_us << 30
+        speed = (abs(num) + (den >> 1)) // den
+        self.angular_mrad_s = speed if num >= 0 else -speed
         self.tick_ds_q20_m = 0
         self.tick_dheading_q30_rad = 0
         self.steps = 0
