@@ -186,7 +186,7 @@ class _Robot:
             raise CommandRejected(
                 f"bridge busy: {self.pacer.max_queued} commands already wait for the bus: "
                 "not run", command.cmd_id)
-        answers = self.pacer.pump(time.monotonic())
+        answers = self.pacer.send_now(time.monotonic())
         if not _refused(answers, command):
             self._stage(command)
         return answers

@@ -96,6 +96,13 @@ class CommandPacer:
         self._send_more(now_s, answers)
         return answers
 
+    def send_now(self, now_s: float) -> list[Publication]:
+        """The frames the window takes now (a command just taken): only the answers of
+        commands the bus refused; timeouts and expiries are ``pump``'s."""
+        answers: list[Publication] = []
+        self._send_more(now_s, answers)
+        return answers
+
     def _release(self, published: list[Publication]) -> None:
         """Free the slots of frames whose ODOM_ACK came (their PendingAck left the telemetry's
         ``pending``); a final answer published for a command ends it."""
