@@ -15,11 +15,12 @@ robot's ``RobotLink``, ``slice_frames`` frames at a time with a loop turn betwee
 large fleet's tick never holds the loop for long); ``periodic`` publishes ``status`` and
 ``rates``, the robots' turns spread over the period (``PERIODIC_SLOTS`` groups); each link
 runs its own connection. Commands are validated by the robot's ``CommandEncoder`` and only then
-sent on the robot's bus; each one is answered on ``cmd/result`` (accepted, rejected with the
-reason, expired). No frame and no command can stop
-the bridge: a handler that raises anyway is counted (``frames_failed``, ``commands_failed``) and
-logged once. ``rates`` carries each link's counters
-(``link``: telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects).
+sent on the robot's bus, paced (``host.mqtt.pacing``: a window of frames un-answered, the rest
+queued); each one is answered on ``cmd/result`` (accepted, rejected with the reason, expired),
+then once more with its end (acked, nacked, expired, rejected, timeout). No frame and no
+command can stop the bridge: a handler that raises anyway is counted (``frames_failed``,
+``commands_failed``) and logged once. ``rates`` carries each link's counters (``link``:
+telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects).
 """
 
 from __future__ import annotations
