@@ -37,20 +37,24 @@ class SetPoseFollower:
     def __init__(self) -> None:
         self.staged: dict[str, float] = {}  # X m, Y m, HEADING rad, as ACKed
         self._sent: dict[int, tuple[str, float]] = {}  # by E2E COUNTER: field, value heard
-        self._apply: tuple[int, int] | None = None  # APPLY's COUNTER, the encoder seq then
+        # the APPLYs heard, not answered yet: COUNTER -> the encoder seq then (a paced burst has
+        # several in flight: one slot let a later APPLY hide an earlier one's ACK)
+        self._applies: dict[int, int] = {}
 
     def on_frame(self, counter: int, field: str, value: float | None, enc_seq: int) -> None:
         """An ODOM_SET_POSE frame heard (its E2E COUNTER, FIELD name, value in m or rad);
         ``enc_seq``: the latest accepted encoder frame's seq."""
+        self._sent.pop(counter, None)  # a COUNTER heard again: its older frame is gone
+        self._applies.pop(counter, None)
         if field == "APPLY":
-            self._apply = (counter, enc_seq)
+            self._applies[counter] = enc_seq
         elif field in FIELDS and value is not None:
             self._sent[counter] = (field, float(value))
 
     def on_auth(self, enc_seq: int) -> None:
         """An ODOM_AUTH naming ODOM_SET_POSE: the firmware acts on the held frame now."""
-        if self._apply is not None:
-            self._apply = (self._apply[0], enc_seq)
+        if self._applies:  # the latest APPLY is the held one
+            self._applies[next(reversed(self._applies))] = enc_seq
 
     def on_ack(self, request_counter: int, acked: bool) -> tuple[int, dict[str, float]] | None:
         """ODOM_ACK of an ODOM_SET_POSE frame: a field ACKed is staged; the APPLY's ACK
@@ -59,10 +63,10 @@ class SetPoseFollower:
         if sent is not None and acked:
             self.staged[sent[0]] = sent[1]
             return None
-        if self._apply is None or self._apply[0] != request_counter:
+        seq = self._applies.pop(request_counter, None)
+        if seq is None:
             return None
-        seq, staged = self._apply[1], self.staged
-        self._apply = None
+        staged = self.staged
         if not acked:
             return None
         self.staged = {}

@@ -15,11 +15,12 @@ robot's ``RobotLink``, ``slice_frames`` frames at a time with a loop turn betwee
 large fleet's tick never holds the loop for long); ``periodic`` publishes ``status`` and
 ``rates``, the robots' turns spread over the period (``PERIODIC_SLOTS`` groups); each link
 runs its own connection. Commands are validated by the robot's ``CommandEncoder`` and only then
-sent on the robot's bus; each one is answered on ``cmd/result`` (accepted, rejected with the
-reason, expired). No frame and no command can stop
-the bridge: a handler that raises anyway is counted (``frames_failed``, ``commands_failed``) and
-logged once. ``rates`` carries each link's counters
-(``link``: telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects).
+sent on the robot's bus, paced (``host.mqtt.pacing``: a window of frames un-answered, the rest
+queued); each one is answered on ``cmd/result`` (accepted, rejected with the reason, expired),
+then once more with its end (acked, nacked, expired, rejected, timeout). No frame and no
+command can stop the bridge: a handler that raises anyway is counted (``frames_failed``,
+``commands_failed``) and logged once. ``rates`` carries each link's counters (``link``:
+telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects).
 """
 
 from __future__ import annotations
@@ -39,8 +40,15 @@ from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL, first_error
 from odocan.host.mqtt.expiry import Expired
 from odocan.host.mqtt.link import RobotLink, Verdict
+from odocan.host.mqtt.pacing import ACK_TIMEOUT_S, MAX_QUEUED, WINDOW_FRAMES, CommandPacer
 from odocan.host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
-from odocan.host.protocol.commands import Command, CommandEncoder, CommandRejected, command_id
+from odocan.host.protocol.commands import (
+    Command,
+    CommandEncoder,
+    CommandRejected,
+    Frame,
+    command_id,
+)
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.sim.framebatch import Received
 
@@ -83,6 +91,12 @@ class BridgeConfig:
     command_expiry_s: float = 5.0  # a command without its own MQTT v5 expiry, at most this old
     telemetry_buffer: int = 1000  # QoS-0 publications per robot waiting for the socket
     reliable_buffer: int = 1000  # QoS-1 publications per robot waiting for their PUBACK
+    # command pacing per robot (``host.mqtt.pacing``): frames un-answered on the bus, the
+    # ODOM_ACK's deadline after a command's last frame, commands waiting beyond the window
+    command_window_frames: int = WINDOW_FRAMES
+    command_ack_timeout_s: float = ACK_TIMEOUT_S
+    command_queue: int = MAX_QUEUED
+    pace_period_s: float = 0.05  # timeouts and expiries of paced commands checked this often
 
 
 PERIODIC_SLOTS = 10  # ``status``/``rates`` turns per period (``Bridge._periodic``)
@@ -106,6 +120,11 @@ class _Robot:
             connect_timeout_s=config.connect_timeout_s,
             command_expiry_s=config.command_expiry_s,
             telemetry_buffer=config.telemetry_buffer, reliable_buffer=config.reliable_buffer,
+        )
+        self.pacer = CommandPacer(
+            self.telemetry, self._send_frame, window_frames=config.command_window_frames,
+            ack_timeout_s=config.command_ack_timeout_s, max_queued=config.command_queue,
+            expiry_s=config.command_expiry_s,
         )
         self.commands_sent = self.commands_rejected = self.commands_failed = 0
         # what this process lost of the robot's live bus, for ``status`` (``host.mqtt.busfeed``)
@@ -136,7 +155,7 @@ class _Robot:
             return [_result(command_id(payload), name, "rejected", reason)]
         try:
             command = self.encoder.encode(name, payload)
-            self._send(command)
+            paced = self._submit(command)
         except CommandRejected as exc:
             self.commands_rejected += 1
             return [_result(exc.cmd_id, name, "rejected", exc.reason)]
@@ -146,35 +165,63 @@ class _Robot:
                         exc_info=log.isEnabledFor(logging.DEBUG))
             return [_result(command_id(payload), name, "rejected",
                             f"internal error ({type(exc).__name__})")]
+        if _refused(paced, command):  # the bus refused its first frame: that is its answer
+            self.commands_rejected += 1
+            return paced
         self.commands_sent += 1
-        return [_result(command.cmd_id, name, "accepted", None, frames=len(command.frames))]
+        return [_result(command.cmd_id, name, "accepted", None, frames=len(command.frames)),
+                *paced]
 
-    def _send(self, command: Command) -> None:
-        bus = self.endpoint.bus
+    def paced(self, published: list[Publication]) -> list[Publication]:
+        """``published`` (the telemetry's, for one frame) and the pacer's answers: an ODOM_ACK
+        frees its frame's slot in the window, and the next command frames go out."""
+        return [*published, *self.pacer.pump(time.monotonic(), published)]
+
+    def _submit(self, command: Command) -> list[Publication]:
+        """Queue ``command`` on the pacer and send what the window takes now: the pacer's
+        answers (``rejected`` for ``command`` when the bus refused its first frame), or
+        CommandRejected (the queue full, no SecOC freshness)."""
         signer = self.endpoint.signer
         if signer is not None and signer.next_fv is None:  # before any frame: all or nothing
             raise CommandRejected(
                 "SecOC: no ODOM_FRESHNESS from the firmware yet (it sends one every second)",
                 command.cmd_id,
             )
-        for frame in command.frames:
-            ack = PendingAck(command.cmd_id, command.name, frame.final)
-            self.telemetry.expect_ack(frame.can_id, frame.counter, ack)
-            self.telemetry.command_sent(frame.can_id, frame.data)  # a set-pose is followed
-            try:
-                bus.send(can.Message(arbitration_id=frame.can_id, is_extended_id=False,
-                                     data=frame.data))
-            except can.CanError as exc:
-                raise CommandRejected(f"bus refused the frame: {exc}", command.cmd_id) from None
-            if signer is not None and signer.is_secured(frame.can_id):
-                auth = signer.sign(frame.can_id, frame.data)
-                try:
-                    bus.send(can.Message(arbitration_id=signer.auth_frame_id,
-                                         is_extended_id=False, data=auth))
-                    self.telemetry.command_sent(signer.auth_frame_id, auth)
-                except can.CanError as exc:
-                    raise CommandRejected(f"bus refused ODOM_AUTH: {exc}",
-                                          command.cmd_id) from None
+        if not self.pacer.submit(command, command.name, time.monotonic()):
+            raise CommandRejected(
+                f"bridge busy: {self.pacer.max_queued} commands already wait for the bus: "
+                "not run", command.cmd_id)
+        answers = self.pacer.send_now(time.monotonic())
+        if not _refused(answers, command):
+            self._stage(command)
+        return answers
+
+    def _send_frame(self, command: Command, frame: Frame) -> int:
+        """Put one command frame (and its ODOM_AUTH) on the bus: the mailbox slots taken."""
+        bus = self.endpoint.bus
+        signer = self.endpoint.signer
+        ack = PendingAck(command.cmd_id, command.name, frame.final)
+        self.telemetry.expect_ack(frame.can_id, frame.counter, ack)
+        self.telemetry.command_sent(frame.can_id, frame.data)  # a set-pose is followed
+        try:
+            bus.send(can.Message(arbitration_id=frame.can_id, is_extended_id=False,
+                                 data=frame.data))
+        except can.CanError as exc:
+            del self.telemetry.pending[(frame.can_id, frame.counter)]
+            raise CommandRejected(f"bus refused the frame: {exc}", command.cmd_id) from None
+        if signer is None or not signer.is_secured(frame.can_id):
+            return 1
+        auth = signer.sign(frame.can_id, frame.data)
+        try:
+            bus.send(can.Message(arbitration_id=signer.auth_frame_id,
+                                 is_extended_id=False, data=auth))
+            self.telemetry.command_sent(signer.auth_frame_id, auth)
+        except can.CanError as exc:
+            raise CommandRejected(f"bus refused ODOM_AUTH: {exc}", command.cmd_id) from None
+        return 2
+
+    def _stage(self, command: Command) -> None:
+        """A config command's robot, the reference's once the firmware ACKs its APPLY."""
         if command.name == "config":
             v = command.values
             speed = v.get("max_wheel_speed_m_s")  # absent: the firmware keeps its bound
@@ -195,6 +242,12 @@ def _id_and_data(frame: Received) -> tuple[int, bytes]:
         return frame[1], frame[2]
     assert isinstance(frame, can.Message)
     return frame.arbitration_id, bytes(frame.data)
+
+
+def _refused(answers: list[Publication], command: Command) -> bool:
+    """``answers`` (the pacer's) refuse ``command`` itself (the bus refused its frame)."""
+    return any(p.get("result") == "rejected" and p.get("id") == command.cmd_id
+               for _, p in answers)
 
 
 def _result(
@@ -241,11 +294,13 @@ class Bridge:
                                    name=f"mqtt-link-{robot.link.robot}")
                 frames = tg.create_task(self._consume(), name="can-frames")
                 periodic = tg.create_task(self._periodic(), name="periodic")
+                pacing = tg.create_task(self._pace(), name="command-pacing")
                 await stop.wait()
                 await asyncio.sleep(0)
                 self._drain()
                 frames.cancel()
                 periodic.cancel()
+                pacing.cancel()
         except BaseExceptionGroup as group:
             raise first_error(group) from None
 
@@ -313,6 +368,8 @@ class Bridge:
                                 exc_info=log.isEnabledFor(logging.DEBUG))
                 self.frames_failed += 1
                 continue
+            if robot.pacer.busy:  # an ODOM_ACK frees the window: the next command frames
+                publications = robot.paced(publications)
             for leaf, payload in publications:
                 robot.link.publish(leaf, payload)
 
@@ -345,3 +402,12 @@ class Bridge:
                     for robot in group:
                         robot.link.publish(*robot.status())
 
+
+    async def _pace(self) -> None:
+        """Every ``pace_period_s``: the paced commands' timeouts and expiries, answered."""
+        while True:
+            await asyncio.sleep(self.config.pace_period_s)
+            for robot in self.robots:
+                if robot.pacer.busy:
+                    for leaf, payload in robot.paced([]):
+                        robot.link.publish(leaf, payload)
