@@ -16,7 +16,8 @@ encoder cycle, the summary on time: not ``queued_frames``); it was made then. A 
 or sent again carries older counts at a later place: no evidence. The host's E2E window may
 refuse a good page after the bus lost a few status frames: its CRC suffices.
 
-For two such pages p, q of one firmware life (at most ``PAIR_PAGES`` apart), let S_p, S_q be the
+For two such pages p, q of one firmware life (at most ``PAIR_PAGES`` apart, or the pages
+around a gap of the log however far apart: ``pagechain.long_pairs``), let S_p, S_q be the
 sender's sequence numbers of the last encoder frames the firmware had accepted when it made
 them, W the sender's frames in (S_p, S_q], F those the firmware accepted, L those the log holds.
 
@@ -24,15 +25,18 @@ them, W the sender's frames in (S_p, S_q], F those the firmware accepted, L thos
   firmware had it, seq(lo(p)) <= S_p. hi(p): the first logged after p: it came on the bus after
   p was made, S_p < seq(hi(p)). So the log's frames hi(p) .. lo(q) are surely in W.
 * Quiet: the last page 1 sent before frame lo(p) (made before the firmware took any frame of W)
-  and the first sent at or after q count the same rejected and overflowed frames, less than
-  ``WRAP_SAFE_S`` apart (65536 frames cannot pass in that time on a 1 Mbit/s bus, so the u16
-  counts did not wrap). A frame of L in W reached the firmware (CAN delivers every frame on the
-  wire to every node; a fault takes a frame off the bus for all), was not dropped nor refused:
-  L and W  is within F. Every frame of W the firmware did not accept is missing from the log.
-* By OK: g_ok = (OK(q) - OK(p)) mod 65536 is exact (fewer than 65536 frames in the window) and
-  equals |L and W| + a, a the frames of W the firmware accepted that the log lacks; |L and W|
-  >= lo(q) - hi(p) + 1. If g_ok <= lo(q) - hi(p) + 1 then a = 0: on W the firmware accepted
-  exactly L.
+  and the first sent at or after q count the same rejected and overflowed frames, and so does
+  every page 1 between, each less than ``WRAP_SAFE_S`` after the one before (65536 frames
+  cannot pass in that time on a 1 Mbit/s bus, so the u16 counts did not wrap: a chain,
+  ``host.judge.pagechain``). A frame of L in W reached the firmware (CAN delivers every frame
+  on the wire to every node; a fault takes a frame off the bus for all), was not dropped nor
+  refused: L and W is within F. Every frame of W the firmware did not accept is missing from
+  the log.
+* By OK: g_ok, OK's growth from p to q summed over the pages kept between them, each less
+  than ``WRAP_SAFE_S`` after the one before (one chain: each step's growth mod 65536 exact), is
+  exact and equals |L and W| + a, a the frames of W the firmware accepted that the log lacks;
+  |L and W| >= lo(q) - hi(p) + 1. If g_ok <= lo(q) - hi(p) + 1 then a = 0: on W the firmware
+  accepted exactly L.
 * By LOST: the true growth G of ENC_E2E_LOST counts frames of W not accepted, never more (a
   COUNTER skip of 16 or more counts short; the cycles term counts mailbox drops only: none
   here); g = G mod 256 <= G. M, the frames the log lacks between frames lo(p) and hi(q) (the
@@ -80,6 +84,14 @@ from odocan.host.judge.gapfill import (
     late_in_chunk,
     recent_anchors,
 )
+from odocan.host.judge.pagechain import (
+    boot_breaks,
+    boot_ok,
+    chained_breaks,
+    chained_ok,
+    long_pairs,
+    quiet,
+)
 from odocan.host.judge.samples import QUEUED_GAP_CYCLES, Encoders, FloatArray, IntArray
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
@@ -89,7 +101,6 @@ TOTALS_PAGE = 1  # ODOM_STATUS page with REJECTED_FRAMES and OVERFLOWED_FRAMES
 PAIR_PAGES = 8  # pages paired up to this many apart (4 s of pages: a window per pair)
 DARK_CYCLES = 3  # a log without any frame this many encoder cycles (the firmware sends a pose
 # every 2): the recorder lost frames
-WRAP_SAFE_S = 7.0  # 65536 frames take longer than this on a 1 Mbit/s bus (~9 000 frames/s)
 Span = tuple[int, int]  # encoder frames (first, last), both included
 Status = tuple[int, int, float, bool, int, float]  # a status frame: page, COUNTER, time, CRC
 # good, encoder frames before it, the last one's time
@@ -105,6 +116,8 @@ class LostPages:
     ok: IntArray  # ENC_E2E_OK (u16)
     lost: IntArray  # ENC_E2E_LOST (u8)
     sent_s: FloatArray  # its bus time (s)
+    ok_u: IntArray  # ENC_E2E_OK unwrapped along its chain (``pagechain.chained_ok``)
+    chain: IntArray  # the chain's number
 
 
 @dataclass(frozen=True)
@@ -114,6 +127,7 @@ class TotalsPages:
     sent_s: FloatArray
     rejected: IntArray  # REJECTED_FRAMES (u16)
     overflowed: IntArray  # OVERFLOWED_FRAMES (u16)
+    breaks: IntArray  # the breaks before it (``pagechain.chained_breaks``)
 
 
 @dataclass(frozen=True)
@@ -165,29 +179,29 @@ def _clear(lo: int, hi: int, reprimed: frozenset[int]) -> bool:
 def seen_by_pages(pages: LostPages, totals: TotalsPages, gap_frames: IntArray,
                   gap_missing: IntArray) -> Seen:
     """``Seen`` of a life's pages (module docstring), over every pair of pages up to
-    ``PAIR_PAGES`` apart: ``gap_frames`` the frames after the log's gaps (sorted),
+    ``PAIR_PAGES`` apart and, per gap, the pages around it however far apart
+    (``pagechain.long_pairs``): ``gap_frames`` the frames after the log's gaps (sorted),
     ``gap_missing`` the frames each lacks (its sender-sequence step less one)."""
     n = len(pages.lo)
     if n < 2 or len(totals.sent_s) < 2:
         return NOTHING
     cum = np.concatenate(([0], np.cumsum(gap_missing, dtype=np.int64)))
-    missed: list[Span] = []
-    windows: list[tuple[int, int]] = []  # proven pairs of pages (i, j)
-    counted: list[tuple[int, int]] = []  # of them, those proven by OK
-    for d in range(1, min(PAIR_PAGES, n - 1) + 1):
-        i = np.arange(n - d)
-        j = i + d
-        lo, hi = pages.lo[i], pages.hi[j]
-        missing = (cum[np.searchsorted(gap_frames, hi, side="right")]
-                   - cum[np.searchsorted(gap_frames, lo, side="right")])
-        quiet = _quiet(totals, pages.lo_s[i], pages.sent_s[j])
-        grew = (pages.lost[j] - pages.lost[i]) & 0xFF
-        by_lost = quiet & (missing > 0) & (grew >= missing)
-        sure = pages.lo[j] - pages.hi[i] + 1  # the log's frames surely among those counted
-        by_ok = quiet & (sure > 0) & (((pages.ok[j] - pages.ok[i]) & 0xFFFF) <= sure)
-        missed += zip(lo[by_lost].tolist(), hi[by_lost].tolist(), strict=True)
-        windows += zip(i[by_lost | by_ok].tolist(), j[by_lost | by_ok].tolist(), strict=True)
-        counted += zip(i[by_ok].tolist(), j[by_ok].tolist(), strict=True)
+    near = [(np.arange(n - d), np.arange(d, n)) for d in range(1, min(PAIR_PAGES, n - 1) + 1)]
+    far = long_pairs(pages.lo, pages.hi, gap_frames, PAIR_PAGES)
+    i = np.concatenate([a for a, _ in near] + [far[0]])
+    j = np.concatenate([b for _, b in near] + [far[1]])
+    lo, hi = pages.lo[i], pages.hi[j]
+    missing = (cum[np.searchsorted(gap_frames, hi, side="right")]
+               - cum[np.searchsorted(gap_frames, lo, side="right")])
+    calm = quiet(totals.sent_s, totals.breaks, pages.lo_s[i], pages.sent_s[j])
+    grew = (pages.lost[j] - pages.lost[i]) & 0xFF
+    by_lost = calm & (missing > 0) & (grew >= missing)
+    sure = pages.lo[j] - pages.hi[i] + 1  # the log's frames surely among those counted
+    exact = pages.chain[i] == pages.chain[j]  # OK's growth exact (``pagechain``)
+    by_ok = calm & exact & (sure > 0) & (pages.ok_u[j] - pages.ok_u[i] <= sure)
+    missed = list(zip(lo[by_lost].tolist(), hi[by_lost].tolist(), strict=True))
+    windows = list(zip(i[by_lost | by_ok].tolist(), j[by_lost | by_ok].tolist(), strict=True))
+    counted = list(zip(i[by_ok].tolist(), j[by_ok].tolist(), strict=True))
     return Seen(_runs(windows, pages), missed, counted=_runs(counted, pages))
 
 
@@ -208,37 +222,29 @@ def _runs(windows: list[tuple[int, int]], pages: LostPages) -> list[Span]:
     return [(a, b) for a, b in runs if a <= b]
 
 
-def _quiet(totals: TotalsPages, from_s: FloatArray, to_s: FloatArray) -> npt.NDArray[np.bool_]:
-    """Per window: the last FRAME_TOTALS page sent before ``from_s`` and the first at or after
-    ``to_s`` exist, are less than ``WRAP_SAFE_S`` apart and count the same frames rejected and
-    overflowed."""
-    a = np.searchsorted(totals.sent_s, from_s, side="left") - 1
-    b = np.searchsorted(totals.sent_s, to_s, side="left")
-    n = len(totals.sent_s)
-    have = (a >= 0) & (b < n)
-    a, b = np.maximum(a, 0), np.minimum(b, n - 1)
-    same = ((totals.rejected[a] == totals.rejected[b])
-            & (totals.overflowed[a] == totals.overflowed[b]))
-    quiet: npt.NDArray[np.bool_] = have & same & (
-        totals.sent_s[b] - totals.sent_s[a] < WRAP_SAFE_S)
-    return quiet
-
-
 def with_boot(pages: LostPages, totals: TotalsPages, first_s: float, boot_s: float
               ) -> tuple[LostPages, TotalsPages]:
     """The pages with the firmware's power-up before them, at ``boot_s`` (before the log's first
     encoder frame, at ``first_s``, on which it primed, ``host.judge.powerup``): every count 0
     and no frame taken, so the first encoder frame logged after it is frame 0 (its ``lo``, 0,
-    bounds no missing frame: none lies before frame 0)."""
+    bounds no missing frame: none lies before frame 0); chained to the first pages
+    (``pagechain.boot_ok``, ``boot_breaks``)."""
     zero, now = np.zeros(1, dtype=np.int64), np.array([boot_s])
+    ok_u, chain = boot_ok((int(pages.ok[0]), int(pages.ok_u[0]), int(pages.chain[0]),
+                           float(pages.sent_s[0])), boot_s)
+    breaks = zero if not len(totals.sent_s) else [boot_breaks(
+        (float(totals.sent_s[0]), int(totals.rejected[0]), int(totals.overflowed[0]),
+         int(totals.breaks[0])), boot_s)]
     return (LostPages(np.r_[zero, pages.lo], np.r_[[first_s], pages.lo_s], np.r_[zero, pages.hi],
-                      np.r_[zero, pages.ok], np.r_[zero, pages.lost], np.r_[now, pages.sent_s]),
+                      np.r_[zero, pages.ok], np.r_[zero, pages.lost], np.r_[now, pages.sent_s],
+                      np.r_[[ok_u], pages.ok_u], np.r_[[chain], pages.chain]),
             TotalsPages(np.r_[now, totals.sent_s], np.r_[zero, totals.rejected],
-                        np.r_[zero, totals.overflowed]))
+                        np.r_[zero, totals.overflowed], np.r_[breaks, totals.breaks]))
 
 
-Page = tuple[int, float, int, int, int, float]  # lo, lo_s, hi, ENC_E2E_OK, LOST, sent_s
-Totals = tuple[float, int, int]  # sent_s, REJECTED_FRAMES, OVERFLOWED_FRAMES
+Page = tuple[int, float, int, int, int, float, int, int]  # lo, lo_s, hi, ENC_E2E_OK, LOST,
+# sent_s, OK unwrapped and its chain (``pagechain.chained_ok``)
+Totals = tuple[float, int, int, int]  # sent_s, REJECTED_FRAMES, OVERFLOWED_FRAMES, breaks
 
 
 @dataclass
@@ -287,9 +293,15 @@ class PageKeeper:
         """The pages pending on the last summary kept (``keep``) or dropped."""
         for kind, row in self._pending if keep else []:
             if kind == LOST_PAGE:
-                self.pages.append(row)  # type: ignore[arg-type]
+                last = self.pages[-1] if self.pages else None
+                ok_u, chain = chained_ok(None if last is None else (last[6], last[7], last[5]),
+                                         int(row[3]), float(row[5]))
+                self.pages.append((*row, ok_u, chain))  # type: ignore[arg-type]
             else:
-                self.totals.append(row)  # type: ignore[arg-type]
+                t = self.totals[-1] if self.totals else None
+                breaks = chained_breaks(None if t is None else t, float(row[0]), int(row[1]),
+                                        int(row[2]))
+                self.totals.append((*row, breaks))  # type: ignore[arg-type]
         self._pending = []
 
     def _made_in_tick(self, summary: Status, page: Status) -> bool:
@@ -308,12 +320,12 @@ def seen_of(pages: list[Page], totals: list[Totals], gaps: list[tuple[int, int]]
     if not pages:
         return NOTHING
     col = list(zip(*pages, strict=True))
-    ints = [np.array(col[k], dtype=np.int64) for k in (0, 2, 3, 4)]
+    ints = [np.array(col[k], dtype=np.int64) for k in (0, 2, 3, 4, 6, 7)]
     lost = LostPages(ints[0], np.array(col[1], dtype=np.float64), ints[1], ints[2], ints[3],
-                     np.array(col[5], dtype=np.float64))
-    tcol = list(zip(*totals, strict=True)) if totals else [(), (), ()]
+                     np.array(col[5], dtype=np.float64), ints[4], ints[5])
+    tcol = list(zip(*totals, strict=True)) if totals else [(), (), (), ()]
     counts = TotalsPages(np.array(tcol[0], dtype=np.float64), np.array(tcol[1], dtype=np.int64),
-                         np.array(tcol[2], dtype=np.int64))
+                         np.array(tcol[2], dtype=np.int64), np.array(tcol[3], dtype=np.int64))
     if boot is not None:
         lost, counts = with_boot(lost, counts, *boot)
     gcol = list(zip(*gaps, strict=True)) if gaps else [(), ()]

@@ -32,6 +32,7 @@ from odocan.host.judge.gapseen import (
     NOTHING,
     PAIR_PAGES,
     TOTALS_PAGE,
+    Page,
     PageKeeper,
     Seen,
     Span,
@@ -122,16 +123,37 @@ class LiveSeen:
         keeper = self.keeper
         if (len(keeper.pages), len(keeper.totals)) == self._kept:
             return False
+        keeper.pages[:] = _unrepeated(keeper.pages)
         if len(keeper.pages) > KEPT_PAGES:
             del keeper.pages[: len(keeper.pages) - KEPT_PAGES]
             self._boot = None  # its page went with the oldest
             from_s = keeper.pages[0][1]
-            before = sum(1 for sent_s, _, _ in keeper.totals if sent_s < from_s)
+            before = sum(1 for sent_s, *_ in keeper.totals if sent_s < from_s)
             del keeper.totals[: max(before - 1, 0)]  # the last one before the first page kept
             self._gaps = [gap for gap in self._gaps if gap[0] > keeper.pages[0][0]]
         del keeper.totals[: max(len(keeper.totals) - 2 * KEPT_PAGES, 0)]  # no ENC page kept
         self._kept, self._dirty = (len(keeper.pages), len(keeper.totals)), True
         return True
+
+
+def _unrepeated(pages: list[Page]) -> list[Page]:
+    """The pages with the middle of every run of pages alike left out (the same frames before
+    and after, the same counts, one chain: a bus silence of the encoder sender, a page every
+    0.5 s): the first and the last of a run prove all the middle ones could, their counts
+    chained (``pagechain``), so a silence longer than ``KEPT_PAGES`` pages keeps the page
+    before it, and the pages after it can prove it (issue #11)."""
+    out: list[Page] = []
+    for page in pages:
+        if len(out) >= 2 and _alike(out[-2], page) and _alike(out[-1], page):
+            out[-1] = page
+        else:
+            out.append(page)
+    return out
+
+
+def _alike(a: Page, b: Page) -> bool:
+    """lo, hi, ENC_E2E_OK, LOST and the chain the same (``gapseen.Page``)."""
+    return a[0] == b[0] and a[2:5] == b[2:5] and a[6:] == b[6:]
 
 
 def _joined(old: list[Span], new: list[Span], base: int, horizon: int) -> list[Span]:
