@@ -191,15 +191,17 @@ class RobotTelemetry:
             self._watch_source(route, data, t_s)
         status = self.e2e.check(can_id, data, extended=extended,
                                 timestamp_s=t_s)  # the window widens with time
-        tracker = self.tracker
-        tracker.advance(t_s)  # settles the pose halves heard half a cycle before
+        tracker = self.tracker  # ``advance``: settles the pose halves heard half a cycle before
         if route is None or status not in ACCEPTED_E2E:
+            tracker.advance(t_s)
             if status in CRC_RIGHT_REFUSED and route is not None \
                     and route.name == "WHEEL_ENCODERS":  # a twin of the latest accepted one?
                 refused_encoders(tracker.twins, route.signals(data), t_s, tracker.placer.fill)
             message = self._by_id.get(can_id)
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
             return self._samples() if tracker.settled else []
+        if not route.advances:  # (else its handler's first act: not twice a frame)
+            tracker.advance(t_s)
         name, handler = route.name, route.handler
         frames, counts = self.frames, self._window.counts  # plain dicts: a Counter's += is slower
         if handler is None:
@@ -209,6 +211,8 @@ class RobotTelemetry:
         try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
             signals = route.decode(data)  # compiled: a tuple for a ``takes`` handler
         except DecodeError:
+            if route.advances:
+                tracker.advance(t_s)
             self.rejected[name] += 1
             return self._samples() if tracker.settled else []
         frames[name] = frames.get(name, 0) + 1
@@ -242,7 +246,7 @@ class RobotTelemetry:
             return key
         return "other"
 
-    @takes("COUNTER", "LEFT_COUNT", "RIGHT_COUNT", "CTRL_UPTIME")
+    @takes("COUNTER", "LEFT_COUNT", "RIGHT_COUNT", "CTRL_UPTIME", advances=True)
     def _on_encoders(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
         frame = (int(s[0]), int(s[1]), int(s[2]), t_s, int(s[3]))
         self.tracker.on_encoders(*frame)
@@ -250,7 +254,7 @@ class RobotTelemetry:
         self.twist.on_encoders(self.tracker, *frame)
         return []
 
-    @takes("ENC_COUNTER", "X", "HEADING", "COUNTER")
+    @takes("ENC_COUNTER", "X", "HEADING", "COUNTER", advances=True)
     def _on_pose_x(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
         self.tracker.on_pose_x(int(s[0]), s[1], s[2], counter=int(s[3]), t_s=t_s)
         return []
@@ -265,7 +269,7 @@ class RobotTelemetry:
         self.twist.on_twist(self.distance.named, round(linear * 1e3), round(angular * 1e3), t_s)
         return []
 
-    @takes("ENC_COUNTER", "Y", "TURNS", "COUNTER")
+    @takes("ENC_COUNTER", "Y", "TURNS", "COUNTER", advances=True)
     def _on_pose_y(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
         self.tracker.on_pose_y(int(s[0]), s[1], int(s[2]), counter=int(s[3]), t_s=t_s)
         return []
