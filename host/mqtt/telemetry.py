@@ -227,7 +227,7 @@ class RobotTelemetry:
         its power-up pose, as the monitor and ``analyze`` do (``host.judge.sources``); every
         page to the live gapseen (``livegapseen.heard_status``)."""
         ids = self._status_ids.data_ids if self._status_ids is not None else None
-        heard_status(self.tracker, route.message, data, ids, t_s)
+        heard_status(self.tracker, route.message, data, ids, t_s, route.signals)  # compiled
         summary = (boot_summary(route.message, data, ids, route.signals)
                    if route.is_summary(data) else None)
         if summary is None or self.sources.observe(t_s, *summary) != "reboot":
