@@ -144,7 +144,7 @@ class PoseTracker:
         self.advance(t_s)
         self.enc_seq += 1
         self._pos += 1
-        prev = self._window.rows[-1] if len(self._window) else None
+        prev = self._window.rows[-1] if self._window.rows else None  # (no __len__ call)
         if self.placer.on_encoders(self.enc_seq, (counter, left, right, t_s), prev,
                                    self.counter_bits) and self._ref is not None:
             self._place_at_next = True  # a gap: placed again, bounded (liveplace.StallPlacer)
