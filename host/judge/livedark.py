@@ -29,7 +29,6 @@ from odocan.host.judge.gapseen import DARK_CYCLES
 from odocan.host.judge.livegapseen import LiveSeen
 from odocan.host.judge.livewindow import CYCLE_S
 
-
 _NO_FRAME_S = -math.inf  # ``_last_s`` before any frame
 
 
