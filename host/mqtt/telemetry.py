@@ -169,7 +169,8 @@ class RobotTelemetry:
         if msg.is_error_frame or msg.is_remote_frame:
             self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
             return []
-        return self._feed(msg.timestamp, msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
+        return self.feed_fields(msg.timestamp, msg.arbitration_id, bytes(msg.data),
+                                msg.is_extended_id)
 
     def feed_frame(self, frame: Received) -> list[Publication]:
         """``feed`` of a frame as the lockstep transport queues it (``sim.framebatch``): a
@@ -177,12 +178,14 @@ class RobotTelemetry:
         ``Message`` goes to ``feed``."""
         if type(frame) is tuple:
             t_s, can_id, data = frame
-            return self._feed(t_s, can_id, data, False)
+            return self.feed_fields(t_s, can_id, data, False)
         assert isinstance(frame, can.Message)
         return self.feed(frame)
 
-    def _feed(self, t_s: float, can_id: int, data: bytes, extended: bool) -> list[Publication]:
-        """One data frame given by its fields (bus timestamp ``t_s`` s, identifier, payload).
+    def feed_fields(self, t_s: float, can_id: int, data: bytes, extended: bool
+                    ) -> list[Publication]:
+        """One data frame given by its fields (bus timestamp ``t_s`` s, identifier, payload;
+        the bridge's ``_handle`` gives a fleet's ``(t, id, payload)`` tuples here directly).
 
         Runs per frame of every robot (the fleet's hot path): one lookup of the frame's route
         (message, handler, decoder), the sample check only when the tracker settled one."""

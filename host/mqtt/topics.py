@@ -79,8 +79,9 @@ def check_robot_name(name: str) -> str:
     return name
 
 
-# json.dumps with these options would build its encoder per call: built once (the same text)
-_COMPACT: Final = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
+# json.dumps with these options would build its encoder per call: built once (the same text);
+# no circular check (the payloads are trees built here: no id() noted per dict and list)
+_COMPACT: Final = json.JSONEncoder(separators=(",", ":"), allow_nan=False, check_circular=False)
 
 
 def dumps(payload: dict[str, Any]) -> bytes:
