@@ -77,6 +77,7 @@ Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # foreign CAN IDs counted by name in ``rejected``; the rest as ``other``
 STATUS_EVENTS = 16  # the latest firmware events and set-poses carried by ``status``
+TRUTH_PARTS = {0: "X", 1: "Y", 2: "HEADING"}  # SIM_TRUTH's PART: the signal it carries
 
 
 @dataclass
@@ -313,13 +314,13 @@ class RobotTelemetry:
 
     def _on_truth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         enc, part = int(s["ENC_COUNTER"]), int(s["PART"])
-        value = s.get({0: "X", 1: "Y", 2: "HEADING"}.get(part, ""), 0.0)
+        value = s.get(TRUTH_PARTS.get(part, ""), 0.0)
         sample = self.tracker.on_truth(part, enc, float(value))
         if sample is None:
             return []
         truth, ref = sample
-        if ref is not None:  # the truth was sampled at that very encoder frame
-            self._truth_error = {"enc_seq": ref.seq, **difference(ref, truth)}
+        if ref is not None:  # sampled at that very encoder frame (difference: the tracker's)
+            self._truth_error = {"enc_seq": ref.seq, **self.tracker.reference_vs_truth.latest}
         self._truth = {"t_s": t_s, "counter": int(s["COUNTER"]), "enc_counter": enc,
                        "enc_seq": truth.seq, **_pose_dict(truth)}
         if t_s < self._truth_pub_t:  # the bus clock went back (a restart, a replay): follow it
