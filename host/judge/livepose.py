@@ -56,7 +56,6 @@ class StepGate:
         self.bound = (0, 0)  # counts per period, left and right (``rebound``)
         self.rebound(geometry)
         self.bits = counter_bits
-        self._half, self._range = 1 << (counter_bits - 1), 1 << counter_bits  # (wrap_delta's)
         self.prev: tuple[int, int, int] | None = None  # counter, left, right of the last accepted
         self._refused: list[tuple[int, int, int]] = []
         self._seq = self._prev_seq = 0  # periods heard, at the latest frame and at ``prev``
@@ -110,15 +109,12 @@ class StepGate:
             self._refused = []
             self._restarted(seq, t_s, by_uptime=True)
             return 0, 0
-        # ``_plausible`` inlined, the delta computed once (``_delta``'s ``wrap_delta`` in line)
-        half, wrap = self._half, self._range
-        d_left = (left - prev[1] + half) % wrap - half
-        d_right = (right - prev[2] + half) % wrap - half
+        delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
         periods = self._seq - prev_seq
-        if abs(d_left) <= periods * self.bound[0] and abs(d_right) <= periods * self.bound[1]:
+        if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
             if self._refused:
                 self._refused = []
-            return d_left, d_right
+            return delta
         self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # refused: kept
         self._prev_t = last_t
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
