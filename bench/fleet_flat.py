@@ -17,7 +17,9 @@ printed too. Pair trees in alternation:
 the CPU per robot-tick of the fleet step (``Fleet.step``), of the bridge's frame handling
 (``Bridge._handle``: E2E, decode, live judge, publications and their JSON queued), of the young
 GC passes (one after each tick, ``fleetrun.TickCollector``), the rest (paho, the socket writes,
-the loop, status and rates) and the socket writes per robot-tick.
+the loop, status and rates) and the socket writes per robot-tick. The bridge's frame handling
+alone, on recorded frames, with a digest of what it publishes (two trees compared without the
+fleet, paho and the loop around it): ``bench/bridge_frames.py``.
 ``--young-gc-every N`` makes the worker's young GC pass one every N ticks instead of every tick
 (``TickCollector.every_ticks``; 0: none while the clock runs): what the pass costs, measured
 whole (its survivors live 20-100 ticks, so rarer passes cost about as much CPU in all, in longer

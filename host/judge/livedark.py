@@ -29,6 +29,8 @@ from odocan.host.judge.gapseen import DARK_CYCLES
 from odocan.host.judge.livegapseen import LiveSeen
 from odocan.host.judge.livewindow import CYCLE_S
 
+_NO_FRAME_S = -math.inf  # ``_last_s`` before any frame
+
 
 class DarkRestarts:
     """Dark gaps of the frames heard and the controller restarts that end one (module
@@ -36,7 +38,7 @@ class DarkRestarts:
 
     def __init__(self, cycle_s: float = CYCLE_S) -> None:
         self.dark_s = DARK_CYCLES * cycle_s  # no frame this long (s): the input went dark
-        self._last_s = -math.inf  # bus time of the latest frame heard (s)
+        self._last_s = _NO_FRAME_S  # bus time of the latest frame heard (s)
         self._dark = False  # a dark gap since the latest encoder frame
         self._hole = -1  # the latest encoder frame (seq) that ended a dark gap of the sequence
         self._pending = -1  # a new start owed from this encoder frame on (-1: none)
@@ -44,9 +46,11 @@ class DarkRestarts:
 
     def heard(self, t_s: float) -> float:
         """Any frame heard at bus time ``t_s`` (returned: the tracker's bus time)."""
-        if self._last_s > -math.inf and t_s - self._last_s > self.dark_s:
+        last_s = self._last_s  # (per frame of every robot: no max(), no math.inf looked up)
+        if t_s - last_s > self.dark_s and last_s != _NO_FRAME_S:
             self._dark = True
-        self._last_s = max(self._last_s, t_s)
+        if t_s > last_s:  # (a NaN never)
+            self._last_s = t_s
         return t_s
 
     def on_encoders(self, seq: int, periods: int) -> None:

@@ -163,14 +163,16 @@ def _joined(old: list[Span], new: list[Span], base: int, horizon: int) -> list[S
     return sorted({span for span in spans if span[1] >= horizon})
 
 
-def status_values(message: Any, data: bytes, data_ids: Any
+def status_values(message: Any, data: bytes, data_ids: Any, decode: Any = None
                   ) -> tuple[int, int, bool, tuple[int, int] | None] | None:
     """PAGE, COUNTER, whether the CRC holds (whatever the E2E sequence: ``gapseen.crc_holds``)
     and the page's two counts (ENC_E2E_OK and ENC_E2E_LOST, or REJECTED_FRAMES and
     OVERFLOWED_FRAMES; None on the other pages) of an ODOM_STATUS frame, by the DBC
-    (``message``: cantools'); None when it does not decode."""
+    (``message``: cantools'; ``decode``: its ``decode(data, decode_choices=False)`` compiled,
+    the bridge's ``livedecode.LiveDecoder``); None when it does not decode."""
     try:
-        signals = message.decode(data, decode_choices=False)
+        signals = (message.decode(data, decode_choices=False) if decode is None
+                   else decode(data))
     except Exception:  # not decodable: the E2E check and the caller count it
         return None
     if "PAGE" not in signals or "COUNTER" not in signals:
@@ -184,14 +186,14 @@ def status_values(message: Any, data: bytes, data_ids: Any
 
 
 def heard_status(tracker: PoseTracker, message: Any, data: bytes, data_ids: Any,
-                 t_s: float) -> None:
+                 t_s: float, decode: Any = None) -> None:
     """An ODOM_STATUS frame heard (before its E2E check: a page the host's window refused
     after the bus lost a few is as good evidence) at bus time ``t_s``: to the tracker's
     ``LiveSeen``; a placement part the pages now prove loses its allowance (module
-    docstring)."""
+    docstring; ``decode``: ``status_values``')."""
     if message.name != "ODOM_STATUS" or len(data) != message.length:
         return
-    values = status_values(message, data, data_ids)
+    values = status_values(message, data, data_ids, decode)
     if values is None:
         return
     page, counter, crc_ok, value = values

@@ -35,7 +35,7 @@ from odocan.host.judge.livegapseen import LiveSeen
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livewindow import CYCLE_S, Columns, window_holes
-from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
+from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.samples import POSITION_LSB_M, sender_seq
 from odocan.host.judge.spanfill import filled_span_allowance_m
 
@@ -136,8 +136,9 @@ class StallPlacer:
             self.fill.accepted(1, counter, t_s)
             return False
         abs_left, abs_right = self._abs_counts
-        self._abs_counts = (abs_left + abs(wrap_delta(left - int(prev[4]), bits)),
-                            abs_right + abs(wrap_delta(right - int(prev[5]), bits)))
+        half, wrap = 1 << (bits - 1), 1 << bits  # ``wrap_delta`` in line (per encoder frame)
+        self._abs_counts = (abs_left + abs((left - int(prev[4]) + half) % wrap - half),
+                            abs_right + abs((right - int(prev[5]) + half) % wrap - half))
         self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)  # a fixed ring: no growth
         periods = (counter - int(prev[2])) & 0xF
         if periods == 1 and t_s - float(prev[3]) < 8.0 * CYCLE_S:

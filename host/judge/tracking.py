@@ -145,7 +145,7 @@ class PoseTracker:
         self.advance(t_s)
         self.enc_seq += 1
         self._pos += 1
-        prev = self._window.rows[-1] if len(self._window) else None
+        prev = self._window.rows[-1] if self._window.rows else None  # (no __len__ call)
         if self.placer.on_encoders(self.enc_seq, (counter, left, right, t_s), prev,
                                    self.counter_bits) and self._ref is not None:
             self._place_at_next = True  # a gap: placed again, bounded (liveplace.StallPlacer)
@@ -205,7 +205,9 @@ class PoseTracker:
     def _settle(self, name: str) -> None:
         """Resolve the encoder frame the unsettled half of ``name`` names, and pair it."""
         half = self._unsettled.pop(name)
-        self._unsettled_from_s = min([h.t_s for h in self._unsettled.values()], default=math.inf)
+        rest = self._unsettled  # x, y: one left at most (per pose half: no list, no min())
+        self._unsettled_from_s = (math.inf if not rest else next(iter(rest.values())).t_s
+                                  if len(rest) == 1 else min(h.t_s for h in rest.values()))
         seq, queued = self._named(self._halves[name], half.pos)
         if seq < 0 or self.twins.twinned(seq) or judge_resend(name, seq, half, self):
             return  # left out, as analyze leaves it out (unmatched); a resend judged

@@ -360,8 +360,9 @@ class Bridge:
                 can_id, data = _id_and_data(frame)
                 if can_id == signer.freshness_frame_id:
                     signer.on_freshness(data)  # a bad frame is refused by its E2E check
-            try:
-                publications = robot.telemetry.feed_frame(frame)
+            try:  # (``feed_frame``'s fast path in line: the fleet's frames are tuples)
+                publications = (robot.telemetry.feed_fields(*frame, False)
+                                if type(frame) is tuple else robot.telemetry.feed_frame(frame))
             except Exception as exc:  # a defect must not stop the bridge: count, log once
                 if self.frames_failed == 0:
                     log.warning("%s: frame %s failed: %r", robot.endpoint.name, frame, exc,

@@ -25,9 +25,11 @@ from typing import Any
 
 from cantools.database.can import Message
 from cantools.database.conversion import (
+    BaseConversion,
     IdentityConversion,
     LinearConversion,
     LinearIntegerConversion,
+    NamedSignalConversion,
 )
 from cantools.database.errors import DecodeError
 
@@ -81,12 +83,23 @@ def _covered(message: Message) -> bool:
 def _compile(node: Any) -> _Node:
     fields = tuple(
         (s.name, s.start, (1 << s.length) - 1, 1 << (s.length - 1) if s.is_signed else 0,
-         None if type(s.conversion) is IdentityConversion else s.conversion.raw_to_scaled)
+         _scale(s.conversion))
         for s in node["signals"]
     )
     muxes = tuple((name, {value: _compile(sub) for value, sub in by_value.items()})
                   for name, by_value in node["multiplexers"].items())
     return _Node(fields, muxes)
+
+
+def _scale(conversion: Any) -> Callable[[int, bool], Any] | None:
+    """A signal's ``Field`` scale: None for an identity. An enum signal's conversion
+    (``NamedSignalConversion``) decoded with ``decode_choices=False`` is the conversion it wraps
+    (its ``raw_to_scaled`` calls that one's, the choices unread): that one's, written out when
+    linear (ODOM_STATUS's enums: no cantools call per signal and frame)."""
+    if type(conversion) is NamedSignalConversion and isinstance(
+            getattr(conversion, "_conversion", None), BaseConversion):
+        conversion = conversion._conversion
+    return None if type(conversion) is IdentityConversion else conversion.raw_to_scaled
 
 
 def _decode(node: _Node, word: int, out: dict[str, Any]) -> None:

@@ -21,10 +21,13 @@ DEFAULTS = {"CTRL_UPTIME": 0}  # a signal a DBC may lack (not reported): its val
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-def takes(*names: str) -> Callable[[F], F]:
-    """Mark a handler as given the values of ``names``, a tuple in that order."""
+def takes(*names: str, advances: bool = False) -> Callable[[F], F]:
+    """Mark a handler as given the values of ``names``, a tuple in that order; ``advances``:
+    its first act is the tracker's ``advance`` to the frame's time (``PoseTracker.on_encoders``,
+    ``on_pose_x``, ``on_pose_y``), so ``RobotTelemetry`` does not advance it before as well."""
     def mark(handler: F) -> F:
         handler.signal_names = names  # type: ignore[attr-defined]
+        handler.advances = advances  # type: ignore[attr-defined]
         return handler
     return mark
 
@@ -35,7 +38,8 @@ class Route:
     the handler is given (``decode``: a tuple for a ``takes`` handler, else ``signals``), its
     signals by name (``signals``: the compiled dict decoder); for ODOM_STATUS the PAGE signal's
     place (``status_page``: shift, mask, SUMMARY's value) to pass only its summaries to the
-    reboot watch (``host.judge.sources.boot_summary`` reads nothing else)."""
+    reboot watch (``host.judge.sources.boot_summary`` reads nothing else); ``advances``: the
+    handler advances the tracker itself (``takes``)."""
 
     message: Message
     name: str
@@ -43,6 +47,7 @@ class Route:
     decode: Any
     signals: Any
     status_page: tuple[int, int, int] | None
+    advances: bool
 
     @classmethod
     def of(cls, message: Message, handler: Any) -> Route:
@@ -58,7 +63,8 @@ class Route:
         signals = LiveDecoder(message).decode
         names = getattr(handler, "signal_names", None)
         decode = signals if names is None else values_decoder(message, names, DEFAULTS)
-        return cls(message, message.name, handler, decode, signals, page)
+        return cls(message, message.name, handler, decode, signals, page,
+                   bool(getattr(handler, "advances", False)))
 
     def is_summary(self, data: bytes) -> bool:
         """Whether an ODOM_STATUS payload may be a SUMMARY page (its raw PAGE says so)."""

@@ -77,6 +77,7 @@ Publication = tuple[str, dict[str, Any]]
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # foreign CAN IDs counted by name in ``rejected``; the rest as ``other``
 STATUS_EVENTS = 16  # the latest firmware events and set-poses carried by ``status``
+TRUTH_PARTS = {0: "X", 1: "Y", 2: "HEADING"}  # SIM_TRUTH's PART: the signal it carries
 
 
 @dataclass
@@ -170,7 +171,8 @@ class RobotTelemetry:
         if msg.is_error_frame or msg.is_remote_frame:
             self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
             return []
-        return self._feed(msg.timestamp, msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
+        return self.feed_fields(msg.timestamp, msg.arbitration_id, bytes(msg.data),
+                                msg.is_extended_id)
 
     def feed_frame(self, frame: Received) -> list[Publication]:
         """``feed`` of a frame as the lockstep transport queues it (``sim.framebatch``): a
@@ -178,12 +180,14 @@ class RobotTelemetry:
         ``Message`` goes to ``feed``."""
         if type(frame) is tuple:
             t_s, can_id, data = frame
-            return self._feed(t_s, can_id, data, False)
+            return self.feed_fields(t_s, can_id, data, False)
         assert isinstance(frame, can.Message)
         return self.feed(frame)
 
-    def _feed(self, t_s: float, can_id: int, data: bytes, extended: bool) -> list[Publication]:
-        """One data frame given by its fields (bus timestamp ``t_s`` s, identifier, payload).
+    def feed_fields(self, t_s: float, can_id: int, data: bytes, extended: bool
+                    ) -> list[Publication]:
+        """One data frame given by its fields (bus timestamp ``t_s`` s, identifier, payload;
+        the bridge's ``_handle`` gives a fleet's ``(t, id, payload)`` tuples here directly).
 
         Runs per frame of every robot (the fleet's hot path): one lookup of the frame's route
         (message, handler, decoder), the sample check only when the tracker settled one."""
@@ -192,15 +196,17 @@ class RobotTelemetry:
             self._watch_source(route, data, t_s)
         status = self.e2e.check(can_id, data, extended=extended,
                                 timestamp_s=t_s)  # the window widens with time
-        tracker = self.tracker
-        tracker.advance(t_s)  # settles the pose halves heard half a cycle before
+        tracker = self.tracker  # ``advance``: settles the pose halves heard half a cycle before
         if route is None or status not in ACCEPTED_E2E:
+            tracker.advance(t_s)
             if status in CRC_RIGHT_REFUSED and route is not None \
                     and route.name == "WHEEL_ENCODERS":  # a twin of the latest accepted one?
                 refused_encoders(tracker.twins, route.signals(data), t_s, tracker.placer.fill)
             message = self._by_id.get(can_id)
             self.rejected[message.name if message else self._unknown_key(can_id)] += 1
             return self._samples() if tracker.settled else []
+        if not route.advances:  # (else its handler's first act: not twice a frame)
+            tracker.advance(t_s)
         name, handler = route.name, route.handler
         frames, counts = self.frames, self._window.counts  # plain dicts: a Counter's += is slower
         if handler is None:
@@ -210,6 +216,8 @@ class RobotTelemetry:
         try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
             signals = route.decode(data)  # compiled: a tuple for a ``takes`` handler
         except DecodeError:
+            if route.advances:
+                tracker.advance(t_s)
             self.rejected[name] += 1
             return self._samples() if tracker.settled else []
         frames[name] = frames.get(name, 0) + 1
@@ -224,7 +232,7 @@ class RobotTelemetry:
         its power-up pose, as the monitor and ``analyze`` do (``host.judge.sources``); every
         page to the live gapseen (``livegapseen.heard_status``)."""
         ids = self._status_ids.data_ids if self._status_ids is not None else None
-        heard_status(self.tracker, route.message, data, ids, t_s)
+        heard_status(self.tracker, route.message, data, ids, t_s, route.signals)  # compiled
         summary = (boot_summary(route.message, data, ids, route.signals)
                    if route.is_summary(data) else None)
         if summary is None or self.sources.observe(t_s, *summary) != "reboot":
@@ -243,7 +251,7 @@ class RobotTelemetry:
             return key
         return "other"
 
-    @takes("COUNTER", "LEFT_COUNT", "RIGHT_COUNT", "CTRL_UPTIME")
+    @takes("COUNTER", "LEFT_COUNT", "RIGHT_COUNT", "CTRL_UPTIME", advances=True)
     def _on_encoders(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
         frame = (int(s[0]), int(s[1]), int(s[2]), t_s, int(s[3]))
         self.tracker.on_encoders(*frame)
@@ -251,7 +259,7 @@ class RobotTelemetry:
         self.twist.on_encoders(self.tracker, *frame)
         return []
 
-    @takes("ENC_COUNTER", "X", "HEADING", "COUNTER")
+    @takes("ENC_COUNTER", "X", "HEADING", "COUNTER", advances=True)
     def _on_pose_x(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
         self.tracker.on_pose_x(int(s[0]), s[1], s[2], counter=int(s[3]), t_s=t_s)
         return []
@@ -266,7 +274,7 @@ class RobotTelemetry:
         self.twist.on_twist(self.distance.named, round(linear * 1e3), round(angular * 1e3), t_s)
         return []
 
-    @takes("ENC_COUNTER", "Y", "TURNS", "COUNTER")
+    @takes("ENC_COUNTER", "Y", "TURNS", "COUNTER", advances=True)
     def _on_pose_y(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
         self.tracker.on_pose_y(int(s[0]), s[1], int(s[2]), counter=int(s[3]), t_s=t_s)
         return []
@@ -307,13 +315,13 @@ class RobotTelemetry:
 
     def _on_truth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         enc, part = int(s["ENC_COUNTER"]), int(s["PART"])
-        value = s.get({0: "X", 1: "Y", 2: "HEADING"}.get(part, ""), 0.0)
+        value = s.get(TRUTH_PARTS.get(part, ""), 0.0)
         sample = self.tracker.on_truth(part, enc, float(value))
         if sample is None:
             return []
         truth, ref = sample
-        if ref is not None:  # the truth was sampled at that very encoder frame
-            self._truth_error = {"enc_seq": ref.seq, **difference(ref, truth)}
+        if ref is not None:  # sampled at that very encoder frame (difference: the tracker's)
+            self._truth_error = {"enc_seq": ref.seq, **self.tracker.reference_vs_truth.latest}
         self._truth = {"t_s": t_s, "counter": int(s["COUNTER"]), "enc_counter": enc,
                        "enc_seq": truth.seq, **_pose_dict(truth)}
         if t_s < self._truth_pub_t:  # the bus clock went back (a restart, a replay): follow it

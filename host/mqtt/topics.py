@@ -79,8 +79,15 @@ def check_robot_name(name: str) -> str:
     return name
 
 
-# json.dumps with these options would build its encoder per call: built once (the same text)
-_COMPACT: Final = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
+# json.dumps with these options would build its encoder per call: built once (the same text);
+# no circular check (the payloads are trees built here: no id() noted per dict and list)
+_COMPACT: Final = json.JSONEncoder(separators=(",", ":"), allow_nan=False, check_circular=False)
+# ... and its ``encode`` would still make its C encoder (and a float formatter) per call: the C
+# encoder ``JSONEncoder.iterencode`` makes for these options, made once (None without _json)
+_MAKE_C_ENCODER: Final = getattr(json.encoder, "c_make_encoder", None)  # (not in the stubs)
+_C_ENCODE: Final = None if _MAKE_C_ENCODER is None else _MAKE_C_ENCODER(
+    None, _COMPACT.default, json.encoder.encode_basestring_ascii, None, ":", ",", False, False,
+    False)  # markers, default, strings, indent, separators, sort_keys, skipkeys, allow_nan
 
 
 def dumps(payload: dict[str, Any]) -> bytes:
@@ -88,6 +95,8 @@ def dumps(payload: dict[str, Any]) -> bytes:
     (every publication of every robot comes here); only a payload with a NaN or an infinity
     (``ValueError``) is copied with them as null (``finite``) and encoded again."""
     try:
+        if _C_ENCODE is not None:
+            return "".join(_C_ENCODE(payload, 0)).encode()
         return _COMPACT.encode(payload).encode()
     except ValueError:
         return json.dumps(finite(payload), separators=(",", ":")).encode()

@@ -6,6 +6,7 @@ stalled recorder's release read wide (``host.protocol.e2e_evidence.ReleaseWatch`
 
 from __future__ import annotations
 
+from math import isfinite
 from typing import TYPE_CHECKING
 
 from odocan.host.protocol.decode import frame_key
@@ -25,7 +26,6 @@ from odocan.host.protocol.e2e_cycles import new_cycle_s
 from odocan.host.protocol.e2e_evidence import CAPTURE_HOLD_CYCLES, ReleaseWatch
 from odocan.host.protocol.e2e_periods import (
     CAPTURE_TOLERANCE_CYCLES,
-    period_count,
     receive_period_count,
 )
 from odocan.sim import contract
@@ -76,18 +76,20 @@ class E2EMonitor:
             return self._check_first(frame_key(can_id, extended), data, timestamp_s)
         counter = data[1] & COUNTER_MASK
         crc_ok = crc8h2f_p02_one(data, live.data_ids[counter]) == data[0]
-        periods = 1
+        periods = 1  # (the first frame, or no cycle: ``period_count``'s 1)
         if timestamp_s is not None:
             last, live.last_s = live.last_s, timestamp_s
-            if last is not None and crc_ok and live.last >= 0 and live.min_periods == 0 and (
-                    live.cycle_s is not None):  # as ``frame_periods``
+            cycle_s = live.cycle_s
+            if last is None or cycle_s is None:
+                pass
+            elif crc_ok and live.last >= 0 and live.min_periods == 0:  # as ``frame_periods``
                 periods = receive_period_count(  # the wide reading after a release
-                    timestamp_s - last, (counter - live.last) & COUNTER_MASK, live.cycle_s,
+                    timestamp_s - last, (counter - live.last) & COUNTER_MASK, cycle_s,
                     CAPTURE_HOLD_CYCLES if self._releases.released(last)
                     or self._releases.silent_after(last)
                     else CAPTURE_TOLERANCE_CYCLES)
-            elif last is not None:
-                periods = period_count(timestamp_s - last, live.cycle_s, live.min_periods)
+            elif isfinite(dt_s := timestamp_s - last):  # ``period_count`` in line (per frame)
+                periods = max(live.min_periods, round(dt_s / cycle_s))
         live.last = counter if crc_ok else -1
         return live.state.check(crc_ok, counter, periods, timestamp_s)
 

@@ -1,0 +1,148 @@
+"""The bridge's frame handling alone (the live judge's per-frame path): CPU per robot-tick and per
+frame of each message, on a fleet's frames recorded once, and a digest of what it publishes.
+
+``bench/fleet_flat.py --parts`` gives the bridge's share of a worker (``Bridge._handle``) with
+the fleet stepping and paho writing around it; here the frames of a lockstep fleet (``--robots``,
+``--ticks``; the worker's own: ``Fleet.take_batch``) are recorded first, then fed to one
+``RobotTelemetry`` per robot as ``Bridge._handle`` feeds them (``feed_fields``), every
+publication encoded (``topics.dumps``), under the worker's GC regime (``fleetrun.TickCollector``:
+the set-up frozen, the automatic collector off, one young pass after each tick, counted in):
+nothing else runs, so two trees compare in alternating pairs with little noise. ``--by-message``
+adds each message's frames per robot-tick and CPU per frame (``process_time`` around each frame:
+the figures include that clock's own cost, ~1 us a frame).
+
+The digest (sha-256 of every publication in order, the wall clock ``unix_s`` pinned, then each
+robot's ``status`` and ``rates``) is the same for two trees whose bridge publishes the same bytes
+from the same frames: a faster per-frame path must leave it unchanged. Pair trees in
+alternation (the recording is made with the tree that records; pass it with ``--frames``):
+
+    PYTHONPATH=. .venv/bin/python bench/bridge_frames.py --robots 50 --ticks 600 \
+        --record /tmp/fleet50.pkl
+    PYTHONPATH=<tree> .venv/bin/python bench/bridge_frames.py --frames /tmp/fleet50.pkl \
+        [--repeat 3] [--by-message]
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import hashlib
+import os
+import pickle
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import odocan.host.mqtt.topics as topics
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt.fleetrun import publish_phase_s
+from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.sim import robot
+from odocan.sim.contract import database
+from odocan.sim.fleet import Fleet, FleetConfig, robot_name
+
+# the bridge's entry for a fleet's frames (``_feed`` in the trees before it was public)
+FEED = getattr(RobotTelemetry, "feed_fields", None) or getattr(RobotTelemetry, "_feed")  # noqa: B009
+Recording = tuple[int, list[list[tuple[int, tuple[float, int, bytes]]]]]  # robots, batches
+
+
+def record(robots: int, ticks: int) -> Recording:
+    """The frames a lockstep fleet of ``robots`` hands its bridge over ``ticks`` ticks."""
+    fleet = Fleet(FleetConfig(robots=robots, robot=robot.load("pmir")))
+    batches = []
+    try:
+        for k in range(ticks):
+            fleet.step(k)
+            batches.append([(i, f if type(f) is tuple else
+                             (f.timestamp, f.arbitration_id, bytes(f.data)))
+                            for i, f in fleet.take_batch()])
+    finally:
+        fleet.close()
+    return robots, batches
+
+
+def telemetries(robots: int) -> list[RobotTelemetry]:
+    """One ``RobotTelemetry`` per robot, as ``fleetrun`` makes the bridge's endpoints."""
+    config = FleetConfig(robots=robots, robot=robot.load("pmir"))
+    p = config.robot
+    return [RobotTelemetry(robot_name(i), Geometry.of(p), config.integrator,
+                           counter_bits=p.counter_bits, publish_hz=10.0,
+                           publish_phase_s=publish_phase_s(i, 10.0), now_s=0.0,
+                           profile_name=p.name)
+            for i in range(robots)]
+
+
+def run_once(recording: Recording, by_message: Counter[str] | None,
+             frames: Counter[str]) -> tuple[float, str, int]:
+    """Feed the recording once: CPU s, the digest, the publications made."""
+    robots, batches = recording
+    names = {m.frame_id: m.name for m in database().messages}
+    tels, digest, published = telemetries(robots), hashlib.sha256(), 0
+    feed = FEED  # unbound: feed(telemetry, t_s, can_id, data, extended)
+    clock = time.process_time
+    gc.collect()
+    gc.freeze()
+    gc.disable()
+    try:
+        start_s = clock()
+        for batch in batches:
+            for index, (t_s, can_id, data) in batch:
+                t0_s = clock() if by_message is not None else 0.0
+                for _, payload in feed(tels[index], t_s, can_id, data, False):
+                    digest.update(topics.dumps(payload))
+                    published += 1
+                if by_message is not None:
+                    name = names.get(can_id, hex(can_id))
+                    by_message[name] += clock() - t0_s
+                    frames[name] += 1
+            gc.collect(0)
+        cpu_s = clock() - start_s
+    finally:
+        gc.enable()
+        gc.unfreeze()
+    for telemetry in tels:
+        digest.update(topics.dumps(telemetry.status()[1]) + topics.dumps(telemetry.rates(1.0)[1]))
+    return cpu_s, digest.hexdigest()[:16], published
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", type=int, default=50)
+    parser.add_argument("--ticks", type=int, default=600)
+    parser.add_argument("--record", metavar="PATH", help="record the frames there, then stop")
+    parser.add_argument("--frames", metavar="PATH", help="a recording (else one made now)")
+    parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--by-message", action="store_true",
+                        help="CPU per frame of each message (the clock read per frame)")
+    args = parser.parse_args()
+    recording: Recording
+    if args.frames:
+        recording = pickle.loads(Path(args.frames).read_bytes())
+    else:
+        recording = record(args.robots, args.ticks)
+    if args.record:
+        Path(args.record).write_bytes(pickle.dumps(recording))
+        return 0
+    setattr(topics.time, "time", lambda: 1.0)  # noqa: B010 (this process's wall clock pinned:
+    # ``unix_s`` in the digest)
+    robots, batches = recording
+    robot_ticks = robots * len(batches)
+    for _ in range(args.repeat):
+        by_message: Counter[str] | None = Counter() if args.by_message else None
+        frames: Counter[str] = Counter()
+        cpu_s, digest, published = run_once(recording, by_message, frames)
+        print(f"{robots} robots, {len(batches)} ticks: {cpu_s / robot_ticks * 1e6:.1f} us CPU "
+              f"per robot-tick, {published} publications, digest {digest}, "
+              f"load {os.getloadavg()[0]:.2f}", flush=True)
+        for name, spent_s in (by_message or Counter[str]()).most_common():
+            print(f"  {name:16s} {frames[name] / robot_ticks:5.2f} a robot-tick, "
+                  f"{spent_s / frames[name] * 1e6:6.1f} us a frame, "
+                  f"{spent_s / cpu_s * 100:4.1f}% of the CPU", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
