@@ -24,6 +24,7 @@ import can
 import pytest
 
 from odocan.firmware.encoders import EncoderInput
+from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import POSITION_LSB_M, analyze
 from odocan.host.judge.monitor import BusMonitor
@@ -174,3 +175,18 @@ def test_a_firmware_that_integrates_the_ambiguous_step_fails_every_judge(
     path = silenced_log(tmp_path / "python.log", name, "python", SILENCES_S[name][1])
     assert judged(path, robot_of(name))[:3] == (False, False, False)
 
+
+def test_the_outside_trial_passes_and_says_why_the_truth_is_off(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """The trial's own run: PASS, the re-prime and its reason in the summary."""
+    code = main(["run", "--robot", "kobuki", "--scenario", "square", "--duration", "50",
+                 "--faults", "busoff=5:30"])
+    out, err = capsys.readouterr()
+    assert (code, err) == (0, "")
+    lines = [line.split() for line in out.splitlines()]
+    reprimed = [line for line in lines if line[:1] == ["re-primed"]]
+    assert reprimed, out
+    assert reprimed[0][1:6] == ["1:", "the", "firmware", "re-primed", "(COUNTER_RESET)"]
+    assert "truth row is off" in " ".join(reprimed[0])
+    assert lines[-1][0] == "PASS:"
