@@ -27,6 +27,13 @@ that is a restart too, one that came during the silence and has been up longer t
 was before it. The firmware needs this rule, not only the judges: without it such a restart's jump
 fits the time-widened bound, is integrated as motion, and the firmware recovers to OK with a phantom
 jump in its pose.
+
+A step whose plausibility bound (its periods times a period's most counts) reaches half the
+range the counts are read in is ambiguous: after a silence that long any wire delta is as
+plausible as one a whole range away (kobuki's 16-bit counters after 3.9 s of silence at full
+speed). The firmware never integrates such a guess: it re-primes on the frame (COUNTER_RESET,
+latched as a restart's; the pose keeps its value, the silence's motion is lost). Taken mod 2^16
+(``odocan run --robot kobuki --faults busoff=5:30``) the pose went 788 mm off and back to OK.
 """
 
 from __future__ import annotations
@@ -124,6 +131,7 @@ class EncoderInput:
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS  # wider than the wire's
         self._wire_unused_mask = self._unused_wire_bits()  # u32: wire bits a counter never sets
         self._max_counts_per_period = self.step_bounds()
+        self._ambiguous_periods = self._least_ambiguous_periods()
         # The window widens once per tick (not per frame): a replay cannot widen it.
         self.rx = E2EReceiver(
             fr.WHEEL_ENCODERS_DATA_IDS, max_delta_counter_init=0, window_per_period=True
@@ -241,6 +249,9 @@ class EncoderInput:
         # absolute, so the wider step is exact.
         dropped = self._overflows_at_accept != self._health.overflows_before  # _mailbox_dropped
         bound = self._dropped_bound_periods(periods) if dropped else periods
+        if bound >= self._ambiguous_periods and self._counts_prev is not None:
+            self._reprime(counter, wire, counts)  # any step is as plausible as another
+            return
         if not self._plausible(self._counts_prev, counts, bound):
             self._on_implausible(counter, wire, counts)
             return
@@ -517,6 +528,22 @@ class EncoderInput:
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS
         self._wire_unused_mask = self._unused_wire_bits()
         self._max_counts_per_period = self.step_bounds()
+        self._ambiguous_periods = self._least_ambiguous_periods()
+
+    def _least_ambiguous_periods(self) -> int:
+        """The fewest step periods whose plausibility bound reaches half the range the counts
+        are read in (the counters' width, at most the wire's 24 bits) on either wheel: from
+        there every wire delta is plausible, the one read (mod the range) as much as the ones a
+        whole range away, so the step is ambiguous and never integrated (``on_frame``: the
+        odometry re-primes on the frame, COUNTER_RESET; kobuki: 16-bit counters, 84 counts a
+        period, 391 periods). ceil(half / counts per period) of the larger wheel bound (u64
+        at configuration time; at least 1), at most ``STEP_PERIODS_MAX``: a bound saturated
+        there no longer knows the elapsed time. C: the end of ``step_bounds``."""
+        half = 1 << (min(self._counter_bits, WIRE_COUNTER_BITS) - 1)
+        left_max, right_max = self._max_counts_per_period
+        most = left_max if left_max > right_max else right_max  # >= 1
+        least = (half + most - 1) // most
+        return least if least < STEP_PERIODS_MAX else STEP_PERIODS_MAX  # saturated: unknown
 
     def _unused_wire_bits(self) -> int:
         """The wire's count bits above the counters' width (0 for counters of 24 bits or more):

@@ -18,6 +18,7 @@ class ErrorFlag(IntFlag):
     TIME_LOST = 1 << 7  # the tick ran WATCHDOG_TICKS periods or more late (a stalled MCU)
     IMPLAUSIBLE_STEP = 1 << 8  # an encoder step beyond the maximum wheel speed: not integrated
     COUNTER_RESET = 1 << 9  # the encoder counters restarted: re-primed, the jump not integrated
+    # (also a step too long to read: its bound reached half the counters' range, encoders.py)
 
 
 class State(IntEnum):
@@ -38,7 +39,8 @@ class Reason(IntEnum):
     TIME_LOST = 2  # the firmware itself did not run for the watchdog period (stall)
     MAILBOX_OVERFLOW = 3  # received frames were dropped: the mailbox was full
     IMPLAUSIBLE_STEP = 4  # an encoder step beyond the maximum wheel speed was refused
-    COUNTER_RESET = 5  # the encoder counters restarted (motor controller reboot): re-primed
+    COUNTER_RESET = 5  # the encoder counters restarted (motor controller reboot), or a step
+    # was ambiguous (a silence long enough for them to wrap): re-primed, nothing integrated
     CONFIG_INVALID = 6  # the boot configuration was refused (FAULT)
 
 

@@ -341,6 +341,9 @@ def test_a_firmware_that_integrated_the_aged_restart_fails_every_judge(
     alone, as before): it integrates the restart's jump, and analyze (whole and streamed) and
     the monitor fail it."""
     monkeypatch.setattr(EncoderInput, "_aged_uptime", lambda self, prev, counter: prev)
+    # and without the ambiguity rule (tests/test_wrap_in_silence.py), which 10 s of silence
+    # on pmir reach too: it would re-prime on the jump for its own reason
+    monkeypatch.setattr(EncoderInput, "_least_ambiguous_periods", lambda _self: 1 << 20)
     path = aged_restart_log(tmp_path / "integrated.log", "python")
     after = [(s, r) for t, s, r in summaries(path)
              if t > (SILENT_FROM + AGED_SILENT_TICKS) * TICK_S + 2.0]

@@ -25,6 +25,8 @@ from hypothesis import strategies as st
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import POSITION_LSB_M, analyze
+from odocan.host.judge.stream_analysis import analyze_file
+from odocan.host.judge.stream_refusal import NotStreamable
 from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile, load
 from tests.independent_checker import Robot, _Odometry
@@ -173,7 +175,13 @@ def test_a_correct_firmware_with_random_recorder_gaps_passes(
     result = analyze(read_log(path), profile, integrator)
     assert result.passed, (result.report["onboard_vs_reference"],
                            result.report["reference_breaks"], cut)
-    _streamed_alike(path, profile, result.report, integrator, chunks=(333,))
+    if result.report["samples"]["unseen_restarts"]:  # a hole the firmware's bound cannot read
+        # (tests/test_wrap_in_silence.py): it may have re-primed there, a new start the streamed
+        # judge does not fit (host.judge.unseenrestart): it refuses, odocan analyze judges whole
+        with pytest.raises(NotStreamable):
+            analyze_file(path, profile, integrator, chunk_frames=333)
+    else:
+        _streamed_alike(path, profile, result.report, integrator, chunks=(333,))
     monitor, bridge, end_s = _live(profile, integrator, path)
     assert monitor.health(end_s)["state"] != "POSE WRONG", (monitor.health(end_s), cut)
     for tracker in (monitor.tracker, bridge.tracker):

@@ -85,6 +85,7 @@ static uint32_t step_periods(const struct odom_ecu *ecu, uint32_t advance);
 static uint32_t bound_periods(const struct odom_ecu *ecu, uint32_t periods);
 static void count_cycles_dropped(struct odom_ecu *ecu, uint8_t counter, uint32_t advance);
 static void step_bounds(struct odom_ecu *ecu);
+static void least_ambiguous_periods(struct odom_ecu *ecu);
 static bool plausible(const struct odom_ecu *ecu, const uint32_t prev[2], const uint32_t counts[2],
                       uint32_t periods);
 static void on_implausible(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
@@ -395,8 +396,12 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
     }
     uint32_t advance = counter_advance(ecu, counter);
     uint32_t periods = step_periods(ecu, advance);
-    if (!plausible(ecu, ecu->counts_prev_valid ? ecu->counts_prev : NULL, counts,
-                   bound_periods(ecu, periods))) {
+    uint32_t bound = bound_periods(ecu, periods);
+    if (bound >= ecu->ambiguous_periods && ecu->counts_prev_valid) {
+        reprime(ecu, counter, wire, counts); /* any step is as plausible as another */
+        return;
+    }
+    if (!plausible(ecu, ecu->counts_prev_valid ? ecu->counts_prev : NULL, counts, bound)) {
         on_implausible(ecu, counter, wire, counts);
         return;
     }
@@ -580,6 +585,26 @@ static void step_bounds(struct odom_ecu *ecu)
         uint64_t ceil = travel_q48_m / m + (travel_q48_m % m != 0u ? 1u : 0u);
         ecu->max_counts_per_period[side] = ceil + 1u;
     }
+    least_ambiguous_periods(ecu);
+}
+
+/* The fewest step periods whose plausibility bound reaches half the range the counts are read in
+ * (the counters' width, at most the wire's 24 bits) on either wheel: every wire delta is then
+ * as plausible as another, the step is ambiguous and never integrated (on_wheel_encoders
+ * re-primes, COUNTER_RESET). ceil(half / counts per period) of the larger bound, saturated at
+ * STEP_PERIODS_MAX (encoders.py _least_ambiguous_periods). Configuration time: u64 division. */
+static void least_ambiguous_periods(struct odom_ecu *ecu)
+{
+    unsigned bits = (unsigned)ecu->odometry.consts.counter_bits;
+    if (bits > WIRE_COUNTER_BITS) {
+        bits = WIRE_COUNTER_BITS;
+    }
+    uint64_t half = UINT64_C(1) << (bits - 1u);
+    uint64_t most = ecu->max_counts_per_period[0] > ecu->max_counts_per_period[1]
+                        ? ecu->max_counts_per_period[0]
+                        : ecu->max_counts_per_period[1]; /* >= 1 */
+    uint64_t least = half / most + (half % most != 0u ? 1u : 0u);
+    ecu->ambiguous_periods = least < STEP_PERIODS_MAX ? (uint32_t)least : STEP_PERIODS_MAX;
 }
 
 /* True when each wheel moved at most periods times its per-period bound since prev (NULL:

@@ -57,6 +57,7 @@ struct odom_ecu {
     struct odometry odometry;
     uint32_t max_wheel_speed_mm_s;     /* u16: an encoder step beyond it is implausible */
     uint64_t max_counts_per_period[2]; /* per wheel, at max_wheel_speed_mm_s */
+    uint32_t ambiguous_periods; /* the fewest step periods whose bound reaches half the range */
     struct mailbox mailbox;
     uint8_t data_ids[4][DATA_ID_COUNT];
     struct e2e_receiver rx_encoders;

@@ -17,6 +17,7 @@ from odocan.firmware.encoders import (
     RESYNC_FRAMES,
 )
 from odocan.firmware.twist import ENCODER_PERIOD_US
+from odocan.host.judge.ambiguity import least_ambiguous_periods
 from odocan.host.judge.livewindow import CYCLE_S, Counted
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.reference_path import restart_detail
@@ -56,13 +57,15 @@ class StepGate:
     (firmware/restarthold.py: CTRL_UPTIME the same or one more, its counts young and within the
     bound of the held frame's over their COUNTER advance) the reference re-primes on the held
     frame (the motor controller restarted) and steps from it to the next; else the held frame is
-    refused and the next judged against the last accepted one. Each restart is told to
-    ``told``."""
+    refused and the next judged against the last accepted one; a frame whose step from the
+    last accepted one is ambiguous (its periods' bound reaches half the counters' range,
+    ``ambiguity``) re-primes it. Each restart is told to ``told``."""
 
     def __init__(self, geometry: Geometry, counter_bits: int, told: RestartLog) -> None:
         self.bound = (0, 0)  # counts per period, left and right (``rebound``)
-        self.rebound(geometry)
+        self.least = 1  # the fewest periods of an ambiguous step (``rebound``)
         self.bits = counter_bits
+        self.rebound(geometry)
         self.prev: tuple[int, int, int] | None = None  # counter, left, right of the last accepted
         self._refused: list[tuple[int, int, int]] = []
         self._seq = self._prev_seq = 0  # periods heard, at the latest frame and at ``prev``
@@ -79,6 +82,7 @@ class StepGate:
         travel_m = geometry.max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
         self.bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
                       math.ceil(travel_m / geometry.m_per_count_right) + 1)
+        self.least = least_ambiguous_periods(self.bound, self.bits)
 
     def _delta(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[int, int]:
         return wrap_delta(b[1] - a[1], self.bits), wrap_delta(b[2] - a[2], self.bits)
@@ -121,8 +125,12 @@ class StepGate:
             self._prev_t = last_t
             self._held = (frame, seq, uptime, t_s)
             return None
-        delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
         periods = self._seq - prev_seq
+        if periods >= self.least:  # ambiguous (``ambiguity``): the firmware re-primes on it
+            self._refused = []
+            self._restarted(seq, t_s, by_uptime=True)
+            return 0, 0
+        delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
         if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
             if self._refused:
                 self._refused = []

@@ -13,6 +13,7 @@ import numpy.typing as npt
 
 from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.firmware.twist import ENCODER_PERIOD_US
+from odocan.host.judge.ambiguity import least_ambiguous_periods
 from odocan.host.judge.breaks import BreakSummary, placed_offsets
 from odocan.host.judge.breakspan import break_allowance as break_allowance
 from odocan.host.judge.breakspan import seen_whole
@@ -121,8 +122,8 @@ def build_reference(
     def gap_allowance(b: int) -> float:
         if b - e0 in unseen:  # frames lost before a restart: a new start, placed freely
             return math.inf
-        if b in uptime_reprimed:  # the gap ends in a controller restart: nothing integrated
-            return 0.0  # across it on board (re-primed), the position goes on exactly
+        if b in uptime_reprimed:  # the gap ends in a controller restart or an ambiguous
+            return 0.0  # step: nothing integrated across it on board (re-primed), exact
         if seen.gap_missed(b, reprimed):
             return 0.0  # the firmware took the gap as the reference's one step
         return gap_allowance_at(enc, b, seen.filled(b, reprimed), geometry, bits, integrator,
@@ -151,7 +152,8 @@ def build_reference(
         counter_restarts=tuple(e0 + k for k in steps.reprimed),
         implausible_frames=steps.refused,
         placements=placed,
-        ctrl_restarts=uptime_reprimed, unseen_restarts=frozenset(e0 + k for k in unseen),
+        ctrl_restarts=uptime_reprimed - frozenset(e0 + k for k in steps.ambiguous),
+        unseen_restarts=frozenset(e0 + k for k in unseen),
     )
 
 
@@ -164,7 +166,8 @@ class Steps:
     d_right: IntArray
     refused: int = 0  # frames beyond the plausibility bound, not integrated
     reprimed: list[int] = field(default_factory=list)  # frames (from e0) a counter restart primed
-    by_uptime: list[int] = field(default_factory=list)  # of them, a controller restart's
+    by_uptime: list[int] = field(default_factory=list)  # of them, a controller restart's or
+    ambiguous: list[int] = field(default_factory=list)  # an ambiguous step's (``ambiguity``)
     open_from: int | None = None  # the last accepted frame when the log ends in a refusal run
 
 
@@ -227,10 +230,16 @@ def firmware_steps(
             return False
         return True if confirmed[b] else None
 
+    least = least_ambiguous_periods(bound, bits)  # ``ambiguity``: the firmware re-primes
+
+    def ambiguous(a: int, b: int) -> bool:
+        return pair_bound_periods(seq, stamps, enc.cycle_s, a, b) >= least
+
     periods = step_bound_periods(seq, stamps, enc.cycle_s)
     bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])
-    bad |= foreign[1:] | unconfirmed
-    return _walk(steps, bad, restart, ((plausible, consistent, foreign), delta, restarted))
+    bad |= foreign[1:] | unconfirmed | (periods >= least)
+    return _walk(steps, bad, restart,
+                 ((plausible, consistent, foreign, ambiguous), delta, restarted))
 
 
 def _walk(steps: Steps, bad: Any, restart: Any, rules: tuple[Any, Any, Any]) -> Steps:
@@ -245,17 +254,23 @@ def _walk(steps: Steps, bad: Any, restart: Any, rules: tuple[Any, Any, Any]) -> 
         if restart[first_bad]:  # frame first_bad accepted: the next one re-primes
             k = _reprime(steps, first_bad + 1)
             continue
+        if plausibility[3](first_bad, first_bad + 1) and not plausibility[2][first_bad + 1]:
+            k = _reprime(steps, first_bad + 1, ambiguous=True)  # ``ambiguity``
+            continue
         k = _refusals(steps, first_bad, n_frames, plausibility, delta, restarted)
         if k == n_frames:
             steps.open_from = first_bad
     return steps
 
 
-def _reprime(steps: Steps, k: int) -> int:
-    """The firmware re-primes on frame ``k`` (a controller restart): no step into it."""
+def _reprime(steps: Steps, k: int, *, ambiguous: bool = False) -> int:
+    """The firmware re-primes on frame ``k`` (a controller restart, or an ambiguous step):
+    no step into it."""
     steps.d_left[k - 1] = steps.d_right[k - 1] = 0
     steps.reprimed.append(k)
-    steps.by_uptime.append(k)
+    steps.by_uptime.append(k)  # re-primed on this frame alone, as a controller restart
+    if ambiguous:
+        steps.ambiguous.append(k)
     return k
 
 
@@ -270,7 +285,7 @@ def _refusals(
     steps: Steps,
     prev: int,
     n_frames: int,
-    rules: tuple[Any, Any, Any],
+    rules: tuple[Any, Any, Any, Any],
     delta: Any,
     restarted: Any,
 ) -> int:
@@ -278,9 +293,10 @@ def _refusals(
     is accepted again (``restarted(prev, k)``: it re-primes on frame k, a controller restart);
     return that frame (``n_frames`` at the end of the log). ``rules``: whether a step from the
     last accepted frame is plausible, whether one between refused frames is, and per frame
-    whether its counts lie beyond the counters' width (``lossgate.beyond_width``);
+    whether its counts lie beyond the counters' width (``lossgate.beyond_width``), and whether
+    a step from the last accepted frame is ambiguous (``ambiguity``: re-primed, no step);
     ``restarted``: None for a restart frame the next one did not confirm (refused outright)."""
-    plausible, consistent, foreign = rules
+    plausible, consistent, foreign, ambiguous = rules
     resync_first: int | None = None
     resync_last = 0
     resync_frames = 0
@@ -292,6 +308,8 @@ def _refusals(
             continue
         if told:
             return _reprime(steps, k)
+        if ambiguous(prev, k):
+            return _reprime(steps, k, ambiguous=True)
         if plausible(prev, k):
             steps.d_left[k - 1], steps.d_right[k - 1] = delta(prev, k)
             return k
