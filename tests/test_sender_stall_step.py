@@ -41,6 +41,7 @@ from tests.test_stall_bound import _live
 
 KOBUKI = load("kobuki")
 FAST_KOBUKI = dataclasses.replace(KOBUKI, max_wheel_speed_m_s=4.0)  # before the 0.7 m/s profile
+SURE_KOBUKI = dataclasses.replace(KOBUKI, max_wheel_speed_m_s=2.0)  # twice its wheels' 1.0 m/s
 EVIDENCE = Path(__file__).parent / "files" / "sim_sigstop_1s.blf"
 STEPS = 600
 STALL_AT = 301  # odd: the resumed frame has no pose of its own (the catch-up frame's names it on)
@@ -133,20 +134,46 @@ def test_the_evidence_log_of_a_sim_stopped_1_s_passes(capsys: pytest.CaptureFixt
     """odocan sim SIGSTOPped 1 s (udp_multicast, kobuki): before, analyze said counter_restart
     and FAIL at 1644.9 mm (whole and --stream always); the firmware was within 6 mm of the
     truth. The log was recorded before kobuki's profile said 0.7 m/s: its wheels ran at up to
-    1.0 m/s (117 counts a period) under a firmware bounded at 4 m/s, so it is judged as that
-    robot (``FAST_KOBUKI``)."""
-    robot = tmp_path / "kobuki_4m_s.toml"
-    robot.write_text(to_toml(FAST_KOBUKI))
+    1.0 m/s (117 counts a period). It is judged as a robot bounded at 2 m/s (``SURE_KOBUKI``),
+    for which its 1.1 s silence is not ambiguous (``test_..._bounded_at_4_m_s_...`` below)."""
+    robot = tmp_path / "kobuki_2m_s.toml"
+    robot.write_text(to_toml(SURE_KOBUKI))
     for stream in ("never", "always"):
         code = main(["analyze", str(EVIDENCE), "--robot", str(robot), "--stream", stream])
         out = capsys.readouterr().out
         assert code == 0, out
         assert "PASS" in out
-    result = analyze(read_log(EVIDENCE), FAST_KOBUKI)
+    result = analyze(read_log(EVIDENCE), SURE_KOBUKI)
     assert result.passed
     assert not [e for e in result.report["events"] if e["kind"] == "counter_restart"]
     assert result.report["onboard_vs_reference"]["max_position_error_m"] <= POSITION_LSB_M
     assert result.report["onboard_vs_truth"]["max_position_error_m"] < 0.006
+
+
+def test_the_evidence_log_judged_as_its_firmware_bounded_at_4_m_s_fails_its_guess(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """The firmware that recorded the evidence log was bounded at 4 m/s (469 counts a period):
+    its 1.1 s silence (110 periods) reaches half the 16-bit range (70 periods), so any wire
+    delta was as plausible as another and it integrated a guess (it predates the ambiguity rule,
+    firmware/encoders.py: re-prime, COUNTER_RESET). The guess was right here (6 mm off the
+    truth), but the same firmware 788 mm off after a longer silence looked the same: FAIL, the
+    report naming where the reference re-primed."""
+    half_range = 1 << 15
+    assert 110 * _counts_per_period(FAST_KOBUKI) >= half_range  # ambiguous: the premise
+    assert 110 * _counts_per_period(SURE_KOBUKI) < half_range
+    robot = tmp_path / "kobuki_4m_s.toml"
+    robot.write_text(to_toml(FAST_KOBUKI))
+    code = main(["analyze", str(EVIDENCE), "--robot", str(robot)])
+    out = capsys.readouterr().out
+    assert code == 1, out
+    assert "re-primed" in out
+    assert "COUNTER_RESET" in out
+
+
+def _counts_per_period(profile: Any) -> float:
+    """A wheel's most counts in one 10 ms period at ``profile``'s max wheel speed (float64)."""
+    radius_m = max(profile.wheel_radius_left_m, profile.wheel_radius_right_m)
+    return profile.max_wheel_speed_m_s * TICK_S * profile.counts_per_rev / (2 * math.pi * radius_m)
 
 
 @pytest.mark.parametrize("stall_s", [0.5, 1.0, 1.9])

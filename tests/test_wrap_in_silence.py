@@ -187,6 +187,6 @@ def test_the_outside_trial_passes_and_says_why_the_truth_is_off(
     lines = [line.split() for line in out.splitlines()]
     reprimed = [line for line in lines if line[:1] == ["re-primed"]]
     assert reprimed, out
-    assert reprimed[0][1:6] == ["1:", "the", "firmware", "re-primed", "(COUNTER_RESET)"]
+    assert reprimed[0][1:8] == ["1:", "the", "reference", "re-primed", "where", "the", "firmware"]
     assert "truth row is off" in " ".join(reprimed[0])
     assert lines[-1][0] == "PASS:"

@@ -235,10 +235,12 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
                       + "; the reference restarted with it"))
     reprimed = [e for e in report.get("events") or [] if e.get("kind") == "counter_restart"]
     if reprimed:  # the truth row is off by the motion there (reference_path, ambiguity)
-        facts.append(("re-primed", f"{len(reprimed)}: the firmware re-primed (COUNTER_RESET) at "
+        facts.append(("re-primed", f"{len(reprimed)}: the reference re-primed where the firmware "
+                      "must (COUNTER_RESET) at "
                       + ", ".join(f"{e['t_s']:.2f} s" for e in reprimed[:5])
                       + (", ..." if len(reprimed) > 5 else "")
-                      + "; the motion across is unknowable: the truth row is off by it"))
+                      + "; the motion across is unknowable: the truth row is off by it, and a "
+                        "firmware that integrated it instead is off the reference"))
     unchecked = {k: v for k, v in (report.get("unknown_frames") or {}).items() if v}
     if unchecked:
         facts.append(
