@@ -20,15 +20,10 @@ import re
 from pathlib import Path
 from typing import Any
 
-import can
-import cantools
 import pytest
-from cantools.autosar import compute_profile2_crc
-from cantools.database.can import Database
 
 from odocan.host.cli.app import main
-from odocan.sim import contract
-from tests.dbc_typed import dbc_attribute
+from tests.log_edit import raise_raw
 
 STEP_LINE = 3000  # the clock goes back after this many frames (8.3 s into the drive)
 STEP_S = -100.0
@@ -45,25 +40,7 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def _raise_x(src: Path, dst: Path, lsb: int, from_s: float) -> int:
     """Copy ``src`` with ODOM_POSE_X.X ``lsb`` higher from ``from_s`` on; frames changed."""
-    db = cantools.database.load_file(str(contract.DBC_PATH))
-    assert isinstance(db, Database)
-    pose = db.get_message_by_name("ODOM_POSE_X")
-    ids = [int(v) for v in dbc_attribute(pose, "E2EDataIDs").split(",")]
-    changed, first = 0, None
-    with can.Logger(str(dst)) as out:
-        for msg in can.LogReader(str(src)):
-            first = msg.timestamp if first is None else first
-            if msg.arbitration_id == pose.frame_id and msg.timestamp - first >= from_s:
-                data = bytearray(msg.data)
-                raw = int.from_bytes(data[2:6], "little", signed=True) + lsb  # X: 16|32
-                data[2:6] = raw.to_bytes(4, "little", signed=True)
-                crc = compute_profile2_crc(bytes(data), ids[data[1] & 0xF])
-                assert crc is not None
-                data[0] = crc
-                msg.data = data
-                changed += 1
-            out.on_message_received(msg)
-    return changed
+    return raise_raw(src, dst, "ODOM_POSE_X", (2, 4), lsb, from_s)  # X: 16|32
 
 
 def _step_back(src: Path, dst: Path) -> None:

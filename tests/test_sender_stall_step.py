@@ -173,7 +173,8 @@ def test_the_evidence_log_judged_as_its_firmware_bounded_at_4_m_s_fails_its_gues
 def _counts_per_period(profile: Any) -> float:
     """A wheel's most counts in one 10 ms period at ``profile``'s max wheel speed (float64)."""
     radius_m = max(profile.wheel_radius_left_m, profile.wheel_radius_right_m)
-    return profile.max_wheel_speed_m_s * TICK_S * profile.counts_per_rev / (2 * math.pi * radius_m)
+    return float(profile.max_wheel_speed_m_s * TICK_S * profile.counts_per_rev
+                 / (2 * math.pi * radius_m))
 
 
 @pytest.mark.parametrize("stall_s", [0.5, 1.0, 1.9])

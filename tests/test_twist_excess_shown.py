@@ -17,15 +17,10 @@ import json
 import re
 from pathlib import Path
 
-import can
-import cantools
 import pytest
-from cantools.autosar import compute_profile2_crc
-from cantools.database.can import Database
 
 from odocan.host.cli.app import main
-from odocan.sim import contract
-from tests.dbc_typed import dbc_attribute
+from tests.log_edit import raise_raw
 
 FROM_S = 10.0
 
@@ -33,25 +28,7 @@ FROM_S = 10.0
 def _raise_linear_vel(src: Path, dst: Path) -> int:
     """Copy ``src`` with ODOM_TWIST.LINEAR_VEL one LSB higher from ``FROM_S`` on (CRC re-signed,
     cantools); the number of frames changed."""
-    db = cantools.database.load_file(str(contract.DBC_PATH))
-    assert isinstance(db, Database)
-    twist = db.get_message_by_name("ODOM_TWIST")
-    ids = [int(v) for v in dbc_attribute(twist, "E2EDataIDs").split(",")]
-    changed, first = 0, None
-    with can.Logger(str(dst)) as out:
-        for msg in can.LogReader(str(src)):
-            first = msg.timestamp if first is None else first
-            if msg.arbitration_id == twist.frame_id and msg.timestamp - first >= FROM_S:
-                data = bytearray(msg.data)
-                raw = int.from_bytes(data[2:4], "little", signed=True) + 1  # LINEAR_VEL: 16|16
-                data[2:4] = raw.to_bytes(2, "little", signed=True)
-                crc = compute_profile2_crc(bytes(data), ids[data[1] & 0xF])
-                assert crc is not None
-                data[0] = crc
-                msg.data = data
-                changed += 1
-            out.on_message_received(msg)
-    return changed
+    return raise_raw(src, dst, "ODOM_TWIST", (2, 2), 1, FROM_S)  # LINEAR_VEL: 16|16
 
 
 def test_a_twist_fail_names_a_nonzero_excess(tmp_path: Path,

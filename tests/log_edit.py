@@ -1,0 +1,42 @@
+"""Hand edits of a recorded log, as a skeptical user makes them: a signal's raw value raised by
+some LSB from a time on, each edited frame re-signed with its Profile 2 CRC by cantools (not by
+odocan's own E2E code), every other frame copied as recorded."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import can
+import cantools
+from cantools.autosar import compute_profile2_crc
+from cantools.database.can import Database
+
+from odocan.sim import contract
+from tests.dbc_typed import dbc_attribute
+
+
+def raise_raw(src: Path, dst: Path, message: str, byte_span: tuple[int, int], lsb: int,
+              from_s: float) -> int:
+    """Copy ``src`` to ``dst`` with the little-endian signed raw field in bytes
+    ``byte_span`` (start, length) of ``message`` raised by ``lsb`` from ``from_s`` s after the
+    log's first frame on; the number of frames changed."""
+    db = cantools.database.load_file(str(contract.DBC_PATH))
+    assert isinstance(db, Database)
+    target = db.get_message_by_name(message)
+    ids = [int(v) for v in dbc_attribute(target, "E2EDataIDs").split(",")]
+    start, length = byte_span
+    changed, first = 0, None
+    with can.Logger(str(dst)) as out:
+        for msg in can.LogReader(str(src)):
+            first = msg.timestamp if first is None else first
+            if msg.arbitration_id == target.frame_id and msg.timestamp - first >= from_s:
+                data = bytearray(msg.data)
+                raw = int.from_bytes(data[start:start + length], "little", signed=True) + lsb
+                data[start:start + length] = raw.to_bytes(length, "little", signed=True)
+                crc = compute_profile2_crc(bytes(data), ids[data[1] & 0xF])
+                assert crc is not None
+                data[0] = crc
+                msg.data = data
+                changed += 1
+            out.on_message_received(msg)
+    return changed
