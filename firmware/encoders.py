@@ -14,31 +14,15 @@ meets the same bound, also after the mailbox dropped frames (``_dropped_bound_pe
 robot with 16-bit counters it is refused first when it sets the wire's top 8 bits, which no
 genuine frame does (``_refuse_unused_bits``): neither its step nor a restart is taken from it.
 
-No rule on the counts alone tells a restart whose jump fits the bound (a controller silent long
-enough) from motion, so the controller says its age: a frame whose CTRL_UPTIME is below the last
-accepted frame's (both reported, non-zero) comes from a restarted controller, its counters from 0:
-COUNTER_RESET, the odometry re-primed on that frame, if its counts are ones such a young controller
-can hold (each wheel within CTRL_UPTIME seconds of its per-period bound of 0: a forged frame that
-passes E2E is refused as before, not taken for a restart) and the next frame confirms it
-(``firmware.restarthold``: held until then; on a 32-bit robot a forged frame is often "young"). A
-controller that reports 0 (an old one) is judged by the counts alone, as before. After a silence of
-S s the last frame's CTRL_UPTIME has aged by at least floor(S) (``_aged_uptime``): a frame below
-that is a restart too, one that came during the silence and has been up longer than the controller
-was before it. The firmware needs this rule, not only the judges: without it such a restart's jump
-fits the time-widened bound, is integrated as motion, and the firmware recovers to OK with a phantom
-jump in its pose.
-
-A step whose plausibility bound (its periods times a period's most counts) reaches half the
-range the counts are read in is ambiguous: after a silence that long any wire delta is as
-plausible as one a whole range away (kobuki's 16-bit counters after 3.9 s of silence at full
-speed). The firmware never integrates such a guess: it re-primes on the frame (COUNTER_RESET,
-latched as a restart's; the pose keeps its value, the silence's motion is lost). Taken mod 2^16
-(``odocan run --robot kobuki --faults busoff=5:30``) the pose went 788 mm off and back to OK.
+A restarted motor controller is told by its age (CTRL_UPTIME: ``firmware.restartage``) and taken
+when the next frame confirms it (``firmware.restarthold``); a step too long to read its counts
+unambiguously is never integrated (``firmware.ambiguity``).
 """
 
 from __future__ import annotations
 
 from odocan.firmware import frames as fr
+from odocan.firmware.ambiguity import least_ambiguous_periods
 from odocan.firmware.clock import FirmwareClock
 from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
 from odocan.firmware.e2e import COUNTER_MASK, FRAME_LEN, E2EReceiver, p02_crc
@@ -47,6 +31,10 @@ from odocan.firmware.fixmath import U16_MAX, U32_MAX, muldiv_round_u64, wrap_sig
 from odocan.firmware.health import RECOVERY_FRAMES, Health
 from odocan.firmware.odometry import Odometry
 from odocan.firmware.reception import Reception
+from odocan.firmware.restartage import CTRL_UPTIME_MAX as CTRL_UPTIME_MAX
+from odocan.firmware.restartage import PERIODS_PER_S as PERIODS_PER_S
+from odocan.firmware.restartage import RESTART_SLACK_PERIODS as RESTART_SLACK_PERIODS
+from odocan.firmware.restartage import aged_uptime, young_counts
 from odocan.firmware.restarthold import RestartHold
 from odocan.firmware.twist import ENCODER_PERIOD_US, Twist
 
@@ -56,9 +44,6 @@ RESYNC_FRAMES = 3  # frames consistent with each other, not with the last one: c
 COUNTER_VALUES = 16  # E2E COUNTER values (4 bits): one whole counter cycle
 STEP_PERIODS_MAX = U16_MAX  # the twist's dt and the plausibility bound saturate here (655 s)
 WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
-PERIODS_PER_S = 100  # encoder periods in one second (1 s / ENCODER_PERIOD_US)
-CTRL_UPTIME_MAX = 15  # CTRL_UPTIME saturates here (u4)
-RESTART_SLACK_PERIODS = 16  # periods two frames' queueing may shorten the gap between samples
 
 Counts = tuple[int, int]  # (left, right) counter values
 _FAULT = State.FAULT  # the enumerators as module constants (a 3.11 enum attribute read: ~0.14 us)
@@ -440,46 +425,17 @@ class EncoderInput:
         return self._young_counts(wire, uptime)
 
     def _aged_uptime(self, prev: int, counter: int) -> int:
-        """The least CTRL_UPTIME (u4) a controller that did not restart can report now, ``prev``
-        at the last accepted frame: ``prev`` plus the whole seconds of firmware time since that
-        frame, less the periods this tick came late and ``RESTART_SLACK_PERIODS`` (the frames'
-        queueing: the gap between their samples is at least that), saturated at
-        ``CTRL_UPTIME_MAX``; ``prev`` after a tick that lost time or frames the mailbox dropped
-        (a backlog's frames were sampled at unknown times). A controller silent S s reports at
-        least ``prev`` + floor(S) (1 + whole s of its age); less is a restart even when it is not
-        below ``prev`` (it restarted during the silence and has been up longer than before).
-
-        ``prev`` too when ``counter`` is the E2E successor of the last accepted frame's (its
-        COUNTER + 1 mod 16): the silence may be the bus's, not the controller's (a babbler held
-        it; the frames waited in the controller's transmit buffer), and the first frame after it
-        was then sampled right after the last accepted one, its CTRL_UPTIME as old. Proof that a
-        controller that did not restart is never taken for one: it numbers its frames 0..15 in
-        turn, so if none of them was lost this frame is the successor (this rule does not apply),
-        and if some were lost (on the bus: ENC_E2E_LOST) their samples lie between, so
-        the silence is the controller's own and it aged by it (the rule as before). What the rule
-        gives up: a restarted controller numbers afresh (sim ``MotorController.restart``: COUNTER
-        0 first), so a restart whose heard COUNTER happens to be the successor (1 in 16 over the
-        silence's unheard frames) is not told by its age here; it is still told if its
-        CTRL_UPTIME is below ``prev`` (it went back), else its jump is judged by the counts'
-        plausibility bound (widened by the silence) as before this rule."""
-        since = self.periods_since_frame  # u16
-        late = self._tick_late + RESTART_SLACK_PERIODS  # u32: < 2^19 + 16
+        """``restartage.aged_uptime`` of ``prev`` (the last accepted frame's CTRL_UPTIME, u4)
+        now; ``counter``: this frame's COUNTER (the E2E successor of the last one's may have
+        waited behind the silence: ``prev``, as after lost time or mailbox drops)."""
         successor = counter == ((self.enc_counter + 1) & COUNTER_MASK)
-        if since <= late or successor or self._clock.time_lost_now or self._mailbox_dropped():
-            return prev
-        aged = prev + (since - late) // PERIODS_PER_S  # u16: at most 15 + 655
-        return aged if aged < CTRL_UPTIME_MAX else CTRL_UPTIME_MAX
+        unknown = successor or self._clock.time_lost_now or self._mailbox_dropped()
+        return aged_uptime(prev, self.periods_since_frame, self._tick_late, unknown)
 
     def _young_counts(self, wire: Counts, uptime: int) -> bool:
-        """True when each wheel's count, read signed in the wire's bits, is within the counts a
-        controller ``uptime`` seconds old can have run from 0 (it powered up less than that
-        long ago): ``uptime * PERIODS_PER_S`` periods of its per-period bound (u64: at most
-        1500 * 2^44)."""
+        """``restartage.young_counts`` of ``wire`` for a controller ``uptime`` s old."""
         bits = min(self._odometry.consts.counter_bits, WIRE_COUNTER_BITS)
-        periods = uptime * PERIODS_PER_S
-        left_max, right_max = self._max_counts_per_period
-        left, right = wrap_signed(wire[0], bits), wrap_signed(wire[1], bits)
-        return abs(left) <= periods * left_max and abs(right) <= periods * right_max
+        return young_counts(wire, uptime, bits, self._max_counts_per_period)
 
     def _release_held(self, counter: int, wire: Counts, counts: Counts) -> Counts:
         """The frame after a held one (``counter``, ``wire``, ``counts`` from the last accepted
@@ -531,19 +487,9 @@ class EncoderInput:
         self._ambiguous_periods = self._least_ambiguous_periods()
 
     def _least_ambiguous_periods(self) -> int:
-        """The fewest step periods whose plausibility bound reaches half the range the counts
-        are read in (the counters' width, at most the wire's 24 bits) on either wheel: from
-        there every wire delta is plausible, the one read (mod the range) as much as the ones a
-        whole range away, so the step is ambiguous and never integrated (``on_frame``: the
-        odometry re-primes on the frame, COUNTER_RESET; kobuki: 16-bit counters, 84 counts a
-        period, 391 periods). ceil(half / counts per period) of the larger wheel bound (u64
-        at configuration time; at least 1), at most ``STEP_PERIODS_MAX``: a bound saturated
-        there no longer knows the elapsed time. C: the end of ``step_bounds``."""
-        half = 1 << (min(self._counter_bits, WIRE_COUNTER_BITS) - 1)
-        left_max, right_max = self._max_counts_per_period
-        most = left_max if left_max > right_max else right_max  # >= 1
-        least = (half + most - 1) // most
-        return least if least < STEP_PERIODS_MAX else STEP_PERIODS_MAX  # saturated: unknown
+        """``ambiguity.least_ambiguous_periods`` of this robot (configuration time)."""
+        bits = min(self._counter_bits, WIRE_COUNTER_BITS)
+        return least_ambiguous_periods(bits, self._max_counts_per_period, STEP_PERIODS_MAX)
 
     def _unused_wire_bits(self) -> int:
         """The wire's count bits above the counters' width (0 for counters of 24 bits or more):
