@@ -19,7 +19,8 @@ and period; every frame is judged whatever the rate). ``--lookahead off`` runs t
 drives tick by tick instead of ahead in staggered blocks (``sim.lookahead``, the fleet's
 default): a pair of sweeps shows what the blocks save. ``--firmware c`` puts the C port
 (``firmware/c``, bit-exact, a shared library through ctypes: ``odocan fleet --firmware c``) on
-every board instead of the Python firmware (the default, as ``odocan fleet``'s).
+every board instead of the Python firmware (this bench's default, so that trials pair with
+older trees; ``odocan fleet``'s is ``auto``: C when its library builds and loads).
 
 ``--robots`` (or ``--fixed``) replaces the search by one trial per size; the table's "2 cores"
 column is 20 000 us / (fleet + bridge + broker CPU per robot-tick): what two idle cores would

@@ -93,10 +93,12 @@ def merge_allowance_m(
     if n - 2 > MAX_MERGE_FRAMES:
         return path_bound_m(int(np.sum(np.abs(dl))), int(np.sum(np.abs(dr))), geometry)
     steps = OneSteps.of_deltas(dl, dr, geometry, integrator)
+    error = np.zeros((n, n))  # error[a, t]: the merge error from frame a to frame t (a < t)
+    a, t = np.triu_indices(n, k=1)
+    error[a, t] = merge_error(steps, a, t)  # every pair at once, each element as one by one
     best = np.zeros(n)  # best[t]: the largest sum with frame t taken (runs before it)
-    for t in range(1, n):
-        a = np.arange(t)
-        best[t] = float(np.max(best[:t] + merge_error(steps, a, t)))
+    for t_taken in range(1, n):
+        best[t_taken] = float(np.max(best[:t_taken] + error[:t_taken, t_taken]))
     return float(best[-1])
 
 

@@ -159,16 +159,19 @@ def worst_runs_m(steps: OneSteps, lost_ok: npt.NDArray[np.bool_], first: int, la
         run_ok = run_ok[: width - r + 1] & ok[r - 1 :]
         e = run_errors(steps, np.arange(lo, hi - r + 2), r)
         error[r, : width - r + 1] = np.where(run_ok, e, -np.inf)
-    # best[k][c]: the largest sum with c frames lost among the first k frames (-inf: impossible)
+    # best[k][c]: the largest sum with c frames lost among the first k frames (-inf: impossible):
+    # frame lo + k - 1 kept (best[k - 1][c]) or a run of r lost frames ending at it, a kept one
+    # before (row start - 1; row 0 for start 0). Layer c needs only layers c - r < c: every k
+    # and r of it at once, then the kept frames' chain as a running maximum over k.
     best = np.full((width + 1, n + 1), -np.inf)
-    best[0, 0] = 0.0
-    for k in range(1, width + 1):
-        best[k] = best[k - 1]  # frame lo + k - 1 kept
-        for r in range(1, min(n, k) + 1):  # a run of r lost frames ends at it, a kept one before
-            start = k - r
-            before = best[start - 1, : n + 1 - r] if start > 0 else best[0, : n + 1 - r]
-            candidate = before + error[r, start]
-            best[k, r:] = np.maximum(best[k, r:], candidate)
+    best[:, 0] = 0.0
+    ends = np.arange(1, width + 1)[None, :]  # k
+    for c in range(1, n + 1):
+        runs = np.arange(1, c + 1)[:, None]  # r
+        start = ends - runs
+        candidate = np.where(start >= 0, best[np.maximum(start - 1, 0), c - runs]
+                             + error[runs, np.maximum(start, 0)], -np.inf)
+        best[1:, c] = np.maximum.accumulate(candidate.max(axis=0))
     reachable = best[width][np.isfinite(best[width])]
     return float(np.max(reachable, initial=0.0))
 
