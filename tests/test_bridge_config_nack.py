@@ -13,58 +13,15 @@ from __future__ import annotations
 import json
 import math
 
-import can
-
 from odocan.firmware import frames as fr
-from odocan.firmware.ecu import OdomEcu
 from odocan.host.judge.reference import Geometry
-from odocan.host.mqtt import topics
-from odocan.host.mqtt.bridge import BridgeConfig, RobotEndpoint, _Robot
-from odocan.host.mqtt.broker import BrokerURL
-from odocan.sim import frames as sf
-from odocan.sim import robot
-from odocan.sim.rig import firmware_params
-from tests.test_monitor_config import _Hal
+from odocan.host.mqtt.bridge import _Robot
+from tests.bridge_pair import D_LEFT, D_RIGHT, KOBUKI, Board, bridged_robot
 
-KOBUKI = robot.load("kobuki")
-PERIOD_S = 0.01
-D_LEFT, D_RIGHT = 40, 55  # counts per period: a left curve at ~0.4 m/s
 # A robot the firmware refuses as a whole (one count turns it 450 deg): NACK INCONSISTENT
 REFUSED = {"id": "c2", "counts_per_rev": 4, "wheel_radius_left_m": 0.05,
            "wheel_radius_right_m": 0.05, "wheelbase_m": 0.01, "counter_bits": 16,
            "integrator": "exact"}
-
-
-class _Board:
-    """The firmware on kobuki, fed one encoder frame a period; its frames go to the bridge."""
-
-    def __init__(self, bridge: _Robot) -> None:
-        self.hal = _Hal()
-        self.ecu = OdomEcu(self.hal, firmware_params(KOBUKI, "exact"))
-        self.bridge = bridge
-        self.t_s = 0.0
-        self.counter = self.left = self.right = 0
-        self.results: list[dict[str, object]] = []
-
-    def period(self, commands: list[can.Message] = ()) -> None:  # type: ignore[assignment]
-        self.left = (self.left + D_LEFT) & 0xFFFF
-        self.right = (self.right + D_RIGHT) & 0xFFFF
-        frame = sf.pack_wheel_encoders(self.counter, self.left, self.right)
-        self.counter = (self.counter + 1) & 0xF
-        self._to_bridge(fr.WHEEL_ENCODERS_ID, frame)
-        self.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, frame)
-        for msg in commands:
-            self.ecu.isr_can_rx(msg.arbitration_id, bytes(msg.data))
-        self.ecu.tick()
-        for can_id, data in self.hal.sent:
-            self._to_bridge(can_id, data)
-        self.hal.sent.clear()
-        self.t_s += PERIOD_S
-
-    def _to_bridge(self, can_id: int, data: bytes) -> None:
-        published = self.bridge.telemetry.feed(can.Message(
-            timestamp=self.t_s, arbitration_id=can_id, is_extended_id=False, data=data))
-        self.results += [p for leaf, p in published if leaf == topics.RESULT_LEAF]
 
 
 def _dead_reckoned(periods: int) -> tuple[float, float]:
@@ -81,29 +38,19 @@ def _dead_reckoned(periods: int) -> tuple[float, float]:
     return x, y
 
 
-def _drive_with_config(config: dict[str, object], channel: str) -> tuple[_Robot, _Board]:
-    """100 periods, ``config`` sent through the bridge to the firmware, 300 periods more."""
-    send_bus = can.Bus(interface="virtual", channel=channel)
-    listener = can.Bus(interface="virtual", channel=channel)
-    try:
-        bridge = _Robot(RobotEndpoint("robot001", send_bus, Geometry.of(KOBUKI),
-                                      counter_bits=16),
-                        BridgeConfig(broker=BrokerURL("127.0.0.1", 1883)))
-        board = _Board(bridge)
+def _drive_with_config(config: dict[str, object], channel: str) -> tuple[_Robot, Board]:
+    """100 periods, ``config`` sent through the bridge to the firmware (taken after the next
+    encoder frame), 300 periods more."""
+    with bridged_robot(channel) as (bridge, listener):
+        board = Board(bridge, listener)
         for _ in range(100):
             board.period()
         answer = bridge.on_command("config", json.dumps(config).encode())
         assert answer[0][1]["result"] == "accepted", answer
-        frames = []
-        while (msg := listener.recv(0)) is not None:
-            frames.append(msg)
-        assert any(m.arbitration_id == fr.ODOM_CONFIG_ID for m in frames)
-        board.period(frames)  # the firmware answers the APPLY: ODOM_ACK
+        board.period(late=True)  # the firmware answers the APPLY: ODOM_ACK
+        assert any(m.arbitration_id == fr.ODOM_CONFIG_ID for m in board.commands)
         for _ in range(299):
             board.period()
-    finally:
-        send_bus.shutdown()
-        listener.shutdown()
     return bridge, board
 
 
