@@ -20,7 +20,11 @@ queued); each one is answered on ``cmd/result`` (accepted, rejected with the rea
 then once more with its end (acked, nacked, expired, rejected, timeout). No frame and no
 command can stop the bridge: a handler that raises anyway is counted (``frames_failed``,
 ``commands_failed``) and logged once. ``rates`` carries each link's counters (``link``:
-telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects).
+telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects) and its pacer's
+(``pacing``: commands queued, frames in flight, refused, expired in the queue, timed out,
+aborted). When the bridge stops, every command taken and not answered yet is answered
+``aborted`` (the reason says whether it ran) before the links say ``offline`` and disconnect,
+and a command that arrives meanwhile is answered ``aborted`` too, not sent.
 """
 
 from __future__ import annotations
@@ -127,6 +131,7 @@ class _Robot:
             expiry_s=config.command_expiry_s,
         )
         self.commands_sent = self.commands_rejected = self.commands_failed = 0
+        self.stopping = False  # the bridge stops: no command is sent any more (``abort``)
         # what this process lost of the robot's live bus, for ``status`` (``host.mqtt.busfeed``)
         self.receive: Callable[[], dict[str, Any]] | None = None
 
@@ -148,6 +153,10 @@ class _Robot:
             reason = (verdict.reason if isinstance(verdict, Expired) else
                       "older than its expiry: not run")  # the rule, when the link said it
             return [_result(command_id(payload), name, "expired", reason)]
+        if self.stopping:
+            self.commands_rejected += 1
+            return [_result(command_id(payload), name, "aborted",
+                            "the bridge is stopping: not run")]
         if verdict in ("busy", "retained"):
             self.commands_rejected += 1
             reason = ("bridge busy: not run" if verdict == "busy" else
@@ -171,6 +180,12 @@ class _Robot:
         self.commands_sent += 1
         return [_result(command.cmd_id, name, "accepted", None, frames=len(command.frames)),
                 *paced]
+
+    def abort(self) -> list[Publication]:
+        """The bridge stops: the pacer's commands not answered yet, answered ``aborted``; from
+        now on no command is sent."""
+        self.stopping = True
+        return self.pacer.abort()
 
     def paced(self, published: list[Publication]) -> list[Publication]:
         """``published`` (the telemetry's, for one frame) and the pacer's answers: an ODOM_ACK
@@ -298,6 +313,7 @@ class Bridge:
                 await stop.wait()
                 await asyncio.sleep(0)
                 self._drain()
+                self._abort()  # queued before the links' offline: flushed with it
                 frames.cancel()
                 periodic.cancel()
                 pacing.cancel()
@@ -307,8 +323,9 @@ class Bridge:
     def counters(self) -> dict[str, Any]:
         """What was dropped, refused, expired or failed (the report's ``bridge`` entry)."""
         totals: Counter[str] = Counter()
-        for link in self.links:
-            totals.update(link.counters())
+        for robot in self.robots:
+            totals.update(robot.link.counters())
+            totals.update(robot.pacer.counters())
         return {
             "frames_in": self.frames_in,
             "frames_dropped": self.frames_dropped,
@@ -323,7 +340,8 @@ class Bridge:
         return (f"{c['frames_in']} frames in ({c['frames_dropped']} dropped), telemetry "
                 f"dropped {c['telemetry_dropped']} (queue full) + {c['telemetry_offline']} "
                 f"(broker away), QoS-1 dropped {c['reliable_dropped']}, refused by the broker "
-                f"{c['refused']}, commands expired {c['commands_expired']}, "
+                f"{c['refused']}, commands expired {c['commands_expired']}, commands timed out "
+                f"{c['commands_timeout']}, aborted {c['commands_aborted']}, "
                 f"{c['reconnects']} reconnects")
 
     async def _consume(self) -> None:
@@ -343,6 +361,12 @@ class Bridge:
                 self._pending = []
             else:
                 await asyncio.sleep(0)
+
+    def _abort(self) -> None:
+        """Every robot's commands not answered yet: ``aborted`` (``_Robot.abort``)."""
+        for robot in self.robots:
+            for leaf, payload in robot.abort():
+                robot.link.publish(leaf, payload)
 
     def _drain(self) -> None:
         pending, self._pending = self._pending[self._pending_at:], []
@@ -397,7 +421,8 @@ class Bridge:
                     due_rates[slot] = max(due_rates[slot] + cfg.rates_period_s, now)
                     for robot in group:
                         leaf, payload = robot.telemetry.rates(now)
-                        robot.link.publish(leaf, {**payload, "link": robot.link.counters()})
+                        robot.link.publish(leaf, {**payload, "link": robot.link.counters(),
+                                                  "pacing": robot.pacer.counters()})
                 if now >= due_status[slot] - 1e-3:
                     due_status[slot] = max(due_status[slot] + cfg.status_period_s, now)
                     for robot in group:

@@ -15,8 +15,12 @@ are ever un-answered: each COUNTER in flight is distinct. Commands beyond the wi
 queue of ``max_queued`` commands; beyond that a command is refused (``rejected``, said why).
 Every command taken gets exactly one final answer: ``acked``/``nacked`` (the firmware's, from
 ``RobotTelemetry``), ``expired`` (it waited in the queue longer than ``expiry_s``), ``rejected``
-(the bus refused a frame) or ``timeout`` (no ODOM_ACK within ``ack_timeout_s`` of its last
-frame; its late ACK is then not taken). A NACKed command's frames not sent yet are not sent.
+(the bus refused a frame), ``timeout`` (no ODOM_ACK within ``ack_timeout_s`` of its last
+frame; its late ACK is then not taken) or ``aborted`` (the bridge stopped first: ``abort``, the
+reason says whether any of its frames went out). A NACKed command's frames not sent yet are not
+sent. ``counters`` (in ``rates`` and the bridge's report): commands waiting for the window
+(``commands_queued``), frames un-answered (``command_frames_in_flight``), and the totals
+refused (queue full), expired in the queue, timed out and aborted.
 """
 
 from __future__ import annotations
@@ -70,17 +74,28 @@ class CommandPacer:
         self.expiry_s = expiry_s
         self._active: deque[_Paced] = deque()  # in bus order: sending, then awaiting the ACK
         self._frames_in_flight = 0
-        self.refused = self.timed_out = self.expired = 0
+        self.refused = self.timed_out = self.expired = self.aborted = 0
 
     @property
     def busy(self) -> bool:
         """Commands still to send or to be answered."""
         return bool(self._active)
 
+    @property
+    def waiting(self) -> int:
+        """Commands taken, none of their frames sent yet."""
+        return sum(1 for p in self._active if p.next_frame == 0)
+
+    def counters(self) -> dict[str, int]:
+        """What the pacer holds now and what it answered itself (see the module docstring)."""
+        return {"commands_queued": self.waiting,
+                "command_frames_in_flight": self._frames_in_flight,
+                "commands_refused": self.refused, "commands_queue_expired": self.expired,
+                "commands_timeout": self.timed_out, "commands_aborted": self.aborted}
+
     def submit(self, command: Command, name: str, now_s: float) -> bool:
         """Take ``command`` (False: the queue is full, it is refused: not run)."""
-        waiting = sum(1 for p in self._active if p.next_frame == 0)
-        if waiting >= self.max_queued:
+        if self.waiting >= self.max_queued:
             self.refused += 1
             return False
         self._active.append(_Paced(command, name, now_s))
@@ -101,6 +116,26 @@ class CommandPacer:
         commands the bus refused; timeouts and expiries are ``pump``'s."""
         answers: list[Publication] = []
         self._send_more(now_s, answers)
+        return answers
+
+    def abort(self) -> list[Publication]:
+        """The bridge stops: every command taken and not answered yet is answered
+        ``aborted`` (in bus order), with whether it ran: none of its frames sent (not run),
+        some but not its last (not run: the firmware only staged them), or all of them (its
+        ODOM_ACK never heard: its outcome is unknown)."""
+        answers: list[Publication] = []
+        for paced in list(self._active):
+            if paced.next_frame == 0:
+                reason = "the bridge stopped before it was sent: not run"
+            elif not paced.all_sent:
+                reason = ("the bridge stopped before its last frame was sent: not run (the "
+                          "firmware staged its first frames only)")
+            else:
+                reason = ("the bridge stopped before its ODOM_ACK was heard: its outcome is "
+                          "unknown")
+            self.aborted += 1
+            self._finish(paced)
+            answers.append(_answer(paced, "aborted", reason))
         return answers
 
     def _release(self, published: list[Publication]) -> None:
