@@ -39,6 +39,7 @@ from typing import Any
 
 import can
 
+from odocan.host.judge.liveconfig import INTEGRATORS
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL, first_error
@@ -206,16 +207,14 @@ class _Robot:
             raise CommandRejected(
                 f"bridge busy: {self.pacer.max_queued} commands already wait for the bus: "
                 "not run", command.cmd_id)
-        answers = self.pacer.send_now(time.monotonic())
-        if not _refused(answers, command):
-            self._stage(command)
-        return answers
+        return self.pacer.send_now(time.monotonic())
 
     def _send_frame(self, command: Command, frame: Frame) -> int:
         """Put one command frame (and its ODOM_AUTH) on the bus: the mailbox slots taken."""
         bus = self.endpoint.bus
         signer = self.endpoint.signer
-        ack = PendingAck(command.cmd_id, command.name, frame.final)
+        ack = PendingAck(command.cmd_id, command.name, frame.final,
+                         _config_params(command) if frame.final else None)
         self.telemetry.expect_ack(frame.can_id, frame.counter, ack)
         self.telemetry.command_sent(frame.can_id, frame.data)  # a set-pose is followed
         try:
@@ -235,20 +234,22 @@ class _Robot:
             raise CommandRejected(f"bus refused ODOM_AUTH: {exc}", command.cmd_id) from None
         return 2
 
-    def _stage(self, command: Command) -> None:
-        """A config command's robot, the reference's once the firmware ACKs its APPLY."""
-        if command.name == "config":
-            v = command.values
-            speed = v.get("max_wheel_speed_m_s")  # absent: the firmware keeps its bound
-            self.telemetry.set_geometry(
-                Geometry(v["counts_per_rev"], v["wheel_radius_left_m"],
-                         v["wheel_radius_right_m"], v["wheelbase_m"],
-                         self.telemetry.tracker.geometry.max_wheel_speed_mm_s if speed is None
-                         else round(speed * 1000)),
-                str(v["integrator"]).lower() if isinstance(v["integrator"], str)
-                else ("euler", "rk2", "exact")[v["integrator"]],
-                v["counter_bits"],
-            )
+
+def _config_params(command: Command) -> dict[str, float] | None:
+    """A config command's robot as ODOM_CONFIG's PARAMs (``host.judge.liveconfig``): the
+    reference's once the firmware ACKs this command's own APPLY; None for other commands."""
+    if command.name != "config":
+        return None
+    v = command.values
+    integrator = v["integrator"]
+    params = {"COUNTS_PER_REV": v["counts_per_rev"], "WHEEL_RADIUS_LEFT": v["wheel_radius_left_m"],
+              "WHEEL_RADIUS_RIGHT": v["wheel_radius_right_m"], "WHEELBASE": v["wheelbase_m"],
+              "COUNTER_BITS": v["counter_bits"],
+              "INTEGRATOR": INTEGRATORS.index(integrator.lower())
+              if isinstance(integrator, str) else integrator}
+    if v.get("max_wheel_speed_m_s") is not None:  # absent: the firmware keeps its bound
+        params["MAX_WHEEL_SPEED"] = v["max_wheel_speed_m_s"]
+    return params
 
 
 def _id_and_data(frame: Received) -> tuple[int, bytes]:

@@ -54,6 +54,7 @@ import can
 from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
+from odocan.host.judge.liveconfig import apply_config
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livegapseen import heard_status
@@ -87,6 +88,7 @@ class PendingAck:
     cmd_id: Any
     command: str
     final: bool  # the APPLY / GO frame: its ACK completes the command
+    config: dict[str, float] | None = None  # a config's APPLY: its parameters (DBC PARAMs)
 
 
 def _routes(db: Database) -> dict[int, Route]:
@@ -144,7 +146,6 @@ class RobotTelemetry:
         self._truth_pub_t = -math.inf  # bus time of the last truth published (s)
         self.firmware: dict[str, Any] = {}
         self.pending: dict[tuple[int, int], PendingAck] = {}
-        self._staged_config: tuple[Geometry, str, int] | None = None  # until its APPLY's ACK
         self.status_seq = 0
         self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
         self._status_ids = e2e_messages(self.db).get(self._status_id)
@@ -401,12 +402,10 @@ class RobotTelemetry:
         nack = int(s["RESULT"]) != 0
         if not nack and not pending.final:
             return []
-        if nack:  # forget the rest of this command: one answer per command
+        if nack:  # forget the rest of this command: one answer per command (a config's
             self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
-            if pending.command == "config":  # the firmware keeps its parameters: so does the
-                self._staged_config = None  # reference
-        elif pending.command == "config":  # (a set-pose is followed: ``_followed_set_pose``)
-            self._apply_config()
+        elif pending.config is not None:  # parameters too: the firmware keeps its own)
+            self._apply_config(pending.config)  # (a set-pose: ``_followed_set_pose``)
             self.tracker.restart_reference()
         reason = _choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
         payload = {"id": pending.cmd_id, "command": pending.command,
@@ -417,20 +416,13 @@ class RobotTelemetry:
         """A command frame was sent: its ODOM_ACK will answer the command."""
         self.pending[(can_id, counter)] = ack
 
-    def set_geometry(self, geometry: Geometry, integrator: str, counter_bits: int) -> None:
-        """New robot parameters (a config command sent): the reference takes them when the
-        firmware ACKs the APPLY (``_answered``; it restarts at the next pose), never on a NACK
-        (the firmware keeps its own: a refused robot must not become the reference's)."""
-        self._staged_config = (geometry, integrator, counter_bits)
-
-    def _apply_config(self) -> None:
-        """The staged config command's parameters, now the firmware's (its APPLY ACKed)."""
-        if self._staged_config is None:
-            return
-        geometry, integrator, counter_bits = self._staged_config
-        self._staged_config = None
-        self.tracker.integrator = integrator
-        self.tracker.set_geometry(geometry, counter_bits)
+    def _apply_config(self, params: dict[str, float]) -> None:
+        """A config command's parameters (its APPLY's ``PendingAck.config``), the firmware's
+        now its APPLY is ACKed: each config when its own ACK says so, never on a NACK (the
+        firmware keeps its own: a refused robot must not become the reference's)."""
+        apply_config(self.tracker, params)  # those it lacks kept (max wheel speed)
+        geometry = self.tracker.geometry
+        counter_bits = int(params.get("COUNTER_BITS", self.tracker.counter_bits))
         self.distance.reconfigure(geometry, counter_bits)
         self.twist.reconfigure(geometry, counter_bits)
         self.profile.forget()  # the firmware's next page is judged against them
