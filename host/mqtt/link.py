@@ -76,6 +76,7 @@ log = logging.getLogger("odocan.mqtt")
 CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
 Publication = tuple[str, dict[str, Any]]
 Verdict = Literal["run", "expired", "busy", "retained"]
+COMMANDS_PER_TURN = 8  # commands handled before the event loop's other tasks get a turn
 CommandHandler = Callable[[str, bytes, Verdict | Expired], list[Publication]]
 
 
@@ -302,8 +303,13 @@ class RobotLink:
                             "arrive", self.robot, topics.command_filter(self.robot), code)
 
     async def _receive(self, client: LinkClient) -> None:
+        """Commands as they come, at most ``COMMANDS_PER_TURN`` in one loop turn: a flood
+        (1 500 at once, all in paho's queue) handled in one turn held the telemetry, the
+        frames and paho's keepalive back for seconds."""
         while True:
-            self._handle(await self._next_message(client))
+            for _ in range(COMMANDS_PER_TURN):
+                self._handle(await self._next_message(client))
+            await asyncio.sleep(0)  # the other tasks' turn
 
     async def _next_message(self, client: LinkClient) -> aiomqtt.Message:
         """The next message paho received; ``MqttError`` once the connection is lost.

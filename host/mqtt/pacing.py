@@ -83,8 +83,21 @@ class CommandPacer:
 
     @property
     def waiting(self) -> int:
-        """Commands taken, none of their frames sent yet."""
-        return sum(1 for p in self._active if p.next_frame == 0)
+        """Commands taken, none of their frames sent yet (``_active``'s tail: see ``_sent``)."""
+        return len(self._active) - len(self._sent())
+
+    def _sent(self) -> list[_Paced]:
+        """The commands with frames on the bus, ``_active``'s head: a command's frames go out
+        only once the one before it sent its last (``_send_more``), so the commands waiting
+        (none sent) are the tail, in the order taken. Every step of ``pump`` looks at these
+        few (the window is at most 15 frames) and the tail's head only: with 1 024 queued,
+        walking them all for each frame heard took the bridge's loop."""
+        sent = []
+        for paced in self._active:
+            if paced.next_frame == 0:
+                break
+            sent.append(paced)
+        return sent
 
     def counters(self) -> dict[str, int]:
         """What the pacer holds now and what it answered itself (see the module docstring)."""
@@ -144,7 +157,7 @@ class CommandPacer:
         pending = self._telemetry.pending
         answered_ids = [p.get("id") for leaf, p in published
                         if leaf == topics.RESULT_LEAF and p.get("result") in ("acked", "nacked")]
-        for paced in list(self._active):
+        for paced in self._sent():
             gone = [k for k, (ack, _) in paced.in_flight.items() if pending.get(k) is not ack]
             for key in gone:
                 self._frames_in_flight -= paced.in_flight.pop(key)[1]
@@ -153,21 +166,29 @@ class CommandPacer:
                 self._finish(paced)
 
     def _expire(self, now_s: float, answers: list[Publication]) -> None:
-        for paced in list(self._active):
-            if paced.next_frame == 0 and now_s - paced.queued_s > self.expiry_s:
-                self.expired += 1
-                self._finish(paced)
-                answers.append(_answer(paced, "expired",
-                                       "waited in the bridge's queue beyond its expiry: not run"))
-            elif paced.deadline_s is not None and now_s > paced.deadline_s:
+        sent = self._sent()
+        for paced in sent:
+            if paced.deadline_s is not None and now_s > paced.deadline_s:
                 self.timed_out += 1
                 self._finish(paced)
                 answers.append(_answer(paced, "timeout", (
                     f"no ODOM_ACK from the firmware within {self.ack_timeout_s:g} s: "
                     "its outcome is unknown")))
+        waiting = len(self._sent())  # the first waiting (taken in order: the oldest first)
+        while len(self._active) > waiting:
+            paced = self._active[waiting]
+            if now_s - paced.queued_s <= self.expiry_s:
+                break
+            self.expired += 1
+            self._finish(paced)
+            answers.append(_answer(paced, "expired",
+                                   "waited in the bridge's queue beyond its expiry: not run"))
 
     def _send_more(self, now_s: float, answers: list[Publication]) -> None:
-        for paced in list(self._active):
+        at = 0
+        while at < len(self._active) and self._frames_in_flight < self.window_frames:
+            paced = self._active[at]
+            at += 1
             while not paced.all_sent and self._frames_in_flight < self.window_frames:
                 frame = paced.command.frames[paced.next_frame]
                 try:
@@ -175,6 +196,7 @@ class CommandPacer:
                 except CommandRejected as exc:
                     self._finish(paced)
                     answers.append(_answer(paced, "rejected", exc.reason))
+                    at -= 1  # the next one took its place
                     break
                 ack = self._telemetry.pending.get((frame.can_id, frame.counter))
                 if ack is not None:
