@@ -60,6 +60,7 @@ from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
+from odocan.host.judge.livesetpose_choice import ApplyChoice
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.reference import Geometry
@@ -159,6 +160,7 @@ class RobotTelemetry:
         # ... set-poses and the counter restarts the reference follows (its ``RestartLog``)
         self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=STATUS_EVENTS)
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
+        self._apply_choice: ApplyChoice | None = None
         set_pose = next((m for m in self.db.messages if m.name == "ODOM_SET_POSE"), None)
         self._set_pose_id = set_pose.frame_id if set_pose is not None else -1
         self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {} \
@@ -262,6 +264,9 @@ class RobotTelemetry:
 
     @takes("ENC_COUNTER", "X", "HEADING", "COUNTER", advances=True)
     def _on_pose_x(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
+        if self._apply_choice is not None and self._apply_choice.on_pose_x(
+                self.tracker, int(s[0]), s[1], s[2]):  # (host.judge.livesetpose_choice)
+            self._apply_choice = None
         self.tracker.on_pose_x(int(s[0]), s[1], s[2], counter=int(s[3]), t_s=t_s)
         return []
 
@@ -385,8 +390,9 @@ class RobotTelemetry:
         the set pose (``host.judge.livesetpose``), a ``set_pose`` event in ``status``."""
         applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
         if applied is not None:
-            self.events.append(set_pose_event(t_s, apply_set_pose(self.tracker, *applied),
-                                              applied[1]))
+            event = set_pose_event(t_s, apply_set_pose(self.tracker, *applied), applied[1])
+            self.events.append(event)  # which frame it took effect after, if frames came since
+            self._apply_choice = ApplyChoice.after_ack(self.tracker, *applied, event)
 
     def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         if int(s["REQUEST_ID"]) == self._set_pose_id:
