@@ -18,21 +18,10 @@ from typing import Any, cast
 import can
 
 from odocan.firmware import frames as fr
-from odocan.firmware.ecu import OdomEcu
 from odocan.host.judge.livesetpose import SetPoseFollower
-from odocan.host.judge.reference import Geometry
-from odocan.host.mqtt import topics
-from odocan.host.mqtt.bridge import BridgeConfig, RobotEndpoint, _Robot
-from odocan.host.mqtt.broker import BrokerURL
-from odocan.sim import frames as sf
-from odocan.sim import robot
 from odocan.sim.contract import database
-from odocan.sim.rig import firmware_params
-from tests.test_monitor_config import _Hal
+from tests.bridge_pair import Board, bridged_robot
 
-KOBUKI = robot.load("kobuki")
-PERIOD_S = 0.01
-D_LEFT, D_RIGHT = 40, 55  # counts per period
 BURST = 40
 DB = database()
 
@@ -42,73 +31,43 @@ def _decoded(can_id: int, data: bytes) -> dict[str, Any]:
     return dict(cast(dict[str, Any], DB.decode_message(can_id, data, decode_choices=False)))
 
 
-class _Board:
-    """The firmware fed, each period, the frames the bridge sent since the last period (on the
-    bus before this period's encoder frame: the bridge sent them after hearing the last one),
-    then one encoder frame; then its tick."""
+class _Board(Board):
+    """``Board`` (the bridge's frames reach the mailbox before the period's encoder frame),
+    noting which command each APPLY drained and each APPLY's ACK belongs to."""
 
-    def __init__(self, bridge: _Robot, listener: can.BusABC) -> None:
-        self.hal = _Hal()
-        self.ecu = OdomEcu(self.hal, firmware_params(KOBUKI, "exact"))
-        self.bridge, self.listener = bridge, listener
-        self.t_s = 0.0
-        self.counter = self.left = self.right = 0
-        self.results: list[dict[str, Any]] = []
+    def __init__(self, bridge: Any, listener: can.BusABC) -> None:
+        super().__init__(bridge, listener)
         self.drained_applies: list[int] = []  # the command (by its X) of each APPLY delivered
         self.acked_applies: list[int] = []  # ... of each APPLY the firmware ACKed, in order
         self._last_x = -1
         self.answers_at_apply_ack: list[tuple[int, list[Any]]] = []
 
-    def period(self) -> None:
-        self.left = (self.left + D_LEFT) & 0xFFFF
-        self.right = (self.right + D_RIGHT) & 0xFFFF
-        frame = sf.pack_wheel_encoders(self.counter, self.left, self.right)
-        self.counter = (self.counter + 1) & 0xF
-        while (msg := self.listener.recv(0)) is not None:
-            dropped_before = self.ecu.mailbox.overflows
-            self.ecu.isr_can_rx(msg.arbitration_id, bytes(msg.data))
-            if msg.arbitration_id != fr.ODOM_SET_POSE_ID:
-                continue
-            s = _decoded(msg.arbitration_id, bytes(msg.data))
-            if self.ecu.mailbox.overflows != dropped_before:
-                continue  # dropped: never drained, never answered
-            if s["FIELD"] == 0:
-                self._last_x = round(s["X"] * 1000)
-            elif s["FIELD"] == 15:
-                self.drained_applies.append(self._last_x)
-        self._to_bridge(fr.WHEEL_ENCODERS_ID, frame)
-        self.ecu.isr_can_rx(fr.WHEEL_ENCODERS_ID, frame)
-        self.ecu.tick()
-        for can_id, data in self.hal.sent:
-            if can_id == fr.ODOM_ACK_ID:
-                s = _decoded(can_id, data)
-                if s["REQUEST_ID"] == fr.ODOM_SET_POSE_ID and s["REQUEST_FIELD"] == 15:
-                    x_mm = self.drained_applies[len(self.acked_applies)]
-                    self.acked_applies.append(x_mm)
-                    published = self._to_bridge(can_id, data)
-                    self.answers_at_apply_ack.append((x_mm, published))
-                    continue
-            self._to_bridge(can_id, data)
-        self.hal.sent.clear()
-        self.t_s += PERIOD_S
+    def command_frame(self, msg: can.Message) -> None:
+        dropped_before = self.ecu.mailbox.overflows
+        super().command_frame(msg)
+        if msg.arbitration_id != fr.ODOM_SET_POSE_ID:
+            return
+        s = _decoded(msg.arbitration_id, bytes(msg.data))
+        if self.ecu.mailbox.overflows != dropped_before:
+            return  # dropped: never drained, never answered
+        if s["FIELD"] == 0:
+            self._last_x = round(s["X"] * 1000)
+        elif s["FIELD"] == 15:
+            self.drained_applies.append(self._last_x)
 
-    def _to_bridge(self, can_id: int, data: bytes) -> list[dict[str, Any]]:
-        msg = can.Message(timestamp=self.t_s, arbitration_id=can_id, is_extended_id=False,
-                          data=data)
-        published = self.bridge.paced(self.bridge.telemetry.feed(msg))
-        results = [p for leaf, p in published if leaf == topics.RESULT_LEAF]
-        self.results += results
-        return results
+    def firmware_frame(self, can_id: int, data: bytes) -> None:
+        if can_id == fr.ODOM_ACK_ID:
+            s = _decoded(can_id, data)
+            if s["REQUEST_ID"] == fr.ODOM_SET_POSE_ID and s["REQUEST_FIELD"] == 15:
+                x_mm = self.drained_applies[len(self.acked_applies)]
+                self.acked_applies.append(x_mm)
+                self.answers_at_apply_ack.append((x_mm, self.to_bridge(can_id, data)))
+                return
+        self.to_bridge(can_id, data)
 
 
 def test_a_burst_of_40_set_poses_is_paced_answered_once_each_and_never_judged_wrong() -> None:
-    channel = "test-command-pacing"
-    send_bus = can.Bus(interface="virtual", channel=channel)
-    listener = can.Bus(interface="virtual", channel=channel)
-    try:
-        bridge = _Robot(RobotEndpoint("robot001", send_bus, Geometry.of(KOBUKI),
-                                      counter_bits=16),
-                        BridgeConfig(broker=BrokerURL("127.0.0.1", 1883)))
+    with bridged_robot("test-command-pacing") as (bridge, listener):
         board = _Board(bridge, listener)
         for _ in range(50):
             board.period()
@@ -118,9 +77,6 @@ def test_a_burst_of_40_set_poses_is_paced_answered_once_each_and_never_judged_wr
             accepted += bridge.on_command("set_pose", json.dumps(payload).encode())
         for _ in range(200):
             board.period()
-    finally:
-        send_bus.shutdown()
-        listener.shutdown()
 
     assert [p["result"] for _, p in accepted] == ["accepted"] * BURST
     assert board.ecu.mailbox.overflows == 0  # the firmware lost no frame
@@ -136,10 +92,8 @@ def test_a_burst_of_40_set_poses_is_paced_answered_once_each_and_never_judged_wr
 def test_a_command_the_firmware_never_answers_times_out_once() -> None:
     """No firmware on the bus: the first command's frames go out, its deadline passes, it is
     answered ``timeout`` once, and the window goes on to the next (never stuck)."""
-    with can.Bus(interface="virtual", channel="test-command-pacing-silent") as bus:
-        bridge = _Robot(RobotEndpoint("robot001", bus, Geometry.of(KOBUKI), counter_bits=16),
-                        BridgeConfig(broker=BrokerURL("127.0.0.1", 1883),
-                                     command_ack_timeout_s=0.0, command_window_frames=4))
+    with bridged_robot("test-command-pacing-silent", command_ack_timeout_s=0.0,
+                       command_window_frames=4) as (bridge, _):
         answers = []
         for k in range(3):
             payload = {"id": k, "x_m": 1.0, "y_m": 0.5, "heading_rad": 0.25}

@@ -20,7 +20,11 @@ queued); each one is answered on ``cmd/result`` (accepted, rejected with the rea
 then once more with its end (acked, nacked, expired, rejected, timeout). No frame and no
 command can stop the bridge: a handler that raises anyway is counted (``frames_failed``,
 ``commands_failed``) and logged once. ``rates`` carries each link's counters (``link``:
-telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects).
+telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects) and its pacer's
+(``pacing``: commands queued, frames in flight, refused, expired in the queue, timed out,
+aborted). When the bridge stops, every command taken and not answered yet is answered
+``aborted`` (the reason says whether it ran) before the links say ``offline`` and disconnect,
+and a command that arrives meanwhile is answered ``aborted`` too, not sent.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from typing import Any
 
 import can
 
+from odocan.host.judge.liveconfig import INTEGRATORS
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL, first_error
@@ -127,6 +132,7 @@ class _Robot:
             expiry_s=config.command_expiry_s,
         )
         self.commands_sent = self.commands_rejected = self.commands_failed = 0
+        self.stopping = False  # the bridge stops: no command is sent any more (``abort``)
         # what this process lost of the robot's live bus, for ``status`` (``host.mqtt.busfeed``)
         self.receive: Callable[[], dict[str, Any]] | None = None
 
@@ -148,6 +154,10 @@ class _Robot:
             reason = (verdict.reason if isinstance(verdict, Expired) else
                       "older than its expiry: not run")  # the rule, when the link said it
             return [_result(command_id(payload), name, "expired", reason)]
+        if self.stopping:
+            self.commands_rejected += 1
+            return [_result(command_id(payload), name, "aborted",
+                            "the bridge is stopping: not run")]
         if verdict in ("busy", "retained"):
             self.commands_rejected += 1
             reason = ("bridge busy: not run" if verdict == "busy" else
@@ -172,6 +182,12 @@ class _Robot:
         return [_result(command.cmd_id, name, "accepted", None, frames=len(command.frames)),
                 *paced]
 
+    def abort(self) -> list[Publication]:
+        """The bridge stops: the pacer's commands not answered yet, answered ``aborted``; from
+        now on no command is sent."""
+        self.stopping = True
+        return self.pacer.abort()
+
     def paced(self, published: list[Publication]) -> list[Publication]:
         """``published`` (the telemetry's, for one frame) and the pacer's answers: an ODOM_ACK
         frees its frame's slot in the window, and the next command frames go out."""
@@ -191,16 +207,14 @@ class _Robot:
             raise CommandRejected(
                 f"bridge busy: {self.pacer.max_queued} commands already wait for the bus: "
                 "not run", command.cmd_id)
-        answers = self.pacer.send_now(time.monotonic())
-        if not _refused(answers, command):
-            self._stage(command)
-        return answers
+        return self.pacer.send_now(time.monotonic())
 
     def _send_frame(self, command: Command, frame: Frame) -> int:
         """Put one command frame (and its ODOM_AUTH) on the bus: the mailbox slots taken."""
         bus = self.endpoint.bus
         signer = self.endpoint.signer
-        ack = PendingAck(command.cmd_id, command.name, frame.final)
+        ack = PendingAck(command.cmd_id, command.name, frame.final,
+                         _config_params(command) if frame.final else None)
         self.telemetry.expect_ack(frame.can_id, frame.counter, ack)
         self.telemetry.command_sent(frame.can_id, frame.data)  # a set-pose is followed
         try:
@@ -220,20 +234,22 @@ class _Robot:
             raise CommandRejected(f"bus refused ODOM_AUTH: {exc}", command.cmd_id) from None
         return 2
 
-    def _stage(self, command: Command) -> None:
-        """A config command's robot, the reference's once the firmware ACKs its APPLY."""
-        if command.name == "config":
-            v = command.values
-            speed = v.get("max_wheel_speed_m_s")  # absent: the firmware keeps its bound
-            self.telemetry.set_geometry(
-                Geometry(v["counts_per_rev"], v["wheel_radius_left_m"],
-                         v["wheel_radius_right_m"], v["wheelbase_m"],
-                         self.telemetry.tracker.geometry.max_wheel_speed_mm_s if speed is None
-                         else round(speed * 1000)),
-                str(v["integrator"]).lower() if isinstance(v["integrator"], str)
-                else ("euler", "rk2", "exact")[v["integrator"]],
-                v["counter_bits"],
-            )
+
+def _config_params(command: Command) -> dict[str, float] | None:
+    """A config command's robot as ODOM_CONFIG's PARAMs (``host.judge.liveconfig``): the
+    reference's once the firmware ACKs this command's own APPLY; None for other commands."""
+    if command.name != "config":
+        return None
+    v = command.values
+    integrator = v["integrator"]
+    params = {"COUNTS_PER_REV": v["counts_per_rev"], "WHEEL_RADIUS_LEFT": v["wheel_radius_left_m"],
+              "WHEEL_RADIUS_RIGHT": v["wheel_radius_right_m"], "WHEELBASE": v["wheelbase_m"],
+              "COUNTER_BITS": v["counter_bits"],
+              "INTEGRATOR": INTEGRATORS.index(integrator.lower())
+              if isinstance(integrator, str) else integrator}
+    if v.get("max_wheel_speed_m_s") is not None:  # absent: the firmware keeps its bound
+        params["MAX_WHEEL_SPEED"] = v["max_wheel_speed_m_s"]
+    return params
 
 
 def _id_and_data(frame: Received) -> tuple[int, bytes]:
@@ -298,6 +314,7 @@ class Bridge:
                 await stop.wait()
                 await asyncio.sleep(0)
                 self._drain()
+                self._abort()  # queued before the links' offline: flushed with it
                 frames.cancel()
                 periodic.cancel()
                 pacing.cancel()
@@ -307,8 +324,9 @@ class Bridge:
     def counters(self) -> dict[str, Any]:
         """What was dropped, refused, expired or failed (the report's ``bridge`` entry)."""
         totals: Counter[str] = Counter()
-        for link in self.links:
-            totals.update(link.counters())
+        for robot in self.robots:
+            totals.update(robot.link.counters())
+            totals.update(robot.pacer.counters())
         return {
             "frames_in": self.frames_in,
             "frames_dropped": self.frames_dropped,
@@ -323,7 +341,8 @@ class Bridge:
         return (f"{c['frames_in']} frames in ({c['frames_dropped']} dropped), telemetry "
                 f"dropped {c['telemetry_dropped']} (queue full) + {c['telemetry_offline']} "
                 f"(broker away), QoS-1 dropped {c['reliable_dropped']}, refused by the broker "
-                f"{c['refused']}, commands expired {c['commands_expired']}, "
+                f"{c['refused']}, commands expired {c['commands_expired']}, commands timed out "
+                f"{c['commands_timeout']}, aborted {c['commands_aborted']}, "
                 f"{c['reconnects']} reconnects")
 
     async def _consume(self) -> None:
@@ -343,6 +362,12 @@ class Bridge:
                 self._pending = []
             else:
                 await asyncio.sleep(0)
+
+    def _abort(self) -> None:
+        """Every robot's commands not answered yet: ``aborted`` (``_Robot.abort``)."""
+        for robot in self.robots:
+            for leaf, payload in robot.abort():
+                robot.link.publish(leaf, payload)
 
     def _drain(self) -> None:
         pending, self._pending = self._pending[self._pending_at:], []
@@ -397,7 +422,8 @@ class Bridge:
                     due_rates[slot] = max(due_rates[slot] + cfg.rates_period_s, now)
                     for robot in group:
                         leaf, payload = robot.telemetry.rates(now)
-                        robot.link.publish(leaf, {**payload, "link": robot.link.counters()})
+                        robot.link.publish(leaf, {**payload, "link": robot.link.counters(),
+                                                  "pacing": robot.pacer.counters()})
                 if now >= due_status[slot] - 1e-3:
                     due_status[slot] = max(due_status[slot] + cfg.status_period_s, now)
                     for robot in group:

@@ -25,7 +25,8 @@
   queued until the broker acknowledged them (at least once across broker restarts; a ``status``
   queued while disconnected replaces the queued ones, ``status_superseded``), up to
   ``reliable_buffer`` entries: beyond, the oldest ``status`` (superseded) goes first, then the
-  oldest entry (``reliable_dropped``);
+  oldest interim ``accepted`` answer (a command's final answer stays), then the oldest entry
+  (``reliable_dropped``);
 * commands arrive on ``odocan/<robot>/cmd/<name>`` and go to ``on_command(name, payload,
   verdict)``, which returns the publications that answer it (``cmd/result``). ``verdict`` is
   ``"run"``, or ``"expired"`` when the message is older than its MQTT v5 message expiry (the
@@ -76,6 +77,7 @@ log = logging.getLogger("odocan.mqtt")
 CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
 Publication = tuple[str, dict[str, Any]]
 Verdict = Literal["run", "expired", "busy", "retained"]
+COMMANDS_PER_TURN = 8  # commands handled before the event loop's other tasks get a turn
 CommandHandler = Callable[[str, bytes, Verdict | Expired], list[Publication]]
 
 
@@ -86,6 +88,7 @@ class _Outgoing:
     topic: str
     body: bytes
     retain: bool
+    interim: bool = False  # a command's ``accepted``: dropped before final answers
 
 
 class _Stopped(Exception):
@@ -152,7 +155,8 @@ class RobotLink:
             self._supersede_status(topic)
         if len(self.reliable) >= self.reliable_buffer:
             self._drop_reliable()
-        self.reliable.append(_Outgoing(topic, body, topics.retained(leaf)))
+        interim = leaf == topics.RESULT_LEAF and payload.get("result") == "accepted"
+        self.reliable.append(_Outgoing(topic, body, topics.retained(leaf), interim))
         self._reliable_wake.set()
 
     def _supersede_status(self, topic: str) -> None:
@@ -163,8 +167,11 @@ class RobotLink:
         self.reliable = kept
 
     def _drop_reliable(self) -> None:
+        """The oldest ``status`` (the next supersedes it), else the oldest interim answer (its
+        command's final answer is the one its sender waits for), else the oldest."""
         status = topics.topic(self.robot, topics.STATUS_LEAF)
-        victim = next((p for p in self.reliable if p.topic == status), self.reliable[0])
+        victim = next((p for p in self.reliable if p.topic == status), None) or next(
+            (p for p in self.reliable if p.interim), self.reliable[0])
         self.reliable.remove(victim)
         if self.reliable_dropped == 0:
             log.warning("%s: QoS-1 buffer full (%d): dropping the oldest", self.robot,
@@ -302,8 +309,13 @@ class RobotLink:
                             "arrive", self.robot, topics.command_filter(self.robot), code)
 
     async def _receive(self, client: LinkClient) -> None:
+        """Commands as they come, at most ``COMMANDS_PER_TURN`` in one loop turn: a flood
+        (1 500 at once, all in paho's queue) handled in one turn held the telemetry, the
+        frames and paho's keepalive back for seconds."""
         while True:
-            self._handle(await self._next_message(client))
+            for _ in range(COMMANDS_PER_TURN):
+                self._handle(await self._next_message(client))
+            await asyncio.sleep(0)  # the other tasks' turn
 
     async def _next_message(self, client: LinkClient) -> aiomqtt.Message:
         """The next message paho received; ``MqttError`` once the connection is lost.

@@ -15,8 +15,12 @@ are ever un-answered: each COUNTER in flight is distinct. Commands beyond the wi
 queue of ``max_queued`` commands; beyond that a command is refused (``rejected``, said why).
 Every command taken gets exactly one final answer: ``acked``/``nacked`` (the firmware's, from
 ``RobotTelemetry``), ``expired`` (it waited in the queue longer than ``expiry_s``), ``rejected``
-(the bus refused a frame) or ``timeout`` (no ODOM_ACK within ``ack_timeout_s`` of its last
-frame; its late ACK is then not taken). A NACKed command's frames not sent yet are not sent.
+(the bus refused a frame), ``timeout`` (no ODOM_ACK within ``ack_timeout_s`` of its last
+frame; its late ACK is then not taken) or ``aborted`` (the bridge stopped first: ``abort``, the
+reason says whether any of its frames went out). A NACKed command's frames not sent yet are not
+sent. ``counters`` (in ``rates`` and the bridge's report): commands waiting for the window
+(``commands_queued``), frames un-answered (``command_frames_in_flight``), and the totals
+refused (queue full), expired in the queue, timed out and aborted.
 """
 
 from __future__ import annotations
@@ -70,17 +74,41 @@ class CommandPacer:
         self.expiry_s = expiry_s
         self._active: deque[_Paced] = deque()  # in bus order: sending, then awaiting the ACK
         self._frames_in_flight = 0
-        self.refused = self.timed_out = self.expired = 0
+        self.refused = self.timed_out = self.expired = self.aborted = 0
 
     @property
     def busy(self) -> bool:
         """Commands still to send or to be answered."""
         return bool(self._active)
 
+    @property
+    def waiting(self) -> int:
+        """Commands taken, none of their frames sent yet (``_active``'s tail: see ``_sent``)."""
+        return len(self._active) - len(self._sent())
+
+    def _sent(self) -> list[_Paced]:
+        """The commands with frames on the bus, ``_active``'s head: a command's frames go out
+        only once the one before it sent its last (``_send_more``), so the commands waiting
+        (none sent) are the tail, in the order taken. Every step of ``pump`` looks at these
+        few (the window is at most 15 frames) and the tail's head only: with 1 024 queued,
+        walking them all for each frame heard took the bridge's loop."""
+        sent = []
+        for paced in self._active:
+            if paced.next_frame == 0:
+                break
+            sent.append(paced)
+        return sent
+
+    def counters(self) -> dict[str, int]:
+        """What the pacer holds now and what it answered itself (see the module docstring)."""
+        return {"commands_queued": self.waiting,
+                "command_frames_in_flight": self._frames_in_flight,
+                "commands_refused": self.refused, "commands_queue_expired": self.expired,
+                "commands_timeout": self.timed_out, "commands_aborted": self.aborted}
+
     def submit(self, command: Command, name: str, now_s: float) -> bool:
         """Take ``command`` (False: the queue is full, it is refused: not run)."""
-        waiting = sum(1 for p in self._active if p.next_frame == 0)
-        if waiting >= self.max_queued:
+        if self.waiting >= self.max_queued:
             self.refused += 1
             return False
         self._active.append(_Paced(command, name, now_s))
@@ -103,13 +131,33 @@ class CommandPacer:
         self._send_more(now_s, answers)
         return answers
 
+    def abort(self) -> list[Publication]:
+        """The bridge stops: every command taken and not answered yet is answered
+        ``aborted`` (in bus order), with whether it ran: none of its frames sent (not run),
+        some but not its last (not run: the firmware only staged them), or all of them (its
+        ODOM_ACK never heard: its outcome is unknown)."""
+        answers: list[Publication] = []
+        for paced in list(self._active):
+            if paced.next_frame == 0:
+                reason = "the bridge stopped before it was sent: not run"
+            elif not paced.all_sent:
+                reason = ("the bridge stopped before its last frame was sent: not run (the "
+                          "firmware staged its first frames only)")
+            else:
+                reason = ("the bridge stopped before its ODOM_ACK was heard: its outcome is "
+                          "unknown")
+            self.aborted += 1
+            self._finish(paced)
+            answers.append(_answer(paced, "aborted", reason))
+        return answers
+
     def _release(self, published: list[Publication]) -> None:
         """Free the slots of frames whose ODOM_ACK came (their PendingAck left the telemetry's
         ``pending``); a final answer published for a command ends it."""
         pending = self._telemetry.pending
         answered_ids = [p.get("id") for leaf, p in published
                         if leaf == topics.RESULT_LEAF and p.get("result") in ("acked", "nacked")]
-        for paced in list(self._active):
+        for paced in self._sent():
             gone = [k for k, (ack, _) in paced.in_flight.items() if pending.get(k) is not ack]
             for key in gone:
                 self._frames_in_flight -= paced.in_flight.pop(key)[1]
@@ -118,21 +166,29 @@ class CommandPacer:
                 self._finish(paced)
 
     def _expire(self, now_s: float, answers: list[Publication]) -> None:
-        for paced in list(self._active):
-            if paced.next_frame == 0 and now_s - paced.queued_s > self.expiry_s:
-                self.expired += 1
-                self._finish(paced)
-                answers.append(_answer(paced, "expired",
-                                       "waited in the bridge's queue beyond its expiry: not run"))
-            elif paced.deadline_s is not None and now_s > paced.deadline_s:
+        sent = self._sent()
+        for paced in sent:
+            if paced.deadline_s is not None and now_s > paced.deadline_s:
                 self.timed_out += 1
                 self._finish(paced)
                 answers.append(_answer(paced, "timeout", (
                     f"no ODOM_ACK from the firmware within {self.ack_timeout_s:g} s: "
                     "its outcome is unknown")))
+        waiting = len(self._sent())  # the first waiting (taken in order: the oldest first)
+        while len(self._active) > waiting:
+            paced = self._active[waiting]
+            if now_s - paced.queued_s <= self.expiry_s:
+                break
+            self.expired += 1
+            self._finish(paced)
+            answers.append(_answer(paced, "expired",
+                                   "waited in the bridge's queue beyond its expiry: not run"))
 
     def _send_more(self, now_s: float, answers: list[Publication]) -> None:
-        for paced in list(self._active):
+        at = 0
+        while at < len(self._active) and self._frames_in_flight < self.window_frames:
+            paced = self._active[at]
+            at += 1
             while not paced.all_sent and self._frames_in_flight < self.window_frames:
                 frame = paced.command.frames[paced.next_frame]
                 try:
@@ -140,6 +196,7 @@ class CommandPacer:
                 except CommandRejected as exc:
                     self._finish(paced)
                     answers.append(_answer(paced, "rejected", exc.reason))
+                    at -= 1  # the next one took its place
                     break
                 ack = self._telemetry.pending.get((frame.can_id, frame.counter))
                 if ack is not None:

@@ -54,11 +54,13 @@ import can
 from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
+from odocan.host.judge.liveconfig import apply_config
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
+from odocan.host.judge.livesetpose_choice import ApplyChoice
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.reference import Geometry
@@ -87,6 +89,7 @@ class PendingAck:
     cmd_id: Any
     command: str
     final: bool  # the APPLY / GO frame: its ACK completes the command
+    config: dict[str, float] | None = None  # a config's APPLY: its parameters (DBC PARAMs)
 
 
 def _routes(db: Database) -> dict[int, Route]:
@@ -144,7 +147,6 @@ class RobotTelemetry:
         self._truth_pub_t = -math.inf  # bus time of the last truth published (s)
         self.firmware: dict[str, Any] = {}
         self.pending: dict[tuple[int, int], PendingAck] = {}
-        self._staged_config: tuple[Geometry, str, int] | None = None  # until its APPLY's ACK
         self.status_seq = 0
         self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
         self._status_ids = e2e_messages(self.db).get(self._status_id)
@@ -158,6 +160,7 @@ class RobotTelemetry:
         # ... set-poses and the counter restarts the reference follows (its ``RestartLog``)
         self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=STATUS_EVENTS)
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
+        self._apply_choice: ApplyChoice | None = None
         set_pose = next((m for m in self.db.messages if m.name == "ODOM_SET_POSE"), None)
         self._set_pose_id = set_pose.frame_id if set_pose is not None else -1
         self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {} \
@@ -261,6 +264,9 @@ class RobotTelemetry:
 
     @takes("ENC_COUNTER", "X", "HEADING", "COUNTER", advances=True)
     def _on_pose_x(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
+        if self._apply_choice is not None and self._apply_choice.on_pose_x(
+                self.tracker, int(s[0]), s[1], s[2]):  # (host.judge.livesetpose_choice)
+            self._apply_choice = None
         self.tracker.on_pose_x(int(s[0]), s[1], s[2], counter=int(s[3]), t_s=t_s)
         return []
 
@@ -384,8 +390,9 @@ class RobotTelemetry:
         the set pose (``host.judge.livesetpose``), a ``set_pose`` event in ``status``."""
         applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
         if applied is not None:
-            self.events.append(set_pose_event(t_s, apply_set_pose(self.tracker, *applied),
-                                              applied[1]))
+            event = set_pose_event(t_s, apply_set_pose(self.tracker, *applied), applied[1])
+            self.events.append(event)  # which frame it took effect after, if frames came since
+            self._apply_choice = ApplyChoice.after_ack(self.tracker, *applied, event)
 
     def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         if int(s["REQUEST_ID"]) == self._set_pose_id:
@@ -401,12 +408,10 @@ class RobotTelemetry:
         nack = int(s["RESULT"]) != 0
         if not nack and not pending.final:
             return []
-        if nack:  # forget the rest of this command: one answer per command
+        if nack:  # forget the rest of this command: one answer per command (a config's
             self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
-            if pending.command == "config":  # the firmware keeps its parameters: so does the
-                self._staged_config = None  # reference
-        elif pending.command == "config":  # (a set-pose is followed: ``_followed_set_pose``)
-            self._apply_config()
+        elif pending.config is not None:  # parameters too: the firmware keeps its own)
+            self._apply_config(pending.config)  # (a set-pose: ``_followed_set_pose``)
             self.tracker.restart_reference()
         reason = _choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
         payload = {"id": pending.cmd_id, "command": pending.command,
@@ -417,20 +422,13 @@ class RobotTelemetry:
         """A command frame was sent: its ODOM_ACK will answer the command."""
         self.pending[(can_id, counter)] = ack
 
-    def set_geometry(self, geometry: Geometry, integrator: str, counter_bits: int) -> None:
-        """New robot parameters (a config command sent): the reference takes them when the
-        firmware ACKs the APPLY (``_answered``; it restarts at the next pose), never on a NACK
-        (the firmware keeps its own: a refused robot must not become the reference's)."""
-        self._staged_config = (geometry, integrator, counter_bits)
-
-    def _apply_config(self) -> None:
-        """The staged config command's parameters, now the firmware's (its APPLY ACKed)."""
-        if self._staged_config is None:
-            return
-        geometry, integrator, counter_bits = self._staged_config
-        self._staged_config = None
-        self.tracker.integrator = integrator
-        self.tracker.set_geometry(geometry, counter_bits)
+    def _apply_config(self, params: dict[str, float]) -> None:
+        """A config command's parameters (its APPLY's ``PendingAck.config``), the firmware's
+        now its APPLY is ACKed: each config when its own ACK says so, never on a NACK (the
+        firmware keeps its own: a refused robot must not become the reference's)."""
+        apply_config(self.tracker, params)  # those it lacks kept (max wheel speed)
+        geometry = self.tracker.geometry
+        counter_bits = int(params.get("COUNTER_BITS", self.tracker.counter_bits))
         self.distance.reconfigure(geometry, counter_bits)
         self.twist.reconfigure(geometry, counter_bits)
         self.profile.forget()  # the firmware's next page is judged against them
