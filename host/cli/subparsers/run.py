@@ -44,7 +44,6 @@ from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.listeners import Isolated, Recording
 from odocan.host.io.logs import FrameCollector
-from odocan.host.judge import busstats
 from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.outputs import OutputError, check_distinct, check_writable
 from odocan.host.report import provenance
@@ -248,6 +247,8 @@ def _run_and_analyze(
         if mirror is not None:
             rig.listeners.append(PacedRedirect(mirror))
         wire = getattr(rig.host_bus, "timing", None)  # bit-timed: the wire's own records
+        if wire is not None:  # -b only: busstats (cantools, the schedulability) costs 0.1 s
+            from odocan.host.judge import busstats
         try:
             start = time.perf_counter()
             stopped = _run(rig, rig.default_duration_s,
