@@ -28,6 +28,7 @@ from odocan.host.protocol.dbcplan import (
 )
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import e2e_messages
+from odocan.sim import contract
 from odocan.sim.contract import DBC_PATH, database
 
 FRAMES_PER_MESSAGE = 300
@@ -178,3 +179,18 @@ def test_a_warm_cache_needs_neither_cantools_nor_python_can(tmp_path: Path) -> N
     cold, warm = (set(json.loads(r.stdout.strip().splitlines()[-1])) for r in runs)
     assert "cantools" in cold  # the probe sees cantools when it is used
     assert warm.isdisjoint({"cantools", "can"}), sorted(warm & {"cantools", "can"})
+
+
+def test_the_rig_reads_each_cycle_time_from_the_plan_as_cantools_gives_it() -> None:
+    """``odocan run`` builds its rig under ``contract.read_as(plan)``: every cyclic message's
+    cycle time (the sim's send periods) is the one cantools reads from the DBC, and the plan is
+    what is read there (a message the plan lacks is not found), cantools again after it."""
+    names = [m.name for m in database().messages if m.cycle_time]
+    assert {"MOTOR_CMD", "SIM_TRUTH"} <= set(names)
+    by_cantools = {name: contract.cycle_time_s(name) for name in names}
+    plan = load_plan(DBC_PATH)
+    with contract.read_as(plan):
+        assert {name: contract.cycle_time_s(name) for name in names} == by_cantools
+        with contract.read_as(DbcPlan(())), pytest.raises(KeyError):
+            contract.cycle_time_s("MOTOR_CMD")
+    assert contract.cycle_time_s("MOTOR_CMD") == by_cantools["MOTOR_CMD"]

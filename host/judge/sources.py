@@ -21,12 +21,14 @@ import numpy.typing as npt
 
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.powerup import NAMED_SPAN, holds_first_cycle, same_tick, tick_bound_s
-from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.e2e import crc8h2f_p02_one
 from odocan.host.protocol.e2e_live import E2EMonitor
 
-if TYPE_CHECKING:  # the live judges' (a log's analysis imports this module, not cantools)
+if TYPE_CHECKING:  # the live judges' (a log's analysis imports this module, not cantools, nor
+    # the live judge: ``odocan run`` and ``analyze`` would compile and build it for nothing)
     from cantools.database.can import Database, Message
+
+    from odocan.host.judge.tracking import PoseTracker
 
 FIRMWARE_NODE = "ODOM_MCU"  # the DBC node that sends the firmware's frames (ODOM_STATUS, ...)
 UPTIME_MATCH_S = 2.0  # one source's UPTIME (whole s) minus bus time stays within this

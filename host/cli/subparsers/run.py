@@ -44,9 +44,9 @@ from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.listeners import Isolated, Recording
 from odocan.host.io.logs import FrameCollector
-from odocan.host.judge import busstats
 from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.outputs import OutputError, check_distinct, check_writable
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
     add_junit_argument,
@@ -66,7 +66,7 @@ from odocan.host.stopped import Stopped, signum_of
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
 from odocan.sim.cboard import board_maker
-from odocan.sim.contract import database
+from odocan.sim.contract import database, read_as
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultSpec
 from odocan.sim.faultspec import two_handles
@@ -242,12 +242,15 @@ def _run_and_analyze(
     try:
         if args.log is not None:
             listeners.append(_open_log(args.log))
-        rig = LockstepRig(config, listeners=listeners)
+        with read_as(default_plan()):  # the judge's plan of the DBC: no cantools to start
+            rig = LockstepRig(config, listeners=listeners)
         total_ticks = round(rig.default_duration_s / TICK_S)
         trace = TruthTrace(rig, total_ticks) if args.plot is not None else None
         if mirror is not None:
             rig.listeners.append(PacedRedirect(mirror))
         wire = getattr(rig.host_bus, "timing", None)  # bit-timed: the wire's own records
+        if wire is not None:  # -b only: busstats (cantools, the schedulability) costs 0.1 s
+            from odocan.host.judge import busstats
         try:
             start = time.perf_counter()
             stopped = _run(rig, rig.default_duration_s,
