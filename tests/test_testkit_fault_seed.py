@@ -39,7 +39,8 @@ def test_the_firmware_command_takes_a_seed_for_its_faults(
     args = build_parser("firmware").parse_args(
         ["firmware", "--seed", "7", "--faults", "drop=0.1"])
     spec = parse_faults(args)
-    assert spec is not None and spec.seed == 7
+    assert spec is not None
+    assert spec.seed == 7
     assert main(["firmware", "-i", "virtual", "-c", "odocan-fault-seed", "--duration", "0.1",
                  "--seed", "3", "--faults", "drop=0.1"]) == 0
     assert "error" not in capsys.readouterr().err
