@@ -67,7 +67,7 @@ def test_replay_reproduces_the_run(
     assert section["ticks_without_frame"] == 0
     assert section["onboard_vs_log"] == {
         "samples": 300, "identical": 300, "identical_before_gap": 300,
-        "max_position_diff_m": 0.0, "max_heading_diff_rad": 0.0,
+        "max_position_diff_m": 0.0, "max_position_diff_raw_m": 0.0, "max_heading_diff_rad": 0.0,
         "before_first_gap": 300, "max_position_diff_before_gap_m": 0.0,
         "max_resent_position_diff_m": 0.0, "max_position_drift_between_gaps_m": 0.0,
         "logged": 300, "log_starts_mid_drive": False, "holes": [], "heading_offsets_bam16": [],

@@ -36,17 +36,14 @@ from odocan.host.io.rxsocket import SocketDrops, bus_socket_fd
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.report.tui_app import FrameLog, MonitorApp
 from tests.test_cli_run import run_cli
+from tests.udp_pair import fresh_group, open_pair
 
 BURST = 3000  # > 10x what Linux's default receive buffer holds (256 udp_multicast frames)
 PACE = 10  # frames sent back to back, then PACE_S: 2 000 frames/s, a busy 500 kbit/s bus
 PACE_S = 0.005
 QUIET_POLLS = 3  # the watch ends after the burst and this many empty receives in a row
 UNKNOWN_ID = 0x7F0  # not in the DBC: the model counts it, nothing more
-
-
-def _group_and_port() -> tuple[str, int]:
-    group = f"239.255.{secrets.randbelow(250) + 1}.{secrets.randbelow(250) + 1}"
-    return group, 43000 + secrets.randbelow(900)
+_group_and_port = fresh_group  # the name test_bridge_reader imports
 
 
 def _frame(n: int) -> can.Message:
@@ -246,13 +243,7 @@ def test_a_bus_error_reaches_the_judge_after_the_frames_before_it() -> None:
 def test_the_kernel_drop_count_adds_up_with_what_was_read() -> None:
     """A udp_multicast socket with a tiny receive buffer that nobody reads: what it holds plus
     what the kernel says it dropped is every frame sent."""
-    group, port = _group_and_port()
-    kwargs: dict[str, Any] = {"interface": "udp_multicast", "channel": group, "hop_limit": 0,
-                              "port": port}
-    try:
-        rx, tx = can.Bus(**kwargs), can.Bus(**kwargs)
-    except Exception as exc:
-        pytest.skip(f"udp_multicast unavailable: {exc}")
+    rx, tx = open_pair()
     try:
         fd = bus_socket_fd(rx)
         assert fd is not None

@@ -12,13 +12,13 @@ from __future__ import annotations
 import os
 import socket
 from pathlib import Path
-from typing import Any
 
 import can
 import pytest
 
 from odocan.host.io.rxsocket import SocketDrops, bus_socket_fd
-from tests.test_monitor_recorder import _frame, _group_and_port
+from tests.test_monitor_recorder import _frame
+from tests.udp_pair import open_pair
 
 SENT = 500
 QUIET_POLLS = 3  # empty receives in a row: the socket is drained
@@ -66,13 +66,7 @@ def _fill_and_count(rx: can.BusABC, tx: can.BusABC, drops: SocketDrops) -> tuple
 def test_the_drop_count_is_read_from_the_socket_itself() -> None:
     """No ``/proc`` table given: the count comes from the socket, and it is the one
     ``/proc/net/udp`` shows."""
-    group, port = _group_and_port()
-    kwargs: dict[str, Any] = {"interface": "udp_multicast", "channel": group, "hop_limit": 0,
-                              "port": port}
-    try:
-        rx, tx = can.Bus(**kwargs), can.Bus(**kwargs)
-    except Exception as exc:
-        pytest.skip(f"udp_multicast unavailable: {exc}")
+    rx, tx = open_pair()
     try:
         heard, dropped = _fill_and_count(rx, tx, SocketDrops(rx, tables=()))
         in_proc = _proc_udp_drops(rx)

@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from odocan.host.io.blf_objects import blf_corruption, quiet_python_can_blf
 from odocan.host.io.candump import (
     CHUNK_BYTES,
     candump_parts,
@@ -301,6 +302,7 @@ def _python_can_parts(
     except ValueError as exc:  # python-can: unknown suffix, bad file contents
         raise LogFormatError(f"{path}: {_first_line(exc)}") from None
     except Exception as exc:  # readers raise anything from struct.error to IndexError
+        _raise_if_blf_corrupt(path, count)
         raise LogFormatError(f"{path}: cannot read frame {count + 1}: {_cause(exc)}") from None
     if len(collector):
         yield collector.arrays()
@@ -315,6 +317,8 @@ def _reader(path: Path) -> tuple[Iterable[can.Message], AscLines | None]:
     """python-can's reader of ``path``; an ``.asc``'s through ``AscLines`` (returned too)."""
     import can
 
+    if path.suffix.lower() == ".blf":
+        quiet_python_can_blf()
     if path.suffix.lower() != ".asc":
         return can.LogReader(path), None
     from odocan.host.io.asc import AscLines
@@ -331,8 +335,28 @@ def _format_warnings(
         warn(f"{path}: skipped {lines.skipped} line{'s' if lines.skipped > 1 else ''} that "
              f"{'are' if lines.skipped > 1 else 'is'} no ASC frame or event (first: line "
              f"{lines.first_skipped})")
-    if path.suffix.lower() == ".blf" and (note := blf_warning(path, frames)) is not None:
+    if path.suffix.lower() == ".blf":
+        _blf_notes(path, frames, warn)
+
+
+def _blf_notes(path: Path, frames: int, warn: Callable[[str], None]) -> None:
+    """A ``.blf`` cut short or unfinished (``blf_warning``); one with a corrupt object header
+    (``blf_objects``): an error when no frame was read, else a warning (python-can skipped it)."""
+    if frames == 0:
+        _raise_if_blf_corrupt(path, frames)
+    if (note := blf_warning(path, frames)) is not None:
         warn(note)
+    if (where := blf_corruption(path)) is not None:
+        warn(f"{path}: corrupt {where}: skipped (the frames it held, if any, not read; "
+             f"{frames} frames read from the rest)")
+
+
+def _raise_if_blf_corrupt(path: Path, frames: int) -> None:
+    """A ``.blf`` read to no frame, or failing, because of a corrupt object header: that, as
+    one line (not "empty log", not the reader's bare exception)."""
+    if path.suffix.lower() == ".blf" and (where := blf_corruption(path)) is not None:
+        read = f"{frames} frames read before" if frames else "not a single CAN frame read"
+        raise LogFormatError(f"{path}: corrupt BLF: {where} ({read})")
 
 
 def blf_warning(path: Path, frames: int) -> str | None:

@@ -152,14 +152,29 @@ def onboard_at(onboard: Poses, ref: Reference, enc: IntArray) -> tuple[Poses, In
     s = following[keep]
     here, there = ref.at(enc[keep]), ref.at(onboard.enc[s])
     heading = onboard.heading_raw[s] * HEADING_LSB_RAD
-    poses = Poses(
-        enc=enc[keep],
-        x_m=onboard.x_m[s] - there.x_m + here.x_m,
-        y_m=onboard.y_m[s] - there.y_m + here.y_m,
-        heading_rad=np.asarray(heading - there.heading_rad + here.heading_rad, dtype=np.float64),
-        heading_raw=onboard.heading_raw[s],
-    )
+    x_m, y_m, heading_rad = carried(
+        (onboard.x_m[s], onboard.y_m[s], heading),
+        (there.x_m, there.y_m, there.heading_rad), (here.x_m, here.y_m, here.heading_rad))
+    poses = Poses(enc=enc[keep], x_m=x_m, y_m=y_m,
+                  heading_rad=np.asarray(heading_rad, dtype=np.float64),
+                  heading_raw=onboard.heading_raw[s])
     return poses, keep
+
+
+def carried(onboard: tuple[Any, Any, Any], there: tuple[Any, Any, Any],
+            here: tuple[Any, Any, Any]) -> tuple[Any, Any, Any]:
+    """The on-board pose (x m, y m, heading rad) at the reference's ``there``, carried to its
+    ``here`` by the reference's own motion between them, turned into the on-board pose's frame
+    (by on-board heading - reference heading at ``there``): where the reference and the
+    firmware part in heading (a reference that re-primed over a stall, a firmware off), the
+    reference's step in its own direction is no step of the firmware's (6 mm off the truth on a
+    correct firmware at 0.7 m/s). Element by element, arrays or floats: the whole-log, streamed
+    and live judges carry alike."""
+    turn = onboard[2] - there[2]
+    c, s = np.cos(turn), np.sin(turn)
+    dx, dy = here[0] - there[0], here[1] - there[1]
+    return (onboard[0] + c * dx - s * dy, onboard[1] + s * dx + c * dy,
+            onboard[2] - there[2] + here[2])
 
 
 

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from odocan.host.judge.compare import life_origin, rebase_truth
+from odocan.host.judge.compare import carried, life_origin, rebase_truth
 from odocan.host.judge.livepose import FramePose, recent, truth_heading
 
 if TYPE_CHECKING:
@@ -90,9 +90,12 @@ class TruthParts:
 
 def carried_to(pose: FramePose, at: FramePose, ref: FramePose) -> FramePose:
     """The on-board ``pose``, judged against the reference ``at``, carried to the reference
-    ``ref`` of a later frame (by the reference's own motion since)."""
-    return FramePose(ref.seq, pose.x_m - at.x_m + ref.x_m, pose.y_m - at.y_m + ref.y_m,
-                     pose.heading_rad - at.heading_rad + ref.heading_rad)
+    ``ref`` of a later frame (by the reference's own motion since, turned into the on-board
+    pose's frame: ``compare.carried``)."""
+    x_m, y_m, heading_rad = carried((pose.x_m, pose.y_m, pose.heading_rad),
+                                    (at.x_m, at.y_m, at.heading_rad),
+                                    (ref.x_m, ref.y_m, ref.heading_rad))
+    return FramePose(ref.seq, float(x_m), float(y_m), float(heading_rad))
 
 
 def judge_truth(

@@ -72,7 +72,10 @@ def versus_log(
     firmware took frames the replay is not fed, e.g. a step its counters wrapped over), the
     heading offset at the first frame both name (``anchors``) is taken off the headings that
     follow, less one LSB of rounding, and the replayed positions are turned by it and compared
-    by their drift (``drift_between_gaps_m``)."""
+    by their drift (``drift_between_gaps_m``). ``max_position_diff_m`` is the position figure
+    the verdict judges (the larger of the difference up to the first gap and the drift between
+    gaps); ``max_position_diff_raw_m`` the raw difference over every pose, holes and all (None
+    for a log cut mid-drive: its positions have no common origin)."""
     _, accepted = check_frames(replayed)
     old, new = onboard_by_tick(log, log_accepted), onboard_by_tick(replayed, accepted)
     common = np.array(sorted(old.keys() & new.keys()), dtype=np.int64)
@@ -85,7 +88,7 @@ def versus_log(
                              "max_resent_position_diff_m": resent_position_diff_m(old)}
     if len(common) == 0:
         return {"samples": 0, "identical": 0, "identical_before_gap": 0,
-                "max_position_diff_m": None,
+                "max_position_diff_m": None, "max_position_diff_raw_m": None,
                 "max_heading_diff_rad": None, "before_first_gap": 0,
                 "max_position_diff_before_gap_m": None, "heading_offsets_bam16": [],
                 "max_position_drift_between_gaps_m": None, **facts}
@@ -102,14 +105,18 @@ def versus_log(
     gap_ends = np.r_[common[0], ticks[gaps + 1]] if mid else ticks[gaps + 1]
     drift = drift_between_gaps_m(common, log_xy, replay_xy, gap_ends, turn, anchored) \
         if replayable(log, log_accepted) else None
+    before_gap = float(position[:before].max()) if before else None
+    judged = [v for v in (before_gap, drift) if v is not None]
     return {
         "samples": len(common),
         "identical": int(np.count_nonzero(differs == 0)),
         "identical_before_gap": int(np.count_nonzero(differs[:before] == 0)),
-        "max_position_diff_m": None if mid else float(position.max()),
+        # the figure the verdict compares (``departures``), not the raw one across a hole
+        "max_position_diff_m": max(judged) if judged else None,
+        "max_position_diff_raw_m": None if mid else float(position.max()),
         "max_heading_diff_rad": float(heading.max()),
         "before_first_gap": before,
-        "max_position_diff_before_gap_m": float(position[:before].max()) if before else None,
+        "max_position_diff_before_gap_m": before_gap,
         "heading_offsets_bam16": offsets,
         "max_position_drift_between_gaps_m": drift,
         **facts,

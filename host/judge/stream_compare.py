@@ -16,7 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from odocan.host.judge.compare import error_summary, life_origin, origin_dict, rebase_truth
+from odocan.host.judge.compare import (
+    carried,
+    error_summary,
+    life_origin,
+    origin_dict,
+    rebase_truth,
+)
 from odocan.host.judge.reference_path import wrap_pi
 from odocan.host.judge.samples import HEADING_LSB_RAD, FloatArray
 from odocan.host.judge.stream_life import TruthChunk
@@ -90,9 +96,10 @@ class TruthCompare:
         s = following[ready]
         t = {k: v[ready] for k, v in w.items()}
         heading = o["raw"][s] * HEADING_LSB_RAD
-        est_x = o["x"][s] - o["rx"][s] + t["rx"]
-        est_y = o["y"][s] - o["ry"][s] + t["ry"]
-        est_h = np.asarray(heading - o["rh"][s] + t["rh"], dtype=np.float64)
+        est_x, est_y, est_h = carried((o["x"][s], o["y"][s], heading),
+                                      (o["rx"][s], o["ry"][s], o["rh"][s]),
+                                      (t["rx"], t["ry"], t["rh"]))
+        est_h = np.asarray(est_h, dtype=np.float64)
         position = np.hypot(est_x - t["x"], est_y - t["y"])
         wrapped = wrap_pi(est_h - t["h"])
         self.compared += len(position)

@@ -111,8 +111,9 @@ class LockstepBackend:
             seed=options.seed,
             errors=options.error_model(),
             channel=f"odocan-testkit-{next(_channels)}",
-            faults=fault_spec(options.faults),
-            fw_faults=fault_spec(options.fw_faults),
+            # the seeds follow the rig's as ``odocan run``'s do (the firmware's seed + 1)
+            faults=fault_spec(options.faults, options.seed),
+            fw_faults=fault_spec(options.fw_faults, options.seed + 1),
             firmware=options.firmware,
             secoc_key=load_secoc_key(options.secoc_key) if options.secoc_key else None,
         )
@@ -192,7 +193,7 @@ class ExternalBackend:
         self._buses: list[can.BusABC] = [open_bus(bus_kwargs)]
         self._buses.append(open_bus(bus_kwargs))
         host_bus, sim_bus = self._buses
-        spec = fault_spec(options.faults)
+        spec = fault_spec(options.faults, options.seed)
         if spec is not None:
             sim_bus = FaultInjectingBus(sim_bus, spec, clock=self.clock.now_s)
         self._host_bus = host_bus

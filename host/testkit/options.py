@@ -44,8 +44,10 @@ class RigOptions:
         return parse_errors(self.errors)
 
 
-def fault_spec(text: str) -> FaultSpec | None:
-    spec = FaultSpec.parse(text)
+def fault_spec(text: str, seed: int = 0) -> FaultSpec | None:
+    """The spec of ``text`` (None when it injects nothing); its seed, unless the text sets
+    ``seed=``: ``seed`` (the rig's, as ``odocan run --seed`` gives its faults)."""
+    spec = FaultSpec.parse(text, seed=seed)
     return spec if spec.active else None
 
 

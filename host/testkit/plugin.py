@@ -42,7 +42,7 @@ _INI = {
     "odocan_integrator": ("integrator of odocan_rig: euler, rk2 or exact", "exact"),
     "odocan_errors": ("the simulated robot's real errors, e.g. ed=1.002,eb=1.01,slip=0.01", ""),
     "odocan_faults": ("faults on what MOTOR_CTRL and SIM send, e.g. drop=0.01,seed=3", ""),
-    "odocan_seed": ("seed of odocan_rig's vehicle and scenarios", "0"),
+    "odocan_seed": ("seed of odocan_rig's vehicle, scenarios and faults (unless seed=)", "0"),
     "odocan_secoc_key": (
         "SecOC key file (16 raw bytes or 32 hex digits): our firmware is provisioned with it "
         "and every command is signed (docs/secoc.md; none: no SecOC)",

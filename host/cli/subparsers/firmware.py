@@ -24,6 +24,7 @@ from pathlib import Path
 from odocan.host.cli.options import (
     add_duration_argument,
     add_firmware_arguments,
+    add_seed_argument,
     check_duration,
 )
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
@@ -60,6 +61,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "first use; needs --secoc-key (default: in RAM, lost when the process ends)",
     )
     add_duration_argument(parser)
+    add_seed_argument(parser, "seed of the --faults streams unless the spec sets seed=")
     add_bus_arguments(parser)
     add_fault_argument(parser)
     parser.set_defaults(func=_do_firmware)
