@@ -35,21 +35,12 @@ from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.busfeed import BusFeed
 from odocan.sim import robot
 from tests.test_cli_run import run_cli
-from tests.test_monitor_recorder import BURST, PACE, PACE_S, _frame, _group_and_port, _tiny_buffer
+from tests.test_monitor_recorder import BURST, PACE, PACE_S, _frame, _tiny_buffer
+from tests.udp_pair import fresh_group, open_pair
 
 URL = BrokerURL(host="127.0.0.1", port=1)  # never connected to in this file
 WAIT_S = 120.0  # a safety net against a hang, never a timing assertion
 FRAME_BYTES = 1024  # a udp_multicast frame's share of a socket's receive buffer, at most
-
-
-def _open_pair() -> tuple[can.BusABC, can.BusABC]:
-    group, port = _group_and_port()
-    kwargs: dict[str, Any] = {"interface": "udp_multicast", "channel": group, "hop_limit": 0,
-                              "port": port}
-    try:
-        return can.Bus(**kwargs), can.Bus(**kwargs)
-    except Exception as exc:  # no multicast route in this sandbox
-        pytest.skip(f"udp_multicast unavailable: {exc}")
 
 
 def _send_burst(tx: can.BusABC, sent: threading.Event) -> None:
@@ -95,7 +86,7 @@ async def _burst_into_bridge(rx: can.BusABC, tx: can.BusABC, *, hold_loop: bool,
 
 
 def test_a_busy_loop_costs_the_bridge_no_frame() -> None:
-    rx, tx = _open_pair()
+    rx, tx = open_pair()
 
     async def scenario() -> tuple[Bridge, BusFeed, int | None, dict[str, Any]]:
         bridge, feed, dropped = await _burst_into_bridge(rx, tx, hold_loop=True)
@@ -128,7 +119,7 @@ def test_frames_the_kernel_dropped_are_said_apart_in_status(
     ``status``'s ``receive`` says what the kernel dropped, which adds up with what was read to
     the burst, and one ``lost_here`` event says it once."""
     monkeypatch.setattr(busreader, "widen_receive_buffer", _tiny_buffer)
-    rx, tx = _open_pair()
+    rx, tx = open_pair()
     sent, plain = threading.Event(), rx.recv
 
     def held(timeout: float | None = None) -> can.Message | None:
@@ -170,7 +161,7 @@ def test_the_bridge_says_what_it_lost_here_when_it_stops(
     say how many frames it took in and, apart, how many the kernel dropped; both make the
     burst."""
     monkeypatch.setattr(busreader, "widen_receive_buffer", _tiny_buffer)
-    group, port = _group_and_port()
+    group, port = fresh_group()
     sent = threading.Event()
     opened: list[can.BusABC] = []
 

@@ -43,7 +43,6 @@ PACE = 10  # frames sent back to back, then PACE_S: 2 000 frames/s, a busy 500 k
 PACE_S = 0.005
 QUIET_POLLS = 3  # the watch ends after the burst and this many empty receives in a row
 UNKNOWN_ID = 0x7F0  # not in the DBC: the model counts it, nothing more
-_group_and_port = fresh_group  # the name test_bridge_reader imports
 
 
 def _frame(n: int) -> can.Message:
@@ -98,7 +97,7 @@ def _watch_burst(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[
     sent, ``held`` (a class and the name of its method taking one frame) held on its first
     frame until the burst was sent; (exit code, the JSON, stderr, the tags in the log)."""
     build_parser()
-    group, port = _group_and_port()
+    group, port = fresh_group()
     burst = _Burst(group, port)
     owner, name = held
     plain = getattr(owner, name)
