@@ -90,6 +90,7 @@ class Commands:
             self._ecu.odometry.set_pose(x_q40, y_q40, heading)
             self._staged_pose.clear()
             self._ecu.health.pose_set()  # a pose given again: COUNTER_RESET may recover
+            self._ecu.uncertainty.pose_set()  # and the uncertainty restarts
         elif field in (fr.SetPoseField.X, fr.SetPoseField.Y, fr.SetPoseField.HEADING):
             self._staged_pose[field] = frame.value
         else:
@@ -144,6 +145,7 @@ class Commands:
         if bits_changed:
             ecu.odometry.unprime()
         ecu.params = candidate
+        ecu.uncertainty.params = candidate
         ecu.profile_crc = profile_crc32(candidate)
         ecu.odometry.reconfigure(derive_constants(candidate, ecu.errors))
         ecu.encoders.max_wheel_speed_mm_s = candidate.max_wheel_speed_mm_s

@@ -87,6 +87,7 @@ from odocan.firmware.transmit import Transmitter
 from odocan.firmware.twist import ENCODER_PERIOD_US as ENCODER_PERIOD_US
 from odocan.firmware.twist import TWIST_SUM_MAX as TWIST_SUM_MAX
 from odocan.firmware.twist import Twist
+from odocan.firmware.uncertainty import PoseUncertainty
 
 # Module constants for the tick's hot path (C: #defines and enumerators; in CPython 3.11 an enum
 # attribute read costs ~0.14 us, a module attribute ~0.03 us).
@@ -123,7 +124,8 @@ class OdomEcu:
         self.odometry = Odometry(derive_constants(params, self.errors), self.errors)
         self.mailbox = Mailbox()
         self.reception = Reception(self.errors)
-        self.twist = Twist(self.odometry, self.errors)
+        self.uncertainty = PoseUncertainty(self.health, params)
+        self.twist = Twist(self.odometry, self.errors, self.uncertainty)
         self.encoders = EncoderInput(
             self.odometry,
             self.health,

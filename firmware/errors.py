@@ -19,6 +19,7 @@ class ErrorFlag(IntFlag):
     IMPLAUSIBLE_STEP = 1 << 8  # an encoder step beyond the maximum wheel speed: not integrated
     COUNTER_RESET = 1 << 9  # the encoder counters restarted: re-primed, the jump not integrated
     # (also a step too long to read: its bound reached half the counters' range, encoders.py)
+    POSE_UNCERTAIN = 1 << 10  # merged steps' worst-case error passed the tolerance (uncertainty.py)
 
 
 class State(IntEnum):
@@ -42,6 +43,8 @@ class Reason(IntEnum):
     COUNTER_RESET = 5  # the encoder counters restarted (motor controller reboot), or a step
     # was ambiguous (a silence long enough for them to wrap): re-primed, nothing integrated
     CONFIG_INVALID = 6  # the boot configuration was refused (FAULT)
+    POSE_UNCERTAIN = 7  # the worst-case error of the steps merged across lost periods (a stall,
+    # lost frames) passed the tolerance: latched until a set-pose, as COUNTER_RESET
 
 
 class ErrorMask:

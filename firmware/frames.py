@@ -446,7 +446,7 @@ def pack_odom_status_summary(
         e2e_head(counter, StatusPage.SUMMARY)
         | (sat_range(state, 0, 3, errors) << 16)
         | (sat_range(integrator, Integrator.EULER, Integrator.EXACT, errors) << 18)
-        | (sat_range(reason, Reason.NONE, Reason.CONFIG_INVALID, errors) << 20)
+        | (sat_range(reason, Reason.NONE, Reason.POSE_UNCERTAIN, errors) << 20)
         | (wrap_u16(error_mask) << 24)
         | (sat_range(uptime_s, 0, U24_MAX, errors) << 40)
     )

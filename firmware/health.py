@@ -9,7 +9,8 @@ bring it back to OK, but never before an ODOM_STATUS summary page has carried th
 so without this hold a short episode would only ever show in the sticky ERROR_MASK. The motion
 between the last frame before a counter restart and the first after it is unknowable, so
 COUNTER_RESET stays until the host sets the pose again (ODOM_SET_POSE APPLY): no later cause
-replaces it as the reason. Errors are state, never exceptions: each cause
+replaces it as the reason. POSE_UNCERTAIN (``firmware.uncertainty``: the merged steps' worst-case
+error past its tolerance) is latched the same way. Errors are state, never exceptions: each cause
 also sets its sticky bit in the u32 error mask.
 """
 
@@ -26,6 +27,7 @@ _OK = State.OK
 _DEGRADED = State.DEGRADED
 _FAULT = State.FAULT
 _COUNTER_RESET = Reason.COUNTER_RESET
+_POSE_UNCERTAIN = Reason.POSE_UNCERTAIN
 _ENCODER_TIMEOUT = Reason.ENCODER_TIMEOUT
 
 
@@ -72,18 +74,23 @@ class Health:
             self.reason = Reason.NONE
 
     def pose_set(self) -> None:
-        """The host set the pose again (ODOM_SET_POSE APPLY): COUNTER_RESET may now recover."""
-        if self.reason is _COUNTER_RESET:
+        """The host set the pose again (ODOM_SET_POSE APPLY): COUNTER_RESET and POSE_UNCERTAIN
+        may now recover."""
+        if self.reason is _COUNTER_RESET or self.reason is _POSE_UNCERTAIN:
             self.reason = Reason.NONE
 
     def degrade(self, reason: Reason) -> None:
         """OK or DEGRADED -> DEGRADED for ``reason`` (INIT and FAULT stay); recovery restarts.
-        COUNTER_RESET is never replaced by a later cause (those still set their error bits):
-        only ODOM_SET_POSE APPLY clears it, or a later cause would let the firmware report OK
-        on a pose that lost its continuity."""
+        COUNTER_RESET is never replaced by a later cause, POSE_UNCERTAIN only by COUNTER_RESET
+        (the others still set their error bits): only ODOM_SET_POSE APPLY clears them, or a
+        later cause would let the firmware report OK on a pose that lost its continuity or its
+        accuracy."""
         if self.state is _OK or self.state is _DEGRADED:
             self.state = _DEGRADED
-            if self.reason is not _COUNTER_RESET:
+            kept = self.reason
+            if kept is not _COUNTER_RESET and (
+                kept is not _POSE_UNCERTAIN or reason is _COUNTER_RESET
+            ):
                 self.reason = reason
             self.good_in_a_row = 0
             self._reason_tick = self._clock.ticks
@@ -94,6 +101,13 @@ class Health:
         with the current state and reason: a DEGRADED episode it carried may now recover."""
         if carried and self.state is _DEGRADED:
             self._unreported = False
+
+    def pose_uncertain(self) -> None:
+        """The pose's uncertainty passed its tolerance: POSE_UNCERTAIN, DEGRADED, latched until
+        a set-pose (once: a latched episode is not restarted by every later merged step)."""
+        self.errors.set(ErrorFlag.POSE_UNCERTAIN)
+        if self.reason is not _POSE_UNCERTAIN:
+            self.degrade(_POSE_UNCERTAIN)
 
     def time_lost(self) -> None:
         """This tick was released ``LOST_TIME_PERIODS`` or more late: TIME_LOST, DEGRADED."""
@@ -132,6 +146,7 @@ class Health:
             self.state is _DEGRADED
             and self.good_in_a_row >= RECOVERY_FRAMES
             and self.reason is not _COUNTER_RESET  # the pose lost its continuity
+            and self.reason is not _POSE_UNCERTAIN  # or its accuracy
             and not self._unreported  # the bus has seen DEGRADED and why
         ):
             self.state = _OK

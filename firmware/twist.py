@@ -16,6 +16,7 @@ from odocan.firmware.config import TWO_PI_Q60
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.fixmath import U16_MAX, mul_shr_round_i64, sat_range
 from odocan.firmware.odometry import Odometry
+from odocan.firmware.uncertainty import PoseUncertainty
 
 TWO_PI_Q30 = (TWO_PI_Q60 + (1 << 29)) >> 30  # one turn in Q30 rad (< 2^33)
 TWIST_SUM_MAX = 1 << 32  # one tick's summed steps saturate at 4096 m (Q20) and 4 rad (Q30)
@@ -26,9 +27,13 @@ PERIODS_MAX = U16_MAX  # the speeds' dt saturates here (655 s; encoders.STEP_PER
 class Twist:
     """This tick's summed steps and the last speeds (C: two i64 sums, a u8 count, two i32)."""
 
-    def __init__(self, odometry: Odometry, errors: ErrorMask) -> None:
+    def __init__(
+        self, odometry: Odometry, errors: ErrorMask, uncertainty: PoseUncertainty | None = None
+    ) -> None:
+        """``uncertainty``: told every step that spans more than one period (None: no one)."""
         self._odometry = odometry
         self._errors = errors
+        self._uncertainty = uncertainty
         self.tick_ds_q20_m = 0  # i64, saturated to +-2^32 (4096 m)
         self.tick_dheading_q30_rad = 0  # i64, saturated to +-2^32 (4 rad)
         self.steps = 0  # steps summed since the last update
@@ -39,9 +44,14 @@ class Twist:
 
     def sum_step(self, periods: int) -> None:
         """Add the step just integrated, spanning ``periods`` sample periods, to this tick's sums
-        (Q20 m, Q30 rad; i64, saturated: ``sat_range`` only when a sum leaves +-TWIST_SUM_MAX)."""
+        (Q20 m, Q30 rad; i64, saturated: ``sat_range`` only when a sum leaves +-TWIST_SUM_MAX);
+        a step merged across more than one period adds its bound to the pose's uncertainty."""
         odo = self._odometry
         errors = self._errors
+        if periods > 1 and self._uncertainty is not None:
+            self._uncertainty.merged_step(
+                periods, odo.last_ds_q49_m, odo.last_dheading_bam64, odo.last_dheading_turns
+            )
         dheading_q30_rad = (  # the signed read, plus the step's whole turns (< 2^62)
             mul_shr_round_i64(odo.last_dheading_bam64, TWO_PI_Q60, 94, errors)
             + odo.last_dheading_turns * TWO_PI_Q30

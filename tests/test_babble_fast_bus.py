@@ -229,8 +229,12 @@ def test_after_frames_its_mailbox_dropped_the_twist_is_right_and_every_one_is_co
     assert rig.ecu.encoders.rx.count_repeated == refused
     assert rig.ecu.mailbox.overflows == dropped
     assert not rig.ecu.errors.bits & (ErrorFlag.COUNTER_RESET | ErrorFlag.IMPLAUSIBLE_STEP)
-    assert rig.state() is State.OK  # recovered from MAILBOX_OVERFLOW
-    assert rig.ecu.reason is Reason.NONE
+    # recovered from MAILBOX_OVERFLOW; unless the merged step's worst case (its path is
+    # unknowable: firmware.uncertainty) passed the tolerance: latched until a set-pose
+    uncertain = rig.ecu.errors.has(ErrorFlag.POSE_UNCERTAIN)
+    assert uncertain == (dropped >= 31)  # 32 periods at this speed: a bound past 50 mm
+    assert rig.state() is (State.DEGRADED if uncertain else State.OK)
+    assert rig.ecu.reason is (Reason.POSE_UNCERTAIN if uncertain else Reason.NONE)
     # the pose: the same arc as with every frame (the exact integrator's steps merge exactly)
     odo, ref = rig.ecu.odometry, steady.ecu.odometry
     assert odo.heading_bam64 == ref.heading_bam64

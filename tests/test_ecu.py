@@ -96,7 +96,7 @@ def test_twist_reports_speeds_of_the_last_step() -> None:
     assert twist["ANGULAR_VEL"] == round(w * 1000)
 
 
-def test_watchdog_degrades_after_ten_silent_periods_and_recovers() -> None:
+def test_watchdog_degrades_after_ten_silent_periods_and_recovers_after_a_set_pose() -> None:
     rig = Rig()
     rig.drive(5)
     assert rig.state() is State.OK
@@ -115,6 +115,13 @@ def test_watchdog_degrades_after_ten_silent_periods_and_recovers() -> None:
     rig.drive(RECOVERY_FRAMES - 1)
     assert rig.state() is State.DEGRADED
     rig.drive(1)
+    # The first frame after the silence spans its 60 periods, a path the firmware cannot know
+    # (firmware.uncertainty): DEGRADED POSE_UNCERTAIN, latched until a set-pose.
+    assert rig.state() is State.DEGRADED
+    assert rig.ecu.errors.has(ErrorFlag.POSE_UNCERTAIN)
+    rig.command(fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0,
+                                                            ErrorMask()))
+    rig.drive(RECOVERY_FRAMES)
     assert rig.state() is State.OK
 
 

@@ -606,7 +606,7 @@ def _receive_all(reader: can.BufferedReader, frames: list[can.Message]) -> None:
         reader.on_message_received(m)
 
 
-def test_bus_off_of_the_motor_controller_degrades_the_firmware_and_it_recovers() -> None:
+def test_bus_off_of_the_motor_controller_degrades_the_firmware_and_latches_pose_uncertain() -> None:
     spec = FaultSpec.parse("busoff=3:0.5,seed=1")
     reader = can.BufferedReader()
     with FaultRig(sim_faults=spec, seed=1) as rig:
@@ -627,16 +627,18 @@ def test_bus_off_of_the_motor_controller_degrades_the_firmware_and_it_recovers()
                 summaries.append((msg.timestamp, state, mask))
     states = [s for _, s, _ in summaries]
     first_degraded = next(t for t, s, _ in summaries if s == "DEGRADED")
-    back_ok = next(t for t, s, _ in summaries if s == "OK" and t > first_degraded)
     print(
         f"\nbus-off at 3.0 s for 0.5 s (+2.8 ms recovery): ODOM_STATUS DEGRADED from "
-        f"{first_degraded:.3f} s, OK again at {back_ok:.3f} s; {refused} frames refused"
+        f"{first_degraded:.3f} s; {refused} frames refused"
     )
     assert states[0] in ("INIT", "OK")
     assert "DEGRADED" in states
-    assert states[-1] == "OK"
-    assert 3.0 < first_degraded < 3.5 < back_ok < 4.0
+    assert 3.0 < first_degraded < 3.5
     assert summaries[-1][2] & ErrorFlag.ENCODER_TIMEOUT
+    # The first frame after it spans the 0.5 s, a path the firmware cannot know: its worst case
+    # passes the uncertainty's tolerance, DEGRADED POSE_UNCERTAIN until a set-pose, not OK.
+    assert states[-1] == "DEGRADED"
+    assert summaries[-1][2] & ErrorFlag.POSE_UNCERTAIN
     assert all(s is can.BusState.ERROR for t, s in seen if 3.0 <= t < 3.5)
     assert all(s is can.BusState.ACTIVE for t, s in seen if t < 3.0 or t >= 3.51)
     assert bus.injected["busoff"] == 1

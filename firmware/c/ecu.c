@@ -29,6 +29,12 @@ enum tx_index { TX_MOTOR_CMD, TX_POSE_X, TX_POSE_Y, TX_TWIST, TX_ACK, TX_STATUS,
                 TX_FRESHNESS };
 
 #define ROTATING_PAGE_COUNT 6u
+/* uncertainty.py: the rim acceleration bound (mm/s^2), the tolerance (um), the longest step the
+ * acceleration bound is taken for, ceil(2 pi 10^6). */
+#define MAX_WHEEL_ACCEL_MM_S2 UINT64_C(2000)
+#define UNCERTAINTY_TOLERANCE_UM 50000u
+#define ACCEL_PERIODS_MAX 64u
+#define TWO_PI_URAD_CEIL UINT64_C(6283186)
 static const enum status_page ROTATING_PAGES[ROTATING_PAGE_COUNT] = {
     PAGE_FRAME_TOTALS,    PAGE_E2E_WHEEL_ENCODERS, PAGE_E2E_ODOM_SET_POSE, PAGE_E2E_ODOM_CONFIG,
     PAGE_E2E_NAV_GOAL,    PAGE_PROFILE,
@@ -105,6 +111,7 @@ static void release_held(struct odom_ecu *ecu, uint8_t counter, const uint32_t w
 static bool hold_confirmed(const struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                            uint8_t uptime);
 static void sum_step(struct odom_ecu *ecu);
+static void add_merged_step(struct odom_ecu *ecu);
 static void update_twist(struct odom_ecu *ecu, uint32_t periods);
 static bool secured(struct odom_ecu *ecu, enum auth_request request, const uint8_t *data);
 static void on_auth(struct odom_ecu *ecu, const uint8_t *data, size_t len);
@@ -150,6 +157,8 @@ void ecu_init(struct odom_ecu *ecu, can_tx_fn transmit, void *tx_ctx,
     odometry_init(&ecu->odometry, &consts, &ecu->errors);
     ecu->max_wheel_speed_mm_s = params->max_wheel_speed_mm_s;
     ecu->this_step_periods = 1u;
+    ecu->uncertainty_um = 0u;
+    ecu->uncertainty_tolerance_um = UNCERTAINTY_TOLERANCE_UM;
     step_bounds(ecu);
     data_ids_of_slot(WHEEL_ENCODERS_E2E_SLOT, ecu->data_ids[0]);
     data_ids_of_slot(ODOM_SET_POSE_E2E_SLOT, ecu->data_ids[1]);
@@ -329,6 +338,7 @@ static void check_overflows(struct odom_ecu *ecu)
 }
 
 /* OK or DEGRADED -> DEGRADED for reason (INIT and FAULT stay); recovery restarts.
+ * POSE_UNCERTAIN is replaced by COUNTER_RESET alone (both latched until a set-pose).
  * COUNTER_RESET is never replaced by a later cause (those still set their error bits): only
  * ODOM_SET_POSE APPLY clears it, or a later cause would let the firmware report OK on a pose that
  * lost its continuity. */
@@ -336,7 +346,8 @@ static void degrade(struct odom_ecu *ecu, enum reason reason)
 {
     if (ecu->state == STATE_OK || ecu->state == STATE_DEGRADED) {
         ecu->state = STATE_DEGRADED;
-        if (ecu->reason != REASON_COUNTER_RESET) {
+        if (ecu->reason != REASON_COUNTER_RESET
+            && (ecu->reason != REASON_POSE_UNCERTAIN || reason == REASON_COUNTER_RESET)) {
             ecu->reason = reason;
         }
         ecu->good_in_a_row = 0;
@@ -795,6 +806,9 @@ static bool hold_confirmed(const struct odom_ecu *ecu, uint8_t counter, const ui
 static void sum_step(struct odom_ecu *ecu)
 {
     const struct odometry *odo = &ecu->odometry;
+    if (ecu->this_step_periods > 1u) {
+        add_merged_step(ecu);
+    }
     int64_t dheading_q30_rad =
         mul_shr_round_i64(odo->last_dheading_bam64, TWO_PI_Q60, 94u, &ecu->errors)
         + (int64_t)odo->last_dheading_turns * TWO_PI_Q30;
@@ -805,6 +819,59 @@ static void sum_step(struct odom_ecu *ecu)
     ecu->tick_steps++;
     uint32_t periods = ecu->tick_periods + ecu->this_step_periods; /* < 2^18 */
     ecu->tick_periods = periods < STEP_PERIODS_MAX ? periods : STEP_PERIODS_MAX;
+}
+
+/* ceil(num / den) of num >= 0, den > 0. */
+static uint64_t ceil_div_u64(uint64_t num, uint64_t den)
+{
+    return (num + den - 1u) / den;
+}
+
+/* The worst-case position error (um) of one step of periods (>= 2) encoder periods: the smaller
+ * of 2 V tau and the acceleration bound plus the integrator's distance from the arc
+ * (firmware/uncertainty.py merged_step_bound_um, which derives it). Products < 2^63. */
+static uint64_t merged_step_bound_um(const struct robot_params *params, uint32_t periods,
+                                     int64_t ds_q49_m, int64_t dheading_bam64, int32_t turns)
+{
+    uint64_t speed_um = UINT64_C(20) * params->max_wheel_speed_mm_s * periods;
+    if (turns != 0 || periods > ACCEL_PERIODS_MAX || ds_q49_m == INT64_MIN) {
+        return speed_um;
+    }
+    uint64_t tau_us = (uint64_t)periods * ENCODER_PERIOD_US;
+    uint64_t at2_um = ceil_div_u64(MAX_WHEEL_ACCEL_MM_S2 * tau_us * tau_us, UINT64_C(1000000000));
+    uint64_t ds_abs = ds_q49_m < 0 ? (uint64_t)0 - (uint64_t)ds_q49_m : (uint64_t)ds_q49_m;
+    uint64_t d_um = (((ds_abs >> 29) * UINT64_C(1000000)) >> 20) + 1u;
+    uint64_t th_abs = dheading_bam64 < 0 ? (uint64_t)0 - (uint64_t)dheading_bam64
+                                         : (uint64_t)dheading_bam64;
+    uint64_t th_urad = (((th_abs >> 32) * TWO_PI_URAD_CEIL) >> 32) + 1u;
+    uint64_t b_um = params->wheelbase_nm / 1000u;
+    uint64_t bound = ceil_div_u64(at2_um * (d_um + (at2_um >> 1) + 1u), 6u * b_um);
+    bound += ceil_div_u64(at2_um * th_urad, UINT64_C(12000000));
+    if (params->integrator != INTEGRATOR_EXACT) {
+        uint64_t d_th = ceil_div_u64(d_um * th_urad, UINT64_C(1000000));
+        bound += ceil_div_u64(d_th * th_urad, UINT64_C(24000000));
+        if (params->integrator == INTEGRATOR_EULER) {
+            bound += ceil_div_u64(d_th, 2u);
+        }
+    }
+    return bound < speed_um ? bound : speed_um;
+}
+
+/* A step of this_step_periods > 1 was integrated: add its bound to the uncertainty; past the
+ * tolerance, DEGRADED (POSE_UNCERTAIN), latched until a set-pose (uncertainty.py). */
+static void add_merged_step(struct odom_ecu *ecu)
+{
+    const struct odometry *odo = &ecu->odometry;
+    uint64_t total = (uint64_t)ecu->uncertainty_um
+        + merged_step_bound_um(&ecu->params, ecu->this_step_periods, odo->last_ds_q49_m,
+                               odo->last_dheading_bam64, odo->last_dheading_turns);
+    ecu->uncertainty_um = total < UINT32_MAX ? (uint32_t)total : UINT32_MAX;
+    if (ecu->uncertainty_um > ecu->uncertainty_tolerance_um) {
+        ecu->errors |= ERROR_POSE_UNCERTAIN;
+        if (ecu->reason != REASON_POSE_UNCERTAIN) {
+            degrade(ecu, REASON_POSE_UNCERTAIN);
+        }
+    }
 }
 
 /* Speeds over this tick's steps, which cover the periods (1 .. STEP_PERIODS_MAX): the steps'
@@ -941,9 +1008,10 @@ static void act_set_pose(struct odom_ecu *ecu, const uint8_t *data)
         }
         odometry_set_pose(odo, x_q40, y_q40, heading);
         ecu->staged_pose = 0u;
-        if (ecu->reason == REASON_COUNTER_RESET) { /* a pose given again: recovery may proceed */
-            ecu->reason = REASON_NONE;
+        if (ecu->reason == REASON_COUNTER_RESET || ecu->reason == REASON_POSE_UNCERTAIN) {
+            ecu->reason = REASON_NONE; /* a pose given again: recovery may proceed */
         }
+        ecu->uncertainty_um = 0u; /* and the uncertainty restarts */
     } else if (frame.field <= SET_POSE_HEADING) {
         ecu->staged_pose_value[frame.field] = frame.value;
         ecu->staged_pose |= 1u << frame.field;
@@ -1210,6 +1278,7 @@ static void watchdog(struct odom_ecu *ecu)
         ecu->good_in_a_row = 0;
     } else if (ecu->state == STATE_DEGRADED && ecu->good_in_a_row >= RECOVERY_FRAMES
                && ecu->reason != REASON_COUNTER_RESET /* the pose lost its continuity */
+               && ecu->reason != REASON_POSE_UNCERTAIN /* or its accuracy */
                && !ecu->unreported) {                 /* the bus has seen DEGRADED and why */
         ecu->state = STATE_OK;
         ecu->reason = REASON_NONE;

@@ -124,6 +124,10 @@ struct odom_ecu {
     uint32_t tick_periods; /* the sample periods the summed steps span (u16, saturated) */
     bool tick_carried;     /* the sums hold steps of a tick that lost time */
     uint32_t this_step_periods; /* the sample periods of the step being accepted */
+    /* The merged steps' summed worst-case position error since the last set-pose (um,
+     * saturated) and its tolerance (uncertainty.py). */
+    uint32_t uncertainty_um;
+    uint32_t uncertainty_tolerance_um;
     uint32_t tick_late;         /* periods this tick came after its due time */
     int good_in_a_row;
     int64_t twist_mm_s;

@@ -13,6 +13,7 @@
 #define ERROR_TIME_LOST (1u << 7)        /* the tick ran WATCHDOG_TICKS periods or more late */
 #define ERROR_IMPLAUSIBLE_STEP (1u << 8) /* an encoder step beyond the max wheel speed */
 #define ERROR_COUNTER_RESET (1u << 9)    /* counters restarted, or an ambiguous step: re-primed */
+#define ERROR_POSE_UNCERTAIN (1u << 10)  /* merged steps' worst-case error passed the tolerance */
 
 /* Why the state is not OK (the REASON signal of ODOM_STATUS): the last cause of DEGRADED (or
  * FAULT); REASON_NONE while OK. */
@@ -23,7 +24,8 @@ enum reason {
     REASON_MAILBOX_OVERFLOW = 3, /* received frames were dropped: the mailbox was full */
     REASON_IMPLAUSIBLE_STEP = 4, /* an encoder step beyond the maximum wheel speed was refused */
     REASON_COUNTER_RESET = 5,    /* counters restarted (controller reboot), or an ambiguous step */
-    REASON_CONFIG_INVALID = 6    /* the boot configuration was refused (FAULT) */
+    REASON_CONFIG_INVALID = 6,   /* the boot configuration was refused (FAULT) */
+    REASON_POSE_UNCERTAIN = 7    /* merged steps' worst-case error passed the tolerance: latched */
 };
 
 #endif

@@ -220,7 +220,7 @@ void pack_odom_status_summary(uint8_t out[8], uint8_t counter, int64_t state, in
     m.page = PAGE_SUMMARY;
     m.state = (uint8_t)sat_range(state, 0, 3, errors);
     m.integrator = (uint8_t)sat_range(integrator, INTEGRATOR_EULER, INTEGRATOR_EXACT, errors);
-    m.reason = (uint8_t)sat_range(reason, REASON_NONE, REASON_CONFIG_INVALID, errors);
+    m.reason = (uint8_t)sat_range(reason, REASON_NONE, REASON_POSE_UNCERTAIN, errors);
     m.error_mask = (uint16_t)error_mask;
     m.uptime = (uint32_t)sat_range(uptime_s, 0, 0xFFFFFF, errors);
     (void)odocan_odom_status_pack(out, &m, 8u);

@@ -40,6 +40,8 @@ from odocan.sim.board import TICK_S
 from odocan.sim.scenarios import Scenario, get_scenario
 
 _TRACKING_POSES = 10  # pose frames in a row that must name our encoder frames (0.2 s)
+# DEGRADED reasons only a set-pose clears (attach sets the pose next): the firmware still tracks
+_POSE_ASKED = ("COUNTER_RESET", "POSE_UNCERTAIN")
 _TRACKING_WINDOW_S = 0.05  # ... one sent at most this long before the pose frame
 
 # --- the driver -------------------------------------------------------------------------------
@@ -115,16 +117,17 @@ class OdocanRig(RigAssertions):
         self.backend.recorder.reset(self._t0)
 
     def _tracks_our_encoders(self) -> bool:
-        """STATE OK (or DEGRADED for COUNTER_RESET: our counters restarted, and only the pose
-        ``attach`` sets next clears it), and the last ``_TRACKING_POSES`` ODOM_POSE_X frames each
-        name one of the encoder frames sent just before them: the firmware integrates our
-        counters (after a restart of the sim its E2E receiver takes up to 16 frames to accept
-        them again, and it re-primes on the restarted counters)."""
+        """STATE OK (or DEGRADED for COUNTER_RESET or POSE_UNCERTAIN: our counters restarted, or
+        a stall merged steps, and only the pose ``attach`` sets next clears it), and the last
+        ``_TRACKING_POSES`` ODOM_POSE_X frames each name one of the encoder frames sent just
+        before them: the firmware integrates our counters (after a restart of the sim its E2E
+        receiver takes up to 16 frames to accept them again, and it re-primes on the restarted
+        counters)."""
         status = self.odom_status
         poses = self.frames("ODOM_POSE_X")[-_TRACKING_POSES:]
         if status is None or len(poses) != _TRACKING_POSES:
             return False
-        if status["STATE"] != "OK" and status.get("REASON") != "COUNTER_RESET":
+        if status["STATE"] != "OK" and status.get("REASON") not in _POSE_ASKED:
             return False
         encoders = self.frames("WHEEL_ENCODERS")
         for pose in poses:

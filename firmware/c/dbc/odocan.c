@@ -1722,7 +1722,7 @@ bool odocan_odom_status_integrator_is_in_range(uint8_t value)
 
 bool odocan_odom_status_reason_is_in_range(uint8_t value)
 {
-    return (value <= 6u);
+    return (value <= 7u);
 }
 
 bool odocan_odom_status_error_mask_is_in_range(uint16_t value)

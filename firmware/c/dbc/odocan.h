@@ -198,6 +198,7 @@ extern "C" {
 #define ODOCAN_ODOM_STATUS_REASON_IMPLAUSIBLE_STEP_CHOICE (4u)
 #define ODOCAN_ODOM_STATUS_REASON_COUNTER_RESET_CHOICE (5u)
 #define ODOCAN_ODOM_STATUS_REASON_CONFIG_INVALID_CHOICE (6u)
+#define ODOCAN_ODOM_STATUS_REASON_POSE_UNCERTAIN_CHOICE (7u)
 
 #define ODOCAN_SIM_TRUTH_PART_X_CHOICE (0u)
 #define ODOCAN_SIM_TRUTH_PART_Y_CHOICE (1u)
@@ -1227,16 +1228,16 @@ struct odocan_odom_status_t {
     uint8_t integrator;
 
     /**
-     * u4 enum: why STATE is not OK, the last cause of DEGRADED (or FAULT); NONE while OK.
+     * u4 enum: why STATE is not OK, the last cause of DEGRADED (or FAULT); NONE while OK. COUNTER_RESET and POSE_UNCERTAIN (the worst-case error of the steps merged across lost periods passed the firmware's tolerance) are latched until ODOM_SET_POSE APPLY.
      *
-     * Range: 0..6 (0..6 -)
+     * Range: 0..7 (0..7 -)
      * Scale: 1
      * Offset: 0
      */
     uint8_t reason;
 
     /**
-     * u16: the low 16 bits of the firmware's sticky u32 error mask (firmware.errors.ErrorFlag): bit 0 SATURATION, 1 CONFIG_INVALID, 2 ENCODER_TIMEOUT, 3 MAILBOX_OVERFLOW, 4 E2E_ERROR, 6 BUS_OFF, 7 TIME_LOST, 8 IMPLAUSIBLE_STEP, 9 COUNTER_RESET.
+     * u16: the low 16 bits of the firmware's sticky u32 error mask (firmware.errors.ErrorFlag): bit 0 SATURATION, 1 CONFIG_INVALID, 2 ENCODER_TIMEOUT, 3 MAILBOX_OVERFLOW, 4 E2E_ERROR, 6 BUS_OFF, 7 TIME_LOST, 8 IMPLAUSIBLE_STEP, 9 COUNTER_RESET, 10 POSE_UNCERTAIN.
      *
      * Range: 0..65535 (0..65535 -)
      * Scale: 1
