@@ -32,7 +32,8 @@ allowance; before, a skip put several periods under one COUNTER step, which kobu
 refused, and the robot was UNJUDGED). A loop 10 periods or more behind halts every board
 (``sim.board.HALT_AFTER_S``: the firmwares lose frames no judge sees them lose): a robot that
 FAILs once that happened is judged on its samples before it alone (``host.mqtt.overload``):
-FAIL when one of them was wrong, else UNJUDGED with the numbers of the overload. The error
+FAIL when one of them was wrong, else UNJUDGED with the numbers of the overload (a PASS says
+them in its reason: an error that began during the halts may not show). The error
 against the ground truth (SIM_TRUTH) is reported, never judged: it is the odometry's own drift, not
 the firmware's arithmetic. When the bridge dropped frames (queue full), the references miss encoder
 steps, so no robot is judged (UNJUDGED) and the run fails for that reason instead of blaming a
@@ -68,7 +69,7 @@ from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
 from odocan.host.mqtt.options import broker_for
-from odocan.host.mqtt.overload import Halted, rejudge
+from odocan.host.mqtt.overload import Halted, noted, rejudge
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.host.stopped import Stopped
 from odocan.sim.board import TICK_S
@@ -314,6 +315,8 @@ def _report(
             halted = _halted(fleet, i, stats)
             if verdict["verdict"] == "FAIL" and halted is not None:
                 verdict = rejudge(verdict, halted, tracker)  # host.mqtt.overload
+            elif verdict["verdict"] == "PASS" and halted is not None:
+                verdict = noted(verdict, halted)
             entry.update(verdict)
         else:
             entry.update(pose_vs_reference=None, pose_vs_truth=None, verdict=None,

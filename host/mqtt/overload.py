@@ -16,7 +16,11 @@ FAILed with "heading vs reference 62.81 mrad". The loop knows when it first halt
 when a sample before the first halt was wrong (``host.judge.posewrongs``: beyond one LSB of
 position after its loss allowance, or one LSB of heading); else UNJUDGED, saying so with the
 numbers (from which bus time, how many halts, the longest gap). A robot that PASSed on all its
-samples is left PASS: no sample was wrong, halted or not.
+samples stays PASS (no sample was wrong: the judge's stall rules followed it through the halts),
+its ``reason`` saying how far the loop starved it (``noted``): after a halt the judge places its
+reference where the firmware is, within the merge allowance of the frames the firmware took as
+one step, so an error that began during the halts may not show (a firmware 2 LSB off from then
+PASSed in ``tests/test_fleet_overload.py``'s drive).
 """
 
 from __future__ import annotations
@@ -60,6 +64,14 @@ def rejudge(entry: dict[str, Any], halted: Halted, tracker: PoseTracker) -> dict
                           f"{halted.from_s:.2f} s: {before.summary()}"}
     return {**entry, "verdict": "UNJUDGED",
             "reason": f"{halted.text()}; no sample before was wrong ({entry['reason']} after)"}
+
+
+def noted(entry: dict[str, Any], halted: Halted) -> dict[str, Any]:
+    """``entry`` (a PASS of ``fleetrun.judge_robot``) with the overload in its ``reason``."""
+    return {**entry, "reason": f"PASS on the samples the judge could follow; overloaded: from "
+                               f"{halted.from_s:.2f} s of bus time the loop ran {halted.halts} "
+                               f"ticks up to {halted.longest_gap_periods} periods apart, each a "
+                               "halt of the robot's MCU: a pose wrong since may not show"}
 
 
 def _wrongs_before(tracker: PoseTracker, from_s: float) -> PoseWrongs:
