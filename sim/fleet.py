@@ -20,7 +20,9 @@ up to ``BLOCK_TICKS`` robots, never all at once.
 ``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
 tick starting more than half a period after its release is late; releases a whole period or more
 behind are skipped, never run in a burst: each robot sends their encoder samples late, each taken
-at its own release, ``Fleet.step``), steps every robot, and hands the tick's frames to
+at its own release, ``Fleet.step``; a tick ``sim.board.HALT_AFTER_S`` or more after the
+previous one is run by every board as a halted MCU's, counted in ``Fleet.halts`` and
+``Fleet.halted_from_s`` for the verdict), steps every robot, and hands the tick's frames to
 ``on_batch`` (e.g. the MQTT bridge). Between ticks the event loop runs the other tasks (MQTT I/O):
 one thread, no lock, no GIL contention with the timer.
 """
@@ -35,7 +37,7 @@ from itertools import repeat
 
 import can
 
-from odocan.sim.board import TICK_S
+from odocan.sim.board import HALT_AFTER_S, TICK_S
 from odocan.sim.clock import RealTimeClock
 from odocan.sim.closing import Closing
 from odocan.sim.contract import cycle_ticks, database
@@ -142,6 +144,9 @@ class Fleet(Closing):
                 vehicle.start()
         self._last_k = -1  # the latest tick stepped
         self._calm_since = 0  # the first tick stepped after the latest skip
+        self.halts = 0  # ticks that came so late that every board was halted (``halted_from_s``)
+        self.halted_from_k: int | None = None  # the fleet tick of the first of them
+        self.longest_gap_periods = 1  # the most periods between two ticks stepped
 
     def step(self, k: int) -> None:
         """Tick ``k`` of every robot (simulated time ``k * TICK_S``). A robot whose drive fell
@@ -153,6 +158,7 @@ class Fleet(Closing):
         if k != self._last_k + 1:
             self._calm_since = k
             self._sample_skipped(k)
+            self._count_halt(k)
         self._last_k = k
         first = self.config.first
         planned, calm = self._planned, k - self._calm_since >= BLOCK_TICKS
@@ -165,6 +171,28 @@ class Fleet(Closing):
                     vehicle.replan(own_k * TICK_S, BLOCK_TICKS)
                 rig.ticks = own_k
                 rig.step()
+
+    def _count_halt(self, k: int) -> None:
+        """Tick ``k`` comes ``k - _last_k`` periods after the previous one: from
+        ``HALT_AFTER_S`` on every robot's board runs it as a halted MCU's (``sim.board``: its
+        receive FIFO kept 3 frames and overran the rest, the firmware lost time). Counted here,
+        where the loop knows it starved its robots: the frames the firmwares lost are not on
+        the bus, so the judges cannot follow their poses from then (``halted_from_s``)."""
+        gap = k - self._last_k
+        self.longest_gap_periods = max(self.longest_gap_periods, gap)
+        if self._last_k < 0 or gap * TICK_S < HALT_AFTER_S:
+            return
+        self.halts += 1
+        if self.halted_from_k is None:
+            self.halted_from_k = k
+
+    def halted_from_s(self, index: int) -> float | None:
+        """Bus time (s, robot ``index``'s own clock) of the first tick at which the loop had
+        fallen so far behind that its board was halted (None: never): from then its firmware
+        may have lost frames to the overrun that no judge saw it lose."""
+        if self.halted_from_k is None:
+            return None
+        return max(self.halted_from_k - _tick_offset(self.config.first + index), 0) * TICK_S
 
     def _sample_skipped(self, k: int) -> None:
         """Releases ``_last_k + 1 .. k - 1`` were skipped: each robot's motor controller sampled

@@ -29,7 +29,11 @@ encoder frame per release, the skipped ones' late, each sampled at its own relea
 (``sim.fleet.Fleet.step``, as ``odocan sim`` does): no step spans several cycles, so the pose
 is judged as any other (a firmware that lost frames or time meanwhile has the judges' loss
 allowance; before, a skip put several periods under one COUNTER step, which kobuki's firmware
-refused, and the robot was UNJUDGED). The error
+refused, and the robot was UNJUDGED). A loop 10 periods or more behind halts every board
+(``sim.board.HALT_AFTER_S``: the firmwares lose frames no judge sees them lose): a robot that
+FAILs once that happened is judged on its samples before it alone (``host.mqtt.overload``):
+FAIL when one of them was wrong, else UNJUDGED with the numbers of the overload (a PASS says
+them in its reason: an error that began during the halts may not show). The error
 against the ground truth (SIM_TRUTH) is reported, never judged: it is the odometry's own drift, not
 the firmware's arithmetic. When the bridge dropped frames (queue full), the references miss encoder
 steps, so no robot is judged (UNJUDGED) and the run fails for that reason instead of blaming a
@@ -65,6 +69,7 @@ from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
 from odocan.host.mqtt.options import broker_for
+from odocan.host.mqtt.overload import Halted, noted, rejudge
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.host.stopped import Stopped
 from odocan.sim.board import TICK_S
@@ -304,9 +309,15 @@ def _report(
             entry["commands_accepted"] = robot.commands_sent
             entry["commands_rejected"] = robot.commands_rejected
             tracker = robot.telemetry.tracker
-            entry.update(judge_robot(
+            verdict = judge_robot(
                 tracker.vs_reference, tracker.vs_truth, frames_dropped=dropped,
-                beyond_allowance_m=tracker.max_beyond_allowance_m))
+                beyond_allowance_m=tracker.max_beyond_allowance_m)
+            halted = _halted(fleet, i, stats)
+            if verdict["verdict"] == "FAIL" and halted is not None:
+                verdict = rejudge(verdict, halted, tracker)  # host.mqtt.overload
+            elif verdict["verdict"] == "PASS" and halted is not None:
+                verdict = noted(verdict, halted)
+            entry.update(verdict)
         else:
             entry.update(pose_vs_reference=None, pose_vs_truth=None, verdict=None,
                          reason="no bridge: the poses were not watched")
@@ -328,6 +339,14 @@ def _report(
         "bridge": None if bridge is None else bridge.counters(),
         "per_robot": per_robot,
     }
+
+
+def _halted(fleet: Fleet, index: int, stats: DeadlineStats) -> Halted | None:
+    """How the loop starved robot ``index`` (None: it never halted its board)."""
+    from_s = fleet.halted_from_s(index)
+    if from_s is None:
+        return None
+    return Halted(from_s, fleet.halts, fleet.longest_gap_periods, stats.skipped_releases)
 
 
 def _errors(stats: ErrorStats) -> dict[str, Any] | None:

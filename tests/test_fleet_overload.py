@@ -1,0 +1,173 @@
+"""`odocan fleet` overloaded (the loop one tick in 10-30): a correct firmware is never FAILed.
+
+Found under load 13-14 (``odocan fleet -n 50 --workers 2``, deadline_miss_ratio ~0.99): the
+bridge's live judge FAILed correct firmwares (Python 15-50 of 50 robots, C 23-50 of 50; "heading
+vs reference 62.81 mrad"). Reproduced here without load: a fake clock makes the fleet's loop
+(``sim.fleet.run_realtime``) run on time for ``CALM_TICKS``, then every tick 9-29 releases
+late. Each such tick comes 10-30 periods after the previous one, so every board runs it as a
+halted MCU's (``sim.board.HALT_AFTER_S``: its receive FIFO keeps 3 frames, overruns the rest):
+the firmware lost frames the bus carried, took the gaps as single steps and, seconds on, re-primed
+on steps too long to read (COUNTER_RESET): its pose leaves the all-frames reference for the
+loop's reasons, not its arithmetic.
+
+Before the halts the evidence is whole: an independent float64 checker (``tests/
+independent_checker.py``: cantools decoding, odometry of its own, never ``host.judge``) reads the
+robot's frames up to the first halt and says whether the firmware was right there. The fleet's
+verdict must then be UNJUDGED with the overload's numbers for the right firmware, FAIL for one
+2 LSB off before the halts.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import random
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+
+from odocan.firmware import frames as fw_frames
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
+from odocan.host.mqtt import fleetrun
+from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.sim import fleet as sim_fleet
+from odocan.sim import robot
+from odocan.sim.board import TICK_S
+from odocan.sim.cboard import load_library
+from odocan.sim.fleet import Batch, Fleet, FleetConfig, frame_fields
+from odocan.sim.realtime import DeadlineStats
+from tests.independent_checker import Robot, Verdict, check
+from tests.requires import require_executables
+
+SEED = 2
+ROBOTS = 3
+CALM_TICKS = 300  # the loop on time for 3 s of bus time
+DURATION_S = 30.0
+LATE_RELEASES = (0, 29)  # then every tick 0-29 releases late (seeded): mostly halts
+WRONG_FROM_SAMPLE = 100  # the wrong firmware: x 2 LSB off from its 100th ODOM_POSE_X (2 s)
+
+
+class StarvedClock:
+    """A fake ``RealTimeClock`` for ``run_realtime``, which reads it twice a tick: before its
+    sleep (answered far ahead: no sleep) and for the tick's lateness: none for the first
+    ``CALM_TICKS`` releases, then 9-29 whole periods (the loop skips that many releases)."""
+
+    def __init__(self) -> None:
+        self.reads = 0
+        self.k = 0
+        self.rng = random.Random(SEED)
+
+    def now_s(self) -> float:
+        self.reads += 1
+        if self.reads % 2:
+            return 1e9
+        late = self.rng.randint(*LATE_RELEASES) if self.k >= CALM_TICKS else 0
+        now_s = (self.k + late) * TICK_S + 0.0003
+        self.k += late + 1
+        return now_s
+
+
+def _starved_fleet(
+    monkeypatch: pytest.MonkeyPatch, firmware: str = "python"
+) -> tuple[dict[str, Any], list[list[str]], list[float | None]]:
+    """The fleet report's ``per_robot`` after the starved run, each robot's frames as candump
+    lines, and the bus time of its first halted tick."""
+    profile = robot.load("kobuki")
+    config = FleetConfig(robots=ROBOTS, robot=profile, seed=SEED, firmware=firmware)
+    monkeypatch.setattr(sim_fleet, "RealTimeClock", StarvedClock)
+    lines: list[list[str]] = [[] for _ in range(ROBOTS)]
+    with Fleet(config) as fleet:
+        telemetry = [RobotTelemetry(name, Geometry.of(profile), config.integrator,
+                                    counter_bits=profile.counter_bits) for name in fleet.names]
+
+        def on_batch(batch: Batch) -> None:
+            for i, frame in batch:
+                telemetry[i].feed_frame(frame)
+                t_s, can_id, data = frame_fields(frame)
+                lines[i].append(f"({t_s:.6f}) vcan0 {can_id:03X}#{data.hex().upper()}")
+
+        stats = asyncio.run(sim_fleet.run_realtime(fleet, duration_s=DURATION_S,
+                                                   on_batch=on_batch))
+        assert isinstance(stats, DeadlineStats)
+        bridge = SimpleNamespace(
+            frames_dropped=0, frames_failed=0, counters=dict,
+            robots=[SimpleNamespace(commands_sent=0, commands_rejected=0, telemetry=t)
+                    for t in telemetry])
+        run = fleetrun.FleetRun(fleet=config, duration_s=DURATION_S)
+        report = fleetrun._report(run, fleet, stats, bridge, None, False)  # type: ignore[arg-type]
+        halted = [fleet.halted_from_s(i) for i in range(ROBOTS)]
+    assert stats.skipped_releases > 1000  # the premise: starved
+    return dict(report["per_robot"]), lines, halted
+
+
+def _checked_before(tmp_path: Path, lines: list[str], until_s: float) -> Verdict:
+    """The independent checker on the robot's frames before ``until_s`` (from power-up)."""
+    log = tmp_path / "before.log"
+    log.write_text("\n".join(li for li in lines if float(li[1:li.index(")")]) < until_s) + "\n")
+    p = robot.load("kobuki").firmware_params()
+    kobuki = Robot(p["counts_per_rev"], p["wheel_radius_left_nm"], p["wheel_radius_right_nm"],
+                   p["wheelbase_nm"], p["counter_bits"], p["max_wheel_speed_mm_s"])
+    return check(log, kobuki, "exact", lambda t: (0.0, 0.0, 0.0))
+
+
+@pytest.fixture(params=["python", "c"])
+def firmware(request: pytest.FixtureRequest) -> str:
+    """Both firmwares (the fleet's default is the C port where it builds)."""
+    if request.param == "c":
+        require_executables("make", "cc", install="apt-get install gcc make")
+        load_library()
+    return str(request.param)
+
+
+def test_a_starved_fleet_does_not_fail_its_correct_firmwares(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, firmware: str
+) -> None:
+    per_robot, lines, halted = _starved_fleet(monkeypatch, firmware)
+    off = 0
+    for index, (name, entry) in enumerate(per_robot.items()):
+        from_s = halted[index]
+        assert from_s is not None
+        assert CALM_TICKS * TICK_S - TICK_S <= from_s < 4.0, from_s  # soon after the calm
+        right = _checked_before(tmp_path, lines[index], from_s)
+        assert right.samples > 100, right
+        assert right.passed, right  # the firmware was right up to the first halt
+        if entry["pose_vs_reference"]["max_dheading_rad"] <= HEADING_LSB_RAD \
+                and entry["max_dpos_beyond_allowance_m"] <= POSITION_LSB_M:
+            assert entry["verdict"] == "PASS", (name, entry["reason"])  # followed throughout
+            assert entry["reason"].startswith("PASS on the samples the judge could follow; "
+                                              f"overloaded: from {from_s:.2f} s"), entry["reason"]
+            continue
+        # the judge did not follow it after the halts: it says so instead of blaming it
+        off += 1
+        assert entry["verdict"] == "UNJUDGED", (name, entry["reason"])
+        assert entry["reason"].startswith(f"overloaded: from {from_s:.2f} s of bus time"), \
+            entry["reason"]
+        assert "periods apart" in entry["reason"]
+        assert "releases skipped" in entry["reason"]
+    assert off >= 1  # the premise: all samples judged, a correct firmware was FAILed
+
+
+def test_a_firmware_2_lsb_off_before_the_halts_still_fails(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    real = fw_frames.pack_odom_pose_x
+    sent = [0]
+
+    def off(counter: int, enc: int, x_100um: int, heading_bam16: int, errors: Any) -> bytes:
+        sent[0] += 1  # both robots' frames: from about the 50th of each
+        wrong = 2 if sent[0] > WRONG_FROM_SAMPLE else 0
+        return real(counter, enc, x_100um + wrong, heading_bam16, errors)
+
+    monkeypatch.setattr(fw_frames, "pack_odom_pose_x", off)
+    per_robot, lines, halted = _starved_fleet(monkeypatch)
+    for index, entry in enumerate(per_robot.values()):
+        from_s = halted[index]
+        assert from_s is not None
+        wrong = _checked_before(tmp_path, lines[index], from_s)
+        assert wrong.max_position_error_m > 1.5e-4, wrong  # the checker sees the 2 LSB
+        assert entry["verdict"] == "FAIL", entry["reason"]
+        assert entry["reason"].startswith(
+            f"pose vs reference wrong before the loop halted the robot at {from_s:.2f} s"
+        ), entry["reason"]
