@@ -14,6 +14,7 @@ come 0.6 s after it (strict xfail, stated).
 
 from __future__ import annotations
 
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -63,7 +64,7 @@ def _true_steps(clean: Path, holed: Path) -> list[int]:
             places.append(j)
         j += 1
     order = {p: n for n, p in enumerate(i for i, line in enumerate(full) if " 100#" in line)}
-    return np.diff([order[p] for p in places]).tolist()
+    return [order[b] - order[a] for a, b in pairwise(places)]
 
 
 @pytest.mark.parametrize("robot", ["kobuki", "pmir"])
