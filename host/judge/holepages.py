@@ -49,11 +49,13 @@ def page_numbered(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders) -> E
     """``enc`` with each hole the firmware's pages span renumbered (module docstring)."""
     if enc.cycle_s is None or len(enc.seq) < 3:
         return enc
+    step: IntArray = np.diff(enc.seq)
+    gap = (step > 1) | (np.diff(enc.timestamp_s) >= GAP_CYCLES * enc.cycle_s)
+    if not gap.any():  # no hole: the pages need not be read
+        return enc
     evidence = PageEvidence(decoder)
     evidence.feed(frames, enc)
     evidence.keeper.keep_pending(True)
-    step: IntArray = np.diff(enc.seq)
-    gap = (step > 1) | (np.diff(enc.timestamp_s) >= GAP_CYCLES * enc.cycle_s)
     pages = [p for p in evidence.keeper.pages if _exact(step, gap, p)]
     changed = False
     for k in np.flatnonzero(gap).tolist():
