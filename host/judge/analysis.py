@@ -122,6 +122,7 @@ from odocan.host.judge.compare import (
 from odocan.host.judge.configs import config_cuts, cut_configs, in_force
 from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
 from odocan.host.judge.gapseen import seen_in_log
+from odocan.host.judge.holepages import page_numbered
 from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import (
@@ -333,7 +334,7 @@ def _analyze_life(
     (``host.judge.setposes``)."""
     e2e, accepted = check_frames(frames, db)
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
-    enc = encoder_frames(frames, accepted, decoder)
+    enc = page_numbered(frames, decoder, encoder_frames(frames, accepted, decoder))
     halves = pose_halves(frames, accepted, decoder, enc)
     onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc, halves)
     pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]

@@ -13,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.holechain import hole_between
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.resendalias import may_alias
 from odocan.host.judge.senderseq import QUEUED_GAP_CYCLES as QUEUED_GAP_CYCLES
@@ -276,8 +277,9 @@ def _queued(
     it on the bus says nothing of what its sender had. Its sender makes one every send period
     (the median spacing of the frames, 20 ms for a pose): counted on from the last frame before
     the burst that was not queued (sent when made), without a loss between (own COUNTER + 1
-    each), the k-th queued frame was made ``k`` send periods later. It names the latest encoder
-    frame of its ENC_COUNTER that was on the bus by then, not before the frame its predecessor
+    each, and no hole of the log a COUNTER lap long between: ``holechain.hole_between``), the
+    k-th queued frame was made ``k`` send periods later. It names the latest encoder frame of
+    its ENC_COUNTER that was on the bus by then, not before the frame its predecessor
     named (a firmware names frames in increasing order) and accepted in the log before it.
     A queued frame without such a chain names none (it is left out, not guessed)."""
     assert enc.cycle_s is not None
@@ -292,7 +294,8 @@ def _queued(
             made_s = float(timestamp_s[k])
             continue
         chained = (k > 0 and named[k - 1] >= 0
-                   and (int(own_counter[k] - own_counter[k - 1]) & 0xF) == 1)
+                   and (int(own_counter[k] - own_counter[k - 1]) & 0xF) == 1
+                   and not hole_between(enc.index, enc.seq, int(index[k - 1]), int(index[k])))
         made_s = made_s + send_s if chained else np.nan
         named[k] = _named_by(enc, int(named[k - 1]), int(enc_counter[k]), made_s, int(index[k]),
                              send_s)
