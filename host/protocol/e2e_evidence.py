@@ -27,6 +27,12 @@ Neither: the strict reading stands (its verdict is exact on a capture whose stam
 bus's, e.g. the lockstep rig's logs, where a firmware locked out by a late frame refuses the
 frames on time after it).
 
+The evidence also decides where the three readings agree but it speaks otherwise: the host's
+last frame is then not the firmware's (a jittered stamp widened the host's window by a period in
+a lock-out, and it took a frame the firmware refused: every later verdict of the lock-out was
+against the wrong COUNTER). A frame proven skipped is refused; a frame proven taken that every
+window refuses takes back the host's frames since the firmware's last (``e2e_retract``).
+
 The status codes are ``host.protocol.e2e``'s (``_STATUS`` order: ok, oksomelost, repeated,
 wrong_sequence, crc_error).
 """
@@ -46,6 +52,7 @@ from odocan.host.protocol.e2e_periods import (
     RECEIVE_LAG_CYCLES,
     receive_periods,
 )
+from odocan.host.protocol.e2e_retract import firmware_last
 
 # How late a starved recorder may stamp a frame, in periods: held 1..4 periods (the trial's
 # lateness reached +3.9), plus the stamp jitter of ``CAPTURE_TOLERANCE_CYCLES``.
@@ -161,7 +168,7 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
            max_delta_init: int, released: npt.NDArray[np.bool_],
            new_cycle: tuple[npt.NDArray[np.float64], float] | None = None) -> npt.NDArray[np.int8]:
     """One message's statuses (bus order) judged with the three readings' ``periods`` (strict,
-    wide, narrow) and, where they differ, with ``evidence``, else by the strict reading, or
+    wide, narrow) and, where it speaks, with ``evidence``, else by the strict reading, or
     the wide one after a frame a stalled recorder ``released``. The Profile 2 check of
     ``host.protocol.e2e.SequenceState`` with three windows, its new-cycle rule included
     (``new_cycle``: the frames' bus times and the message's period; ``e2e_cycles``)."""
@@ -173,6 +180,8 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
     ok, counters = crc_ok.tolist(), (counter & 0x0F).tolist()
     late = released.tolist()
     stamps, cycle_s = (new_cycle[0].tolist(), new_cycle[1]) if new_cycle else ([], 0.0)
+    taken: list[int] = []  # the frames taken so far (``e2e_retract``)
+    cums = (np.cumsum(periods[1]).tolist(), np.cumsum(periods[2]).tolist())
     for j in range(n):
         windows = [min(w + c[j], _MAX_WINDOW) for w, c in zip(windows, columns, strict=True)]
         if not ok[j]:
@@ -189,8 +198,12 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
         else:
             wide = late[j - 1] if j else False
             code = _by_window_or_evidence(j, delta, windows, evidence, wide)
+            if j in evidence.taken and delta > max(windows):  # the host's last is not its
+                code = _taken_back(j, taken, counters, ok, cums, max_delta_init, evidence,
+                                   status)
         status[j] = code
         if code != S_WRONG:
+            taken.append(j)
             waiting, last, windows = False, counters[j], [max_delta_init] * 3
             last_s = stamps[j] if stamps else math.nan
         else:
@@ -198,16 +211,30 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
     return status
 
 
+def _taken_back(j: int, taken: list[int], counters: list[int], ok: list[bool],
+                cums: tuple[list[int], list[int]], max_delta_init: int, evidence: Evidence,
+                status: npt.NDArray[np.int8]) -> int:
+    """The status of frame ``j``, proven taken though every window refuses it: the frames
+    ``taken`` after the firmware's last (``e2e_retract.firmware_last``) are refused
+    (``status`` and ``taken`` edited in place); OKSOMELOST (or OK one COUNTER on)."""
+    place = firmware_last(j, taken, counters, ok, cums, max_delta_init, evidence.taken)
+    if place is None:
+        return S_LOST
+    for q in taken[place + 1 :]:
+        status[q] = S_WRONG
+    del taken[place + 1 :]
+    return S_OK if (counters[j] - counters[taken[-1]]) & 0x0F == 1 else S_LOST
+
+
 def _by_window_or_evidence(j: int, delta: int, windows: list[int], evidence: Evidence,
                            wide: bool) -> int:
-    """OKSOMELOST or WRONG_SEQUENCE for a frame ``delta`` after the last taken one
-    (``windows``: the strict, wide and narrow readings'; ``wide``: the wide one's verdict
-    where the evidence is silent)."""
-    if len({delta <= w for w in windows}) > 1:
-        if j in evidence.taken:
-            return S_LOST
-        if j in evidence.skipped:
-            return S_WRONG
+    """OKSOMELOST or WRONG_SEQUENCE for a frame ``delta`` after the last taken one: the
+    evidence's where it speaks, even where the readings agree (module docstring), else by the
+    window (``windows``: the strict, wide and narrow readings'; ``wide``: the wide one's)."""
+    if j in evidence.taken:
+        return S_LOST
+    if j in evidence.skipped:
+        return S_WRONG
     return S_LOST if delta <= windows[1 if wide else 0] else S_WRONG
 
 
