@@ -346,7 +346,7 @@ def _analyze_life(
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
                          slack_m=tolerance.position_m, start_pose=start_pose,
-                         seen=seen_in_log(frames, decoder, enc, power_up=power_up))
+                         seen=(seen := seen_in_log(frames, decoder, enc, power_up=power_up)))
     onboard = worst_sent(onboard, halves, ref_all, tolerance.position_m, tolerance.heading_rad)
     ref = ref_all.at(onboard.enc)
     truth_origin = None
@@ -368,7 +368,7 @@ def _analyze_life(
                          DistanceJudge(robot, max_wheel_speed_mm_s, power_up and not start_pose,
                                        [b for b in stalls.tolist() if b > ref_all.start],
                                        [(a, z) for a, z, _ in losses],
-                                       twin_paths(enc, robot, ref_all.start)))
+                                       twin_paths(enc, robot, ref_all.start)), seen.through)
     vs_ref["max_position_error_beyond_allowance_m"] = float(
         np.max(pos_err - allowance - twin_allowed))
     passed = bool(
@@ -459,9 +459,11 @@ def _analyze_life(
 
 
 def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, enc: Encoders,
-              robot: RobotProfile, e0: int, judge: DistanceJudge) -> dict[str, Any]:
-    """``distance.check_distance`` over the firmware's steps from ``e0``."""
+              robot: RobotProfile, e0: int, judge: DistanceJudge, through: dict[int, int]
+              ) -> dict[str, Any]:
+    """``distance.check_distance`` over the firmware's steps from ``e0`` (``through``: the
+    reference's, ``holetaken``)."""
     steps = firmware_steps(enc, e0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
-                           judge.max_wheel_speed_mm_s)
+                           judge.max_wheel_speed_mm_s, through=through)
     return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right), e0,
                           judge)

@@ -84,6 +84,7 @@ from odocan.host.judge.gapfill import (
     late_in_chunk,
     recent_anchors,
 )
+from odocan.host.judge.holetaken import LONG_GAP_FRAMES, through_gaps
 from odocan.host.judge.pagechain import (
     boot_breaks,
     boot_ok,
@@ -149,6 +150,8 @@ class Seen:
     counted: list[Span] = field(default_factory=list)  # the runs of ``same`` proven by OK alone
     holes: frozenset[int] = frozenset()  # encoder frames after a hole of the log's encoder
     # frames (refused ones included): the sender silent or the recorder lost frames
+    through: dict[int, int] = field(default_factory=dict)  # per long gap (its frame after) the
+    # pages prove frames taken in: the firmware's longest step there (``host.judge.holetaken``)
 
     def took_across(self, frame: int) -> bool:
         """Whether ENC_E2E_OK alone proves the firmware took exactly the log's frames from
@@ -348,6 +351,8 @@ class PageEvidence:
     _last_enc_s: float = -math.inf
     _gaps: list[tuple[int, int]] = field(default_factory=list)  # frame after, frames missing
     _gap_seq: dict[int, int] = field(default_factory=dict)  # per gap: the sequence number before
+    _gap_s: dict[int, tuple[float, float]] = field(default_factory=dict)  # per long gap: the bus
+    # times of its frames before and after (``holetaken``)
     late: LateFrames = field(default_factory=LateFrames)  # encoder frames refused (gapfill)
     _anchors: Anchors = NO_ANCHORS  # the last accepted encoder frames (gapfill's anchors)
     _usable: bool = True  # the DBC has the signals
@@ -384,7 +389,8 @@ class PageEvidence:
         boot = (None if not power_up or self.first_s is None
                 else (self.first_s, self.first_s - keeper.cycle_s))
         return replace(seen_of(keeper.pages, keeper.totals, self._gaps, boot), fills=fills,
-                       holes=holes)
+                       holes=holes, through=through_gaps(keeper.pages, keeper.totals,
+                                                         keeper.cycle_s, self._gap_s))
 
     def _add_holes(self, chunk: FrameArrays, enc: Encoders) -> None:
         """``Seen.holes``: the accepted encoder frames at or after an encoder frame of the chunk
@@ -416,6 +422,9 @@ class PageEvidence:
         k = np.flatnonzero(step > 1)
         self._gaps += zip((self._enc_count + k).tolist(), (step[k] - 1).tolist(), strict=True)
         self._gap_seq.update(zip((self._enc_count + k).tolist(), prior[k].tolist(), strict=True))
+        times = np.concatenate(([self._last_enc_s], enc.timestamp_s))
+        self._gap_s.update((self._enc_count + i, (float(times[i]), float(times[i + 1])))
+                           for i in k[step[k] > LONG_GAP_FRAMES].tolist())
         self._last_seq = int(enc.seq[-1])
 
     def _add_status(self, chunk: FrameArrays, enc: Encoders) -> None:

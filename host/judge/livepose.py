@@ -126,7 +126,7 @@ class StepGate:
             self._held = (frame, seq, uptime, t_s)
             return None
         periods = self._seq - prev_seq
-        if periods >= self.least:  # ambiguous (``ambiguity``): the firmware re-primes on it
+        if periods >= self.least and not self._taken(last_t, t_s):  # ambiguous: re-primed
             self._refused = []
             self._restarted(seq, t_s, by_uptime=True)
             return 0, 0
@@ -144,6 +144,13 @@ class StepGate:
         first, self._refused, self.prev, self.uptime = self._refused[0], [], frame, uptime
         self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
+
+    def _taken(self, a_s: float, b_s: float) -> bool:
+        """Whether the firmware's pages prove it took frames between the last accepted frame
+        (bus time ``a_s``) and this one (``b_s``), its longest step there below an ambiguous
+        one (``holetaken``): the firmware did not re-prime, the gap is a gap."""
+        longest = None if self._refused else self._told.through(a_s, b_s)
+        return longest is not None and longest < self.least
 
     def _confirms(self, held: Held, frame: tuple[int, int, int], uptime: int) -> bool:
         """``frame`` (its CTRL_UPTIME ``uptime``) confirms the ``held`` restart frame
@@ -181,6 +188,7 @@ class RestartLog:
         self.events: deque[dict[str, Any]] = deque(maxlen=16)  # the owner's deque replaces it
         self._told = -1  # the latest encoder frame (seq) told
         self._reprimed = reprimed
+        self.through: Callable[[float, float], int | None] = _unproven  # ``LiveSeen.through``
 
     def add(self, seq: int, t_s: float, by_uptime: bool) -> None:
         unseen = bool(self._reprimed(seq, by_uptime))
@@ -189,6 +197,11 @@ class RestartLog:
         self._told = seq
         self.events.append({"t_s": t_s, "kind": "counter_restart", "encoder_frame": seq,
                             "detail": restart_detail(by_uptime, unseen)})
+
+
+def _unproven(_a_s: float, _b_s: float) -> int | None:
+    """No pages: nothing proven taken in a hole (``RestartLog.through``)."""
+    return None
 
 
 # below this silence ``aged`` is the last CTRL_UPTIME itself (the per-frame test skips it)

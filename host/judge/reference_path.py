@@ -91,7 +91,7 @@ def build_reference(
     exact_at_first = power_up or start_pose is not None
     e0 = 0 if exact_at_first else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
     geometry = Geometry.of(robot)
-    steps = firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s)
+    steps = firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s, through=seen.through)
     d_left, d_right = steps.d_left, steps.d_right
     rel = integrate(d_left, d_right, geometry, integrator)
     zero = np.zeros(1)
@@ -172,7 +172,8 @@ class Steps:
 
 
 def firmware_steps(
-    enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: SpeedBound
+    enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: SpeedBound,
+    *, through: dict[int, int] | None = None,
 ) -> Steps:
     """The steps as firmware/ecu.py takes them: a frame whose step from the last accepted one
     exceeds the robot's maximum wheel speed (``max_wheel_speed_mm_s``; ``PROFILE_SPEED``: the
@@ -186,7 +187,9 @@ def firmware_steps(
     COUNTER_RESET, no step into it), else it is refused outright. A frame whose counts
     set wire bits above a 16-bit counter's width is refused outright. Vectorised; a short
     state machine runs only from each refused frame on. The bound is computed in float (the
-    firmware's Q48 integer bound may differ by a count at the limit)."""
+    firmware's Q48 integer bound may differ by a count at the limit). ``through``: per gap (its
+    encoder frame after) the firmware's longest step there, its pages' (``holetaken``): shorter
+    than an ambiguous step, the gap is no ambiguous step (the firmware took frames in it)."""
     left, right = enc.left[e0:], enc.right[e0:]
     seq = enc.seq[e0:]
     steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
@@ -232,8 +235,11 @@ def firmware_steps(
 
     least = least_ambiguous_periods(bound, bits)  # ``ambiguity``: the firmware re-primes
 
-    def ambiguous(a: int, b: int) -> bool:
-        return pair_bound_periods(seq, stamps, enc.cycle_s, a, b) >= least
+    taken = through or {}
+
+    def ambiguous(a: int, b: int) -> bool:  # unless the pages prove frames taken (holetaken)
+        return (pair_bound_periods(seq, stamps, enc.cycle_s, a, b) >= least
+                and not (b == a + 1 and taken.get(e0 + b, least) < least))
 
     periods = step_bound_periods(seq, stamps, enc.cycle_s)
     bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])

@@ -46,6 +46,8 @@ from odocan.host.judge.samples import Encoders, FloatArray, IntArray
 if TYPE_CHECKING:
     from odocan.host.judge.stream_life import LifeInfo
 
+THROUGH = ("a long gap of the log's encoder frames the firmware's pages prove it took frames "
+           "in: judged on the whole log")
 DETAIL = ("a controller restart (CTRL_UPTIME went back) behind a silence of the log (frames the "
           "recorder lost, or a controller that stopped sending): the firmware may have taken "
           "frames the log lacks and their counts are unknowable across the restarted counters; "
@@ -66,10 +68,14 @@ def whole_only(seen: Seen, info: LifeInfo, refusal: type[Exception]
     """The streamed judge's ``seen`` and re-primed frames of a life (``info``: its first
     placement pass's); ``refusal`` (``stream_analysis.NotStreamable``: the whole log's judge
     then) when a controller restart there is a new start (``unseen_restarts``): the stream
-    does not fit the new start's heading."""
+    does not fit the new start's heading; nor when the stream's reference re-primed at a gap
+    the firmware's pages prove it took frames in (``Seen.through``: the stream steps before
+    the pages are read; the whole log's reference takes such a gap as a gap, ``holetaken``)."""
     if any(b in info.gap_steps and b in seen.holes and not seen.took_across(b)
            for b in info.by_uptime):
         raise refusal(DETAIL)
+    if any(b in seen.through for b in info.by_uptime):
+        raise refusal(THROUGH)
     return seen, frozenset(info.reprimed)
 
 
