@@ -403,7 +403,8 @@ def _analyze_life(
         "events": [
             {"kind": "counter_restart", "t_s": float(frames.timestamp_s[enc.index[e]]),
              "encoder_frame": int(e),
-             "detail": restart_detail(e in ref_all.ctrl_restarts, e in ref_all.unseen_restarts)}
+             "detail": restart_detail(e in ref_all.ctrl_restarts, e in ref_all.unseen_restarts,
+                                      ambiguous=e in ref_all.ambiguous)}
             for e in ref_all.counter_restarts
         ] + [
             {"kind": "firmware_stall", "t_s": float(frames.timestamp_s[enc.index[e]]),

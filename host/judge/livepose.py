@@ -128,7 +128,7 @@ class StepGate:
         periods = self._seq - prev_seq
         if periods >= self.least and not self._taken(last_t, t_s):  # ambiguous: re-primed
             self._refused = []
-            self._restarted(seq, t_s, by_uptime=True)
+            self._restarted(seq, t_s, by_uptime=True, ambiguous=True)
             return 0, 0
         delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
         if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
@@ -171,9 +171,10 @@ class StepGate:
         self.prev, self._prev_seq, self.uptime, self._prev_t = frame, self._seq, uptime, t_s
         return self._delta(first, frame)
 
-    def _restarted(self, seq: int, t_s: float, *, by_uptime: bool) -> None:
+    def _restarted(self, seq: int, t_s: float, *, by_uptime: bool,
+                   ambiguous: bool = False) -> None:
         self.counter_restarts += 1
-        self._told.add(seq, t_s, by_uptime)
+        self._told.add(seq, t_s, by_uptime, ambiguous=ambiguous)
 
 
 class RestartLog:
@@ -190,13 +191,15 @@ class RestartLog:
         self._reprimed = reprimed
         self.through: Callable[[float, float], int | None] = _unproven  # ``LiveSeen.through``
 
-    def add(self, seq: int, t_s: float, by_uptime: bool) -> None:
+    def add(self, seq: int, t_s: float, by_uptime: bool, *, ambiguous: bool = False) -> None:
+        """A restart on encoder frame ``seq`` at bus time ``t_s`` (``by_uptime``: nothing
+        integrated into it; ``ambiguous``: a step too long to read, ``ambiguity``)."""
         unseen = bool(self._reprimed(seq, by_uptime))
         if seq <= self._told:
             return
         self._told = seq
         self.events.append({"t_s": t_s, "kind": "counter_restart", "encoder_frame": seq,
-                            "detail": restart_detail(by_uptime, unseen)})
+                            "detail": restart_detail(by_uptime, unseen, ambiguous=ambiguous)})
 
 
 def _unproven(_a_s: float, _b_s: float) -> int | None:

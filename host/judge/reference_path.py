@@ -61,6 +61,7 @@ class Reference:
     placements: BreakSummary = field(default_factory=BreakSummary)  # after stalls and gaps
     ctrl_restarts: frozenset[int] = frozenset()  # counter restarts told by CTRL_UPTIME
     unseen_restarts: frozenset[int] = frozenset()  # of them, new starts (``unseenrestart``)
+    ambiguous: frozenset[int] = frozenset()  # counter restarts on an ambiguous step (``ambiguity``)
 
     def at(self, enc: IntArray) -> Reference:
         """The reference at the encoder frames ``enc`` (all >= start)."""
@@ -68,7 +69,7 @@ class Reference:
         return Reference(
             self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
             self.restarts, self.exact_start, self.counter_restarts, self.implausible_frames,
-            self.placements, self.ctrl_restarts, self.unseen_restarts,
+            self.placements, self.ctrl_restarts, self.unseen_restarts, self.ambiguous,
         )
 
 
@@ -154,6 +155,7 @@ def build_reference(
         placements=placed,
         ctrl_restarts=uptime_reprimed - frozenset(e0 + k for k in steps.ambiguous),
         unseen_restarts=frozenset(e0 + k for k in unseen),
+        ambiguous=frozenset(e0 + k for k in steps.ambiguous),
     )
 
 

@@ -46,6 +46,9 @@ from odocan.host.judge.samples import Encoders, FloatArray, IntArray
 if TYPE_CHECKING:
     from odocan.host.judge.stream_life import LifeInfo
 
+AMBIGUOUS = ("re-primed: the counts could not span the silence (its bound reached half the "
+             "counters' range); the reference re-primed where the firmware must (COUNTER_RESET): "
+             "the motion across is unknowable")
 THROUGH = ("a long gap of the log's encoder frames the firmware's pages prove it took frames "
            "in: judged on the whole log")
 DETAIL = ("a controller restart (CTRL_UPTIME went back) behind a silence of the log (frames the "
@@ -127,12 +130,16 @@ def _wrap(angle: FloatArray) -> FloatArray:
     return wrapped
 
 
-def restart_detail(by_uptime: bool, unseen: bool = False) -> str:
+def restart_detail(by_uptime: bool, unseen: bool = False, *, ambiguous: bool = False) -> str:
     """The report's words for an encoder frame the firmware re-primes on (COUNTER_RESET):
     ``by_uptime``, the motor controller said it restarted (CTRL_UPTIME went back); ``unseen``:
-    after frames the recorder lost (``unseenrestart.DETAIL``)."""
+    after frames the recorder lost (``unseenrestart.DETAIL``); ``ambiguous``: a step too
+    long to read (``AMBIGUOUS``), whatever CTRL_UPTIME says. The same words in ``analyze``'s
+    events, the monitor's (screen and ``--json``) and the bridge's status events."""
     if unseen:
         return DETAIL
+    if ambiguous:
+        return AMBIGUOUS
     cause = ("the motor controller restarted (CTRL_UPTIME went back): " if by_uptime
              else "")
     return (f"{cause}the firmware re-primes here (COUNTER_RESET): the reference restarts with "
