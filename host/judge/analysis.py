@@ -121,7 +121,7 @@ from odocan.host.judge.compare import (
 )
 from odocan.host.judge.configs import config_cuts, cut_configs, in_force
 from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
-from odocan.host.judge.gapseen import seen_in_log
+from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import (
@@ -368,7 +368,7 @@ def _analyze_life(
                          DistanceJudge(robot, max_wheel_speed_mm_s, power_up and not start_pose,
                                        [b for b in stalls.tolist() if b > ref_all.start],
                                        [(a, z) for a, z, _ in losses],
-                                       twin_paths(enc, robot, ref_all.start)), seen.through)
+                                       twin_paths(enc, robot, ref_all.start)), seen)
     vs_ref["max_position_error_beyond_allowance_m"] = float(
         np.max(pos_err - allowance - twin_allowed))
     passed = bool(
@@ -460,11 +460,11 @@ def _analyze_life(
 
 
 def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, enc: Encoders,
-              robot: RobotProfile, e0: int, judge: DistanceJudge, through: dict[int, int]
+              robot: RobotProfile, e0: int, judge: DistanceJudge, seen: Seen
               ) -> dict[str, Any]:
-    """``distance.check_distance`` over the firmware's steps from ``e0`` (``through``: the
-    reference's, ``holetaken``)."""
+    """``distance.check_distance`` over the firmware's steps from ``e0`` (``seen``: the
+    reference's evidence, ``holetaken``, ``nearthreshold``)."""
     steps = firmware_steps(enc, e0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
-                           judge.max_wheel_speed_mm_s, through=through)
+                           judge.max_wheel_speed_mm_s, through=seen.through, resets=seen.resets)
     return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right), e0,
                           judge)

@@ -85,6 +85,7 @@ from odocan.host.judge.gapfill import (
     recent_anchors,
 )
 from odocan.host.judge.holetaken import LONG_GAP_FRAMES, through_gaps
+from odocan.host.judge.nearthreshold import ResetLog, Resets
 from odocan.host.judge.pagechain import (
     boot_breaks,
     boot_ok,
@@ -152,6 +153,7 @@ class Seen:
     # frames (refused ones included): the sender silent or the recorder lost frames
     through: dict[int, int] = field(default_factory=dict)  # per long gap (its frame after) the
     # pages prove frames taken in: the firmware's longest step there (``host.judge.holetaken``)
+    resets: Resets = field(default_factory=Resets)  # its COUNTER_RESET word (nearthreshold)
 
     def took_across(self, frame: int) -> bool:
         """Whether ENC_E2E_OK alone proves the firmware took exactly the log's frames from
@@ -353,6 +355,7 @@ class PageEvidence:
     _gap_seq: dict[int, int] = field(default_factory=dict)  # per gap: the sequence number before
     _gap_s: dict[int, tuple[float, float]] = field(default_factory=dict)  # per long gap: the bus
     # times of its frames before and after (``holetaken``)
+    resets: ResetLog = field(default_factory=ResetLog)  # the summaries' ERROR_MASK
     late: LateFrames = field(default_factory=LateFrames)  # encoder frames refused (gapfill)
     _anchors: Anchors = NO_ANCHORS  # the last accepted encoder frames (gapfill's anchors)
     _usable: bool = True  # the DBC has the signals
@@ -390,7 +393,8 @@ class PageEvidence:
                 else (self.first_s, self.first_s - keeper.cycle_s))
         return replace(seen_of(keeper.pages, keeper.totals, self._gaps, boot), fills=fills,
                        holes=holes, through=through_gaps(keeper.pages, keeper.totals,
-                                                         keeper.cycle_s, self._gap_s))
+                                                         keeper.cycle_s, self._gap_s),
+                       resets=self.resets.resets(self._gap_s, keeper.cycle_s))
 
     def _add_holes(self, chunk: FrameArrays, enc: Encoders) -> None:
         """``Seen.holes``: the accepted encoder frames at or after an encoder frame of the chunk
@@ -441,6 +445,7 @@ class PageEvidence:
         head = self.decoder.decode(chunk, "ODOM_STATUS")  # PAGE and COUNTER by the DBC
         rows = np.asarray(head["index"], dtype=np.int64)
         crc = crc_holds(chunk, self.decoder, rows)
+        self.resets.feed(chunk, self.decoder, rows[crc])  # ``nearthreshold``
         before = np.searchsorted(enc.index, rows + self._offset)  # enc.index: in the log
         last_s = np.where(before > 0, enc.timestamp_s[np.maximum(before - 1, 0)]
                           if len(enc.seq) else 0.0, self._last_enc_s)

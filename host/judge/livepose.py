@@ -19,6 +19,7 @@ from odocan.firmware.encoders import (
 from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.ambiguity import least_ambiguous_periods
 from odocan.host.judge.livewindow import CYCLE_S, Counted
+from odocan.host.judge.nearthreshold import NEAR_DETAIL, near
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.reference_path import restart_detail
 from odocan.host.judge.turns import unwrapped_error
@@ -126,6 +127,9 @@ class StepGate:
             self._held = (frame, seq, uptime, t_s)
             return None
         periods = self._seq - prev_seq
+        if periods + RING >= self.least and near(  # (a plain test first: it runs per frame)
+                ((counter - prev[0]) & 0xF) or RING, t_s - last_t, CYCLE_S, self.least):
+            self._told.near_threshold(seq, t_s)  # either decision: a new start (nearthreshold)
         if periods >= self.least and not self._taken(last_t, t_s):  # ambiguous: re-primed
             self._refused = []
             self._restarted(seq, t_s, by_uptime=True, ambiguous=True)
@@ -190,6 +194,15 @@ class RestartLog:
         self._told = -1  # the latest encoder frame (seq) told
         self._reprimed = reprimed
         self.through: Callable[[float, float], int | None] = _unproven  # ``LiveSeen.through``
+        self.owe: Callable[[int], None] = _owed  # ``livedark.DarkRestarts.owe``
+
+    def near_threshold(self, seq: int, t_s: float) -> None:
+        """A step within a period of the ambiguity threshold into encoder frame ``seq`` (bus
+        time ``t_s``): the firmware may have decided either way and its word comes later, so
+        the reference restarts from the next on-board pose (``owe``), told as an event."""
+        self.owe(seq)
+        self.events.append({"t_s": t_s, "kind": "near_threshold", "encoder_frame": seq,
+                            "detail": NEAR_DETAIL})
 
     def add(self, seq: int, t_s: float, by_uptime: bool, *, ambiguous: bool = False) -> None:
         """A restart on encoder frame ``seq`` at bus time ``t_s`` (``by_uptime``: nothing
@@ -200,6 +213,10 @@ class RestartLog:
         self._told = seq
         self.events.append({"t_s": t_s, "kind": "counter_restart", "encoder_frame": seq,
                             "detail": restart_detail(by_uptime, unseen, ambiguous=ambiguous)})
+
+
+def _owed(_seq: int) -> None:
+    """No new start to owe (``RestartLog.owe``: a gate of its own)."""
 
 
 def _unproven(_a_s: float, _b_s: float) -> int | None:

@@ -27,6 +27,7 @@ from odocan.host.judge.ctrlrestart import (
 from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.lossgate import beyond_width
+from odocan.host.judge.nearthreshold import Resets, ambiguity_rule, near_candidates
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -92,7 +93,8 @@ def build_reference(
     exact_at_first = power_up or start_pose is not None
     e0 = 0 if exact_at_first else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
     geometry = Geometry.of(robot)
-    steps = firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s, through=seen.through)
+    steps = firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s, through=seen.through,
+                           resets=seen.resets)
     d_left, d_right = steps.d_left, steps.d_right
     rel = integrate(d_left, d_right, geometry, integrator)
     zero = np.zeros(1)
@@ -175,7 +177,7 @@ class Steps:
 
 def firmware_steps(
     enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: SpeedBound,
-    *, through: dict[int, int] | None = None,
+    *, through: dict[int, int] | None = None, resets: Resets | None = None,
 ) -> Steps:
     """The steps as firmware/ecu.py takes them: a frame whose step from the last accepted one
     exceeds the robot's maximum wheel speed (``max_wheel_speed_mm_s``; ``PROFILE_SPEED``: the
@@ -191,7 +193,9 @@ def firmware_steps(
     state machine runs only from each refused frame on. The bound is computed in float (the
     firmware's Q48 integer bound may differ by a count at the limit). ``through``: per gap (its
     encoder frame after) the firmware's longest step there, its pages' (``holetaken``): shorter
-    than an ambiguous step, the gap is no ambiguous step (the firmware took frames in it)."""
+    than an ambiguous step, the gap is no ambiguous step (the firmware took frames in it).
+    ``resets``: the firmware's COUNTER_RESET word, followed within a period of the threshold
+    (``nearthreshold``)."""
     left, right = enc.left[e0:], enc.right[e0:]
     seq = enc.seq[e0:]
     steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
@@ -236,16 +240,12 @@ def firmware_steps(
         return True if confirmed[b] else None
 
     least = least_ambiguous_periods(bound, bits)  # ``ambiguity``: the firmware re-primes
-
-    taken = through or {}
-
-    def ambiguous(a: int, b: int) -> bool:  # unless the pages prove frames taken (holetaken)
-        return (pair_bound_periods(seq, stamps, enc.cycle_s, a, b) >= least
-                and not (b == a + 1 and taken.get(e0 + b, least) < least))
+    ambiguous = ambiguity_rule(enc, e0, least, through or {}, resets)  # holetaken, nearthreshold
 
     periods = step_bound_periods(seq, stamps, enc.cycle_s)
     bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])
     bad |= foreign[1:] | unconfirmed | (periods >= least)
+    bad |= near_candidates(seq, stamps, enc.cycle_s, least, resets)
     return _walk(steps, bad, restart,
                  ((plausible, consistent, foreign, ambiguous), delta, restarted))
 

@@ -49,6 +49,8 @@ if TYPE_CHECKING:
 AMBIGUOUS = ("re-primed: the counts could not span the silence (its bound reached half the "
              "counters' range); the reference re-primed where the firmware must (COUNTER_RESET): "
              "the motion across is unknowable")
+NEAR = ("the firmware's COUNTER_RESET at a long gap differs from the stream's re-prime (a "
+        "silence near the ambiguity threshold): judged on the whole log")
 THROUGH = ("a long gap of the log's encoder frames the firmware's pages prove it took frames "
            "in: judged on the whole log")
 DETAIL = ("a controller restart (CTRL_UPTIME went back) behind a silence of the log (frames the "
@@ -73,12 +75,15 @@ def whole_only(seen: Seen, info: LifeInfo, refusal: type[Exception]
     then) when a controller restart there is a new start (``unseen_restarts``): the stream
     does not fit the new start's heading; nor when the stream's reference re-primed at a gap
     the firmware's pages prove it took frames in (``Seen.through``: the stream steps before
-    the pages are read; the whole log's reference takes such a gap as a gap, ``holetaken``)."""
+    the pages are read; the whole log's reference takes such a gap as a gap, ``holetaken``),
+    nor where the firmware's word differs from its re-primes (``nearthreshold``)."""
     if any(b in info.gap_steps and b in seen.holes and not seen.took_across(b)
            for b in info.by_uptime):
         raise refusal(DETAIL)
     if any(b in seen.through for b in info.by_uptime):
         raise refusal(THROUGH)
+    if seen.resets.disagrees(frozenset(info.reprimed)):  # nearthreshold
+        raise refusal(NEAR)
     return seen, frozenset(info.reprimed)
 
 
