@@ -353,8 +353,8 @@ class PageEvidence:
     _last_enc_s: float = -math.inf
     _gaps: list[tuple[int, int]] = field(default_factory=list)  # frame after, frames missing
     _gap_seq: dict[int, int] = field(default_factory=dict)  # per gap: the sequence number before
-    _gap_s: dict[int, tuple[float, float]] = field(default_factory=dict)  # per long gap: the bus
-    # times of its frames before and after (``holetaken``)
+    _gap_s: dict[int, tuple[float, float, int]] = field(default_factory=dict)  # per long gap: the
+    # bus times of its frames before and after, its sequence step (``holetaken``)
     resets: ResetLog = field(default_factory=ResetLog)  # the summaries' ERROR_MASK
     late: LateFrames = field(default_factory=LateFrames)  # encoder frames refused (gapfill)
     _anchors: Anchors = NO_ANCHORS  # the last accepted encoder frames (gapfill's anchors)
@@ -426,8 +426,8 @@ class PageEvidence:
         k = np.flatnonzero(step > 1)
         self._gaps += zip((self._enc_count + k).tolist(), (step[k] - 1).tolist(), strict=True)
         self._gap_seq.update(zip((self._enc_count + k).tolist(), prior[k].tolist(), strict=True))
-        times = np.concatenate(([self._last_enc_s], enc.timestamp_s))
-        self._gap_s.update((self._enc_count + i, (float(times[i]), float(times[i + 1])))
+        t = np.concatenate(([self._last_enc_s], enc.timestamp_s))
+        self._gap_s.update((self._enc_count + i, (float(t[i]), float(t[i + 1]), int(step[i])))
                            for i in k[step[k] > LONG_GAP_FRAMES].tolist())
         self._last_seq = int(enc.seq[-1])
 

@@ -85,12 +85,12 @@ def _quiet(totals: Sequence[tuple[float, ...]], sent: list[float], a_s: float, b
 
 
 def through_gaps(pages: Sequence[tuple[float, ...]], totals: Sequence[tuple[float, ...]],
-                 cycle_s: float, gaps: dict[int, tuple[float, float]]) -> dict[int, int]:
+                 cycle_s: float, gaps: dict[int, tuple[float, float, int]]) -> dict[int, int]:
     """``taken_through`` of each gap (its frame after: the bus times of the frames around it)
     whose pages prove frames taken."""
     out = {}
     sent, totals_s = [float(page[SENT]) for page in pages], [float(row[0]) for row in totals]
-    for frame, (a_s, b_s) in gaps.items():
+    for frame, (a_s, b_s, _) in gaps.items():
         periods = _taken(pages, sent, totals, totals_s, (cycle_s, a_s, b_s), closed=True)
         if periods is not None:
             out[frame] = periods

@@ -24,6 +24,7 @@ event), as after a dark restart: either decision passes, the one pose jump there
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -31,7 +32,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.ambiguity import least_ambiguous_periods
+from odocan.host.judge.reference import Geometry, SpeedBound
 from odocan.host.judge.samples import FloatArray, IntArray
 from odocan.host.judge.step_periods import pair_bound_periods, widened_periods
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -60,11 +64,12 @@ def near(seq_periods: int, elapsed_s: float, cycle_s: float | None, least: int) 
 @dataclass(frozen=True)
 class Resets:
     """The firmware's summaries (bus time, ERROR_MASK) and the log's long gaps (frame after:
-    the bus times of the frames either side), for ``told`` and ``disagrees``."""
+    the bus times of the frames either side, the sequence step), for ``told`` and
+    ``disagrees``."""
 
     sent_s: FloatArray = field(default_factory=lambda: np.zeros(0))
     mask: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    long_gaps: dict[int, tuple[float, float]] = field(default_factory=dict)
+    long_gaps: dict[int, tuple[float, float, int]] = field(default_factory=dict)
     cycle_s: float = 0.01
 
     def told(self, b_s: float) -> bool | None:
@@ -76,10 +81,12 @@ class Resets:
             return None
         return bool(self.mask[j] & COUNTER_RESET_BIT)
 
-    def disagrees(self, reprimed: frozenset[int]) -> bool:
-        """Whether the firmware's word at a long gap differs from re-priming there or not."""
-        return any((word := self.told(b_s)) is not None and word != (frame in reprimed)
-                   for frame, (_, b_s) in self.long_gaps.items())
+    def disagrees(self, reprimed: frozenset[int], least: int | None) -> bool:
+        """Whether the firmware's word at a long gap within a period of the threshold
+        (``least``: the fewest periods of an ambiguous step) differs from re-priming there."""
+        return least is not None and any(
+            near(step, b_s - a_s, self.cycle_s, least) and (word := self.told(b_s)) is not None
+            and word != (frame in reprimed) for frame, (a_s, b_s, step) in self.long_gaps.items())
 
 
 @dataclass
@@ -108,7 +115,8 @@ class ResetLog:
         self.sent_s.append(np.asarray(page["timestamp_s"], dtype=np.float64)[keep])
         self.mask.append(np.asarray(page["ERROR_MASK"], dtype=np.int64)[keep])
 
-    def resets(self, long_gaps: dict[int, tuple[float, float]], cycle_s: float | None) -> Resets:
+    def resets(self, long_gaps: dict[int, tuple[float, float, int]], cycle_s: float | None
+               ) -> Resets:
         """What was fed, with the log's long gaps."""
         if not self.usable or not self.sent_s or cycle_s is None:
             return Resets(long_gaps=dict(long_gaps))
@@ -146,3 +154,14 @@ def near_candidates(seq: IntArray, stamps: FloatArray, cycle_s: float | None, le
     longer: npt.NDArray[np.bool_] = widened_periods(np.diff(seq), np.diff(stamps) + cycle_s,
                                                     cycle_s) >= least
     return longer
+
+
+def least_of(geometry: Geometry, bits: int, max_wheel_speed_mm_s: SpeedBound) -> int | None:
+    """The fewest periods of an ambiguous step (``ambiguity.least_ambiguous_periods``) from the
+    speed bound as ``reference_path.firmware_steps`` takes it; None without one."""
+    speed_mm_s = geometry.speed_bound_mm_s(max_wheel_speed_mm_s)
+    if speed_mm_s is None:
+        return None
+    travel_m = speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
+    return least_ambiguous_periods((math.ceil(travel_m / geometry.m_per_count_left) + 1,
+                                    math.ceil(travel_m / geometry.m_per_count_right) + 1), bits)
