@@ -394,7 +394,7 @@ class PageEvidence:
         return replace(seen_of(keeper.pages, keeper.totals, self._gaps, boot), fills=fills,
                        holes=holes, through=through_gaps(keeper.pages, keeper.totals,
                                                          keeper.cycle_s, self._gap_s),
-                       resets=self.resets.resets(self._gap_s, keeper.cycle_s))
+                       resets=self.resets.resets(self._gap_s, keeper.cycle_s, holes))
 
     def _add_holes(self, chunk: FrameArrays, enc: Encoders) -> None:
         """``Seen.holes``: the accepted encoder frames at or after an encoder frame of the chunk

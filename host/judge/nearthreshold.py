@@ -71,6 +71,7 @@ class Resets:
     mask: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     long_gaps: dict[int, tuple[float, float, int]] = field(default_factory=dict)
     cycle_s: float = 0.01
+    holes: frozenset[int] = frozenset()  # ``gapseen.Seen.holes``: no word of the log's step
 
     def told(self, b_s: float) -> bool | None:
         """Whether the firmware re-primed on the encoder frame at bus time ``b_s`` by its own
@@ -81,12 +82,14 @@ class Resets:
             return None
         return bool(self.mask[j] & COUNTER_RESET_BIT)
 
-    def disagrees(self, reprimed: frozenset[int], least: int | None) -> bool:
+    def disagrees(self, reprimed: frozenset[int], least: int | None,
+                  holes: frozenset[int] = frozenset()) -> bool:
         """Whether the firmware's word at a long gap within a period of the threshold
         (``least``: the fewest periods of an ambiguous step) differs from re-priming there."""
         return least is not None and any(
             near(step, b_s - a_s, self.cycle_s, least) and (word := self.told(b_s)) is not None
-            and word != (frame in reprimed) for frame, (a_s, b_s, step) in self.long_gaps.items())
+            and word != (frame in reprimed) and frame not in holes
+            for frame, (a_s, b_s, step) in self.long_gaps.items())
 
 
 @dataclass
@@ -115,29 +118,33 @@ class ResetLog:
         self.sent_s.append(np.asarray(page["timestamp_s"], dtype=np.float64)[keep])
         self.mask.append(np.asarray(page["ERROR_MASK"], dtype=np.int64)[keep])
 
-    def resets(self, long_gaps: dict[int, tuple[float, float, int]], cycle_s: float | None
-               ) -> Resets:
-        """What was fed, with the log's long gaps."""
+    def resets(self, long_gaps: dict[int, tuple[float, float, int]], cycle_s: float | None,
+               holes: frozenset[int] = frozenset()) -> Resets:
+        """What was fed, with the log's long gaps and holes."""
         if not self.usable or not self.sent_s or cycle_s is None:
-            return Resets(long_gaps=dict(long_gaps))
+            return Resets(long_gaps=dict(long_gaps), holes=holes)
         return Resets(np.concatenate(self.sent_s), np.concatenate(self.mask), dict(long_gaps),
-                      cycle_s)
+                      cycle_s, holes)
 
 
 def ambiguity_rule(enc: Encoders, e0: int, least: int, through: dict[int, int],
-                   resets: Resets | None) -> Callable[[int, int], bool]:
+                   resets: Resets | None, holes: frozenset[int] = frozenset()
+                   ) -> Callable[[int, int], bool]:
     """``reference_path.firmware_steps``' test whether the step from frame ``a`` (the last
     accepted, from ``e0``) to frame ``b`` is ambiguous: its periods reach ``least``, unless the
     pages prove frames taken in the gap (``through``: ``holetaken``); within a period of the
-    threshold the firmware's own word (``resets``, module docstring) where it says one."""
+    threshold the firmware's own word (``resets``, module docstring) where it says one, but
+    not behind a hole of the log (``holes``: the firmware may have taken frames the log lacks,
+    one by one; its word then says nothing of the log's step)."""
     seq, stamps = enc.seq[e0:], enc.timestamp_s[e0:]
 
     def ambiguous(a: int, b: int) -> bool:
         if b == a + 1 and through.get(e0 + b, least) < least:
             return False
         decided = pair_bound_periods(seq, stamps, enc.cycle_s, a, b) >= least
-        if resets is None or not near(int(seq[b] - seq[a]), float(stamps[b] - stamps[a]),
-                                      enc.cycle_s, least):
+        elapsed_s = float(stamps[b] - stamps[a])
+        if resets is None or e0 + b in holes or not near(int(seq[b] - seq[a]), elapsed_s,
+                                                         enc.cycle_s, least):
             return decided
         word = resets.told(float(stamps[b]))
         return decided if word is None else word

@@ -240,7 +240,8 @@ def firmware_steps(
         return True if confirmed[b] else None
 
     least = least_ambiguous_periods(bound, bits)  # ``ambiguity``: the firmware re-primes
-    ambiguous = ambiguity_rule(enc, e0, least, through or {}, resets)  # holetaken, nearthreshold
+    ambiguous = ambiguity_rule(enc, e0, least, through or {}, resets,  # holetaken, nearthreshold
+                               resets.holes if resets is not None else frozenset())
 
     periods = step_bound_periods(seq, stamps, enc.cycle_s)
     bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])

@@ -82,7 +82,7 @@ def whole_only(seen: Seen, info: LifeInfo, refusal: type[Exception]
         raise refusal(DETAIL)
     if any(b in seen.through for b in info.by_uptime):
         raise refusal(THROUGH)
-    if seen.resets.disagrees(frozenset(info.reprimed), info.least):  # nearthreshold
+    if seen.resets.disagrees(frozenset(info.reprimed), info.least, seen.holes):  # nearthreshold
         raise refusal(NEAR)
     return seen, frozenset(info.reprimed)
 
