@@ -27,6 +27,7 @@ from typing import Any
 
 import cantools
 import pytest
+from cantools.autosar import compute_profile2_crc
 from cantools.database.can import Database
 
 from odocan.host.cli.app import main
@@ -36,6 +37,7 @@ from odocan.sim.board import TICK_S
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
+from tests.dbc_typed import dbc_attribute, decode, number
 from tests.fault_rig import FaultRig
 from tests.independent_checker import Robot, _Odometry
 from tests.test_replay_clock_step import _raise_x
@@ -183,22 +185,62 @@ def test_the_correct_firmware_passes_every_judge(drives: list[tuple[Path, float]
         assert all(verdicts.values()), (path, verdicts)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "open: the judges' ambiguity mirror re-primes the reference at a 600-period hole of the "
-    "encoder frames alone (kobuki: ambiguous from 391) though the pages heard through it show "
-    "the firmware took those frames one by one (ENC_E2E_OK grew): a FAIL of a correct "
-    "firmware; the mirror should re-prime only where the pages do not prove frames taken"))
 def test_a_recorder_loss_of_the_encoder_frames_only_keeps_its_allowance(
         recorder_loss: Path, tmp_path: Path) -> None:
     """The pages heard through a 6 s hole of the log's encoder frames count the frames the
     firmware took there (ENC_E2E_OK grew): no proof, the allowance stays, the correct firmware
-    PASSes although its pose did not take the gap as one step."""
+    PASSes although its pose did not take the gap as one step. (The judges' ambiguity mirror
+    re-primed the reference at the hole, 600 periods, kobuki ambiguous from 391: a FAIL of
+    the correct firmware, its heading 10.8 rad off the reference's.)"""
     worst_m, periods, inside = _checked(recorder_loss)
     assert periods >= 600  # ten pages: beyond the pairs of nearby pages (a long pair)
     assert len(inside) >= 8  # ENC_E2E_OK grew through the hole
     assert worst_m > 10 * POSITION_LSB_M  # one merged step is not what the firmware took
     verdicts = _verdicts(recorder_loss, tmp_path)
     assert all(verdicts.values()), verdicts
+
+
+def _taken_in_silence(src: Path, dst: Path, from_s: float, silence_s: float) -> int:
+    """``src`` with ENC_E2E_OK of every ODOM_STATUS page 2 sent after ``from_s`` raised by the
+    periods since then (at most the silence's): pages that say the firmware took a frame a
+    period all through the silence (LOST unchanged), re-encoded and re-signed by cantools;
+    the pages changed."""
+    db = _db()
+    status = db.get_message_by_name("ODOM_STATUS")
+    ids = [int(v) for v in dbc_attribute(status, "E2EDataIDs").split(",")]
+    lines, changed = [], 0
+    for line in src.read_text().splitlines():
+        stamp, channel, frame = line.split()[:3]
+        t_s = float(stamp.strip("()"))
+        head, payload = frame.split("#")
+        data = bytes.fromhex(payload)
+        if int(head, 16) == status.frame_id and (data[1] >> 4) == 2 and t_s > from_s:
+            s = decode(db, status.frame_id, data, decode_choices=False, scaling=False)
+            s["ENC_E2E_OK"] = (int(number(s["ENC_E2E_OK"])) + min(round((t_s - from_s) / TICK_S),
+                                                           round(silence_s / TICK_S))) & 0xFFFF
+            out = bytearray(db.encode_message(status.frame_id, s, scaling=False))
+            out[0] = int(compute_profile2_crc(bytes(out), ids[out[1] & 0xF]) or 0)
+            line, changed = f"{stamp} {channel} {head}#{out.hex().upper()}", changed + 1
+        lines.append(line + "\n")
+    dst.write_text("".join(lines))
+    return changed
+
+
+def test_a_firmware_that_reprimed_where_its_pages_say_it_took_frames_fails(
+        drives: list[tuple[Path, float]], tmp_path: Path) -> None:
+    """The control of the recorder loss: the random drive's 8 s silence (800 periods, ambiguous
+    from 391: the correct firmware re-primed there, no step) with pages that say the firmware
+    took a frame every period through it. A firmware that re-primed where it took frames one
+    by one dropped the silence's motion: every judge FAILs it (the mirror re-primed with it
+    and PASSed it when it re-primed at any hole of the log that long)."""
+    path, drive = drives[1][0], DRIVES[1]
+    edited = tmp_path / "reprimed-where-taken.log"
+    assert _taken_in_silence(path, edited, drive[3], drive[4]) > 20  # a page 2 every 0.6 s
+    _, periods, inside = _checked(edited)
+    assert periods >= 800
+    assert len(inside) >= 10  # OK grew all through the silence
+    verdicts = _verdicts(edited, tmp_path)
+    assert not any(verdicts.values()), verdicts
 
 
 @pytest.mark.parametrize("lsb", EDITS_LSB)

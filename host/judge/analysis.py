@@ -121,7 +121,7 @@ from odocan.host.judge.compare import (
 )
 from odocan.host.judge.configs import config_cuts, cut_configs, in_force
 from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
-from odocan.host.judge.gapseen import seen_in_log
+from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
 from odocan.host.judge.losses import firmware_losses, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
@@ -347,7 +347,7 @@ def _analyze_life(
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
                          slack_m=tolerance.position_m, start_pose=start_pose,
-                         seen=seen_in_log(frames, decoder, enc, power_up=power_up))
+                         seen=(seen := seen_in_log(frames, decoder, enc, power_up=power_up)))
     onboard = worst_sent(onboard, halves, ref_all, tolerance.position_m, tolerance.heading_rad)
     ref = ref_all.at(onboard.enc)
     truth_origin = None
@@ -369,7 +369,7 @@ def _analyze_life(
                          DistanceJudge(robot, max_wheel_speed_mm_s, power_up and not start_pose,
                                        [b for b in stalls.tolist() if b > ref_all.start],
                                        [(a, z) for a, z, _ in losses],
-                                       twin_paths(enc, robot, ref_all.start)))
+                                       twin_paths(enc, robot, ref_all.start)), seen)
     vs_ref["max_position_error_beyond_allowance_m"] = float(
         np.max(pos_err - allowance - twin_allowed))
     passed = bool(
@@ -404,7 +404,8 @@ def _analyze_life(
         "events": [
             {"kind": "counter_restart", "t_s": float(frames.timestamp_s[enc.index[e]]),
              "encoder_frame": int(e),
-             "detail": restart_detail(e in ref_all.ctrl_restarts, e in ref_all.unseen_restarts)}
+             "detail": restart_detail(e in ref_all.ctrl_restarts, e in ref_all.unseen_restarts,
+                                      ambiguous=e in ref_all.ambiguous)}
             for e in ref_all.counter_restarts
         ] + [
             {"kind": "firmware_stall", "t_s": float(frames.timestamp_s[enc.index[e]]),
@@ -460,9 +461,11 @@ def _analyze_life(
 
 
 def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, enc: Encoders,
-              robot: RobotProfile, e0: int, judge: DistanceJudge) -> dict[str, Any]:
-    """``distance.check_distance`` over the firmware's steps from ``e0``."""
+              robot: RobotProfile, e0: int, judge: DistanceJudge, seen: Seen
+              ) -> dict[str, Any]:
+    """``distance.check_distance`` over the firmware's steps from ``e0`` (``seen``: the
+    reference's evidence, ``holetaken``, ``nearthreshold``)."""
     steps = firmware_steps(enc, e0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
-                           judge.max_wheel_speed_mm_s)
+                           judge.max_wheel_speed_mm_s, through=seen.through, resets=seen.resets)
     return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right), e0,
                           judge)

@@ -84,6 +84,8 @@ from odocan.host.judge.gapfill import (
     late_in_chunk,
     recent_anchors,
 )
+from odocan.host.judge.holetaken import LONG_GAP_FRAMES, through_gaps
+from odocan.host.judge.nearthreshold import ResetLog, Resets
 from odocan.host.judge.pagechain import (
     boot_breaks,
     boot_ok,
@@ -149,6 +151,9 @@ class Seen:
     counted: list[Span] = field(default_factory=list)  # the runs of ``same`` proven by OK alone
     holes: frozenset[int] = frozenset()  # encoder frames after a hole of the log's encoder
     # frames (refused ones included): the sender silent or the recorder lost frames
+    through: dict[int, int] = field(default_factory=dict)  # per long gap (its frame after) the
+    # pages prove frames taken in: the firmware's longest step there (``host.judge.holetaken``)
+    resets: Resets = field(default_factory=Resets)  # its COUNTER_RESET word (nearthreshold)
 
     def took_across(self, frame: int) -> bool:
         """Whether ENC_E2E_OK alone proves the firmware took exactly the log's frames from
@@ -348,6 +353,9 @@ class PageEvidence:
     _last_enc_s: float = -math.inf
     _gaps: list[tuple[int, int]] = field(default_factory=list)  # frame after, frames missing
     _gap_seq: dict[int, int] = field(default_factory=dict)  # per gap: the sequence number before
+    _gap_s: dict[int, tuple[float, float, int]] = field(default_factory=dict)  # per long gap: the
+    # bus times of its frames before and after, its sequence step (``holetaken``)
+    resets: ResetLog = field(default_factory=ResetLog)  # the summaries' ERROR_MASK
     late: LateFrames = field(default_factory=LateFrames)  # encoder frames refused (gapfill)
     _anchors: Anchors = NO_ANCHORS  # the last accepted encoder frames (gapfill's anchors)
     _usable: bool = True  # the DBC has the signals
@@ -384,7 +392,9 @@ class PageEvidence:
         boot = (None if not power_up or self.first_s is None
                 else (self.first_s, self.first_s - keeper.cycle_s))
         return replace(seen_of(keeper.pages, keeper.totals, self._gaps, boot), fills=fills,
-                       holes=holes)
+                       holes=holes, through=through_gaps(keeper.pages, keeper.totals,
+                                                         keeper.cycle_s, self._gap_s),
+                       resets=self.resets.resets(self._gap_s, keeper.cycle_s, holes))
 
     def _add_holes(self, chunk: FrameArrays, enc: Encoders) -> None:
         """``Seen.holes``: the accepted encoder frames at or after an encoder frame of the chunk
@@ -416,6 +426,9 @@ class PageEvidence:
         k = np.flatnonzero(step > 1)
         self._gaps += zip((self._enc_count + k).tolist(), (step[k] - 1).tolist(), strict=True)
         self._gap_seq.update(zip((self._enc_count + k).tolist(), prior[k].tolist(), strict=True))
+        t = np.concatenate(([self._last_enc_s], enc.timestamp_s))
+        self._gap_s.update((self._enc_count + i, (float(t[i]), float(t[i + 1]), int(step[i])))
+                           for i in k[step[k] > LONG_GAP_FRAMES].tolist())
         self._last_seq = int(enc.seq[-1])
 
     def _add_status(self, chunk: FrameArrays, enc: Encoders) -> None:
@@ -432,6 +445,7 @@ class PageEvidence:
         head = self.decoder.decode(chunk, "ODOM_STATUS")  # PAGE and COUNTER by the DBC
         rows = np.asarray(head["index"], dtype=np.int64)
         crc = crc_holds(chunk, self.decoder, rows)
+        self.resets.feed(chunk, self.decoder, rows[crc])  # ``nearthreshold``
         before = np.searchsorted(enc.index, rows + self._offset)  # enc.index: in the log
         last_s = np.where(before > 0, enc.timestamp_s[np.maximum(before - 1, 0)]
                           if len(enc.seq) else 0.0, self._last_enc_s)

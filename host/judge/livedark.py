@@ -70,6 +70,12 @@ class DarkRestarts:
         self._pending = seq
         return True
 
+    def owe(self, seq: int) -> None:
+        """A new start owed at encoder frame ``seq`` whatever the pages say: a step within a
+        period of the ambiguity threshold (``host.judge.nearthreshold``), which the live judge
+        cannot know the firmware's decision on when it steps."""
+        self._pending = seq if self._pending < 0 else min(self._pending, seq)
+
     def due(self, seq: int, restart: Callable[[], None]) -> None:
         """A sample of encoder frame ``seq`` is to be judged: ``restart`` the reference first
         when a new start is owed at or before that frame (the sample is then its start)."""

@@ -117,8 +117,9 @@ class LiveDistance:
         seq = tracker.enc_seq
         if self._gate is None:
             # its own gate: the restarts it re-primes on are the tracker's to tell
-            self._gate = StepGate(tracker.geometry, tracker.counter_bits,
-                                  RestartLog(lambda _seq, _by_uptime: None))
+            told = RestartLog(lambda _seq, _by_uptime: None)
+            told.through = tracker.placer.seen.through  # the tracker's gate's (holetaken)
+            self._gate = StepGate(tracker.geometry, tracker.counter_bits, told)
             self.first_seq = seq
         periods = tracker.placer.periods
         step = self._gate.step((seq, counter, left, right, periods, uptime, t_s))

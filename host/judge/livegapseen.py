@@ -38,6 +38,7 @@ from odocan.host.judge.gapseen import (
     Span,
     seen_of,
 )
+from odocan.host.judge.holetaken import taken_through
 from odocan.host.judge.livewindow import CYCLE_S
 from odocan.host.protocol.e2e import crc8h2f_p02_one
 
@@ -116,6 +117,13 @@ class LiveSeen:
             self.seen = Seen(_joined(self.seen.same, new.same, base, horizon),
                              _joined(self.seen.missed, new.missed, base, horizon))
         return self.seen
+
+    def through(self, a_s: float, b_s: float) -> int | None:
+        """``holetaken.taken_through`` of the pages kept, for a hole of the encoder frames heard
+        from bus time ``a_s`` to ``b_s`` (the live judge steps at ``b_s``, before the first
+        FRAME_TOTALS page after it came: the totals heard so far must be quiet)."""
+        return taken_through(self.keeper.pages, self.keeper.totals, self.cycle_s, a_s, b_s,
+                             closed=False)
 
     def _kept_more(self) -> bool:
         """Whether a page was kept since last asked; the oldest beyond ``KEPT_PAGES`` let go,

@@ -19,6 +19,7 @@ from odocan.firmware.encoders import (
 from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.ambiguity import least_ambiguous_periods
 from odocan.host.judge.livewindow import CYCLE_S, Counted
+from odocan.host.judge.nearthreshold import NEAR_DETAIL, near
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.reference_path import restart_detail
 from odocan.host.judge.turns import unwrapped_error
@@ -126,9 +127,12 @@ class StepGate:
             self._held = (frame, seq, uptime, t_s)
             return None
         periods = self._seq - prev_seq
-        if periods >= self.least:  # ambiguous (``ambiguity``): the firmware re-primes on it
+        if periods + RING >= self.least and near(  # (a plain test first: it runs per frame)
+                ((counter - prev[0]) & 0xF) or RING, t_s - last_t, CYCLE_S, self.least):
+            self._told.near_threshold(seq, t_s)  # either decision: a new start (nearthreshold)
+        if periods >= self.least and not self._taken(last_t, t_s):  # ambiguous: re-primed
             self._refused = []
-            self._restarted(seq, t_s, by_uptime=True)
+            self._restarted(seq, t_s, by_uptime=True, ambiguous=True)
             return 0, 0
         delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
         if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
@@ -144,6 +148,13 @@ class StepGate:
         first, self._refused, self.prev, self.uptime = self._refused[0], [], frame, uptime
         self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
+
+    def _taken(self, a_s: float, b_s: float) -> bool:
+        """Whether the firmware's pages prove it took frames between the last accepted frame
+        (bus time ``a_s``) and this one (``b_s``), its longest step there below an ambiguous
+        one (``holetaken``): the firmware did not re-prime, the gap is a gap."""
+        longest = None if self._refused else self._told.through(a_s, b_s)
+        return longest is not None and longest < self.least
 
     def _confirms(self, held: Held, frame: tuple[int, int, int], uptime: int) -> bool:
         """``frame`` (its CTRL_UPTIME ``uptime``) confirms the ``held`` restart frame
@@ -164,9 +175,10 @@ class StepGate:
         self.prev, self._prev_seq, self.uptime, self._prev_t = frame, self._seq, uptime, t_s
         return self._delta(first, frame)
 
-    def _restarted(self, seq: int, t_s: float, *, by_uptime: bool) -> None:
+    def _restarted(self, seq: int, t_s: float, *, by_uptime: bool,
+                   ambiguous: bool = False) -> None:
         self.counter_restarts += 1
-        self._told.add(seq, t_s, by_uptime)
+        self._told.add(seq, t_s, by_uptime, ambiguous=ambiguous)
 
 
 class RestartLog:
@@ -181,14 +193,35 @@ class RestartLog:
         self.events: deque[dict[str, Any]] = deque(maxlen=16)  # the owner's deque replaces it
         self._told = -1  # the latest encoder frame (seq) told
         self._reprimed = reprimed
+        self.through: Callable[[float, float], int | None] = _unproven  # ``LiveSeen.through``
+        self.owe: Callable[[int], None] = _owed  # ``livedark.DarkRestarts.owe``
 
-    def add(self, seq: int, t_s: float, by_uptime: bool) -> None:
+    def near_threshold(self, seq: int, t_s: float) -> None:
+        """A step within a period of the ambiguity threshold into encoder frame ``seq`` (bus
+        time ``t_s``): the firmware may have decided either way and its word comes later, so
+        the reference restarts from the next on-board pose (``owe``), told as an event."""
+        self.owe(seq)
+        self.events.append({"t_s": t_s, "kind": "near_threshold", "encoder_frame": seq,
+                            "detail": NEAR_DETAIL})
+
+    def add(self, seq: int, t_s: float, by_uptime: bool, *, ambiguous: bool = False) -> None:
+        """A restart on encoder frame ``seq`` at bus time ``t_s`` (``by_uptime``: nothing
+        integrated into it; ``ambiguous``: a step too long to read, ``ambiguity``)."""
         unseen = bool(self._reprimed(seq, by_uptime))
         if seq <= self._told:
             return
         self._told = seq
         self.events.append({"t_s": t_s, "kind": "counter_restart", "encoder_frame": seq,
-                            "detail": restart_detail(by_uptime, unseen)})
+                            "detail": restart_detail(by_uptime, unseen, ambiguous=ambiguous)})
+
+
+def _owed(_seq: int) -> None:
+    """No new start to owe (``RestartLog.owe``: a gate of its own)."""
+
+
+def _unproven(_a_s: float, _b_s: float) -> int | None:
+    """No pages: nothing proven taken in a hole (``RestartLog.through``)."""
+    return None
 
 
 # below this silence ``aged`` is the last CTRL_UPTIME itself (the per-frame test skips it)

@@ -27,6 +27,7 @@ from odocan.host.judge.ctrlrestart import (
 from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.lossgate import beyond_width
+from odocan.host.judge.nearthreshold import Resets, ambiguity_rule, near_candidates
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -61,6 +62,7 @@ class Reference:
     placements: BreakSummary = field(default_factory=BreakSummary)  # after stalls and gaps
     ctrl_restarts: frozenset[int] = frozenset()  # counter restarts told by CTRL_UPTIME
     unseen_restarts: frozenset[int] = frozenset()  # of them, new starts (``unseenrestart``)
+    ambiguous: frozenset[int] = frozenset()  # counter restarts on an ambiguous step (``ambiguity``)
 
     def at(self, enc: IntArray) -> Reference:
         """The reference at the encoder frames ``enc`` (all >= start)."""
@@ -68,7 +70,7 @@ class Reference:
         return Reference(
             self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
             self.restarts, self.exact_start, self.counter_restarts, self.implausible_frames,
-            self.placements, self.ctrl_restarts, self.unseen_restarts,
+            self.placements, self.ctrl_restarts, self.unseen_restarts, self.ambiguous,
         )
 
 
@@ -91,7 +93,8 @@ def build_reference(
     exact_at_first = power_up or start_pose is not None
     e0 = 0 if exact_at_first else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
     geometry = Geometry.of(robot)
-    steps = firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s)
+    steps = firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s, through=seen.through,
+                           resets=seen.resets)
     d_left, d_right = steps.d_left, steps.d_right
     rel = integrate(d_left, d_right, geometry, integrator)
     zero = np.zeros(1)
@@ -154,6 +157,7 @@ def build_reference(
         placements=placed,
         ctrl_restarts=uptime_reprimed - frozenset(e0 + k for k in steps.ambiguous),
         unseen_restarts=frozenset(e0 + k for k in unseen),
+        ambiguous=frozenset(e0 + k for k in steps.ambiguous),
     )
 
 
@@ -172,7 +176,8 @@ class Steps:
 
 
 def firmware_steps(
-    enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: SpeedBound
+    enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: SpeedBound,
+    *, through: dict[int, int] | None = None, resets: Resets | None = None,
 ) -> Steps:
     """The steps as firmware/ecu.py takes them: a frame whose step from the last accepted one
     exceeds the robot's maximum wheel speed (``max_wheel_speed_mm_s``; ``PROFILE_SPEED``: the
@@ -186,7 +191,11 @@ def firmware_steps(
     COUNTER_RESET, no step into it), else it is refused outright. A frame whose counts
     set wire bits above a 16-bit counter's width is refused outright. Vectorised; a short
     state machine runs only from each refused frame on. The bound is computed in float (the
-    firmware's Q48 integer bound may differ by a count at the limit)."""
+    firmware's Q48 integer bound may differ by a count at the limit). ``through``: per gap (its
+    encoder frame after) the firmware's longest step there, its pages' (``holetaken``): shorter
+    than an ambiguous step, the gap is no ambiguous step (the firmware took frames in it).
+    ``resets``: the firmware's COUNTER_RESET word, followed within a period of the threshold
+    (``nearthreshold``)."""
     left, right = enc.left[e0:], enc.right[e0:]
     seq = enc.seq[e0:]
     steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
@@ -231,13 +240,13 @@ def firmware_steps(
         return True if confirmed[b] else None
 
     least = least_ambiguous_periods(bound, bits)  # ``ambiguity``: the firmware re-primes
-
-    def ambiguous(a: int, b: int) -> bool:
-        return pair_bound_periods(seq, stamps, enc.cycle_s, a, b) >= least
+    ambiguous = ambiguity_rule(enc, e0, least, through or {}, resets,  # holetaken, nearthreshold
+                               resets.holes if resets is not None else frozenset())
 
     periods = step_bound_periods(seq, stamps, enc.cycle_s)
     bad = (np.abs(steps.d_left) > periods * bound[0]) | (np.abs(steps.d_right) > periods * bound[1])
     bad |= foreign[1:] | unconfirmed | (periods >= least)
+    bad |= near_candidates(seq, stamps, enc.cycle_s, least, resets)
     return _walk(steps, bad, restart,
                  ((plausible, consistent, foreign, ambiguous), delta, restarted))
 

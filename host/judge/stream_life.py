@@ -20,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.nearthreshold import least_of
 from odocan.host.judge.reference import Geometry, SpeedBound
 from odocan.host.judge.samples import WIRE_COUNTER_BITS, Encoders
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses, StreamReference
@@ -112,6 +113,7 @@ class LifeInfo:
     openings: list[tuple[int, bool]] = field(default_factory=list)  # ``_Rows.openings``
     gap_steps: dict[int, GapStep] = field(default_factory=dict)  # ``_Rows.gap_steps``
     times_s: dict[int, float] = field(default_factory=dict)
+    least: int | None = None  # the fewest periods of an ambiguous step (``nearthreshold``)
 
 
 @dataclass(frozen=True)
@@ -185,6 +187,7 @@ def life_chunks(
     info.gap_steps = rows.gap_steps
     info.reprimed = [e0 + k for k in reference.reprimed]
     info.by_uptime = [e0 + k for k in reference.by_uptime]
+    info.least = least_of(reference.geometry, reference.bits, reference.max_wheel_speed_mm_s)
 
 
 def _truth_floor(truth: StreamTruth, top: int) -> float:

@@ -46,6 +46,13 @@ from odocan.host.judge.samples import Encoders, FloatArray, IntArray
 if TYPE_CHECKING:
     from odocan.host.judge.stream_life import LifeInfo
 
+AMBIGUOUS = ("re-primed: the counts could not span the silence (its bound reached half the "
+             "counters' range); the reference re-primed where the firmware must (COUNTER_RESET): "
+             "the motion across is unknowable")
+NEAR = ("the firmware's COUNTER_RESET at a long gap differs from the stream's re-prime (a "
+        "silence near the ambiguity threshold): judged on the whole log")
+THROUGH = ("a long gap of the log's encoder frames the firmware's pages prove it took frames "
+           "in: judged on the whole log")
 DETAIL = ("a controller restart (CTRL_UPTIME went back) behind a silence of the log (frames the "
           "recorder lost, or a controller that stopped sending): the firmware may have taken "
           "frames the log lacks and their counts are unknowable across the restarted counters; "
@@ -66,10 +73,17 @@ def whole_only(seen: Seen, info: LifeInfo, refusal: type[Exception]
     """The streamed judge's ``seen`` and re-primed frames of a life (``info``: its first
     placement pass's); ``refusal`` (``stream_analysis.NotStreamable``: the whole log's judge
     then) when a controller restart there is a new start (``unseen_restarts``): the stream
-    does not fit the new start's heading."""
+    does not fit the new start's heading; nor when the stream's reference re-primed at a gap
+    the firmware's pages prove it took frames in (``Seen.through``: the stream steps before
+    the pages are read; the whole log's reference takes such a gap as a gap, ``holetaken``),
+    nor where the firmware's word differs from its re-primes (``nearthreshold``)."""
     if any(b in info.gap_steps and b in seen.holes and not seen.took_across(b)
            for b in info.by_uptime):
         raise refusal(DETAIL)
+    if any(b in seen.through for b in info.by_uptime):
+        raise refusal(THROUGH)
+    if seen.resets.disagrees(frozenset(info.reprimed), info.least, seen.holes):  # nearthreshold
+        raise refusal(NEAR)
     return seen, frozenset(info.reprimed)
 
 
@@ -121,12 +135,16 @@ def _wrap(angle: FloatArray) -> FloatArray:
     return wrapped
 
 
-def restart_detail(by_uptime: bool, unseen: bool = False) -> str:
+def restart_detail(by_uptime: bool, unseen: bool = False, *, ambiguous: bool = False) -> str:
     """The report's words for an encoder frame the firmware re-primes on (COUNTER_RESET):
     ``by_uptime``, the motor controller said it restarted (CTRL_UPTIME went back); ``unseen``:
-    after frames the recorder lost (``unseenrestart.DETAIL``)."""
+    after frames the recorder lost (``unseenrestart.DETAIL``); ``ambiguous``: a step too
+    long to read (``AMBIGUOUS``), whatever CTRL_UPTIME says. The same words in ``analyze``'s
+    events, the monitor's (screen and ``--json``) and the bridge's status events."""
     if unseen:
         return DETAIL
+    if ambiguous:
+        return AMBIGUOUS
     cause = ("the motor controller restarted (CTRL_UPTIME went back): " if by_uptime
              else "")
     return (f"{cause}the firmware re-primes here (COUNTER_RESET): the reference restarts with "
