@@ -160,7 +160,7 @@ def test_the_three_agree_after_a_gap(busoff_s: float, shows: bool) -> None:
     if busoff_s > 1.0:  # the 100-period step's path is unknowable: latched until a set-pose;
         # the monitor says TWIST WRONG (``_agree``) and why, the firmware's DEGRADED with it
         why = monitor.health(messages[-1].timestamp)["why"]
-        assert why[-1] == "firmware reports DEGRADED (POSE_UNCERTAIN)"
+        assert why[-1].startswith("firmware reports DEGRADED (POSE_UNCERTAIN")
 
 
 def test_the_three_agree_on_a_carried_update() -> None:

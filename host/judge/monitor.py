@@ -71,6 +71,7 @@ from odocan.host.judge.monitorvalues import (
     unit_of,
 )
 from odocan.host.judge.profilepage import follow_profile
+from odocan.host.judge.reasonwords import reason_text
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatch
@@ -379,7 +380,7 @@ class BusMonitor:
         """The firmware's own state when not OK, with its REASON; but a DISTANCE or TWIST found
         wrong (latched, settled) outranks DEGRADED, which a latched REASON (COUNTER_RESET,
         POSE_UNCERTAIN) keeps until a set-pose: the judge's finding is not hidden behind it."""
-        said = f"firmware reports {reported} ({self.status.get('reason', '?')})"
+        said = f"firmware reports {reported} ({reason_text(str(self.status.get('reason', '?')))})"
         if reported == "DEGRADED":
             for verdict, why in (("DISTANCE WRONG", self.distance.verdict()),
                                  ("TWIST WRONG", self.twist.verdict())):
