@@ -29,8 +29,8 @@ its age. UPTIME against bus time tells a **reboot** (UPTIME going back, or INIT 
 the reference restarts, the node's E2E sequences afresh: an event, not lost frames) from **two
 sources** on one ID (two UPTIME offsets interleaving); a motor controller restart the reference
 re-primes on is a ``counter_restart`` event, as analyze tells it. The verdict, in order: NO
-FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (its REASON; DISTANCE WRONG or
-TWIST WRONG, once latched, outrank its DEGRADED), POSE WRONG (the
+FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (its REASON; a POSE WRONG
+episode, DISTANCE WRONG or TWIST WRONG, once latched, outrank its DEGRADED), POSE WRONG (the
 latest sample vs reference beyond ``analyze``'s limit, one LSB of position after the loss
 allowance or of heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it),
 UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), DISTANCE WRONG and
@@ -377,12 +377,15 @@ class BusMonitor:
         return ("TWIST WRONG", why) if why else ("OK", [])
 
     def _reported_verdict(self, reported: str) -> tuple[str, list[str]]:
-        """The firmware's own state when not OK, with its REASON; but a DISTANCE or TWIST found
-        wrong (latched, settled) outranks DEGRADED, which a latched REASON (COUNTER_RESET,
-        POSE_UNCERTAIN) keeps until a set-pose: the judge's finding is not hidden behind it."""
+        """The firmware's own state when not OK, with its REASON; but a pose, DISTANCE or twist
+        found wrong (latched once settled: ``posewrongs``, ``livedistance``, ``livetwist``)
+        outranks DEGRADED, which a latched REASON (COUNTER_RESET, POSE_UNCERTAIN) keeps until
+        a set-pose: the judge's finding is not hidden behind it."""
         said = f"firmware reports {reported} ({reason_text(str(self.status.get('reason', '?')))})"
         if reported == "DEGRADED":
-            for verdict, why in (("DISTANCE WRONG", self.distance.verdict()),
+            wrongs = self.tracker.wrongs
+            for verdict, why in (("POSE WRONG", [wrongs.summary()] if wrongs.count else []),
+                                 ("DISTANCE WRONG", self.distance.verdict()),
                                  ("TWIST WRONG", self.twist.verdict())):
                 if why:
                     return verdict, [*why, said]
