@@ -37,7 +37,7 @@ def _status(t_s: float, signals: dict[str, int]) -> can.Message:
 
 
 def _summary(t_s: float, reason: str, mask: int) -> can.Message:
-    raw = next(int(v) for v, n in STATUS.get_signal_by_name("REASON").choices.items()
+    raw = next(int(v) for v, n in (STATUS.get_signal_by_name("REASON").choices or {}).items()
                if str(n) == reason)
     return _status(t_s, {"PAGE": 0, **SUMMARY_BASE, "REASON": raw, "ERROR_MASK": mask})
 

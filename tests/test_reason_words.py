@@ -17,7 +17,7 @@ from odocan.sim.contract import database
 from tests.test_health_rig import run_stall
 
 STATUS = database().get_message_by_name("ODOM_STATUS")
-RAW = {str(n): int(v) for v, n in STATUS.get_signal_by_name("REASON").choices.items()}
+RAW = {str(n): int(v) for v, n in (STATUS.get_signal_by_name("REASON").choices or {}).items()}
 
 
 def _said(words: str) -> None:
