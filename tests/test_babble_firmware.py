@@ -36,7 +36,7 @@ import can
 import numpy as np
 
 from odocan.firmware import frames as fr
-from odocan.firmware.errors import ErrorFlag
+from odocan.firmware.errors import ErrorFlag, ErrorMask
 from odocan.host.io.logs import read_log
 from odocan.host.judge.samples import (
     accepted_rows,
@@ -51,11 +51,13 @@ from odocan.sim.faults import FaultInjectingBus, FaultSpec
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests.dbc_typed import decode, number
+from tests.host_frames import pack_odom_set_pose
 
 BABBLE = "babble=1500:0x050:2:0.5,seed=3"  # one handle (the motor controller's)
 BABBLE_RUN = "babble=3000:0x050:2:0.5,seed=3"  # ``odocan run``: 1500/s from each controller
 BITRATE = 125_000
 DURATION_S = 4.5
+SET_POSE_S = 3.5  # after the queued frames have drained (about 2.75 s)
 
 
 def _status_summaries(reader: can.BufferedReader) -> list[tuple[float, str, str, int]]:
@@ -77,7 +79,7 @@ def _transitions(states: list[tuple[float, str, str]]) -> list[tuple[float, str,
     return [s for i, s in enumerate(states) if i == 0 or s[1:] != states[i - 1][1:]]
 
 
-def test_babble_below_wheel_encoders_degrades_the_firmware_and_it_recovers() -> None:
+def test_babble_below_wheel_encoders_degrades_the_firmware_until_a_set_pose() -> None:
     reader = can.BufferedReader()
     config = RigConfig(
         load("pmir"),
@@ -89,6 +91,9 @@ def test_babble_below_wheel_encoders_degrades_the_firmware_and_it_recovers() -> 
     firmware: list[tuple[float, str, str]] = []
     with LockstepRig(config, [reader]) as rig:
         for k in range(round(DURATION_S * 100)):
+            if k == round(SET_POSE_S * 100):  # a host tool accepts the on-board pose
+                rig.send(fr.ODOM_SET_POSE_ID,
+                         pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask()))
             rig.step()
             ecu = rig.board.ecu
             firmware.append((k * 0.01, ecu.state.name, ecu.reason.name))
@@ -100,18 +105,28 @@ def test_babble_below_wheel_encoders_degrades_the_firmware_and_it_recovers() -> 
     heard = _transitions([(t, s, r) for t, s, r, _ in summaries])
     print(f"\n{babbled} babble frames on 0x050; firmware: {on_board}; host heard: {heard}")
     assert 600 < babbled < 900  # 1500/s for 0.5 s
-    # the firmware: OK, DEGRADED 10-20 periods after the babble began, OK once it has drained
+    # the firmware: OK, DEGRADED 10-20 periods after the babble began; the first queued frame
+    # it takes after the silence could follow whole COUNTER cycles of lost frames (the 4-bit
+    # COUNTER cannot tell), one merged step whose path it cannot know: POSE_UNCERTAIN, latched
+    # (no longer OK by itself once drained), OK only after the host sets the pose
     assert [(s, r) for _, s, r in on_board] == [
-        ("OK", "NONE"), ("DEGRADED", "ENCODER_TIMEOUT"), ("OK", "NONE")
+        ("OK", "NONE"), ("DEGRADED", "ENCODER_TIMEOUT"), ("DEGRADED", "POSE_UNCERTAIN"),
+        ("OK", "NONE"),
     ]
     assert 2.10 <= on_board[1][0] <= 2.20
     assert 2.5 < on_board[2][0] < 3.0
-    # the host: the same transitions, from ODOM_STATUS, later than they happened
-    assert [(s, r) for _, s, r in heard] == [
-        ("OK", "NONE"), ("DEGRADED", "ENCODER_TIMEOUT"), ("OK", "NONE")
+    assert SET_POSE_S <= on_board[3][0] < SET_POSE_S + 0.1
+    # the host: the same transitions, from ODOM_STATUS, later than they happened (the summary
+    # sent in the set-pose's own tick says DEGRADED with REASON NONE: the set-pose cleared the
+    # reason before the summary, the watchdog says OK after it)
+    assert [(s, r) for _, s, r in heard][:3] == [
+        ("OK", "NONE"), ("DEGRADED", "ENCODER_TIMEOUT"), ("DEGRADED", "POSE_UNCERTAIN"),
     ]
-    assert heard[1][0] > on_board[2][0]  # DEGRADED reaches the host after the firmware recovered
+    assert ("OK", "NONE") not in [(s, r) for t, s, r in heard if 2.2 < t < SET_POSE_S]
+    assert [(s, r) for _, s, r in heard][-1] == ("OK", "NONE")
+    assert heard[1][0] > on_board[2][0]  # DEGRADED reaches the host after the drain began
     assert summaries[-1][3] & ErrorFlag.ENCODER_TIMEOUT  # sticky in the error mask
+    assert summaries[-1][3] & ErrorFlag.POSE_UNCERTAIN
 
 
 def test_babble_starves_the_encoders_but_loses_neither_frames_nor_distance(tmp_path: Path) -> None:

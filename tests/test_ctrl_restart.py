@@ -19,7 +19,9 @@ import can
 import pytest
 
 from odocan.firmware import frames as fr
+from odocan.firmware import uncertainty
 from odocan.firmware.encoders import EncoderInput
+from odocan.firmware.fixmath import U32_MAX
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.host.judge.monitor import BusMonitor
@@ -344,6 +346,9 @@ def test_a_firmware_that_integrated_the_aged_restart_fails_every_judge(
     # and without the ambiguity rule (tests/test_wrap_in_silence.py), which 10 s of silence
     # on pmir reach too: it would re-prime on the jump for its own reason
     monkeypatch.setattr(EncoderInput, "_least_ambiguous_periods", lambda _self: 1 << 20)
+    # and without the pose-uncertainty rule (tests/test_pose_uncertainty.py), which says
+    # DEGRADED POSE_UNCERTAIN after any 10 s step: as before, it claims OK on the wrong pose
+    monkeypatch.setattr(uncertainty, "UNCERTAINTY_TOLERANCE_UM", U32_MAX)
     path = aged_restart_log(tmp_path / "integrated.log", "python")
     after = [(s, r) for t, s, r in summaries(path)
              if t > (SILENT_FROM + AGED_SILENT_TICKS) * TICK_S + 2.0]

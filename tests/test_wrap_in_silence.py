@@ -7,7 +7,8 @@ silence, the firmware integrated the step read mod 2^16 (its plausibility bound,
 silence, passed any wire delta) and went back to OK, and the judges mirrored it. Once a step's
 bound reaches half the counters' range every wire delta is as plausible as one a whole range
 away: the firmware re-primes on that frame (DEGRADED, COUNTER_RESET, latched), its pose keeps
-its value, in Python and C bit for bit; a silence just shorter is integrated as before.
+its value, in Python and C bit for bit; a silence just shorter is integrated as before (and, when
+its path is too long to know, DEGRADED POSE_UNCERTAIN until a set-pose, no longer OK).
 
 The ambiguity and the heading are computed here again in float64 from the robot's geometry and
 the counts cantools decodes from the log (nothing of the judges'), the firmware's state read
@@ -75,6 +76,13 @@ def bound_periods(silent_ticks: int) -> int:
 # Bus-off silences of the motor controller (s) just below and just above the ambiguity, at
 # least one COUNTER cycle (16 periods) of the bound from it (kobuki: 391 periods; odd16: 11).
 SILENCES_S = {"kobuki": (3.6, 4.1), "odd16": (0.03, 0.2), "odd32": (1.2, 1.6)}
+# The firmware's state a second after the silence just below the ambiguity: the step across 3.6 s
+# (kobuki) or 1.2 s (odd32) is integrated, but any path of the wheels inside it is possible (past
+# 0.64 s the firmware bounds it by 2 V tau alone: metres), so DEGRADED POSE_UNCERTAIN, latched
+# until a set-pose (issue #11, point 5); across 0.03 s (odd16, 4 periods) the bound is well under
+# the firmware's 50 mm tolerance: OK again.
+BELOW_SETTLED = {"kobuki": ("DEGRADED", "POSE_UNCERTAIN"), "odd16": ("OK", "NONE"),
+                 "odd32": ("DEGRADED", "POSE_UNCERTAIN")}
 
 
 def silenced_log(path: Path, name: str, firmware: str, silent_s: float) -> Path:
@@ -144,8 +152,13 @@ def test_an_ambiguous_silence_is_reprimed_and_said_in_python_and_c(
         assert all(state != "OK" for state, _ in after)
         assert states_after(python, SILENT_FROM * TICK_S + silent + 1.0) == {
             ("DEGRADED", "COUNTER_RESET")}
-    else:
-        assert ("OK", "NONE") in states_after(python, SILENT_FROM * TICK_S + silent + 1.0)
+    else:  # integrated, not re-primed: no COUNTER_RESET; settled as BELOW_SETTLED says
+        settled = states_after(python, SILENT_FROM * TICK_S + silent + 1.0)
+        if BELOW_SETTLED[name] == ("OK", "NONE"):
+            assert ("OK", "NONE") in settled
+            assert all(reason != "POSE_UNCERTAIN" for _, reason in after)
+        else:
+            assert settled == {BELOW_SETTLED[name]}
         assert all(reason != "COUNTER_RESET" for _, reason in after)
     verdicts = judged(python, robot)
     assert verdicts[:3] == (True, True, True)

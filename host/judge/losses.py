@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from odocan.firmware.errors import ErrorFlag
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.gapbound import period_bounds
 from odocan.host.judge.lossgate import gated_counts
@@ -98,10 +99,18 @@ def _made_from(
     return made
 
 
+# REASON values the firmware keeps until a set-pose (firmware/health.py ``degrade``): behind
+# them a mailbox overflow shows only as its sticky ERROR_MASK bit
+LATCHED_REASONS = ("COUNTER_RESET", "POSE_UNCERTAIN")
+
+
 def overflow_reported_after(
     frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, after: int
 ) -> bool:
-    """Whether an ODOM_STATUS summary after frame ``after`` says DEGRADED for MAILBOX_OVERFLOW."""
+    """Whether an ODOM_STATUS summary after frame ``after`` says DEGRADED for MAILBOX_OVERFLOW:
+    its REASON, or, behind a latched REASON (``LATCHED_REASONS``, which no later cause
+    replaces), its ERROR_MASK's MAILBOX_OVERFLOW bit (sticky: possibly an older overflow, so
+    every frame since is counted as possibly lost, as for the REASON)."""
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", 0)
         signal = decoder.message("ODOM_STATUS").get_signal_by_name("REASON")
@@ -111,7 +120,14 @@ def overflow_reported_after(
     if "REASON" not in page or "MAILBOX_OVERFLOW" not in names:
         return False
     later = accepted[page["index"]] & (page["index"] > after)
-    return bool(np.any(page["REASON"][later] == names["MAILBOX_OVERFLOW"]))
+    reason = page["REASON"][later]
+    if np.any(reason == names["MAILBOX_OVERFLOW"]):
+        return True
+    if "ERROR_MASK" not in page:
+        return False
+    latched = np.isin(reason, [names[n] for n in LATCHED_REASONS if n in names])
+    bit = (page["ERROR_MASK"][later].astype(np.int64) & int(ErrorFlag.MAILBOX_OVERFLOW)) != 0
+    return bool(np.any(latched & bit))
 
 
 def loss_allowance(

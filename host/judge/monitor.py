@@ -29,7 +29,8 @@ its age. UPTIME against bus time tells a **reboot** (UPTIME going back, or INIT 
 the reference restarts, the node's E2E sequences afresh: an event, not lost frames) from **two
 sources** on one ID (two UPTIME offsets interleaving); a motor controller restart the reference
 re-primes on is a ``counter_restart`` event, as analyze tells it. The verdict, in order: NO
-FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (its REASON), POSE WRONG (the
+FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (its REASON; a POSE WRONG
+episode, DISTANCE WRONG or TWIST WRONG, once latched, outrank its DEGRADED), POSE WRONG (the
 latest sample vs reference beyond ``analyze``'s limit, one LSB of position after the loss
 allowance or of heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it),
 UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), DISTANCE WRONG and
@@ -70,6 +71,7 @@ from odocan.host.judge.monitorvalues import (
     unit_of,
 )
 from odocan.host.judge.profilepage import follow_profile
+from odocan.host.judge.reasonwords import reason_text
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatch
@@ -352,7 +354,7 @@ class BusMonitor:
             return "CONFLICT", [str(self.events[-1]["detail"]) if self.events else "two sources"]
         reported = str(self.status.get("state", "?"))
         if reported != "OK":
-            return reported, [f"firmware reports {reported} ({self.status.get('reason', '?')})"]
+            return self._reported_verdict(reported)
         if self.sources.conflict_from_s is not None:  # whose pose is it? (posewrongs: none judged)
             return "UNVERIFIED", [self.sources.conflict_text()]
         error = self.tracker.vs_reference.latest
@@ -373,6 +375,21 @@ class BusMonitor:
             return "DISTANCE WRONG", why
         why = self.twist.verdict()  # latched: LINEAR_VEL / ANGULAR_VEL beyond their band
         return ("TWIST WRONG", why) if why else ("OK", [])
+
+    def _reported_verdict(self, reported: str) -> tuple[str, list[str]]:
+        """The firmware's own state when not OK, with its REASON; but a pose, DISTANCE or twist
+        found wrong (latched once settled: ``posewrongs``, ``livedistance``, ``livetwist``)
+        outranks DEGRADED, which a latched REASON (COUNTER_RESET, POSE_UNCERTAIN) keeps until
+        a set-pose: the judge's finding is not hidden behind it."""
+        said = f"firmware reports {reported} ({reason_text(str(self.status.get('reason', '?')))})"
+        if reported == "DEGRADED":
+            wrongs = self.tracker.wrongs
+            for verdict, why in (("POSE WRONG", [wrongs.summary()] if wrongs.count else []),
+                                 ("DISTANCE WRONG", self.distance.verdict()),
+                                 ("TWIST WRONG", self.twist.verdict())):
+                if why:
+                    return verdict, [*why, said]
+        return reported, [said]
 
     def snapshot(self, now_s: float | None = None) -> dict[str, Any]:
         """The whole model as JSON-ready data (``odocan monitor --json``); ``now_s``: local

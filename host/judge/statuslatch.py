@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.firmware.errors import ErrorFlag
+from odocan.host.judge.reasonwords import reason_text
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import DecodeError
 
@@ -53,7 +54,7 @@ class StatusLatch:
         events: list[dict[str, Any]] = []
         if self.state is not None and name != self.state:
             events.append({"t_s": t_s, "kind": "state", "state": name, "reason": why,
-                           "detail": f"state {self.state} -> {name} (reason {why})"})
+                           "detail": f"state {self.state} -> {name} (reason {reason_text(why)})"})
         self.state = name
         new = mask & ~self.mask
         self.mask = mask
@@ -63,7 +64,7 @@ class StatusLatch:
             if new >> bit & 1:
                 events.append({"t_s": t_s, "kind": "error_bit", "bit": bit_name(bit),
                                "detail": f"ERROR_MASK {bit_name(bit)} set (state {name}, "
-                                         f"reason {why})"})
+                                         f"reason {reason_text(why)})"})
             bit += 1
         return events
 
