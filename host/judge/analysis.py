@@ -358,7 +358,7 @@ def _analyze_life(
     vs_truth, truth_series = versus_truth(onboard, truth, ref_all)
     vs_truth["distance_travelled_m"] = float(ref.distance_m[-1])
     twist = check_twist(frames, accepted, decoder, enc, robot)
-    losses = firmware_losses(frames, accepted, decoder, enc)
+    losses = firmware_losses(frames, accepted, decoder, enc, power_up and start_pose is None)
     allowance = loss_allowance(enc, robot, integrator, losses, onboard.enc, onboard.enc)
     vs_ref["loss_allowance_m"] = float(np.max(allowance, initial=0.0))
     after_span = loss_allowance(enc, robot, integrator, losses,

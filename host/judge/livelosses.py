@@ -83,6 +83,13 @@ class LiveAllowance:
         self.wrongs.close()  # an episode does not run on into another reference
         self.spans = []
 
+    def primed(self, seq: int) -> None:
+        """A life proven to start at its power-up, primed on encoder frame ``seq``: its
+        ENC_E2E_LOST counted from 0 there, so its first page's growth beyond the gaps since
+        that frame is a lossy span too (``losses.firmware_losses``' power-up page)."""
+        if self.lost_page is None:
+            self.lost_page = (0, seq)
+
     def at_m(self, seq: int) -> float:
         """The allowance (m) at encoder frame ``seq``."""
         if not self.spans:  # the usual case (per sample settled): ``sum`` of nothing

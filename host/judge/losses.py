@@ -29,7 +29,8 @@ LOST_PAGE = 2  # ODOM_STATUS page with the firmware's WHEEL_ENCODERS E2E counts 
 
 
 def firmware_losses(
-    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders,
+    power_up: bool = False,
 ) -> list[tuple[int, int, int]]:
     """Where the firmware lost encoder frames the log holds (its mailbox overflowed): ``(first,
     last, n)``, n frames lost among encoder frames first..last (indices into ``enc``).
@@ -38,6 +39,8 @@ def firmware_losses(
     ODOM_STATUS, every 500 ms); between two such pages, its count grew by more than the gaps of
     the log's own encoder sequence there: the rest it lost after they were on the bus. After
     the last page, a summary saying MAILBOX_OVERFLOW counts every frame since as possibly lost.
+    ``power_up``: the frames start at the firmware's power-up (it primed on the first encoder
+    frame, ENC_E2E_LOST 0 there): a page of 0 lost at that frame comes before the first.
     """
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", LOST_PAGE)
@@ -49,6 +52,8 @@ def firmware_losses(
     index, lost = page["index"][keep], page["ENC_E2E_LOST"][keep].astype(np.int64)
     upto = np.maximum(np.searchsorted(enc.index, index) - 1, 0)  # the latest before each page
     made = _made_from(frames, accepted, decoder, enc, index)
+    if power_up:  # ENC_E2E_LOST counted from 0 on the primed frame (enc frame 0)
+        lost, upto, made = (np.concatenate(([0], a)) for a in (lost, upto, made))
     excess = lost_beyond_gaps(lost[:-1], lost[1:], enc.seq[upto[:-1]], enc.seq[upto[1:]],
                               upto[1:] - upto[:-1], at_most=upto[1:] - made[:-1])
     spans = [(int(made[k]), int(upto[k + 1]), int(excess[k])) for k in np.flatnonzero(excess > 0)]

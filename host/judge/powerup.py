@@ -85,9 +85,11 @@ def counted_only_the_log(
     page was made (``made_at``), not before it reached the bus (a page held back comes after
     encoder frames it could not count); or those up to the frame the latest pose before that
     point names (``pose_named``: an encoder frame held back past the tick that made the page
-    came before it on the bus all the same). A log cut by some frames after the power-up (the
-    firmware counted them too) matches neither unless its page's tick came late past as many
-    frames, both its summary and the poses before it (a later tick's pose)."""
+    came before it on the bus all the same). The count is ENC_E2E_OK, or ENC_E2E_OK plus
+    ENC_E2E_LOST (u8): a firmware whose mailbox dropped frames the bus carried counted each
+    frame since its first once, accepted or lost. A log cut by some frames after the power-up
+    (the firmware counted them too) matches neither unless its page's tick came late past as
+    many frames, both its summary and the poses before it (a later tick's pose)."""
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
         summary = decoder.decode_page(frames, "ODOM_STATUS", 0)
@@ -104,9 +106,11 @@ def counted_only_the_log(
                    status_counter_modulo(decoder))
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
     in_log = int(np.count_nonzero(accepted[encoders] & (encoders < made)))
-    if ok == in_log & 0xFFFF or ok == pose_named(frames, accepted, decoder, made):
+    lost = int(page["ENC_E2E_LOST"][keep][0]) if "ENC_E2E_LOST" in page else 0
+    counts = {ok, (ok + lost) & 0xFFFF}  # and the frames it lost after the bus carried them
+    if in_log & 0xFFFF in counts or pose_named(frames, accepted, decoder, made) in counts:
         return True
-    return ok == heard_by_tick(frames, accepted, decoder, (first, made))
+    return heard_by_tick(frames, accepted, decoder, (first, made)) in counts
 
 
 def heard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,

@@ -67,7 +67,8 @@ class SourceWatch:
         its ENC_E2E_OK counts the encoder frames heard when the firmware made it, as
         ``powerup.counted_only_the_log`` counts them (before the summary of its tick when that
         is the latest heard, for the page may have been held back past frames it could not
-        count, else before it; or up to the frame the latest pose before that names). Once."""
+        count, else before it; or up to the frame the latest pose before that names); or with
+        its ENC_E2E_LOST added (``powerup.counted_only_the_log``). Once."""
         if not self.page_pending:  # heard, or a reboot came first: nothing to count
             return False
         heard = (tracker.enc_seq + 1, pose_named_live(tracker))
@@ -89,7 +90,8 @@ class SourceWatch:
         bound_s = tick_bound_s(int(signals["COUNTER"]), self.summary_times, STATUS_COUNTER_MODULO,
                                STATUS_CYCLE_MS)
         by_tick = None if bound_s is None else heard_before_live(tracker, bound_s, heard[0])
-        return ok in (heard[0] & 0xFFFF, heard[1], by_tick)
+        spanned = (ok + int(signals.get("ENC_E2E_LOST", 0))) & 0xFFFF  # accepted or lost
+        return bool({ok, spanned} & {heard[0] & 0xFFFF, heard[1], by_tick})
 
     def observe(self, t_s: float, uptime_s: int, state: str) -> str | None:
         """One ODOM_STATUS summary; returns ``"reboot"``, ``"two sources"``, ``"uptime jump"``

@@ -233,7 +233,7 @@ def _life(
     power_up = facts.saw_only_the_log() if boot else facts.starts_at_power_up(first.head)
     e0 = 0 if power_up else int(first.head.enc[0])
     breaks = first.breaks
-    spans = first.losses.spans()
+    spans = first.losses.spans(power_up)
     geometry, bits = Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS)
     drops = SpanDrops(spans, geometry, bits, integrator)
     across = StreamBreakCounts(breaks[breaks > e0].tolist(), geometry, bits, integrator,

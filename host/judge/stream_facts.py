@@ -89,6 +89,7 @@ class StreamFacts:
     _first_counter: _Signal = field(default_factory=_Signal)  # ODOM_STATUS's COUNTER, any page
     _integrator: _Signal = field(default_factory=_Signal)
     _enc_ok: _Signal = field(default_factory=_Signal)
+    _enc_lost: _Signal = field(default_factory=_Signal)  # ENC_E2E_LOST of the same pages
     _has_status: bool = True  # the DBC's ODOM_STATUS is multiplexed
     _accepted_encoders: int = 0  # accepted WHEEL_ENCODERS frames before the first count page
     _summary: tuple[int, int] | None = None  # ... before the latest summary ahead of it, COUNTER
@@ -145,6 +146,7 @@ class StreamFacts:
         self._integrator.feed(summary, "INTEGRATOR", keep, self._offset)
         before = self._enc_ok.first is None
         self._enc_ok.feed(counts, "ENC_E2E_OK", accepted[counts["index"]], self._offset)
+        self._enc_lost.feed(counts, "ENC_E2E_LOST", accepted[counts["index"]], self._offset)
         if before:
             self._feed_until_counts(chunk, accepted, summary, counts)
 
@@ -213,13 +215,15 @@ class StreamFacts:
         at_summary = self._summary is not None and same_tick(self._page_counter,
                                                              self._summary[1], modulo)
         named = self._named[0] if at_summary else self._named[1]
-        if self._enc_ok.first in (made & 0xFFFF, named):
+        lost = self._enc_lost.first if self._enc_lost.present else None
+        counts = {self._enc_ok.first, (self._enc_ok.first + (lost or 0)) & 0xFFFF}
+        if made & 0xFFFF in counts or named in counts:
             return True
         cycle_ms = self.decoder.message("ODOM_STATUS").cycle_time
         if self._page_counter is None or not cycle_ms:
             return False
         bound_s = tick_bound_s(self._page_counter, self._times.summaries, modulo, cycle_ms)
-        return bound_s is not None and self._enc_ok.first == self._times.before(bound_s, made)
+        return bound_s is not None and self._times.before(bound_s, made) in counts
 
     def starts_at_power_up(self, first: Poses) -> bool:
         """``samples.starts_at_power_up``, given the log's first on-board sample (``first``:

@@ -84,8 +84,9 @@ class StreamLosses:
             self._last_seq = int(enc.seq[-1])
             self._last_enc_t = float(enc.timestamp_s[-1])
 
-    def spans(self) -> list[tuple[int, int, int]]:
-        """``firmware_losses`` of the life fed: (first, last, n) per span."""
+    def spans(self, power_up: bool = False) -> list[tuple[int, int, int]]:
+        """``firmware_losses`` of the life fed: (first, last, n) per span; ``power_up``: its
+        power-up page of 0 lost at the first encoder frame before the first page."""
         n_enc = self._enc_count
         if not self._signal or n_enc < 2:
             return []
@@ -94,6 +95,8 @@ class StreamLosses:
             upto, seq, lost = (np.array([p[k] for p in self._pages], dtype=np.int64)
                                for k in range(3))
             made = self._made_from(upto, np.array([p[3] for p in self._pages]))
+            if power_up:  # ENC_E2E_LOST counted from 0 on the primed frame (sequence 0)
+                upto, seq, lost, made = (np.concatenate(([0], a)) for a in (upto, seq, lost, made))
             excess = lost_beyond_gaps(lost[:-1], lost[1:], seq[:-1], seq[1:], np.diff(upto),
                                       at_most=upto[1:] - made[:-1])
             spans = [(int(made[k]), int(upto[k + 1]), int(excess[k]))

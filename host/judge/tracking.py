@@ -387,6 +387,7 @@ class PoseTracker:
             return
         self.reference_starts -= first_life and self.reference_starts > 0
         self.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
+        self._losses.primed(primed)  # ENC_E2E_LOST counted from 0 there
         self._start_reference(FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
         if not first_life:
             self.life_truth.booted(primed, self._ref_at)
