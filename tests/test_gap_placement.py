@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from odocan.host.cli.app import main
@@ -145,6 +145,13 @@ def _drive(robot: Robot, steps: int, seed: int, speed_m: float, turn: float
        seed=st.integers(0, 2**32 - 1),
        gaps=st.lists(st.tuples(st.floats(0.05, 0.9), st.integers(1, 200)), min_size=1,
                      max_size=4))
+@example(  # a 200-frame gap on a 16.5 mm wheelbase turning 0.03 rad a period: the firmware's
+    # fine counts cannot span it (a re-prime, host.judge.unseenrestart) and the drive turned
+    # 6.03 rad inside it: the new start took the wrapped -0.25 rad, TURNS one more (before: FAIL
+    # with a heading error of 2 pi, whole analyze; found by hypothesis with a random seed)
+    robot=Robot(150_000, 11_000_000, 11_000_000, 16_500_000, 32), integrator="euler",
+    speed_m=0.0125, turn=0.03, seed=0, gaps=[(0.5, 200)],
+)
 def test_a_correct_firmware_with_random_recorder_gaps_passes(
     tmp_path_factory: pytest.TempPathFactory, robot: Robot, integrator: str, speed_m: float,
     turn: float, seed: int, gaps: list[tuple[float, int]],
@@ -233,3 +240,25 @@ def test_a_lockstep_log_with_recorder_gaps_and_a_jump(tmp_path: Path) -> None:
                             if float(line.split()[0].strip("()")) < 3.9))
     monitor, _, end_s = _live(kobuki, "exact", upto)
     assert monitor.health(end_s)["state"] == "POSE WRONG"
+
+
+@pytest.mark.parametrize("bias_lsb", [0, 2, 1 << 16])
+def test_a_turn_past_half_inside_an_unseen_restart_gap(tmp_path: Path, bias_lsb: int) -> None:
+    """The pinned example above (a 200-frame gap the fine counts cannot span, 6.03 rad turned
+    inside it): the new start takes the on-board turns across it, so the firmware, right by the
+    independent odometry, passes (before: FAIL, 2 pi); its HEADING 2 LSB off, or TURNS one off,
+    from frame 650 on (the new start's samples from 520) still FAILs."""
+    robot = Robot(150_000, 11_000_000, 11_000_000, 16_500_000, 32)
+    d_left, d_right = _drive(robot, 800, 0, 0.0125, 0.03)
+    synth = synthesize(profile_of(robot), "euler", d_left, d_right,
+                       heading_bias_lsb=dict.fromkeys(range(650, 801), bias_lsb))
+    fine = _Odometry(robot, "euler")
+    for k in range(1, 801):
+        fine.step(int(d_left[k - 1]), int(d_right[k - 1]))
+    x_m, y_m, heading_rad = synth.state[800].pose
+    assert math.hypot(x_m - fine.x, y_m - fine.y) < POSITION_LSB_M
+    assert abs(heading_rad - fine.heading) < 1e-6
+    path = _cut(synth, [(320, 200)]).write(tmp_path / "turned.log")
+    result = analyze(read_log(path), profile_of(robot), "euler")
+    assert result.report["samples"]["unseen_restarts"] == 1
+    assert result.passed is (bias_lsb == 0), result.report["onboard_vs_reference"]

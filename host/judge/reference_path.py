@@ -103,7 +103,8 @@ def build_reference(
     at = onboard.enc - e0
     unseen = unseen_restarts(enc, e0, steps.by_uptime, seen)
     rel_x, rel_y, rel_h = restarted_path(unseen, rel_x, rel_y, rel_h, heading_offsets(
-        unseen, rel_h, HEADING_LSB_RAD * onboard.heading_raw.astype(np.float64), at))
+        unseen, rel_h, HEADING_LSB_RAD * onboard.heading_raw.astype(np.float64), at,
+        onboard.heading_rad))
     gaps = np.concatenate(([False], np.diff(enc.seq[e0:]) > 1))
     starts = gaps.copy()
     if breaks is not None:  # encoder frames where the firmware resumed after a stall

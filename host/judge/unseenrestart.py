@@ -88,25 +88,41 @@ def whole_only(seen: Seen, info: LifeInfo, refusal: type[Exception]
 
 
 def heading_offsets(unseen: list[int], rel_h: FloatArray, heading_rad: FloatArray,
-                    at: IntArray) -> FloatArray:
+                    at: IntArray, unwrapped_rad: FloatArray) -> FloatArray:
     """Per frame of the reference (from ``e0``: ``rel_h`` its heading from the start), the
     heading (rad) each restart of ``unseen`` adds from it on: the middle of the overlap of the
     heading intervals of the on-board samples (``heading_rad`` at frames ``at``) after it, less
     that of the samples of the life before it (0 for a life without samples: nothing to
-    compare there)."""
+    compare there), plus the whole turns the on-board unwrapped heading (``unwrapped_rad``:
+    TURNS * 2 pi + HEADING) took across it (``_turns_across``)."""
     cuts = [0, *unseen, len(rel_h)]
-    mids = []
+    mids, firsts = [], []
     for a, b in itertools.pairwise(cuts):
         inside = (at >= a) & (at < b)
         offsets = _wrap(heading_rad[inside] - rel_h[at[inside]])
         mids.append(_middle(offsets) if len(offsets) else math.nan)
+        first = np.flatnonzero(inside)[:1]  # the life's first sample's unwrapped offset
+        firsts.append(float(unwrapped_rad[first[0]] - rel_h[at[first[0]]]) if len(first) else 0.0)
     add = np.zeros(len(rel_h))
     known = mids[0] if not math.isnan(mids[0]) else 0.0
-    for k, mid in zip(unseen, mids[1:], strict=True):
+    known_first = firsts[0]
+    for k, mid, first_rad in zip(unseen, mids[1:], firsts[1:], strict=True):
         if not math.isnan(mid):
-            add[k:] += float(_wrap(np.array([mid - known]))[0])
-            known = mid
+            turn = float(_wrap(np.array([mid - known]))[0])
+            add[k:] += turn + _turns_across(first_rad - known_first, turn)
+            known, known_first = mid, first_rad
     return add
+
+
+def _turns_across(unwrapped_rad: float, wrapped_rad: float) -> float:
+    """The whole turns (rad, a multiple of 2 pi) by which the on-board unwrapped heading's
+    change across a restart (``unwrapped_rad``: its first samples' offsets from the reference,
+    before and after) exceeds the wrapped one (``wrapped_rad``, in (-pi, pi]). Its heading
+    across the restart is unknowable (module docstring), its whole turns as much as its
+    fraction: the new start takes both, as a fitted start takes its first sample's turn
+    (``host.judge.turns``), so a drive that turned past half a turn inside the gap is not
+    judged 2 pi off; TURNS after the new start is judged from it."""
+    return 2.0 * math.pi * round((unwrapped_rad - wrapped_rad) / (2.0 * math.pi))
 
 
 def restarted_path(unseen: list[int], rel_x: FloatArray, rel_y: FloatArray, rel_h: FloatArray,
