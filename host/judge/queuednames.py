@@ -48,12 +48,13 @@ def queued_names(
                    and not hole_between(enc.index, enc.seq, int(index[k - 1]), int(index[k])))
         made_s = made_s + send_s if chained else np.nan
         named[k] = named_by(enc, int(named[k - 1]), int(enc_counter[k]), made_s, int(index[k]),
-                             send_s)
+                             send_s, bool(enc_counter[k] == enc_counter[k - 1]))
     return named
 
 
 def named_by(
-    enc: Encoders, floor: int, enc_counter: int, made_s: float, index: int, send_s: float
+    enc: Encoders, floor: int, enc_counter: int, made_s: float, index: int, send_s: float,
+    repeat: bool = False,
 ) -> int:
     """The latest accepted encoder frame at or after ``floor`` with COUNTER ``enc_counter``, on
     the bus by ``made_s`` and before frame ``index`` of the log; -1 when none (or no time), and
@@ -64,15 +65,15 @@ def named_by(
     is good to a fraction of a send period, and a firmware whose mailbox overflowed had an
     earlier frame of that COUNTER than the latest on the bus, so time cannot tell which it had.
 
-    -1 too when a frame of that COUNTER 16 periods before it is at or after ``floor`` (the
-    frame the predecessor named: the firmware names frames in increasing order, and may still
-    hold that one): the firmware may have taken none of the frames on the bus since, as when
-    its E2E lock-out refuses them (a late frame, then the COUNTER repeated 16 periods on), and
-    the pose or twist it made then names the older frame. Found on kobuki and pmir, seed 10,
-    ``delay=0.1:20``, a capture jittered (seed 0): a twist queued behind the next, made while
-    the firmware held a frame and refused the four after it, was named 16 periods later, where
-    the host's path was 5.8 mm longer: the correct firmware FAILed ODOM_TWIST DISTANCE
-    (tests/test_twist_jitter_distance.py)."""
+    -1 too when ``repeat`` (the frame repeats its predecessor's ENC_COUNTER) and a frame of
+    that COUNTER 16 periods before it is at or after ``floor`` (the frame the predecessor
+    named, which the firmware may still hold): it may have taken none of the frames on the
+    bus since, as when its E2E lock-out refuses them (a late frame, then the COUNTER repeated
+    16 periods on), and the pose or twist it made then names the older frame. Found on kobuki
+    and pmir, seed 10, ``delay=0.1:20``, a capture jittered (seed 0): a twist queued behind the
+    next, made while the firmware held a frame and refused the four after it, was named 16
+    periods later, where the host's path was 5.8 mm longer: the correct firmware FAILed
+    ODOM_TWIST DISTANCE (tests/test_twist_jitter_distance.py)."""
     if np.isnan(made_s):
         return -1
     last = min(int(np.searchsorted(enc.timestamp_s, made_s, side="right")),
@@ -83,7 +84,7 @@ def named_by(
     found = int(np.searchsorted(enc.seq, target))
     if target < enc.seq[floor] or found >= len(enc.seq) or enc.seq[found] != target:
         return -1
-    if target - 16 >= enc.seq[floor]:  # as good a name: the firmware may hold an older frame
+    if repeat and target - 16 >= enc.seq[floor]:  # it may still hold the floor
         return -1
     for other in (target - 16, target + 16):
         j = int(np.searchsorted(enc.seq, other))
