@@ -142,7 +142,7 @@ def test_a_correct_firmware_passes_16k_period_gaps_read_in_bursts(
     """The same chunks with the frames of the 3 periods after each stamped at once, as the
     evidence recordings read their backlog: the encoder frames are numbered right (a COUNTER
     step of 0 is widened by the time even in a burst: ``samples.sender_seq``), and a pose in
-    the burst is resolved from when its sender made it (``samples._queued``), counted on from
+    the burst is resolved from when its sender made it (``queued_names``), counted on from
     the last pose before the chunk by its own COUNTER, which 16 sends lost bring round too.
     Before: after the 32-period chunk the first pose of the burst was chained to the pose
     before it, paired 32 periods back, and all three judges FAILed the correct firmware (pmir

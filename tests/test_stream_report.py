@@ -121,7 +121,7 @@ def test_the_streamed_report_counts_the_logs_frames_when_asked(
 
 def test_a_babble_run_is_refused_for_streaming_and_analysed_whole(tmp_path: Path) -> None:
     """Pose frames let out in a burst after a busy bus are paired by when their firmware made
-    them (``samples._queued``: a median over the whole life): the stream refuses the log, and
+    them (``queued_names``: a median over the whole life): the stream refuses the log, and
     the command, told to stream, writes the whole log's report."""
     path = log_of(tmp_path, "babble")
     profile = load("pmir")

@@ -13,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.holechain import hole_between
+from odocan.host.judge.queuednames import queued_names
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.resendalias import may_alias
 from odocan.host.judge.senderseq import QUEUED_GAP_CYCLES as QUEUED_GAP_CYCLES
@@ -245,7 +245,7 @@ def match_encoder(
     result[np.flatnonzero(has)] = np.where((enc.seq[found] == target) & before, found, -1)
     if own_counter is not None and enc.cycle_s is not None:
         result = _held(result, enc_counter, own_counter, timestamp_s, enc.cycle_s)
-        result = _queued(result, enc, index, enc_counter, own_counter, timestamp_s)
+        result = queued_names(result, enc, index, enc_counter, own_counter, timestamp_s)
     if enc.twinned is not None:  # which of a frame and its twin the firmware had is unknown
         result[(result >= 0) & enc.twinned[np.maximum(result, 0)]] = -1
     return result
@@ -264,71 +264,6 @@ def named_targets(
         has &= timestamp_s - enc.timestamp_s[last] < 8 * enc.cycle_s
     target: IntArray = enc.seq[last] + (((enc_counter - enc.counter[last] + 8) & 0xF) - 8)
     return has, target
-
-
-def _queued(
-    named: IntArray, enc: Encoders, index: IntArray, enc_counter: IntArray,
-    own_counter: IntArray, timestamp_s: FloatArray,
-) -> IntArray:
-    """``named`` with each queued frame (``queued_frames``) resolved from when its sender made
-    it, not from when the bus let it out (host.judge.analysis docstring, step 3).
-
-    A queued frame was made long before it reached the bus, so the latest encoder frame before
-    it on the bus says nothing of what its sender had. Its sender makes one every send period
-    (the median spacing of the frames, 20 ms for a pose): counted on from the last frame before
-    the burst that was not queued (sent when made), without a loss between (own COUNTER + 1
-    each, and no hole of the log a COUNTER lap long between: ``holechain.hole_between``), the
-    k-th queued frame was made ``k`` send periods later. It names the latest encoder frame of
-    its ENC_COUNTER that was on the bus by then, not before the frame its predecessor
-    named (a firmware names frames in increasing order) and accepted in the log before it.
-    A queued frame without such a chain names none (it is left out, not guessed)."""
-    assert enc.cycle_s is not None
-    queued = queued_frames(timestamp_s, enc.cycle_s)
-    if not queued.any():
-        return named
-    send_s = float(np.median(np.diff(timestamp_s)))
-    named = named.copy()
-    made_s = np.nan  # when the previous frame was made (bus time s)
-    for k in range(len(named)):
-        if not queued[k]:
-            made_s = float(timestamp_s[k])
-            continue
-        chained = (k > 0 and named[k - 1] >= 0
-                   and (int(own_counter[k] - own_counter[k - 1]) & 0xF) == 1
-                   and not hole_between(enc.index, enc.seq, int(index[k - 1]), int(index[k])))
-        made_s = made_s + send_s if chained else np.nan
-        named[k] = _named_by(enc, int(named[k - 1]), int(enc_counter[k]), made_s, int(index[k]),
-                             send_s)
-    return named
-
-
-def _named_by(
-    enc: Encoders, floor: int, enc_counter: int, made_s: float, index: int, send_s: float
-) -> int:
-    """The latest accepted encoder frame at or after ``floor`` with COUNTER ``enc_counter``, on
-    the bus by ``made_s`` and before frame ``index`` of the log; -1 when none (or no time), and
-    -1 when the name is ambiguous: another accepted frame of that COUNTER (16 before or after
-    it, at or after ``floor``, before ``index``) came within half a send period (``send_s``) of
-    it on the bus. That happens when the encoder frames came out in a burst too (about 240 us
-    apart at 500 kbit/s, 16 of them in 3.8 ms; about 1 ms apart at 125 kbit/s, 16 ms): ``made_s``
-    is good to a fraction of a send period, and a firmware whose mailbox overflowed had an
-    earlier frame of that COUNTER than the latest on the bus, so time cannot tell which it had."""
-    if np.isnan(made_s):
-        return -1
-    last = min(int(np.searchsorted(enc.timestamp_s, made_s, side="right")),
-               int(np.searchsorted(enc.index, index))) - 1
-    if last < floor:
-        return -1
-    target = int(enc.seq[last]) - ((int(enc.counter[last]) - enc_counter) & 0xF)
-    found = int(np.searchsorted(enc.seq, target))
-    if target < enc.seq[floor] or found >= len(enc.seq) or enc.seq[found] != target:
-        return -1
-    for other in (target - 16, target + 16):
-        j = int(np.searchsorted(enc.seq, other))
-        if (j < len(enc.seq) and enc.seq[j] == other and j >= floor and enc.index[j] < index
-                and abs(float(enc.timestamp_s[j] - enc.timestamp_s[found])) < 0.5 * send_s):
-            return -1
-    return found
 
 
 def _held(
