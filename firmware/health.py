@@ -10,8 +10,10 @@ so without this hold a short episode would only ever show in the sticky ERROR_MA
 between the last frame before a counter restart and the first after it is unknowable, so
 COUNTER_RESET stays until the host sets the pose again (ODOM_SET_POSE APPLY): no later cause
 replaces it as the reason. POSE_UNCERTAIN (``firmware.uncertainty``: the merged steps' worst-case
-error past its tolerance) is latched the same way. Errors are state, never exceptions: each cause
-also sets its sticky bit in the u32 error mask.
+error past its tolerance) is latched the same way. The set-pose releases the latch: the reason
+stays, DEGRADED never goes out with REASON NONE (the DBC's "NONE while OK"), and recovers as any
+other (the watchdog, usually in the set-pose's own tick), or a later cause replaces it. Errors
+are state, never exceptions: each cause also sets its sticky bit in the u32 error mask.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ class Health:
         "_clock",
         "_overflows_seen",
         "_reason_tick",
+        "_released",
         "_unreported",
         "errors",
         "good_in_a_row",
@@ -53,6 +56,7 @@ class Health:
         self.reason = Reason.NONE
         self.good_in_a_row = 0  # accepted encoder frames since the last cause (<= RECOVERY_FRAMES)
         self._reason_tick = 0  # u32: the tick that set ``reason``
+        self._released = False  # bool: a set-pose released the latched ``reason``
         self._unreported = False  # bool: no summary page has carried the last cause yet
         self._overflows_seen = 0  # u32: the mailbox's overflow count at the previous tick
         # u32: the mailbox's overflow count as of the previous tick's start (the count
@@ -66,32 +70,42 @@ class Health:
         self.errors.set(ErrorFlag.CONFIG_INVALID)
         self.state = _FAULT
         self.reason = Reason.CONFIG_INVALID
+        self._released = False
 
     def config_applied(self) -> None:
         """A valid configuration was applied: FAULT -> INIT (the next encoder frame: OK)."""
         if self.state is _FAULT:
             self.state = _INIT
             self.reason = Reason.NONE
+            self._released = False
 
     def pose_set(self) -> None:
         """The host set the pose again (ODOM_SET_POSE APPLY): COUNTER_RESET and POSE_UNCERTAIN
-        may now recover."""
+        may now recover. The reason stays until then (cleared with the state by the watchdog):
+        a DEGRADED summary always carries its REASON."""
         if self.reason is _COUNTER_RESET or self.reason is _POSE_UNCERTAIN:
-            self.reason = Reason.NONE
+            self._released = True
+
+    def _latched(self) -> bool:
+        """``reason`` is COUNTER_RESET or POSE_UNCERTAIN and no set-pose released it since."""
+        return (
+            self.reason is _COUNTER_RESET or self.reason is _POSE_UNCERTAIN
+        ) and not self._released
 
     def degrade(self, reason: Reason) -> None:
         """OK or DEGRADED -> DEGRADED for ``reason`` (INIT and FAULT stay); recovery restarts.
         COUNTER_RESET is never replaced by a later cause, POSE_UNCERTAIN only by COUNTER_RESET
-        (the others still set their error bits): only ODOM_SET_POSE APPLY clears them, or a
+        (the others still set their error bits): only ODOM_SET_POSE APPLY releases them, or a
         later cause would let the firmware report OK on a pose that lost its continuity or its
         accuracy."""
         if self.state is _OK or self.state is _DEGRADED:
             self.state = _DEGRADED
             kept = self.reason
-            if kept is not _COUNTER_RESET and (
+            if self._released or (kept is not _COUNTER_RESET and (
                 kept is not _POSE_UNCERTAIN or reason is _COUNTER_RESET
-            ):
+            )):
                 self.reason = reason
+                self._released = False
             self.good_in_a_row = 0
             self._reason_tick = self._clock.ticks
             self._unreported = True
@@ -106,7 +120,7 @@ class Health:
         """The pose's uncertainty passed its tolerance: POSE_UNCERTAIN, DEGRADED, latched until
         a set-pose (once: a latched episode is not restarted by every later merged step)."""
         self.errors.set(ErrorFlag.POSE_UNCERTAIN)
-        if self.reason is not _POSE_UNCERTAIN:
+        if self.reason is not _POSE_UNCERTAIN or self._released:
             self.degrade(_POSE_UNCERTAIN)
 
     def time_lost(self) -> None:
@@ -145,9 +159,9 @@ class Health:
         elif (
             self.state is _DEGRADED
             and self.good_in_a_row >= RECOVERY_FRAMES
-            and self.reason is not _COUNTER_RESET  # the pose lost its continuity
-            and self.reason is not _POSE_UNCERTAIN  # or its accuracy
+            and not self._latched()  # the pose lost its continuity or its accuracy
             and not self._unreported  # the bus has seen DEGRADED and why
         ):
             self.state = _OK
             self.reason = Reason.NONE
+            self._released = False

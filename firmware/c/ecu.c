@@ -340,15 +340,17 @@ static void check_overflows(struct odom_ecu *ecu)
 /* OK or DEGRADED -> DEGRADED for reason (INIT and FAULT stay); recovery restarts.
  * POSE_UNCERTAIN is replaced by COUNTER_RESET alone (both latched until a set-pose).
  * COUNTER_RESET is never replaced by a later cause (those still set their error bits): only
- * ODOM_SET_POSE APPLY clears it, or a later cause would let the firmware report OK on a pose that
- * lost its continuity. */
+ * ODOM_SET_POSE APPLY releases it, or a later cause would let the firmware report OK on a pose
+ * that lost its continuity. A released reason is replaced by any cause. */
 static void degrade(struct odom_ecu *ecu, enum reason reason)
 {
     if (ecu->state == STATE_OK || ecu->state == STATE_DEGRADED) {
         ecu->state = STATE_DEGRADED;
-        if (ecu->reason != REASON_COUNTER_RESET
-            && (ecu->reason != REASON_POSE_UNCERTAIN || reason == REASON_COUNTER_RESET)) {
+        if (ecu->released
+            || (ecu->reason != REASON_COUNTER_RESET
+                && (ecu->reason != REASON_POSE_UNCERTAIN || reason == REASON_COUNTER_RESET))) {
             ecu->reason = reason;
+            ecu->released = false;
         }
         ecu->good_in_a_row = 0;
         ecu->reason_tick = ecu->ticks;
@@ -868,7 +870,7 @@ static void add_merged_step(struct odom_ecu *ecu)
     ecu->uncertainty_um = total < UINT32_MAX ? (uint32_t)total : UINT32_MAX;
     if (ecu->uncertainty_um > ecu->uncertainty_tolerance_um) {
         ecu->errors |= ERROR_POSE_UNCERTAIN;
-        if (ecu->reason != REASON_POSE_UNCERTAIN) {
+        if (ecu->reason != REASON_POSE_UNCERTAIN || ecu->released) {
             degrade(ecu, REASON_POSE_UNCERTAIN);
         }
     }
@@ -1009,7 +1011,9 @@ static void act_set_pose(struct odom_ecu *ecu, const uint8_t *data)
         odometry_set_pose(odo, x_q40, y_q40, heading);
         ecu->staged_pose = 0u;
         if (ecu->reason == REASON_COUNTER_RESET || ecu->reason == REASON_POSE_UNCERTAIN) {
-            ecu->reason = REASON_NONE; /* a pose given again: recovery may proceed */
+            /* a pose given again: recovery may proceed; the reason stays until then (a
+             * DEGRADED summary always carries its REASON) */
+            ecu->released = true;
         }
         ecu->uncertainty_um = 0u; /* and the uncertainty restarts */
     } else if (frame.field <= SET_POSE_HEADING) {
@@ -1084,6 +1088,7 @@ static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame)
     if (ecu->state == STATE_FAULT) {
         ecu->state = STATE_INIT;
         ecu->reason = REASON_NONE;
+        ecu->released = false;
     }
     ack(ecu, ODOM_CONFIG_ID, frame, ACK_RESULT_ACK, ACK_OK);
 }
@@ -1277,10 +1282,12 @@ static void watchdog(struct odom_ecu *ecu)
         }
         ecu->good_in_a_row = 0;
     } else if (ecu->state == STATE_DEGRADED && ecu->good_in_a_row >= RECOVERY_FRAMES
-               && ecu->reason != REASON_COUNTER_RESET /* the pose lost its continuity */
-               && ecu->reason != REASON_POSE_UNCERTAIN /* or its accuracy */
-               && !ecu->unreported) {                 /* the bus has seen DEGRADED and why */
+               && (ecu->released /* the pose lost its continuity or its accuracy: latched */
+                   || (ecu->reason != REASON_COUNTER_RESET
+                       && ecu->reason != REASON_POSE_UNCERTAIN))
+               && !ecu->unreported) { /* the bus has seen DEGRADED and why */
         ecu->state = STATE_OK;
         ecu->reason = REASON_NONE;
+        ecu->released = false;
     }
 }

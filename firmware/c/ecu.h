@@ -112,6 +112,7 @@ struct odom_ecu {
     uint32_t ticks_since_encoder; /* periods (firmware time) since the last accepted frame, sat. */
     uint32_t reason_tick;         /* the tick that set reason */
     bool unreported; /* no ODOM_STATUS summary has carried the last cause yet (health.py) */
+    bool released;   /* a set-pose released the latched reason (health.py) */
     /* Periods since the last accepted frame's sample is known to have been taken (u16, sat.). */
     uint32_t periods_since_sample;
     bool time_lost_now;  /* this tick came LOST_TIME_PERIODS periods or more late */

@@ -121,6 +121,7 @@ from odocan.host.judge.compare import (
 )
 from odocan.host.judge.configs import config_cuts, cut_configs, in_force
 from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
+from odocan.host.judge.finalstate import firmware_fields, latched_fields
 from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
 from odocan.host.judge.losses import firmware_losses, loss_allowance
@@ -159,7 +160,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.stalls import after_stalls
-from odocan.host.judge.statuslatch import firmware_events
+from odocan.host.judge.statuslatch import StatusLatch, firmware_events
 from odocan.host.judge.twins import twin_allowance_of
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
@@ -267,7 +268,7 @@ def analyze(
     report, series = merge([d[1].report for d in done], [d[1].series for d in done],
                            [d[0] for d in done], [d[2] for d in done], silent=silent)
     if len(lives) != len(firmware_lives):  # a set-pose is no reboot: one latch per firmware
-        report["firmware_events"] = _latched_per_firmware(frames, firmware_lives, db)
+        report.update(_latched_per_firmware(frames, firmware_lives, db))
     seconds = covered_s(frames, db)
     report.update(
         integrator_source=source, scenario=scenario, seed=seed, sim_seconds=seconds,
@@ -300,15 +301,18 @@ def _first_integrator(frames: FrameArrays, lives: list[Life], decoder: BulkDecod
 
 
 def _latched_per_firmware(frames: FrameArrays, lives: list[Life],
-                          db: DatabaseSpec) -> list[dict[str, Any]]:
+                          db: DatabaseSpec) -> dict[str, Any]:
     """``firmware_events`` of each firmware life (a reboot's), its mask latched from its start
-    (a set-pose's cut does not clear the firmware's sticky bits: not reported again there)."""
-    events = []
+    (a set-pose's cut does not clear the firmware's sticky bits: not reported again there), and
+    the last life's ``firmware_final``."""
+    events: list[dict[str, Any]] = []
+    latch = StatusLatch()
     for k, life in enumerate(lives):
         part = frames.select(life.index)
+        latch = StatusLatch()  # a reboot clears the firmware's state
         events += [dict(e, firmware_life=k) for e in firmware_events(
-            part, check_frames(part, db)[1], BulkDecoder(db))]
-    return events
+            part, check_frames(part, db)[1], BulkDecoder(db), latch)]
+    return latched_fields(events, latch)
 
 
 def _analyze_life(
@@ -421,7 +425,7 @@ def _analyze_life(
                        f"{allowed * 1e3:.4f} mm from here (loss_allowance_m)"}
             for (first, last, n), allowed in zip(losses, after_span.tolist(), strict=True)
         ],
-        "firmware_events": firmware_events(frames, accepted, decoder),
+        **firmware_fields(frames, accepted, decoder),
         "reboots": [],
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,

@@ -266,6 +266,7 @@ def merge(
     events = [dict(e, life=k) for k, r in enumerate(reports) for e in r["events"]]
     report["firmware_events"] = [dict(e, life=k) for k, r in enumerate(reports)
                                  for e in r.get("firmware_events", [])]
+    report["firmware_final"] = last.get("firmware_final")  # the last firmware's state
     report.pop("truth_origin", None)
     reboots = [
         {"t_s": life.t_s, "uptime_before_s": life.uptime_before_s,

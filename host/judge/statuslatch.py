@@ -44,6 +44,8 @@ class StatusLatch:
 
     def __init__(self) -> None:
         self.state: str | None = None  # None before the first summary
+        self.reason: str | None = None  # ... its REASON
+        self.since_s: float | None = None  # bus time of the first summary saying both
         self.mask = 0
         self.latched = 0  # every bit ever seen set (for a status that shows them all)
 
@@ -55,7 +57,9 @@ class StatusLatch:
         if self.state is not None and name != self.state:
             events.append({"t_s": t_s, "kind": "state", "state": name, "reason": why,
                            "detail": f"state {self.state} -> {name} (reason {reason_text(why)})"})
-        self.state = name
+        if (name, why) != (self.state, self.reason):
+            self.since_s = t_s
+        self.state, self.reason = name, why
         new = mask & ~self.mask
         self.mask = mask
         self.latched |= mask
@@ -87,20 +91,22 @@ def latch_summaries(latch: StatusLatch, page: dict[str, np.ndarray],
     # the first row, and every row unlike the one before (a row like it changes nothing: the
     # latch holds its values already)
     changed = np.ones(len(state), dtype=bool)
-    changed[1:] = (state[1:] != state[:-1]) | (mask[1:] != mask[:-1])
+    changed[1:] = (state[1:] != state[:-1]) | (mask[1:] != mask[:-1]) | (
+        reason[1:] != reason[:-1])
     events: list[dict[str, Any]] = []
     for k in np.flatnonzero(changed).tolist():
         events += latch.observe(float(t_s[k]), int(state[k]), int(reason[k]), int(mask[k]))
     return events
 
 
-def firmware_events(frames: Any, accepted: npt.NDArray[np.bool_], decoder: Any
-                    ) -> list[dict[str, Any]]:
-    """``analyze``'s ``firmware_events``: a fresh ``StatusLatch`` over the accepted ODOM_STATUS
-    summaries of ``frames`` (``FrameArrays``; ``decoder``: a ``BulkDecoder``); none when the
-    DBC's ODOM_STATUS has no summary page."""
+def firmware_events(frames: Any, accepted: npt.NDArray[np.bool_], decoder: Any,
+                    latch: StatusLatch | None = None) -> list[dict[str, Any]]:
+    """``analyze``'s ``firmware_events``: ``latch`` (default a fresh ``StatusLatch``) over the
+    accepted ODOM_STATUS summaries of ``frames`` (``FrameArrays``; ``decoder``: a
+    ``BulkDecoder``); none when the DBC's ODOM_STATUS has no summary page."""
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", SUMMARY_PAGE)
     except (DecodeError, KeyError):
         return []
-    return latch_summaries(StatusLatch(), page, accepted[page["index"]])
+    latch = latch if latch is not None else StatusLatch()
+    return latch_summaries(latch, page, accepted[page["index"]])

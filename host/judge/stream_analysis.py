@@ -333,7 +333,7 @@ def _life(
                        f"{allowed * 1e3:.4f} mm from here (loss_allowance_m)"}
             for (begin, end, n), allowed in zip(spans, after_span.tolist(), strict=True)
         ],
-        "firmware_events": first.facts.firmware_events,
+        **first.facts.firmware_fields(),
         "reboots": [],
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,

@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.finalstate import latched_fields
 from odocan.host.judge.powerup import (
     NAMED_SPAN,
     holds_first_cycle,
@@ -101,6 +102,10 @@ class StreamFacts:
     firmware_events: list[dict[str, Any]] = field(default_factory=list)  # ... its events
     applied: str = ""  # the first command whose APPLY was ACKed: ODOM_SET_POSE or ODOM_CONFIG
     # (the whole log's lives are cut there: host.judge.setposes, host.judge.configs)
+
+    def firmware_fields(self) -> dict[str, Any]:
+        """The report's ``firmware_events`` and ``firmware_final`` (``host.judge.finalstate``)."""
+        return latched_fields(self.firmware_events, self.latch)
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's facts."""

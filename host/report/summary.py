@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from odocan.host.jsonutil import write_report
 from odocan.host.judge.analysis import Analysis, Tolerance
+from odocan.host.judge.finalstate import final_text
 from odocan.host.outputs import OutputError, check_writable
 from odocan.host.protocol.e2e_silence import lost_text, silence_caption
 from odocan.host.stopped import stopped_text
@@ -257,6 +258,9 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
             f"{pose['heading_rad']:.4f} rad ({math.degrees(pose['heading_rad']):.2f} deg)",
         )
     )
+    final = final_text(report.get("firmware_final"))
+    if final:  # a PASS may end DEGRADED (a latched REASON): said, never a plain PASS
+        facts.append(("firmware", final))
     return facts
 
 
