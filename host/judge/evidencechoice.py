@@ -19,6 +19,8 @@ def chosen_seen(enc: Encoders, onboard: Poses, geometry: Geometry, integrator: s
                 e0: int, bits: int, max_wheel_speed_mm_s: SpeedBound, seen: Seen) -> Seen:
     """``seen`` with each evidenceless ambiguous gap (from ``e0``) whose next on-board pose the
     gap taken fits better than the re-prime, as proven taken (``Seen.through``: 0)."""
+    if not np.any(np.diff(enc.seq[e0:]) > 1):
+        return seen  # no gap in the log: nothing to choose (and no second pass over its steps)
     steps = firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s, through=seen.through,
                            resets=seen.resets)
     taken = [e0 + k for k in steps.ambiguous
