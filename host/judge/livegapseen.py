@@ -126,10 +126,14 @@ class LiveSeen:
                              closed=False)
 
     def heard_in(self, a_s: float, b_s: float) -> bool:
-        """Whether an ENC_E2E page kept was sent inside the hole of the encoder frames heard
-        from bus time ``a_s`` to ``b_s``: evidence of what the firmware took there (without one,
-        ``host.judge.evidenceless``: the live reference starts again from the next pose)."""
-        return any(a_s < page[SENT] < b_s for page in self.keeper.pages)
+        """Whether pages may yet tell what the firmware took in the hole of the encoder frames
+        heard from bus time ``a_s`` to ``b_s`` (the live judge steps before the pages after it
+        come): an ENC_E2E page kept sent inside it, or any FRAME_TOTALS page of this life (the
+        proofs of frames taken or missed need them quiet: ``holetaken``, ``pagechain``).
+        Without (``host.judge.evidenceless``) the live reference starts again from the next
+        pose."""
+        return bool(self.keeper.totals) or any(a_s < page[SENT] < b_s
+                                               for page in self.keeper.pages)
 
     def _kept_more(self) -> bool:
         """Whether a page was kept since last asked; the oldest beyond ``KEPT_PAGES`` let go,
