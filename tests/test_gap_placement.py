@@ -27,6 +27,7 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import POSITION_LSB_M, analyze
 from odocan.host.judge.stream_analysis import analyze_file
 from odocan.host.judge.stream_refusal import NotStreamable
+from odocan.host.judge.unseenrestart import DETAIL, EVIDENCELESS
 from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile, load
 from tests.independent_checker import Robot, _Odometry
@@ -152,6 +153,13 @@ def _drive(robot: Robot, steps: int, seed: int, speed_m: float, turn: float
     robot=Robot(150_000, 11_000_000, 11_000_000, 16_500_000, 32), integrator="euler",
     speed_m=0.0125, turn=0.03, seed=0, gaps=[(0.5, 200)],
 )
+@example(  # a 2-frame recorder hole on a fast 16-bit robot: 3 periods reach half the 16-bit
+    # range (host.judge.ambiguity), the log holds no pages that tell whether the firmware took
+    # the frames (it did): before, analyze re-primed there and FAILed it by 22.4 mm; now the
+    # next pose chooses (host.judge.evidenceless; found by hypothesis with random seeds 11, 12)
+    robot=Robot(17155, 10_000_000, 10_000_000, 1_000_000_000, 16), integrator="euler",
+    speed_m=0.015625, turn=0.0, seed=0, gaps=[(0.25, 2)],
+)
 def test_a_correct_firmware_with_random_recorder_gaps_passes(
     tmp_path_factory: pytest.TempPathFactory, robot: Robot, integrator: str, speed_m: float,
     turn: float, seed: int, gaps: list[tuple[float, int]],
@@ -188,7 +196,12 @@ def test_a_correct_firmware_with_random_recorder_gaps_passes(
         with pytest.raises(NotStreamable):
             analyze_file(path, profile, integrator, chunk_frames=333)
     else:
-        _streamed_alike(path, profile, result.report, integrator, chunks=(333,))
+        refused = ""
+        try:
+            _streamed_alike(path, profile, result.report, integrator, chunks=(333,))
+        except NotStreamable as refusal:  # the next pose chose at an ambiguous gap the log
+            refused = str(refusal)  # gives no evidence for (in a hole the stream re-primed
+        assert refused in ("", EVIDENCELESS, DETAIL)  # a new start): the whole log's judges
     monitor, bridge, end_s = _live(profile, integrator, path)
     assert monitor.health(end_s)["state"] != "POSE WRONG", (monitor.health(end_s), cut)
     for tracker in (monitor.tracker, bridge.tracker):
@@ -262,3 +275,40 @@ def test_a_turn_past_half_inside_an_unseen_restart_gap(tmp_path: Path, bias_lsb:
     result = analyze(read_log(path), profile_of(robot), "euler")
     assert result.report["samples"]["unseen_restarts"] == 1
     assert result.passed is (bias_lsb == 0), result.report["onboard_vs_reference"]
+
+
+FAST = Robot(17155, 10_000_000, 10_000_000, 1_000_000_000, 16)  # 3 periods are ambiguous
+
+
+@pytest.mark.parametrize("firmware", ["took", "reprimed", "heading_off"])
+def test_an_ambiguous_recorder_hole_without_evidence_takes_either(tmp_path: Path,
+                                                                   firmware: str) -> None:
+    """The pinned example above: frames 185-186 cut from the log, the step from 184 to 187
+    (3 periods) ambiguous (host.judge.ambiguity) and no page telling what the firmware did. The
+    firmware that took them one by one passes (before: FAIL by 22.4 mm, re-primed); one that
+    re-primed there (its pose the float64 odometry without the steps into 185-187) passes too;
+    one whose HEADING is 2 LSB off from 187 on fits neither and FAILs. The streamed judge
+    leaves such a life to the whole log's."""
+    d_left, d_right = _drive(FAST, 800, 0, 0.015625, 0.0)
+    fine, reprimed = _Odometry(FAST, "euler"), _Odometry(FAST, "euler")
+    x_bias: dict[int, int] = {}
+    for k in range(1, 801):
+        fine.step(int(d_left[k - 1]), int(d_right[k - 1]))
+        if k not in (185, 186, 187):  # the re-prime integrates nothing from 184 to 187
+            reprimed.step(int(d_left[k - 1]), int(d_right[k - 1]))
+        assert abs(reprimed.y - fine.y) < 1e-9
+        assert abs(reprimed.heading - fine.heading) < 1e-12
+        x_bias[k] = round((reprimed.x - fine.x) / POSITION_LSB_M)
+    assert x_bias[187] < -200  # the re-prime is 2 cm behind: far beyond the gap's allowance
+    synth = synthesize(profile_of(FAST), "euler", d_left, d_right,
+                       x_bias_100um=x_bias if firmware == "reprimed" else None,
+                       heading_bias_lsb=dict.fromkeys(range(187, 801), 2)
+                       if firmware == "heading_off" else None)
+    path = _cut(synth, [(185, 2)]).write(tmp_path / "hole.log")
+    result = analyze(read_log(path), profile_of(FAST), "euler")
+    assert result.passed is (firmware != "heading_off"), result.report["onboard_vs_reference"]
+    with pytest.raises(NotStreamable, match="no evidence"):
+        analyze_file(path, profile_of(FAST), "euler", chunk_frames=333)
+    if firmware != "heading_off":  # the live judge starts again from the next pose there
+        monitor, _, end_s = _live(profile_of(FAST), "euler", path)
+        assert monitor.health(end_s)["state"] == "OK", monitor.health(end_s)

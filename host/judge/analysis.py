@@ -121,6 +121,7 @@ from odocan.host.judge.compare import (
 )
 from odocan.host.judge.configs import config_cuts, cut_configs, in_force
 from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
+from odocan.host.judge.evidencechoice import chosen_seen
 from odocan.host.judge.finalstate import firmware_fields, latched_fields
 from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
@@ -351,7 +352,12 @@ def _analyze_life(
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
                          slack_m=tolerance.position_m, start_pose=start_pose,
-                         seen=(seen := seen_in_log(frames, decoder, enc, power_up=power_up)))
+                         seen=(seen := chosen_seen(  # an evidenceless ambiguous gap
+                             enc, onboard, Geometry.of(robot), integrator,
+                             e0=0 if power_up or start_pose is not None else int(onboard.enc[0]),
+                             bits=min(robot.counter_bits, WIRE_COUNTER_BITS),
+                             max_wheel_speed_mm_s=max_wheel_speed_mm_s,
+                             seen=seen_in_log(frames, decoder, enc, power_up=power_up))))
     onboard = worst_sent(onboard, halves, ref_all, tolerance.position_m, tolerance.heading_rad)
     ref = ref_all.at(onboard.enc)
     truth_origin = None

@@ -38,7 +38,7 @@ from odocan.host.judge.gapseen import (
     Span,
     seen_of,
 )
-from odocan.host.judge.holetaken import taken_through
+from odocan.host.judge.holetaken import SENT, taken_through
 from odocan.host.judge.livewindow import CYCLE_S
 from odocan.host.protocol.e2e import crc8h2f_p02_one
 
@@ -124,6 +124,16 @@ class LiveSeen:
         FRAME_TOTALS page after it came: the totals heard so far must be quiet)."""
         return taken_through(self.keeper.pages, self.keeper.totals, self.cycle_s, a_s, b_s,
                              closed=False)
+
+    def heard_in(self, a_s: float, b_s: float) -> bool:
+        """Whether pages may yet tell what the firmware took in the hole of the encoder frames
+        heard from bus time ``a_s`` to ``b_s`` (the live judge steps before the pages after it
+        come): an ENC_E2E page kept sent inside it, or any FRAME_TOTALS page of this life (the
+        proofs of frames taken or missed need them quiet: ``holetaken``, ``pagechain``).
+        Without (``host.judge.evidenceless``) the live reference starts again from the next
+        pose."""
+        return bool(self.keeper.totals) or any(a_s < page[SENT] < b_s
+                                               for page in self.keeper.pages)
 
     def _kept_more(self) -> bool:
         """Whether a page was kept since last asked; the oldest beyond ``KEPT_PAGES`` let go,

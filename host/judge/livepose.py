@@ -131,9 +131,7 @@ class StepGate:
                 ((counter - prev[0]) & 0xF) or RING, t_s - last_t, CYCLE_S, self.least):
             self._told.near_threshold(seq, t_s)  # either decision: a new start (nearthreshold)
         if periods >= self.least and not self._taken(last_t, t_s):  # ambiguous: re-primed
-            self._refused = []
-            self._restarted(seq, t_s, by_uptime=True, ambiguous=True)
-            return 0, 0
+            return self._ambiguous(seq, (last_t, t_s), hole=heard > 1)
         delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
         if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
             if self._refused:
@@ -148,6 +146,17 @@ class StepGate:
         first, self._refused, self.prev, self.uptime = self._refused[0], [], frame, uptime
         self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
+
+    def _ambiguous(self, seq: int, span_s: tuple[float, float], *, hole: bool) -> tuple[int, int]:
+        """An ambiguous step into encoder frame ``seq`` (``ambiguity``; ``span_s``: the bus times
+        of the last accepted frame and of this one) re-primes; behind a ``hole`` of the frames
+        heard where no page tells what the firmware took (``host.judge.evidenceless``) it may
+        as well have taken them one by one: the reference starts again from the next pose."""
+        if hole and not self._refused and not self._told.heard_in(*span_s):
+            self._told.owe(seq)
+        self._refused = []
+        self._restarted(seq, span_s[1], by_uptime=True, ambiguous=True)
+        return 0, 0
 
     def _taken(self, a_s: float, b_s: float) -> bool:
         """Whether the firmware's pages prove it took frames between the last accepted frame
@@ -195,6 +204,7 @@ class RestartLog:
         self._reprimed = reprimed
         self.through: Callable[[float, float], int | None] = _unproven  # ``LiveSeen.through``
         self.owe: Callable[[int], None] = _owed  # ``livedark.DarkRestarts.owe``
+        self.heard_in: Callable[[float, float], bool] = _unheard  # ``LiveSeen.heard_in``
 
     def near_threshold(self, seq: int, t_s: float) -> None:
         """A step within a period of the ambiguity threshold into encoder frame ``seq`` (bus
@@ -217,6 +227,11 @@ class RestartLog:
 
 def _owed(_seq: int) -> None:
     """No new start to owe (``RestartLog.owe``: a gate of its own)."""
+
+
+def _unheard(_a_s: float, _b_s: float) -> bool:
+    """No pages: none heard in a hole (``RestartLog.heard_in``)."""
+    return False
 
 
 def _unproven(_a_s: float, _b_s: float) -> int | None:

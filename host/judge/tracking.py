@@ -102,6 +102,7 @@ class PoseTracker:
         self.placer.halves = self._halves["x"]  # the holes of the log its gaps are told by
         self.restarts = RestartLog(self.placer.reprimed)  # counter restarts told (``events``)
         self.restarts.through, self.restarts.owe = self.placer.seen.through, self.placer.dark.owe
+        self.restarts.heard_in = self.placer.seen.heard_in  # evidenceless: a new start owed
         self._gate = StepGate(geometry, self.counter_bits, self.restarts)
         self._pending: FramePose | None = None  # the first pose, heard before the integrator
         self._backlog_counts: list[Counted] = []  # the frames since the pending pose's

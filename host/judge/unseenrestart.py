@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from odocan.host.judge.evidenceless import evidenceless
 from odocan.host.judge.gapseen import Seen
 from odocan.host.judge.samples import Encoders, FloatArray, IntArray
 
@@ -49,6 +50,8 @@ if TYPE_CHECKING:
 AMBIGUOUS = ("re-primed: the counts could not span the silence (its bound reached half the "
              "counters' range); the reference re-primed where the firmware must (COUNTER_RESET): "
              "the motion across is unknowable")
+EVIDENCELESS = ("an ambiguous gap the log gives no evidence for (host.judge.evidenceless): the "
+                "whole log's judge chooses re-prime or gap by the next pose")
 NEAR = ("the firmware's COUNTER_RESET at a long gap differs from the stream's re-prime (a "
         "silence near the ambiguity threshold): judged on the whole log")
 THROUGH = ("a long gap of the log's encoder frames the firmware's pages prove it took frames "
@@ -84,6 +87,8 @@ def whole_only(seen: Seen, info: LifeInfo, refusal: type[Exception]
         raise refusal(THROUGH)
     if seen.resets.disagrees(frozenset(info.reprimed), info.least, seen.holes):  # nearthreshold
         raise refusal(NEAR)
+    if any(b in info.gap_steps and evidenceless(seen, b) for b in info.by_uptime):
+        raise refusal(EVIDENCELESS)  # the whole log's judge chooses by the next pose
     return seen, frozenset(info.reprimed)
 
 
