@@ -79,7 +79,7 @@ def test_a_pass_that_ends_degraded_says_so(
     assert "PASS" in out
     assert _firmware_lines(out) == [
         f"firmware   ends {state} {reason} since {since_s:.2f} s: steps merged across lost "
-        "encoder periods may have put the pose up to 50 mm off (their path is unknowable); "
+        "encoder periods may have put the pose more than 50 mm off (their path is unknowable); "
         "DEGRADED until a set-pose"]
     final = json.loads(report.read_text())["firmware_final"]
     assert (final["state"], final["reason"]) == (state, reason)

@@ -10,7 +10,7 @@ from odocan.firmware.uncertainty import UNCERTAINTY_TOLERANCE_UM
 REASON_WORDS = {
     "COUNTER_RESET": "the encoder counters restarted, the motion across it is not in the pose; "
                      "DEGRADED until a set-pose",
-    "POSE_UNCERTAIN": "steps merged across lost encoder periods may have put the pose up to "
+    "POSE_UNCERTAIN": "steps merged across lost encoder periods may have put the pose more than "
                       f"{UNCERTAINTY_TOLERANCE_UM // 1000} mm off (their path is unknowable); "
                       "DEGRADED until a set-pose",
 }
