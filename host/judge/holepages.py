@@ -86,9 +86,7 @@ def _laps(step: IntArray, gap: npt.NDArray[np.bool_], k: int, pages: list[Page],
         return 0
     if span < took:
         return -((span - took) // LAP)  # the fewest laps that meet the count
-    if (took - span) % LAP == 0 and step[k] + took - span >= 1:
-        return (took - span) // LAP
-    return 0
+    return 0  # never lowered: a stalled sender's hole spans more periods than frames it sent
 
 
 def _exact(step: IntArray, gap: npt.NDArray[np.bool_], page: Page) -> bool:
