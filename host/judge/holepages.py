@@ -17,10 +17,10 @@ firmware accepted g = OK(q) - OK(p) frames of (S_p, S_q]. Only where ENC_E2E_LOS
 and FRAME_TOTALS shows no frame refused or dropped between (``pagechain.quiet``: a forger's
 frame whose CRC holds would count in OK, but its others are refused) are the counts read: then
 S_q - S_p >= g, and a hole numbered shorter is raised by the fewest COUNTER laps (16) that meet
-it; and the firmware accepted every frame of (S_p, S_q] it saw and saw no COUNTER skip, so S_q -
-S_p = g when a whole number of laps gives it (a hole numbered longer is lowered; else the
-numbering stands: a firmware that lost 16 k + 1 frames on the bus saw no skip, the one case this
-reads short). Only a span with one step where the log lacks frames or its stamps may hide a lap
+it. A hole numbered longer is never lowered: a stalled sender's hole spans more periods than
+the frames it sent (its COUNTER goes on by one), so S_q - S_p = g says nothing of the periods
+(a firmware that lost 16 k + 1 frames on the bus saw no skip either). Only a span with one
+step where the log lacks frames or its stamps may hide a lap
 (``GAP_CYCLES``) is numbered so (the laps of two holes cannot be shared out by one count); the
 hole's COUNTER step (mod 16) stays what it is. The whole-log judge only: the live one, whose
 pages after a hole come 0.6 s after it, does not (yet).
