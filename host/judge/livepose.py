@@ -16,7 +16,6 @@ from odocan.firmware.encoders import (
     RESTART_SLACK_PERIODS,
     RESYNC_FRAMES,
 )
-from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.ambiguity import least_ambiguous_periods
 from odocan.host.judge.livewindow import CYCLE_S, Counted
 from odocan.host.judge.nearthreshold import NEAR_DETAIL, near
@@ -80,9 +79,7 @@ class StepGate:
         """Gate the next frames with ``geometry``'s speed bound (the firmware's, from its PROFILE
         page): the frames accepted so far stay, the next one is judged against the last of them
         over the periods since."""
-        travel_m = geometry.max_wheel_speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
-        self.bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
-                      math.ceil(travel_m / geometry.m_per_count_right) + 1)
+        self.bound = geometry.period_counts(geometry.max_wheel_speed_mm_s)
         self.least = least_ambiguous_periods(self.bound, self.bits)
 
     def _delta(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[int, int]:

@@ -24,7 +24,6 @@ event), as after a dark restart: either decision passes, the one pose jump there
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -32,7 +31,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.ambiguity import least_ambiguous_periods
 from odocan.host.judge.reference import Geometry, SpeedBound
@@ -169,6 +167,4 @@ def least_of(geometry: Geometry, bits: int, max_wheel_speed_mm_s: SpeedBound) ->
     speed_mm_s = geometry.speed_bound_mm_s(max_wheel_speed_mm_s)
     if speed_mm_s is None:
         return None
-    travel_m = speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
-    return least_ambiguous_periods((math.ceil(travel_m / geometry.m_per_count_left) + 1,
-                                    math.ceil(travel_m / geometry.m_per_count_right) + 1), bits)
+    return least_ambiguous_periods(geometry.period_counts(speed_mm_s), bits)

@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
+from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.sim.robot import RobotProfile
 
 INTEGRATORS = ("euler", "rk2", "exact")
@@ -58,6 +59,13 @@ class Geometry:
     def speed_bound_mm_s(self, bound: SpeedBound) -> int | None:
         """``bound`` resolved: this robot's maximum wheel speed for ``PROFILE_SPEED``."""
         return self.max_wheel_speed_mm_s if isinstance(bound, str) else bound
+
+    def period_counts(self, speed_mm_s: float) -> tuple[int, int]:
+        """The most counts (left, right) a wheel moves in one encoder period at ``speed_mm_s``,
+        one count of margin: the per-period step bound the firmware's plausibility rule uses."""
+        travel_m = speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
+        return (math.ceil(travel_m / self.m_per_count_left) + 1,
+                math.ceil(travel_m / self.m_per_count_right) + 1)
 
     @property
     def m_per_count_left(self) -> float:

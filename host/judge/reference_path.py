@@ -12,7 +12,6 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.firmware.encoders import RESYNC_FRAMES
-from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.ambiguity import least_ambiguous_periods
 from odocan.host.judge.breaks import BreakSummary, placed_offsets
 from odocan.host.judge.breakspan import break_allowance as break_allowance
@@ -209,9 +208,7 @@ def firmware_steps(
         held = confirmed_holds((left, right, uptime, counter), ones, ~ones, bits, None)
         return _reprime_all(steps, ctrl_restarts(uptime, ones, np.diff(stamps), enc.cycle_s,
                                                  counter) & held[1:])
-    travel_m = speed_mm_s * 1e-3 * ENCODER_PERIOD_US * 1e-6
-    bound = (math.ceil(travel_m / geometry.m_per_count_left) + 1,
-             math.ceil(travel_m / geometry.m_per_count_right) + 1)
+    bound = geometry.period_counts(speed_mm_s)
     foreign = beyond_width(left, right, bits)  # refused outright (IMPLAUSIBLE_STEP)
     young = young_counts(left, right, uptime, bits, bound) & ~foreign
     restart = ctrl_restarts(uptime, young, np.diff(stamps), enc.cycle_s, counter)
