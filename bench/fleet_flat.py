@@ -65,7 +65,7 @@ from odocan.host.mqtt.bridge import Bridge
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
 from odocan.sim import robot
 from odocan.sim.cboard import FIRMWARES
-from odocan.sim.fleet import Fleet, FleetConfig
+from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
 from odocan.sim.realtime import DeadlineStats
 
 TICK_S = 0.01
@@ -183,7 +183,7 @@ class Parts:
 
 
 PARTS: Parts | None = None  # --parts
-REAL_TIME = fleetrun.run_realtime  # the product's clock (--clock real)
+REAL_TIME = run_realtime  # the product's clock (--clock real), as fleetrun imports it
 
 
 def one_run(robots: int, ticks: int, publish_hz: float = 10.0,
