@@ -7,7 +7,13 @@ trial misses, then bisected. Every trial prints its figures, the load average (o
 machine shows up as misses) and the CPU it cost per robot and 10 ms tick: the workers' (their
 process time while the clock ran, the report's ``cpu_s``: other processes on the machine do not
 count) and the broker's (/proc/PID/stat). One idle core's worth of CPU is 10 000 us per tick:
-robots per core is about 10 000 / (us per robot-tick).
+robots per core is about 10 000 / (us per robot-tick). A trial that skips releases (a period or
+more behind) does more than its ticks run: each skipped release's encoder sample is still sent
+and judged, and every robot's drive falls back from running ahead (``sim.lookahead``) for at least
+``sim.fleet.BLOCK_TICKS`` ticks; so the CPU per robot-release (ticks run plus releases skipped) is
+printed next to the per robot-tick figure, which a skipping trial inflates (by up to
+releases / ticks). ``bench/fleet_flat.py --clock both --parts`` splits one worker's CPU by part
+flat out and in real time.
 
     .venv/bin/python bench/fleet.py [--trial-s 3] [--start 8] [--max 256] [--workers 2]
     .venv/bin/python bench/fleet.py --robots 50,75,100 --workers 2 --broker mosquitto \
@@ -81,9 +87,12 @@ def trial(n: int, seconds: float, bridge: bool, broker: BrokerURL | None, worker
     broker_cpu = proc_cpu_s(broker_pid) - broker0  # includes the workers' connect and goodbye
     ratio: float = report["deadline_miss_ratio"]
     robot_ticks = max(sum(w["robots"] * w["ticks"] for w in _workers(report)), 1)
+    robot_releases = max(sum(w["robots"] * (w["ticks"] + w["skipped_releases"])
+                             for w in _workers(report)), 1)
     row = {"robots": n, "ratio": ratio, "late": report["late_ticks"], "ticks": report["ticks"],
            "worst_ms": report["max_lateness_ms"], "skipped": report["skipped_releases"],
            "fleet_us": report["cpu_s"] / robot_ticks * 1e6,
+           "release_us": report["cpu_s"] / robot_releases * 1e6,
            "broker_us": broker_cpu / robot_ticks * 1e6, "load": os.getloadavg()[0],
            "dropped": report["bridge"]["frames_dropped"] if report["bridge"] else 0}
     extra = ""
@@ -93,7 +102,8 @@ def trial(n: int, seconds: float, bridge: bool, broker: BrokerURL | None, worker
     print(f"  N={n:4d}: deadline_miss_ratio {ratio:.4f} ({report['late_ticks']} late of "
           f"{report['ticks']}, worst {report['max_lateness_ms']:.1f} ms, "
           f"{report['skipped_releases']} skipped{extra}); CPU per robot-tick: fleet+bridge "
-          f"{row['fleet_us']:.0f} us, broker {row['broker_us']:.0f} us; "
+          f"{row['fleet_us']:.0f} us ({row['release_us']:.0f} us per robot-release), broker "
+          f"{row['broker_us']:.0f} us; "
           f"load {row['load']:.2f}", flush=True)
     return row
 
@@ -262,7 +272,8 @@ def print_table(rows: list[tuple[str, dict[str, Any]]]) -> None:
     if not rows:
         return
     print(f"\n{'setting':44s} {'N':>4s} {'miss ratio':>10s} {'late/ticks':>13s} "
-          f"{'worst ms':>8s} {'skip':>4s} {'drop':>5s} {'fleet us':>8s} {'broker us':>9s} "
+          f"{'worst ms':>8s} {'skip':>4s} {'drop':>5s} {'fleet us':>8s} {'/release':>8s} "
+          f"{'broker us':>9s} "
           f"{'2 cores':>7s} {'load':>5s}  verdict")
     for label, r in rows:
         per_tick = r["fleet_us"] + r["broker_us"]
@@ -270,7 +281,8 @@ def print_table(rows: list[tuple[str, dict[str, Any]]]) -> None:
         verdict = "real time" if r["ratio"] <= LIMIT else "MISSES"
         print(f"{label:44s} {r['robots']:4d} {r['ratio']:10.4f} "
               f"{r['late']:>6d}/{r['ticks']:<6d} {r['worst_ms']:8.1f} {r['skipped']:4d} "
-              f"{r['dropped']:5d} {r['fleet_us']:8.0f} {r['broker_us']:9.0f} {fits:7.0f} "
+              f"{r['dropped']:5d} {r['fleet_us']:8.0f} {r['release_us']:8.0f} "
+              f"{r['broker_us']:9.0f} {fits:7.0f} "
               f"{r['load']:5.2f}  {verdict}")
 
 

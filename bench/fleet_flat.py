@@ -25,6 +25,16 @@ fleet, paho and the loop around it): ``bench/bridge_frames.py``.
 whole (its survivors live 20-100 ticks, so rarer passes cost about as much CPU in all, in longer
 pauses: 16 ms every 50 ticks, 43 ms every 200, 50 robots at load 9).
 
+``--clock real`` runs the same worker under the product's clock (``sim.fleet.run_realtime``:
+each tick released at ``k * 10 ms`` of the wall clock, the loop asleep in between, late releases
+skipped), with the same parts, the skipped releases and the drives' fall-backs from running
+ahead (``sim.lookahead``: a skipped release's MOTOR_CMD never comes, so every robot's drive
+falls back and runs tick by tick until ``sim.fleet.BLOCK_TICKS`` ticks pass without a skip);
+``--clock both`` alternates a flat and a real run per ``--repeat``: the pair shows what running
+in real time adds to the same work. In real time the figures are per robot-release (ticks run
+plus releases skipped: a skipped release's encoder sample is still sent, and judged) as well as
+per robot-tick run (``bench/fleet.py``'s figure, which a skipping run inflates).
+
 The script runs unchanged on trees since the bridge's ``run_fleet`` (copy it there to pair).
 Before, the clock released every tick at once (a ``NeverLate`` clock in ``run_realtime``): the
 bridge, one 64-frame slice a loop turn, fell behind and handled most of the frames in its final
@@ -55,7 +65,7 @@ from odocan.host.mqtt.bridge import Bridge
 from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
 from odocan.sim import robot
 from odocan.sim.cboard import FIRMWARES
-from odocan.sim.fleet import Fleet, FleetConfig
+from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
 from odocan.sim.realtime import DeadlineStats
 
 TICK_S = 0.01
@@ -114,9 +124,25 @@ class Parts:
         else:
             self.young_gc_s += time.process_time() - self._gc_t0_s
 
+    fall_backs = replans = 0  # the drives run ahead (``sim.lookahead``) that fell back, replanned
+
     def install(self) -> None:
-        """Wrap the two parts and count every link's ``CoalescedSend``."""
+        """Wrap the two parts, count every link's ``CoalescedSend`` and the drives' fall-backs."""
         from odocan.host.mqtt import client
+        from odocan.sim.lookahead import PlannedVehicle
+
+        fall_back, replan = PlannedVehicle._fall_back, PlannedVehicle.replan
+
+        def counted_fall_back(vehicle: PlannedVehicle) -> None:
+            Parts.fall_backs += 1
+            fall_back(vehicle)
+
+        def counted_replan(vehicle: PlannedVehicle, t_s: float, first_block_ticks: int) -> bool:
+            Parts.replans += 1
+            return replan(vehicle, t_s, first_block_ticks)
+
+        setattr(PlannedVehicle, "_fall_back", counted_fall_back)  # noqa: B010
+        setattr(PlannedVehicle, "replan", counted_replan)  # noqa: B010
 
         parts = self
         step, handle, made = Fleet.step, Bridge._handle, client.CoalescedSend.__init__
@@ -141,24 +167,30 @@ class Parts:
         gc.callbacks.append(self._on_gc)
 
     def line(self, cpu_s: float, robot_ticks: int) -> str:
-        """The parts in us per robot-tick, and the socket writes per robot-tick."""
+        """The parts in us per robot-tick, and the socket writes per robot-tick (per
+        robot-release in real time: ``robot_ticks`` counts the skipped releases too)."""
         per = robot_ticks / 1e6
         rest = (cpu_s - self.step_s - self.handle_s - self.young_gc_s) / per
         writes = sum(sender.writes for sender in self.senders) / robot_ticks
         line = (f"  step {self.step_s / per:.1f}, bridge frame handling "
                 f"{self.handle_s / per:.1f}, young GC passes {self.young_gc_s / per:.1f}, the "
-                f"rest {rest:.1f} us; {writes:.3f} socket writes per robot-tick (the whole run)")
+                f"rest {rest:.1f} us; {writes:.3f} socket writes per robot-tick (the whole run); "
+                f"drives fell back {Parts.fall_backs}, replanned {Parts.replans}")
         self.step_s = self.handle_s = self.young_gc_s = 0.0
+        Parts.fall_backs = Parts.replans = 0
         self.senders.clear()
         return line
 
 
 PARTS: Parts | None = None  # --parts
+REAL_TIME = run_realtime  # the product's clock (--clock real), as fleetrun imports it
 
 
 def one_run(robots: int, ticks: int, publish_hz: float = 10.0,
-            firmware: str = "python") -> str:
-    """One flat-out run of ``robots`` for ``ticks`` ticks; its line of figures."""
+            firmware: str = "python", clock: str = "flat") -> str:
+    """One run of ``robots`` for ``ticks`` ticks (``clock``: flat out or real time); its line
+    of figures."""
+    setattr(fleetrun, "run_realtime", run_flat if clock == "flat" else REAL_TIME)  # noqa: B010
     with tempfile.TemporaryDirectory() as tmp:
         started = start_mosquitto(Path(tmp))
         if started is None:
@@ -175,11 +207,16 @@ def one_run(robots: int, ticks: int, publish_hz: float = 10.0,
             proc.wait()
     verdicts = Counter(r["verdict"] for r in report["per_robot"].values())
     per_us = report["cpu_s"] / (report["robots"] * report["ticks"]) * 1e6
-    line = (f"{robots} robots, {report['ticks']} ticks flat out: {per_us:.1f} us CPU per "
+    releases = report["ticks"] + report["skipped_releases"]
+    per_release = report["cpu_s"] / (report["robots"] * releases) * 1e6
+    how = "flat out" if clock == "flat" else (
+        f"in real time (deadline_miss_ratio {report['deadline_miss_ratio']:.4f}; "
+        f"{per_release:.1f} us per robot-release)")
+    line = (f"{robots} robots, {report['ticks']} ticks {how}: {per_us:.1f} us CPU per "
             f"robot-tick (fleet + bridge + MQTT), {report['skipped_releases']} skipped, "
             f"verdicts {dict(verdicts)}, {firmware} firmware, load {os.getloadavg()[0]:.2f}")
     if PARTS is not None:
-        line += "\n" + PARTS.line(report["cpu_s"], report["robots"] * report["ticks"])
+        line += "\n" + PARTS.line(report["cpu_s"], report["robots"] * releases)
     return line
 
 
@@ -197,15 +234,20 @@ def main() -> int:
                              "clock runs; the product: 1)")
     parser.add_argument("--parts", action="store_true",
                         help="the CPU of the step, of the bridge's frame handling, the rest")
+    parser.add_argument("--clock", choices=("flat", "real", "both"), default="flat",
+                        help="flat out (default), the product's real-time clock, or both "
+                             "alternately (a pair per --repeat)")
     args = parser.parse_args()
-    setattr(fleetrun, "run_realtime", run_flat)  # noqa: B010 (a bench's patch)
     fleetrun.TickCollector.every_ticks = args.young_gc_every or 1 << 62
     if args.parts:
         global PARTS
         PARTS = Parts()
         PARTS.install()
+    clocks = ("flat", "real") if args.clock == "both" else (args.clock,)
     for _ in range(args.repeat):
-        print(one_run(args.robots, args.ticks, args.publish_hz, args.firmware), flush=True)
+        for clock in clocks:
+            print(one_run(args.robots, args.ticks, args.publish_hz, args.firmware, clock),
+                  flush=True)
     return 0
 
 
