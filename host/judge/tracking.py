@@ -28,6 +28,7 @@ from odocan.host.judge.livepose import (
 )
 from odocan.host.judge.liveresent import judge_resend
 from odocan.host.judge.livesnapshot import tracker_snapshot
+from odocan.host.judge.livestart import start_reference
 from odocan.host.judge.livetruth import LifeTruth, TruthParts, judge_truth
 from odocan.host.judge.livetwins import TwinWatch
 from odocan.host.judge.livewindow import (
@@ -246,7 +247,7 @@ class PoseTracker:
         self.placer.dark.due(seq, self.restart_reference)  # after a dark restart: livedark
         ref = self._compare(pose, y, queued)
         self.settled.append(sample := Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
-        if self._boot is not None:  # held: settled again once judged (``_start_reference``)
+        if self._boot is not None:  # held: settled again once judged (``livestart``)
             self._held[seq] = sample
 
     def _compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
@@ -280,7 +281,7 @@ class PoseTracker:
             if self.integrator is None:
                 self._backlog_poses.append(pose)
                 return None
-            self._start_reference(self._pending, self._backlog_counts, [])
+            start_reference(self, self._pending, self._backlog_counts, [])
             self._drop_backlog()
         ref = self._ref_at.get(seq)
         if ref is None:
@@ -330,7 +331,7 @@ class PoseTracker:
         first = self.integrator is None
         self.integrator = name
         if first and self._pending is not None:  # judge what was heard while waiting
-            self._start_reference(self._pending, self._backlog_counts, self._backlog_poses)
+            start_reference(self, self._pending, self._backlog_counts, self._backlog_poses)
             self._drop_backlog()
         else:
             self.restart_reference()
@@ -389,7 +390,7 @@ class PoseTracker:
         self.reference_starts -= first_life and self.reference_starts > 0
         self.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
         self._losses.primed(primed)  # ENC_E2E_LOST counted from 0 there
-        self._start_reference(FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
+        start_reference(self, FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
         if not first_life:
             self.life_truth.booted(primed, self._ref_at)
 
@@ -408,7 +409,7 @@ class PoseTracker:
         self._backlog_poses = poses
         self._backlog_counts = counts if zero else window_counts(self._window, poses[0].seq)
         if self.integrator is not None:
-            self._start_reference(self._pending, self._backlog_counts, poses)
+            start_reference(self, self._pending, self._backlog_counts, poses)
             self._drop_backlog()
 
     def on_enc_counts(self, ok: int, lost: int, proven: bool = False) -> None:
@@ -467,33 +468,6 @@ class PoseTracker:
     def counter_restarts(self) -> int:
         """Counter restarts the current reference re-primed on (as the firmware does)."""
         return self._gate.counter_restarts
-
-    def _start_reference(self, pose: FramePose, counts: list[Counted],
-                         poses: list[FramePose]) -> None:
-        """Start the reference at ``pose``, primed on the first of ``counts`` (the frame ``pose``
-        names on, stepped as heard: ``Counted``), catch up, compare the ``poses`` heard since."""
-        assert self.integrator is not None
-        ref = self._ref = ReferenceOdometry(
-            self.geometry, self.integrator, self.counter_bits,
-            x_m=pose.x_m, y_m=pose.y_m, heading_rad=pose.heading_rad,
-        )
-        self.reference_starts += 1
-        self.fit = LiveFit.start(pose)
-        self._ref_at = {}
-        self.placer.restart()
-        self._gate = StepGate(self.geometry, self.counter_bits, self.restarts)
-        for frame in counts:
-            step = self._gate.step(frame)  # the first primes: stays at pose
-            if step is not None:
-                ref.step_deltas(*step)
-            self._keep_ref(FramePose(frame[0], ref.x_m, ref.y_m, ref.heading_rad))
-        for heard in poses:
-            at = self._ref_at.get(heard.seq)
-            held = self._held.pop(heard.seq, None)
-            if at is not None and held is not None:  # settled again, judged now
-                self.settled.append(held._replace(reference=self._record(heard, at)))
-            elif at is not None:
-                self._record(heard, at)
 
     def snapshot(self) -> dict[str, Any]:
         """``pose``, ``reference``, ``truth``, ``error`` (``livesnapshot.tracker_snapshot``)."""
