@@ -226,3 +226,4 @@ def end_of_watch(tracker: PoseTracker) -> None:
     placer = tracker.placer
     if placer.seen.flush() and placer.waiting:
         placer.withdraw(placer.seen.proven())
+    tracker.choice.decide()  # no page comes now: an ambiguous hole's choice is made

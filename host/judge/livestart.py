@@ -21,6 +21,7 @@ def start_reference(tracker: PoseTracker, pose: FramePose, counts: list[Counted]
     ``pose`` names on, stepped as heard: ``Counted``), catch up, compare the ``poses`` heard
     since."""
     assert tracker.integrator is not None
+    tracker.choice.decide()  # the samples held are judged by the reference they named
     ref = tracker._ref = ReferenceOdometry(
         tracker.geometry, tracker.integrator, tracker.counter_bits,
         x_m=pose.x_m, y_m=pose.y_m, heading_rad=pose.heading_rad,
@@ -35,6 +36,8 @@ def start_reference(tracker: PoseTracker, pose: FramePose, counts: list[Counted]
         if step is not None:
             ref.step_deltas(*step)
         tracker._keep_ref(FramePose(frame[0], ref.x_m, ref.y_m, ref.heading_rad))
+        if tracker.choice.pending is not None:  # the twin steps along (livechoice)
+            tracker.choice.stepped(frame[0], step)
     for heard in poses:
         at = tracker._ref_at.get(heard.seq)
         held = tracker._held.pop(heard.seq, None)

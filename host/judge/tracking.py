@@ -15,6 +15,7 @@ import math
 from dataclasses import replace
 from typing import Any
 
+from odocan.host.judge.livechoice import LiveChoice
 from odocan.host.judge.livefit import LiveFit, rebase
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.liveplace import StallPlacer
@@ -103,7 +104,9 @@ class PoseTracker:
         self.placer.halves = self._halves["x"]  # the holes of the log its gaps are told by
         self.restarts = RestartLog(self.placer.reprimed)  # counter restarts told (``events``)
         self.restarts.through, self.restarts.owe = self.placer.seen.through, self.placer.dark.owe
-        self.restarts.heard_in = self.placer.seen.heard_in  # evidenceless: a new start owed
+        self.restarts.heard_in = self.placer.seen.heard_in  # evidenceless: a choice held
+        self.choice = LiveChoice(self)  # ... both candidates until the pages or the next pose
+        self.restarts.choose = self.choice.open
         self._gate = StepGate(geometry, self.counter_bits, self.restarts)
         self._pending: FramePose | None = None  # the first pose, heard before the integrator
         self._backlog_counts: list[Counted] = []  # the frames since the pending pose's
@@ -135,6 +138,8 @@ class PoseTracker:
         """Bus time is now ``t_s`` (any frame heard): pose halves heard half an encoder cycle or
         more before are settled; a new life waiting ``BOOT_COUNT_WAIT_S`` starts without it."""
         self._now_s = self.placer.dark.heard(t_s)  # (and whether the input went dark)
+        if t_s > self.choice.until_s:  # the pages had their time: the choice is made
+            self.choice.decide()
         if self._boot is not None and t_s > self._boot[1]:
             self._finish_boot(self._boot[0]) if self._boot[0] >= 0 else self._finish_first(False)
         if t_s - self._unsettled_from_s < QUEUED_GAP_S:
@@ -163,6 +168,8 @@ class PoseTracker:
             if step is not None:
                 ref.step_deltas(*step)
             self._keep_ref(FramePose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad))
+            if self.choice.pending is not None:  # the twin steps along (livechoice)
+                self.choice.stepped(self.enc_seq, step)
         elif self._pending is not None:
             self._backlog_counts.append(counted(row))
             if len(self._backlog_counts) > BACKLOG_FRAMES:  # too long: start at a later pose
@@ -283,6 +290,8 @@ class PoseTracker:
                 return None
             start_reference(self, self._pending, self._backlog_counts, [])
             self._drop_backlog()
+        if self.choice.holds(pose):  # judged once the choice is made (livechoice)
+            return None
         ref = self._ref_at.get(seq)
         if ref is None:
             return None
@@ -338,6 +347,7 @@ class PoseTracker:
 
     def restart_reference(self) -> None:
         """Start the reference again at the next on-board pose (after a set-pose or config)."""
+        self.choice.decide()  # the samples held are judged by the reference they named
         self._ref = None
         self._last_compared = -1
         self._last_sample_t = None
