@@ -101,7 +101,7 @@ class LiveChoice:
 
     def decide(self) -> None:
         """Choose (module docstring) and judge the samples held against the chosen reference,
-        placed after the hole as any gap's (``tracking._place``)."""
+        placed after the hole as any gap's (``tracking.PoseTracker.judge``)."""
         p, self.pending, self.until_s = self.pending, None, math.inf
         if p is None:
             return
@@ -116,12 +116,7 @@ class LiveChoice:
             self.reprimed += 1
         tracker._last_compared = p.last_compared
         for pose in p.held:
-            ref = tracker._ref_at.get(pose.seq)
-            if ref is None:
-                continue
-            if tracker._place_at_next or tracker.placer.owed:
-                ref = tracker._place(pose, ref)
-            tracker._record(pose, ref)
+            tracker.judge(pose)
 
     def _take(self, p: Pending) -> bool:
         """Whether the twin (the hole taken) is chosen: not where the pages heard prove the

@@ -290,9 +290,11 @@ class PoseTracker:
                 return None
             start_reference(self, self._pending, self._backlog_counts, [])
             self._drop_backlog()
-        if self.choice.holds(pose):  # judged once the choice is made (livechoice)
-            return None
-        ref = self._ref_at.get(seq)
+        return None if self.choice.holds(pose) else self.judge(pose)  # held: livechoice
+
+    def judge(self, pose: FramePose) -> FramePose | None:
+        """Judge ``pose`` against the reference at its frame, placed again first where owed."""
+        ref = self._ref_at.get(pose.seq)
         if ref is None:
             return None
         if self._place_at_next or self.placer.owed:  # owed: an allowance withdrawn
