@@ -25,6 +25,8 @@ from hypothesis import strategies as st
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import POSITION_LSB_M, analyze
+from odocan.host.judge.livegapseen import end_of_watch
+from odocan.host.judge.samples import HEADING_LSB_RAD
 from odocan.host.judge.stream_analysis import analyze_file
 from odocan.host.judge.stream_refusal import NotStreamable
 from odocan.host.judge.unseenrestart import DETAIL, EVIDENCELESS
@@ -287,8 +289,9 @@ def test_an_ambiguous_recorder_hole_without_evidence_takes_either(tmp_path: Path
     (3 periods) ambiguous (host.judge.ambiguity) and no page telling what the firmware did. The
     firmware that took them one by one passes (before: FAIL by 22.4 mm, re-primed); one that
     re-primed there (its pose the float64 odometry without the steps into 185-187) passes too;
-    one whose HEADING is 2 LSB off from 187 on fits neither and FAILs. The streamed judge
-    leaves such a life to the whole log's."""
+    one whose HEADING is 2 LSB off from 187 on fits neither and FAILs, on the live judges too
+    (the monitor's model, the bridge). The streamed judge leaves such a life to the whole
+    log's."""
     d_left, d_right = _drive(FAST, 800, 0, 0.015625, 0.0)
     fine, reprimed = _Odometry(FAST, "euler"), _Odometry(FAST, "euler")
     x_bias: dict[int, int] = {}
@@ -309,6 +312,34 @@ def test_an_ambiguous_recorder_hole_without_evidence_takes_either(tmp_path: Path
     assert result.passed is (firmware != "heading_off"), result.report["onboard_vs_reference"]
     with pytest.raises(NotStreamable, match="no evidence"):
         analyze_file(path, profile_of(FAST), "euler", chunk_frames=333)
-    if firmware != "heading_off":  # the live judge starts again from the next pose there
-        monitor, _, end_s = _live(profile_of(FAST), "euler", path)
-        assert monitor.health(end_s)["state"] == "OK", monitor.health(end_s)
+    monitor, bridge, end_s = _live(profile_of(FAST), "euler", path)  # the live judge agrees:
+    wrong = firmware == "heading_off"  # both candidates held until the pose after the hole
+    assert (monitor.health(end_s)["state"] == "POSE WRONG") is wrong, monitor.health(end_s)
+    for tracker in (monitor.tracker, bridge.tracker):  # (before: heading_off PASSed live)
+        assert (tracker.vs_reference.max_dheading_rad > HEADING_LSB_RAD) is wrong
+        assert (tracker.wrongs.count > 0) is wrong
+        assert tracker.max_beyond_allowance_m <= POSITION_LSB_M
+        assert tracker.reference_starts == 1  # one start: the choice, not a new start
+
+
+@pytest.mark.parametrize("firmware", ["took", "heading_off"])
+def test_an_ambiguous_hole_near_the_end_of_a_watch_is_chosen_at_its_end(tmp_path: Path,
+                                                                        firmware: str) -> None:
+    """The hole above, the watch ending 0.4 s after it (before the 1 s the live judge gives
+    the pages): ``end_of_watch`` (``odocan monitor``'s end) makes the choice, so the samples
+    held since the hole are judged; the firmware whose HEADING is 2 LSB off FAILs on the
+    monitor's model and the bridge (before: PASS, a new start from the pose after the
+    hole), the one that took the frames passes."""
+    d_left, d_right = _drive(FAST, 800, 0, 0.015625, 0.0)
+    synth = synthesize(profile_of(FAST), "euler", d_left, d_right,
+                       heading_bias_lsb=dict.fromkeys(range(187, 801), 2)
+                       if firmware == "heading_off" else None)
+    synth = _cut(synth, [(185, 2)])
+    synth.groups = synth.groups[:228]  # encoder frames 0 .. 227 but the hole's
+    path = synth.write(tmp_path / "end.log")
+    monitor, bridge, _ = _live(profile_of(FAST), "euler", path)
+    for tracker in (monitor.tracker, bridge.tracker):
+        end_of_watch(tracker)
+        wrong = tracker.vs_reference.max_dheading_rad > HEADING_LSB_RAD
+        assert wrong is (firmware == "heading_off"), tracker.vs_reference
+        assert tracker.max_beyond_allowance_m <= POSITION_LSB_M

@@ -14,6 +14,9 @@ then with the gap's usual merge allowance, ``gapbound``) are integrated from the
 before; the one ending nearer the on-board pose after (position and heading in LSBs) is taken
 (into ``Seen.through``, as a hole proven taken). Either is then judged as usual: a pose that
 fits neither still FAILs. Each choice is local (anchored on the on-board pose before its gap).
+The live judge (the monitor, the bridge) holds both candidates and the samples after such a hole
+until its pages had their time, then chooses the same way (``host.judge.livechoice``); the
+streamed judge refuses such a life (``host.judge.unseenrestart``: the whole log's judge judges).
 """
 
 from __future__ import annotations

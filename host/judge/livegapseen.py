@@ -130,8 +130,8 @@ class LiveSeen:
         heard from bus time ``a_s`` to ``b_s`` (the live judge steps before the pages after it
         come): an ENC_E2E page kept sent inside it, or any FRAME_TOTALS page of this life (the
         proofs of frames taken or missed need them quiet: ``holetaken``, ``pagechain``).
-        Without (``host.judge.evidenceless``) the live reference starts again from the next
-        pose."""
+        Without (``host.judge.evidenceless``) both candidates are held until the pages had
+        their time or the next pose chooses (``host.judge.livechoice``)."""
         return bool(self.keeper.totals) or any(a_s < page[SENT] < b_s
                                                for page in self.keeper.pages)
 
@@ -222,7 +222,9 @@ def heard_status(tracker: PoseTracker, message: Any, data: bytes, data_ids: Any,
 
 def end_of_watch(tracker: PoseTracker) -> None:
     """The watch ends (no later frame comes): ``LiveSeen.flush`` and what it proves withdrawn,
-    before the samples still waiting are judged (``posewrongs.PoseWrongs.finish``)."""
+    and an ambiguous hole's choice made (``livechoice``), before the samples still waiting are
+    judged (``posewrongs.PoseWrongs.finish``)."""
     placer = tracker.placer
     if placer.seen.flush() and placer.waiting:
         placer.withdraw(placer.seen.proven())
+    tracker.choice.decide()  # no page comes now: an ambiguous hole's choice is made

@@ -170,6 +170,16 @@ class StallPlacer:
             self._gaps = [gap for gap in self._gaps if gap[0] != seq]
         return self.dark.restarted(seq, by_uptime, self.seen)  # a new start (livedark)
 
+    def gap_at(self, seq: int) -> Gap | None:
+        """The gap (since the last placement) that ends at encoder frame ``seq``, if any."""
+        return next((gap for gap in self._gaps if gap[0] == seq), None)
+
+    def took_gap(self, gap: Gap) -> None:
+        """A gap ``reprimed`` left out was taken after all (``host.judge.livechoice``): a
+        placement part again, with its allowance."""
+        if gap[0] not in {g[0] for g in self._gaps}:
+            self._gaps = sorted([*self._gaps, gap])
+
     def compared(self, seq: int) -> None:
         """A sample of encoder frame ``seq`` was compared."""
         self._abs_last = self._abs_at(seq)

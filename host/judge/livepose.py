@@ -128,7 +128,8 @@ class StepGate:
                 ((counter - prev[0]) & 0xF) or RING, t_s - last_t, CYCLE_S, self.least):
             self._told.near_threshold(seq, t_s)  # either decision: a new start (nearthreshold)
         if periods >= self.least and not self._taken(last_t, t_s):  # ambiguous: re-primed
-            return self._ambiguous(seq, (last_t, t_s), hole=heard > 1)
+            return self._ambiguous(seq, (last_t, t_s), hole=heard > 1,
+                                   taken=self._delta(prev, frame))
         delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
         if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
             if self._refused:
@@ -144,12 +145,15 @@ class StepGate:
         self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
 
-    def _ambiguous(self, seq: int, span_s: tuple[float, float], *, hole: bool) -> tuple[int, int]:
+    def _ambiguous(self, seq: int, span_s: tuple[float, float], *, hole: bool,
+                   taken: tuple[int, int]) -> tuple[int, int]:
         """An ambiguous step into encoder frame ``seq`` (``ambiguity``; ``span_s``: the bus times
         of the last accepted frame and of this one) re-primes; behind a ``hole`` of the frames
         heard where no page tells what the firmware took (``host.judge.evidenceless``) it may
-        as well have taken them one by one: the reference starts again from the next pose."""
-        if hole and not self._refused and not self._told.heard_in(*span_s):
+        as well have taken them one by one (the step ``taken``): both are held until the next
+        pose chooses (``host.judge.livechoice``), else the reference starts again from it."""
+        if hole and not self._refused and not self._told.heard_in(*span_s) \
+                and not self._told.choose(seq, span_s, taken):
             self._told.owe(seq)
         self._refused = []
         self._restarted(seq, span_s[1], by_uptime=True, ambiguous=True)
@@ -202,6 +206,7 @@ class RestartLog:
         self.through: Callable[[float, float], int | None] = _unproven  # ``LiveSeen.through``
         self.owe: Callable[[int], None] = _owed  # ``livedark.DarkRestarts.owe``
         self.heard_in: Callable[[float, float], bool] = _unheard  # ``LiveSeen.heard_in``
+        self.choose: Callable[[int, tuple[float, float], tuple[int, int]], bool] = _unchosen
 
     def near_threshold(self, seq: int, t_s: float) -> None:
         """A step within a period of the ambiguity threshold into encoder frame ``seq`` (bus
@@ -224,6 +229,11 @@ class RestartLog:
 
 def _owed(_seq: int) -> None:
     """No new start to owe (``RestartLog.owe``: a gate of its own)."""
+
+
+def _unchosen(_seq: int, _span_s: tuple[float, float], _taken: tuple[int, int]) -> bool:
+    """No choice held (``RestartLog.choose``: ``livechoice.LiveChoice.open``): a new start."""
+    return False
 
 
 def _unheard(_a_s: float, _b_s: float) -> bool:

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livepose import FramePose
+from odocan.host.judge.livestart import start_reference
 from odocan.host.judge.livewindow import window_counts
 
 if TYPE_CHECKING:
@@ -84,7 +85,7 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float]) -> 
         return None
     pose = FramePose(seq, staged.get("X", at.x_m), staged.get("Y", at.y_m),
                      staged.get("HEADING", at.heading_rad % _TURN))
-    tracker._start_reference(pose, counts, [])
+    start_reference(tracker, pose, counts, [])
     if all(name in staged for name in ("X", "Y", "HEADING")):
         tracker.fit = LiveFit(pose.x_m, pose.y_m, exact=True)  # the pose set: nothing to fit
     return pose

@@ -15,6 +15,7 @@ import math
 from dataclasses import replace
 from typing import Any
 
+from odocan.host.judge.livechoice import LiveChoice
 from odocan.host.judge.livefit import LiveFit, rebase
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.liveplace import StallPlacer
@@ -28,6 +29,7 @@ from odocan.host.judge.livepose import (
 )
 from odocan.host.judge.liveresent import judge_resend
 from odocan.host.judge.livesnapshot import tracker_snapshot
+from odocan.host.judge.livestart import start_reference
 from odocan.host.judge.livetruth import LifeTruth, TruthParts, judge_truth
 from odocan.host.judge.livetwins import TwinWatch
 from odocan.host.judge.livewindow import (
@@ -102,7 +104,9 @@ class PoseTracker:
         self.placer.halves = self._halves["x"]  # the holes of the log its gaps are told by
         self.restarts = RestartLog(self.placer.reprimed)  # counter restarts told (``events``)
         self.restarts.through, self.restarts.owe = self.placer.seen.through, self.placer.dark.owe
-        self.restarts.heard_in = self.placer.seen.heard_in  # evidenceless: a new start owed
+        self.restarts.heard_in = self.placer.seen.heard_in  # evidenceless: a choice held
+        self.choice = LiveChoice(self)  # ... both candidates until the pages or the next pose
+        self.restarts.choose = self.choice.open
         self._gate = StepGate(geometry, self.counter_bits, self.restarts)
         self._pending: FramePose | None = None  # the first pose, heard before the integrator
         self._backlog_counts: list[Counted] = []  # the frames since the pending pose's
@@ -134,6 +138,8 @@ class PoseTracker:
         """Bus time is now ``t_s`` (any frame heard): pose halves heard half an encoder cycle or
         more before are settled; a new life waiting ``BOOT_COUNT_WAIT_S`` starts without it."""
         self._now_s = self.placer.dark.heard(t_s)  # (and whether the input went dark)
+        if t_s > self.choice.until_s:  # the pages had their time: the choice is made
+            self.choice.decide()
         if self._boot is not None and t_s > self._boot[1]:
             self._finish_boot(self._boot[0]) if self._boot[0] >= 0 else self._finish_first(False)
         if t_s - self._unsettled_from_s < QUEUED_GAP_S:
@@ -162,6 +168,8 @@ class PoseTracker:
             if step is not None:
                 ref.step_deltas(*step)
             self._keep_ref(FramePose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad))
+            if self.choice.pending is not None:  # the twin steps along (livechoice)
+                self.choice.stepped(self.enc_seq, step)
         elif self._pending is not None:
             self._backlog_counts.append(counted(row))
             if len(self._backlog_counts) > BACKLOG_FRAMES:  # too long: start at a later pose
@@ -246,7 +254,7 @@ class PoseTracker:
         self.placer.dark.due(seq, self.restart_reference)  # after a dark restart: livedark
         ref = self._compare(pose, y, queued)
         self.settled.append(sample := Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
-        if self._boot is not None:  # held: settled again once judged (``_start_reference``)
+        if self._boot is not None:  # held: settled again once judged (``livestart``)
             self._held[seq] = sample
 
     def _compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
@@ -280,9 +288,13 @@ class PoseTracker:
             if self.integrator is None:
                 self._backlog_poses.append(pose)
                 return None
-            self._start_reference(self._pending, self._backlog_counts, [])
+            start_reference(self, self._pending, self._backlog_counts, [])
             self._drop_backlog()
-        ref = self._ref_at.get(seq)
+        return None if self.choice.holds(pose) else self.judge(pose)  # held: livechoice
+
+    def judge(self, pose: FramePose) -> FramePose | None:
+        """Judge ``pose`` against the reference at its frame, placed again first where owed."""
+        ref = self._ref_at.get(pose.seq)
         if ref is None:
             return None
         if self._place_at_next or self.placer.owed:  # owed: an allowance withdrawn
@@ -330,13 +342,14 @@ class PoseTracker:
         first = self.integrator is None
         self.integrator = name
         if first and self._pending is not None:  # judge what was heard while waiting
-            self._start_reference(self._pending, self._backlog_counts, self._backlog_poses)
+            start_reference(self, self._pending, self._backlog_counts, self._backlog_poses)
             self._drop_backlog()
         else:
             self.restart_reference()
 
     def restart_reference(self) -> None:
         """Start the reference again at the next on-board pose (after a set-pose or config)."""
+        self.choice.decide()  # the samples held are judged by the reference they named
         self._ref = None
         self._last_compared = -1
         self._last_sample_t = None
@@ -389,7 +402,7 @@ class PoseTracker:
         self.reference_starts -= first_life and self.reference_starts > 0
         self.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
         self._losses.primed(primed)  # ENC_E2E_LOST counted from 0 there
-        self._start_reference(FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
+        start_reference(self, FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
         if not first_life:
             self.life_truth.booted(primed, self._ref_at)
 
@@ -408,7 +421,7 @@ class PoseTracker:
         self._backlog_poses = poses
         self._backlog_counts = counts if zero else window_counts(self._window, poses[0].seq)
         if self.integrator is not None:
-            self._start_reference(self._pending, self._backlog_counts, poses)
+            start_reference(self, self._pending, self._backlog_counts, poses)
             self._drop_backlog()
 
     def on_enc_counts(self, ok: int, lost: int, proven: bool = False) -> None:
@@ -467,33 +480,6 @@ class PoseTracker:
     def counter_restarts(self) -> int:
         """Counter restarts the current reference re-primed on (as the firmware does)."""
         return self._gate.counter_restarts
-
-    def _start_reference(self, pose: FramePose, counts: list[Counted],
-                         poses: list[FramePose]) -> None:
-        """Start the reference at ``pose``, primed on the first of ``counts`` (the frame ``pose``
-        names on, stepped as heard: ``Counted``), catch up, compare the ``poses`` heard since."""
-        assert self.integrator is not None
-        ref = self._ref = ReferenceOdometry(
-            self.geometry, self.integrator, self.counter_bits,
-            x_m=pose.x_m, y_m=pose.y_m, heading_rad=pose.heading_rad,
-        )
-        self.reference_starts += 1
-        self.fit = LiveFit.start(pose)
-        self._ref_at = {}
-        self.placer.restart()
-        self._gate = StepGate(self.geometry, self.counter_bits, self.restarts)
-        for frame in counts:
-            step = self._gate.step(frame)  # the first primes: stays at pose
-            if step is not None:
-                ref.step_deltas(*step)
-            self._keep_ref(FramePose(frame[0], ref.x_m, ref.y_m, ref.heading_rad))
-        for heard in poses:
-            at = self._ref_at.get(heard.seq)
-            held = self._held.pop(heard.seq, None)
-            if at is not None and held is not None:  # settled again, judged now
-                self.settled.append(held._replace(reference=self._record(heard, at)))
-            elif at is not None:
-                self._record(heard, at)
 
     def snapshot(self) -> dict[str, Any]:
         """``pose``, ``reference``, ``truth``, ``error`` (``livesnapshot.tracker_snapshot``)."""

@@ -309,6 +309,7 @@ def _report(
             entry["commands_accepted"] = robot.commands_sent
             entry["commands_rejected"] = robot.commands_rejected
             tracker = robot.telemetry.tracker
+            tracker.choice.decide()  # the end of the watch: a held choice made (livechoice)
             verdict = judge_robot(
                 tracker.vs_reference, tracker.vs_truth, frames_dropped=dropped,
                 beyond_allowance_m=tracker.max_beyond_allowance_m)

@@ -1,0 +1,141 @@
+"""The live judge's choice at an ambiguous hole no page has told of yet (issue #11, one judge;
+rule 5: a PASS must never hide a wrong pose; ``host.judge.evidenceless``).
+
+A step of the encoder frames heard that reaches the ambiguous step (``host.judge.ambiguity``)
+behind a hole of the frames heard re-primes the reference (``livepose.StepGate``), as the
+firmware does when it missed the frames; a recorder (or a link) that lost the frames alone holds
+a firmware that took them one by one. Where the pages heard so far cannot tell which (no
+FRAME_TOTALS page of the life, no ENC_E2E page inside the hole: ``LiveSeen.heard_in``), the whole
+log's judge chooses by the firmware's next pose (``host.judge.evidencechoice``: the candidate
+nearer to it, in LSBs of position and heading) unless its pages prove the gap missed. The live
+judge did not choose: it started again from the next pose, so a firmware whose HEADING was
+2 LSB off after such a hole FAILed ``analyze`` and PASSed the monitor and the bridge.
+
+Now both candidates are kept: the reference re-primed (the gate's) and its twin that took the
+hole's step (the frames' counts across it, ``wrap_delta``), stepped along with it frame by
+frame. The on-board samples naming the hole's frame or later are held, unjudged, until
+``WAIT_S`` of bus time after the hole (the next ENC_E2E and FRAME_TOTALS pages come within it),
+the end of the watch or the reference's restart; then the pages heard decide as they decide for
+the whole log (the gap proven missed: ``Seen.gap_missed``, the re-prime), else the first held
+sample chooses as ``evidencechoice`` does, and every held sample is judged against the chosen
+candidate (the gap taken keeps its placement, ``gapbound``'s allowance; the re-prime none). A
+live verdict so lags the hole by at most ``WAIT_S``; a pose that fits neither candidate FAILs.
+Bounded: one choice at a time (a second such hole while one waits falls back to the new start
+from the next pose, ``livedark.DarkRestarts.owe``), its twin's poses over ``WAIT_S`` of frames.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+from odocan.host.judge.liveplace import Gap
+from odocan.host.judge.livepose import FramePose, difference
+from odocan.host.judge.reference import ReferenceOdometry
+from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
+
+if TYPE_CHECKING:
+    from odocan.host.judge.tracking import PoseTracker
+
+WAIT_S = 1.0  # bus time after the hole's frame the pages may take to tell (s)
+
+
+@dataclass
+class Pending:
+    """A choice waiting: the frame after the hole, the bus times of the frames around it, the
+    twin that took its step and its poses by frame, the hole's gap (a placement part when
+    taken), the last sample compared before it, the samples held since."""
+
+    seq: int
+    span_s: tuple[float, float]
+    twin: ReferenceOdometry
+    gap: Gap | None
+    last_compared: int
+    twin_at: dict[int, FramePose] = field(default_factory=dict)
+    held: list[FramePose] = field(default_factory=list)
+
+
+class LiveChoice:
+    """The tracker's choice at an ambiguous hole no page told of (module docstring)."""
+
+    def __init__(self, tracker: PoseTracker) -> None:
+        self._tracker = tracker
+        self.pending: Pending | None = None
+        self.until_s = math.inf  # bus time the pending choice is decided at (s)
+        self.taken = self.reprimed = 0  # choices made each way
+
+    def open(self, seq: int, span_s: tuple[float, float], taken: tuple[int, int]) -> bool:
+        """The reference re-primes on encoder frame ``seq`` after a hole from bus time
+        ``span_s[0]`` to ``span_s[1]`` whose frames' step was ``taken`` (counts): hold the
+        choice (True), or False (a choice waits already, or no reference: a new start owed)."""
+        ref = self._tracker._ref
+        if self.pending is not None or ref is None:
+            return False
+        twin = copy.copy(ref)
+        twin.step_deltas(*taken)
+        self.pending = Pending(seq, span_s, twin, self._tracker.placer.gap_at(seq),
+                               self._tracker._last_compared)
+        self.until_s = span_s[1] + WAIT_S
+        return True
+
+    def stepped(self, seq: int, step: tuple[int, int] | None) -> None:
+        """Encoder frame ``seq`` stepped the reference by ``step``: the twin steps too (the hole's
+        frame it stepped at ``open``)."""
+        p = self.pending
+        assert p is not None
+        if step is not None and seq != p.seq:
+            p.twin.step_deltas(*step)
+        p.twin_at[seq] = FramePose(seq, p.twin.x_m, p.twin.y_m, p.twin.heading_rad)
+
+    def holds(self, pose: FramePose) -> bool:
+        """Whether the on-board ``pose`` waits for the choice (it names the hole's frame or
+        later); then it counts as compared for the stall rules (``tracking._compare``)."""
+        p = self.pending
+        if p is None or pose.seq < p.seq:
+            return False
+        p.held.append(pose)
+        self._tracker._last_compared = pose.seq
+        return True
+
+    def decide(self) -> None:
+        """Choose (module docstring) and judge the samples held against the chosen reference,
+        placed after the hole as any gap's (``tracking.PoseTracker.judge``)."""
+        p, self.pending, self.until_s = self.pending, None, math.inf
+        if p is None:
+            return
+        tracker = self._tracker
+        if self._take(p):
+            self.taken += 1
+            tracker._ref = p.twin
+            tracker._ref_at.update(p.twin_at)
+            if p.gap is not None:
+                tracker.placer.took_gap(p.gap)
+        else:
+            self.reprimed += 1
+        tracker._last_compared = p.last_compared
+        for pose in p.held:
+            tracker.judge(pose)
+
+    def _take(self, p: Pending) -> bool:
+        """Whether the twin (the hole taken) is chosen: not where the pages heard prove the
+        firmware missed the hole's frames; else by the first sample held (``evidencechoice``:
+        strictly nearer, position and heading in LSBs)."""
+        seen = self._tracker.placer.seen
+        if seen.heard_in(*p.span_s) and seen.proven().gap_missed(p.seq):
+            return False
+        if not p.held:
+            return False
+        pose = p.held[0]
+        reprimed, took = self._tracker._ref_at.get(pose.seq), p.twin_at.get(pose.seq)
+        if reprimed is None or took is None:
+            return False
+        correct = self._tracker.fit.correct
+        return _lsbs(pose, correct(took)) < _lsbs(pose, correct(reprimed))
+
+
+def _lsbs(pose: FramePose, ref: FramePose) -> float:
+    """How far ``pose`` lies from ``ref``: position and heading in LSBs, summed."""
+    off = difference(pose, ref)
+    return off["dpos_m"] / POSITION_LSB_M + abs(off["dheading_rad"]) / HEADING_LSB_RAD
