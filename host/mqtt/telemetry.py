@@ -68,6 +68,7 @@ from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.dbcnames import choice, named_value, page_name
+from odocan.host.mqtt.haltstretch import HaltStretches
 from odocan.host.mqtt.liveprofile import ProfileStatus
 from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
@@ -168,6 +169,7 @@ class RobotTelemetry:
             if set_pose is not None else {}
         self.reboots = 0
         self.profile = ProfileStatus(profile_name)  # ODOM_STATUS PROFILE vs these parameters
+        self.stretches: HaltStretches | None = None  # an overloaded fleet's (host.mqtt.overload)
 
     # --- frames ---
     def feed(self, msg: can.Message) -> list[Publication]:
@@ -292,6 +294,8 @@ class RobotTelemetry:
         samples = self.tracker.take_samples()
         if not samples:
             return []
+        if self.stretches is not None:
+            self.stretches.on_samples(samples)
         sample = samples[-1]
         t_s = sample.t_s
         if t_s < self._last_pub_t:  # the bus clock went back (a restart, a replay): follow it
