@@ -49,7 +49,6 @@ import contextlib
 import logging
 import math
 import time
-import weakref
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -72,9 +71,9 @@ from odocan.host.mqtt.broker import (
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient
 from odocan.host.mqtt.expiry import Expired, expired_by
 from odocan.host.mqtt.redelivery import Redeliveries
+from odocan.host.mqtt.v5probe import CLIENT_LOG, speaks_v5
 
 log = logging.getLogger("odocan.mqtt")
-CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
 Publication = tuple[str, dict[str, Any]]
 Verdict = Literal["run", "expired", "busy", "retained"]
 COMMANDS_PER_TURN = 8  # commands handled before the event loop's other tasks get a turn
@@ -433,40 +432,6 @@ class RobotLink:
 
 def _payload(message: aiomqtt.Message) -> bytes:
     return bytes(message.payload) if isinstance(message.payload, bytes | bytearray) else b""
-
-
-_V5_SEEN: weakref.WeakKeyDictionary[
-    asyncio.AbstractEventLoop, tuple[asyncio.Lock, dict[tuple[str, int], bool]]
-] = weakref.WeakKeyDictionary()  # per event loop: its lock and the answers
-
-
-async def speaks_v5(broker: BrokerURL, timeout_s: float) -> bool:
-    """Whether ``broker`` speaks MQTT v5, from one plain v5 CONNECT (no will, no properties:
-    amqtt misreads a v5 CONNECT with properties and never answers). Cached per host and port
-    for the running event loop;
-    ``BrokerError`` when the broker cannot be used at all (refused, not authorized, TLS, DNS)."""
-    loop = asyncio.get_running_loop()
-    lock, seen = _V5_SEEN.setdefault(loop, (asyncio.Lock(), {}))
-    async with lock:
-        key = (broker.host, broker.port)
-        if key not in seen:
-            seen[key] = await _probe_v5(broker, timeout_s)
-        return seen[key]
-
-
-async def _probe_v5(broker: BrokerURL, timeout_s: float) -> bool:
-    client = aiomqtt.Client(**broker.client_kwargs(), protocol=aiomqtt.ProtocolVersion.V5,
-                            timeout=timeout_s, logger=CLIENT_LOG)
-    client._client.connect_timeout = timeout_s
-    try:
-        async with asyncio.timeout(timeout_s + 1.0), client:
-            return True
-    except (aiomqtt.MqttError, TimeoutError, OSError) as exc:
-        if protocol_unsupported(exc):
-            log.info("%s speaks MQTT 3.1.1 only: no reason codes, no message expiry", broker)
-            return False
-        reason = await first_connect_failure(exc, broker, timeout_s)
-        raise BrokerError(f"cannot connect to {broker}: {reason}") from None
 
 
 async def _raise_on(stop: asyncio.Event) -> None:
