@@ -88,6 +88,8 @@ class _Outgoing:
     body: bytes
     retain: bool
     interim: bool = False  # a command's ``accepted``: dropped before final answers
+    sent_on: object = None  # the connection (client) paho took it on, its info: not sent twice
+    info: Any = None
 
 
 class _Stopped(Exception):
@@ -412,8 +414,7 @@ class RobotLink:
     async def _publish_window(self, client: LinkClient) -> None:
         """The oldest ``inflight`` QoS-1 entries at once; each leaves once acknowledged."""
         window = list(islice(self.reliable, self.inflight))
-        await asyncio.gather(*(client.publish(p.topic, p.body, qos=topics.QOS_RELIABLE,
-                                              retain=p.retain) for p in window))
+        await asyncio.gather(*(_publish_once(client, p) for p in window))
         for p in window:
             with contextlib.suppress(ValueError):  # dropped meanwhile (buffer full)
                 self.reliable.remove(p)
@@ -428,6 +429,16 @@ class RobotLink:
             async with asyncio.timeout(timeout_s):
                 while self.reliable:
                     await self._publish_window(client)
+
+
+async def _publish_once(client: LinkClient, p: _Outgoing) -> None:
+    """``p`` to the broker and its PUBACK awaited; once per connection: an entry paho already
+    took on ``client`` (its wait cancelled, the bridge stopping: ``_goodbye`` flushes the buffer
+    on the same connection) is waited for, not sent again (20 ``accepted`` went out twice). On
+    a new connection it is sent again (at least once: its PUBACK may never have come)."""
+    if p.sent_on is not client:
+        p.info, p.sent_on = client.publish_reliable(p.topic, p.body, p.retain), client
+    await client.acknowledged(p.info)
 
 
 def _payload(message: aiomqtt.Message) -> bytes:
