@@ -174,11 +174,11 @@ class HaltStretches:
         """``sample`` is the stretch's base when its frame came ``RESYNC_FRAMES`` releases after
         the halt or later (module docstring) and the reference's integrator is known."""
         assert self.halt_s is not None
-        rows = window_counts(self.tracker._window, sample.pose.seq)  # the tracker's own window
+        rows = _frames_from(self.tracker, sample.pose.seq)
         integrator = self.tracker.integrator
         if not rows or rows[0][0] != sample.pose.seq or integrator is None:
             return
-        seq, counter, left, right, _, _, frame_t_s = rows[0]
+        seq, counter, frame_t_s, left, right = rows[0]
         if frame_t_s < self.halt_s + (RESYNC_FRAMES - 0.5) * TICK_S:
             return
         pose = sample.pose
@@ -196,10 +196,10 @@ class HaltStretches:
             return False
         if seq == stretch.seq:
             return True
-        rows = window_counts(self.tracker._window, stretch.seq + 1)
+        rows = _frames_from(self.tracker, stretch.seq + 1)
         ref, (bound_left, bound_right) = stretch.ref, self._bound
         bits = self.tracker.counter_bits
-        for row_seq, counter, left, right, _, _, _ in rows:
+        for row_seq, counter, _, left, right in rows:
             if row_seq > seq:
                 break
             prev = ref._prev
@@ -243,6 +243,27 @@ class HaltStretches:
         return {"samples_after_first_halt": self.after, "samples_judged": self.judged,
                 "stretches": self.stretches, "wrong_stretches": self.wrong_stretches,
                 "first_wrong": None if first is None else first.text()}
+
+
+Frame = tuple[int, int, float, int, int]  # seq, COUNTER, bus time s, left, right
+
+
+def _frames_from(tracker: PoseTracker, first: int) -> list[Frame]:
+    """The encoder frames of the tracker's window from seq ``first`` on: from its latest rows
+    as plain tuples (``Columns.rows``: a sample names one of the latest frames) when they reach
+    back that far, else from the numpy window (``window_counts``: 20 times the CPU)."""
+    window = tracker._window  # the tracker's own window (tracking.py is at its size limit)
+    rows = window.rows
+    if rows and (rows[0][0] <= first or window.whole):
+        frames = []
+        for r in reversed(rows):  # the latest first: a sample names one of the last few
+            if r[0] < first:
+                break
+            frames.append((int(r[0]), int(r[2]), float(r[3]), int(r[4]), int(r[5])))
+        frames.reverse()
+        return frames
+    return [(seq, counter, t_s, left, right)
+            for seq, counter, left, right, _, _, t_s in window_counts(window, first)]
 
 
 def _wrap(delta: int, bits: int) -> int:
