@@ -150,7 +150,9 @@ def test_a_correct_firmware_passes_every_stretch_between_halts(
         assert entry["verdict"] == "PASS", entry["reason"]
         stretches = entry["halt_stretches"]
         assert stretches["first_wrong"] is None, stretches
-        assert stretches["stretches"] >= 10, stretches  # a stretch after every halt
+        assert stretches["halts"] >= 10, stretches
+        # a stretch after every halt (the last may leave no sample before the run's end)
+        assert stretches["stretches"] >= stretches["halts"] - 1, stretches
         assert stretches["samples_judged"] > stretches["samples_after_first_halt"] // 2
         assert entry["reason"].startswith("PASS: no sample wrong before the loop first halted "
                                           f"the robot at {from_s:.2f} s"), entry["reason"]

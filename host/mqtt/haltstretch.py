@@ -144,12 +144,14 @@ class HaltStretches:
     def _on_sample(self, sample: Sample) -> None:
         if self._consume_halts(sample.t_s):
             self._stretch = None
+        starts, restarted = self.tracker.reference_starts, False
+        if starts != self._starts:  # a reboot, a set-pose: a stretch based before it ends
+            self._starts, restarted = starts, self._stretch is not None
         if self.halt_s is None:
             return  # before the first halt: the tracker judges (``overload``)
         self.after += 1
-        if self.tracker.reference_starts != self._starts:  # a reboot, a set-pose: ended
-            self._starts, self._stretch = self.tracker.reference_starts, None
-            self.halt_s = math.inf  # no new base before the next halt
+        if restarted:
+            self._stretch, self.halt_s = None, math.inf  # no new base before the next halt
             return
         if self._stretch is None:
             self._start(sample)
@@ -237,8 +239,8 @@ class HaltStretches:
                 return
 
     def as_dict(self) -> dict[str, Any]:
-        """The report's ``halt_stretches``: samples after the first halt, judged, stretches,
-        wrong stretches, the first wrong one (None: none)."""
+        """The report's ``halt_stretches`` (``overload`` adds the loop's ``halts``): samples
+        after the first halt, judged, stretches, wrong stretches, the first wrong one (None)."""
         first = self.first_wrong
         return {"samples_after_first_halt": self.after, "samples_judged": self.judged,
                 "stretches": self.stretches, "wrong_stretches": self.wrong_stretches,

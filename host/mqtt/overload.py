@@ -77,7 +77,7 @@ def after_halts(entry: dict[str, Any], halted: Halted, tracker: PoseTracker,
     if stretches is None:
         return rejudge(entry, halted, tracker) if entry["verdict"] == "FAIL" \
             else noted(entry, halted)
-    entry = {**entry, "halt_stretches": stretches.as_dict()}
+    entry = {**entry, "halt_stretches": {"halts": halted.halts, **stretches.as_dict()}}
     wrong = stretches.first_wrong
     if wrong is not None:
         return {**entry, "verdict": "FAIL",
