@@ -146,6 +146,7 @@ class Fleet(Closing):
         self._calm_since = 0  # the first tick stepped after the latest skip
         self.halts = 0  # ticks that came so late that every board was halted (``halted_from_s``)
         self.halted_from_k: int | None = None  # the fleet tick of the first of them
+        self.halt_ticks: list[int] = []  # every such tick (one int a halt: <= 10 a second)
         self.longest_gap_periods = 1  # the most periods between two ticks stepped
 
     def step(self, k: int) -> None:
@@ -183,6 +184,7 @@ class Fleet(Closing):
         if self._last_k < 0 or gap * TICK_S < HALT_AFTER_S:
             return
         self.halts += 1
+        self.halt_ticks.append(k)
         if self.halted_from_k is None:
             self.halted_from_k = k
 
@@ -193,6 +195,11 @@ class Fleet(Closing):
         if self.halted_from_k is None:
             return None
         return max(self.halted_from_k - _tick_offset(self.config.first + index), 0) * TICK_S
+
+    def offset_ticks(self, index: int) -> int:
+        """How many fleet ticks robot ``index``'s clock starts late (its bus time of fleet tick
+        k: ``(k - offset) * TICK_S``)."""
+        return _tick_offset(self.config.first + index)
 
     def _sample_skipped(self, k: int) -> None:
         """Releases ``_last_k + 1 .. k - 1`` were skipped: each robot's motor controller sampled

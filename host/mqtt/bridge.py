@@ -46,6 +46,7 @@ from odocan.host.mqtt.broker import BrokerURL, first_error
 from odocan.host.mqtt.expiry import Expired
 from odocan.host.mqtt.link import RobotLink, Verdict
 from odocan.host.mqtt.pacing import ACK_TIMEOUT_S, MAX_QUEUED, WINDOW_FRAMES, CommandPacer
+from odocan.host.mqtt.stallwatch import StallWatch
 from odocan.host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
 from odocan.host.protocol.commands import (
     Command,
@@ -286,6 +287,7 @@ class Bridge:
         self.frames_failed = 0  # frames whose handling raised (a defect): counted, logged once
         self._pending: Batch = []  # the batch being handled, slice by slice (``_consume``)
         self._pending_at = 0  # its first frame not handled yet
+        self.stalls = StallWatch(lambda: any(r.link.connected.is_set() for r in self.robots))
 
     @property
     def links(self) -> list[RobotLink]:
@@ -311,6 +313,7 @@ class Bridge:
                 frames = tg.create_task(self._consume(), name="can-frames")
                 periodic = tg.create_task(self._periodic(), name="periodic")
                 pacing = tg.create_task(self._pace(), name="command-pacing")
+                stalls = tg.create_task(self.stalls.run(), name="loop-stalls")
                 await stop.wait()
                 await asyncio.sleep(0)
                 self._drain()
@@ -318,6 +321,7 @@ class Bridge:
                 frames.cancel()
                 periodic.cancel()
                 pacing.cancel()
+                stalls.cancel()
         except BaseExceptionGroup as group:
             raise first_error(group) from None
 
@@ -333,6 +337,7 @@ class Bridge:
             "frames_failed": self.frames_failed,
             "commands_failed": sum(r.commands_failed for r in self.robots),
             **totals,
+            **self.stalls.counters(),  # commands a broker held for us may be lost (stallwatch)
         }
 
     def summary(self) -> str:

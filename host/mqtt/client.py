@@ -287,6 +287,20 @@ class LinkClient(aiomqtt.Client):
         client._packet_queue(paho.PUBLISH, packet, info.mid, 0, info)
         return info
 
+    def publish_reliable(self, topic: str, body: bytes, retain: bool) -> paho.MQTTMessageInfo:
+        """One QoS-1 message into paho's queue (as aiomqtt's ``publish`` puts it there, without
+        its wait): ``acknowledged(info)`` waits for its PUBACK, and can be awaited again after a
+        cancelled wait (the message is not sent twice); ``MqttCodeError`` when paho refuses."""
+        info = self._client.publish(topic, body, 1, retain)
+        if info.rc != paho.MQTT_ERR_SUCCESS:
+            raise aiomqtt.MqttCodeError(info.rc, "Could not publish message")
+        return info
+
+    async def acknowledged(self, info: paho.MQTTMessageInfo) -> None:
+        """Wait for the PUBACK of the QoS-1 publication ``info`` (``written``: paho calls
+        ``on_publish`` when it reads the PUBACK)."""
+        await self.written(info)
+
     async def written(self, info: paho.MQTTMessageInfo) -> None:
         """Wait until paho wrote the QoS-0 publication ``info`` to the socket (and so every one
         queued before it: paho writes in order)."""

@@ -16,6 +16,7 @@ the fleet's frames offered to it each tick), runs for ``duration_s`` and returns
                             "pose_vs_reference": {"max_dpos_m": ..., "max_dheading_rad": ...,
                                                   "samples": ...} | null,
                             "pose_vs_truth": {...} | null,
+                            "halt_stretches": {...} (a robot the loop halted: haltstretch),
                             "verdict": "PASS" | "FAIL" | "UNJUDGED" | null, "reason": ...}, ...}}
 ```
 
@@ -31,9 +32,11 @@ is judged as any other (a firmware that lost frames or time meanwhile has the ju
 allowance; before, a skip put several periods under one COUNTER step, which kobuki's firmware
 refused, and the robot was UNJUDGED). A loop 10 periods or more behind halts every board
 (``sim.board.HALT_AFTER_S``: the firmwares lose frames no judge sees them lose): a robot that
-FAILs once that happened is judged on its samples before it alone (``host.mqtt.overload``):
-FAIL when one of them was wrong, else UNJUDGED with the numbers of the overload (a PASS says
-them in its reason: an error that began during the halts may not show). The error
+was halted is judged on its samples before the first halt and, after it, stretch by stretch
+between the halts, each re-started at the firmware's pose (``host.mqtt.overload``,
+``host.mqtt.haltstretch``; ``watch_halts``): FAIL when a sample before or a stretch was wrong,
+PASS when the stretches judged samples (the re-starts at the halts not judged, said), else as
+before the stretches (UNJUDGED with the numbers of the overload). The error
 against the ground truth (SIM_TRUTH) is reported, never judged: it is the odometry's own drift, not
 the firmware's arithmetic. When the bridge dropped frames (queue full), the references miss encoder
 steps, so no robot is judged (UNJUDGED) and the run fails for that reason instead of blaming a
@@ -68,8 +71,10 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
+from odocan.host.mqtt.haltstretch import HaltStretches
 from odocan.host.mqtt.options import broker_for
-from odocan.host.mqtt.overload import Halted, noted, rejudge
+from odocan.host.mqtt.overload import Halted, after_halts
+from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.host.stopped import Stopped
 from odocan.sim.board import TICK_S
@@ -118,6 +123,7 @@ async def run_fleet(
             bridge = Bridge(_endpoints(fleet, run), config=BridgeConfig(
                 broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix,
                 connect_timeout_s=run.connect_timeout_s, command_expiry_s=run.command_expiry_s))
+            watch_halts(fleet, [robot.telemetry for robot in bridge.robots])
             stop = asyncio.Event()
             try:
                 async with asyncio.TaskGroup() as tg:
@@ -314,10 +320,9 @@ def _report(
                 tracker.vs_reference, tracker.vs_truth, frames_dropped=dropped,
                 beyond_allowance_m=tracker.max_beyond_allowance_m)
             halted = _halted(fleet, i, stats)
-            if verdict["verdict"] == "FAIL" and halted is not None:
-                verdict = rejudge(verdict, halted, tracker)  # host.mqtt.overload
-            elif verdict["verdict"] == "PASS" and halted is not None:
-                verdict = noted(verdict, halted)
+            if verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
+                verdict = after_halts(verdict, halted, tracker,  # host.mqtt.overload
+                                      robot.telemetry.stretches)
             entry.update(verdict)
         else:
             entry.update(pose_vs_reference=None, pose_vs_truth=None, verdict=None,
@@ -340,6 +345,13 @@ def _report(
         "bridge": None if bridge is None else bridge.counters(),
         "per_robot": per_robot,
     }
+
+
+def watch_halts(fleet: Fleet, telemetry: list[RobotTelemetry]) -> None:
+    """Each robot's telemetry judges its samples between the loop's halts
+    (``host.mqtt.haltstretch``; nothing to do until the loop halts the boards)."""
+    for i, robot in enumerate(telemetry):
+        robot.stretches = HaltStretches(robot.tracker, fleet.halt_ticks, fleet.offset_ticks(i))
 
 
 def _halted(fleet: Fleet, index: int, stats: DeadlineStats) -> Halted | None:

@@ -49,7 +49,6 @@ import contextlib
 import logging
 import math
 import time
-import weakref
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -72,9 +71,9 @@ from odocan.host.mqtt.broker import (
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient
 from odocan.host.mqtt.expiry import Expired, expired_by
 from odocan.host.mqtt.redelivery import Redeliveries
+from odocan.host.mqtt.v5probe import CLIENT_LOG, speaks_v5
 
 log = logging.getLogger("odocan.mqtt")
-CLIENT_LOG = logging.getLogger("odocan.mqtt.client")  # aiomqtt, paho: quiet unless --debug
 Publication = tuple[str, dict[str, Any]]
 Verdict = Literal["run", "expired", "busy", "retained"]
 COMMANDS_PER_TURN = 8  # commands handled before the event loop's other tasks get a turn
@@ -89,6 +88,8 @@ class _Outgoing:
     body: bytes
     retain: bool
     interim: bool = False  # a command's ``accepted``: dropped before final answers
+    sent_on: object = None  # the connection (client) paho took it on, its info: not sent twice
+    info: Any = None
 
 
 class _Stopped(Exception):
@@ -413,8 +414,7 @@ class RobotLink:
     async def _publish_window(self, client: LinkClient) -> None:
         """The oldest ``inflight`` QoS-1 entries at once; each leaves once acknowledged."""
         window = list(islice(self.reliable, self.inflight))
-        await asyncio.gather(*(client.publish(p.topic, p.body, qos=topics.QOS_RELIABLE,
-                                              retain=p.retain) for p in window))
+        await asyncio.gather(*(_publish_once(client, p) for p in window))
         for p in window:
             with contextlib.suppress(ValueError):  # dropped meanwhile (buffer full)
                 self.reliable.remove(p)
@@ -431,42 +431,18 @@ class RobotLink:
                     await self._publish_window(client)
 
 
+async def _publish_once(client: LinkClient, p: _Outgoing) -> None:
+    """``p`` to the broker and its PUBACK awaited; once per connection: an entry paho already
+    took on ``client`` (its wait cancelled, the bridge stopping: ``_goodbye`` flushes the buffer
+    on the same connection) is waited for, not sent again (20 ``accepted`` went out twice). On
+    a new connection it is sent again (at least once: its PUBACK may never have come)."""
+    if p.sent_on is not client:
+        p.info, p.sent_on = client.publish_reliable(p.topic, p.body, p.retain), client
+    await client.acknowledged(p.info)
+
+
 def _payload(message: aiomqtt.Message) -> bytes:
     return bytes(message.payload) if isinstance(message.payload, bytes | bytearray) else b""
-
-
-_V5_SEEN: weakref.WeakKeyDictionary[
-    asyncio.AbstractEventLoop, tuple[asyncio.Lock, dict[tuple[str, int], bool]]
-] = weakref.WeakKeyDictionary()  # per event loop: its lock and the answers
-
-
-async def speaks_v5(broker: BrokerURL, timeout_s: float) -> bool:
-    """Whether ``broker`` speaks MQTT v5, from one plain v5 CONNECT (no will, no properties:
-    amqtt misreads a v5 CONNECT with properties and never answers). Cached per host and port
-    for the running event loop;
-    ``BrokerError`` when the broker cannot be used at all (refused, not authorized, TLS, DNS)."""
-    loop = asyncio.get_running_loop()
-    lock, seen = _V5_SEEN.setdefault(loop, (asyncio.Lock(), {}))
-    async with lock:
-        key = (broker.host, broker.port)
-        if key not in seen:
-            seen[key] = await _probe_v5(broker, timeout_s)
-        return seen[key]
-
-
-async def _probe_v5(broker: BrokerURL, timeout_s: float) -> bool:
-    client = aiomqtt.Client(**broker.client_kwargs(), protocol=aiomqtt.ProtocolVersion.V5,
-                            timeout=timeout_s, logger=CLIENT_LOG)
-    client._client.connect_timeout = timeout_s
-    try:
-        async with asyncio.timeout(timeout_s + 1.0), client:
-            return True
-    except (aiomqtt.MqttError, TimeoutError, OSError) as exc:
-        if protocol_unsupported(exc):
-            log.info("%s speaks MQTT 3.1.1 only: no reason codes, no message expiry", broker)
-            return False
-        reason = await first_connect_failure(exc, broker, timeout_s)
-        raise BrokerError(f"cannot connect to {broker}: {reason}") from None
 
 
 async def _raise_on(stop: asyncio.Event) -> None:

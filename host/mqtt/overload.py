@@ -12,15 +12,19 @@ loop's, not its arithmetic: with the loop one tick in 7-30 (load 13-14), a corre
 FAILed with "heading vs reference 62.81 mrad". The loop knows when it first halted the boards
 (``Fleet.halted_from_s``): the samples before are judged as ever; from then on they are not.
 
-``rejudge``: the verdict of a robot that FAILed on all its samples once the loop halted it. FAIL
-when a sample before the first halt was wrong (``host.judge.posewrongs``: beyond one LSB of
-position after its loss allowance, or one LSB of heading); else UNJUDGED, saying so with the
-numbers (from which bus time, how many halts, the longest gap). A robot that PASSed on all its
-samples stays PASS (no sample was wrong: the judge's stall rules followed it through the halts),
-its ``reason`` saying how far the loop starved it (``noted``): after a halt the judge places its
-reference where the firmware is, within the merge allowance of the frames the firmware took as
-one step, so an error that began during the halts may not show (a firmware 2 LSB off from then
-PASSed in ``tests/test_fleet_overload.py``'s drive).
+``after_halts``: the verdict of a robot the loop halted. FAIL when a sample before the first halt
+was wrong (``host.judge.posewrongs``: beyond one LSB of position after its loss allowance, or one
+LSB of heading), or when a stretch between two halts was (``host.mqtt.haltstretch``: each
+stretch re-started at the firmware's pose once it took the frames after the halt, as a set-pose;
+a pose step inside it that the reference does not make FAILs, the re-start jump at the halt
+itself, the rig's fault, is not judged). Else PASS when the stretches judged at least half the
+samples since (``MIN_JUDGED_SHARE``), its ``reason`` saying how many and that the re-starts were
+not. Without enough of them (the halts too close) the verdict is as before the stretches:
+``rejudge`` (a FAIL of all its samples: UNJUDGED with the numbers, from which bus time, how many
+halts, the longest gap) and ``noted`` (a PASS of all its samples says how far the loop starved
+it: after a halt the tracker places its reference where the firmware is, within the merge
+allowance of the frames the firmware took as one step, so an error that began during the halts
+may not show).
 """
 
 from __future__ import annotations
@@ -31,6 +35,12 @@ from typing import Any
 
 from odocan.host.judge.posewrongs import PoseWrongs
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.haltstretch import HaltStretches
+
+# A PASS after halts needs the stretches to have judged this share of the samples since the
+# first halt: halts a few ticks apart leave a stretch a sample or two (one tick in 7-30 at load
+# 13-14 judged 1-4 of 40-60), too little to call the firmware right there.
+MIN_JUDGED_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -54,14 +64,54 @@ class Halted:
                 "the bus, so its pose is not judged from then")
 
 
+def after_halts(entry: dict[str, Any], halted: Halted, tracker: PoseTracker,
+                stretches: HaltStretches | None) -> dict[str, Any]:
+    """``entry`` (a PASS or FAIL of ``fleetrun.judge_robot``) of a robot the loop halted:
+    FAIL when a sample before the first halt was wrong, or a stretch between halts was
+    (``host.mqtt.haltstretch``); else PASS when a stretch judged a sample, saying what was not
+    judged, as long as they judged at least ``MIN_JUDGED_SHARE`` of the samples since; else as
+    before the stretches (``rejudge``, ``noted``)."""
+    before = _wrongs_before(tracker, halted.from_s)
+    if before.worst is not None:
+        return _failed_before(entry, halted, before)
+    if stretches is None:
+        return rejudge(entry, halted, tracker) if entry["verdict"] == "FAIL" \
+            else noted(entry, halted)
+    entry = {**entry, "halt_stretches": {"halts": halted.halts, **stretches.as_dict()}}
+    wrong = stretches.first_wrong
+    if wrong is not None:
+        return {**entry, "verdict": "FAIL",
+                "reason": f"pose vs reference wrong after the loop halted the robot at "
+                          f"{halted.from_s:.2f} s: {wrong.text()} ({stretches.wrong_stretches} "
+                          f"of {stretches.stretches} stretches between halts wrong)"}
+    if stretches.judged < MIN_JUDGED_SHARE * stretches.after or not stretches.judged:
+        return rejudge(entry, halted, tracker) if entry["verdict"] == "FAIL" \
+            else noted(entry, halted)
+    return {**entry, "verdict": "PASS", "reason": _stretches_text(halted, stretches)}
+
+
+def _stretches_text(halted: Halted, stretches: HaltStretches) -> str:
+    """A PASS after halts: what was judged, what was not."""
+    return (f"PASS: no sample wrong before the loop first halted the robot at {halted.from_s:.2f} "
+            f"s, nor inside the {stretches.stretches} stretches between its {halted.halts} halts "
+            f"(up to {halted.longest_gap_periods} periods apart; {stretches.judged} of "
+            f"{stretches.after} samples since judged, each stretch re-started at the firmware's "
+            "pose); the re-start at each halt is not judged (the halted MCU lost frames the bus "
+            "carried: the rig's fault, not the firmware's)")
+
+
+def _failed_before(entry: dict[str, Any], halted: Halted, before: PoseWrongs) -> dict[str, Any]:
+    return {**entry, "verdict": "FAIL",
+            "reason": f"pose vs reference wrong before the loop halted the robot at "
+                      f"{halted.from_s:.2f} s: {before.summary()}"}
+
+
 def rejudge(entry: dict[str, Any], halted: Halted, tracker: PoseTracker) -> dict[str, Any]:
     """``entry`` (a FAIL of ``fleetrun.judge_robot``) judged on the samples before
     ``halted.from_s`` only (module docstring); the tracker is left as it was."""
     before = _wrongs_before(tracker, halted.from_s)
     if before.worst is not None:
-        return {**entry, "verdict": "FAIL",
-                "reason": f"pose vs reference wrong before the loop halted the robot at "
-                          f"{halted.from_s:.2f} s: {before.summary()}"}
+        return _failed_before(entry, halted, before)
     return {**entry, "verdict": "UNJUDGED",
             "reason": f"{halted.text()}; no sample before was wrong ({entry['reason']} after)"}
 

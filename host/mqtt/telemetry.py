@@ -67,6 +67,8 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.dbcnames import choice, named_value, page_name
+from odocan.host.mqtt.haltstretch import HaltStretches
 from odocan.host.mqtt.liveprofile import ProfileStatus
 from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
@@ -167,6 +169,7 @@ class RobotTelemetry:
             if set_pose is not None else {}
         self.reboots = 0
         self.profile = ProfileStatus(profile_name)  # ODOM_STATUS PROFILE vs these parameters
+        self.stretches: HaltStretches | None = None  # an overloaded fleet's (host.mqtt.overload)
 
     # --- frames ---
     def feed(self, msg: can.Message) -> list[Publication]:
@@ -291,6 +294,8 @@ class RobotTelemetry:
         samples = self.tracker.take_samples()
         if not samples:
             return []
+        if self.stretches is not None:
+            self.stretches.on_samples(samples)
         sample = samples[-1]
         t_s = sample.t_s
         if t_s < self._last_pub_t:  # the bus clock went back (a restart, a replay): follow it
@@ -350,9 +355,9 @@ class RobotTelemetry:
     def _on_status(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         page = int(s["PAGE"])
         signals = self._status_signals
-        fields = {signals[k][0]: _named_value(signals[k][1], v) for k, v in s.items()
+        fields = {signals[k][0]: named_value(signals[k][1], v) for k, v in s.items()
                   if k not in ("CHECKSUM", "COUNTER", "PAGE")}
-        name = self._page_names.get(page) or _page_name(self.db, page)
+        name = self._page_names.get(page) or page_name(self.db, page)
         self.firmware[name] = fields
         proven = self.sources.on_page(name, s, self.tracker)  # the power-up rule
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
@@ -369,7 +374,7 @@ class RobotTelemetry:
     def _on_set_pose(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         """An ODOM_SET_POSE frame on the bus (another tool's; the bridge's own go through
         ``command_sent``): staged and applied as the firmware ACKs it."""
-        field = str(_named_value(self._set_pose_fields, s["FIELD"]))
+        field = str(named_value(self._set_pose_fields, s["FIELD"]))
         self.set_pose.on_frame(int(s["COUNTER"]), field, s.get(field), self.tracker.enc_seq)
         return []
 
@@ -413,7 +418,7 @@ class RobotTelemetry:
         elif pending.config is not None:  # parameters too: the firmware keeps its own)
             self._apply_config(pending.config)  # (a set-pose: ``_followed_set_pose``)
             self.tracker.restart_reference()
-        reason = _choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
+        reason = choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
         payload = {"id": pending.cmd_id, "command": pending.command,
                    "result": "nacked" if nack else "acked", "reason": reason, "t_s": t_s}
         return [(RESULT_LEAF, stamp(payload))]
@@ -478,19 +483,3 @@ def _pose_dict(pose: FramePose) -> dict[str, float]:
     assert fields is not None
     return fields
 
-
-def _named_value(choices: Any, value: Any) -> Any:
-    """An enum signal's value by its DBC name (``"OK"``, not 1; ``choices``: the signal's);
-    other values as they are."""
-    if choices and int(value) in choices:
-        return str(choices[int(value)])
-    return value
-
-
-def _choice(db: Database, message: str, signal: str, value: int) -> str:
-    choices = db.get_message_by_name(message).get_signal_by_name(signal).choices
-    return str(choices.get(value, value)) if choices else str(value)
-
-
-def _page_name(db: Database, page: int) -> str:
-    return _choice(db, "ODOM_STATUS", "PAGE", page).lower()
