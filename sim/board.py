@@ -270,22 +270,19 @@ class FirmwareBoard(BusNode):
         if type(bus) is not OdocanBus or self._bus_off:  # the lean handle is never bus-off
             self._service_bus_state()
         elif not halted and self.accept_ids is None and self._take_lean(bus):
-            self._tick_lean(bus, now_s)
+            # The firmware's frames straight onto the open, instant handle's wire stamped now
+            # plus the latency (``transmit``: the handle's checks and a lockstep clock's time
+            # are the same for every frame of the tick, done here once; a wall clock moves
+            # during the tick: each frame reads it).
+            if bus.preserve_timestamps and type(self.clock) is LockstepClock:
+                self._lean_stamp_s = now_s + self.tx_latency_s
+            try:
+                self.ecu.tick(round(now_s * 1e6) & _U32)
+            finally:
+                self._lean_stamp_s = None
             return
         self.service_rx(HW_RX_FIFO_FRAMES if halted else None)
         self.ecu.tick(round(now_s * 1e6) & _U32)
-
-    def _tick_lean(self, bus: OdocanBus, now_s: float) -> None:
-        """The firmware's tick after ``_take_lean``: its frames straight onto the open, instant
-        handle's wire stamped ``now_s`` plus the latency (``transmit``: that handle's checks and
-        the lockstep clock's time are the same for every frame of the tick, done here once; a
-        wall clock moves during the tick, each frame reads it)."""
-        if bus.preserve_timestamps and type(self.clock) is LockstepClock:  # open and instant
-            self._lean_stamp_s = now_s + self.tx_latency_s
-        try:
-            self.ecu.tick(round(now_s * 1e6) & _U32)
-        finally:
-            self._lean_stamp_s = None
 
     def _take_lean(self, bus: OdocanBus) -> bool:
         """``service_rx()`` of the common tick on the lean transport's open, instant, unfiltered
