@@ -34,7 +34,7 @@ import can
 from odocan.firmware.config import RobotParams
 from odocan.firmware.ecu import LOST_TIME_PERIODS, OdomEcu
 from odocan.firmware.hal import TICK_PERIOD_US
-from odocan.sim.clock import Clock
+from odocan.sim.clock import Clock, LockstepClock
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.framebatch import Received
 from odocan.sim.node import BusNode
@@ -182,6 +182,8 @@ class FirmwareBoard(BusNode):
         self.frames_dropped_by_filter = 0
         self.frames_overrun = 0  # frames the halted MCU's receive FIFO could not hold
         self._last_run_s: float | None = None
+        # The stamp of the firmware's frames in a lean tick (``run_tick``; None outside one).
+        self._lean_stamp_s: float | None = None
 
     tx_latency_s = TX_LATENCY_S
 
@@ -201,6 +203,11 @@ class FirmwareBoard(BusNode):
         open, instant, simulated-time handle straight onto its wire (``OdocanBus.send_data``'s
         own path, two calls less a frame: the firmware sends ~2 frames a tick)."""
         bus = self.bus
+        stamp_s = self._lean_stamp_s  # a lean tick's: the handle's checks done, the time added
+        if stamp_s is not None:
+            bus._wire.deliver_data(bus, stamp_s, can_id, data)  # type: ignore[attr-defined]
+            self.frames_sent += 1
+            return True
         if type(bus) is OdocanBus and bus.timing is None and bus._open and bus.preserve_timestamps:
             bus._wire.deliver_data(bus, self.clock.now_s() + self.tx_latency_s, can_id, data)
             self.frames_sent += 1
@@ -263,7 +270,16 @@ class FirmwareBoard(BusNode):
         if type(bus) is not OdocanBus or self._bus_off:  # the lean handle is never bus-off
             self._service_bus_state()
         elif not halted and self.accept_ids is None and self._take_lean(bus):
-            self.ecu.tick(round(now_s * 1e6) & _U32)
+            # The firmware's frames straight onto the open, instant handle's wire stamped now
+            # plus the latency (``transmit``: the handle's checks and a lockstep clock's time
+            # are the same for every frame of the tick, done here once; a wall clock moves
+            # during the tick: each frame reads it).
+            if bus.preserve_timestamps and type(self.clock) is LockstepClock:
+                self._lean_stamp_s = now_s + self.tx_latency_s
+            try:
+                self.ecu.tick(round(now_s * 1e6) & _U32)
+            finally:
+                self._lean_stamp_s = None
             return
         self.service_rx(HW_RX_FIFO_FRAMES if halted else None)
         self.ecu.tick(round(now_s * 1e6) & _U32)

@@ -39,6 +39,7 @@ from odocan.sim.robot import RobotProfile
 
 FloatArray = npt.NDArray[np.float64]
 TAU_RAD = 2.0 * math.pi
+_EXACT_FLOOR_LIMIT = float(1 << 62)  # encoder counts (floored) int64 holds, offsets added
 _MANY_SEGMENTS = 32  # take_travel handles more segments than this as one array
 _CACHED_SEGMENT_LENGTHS = 64  # segment lengths whose _run_segment constants are kept
 _CACHED_SEGMENT_SUBSTEPS = 256  # take_travel keeps the time columns of segments up to this long
@@ -352,6 +353,29 @@ class Drivetrain:
             (left0 + floor(angle_l / TAU_RAD * cpr * k)) & mask,
             (right0 + floor(angle_r / TAU_RAD * cpr * k)) & mask,
         )
+
+    def encoder_counts_at(self, angles: list[list[float]]) -> list[tuple[int, int]]:
+        """``encoder_counts`` at each of ``angles`` (the wheels' ``angle`` at some substeps),
+        computed at once: the same IEEE operations on the same doubles element by element, the
+        floor exact while |angle| is below 2^62 counts (else each one as ``encoder_counts``)."""
+        cpr = self.profile.counts_per_rev
+        k = 4 if self.quadrature else 1
+        counts = np.floor(np.array(angles, dtype=np.float64).reshape(-1, 2) / TAU_RAD * cpr * k)
+        if not np.all(np.abs(counts) < _EXACT_FLOOR_LIMIT):  # NaN, inf or beyond int64's reach
+            return [self._counts_of(angle) for angle in angles]
+        wrapped = (counts.astype(np.int64) + np.array(self.counter_offset, dtype=np.int64)) & (
+            (1 << self.profile.counter_bits) - 1
+        )
+        left, right = wrapped.T.tolist()
+        return list(zip(left, right, strict=True))
+
+    def _counts_of(self, angle: list[float]) -> tuple[int, int]:
+        """``encoder_counts`` with the wheels at ``angle`` (the state left as it was)."""
+        now, self.angle = self.angle, angle
+        try:
+            return self.encoder_counts()
+        finally:
+            self.angle = now
 
     def wheel_speeds_mps(self) -> tuple[float, float]:
         """Actual (left, right) ground speeds of the wheel rims, m/s (omega * actual radius)."""

@@ -323,10 +323,11 @@ class PlannedVehicle(Vehicle):
         block = _Block()
         forecast, start_s, tick_s = self._forecast, self._start_s, self._tick_s
         drivetrain = self.drivetrain
-        advance, counts, hz = drivetrain.advance, drivetrain.encoder_counts, self.substep_hz
+        advance, hz = drivetrain.advance, self.substep_hz
         floor = math.floor
         first = self._next_tick
-        index, substeps, recorded = block.index, block.substeps, block.counts
+        index, substeps = block.index, block.substeps
+        angles: list[list[float]] = []  # the wheels' at each tick (a new list every segment)
         command, commands = drivetrain.command, block.commands
         for i, k in enumerate(range(first, first + ticks)):  # Vehicle.command and advance_to,
             t_s = start_s + k * tick_s  # unchecked
@@ -338,7 +339,8 @@ class PlannedVehicle(Vehicle):
                 commands.append((n, speeds[0], speeds[1]))
             index[n] = i
             substeps.append(n)
-            recorded.append(counts())
+            angles.append(drivetrain.angle)
+        block.counts = drivetrain.encoder_counts_at(angles)  # encoder_counts() of each, at once
         block.end = drivetrain.substep
         block.truth_s0 = self._truth.substep
         ds = self.drivetrain.take_travel()

@@ -286,3 +286,41 @@ def test_a_segment_is_evolve_s_closed_form_bit_for_bit(
     assert [math.copysign(1.0, a) for a in drivetrain.angle] == [
         math.copysign(1.0, want_l[1]), math.copysign(1.0, want_r[1])
     ]
+
+
+# Angles anywhere, and at count edges (c counts of 4096 x1 or x4 a turn, and the doubles either
+# side): where the floor turns on the last bit of the quotient.
+_EDGE = st.builds(lambda c, k, side: math.nextafter(c * (2.0 * math.pi) / (4096 * k), side),
+                  st.integers(-(2**30), 2**30), st.sampled_from([1, 4]),
+                  st.sampled_from([-math.inf, 0.0, math.inf]))
+_ANGLE = (st.floats(-1e7, 1e7) | _EDGE
+          | st.sampled_from([0.0, -0.0, 1e-300, -1e-300, 1e18, math.inf]))
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.tuples(_ANGLE, _ANGLE), max_size=20),
+    st.booleans(),
+    st.sampled_from([16, 32]),
+    st.tuples(st.integers(0, 2**32 - 1), st.integers(0, 2**32 - 1)),
+)
+def test_counts_at_many_angles_are_encoder_counts_at_each(
+    angles: list[tuple[float, float]], quadrature: bool, bits: int, offset: tuple[int, int]
+) -> None:
+    """``encoder_counts_at`` (a block's counts at once, in numpy) gives, angle for angle, what
+    ``encoder_counts`` gives with the wheels there: the independent formula, floor(angle /
+    2 pi * cpr * k) plus the offset, wrapped (beyond int64 or not finite: per angle, as it)."""
+    profile = RobotProfile("p", 4096, 0.05, 0.05, 0.3, bits)
+    radii = (profile.wheel_radius_left_m, profile.wheel_radius_right_m)
+    drive = Drivetrain(profile, radii, HZ, quadrature, counter_offset=offset)
+    k = 4 if quadrature else 1
+    finite = [a for a in angles if math.isfinite(a[0]) and math.isfinite(a[1])]
+    expected = [
+        tuple((o + math.floor(x / (2.0 * math.pi) * 4096 * k)) % 2**bits
+              for x, o in zip(a, offset, strict=True))
+        for a in finite
+    ]
+    assert drive.encoder_counts_at([list(a) for a in finite]) == expected
+    if len(finite) < len(angles):  # a NaN or an infinity: as encoder_counts, it raises
+        with pytest.raises((OverflowError, ValueError)):
+            drive.encoder_counts_at([list(a) for a in angles])

@@ -78,10 +78,10 @@ class FrameCollector(FrameBatchListener):
             return
         if set(map(type, pending)) == {tuple}:
             frames = cast("list[DataFrame]", pending)
-            payloads = [frame[2] for frame in frames]
+            stamps, can_ids, payloads = zip(*frames, strict=True)  # the columns, at once
             if set(map(len, payloads)) == {MAX_DLC}:
-                self._timestamp.extend([frame[0] for frame in frames])
-                self._can_id.extend([frame[1] for frame in frames])
+                self._timestamp.extend(stamps)
+                self._can_id.extend(can_ids)
                 self._dlc.frombytes(_FULL_DLC * len(frames))
                 self._flags.frombytes(bytes(len(frames)))
                 self._data += b"".join(payloads)
