@@ -12,8 +12,10 @@ Passes: the whole log once (E2E, the firmware lives, the report's facts); then p
 5. the segment offsets, and the lossy spans' weights (``stream_losses.SpanDrops``); 6. the errors
    against the reference (and beyond the loss allowance) and the truth, the distance, the events'
    times. Memory: the chunk and the stages' carried state, never the log.
-A life whose frames came in a burst after a busy bus is refused (``NotStreamable``: ``samples._queued``
-pairs them by the whole life's median send period). ``streams`` says when to stream at all."""
+A life whose frames came in a burst after a busy bus is refused (``NotStreamable``:
+``samples._queued`` pairs them by the whole life's median send period). Lives are cut again at
+the applied set-poses and configs (``stream_cuts``), as the whole log's judge cuts them.
+``streams`` says when to stream at all."""
 
 from __future__ import annotations
 
@@ -28,6 +30,7 @@ import numpy as np
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance
 from odocan.host.judge.breaks import placed_offsets
+from odocan.host.judge.configs import in_force
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
 from odocan.host.judge.reboots import Life, merge
@@ -47,6 +50,12 @@ from odocan.host.judge.stream_choice import WHOLE_RSS_MB as WHOLE_RSS_MB
 from odocan.host.judge.stream_choice import stream_above_bytes as stream_above_bytes
 from odocan.host.judge.stream_choice import streams as streams
 from odocan.host.judge.stream_compare import TruthCompare
+from odocan.host.judge.stream_cuts import (
+    StreamCuts,
+    cut_spans,
+    first_integrator,
+    latched_per_firmware,
+)
 from odocan.host.judge.stream_distance import stream_distance
 from odocan.host.judge.stream_facts import StreamFacts
 from odocan.host.judge.stream_first import Frames, first_pass
@@ -102,21 +111,28 @@ def analyze_file(
     with tempfile.TemporaryDirectory(prefix="odocan-analyze-") as tmp:
         spill = FrameSpill(Path(tmp))
         e2e, lives = StreamE2E(db), StreamLives(decoder)  # one decoder: its cache too
-        facts = StreamFacts(decoder)
+        facts, cuts = StreamFacts(decoder), StreamCuts(decoder)
         for chunk in iter_log(path, chunk_frames=chunk_frames, warn=warn):
             count.frames += len(chunk)
             spill.write(chunk)
             accepted = e2e.feed(chunk)
             lives.feed(chunk, accepted)
             facts.feed(chunk, accepted)
+            cuts.feed(chunk, accepted)
         spill.close()
-        if facts.applied:  # cut into lives there: host.judge.setposes and configs, whole only
-            raise NotStreamable(f"an {facts.applied} was applied: the reference restarts there")
-        return lives.marked(_analyze_lives(  # two firmwares: not judged from there, a FAIL
-            lives.finish_one_source(), facts, lambda span: lambda: spill.read(
-                span.start, span.stop, chunk_frames),
-            robot, integrator, tolerance=tolerance, db=db, scenario=scenario, seed=seed,
-            wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s), count.frames)
+
+        def frames_of(span: LifeSpan) -> Frames:
+            return lambda: spill.read(span.start, span.stop, chunk_frames)
+
+        firmware = lives.finish_one_source()  # two firmwares: not judged from there, a FAIL
+        spans = cut_spans(firmware, cuts.set_poses(), cuts.configs(robot.counter_bits))
+        report = _analyze_lives(
+            spans, facts, frames_of, robot, integrator, tolerance=tolerance, db=db,
+            scenario=scenario, seed=seed, wall_seconds=wall_seconds,
+            max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+        if len(spans) != len(firmware):  # a set-pose is no reboot: one latch per firmware
+            report.update(latched_per_firmware(firmware, frames_of, db))
+        return lives.marked(report, count.frames)
 
 
 def _analyze_lives(
@@ -136,11 +152,16 @@ def _analyze_lives(
     done: list[tuple[LifeSpan, dict[str, Any], float]] = []
     failure: AnalysisError | None = None
     silent: list[Life] = []
-    for span in spans:
+    for span, (life_robot, life_integrator, bound) in zip(spans, in_force(
+            [_as_life(span) for span in spans], robot,
+            first_integrator(spans, frames_of, db, integrator, source), max_wheel_speed_mm_s),
+            strict=True):
         try:
-            report, t_first = _life(frames_of(span), robot, integrator, tolerance=tolerance,
-                                    db=db, boot=span.boot, rebase=span.t_s is not None,
-                                    max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+            report, t_first = _life(frames_of(span), life_robot, life_integrator,
+                                    tolerance=tolerance, db=db, boot=span.boot,
+                                    rebase=span.t_s is not None and span.config is None,
+                                    max_wheel_speed_mm_s=bound,
+                                    start_pose=span.set_pose and span.set_pose.start_pose())
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
             silent.append(_as_life(span))
@@ -170,7 +191,8 @@ def _analyze_lives(
 
 def _as_life(span: LifeSpan) -> Life:
     """A ``reboots.Life`` for ``merge`` (which reads its time and UPTIME, not its frames)."""
-    return Life(np.zeros(0, dtype=np.int64), span.boot, span.t_s, span.uptime_before_s)
+    return Life(np.zeros(0, dtype=np.int64), span.boot, span.t_s, span.uptime_before_s,
+                set_pose=span.set_pose, config=span.config)
 
 
 class FrameSpill:
@@ -211,18 +233,20 @@ def _life(
     frames: Frames, robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
     db: DatabaseSpec, boot: bool, max_wheel_speed_mm_s: SpeedBound,
     rebase: bool = False, scenario: str | None = None, seed: int | None = None,
-    wall_seconds: float | None = None,
+    wall_seconds: float | None = None, start_pose: tuple[float, float, float] | None = None,
 ) -> tuple[dict[str, Any], float]:
-    """``analysis._analyze_life``'s report of one life, and its first frame's time."""
+    """``analysis._analyze_life``'s report of one life, and its first frame's time
+    (``start_pose``: a set-pose's, exact at the life's first encoder frame)."""
     first = first_pass(frames, db, robot)
     first.refuse()
     facts = first.facts
     integrator, source = facts.integrator(integrator)
     first.check()
     power_up = facts.saw_only_the_log() if boot else facts.starts_at_power_up(first.head)
-    e0 = 0 if power_up else int(first.head.enc[0])
+    at_first = power_up or start_pose is not None  # the start exact at the first frame
+    e0 = 0 if at_first else int(first.head.enc[0])
     breaks = first.breaks
-    spans = first.losses.spans(power_up)
+    spans = first.losses.spans(power_up and start_pose is None)
     geometry, bits = Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS)
     drops = SpanDrops(spans, geometry, bits, integrator)
     across = StreamBreakCounts(breaks[breaks > e0].tolist(), geometry, bits, integrator,
@@ -242,7 +266,8 @@ def _life(
             yield chunk
 
     info = LifeInfo()
-    x0, y0, h0, exact = place_start(lambda: placed(info), power_up=power_up)
+    x0, y0, h0, exact = place_start(lambda: placed(info), power_up=at_first)
+    x0, y0, h0 = start_pose if start_pose is not None else (x0, y0, h0)
     # the offsets' pass also weighs the lossy spans (losses.loss_allowance) and keeps the
     # counts across the stalls' breaks (their allowance)
     raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
@@ -274,7 +299,8 @@ def _life(
     vs_truth["distance_travelled_m"] = float(last[0].rel_distance_m[-1])
     twist = first.twist.finish()
     distance = stream_distance(frames, db, robot, integrator, e0, DistanceJudge(
-        robot, max_wheel_speed_mm_s, power_up, [b for b in breaks.tolist() if b > e0],
+        robot, max_wheel_speed_mm_s, power_up and start_pose is None,
+        [b for b in breaks.tolist() if b > e0],
         [(a, z) for a, z, _ in spans]))
     after_span = drops.allowance(np.array([last + 1 for _, last, _ in spans], dtype=np.int64))
     passed = bool(
@@ -288,7 +314,7 @@ def _life(
         "robot": robot_dict(robot),
         "integrator": integrator,
         "integrator_source": source,
-        "reference_start": "power-up" if exact else "fitted",
+        "reference_start": "set pose" if start_pose else "power-up" if exact else "fitted",
         "scenario": scenario,
         "seed": seed,
         "sim_seconds": covered_s,
