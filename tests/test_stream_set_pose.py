@@ -6,7 +6,7 @@ tool's ODOM_SET_POSE frames on the bus: one set-pose, several (one a bare APPLY)
 both sides of a firmware reboot, a bare APPLY right after a 2 s MCU stall latched
 POSE_UNCERTAIN, and a firmware that applies the set-pose 1 mm off (a FAIL both ways); the
 config drive of tests/test_analyze_config.py (a NACKed APPLY, then an ACKed one; and a firmware
-that ignores the one it ACKed: a FAIL both ways).
+that ignores the one it ACKed: a FAIL both ways) and a config that changes the integrator.
 
 Independent of the judges: what the log must hold is read back with cantools (the ACKs of the
 APPLYs), and the wrong firmware's offset is checked against the float64 arc from the pose set."""
@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import uuid
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -28,12 +29,15 @@ from odocan.firmware.odometry import Odometry
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.stream_analysis import analyze_file
+from odocan.host.protocol.heard import Recorder
+from odocan.host.protocol.session import CommandSession
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.contract import database
+from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import load
 from tests import host_frames as hf
 from tests.fault_rig import open_virtual
-from tests.test_analyze_config import _drive
+from tests.test_analyze_config import KOBUKI, _config, _drive
 from tests.test_health_rig import circle_rig
 
 CHUNKS = [97, 1 << 20]
@@ -135,29 +139,60 @@ def test_the_streamed_report_cuts_at_set_poses_as_the_whole_log(
         assert math.isclose(error_m, OFF_Q40_M / 2**40, rel_tol=0.05)
 
 
+def _integrator_drive() -> list[can.Message]:
+    """6 s of kobuki (exact); at 2 s a config of its own robot with the rk2 integrator."""
+    messages: list[can.Message] = []
+    heard = Recorder(DB)
+    config = RigConfig(robot=KOBUKI, seed=5, channel=f"test-stream-config-{uuid.uuid4().hex}",
+                       duration_s=60.0)
+    rig = LockstepRig(config, [heard, _Keep(messages)])
+    try:
+        session = CommandSession(heard, rig.send, rig.run_until, ack_timeout_s=0.5)
+        rig.run(2.0)
+        assert session.configure(**_config(integrator="rk2"))["RESULT"] == "ACK"  # type: ignore[arg-type]
+        rig.run(4.0)
+    finally:
+        rig.close()
+    return messages
+
+
+class _Keep(can.Listener):
+    def __init__(self, into: list[can.Message]) -> None:
+        self.into = into
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self.into.append(msg)
+
+
 @pytest.fixture(scope="module")
-def config_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[bool, Path]:
+def config_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """tests/test_analyze_config.py's drive (kobuki: a NACKed config at 2 s, an ACKed one at
-    3 s), by whether the firmware ignores the config it ACKed."""
+    3 s), ``taken`` or ``ignored`` by the firmware (it keeps the old wheelbase); ``rk2``: a
+    config that changes the integrator (the life before it judged with the one ODOM_STATUS
+    reported before the APPLY)."""
     folder = tmp_path_factory.mktemp("config")
-    paths = {}
+    paths = {"rk2": _written(_integrator_drive(), folder / "config-rk2.log")}
     with pytest.MonkeyPatch.context() as monkeypatch:
         for ignores in (False, True):
-            paths[ignores] = _written(_drive(ignores, monkeypatch),
-                                      folder / f"config-{ignores}.log")
+            which = "ignored" if ignores else "taken"
+            paths[which] = _written(_drive(ignores, monkeypatch), folder / f"config-{which}.log")
             monkeypatch.undo()
     return paths
 
 
 @pytest.mark.parametrize("chunk_frames", CHUNKS)
-@pytest.mark.parametrize("ignores", [False, True])
+@pytest.mark.parametrize("which", ["taken", "ignored", "rk2"])
 def test_the_streamed_report_cuts_at_an_acked_config_as_the_whole_log(
-    config_logs: dict[bool, Path], ignores: bool, chunk_frames: int
+    config_logs: dict[str, Path], which: str, chunk_frames: int
 ) -> None:
-    path, kobuki = config_logs[ignores], load("kobuki")
-    assert _applies_acked(path, DB.get_message_by_name("ODOM_CONFIG").frame_id) == [False, True]
-    want = analyze(read_log(path), kobuki).report
-    got = analyze_file(path, kobuki, chunk_frames=chunk_frames)
+    path = config_logs[which]
+    acked = [True] if which == "rk2" else [False, True]
+    assert _applies_acked(path, DB.get_message_by_name("ODOM_CONFIG").frame_id) == acked
+    want = analyze(read_log(path), KOBUKI).report
+    got = analyze_file(path, KOBUKI, chunk_frames=chunk_frames)
     assert json.dumps(got) == json.dumps(want)
     assert [e["kind"] for e in want["events"]] == ["config"]  # the ACKed one only
-    assert want["passed"] is not ignores
+    assert want["passed"] is (which != "ignored")
+    if which == "rk2":  # the life before the config judged with exact, the one after with rk2
+        assert want["integrator"] == "exact"
+        assert "rk2" in want["events"][0]["detail"]
