@@ -112,6 +112,21 @@ def _applies_acked(path: Path, request_id: int) -> list[bool]:
     return said
 
 
+def _reasons(path: Path) -> list[str]:
+    """The REASON of every ODOM_STATUS summary (page 0) in the log (cantools)."""
+    status = DB.get_message_by_name("ODOM_STATUS")
+    said = []
+    for msg in can.LogReader(str(path)):
+        if msg.arbitration_id == status.frame_id:
+            raw = DB.decode_message(msg.arbitration_id, bytes(msg.data), decode_choices=False)
+            named = DB.decode_message(msg.arbitration_id, bytes(msg.data))
+            assert isinstance(raw, dict)
+            assert isinstance(named, dict)
+            if raw["PAGE"] == 0:
+                said.append(str(named["REASON"]))
+    return said
+
+
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("stream_set_pose")
@@ -134,6 +149,10 @@ def test_the_streamed_report_cuts_at_set_poses_as_the_whole_log(
     assert want["passed"] is (which != "wrong")  # a correct firmware PASSes, the wrong FAILs
     if which == "reboot":
         assert len(want["reboots"]) == 1
+    if which == "uncertain":  # the latch was on the bus, and the set-pose released it
+        reasons = _reasons(path)
+        assert "POSE_UNCERTAIN" in reasons
+        assert reasons[-1] == "NONE"
     if which == "wrong":  # the firmware's X: the float64 pose set plus its offset
         error_m = want["onboard_vs_reference"]["max_position_error_m"]
         assert math.isclose(error_m, OFF_Q40_M / 2**40, rel_tol=0.05)
