@@ -101,22 +101,27 @@ class StreamCuts:
 
     def set_poses(self) -> list[SetPoseCut]:
         """``setposes.set_pose_cuts`` of the log fed."""
-        try:
-            self.decoder.message("ODOM_SET_POSE")
-            self.decoder.message("ODOM_ACK")
-        except (DecodeError, KeyError):
+        rows = self._joined()
+        if not self._follows("ODOM_SET_POSE", rows):
             return []
-        return setposes.cuts_of(self._joined(), self._encoder_positions(), self.decoder)
+        return setposes.cuts_of(rows, self._encoder_positions(), self.decoder)
 
     def configs(self, counter_bits: int) -> list[ConfigCut]:
         """``configs.config_cuts`` of the log fed (``counter_bits``: the log's robot's)."""
+        rows = self._joined()
+        if not self._follows("ODOM_CONFIG", rows):
+            return []
+        return configs.cuts_of(rows, self._encoder_positions(), self.decoder, counter_bits)
+
+    def _follows(self, name: str, rows: dict[str, dict[str, np.ndarray]]) -> bool:
+        """Whether there is anything to follow: the DBC has ``name`` and ODOM_ACK, and the log
+        an accepted ACK (without one, no cut: the whole log's functions return early)."""
         try:
-            self.decoder.message("ODOM_CONFIG")
+            self.decoder.message(name)
             self.decoder.message("ODOM_ACK")
         except (DecodeError, KeyError):
-            return []
-        return configs.cuts_of(self._joined(), self._encoder_positions(), self.decoder,
-                               counter_bits)
+            return False
+        return len(rows["ODOM_ACK"]["index"]) > 0
 
 
 def cut_spans(spans: list[LifeSpan], set_poses: list[SetPoseCut],
