@@ -26,6 +26,7 @@ import pytest
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.odometry import Odometry
+from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.stream_analysis import analyze_file
@@ -215,3 +216,24 @@ def test_the_streamed_report_cuts_at_an_acked_config_as_the_whole_log(
     if which == "rk2":  # the life before the config judged with exact, the one after with rk2
         assert want["integrator"] == "exact"
         assert "rk2" in want["events"][0]["detail"]
+
+
+def test_odocan_analyze_streams_a_set_pose_log_without_reading_it_whole(
+    folder: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The command keeps a log with a set-pose in bounded memory (``--stream always``: the
+    whole log is never read) and writes the whole-log path's report. A log with an applied
+    config still goes whole in the command (its PROFILE pages: ``configs.later_mismatches``)."""
+    path = drive_log("one", folder)
+    whole, streamed = tmp_path / "whole.json", tmp_path / "streamed.json"
+    argv = ["analyze", str(path), "--robot", "pmir", "--integrator", "exact", "--report"]
+    assert main([*argv, str(whole), "--stream", "never"]) == 0
+
+    def read_whole(*_args: object, **_kwargs: object) -> None:
+        raise AssertionError("the whole log was read")
+
+    monkeypatch.setattr("odocan.host.io.logs.read_log", read_whole)
+    assert main([*argv, str(streamed), "--stream", "always", "--chunk-frames", "97"]) == 0
+    assert json.loads(streamed.read_text()) == json.loads(whole.read_text())
+    capsys.readouterr()

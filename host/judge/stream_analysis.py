@@ -100,10 +100,13 @@ def analyze_file(
     chunk_frames: int = CHUNK_FRAMES,
     warn: Callable[[str], None] = warn_on_stderr,
     count: FrameCount | None = None,
+    whole_on_config: bool = False,
 ) -> dict[str, Any]:
     """``analyze(read_log(path), ...).report``, the log read ``chunk_frames`` at a time
     (``warn``: where ``iter_log`` says it skipped a partial last line; ``count``, when given:
-    the number of frames in the log, counted as they are read)."""
+    the number of frames in the log, counted as they are read). ``whole_on_config``:
+    ``NotStreamable`` when a config was applied (the CLI's PROFILE-page checks, which read
+    the whole log: ``configs.running_before_configs``, ``later_mismatches``)."""
     db = db if db is not None else default_plan()
     count = count if count is not None else FrameCount()
     decoder = BulkDecoder(db)
@@ -125,7 +128,10 @@ def analyze_file(
             return lambda: spill.read(span.start, span.stop, chunk_frames)
 
         firmware = lives.finish_one_source()  # two firmwares: not judged from there, a FAIL
-        spans = cut_spans(firmware, cuts.set_poses(), cuts.configs(robot.counter_bits))
+        applied = cuts.configs(robot.counter_bits)
+        if applied and whole_on_config:
+            raise NotStreamable("a config was applied: its PROFILE pages are judged whole")
+        spans = cut_spans(firmware, cuts.set_poses(), applied)
         report = _analyze_lives(
             spans, facts, frames_of, robot, integrator, tolerance=tolerance, db=db,
             scenario=scenario, seed=seed, wall_seconds=wall_seconds,
