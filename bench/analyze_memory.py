@@ -4,8 +4,9 @@ Builds a log of about ``--gb`` GB (default 1) by concatenating one lockstep driv
 seconds of the rig's ``random`` scenario on pmir, made once) again and again, each copy's
 timestamps shifted to follow the previous one: every copy starts with a firmware power-up, so
 the analysis sees a reboot at each seam (``host.judge.reboots``) and judges every life from its
-power-up pose -- the verdict must stay PASS. Then runs, as whole processes measured like
-``/usr/bin/time -v`` (``os.wait4``: wall, user + system CPU, max RSS):
+power-up pose -- the verdict must stay PASS (``--set-pose-s S``: the host sets the pose S s
+into the drive, so every copy is also cut there: ``host.judge.stream_cuts``). Then runs, as
+whole processes measured like ``/usr/bin/time -v`` (``os.wait4``: wall, user + system CPU, max RSS):
 
 * ``python -m odocan analyze LOG --robot pmir --stream always`` (streamed:
   ``host.judge.stream_analysis``), and ``--stream never`` (the whole log) with ``--whole``;
@@ -53,11 +54,22 @@ ROBOT = "pmir"
 _STAMP = re.compile(rb"^\((\d+)\.(\d{6})\)")
 
 
-def make_drive(seconds: float, path: Path) -> Path:
-    """One drive of the lockstep rig as a candump log."""
-    logger = can.Logger(str(path))
-    with LockstepRig(RigConfig(load(ROBOT), "exact", "random", 1), [logger]) as rig:
-        rig.run(seconds)
+def make_drive(seconds: float, path: Path, set_pose_s: float | None = None) -> Path:
+    """One drive of the lockstep rig as a candump log; ``set_pose_s``: at that time the host
+    sets the pose (ODOM_SET_POSE X, Y, HEADING, APPLY, each ACKed: the judges cut the life
+    there, ``host.judge.setposes``, ``stream_cuts``)."""
+    from odocan.host.protocol.heard import Recorder
+    from odocan.host.protocol.session import CommandSession
+    from odocan.sim.board import TICK_S
+    from odocan.sim.contract import database
+
+    logger, heard = can.Logger(str(path)), Recorder(database())
+    with LockstepRig(RigConfig(load(ROBOT), "exact", "random", 1), [logger, heard]) as rig:
+        if set_pose_s is not None and 0 < set_pose_s < seconds:
+            rig.run(set_pose_s)
+            CommandSession(heard, rig.send, rig.run_until, ack_timeout_s=0.5).set_pose(
+                1.2345, -0.6789, 1.0)
+        rig.run(seconds - rig.ticks * TICK_S)
     return path
 
 
@@ -240,6 +252,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--gb", type=float, default=1.0, help="log size in GB (1e9 bytes)")
     parser.add_argument("--drive-s", type=float, default=600.0, help="seconds of one drive")
+    parser.add_argument("--set-pose-s", type=float, metavar="S",
+                        help="the host sets the pose S s into the drive (in every copy)")
     parser.add_argument("--dir", type=Path, default=Path(tempfile.gettempdir()))
     parser.add_argument("--no-cantools", action="store_true")
     parser.add_argument("--keep", action="store_true", help="keep the log")
@@ -258,7 +272,7 @@ def main() -> None:
     log = args.dir / f"odocan_bench_{args.gb:g}gb.log"
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        drive = make_drive(args.drive_s, Path(tmp) / "drive.log")
+        drive = make_drive(args.drive_s, Path(tmp) / "drive.log", args.set_pose_s)
         copies, frames = concatenate(drive, int(args.gb * 1e9), log)
     print(f"{log}: {log.stat().st_size / 1e9:.2f} GB, {frames} frames, {copies} drives of "
           f"{args.drive_s:g} s (made in {time.perf_counter() - start:.0f} s)", flush=True)

@@ -119,7 +119,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
             try:
                 streamed = analyze_file(log, with_bus_speed(profile, running), job.integrator,
                                         tolerance=tolerance, db=db, warn=lambda message: None,
-                                        count=count)
+                                        count=count, whole_on_config=db is None)
             except (AnalysisError, NotStreamable):  # refused: the whole log's path says why
                 streamed = None
         if streamed is not None:

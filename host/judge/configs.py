@@ -15,8 +15,8 @@ lives after it are judged with the log's robot until the next config.
 
 The PROFILE page is judged against the parameters in force: the pages before the first APPLY
 against ``--robot`` (``running_before_configs``), those after each APPLY against the robot it
-applied (``later_mismatches``). The streamed analysis does not cut: such a log is analysed whole
-(``NotStreamable``), as one with a set-pose.
+applied (``later_mismatches``). The streamed analysis cuts at the same
+configs (``stream_cuts``: ``cuts_of`` of the rows it gathers chunk by chunk).
 """
 
 from __future__ import annotations
@@ -86,21 +86,32 @@ def config_cuts(frames: FrameArrays, decoder: BulkDecoder, counter_bits: int) ->
     if not ((raw["REQUEST_ID"] == config_id) & (raw["REQUEST_FIELD"] == APPLY_PARAM)).any():
         return []
     _, accepted = check_frames(frames, decoder.db)
-    acks = optional_rows(frames, accepted, decoder, "ODOM_ACK")
-    commands = optional_rows(frames, accepted, decoder, "ODOM_CONFIG")
-    auths = optional_rows(frames, accepted, decoder, "ODOM_AUTH")
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
+    return cuts_of({name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS},
+                   encoders[accepted[encoders]], decoder, counter_bits)
+
+
+COMMANDS = ("ODOM_CONFIG", "ODOM_AUTH", "ODOM_ACK")  # the accepted rows ``cuts_of`` follows
+
+
+def cuts_of(rows: dict[str, dict[str, np.ndarray]], encoders: npt.NDArray[np.intp],
+            decoder: BulkDecoder, counter_bits: int) -> list[ConfigCut]:
+    """``config_cuts`` from the log's accepted rows of ``COMMANDS`` (``optional_rows``, their
+    index the log position) and the log positions of its accepted encoder frames (``encoders``:
+    at least the latest before and the first after each of those rows)."""
+    commands, auths, acks = (rows[name] for name in COMMANDS)
+    config_id = decoder.message("ODOM_CONFIG").frame_id
     steps = sorted(
         [(int(i), "cmd", k) for k, i in enumerate(commands["index"].tolist())]
         + [(int(i), "auth", k) for k, i in enumerate(auths["index"].tolist())
            if int(auths["REQUEST"][k]) == CONFIG_REQUEST]
         + [(int(i), "ack", k) for k, i in enumerate(acks["index"].tolist())
            if int(acks["REQUEST_ID"][k]) == config_id])
-    return _follow(steps, commands, acks, encoders[accepted[encoders]], frames, counter_bits)
+    return _follow(steps, commands, acks, encoders, counter_bits)
 
 
 def _follow(steps: list[tuple[int, str, int]], commands: dict[str, np.ndarray],
-            acks: dict[str, np.ndarray], encoders: npt.NDArray[np.intp], frames: FrameArrays,
+            acks: dict[str, np.ndarray], encoders: npt.NDArray[np.intp],
             counter_bits: int) -> list[ConfigCut]:
     """``ConfigFollower`` over the frames in bus order; the APPLY's (or its ODOM_AUTH's) log
     position is noted for its cut."""
@@ -122,7 +133,7 @@ def _follow(steps: list[tuple[int, str, int]], commands: dict[str, np.ndarray],
             if staged is not None and apply_at >= 0:
                 bits = int(staged.get("COUNTER_BITS", counter_bits))
                 cuts.append(ConfigCut(_life_start(encoders, apply_at, bits != counter_bits),
-                                      apply_at, float(frames.timestamp_s[position]), staged))
+                                      apply_at, float(acks["timestamp_s"][k]), staged))
                 counter_bits = bits
     return cuts
 

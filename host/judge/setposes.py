@@ -12,8 +12,8 @@ were not (the firmware kept its own values, e.g. a bare APPLY after a counter re
 is fitted to its samples, as a log that starts mid-drive. Either way its truth is compared in
 the new frame (re-based at the life's start, ``compare.life_origin``).
 
-The streamed analysis does not cut (``stream_analysis``): a log with an applied set-pose is
-analysed whole (``NotStreamable``)."""
+The streamed analysis cuts its lives at the same set-poses (``stream_cuts``, ``cuts_of`` of
+the rows it gathers chunk by chunk)."""
 
 from __future__ import annotations
 
@@ -71,23 +71,32 @@ def set_pose_cuts(frames: FrameArrays, decoder: BulkDecoder) -> list[SetPoseCut]
     if not ((raw["REQUEST_ID"] == set_pose_id) & (raw["REQUEST_FIELD"] == APPLY_FIELD)).any():
         return []
     _, accepted = check_frames(frames, decoder.db)
-    acks = optional_rows(frames, accepted, decoder, "ODOM_ACK")
-    mine = acks["REQUEST_ID"] == set_pose_id
-    commands = optional_rows(frames, accepted, decoder, "ODOM_SET_POSE")
-    auths = optional_rows(frames, accepted, decoder, "ODOM_AUTH")
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    encoders = encoders[accepted[encoders]]
+    return cuts_of({name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS},
+                   encoders[accepted[encoders]], decoder)
+
+
+COMMANDS = ("ODOM_SET_POSE", "ODOM_AUTH", "ODOM_ACK")  # the accepted rows ``cuts_of`` follows
+
+
+def cuts_of(rows: dict[str, dict[str, np.ndarray]], encoders: npt.NDArray[np.intp],
+            decoder: BulkDecoder) -> list[SetPoseCut]:
+    """``set_pose_cuts`` from the log's accepted rows of ``COMMANDS`` (``optional_rows``, their
+    index the log position) and the log positions of its accepted encoder frames (``encoders``:
+    at least the latest before each of those rows; the streamed judge keeps no more)."""
+    commands, auths, acks = (rows[name] for name in COMMANDS)
+    mine = acks["REQUEST_ID"] == decoder.message("ODOM_SET_POSE").frame_id
     steps: list[tuple[int, str, int]] = (
         [(int(i), "cmd", k) for k, i in enumerate(commands["index"].tolist())]
         + [(int(i), "auth", k) for k, i in enumerate(auths["index"].tolist())
            if int(auths["REQUEST"][k]) == SET_POSE_REQUEST]
         + [(int(i), "ack", k) for k, i in enumerate(acks["index"].tolist()) if mine[k]])
-    return _follow(sorted(steps), commands, acks, encoders, frames, decoder)
+    return _follow(sorted(steps), commands, acks, encoders, decoder)
 
 
 def _follow(steps: list[tuple[int, str, int]], commands: dict[str, np.ndarray],
             acks: dict[str, np.ndarray], encoders: npt.NDArray[np.intp],
-            frames: FrameArrays, decoder: BulkDecoder) -> list[SetPoseCut]:
+            decoder: BulkDecoder) -> list[SetPoseCut]:
     """``SetPoseFollower`` over the frames in bus order; the encoder 'seq' it notes is the log
     position of the latest accepted encoder frame."""
     follower, cuts = SetPoseFollower(), []
@@ -109,8 +118,7 @@ def _follow(steps: list[tuple[int, str, int]], commands: dict[str, np.ndarray],
         else:
             applied = follower.on_ack(int(acks["REQUEST_COUNTER"][k]), int(acks["RESULT"][k]) == 0)
             if applied is not None and applied[0] >= 0:
-                cuts.append(SetPoseCut(applied[0], float(frames.timestamp_s[position]),
-                                       applied[1]))
+                cuts.append(SetPoseCut(applied[0], float(acks["timestamp_s"][k]), applied[1]))
     return cuts
 
 

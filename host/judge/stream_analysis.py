@@ -12,13 +12,15 @@ Passes: the whole log once (E2E, the firmware lives, the report's facts); then p
 5. the segment offsets, and the lossy spans' weights (``stream_losses.SpanDrops``); 6. the errors
    against the reference (and beyond the loss allowance) and the truth, the distance, the events'
    times. Memory: the chunk and the stages' carried state, never the log.
-A life whose frames came in a burst after a busy bus is refused (``NotStreamable``: ``_queued``
-pairs them by the whole life's median send period). ``streams`` says when to stream at all."""
+A life whose frames came in a burst after a busy bus is refused (``NotStreamable``:
+``samples._queued`` pairs them by the whole life's median send period). Lives are cut again at
+the applied set-poses and configs (``stream_cuts``), as the whole log's judge cuts them.
+``streams`` says when to stream at all."""
 
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
@@ -28,23 +30,19 @@ import numpy as np
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance
 from odocan.host.judge.breaks import placed_offsets
+from odocan.host.judge.configs import in_force
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
-from odocan.host.judge.gapseen import PageEvidence
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.reportfacts import realtime, robot_dict
 from odocan.host.judge.samples import (
-    REQUIRED,
     WIRE_COUNTER_BITS,
     AnalysisError,
     Encoders,
-    Poses,
-    queued_frames,
     require_messages,
-    twinned_encoder_frames,
 )
-from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
+from odocan.host.judge.stream import StreamE2E
 from odocan.host.judge.stream_choice import RSS_MARGIN as RSS_MARGIN
 from odocan.host.judge.stream_choice import RSS_TARGET_MB as RSS_TARGET_MB
 from odocan.host.judge.stream_choice import STREAM_MODES as STREAM_MODES
@@ -52,17 +50,22 @@ from odocan.host.judge.stream_choice import WHOLE_RSS_MB as WHOLE_RSS_MB
 from odocan.host.judge.stream_choice import stream_above_bytes as stream_above_bytes
 from odocan.host.judge.stream_choice import streams as streams
 from odocan.host.judge.stream_compare import TruthCompare
+from odocan.host.judge.stream_cuts import (
+    StreamCuts,
+    cut_spans,
+    first_integrator,
+    latched_per_firmware,
+)
 from odocan.host.judge.stream_distance import stream_distance
 from odocan.host.judge.stream_facts import StreamFacts
+from odocan.host.judge.stream_first import Frames, first_pass
 from odocan.host.judge.stream_life import LifeInfo, life_chunks
 from odocan.host.judge.stream_lives import LifeSpan, StreamLives
-from odocan.host.judge.stream_losses import SpanDrops, StreamLosses
+from odocan.host.judge.stream_losses import SpanDrops
 from odocan.host.judge.stream_place import PlacedChunk, reference_errors, segment_offsets
 from odocan.host.judge.stream_place import start_pose as place_start
 from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
-from odocan.host.judge.stream_stalls import StreamBreakCounts, StreamStalls
-from odocan.host.judge.stream_truth import StreamTruth
-from odocan.host.judge.stream_twist import StreamTwist
+from odocan.host.judge.stream_stalls import StreamBreakCounts
 from odocan.host.judge.unseenrestart import restart_detail, whole_only
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
@@ -72,11 +75,6 @@ from odocan.sim.robot import RobotProfile
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
     from odocan.host.protocol.dbcplan import DatabaseSpec
-
-Frames = Callable[[], Iterable[FrameArrays]]  # a life's frames, from its first, each call
-QUEUED_MESSAGES = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y", "ODOM_TWIST")
-
-
 
 DEFAULT_TOLERANCE = Tolerance()
 
@@ -102,10 +100,13 @@ def analyze_file(
     chunk_frames: int = CHUNK_FRAMES,
     warn: Callable[[str], None] = warn_on_stderr,
     count: FrameCount | None = None,
+    whole_on_config: bool = False,
 ) -> dict[str, Any]:
     """``analyze(read_log(path), ...).report``, the log read ``chunk_frames`` at a time
     (``warn``: where ``iter_log`` says it skipped a partial last line; ``count``, when given:
-    the number of frames in the log, counted as they are read)."""
+    the number of frames in the log, counted as they are read). ``whole_on_config``:
+    ``NotStreamable`` when a config was applied (the CLI's PROFILE-page checks, which read
+    the whole log: ``configs.running_before_configs``, ``later_mismatches``)."""
     db = db if db is not None else default_plan()
     count = count if count is not None else FrameCount()
     decoder = BulkDecoder(db)
@@ -113,21 +114,31 @@ def analyze_file(
     with tempfile.TemporaryDirectory(prefix="odocan-analyze-") as tmp:
         spill = FrameSpill(Path(tmp))
         e2e, lives = StreamE2E(db), StreamLives(decoder)  # one decoder: its cache too
-        facts = StreamFacts(decoder)
+        facts, cuts = StreamFacts(decoder), StreamCuts(decoder)
         for chunk in iter_log(path, chunk_frames=chunk_frames, warn=warn):
             count.frames += len(chunk)
             spill.write(chunk)
             accepted = e2e.feed(chunk)
             lives.feed(chunk, accepted)
             facts.feed(chunk, accepted)
+            cuts.feed(chunk, accepted)
         spill.close()
-        if facts.applied:  # cut into lives there: host.judge.setposes and configs, whole only
-            raise NotStreamable(f"an {facts.applied} was applied: the reference restarts there")
-        return lives.marked(_analyze_lives(  # two firmwares: not judged from there, a FAIL
-            lives.finish_one_source(), facts, lambda span: lambda: spill.read(
-                span.start, span.stop, chunk_frames),
-            robot, integrator, tolerance=tolerance, db=db, scenario=scenario, seed=seed,
-            wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s), count.frames)
+
+        def frames_of(span: LifeSpan) -> Frames:
+            return lambda: spill.read(span.start, span.stop, chunk_frames)
+
+        firmware = lives.finish_one_source()  # two firmwares: not judged from there, a FAIL
+        applied = cuts.configs(robot.counter_bits)
+        if applied and whole_on_config:
+            raise NotStreamable("a config was applied: its PROFILE pages are judged whole")
+        spans = cut_spans(firmware, cuts.set_poses(), applied)
+        report = _analyze_lives(
+            spans, facts, frames_of, robot, integrator, tolerance=tolerance, db=db,
+            scenario=scenario, seed=seed, wall_seconds=wall_seconds,
+            max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+        if len(spans) != len(firmware):  # a set-pose is no reboot: one latch per firmware
+            report.update(latched_per_firmware(firmware, frames_of, db))
+        return lives.marked(report, count.frames)
 
 
 def _analyze_lives(
@@ -147,11 +158,16 @@ def _analyze_lives(
     done: list[tuple[LifeSpan, dict[str, Any], float]] = []
     failure: AnalysisError | None = None
     silent: list[Life] = []
-    for span in spans:
+    for span, (life_robot, life_integrator, bound) in zip(spans, in_force(
+            [_as_life(span) for span in spans], robot,
+            first_integrator(spans, frames_of, db, integrator, source), max_wheel_speed_mm_s),
+            strict=True):
         try:
-            report, t_first = _life(frames_of(span), robot, integrator, tolerance=tolerance,
-                                    db=db, boot=span.boot, rebase=span.t_s is not None,
-                                    max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+            report, t_first = _life(frames_of(span), life_robot, life_integrator,
+                                    tolerance=tolerance, db=db, boot=span.boot,
+                                    rebase=span.t_s is not None and span.config is None,
+                                    max_wheel_speed_mm_s=bound,
+                                    start_pose=span.set_pose and span.set_pose.start_pose())
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
             silent.append(_as_life(span))
@@ -181,7 +197,8 @@ def _analyze_lives(
 
 def _as_life(span: LifeSpan) -> Life:
     """A ``reboots.Life`` for ``merge`` (which reads its time and UPTIME, not its frames)."""
-    return Life(np.zeros(0, dtype=np.int64), span.boot, span.t_s, span.uptime_before_s)
+    return Life(np.zeros(0, dtype=np.int64), span.boot, span.t_s, span.uptime_before_s,
+                set_pose=span.set_pose, config=span.config)
 
 
 class FrameSpill:
@@ -222,18 +239,20 @@ def _life(
     frames: Frames, robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
     db: DatabaseSpec, boot: bool, max_wheel_speed_mm_s: SpeedBound,
     rebase: bool = False, scenario: str | None = None, seed: int | None = None,
-    wall_seconds: float | None = None,
+    wall_seconds: float | None = None, start_pose: tuple[float, float, float] | None = None,
 ) -> tuple[dict[str, Any], float]:
-    """``analysis._analyze_life``'s report of one life, and its first frame's time."""
-    first = _first_pass(frames, db, robot)
+    """``analysis._analyze_life``'s report of one life, and its first frame's time
+    (``start_pose``: a set-pose's, exact at the life's first encoder frame)."""
+    first = first_pass(frames, db, robot)
     first.refuse()
     facts = first.facts
     integrator, source = facts.integrator(integrator)
     first.check()
     power_up = facts.saw_only_the_log() if boot else facts.starts_at_power_up(first.head)
-    e0 = 0 if power_up else int(first.head.enc[0])
+    at_first = power_up or start_pose is not None  # the start exact at the first frame
+    e0 = 0 if at_first else int(first.head.enc[0])
     breaks = first.breaks
-    spans = first.losses.spans(power_up)
+    spans = first.losses.spans(power_up and start_pose is None)
     geometry, bits = Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS)
     drops = SpanDrops(spans, geometry, bits, integrator)
     across = StreamBreakCounts(breaks[breaks > e0].tolist(), geometry, bits, integrator,
@@ -253,7 +272,8 @@ def _life(
             yield chunk
 
     info = LifeInfo()
-    x0, y0, h0, exact = place_start(lambda: placed(info), power_up=power_up)
+    x0, y0, h0, exact = place_start(lambda: placed(info), power_up=at_first)
+    x0, y0, h0 = start_pose if start_pose is not None else (x0, y0, h0)
     # the offsets' pass also weighs the lossy spans (losses.loss_allowance) and keeps the
     # counts across the stalls' breaks (their allowance)
     raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
@@ -285,7 +305,8 @@ def _life(
     vs_truth["distance_travelled_m"] = float(last[0].rel_distance_m[-1])
     twist = first.twist.finish()
     distance = stream_distance(frames, db, robot, integrator, e0, DistanceJudge(
-        robot, max_wheel_speed_mm_s, power_up, [b for b in breaks.tolist() if b > e0],
+        robot, max_wheel_speed_mm_s, power_up and start_pose is None,
+        [b for b in breaks.tolist() if b > e0],
         [(a, z) for a, z, _ in spans]))
     after_span = drops.allowance(np.array([last + 1 for _, last, _ in spans], dtype=np.int64))
     passed = bool(
@@ -299,7 +320,7 @@ def _life(
         "robot": robot_dict(robot),
         "integrator": integrator,
         "integrator_source": source,
-        "reference_start": "power-up" if exact else "fitted",
+        "reference_start": "set pose" if start_pose else "power-up" if exact else "fitted",
         "scenario": scenario,
         "seed": seed,
         "sim_seconds": covered_s,
@@ -352,149 +373,3 @@ def _life(
     if rebase:  # a life after a reboot: the truth compared in its frame
         report["truth_origin"] = truth.origin
     return report, first.t_first_s
-
-
-class _FirstPass:
-    """Pass 1 over a life (module docstring)."""
-
-    def __init__(self, db: DatabaseSpec, robot: RobotProfile) -> None:
-        self.decoder = BulkDecoder(db)
-        self.e2e = StreamE2E(db)
-        self.numbering = StreamEncoders(self.decoder)
-        self.poses = StreamPoses(self.decoder)
-        self.truth = StreamTruth(self.decoder)
-        self.twist = StreamTwist(self.decoder, robot)
-        self.facts = StreamFacts(self.decoder)
-        self.losses = StreamLosses(self.decoder)
-        self.pages = PageEvidence(self.decoder)  # what the firmware took (gapseen)
-        self.queued = False  # frames of a periodic sender let out in a burst (queued_frames)
-        self.twins = False  # an encoder frame with a twin (samples.twinned_encoder_frames)
-        self.resent_kept = False  # a sample kept whose resend differs (StreamPoses.resent)
-        self._last_enc: dict[str, np.ndarray] | None = None  # the last accepted encoder row
-        self._last_t: dict[str, float] = {}  # per such message, its last accepted frame's time
-        self.stalls: StreamStalls | None = None
-        self.rows = dict.fromkeys(REQUIRED, 0)  # decoded frames of the required messages
-        self.accepted = dict.fromkeys(REQUIRED, 0)  # and those E2E accepts
-        self.samples = self.kept = self.truths = self.encoders = 0
-        self.head = self.tail = _poses({})
-        self.t_first_s = 0.0
-
-    def feed(self, chunk: FrameArrays) -> None:
-        if self.e2e.counts == {} and len(chunk):
-            self.t_first_s = float(chunk.timestamp_s[0])
-        accepted = self.e2e.feed(chunk)
-        for name in REQUIRED:
-            index = self.decoder.select(chunk, name)
-            self.rows[name] += len(index)
-            self.accepted[name] += int(np.count_nonzero(accepted[index]))
-        enc = self.numbering.feed(chunk, accepted)
-        self.encoders += len(enc.index)
-        self.stalls = self.stalls or StreamStalls(enc.cycle_s)
-        samples, sent = self.poses.feed(chunk, accepted, enc)
-        watermark = min(float(chunk.timestamp_s[-1]), self.poses.open_sent_s())
-        pose_y = self.decoder.select(chunk, "ODOM_POSE_Y")
-        pose_t = chunk.timestamp_s[pose_y[accepted[pose_y]]]
-        self._kept(self.stalls.feed(samples, sent, enc.timestamp_s, watermark, pose_t), samples)
-        self.truths += len(self.truth.feed(chunk, accepted, enc)[0]["enc"])
-        self.twist.feed(chunk, accepted, enc)
-        self.facts.feed(chunk, accepted)
-        self.losses.feed(chunk, accepted, enc)
-        self.pages.feed(chunk, enc)
-        if enc.cycle_s is not None:
-            self._bursts(chunk, accepted, enc.cycle_s)
-        self._twins(chunk, accepted)
-
-    def _twins(self, chunk: FrameArrays, accepted: np.ndarray) -> None:
-        """Whether an accepted encoder frame has a twin (``samples.twinned_encoder_frames``,
-        over the chunk and the last accepted encoder frame before it)."""
-        rows = self.decoder.decode(chunk, "WHEEL_ENCODERS")
-        keep = accepted[rows["index"]]
-        if self._last_enc is not None:
-            rows = {k: np.concatenate((self._last_enc[k], v)) for k, v in rows.items()}
-            keep = np.concatenate(([True], keep))
-        if keep.any():
-            last = int(np.flatnonzero(keep)[-1])
-            self._last_enc = {k: v[last:last + 1] for k, v in rows.items()}
-        self.twins = self.twins or bool(
-            twinned_encoder_frames(chunk, rows, keep, self.decoder).any())
-
-    def _bursts(self, chunk: FrameArrays, accepted: np.ndarray, cycle_s: float) -> None:
-        """Whether a message ``samples.queued_frames`` looks at (encoder frames, poses, twist)
-        has two accepted frames closer than it allows, in log order (a superset of every
-        pair it can find: a pair in time order has one at least as close in log order)."""
-        for name in QUEUED_MESSAGES:
-            index = self.decoder.select(chunk, name)
-            t = chunk.timestamp_s[index[accepted[index]]]
-            if len(t) == 0:
-                continue
-            if name in self._last_t:
-                t = np.concatenate(([self._last_t[name]], t))
-            self.queued = self.queued or bool(queued_frames(t, cycle_s).any())
-            self._last_t[name] = float(t[-1])
-
-    def finish(self) -> None:
-        if self.stalls is None:
-            return
-        samples, sent = self.poses.finish()
-        self._kept(self.stalls.feed(samples, sent, np.zeros(0), np.inf), samples)
-        self._kept(self.stalls.finish(), {"enc": np.zeros(0)})
-        self.truths += len(self.truth.finish()[0]["enc"])
-
-    def _kept(self, kept: dict[str, np.ndarray], fed: dict[str, np.ndarray]) -> None:
-        self.samples += len(fed["enc"])
-        self.resent_kept |= -1 in self.poses.resent or bool(  # a sample kept, a resend differs
-            np.isin(kept["enc"], sorted(self.poses.resent)).any())
-        if len(kept["enc"]):
-            if self.kept == 0:
-                self.head = _poses({k: v[:1] for k, v in kept.items()})
-            self.tail = _poses({k: v[-1:] for k, v in kept.items()})
-            self.kept += len(kept["enc"])
-
-    def refuse(self) -> None:
-        """``NotStreamable`` when the life is one the stream cannot judge as the whole log."""
-        if self.twins:  # the stream's encoder frames carry no twins (samples.encoder_frames)
-            raise NotStreamable("two encoder frames of one COUNTER (a forger or a second sender)")
-        if self.stalls is not None and not self.stalls.exact:
-            raise NotStreamable("the log's frame times go back around a silence of the firmware")
-        if not self.losses.exact:  # a summary stamped before an earlier encoder frame
-            raise NotStreamable("the log's status times go back against its encoder frames")
-        if self.queued:  # samples._queued pairs them by a median over the whole life
-            raise NotStreamable("frames let out in a burst after a busy bus (queued pairing)")
-        if self.resent_kept:  # judged whole (host.judge.resent), as the sample is out already
-            raise NotStreamable("a resent pose differs from the first naming its encoder frame")
-
-    @property
-    def breaks(self) -> np.ndarray:
-        return self.stalls.breaks if self.stalls is not None else np.zeros(0, dtype=np.int64)
-
-    def check(self) -> None:
-        """``analysis._analyze_life``'s errors, in its order: the required messages missing
-        or all refused, no on-board sample."""
-        for name in REQUIRED:
-            if self.accepted[name] == 0:
-                message = self.decoder.message(name)
-                if self.rows[name] == 0:
-                    raise AnalysisError(
-                        f"no {name} frame (ID 0x{message.frame_id:03X}, {message.length} bytes)"
-                        " in the log: the DBC does not match the log")
-                raise AnalysisError(f"none of the {self.rows[name]} {name} frames passes its "
-                                    "E2E check: the DBC does not match the log")
-        if self.samples == 0:
-            raise AnalysisError("no ODOM_POSE_X/ODOM_POSE_Y pair names an encoder frame of the "
-                                "log: nothing to compare")
-
-
-def _first_pass(frames: Frames, db: DatabaseSpec,
-                robot: RobotProfile) -> _FirstPass:
-    first = _FirstPass(db, robot)
-    for chunk in frames():
-        first.feed(chunk)
-    first.finish()
-    return first
-
-
-def _poses(columns: dict[str, np.ndarray]) -> Poses:
-    empty_i, empty_f = np.zeros(0, dtype=np.int64), np.zeros(0)
-    return Poses(columns.get("enc", empty_i), columns.get("x_m", empty_f),
-                 columns.get("y_m", empty_f), columns.get("heading_rad", empty_f),
-                 columns.get("heading_raw", empty_i))

@@ -44,7 +44,6 @@ from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 SUMMARY_PAGE = 0  # ODOM_STATUS page with UPTIME and INTEGRATOR
-APPLY_FIELD = 15  # ODOM_ACK REQUEST_FIELD of an APPLY (the DBC's FIELD and PARAM comments)
 
 
 @dataclass
@@ -100,8 +99,6 @@ class StreamFacts:
     _times: TickTimes = field(default_factory=TickTimes)  # powerup.heard_by_tick's evidence
     latch: StatusLatch = field(default_factory=StatusLatch)  # host.judge.statuslatch
     firmware_events: list[dict[str, Any]] = field(default_factory=list)  # ... its events
-    applied: str = ""  # the first command whose APPLY was ACKed: ODOM_SET_POSE or ODOM_CONFIG
-    # (the whole log's lives are cut there: host.judge.setposes, host.judge.configs)
 
     def firmware_fields(self) -> dict[str, Any]:
         """The report's ``firmware_events`` and ``firmware_final`` (``host.judge.finalstate``)."""
@@ -122,8 +119,6 @@ class StreamFacts:
         self.frame_counts = counts
         self._feed_encoder_span(chunk)
         self._feed_status(chunk, accepted)
-        self.applied = self.applied or next(
-            (name for name in _APPLIED if _applies(chunk, accepted, self.decoder, name)), "")
         self._offset += len(chunk)
 
     def _feed_encoder_span(self, chunk: FrameArrays) -> None:
@@ -240,21 +235,6 @@ class StreamFacts:
             return zero_first_sample(first)
         counter = self._first_counter.first if self._first_counter.present else None
         return counted and holds_first_cycle(counter)
-
-
-_APPLIED = ("ODOM_SET_POSE", "ODOM_CONFIG")  # staged commands whose APPLY starts a new life
-
-
-def _applies(chunk: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
-             name: str) -> bool:
-    """Whether the chunk has an accepted ODOM_ACK saying ACK to an APPLY of ``name``."""
-    try:
-        acks = decoder.decode(chunk, "ODOM_ACK")
-        request_id = decoder.message(name).frame_id
-    except (DecodeError, KeyError):
-        return False
-    return bool((accepted[acks["index"]] & (acks["REQUEST_ID"] == request_id)
-                 & (acks["REQUEST_FIELD"] == APPLY_FIELD) & (acks["RESULT"] == 0)).any())
 
 
 class _NamedBefore:

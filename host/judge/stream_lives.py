@@ -38,6 +38,8 @@ class LifeSpan:
     boot: bool
     t_s: float | None = None
     uptime_before_s: int | None = None
+    set_pose: Any = None  # a set-pose's piece (``setposes.SetPoseCut``: ``stream_cuts``)
+    config: Any = None  # an applied config's piece (``configs.ConfigCut``)
 
 
 @dataclass

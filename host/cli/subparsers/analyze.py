@@ -29,8 +29,9 @@ frames at a time, the report bit for bit the whole log's, at about 3x the CPU), 
 memory whatever its size; those four read the whole log (their series and frames), and so does
 a log the analysis refuses (to explain why in the log's terms) or fails (to look for a wrong
 ``--robot``), or that the stream cannot judge exactly (``stream_analysis.NotStreamable``: frame
-times going back around a stall, frames let out in a burst after a busy bus). ``odocan analyze
-LOG…`` chooses the same way for each log (``host.cli.batch.analyze_one``).
+times going back around a stall, frames let out in a burst after a busy bus; on odocan's DBC,
+an applied config: its PROFILE pages are judged against its robot over the whole log).
+``odocan analyze LOG…`` chooses the same way for each log (``host.cli.batch.analyze_one``).
 """
 
 from __future__ import annotations
@@ -223,7 +224,7 @@ def _streamed(
     try:
         report = analyze_file(args.log, profile, args.integrator, tolerance=args.tolerance,
                               db=db, chunk_frames=args.chunk_frames or CHUNK_FRAMES,
-                              warn=warnings.append)
+                              warn=warnings.append, whole_on_config=db is None)
     except (AnalysisError, NotStreamable):
         return None
     for message in warnings:
