@@ -19,7 +19,8 @@ ODOM_POSE_X and ODOM_POSE_Y pair naming the same encoder frame (ENC_COUNTER = th
 COUNTER, the latest such frame in the log, if the log's latest encoder frame is less than 8
 periods older than the pose: else which frame it names cannot be told); an encoder frame
 repeating the COUNTER of its ID's previous frame is refused, as E2E Profile 2 refuses it (a
-repetition, or 16 frames lost: the same to it).
+repetition, or 16 frames lost: the same to it), unless the checker is told the log's gaps are
+the recorder's (the firmware had the frames between: ``recorder_gaps``).
 
 The firmware's plausibility rule, from its specification (firmware/ecu.py's module docstring),
 written again here: a step from the last accepted frame beyond ceil(v_max T / travel per count)
@@ -105,9 +106,12 @@ def crc8h2f(data: bytes) -> int:
 
 
 class _Frames:
-    """The log's E2E-valid frames decoded with cantools, in order."""
+    """The log's E2E-valid frames decoded with cantools, in order. ``recorder_gaps``: the log's
+    gaps are frames the recorder lost, the firmware had them: a WHEEL_ENCODERS frame repeating
+    its previous frame's COUNTER half a COUNTER cycle (8 periods) or more after it is the
+    sender's frame 16 k periods on, which the firmware took (no repetition to it)."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, recorder_gaps: bool = False) -> None:
         db = cantools.database.load_file(str(DBC_PATH))
         assert isinstance(db, Database)
         self.db = db
@@ -115,6 +119,8 @@ class _Frames:
                      for m in db.messages}
         self.rows: list[tuple[float, str, dict[str, float | int]]] = []
         last_counter: dict[int, int] = {}
+        last_t: dict[int, float] = {}
+        encoders_id = db.get_message_by_name("WHEEL_ENCODERS").frame_id
         for line in path.read_text().splitlines():
             m = _LINE.fullmatch(line.strip())
             if m is None:
@@ -124,9 +130,12 @@ class _Frames:
                 continue
             if crc8h2f(data[1:] + bytes([self._ids[can_id][data[1] & 0xF]])) != data[0]:
                 continue
-            if last_counter.get(can_id) == data[1] & 0xF:
+            t = float(m.group(1))
+            cycled = (recorder_gaps and can_id == encoders_id
+                      and t - last_t.get(can_id, t) >= 8 * PERIOD_S)
+            if last_counter.get(can_id) == data[1] & 0xF and not cycled:
                 continue  # E2E Profile 2: a repetition (or 16 frames lost: the same to it)
-            last_counter[can_id] = data[1] & 0xF
+            last_counter[can_id], last_t[can_id] = data[1] & 0xF, t
             message = self.db.get_message_by_frame_id(can_id)
             signals = self.db.decode_message(can_id, data, decode_choices=False, scaling=False)
             self.rows.append((float(m.group(1)), message.name, dict(signals)))  # type: ignore[arg-type]
@@ -300,13 +309,15 @@ def check(
     starts: Callable[[float], tuple[float, float, float]],
     max_wheel_speed_m_s: float | Literal["robot"] | None = "robot",
     reboots_t_s: Collection[float] = (),
+    recorder_gaps: bool = False,
 ) -> Verdict:
     """Compare the on-board poses of the log at ``path`` with this checker's odometry started
     at ``starts(timestamp of the segment's first encoder frame)`` (module docstring);
     ``max_wheel_speed_m_s`` None: no plausibility rule (drives faster than any ECU allows);
     "robot": the robot's own (``Robot.max_wheel_speed_mm_s``);
-    ``reboots_t_s``: encoder frames (their times) a rebooted firmware primed on."""
-    frames = _Frames(path)
+    ``reboots_t_s``: encoder frames (their times) a rebooted firmware primed on;
+    ``recorder_gaps``: the log's gaps are the recorder's (``_Frames``)."""
+    frames = _Frames(path, recorder_gaps)
     if max_wheel_speed_m_s == "robot":
         max_wheel_speed_m_s = robot.max_wheel_speed_mm_s / 1000
     walk = _Follower(robot, integrator, starts, max_wheel_speed_m_s, reboots_t_s)

@@ -9,9 +9,11 @@ other than the profile's). ``tests/independent_checker.py`` (float64 odometry of
 cantools decoding, the true start from the synthesizer) gives the expected verdict; ``analyze``
 must agree, and for a right firmware its maximum errors must match the checker's to a quarter
 LSB (up to 4 LSB; beyond, both must fail), never above them, and below them, for a log starting
-mid-drive, by no more than the freedom of a start not told (below): a fitted start's rotation
-takes in a right firmware's own arithmetic drift too (found: 91.7 km of rk2 steps of ~4 m, a
-drift of 1.1 LSB by the told start, 0.76 by a start heading 4e-9 rad off it). Where the
+mid-drive or with gaps, by no more than the freedom of a start (or a segment) not told (below):
+a fitted start's rotation takes in a right firmware's own arithmetic drift too (found: 91.7 km
+of rk2 steps of ~4 m, a drift of 1.1 LSB by the told start, 0.76 by a start heading 4e-9 rad
+off it), a placed segment the rounding of its samples' one pose (found: 0.0 by analyze, 0.58
+LSB by the checker). Where the
 checker's error lies within a quarter LSB of the tolerance, the verdict is too close to call
 and only the errors are compared. For a wrong firmware, a checker PASS must be a PASS, and a
 checker FAIL a FAIL unless the error is within the
@@ -166,6 +168,24 @@ def with_gaps(synth: Synth, start: int, gaps: list[tuple[float, int]], step_max:
     distance_m=91738.88955103185, cut=6, gaps=[(1e-87, 26), (1e-128, 25), (5e-301, 37)],
     fault="none", radius_error_nm=30, seed=449962,
 ).via("found by the campaign")
+@example(  # from power-up, standing still but for 24 steps all inside a 34-frame gap: the
+    # segment after it is placed on its samples, all one pose, so analyze's error is 0.0 where
+    # the checker's told start leaves the pose's rounding, 0.058 mm (found by the campaign with
+    # a random seed: a placed segment's freedom, as a fitted start's)
+    robot=Robot(12, 374_794_327, 362_858_991, 1_696_689_508, 32), integrator="rk2", steps=201,
+    distance_m=12.018, cut=0, gaps=[(0.164, 34), (0.164, 1)], fault="none", radius_error_nm=1,
+    seed=2989,
+).via("found by the campaign")
+@example(  # a 15-frame gap (16 periods): the encoder frame after it repeats the COUNTER of the
+    # one before; the firmware had the frames between and took it, analyze (e2e.SequenceState,
+    # tests/test_recorder_gap16.py) pairs its pose, the checker refused it as a repetition: one
+    # sample fewer (found by the campaign with random seed 32; the checker is told the gaps
+    # are the recorder's now)
+    robot=Robot(76, 398_873_529, 378_929_853, 1_000_023_026, 16), integrator="rk2", steps=540,
+    distance_m=561.2120952066347, cut=6,
+    gaps=[(0.04845486084806662, 15), (0.12405835659556932, 39)], fault="radius",
+    radius_error_nm=30, seed=2998,
+).via("found by the campaign")
 @given(
     robot=robots(),
     integrator=st.sampled_from(["euler", "rk2", "exact"]),
@@ -205,7 +225,7 @@ def test_analyze_agrees_with_the_independent_checker(
     # (test_counter_restarts_agree_with_the_independent_checker drives within it).
     expected = check(path, robot, integrator,
                      lambda t_s: synth.state[round(t_s / ENCODER_PERIOD_S)].pose,
-                     max_wheel_speed_m_s=None)
+                     max_wheel_speed_m_s=None, recorder_gaps=True)
     analysis = analyze(read_log(path), profile_of(robot), integrator, max_wheel_speed_mm_s=None)
     got = analysis.report["onboard_vs_reference"]
     assert analysis.report["samples"]["onboard"] == expected.samples
@@ -216,7 +236,7 @@ def test_analyze_agrees_with_the_independent_checker(
             assert not analysis.passed, (got, expected)
             assert not expected.passed, (got, expected)
             return
-        assert_right_firmware_agrees(analysis, expected, synth, cut)
+        assert_right_firmware_agrees(analysis, expected, synth, cut, placed=bool(dropped))
     else:  # a wrong firmware: a start the log does not give is fitted (module docstring)
         freedom_position, freedom_heading = WRONG_SAMPLE_FREEDOM, 0.0
         if cut:
@@ -233,11 +253,15 @@ def test_analyze_agrees_with_the_independent_checker(
 
 
 def assert_right_firmware_agrees(
-    analysis: Analysis, expected: Verdict, synth: Synth, cut: int
+    analysis: Analysis, expected: Verdict, synth: Synth, cut: int, *, placed: bool = False
 ) -> None:
     """A right firmware's maximum errors by ``analyze`` against the checker's: never above them
     by more than a quarter LSB (a FAIL must not blame a right firmware); below them by a quarter
-    LSB from power-up, mid-drive (``cut``) by the freedom of a start not told (docstring)."""
+    LSB from power-up, mid-drive (``cut``) by the freedom of a start not told (docstring), and
+    with gaps in the log (``placed``) by a placed segment's: its position is placed on its own
+    samples (within half an LSB of them), where the checker is told the firmware's (a segment
+    whose samples are all one pose is placed on it exactly: 0.0 where the checker has that
+    pose's rounding, up to 0.71 LSB)."""
     got = analysis.report["onboard_vs_reference"]
     position_lsb = expected.max_position_error_m / POSITION_LSB_M
     heading_lsb = expected.max_heading_error_rad / HEADING_LSB_RAD
@@ -246,6 +270,8 @@ def assert_right_firmware_agrees(
         below_position += WRONG_SAMPLE_FREEDOM + (
             0.5 * HEADING_LSB_RAD * displacement_m(synth, cut) / POSITION_LSB_M)
         below_heading += 0.5
+    elif placed:
+        below_position += WRONG_SAMPLE_FREEDOM
     off_position = got["max_position_error_m"] / POSITION_LSB_M - position_lsb
     off_heading = got["max_heading_error_rad"] / HEADING_LSB_RAD - heading_lsb
     assert -below_position <= off_position <= CLOSE_CALL, (got, expected)

@@ -27,6 +27,7 @@ from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.lossgate import beyond_width
 from odocan.host.judge.nearthreshold import Resets, ambiguity_rule, near_candidates
+from odocan.host.judge.newstartfit import refit_new_starts
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -116,6 +117,8 @@ def build_reference(
     cos0, sin0 = math.cos(h0), math.sin(h0)
     x_m = x0 + cos0 * rel_x - sin0 * rel_y
     y_m = y0 + sin0 * rel_x + cos0 * rel_y
+    x_m, y_m, rel_h = refit_new_starts(unseen, x_m, y_m, rel_h, h0, (
+        at, onboard.x_m, onboard.y_m, onboard.heading_rad), segment)  # newstartfit
     opened = np.flatnonzero(starts)  # the first frame (from e0) of segments 1, 2, ...
     stalled = frozenset(breaks.tolist()) if breaks is not None else frozenset()
 
