@@ -8,9 +8,11 @@ lost (ENC_E2E_LOST: its mailbox dropped them, or the bus did). Counting ENC_E2E_
 from the page, as it did, lands as many frames late as it lost the bus carried; that count
 overrode even the boot summary's exact frame, and the reference started there, at the
 power-up pose, while the firmware had already moved: a correct kobuki FAILed by 12 mm (the
-whole-log and the streamed ``analyze``, ``host.judge.stream_lives``). The start is the frame
-ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back from the latest frame before the page: the
-earliest the counts allow, exact when the log holds it.
+whole-log and the streamed ``analyze``, ``host.judge.stream_lives``, and the live judge, which
+counted ENC_E2E_OK frames back in its window). The start is the frame ENC_E2E_OK +
+ENC_E2E_LOST - 1 COUNTER steps back from the latest frame before the page
+(``host.judge.primed.counted_start``, one rule for the three): the earliest the counts allow,
+exact when the log holds it.
 
 The logs are written directly (``tests/synth_log.py``: the firmware's own odometry and codec,
 the frames it lost not integrated, its next step merged); the verdicts are checked against
@@ -32,6 +34,7 @@ from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.robot import load
 from tests.synth_log import Synth, synthesize, wandering_drive
 from tests.test_analysis_reboot import REBOOT, STEPS, independent
+from tests.test_capture_jitter import _live_passes
 
 LOST = {REBOOT + 3, REBOOT + 4}  # dropped by the new firmware's mailbox, before its first page
 
@@ -67,7 +70,7 @@ def test_the_life_starts_at_the_frame_the_firmware_primed_on(
 def test_the_verdict_follows_the_independent_checker(
     tmp_path: Path, keep_boot_summary: bool, bias_100um: int
 ) -> None:
-    """Before: the correct firmware FAILed (12 mm), whole and streamed."""
+    """Before: the correct firmware FAILed (12 mm), whole, streamed and live."""
     profile = load("kobuki")
     path = _drive(bias_100um, keep_boot_summary).write(tmp_path / "reboot.log")
     assert independent(path, profile, "exact", REBOOT) == (bias_100um == 0)
@@ -76,3 +79,4 @@ def test_the_verdict_follows_the_independent_checker(
     assert analysis.report["reboots"][0]["reference_start"] == "power-up"
     streamed = main(["analyze", str(path), "--robot", "kobuki", "--stream", "always"])
     assert (streamed == 0) == (bias_100um == 0)
+    assert _live_passes(path, "kobuki") == (bias_100um == 0)  # the monitor's model

@@ -4,7 +4,7 @@
 A reboot is a summary (ODOM_STATUS page 0, CRC holding) that ``SourceWatch`` calls one, fed in
 bus order as in the whole log. Its life starts at the summary, at the latest accepted encoder
 frame before it (UPTIME 0, not INIT), or at the encoder frame its first page of WHEEL_ENCODERS
-E2E counts names (``reboots.counted_start``: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back
+E2E counts names (``primed.counted_start``: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back
 from that page's latest encoder frame, when the page comes before the next reboot). Carried:
 the watch, the positions and COUNTERs of the last 2^16 accepted encoder frames (ENC_E2E_OK is
 a wrapping u16: no page names one further back), and the
@@ -22,7 +22,8 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.gapseen import crc_holds
-from odocan.host.judge.reboots import SUMMARY_PAGE, counted_start, mark_two_sources
+from odocan.host.judge.primed import counted_start
+from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.protocol.decode import BulkDecoder, DecodeError

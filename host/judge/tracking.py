@@ -43,6 +43,7 @@ from odocan.host.judge.livewindow import (
     held_on_time,
     named_in_window,
     named_plain,
+    primed_at,
     silent_since,
     window_counts,
 )
@@ -420,8 +421,8 @@ class PoseTracker:
         whatever the first pose said (``analyze``'s rule); then ``on_enc_lost``."""
         if self._boot is not None and self._boot[0] < 0:  # the first life's samples wait
             self._finish_first(proven)
-        elif self._boot is not None and 0 < ok <= self.enc_seq + 1:
-            self._finish_boot(self.enc_seq - ok + 1)
+        elif self._boot is not None and (at := primed_at(self._window, ok, lost)) is not None:
+            self._finish_boot(at)
         elif proven and self.integrator is not None:
             self._finish_boot(0, first_life=True)  # the samples judged before keep their errors
         self.on_enc_lost(lost)
