@@ -118,6 +118,7 @@ def synthesize(
     y_bias_100um: dict[int, int] | None = None,
     twist: bool = False,
     distance_of: Callable[[int, int, Odometry], int] | None = None,
+    firmware_lost: set[int] | None = None,
 ) -> Synth:
     """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
     ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB;
@@ -132,8 +133,13 @@ def synthesize(
     ``integrates_restarts``: the firmware integrates the jump.
     ``twist``: ODOM_TWIST with each pose pair (speeds from the firmware's ``Twist``, DISTANCE
     rounded as ``reports._send_pose_and_twist`` does); ``distance_of(k, distance_mm, odo)``: a
-    wrong firmware's DISTANCE (mm) at encoder frame k instead."""
+    wrong firmware's DISTANCE (mm) at encoder frame k instead.
+    ``firmware_lost``: encoder frames the firmware lost (its mailbox dropped them) while the
+    bus, and the log, carried them: not integrated (the next frame is one merged step) and
+    counted in ENC_E2E_LOST, not ENC_E2E_OK."""
     bias = x_bias_100um or {}
+    lost_frames = firmware_lost or set()
+    lost = 0  # encoder frames the running firmware lost since it primed
     jumps = counter_jumps or {}
     named = 0  # the COUNTER of the last encoder frame the firmware accepted
     resync_first: tuple[int, int] | None = None
@@ -155,22 +161,16 @@ def synthesize(
             errors = ErrorMask()
             odo = Odometry(derive_constants(params_of(robot, integrator), errors), errors)
             speeds = Twist(odo, errors)
-            pose_counter = status_counter = 0
+            pose_counter = status_counter = lost = 0
             boot = k
         left, right = (left + int(dl[k])) & mask, (right + int(dr[k])) & mask
         if k in jumps:  # the motor controller restarts its counters
             left, right = (left + jumps[k]) & mask, (right + jumps[k]) & mask
             resync_first, resync_until = (left, right), k + RESYNC_FRAMES - 1
         (left, right), uptime = controller.frame(k, (left, right), mask, odo)
-        if k < resync_until:
-            pass  # refused: beyond the plausibility bound from the last accepted frame
-        elif k == resync_until and resync_first is not None:  # COUNTER_RESET: re-prime
-            odo.unprime()
-            odo.step_counts(*resync_first)
-            _integrate(odo, speeds, left, right)
-            named = k & 0xF
-        else:
-            _integrate(odo, speeds, left, right)
+        if k in lost_frames:
+            lost += 1  # never in its mailbox: the next frame it takes shows the COUNTER skip
+        elif _takes(odo, speeds, k, (left, right), (resync_first, resync_until)):
             named = k & 0xF
         t_s = t0_s + k * ENCODER_PERIOD_S
         group = [_line(t_s, fr.WHEEL_ENCODERS_ID,
@@ -194,9 +194,9 @@ def synthesize(
             )
             group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, status))
             status_counter += 1
-        if life % 50 == 10:  # the firmware's E2E counts of the encoder frames: life + 1 accepted
+        if life % 50 == 10:  # the firmware's E2E counts of the encoder frames: life + 1 seen
             page = fr.pack_odom_status_e2e(
-                status_counter, fr.StatusPage.E2E_WHEEL_ENCODERS, life + 1, 0, 0, 0, 0
+                status_counter, fr.StatusPage.E2E_WHEEL_ENCODERS, life + 1 - lost, lost, 0, 0, 0
             )
             group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, page))
             status_counter += 1
@@ -231,6 +231,22 @@ class _Controller:
             self.powered_up = k
         age_s = (k - self.powered_up) // 100
         return counts, min(15, 1 + age_s) if self.reports_uptime else 0
+
+
+def _takes(odo: Odometry, speeds: Twist, k: int, counts: tuple[int, int],
+           resync: tuple[tuple[int, int] | None, int]) -> bool:
+    """Whether the firmware integrates encoder frame ``k`` (``counts``), and does so: frames
+    before a counter restart's re-prime frame (``resync``: the first counts after the jump and
+    that frame) are refused, beyond the plausibility bound from the last accepted frame; on
+    that frame it re-primes (COUNTER_RESET)."""
+    first, until = resync
+    if k < until:
+        return False
+    if k == until and first is not None:
+        odo.unprime()
+        odo.step_counts(*first)
+    _integrate(odo, speeds, *counts)
+    return True
 
 
 def _integrate(odo: Odometry, speeds: Twist, left: int, right: int) -> None:

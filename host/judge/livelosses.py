@@ -4,7 +4,15 @@ bus's own gaps since its previous page, it lost frames the bus carried (``losses
 the position may leave the fine reference by the worst error that many frames lost in runs make
 there (``losses.worst_runs_m``), from the frame of the previous page on, as ``analyze`` allows
 it. A sample's error beyond its allowance is settled once no later page can reach its frame;
-then ``wrongs`` (``host.judge.posewrongs``) latches it when it was beyond the limit."""
+then ``wrongs`` (``host.judge.posewrongs``) latches it when it was beyond the limit.
+
+The window's frames are numbered here without the pose halves (``window_encoders(window)``):
+a recorder's chunk read in a burst is numbered a lap short, so a span holding such a chunk and
+frames the firmware lost counts 16 more frames lost per lap than ``analyze`` does (its
+numbering tells the chunk, ``senderseq.pose_skips``). Left so, not aligned: ``lost_beyond_gaps``
+subtracts every gap of the log as frames the firmware lost too, which a recorder's chunk need
+not be, so ``analyze``'s count is the lower bound of the firmware's losses there and this one
+nearer the upper; the pages cannot tell which frames it lost."""
 
 from __future__ import annotations
 

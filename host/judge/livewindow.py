@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import (
     QUEUED_GAP_CYCLES,
     SILENCE_CYCLES,
@@ -279,3 +280,15 @@ def held_on_time(window: Columns, last_seq: int, seq: int) -> bool:
     hi = int(np.searchsorted(seqs, seq, side="right"))
     on_time = ~queued_frames(window.col("t_s"), CYCLE_S)
     return int(np.count_nonzero(on_time[lo:hi])) >= SILENCE_CYCLES
+
+
+def primed_at(window: Columns, ok: int, lost: int) -> int | None:
+    """The encoder frame (the tracker's seq) a rebooted firmware primed on, from its first page
+    of WHEEL_ENCODERS E2E counts (ENC_E2E_OK ``ok``, ENC_E2E_LOST ``lost``) heard after the
+    window's latest frame: ``primed.counted_start`` over the window (the earliest the counts
+    allow: its mailbox may have lost frames the bus carried). None when the window lacks it."""
+    if not len(window):
+        return None
+    seqs = window.col("seq").astype(np.int64)
+    return counted_start((seqs, window.col("counter").astype(np.int64)), int(seqs[-1]) + 1,
+                         ok, lost)

@@ -19,8 +19,9 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
 * UPTIME above 0 (the recorder missed the boot summary): where it primed is unknown; the life
   starts at the summary and its start is fitted like a log that starts mid-drive;
 * whatever the summary says, when the new firmware's first page of WHEEL_ENCODERS E2E counts
-  (ENC_E2E_OK: encoder frames accepted since its boot) follows, it names the frame it primed
-  on exactly: the ENC_E2E_OK-th accepted encoder frame back from the page. That holds when the
+  (ENC_E2E_OK: encoder frames accepted since its boot; ENC_E2E_LOST: lost) follows, it names
+  the frame it primed on: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back from the page's
+  latest encoder frame (``_counted_start``: the earliest the counts allow). That holds when the
   log missed the boot summary (UPTIME counts whole seconds: the summaries of the first second
   all say 0) and is checked again on the life (``host.judge.powerup.saw_only_the_log``).
 
@@ -51,6 +52,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.liveconfig import config_text
+from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -78,14 +80,15 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     if not boots:
         return [Life(everything, boot=False)]
     _, accepted = check_frames(frames, decoder.db)  # the encoder frames a firmware takes
-    encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    encoders = encoders[accepted[encoders]]
+    rows = decoder.decode(frames, "WHEEL_ENCODERS")
+    keep = accepted[rows["index"]]
+    encoders, counters = rows["index"][keep], rows["COUNTER"][keep].astype(np.int64)
     pages = _encoder_count_pages(frames, decoder)
     starts: list[int] = []
     limits = [b[0] for b in boots[1:]] + [len(frames)]
     for (position, uptime_s, state, _), limit in zip(boots, limits, strict=True):
         start = _life_start(position, uptime_s, state, encoders)
-        counted = _counted_start(position, limit, encoders, pages)
+        counted = _counted_start(position, limit, (encoders, counters), pages)
         if counted is not None and counted > (starts[-1] if starts else 0):
             start = counted
         starts.append(start)
@@ -108,29 +111,26 @@ def _life_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[
 
 
 def _counted_start(
-    position: int, limit: int, encoders: npt.NDArray[np.intp],
+    position: int, limit: int, encoders: tuple[npt.NDArray[np.intp], npt.NDArray[np.int64]],
     pages: tuple[npt.NDArray[np.int64], ...],
 ) -> int | None:
     """The encoder frame the firmware primed on, from its first page of WHEEL_ENCODERS E2E
-    counts after the summary at ``position`` (and before ``limit``, the next boot): it had
-    accepted ENC_E2E_OK frames, so it primed on the ENC_E2E_OK-th accepted encoder frame back
-    from that page (when the log lacks none of them). None without such a page."""
-    where, ok = pages
+    counts after the summary at ``position`` (and before ``limit``, the next boot):
+    ``counted_start``. None without such a page."""
+    where, ok, lost = pages
     after = int(np.searchsorted(where, position))
-    if after == len(where) or where[after] >= limit or int(ok[after]) <= 0:
+    if after == len(where) or where[after] >= limit:
         return None
-    before = encoders[encoders < where[after]]
-    if len(before) < int(ok[after]):
-        return None
-    return int(before[-int(ok[after])])
+    return counted_start(encoders, int(where[after]), int(ok[after]), int(lost[after]))
 
 
 def _encoder_count_pages(
     frames: FrameArrays, decoder: BulkDecoder
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Positions and ENC_E2E_OK of the ODOM_STATUS pages of WHEEL_ENCODERS E2E counts whose CRC
-    holds (empty when the log or the DBC has none)."""
-    none = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Positions, ENC_E2E_OK and ENC_E2E_LOST (0 where the DBC has none) of the ODOM_STATUS
+    pages of WHEEL_ENCODERS E2E counts whose CRC holds (empty when the log or the DBC has
+    none)."""
+    none = (np.zeros(0, dtype=np.int64),) * 3
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
     except DecodeError:
@@ -138,7 +138,9 @@ def _encoder_count_pages(
     if "ENC_E2E_OK" not in page:
         return none
     good = crc_holds(frames, decoder, page["index"])
-    return page["index"][good].astype(np.int64), page["ENC_E2E_OK"][good].astype(np.int64)
+    lost = page.get("ENC_E2E_LOST", np.zeros(len(good), dtype=np.int64))
+    return (page["index"][good].astype(np.int64), page["ENC_E2E_OK"][good].astype(np.int64),
+            lost[good].astype(np.int64))
 
 
 def two_sources(frames: FrameArrays, decoder: BulkDecoder) -> tuple[int, float] | None:

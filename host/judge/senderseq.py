@@ -12,6 +12,8 @@ import numpy.typing as npt
 
 QUEUED_GAP_CYCLES = 0.35  # two sends of one message closer than this waited (``queued_frames``)
 BURST_END_CYCLES = 1.5  # a step this long ends a recorder's burst (``burst_laps``)
+LATE_SLACK_CYCLES = 2.0  # a frame this much earlier than its neighbours is no stamp's jitter
+LAP = 16  # the 4-bit COUNTER's lap
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -48,6 +50,7 @@ def sender_seq(counter: IntArray, timestamp_s: FloatArray, cycle_s: float | None
         for k in in_holes:
             lost[k] = burst_laps(k, step, queued, timestamp_s, cycle_s)
         step += lost
+        late_lone_frames(step, lost, holes, timestamp_s, cycle_s)
     seq: IntArray = np.empty(len(step) + 1, dtype=np.int64)
     seq[0] = 0
     np.cumsum(step, out=seq[1:])
@@ -121,3 +124,38 @@ def burst_laps(k: int, step: IntArray, queued: npt.NDArray[np.bool_], timestamp_
         if not queued[b]:
             break
     return 16 * max(0, laps or 0)
+
+
+def late_lone_frames(step: IntArray, lost: IntArray, holes: npt.NDArray[np.bool_] | None,
+                     timestamp_s: FloatArray, cycle_s: float) -> None:
+    """In place: a lap of ``step`` (``sender_seq``'s; ``lost``: the laps it added) that the
+    stamps put at a step only because the frame after it was stamped 8 periods late or more is
+    moved to the step after that frame (issue #11, rule 3: a recorder that stamped the frame
+    before its chunk 10 periods late had the lap counted at the single step before it, which
+    took a gap's allowance there, and a firmware 1 LSB wrong at that step PASSed; the chunk was
+    numbered a lap short).
+
+    A recorder, like a bus, stamps late, never early. Let r = stamp / cycle - sequence number:
+    frames on time share one level, a late frame lies above it. A frame f after a step that
+    took a lap from the stamps (not in a hole of the log, ``pose_skips``, when known) numbered
+    so that r(f) lies more than ``LATE_SLACK_CYCLES`` below both r(f - 1) and the least late of
+    the 16 frames after f would make every frame around it late by that much and f alone on
+    time (the lap before f's stamp: f early). One lap fewer before f and one more after it
+    puts f above them instead: late, as the recorder stamped it. A sender's stall (stamps on
+    time) leaves f at the level: its lap is kept; so is a lap the frames after f do not take
+    (their level 16 below: no second step to carry it)."""
+    at = lost[:-1] >= LAP
+    if holes is not None:
+        at &= ~holes[:-1]
+    picks = np.flatnonzero(at)
+    if not len(picks):
+        return
+    seq = np.concatenate(([0], np.cumsum(step)))
+    level = timestamp_s / cycle_s - seq
+    for i in picks.tolist():
+        if i + 2 >= len(level):  # no frame after f: nothing tells
+            break
+        after = float(np.min(level[i + 2 : i + 2 + LAP]))
+        if level[i + 1] < min(float(level[i]), after) - LATE_SLACK_CYCLES:
+            step[i] -= LAP
+            step[i + 1] += LAP

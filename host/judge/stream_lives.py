@@ -4,9 +4,10 @@
 A reboot is a summary (ODOM_STATUS page 0, CRC holding) that ``SourceWatch`` calls one, fed in
 bus order as in the whole log. Its life starts at the summary, at the latest accepted encoder
 frame before it (UPTIME 0, not INIT), or at the encoder frame its first page of WHEEL_ENCODERS
-E2E counts names (the ENC_E2E_OK-th accepted encoder frame back from that page, when the page
-comes before the next reboot). Carried: the watch, the positions of the last 2^16 accepted
-encoder frames (ENC_E2E_OK is a wrapping u16: no page names one further back), and the
+E2E counts names (``primed.counted_start``: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back
+from that page's latest encoder frame, when the page comes before the next reboot). Carried:
+the watch, the positions and COUNTERs of the last 2^16 accepted encoder frames (ENC_E2E_OK is
+a wrapping u16: no page names one further back), and the
 reboot still waiting for its first count page. A reboot's start is final at its first count
 page, at the next reboot or at the end of the log; lives are contiguous ranges of frames."""
 
@@ -21,6 +22,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
 from odocan.host.judge.sources import SourceWatch, two_sources_text
@@ -61,6 +63,8 @@ class StreamLives:
     _watch: SourceWatch = field(default_factory=SourceWatch)
     _encoders: npt.NDArray[np.int64] = field(
         default_factory=lambda: np.zeros(0, dtype=np.int64))
+    _counters: npt.NDArray[np.int64] = field(  # the COUNTER of each of ``_encoders``
+        default_factory=lambda: np.zeros(0, dtype=np.int64))
     _waiting: _Boot | None = None  # the last reboot, before its first count page
     _boots: list[tuple[_Boot, int]] = field(default_factory=list)  # with their final start
     _summaries: bool = True  # the DBC's ODOM_STATUS has UPTIME and STATE on its summary page
@@ -70,9 +74,11 @@ class StreamLives:
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
-        encoders = self.decoder.select(chunk, "WHEEL_ENCODERS")
+        rows = self.decoder.decode(chunk, "WHEEL_ENCODERS")
+        keep = accepted[rows["index"]]
         self._encoders = np.concatenate(
-            (self._encoders, encoders[accepted[encoders]].astype(np.int64) + self._offset))
+            (self._encoders, rows["index"][keep].astype(np.int64) + self._offset))
+        self._counters = np.concatenate((self._counters, rows["COUNTER"][keep].astype(np.int64)))
         events = sorted(self._boot_events(chunk) + self._page_events(chunk),
                         key=lambda event: event[0])
         for position, boot in events:
@@ -82,6 +88,7 @@ class StreamLives:
             else:
                 self._decide((position, boot))
         self._encoders = self._encoders[-ENCODERS_KEPT:]
+        self._counters = self._counters[-ENCODERS_KEPT:]
         self._offset += len(chunk)
 
     def finish(self, n_frames: int | None = None) -> list[LifeSpan]:
@@ -119,23 +126,21 @@ class StreamLives:
             mark_two_sources(report, self.conflict[1], n_frames - self._cut)
         return report
 
-    def _decide(self, page: tuple[int, int] | None) -> None:
-        """The waiting reboot's start, from its first count page (position, ENC_E2E_OK) or
-        without one."""
+    def _decide(self, page: tuple[int, tuple[int, int]] | None) -> None:
+        """The waiting reboot's start, from its first count page (position, (ENC_E2E_OK,
+        ENC_E2E_LOST)) or without one."""
         boot = self._waiting
         if boot is None:
             return
         self._waiting = None
         start = boot.start
-        if page is not None and page[1] > 0:
-            before = self._encoders[self._encoders < page[0]]
-            if len(before) >= page[1]:
-                counted = int(before[-page[1]])
-                if counted > (self._boots[-1][1] if self._boots else 0):
-                    start = counted
+        if page is not None:
+            counted = counted_start((self._encoders, self._counters), page[0], *page[1])
+            if counted is not None and counted > (self._boots[-1][1] if self._boots else 0):
+                start = counted
         self._boots.append((boot, start))
 
-    def _boot_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | int]]:
+    def _boot_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | tuple[int, int]]]:
         """The chunk's reboots (``reboots._boot_summaries``), at their positions in the log."""
         if not self._summaries:
             return []
@@ -153,7 +158,7 @@ class StreamLives:
         index = page["index"]
         good = crc_holds(chunk, self.decoder, index)
         choices = dict(message.get_signal_by_name("STATE").choices or {})
-        events: list[tuple[int, _Boot | int]] = []
+        events: list[tuple[int, _Boot | tuple[int, int]]] = []
         for position, t_s, uptime_s, state in zip(
             index[good].tolist(), page["timestamp_s"][good].tolist(),
             page["UPTIME"][good].tolist(), page["STATE"][good].tolist(), strict=True,
@@ -173,8 +178,9 @@ class StreamLives:
                 events.append((at, _Boot(at, int(uptime_s), float(t_s), int(before), start)))
         return events
 
-    def _page_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | int]]:
-        """The chunk's count pages whose CRC holds: (position in the log, ENC_E2E_OK)."""
+    def _page_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | tuple[int, int]]]:
+        """The chunk's count pages whose CRC holds: (position in the log, (ENC_E2E_OK,
+        ENC_E2E_LOST))."""
         try:
             page = self.decoder.decode_page(chunk, "ODOM_STATUS", ENC_E2E_PAGE)
         except (DecodeError, KeyError):
@@ -182,6 +188,7 @@ class StreamLives:
         if "ENC_E2E_OK" not in page or len(page["index"]) == 0:
             return []
         good = crc_holds(chunk, self.decoder, page["index"])
-        return [(int(p) + self._offset, int(ok)) for p, ok in
+        lost = page.get("ENC_E2E_LOST", np.zeros(len(good), dtype=np.int64))
+        return [(int(p) + self._offset, (int(ok), int(n))) for p, ok, n in
                 zip(page["index"][good].tolist(), page["ENC_E2E_OK"][good].tolist(),
-                    strict=True)]
+                    lost[good].tolist(), strict=True)]

@@ -16,9 +16,10 @@ from dataclasses import replace
 from typing import Any
 
 from odocan.host.judge.livechoice import LiveChoice
-from odocan.host.judge.livefit import LiveFit, rebase
+from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.liveplace import StallPlacer
+from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import (
     RING,
     ErrorStats,
@@ -44,6 +45,7 @@ from odocan.host.judge.livewindow import (
     held_on_time,
     named_in_window,
     named_plain,
+    primed_at,
     silent_since,
     window_counts,
 )
@@ -298,7 +300,7 @@ class PoseTracker:
         if ref is None:
             return None
         if self._place_at_next or self.placer.owed:  # owed: an allowance withdrawn
-            ref = self._place(pose, ref)
+            ref = place_reference(self, pose, ref)
         return self._record(pose, ref)
 
     def _record(self, pose: FramePose, raw: FramePose) -> FramePose:
@@ -432,8 +434,8 @@ class PoseTracker:
         whatever the first pose said (``analyze``'s rule); then ``on_enc_lost``."""
         if self._boot is not None and self._boot[0] < 0:  # the first life's samples wait
             self._finish_first(proven)
-        elif self._boot is not None and 0 < ok <= self.enc_seq + 1:
-            self._finish_boot(self.enc_seq - ok + 1)
+        elif self._boot is not None and (at := primed_at(self._window, ok, lost)) is not None:
+            self._finish_boot(at)
         elif proven and self.integrator is not None:
             self._finish_boot(0, first_life=True)  # the samples judged before keep their errors
         self.on_enc_lost(lost)
@@ -452,21 +454,6 @@ class PoseTracker:
         from the next frame on, as the firmware's gate runs with it; the reference goes on."""
         self.geometry = replace(self.geometry, max_wheel_speed_mm_s=max_wheel_speed_mm_s)
         self._gate.rebound(self.geometry)
-
-    def _place(self, pose: FramePose, raw: FramePose) -> FramePose:
-        """Move the reference's position (now and at the frames heard since ``raw``) to where
-        the firmware is, within the pose's rounding, while its heading goes on exact; bounded
-        as ``analyze`` places it (``liveplace.StallPlacer``); the start fit's correction is
-        taken into the reference first and the fit goes on (``livefit.rebase``). Returns the
-        moved reference at ``raw``'s frame."""
-        assert self._ref is not None and self.integrator is not None
-        ref = self.fit.correct(raw)
-        shift = self.placer.shift(pose, ref, self._last_compared, self._window,
-                                  (self.geometry, self.counter_bits, self.integrator),
-                                  self.fit.placed_shift_m())
-        self._ref_at, self.fit, placed = rebase(self.fit, self._ref, self._ref_at, ref, shift)
-        self._place_at_next = False
-        return placed
 
     def on_truth(
         self, part: int, enc_counter: int, value: float
