@@ -118,6 +118,7 @@ def synthesize(
     y_bias_100um: dict[int, int] | None = None,
     twist: bool = False,
     distance_of: Callable[[int, int, Odometry], int] | None = None,
+    totals_at: frozenset[int] = frozenset(),
 ) -> Synth:
     """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
     ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB;
@@ -132,7 +133,9 @@ def synthesize(
     ``integrates_restarts``: the firmware integrates the jump.
     ``twist``: ODOM_TWIST with each pose pair (speeds from the firmware's ``Twist``, DISTANCE
     rounded as ``reports._send_pose_and_twist`` does); ``distance_of(k, distance_mm, odo)``: a
-    wrong firmware's DISTANCE (mm) at encoder frame k instead."""
+    wrong firmware's DISTANCE (mm) at encoder frame k instead.
+    ``totals_at``: frames of the life (multiples of 10, not 10 mod 50) whose summary a
+    FRAME_TOTALS page follows (nothing lost, refused or overflowed)."""
     bias = x_bias_100um or {}
     jumps = counter_jumps or {}
     named = 0  # the COUNTER of the last encoder frame the firmware accepted
@@ -194,12 +197,9 @@ def synthesize(
             )
             group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, status))
             status_counter += 1
-        if life % 50 == 10:  # the firmware's E2E counts of the encoder frames: life + 1 accepted
-            page = fr.pack_odom_status_e2e(
-                status_counter, fr.StatusPage.E2E_WHEEL_ENCODERS, life + 1, 0, 0, 0, 0
-            )
-            group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, page))
-            status_counter += 1
+        pages = _pages(life, status_counter, life in totals_at)
+        group += [_line(t_s + 0.001, fr.ODOM_STATUS_ID, page) for page in pages]
+        status_counter += len(pages)
         out.groups.append(group)
         out.state.append(
             FirmwareState(odo.x_q40_m, odo.y_q40_m, odo.heading_bam64, odo.heading_turns)
@@ -231,6 +231,19 @@ class _Controller:
             self.powered_up = k
         age_s = (k - self.powered_up) // 100
         return counts, min(15, 1 + age_s) if self.reports_uptime else 0
+
+
+def _pages(life: int, counter: int, totals: bool) -> list[bytes]:
+    """The ODOM_STATUS pages after the summary of the life's frame ``life`` (from E2E COUNTER
+    ``counter``): the E2E counts of the encoder frames (life + 1 accepted) at 10 mod 50, the
+    FRAME_TOTALS page (nothing lost, refused or overflowed) when ``totals``."""
+    pages = []
+    if life % 50 == 10:
+        pages.append(fr.pack_odom_status_e2e(
+            counter, fr.StatusPage.E2E_WHEEL_ENCODERS, life + 1, 0, 0, 0, 0))
+    if totals:
+        pages.append(fr.pack_odom_status_frame_totals(counter + len(pages), 0, 0, 0))
+    return pages
 
 
 def _integrate(odo: Odometry, speeds: Twist, left: int, right: int) -> None:
