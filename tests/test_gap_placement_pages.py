@@ -72,3 +72,25 @@ def test_an_ambiguous_hole_the_pages_heard_do_not_decide_is_chosen_as_whole(
         assert (tracker.wrongs.count > 0) is not right
         assert tracker.max_beyond_allowance_m <= POSITION_LSB_M
         assert tracker.reference_starts == 1  # one start: the choice, not a new start
+
+
+@pytest.mark.parametrize("firmware", ["took", "heading_off"])
+def test_a_second_ambiguous_hole_within_the_hold(tmp_path: Path, firmware: str) -> None:
+    """Two such holes 0.5 s apart (frames 185-186 and 235-236 cut, no FRAME_TOTALS page): the
+    firmware that took both passes every judge; one whose HEADING is 2 LSB off from 237 on
+    FAILs every judge (before: PASS live, the second hole a new start from the pose after it
+    while the first one's choice was held)."""
+    d_left, d_right = _drive(FAST, 800, 0, 0.015625, 0.0)
+    synth = synthesize(profile_of(FAST), "euler", d_left, d_right,
+                       heading_bias_lsb=dict.fromkeys(range(237, 801), 2)
+                       if firmware == "heading_off" else None)
+    path = _cut(synth, [(185, 2), (235, 2)]).write(tmp_path / "holes.log")
+    right = firmware == "took"
+    result = analyze(read_log(path), profile_of(FAST), "euler")
+    assert result.passed is right, result.report["onboard_vs_reference"]
+    monitor, bridge, end_s = _live(profile_of(FAST), "euler", path)
+    assert (monitor.health(end_s)["state"] == "POSE WRONG") is not right, monitor.health(end_s)
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert (tracker.vs_reference.max_dheading_rad > HEADING_LSB_RAD) is not right
+        assert tracker.max_beyond_allowance_m <= POSITION_LSB_M
+        assert tracker.reference_starts == 1  # one start: the choices, no new start

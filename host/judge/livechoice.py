@@ -28,8 +28,12 @@ whole log (the gap proven missed: ``Seen.gap_missed``, the re-prime), else the f
 sample chooses as ``evidencechoice`` does, and every held sample is judged against the chosen
 candidate (the gap taken keeps its placement, ``gapbound``'s allowance; the re-prime none). A
 live verdict so lags the hole by at most ``PAGES_WAIT_S``; a pose that fits neither FAILs.
-Bounded: one choice at a time (a second such hole while one waits falls back to the new start
-from the next pose, ``livedark.DarkRestarts.owe``), its twin's poses over ``WAIT_S`` of frames.
+Bounded: one choice at a time, its twin's poses over ``PAGES_WAIT_S`` of frames. A hole of the
+frames heard while one waits makes it first (``ahead``), before the new gap is placed or the
+reference steps into it: from its first held sample, as it would be later (so a second such hole
+holds its own choice), unless it waits for pages (then a second such hole falls back: the
+re-prime) or holds no sample yet (then a second such hole falls back to the new start from the
+next pose, ``livedark.DarkRestarts.owe``).
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ from typing import TYPE_CHECKING
 
 from odocan.host.judge.liveplace import Gap
 from odocan.host.judge.livepose import FramePose, difference
+from odocan.host.judge.livewindow import CYCLE_S
 from odocan.host.judge.reference import ReferenceOdometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 
@@ -48,6 +53,7 @@ if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
 
 WAIT_S = 1.0  # bus time after the hole's frame the pages may take to tell (s)
+ROW_COUNTER, ROW_T_S = 2, 3  # the tracker's window rows (``tracking.PoseTracker.on_encoders``)
 PAGES_WAIT_S = 3.0  # ... at most, pages of the life heard before it (five page rotations, s)
 
 
@@ -117,6 +123,18 @@ class LiveChoice:
         p.held.append(pose)
         self._tracker._last_compared = pose.seq
         return True
+
+    def ahead(self, counter: int, t_s: float, prev: tuple[float, ...]) -> None:
+        """An encoder frame (COUNTER, bus time ``t_s``) heard after the window's row ``prev``
+        while a choice waits: when the frames heard have a hole before it (COUNTER not the
+        next, or late by half a period), the choice is made now if a sample is held and no
+        page is waited for (module docstring)."""
+        p = self.pending
+        assert p is not None
+        if p.heard or not p.held:
+            return
+        if (counter - int(prev[ROW_COUNTER])) & 0xF != 1 or t_s - prev[ROW_T_S] > 1.5 * CYCLE_S:
+            self.decide()
 
     def decide(self) -> None:
         """Choose (module docstring) and judge the samples held against the chosen reference,
