@@ -119,6 +119,7 @@ def synthesize(
     twist: bool = False,
     distance_of: Callable[[int, int, Odometry], int] | None = None,
     firmware_lost: set[int] | None = None,
+    totals_at: frozenset[int] = frozenset(),
 ) -> Synth:
     """The frames of a drive of ``len(d_left)`` steps (``len + 1`` encoder frames).
     ``x_bias_100um``: a wrong firmware, whose X at encoder frame k is off by that many LSB;
@@ -136,7 +137,11 @@ def synthesize(
     wrong firmware's DISTANCE (mm) at encoder frame k instead.
     ``firmware_lost``: encoder frames the firmware lost (its mailbox dropped them) while the
     bus, and the log, carried them: not integrated (the next frame is one merged step) and
-    counted in ENC_E2E_LOST, not ENC_E2E_OK."""
+    counted in ENC_E2E_LOST, not ENC_E2E_OK.
+    ``totals_at``: frames of the life (multiples of 10, not 10 mod 50) whose summary a
+    FRAME_TOTALS page follows (nothing lost, refused or overflowed: not with ``firmware_lost``)."""
+    if totals_at and firmware_lost:
+        raise ValueError("totals_at says nothing was lost: not with firmware_lost")
     bias = x_bias_100um or {}
     lost_frames = firmware_lost or set()
     lost = 0  # encoder frames the running firmware lost since it primed
@@ -194,12 +199,9 @@ def synthesize(
             )
             group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, status))
             status_counter += 1
-        if life % 50 == 10:  # the firmware's E2E counts of the encoder frames: life + 1 seen
-            page = fr.pack_odom_status_e2e(
-                status_counter, fr.StatusPage.E2E_WHEEL_ENCODERS, life + 1 - lost, lost, 0, 0, 0
-            )
-            group.append(_line(t_s + 0.001, fr.ODOM_STATUS_ID, page))
-            status_counter += 1
+        pages = _pages(life, status_counter, lost, life in totals_at)
+        group += [_line(t_s + 0.001, fr.ODOM_STATUS_ID, page) for page in pages]
+        status_counter += len(pages)
         out.groups.append(group)
         out.state.append(
             FirmwareState(odo.x_q40_m, odo.y_q40_m, odo.heading_bam64, odo.heading_turns)
@@ -247,6 +249,19 @@ def _takes(odo: Odometry, speeds: Twist, k: int, counts: tuple[int, int],
         odo.step_counts(*first)
     _integrate(odo, speeds, *counts)
     return True
+
+
+def _pages(life: int, counter: int, lost: int, totals: bool) -> list[bytes]:
+    """The ODOM_STATUS pages after the summary of the life's frame ``life`` (from E2E COUNTER
+    ``counter``): the E2E counts of the encoder frames (life + 1 seen, ``lost`` of them lost) at
+    10 mod 50, the FRAME_TOTALS page (nothing lost, refused or overflowed) when ``totals``."""
+    pages = []
+    if life % 50 == 10:
+        pages.append(fr.pack_odom_status_e2e(
+            counter, fr.StatusPage.E2E_WHEEL_ENCODERS, life + 1 - lost, lost, 0, 0, 0))
+    if totals:
+        pages.append(fr.pack_odom_status_frame_totals(counter + len(pages), 0, 0, 0))
+    return pages
 
 
 def _integrate(odo: Odometry, speeds: Twist, left: int, right: int) -> None:

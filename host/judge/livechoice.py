@@ -1,27 +1,39 @@
 """The live judge's choice at an ambiguous hole no page has told of yet (issue #11, one judge;
-rule 5: a PASS must never hide a wrong pose; ``host.judge.evidenceless``).
+rule 3: a FAIL must never blame a correct firmware, rule 5: a PASS must never hide a wrong
+pose; ``host.judge.evidenceless``).
 
 A step of the encoder frames heard that reaches the ambiguous step (``host.judge.ambiguity``)
 behind a hole of the frames heard re-primes the reference (``livepose.StepGate``), as the
 firmware does when it missed the frames; a recorder (or a link) that lost the frames alone holds
-a firmware that took them one by one. Where the pages heard so far cannot tell which (no
-FRAME_TOTALS page of the life, no ENC_E2E page inside the hole: ``LiveSeen.heard_in``), the whole
-log's judge chooses by the firmware's next pose (``host.judge.evidencechoice``: the candidate
-nearer to it, in LSBs of position and heading) unless its pages prove the gap missed. The live
-judge did not choose: it started again from the next pose, so a firmware whose HEADING was
-2 LSB off after such a hole FAILed ``analyze`` and PASSed the monitor and the bridge.
+a firmware that took them one by one. Where the pages heard when it steps do not prove frames
+taken in the hole (``livepose.StepGate._taken``), the whole log's judge chooses by the
+firmware's next pose (``host.judge.evidencechoice``: the candidate nearer to it, in LSBs of
+position and heading) unless its pages prove the gap missed. The live judge did not choose:
+with no page of the life to tell (no FRAME_TOTALS page, no ENC_E2E page inside the hole:
+``LiveSeen.heard_in``) it started again from the next pose, so a firmware whose HEADING was
+2 LSB off after such a hole FAILed ``analyze`` and PASSed the monitor and the bridge; with
+one, it stayed re-primed, so a firmware that took a short recorder hole, which no page
+decides, FAILed the monitor and the bridge (22.5 mm on a fast robot) and PASSed ``analyze``.
 
 Now both candidates are kept: the reference re-primed (the gate's) and its twin that took the
 hole's step (the frames' counts across it, ``wrap_delta``), stepped along with it frame by
-frame. The on-board samples naming the hole's frame or later are held, unjudged, until
-``WAIT_S`` of bus time after the hole (the next ENC_E2E and FRAME_TOTALS pages come within it),
-the end of the watch or the reference's restart; then the pages heard decide as they decide for
-the whole log (the gap proven missed: ``Seen.gap_missed``, the re-prime), else the first held
+frame. The on-board samples naming the hole's frame or later are held, unjudged, until the pages
+had their time: ``WAIT_S`` of bus time after the hole when no page of the life was heard before
+it; when one was, until an ENC_E2E page sent after the hole and a FRAME_TOTALS page after that
+one are kept (``LiveSeen.told_after``: the first window over the hole a proof can close; about
+1.2 s at the firmware's page rotation), at most ``PAGES_WAIT_S`` (the pages that prove a silence
+missed must not come after the choice: 932077b kept the re-prime there for that), or the end
+of the watch or the reference's restart. Then the pages heard decide as they decide for the
+whole log (the gap proven missed: ``Seen.gap_missed``, the re-prime), else the first held
 sample chooses as ``evidencechoice`` does, and every held sample is judged against the chosen
 candidate (the gap taken keeps its placement, ``gapbound``'s allowance; the re-prime none). A
-live verdict so lags the hole by at most ``WAIT_S``; a pose that fits neither candidate FAILs.
-Bounded: one choice at a time (a second such hole while one waits falls back to the new start
-from the next pose, ``livedark.DarkRestarts.owe``), its twin's poses over ``WAIT_S`` of frames.
+live verdict so lags the hole by at most ``PAGES_WAIT_S``; a pose that fits neither FAILs.
+Bounded: one choice at a time, its twin's poses over ``PAGES_WAIT_S`` of frames. A hole of the
+frames heard while one waits makes it first (``ahead``), before the new gap is placed or the
+reference steps into it: from its first held sample, as it would be later (so a second such hole
+holds its own choice), unless it waits for pages (then a second such hole falls back: the
+re-prime) or holds no sample yet (then a second such hole falls back to the new start from the
+next pose, ``livedark.DarkRestarts.owe``).
 """
 
 from __future__ import annotations
@@ -33,6 +45,7 @@ from typing import TYPE_CHECKING
 
 from odocan.host.judge.liveplace import Gap
 from odocan.host.judge.livepose import FramePose, difference
+from odocan.host.judge.livewindow import CYCLE_S
 from odocan.host.judge.reference import ReferenceOdometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 
@@ -40,16 +53,20 @@ if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
 
 WAIT_S = 1.0  # bus time after the hole's frame the pages may take to tell (s)
+ROW_COUNTER, ROW_T_S = 2, 3  # the tracker's window rows (``tracking.PoseTracker.on_encoders``)
+PAGES_WAIT_S = 3.0  # ... at most, pages of the life heard before it (five page rotations, s)
 
 
 @dataclass
 class Pending:
     """A choice waiting: the frame after the hole, the bus times of the frames around it, the
     twin that took its step and its poses by frame, the hole's gap (a placement part when
-    taken), the last sample compared before it, the samples held since."""
+    taken), the last sample compared before it, the samples held since; whether pages of the
+    life were heard before it (``LiveSeen.heard_in``: the pages after it are waited for)."""
 
     seq: int
     span_s: tuple[float, float]
+    heard: bool
     twin: ReferenceOdometry
     gap: Gap | None
     last_compared: int
@@ -75,10 +92,18 @@ class LiveChoice:
             return False
         twin = copy.copy(ref)
         twin.step_deltas(*taken)
-        self.pending = Pending(seq, span_s, twin, self._tracker.placer.gap_at(seq),
+        heard = self._tracker.placer.seen.heard_in(*span_s)
+        self.pending = Pending(seq, span_s, heard, twin, self._tracker.placer.gap_at(seq),
                                self._tracker._last_compared)
-        self.until_s = span_s[1] + WAIT_S
+        self.until_s = span_s[1] + (PAGES_WAIT_S if heard else WAIT_S)
         return True
+
+    def paged(self, t_s: float) -> None:
+        """A FRAME_TOTALS page kept at bus time ``t_s``: when pages were heard before the hole
+        and those a proof over it needs are in, the choice is made at the next frame."""
+        p = self.pending
+        if p is not None and p.heard and self._tracker.placer.seen.told_after(p.span_s[1]):
+            self.until_s = min(self.until_s, t_s)
 
     def stepped(self, seq: int, step: tuple[int, int] | None) -> None:
         """Encoder frame ``seq`` stepped the reference by ``step``: the twin steps too (the hole's
@@ -98,6 +123,18 @@ class LiveChoice:
         p.held.append(pose)
         self._tracker._last_compared = pose.seq
         return True
+
+    def ahead(self, counter: int, t_s: float, prev: tuple[float, ...]) -> None:
+        """An encoder frame (COUNTER, bus time ``t_s``) heard after the window's row ``prev``
+        while a choice waits: when the frames heard have a hole before it (COUNTER not the
+        next, or late by half a period), the choice is made now if a sample is held and no
+        page is waited for (module docstring)."""
+        p = self.pending
+        assert p is not None
+        if p.heard or not p.held:
+            return
+        if (counter - int(prev[ROW_COUNTER])) & 0xF != 1 or t_s - prev[ROW_T_S] > 1.5 * CYCLE_S:
+            self.decide()
 
     def decide(self) -> None:
         """Choose (module docstring) and judge the samples held against the chosen reference,

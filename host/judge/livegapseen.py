@@ -130,10 +130,19 @@ class LiveSeen:
         heard from bus time ``a_s`` to ``b_s`` (the live judge steps before the pages after it
         come): an ENC_E2E page kept sent inside it, or any FRAME_TOTALS page of this life (the
         proofs of frames taken or missed need them quiet: ``holetaken``, ``pagechain``).
-        Without (``host.judge.evidenceless``) both candidates are held until the pages had
-        their time or the next pose chooses (``host.judge.livechoice``)."""
+        Either way both candidates are held until the pages had their time (with: until the
+        pages after the hole come, ``told_after``) and decide, or the next pose chooses
+        (``host.judge.livechoice``)."""
         return bool(self.keeper.totals) or any(a_s < page[SENT] < b_s
                                                for page in self.keeper.pages)
+
+    def told_after(self, b_s: float) -> bool:
+        """Whether the pages kept reach past a hole of the encoder frames heard that ends at bus
+        time ``b_s``: an ENC_E2E page sent after it and a FRAME_TOTALS page after that one (the
+        first window over the hole ``proven`` can close; ``host.judge.livechoice`` waits for
+        it)."""
+        after_s = next((page[SENT] for page in self.keeper.pages if page[SENT] > b_s), None)
+        return after_s is not None and any(row[0] > after_s for row in self.keeper.totals)
 
     def _kept_more(self) -> bool:
         """Whether a page was kept since last asked; the oldest beyond ``KEPT_PAGES`` let go,
@@ -216,8 +225,10 @@ def heard_status(tracker: PoseTracker, message: Any, data: bytes, data_ids: Any,
         return
     page, counter, crc_ok, value = values
     placer = tracker.placer
-    if placer.seen.on_status(page, counter, t_s, crc_ok, value) and placer.waiting:
-        placer.withdraw(placer.seen.proven())  # the reference moves at the next sample
+    if placer.seen.on_status(page, counter, t_s, crc_ok, value):  # a FRAME_TOTALS page kept
+        if placer.waiting:
+            placer.withdraw(placer.seen.proven())  # the reference moves at the next sample
+        tracker.choice.paged(t_s)  # a held choice the pages may now decide (livechoice)
 
 
 def end_of_watch(tracker: PoseTracker) -> None:

@@ -149,11 +149,13 @@ class StepGate:
                    taken: tuple[int, int]) -> tuple[int, int]:
         """An ambiguous step into encoder frame ``seq`` (``ambiguity``; ``span_s``: the bus times
         of the last accepted frame and of this one) re-primes; behind a ``hole`` of the frames
-        heard where no page tells what the firmware took (``host.judge.evidenceless``) it may
-        as well have taken them one by one (the step ``taken``): both are held until the next
-        pose chooses (``host.judge.livechoice``), else the reference starts again from it."""
-        if hole and not self._refused and not self._told.heard_in(*span_s) \
-                and not self._told.choose(seq, span_s, taken):
+        heard where no page told yet what the firmware took (``host.judge.evidenceless``) it
+        may as well have taken them one by one (the step ``taken``): both are held until the
+        pages or the next pose choose (``host.judge.livechoice``); when no choice can be held,
+        the reference starts again from the next pose, or, pages of the life heard (they may
+        prove the hole missed: ``LiveSeen.heard_in``), stays re-primed."""
+        if hole and not self._refused and not self._told.choose(seq, span_s, taken) \
+                and not self._told.heard_in(*span_s):
             self._told.owe(seq)
         self._refused = []
         self._restarted(seq, span_s[1], by_uptime=True, ambiguous=True)

@@ -156,6 +156,8 @@ class PoseTracker:
         self.enc_seq += 1
         self._pos += 1
         prev = self._window.rows[-1] if self._window.rows else None  # (no __len__ call)
+        if self.choice.pending is not None and prev is not None:  # a hole: the choice first
+            self.choice.ahead(counter, t_s, prev)
         if self.placer.on_encoders(self.enc_seq, (counter, left, right, t_s), prev,
                                    self.counter_bits) and self._ref is not None:
             self._place_at_next = True  # a gap: placed again, bounded (liveplace.StallPlacer)
