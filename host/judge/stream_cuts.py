@@ -15,7 +15,7 @@ log cut so, each an extra pass over part of the log."""
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -99,19 +99,23 @@ class StreamCuts:
     def _encoder_positions(self) -> npt.NDArray[np.intp]:
         return np.unique(np.array(self._encoders, dtype=np.intp))
 
-    def set_poses(self) -> list[SetPoseCut]:
-        """``setposes.set_pose_cuts`` of the log fed."""
+    def set_poses(self, firmware: Sequence[LifeSpan] = ()) -> list[SetPoseCut]:
+        """``setposes.set_pose_cuts`` of the log fed (``firmware``: its firmware lives, at
+        whose starts the staged fields are forgotten)."""
         rows = self._joined()
         if not self._follows("ODOM_SET_POSE", rows):
             return []
-        return setposes.cuts_of(rows, self._encoder_positions(), self.decoder)
+        return setposes.cuts_of(rows, self._encoder_positions(), self.decoder,
+                                [span.start for span in firmware[1:]])
 
-    def configs(self, counter_bits: int) -> list[ConfigCut]:
-        """``configs.config_cuts`` of the log fed (``counter_bits``: the log's robot's)."""
+    def configs(self, counter_bits: int, firmware: Sequence[LifeSpan] = ()) -> list[ConfigCut]:
+        """``configs.config_cuts`` of the log fed (``counter_bits``: the log's robot's;
+        ``firmware``: its firmware lives, as for ``set_poses``)."""
         rows = self._joined()
         if not self._follows("ODOM_CONFIG", rows):
             return []
-        return configs.cuts_of(rows, self._encoder_positions(), self.decoder, counter_bits)
+        return configs.cuts_of(rows, self._encoder_positions(), self.decoder, counter_bits,
+                               [span.start for span in firmware[1:]])
 
     def _follows(self, name: str, rows: dict[str, dict[str, np.ndarray]]) -> bool:
         """Whether there is anything to follow: the DBC has ``name`` and ODOM_ACK, and the log
