@@ -47,11 +47,13 @@ CONFIG = ((fr.ConfigParam.COUNTS_PER_REV, PMIR.counts_per_rev),  # three ACKs be
           (fr.ConfigParam.WHEELBASE, WHEELBASE_NM),  # the new firmware's first ACK COUNTER (0)
           (fr.ConfigParam.INTEGRATOR, 2))  # is no repeat of the old one's last
 
-DRIVES: dict[str, tuple[int, Any, Any]] = {  # request ID, packer, the staged frames
-    "set_pose": (fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose, (*POSE,
-                                                              (fr.SetPoseField.APPLY, 0))),
-    "config": (fr.ODOM_CONFIG_ID, hf.pack_odom_config, (*CONFIG, (fr.ConfigParam.APPLY, 0))),
+DRIVES: dict[str, tuple[int, Any, Any, Any]] = {  # request ID, packer, frames before, after
+    "set_pose": (fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose, POSE, ((fr.SetPoseField.APPLY, 0),)),
+    "config": (fr.ODOM_CONFIG_ID, hf.pack_odom_config, CONFIG, ((fr.ConfigParam.APPLY, 0),)),
 }
+AGAIN = {"config_again": (fr.ODOM_CONFIG_ID, hf.pack_odom_config,  # one ACK before the reboot,
+                          ((fr.ConfigParam.WHEELBASE, WHEELBASE_NM),),  # the same again after
+                          ((fr.ConfigParam.WHEELBASE, WHEELBASE_NM), (fr.ConfigParam.APPLY, 0)))}
 ONE_TICK_M = 0.02  # pmir on the circle moves < 2 cm a tick: a jump is more
 
 
@@ -60,8 +62,9 @@ def drive(which: str, kept: bool = False) -> tuple[can.Message, ...]:
     """5 s of pmir on the circle: the fields staged from ``STAGE_AT``, the MCU reset at
     ``REBOOT_AT``, the APPLY alone at ``APPLY_AT`` (E2E COUNTER running on). ``kept``: a wrong
     firmware that keeps its staging across the reset."""
-    request_id, pack, frames = DRIVES[which]
-    sends = {STAGE_AT + k: frame for k, frame in enumerate(frames[:-1])} | {APPLY_AT: frames[-1]}
+    request_id, pack, before_reboot, after_reboot = (AGAIN | DRIVES)[which]
+    sends = ({STAGE_AT + k: frame for k, frame in enumerate(before_reboot)}
+             | {APPLY_AT + k: frame for k, frame in enumerate(after_reboot)})
     heard: list[can.Message] = []
     with circle_rig() as rig:
         rig.observers.append(lambda _k, got: heard.extend(got))
@@ -190,3 +193,26 @@ def test_a_firmware_that_keeps_its_config_staging_fails_analyze(tmp_path: Path) 
 def test_a_firmware_that_keeps_its_set_pose_staging_fails_analyze(tmp_path: Path) -> None:
     path = _log("set_pose", tmp_path, kept=True)
     assert not analyze(read_log(path), PMIR, "exact").passed
+
+
+def test_a_config_staged_again_after_a_reboot_is_followed(tmp_path: Path) -> None:
+    """WHEELBASE staged (its ACK COUNTER 0), the MCU reset, then WHEELBASE and APPLY again: the
+    new firmware's first ODOM_ACK has COUNTER 0 too (its counters restart), no repeat of the old
+    one's. Every judge follows the 0.33 m the correct firmware applied (the whole log's E2E check
+    took that ACK for a repeat: with the staging forgotten at the reboot, analyze judged the
+    life with 0.30 m and FAILed the firmware)."""
+    messages = drive("config_again")
+    acks = [_decoded(m) for m in messages if m.arbitration_id == fr.ODOM_ACK_ID]
+    assert [(a["COUNTER"], a["REQUEST_FIELD"], a["RESULT"]) for a in acks] == [
+        (0, fr.ConfigParam.WHEELBASE, 0), (0, fr.ConfigParam.WHEELBASE, 0),
+        (1, fr.ConfigParam.APPLY, 0)]  # cantools: both staged, the APPLY ACKed
+    path = _log("config_again", tmp_path)
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert [e["detail"] for e in whole.report["events"] if e["kind"] == "config"] == [
+        "config applied: 500 counts/rev, wheel radii 0.075/0.075 m, wheelbase 0.33 m, exact: "
+        "reference restarted"]
+    assert whole.passed
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+    monitor, _ = _live(messages)  # (the bridge follows only the configs it sends itself)
+    assert monitor.tracker.vs_reference.max_dpos_m < 1e-3

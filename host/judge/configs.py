@@ -13,7 +13,8 @@ firmware (``Odometry.unprime``): the life then starts at the first encoder frame
 A NACKed APPLY changes nothing. A reboot brings the firmware up with its build's robot again: the
 lives after it are judged with the log's robot until the next config; the parameters staged
 before it are lost with the firmware's RAM (``ConfigFollower.forget`` at each firmware life's
-start, ``setposes.reboot_positions``): a bare APPLY after a reboot applies nothing of them.
+start, ``setposes.reboot_positions``): a bare APPLY after a reboot applies nothing of them
+(the ODOM_ACKs E2E-checked afresh in each life, ``stagedacks``).
 
 The PROFILE page is judged against the parameters in force: the pages before the first APPLY
 against ``--robot`` (``running_before_configs``), those after each APPLY against the robot it
@@ -36,6 +37,7 @@ from odocan.host.judge.profilepage import RunningProfile, profile_mismatch, runn
 from odocan.host.judge.reboots import Life
 from odocan.host.judge.reference import PROFILE_SPEED, SpeedBound
 from odocan.host.judge.setposes import optional_rows, reboot_positions
+from odocan.host.judge.stagedacks import acks_by_life
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -90,9 +92,10 @@ def config_cuts(frames: FrameArrays, decoder: BulkDecoder, counter_bits: int) ->
         return []
     _, accepted = check_frames(frames, decoder.db)
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    return cuts_of({name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS},
-                   encoders[accepted[encoders]], decoder, counter_bits,
-                   reboot_positions(frames, decoder))
+    reboots = reboot_positions(frames, decoder)
+    rows = {name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS}
+    rows["ODOM_ACK"] = acks_by_life(frames, decoder, reboots)  # E2E afresh in each life
+    return cuts_of(rows, encoders[accepted[encoders]], decoder, counter_bits, reboots)
 
 
 COMMANDS = ("ODOM_CONFIG", "ODOM_AUTH", "ODOM_ACK")  # the accepted rows ``cuts_of`` follows

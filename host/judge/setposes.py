@@ -14,7 +14,8 @@ the new frame (re-based at the life's start, ``compare.life_origin``).
 
 A reboot empties the firmware's staging (RAM): the follower forgets the fields staged before
 it (``SetPoseFollower.forget`` at each firmware life's start, ``reboots.split_lives``), so a bare
-APPLY after a reboot is judged as the firmware takes it, its own pose kept.
+APPLY after a reboot is judged as the firmware takes it, its own pose kept; the ODOM_ACKs are
+E2E-checked afresh in each life (``stagedacks``: a new firmware's COUNTER restarts).
 
 The streamed analysis cuts its lives at the same set-poses (``stream_cuts``, ``cuts_of`` of
 the rows it gathers chunk by chunk)."""
@@ -30,6 +31,7 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.livesetpose import FIELDS, SetPoseFollower
 from odocan.host.judge.reboots import Life, split_lives
+from odocan.host.judge.stagedacks import acks_by_life
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
 
@@ -77,8 +79,10 @@ def set_pose_cuts(frames: FrameArrays, decoder: BulkDecoder) -> list[SetPoseCut]
         return []
     _, accepted = check_frames(frames, decoder.db)
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    return cuts_of({name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS},
-                   encoders[accepted[encoders]], decoder, reboot_positions(frames, decoder))
+    reboots = reboot_positions(frames, decoder)
+    rows = {name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS}
+    rows["ODOM_ACK"] = acks_by_life(frames, decoder, reboots)  # E2E afresh in each life
+    return cuts_of(rows, encoders[accepted[encoders]], decoder, reboots)
 
 
 def reboot_positions(frames: FrameArrays, decoder: BulkDecoder) -> list[int]:
