@@ -11,7 +11,10 @@ starts there (its reference steps from it with the new robot, its start fitted t
 as a log that starts mid-drive: the firmware keeps its pose). A new counter width re-primes the
 firmware (``Odometry.unprime``): the life then starts at the first encoder frame after the APPLY.
 A NACKed APPLY changes nothing. A reboot brings the firmware up with its build's robot again: the
-lives after it are judged with the log's robot until the next config.
+lives after it are judged with the log's robot until the next config; the parameters staged
+before it are lost with the firmware's RAM (``ConfigFollower.forget`` at each firmware life's
+start, ``setposes.reboot_positions``): a bare APPLY after a reboot applies nothing of them
+(the ODOM_ACKs E2E-checked afresh in each life, ``stagedacks``).
 
 The PROFILE page is judged against the parameters in force: the pages before the first APPLY
 against ``--robot`` (``running_before_configs``), those after each APPLY against the robot it
@@ -22,6 +25,7 @@ configs (``stream_cuts``: ``cuts_of`` of the rows it gathers chunk by chunk).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,7 +36,8 @@ from odocan.host.judge.liveconfig import INTEGRATORS, PARAMS, ConfigFollower
 from odocan.host.judge.profilepage import RunningProfile, profile_mismatch, running_profile
 from odocan.host.judge.reboots import Life
 from odocan.host.judge.reference import PROFILE_SPEED, SpeedBound
-from odocan.host.judge.setposes import optional_rows
+from odocan.host.judge.setposes import optional_rows, reboot_positions
+from odocan.host.judge.stagedacks import acks_by_life
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -87,22 +92,27 @@ def config_cuts(frames: FrameArrays, decoder: BulkDecoder, counter_bits: int) ->
         return []
     _, accepted = check_frames(frames, decoder.db)
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    return cuts_of({name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS},
-                   encoders[accepted[encoders]], decoder, counter_bits)
+    reboots = reboot_positions(frames, decoder)
+    rows = {name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS}
+    rows["ODOM_ACK"] = acks_by_life(frames, decoder, reboots)  # E2E afresh in each life
+    return cuts_of(rows, encoders[accepted[encoders]], decoder, counter_bits, reboots)
 
 
 COMMANDS = ("ODOM_CONFIG", "ODOM_AUTH", "ODOM_ACK")  # the accepted rows ``cuts_of`` follows
 
 
 def cuts_of(rows: dict[str, dict[str, np.ndarray]], encoders: npt.NDArray[np.intp],
-            decoder: BulkDecoder, counter_bits: int) -> list[ConfigCut]:
+            decoder: BulkDecoder, counter_bits: int, reboots: Sequence[int] = ()
+            ) -> list[ConfigCut]:
     """``config_cuts`` from the log's accepted rows of ``COMMANDS`` (``optional_rows``, their
     index the log position) and the log positions of its accepted encoder frames (``encoders``:
-    at least the latest before and the first after each of those rows)."""
+    at least the latest before and the first after each of those rows); ``reboots``: where
+    the firmware lives after the first start (``setposes.reboot_positions``)."""
     commands, auths, acks = (rows[name] for name in COMMANDS)
     config_id = decoder.message("ODOM_CONFIG").frame_id
     steps = sorted(
-        [(int(i), "cmd", k) for k, i in enumerate(commands["index"].tolist())]
+        [(int(i), "boot", -1) for i in reboots]
+        + [(int(i), "cmd", k) for k, i in enumerate(commands["index"].tolist())]
         + [(int(i), "auth", k) for k, i in enumerate(auths["index"].tolist())
            if int(auths["REQUEST"][k]) == CONFIG_REQUEST]
         + [(int(i), "ack", k) for k, i in enumerate(acks["index"].tolist())
@@ -128,6 +138,9 @@ def _follow(steps: list[tuple[int, str, int]], commands: dict[str, np.ndarray],
             apply_at = position if param == "APPLY" else apply_at
         elif kind == "auth":
             apply_at = position if apply_at >= 0 else apply_at
+        elif kind == "boot":  # the firmware's staging was in its RAM
+            follower.forget()
+            apply_at = -1
         else:
             staged = follower.on_ack(int(acks["REQUEST_COUNTER"][k]), int(acks["RESULT"][k]) == 0)
             if staged is not None and apply_at >= 0:

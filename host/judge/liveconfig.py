@@ -35,6 +35,11 @@ class ConfigFollower:
         self._sent: dict[int, tuple[str, float]] = {}  # by E2E COUNTER: PARAM, value heard
         self._apply: int | None = None  # the APPLY frame's COUNTER
 
+    def forget(self) -> None:
+        """A firmware reboot the judge saw: the firmware lost its staged parameters with its RAM
+        (a bare APPLY after it applies its build's robot again)."""
+        self.staged, self._sent, self._apply = {}, {}, None
+
     def on_frame(self, counter: int, param: str, value: Any) -> None:
         """An ODOM_CONFIG frame heard (its E2E COUNTER, PARAM name, the value in DBC units)."""
         if param == "APPLY":

@@ -10,7 +10,8 @@ latest accepted encoder frame when the APPLY (or its ODOM_AUTH) is heard, and on
 ACK (RESULT ACK) ``apply_set_pose`` restarts the reference there: at the staged fields, the
 others carried from the reference at that frame (what the firmware kept, if it was right), the
 encoder frames since stepped again; the truth is compared in the new frame from the next truth
-sample on (``livetruth.LifeTruth``, as after a reboot). A NACKed APPLY changes nothing. Without
+sample on (``livetruth.LifeTruth``, as after a reboot). A NACKed APPLY changes nothing. A reboot
+empties the firmware's staging (RAM): ``forget`` at every reboot the judge sees. Without
 the reference at that frame (not started, or out of the window) the reference restarts at the
 next on-board pose, as before.
 """
@@ -41,6 +42,11 @@ class SetPoseFollower:
         # the APPLYs heard, not answered yet: COUNTER -> the encoder seq then (a paced burst has
         # several in flight: one slot let a later APPLY hide an earlier one's ACK)
         self._applies: dict[int, int] = {}
+
+    def forget(self) -> None:
+        """A firmware reboot the judge saw: the firmware lost its staged fields and the frames
+        it had not answered with its RAM (a bare APPLY after it keeps the firmware's pose)."""
+        self.staged, self._sent, self._applies = {}, {}, {}
 
     def on_frame(self, counter: int, field: str, value: float | None, enc_seq: int) -> None:
         """An ODOM_SET_POSE frame heard (its E2E COUNTER, FIELD name, value in m or rad);

@@ -303,6 +303,8 @@ class BusMonitor:
             detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
             self.distance.new_life()
             self.twist.new_life()
+            self.set_pose.forget()  # the firmware's staging was in its RAM
+            self.config.forget()
         elif kind == "two sources":  # no pose is judged from the second one's first summary
             self.tracker.wrongs.unjudgeable_from(self.sources.conflict_from_s or self._bus_time_s)
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"

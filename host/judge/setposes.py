@@ -12,11 +12,17 @@ were not (the firmware kept its own values, e.g. a bare APPLY after a counter re
 is fitted to its samples, as a log that starts mid-drive. Either way its truth is compared in
 the new frame (re-based at the life's start, ``compare.life_origin``).
 
+A reboot empties the firmware's staging (RAM): the follower forgets the fields staged before
+it (``SetPoseFollower.forget`` at each firmware life's start, ``reboots.split_lives``), so a bare
+APPLY after a reboot is judged as the firmware takes it, its own pose kept; the ODOM_ACKs are
+E2E-checked afresh in each life (``stagedacks``: a new firmware's COUNTER restarts).
+
 The streamed analysis cuts its lives at the same set-poses (``stream_cuts``, ``cuts_of`` of
 the rows it gathers chunk by chunk)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -24,7 +30,8 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.livesetpose import FIELDS, SetPoseFollower
-from odocan.host.judge.reboots import Life
+from odocan.host.judge.reboots import Life, split_lives
+from odocan.host.judge.stagedacks import acks_by_life
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
 
@@ -72,22 +79,32 @@ def set_pose_cuts(frames: FrameArrays, decoder: BulkDecoder) -> list[SetPoseCut]
         return []
     _, accepted = check_frames(frames, decoder.db)
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    return cuts_of({name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS},
-                   encoders[accepted[encoders]], decoder)
+    reboots = reboot_positions(frames, decoder)
+    rows = {name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS}
+    rows["ODOM_ACK"] = acks_by_life(frames, decoder, reboots)  # E2E afresh in each life
+    return cuts_of(rows, encoders[accepted[encoders]], decoder, reboots)
+
+
+def reboot_positions(frames: FrameArrays, decoder: BulkDecoder) -> list[int]:
+    """The log positions where the firmware lives after the first start (``split_lives``):
+    where the followers forget what was staged (module docstring)."""
+    return [int(life.index[0]) for life in split_lives(frames, decoder)[1:] if len(life.index)]
 
 
 COMMANDS = ("ODOM_SET_POSE", "ODOM_AUTH", "ODOM_ACK")  # the accepted rows ``cuts_of`` follows
 
 
 def cuts_of(rows: dict[str, dict[str, np.ndarray]], encoders: npt.NDArray[np.intp],
-            decoder: BulkDecoder) -> list[SetPoseCut]:
+            decoder: BulkDecoder, reboots: Sequence[int] = ()) -> list[SetPoseCut]:
     """``set_pose_cuts`` from the log's accepted rows of ``COMMANDS`` (``optional_rows``, their
     index the log position) and the log positions of its accepted encoder frames (``encoders``:
-    at least the latest before each of those rows; the streamed judge keeps no more)."""
+    at least the latest before each of those rows; the streamed judge keeps no more);
+    ``reboots``: where the firmware lives after the first start (``reboot_positions``)."""
     commands, auths, acks = (rows[name] for name in COMMANDS)
     mine = acks["REQUEST_ID"] == decoder.message("ODOM_SET_POSE").frame_id
     steps: list[tuple[int, str, int]] = (
-        [(int(i), "cmd", k) for k, i in enumerate(commands["index"].tolist())]
+        [(int(i), "boot", -1) for i in reboots]
+        + [(int(i), "cmd", k) for k, i in enumerate(commands["index"].tolist())]
         + [(int(i), "auth", k) for k, i in enumerate(auths["index"].tolist())
            if int(auths["REQUEST"][k]) == SET_POSE_REQUEST]
         + [(int(i), "ack", k) for k, i in enumerate(acks["index"].tolist()) if mine[k]])
@@ -115,6 +132,8 @@ def _follow(steps: list[tuple[int, str, int]], commands: dict[str, np.ndarray],
             follower.on_frame(int(commands["COUNTER"][k]), field, value, latest)
         elif kind == "auth":
             follower.on_auth(latest)
+        elif kind == "boot":  # the firmware's staging was in its RAM
+            follower.forget()
         else:
             applied = follower.on_ack(int(acks["REQUEST_COUNTER"][k]), int(acks["RESULT"][k]) == 0)
             if applied is not None and applied[0] >= 0:

@@ -128,10 +128,10 @@ def analyze_file(
             return lambda: spill.read(span.start, span.stop, chunk_frames)
 
         firmware = lives.finish_one_source()  # two firmwares: not judged from there, a FAIL
-        applied = cuts.configs(robot.counter_bits)
+        applied = cuts.configs(robot.counter_bits, firmware)
         if applied and whole_on_config:
             raise NotStreamable("a config was applied: its PROFILE pages are judged whole")
-        spans = cut_spans(firmware, cuts.set_poses(), applied)
+        spans = cut_spans(firmware, cuts.set_poses(firmware), applied)
         report = _analyze_lives(
             spans, facts, frames_of, robot, integrator, tolerance=tolerance, db=db,
             scenario=scenario, seed=seed, wall_seconds=wall_seconds,

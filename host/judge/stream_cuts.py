@@ -15,19 +15,21 @@ log cut so, each an extra pass over part of the log."""
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.io.frames import concat_frames, empty_frames
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge import configs, setposes
 from odocan.host.judge.configs import ConfigCut
 from odocan.host.judge.finalstate import latched_fields
 from odocan.host.judge.samples import AnalysisError
 from odocan.host.judge.setposes import SetPoseCut, optional_rows
+from odocan.host.judge.stagedacks import ACK, ack_positions, ack_rows
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.stream import StreamE2E
 from odocan.host.judge.stream_facts import StreamFacts
@@ -52,6 +54,8 @@ class StreamCuts:
     _encoders: list[int] = field(default_factory=list)  # kept accepted encoder positions
     _last_encoder: int | None = None  # the latest accepted encoder frame's position so far
     _waiting: bool = False  # a row since it: the next accepted encoder frame is kept
+    _acks: list[FrameArrays] = field(default_factory=list)  # every ODOM_ACK frame (``stagedacks``)
+    _ack_positions: list[npt.NDArray[np.int64]] = field(default_factory=list)
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the chunk's accepted command rows and the encoder frames around them."""
@@ -62,6 +66,9 @@ class StreamCuts:
                 rows = dict(rows, index=rows["index"].astype(np.int64) + self._offset)
                 self._rows.setdefault(name, []).append(rows)
                 positions.append(rows["index"])
+        acks = ack_positions(chunk, self.decoder)
+        self._acks.append(chunk.select(acks))  # checked per firmware life at the end
+        self._ack_positions.append(acks.astype(np.int64) + self._offset)
         encoders = self.decoder.select(chunk, "WHEEL_ENCODERS")
         encoders = encoders[accepted[encoders]].astype(np.int64) + self._offset
         self._keep_around(np.unique(np.concatenate(positions)) if positions else
@@ -87,31 +94,39 @@ class StreamCuts:
         if len(encoders):
             self._last_encoder = int(encoders[-1])
 
-    def _joined(self) -> dict[str, dict[str, np.ndarray]]:
-        """Each name's rows over the log (``optional_rows``' keys; the index empty if none)."""
+    def _joined(self, reboots: list[int]) -> dict[str, dict[str, np.ndarray]]:
+        """Each name's rows over the log (``optional_rows``' keys; the index empty if none);
+        ODOM_ACK's E2E-checked afresh in each firmware life (``reboots``: where they start)."""
         joined: dict[str, dict[str, np.ndarray]] = {}
         for name in NAMES:
             parts = self._rows.get(name, [])
             joined[name] = ({key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
                             if parts else {"index": np.zeros(0, dtype=np.int64)})
+        joined[ACK] = ack_rows(concat_frames(self._acks) if self._acks else empty_frames(),
+                               np.concatenate([np.zeros(0, dtype=np.int64),
+                                               *self._ack_positions]),
+                               BulkDecoder(self.decoder.db), reboots)
         return joined
 
     def _encoder_positions(self) -> npt.NDArray[np.intp]:
         return np.unique(np.array(self._encoders, dtype=np.intp))
 
-    def set_poses(self) -> list[SetPoseCut]:
-        """``setposes.set_pose_cuts`` of the log fed."""
-        rows = self._joined()
+    def set_poses(self, firmware: Sequence[LifeSpan] = ()) -> list[SetPoseCut]:
+        """``setposes.set_pose_cuts`` of the log fed (``firmware``: its firmware lives, at
+        whose starts the staged fields are forgotten)."""
+        rows = self._joined(reboots := [span.start for span in firmware[1:]])
         if not self._follows("ODOM_SET_POSE", rows):
             return []
-        return setposes.cuts_of(rows, self._encoder_positions(), self.decoder)
+        return setposes.cuts_of(rows, self._encoder_positions(), self.decoder, reboots)
 
-    def configs(self, counter_bits: int) -> list[ConfigCut]:
-        """``configs.config_cuts`` of the log fed (``counter_bits``: the log's robot's)."""
-        rows = self._joined()
+    def configs(self, counter_bits: int, firmware: Sequence[LifeSpan] = ()) -> list[ConfigCut]:
+        """``configs.config_cuts`` of the log fed (``counter_bits``: the log's robot's;
+        ``firmware``: its firmware lives, as for ``set_poses``)."""
+        rows = self._joined(reboots := [span.start for span in firmware[1:]])
         if not self._follows("ODOM_CONFIG", rows):
             return []
-        return configs.cuts_of(rows, self._encoder_positions(), self.decoder, counter_bits)
+        return configs.cuts_of(rows, self._encoder_positions(), self.decoder, counter_bits,
+                               reboots)
 
     def _follows(self, name: str, rows: dict[str, dict[str, np.ndarray]]) -> bool:
         """Whether there is anything to follow: the DBC has ``name`` and ODOM_ACK, and the log

@@ -247,6 +247,7 @@ class RobotTelemetry:
         start_new_life(self.tracker, self.e2e, self.db, *summary)
         self.distance.new_life()
         self.twist.new_life()
+        self.set_pose.forget()  # the firmware's staging was in its RAM
 
     def _unknown_key(self, can_id: int) -> str:
         """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
