@@ -10,11 +10,16 @@ later prove it took as the reference did (``host.judge.livegapseen``) has its al
 withdrawn (``withdraw``), as ``analyze`` gives it none. Each placement's step from the one before
 is bounded too, by its own parts' allowances (``breaks.placed_step``); a gap placed before its
 held-back frame was heard takes the fill's allowance for its step when the frame comes
-(``_refill``), as ``analyze``, which knows the frames past the sample, bounds it."""
+(``_refill``), as ``analyze``, which knows the frames past the sample, bounds it. A placement
+never leaves the sample closer to the reference than the firmware's own poses and the frames
+the bus carried prove it off (``_narrow``, ``host.judge.liveholdstep``): the live E2E model,
+which decides each frame before the poses that prove it wrong are heard, can make gaps the
+firmware never had."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -174,6 +179,12 @@ class StallPlacer:
             self._gaps = [gap for gap in self._gaps if gap[0] != seq]
         return self.dark.restarted(seq, by_uptime, self.seen)  # a new start (livedark)
 
+    def sampled(self, seq: int, restart: Callable[[], None]) -> None:
+        """An on-board sample of encoder frame ``seq`` is made (a frame the firmware took:
+        ``bus``); ``restart`` the reference first where a new start is owed (``dark.due``)."""
+        self.bus.named(seq)
+        self.dark.due(seq, restart)
+
     def compared(self, pose: FramePose) -> None:
         """The on-board sample ``pose`` was compared."""
         self._abs_last = self._abs_at(pose.seq)
@@ -249,11 +260,14 @@ class StallPlacer:
         prove (``liveholdstep``) away from ``pose``: the sample is judged by the larger of the
         two (``want``: the offset that would put the reference on the pose, m)."""
         before = self.bus.last_pose
-        span = None if before is None else self.bus.span(before.seq, pose.seq)
-        if before is None or span is None or any(
+        halves = None if self.halves is None else list(zip(
+            self.halves.col("enc_counter").astype(int).tolist(),
+            self.halves.col("t_s").tolist(), strict=True))
+        chain = None if before is None else self.bus.chain(before.seq, pose.seq, halves)
+        if before is None or chain is None or any(
                 before.seq < seq <= pose.seq for seq in self._reprimed):
             return
-        excess = excess_m(before, pose, span, reference)
+        excess = excess_m(before, pose, chain, reference)
         rest_x, rest_y = want[0] - self._shift[0], want[1] - self._shift[1]
         rest = math.hypot(rest_x, rest_y)
         if excess <= rest:
