@@ -19,9 +19,10 @@ a COUNTER cycle, as ``livefill`` numbers them). Where a frame of every sender nu
 P's and Q's is heard (accepted or refused, CRC right: no hole) and none re-primed, its position
 moved from P by the one-by-one steps of those frames in sender order (``d``, from P's heading)
 within their worst merge error over any subset (``breaks.merge_allowance_m``: frames skipped
-in runs), summed over the runs between the frames its poses in between name (each taken: the
-samples the tracker made, and the poses whose ENC_COUNTER changed, ``pose_named``, which the
-tracker cannot resolve where its model refused the frame). So Q lies within that of P + d,
+in runs), summed over the runs between the frames its poses in between name (each taken),
+where only one frame fits a pose's ENC_COUNTER (``pose_named``; the tracker cannot resolve
+them where its model refused the frame, and after a stall its names of backlog frames are not
+sure: a correct firmware was 0.125 mm beyond with them). So Q lies within that of P + d,
 plus P's and Q's rounding (half an LSB on each axis each) and P's heading's (half an LSB,
 turning d). The error this leaves (``excess_m``, 0 for a firmware that did so) is kept in the
 placed sample: the larger of the two is judged. On the kobuki drive the poses from 0.06 to
@@ -31,8 +32,6 @@ at the frames the poses name, the wrong firmware's step shows (0.39 mm beyond, l
 
 from __future__ import annotations
 
-import bisect
-import itertools
 import math
 from collections import deque
 
@@ -48,8 +47,6 @@ BUS_KEPT = 192  # the latest CRC-right encoder frames kept in bus order
 MAX_SPAN_FRAMES = 128  # sender periods: longer spans are not checked (the DP is n^2)
 LATE_CYCLES = 1.0  # a frame's typical lateness on the bus (periods): the numbering's centre
 COUNTER_MODULO = 16
-NEW_NAME_CYCLES = 3  # a pose half heard at most this after the one before: a new name is recent
-NAME_AGE_CYCLES = COUNTER_MODULO // 2  # how far back the frame a new name names is looked for
 ROUND_SLACK_M = 1e-7  # float64 against the firmware's integer arithmetic over a span (m)
 
 Heard = tuple[int, int, int, int, float]  # accepted seq (-1: refused), COUNTER, left, right,
@@ -65,17 +62,12 @@ class BusOrder:
     def __init__(self, cycle_s: float) -> None:
         self.cycle_s = cycle_s  # the encoder frames' cycle (s)
         self._heard: deque[Heard] = deque(maxlen=BUS_KEPT)
-        self._named: deque[int] = deque(maxlen=BUS_KEPT)  # frames on-board samples named (seq)
         self.last_pose: FramePose | None = None  # the firmware's, at the last sample compared
 
     def heard(self, seq: int, counter: int, left: int, right: int, t_s: float) -> None:
         """An encoder frame, accepted as ``seq`` or refused (-1); its COUNTER, raw counts, bus
         time s."""
         self._heard.append((seq, counter, left, right, t_s))
-
-    def named(self, seq: int) -> None:
-        """An on-board sample named accepted frame ``seq``: the firmware took it."""
-        self._named.append(seq)
 
     def restart(self) -> None:
         """A new reference: no pose to measure from."""
@@ -85,12 +77,11 @@ class BusOrder:
               ) -> list[list[Counts]] | None:
         """The counts the firmware may have stepped through from accepted frame ``first`` to
         ``last`` (seq), in sender order (module docstring): both ends, and one frame of every
-        sender number between them heard between them, cut into runs at the frames on-board
-        samples named between them and at the frames the pose ``halves`` (ENC_COUNTER, bus
-        time s; ``pose_named``) name (each run from one frame taken to the next); None when
-        either is no longer kept,
-        the span is too long, a sender number between them was never heard (a hole: the
-        firmware may have taken a frame the host lacks) or two frames of one number differ."""
+        sender number between them heard between them, cut into runs at the frames the pose
+        ``halves`` (ENC_COUNTER, bus time s; ``pose_named``) name for sure (each run from one
+        frame taken to the next); None when either is no longer kept, the span is too long,
+        a sender number between them was never heard (a hole: the firmware may have taken a
+        frame the host lacks) or two frames of one number differ."""
         rows = list(self._heard)
         ends = [i for i, row in enumerate(rows) if row[0] in (first, last)]
         if len(ends) != 2 or rows[ends[0]][0] != first:
@@ -101,17 +92,14 @@ class BusOrder:
                 range(n_first, n_last + 1)) <= set(numbers):
             return None
         between: dict[int, Counts] = {}
-        named = set(self._named)
         cuts = {n_first, n_last}
         for i in range(ends[0], ends[1] + 1):
             counts = (rows[i][2], rows[i][3])
             if between.setdefault(numbers[i], counts) != counts:
                 return None  # two frames of one number differ: which one it took is unknown
-            if rows[i][0] in named and n_first < numbers[i] < n_last:
-                cuts.add(numbers[i])
-        for i in pose_named(rows, halves or [], self.cycle_s):
-            if n_first < numbers[i] < n_last and between.get(numbers[i]) == rows[i][2:4]:
-                cuts.add(numbers[i])
+        span = rows[ends[0]:ends[1] + 1]
+        cuts |= {n for n in pose_named(span, numbers[ends[0]:ends[1] + 1], halves or [])
+                 if n_first < n < n_last}
         kept = [n for n in sorted(between) if n_first <= n <= n_last]
         runs: list[list[Counts]] = [[]]
         for n in kept:
@@ -121,26 +109,30 @@ class BusOrder:
         return runs
 
 
-def pose_named(rows: list[Heard], halves: list[Named], cycle_s: float) -> list[int]:
-    """The places in ``rows`` of the frames pose halves name (each half's ENC_COUNTER and bus
-    time s, in the order heard), where that is sure: a half whose ENC_COUNTER differs from the
-    one heard before it (at most ``NEW_NAME_CYCLES`` before) names a frame the firmware took
-    since that one, so heard within ``NEW_NAME_CYCLES`` and its own lateness before it: the
-    latest frame of that COUNTER heard within ``NAME_AGE_CYCLES`` (a frame 16 periods older
-    was heard before that, one 16 newer is not sent yet; frames held back less than half a
-    COUNTER cycle, as ``_numbers``)."""
-    places: list[int] = []
-    times = [row[4] for row in rows]  # in bus order: non-decreasing
-    for (before, before_s), (counter, t_s) in itertools.pairwise(halves):
-        if t_s <= times[0] or counter == before or t_s - before_s > NEW_NAME_CYCLES * cycle_s:
+def pose_named(span: list[Heard], numbers: list[int], halves: list[Named]) -> set[int]:
+    """The sender numbers of the frames pose ``halves`` (ENC_COUNTER, bus time s, in the order
+    heard) name within ``span`` (the frames heard from P's to Q's, ``numbers`` theirs), where
+    that is sure. The firmware's last frame only moves on in sender order, so a half heard
+    after P's frame names a frame from the last sure one (first P's) to Q's, heard before the
+    half: where exactly one frame of its COUNTER is such, it is that one (after a stall the
+    firmware names frames of its backlog, heard long before: several fit, none is taken). The
+    halves from the first naming Q's COUNTER after Q's frame was heard on are Q's or later."""
+    arrival: dict[int, float] = {}
+    for row, number in zip(span, numbers, strict=True):
+        arrival.setdefault(number, row[4])
+    floor, last, first_s = numbers[0], numbers[-1], span[0][4]
+    sure: set[int] = set()
+    for counter, t_s in halves:
+        if t_s <= first_s:
             continue
-        oldest_s = t_s - NAME_AGE_CYCLES * cycle_s
-        i = bisect.bisect_left(times, t_s) - 1
-        while i >= 0 and times[i] > oldest_s and rows[i][1] != counter:
-            i -= 1
-        if i >= 0 and times[i] > oldest_s:
-            places.append(i)
-    return places
+        if counter == span[-1][1] and t_s >= span[-1][4]:
+            break
+        fits = [n for n in range(floor, last + 1)
+                if n % COUNTER_MODULO == counter and arrival.get(n, math.inf) < t_s]
+        if len(fits) == 1:
+            floor = fits[0]
+            sure.add(floor)
+    return sure
 
 
 def _numbers(rows: list[Heard], anchor: Heard, cycle_s: float) -> list[int]:

@@ -19,7 +19,6 @@ firmware never had."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 
@@ -178,12 +177,6 @@ class StallPlacer:
         if by_uptime:
             self._gaps = [gap for gap in self._gaps if gap[0] != seq]
         return self.dark.restarted(seq, by_uptime, self.seen)  # a new start (livedark)
-
-    def sampled(self, seq: int, restart: Callable[[], None]) -> None:
-        """An on-board sample of encoder frame ``seq`` is made (a frame the firmware took:
-        ``bus``); ``restart`` the reference first where a new start is owed (``dark.due``)."""
-        self.bus.named(seq)
-        self.dark.due(seq, restart)
 
     def compared(self, pose: FramePose) -> None:
         """The on-board sample ``pose`` was compared."""

@@ -243,7 +243,7 @@ class PoseTracker:
         self._sampled.add(seq)
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
         self.pose_t_s = y.t_s
-        self.placer.sampled(seq, self.restart_reference)  # after a dark restart: livedark
+        self.placer.dark.due(seq, self.restart_reference)  # after a dark restart: livedark
         ref = self._compare(pose, y, queued)
         self.settled.append(sample := Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
         if self._boot is not None:  # held: settled again once judged (``_start_reference``)
