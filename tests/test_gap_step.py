@@ -19,8 +19,7 @@ step and exactly 10 LSB (1 mm) more from there on, and the right one's log PASSe
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
@@ -28,10 +27,9 @@ import can
 import cantools.autosar
 import pytest
 
-import odocan.firmware.e2e as fw_e2e
-import odocan.firmware.odometry as odometry
 from odocan.host.cli.app import main
 from tests.dbc_typed import dbc_attribute, load_can_dbc
+from tests.firmware_patch import after_gap, edited_after, x_added
 from tests.test_gap_fill import DBC, X_LSB_Q40, _verdicts
 
 WRONG_LSB = 10  # 1 mm of X
@@ -40,32 +38,11 @@ AFTER_GAPS = (25, 45)  # the wrong step follows the 25th or the 45th gap the fir
 ROBOTS = ("kobuki", "pmir")
 
 
-@contextmanager
-def _adds_once_after_a_gap(lsb: int, after: int) -> Iterator[list[int]]:
+def _adds_once_after_a_gap(lsb: int, after: int) -> AbstractContextManager[list[int]]:
     """The Python firmware, but ``lsb`` LSB of X added once, at the encoder step it takes right
     after the ``after``-th frame its encoder receiver accepted as OKSOMELOST (a gap); yields a
     list that holds 1 once the step was made."""
-    check, step = fw_e2e.E2EReceiver.check, odometry.Odometry.step_deltas
-    gaps, pending, done = [0], [False], [0]
-
-    def checked(self: fw_e2e.E2EReceiver, frame: bytes | bytearray | None) -> fw_e2e.E2EStatus:
-        status = check(self, frame)
-        if self.window_per_period and status == fw_e2e.E2EStatus.OKSOMELOST:
-            gaps[0] += 1
-            pending[0] = pending[0] or gaps[0] == after
-        return status
-
-    def stepped(self: odometry.Odometry, d_left: int, d_right: int) -> None:
-        step(self, d_left, d_right)
-        if pending[0]:
-            pending[0] = False
-            done[0] += 1
-            self.x_q40_m += lsb * X_LSB_Q40
-
-    with pytest.MonkeyPatch.context() as monkeypatch:
-        monkeypatch.setattr(fw_e2e.E2EReceiver, "check", checked)
-        monkeypatch.setattr(odometry.Odometry, "step_deltas", stepped)
-        yield done
+    return edited_after(after_gap(after), x_added(lsb * X_LSB_Q40))
 
 
 def _drive(tmp: Path, robot: str, seed: int, after: int | None) -> dict[str, Any]:

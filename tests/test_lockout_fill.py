@@ -23,8 +23,7 @@ from __future__ import annotations
 
 import itertools
 import json
-from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
@@ -32,45 +31,20 @@ import can
 import cantools.autosar
 import pytest
 
-import odocan.firmware.e2e as fw_e2e
-import odocan.firmware.odometry as odometry
 from odocan.host.cli.app import main
 from tests.dbc_typed import dbc_attribute, load_can_dbc
+from tests.firmware_patch import LOCKED_OUT, after_lock_outs, edited_after, x_added
 from tests.test_gap_fill import DBC, X_LSB_Q40, _verdicts
 
 DRIVE = ["--duration", "10", "--seed", "305", "--faults", "delay=0.1:20,seed=305"]
-LOCKED_OUT = 4  # refusals in a row that only a lock-out makes here (a frame held back: one)
 TICK_S, RECEIVE_LAG_S, WINDOW_MAX = 0.01, 0.001, 15
 WRONG_LSB = 10  # 1 mm of X added after each lock-out
 
 
-@contextmanager
-def _adds_after_lock_outs(lsb: int) -> Iterator[list[int]]:
+def _adds_after_lock_outs(lsb: int) -> AbstractContextManager[list[int]]:
     """The Python firmware, but ``lsb`` LSB of X added at each encoder step it takes after
     refusing ``LOCKED_OUT`` or more frames in a row; yields the list the count is kept in."""
-    check, step = fw_e2e.E2EReceiver.check, odometry.Odometry.step_deltas
-    refused, pending, steps = [0], [False], [0]
-
-    def checked(self: fw_e2e.E2EReceiver, frame: bytes | bytearray | None) -> fw_e2e.E2EStatus:
-        status = check(self, frame)
-        if self.window_per_period and frame is not None:  # the encoder receiver's
-            if status in (fw_e2e.E2EStatus.OK, fw_e2e.E2EStatus.OKSOMELOST):
-                pending[0], refused[0] = refused[0] >= LOCKED_OUT, 0
-            else:
-                refused[0] += 1
-        return status
-
-    def stepped(self: odometry.Odometry, d_left: int, d_right: int) -> None:
-        step(self, d_left, d_right)
-        if pending[0]:
-            pending[0] = False
-            steps[0] += 1
-            self.x_q40_m += lsb * X_LSB_Q40
-
-    with pytest.MonkeyPatch.context() as monkeypatch:
-        monkeypatch.setattr(fw_e2e.E2EReceiver, "check", checked)
-        monkeypatch.setattr(odometry.Odometry, "step_deltas", stepped)
-        yield steps
+    return edited_after(after_lock_outs, x_added(lsb * X_LSB_Q40), sticky=False)
 
 
 def _drive(tmp: Path, lsb: int) -> dict[str, Any]:

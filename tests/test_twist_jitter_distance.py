@@ -19,59 +19,33 @@ the judges never see) up to the latest of the ENC_COUNTER it names.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
-from contextlib import contextmanager, nullcontext
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 
 import can
 import pytest
 
-import odocan.firmware.e2e as fw_e2e
-import odocan.firmware.odometry as odometry
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.robot import load
 from tests.dbc_typed import load_can_dbc, numbers
+from tests.firmware_patch import after_lock_outs, distance_taken_off, edited_after
 from tests.test_capture_jitter import _jittered, _live_passes
 from tests.test_gap_fill import DBC
 from tests.test_live_jitter_lockout import _frames_taken
-from tests.test_lockout_fill import LOCKED_OUT
 
 DURATION_S = 6
 WIRE_MM = 0.5 + 1e-3  # DISTANCE's rounding to whole mm, and the float64 sum's error
 WRONG_MM = 2  # the control firmware's DISTANCE: 2 LSB low from its first lock-out on
 
 
-@contextmanager
-def _distance_low_after_a_lock_out(mm: int) -> Iterator[list[int]]:
+def _distance_low_after_a_lock_out(mm: int) -> AbstractContextManager[list[int]]:
     """The Python firmware, but ``mm`` mm taken off its DISTANCE once, at the encoder step it
     takes after its first run of ``LOCKED_OUT`` or more refusals; yields [steps made]."""
-    check, step = fw_e2e.E2EReceiver.check, odometry.Odometry.step_deltas
-    refused, pending, done = [0], [False], [0]
-
-    def checked(self: fw_e2e.E2EReceiver, frame: bytes | bytearray | None) -> fw_e2e.E2EStatus:
-        status = check(self, frame)
-        if self.window_per_period and frame is not None:
-            if status in (fw_e2e.E2EStatus.OK, fw_e2e.E2EStatus.OKSOMELOST):
-                pending[0] = pending[0] or (refused[0] >= LOCKED_OUT and done[0] == 0)
-                refused[0] = 0
-            else:
-                refused[0] += 1
-        return status
-
-    def stepped(self: odometry.Odometry, d_left: int, d_right: int) -> None:
-        step(self, d_left, d_right)
-        if pending[0]:
-            pending[0] = False
-            done[0] += 1
-            self.distance_q40_m -= (mm << 40) // 1000
-
-    with pytest.MonkeyPatch.context() as monkeypatch:
-        monkeypatch.setattr(fw_e2e.E2EReceiver, "check", checked)
-        monkeypatch.setattr(odometry.Odometry, "step_deltas", stepped)
-        yield done
+    return edited_after(lambda taken: after_lock_outs(taken) and taken.done == 0,
+                        distance_taken_off(mm))
 
 
 def _float64_distance_off_mm(log: Path, robot: str, taken: list[bytes]) -> list[float]:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from odocan.host.judge.gapfill import (
     ANCHOR_FRAMES,
@@ -24,6 +25,9 @@ from odocan.host.judge.gapfill import (
     Counts,
 )
 from odocan.host.judge.livewindow import CYCLE_S
+
+if TYPE_CHECKING:
+    from odocan.host.judge.liveholdstep import BusOrder
 
 KEPT_PERIODS = 64  # refused frames kept this many periods behind the latest accepted one
 
@@ -36,6 +40,7 @@ class LiveFill:
         self._anchors: deque[tuple[int, float, int]] = deque(maxlen=ANCHOR_FRAMES)
         self._counts: dict[int, Counts | None] = {}  # None: two frames of a number disagreed
         self.heard: Callable[[], None] | None = None  # told of every frame placed (liveplace)
+        self.bus: BusOrder | None = None  # told of every frame refused (liveplace)
 
     def accepted(self, periods: int, counter: int, t_s: float) -> None:
         """An accepted frame ``periods`` after the one before it (COUNTER, bus time s)."""
@@ -47,6 +52,8 @@ class LiveFill:
 
     def refused(self, counter: int, left: int, right: int, t_s: float) -> None:
         """A WHEEL_ENCODERS frame the host's E2E check refused with its CRC right."""
+        if self.bus is not None:
+            self.bus.heard(-1, counter, left, right, t_s)
         if not self._anchors:
             return
         seq_a, t_a, counter_a = min(self._anchors, key=lambda a: a[1] - a[0] * CYCLE_S)

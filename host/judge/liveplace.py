@@ -10,7 +10,11 @@ later prove it took as the reference did (``host.judge.livegapseen``) has its al
 withdrawn (``withdraw``), as ``analyze`` gives it none. Each placement's step from the one before
 is bounded too, by its own parts' allowances (``breaks.placed_step``); a gap placed before its
 held-back frame was heard takes the fill's allowance for its step when the frame comes
-(``_refill``), as ``analyze``, which knows the frames past the sample, bounds it."""
+(``_refill``), as ``analyze``, which knows the frames past the sample, bounds it. A placement
+never leaves the sample closer to the reference than the firmware's own poses and the frames
+the bus carried prove it off (``_narrow``, ``host.judge.liveholdstep``): the live E2E model,
+which decides each frame before the poses that prove it wrong are heard, can make gaps the
+firmware never had."""
 
 from __future__ import annotations
 
@@ -32,6 +36,7 @@ from odocan.host.judge.gapseen import Seen
 from odocan.host.judge.livedark import DarkRestarts
 from odocan.host.judge.livefill import LiveFill
 from odocan.host.judge.livegapseen import LiveSeen
+from odocan.host.judge.liveholdstep import BusOrder, excess_m
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livewindow import CYCLE_S, Columns, window_holes
@@ -103,6 +108,7 @@ class StallPlacer:
         # hold one placed before it): the sender number before, its periods
         self._gap_sender: dict[int, tuple[int, int]] = {}
         self.fill.heard = self._refill  # a frame heard late may fill a gap placed already
+        self.bus = self.fill.bus = BusOrder(CYCLE_S)  # the frames heard, in bus order
         # gaps placed before their frames were all heard: seq after -> (sender number before,
         # counts before, after, periods, the placement's frame, the bound's arguments)
         self._unfilled: dict[int, tuple[int, Gap, int, tuple[Geometry, int, str]]] = {}
@@ -114,11 +120,13 @@ class StallPlacer:
         self._history = []
         self._unfilled = {}
         self._gap_sender = {}
+        self.bus.restart()
 
     def on_encoders(self, seq: int, frame: tuple[int, int, int, float],
                     prev: tuple[float, ...] | None, bits: int) -> bool:
         """``_on_encoders``, and the frame to ``seen``."""
         gap = self._on_encoders(seq, frame, prev, bits)
+        self.bus.heard(seq, *frame)
         self.seen.on_encoders(seq, frame[3], self.periods)
         self.dark.on_encoders(seq, self.periods)
         return gap
@@ -180,9 +188,10 @@ class StallPlacer:
         if gap[0] not in {g[0] for g in self._gaps}:
             self._gaps = sorted([*self._gaps, gap])
 
-    def compared(self, seq: int) -> None:
-        """A sample of encoder frame ``seq`` was compared."""
-        self._abs_last = self._abs_at(seq)
+    def compared(self, pose: FramePose) -> None:
+        """The on-board sample ``pose`` was compared."""
+        self._abs_last = self._abs_at(pose.seq)
+        self.bus.last_pose = pose
 
     def _abs_at(self, seq: int) -> tuple[int, int] | None:
         """The |count steps| summed up to encoder frame ``seq``, None when no longer kept."""
@@ -245,7 +254,29 @@ class StallPlacer:
         self._history = [*self._history[1 - PARTS_KEPT:], [
             pose.seq, want_x - px, want_y - py, self._shift[0] - px, self._shift[1] - py,
             self._budget_m, step_m]]
+        self._narrow(pose, (want_x, want_y), reference)
         return self._shift[0] - sx, self._shift[1] - sy
+
+    def _narrow(self, pose: FramePose, want: tuple[float, float],
+                reference: tuple[Geometry, int, str]) -> None:
+        """Keep the placed reference at least the error the firmware's own poses and the bus
+        prove (``liveholdstep``) away from ``pose``: the sample is judged by the larger of the
+        two (``want``: the offset that would put the reference on the pose, m)."""
+        before = self.bus.last_pose
+        halves = None if self.halves is None else list(zip(
+            self.halves.col("enc_counter").astype(int).tolist(),
+            self.halves.col("t_s").tolist(), strict=True))
+        chain = None if before is None else self.bus.chain(before.seq, pose.seq, halves)
+        if before is None or chain is None or any(
+                before.seq < seq <= pose.seq for seq in self._reprimed):
+            return
+        excess = excess_m(before, pose, chain, reference)
+        rest_x, rest_y = want[0] - self._shift[0], want[1] - self._shift[1]
+        rest = math.hypot(rest_x, rest_y)
+        if excess <= rest:
+            return
+        unit_x, unit_y = (rest_x / rest, rest_y / rest) if rest > 0.0 else (1.0, 0.0)
+        self._shift = (want[0] - unit_x * excess, want[1] - unit_y * excess)
 
     def withdraw(self, seen: Seen) -> bool:
         """The parts of the placements (since the reference started, the latest

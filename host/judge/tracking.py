@@ -310,7 +310,7 @@ class PoseTracker:
         fit (which the sample narrows first); returns the corrected reference."""
         self.fit.feed(pose, raw)
         ref = self.fit.correct(raw)
-        self.placer.compared(pose.seq)
+        self.placer.compared(pose)
         self.reference, self._last_pair = ref, (pose, ref)
         self._last_compared = pose.seq
         self.vs_reference.add(pose, ref)
