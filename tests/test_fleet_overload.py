@@ -21,27 +21,16 @@ followed it); FAIL for one 2 LSB off before the halts.
 
 from __future__ import annotations
 
-import asyncio
 import random
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import pytest
 
 from odocan.firmware import frames as fw_frames
-from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
-from odocan.host.mqtt import fleetrun
-from odocan.host.mqtt.telemetry import RobotTelemetry
-from odocan.sim import fleet as sim_fleet
-from odocan.sim import robot
 from odocan.sim.board import TICK_S
-from odocan.sim.cboard import load_library
-from odocan.sim.fleet import Batch, Fleet, FleetConfig, frame_fields
-from odocan.sim.realtime import DeadlineStats
-from tests.independent_checker import Robot, Verdict, check
-from tests.requires import require_executables
+from tests.overloaded_fleet import FIRMWARES, checked_before, ready, run_overloaded
 
 SEED = 2
 ROBOTS = 3
@@ -76,64 +65,23 @@ def _starved_fleet(
 ) -> tuple[dict[str, Any], list[list[str]], list[float | None]]:
     """The fleet report's ``per_robot`` after the starved run, each robot's frames as candump
     lines, and the bus time of its first halted tick."""
-    profile = robot.load("kobuki")
-    config = FleetConfig(robots=ROBOTS, robot=profile, seed=SEED, firmware=firmware)
-    monkeypatch.setattr(sim_fleet, "RealTimeClock", StarvedClock)
-    lines: list[list[str]] = [[] for _ in range(ROBOTS)]
-    with Fleet(config) as fleet:
-        telemetry = [RobotTelemetry(name, Geometry.of(profile), config.integrator,
-                                    counter_bits=profile.counter_bits) for name in fleet.names]
-        fleetrun.watch_halts(fleet, telemetry)  # as run_fleet does
-
-        def on_batch(batch: Batch) -> None:
-            for i, frame in batch:
-                telemetry[i].feed_frame(frame)
-                t_s, can_id, data = frame_fields(frame)
-                lines[i].append(f"({t_s:.6f}) vcan0 {can_id:03X}#{data.hex().upper()}")
-
-        stats = asyncio.run(sim_fleet.run_realtime(fleet, duration_s=DURATION_S,
-                                                   on_batch=on_batch))
-        assert isinstance(stats, DeadlineStats)
-        bridge = SimpleNamespace(
-            frames_dropped=0, frames_failed=0, counters=dict,
-            robots=[SimpleNamespace(commands_sent=0, commands_rejected=0, telemetry=t)
-                    for t in telemetry])
-        run = fleetrun.FleetRun(fleet=config, duration_s=DURATION_S)
-        report = fleetrun._report(run, fleet, stats, bridge, None, False)  # type: ignore[arg-type]
-        halted = [fleet.halted_from_s(i) for i in range(ROBOTS)]
-    assert stats.skipped_releases > 1000  # the premise: starved
-    return dict(report["per_robot"]), lines, halted
+    run = run_overloaded(monkeypatch, StarvedClock, robots=ROBOTS, seed=SEED,
+                         duration_s=DURATION_S, firmware=firmware)
+    assert run.skipped_releases > 1000  # the premise: starved
+    return run.per_robot, run.lines, run.halted
 
 
-def _checked_before(tmp_path: Path, lines: list[str], until_s: float) -> Verdict:
-    """The independent checker on the robot's frames before ``until_s`` (from power-up)."""
-    log = tmp_path / "before.log"
-    log.write_text("\n".join(li for li in lines if float(li[1:li.index(")")]) < until_s) + "\n")
-    p = robot.load("kobuki").firmware_params()
-    kobuki = Robot(p["counts_per_rev"], p["wheel_radius_left_nm"], p["wheel_radius_right_nm"],
-                   p["wheelbase_nm"], p["counter_bits"], p["max_wheel_speed_mm_s"])
-    return check(log, kobuki, "exact", lambda t: (0.0, 0.0, 0.0))
-
-
-@pytest.fixture(params=["python", "c"])
-def firmware(request: pytest.FixtureRequest) -> str:
-    """Both firmwares (the fleet's default is the C port where it builds)."""
-    if request.param == "c":
-        require_executables("make", "cc", install="apt-get install gcc make")
-        load_library()
-    return str(request.param)
-
-
+@pytest.mark.parametrize("firmware", FIRMWARES)
 def test_a_starved_fleet_does_not_fail_its_correct_firmwares(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path, firmware: str
 ) -> None:
-    per_robot, lines, halted = _starved_fleet(monkeypatch, firmware)
+    per_robot, lines, halted = _starved_fleet(monkeypatch, ready(firmware))
     off = 0
     for index, (name, entry) in enumerate(per_robot.items()):
         from_s = halted[index]
         assert from_s is not None
         assert CALM_TICKS * TICK_S - TICK_S <= from_s < 4.0, from_s  # soon after the calm
-        right = _checked_before(tmp_path, lines[index], from_s)
+        right = checked_before(tmp_path, lines[index], from_s)
         assert right.samples > 100, right
         assert right.passed, right  # the firmware was right up to the first halt
         if entry["pose_vs_reference"]["max_dheading_rad"] > HEADING_LSB_RAD \
@@ -176,7 +124,7 @@ def test_a_firmware_2_lsb_off_before_the_halts_still_fails(
     for index, entry in enumerate(per_robot.values()):
         from_s = halted[index]
         assert from_s is not None
-        wrong = _checked_before(tmp_path, lines[index], from_s)
+        wrong = checked_before(tmp_path, lines[index], from_s)
         assert wrong.max_position_error_m > 1.5e-4, wrong  # the checker sees the 2 LSB
         assert entry["verdict"] == "FAIL", entry["reason"]
         assert entry["reason"].startswith(

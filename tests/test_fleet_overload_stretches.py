@@ -19,28 +19,17 @@ releases whose encoder samples go out late, which the firmware takes one by one)
 
 from __future__ import annotations
 
-import asyncio
 import random
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import pytest
 
 from odocan.firmware import frames as fw_frames
-from odocan.host.judge.reference import Geometry
-from odocan.host.mqtt import fleetrun
-from odocan.host.mqtt.telemetry import RobotTelemetry
-from odocan.sim import fleet as sim_fleet
-from odocan.sim import robot
 from odocan.sim.board import TICK_S
-from odocan.sim.cboard import load_library
 from odocan.sim.contract import DBC_PATH
-from odocan.sim.fleet import Batch, Fleet, FleetConfig, frame_fields
-from odocan.sim.realtime import DeadlineStats
 from tests.dbc_typed import load_can_dbc, numbers
-from tests.independent_checker import Robot, check
-from tests.requires import require_executables
+from tests.overloaded_fleet import FIRMWARES, checked_before, ready, run_overloaded
 
 SEED = 5
 ROBOTS = 2
@@ -88,60 +77,24 @@ def _run(monkeypatch: pytest.MonkeyPatch, firmware: str = "python"
          ) -> tuple[dict[str, Any], list[list[str]], list[float | None]]:
     """The fleet report's ``per_robot``, each robot's frames as candump lines, the bus time
     of its first halted tick."""
-    profile = robot.load("kobuki")
-    config = FleetConfig(robots=ROBOTS, robot=profile, seed=SEED, firmware=firmware)
-    monkeypatch.setattr(sim_fleet, "RealTimeClock", HaltingClock)
     HaltingClock.latest = None
-    lines: list[list[str]] = [[] for _ in range(ROBOTS)]
-    with Fleet(config) as fleet:
-        telemetry = [RobotTelemetry(name, Geometry.of(profile), config.integrator,
-                                    counter_bits=profile.counter_bits) for name in fleet.names]
-        fleetrun.watch_halts(fleet, telemetry)
-
-        def on_batch(batch: Batch) -> None:
-            for i, frame in batch:
-                telemetry[i].feed_frame(frame)
-                t_s, can_id, data = frame_fields(frame)
-                lines[i].append(f"({t_s:.6f}) vcan0 {can_id:03X}#{data.hex().upper()}")
-
-        stats = asyncio.run(sim_fleet.run_realtime(fleet, duration_s=DURATION_S,
-                                                   on_batch=on_batch))
-        assert isinstance(stats, DeadlineStats)
-        bridge = SimpleNamespace(
-            frames_dropped=0, frames_failed=0, counters=dict,
-            robots=[SimpleNamespace(commands_sent=0, commands_rejected=0, telemetry=t)
-                    for t in telemetry])
-        run = fleetrun.FleetRun(fleet=config, duration_s=DURATION_S)
-        report = fleetrun._report(run, fleet, stats, bridge, None, False)  # type: ignore[arg-type]
-        halted = [fleet.halted_from_s(i) for i in range(ROBOTS)]
-        assert fleet.halts >= 10, fleet.halts  # the premise: halted again and again
-    return dict(report["per_robot"]), lines, halted
+    run = run_overloaded(monkeypatch, HaltingClock, robots=ROBOTS, seed=SEED,
+                         duration_s=DURATION_S, firmware=firmware)
+    assert run.halts >= 10, run.halts  # the premise: halted again and again
+    return run.per_robot, run.lines, run.halted
 
 
 def _right_before(tmp_path: Path, lines: list[str], until_s: float) -> bool:
     """The independent checker: the robot's pose right on its frames before ``until_s``."""
-    log = tmp_path / "before.log"
-    log.write_text("\n".join(li for li in lines if float(li[1:li.index(")")]) < until_s) + "\n")
-    p = robot.load("kobuki").firmware_params()
-    kobuki = Robot(p["counts_per_rev"], p["wheel_radius_left_nm"], p["wheel_radius_right_nm"],
-                   p["wheelbase_nm"], p["counter_bits"], p["max_wheel_speed_mm_s"])
-    verdict = check(log, kobuki, "exact", lambda t: (0.0, 0.0, 0.0))
+    verdict = checked_before(tmp_path, lines, until_s)
     return verdict.samples > 100 and verdict.passed
 
 
-@pytest.fixture(params=["python", "c"])
-def firmware(request: pytest.FixtureRequest) -> str:
-    """Both firmwares (the fleet's default is the C port where it builds)."""
-    if request.param == "c":
-        require_executables("make", "cc", install="apt-get install gcc make")
-        load_library()
-    return str(request.param)
-
-
+@pytest.mark.parametrize("firmware", FIRMWARES)
 def test_a_correct_firmware_passes_every_stretch_between_halts(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path, firmware: str
 ) -> None:
-    per_robot, lines, halted = _run(monkeypatch, firmware)
+    per_robot, lines, halted = _run(monkeypatch, ready(firmware))
     for index, entry in enumerate(per_robot.values()):
         from_s = halted[index]
         assert from_s is not None
