@@ -297,16 +297,11 @@ def test_a_turn_past_half_inside_an_unseen_restart_gap(tmp_path: Path, bias_lsb:
 FAST = Robot(17155, 10_000_000, 10_000_000, 1_000_000_000, 16)  # 3 periods are ambiguous
 
 
-@pytest.mark.parametrize("firmware", ["took", "reprimed", "heading_off"])
-def test_an_ambiguous_recorder_hole_without_evidence_takes_either(tmp_path: Path,
-                                                                   firmware: str) -> None:
-    """The pinned example above: frames 185-186 cut from the log, the step from 184 to 187
-    (3 periods) ambiguous (host.judge.ambiguity) and no page telling what the firmware did. The
-    firmware that took them one by one passes (before: FAIL by 22.4 mm, re-primed); one that
-    re-primed there (its pose the float64 odometry without the steps into 185-187) passes too;
-    one whose HEADING is 2 LSB off from 187 on fits neither and FAILs, on the live judges too
-    (the monitor's model, the bridge). The streamed judge leaves such a life to the whole
-    log's."""
+def hole_log(tmp_path: Path, firmware: str, totals_at: frozenset[int] = frozenset()) -> Path:
+    """The drive of the evidenceless hole (the pinned example above), frames 185-186 cut: the
+    firmware ``took`` them, ``reprimed`` at 187 (X off by the float64 odometry's difference),
+    or took them with its HEADING 2 LSB off from 187 on (``heading_off``); FRAME_TOTALS pages
+    after the summaries of the frames ``totals_at`` (``synth_log.synthesize``)."""
     d_left, d_right = _drive(FAST, 800, 0, 0.015625, 0.0)
     fine, reprimed = _Odometry(FAST, "euler"), _Odometry(FAST, "euler")
     x_bias: dict[int, int] = {}
@@ -318,11 +313,24 @@ def test_an_ambiguous_recorder_hole_without_evidence_takes_either(tmp_path: Path
         assert abs(reprimed.heading - fine.heading) < 1e-12
         x_bias[k] = round((reprimed.x - fine.x) / POSITION_LSB_M)
     assert x_bias[187] < -200  # the re-prime is 2 cm behind: far beyond the gap's allowance
-    synth = synthesize(profile_of(FAST), "euler", d_left, d_right,
+    synth = synthesize(profile_of(FAST), "euler", d_left, d_right, totals_at=totals_at,
                        x_bias_100um=x_bias if firmware == "reprimed" else None,
                        heading_bias_lsb=dict.fromkeys(range(187, 801), 2)
                        if firmware == "heading_off" else None)
-    path = _cut(synth, [(185, 2)]).write(tmp_path / "hole.log")
+    return _cut(synth, [(185, 2)]).write(tmp_path / "hole.log")
+
+
+@pytest.mark.parametrize("firmware", ["took", "reprimed", "heading_off"])
+def test_an_ambiguous_recorder_hole_without_evidence_takes_either(tmp_path: Path,
+                                                                   firmware: str) -> None:
+    """The pinned example above: frames 185-186 cut from the log, the step from 184 to 187
+    (3 periods) ambiguous (host.judge.ambiguity) and no page telling what the firmware did. The
+    firmware that took them one by one passes (before: FAIL by 22.4 mm, re-primed); one that
+    re-primed there (its pose the float64 odometry without the steps into 185-187) passes too;
+    one whose HEADING is 2 LSB off from 187 on fits neither and FAILs, on the live judges too
+    (the monitor's model, the bridge). The streamed judge leaves such a life to the whole
+    log's."""
+    path = hole_log(tmp_path, firmware)
     result = analyze(read_log(path), profile_of(FAST), "euler")
     assert result.passed is (firmware != "heading_off"), result.report["onboard_vs_reference"]
     with pytest.raises(NotStreamable, match="no evidence"):

@@ -22,36 +22,13 @@ import pytest
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import POSITION_LSB_M, analyze
 from odocan.host.judge.samples import HEADING_LSB_RAD
-from tests.independent_checker import _Odometry
 from tests.synth_log import synthesize
-from tests.test_gap_placement import FAST, _cut, _drive
+from tests.test_gap_placement import FAST, _cut, _drive, hole_log
 from tests.test_judge_campaign import profile_of
 from tests.test_stall_bound import _live
 
 ONE_PAGE = frozenset({30})  # one FRAME_TOTALS page, 1.5 s before the hole: it proves nothing
 ROTATION = frozenset(range(30, 801, 50))  # one every 0.5 s, ENC_E2E pages at 160 and 210
-
-
-def _hole_log(tmp_path: Path, firmware: str, totals_at: frozenset[int]) -> Path:
-    """The drive of ``test_gap_placement``'s evidenceless hole, frames 185-186 cut: the
-    firmware ``took`` them, ``reprimed`` at 187 (X off by the float64 odometry's difference),
-    or took them with its HEADING 2 LSB off from 187 on (``heading_off``)."""
-    d_left, d_right = _drive(FAST, 800, 0, 0.015625, 0.0)
-    fine, reprimed = _Odometry(FAST, "euler"), _Odometry(FAST, "euler")
-    x_bias: dict[int, int] = {}
-    for k in range(1, 801):
-        fine.step(int(d_left[k - 1]), int(d_right[k - 1]))
-        if k not in (185, 186, 187):  # the re-prime integrates nothing from 184 to 187
-            reprimed.step(int(d_left[k - 1]), int(d_right[k - 1]))
-        assert abs(reprimed.y - fine.y) < 1e-9
-        assert abs(reprimed.heading - fine.heading) < 1e-12
-        x_bias[k] = round((reprimed.x - fine.x) / POSITION_LSB_M)
-    assert x_bias[187] < -200  # the re-prime is 2 cm behind: far beyond the gap's allowance
-    synth = synthesize(profile_of(FAST), "euler", d_left, d_right, totals_at=totals_at,
-                       x_bias_100um=x_bias if firmware == "reprimed" else None,
-                       heading_bias_lsb=dict.fromkeys(range(187, 801), 2)
-                       if firmware == "heading_off" else None)
-    return _cut(synth, [(185, 2)]).write(tmp_path / "hole.log")
 
 
 @pytest.mark.parametrize("firmware", ["took", "reprimed", "heading_off"])
@@ -61,7 +38,7 @@ def test_an_ambiguous_hole_the_pages_heard_do_not_decide_is_chosen_as_whole(
     """FRAME_TOTALS pages heard before the hole, none deciding it: the firmware that took the
     frames passes every judge (before: POSE WRONG live, 22.5 mm off the re-primed reference),
     the one that re-primed too; HEADING 2 LSB off from 187 on FAILs every judge."""
-    path = _hole_log(tmp_path, firmware, ONE_PAGE if pages == "one" else ROTATION)
+    path = hole_log(tmp_path, firmware, ONE_PAGE if pages == "one" else ROTATION)
     right = firmware != "heading_off"
     result = analyze(read_log(path), profile_of(FAST), "euler")
     assert result.passed is right, result.report["onboard_vs_reference"]
