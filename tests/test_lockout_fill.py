@@ -38,7 +38,8 @@ from odocan.host.cli.app import main
 from tests.dbc_typed import dbc_attribute, load_can_dbc
 from tests.test_gap_fill import DBC, X_LSB_Q40, _verdicts
 
-DRIVE = ["--duration", "10", "--seed", "305", "--faults", "delay=0.1:20,seed=305"]
+DRIVE = ["--duration", "10", "--seed", "305", "--faults", "delay=0.1:20,seed=305",
+         "--firmware", "python"]  # the patched Python firmware, never auto's C
 LOCKED_OUT = 4  # refusals in a row that only a lock-out makes here (a frame held back: one)
 TICK_S, RECEIVE_LAG_S, WINDOW_MAX = 0.01, 0.001, 15
 WRONG_LSB = 10  # 1 mm of X added after each lock-out
