@@ -140,7 +140,8 @@ def _verdicts(tmp_path: Path, drive: tuple[str, int, str, int], wrong: str | Non
     (whole, streamed and live: the monitor model fed the capture at its stamps)."""
     robot, seed, faults, recorder_seed = drive
     log, capture = tmp_path / "drive.log", tmp_path / "capture.log"
-    argv = ["run", "--robot", robot, "--duration", "4", "--seed", str(seed), "--log", str(log)]
+    argv = ["run", "--robot", robot, "--duration", "4", "--seed", str(seed), "--log", str(log),
+            "--firmware", "python"]  # the patched Python firmware, never auto's C
     argv += ["--faults", faults] if faults else []
     with _off_by_two(wrong):
         main(argv)

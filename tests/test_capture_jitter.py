@@ -68,7 +68,7 @@ def _verdicts(tmp_path: Path, drive: tuple[str, int, int, str], wrong: str | Non
     robot, duration_s, seed, faults = drive
     log, moved = tmp_path / "drive.log", tmp_path / "moved.log"
     argv = ["run", "--robot", robot, "--duration", str(duration_s), "--seed", str(seed),
-            "--log", str(log)]
+            "--log", str(log), "--firmware", "python"]  # the patched Python firmware, never C
     argv += ["--faults", faults] if faults else []
     with _off_by_two(wrong):
         main(argv)

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from odocan.host.cli.app import build_parser
+from odocan.host.cli.firmware_choice import FirmwareChoice, resolve_firmware
 from odocan.host.cli.subparsers import fleet
 from odocan.sim.cboard import LIBRARY_ENV
 from tests.requires import require_executables
@@ -24,9 +25,9 @@ def test_auto_takes_the_c_firmware_when_it_builds_and_the_start_line_says_so(
 ) -> None:
     require_executables("make", "cc", install="apt-get install gcc make")
     monkeypatch.delenv(LIBRARY_ENV, raising=False)
-    kind, said = fleet._firmware("auto", secoc=False)
-    assert kind == "c"
-    fleet._say_started(2, None, said)
+    choice = resolve_firmware("auto", secoc=False)
+    assert choice.firmware == "c"
+    fleet._say_started(2, None, choice.said)
     line = capsys.readouterr().err
     assert line.startswith("fleet: 2 robots running; firmware c (auto"), line
 
@@ -36,10 +37,10 @@ def test_auto_falls_back_to_python_naming_why(
 ) -> None:
     missing = tmp_path / "no_such_lib.so"
     monkeypatch.setenv(LIBRARY_ENV, str(missing))
-    kind, said = fleet._firmware("auto", secoc=False)
-    assert kind == "python"
-    assert said.startswith("firmware python (auto: ")
-    assert str(missing) in said
+    choice = resolve_firmware("auto", secoc=False)
+    assert choice.firmware == "python"
+    assert choice.said.startswith("firmware python (auto: the C firmware is unavailable: ")
+    assert str(missing) in choice.said
 
 
 @pytest.mark.parametrize("asked", ["python", "c"])
@@ -47,4 +48,5 @@ def test_a_firmware_asked_by_name_is_taken_as_asked(
     asked: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setenv(LIBRARY_ENV, str(tmp_path / "no_such_lib.so"))  # never loaded here
-    assert fleet._firmware(asked, secoc=False) == (asked, f"firmware {asked}")
+    choice = resolve_firmware(asked, secoc=False)
+    assert (choice, choice.said) == (FirmwareChoice(asked), f"firmware {asked}")

@@ -43,7 +43,8 @@ wheel_radius_right_m = 0.075
 wheelbase_m = 0.01
 counter_bits = 16
 """
-DRIVE = ["--duration", "10", "--seed", "2", "--faults", "delay=0.1:15,seed=2"]
+DRIVE = ["--duration", "10", "--seed", "2", "--faults", "delay=0.1:15,seed=2",
+         "--firmware", "python"]  # the patched Python firmware, never auto's C
 X_LSB_Q40 = round(1e-4 * 2**40)  # ODOM_POSE_X's LSB (0.1 mm) in the firmware's Q40 metres
 
 

@@ -48,7 +48,7 @@ def _adds_once_after_a_gap(lsb: int, after: int) -> AbstractContextManager[list[
 def _drive(tmp: Path, robot: str, seed: int, after: int | None) -> dict[str, Any]:
     log = tmp / f"{robot}-{seed}-{after}.log"
     args = ["run", "--robot", robot, "--duration", "10", "--seed", str(seed),
-            "--faults", f"delay=0.1:15,seed={seed}", "--log", str(log)]
+            "--faults", f"delay=0.1:15,seed={seed}", "--log", str(log), "--firmware", "python"]
     with _adds_once_after_a_gap(WRONG_LSB if after else 0, after or 0) as done:
         code = main(args)
     return {"run": code, "log": log, "robot": robot, "steps": done[0]}

@@ -61,7 +61,8 @@ def _verdicts(tmp_path: Path, drive: Drive, hiding: bool, jitter_seed: int | Non
     robot, seed, delay_ms = drive
     log, moved = tmp_path / "drive.log", tmp_path / "moved.log"
     argv = ["run", "--robot", robot, "--duration", str(duration_s), "--seed", str(seed),
-            "--faults", f"delay=0.1:{delay_ms},seed={seed}", "--log", str(log)]
+            "--faults", f"delay=0.1:{delay_ms},seed={seed}", "--log", str(log),
+            "--firmware", "python"]  # the patched Python firmware, never auto's C
     with _adds_after_lock_outs(WRONG_LSB) if hiding else nullcontext([0]) as steps:
         main(argv)
     if jitter_seed is None:
@@ -196,7 +197,7 @@ def one_step(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
     log, moved = tmp / "drive.log", tmp / "moved.log"
     with _frames_taken() as taken, _adds_once_after_a_lock_out(3) as done:
         main(["run", "--robot", robot, "--duration", "10", "--seed", "3",
-              "--faults", "delay=0.1:15,seed=3", "--log", str(log)])
+              "--faults", "delay=0.1:15,seed=3", "--log", str(log), "--firmware", "python"])
     assert done == [1]
     _jittered(log, moved, 0)
     return robot, moved, _float64_x_off_m(log, robot, taken)

@@ -36,7 +36,8 @@ from tests.dbc_typed import dbc_attribute, load_can_dbc
 from tests.firmware_patch import LOCKED_OUT, after_lock_outs, edited_after, x_added
 from tests.test_gap_fill import DBC, X_LSB_Q40, _verdicts
 
-DRIVE = ["--duration", "10", "--seed", "305", "--faults", "delay=0.1:20,seed=305"]
+DRIVE = ["--duration", "10", "--seed", "305", "--faults", "delay=0.1:20,seed=305",
+         "--firmware", "python"]  # the patched Python firmware, never auto's C
 TICK_S, RECEIVE_LAG_S, WINDOW_MAX = 0.01, 0.001, 15
 WRONG_LSB = 10  # 1 mm of X added after each lock-out
 

@@ -45,7 +45,7 @@ def _holed_drive(tmp_path: Path, robot: str, wrong: str | None,
     clean, holed = tmp_path / "clean.log", tmp_path / "holed.log"
     with _off_by_two(wrong):
         main(["run", "--robot", robot, "--scenario", "random", "--duration", "7", "--seed", "3",
-              "--log", str(clean)])
+              "--log", str(clean), "--firmware", "python"])  # patched: never auto's C
     monkeypatch.setattr(holes, "HOLES", LAPPED)
     holes._holed(clean, holed)
     return clean, holed

@@ -70,7 +70,7 @@ def _off_by_two(signal: str | None) -> Iterator[None]:
 def _run(path: Path, drive: tuple[int, int | None, str], wrong: str | None) -> int:
     duration, seed, faults = drive
     argv = ["run", "--robot", "kobuki", "--duration", str(duration), "--faults", faults,
-            "--log", str(path)]
+            "--log", str(path), "--firmware", "python"]  # the patched Python firmware, never C
     argv += ["--seed", str(seed)] if seed is not None else []
     with _off_by_two(wrong):
         return main(argv)
@@ -163,7 +163,8 @@ def test_distance_under_delays_passes_right_and_fails_off_by_a_mm(
     path = tmp_path / "drive.blf"
     duration, seed, faults = drive
     argv = ["run", "--robot", "kobuki", "--duration", str(duration), "--faults", faults,
-            "--log", str(path)] + (["--seed", str(seed)] if seed is not None else [])
+            "--log", str(path), "--firmware", "python"] + (
+                ["--seed", str(seed)] if seed is not None else [])
     with _distance_off(off_mm):
         code = main(argv)
     report = tmp_path / "report.json"

@@ -93,7 +93,8 @@ def _drive(tmp_path: Path, robot: str, seed: int, delay_ms: int, wrong_mm: int
     wrong = _distance_low_after_a_lock_out(wrong_mm) if wrong_mm else nullcontext([0])
     with _frames_taken() as taken, wrong as done:
         main(["run", "--robot", robot, "--duration", str(DURATION_S), "--seed", str(seed),
-              "--faults", f"delay=0.1:{delay_ms},seed={seed}", "--log", str(log)])
+              "--faults", f"delay=0.1:{delay_ms},seed={seed}", "--log", str(log),
+              "--firmware", "python"])  # the patched Python firmware, never auto's C
     _jittered(log, moved, 0)
     return moved, _float64_distance_off_mm(log, robot, taken), done[0]
 

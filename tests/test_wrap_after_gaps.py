@@ -71,7 +71,8 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, dict[str, Any]
     with pytest.MonkeyPatch.context() as monkeypatch:
         wrapped = _wrapping_firmware(monkeypatch)
         code = main(["run", "--robot", str(robot), "--scenario", "random", "--duration", "30",
-                     "--faults", "burst=0.05:6,seed=3", "--report", str(report)])
+                     "--faults", "burst=0.05:6,seed=3", "--report", str(report),
+                     "--firmware", "python"])  # the patched Python firmware, never auto's C
     return code, json.loads(report.read_text()), wrapped[0]
 
 

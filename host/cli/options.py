@@ -95,9 +95,9 @@ def add_judge_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_firmware_arguments(parser: argparse.ArgumentParser) -> None:
-    """The board's firmware: ``--robot``, ``--integrator`` and ``--firmware python|c``
-    (``odocan run`` and ``odocan firmware``)."""
-    from odocan.sim.cboard import FIRMWARES
+    """The board's firmware: ``--robot``, ``--integrator`` and ``--firmware auto|python|c``
+    (``odocan run`` and ``odocan firmware``; ``auto``: ``firmware_choice.resolve_firmware``)."""
+    from odocan.host.cli.firmware_choice import AUTO_FIRMWARE, FIRMWARE_CHOICES
     from odocan.sim.rig import INTEGRATORS
 
     add_robot_argument(parser)
@@ -106,9 +106,10 @@ def add_firmware_arguments(parser: argparse.ArgumentParser) -> None:
         help="on-board integrator (default: exact)",
     )
     parser.add_argument(
-        "--firmware", choices=FIRMWARES, default="python",
+        "--firmware", choices=FIRMWARE_CHOICES, default=AUTO_FIRMWARE,
         help="the firmware on the board: python (firmware/) or c (firmware/c, built with make "
-        "on first use) (default: python)",
+        "on first use; bit-exact, about twice as fast); auto: c when it builds and loads, "
+        "python otherwise (the output says which, and why) (default: auto)",
     )
 
 

@@ -1,12 +1,13 @@
 """``odocan firmware``: the odometry firmware on its board, ticking every 10 ms in real time.
 
-The unchanged firmware (``firmware.ecu.OdomEcu``, or with ``--firmware c`` the C port in
-``firmware/c`` through ``sim.cboard``) on a ``sim.board.FirmwareBoard`` whose CAN
-controller is a python-can bus (``-i/-c/-b`` or python-can's config file); ``sim.realtime`` plays
-its timer. The board's acceptance filter passes only the frames ODOM_MCU receives in the DBC:
-interfaces such as ``udp_multicast`` hand a node its own frames back, a CAN controller does
-not. Without ``--duration`` it runs until Ctrl-C or SIGTERM; either way it closes the bus,
-prints a one-line summary on stderr and exits 0.
+The unchanged firmware (``--firmware auto``, the default: the C port in ``firmware/c``
+through ``sim.cboard`` when its library builds and loads, else ``firmware.ecu.OdomEcu``; the
+summary line says which; ``--firmware python|c`` asks for one) on a
+``sim.board.FirmwareBoard`` whose CAN controller is a python-can bus (``-i/-c/-b`` or
+python-can's config file); ``sim.realtime`` plays its timer. The board's acceptance filter
+passes only the frames ODOM_MCU receives in the DBC: interfaces such as ``udp_multicast`` hand
+a node its own frames back, a CAN controller does not. Without ``--duration`` it runs until
+Ctrl-C or SIGTERM; either way it closes the bus, prints a one-line summary on stderr and exits 0.
 
 SecOC (docs/secoc.md): ``--secoc-key PATH`` provisions the firmware (Python or C) with the key;
 its EPOCH lives in RAM for the process, or with ``--nvm PATH`` in a file (``sim.board.FileNvm``:
@@ -21,6 +22,7 @@ import sys
 import time
 from pathlib import Path
 
+from odocan.host.cli.firmware_choice import resolve_firmware
 from odocan.host.cli.options import (
     add_duration_argument,
     add_firmware_arguments,
@@ -80,7 +82,8 @@ def _do_firmware(args: argparse.Namespace) -> int:
     key = None if args.secoc_key is None else _secoc_key(args.secoc_key)
     nvm = _nvm(args.nvm, key)
     # builds the C library (and checks its ABI takes a key) before the bus opens
-    make_board = board_maker(args.firmware, secoc=key is not None)
+    choice = resolve_firmware(args.firmware, secoc=key is not None)
+    make_board = board_maker(choice.firmware, secoc=key is not None)
     bus = open_bus(args)
     try:
         loop = PeriodicLoop()
@@ -95,7 +98,7 @@ def _do_firmware(args: argparse.Namespace) -> int:
         bus.shutdown()
     ecu = board.ecu
     print(
-        f"odocan firmware: {args.firmware} firmware, {board.frames_sent} frames sent "
+        f"odocan firmware: {choice.words}, {board.frames_sent} frames sent "
         f"({board.tx_errors} refused), "
         f"state {ecu.state.name}, {stats.summary()}",
         file=sys.stderr,

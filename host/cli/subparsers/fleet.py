@@ -28,6 +28,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from odocan.host.cli.firmware_choice import AUTO_FIRMWARE, FIRMWARE_CHOICES, resolve_firmware
 from odocan.host.cli.options import SEED_LIMIT, add_seed_argument, float_in, int_in
 from odocan.host.io.export import FOXGLOVE_PORT
 from odocan.host.mqtt.broker import BrokerURL
@@ -45,7 +46,6 @@ from odocan.host.report.foxglove_options import HOST, port_number
 from odocan.host.report.progress import Progress, wall_clock_progress
 from odocan.host.stopped import stop_code, stopped_text
 from odocan.sim import robot
-from odocan.sim.cboard import FIRMWARES, FirmwareBuildError, board_maker
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.fleet import FleetConfig, robot_name
 from odocan.sim.rig import INTEGRATORS, TRANSPORTS
@@ -58,7 +58,6 @@ if TYPE_CHECKING:
 
 FLEET_MAX_ROBOTS = 500  # one 2-core machine holds about 45 in real time (README, bench/fleet.py)
 FLEET_MAX_DURATION_S = 86400.0
-AUTO_FIRMWARE = "auto"  # --firmware's default: c when its library builds and loads, else python
 FLEET_MAX_WORKERS = 64
 
 
@@ -114,7 +113,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         "in-process transport; virtual: python-can's, same frames)",
     )
     parser.add_argument(
-        "--firmware", choices=(AUTO_FIRMWARE, *FIRMWARES), default=AUTO_FIRMWARE,
+        "--firmware", choices=FIRMWARE_CHOICES, default=AUTO_FIRMWARE,
         help="every board's firmware: python (firmware/) or c (firmware/c, built with make on "
         "first use; bit-exact, a third less CPU per fleet step); auto: c when it builds and "
         "loads, python otherwise (the start line says which, and why) (default: auto)",
@@ -182,7 +181,7 @@ def _do_fleet(args: argparse.Namespace) -> int:
     broker = broker_url(args)
     if broker is not None and args.port is not None:
         raise ConfigurationError("--port is the embedded broker's: --broker names its own port")
-    firmware, said = _firmware(args.firmware, args.secoc_key is not None)
+    choice = resolve_firmware(args.firmware, args.secoc_key is not None)
     fleet = FleetConfig(
         robots=args.count,
         robot=robot.load(args.robot),
@@ -191,7 +190,7 @@ def _do_fleet(args: argparse.Namespace) -> int:
         seed=args.seed,
         secoc_key=None if args.secoc_key is None else load_secoc_key(args.secoc_key),
         transport=args.transport,
-        firmware=firmware,
+        firmware=choice.firmware,
     ).shard(first, robots)
     run = FleetRun(fleet=fleet, duration_s=args.duration, broker=broker, **bridge_options(args))
     debug = getattr(args, "debug", False)
@@ -199,11 +198,11 @@ def _do_fleet(args: argparse.Namespace) -> int:
     names = [robot_name(fleet.first + i) for i in range(fleet.robots)]
     if broker is None:
         with embedded_broker(args.port) as url, _foxglove(args, url, names):
-            report = _run(replace(run, broker=url), args.workers, debug, said)
+            report = _run(replace(run, broker=url), args.workers, debug, choice.said)
         report["embedded_broker"] = True
     else:
         with _foxglove(args, broker, names):
-            report = _run(run, args.workers, debug, said)
+            report = _run(run, args.workers, debug, choice.said)
     broken = failures(report, args.max_miss_ratio)
     _print_summary(report, broken)
     if args.report is not None:
@@ -211,20 +210,6 @@ def _do_fleet(args: argparse.Namespace) -> int:
     if report.get("stopped"):
         return stop_code(report["stopped"])  # not the fleet it was asked for: never 0
     return 1 if broken else 0
-
-
-def _firmware(asked: str, secoc: bool) -> tuple[str, str]:
-    """``--firmware`` and the start line's words for it: python or c as asked; ``auto``: c when
-    its library builds and loads (and takes a SecOC key when one is given), else python and
-    why (the C port is bit-exact and its fleet step costs a third less CPU:
-    bench/fleet_step.py)."""
-    if asked != AUTO_FIRMWARE:
-        return asked, f"firmware {asked}"
-    try:
-        board_maker("c", secoc=secoc)
-    except (FirmwareBuildError, ConfigurationError) as exc:
-        return "python", f"firmware python (auto: the C firmware is unavailable: {exc})"
-    return "c", "firmware c (auto: it built and loaded; --firmware python for the Python one)"
 
 
 def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
@@ -299,7 +284,7 @@ def _print_summary(report: dict[str, Any], broken: list[str]) -> None:
 
 def _say_started(robots: int, url: BrokerURL | None, firmware: str = "") -> None:
     """One line on stderr when the clock starts: how many robots, and where to watch them
-    (``odocan monitor --broker URL``), and the firmware (``_firmware``'s words)."""
+    (``odocan monitor --broker URL``), and the firmware (``FirmwareChoice.said``)."""
     where = f", telemetry on {url}" if url is not None else ""
     which = f"; {firmware}" if firmware else ""
     print(

@@ -5,6 +5,10 @@ asks for python-can's own ``virtual`` interface: the same frames, byte for byte,
 ``-b/--bitrate`` makes the rig's bus bit-timed (arbitration, exact frame lengths, delivery at the
 end of frame, in simulated time); without it the bus is instant.
 
+The firmware is ``--firmware auto`` unless asked: the C port when its library builds and loads
+(bit-exact, about twice as fast), else the Python one; the summary's title and the report's
+``inputs.firmware`` say which and why (``host.cli.firmware_choice``).
+
 The motor controller, the ground truth, the scenario driver and the firmware run in simulated
 time (about 100x faster than real time on one core); every frame goes to a ``FrameCollector``
 and, with ``--log``, to python-can's ``can.Logger`` (``.log`` candump, ``.asc``, ``.blf``). The
@@ -31,6 +35,7 @@ from pathlib import Path
 import can
 import numpy as np
 
+from odocan.host.cli.firmware_choice import resolve_firmware
 from odocan.host.cli.inputs import explained, require_frames
 from odocan.host.cli.options import (
     SIM_DURATION_MAX_S,
@@ -155,6 +160,7 @@ def _do_run(args: argparse.Namespace) -> int:
         from odocan.host.protocol.secoc import load_secoc_key
 
         secoc_key = load_secoc_key(args.secoc_key)
+    choice = resolve_firmware(args.firmware, secoc=secoc_key is not None)
     config = RigConfig(
         robot=profile,
         integrator=args.integrator,
@@ -166,7 +172,7 @@ def _do_run(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         transport=args.transport,
         bitrate=args.bitrate,
-        firmware=args.firmware,
+        firmware=choice.firmware,
         secoc_key=secoc_key,
         # flat out: the drive may run ahead (not when frames are paced onto a live bus)
         lookahead=args.interface is None and args.channel is None,
@@ -182,13 +188,14 @@ def _do_run(args: argparse.Namespace) -> int:
                     ("--latency-plot", args.latency_plot)])
     board_maker(config.firmware, secoc=config.secoc_key is not None)  # refusals before any file
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
-    if config.firmware != "python":
-        title += f", {config.firmware} firmware"
+    if choice.auto or choice.firmware != "python":  # the Python one asked by name: unsaid
+        title += f", {choice.words}"
     with foxglove_session(args, config.robot, config.integrator) as live:
         extra: list[can.Listener] = [] if live is None else [Isolated(live)]
         with _rare_collections():
             analysis, log_error, stopped = _run_and_analyze(config, args, extra)
         analysis.report["inputs"] = run_inputs(config, args.errors, faults)
+        analysis.report["inputs"]["firmware"] = choice.as_dict()
         code = finish(analysis, args, title=title)
     write_checks(args, "run", analysis_checks(analysis.report))
     if args.latency_plot is not None:
