@@ -39,16 +39,7 @@ def test_an_ambiguous_hole_the_pages_heard_do_not_decide_is_chosen_as_whole(
     frames passes every judge (before: POSE WRONG live, 22.5 mm off the re-primed reference),
     the one that re-primed too; HEADING 2 LSB off from 187 on FAILs every judge."""
     path = hole_log(tmp_path, firmware, ONE_PAGE if pages == "one" else ROTATION)
-    right = firmware != "heading_off"
-    result = analyze(read_log(path), profile_of(FAST), "euler")
-    assert result.passed is right, result.report["onboard_vs_reference"]
-    monitor, bridge, end_s = _live(profile_of(FAST), "euler", path)
-    assert (monitor.health(end_s)["state"] == "POSE WRONG") is not right, monitor.health(end_s)
-    for tracker in (monitor.tracker, bridge.tracker):
-        assert (tracker.vs_reference.max_dheading_rad > HEADING_LSB_RAD) is not right
-        assert (tracker.wrongs.count > 0) is not right
-        assert tracker.max_beyond_allowance_m <= POSITION_LSB_M
-        assert tracker.reference_starts == 1  # one start: the choice, not a new start
+    _judged_alike(path, right=firmware != "heading_off")
 
 
 @pytest.mark.parametrize("firmware", ["took", "heading_off"])
@@ -62,12 +53,19 @@ def test_a_second_ambiguous_hole_within_the_hold(tmp_path: Path, firmware: str) 
                        heading_bias_lsb=dict.fromkeys(range(237, 801), 2)
                        if firmware == "heading_off" else None)
     path = _cut(synth, [(185, 2), (235, 2)]).write(tmp_path / "holes.log")
-    right = firmware == "took"
+    _judged_alike(path, right=firmware == "took")
+
+
+def _judged_alike(path: Path, right: bool) -> None:
+    """``analyze`` and the live judges (the monitor's model, the bridge) PASS the log when
+    ``right``, else FAIL it on its heading, each with one reference start (the choices, never
+    a new start)."""
     result = analyze(read_log(path), profile_of(FAST), "euler")
     assert result.passed is right, result.report["onboard_vs_reference"]
     monitor, bridge, end_s = _live(profile_of(FAST), "euler", path)
     assert (monitor.health(end_s)["state"] == "POSE WRONG") is not right, monitor.health(end_s)
     for tracker in (monitor.tracker, bridge.tracker):
         assert (tracker.vs_reference.max_dheading_rad > HEADING_LSB_RAD) is not right
+        assert (tracker.wrongs.count > 0) is not right
         assert tracker.max_beyond_allowance_m <= POSITION_LSB_M
-        assert tracker.reference_starts == 1  # one start: the choices, no new start
+        assert tracker.reference_starts == 1
