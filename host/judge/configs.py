@@ -36,11 +36,9 @@ from odocan.host.judge.liveconfig import INTEGRATORS, PARAMS, ConfigFollower
 from odocan.host.judge.profilepage import RunningProfile, profile_mismatch, running_profile
 from odocan.host.judge.reboots import Life
 from odocan.host.judge.reference import PROFILE_SPEED, SpeedBound
-from odocan.host.judge.setposes import optional_rows, reboot_positions
-from odocan.host.judge.stagedacks import acks_by_life
+from odocan.host.judge.setposes import followed_rows
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
-from odocan.host.protocol.e2e import check_frames
 from odocan.sim.robot import MM_PER_M, RobotProfile
 
 APPLY_PARAM = 15  # ODOM_CONFIG PARAM / ODOM_ACK REQUEST_FIELD of APPLY
@@ -90,12 +88,8 @@ def config_cuts(frames: FrameArrays, decoder: BulkDecoder, counter_bits: int) ->
         return []
     if not ((raw["REQUEST_ID"] == config_id) & (raw["REQUEST_FIELD"] == APPLY_PARAM)).any():
         return []
-    _, accepted = check_frames(frames, decoder.db)
-    encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    reboots = reboot_positions(frames, decoder)
-    rows = {name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS}
-    rows["ODOM_ACK"] = acks_by_life(frames, decoder, reboots)  # E2E afresh in each life
-    return cuts_of(rows, encoders[accepted[encoders]], decoder, counter_bits, reboots)
+    rows, encoders, reboots = followed_rows(frames, decoder, COMMANDS)
+    return cuts_of(rows, encoders, decoder, counter_bits, reboots)
 
 
 COMMANDS = ("ODOM_CONFIG", "ODOM_AUTH", "ODOM_ACK")  # the accepted rows ``cuts_of`` follows

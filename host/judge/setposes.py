@@ -77,12 +77,23 @@ def set_pose_cuts(frames: FrameArrays, decoder: BulkDecoder) -> list[SetPoseCut]
         return []
     if not ((raw["REQUEST_ID"] == set_pose_id) & (raw["REQUEST_FIELD"] == APPLY_FIELD)).any():
         return []
+    rows, encoders, reboots = followed_rows(frames, decoder, COMMANDS)
+    return cuts_of(rows, encoders, decoder, reboots)
+
+
+def followed_rows(frames: FrameArrays, decoder: BulkDecoder, names: Sequence[str]
+                  ) -> tuple[dict[str, dict[str, np.ndarray]], npt.NDArray[np.intp], list[int]]:
+    """What a command follower's ``cuts_of`` reads of a whole log (here and ``configs``): the
+    accepted rows of the messages ``names`` (``optional_rows``; ODOM_ACK's E2E checked afresh in
+    each firmware life, ``stagedacks``), the log positions of the accepted encoder frames, and
+    the reboots (``reboot_positions``)."""
     _, accepted = check_frames(frames, decoder.db)
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
     reboots = reboot_positions(frames, decoder)
-    rows = {name: optional_rows(frames, accepted, decoder, name) for name in COMMANDS}
-    rows["ODOM_ACK"] = acks_by_life(frames, decoder, reboots)  # E2E afresh in each life
-    return cuts_of(rows, encoders[accepted[encoders]], decoder, reboots)
+    rows = {name: optional_rows(frames, accepted, decoder, name)
+            for name in names if name != "ODOM_ACK"}
+    rows["ODOM_ACK"] = acks_by_life(frames, decoder, reboots)
+    return rows, encoders[accepted[encoders]], reboots
 
 
 def reboot_positions(frames: FrameArrays, decoder: BulkDecoder) -> list[int]:
