@@ -140,7 +140,6 @@ from odocan.host.judge.reference_path import (
     build_reference,
     firmware_steps,
     restart_detail,
-    wrap_pi,
 )
 from odocan.host.judge.reportfacts import covered_s, frame_counts, realtime, robot_dict
 from odocan.host.judge.resent import worst_sent
@@ -158,6 +157,7 @@ from odocan.host.judge.samples import (
     pose_halves,
     require_messages,
     truth_samples,
+    wrap_pi,
 )
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.stalls import after_stalls

@@ -14,7 +14,7 @@ from odocan.firmware.clock import LOST_TIME_PERIODS
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.ctrlrestart import ctrl_restarts
 from odocan.host.judge.reference import Geometry, wrap_delta
-from odocan.host.judge.reference_path import Reference, wrap_pi
+from odocan.host.judge.reference_path import Reference
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     WIRE_COUNTER_BITS,
@@ -24,6 +24,7 @@ from odocan.host.judge.samples import (
     Poses,
     contract_cycle_s,
     match_encoder,
+    wrap_pi,
 )
 from odocan.host.judge.turns import unwrapped_errors
 from odocan.host.protocol.decode import BulkDecoder, DecodeError

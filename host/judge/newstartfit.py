@@ -30,7 +30,13 @@ import math
 
 import numpy as np
 
-from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M, FloatArray, IntArray
+from odocan.host.judge.samples import (
+    HEADING_LSB_RAD,
+    POSITION_LSB_M,
+    FloatArray,
+    IntArray,
+    wrap_pi,
+)
 
 
 def refit_new_starts(
@@ -65,7 +71,7 @@ def _heading_bounds(errors_rad: FloatArray) -> tuple[float, float] | None:
     """The rotations (rad, lo .. hi) that keep every sample's heading error (``errors_rad``,
     on-board minus reference, wrapped about the first) within half a heading LSB; None when
     there is none (the samples disagree)."""
-    wrapped = _wrap(errors_rad - errors_rad[0]) + _wrap(errors_rad[:1])[0]
+    wrapped = wrap_pi(errors_rad - errors_rad[0]) + wrap_pi(errors_rad[:1])[0]
     lo = float(np.max(wrapped)) - 0.5 * HEADING_LSB_RAD
     hi = float(np.min(wrapped)) + 0.5 * HEADING_LSB_RAD
     return (lo, hi) if lo <= hi else None
@@ -96,8 +102,3 @@ def _centred(values: FloatArray, segment: IntArray) -> FloatArray:
     counts = np.bincount(index)
     centred: FloatArray = values - (sums / counts)[index]
     return centred
-
-
-def _wrap(angle: FloatArray) -> FloatArray:
-    wrapped: FloatArray = math.pi - (math.pi - angle) % (2 * math.pi)
-    return wrapped

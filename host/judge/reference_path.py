@@ -38,6 +38,7 @@ from odocan.host.judge.samples import (
     FloatArray,
     IntArray,
     Poses,
+    wrap_pi,
 )
 from odocan.host.judge.step_periods import pair_bound_periods, step_bound_periods
 from odocan.host.judge.unseenrestart import heading_offsets, restarted_path, unseen_restarts
@@ -459,10 +460,5 @@ def _overlap_mid(offsets: FloatArray, lsb: float, *, base: bool = False) -> floa
     hi = float(np.min(offsets)) + 0.5 * lsb
     return min(max(0.5 * (lo + hi), first - 0.5 * lsb), first + 0.5 * lsb)
 
-
-def wrap_pi(angle: FloatArray) -> FloatArray:
-    """Wrap to (-pi, pi], the one convention (``odocan.sim.truth.wrap_angle`` for arrays)."""
-    wrapped: FloatArray = math.pi - (math.pi - angle) % (2 * math.pi)
-    return wrapped
 
 

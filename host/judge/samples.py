@@ -394,3 +394,9 @@ def truth_samples(
 def empty_poses() -> Poses:
     empty_f, empty_i = np.zeros(0), np.zeros(0, dtype=np.int64)
     return Poses(empty_i, empty_f, empty_f, empty_f, empty_i)
+
+
+def wrap_pi(angle: FloatArray) -> FloatArray:
+    """Wrap to (-pi, pi], the one convention (``odocan.sim.truth.wrap_angle`` for arrays)."""
+    wrapped: FloatArray = math.pi - (math.pi - angle) % (2 * math.pi)
+    return wrapped

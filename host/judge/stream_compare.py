@@ -23,8 +23,7 @@ from odocan.host.judge.compare import (
     origin_dict,
     rebase_truth,
 )
-from odocan.host.judge.reference_path import wrap_pi
-from odocan.host.judge.samples import HEADING_LSB_RAD, FloatArray
+from odocan.host.judge.samples import HEADING_LSB_RAD, FloatArray, wrap_pi
 from odocan.host.judge.stream_life import TruthChunk
 from odocan.host.judge.stream_place import PlacedChunk
 

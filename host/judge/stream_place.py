@@ -23,7 +23,6 @@ from odocan.host.judge.compare import error_summary
 from odocan.host.judge.reference_path import (
     _overlap_mid,
     placed_start,
-    wrap_pi,
 )
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -31,6 +30,7 @@ from odocan.host.judge.samples import (
     START_FIT_SAMPLES,
     FloatArray,
     IntArray,
+    wrap_pi,
 )
 from odocan.host.judge.stream_fit import BlockDot, SegmentSums
 from odocan.host.judge.turns import unwrapped_errors

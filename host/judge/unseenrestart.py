@@ -42,7 +42,7 @@ import numpy as np
 
 from odocan.host.judge.evidenceless import evidenceless
 from odocan.host.judge.gapseen import Seen
-from odocan.host.judge.samples import Encoders, FloatArray, IntArray
+from odocan.host.judge.samples import Encoders, FloatArray, IntArray, wrap_pi
 
 if TYPE_CHECKING:
     from odocan.host.judge.stream_life import LifeInfo
@@ -104,7 +104,7 @@ def heading_offsets(unseen: list[int], rel_h: FloatArray, heading_rad: FloatArra
     mids, firsts = [], []
     for a, b in itertools.pairwise(cuts):
         inside = (at >= a) & (at < b)
-        offsets = _wrap(heading_rad[inside] - rel_h[at[inside]])
+        offsets = wrap_pi(heading_rad[inside] - rel_h[at[inside]])
         mids.append(_middle(offsets) if len(offsets) else math.nan)
         first = np.flatnonzero(inside)[:1]  # the life's first sample's unwrapped offset
         firsts.append(float(unwrapped_rad[first[0]] - rel_h[at[first[0]]]) if len(first) else 0.0)
@@ -113,7 +113,7 @@ def heading_offsets(unseen: list[int], rel_h: FloatArray, heading_rad: FloatArra
     known_first = firsts[0]
     for k, mid, first_rad in zip(unseen, mids[1:], firsts[1:], strict=True):
         if not math.isnan(mid):
-            turn = float(_wrap(np.array([mid - known]))[0])
+            turn = float(wrap_pi(np.array([mid - known]))[0])
             add[k:] += turn + _turns_across(first_rad - known_first, turn)
             known, known_first = mid, first_rad
     return add
@@ -147,13 +147,8 @@ def restarted_path(unseen: list[int], rel_x: FloatArray, rel_y: FloatArray, rel_
 def _middle(offsets: FloatArray) -> float:
     """The middle of the overlap of [o - lsb/2, o + lsb/2] over ``offsets`` (unwrapped about
     the first); the middle of the extremes when they do not overlap (a wrong firmware)."""
-    around = offsets[0] + _wrap(offsets - offsets[0])
+    around = offsets[0] + wrap_pi(offsets - offsets[0])
     return 0.5 * (float(np.max(around)) + float(np.min(around)))
-
-
-def _wrap(angle: FloatArray) -> FloatArray:
-    wrapped: FloatArray = math.pi - (math.pi - angle) % (2 * math.pi)
-    return wrapped
 
 
 def restart_detail(by_uptime: bool, unseen: bool = False, *, ambiguous: bool = False) -> str:

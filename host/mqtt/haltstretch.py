@@ -42,7 +42,7 @@ from typing import Any
 from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.host.judge.livepose import Sample
 from odocan.host.judge.livewindow import window_counts
-from odocan.host.judge.reference import ReferenceOdometry
+from odocan.host.judge.reference import ReferenceOdometry, wrap_delta
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.judge.tracking import PoseTracker
 from odocan.sim.board import TICK_S
@@ -206,8 +206,8 @@ class HaltStretches:
                 break
             prev = ref._prev
             if row_seq != stretch.seq + 1 or counter != (stretch.counter + 1) & COUNTER_MASK \
-                    or prev is None or abs(_wrap(left - prev[0], bits)) > bound_left \
-                    or abs(_wrap(right - prev[1], bits)) > bound_right:
+                    or prev is None or abs(wrap_delta(left - prev[0], bits)) > bound_left \
+                    or abs(wrap_delta(right - prev[1], bits)) > bound_right:
                 return False
             ref.step_counts(left, right)
             stretch.seq, stretch.counter, stretch.steps = row_seq, counter, stretch.steps + 1
@@ -267,8 +267,3 @@ def _frames_from(tracker: PoseTracker, first: int) -> list[Frame]:
     return [(seq, counter, t_s, left, right)
             for seq, counter, left, right, _, _, t_s in window_counts(window, first)]
 
-
-def _wrap(delta: int, bits: int) -> int:
-    """``delta`` as a signed ``bits``-bit difference (the counters wrap)."""
-    half = 1 << (bits - 1)
-    return ((delta + half) & (2 * half - 1)) - half
