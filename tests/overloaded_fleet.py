@@ -19,11 +19,35 @@ from odocan.host.mqtt import fleetrun
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim import fleet as sim_fleet
 from odocan.sim import robot
+from odocan.sim.board import TICK_S
 from odocan.sim.cboard import load_library
 from odocan.sim.fleet import Batch, Fleet, FleetConfig, frame_fields
 from odocan.sim.realtime import DeadlineStats
 from tests.independent_checker import Robot, Verdict, check
 from tests.requires import require_executables
+
+
+class LateTicksClock:
+    """A fake ``RealTimeClock`` for ``run_realtime``, which reads it twice a tick: before its
+    sleep (answered far ahead: no sleep) and for the tick's lateness, ``late()`` whole periods
+    (the loop skips that many releases; a subclass says how many, this one none)."""
+
+    def __init__(self) -> None:
+        self.reads = 0
+        self.k = 0  # the release the loop is at
+
+    def now_s(self) -> float:
+        self.reads += 1
+        if self.reads % 2:
+            return 1e9
+        late = self.late()
+        now_s = (self.k + late) * TICK_S + 0.0003
+        self.k += late + 1
+        return now_s
+
+    def late(self) -> int:
+        """Whole periods the tick at release ``k`` runs late."""
+        return 0
 
 
 @dataclass

@@ -30,7 +30,13 @@ import pytest
 from odocan.firmware import frames as fw_frames
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.sim.board import TICK_S
-from tests.overloaded_fleet import FIRMWARES, checked_before, ready, run_overloaded
+from tests.overloaded_fleet import (
+    FIRMWARES,
+    LateTicksClock,
+    checked_before,
+    ready,
+    run_overloaded,
+)
 
 SEED = 2
 ROBOTS = 3
@@ -40,24 +46,16 @@ LATE_RELEASES = (0, 29)  # then every tick 0-29 releases late (seeded): mostly h
 WRONG_FROM_SAMPLE = 100  # the wrong firmware: x 2 LSB off from its 100th ODOM_POSE_X (2 s)
 
 
-class StarvedClock:
-    """A fake ``RealTimeClock`` for ``run_realtime``, which reads it twice a tick: before its
-    sleep (answered far ahead: no sleep) and for the tick's lateness: none for the first
-    ``CALM_TICKS`` releases, then 9-29 whole periods (the loop skips that many releases)."""
+class StarvedClock(LateTicksClock):
+    """The loop on time for the first ``CALM_TICKS`` releases, then every tick 0-29 whole
+    periods late (seeded)."""
 
     def __init__(self) -> None:
-        self.reads = 0
-        self.k = 0
+        super().__init__()
         self.rng = random.Random(SEED)
 
-    def now_s(self) -> float:
-        self.reads += 1
-        if self.reads % 2:
-            return 1e9
-        late = self.rng.randint(*LATE_RELEASES) if self.k >= CALM_TICKS else 0
-        now_s = (self.k + late) * TICK_S + 0.0003
-        self.k += late + 1
-        return now_s
+    def late(self) -> int:
+        return self.rng.randint(*LATE_RELEASES) if self.k >= CALM_TICKS else 0
 
 
 def _starved_fleet(

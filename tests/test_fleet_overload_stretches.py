@@ -29,7 +29,13 @@ from odocan.firmware import frames as fw_frames
 from odocan.sim.board import TICK_S
 from odocan.sim.contract import DBC_PATH
 from tests.dbc_typed import load_can_dbc, numbers
-from tests.overloaded_fleet import FIRMWARES, checked_before, ready, run_overloaded
+from tests.overloaded_fleet import (
+    FIRMWARES,
+    LateTicksClock,
+    checked_before,
+    ready,
+    run_overloaded,
+)
 
 SEED = 5
 ROBOTS = 2
@@ -42,29 +48,19 @@ WRONG_FROM = PERIOD_TICKS + PERIOD_TICKS // 2  # ticks run after the calm: mid s
 WRONG_LSB = 3
 
 
-class HaltingClock:
-    """A fake ``RealTimeClock`` for ``run_realtime``, which reads it twice a tick: before its
-    sleep (answered far ahead: no sleep) and for the tick's lateness (module docstring)."""
+class HaltingClock(LateTicksClock):
+    """The loop on time for ``CALM_TICKS``, then a halt every ``PERIOD_TICKS`` ticks run and a
+    few late ticks short of one between (module docstring)."""
 
     latest: HaltingClock | None = None
 
     def __init__(self) -> None:
-        self.reads = 0
-        self.k = 0
+        super().__init__()
         self.ran = 0  # ticks run after the calm
         self.rng = random.Random(SEED)
         HaltingClock.latest = self
 
-    def now_s(self) -> float:
-        self.reads += 1
-        if self.reads % 2:
-            return 1e9
-        late = self._late()
-        now_s = (self.k + late) * TICK_S + 0.0003
-        self.k += late + 1
-        return now_s
-
-    def _late(self) -> int:
+    def late(self) -> int:
         if self.k < CALM_TICKS:
             return 0
         self.ran += 1

@@ -41,6 +41,7 @@ from odocan.sim.board import TICK_S
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.fleet import Batch, Fleet, FleetConfig, frame_fields
 from tests.independent_checker import HEADING_LSB_RAD, POSITION_LSB_M, Robot, _Odometry
+from tests.overloaded_fleet import LateTicksClock
 
 SEED = 2
 # tick k's run starts this many periods late, the rest on time: the firmware's FIFO keeps 3 of
@@ -51,24 +52,13 @@ DURATION_S = 3.0
 WRONG_FROM_SAMPLE = 100  # the wrong firmware: x 2 LSB off from its 100th ODOM_POSE_X (1 s)
 
 
-class EarlyLateClock:
-    """A fake ``RealTimeClock`` for ``run_realtime`` (read twice a tick: before its sleep,
-    answered far ahead, then for the tick's lateness): ``late_ticks`` late, else on time."""
+class EarlyLateClock(LateTicksClock):
+    """The loop ``late_ticks`` late (whole periods by release), else on time."""
 
     late_ticks: dict[int, int] = LATE_TICKS
 
-    def __init__(self) -> None:
-        self.reads = 0
-        self.k = 0
-
-    def now_s(self) -> float:
-        self.reads += 1
-        if self.reads % 2:
-            return 1e9
-        late = self.late_ticks.get(self.k, 0)
-        now_s = (self.k + late) * TICK_S + 0.0003
-        self.k += late + 1
-        return now_s
+    def late(self) -> int:
+        return self.late_ticks.get(self.k, 0)
 
 
 class Checker:
