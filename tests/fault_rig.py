@@ -129,6 +129,17 @@ class FaultRig:
         if not self.halted(k):
             self.board.run_tick()
 
+    def mute_sim(self, ticks: range) -> None:
+        """The motor controller silent in ``ticks`` (its tick not run: no frame, no counter
+        advance on the bus; the firmware runs on)."""
+        tick = self.sim.tick
+
+        def muted_tick(k: int) -> None:
+            if k not in ticks:
+                tick(k)
+
+        self.sim.tick = muted_tick  # type: ignore[method-assign]
+
     def run(self, duration_s: float) -> None:
         """``duration_s`` of simulated time."""
         for _ in range(round(duration_s / TICK_S)):
