@@ -354,16 +354,22 @@ class BoardMaker(Protocol):
     ) -> FirmwareBoard: ...
 
 
-def board_maker(kind: str, *, secoc: bool = False) -> BoardMaker:
+def board_maker(
+    kind: str, *, secoc: bool = False, params: RobotParams | None = None
+) -> BoardMaker:
     """The board class of firmware ``kind`` ("python" or "c"), the C library built and loaded
     now: call it before opening a bus or a log, so a refusal leaves nothing to close or to
-    truncate (``secoc``: a SecOC key will be provisioned: a C library of ABI 1 is refused)."""
+    truncate (``secoc``: a SecOC key will be provisioned: a C library of ABI 1 is refused;
+    ``params``: the robot it will run: a library older than ABI 3 is refused unless the robot's
+    speed bound is its built-in 4 m/s)."""
     if kind == "python":
         return FirmwareBoard
     if kind == "c":
         lib = load_library()
         if secoc:
             check_secoc_abi(lib)
+        if params is not None:
+            check_speed_abi(lib, params)
         return CFirmwareBoard
     raise ConfigurationError(f"unknown firmware {kind!r} (known: {', '.join(FIRMWARES)})")
 

@@ -2,12 +2,14 @@
 
 The board must refuse it, in one line naming the ABI and both speeds, for a robot that states
 another maximum wheel speed (kobuki: 0.7 m/s), and take it for a robot at the old bound (pmir).
+``--firmware auto`` (the CLI's default) then falls back to the Python firmware and says why.
 The library is a stub of ABI 1 (the SecOC test's), built with the system's C compiler.
 Skips with the reason when a C compiler is missing, and fails instead under CI=true.
 """
 
 from __future__ import annotations
 
+import re
 import subprocess
 from pathlib import Path
 
@@ -54,3 +56,18 @@ def test_an_old_library_is_taken_for_a_robot_at_the_old_bound(old_library: Path)
     pmir = firmware_params(load("pmir"), "exact")
     assert pmir.max_wheel_speed_mm_s == MAX_WHEEL_SPEED_DEFAULT_MM_S
     cboard.check_speed_abi(cboard.load_library(), pmir)  # no refusal
+
+
+@pytest.mark.parametrize("command", [
+    ["run", "--robot", "kobuki", "--duration", "1"],
+    ["fleet", "-n", "1", "--robot", "kobuki", "--duration", "1", "--max-miss-ratio", "1"],
+])
+def test_auto_falls_back_to_python_when_the_old_library_cannot_run_the_robot(
+    old_library: Path, command: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before: auto chose the library (it loads), then the board refused it: exit 2."""
+    assert main(command) == 0  # the fleet's miss ratio is not this test's: load
+    said = "".join(capsys.readouterr())  # run: the title; fleet: its start line (stderr)
+    assert re.search(r"(python firmware|firmware python) \(auto: the C firmware is "
+                     r"unavailable: the C firmware ", said)
+    assert "ABI version 1, bounded at 4000 mm/s" in said

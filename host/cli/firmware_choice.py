@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from odocan.firmware.config import RobotParams
 from odocan.sim.cboard import FIRMWARES, FirmwareBuildError, board_maker
 from odocan.sim.exceptions import ConfigurationError
 
@@ -47,14 +48,15 @@ class FirmwareChoice:
         return {"name": self.firmware, "auto": self.auto, "why": self.why}
 
 
-def resolve_firmware(asked: str, secoc: bool) -> FirmwareChoice:
+def resolve_firmware(asked: str, secoc: bool, params: RobotParams) -> FirmwareChoice:
     """``--firmware``: python or c as asked; ``auto``: c when its library builds and loads (and
-    takes a SecOC key when ``secoc``), else python with the reason the C firmware is
+    takes a SecOC key when ``secoc``, and runs ``params``' robot: a library older than ABI 3
+    only runs one bounded at 4 m/s), else python with the reason the C firmware is
     unavailable."""
     if asked != AUTO_FIRMWARE:
         return FirmwareChoice(asked)
     try:
-        board_maker("c", secoc=secoc)
+        board_maker("c", secoc=secoc, params=params)
     except (FirmwareBuildError, ConfigurationError) as exc:
         return FirmwareChoice("python", True, f"the C firmware is unavailable: {exc}")
     return FirmwareChoice("c", True, AUTO_TOOK_C)

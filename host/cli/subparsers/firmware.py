@@ -82,8 +82,8 @@ def _do_firmware(args: argparse.Namespace) -> int:
     key = None if args.secoc_key is None else _secoc_key(args.secoc_key)
     nvm = _nvm(args.nvm, key)
     # builds the C library (and checks its ABI takes a key) before the bus opens
-    choice = resolve_firmware(args.firmware, secoc=key is not None)
-    make_board = board_maker(choice.firmware, secoc=key is not None)
+    choice = resolve_firmware(args.firmware, key is not None, params)
+    make_board = board_maker(choice.firmware, secoc=key is not None, params=params)
     bus = open_bus(args)
     try:
         loop = PeriodicLoop()

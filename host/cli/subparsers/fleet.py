@@ -48,7 +48,7 @@ from odocan.host.stopped import stop_code, stopped_text
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.fleet import FleetConfig, robot_name
-from odocan.sim.rig import INTEGRATORS, TRANSPORTS
+from odocan.sim.rig import INTEGRATORS, TRANSPORTS, firmware_params
 from odocan.sim.scenarios import SCENARIOS
 
 if TYPE_CHECKING:
@@ -181,10 +181,12 @@ def _do_fleet(args: argparse.Namespace) -> int:
     broker = broker_url(args)
     if broker is not None and args.port is not None:
         raise ConfigurationError("--port is the embedded broker's: --broker names its own port")
-    choice = resolve_firmware(args.firmware, args.secoc_key is not None)
+    profile = robot.load(args.robot)
+    choice = resolve_firmware(args.firmware, args.secoc_key is not None,
+                              firmware_params(profile, args.integrator))
     fleet = FleetConfig(
         robots=args.count,
-        robot=robot.load(args.robot),
+        robot=profile,
         integrator=args.integrator,
         scenario=args.scenario,
         seed=args.seed,

@@ -76,7 +76,7 @@ from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultSpec
 from odocan.sim.faultspec import two_handles
 from odocan.sim.realtime import StopRequest, stop_on_signals
-from odocan.sim.rig import TRANSPORTS, LockstepRig, RigConfig
+from odocan.sim.rig import TRANSPORTS, LockstepRig, RigConfig, firmware_params
 from odocan.sim.scenarios import SCENARIOS
 
 PROGRESS_EVERY_TICKS = 100  # one simulated second
@@ -160,7 +160,8 @@ def _do_run(args: argparse.Namespace) -> int:
         from odocan.host.protocol.secoc import load_secoc_key
 
         secoc_key = load_secoc_key(args.secoc_key)
-    choice = resolve_firmware(args.firmware, secoc=secoc_key is not None)
+    choice = resolve_firmware(args.firmware, secoc_key is not None,
+                              firmware_params(profile, args.integrator))
     config = RigConfig(
         robot=profile,
         integrator=args.integrator,
@@ -186,7 +187,8 @@ def _do_run(args: argparse.Namespace) -> int:
     check_distinct([("--log", args.log), ("--report", args.report), ("--plot", args.plot),
                     ("--junit", args.junit), ("--mcap", args.mcap),
                     ("--latency-plot", args.latency_plot)])
-    board_maker(config.firmware, secoc=config.secoc_key is not None)  # refusals before any file
+    board_maker(config.firmware, secoc=config.secoc_key is not None,  # refusals before any file
+                params=firmware_params(config.robot, config.integrator))
     title = f"odocan run: {config.scenario} on {config.robot.name}, {config.integrator} integrator"
     if choice.auto or choice.firmware != "python":  # the Python one asked by name: unsaid
         title += f", {choice.words}"
