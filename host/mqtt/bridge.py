@@ -45,9 +45,10 @@ from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL, first_error
 from odocan.host.mqtt.expiry import Expired
 from odocan.host.mqtt.link import RobotLink, Verdict
+from odocan.host.mqtt.livecommands import PendingAck
 from odocan.host.mqtt.pacing import ACK_TIMEOUT_S, MAX_QUEUED, WINDOW_FRAMES, CommandPacer
 from odocan.host.mqtt.stallwatch import StallWatch
-from odocan.host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
+from odocan.host.mqtt.telemetry import Publication, RobotTelemetry
 from odocan.host.protocol.commands import (
     Command,
     CommandEncoder,
