@@ -1,6 +1,7 @@
-"""ODOM_CONFIG followed by the live judge (``odocan monitor``; the bridge follows its own commands
-in ``host.mqtt.telemetry``): an applied config is the firmware's new robot, so it is the
-reference's too.
+"""ODOM_CONFIG followed by the live judges (``odocan monitor`` and the bridge's
+``host.mqtt.telemetry``, both through ``follow_config_ack``): an applied config is the
+firmware's new robot, so it is the reference's too, whoever sent it (the bridge's own config
+command, the ``odocan`` CLI, a user's script on the same bus).
 
 The firmware (firmware/commands.py) stages each parameter frame it accepted (ACK), and APPLY
 validates its current parameters overwritten by the staged ones, all or nothing (ACK, or NACK
@@ -10,16 +11,22 @@ tracker's geometry, integrator and counter width; the reference restarts at the 
 pose). A NACKed APPLY changes nothing: the firmware keeps its parameters. Found by the trial: the
 monitor restarted its reference at every APPLY heard but kept the old parameters, so after an
 accepted config (kobuki, wheelbase 0.23 -> 0.25 m) it said POSE WRONG, 938 mm, exit 1, while the
-firmware was right with its new wheelbase.
+firmware was right with its new wheelbase. The bridge took the parameters of its own config
+command at its APPLY's ACK: it kept the old robot when another tool configured the firmware
+(a correct firmware failed, one that ACKed but kept its wheelbase passed), and after a reboot
+between its pages and its APPLY it took the parameters the new firmware never staged.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from collections import deque
+from typing import TYPE_CHECKING, Any, Protocol
 
 from odocan.host.judge.reference import Geometry
 
 if TYPE_CHECKING:
+    from odocan.host.judge.livedistance import LiveDistance
+    from odocan.host.judge.livetwist import LiveTwist
     from odocan.host.judge.tracking import PoseTracker
 
 PARAMS = ("COUNTS_PER_REV", "WHEEL_RADIUS_LEFT", "WHEEL_RADIUS_RIGHT", "WHEELBASE", "COUNTER_BITS",
@@ -33,17 +40,19 @@ class ConfigFollower:
     def __init__(self) -> None:
         self.staged: dict[str, float] = {}  # PARAM: value (m, m/s, counts, raw enum), as ACKed
         self._sent: dict[int, tuple[str, float]] = {}  # by E2E COUNTER: PARAM, value heard
-        self._apply: int | None = None  # the APPLY frame's COUNTER
+        self._applies: set[int] = set()  # the COUNTERs of the APPLY frames not answered yet
 
     def forget(self) -> None:
         """A firmware reboot the judge saw: the firmware lost its staged parameters with its RAM
         (a bare APPLY after it applies its build's robot again)."""
-        self.staged, self._sent, self._apply = {}, {}, None
+        self.staged, self._sent, self._applies = {}, {}, set()
 
     def on_frame(self, counter: int, param: str, value: Any) -> None:
         """An ODOM_CONFIG frame heard (its E2E COUNTER, PARAM name, the value in DBC units)."""
+        self._sent.pop(counter, None)  # the latest frame of a COUNTER is the one its ACK answers
+        self._applies.discard(counter)
         if param == "APPLY":
-            self._apply = counter
+            self._applies.add(counter)  # several: two configs back to back, each APPLY its ACK
         elif param in PARAMS and value is not None:
             self._sent[counter] = (param, float(value))
 
@@ -55,11 +64,38 @@ class ConfigFollower:
             if acked:
                 self.staged[sent[0]] = sent[1]
             return None
-        if self._apply is None or self._apply != request_counter:
+        if request_counter not in self._applies:
             return None
-        self._apply = None
+        self._applies.discard(request_counter)
         staged, self.staged = self.staged, {}
         return staged if acked else None
+
+
+class Judges(Protocol):
+    """The live judges an applied config reconfigures (the monitor's, a bridge robot's)."""
+
+    tracker: PoseTracker
+    distance: LiveDistance
+    twist: LiveTwist
+    events: deque[dict[str, Any]]
+
+
+def follow_config_ack(judges: Judges, follower: ConfigFollower, request_counter: int,
+                      acked: bool, t_s: float) -> bool:
+    """ODOM_ACK of an ODOM_CONFIG frame (its REQUEST_COUNTER; ``acked``: RESULT 0) heard at
+    bus time ``t_s`` (s): an ACKed APPLY makes the staged set ``judges``' robot (reference,
+    DISTANCE and speed judges, from here as a new life) and a ``config`` event. Returns
+    whether a config was applied."""
+    config = follower.on_ack(request_counter, acked)
+    if config is None:
+        return False
+    detail = apply_config(judges.tracker, config)
+    geometry = judges.tracker.geometry
+    counter_bits = int(config.get("COUNTER_BITS", judges.distance.robot.counter_bits))
+    judges.distance.reconfigure(geometry, counter_bits)  # the width as configured (its CRC)
+    judges.twist.reconfigure(geometry, counter_bits)
+    judges.events.append({"t_s": t_s, "kind": "config", "detail": detail})
+    return True
 
 
 def apply_config(tracker: PoseTracker, staged: dict[str, float]) -> str:

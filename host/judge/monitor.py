@@ -54,7 +54,7 @@ from cantools.database.can import Database, Message
 
 from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
-from odocan.host.judge.liveconfig import ConfigFollower, apply_config
+from odocan.host.judge.liveconfig import ConfigFollower, follow_config_ack
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
@@ -228,12 +228,8 @@ class BusMonitor:
                 pose = apply_set_pose(self.tracker, *applied)
                 self.events.append(set_pose_event(self._bus_time_s, pose, applied[1]))
         elif int(s["REQUEST_ID"]) == self._config_id:
-            config = self.config.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
-            if config is not None:  # the firmware's new robot: the reference's too
-                detail = apply_config(self.tracker, config)
-                self.distance.reconfigure(self.tracker.geometry, self.tracker.counter_bits)
-                self.twist.reconfigure(self.tracker.geometry, self.tracker.counter_bits)
-                self.events.append({"t_s": self._bus_time_s, "kind": "config", "detail": detail})
+            follow_config_ack(self, self.config, int(s["REQUEST_COUNTER"]),  # the firmware's
+                              int(s["RESULT"]) == 0, self._bus_time_s)  # robot: the judges' too
         reason = str(shown.get("REASON", ""))
         if not reason.startswith("AUTH_"):
             return

@@ -1,8 +1,10 @@
 """The commands ``RobotTelemetry`` (``host.mqtt.telemetry``) follows on its robot's bus: the
-ODOM_SET_POSE it hears (another tool's, or the bridge's own through ``command_sent``), staged
-and applied as the firmware ACKs them (``host.judge.livesetpose``), the ODOM_ACK answering a
-command the bridge sent (its ``cmd/result``), and a config command's parameters taken when the
-firmware ACKs its APPLY. Moved out of ``host.mqtt.telemetry`` (a module near 500 lines).
+ODOM_SET_POSE and ODOM_CONFIG frames it hears (another tool's, or the bridge's own through
+``command_sent``), staged and applied as the firmware ACKs them (``host.judge.livesetpose``;
+``host.judge.liveconfig``, the monitor's follower: what the firmware ACKs, forgotten at a
+reboot, is the judges' robot, not what a ``cmd/config`` asked), and the ODOM_ACK answering a
+command the bridge sent (its ``cmd/result``). Moved out of ``host.mqtt.telemetry`` (a module
+near 500 lines).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
-from odocan.host.judge.liveconfig import apply_config
+from odocan.host.judge.liveconfig import ConfigFollower, follow_config_ack
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livesetpose_choice import ApplyChoice
@@ -38,7 +40,6 @@ class PendingAck:
     cmd_id: Any
     command: str
     final: bool  # the APPLY / GO frame: its ACK completes the command
-    config: dict[str, float] | None = None  # a config's APPLY: its parameters (DBC PARAMs)
 
 
 class CommandFollowing:
@@ -61,12 +62,24 @@ class CommandFollowing:
         self._set_pose_id = set_pose.frame_id if set_pose is not None else -1
         self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {} \
             if set_pose is not None else {}
+        self.config = ConfigFollower()  # ODOM_CONFIG staged and applied (its ACKs)
+        config = next((m for m in self.db.messages if m.name == "ODOM_CONFIG"), None)
+        self._config_id = config.frame_id if config is not None else -1
+        self._config_params: Any = config.get_signal_by_name("PARAM").choices or {} \
+            if config is not None else {}
 
     def _on_set_pose(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         """An ODOM_SET_POSE frame on the bus (another tool's; the bridge's own go through
         ``command_sent``): staged and applied as the firmware ACKs it."""
         field = str(named_value(self._set_pose_fields, s["FIELD"]))
         self.set_pose.on_frame(int(s["COUNTER"]), field, s.get(field), self.tracker.enc_seq)
+        return []
+
+    def _on_config(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        """An ODOM_CONFIG frame on the bus (another tool's, or the bridge's own through
+        ``command_sent``): staged and applied as the firmware ACKs it."""
+        param = str(named_value(self._config_params, s["PARAM"]))
+        self.config.on_frame(int(s["COUNTER"]), param, s.get(param))
         return []
 
     def _on_auth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
@@ -77,7 +90,7 @@ class CommandFollowing:
     def command_sent(self, can_id: int, data: bytes) -> None:
         """A command frame the bridge itself sent (not heard back from its bus)."""
         route = self._routes.get(can_id)
-        if route is not None and route.name in ("ODOM_SET_POSE", "ODOM_AUTH"):
+        if route is not None and route.name in ("ODOM_SET_POSE", "ODOM_CONFIG", "ODOM_AUTH"):
             with contextlib.suppress(DecodeError, KeyError, ValueError):
                 route.handler(self, route.decode(data), 0.0)
 
@@ -91,8 +104,12 @@ class CommandFollowing:
             self._apply_choice = ApplyChoice.after_ack(self.tracker, *applied, event)
 
     def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        if int(s["REQUEST_ID"]) == self._set_pose_id:
+        request_id = int(s["REQUEST_ID"])
+        if request_id == self._set_pose_id:
             self._followed_set_pose(s, t_s)
+        elif request_id == self._config_id and follow_config_ack(
+                self, self.config, int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0, t_s):
+            self.profile.forget()  # the firmware's next PROFILE page is judged against it
         return self._answered(s, t_s)
 
     def _answered(self, s: dict[str, Any], t_s: float) -> list[Publication]:
@@ -104,11 +121,8 @@ class CommandFollowing:
         nack = int(s["RESULT"]) != 0
         if not nack and not pending.final:
             return []
-        if nack:  # forget the rest of this command: one answer per command (a config's
+        if nack:  # forget the rest of this command: one answer per command
             self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
-        elif pending.config is not None:  # parameters too: the firmware keeps its own)
-            self._apply_config(pending.config)  # (a set-pose: ``_followed_set_pose``)
-            self.tracker.restart_reference()
         reason = choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
         payload = {"id": pending.cmd_id, "command": pending.command,
                    "result": "nacked" if nack else "acked", "reason": reason, "t_s": t_s}
@@ -117,14 +131,3 @@ class CommandFollowing:
     def expect_ack(self, can_id: int, counter: int, ack: PendingAck) -> None:
         """A command frame was sent: its ODOM_ACK will answer the command."""
         self.pending[(can_id, counter)] = ack
-
-    def _apply_config(self, params: dict[str, float]) -> None:
-        """A config command's parameters (its APPLY's ``PendingAck.config``), the firmware's
-        now its APPLY is ACKed: each config when its own ACK says so, never on a NACK (the
-        firmware keeps its own: a refused robot must not become the reference's)."""
-        apply_config(self.tracker, params)  # those it lacks kept (max wheel speed)
-        geometry = self.tracker.geometry
-        counter_bits = int(params.get("COUNTER_BITS", self.tracker.counter_bits))
-        self.distance.reconfigure(geometry, counter_bits)
-        self.twist.reconfigure(geometry, counter_bits)
-        self.profile.forget()  # the firmware's next page is judged against them

@@ -229,6 +229,7 @@ class RobotTelemetry(CommandFollowing):
         self.distance.new_life()
         self.twist.new_life()
         self.set_pose.forget()  # the firmware's staging was in its RAM
+        self.config.forget()
 
     def _unknown_key(self, can_id: int) -> str:
         """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
@@ -362,6 +363,7 @@ class RobotTelemetry(CommandFollowing):
         "ODOM_STATUS": _on_status,
         "ODOM_ACK": CommandFollowing._on_ack,
         "ODOM_SET_POSE": CommandFollowing._on_set_pose,
+        "ODOM_CONFIG": CommandFollowing._on_config,
         "ODOM_AUTH": CommandFollowing._on_auth,
     }
 

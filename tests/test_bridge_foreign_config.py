@@ -1,0 +1,222 @@
+"""The bridge follows the configs the firmware applies, not the ones it sent (issue #11).
+
+Two holes the monitor no longer had (``host.judge.liveconfig``) but the bridge did, for it took
+a config's parameters from its own ``cmd/config`` when the firmware ACKed the APPLY:
+
+* **another tool's config** (the ``odocan`` CLI, a user's script) on the bus while a bridge
+  judges: the bridge kept the old geometry, so it failed a correct firmware reconfigured to a
+  wheelbase of 0.25 m, and passed one that ACKed the config but kept its 0.23 m;
+* **its own config interrupted by a reboot**: the pages ACKed, the MCU reset (RAM lost: the
+  staged pages with it), then the APPLY, which the new firmware ACKs with nothing staged: it
+  runs its build's robot. The bridge took the parameters it had sent.
+
+A real Python firmware (``OdomEcu`` on kobuki, ``tests.bridge_pair``) answers. Independent of
+the judges: ODOM_ACK, ODOM_STATUS PROFILE and ODOM_POSE_X/Y decoded with cantools, and a float64
+dead reckoning written here (``tests.test_bridge_config_nack``) says where the pose must be.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any, cast
+
+import can
+import pytest
+
+from odocan.firmware import frames as fr
+from odocan.firmware.ecu import OdomEcu
+from odocan.firmware.odometry import Odometry
+from odocan.host.mqtt.bridge import _Robot
+from odocan.host.protocol.commands import CommandEncoder
+from odocan.sim.contract import database
+from odocan.sim.rig import firmware_params
+from tests.bridge_pair import KOBUKI, PERIOD_S, bridged_robot
+from tests.test_bridge_config_nack import WIDER, _ConfigBoard, _dead_reckoned_with
+
+DB = database()
+APPLY = 15  # ODOM_CONFIG PARAM / ODOM_ACK REQUEST_FIELD of APPLY (the DBC's VAL_)
+PROFILE_PAGE = 6  # ODOM_STATUS PAGE of PROFILE (the DBC's VAL_)
+PERIODS = 400
+
+
+def _decoded(can_id: int, data: bytes) -> dict[str, Any]:
+    return cast(dict[str, Any], DB.decode_message(can_id, data, decode_choices=False))
+
+
+class _Watched(_ConfigBoard):
+    """``_ConfigBoard`` keeping, with cantools, every ODOM_ACK (its period), every PROFILE_CRC
+    (its period) and the latest on-board pose the firmware sent."""
+
+    def __init__(self, bridge: _Robot, listener: Any) -> None:
+        super().__init__(bridge, listener)
+        self.acks: list[tuple[int, dict[str, Any]]] = []
+        self.profile_crcs: list[tuple[int, int]] = []
+        self.poses: dict[int, dict[str, float]] = {}  # by encoder period: X, Y (m)
+
+    def firmware_frame(self, can_id: int, data: bytes) -> None:
+        k = round(self.t_s / PERIOD_S)
+        if can_id == fr.ODOM_ACK_ID:
+            self.acks.append((k, _decoded(can_id, data)))
+        elif can_id == fr.ODOM_STATUS_ID and _decoded(can_id, data)["PAGE"] == PROFILE_PAGE:
+            self.profile_crcs.append((k, int(_decoded(can_id, data)["PROFILE_CRC"])))
+        elif can_id in (fr.ODOM_POSE_X_ID, fr.ODOM_POSE_Y_ID):
+            s = _decoded(can_id, data)
+            named = k - ((k - int(s["ENC_COUNTER"])) & 0xF)  # the period of the frame it names
+            self.poses.setdefault(named, {}).update(
+                {n: float(v) for n, v in s.items() if n in ("X", "Y")})
+        super().firmware_frame(can_id, data)
+
+    def other_tool(self, frames: list[tuple[int, bytes]]) -> None:
+        """Frames another tool puts on the bus: the firmware and the bridge hear them."""
+        for can_id, data in frames:
+            self.to_bridge(can_id, data)
+            self.ecu.isr_can_rx(can_id, data)
+
+
+def _config_frames(config: dict[str, object]) -> list[tuple[int, bytes]]:
+    """``config`` as the ``odocan`` CLI puts it on the bus (its own E2E counters)."""
+    command = CommandEncoder().encode("config", json.dumps(config).encode())
+    return [(f.can_id, f.data) for f in command.frames]
+
+
+def _other_tool_drive(channel: str) -> tuple[_Robot, _Watched]:
+    """100 periods, WIDER (wheelbase 0.25 m) sent by another tool, 299 periods more."""
+    with bridged_robot(channel) as (bridge, listener):
+        board = _Watched(bridge, listener)
+        for _ in range(100):
+            board.period()
+        board.other_tool(_config_frames(WIDER))
+        for _ in range(PERIODS - 100):
+            board.period()
+    return bridge, board
+
+
+def _events(bridge: _Robot, kind: str) -> list[str]:
+    """The ``kind`` events the bridge's retained ``status`` carries."""
+    _, payload = bridge.telemetry.status()
+    return [e["detail"] for e in payload["events"] if e["kind"] == kind]
+
+
+def _assert_pose(board: _Watched, primed: int, applied: int | None) -> None:
+    """The firmware's last whole pose (cantools) is the float64 dead reckoning from its
+    power-up primed on the encoder frame of period ``primed``: 0.23 m a step, 0.25 m from the
+    period ``applied`` on (None: never)."""
+    named = max(k for k, xy in board.poses.items() if len(xy) == 2)
+    wheelbases_m = [0.25 if applied is not None and k >= applied else KOBUKI.wheelbase_m
+                    for k in range(primed + 1, named + 1)]
+    x_m, y_m = _dead_reckoned_with(wheelbases_m)
+    pose = board.poses[named]
+    assert named >= PERIODS - 3
+    assert abs(pose["X"] - x_m) < 1e-3, (pose, x_m, y_m)
+    assert abs(pose["Y"] - y_m) < 1e-3, (pose, x_m, y_m)
+
+
+def test_the_bridge_follows_a_config_another_tool_applies() -> None:
+    bridge, board = _other_tool_drive("test-bridge-foreign-config")
+    config_acks = [s for _, s in board.acks if s["REQUEST_ID"] == fr.ODOM_CONFIG_ID]
+    assert [s["RESULT"] for s in config_acks] == [0] * 7  # six PARAMs and the APPLY ACKed
+    _assert_pose(board, 0, board.apply_periods[0])
+    telemetry = bridge.telemetry  # the firmware is right: PASS, the config an event
+    assert telemetry.tracker.geometry.wheelbase_m == 0.25
+    assert telemetry.tracker.wrongs.as_dict()["episodes"] == 0, telemetry.tracker.wrongs.as_dict()
+    assert _events(bridge, "config") == [
+        "config applied: 2578 counts/rev, wheel radii 0.035/0.035 m, wheelbase 0.25 m, exact: "
+        "reference restarted"]
+    assert telemetry.profile.section is not None
+    assert telemetry.profile.section["verdict"] == "OK", telemetry.profile.section
+    assert board.results == []  # not the bridge's command: no cmd/result
+
+
+def test_a_firmware_that_acks_another_tool_s_config_but_keeps_its_wheelbase_fails(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(Odometry, "reconfigure", lambda self, consts: None)
+    bridge, board = _other_tool_drive("test-bridge-foreign-config-kept")
+    assert [s["RESULT"] for _, s in board.acks] == [0] * 7  # cantools: all ACKed ...
+    _assert_pose(board, 0, None)  # ... yet 0.23 m all along
+    assert bridge.telemetry.tracker.wrongs.as_dict()["episodes"] >= 1  # FAIL
+
+
+# --- the bridge's own config, the MCU reset between its pages and its APPLY ---
+REBOOT_AT, APPLY_AT = 120, 150  # periods
+
+
+class _RebootBoard(_Watched):
+    """The bridge's APPLY held back (a slow bus) until ``APPLY_AT``; the MCU reset at
+    ``REBOOT_AT`` (a new ``OdomEcu``: RAM lost). ``kept``: a wrong firmware that keeps its
+    staged config across the reset."""
+
+    def __init__(self, bridge: _Robot, listener: Any, kept: bool) -> None:
+        super().__init__(bridge, listener)
+        self.kept = kept
+        self.held: list[can.Message] = []
+
+    def command_frame(self, msg: can.Message) -> None:
+        if msg.arbitration_id == fr.ODOM_CONFIG_ID and \
+                _decoded(msg.arbitration_id, bytes(msg.data))["PARAM"] == APPLY:
+            self.held.append(msg)
+            return
+        super().command_frame(msg)
+
+    def period(self, *, late: bool = False) -> None:
+        k = round(self.t_s / PERIOD_S)
+        if k == REBOOT_AT:
+            staged = self.ecu.commands._staged_config
+            self.ecu = OdomEcu(self.hal, firmware_params(KOBUKI, "exact"))
+            if self.kept:
+                self.ecu.commands._staged_config = staged
+        if k == APPLY_AT:
+            for msg in self.held:
+                super().command_frame(msg)
+        super().period(late=late)
+
+
+def _rebooted_drive(channel: str, kept: bool) -> tuple[_Robot, _RebootBoard]:
+    """100 periods, the bridge's cmd/config WIDER (its APPLY held), the reset, 300 periods."""
+    with bridged_robot(channel) as (bridge, listener):
+        board = _RebootBoard(bridge, listener, kept)
+        for _ in range(100):
+            board.period()
+        answer = bridge.on_command("config", json.dumps(WIDER).encode())
+        assert answer[0][1]["result"] == "accepted", answer
+        for _ in range(PERIODS - 100):
+            board.period()
+    return bridge, board
+
+
+def _reset_checked(board: _RebootBoard) -> None:
+    """cantools: the six PARAMs ACKed before the reset, the APPLY alone after it, ACKed."""
+    acks = [(k, s["REQUEST_FIELD"], s["RESULT"]) for k, s in board.acks
+            if s["REQUEST_ID"] == fr.ODOM_CONFIG_ID]
+    assert [(k < REBOOT_AT, field, result) for k, field, result in acks] == [
+        *[(True, field, 0) for field in (0, 1, 2, 3, 4, 5)], (False, APPLY, 0)]
+    assert REBOOT_AT < board.apply_periods[0] <= APPLY_AT + 1
+
+
+def test_a_bridge_config_interrupted_by_a_reboot_leaves_the_build_s_robot() -> None:
+    bridge, board = _rebooted_drive("test-bridge-config-reboot", kept=False)
+    _reset_checked(board)
+    before = [crc for k, crc in board.profile_crcs if k < 100]
+    after = [crc for k, crc in board.profile_crcs if k > board.apply_periods[0]]
+    assert before
+    assert set(after) == {before[-1]}  # the build's robot, as at first
+    _assert_pose(board, REBOOT_AT, None)  # 0.23 m from its reset on
+    assert [(r["id"], r["result"]) for r in board.results] == [("c1", "acked")]
+    telemetry = bridge.telemetry  # the judge follows what the firmware runs: PASS
+    assert telemetry.reboots == 1
+    assert telemetry.tracker.geometry.wheelbase_m == KOBUKI.wheelbase_m
+    assert telemetry.tracker.wrongs.as_dict()["episodes"] == 0, telemetry.tracker.wrongs.as_dict()
+    assert telemetry.profile.section is not None
+    assert telemetry.profile.section["verdict"] == "OK", telemetry.profile.section
+
+
+def test_a_firmware_that_keeps_the_config_staged_before_its_reboot_fails() -> None:
+    bridge, board = _rebooted_drive("test-bridge-config-reboot-kept", kept=True)
+    _reset_checked(board)
+    applied = board.apply_periods[0]
+    before = [crc for k, crc in board.profile_crcs if k < 100]
+    after = [crc for k, crc in board.profile_crcs if k > applied]
+    assert after
+    assert before[-1] not in after  # cantools: it runs another robot ...
+    _assert_pose(board, REBOOT_AT, applied)  # ... the staged 0.25 m
+    assert bridge.telemetry.tracker.wrongs.as_dict()["episodes"] >= 1  # FAIL
