@@ -10,7 +10,12 @@ a config's parameters from its own ``cmd/config`` when the firmware ACKed the AP
   staged pages with it), then the APPLY, which the new firmware ACKs with nothing staged: it
   runs its build's robot. The bridge took the parameters it had sent.
 
-A real Python firmware (``OdomEcu`` on kobuki, ``tests.bridge_pair``) answers. Independent of
+* **a config lost with a reboot**: the firmware applied the bridge's config, then rebooted: it
+  comes up with its build's robot (the config was in its RAM), while the bridge and the monitor
+  judged its new life with the config's wheelbase.
+
+A real Python firmware (``OdomEcu`` on kobuki, ``tests.bridge_pair``) answers; a monitor
+(``BusMonitor``) hears the same bus, the bridge's own command frames too. Independent of
 the judges: ODOM_ACK, ODOM_STATUS PROFILE and ODOM_POSE_X/Y decoded with cantools, and a float64
 dead reckoning written here (``tests.test_bridge_config_nack``) says where the pose must be.
 """
@@ -26,6 +31,8 @@ import pytest
 from odocan.firmware import frames as fr
 from odocan.firmware.ecu import OdomEcu
 from odocan.firmware.odometry import Odometry
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.bridge import _Robot
 from odocan.host.protocol.commands import CommandEncoder
 from odocan.sim.contract import database
@@ -52,6 +59,7 @@ class _Watched(_ConfigBoard):
         self.acks: list[tuple[int, dict[str, Any]]] = []
         self.profile_crcs: list[tuple[int, int]] = []
         self.poses: dict[int, dict[str, float]] = {}  # by encoder period: X, Y (m)
+        self.monitor = BusMonitor(KOBUKI, "exact")
 
     def firmware_frame(self, can_id: int, data: bytes) -> None:
         k = round(self.t_s / PERIOD_S)
@@ -65,6 +73,18 @@ class _Watched(_ConfigBoard):
             self.poses.setdefault(named, {}).update(
                 {n: float(v) for n, v in s.items() if n in ("X", "Y")})
         super().firmware_frame(can_id, data)
+
+    def to_bridge(self, can_id: int, data: bytes) -> list[dict[str, Any]]:
+        self._to_monitor(can_id, data)
+        return super().to_bridge(can_id, data)
+
+    def command_frame(self, msg: can.Message) -> None:
+        self._to_monitor(msg.arbitration_id, bytes(msg.data))  # the bridge's own, on the wire
+        super().command_frame(msg)
+
+    def _to_monitor(self, can_id: int, data: bytes) -> None:
+        self.monitor.feed(can.Message(timestamp=self.t_s, arbitration_id=can_id,
+                                      is_extended_id=False, data=data), now_s=self.t_s)
 
     def other_tool(self, frames: list[tuple[int, bytes]]) -> None:
         """Frames another tool puts on the bus: the firmware and the bridge hear them."""
@@ -95,6 +115,12 @@ def _events(bridge: _Robot, kind: str) -> list[str]:
     """The ``kind`` events the bridge's retained ``status`` carries."""
     _, payload = bridge.telemetry.status()
     return [e["detail"] for e in payload["events"] if e["kind"] == kind]
+
+
+def _wrongs(bridge: _Robot, board: _Watched) -> tuple[int, int]:
+    """The POSE WRONG episodes of the bridge and of the monitor."""
+    return (bridge.telemetry.tracker.wrongs.as_dict()["episodes"],
+            board.monitor.tracker.wrongs.as_dict()["episodes"])
 
 
 def _assert_pose(board: _Watched, primed: int, applied: int | None) -> None:
@@ -220,3 +246,77 @@ def test_a_firmware_that_keeps_the_config_staged_before_its_reboot_fails() -> No
     assert before[-1] not in after  # cantools: it runs another robot ...
     _assert_pose(board, REBOOT_AT, applied)  # ... the staged 0.25 m
     assert bridge.telemetry.tracker.wrongs.as_dict()["episodes"] >= 1  # FAIL
+
+
+# --- the bridge's config applied, then the MCU reset: the config was in its RAM ---
+LOST_AT = 250  # period of the reset
+
+
+class _LostBoard(_Watched):
+    """The MCU reset at ``LOST_AT``; ``kept``: a wrong firmware that comes up with the robot
+    it was configured to (its parameters, PROFILE CRC and odometry constants kept)."""
+
+    def __init__(self, bridge: _Robot, listener: Any, kept: bool) -> None:
+        super().__init__(bridge, listener)
+        self.kept = kept
+
+    def period(self, *, late: bool = False) -> None:
+        if round(self.t_s / PERIOD_S) == LOST_AT:
+            old, self.ecu = self.ecu, OdomEcu(self.hal, firmware_params(KOBUKI, "exact"))
+            if self.kept:
+                self.ecu.params, self.ecu.profile_crc = old.params, old.profile_crc
+                self.ecu.odometry.reconfigure(old.odometry._consts)
+        super().period(late=late)
+
+
+def _lost_drive(channel: str, kept: bool) -> tuple[_Robot, _LostBoard]:
+    """100 periods, the bridge's cmd/config WIDER, the reset at ``LOST_AT``, to ``PERIODS``."""
+    with bridged_robot(channel) as (bridge, listener):
+        board = _LostBoard(bridge, listener, kept)
+        for _ in range(100):
+            board.period()
+        answer = bridge.on_command("config", json.dumps(WIDER).encode())
+        assert answer[0][1]["result"] == "accepted", answer
+        for _ in range(PERIODS - 100):
+            board.period()
+    return bridge, board
+
+
+def _crcs(board: _Watched) -> tuple[int, set[int], set[int]]:
+    """cantools: the PROFILE_CRC before the config, those between its APPLY and the reset,
+    those after the reset."""
+    applied = board.apply_periods[0]
+    return ([crc for k, crc in board.profile_crcs if k < 100][-1],
+            {crc for k, crc in board.profile_crcs if applied < k < LOST_AT},
+            {crc for k, crc in board.profile_crcs if k > LOST_AT})
+
+
+def test_a_config_is_lost_with_a_reboot_and_the_judges_say_so() -> None:
+    bridge, board = _lost_drive("test-bridge-config-lost", kept=False)
+    assert [(r["id"], r["result"]) for r in board.results] == [("c1", "acked")]
+    built, configured, rebooted = _crcs(board)
+    assert configured
+    assert built not in configured  # cantools: the config ran ...
+    assert rebooted == {built}  # ... and the build's robot after the reset
+    _assert_pose(board, LOST_AT, None)  # 0.23 m from its reset on
+    assert _wrongs(bridge, board) == (0, 0)  # PASS, both judges
+    lost = ("config lost with the reboot, the build's robot again: 2578 counts/rev, wheel radii "
+            "0.035/0.035 m, wheelbase 0.23 m, exact: reference restarted")
+    assert _events(bridge, "config")[-1] == lost
+    assert [e["detail"] for e in board.monitor.events if e["kind"] == "config"][-1] == lost
+    for tracker in (bridge.telemetry.tracker, board.monitor.tracker):
+        assert tracker.geometry == Geometry.of(KOBUKI)
+    section = bridge.telemetry.profile.section
+    assert section is not None
+    assert section["verdict"] == "OK", section
+    assert board.monitor.health(board.t_s)["state"] == "OK"
+
+
+def test_a_firmware_that_keeps_its_config_across_a_reboot_fails() -> None:
+    bridge, board = _lost_drive("test-bridge-config-lost-kept", kept=True)
+    built, configured, rebooted = _crcs(board)
+    assert rebooted == configured != {built}  # cantools: it still runs the config
+    _assert_pose(board, LOST_AT, LOST_AT)  # 0.25 m from its reset on
+    bridge_wrongs, monitor_wrongs = _wrongs(bridge, board)
+    assert bridge_wrongs >= 1  # FAIL, both judges
+    assert monitor_wrongs >= 1

@@ -41,6 +41,7 @@ class ConfigFollower:
         self.staged: dict[str, float] = {}  # PARAM: value (m, m/s, counts, raw enum), as ACKed
         self._sent: dict[int, tuple[str, float]] = {}  # by E2E COUNTER: PARAM, value heard
         self._applies: set[int] = set()  # the COUNTERs of the APPLY frames not answered yet
+        self.built: Built | None = None  # the robot before the first config applied this life
 
     def forget(self) -> None:
         """A firmware reboot the judge saw: the firmware lost its staged parameters with its RAM
@@ -71,6 +72,10 @@ class ConfigFollower:
         return staged if acked else None
 
 
+Built = tuple[Geometry, int, int, str | None]  # geometry, its counter width (the tracker's,
+# the distance judge's) and integrator: the judges' robot before a config applied
+
+
 class Judges(Protocol):
     """The live judges an applied config reconfigures (the monitor's, a bridge robot's)."""
 
@@ -89,13 +94,40 @@ def follow_config_ack(judges: Judges, follower: ConfigFollower, request_counter:
     config = follower.on_ack(request_counter, acked)
     if config is None:
         return False
-    detail = apply_config(judges.tracker, config)
+    tracker = judges.tracker
+    if follower.built is None:  # the firmware's build's robot, back at its next reboot
+        follower.built = (tracker.geometry, tracker.counter_bits,
+                          judges.distance.robot.counter_bits, tracker.integrator)
+    detail = apply_config(tracker, config)
     geometry = judges.tracker.geometry
     counter_bits = int(config.get("COUNTER_BITS", judges.distance.robot.counter_bits))
     judges.distance.reconfigure(geometry, counter_bits)  # the width as configured (its CRC)
     judges.twist.reconfigure(geometry, counter_bits)
     judges.events.append({"t_s": t_s, "kind": "config", "detail": detail})
     return True
+
+
+def rebooted(judges: Judges, follower: ConfigFollower) -> str | None:
+    """A firmware reboot the judges saw (call before they start its new life): its staging
+    and the configs it applied were in its RAM, so it comes up with its build's robot, and the
+    judges take back the robot they had before the first config applied (``analyze`` judges
+    the lives after a reboot with the log's robot likewise, ``host.judge.configs``). Found by
+    the trial: after a config the firmware applied (wheelbase 0.23 -> 0.25 m) and a reboot,
+    the bridge judged the new life with 0.25 m: POSE WRONG (53 mm) on a correct firmware
+    running its build's 0.23 m. Returns the ``config`` event's detail (None: none applied)."""
+    built, follower.built = follower.built, None
+    follower.forget()
+    if built is None:
+        return None
+    geometry, counter_bits, distance_bits, integrator = built
+    tracker = judges.tracker
+    tracker.integrator = integrator
+    tracker.set_geometry(geometry, counter_bits)
+    judges.distance.reconfigure(geometry, distance_bits)
+    judges.twist.reconfigure(geometry, distance_bits)
+    return config_text(geometry.counts_per_rev, geometry.wheel_radius_left_m,
+                       geometry.wheel_radius_right_m, geometry.wheelbase_m, integrator,
+                       lead="config lost with the reboot, the build's robot again")
 
 
 def apply_config(tracker: PoseTracker, staged: dict[str, float]) -> str:
@@ -118,8 +150,8 @@ def apply_config(tracker: PoseTracker, staged: dict[str, float]) -> str:
 
 
 def config_text(counts_per_rev: int, wheel_radius_left_m: float, wheel_radius_right_m: float,
-                wheelbase_m: float, integrator: str | None) -> str:
+                wheelbase_m: float, integrator: str | None, *, lead: str = "config applied") -> str:
     """The ``config`` event's words (the monitor's and ``analyze``'s, host.judge.configs)."""
-    return (f"config applied: {counts_per_rev} counts/rev, wheel radii "
+    return (f"{lead}: {counts_per_rev} counts/rev, wheel radii "
             f"{wheel_radius_left_m:.6g}/{wheel_radius_right_m:.6g} m, wheelbase "
             f"{wheelbase_m:.6g} m, {integrator}: reference restarted")

@@ -53,6 +53,7 @@ import can
 from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
+from odocan.host.judge.liveconfig import rebooted
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livegapseen import heard_status
@@ -225,11 +226,14 @@ class RobotTelemetry(CommandFollowing):
         if summary is None or self.sources.observe(t_s, *summary) != "reboot":
             return
         self.reboots += 1
+        lost = rebooted(self, self.config)  # its staging and configs were in its RAM
         start_new_life(self.tracker, self.e2e, self.db, *summary)
         self.distance.new_life()
         self.twist.new_life()
-        self.set_pose.forget()  # the firmware's staging was in its RAM
-        self.config.forget()
+        self.set_pose.forget()
+        if lost is not None:
+            self.events.append({"t_s": t_s, "kind": "config", "detail": lost})
+            self.profile.forget()  # its next PROFILE page is judged against the build's robot
 
     def _unknown_key(self, can_id: int) -> str:
         """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
