@@ -26,8 +26,10 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
 * ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result`` (enums by
   their DBC names: ``"state": "OK"``); every STATE change and ERROR_MASK bit newly set
   (``host.judge.statuslatch``), every set-pose applied (``host.judge.livesetpose``, which the
-  reference follows) and every counter restart it re-primes on (``counter_restart``, a motor
-  controller's told by CTRL_UPTIME, as analyze names it) is an event: ``status`` carries the
+  reference follows), every config the firmware applies, whoever sent it, or loses at a reboot
+  (``host.judge.liveconfig``, the monitor's follower) and every counter restart it re-primes
+  on (``counter_restart``, a motor controller's told by CTRL_UPTIME, as analyze names it) is
+  an event: ``status`` carries the
   latest ``STATUS_EVENTS`` and ``latched_errors`` (every bit seen set), retained, so a short
   DEGRADED is never lost (not a QoS-1 publication each); likewise ``pose_wrongs``, the judge's
   own POSE WRONG episodes latched (``host.judge.posewrongs``), ``distance``, ODOM_TWIST
