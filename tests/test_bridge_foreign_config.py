@@ -320,3 +320,23 @@ def test_a_firmware_that_keeps_its_config_across_a_reboot_fails() -> None:
     bridge_wrongs, monitor_wrongs = _wrongs(bridge, board)
     assert bridge_wrongs >= 1  # FAIL, both judges
     assert monitor_wrongs >= 1
+
+
+def test_a_config_taken_in_the_first_tick_after_a_reboot_is_kept() -> None:
+    """The firmware ACKs the frames it drains before it sends its boot summary, in the same
+    tick: another tool's config delivered in the new firmware's first tick is ACKed (APPLY
+    included) before the judges are told of the reboot. They must not take it for a config of
+    the old life, lost with the reboot (they did: POSE WRONG on a correct firmware)."""
+    with bridged_robot("test-bridge-config-first-tick") as (bridge, listener):
+        board = _Watched(bridge, listener)
+        for k in range(PERIODS):
+            if k == LOST_AT:
+                board.ecu = OdomEcu(board.hal, firmware_params(KOBUKI, "exact"))
+                board.other_tool(_config_frames(WIDER))
+            board.period()
+    assert [s["RESULT"] for _, s in board.acks] == [0] * 7  # cantools: all ACKed
+    assert board.apply_periods == [LOST_AT]
+    _assert_pose(board, LOST_AT, LOST_AT + 1)  # primed on that frame, 0.25 m from the next
+    assert _wrongs(bridge, board) == (0, 0)
+    for tracker in (bridge.telemetry.tracker, board.monitor.tracker):
+        assert tracker.geometry.wheelbase_m == 0.25

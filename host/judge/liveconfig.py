@@ -19,6 +19,7 @@ between its pages and its APPLY it took the parameters the new firmware never st
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -32,6 +33,9 @@ if TYPE_CHECKING:
 PARAMS = ("COUNTS_PER_REV", "WHEEL_RADIUS_LEFT", "WHEEL_RADIUS_RIGHT", "WHEELBASE", "COUNTER_BITS",
           "INTEGRATOR", "MAX_WHEEL_SPEED")  # ODOM_CONFIG's staged PARAMs (names in the DBC)
 INTEGRATORS = ("euler", "rk2", "exact")  # INTEGRATOR's raw values 0, 1, 2
+SAME_TICK_S = 0.005  # half the firmware's 10 ms tick: the ODOM_ACKs a new firmware sends in its
+# first tick come before its boot summary, less than this before it; the old life's last ACK
+# came a tick or more before (its last tick, then the reset and the boot)
 
 
 class ConfigFollower:
@@ -39,14 +43,22 @@ class ConfigFollower:
 
     def __init__(self) -> None:
         self.staged: dict[str, float] = {}  # PARAM: value (m, m/s, counts, raw enum), as ACKed
+        self._staged_s: dict[str, float] = {}  # PARAM: bus time of its ACK (s)
         self._sent: dict[int, tuple[str, float]] = {}  # by E2E COUNTER: PARAM, value heard
         self._applies: set[int] = set()  # the COUNTERs of the APPLY frames not answered yet
         self.built: Built | None = None  # the robot before the first config applied this life
+        self.applied_s = -math.inf  # bus time of the latest APPLY ACKed (s)
 
-    def forget(self) -> None:
+    def forget(self, since_s: float = math.inf) -> None:
         """A firmware reboot the judge saw: the firmware lost its staged parameters with its RAM
-        (a bare APPLY after it applies its build's robot again)."""
-        self.staged, self._sent, self._applies = {}, {}, set()
+        (a bare APPLY after it applies its build's robot again); ``since_s``: the parameters
+        ACKed from this bus time on (s) are the new firmware's, kept with the frames not
+        answered yet (default: none, everything forgotten)."""
+        if since_s == math.inf:
+            self._sent, self._applies = {}, set()
+        kept = {p for p, t_s in self._staged_s.items() if t_s >= since_s}
+        self.staged = {p: v for p, v in self.staged.items() if p in kept}
+        self._staged_s = {p: t_s for p, t_s in self._staged_s.items() if p in kept}
 
     def on_frame(self, counter: int, param: str, value: Any) -> None:
         """An ODOM_CONFIG frame heard (its E2E COUNTER, PARAM name, the value in DBC units)."""
@@ -57,18 +69,23 @@ class ConfigFollower:
         elif param in PARAMS and value is not None:
             self._sent[counter] = (param, float(value))
 
-    def on_ack(self, request_counter: int, acked: bool) -> dict[str, float] | None:
-        """ODOM_ACK of an ODOM_CONFIG frame: a parameter ACKed is staged; the APPLY's ACK
-        returns the staged set (None when NACKed) and clears it, as the firmware does."""
+    def on_ack(self, request_counter: int, acked: bool, t_s: float = -math.inf
+               ) -> dict[str, float] | None:
+        """ODOM_ACK of an ODOM_CONFIG frame (heard at bus time ``t_s``, s): a parameter ACKed
+        is staged; the APPLY's ACK returns the staged set (None when NACKed) and clears it, as
+        the firmware does."""
         sent = self._sent.pop(request_counter, None)
         if sent is not None:
             if acked:
                 self.staged[sent[0]] = sent[1]
+                self._staged_s[sent[0]] = t_s
             return None
         if request_counter not in self._applies:
             return None
         self._applies.discard(request_counter)
-        staged, self.staged = self.staged, {}
+        staged, self.staged, self._staged_s = self.staged, {}, {}
+        if acked:
+            self.applied_s = t_s
         return staged if acked else None
 
 
@@ -91,7 +108,7 @@ def follow_config_ack(judges: Judges, follower: ConfigFollower, request_counter:
     bus time ``t_s`` (s): an ACKed APPLY makes the staged set ``judges``' robot (reference,
     DISTANCE and speed judges, from here as a new life) and a ``config`` event. Returns
     whether a config was applied."""
-    config = follower.on_ack(request_counter, acked)
+    config = follower.on_ack(request_counter, acked, t_s)
     if config is None:
         return False
     tracker = judges.tracker
@@ -107,16 +124,21 @@ def follow_config_ack(judges: Judges, follower: ConfigFollower, request_counter:
     return True
 
 
-def rebooted(judges: Judges, follower: ConfigFollower) -> str | None:
+def rebooted(judges: Judges, follower: ConfigFollower, t_s: float) -> str | None:
     """A firmware reboot the judges saw (call before they start its new life): its staging
     and the configs it applied were in its RAM, so it comes up with its build's robot, and the
     judges take back the robot they had before the first config applied (``analyze`` judges
     the lives after a reboot with the log's robot likewise, ``host.judge.configs``). Found by
     the trial: after a config the firmware applied (wheelbase 0.23 -> 0.25 m) and a reboot,
     the bridge judged the new life with 0.25 m: POSE WRONG (53 mm) on a correct firmware
-    running its build's 0.23 m. Returns the ``config`` event's detail (None: none applied)."""
+    running its build's 0.23 m. ``t_s``: the bus time of the boot summary that told it (s);
+    what was ACKed less than ``SAME_TICK_S`` before is the new firmware's (its first tick), kept.
+    Returns the ``config`` event's detail (None: none applied, or in the new firmware)."""
+    since_s = t_s - SAME_TICK_S
+    follower.forget(since_s)
+    if follower.applied_s >= since_s:  # applied by the new firmware: its robot now
+        return None
     built, follower.built = follower.built, None
-    follower.forget()
     if built is None:
         return None
     geometry, counter_bits, distance_bits, integrator = built

@@ -296,7 +296,7 @@ class BusMonitor:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
-            lost = rebooted(self, self.config)  # its staging and configs were in its RAM
+            lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
             detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
             self.distance.new_life()
             self.twist.new_life()

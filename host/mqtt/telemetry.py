@@ -228,7 +228,7 @@ class RobotTelemetry(CommandFollowing):
         if summary is None or self.sources.observe(t_s, *summary) != "reboot":
             return
         self.reboots += 1
-        lost = rebooted(self, self.config)  # its staging and configs were in its RAM
+        lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM
         start_new_life(self.tracker, self.e2e, self.db, *summary)
         self.distance.new_life()
         self.twist.new_life()
