@@ -1,18 +1,19 @@
 """The bridge follows the configs the firmware applies, not the ones it sent (issue #11).
 
-Two holes the monitor no longer had (``host.judge.liveconfig``) but the bridge did, for it took
-a config's parameters from its own ``cmd/config`` when the firmware ACKed the APPLY:
+Holes the bridge had, for it took a config's parameters from its own ``cmd/config`` when the
+firmware ACKed the APPLY (the monitor followed the bus, ``host.judge.liveconfig``; now both do
+through it):
 
 * **another tool's config** (the ``odocan`` CLI, a user's script) on the bus while a bridge
   judges: the bridge kept the old geometry, so it failed a correct firmware reconfigured to a
   wheelbase of 0.25 m, and passed one that ACKed the config but kept its 0.23 m;
 * **its own config interrupted by a reboot**: the pages ACKed, the MCU reset (RAM lost: the
   staged pages with it), then the APPLY, which the new firmware ACKs with nothing staged: it
-  runs its build's robot. The bridge took the parameters it had sent.
-
+  runs its build's robot. The bridge took the parameters it had sent;
 * **a config lost with a reboot**: the firmware applied the bridge's config, then rebooted: it
   comes up with its build's robot (the config was in its RAM), while the bridge and the monitor
-  judged its new life with the config's wheelbase.
+  judged its new life with the config's wheelbase; and the other way, a config the new firmware
+  takes in its very first tick, ACKed before its boot summary tells the reboot, is its own.
 
 A real Python firmware (``OdomEcu`` on kobuki, ``tests.bridge_pair``) answers; a monitor
 (``BusMonitor``) hears the same bus, the bridge's own command frames too. Independent of
@@ -52,7 +53,8 @@ def _decoded(can_id: int, data: bytes) -> dict[str, Any]:
 
 class _Watched(_ConfigBoard):
     """``_ConfigBoard`` keeping, with cantools, every ODOM_ACK (its period), every PROFILE_CRC
-    (its period) and the latest on-board pose the firmware sent."""
+    (its period) and the on-board poses the firmware sent; a ``BusMonitor`` hears every frame
+    on the bus (the bridge's command frames too)."""
 
     def __init__(self, bridge: _Robot, listener: Any) -> None:
         super().__init__(bridge, listener)
@@ -87,7 +89,7 @@ class _Watched(_ConfigBoard):
                                       is_extended_id=False, data=data), now_s=self.t_s)
 
     def other_tool(self, frames: list[tuple[int, bytes]]) -> None:
-        """Frames another tool puts on the bus: the firmware and the bridge hear them."""
+        """Frames another tool puts on the bus: the firmware, the bridge and the monitor."""
         for can_id, data in frames:
             self.to_bridge(can_id, data)
             self.ecu.isr_can_rx(can_id, data)
@@ -144,7 +146,7 @@ def test_the_bridge_follows_a_config_another_tool_applies() -> None:
     _assert_pose(board, 0, board.apply_periods[0])
     telemetry = bridge.telemetry  # the firmware is right: PASS, the config an event
     assert telemetry.tracker.geometry.wheelbase_m == 0.25
-    assert telemetry.tracker.wrongs.as_dict()["episodes"] == 0, telemetry.tracker.wrongs.as_dict()
+    assert _wrongs(bridge, board) == (0, 0), telemetry.tracker.wrongs.as_dict()
     assert _events(bridge, "config") == [
         "config applied: 2578 counts/rev, wheel radii 0.035/0.035 m, wheelbase 0.25 m, exact: "
         "reference restarted"]
@@ -160,7 +162,9 @@ def test_a_firmware_that_acks_another_tool_s_config_but_keeps_its_wheelbase_fail
     bridge, board = _other_tool_drive("test-bridge-foreign-config-kept")
     assert [s["RESULT"] for _, s in board.acks] == [0] * 7  # cantools: all ACKed ...
     _assert_pose(board, 0, None)  # ... yet 0.23 m all along
-    assert bridge.telemetry.tracker.wrongs.as_dict()["episodes"] >= 1  # FAIL
+    bridge_wrongs, monitor_wrongs = _wrongs(bridge, board)
+    assert bridge_wrongs >= 1  # FAIL, both judges
+    assert monitor_wrongs >= 1
 
 
 # --- the bridge's own config, the MCU reset between its pages and its APPLY ---
@@ -231,7 +235,7 @@ def test_a_bridge_config_interrupted_by_a_reboot_leaves_the_build_s_robot() -> N
     telemetry = bridge.telemetry  # the judge follows what the firmware runs: PASS
     assert telemetry.reboots == 1
     assert telemetry.tracker.geometry.wheelbase_m == KOBUKI.wheelbase_m
-    assert telemetry.tracker.wrongs.as_dict()["episodes"] == 0, telemetry.tracker.wrongs.as_dict()
+    assert _wrongs(bridge, board) == (0, 0), telemetry.tracker.wrongs.as_dict()
     assert telemetry.profile.section is not None
     assert telemetry.profile.section["verdict"] == "OK", telemetry.profile.section
 
@@ -245,7 +249,9 @@ def test_a_firmware_that_keeps_the_config_staged_before_its_reboot_fails() -> No
     assert after
     assert before[-1] not in after  # cantools: it runs another robot ...
     _assert_pose(board, REBOOT_AT, applied)  # ... the staged 0.25 m
-    assert bridge.telemetry.tracker.wrongs.as_dict()["episodes"] >= 1  # FAIL
+    bridge_wrongs, monitor_wrongs = _wrongs(bridge, board)
+    assert bridge_wrongs >= 1  # FAIL, both judges
+    assert monitor_wrongs >= 1
 
 
 # --- the bridge's config applied, then the MCU reset: the config was in its RAM ---
