@@ -200,7 +200,8 @@ def test_a_config_staged_again_after_a_reboot_is_followed(tmp_path: Path) -> Non
     new firmware's first ODOM_ACK has COUNTER 0 too (its counters restart), no repeat of the old
     one's. Every judge follows the 0.33 m the correct firmware applied (the whole log's E2E check
     took that ACK for a repeat: with the staging forgotten at the reboot, analyze judged the
-    life with 0.30 m and FAILed the firmware)."""
+    life with 0.30 m and FAILed the firmware; the bridge, which followed only the configs it
+    sent itself, judged it with 0.30 m too)."""
     messages = drive("config_again")
     acks = [_decoded(m) for m in messages if m.arbitration_id == fr.ODOM_ACK_ID]
     assert [(a["COUNTER"], a["REQUEST_FIELD"], a["RESULT"]) for a in acks] == [
@@ -214,5 +215,7 @@ def test_a_config_staged_again_after_a_reboot_is_followed(tmp_path: Path) -> Non
     assert whole.passed
     assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
         whole.report)
-    monitor, _ = _live(messages)  # (the bridge follows only the configs it sends itself)
-    assert monitor.tracker.vs_reference.max_dpos_m < 1e-3
+    monitor, bridge = _live(messages)  # the bridge follows another tool's config too
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.vs_reference.max_dpos_m < 1e-3
+        assert tracker.geometry.wheelbase_m == 0.33

@@ -54,7 +54,7 @@ from cantools.database.can import Database, Message
 
 from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
-from odocan.host.judge.liveconfig import ConfigFollower, apply_config
+from odocan.host.judge.liveconfig import ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
@@ -228,12 +228,8 @@ class BusMonitor:
                 pose = apply_set_pose(self.tracker, *applied)
                 self.events.append(set_pose_event(self._bus_time_s, pose, applied[1]))
         elif int(s["REQUEST_ID"]) == self._config_id:
-            config = self.config.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
-            if config is not None:  # the firmware's new robot: the reference's too
-                detail = apply_config(self.tracker, config)
-                self.distance.reconfigure(self.tracker.geometry, self.tracker.counter_bits)
-                self.twist.reconfigure(self.tracker.geometry, self.tracker.counter_bits)
-                self.events.append({"t_s": self._bus_time_s, "kind": "config", "detail": detail})
+            follow_config_ack(self, self.config, int(s["REQUEST_COUNTER"]),  # the firmware's
+                              int(s["RESULT"]) == 0, self._bus_time_s)  # robot: the judges' too
         reason = str(shown.get("REASON", ""))
         if not reason.startswith("AUTH_"):
             return
@@ -300,11 +296,13 @@ class BusMonitor:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
+            lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
             detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
             self.distance.new_life()
             self.twist.new_life()
-            self.set_pose.forget()  # the firmware's staging was in its RAM
-            self.config.forget()
+            self.set_pose.forget()
+            if lost is not None:
+                self.events.append({"t_s": self._bus_time_s, "kind": "config", "detail": lost})
         elif kind == "two sources":  # no pose is judged from the second one's first summary
             self.tracker.wrongs.unjudgeable_from(self.sources.conflict_from_s or self._bus_time_s)
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"

@@ -39,15 +39,15 @@ from typing import Any
 
 import can
 
-from odocan.host.judge.liveconfig import INTEGRATORS
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL, first_error
 from odocan.host.mqtt.expiry import Expired
 from odocan.host.mqtt.link import RobotLink, Verdict
+from odocan.host.mqtt.livecommands import PendingAck
 from odocan.host.mqtt.pacing import ACK_TIMEOUT_S, MAX_QUEUED, WINDOW_FRAMES, CommandPacer
 from odocan.host.mqtt.stallwatch import StallWatch
-from odocan.host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
+from odocan.host.mqtt.telemetry import Publication, RobotTelemetry
 from odocan.host.protocol.commands import (
     Command,
     CommandEncoder,
@@ -214,10 +214,9 @@ class _Robot:
         """Put one command frame (and its ODOM_AUTH) on the bus: the mailbox slots taken."""
         bus = self.endpoint.bus
         signer = self.endpoint.signer
-        ack = PendingAck(command.cmd_id, command.name, frame.final,
-                         _config_params(command) if frame.final else None)
+        ack = PendingAck(command.cmd_id, command.name, frame.final)
         self.telemetry.expect_ack(frame.can_id, frame.counter, ack)
-        self.telemetry.command_sent(frame.can_id, frame.data)  # a set-pose is followed
+        self.telemetry.command_sent(frame.can_id, frame.data)  # a set-pose, a config followed
         try:
             bus.send(can.Message(arbitration_id=frame.can_id, is_extended_id=False,
                                  data=frame.data))
@@ -234,23 +233,6 @@ class _Robot:
         except can.CanError as exc:
             raise CommandRejected(f"bus refused ODOM_AUTH: {exc}", command.cmd_id) from None
         return 2
-
-
-def _config_params(command: Command) -> dict[str, float] | None:
-    """A config command's robot as ODOM_CONFIG's PARAMs (``host.judge.liveconfig``): the
-    reference's once the firmware ACKs this command's own APPLY; None for other commands."""
-    if command.name != "config":
-        return None
-    v = command.values
-    integrator = v["integrator"]
-    params = {"COUNTS_PER_REV": v["counts_per_rev"], "WHEEL_RADIUS_LEFT": v["wheel_radius_left_m"],
-              "WHEEL_RADIUS_RIGHT": v["wheel_radius_right_m"], "WHEELBASE": v["wheelbase_m"],
-              "COUNTER_BITS": v["counter_bits"],
-              "INTEGRATOR": INTEGRATORS.index(integrator.lower())
-              if isinstance(integrator, str) else integrator}
-    if v.get("max_wheel_speed_m_s") is not None:  # absent: the firmware keeps its bound
-        params["MAX_WHEEL_SPEED"] = v["max_wheel_speed_m_s"]
-    return params
 
 
 def _id_and_data(frame: Received) -> tuple[int, bytes]:

@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from odocan.host.mqtt import topics
-from odocan.host.mqtt.telemetry import PendingAck, Publication, RobotTelemetry
+from odocan.host.mqtt.livecommands import PendingAck
+from odocan.host.mqtt.telemetry import Publication, RobotTelemetry
 from odocan.host.protocol.commands import Command, CommandRejected, Frame
 
 WINDOW_FRAMES = 8  # command frames (and their ODOM_AUTHs) un-answered on the bus per robot

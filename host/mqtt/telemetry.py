@@ -26,8 +26,10 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
 * ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result`` (enums by
   their DBC names: ``"state": "OK"``); every STATE change and ERROR_MASK bit newly set
   (``host.judge.statuslatch``), every set-pose applied (``host.judge.livesetpose``, which the
-  reference follows) and every counter restart it re-primes on (``counter_restart``, a motor
-  controller's told by CTRL_UPTIME, as analyze names it) is an event: ``status`` carries the
+  reference follows), every config the firmware applies, whoever sent it, or loses at a reboot
+  (``host.judge.liveconfig``, the monitor's follower) and every counter restart it re-primes
+  on (``counter_restart``, a motor controller's told by CTRL_UPTIME, as analyze names it) is
+  an event: ``status`` carries the
   latest ``STATUS_EVENTS`` and ``latched_errors`` (every bit seen set), retained, so a short
   DEGRADED is never lost (not a QoS-1 publication each); likewise ``pose_wrongs``, the judge's
   own POSE WRONG episodes latched (``host.judge.posewrongs``), ``distance``, ODOM_TWIST
@@ -44,7 +46,6 @@ Times: ``t_s`` the frame's bus timestamp (s), ``unix_s`` the wall clock at publi
 
 from __future__ import annotations
 
-import contextlib
 import math
 from collections import Counter, deque
 from dataclasses import dataclass, field
@@ -54,24 +55,23 @@ import can
 from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
-from odocan.host.judge.liveconfig import apply_config
+from odocan.host.judge.liveconfig import rebooted
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
-from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
-from odocan.host.judge.livesetpose_choice import ApplyChoice
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
-from odocan.host.mqtt.dbcnames import choice, named_value, page_name
+from odocan.host.mqtt.dbcnames import named_value, page_name
 from odocan.host.mqtt.haltstretch import HaltStretches
+from odocan.host.mqtt.livecommands import CommandFollowing
 from odocan.host.mqtt.liveprofile import ProfileStatus
 from odocan.host.mqtt.liveroutes import Route, routes, takes
-from odocan.host.mqtt.topics import RESULT_LEAF, stamp, status_payload
+from odocan.host.mqtt.topics import stamp, status_payload
 from odocan.host.protocol.e2e import e2e_messages
 from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.sim.contract import database
@@ -82,16 +82,6 @@ ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # foreign CAN IDs counted by name in ``rejected``; the rest as ``other``
 STATUS_EVENTS = 16  # the latest firmware events and set-poses carried by ``status``
 TRUTH_PARTS = {0: "X", 1: "Y", 2: "HEADING"}  # SIM_TRUTH's PART: the signal it carries
-
-
-@dataclass
-class PendingAck:
-    """A command frame sent, waiting for its ODOM_ACK."""
-
-    cmd_id: Any
-    command: str
-    final: bool  # the APPLY / GO frame: its ACK completes the command
-    config: dict[str, float] | None = None  # a config's APPLY: its parameters (DBC PARAMs)
 
 
 def _routes(db: Database) -> dict[int, Route]:
@@ -107,7 +97,7 @@ class _Window:
     counts: dict[str, int] = field(default_factory=dict)
 
 
-class RobotTelemetry:
+class RobotTelemetry(CommandFollowing):
     """The bridge's view of one robot, built only from its bus."""
 
     def __init__(
@@ -148,7 +138,6 @@ class RobotTelemetry:
         self._truth: dict[str, Any] | None = None  # the latest truth not published yet
         self._truth_pub_t = -math.inf  # bus time of the last truth published (s)
         self.firmware: dict[str, Any] = {}
-        self.pending: dict[tuple[int, int], PendingAck] = {}
         self.status_seq = 0
         self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
         self._status_ids = e2e_messages(self.db).get(self._status_id)
@@ -161,12 +150,7 @@ class RobotTelemetry:
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         # ... set-poses and the counter restarts the reference follows (its ``RestartLog``)
         self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=STATUS_EVENTS)
-        self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
-        self._apply_choice: ApplyChoice | None = None
-        set_pose = next((m for m in self.db.messages if m.name == "ODOM_SET_POSE"), None)
-        self._set_pose_id = set_pose.frame_id if set_pose is not None else -1
-        self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {} \
-            if set_pose is not None else {}
+        self._init_commands()  # set-poses, configs, the ACKs awaited (host.mqtt.livecommands)
         self.reboots = 0
         self.profile = ProfileStatus(profile_name)  # ODOM_STATUS PROFILE vs these parameters
         self.stretches: HaltStretches | None = None  # an overloaded fleet's (host.mqtt.overload)
@@ -244,10 +228,14 @@ class RobotTelemetry:
         if summary is None or self.sources.observe(t_s, *summary) != "reboot":
             return
         self.reboots += 1
+        lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM
         start_new_life(self.tracker, self.e2e, self.db, *summary)
         self.distance.new_life()
         self.twist.new_life()
-        self.set_pose.forget()  # the firmware's staging was in its RAM
+        self.set_pose.forget()
+        if lost is not None:
+            self.events.append({"t_s": t_s, "kind": "config", "detail": lost})
+            self.profile.forget()  # its next PROFILE page is judged against the build's robot
 
     def _unknown_key(self, can_id: int) -> str:
         """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
@@ -372,73 +360,6 @@ class RobotTelemetry:
             self.profile.on_page(self, s, t_s)
         return []
 
-    def _on_set_pose(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        """An ODOM_SET_POSE frame on the bus (another tool's; the bridge's own go through
-        ``command_sent``): staged and applied as the firmware ACKs it."""
-        field = str(named_value(self._set_pose_fields, s["FIELD"]))
-        self.set_pose.on_frame(int(s["COUNTER"]), field, s.get(field), self.tracker.enc_seq)
-        return []
-
-    def _on_auth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        if int(s["REQUEST"]) == 1:  # ODOM_SET_POSE (the DBC's VAL_): the firmware acts now
-            self.set_pose.on_auth(self.tracker.enc_seq)
-        return []
-
-    def command_sent(self, can_id: int, data: bytes) -> None:
-        """A command frame the bridge itself sent (not heard back from its bus)."""
-        route = self._routes.get(can_id)
-        if route is not None and route.name in ("ODOM_SET_POSE", "ODOM_AUTH"):
-            with contextlib.suppress(DecodeError, KeyError, ValueError):
-                route.handler(self, route.decode(data), 0.0)
-
-    def _followed_set_pose(self, s: dict[str, Any], t_s: float) -> None:
-        """ODOM_ACK of an ODOM_SET_POSE frame: an applied APPLY restarts the reference at
-        the set pose (``host.judge.livesetpose``), a ``set_pose`` event in ``status``."""
-        applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
-        if applied is not None:
-            event = set_pose_event(t_s, apply_set_pose(self.tracker, *applied), applied[1])
-            self.events.append(event)  # which frame it took effect after, if frames came since
-            self._apply_choice = ApplyChoice.after_ack(self.tracker, *applied, event)
-
-    def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        if int(s["REQUEST_ID"]) == self._set_pose_id:
-            self._followed_set_pose(s, t_s)
-        return self._answered(s, t_s)
-
-    def _answered(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        """ODOM_ACK of a command the bridge sent: its ``cmd/result``."""
-        key = (int(s["REQUEST_ID"]), int(s["REQUEST_COUNTER"]))
-        pending = self.pending.pop(key, None)
-        if pending is None:
-            return []
-        nack = int(s["RESULT"]) != 0
-        if not nack and not pending.final:
-            return []
-        if nack:  # forget the rest of this command: one answer per command (a config's
-            self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
-        elif pending.config is not None:  # parameters too: the firmware keeps its own)
-            self._apply_config(pending.config)  # (a set-pose: ``_followed_set_pose``)
-            self.tracker.restart_reference()
-        reason = choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
-        payload = {"id": pending.cmd_id, "command": pending.command,
-                   "result": "nacked" if nack else "acked", "reason": reason, "t_s": t_s}
-        return [(RESULT_LEAF, stamp(payload))]
-
-    def expect_ack(self, can_id: int, counter: int, ack: PendingAck) -> None:
-        """A command frame was sent: its ODOM_ACK will answer the command."""
-        self.pending[(can_id, counter)] = ack
-
-    def _apply_config(self, params: dict[str, float]) -> None:
-        """A config command's parameters (its APPLY's ``PendingAck.config``), the firmware's
-        now its APPLY is ACKed: each config when its own ACK says so, never on a NACK (the
-        firmware keeps its own: a refused robot must not become the reference's)."""
-        apply_config(self.tracker, params)  # those it lacks kept (max wheel speed)
-        geometry = self.tracker.geometry
-        counter_bits = int(params.get("COUNTER_BITS", self.tracker.counter_bits))
-        self.distance.reconfigure(geometry, counter_bits)
-        self.twist.reconfigure(geometry, counter_bits)
-        self.profile.forget()  # the firmware's next page is judged against them
-
     _handlers: ClassVar[dict[str, Any]] = {
         "WHEEL_ENCODERS": _on_encoders,
         "ODOM_POSE_X": _on_pose_x,
@@ -446,9 +367,10 @@ class RobotTelemetry:
         "ODOM_TWIST": _on_twist,
         "SIM_TRUTH": _on_truth,
         "ODOM_STATUS": _on_status,
-        "ODOM_ACK": _on_ack,
-        "ODOM_SET_POSE": _on_set_pose,
-        "ODOM_AUTH": _on_auth,
+        "ODOM_ACK": CommandFollowing._on_ack,
+        "ODOM_SET_POSE": CommandFollowing._on_set_pose,
+        "ODOM_CONFIG": CommandFollowing._on_config,
+        "ODOM_AUTH": CommandFollowing._on_auth,
     }
 
     # --- periodic ---

@@ -1,0 +1,133 @@
+"""The commands ``RobotTelemetry`` (``host.mqtt.telemetry``) follows on its robot's bus: the
+ODOM_SET_POSE and ODOM_CONFIG frames it hears (another tool's, or the bridge's own through
+``command_sent``), staged and applied as the firmware ACKs them (``host.judge.livesetpose``;
+``host.judge.liveconfig``, the monitor's follower: what the firmware ACKs, forgotten at a
+reboot, is the judges' robot, not what a ``cmd/config`` asked), and the ODOM_ACK answering a
+command the bridge sent (its ``cmd/result``). Moved out of ``host.mqtt.telemetry`` (a module
+near 500 lines).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections import deque
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from cantools.database.can import Database
+from cantools.database.errors import DecodeError
+
+from odocan.host.judge.liveconfig import ConfigFollower, follow_config_ack
+from odocan.host.judge.livedistance import LiveDistance
+from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
+from odocan.host.judge.livesetpose_choice import ApplyChoice
+from odocan.host.judge.livetwist import LiveTwist
+from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.dbcnames import choice, named_value
+from odocan.host.mqtt.topics import RESULT_LEAF, stamp
+
+if TYPE_CHECKING:
+    from odocan.host.mqtt.liveprofile import ProfileStatus
+    from odocan.host.mqtt.liveroutes import Route
+
+Publication = tuple[str, dict[str, Any]]
+
+
+@dataclass
+class PendingAck:
+    """A command frame sent, waiting for its ODOM_ACK."""
+
+    cmd_id: Any
+    command: str
+    final: bool  # the APPLY / GO frame: its ACK completes the command
+
+
+class CommandFollowing:
+    """``RobotTelemetry``'s command handlers (module docstring); it gives the judges."""
+
+    db: Database
+    _routes: dict[int, Route]
+    tracker: PoseTracker
+    distance: LiveDistance
+    twist: LiveTwist
+    events: deque[dict[str, Any]]
+    profile: ProfileStatus
+
+    def _init_commands(self) -> None:
+        """The followers' state (``db`` set): nothing staged, no ACK awaited."""
+        self.pending: dict[tuple[int, int], PendingAck] = {}
+        self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
+        self._apply_choice: ApplyChoice | None = None
+        set_pose = next((m for m in self.db.messages if m.name == "ODOM_SET_POSE"), None)
+        self._set_pose_id = set_pose.frame_id if set_pose is not None else -1
+        self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {} \
+            if set_pose is not None else {}
+        self.config = ConfigFollower()  # ODOM_CONFIG staged and applied (its ACKs)
+        config = next((m for m in self.db.messages if m.name == "ODOM_CONFIG"), None)
+        self._config_id = config.frame_id if config is not None else -1
+        self._config_params: Any = config.get_signal_by_name("PARAM").choices or {} \
+            if config is not None else {}
+
+    def _on_set_pose(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        """An ODOM_SET_POSE frame on the bus (another tool's; the bridge's own go through
+        ``command_sent``): staged and applied as the firmware ACKs it."""
+        field = str(named_value(self._set_pose_fields, s["FIELD"]))
+        self.set_pose.on_frame(int(s["COUNTER"]), field, s.get(field), self.tracker.enc_seq)
+        return []
+
+    def _on_config(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        """An ODOM_CONFIG frame on the bus (another tool's, or the bridge's own through
+        ``command_sent``): staged and applied as the firmware ACKs it."""
+        param = str(named_value(self._config_params, s["PARAM"]))
+        self.config.on_frame(int(s["COUNTER"]), param, s.get(param))
+        return []
+
+    def _on_auth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        if int(s["REQUEST"]) == 1:  # ODOM_SET_POSE (the DBC's VAL_): the firmware acts now
+            self.set_pose.on_auth(self.tracker.enc_seq)
+        return []
+
+    def command_sent(self, can_id: int, data: bytes) -> None:
+        """A command frame the bridge itself sent (not heard back from its bus)."""
+        route = self._routes.get(can_id)
+        if route is not None and route.name in ("ODOM_SET_POSE", "ODOM_CONFIG", "ODOM_AUTH"):
+            with contextlib.suppress(DecodeError, KeyError, ValueError):
+                route.handler(self, route.decode(data), 0.0)
+
+    def _followed_set_pose(self, s: dict[str, Any], t_s: float) -> None:
+        """ODOM_ACK of an ODOM_SET_POSE frame: an applied APPLY restarts the reference at
+        the set pose (``host.judge.livesetpose``), a ``set_pose`` event in ``status``."""
+        applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
+        if applied is not None:
+            event = set_pose_event(t_s, apply_set_pose(self.tracker, *applied), applied[1])
+            self.events.append(event)  # which frame it took effect after, if frames came since
+            self._apply_choice = ApplyChoice.after_ack(self.tracker, *applied, event)
+
+    def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        request_id = int(s["REQUEST_ID"])
+        if request_id == self._set_pose_id:
+            self._followed_set_pose(s, t_s)
+        elif request_id == self._config_id and follow_config_ack(
+                self, self.config, int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0, t_s):
+            self.profile.forget()  # the firmware's next PROFILE page is judged against it
+        return self._answered(s, t_s)
+
+    def _answered(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        """ODOM_ACK of a command the bridge sent: its ``cmd/result``."""
+        key = (int(s["REQUEST_ID"]), int(s["REQUEST_COUNTER"]))
+        pending = self.pending.pop(key, None)
+        if pending is None:
+            return []
+        nack = int(s["RESULT"]) != 0
+        if not nack and not pending.final:
+            return []
+        if nack:  # forget the rest of this command: one answer per command
+            self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
+        reason = choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
+        payload = {"id": pending.cmd_id, "command": pending.command,
+                   "result": "nacked" if nack else "acked", "reason": reason, "t_s": t_s}
+        return [(RESULT_LEAF, stamp(payload))]
+
+    def expect_ack(self, can_id: int, counter: int, ack: PendingAck) -> None:
+        """A command frame was sent: its ODOM_ACK will answer the command."""
+        self.pending[(can_id, counter)] = ack
