@@ -16,8 +16,13 @@ it judges):
   (``reference_path._rotation_fit``'s, the start position eliminated; here in closed form, the
   2-D Procrustes angle ``atan2(sum q_c x p_c, sum q_c . p_c)`` of the centred paths, from
   running sums), kept within the running overlap of the heading offsets' rounding intervals
-  (``reference_path._start_pose``'s ``lo``, ``hi``); the interval's middle while the path has
-  no lever arm;
+  (``reference_path._start_pose``'s ``lo``, ``hi``), weighed against that interval by its
+  spread (``bounded_mean``: the mean of the fit's normal, deviation ``ROUNDING_SIGMA_M /
+  sqrt(sum |q_c|^2)``, restricted to the interval): the interval's middle while the path has
+  no lever arm, the fit once its lever arm outweighs the rounding. Clamped alone, a fit over a
+  few centimetres (mostly the positions' rounding) sat at an edge of the interval, up to 0.79
+  heading LSB from the firmware's heading after an unseen restart
+  (``tests/test_live_unseen_restart.py``);
 * ``s`` the least-squares position given ``d``, kept within the running overlap of the samples'
   position rounding intervals, each widened by what the heading interval of its time could turn
   it (``|q| (hi - lo) / 2``): every interval holds a correct firmware's start, so their overlap
@@ -50,8 +55,33 @@ HALF_HEADING_RAD = 0.5 * HEADING_LSB_RAD + 1e-12
 # rad per metre on bench/judge_error.py's 112 km drives (3.3-4.8 um, 5.9e-11 rad at the end)
 POSITION_DRIFT_PER_M = 1e-10
 HEADING_DRIFT_RAD_PER_M = 2e-15
+# one sample's position rounding as a deviation (m per axis: uniform over one LSB), which
+# weighs the rotation's least-squares fit against its interval (``bounded_mean``)
+ROUNDING_SIGMA_M = POSITION_LSB_M / math.sqrt(12.0)
+_SQRT_HALF = math.sqrt(0.5)
+_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+_TINY_MASS = 1e-300
 _PI = math.pi
 _TURN = 2.0 * math.pi
+
+
+def bounded_mean(fit: float, sigma: float, bounds: tuple[float, float]) -> float:
+    """The mean of a normal (mean ``fit``, deviation ``sigma``) restricted to ``bounds`` (lo,
+    hi): a least-squares estimate weighed against the interval the rounding proves. A short
+    lever arm (``sigma`` wide against the interval) keeps about its middle instead of the edge
+    the noise pulls the estimate to; a long one (``sigma`` narrow) its fit, clamped."""
+    lo, hi = bounds
+    if not sigma > 0.0 or hi <= lo:
+        return min(max(fit, lo), hi)
+    a, b = (lo - fit) / sigma, (hi - fit) / sigma
+    if a > 0.0:  # the tail above: erfc keeps its mass from cancelling
+        mass = 0.5 * (math.erfc(a * _SQRT_HALF) - math.erfc(b * _SQRT_HALF))
+    else:
+        mass = 0.5 * (math.erfc(-b * _SQRT_HALF) - math.erfc(-a * _SQRT_HALF))
+    if mass < _TINY_MASS:  # the fit far outside: its nearest bound
+        return min(max(fit, lo), hi)
+    pull = (math.exp(-0.5 * a * a) - math.exp(-0.5 * b * b)) * _INV_SQRT_2PI
+    return min(max(fit + sigma * pull / mass, lo), hi)
 
 
 def pose_wrong(dpos_m: float, dheading_rad: float, allowance_m: float = 0.0) -> bool:
@@ -145,10 +175,11 @@ class LiveFit:
         if n:
             mqx, mqy, mbx, mby = self.sqx / n, self.sqy / n, self.sbx / n, self.sby / n
             spread = self.sqq - n * (mqx * mqx + mqy * mqy)  # of the centred q
-            if spread > POSITION_LSB_M * POSITION_LSB_M * n:  # a lever arm to learn from
+            if spread > 0.0:  # a lever arm to learn from
                 cross = self.scross - n * (mqx * mby - mqy * mbx)  # of the centred q, b
                 dot = self.sdot - n * (mqx * mbx + mqy * mby)
-                d = min(max(math.atan2(cross, spread + dot), self.d_lo), self.d_hi)
+                d = bounded_mean(math.atan2(cross, spread + dot), ROUNDING_SIGMA_M / math.sqrt(
+                    spread), (self.d_lo, self.d_hi))
                 cos_d, sin_d = math.cos(d), math.sin(d)
             # s = mean(pose - A - R(d) q) = mean(b) + (I - R(d)) mean(q)
             sx = mbx + (1.0 - cos_d) * mqx + sin_d * mqy
