@@ -35,7 +35,11 @@ the fit stays frozen from then on (it never absorbs an error bigger than the rou
 sums only: O(1) memory and a few dozen float operations per sample. A reference that starts at
 the power-up pose (0, 0, 0) is exact (``C`` the identity), as ``analyze`` takes it. After a
 stall's placement (``rebase``) the correction is taken into the reference and the fit goes on
-from the placed pose: the heading interval carried, the position within a pose's rounding of it.
+from the placed pose: the heading interval carried, and the rotation's evidence (its least
+squares and the spread behind it: the heading goes on across a placement, one rotation fits
+every segment, as ``analyze`` fits a life's), the position within a pose's rounding of it.
+Started afresh, the rotation after a placement had only the centimetres since, and sat up to
+0.48 heading LSB off where the segments before had it to 0.02.
 
 ``pose_wrong`` is the verdict's rule, ``analyze``'s: beyond one LSB of position (after the loss
 allowance) or of heading.
@@ -94,17 +98,19 @@ class LiveFit:
     """The start fit of one live reference (module docstring); ``exact``: nothing to fit."""
 
     __slots__ = ("_fit", "_last_q", "ax", "ay", "d_hi", "d_lo", "exact", "frozen", "n",
-                 "path_m", "placed", "sbx", "sby", "scross", "sdot", "sqq", "sqx", "sqy", "x_hi",
-                 "x_lo", "y_hi", "y_lo")
+                 "path_m", "placed", "prior", "sbx", "sby", "scross", "sdot", "sqq", "sqx", "sqy",
+                 "x_hi", "x_lo", "y_hi", "y_lo")
 
     def __init__(self, anchor_x_m: float, anchor_y_m: float, *, exact: bool = False,
                  heading_rad: tuple[float, float] = (-HALF_HEADING_RAD, HALF_HEADING_RAD),
-                 placed: bool = False) -> None:
+                 placed: bool = False, prior: tuple[float, float] = (0.0, 0.0)) -> None:
         """Anchored at the raw reference position (m) where it started; ``heading_rad``: the
         interval ``d`` is known to lie in (a correct firmware's); ``placed``: anchored at a
-        placement (``carried``), not at the reference's start."""
+        placement (``carried``), not at the reference's start; ``prior``: the rotation the
+        segments before it fitted (rad, relative to ``d`` = 0 here) and its weight (their
+        spread, m^2: ``carried``)."""
         self.ax, self.ay, self.exact, self.frozen = anchor_x_m, anchor_y_m, exact, exact
-        self.placed = placed
+        self.placed, self.prior = placed, prior
         self.d_lo, self.d_hi = (0.0, 0.0) if exact else heading_rad
         h = 0.0 if exact else HALF_POSITION_M
         self.x_lo, self.x_hi, self.y_lo, self.y_hi = -h, h, -h, h
@@ -169,24 +175,49 @@ class LiveFit:
         if fit is not None:
             return fit
         n = self.n
-        d = 0.5 * (self.d_lo + self.d_hi)
+        d = self._rotation()
         sx = sy = 0.0
         cos_d, sin_d = math.cos(d), math.sin(d)
         if n:
             mqx, mqy, mbx, mby = self.sqx / n, self.sqy / n, self.sbx / n, self.sby / n
-            spread = self.sqq - n * (mqx * mqx + mqy * mqy)  # of the centred q
-            if spread > 0.0:  # a lever arm to learn from
-                cross = self.scross - n * (mqx * mby - mqy * mbx)  # of the centred q, b
-                dot = self.sdot - n * (mqx * mbx + mqy * mby)
-                d = bounded_mean(math.atan2(cross, spread + dot), ROUNDING_SIGMA_M / math.sqrt(
-                    spread), (self.d_lo, self.d_hi))
-                cos_d, sin_d = math.cos(d), math.sin(d)
             # s = mean(pose - A - R(d) q) = mean(b) + (I - R(d)) mean(q)
             sx = mbx + (1.0 - cos_d) * mqx + sin_d * mqy
             sy = mby - sin_d * mqx + (1.0 - cos_d) * mqy
             sx, sy = min(max(sx, self.x_lo), self.x_hi), min(max(sy, self.y_lo), self.y_hi)
         fit = self._fit = (d, sx, sy, cos_d, sin_d)
         return fit
+
+    def _rotation(self) -> float:
+        """``d`` (rad): the rotation the segments so far fit (``_fitted``) weighed against the
+        heading interval (``bounded_mean``); the interval's middle without a lever arm."""
+        fit, weight = self._fitted()
+        if not weight > 0.0:
+            return 0.5 * (self.d_lo + self.d_hi)
+        return bounded_mean(fit, ROUNDING_SIGMA_M / math.sqrt(weight), (self.d_lo, self.d_hi))
+
+    def _fitted(self) -> tuple[float, float]:
+        """The least-squares rotation (rad) of this segment's centred path and the segments'
+        before it (``prior``), each weighed by its spread (one rotation, an offset each, as
+        ``analyze`` fits a life's segments), and their spread (m^2)."""
+        here, spread = self._segment_fit()
+        fit, weight = self.prior
+        total = weight + spread
+        return ((fit * weight + here * spread) / total if total > 0.0 else 0.0), total
+
+    def _segment_fit(self) -> tuple[float, float]:
+        """This segment's least-squares rotation of its centred path onto the on-board
+        positions (rad: the 2-D Procrustes angle) and the path's spread (sum |q_c|^2, m^2);
+        (0, 0) without a lever arm."""
+        n = self.n
+        if not n:
+            return 0.0, 0.0
+        mqx, mqy, mbx, mby = self.sqx / n, self.sqy / n, self.sbx / n, self.sby / n
+        spread = self.sqq - n * (mqx * mqx + mqy * mqy)  # of the centred q
+        if not spread > 0.0:
+            return 0.0, 0.0
+        cross = self.scross - n * (mqx * mby - mqy * mbx)  # of the centred q, b
+        dot = self.sdot - n * (mqx * mbx + mqy * mby)
+        return math.atan2(cross, spread + dot), spread
 
     def correct(self, raw: FramePose) -> FramePose:
         """``C(raw)``: the raw reference pose corrected by the fit."""
@@ -204,8 +235,9 @@ class LiveFit:
         if self.exact:  # the heading is exact across a stall: only the position is placed
             return LiveFit(anchor_x_m, anchor_y_m, heading_rad=(0.0, 0.0), placed=True)
         d = self.solve()[0]
+        fit, weight = self._fitted()  # the rotation's evidence goes on: the heading does
         return LiveFit(anchor_x_m, anchor_y_m, heading_rad=(self.d_lo - d, self.d_hi - d),
-                       placed=True)
+                       placed=True, prior=(fit - d, weight))
 
     def placed_shift_m(self) -> tuple[float, float]:
         """The position this fit moves the reference by at its anchor (``s``: dx, dy m) when
