@@ -39,7 +39,8 @@ STEPS = 800
 
 class Drive(NamedTuple):
     """A pinned drive: the robot, integrator, speed (m a period), turn (rad a period), seed,
-    the frames the recorder lost (first, count) and the unseen restart's encoder frame."""
+    the frames the recorder lost (first, count), the unseen restart's encoder frame and the
+    first frame lost after it (or the end)."""
 
     robot: Robot
     integrator: str
@@ -48,15 +49,16 @@ class Drive(NamedTuple):
     seed: int
     cut: list[tuple[int, int]]
     restart: int
+    until: int
 
 
 DRIVES = {
     "straight32": Drive(Robot(9_431_988, 285_819_757, 300_110_745, 151_990_577, 32), "euler",
-                        0.01925670943473033, 0.0, 804, [(198, 5), (320, 80), (535, 1)], 400),
+                        0.01925670943473033, 0.0, 804, [(198, 5), (320, 80), (535, 1)], 400, 535),
     "slow_turn16": Drive(Robot(3878, 15_719_271, 15_719_271, 1_000_000_000, 16), "euler",
-                         0.01948434034339805, 0.005, 1, [(166, 31)], 197),
+                         0.01948434034339805, 0.005, 1, [(166, 31)], 197, STEPS + 1),
     "turned_in_hole": Drive(Robot(150_000, 11_000_000, 11_000_000, 16_500_000, 32), "euler",
-                            0.0125, 0.03, 0, [(320, 200)], 520),
+                            0.0125, 0.03, 0, [(320, 200)], 520, STEPS + 1),
 }
 
 
@@ -179,6 +181,24 @@ def test_a_placement_after_the_restart_keeps_the_heading_fitted_before_it(
     assert len(errors) > 20
     own_heading_lsb = max(h for _, h in errors)
     assert own_heading_lsb <= 0.1, own_heading_lsb
+
+
+@pytest.mark.parametrize("name", sorted(DRIVES))
+def test_the_new_lifes_first_samples_are_judged_by_the_fit_of_a_second_of_them(
+    tmp_path: Path, name: str,
+) -> None:
+    """The new life's samples wait ``livenewstart.HOLD_S`` of bus time, then are judged by the
+    start fitted over all of them: the live reference's own error over the life (to its next
+    hole) stays within a quarter LSB of position and of heading (before: up to 0.62 LSB of
+    position and 0.48 of heading, its first samples judged by a fit of one, two, three)."""
+    drive = DRIVES[name]
+    live = _live(_log(tmp_path, drive), drive)
+    assert live.monitor.tracker.placer.dark.new_starts == 1
+    errors = _own_errors(live, drive, range(drive.restart, drive.until))
+    assert len(errors) > 60  # (the bridge publishes the last of the samples judged at once)
+    own_position_lsb, own_heading_lsb = (max(e[i] for e in errors) for i in (0, 1))
+    assert own_position_lsb <= 0.25, own_position_lsb
+    assert own_heading_lsb <= 0.25, own_heading_lsb
 
 
 @pytest.mark.parametrize(("key", "frames", "bias_lsb"), [
