@@ -24,6 +24,7 @@ import pytest
 
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
+from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.livepose import Sample
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
@@ -84,15 +85,18 @@ def _fine_path(drive: Drive) -> list[tuple[float, float, float]]:
     return path
 
 
-def _log(tmp_path: Path, drive: Drive, key: str = "", bias: dict[int, int] | None = None
-         ) -> Path:
+def _log(tmp_path: Path, drive: Drive, key: str = "", bias: dict[int, int] | None = None,
+         stop: int = STEPS + 1) -> Path:
     """The drive synthesized (``key``: ``x_bias_100um`` or ``heading_bias_lsb``, a firmware off
-    by ``bias`` LSB at those frames), less the frames the recorder lost."""
+    by ``bias`` LSB at those frames), less the frames the recorder lost, up to frame ``stop``
+    (exclusive)."""
     d_left, d_right = _drive(drive.robot, STEPS, drive.seed, drive.speed_m, drive.turn_rad)
     synth = synthesize(profile_of(drive.robot), drive.integrator, d_left, d_right,
                        x_bias_100um=bias if key == "x_bias_100um" else None,
                        heading_bias_lsb=bias if key == "heading_bias_lsb" else None)
-    return _cut(synth, drive.cut).write(tmp_path / "drive.log")
+    lost = {k for first, n in drive.cut for k in range(first, first + n)}
+    kept = sum(1 for k in range(stop) if k not in lost)  # the cut log's groups before ``stop``
+    return _cut(synth, drive.cut).write(tmp_path / "drive.log", stop=kept)
 
 
 def _live(path: Path, drive: Drive) -> Live:
@@ -217,3 +221,18 @@ def test_a_firmware_wrong_after_the_unseen_restart_fails_live(
     assert live.monitor.tracker.placer.dark.new_starts == 1
     assert live.monitor.tracker.wrongs.count >= 1  # a POSE WRONG episode latched
     assert any(p["pose_wrong"] for leaf, p in live.publications if leaf == "error")
+
+
+def test_the_samples_held_when_the_watch_ends_are_judged(tmp_path: Path) -> None:
+    """The log ends 0.4 s after the unseen restart (within ``HOLD_S``), the firmware's X 3 LSB
+    off from frame 420: the end of the watch (``livegapseen.end_of_watch``, ``odocan
+    monitor``'s end) judges the samples still held, POSE WRONG (before: never judged)."""
+    drive = DRIVES["straight32"]
+    path = _log(tmp_path, drive, "x_bias_100um", dict.fromkeys(range(420, STEPS + 1), 3),
+                stop=440)
+    tracker = _live(path, drive).monitor.tracker
+    assert tracker.placer.dark.new_starts == 1
+    assert tracker.wrongs.count == 0  # held, not judged yet
+    end_of_watch(tracker)
+    tracker.wrongs.finish(tracker.allowance_m)
+    assert tracker.wrongs.count >= 1
