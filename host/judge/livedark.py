@@ -10,7 +10,8 @@ heard, and across the restarted counters their counts (the heading's too) are un
 the firmware's pages heard so far prove it took exactly the frames heard across it
 (``livegapseen.LiveSeen``: ``Seen.took_across``), the reference restarts there from the next
 on-board pose (``tracking.PoseTracker.restart_reference``: the pose adopted, its heading and
-position fitted within their rounding by ``livefit``), and the restart's event says why
+position fitted within their rounding by ``livefit``, the new life's samples held until that fit
+is made of a second of them: ``livenewstart``), and the restart's event says why
 (``unseenrestart.DETAIL``), as ``analyze`` restarts it. What the new start hides is one pose
 jump at the restart; every step after it is judged exactly (a firmware that drifts after it is
 POSE WRONG). Without a dark gap (the whole log: the firmware's frames heard across the

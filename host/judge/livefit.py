@@ -16,8 +16,13 @@ it judges):
   (``reference_path._rotation_fit``'s, the start position eliminated; here in closed form, the
   2-D Procrustes angle ``atan2(sum q_c x p_c, sum q_c . p_c)`` of the centred paths, from
   running sums), kept within the running overlap of the heading offsets' rounding intervals
-  (``reference_path._start_pose``'s ``lo``, ``hi``); the interval's middle while the path has
-  no lever arm;
+  (``reference_path._start_pose``'s ``lo``, ``hi``), weighed against that interval by its
+  spread (``bounded_mean``: the mean of the fit's normal, deviation ``ROUNDING_SIGMA_M /
+  sqrt(sum |q_c|^2)``, restricted to the interval): the interval's middle while the path has
+  no lever arm, the fit once its lever arm outweighs the rounding. Clamped alone, a fit over a
+  few centimetres (mostly the positions' rounding) sat at an edge of the interval, up to 0.79
+  heading LSB from the firmware's heading after an unseen restart
+  (``tests/test_live_unseen_restart.py``);
 * ``s`` the least-squares position given ``d``, kept within the running overlap of the samples'
   position rounding intervals, each widened by what the heading interval of its time could turn
   it (``|q| (hi - lo) / 2``): every interval holds a correct firmware's start, so their overlap
@@ -30,7 +35,11 @@ the fit stays frozen from then on (it never absorbs an error bigger than the rou
 sums only: O(1) memory and a few dozen float operations per sample. A reference that starts at
 the power-up pose (0, 0, 0) is exact (``C`` the identity), as ``analyze`` takes it. After a
 stall's placement (``rebase``) the correction is taken into the reference and the fit goes on
-from the placed pose: the heading interval carried, the position within a pose's rounding of it.
+from the placed pose: the heading interval carried, and the rotation's evidence (its least
+squares and the spread behind it: the heading goes on across a placement, one rotation fits
+every segment, as ``analyze`` fits a life's), the position within a pose's rounding of it.
+Started afresh, the rotation after a placement had only the centimetres since, and sat up to
+0.48 heading LSB off where the segments before had it to 0.02.
 
 ``pose_wrong`` is the verdict's rule, ``analyze``'s: beyond one LSB of position (after the loss
 allowance) or of heading.
@@ -50,8 +59,33 @@ HALF_HEADING_RAD = 0.5 * HEADING_LSB_RAD + 1e-12
 # rad per metre on bench/judge_error.py's 112 km drives (3.3-4.8 um, 5.9e-11 rad at the end)
 POSITION_DRIFT_PER_M = 1e-10
 HEADING_DRIFT_RAD_PER_M = 2e-15
+# one sample's position rounding as a deviation (m per axis: uniform over one LSB), which
+# weighs the rotation's least-squares fit against its interval (``bounded_mean``)
+ROUNDING_SIGMA_M = POSITION_LSB_M / math.sqrt(12.0)
+_SQRT_HALF = math.sqrt(0.5)
+_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+_TINY_MASS = 1e-300
 _PI = math.pi
 _TURN = 2.0 * math.pi
+
+
+def bounded_mean(fit: float, sigma: float, bounds: tuple[float, float]) -> float:
+    """The mean of a normal (mean ``fit``, deviation ``sigma``) restricted to ``bounds`` (lo,
+    hi): a least-squares estimate weighed against the interval the rounding proves. A short
+    lever arm (``sigma`` wide against the interval) keeps about its middle instead of the edge
+    the noise pulls the estimate to; a long one (``sigma`` narrow) its fit, clamped."""
+    lo, hi = bounds
+    if not sigma > 0.0 or hi <= lo:
+        return min(max(fit, lo), hi)
+    a, b = (lo - fit) / sigma, (hi - fit) / sigma
+    if a > 0.0:  # the tail above: erfc keeps its mass from cancelling
+        mass = 0.5 * (math.erfc(a * _SQRT_HALF) - math.erfc(b * _SQRT_HALF))
+    else:
+        mass = 0.5 * (math.erfc(-b * _SQRT_HALF) - math.erfc(-a * _SQRT_HALF))
+    if mass < _TINY_MASS:  # the fit far outside: its nearest bound
+        return min(max(fit, lo), hi)
+    pull = (math.exp(-0.5 * a * a) - math.exp(-0.5 * b * b)) * _INV_SQRT_2PI
+    return min(max(fit + sigma * pull / mass, lo), hi)
 
 
 def pose_wrong(dpos_m: float, dheading_rad: float, allowance_m: float = 0.0) -> bool:
@@ -64,17 +98,19 @@ class LiveFit:
     """The start fit of one live reference (module docstring); ``exact``: nothing to fit."""
 
     __slots__ = ("_fit", "_last_q", "ax", "ay", "d_hi", "d_lo", "exact", "frozen", "n",
-                 "path_m", "placed", "sbx", "sby", "scross", "sdot", "sqq", "sqx", "sqy", "x_hi",
-                 "x_lo", "y_hi", "y_lo")
+                 "path_m", "placed", "prior", "sbx", "sby", "scross", "sdot", "sqq", "sqx", "sqy",
+                 "x_hi", "x_lo", "y_hi", "y_lo")
 
     def __init__(self, anchor_x_m: float, anchor_y_m: float, *, exact: bool = False,
                  heading_rad: tuple[float, float] = (-HALF_HEADING_RAD, HALF_HEADING_RAD),
-                 placed: bool = False) -> None:
+                 placed: bool = False, prior: tuple[float, float] = (0.0, 0.0)) -> None:
         """Anchored at the raw reference position (m) where it started; ``heading_rad``: the
         interval ``d`` is known to lie in (a correct firmware's); ``placed``: anchored at a
-        placement (``carried``), not at the reference's start."""
+        placement (``carried``), not at the reference's start; ``prior``: the rotation the
+        segments before it fitted (rad, relative to ``d`` = 0 here) and its weight (their
+        spread, m^2: ``carried``)."""
         self.ax, self.ay, self.exact, self.frozen = anchor_x_m, anchor_y_m, exact, exact
-        self.placed = placed
+        self.placed, self.prior = placed, prior
         self.d_lo, self.d_hi = (0.0, 0.0) if exact else heading_rad
         h = 0.0 if exact else HALF_POSITION_M
         self.x_lo, self.x_hi, self.y_lo, self.y_hi = -h, h, -h, h
@@ -139,23 +175,49 @@ class LiveFit:
         if fit is not None:
             return fit
         n = self.n
-        d = 0.5 * (self.d_lo + self.d_hi)
+        d = self._rotation()
         sx = sy = 0.0
         cos_d, sin_d = math.cos(d), math.sin(d)
         if n:
             mqx, mqy, mbx, mby = self.sqx / n, self.sqy / n, self.sbx / n, self.sby / n
-            spread = self.sqq - n * (mqx * mqx + mqy * mqy)  # of the centred q
-            if spread > POSITION_LSB_M * POSITION_LSB_M * n:  # a lever arm to learn from
-                cross = self.scross - n * (mqx * mby - mqy * mbx)  # of the centred q, b
-                dot = self.sdot - n * (mqx * mbx + mqy * mby)
-                d = min(max(math.atan2(cross, spread + dot), self.d_lo), self.d_hi)
-                cos_d, sin_d = math.cos(d), math.sin(d)
             # s = mean(pose - A - R(d) q) = mean(b) + (I - R(d)) mean(q)
             sx = mbx + (1.0 - cos_d) * mqx + sin_d * mqy
             sy = mby - sin_d * mqx + (1.0 - cos_d) * mqy
             sx, sy = min(max(sx, self.x_lo), self.x_hi), min(max(sy, self.y_lo), self.y_hi)
         fit = self._fit = (d, sx, sy, cos_d, sin_d)
         return fit
+
+    def _rotation(self) -> float:
+        """``d`` (rad): the rotation the segments so far fit (``_fitted``) weighed against the
+        heading interval (``bounded_mean``); the interval's middle without a lever arm."""
+        fit, weight = self._fitted()
+        if not weight > 0.0:
+            return 0.5 * (self.d_lo + self.d_hi)
+        return bounded_mean(fit, ROUNDING_SIGMA_M / math.sqrt(weight), (self.d_lo, self.d_hi))
+
+    def _fitted(self) -> tuple[float, float]:
+        """The least-squares rotation (rad) of this segment's centred path and the segments'
+        before it (``prior``), each weighed by its spread (one rotation, an offset each, as
+        ``analyze`` fits a life's segments), and their spread (m^2)."""
+        here, spread = self._segment_fit()
+        fit, weight = self.prior
+        total = weight + spread
+        return ((fit * weight + here * spread) / total if total > 0.0 else 0.0), total
+
+    def _segment_fit(self) -> tuple[float, float]:
+        """This segment's least-squares rotation of its centred path onto the on-board
+        positions (rad: the 2-D Procrustes angle) and the path's spread (sum |q_c|^2, m^2);
+        (0, 0) without a lever arm."""
+        n = self.n
+        if not n:
+            return 0.0, 0.0
+        mqx, mqy, mbx, mby = self.sqx / n, self.sqy / n, self.sbx / n, self.sby / n
+        spread = self.sqq - n * (mqx * mqx + mqy * mqy)  # of the centred q
+        if not spread > 0.0:
+            return 0.0, 0.0
+        cross = self.scross - n * (mqx * mby - mqy * mbx)  # of the centred q, b
+        dot = self.sdot - n * (mqx * mbx + mqy * mby)
+        return math.atan2(cross, spread + dot), spread
 
     def correct(self, raw: FramePose) -> FramePose:
         """``C(raw)``: the raw reference pose corrected by the fit."""
@@ -173,8 +235,9 @@ class LiveFit:
         if self.exact:  # the heading is exact across a stall: only the position is placed
             return LiveFit(anchor_x_m, anchor_y_m, heading_rad=(0.0, 0.0), placed=True)
         d = self.solve()[0]
+        fit, weight = self._fitted()  # the rotation's evidence goes on: the heading does
         return LiveFit(anchor_x_m, anchor_y_m, heading_rad=(self.d_lo - d, self.d_hi - d),
-                       placed=True)
+                       placed=True, prior=(fit - d, weight))
 
     def placed_shift_m(self) -> tuple[float, float]:
         """The position this fit moves the reference by at its anchor (``s``: dx, dy m) when

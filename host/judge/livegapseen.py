@@ -233,9 +233,11 @@ def heard_status(tracker: PoseTracker, message: Any, data: bytes, data_ids: Any,
 
 def end_of_watch(tracker: PoseTracker) -> None:
     """The watch ends (no later frame comes): ``LiveSeen.flush`` and what it proves withdrawn,
-    and an ambiguous hole's choice made (``livechoice``), before the samples still waiting are
-    judged (``posewrongs.PoseWrongs.finish``)."""
+    an ambiguous hole's choice made (``livechoice``) and a new start's samples held judged
+    (``livenewstart``), before the samples still waiting are judged
+    (``posewrongs.PoseWrongs.finish``)."""
     placer = tracker.placer
     if placer.seen.flush() and placer.waiting:
         placer.withdraw(placer.seen.proven())
     tracker.choice.decide()  # no page comes now: an ambiguous hole's choice is made
+    tracker.newstart.release()  # a new start's samples held: judged by its fit so far

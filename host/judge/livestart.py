@@ -28,6 +28,7 @@ def start_reference(tracker: PoseTracker, pose: FramePose, counts: list[Counted]
     )
     tracker.reference_starts += 1
     tracker.fit = LiveFit.start(pose)
+    tracker.newstart.started(tracker.fit.exact)  # after an unseen restart: held (livenewstart)
     tracker._ref_at = {}
     tracker.placer.restart()
     tracker._gate = StepGate(tracker.geometry, tracker.counter_bits, tracker.restarts)

@@ -18,6 +18,7 @@ from typing import Any
 from odocan.host.judge.livechoice import LiveChoice
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livelosses import LiveAllowance
+from odocan.host.judge.livenewstart import NewStartHold
 from odocan.host.judge.liveplace import StallPlacer
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import (
@@ -109,6 +110,7 @@ class PoseTracker:
         self.restarts.heard_in = self.placer.seen.heard_in  # evidenceless: a choice held
         self.choice = LiveChoice(self)  # ... both candidates until the pages or the next pose
         self.restarts.choose = self.choice.open
+        self.newstart = NewStartHold(self)  # a new start's samples wait for its fit
         self._gate = StepGate(geometry, self.counter_bits, self.restarts)
         self._pending: FramePose | None = None  # the first pose, heard before the integrator
         self._backlog_counts: list[Counted] = []  # the frames since the pending pose's
@@ -142,6 +144,8 @@ class PoseTracker:
         self._now_s = self.placer.dark.heard(t_s)  # (and whether the input went dark)
         if t_s > self.choice.until_s:  # the pages had their time: the choice is made
             self.choice.decide()
+        if t_s > self.newstart.until_s:  # the new start's samples had their fit
+            self.newstart.release()
         if self._boot is not None and t_s > self._boot[1]:
             self._finish_boot(self._boot[0]) if self._boot[0] >= 0 else self._finish_first(False)
         if t_s - self._unsettled_from_s < QUEUED_GAP_S:
@@ -255,11 +259,12 @@ class PoseTracker:
         self._sampled.add(seq)
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
         self.pose_t_s = y.t_s
-        self.placer.dark.due(seq, self.restart_reference)  # after a dark restart: livedark
+        self.placer.dark.due(seq, self.newstart.restart)  # after a dark restart: livedark
         ref = self._compare(pose, y, queued)
         self.settled.append(sample := Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
         if self._boot is not None:  # held: settled again once judged (``livestart``)
             self._held[seq] = sample
+        self.newstart.sampled(sample)  # ... or held after an unseen restart (livenewstart)
 
     def _compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
         """Judge one on-board sample; the reference at its encoder frame, None when unknown."""
@@ -302,20 +307,27 @@ class PoseTracker:
         if ref is None:
             return None
         if self._place_at_next or self.placer.owed:  # owed: an allowance withdrawn
+            self.newstart.release()  # judged by the fit before the placement
             ref = place_reference(self, pose, ref)
+        elif self.newstart.holds(pose, ref):
+            return None
         return self._record(pose, ref)
 
-    def _record(self, pose: FramePose, raw: FramePose) -> FramePose:
-        """Judge ``pose`` against the raw reference ``raw`` at its frame, corrected by the start
-        fit (which the sample narrows first); returns the corrected reference."""
-        self.fit.feed(pose, raw)
+    def _record(self, pose: FramePose, raw: FramePose, fed: bool = False,
+                t_s: float | None = None) -> FramePose:
+        """Judge ``pose`` (its ODOM_POSE_Y at bus time ``t_s``, default the latest's) against
+        the raw reference ``raw`` at its frame, corrected by the start fit (which the sample
+        narrows first, unless ``fed``); returns the corrected reference."""
+        if not fed:
+            self.fit.feed(pose, raw)
         ref = self.fit.correct(raw)
         self.placer.compared(pose)
         self.reference, self._last_pair = ref, (pose, ref)
         self._last_compared = pose.seq
         self.vs_reference.add(pose, ref)
         self._losses.spans += self.twins.resolve(self.geometry, self.counter_bits, self.integrator)
-        self._losses.record(pose.seq, self.vs_reference.latest, self.fast_path, self.pose_t_s)
+        self._losses.record(pose.seq, self.vs_reference.latest, self.fast_path,
+                            self.pose_t_s if t_s is None else t_s)
         return ref
 
     # --- encoder frames the firmware lost that the bus carried (host.judge.livelosses) ---
@@ -354,6 +366,7 @@ class PoseTracker:
     def restart_reference(self) -> None:
         """Start the reference again at the next on-board pose (after a set-pose or config)."""
         self.choice.decide()  # the samples held are judged by the reference they named
+        self.newstart.release()
         self._ref = None
         self._last_compared = -1
         self._last_sample_t = None

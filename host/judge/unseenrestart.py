@@ -29,7 +29,9 @@ a restart the pages prove it took exactly (the exact rule). Each such restart is
 report (``DETAIL``) and counted (``samples.unseen_restarts``). The streamed judge does not fit
 the new start: it refuses such a life (``whole_only``) and ``odocan analyze`` judges it whole.
 The live judge (``host.judge.tracking``) restarts its reference there from the next on-board
-pose when its input went dark before the restart (``host.judge.livedark``), with this event.
+pose when its input went dark before the restart (``host.judge.livedark``), with this event, and
+judges the new life's first second of samples by the start fitted over all of them
+(``host.judge.livenewstart``), the samples after by that fit as it goes on.
 """
 
 from __future__ import annotations
