@@ -28,6 +28,7 @@ from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.livepose import Sample
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt.fleetrun import watched_verdict
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from tests.independent_checker import Robot, _Odometry
 from tests.synth_log import synthesize
@@ -236,3 +237,21 @@ def test_the_samples_held_when_the_watch_ends_are_judged(tmp_path: Path) -> None
     end_of_watch(tracker)
     tracker.wrongs.finish(tracker.allowance_m)
     assert tracker.wrongs.count >= 1
+
+
+def test_the_fleets_verdict_judges_the_samples_held_when_the_watch_ends(tmp_path: Path) -> None:
+    """The same log through the bridge: the fleet's verdict at the end of its run
+    (``fleetrun.watched_verdict``) judges the new start's samples still held: FAIL (before: only
+    a held hole's choice was made there, and the wrong samples were never judged: PASS)."""
+    drive = DRIVES["straight32"]
+    path = _log(tmp_path, drive, "x_bias_100um", dict.fromkeys(range(420, STEPS + 1), 3),
+                stop=440)
+    profile = profile_of(drive.robot)
+    bridge = RobotTelemetry("r", Geometry.of(profile), drive.integrator,
+                            counter_bits=profile.counter_bits)
+    for msg in _messages(path):
+        bridge.feed(msg)
+    assert bridge.tracker.placer.dark.new_starts == 1
+    verdict = watched_verdict(bridge, 0, None)
+    assert verdict["verdict"] == "FAIL", verdict
+    assert "position vs reference" in verdict["reason"]

@@ -66,6 +66,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from odocan.host.judge.livefit import pose_wrong
+from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.livepose import ErrorStats
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
@@ -314,16 +315,7 @@ def _report(
             robot = bridge.robots[i]
             entry["commands_accepted"] = robot.commands_sent
             entry["commands_rejected"] = robot.commands_rejected
-            tracker = robot.telemetry.tracker
-            tracker.choice.decide()  # the end of the watch: a held choice made (livechoice)
-            verdict = judge_robot(
-                tracker.vs_reference, tracker.vs_truth, frames_dropped=dropped,
-                beyond_allowance_m=tracker.max_beyond_allowance_m)
-            halted = _halted(fleet, i, stats)
-            if verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
-                verdict = after_halts(verdict, halted, tracker,  # host.mqtt.overload
-                                      robot.telemetry.stretches)
-            entry.update(verdict)
+            entry.update(watched_verdict(robot.telemetry, dropped, _halted(fleet, i, stats)))
         else:
             entry.update(pose_vs_reference=None, pose_vs_truth=None, verdict=None,
                          reason="no bridge: the poses were not watched")
@@ -368,6 +360,21 @@ def _errors(stats: ErrorStats) -> dict[str, Any] | None:
         return None
     return {"max_dpos_m": stats.max_dpos_m, "max_dheading_rad": stats.max_dheading_rad,
             "samples": stats.samples}
+
+
+def watched_verdict(
+    telemetry: RobotTelemetry, frames_dropped: int, halted: Halted | None
+) -> dict[str, Any]:
+    """One bridged robot's verdict when the watch ends: what its live judge still holds judged
+    first (``livegapseen.end_of_watch``: a held choice made, a new start's held samples judged),
+    then ``judge_robot``, then the stretches between the loop's halts (``overload``)."""
+    tracker = telemetry.tracker
+    end_of_watch(tracker)
+    verdict = judge_robot(tracker.vs_reference, tracker.vs_truth, frames_dropped=frames_dropped,
+                          beyond_allowance_m=tracker.max_beyond_allowance_m)
+    if verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
+        verdict = after_halts(verdict, halted, tracker, telemetry.stretches)
+    return verdict
 
 
 def judge_robot(
