@@ -3,17 +3,23 @@
 When the fleet's loop runs a tick ``sim.board.HALT_AFTER_S`` (9.5 periods) or more late, every
 board runs it as a halted MCU's: its receive FIFO kept 3 frames and overran the rest, so the
 firmware lost frames the bus carried and took them as one step (or refused it and re-primed,
-COUNTER_RESET). No judge can tell from the bus how far that moved the firmware's pose: the halt
-is the rig's fault. Between two halts, though, the firmware hears every frame again, and its pose
-must move exactly as a float64 reference stepped with those frames moves.
+COUNTER_RESET): the halt is the rig's fault. Between two halts the firmware hears every frame
+again, and its pose must move exactly as a float64 reference stepped with those frames moves.
 
 ``HaltStretches`` judges each *stretch* so, like a set-pose: the reference re-starts at the
 firmware's pose (its *base* sample) once the firmware has taken the frames after the halt
 (the base names a frame ``RESYNC_FRAMES`` releases after the halted tick or later: by then a
 refused step has been re-primed, ``firmware.encoders``), and steps with every encoder frame the
 tracker accepted; the stretch ends at the next halt (a sample made at or after it belongs to
-the next). The re-start jump itself is never judged; a pose step inside a stretch that the
-reference does not make is.
+the next). A pose step inside a stretch that the reference does not make is wrong.
+
+The re-start itself, the samples from the halt up to the new base, is judged across the halt
+(``host.mqtt.haltcross``): the stretch before it (before the first halt: one based at the latest
+sample) is stepped with the frames sent during the halt in each way the halted MCU could have
+taken them (its FIFO's frames, then the first after the halt merged or re-primed on), and a
+sample no way explains is wrong. That needs the loop's gap before each halt (``halt_gaps``,
+``sim.fleet.Fleet.halt_gaps``), one halt since the latest sample and the frames in the
+tracker's window; else the re-start is not judged (counted apart: ``restarts_judged``).
 
 The rule is the pose signals' rounding, not a tolerance: the firmware rounds X and Y to 0.1 mm
 and HEADING to one LSB, to nearest. So a correct firmware's samples of one stretch differ from
@@ -44,7 +50,9 @@ from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.host.judge.livepose import Sample
 from odocan.host.judge.reference import ReferenceOdometry
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.haltcross import ENC, Crossing
 from odocan.host.mqtt.haltpath import (
+    Frame,
     Stretch,
     frames_from,
     narrow_offsets,
@@ -55,18 +63,27 @@ from odocan.sim.board import TICK_S
 
 @dataclass
 class Wrong:
-    """The first wrong stretch: bus time (s) of its sample whose interval emptied, its encoder
-    frame (seq), which pose field, by how much beyond the rounding (LSB), the stretch's base
-    time (s)."""
+    """The first wrong stretch or re-start: bus time (s) of its sample whose interval emptied,
+    its encoder frame (seq), which pose field (``haltcross.ENC``: the frame it names), by how
+    much beyond the rounding (LSB), the stretch's base time (s) or (``across``) the halt's."""
 
     t_s: float
     seq: int
     field: str
     excess_lsb: float
     base_t_s: float
+    across: bool = False
 
     def text(self) -> str:
         """``x 2.04 LSB beyond the rounding at 4.81 s (enc 480), in the stretch from 4.62 s``."""
+        if self.across:
+            what = (f"ENC_COUNTER names no frame the halted firmware could have taken last at "
+                    f"{self.t_s:.2f} s" if self.field == ENC else
+                    f"{self.field} {self.excess_lsb:.2f} LSB beyond the pose signals' rounding "
+                    f"at {self.t_s:.2f} s (enc {self.seq})")
+            return (f"{what}, across the halt at {self.base_t_s:.2f} s: no way the halted "
+                    "firmware could have taken the frames sent meanwhile (its FIFO's, then the "
+                    "first after the halt merged or re-primed) brings the stretch before it there")
         return (f"{self.field} {self.excess_lsb:.2f} LSB beyond the pose signals' rounding at "
                 f"{self.t_s:.2f} s (enc {self.seq}), inside the stretch re-started at "
                 f"{self.base_t_s:.2f} s: a pose step the reference does not make")
@@ -78,9 +95,13 @@ class HaltStretches:
     (``sim.fleet.Fleet.halt_ticks``, ascending, read as it grows); ``offset_ticks``: how many
     fleet ticks this robot's clock starts late (its bus time = (k - offset) * TICK_S)."""
 
-    def __init__(self, tracker: PoseTracker, halt_ticks: Sequence[int], offset_ticks: int) -> None:
+    def __init__(self, tracker: PoseTracker, halt_ticks: Sequence[int], offset_ticks: int,
+                 halt_gaps: Sequence[int] | None = None) -> None:
         self.tracker = tracker
         self._halt_ticks, self._offset = halt_ticks, offset_ticks
+        self._halt_gaps = halt_gaps  # each halt's periods since the tick run before it
+        self._crossing: Crossing | None = None  # the latest halt's, until its new base
+        self._last: Sample | None = None  # the latest sample before the first halt
         self._next = 0  # the next halt not consumed
         self.halt_s: float | None = None  # bus time of the latest halt before the samples
         self._stretch: Stretch | None = None
@@ -92,6 +113,10 @@ class HaltStretches:
         self.stretches = 0  # stretches with a base
         self.wrong_stretches = 0
         self.first_wrong: Wrong | None = None
+        self.restarts_seen = 0  # halts taken (each a re-start of the firmware's pose)
+        self.restarts_judged = 0  # ... whose samples up to the new base were judged across it
+        self.wrong_restarts = 0
+        self.judged_across = 0  # samples judged across a halt (``haltcross``)
 
     def on_samples(self, samples: list[Sample]) -> None:
         """The tracker's samples settled (``PoseTracker.take_samples``), in order."""
@@ -99,53 +124,106 @@ class HaltStretches:
             self._on_sample(sample)
 
     def _on_sample(self, sample: Sample) -> None:
-        if self._consume_halts(sample.t_s):
+        taken = self._consume_halts(sample.t_s)
+        if taken:
+            self._cross(taken)
             self._stretch = None
         starts, restarted = self.tracker.reference_starts, False
         if starts != self._starts:  # a reboot, a set-pose: a stretch based before it ends
             self._starts, restarted = starts, self._stretch is not None
+            self._crossing = None
         if self.halt_s is None:
-            return  # before the first halt: the tracker judges (``overload``)
+            self._last = sample  # before the first halt: the tracker judges (``overload``)
+            return
         self.after += 1
         if restarted:
-            self._stretch, self.halt_s = None, math.inf  # no new base before the next halt
-            return
+            self._stretch, self.halt_s, self._crossing = None, math.inf, None  # no new base
+            return  # before the next halt
         if self._stretch is None:
+            self._judge_crossing(sample)
             self._start(sample)
+            if self._stretch is not None and self._crossing is not None:
+                self._crossing = None  # the halt's re-start judged up to the new base
+                self.restarts_judged += 1
         elif self._step_to(self._stretch, sample.pose.seq):
             self._compare(self._stretch, sample)
         else:
             self._stretch, self.halt_s = None, math.inf
 
-    def _consume_halts(self, t_s: float) -> bool:
+    def _consume_halts(self, t_s: float) -> int:
         """Take the halts at or before bus time ``t_s`` (a sample made at a halted tick, sent
-        1 ms after it, is the next stretch's); True when one was taken."""
-        ticks, taken = self._halt_ticks, False
+        1 ms after it, is the next stretch's); how many were taken."""
+        ticks, taken = self._halt_ticks, 0
         while self._next < len(ticks):
             halt_s = max(ticks[self._next] - self._offset, 0) * TICK_S
             if halt_s > t_s:
                 break
-            self.halt_s, taken = halt_s, True
+            self.halt_s, taken = halt_s, taken + 1
             self._next += 1
         return taken
+
+    def _cross(self, taken: int) -> None:
+        """The samples from the halt just taken on are judged across it (``haltcross``) from
+        the stretch judged before it (before the first halt: from the latest sample), when
+        that is the only halt since the latest sample and the loop told its gap; an open
+        crossing of an earlier halt ends unsettled (its re-start not judged)."""
+        self._crossing = None
+        self.restarts_seen += taken
+        gaps, index = self._halt_gaps, self._next - 1
+        if taken != 1 or gaps is None or index >= len(gaps) or self.halt_s is None:
+            return
+        before = self._stretch
+        if index == 0 and before is None and self._last is not None:
+            before = self._stretch_at(self._last)
+        if before is None or before.wrong:
+            return
+        last_run_s = max(self._halt_ticks[index] - gaps[index] - self._offset, 0) * TICK_S
+        self._crossing = Crossing(before, self.tracker, self._bound, self.halt_s, last_run_s)
+
+    def _judge_crossing(self, sample: Sample) -> None:
+        """``sample`` judged across the latest halt (``haltcross``), while its crossing is open."""
+        crossing = self._crossing
+        if crossing is None:
+            return
+        if not crossing.judge(sample):
+            self._crossing = None  # lost: this halt's re-start not judged
+            return
+        self.judged += 1
+        self.judged_across += 1
+        if crossing.wrong is None:
+            return
+        self._crossing = None
+        self.wrong_restarts += 1
+        self.restarts_judged += 1
+        if self.first_wrong is None:
+            self.first_wrong = Wrong(sample.t_s, sample.pose.seq, *crossing.wrong,
+                                     crossing.halt_s, across=True)
 
     def _start(self, sample: Sample) -> None:
         """``sample`` is the stretch's base when its frame came ``RESYNC_FRAMES`` releases after
         the halt or later (module docstring) and the reference's integrator is known."""
         assert self.halt_s is not None
         rows = frames_from(self.tracker, sample.pose.seq)
+        if rows and rows[0][2] < self.halt_s + (RESYNC_FRAMES - 0.5) * TICK_S:
+            return
+        self._stretch = self._stretch_at(sample, rows)
+        if self._stretch is not None:
+            self.stretches += 1
+
+    def _stretch_at(self, sample: Sample, rows: list[Frame] | None = None) -> Stretch | None:
+        """A stretch based at ``sample`` (its reference primed at the frame it names; None
+        when that frame is not in the window or the integrator is not known)."""
+        if rows is None:
+            rows = frames_from(self.tracker, sample.pose.seq)
         integrator = self.tracker.integrator
         if not rows or rows[0][0] != sample.pose.seq or integrator is None:
-            return
-        seq, counter, frame_t_s, left, right = rows[0]
-        if frame_t_s < self.halt_s + (RESYNC_FRAMES - 0.5) * TICK_S:
-            return
+            return None
+        seq, counter, _, left, right = rows[0]
         pose = sample.pose
         ref = ReferenceOdometry(self.tracker.geometry, integrator, self.tracker.counter_bits,
                                 x_m=pose.x_m, y_m=pose.y_m, heading_rad=pose.heading_rad)
         ref.step_counts(left, right)  # primes
-        self._stretch = Stretch(sample.t_s, ref, seq, counter, pose.x_m, pose.y_m)
-        self.stretches += 1
+        return Stretch(sample.t_s, ref, seq, counter, pose.x_m, pose.y_m)
 
     def _step_to(self, stretch: Stretch, seq: int) -> bool:
         """Step the stretch's reference up to encoder frame ``seq``; False when a frame is
@@ -174,6 +252,14 @@ class HaltStretches:
         after the first halt, judged, stretches, wrong stretches, the first wrong one (None)."""
         first = self.first_wrong
         return {"samples_after_first_halt": self.after, "samples_judged": self.judged,
+                "samples_judged_across_halts": self.judged_across,
                 "stretches": self.stretches, "wrong_stretches": self.wrong_stretches,
+                "restarts": self.restarts_seen, "restarts_judged": self.restarts_judged,
+                "wrong_restarts": self.wrong_restarts,
                 "first_wrong": None if first is None else first.text()}
+
+    def tally(self) -> str:
+        """``1 of 12 stretches between halts wrong, 0 of 13 re-starts at them`` (a FAIL's)."""
+        return (f"{self.wrong_stretches} of {self.stretches} stretches between halts wrong, "
+                f"{self.wrong_restarts} of {self.restarts_judged} re-starts at them judged")
 

@@ -1,0 +1,162 @@
+"""The samples across one of the fleet loop's halts, judged (``host.mqtt.haltstretch``).
+
+At a halt (``sim.board``: a tick ``HALT_AFTER_S`` or more after the tick run before it) the
+halted MCU's receive FIFO kept the first ``HW_RX_FIFO_FRAMES`` frames waiting, the encoder
+samples of the first skipped releases (fewer of them when other frames waited first), and
+overran the rest, the halted tick's own encoder frame among them. Every one of those frames is
+on the bus (the motor controller sends the skipped releases' samples late, ``sim.fleet``), so
+the halted firmware can have done few things with them, each a ``Path`` fixed by the bus:
+
+- it stepped the frames one by one up to the last it took before the overrun: the frame of the
+  tick run before the halt and the 0 to ``HW_RX_FIFO_FRAMES`` after it (``fifo``);
+- then the first frame after the halted tick (``first``) either as one step (MERGED: the
+  counters are absolute), or it re-primed on it, the motion between lost: at once (PRIMED: a
+  step too long to read, ``firmware.ambiguity``) or once ``RESYNC_FRAMES`` frames refused as
+  implausible agreed among themselves (RESYNCED: then one step from ``first`` to the third,
+  ``firmware.encoders``);
+- and every later frame one by one.
+
+Each path forks the stretch judged before the halt (its reference and the offsets its samples
+allow, ``host.mqtt.haltpath``), and every sample from the halt up to the next stretch's base is
+compared on every path still alive: its ENC_COUNTER must name the frame the path took last by
+the sample's tick, its pose must leave the path's offsets non-empty. A sample no path explains
+is wrong (a firmware that added 3 LSB of X at the first release after a halt PASSed before:
+the stretch re-started from whatever pose it reported 3 releases on). A crossing is lost,
+never wrong, when a frame it needs is not in the tracker's window (missing, or beyond the
+per-period bound): that halt's re-start is then not judged, as before.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from odocan.firmware.encoders import RESYNC_FRAMES
+from odocan.host.judge.livepose import Sample
+from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.haltpath import Frame, Stretch, frames_from, narrow_offsets, step_frames
+from odocan.sim.board import HW_RX_FIFO_FRAMES, TICK_S, TX_LATENCY_S
+
+MERGED, PRIMED, RESYNCED = "merged", "primed", "resynced"
+ENC = "enc_counter"  # a path's death by the frame a sample names, not its pose
+_HALF_TICK_S = 0.5 * TICK_S
+
+
+@dataclass
+class Path:
+    """One way the halted firmware took the frames (module docstring): the last frame (seq)
+    it took before the overrun, what it did with the first after, its fork of the stretch,
+    whether it crossed yet, why it died (field, LSB beyond the rounding; None: alive)."""
+
+    fifo: int
+    mode: str
+    stretch: Stretch
+    crossed: bool = False
+    died: tuple[str, float] | None = None
+
+    def takes(self, seq: int, first: int | None) -> bool:
+        """Whether this path's firmware took frame ``seq`` (``first``: the first after the
+        halted tick, None while not heard)."""
+        if seq <= self.fifo:
+            return True
+        if first is None:
+            return False
+        return seq >= first + (RESYNC_FRAMES - 1 if self.mode == RESYNCED else 0)
+
+
+class Crossing:
+    """The samples from one halt on, judged on every ``Path`` from the ``stretch`` before it
+    (module docstring). ``halt_s``, ``last_run_s``: the bus times (s) of the halted tick and of
+    the tick run before it; ``bound``: the robot's most counts a period per wheel."""
+
+    def __init__(self, stretch: Stretch, tracker: PoseTracker, bound: tuple[int, int],
+                 halt_s: float, last_run_s: float) -> None:
+        self.halt_s = halt_s
+        self._last_run_s = last_run_s
+        self._stretch = stretch
+        self._tracker, self._bound = tracker, bound
+        self._paths: list[Path] = []
+        self.wrong: tuple[str, float] | None = None  # no path explains a sample: field, LSB
+
+    def judge(self, sample: Sample) -> bool:
+        """Compare ``sample`` on every path alive (``wrong`` when none explains it); False when
+        the crossing is lost (a frame it needs not in the window: not judged)."""
+        rows = frames_from(self._tracker, self._stretch.seq + 1)
+        if not self._paths and not self._fork(rows):
+            return False
+        first = next((i for i, row in enumerate(rows) if row[2] >= self.halt_s + _HALF_TICK_S),
+                     None)
+        tick_s = sample.t_s - TX_LATENCY_S + 1e-6  # the tick that made the sample
+        alive = [path for path in self._paths if path.died is None]
+        for path in alive:
+            if not self._follow(path, rows, first, tick_s, sample):
+                return False
+        if all(path.died is not None for path in alive):
+            self.wrong = min((path.died for path in alive if path.died is not None),
+                             key=lambda died: died[1])
+        return True
+
+    def _fork(self, rows: list[Frame]) -> bool:
+        """The paths: the stretch stepped to the frame of the tick run before the halt, then
+        to each of the FIFO's frames, each with every mode."""
+        before = [row[0] for row in rows if row[2] <= self._last_run_s + _HALF_TICK_S]
+        ran = before[-1] if before else self._stretch.seq
+        stretch = self._stretch.fork()
+        if not step_frames(stretch, rows, ran, self._bound, self._tracker.counter_bits):
+            return False
+        at = {row[0]: row[2] for row in rows}  # seq: bus time (s)
+        for taken in range(HW_RX_FIFO_FRAMES + 1):
+            fifo = ran + taken
+            if taken and (at.get(fifo, math.inf) >= self.halt_s or not step_frames(
+                    stretch, rows, fifo, self._bound, self._tracker.counter_bits)):
+                break
+            self._paths += [Path(fifo, mode, stretch.fork()) for mode in (MERGED, PRIMED,
+                                                                          RESYNCED)]
+        return True
+
+    def _follow(self, path: Path, rows: list[Frame], first: int | None, tick_s: float,
+                sample: Sample) -> bool:
+        """Step ``path`` to the frame it took last by ``tick_s`` and compare ``sample`` there
+        (its death noted); False when a frame it needs is missing."""
+        first_seq = None if first is None else rows[first][0]
+        target = next((row for row in reversed(rows)  # the latest first: found in 1-3
+                       if row[2] <= tick_s and path.takes(row[0], first_seq)), None)
+        if target is None:  # the frames before the window's: the path still at its FIFO's last
+            return path.stretch.seq == path.fifo and self._compare(
+                path, path.stretch.counter, sample)
+        if target[0] > path.fifo and not path.crossed:
+            assert first is not None
+            if not self._cross(path, rows, first):
+                return False
+        if target[0] < path.stretch.seq or not step_frames(
+                path.stretch, rows, target[0], self._bound, self._tracker.counter_bits):
+            return False
+        return self._compare(path, target[1], sample)
+
+    def _cross(self, path: Path, rows: list[Frame], first: int) -> bool:
+        """The path takes the first frame after the halt as its mode says."""
+        stretch, ref = path.stretch, path.stretch.ref
+        seq, counter, _, left, right = rows[first]
+        if path.mode == MERGED:
+            ref.step_counts(left, right)
+        else:
+            ref._prev = (left, right)  # re-primed: the step to it never integrated
+        if path.mode == RESYNCED:
+            third = first + RESYNC_FRAMES - 1
+            if third >= len(rows) or rows[third][0] != seq + RESYNC_FRAMES - 1:
+                return False
+            seq, counter, _, left, right = rows[third]
+            ref.step_counts(left, right)
+        stretch.seq, stretch.counter, stretch.steps = seq, counter, stretch.steps + 1
+        path.crossed = True
+        return True
+
+    @staticmethod
+    def _compare(path: Path, counter: int, sample: Sample) -> bool:
+        """The sample on ``path`` at its last frame (its COUNTER ``counter``): its ENC_COUNTER
+        must name it, its pose keep the offsets."""
+        if counter != sample.enc_counter:
+            path.died = (ENC, math.inf)
+        else:
+            path.died = narrow_offsets(path.stretch, sample.pose)
+        return True
