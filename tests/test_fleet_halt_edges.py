@@ -10,6 +10,11 @@ halt (for good, or only for those two releases) and the robot FAILs, the halt na
 correct firmware (Python and C) PASSes the same run with every sample after the halts judged
 (``test_fleet_overload_stretches.py``, ``test_fleet_overload.py``).
 
+Halts 10-30 releases long (``WideHaltingClock``) make the correct firmware refuse the first frame
+or two after a halt and take the next as one step: a judge that knew only "merged or re-primed
+on the first" FAILed it (seeds 1 and 4, ``x 13.53 LSB beyond ...``); the correct firmware must
+PASS them with every sample after the first halt judged.
+
 The independent proof that the firmware is wrong there and only there: the lockstep run is
 deterministic, so its frames are the correct run's byte for byte but for the X signal (cantools
 decoding), exactly 3 LSB more, from the injection on.
@@ -17,6 +22,7 @@ decoding), exactly 3 LSB more, from the injection on.
 
 from __future__ import annotations
 
+import random
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +32,13 @@ from odocan.firmware import frames as fw_frames
 from odocan.sim.board import HALT_AFTER_S, TICK_S
 from odocan.sim.contract import DBC_PATH
 from tests.dbc_typed import load_can_dbc, numbers
-from tests.overloaded_fleet import checked_before, run_overloaded
+from tests.overloaded_fleet import (
+    FIRMWARES,
+    LateTicksClock,
+    checked_before,
+    ready,
+    run_overloaded,
+)
 from tests.test_fleet_overload_stretches import (
     DURATION_S,
     ROBOTS,
@@ -108,6 +120,46 @@ def test_a_firmware_wrong_at_a_halts_restart_fails(
             f"pose vs reference wrong after the loop halted the robot at {from_s:.2f} s: x "
         ), entry["reason"]
         assert f"across the halt at {halt_s:.2f} s" in entry["reason"], entry["reason"]
+
+
+class WideHaltingClock(LateTicksClock):
+    """On time for 3 s, then a halt 10-30 releases long every ``period`` ticks run and a tick
+    1-8 late now and then (seeded by ``seed``)."""
+
+    seed, period = 0, 40
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.ran = 0
+        self.rng = random.Random(self.seed)
+
+    def late(self) -> int:
+        if self.k < 300:
+            return 0
+        self.ran += 1
+        if self.ran % self.period == 1:
+            return self.rng.randint(10, 30)
+        return self.rng.randint(1, 8) if self.ran % 10 == 5 else 0
+
+
+@pytest.mark.parametrize("firmware", FIRMWARES)
+@pytest.mark.parametrize(("seed", "period"), [(1, 25), (4, 40)])
+def test_a_correct_firmware_passes_long_halts_every_sample_judged(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, firmware: str, seed: int, period: int
+) -> None:
+    clock = type("Clock", (WideHaltingClock,), {"seed": seed, "period": period})
+    run = run_overloaded(monkeypatch, clock, robots=ROBOTS, seed=seed, duration_s=10.0,
+                         firmware=ready(firmware))
+    assert run.halts >= 7, run.halts
+    for index, entry in enumerate(run.per_robot.values()):
+        from_s = run.halted[index]
+        assert from_s is not None
+        assert checked_before(tmp_path, run.lines[index], from_s).passed
+        assert entry["verdict"] == "PASS", entry["reason"]
+        stretches = entry["halt_stretches"]
+        assert stretches["first_wrong"] is None, stretches
+        assert stretches["samples_judged"] == stretches["samples_after_first_halt"], stretches
+        assert stretches["restarts_judged"] >= stretches["restarts"] - 1, stretches
 
 
 def _x_off(right: list[str], wrong: list[str]) -> list[float]:

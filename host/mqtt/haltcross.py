@@ -9,11 +9,13 @@ the halted firmware can have done few things with them, each a ``Path`` fixed by
 
 - it stepped the frames one by one up to the last it took before the overrun: the frame of the
   tick run before the halt and the 0 to ``HW_RX_FIFO_FRAMES`` after it (``fifo``);
-- then the first frame after the halted tick (``first``) either as one step (MERGED: the
-  counters are absolute), or it re-primed on it, the motion between lost: at once (PRIMED: a
-  step too long to read, ``firmware.ambiguity``) or once ``RESYNC_FRAMES`` frames refused as
-  implausible agreed among themselves (RESYNCED: then one step from ``first`` to the third,
-  ``firmware.encoders``);
+- then, from the first frame after the halted tick (``first``) on, it refused 0 to
+  ``RESYNC_FRAMES - 1`` frames as implausible (``skip``: the periods it counts for a step after
+  lost time are an estimate, ``EncoderInput._step_periods``) and took the next either as one
+  step (MERGED: the counters are absolute), or re-primed on it, the motion between lost
+  (PRIMED: a step too long to read, ``firmware.ambiguity``); or it refused ``RESYNC_FRAMES``
+  frames that agreed among themselves (RESYNCED: re-primed on ``first``, then one step to the
+  third, ``firmware.encoders``);
 - and every later frame one by one.
 
 Each path forks the stretch judged before the halt (its reference and the offsets its samples
@@ -40,16 +42,20 @@ from odocan.sim.board import HW_RX_FIFO_FRAMES, TICK_S, TX_LATENCY_S
 MERGED, PRIMED, RESYNCED = "merged", "primed", "resynced"
 ENC = "enc_counter"  # a path's death by the frame a sample names, not its pose
 _HALF_TICK_S = 0.5 * TICK_S
+_WAYS = (*((mode, skip) for mode in (MERGED, PRIMED) for skip in range(RESYNC_FRAMES)),
+         (RESYNCED, 0))  # (mode, frames refused first): every path from one FIFO frame
 
 
 @dataclass
 class Path:
     """One way the halted firmware took the frames (module docstring): the last frame (seq)
-    it took before the overrun, what it did with the first after, its fork of the stretch,
-    whether it crossed yet, why it died (field, LSB beyond the rounding; None: alive)."""
+    it took before the overrun, what it did with the first after, how many frames it refused
+    before, its fork of the stretch, whether it crossed yet, why it died (field, LSB beyond
+    the rounding; None: alive)."""
 
     fifo: int
     mode: str
+    skip: int
     stretch: Stretch
     crossed: bool = False
     died: tuple[str, float] | None = None
@@ -61,7 +67,7 @@ class Path:
             return True
         if first is None:
             return False
-        return seq >= first + (RESYNC_FRAMES - 1 if self.mode == RESYNCED else 0)
+        return seq >= first + (RESYNC_FRAMES - 1 if self.mode == RESYNCED else self.skip)
 
 
 class Crossing:
@@ -110,8 +116,8 @@ class Crossing:
             if taken and (at.get(fifo, math.inf) >= self.halt_s or not step_frames(
                     stretch, rows, fifo, self._bound, self._tracker.counter_bits)):
                 break
-            self._paths += [Path(fifo, mode, stretch.fork()) for mode in (MERGED, PRIMED,
-                                                                          RESYNCED)]
+            self._paths += [Path(fifo, mode, skip, stretch.fork())
+                            for mode, skip in _WAYS]
         return True
 
     def _follow(self, path: Path, rows: list[Frame], first: int | None, tick_s: float,
@@ -136,7 +142,10 @@ class Crossing:
     def _cross(self, path: Path, rows: list[Frame], first: int) -> bool:
         """The path takes the first frame after the halt as its mode says."""
         stretch, ref = path.stretch, path.stretch.ref
-        seq, counter, _, left, right = rows[first]
+        at = first + path.skip
+        if at >= len(rows) or rows[at][0] != rows[first][0] + path.skip:
+            return False
+        seq, counter, _, left, right = rows[at]
         if path.mode == MERGED:
             ref.step_counts(left, right)
         else:
