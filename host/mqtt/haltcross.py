@@ -20,12 +20,13 @@ the halted firmware can have done few things with them, each a ``Path`` fixed by
 
 Each path forks the stretch judged before the halt (its reference and the offsets its samples
 allow, ``host.mqtt.haltpath``), and every sample from the halt up to the next stretch's base is
-compared on every path still alive: its ENC_COUNTER must name the frame the path took last by
-the sample's tick, its pose must leave the path's offsets non-empty. A sample no path explains
-is wrong (a firmware that added 3 LSB of X at the first release after a halt PASSed before:
-the stretch re-started from whatever pose it reported 3 releases on). A crossing is lost,
-never wrong, when a frame it needs is not in the tracker's window (missing, or beyond the
-per-period bound): that halt's re-start is then not judged, as before.
+compared on the paths (in turn, the likeliest first, until one explains every sample so far): its
+ENC_COUNTER must name the frame the path took last by the sample's tick, its pose must leave the
+path's offsets non-empty. A sample no path explains is wrong (a firmware that added 3 LSB of X at
+the first release after a halt PASSed before: the stretch re-started from whatever pose it reported
+3 releases on). A crossing is lost, never wrong, when a frame it needs is not in the tracker's
+window (missing, or beyond the per-period bound): that halt's re-start is then not judged, as
+before.
 """
 
 from __future__ import annotations
@@ -42,8 +43,9 @@ from odocan.sim.board import HW_RX_FIFO_FRAMES, TICK_S, TX_LATENCY_S
 MERGED, PRIMED, RESYNCED = "merged", "primed", "resynced"
 ENC = "enc_counter"  # a path's death by the frame a sample names, not its pose
 _HALF_TICK_S = 0.5 * TICK_S
-_WAYS = (*((mode, skip) for mode in (MERGED, PRIMED) for skip in range(RESYNC_FRAMES)),
-         (RESYNCED, 0))  # (mode, frames refused first): every path from one FIFO frame
+_WAYS = (*((MERGED, skip) for skip in range(RESYNC_FRAMES)), (RESYNCED, 0),
+         *((PRIMED, skip) for skip in range(RESYNC_FRAMES)))  # (mode, frames refused first):
+# every path from one FIFO frame, the likeliest first
 
 
 @dataclass
@@ -59,6 +61,7 @@ class Path:
     stretch: Stretch
     crossed: bool = False
     died: tuple[str, float] | None = None
+    done: int = 0  # the crossing's samples compared on it (from 1 on: its own stretch)
 
     def takes(self, seq: int, first: int | None) -> bool:
         """Whether this path's firmware took frame ``seq`` (``first``: the first after the
@@ -81,25 +84,40 @@ class Crossing:
         self._last_run_s = last_run_s
         self._stretch = stretch
         self._tracker, self._bound = tracker, bound
-        self._paths: list[Path] = []
+        self._paths: list[Path] = []  # the likeliest first (``_fork``)
+        self._alive = 0  # the first path no sample so far refuted (all before it were)
+        self._samples: list[Sample] = []
         self.wrong: tuple[str, float] | None = None  # no path explains a sample: field, LSB
 
     def judge(self, sample: Sample) -> bool:
-        """Compare ``sample`` on every path alive (``wrong`` when none explains it); False when
-        the crossing is lost (a frame it needs not in the window: not judged)."""
+        """Compare ``sample`` and those before on the paths in turn until one explains them
+        all (``wrong`` when none does): the verdict of every path at once, for the CPU of
+        about one (the likeliest path, the FIFO full and the first frame merged, is nearly
+        always right). False when the crossing is lost (a frame it needs not in the window:
+        not judged)."""
         rows = frames_from(self._tracker, self._stretch.seq + 1)
         if not self._paths and not self._fork(rows):
             return False
+        self._samples.append(sample)
         first = next((i for i, row in enumerate(rows) if row[2] >= self.halt_s + _HALF_TICK_S),
                      None)
-        tick_s = sample.t_s - TX_LATENCY_S + 1e-6  # the tick that made the sample
-        alive = [path for path in self._paths if path.died is None]
-        for path in alive:
-            if not self._follow(path, rows, first, tick_s, sample):
-                return False
-        if all(path.died is not None for path in alive):
-            self.wrong = min((path.died for path in alive if path.died is not None),
-                             key=lambda died: died[1])
+        paths = self._paths
+        while self._alive < len(paths):
+            path = paths[self._alive]
+            if not path.done:  # its stretch was its FIFO frame's, shared: its own from now
+                path.stretch = path.stretch.fork()
+            for earlier in self._samples[path.done:]:
+                path.done += 1
+                tick_s = earlier.t_s - TX_LATENCY_S + 1e-6  # the tick that made the sample
+                if not self._follow(path, rows, first, tick_s, earlier):
+                    return False
+                if path.died is not None:
+                    break
+            if path.died is None:
+                return True
+            self._alive += 1
+        self.wrong = min((path.died for path in paths if path.died is not None),
+                         key=lambda died: died[1])
         return True
 
     def _fork(self, rows: list[Frame]) -> bool:
@@ -116,8 +134,9 @@ class Crossing:
             if taken and (at.get(fifo, math.inf) >= self.halt_s or not step_frames(
                     stretch, rows, fifo, self._bound, self._tracker.counter_bits)):
                 break
-            self._paths += [Path(fifo, mode, skip, stretch.fork())
-                            for mode, skip in _WAYS]
+            # the FIFO's most frames first (nothing else waited), each way in ``_WAYS``' order
+            base = stretch.fork()  # forked again by each path it is judged on
+            self._paths[:0] = [Path(fifo, mode, skip, base) for mode, skip in _WAYS]
         return True
 
     def _follow(self, path: Path, rows: list[Frame], first: int | None, tick_s: float,
