@@ -147,6 +147,7 @@ class Fleet(Closing):
         self.halts = 0  # ticks that came so late that every board was halted (``halted_from_s``)
         self.halted_from_k: int | None = None  # the fleet tick of the first of them
         self.halt_ticks: list[int] = []  # every such tick (one int a halt: <= 10 a second)
+        self.halt_gaps: list[int] = []  # ... and the periods since the tick run before it
         self.longest_gap_periods = 1  # the most periods between two ticks stepped
 
     def step(self, k: int) -> None:
@@ -184,6 +185,7 @@ class Fleet(Closing):
         if self._last_k < 0 or gap * TICK_S < HALT_AFTER_S:
             return
         self.halts += 1
+        self.halt_gaps.append(gap)  # before the tick: a reader of halt_ticks finds its gap
         self.halt_ticks.append(k)
         if self.halted_from_k is None:
             self.halted_from_k = k

@@ -343,7 +343,8 @@ def watch_halts(fleet: Fleet, telemetry: list[RobotTelemetry]) -> None:
     """Each robot's telemetry judges its samples between the loop's halts
     (``host.mqtt.haltstretch``; nothing to do until the loop halts the boards)."""
     for i, robot in enumerate(telemetry):
-        robot.stretches = HaltStretches(robot.tracker, fleet.halt_ticks, fleet.offset_ticks(i))
+        robot.stretches = HaltStretches(robot.tracker, fleet.halt_ticks, fleet.offset_ticks(i),
+                                        fleet.halt_gaps)
 
 
 def _halted(fleet: Fleet, index: int, stats: DeadlineStats) -> Halted | None:

@@ -16,8 +16,10 @@ FAILed with "heading vs reference 62.81 mrad". The loop knows when it first halt
 was wrong (``host.judge.posewrongs``: beyond one LSB of position after its loss allowance, or one
 LSB of heading), or when a stretch between two halts was (``host.mqtt.haltstretch``: each
 stretch re-started at the firmware's pose once it took the frames after the halt, as a set-pose;
-a pose step inside it that the reference does not make FAILs, the re-start jump at the halt
-itself, the rig's fault, is not judged). Else PASS when the stretches judged at least half the
+a pose step inside it that the reference does not make FAILs; the samples from the halt to the
+re-start are judged on the stretch before the halt stepped with the frames sent during it, as
+the halted MCU could have taken them, ``host.mqtt.haltcross``: a re-start no such way explains
+FAILs too, the others are not judged). Else PASS when the stretches judged at least half the
 samples since (``MIN_JUDGED_SHARE``), its ``reason`` saying how many and that the re-starts were
 not. Without enough of them (the halts too close) the verdict is as before the stretches:
 ``rejudge`` (a FAIL of all its samples: UNJUDGED with the numbers, from which bus time, how many
@@ -82,8 +84,7 @@ def after_halts(entry: dict[str, Any], halted: Halted, tracker: PoseTracker,
     if wrong is not None:
         return {**entry, "verdict": "FAIL",
                 "reason": f"pose vs reference wrong after the loop halted the robot at "
-                          f"{halted.from_s:.2f} s: {wrong.text()} ({stretches.wrong_stretches} "
-                          f"of {stretches.stretches} stretches between halts wrong)"}
+                          f"{halted.from_s:.2f} s: {wrong.text()} ({stretches.tally()})"}
     if stretches.judged < MIN_JUDGED_SHARE * stretches.after or not stretches.judged:
         return rejudge(entry, halted, tracker) if entry["verdict"] == "FAIL" \
             else noted(entry, halted)
@@ -96,8 +97,10 @@ def _stretches_text(halted: Halted, stretches: HaltStretches) -> str:
             f"s, nor inside the {stretches.stretches} stretches between its {halted.halts} halts "
             f"(up to {halted.longest_gap_periods} periods apart; {stretches.judged} of "
             f"{stretches.after} samples since judged, each stretch re-started at the firmware's "
-            "pose); the re-start at each halt is not judged (the halted MCU lost frames the bus "
-            "carried: the rig's fault, not the firmware's)")
+            f"pose), nor across {stretches.restarts_judged} of the {stretches.restarts_seen} "
+            "re-starts (the stretch before each halt stepped with the frames sent during it, as "
+            "the halted MCU could have taken them); the other re-starts are not judged (the "
+            "halted MCU lost frames the bus carried: the rig's fault, not the firmware's)")
 
 
 def _failed_before(entry: dict[str, Any], halted: Halted, before: PoseWrongs) -> dict[str, Any]:
