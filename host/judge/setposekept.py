@@ -1,0 +1,192 @@
+"""What an applied set-pose keeps (issue #11): the fields not staged in the firmware's life.
+
+The firmware's APPLY (firmware/commands.py ``_pose_with``, ecu.c alike) overwrites its pose with
+the fields staged since its start and keeps its own values of the others; a bare APPLY keeps
+X, Y and HEADING (only TURNS start again: the heading is then within [0, 2 pi)). A reboot
+empties the staging (its RAM), so a bare APPLY after a reboot must leave the pose where it was.
+
+``analyze`` judges the life after an APPLY that set fewer than all three fields from a fitted
+start (``host.judge.setposes``), which follows any pose the firmware jumped to: a wrong
+firmware that kept its staging across a reboot and applied it on a bare APPLY after it
+PASSed. So each such APPLY is checked here, on the bus alone: the first on-board sample after
+it (naming an encoder frame after the one the APPLY took effect after, C) must be the last one
+before it (naming a frame before C) moved by the reference's steps between them
+(``reference.integrate``), with the staged fields set at C. The difference is bounded by the
+two samples' rounding (under one LSB per axis and of heading, the wire's) and the start
+heading's rounding over the path between them (one heading LSB times its length); beyond,
+the firmware set what it had not been given: ``passed`` False, a FAIL named in the set-pose
+event (``mark_kept``).
+
+Not judged (``None``): two samples around C within ``WINDOW_FRAMES`` of it in the firmware's
+life are not there, or the steps between them are not the plain ones (a gap of the encoder
+sequence, a refused or re-primed step, a twin), or the firmware is not seen stepping plainly
+on each side (the sample before the last one before C, and the one after the first after C,
+must continue them by the plain steps between, nothing staged: after a stall the first poses
+name backlog frames the window cannot resolve, and merged steps leave the fine reference):
+the fitted start alone judges that life then.
+The window is read alike from a whole log and from a streamed one (its frames only), so
+``analyze`` and ``analyze_file`` give the same check bit for bit."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.livesetpose import FIELDS
+from odocan.host.judge.reference import Geometry, SpeedBound, integrate
+from odocan.host.judge.reference_path import firmware_steps
+from odocan.host.judge.samples import (
+    HEADING_LSB_RAD,
+    POSITION_LSB_M,
+    WIRE_COUNTER_BITS,
+    AnalysisError,
+    Encoders,
+    Poses,
+    encoder_frames,
+    onboard_samples,
+)
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.e2e import check_frames
+from odocan.sim.robot import RobotProfile
+
+if TYPE_CHECKING:
+    from odocan.host.judge.setposes import SetPoseCut
+    from odocan.host.protocol.dbcplan import DatabaseSpec
+
+WINDOW_FRAMES = 512  # log frames read on each side of the APPLY's encoder frame
+_FLOAT_M = 1e-9  # the firmware's Q40 steps against float64 over a few frames, and more
+_FLOAT_RAD = 1e-12
+_TURN = 2.0 * math.pi
+
+
+def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
+    """The log positions [lo, hi) read for the cut at ``position``: ``WINDOW_FRAMES`` each side,
+    within the life before it (from ``head_start``) and the life it opens (to ``tail_stop``)."""
+    return max(head_start, position - WINDOW_FRAMES), min(tail_stop, position + WINDOW_FRAMES)
+
+
+def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfile,
+               integrator: str, db: DatabaseSpec,
+               max_wheel_speed_mm_s: SpeedBound) -> dict[str, Any] | None:
+    """The check of the module docstring for ``cut`` (a set-pose whose fields were not all
+    staged) over ``frames``, the log's frames from position ``lo`` (``window``); None when
+    every field was staged or the check cannot be made."""
+    if cut.start_pose() is not None:
+        return None
+    decoder = BulkDecoder(db)
+    _, accepted = check_frames(frames, db)
+    enc = encoder_frames(frames, accepted, decoder)
+    at = np.flatnonzero(enc.index == cut.position - lo)
+    if len(at) == 0:
+        return None
+    try:
+        poses = onboard_samples(frames, accepted, decoder, enc)[0]
+    except AnalysisError:
+        return None
+    before, after = _around(poses, int(at[0]))
+    if before is None or after is None:
+        return None
+    geometry = Geometry.of(robot)
+    if not all(_settled(poses, i, enc, robot, integrator, max_wheel_speed_mm_s)
+               for i in (before - 1, after)):
+        return None  # the firmware not in its plain steps around the APPLY: not judged here
+    steps = _plain_steps(enc, int(poses.enc[before]), int(poses.enc[after]), robot,
+                         max_wheel_speed_mm_s)
+    if steps is None:
+        return None
+    judged = _judged(poses, before, after, steps, int(at[0]) - int(poses.enc[before]),
+                     cut.staged, geometry, integrator)
+    return {"fields_kept": [name for name in FIELDS if name not in cut.staged], **judged}
+
+
+def _settled(poses: Poses, i: int, enc: Encoders, robot: RobotProfile, integrator: str,
+             max_wheel_speed_mm_s: SpeedBound) -> bool:
+    """Whether sample ``i + 1`` is sample ``i`` moved by the plain steps between them (a pose
+    resolved to the wrong encoder frame after a silence, or a firmware taking merged steps
+    after a stall, is not: the samples there cannot pin a jump)."""
+    steps = _plain_steps(enc, int(poses.enc[i]), int(poses.enc[i + 1]), robot,
+                         max_wheel_speed_mm_s)
+    return steps is not None and bool(
+        _judged(poses, i, i + 1, steps, 0, {}, Geometry.of(robot), integrator)["passed"])
+
+
+def _around(poses: Poses, c: int) -> tuple[int | None, int | None]:
+    """The last sample naming an encoder frame before ``c`` and the first naming one after,
+    each with another sample beyond it (before the first, after the second)."""
+    before = np.flatnonzero(poses.enc < c)
+    after = np.flatnonzero(poses.enc > c)
+    return (int(before[-1]) if len(before) > 1 else None,
+            int(after[0]) if len(after) > 1 else None)
+
+
+def _plain_steps(enc: Encoders, b: int, a: int, robot: RobotProfile,
+                 max_wheel_speed_mm_s: SpeedBound) -> tuple[np.ndarray, np.ndarray] | None:
+    """The count steps from encoder frame ``b`` to ``a`` (element k: into ``b + k + 1``) when
+    they are the plain ones: consecutive frames, none refused or re-primed, no twin."""
+    if np.any(np.diff(enc.seq[b:a + 1]) != 1):
+        return None
+    if enc.twinned is not None and bool(np.any(enc.twinned[b:a + 1])):
+        return None
+    part = slice(b, a + 1)
+    sub = Encoders(index=enc.index[part], counter=enc.counter[part], seq=enc.seq[part],
+                   left=enc.left[part], right=enc.right[part],
+                   timestamp_s=enc.timestamp_s[part], cycle_s=enc.cycle_s,
+                   uptime=None if enc.uptime is None else enc.uptime[part])
+    steps = firmware_steps(sub, 0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
+                           max_wheel_speed_mm_s)
+    if steps.refused or steps.reprimed or len(steps.d_left) != a - b:
+        return None
+    return steps.d_left, steps.d_right
+
+
+def _moved(pose: tuple[float, float, float], d_left: np.ndarray, d_right: np.ndarray,
+           geometry: Geometry, integrator: str) -> tuple[float, float, float, float]:
+    """``pose`` (x m, y m, heading rad) moved by the steps: the pose, and the path (m)."""
+    if len(d_left) == 0:
+        return (*pose, 0.0)
+    moved = integrate(d_left, d_right, geometry, integrator, x0_m=pose[0], y0_m=pose[1],
+                      heading0_rad=pose[2])
+    return (float(moved.x_m[-1]), float(moved.y_m[-1]), float(moved.heading_rad[-1]),
+            float(moved.distance_m[-1]))
+
+
+def _judged(poses: Poses, before: int, after: int, steps: tuple[np.ndarray, np.ndarray],
+            to_cut: int, staged: dict[str, float], geometry: Geometry,
+            integrator: str) -> dict[str, Any]:
+    """The sample ``before`` moved by the ``to_cut`` steps to the APPLY's frame, the staged
+    fields set there, moved by the rest to the sample ``after``: how far that sample is."""
+    d_left, d_right = steps
+    x, y, h, head_m = _moved((float(poses.x_m[before]), float(poses.y_m[before]),
+                              float(poses.heading_rad[before])),
+                             d_left[:to_cut], d_right[:to_cut], geometry, integrator)
+    start = (staged.get("X", x), staged.get("Y", y), staged.get("HEADING", h))
+    x, y, h, tail_m = _moved(start, d_left[to_cut:], d_right[to_cut:], geometry, integrator)
+    dx_m, dy_m = float(poses.x_m[after]) - x, float(poses.y_m[after]) - y
+    dh_rad = (float(poses.heading_rad[after]) - h + math.pi) % _TURN - math.pi
+    bound_m = POSITION_LSB_M + HEADING_LSB_RAD * (head_m + tail_m) + _FLOAT_M
+    passed = (max(abs(dx_m), abs(dy_m)) <= bound_m
+              and abs(dh_rad) <= HEADING_LSB_RAD + _FLOAT_RAD)
+    return {"encoder_frames": int(poses.enc[after]) - int(poses.enc[before]),
+            "position_jump_m": math.hypot(dx_m, dy_m), "heading_jump_rad": abs(dh_rad),
+            "bound_m": bound_m, "passed": passed}
+
+
+def mark_kept(report: dict[str, Any], checks: dict[int, dict[str, Any] | None]) -> None:
+    """Put each check (by the index of the life the set-pose opened: its event's ``life``)
+    into its ``set_pose`` event (``kept``); a failed one FAILs the report, named there."""
+    for event in report["events"]:
+        if event["kind"] != "set_pose" or event.get("life") not in checks or all(
+                event[name] is not None for name in ("x_m", "y_m", "heading_rad")):
+            continue  # every field set: the life starts exactly there, nothing kept
+        check = event["kept"] = checks[event["life"]]
+        if check is not None and not check["passed"]:
+            report["passed"] = False
+            event["detail"] += (
+                f"; FAIL: the firmware's pose jumped {check['position_jump_m']:.4f} m, "
+                f"{check['heading_jump_rad']:.5f} rad at an APPLY that kept "
+                f"{', '.join(check['fields_kept'])} (nothing staged for them in this firmware "
+                "life): it set what it was not given")
+
