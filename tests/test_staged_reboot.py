@@ -19,12 +19,14 @@ import math
 from functools import cache
 from pathlib import Path
 from typing import Any
+from xml.etree import ElementTree
 
 import can
 import pytest
 
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorMask
+from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
@@ -213,6 +215,35 @@ def test_a_firmware_that_keeps_its_set_pose_staging_fails_analyze(tmp_path: Path
     monitor, bridge = _live(messages)
     assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
     assert bridge.tracker.vs_reference.max_dpos_m > 0.01
+
+
+@pytest.mark.parametrize("stream", ["never", "always"])
+def test_odocan_analyze_names_the_jump_at_the_bare_apply(
+    stream: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The command's verdict, whole and streamed: exit 1, the jump named on the FAIL line
+    (before the fix: exit 0, PASS), and a failed ``set_pose_kept`` testcase in --junit; the
+    correct firmware's log: exit 0, its check a passed testcase."""
+    wrong, right = _log("set_pose", tmp_path, kept=True), _log("set_pose", tmp_path)
+    junit = tmp_path / "checks.xml"
+    argv = ["analyze", "--robot", "pmir", "--integrator", "exact", "--stream", stream,
+            "--junit", str(junit)]
+    assert main([*argv, str(wrong)]) == 1
+    out = capsys.readouterr().out
+    assert ("FAIL: at 3.501 s the firmware's pose jumped 1096 mm and 459.2 mrad at an "
+            "ODOM_SET_POSE APPLY that kept X, Y, HEADING (nothing staged for them in this "
+            "firmware life)") in out
+    assert _kept_cases(junit) == [False]
+    assert main([*argv, str(right)]) == 0
+    assert "PASS: on-board vs reference within" in capsys.readouterr().out
+    assert _kept_cases(junit) == [True]
+
+
+def _kept_cases(junit: Path) -> list[bool]:
+    """Per ``set_pose_kept`` testcase of the JUnit file: passed (no failure in it)."""
+    cases = ElementTree.parse(junit).getroot().iter("testcase")
+    return [case.find("failure") is None for case in cases
+            if case.get("name") == "set_pose_kept"]
 
 
 def test_a_config_staged_again_after_a_reboot_is_followed(tmp_path: Path) -> None:
