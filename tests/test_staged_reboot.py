@@ -8,9 +8,18 @@ its own pose (TURNS start again) or its build's robot. Before the fix the judges
 fields staged before the reboot: the whole and streamed ``analyze``, the monitor model and the
 bridge all failed the correct firmware (a pose 1.4 m off, a wheelbase it never had).
 
+The other way, a wrong firmware that keeps its staging across the reset and applies it on the
+bare APPLY: the live judges carry the reference across the APPLY and say POSE WRONG; ``analyze``
+fits the life after it, so it checks the APPLY itself (``host.judge.setposekept``: the pose
+after it must continue the one before it in every field not staged in this firmware life) and
+FAILs it, named, whole and streamed, on the command line and in --junit. The same with only
+HEADING staged after the reset (X and Y kept), and no false FAIL for the correct firmware (and
+the C port) applying with nothing staged all through drives of two robots and three integrators.
+
 Independent of the judges: the ACKs read with cantools, and the firmware's pose just before and
 just after the APPLY's ACK (ODOM_POSE_X/Y, cantools): no jump to the pose staged before the
-reboot, as a float64 bound of one tick's motion says."""
+reboot (or a jump of more than a metre for the wrong firmware), as a float64 bound of one
+tick's motion says."""
 
 from __future__ import annotations
 
@@ -36,8 +45,9 @@ from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.board import TICK_S
 from odocan.sim.contract import database
 from odocan.sim.robot import load
+from odocan.sim.scenarios import get_scenario
 from tests import host_frames as hf
-from tests.fault_rig import open_virtual
+from tests.fault_rig import FaultRig, open_virtual
 from tests.test_health_rig import circle_rig
 
 PMIR = load("pmir")
@@ -56,6 +66,9 @@ DRIVES: dict[str, tuple[int, Any, Any, Any]] = {  # request ID, packer, frames b
 AGAIN = {"config_again": (fr.ODOM_CONFIG_ID, hf.pack_odom_config,  # one ACK before the reboot,
                           ((fr.ConfigParam.WHEELBASE, WHEELBASE_NM),),  # the same again after
                           ((fr.ConfigParam.WHEELBASE, WHEELBASE_NM), (fr.ConfigParam.APPLY, 0)))}
+PARTIAL = {"heading_after": (fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose, POSE,  # X, Y, HEADING
+                             ((fr.SetPoseField.HEADING, 20000),  # staged before the reboot, only
+                              (fr.SetPoseField.APPLY, 0)))}  # HEADING again after it
 ONE_TICK_M = 0.02  # pmir on the circle moves < 2 cm a tick: a jump is more
 
 
@@ -64,7 +77,7 @@ def drive(which: str, kept: bool = False) -> tuple[can.Message, ...]:
     """5 s of pmir on the circle: the fields staged from ``STAGE_AT``, the MCU reset at
     ``REBOOT_AT``, the APPLY alone at ``APPLY_AT`` (E2E COUNTER running on). ``kept``: a wrong
     firmware that keeps its staging across the reset."""
-    request_id, pack, before_reboot, after_reboot = (AGAIN | DRIVES)[which]
+    request_id, pack, before_reboot, after_reboot = (AGAIN | PARTIAL | DRIVES)[which]
     sends = ({STAGE_AT + k: frame for k, frame in enumerate(before_reboot)}
              | {APPLY_AT + k: frame for k, frame in enumerate(after_reboot)})
     heard: list[can.Message] = []
@@ -215,6 +228,82 @@ def test_a_firmware_that_keeps_its_set_pose_staging_fails_analyze(tmp_path: Path
     monitor, bridge = _live(messages)
     assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
     assert bridge.tracker.vs_reference.max_dpos_m > 0.01
+
+
+@pytest.mark.parametrize("kept", [False, True])
+def test_a_set_pose_of_the_heading_alone_after_a_reboot_keeps_the_position(
+    kept: bool, tmp_path: Path
+) -> None:
+    """X, Y and HEADING staged, the MCU reset, HEADING staged again and APPLYed: the correct
+    firmware keeps its X and Y (cantools: no position jump at the APPLY's ACK) and takes the
+    new heading, and every judge PASSes it; the wrong one applies the X and Y staged before the
+    reset too (a 1.1 m jump), and every judge FAILs it: analyze names the X, Y it kept."""
+    messages = drive("heading_after", kept)
+    at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
+    heading = next(_decoded(m)["HEADING"] for m in messages[at:]
+                   if m.arbitration_id == fr.ODOM_POSE_X_ID)
+    assert 20000 * 2 * math.pi / 65536 < heading < 20000 * 2 * math.pi / 65536 + 0.05
+    assert (_pose_around(messages, at) > 1.0) is kept
+    path = _log("heading_after", tmp_path, kept)
+    whole = analyze(read_log(path), PMIR, "exact")
+    [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+    assert event["kept"]["fields_kept"] == ["X", "Y"]
+    assert event["kept"]["passed"] is (not kept) is whole.passed
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+    monitor, bridge = _live(messages)
+    assert (monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG") is kept
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert (tracker.vs_reference.max_dpos_m > 0.01) is kept
+
+
+@pytest.mark.parametrize(("robot", "integrator", "scenario", "firmware"), [
+    ("pmir", "exact", "circle", "python"), ("kobuki", "euler", "random", "python"),
+    ("pmir", "rk2", "random", "c")])
+def test_bare_applies_all_through_a_drive_are_each_judged_and_pass(
+    robot: str, integrator: str, scenario: str, firmware: str, tmp_path: Path
+) -> None:
+    """No false FAIL: the correct firmware (Python, and the C port) APPLYs with nothing staged
+    every 17 ticks (26 times, at every phase of the pose and encoder cycles, on both sides of a
+    reboot); each APPLY's check is made (none left unjudged) and passes, whole and streamed;
+    cantools: no APPLY moved the pose by more than a tick's motion."""
+    ticks = list(range(40, 480, 17))
+    heard: list[can.Message] = []
+    profile = load(robot)
+    with FaultRig(scenario=get_scenario(scenario, profile, duration_s=60.0), robot=robot,
+                  integrator=integrator, firmware=firmware) as rig:
+        rig.observers.append(lambda _k, got: heard.extend(got))
+        tool = open_virtual(rig.channel)
+
+        def host(k: int) -> None:
+            if k == REBOOT_AT:
+                rig.board.reboot()
+            if k in ticks:
+                data = hf.pack_odom_set_pose(ticks.index(k) & 0xF, fr.SetPoseField.APPLY, 0,
+                                             ErrorMask())
+                tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
+                                      is_extended_id=False, timestamp=k * TICK_S))
+
+        rig.before_board.append(host)
+        try:
+            rig.run(5.0)
+        finally:
+            tool.shutdown()
+    messages = tuple(heard)
+    acks = [k for k, m in enumerate(messages) if m.arbitration_id == fr.ODOM_ACK_ID
+            and _decoded(m)["RESULT"] == 0]
+    assert len(acks) == len(ticks)
+    assert all(_pose_around(messages, at) < ONE_TICK_M for at in acks)
+    path = tmp_path / "bare.log"
+    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
+                            f"{bytes(m.data).hex().upper()}\n" for m in messages))
+    whole = analyze(read_log(path), profile, integrator)
+    checks = [e["kept"] for e in whole.report["events"] if e["kind"] == "set_pose"]
+    assert len(checks) == len(ticks)
+    assert all(check is not None and check["passed"] for check in checks)
+    assert whole.passed
+    assert json.dumps(analyze_file(path, profile, integrator, chunk_frames=97)) == json.dumps(
+        whole.report)
 
 
 @pytest.mark.parametrize("stream", ["never", "always"])
