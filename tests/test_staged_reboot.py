@@ -73,13 +73,13 @@ ONE_TICK_M = 0.02  # pmir on the circle moves < 2 cm a tick: a jump is more
 
 
 @cache
-def drive(which: str, kept: bool = False) -> tuple[can.Message, ...]:
+def drive(which: str, kept: bool = False, apply_at: int = APPLY_AT) -> tuple[can.Message, ...]:
     """5 s of pmir on the circle: the fields staged from ``STAGE_AT``, the MCU reset at
-    ``REBOOT_AT``, the APPLY alone at ``APPLY_AT`` (E2E COUNTER running on). ``kept``: a wrong
+    ``REBOOT_AT``, the APPLY alone at ``apply_at`` (E2E COUNTER running on). ``kept``: a wrong
     firmware that keeps its staging across the reset."""
     request_id, pack, before_reboot, after_reboot = (AGAIN | PARTIAL | DRIVES)[which]
     sends = ({STAGE_AT + k: frame for k, frame in enumerate(before_reboot)}
-             | {APPLY_AT + k: frame for k, frame in enumerate(after_reboot)})
+             | {apply_at + k: frame for k, frame in enumerate(after_reboot)})
     heard: list[can.Message] = []
     with circle_rig() as rig:
         rig.observers.append(lambda _k, got: heard.extend(got))
@@ -137,10 +137,11 @@ def _pose_around(messages: tuple[can.Message, ...], at: int) -> float:
     return math.hypot(after[0] - before[0], after[1] - before[1])
 
 
-def _log(which: str, folder: Path, kept: bool = False) -> Path:
-    path = folder / f"{which}{'-kept' * kept}.log"
+def _log(which: str, folder: Path, kept: bool = False, apply_at: int = APPLY_AT) -> Path:
+    path = folder / f"{which}{'-kept' * kept}-{apply_at}.log"
     path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
-                            f"{bytes(m.data).hex().upper()}\n" for m in drive(which, kept)))
+                            f"{bytes(m.data).hex().upper()}\n"
+                            for m in drive(which, kept, apply_at)))
     return path
 
 
@@ -186,7 +187,7 @@ def test_a_firmware_that_keeps_its_staging_across_a_reboot_fails_live(which: str
     them on the bare APPLY (the pose jumps 1.1 m; the wheelbase becomes 0.33 m). The live
     judges, which carry the reference across a bare APPLY, say POSE WRONG (before the fix they
     followed the wrong firmware)."""
-    messages = drive(which, kept=True)
+    messages = drive(which, True)
     at = _apply_ack(messages, DRIVES[which][0])
     if which == "set_pose":
         assert _pose_around(messages, at) > 1.0  # cantools: it jumped to the staged pose
@@ -206,16 +207,25 @@ def test_a_firmware_that_keeps_its_config_staging_fails_analyze(tmp_path: Path) 
         whole.report)
 
 
-def test_a_firmware_that_keeps_its_set_pose_staging_fails_analyze(tmp_path: Path) -> None:
+@pytest.mark.parametrize("apply_at", [APPLY_AT, REBOOT_AT + 1])
+def test_a_firmware_that_keeps_its_set_pose_staging_fails_analyze(
+    apply_at: int, tmp_path: Path
+) -> None:
     """The wrong set-pose firmware of the live test above, judged by ``analyze``, whole and
     streamed: FAIL, named in the set-pose event (``setposekept``: the pose jumped at an APPLY
     that had nothing staged in this firmware life). Before the fix analyze fitted the life after
     the bare APPLY to the pose the firmware jumped to, and PASSed it. The jump it names is the
-    one cantools reads around the APPLY's ACK, within one tick's motion."""
-    messages = drive("set_pose", kept=True)
+    one cantools reads around the APPLY's ACK, within one tick's motion. Also with the APPLY
+    a tick after the reset, before the new firmware sent two poses: judged from its power-up
+    pose. The correct firmware's log of that tick PASSes, its APPLY judged."""
+    messages = drive("set_pose", True, apply_at)
     jumped_m = _pose_around(messages, _apply_ack(messages, fr.ODOM_SET_POSE_ID))
     assert jumped_m > 1.0
-    path = _log("set_pose", tmp_path, kept=True)
+    right = analyze(read_log(_log("set_pose", tmp_path, False, apply_at)), PMIR, "exact")
+    assert right.passed
+    assert [e["kept"]["passed"] for e in right.report["events"] if e["kind"] == "set_pose"] == [
+        True]
+    path = _log("set_pose", tmp_path, True, apply_at)
     whole = analyze(read_log(path), PMIR, "exact")
     assert not whole.passed
     [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]

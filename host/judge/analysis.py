@@ -268,7 +268,8 @@ def analyze(
             lo, hi = window(life.set_pose.position, int(lives[k - 1].index[0]),
                             int(life.index[-1]) + 1)
             kept[len(done)] = kept_check(frames.select(np.arange(lo, hi)), lo, life.set_pose,
-                                         life_robot, life_integrator, db, bound)
+                                         life_robot, life_integrator, db, bound, boot=lives[
+                                             k - 1].boot and lo == int(lives[k - 1].index[0]))
         done.append((life, result, float(part.timestamp_s[0])))
     if not done:
         assert failure is not None

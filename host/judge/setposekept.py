@@ -15,7 +15,10 @@ before it (naming a frame before C) moved by the reference's steps between them
 two samples' rounding (under one LSB per axis and of heading, the wire's) and the start
 heading's rounding over the path between them (one heading LSB times its length); beyond,
 the firmware set what it had not been given: ``passed`` False, a FAIL named in the set-pose
-event (``mark_kept``).
+event (``mark_kept``). An APPLY so soon after a reboot that the new firmware sent fewer than
+two poses before it is judged from the firmware's power-up pose instead ((0, 0, 0) at the first
+encoder frame of its life, ``analyze``'s own rule for a reboot's life: ``powerup``), when the
+window starts at that life's first frame.
 
 Not judged (``None``): two samples around C within ``WINDOW_FRAMES`` of it in the firmware's
 life are not there, or the steps between them are not the plain ones (a gap of the encoder
@@ -36,6 +39,7 @@ import numpy as np
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.livesetpose import FIELDS
+from odocan.host.judge.powerup import saw_only_the_log
 from odocan.host.judge.reference import Geometry, SpeedBound, integrate
 from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
@@ -69,11 +73,12 @@ def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
 
 
 def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfile,
-               integrator: str, db: DatabaseSpec,
-               max_wheel_speed_mm_s: SpeedBound) -> dict[str, Any] | None:
+               integrator: str, db: DatabaseSpec, max_wheel_speed_mm_s: SpeedBound, *,
+               boot: bool = False) -> dict[str, Any] | None:
     """The check of the module docstring for ``cut`` (a set-pose whose fields were not all
     staged) over ``frames``, the log's frames from position ``lo`` (``window``); None when
-    every field was staged or the check cannot be made."""
+    every field was staged or the check cannot be made. ``boot``: ``frames`` start where the
+    firmware started (a reboot's life, read from its first frame)."""
     if cut.start_pose() is not None:
         return None
     decoder = BulkDecoder(db)
@@ -86,20 +91,28 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
         poses = onboard_samples(frames, accepted, decoder, enc)[0]
     except AnalysisError:
         return None
-    before, after = _around(poses, int(at[0]))
-    if before is None or after is None:
+    c = int(at[0])
+    before, after = _around(poses, c)
+    start = _sample(poses, before) if before is not None else None
+    if before is None and boot and saw_only_the_log(frames, accepted, decoder):
+        start = (0, (0.0, 0.0, 0.0))  # applied before two poses: from its power-up pose
+    if start is None or after is None:
         return None
-    geometry = Geometry.of(robot)
-    if not all(_settled(poses, i, enc, robot, integrator, max_wheel_speed_mm_s)
-               for i in (before - 1, after)):
+    sides = ([] if before is None else [before - 1]) + [after]
+    if not all(_settled(poses, i, enc, robot, integrator, max_wheel_speed_mm_s) for i in sides):
         return None  # the firmware not in its plain steps around the APPLY: not judged here
-    steps = _plain_steps(enc, int(poses.enc[before]), int(poses.enc[after]), robot,
-                         max_wheel_speed_mm_s)
+    steps = _plain_steps(enc, start[0], int(poses.enc[after]), robot, max_wheel_speed_mm_s)
     if steps is None:
         return None
-    judged = _judged(poses, before, after, steps, int(at[0]) - int(poses.enc[before]),
-                     cut.staged, geometry, integrator)
+    judged = _judged(start, _sample(poses, after), steps, c - start[0], cut.staged,
+                     Geometry.of(robot), integrator)
     return {"fields_kept": [name for name in FIELDS if name not in cut.staged], **judged}
+
+
+def _sample(poses: Poses, i: int) -> tuple[int, tuple[float, float, float]]:
+    """Sample ``i``: its encoder frame and its pose (x m, y m, heading rad)."""
+    return int(poses.enc[i]), (float(poses.x_m[i]), float(poses.y_m[i]),
+                               float(poses.heading_rad[i]))
 
 
 def _settled(poses: Poses, i: int, enc: Encoders, robot: RobotProfile, integrator: str,
@@ -109,8 +122,9 @@ def _settled(poses: Poses, i: int, enc: Encoders, robot: RobotProfile, integrato
     after a stall, is not: the samples there cannot pin a jump)."""
     steps = _plain_steps(enc, int(poses.enc[i]), int(poses.enc[i + 1]), robot,
                          max_wheel_speed_mm_s)
-    return steps is not None and bool(
-        _judged(poses, i, i + 1, steps, 0, {}, Geometry.of(robot), integrator)["passed"])
+    return steps is not None and bool(_judged(
+        _sample(poses, i), _sample(poses, i + 1), steps, 0, {}, Geometry.of(robot),
+        integrator)["passed"])
 
 
 def _around(poses: Poses, c: int) -> tuple[int | None, int | None]:
@@ -153,23 +167,23 @@ def _moved(pose: tuple[float, float, float], d_left: np.ndarray, d_right: np.nda
             float(moved.distance_m[-1]))
 
 
-def _judged(poses: Poses, before: int, after: int, steps: tuple[np.ndarray, np.ndarray],
+def _judged(before: tuple[int, tuple[float, float, float]],
+            after: tuple[int, tuple[float, float, float]], steps: tuple[np.ndarray, np.ndarray],
             to_cut: int, staged: dict[str, float], geometry: Geometry,
             integrator: str) -> dict[str, Any]:
-    """The sample ``before`` moved by the ``to_cut`` steps to the APPLY's frame, the staged
-    fields set there, moved by the rest to the sample ``after``: how far that sample is."""
+    """The pose ``before`` (encoder frame, pose) moved by the ``to_cut`` steps to the APPLY's
+    frame, the staged fields set there, moved by the rest to the sample ``after``: how far that
+    sample is."""
     d_left, d_right = steps
-    x, y, h, head_m = _moved((float(poses.x_m[before]), float(poses.y_m[before]),
-                              float(poses.heading_rad[before])),
-                             d_left[:to_cut], d_right[:to_cut], geometry, integrator)
+    x, y, h, head_m = _moved(before[1], d_left[:to_cut], d_right[:to_cut], geometry, integrator)
     start = (staged.get("X", x), staged.get("Y", y), staged.get("HEADING", h))
     x, y, h, tail_m = _moved(start, d_left[to_cut:], d_right[to_cut:], geometry, integrator)
-    dx_m, dy_m = float(poses.x_m[after]) - x, float(poses.y_m[after]) - y
-    dh_rad = (float(poses.heading_rad[after]) - h + math.pi) % _TURN - math.pi
+    dx_m, dy_m = after[1][0] - x, after[1][1] - y
+    dh_rad = (after[1][2] - h + math.pi) % _TURN - math.pi
     bound_m = POSITION_LSB_M + HEADING_LSB_RAD * (head_m + tail_m) + _FLOAT_M
     passed = (max(abs(dx_m), abs(dy_m)) <= bound_m
               and abs(dh_rad) <= HEADING_LSB_RAD + _FLOAT_RAD)
-    return {"encoder_frames": int(poses.enc[after]) - int(poses.enc[before]),
+    return {"encoder_frames": after[0] - before[0],
             "position_jump_m": math.hypot(dx_m, dy_m), "heading_jump_rad": abs(dh_rad),
             "bound_m": bound_m, "passed": passed}
 

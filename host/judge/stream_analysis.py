@@ -178,7 +178,8 @@ def _analyze_lives(
         if span.set_pose is not None:
             lo, hi = window(span.set_pose.position, spans[k - 1].start, span.stop)
             kept[len(done)] = kept_check(concat_frames(list(frames_of(LifeSpan(lo, hi, False))())),
-                                         lo, span.set_pose, life_robot, life_integrator, db, bound)
+                                         lo, span.set_pose, life_robot, life_integrator, db, bound,
+                                         boot=spans[k - 1].boot and lo == spans[k - 1].start)
         done.append((span, report, t_first))
     if not done:
         assert failure is not None
