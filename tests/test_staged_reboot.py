@@ -225,6 +225,11 @@ def test_a_firmware_that_keeps_its_set_pose_staging_fails_analyze(
     assert right.passed
     assert [e["kept"]["passed"] for e in right.report["events"] if e["kind"] == "set_pose"] == [
         True]
+    right_messages = drive("set_pose", False, apply_at)
+    monitor, bridge = _live(right_messages)
+    assert monitor.health(right_messages[-1].timestamp)["state"] == "OK"
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.vs_reference.max_dpos_m < 1e-3
     path = _log("set_pose", tmp_path, True, apply_at)
     whole = analyze(read_log(path), PMIR, "exact")
     assert not whole.passed
