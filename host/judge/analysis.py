@@ -159,7 +159,7 @@ from odocan.host.judge.samples import (
     truth_samples,
     wrap_pi,
 )
-from odocan.host.judge.setposekept import kept_check, mark_kept, window
+from odocan.host.judge.setposekept import check_cut, mark_kept
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.stalls import after_stalls
 from odocan.host.judge.statuslatch import StatusLatch, firmware_events
@@ -265,11 +265,9 @@ def analyze(
             silent.append(life)
             continue
         if life.set_pose is not None:
-            lo, hi = window(life.set_pose.position, int(lives[k - 1].index[0]),
-                            int(life.index[-1]) + 1)
-            kept[len(done)] = kept_check(frames.select(np.arange(lo, hi)), lo, life.set_pose,
-                                         life_robot, life_integrator, db, bound, boot=lives[
-                                             k - 1].boot and lo == int(lives[k - 1].index[0]))
+            kept[len(done)] = check_cut(lambda lo, hi: frames.select(np.arange(lo, hi)), (
+                int(lives[k - 1].index[0]), lives[k - 1].boot), int(life.index[-1]) + 1,
+                life.set_pose, life_robot, life_integrator, db, bound)
         done.append((life, result, float(part.timestamp_s[0])))
     if not done:
         assert failure is not None

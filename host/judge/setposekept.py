@@ -33,6 +33,7 @@ The window is read alike from a whole log and from a streamed one (its frames on
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -70,6 +71,18 @@ def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
     """The log positions [lo, hi) read for the cut at ``position``: ``WINDOW_FRAMES`` each side,
     within the life before it (from ``head_start``) and the life it opens (to ``tail_stop``)."""
     return max(head_start, position - WINDOW_FRAMES), min(tail_stop, position + WINDOW_FRAMES)
+
+
+def check_cut(read: Callable[[int, int], FrameArrays], head: tuple[int, bool], tail_stop: int,
+              cut: SetPoseCut, robot: RobotProfile, integrator: str, db: DatabaseSpec,
+              max_wheel_speed_mm_s: SpeedBound) -> dict[str, Any] | None:
+    """``kept_check`` of the set-pose ``cut`` over its ``window``: ``read(lo, hi)`` gives the
+    log's frames [lo, hi) (whole or streamed alike); ``head``: the first frame of the life
+    before the cut and whether it starts at a reboot; ``tail_stop``: the end of the life the
+    cut opens."""
+    lo, hi = window(cut.position, head[0], tail_stop)
+    return kept_check(read(lo, hi), lo, cut, robot, integrator, db, max_wheel_speed_mm_s,
+                      boot=head[1] and lo == head[0])
 
 
 def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfile,

@@ -43,7 +43,7 @@ from odocan.host.judge.samples import (
     Encoders,
     require_messages,
 )
-from odocan.host.judge.setposekept import kept_check, mark_kept, window
+from odocan.host.judge.setposekept import check_cut, mark_kept
 from odocan.host.judge.stream import StreamE2E
 from odocan.host.judge.stream_choice import RSS_MARGIN as RSS_MARGIN
 from odocan.host.judge.stream_choice import RSS_TARGET_MB as RSS_TARGET_MB
@@ -176,10 +176,10 @@ def _analyze_lives(
             silent.append(_as_life(span))
             continue
         if span.set_pose is not None:
-            lo, hi = window(span.set_pose.position, spans[k - 1].start, span.stop)
-            kept[len(done)] = kept_check(concat_frames(list(frames_of(LifeSpan(lo, hi, False))())),
-                                         lo, span.set_pose, life_robot, life_integrator, db, bound,
-                                         boot=spans[k - 1].boot and lo == spans[k - 1].start)
+            kept[len(done)] = check_cut(
+                lambda lo, hi: concat_frames(list(frames_of(LifeSpan(lo, hi, False))())),
+                (spans[k - 1].start, spans[k - 1].boot), span.stop, span.set_pose, life_robot,
+                life_integrator, db, bound)
         done.append((span, report, t_first))
     if not done:
         assert failure is not None
