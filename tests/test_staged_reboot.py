@@ -31,10 +31,12 @@ from typing import Any
 from xml.etree import ElementTree
 
 import can
+import numpy as np
 import pytest
 
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorMask
+from odocan.firmware.odometry import Odometry
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
@@ -319,6 +321,56 @@ def test_bare_applies_all_through_a_drive_are_each_judged_and_pass(
     assert whole.passed
     assert json.dumps(analyze_file(path, profile, integrator, chunk_frames=97)) == json.dumps(
         whole.report)
+
+
+def test_a_bare_apply_that_moves_the_pose_a_little_fails_everywhere(tmp_path: Path) -> None:
+    """A wrong firmware whose bare APPLY (no reboot) moves its X by 2^-13 m (0.122 mm, 1.2
+    LSB): analyze, whole and streamed, FAILs it as the live judges do (the two samples around
+    the APPLY alone allow two roundings; the 16 on each side narrow the pose at the APPLY to
+    well below one LSB). Before the fix analyze fitted the life after the APPLY and PASSed.
+    cantools: the APPLY was ACKed, and the X just after it is the one just before plus a
+    tick's motion and the offset (float64, the motion from the ticks on either side)."""
+    off_q40 = 1 << 27
+    heard: list[can.Message] = []
+    with pytest.MonkeyPatch.context() as patch, circle_rig() as rig:
+        apply = Odometry.set_pose
+        patch.setattr(Odometry, "set_pose", lambda self, x, y, h: apply(self, x + off_q40, y, h))
+        rig.observers.append(lambda _k, got: heard.extend(got))
+        tool = open_virtual(rig.channel)
+
+        def host(k: int) -> None:
+            if k == APPLY_AT:
+                data = hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+                tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
+                                      is_extended_id=False, timestamp=k * TICK_S))
+
+        rig.before_board.append(host)
+        try:
+            rig.run(5.0)
+        finally:
+            tool.shutdown()
+    messages = tuple(heard)
+    at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
+    poses_x = [(m.timestamp, float(_decoded(m)["X"])) for m in messages
+               if m.arbitration_id == fr.ODOM_POSE_X_ID]
+    k = sum(m.arbitration_id == fr.ODOM_POSE_X_ID for m in messages[:at])
+    t_s, x_m = np.array(poses_x).T
+    mid_s = 0.5 * (t_s[k - 1] + t_s[k])  # a cubic through 20 X on each side, met there
+    before = np.polyval(np.polyfit(t_s[k - 20:k] - mid_s, x_m[k - 20:k], 3), 0.0)
+    after = np.polyval(np.polyfit(t_s[k:k + 20] - mid_s, x_m[k:k + 20], 3), 0.0)
+    assert abs((after - before) - off_q40 / 2**40) < 0.05e-3  # cantools, float64: 1.2 LSB
+    path = tmp_path / "moved.log"
+    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
+                            f"{bytes(m.data).hex().upper()}\n" for m in messages))
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert not whole.passed
+    assert [e["kept"]["passed"] for e in whole.report["events"] if e["kind"] == "set_pose"] == [
+        False]
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+    monitor, bridge = _live(messages)
+    assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
+    assert bridge.tracker.vs_reference.max_dpos_m > 1e-4
 
 
 @pytest.mark.parametrize("stream", ["never", "always"])

@@ -20,6 +20,14 @@ two poses before it is judged from the firmware's power-up pose instead ((0, 0, 
 encoder frame of its life, ``analyze``'s own rule for a reboot's life: ``powerup``), when the
 window starts at that life's first frame.
 
+Two samples alone allow a jump of up to two roundings (a firmware moving X by 1.2 LSB at a bare
+APPLY passed, where the live judges, which carry the reference across it, said POSE WRONG). So
+a check the two pass is narrowed by up to ``NARROW_SAMPLES`` samples on each side (``_overlap``):
+each, moved rigidly to C by the reference's motion, allows the pose at C within its rounding
+(half an LSB each way, its heading's half LSB over the motion); the intersections of each side
+must agree in every field kept (a staged one: inside the after side's). Samples at varied
+sub-LSB phases narrow each side well below one LSB, as the start fits do.
+
 Not judged (``None``): two samples around C within ``WINDOW_FRAMES`` of it in the firmware's
 life are not there, or the steps between them are not the plain ones (a gap of the encoder
 sequence, a refused or re-primed step, a twin), or the firmware is not seen stepping plainly
@@ -49,6 +57,7 @@ from odocan.host.judge.samples import (
     WIRE_COUNTER_BITS,
     AnalysisError,
     Encoders,
+    FloatArray,
     Poses,
     encoder_frames,
     onboard_samples,
@@ -62,6 +71,7 @@ if TYPE_CHECKING:
     from odocan.host.protocol.dbcplan import DatabaseSpec
 
 WINDOW_FRAMES = 512  # log frames read on each side of the APPLY's encoder frame
+NARROW_SAMPLES = 16  # samples on each side whose rounding intervals narrow the check
 _FLOAT_M = 1e-9  # the firmware's Q40 steps against float64 over a few frames, and more
 _FLOAT_RAD = 1e-12
 _TURN = 2.0 * math.pi
@@ -119,7 +129,79 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
         return None
     judged = _judged(start, _sample(poses, after), steps, c - start[0], cut.staged,
                      Geometry.of(robot), integrator)
+    if judged["passed"] and before is not None:  # narrowed by more samples on each side
+        judged["passed"] = _overlap(poses, before, after, c, enc, cut.staged, robot, integrator,
+                                    max_wheel_speed_mm_s)
     return {"fields_kept": [name for name in FIELDS if name not in cut.staged], **judged}
+
+
+def _overlap(poses: Poses, before: int, after: int, c: int, enc: Encoders,
+             staged: dict[str, float], robot: RobotProfile, integrator: str,
+             max_wheel_speed_mm_s: SpeedBound) -> bool:
+    """Whether the pose at the APPLY's frame ``c`` that up to ``NARROW_SAMPLES`` samples on
+    each side allow (each sample moved to ``c`` by the reference's steps: an interval of its
+    rounding, half an LSB each way, widened by its heading's rounding over the motion)
+    agrees between the sides for every field not staged (the staged ones: within the after
+    side's). True (nothing more to say) when those samples do not step plainly."""
+    first = max(0, before - NARROW_SAMPLES + 1)
+    last = min(len(poses.enc) - 1, after + NARROW_SAMPLES - 1)
+    steps = _plain_steps(enc, int(poses.enc[first]), int(poses.enc[last]), robot,
+                         max_wheel_speed_mm_s)
+    if steps is None:
+        return True
+    rel = integrate(*steps, Geometry.of(robot), integrator)
+    rel_x, rel_y, rel_h = (np.concatenate(([0.0], v)) for v in (rel.x_m, rel.y_m,
+                                                                rel.heading_rad))
+    base = int(poses.enc[first])
+    sides = [_at_cut(poses, range(first, before + 1), c - base, base, (rel_x, rel_y, rel_h)),
+             _at_cut(poses, range(after, last + 1), c - base, base, (rel_x, rel_y, rel_h))]
+    if any(side is None for side in sides):
+        return True  # a side's samples disagree among themselves: not judged here
+    lows, highs = sides[0], sides[1]
+    assert lows is not None and highs is not None
+    for k, name in enumerate(FIELDS):
+        lo_b, hi_b = lows[k]
+        lo_a, hi_a = highs[k]
+        if name in staged:
+            value = staged[name]
+            if k == 2:
+                value = lo_a + (value - lo_a) % _TURN
+            if not lo_a - _FLOAT_M <= value <= hi_a + _FLOAT_M:
+                return False
+        elif k == 2:
+            shift = round((lo_a - lo_b) / _TURN) * _TURN
+            if lo_a - shift > hi_b + _FLOAT_RAD or lo_b > hi_a - shift + _FLOAT_RAD:
+                return False
+        elif lo_a > hi_b + _FLOAT_M or lo_b > hi_a + _FLOAT_M:
+            return False
+    return True
+
+
+def _at_cut(poses: Poses, samples: range, c: int, base: int,
+            rel: tuple[FloatArray, FloatArray, FloatArray]) -> list[tuple[float, float]] | None:
+    """The intervals (x, y, heading) of the pose at frame ``c`` (from ``base``) that every one
+    of ``samples`` allows, moved there rigidly by the reference's motion ``rel`` (from
+    ``base``); None when they do not overlap."""
+    rel_x, rel_y, rel_h = rel
+    bounds = [(-math.inf, math.inf)] * 3
+    h_first: float | None = None
+    for i in samples:
+        k = int(poses.enc[i]) - base
+        dx, dy = rel_x[k] - rel_x[c], rel_y[k] - rel_y[c]
+        cos_c, sin_c = math.cos(rel_h[c]), math.sin(rel_h[c])
+        mx, my = cos_c * dx + sin_c * dy, -sin_c * dx + cos_c * dy  # in the frame at c
+        h_c = float(poses.heading_rad[i]) - (rel_h[k] - rel_h[c])
+        h_first = h_c if h_first is None else h_first
+        h_c = h_first + (h_c - h_first + math.pi) % _TURN - math.pi
+        x_c = float(poses.x_m[i]) - (math.cos(h_c) * mx - math.sin(h_c) * my)
+        y_c = float(poses.y_m[i]) - (math.sin(h_c) * mx + math.cos(h_c) * my)
+        widen = 0.5 * HEADING_LSB_RAD * math.hypot(mx, my) + _FLOAT_M
+        half = [0.5 * POSITION_LSB_M + widen] * 2 + [0.5 * HEADING_LSB_RAD + _FLOAT_RAD]
+        bounds = [(max(lo, v - w), min(hi, v + w))
+                  for (lo, hi), v, w in zip(bounds, (x_c, y_c, h_c), half, strict=True)]
+    if any(lo > hi for lo, hi in bounds):
+        return None
+    return bounds
 
 
 def _sample(poses: Poses, i: int) -> tuple[int, tuple[float, float, float]]:
