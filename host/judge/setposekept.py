@@ -26,7 +26,8 @@ a check the two pass is narrowed by up to ``NARROW_SAMPLES`` samples on each sid
 each, moved rigidly to C by the reference's motion, allows the pose at C within its rounding
 (half an LSB each way, its heading's half LSB over the motion); the intersections of each side
 must agree in every field kept (a staged one: inside the after side's). Samples at varied
-sub-LSB phases narrow each side well below one LSB, as the start fits do.
+sub-LSB phases narrow each side well below one LSB, as the start fits do. (Not from the
+power-up pose: that side is exact, the after sample's one rounding is left in the bound.)
 
 Not judged (``None``): two samples around C within ``WINDOW_FRAMES`` of it in the firmware's
 life are not there, or the steps between them are not the plain ones (a gap of the encoder
