@@ -8,9 +8,18 @@ its own pose (TURNS start again) or its build's robot. Before the fix the judges
 fields staged before the reboot: the whole and streamed ``analyze``, the monitor model and the
 bridge all failed the correct firmware (a pose 1.4 m off, a wheelbase it never had).
 
+The other way, a wrong firmware that keeps its staging across the reset and applies it on the
+bare APPLY: the live judges carry the reference across the APPLY and say POSE WRONG; ``analyze``
+fits the life after it, so it checks the APPLY itself (``host.judge.setposekept``: the pose
+after it must continue the one before it in every field not staged in this firmware life) and
+FAILs it, named, whole and streamed, on the command line and in --junit. The same with only
+HEADING staged after the reset (X and Y kept), and no false FAIL for the correct firmware (and
+the C port) applying with nothing staged all through drives of two robots and three integrators.
+
 Independent of the judges: the ACKs read with cantools, and the firmware's pose just before and
 just after the APPLY's ACK (ODOM_POSE_X/Y, cantools): no jump to the pose staged before the
-reboot, as a float64 bound of one tick's motion says."""
+reboot (or a jump of more than a metre for the wrong firmware), as a float64 bound of one
+tick's motion says."""
 
 from __future__ import annotations
 
@@ -19,12 +28,16 @@ import math
 from functools import cache
 from pathlib import Path
 from typing import Any
+from xml.etree import ElementTree
 
 import can
+import numpy as np
 import pytest
 
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorMask
+from odocan.firmware.odometry import Odometry
+from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
@@ -34,8 +47,9 @@ from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.board import TICK_S
 from odocan.sim.contract import database
 from odocan.sim.robot import load
+from odocan.sim.scenarios import get_scenario
 from tests import host_frames as hf
-from tests.fault_rig import open_virtual
+from tests.fault_rig import FaultRig, open_virtual
 from tests.test_health_rig import circle_rig
 
 PMIR = load("pmir")
@@ -54,17 +68,20 @@ DRIVES: dict[str, tuple[int, Any, Any, Any]] = {  # request ID, packer, frames b
 AGAIN = {"config_again": (fr.ODOM_CONFIG_ID, hf.pack_odom_config,  # one ACK before the reboot,
                           ((fr.ConfigParam.WHEELBASE, WHEELBASE_NM),),  # the same again after
                           ((fr.ConfigParam.WHEELBASE, WHEELBASE_NM), (fr.ConfigParam.APPLY, 0)))}
+PARTIAL = {"heading_after": (fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose, POSE,  # X, Y, HEADING
+                             ((fr.SetPoseField.HEADING, 20000),  # staged before the reboot, only
+                              (fr.SetPoseField.APPLY, 0)))}  # HEADING again after it
 ONE_TICK_M = 0.02  # pmir on the circle moves < 2 cm a tick: a jump is more
 
 
 @cache
-def drive(which: str, kept: bool = False) -> tuple[can.Message, ...]:
+def drive(which: str, kept: bool = False, apply_at: int = APPLY_AT) -> tuple[can.Message, ...]:
     """5 s of pmir on the circle: the fields staged from ``STAGE_AT``, the MCU reset at
-    ``REBOOT_AT``, the APPLY alone at ``APPLY_AT`` (E2E COUNTER running on). ``kept``: a wrong
+    ``REBOOT_AT``, the APPLY alone at ``apply_at`` (E2E COUNTER running on). ``kept``: a wrong
     firmware that keeps its staging across the reset."""
-    request_id, pack, before_reboot, after_reboot = (AGAIN | DRIVES)[which]
+    request_id, pack, before_reboot, after_reboot = (AGAIN | PARTIAL | DRIVES)[which]
     sends = ({STAGE_AT + k: frame for k, frame in enumerate(before_reboot)}
-             | {APPLY_AT + k: frame for k, frame in enumerate(after_reboot)})
+             | {apply_at + k: frame for k, frame in enumerate(after_reboot)})
     heard: list[can.Message] = []
     with circle_rig() as rig:
         rig.observers.append(lambda _k, got: heard.extend(got))
@@ -122,10 +139,11 @@ def _pose_around(messages: tuple[can.Message, ...], at: int) -> float:
     return math.hypot(after[0] - before[0], after[1] - before[1])
 
 
-def _log(which: str, folder: Path, kept: bool = False) -> Path:
-    path = folder / f"{which}{'-kept' * kept}.log"
+def _log(which: str, folder: Path, kept: bool = False, apply_at: int = APPLY_AT) -> Path:
+    path = folder / f"{which}{'-kept' * kept}-{apply_at}.log"
     path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
-                            f"{bytes(m.data).hex().upper()}\n" for m in drive(which, kept)))
+                            f"{bytes(m.data).hex().upper()}\n"
+                            for m in drive(which, kept, apply_at)))
     return path
 
 
@@ -142,6 +160,10 @@ def test_a_bare_apply_after_a_reboot_applies_nothing_staged_before_it(
     assert len(whole.report["reboots"]) == 1
     assert whole.report["onboard_vs_reference"]["max_position_error_m"] < 1e-3
     assert whole.passed
+    kept = [e["kept"] for e in whole.report["events"] if e["kind"] == "set_pose"]
+    if which == "set_pose":  # nothing staged in this life: the pose continued, checked
+        assert kept[0]["passed"]
+        assert kept[0]["position_jump_m"] < 2e-4  # two samples' rounding: within one tick
     streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
     assert json.dumps(streamed) == json.dumps(whole.report)
     monitor, bridge = _live(messages)
@@ -167,7 +189,7 @@ def test_a_firmware_that_keeps_its_staging_across_a_reboot_fails_live(which: str
     them on the bare APPLY (the pose jumps 1.1 m; the wheelbase becomes 0.33 m). The live
     judges, which carry the reference across a bare APPLY, say POSE WRONG (before the fix they
     followed the wrong firmware)."""
-    messages = drive(which, kept=True)
+    messages = drive(which, True)
     at = _apply_ack(messages, DRIVES[which][0])
     if which == "set_pose":
         assert _pose_around(messages, at) > 1.0  # cantools: it jumped to the staged pose
@@ -187,12 +209,197 @@ def test_a_firmware_that_keeps_its_config_staging_fails_analyze(tmp_path: Path) 
         whole.report)
 
 
-@pytest.mark.xfail(strict=True, reason="known limit: analyze fits the start of a life after a "
-                   "bare APPLY (the firmware keeps its pose, which after a counter reset is not "
-                   "the reference's), so a jump at a bare APPLY is not seen")
-def test_a_firmware_that_keeps_its_set_pose_staging_fails_analyze(tmp_path: Path) -> None:
-    path = _log("set_pose", tmp_path, kept=True)
-    assert not analyze(read_log(path), PMIR, "exact").passed
+@pytest.mark.parametrize("apply_at", [APPLY_AT, REBOOT_AT + 1])
+def test_a_firmware_that_keeps_its_set_pose_staging_fails_analyze(
+    apply_at: int, tmp_path: Path
+) -> None:
+    """The wrong set-pose firmware of the live test above, judged by ``analyze``, whole and
+    streamed: FAIL, named in the set-pose event (``setposekept``: the pose jumped at an APPLY
+    that had nothing staged in this firmware life). Before the fix analyze fitted the life after
+    the bare APPLY to the pose the firmware jumped to, and PASSed it. The jump it names is the
+    one cantools reads around the APPLY's ACK, within one tick's motion. Also with the APPLY
+    a tick after the reset, before the new firmware sent two poses: judged from its power-up
+    pose. The correct firmware's log of that tick PASSes, its APPLY judged."""
+    messages = drive("set_pose", True, apply_at)
+    jumped_m = _pose_around(messages, _apply_ack(messages, fr.ODOM_SET_POSE_ID))
+    assert jumped_m > 1.0
+    right = analyze(read_log(_log("set_pose", tmp_path, False, apply_at)), PMIR, "exact")
+    assert right.passed
+    assert [e["kept"]["passed"] for e in right.report["events"] if e["kind"] == "set_pose"] == [
+        True]
+    right_messages = drive("set_pose", False, apply_at)
+    monitor, bridge = _live(right_messages)
+    assert monitor.health(right_messages[-1].timestamp)["state"] == "OK"
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.vs_reference.max_dpos_m < 1e-3
+    path = _log("set_pose", tmp_path, True, apply_at)
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert not whole.passed
+    [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+    assert event["kept"]["fields_kept"] == ["X", "Y", "HEADING"]
+    assert not event["kept"]["passed"]
+    assert abs(event["kept"]["position_jump_m"] - jumped_m) < ONE_TICK_M
+    assert "FAIL: the firmware's pose jumped" in event["detail"]
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+    monitor, bridge = _live(messages)
+    assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
+    assert bridge.tracker.vs_reference.max_dpos_m > 0.01
+
+
+@pytest.mark.parametrize("kept", [False, True])
+def test_a_set_pose_of_the_heading_alone_after_a_reboot_keeps_the_position(
+    kept: bool, tmp_path: Path
+) -> None:
+    """X, Y and HEADING staged, the MCU reset, HEADING staged again and APPLYed: the correct
+    firmware keeps its X and Y (cantools: no position jump at the APPLY's ACK) and takes the
+    new heading, and every judge PASSes it; the wrong one applies the X and Y staged before the
+    reset too (a 1.1 m jump), and every judge FAILs it: analyze names the X, Y it kept."""
+    messages = drive("heading_after", kept)
+    at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
+    heading = next(_decoded(m)["HEADING"] for m in messages[at:]
+                   if m.arbitration_id == fr.ODOM_POSE_X_ID)
+    assert 20000 * 2 * math.pi / 65536 < heading < 20000 * 2 * math.pi / 65536 + 0.05
+    assert (_pose_around(messages, at) > 1.0) is kept
+    path = _log("heading_after", tmp_path, kept)
+    whole = analyze(read_log(path), PMIR, "exact")
+    [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+    assert event["kept"]["fields_kept"] == ["X", "Y"]
+    assert event["kept"]["passed"] is (not kept) is whole.passed
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+    monitor, bridge = _live(messages)
+    assert (monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG") is kept
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert (tracker.vs_reference.max_dpos_m > 0.01) is kept
+
+
+@pytest.mark.parametrize(("robot", "integrator", "scenario", "firmware"), [
+    ("pmir", "exact", "circle", "python"), ("kobuki", "euler", "random", "python"),
+    ("pmir", "rk2", "random", "c")])
+def test_bare_applies_all_through_a_drive_are_each_judged_and_pass(
+    robot: str, integrator: str, scenario: str, firmware: str, tmp_path: Path
+) -> None:
+    """No false FAIL: the correct firmware (Python, and the C port) APPLYs with nothing staged
+    every 17 ticks (26 times, at every phase of the pose and encoder cycles, on both sides of a
+    reboot); each APPLY's check is made (none left unjudged) and passes, whole and streamed;
+    cantools: no APPLY moved the pose by more than a tick's motion."""
+    ticks = list(range(40, 480, 17))
+    heard: list[can.Message] = []
+    profile = load(robot)
+    with FaultRig(scenario=get_scenario(scenario, profile, duration_s=60.0), robot=robot,
+                  integrator=integrator, firmware=firmware) as rig:
+        rig.observers.append(lambda _k, got: heard.extend(got))
+        tool = open_virtual(rig.channel)
+
+        def host(k: int) -> None:
+            if k == REBOOT_AT:
+                rig.board.reboot()
+            if k in ticks:
+                data = hf.pack_odom_set_pose(ticks.index(k) & 0xF, fr.SetPoseField.APPLY, 0,
+                                             ErrorMask())
+                tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
+                                      is_extended_id=False, timestamp=k * TICK_S))
+
+        rig.before_board.append(host)
+        try:
+            rig.run(5.0)
+        finally:
+            tool.shutdown()
+    messages = tuple(heard)
+    acks = [k for k, m in enumerate(messages) if m.arbitration_id == fr.ODOM_ACK_ID
+            and _decoded(m)["RESULT"] == 0]
+    assert len(acks) == len(ticks)
+    assert all(_pose_around(messages, at) < ONE_TICK_M for at in acks)
+    path = tmp_path / "bare.log"
+    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
+                            f"{bytes(m.data).hex().upper()}\n" for m in messages))
+    whole = analyze(read_log(path), profile, integrator)
+    checks = [e["kept"] for e in whole.report["events"] if e["kind"] == "set_pose"]
+    assert len(checks) == len(ticks)
+    assert all(check is not None and check["passed"] for check in checks)
+    assert whole.passed
+    assert json.dumps(analyze_file(path, profile, integrator, chunk_frames=97)) == json.dumps(
+        whole.report)
+
+
+def test_a_bare_apply_that_moves_the_pose_a_little_fails_everywhere(tmp_path: Path) -> None:
+    """A wrong firmware whose bare APPLY (no reboot) moves its X by 2^-13 m (0.122 mm, 1.2
+    LSB): analyze, whole and streamed, FAILs it as the live judges do (the two samples around
+    the APPLY alone allow two roundings; the 16 on each side narrow the pose at the APPLY to
+    well below one LSB). Before the fix analyze fitted the life after the APPLY and PASSed.
+    cantools: the APPLY was ACKed, and the X just after it is the one just before plus a
+    tick's motion and the offset (float64, the motion from the ticks on either side)."""
+    off_q40 = 1 << 27
+    heard: list[can.Message] = []
+    with pytest.MonkeyPatch.context() as patch, circle_rig() as rig:
+        apply = Odometry.set_pose
+        patch.setattr(Odometry, "set_pose", lambda self, x, y, h: apply(self, x + off_q40, y, h))
+        rig.observers.append(lambda _k, got: heard.extend(got))
+        tool = open_virtual(rig.channel)
+
+        def host(k: int) -> None:
+            if k == APPLY_AT:
+                data = hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+                tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
+                                      is_extended_id=False, timestamp=k * TICK_S))
+
+        rig.before_board.append(host)
+        try:
+            rig.run(5.0)
+        finally:
+            tool.shutdown()
+    messages = tuple(heard)
+    at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
+    poses_x = [(m.timestamp, float(_decoded(m)["X"])) for m in messages
+               if m.arbitration_id == fr.ODOM_POSE_X_ID]
+    k = sum(m.arbitration_id == fr.ODOM_POSE_X_ID for m in messages[:at])
+    t_s, x_m = np.array(poses_x).T
+    mid_s = 0.5 * (t_s[k - 1] + t_s[k])  # a cubic through 20 X on each side, met there
+    before = np.polyval(np.polyfit(t_s[k - 20:k] - mid_s, x_m[k - 20:k], 3), 0.0)
+    after = np.polyval(np.polyfit(t_s[k:k + 20] - mid_s, x_m[k:k + 20], 3), 0.0)
+    assert abs((after - before) - off_q40 / 2**40) < 0.05e-3  # cantools, float64: 1.2 LSB
+    path = tmp_path / "moved.log"
+    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
+                            f"{bytes(m.data).hex().upper()}\n" for m in messages))
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert not whole.passed
+    assert [e["kept"]["passed"] for e in whole.report["events"] if e["kind"] == "set_pose"] == [
+        False]
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+    monitor, bridge = _live(messages)
+    assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
+    assert bridge.tracker.vs_reference.max_dpos_m > 1e-4
+
+
+@pytest.mark.parametrize("stream", ["never", "always"])
+def test_odocan_analyze_names_the_jump_at_the_bare_apply(
+    stream: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The command's verdict, whole and streamed: exit 1, the jump named on the FAIL line
+    (before the fix: exit 0, PASS), and a failed ``set_pose_kept`` testcase in --junit; the
+    correct firmware's log: exit 0, its check a passed testcase."""
+    wrong, right = _log("set_pose", tmp_path, kept=True), _log("set_pose", tmp_path)
+    junit = tmp_path / "checks.xml"
+    argv = ["analyze", "--robot", "pmir", "--integrator", "exact", "--stream", stream,
+            "--junit", str(junit)]
+    assert main([*argv, str(wrong)]) == 1
+    out = capsys.readouterr().out
+    assert ("FAIL: at 3.501 s the firmware's pose jumped 1096 mm and 459.2 mrad at an "
+            "ODOM_SET_POSE APPLY that kept X, Y, HEADING (nothing staged for them in this "
+            "firmware life)") in out
+    assert _kept_cases(junit) == [False]
+    assert main([*argv, str(right)]) == 0
+    assert "PASS: on-board vs reference within" in capsys.readouterr().out
+    assert _kept_cases(junit) == [True]
+
+
+def _kept_cases(junit: Path) -> list[bool]:
+    """Per ``set_pose_kept`` testcase of the JUnit file: passed (no failure in it)."""
+    cases = ElementTree.parse(junit).getroot().iter("testcase")
+    return [case.find("failure") is None for case in cases
+            if case.get("name") == "set_pose_kept"]
 
 
 def test_a_config_staged_again_after_a_reboot_is_followed(tmp_path: Path) -> None:

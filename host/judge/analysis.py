@@ -159,6 +159,7 @@ from odocan.host.judge.samples import (
     truth_samples,
     wrap_pi,
 )
+from odocan.host.judge.setposekept import check_cut, mark_kept
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.stalls import after_stalls
 from odocan.host.judge.statuslatch import StatusLatch, firmware_events
@@ -247,10 +248,11 @@ def analyze(
     done: list[tuple[Life, Analysis, float]] = []
     failure: AnalysisError | None = None
     silent: list[Life] = []
-    for life, (life_robot, life_integrator, bound) in zip(
+    kept: dict[int, dict[str, Any] | None] = {}  # per set-pose's life: what it kept (setposekept)
+    for k, (life, (life_robot, life_integrator, bound)) in enumerate(zip(
             lives, in_force(lives, robot, _first_integrator(frames, lives, decoder, integrator,
                                                             source), max_wheel_speed_mm_s),
-            strict=True):
+            strict=True)):
         part = frames.select(life.index)
         try:
             result = _analyze_life(part, life_robot, life_integrator, tolerance=tolerance, db=db,
@@ -262,6 +264,10 @@ def analyze(
             failure = failure or exc
             silent.append(life)
             continue
+        if life.set_pose is not None:
+            kept[len(done)] = check_cut(lambda lo, hi: frames.select(np.arange(lo, hi)), (
+                int(lives[k - 1].index[0]), lives[k - 1].boot), int(life.index[-1]) + 1,
+                life.set_pose, life_robot, life_integrator, db, bound)
         done.append((life, result, float(part.timestamp_s[0])))
     if not done:
         assert failure is not None
@@ -284,6 +290,7 @@ def analyze(
         and report["onboard_twist_vs_reference"]["passed"]
         and report["onboard_distance_vs_reference"]["passed"]
     )
+    mark_kept(report, kept)  # a set-pose that changed a field it kept: FAIL
     return Analysis(report=report, series=series, passed=report["passed"])
 
 

@@ -9,8 +9,10 @@ frame before it (or before its ODOM_AUTH), where the new life starts; it counts 
 says ACK. When X, Y and HEADING were all staged the new life starts exactly at them
 (``Life.set_pose``; the firmware's TURNS start again: the heading within [0, 2 pi)); when some
 were not (the firmware kept its own values, e.g. a bare APPLY after a counter reset) its start
-is fitted to its samples, as a log that starts mid-drive. Either way its truth is compared in
-the new frame (re-based at the life's start, ``compare.life_origin``).
+is fitted to its samples, as a log that starts mid-drive, and what it kept is checked at the
+APPLY (``host.judge.setposekept``: a fit alone would follow a pose the firmware jumped to).
+Either way its truth is compared in the new frame (re-based at the life's start,
+``compare.life_origin``).
 
 A reboot empties the firmware's staging (RAM): the follower forgets the fields staged before
 it (``SetPoseFollower.forget`` at each firmware life's start, ``reboots.split_lives``), so a bare

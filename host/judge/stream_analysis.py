@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
+from odocan.host.io.frames import concat_frames
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance
 from odocan.host.judge.breaks import placed_offsets
@@ -42,6 +43,7 @@ from odocan.host.judge.samples import (
     Encoders,
     require_messages,
 )
+from odocan.host.judge.setposekept import check_cut, mark_kept
 from odocan.host.judge.stream import StreamE2E
 from odocan.host.judge.stream_choice import RSS_MARGIN as RSS_MARGIN
 from odocan.host.judge.stream_choice import RSS_TARGET_MB as RSS_TARGET_MB
@@ -158,10 +160,11 @@ def _analyze_lives(
     done: list[tuple[LifeSpan, dict[str, Any], float]] = []
     failure: AnalysisError | None = None
     silent: list[Life] = []
-    for span, (life_robot, life_integrator, bound) in zip(spans, in_force(
+    kept: dict[int, dict[str, Any] | None] = {}  # per set-pose's life: what it kept (setposekept)
+    for k, (span, (life_robot, life_integrator, bound)) in enumerate(zip(spans, in_force(
             [_as_life(span) for span in spans], robot,
             first_integrator(spans, frames_of, db, integrator, source), max_wheel_speed_mm_s),
-            strict=True):
+            strict=True)):
         try:
             report, t_first = _life(frames_of(span), life_robot, life_integrator,
                                     tolerance=tolerance, db=db, boot=span.boot,
@@ -172,6 +175,11 @@ def _analyze_lives(
             failure = failure or exc
             silent.append(_as_life(span))
             continue
+        if span.set_pose is not None:
+            kept[len(done)] = check_cut(
+                lambda lo, hi: concat_frames(list(frames_of(LifeSpan(lo, hi, False))())),
+                (spans[k - 1].start, spans[k - 1].boot), span.stop, span.set_pose, life_robot,
+                life_integrator, db, bound)
         done.append((span, report, t_first))
     if not done:
         assert failure is not None
@@ -192,6 +200,7 @@ def _analyze_lives(
         and report["onboard_twist_vs_reference"]["passed"]
         and report["onboard_distance_vs_reference"]["passed"]
     )
+    mark_kept(report, kept)  # a set-pose that changed a field it kept: FAIL
     return report
 
 

@@ -4,7 +4,8 @@
   cannot be written before the work starts; ``write_checks(args, suite, checks)`` writes it.
 * ``analysis_checks(report)``: the two checks behind ``run``/``analyze``/``replay``'s verdict
   (on-board vs float64 reference, position and heading, against the tolerance), plus the
-  replay's own comparison with the logged firmware when the report has it, and a failed
+  replay's own comparison with the logged firmware when the report has it, each set-pose
+  APPLY's check of the fields it kept (``set_pose_kept``), and a failed
   ``completed`` when a signal stopped the command before it finished (``host.stopped``).
 * ``umbmark_checks``/``calibration_checks``/``experiment_checks``: the figures of the benchmark
   and, when the report carries a verdict (``passed``, ``faults``), a ``verdict`` testcase that
@@ -60,6 +61,13 @@ def analysis_checks(report: dict[str, Any]) -> list[Check]:
         checks.append(Check("onboard_distance_vs_reference", bool(distance["passed"]),
                             f"DISTANCE beyond the reference's path length by "
                             f"{distance['max_excess_m']} m", dict(distance)))
+    for event in report.get("events") or []:  # what a set-pose kept (host.judge.setposekept)
+        kept = event.get("kept") if event.get("kind") == "set_pose" else None
+        if isinstance(kept, dict):
+            checks.append(Check("set_pose_kept", bool(kept["passed"]),
+                                f"the pose jumped {kept['position_jump_m']} m, "
+                                f"{kept['heading_jump_rad']} rad at an APPLY that kept "
+                                f"{', '.join(kept['fields_kept'])}", dict(kept)))
     # on-board vs truth has no limit (the robot's own errors are not the firmware's fault): it
     # is no testcase, so a green CI page never stands for a pose far from the truth
     replay = report.get("replay")

@@ -147,6 +147,9 @@ def print_summary(
     twist = report.get("onboard_twist_vs_reference") or {"passed": True}
     distance = report.get("onboard_distance_vs_reference") or {"passed": True}
     pose_met = _pose_within(report, tolerance)
+    for kept in kept_failures(report):  # a set-pose that moved what it kept: a FAIL of its own
+        console.print(f"[{style}]{verdict}[/{style}]: {kept}", soft_wrap=True)
+        verdict, style = "otherwise", "bold" if pose_met and twist["passed"] else style
     conflict = report.get("two_sources")
     if conflict:  # a FAIL of its own; the pose before it is judged as usual
         console.print(f"[{style}]{verdict}[/{style}]: {conflict['detail']}", soft_wrap=True)
@@ -165,6 +168,18 @@ def print_summary(
     else:
         line = "; ".join([pose + ("" if pose_met else ": not met"), *failed])
     console.print(f"[{style}]{verdict}[/{style}]: {line}", soft_wrap=True)
+
+
+def kept_failures(report: dict[str, Any]) -> list[str]:
+    """The set-poses whose APPLY moved a field it kept (``host.judge.setposekept``), in words."""
+    return [f"at {event['t_s']:.3f} s the firmware's pose jumped "
+            f"{event['kept']['position_jump_m'] * 1e3:.4g} mm and "
+            f"{event['kept']['heading_jump_rad'] * 1e3:.4g} mrad at an ODOM_SET_POSE APPLY that "
+            f"kept {', '.join(event['kept']['fields_kept'])} (nothing staged for them in this "
+            "firmware life)"
+            for event in report.get("events") or []
+            if event.get("kind") == "set_pose" and isinstance(event.get("kept"), dict)
+            and not event["kept"]["passed"]]
 
 
 def _twist_failures(twist: dict[str, Any], distance: dict[str, Any]) -> list[str]:

@@ -1,0 +1,302 @@
+"""What an applied set-pose keeps (issue #11): the fields not staged in the firmware's life.
+
+The firmware's APPLY (firmware/commands.py ``_pose_with``, ecu.c alike) overwrites its pose with
+the fields staged since its start and keeps its own values of the others; a bare APPLY keeps
+X, Y and HEADING (only TURNS start again: the heading is then within [0, 2 pi)). A reboot
+empties the staging (its RAM), so a bare APPLY after a reboot must leave the pose where it was.
+
+``analyze`` judges the life after an APPLY that set fewer than all three fields from a fitted
+start (``host.judge.setposes``), which follows any pose the firmware jumped to: a wrong
+firmware that kept its staging across a reboot and applied it on a bare APPLY after it
+PASSed. So each such APPLY is checked here, on the bus alone: the first on-board sample after
+it (naming an encoder frame after the one the APPLY took effect after, C) must be the last one
+before it (naming a frame before C) moved by the reference's steps between them
+(``reference.integrate``), with the staged fields set at C. The difference is bounded by the
+two samples' rounding (under one LSB per axis and of heading, the wire's) and the start
+heading's rounding over the path between them (one heading LSB times its length); beyond,
+the firmware set what it had not been given: ``passed`` False, a FAIL named in the set-pose
+event (``mark_kept``). An APPLY so soon after a reboot that the new firmware sent fewer than
+two poses before it is judged from the firmware's power-up pose instead ((0, 0, 0) at the first
+encoder frame of its life, ``analyze``'s own rule for a reboot's life: ``powerup``), when the
+window starts at that life's first frame.
+
+Two samples alone allow a jump of up to two roundings (a firmware moving X by 1.2 LSB at a bare
+APPLY passed, where the live judges, which carry the reference across it, said POSE WRONG). So
+a check the two pass is narrowed by up to ``NARROW_SAMPLES`` samples on each side (``_overlap``):
+each, moved rigidly to C by the reference's motion, allows the pose at C within its rounding
+(half an LSB each way, its heading's half LSB over the motion); the intersections of each side
+must agree in every field kept (a staged one: inside the after side's). Samples at varied
+sub-LSB phases narrow each side well below one LSB, as the start fits do. (Not from the
+power-up pose: that side is exact, the after sample's one rounding is left in the bound.)
+
+Not judged (``None``): two samples around C within ``WINDOW_FRAMES`` of it in the firmware's
+life are not there, or the steps between them are not the plain ones (a gap of the encoder
+sequence, a refused or re-primed step, a twin), or the firmware is not seen stepping plainly
+on each side (the sample before the last one before C, and the one after the first after C,
+must continue them by the plain steps between, nothing staged: after a stall the first poses
+name backlog frames the window cannot resolve, and merged steps leave the fine reference):
+the fitted start alone judges that life then.
+The window is read alike from a whole log and from a streamed one (its frames only), so
+``analyze`` and ``analyze_file`` give the same check bit for bit."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.livesetpose import FIELDS
+from odocan.host.judge.powerup import saw_only_the_log
+from odocan.host.judge.reference import Geometry, SpeedBound, integrate
+from odocan.host.judge.reference_path import firmware_steps
+from odocan.host.judge.samples import (
+    HEADING_LSB_RAD,
+    POSITION_LSB_M,
+    WIRE_COUNTER_BITS,
+    AnalysisError,
+    Encoders,
+    FloatArray,
+    Poses,
+    encoder_frames,
+    onboard_samples,
+)
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.e2e import check_frames
+from odocan.sim.robot import RobotProfile
+
+if TYPE_CHECKING:
+    from odocan.host.judge.setposes import SetPoseCut
+    from odocan.host.protocol.dbcplan import DatabaseSpec
+
+WINDOW_FRAMES = 512  # log frames read on each side of the APPLY's encoder frame
+NARROW_SAMPLES = 16  # samples on each side whose rounding intervals narrow the check
+_FLOAT_M = 1e-9  # the firmware's Q40 steps against float64 over a few frames, and more
+_FLOAT_RAD = 1e-12
+_TURN = 2.0 * math.pi
+
+
+def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
+    """The log positions [lo, hi) read for the cut at ``position``: ``WINDOW_FRAMES`` each side,
+    within the life before it (from ``head_start``) and the life it opens (to ``tail_stop``)."""
+    return max(head_start, position - WINDOW_FRAMES), min(tail_stop, position + WINDOW_FRAMES)
+
+
+def check_cut(read: Callable[[int, int], FrameArrays], head: tuple[int, bool], tail_stop: int,
+              cut: SetPoseCut, robot: RobotProfile, integrator: str, db: DatabaseSpec,
+              max_wheel_speed_mm_s: SpeedBound) -> dict[str, Any] | None:
+    """``kept_check`` of the set-pose ``cut`` over its ``window``: ``read(lo, hi)`` gives the
+    log's frames [lo, hi) (whole or streamed alike); ``head``: the first frame of the life
+    before the cut and whether it starts at a reboot; ``tail_stop``: the end of the life the
+    cut opens."""
+    lo, hi = window(cut.position, head[0], tail_stop)
+    return kept_check(read(lo, hi), lo, cut, robot, integrator, db, max_wheel_speed_mm_s,
+                      boot=head[1] and lo == head[0])
+
+
+def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfile,
+               integrator: str, db: DatabaseSpec, max_wheel_speed_mm_s: SpeedBound, *,
+               boot: bool = False) -> dict[str, Any] | None:
+    """The check of the module docstring for ``cut`` (a set-pose whose fields were not all
+    staged) over ``frames``, the log's frames from position ``lo`` (``window``); None when
+    every field was staged or the check cannot be made. ``boot``: ``frames`` start where the
+    firmware started (a reboot's life, read from its first frame)."""
+    if cut.start_pose() is not None:
+        return None
+    decoder = BulkDecoder(db)
+    _, accepted = check_frames(frames, db)
+    enc = encoder_frames(frames, accepted, decoder)
+    at = np.flatnonzero(enc.index == cut.position - lo)
+    if len(at) == 0:
+        return None
+    try:
+        poses = onboard_samples(frames, accepted, decoder, enc)[0]
+    except AnalysisError:
+        return None
+    c = int(at[0])
+    before, after = _around(poses, c)
+    start = _sample(poses, before) if before is not None else None
+    if before is None and boot and saw_only_the_log(frames, accepted, decoder):
+        start = (0, (0.0, 0.0, 0.0))  # applied before two poses: from its power-up pose
+    if start is None or after is None:
+        return None
+    sides = ([] if before is None else [before - 1]) + [after]
+    if not all(_settled(poses, i, enc, robot, integrator, max_wheel_speed_mm_s) for i in sides):
+        return None  # the firmware not in its plain steps around the APPLY: not judged here
+    steps = _plain_steps(enc, start[0], int(poses.enc[after]), robot, max_wheel_speed_mm_s)
+    if steps is None:
+        return None
+    judged = _judged(start, _sample(poses, after), steps, c - start[0], cut.staged,
+                     Geometry.of(robot), integrator)
+    if judged["passed"] and before is not None:  # narrowed by more samples on each side
+        judged["passed"] = _overlap(poses, before, after, c, enc, cut.staged, robot, integrator,
+                                    max_wheel_speed_mm_s)
+    return {"fields_kept": [name for name in FIELDS if name not in cut.staged], **judged}
+
+
+def _overlap(poses: Poses, before: int, after: int, c: int, enc: Encoders,
+             staged: dict[str, float], robot: RobotProfile, integrator: str,
+             max_wheel_speed_mm_s: SpeedBound) -> bool:
+    """Whether the pose at the APPLY's frame ``c`` that up to ``NARROW_SAMPLES`` samples on
+    each side allow (each sample moved to ``c`` by the reference's steps: an interval of its
+    rounding, half an LSB each way, widened by its heading's rounding over the motion)
+    agrees between the sides for every field not staged (the staged ones: within the after
+    side's). True (nothing more to say) when those samples do not step plainly."""
+    first = max(0, before - NARROW_SAMPLES + 1)
+    last = min(len(poses.enc) - 1, after + NARROW_SAMPLES - 1)
+    steps = _plain_steps(enc, int(poses.enc[first]), int(poses.enc[last]), robot,
+                         max_wheel_speed_mm_s)
+    if steps is None:
+        return True
+    rel = integrate(*steps, Geometry.of(robot), integrator)
+    rel_x, rel_y, rel_h = (np.concatenate(([0.0], v)) for v in (rel.x_m, rel.y_m,
+                                                                rel.heading_rad))
+    base = int(poses.enc[first])
+    sides = [_at_cut(poses, range(first, before + 1), c - base, base, (rel_x, rel_y, rel_h)),
+             _at_cut(poses, range(after, last + 1), c - base, base, (rel_x, rel_y, rel_h))]
+    if any(side is None for side in sides):
+        return True  # a side's samples disagree among themselves: not judged here
+    lows, highs = sides[0], sides[1]
+    assert lows is not None and highs is not None
+    for k, name in enumerate(FIELDS):
+        lo_b, hi_b = lows[k]
+        lo_a, hi_a = highs[k]
+        if name in staged:
+            value = staged[name]
+            if k == 2:
+                value = lo_a + (value - lo_a) % _TURN
+            if not lo_a - _FLOAT_M <= value <= hi_a + _FLOAT_M:
+                return False
+        elif k == 2:
+            shift = round((lo_a - lo_b) / _TURN) * _TURN
+            if lo_a - shift > hi_b + _FLOAT_RAD or lo_b > hi_a - shift + _FLOAT_RAD:
+                return False
+        elif lo_a > hi_b + _FLOAT_M or lo_b > hi_a + _FLOAT_M:
+            return False
+    return True
+
+
+def _at_cut(poses: Poses, samples: range, c: int, base: int,
+            rel: tuple[FloatArray, FloatArray, FloatArray]) -> list[tuple[float, float]] | None:
+    """The intervals (x, y, heading) of the pose at frame ``c`` (from ``base``) that every one
+    of ``samples`` allows, moved there rigidly by the reference's motion ``rel`` (from
+    ``base``); None when they do not overlap."""
+    rel_x, rel_y, rel_h = rel
+    bounds = [(-math.inf, math.inf)] * 3
+    h_first: float | None = None
+    for i in samples:
+        k = int(poses.enc[i]) - base
+        dx, dy = rel_x[k] - rel_x[c], rel_y[k] - rel_y[c]
+        cos_c, sin_c = math.cos(rel_h[c]), math.sin(rel_h[c])
+        mx, my = cos_c * dx + sin_c * dy, -sin_c * dx + cos_c * dy  # in the frame at c
+        h_c = float(poses.heading_rad[i]) - (rel_h[k] - rel_h[c])
+        h_first = h_c if h_first is None else h_first
+        h_c = h_first + (h_c - h_first + math.pi) % _TURN - math.pi
+        x_c = float(poses.x_m[i]) - (math.cos(h_c) * mx - math.sin(h_c) * my)
+        y_c = float(poses.y_m[i]) - (math.sin(h_c) * mx + math.cos(h_c) * my)
+        widen = 0.5 * HEADING_LSB_RAD * math.hypot(mx, my) + _FLOAT_M
+        half = [0.5 * POSITION_LSB_M + widen] * 2 + [0.5 * HEADING_LSB_RAD + _FLOAT_RAD]
+        bounds = [(max(lo, v - w), min(hi, v + w))
+                  for (lo, hi), v, w in zip(bounds, (x_c, y_c, h_c), half, strict=True)]
+    if any(lo > hi for lo, hi in bounds):
+        return None
+    return bounds
+
+
+def _sample(poses: Poses, i: int) -> tuple[int, tuple[float, float, float]]:
+    """Sample ``i``: its encoder frame and its pose (x m, y m, heading rad)."""
+    return int(poses.enc[i]), (float(poses.x_m[i]), float(poses.y_m[i]),
+                               float(poses.heading_rad[i]))
+
+
+def _settled(poses: Poses, i: int, enc: Encoders, robot: RobotProfile, integrator: str,
+             max_wheel_speed_mm_s: SpeedBound) -> bool:
+    """Whether sample ``i + 1`` is sample ``i`` moved by the plain steps between them (a pose
+    resolved to the wrong encoder frame after a silence, or a firmware taking merged steps
+    after a stall, is not: the samples there cannot pin a jump)."""
+    steps = _plain_steps(enc, int(poses.enc[i]), int(poses.enc[i + 1]), robot,
+                         max_wheel_speed_mm_s)
+    return steps is not None and bool(_judged(
+        _sample(poses, i), _sample(poses, i + 1), steps, 0, {}, Geometry.of(robot),
+        integrator)["passed"])
+
+
+def _around(poses: Poses, c: int) -> tuple[int | None, int | None]:
+    """The last sample naming an encoder frame before ``c`` and the first naming one after,
+    each with another sample beyond it (before the first, after the second)."""
+    before = np.flatnonzero(poses.enc < c)
+    after = np.flatnonzero(poses.enc > c)
+    return (int(before[-1]) if len(before) > 1 else None,
+            int(after[0]) if len(after) > 1 else None)
+
+
+def _plain_steps(enc: Encoders, b: int, a: int, robot: RobotProfile,
+                 max_wheel_speed_mm_s: SpeedBound) -> tuple[np.ndarray, np.ndarray] | None:
+    """The count steps from encoder frame ``b`` to ``a`` (element k: into ``b + k + 1``) when
+    they are the plain ones: consecutive frames, none refused or re-primed, no twin."""
+    if np.any(np.diff(enc.seq[b:a + 1]) != 1):
+        return None
+    if enc.twinned is not None and bool(np.any(enc.twinned[b:a + 1])):
+        return None
+    part = slice(b, a + 1)
+    sub = Encoders(index=enc.index[part], counter=enc.counter[part], seq=enc.seq[part],
+                   left=enc.left[part], right=enc.right[part],
+                   timestamp_s=enc.timestamp_s[part], cycle_s=enc.cycle_s,
+                   uptime=None if enc.uptime is None else enc.uptime[part])
+    steps = firmware_steps(sub, 0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
+                           max_wheel_speed_mm_s)
+    if steps.refused or steps.reprimed or len(steps.d_left) != a - b:
+        return None
+    return steps.d_left, steps.d_right
+
+
+def _moved(pose: tuple[float, float, float], d_left: np.ndarray, d_right: np.ndarray,
+           geometry: Geometry, integrator: str) -> tuple[float, float, float, float]:
+    """``pose`` (x m, y m, heading rad) moved by the steps: the pose, and the path (m)."""
+    if len(d_left) == 0:
+        return (*pose, 0.0)
+    moved = integrate(d_left, d_right, geometry, integrator, x0_m=pose[0], y0_m=pose[1],
+                      heading0_rad=pose[2])
+    return (float(moved.x_m[-1]), float(moved.y_m[-1]), float(moved.heading_rad[-1]),
+            float(moved.distance_m[-1]))
+
+
+def _judged(before: tuple[int, tuple[float, float, float]],
+            after: tuple[int, tuple[float, float, float]], steps: tuple[np.ndarray, np.ndarray],
+            to_cut: int, staged: dict[str, float], geometry: Geometry,
+            integrator: str) -> dict[str, Any]:
+    """The pose ``before`` (encoder frame, pose) moved by the ``to_cut`` steps to the APPLY's
+    frame, the staged fields set there, moved by the rest to the sample ``after``: how far that
+    sample is."""
+    d_left, d_right = steps
+    x, y, h, head_m = _moved(before[1], d_left[:to_cut], d_right[:to_cut], geometry, integrator)
+    start = (staged.get("X", x), staged.get("Y", y), staged.get("HEADING", h))
+    x, y, h, tail_m = _moved(start, d_left[to_cut:], d_right[to_cut:], geometry, integrator)
+    dx_m, dy_m = after[1][0] - x, after[1][1] - y
+    dh_rad = (after[1][2] - h + math.pi) % _TURN - math.pi
+    bound_m = POSITION_LSB_M + HEADING_LSB_RAD * (head_m + tail_m) + _FLOAT_M
+    passed = (max(abs(dx_m), abs(dy_m)) <= bound_m
+              and abs(dh_rad) <= HEADING_LSB_RAD + _FLOAT_RAD)
+    return {"encoder_frames": after[0] - before[0],
+            "position_jump_m": math.hypot(dx_m, dy_m), "heading_jump_rad": abs(dh_rad),
+            "bound_m": bound_m, "passed": passed}
+
+
+def mark_kept(report: dict[str, Any], checks: dict[int, dict[str, Any] | None]) -> None:
+    """Put each check (by the index of the life the set-pose opened: its event's ``life``)
+    into its ``set_pose`` event (``kept``); a failed one FAILs the report, named there."""
+    for event in report["events"]:
+        if event["kind"] != "set_pose" or event.get("life") not in checks or all(
+                event[name] is not None for name in ("x_m", "y_m", "heading_rad")):
+            continue  # every field set: the life starts exactly there, nothing kept
+        check = event["kept"] = checks[event["life"]]
+        if check is not None and not check["passed"]:
+            report["passed"] = False
+            event["detail"] += (
+                f"; FAIL: the firmware's pose jumped {check['position_jump_m']:.4f} m, "
+                f"{check['heading_jump_rad']:.5f} rad at an APPLY that kept "
+                f"{', '.join(check['fields_kept'])} (nothing staged for them in this firmware "
+                "life): it set what it was not given")
+
