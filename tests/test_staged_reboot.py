@@ -74,13 +74,19 @@ PARTIAL = {"heading_after": (fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose, POSE,  
 ONE_TICK_M = 0.02  # pmir on the circle moves < 2 cm a tick: a jump is more
 
 
+FIRST_TICK = {"x_first_tick": (fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose,  # X sent as the MCU
+                              ((fr.SetPoseField.X, 12345),),  # resets: its first tick drains
+                              ((fr.SetPoseField.APPLY, 0),))}  # and ACKs it, then the APPLY
+
+
 @cache
-def drive(which: str, kept: bool = False, apply_at: int = APPLY_AT) -> tuple[can.Message, ...]:
-    """5 s of pmir on the circle: the fields staged from ``STAGE_AT``, the MCU reset at
-    ``REBOOT_AT``, the APPLY alone at ``apply_at`` (E2E COUNTER running on). ``kept``: a wrong
-    firmware that keeps its staging across the reset."""
-    request_id, pack, before_reboot, after_reboot = (AGAIN | PARTIAL | DRIVES)[which]
-    sends = ({STAGE_AT + k: frame for k, frame in enumerate(before_reboot)}
+def drive(which: str, kept: bool = False, apply_at: int = APPLY_AT,
+          stage_at: int = STAGE_AT) -> tuple[can.Message, ...]:
+    """5 s of pmir on the circle: the fields staged from ``stage_at``, the MCU reset at
+    ``REBOOT_AT`` (before the tick's frames are sent), the APPLY alone at ``apply_at`` (E2E
+    COUNTER running on). ``kept``: a wrong firmware that keeps its staging across the reset."""
+    request_id, pack, before_reboot, after_reboot = (AGAIN | PARTIAL | FIRST_TICK | DRIVES)[which]
+    sends = ({stage_at + k: frame for k, frame in enumerate(before_reboot)}
              | {apply_at + k: frame for k, frame in enumerate(after_reboot)})
     heard: list[can.Message] = []
     with circle_rig() as rig:
@@ -426,3 +432,25 @@ def test_a_config_staged_again_after_a_reboot_is_followed(tmp_path: Path) -> Non
     for tracker in (monitor.tracker, bridge.tracker):
         assert tracker.vs_reference.max_dpos_m < 1e-3
         assert tracker.geometry.wheelbase_m == 0.33
+
+
+def test_a_field_staged_in_the_new_firmwares_first_tick_is_applied(tmp_path: Path) -> None:
+    """X sent as the MCU resets: the new firmware drains it in its first tick and ACKs it before
+    its boot summary; the APPLY later sets it (the pose jumps to x 1.2345 m, cantools). Every
+    judge follows it (before: the live judges forgot it with the reboot they learn of at the
+    summary, and said POSE WRONG on the correct firmware)."""
+    messages = drive("x_first_tick", stage_at=REBOOT_AT)
+    at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
+    x_after = next(_decoded(m)["X"] for m in messages[at:] if m.arbitration_id == fr.ODOM_POSE_X_ID)
+    assert abs(float(x_after) - 1.2345) < ONE_TICK_M  # the firmware applied the staged X
+    path = tmp_path / "x_first_tick.log"
+    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
+                            f"{bytes(m.data).hex().upper()}\n" for m in messages))
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert whole.passed
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+    monitor, bridge = _live(messages)
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.vs_reference.max_dpos_m < 1e-3
+    assert monitor.health(messages[-1].timestamp)["state"] == "OK"

@@ -38,15 +38,22 @@ class SetPoseFollower:
 
     def __init__(self) -> None:
         self.staged: dict[str, float] = {}  # X m, Y m, HEADING rad, as ACKed
+        self._staged_s: dict[str, float] = {}  # field: bus time of its ACK (s)
         self._sent: dict[int, tuple[str, float]] = {}  # by E2E COUNTER: field, value heard
         # the APPLYs heard, not answered yet: COUNTER -> the encoder seq then (a paced burst has
         # several in flight: one slot let a later APPLY hide an earlier one's ACK)
         self._applies: dict[int, int] = {}
 
-    def forget(self) -> None:
+    def forget(self, since_s: float = math.inf) -> None:
         """A firmware reboot the judge saw: the firmware lost its staged fields and the frames
-        it had not answered with its RAM (a bare APPLY after it keeps the firmware's pose)."""
-        self.staged, self._sent, self._applies = {}, {}, {}
+        it had not answered with its RAM (a bare APPLY after it keeps the firmware's pose);
+        ``since_s``: the fields ACKed from this bus time on (s) are the new firmware's, drained
+        in its first tick before its boot summary told the reboot (``liveconfig.SAME_TICK_S``),
+        kept with the frames not answered yet (default: everything forgotten)."""
+        if since_s == math.inf:
+            self._sent, self._applies = {}, {}
+        self.staged = {f: v for f, v in self.staged.items() if self._staged_s[f] >= since_s}
+        self._staged_s = {f: self._staged_s[f] for f in self.staged}
 
     def on_frame(self, counter: int, field: str, value: float | None, enc_seq: int) -> None:
         """An ODOM_SET_POSE frame heard (its E2E COUNTER, FIELD name, value in m or rad);
@@ -63,12 +70,15 @@ class SetPoseFollower:
         if self._applies:  # the latest APPLY is the held one
             self._applies[next(reversed(self._applies))] = enc_seq
 
-    def on_ack(self, request_counter: int, acked: bool) -> tuple[int, dict[str, float]] | None:
-        """ODOM_ACK of an ODOM_SET_POSE frame: a field ACKed is staged; the APPLY's ACK
-        returns (the encoder seq it took effect after, the staged fields) and clears them."""
+    def on_ack(self, request_counter: int, acked: bool, t_s: float = 0.0
+               ) -> tuple[int, dict[str, float]] | None:
+        """ODOM_ACK of an ODOM_SET_POSE frame at bus time ``t_s``: a field ACKed is staged; the
+        APPLY's ACK returns (the encoder seq it took effect after, the staged fields) and clears
+        them."""
         sent = self._sent.pop(request_counter, None)
         if sent is not None and acked:
             self.staged[sent[0]] = sent[1]
+            self._staged_s[sent[0]] = t_s
             return None
         seq = self._applies.pop(request_counter, None)
         if seq is None:
@@ -76,7 +86,7 @@ class SetPoseFollower:
         staged = self.staged
         if not acked:
             return None
-        self.staged = {}
+        self.staged, self._staged_s = {}, {}
         return seq, staged
 
 

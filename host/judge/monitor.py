@@ -54,7 +54,7 @@ from cantools.database.can import Database, Message
 
 from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
-from odocan.host.judge.liveconfig import ConfigFollower, follow_config_ack, rebooted
+from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
@@ -223,7 +223,8 @@ class BusMonitor:
         the reference at the set pose: a ``set_pose`` event); a NACK with an AUTH_* reason is an
         authentication failure (an event)."""
         if int(s["REQUEST_ID"]) == self._set_pose_id:
-            applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
+            applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0,
+                                           self._bus_time_s)
             if applied is not None:
                 pose = apply_set_pose(self.tracker, *applied)
                 self.events.append(set_pose_event(self._bus_time_s, pose, applied[1]))
@@ -300,7 +301,7 @@ class BusMonitor:
             detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
             self.distance.new_life()
             self.twist.new_life()
-            self.set_pose.forget()
+            self.set_pose.forget(self._bus_time_s - SAME_TICK_S)  # the new firmware's kept
             if lost is not None:
                 self.events.append({"t_s": self._bus_time_s, "kind": "config", "detail": lost})
         elif kind == "two sources":  # no pose is judged from the second one's first summary

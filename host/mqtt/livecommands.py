@@ -97,7 +97,7 @@ class CommandFollowing:
     def _followed_set_pose(self, s: dict[str, Any], t_s: float) -> None:
         """ODOM_ACK of an ODOM_SET_POSE frame: an applied APPLY restarts the reference at
         the set pose (``host.judge.livesetpose``), a ``set_pose`` event in ``status``."""
-        applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0)
+        applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0, t_s)
         if applied is not None:
             event = set_pose_event(t_s, apply_set_pose(self.tracker, *applied), applied[1])
             self.events.append(event)  # which frame it took effect after, if frames came since

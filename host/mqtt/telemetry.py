@@ -55,7 +55,7 @@ import can
 from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
-from odocan.host.judge.liveconfig import rebooted
+from odocan.host.judge.liveconfig import SAME_TICK_S, rebooted
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livegapseen import heard_status
@@ -232,7 +232,7 @@ class RobotTelemetry(CommandFollowing):
         start_new_life(self.tracker, self.e2e, self.db, *summary)
         self.distance.new_life()
         self.twist.new_life()
-        self.set_pose.forget()
+        self.set_pose.forget(t_s - SAME_TICK_S)  # what the new firmware ACKed: kept
         if lost is not None:
             self.events.append({"t_s": t_s, "kind": "config", "detail": lost})
             self.profile.forget()  # its next PROFILE page is judged against the build's robot
