@@ -145,11 +145,12 @@ def _pose_around(messages: tuple[can.Message, ...], at: int) -> float:
     return math.hypot(after[0] - before[0], after[1] - before[1])
 
 
-def _log(which: str, folder: Path, kept: bool = False, apply_at: int = APPLY_AT) -> Path:
+def _log(which: str, folder: Path, kept: bool = False, apply_at: int = APPLY_AT,
+         stage_at: int = STAGE_AT) -> Path:
     path = folder / f"{which}{'-kept' * kept}-{apply_at}.log"
     path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
                             f"{bytes(m.data).hex().upper()}\n"
-                            for m in drive(which, kept, apply_at)))
+                            for m in drive(which, kept, apply_at, stage_at)))
     return path
 
 
@@ -443,9 +444,7 @@ def test_a_field_staged_in_the_new_firmwares_first_tick_is_applied(tmp_path: Pat
     at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
     x_after = next(_decoded(m)["X"] for m in messages[at:] if m.arbitration_id == fr.ODOM_POSE_X_ID)
     assert abs(float(x_after) - 1.2345) < ONE_TICK_M  # the firmware applied the staged X
-    path = tmp_path / "x_first_tick.log"
-    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
-                            f"{bytes(m.data).hex().upper()}\n" for m in messages))
+    path = _log("x_first_tick", tmp_path, stage_at=REBOOT_AT)
     whole = analyze(read_log(path), PMIR, "exact")
     assert whole.passed
     assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
