@@ -124,14 +124,16 @@ class LiveDistance:
         periods = tracker.placer.periods
         step = self._gate.step((seq, counter, left, right, periods, uptime, t_s))
         d_left, d_right = step if step is not None else (0, 0)
-        ds_m = abs(0.5 * (d_left * self._m[0] + d_right * self._m[1]))
+        m_left, m_right = self._m
+        ds_m = abs(0.5 * (d_left * m_left + d_right * m_right))
         units, n, c, up = self._sums
-        extra = gap_extra_m(self.robot, self.max_wheel_speed_mm_s, periods, ds_m) if (
-            periods > 1 and len(self._frames)) else 0.0
-        self._sums = (units + round(ds_m * UNITS_PER_M), n + 1, c + abs(d_left) + abs(d_right),
-                      up + extra)
-        self._frames[seq] = self._sums
-        self._frames.pop(seq - KEPT_FRAMES, None)
+        frames = self._frames
+        if periods > 1 and frames:
+            up += gap_extra_m(self.robot, self.max_wheel_speed_mm_s, periods, ds_m)  # >= 0
+        sums = self._sums = (units + round(ds_m * UNITS_PER_M), n + 1,
+                             c + abs(d_left) + abs(d_right), up)
+        frames[seq] = sums
+        frames.pop(seq - KEPT_FRAMES, None)
 
     def on_counts(self, tracker: PoseTracker, ok: int, lost: int, proven: bool) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS. The first life's first page, after a first

@@ -65,6 +65,8 @@ class StepGate:
         self.bound = (0, 0)  # counts per period, left and right (``rebound``)
         self.least = 1  # the fewest periods of an ambiguous step (``rebound``)
         self.bits = counter_bits
+        # ``wrap_delta``'s at this width, in line per step (``& mask``: ``% 2^bits`` on ints)
+        self._half, self._mask = 1 << (counter_bits - 1), (1 << counter_bits) - 1
         self.rebound(geometry)
         self.prev: tuple[int, int, int] | None = None  # counter, left, right of the last accepted
         self._refused: list[tuple[int, int, int]] = []
@@ -83,7 +85,8 @@ class StepGate:
         self.least = least_ambiguous_periods(self.bound, self.bits)
 
     def _delta(self, a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[int, int]:
-        return wrap_delta(b[1] - a[1], self.bits), wrap_delta(b[2] - a[2], self.bits)
+        half, mask = self._half, self._mask
+        return ((b[1] - a[1] + half) & mask) - half, ((b[2] - a[2] + half) & mask) - half
 
     def _young(self, frame: tuple[int, int, int], uptime: int) -> bool:
         """The counts a controller ``uptime`` seconds old can have run from 0 (a restart's)."""
@@ -130,11 +133,14 @@ class StepGate:
         if periods >= self.least and not self._taken(last_t, t_s):  # ambiguous: re-primed
             return self._ambiguous(seq, (last_t, t_s), hole=heard > 1,
                                    taken=self._delta(prev, frame))
-        delta = self._delta(prev, frame)  # ``_plausible`` inlined: the delta computed once
-        if abs(delta[0]) <= periods * self.bound[0] and abs(delta[1]) <= periods * self.bound[1]:
+        half, mask = self._half, self._mask  # ``_plausible`` and ``_delta`` in line (per frame)
+        d_left, d_right = ((left - prev[1] + half) & mask) - half, (
+            (right - prev[2] + half) & mask) - half
+        bound = self.bound
+        if abs(d_left) <= periods * bound[0] and abs(d_right) <= periods * bound[1]:
             if self._refused:
                 self._refused = []
-            return delta
+            return d_left, d_right
         self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # refused: kept
         self._prev_t = last_t
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)

@@ -6,11 +6,10 @@ encoder frame are judged against the reference there."""
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
-import numpy as np
-
-from odocan.host.judge.compare import carried, life_origin, rebase_truth
+from odocan.host.judge.compare import life_origin
 from odocan.host.judge.livepose import FramePose, recent, truth_heading
 
 if TYPE_CHECKING:
@@ -46,9 +45,7 @@ class LifeTruth:
             self._boot.append(self._last)
         if self.origin is None:
             return x_m, y_m, wrapped_rad
-        rx, ry, rh = rebase_truth(np.array([x_m]), np.array([y_m]), np.array([wrapped_rad]),
-                                  self.origin)
-        return float(rx[0]), float(ry[0]), float(rh[0])
+        return rebased(x_m, y_m, wrapped_rad, self.origin)
 
     def booted(self, primed: int, ref_at: dict[int, FramePose]) -> None:
         """The new life started at encoder frame ``primed``: its first truth sample heard
@@ -88,14 +85,28 @@ class TruthParts:
         return parts[0][1], parts[1][1], parts[2][1]
 
 
+def rebased(x_m: float, y_m: float, heading_rad: float,
+            origin: tuple[float, float, float]) -> tuple[float, float, float]:
+    """``compare.rebase_truth`` of one truth sample, in plain floats (it runs per sample of a
+    rebooted life; numpy on one element cost more than the sums): the same operations in the
+    same order, so the same bits (tests/test_livetruth_scalar.py)."""
+    x0, y0, h0 = origin
+    c, s = math.cos(h0), math.sin(h0)
+    dx, dy = x_m - x0, y_m - y0
+    return c * dx + s * dy, c * dy - s * dx, heading_rad - h0
+
+
 def carried_to(pose: FramePose, at: FramePose, ref: FramePose) -> FramePose:
     """The on-board ``pose``, judged against the reference ``at``, carried to the reference
     ``ref`` of a later frame (by the reference's own motion since, turned into the on-board
-    pose's frame: ``compare.carried``)."""
-    x_m, y_m, heading_rad = carried((pose.x_m, pose.y_m, pose.heading_rad),
-                                    (at.x_m, at.y_m, at.heading_rad),
-                                    (ref.x_m, ref.y_m, ref.heading_rad))
-    return FramePose(ref.seq, float(x_m), float(y_m), float(heading_rad))
+    pose's frame): ``compare.carried`` in plain floats (it runs per truth sample; numpy's
+    float64 cos and sin are libm's, its scalar sums IEEE's: the same bits,
+    tests/test_livetruth_scalar.py)."""
+    turn = pose.heading_rad - at.heading_rad
+    c, s = math.cos(turn), math.sin(turn)
+    dx, dy = ref.x_m - at.x_m, ref.y_m - at.y_m
+    return FramePose(ref.seq, pose.x_m + c * dx - s * dy, pose.y_m + s * dx + c * dy,
+                     pose.heading_rad - at.heading_rad + ref.heading_rad)
 
 
 def judge_truth(
