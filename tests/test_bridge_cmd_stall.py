@@ -10,7 +10,7 @@ on publishing and listening while the loop is blocked) flooding ``set_pose`` at 
 command the broker acknowledged (PUBACK) must end with a final answer on ``cmd/result``
 (``rejected``, ``expired``, ``timeout``…; no firmware is on the bus), and none may run after its
 expiry: a command that waited longer than ``--command-expiry`` is ``expired``, never
-``accepted``.
+``accepted``. When the bridge has stopped, no thread of its command reader is left.
 """
 
 from __future__ import annotations
@@ -103,8 +103,9 @@ def test_every_acknowledged_command_is_answered_when_the_bridge_loop_is_blocked(
 ) -> None:
     operator = _Operator(mosquitto.url(ROBOT))
 
-    async def scenario() -> None:
-        async with running_bridge(mosquitto.url("bridge"), command_expiry_s=EXPIRY_S):
+    async def scenario() -> dict[str, int]:
+        async with running_bridge(mosquitto.url("bridge"), command_expiry_s=EXPIRY_S) as (
+                bridge, _):
             operator.start()
             assert await asyncio.to_thread(operator.subscribed.wait, 10)
             operator.flood(FLOOD)
@@ -112,12 +113,16 @@ def test_every_acknowledged_command_is_answered_when_the_bridge_loop_is_blocked(
             deadline = time.monotonic() + 40
             while operator.unanswered() and time.monotonic() < deadline:
                 await asyncio.sleep(0.2)
+        return dict(bridge.counters())
 
     try:
-        asyncio.run(scenario())
+        counters = asyncio.run(scenario())
     finally:
         operator.stop()
+    left = [t.name for t in threading.enumerate() if t.name.startswith("mqtt-cmd-")]
+    assert left == []  # the bridge stopped: its command reader's thread is joined
     assert len(operator.acknowledged) == FLOOD  # the broker took them all
+    assert counters["reliable_dropped"] == 0, counters  # no answer pushed out of the buffer
     missing = operator.unanswered()
     assert not missing, f"{len(missing)} of {FLOOD} acknowledged commands never answered"
     # none ran after its expiry: an ``accepted`` is stamped when the bridge ran it

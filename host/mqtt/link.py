@@ -81,6 +81,7 @@ log = logging.getLogger("odocan.mqtt")
 Publication = tuple[str, dict[str, Any]]
 Verdict = Literal["run", "expired", "busy", "retained"]
 COMMANDS_PER_TURN = 8  # commands handled before the event loop's other tasks get a turn
+ROOM_POLL_S = 0.01  # commands wait this long for room in the QoS-1 buffer (``_receive``)
 CommandHandler = Callable[[str, bytes, Verdict | Expired], list[Publication]]
 
 
@@ -340,8 +341,14 @@ class RobotLink:
     async def _receive(self, reader: CommandReader) -> None:
         """Commands as the reader read them, at most ``COMMANDS_PER_TURN`` in one loop turn: a
         flood (1 500 at once) handled in one turn held the telemetry, the frames and paho's
-        keepalive back for seconds."""
+        keepalive back for seconds. None is taken while the QoS-1 buffer is half full: 1 000
+        commands read during a stall, each answered at once (``expired``), filled it and pushed
+        out answers owed (the connection, timed out by the stall, was coming back); they wait
+        in the reader's queue instead (beyond it, answered ``rejected`` by the reader)."""
         while True:
+            if len(self.reliable) > self.reliable_buffer // 2 - 2 * COMMANDS_PER_TURN:
+                await asyncio.sleep(ROOM_POLL_S)  # their answers would push out others
+                continue
             batch = reader.take(COMMANDS_PER_TURN)
             if not batch:
                 reader.wake.clear()  # set again by the reader when its queue was empty
