@@ -27,6 +27,8 @@ from paho.mqtt.enums import CallbackAPIVersion
 
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.expiry import Fresh
+from tests.bridge_pair import bridged_robot
 from tests.conftest_mqtt import Mosquitto, mosquitto  # noqa: F401 (fixture)
 from tests.test_mqtt_bridge import ROBOT, running_bridge
 
@@ -129,3 +131,18 @@ def test_every_acknowledged_command_is_answered_when_the_bridge_loop_is_blocked(
     late = {k: round(t - operator.sent_unix_s[k], 1) for k, t in operator.accepted_unix_s.items()
             if t - operator.sent_unix_s[k] > EXPIRY_S + 0.5}
     assert not late, f"{len(late)} ran after their expiry (id: age s): {list(late.items())[:5]}"
+
+
+def test_a_command_that_spent_its_life_waiting_to_be_read_expires_in_the_pacers_queue() -> None:
+    """A command taken from the reader's queue with 0.1 s of its life left (it waited there
+    through a stall) and queued behind another in the pacer: it expires 0.1 s later, not
+    ``--command-expiry`` after it reached the pacer (the pacer counted from then)."""
+    with bridged_robot(f"cmd-stall-{os.getpid()}", command_window_frames=1) as (robot_, _):
+        first = b'{"id": "a", "x_m": 1, "y_m": 0, "heading_rad": 0}'
+        late = b'{"id": "b", "x_m": 2, "y_m": 0, "heading_rad": 0}'
+        robot_.on_command("set_pose", first, Fresh(EXPIRY_S))  # takes the window: no firmware
+        answers = robot_.on_command("set_pose", late, Fresh(0.1))
+        assert [p["result"] for _, p in answers] == ["accepted"]  # queued behind the first
+        time.sleep(0.3)
+        later = robot_.paced([])
+    assert [(p["id"], p["result"]) for _, p in later] == [("b", "expired")]

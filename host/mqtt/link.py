@@ -73,7 +73,7 @@ from odocan.host.mqtt.broker import (
 )
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient
 from odocan.host.mqtt.cmdreader import CommandReader
-from odocan.host.mqtt.expiry import Expired, expired_by
+from odocan.host.mqtt.expiry import Expired, Fresh, expired_by, fresh
 from odocan.host.mqtt.redelivery import Redeliveries
 from odocan.host.mqtt.v5probe import CLIENT_LOG, speaks_v5
 
@@ -82,7 +82,7 @@ Publication = tuple[str, dict[str, Any]]
 Verdict = Literal["run", "expired", "busy", "retained"]
 COMMANDS_PER_TURN = 8  # commands handled before the event loop's other tasks get a turn
 ROOM_POLL_S = 0.01  # commands wait this long for room in the QoS-1 buffer (``_receive``)
-CommandHandler = Callable[[str, bytes, Verdict | Expired], list[Publication]]
+CommandHandler = Callable[[str, bytes, Verdict | Expired | Fresh], list[Publication]]
 
 
 @dataclass(eq=False)
@@ -330,9 +330,9 @@ class RobotLink:
         finally:
             self.connected.clear()
             self.telemetry.clear()
-            if stop.is_set() and self.reader is not None:
+            if stop.is_set() and self.reader is not None:  # (a lost connection: they wait)
                 await self.reader.stop()  # no command read any more: the read ones answered
-            self._answer_waiting()
+                self._answer_waiting()
             if stop.is_set() or not client._disconnected.done():
                 await self._goodbye(client)
             with contextlib.suppress(Exception):
@@ -379,9 +379,11 @@ class RobotLink:
             return self.on_command(name, _payload(message), "retained")
         if self.redeliveries.is_repeat(name, _payload(message), dup=message.dup):
             return []  # sent again after a reconnect: run and answered at its first delivery
-        expired = expired_by(message, _payload(message), self.command_expiry_s)
+        payload = _payload(message)
+        expired = expired_by(message, payload, self.command_expiry_s)
         self.commands_expired += expired is not None
-        return self.on_command(name, _payload(message), expired or "run")
+        return self.on_command(name, payload,
+                               expired or fresh(message, payload, self.command_expiry_s))
 
     def _overflow(self, message: Arrived) -> None:
         """A command on this connection (a session kept from a bridge that read its commands
