@@ -162,14 +162,20 @@ class CommandReader:
             await self._subscribe(client)
             self._to_main(self._subscribed.set)
             stop = asyncio.ensure_future(self._stop.wait())
-            await asyncio.wait((stop, client._disconnected),
-                               return_when=asyncio.FIRST_COMPLETED)
+            lost = client._disconnected
+            await asyncio.wait((stop, lost), return_when=asyncio.FIRST_COMPLETED)
             stop.cancel()
+            if lost.done() and not lost.cancelled() and lost.exception() is not None:
+                log.warning("%s: command reader lost its connection (%s)", self.robot,
+                            lost.exception())  # (retrieved: asyncio logs none at exit)
         except (aiomqtt.MqttError, OSError) as exc:
             log.warning("%s: command reader lost its connection (%s)", self.robot, exc)
         finally:
             with contextlib.suppress(Exception):
                 await client.__aexit__(None, None, None)
+            lost = client._disconnected
+            if lost.done() and not lost.cancelled():
+                lost.exception()  # retrieved, whatever ended the connection: asyncio logs none
         if not self._stop.is_set():
             await self._sleep(self.backoff_s)
 

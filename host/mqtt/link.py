@@ -337,6 +337,9 @@ class RobotLink:
                 await self._goodbye(client)
             with contextlib.suppress(Exception):
                 await client.__aexit__(None, None, None)
+            lost = client._disconnected
+            if lost.done() and not lost.cancelled():
+                lost.exception()  # retrieved (``_receive`` read it here before): asyncio logs none
 
     async def _receive(self, reader: CommandReader) -> None:
         """Commands as the reader read them, at most ``COMMANDS_PER_TURN`` in one loop turn: a
