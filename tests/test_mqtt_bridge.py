@@ -466,7 +466,9 @@ def _every_acknowledged_command_is_answered(
     accepted = asyncio.run(scenario())
     assert sorted(accepted) == list(range(80))
     assert set(accepted) - set(answers) == set()
-    assert all(set(results) <= {"accepted", "expired"} for results in answers.values()), answers
+    # no firmware on the bus: a command run ends ``timeout`` 2 s later, if the test is still there
+    assert all(set(results) <= {"accepted", "expired", "timeout"}
+               for results in answers.values()), answers
 
 
 def test_no_stale_telemetry_is_replayed_after_an_outage(mosquitto: Mosquitto) -> None:  # noqa: F811

@@ -42,7 +42,7 @@ import can
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL, first_error
-from odocan.host.mqtt.expiry import Expired
+from odocan.host.mqtt.expiry import Expired, Fresh
 from odocan.host.mqtt.link import RobotLink, Verdict
 from odocan.host.mqtt.livecommands import PendingAck
 from odocan.host.mqtt.pacing import ACK_TIMEOUT_S, MAX_QUEUED, WINDOW_FRAMES, CommandPacer
@@ -146,7 +146,7 @@ class _Robot:
         return leaf, {**payload, "receive": receive}
 
     def on_command(
-        self, name: str, payload: bytes, verdict: Verdict | Expired = "run"
+        self, name: str, payload: bytes, verdict: Verdict | Expired | Fresh = "run"
     ) -> list[Publication]:
         """Validate, then send; always the one answer for ``cmd/result``, never an exception."""
         name = name[:64]  # a topic level is up to 64 KiB: the answer echoes a bounded name
@@ -166,7 +166,7 @@ class _Robot:
             return [_result(command_id(payload), name, "rejected", reason)]
         try:
             command = self.encoder.encode(name, payload)
-            paced = self._submit(command)
+            paced = self._submit(command, getattr(verdict, "remaining_s", None))
         except CommandRejected as exc:
             self.commands_rejected += 1
             return [_result(exc.cmd_id, name, "rejected", exc.reason)]
@@ -194,17 +194,22 @@ class _Robot:
         frees its frame's slot in the window, and the next command frames go out."""
         return [*published, *self.pacer.pump(time.monotonic(), published)]
 
-    def _submit(self, command: Command) -> list[Publication]:
+    def _submit(self, command: Command, remaining_s: float | None = None) -> list[Publication]:
         """Queue ``command`` on the pacer and send what the window takes now: the pacer's
         answers (``rejected`` for ``command`` when the bus refused its first frame), or
-        CommandRejected (the queue full, no SecOC freshness)."""
+        CommandRejected (the queue full, no SecOC freshness). ``remaining_s``: what its expiry
+        rules left it (``host.mqtt.expiry.Fresh``): it expires in the pacer's queue then, if
+        that comes before the pacer's own ``expiry_s``."""
         signer = self.endpoint.signer
         if signer is not None and signer.next_fv is None:  # before any frame: all or nothing
             raise CommandRejected(
                 "SecOC: no ODOM_FRESHNESS from the firmware yet (it sends one every second)",
                 command.cmd_id,
             )
-        if not self.pacer.submit(command, command.name, time.monotonic()):
+        now_s = time.monotonic()
+        queued_s = now_s if remaining_s is None else \
+            min(now_s, now_s + remaining_s - self.pacer.expiry_s)
+        if not self.pacer.submit(command, command.name, queued_s):
             raise CommandRejected(
                 f"bridge busy: {self.pacer.max_queued} commands already wait for the bus: "
                 "not run", command.cmd_id)

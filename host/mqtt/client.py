@@ -341,12 +341,19 @@ class LinkClient(aiomqtt.Client):
 
     def _on_message(self, client: paho.Client, userdata: Any,
                     message: paho.MQTTMessage) -> None:
-        arrived = Arrived._from_paho_message(message)
-        arrived.arrival_s = time.monotonic()
-        arrived.dup = bool(message.dup)
-        expiry = getattr(message.properties, "MessageExpiryInterval", None)
-        arrived.expiry_s = float(expiry) if expiry is not None else None
+        arrived = arrived_of(message)
         if self._queue.qsize() >= self._max_waiting:
             self._on_overflow(arrived)
             return
         self._queue.put_nowait(arrived)
+
+
+def arrived_of(message: paho.MQTTMessage) -> Arrived:
+    """``message`` as paho read it, stamped now (``arrival_s``), with its DUP flag and MQTT v5
+    expiry."""
+    arrived = Arrived._from_paho_message(message)
+    arrived.arrival_s = time.monotonic()
+    arrived.dup = bool(message.dup)
+    expiry = getattr(message.properties, "MessageExpiryInterval", None)
+    arrived.expiry_s = float(expiry) if expiry is not None else None
+    return arrived

@@ -46,3 +46,27 @@ def expired_by(message: Arrived, payload: bytes, command_expiry_s: float) -> Exp
                        f"this host's clock, more than the bridge's command expiry "
                        f"{command_expiry_s:g} s: not run")
     return None
+
+
+class Fresh(str):
+    """The verdict ``"run"`` with what is left of the command's life (``remaining_s``, by the
+    rules above): the pacer's queue (``host.mqtt.pacing``) counts its expiry from the command's
+    submission, so a command that waited in the command reader's queue first must not wait
+    there past what its rules left it."""
+
+    remaining_s: float
+
+    def __new__(cls, remaining_s: float) -> Fresh:
+        verdict = super().__new__(cls, "run")
+        verdict.remaining_s = remaining_s
+        return verdict
+
+
+def fresh(message: Arrived, payload: bytes, command_expiry_s: float) -> Fresh:
+    """``message`` found fresh by ``expired_by``: the verdict with the least life its rules left."""
+    waited_s = time.monotonic() - message.arrival_s
+    left_s = (message.expiry_s if message.expiry_s is not None else command_expiry_s) - waited_s
+    sent_unix_s = command_sent_unix_s(payload)
+    if sent_unix_s is not None:
+        left_s = min(left_s, command_expiry_s - max(0.0, time.time() - sent_unix_s))
+    return Fresh(max(0.0, left_s))

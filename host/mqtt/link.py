@@ -10,12 +10,16 @@
 * the first connection must succeed within ``connect_timeout_s``, else ``BrokerError`` (the
   CLI's exit 2); later losses are one line each: "connection lost", "reconnecting in N s",
   "reconnected" (exponential backoff from ``backoff_s`` up to ``max_backoff_s``);
-* client id ``<client_prefix>-<robot>``, clean start off: the broker keeps the ``cmd/+``
-  subscription and queues commands while the bridge is away, for at most ``command_expiry_s``
-  (the session expiry), so no command older than that is queued for it. A broker that comes back
-  without that session although we were away for less is one warning line (``sessions_lost``:
-  it lost its state, and with it what it held). Commands paho received (and acknowledged) before
-  a connection broke are still answered;
+* client id ``<client_prefix>-<robot>``, clean start off, session expiry ``command_expiry_s``.
+  A broker that comes back without that session although we were away for less is one warning
+  line (``sessions_lost``: it lost its state, and with it what it held);
+* commands are read off this loop: ``host.mqtt.cmdreader.CommandReader``, a thread with its own
+  connection (client id ``<client_prefix>-<robot>-cmd``, its own session of the same expiry:
+  the broker keeps its ``cmd/+`` subscription and queues commands while the bridge is away, for
+  at most ``command_expiry_s``), reads and acknowledges them even while this loop is blocked,
+  into a queue of ``command_queue`` (a broker's own queue for a client that does not read drops
+  commands it acknowledged, unanswered); ``_receive`` takes them from there. Commands read
+  before a connection broke, or before the bridge stopped, are still answered;
 * last will: ``status`` = ``{"state": "offline", "reason": "connection lost"}``, QoS 1, retained;
   whenever ``run`` ends (stop, cancellation, an error) it publishes ``offline`` itself first;
 * telemetry never waits for acknowledgements: QoS-0 telemetry and QoS-1 publications (status,
@@ -58,7 +62,6 @@ from typing import Any, Literal
 import aiomqtt
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
-from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import (
@@ -69,7 +72,8 @@ from odocan.host.mqtt.broker import (
     protocol_unsupported,
 )
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient
-from odocan.host.mqtt.expiry import Expired, expired_by
+from odocan.host.mqtt.cmdreader import CommandReader
+from odocan.host.mqtt.expiry import Expired, Fresh, expired_by, fresh
 from odocan.host.mqtt.redelivery import Redeliveries
 from odocan.host.mqtt.v5probe import CLIENT_LOG, speaks_v5
 
@@ -77,7 +81,8 @@ log = logging.getLogger("odocan.mqtt")
 Publication = tuple[str, dict[str, Any]]
 Verdict = Literal["run", "expired", "busy", "retained"]
 COMMANDS_PER_TURN = 8  # commands handled before the event loop's other tasks get a turn
-CommandHandler = Callable[[str, bytes, Verdict | Expired], list[Publication]]
+ROOM_POLL_S = 0.01  # commands wait this long for room in the QoS-1 buffer (``_receive``)
+CommandHandler = Callable[[str, bytes, Verdict | Expired | Fresh], list[Publication]]
 
 
 @dataclass(eq=False)
@@ -135,7 +140,8 @@ class RobotLink:
         self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
         self.connected = asyncio.Event()
         self.redeliveries = Redeliveries()  # a DUP copy of a command handled is not run again
-        self._taken: list[aiomqtt.Message] = []  # off paho's queue, not answered (cancelled)
+        self.reader: CommandReader | None = None  # the commands' thread (``run``)
+        self._receiver: asyncio.Task[None] | None = None  # ``_receive``, from the first connection
         self._telemetry_wake = asyncio.Event()
         self._reliable_wake = asyncio.Event()
 
@@ -189,7 +195,7 @@ class RobotLink:
             "status_superseded": self.status_superseded,
             "refused": sum(self.refused.values()),
             "commands_expired": self.commands_expired,
-            "commands_busy": self.commands_busy,
+            "commands_busy": self.commands_busy + (self.reader.busy if self.reader else 0),
             "reconnects": max(self.connects - 1, 0),
             "sessions_lost": self.sessions_lost,
             "commands_redelivered": self.redeliveries.skipped,
@@ -214,7 +220,7 @@ class RobotLink:
         client = LinkClient(
             **self.broker.client_kwargs(), **session,
             on_refused=self._refused, on_overflow=self._overflow,
-            max_waiting=self.command_queue,
+            max_waiting=0,  # commands come on the reader's connection: one here is not run
             identifier=self.client_id, will=will, keepalive=self.keepalive_s,
             timeout=self.connect_timeout_s, logger=CLIENT_LOG,
         )
@@ -222,12 +228,8 @@ class RobotLink:
         client.pending_calls_threshold = 10**9  # our buffers are bounded; no per-call warning
         return client
 
-    async def run(self, *, stop: asyncio.Event) -> None:
-        """Connect, serve, reconnect with backoff; returns after ``stop``.
-
-        ``BrokerError`` when the first connection fails (refused, not authorized, TLS, DNS, no
-        answer within ``connect_timeout_s``): a bridge that never connected tells so at once.
-        """
+    async def _serve(self, *, stop: asyncio.Event) -> None:
+        """``run``'s connections: the first, then again after each loss, with backoff."""
         if self.v5:
             self.v5 = await speaks_v5(self.broker, self.connect_timeout_s)
         backoff, lost_at = self.backoff_s, time.monotonic()
@@ -249,6 +251,8 @@ class RobotLink:
                 await _sleep_or_stop(stop, backoff)
                 backoff = min(backoff * 2, self.max_backoff_s)
                 continue
+            if self.connects == 0:
+                await self._start_reader(client)
             self.connects += 1
             backoff = self.backoff_s
             if self.connects > 1:
@@ -261,6 +265,43 @@ class RobotLink:
                 log.warning("%s: connection lost (%s); reconnecting in %.1f s", self.robot,
                             group.exceptions[0], backoff)
                 await _sleep_or_stop(stop, backoff)
+
+    async def run(self, *, stop: asyncio.Event) -> None:
+        """Connect, serve, reconnect with backoff; returns after ``stop``.
+
+        ``BrokerError`` when the first connection fails (refused, not authorized, TLS, DNS, no
+        answer within ``connect_timeout_s``): a bridge that never connected tells so at once.
+        The command reader's thread, started with the first connection, is stopped and joined
+        whatever ends ``run``.
+        """
+        try:
+            await self._serve(stop=stop)
+        finally:
+            if self._receiver is not None:
+                self._receiver.cancel()
+            if self.reader is not None:
+                self.reader.stop_now()  # stopped already unless an error or a cancellation
+
+    async def _start_reader(self, client: LinkClient) -> None:
+        """The command reader's thread (its first subscription in place), then ``_receive``;
+        ``BrokerError`` when it cannot subscribe. A session this connection kept from a bridge
+        that read its commands here loses its ``cmd/+`` subscription (no command read twice)."""
+        if client.session_present:
+            with contextlib.suppress(aiomqtt.MqttError):
+                await client.unsubscribe(topics.command_filter(self.robot))
+        self.reader = CommandReader(
+            robot=self.robot, broker=self.broker, client_id=f"{self.client_id}-cmd", v5=self.v5,
+            keepalive_s=self.keepalive_s, connect_timeout_s=self.connect_timeout_s,
+            session_expiry_s=self.command_expiry_s, capacity=self.command_queue,
+            backoff_s=self.backoff_s, max_backoff_s=self.max_backoff_s)
+        try:
+            await self.reader.start()
+        except BaseException:
+            with contextlib.suppress(Exception):
+                await client.__aexit__(None, None, None)
+            raise
+        self._receiver = asyncio.create_task(self._receive(self.reader),
+                                             name=f"mqtt-commands-{self.robot}")
 
     def _check_session(self, client: LinkClient, away_s: float) -> None:
         """A v5 broker without our session, though we were away for less than its expiry, has
@@ -279,10 +320,8 @@ class RobotLink:
     async def _session(self, client: LinkClient, stop: asyncio.Event) -> None:
         """Serve one connection; whatever ends it, ``offline`` is published first if it can be."""
         try:
-            await self._subscribe(client)
             self.connected.set()
             async with asyncio.TaskGroup() as tg:
-                tg.create_task(self._receive(client), name=f"mqtt-commands-{self.robot}")
                 tg.create_task(self._send_telemetry(client), name=f"mqtt-tel-{self.robot}")
                 tg.create_task(self._send_reliable(client), name=f"mqtt-qos1-{self.robot}")
                 tg.create_task(_raise_on(stop), name=f"mqtt-stop-{self.robot}")
@@ -291,60 +330,38 @@ class RobotLink:
         finally:
             self.connected.clear()
             self.telemetry.clear()
-            self._answer_waiting(client)
+            if stop.is_set() and self.reader is not None:  # (a lost connection: they wait)
+                await self.reader.stop()  # no command read any more: the read ones answered
+                self._answer_waiting()
             if stop.is_set() or not client._disconnected.done():
                 await self._goodbye(client)
             with contextlib.suppress(Exception):
                 await client.__aexit__(None, None, None)
+            lost = client._disconnected
+            if lost.done() and not lost.cancelled():
+                lost.exception()  # retrieved (``_receive`` read it here before): asyncio logs none
 
-    async def _subscribe(self, client: LinkClient) -> None:
-        """``cmd/+`` at QoS 1; in v5 with no-local, so our own ``cmd/result`` is not echoed."""
-        if self.v5:
-            options = SubscribeOptions(qos=topics.QOS_RELIABLE, noLocal=True)
-            codes = await client.subscribe(topics.command_filter(self.robot), options=options)
-        else:
-            codes = await client.subscribe(topics.command_filter(self.robot), qos=1)
-        for code in codes if isinstance(codes, list) else [codes]:
-            if getattr(code, "is_failure", False) or code == 0x80:
-                log.warning("%s: the broker refused the subscription %s (%s): no command will "
-                            "arrive", self.robot, topics.command_filter(self.robot), code)
-
-    async def _receive(self, client: LinkClient) -> None:
-        """Commands as they come, at most ``COMMANDS_PER_TURN`` in one loop turn: a flood
-        (1 500 at once, all in paho's queue) handled in one turn held the telemetry, the
-        frames and paho's keepalive back for seconds."""
+    async def _receive(self, reader: CommandReader) -> None:
+        """Commands as the reader read them, at most ``COMMANDS_PER_TURN`` in one loop turn: a
+        flood (1 500 at once) handled in one turn held the telemetry, the frames and paho's
+        keepalive back for seconds. None is taken while the QoS-1 buffer is half full: 1 000
+        commands read during a stall, each answered at once (``expired``), filled it and pushed
+        out answers owed (the connection, timed out by the stall, was coming back); they wait
+        in the reader's queue instead (beyond it, answered ``rejected`` by the reader)."""
         while True:
-            for _ in range(COMMANDS_PER_TURN):
-                self._handle(await self._next_message(client))
+            if len(self.reliable) > self.reliable_buffer // 2 - 2 * COMMANDS_PER_TURN:
+                await asyncio.sleep(ROOM_POLL_S)  # their answers would push out others
+                continue
+            batch = reader.take(COMMANDS_PER_TURN)
+            if not batch:
+                reader.wake.clear()  # set again by the reader when its queue was empty
+                batch = reader.take(COMMANDS_PER_TURN)
+                if not batch:
+                    await reader.wake.wait()
+                    continue
+            for message in batch:
+                self._handle(message)
             await asyncio.sleep(0)  # the other tasks' turn
-
-    async def _next_message(self, client: LinkClient) -> aiomqtt.Message:
-        """The next message paho received; ``MqttError`` once the connection is lost.
-
-        Never loses one, unlike aiomqtt's ``client.messages``: its iterator takes a message off
-        the queue in a task of its own and drops it when the iteration is cancelled (the session's
-        task group ending) or the connection drops in the same turn. Here a message taken when
-        this task is cancelled is kept in ``_taken`` for ``_answer_waiting``; one not yet taken
-        stays in the queue."""
-        queue = client._queue
-        if not queue.empty():
-            return queue.get_nowait()
-        get = asyncio.ensure_future(queue.get())
-        try:
-            await asyncio.wait((get, client._disconnected), return_when=asyncio.FIRST_COMPLETED)
-        except asyncio.CancelledError:
-            get.cancel()  # a task not done yet has not taken its message off the queue
-            if get.done() and not get.cancelled():
-                self._taken.append(get.result())
-            raise
-        if get.done():
-            return get.result()
-        get.cancel()
-        lost = client._disconnected
-        reason = None if lost.cancelled() else lost.exception()  # retrieved: asyncio logs none
-        raise aiomqtt.MqttError(
-            "Disconnected during message iteration" + (f" ({reason})" if reason else "")
-        )
 
     def _handle(self, message: aiomqtt.Message) -> None:
         """Answer one message on ``cmd/<name>`` (our own ``cmd/result`` is not a command)."""
@@ -353,26 +370,27 @@ class RobotLink:
             for leaf, payload in self._answer(name, message):
                 self.publish(leaf, payload)
 
-    def _answer_waiting(self, client: LinkClient) -> None:
-        """Answer the commands this client received but we did not handle yet: paho has
+    def _answer_waiting(self) -> None:
+        """Answer the commands the reader read but we did not handle yet: paho has
         acknowledged them to the broker, so the broker will not send them again."""
-        taken, self._taken = self._taken, []
-        for message in taken:
-            self._handle(message)
-        while not client._queue.empty():
-            self._handle(client._queue.get_nowait())
+        while self.reader is not None and (batch := self.reader.take(self.command_queue)):
+            for message in batch:
+                self._handle(message)
 
     def _answer(self, name: str, message: Arrived) -> list[Publication]:
         if message.retain:  # kept by the broker from whenever: would run again each reconnect
             return self.on_command(name, _payload(message), "retained")
         if self.redeliveries.is_repeat(name, _payload(message), dup=message.dup):
             return []  # sent again after a reconnect: run and answered at its first delivery
-        expired = expired_by(message, _payload(message), self.command_expiry_s)
+        payload = _payload(message)
+        expired = expired_by(message, payload, self.command_expiry_s)
         self.commands_expired += expired is not None
-        return self.on_command(name, _payload(message), expired or "run")
+        return self.on_command(name, payload,
+                               expired or fresh(message, payload, self.command_expiry_s))
 
     def _overflow(self, message: Arrived) -> None:
-        """Too many commands waiting: answer this one at once (it is not run)."""
+        """A command on this connection (a session kept from a bridge that read its commands
+        here, before ``_start_reader`` unsubscribed): answered at once, not run."""
         name = message.topic.value.removeprefix(topics.topic(self.robot, "cmd/"))
         if name != "result":
             self.commands_busy += 1

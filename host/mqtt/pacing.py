@@ -108,7 +108,9 @@ class CommandPacer:
                 "commands_timeout": self.timed_out, "commands_aborted": self.aborted}
 
     def submit(self, command: Command, name: str, now_s: float) -> bool:
-        """Take ``command`` (False: the queue is full, it is refused: not run)."""
+        """Take ``command`` (False: the queue is full, it is refused: not run); ``now_s`` may
+        lie in the past: the command's life was partly spent before (``host.mqtt.expiry.Fresh``),
+        and it expires ``expiry_s`` after it."""
         if self.waiting >= self.max_queued:
             self.refused += 1
             return False
@@ -189,6 +191,12 @@ class CommandPacer:
         at = 0
         while at < len(self._active) and self._frames_in_flight < self.window_frames:
             paced = self._active[at]
+            if paced.next_frame == 0 and now_s - paced.queued_s > self.expiry_s:
+                self.expired += 1  # out of order: its life was shortened (``submit``)
+                self._finish(paced)
+                answers.append(_answer(paced, "expired",
+                                       "waited in the bridge's queue beyond its expiry: not run"))
+                continue
             at += 1
             while not paced.all_sent and self._frames_in_flight < self.window_frames:
                 frame = paced.command.frames[paced.next_frame]

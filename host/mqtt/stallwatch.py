@@ -7,10 +7,12 @@ every command was answered; with the loop blocked 6 s, 1 020 of 1 500 were, and 
 ``max_inflight_messages`` (20) in flight and ``max_queued_messages`` (1 000) queued, the rest is
 dropped, silently for the sender, which already has its PUBACK. The bridge answered every command
 it received (1 020 finals for 1 020 received): the others never reached it, and nothing on the
-wire says so. What the bridge can know is that it did not read for that long: ``StallWatch``
-counts the loop's turns that came ``STALL_S`` or more late while a link was connected
-(``loop_stalls``, and ``loop_stalled_ms`` in all, in the bridge's counters and the fleet report)
-and says once why it matters. The broker's side is its configuration (docs/mqtt.md).
+wire says so. Since then the commands are read on a thread of their own
+(``host.mqtt.cmdreader``), which goes on reading while the loop is blocked: none is left to the
+broker's queue. A stall still delays every answer and every pose: ``StallWatch`` counts the
+loop's turns that came ``STALL_S`` or more late while a link was connected (``loop_stalls``, and
+``loop_stalled_ms`` in all, in the bridge's counters and the fleet report) and says once what it
+does to commands.
 """
 
 from __future__ import annotations
@@ -47,9 +49,9 @@ class StallWatch:
     def stalled(self, late_s: float) -> None:
         """One stall of ``late_s`` seconds: counted, the first one said."""
         if not self.stalls:
-            log.warning("the bridge's event loop did not run for %.1f s: a broker holds a bounded "
-                        "queue of commands for a client that does not read (mosquitto: "
-                        "max_queued_messages, 1000 by default) and drops the rest, unanswered "
+            log.warning("the bridge's event loop did not run for %.1f s: commands read "
+                        "meanwhile wait in the command reader's queue (command_queue per robot; "
+                        "beyond, answered busy) and expire there after --command-expiry "
                         "(counted in loop_stalls)", late_s)
         self.stalls += 1
         self.stalled_s += late_s
