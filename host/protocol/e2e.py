@@ -227,7 +227,10 @@ class SequenceState:
         self.window = self.max_delta_init
         self.last_valid_s = timestamp_s
         self.counts["ok"] += 1
-        self._heard(timestamp_s)
+        if timestamp_s is not None:  # ``_heard`` in line (per frame of every robot)
+            last_ok_s, self.last_ok_s = self.last_ok_s, timestamp_s
+            if last_ok_s is not None and is_silence(timestamp_s - last_ok_s, self.period_s):
+                add_silence(self.counts, timestamp_s - last_ok_s)
         return status
 
     def _heard(self, timestamp_s: float | None) -> None:
