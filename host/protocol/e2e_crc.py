@@ -79,43 +79,36 @@ def crc8h2f_p02(
     return result
 
 
-def _word_pair(low: list[int], high: list[int]) -> list[int]:
-    """The contributions of two neighbouring bytes at once, indexed by them as one
-    little-endian uint16 (``low`` the first byte's, ``high`` the second's)."""
-    return [lo ^ hi for hi in high for lo in low]
+_PLACES: list[list[int]] = [place.tolist() for place in _places()]
+# The check by place (``byte1_table``): bytes 2..7's contributions, shared by every message
+PLACE_B2, PLACE_B3, PLACE_B4, PLACE_B5, PLACE_B6, PLACE_B7 = _PLACES[1:7]
+_BYTE1_TABLES: dict[tuple[int, ...], list[int]] = {}
 
 
-_PLACES = [place.tolist() for place in _places()]
-# The word form of the check (``word_head``): bytes 2-3, 4-5 and 6-7's contributions, shared
-WORD_B23, WORD_B45, WORD_B67 = (_word_pair(_PLACES[k], _PLACES[k + 1]) for k in (1, 3, 5))
-_WORD_HEADS: dict[tuple[int, ...], list[int]] = {}
-
-
-def word_head(data_ids: tuple[int, ...]) -> list[int]:
-    """The first table of the Profile 2 check by table over a frame read as one little-endian
-    integer ``w`` (``int.from_bytes(data, "little")`` of its 8 bytes): its CRC is right exactly
-    when ``head[w & 0xFFFF] ^ WORD_B23[(w >> 16) & 0xFFFF] ^ WORD_B45[(w >> 32) & 0xFFFF] ^
-    WORD_B67[w >> 48]`` is 0 (``crc_right_by_word``). CRC8H2F is linear (``_pair_tables``):
-    ``head``, indexed by bytes 0-1, holds the CRC byte itself XOR byte 1's contribution XOR that
-    of the data ID its COUNTER (byte 1's low nibble) selects XOR the register of zero bytes and
-    the final XOR; the ``WORD_B*`` tables the contributions of bytes 2-3, 4-5, 6-7. Four
-    lookups a frame, not ``crc8h2f_p02_one``'s eight and its call (the live check, per frame of
-    every robot). One table per list of data IDs, shared (65536 entries)."""
-    head = _WORD_HEADS.get(data_ids)
-    if head is None:
+def byte1_table(data_ids: tuple[int, ...]) -> list[int]:
+    """The first table of the Profile 2 check by place: a frame's CRC is right exactly when
+    ``table[data[1]] ^ PLACE_B2[data[2]] ^ ... ^ PLACE_B7[data[7]] == data[0]``
+    (``crc_right_by_place``). CRC8H2F is linear (``_pair_tables``): byte 1's contribution XOR
+    that of the data ID its COUNTER (byte 1's low nibble) selects XOR the register of zero
+    bytes and the final XOR, by byte 1; the ``PLACE_B*`` tables those of bytes 2..7. Seven
+    lookups of one byte each a frame, no nesting and no call (the live check, per frame of
+    every robot: ``crc8h2f_p02_one`` and its call cost a third more; 256-entry tables stay in
+    the cache, and a byte of ``bytes`` is a cached small int where a shifted 64-bit word is a
+    new object). One table per list of data IDs, shared."""
+    table = _BYTE1_TABLES.get(data_ids)
+    if table is None:
         byte1, data_id = _PLACES[0], _PLACES[7]
-        head = _WORD_HEADS[data_ids] = [
-            crc ^ byte1[b1] ^ data_id[data_ids[b1 & 0xF]] ^ _CRC_ZEROS
-            for b1 in range(256) for crc in range(256)]
-    return head
+        table = _BYTE1_TABLES[data_ids] = [byte1[b1] ^ data_id[data_ids[b1 & 0xF]] ^ _CRC_ZEROS
+                                           for b1 in range(256)]
+    return table
 
 
-def crc_right_by_word(data: bytes, data_ids: tuple[int, ...]) -> bool:
-    """Whether the CRC of an 8-byte frame is right, by ``word_head``'s tables (as the live
-    check reads them, written out there; tests hold this to ``crc8h2f_p02_one``)."""
-    w = int.from_bytes(data, "little")
-    return not (word_head(data_ids)[w & 0xFFFF] ^ WORD_B23[(w >> 16) & 0xFFFF]
-                ^ WORD_B45[(w >> 32) & 0xFFFF] ^ WORD_B67[w >> 48])
+def crc_right_by_place(data: bytes, data_ids: tuple[int, ...]) -> bool:
+    """Whether the CRC of an 8-byte frame is right, by ``byte1_table``'s tables (as the live
+    check reads them, written out there; tests hold this to cantools)."""
+    return (byte1_table(data_ids)[data[1]] ^ PLACE_B2[data[2]] ^ PLACE_B3[data[3]]
+            ^ PLACE_B4[data[4]] ^ PLACE_B5[data[5]] ^ PLACE_B6[data[6]]
+            ^ PLACE_B7[data[7]]) == data[0]
 
 
 def crc8h2f_p02_one(data: bytes, data_id: int) -> int:

@@ -23,11 +23,14 @@ from odocan.host.protocol.e2e import (
     e2e_messages,
 )
 from odocan.host.protocol.e2e_crc import (
-    WORD_B23,
-    WORD_B45,
-    WORD_B67,
+    PLACE_B2,
+    PLACE_B3,
+    PLACE_B4,
+    PLACE_B5,
+    PLACE_B6,
+    PLACE_B7,
+    byte1_table,
     crc8h2f_p02_one,
-    word_head,
 )
 from odocan.host.protocol.e2e_cycles import new_cycle_s
 from odocan.host.protocol.e2e_evidence import CAPTURE_HOLD_CYCLES, ReleaseWatch
@@ -43,10 +46,10 @@ if TYPE_CHECKING:  # a cantools Database or a plan of it
 
 class _Live:
     """A protected message heard (``E2EMonitor.check``): its fields, state, last frame's time s,
-    its CRC table (``e2e_crc.word_head``) and the gaps within which a frame adds one receive
+    its CRC table (``e2e_crc.byte1_table``) and the gaps within which a frame adds one receive
     period whatever the rest of the rule (``one_period_s``)."""
 
-    __slots__ = ("cycle_s", "data_ids", "head", "last", "last_s", "length", "min_periods",
+    __slots__ = ("byte1", "cycle_s", "data_ids", "last", "last_s", "length", "min_periods",
                  "one_from_s", "one_to_s", "state")
 
     def __init__(self, config: E2EMessage, state: SequenceState, data_ids: tuple[int, ...],
@@ -54,7 +57,7 @@ class _Live:
         self.length, self.data_ids, self.state = config.length, data_ids, state
         self.cycle_s, self.min_periods, self.last_s = config.cycle_s, config.min_periods, last_s
         self.last = last  # the last frame's COUNTER, -1 when its CRC was wrong
-        self.head = word_head(data_ids)
+        self.byte1 = byte1_table(data_ids)
         self.one_from_s, self.one_to_s = one_period_s(config.cycle_s, config.min_periods)
 
 
@@ -67,7 +70,7 @@ def one_period_s(cycle_s: float | None, min_periods: int) -> tuple[float, float]
     included) gives 1 by ``period_count`` (a wrong CRC) and by ``receive_period_count`` when
     the COUNTER steps by one (its ``s`` 1 and ``|e|`` at most 0.5, brought below the lag of 0.1
     by any tolerance of 0.45 or more: 1): ``check`` asks that step too. Without a cycle (or
-    another minimum): none, an empty range. tests/test_e2e_live_word.py holds the edges."""
+    another minimum): none, an empty range. tests/test_e2e_live_shortcuts.py holds the edges."""
     if cycle_s is None:
         return math.inf, -math.inf
     if min_periods == 1:
@@ -105,10 +108,10 @@ class E2EMonitor:
         live = self._live.get(frame_key(can_id, True) if extended else can_id)
         if live is None or len(data) != live.length:
             return self._check_first(frame_key(can_id, extended), data, timestamp_s)
-        word = int.from_bytes(data, "little")  # 8 bytes (Profile 2): the CRC by table
-        crc_ok = not (live.head[word & 0xFFFF] ^ WORD_B23[(word >> 16) & 0xFFFF]
-                      ^ WORD_B45[(word >> 32) & 0xFFFF] ^ WORD_B67[word >> 48])
-        counter = (word >> 8) & COUNTER_MASK
+        counter = data[1]  # 8 bytes (Profile 2): the CRC by place (``byte1_table``)
+        crc_ok = (live.byte1[counter] ^ PLACE_B2[data[2]] ^ PLACE_B3[data[3]] ^ PLACE_B4[data[4]]
+                  ^ PLACE_B5[data[5]] ^ PLACE_B6[data[6]] ^ PLACE_B7[data[7]]) == data[0]
+        counter &= COUNTER_MASK
         periods = 1  # (the first frame, or no cycle: ``period_count``'s 1)
         if timestamp_s is not None:
             last, live.last_s = live.last_s, timestamp_s

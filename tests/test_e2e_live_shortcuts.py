@@ -1,5 +1,5 @@
-"""The live E2E check's shortcuts against the rules they stand for: the CRC by table over the frame
-read as one integer (``e2e_crc.word_head``) against cantools.autosar, and the gaps within which a
+"""The live E2E check's shortcuts against the rules they stand for: the CRC by place
+(``e2e_crc.byte1_table``: one table a byte) against cantools.autosar, and the gaps within which a
 frame adds one receive period (``e2e_live.one_period_s``) against ``period_count`` and
 ``receive_period_count``; then ``E2EMonitor`` on frames whose gaps sit on those edges against
 the log check (``check_frames``)."""
@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from odocan.host.io.logs import FrameCollector
 from odocan.host.protocol.e2e import check_frames, e2e_messages
-from odocan.host.protocol.e2e_crc import crc_right_by_word
+from odocan.host.protocol.e2e_crc import crc_right_by_place
 from odocan.host.protocol.e2e_evidence import CAPTURE_HOLD_CYCLES
 from odocan.host.protocol.e2e_live import E2EMonitor, one_period_s
 from odocan.host.protocol.e2e_periods import (
@@ -37,25 +37,25 @@ CYCLES_S = sorted({c.cycle_s for c in CONFIGS.values() if c.cycle_s} | {0.001, 0
 @settings(max_examples=300, deadline=None)
 @given(frame=st.binary(min_size=8, max_size=8),
        ids=st.lists(st.integers(0, 255), min_size=16, max_size=16), sealed=st.booleans())
-def test_the_crc_by_word_is_cantools_autosar(frame: bytes, ids: list[int], sealed: bool) -> None:
+def test_the_crc_by_place_is_cantools_autosar(frame: bytes, ids: list[int], sealed: bool) -> None:
     expected = cantools.autosar.compute_profile2_crc(frame, autosar_message(ids))
     assert expected is not None
     if sealed:  # half the frames carry their right CRC (random bytes almost never do)
         frame = bytes([expected]) + frame[1:]
-    assert crc_right_by_word(frame, tuple(ids)) is (frame[0] == expected)
+    assert crc_right_by_place(frame, tuple(ids)) is (frame[0] == expected)
 
 
-def test_the_crc_by_word_refuses_every_single_bit_flip_of_every_message() -> None:
+def test_the_crc_by_place_refuses_every_single_bit_flip_of_every_message() -> None:
     rng = random.Random(7)
     for config in CONFIGS.values():
         assert config.data_ids is not None
         for counter in range(16):
             buf = bytearray(rng.randbytes(8))
             p02_protect(buf, counter, config.data_ids)
-            assert crc_right_by_word(bytes(buf), config.data_ids), config.name
+            assert crc_right_by_place(bytes(buf), config.data_ids), config.name
             for bit in range(64):
                 flipped = int.from_bytes(buf, "little") ^ (1 << bit)
-                assert not crc_right_by_word(flipped.to_bytes(8, "little"), config.data_ids)
+                assert not crc_right_by_place(flipped.to_bytes(8, "little"), config.data_ids)
 
 
 def _gaps_s(cycle_s: float, from_s: float, to_s: float) -> list[float]:
