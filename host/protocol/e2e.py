@@ -201,25 +201,25 @@ class SequenceState:
               timestamp_s: float | None = None) -> str:
         """Judge one frame ``periods`` receive periods after the previous one, at bus time
         ``timestamp_s`` (s, optional); count it."""
-        window = self.window + periods  # at most MAX_DELTA_COUNTER (no min(): per frame)
-        self.window = window if window < MAX_DELTA_COUNTER else MAX_DELTA_COUNTER
-        if not crc_ok:
-            self.counts["crc_errors"] += 1
-            return CRC_ERROR
         delta = (counter - self.last_valid) & COUNTER_MASK
-        if self.waiting or delta == 1:
+        if crc_ok and (self.waiting or delta == 1):  # the usual frame: the window restarts
             status = OK
-        elif delta == 0 and (cycles := self._new_cycles(timestamp_s)):
-            self.counts["lost"] += COUNTER_CYCLE * cycles - 1
-            self.counts["ok"] += 1
-            self.last_valid_s = timestamp_s
-            self._heard(timestamp_s)
-            return OKSOMELOST  # the window kept (the docstring)
-        elif delta == 0 or delta > self.window:
-            self.last_valid_s = None  # a frame between: no new cycle till the next accepted
-            self.counts["repeated" if delta == 0 else "wrong_sequence"] += 1
-            return REPEATED if delta == 0 else WRONG_SEQUENCE
         else:
+            window = self.window + periods  # at most MAX_DELTA_COUNTER (no min(): per frame)
+            self.window = window if window < MAX_DELTA_COUNTER else MAX_DELTA_COUNTER
+            if not crc_ok:
+                self.counts["crc_errors"] += 1
+                return CRC_ERROR
+            if delta == 0 and (cycles := self._new_cycles(timestamp_s)):
+                self.counts["lost"] += COUNTER_CYCLE * cycles - 1
+                self.counts["ok"] += 1
+                self.last_valid_s = timestamp_s
+                self._heard(timestamp_s)
+                return OKSOMELOST  # the window kept (the docstring)
+            if delta == 0 or delta > self.window:
+                self.last_valid_s = None  # a frame between: no new cycle till the next accepted
+                self.counts["repeated" if delta == 0 else "wrong_sequence"] += 1
+                return REPEATED if delta == 0 else WRONG_SEQUENCE
             status = OKSOMELOST
             self.counts["lost"] += delta - 1
         self.waiting = False
