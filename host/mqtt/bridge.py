@@ -119,6 +119,8 @@ class _Robot:
             publish_phase_s=endpoint.publish_phase_s,
             now_s=time.monotonic(), profile_name=endpoint.profile_name,
         )
+        self.feed_fields = self.telemetry.feed_fields  # (bound once: per frame, ``_handle``)
+        self.signer = endpoint.signer
         self.encoder = CommandEncoder(self.telemetry.db)
         self.link = RobotLink(
             robot=endpoint.name, broker=config.broker, on_command=self.on_command,
@@ -368,18 +370,24 @@ class Bridge:
             self._handle(self.queue.get_nowait())
 
     def _handle(self, batch: Batch) -> None:
+        """Feed each frame of ``batch`` to its robot's telemetry, queue what it publishes (and
+        the pacer's answers while it is busy). Per frame of every robot: the robot's parts as
+        ``_Robot`` holds them (``feed_fields`` bound once), a fleet's ``(t, id, payload)``
+        tuple taken apart, not spread (``feed_frame``'s fast path in line)."""
         robots = self.robots
         self.frames_in += len(batch)
         for index, frame in batch:
             robot = robots[index]
-            signer = robot.endpoint.signer
-            if signer is not None:
+            if robot.signer is not None:
                 can_id, data = _id_and_data(frame)
-                if can_id == signer.freshness_frame_id:
-                    signer.on_freshness(data)  # a bad frame is refused by its E2E check
-            try:  # (``feed_frame``'s fast path in line: the fleet's frames are tuples)
-                publications = (robot.telemetry.feed_fields(*frame, False)
-                                if type(frame) is tuple else robot.telemetry.feed_frame(frame))
+                if can_id == robot.signer.freshness_frame_id:
+                    robot.signer.on_freshness(data)  # a bad frame is refused by its E2E check
+            try:
+                if type(frame) is tuple:
+                    t_s, can_id, data = frame
+                    publications = robot.feed_fields(t_s, can_id, data, False)
+                else:
+                    publications = robot.telemetry.feed_frame(frame)
             except Exception as exc:  # a defect must not stop the bridge: count, log once
                 if self.frames_failed == 0:
                     log.warning("%s: frame %s failed: %r", robot.endpoint.name, frame, exc,

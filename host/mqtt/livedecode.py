@@ -6,13 +6,13 @@ call; ``LiveDecoder`` reads the same tree once (cantools' own ``_codecs``: signa
 their selected sub-trees) and decodes a frame as one little-endian integer, a shift and a mask per
 signal, a sign extension, and the signal's own cantools conversion (``raw_to_scaled``: the very
 same arithmetic, so the same ints and floats; an identity conversion, which returns the raw
-integer, is not called; a linear one is written out as its ``raw * scale + offset``, the
-constants by their exact ``repr``: a message without multiplexers is decoded by one function
-made for it, one dict display of its signals). Multiplexed messages select their sub-tree by the
-multiplexer's value as cantools does (one multiplexer with plain pages, as ODOM_STATUS and
-SIM_TRUTH: one such function per page, picked by the multiplexer's value); a value the DBC
-does not define is cantools' ``DecodeError``, and so is a payload shorter than the message (a
-longer one is cut, as cantools' ``allow_excess``). A message this form does not cover (a
+integer, is not called; a linear one is written out as its ``raw * scale + offset``, the constants
+by their exact ``repr``: a message without multiplexers is decoded by one function made for it, one
+dict display of its signals, each read from the bytes it spans). Multiplexed messages select their
+sub-tree by the multiplexer's value as cantools does (one multiplexer with plain pages, as
+ODOM_STATUS and SIM_TRUTH: one such function per page, picked by the multiplexer's value); a value
+the DBC does not define is cantools' ``DecodeError``, and so is a payload shorter than the message
+(a longer one is cut, as cantools' ``allow_excess``). A message this form does not cover (a
 big-endian or float signal, a container) is decoded by cantools itself.
 tests/test_mqtt_livedecode.py holds it to cantools on random payloads of every message of the DBC.
 """
@@ -153,9 +153,9 @@ def _paged_decoder(root: _Node, length: int) -> Callable[[bytes], dict[str, Any]
 
 def _flat_decoder(fields: tuple[Field, ...], length: int) -> Callable[[bytes], dict[str, Any]]:
     """``LiveDecoder.decode`` of a message without multiplexers, as one function made for it:
-    per signal ``(word >> shift) & mask``, a sign extended as ``(raw ^ sign) - sign``, then
-    cantools' linear conversion written out (``raw * scale + offset``, as ``raw_to_scaled``
-    computes it) or called (any other conversion)."""
+    per signal ``(word >> shift) & mask`` from the bytes it spans (``_raw_expression``), a sign
+    extended as ``(raw ^ sign) - sign``, then cantools' linear conversion written out (``raw *
+    scale + offset``, as ``raw_to_scaled`` computes it) or called (any other conversion)."""
     namespace: dict[str, Any] = {"DecodeError": DecodeError}
     items = [f"{field[0]!r}: {_field_expression(field, k, namespace)}"
              for k, field in enumerate(fields)]
@@ -163,7 +163,6 @@ def _flat_decoder(fields: tuple[Field, ...], length: int) -> Callable[[bytes], d
               f"    if len(data) < {length}:\n"
               f"        raise DecodeError(f'Wrong data size: {{len(data)}} instead of {length} "
               f"bytes')\n"
-              f"    word = int.from_bytes(data[:{length}], 'little')\n"
               f"    return {{{', '.join(items)}}}\n")
     exec(compile(source, f"<livedecode {length} bytes>", "exec"), namespace)
     decode: Callable[[bytes], dict[str, Any]] = namespace["decode"]
@@ -171,12 +170,29 @@ def _flat_decoder(fields: tuple[Field, ...], length: int) -> Callable[[bytes], d
 
 
 def _field_expression(field: Field, k: int, namespace: dict[str, Any]) -> str:
-    """The expression of one signal's value from ``word`` (see ``_flat_decoder``)."""
+    """The expression of one signal's value from the frame's bytes (see ``_flat_decoder``)."""
     _, shift, mask, sign, scale = field
-    raw = f"(word >> {shift}) & {mask}" if shift else f"word & {mask}"
+    raw = _raw_expression(shift, mask)
     if sign:
         raw = f"(({raw}) ^ {sign}) - {sign}"
     return _scaled(raw, scale, k, namespace)
+
+
+def _raw_expression(shift: int, mask: int) -> str:
+    """A little-endian field's raw value, ``(word >> shift) & mask`` of the frame read as one
+    integer, from the bytes it spans: ``data[i] | data[i + 1] << 8 | ...``, shifted and masked
+    only where it does not start or end on a byte. Each byte of ``bytes`` is a cached small int;
+    a shift of the 64-bit word made a new int per signal (the bridge decodes every accepted
+    frame of every robot)."""
+    first, last = shift // 8, (shift + mask.bit_length() - 1) // 8
+    raw = " | ".join(f"data[{i}] << {8 * (i - first)}" if i > first else f"data[{i}]"
+                     for i in range(first, last + 1))
+    offset = shift - 8 * first
+    if offset:
+        raw = f"({raw}) >> {offset}"
+    if mask.bit_length() + offset != 8 * (last - first + 1):  # not up to its last byte's top
+        raw = f"({raw}) & {mask}"
+    return raw
 
 
 def _scaled(raw: str, scale: Callable[[int, bool], Any] | None, k: int,
@@ -221,7 +237,6 @@ def values_decoder(message: Message, names: tuple[str, ...],
               f"    if len(data) < {length}:\n"
               f"        raise DecodeError(f'Wrong data size: {{len(data)}} instead of {length} "
               f"bytes')\n"
-              f"    word = int.from_bytes(data[:{length}], 'little')\n"
               f"    return ({', '.join(items)},)\n")
     exec(compile(source, f"<livedecode values {message.name}>", "exec"), namespace)
     values: Callable[[bytes], tuple[Any, ...]] = namespace["values"]

@@ -201,25 +201,25 @@ class SequenceState:
               timestamp_s: float | None = None) -> str:
         """Judge one frame ``periods`` receive periods after the previous one, at bus time
         ``timestamp_s`` (s, optional); count it."""
-        window = self.window + periods  # at most MAX_DELTA_COUNTER (no min(): per frame)
-        self.window = window if window < MAX_DELTA_COUNTER else MAX_DELTA_COUNTER
-        if not crc_ok:
-            self.counts["crc_errors"] += 1
-            return CRC_ERROR
         delta = (counter - self.last_valid) & COUNTER_MASK
-        if self.waiting or delta == 1:
+        if crc_ok and (self.waiting or delta == 1):  # the usual frame: the window restarts
             status = OK
-        elif delta == 0 and (cycles := self._new_cycles(timestamp_s)):
-            self.counts["lost"] += COUNTER_CYCLE * cycles - 1
-            self.counts["ok"] += 1
-            self.last_valid_s = timestamp_s
-            self._heard(timestamp_s)
-            return OKSOMELOST  # the window kept (the docstring)
-        elif delta == 0 or delta > self.window:
-            self.last_valid_s = None  # a frame between: no new cycle till the next accepted
-            self.counts["repeated" if delta == 0 else "wrong_sequence"] += 1
-            return REPEATED if delta == 0 else WRONG_SEQUENCE
         else:
+            window = self.window + periods  # at most MAX_DELTA_COUNTER (no min(): per frame)
+            self.window = window if window < MAX_DELTA_COUNTER else MAX_DELTA_COUNTER
+            if not crc_ok:
+                self.counts["crc_errors"] += 1
+                return CRC_ERROR
+            if delta == 0 and (cycles := self._new_cycles(timestamp_s)):
+                self.counts["lost"] += COUNTER_CYCLE * cycles - 1
+                self.counts["ok"] += 1
+                self.last_valid_s = timestamp_s
+                self._heard(timestamp_s)
+                return OKSOMELOST  # the window kept (the docstring)
+            if delta == 0 or delta > self.window:
+                self.last_valid_s = None  # a frame between: no new cycle till the next accepted
+                self.counts["repeated" if delta == 0 else "wrong_sequence"] += 1
+                return REPEATED if delta == 0 else WRONG_SEQUENCE
             status = OKSOMELOST
             self.counts["lost"] += delta - 1
         self.waiting = False
@@ -227,7 +227,10 @@ class SequenceState:
         self.window = self.max_delta_init
         self.last_valid_s = timestamp_s
         self.counts["ok"] += 1
-        self._heard(timestamp_s)
+        if timestamp_s is not None:  # ``_heard`` in line (per frame of every robot)
+            last_ok_s, self.last_ok_s = self.last_ok_s, timestamp_s
+            if last_ok_s is not None and is_silence(timestamp_s - last_ok_s, self.period_s):
+                add_silence(self.counts, timestamp_s - last_ok_s)
         return status
 
     def _heard(self, timestamp_s: float | None) -> None:

@@ -6,6 +6,7 @@ stalled recorder's release read wide (``host.protocol.e2e_evidence.ReleaseWatch`
 
 from __future__ import annotations
 
+import math
 from math import isfinite
 from typing import TYPE_CHECKING
 
@@ -21,7 +22,16 @@ from odocan.host.protocol.e2e import (
     SequenceState,
     e2e_messages,
 )
-from odocan.host.protocol.e2e_crc import crc8h2f_p02_one
+from odocan.host.protocol.e2e_crc import (
+    PLACE_B2,
+    PLACE_B3,
+    PLACE_B4,
+    PLACE_B5,
+    PLACE_B6,
+    PLACE_B7,
+    byte1_table,
+    crc8h2f_p02_one,
+)
 from odocan.host.protocol.e2e_cycles import new_cycle_s
 from odocan.host.protocol.e2e_evidence import CAPTURE_HOLD_CYCLES, ReleaseWatch
 from odocan.host.protocol.e2e_periods import (
@@ -35,15 +45,39 @@ if TYPE_CHECKING:  # a cantools Database or a plan of it
 
 
 class _Live:
-    """A protected message heard (``E2EMonitor.check``): its fields, state, last frame's time s."""
+    """A protected message heard (``E2EMonitor.check``): its fields, state, last frame's time s,
+    its CRC table (``e2e_crc.byte1_table``) and the gaps within which a frame adds one receive
+    period whatever the rest of the rule (``one_period_s``)."""
 
-    __slots__ = ("cycle_s", "data_ids", "last", "last_s", "length", "min_periods", "state")
+    __slots__ = ("byte1", "cycle_s", "data_ids", "last", "last_s", "length", "min_periods",
+                 "one_from_s", "one_to_s", "state")
 
     def __init__(self, config: E2EMessage, state: SequenceState, data_ids: tuple[int, ...],
                  last_s: float | None, last: int) -> None:
         self.length, self.data_ids, self.state = config.length, data_ids, state
         self.cycle_s, self.min_periods, self.last_s = config.cycle_s, config.min_periods, last_s
         self.last = last  # the last frame's COUNTER, -1 when its CRC was wrong
+        self.byte1 = byte1_table(data_ids)
+        self.one_from_s, self.one_to_s = one_period_s(config.cycle_s, config.min_periods)
+
+
+def one_period_s(cycle_s: float | None, min_periods: int) -> tuple[float, float]:
+    """Gaps (s, from, to) within which a frame of a message adds one receive period to its
+    window, whatever ``E2EMonitor._periods`` would find (the usual frame, on time: the rules
+    not run). For a message with ``min_periods`` 1, ``period_count``'s ``max(1, round(dt /
+    cycle))`` is 1 below 1.5 periods: a gap of at most 1.4 cycles. For one checked per period
+    (``min_periods`` 0) a gap of 0.6 to 1.04 cycles (``x`` within 0.5 to 1.05, float error
+    included) gives 1 by ``period_count`` (a wrong CRC) and by ``receive_period_count`` when
+    the COUNTER steps by one (its ``s`` 1 and ``|e|`` at most 0.5, brought below the lag of 0.1
+    by any tolerance of 0.45 or more: 1): ``check`` asks that step too. Without a cycle (or
+    another minimum): none, an empty range. tests/test_e2e_live_shortcuts.py holds the edges."""
+    if cycle_s is None:
+        return math.inf, -math.inf
+    if min_periods == 1:
+        return -math.inf, 1.4 * cycle_s
+    if min_periods == 0:
+        return 0.6 * cycle_s, 1.04 * cycle_s
+    return math.inf, -math.inf
 
 
 class E2EMonitor:
@@ -74,24 +108,35 @@ class E2EMonitor:
         live = self._live.get(frame_key(can_id, True) if extended else can_id)
         if live is None or len(data) != live.length:
             return self._check_first(frame_key(can_id, extended), data, timestamp_s)
-        counter = data[1] & COUNTER_MASK
-        crc_ok = crc8h2f_p02_one(data, live.data_ids[counter]) == data[0]
+        counter = data[1]  # 8 bytes (Profile 2): the CRC by place (``byte1_table``)
+        crc_ok = (live.byte1[counter] ^ PLACE_B2[data[2]] ^ PLACE_B3[data[3]] ^ PLACE_B4[data[4]]
+                  ^ PLACE_B5[data[5]] ^ PLACE_B6[data[6]] ^ PLACE_B7[data[7]]) == data[0]
+        counter &= COUNTER_MASK
         periods = 1  # (the first frame, or no cycle: ``period_count``'s 1)
         if timestamp_s is not None:
             last, live.last_s = live.last_s, timestamp_s
-            cycle_s = live.cycle_s
-            if last is None or cycle_s is None:
-                pass
-            elif crc_ok and live.last >= 0 and live.min_periods == 0:  # as ``frame_periods``
-                periods = receive_period_count(  # the wide reading after a release
-                    timestamp_s - last, (counter - live.last) & COUNTER_MASK, cycle_s,
-                    CAPTURE_HOLD_CYCLES if self._releases.released(last)
-                    or self._releases.silent_after(last)
-                    else CAPTURE_TOLERANCE_CYCLES)
-            elif isfinite(dt_s := timestamp_s - last):  # ``period_count`` in line (per frame)
-                periods = max(live.min_periods, round(dt_s / cycle_s))
+            if last is not None and not (  # (else on time: one period, ``one_period_s``)
+                    live.one_from_s <= timestamp_s - last <= live.one_to_s
+                    and (live.min_periods or (counter - live.last) & COUNTER_MASK == 1)):
+                periods = self._periods(live, timestamp_s - last, last, crc_ok, counter)
         live.last = counter if crc_ok else -1
         return live.state.check(crc_ok, counter, periods, timestamp_s)
+
+    def _periods(self, live: _Live, dt_s: float, last_s: float, crc_ok: bool,
+                 counter: int) -> int:
+        """The receive periods a frame ``dt_s`` after the message's last (heard at ``last_s``)
+        adds to its window, as ``check_frames`` counts them."""
+        cycle_s = live.cycle_s
+        if cycle_s is None:
+            return 1
+        if crc_ok and live.last >= 0 and live.min_periods == 0:  # as ``frame_periods``
+            return receive_period_count(  # the wide reading after a release
+                dt_s, (counter - live.last) & COUNTER_MASK, cycle_s,
+                CAPTURE_HOLD_CYCLES if self._releases.released(last_s)
+                or self._releases.silent_after(last_s) else CAPTURE_TOLERANCE_CYCLES)
+        if isfinite(dt_s):  # ``period_count`` in line (per frame)
+            return max(live.min_periods, round(dt_s / cycle_s))
+        return 1
 
     def _check_first(self, key: int, data: bytes, timestamp_s: float | None) -> str:
         """``check`` of a message not heard yet (makes its ``_Live``), unknown, or off its DLC."""
