@@ -92,8 +92,6 @@ def test_a_correct_firmware_passes_lapped_holes(
     assert main(["analyze", str(holed), "--robot", robot, "--stream", "always"]) == 0
 
 
-@pytest.mark.xfail(strict=True, reason="open: the live judge numbers the hole by the poses' "
-                   "COUNTER, which came round; the pages that number it come 0.6 s later")
 def test_the_live_judge_passes_lapped_holes(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

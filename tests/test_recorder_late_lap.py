@@ -148,8 +148,6 @@ def test_a_firmware_wrong_at_the_step_before_the_chunk_fails(
     assert not any(verdicts.values()), verdicts
 
 
-@pytest.mark.xfail(strict=True, reason="the live judge numbers frame f when it comes: the "
-                   "phantom lap is counted before the frames after f show f was late")
 @pytest.mark.parametrize(("lsb", "late"), [(-1, 10), (0, 13)])
 def test_live(clean: Path, tmp_path: Path, lsb: int, late: int,
               monkeypatch: pytest.MonkeyPatch) -> None:
