@@ -22,8 +22,9 @@ the frames it sent (its COUNTER goes on by one), so S_q - S_p = g says nothing o
 (a firmware that lost 16 k + 1 frames on the bus saw no skip either). Only a span with one
 step where the log lacks frames or its stamps may hide a lap
 (``GAP_CYCLES``) is numbered so (the laps of two holes cannot be shared out by one count); the
-hole's COUNTER step (mod 16) stays what it is. The whole-log judge only: the live one, whose
-pages after a hole come 0.6 s after it, does not (yet).
+hole's COUNTER step (mod 16) stays what it is. The live judge, whose pages after a hole come
+0.6 s after it, holds its samples after such a hole for them and applies the same rule on its
+window (``livelaphold``, ``livepagelaps``).
 """
 
 from __future__ import annotations

@@ -66,6 +66,7 @@ class Lapped:
     heard: bool
     until_s: float
     periods: int  # the stamps' numbering of the step
+    stamps_kept: bool | None = None  # the window numbers it so, its frames in (None: not asked)
 
 
 class LapHold:
@@ -105,10 +106,11 @@ class LapHold:
         the life heard, the pages after it kept, or no page needed: the window numbers the step
         the stamps' way (the pages only ever raise a numbering: ``holepages``)."""
         tracker = self._tracker
-        if not hold.heard or tracker.placer.seen.told_after(hold.t_s):
-            return True
-        numbered = window_step(tracker._window, tracker.placer.halves, hold.seq)
-        return numbered is None or numbered >= hold.periods
+        if hold.stamps_kept is None:  # asked once, when its frames are in (no arrays per frame)
+            numbered = window_step(tracker._window, tracker.placer.halves, hold.seq)
+            hold.stamps_kept = numbered is None or numbered >= hold.periods
+        return (not hold.heard or hold.stamps_kept
+                or tracker.placer.seen.told_after(hold.t_s))
 
     def holds(self, sample: Held) -> bool:
         """Whether the on-board sample (its pose, ODOM_POSE_Y half and whether it queued:

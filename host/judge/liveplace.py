@@ -115,6 +115,7 @@ class StallPlacer:
         self.periods = 1  # encoder periods from the frame heard before to the latest
         self.lapped = False  # ... more than a lap (16): the stamps gave it one (livelaphold)
         self.moved = 0  # ... of which the lap of the step before it (``_moved``)
+        self._was_lapped = False  # ``lapped`` of the frame before the latest
         self._before: tuple[float, ...] | None = None  # the window's row before the latest
         self.seen = LiveSeen()  # what the firmware's pages prove it took (its life's)
         self.dark = DarkRestarts()  # restarts after the input went dark (host.judge.livedark)
@@ -166,8 +167,8 @@ class StallPlacer:
         stamped 13 periods late before a chunk of 20 left 4 periods for the chunk: the gate
         refused its frames and re-primed, 0.47 m); ``moved``: the periods added."""
         before, self.moved = self._before, 0
-        if before is None or int(before[0]) != int(prev[0]) - 1:
-            return periods
+        if not self._was_lapped or before is None or int(before[0]) != int(prev[0]) - 1:
+            return periods  # (only a lap of the step before can move: no arrays per frame)
         counter, t_s = np.array([int(before[2]), int(prev[2]), frame[0]]), np.array(
             [float(before[3]), float(prev[3]), frame[3]])
         holes = np.zeros(2, dtype=bool)
@@ -186,6 +187,7 @@ class StallPlacer:
         True after a gap of the sender's sequence (``samples.sender_seq``): the reference is to
         be placed again at the next sample."""
         counter, left, right, t_s = frame
+        self._was_lapped = self.lapped
         self.periods, self.lapped, self.moved = 1, False, 0
         if prev is None:
             self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)
