@@ -37,6 +37,7 @@ oldest), their samples those of ``PAGES_WAIT_S`` at most.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -52,6 +53,8 @@ Held = tuple[FramePose, Half, bool]  # a sample held: its pose, ODOM_POSE_Y half
 
 LAP = 16  # the COUNTER's lap: frames after a late frame that tell it (``late_lone_frames``)
 KEPT = 8  # laps held at once (more: the oldest ends first)
+AT_ONCE_S = 20e-6  # two frames closer than any frame lasts on a 1 Mbit/s bus (47 us): stamped
+# when a recorder read its backlog, not when the bus carried them (a busy bus's burst is spaced)
 
 
 @dataclass
@@ -108,7 +111,8 @@ class LapHold:
         tracker = self._tracker
         if hold.stamps_kept is None:  # asked once, when its frames are in (no arrays per frame)
             numbered = window_step(tracker._window, tracker.placer.halves, hold.seq)
-            hold.stamps_kept = numbered is None or numbered >= hold.periods
+            hold.stamps_kept = (numbered is None or numbered >= hold.periods
+                                or not _read_at_once(tracker._window.rows, hold.seq))
         return (not hold.heard or hold.stamps_kept
                 or tracker.placer.seen.told_after(hold.t_s))
 
@@ -142,3 +146,12 @@ class LapHold:
         self.held = [sample for sample in self.held if sample[0].seq >= below]
         for sample in now:
             self._tracker._compare(*sample)
+
+
+def _read_at_once(rows: deque[tuple[float, ...]], seq: int) -> bool:
+    """Whether encoder frame ``seq`` and the one after it (the window's latest ``rows``: seq,
+    pos, COUNTER, bus time s, ...) were stamped at once (``AT_ONCE_S``): a recorder's backlog,
+    whose chunk the pages may number; a busy bus lets its burst out frame by frame, and its
+    pages, held too, are not waited for (the window's numbering stands, as before)."""
+    stamps = {int(row[0]): row[3] for row in rows}
+    return seq in stamps and seq + 1 in stamps and stamps[seq + 1] - stamps[seq] < AT_ONCE_S
