@@ -22,8 +22,9 @@ the frames it sent (its COUNTER goes on by one), so S_q - S_p = g says nothing o
 (a firmware that lost 16 k + 1 frames on the bus saw no skip either). Only a span with one
 step where the log lacks frames or its stamps may hide a lap
 (``GAP_CYCLES``) is numbered so (the laps of two holes cannot be shared out by one count); the
-hole's COUNTER step (mod 16) stays what it is. The whole-log judge only: the live one, whose
-pages after a hole come 0.6 s after it, does not (yet).
+hole's COUNTER step (mod 16) stays what it is. The live judge, whose pages after a hole come
+0.6 s after it, holds its samples after such a hole for them and applies the same rule on its
+window (``livelaphold``, ``livepagelaps``).
 """
 
 from __future__ import annotations
@@ -56,10 +57,10 @@ def page_numbered(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders) -> E
     evidence = PageEvidence(decoder)
     evidence.feed(frames, enc)
     evidence.keeper.keep_pending(True)
-    pages = [p for p in evidence.keeper.pages if _exact(step, gap, p)]
+    pages = [p for p in evidence.keeper.pages if exact_page(step, gap, p)]
     changed = False
     for k in np.flatnonzero(gap).tolist():
-        laps = _laps(step, gap, k, pages, evidence.keeper.totals)
+        laps = proven_laps(step, gap, k, pages, evidence.keeper.totals)
         if laps:
             step[k] += LAP * laps
             changed = True
@@ -69,7 +70,7 @@ def page_numbered(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders) -> E
     return replace(enc, seq=seq)
 
 
-def _laps(step: IntArray, gap: npt.NDArray[np.bool_], k: int, pages: list[Page],
+def proven_laps(step: IntArray, gap: npt.NDArray[np.bool_], k: int, pages: list[Page],
           totals: list[Totals]) -> int:
     """The laps to add to step ``k`` (a hole of the log) that the last page before it and the
     first after it prove (0: none)."""
@@ -89,7 +90,7 @@ def _laps(step: IntArray, gap: npt.NDArray[np.bool_], k: int, pages: list[Page],
     return 0  # never lowered: a stalled sender's hole spans more periods than frames it sent
 
 
-def _exact(step: IntArray, gap: npt.NDArray[np.bool_], page: Page) -> bool:
+def exact_page(step: IntArray, gap: npt.NDArray[np.bool_], page: Page) -> bool:
     """Whether the sender's number of the last frame the firmware had when it made ``page`` is
     known: its frames before and after are one period apart, no hole between."""
     lo, hi = page[0], page[2]

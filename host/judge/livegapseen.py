@@ -79,6 +79,12 @@ class LiveSeen:
         if self._first is not None and self._first[0] == primed:
             self._boot = (self._first[1], self._first[1] - self.cycle_s)
 
+    @property
+    def first_seq(self) -> int | None:
+        """The life's first encoder frame heard (the tracker's seq; the pages' frames count
+        from it), None before it."""
+        return None if self._first is None else self._first[0]
+
     def on_encoders(self, seq: int, t_s: float, periods: int) -> None:
         """Accepted encoder frame ``seq`` at bus time ``t_s``, ``periods`` of the sender's
         sequence after the frame before (``samples.sender_seq``); the life's frames are
@@ -229,15 +235,18 @@ def heard_status(tracker: PoseTracker, message: Any, data: bytes, data_ids: Any,
         if placer.waiting:
             placer.withdraw(placer.seen.proven())  # the reference moves at the next sample
         tracker.choice.paged(t_s)  # a held choice the pages may now decide (livechoice)
+        tracker.laps.heard()  # ... and samples after a lap of the stamps (livelaphold)
 
 
 def end_of_watch(tracker: PoseTracker) -> None:
     """The watch ends (no later frame comes): ``LiveSeen.flush`` and what it proves withdrawn,
-    an ambiguous hole's choice made (``livechoice``) and a new start's samples held judged
-    (``livenewstart``), before the samples still waiting are judged
+    an ambiguous hole's choice made (``livechoice``), the samples after a lap of the stamps
+    (``livelaphold``) and a new start's samples held judged (``livenewstart``), before the
+    samples still waiting are judged
     (``posewrongs.PoseWrongs.finish``)."""
     placer = tracker.placer
     if placer.seen.flush() and placer.waiting:
         placer.withdraw(placer.seen.proven())
     tracker.choice.decide()  # no page comes now: an ambiguous hole's choice is made
+    tracker.laps.decide()  # ... and the samples after a lap of the stamps are judged
     tracker.newstart.release()  # a new start's samples held: judged by its fit so far

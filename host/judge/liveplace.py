@@ -38,16 +38,19 @@ from odocan.host.judge.livefill import LiveFill
 from odocan.host.judge.livegapseen import LiveSeen
 from odocan.host.judge.liveholdstep import BusOrder, excess_m
 from odocan.host.judge.livelosses import LiveAllowance
+from odocan.host.judge.livepagelaps import page_laps
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livewindow import CYCLE_S, Columns, window_holes
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.samples import POSITION_LSB_M, sender_seq
+from odocan.host.judge.senderseq import pose_skips
 from odocan.host.judge.spanfill import filled_span_allowance_m
 
 ABS_KEPT = 128  # the latest encoder frames whose count-step sums are kept (a sample names one)
 GAPS_KEPT = 64  # gaps of the encoder sequence kept between two placements (no growth)
 REPRIMED_KEPT = 64  # counter restarts kept (no page proves a span across one)
 PARTS_KEPT = 64  # placements' gaps and stalls waiting for the pages (older ones keep theirs)
+LAP = 16  # the encoder COUNTER's lap: a step of more periods took one from the stamps
 
 
 Gap = tuple[int, tuple[int, int], tuple[int, int], int]  # seq after, counts before, after, periods
@@ -55,25 +58,42 @@ Part = tuple[bool, int, int, float, int]  # a placement's gap (True: seq after) 
 # span): first and last frame, the allowance it added (m), the placement's frame
 
 
-def _confirmed(gaps: list[Gap], window: Columns, halves: Columns | None) -> list[Gap]:
-    """The gaps still gaps by ``samples.sender_seq`` over the window from the frame before each
-    (the frames heard since tell a burst after a busy bus, whose first frame only looked 16
-    periods late, from frames lost); a gap whose frames left the window is kept as heard."""
+def _confirmed(gaps: list[Gap], window: Columns, halves: Columns | None,
+               seen: LiveSeen | None = None) -> list[Gap]:
+    """The gaps still gaps by ``samples.sender_seq`` over the window from the frame before the
+    frame before each (the frames heard since tell a burst after a busy bus, whose first frame
+    only looked 16 periods late, from frames lost; and a frame stamped late before it, alone
+    below its neighbours' level, whose lap is this step's: ``senderseq.late_lone_frames``), a
+    gap the stamps gave a lap (over 16 periods) raised by the laps the pages ``seen`` prove
+    (``livepagelaps``); a gap whose frames left the window is kept as heard."""
     if not gaps:
         return gaps
-    seqs = window.col("seq")
     kept = []
     for gap in gaps:
-        i = int(np.searchsorted(seqs, gap[0] - 1))
-        if gap[3] < 0 or i >= len(seqs) or int(seqs[i]) != gap[0] - 1:
+        numbered = None if gap[3] < 0 else window_step(window, halves, gap[0])
+        if numbered is None:
             kept.append(gap)
             continue
-        numbered = sender_seq(window.col("counter")[i:].astype(np.int64),
-                              window.col("t_s")[i:], CYCLE_S, window_holes(window, halves, i))
-        periods = int(numbered[1] - numbered[0])
+        periods = numbered
+        if gap[3] > LAP and seen is not None:  # a lap of the stamps: the pages may number it
+            periods += LAP * page_laps(window, halves, seen, gap[0])
         if periods > 1:
             kept.append((gap[0], gap[1], gap[2], periods))
     return kept
+
+
+def window_step(window: Columns, halves: Columns | None, seq: int) -> int | None:
+    """The periods ``samples.sender_seq`` numbers over the window, from the frame before the
+    frame before it, for the step into encoder frame ``seq``; None when the frame before it
+    left the window."""
+    seqs = window.col("seq")
+    i = int(np.searchsorted(seqs, seq - 1))
+    if i >= len(seqs) - 1 or int(seqs[i]) != seq - 1:
+        return None
+    j = max(i - 1, 0)  # the frame before: its lap may be this step's (late_lone_frames)
+    numbered = sender_seq(window.col("counter")[j:].astype(np.int64), window.col("t_s")[j:],
+                          CYCLE_S, window_holes(window, halves, j))
+    return int(numbered[i - j + 1] - numbered[i - j])
 
 
 class StallPlacer:
@@ -93,6 +113,10 @@ class StallPlacer:
         self._gaps: list[Gap] = []  # since then
         self.max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED  # the gaps' bound
         self.periods = 1  # encoder periods from the frame heard before to the latest
+        self.lapped = False  # ... more than a lap (16): the stamps gave it one (livelaphold)
+        self.moved = 0  # ... of which the lap of the step before it (``_moved``)
+        self._was_lapped = False  # ``lapped`` of the frame before the latest
+        self._before: tuple[float, ...] | None = None  # the window's row before the latest
         self.seen = LiveSeen()  # what the firmware's pages prove it took (its life's)
         self.dark = DarkRestarts()  # restarts after the input went dark (host.judge.livedark)
         self._reprimed: tuple[int, ...] = ()  # the latest counter restarts re-primed on
@@ -126,10 +150,35 @@ class StallPlacer:
                     prev: tuple[float, ...] | None, bits: int) -> bool:
         """``_on_encoders``, and the frame to ``seen``."""
         gap = self._on_encoders(seq, frame, prev, bits)
+        self._before = prev
         self.bus.heard(seq, *frame)
-        self.seen.on_encoders(seq, frame[3], self.periods)
-        self.dark.on_encoders(seq, self.periods)
+        periods = self.periods - self.moved  # the stamps' numbering: sums kept
+        self.seen.on_encoders(seq, frame[3], periods)
+        self.dark.on_encoders(seq, periods)
         return gap
+
+    def _moved(self, periods: int, frame: tuple[int, int, int, float],
+               prev: tuple[float, ...]) -> int:
+        """``periods`` (the stamps' numbering of the step from ``prev``, the window's row of the
+        frame before, to ``frame``) with the lap of the step before it when that one's frame
+        lies alone below its neighbours' level (``senderseq.late_lone_frames`` over the three
+        frames: the frames after it, which ``analyze`` reads too, are not heard yet; the samples
+        wait for them, ``host.judge.livelaphold``). The gate steps this frame with it (a frame
+        stamped 13 periods late before a chunk of 20 left 4 periods for the chunk: the gate
+        refused its frames and re-primed, 0.47 m); ``moved``: the periods added."""
+        before, self.moved = self._before, 0
+        if not self._was_lapped or before is None or int(before[0]) != int(prev[0]) - 1:
+            return periods  # (only a lap of the step before can move: no arrays per frame)
+        counter, t_s = np.array([int(before[2]), int(prev[2]), frame[0]]), np.array(
+            [float(before[3]), float(prev[3]), frame[3]])
+        holes = np.zeros(2, dtype=bool)
+        if self.halves is not None:
+            holes[0] = pose_skips(np.array([int(before[1]), int(prev[1])]),
+                                  self.halves.col("pos").astype(np.int64),
+                                  self.halves.col("counter").astype(np.int64))[0]
+        step = np.diff(sender_seq(counter, t_s, CYCLE_S, holes))
+        self.moved = max(0, int(step[1]) - periods)
+        return periods + self.moved
 
     def _on_encoders(self, seq: int, frame: tuple[int, int, int, float],
                      prev: tuple[float, ...] | None, bits: int) -> bool:
@@ -138,7 +187,8 @@ class StallPlacer:
         True after a gap of the sender's sequence (``samples.sender_seq``): the reference is to
         be placed again at the next sample."""
         counter, left, right, t_s = frame
-        self.periods = 1
+        self._was_lapped = self.lapped
+        self.periods, self.lapped, self.moved = 1, False, 0
         if prev is None:
             self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)
             self.fill.accepted(1, counter, t_s)
@@ -152,8 +202,10 @@ class StallPlacer:
         if periods == 1 and t_s - float(prev[3]) < 8.0 * CYCLE_S:
             self.fill.accepted(1, counter, t_s)
             return False  # the next frame (the fast path: no arrays)
-        periods = self.periods = int(sender_seq(np.array([int(prev[2]), counter]),
-                                                np.array([float(prev[3]), t_s]), CYCLE_S)[1])
+        periods = int(sender_seq(np.array([int(prev[2]), counter]),
+                                 np.array([float(prev[3]), t_s]), CYCLE_S)[1])
+        self.periods = self._moved(periods, frame, prev)
+        self.lapped = self.periods > LAP
         sender_before = self.fill.sender
         self.fill.accepted(periods, counter, t_s)
         if periods <= 1:
@@ -217,7 +269,10 @@ class StallPlacer:
         if stalled:
             allowance = self._allowance_m(last_compared, pose.seq, window, reference)
             parts.append((False, last_compared, pose.seq, allowance, pose.seq))
-        gaps, self._gaps, self.stalled = _confirmed(self._gaps, window, self.halves), [], False
+        later = [gap for gap in self._gaps if gap[0] > pose.seq]  # after a held sample's
+        gaps = _confirmed([gap for gap in self._gaps if gap[0] <= pose.seq], window,
+                          self.halves, self.seen)  # frame (livelaphold): the next sample's
+        self._gaps, self.stalled = later, False
         sx, sy = self._shift[0] - self._owed[0], self._shift[1] - self._owed[1]  # applied
         owed, self._owed = self._owed, (0.0, 0.0)
         if not gaps and not stalled and owed == (0.0, 0.0):  # a burst after a busy bus, not a
@@ -354,6 +409,17 @@ class StallPlacer:
                 self.losses.rejudge(int(seq), until, (less_x, less_y))
         self._owed = (self._owed[0] + less_x, self._owed[1] + less_y)
         self._shift = (self._shift[0] + less_x, self._shift[1] + less_y)
+
+    def due(self, seq: int) -> bool:
+        """Whether a placement is due at the sample of encoder frame ``seq``: a stall, a gap
+        into its frame or before, or an allowance withdrawn."""
+        return self.stalled or self.owed or any(gap[0] <= seq for gap in self._gaps)
+
+    @property
+    def gapped(self) -> bool:
+        """Gaps wait for the next placement (heard after the frame of a sample held:
+        ``host.judge.livelaphold``)."""
+        return bool(self._gaps)
 
     @property
     def waiting(self) -> bool:

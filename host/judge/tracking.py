@@ -17,6 +17,7 @@ from typing import Any
 
 from odocan.host.judge.livechoice import LiveChoice
 from odocan.host.judge.livefit import LiveFit
+from odocan.host.judge.livelaphold import LapHold
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livenewstart import NewStartHold
 from odocan.host.judge.liveplace import StallPlacer
@@ -111,6 +112,7 @@ class PoseTracker:
         self.choice = LiveChoice(self)  # ... both candidates until the pages or the next pose
         self.restarts.choose = self.choice.open
         self.newstart = NewStartHold(self)  # a new start's samples wait for its fit
+        self.laps = LapHold(self)  # samples after a lap of the stamps wait for its evidence
         self._gate = StepGate(geometry, self.counter_bits, self.restarts)
         self._pending: FramePose | None = None  # the first pose, heard before the integrator
         self._backlog_counts: list[Counted] = []  # the frames since the pending pose's
@@ -144,6 +146,8 @@ class PoseTracker:
         self._now_s = self.placer.dark.heard(t_s)  # (and whether the input went dark)
         if t_s > self.choice.until_s:  # the pages had their time: the choice is made
             self.choice.decide()
+        if t_s > self.laps.until_s:  # ... and a lap's numbering is decided (livelaphold)
+            self.laps.decide(t_s)
         if t_s > self.newstart.until_s:  # the new start's samples had their fit
             self.newstart.release()
         if self._boot is not None and t_s > self._boot[1]:
@@ -165,6 +169,8 @@ class PoseTracker:
         if self.placer.on_encoders(self.enc_seq, (counter, left, right, t_s), prev,
                                    self.counter_bits) and self._ref is not None:
             self._place_at_next = True  # a gap: placed again, bounded (liveplace.StallPlacer)
+            if self.placer.lapped:  # its lap the stamps' alone: the samples wait (livelaphold)
+                self.laps.lapped(self.enc_seq, t_s, self.placer.periods)
         row = (self.enc_seq, self._pos, counter, t_s, left, right, self.placer.periods, uptime)
         self._window.append(*row)
         if self.enc_seq % ENC_WINDOW == 0:
@@ -178,6 +184,7 @@ class PoseTracker:
             self._keep_ref(FramePose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad))
             if self.choice.pending is not None:  # the twin steps along (livechoice)
                 self.choice.stepped(self.enc_seq, step)
+            self.laps.heard()
         elif self._pending is not None:
             self._backlog_counts.append(counted(row))
             if len(self._backlog_counts) > BACKLOG_FRAMES:  # too long: start at a later pose
@@ -268,6 +275,8 @@ class PoseTracker:
 
     def _compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
         """Judge one on-board sample; the reference at its encoder frame, None when unknown."""
+        if self.laps.holds((pose, y, queued)):  # compared once its lap is numbered
+            return None
         seq = pose.seq
         last, self._last_sample_t = self._last_sample_t, y.t_s
         silent = not queued and silent_since(last, y.t_s, self._halves["y"], self._window)
@@ -366,6 +375,7 @@ class PoseTracker:
     def restart_reference(self) -> None:
         """Start the reference again at the next on-board pose (after a set-pose or config)."""
         self.choice.decide()  # the samples held are judged by the reference they named
+        self.laps.decide()
         self.newstart.release()
         self._ref = None
         self._last_compared = -1
