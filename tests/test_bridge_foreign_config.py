@@ -24,7 +24,7 @@ dead reckoning written here (``tests.test_bridge_config_nack``) says where the p
 from __future__ import annotations
 
 import json
-from typing import Any, cast
+from typing import Any, TypeVar, cast
 
 import can
 import pytest
@@ -201,10 +201,15 @@ class _RebootBoard(_Watched):
         super().period(late=late)
 
 
-def _rebooted_drive(channel: str, kept: bool) -> tuple[_Robot, _RebootBoard]:
-    """100 periods, the bridge's cmd/config WIDER (its APPLY held), the reset, 300 periods."""
+Board = TypeVar("Board", "_RebootBoard", "_LostBoard")
+
+
+def _config_drive(channel: str, board_of: type[Board], kept: bool) -> tuple[_Robot, Board]:
+    """100 periods, the bridge's cmd/config WIDER, then to ``PERIODS`` on a board of
+    ``board_of`` (which resets the MCU on its way; ``kept``: a firmware that keeps what the
+    reset should take)."""
     with bridged_robot(channel) as (bridge, listener):
-        board = _RebootBoard(bridge, listener, kept)
+        board = board_of(bridge, listener, kept)
         for _ in range(100):
             board.period()
         answer = bridge.on_command("config", json.dumps(WIDER).encode())
@@ -224,7 +229,7 @@ def _reset_checked(board: _RebootBoard) -> None:
 
 
 def test_a_bridge_config_interrupted_by_a_reboot_leaves_the_build_s_robot() -> None:
-    bridge, board = _rebooted_drive("test-bridge-config-reboot", kept=False)
+    bridge, board = _config_drive("test-bridge-config-reboot", _RebootBoard, kept=False)
     _reset_checked(board)
     before = [crc for k, crc in board.profile_crcs if k < 100]
     after = [crc for k, crc in board.profile_crcs if k > board.apply_periods[0]]
@@ -241,7 +246,7 @@ def test_a_bridge_config_interrupted_by_a_reboot_leaves_the_build_s_robot() -> N
 
 
 def test_a_firmware_that_keeps_the_config_staged_before_its_reboot_fails() -> None:
-    bridge, board = _rebooted_drive("test-bridge-config-reboot-kept", kept=True)
+    bridge, board = _config_drive("test-bridge-config-reboot-kept", _RebootBoard, kept=True)
     _reset_checked(board)
     applied = board.apply_periods[0]
     before = [crc for k, crc in board.profile_crcs if k < 100]
@@ -275,19 +280,6 @@ class _LostBoard(_Watched):
         super().period(late=late)
 
 
-def _lost_drive(channel: str, kept: bool) -> tuple[_Robot, _LostBoard]:
-    """100 periods, the bridge's cmd/config WIDER, the reset at ``LOST_AT``, to ``PERIODS``."""
-    with bridged_robot(channel) as (bridge, listener):
-        board = _LostBoard(bridge, listener, kept)
-        for _ in range(100):
-            board.period()
-        answer = bridge.on_command("config", json.dumps(WIDER).encode())
-        assert answer[0][1]["result"] == "accepted", answer
-        for _ in range(PERIODS - 100):
-            board.period()
-    return bridge, board
-
-
 def _crcs(board: _Watched) -> tuple[int, set[int], set[int]]:
     """cantools: the PROFILE_CRC before the config, those between its APPLY and the reset,
     those after the reset."""
@@ -298,7 +290,7 @@ def _crcs(board: _Watched) -> tuple[int, set[int], set[int]]:
 
 
 def test_a_config_is_lost_with_a_reboot_and_the_judges_say_so() -> None:
-    bridge, board = _lost_drive("test-bridge-config-lost", kept=False)
+    bridge, board = _config_drive("test-bridge-config-lost", _LostBoard, kept=False)
     assert [(r["id"], r["result"]) for r in board.results] == [("c1", "acked")]
     built, configured, rebooted = _crcs(board)
     assert configured
@@ -319,7 +311,7 @@ def test_a_config_is_lost_with_a_reboot_and_the_judges_say_so() -> None:
 
 
 def test_a_firmware_that_keeps_its_config_across_a_reboot_fails() -> None:
-    bridge, board = _lost_drive("test-bridge-config-lost-kept", kept=True)
+    bridge, board = _config_drive("test-bridge-config-lost-kept", _LostBoard, kept=True)
     built, configured, rebooted = _crcs(board)
     assert rebooted == configured != {built}  # cantools: it still runs the config
     _assert_pose(board, LOST_AT, LOST_AT)  # 0.25 m from its reset on

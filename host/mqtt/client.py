@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -38,6 +39,17 @@ from paho.mqtt.properties import Properties
 MAX_WRITE_BYTES = 64 * 1024  # one coalesced socket write at most (a loopback socket's buffer)
 MAX_READ_PACKETS = 1024  # packets one readable event reads at most (then the loop turns)
 DISCONNECT = PacketTypes.DISCONNECT << 4  # the packet-type nibble of paho's ``command``
+
+
+def persistent_session(v5: bool, expiry_s: float) -> dict[str, Any]:
+    """The CONNECT options of a session the broker keeps while the client is away: MQTT v5
+    ``clean_start`` off with a session expiry of ``expiry_s`` (at least 1 s), 3.1.1
+    ``clean_session`` off (kept until the client cleans it)."""
+    if not v5:
+        return {"protocol": aiomqtt.ProtocolVersion.V311, "clean_session": False}
+    props = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
+    props.SessionExpiryInterval = max(1, math.ceil(expiry_s))
+    return {"protocol": aiomqtt.ProtocolVersion.V5, "clean_start": False, "properties": props}
 
 
 class CoalescedSend:

@@ -26,20 +26,17 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import math
 import threading
 from collections import deque
 from typing import Any
 
 import aiomqtt
 import paho.mqtt.client as paho
-from paho.mqtt.packettypes import PacketTypes
-from paho.mqtt.properties import Properties
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, connect_failure
-from odocan.host.mqtt.client import Arrived, LinkClient, arrived_of
+from odocan.host.mqtt.client import Arrived, LinkClient, arrived_of, persistent_session
 from odocan.host.mqtt.v5probe import CLIENT_LOG
 from odocan.host.protocol.commands import command_id
 
@@ -185,14 +182,7 @@ class CommandReader:
             await asyncio.wait_for(self._stop.wait(), timeout=delay_s)
 
     def _client(self) -> _ReaderClient:
-        session: dict[str, Any]
-        if self.v5:
-            props = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
-            props.SessionExpiryInterval = max(1, math.ceil(self.session_expiry_s))
-            session = {"protocol": aiomqtt.ProtocolVersion.V5, "clean_start": False,
-                       "properties": props}
-        else:
-            session = {"protocol": aiomqtt.ProtocolVersion.V311, "clean_session": False}
+        session = persistent_session(self.v5, self.session_expiry_s)
         client = _ReaderClient(
             **self.broker.client_kwargs(), **session, on_refused=self._refused,
             on_overflow=lambda _: None, max_waiting=self.capacity,

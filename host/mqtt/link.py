@@ -51,7 +51,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import math
 import time
 from collections import Counter, deque
 from collections.abc import Callable
@@ -60,8 +59,6 @@ from itertools import islice
 from typing import Any, Literal
 
 import aiomqtt
-from paho.mqtt.packettypes import PacketTypes
-from paho.mqtt.properties import Properties
 
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import (
@@ -71,7 +68,7 @@ from odocan.host.mqtt.broker import (
     first_connect_failure,
     protocol_unsupported,
 )
-from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient
+from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient, persistent_session
 from odocan.host.mqtt.cmdreader import CommandReader
 from odocan.host.mqtt.expiry import Expired, Fresh, expired_by, fresh
 from odocan.host.mqtt.redelivery import Redeliveries
@@ -209,14 +206,7 @@ class RobotLink:
             qos=topics.QOS_RELIABLE,
             retain=True,
         )
-        session: dict[str, Any]
-        if self.v5:
-            props = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
-            props.SessionExpiryInterval = max(1, math.ceil(self.command_expiry_s))
-            session = {"protocol": aiomqtt.ProtocolVersion.V5, "clean_start": False,
-                       "properties": props}
-        else:
-            session = {"protocol": aiomqtt.ProtocolVersion.V311, "clean_session": False}
+        session = persistent_session(self.v5, self.command_expiry_s)
         client = LinkClient(
             **self.broker.client_kwargs(), **session,
             on_refused=self._refused, on_overflow=self._overflow,
