@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -88,13 +89,10 @@ def drive(which: str, kept: bool = False, apply_at: int = APPLY_AT,
     request_id, pack, before_reboot, after_reboot = (AGAIN | PARTIAL | FIRST_TICK | DRIVES)[which]
     sends = ({stage_at + k: frame for k, frame in enumerate(before_reboot)}
              | {apply_at + k: frame for k, frame in enumerate(after_reboot)})
-    heard: list[can.Message] = []
     with circle_rig() as rig:
-        rig.observers.append(lambda _k, got: heard.extend(got))
-        tool = open_virtual(rig.channel)
         sent = [0]
 
-        def host(k: int) -> None:
+        def host(k: int, tool: can.BusABC) -> None:
             if k == REBOOT_AT:
                 before = rig.board.ecu.commands
                 rig.board.reboot()
@@ -109,12 +107,28 @@ def drive(which: str, kept: bool = False, apply_at: int = APPLY_AT,
                 tool.send(can.Message(arbitration_id=request_id, data=data,
                                       is_extended_id=False, timestamp=k * TICK_S))
 
-        rig.before_board.append(host)
-        try:
-            rig.run(5.0)
-        finally:
-            tool.shutdown()
+        return _heard(rig, host)
+
+
+def _heard(rig: Any, host: Callable[[int, can.BusABC], None]) -> tuple[can.Message, ...]:
+    """5 s of ``rig`` with ``host(k, tool)`` before the board's tick ``k`` (``tool``: another
+    handle on the rig's bus): every frame heard."""
+    heard: list[can.Message] = []
+    rig.observers.append(lambda _k, got: heard.extend(got))
+    tool = open_virtual(rig.channel)
+    rig.before_board.append(lambda k: host(k, tool))
+    try:
+        rig.run(5.0)
+    finally:
+        tool.shutdown()
     return tuple(heard)
+
+
+def _written(messages: tuple[can.Message, ...], path: Path) -> Path:
+    """``messages`` as a candump log at ``path``."""
+    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
+                            f"{bytes(m.data).hex().upper()}\n" for m in messages))
+    return path
 
 
 def _decoded(msg: can.Message) -> dict[str, Any]:
@@ -147,11 +161,8 @@ def _pose_around(messages: tuple[can.Message, ...], at: int) -> float:
 
 def _log(which: str, folder: Path, kept: bool = False, apply_at: int = APPLY_AT,
          stage_at: int = STAGE_AT) -> Path:
-    path = folder / f"{which}{'-kept' * kept}-{apply_at}.log"
-    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
-                            f"{bytes(m.data).hex().upper()}\n"
-                            for m in drive(which, kept, apply_at, stage_at)))
-    return path
+    return _written(drive(which, kept, apply_at, stage_at),
+                    folder / f"{which}{'-kept' * kept}-{apply_at}.log")
 
 
 @pytest.mark.parametrize("which", list(DRIVES))
@@ -292,14 +303,11 @@ def test_bare_applies_all_through_a_drive_are_each_judged_and_pass(
     reboot); each APPLY's check is made (none left unjudged) and passes, whole and streamed;
     cantools: no APPLY moved the pose by more than a tick's motion."""
     ticks = list(range(40, 480, 17))
-    heard: list[can.Message] = []
     profile = load(robot)
     with FaultRig(scenario=get_scenario(scenario, profile, duration_s=60.0), robot=robot,
                   integrator=integrator, firmware=firmware) as rig:
-        rig.observers.append(lambda _k, got: heard.extend(got))
-        tool = open_virtual(rig.channel)
 
-        def host(k: int) -> None:
+        def host(k: int, tool: can.BusABC) -> None:
             if k == REBOOT_AT:
                 rig.board.reboot()
             if k in ticks:
@@ -308,19 +316,12 @@ def test_bare_applies_all_through_a_drive_are_each_judged_and_pass(
                 tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
                                       is_extended_id=False, timestamp=k * TICK_S))
 
-        rig.before_board.append(host)
-        try:
-            rig.run(5.0)
-        finally:
-            tool.shutdown()
-    messages = tuple(heard)
+        messages = _heard(rig, host)
     acks = [k for k, m in enumerate(messages) if m.arbitration_id == fr.ODOM_ACK_ID
             and _decoded(m)["RESULT"] == 0]
     assert len(acks) == len(ticks)
     assert all(_pose_around(messages, at) < ONE_TICK_M for at in acks)
-    path = tmp_path / "bare.log"
-    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
-                            f"{bytes(m.data).hex().upper()}\n" for m in messages))
+    path = _written(messages, tmp_path / "bare.log")
     whole = analyze(read_log(path), profile, integrator)
     checks = [e["kept"] for e in whole.report["events"] if e["kind"] == "set_pose"]
     assert len(checks) == len(ticks)
@@ -338,25 +339,17 @@ def test_a_bare_apply_that_moves_the_pose_a_little_fails_everywhere(tmp_path: Pa
     cantools: the APPLY was ACKed, and the X just after it is the one just before plus a
     tick's motion and the offset (float64, the motion from the ticks on either side)."""
     off_q40 = 1 << 27
-    heard: list[can.Message] = []
     with pytest.MonkeyPatch.context() as patch, circle_rig() as rig:
         apply = Odometry.set_pose
         patch.setattr(Odometry, "set_pose", lambda self, x, y, h: apply(self, x + off_q40, y, h))
-        rig.observers.append(lambda _k, got: heard.extend(got))
-        tool = open_virtual(rig.channel)
 
-        def host(k: int) -> None:
+        def host(k: int, tool: can.BusABC) -> None:
             if k == APPLY_AT:
                 data = hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
                 tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
                                       is_extended_id=False, timestamp=k * TICK_S))
 
-        rig.before_board.append(host)
-        try:
-            rig.run(5.0)
-        finally:
-            tool.shutdown()
-    messages = tuple(heard)
+        messages = _heard(rig, host)
     at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
     poses_x = [(m.timestamp, float(_decoded(m)["X"])) for m in messages
                if m.arbitration_id == fr.ODOM_POSE_X_ID]
@@ -366,9 +359,7 @@ def test_a_bare_apply_that_moves_the_pose_a_little_fails_everywhere(tmp_path: Pa
     before = np.polyval(np.polyfit(t_s[k - 20:k] - mid_s, x_m[k - 20:k], 3), 0.0)
     after = np.polyval(np.polyfit(t_s[k:k + 20] - mid_s, x_m[k:k + 20], 3), 0.0)
     assert abs((after - before) - off_q40 / 2**40) < 0.05e-3  # cantools, float64: 1.2 LSB
-    path = tmp_path / "moved.log"
-    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
-                            f"{bytes(m.data).hex().upper()}\n" for m in messages))
+    path = _written(messages, tmp_path / "moved.log")
     whole = analyze(read_log(path), PMIR, "exact")
     assert not whole.passed
     assert [e["kept"]["passed"] for e in whole.report["events"] if e["kind"] == "set_pose"] == [
