@@ -30,8 +30,6 @@ import pytest
 
 from odocan.firmware import frames as fw_frames
 from odocan.sim.board import HALT_AFTER_S, TICK_S
-from odocan.sim.contract import DBC_PATH
-from tests.dbc_typed import load_can_dbc, numbers
 from tests.overloaded_fleet import (
     FIRMWARES,
     LateTicksClock,
@@ -44,6 +42,7 @@ from tests.test_fleet_overload_stretches import (
     ROBOTS,
     SEED,
     HaltingClock,
+    x_off_times,
 )
 
 WRONG_LSB = 3
@@ -108,7 +107,7 @@ def test_a_firmware_wrong_at_a_halts_restart_fails(
         from_s = wrong.halted[index]
         assert from_s is not None
         halt_s = (clock.halt_ticks[halt] - index % 2) * TICK_S  # robot 1 runs a tick late
-        off_s = _x_off(right.lines[index], wrong.lines[index])
+        off_s = x_off_times(right.lines[index], wrong.lines[index], WRONG_LSB)
         assert off_s, "the injection reached no pose frame"
         assert halt_s < off_s[0] <= halt_s + (first + 1) * TICK_S + 0.002, (halt_s, off_s)
         if last is not None:
@@ -160,29 +159,3 @@ def test_a_correct_firmware_passes_long_halts_every_sample_judged(
         assert stretches["first_wrong"] is None, stretches
         assert stretches["samples_judged"] == stretches["samples_after_first_halt"], stretches
         assert stretches["restarts_judged"] >= stretches["restarts"] - 1, stretches
-
-
-def _x_off(right: list[str], wrong: list[str]) -> list[float]:
-    """Bus times (s) of the wrong run's frames that differ from the right run's: each an
-    ODOM_POSE_X whose X is exactly ``WRONG_LSB`` more, every other signal the same."""
-    db = load_can_dbc(DBC_PATH)
-    assert len(right) == len(wrong)
-    times = []
-    for a, b in zip(right, wrong, strict=True):
-        if a == b:
-            continue
-        (t_a, id_a, data_a), (t_b, id_b, data_b) = _fields(a), _fields(b)
-        assert (t_a, id_a) == (t_b, id_b), (a, b)
-        assert db.get_message_by_frame_id(id_a).name == "ODOM_POSE_X", (a, b)
-        sig_a, sig_b = (numbers(db, id_a, d, scaling=False) for d in (data_a, data_b))
-        assert sig_b["X"] - sig_a["X"] == WRONG_LSB, (sig_a, sig_b)
-        assert {k: v for k, v in sig_a.items() if k not in ("X", "CHECKSUM")} == \
-            {k: v for k, v in sig_b.items() if k not in ("X", "CHECKSUM")}
-        times.append(t_a)
-    return times
-
-
-def _fields(line: str) -> tuple[float, int, bytes]:
-    t_s = float(line[1:line.index(")")])
-    can_id, data = line.split()[-1].split("#")
-    return t_s, int(can_id, 16), bytes.fromhex(data)

@@ -137,23 +137,29 @@ def test_a_firmware_wrong_after_the_first_halt_fails(
 def _x_off_from(right: list[str], wrong: list[str]) -> float:
     """Bus time (s) from which the wrong run's X is exactly ``WRONG_LSB`` more than the right
     run's, every other signal of every frame the same (cantools decoding)."""
+    times = x_off_times(right, wrong)
+    assert times
+    return times[0]
+
+
+def x_off_times(right: list[str], wrong: list[str], lsb: int = WRONG_LSB) -> list[float]:
+    """Bus times (s) of the wrong run's frames that differ from the right run's: each an
+    ODOM_POSE_X whose X is exactly ``lsb`` more, every other signal the same (cantools)."""
     db = load_can_dbc(DBC_PATH)
     assert len(right) == len(wrong)
-    first: float | None = None
+    times = []
     for a, b in zip(right, wrong, strict=True):
         if a == b:
             continue
-        t_a, id_a, data_a = _fields(a)
-        t_b, id_b, data_b = _fields(b)
+        (t_a, id_a, data_a), (t_b, id_b, data_b) = _fields(a), _fields(b)
         assert (t_a, id_a) == (t_b, id_b), (a, b)
         assert db.get_message_by_frame_id(id_a).name == "ODOM_POSE_X", (a, b)
         sig_a, sig_b = (numbers(db, id_a, d, scaling=False) for d in (data_a, data_b))
-        assert sig_b["X"] - sig_a["X"] == WRONG_LSB, (sig_a, sig_b)
+        assert sig_b["X"] - sig_a["X"] == lsb, (sig_a, sig_b)
         assert {k: v for k, v in sig_a.items() if k not in ("X", "CHECKSUM")} == \
             {k: v for k, v in sig_b.items() if k not in ("X", "CHECKSUM")}
-        first = t_a if first is None else first
-    assert first is not None
-    return first
+        times.append(t_a)
+    return times
 
 
 def _fields(line: str) -> tuple[float, int, bytes]:
