@@ -298,6 +298,23 @@ def test_monitor_mqtt_unreachable_broker(capsys: pytest.CaptureFixture[str]) -> 
     assert_usage_error(capsys, code, "cannot reach the MQTT broker", url)
 
 
+@pytest.mark.parametrize("json_out", [True, False])
+def test_monitor_without_a_duration_gives_up_on_a_broker_it_never_reached(
+    capsys: pytest.CaptureFixture[str], json_out: bool
+) -> None:
+    """Before: it retried for ever, the screen saying "(reconnecting)", until stopped."""
+    from odocan.host.mqtt.broker import free_loopback_port
+
+    url = f"mqtt://127.0.0.1:{free_loopback_port()}"
+    code = main(["monitor", "--broker", url, *(["--json"] if json_out else [])])
+    if json_out:
+        assert_usage_error(capsys, code, "cannot reach the MQTT broker", url, "for 5 s")
+        return
+    err = capsys.readouterr().err  # the screen drew the empty table meanwhile
+    assert (code, err.count("\n"), err.startswith("error: cannot reach the MQTT broker")) == (
+        2, 1, True), err
+
+
 def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
     """Two real-time robots bridged to the embedded amqtt broker; the monitor's fleet table."""
     from odocan.host.mqtt.broker import EmbeddedBroker

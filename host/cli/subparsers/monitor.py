@@ -76,6 +76,8 @@ DEFAULT_BROKER = "mqtt://127.0.0.1:1883"
 REFRESH_S = 0.25  # screen redraws
 RECONNECT_S = 1.0  # wait before reconnecting to the broker
 TLS_CHECK_S = 5.0  # the TLS handshake checked before watching an mqtts:// broker
+FIRST_CONNECT_S = 5.0  # a broker never reached in this long: an error (the bridge's
+# --connect-timeout default); once reached, the watch reconnects for as long as it runs
 
 
 class BrokerUnreachable(OdocanError):
@@ -356,6 +358,10 @@ class _FleetWatch:
                                          client_cert=self.url.cert is not None)
                 if not self.connected_once and reason.startswith(("not authorized", "TLS:")):
                     raise BrokerError(f"cannot connect to {self.url}: {reason}") from None
+                if not self.connected_once and \
+                        time.monotonic() - self.started >= FIRST_CONNECT_S:  # a wrong URL
+                    raise BrokerUnreachable(f"cannot reach the MQTT broker {self.url}: "
+                                            f"{reason} (for {FIRST_CONNECT_S:g} s)") from None
             await asyncio.sleep(RECONNECT_S)
 
     def snapshot(self) -> dict[str, Any]:
