@@ -50,6 +50,7 @@ from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.host.judge.livepose import Sample
 from odocan.host.judge.reference import ReferenceOdometry
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.haltcarry import carry_offsets
 from odocan.host.mqtt.haltcross import ENC, Crossing
 from odocan.host.mqtt.haltpath import (
     Frame,
@@ -117,6 +118,7 @@ class HaltStretches:
         self.restarts_judged = 0  # ... whose samples up to the new base were judged across it
         self.wrong_restarts = 0
         self.judged_across = 0  # samples judged across a halt (``haltcross``)
+        self.restarts_carried = 0  # ... whose paths' offsets the next stretch kept
 
     def on_samples(self, samples: list[Sample]) -> None:
         """The tracker's samples settled (``PoseTracker.take_samples``), in order."""
@@ -143,6 +145,7 @@ class HaltStretches:
             self._judge_crossing(sample)
             self._start(sample)
             if self._stretch is not None and self._crossing is not None:
+                self._carry(self._crossing, self._stretch, sample)
                 self._crossing = None  # the halt's re-start judged up to the new base
                 self.restarts_judged += 1
         elif self._step_to(self._stretch, sample.pose.seq):
@@ -198,6 +201,21 @@ class HaltStretches:
         if self.first_wrong is None:
             self.first_wrong = Wrong(sample.t_s, sample.pose.seq, *crossing.wrong,
                                      crossing.halt_s, across=True)
+
+    def _carry(self, crossing: Crossing, stretch: Stretch, sample: Sample) -> None:
+        """The new stretch keeps the offsets the crossing's surviving paths allow at its base
+        (``host.mqtt.haltcarry``); wrong when none of them is within the base's rounding."""
+        paths = crossing.survivors()
+        if paths is None:
+            return
+        emptied = carry_offsets(paths, stretch)
+        if emptied is None:
+            self.restarts_carried += 1
+            return
+        stretch.wrong = True
+        self.wrong_stretches += 1
+        if self.first_wrong is None:
+            self.first_wrong = Wrong(sample.t_s, sample.pose.seq, *emptied, stretch.base_t_s)
 
     def _start(self, sample: Sample) -> None:
         """``sample`` is the stretch's base when its frame came ``RESYNC_FRAMES`` releases after
@@ -255,7 +273,7 @@ class HaltStretches:
                 "samples_judged_across_halts": self.judged_across,
                 "stretches": self.stretches, "wrong_stretches": self.wrong_stretches,
                 "restarts": self.restarts_seen, "restarts_judged": self.restarts_judged,
-                "wrong_restarts": self.wrong_restarts,
+                "wrong_restarts": self.wrong_restarts, "restarts_carried": self.restarts_carried,
                 "first_wrong": None if first is None else first.text()}
 
     def tally(self) -> str:
