@@ -19,7 +19,10 @@ sample) is stepped with the frames sent during the halt in each way the halted M
 taken them (its FIFO's frames, then the first after the halt merged or re-primed on), and a
 sample no way explains is wrong. That needs the loop's gap before each halt (``halt_gaps``,
 ``sim.fleet.Fleet.halt_gaps``), one halt since the latest sample and the frames in the
-tracker's window; else the re-start is not judged (counted apart: ``restarts_judged``).
+tracker's window; else the re-start is not judged (counted apart: ``restarts_judged``). A
+judged re-start's new stretch keeps the offsets the surviving paths allow at its base
+(``host.mqtt.haltcarry``, counted: ``restarts_carried``), not only its base's rounding, so a
+shift under one LSB at every halt adds up halt after halt until it shows.
 
 The rule is the pose signals' rounding, not a tolerance: the firmware rounds X and Y to 0.1 mm
 and HEADING to one LSB, to nearest. So a correct firmware's samples of one stretch differ from
