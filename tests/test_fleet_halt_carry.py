@@ -3,15 +3,16 @@
 Found by the halt-edge pass: each stretch between the loop's halts (``host.mqtt.haltstretch``)
 re-started from the firmware's own pose with +-half an LSB, so a firmware that moved its X by
 less than one LSB at every halt drifted unseen, halt after halt (the crossing, ``haltcross``,
-sees only the few samples up to the next base). Here the firmware adds ``SHIFT_LSB`` of X to its
-Q40 pose (``firmware.odometry``) at the first step after each halt, as a wrong firmware would;
-the robot must FAIL, while the correct firmware (``test_fleet_halt_edges``,
+sees only the few samples up to the next base: X 0.15 LSB or HEADING 0.1 LSB at every halt
+PASSed). Here the firmware adds a tenth of an LSB or so of X (to its Q40 pose) or HEADING (to its
+bam64) at the first step after each halt (``firmware.odometry``), as a wrong firmware would; the
+robot must FAIL, while the correct firmware (``test_fleet_halt_edges``,
 ``test_fleet_overload_stretches``) still PASSes with every sample judged.
 
 The independent proof that the firmware is wrong: the lockstep run is deterministic, so its
-frames are the correct run's byte for byte but for the X signal (cantools decoding), which
-differs by the shift summed over the halts so far, rounded (never less, never more than one
-LSB beyond), and ends several LSB off.
+frames are the correct run's byte for byte but for the pose frames (cantools decoding; an X
+shift: the X signal alone), whose shifted signal differs by the shift summed over the halts so
+far, rounded either way, and ends a whole LSB or more off.
 """
 
 from __future__ import annotations
@@ -31,6 +32,9 @@ from tests.test_fleet_halt_edges import RecordingClock
 from tests.test_fleet_overload_stretches import DURATION_S, ROBOTS, SEED
 
 Q40_PER_LSB = (1 << 40) * 1e-4  # X's LSB (0.1 mm) in the firmware's Q40 metres
+BAM64_PER_LSB = float(1 << 48)  # HEADING's LSB (2^-16 turn) in the firmware's bam64
+SHIFTED = {"X": ("x_q40_m", Q40_PER_LSB), "HEADING": ("heading_bam64", BAM64_PER_LSB)}
+POSE_FRAMES = ("ODOM_POSE_X", "ODOM_POSE_Y")
 
 
 def _run(monkeypatch: pytest.MonkeyPatch) -> Any:
@@ -40,11 +44,13 @@ def _run(monkeypatch: pytest.MonkeyPatch) -> Any:
     return run
 
 
-def _shift_at_halts(monkeypatch: pytest.MonkeyPatch, shift_lsb: float) -> None:
-    """Every robot's firmware adds ``shift_lsb`` of X at its first step after each halt."""
+def _shift_at_halts(monkeypatch: pytest.MonkeyPatch, signal: str, shift_lsb: float) -> None:
+    """Every robot's firmware adds ``shift_lsb`` of ``signal`` (X or HEADING) to its pose at
+    its first step after each halt."""
     real = fw_odometry.Odometry.step_deltas
     shifted: dict[int, int] = {}  # id(odometry): halts shifted so far
-    shift_q40 = round(shift_lsb * Q40_PER_LSB)
+    name, units_per_lsb = SHIFTED[signal]
+    shift = round(shift_lsb * units_per_lsb)
 
     def step_deltas(self: fw_odometry.Odometry, d_left: int, d_right: int) -> None:
         real(self, d_left, d_right)
@@ -54,14 +60,15 @@ def _shift_at_halts(monkeypatch: pytest.MonkeyPatch, shift_lsb: float) -> None:
         halts = sum(1 for tick in clock.halt_ticks if clock.running - tick >= 1)
         if halts > shifted.get(id(self), 0):
             shifted[id(self)] = halts
-            self.x_q40_m += shift_q40
+            setattr(self, name, (getattr(self, name) + shift) & ((1 << 64) - 1)
+                    if name == "heading_bam64" else getattr(self, name) + shift)
 
     monkeypatch.setattr(fw_odometry.Odometry, "step_deltas", step_deltas)
 
 
-def _x_drift_lsb(right: list[str], wrong: list[str]) -> list[tuple[float, int]]:
-    """(bus time s, X wrong - X right in LSB) of every ODOM_POSE_X frame that differs, every
-    other frame and every other signal the same (cantools)."""
+def _drift_lsb(right: list[str], wrong: list[str], signal: str) -> list[tuple[float, int]]:
+    """(bus time s, ``signal`` wrong - right in LSB) of every ODOM_POSE_X frame that differs;
+    only pose frames differ, and (an X shift) only in X (cantools)."""
     db = load_can_dbc(DBC_PATH)
     assert len(right) == len(wrong)
     drift = []
@@ -70,11 +77,15 @@ def _x_drift_lsb(right: list[str], wrong: list[str]) -> list[tuple[float, int]]:
             continue
         (t_a, id_a, data_a), (t_b, id_b, data_b) = _fields(a), _fields(b)
         assert (t_a, id_a) == (t_b, id_b), (a, b)
-        assert db.get_message_by_frame_id(id_a).name == "ODOM_POSE_X", (a, b)
+        name = db.get_message_by_frame_id(id_a).name
+        assert name in (POSE_FRAMES[:1] if signal == "X" else POSE_FRAMES), (a, b)
         sig_a, sig_b = (numbers(db, id_a, d, scaling=False) for d in (data_a, data_b))
-        assert {k: v for k, v in sig_a.items() if k not in ("X", "CHECKSUM")} == \
-            {k: v for k, v in sig_b.items() if k not in ("X", "CHECKSUM")}
-        drift.append((t_a, int(sig_b["X"]) - int(sig_a["X"])))
+        if signal == "X":
+            assert {k: v for k, v in sig_a.items() if k not in ("X", "CHECKSUM")} == \
+                {k: v for k, v in sig_b.items() if k not in ("X", "CHECKSUM")}
+        if name == "ODOM_POSE_X":
+            lsb = (int(sig_b[signal]) - int(sig_a[signal]) + 0x8000) % 0x10000 - 0x8000
+            drift.append((t_a, lsb))  # HEADING wraps (u16)
     return drift
 
 
@@ -84,12 +95,12 @@ def _fields(line: str) -> tuple[float, int, bytes]:
     return t_s, int(can_id, 16), bytes.fromhex(data)
 
 
-@pytest.mark.parametrize("shift_lsb", [0.15, 0.1])
+@pytest.mark.parametrize(("signal", "shift_lsb"), [("X", 0.15), ("X", 0.1), ("HEADING", 0.1)])
 def test_a_firmware_shifting_under_one_lsb_at_every_halt_fails(
-    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, shift_lsb: float
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, signal: str, shift_lsb: float
 ) -> None:
     right = _run(monkeypatch)
-    _shift_at_halts(monkeypatch, shift_lsb)
+    _shift_at_halts(monkeypatch, signal, shift_lsb)
     wrong = _run(monkeypatch)
     clock = RecordingClock.latest_recording
     assert clock is not None
@@ -97,16 +108,16 @@ def test_a_firmware_shifting_under_one_lsb_at_every_halt_fails(
         from_s = wrong.halted[index]
         assert from_s is not None
         halts_s = [(tick - index % 2) * TICK_S for tick in clock.halt_ticks]  # robot 1 late
-        drift = _x_drift_lsb(right.lines[index], wrong.lines[index])
+        drift = _drift_lsb(right.lines[index], wrong.lines[index], signal)
         assert drift
         assert drift[0][0] > halts_s[0], (halts_s[0], drift[:3])
         for t_s, lsb in drift:  # the shift summed over the halts before, rounded either way
             shifted = shift_lsb * sum(1 for h_s in halts_s if h_s + TICK_S < t_s)
             assert math.floor(shifted) <= lsb <= math.ceil(shifted), (t_s, lsb, shifted)
-        assert drift[-1][1] >= 2, drift[-1]  # LSB off by the end
+        assert drift[-1][1] >= 1, drift[-1]  # whole LSB off by the end
         assert checked_before(tmp_path, wrong.lines[index], from_s).passed
         assert list(right.per_robot.values())[index]["verdict"] == "PASS"
         assert entry["verdict"] == "FAIL", entry["reason"]
         assert entry["reason"].startswith(
-            f"pose vs reference wrong after the loop halted the robot at {from_s:.2f} s: x "
+            f"pose vs reference wrong after the loop halted the robot at {from_s:.2f} s: "
         ), entry["reason"]
