@@ -99,25 +99,53 @@ class Crossing:
         if not self._paths and not self._fork(rows):
             return False
         self._samples.append(sample)
-        first = next((i for i, row in enumerate(rows) if row[2] >= self.halt_s + _HALF_TICK_S),
-                     None)
+        first = self._first(rows)
         paths = self._paths
         while self._alive < len(paths):
             path = paths[self._alive]
-            if not path.done:  # its stretch was its FIFO frame's, shared: its own from now
-                path.stretch = path.stretch.fork()
-            for earlier in self._samples[path.done:]:
-                path.done += 1
-                tick_s = earlier.t_s - TX_LATENCY_S + 1e-6  # the tick that made the sample
-                if not self._follow(path, rows, first, tick_s, earlier):
-                    return False
-                if path.died is not None:
-                    break
+            if not self._settle(path, rows, first):
+                return False
             if path.died is None:
                 return True
             self._alive += 1
         self.wrong = min((path.died for path in paths if path.died is not None),
                          key=lambda died: died[1])
+        return True
+
+    def survivors(self) -> list[Stretch] | None:
+        """The stretches of every path that explains every sample so far, each stepped to the
+        frame the latest sample names (all paths judged now, not only up to the first that
+        explains them: the offsets carried on, ``host.mqtt.haltcarry``, must hold whichever
+        the firmware took); None when the crossing is wrong, not started or lost."""
+        if self.wrong is not None or not self._paths:
+            return None
+        rows = frames_from(self._tracker, self._stretch.seq + 1)
+        first = self._first(rows)
+        alive = []
+        for path in self._paths[self._alive:]:
+            if not self._settle(path, rows, first):
+                return None
+            if path.died is None:
+                alive.append(path.stretch)
+        return alive
+
+    def _first(self, rows: list[Frame]) -> int | None:
+        """The index in ``rows`` of the first frame after the halted tick (None: not heard)."""
+        return next((i for i, row in enumerate(rows) if row[2] >= self.halt_s + _HALF_TICK_S),
+                    None)
+
+    def _settle(self, path: Path, rows: list[Frame], first: int | None) -> bool:
+        """Compare the samples ``path`` has not seen on it until one refutes it; False when
+        a frame it needs is missing (lost)."""
+        if not path.done:  # its stretch was its FIFO frame's, shared: its own from now
+            path.stretch = path.stretch.fork()
+        for earlier in self._samples[path.done:]:
+            path.done += 1
+            tick_s = earlier.t_s - TX_LATENCY_S + 1e-6  # the tick that made the sample
+            if not self._follow(path, rows, first, tick_s, earlier):
+                return False
+            if path.died is not None:
+                break
         return True
 
     def _fork(self, rows: list[Frame]) -> bool:

@@ -19,7 +19,10 @@ sample) is stepped with the frames sent during the halt in each way the halted M
 taken them (its FIFO's frames, then the first after the halt merged or re-primed on), and a
 sample no way explains is wrong. That needs the loop's gap before each halt (``halt_gaps``,
 ``sim.fleet.Fleet.halt_gaps``), one halt since the latest sample and the frames in the
-tracker's window; else the re-start is not judged (counted apart: ``restarts_judged``).
+tracker's window; else the re-start is not judged (counted apart: ``restarts_judged``). A
+judged re-start's new stretch keeps the offsets the surviving paths allow at its base
+(``host.mqtt.haltcarry``, counted: ``restarts_carried``), not only its base's rounding, so a
+shift under one LSB at every halt adds up halt after halt until it shows.
 
 The rule is the pose signals' rounding, not a tolerance: the firmware rounds X and Y to 0.1 mm
 and HEADING to one LSB, to nearest. So a correct firmware's samples of one stretch differ from
@@ -50,6 +53,7 @@ from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.host.judge.livepose import Sample
 from odocan.host.judge.reference import ReferenceOdometry
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.haltcarry import carry_offsets
 from odocan.host.mqtt.haltcross import ENC, Crossing
 from odocan.host.mqtt.haltpath import (
     Frame,
@@ -117,6 +121,7 @@ class HaltStretches:
         self.restarts_judged = 0  # ... whose samples up to the new base were judged across it
         self.wrong_restarts = 0
         self.judged_across = 0  # samples judged across a halt (``haltcross``)
+        self.restarts_carried = 0  # ... whose paths' offsets the next stretch kept
 
     def on_samples(self, samples: list[Sample]) -> None:
         """The tracker's samples settled (``PoseTracker.take_samples``), in order."""
@@ -143,6 +148,7 @@ class HaltStretches:
             self._judge_crossing(sample)
             self._start(sample)
             if self._stretch is not None and self._crossing is not None:
+                self._carry(self._crossing, self._stretch, sample)
                 self._crossing = None  # the halt's re-start judged up to the new base
                 self.restarts_judged += 1
         elif self._step_to(self._stretch, sample.pose.seq):
@@ -198,6 +204,21 @@ class HaltStretches:
         if self.first_wrong is None:
             self.first_wrong = Wrong(sample.t_s, sample.pose.seq, *crossing.wrong,
                                      crossing.halt_s, across=True)
+
+    def _carry(self, crossing: Crossing, stretch: Stretch, sample: Sample) -> None:
+        """The new stretch keeps the offsets the crossing's surviving paths allow at its base
+        (``host.mqtt.haltcarry``); wrong when none of them is within the base's rounding."""
+        paths = crossing.survivors()
+        if paths is None:
+            return
+        emptied = carry_offsets(paths, stretch)
+        if emptied is None:
+            self.restarts_carried += 1
+            return
+        stretch.wrong = True
+        self.wrong_stretches += 1
+        if self.first_wrong is None:
+            self.first_wrong = Wrong(sample.t_s, sample.pose.seq, *emptied, stretch.base_t_s)
 
     def _start(self, sample: Sample) -> None:
         """``sample`` is the stretch's base when its frame came ``RESYNC_FRAMES`` releases after
@@ -255,7 +276,7 @@ class HaltStretches:
                 "samples_judged_across_halts": self.judged_across,
                 "stretches": self.stretches, "wrong_stretches": self.wrong_stretches,
                 "restarts": self.restarts_seen, "restarts_judged": self.restarts_judged,
-                "wrong_restarts": self.wrong_restarts,
+                "wrong_restarts": self.wrong_restarts, "restarts_carried": self.restarts_carried,
                 "first_wrong": None if first is None else first.text()}
 
     def tally(self) -> str:
