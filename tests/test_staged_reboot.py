@@ -444,3 +444,67 @@ def test_a_field_staged_in_the_new_firmwares_first_tick_is_applied(tmp_path: Pat
     for tracker in (monitor.tracker, bridge.tracker):
         assert tracker.vs_reference.max_dpos_m < 1e-3
     assert monitor.health(messages[-1].timestamp)["state"] == "OK"
+
+
+@cache
+def _rebooted(reboot_at: int, apply_at: int | None, off_q40: int) -> tuple[can.Message, ...]:
+    """5 s of pmir on the circle, the MCU reset at ``reboot_at``, a bare APPLY (nothing staged
+    in any life) at ``apply_at`` (None: no APPLY); the firmware's set_pose adds ``off_q40`` to
+    its X (0: the correct firmware)."""
+    with pytest.MonkeyPatch.context() as patch, circle_rig() as rig:
+        apply = Odometry.set_pose
+        patch.setattr(Odometry, "set_pose", lambda self, x, y, h: apply(self, x + off_q40, y, h))
+
+        def host(k: int, tool: can.BusABC) -> None:
+            if k == reboot_at:
+                rig.board.reboot()
+            if k == apply_at:
+                data = hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+                tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
+                                      is_extended_id=False, timestamp=k * TICK_S))
+
+        return _heard(rig, host)
+
+
+def _x_by_frame(messages: tuple[can.Message, ...]) -> dict[tuple[float, int], int]:
+    """ODOM_POSE_X's raw X (LSB, cantools) per (bus time, ENC_COUNTER)."""
+    return {(m.timestamp, int(_decoded(m)["ENC_COUNTER"])): round(float(_decoded(m)["X"]) * 1e4)
+            for m in messages if m.arbitration_id == fr.ODOM_POSE_X_ID}
+
+
+@pytest.mark.parametrize(("reboot_at", "after_ticks"), [(237, 1), (244, 2), (246, 1)])
+def test_a_bare_apply_just_after_a_reboot_that_moves_the_pose_a_little_fails_everywhere(
+    reboot_at: int, after_ticks: int, tmp_path: Path
+) -> None:
+    """A wrong firmware whose bare APPLY, 1 or 2 ticks after a reset (fewer than two poses sent
+    by the new firmware before it), moves its X by -2^-13 m (-1.22 LSB): analyze, whole and
+    streamed, FAILs it (before: PASS, the check from the power-up pose allowed two roundings
+    and was not narrowed); the live judges latch POSE WRONG. The correct firmware's log PASSes,
+    its APPLY judged. cantools: the correct firmware's poses are those of the same drive
+    without the APPLY (it moved nothing); the wrong one's are identical before the APPLY and
+    after it off by -1.22 LSB on average (each by -1 or -2 LSB)."""
+    off_q40, apply_at = -(1 << 27), reboot_at + after_ticks
+    plain = _x_by_frame(_rebooted(reboot_at, None, 0))
+    right = _rebooted(reboot_at, apply_at, 0)
+    wrong = _rebooted(reboot_at, apply_at, off_q40)
+    assert _x_by_frame(right) == plain
+    at = _apply_ack(wrong, fr.ODOM_SET_POSE_ID)
+    since_s = reboot_at * TICK_S
+    before = _x_by_frame(wrong[:at])
+    assert sum(1 for key in before if key[0] >= since_s) <= 2  # before two new poses
+    assert all(x == plain[key] for key, x in before.items())  # nothing moved before it
+    offsets = [x - plain[key] for key, x in _x_by_frame(wrong[at:]).items()]
+    assert set(offsets) == {-1, -2}  # each round(x + off) - round(x): off within (-2, -1) LSB
+    assert abs(sum(offsets) / len(offsets) + 1.22) < 0.1
+    for messages, ok in ((right, True), (wrong, False)):
+        path = _written(messages, tmp_path / f"{ok}.log")
+        whole = analyze(read_log(path), PMIR, "exact")
+        assert len(whole.report["reboots"]) == 1
+        assert whole.passed is ok
+        [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+        assert event["kept"]["passed"] is ok
+        assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+            whole.report)
+        monitor, bridge = _live(messages)
+        for tracker in (monitor.tracker, bridge.tracker):
+            assert (tracker.wrongs.count > 0) is not ok

@@ -26,8 +26,11 @@ a check the two pass is narrowed by up to ``NARROW_SAMPLES`` samples on each sid
 each, moved rigidly to C by the reference's motion, allows the pose at C within its rounding
 (half an LSB each way, its heading's half LSB over the motion); the intersections of each side
 must agree in every field kept (a staged one: inside the after side's). Samples at varied
-sub-LSB phases narrow each side well below one LSB, as the start fits do. (Not from the
-power-up pose: that side is exact, the after sample's one rounding is left in the bound.)
+sub-LSB phases narrow each side well below one LSB, as the start fits do. From the power-up
+pose that side is exact: the after sample's one rounding is the bound (half an LSB each way,
+nothing over the path), and up to ``NARROW_SAMPLES`` samples after the APPLY narrow it
+(``_from_power_up``: the exact pose at C must be within each one's interval): a 1.2-LSB jump
+1 or 2 ticks after a reboot PASSed before (two roundings allowed, not narrowed).
 
 Not judged (``None``): two samples around C within ``WINDOW_FRAMES`` of it in the firmware's
 life are not there, or the steps between them are not the plain ones (a gap of the encoder
@@ -129,10 +132,13 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
     if steps is None:
         return None
     judged = _judged(start, _sample(poses, after), steps, c - start[0], cut.staged,
-                     Geometry.of(robot), integrator)
+                     Geometry.of(robot), integrator, exact_start=before is None)
     if judged["passed"] and before is not None:  # narrowed by more samples on each side
         judged["passed"] = _overlap(poses, before, after, c, enc, cut.staged, robot, integrator,
                                     max_wheel_speed_mm_s)
+    elif judged["passed"]:  # from the power-up pose: narrowed by more samples after the APPLY
+        judged["passed"] = _from_power_up(poses, after, c, enc, cut.staged, robot, integrator,
+                                          max_wheel_speed_mm_s)
     return {"fields_kept": [name for name in FIELDS if name not in cut.staged], **judged}
 
 
@@ -150,16 +156,52 @@ def _overlap(poses: Poses, before: int, after: int, c: int, enc: Encoders,
                          max_wheel_speed_mm_s)
     if steps is None:
         return True
-    rel = integrate(*steps, Geometry.of(robot), integrator)
-    rel_x, rel_y, rel_h = (np.concatenate(([0.0], v)) for v in (rel.x_m, rel.y_m,
-                                                                rel.heading_rad))
+    rel = _relative(steps, robot, integrator)
     base = int(poses.enc[first])
-    sides = [_at_cut(poses, range(first, before + 1), c - base, base, (rel_x, rel_y, rel_h)),
-             _at_cut(poses, range(after, last + 1), c - base, base, (rel_x, rel_y, rel_h))]
+    sides = [_at_cut(poses, range(first, before + 1), c - base, base, rel),
+             _at_cut(poses, range(after, last + 1), c - base, base, rel)]
     if any(side is None for side in sides):
         return True  # a side's samples disagree among themselves: not judged here
     lows, highs = sides[0], sides[1]
     assert lows is not None and highs is not None
+    return _agree(lows, highs, staged)
+
+
+def _from_power_up(poses: Poses, after: int, c: int, enc: Encoders, staged: dict[str, float],
+                   robot: RobotProfile, integrator: str,
+                   max_wheel_speed_mm_s: SpeedBound) -> bool:
+    """``_overlap`` for an APPLY judged from the power-up pose (before the new firmware's
+    second pose): the pose at the APPLY's frame ``c`` is then known exactly (the reference
+    from (0, 0, 0) at the life's first encoder frame), a point that the intervals of up to
+    ``NARROW_SAMPLES`` samples after it must hold in every field kept (a wrong jump of 1.2 LSB
+    passed the one sample's rounding). True when those samples do not step plainly or
+    disagree among themselves."""
+    last = min(len(poses.enc) - 1, after + NARROW_SAMPLES - 1)
+    steps = _plain_steps(enc, 0, int(poses.enc[last]), robot, max_wheel_speed_mm_s)
+    if steps is None:
+        return True
+    rel = _relative(steps, robot, integrator)
+    highs = _at_cut(poses, range(after, last + 1), c, 0, rel)
+    if highs is None:
+        return True
+    return _agree([(float(v[c]), float(v[c])) for v in rel], highs, staged)
+
+
+def _relative(steps: tuple[np.ndarray, np.ndarray], robot: RobotProfile,
+              integrator: str) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The reference's pose (x m, y m, heading rad) at each frame of ``steps`` (element k:
+    after k steps) from (0, 0, 0) at their first."""
+    rel = integrate(*steps, Geometry.of(robot), integrator)
+    rel_x, rel_y, rel_h = (np.concatenate(([0.0], v)) for v in (rel.x_m, rel.y_m,
+                                                                rel.heading_rad))
+    return rel_x, rel_y, rel_h
+
+
+def _agree(lows: list[tuple[float, float]], highs: list[tuple[float, float]],
+           staged: dict[str, float]) -> bool:
+    """Whether the pose at the APPLY the samples before it allow (``lows``: an interval per
+    field) meets the one those after it allow (``highs``) in every field kept, and each staged
+    field is within ``highs``."""
     for k, name in enumerate(FIELDS):
         lo_b, hi_b = lows[k]
         lo_a, hi_a = highs[k]
@@ -265,20 +307,24 @@ def _moved(pose: tuple[float, float, float], d_left: np.ndarray, d_right: np.nda
 
 def _judged(before: tuple[int, tuple[float, float, float]],
             after: tuple[int, tuple[float, float, float]], steps: tuple[np.ndarray, np.ndarray],
-            to_cut: int, staged: dict[str, float], geometry: Geometry,
-            integrator: str) -> dict[str, Any]:
+            to_cut: int, staged: dict[str, float], geometry: Geometry, integrator: str, *,
+            exact_start: bool = False) -> dict[str, Any]:
     """The pose ``before`` (encoder frame, pose) moved by the ``to_cut`` steps to the APPLY's
     frame, the staged fields set there, moved by the rest to the sample ``after``: how far that
-    sample is."""
+    sample is. ``exact_start``: ``before`` is the power-up pose, no sample: only ``after``'s
+    rounding is left (half an LSB, of position and of heading)."""
     d_left, d_right = steps
     x, y, h, head_m = _moved(before[1], d_left[:to_cut], d_right[:to_cut], geometry, integrator)
     start = (staged.get("X", x), staged.get("Y", y), staged.get("HEADING", h))
     x, y, h, tail_m = _moved(start, d_left[to_cut:], d_right[to_cut:], geometry, integrator)
     dx_m, dy_m = after[1][0] - x, after[1][1] - y
     dh_rad = (after[1][2] - h + math.pi) % _TURN - math.pi
-    bound_m = POSITION_LSB_M + HEADING_LSB_RAD * (head_m + tail_m) + _FLOAT_M
-    passed = (max(abs(dx_m), abs(dy_m)) <= bound_m
-              and abs(dh_rad) <= HEADING_LSB_RAD + _FLOAT_RAD)
+    if exact_start:  # the power-up pose: the after sample's rounding alone
+        bound_m, bound_rad = 0.5 * POSITION_LSB_M + _FLOAT_M, 0.5 * HEADING_LSB_RAD + _FLOAT_RAD
+    else:  # two samples' roundings, and the start heading's over the path
+        bound_m = POSITION_LSB_M + HEADING_LSB_RAD * (head_m + tail_m) + _FLOAT_M
+        bound_rad = HEADING_LSB_RAD + _FLOAT_RAD
+    passed = max(abs(dx_m), abs(dy_m)) <= bound_m and abs(dh_rad) <= bound_rad
     return {"encoder_frames": after[0] - before[0],
             "position_jump_m": math.hypot(dx_m, dy_m), "heading_jump_rad": abs(dh_rad),
             "bound_m": bound_m, "passed": passed}
