@@ -508,3 +508,34 @@ def test_a_bare_apply_just_after_a_reboot_that_moves_the_pose_a_little_fails_eve
         monitor, bridge = _live(messages)
         for tracker in (monitor.tracker, bridge.tracker):
             assert (tracker.wrongs.count > 0) is not ok
+
+
+@pytest.mark.parametrize(("case", "why"), [
+    ("hole", "the encoder frames between the poses around the APPLY are not plain steps"),
+    ("end", "fewer than two on-board poses after the APPLY")])
+def test_a_bare_apply_left_unjudged_says_why(case: str, why: str, tmp_path: Path) -> None:
+    """The correct firmware's bare APPLY after a reboot, in a log whose recorder lost the
+    WHEEL_ENCODERS frame just before the APPLY's ACK (cantools: one COUNTER skipped there), or
+    sent 2 ticks before the log ends (one pose after it): the check of what it kept cannot be
+    made, and the set-pose event says why (``kept_not_judged``, and its detail), whole and
+    streamed; the life is judged by its fit (PASS). Before, ``kept`` was null and nothing
+    said why."""
+    messages = drive("set_pose", False, 498 if case == "end" else APPLY_AT)
+    at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
+    if case == "hole":
+        lost = max(k for k in range(at) if messages[k].arbitration_id == fr.WHEEL_ENCODERS_ID)
+        messages = messages[:lost] + messages[lost + 1:]
+        counters = [int(_decoded(m)["COUNTER"]) for m in messages
+                    if m.arbitration_id == fr.WHEEL_ENCODERS_ID]
+        assert np.count_nonzero(np.diff(counters) % 16 != 1) == 1
+    else:
+        assert sum(m.arbitration_id == fr.ODOM_POSE_X_ID for m in messages[at:]) == 1
+    path = _written(messages, tmp_path / f"{case}.log")
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert whole.passed
+    [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+    assert event["kept"] is None
+    assert event["kept_not_judged"].startswith(why)
+    assert f"not checked: {why}" in event["detail"]
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)

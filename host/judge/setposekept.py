@@ -32,13 +32,14 @@ nothing over the path), and up to ``NARROW_SAMPLES`` samples after the APPLY nar
 (``_from_power_up``: the exact pose at C must be within each one's interval): a 1.2-LSB jump
 1 or 2 ticks after a reboot PASSed before (two roundings allowed, not narrowed).
 
-Not judged (``None``): two samples around C within ``WINDOW_FRAMES`` of it in the firmware's
-life are not there, or the steps between them are not the plain ones (a gap of the encoder
-sequence, a refused or re-primed step, a twin), or the firmware is not seen stepping plainly
-on each side (the sample before the last one before C, and the one after the first after C,
-must continue them by the plain steps between, nothing staged: after a stall the first poses
-name backlog frames the window cannot resolve, and merged steps leave the fine reference):
-the fitted start alone judges that life then.
+Not judged (``kept_check`` says why, in words: the event's ``kept_not_judged``): two samples
+around C within ``WINDOW_FRAMES`` of it in the firmware's life are not there, or the steps
+between them are not the plain ones (a gap of the encoder sequence, a refused or re-primed
+step, a twin), or the firmware is not seen stepping plainly on each side (the sample before the
+last one before C, and the one after the first after C, must continue them by the plain steps
+between, nothing staged: after a stall the first poses name backlog frames the window cannot
+resolve, and merged steps leave the fine reference): the fitted start alone judges that life
+then.
 The window is read alike from a whole log and from a streamed one (its frames only), so
 ``analyze`` and ``analyze_file`` give the same check bit for bit."""
 
@@ -79,6 +80,7 @@ NARROW_SAMPLES = 16  # samples on each side whose rounding intervals narrow the 
 _FLOAT_M = 1e-9  # the firmware's Q40 steps against float64 over a few frames, and more
 _FLOAT_RAD = 1e-12
 _TURN = 2.0 * math.pi
+Kept = dict[str, Any] | str | None  # the check, why it was not made, or None: all staged
 
 
 def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
@@ -89,7 +91,7 @@ def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
 
 def check_cut(read: Callable[[int, int], FrameArrays], head: tuple[int, bool], tail_stop: int,
               cut: SetPoseCut, robot: RobotProfile, integrator: str, db: DatabaseSpec,
-              max_wheel_speed_mm_s: SpeedBound) -> dict[str, Any] | None:
+              max_wheel_speed_mm_s: SpeedBound) -> Kept:
     """``kept_check`` of the set-pose ``cut`` over its ``window``: ``read(lo, hi)`` gives the
     log's frames [lo, hi) (whole or streamed alike); ``head``: the first frame of the life
     before the cut and whether it starts at a reboot; ``tail_stop``: the end of the life the
@@ -101,11 +103,12 @@ def check_cut(read: Callable[[int, int], FrameArrays], head: tuple[int, bool], t
 
 def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfile,
                integrator: str, db: DatabaseSpec, max_wheel_speed_mm_s: SpeedBound, *,
-               boot: bool = False) -> dict[str, Any] | None:
+               boot: bool = False) -> Kept:
     """The check of the module docstring for ``cut`` (a set-pose whose fields were not all
     staged) over ``frames``, the log's frames from position ``lo`` (``window``); None when
-    every field was staged or the check cannot be made. ``boot``: ``frames`` start where the
-    firmware started (a reboot's life, read from its first frame)."""
+    every field was staged, why not (words) when the check cannot be made. ``boot``:
+    ``frames`` start where the firmware started (a reboot's life, read from its first
+    frame)."""
     if cut.start_pose() is not None:
         return None
     decoder = BulkDecoder(db)
@@ -113,24 +116,39 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
     enc = encoder_frames(frames, accepted, decoder)
     at = np.flatnonzero(enc.index == cut.position - lo)
     if len(at) == 0:
-        return None
+        return "the encoder frame the APPLY took effect after is not among the frames read"
     try:
         poses = onboard_samples(frames, accepted, decoder, enc)[0]
     except AnalysisError:
-        return None
+        return "no on-board poses around the APPLY"
     c = int(at[0])
     before, after = _around(poses, c)
     start = _sample(poses, before) if before is not None else None
     if before is None and boot and saw_only_the_log(frames, accepted, decoder):
         start = (0, (0.0, 0.0, 0.0))  # applied before two poses: from its power-up pose
-    if start is None or after is None:
-        return None
+    if start is None:
+        return ("fewer than two on-board poses before the APPLY in this firmware life, and its "
+                "power-up pose not known")
+    if after is None:
+        return "fewer than two on-board poses after the APPLY"
+    return _checked(poses, enc, c, (before, after), start, cut, robot, integrator,
+                    max_wheel_speed_mm_s)
+
+
+def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int],
+             start: tuple[int, tuple[float, float, float]], cut: SetPoseCut,
+             robot: RobotProfile, integrator: str, max_wheel_speed_mm_s: SpeedBound) -> Kept:
+    """``kept_check`` from ``start`` (the last sample before the APPLY's frame ``c``, or the
+    power-up pose when ``around``'s first is None) to the first sample after it."""
+    before, after = around
     sides = ([] if before is None else [before - 1]) + [after]
     if not all(_settled(poses, i, enc, robot, integrator, max_wheel_speed_mm_s) for i in sides):
-        return None  # the firmware not in its plain steps around the APPLY: not judged here
+        return ("the firmware not seen stepping plainly around the APPLY (after a stall: poses "
+                "naming backlog frames, merged steps)")
     steps = _plain_steps(enc, start[0], int(poses.enc[after]), robot, max_wheel_speed_mm_s)
     if steps is None:
-        return None
+        return ("the encoder frames between the poses around the APPLY are not plain steps (a "
+                "gap in their sequence, a refused, re-primed or twinned step)")
     judged = _judged(start, _sample(poses, after), steps, c - start[0], cut.staged,
                      Geometry.of(robot), integrator, exact_start=before is None)
     if judged["passed"] and before is not None:  # narrowed by more samples on each side
@@ -330,14 +348,20 @@ def _judged(before: tuple[int, tuple[float, float, float]],
             "bound_m": bound_m, "passed": passed}
 
 
-def mark_kept(report: dict[str, Any], checks: dict[int, dict[str, Any] | None]) -> None:
+def mark_kept(report: dict[str, Any], checks: dict[int, Kept]) -> None:
     """Put each check (by the index of the life the set-pose opened: its event's ``life``)
-    into its ``set_pose`` event (``kept``); a failed one FAILs the report, named there."""
+    into its ``set_pose`` event (``kept``); a failed one FAILs the report, named there. One
+    not made: ``kept`` null, why in ``kept_not_judged`` and the event's detail."""
     for event in report["events"]:
         if event["kind"] != "set_pose" or event.get("life") not in checks or all(
                 event[name] is not None for name in ("x_m", "y_m", "heading_rad")):
             continue  # every field set: the life starts exactly there, nothing kept
-        check = event["kept"] = checks[event["life"]]
+        check = checks[event["life"]]
+        if isinstance(check, str):
+            event["kept"], event["kept_not_judged"] = None, check
+            event["detail"] += f"; what the APPLY kept not checked: {check} (judged by its fit)"
+            continue
+        event["kept"] = check
         if check is not None and not check["passed"]:
             report["passed"] = False
             event["detail"] += (
