@@ -447,13 +447,15 @@ def test_a_field_staged_in_the_new_firmwares_first_tick_is_applied(tmp_path: Pat
 
 
 @cache
-def _rebooted(reboot_at: int, apply_at: int | None, off_q40: int) -> tuple[can.Message, ...]:
+def _rebooted(reboot_at: int, apply_at: int | None, off_q40: int,
+              stall: tuple[int, int] = (0, 0)) -> tuple[can.Message, ...]:
     """5 s of pmir on the circle, the MCU reset at ``reboot_at``, a bare APPLY (nothing staged
     in any life) at ``apply_at`` (None: no APPLY); the firmware's set_pose adds ``off_q40`` to
-    its X (0: the correct firmware)."""
+    its X (0: the correct firmware); the MCU runs no tick in the ticks [``stall``)."""
     with pytest.MonkeyPatch.context() as patch, circle_rig() as rig:
         apply = Odometry.set_pose
         patch.setattr(Odometry, "set_pose", lambda self, x, y, h: apply(self, x + off_q40, y, h))
+        rig.halted = lambda k: stall[0] <= k < stall[1]
 
         def host(k: int, tool: can.BusABC) -> None:
             if k == reboot_at:
@@ -537,5 +539,51 @@ def test_a_bare_apply_left_unjudged_says_why(case: str, why: str, tmp_path: Path
     assert event["kept"] is None
     assert event["kept_not_judged"].startswith(why)
     assert f"not checked: {why}" in event["detail"]
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+
+
+STALL = (330, 345)  # ticks the MCU runs none (150 ms): it takes the frames it missed merged
+
+
+@pytest.mark.parametrize("apply_at", [346, 348, 353])
+def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
+    apply_at: int, tmp_path: Path
+) -> None:
+    """The MCU stalls 150 ms, then gets a bare APPLY 1, 3 or 8 ticks after (no reboot). The
+    correct firmware PASSes, whole and streamed: an APPLY whose poses around it straddle the
+    stall is not judged and says why (before: analyze FAILed it, 0.03-0.07 mm, the reference's
+    fine steps across the stall against the firmware's merged ones); 8 ticks after, its check
+    is made from the poses after the stall alone, and passes, and a wrong firmware moving X by
+    -1.22 LSB there FAILs. cantools: the firmware was silent 150 ms before the APPLY; the
+    wrong one's X after the APPLY is the no-APPLY drive's minus 1 or 2 LSB, before it the
+    same."""
+    right = _rebooted(0, apply_at, 0, STALL)
+    at = _apply_ack(right, fr.ODOM_SET_POSE_ID)
+    sent_s = [m.timestamp for m in right[:at] if m.arbitration_id == fr.ODOM_POSE_Y_ID]
+    assert max(np.diff(sent_s)) > 0.1  # the firmware silent 150 ms before the APPLY (bus times)
+    path = _written(right, tmp_path / "right.log")
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert whole.passed
+    [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+    if apply_at < 353:
+        assert event["kept"] is None
+        assert event["kept_not_judged"].startswith("the firmware silent (a stall)")
+    else:
+        assert event["kept"]["passed"]
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+    if apply_at < 353:
+        return
+    plain = _x_by_frame(_rebooted(0, None, 0, STALL))
+    wrong = _rebooted(0, apply_at, -(1 << 27), STALL)
+    at = _apply_ack(wrong, fr.ODOM_SET_POSE_ID)
+    assert all(x == plain[key] for key, x in _x_by_frame(wrong[:at]).items())
+    assert set(x - plain[key] for key, x in _x_by_frame(wrong[at:]).items()) == {-1, -2}
+    path = _written(wrong, tmp_path / "wrong.log")
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert not whole.passed
+    [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+    assert not event["kept"]["passed"]
     assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
         whole.report)

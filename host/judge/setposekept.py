@@ -39,7 +39,12 @@ step, a twin), or the firmware is not seen stepping plainly on each side (the sa
 last one before C, and the one after the first after C, must continue them by the plain steps
 between, nothing staged: after a stall the first poses name backlog frames the window cannot
 resolve, and merged steps leave the fine reference): the fitted start alone judges that life
-then.
+then. A stall (the firmware silent ``SILENCE_CYCLES`` encoder cycles on the bus: it takes the
+frames it missed merged, not in the reference's fine steps) between the sample before the last
+one before C and the one after the first after C leaves the APPLY unjudged too (before, a
+correct firmware's APPLY 1-3 ticks after a 150 ms stall FAILed, 0.03-0.07 mm); one further
+off only bounds the samples that narrow the check (``_voiced``: those after it, less the
+first), so an APPLY a few poses after a stall is judged from the poses after it.
 The window is read alike from a whole log and from a streamed one (its frames only), so
 ``analyze`` and ``analyze_file`` give the same check bit for bit."""
 
@@ -59,6 +64,7 @@ from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
+    SILENCE_CYCLES,
     WIRE_COUNTER_BITS,
     AnalysisError,
     Encoders,
@@ -118,11 +124,12 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
     if len(at) == 0:
         return "the encoder frame the APPLY took effect after is not among the frames read"
     try:
-        poses = onboard_samples(frames, accepted, decoder, enc)[0]
+        poses, _, sent_s = onboard_samples(frames, accepted, decoder, enc)
     except AnalysisError:
         return "no on-board poses around the APPLY"
     c = int(at[0])
     before, after = _around(poses, c)
+    voiced = _voiced(sent_s, enc.cycle_s, before, after)
     start = _sample(poses, before) if before is not None else None
     if before is None and boot and saw_only_the_log(frames, accepted, decoder):
         start = (0, (0.0, 0.0, 0.0))  # applied before two poses: from its power-up pose
@@ -131,15 +138,20 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
                 "power-up pose not known")
     if after is None:
         return "fewer than two on-board poses after the APPLY"
+    if voiced is None:
+        return ("the firmware silent (a stall) between the poses around the APPLY: its steps "
+                "over the frames it missed are not the reference's")
     return _checked(poses, enc, c, (before, after), start, cut, robot, integrator,
-                    max_wheel_speed_mm_s)
+                    max_wheel_speed_mm_s, voiced)
 
 
 def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int],
              start: tuple[int, tuple[float, float, float]], cut: SetPoseCut,
-             robot: RobotProfile, integrator: str, max_wheel_speed_mm_s: SpeedBound) -> Kept:
+             robot: RobotProfile, integrator: str, max_wheel_speed_mm_s: SpeedBound,
+             voiced: tuple[int, int]) -> Kept:
     """``kept_check`` from ``start`` (the last sample before the APPLY's frame ``c``, or the
-    power-up pose when ``around``'s first is None) to the first sample after it."""
+    power-up pose when ``around``'s first is None) to the first sample after it; narrowed by
+    the samples ``voiced`` (first, last) alone."""
     before, after = around
     sides = ([] if before is None else [before - 1]) + [after]
     if not all(_settled(poses, i, enc, robot, integrator, max_wheel_speed_mm_s) for i in sides):
@@ -152,24 +164,26 @@ def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int]
     judged = _judged(start, _sample(poses, after), steps, c - start[0], cut.staged,
                      Geometry.of(robot), integrator, exact_start=before is None)
     if judged["passed"] and before is not None:  # narrowed by more samples on each side
-        judged["passed"] = _overlap(poses, before, after, c, enc, cut.staged, robot, integrator,
-                                    max_wheel_speed_mm_s)
+        judged["passed"] = _overlap(poses, (before, after), c, enc, cut.staged, robot,
+                                    integrator, max_wheel_speed_mm_s, voiced)
     elif judged["passed"]:  # from the power-up pose: narrowed by more samples after the APPLY
         judged["passed"] = _from_power_up(poses, after, c, enc, cut.staged, robot, integrator,
-                                          max_wheel_speed_mm_s)
+                                          max_wheel_speed_mm_s, voiced[1])
     return {"fields_kept": [name for name in FIELDS if name not in cut.staged], **judged}
 
 
-def _overlap(poses: Poses, before: int, after: int, c: int, enc: Encoders,
+def _overlap(poses: Poses, around: tuple[int, int], c: int, enc: Encoders,
              staged: dict[str, float], robot: RobotProfile, integrator: str,
-             max_wheel_speed_mm_s: SpeedBound) -> bool:
+             max_wheel_speed_mm_s: SpeedBound, voiced: tuple[int, int]) -> bool:
     """Whether the pose at the APPLY's frame ``c`` that up to ``NARROW_SAMPLES`` samples on
     each side allow (each sample moved to ``c`` by the reference's steps: an interval of its
     rounding, half an LSB each way, widened by its heading's rounding over the motion)
     agrees between the sides for every field not staged (the staged ones: within the after
-    side's). True (nothing more to say) when those samples do not step plainly."""
-    first = max(0, before - NARROW_SAMPLES + 1)
-    last = min(len(poses.enc) - 1, after + NARROW_SAMPLES - 1)
+    side's), of the samples ``voiced`` (first, last) alone. True (nothing more to say) when
+    those samples do not step plainly."""
+    before, after = around
+    first = max(voiced[0], before - NARROW_SAMPLES + 1)
+    last = min(voiced[1], after + NARROW_SAMPLES - 1)
     steps = _plain_steps(enc, int(poses.enc[first]), int(poses.enc[last]), robot,
                          max_wheel_speed_mm_s)
     if steps is None:
@@ -186,15 +200,15 @@ def _overlap(poses: Poses, before: int, after: int, c: int, enc: Encoders,
 
 
 def _from_power_up(poses: Poses, after: int, c: int, enc: Encoders, staged: dict[str, float],
-                   robot: RobotProfile, integrator: str,
-                   max_wheel_speed_mm_s: SpeedBound) -> bool:
+                   robot: RobotProfile, integrator: str, max_wheel_speed_mm_s: SpeedBound,
+                   voiced_last: int) -> bool:
     """``_overlap`` for an APPLY judged from the power-up pose (before the new firmware's
     second pose): the pose at the APPLY's frame ``c`` is then known exactly (the reference
     from (0, 0, 0) at the life's first encoder frame), a point that the intervals of up to
     ``NARROW_SAMPLES`` samples after it must hold in every field kept (a wrong jump of 1.2 LSB
     passed the one sample's rounding). True when those samples do not step plainly or
-    disagree among themselves."""
-    last = min(len(poses.enc) - 1, after + NARROW_SAMPLES - 1)
+    disagree among themselves. Up to ``voiced_last`` (before a later stall)."""
+    last = min(voiced_last, after + NARROW_SAMPLES - 1)
     steps = _plain_steps(enc, 0, int(poses.enc[last]), robot, max_wheel_speed_mm_s)
     if steps is None:
         return True
@@ -281,6 +295,26 @@ def _settled(poses: Poses, i: int, enc: Encoders, robot: RobotProfile, integrato
     return steps is not None and bool(_judged(
         _sample(poses, i), _sample(poses, i + 1), steps, 0, {}, Geometry.of(robot),
         integrator)["passed"])
+
+
+def _voiced(sent_s: FloatArray, cycle_s: float | None, before: int | None,
+            after: int | None) -> tuple[int, int] | None:
+    """The samples (first, last) around the APPLY sent without a silence of the firmware
+    between them (``SILENCE_CYCLES`` encoder cycles, ``cycle_s``, or more between two samples
+    on the bus, analyze's own rule: a stall, after which it took the frames it missed in merged
+    steps), less the first after a silence (it may name a backlog frame); None when there is
+    one between the sample before ``before`` and the one after ``after`` (or from the life's
+    first sample, when ``before`` is None). All of them when the DBC gives no cycle time."""
+    last = len(sent_s) - 1
+    if cycle_s is None or after is None:
+        return 0, last
+    gaps = np.flatnonzero(np.diff(sent_s) >= SILENCE_CYCLES * cycle_s)
+    low = 0 if before is None else before - 1
+    if np.any((gaps >= low) & (gaps <= after)):
+        return None
+    earlier, later = gaps[gaps < low], gaps[gaps > after]
+    return (int(earlier[-1]) + 2 if len(earlier) else 0,
+            int(later[0]) if len(later) else last)
 
 
 def _around(poses: Poses, c: int) -> tuple[int | None, int | None]:
