@@ -444,3 +444,146 @@ def test_a_field_staged_in_the_new_firmwares_first_tick_is_applied(tmp_path: Pat
     for tracker in (monitor.tracker, bridge.tracker):
         assert tracker.vs_reference.max_dpos_m < 1e-3
     assert monitor.health(messages[-1].timestamp)["state"] == "OK"
+
+
+@cache
+def _rebooted(reboot_at: int, apply_at: int | None, off_q40: int,
+              stall: tuple[int, int] = (0, 0)) -> tuple[can.Message, ...]:
+    """5 s of pmir on the circle, the MCU reset at ``reboot_at``, a bare APPLY (nothing staged
+    in any life) at ``apply_at`` (None: no APPLY); the firmware's set_pose adds ``off_q40`` to
+    its X (0: the correct firmware); the MCU runs no tick in the ticks [``stall``)."""
+    with pytest.MonkeyPatch.context() as patch, circle_rig() as rig:
+        apply = Odometry.set_pose
+        patch.setattr(Odometry, "set_pose", lambda self, x, y, h: apply(self, x + off_q40, y, h))
+        rig.halted = lambda k: stall[0] <= k < stall[1]
+
+        def host(k: int, tool: can.BusABC) -> None:
+            if k == reboot_at:
+                rig.board.reboot()
+            if k == apply_at:
+                data = hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+                tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
+                                      is_extended_id=False, timestamp=k * TICK_S))
+
+        return _heard(rig, host)
+
+
+def _x_by_frame(messages: tuple[can.Message, ...]) -> dict[tuple[float, int], int]:
+    """ODOM_POSE_X's raw X (LSB, cantools) per (bus time, ENC_COUNTER)."""
+    return {(m.timestamp, int(_decoded(m)["ENC_COUNTER"])): round(float(_decoded(m)["X"]) * 1e4)
+            for m in messages if m.arbitration_id == fr.ODOM_POSE_X_ID}
+
+
+@pytest.mark.parametrize(("reboot_at", "after_ticks"), [(237, 1), (244, 2), (246, 1)])
+def test_a_bare_apply_just_after_a_reboot_that_moves_the_pose_a_little_fails_everywhere(
+    reboot_at: int, after_ticks: int, tmp_path: Path
+) -> None:
+    """A wrong firmware whose bare APPLY, 1 or 2 ticks after a reset (fewer than two poses sent
+    by the new firmware before it), moves its X by -2^-13 m (-1.22 LSB): analyze, whole and
+    streamed, FAILs it (before: PASS, the check from the power-up pose allowed two roundings
+    and was not narrowed); the live judges latch POSE WRONG. The correct firmware's log PASSes,
+    its APPLY judged. cantools: the correct firmware's poses are those of the same drive
+    without the APPLY (it moved nothing); the wrong one's are identical before the APPLY and
+    after it off by -1.22 LSB on average (each by -1 or -2 LSB)."""
+    off_q40, apply_at = -(1 << 27), reboot_at + after_ticks
+    plain = _x_by_frame(_rebooted(reboot_at, None, 0))
+    right = _rebooted(reboot_at, apply_at, 0)
+    wrong = _rebooted(reboot_at, apply_at, off_q40)
+    assert _x_by_frame(right) == plain
+    at = _apply_ack(wrong, fr.ODOM_SET_POSE_ID)
+    since_s = reboot_at * TICK_S
+    before = _x_by_frame(wrong[:at])
+    assert sum(1 for key in before if key[0] >= since_s) <= 2  # before two new poses
+    assert all(x == plain[key] for key, x in before.items())  # nothing moved before it
+    offsets = [x - plain[key] for key, x in _x_by_frame(wrong[at:]).items()]
+    assert set(offsets) == {-1, -2}  # each round(x + off) - round(x): off within (-2, -1) LSB
+    assert abs(sum(offsets) / len(offsets) + 1.22) < 0.1
+    for messages, ok in ((right, True), (wrong, False)):
+        path = _written(messages, tmp_path / f"{ok}.log")
+        whole = analyze(read_log(path), PMIR, "exact")
+        assert len(whole.report["reboots"]) == 1
+        assert whole.passed is ok
+        [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+        assert event["kept"]["passed"] is ok
+        assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+            whole.report)
+        monitor, bridge = _live(messages)
+        for tracker in (monitor.tracker, bridge.tracker):
+            assert (tracker.wrongs.count > 0) is not ok
+
+
+@pytest.mark.parametrize(("case", "why"), [
+    ("hole", "the encoder frames between the poses around the APPLY are not plain steps"),
+    ("end", "fewer than two on-board poses after the APPLY")])
+def test_a_bare_apply_left_unjudged_says_why(case: str, why: str, tmp_path: Path) -> None:
+    """The correct firmware's bare APPLY after a reboot, in a log whose recorder lost the
+    WHEEL_ENCODERS frame just before the APPLY's ACK (cantools: one COUNTER skipped there), or
+    sent 2 ticks before the log ends (one pose after it): the check of what it kept cannot be
+    made, and the set-pose event says why (``kept_not_judged``, and its detail), whole and
+    streamed; the life is judged by its fit (PASS). Before, ``kept`` was null and nothing
+    said why."""
+    messages = drive("set_pose", False, 498 if case == "end" else APPLY_AT)
+    at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
+    if case == "hole":
+        lost = max(k for k in range(at) if messages[k].arbitration_id == fr.WHEEL_ENCODERS_ID)
+        messages = messages[:lost] + messages[lost + 1:]
+        counters = [int(_decoded(m)["COUNTER"]) for m in messages
+                    if m.arbitration_id == fr.WHEEL_ENCODERS_ID]
+        assert np.count_nonzero(np.diff(counters) % 16 != 1) == 1
+    else:
+        assert sum(m.arbitration_id == fr.ODOM_POSE_X_ID for m in messages[at:]) == 1
+    path = _written(messages, tmp_path / f"{case}.log")
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert whole.passed
+    [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+    assert event["kept"] is None
+    assert event["kept_not_judged"].startswith(why)
+    assert f"not checked: {why}" in event["detail"]
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+
+
+STALL = (330, 345)  # ticks the MCU runs none (150 ms): it takes the frames it missed merged
+
+
+@pytest.mark.parametrize("apply_at", [346, 348, 353])
+def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
+    apply_at: int, tmp_path: Path
+) -> None:
+    """The MCU stalls 150 ms, then gets a bare APPLY 1, 3 or 8 ticks after (no reboot). The
+    correct firmware PASSes, whole and streamed: an APPLY whose poses around it straddle the
+    stall is not judged and says why (before: analyze FAILed it, 0.03-0.07 mm, the reference's
+    fine steps across the stall against the firmware's merged ones); 8 ticks after, its check
+    is made from the poses after the stall alone, and passes, and a wrong firmware moving X by
+    -1.22 LSB there FAILs. cantools: the firmware was silent 150 ms before the APPLY; the
+    wrong one's X after the APPLY is the no-APPLY drive's minus 1 or 2 LSB, before it the
+    same."""
+    right = _rebooted(0, apply_at, 0, STALL)
+    at = _apply_ack(right, fr.ODOM_SET_POSE_ID)
+    sent_s = [m.timestamp for m in right[:at] if m.arbitration_id == fr.ODOM_POSE_Y_ID]
+    assert max(np.diff(sent_s)) > 0.1  # the firmware silent 150 ms before the APPLY (bus times)
+    path = _written(right, tmp_path / "right.log")
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert whole.passed
+    [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+    if apply_at < 353:
+        assert event["kept"] is None
+        assert event["kept_not_judged"].startswith("the firmware silent (a stall)")
+    else:
+        assert event["kept"]["passed"]
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+    if apply_at < 353:
+        return
+    plain = _x_by_frame(_rebooted(0, None, 0, STALL))
+    wrong = _rebooted(0, apply_at, -(1 << 27), STALL)
+    at = _apply_ack(wrong, fr.ODOM_SET_POSE_ID)
+    assert all(x == plain[key] for key, x in _x_by_frame(wrong[:at]).items())
+    assert set(x - plain[key] for key, x in _x_by_frame(wrong[at:]).items()) == {-1, -2}
+    path = _written(wrong, tmp_path / "wrong.log")
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert not whole.passed
+    [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+    assert not event["kept"]["passed"]
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)

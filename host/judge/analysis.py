@@ -159,7 +159,7 @@ from odocan.host.judge.samples import (
     truth_samples,
     wrap_pi,
 )
-from odocan.host.judge.setposekept import check_cut, mark_kept
+from odocan.host.judge.setposekept import Kept, check_cut, mark_kept
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.stalls import after_stalls
 from odocan.host.judge.statuslatch import StatusLatch, firmware_events
@@ -248,7 +248,7 @@ def analyze(
     done: list[tuple[Life, Analysis, float]] = []
     failure: AnalysisError | None = None
     silent: list[Life] = []
-    kept: dict[int, dict[str, Any] | None] = {}  # per set-pose's life: what it kept (setposekept)
+    kept: dict[int, Kept] = {}  # per set-pose's life: what it kept (setposekept)
     for k, (life, (life_robot, life_integrator, bound)) in enumerate(zip(
             lives, in_force(lives, robot, _first_integrator(frames, lives, decoder, integrator,
                                                             source), max_wheel_speed_mm_s),

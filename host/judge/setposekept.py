@@ -26,16 +26,25 @@ a check the two pass is narrowed by up to ``NARROW_SAMPLES`` samples on each sid
 each, moved rigidly to C by the reference's motion, allows the pose at C within its rounding
 (half an LSB each way, its heading's half LSB over the motion); the intersections of each side
 must agree in every field kept (a staged one: inside the after side's). Samples at varied
-sub-LSB phases narrow each side well below one LSB, as the start fits do. (Not from the
-power-up pose: that side is exact, the after sample's one rounding is left in the bound.)
+sub-LSB phases narrow each side well below one LSB, as the start fits do. From the power-up
+pose that side is exact: the after sample's one rounding is the bound (half an LSB each way,
+nothing over the path), and up to ``NARROW_SAMPLES`` samples after the APPLY narrow it
+(``_from_power_up``: the exact pose at C must be within each one's interval): a 1.2-LSB jump
+1 or 2 ticks after a reboot PASSed before (two roundings allowed, not narrowed).
 
-Not judged (``None``): two samples around C within ``WINDOW_FRAMES`` of it in the firmware's
-life are not there, or the steps between them are not the plain ones (a gap of the encoder
-sequence, a refused or re-primed step, a twin), or the firmware is not seen stepping plainly
-on each side (the sample before the last one before C, and the one after the first after C,
-must continue them by the plain steps between, nothing staged: after a stall the first poses
-name backlog frames the window cannot resolve, and merged steps leave the fine reference):
-the fitted start alone judges that life then.
+Not judged (``kept_check`` says why, in words: the event's ``kept_not_judged``): two samples
+around C within ``WINDOW_FRAMES`` of it in the firmware's life are not there, or the steps
+between them are not the plain ones (a gap of the encoder sequence, a refused or re-primed
+step, a twin), or the firmware is not seen stepping plainly on each side (the sample before the
+last one before C, and the one after the first after C, must continue them by the plain steps
+between, nothing staged: after a stall the first poses name backlog frames the window cannot
+resolve, and merged steps leave the fine reference): the fitted start alone judges that life
+then. A stall (the firmware silent ``SILENCE_CYCLES`` encoder cycles on the bus: it takes the
+frames it missed merged, not in the reference's fine steps) between the sample before the last
+one before C and the one after the first after C leaves the APPLY unjudged too (before, a
+correct firmware's APPLY 1-3 ticks after a 150 ms stall FAILed, 0.03-0.07 mm); one further
+off only bounds the samples that narrow the check (``_voiced``: those after it, less the
+first), so an APPLY a few poses after a stall is judged from the poses after it.
 The window is read alike from a whole log and from a streamed one (its frames only), so
 ``analyze`` and ``analyze_file`` give the same check bit for bit."""
 
@@ -55,6 +64,7 @@ from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
+    SILENCE_CYCLES,
     WIRE_COUNTER_BITS,
     AnalysisError,
     Encoders,
@@ -76,6 +86,7 @@ NARROW_SAMPLES = 16  # samples on each side whose rounding intervals narrow the 
 _FLOAT_M = 1e-9  # the firmware's Q40 steps against float64 over a few frames, and more
 _FLOAT_RAD = 1e-12
 _TURN = 2.0 * math.pi
+Kept = dict[str, Any] | str | None  # the check, why it was not made, or None: all staged
 
 
 def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
@@ -86,7 +97,7 @@ def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
 
 def check_cut(read: Callable[[int, int], FrameArrays], head: tuple[int, bool], tail_stop: int,
               cut: SetPoseCut, robot: RobotProfile, integrator: str, db: DatabaseSpec,
-              max_wheel_speed_mm_s: SpeedBound) -> dict[str, Any] | None:
+              max_wheel_speed_mm_s: SpeedBound) -> Kept:
     """``kept_check`` of the set-pose ``cut`` over its ``window``: ``read(lo, hi)`` gives the
     log's frames [lo, hi) (whole or streamed alike); ``head``: the first frame of the life
     before the cut and whether it starts at a reboot; ``tail_stop``: the end of the life the
@@ -98,11 +109,12 @@ def check_cut(read: Callable[[int, int], FrameArrays], head: tuple[int, bool], t
 
 def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfile,
                integrator: str, db: DatabaseSpec, max_wheel_speed_mm_s: SpeedBound, *,
-               boot: bool = False) -> dict[str, Any] | None:
+               boot: bool = False) -> Kept:
     """The check of the module docstring for ``cut`` (a set-pose whose fields were not all
     staged) over ``frames``, the log's frames from position ``lo`` (``window``); None when
-    every field was staged or the check cannot be made. ``boot``: ``frames`` start where the
-    firmware started (a reboot's life, read from its first frame)."""
+    every field was staged, why not (words) when the check cannot be made. ``boot``:
+    ``frames`` start where the firmware started (a reboot's life, read from its first
+    frame)."""
     if cut.start_pose() is not None:
         return None
     decoder = BulkDecoder(db)
@@ -110,56 +122,118 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
     enc = encoder_frames(frames, accepted, decoder)
     at = np.flatnonzero(enc.index == cut.position - lo)
     if len(at) == 0:
-        return None
+        return "the encoder frame the APPLY took effect after is not among the frames read"
     try:
-        poses = onboard_samples(frames, accepted, decoder, enc)[0]
+        poses, _, sent_s = onboard_samples(frames, accepted, decoder, enc)
     except AnalysisError:
-        return None
+        return "no on-board poses around the APPLY"
     c = int(at[0])
     before, after = _around(poses, c)
+    voiced = _voiced(sent_s, enc.cycle_s, before, after)
     start = _sample(poses, before) if before is not None else None
     if before is None and boot and saw_only_the_log(frames, accepted, decoder):
         start = (0, (0.0, 0.0, 0.0))  # applied before two poses: from its power-up pose
-    if start is None or after is None:
-        return None
+    if start is None:
+        return ("fewer than two on-board poses before the APPLY in this firmware life, and its "
+                "power-up pose not known")
+    if after is None:
+        return "fewer than two on-board poses after the APPLY"
+    if voiced is None:
+        return ("the firmware silent (a stall) between the poses around the APPLY: its steps "
+                "over the frames it missed are not the reference's")
+    return _checked(poses, enc, c, (before, after), start, cut, robot, integrator,
+                    max_wheel_speed_mm_s, voiced)
+
+
+def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int],
+             start: tuple[int, tuple[float, float, float]], cut: SetPoseCut,
+             robot: RobotProfile, integrator: str, max_wheel_speed_mm_s: SpeedBound,
+             voiced: tuple[int, int]) -> Kept:
+    """``kept_check`` from ``start`` (the last sample before the APPLY's frame ``c``, or the
+    power-up pose when ``around``'s first is None) to the first sample after it; narrowed by
+    the samples ``voiced`` (first, last) alone."""
+    before, after = around
     sides = ([] if before is None else [before - 1]) + [after]
     if not all(_settled(poses, i, enc, robot, integrator, max_wheel_speed_mm_s) for i in sides):
-        return None  # the firmware not in its plain steps around the APPLY: not judged here
+        return ("the firmware not seen stepping plainly around the APPLY (after a stall: poses "
+                "naming backlog frames, merged steps)")
     steps = _plain_steps(enc, start[0], int(poses.enc[after]), robot, max_wheel_speed_mm_s)
     if steps is None:
-        return None
+        return ("the encoder frames between the poses around the APPLY are not plain steps (a "
+                "gap in their sequence, a refused, re-primed or twinned step)")
     judged = _judged(start, _sample(poses, after), steps, c - start[0], cut.staged,
-                     Geometry.of(robot), integrator)
+                     Geometry.of(robot), integrator, exact_start=before is None)
     if judged["passed"] and before is not None:  # narrowed by more samples on each side
-        judged["passed"] = _overlap(poses, before, after, c, enc, cut.staged, robot, integrator,
-                                    max_wheel_speed_mm_s)
+        judged["passed"] = _overlap(poses, (before, after), c, enc, cut.staged, robot,
+                                    integrator, max_wheel_speed_mm_s, voiced)
+    elif judged["passed"]:  # from the power-up pose: narrowed by more samples after the APPLY
+        judged["passed"] = _from_power_up(poses, after, c, enc, cut.staged, robot, integrator,
+                                          max_wheel_speed_mm_s, voiced[1])
     return {"fields_kept": [name for name in FIELDS if name not in cut.staged], **judged}
 
 
-def _overlap(poses: Poses, before: int, after: int, c: int, enc: Encoders,
+def _overlap(poses: Poses, around: tuple[int, int], c: int, enc: Encoders,
              staged: dict[str, float], robot: RobotProfile, integrator: str,
-             max_wheel_speed_mm_s: SpeedBound) -> bool:
+             max_wheel_speed_mm_s: SpeedBound, voiced: tuple[int, int]) -> bool:
     """Whether the pose at the APPLY's frame ``c`` that up to ``NARROW_SAMPLES`` samples on
     each side allow (each sample moved to ``c`` by the reference's steps: an interval of its
     rounding, half an LSB each way, widened by its heading's rounding over the motion)
     agrees between the sides for every field not staged (the staged ones: within the after
-    side's). True (nothing more to say) when those samples do not step plainly."""
-    first = max(0, before - NARROW_SAMPLES + 1)
-    last = min(len(poses.enc) - 1, after + NARROW_SAMPLES - 1)
+    side's), of the samples ``voiced`` (first, last) alone. True (nothing more to say) when
+    those samples do not step plainly."""
+    before, after = around
+    first = max(voiced[0], before - NARROW_SAMPLES + 1)
+    last = min(voiced[1], after + NARROW_SAMPLES - 1)
     steps = _plain_steps(enc, int(poses.enc[first]), int(poses.enc[last]), robot,
                          max_wheel_speed_mm_s)
     if steps is None:
         return True
-    rel = integrate(*steps, Geometry.of(robot), integrator)
-    rel_x, rel_y, rel_h = (np.concatenate(([0.0], v)) for v in (rel.x_m, rel.y_m,
-                                                                rel.heading_rad))
+    rel = _relative(steps, robot, integrator)
     base = int(poses.enc[first])
-    sides = [_at_cut(poses, range(first, before + 1), c - base, base, (rel_x, rel_y, rel_h)),
-             _at_cut(poses, range(after, last + 1), c - base, base, (rel_x, rel_y, rel_h))]
+    sides = [_at_cut(poses, range(first, before + 1), c - base, base, rel),
+             _at_cut(poses, range(after, last + 1), c - base, base, rel)]
     if any(side is None for side in sides):
         return True  # a side's samples disagree among themselves: not judged here
     lows, highs = sides[0], sides[1]
     assert lows is not None and highs is not None
+    return _agree(lows, highs, staged)
+
+
+def _from_power_up(poses: Poses, after: int, c: int, enc: Encoders, staged: dict[str, float],
+                   robot: RobotProfile, integrator: str, max_wheel_speed_mm_s: SpeedBound,
+                   voiced_last: int) -> bool:
+    """``_overlap`` for an APPLY judged from the power-up pose (before the new firmware's
+    second pose): the pose at the APPLY's frame ``c`` is then known exactly (the reference
+    from (0, 0, 0) at the life's first encoder frame), a point that the intervals of up to
+    ``NARROW_SAMPLES`` samples after it must hold in every field kept (a wrong jump of 1.2 LSB
+    passed the one sample's rounding). True when those samples do not step plainly or
+    disagree among themselves. Up to ``voiced_last`` (before a later stall)."""
+    last = min(voiced_last, after + NARROW_SAMPLES - 1)
+    steps = _plain_steps(enc, 0, int(poses.enc[last]), robot, max_wheel_speed_mm_s)
+    if steps is None:
+        return True
+    rel = _relative(steps, robot, integrator)
+    highs = _at_cut(poses, range(after, last + 1), c, 0, rel)
+    if highs is None:
+        return True
+    return _agree([(float(v[c]), float(v[c])) for v in rel], highs, staged)
+
+
+def _relative(steps: tuple[np.ndarray, np.ndarray], robot: RobotProfile,
+              integrator: str) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The reference's pose (x m, y m, heading rad) at each frame of ``steps`` (element k:
+    after k steps) from (0, 0, 0) at their first."""
+    rel = integrate(*steps, Geometry.of(robot), integrator)
+    rel_x, rel_y, rel_h = (np.concatenate(([0.0], v)) for v in (rel.x_m, rel.y_m,
+                                                                rel.heading_rad))
+    return rel_x, rel_y, rel_h
+
+
+def _agree(lows: list[tuple[float, float]], highs: list[tuple[float, float]],
+           staged: dict[str, float]) -> bool:
+    """Whether the pose at the APPLY the samples before it allow (``lows``: an interval per
+    field) meets the one those after it allow (``highs``) in every field kept, and each staged
+    field is within ``highs``."""
     for k, name in enumerate(FIELDS):
         lo_b, hi_b = lows[k]
         lo_a, hi_a = highs[k]
@@ -223,6 +297,26 @@ def _settled(poses: Poses, i: int, enc: Encoders, robot: RobotProfile, integrato
         integrator)["passed"])
 
 
+def _voiced(sent_s: FloatArray, cycle_s: float | None, before: int | None,
+            after: int | None) -> tuple[int, int] | None:
+    """The samples (first, last) around the APPLY sent without a silence of the firmware
+    between them (``SILENCE_CYCLES`` encoder cycles, ``cycle_s``, or more between two samples
+    on the bus, analyze's own rule: a stall, after which it took the frames it missed in merged
+    steps), less the first after a silence (it may name a backlog frame); None when there is
+    one between the sample before ``before`` and the one after ``after`` (or from the life's
+    first sample, when ``before`` is None). All of them when the DBC gives no cycle time."""
+    last = len(sent_s) - 1
+    if cycle_s is None or after is None:
+        return 0, last
+    gaps = np.flatnonzero(np.diff(sent_s) >= SILENCE_CYCLES * cycle_s)
+    low = 0 if before is None else before - 1
+    if np.any((gaps >= low) & (gaps <= after)):
+        return None
+    earlier, later = gaps[gaps < low], gaps[gaps > after]
+    return (int(earlier[-1]) + 2 if len(earlier) else 0,
+            int(later[0]) if len(later) else last)
+
+
 def _around(poses: Poses, c: int) -> tuple[int | None, int | None]:
     """The last sample naming an encoder frame before ``c`` and the first naming one after,
     each with another sample beyond it (before the first, after the second)."""
@@ -265,33 +359,43 @@ def _moved(pose: tuple[float, float, float], d_left: np.ndarray, d_right: np.nda
 
 def _judged(before: tuple[int, tuple[float, float, float]],
             after: tuple[int, tuple[float, float, float]], steps: tuple[np.ndarray, np.ndarray],
-            to_cut: int, staged: dict[str, float], geometry: Geometry,
-            integrator: str) -> dict[str, Any]:
+            to_cut: int, staged: dict[str, float], geometry: Geometry, integrator: str, *,
+            exact_start: bool = False) -> dict[str, Any]:
     """The pose ``before`` (encoder frame, pose) moved by the ``to_cut`` steps to the APPLY's
     frame, the staged fields set there, moved by the rest to the sample ``after``: how far that
-    sample is."""
+    sample is. ``exact_start``: ``before`` is the power-up pose, no sample: only ``after``'s
+    rounding is left (half an LSB, of position and of heading)."""
     d_left, d_right = steps
     x, y, h, head_m = _moved(before[1], d_left[:to_cut], d_right[:to_cut], geometry, integrator)
     start = (staged.get("X", x), staged.get("Y", y), staged.get("HEADING", h))
     x, y, h, tail_m = _moved(start, d_left[to_cut:], d_right[to_cut:], geometry, integrator)
     dx_m, dy_m = after[1][0] - x, after[1][1] - y
     dh_rad = (after[1][2] - h + math.pi) % _TURN - math.pi
-    bound_m = POSITION_LSB_M + HEADING_LSB_RAD * (head_m + tail_m) + _FLOAT_M
-    passed = (max(abs(dx_m), abs(dy_m)) <= bound_m
-              and abs(dh_rad) <= HEADING_LSB_RAD + _FLOAT_RAD)
+    if exact_start:  # the power-up pose: the after sample's rounding alone
+        bound_m, bound_rad = 0.5 * POSITION_LSB_M + _FLOAT_M, 0.5 * HEADING_LSB_RAD + _FLOAT_RAD
+    else:  # two samples' roundings, and the start heading's over the path
+        bound_m = POSITION_LSB_M + HEADING_LSB_RAD * (head_m + tail_m) + _FLOAT_M
+        bound_rad = HEADING_LSB_RAD + _FLOAT_RAD
+    passed = max(abs(dx_m), abs(dy_m)) <= bound_m and abs(dh_rad) <= bound_rad
     return {"encoder_frames": after[0] - before[0],
             "position_jump_m": math.hypot(dx_m, dy_m), "heading_jump_rad": abs(dh_rad),
             "bound_m": bound_m, "passed": passed}
 
 
-def mark_kept(report: dict[str, Any], checks: dict[int, dict[str, Any] | None]) -> None:
+def mark_kept(report: dict[str, Any], checks: dict[int, Kept]) -> None:
     """Put each check (by the index of the life the set-pose opened: its event's ``life``)
-    into its ``set_pose`` event (``kept``); a failed one FAILs the report, named there."""
+    into its ``set_pose`` event (``kept``); a failed one FAILs the report, named there. One
+    not made: ``kept`` null, why in ``kept_not_judged`` and the event's detail."""
     for event in report["events"]:
         if event["kind"] != "set_pose" or event.get("life") not in checks or all(
                 event[name] is not None for name in ("x_m", "y_m", "heading_rad")):
             continue  # every field set: the life starts exactly there, nothing kept
-        check = event["kept"] = checks[event["life"]]
+        check = checks[event["life"]]
+        if isinstance(check, str):
+            event["kept"], event["kept_not_judged"] = None, check
+            event["detail"] += f"; what the APPLY kept not checked: {check} (judged by its fit)"
+            continue
+        event["kept"] = check
         if check is not None and not check["passed"]:
             report["passed"] = False
             event["detail"] += (

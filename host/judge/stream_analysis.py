@@ -43,7 +43,7 @@ from odocan.host.judge.samples import (
     Encoders,
     require_messages,
 )
-from odocan.host.judge.setposekept import check_cut, mark_kept
+from odocan.host.judge.setposekept import Kept, check_cut, mark_kept
 from odocan.host.judge.stream import StreamE2E
 from odocan.host.judge.stream_choice import RSS_MARGIN as RSS_MARGIN
 from odocan.host.judge.stream_choice import RSS_TARGET_MB as RSS_TARGET_MB
@@ -160,7 +160,7 @@ def _analyze_lives(
     done: list[tuple[LifeSpan, dict[str, Any], float]] = []
     failure: AnalysisError | None = None
     silent: list[Life] = []
-    kept: dict[int, dict[str, Any] | None] = {}  # per set-pose's life: what it kept (setposekept)
+    kept: dict[int, Kept] = {}  # per set-pose's life: what it kept (setposekept)
     for k, (span, (life_robot, life_integrator, bound)) in enumerate(zip(spans, in_force(
             [_as_life(span) for span in spans], robot,
             first_integrator(spans, frames_of, db, integrator, source), max_wheel_speed_mm_s),
