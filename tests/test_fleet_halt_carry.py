@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -27,21 +26,14 @@ from odocan.firmware import odometry as fw_odometry
 from odocan.sim.board import TICK_S
 from odocan.sim.contract import DBC_PATH
 from tests.dbc_typed import load_can_dbc, numbers
-from tests.overloaded_fleet import checked_before, run_overloaded
-from tests.test_fleet_halt_edges import RecordingClock
-from tests.test_fleet_overload_stretches import DURATION_S, ROBOTS, SEED
+from tests.overloaded_fleet import checked_before
+from tests.test_fleet_halt_edges import RecordingClock, recorded_run
+from tests.test_fleet_overload_stretches import candump_fields
 
 Q40_PER_LSB = (1 << 40) * 1e-4  # X's LSB (0.1 mm) in the firmware's Q40 metres
 BAM64_PER_LSB = float(1 << 48)  # HEADING's LSB (2^-16 turn) in the firmware's bam64
 SHIFTED = {"X": ("x_q40_m", Q40_PER_LSB), "HEADING": ("heading_bam64", BAM64_PER_LSB)}
 POSE_FRAMES = ("ODOM_POSE_X", "ODOM_POSE_Y")
-
-
-def _run(monkeypatch: pytest.MonkeyPatch) -> Any:
-    run = run_overloaded(monkeypatch, RecordingClock, robots=ROBOTS, seed=SEED,
-                         duration_s=DURATION_S)
-    assert run.halts >= 10, run.halts
-    return run
 
 
 def _shift_at_halts(monkeypatch: pytest.MonkeyPatch, signal: str, shift_lsb: float) -> None:
@@ -75,7 +67,7 @@ def _drift_lsb(right: list[str], wrong: list[str], signal: str) -> list[tuple[fl
     for a, b in zip(right, wrong, strict=True):
         if a == b:
             continue
-        (t_a, id_a, data_a), (t_b, id_b, data_b) = _fields(a), _fields(b)
+        (t_a, id_a, data_a), (t_b, id_b, data_b) = candump_fields(a), candump_fields(b)
         assert (t_a, id_a) == (t_b, id_b), (a, b)
         name = db.get_message_by_frame_id(id_a).name
         assert name in (POSE_FRAMES[:1] if signal == "X" else POSE_FRAMES), (a, b)
@@ -89,19 +81,13 @@ def _drift_lsb(right: list[str], wrong: list[str], signal: str) -> list[tuple[fl
     return drift
 
 
-def _fields(line: str) -> tuple[float, int, bytes]:
-    t_s = float(line[1:line.index(")")])
-    can_id, data = line.split()[-1].split("#")
-    return t_s, int(can_id, 16), bytes.fromhex(data)
-
-
 @pytest.mark.parametrize(("signal", "shift_lsb"), [("X", 0.15), ("X", 0.1), ("HEADING", 0.1)])
 def test_a_firmware_shifting_under_one_lsb_at_every_halt_fails(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path, signal: str, shift_lsb: float
 ) -> None:
-    right = _run(monkeypatch)
+    right = recorded_run(monkeypatch)
     _shift_at_halts(monkeypatch, signal, shift_lsb)
-    wrong = _run(monkeypatch)
+    wrong = recorded_run(monkeypatch)
     clock = RecordingClock.latest_recording
     assert clock is not None
     for index, entry in enumerate(wrong.per_robot.values()):

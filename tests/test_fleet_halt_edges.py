@@ -71,7 +71,7 @@ class RecordingClock(HaltingClock):
         return self.k - 1
 
 
-def _run(monkeypatch: pytest.MonkeyPatch) -> Any:
+def recorded_run(monkeypatch: pytest.MonkeyPatch) -> Any:
     run = run_overloaded(monkeypatch, RecordingClock, robots=ROBOTS, seed=SEED,
                          duration_s=DURATION_S)
     assert run.halts >= 10, run.halts
@@ -87,7 +87,7 @@ def _run(monkeypatch: pytest.MonkeyPatch) -> Any:
 def test_a_firmware_wrong_at_a_halts_restart_fails(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path, halt: int, first: int, last: int | None
 ) -> None:
-    right = _run(monkeypatch)
+    right = recorded_run(monkeypatch)
     real = fw_frames.pack_odom_pose_x
 
     def off(counter: int, enc: int, x_100um: int, heading_bam16: int, errors: Any) -> bytes:
@@ -100,7 +100,7 @@ def test_a_firmware_wrong_at_a_halts_restart_fails(
         return real(counter, enc, x_100um + wrong, heading_bam16, errors)
 
     monkeypatch.setattr(fw_frames, "pack_odom_pose_x", off)
-    wrong = _run(monkeypatch)
+    wrong = recorded_run(monkeypatch)
     clock = RecordingClock.latest_recording
     assert clock is not None
     for index, entry in enumerate(wrong.per_robot.values()):

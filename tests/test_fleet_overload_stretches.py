@@ -151,7 +151,7 @@ def x_off_times(right: list[str], wrong: list[str], lsb: int = WRONG_LSB) -> lis
     for a, b in zip(right, wrong, strict=True):
         if a == b:
             continue
-        (t_a, id_a, data_a), (t_b, id_b, data_b) = _fields(a), _fields(b)
+        (t_a, id_a, data_a), (t_b, id_b, data_b) = candump_fields(a), candump_fields(b)
         assert (t_a, id_a) == (t_b, id_b), (a, b)
         assert db.get_message_by_frame_id(id_a).name == "ODOM_POSE_X", (a, b)
         sig_a, sig_b = (numbers(db, id_a, d, scaling=False) for d in (data_a, data_b))
@@ -162,7 +162,7 @@ def x_off_times(right: list[str], wrong: list[str], lsb: int = WRONG_LSB) -> lis
     return times
 
 
-def _fields(line: str) -> tuple[float, int, bytes]:
+def candump_fields(line: str) -> tuple[float, int, bytes]:
     t_s = float(line[1:line.index(")")])
     can_id, data = line.split()[-1].split("#")
     return t_s, int(can_id, 16), bytes.fromhex(data)
