@@ -130,10 +130,12 @@ def _close(gap_s: float) -> bool:
 
 
 class Columns:
-    """The latest ``size`` rows of a few numeric columns, as numpy views (``col``, amortised
-    O(1) append: rows are copied in ``RECENT`` at a time, or when a view is asked for), and
-    the latest ``RECENT`` of them as plain tuples (``rows``, a ring buffer for the fast path;
-    ``whole``: they are the whole window): the live judge's window of recent frames."""
+    """The latest ``size`` rows of a few numeric columns, as numpy views (``col``: rows are
+    copied in only when a view is asked for, the ones appended since the last, at most
+    ``size``: a window never read, as a pose half window mostly is, costs one deque append a
+    row), and the latest ``RECENT`` of them as plain tuples (``rows``, a ring buffer for the
+    fast path; ``whole``: they are the whole window): the live judge's window of recent
+    frames."""
 
     def __init__(self, names: tuple[str, ...], size: int) -> None:
         self.size = size
@@ -141,15 +143,14 @@ class Columns:
         self._data = np.zeros((2 * size, len(names)))
         self._n = 0  # rows in ``_data``
         self._count = 0  # rows appended in all
-        self._unflushed: list[tuple[float, ...]] = []  # rows appended, not in ``_data`` yet
+        # rows appended, not in ``_data`` yet (the latest ``size``: older ones are never read)
+        self._unflushed: deque[tuple[float, ...]] = deque(maxlen=size)
         self.rows: deque[tuple[float, ...]] = deque(maxlen=RECENT)
 
     def append(self, *row: float) -> None:
         self.rows.append(row)
         self._count += 1
-        self._unflushed.append(row)
-        if len(self._unflushed) >= RECENT:  # copied in a batch: the state stays small
-            self._flush()
+        self._unflushed.append(row)  # copied into ``_data`` when a column is read
 
     @property
     def whole(self) -> bool:
@@ -157,7 +158,8 @@ class Columns:
         return self._count <= RECENT
 
     def _flush(self) -> None:
-        rows, self._unflushed = self._unflushed[-self.size :], []
+        rows = list(self._unflushed)
+        self._unflushed.clear()
         m = len(rows)
         if self._n + m > len(self._data):  # keep the latest ``size`` rows, at the front
             keep = min(self._n, self.size - m)
