@@ -168,6 +168,29 @@ class Columns:
         self._data[self._n : self._n + m] = rows
         self._n += m
 
+    def latest_from(self, first: float) -> list[tuple[float, ...]] | None:
+        """The rows from the first whose first column (increasing, as ``seq``) is ``first``
+        or more to the latest, as plain tuples (those not copied yet as appended, the copied
+        ones as floats): the rows ``col`` cut with ``searchsorted`` gives, without copying;
+        None when they reach more than ``RECENT`` copied rows back (then read ``col``)."""
+        rows: list[tuple[float, ...]] = []
+        for row in reversed(self._unflushed):
+            if row[0] < first:
+                rows.reverse()
+                return rows
+            rows.append(row)
+        start = max(0, self._n + len(self._unflushed) - self.size)  # the window's, in _data
+        for k in range(self._n - 1, max(start, self._n - RECENT) - 1, -1):
+            row = tuple(self._data[k].tolist())
+            if row[0] < first:
+                rows.reverse()
+                return rows
+            rows.append(row)
+        if self._n - RECENT <= start:  # the window's first reached: none before ``first``
+            rows.reverse()
+            return rows
+        return None
+
     def col(self, name: str) -> FloatArray:
         if self._unflushed:
             self._flush()
