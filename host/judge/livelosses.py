@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from itertools import pairwise
 
 import numpy as np
 
@@ -117,6 +118,8 @@ class LiveAllowance:
         before, self.lost_page = self.lost_page, (lost, upto)
         if before is None or window is None or not len(window):
             return
+        if (lost - before[0]) & 0xFF == 0 and _quiet(window, before[1]):
+            return  # the common page, told from the rows not copied yet (no numpy)
         seqs = window.col("seq")
         i0, i1 = int(np.searchsorted(seqs, before[1])), len(seqs) - 1
         if i0 >= len(seqs) or seqs[i0] != before[1]:
@@ -133,3 +136,16 @@ class LiveAllowance:
             steps = OneSteps.of_firmware(enc, geometry, bits, integrator)
             lost_ok = ~np.isin(seqs.astype(np.int64), list(sampled))  # named: not lost
             self.spans.append((before[1], worst_runs_m(steps, lost_ok, i0, i1, n)))
+
+
+def _quiet(window: Columns, first: int) -> bool:
+    """The window's frames from seq ``first`` on, read as plain rows (``Columns.latest_from``:
+    seq, pos, COUNTER, ...), give ``on_page`` nothing to judge: the frame ``first`` left the
+    window (or none is that late), or no sender step of 0 follows it; False when they do, or
+    when they reach too far back among the rows copied (``on_page`` reads the columns)."""
+    rows = window.latest_from(first)
+    if rows is None:
+        return False
+    if not rows or rows[0][0] != first:
+        return True  # the previous page's frame left the window: not judged
+    return all(a[2] != b[2] for a, b in pairwise(rows))

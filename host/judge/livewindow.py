@@ -130,10 +130,12 @@ def _close(gap_s: float) -> bool:
 
 
 class Columns:
-    """The latest ``size`` rows of a few numeric columns, as numpy views (``col``, amortised
-    O(1) append: rows are copied in ``RECENT`` at a time, or when a view is asked for), and
-    the latest ``RECENT`` of them as plain tuples (``rows``, a ring buffer for the fast path;
-    ``whole``: they are the whole window): the live judge's window of recent frames."""
+    """The latest ``size`` rows of a few numeric columns, as numpy views (``col``: rows are
+    copied in only when a view is asked for, the ones appended since the last, at most
+    ``size``: a window never read, as a pose half window mostly is, costs one deque append a
+    row), and the latest ``RECENT`` of them as plain tuples (``rows``, a ring buffer for the
+    fast path; ``whole``: they are the whole window): the live judge's window of recent
+    frames."""
 
     def __init__(self, names: tuple[str, ...], size: int) -> None:
         self.size = size
@@ -141,15 +143,14 @@ class Columns:
         self._data = np.zeros((2 * size, len(names)))
         self._n = 0  # rows in ``_data``
         self._count = 0  # rows appended in all
-        self._unflushed: list[tuple[float, ...]] = []  # rows appended, not in ``_data`` yet
+        # rows appended, not in ``_data`` yet (the latest ``size``: older ones are never read)
+        self._unflushed: deque[tuple[float, ...]] = deque(maxlen=size)
         self.rows: deque[tuple[float, ...]] = deque(maxlen=RECENT)
 
     def append(self, *row: float) -> None:
         self.rows.append(row)
         self._count += 1
-        self._unflushed.append(row)
-        if len(self._unflushed) >= RECENT:  # copied in a batch: the state stays small
-            self._flush()
+        self._unflushed.append(row)  # copied into ``_data`` when a column is read
 
     @property
     def whole(self) -> bool:
@@ -157,7 +158,8 @@ class Columns:
         return self._count <= RECENT
 
     def _flush(self) -> None:
-        rows, self._unflushed = self._unflushed[-self.size :], []
+        rows = list(self._unflushed)
+        self._unflushed.clear()
         m = len(rows)
         if self._n + m > len(self._data):  # keep the latest ``size`` rows, at the front
             keep = min(self._n, self.size - m)
@@ -165,6 +167,29 @@ class Columns:
             self._n = keep
         self._data[self._n : self._n + m] = rows
         self._n += m
+
+    def latest_from(self, first: float) -> list[tuple[float, ...]] | None:
+        """The rows from the first whose first column (increasing, as ``seq``) is ``first``
+        or more to the latest, as plain tuples (those not copied yet as appended, the copied
+        ones as floats): the rows ``col`` cut with ``searchsorted`` gives, without copying;
+        None when they reach more than ``RECENT`` copied rows back (then read ``col``)."""
+        rows: list[tuple[float, ...]] = []
+        for row in reversed(self._unflushed):
+            if row[0] < first:
+                rows.reverse()
+                return rows
+            rows.append(row)
+        start = max(0, self._n + len(self._unflushed) - self.size)  # the window's, in _data
+        for k in range(self._n - 1, max(start, self._n - RECENT) - 1, -1):
+            row = tuple(self._data[k].tolist())
+            if row[0] < first:
+                rows.reverse()
+                return rows
+            rows.append(row)
+        if self._n - RECENT <= start:  # the window's first reached: none before ``first``
+            rows.reverse()
+            return rows
+        return None
 
     def col(self, name: str) -> FloatArray:
         if self._unflushed:
