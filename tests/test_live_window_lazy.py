@@ -48,15 +48,21 @@ def test_a_column_read_is_the_latest_rows_whatever_the_reads(seed: int) -> None:
         assert window.whole == (k + 1 <= RECENT)
 
 
-def test_a_window_never_read_copies_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
-    copies: list[int] = []
+@pytest.fixture
+def copies(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """The rows each copy into numpy held (``Columns._flush`` counted), in order."""
+    counts: list[int] = []
     flush = Columns._flush
 
     def counted(self: Columns) -> None:
-        copies.append(len(self))
+        counts.append(len(self))
         flush(self)
 
     monkeypatch.setattr(livewindow.Columns, "_flush", counted)
+    return counts
+
+
+def test_a_window_never_read_copies_nothing(copies: list[int]) -> None:
     size = livewindow.HALF_WINDOW
     window = Columns(NAMES, size)
     for k in range(3 * size + 5):
@@ -126,15 +132,7 @@ def test_a_page_told_from_plain_rows_as_from_the_columns(seed: int,
     assert plain == _paged(*_drive(seed))
 
 
-def test_a_quiet_page_copies_no_row(monkeypatch: pytest.MonkeyPatch) -> None:
-    copies: list[int] = []
-    flush = Columns._flush
-
-    def counted(self: Columns) -> None:
-        copies.append(len(self))
-        flush(self)
-
-    monkeypatch.setattr(livewindow.Columns, "_flush", counted)
+def test_a_quiet_page_copies_no_row(copies: list[int]) -> None:
     window = Columns(ENC_COLUMNS, ENC_WINDOW)
     pages = []
     for seq in range(1000):
