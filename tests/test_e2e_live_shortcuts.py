@@ -99,7 +99,7 @@ def _frames(rng: random.Random, name: str, n: int) -> list[tuple[float, bytes]]:
     for _ in range(n):
         roll = rng.random()
         gap_s = (rng.choice(edges) * (1 + rng.uniform(-1e-6, 1e-6)) if roll < 0.6
-                 else config.cycle_s * rng.choice([0.5, 1.5, 2, 3, 0.01, 9]))
+                 else config.cycle_s * rng.choice([0.5, 1.5, 2, 3, 0.01, 9, 17.3, 40.7]))
         t_s += gap_s
         counter = (counter + rng.choice([1] * 12 + [0, 2, 3, 9])) & 0xF
         buf = bytearray(rng.randbytes(8))
@@ -124,7 +124,5 @@ def test_frames_on_the_edges_are_judged_as_the_log_check_judges_them(seed: int,
                                                   data=data, is_extended_id=False))
     counts, accepted = check_frames(collector.arrays(), DB)
     live = monitor.counts()[name]
-    # (``silence_ms``: each silence rounded live, their sum in a log: 1 ms apart, no judge's)
-    assert abs(live.pop("silence_ms", 0) - counts[name].pop("silence_ms", 0)) <= 1
-    assert live == counts[name]
+    assert live == counts[name]  # ``silence_ms`` too: each silence rounded on its own in both
     assert [s in ("ok", "oksomelost") for s in statuses] == accepted.tolist()

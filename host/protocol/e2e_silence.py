@@ -5,10 +5,12 @@ Profile 2's COUNTER is 4 bits: after 16 periods without a frame it has gone roun
 10 ms WHEEL_ENCODERS read "lost 1" for 2000 frames missing. The receiver says it apart:
 ``silences`` the steps between two accepted frames of a message ``SILENCE_PERIODS`` receive
 periods or more apart (15.5: from 15 frames missing the COUNTER steps by 0 mod 16, round half
-up), and ``silence_ms`` their total length (ms, int: the counts stay integers and add up
-chunk by chunk, as ``host.judge.stream`` adds them). Both keys are present only when a silence
-was heard, in ``check_frames``' counts, the live receiver's (the monitor, the bridge's
-``rates``) and the reports; ``lost_text`` says the count the way every view prints it.
+up), and ``silence_ms`` their total length (ms, int: each silence rounded to the ms on its
+own, then added, so that a log read whole, a log read chunk by chunk as ``host.judge.stream``
+adds the counts, and the live receiver counting one silence at a time say the same number).
+Both keys are present only when a silence was heard, in ``check_frames``' counts, the live
+receiver's (the monitor, the bridge's ``rates``) and the reports; ``lost_text`` says the count
+the way every view prints it.
 """
 
 from __future__ import annotations
@@ -39,13 +41,18 @@ def silences(t_s: npt.NDArray[np.float64], period_s: float | None) -> dict[str, 
     long_s = step_s[step_s >= SILENCE_PERIODS * period_s]
     if len(long_s) == 0:
         return {}
-    return {"silences": len(long_s), "silence_ms": round(float(long_s.sum()) * 1e3)}
+    return {"silences": len(long_s), "silence_ms": sum(silence_ms(float(s)) for s in long_s)}
+
+
+def silence_ms(step_s: float) -> int:
+    """One silence's length in whole ms: the unit every count of them adds."""
+    return round(step_s * 1e3)
 
 
 def add_silence(counts: dict[str, int], step_s: float) -> None:
     """Count one silence of ``step_s`` seconds into ``counts`` (the live receiver)."""
     counts["silences"] = counts.get("silences", 0) + 1
-    counts["silence_ms"] = counts.get("silence_ms", 0) + round(step_s * 1e3)
+    counts["silence_ms"] = counts.get("silence_ms", 0) + silence_ms(step_s)
 
 
 def lost_text(counts: Mapping[str, object], *, cell: bool = False) -> str:
