@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -87,6 +87,16 @@ _FLOAT_M = 1e-9  # the firmware's Q40 steps against float64 over a few frames, a
 _FLOAT_RAD = 1e-12
 _TURN = 2.0 * math.pi
 Kept = dict[str, Any] | str | None  # the check, why it was not made, or None: all staged
+
+
+class Odo(NamedTuple):
+    """How the firmware steps: its geometry, counter width on the wire (bits), integrator and
+    step bound (``reference_path.firmware_steps``)."""
+
+    geometry: Geometry
+    bits: int
+    integrator: str
+    max_wheel_speed_mm_s: SpeedBound
 
 
 def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
@@ -127,11 +137,23 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
         poses, _, sent_s = onboard_samples(frames, accepted, decoder, enc)
     except AnalysisError:
         return "no on-board poses around the APPLY"
-    c = int(at[0])
+    odo = Odo(Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS), integrator,
+              max_wheel_speed_mm_s)
+    return judge_kept((poses, enc, sent_s), int(at[0]), cut.staged, odo,
+                      lambda: boot and saw_only_the_log(frames, accepted, decoder))
+
+
+def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[str, float],
+               odo: Odo, power_up: Callable[[], bool] = lambda: False) -> Kept:
+    """``kept_check``'s rule on the samples and encoder frames ``seen`` (poses, frames, each
+    sample's ODOM_POSE_Y bus time s), from a log or heard live (``host.judge.livekept``): the
+    APPLY took effect after encoder frame ``c`` (an index into the frames) with ``staged``;
+    ``power_up()``: the frames start at the firmware's power-up (its pose (0, 0, 0) there)."""
+    poses, enc, sent_s = seen
     before, after = _around(poses, c)
     voiced = _voiced(sent_s, enc.cycle_s, before, after)
     start = _sample(poses, before) if before is not None else None
-    if before is None and boot and saw_only_the_log(frames, accepted, decoder):
+    if before is None and power_up():
         start = (0, (0.0, 0.0, 0.0))  # applied before two poses: from its power-up pose
     if start is None:
         return ("fewer than two on-board poses before the APPLY in this firmware life, and its "
@@ -141,40 +163,35 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
     if voiced is None:
         return ("the firmware silent (a stall) between the poses around the APPLY: its steps "
                 "over the frames it missed are not the reference's")
-    return _checked(poses, enc, c, (before, after), start, cut, robot, integrator,
-                    max_wheel_speed_mm_s, voiced)
+    return _checked(poses, enc, c, (before, after), start, staged, odo, voiced)
 
 
 def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int],
-             start: tuple[int, tuple[float, float, float]], cut: SetPoseCut,
-             robot: RobotProfile, integrator: str, max_wheel_speed_mm_s: SpeedBound,
-             voiced: tuple[int, int]) -> Kept:
+             start: tuple[int, tuple[float, float, float]], staged: dict[str, float],
+             odo: Odo, voiced: tuple[int, int]) -> Kept:
     """``kept_check`` from ``start`` (the last sample before the APPLY's frame ``c``, or the
     power-up pose when ``around``'s first is None) to the first sample after it; narrowed by
     the samples ``voiced`` (first, last) alone."""
     before, after = around
     sides = ([] if before is None else [before - 1]) + [after]
-    if not all(_settled(poses, i, enc, robot, integrator, max_wheel_speed_mm_s) for i in sides):
+    if not all(_settled(poses, i, enc, odo) for i in sides):
         return ("the firmware not seen stepping plainly around the APPLY (after a stall: poses "
                 "naming backlog frames, merged steps)")
-    steps = _plain_steps(enc, start[0], int(poses.enc[after]), robot, max_wheel_speed_mm_s)
+    steps = _plain_steps(enc, start[0], int(poses.enc[after]), odo)
     if steps is None:
         return ("the encoder frames between the poses around the APPLY are not plain steps (a "
                 "gap in their sequence, a refused, re-primed or twinned step)")
-    judged = _judged(start, _sample(poses, after), steps, c - start[0], cut.staged,
-                     Geometry.of(robot), integrator, exact_start=before is None)
+    judged = _judged(start, _sample(poses, after), steps, c - start[0], staged, odo.geometry,
+                     odo.integrator, exact_start=before is None)
     if judged["passed"] and before is not None:  # narrowed by more samples on each side
-        judged["passed"] = _overlap(poses, (before, after), c, enc, cut.staged, robot,
-                                    integrator, max_wheel_speed_mm_s, voiced)
+        judged["passed"] = _overlap(poses, (before, after), c, enc, staged, odo, voiced)
     elif judged["passed"]:  # from the power-up pose: narrowed by more samples after the APPLY
-        judged["passed"] = _from_power_up(poses, after, c, enc, cut.staged, robot, integrator,
-                                          max_wheel_speed_mm_s, voiced[1])
-    return {"fields_kept": [name for name in FIELDS if name not in cut.staged], **judged}
+        judged["passed"] = _from_power_up(poses, after, c, enc, staged, odo, voiced[1])
+    return {"fields_kept": [name for name in FIELDS if name not in staged], **judged}
 
 
 def _overlap(poses: Poses, around: tuple[int, int], c: int, enc: Encoders,
-             staged: dict[str, float], robot: RobotProfile, integrator: str,
-             max_wheel_speed_mm_s: SpeedBound, voiced: tuple[int, int]) -> bool:
+             staged: dict[str, float], odo: Odo, voiced: tuple[int, int]) -> bool:
     """Whether the pose at the APPLY's frame ``c`` that up to ``NARROW_SAMPLES`` samples on
     each side allow (each sample moved to ``c`` by the reference's steps: an interval of its
     rounding, half an LSB each way, widened by its heading's rounding over the motion)
@@ -184,11 +201,10 @@ def _overlap(poses: Poses, around: tuple[int, int], c: int, enc: Encoders,
     before, after = around
     first = max(voiced[0], before - NARROW_SAMPLES + 1)
     last = min(voiced[1], after + NARROW_SAMPLES - 1)
-    steps = _plain_steps(enc, int(poses.enc[first]), int(poses.enc[last]), robot,
-                         max_wheel_speed_mm_s)
+    steps = _plain_steps(enc, int(poses.enc[first]), int(poses.enc[last]), odo)
     if steps is None:
         return True
-    rel = _relative(steps, robot, integrator)
+    rel = _relative(steps, odo)
     base = int(poses.enc[first])
     sides = [_at_cut(poses, range(first, before + 1), c - base, base, rel),
              _at_cut(poses, range(after, last + 1), c - base, base, rel)]
@@ -200,8 +216,7 @@ def _overlap(poses: Poses, around: tuple[int, int], c: int, enc: Encoders,
 
 
 def _from_power_up(poses: Poses, after: int, c: int, enc: Encoders, staged: dict[str, float],
-                   robot: RobotProfile, integrator: str, max_wheel_speed_mm_s: SpeedBound,
-                   voiced_last: int) -> bool:
+                   odo: Odo, voiced_last: int) -> bool:
     """``_overlap`` for an APPLY judged from the power-up pose (before the new firmware's
     second pose): the pose at the APPLY's frame ``c`` is then known exactly (the reference
     from (0, 0, 0) at the life's first encoder frame), a point that the intervals of up to
@@ -209,21 +224,21 @@ def _from_power_up(poses: Poses, after: int, c: int, enc: Encoders, staged: dict
     passed the one sample's rounding). True when those samples do not step plainly or
     disagree among themselves. Up to ``voiced_last`` (before a later stall)."""
     last = min(voiced_last, after + NARROW_SAMPLES - 1)
-    steps = _plain_steps(enc, 0, int(poses.enc[last]), robot, max_wheel_speed_mm_s)
+    steps = _plain_steps(enc, 0, int(poses.enc[last]), odo)
     if steps is None:
         return True
-    rel = _relative(steps, robot, integrator)
+    rel = _relative(steps, odo)
     highs = _at_cut(poses, range(after, last + 1), c, 0, rel)
     if highs is None:
         return True
     return _agree([(float(v[c]), float(v[c])) for v in rel], highs, staged)
 
 
-def _relative(steps: tuple[np.ndarray, np.ndarray], robot: RobotProfile,
-              integrator: str) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _relative(steps: tuple[np.ndarray, np.ndarray],
+              odo: Odo) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The reference's pose (x m, y m, heading rad) at each frame of ``steps`` (element k:
     after k steps) from (0, 0, 0) at their first."""
-    rel = integrate(*steps, Geometry.of(robot), integrator)
+    rel = integrate(*steps, odo.geometry, odo.integrator)
     rel_x, rel_y, rel_h = (np.concatenate(([0.0], v)) for v in (rel.x_m, rel.y_m,
                                                                 rel.heading_rad))
     return rel_x, rel_y, rel_h
@@ -285,16 +300,14 @@ def _sample(poses: Poses, i: int) -> tuple[int, tuple[float, float, float]]:
                                float(poses.heading_rad[i]))
 
 
-def _settled(poses: Poses, i: int, enc: Encoders, robot: RobotProfile, integrator: str,
-             max_wheel_speed_mm_s: SpeedBound) -> bool:
+def _settled(poses: Poses, i: int, enc: Encoders, odo: Odo) -> bool:
     """Whether sample ``i + 1`` is sample ``i`` moved by the plain steps between them (a pose
     resolved to the wrong encoder frame after a silence, or a firmware taking merged steps
     after a stall, is not: the samples there cannot pin a jump)."""
-    steps = _plain_steps(enc, int(poses.enc[i]), int(poses.enc[i + 1]), robot,
-                         max_wheel_speed_mm_s)
+    steps = _plain_steps(enc, int(poses.enc[i]), int(poses.enc[i + 1]), odo)
     return steps is not None and bool(_judged(
-        _sample(poses, i), _sample(poses, i + 1), steps, 0, {}, Geometry.of(robot),
-        integrator)["passed"])
+        _sample(poses, i), _sample(poses, i + 1), steps, 0, {}, odo.geometry,
+        odo.integrator)["passed"])
 
 
 def _voiced(sent_s: FloatArray, cycle_s: float | None, before: int | None,
@@ -326,8 +339,8 @@ def _around(poses: Poses, c: int) -> tuple[int | None, int | None]:
             int(after[0]) if len(after) > 1 else None)
 
 
-def _plain_steps(enc: Encoders, b: int, a: int, robot: RobotProfile,
-                 max_wheel_speed_mm_s: SpeedBound) -> tuple[np.ndarray, np.ndarray] | None:
+def _plain_steps(enc: Encoders, b: int, a: int,
+                 odo: Odo) -> tuple[np.ndarray, np.ndarray] | None:
     """The count steps from encoder frame ``b`` to ``a`` (element k: into ``b + k + 1``) when
     they are the plain ones: consecutive frames, none refused or re-primed, no twin."""
     if np.any(np.diff(enc.seq[b:a + 1]) != 1):
@@ -339,8 +352,7 @@ def _plain_steps(enc: Encoders, b: int, a: int, robot: RobotProfile,
                    left=enc.left[part], right=enc.right[part],
                    timestamp_s=enc.timestamp_s[part], cycle_s=enc.cycle_s,
                    uptime=None if enc.uptime is None else enc.uptime[part])
-    steps = firmware_steps(sub, 0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
-                           max_wheel_speed_mm_s)
+    steps = firmware_steps(sub, 0, odo.geometry, odo.bits, odo.max_wheel_speed_mm_s)
     if steps.refused or steps.reprimed or len(steps.d_left) != a - b:
         return None
     return steps.d_left, steps.d_right
