@@ -192,9 +192,11 @@ def test_a_bare_apply_after_a_reboot_applies_nothing_staged_before_it(
     assert monitor.health(messages[-1].timestamp)["state"] == "OK"
 
 
-def _live(messages: tuple[can.Message, ...]) -> tuple[BusMonitor, RobotTelemetry]:
-    monitor = BusMonitor(PMIR, "exact")
-    bridge = RobotTelemetry("r1", Geometry.of(PMIR), "exact", counter_bits=PMIR.counter_bits)
+def _live(messages: tuple[can.Message, ...], profile: Any = PMIR,
+          integrator: str = "exact") -> tuple[BusMonitor, RobotTelemetry]:
+    monitor = BusMonitor(profile, integrator)
+    bridge = RobotTelemetry("r1", Geometry.of(profile), integrator,
+                            counter_bits=profile.counter_bits)
     for msg in messages:
         monitor.feed(msg, now_s=msg.timestamp)
         bridge.feed(msg)
@@ -327,6 +329,10 @@ def test_bare_applies_all_through_a_drive_are_each_judged_and_pass(
     assert len(checks) == len(ticks)
     assert all(check is not None and check["passed"] for check in checks)
     assert whole.passed
+    monitor, bridge = _live(messages, profile, integrator)  # the same check live: no false FAIL
+    for judge in (monitor, bridge):
+        assert (judge.kept.made, judge.kept.not_made, judge.kept.failed) == (len(ticks), 0, 0)
+        assert judge.tracker.wrongs.count == 0
     assert json.dumps(analyze_file(path, profile, integrator, chunk_frames=97)) == json.dumps(
         whole.report)
 
@@ -555,9 +561,11 @@ def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
     stall is not judged and says why (before: analyze FAILed it, 0.03-0.07 mm, the reference's
     fine steps across the stall against the firmware's merged ones); 8 ticks after, its check
     is made from the poses after the stall alone, and passes, and a wrong firmware moving X by
-    -1.22 LSB there FAILs. cantools: the firmware was silent 150 ms before the APPLY; the
-    wrong one's X after the APPLY is the no-APPLY drive's minus 1 or 2 LSB, before it the
-    same."""
+    -1.22 LSB there FAILs, and the live judges make the same check and latch a POSE WRONG
+    episode (before, the monitor and the bridge stayed OK: the jump hid in the fit of their
+    reference's start, placed after the stall). cantools: the firmware was silent 150 ms
+    before the APPLY; the wrong one's X after the APPLY is the no-APPLY drive's minus 1 or 2
+    LSB, before it the same."""
     right = _rebooted(0, apply_at, 0, STALL)
     at = _apply_ack(right, fr.ODOM_SET_POSE_ID)
     sent_s = [m.timestamp for m in right[:at] if m.arbitration_id == fr.ODOM_POSE_Y_ID]
@@ -587,3 +595,16 @@ def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
     assert not event["kept"]["passed"]
     assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
         whole.report)
+    for messages, ok in ((wrong, False), (right, True)):
+        _assert_live_kept(messages, ok)
+
+
+def _assert_live_kept(messages: tuple[can.Message, ...], ok: bool) -> None:
+    """The monitor's model and the bridge make ``analyze``'s check of what the one APPLY kept
+    (``livekept``): it passes when ``ok``; else it fails and latches a POSE WRONG episode
+    (the wrong firmware's jump 8 ticks after a stall: before, both were OK, no episode)."""
+    monitor, bridge = _live(messages)
+    for judge in (monitor, bridge):
+        assert (judge.tracker.wrongs.count > 0) is not ok
+        [event] = [e for e in judge.events if e["kind"] == "set_pose"]
+        assert event["kept"]["passed"] is ok
