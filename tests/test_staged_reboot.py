@@ -522,20 +522,19 @@ def test_a_bare_apply_just_after_a_reboot_that_moves_the_pose_a_little_fails_eve
     ("hole", "the encoder frames between the poses around the APPLY are not plain steps"),
     ("end", "fewer than two on-board poses after the APPLY")])
 def test_a_bare_apply_left_unjudged_says_why(case: str, why: str, tmp_path: Path) -> None:
-    """The correct firmware's bare APPLY after a reboot, in a log whose recorder lost the
-    WHEEL_ENCODERS frame just before the APPLY's ACK (cantools: one COUNTER skipped there), or
-    sent 2 ticks before the log ends (one pose after it): the check of what it kept cannot be
+    """The correct firmware's bare APPLY after a reboot, in a log whose recorder lost the two
+    WHEEL_ENCODERS frames just before the APPLY's ACK (cantools: two COUNTERs skipped there),
+    or sent 2 ticks before the log ends (one pose after it): the check of what it kept cannot be
     made, and the set-pose event says why (``kept_not_judged``, and its detail), whole and
     streamed; the life is judged by its fit (PASS). Before, ``kept`` was null and nothing
-    said why."""
+    said why. (One frame lost is judged: the next test.)"""
     messages = drive("set_pose", False, 498 if case == "end" else APPLY_AT)
     at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
     if case == "hole":
-        lost = max(k for k in range(at) if messages[k].arbitration_id == fr.WHEEL_ENCODERS_ID)
-        messages = messages[:lost] + messages[lost + 1:]
+        messages = _lost(messages, at, (1, 2))
         counters = [int(_decoded(m)["COUNTER"]) for m in messages
                     if m.arbitration_id == fr.WHEEL_ENCODERS_ID]
-        assert np.count_nonzero(np.diff(counters) % 16 != 1) == 1
+        assert sorted(np.diff(counters) % 16)[-2:] == [1, 3]  # one hole of two frames
     else:
         assert sum(m.arbitration_id == fr.ODOM_POSE_X_ID for m in messages[at:]) == 1
     path = _written(messages, tmp_path / f"{case}.log")
@@ -547,6 +546,49 @@ def test_a_bare_apply_left_unjudged_says_why(case: str, why: str, tmp_path: Path
     assert f"not checked: {why}" in event["detail"]
     assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
         whole.report)
+
+
+def _lost(messages: tuple[can.Message, ...], at: int,
+          back: tuple[int, ...]) -> tuple[can.Message, ...]:
+    """``messages`` less the WHEEL_ENCODERS frames ``back`` (1: the last) before position
+    ``at`` (what a recorder that dropped them logged)."""
+    encoders = [k for k in range(at) if messages[k].arbitration_id == fr.WHEEL_ENCODERS_ID]
+    gone = {encoders[-k] for k in back}
+    return tuple(m for k, m in enumerate(messages) if k not in gone)
+
+
+@pytest.mark.parametrize("back", [1, 3])
+@pytest.mark.parametrize("kept", [False, True])
+def test_an_apply_across_a_frame_the_recorder_lost_is_judged(
+    kept: bool, back: int, tmp_path: Path
+) -> None:
+    """The recorder lost one WHEEL_ENCODERS frame (the last, or the third last, before the
+    APPLY's ACK; cantools: one COUNTER skipped) of the staged-reboot drive: the check of what
+    the bare APPLY kept is made across the hole, its bound widened by the merged step's
+    (``gapbound``: a few mm for pmir). The correct firmware PASSes, its check made and passed;
+    the wrong one that kept its staging across the reset (cantools: a 1.1 m jump) FAILs whole
+    and streamed, the jump named, and the live judges latch POSE WRONG. Before, the check was
+    skipped there (not plain steps) and analyze PASSed the wrong firmware by its fit."""
+    messages = drive("set_pose", kept)
+    at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
+    jumped_m = _pose_around(messages, at)
+    assert (jumped_m > 1.0) is kept
+    messages = _lost(messages, at, (back,))
+    counters = [int(_decoded(m)["COUNTER"]) for m in messages
+                if m.arbitration_id == fr.WHEEL_ENCODERS_ID]
+    assert sorted(np.diff(counters) % 16)[-2:] == [1, 2]  # one frame lost
+    path = _written(messages, tmp_path / "hole.log")
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert whole.passed is not kept
+    [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+    assert event["kept"]["passed"] is not kept
+    assert event["kept"]["bound_m"] < 5e-3
+    assert abs(event["kept"]["position_jump_m"] - jumped_m) < ONE_TICK_M
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+    monitor, bridge = _live(messages)
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert (tracker.wrongs.count > 0) is kept
 
 
 STALL = (330, 345)  # ticks the MCU runs none (150 ms): it takes the frames it missed merged

@@ -34,8 +34,8 @@ nothing over the path), and up to ``NARROW_SAMPLES`` samples after the APPLY nar
 
 Not judged (``kept_check`` says why, in words: the event's ``kept_not_judged``): two samples
 around C within ``WINDOW_FRAMES`` of it in the firmware's life are not there, or the steps
-between them are not the plain ones (a gap of the encoder sequence, a refused or re-primed
-step, a twin), or the firmware is not seen stepping plainly on each side (the sample before the
+between them are not the plain ones (a gap of the encoder sequence of more than one frame, or
+at a set-pose that staged a field, a refused or re-primed step, a twin), or the firmware is not seen stepping plainly on each side (the sample before the
 last one before C, and the one after the first after C, must continue them by the plain steps
 between, nothing staged: after a stall the first poses name backlog frames the window cannot
 resolve, and merged steps leave the fine reference): the fitted start alone judges that life
@@ -45,6 +45,12 @@ one before C and the one after the first after C leaves the APPLY unjudged too (
 correct firmware's APPLY 1-3 ticks after a 150 ms stall FAILed, 0.03-0.07 mm); one further
 off only bounds the samples that narrow the check (``_voiced``: those after it, less the
 first), so an APPLY a few poses after a stall is judged from the poses after it.
+A gap of one frame (the recorder lost a frame the firmware took, or the firmware took two
+periods merged) between the samples around a bare APPLY, or between two samples on a side,
+is judged across: the reference takes its merged step, and the bound is widened by how far the
+firmware's position can lie from it (``gapbound.gap_allowance_m``, ``_gap_m``: a few mm for
+pmir; the heading after it is exact): a firmware that applied a staging it had lost jumps far
+beyond (before, skipped, and its fitted life PASSed a 1.1 m jump).
 The window is read alike from a whole log and from a streamed one (its frames only), so
 ``analyze`` and ``analyze_file`` give the same check bit for bit."""
 
@@ -57,6 +63,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.gapbound import gap_allowance_m, period_bounds
 from odocan.host.judge.livesetpose import FIELDS
 from odocan.host.judge.powerup import saw_only_the_log
 from odocan.host.judge.reference import Geometry, SpeedBound, integrate
@@ -177,12 +184,13 @@ def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int]
     if not all(_settled(poses, i, enc, odo) for i in sides):
         return ("the firmware not seen stepping plainly around the APPLY (after a stall: poses "
                 "naming backlog frames, merged steps)")
-    steps = _plain_steps(enc, start[0], int(poses.enc[after]), odo)
+    steps = _plain_steps(enc, start[0], int(poses.enc[after]), odo, one_gap=not staged)
     if steps is None:
         return ("the encoder frames between the poses around the APPLY are not plain steps (a "
                 "gap in their sequence, a refused, re-primed or twinned step)")
     judged = _judged(start, _sample(poses, after), steps, c - start[0], staged, odo.geometry,
-                     odo.integrator, exact_start=before is None)
+                     odo.integrator, exact_start=before is None,
+                     gap_m=_gap_m(enc, (start[0], int(poses.enc[after])), steps, odo))
     if judged["passed"] and before is not None:  # narrowed by more samples on each side
         judged["passed"] = _overlap(poses, (before, after), c, enc, staged, odo, voiced)
     elif judged["passed"]:  # from the power-up pose: narrowed by more samples after the APPLY
@@ -304,10 +312,11 @@ def _settled(poses: Poses, i: int, enc: Encoders, odo: Odo) -> bool:
     """Whether sample ``i + 1`` is sample ``i`` moved by the plain steps between them (a pose
     resolved to the wrong encoder frame after a silence, or a firmware taking merged steps
     after a stall, is not: the samples there cannot pin a jump)."""
-    steps = _plain_steps(enc, int(poses.enc[i]), int(poses.enc[i + 1]), odo)
+    b, a = int(poses.enc[i]), int(poses.enc[i + 1])
+    steps = _plain_steps(enc, b, a, odo, one_gap=True)
     return steps is not None and bool(_judged(
         _sample(poses, i), _sample(poses, i + 1), steps, 0, {}, odo.geometry,
-        odo.integrator)["passed"])
+        odo.integrator, gap_m=_gap_m(enc, (b, a), steps, odo))["passed"])
 
 
 def _voiced(sent_s: FloatArray, cycle_s: float | None, before: int | None,
@@ -339,11 +348,14 @@ def _around(poses: Poses, c: int) -> tuple[int | None, int | None]:
             int(after[0]) if len(after) > 1 else None)
 
 
-def _plain_steps(enc: Encoders, b: int, a: int,
-                 odo: Odo) -> tuple[np.ndarray, np.ndarray] | None:
+def _plain_steps(enc: Encoders, b: int, a: int, odo: Odo, *,
+                 one_gap: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
     """The count steps from encoder frame ``b`` to ``a`` (element k: into ``b + k + 1``) when
-    they are the plain ones: consecutive frames, none refused or re-primed, no twin."""
-    if np.any(np.diff(enc.seq[b:a + 1]) != 1):
+    they are the plain ones: consecutive frames, none refused or re-primed, no twin.
+    ``one_gap``: one gap of a single frame allowed (a merged step, ``_gap_m``)."""
+    periods = np.diff(enc.seq[b:a + 1])
+    gaps = periods[periods != 1]
+    if len(gaps) > int(one_gap) or np.any(gaps != 2):
         return None
     if enc.twinned is not None and bool(np.any(enc.twinned[b:a + 1])):
         return None
@@ -356,6 +368,23 @@ def _plain_steps(enc: Encoders, b: int, a: int,
     if steps.refused or steps.reprimed or len(steps.d_left) != a - b:
         return None
     return steps.d_left, steps.d_right
+
+
+def _gap_m(enc: Encoders, frames: tuple[int, int], steps: tuple[np.ndarray, np.ndarray],
+           odo: Odo) -> float:
+    """How far (m) the firmware's position can lie from the reference's after ``steps`` (from
+    encoder frame ``frames[0]`` to ``frames[1]``): 0 when plain; across a gap of one frame (the
+    recorder lost a frame the firmware took, or the firmware took the two periods merged) the
+    merged step's bound, ``gapbound.gap_allowance_m`` (the heading after it is exact: the
+    counts' total is known)."""
+    periods = np.diff(enc.seq[frames[0]:frames[1] + 1])
+    at = np.flatnonzero(periods != 1)
+    if len(at) == 0:
+        return 0.0
+    k = int(at[0])
+    bounds = period_bounds(odo.geometry, odo.geometry.speed_bound_mm_s(odo.max_wheel_speed_mm_s))
+    return gap_allowance_m(int(steps[0][k]), int(steps[1][k]), int(periods[k]), odo.geometry,
+                           odo.integrator, bounds)
 
 
 def _moved(pose: tuple[float, float, float], d_left: np.ndarray, d_right: np.ndarray,
@@ -372,11 +401,12 @@ def _moved(pose: tuple[float, float, float], d_left: np.ndarray, d_right: np.nda
 def _judged(before: tuple[int, tuple[float, float, float]],
             after: tuple[int, tuple[float, float, float]], steps: tuple[np.ndarray, np.ndarray],
             to_cut: int, staged: dict[str, float], geometry: Geometry, integrator: str, *,
-            exact_start: bool = False) -> dict[str, Any]:
+            exact_start: bool = False, gap_m: float = 0.0) -> dict[str, Any]:
     """The pose ``before`` (encoder frame, pose) moved by the ``to_cut`` steps to the APPLY's
     frame, the staged fields set there, moved by the rest to the sample ``after``: how far that
     sample is. ``exact_start``: ``before`` is the power-up pose, no sample: only ``after``'s
-    rounding is left (half an LSB, of position and of heading)."""
+    rounding is left (half an LSB, of position and of heading). ``gap_m``: a merged step's
+    bound on the position (``_gap_m``)."""
     d_left, d_right = steps
     x, y, h, head_m = _moved(before[1], d_left[:to_cut], d_right[:to_cut], geometry, integrator)
     start = (staged.get("X", x), staged.get("Y", y), staged.get("HEADING", h))
@@ -388,6 +418,7 @@ def _judged(before: tuple[int, tuple[float, float, float]],
     else:  # two samples' roundings, and the start heading's over the path
         bound_m = POSITION_LSB_M + HEADING_LSB_RAD * (head_m + tail_m) + _FLOAT_M
         bound_rad = HEADING_LSB_RAD + _FLOAT_RAD
+    bound_m += gap_m
     passed = max(abs(dx_m), abs(dy_m)) <= bound_m and abs(dh_rad) <= bound_rad
     return {"encoder_frames": after[0] - before[0],
             "position_jump_m": math.hypot(dx_m, dy_m), "heading_jump_rad": abs(dh_rad),
