@@ -599,13 +599,15 @@ def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
     apply_at: int, tmp_path: Path
 ) -> None:
     """The MCU stalls 150 ms, then gets a bare APPLY 1, 3 or 8 ticks after (no reboot). The
-    correct firmware PASSes, whole and streamed: an APPLY whose poses around it straddle the
-    stall is not judged and says why (before: analyze FAILed it, 0.03-0.07 mm, the reference's
-    fine steps across the stall against the firmware's merged ones); 8 ticks after, its check
-    is made from the poses after the stall alone, and passes, and a wrong firmware moving X by
-    -1.22 LSB there FAILs, and the live judges make the same check and latch a POSE WRONG
-    episode (before, the monitor and the bridge stayed OK: the jump hid in the fit of their
-    reference's start, placed after the stall). cantools: the firmware was silent 150 ms
+    correct firmware PASSes, whole and streamed: an APPLY with no pose between the stall and it
+    is not judged and says why (before: analyze FAILed it, 0.03-0.07 mm, the reference's fine
+    steps across the stall against the firmware's merged ones); 3 ticks after, its check starts
+    from the first pose after the stall (it names the latest encoder frame: the firmware caught
+    up there; before, not judged), 8 ticks after from the poses after the stall alone; each
+    passes, and a wrong firmware moving X by -1.22 LSB there FAILs, and the live judges make
+    the same check and latch a POSE WRONG episode (8 ticks after, before, the monitor and the
+    bridge stayed OK: the jump hid in the fit of their reference's start, placed after the
+    stall). cantools: the firmware was silent 150 ms
     before the APPLY; the wrong one's X after the APPLY is the no-APPLY drive's minus 1 or 2
     LSB, before it the same."""
     right = _rebooted(0, apply_at, 0, STALL)
@@ -616,14 +618,14 @@ def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
     whole = analyze(read_log(path), PMIR, "exact")
     assert whole.passed
     [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
-    if apply_at < 353:
+    if apply_at < 348:
         assert event["kept"] is None
         assert event["kept_not_judged"].startswith("the firmware silent (a stall)")
     else:
         assert event["kept"]["passed"]
     assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
         whole.report)
-    if apply_at < 353:
+    if apply_at < 348:
         return
     plain = _x_by_frame(_rebooted(0, None, 0, STALL))
     wrong = _rebooted(0, apply_at, -(1 << 27), STALL)

@@ -35,16 +35,21 @@ nothing over the path), and up to ``NARROW_SAMPLES`` samples after the APPLY nar
 Not judged (``kept_check`` says why, in words: the event's ``kept_not_judged``): two samples
 around C within ``WINDOW_FRAMES`` of it in the firmware's life are not there, or the steps
 between them are not the plain ones (a gap of the encoder sequence of more than one frame, or
-at a set-pose that staged a field, a refused or re-primed step, a twin), or the firmware is not seen stepping plainly on each side (the sample before the
-last one before C, and the one after the first after C, must continue them by the plain steps
-between, nothing staged: after a stall the first poses name backlog frames the window cannot
-resolve, and merged steps leave the fine reference): the fitted start alone judges that life
-then. A stall (the firmware silent ``SILENCE_CYCLES`` encoder cycles on the bus: it takes the
-frames it missed merged, not in the reference's fine steps) between the sample before the last
-one before C and the one after the first after C leaves the APPLY unjudged too (before, a
-correct firmware's APPLY 1-3 ticks after a 150 ms stall FAILed, 0.03-0.07 mm); one further
-off only bounds the samples that narrow the check (``_voiced``: those after it, less the
-first), so an APPLY a few poses after a stall is judged from the poses after it.
+at a set-pose that staged a field, a refused or re-primed step, a twin), or the firmware is not
+seen stepping plainly on each side (the sample before the last one before C, and the one after
+the first after C, must continue them by the plain steps between, nothing staged: after a stall
+the first poses name backlog frames the window cannot resolve, and merged steps leave the fine
+reference): the fitted start alone judges that life then. A stall (the firmware silent
+``SILENCE_CYCLES`` encoder cycles on the bus: it takes the frames it missed merged, not in the
+reference's fine steps) between the sample before the last one before C and the one after the
+first after C leaves the APPLY unjudged too (before, a correct firmware's APPLY 1-3 ticks after
+a 150 ms stall FAILed, 0.03-0.07 mm); one further off only bounds the samples that narrow the
+check (``_voiced``: those after it, less the first), so an APPLY a few poses after a stall is
+judged from the poses after it. When the last sample before C is the first after the stall and
+names the latest encoder frame heard before it (``_caught_up``: the firmware took every frame
+it missed, merged, and names no backlog frame), the firmware and the reference agree again
+there: the check starts from it (the side before C is that one sample), so an APPLY 3-4 ticks
+after a 150 ms stall is judged too; one with no sample between the stall and C is not.
 A gap of one frame (the recorder lost a frame the firmware took, or the firmware took two
 periods merged) between the samples around a bare APPLY, or between two samples on a side,
 is judged across: the reference takes its merged step, and the bound is widened by how far the
@@ -159,6 +164,10 @@ def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[st
     poses, enc, sent_s = seen
     before, after = _around(poses, c)
     voiced = _voiced(sent_s, enc.cycle_s, before, after)
+    caught = voiced is None and _caught_up(seen, before, after)
+    if caught and before is not None:  # the firmware caught up at ``before``: the start
+        later = _voiced(sent_s, enc.cycle_s, before + 1, after)
+        voiced = None if later is None else (before, later[1])
     start = _sample(poses, before) if before is not None else None
     if before is None and power_up():
         start = (0, (0.0, 0.0, 0.0))  # applied before two poses: from its power-up pose
@@ -170,17 +179,18 @@ def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[st
     if voiced is None:
         return ("the firmware silent (a stall) between the poses around the APPLY: its steps "
                 "over the frames it missed are not the reference's")
-    return _checked(poses, enc, c, (before, after), start, staged, odo, voiced)
+    return _checked(poses, enc, c, (before, after), start, staged, odo, voiced,
+                    caught=caught)
 
 
 def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int],
              start: tuple[int, tuple[float, float, float]], staged: dict[str, float],
-             odo: Odo, voiced: tuple[int, int]) -> Kept:
+             odo: Odo, voiced: tuple[int, int], *, caught: bool = False) -> Kept:
     """``kept_check`` from ``start`` (the last sample before the APPLY's frame ``c``, or the
     power-up pose when ``around``'s first is None) to the first sample after it; narrowed by
     the samples ``voiced`` (first, last) alone."""
     before, after = around
-    sides = ([] if before is None else [before - 1]) + [after]
+    sides = ([] if before is None or caught else [before - 1]) + [after]
     if not all(_settled(poses, i, enc, odo) for i in sides):
         return ("the firmware not seen stepping plainly around the APPLY (after a stall: poses "
                 "naming backlog frames, merged steps)")
@@ -337,6 +347,23 @@ def _voiced(sent_s: FloatArray, cycle_s: float | None, before: int | None,
     earlier, later = gaps[gaps < low], gaps[gaps > after]
     return (int(earlier[-1]) + 2 if len(earlier) else 0,
             int(later[0]) if len(later) else last)
+
+
+def _caught_up(seen: tuple[Poses, Encoders, FloatArray], before: int | None,
+               after: int | None) -> bool:
+    """Whether the last sample ``before`` the APPLY is the first after a stall (the only
+    silence between it and the sample ``after``'s successor) and names the latest encoder
+    frame heard before its ODOM_POSE_Y: the firmware had taken every frame it missed (merged:
+    no backlog frame named), its pose there is where the reference and it agree again, and
+    plain steps follow. (An APPLY 2-3 ticks after a stall was left unjudged.)"""
+    poses, enc, sent_s = seen
+    if before is None or after is None or enc.cycle_s is None:
+        return False
+    silent = np.flatnonzero(np.diff(sent_s) >= SILENCE_CYCLES * enc.cycle_s)
+    if [int(g) for g in silent if before - 1 <= g <= after] != [before - 1]:
+        return False
+    named = int(poses.enc[before])
+    return not bool(np.any(enc.timestamp_s[named + 1:] <= sent_s[before]))
 
 
 def _around(poses: Poses, c: int) -> tuple[int | None, int | None]:
