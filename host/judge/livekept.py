@@ -12,7 +12,8 @@ check as ``analyze``'s runs on them (the frames between them from the live windo
 FAILs latches a POSE WRONG episode (``PoseWrongs.jumped``) and is named in the ``set_pose``
 event (``kept``, as ``analyze``'s event; ``kept_not_judged``: why not made). A reboot
 (``forget``) ends the life: the samples before it are not used, a check still gathering is made
-with what it has.
+with what it has; a config applied (another geometry or integrator) likewise, the check then
+not made (said why).
 
 The APPLY took effect after frame ``c``, the latest encoder frame heard before it on the bus
 (``SetPoseFollower``). A set-pose the bridge sent itself is not heard back: when frames came
@@ -36,6 +37,7 @@ from odocan.host.judge.setposekept import NARROW_SAMPLES, Kept, Odo, judge_kept
 
 if TYPE_CHECKING:
     from odocan.host.judge.livepose import Sample
+    from odocan.host.judge.reference import Geometry
     from odocan.host.judge.tracking import PoseTracker
 
 RECENT = NARROW_SAMPLES + 4  # samples kept before an APPLY: the check's, and a stall before them
@@ -65,6 +67,7 @@ class KeptWatch:
         self._open: list[_Open] = []
         self._due: list[_Open] = []  # ended by a reboot: made with what they have
         self.made, self.not_made, self.failed = 0, 0, 0  # checks (the events are a window)
+        self._robot: tuple[Geometry, str | None] | None = None  # the samples' robot
 
     def forget(self) -> None:
         """A reboot the judge saw: the samples heard so far are another firmware life's."""
@@ -91,6 +94,13 @@ class KeptWatch:
         made once it has ``NARROW_SAMPLES`` + 1 samples after its APPLY."""
         if self._floor is None:
             self._floor = tracker.enc_seq
+        if (tracker.geometry, tracker.integrator) != self._robot:  # a config applied
+            self._robot = (tracker.geometry, tracker.integrator)
+            self._recent.clear()
+            for check in self._open:
+                check.why = "a config applied between the poses around the APPLY"
+            self._due += self._open
+            self._open = []
         for sample in samples:
             seq = sample.pose.seq
             if seq <= self._last_seq or seq < self._floor:
