@@ -192,9 +192,11 @@ def test_a_bare_apply_after_a_reboot_applies_nothing_staged_before_it(
     assert monitor.health(messages[-1].timestamp)["state"] == "OK"
 
 
-def _live(messages: tuple[can.Message, ...]) -> tuple[BusMonitor, RobotTelemetry]:
-    monitor = BusMonitor(PMIR, "exact")
-    bridge = RobotTelemetry("r1", Geometry.of(PMIR), "exact", counter_bits=PMIR.counter_bits)
+def _live(messages: tuple[can.Message, ...], profile: Any = PMIR,
+          integrator: str = "exact") -> tuple[BusMonitor, RobotTelemetry]:
+    monitor = BusMonitor(profile, integrator)
+    bridge = RobotTelemetry("r1", Geometry.of(profile), integrator,
+                            counter_bits=profile.counter_bits)
     for msg in messages:
         monitor.feed(msg, now_s=msg.timestamp)
         bridge.feed(msg)
@@ -327,6 +329,10 @@ def test_bare_applies_all_through_a_drive_are_each_judged_and_pass(
     assert len(checks) == len(ticks)
     assert all(check is not None and check["passed"] for check in checks)
     assert whole.passed
+    monitor, bridge = _live(messages, profile, integrator)  # the same check live: no false FAIL
+    for judge in (monitor, bridge):
+        assert (judge.kept.made, judge.kept.not_made, judge.kept.failed) == (len(ticks), 0, 0)
+        assert judge.tracker.wrongs.count == 0
     assert json.dumps(analyze_file(path, profile, integrator, chunk_frames=97)) == json.dumps(
         whole.report)
 
@@ -516,20 +522,19 @@ def test_a_bare_apply_just_after_a_reboot_that_moves_the_pose_a_little_fails_eve
     ("hole", "the encoder frames between the poses around the APPLY are not plain steps"),
     ("end", "fewer than two on-board poses after the APPLY")])
 def test_a_bare_apply_left_unjudged_says_why(case: str, why: str, tmp_path: Path) -> None:
-    """The correct firmware's bare APPLY after a reboot, in a log whose recorder lost the
-    WHEEL_ENCODERS frame just before the APPLY's ACK (cantools: one COUNTER skipped there), or
-    sent 2 ticks before the log ends (one pose after it): the check of what it kept cannot be
+    """The correct firmware's bare APPLY after a reboot, in a log whose recorder lost the two
+    WHEEL_ENCODERS frames just before the APPLY's ACK (cantools: two COUNTERs skipped there),
+    or sent 2 ticks before the log ends (one pose after it): the check of what it kept cannot be
     made, and the set-pose event says why (``kept_not_judged``, and its detail), whole and
     streamed; the life is judged by its fit (PASS). Before, ``kept`` was null and nothing
-    said why."""
+    said why. (One frame lost is judged: the next test.)"""
     messages = drive("set_pose", False, 498 if case == "end" else APPLY_AT)
     at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
     if case == "hole":
-        lost = max(k for k in range(at) if messages[k].arbitration_id == fr.WHEEL_ENCODERS_ID)
-        messages = messages[:lost] + messages[lost + 1:]
+        messages = _lost(messages, at, (1, 2))
         counters = [int(_decoded(m)["COUNTER"]) for m in messages
                     if m.arbitration_id == fr.WHEEL_ENCODERS_ID]
-        assert np.count_nonzero(np.diff(counters) % 16 != 1) == 1
+        assert sorted(np.diff(counters) % 16)[-2:] == [1, 3]  # one hole of two frames
     else:
         assert sum(m.arbitration_id == fr.ODOM_POSE_X_ID for m in messages[at:]) == 1
     path = _written(messages, tmp_path / f"{case}.log")
@@ -543,6 +548,49 @@ def test_a_bare_apply_left_unjudged_says_why(case: str, why: str, tmp_path: Path
         whole.report)
 
 
+def _lost(messages: tuple[can.Message, ...], at: int,
+          back: tuple[int, ...]) -> tuple[can.Message, ...]:
+    """``messages`` less the WHEEL_ENCODERS frames ``back`` (1: the last) before position
+    ``at`` (what a recorder that dropped them logged)."""
+    encoders = [k for k in range(at) if messages[k].arbitration_id == fr.WHEEL_ENCODERS_ID]
+    gone = {encoders[-k] for k in back}
+    return tuple(m for k, m in enumerate(messages) if k not in gone)
+
+
+@pytest.mark.parametrize("back", [1, 3])
+@pytest.mark.parametrize("kept", [False, True])
+def test_an_apply_across_a_frame_the_recorder_lost_is_judged(
+    kept: bool, back: int, tmp_path: Path
+) -> None:
+    """The recorder lost one WHEEL_ENCODERS frame (the last, or the third last, before the
+    APPLY's ACK; cantools: one COUNTER skipped) of the staged-reboot drive: the check of what
+    the bare APPLY kept is made across the hole, its bound widened by the merged step's
+    (``gapbound``: a few mm for pmir). The correct firmware PASSes, its check made and passed;
+    the wrong one that kept its staging across the reset (cantools: a 1.1 m jump) FAILs whole
+    and streamed, the jump named, and the live judges latch POSE WRONG. Before, the check was
+    skipped there (not plain steps) and analyze PASSed the wrong firmware by its fit."""
+    messages = drive("set_pose", kept)
+    at = _apply_ack(messages, fr.ODOM_SET_POSE_ID)
+    jumped_m = _pose_around(messages, at)
+    assert (jumped_m > 1.0) is kept
+    messages = _lost(messages, at, (back,))
+    counters = [int(_decoded(m)["COUNTER"]) for m in messages
+                if m.arbitration_id == fr.WHEEL_ENCODERS_ID]
+    assert sorted(np.diff(counters) % 16)[-2:] == [1, 2]  # one frame lost
+    path = _written(messages, tmp_path / "hole.log")
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert whole.passed is not kept
+    [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
+    assert event["kept"]["passed"] is not kept
+    assert event["kept"]["bound_m"] < 5e-3
+    assert abs(event["kept"]["position_jump_m"] - jumped_m) < ONE_TICK_M
+    assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
+        whole.report)
+    monitor, bridge = _live(messages)
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert (tracker.wrongs.count > 0) is kept
+
+
 STALL = (330, 345)  # ticks the MCU runs none (150 ms): it takes the frames it missed merged
 
 
@@ -551,13 +599,17 @@ def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
     apply_at: int, tmp_path: Path
 ) -> None:
     """The MCU stalls 150 ms, then gets a bare APPLY 1, 3 or 8 ticks after (no reboot). The
-    correct firmware PASSes, whole and streamed: an APPLY whose poses around it straddle the
-    stall is not judged and says why (before: analyze FAILed it, 0.03-0.07 mm, the reference's
-    fine steps across the stall against the firmware's merged ones); 8 ticks after, its check
-    is made from the poses after the stall alone, and passes, and a wrong firmware moving X by
-    -1.22 LSB there FAILs. cantools: the firmware was silent 150 ms before the APPLY; the
-    wrong one's X after the APPLY is the no-APPLY drive's minus 1 or 2 LSB, before it the
-    same."""
+    correct firmware PASSes, whole and streamed: an APPLY with no pose between the stall and it
+    is not judged and says why (before: analyze FAILed it, 0.03-0.07 mm, the reference's fine
+    steps across the stall against the firmware's merged ones); 3 ticks after, its check starts
+    from the first pose after the stall (it names the latest encoder frame: the firmware caught
+    up there; before, not judged), 8 ticks after from the poses after the stall alone; each
+    passes, and a wrong firmware moving X by -1.22 LSB there FAILs, and the live judges make
+    the same check and latch a POSE WRONG episode (8 ticks after, before, the monitor and the
+    bridge stayed OK: the jump hid in the fit of their reference's start, placed after the
+    stall). cantools: the firmware was silent 150 ms
+    before the APPLY; the wrong one's X after the APPLY is the no-APPLY drive's minus 1 or 2
+    LSB, before it the same."""
     right = _rebooted(0, apply_at, 0, STALL)
     at = _apply_ack(right, fr.ODOM_SET_POSE_ID)
     sent_s = [m.timestamp for m in right[:at] if m.arbitration_id == fr.ODOM_POSE_Y_ID]
@@ -566,14 +618,14 @@ def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
     whole = analyze(read_log(path), PMIR, "exact")
     assert whole.passed
     [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
-    if apply_at < 353:
+    if apply_at < 348:
         assert event["kept"] is None
         assert event["kept_not_judged"].startswith("the firmware silent (a stall)")
     else:
         assert event["kept"]["passed"]
     assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
         whole.report)
-    if apply_at < 353:
+    if apply_at < 348:
         return
     plain = _x_by_frame(_rebooted(0, None, 0, STALL))
     wrong = _rebooted(0, apply_at, -(1 << 27), STALL)
@@ -587,3 +639,16 @@ def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
     assert not event["kept"]["passed"]
     assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
         whole.report)
+    for messages, ok in ((wrong, False), (right, True)):
+        _assert_live_kept(messages, ok)
+
+
+def _assert_live_kept(messages: tuple[can.Message, ...], ok: bool) -> None:
+    """The monitor's model and the bridge make ``analyze``'s check of what the one APPLY kept
+    (``livekept``): it passes when ``ok``; else it fails and latches a POSE WRONG episode
+    (the wrong firmware's jump 8 ticks after a stall: before, both were OK, no episode)."""
+    monitor, bridge = _live(messages)
+    for judge in (monitor, bridge):
+        assert (judge.tracker.wrongs.count > 0) is not ok
+        [event] = [e for e in judge.events if e["kind"] == "set_pose"]
+        assert event["kept"]["passed"] is ok

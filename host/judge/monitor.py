@@ -57,6 +57,7 @@ from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livefit import pose_wrong
+from odocan.host.judge.livekept import KeptWatch
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
@@ -120,6 +121,7 @@ class BusMonitor:
         self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=MAX_EVENTS)
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
+        self.kept = KeptWatch()  # what an APPLY kept: analyze's check, live (livekept)
         self.config = ConfigFollower()  # ODOM_CONFIG likewise
         self._config_id = next((m.frame_id for m in self.db.messages
                                 if m.name == "ODOM_CONFIG"), -1)
@@ -163,7 +165,7 @@ class BusMonitor:
         elif status in CRC_RIGHT_REFUSED and message.name == "WHEEL_ENCODERS":
             refused_encoders(self.tracker.twins, message.decode(data, decode_choices=False),
                              timestamp_s, self.tracker.placer.fill)  # a twin, or a gap's frame
-        self.tracker.take_samples()  # judged in ``tracker.vs_reference``
+        self.kept.heard(self.tracker, self.tracker.take_samples())  # judged in vs_reference
 
     def _count_unknown_id(self, can_id: int) -> None:
         key = f"0x{can_id:03X}"
@@ -227,7 +229,8 @@ class BusMonitor:
                                            self._bus_time_s)
             if applied is not None:
                 pose = apply_set_pose(self.tracker, *applied)
-                self.events.append(set_pose_event(self._bus_time_s, pose, applied[1]))
+                event = set_pose_event(self._bus_time_s, pose, applied[1])
+                self.events.append(self.kept.applied(event, *applied, self.tracker.enc_seq))
         elif int(s["REQUEST_ID"]) == self._config_id:
             follow_config_ack(self, self.config, int(s["REQUEST_COUNTER"]),  # the firmware's
                               int(s["RESULT"]) == 0, self._bus_time_s)  # robot: the judges' too
@@ -302,6 +305,7 @@ class BusMonitor:
             self.distance.new_life()
             self.twist.new_life()
             self.set_pose.forget(self._bus_time_s - SAME_TICK_S)  # the new firmware's kept
+            self.kept.forget()
             if lost is not None:
                 self.events.append({"t_s": self._bus_time_s, "kind": "config", "detail": lost})
         elif kind == "two sources":  # no pose is judged from the second one's first summary

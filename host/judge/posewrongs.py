@@ -124,6 +124,20 @@ class PoseWrongs:
         if self.worst is None or episode.size_lsb > self.worst.size_lsb:
             self.worst = episode
 
+    def jumped(self, seq: int, t_s: float, dpos_m: float, dheading_rad: float) -> None:
+        """A set-pose APPLY moved what it kept (``host.judge.livekept``: ``analyze``'s check of
+        the samples around it): an episode of its own, at the first sample after it (frame
+        ``seq``, its ODOM_POSE_Y at ``t_s``), sized by the jump (m, rad)."""
+        if t_s >= self.judged_until_s:
+            return
+        self.close()
+        episode = Episode(t_s, t_s, seq, open=False)
+        episode.add(t_s, dpos_m, dpos_m, dheading_rad)
+        self.count, self.wrong_samples = self.count + 1, self.wrong_samples + 1
+        self.latest.append(episode)
+        if self.worst is None or episode.size_lsb > self.worst.size_lsb:
+            self.worst = episode
+
     def close(self) -> None:
         """The open episode ends (a right sample, or a new reference)."""
         if self._open is not None:

@@ -34,17 +34,28 @@ nothing over the path), and up to ``NARROW_SAMPLES`` samples after the APPLY nar
 
 Not judged (``kept_check`` says why, in words: the event's ``kept_not_judged``): two samples
 around C within ``WINDOW_FRAMES`` of it in the firmware's life are not there, or the steps
-between them are not the plain ones (a gap of the encoder sequence, a refused or re-primed
-step, a twin), or the firmware is not seen stepping plainly on each side (the sample before the
-last one before C, and the one after the first after C, must continue them by the plain steps
-between, nothing staged: after a stall the first poses name backlog frames the window cannot
-resolve, and merged steps leave the fine reference): the fitted start alone judges that life
-then. A stall (the firmware silent ``SILENCE_CYCLES`` encoder cycles on the bus: it takes the
-frames it missed merged, not in the reference's fine steps) between the sample before the last
-one before C and the one after the first after C leaves the APPLY unjudged too (before, a
-correct firmware's APPLY 1-3 ticks after a 150 ms stall FAILed, 0.03-0.07 mm); one further
-off only bounds the samples that narrow the check (``_voiced``: those after it, less the
-first), so an APPLY a few poses after a stall is judged from the poses after it.
+between them are not the plain ones (a gap of the encoder sequence of more than one frame, or
+at a set-pose that staged a field, a refused or re-primed step, a twin), or the firmware is not
+seen stepping plainly on each side (the sample before the last one before C, and the one after
+the first after C, must continue them by the plain steps between, nothing staged: after a stall
+the first poses name backlog frames the window cannot resolve, and merged steps leave the fine
+reference): the fitted start alone judges that life then. A stall (the firmware silent
+``SILENCE_CYCLES`` encoder cycles on the bus: it takes the frames it missed merged, not in the
+reference's fine steps) between the sample before the last one before C and the one after the
+first after C leaves the APPLY unjudged too (before, a correct firmware's APPLY 1-3 ticks after
+a 150 ms stall FAILed, 0.03-0.07 mm); one further off only bounds the samples that narrow the
+check (``_voiced``: those after it, less the first), so an APPLY a few poses after a stall is
+judged from the poses after it. When the last sample before C is the first after the stall and
+names the latest encoder frame heard before it (``_caught_up``: the firmware took every frame
+it missed, merged, and names no backlog frame), the firmware and the reference agree again
+there: the check starts from it (the side before C is that one sample), so an APPLY 3-4 ticks
+after a 150 ms stall is judged too; one with no sample between the stall and C is not.
+A gap of one frame (the recorder lost a frame the firmware took, or the firmware took two
+periods merged) between the samples around a bare APPLY, or between two samples on a side,
+is judged across: the reference takes its merged step, and the bound is widened by how far the
+firmware's position can lie from it (``gapbound.gap_allowance_m``, ``_gap_m``: a few mm for
+pmir; the heading after it is exact): a firmware that applied a staging it had lost jumps far
+beyond (before, skipped, and its fitted life PASSed a 1.1 m jump).
 The window is read alike from a whole log and from a streamed one (its frames only), so
 ``analyze`` and ``analyze_file`` give the same check bit for bit."""
 
@@ -52,11 +63,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.gapbound import gap_allowance_m, period_bounds
 from odocan.host.judge.livesetpose import FIELDS
 from odocan.host.judge.powerup import saw_only_the_log
 from odocan.host.judge.reference import Geometry, SpeedBound, integrate
@@ -87,6 +99,16 @@ _FLOAT_M = 1e-9  # the firmware's Q40 steps against float64 over a few frames, a
 _FLOAT_RAD = 1e-12
 _TURN = 2.0 * math.pi
 Kept = dict[str, Any] | str | None  # the check, why it was not made, or None: all staged
+
+
+class Odo(NamedTuple):
+    """How the firmware steps: its geometry, counter width on the wire (bits), integrator and
+    step bound (``reference_path.firmware_steps``)."""
+
+    geometry: Geometry
+    bits: int
+    integrator: str
+    max_wheel_speed_mm_s: SpeedBound
 
 
 def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
@@ -127,11 +149,27 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
         poses, _, sent_s = onboard_samples(frames, accepted, decoder, enc)
     except AnalysisError:
         return "no on-board poses around the APPLY"
-    c = int(at[0])
+    odo = Odo(Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS), integrator,
+              max_wheel_speed_mm_s)
+    return judge_kept((poses, enc, sent_s), int(at[0]), cut.staged, odo,
+                      lambda: boot and saw_only_the_log(frames, accepted, decoder))
+
+
+def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[str, float],
+               odo: Odo, power_up: Callable[[], bool] = lambda: False) -> Kept:
+    """``kept_check``'s rule on the samples and encoder frames ``seen`` (poses, frames, each
+    sample's ODOM_POSE_Y bus time s), from a log or heard live (``host.judge.livekept``): the
+    APPLY took effect after encoder frame ``c`` (an index into the frames) with ``staged``;
+    ``power_up()``: the frames start at the firmware's power-up (its pose (0, 0, 0) there)."""
+    poses, enc, sent_s = seen
     before, after = _around(poses, c)
     voiced = _voiced(sent_s, enc.cycle_s, before, after)
+    caught = voiced is None and _caught_up(seen, before, after)
+    if caught and before is not None:  # the firmware caught up at ``before``: the start
+        later = _voiced(sent_s, enc.cycle_s, before + 1, after)
+        voiced = None if later is None else (before, later[1])
     start = _sample(poses, before) if before is not None else None
-    if before is None and boot and saw_only_the_log(frames, accepted, decoder):
+    if before is None and power_up():
         start = (0, (0.0, 0.0, 0.0))  # applied before two poses: from its power-up pose
     if start is None:
         return ("fewer than two on-board poses before the APPLY in this firmware life, and its "
@@ -141,40 +179,37 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
     if voiced is None:
         return ("the firmware silent (a stall) between the poses around the APPLY: its steps "
                 "over the frames it missed are not the reference's")
-    return _checked(poses, enc, c, (before, after), start, cut, robot, integrator,
-                    max_wheel_speed_mm_s, voiced)
+    return _checked(poses, enc, c, (before, after), start, staged, odo, voiced,
+                    caught=caught)
 
 
 def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int],
-             start: tuple[int, tuple[float, float, float]], cut: SetPoseCut,
-             robot: RobotProfile, integrator: str, max_wheel_speed_mm_s: SpeedBound,
-             voiced: tuple[int, int]) -> Kept:
+             start: tuple[int, tuple[float, float, float]], staged: dict[str, float],
+             odo: Odo, voiced: tuple[int, int], *, caught: bool = False) -> Kept:
     """``kept_check`` from ``start`` (the last sample before the APPLY's frame ``c``, or the
     power-up pose when ``around``'s first is None) to the first sample after it; narrowed by
     the samples ``voiced`` (first, last) alone."""
     before, after = around
-    sides = ([] if before is None else [before - 1]) + [after]
-    if not all(_settled(poses, i, enc, robot, integrator, max_wheel_speed_mm_s) for i in sides):
+    sides = ([] if before is None or caught else [before - 1]) + [after]
+    if not all(_settled(poses, i, enc, odo) for i in sides):
         return ("the firmware not seen stepping plainly around the APPLY (after a stall: poses "
                 "naming backlog frames, merged steps)")
-    steps = _plain_steps(enc, start[0], int(poses.enc[after]), robot, max_wheel_speed_mm_s)
+    steps = _plain_steps(enc, start[0], int(poses.enc[after]), odo, one_gap=not staged)
     if steps is None:
         return ("the encoder frames between the poses around the APPLY are not plain steps (a "
                 "gap in their sequence, a refused, re-primed or twinned step)")
-    judged = _judged(start, _sample(poses, after), steps, c - start[0], cut.staged,
-                     Geometry.of(robot), integrator, exact_start=before is None)
+    judged = _judged(start, _sample(poses, after), steps, c - start[0], staged, odo.geometry,
+                     odo.integrator, exact_start=before is None,
+                     gap_m=_gap_m(enc, (start[0], int(poses.enc[after])), steps, odo))
     if judged["passed"] and before is not None:  # narrowed by more samples on each side
-        judged["passed"] = _overlap(poses, (before, after), c, enc, cut.staged, robot,
-                                    integrator, max_wheel_speed_mm_s, voiced)
+        judged["passed"] = _overlap(poses, (before, after), c, enc, staged, odo, voiced)
     elif judged["passed"]:  # from the power-up pose: narrowed by more samples after the APPLY
-        judged["passed"] = _from_power_up(poses, after, c, enc, cut.staged, robot, integrator,
-                                          max_wheel_speed_mm_s, voiced[1])
-    return {"fields_kept": [name for name in FIELDS if name not in cut.staged], **judged}
+        judged["passed"] = _from_power_up(poses, after, c, enc, staged, odo, voiced[1])
+    return {"fields_kept": [name for name in FIELDS if name not in staged], **judged}
 
 
 def _overlap(poses: Poses, around: tuple[int, int], c: int, enc: Encoders,
-             staged: dict[str, float], robot: RobotProfile, integrator: str,
-             max_wheel_speed_mm_s: SpeedBound, voiced: tuple[int, int]) -> bool:
+             staged: dict[str, float], odo: Odo, voiced: tuple[int, int]) -> bool:
     """Whether the pose at the APPLY's frame ``c`` that up to ``NARROW_SAMPLES`` samples on
     each side allow (each sample moved to ``c`` by the reference's steps: an interval of its
     rounding, half an LSB each way, widened by its heading's rounding over the motion)
@@ -184,11 +219,10 @@ def _overlap(poses: Poses, around: tuple[int, int], c: int, enc: Encoders,
     before, after = around
     first = max(voiced[0], before - NARROW_SAMPLES + 1)
     last = min(voiced[1], after + NARROW_SAMPLES - 1)
-    steps = _plain_steps(enc, int(poses.enc[first]), int(poses.enc[last]), robot,
-                         max_wheel_speed_mm_s)
+    steps = _plain_steps(enc, int(poses.enc[first]), int(poses.enc[last]), odo)
     if steps is None:
         return True
-    rel = _relative(steps, robot, integrator)
+    rel = _relative(steps, odo)
     base = int(poses.enc[first])
     sides = [_at_cut(poses, range(first, before + 1), c - base, base, rel),
              _at_cut(poses, range(after, last + 1), c - base, base, rel)]
@@ -200,8 +234,7 @@ def _overlap(poses: Poses, around: tuple[int, int], c: int, enc: Encoders,
 
 
 def _from_power_up(poses: Poses, after: int, c: int, enc: Encoders, staged: dict[str, float],
-                   robot: RobotProfile, integrator: str, max_wheel_speed_mm_s: SpeedBound,
-                   voiced_last: int) -> bool:
+                   odo: Odo, voiced_last: int) -> bool:
     """``_overlap`` for an APPLY judged from the power-up pose (before the new firmware's
     second pose): the pose at the APPLY's frame ``c`` is then known exactly (the reference
     from (0, 0, 0) at the life's first encoder frame), a point that the intervals of up to
@@ -209,21 +242,21 @@ def _from_power_up(poses: Poses, after: int, c: int, enc: Encoders, staged: dict
     passed the one sample's rounding). True when those samples do not step plainly or
     disagree among themselves. Up to ``voiced_last`` (before a later stall)."""
     last = min(voiced_last, after + NARROW_SAMPLES - 1)
-    steps = _plain_steps(enc, 0, int(poses.enc[last]), robot, max_wheel_speed_mm_s)
+    steps = _plain_steps(enc, 0, int(poses.enc[last]), odo)
     if steps is None:
         return True
-    rel = _relative(steps, robot, integrator)
+    rel = _relative(steps, odo)
     highs = _at_cut(poses, range(after, last + 1), c, 0, rel)
     if highs is None:
         return True
     return _agree([(float(v[c]), float(v[c])) for v in rel], highs, staged)
 
 
-def _relative(steps: tuple[np.ndarray, np.ndarray], robot: RobotProfile,
-              integrator: str) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _relative(steps: tuple[np.ndarray, np.ndarray],
+              odo: Odo) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The reference's pose (x m, y m, heading rad) at each frame of ``steps`` (element k:
     after k steps) from (0, 0, 0) at their first."""
-    rel = integrate(*steps, Geometry.of(robot), integrator)
+    rel = integrate(*steps, odo.geometry, odo.integrator)
     rel_x, rel_y, rel_h = (np.concatenate(([0.0], v)) for v in (rel.x_m, rel.y_m,
                                                                 rel.heading_rad))
     return rel_x, rel_y, rel_h
@@ -285,16 +318,15 @@ def _sample(poses: Poses, i: int) -> tuple[int, tuple[float, float, float]]:
                                float(poses.heading_rad[i]))
 
 
-def _settled(poses: Poses, i: int, enc: Encoders, robot: RobotProfile, integrator: str,
-             max_wheel_speed_mm_s: SpeedBound) -> bool:
+def _settled(poses: Poses, i: int, enc: Encoders, odo: Odo) -> bool:
     """Whether sample ``i + 1`` is sample ``i`` moved by the plain steps between them (a pose
     resolved to the wrong encoder frame after a silence, or a firmware taking merged steps
     after a stall, is not: the samples there cannot pin a jump)."""
-    steps = _plain_steps(enc, int(poses.enc[i]), int(poses.enc[i + 1]), robot,
-                         max_wheel_speed_mm_s)
+    b, a = int(poses.enc[i]), int(poses.enc[i + 1])
+    steps = _plain_steps(enc, b, a, odo, one_gap=True)
     return steps is not None and bool(_judged(
-        _sample(poses, i), _sample(poses, i + 1), steps, 0, {}, Geometry.of(robot),
-        integrator)["passed"])
+        _sample(poses, i), _sample(poses, i + 1), steps, 0, {}, odo.geometry,
+        odo.integrator, gap_m=_gap_m(enc, (b, a), steps, odo))["passed"])
 
 
 def _voiced(sent_s: FloatArray, cycle_s: float | None, before: int | None,
@@ -317,6 +349,23 @@ def _voiced(sent_s: FloatArray, cycle_s: float | None, before: int | None,
             int(later[0]) if len(later) else last)
 
 
+def _caught_up(seen: tuple[Poses, Encoders, FloatArray], before: int | None,
+               after: int | None) -> bool:
+    """Whether the last sample ``before`` the APPLY is the first after a stall (the only
+    silence between it and the sample ``after``'s successor) and names the latest encoder
+    frame heard before its ODOM_POSE_Y: the firmware had taken every frame it missed (merged:
+    no backlog frame named), its pose there is where the reference and it agree again, and
+    plain steps follow. (An APPLY 2-3 ticks after a stall was left unjudged.)"""
+    poses, enc, sent_s = seen
+    if before is None or after is None or enc.cycle_s is None:
+        return False
+    silent = np.flatnonzero(np.diff(sent_s) >= SILENCE_CYCLES * enc.cycle_s)
+    if [int(g) for g in silent if before - 1 <= g <= after] != [before - 1]:
+        return False
+    named = int(poses.enc[before])
+    return not bool(np.any(enc.timestamp_s[named + 1:] <= sent_s[before]))
+
+
 def _around(poses: Poses, c: int) -> tuple[int | None, int | None]:
     """The last sample naming an encoder frame before ``c`` and the first naming one after,
     each with another sample beyond it (before the first, after the second)."""
@@ -326,11 +375,14 @@ def _around(poses: Poses, c: int) -> tuple[int | None, int | None]:
             int(after[0]) if len(after) > 1 else None)
 
 
-def _plain_steps(enc: Encoders, b: int, a: int, robot: RobotProfile,
-                 max_wheel_speed_mm_s: SpeedBound) -> tuple[np.ndarray, np.ndarray] | None:
+def _plain_steps(enc: Encoders, b: int, a: int, odo: Odo, *,
+                 one_gap: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
     """The count steps from encoder frame ``b`` to ``a`` (element k: into ``b + k + 1``) when
-    they are the plain ones: consecutive frames, none refused or re-primed, no twin."""
-    if np.any(np.diff(enc.seq[b:a + 1]) != 1):
+    they are the plain ones: consecutive frames, none refused or re-primed, no twin.
+    ``one_gap``: one gap of a single frame allowed (a merged step, ``_gap_m``)."""
+    periods = np.diff(enc.seq[b:a + 1])
+    gaps = periods[periods != 1]
+    if len(gaps) > int(one_gap) or np.any(gaps != 2):
         return None
     if enc.twinned is not None and bool(np.any(enc.twinned[b:a + 1])):
         return None
@@ -339,11 +391,27 @@ def _plain_steps(enc: Encoders, b: int, a: int, robot: RobotProfile,
                    left=enc.left[part], right=enc.right[part],
                    timestamp_s=enc.timestamp_s[part], cycle_s=enc.cycle_s,
                    uptime=None if enc.uptime is None else enc.uptime[part])
-    steps = firmware_steps(sub, 0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
-                           max_wheel_speed_mm_s)
+    steps = firmware_steps(sub, 0, odo.geometry, odo.bits, odo.max_wheel_speed_mm_s)
     if steps.refused or steps.reprimed or len(steps.d_left) != a - b:
         return None
     return steps.d_left, steps.d_right
+
+
+def _gap_m(enc: Encoders, frames: tuple[int, int], steps: tuple[np.ndarray, np.ndarray],
+           odo: Odo) -> float:
+    """How far (m) the firmware's position can lie from the reference's after ``steps`` (from
+    encoder frame ``frames[0]`` to ``frames[1]``): 0 when plain; across a gap of one frame (the
+    recorder lost a frame the firmware took, or the firmware took the two periods merged) the
+    merged step's bound, ``gapbound.gap_allowance_m`` (the heading after it is exact: the
+    counts' total is known)."""
+    periods = np.diff(enc.seq[frames[0]:frames[1] + 1])
+    at = np.flatnonzero(periods != 1)
+    if len(at) == 0:
+        return 0.0
+    k = int(at[0])
+    bounds = period_bounds(odo.geometry, odo.geometry.speed_bound_mm_s(odo.max_wheel_speed_mm_s))
+    return gap_allowance_m(int(steps[0][k]), int(steps[1][k]), int(periods[k]), odo.geometry,
+                           odo.integrator, bounds)
 
 
 def _moved(pose: tuple[float, float, float], d_left: np.ndarray, d_right: np.ndarray,
@@ -360,11 +428,12 @@ def _moved(pose: tuple[float, float, float], d_left: np.ndarray, d_right: np.nda
 def _judged(before: tuple[int, tuple[float, float, float]],
             after: tuple[int, tuple[float, float, float]], steps: tuple[np.ndarray, np.ndarray],
             to_cut: int, staged: dict[str, float], geometry: Geometry, integrator: str, *,
-            exact_start: bool = False) -> dict[str, Any]:
+            exact_start: bool = False, gap_m: float = 0.0) -> dict[str, Any]:
     """The pose ``before`` (encoder frame, pose) moved by the ``to_cut`` steps to the APPLY's
     frame, the staged fields set there, moved by the rest to the sample ``after``: how far that
     sample is. ``exact_start``: ``before`` is the power-up pose, no sample: only ``after``'s
-    rounding is left (half an LSB, of position and of heading)."""
+    rounding is left (half an LSB, of position and of heading). ``gap_m``: a merged step's
+    bound on the position (``_gap_m``)."""
     d_left, d_right = steps
     x, y, h, head_m = _moved(before[1], d_left[:to_cut], d_right[:to_cut], geometry, integrator)
     start = (staged.get("X", x), staged.get("Y", y), staged.get("HEADING", h))
@@ -376,6 +445,7 @@ def _judged(before: tuple[int, tuple[float, float, float]],
     else:  # two samples' roundings, and the start heading's over the path
         bound_m = POSITION_LSB_M + HEADING_LSB_RAD * (head_m + tail_m) + _FLOAT_M
         bound_rad = HEADING_LSB_RAD + _FLOAT_RAD
+    bound_m += gap_m
     passed = max(abs(dx_m), abs(dy_m)) <= bound_m and abs(dh_rad) <= bound_rad
     return {"encoder_frames": after[0] - before[0],
             "position_jump_m": math.hypot(dx_m, dy_m), "heading_jump_rad": abs(dh_rad),

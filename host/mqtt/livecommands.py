@@ -19,6 +19,7 @@ from cantools.database.errors import DecodeError
 
 from odocan.host.judge.liveconfig import ConfigFollower, follow_config_ack
 from odocan.host.judge.livedistance import LiveDistance
+from odocan.host.judge.livekept import KeptWatch
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livesetpose_choice import ApplyChoice
 from odocan.host.judge.livetwist import LiveTwist
@@ -57,6 +58,7 @@ class CommandFollowing:
         """The followers' state (``db`` set): nothing staged, no ACK awaited."""
         self.pending: dict[tuple[int, int], PendingAck] = {}
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
+        self.kept = KeptWatch()  # what an APPLY kept: analyze's check, live (livekept)
         self._apply_choice: ApplyChoice | None = None
         set_pose = next((m for m in self.db.messages if m.name == "ODOM_SET_POSE"), None)
         self._set_pose_id = set_pose.frame_id if set_pose is not None else -1
@@ -100,7 +102,7 @@ class CommandFollowing:
         applied = self.set_pose.on_ack(int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0, t_s)
         if applied is not None:
             event = set_pose_event(t_s, apply_set_pose(self.tracker, *applied), applied[1])
-            self.events.append(event)  # which frame it took effect after, if frames came since
+            self.events.append(self.kept.applied(event, *applied, self.tracker.enc_seq))
             self._apply_choice = ApplyChoice.after_ack(self.tracker, *applied, event)
 
     def _on_ack(self, s: dict[str, Any], t_s: float) -> list[Publication]:

@@ -233,6 +233,7 @@ class RobotTelemetry(CommandFollowing):
         self.distance.new_life()
         self.twist.new_life()
         self.set_pose.forget(t_s - SAME_TICK_S)  # what the new firmware ACKed: kept
+        self.kept.forget()
         if lost is not None:
             self.events.append({"t_s": t_s, "kind": "config", "detail": lost})
             self.profile.forget()  # its next PROFILE page is judged against the build's robot
@@ -280,7 +281,7 @@ class RobotTelemetry(CommandFollowing):
     def _samples(self) -> list[Publication]:
         """The on-board samples the tracker settled on this frame: the latest published, at
         most ``publish_hz`` times per second of bus time (its ODOM_POSE_Y's)."""
-        samples = self.tracker.take_samples()
+        samples = self.kept.heard(self.tracker, self.tracker.take_samples())
         if not samples:
             return []
         if self.stretches is not None:
