@@ -87,7 +87,7 @@ def _judged(path: Path, robot: str) -> tuple[list[Any], int, int]:
     for tracker in (monitor.tracker, bridge.tracker):
         judged.append((tracker.snapshot(), vars(tracker.vs_reference), vars(tracker.vs_truth),
                        tracker.allowance_m(), tracker.max_beyond_allowance_m, tracker.stalls,
-                       tracker.reference_starts, list(tracker._losses.spans)))
+                       tracker.reference_starts, list(tracker.losses.spans)))
     return judged, calls["slow"], calls["named"]
 
 
