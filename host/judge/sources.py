@@ -222,7 +222,7 @@ def pose_named_live(tracker: PoseTracker) -> int | None:
     """``powerup.pose_named`` live: the encoder frames heard up to the one the latest pose
     heard names (its ENC_COUNTER: the latest of the last ``NAMED_SPAN`` frames heard before it
     with that COUNTER). None when none."""
-    halves = tracker._halves["x"].rows  # (pos, enc_counter, ...) of the latest X halves heard
+    halves = tracker.pairs.halves["x"].rows  # (pos, enc_counter, ...) of the latest X halves heard
     if not halves:
         return None
     pos, named = halves[-1][0], int(halves[-1][1])

@@ -11,12 +11,12 @@ known: ``samples.queued_frames``): a sample is judged <= half a cycle after its 
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Any
 
 from odocan.host.judge.livechoice import LiveChoice
 from odocan.host.judge.livefit import LiveFit
+from odocan.host.judge.livehalves import HalfPairs
 from odocan.host.judge.livelaphold import LapHold
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livenewstart import NewStartHold
@@ -24,7 +24,6 @@ from odocan.host.judge.liveplace import StallPlacer
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import RING, ErrorStats, FramePose, RestartLog, Sample, StepGate
 from odocan.host.judge.livereference import RawReference
-from odocan.host.judge.liveresent import judge_resend
 from odocan.host.judge.livesnapshot import tracker_snapshot
 from odocan.host.judge.livestart import Lives
 from odocan.host.judge.livetruth import LifeTruth, TruthParts, judge_truth
@@ -32,7 +31,6 @@ from odocan.host.judge.livetwins import TwinWatch
 from odocan.host.judge.livewindow import (
     ENC_COLUMNS,
     ENC_WINDOW,
-    HALF_WINDOW,
     QUEUED_GAP_S,
     Columns,
     Half,
@@ -83,17 +81,11 @@ class PoseTracker:
         self._counts: list[tuple[int, int, int] | None] = [None] * RING  # seq, left, right
         self.window = Columns(ENC_COLUMNS, ENC_WINDOW)  # the latest encoder frames heard
         self.twins = TwinWatch(self.window.rows)  # frames with a twin: their poses left out
-        self._halves = {"x": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW),
-                        "y": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW)}
-        self._unsettled: dict[str, Half] = {}  # per message, the latest half heard
-        self._unsettled_from_s = math.inf  # the earliest bus time among them (s)
-        self._xs: dict[int, Half] = {}  # settled X halves by the encoder frame they name
-        self._ys: dict[int, tuple[Half, bool]] = {}  # settled Y halves (and queued) waiting
-        self._sampled: set[int] = set()  # encoder frames an on-board sample was made of
+        self.pairs = HalfPairs(self)  # the pose halves heard, settled and paired (livehalves)
         self.settled: list[Sample] = []  # samples settled since ``take_samples``
         self.fit = LiveFit(0.0, 0.0, exact=True)  # the start narrowed (host.judge.livefit)
         self.placer = StallPlacer()  # the placements after stalls (host.judge.liveplace)
-        self.placer.halves = self._halves["x"]  # the holes of the log its gaps are told by
+        self.placer.halves = self.pairs.halves["x"]  # the holes of the log its gaps are told by
         self.restarts = RestartLog(self.placer.reprimed)  # counter restarts told (``events``)
         self.restarts.through, self.restarts.owe = self.placer.seen.through, self.placer.dark.owe
         self.restarts.heard_in = self.placer.seen.heard_in  # evidenceless: a choice held
@@ -137,11 +129,9 @@ class PoseTracker:
         boot = self.lives.boot
         if boot is not None and t_s > boot[1]:  # no count page in time: started without it
             self.lives.expire()
-        if t_s - self._unsettled_from_s < QUEUED_GAP_S:
+        if t_s - self.pairs.unsettled_from_s < QUEUED_GAP_S:
             return  # none due (nor any later half: t_s - t is monotone in t); none heard: inf
-        for _, name in sorted((half.pos, name) for name, half in self._unsettled.items()
-                              if t_s - half.t_s >= QUEUED_GAP_S):  # due, in the order heard
-            self._settle(name)
+        self.pairs.settle_due(t_s)  # due, in the order heard (livehalves)
 
     def on_encoders(self, counter: int, left: int, right: int, t_s: float, uptime: int = 0) -> None:
         """An accepted WHEEL_ENCODERS frame (raw 24-bit counts, CTRL_UPTIME) at bus time ``t_s``."""
@@ -172,9 +162,7 @@ class PoseTracker:
 
     def _forget(self, before: int) -> None:
         """Drop what is kept of the encoder frames before ``before`` (seq): bounded state."""
-        self._xs = {seq: half for seq, half in self._xs.items() if seq >= before}
-        self._ys = {seq: half for seq, half in self._ys.items() if seq >= before}
-        self._sampled = {seq for seq in self._sampled if seq >= before}
+        self.pairs.forget(before)
         self.raw.forget(before)
 
     def on_pose_x(self, enc_counter: int, x_m: float, heading_rad: float, *, counter: int,
@@ -197,32 +185,9 @@ class PoseTracker:
         self.advance(half.t_s)
         self._pos += 1
         half.pos = self._pos
-        self._halves[name].append(half.pos, half.enc_counter, half.counter, half.t_s)
-        if name in self._unsettled:  # its successor is heard: it is known whether it queued
-            self._settle(name)
-        self._unsettled[name] = half
-        self._unsettled_from_s = min(self._unsettled_from_s, half.t_s)  # (NaN: never due)
+        self.pairs.heard(name, half)
 
-    def _settle(self, name: str) -> None:
-        """Resolve the encoder frame the unsettled half of ``name`` names, and pair it."""
-        half = self._unsettled.pop(name)
-        rest = self._unsettled  # x, y: one left at most (per pose half: no list, no min())
-        self._unsettled_from_s = (math.inf if not rest else next(iter(rest.values())).t_s
-                                  if len(rest) == 1 else min(h.t_s for h in rest.values()))
-        seq, queued = self._named(self._halves[name], half.pos)
-        if seq < 0 or self.twins.twinned(seq) or judge_resend(name, seq, half, self):
-            return  # left out, as analyze leaves it out (unmatched); a resend judged
-        if name == "x":
-            self._xs.setdefault(seq, half)
-            waiting = self._ys.pop(seq, None)
-            if waiting is not None:
-                self._pair(seq, half, *waiting)
-        elif seq in self._xs:
-            self._pair(seq, self._xs[seq], half, queued)
-        else:
-            self._ys.setdefault(seq, (half, queued))
-
-    def _named(self, halves: Columns, pos: int) -> tuple[int, bool]:
+    def named(self, halves: Columns, pos: int) -> tuple[int, bool]:
         """The encoder frame (seq) the half at ``pos`` names, -1 when none, and whether it
         queued: ``host.judge.samples.match_encoder`` over the window (the held and queued rules,
         the age bound, the causal rule); a half neither queued nor repeating its predecessor's
@@ -234,12 +199,9 @@ class PoseTracker:
                 return plain, False
         return named_in_window(halves, self.window, pos)
 
-    def _pair(self, seq: int, x: Half, y: Half, queued: bool) -> None:
-        """The X and Y halves naming encoder frame ``seq``: one on-board sample (the first)."""
-        self._ys.pop(seq, None)
-        if seq in self._sampled:
-            return
-        self._sampled.add(seq)
+    def on_pair(self, seq: int, x: Half, y: Half, queued: bool) -> None:
+        """The X and Y halves naming encoder frame ``seq`` (``livehalves``): one on-board
+        sample, judged."""
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
         self.pose_t_s = y.t_s
         self.placer.dark.due(seq, self.newstart.restart)  # after a dark restart: livedark
@@ -255,7 +217,7 @@ class PoseTracker:
             return None
         seq = pose.seq
         last, self._last_sample_t = self._last_sample_t, y.t_s
-        silent = not queued and silent_since(last, y.t_s, self._halves["y"], self.window)
+        silent = not queued and silent_since(last, y.t_s, self.pairs.halves["y"], self.window)
         started = self.raw.odometry is not None
         if silent and started:  # stalls.after_stalls' rule
             # The firmware was stalled: this pose names a backlog frame, and it took the
@@ -311,7 +273,7 @@ class PoseTracker:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS: the firmware's ENC_E2E_LOST (u8); a span of
         allowance where it grew beyond the bus's gaps (``LiveAllowance.on_page``)."""
         window = self.window if self.raw.odometry is not None else None
-        self.losses.on_page(lost, self.enc_seq, window, self._sampled,
+        self.losses.on_page(lost, self.enc_seq, window, self.pairs.sampled,
                             (self.geometry, self.counter_bits, self.integrator))
         self.losses.settle(self.enc_seq, self.fast_path)  # later spans start at this frame
 
