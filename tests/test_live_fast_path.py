@@ -60,7 +60,7 @@ def _judged(path: Path, robot: str) -> tuple[list[Any], int, int]:
     statistics; and how many halves went to ``match_encoder`` and were resolved in all."""
     samples: list[list[Sample]] = [[], []]
     calls = {"slow": 0, "named": 0}
-    take, named, match = PoseTracker.take_samples, PoseTracker._named, match_encoder
+    take, named, match = PoseTracker.take_samples, PoseTracker.named, match_encoder
 
     def taking(self: PoseTracker) -> list[Sample]:
         got = take(self)
@@ -77,7 +77,7 @@ def _judged(path: Path, robot: str) -> tuple[list[Any], int, int]:
 
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(PoseTracker, "take_samples", taking)
-        patch.setattr(PoseTracker, "_named", counting_named)
+        patch.setattr(PoseTracker, "named", counting_named)
         patch.setattr(livewindow, "match_encoder", counting_match)
         patch.setattr(PoseTracker, "_which", 0, raising=False)
         monitor = monitor_of(path, robot, "exact")
@@ -87,7 +87,7 @@ def _judged(path: Path, robot: str) -> tuple[list[Any], int, int]:
     for tracker in (monitor.tracker, bridge.tracker):
         judged.append((tracker.snapshot(), vars(tracker.vs_reference), vars(tracker.vs_truth),
                        tracker.allowance_m(), tracker.max_beyond_allowance_m, tracker.stalls,
-                       tracker.reference_starts, list(tracker._losses.spans)))
+                       tracker.reference_starts, list(tracker.losses.spans)))
     return judged, calls["slow"], calls["named"]
 
 

@@ -87,14 +87,14 @@ class LiveChoice:
         """The reference re-primes on encoder frame ``seq`` after a hole from bus time
         ``span_s[0]`` to ``span_s[1]`` whose frames' step was ``taken`` (counts): hold the
         choice (True), or False (a choice waits already, or no reference: a new start owed)."""
-        ref = self._tracker._ref
+        ref = self._tracker.raw.odometry
         if self.pending is not None or ref is None:
             return False
         twin = copy.copy(ref)
         twin.step_deltas(*taken)
         heard = self._tracker.placer.seen.heard_in(*span_s)
         self.pending = Pending(seq, span_s, heard, twin, self._tracker.placer.gap_at(seq),
-                               self._tracker._last_compared)
+                               self._tracker.last_compared)
         self.until_s = span_s[1] + (PAGES_WAIT_S if heard else WAIT_S)
         return True
 
@@ -121,7 +121,7 @@ class LiveChoice:
         if p is None or pose.seq < p.seq:
             return False
         p.held.append(pose)
-        self._tracker._last_compared = pose.seq
+        self._tracker.last_compared = pose.seq
         return True
 
     def ahead(self, counter: int, t_s: float, prev: tuple[float, ...]) -> None:
@@ -145,13 +145,13 @@ class LiveChoice:
         tracker = self._tracker
         if self._take(p):
             self.taken += 1
-            tracker._ref = p.twin
-            tracker._ref_at.update(p.twin_at)
+            tracker.raw.odometry = p.twin
+            tracker.raw.at.update(p.twin_at)
             if p.gap is not None:
                 tracker.placer.took_gap(p.gap)
         else:
             self.reprimed += 1
-        tracker._last_compared = p.last_compared
+        tracker.last_compared = p.last_compared
         for pose in p.held:
             tracker.judge(pose)
 
@@ -165,7 +165,7 @@ class LiveChoice:
         if not p.held:
             return False
         pose = p.held[0]
-        reprimed, took = self._tracker._ref_at.get(pose.seq), p.twin_at.get(pose.seq)
+        reprimed, took = self._tracker.raw.at.get(pose.seq), p.twin_at.get(pose.seq)
         if reprimed is None or took is None:
             return False
         correct = self._tracker.fit.correct

@@ -157,7 +157,7 @@ class LiveDistance:
         encoder frame it names (not the first after a stall: ``distance.DistanceJudge.take``)."""
         tracker._pos += 1  # its place among the frames heard (tracking.py: at its size limit)
         self._twists.append(tracker._pos, enc_counter, counter, t_s)
-        e = self.named = tracker._named(self._twists, tracker._pos)[0]  # (livetwist takes it)
+        e = self.named = tracker.named(self._twists, tracker._pos)[0]  # (livetwist takes it)
         e = -1 if e >= 0 and tracker.twins.twinned(e) else e
         resend = (e >= 0 and e == self._running and self._judged_last  # resentdistance.py
                   and not may_alias_live(e, t_s, tracker))

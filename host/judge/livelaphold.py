@@ -110,9 +110,9 @@ class LapHold:
         the stamps' way (the pages only ever raise a numbering: ``holepages``)."""
         tracker = self._tracker
         if hold.stamps_kept is None:  # asked once, when its frames are in (no arrays per frame)
-            numbered = window_step(tracker._window, tracker.placer.halves, hold.seq)
+            numbered = window_step(tracker.window, tracker.placer.halves, hold.seq)
             hold.stamps_kept = (numbered is None or numbered >= hold.periods
-                                or not _read_at_once(tracker._window.rows, hold.seq))
+                                or not _read_at_once(tracker.window.rows, hold.seq))
         return (not hold.heard or hold.stamps_kept
                 or tracker.placer.seen.told_after(hold.t_s))
 

@@ -63,7 +63,7 @@ class NewStartHold:
         tracker = self._tracker
         tracker.fit.feed(pose, raw)
         tracker.placer.compared(pose)
-        tracker._last_compared = pose.seq
+        tracker.last_compared = pose.seq
         self._held.append((pose, raw, tracker.pose_t_s))
         return True
 
@@ -78,7 +78,7 @@ class NewStartHold:
         samples, self._samples = self._samples, {}
         tracker = self._tracker
         for pose, raw, t_s in held:
-            ref = tracker._record(pose, raw, fed=True, t_s=t_s)
+            ref = tracker.record(pose, raw, fed=True, t_s=t_s)
             sample = samples.get(pose.seq)
             if sample is not None:
                 tracker.settled.append(sample._replace(reference=ref))

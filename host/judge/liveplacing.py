@@ -18,14 +18,15 @@ def place_reference(tracker: PoseTracker, pose: FramePose, raw: FramePose) -> Fr
     ``analyze`` places it (``liveplace.StallPlacer``); the start fit's correction is taken into
     the reference first and the fit goes on (``livefit.rebase``). Returns the moved reference
     at ``raw``'s frame."""
-    assert tracker._ref is not None and tracker.integrator is not None
+    line = tracker.raw  # (livereference: its pose at the frames heard since moves too)
+    odometry = line.odometry
+    assert odometry is not None and tracker.integrator is not None
     if not tracker.placer.due(pose.seq):  # a gap after its frame: placed at a later sample's
         return raw  # (a sample held, ``livelaphold``, is compared after the gaps heard since)
     ref = tracker.fit.correct(raw)
-    shift = tracker.placer.shift(pose, ref, tracker._last_compared, tracker._window,
+    shift = tracker.placer.shift(pose, ref, tracker.last_compared, tracker.window,
                                  (tracker.geometry, tracker.counter_bits, tracker.integrator),
                                  tracker.fit.placed_shift_m())
-    tracker._ref_at, tracker.fit, placed = rebase(tracker.fit, tracker._ref, tracker._ref_at,
-                                                  ref, shift)
-    tracker._place_at_next = tracker.placer.gapped  # a gap after a held sample's frame
+    line.at, tracker.fit, placed = rebase(tracker.fit, odometry, line.at, ref, shift)
+    tracker.place_at_next = tracker.placer.gapped  # a gap after a held sample's frame
     return placed

@@ -40,7 +40,7 @@ def judge_resend(name: str, seq: int, half: Half, tracker: PoseTracker) -> bool:
     stats = tracker.vs_reference
     stats.max_dpos_m = max(stats.max_dpos_m, error["dpos_m"])
     stats.max_dheading_rad = max(stats.max_dheading_rad, abs(error["dheading_rad"]))
-    tracker._losses.record(seq, error, tracker.fast_path, half.t_s)
+    tracker.losses.record(seq, error, tracker.fast_path, half.t_s)
     return True
 
 
@@ -48,7 +48,7 @@ def may_alias_live(seq: int, t_s: float, tracker: PoseTracker) -> bool:
     """Whether a half heard at ``t_s`` may name a later frame with frame ``seq``'s COUNTER
     (``host.judge.resendalias.aged_past_alias`` since frame ``seq`` came, or the frame left the
     window)."""
-    window = tracker._window
+    window = tracker.window
     seqs = window.col("seq")
     k = int(np.searchsorted(seqs, seq))
     if k >= len(seqs) or seqs[k] != seq:

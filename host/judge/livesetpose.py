@@ -93,9 +93,9 @@ class SetPoseFollower:
 def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float]) -> FramePose | None:
     """Restart ``tracker``'s reference at the set pose at encoder frame ``seq`` (module
     docstring); returns that pose, None when it restarts at the next on-board pose instead."""
-    at = tracker._ref_at.get(seq)  # the tracker's own state: tracking.py is at its size limit
-    counts = window_counts(tracker._window, seq)
-    ref_known = tracker._ref is not None and tracker.integrator is not None
+    at = tracker.raw.at.get(seq)  # the raw reference at that frame (livereference)
+    counts = window_counts(tracker.window, seq)
+    ref_known = tracker.raw.odometry is not None and tracker.integrator is not None
     tracker.new_life()  # the reference restarts, the truth is compared in the new frame
     if at is None or not ref_known or not counts or counts[0][0] != seq:
         return None

@@ -57,7 +57,7 @@ class ApplyChoice:
                   heading_rad: float) -> bool:
         """An ODOM_POSE_X heard (before the tracker takes it): True once the choice is made (or
         can no longer be: the frames left the window)."""
-        counts = window_counts(tracker._window, self.first_seq)
+        counts = window_counts(tracker.window, self.first_seq)
         named = [c[0] for c in counts if c[1] == enc_counter and self.last_seq <= c[0]]
         if not counts or counts[0][0] != self.first_seq:
             return True  # out of the window: keep N
@@ -74,7 +74,7 @@ class ApplyChoice:
         """(x m, heading rad) at frame ``at`` had the pose been set after frame ``m``: the set
         pose moved by the reference's steps from ``m`` to ``at`` (a rigid motion: the same from
         any start); None when the reference lacks them."""
-        start, end = tracker._ref_at.get(m), tracker._ref_at.get(at)
+        start, end = tracker.raw.at.get(m), tracker.raw.at.get(at)
         if start is None or end is None:
             return None
         return _moved(start, end, self.staged)

@@ -1,18 +1,23 @@
-"""The live reference's start (``host.judge.tracking``): a ``ReferenceOdometry`` at a pose, primed
+"""The live reference's starts (``host.judge.tracking``): a ``ReferenceOdometry`` at a pose, primed
 on the encoder frame it names, caught up over the frames heard since and the poses heard since
-compared (the first life's backlog, a reboot's held samples)."""
+compared (``start_reference``); and the lives it starts in (``Lives``): the first life's
+backlog (what was heard before the integrator was known), a new life's wait for the frame it
+primed on after a reboot and the samples held meanwhile."""
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
 from odocan.host.judge.livefit import LiveFit
-from odocan.host.judge.livepose import FramePose, StepGate
-from odocan.host.judge.livewindow import Counted
+from odocan.host.judge.livepose import FramePose, Sample
+from odocan.host.judge.livewindow import Counted, primed_at, window_counts
 from odocan.host.judge.reference import ReferenceOdometry
 
 if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
+
+BACKLOG_FRAMES = 6_000  # encoder frames kept while waiting for the integrator (60 s at 100 Hz)
+BOOT_COUNT_WAIT_S = 1.0  # after a reboot, how long the count page is waited for (s of bus time)
 
 
 def start_reference(tracker: PoseTracker, pose: FramePose, counts: list[Counted],
@@ -22,27 +27,134 @@ def start_reference(tracker: PoseTracker, pose: FramePose, counts: list[Counted]
     since."""
     assert tracker.integrator is not None
     tracker.choice.decide()  # the samples held are judged by the reference they named
-    ref = tracker._ref = ReferenceOdometry(
+    ref = ReferenceOdometry(
         tracker.geometry, tracker.integrator, tracker.counter_bits,
         x_m=pose.x_m, y_m=pose.y_m, heading_rad=pose.heading_rad,
     )
     tracker.reference_starts += 1
     tracker.fit = LiveFit.start(pose)
     tracker.newstart.started(tracker.fit.exact)  # after an unseen restart: held (livenewstart)
-    tracker._ref_at = {}
+    raw = tracker.raw
+    raw.start(ref, tracker.geometry, tracker.counter_bits, tracker.restarts)
     tracker.placer.restart()
-    tracker._gate = StepGate(tracker.geometry, tracker.counter_bits, tracker.restarts)
     for frame in counts:
-        step = tracker._gate.step(frame)  # the first primes: stays at pose
-        if step is not None:
-            ref.step_deltas(*step)
-        tracker._keep_ref(FramePose(frame[0], ref.x_m, ref.y_m, ref.heading_rad))
+        step = raw.step(ref, frame)  # the first primes: stays at pose
         if tracker.choice.pending is not None:  # the twin steps along (livechoice)
             tracker.choice.stepped(frame[0], step)
+    held_samples = tracker.lives.held
     for heard in poses:
-        at = tracker._ref_at.get(heard.seq)
-        held = tracker._held.pop(heard.seq, None)
+        at = raw.at.get(heard.seq)
+        held = held_samples.pop(heard.seq, None)
         if at is not None and held is not None:  # settled again, judged now
-            tracker.settled.append(held._replace(reference=tracker._record(heard, at)))
+            tracker.settled.append(held._replace(reference=tracker.record(heard, at)))
         elif at is not None:
-            tracker._record(heard, at)
+            tracker.record(heard, at)
+
+
+class Lives:
+    """Where ``tracker``'s reference starts: at the first pose heard (its frames kept until the
+    integrator is known: ``pending``, ``backlog_counts``, ``backlog_poses``), at (0, 0, 0) on
+    the frame a new life primed on (``boot``: that frame's guess (seq, -1 for the first life's)
+    and the bus time it is waited until; ``boot_poses`` and ``held``: its samples meanwhile)."""
+
+    def __init__(self, tracker: PoseTracker) -> None:
+        self._tracker = tracker
+        self.boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
+        self.boot_poses: list[FramePose] = []  # the new life's samples while it waits
+        self.held: dict[int, Sample] = {}  # ... as settled (unjudged), by encoder frame
+        self.pending: FramePose | None = None  # the first pose, heard before the integrator
+        self.backlog_counts: list[Counted] = []  # the frames since the pending pose's
+        self.backlog_poses: list[FramePose] = []
+
+    def waits(self, pose: FramePose, now_s: float) -> bool:
+        """Whether the on-board ``pose`` waits for its life's start (a boot's frame, the
+        integrator); the reference started at it when it is the first pose (then False)."""
+        tracker = self._tracker
+        started = tracker.raw.odometry is not None
+        if not started and self.pending is None and not tracker.reference_starts:
+            self.boot = self.boot or (-1, now_s + BOOT_COUNT_WAIT_S)  # the first life's
+        if self.boot is not None:  # a new life waiting for the frame it primed on
+            self.boot_poses.append(pose)
+            return True
+        if started:
+            return False
+        if self.pending is None:
+            self.pending = pose
+            self.backlog_counts = window_counts(tracker.window, pose.seq)
+        if tracker.integrator is None:
+            self.backlog_poses.append(pose)
+            return True
+        self.start_pending([])
+        return False
+
+    def heard(self, frame: Counted) -> None:
+        """An encoder frame heard while a pose waits for the integrator (``pending``)."""
+        self.backlog_counts.append(frame)
+        if len(self.backlog_counts) > BACKLOG_FRAMES:  # too long: start at a later pose
+            self.drop_backlog()
+
+    def start_pending(self, poses: list[FramePose]) -> None:
+        """Start at the pending pose over the frames kept, comparing ``poses``."""
+        assert self.pending is not None
+        start_reference(self._tracker, self.pending, self.backlog_counts, poses)
+        self.drop_backlog()
+
+    def drop_backlog(self) -> None:
+        self.pending, self.backlog_counts, self.backlog_poses = None, [], []
+
+    def await_boot(self, guess: int, now_s: float) -> None:
+        """A reboot: the new life's samples wait for the frame it primed on (``guess`` until
+        its first count page names it) up to ``BOOT_COUNT_WAIT_S`` after ``now_s``."""
+        self.boot = (guess, now_s + BOOT_COUNT_WAIT_S)
+        self.boot_poses, self.held = [], {}
+
+    def expire(self) -> None:
+        """The wait for the count page is over: start without it."""
+        assert self.boot is not None
+        self.finish_boot(self.boot[0]) if self.boot[0] >= 0 else self.finish_first(False)
+
+    def on_counts(self, ok: int, lost: int, proven: bool) -> None:
+        """``PoseTracker.on_enc_counts``' start: the page ends a wait, or proves a power-up."""
+        boot, tracker = self.boot, self._tracker
+        if boot is not None and boot[0] < 0:  # the first life's samples wait
+            self.finish_first(proven)
+        elif boot is not None and (at := primed_at(tracker.window, ok, lost)) is not None:
+            self.finish_boot(at)
+        elif proven and tracker.integrator is not None:
+            self.finish_boot(0, first_life=True)  # the samples judged before keep their errors
+
+    def finish_boot(self, primed: int, first_life: bool = False) -> None:
+        """Start the new life's reference at (0, 0, 0) at encoder frame ``primed`` (seq), judge
+        the samples heard since the reboot; adopt the next pose when that frame is not known (not
+        heard yet, or left the window). ``first_life``: the log's first (one start)."""
+        tracker = self._tracker
+        poses, self.boot, self.boot_poses = self.boot_poses, None, []
+        counts = window_counts(tracker.window, primed)
+        if not counts or counts[0][0] != primed:
+            if not first_life:  # a first life keeps its fitted start
+                tracker.restart_reference()
+            return
+        tracker.reference_starts -= first_life and tracker.reference_starts > 0
+        tracker.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
+        tracker.losses.primed(primed)  # ENC_E2E_LOST counted from 0 there
+        start_reference(tracker, FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
+        if not first_life:
+            tracker.life_truth.booted(primed, tracker.raw.at)
+
+    def finish_first(self, proven: bool) -> None:
+        """The first life's samples waited for its first ENC_E2E_OK page (``powerup``'s
+        evidence): ``proven``, judged from (0, 0, 0) on frame 0 as ``analyze`` judges them (once
+        the integrator is known); else (a cut log, no page within ``BOOT_COUNT_WAIT_S``) from
+        the first of them, fitted."""
+        tracker = self._tracker
+        if proven and tracker.integrator is not None:
+            self.finish_boot(0, first_life=True)
+            return
+        poses, self.boot, self.boot_poses = self.boot_poses, None, []
+        counts = window_counts(tracker.window, 0) if proven else []
+        zero = bool(counts) and counts[0][0] == 0  # frame 0 still in the window
+        self.pending = FramePose(0, 0.0, 0.0, 0.0) if zero else poses[0]
+        self.backlog_poses = poses
+        self.backlog_counts = counts if zero else window_counts(tracker.window, poses[0].seq)
+        if tracker.integrator is not None:
+            self.start_pending(poses)

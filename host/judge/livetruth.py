@@ -120,10 +120,10 @@ def judge_truth(
     if heard is None:
         return None
     named = recent(tracker._counts[enc_counter], tracker.enc_seq)
-    raw = tracker._ref_at.get(named[0]) if named is not None else None
+    raw = tracker.raw.at.get(named[0]) if named is not None else None
     ref = None if raw is None else tracker.fit.correct(raw)
     x_m, y_m, wrapped_rad = tracker.life_truth.heard(
-        None if named is None else int(named[0]), *heard, ref, tracker._boot is not None)
+        None if named is None else int(named[0]), *heard, ref, tracker.awaiting_boot)
     heading = truth_heading(wrapped_rad, ref if ref is not None else tracker.truth)
     truth = tracker.truth = FramePose(ref.seq if ref else -1, x_m, y_m, heading)
     if ref is None:

@@ -41,7 +41,7 @@ Row = tuple[int, int, int, float, int, int, int, int]  # a row of ``ENC_COLUMNS`
 
 
 def named_plain(halves: deque[tuple[float, ...]], columns: Columns, pos: int) -> int | None:
-    """``PoseTracker._named`` for the common half, without numpy: the encoder frame (seq) the
+    """``PoseTracker.named`` for the common half, without numpy: the encoder frame (seq) the
     half at ``pos`` names, -1 when none; None when ``samples.match_encoder``'s held or queued
     rule may apply (``plain_half``). Else its plain rule alone decides, computed here as it
     computes it on the window: the latest encoder frame before the half (less than 8 cycles

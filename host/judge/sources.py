@@ -222,11 +222,11 @@ def pose_named_live(tracker: PoseTracker) -> int | None:
     """``powerup.pose_named`` live: the encoder frames heard up to the one the latest pose
     heard names (its ENC_COUNTER: the latest of the last ``NAMED_SPAN`` frames heard before it
     with that COUNTER). None when none."""
-    halves = tracker._halves["x"].rows  # (pos, enc_counter, ...) of the latest X halves heard
+    halves = tracker.pairs.halves["x"].rows  # (pos, enc_counter, ...) of the latest X halves heard
     if not halves:
         return None
     pos, named = halves[-1][0], int(halves[-1][1])
-    before = [row for row in tracker._window.rows if row[1] < pos][-NAMED_SPAN:]
+    before = [row for row in tracker.window.rows if row[1] < pos][-NAMED_SPAN:]
     seqs = [int(row[0]) for row in before if int(row[2]) == named]
     return seqs[-1] + 1 if seqs else None
 
@@ -234,8 +234,8 @@ def pose_named_live(tracker: PoseTracker) -> int | None:
 def heard_before_live(tracker: PoseTracker, bound_s: float, made: int) -> int | None:
     """``powerup.heard_by_tick`` live: the encoder frames heard before bus time ``bound_s`` and
     among the first ``made``; None when the window no longer holds the frames to tell."""
-    rows = [row for row in tracker._window.rows if row[3] < bound_s]
+    rows = [row for row in tracker.window.rows if row[3] < bound_s]
     if rows:
         return min(int(rows[-1][0]) + 1, made)
-    first = tracker._window.rows[0] if tracker._window.rows else None
+    first = tracker.window.rows[0] if tracker.window.rows else None
     return 0 if first is None or int(first[0]) == 0 else None

@@ -11,53 +11,40 @@ known: ``samples.queued_frames``): a sample is judged <= half a cycle after its 
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Any
 
 from odocan.host.judge.livechoice import LiveChoice
 from odocan.host.judge.livefit import LiveFit
+from odocan.host.judge.livehalves import HalfPairs
 from odocan.host.judge.livelaphold import LapHold
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livenewstart import NewStartHold
 from odocan.host.judge.liveplace import StallPlacer
 from odocan.host.judge.liveplacing import place_reference
-from odocan.host.judge.livepose import (
-    RING,
-    ErrorStats,
-    FramePose,
-    RestartLog,
-    Sample,
-    StepGate,
-)
-from odocan.host.judge.liveresent import judge_resend
+from odocan.host.judge.livepose import RING, ErrorStats, FramePose, RestartLog, Sample, StepGate
+from odocan.host.judge.livereference import RawReference
 from odocan.host.judge.livesnapshot import tracker_snapshot
-from odocan.host.judge.livestart import start_reference
+from odocan.host.judge.livestart import Lives
 from odocan.host.judge.livetruth import LifeTruth, TruthParts, judge_truth
 from odocan.host.judge.livetwins import TwinWatch
 from odocan.host.judge.livewindow import (
     ENC_COLUMNS,
     ENC_WINDOW,
-    HALF_WINDOW,
     QUEUED_GAP_S,
     Columns,
-    Counted,
     Half,
     counted,
     held_on_time,
     named_in_window,
     named_plain,
-    primed_at,
     silent_since,
-    window_counts,
 )
-from odocan.host.judge.reference import Geometry, ReferenceOdometry
+from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import SILENCE_CYCLES, WIRE_COUNTER_BITS
 from odocan.sim.pose import TURN_RAD
 
 SILENCE_FRAMES = SILENCE_CYCLES  # encoder cycles without a pose: the firmware was stalled
-BACKLOG_FRAMES = 6_000  # encoder frames kept while waiting for the integrator (60 s at 100 Hz)
-BOOT_COUNT_WAIT_S = 1.0  # after a reboot, how long the count page is waited for (s of bus time)
 
 
 class PoseTracker:
@@ -69,14 +56,15 @@ class PoseTracker:
     on-board sample (the first of each, as ``host.judge.samples.onboard_samples``).
 
     The reference starts at the first on-board pose heard, primed with the counts of the frame
-    it names, stepped with every accepted WHEEL_ENCODERS frame after it. Until the integrator is
-    known (``integrator`` None: ODOM_STATUS's) the poses and frames heard are kept (up to
-    ``BACKLOG_FRAMES``) and compared once it is, so the monitor and the bridge judge the samples
-    ``analyze`` judges; another integrator restarts it. Its start inherits the pose signals'
-    rounding, narrowed sample by sample as ``analyze`` fits it (``host.judge.livefit``), until
-    a power-up is proven (``on_enc_counts``): then exactly (0, 0, 0), as ``analyze`` starts it.
-    The first life's samples wait for its first ENC_E2E_OK page (up to ``BOOT_COUNT_WAIT_S``),
-    so that a power-up's are all judged from (0, 0, 0), as ``analyze`` judges them.
+    it names, stepped with every accepted WHEEL_ENCODERS frame after it (``raw``:
+    ``livereference``). Until the integrator is known (``integrator`` None: ODOM_STATUS's) the
+    poses and frames heard are kept (``lives``: ``livestart.Lives``, up to ``BACKLOG_FRAMES``)
+    and compared once it is, so the monitor and the bridge judge the samples ``analyze``
+    judges; another integrator restarts it. Its start inherits the pose signals' rounding,
+    narrowed sample by sample as ``analyze`` fits it (``host.judge.livefit``), until a power-up
+    is proven (``on_enc_counts``): then exactly (0, 0, 0), as ``analyze`` starts it. The first
+    life's samples wait for its first ENC_E2E_OK page (up to ``BOOT_COUNT_WAIT_S``), so that a
+    power-up's are all judged from (0, 0, 0), as ``analyze`` judges them.
     """
 
     def __init__(
@@ -91,21 +79,13 @@ class PoseTracker:
         self.stalls = 0  # firmware silences after which the reference restarted
         self._pos = 0  # frames fed so far (the order of encoder frames and pose halves)
         self._counts: list[tuple[int, int, int] | None] = [None] * RING  # seq, left, right
-        self._window = Columns(ENC_COLUMNS, ENC_WINDOW)
-        self.twins = TwinWatch(self._window.rows)  # frames with a twin: their poses left out
-        self._halves = {"x": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW),
-                        "y": Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW)}
-        self._unsettled: dict[str, Half] = {}  # per message, the latest half heard
-        self._unsettled_from_s = math.inf  # the earliest bus time among them (s)
-        self._xs: dict[int, Half] = {}  # settled X halves by the encoder frame they name
-        self._ys: dict[int, tuple[Half, bool]] = {}  # settled Y halves (and queued) waiting
-        self._sampled: set[int] = set()  # encoder frames an on-board sample was made of
+        self.window = Columns(ENC_COLUMNS, ENC_WINDOW)  # the latest encoder frames heard
+        self.twins = TwinWatch(self.window.rows)  # frames with a twin: their poses left out
+        self.pairs = HalfPairs(self)  # the pose halves heard, settled and paired (livehalves)
         self.settled: list[Sample] = []  # samples settled since ``take_samples``
-        self._ref_at: dict[int, FramePose] = {}  # the reference at the latest encoder frames
-        self._ref: ReferenceOdometry | None = None  # raw: ``fit`` corrects its start
         self.fit = LiveFit(0.0, 0.0, exact=True)  # the start narrowed (host.judge.livefit)
         self.placer = StallPlacer()  # the placements after stalls (host.judge.liveplace)
-        self.placer.halves = self._halves["x"]  # the holes of the log its gaps are told by
+        self.placer.halves = self.pairs.halves["x"]  # the holes of the log its gaps are told by
         self.restarts = RestartLog(self.placer.reprimed)  # counter restarts told (``events``)
         self.restarts.through, self.restarts.owe = self.placer.seen.through, self.placer.dark.owe
         self.restarts.heard_in = self.placer.seen.heard_in  # evidenceless: a choice held
@@ -113,21 +93,17 @@ class PoseTracker:
         self.restarts.choose = self.choice.open
         self.newstart = NewStartHold(self)  # a new start's samples wait for its fit
         self.laps = LapHold(self)  # samples after a lap of the stamps wait for its evidence
-        self._gate = StepGate(geometry, self.counter_bits, self.restarts)
-        self._pending: FramePose | None = None  # the first pose, heard before the integrator
-        self._backlog_counts: list[Counted] = []  # the frames since the pending pose's
-        self._backlog_poses: list[FramePose] = []
+        # raw: ``fit`` corrects its start (livereference); where it starts (livestart)
+        self.raw = RawReference(StepGate(geometry, self.counter_bits, self.restarts))
+        self.lives = Lives(self)
         self._truth_parts = TruthParts()
         self._last_pair: tuple[FramePose, FramePose] | None = None  # on-board, reference
         self._last_sample_t: float | None = None  # bus time of the last sample's ODOM_POSE_Y
-        self._last_compared = -1  # the encoder frame of the last sample compared
-        self._place_at_next = False  # after a stall or a held pose: place the position again
-        self._losses = self.placer.losses = LiveAllowance()  # (livegapseen re-judges)
-        self.wrongs = self._losses.wrongs  # POSE WRONG episodes latched (host.judge.posewrongs)
+        self.last_compared = -1  # the encoder frame of the last sample compared
+        self.place_at_next = False  # after a stall or a held pose: place the position again
+        self.losses = self.placer.losses = LiveAllowance()  # (livegapseen re-judges)
+        self.wrongs = self.losses.wrongs  # POSE WRONG episodes latched (host.judge.posewrongs)
         self._now_s = 0.0  # the latest bus time (s)
-        self._boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
-        self._boot_poses: list[FramePose] = []  # the new life's samples while it waits
-        self._held: dict[int, Sample] = {}  # ... as settled (unjudged), by encoder frame
         self.pose: FramePose | None = None
         self.pose_t_s = 0.0  # bus time of the ODOM_POSE_Y of ``pose`` (s)
         self.reference: FramePose | None = None
@@ -150,56 +126,44 @@ class PoseTracker:
             self.laps.decide(t_s)
         if t_s > self.newstart.until_s:  # the new start's samples had their fit
             self.newstart.release()
-        if self._boot is not None and t_s > self._boot[1]:
-            self._finish_boot(self._boot[0]) if self._boot[0] >= 0 else self._finish_first(False)
-        if t_s - self._unsettled_from_s < QUEUED_GAP_S:
+        boot = self.lives.boot
+        if boot is not None and t_s > boot[1]:  # no count page in time: started without it
+            self.lives.expire()
+        if t_s - self.pairs.unsettled_from_s < QUEUED_GAP_S:
             return  # none due (nor any later half: t_s - t is monotone in t); none heard: inf
-        for _, name in sorted((half.pos, name) for name, half in self._unsettled.items()
-                              if t_s - half.t_s >= QUEUED_GAP_S):  # due, in the order heard
-            self._settle(name)
+        self.pairs.settle_due(t_s)  # due, in the order heard (livehalves)
 
     def on_encoders(self, counter: int, left: int, right: int, t_s: float, uptime: int = 0) -> None:
         """An accepted WHEEL_ENCODERS frame (raw 24-bit counts, CTRL_UPTIME) at bus time ``t_s``."""
         self.advance(t_s)
         self.enc_seq += 1
         self._pos += 1
-        prev = self._window.rows[-1] if self._window.rows else None  # (no __len__ call)
+        prev = self.window.rows[-1] if self.window.rows else None  # (no __len__ call)
         if self.choice.pending is not None and prev is not None:  # a hole: the choice first
             self.choice.ahead(counter, t_s, prev)
         if self.placer.on_encoders(self.enc_seq, (counter, left, right, t_s), prev,
-                                   self.counter_bits) and self._ref is not None:
-            self._place_at_next = True  # a gap: placed again, bounded (liveplace.StallPlacer)
+                                   self.counter_bits) and self.raw.odometry is not None:
+            self.place_at_next = True  # a gap: placed again, bounded (liveplace.StallPlacer)
             if self.placer.lapped:  # its lap the stamps' alone: the samples wait (livelaphold)
                 self.laps.lapped(self.enc_seq, t_s, self.placer.periods)
         row = (self.enc_seq, self._pos, counter, t_s, left, right, self.placer.periods, uptime)
-        self._window.append(*row)
+        self.window.append(*row)
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
         self._counts[counter] = (self.enc_seq, left, right)
-        ref = self._ref
+        ref = self.raw.odometry
         if ref is not None:
-            step = self._gate.step(counted(row))
-            if step is not None:
-                ref.step_deltas(*step)
-            self._keep_ref(FramePose(self.enc_seq, ref.x_m, ref.y_m, ref.heading_rad))
+            step = self.raw.step(ref, counted(row))
             if self.choice.pending is not None:  # the twin steps along (livechoice)
                 self.choice.stepped(self.enc_seq, step)
             self.laps.heard()
-        elif self._pending is not None:
-            self._backlog_counts.append(counted(row))
-            if len(self._backlog_counts) > BACKLOG_FRAMES:  # too long: start at a later pose
-                self._drop_backlog()
+        elif self.lives.pending is not None:
+            self.lives.heard(counted(row))
 
     def _forget(self, before: int) -> None:
         """Drop what is kept of the encoder frames before ``before`` (seq): bounded state."""
-        self._xs = {seq: half for seq, half in self._xs.items() if seq >= before}
-        self._ys = {seq: half for seq, half in self._ys.items() if seq >= before}
-        self._sampled = {seq for seq in self._sampled if seq >= before}
-        self._ref_at = {seq: ref for seq, ref in self._ref_at.items() if seq >= before}
-
-    def _keep_ref(self, ref: FramePose) -> None:
-        self._ref_at[ref.seq] = ref
-        self._ref_at.pop(ref.seq - ENC_WINDOW, None)
+        self.pairs.forget(before)
+        self.raw.forget(before)
 
     def on_pose_x(self, enc_counter: int, x_m: float, heading_rad: float, *, counter: int,
                   t_s: float) -> None:
@@ -221,56 +185,30 @@ class PoseTracker:
         self.advance(half.t_s)
         self._pos += 1
         half.pos = self._pos
-        self._halves[name].append(half.pos, half.enc_counter, half.counter, half.t_s)
-        if name in self._unsettled:  # its successor is heard: it is known whether it queued
-            self._settle(name)
-        self._unsettled[name] = half
-        self._unsettled_from_s = min(self._unsettled_from_s, half.t_s)  # (NaN: never due)
+        self.pairs.heard(name, half)
 
-    def _settle(self, name: str) -> None:
-        """Resolve the encoder frame the unsettled half of ``name`` names, and pair it."""
-        half = self._unsettled.pop(name)
-        rest = self._unsettled  # x, y: one left at most (per pose half: no list, no min())
-        self._unsettled_from_s = (math.inf if not rest else next(iter(rest.values())).t_s
-                                  if len(rest) == 1 else min(h.t_s for h in rest.values()))
-        seq, queued = self._named(self._halves[name], half.pos)
-        if seq < 0 or self.twins.twinned(seq) or judge_resend(name, seq, half, self):
-            return  # left out, as analyze leaves it out (unmatched); a resend judged
-        if name == "x":
-            self._xs.setdefault(seq, half)
-            waiting = self._ys.pop(seq, None)
-            if waiting is not None:
-                self._pair(seq, half, *waiting)
-        elif seq in self._xs:
-            self._pair(seq, self._xs[seq], half, queued)
-        else:
-            self._ys.setdefault(seq, (half, queued))
-
-    def _named(self, halves: Columns, pos: int) -> tuple[int, bool]:
+    def named(self, halves: Columns, pos: int) -> tuple[int, bool]:
         """The encoder frame (seq) the half at ``pos`` names, -1 when none, and whether it
         queued: ``host.judge.samples.match_encoder`` over the window (the held and queued rules,
         the age bound, the causal rule); a half neither queued nor repeating its predecessor's
         ENC_COUNTER by the plain rule alone, in plain Python (``named_plain``: the same
         result)."""
         if self.fast_path:
-            plain = named_plain(halves.rows, self._window, pos)
+            plain = named_plain(halves.rows, self.window, pos)
             if plain is not None:
                 return plain, False
-        return named_in_window(halves, self._window, pos)
+        return named_in_window(halves, self.window, pos)
 
-    def _pair(self, seq: int, x: Half, y: Half, queued: bool) -> None:
-        """The X and Y halves naming encoder frame ``seq``: one on-board sample (the first)."""
-        self._ys.pop(seq, None)
-        if seq in self._sampled:
-            return
-        self._sampled.add(seq)
+    def on_pair(self, seq: int, x: Half, y: Half, queued: bool) -> None:
+        """The X and Y halves naming encoder frame ``seq`` (``livehalves``): one on-board
+        sample, judged."""
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
         self.pose_t_s = y.t_s
         self.placer.dark.due(seq, self.newstart.restart)  # after a dark restart: livedark
         ref = self._compare(pose, y, queued)
         self.settled.append(sample := Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
-        if self._boot is not None:  # held: settled again once judged (``livestart``)
-            self._held[seq] = sample
+        if self.lives.boot is not None:  # held: settled again once judged (``livestart``)
+            self.lives.held[seq] = sample
         self.newstart.sampled(sample)  # ... or held after an unseen restart (livenewstart)
 
     def _compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
@@ -279,51 +217,41 @@ class PoseTracker:
             return None
         seq = pose.seq
         last, self._last_sample_t = self._last_sample_t, y.t_s
-        silent = not queued and silent_since(last, y.t_s, self._halves["y"], self._window)
-        if silent and self._ref is not None:  # stalls.after_stalls' rule
+        silent = not queued and silent_since(last, y.t_s, self.pairs.halves["y"], self.window)
+        started = self.raw.odometry is not None
+        if silent and started:  # stalls.after_stalls' rule
             # The firmware was stalled: this pose names a backlog frame, and it took the
             # frames it missed as one step: the reference's position is placed again at the
             # next pose (its heading, a function of the counts, goes on).
             self.stalls += 1
-            self._place_at_next = self.placer.stalled = True
+            self.place_at_next = self.placer.stalled = True
             return None
-        held = (0 <= self._last_compared <= seq - SILENCE_FRAMES and not queued
-                and held_on_time(self._window, self._last_compared, seq))  # (stalls._frozen)
-        if self._ref is not None and held and not self.placer.stalled:
+        held = (0 <= self.last_compared <= seq - SILENCE_FRAMES and not queued
+                and held_on_time(self.window, self.last_compared, seq))  # (stalls._frozen)
+        if started and held and not self.placer.stalled:
             # The firmware held its pose that long, then took the frames since as one step: placed
             # again with a stall's allowance, also where a gap opened it (``stalls._frozen``).
             self.stalls += 1
-            self._place_at_next = self.placer.stalled = True
-        if self._ref is None and self._pending is None and not self.reference_starts:
-            self._boot = self._boot or (-1, self._now_s + BOOT_COUNT_WAIT_S)  # the first life's
-        if self._boot is not None:  # a new life waiting for the frame it primed on
-            self._boot_poses.append(pose)
+            self.place_at_next = self.placer.stalled = True
+        lives = self.lives  # a life's start (a boot's frame, the integrator): livestart
+        if (not started or lives.boot is not None) and lives.waits(pose, self._now_s):
             return None
-        if self._ref is None:
-            if self._pending is None:
-                self._pending = pose
-                self._backlog_counts = window_counts(self._window, seq)
-            if self.integrator is None:
-                self._backlog_poses.append(pose)
-                return None
-            start_reference(self, self._pending, self._backlog_counts, [])
-            self._drop_backlog()
         return None if self.choice.holds(pose) else self.judge(pose)  # held: livechoice
 
     def judge(self, pose: FramePose) -> FramePose | None:
         """Judge ``pose`` against the reference at its frame, placed again first where owed."""
-        ref = self._ref_at.get(pose.seq)
+        ref = self.raw.at.get(pose.seq)
         if ref is None:
             return None
-        if self._place_at_next or self.placer.owed:  # owed: an allowance withdrawn
+        if self.place_at_next or self.placer.owed:  # owed: an allowance withdrawn
             self.newstart.release()  # judged by the fit before the placement
             ref = place_reference(self, pose, ref)
         elif self.newstart.holds(pose, ref):
             return None
-        return self._record(pose, ref)
+        return self.record(pose, ref)
 
-    def _record(self, pose: FramePose, raw: FramePose, fed: bool = False,
-                t_s: float | None = None) -> FramePose:
+    def record(self, pose: FramePose, raw: FramePose, fed: bool = False,
+               t_s: float | None = None) -> FramePose:
         """Judge ``pose`` (its ODOM_POSE_Y at bus time ``t_s``, default the latest's) against
         the raw reference ``raw`` at its frame, corrected by the start fit (which the sample
         narrows first, unless ``fed``); returns the corrected reference."""
@@ -332,11 +260,11 @@ class PoseTracker:
         ref = self.fit.correct(raw)
         self.placer.compared(pose)
         self.reference, self._last_pair = ref, (pose, ref)
-        self._last_compared = pose.seq
+        self.last_compared = pose.seq
         self.vs_reference.add(pose, ref)
-        self._losses.spans += self.twins.resolve(self.geometry, self.counter_bits, self.integrator)
-        self._losses.record(pose.seq, self.vs_reference.latest, self.fast_path,
-                            self.pose_t_s if t_s is None else t_s)
+        self.losses.spans += self.twins.resolve(self.geometry, self.counter_bits, self.integrator)
+        self.losses.record(pose.seq, self.vs_reference.latest, self.fast_path,
+                           self.pose_t_s if t_s is None else t_s)
         return ref
 
     # --- encoder frames the firmware lost that the bus carried (host.judge.livelosses) ---
@@ -344,19 +272,20 @@ class PoseTracker:
     def on_enc_lost(self, lost: int) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS: the firmware's ENC_E2E_LOST (u8); a span of
         allowance where it grew beyond the bus's gaps (``LiveAllowance.on_page``)."""
-        self._losses.on_page(lost, self.enc_seq, self._window if self._ref is not None else None,
-                             self._sampled, (self.geometry, self.counter_bits, self.integrator))
-        self._losses.settle(self.enc_seq, self.fast_path)  # later spans start at this frame
+        window = self.window if self.raw.odometry is not None else None
+        self.losses.on_page(lost, self.enc_seq, window, self.pairs.sampled,
+                            (self.geometry, self.counter_bits, self.integrator))
+        self.losses.settle(self.enc_seq, self.fast_path)  # later spans start at this frame
 
     def allowance_m(self, seq: int | None = None) -> float:
         """The loss and twin allowance (m) at frame ``seq`` (default: the latest sample's)."""
-        return self._losses.at_m(self._last_compared if seq is None else seq)
+        return self.losses.at_m(self.last_compared if seq is None else seq)
 
     @property
     def max_beyond_allowance_m(self) -> float:
         """The largest on-board vs reference position error beyond its loss allowance (m);
         analyze's ``max_position_error_beyond_allowance_m``."""
-        return self._losses.max_beyond_m() if self.vs_reference.samples else 0.0
+        return self.losses.max_beyond_m() if self.vs_reference.samples else 0.0
 
     # --- lives and restarts ---
 
@@ -366,9 +295,8 @@ class PoseTracker:
             return
         first = self.integrator is None
         self.integrator = name
-        if first and self._pending is not None:  # judge what was heard while waiting
-            start_reference(self, self._pending, self._backlog_counts, self._backlog_poses)
-            self._drop_backlog()
+        if first and self.lives.pending is not None:  # judge what was heard while waiting
+            self.lives.start_pending(self.lives.backlog_poses)
         else:
             self.restart_reference()
 
@@ -377,14 +305,13 @@ class PoseTracker:
         self.choice.decide()  # the samples held are judged by the reference they named
         self.laps.decide()
         self.newstart.release()
-        self._ref = None
-        self._last_compared = -1
+        self.raw.stop()
+        self.last_compared = -1
         self._last_sample_t = None
-        self._place_at_next = False
-        self._ref_at = {}
+        self.place_at_next = False
         self.placer.restart()
-        self._losses.restart(self.enc_seq, self.fast_path)
-        self._drop_backlog()
+        self.losses.restart(self.enc_seq, self.fast_path)
+        self.lives.drop_backlog()
 
     def power_up(self, primed_now: bool) -> None:
         """A reboot (``sources``): the new life starts at (0, 0, 0) at the encoder frame it
@@ -395,12 +322,11 @@ class PoseTracker:
         adopted, so a firmware that comes up wrong shows its error. Without a known integrator:
         ``restart_reference`` (the next pose is adopted)."""
         self.new_life()
-        self._losses.lost_page = None  # the new firmware counts from 0
+        self.losses.lost_page = None  # the new firmware counts from 0
         if self.integrator is None:
             return
         guess = self.enc_seq if primed_now else self.enc_seq + 1
-        self._boot = (guess, self._now_s + BOOT_COUNT_WAIT_S)
-        self._boot_poses, self._held = [], {}
+        self.lives.await_boot(guess, self._now_s)
 
     def new_life(self) -> None:
         """A new firmware life (a reboot): the reference starts again at the next pose, and
@@ -414,42 +340,7 @@ class PoseTracker:
     @property
     def awaiting_boot(self) -> bool:
         """A new life waits for the frame it primed on (its samples are not judged yet)."""
-        return self._boot is not None
-
-    def _finish_boot(self, primed: int, first_life: bool = False) -> None:
-        """Start the new life's reference at (0, 0, 0) at encoder frame ``primed`` (seq), judge
-        the samples heard since the reboot; adopt the next pose when that frame is not known (not
-        heard yet, or left the window). ``first_life``: the log's first (one start)."""
-        poses, self._boot, self._boot_poses = self._boot_poses, None, []
-        counts = window_counts(self._window, primed)
-        if not counts or counts[0][0] != primed:
-            if not first_life:  # a first life keeps its fitted start
-                self.restart_reference()
-            return
-        self.reference_starts -= first_life and self.reference_starts > 0
-        self.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
-        self._losses.primed(primed)  # ENC_E2E_LOST counted from 0 there
-        start_reference(self, FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
-        if not first_life:
-            self.life_truth.booted(primed, self._ref_at)
-
-    def _finish_first(self, proven: bool) -> None:
-        """The first life's samples waited for its first ENC_E2E_OK page (``powerup``'s
-        evidence): ``proven``, judged from (0, 0, 0) on frame 0 as ``analyze`` judges them (once
-        the integrator is known); else (a cut log, no page within ``BOOT_COUNT_WAIT_S``) from
-        the first of them, fitted."""
-        if proven and self.integrator is not None:
-            self._finish_boot(0, first_life=True)
-            return
-        poses, self._boot, self._boot_poses = self._boot_poses, None, []
-        counts = window_counts(self._window, 0) if proven else []
-        zero = bool(counts) and counts[0][0] == 0  # frame 0 still in the window
-        self._pending = FramePose(0, 0.0, 0.0, 0.0) if zero else poses[0]
-        self._backlog_poses = poses
-        self._backlog_counts = counts if zero else window_counts(self._window, poses[0].seq)
-        if self.integrator is not None:
-            start_reference(self, self._pending, self._backlog_counts, poses)
-            self._drop_backlog()
+        return self.lives.boot is not None
 
     def on_enc_counts(self, ok: int, lost: int, proven: bool = False) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS: ENC_E2E_OK (u16) and ENC_E2E_LOST. A reboot's
@@ -457,16 +348,8 @@ class PoseTracker:
         first summary of UPTIME 0, counting exactly the frames heard when it was made
         (``proven``: ``SourceWatch.on_page``) proves a power-up: (0, 0, 0) on frame 0,
         whatever the first pose said (``analyze``'s rule); then ``on_enc_lost``."""
-        if self._boot is not None and self._boot[0] < 0:  # the first life's samples wait
-            self._finish_first(proven)
-        elif self._boot is not None and (at := primed_at(self._window, ok, lost)) is not None:
-            self._finish_boot(at)
-        elif proven and self.integrator is not None:
-            self._finish_boot(0, first_life=True)  # the samples judged before keep their errors
+        self.lives.on_counts(ok, lost, proven)
         self.on_enc_lost(lost)
-
-    def _drop_backlog(self) -> None:
-        self._pending, self._backlog_counts, self._backlog_poses = None, [], []
 
     def set_geometry(self, geometry: Geometry, counter_bits: int) -> None:
         """New robot parameters (a config command); the reference restarts at the next pose."""
@@ -478,7 +361,7 @@ class PoseTracker:
         """The firmware's plausibility bound (u16 mm/s, its PROFILE page): the step gate takes it
         from the next frame on, as the firmware's gate runs with it; the reference goes on."""
         self.geometry = replace(self.geometry, max_wheel_speed_mm_s=max_wheel_speed_mm_s)
-        self._gate.rebound(self.geometry)
+        self.raw.gate.rebound(self.geometry)
 
     def on_truth(
         self, part: int, enc_counter: int, value: float
@@ -491,7 +374,7 @@ class PoseTracker:
     @property
     def counter_restarts(self) -> int:
         """Counter restarts the current reference re-primed on (as the firmware does)."""
-        return self._gate.counter_restarts
+        return self.raw.gate.counter_restarts
 
     def snapshot(self) -> dict[str, Any]:
         """``pose``, ``reference``, ``truth``, ``error`` (``livesnapshot.tracker_snapshot``)."""

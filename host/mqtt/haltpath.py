@@ -127,7 +127,7 @@ def frames_from(tracker: PoseTracker, first: int) -> list[Frame]:
     """The encoder frames of the tracker's window from seq ``first`` on: from its latest rows
     as plain tuples (``Columns.rows``: a sample names one of the latest frames) when they reach
     back that far, else from the numpy window (``window_counts``: 20 times the CPU)."""
-    window = tracker._window  # the tracker's own window (tracking.py is at its size limit)
+    window = tracker.window  # the tracker's window of the latest encoder frames
     rows = window.rows
     if rows and (rows[0][0] <= first or window.whole):
         frames = []

@@ -1,0 +1,86 @@
+"""The live judge's pose halves (``host.judge.tracking``): each ODOM_POSE_X and ODOM_POSE_Y half is
+settled once bus time is half an encoder cycle past it or the next half of its message is heard
+(then whether it queued is known: ``samples.queued_frames``), the encoder frame it names
+resolved (``PoseTracker.named``); an X and a Y half naming one encoder frame make one on-board
+sample (the first of each, as ``host.judge.samples.onboard_samples``: ``PoseTracker.on_pair``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from odocan.host.judge.liveresent import judge_resend
+from odocan.host.judge.livewindow import HALF_WINDOW, QUEUED_GAP_S, Columns, Half
+
+if TYPE_CHECKING:
+    from odocan.host.judge.tracking import PoseTracker
+
+HALF_COLUMNS = ("pos", "enc_counter", "counter", "t_s")
+
+
+class HalfPairs:
+    """``halves``: the latest halves heard of each message (``HALF_WINDOW``, the columns
+    ``HALF_COLUMNS``: what names a frame); the latest half of each not settled yet (from bus
+    time ``unsettled_from_s``, inf: none); the settled halves waiting for their other half, by
+    the encoder frame they name; ``sampled``: the encoder frames a sample was made of."""
+
+    def __init__(self, tracker: PoseTracker) -> None:
+        self._tracker = tracker
+        self.halves = {"x": Columns(HALF_COLUMNS, HALF_WINDOW),
+                       "y": Columns(HALF_COLUMNS, HALF_WINDOW)}
+        self._unsettled: dict[str, Half] = {}  # per message, the latest half heard
+        self.unsettled_from_s = math.inf  # the earliest bus time among them (s)
+        self._xs: dict[int, Half] = {}  # settled X halves by the encoder frame they name
+        self._ys: dict[int, tuple[Half, bool]] = {}  # settled Y halves (and queued) waiting
+        self.sampled: set[int] = set()  # encoder frames an on-board sample was made of
+
+    def heard(self, name: str, half: Half) -> None:
+        """A half of message ``name`` ("x", "y"; its ``pos`` set) heard: the one before it of
+        that message settled (its successor is heard: it is known whether it queued)."""
+        self.halves[name].append(half.pos, half.enc_counter, half.counter, half.t_s)
+        if name in self._unsettled:
+            self._settle(name)
+        self._unsettled[name] = half
+        self.unsettled_from_s = min(self.unsettled_from_s, half.t_s)  # (NaN: never due)
+
+    def settle_due(self, t_s: float) -> None:
+        """Bus time is ``t_s``: settle the halves heard ``QUEUED_GAP_S`` or more before, in the
+        order heard."""
+        for _, name in sorted((half.pos, name) for name, half in self._unsettled.items()
+                              if t_s - half.t_s >= QUEUED_GAP_S):
+            self._settle(name)
+
+    def forget(self, before: int) -> None:
+        """Drop what is kept of the encoder frames before ``before`` (seq): bounded state."""
+        self._xs = {seq: half for seq, half in self._xs.items() if seq >= before}
+        self._ys = {seq: half for seq, half in self._ys.items() if seq >= before}
+        self.sampled = {seq for seq in self.sampled if seq >= before}
+
+    def _settle(self, name: str) -> None:
+        """Resolve the encoder frame the unsettled half of ``name`` names, and pair it."""
+        half = self._unsettled.pop(name)
+        rest = self._unsettled  # x, y: one left at most (per pose half: no list, no min())
+        self.unsettled_from_s = (math.inf if not rest else next(iter(rest.values())).t_s
+                                 if len(rest) == 1 else min(h.t_s for h in rest.values()))
+        tracker = self._tracker
+        seq, queued = tracker.named(self.halves[name], half.pos)
+        if seq < 0 or tracker.twins.twinned(seq) or judge_resend(name, seq, half, tracker):
+            return  # left out, as analyze leaves it out (unmatched); a resend judged
+        if name == "x":
+            self._xs.setdefault(seq, half)
+            waiting = self._ys.pop(seq, None)
+            if waiting is not None:
+                self._pair(seq, half, *waiting)
+        elif seq in self._xs:
+            self._pair(seq, self._xs[seq], half, queued)
+        else:
+            self._ys.setdefault(seq, (half, queued))
+
+    def _pair(self, seq: int, x: Half, y: Half, queued: bool) -> None:
+        """The X and Y halves naming encoder frame ``seq``: one on-board sample (the first)."""
+        self._ys.pop(seq, None)
+        if seq in self.sampled:
+            return
+        self.sampled.add(seq)
+        self._tracker.on_pair(seq, x, y, queued)

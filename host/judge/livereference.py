@@ -1,0 +1,48 @@
+"""The live judge's raw reference (``host.judge.tracking``): the float64 ``ReferenceOdometry``
+before the start fit corrects it, its pose at each of the latest encoder frames (the frame a
+sample names is compared at), and the firmware's step gate it is stepped through. Owned by the
+tracker (``PoseTracker.raw``); started by ``livestart``, placed again by ``liveplacing``, taken
+from a twin by ``livechoice``."""
+
+from __future__ import annotations
+
+from odocan.host.judge.livepose import FramePose, RestartLog, StepGate
+from odocan.host.judge.livewindow import ENC_WINDOW, Counted
+from odocan.host.judge.reference import Geometry, ReferenceOdometry
+
+
+class RawReference:
+    """``odometry`` (None until started, again after a restart), ``at`` (its pose at the latest
+    encoder frames, by seq) and ``gate`` (``StepGate``: the frames' steps the firmware takes)."""
+
+    __slots__ = ("at", "gate", "odometry")
+
+    def __init__(self, gate: StepGate) -> None:
+        self.odometry: ReferenceOdometry | None = None
+        self.at: dict[int, FramePose] = {}
+        self.gate = gate
+
+    def start(self, odometry: ReferenceOdometry, geometry: Geometry, counter_bits: int,
+              told: RestartLog) -> None:
+        """Start at ``odometry`` (its pose the start's), nothing kept, a new gate."""
+        self.odometry, self.at = odometry, {}
+        self.gate = StepGate(geometry, counter_bits, told)
+
+    def stop(self) -> None:
+        """No reference until the next start (a restart)."""
+        self.odometry, self.at = None, {}
+
+    def step(self, ref: ReferenceOdometry, frame: Counted) -> tuple[int, int] | None:
+        """Step ``ref`` (the started odometry) by ``frame`` as the gate takes it (None: not
+        stepped; a first frame primes) and keep its pose at the frame; returns the step."""
+        step = self.gate.step(frame)
+        if step is not None:
+            ref.step_deltas(*step)
+        seq = frame[0]
+        self.at[seq] = FramePose(seq, ref.x_m, ref.y_m, ref.heading_rad)
+        self.at.pop(seq - ENC_WINDOW, None)
+        return step
+
+    def forget(self, before: int) -> None:
+        """Drop the poses kept at the encoder frames before ``before`` (seq)."""
+        self.at = {seq: ref for seq, ref in self.at.items() if seq >= before}
