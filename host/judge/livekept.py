@@ -133,7 +133,7 @@ def _made(tracker: PoseTracker, check: _Open) -> Kept:
     after = [s for s in check.samples if s.pose.seq > check.c][:NARROW_SAMPLES + 1]
     used = before + after
     first = used[0].pose.seq if used else check.c
-    frames = [f for f in window_counts(tracker._window, first) if f[0] <= max(
+    frames = [f for f in window_counts(tracker.window, first) if f[0] <= max(
         check.c, used[-1].pose.seq if used else check.c)]
     if not frames or frames[0][0] != first:
         return "the encoder frames around the APPLY left the live window"
