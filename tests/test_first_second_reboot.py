@@ -28,6 +28,7 @@ import pytest
 from odocan.firmware import frames as fr
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
+from odocan.host.judge import bootticks
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
@@ -67,6 +68,15 @@ def _robot() -> ic.Robot:
     p = PMIR.firmware_params()
     return ic.Robot(p["counts_per_rev"], p["wheel_radius_left_nm"], p["wheel_radius_right_nm"],
                     p["wheelbase_nm"], p["counter_bits"])
+
+
+def _dbc_cycle(name: str) -> tuple[int, int]:
+    """(GenMsgCycleTime ms, E2EFramesPerCycle) of message ``name`` in the DBC (cantools)."""
+    dbc = DB.get_message_by_name(name).dbc
+    assert dbc is not None
+    attributes = dbc.attributes
+    frames = attributes["E2EFramesPerCycle"].value if "E2EFramesPerCycle" in attributes else 1
+    return int(attributes["GenMsgCycleTime"].value), int(frames)
 
 
 def _decoded(msg: can.Message) -> dict[str, Any]:
@@ -128,6 +138,9 @@ def _live(messages: tuple[can.Message, ...]) -> tuple[BusMonitor, RobotTelemetry
 def test_a_reboot_in_the_first_second_is_seen_and_the_correct_firmware_passes(
     reboot_at: int, firmware: str, tmp_path: Path
 ) -> None:
+    assert _dbc_cycle("ODOM_POSE_X") == (bootticks.POSE_CYCLE_MS, bootticks.POSE_FRAMES_PER_CYCLE)
+    assert _dbc_cycle("ODOM_STATUS") == (bootticks.STATUS_CYCLE_MS,
+                                         bootticks.STATUS_FRAMES_PER_CYCLE)  # the rule's ground
     messages = drive(reboot_at, firmware)
     primed_t = _reset_seen(messages, reboot_at)
     path = _written(messages, tmp_path / f"reboot{reboot_at}.log")
