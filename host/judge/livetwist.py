@@ -76,6 +76,7 @@ class LiveTwist:
         self.suspended = False  # a config applied with parameters not known here
         self.max_linear_excess_mps = 0.0
         self.max_angular_excess_rad_s = 0.0
+        self._undo: tuple[float, int, float, float] | None = None  # before the last judged
         self.reconfigure(geometry, counter_bits)
 
     def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
@@ -98,10 +99,10 @@ class LiveTwist:
         ``from_s``: the bus time the new firmware's frames start from (its first tick's twist
         comes before the summary that told the reboot): the last twist judged from then on is
         the new firmware's, not the old one's wrong, and its judgement is withdrawn."""
-        undo = getattr(self, "_undo", None)
+        undo = self._undo  # (bus time, samples, excesses) before the last twist judged
         if undo is not None and undo[0] >= from_s:
             _, self.samples, self.max_linear_excess_mps, self.max_angular_excess_rad_s = undo
-        self._undo: tuple[float, int, float, float] | None = None  # before the last judged
+        self._undo = None
         self._prev: Frame | None = None  # the last accepted encoder frame
         self._steps: list[Step] = []  # after the last frame taken
         self._folded = (EMPTY, EMPTY)  # steps beyond KEEP_STEPS, before any frame to name

@@ -98,9 +98,10 @@ class SourceWatch:
 
     def observe(self, t_s: float, uptime_s: int, state: str, counter: int | None = None
                 ) -> str | None:
-        """One ODOM_STATUS summary (``counter``: its E2E COUNTER, None: not told; with ``pose``,
-        the latest ODOM_POSE_X heard before it, it tells a power-up tick: ``bootticks``);
-        returns ``"reboot"``, ``"two sources"``, ``"uptime jump"`` or None."""
+        """One ODOM_STATUS summary (``counter``: its E2E COUNTER, None: not told; with the
+        watch's ``pose``, the latest ODOM_POSE_X heard before the summary, it tells a power-up
+        tick: ``bootticks.boot_tick``); returns ``"reboot"``, ``"two sources"``,
+        ``"uptime jump"`` or None."""
         offset = uptime_s - t_s
         kind = None
         booted = counter is not None and boot_tick(uptime_s, counter, t_s, self.pose,
