@@ -76,6 +76,7 @@ class LiveTwist:
         self.suspended = False  # a config applied with parameters not known here
         self.max_linear_excess_mps = 0.0
         self.max_angular_excess_rad_s = 0.0
+        self._undo: tuple[float, int, float, float] | None = None  # before the last judged
         self.reconfigure(geometry, counter_bits)
 
     def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
@@ -93,8 +94,15 @@ class LiveTwist:
         longer judged (what was found wrong stays latched)."""
         self.suspended = True
 
-    def new_life(self) -> None:
-        """A reboot: the steps and the frames taken start again (analyze judges each life)."""
+    def new_life(self, from_s: float = math.inf) -> None:
+        """A reboot: the steps and the frames taken start again (analyze judges each life).
+        ``from_s``: the bus time the new firmware's frames start from (its first tick's twist
+        comes before the summary that told the reboot): the last twist judged from then on is
+        the new firmware's, not the old one's wrong, and its judgement is withdrawn."""
+        undo = self._undo  # (bus time, samples, excesses) before the last twist judged
+        if undo is not None and undo[0] >= from_s:
+            _, self.samples, self.max_linear_excess_mps, self.max_angular_excess_rad_s = undo
+        self._undo = None
         self._prev: Frame | None = None  # the last accepted encoder frame
         self._steps: list[Step] = []  # after the last frame taken
         self._folded = (EMPTY, EMPTY)  # steps beyond KEEP_STEPS, before any frame to name
@@ -169,6 +177,7 @@ class LiveTwist:
         if linear != linear:
             return
         angular = excess(angular_raw * TWIST_LSB, self._a[1], self._b[1], zero)
+        self._undo = (t_s, self.samples, self.max_linear_excess_mps, self.max_angular_excess_rad_s)
         self.samples += 1
         self.max_linear_excess_mps = max(self.max_linear_excess_mps, linear)
         self.max_angular_excess_rad_s = max(self.max_angular_excess_rad_s, angular)

@@ -147,7 +147,7 @@ class BusMonitor:
         message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
         summary = self._summary(message, data) if message is not None else None
         if summary is not None:  # before its E2E check, which a reboot or a second source fails
-            self._watch_source(*summary)
+            self._watch_source(*summary, counter=data[1] & 0xF)
         status = self.e2e.check(msg.arbitration_id, data, extended=msg.is_extended_id,
                                 timestamp_s=timestamp_s)
         if message is None:
@@ -293,17 +293,18 @@ class BusMonitor:
         elif page == "PROFILE":  # what the firmware runs with, against --robot (profilepage)
             follow_profile(self, self._bus_time_s, s["MAX_WHEEL_SPEED"], int(s["PROFILE_CRC"]))
 
-    def _watch_source(self, uptime_s: int, state: str) -> None:
-        """Reboots and a second source, from the summary's UPTIME and STATE (module docstring)."""
+    def _watch_source(self, uptime_s: int, state: str, counter: int) -> None:
+        """Reboots and a second source, from the summary's UPTIME, STATE and E2E COUNTER
+        (module docstring)."""
         before = self.status.get("uptime_s")
-        if (kind := self.sources.observe(self._bus_time_s, uptime_s, state)) is None:
+        if (kind := self.sources.observe(self._bus_time_s, uptime_s, state, counter)) is None:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
         if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
             lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
             detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
             self.distance.new_life()
-            self.twist.new_life()
+            self.twist.new_life(self._bus_time_s - SAME_TICK_S)  # its first tick's twist
             self.set_pose.forget(self._bus_time_s - SAME_TICK_S)  # the new firmware's kept
             self.kept.forget()
             if lost is not None:
@@ -320,6 +321,7 @@ class BusMonitor:
     def _summary(self, message: Message, data: bytes) -> tuple[int, str] | None:
         """(UPTIME, STATE) of a summary whose CRC holds, any sequence (``src.status_frame``)."""
         config = self._e2e_configs.get(frame_key(message.frame_id, message.is_extended_frame))
+        src.pose_frame(self.sources, message, data, config, self._bus_time_s)  # power-up ticks
         return src.status_frame(self.tracker, message, data, config, self._bus_time_s)
 
     def node_ages(self, now_s: float) -> dict[str, dict[str, Any]]:

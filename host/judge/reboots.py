@@ -2,9 +2,10 @@
 
 A reboot is told the way the live monitor tells it (``host.judge.sources.SourceWatch``, the one
 detection): the ODOM_STATUS summaries whose CRC holds, whatever their E2E sequence (a new
-firmware restarts its counters), fed in bus order; a ``"reboot"`` is UPTIME going back or INIT
-after running. The frame of that summary is the new firmware's first (its tick 0 sends a
-summary, firmware/ecu.py).
+firmware restarts its counters), fed in bus order; a ``"reboot"`` is UPTIME going back, INIT
+after running, or (in the first second of uptime) the power-up tick's E2E COUNTERs
+(``host.judge.bootticks``). The frame of that summary is the new firmware's first (its tick 0
+sends a summary, firmware/ecu.py).
 
 The new firmware's pose is (0, 0, 0) at the first encoder frame it accepted (it primes there),
 so each life is analysed on its own, its reference restarted from that power-up pose at that
@@ -49,6 +50,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.bootticks import boot_ticks, poses_before
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.liveconfig import config_text
@@ -177,20 +179,26 @@ def _watch_summaries(
     states = np.array(names, dtype=object)[which]
     positions, times_s = index[good], page["timestamp_s"][good]
     uptimes_s = page["UPTIME"][good].astype(np.int64)
+    counters = page["COUNTER"][good].astype(np.int64)
+    poses = poses_before(frames, decoder, positions)[0]  # their ticks' (``bootticks``)
+    booted = boot_ticks(uptimes_s, counters, times_s, poses, None)
     watch = SourceWatch()
     boots = []
     changed, conflict = 0, None  # the summary of the last new offset; where two sources began
     k, window = 0, _FIRST_WINDOW
     while k < len(positions):  # quiet stretches at once (observe_quiet), the others one by one
         end = min(len(positions), k + window)
-        k += watch.observe_quiet(times_s[k:end], uptimes_s[k:end], states[k:end])
+        k += watch.observe_quiet(times_s[k:end], uptimes_s[k:end], states[k:end],
+                                 booted[k:end])
         if k == end:
             window *= 2
             continue
         window = _FIRST_WINDOW
         before = watch.last_uptime_s
         name = str(states[k])
-        kind = watch.observe(float(times_s[k]), int(uptimes_s[k]), name)
+        pose_counter = int(poses[1][k])
+        watch.pose = None if pose_counter < 0 else (float(poses[0][k]), pose_counter)
+        kind = watch.observe(float(times_s[k]), int(uptimes_s[k]), name, int(counters[k]))
         if kind == "reboot":
             boots.append((int(positions[k]), int(uptimes_s[k]), name, int(before)))
         if watch.changed_at_s == float(times_s[k]):

@@ -4,9 +4,9 @@ The one detection of a firmware reboot, shared by the live monitor (``host.judge
 the log analysis (``host.judge.analysis``): a source's UPTIME (whole seconds) minus bus time stays
 constant within ``UPTIME_MATCH_S``; a reboot moves that offset once, or sends an UPTIME below the
 last one (even within ``UPTIME_MATCH_S``: a reboot a second or two after power-up), or says INIT
-after running; two sources on one ID make two offsets interleave (two sources whose offsets
-differ by less than ``UPTIME_MATCH_S`` look like reboots). A reboot within the first second
-after the previous one that does not say INIT cannot be told from UPTIME (0 again).
+after running, or (within its first second, UPTIME 0 again) its power-up tick's E2E COUNTERs
+(``host.judge.bootticks``); two sources on one ID make two offsets interleave (two sources whose
+offsets differ by less than ``UPTIME_MATCH_S`` look like reboots).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.judge.bootticks import POSE_MESSAGE, boot_tick, pose_heard
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.powerup import NAMED_SPAN, holds_first_cycle, same_tick, tick_bound_s
 from odocan.host.protocol.e2e import crc8h2f_p02_one
@@ -59,6 +60,8 @@ class SourceWatch:
     first_counter: int | None = None  # the first accepted page's COUNTER, any page
     summary_times: list[tuple[int, float]] = field(default_factory=list)  # the latest
     # summaries' COUNTER and bus time (``powerup.tick_bound_s``)
+    pose: tuple[float, int] | None = None  # the latest ODOM_POSE_X heard: bus time, COUNTER
+    summary_s: float | None = None  # the bus time of the latest summary observed
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -93,15 +96,21 @@ class SourceWatch:
         spanned = (ok + int(signals.get("ENC_E2E_LOST", 0))) & 0xFFFF  # accepted or lost
         return bool({ok, spanned} & {heard[0] & 0xFFFF, heard[1], by_tick})
 
-    def observe(self, t_s: float, uptime_s: int, state: str) -> str | None:
-        """One ODOM_STATUS summary; returns ``"reboot"``, ``"two sources"``, ``"uptime jump"``
-        or None."""
+    def observe(self, t_s: float, uptime_s: int, state: str, counter: int | None = None
+                ) -> str | None:
+        """One ODOM_STATUS summary (``counter``: its E2E COUNTER, None: not told; with the
+        watch's ``pose``, the latest ODOM_POSE_X heard before the summary, it tells a power-up
+        tick: ``bootticks.boot_tick``); returns ``"reboot"``, ``"two sources"``,
+        ``"uptime jump"`` or None."""
         offset = uptime_s - t_s
         kind = None
+        booted = counter is not None and boot_tick(uptime_s, counter, t_s, self.pose,
+                                                   self.summary_s)
+        self.summary_s = t_s
         if self.offset_s is None:
             self.offset_s, self.first_uptime_s = offset, uptime_s
         elif abs(offset - self.offset_s) <= UPTIME_MATCH_S:
-            if (state == "INIT" and self.last_state not in ("", "INIT")) or (
+            if booted or (state == "INIT" and self.last_state not in ("", "INIT")) or (
                 uptime_s < self.last_uptime_s  # one source's UPTIME never goes back
             ):
                 kind = "reboot"
@@ -126,12 +135,13 @@ class SourceWatch:
 
     def observe_quiet(
         self, t_s: npt.NDArray[np.float64], uptime_s: npt.NDArray[np.int64],
-        states: npt.NDArray[np.object_],
+        states: npt.NDArray[np.object_], booted: npt.NDArray[np.bool_] | None = None,
     ) -> int:
         """``observe`` of the summaries given (bus times, UPTIMEs, STATE names, in order) up to
         the first one that ``observe`` would return something for or follow another offset at,
         which is left unobserved; returns how many were observed (all: ``len(t_s)``). The
-        same state as ``observe`` one by one, vectorised (a log's summaries are mostly quiet).
+        same state as ``observe`` one by one, vectorised (a log's summaries are mostly quiet);
+        ``booted``: which are a power-up tick (``bootticks.boot_ticks``; None: none).
         """
         if self.offset_s is None or len(t_s) == 0:
             return 0
@@ -144,9 +154,12 @@ class SourceWatch:
             | (init & ~before_idle)
             | (uptime_s < before_uptime_s)
         )
+        if booted is not None:
+            loud |= booted
         count = int(np.argmax(loud)) if loud.any() else len(t_s)
         if count:
             self.last_uptime_s, self.last_state = int(uptime_s[count - 1]), str(states[count - 1])
+            self.summary_s = float(t_s[count - 1])
         return count
 
 
@@ -198,6 +211,16 @@ def status_frame(tracker: PoseTracker, message: Message, data: bytes, e2e: Any, 
     data_ids = e2e.data_ids if e2e is not None else None
     heard_status(tracker, message, data, data_ids, t_s)
     return boot_summary(message, data, data_ids)
+
+
+def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s: float) -> None:
+    """Any frame heard at bus time ``t_s``: an ODOM_POSE_X whose CRC holds, whatever its E2E
+    sequence (``e2e``: the message's ``E2EMessage`` or None), is ``watch``'s latest pose (its
+    COUNTER tells a power-up tick: ``bootticks``)."""
+    if message.name == POSE_MESSAGE:
+        counter = pose_heard(data, e2e.data_ids if e2e is not None else None)
+        if counter is not None:
+            watch.pose = (t_s, counter)
 
 
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,

@@ -55,6 +55,7 @@ import can
 from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 
+from odocan.host.judge.bootticks import POSE_MESSAGE, pose_heard
 from odocan.host.judge.liveconfig import SAME_TICK_S, rebooted
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
@@ -141,6 +142,9 @@ class RobotTelemetry(CommandFollowing):
         self.status_seq = 0
         self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
         self._status_ids = e2e_messages(self.db).get(self._status_id)
+        pose = self.db.get_message_by_name(POSE_MESSAGE)  # its COUNTER tells power-up ticks
+        self._pose_id, self._pose_ids = pose.frame_id, e2e_messages(self.db)[pose.frame_id]
+        self._watched = {self._status_id, self._pose_id}  # heard before E2E (_watch_source)
         status = self._by_id[self._status_id]  # per signal: its key in ``firmware``, its enum
         self._status_signals = {sig.name: (sig.name.lower(), sig.choices)
                                 for sig in status.signals}
@@ -182,7 +186,7 @@ class RobotTelemetry(CommandFollowing):
         Runs per frame of every robot (the fleet's hot path): one lookup of the frame's route
         (message, handler, decoder), the sample check only when the tracker settled one."""
         route = None if extended else self._routes.get(can_id)
-        if route is not None and route.status_page is not None:  # before E2E: a reboot fails it
+        if route is not None and can_id in self._watched:  # before E2E: a reboot fails it
             self._watch_source(route, data, t_s)
         status = self.e2e.check(can_id, data, extended=extended,
                                 timestamp_s=t_s)  # the window widens with time
@@ -218,20 +222,27 @@ class RobotTelemetry(CommandFollowing):
         return publications
 
     def _watch_source(self, route: Route, data: bytes, t_s: float) -> None:
-        """A reboot (UPTIME going back, INIT after running) starts the firmware's new life at
-        its power-up pose, as the monitor and ``analyze`` do (``host.judge.sources``); every
-        page to the live gapseen (``livegapseen.heard_status``)."""
+        """A reboot (UPTIME going back, INIT after running, a power-up tick's COUNTERs) starts
+        the firmware's new life at its power-up pose, as the monitor and ``analyze`` do
+        (``host.judge.sources``); every page to the live gapseen (``livegapseen.heard_status``);
+        an ODOM_POSE_X's COUNTER to the watch (``host.judge.bootticks``)."""
+        if route.name == POSE_MESSAGE:
+            if (counter := pose_heard(data, self._pose_ids.data_ids)) is not None:
+                self.sources.pose = (t_s, counter)
+            return
+        if route.status_page is None:
+            return
         ids = self._status_ids.data_ids if self._status_ids is not None else None
         heard_status(self.tracker, route.message, data, ids, t_s, route.signals)  # compiled
         summary = (boot_summary(route.message, data, ids, route.signals)
                    if route.is_summary(data) else None)
-        if summary is None or self.sources.observe(t_s, *summary) != "reboot":
+        if summary is None or self.sources.observe(t_s, *summary, data[1] & 0xF) != "reboot":
             return
         self.reboots += 1
         lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM
         start_new_life(self.tracker, self.e2e, self.db, *summary)
         self.distance.new_life()
-        self.twist.new_life()
+        self.twist.new_life(t_s - SAME_TICK_S)  # its first tick's twist: the new one's
         self.set_pose.forget(t_s - SAME_TICK_S)  # what the new firmware ACKed: kept
         self.kept.forget()
         if lost is not None:
