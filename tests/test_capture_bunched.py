@@ -46,7 +46,8 @@ DRIVES = [  # (robot, seed, faults, the recorder's seed)
     ("pmir", 3, "burst=0.05:3,seed=3", 2),
     ("pmir", 3, "drop=0.3,seed=5", 1),
 ]
-WRONG_DRIVES = [("kobuki", 3, "drop=0.3,seed=5", 2), ("pmir", 3, "drop=0.3,seed=5", 2)]
+WRONG_DRIVES = [("kobuki", 3, "drop=0.3,seed=5", 2), ("pmir", 3, "drop=0.3,seed=5", 2),
+                ("kobuki", 3, "delay=0.1:15,seed=7", 2)]  # the last: lock-outs read by the pages
 
 
 def _starved(log: Path, out: Path, seed: int) -> None:
@@ -70,11 +71,10 @@ def _starved(log: Path, out: Path, seed: int) -> None:
 
 def _checker_errors(log: Path, robot: str) -> tuple[float, float]:
     """The independent checker: the largest position (m) and heading (rad) error of the
-    firmware's poses in the lockstep ``log`` against float64 exact-arc odometry of the sender's
-    encoder frames from pose 0 at power-up. Frames with a bad CRC or out of the sender's order
-    (a delayed one, overtaken) are left out (the firmware took at most the same steps merged: a
-    few nm here). A pose names the latest of the last 8 encoder frames with its ENC_COUNTER;
-    its X and Y halves are the two sent between the same two encoder frames."""
+    firmware's poses in the lockstep ``log`` against float64 exact-arc odometry of the encoder
+    frames the receiver of dbc/README.md takes (``_Window``), from pose 0 at power-up. A pose
+    names the latest of the last 8 frames taken with its ENC_COUNTER; its X and Y halves are the
+    two sent between the same two encoder frames."""
     db = load_can_dbc(DBC_PATH)
     ids = {m.frame_id: [int(v) for v in dbc_attribute(m, "E2EDataIDs").split(",")]
            for m in db.messages if m.dbc is not None and "E2EDataIDs" in m.dbc.attributes}
@@ -82,21 +82,22 @@ def _checker_errors(log: Path, robot: str) -> tuple[float, float]:
     m_l = 2 * math.pi * p.wheel_radius_left_m / p.counts_per_rev
     m_r = 2 * math.pi * p.wheel_radius_right_m / p.counts_per_rev
     wire = 1 << min(p.counter_bits, 24)
+    window = _Window()
     recent: list[tuple[int, float, float, float]] = []  # (COUNTER, x, y, heading), newest first
     halves: dict[tuple[str, int], dict[str, int]] = {}
     counts: tuple[int, int] | None = None
     x = y = h = 0.0
     errors = [(0.0, 0.0)]
     for line in log.read_text().splitlines():
-        _, _, frame = line.split()[:3]
+        stamp, _, frame = line.split()[:3]
         can_id, data = int(frame.split("#")[0], 16), bytes.fromhex(frame.split("#")[1])
         if can_id not in ids or crc8h2f(data[1:] + bytes([ids[can_id][data[1] & 0xF]])) != data[0]:
             continue
         msg = db.get_message_by_frame_id(can_id)
         s = {k: int(v) for k, v in numbers(db, can_id, data, scaling=False).items()}
         if msg.name == "WHEEL_ENCODERS":
-            if recent and not 0 < (s["COUNTER"] - recent[0][0]) % 16 < 8:
-                continue  # a frame late on the bus, overtaken: not in the sender's order
+            if not window.takes(s["COUNTER"], float(stamp.strip("()"))):
+                continue
             now = (s["LEFT_COUNT"], s["RIGHT_COUNT"])
             if counts is not None:
                 dl = (now[0] - counts[0] + wire // 2) % wire - wire // 2
@@ -120,6 +121,30 @@ def _checker_errors(log: Path, robot: str) -> tuple[float, float]:
             errors.append((math.hypot(hx["X"] * POSITION_LSB_M - pose[1],
                                       hy["Y"] * POSITION_LSB_M - pose[2]), abs(dh)))
     return max(e[0] for e in errors), max(e[1] for e in errors)
+
+
+class _Window:
+    """The WHEEL_ENCODERS receiver of dbc/README.md (AUTOSAR E2E Profile 2, MaxDeltaCounterInit
+    0, the window widened once per receive period up to 15, the reference counter kept after a
+    WRONGSEQUENCE), fed the lockstep log: a frame stamped in (k - 1, k] periods is checked in
+    tick k, after the window widened for it. A frame late on the bus may lock the window out for
+    up to 15 periods (every later frame one step beyond it) or be taken late (counts back)."""
+
+    def __init__(self) -> None:
+        self.last: int | None = None  # the reference COUNTER; None before the first frame
+        self.width = 0
+        self.tick = 0
+
+    def takes(self, counter: int, t_s: float) -> bool:
+        """Whether the receiver takes this frame (its CRC is good) heard at ``t_s``."""
+        tick = math.ceil(round(t_s / PERIOD_S, 6))
+        self.width = min(15, self.width + max(0, tick - self.tick))
+        self.tick = max(self.tick, tick)
+        delta = None if self.last is None else (counter - self.last) % 16
+        if delta is not None and not 0 < delta <= max(1, self.width):
+            return False
+        self.last, self.width = counter, 0
+        return True
 
 
 def _arc(x: float, y: float, h: float, ds_l: float, ds_r: float, b: float
@@ -188,16 +213,34 @@ def test_a_pose_two_lsb_off_fails_a_starved_capture(
     assert not any(verdicts.values()), verdicts
 
 
-@pytest.mark.xfail(strict=True, reason="open: a starved capture of a drive with frames late on "
-                   "the bus: the firmware's lock-outs outlast what its poses can name")
-def test_a_correct_firmware_passes_a_starved_capture_of_a_delayed_drive(tmp_path: Path) -> None:
-    """kobuki, ``delay=0.1:15,seed=7``: the firmware took 262 encoder frames (a late frame
-    locks its E2E window out for up to 15 periods); on the capture the host takes 362: where
-    the stamps cannot decide, the poses hold one frame's name through a lock-out, which no
-    longer tells one frame from the one 16 later, and the wide reading after the recorder's
-    releases takes the frames. FAIL at 38 mm / 0.45 rad (before: 27 mm / 0.45 rad). The hold
-    and stall rules (``samples.queued_frames``) also read the recorder's bursts as a busy
-    bus's."""
-    right, verdicts = _verdicts(tmp_path, ("kobuki", 3, "delay=0.1:15,seed=7", 1), None)
+DELAYED = [("kobuki", 3, "delay=0.1:15,seed=7", 1), ("kobuki", 3, "delay=0.1:15,seed=7", 2)]
+
+
+@pytest.mark.parametrize("drive", DELAYED, ids=[f"recorder-{d[3]}" for d in DELAYED])
+def test_a_correct_firmware_passes_a_starved_capture_of_a_delayed_drive(
+    tmp_path: Path, drive: tuple[str, int, str, int]
+) -> None:
+    """kobuki, ``delay=0.1:15,seed=7``: the firmware took 262 encoder frames: a frame late on
+    the bus locks its E2E window out for up to 15 periods (at 1.06 s: 8 taken after 9, every
+    later frame one step beyond the window until 10 at 1.22 s), and the poses hold the name 8
+    through the lock-out. Before: the checker took the sender's order (the frames the firmware
+    refused, and at 1.20 s the next 8 for the held one) and said 38 mm / 0.45 rad off a correct
+    firmware (now 0.066 mm / 0.048 mrad, ``_Window``); on recorder seed 2's capture the host
+    took 279 frames, 4 of them at the lock-out's end stamped late in a release, and ``analyze``
+    FAILed whole and streamed (ODOM_TWIST's DISTANCE 4.4 mm off the reference's path). The
+    firmware's ENC_E2E_OK pages count fewer there; the host now reads those released frames
+    narrow (``host.protocol.e2e_pages``): 263 taken, PASS."""
+    right, verdicts = _verdicts(tmp_path, drive, None)
     assert right
-    assert all(verdicts.values()), verdicts
+    assert (verdicts["whole"], verdicts["streamed (CLI)"]) == (True, True), verdicts
+
+
+@pytest.mark.xfail(strict=True, reason="open: the live judge has no pose or page evidence of a "
+                   "lock-out: it takes the sender's order after a release (0.25 mm off)")
+def test_the_live_judge_passes_a_starved_capture_of_a_delayed_drive(tmp_path: Path) -> None:
+    """The same drive (recorder seed 1) to the live judge (the monitor model): it judges each
+    frame when it comes, before the poses that name the late frame or the pages that count the
+    lock-out: it took 373 frames where the firmware took 262 and FAILs at 0.25 mm."""
+    right, verdicts = _verdicts(tmp_path, DELAYED[0], None)
+    assert right
+    assert verdicts["live"], verdicts

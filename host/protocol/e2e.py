@@ -83,6 +83,7 @@ from odocan.host.protocol.e2e_evidence import (
     recorder_releases,
     settle,
 )
+from odocan.host.protocol.e2e_pages import OkPages, by_pages, ok_pages
 from odocan.host.protocol.e2e_periods import (
     frame_periods,
 )
@@ -339,7 +340,8 @@ def check_frames(
     The frames are grouped by message once (a stable sort of their message numbers) and the CRCs
     of all protected frames found in one pass; the sequence is then judged per message.
     """
-    configs = e2e_messages(db if db is not None else default_plan())
+    db = db if db is not None else default_plan()
+    configs = e2e_messages(db)
     accepted = np.zeros(len(frames), dtype=bool)
     counts: dict[str, dict[str, int]] = {}
     unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
@@ -358,6 +360,7 @@ def check_frames(
     poses = None if crc_ok is None else evidence_frames(
         frames, [groups.of(k) for k in range(len(in_order))],
         [(c.name, c.length) for c in in_order], crc_ok)
+    pages = None if crc_ok is None else ok_pages(frames, crc_ok, db)
     for number, config in enumerate(in_order):
         of_id = groups.of(number)
         if len(of_id) == 0:
@@ -368,7 +371,8 @@ def check_frames(
             unknown["unprotected"] += len(right_dlc)
             accepted[right_dlc] = True
             continue
-        counts[config.name] = _check_message(frames, right_dlc, config, accepted, crc_ok, poses)
+        counts[config.name] = _check_message(frames, right_dlc, config, accepted, crc_ok, poses,
+                                             pages)
     counts[UNKNOWN] = unknown
     return counts, accepted
 
@@ -396,9 +400,11 @@ def _check_message(
     accepted: npt.NDArray[np.bool_],
     crc_ok: npt.NDArray[np.bool_],
     poses: list[npt.NDArray[np.intp]] | None = None,
+    pages: OkPages | None = None,
 ) -> dict[str, int]:
     """Check the frames ``index`` of one protected message (``crc_ok``: of every frame); mark
-    the accepted ones. ``poses``: the evidence frames' positions (``e2e_evidence``)."""
+    the accepted ones. ``poses``: the evidence frames' positions (``e2e_evidence``); ``pages``:
+    the firmware's counts of the encoder frames it took (``e2e_pages``)."""
     assert config.data_ids is not None
     counter = (frames.data[index, 1] & COUNTER_MASK).astype(np.int64)
     periods = frame_periods(frames.timestamp_s[index], counter, crc_ok[index], config.cycle_s,
@@ -408,7 +414,8 @@ def _check_message(
     status = sequence_statuses(crc_ok[index], counter, periods, config.max_delta_init, t_s,
                                cycle_s)
     if config.name in PER_PERIOD_WINDOW and config.cycle_s is not None and poses is not None:
-        status = _settled(frames, index, counter, crc_ok[index], periods, status, config, poses)
+        status = _settled(frames, index, counter, crc_ok[index], periods, status, config, poses,
+                          pages)
     good = (status == _S_OK) | (status == _S_LOST)
     if good.all():  # the usual case: no gathers
         accepted[index] = True
@@ -435,9 +442,10 @@ def _check_message(
 def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDArray[np.int64],
              crc_ok: npt.NDArray[np.bool_], periods: npt.NDArray[np.int64],
              status: npt.NDArray[np.int8], config: E2EMessage,
-             poses: list[npt.NDArray[np.intp]]) -> npt.NDArray[np.int8]:
+             poses: list[npt.NDArray[np.intp]],
+             pages: OkPages | None = None) -> npt.NDArray[np.int8]:
     """``status`` where the capture's stamps decide every frame; else settled from the
-    firmware's poses (``e2e_evidence``)."""
+    firmware's poses (``e2e_evidence``) and its counts (``e2e_pages``)."""
     assert config.cycle_s is not None
     t_s, cycle_s = frames.timestamp_s[index], new_cycle_s(config)
     wide, narrow = readings(t_s, counter, crc_ok, config.cycle_s, periods)
@@ -448,5 +456,8 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
     evidence = pose_evidence(frames, index, counter, crc_ok, poses)
     released = recorder_releases(frames.timestamp_s, frame_keys(frames) == config.key,
                                  config.cycle_s)[index]
-    return settle(crc_ok, counter, (periods, wide, narrow), evidence, config.max_delta_init,
-                  released, None if cycle_s is None else (t_s, cycle_s))
+    def run(reading: npt.NDArray[np.int8] | None) -> npt.NDArray[np.int8]:
+        return settle(crc_ok, counter, (periods, wide, narrow), evidence, config.max_delta_init,
+                      released, None if cycle_s is None else (t_s, cycle_s), reading)
+
+    return by_pages(run, run(None), index, released, pages)

@@ -166,10 +166,12 @@ def _only_named(enc_counter: IntArray, good: npt.NDArray[np.intp], lo: int, hi: 
 def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
            periods: tuple[IntArray, IntArray, IntArray], evidence: Evidence,
            max_delta_init: int, released: npt.NDArray[np.bool_],
-           new_cycle: tuple[npt.NDArray[np.float64], float] | None = None) -> npt.NDArray[np.int8]:
+           new_cycle: tuple[npt.NDArray[np.float64], float] | None = None,
+           reading: npt.NDArray[np.int8] | None = None) -> npt.NDArray[np.int8]:
     """One message's statuses (bus order) judged with the three readings' ``periods`` (strict,
     wide, narrow) and, where it speaks, with ``evidence``, else by the strict reading, or
-    the wide one after a frame a stalled recorder ``released``. The Profile 2 check of
+    the wide one after a frame a stalled recorder ``released``, or the one ``reading`` names
+    for the frame (0 strict, 1 wide, 2 narrow; -1 none: ``e2e_pages``). The Profile 2 check of
     ``host.protocol.e2e.SequenceState`` with three windows, its new-cycle rule included
     (``new_cycle``: the frames' bus times and the message's period; ``e2e_cycles``)."""
     n = len(counter)
@@ -179,6 +181,7 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
     columns = [p.tolist() for p in periods]
     ok, counters = crc_ok.tolist(), (counter & 0x0F).tolist()
     late = released.tolist()
+    chosen = reading.tolist() if reading is not None else [-1] * n
     stamps, cycle_s = (new_cycle[0].tolist(), new_cycle[1]) if new_cycle else ([], 0.0)
     taken: list[int] = []  # the frames taken so far (``e2e_retract``)
     cums = (np.cumsum(periods[1]).tolist(), np.cumsum(periods[2]).tolist())
@@ -196,8 +199,8 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
             status[j], last_s = S_REPEATED, math.nan  # a frame between: no new cycle till next
             continue
         else:
-            wide = late[j - 1] if j else False
-            code = _by_window_or_evidence(j, delta, windows, evidence, wide)
+            which = chosen[j] if chosen[j] >= 0 else int(late[j - 1]) if j else 0
+            code = _by_window_or_evidence(j, delta, windows[which], evidence)
             if j in evidence.taken and delta > max(windows):  # the host's last is not its
                 code = _taken_back(j, taken, counters, ok, cums, max_delta_init, evidence,
                                    status)
@@ -226,16 +229,15 @@ def _taken_back(j: int, taken: list[int], counters: list[int], ok: list[bool],
     return S_OK if (counters[j] - counters[taken[-1]]) & 0x0F == 1 else S_LOST
 
 
-def _by_window_or_evidence(j: int, delta: int, windows: list[int], evidence: Evidence,
-                           wide: bool) -> int:
+def _by_window_or_evidence(j: int, delta: int, window: int, evidence: Evidence) -> int:
     """OKSOMELOST or WRONG_SEQUENCE for a frame ``delta`` after the last taken one: the
     evidence's where it speaks, even where the readings agree (module docstring), else by the
-    window (``windows``: the strict, wide and narrow readings'; ``wide``: the wide one's)."""
+    ``window`` of the reading chosen for it."""
     if j in evidence.taken:
         return S_LOST
     if j in evidence.skipped:
         return S_WRONG
-    return S_LOST if delta <= windows[1 if wide else 0] else S_WRONG
+    return S_LOST if delta <= window else S_WRONG
 
 
 def recorder_releases(timestamp_s: npt.NDArray[np.float64], is_encoder: npt.NDArray[np.bool_],
