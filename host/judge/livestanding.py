@@ -15,7 +15,8 @@ An odometry offset does not heal until the pose is set anew (a reboot, an applie
 ``posewrongs.PoseWrongs.new_life``), so a POSE WRONG episode of the pose's current life keeps the
 verdict POSE WRONG (``standing_why``). The live judge's own re-basings stay OK but say so
 (``placed_why``): the pose is judged against a reference placed again where the firmware was,
-within the allowance said, and against nothing at all after a gap without a bound.
+within the allowance said (nothing judged across a gap without a bound), or started again at
+the firmware's pose after an unseen controller restart.
 """
 
 from __future__ import annotations
@@ -79,8 +80,9 @@ def _within_because(tracker: PoseTracker) -> str:
 
 
 def placed_why(tracker: PoseTracker) -> list[str]:
-    """The reference's placements since it started, said beside an OK ([] when none): after a
-    stall or a hold, after a gap of the encoder frames (bounded), after a gap without a bound."""
+    """The live judge's re-basings in this watch, said beside an OK ([] when none): placements
+    after a stall or a hold, after a gap of the encoder frames (bounded), after a gap without
+    a bound; new starts at the firmware's pose after an unseen controller restart."""
     placements = tracker.placer.placements
     parts = []
     if placements.stalls:
@@ -94,10 +96,14 @@ def placed_why(tracker: PoseTracker) -> list[str]:
     if placements.free:
         parts.append(f"{placements.free} gap{_s(placements.free)} without a bound (an offset "
                      "there not judged)")
-    if not parts:
-        return []
-    return ["judged against the reference placed again where the firmware was after "
-            + " and ".join(parts)]
+    why = ["judged against the reference placed again where the firmware was after "
+           + " and ".join(parts)] if parts else []
+    starts = tracker.placer.dark.new_starts
+    if starts:
+        why.append(f"the reference restarted at the firmware's pose after {starts} unseen "
+                   f"controller restart{_s(starts)} across a recorder hole (an offset it had "
+                   "then not judged)")
+    return why
 
 
 def _s(count: int) -> str:
