@@ -213,8 +213,9 @@ class PoseWrongs:
         return wrongs
 
     def standing_text(self) -> str:
-        """One line while ``standing``: ``the on-board pose was wrong in 3 episodes since
-        its power-up, worst ...``; "" else."""
+        """One line while ``standing``: ``the on-board pose was wrong in 3 episodes since its
+        pose was set anew at 12.30 s, worst ...`` (``since the watch began`` in the first
+        life); "" else."""
         if not self.standing or self.life_worst is None:
             return ""
         plural = "" if self.life_count == 1 else "s"
