@@ -646,9 +646,12 @@ def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
 def _assert_live_kept(messages: tuple[can.Message, ...], ok: bool) -> None:
     """The monitor's model and the bridge make ``analyze``'s check of what the one APPLY kept
     (``livekept``): it passes when ``ok``; else it fails and latches a POSE WRONG episode
-    (the wrong firmware's jump 8 ticks after a stall: before, both were OK, no episode)."""
+    (the wrong firmware's jump 8 ticks after a stall: before, both were OK, no episode) that
+    stands until the pose is set anew (before, the jump's episode was not counted in the
+    pose's life and the monitor's state went back to OK)."""
     monitor, bridge = _live(messages)
     for judge in (monitor, bridge):
         assert (judge.tracker.wrongs.count > 0) is not ok
+        assert judge.tracker.wrongs.standing is not ok
         [event] = [e for e in judge.events if e["kind"] == "set_pose"]
         assert event["kept"]["passed"] is ok

@@ -32,9 +32,12 @@ re-primes on is a ``counter_restart`` event, as analyze tells it. The verdict, i
 FIRMWARE, STALE, CONFLICT, the firmware's own state when not OK (its REASON; a POSE WRONG
 episode, DISTANCE WRONG or TWIST WRONG, once latched, outrank its DEGRADED), POSE WRONG (the
 latest sample vs reference beyond ``analyze``'s limit, one LSB of position after the loss
-allowance or of heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it),
+allowance or of heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it; or
+an episode latched since the pose was last set anew, which the latest sample does not undo:
+``livestanding``),
 UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), DISTANCE WRONG and
-TWIST WRONG (ODOM_TWIST's DISTANCE and speeds, latched: ``livedistance``, ``livetwist``), OK.
+TWIST WRONG (ODOM_TWIST's DISTANCE and speeds, latched: ``livedistance``, ``livetwist``), OK
+(saying so when the reference was placed again after a stall or a gap: ``livestanding``).
 
 ``bus_load`` (``busstats.LoadWindow``): bits per second over the last second of bus time, from
 every frame's exact stuffed length; the load as a fraction when given the bitrate.
@@ -56,9 +59,9 @@ from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
-from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livekept import KeptWatch
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
+from odocan.host.judge.livestanding import placed_why, pose_wrong_why
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.messagestats import MessageStats
@@ -74,7 +77,6 @@ from odocan.host.judge.monitorvalues import (
 from odocan.host.judge.profilepage import follow_profile
 from odocan.host.judge.reasonwords import reason_text
 from odocan.host.judge.reference import Geometry
-from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatch
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
@@ -369,19 +371,14 @@ class BusMonitor:
             return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
         if self.tracker.awaiting_boot:
             return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
-        allowed_m = self.tracker.allowance_m()  # for frames the firmware lost, and twins
-        if pose_wrong(error["dpos_m"], error["dheading_rad"], allowed_m):
-            plus = f" (allowed {allowed_m * 1e3:.4f} mm: lost frames, twins)" if allowed_m else ""
-            return "POSE WRONG", [
-                f"on-board vs reference {error['dpos_m'] * 1e3:.4f} mm{plus}, "
-                f"{error['dheading_rad'] * 1e3:.4f} mrad (limit one LSB: "
-                f"{POSITION_LSB_M * 1e3:.1f} mm, {HEADING_LSB_RAD * 1e3:.4f} mrad)"
-            ]
+        why = pose_wrong_why(self.tracker)  # the latest sample, or the pose's life: livestanding
+        if why:
+            return "POSE WRONG", why
         why = self.distance.verdict()  # latched: a wrong DISTANCE once is wrong
         if why:
             return "DISTANCE WRONG", why
         why = self.twist.verdict()  # latched: LINEAR_VEL / ANGULAR_VEL beyond their band
-        return ("TWIST WRONG", why) if why else ("OK", [])
+        return ("TWIST WRONG", why) if why else ("OK", placed_why(self.tracker))
 
     def _reported_verdict(self, reported: str) -> tuple[str, list[str]]:
         """The firmware's own state when not OK, with its REASON; but a pose, DISTANCE or twist

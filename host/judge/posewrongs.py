@@ -23,6 +23,16 @@ first WHEEL_ENCODERS frame heard, as the bridge's ``pose`` and ``error`` message
 largest beyond its allowance), ``dheading_mrad`` (the largest heading error), ``open`` (its
 latest sample was wrong). The state is bounded: ``MAX_EPISODES`` latest, the worst and the
 counts kept for ever.
+
+An odometry offset does not heal: a pose once wrong stays off by what it took until the
+firmware's pose is set anew, by a reboot (its power-up pose) or an applied set-pose
+(``new_life``). The latest sample alone does not tell it: the pose signals' rounding (half an
+LSB) puts the samples of a firmware 1.2 LSB off on either side of the one-LSB limit (a 0.6 LSB
+offset too, now and then), and a placement after a gap or a stall takes an offset within its
+allowance into the reference. So the episodes of the pose's current life are counted apart
+(``standing``): while there is one, the live verdict is POSE WRONG whatever the latest sample
+(``host.judge.monitor``), and ``as_dict`` carries them as ``this_life`` (``since_s``: the bus
+time the life began, None for the watch's first; ``episodes``; ``worst``).
 """
 
 from __future__ import annotations
@@ -74,12 +84,30 @@ class PoseWrongs:
 
     def __init__(self) -> None:
         self._pending: dict[int, tuple[float, float, float]] = {}  # frame: t_s, dpos, dheading
+        self._suspects: set[int] = set()  # pending frames beyond the limit without allowance
         self.latest: deque[Episode] = deque(maxlen=MAX_EPISODES)
         self.count = 0  # episodes latched
         self.wrong_samples = 0
         self.worst: Episode | None = None
         self._open: Episode | None = None
         self.judged_until_s = math.inf  # two firmwares from then: no later sample is judged
+        self.life_from_s = -math.inf  # bus time the pose's current life began (``new_life``)
+        self.life_count = 0  # episodes with a wrong sample in it
+        self.life_worst: Episode | None = None
+        self._life_last: Episode | None = None  # the latest episode counted in it
+
+    def new_life(self, t_s: float) -> None:
+        """The firmware's pose was set anew at bus time ``t_s`` (a reboot, an applied
+        set-pose): an offset taken before it is gone; the episodes before it stay latched
+        (``count``, ``worst``), no longer ``standing``."""
+        self.close()
+        self.life_from_s, self.life_count = t_s, 0
+        self.life_worst = self._life_last = None
+
+    @property
+    def standing(self) -> bool:
+        """Whether the pose was wrong in its current life (module docstring)."""
+        return self.life_count > 0
 
     def unjudgeable_from(self, t_s: float) -> None:
         """Two firmwares answered on one node ID from bus time ``t_s``: their pose frames cannot
@@ -94,16 +122,44 @@ class PoseWrongs:
         self.latest = deque(kept, maxlen=MAX_EPISODES)
         if self.worst is not None and self.worst.t_s >= t_s:
             self.worst = max(kept, key=lambda e: e.size_lsb, default=None)
+        self.life_count = max(0, self.life_count - sum(e.t_s >= self.life_from_s for e in gone))
+        if self._life_last is not None and self._life_last.t_s >= t_s:
+            self._life_last = None
+        if self.life_worst is not None and self.life_worst.t_s >= t_s:
+            self.life_worst = max((e for e in kept if e.t_s >= self.life_from_s),
+                                  key=lambda e: e.size_lsb, default=None)
+            self.life_count = self.life_count if self.life_worst is not None else 0
 
     def sample(self, seq: int, t_s: float, dpos_m: float, dheading_rad: float) -> None:
         """A sample of encoder frame ``seq`` (its ODOM_POSE_Y at bus time ``t_s``) was compared:
         ``dpos_m`` from the reference, ``dheading_rad``; judged once settled (``judged``)."""
         self._pending[seq] = (t_s, dpos_m, dheading_rad)
+        if dpos_m > POSITION_LSB_M or abs(dheading_rad) > HEADING_LSB_RAD:
+            self._suspects.add(seq)  # wrong unless a later page gives it an allowance
+
+    def unsettled_wrong(self, allowance_m: Any) -> tuple[int, float, float, float] | None:
+        """The worst sample of the pose's current life not settled yet that is wrong with the
+        allowance it has now (``allowance_m``: frame -> m): (frame, t_s, dpos_m beyond it,
+        dheading_rad); None when none. The latest sample may be right already; this one is
+        latched once its allowance is final, unless a page gives it more."""
+        worst, size = None, 0.0
+        for seq in list(self._suspects):
+            kept = self._pending.get(seq)
+            if kept is None:
+                self._suspects.discard(seq)
+                continue
+            t_s, dpos_m, dheading_rad = kept
+            beyond_m = dpos_m - allowance_m(seq)
+            lsb = max(beyond_m / POSITION_LSB_M, abs(dheading_rad) / HEADING_LSB_RAD)
+            if self.life_from_s <= t_s < self.judged_until_s and lsb > 1.0 and lsb > size:
+                worst, size = (seq, t_s, beyond_m, dheading_rad), lsb
+        return worst
 
     def judged(self, settled: list[tuple[int, float]]) -> None:
         """Samples settled: (frame, position error beyond its final allowance, m), any order."""
         for seq, beyond_m in sorted(settled):
             kept = self._pending.pop(seq, None)
+            self._suspects.discard(seq)
             if kept is not None:
                 self._judge(seq, kept, beyond_m)
 
@@ -123,6 +179,17 @@ class PoseWrongs:
         self.wrong_samples += 1
         if self.worst is None or episode.size_lsb > self.worst.size_lsb:
             self.worst = episode
+        self._count_in_life(episode, t_s)
+
+    def _count_in_life(self, episode: Episode, t_s: float) -> None:
+        """A wrong sample at bus time ``t_s`` of ``episode``: counted in the pose's current life
+        unless it belongs to the life before (settled late)."""
+        if t_s < self.life_from_s:
+            return
+        if episode is not self._life_last:
+            self._life_last, self.life_count = episode, self.life_count + 1
+        if self.life_worst is None or episode.size_lsb > self.life_worst.size_lsb:
+            self.life_worst = episode
 
     def jumped(self, seq: int, t_s: float, dpos_m: float, dheading_rad: float) -> None:
         """A set-pose APPLY moved what it kept (``host.judge.livekept``: ``analyze``'s check of
@@ -137,6 +204,7 @@ class PoseWrongs:
         self.latest.append(episode)
         if self.worst is None or episode.size_lsb > self.worst.size_lsb:
             self.worst = episode
+        self._count_in_life(episode, t_s)  # the jump stands until the pose is set anew
 
     def close(self) -> None:
         """The open episode ends (a right sample, or a new reference)."""
@@ -147,16 +215,34 @@ class PoseWrongs:
     def finish(self, allowance_m: Any) -> None:
         """Judge the samples still waiting with the allowance they have now (``allowance_m``:
         frame -> m, the tracker's ``allowance_m``): the watch ends, no later page comes."""
-        pending, self._pending = self._pending, {}
+        pending, self._pending, self._suspects = self._pending, {}, set()
         for seq in sorted(pending):
             self._judge(seq, pending[seq], pending[seq][1] - allowance_m(seq))
 
     def as_dict(self) -> dict[str, Any]:
         """``episodes`` (count), ``wrong_samples``, ``worst`` and ``latest`` (oldest first)
-        episodes as dicts (None / [] when the pose was never wrong)."""
-        return {"episodes": self.count, "wrong_samples": self.wrong_samples,
-                "worst": None if self.worst is None else asdict(self.worst),
-                "latest": [asdict(e) for e in self.latest]}
+        episodes as dicts (None / [] when the pose was never wrong); ``this_life`` only while
+        the pose is wrong in its current life (``standing``)."""
+        wrongs = {"episodes": self.count, "wrong_samples": self.wrong_samples,
+                  "worst": None if self.worst is None else asdict(self.worst),
+                  "latest": [asdict(e) for e in self.latest]}
+        if self.standing and self.life_worst is not None:
+            since = None if self.life_from_s == -math.inf else self.life_from_s
+            wrongs["this_life"] = {"since_s": since, "episodes": self.life_count,
+                                   "worst": asdict(self.life_worst)}
+        return wrongs
+
+    def standing_text(self) -> str:
+        """One line while ``standing``: ``the on-board pose was wrong in 3 episodes since its
+        pose was set anew at 12.30 s, worst ...`` (``since the watch began`` in the first
+        life); "" else."""
+        if not self.standing or self.life_worst is None:
+            return ""
+        plural = "" if self.life_count == 1 else "s"
+        since = ("since the watch began" if self.life_from_s == -math.inf
+                 else f"since its pose was set anew at {self.life_from_s:.2f} s")
+        return (f"the on-board pose was wrong in {self.life_count} episode{plural} {since}, "
+                f"worst {self.life_worst.text()}")
 
     def summary(self) -> str:
         """One line: ``the on-board pose was wrong in 1 episode (12 samples), worst ...``; ""

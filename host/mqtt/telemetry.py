@@ -15,7 +15,9 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
 * ``ODOM_POSE_X`` + ``ODOM_POSE_Y`` with the same ``ENC_COUNTER`` make the on-board pose, compared
   with the reference of that very encoder frame: ``pose``, ``reference`` and ``error`` at most
   ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic;
-  ``error.pose_wrong``: beyond ``analyze``'s limit, ``host.judge.livefit.pose_wrong``),
+  ``error.pose_wrong``: beyond ``analyze``'s limit, ``host.judge.livefit.pose_wrong``;
+  ``error.since_last``: the worst of the samples since the previous ``error`` when one was wrong,
+  a hold's batch released at once included, ``host.mqtt.errorbatch``),
   the first ``publish_phase_s`` of bus time after the first sample (a fleet spreads its robots'
   publications over the ticks of a period);
 * ``SIM_TRUTH``'s three parts of one encoder frame make ``truth``, compared with the reference of
@@ -68,6 +70,7 @@ from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.dbcnames import named_value, page_name
+from odocan.host.mqtt.errorbatch import SinceLast
 from odocan.host.mqtt.haltstretch import HaltStretches
 from odocan.host.mqtt.livecommands import CommandFollowing
 from odocan.host.mqtt.liveprofile import ProfileStatus
@@ -138,6 +141,7 @@ class RobotTelemetry(CommandFollowing):
         self._truth_error: dict[str, Any] | None = None
         self._truth: dict[str, Any] | None = None  # the latest truth not published yet
         self._truth_pub_t = -math.inf  # bus time of the last truth published (s)
+        self._since = SinceLast()  # the samples since the last ``error`` (host.mqtt.errorbatch)
         self.firmware: dict[str, Any] = {}
         self.status_seq = 0
         self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
@@ -297,6 +301,7 @@ class RobotTelemetry(CommandFollowing):
             return []
         if self.stretches is not None:
             self.stretches.on_samples(samples)
+        self._since.add(samples, self.tracker.allowance_m)  # a held batch: its worst (errorbatch)
         sample = samples[-1]
         t_s = sample.t_s
         if t_s < self._last_pub_t:  # the bus clock went back (a restart, a replay): follow it
@@ -322,6 +327,8 @@ class RobotTelemetry(CommandFollowing):
             vs_ref["dpos_m"], vs_ref["dheading_rad"], self.tracker.allowance_m(pose.seq))}
         if self._truth_error is not None:
             error["reference_vs_truth"] = self._truth_error
+        if (since := self._since.take()) is not None:  # a wrong sample since the last error
+            error["since_last"] = since
         pubs.append(("error", stamp(error)))
         return self._with_truth(pubs, t_s)
 
