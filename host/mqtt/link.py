@@ -10,13 +10,15 @@
 * the first connection must succeed within ``connect_timeout_s``, else ``BrokerError`` (the
   CLI's exit 2); later losses are one line each: "connection lost", "reconnecting in N s",
   "reconnected" (exponential backoff from ``backoff_s`` up to ``max_backoff_s``);
-* client id ``<client_prefix>-<robot>``, clean start off, session expiry ``command_expiry_s``.
+* client id ``<client_prefix>-<robot>`` (shortened to MQTT 3.1.1's 23 bytes when longer:
+  ``host.mqtt.clientids``), clean start off, session expiry ``command_expiry_s``.
   A broker that comes back without that session although we were away for less is one warning
   line (``sessions_lost``: it lost its state, and with it what it held);
 * commands are read off this loop: ``host.mqtt.cmdreader.CommandReader``, a thread with its own
-  connection (client id ``<client_prefix>-<robot>-cmd``, its own session of the same expiry:
-  the broker keeps its ``cmd/+`` subscription and queues commands while the bridge is away, for
-  at most ``command_expiry_s``), reads and acknowledges them even while this loop is blocked,
+  connection, one per bridge process (``commands``: this robot's share of it; without it, one of
+  its own), with its own session of the same expiry (the broker keeps the ``cmd/+``
+  subscriptions and queues commands while the bridge is away, for at most
+  ``command_expiry_s``), reads and acknowledges them even while this loop is blocked,
   into a queue of ``command_queue`` (a broker's own queue for a client that does not read drops
   commands it acknowledged, unanswered); ``_receive`` takes them from there. Commands read
   before a connection broke, or before the bridge stopped, are still answered;
@@ -69,7 +71,8 @@ from odocan.host.mqtt.broker import (
     protocol_unsupported,
 )
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient, persistent_session
-from odocan.host.mqtt.cmdreader import CommandReader
+from odocan.host.mqtt.clientids import link_client_id, reader_client_id
+from odocan.host.mqtt.cmdreader import CommandReader, RobotCommands
 from odocan.host.mqtt.expiry import Expired, Fresh, expired_by, fresh
 from odocan.host.mqtt.redelivery import Redeliveries
 from odocan.host.mqtt.v5probe import CLIENT_LOG, speaks_v5
@@ -117,11 +120,12 @@ class RobotLink:
         reliable_buffer: int = 1000,
         inflight: int = 20,
         command_queue: int = 1000,
+        commands: RobotCommands | None = None,
     ) -> None:
         self.robot = topics.check_robot_name(robot)
         self.broker = broker
         self.on_command = on_command
-        self.client_id = f"{client_prefix}-{robot}"
+        self.client_id = link_client_id(client_prefix, robot)
         self.keepalive_s = keepalive_s
         self.connect_timeout_s, self.command_expiry_s = connect_timeout_s, command_expiry_s
         self.backoff_s, self.max_backoff_s = backoff_s, max_backoff_s
@@ -137,7 +141,13 @@ class RobotLink:
         self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
         self.connected = asyncio.Event()
         self.redeliveries = Redeliveries()  # a DUP copy of a command handled is not run again
-        self.reader: CommandReader | None = None  # the commands' thread (``run``)
+        # this robot's commands, read on the process's reader thread (started by ``run``)
+        self.reader: RobotCommands = commands or CommandReader(
+            robots=[self.robot], broker=broker,
+            client_id=reader_client_id(client_prefix, [self.robot]), keepalive_s=keepalive_s,
+            connect_timeout_s=connect_timeout_s, session_expiry_s=command_expiry_s,
+            capacity=command_queue, backoff_s=backoff_s, max_backoff_s=max_backoff_s,
+        ).robots[self.robot]
         self._receiver: asyncio.Task[None] | None = None  # ``_receive``, from the first connection
         self._telemetry_wake = asyncio.Event()
         self._reliable_wake = asyncio.Event()
@@ -192,7 +202,7 @@ class RobotLink:
             "status_superseded": self.status_superseded,
             "refused": sum(self.refused.values()),
             "commands_expired": self.commands_expired,
-            "commands_busy": self.commands_busy + (self.reader.busy if self.reader else 0),
+            "commands_busy": self.commands_busy + self.reader.busy,
             "reconnects": max(self.connects - 1, 0),
             "sessions_lost": self.sessions_lost,
             "commands_redelivered": self.redeliveries.skipped,
@@ -269,23 +279,18 @@ class RobotLink:
         finally:
             if self._receiver is not None:
                 self._receiver.cancel()
-            if self.reader is not None:
-                self.reader.stop_now()  # stopped already unless an error or a cancellation
+            self.reader.stop_now()  # stopped already unless an error or a cancellation
 
     async def _start_reader(self, client: LinkClient) -> None:
-        """The command reader's thread (its first subscription in place), then ``_receive``;
-        ``BrokerError`` when it cannot subscribe. A session this connection kept from a bridge
-        that read its commands here loses its ``cmd/+`` subscription (no command read twice)."""
+        """The command reader's thread (its subscriptions in place; started by the process's
+        first link), then ``_receive``; ``BrokerError`` when it cannot subscribe. A session
+        this connection kept from a bridge that read its commands here loses its ``cmd/+``
+        subscription (no command read twice)."""
         if client.session_present:
             with contextlib.suppress(aiomqtt.MqttError):
                 await client.unsubscribe(topics.command_filter(self.robot))
-        self.reader = CommandReader(
-            robot=self.robot, broker=self.broker, client_id=f"{self.client_id}-cmd", v5=self.v5,
-            keepalive_s=self.keepalive_s, connect_timeout_s=self.connect_timeout_s,
-            session_expiry_s=self.command_expiry_s, capacity=self.command_queue,
-            backoff_s=self.backoff_s, max_backoff_s=self.max_backoff_s)
         try:
-            await self.reader.start()
+            await self.reader.start(v5=self.v5)
         except BaseException:
             with contextlib.suppress(Exception):
                 await client.__aexit__(None, None, None)
@@ -320,7 +325,7 @@ class RobotLink:
         finally:
             self.connected.clear()
             self.telemetry.clear()
-            if stop.is_set() and self.reader is not None:  # (a lost connection: they wait)
+            if stop.is_set():  # (a lost connection: they wait)
                 await self.reader.stop()  # no command read any more: the read ones answered
                 self._answer_waiting()
             if stop.is_set() or not client._disconnected.done():
@@ -331,7 +336,7 @@ class RobotLink:
             if lost.done() and not lost.cancelled():
                 lost.exception()  # retrieved (``_receive`` read it here before): asyncio logs none
 
-    async def _receive(self, reader: CommandReader) -> None:
+    async def _receive(self, reader: RobotCommands) -> None:
         """Commands as the reader read them, at most ``COMMANDS_PER_TURN`` in one loop turn: a
         flood (1 500 at once) handled in one turn held the telemetry, the frames and paho's
         keepalive back for seconds. None is taken while the QoS-1 buffer is half full: 1 000
@@ -363,7 +368,7 @@ class RobotLink:
     def _answer_waiting(self) -> None:
         """Answer the commands the reader read but we did not handle yet: paho has
         acknowledged them to the broker, so the broker will not send them again."""
-        while self.reader is not None and (batch := self.reader.take(self.command_queue)):
+        while batch := self.reader.take(self.command_queue):
             for message in batch:
                 self._handle(message)
 
