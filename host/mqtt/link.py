@@ -56,7 +56,6 @@ import logging
 import time
 from collections import Counter, deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from itertools import islice
 from typing import Any, Literal
 
@@ -74,6 +73,7 @@ from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient, pe
 from odocan.host.mqtt.clientids import link_client_id, reader_client_id
 from odocan.host.mqtt.cmdreader import CommandReader, RobotCommands
 from odocan.host.mqtt.expiry import Expired, Fresh, expired_by, fresh
+from odocan.host.mqtt.outgoing import Outgoing, publish_once
 from odocan.host.mqtt.redelivery import Redeliveries
 from odocan.host.mqtt.v5probe import CLIENT_LOG, speaks_v5
 
@@ -83,18 +83,6 @@ Verdict = Literal["run", "expired", "busy", "retained"]
 COMMANDS_PER_TURN = 8  # commands handled before the event loop's other tasks get a turn
 ROOM_POLL_S = 0.01  # commands wait this long for room in the QoS-1 buffer (``_receive``)
 CommandHandler = Callable[[str, bytes, Verdict | Expired | Fresh], list[Publication]]
-
-
-@dataclass(eq=False)
-class _Outgoing:
-    """One queued QoS-1 publication (identity matters: equal payloads are distinct entries)."""
-
-    topic: str
-    body: bytes
-    retain: bool
-    interim: bool = False  # a command's ``accepted``: dropped before final answers
-    sent_on: object = None  # the connection (client) paho took it on, its info: not sent twice
-    info: Any = None
 
 
 class _Stopped(Exception):
@@ -129,7 +117,7 @@ class RobotLink:
         self.keepalive_s = keepalive_s
         self.connect_timeout_s, self.command_expiry_s = connect_timeout_s, command_expiry_s
         self.backoff_s, self.max_backoff_s = backoff_s, max_backoff_s
-        self.reliable: deque[_Outgoing] = deque()
+        self.reliable: deque[Outgoing] = deque()
         self.reliable_buffer, self.inflight = reliable_buffer, inflight
         self.telemetry: deque[tuple[str, bytes]] = deque(maxlen=telemetry_buffer)
         self.command_queue = command_queue
@@ -170,7 +158,7 @@ class RobotLink:
         if len(self.reliable) >= self.reliable_buffer:
             self._drop_reliable()
         interim = leaf == topics.RESULT_LEAF and payload.get("result") == "accepted"
-        self.reliable.append(_Outgoing(topic, body, topics.retained(leaf), interim))
+        self.reliable.append(Outgoing(topic, body, topics.retained(leaf), interim))
         self._reliable_wake.set()
 
     def _supersede_status(self, topic: str) -> None:
@@ -427,7 +415,7 @@ class RobotLink:
     async def _publish_window(self, client: LinkClient) -> None:
         """The oldest ``inflight`` QoS-1 entries at once; each leaves once acknowledged."""
         window = list(islice(self.reliable, self.inflight))
-        await asyncio.gather(*(_publish_once(client, p) for p in window))
+        await asyncio.gather(*(publish_once(client, p) for p in window))
         for p in window:
             with contextlib.suppress(ValueError):  # dropped meanwhile (buffer full)
                 self.reliable.remove(p)
@@ -437,21 +425,11 @@ class RobotLink:
         status = topics.topic(self.robot, topics.STATUS_LEAF)
         self.reliable = deque(p for p in self.reliable if p.topic != status)
         offline = topics.status_payload(self.robot, "offline", reason="bridge stopped")
-        self.reliable.append(_Outgoing(status, topics.dumps(offline), True))
+        self.reliable.append(Outgoing(status, topics.dumps(offline), True))
         with contextlib.suppress(Exception):
             async with asyncio.timeout(timeout_s):
                 while self.reliable:
                     await self._publish_window(client)
-
-
-async def _publish_once(client: LinkClient, p: _Outgoing) -> None:
-    """``p`` to the broker and its PUBACK awaited; once per connection: an entry paho already
-    took on ``client`` (its wait cancelled, the bridge stopping: ``_goodbye`` flushes the buffer
-    on the same connection) is waited for, not sent again (20 ``accepted`` went out twice). On
-    a new connection it is sent again (at least once: its PUBACK may never have come)."""
-    if p.sent_on is not client:
-        p.info, p.sent_on = client.publish_reliable(p.topic, p.body, p.retain), client
-    await client.acknowledged(p.info)
 
 
 def _payload(message: aiomqtt.Message) -> bytes:
