@@ -32,7 +32,10 @@
   queued while disconnected replaces the queued ones, ``status_superseded``), up to
   ``reliable_buffer`` entries: beyond, the oldest ``status`` (superseded) goes first, then the
   oldest interim ``accepted`` answer (a command's final answer stays), then the oldest entry
-  (``reliable_dropped``);
+  (``reliable_dropped``). The answers owed when the bridge stops, to the commands the reader
+  read and the link had not taken (up to ``command_queue``), are kept beyond the bound and
+  flushed with ``offline``; those the broker did not acknowledge by then are counted
+  (``answers_unsent``) and said in one warning line;
 * commands arrive on ``odocan/<robot>/cmd/<name>`` and go to ``on_command(name, payload,
   verdict)``, which returns the publications that answer it (``cmd/result``). ``verdict`` is
   ``"run"``, or ``"expired"`` when the message is older than its MQTT v5 message expiry (the
@@ -82,6 +85,7 @@ Publication = tuple[str, dict[str, Any]]
 Verdict = Literal["run", "expired", "busy", "retained"]
 COMMANDS_PER_TURN = 8  # commands handled before the event loop's other tasks get a turn
 ROOM_POLL_S = 0.01  # commands wait this long for room in the QoS-1 buffer (``_receive``)
+GOODBYE_S, GOODBYE_S_PER_ENTRY = 2.0, 0.005  # the QoS-1 buffer's flush at the stop, at most
 CommandHandler = Callable[[str, bytes, Verdict | Expired | Fresh], list[Publication]]
 
 
@@ -126,6 +130,8 @@ class RobotLink:
         self.commands_expired = self.commands_busy = self.status_superseded = 0
         self.refused: Counter[str] = Counter()  # topic -> publications the broker refused
         self.connects = 0
+        self.answers_unsent = 0  # command answers the broker had not acknowledged at the stop
+        self._owed = False  # the stop's answers are queued: the QoS-1 buffer drops none
         self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
         self.connected = asyncio.Event()
         self.redeliveries = Redeliveries()  # a DUP copy of a command handled is not run again
@@ -155,7 +161,7 @@ class RobotLink:
             return
         if leaf == topics.STATUS_LEAF and not self.connected.is_set():
             self._supersede_status(topic)
-        if len(self.reliable) >= self.reliable_buffer:
+        if len(self.reliable) >= self.reliable_buffer and not self._owed:
             self._drop_reliable()
         interim = leaf == topics.RESULT_LEAF and payload.get("result") == "accepted"
         self.reliable.append(Outgoing(topic, body, topics.retained(leaf), interim))
@@ -193,6 +199,7 @@ class RobotLink:
             "commands_busy": self.commands_busy + self.reader.busy,
             "reconnects": max(self.connects - 1, 0),
             "sessions_lost": self.sessions_lost,
+            "answers_unsent": self.answers_unsent,
             "commands_redelivered": self.redeliveries.skipped,
         }
 
@@ -318,6 +325,8 @@ class RobotLink:
                 self._answer_waiting()
             if stop.is_set() or not client._disconnected.done():
                 await self._goodbye(client)
+            if stop.is_set():
+                self._report_unsent()
             with contextlib.suppress(Exception):
                 await client.__aexit__(None, None, None)
             lost = client._disconnected
@@ -355,10 +364,24 @@ class RobotLink:
 
     def _answer_waiting(self) -> None:
         """Answer the commands the reader read but we did not handle yet: paho has
-        acknowledged them to the broker, so the broker will not send them again."""
-        while batch := self.reader.take(self.command_queue):
-            for message in batch:
-                self._handle(message)
+        acknowledged them to the broker, so the broker will not send them again. Their answers
+        push no other out of the QoS-1 buffer (up to ``command_queue`` beyond its bound)."""
+        self._owed = True
+        try:
+            while batch := self.reader.take(self.command_queue):
+                for message in batch:
+                    self._handle(message)
+        finally:
+            self._owed = False
+
+    def _report_unsent(self) -> None:
+        """The bridge stops: the command answers still in the QoS-1 buffer (the broker did not
+        acknowledge them) are counted in ``answers_unsent`` and said in one line."""
+        result = topics.topic(self.robot, topics.RESULT_LEAF)
+        self.answers_unsent = sum(p.topic == result for p in self.reliable)
+        if self.answers_unsent:
+            log.warning("%s: %d command answers not delivered: the broker had not acknowledged "
+                        "them when the bridge stopped", self.robot, self.answers_unsent)
 
     def _answer(self, name: str, message: Arrived) -> list[Publication]:
         if message.retain:  # kept by the broker from whenever: would run again each reconnect
@@ -420,12 +443,14 @@ class RobotLink:
             with contextlib.suppress(ValueError):  # dropped meanwhile (buffer full)
                 self.reliable.remove(p)
 
-    async def _goodbye(self, client: LinkClient, timeout_s: float = 2.0) -> None:
-        """``offline`` (superseding queued statuses), then flush the QoS-1 buffer, if possible."""
+    async def _goodbye(self, client: LinkClient) -> None:
+        """``offline`` (superseding queued statuses), then flush the QoS-1 buffer, if possible
+        (within ``GOODBYE_S``, and ``GOODBYE_S_PER_ENTRY`` more for each entry)."""
         status = topics.topic(self.robot, topics.STATUS_LEAF)
         self.reliable = deque(p for p in self.reliable if p.topic != status)
         offline = topics.status_payload(self.robot, "offline", reason="bridge stopped")
         self.reliable.append(Outgoing(status, topics.dumps(offline), True))
+        timeout_s = GOODBYE_S + GOODBYE_S_PER_ENTRY * len(self.reliable)
         with contextlib.suppress(Exception):
             async with asyncio.timeout(timeout_s):
                 while self.reliable:
