@@ -18,11 +18,17 @@ to overflow.
 Each robot's commands wait in a bounded queue of its own (``capacity``, the link's
 ``command_queue``) for its link (``RobotCommands``: ``take``; ``wake`` is set when the queue was
 empty); a command that finds it full is answered at once from the thread, on this connection,
-``rejected`` ("bridge busy"; counted in the robot's ``busy``), and is not run. The bound, then: a
-blocked loop loses no command; it answers ``busy`` those beyond ``capacity`` that arrive while
-it is blocked, and ``expired`` those it takes after their expiry. The links' own ``cmd/result``
-answers, published on their connections, come back here (``cmd/+`` holds them, and MQTT v5's
-no-local only keeps a connection's own) and are dropped in the thread. ``start`` is called by
+``rejected`` ("bridge busy"; counted in the robot's ``busy``), and is not run. That answer is
+published inside paho's ``on_message``, so it goes out on the socket before the command's own
+PUBACK (paho sends it after ``on_message`` returns): a connection that breaks before the broker
+has the answer breaks before it has the PUBACK too, and the broker (our session) delivers the
+command again, which is answered again (checked: the reader's socket shut right after a busy
+answer was published, with the answer not sent again by us, still got the operator its
+``rejected``). The bound, then: a blocked loop loses no command; it answers ``busy`` those beyond
+``capacity`` that arrive while it is blocked, and ``expired`` those it takes after their expiry.
+The links' own ``cmd/result`` answers, published on their connections, come back here
+(``cmd/+`` holds them, and MQTT v5's no-local only keeps a connection's own) and are dropped in
+the thread. ``start`` is called by
 every link at its first connection: the first starts the thread, the others wait for the same
 subscriptions. ``stop`` disconnects and joins the thread; nothing is left running.
 """
