@@ -109,6 +109,8 @@ class CommandReader:
         self.session_expiry_s, self.capacity = session_expiry_s, capacity
         self.backoff_s, self.max_backoff_s = backoff_s, max_backoff_s
         self.robots = {name: RobotCommands(self, name) for name in robots}
+        # its log lines' name: the robot's, as the link's lines, or the first and last robots'
+        self.label = robots[0] if len(robots) == 1 else f"{robots[0]}..{robots[-1]}"
         self.lock = threading.Lock()
         self._main: asyncio.AbstractEventLoop | None = None
         self._started: asyncio.Future[None] | None = None  # the first ``start``'s outcome
@@ -128,8 +130,12 @@ class CommandReader:
             self._started = asyncio.get_running_loop().create_future()
             try:
                 await self._start_thread(v5)
+            except asyncio.CancelledError:
+                self._started.cancel()
+                raise
             except BaseException as exc:
                 self._started.set_exception(exc)
+                self._started.exception()  # retrieved: the other links' waits raise it again
                 raise
             self._started.set_result(None)
             return
@@ -198,7 +204,7 @@ class CommandReader:
                 async with asyncio.timeout(self.connect_timeout_s + 1.0):
                     await client.__aenter__()
             except (aiomqtt.MqttError, TimeoutError, OSError) as exc:
-                log.warning("command reader reconnecting in %.1f s (%s)", backoff,
+                log.warning("%s: command reader reconnecting in %.1f s (%s)", self.label, backoff,
                             connect_failure(exc, self.connect_timeout_s, tls=self.broker.tls))
                 await self._sleep(backoff)
                 backoff = min(backoff * 2, self.max_backoff_s)
@@ -217,10 +223,10 @@ class CommandReader:
             await asyncio.wait((stop, lost), return_when=asyncio.FIRST_COMPLETED)
             stop.cancel()
             if lost.done() and not lost.cancelled() and lost.exception() is not None:
-                log.warning("command reader lost its connection (%s)",
+                log.warning("%s: command reader lost its connection (%s)", self.label,
                             lost.exception())  # (retrieved: asyncio logs none at exit)
         except (aiomqtt.MqttError, OSError) as exc:
-            log.warning("command reader lost its connection (%s)", exc)
+            log.warning("%s: command reader lost its connection (%s)", self.label, exc)
         finally:
             with contextlib.suppress(Exception):
                 await client.__aexit__(None, None, None)
@@ -261,8 +267,8 @@ class CommandReader:
                 codes = await client.subscribe([(f, topics.QOS_RELIABLE) for f in chunk])
             for topic_filter, code in zip(chunk, codes, strict=False):
                 if getattr(code, "is_failure", False) or code == 0x80:
-                    log.warning("the broker refused the subscription %s (%s): no command "
-                                "will arrive", topic_filter, code)
+                    log.warning("%s: the broker refused the subscription %s (%s): no command "
+                                "will arrive", self.label, topic_filter, code)
 
     def _arrive(self, client: _ReaderClient, message: Arrived) -> None:
         """One message read (paho's thread of this loop): queued for its robot's link, or
@@ -295,4 +301,4 @@ class CommandReader:
                                     topics.dumps(answer), False)
 
     def _refused(self, topic: str, reason: str) -> None:
-        log.warning("the broker refused a publication on %s (%s)", topic, reason)
+        log.warning("%s: the broker refused a publication on %s (%s)", self.label, topic, reason)
