@@ -42,6 +42,8 @@ import can
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL, first_error
+from odocan.host.mqtt.clientids import reader_client_id
+from odocan.host.mqtt.cmdreader import COMMAND_QUEUE, CommandReader, RobotCommands
 from odocan.host.mqtt.expiry import Expired, Fresh
 from odocan.host.mqtt.link import RobotLink, Verdict
 from odocan.host.mqtt.livecommands import PendingAck
@@ -111,7 +113,8 @@ PERIODIC_SLOTS = 10  # ``status``/``rates`` turns per period (``Bridge._periodic
 class _Robot:
     """A robot's telemetry, command encoder, bus and link."""
 
-    def __init__(self, endpoint: RobotEndpoint, config: BridgeConfig) -> None:
+    def __init__(self, endpoint: RobotEndpoint, config: BridgeConfig,
+                 commands: RobotCommands | None = None) -> None:
         self.endpoint = endpoint
         self.telemetry = RobotTelemetry(
             endpoint.name, endpoint.geometry, endpoint.integrator,
@@ -128,6 +131,7 @@ class _Robot:
             connect_timeout_s=config.connect_timeout_s,
             command_expiry_s=config.command_expiry_s,
             telemetry_buffer=config.telemetry_buffer, reliable_buffer=config.reliable_buffer,
+            commands=commands,
         )
         self.pacer = CommandPacer(
             self.telemetry, self._send_frame, window_frames=config.command_window_frames,
@@ -269,7 +273,14 @@ class Bridge:
 
     def __init__(self, robots: Sequence[RobotEndpoint], *, config: BridgeConfig) -> None:
         self.config = config
-        self.robots = [_Robot(r, config) for r in robots]
+        names = [r.name for r in robots]
+        # one thread and one connection read every robot's commands (``host.mqtt.cmdreader``)
+        self.commands = CommandReader(
+            robots=names, broker=config.broker,
+            client_id=reader_client_id(config.client_prefix, names),
+            keepalive_s=config.keepalive_s, connect_timeout_s=config.connect_timeout_s,
+            session_expiry_s=config.command_expiry_s, capacity=COMMAND_QUEUE)
+        self.robots = [_Robot(r, config, self.commands.robots[r.name]) for r in robots]
         self.queue: asyncio.Queue[Batch] = asyncio.Queue(maxsize=config.queue_batches)
         self.frames_dropped = 0
         self.frames_in = 0

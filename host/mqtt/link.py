@@ -10,13 +10,15 @@
 * the first connection must succeed within ``connect_timeout_s``, else ``BrokerError`` (the
   CLI's exit 2); later losses are one line each: "connection lost", "reconnecting in N s",
   "reconnected" (exponential backoff from ``backoff_s`` up to ``max_backoff_s``);
-* client id ``<client_prefix>-<robot>``, clean start off, session expiry ``command_expiry_s``.
+* client id ``<client_prefix>-<robot>`` (shortened to MQTT 3.1.1's 23 bytes when longer:
+  ``host.mqtt.clientids``), clean start off, session expiry ``command_expiry_s``.
   A broker that comes back without that session although we were away for less is one warning
   line (``sessions_lost``: it lost its state, and with it what it held);
 * commands are read off this loop: ``host.mqtt.cmdreader.CommandReader``, a thread with its own
-  connection (client id ``<client_prefix>-<robot>-cmd``, its own session of the same expiry:
-  the broker keeps its ``cmd/+`` subscription and queues commands while the bridge is away, for
-  at most ``command_expiry_s``), reads and acknowledges them even while this loop is blocked,
+  connection, one per bridge process (``commands``: this robot's share of it; without it, one of
+  its own), with its own session of the same expiry (the broker keeps the ``cmd/+``
+  subscriptions and queues commands while the bridge is away, for at most
+  ``command_expiry_s``), reads and acknowledges them even while this loop is blocked,
   into a queue of ``command_queue`` (a broker's own queue for a client that does not read drops
   commands it acknowledged, unanswered); ``_receive`` takes them from there. Commands read
   before a connection broke, or before the bridge stopped, are still answered;
@@ -30,7 +32,10 @@
   queued while disconnected replaces the queued ones, ``status_superseded``), up to
   ``reliable_buffer`` entries: beyond, the oldest ``status`` (superseded) goes first, then the
   oldest interim ``accepted`` answer (a command's final answer stays), then the oldest entry
-  (``reliable_dropped``);
+  (``reliable_dropped``). The answers owed when the bridge stops, to the commands the reader
+  read and the link had not taken (up to ``command_queue``), are kept beyond the bound and
+  flushed with ``offline``; those the broker did not acknowledge by then are counted
+  (``answers_unsent``) and said in one warning line;
 * commands arrive on ``odocan/<robot>/cmd/<name>`` and go to ``on_command(name, payload,
   verdict)``, which returns the publications that answer it (``cmd/result``). ``verdict`` is
   ``"run"``, or ``"expired"`` when the message is older than its MQTT v5 message expiry (the
@@ -54,7 +59,6 @@ import logging
 import time
 from collections import Counter, deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from itertools import islice
 from typing import Any, Literal
 
@@ -69,8 +73,10 @@ from odocan.host.mqtt.broker import (
     protocol_unsupported,
 )
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient, persistent_session
-from odocan.host.mqtt.cmdreader import CommandReader
+from odocan.host.mqtt.clientids import link_client_id, reader_client_id
+from odocan.host.mqtt.cmdreader import CommandReader, RobotCommands
 from odocan.host.mqtt.expiry import Expired, Fresh, expired_by, fresh
+from odocan.host.mqtt.outgoing import Outgoing, publish_once
 from odocan.host.mqtt.redelivery import Redeliveries
 from odocan.host.mqtt.v5probe import CLIENT_LOG, speaks_v5
 
@@ -79,19 +85,8 @@ Publication = tuple[str, dict[str, Any]]
 Verdict = Literal["run", "expired", "busy", "retained"]
 COMMANDS_PER_TURN = 8  # commands handled before the event loop's other tasks get a turn
 ROOM_POLL_S = 0.01  # commands wait this long for room in the QoS-1 buffer (``_receive``)
+GOODBYE_S, GOODBYE_S_PER_ENTRY = 2.0, 0.005  # the QoS-1 buffer's flush at the stop, at most
 CommandHandler = Callable[[str, bytes, Verdict | Expired | Fresh], list[Publication]]
-
-
-@dataclass(eq=False)
-class _Outgoing:
-    """One queued QoS-1 publication (identity matters: equal payloads are distinct entries)."""
-
-    topic: str
-    body: bytes
-    retain: bool
-    interim: bool = False  # a command's ``accepted``: dropped before final answers
-    sent_on: object = None  # the connection (client) paho took it on, its info: not sent twice
-    info: Any = None
 
 
 class _Stopped(Exception):
@@ -117,15 +112,16 @@ class RobotLink:
         reliable_buffer: int = 1000,
         inflight: int = 20,
         command_queue: int = 1000,
+        commands: RobotCommands | None = None,
     ) -> None:
         self.robot = topics.check_robot_name(robot)
         self.broker = broker
         self.on_command = on_command
-        self.client_id = f"{client_prefix}-{robot}"
+        self.client_id = link_client_id(client_prefix, robot)
         self.keepalive_s = keepalive_s
         self.connect_timeout_s, self.command_expiry_s = connect_timeout_s, command_expiry_s
         self.backoff_s, self.max_backoff_s = backoff_s, max_backoff_s
-        self.reliable: deque[_Outgoing] = deque()
+        self.reliable: deque[Outgoing] = deque()
         self.reliable_buffer, self.inflight = reliable_buffer, inflight
         self.telemetry: deque[tuple[str, bytes]] = deque(maxlen=telemetry_buffer)
         self.command_queue = command_queue
@@ -134,10 +130,18 @@ class RobotLink:
         self.commands_expired = self.commands_busy = self.status_superseded = 0
         self.refused: Counter[str] = Counter()  # topic -> publications the broker refused
         self.connects = 0
+        self.answers_unsent = 0  # command answers the broker had not acknowledged at the stop
+        self._owed = False  # the stop's answers are queued: the QoS-1 buffer drops none
         self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
         self.connected = asyncio.Event()
         self.redeliveries = Redeliveries()  # a DUP copy of a command handled is not run again
-        self.reader: CommandReader | None = None  # the commands' thread (``run``)
+        # this robot's commands, read on the process's reader thread (started by ``run``)
+        self.reader: RobotCommands = commands or CommandReader(
+            robots=[self.robot], broker=broker,
+            client_id=reader_client_id(client_prefix, [self.robot]), keepalive_s=keepalive_s,
+            connect_timeout_s=connect_timeout_s, session_expiry_s=command_expiry_s,
+            capacity=command_queue, backoff_s=backoff_s, max_backoff_s=max_backoff_s,
+        ).robots[self.robot]
         self._receiver: asyncio.Task[None] | None = None  # ``_receive``, from the first connection
         self._telemetry_wake = asyncio.Event()
         self._reliable_wake = asyncio.Event()
@@ -157,10 +161,10 @@ class RobotLink:
             return
         if leaf == topics.STATUS_LEAF and not self.connected.is_set():
             self._supersede_status(topic)
-        if len(self.reliable) >= self.reliable_buffer:
+        if len(self.reliable) >= self.reliable_buffer and not self._owed:
             self._drop_reliable()
         interim = leaf == topics.RESULT_LEAF and payload.get("result") == "accepted"
-        self.reliable.append(_Outgoing(topic, body, topics.retained(leaf), interim))
+        self.reliable.append(Outgoing(topic, body, topics.retained(leaf), interim))
         self._reliable_wake.set()
 
     def _supersede_status(self, topic: str) -> None:
@@ -192,9 +196,10 @@ class RobotLink:
             "status_superseded": self.status_superseded,
             "refused": sum(self.refused.values()),
             "commands_expired": self.commands_expired,
-            "commands_busy": self.commands_busy + (self.reader.busy if self.reader else 0),
+            "commands_busy": self.commands_busy + self.reader.busy,
             "reconnects": max(self.connects - 1, 0),
             "sessions_lost": self.sessions_lost,
+            "answers_unsent": self.answers_unsent,
             "commands_redelivered": self.redeliveries.skipped,
         }
 
@@ -269,23 +274,18 @@ class RobotLink:
         finally:
             if self._receiver is not None:
                 self._receiver.cancel()
-            if self.reader is not None:
-                self.reader.stop_now()  # stopped already unless an error or a cancellation
+            self.reader.stop_now()  # stopped already unless an error or a cancellation
 
     async def _start_reader(self, client: LinkClient) -> None:
-        """The command reader's thread (its first subscription in place), then ``_receive``;
-        ``BrokerError`` when it cannot subscribe. A session this connection kept from a bridge
-        that read its commands here loses its ``cmd/+`` subscription (no command read twice)."""
+        """The command reader's thread (its subscriptions in place; started by the process's
+        first link), then ``_receive``; ``BrokerError`` when it cannot subscribe. A session
+        this connection kept from a bridge that read its commands here loses its ``cmd/+``
+        subscription (no command read twice)."""
         if client.session_present:
             with contextlib.suppress(aiomqtt.MqttError):
                 await client.unsubscribe(topics.command_filter(self.robot))
-        self.reader = CommandReader(
-            robot=self.robot, broker=self.broker, client_id=f"{self.client_id}-cmd", v5=self.v5,
-            keepalive_s=self.keepalive_s, connect_timeout_s=self.connect_timeout_s,
-            session_expiry_s=self.command_expiry_s, capacity=self.command_queue,
-            backoff_s=self.backoff_s, max_backoff_s=self.max_backoff_s)
         try:
-            await self.reader.start()
+            await self.reader.start(v5=self.v5)
         except BaseException:
             with contextlib.suppress(Exception):
                 await client.__aexit__(None, None, None)
@@ -320,18 +320,20 @@ class RobotLink:
         finally:
             self.connected.clear()
             self.telemetry.clear()
-            if stop.is_set() and self.reader is not None:  # (a lost connection: they wait)
+            if stop.is_set():  # (a lost connection: they wait)
                 await self.reader.stop()  # no command read any more: the read ones answered
                 self._answer_waiting()
             if stop.is_set() or not client._disconnected.done():
                 await self._goodbye(client)
+            if stop.is_set():
+                self._report_unsent()
             with contextlib.suppress(Exception):
                 await client.__aexit__(None, None, None)
             lost = client._disconnected
             if lost.done() and not lost.cancelled():
                 lost.exception()  # retrieved (``_receive`` read it here before): asyncio logs none
 
-    async def _receive(self, reader: CommandReader) -> None:
+    async def _receive(self, reader: RobotCommands) -> None:
         """Commands as the reader read them, at most ``COMMANDS_PER_TURN`` in one loop turn: a
         flood (1 500 at once) handled in one turn held the telemetry, the frames and paho's
         keepalive back for seconds. None is taken while the QoS-1 buffer is half full: 1 000
@@ -362,10 +364,24 @@ class RobotLink:
 
     def _answer_waiting(self) -> None:
         """Answer the commands the reader read but we did not handle yet: paho has
-        acknowledged them to the broker, so the broker will not send them again."""
-        while self.reader is not None and (batch := self.reader.take(self.command_queue)):
-            for message in batch:
-                self._handle(message)
+        acknowledged them to the broker, so the broker will not send them again. Their answers
+        push no other out of the QoS-1 buffer (up to ``command_queue`` beyond its bound)."""
+        self._owed = True
+        try:
+            while batch := self.reader.take(self.command_queue):
+                for message in batch:
+                    self._handle(message)
+        finally:
+            self._owed = False
+
+    def _report_unsent(self) -> None:
+        """The bridge stops: the command answers still in the QoS-1 buffer (the broker did not
+        acknowledge them) are counted in ``answers_unsent`` and said in one line."""
+        result = topics.topic(self.robot, topics.RESULT_LEAF)
+        self.answers_unsent = sum(p.topic == result for p in self.reliable)
+        if self.answers_unsent:
+            log.warning("%s: %d command answers not delivered: the broker had not acknowledged "
+                        "them when the bridge stopped", self.robot, self.answers_unsent)
 
     def _answer(self, name: str, message: Arrived) -> list[Publication]:
         if message.retain:  # kept by the broker from whenever: would run again each reconnect
@@ -422,31 +438,23 @@ class RobotLink:
     async def _publish_window(self, client: LinkClient) -> None:
         """The oldest ``inflight`` QoS-1 entries at once; each leaves once acknowledged."""
         window = list(islice(self.reliable, self.inflight))
-        await asyncio.gather(*(_publish_once(client, p) for p in window))
+        await asyncio.gather(*(publish_once(client, p) for p in window))
         for p in window:
             with contextlib.suppress(ValueError):  # dropped meanwhile (buffer full)
                 self.reliable.remove(p)
 
-    async def _goodbye(self, client: LinkClient, timeout_s: float = 2.0) -> None:
-        """``offline`` (superseding queued statuses), then flush the QoS-1 buffer, if possible."""
+    async def _goodbye(self, client: LinkClient) -> None:
+        """``offline`` (superseding queued statuses), then flush the QoS-1 buffer, if possible
+        (within ``GOODBYE_S``, and ``GOODBYE_S_PER_ENTRY`` more for each entry)."""
         status = topics.topic(self.robot, topics.STATUS_LEAF)
         self.reliable = deque(p for p in self.reliable if p.topic != status)
         offline = topics.status_payload(self.robot, "offline", reason="bridge stopped")
-        self.reliable.append(_Outgoing(status, topics.dumps(offline), True))
+        self.reliable.append(Outgoing(status, topics.dumps(offline), True))
+        timeout_s = GOODBYE_S + GOODBYE_S_PER_ENTRY * len(self.reliable)
         with contextlib.suppress(Exception):
             async with asyncio.timeout(timeout_s):
                 while self.reliable:
                     await self._publish_window(client)
-
-
-async def _publish_once(client: LinkClient, p: _Outgoing) -> None:
-    """``p`` to the broker and its PUBACK awaited; once per connection: an entry paho already
-    took on ``client`` (its wait cancelled, the bridge stopping: ``_goodbye`` flushes the buffer
-    on the same connection) is waited for, not sent again (20 ``accepted`` went out twice). On
-    a new connection it is sent again (at least once: its PUBACK may never have come)."""
-    if p.sent_on is not client:
-        p.info, p.sent_on = client.publish_reliable(p.topic, p.body, p.retain), client
-    await client.acknowledged(p.info)
 
 
 def _payload(message: aiomqtt.Message) -> bytes:
