@@ -14,6 +14,8 @@ from typing import Any
 import can
 
 from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
+from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.host.protocol.e2e import e2e_messages
 from odocan.host.protocol.e2e_crc import crc8h2f_p02_one
@@ -94,7 +96,7 @@ def test_a_frame_is_handled_by_its_plan_alone() -> None:
     db = database()
     p = robot.load("pmir")
     telemetry = RobotTelemetry("robot0", Geometry.of(p), "exact", counter_bits=p.counter_bits)
-    assert set(telemetry._plans) == {m.frame_id for m in db.messages if not m.is_extended_frame}
+    assert set(telemetry.plans) == {m.frame_id for m in db.messages if not m.is_extended_frame}
     telemetry._routes = _Gone()
     frames, expected = _faulted(_fleet_frames(300))
     published = Counter[str]()
@@ -109,3 +111,32 @@ def test_a_frame_is_handled_by_its_plan_alone() -> None:
     assert published["pose"] > 20
     assert published["error"] >= published["pose"] - 1
     assert telemetry.tracker.wrongs.as_dict()["episodes"] == 0  # a correct firmware: PASS
+
+
+def test_the_bridge_gives_a_frame_of_the_dbc_to_its_plan() -> None:
+    """``Bridge._handle``: a fleet's frame of a DBC message straight to its plan, no
+    ``feed_fields`` call around it; a foreign identifier through ``feed_fields``."""
+    p = robot.load("pmir")
+    frames = _fleet_frames(60)
+    frames.insert(len(frames) // 2, (frames[len(frames) // 2][0], 0x7FF, bytes(8), False))
+    with can.Bus(interface="virtual", channel="liveplan-bridge") as bus:
+        bridge = Bridge([RobotEndpoint("robot001", bus, Geometry.of(p),
+                                       counter_bits=p.counter_bits)],
+                        config=BridgeConfig(broker=BrokerURL(host="127.0.0.1", port=1)))
+        published: list[str] = []
+        bridge.links[0].publish = (  # type: ignore[method-assign]
+            lambda leaf, payload: published.append(leaf))
+        robot_ = bridge.robots[0]
+        through_feed: list[int] = []
+        feed_fields = robot_.feed_fields
+
+        def counted(t_s: float, can_id: int, data: bytes, extended: bool) -> list[Any]:
+            through_feed.append(can_id)
+            return feed_fields(t_s, can_id, data, extended)
+
+        robot_.feed_fields = counted
+        bridge._handle([(0, (t_s, can_id, data)) for t_s, can_id, data, _ in frames])
+    assert through_feed == [0x7FF]
+    assert bridge.frames_failed == 0
+    assert robot_.telemetry.rejected == {"0x7ff": 1}
+    assert published.count("pose") >= 5

@@ -1,15 +1,17 @@
 """One robot's handling of each CAN ID it hears, fused into one function per ID (its plan).
 
-``RobotTelemetry.feed_fields`` runs per frame of every robot of a fleet. Routed step by step,
+The bridge's frame handling runs per frame of every robot of a fleet. Routed step by step,
 a frame paid for three lookups and a dozen attribute reads before its judge saw it: its route
 (``host.mqtt.liveroutes``), whether it is an ODOM_STATUS page, whether its handler advances
 the tracker, its name, handler and decoder, the telemetry's counters. A plan reads all of that
 once, when the robot's telemetry is made, and keeps it in the closure of one function per
-11-bit message of the DBC: ``plan(t_s, data)`` checks the frame's E2E
+11-bit message of the DBC (``RobotTelemetry.plans``, which the bridge's ``_handle`` calls
+without ``feed_fields`` around it): ``plan(t_s, data)`` checks the frame's E2E
 (``host.protocol.e2e_live.E2EMonitor.check``, bound), decodes it (the route's compiled
 decoder), counts it and gives it to the judge's entry (the route's handler), in the very order
-``feed_fields`` took before (tests/test_mqtt_liveplan.py holds the two to the same
-publications and judge states on a fleet's frames, faults included).
+``feed_fields`` took them before (``bench/bridge_frames.py``'s digest of every publication of
+a fleet's frames is unchanged; tests/test_mqtt_liveplan.py feeds frames with faults by the
+plans alone).
 
 What a plan does not handle itself it gives back to the telemetry as before: a frame its E2E
 check refuses (``RobotTelemetry._refused``), one cantools could not decode

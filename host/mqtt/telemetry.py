@@ -153,7 +153,9 @@ class RobotTelemetry(CommandFollowing):
         self.reboots = 0
         self.profile = ProfileStatus(profile_name)  # ODOM_STATUS PROFILE vs these parameters
         self.stretches: HaltStretches | None = None  # an overloaded fleet's (host.mqtt.overload)
-        self._plans = plans(self, self._routes)  # per 11-bit identifier (host.mqtt.liveplan)
+        # per 11-bit identifier (host.mqtt.liveplan): ``plans[id](t_s, data)`` is
+        # ``feed_fields(t_s, id, data, False)`` (the bridge calls it without that call)
+        self.plans = plans(self, self._routes)
 
     # --- frames ---
     def feed(self, msg: can.Message) -> list[Publication]:
@@ -182,7 +184,7 @@ class RobotTelemetry(CommandFollowing):
         Runs per frame of every robot (the fleet's hot path): one lookup of the frame's plan
         (``host.mqtt.liveplan``: E2E, decode, counts and handler made for its identifier); a
         frame of no 11-bit message of the DBC is checked (counted) and refused."""
-        plan = None if extended else self._plans.get(can_id)
+        plan = None if extended else self.plans.get(can_id)
         if plan is not None:
             return plan(t_s, data)
         status = self.e2e.check(can_id, data, extended=extended, timestamp_s=t_s)
