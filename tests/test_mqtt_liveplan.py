@@ -19,6 +19,7 @@ from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.host.protocol.e2e import e2e_messages
 from odocan.host.protocol.e2e_crc import crc8h2f_p02_one
+from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.sim import robot
 from odocan.sim.contract import database
 from odocan.sim.fleet import Fleet, FleetConfig
@@ -140,3 +141,15 @@ def test_the_bridge_gives_a_frame_of_the_dbc_to_its_plan() -> None:
     assert bridge.frames_failed == 0
     assert robot_.telemetry.rejected == {"0x7ff": 1}
     assert published.count("pose") >= 5
+
+
+def test_the_e2e_check_takes_its_frame_by_position() -> None:
+    """The plans call ``E2EMonitor.check`` by position (CPython's keyword call is slower): the
+    same statuses and counts as by keyword, frame by frame, a wrong CRC among them."""
+    frames, _ = _faulted(_fleet_frames(40))
+    by_position, by_keyword = E2EMonitor(), E2EMonitor()
+    for t_s, can_id, data, extended in frames:
+        assert (by_position.check(can_id, data, extended, t_s)
+                == by_keyword.check(can_id, data, extended=extended, timestamp_s=t_s))
+    assert by_position.counts() == by_keyword.counts()
+    assert by_position.counts()["WHEEL_ENCODERS"]["crc_errors"] == 1

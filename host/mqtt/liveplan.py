@@ -63,7 +63,7 @@ def _handled(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
     name, decode, handler, advances = route.name, route.decode, route.handler, route.advances
 
     def plan(t_s: float, data: bytes) -> list[Publication]:
-        status = check(can_id, data, timestamp_s=t_s)  # the window widens with time
+        status = check(can_id, data, False, t_s)  # the window widens with time (by position)
         if status not in ACCEPTED_E2E:
             return refused(route, can_id, data, t_s, status)
         if not advances:
@@ -89,7 +89,7 @@ def _counted(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
     refused, name = telemetry._refused, route.name
 
     def plan(t_s: float, data: bytes) -> list[Publication]:
-        status = check(can_id, data, timestamp_s=t_s)
+        status = check(can_id, data, False, t_s)
         if status not in ACCEPTED_E2E:
             return refused(route, can_id, data, t_s, status)
         tracker.advance(t_s)
