@@ -252,7 +252,7 @@ class RobotTelemetry(CommandFollowing):
         if self._apply_choice is not None and self._apply_choice.on_pose_x(
                 self.tracker, int(s[0]), s[1], s[2]):  # (host.judge.livesetpose_choice)
             self._apply_choice = None
-        self.tracker.on_pose_x(int(s[0]), s[1], s[2], counter=int(s[3]), t_s=t_s)
+        self.tracker.on_pose_x(int(s[0]), s[1], s[2], int(s[3]), t_s)  # (by position)
         return []
 
     @takes("ENC_COUNTER", "LINEAR_VEL", "ANGULAR_VEL", "DISTANCE", "COUNTER")
@@ -267,7 +267,7 @@ class RobotTelemetry(CommandFollowing):
 
     @takes("ENC_COUNTER", "Y", "TURNS", "COUNTER", advances=True)
     def _on_pose_y(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
-        self.tracker.on_pose_y(int(s[0]), s[1], int(s[2]), counter=int(s[3]), t_s=t_s)
+        self.tracker.on_pose_y(int(s[0]), s[1], int(s[2]), int(s[3]), t_s)  # (by position)
         return []
 
     def _samples(self) -> list[Publication]:
