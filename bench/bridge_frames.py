@@ -4,12 +4,13 @@ frame of each message, on a fleet's frames recorded once, and a digest of what i
 ``bench/fleet_flat.py --parts`` gives the bridge's share of a worker (``Bridge._handle``) with
 the fleet stepping and paho writing around it; here the frames of a lockstep fleet (``--robots``,
 ``--ticks``; the worker's own: ``Fleet.take_batch``) are recorded first, then fed to one
-``RobotTelemetry`` per robot as ``Bridge._handle`` feeds them (``feed_fields``), every
-publication encoded (``topics.dumps``), under the worker's GC regime (``fleetrun.TickCollector``:
-the set-up frozen, the automatic collector off, one young pass after each tick, counted in):
-nothing else runs, so two trees compare in alternating pairs with little noise. ``--by-message``
-adds each message's frames per robot-tick and CPU per frame (``process_time`` around each frame:
-the figures include that clock's own cost, ~1 us a frame).
+``RobotTelemetry`` per robot as ``Bridge._handle`` feeds them (each identifier's plan, else
+``feed_fields``), every publication encoded (``topics.dumps``), under the worker's GC regime
+(``fleetrun.TickCollector``: the set-up frozen, the automatic collector off, one young pass
+after each tick, counted in): nothing else runs, so two trees compare in alternating pairs
+with little noise. ``--by-message`` adds each message's frames per robot-tick and CPU per frame
+(``process_time`` around each frame: the figures include that clock's own cost, ~1 us a
+frame).
 
 The digest (sha-256 of every publication in order, the wall clock ``unix_s`` pinned, then each
 robot's ``status`` and ``rates``) is the same for two trees whose bridge publishes the same bytes
@@ -82,6 +83,9 @@ def run_once(recording: Recording, by_message: Counter[str] | None,
     names = {m.frame_id: m.name for m in database().messages}
     tels, digest, published = telemetries(robots), hashlib.sha256(), 0
     feed = FEED  # unbound: feed(telemetry, t_s, can_id, data, extended)
+    # each robot's plans by 11-bit id, as ``Bridge._handle`` calls them (trees since
+    # ``host.mqtt.liveplan``; before, every frame through ``feed``)
+    plans = [getattr(telemetry, "plans", {}) for telemetry in tels]
     clock = time.process_time
     gc.collect()
     gc.freeze()
@@ -91,7 +95,9 @@ def run_once(recording: Recording, by_message: Counter[str] | None,
         for batch in batches:
             for index, (t_s, can_id, data) in batch:
                 t0_s = clock() if by_message is not None else 0.0
-                for _, payload in feed(tels[index], t_s, can_id, data, False):
+                plan = plans[index].get(can_id)
+                for _, payload in (plan(t_s, data) if plan is not None
+                                   else feed(tels[index], t_s, can_id, data, False)):
                     digest.update(topics.dumps(payload))
                     published += 1
                 if by_message is not None:

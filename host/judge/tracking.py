@@ -165,12 +165,12 @@ class PoseTracker:
         self.pairs.forget(before)
         self.raw.forget(before)
 
-    def on_pose_x(self, enc_counter: int, x_m: float, heading_rad: float, *, counter: int,
+    def on_pose_x(self, enc_counter: int, x_m: float, heading_rad: float, counter: int,
                   t_s: float) -> None:
         """ODOM_POSE_X (X in m, HEADING in rad within the turn; its E2E COUNTER, bus time s)."""
         self._on_half("x", Half(0, enc_counter, counter, t_s, x_m, heading_rad))
 
-    def on_pose_y(self, enc_counter: int, y_m: float, turns: int, *, counter: int,
+    def on_pose_y(self, enc_counter: int, y_m: float, turns: int, counter: int,
                   t_s: float) -> None:
         """ODOM_POSE_Y (Y in m, TURNS; its E2E COUNTER, bus time s): with the ODOM_POSE_X of
         the same encoder frame, one on-board sample once settled (``take_samples``)."""

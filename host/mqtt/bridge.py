@@ -123,6 +123,7 @@ class _Robot:
             now_s=time.monotonic(), profile_name=endpoint.profile_name,
         )
         self.feed_fields = self.telemetry.feed_fields  # (bound once: per frame, ``_handle``)
+        self.plans = self.telemetry.plans  # a frame's plan by 11-bit id (host.mqtt.liveplan)
         self.signer = endpoint.signer
         self.encoder = CommandEncoder(self.telemetry.db)
         self.link = RobotLink(
@@ -383,7 +384,8 @@ class Bridge:
     def _handle(self, batch: Batch) -> None:
         """Feed each frame of ``batch`` to its robot's telemetry, queue what it publishes (and
         the pacer's answers while it is busy). Per frame of every robot: the robot's parts as
-        ``_Robot`` holds them (``feed_fields`` bound once), a fleet's ``(t, id, payload)``
+        ``_Robot`` holds them (its telemetry's plans: a frame of a DBC message goes to its
+        identifier's plan, no ``feed_fields`` call around it), a fleet's ``(t, id, payload)``
         tuple taken apart, not spread (``feed_frame``'s fast path in line)."""
         robots = self.robots
         self.frames_in += len(batch)
@@ -396,7 +398,9 @@ class Bridge:
             try:
                 if type(frame) is tuple:
                     t_s, can_id, data = frame
-                    publications = robot.feed_fields(t_s, can_id, data, False)
+                    plan = robot.plans.get(can_id)
+                    publications = (plan(t_s, data) if plan is not None
+                                    else robot.feed_fields(t_s, can_id, data, False))
                 else:
                     publications = robot.telemetry.feed_frame(frame)
             except Exception as exc:  # a defect must not stop the bridge: count, log once

@@ -55,7 +55,6 @@ from typing import Any, ClassVar
 
 import can
 from cantools.database.can import Database
-from cantools.database.errors import DecodeError
 
 from odocan.host.judge.bootticks import POSE_MESSAGE, pose_heard
 from odocan.host.judge.liveconfig import SAME_TICK_S, rebooted
@@ -73,6 +72,7 @@ from odocan.host.mqtt.dbcnames import named_value, page_name
 from odocan.host.mqtt.errorbatch import SinceLast
 from odocan.host.mqtt.haltstretch import HaltStretches
 from odocan.host.mqtt.livecommands import CommandFollowing
+from odocan.host.mqtt.liveplan import plans
 from odocan.host.mqtt.liveprofile import ProfileStatus
 from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.topics import stamp, status_payload
@@ -82,7 +82,6 @@ from odocan.sim.contract import database
 from odocan.sim.framebatch import Received
 
 Publication = tuple[str, dict[str, Any]]
-ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # foreign CAN IDs counted by name in ``rejected``; the rest as ``other``
 STATUS_EVENTS = 16  # the latest firmware events and set-poses carried by ``status``
 TRUTH_PARTS = {0: "X", 1: "Y", 2: "HEADING"}  # SIM_TRUTH's PART: the signal it carries
@@ -162,6 +161,9 @@ class RobotTelemetry(CommandFollowing):
         self.reboots = 0
         self.profile = ProfileStatus(profile_name)  # ODOM_STATUS PROFILE vs these parameters
         self.stretches: HaltStretches | None = None  # an overloaded fleet's (host.mqtt.overload)
+        # per 11-bit identifier (host.mqtt.liveplan): ``plans[id](t_s, data)`` is
+        # ``feed_fields(t_s, id, data, False)`` (the bridge calls it without that call)
+        self.plans = plans(self, self._routes)
 
     # --- frames ---
     def feed(self, msg: can.Message) -> list[Publication]:
@@ -187,43 +189,34 @@ class RobotTelemetry(CommandFollowing):
         """One data frame given by its fields (bus timestamp ``t_s`` s, identifier, payload;
         the bridge's ``_handle`` gives a fleet's ``(t, id, payload)`` tuples here directly).
 
-        Runs per frame of every robot (the fleet's hot path): one lookup of the frame's route
-        (message, handler, decoder), the sample check only when the tracker settled one."""
-        route = None if extended else self._routes.get(can_id)
-        if route is not None and can_id in self._watched:  # before E2E: a reboot fails it
-            self._watch_source(route, data, t_s)
-        status = self.e2e.check(can_id, data, extended=extended,
-                                timestamp_s=t_s)  # the window widens with time
+        Runs per frame of every robot (the fleet's hot path): one lookup of the frame's plan
+        (``host.mqtt.liveplan``: E2E, decode, counts and handler made for its identifier); a
+        frame of no 11-bit message of the DBC is checked (counted) and refused."""
+        plan = None if extended else self.plans.get(can_id)
+        if plan is not None:
+            return plan(t_s, data)
+        status = self.e2e.check(can_id, data, extended=extended, timestamp_s=t_s)
+        return self._refused(None, can_id, data, t_s, status)
+
+    def _refused(self, route: Route | None, can_id: int, data: bytes, t_s: float,
+                 status: str) -> list[Publication]:
+        """A frame refused (its E2E ``status``, or no route): counted in ``rejected``; a
+        CRC-right WHEEL_ENCODERS one may be a twin of the latest accepted (``livetwins``)."""
         tracker = self.tracker  # ``advance``: settles the pose halves heard half a cycle before
-        if route is None or status not in ACCEPTED_E2E:
-            tracker.advance(t_s)
-            if status in CRC_RIGHT_REFUSED and route is not None \
-                    and route.name == "WHEEL_ENCODERS":  # a twin of the latest accepted one?
-                refused_encoders(tracker.twins, route.signals(data), t_s, tracker.placer.fill)
-            message = self._by_id.get(can_id)
-            self.rejected[message.name if message else self._unknown_key(can_id)] += 1
-            return self._samples() if tracker.settled else []
-        if not route.advances:  # (else its handler's first act: not twice a frame)
-            tracker.advance(t_s)
-        name, handler = route.name, route.handler
-        frames, counts = self.frames, self._window.counts  # plain dicts: a Counter's += is slower
-        if handler is None:
-            frames[name] = frames.get(name, 0) + 1
-            counts[name] = counts.get(name, 0) + 1
-            return self._samples() if tracker.settled else []
-        try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
-            signals = route.decode(data)  # compiled: a tuple for a ``takes`` handler
-        except DecodeError:
-            if route.advances:
-                tracker.advance(t_s)
-            self.rejected[name] += 1
-            return self._samples() if tracker.settled else []
-        frames[name] = frames.get(name, 0) + 1
-        counts[name] = counts.get(name, 0) + 1
-        publications: list[Publication] = handler(self, signals, t_s)
-        if tracker.settled:
-            return publications + self._samples() if publications else self._samples()
-        return publications
+        tracker.advance(t_s)
+        if status in CRC_RIGHT_REFUSED and route is not None \
+                and route.name == "WHEEL_ENCODERS":  # a twin of the latest accepted one?
+            refused_encoders(tracker.twins, route.signals(data), t_s, tracker.placer.fill)
+        message = self._by_id.get(can_id)
+        self.rejected[message.name if message else self._unknown_key(can_id)] += 1
+        return self._samples() if tracker.settled else []
+
+    def _undecodable(self, route: Route, t_s: float) -> list[Publication]:
+        """An E2E-valid frame cantools cannot decode (an undefined multiplexer value)."""
+        if route.advances:
+            self.tracker.advance(t_s)
+        self.rejected[route.name] += 1
+        return self._samples() if self.tracker.settled else []
 
     def _watch_source(self, route: Route, data: bytes, t_s: float) -> None:
         """A reboot (UPTIME going back, INIT after running, a power-up tick's COUNTERs) starts
@@ -275,7 +268,7 @@ class RobotTelemetry(CommandFollowing):
         if self._apply_choice is not None and self._apply_choice.on_pose_x(
                 self.tracker, int(s[0]), s[1], s[2]):  # (host.judge.livesetpose_choice)
             self._apply_choice = None
-        self.tracker.on_pose_x(int(s[0]), s[1], s[2], counter=int(s[3]), t_s=t_s)
+        self.tracker.on_pose_x(int(s[0]), s[1], s[2], int(s[3]), t_s)  # (by position)
         return []
 
     @takes("ENC_COUNTER", "LINEAR_VEL", "ANGULAR_VEL", "DISTANCE", "COUNTER")
@@ -290,7 +283,7 @@ class RobotTelemetry(CommandFollowing):
 
     @takes("ENC_COUNTER", "Y", "TURNS", "COUNTER", advances=True)
     def _on_pose_y(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
-        self.tracker.on_pose_y(int(s[0]), s[1], int(s[2]), counter=int(s[3]), t_s=t_s)
+        self.tracker.on_pose_y(int(s[0]), s[1], int(s[2]), int(s[3]), t_s)  # (by position)
         return []
 
     def _samples(self) -> list[Publication]:

@@ -99,10 +99,12 @@ class E2EMonitor:
                                            if c.min_periods == 0 and c.cycle_s), default=0.01))
 
     def check(
-        self, can_id: int, data: bytes, *, extended: bool = False, timestamp_s: float | None = None
+        self, can_id: int, data: bytes, extended: bool = False, timestamp_s: float | None = None
     ) -> str:
         """Judge one data frame (identifier, payload); count and return its status (a message
-        heard before, with its DLC, by its ``_Live``: one lookup a frame of a fleet's robots)."""
+        heard before, with its DLC, by its ``_Live``: one lookup a frame of a fleet's robots).
+        ``extended`` and ``timestamp_s`` may be given by position (the bridge's per-ID plans,
+        ``host.mqtt.liveplan``: a call with keywords takes CPython's slower call path)."""
         if timestamp_s is not None:
             self._releases.seen(timestamp_s, can_id)
         live = self._live.get(frame_key(can_id, True) if extended else can_id)

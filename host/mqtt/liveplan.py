@@ -1,0 +1,103 @@
+"""One robot's handling of each CAN ID it hears, fused into one function per ID (its plan).
+
+The bridge's frame handling runs per frame of every robot of a fleet. Routed step by step,
+a frame paid for three lookups and a dozen attribute reads before its judge saw it: its route
+(``host.mqtt.liveroutes``), whether it is an ODOM_STATUS page, whether its handler advances
+the tracker, its name, handler and decoder, the telemetry's counters. A plan reads all of that
+once, when the robot's telemetry is made, and keeps it in the closure of one function per
+11-bit message of the DBC (``RobotTelemetry.plans``, which the bridge's ``_handle`` calls
+without ``feed_fields`` around it): ``plan(t_s, data)`` checks the frame's E2E
+(``host.protocol.e2e_live.E2EMonitor.check``, bound), decodes it (the route's compiled
+decoder), counts it and gives it to the judge's entry (the route's handler), in the very order
+``feed_fields`` took them before (``bench/bridge_frames.py``'s digest of every publication of
+a fleet's frames is unchanged; tests/test_mqtt_liveplan.py feeds frames with faults by the
+plans alone).
+
+What a plan does not handle itself it gives back to the telemetry as before: a frame its E2E
+check refuses (``RobotTelemetry._refused``), one cantools could not decode
+(``RobotTelemetry._undecodable``); an ODOM_STATUS page and an ODOM_POSE_X go to the reboot
+watch first (``RobotTelemetry._watch_source``: before E2E, a reboot fails it;
+``host.judge.bootticks``: a power-up tick's COUNTERs).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from cantools.database.errors import DecodeError
+
+from odocan.host.mqtt.liveroutes import Route
+
+if TYPE_CHECKING:
+    from odocan.host.mqtt.telemetry import RobotTelemetry
+
+Publication = tuple[str, dict[str, Any]]
+Plan = Callable[[float, bytes], list[Publication]]
+ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
+
+
+def plans(telemetry: RobotTelemetry, routes: dict[int, Route]) -> dict[int, Plan]:
+    """Every route's plan for ``telemetry``, by 11-bit identifier."""
+    return {can_id: plan_of(telemetry, can_id, route) for can_id, route in routes.items()}
+
+
+def plan_of(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
+    """``route``'s plan: a counted-only message, a watched one (ODOM_STATUS, ODOM_POSE_X), or
+    any handled one."""
+    plan = (_counted if route.handler is None else _handled)(telemetry, can_id, route)
+    if can_id not in telemetry._watched:
+        return plan
+    watch = telemetry._watch_source
+
+    def watched_plan(t_s: float, data: bytes) -> list[Publication]:
+        watch(route, data, t_s)  # before E2E: a reboot fails it
+        return plan(t_s, data)
+
+    return watched_plan
+
+
+def _handled(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
+    """A message with a handler: E2E, the tracker's advance (unless the handler's own first
+    act), decode, counts, the handler, then the samples the tracker settled."""
+    check, tracker, frames = telemetry.e2e.check, telemetry.tracker, telemetry.frames
+    refused, undecodable = telemetry._refused, telemetry._undecodable
+    name, decode, handler, advances = route.name, route.decode, route.handler, route.advances
+
+    def plan(t_s: float, data: bytes) -> list[Publication]:
+        status = check(can_id, data, False, t_s)  # the window widens with time (by position)
+        if status not in ACCEPTED_E2E:
+            return refused(route, can_id, data, t_s, status)
+        if not advances:
+            tracker.advance(t_s)
+        try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
+            signals = decode(data)
+        except DecodeError:
+            return undecodable(route, t_s)
+        frames[name] = frames.get(name, 0) + 1  # plain dicts: a Counter's += is slower
+        counts = telemetry._window.counts
+        counts[name] = counts.get(name, 0) + 1
+        publications: list[Publication] = handler(telemetry, signals, t_s)
+        if tracker.settled:
+            return publications + telemetry._samples() if publications else telemetry._samples()
+        return publications
+
+    return plan
+
+
+def _counted(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
+    """A message without a handler (another node's, e.g. MOTOR_CMD): checked and counted."""
+    check, tracker, frames = telemetry.e2e.check, telemetry.tracker, telemetry.frames
+    refused, name = telemetry._refused, route.name
+
+    def plan(t_s: float, data: bytes) -> list[Publication]:
+        status = check(can_id, data, False, t_s)
+        if status not in ACCEPTED_E2E:
+            return refused(route, can_id, data, t_s, status)
+        tracker.advance(t_s)
+        frames[name] = frames.get(name, 0) + 1
+        counts = telemetry._window.counts
+        counts[name] = counts.get(name, 0) + 1
+        return telemetry._samples() if tracker.settled else []
+
+    return plan
