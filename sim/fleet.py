@@ -186,7 +186,7 @@ class Fleet(Closing):
         the bus, so the judges cannot follow their poses from then (``halted_from_s``)."""
         gap = k - self._last_k
         self.longest_gap_periods = max(self.longest_gap_periods, gap)
-        if self._last_k < 0 or gap * TICK_S < HALT_AFTER_S:
+        if not self._halts_boards(k):
             return
         self.halts += 1
         self.halt_gaps.append(gap)  # before the tick: a reader of halt_ticks finds its gap
@@ -210,15 +210,32 @@ class Fleet(Closing):
     def _sample_skipped(self, k: int) -> None:
         """Releases ``_last_k + 1 .. k - 1`` were skipped: each robot's motor controller sampled
         its encoders at each of them in hardware, so their frames go out now, each taken at its
-        own release, back to back (COUNTER +1 each: ``sim.realtime.send_skipped_samples``, as
-        ``odocan sim`` does). Stepped straight to ``k``, a robot put several periods of motion
-        under one COUNTER step, which its firmware rightly refused as faster than the robot
-        can go (kobuki: IMPLAUSIBLE_STEP, COUNTER_RESET) or integrated as one long step."""
-        first = self.config.first
+        own release, back to back (COUNTER +1 each, as ``odocan sim`` does). Stepped straight
+        to ``k``, a robot put several periods of motion under one COUNTER step, which its
+        firmware rightly refused as faster than the robot can go (kobuki: IMPLAUSIBLE_STEP,
+        COUNTER_RESET) or integrated as one long step. The scenario driver's commands of those
+        releases go out too, each before its release's sample (``SimNode.drive_skipped``): the
+        drive is open loop, a function of time, so the robot moves as without the skip and a
+        drive run ahead serves them from its block (it does not fall back).
+        A gap that halts the boards (``_count_halt``) sends the samples alone, as before: the
+        halt judges model what a halted MCU's receive FIFO kept from those frames, and with the
+        commands in the gap a firmware shifting 0.1 LSB at every halt PASSed
+        (tests/test_fleet_halt_carry.py); its drives fall back."""
+        first, halted = self.config.first, self._halts_boards(k)
         for index, rig in enumerate(self.rigs):
             offset = _tick_offset(first + index)
             skipped = range(max(self._last_k + 1 - offset, 0), max(k - offset, 0))
-            send_skipped_samples(rig.sim, rig.clock, skipped)
+            if halted:
+                send_skipped_samples(rig.sim, rig.clock, skipped)
+                continue
+            clock, drive_skipped = rig.clock, rig.sim.drive_skipped
+            for j in skipped:
+                clock.advance_to(j * TICK_S)
+                drive_skipped(j)
+
+    def _halts_boards(self, k: int) -> bool:
+        """Tick ``k`` comes so long after the previous one that every board runs it halted."""
+        return self._last_k >= 0 and (k - self._last_k) * TICK_S >= HALT_AFTER_S
 
     def take_batch(self) -> Batch:
         """The frames the host observers saw since the last call, in bus order per robot."""
