@@ -19,8 +19,8 @@ up to ``BLOCK_TICKS`` robots, never all at once.
 ``run_realtime`` paces ``Fleet.step`` to the wall clock as one asyncio task: at each release
 ``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
 tick starting more than half a period after its release is late; releases a whole period or more
-behind are skipped, never run in a burst: each robot sends their encoder samples late, each taken
-at its own release, ``Fleet.step``; a tick ``sim.board.HALT_AFTER_S`` or more after the
+behind are skipped, never run in a burst: each robot sends their driver commands and encoder
+samples late, each taken at its own release, ``Fleet.step``; a tick ``sim.board.HALT_AFTER_S`` or more after the
 previous one is run by every board as a halted MCU's, counted in ``Fleet.halts`` and
 ``Fleet.halted_from_s`` for the verdict), steps every robot, and hands the tick's frames to
 ``on_batch`` (e.g. the MQTT bridge). Between ticks the event loop runs the other tasks (MQTT I/O):
@@ -155,11 +155,11 @@ class Fleet(Closing):
 
     def step(self, k: int) -> None:
         """Tick ``k`` of every robot (simulated time ``k * TICK_S``). A robot whose drive fell
-        back from running ahead (ticks skipped: its predicted commands never came) runs ahead
+        back from running ahead (a halt's gap: its predicted commands never came) runs ahead
         again from its next block tick (``PlannedVehicle.replan``) once ``BLOCK_TICKS`` ticks
         ran without a skip: a loop that keeps skipping would pay blocks and fall backs for
-        nothing. After skipped releases each robot first sends their encoder samples
-        (``_sample_skipped``)."""
+        nothing. After skipped releases each robot first sends their driver commands and
+        encoder samples (``_sample_skipped``: a drive run ahead serves them, it holds)."""
         if k != self._last_k + 1:
             self._calm_since = k
             self._sample_skipped(k)
