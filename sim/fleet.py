@@ -20,8 +20,9 @@ up to ``BLOCK_TICKS`` robots, never all at once.
 ``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
 tick starting more than half a period after its release is late; releases a whole period or more
 behind are skipped, never run in a burst: each robot sends their driver commands and encoder
-samples late, each taken at its own release, ``Fleet.step``; a tick ``sim.board.HALT_AFTER_S`` or more after the
-previous one is run by every board as a halted MCU's, counted in ``Fleet.halts`` and
+samples late, each taken at its own release, ``Fleet.step``; a tick ``sim.board.HALT_AFTER_S``
+or more after the previous one is run by every board as a halted MCU's, counted in
+``Fleet.halts`` and
 ``Fleet.halted_from_s`` for the verdict), steps every robot, and hands the tick's frames to
 ``on_batch`` (e.g. the MQTT bridge). Between ticks the event loop runs the other tasks (MQTT I/O):
 one thread, no lock, no GIL contention with the timer.
