@@ -22,10 +22,9 @@ tick starting more than half a period after its release is late; releases a whol
 behind are skipped, never run in a burst: each robot sends their driver commands and encoder
 samples late, each taken at its own release, ``Fleet.step``; a tick ``sim.board.HALT_AFTER_S``
 or more after the previous one is run by every board as a halted MCU's, counted in
-``Fleet.halts`` and
-``Fleet.halted_from_s`` for the verdict), steps every robot, and hands the tick's frames to
-``on_batch`` (e.g. the MQTT bridge). Between ticks the event loop runs the other tasks (MQTT I/O):
-one thread, no lock, no GIL contention with the timer.
+``Fleet.halts`` and ``Fleet.halted_from_s`` for the verdict), steps every robot, and hands the
+tick's frames to ``on_batch`` (e.g. the MQTT bridge). Between ticks the event loop runs the
+other tasks (MQTT I/O): one thread, no lock, no GIL contention with the timer.
 """
 
 from __future__ import annotations
