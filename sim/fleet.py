@@ -146,7 +146,7 @@ class Fleet(Closing):
             if vehicle is not None:
                 vehicle.start()
         self._last_k = -1  # the latest tick stepped
-        self._calm_since = 0  # the first tick stepped after the latest skip
+        self._calm_since = 0  # the first tick stepped after the latest halt
         self.halts = 0  # ticks that came so late that every board was halted (``halted_from_s``)
         self.halted_from_k: int | None = None  # the fleet tick of the first of them
         self.halt_ticks: list[int] = []  # every such tick (one int a halt: <= 10 a second)
@@ -157,11 +157,13 @@ class Fleet(Closing):
         """Tick ``k`` of every robot (simulated time ``k * TICK_S``). A robot whose drive fell
         back from running ahead (a halt's gap: its predicted commands never came) runs ahead
         again from its next block tick (``PlannedVehicle.replan``) once ``BLOCK_TICKS`` ticks
-        ran without a skip: a loop that keeps skipping would pay blocks and fall backs for
-        nothing. After skipped releases each robot first sends their driver commands and
-        encoder samples (``_sample_skipped``: a drive run ahead serves them, it holds)."""
+        ran without a halt: a loop that keeps halting would pay blocks and fall backs for
+        nothing (a skip that halts nothing no longer costs a plan). After skipped releases
+        each robot first sends their driver commands and encoder samples (``_sample_skipped``:
+        a drive run ahead serves them, it holds)."""
         if k != self._last_k + 1:
-            self._calm_since = k
+            if self._halts_boards(k):
+                self._calm_since = k
             self._sample_skipped(k)
             self._count_halt(k)
         self._last_k = k
