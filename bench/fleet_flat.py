@@ -28,8 +28,9 @@ pauses: 16 ms every 50 ticks, 43 ms every 200, 50 robots at load 9).
 ``--clock real`` runs the same worker under the product's clock (``sim.fleet.run_realtime``:
 each tick released at ``k * 10 ms`` of the wall clock, the loop asleep in between, late releases
 skipped), with the same parts, the skipped releases and the drives' fall-backs from running
-ahead (``sim.lookahead``: a skipped release's MOTOR_CMD never comes, so every robot's drive
-falls back and runs tick by tick until ``sim.fleet.BLOCK_TICKS`` ticks pass without a skip);
+ahead (``sim.lookahead``: only a gap that halts the boards makes a drive fall back, then run
+tick by tick until ``sim.fleet.BLOCK_TICKS`` ticks pass without a skip; a skipped release's
+MOTOR_CMD is sent late with its sample, ``SimNode.drive_skipped``);
 ``--clock both`` alternates a flat and a real run per ``--repeat``: the pair shows what running
 in real time adds to the same work. In real time the figures are per robot-release (ticks run
 plus releases skipped: a skipped release's encoder sample is still sent, and judged) as well as

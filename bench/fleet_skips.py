@@ -1,11 +1,12 @@
 """The fleet step under a fixed pattern of skipped releases: CPU per robot-tick, frames digest.
 
 A real-time fleet on a loaded machine skips releases (``sim.fleet.run_realtime``): the skipped
-releases' samples go out late and every robot's drive run ahead (``sim.lookahead``) falls back
-at a skipped MOTOR_CMD, then runs tick by tick until ``sim.fleet.BLOCK_TICKS`` ticks pass without
-a skip. ``bench/fleet_flat.py --clock real`` shows that under the load of the moment; here the
-same loop runs without a clock, skipping ``--gap`` releases after every ``--every`` ticks run
-(0: none), so the work is the same on every run and two trees compare in pairs, or under
+releases' driver commands and samples go out late (``SimNode.drive_skipped``), served by each
+robot's drive run ahead (``sim.lookahead``); before that change a skipped MOTOR_CMD never came,
+so every drive fell back and ran tick by tick until ``sim.fleet.BLOCK_TICKS`` ticks passed
+without a skip. ``bench/fleet_flat.py --clock real`` shows that under the load of the moment;
+here the same loop runs without a clock, skipping ``--gap`` releases after every ``--every``
+ticks run (0: none), so the work is the same on every run and two trees compare in pairs, or under
 ``valgrind --tool=callgrind`` (PYTHONHASHSEED=0; the instructions of ``--ticks 0``, the fleet's
 construction, subtracted) without the load in the figure:
 

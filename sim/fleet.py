@@ -19,12 +19,12 @@ up to ``BLOCK_TICKS`` robots, never all at once.
 ``run_realtime`` paces ``Fleet.step`` to the wall clock as one asyncio task: at each release
 ``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
 tick starting more than half a period after its release is late; releases a whole period or more
-behind are skipped, never run in a burst: each robot sends their encoder samples late, each taken
-at its own release, ``Fleet.step``; a tick ``sim.board.HALT_AFTER_S`` or more after the
-previous one is run by every board as a halted MCU's, counted in ``Fleet.halts`` and
-``Fleet.halted_from_s`` for the verdict), steps every robot, and hands the tick's frames to
-``on_batch`` (e.g. the MQTT bridge). Between ticks the event loop runs the other tasks (MQTT I/O):
-one thread, no lock, no GIL contention with the timer.
+behind are skipped, never run in a burst: each robot sends their driver commands and encoder
+samples late, each taken at its own release, ``Fleet.step``; a tick ``sim.board.HALT_AFTER_S``
+or more after the previous one is run by every board as a halted MCU's, counted in
+``Fleet.halts`` and ``Fleet.halted_from_s`` for the verdict), steps every robot, and hands the
+tick's frames to ``on_batch`` (e.g. the MQTT bridge). Between ticks the event loop runs the
+other tasks (MQTT I/O): one thread, no lock, no GIL contention with the timer.
 """
 
 from __future__ import annotations
@@ -146,7 +146,7 @@ class Fleet(Closing):
             if vehicle is not None:
                 vehicle.start()
         self._last_k = -1  # the latest tick stepped
-        self._calm_since = 0  # the first tick stepped after the latest skip
+        self._calm_since = 0  # the first tick stepped after the latest halt
         self.halts = 0  # ticks that came so late that every board was halted (``halted_from_s``)
         self.halted_from_k: int | None = None  # the fleet tick of the first of them
         self.halt_ticks: list[int] = []  # every such tick (one int a halt: <= 10 a second)
@@ -155,13 +155,15 @@ class Fleet(Closing):
 
     def step(self, k: int) -> None:
         """Tick ``k`` of every robot (simulated time ``k * TICK_S``). A robot whose drive fell
-        back from running ahead (ticks skipped: its predicted commands never came) runs ahead
+        back from running ahead (a halt's gap: its predicted commands never came) runs ahead
         again from its next block tick (``PlannedVehicle.replan``) once ``BLOCK_TICKS`` ticks
-        ran without a skip: a loop that keeps skipping would pay blocks and fall backs for
-        nothing. After skipped releases each robot first sends their encoder samples
-        (``_sample_skipped``)."""
+        ran without a halt: a loop that keeps halting would pay blocks and fall backs for
+        nothing (a skip that halts nothing no longer costs a plan). After skipped releases
+        each robot first sends their driver commands and encoder samples (``_sample_skipped``:
+        a drive run ahead serves them, it holds)."""
         if k != self._last_k + 1:
-            self._calm_since = k
+            if self._halts_boards(k):
+                self._calm_since = k
             self._sample_skipped(k)
             self._count_halt(k)
         self._last_k = k
@@ -186,7 +188,7 @@ class Fleet(Closing):
         the bus, so the judges cannot follow their poses from then (``halted_from_s``)."""
         gap = k - self._last_k
         self.longest_gap_periods = max(self.longest_gap_periods, gap)
-        if self._last_k < 0 or gap * TICK_S < HALT_AFTER_S:
+        if not self._halts_boards(k):
             return
         self.halts += 1
         self.halt_gaps.append(gap)  # before the tick: a reader of halt_ticks finds its gap
@@ -210,15 +212,32 @@ class Fleet(Closing):
     def _sample_skipped(self, k: int) -> None:
         """Releases ``_last_k + 1 .. k - 1`` were skipped: each robot's motor controller sampled
         its encoders at each of them in hardware, so their frames go out now, each taken at its
-        own release, back to back (COUNTER +1 each: ``sim.realtime.send_skipped_samples``, as
-        ``odocan sim`` does). Stepped straight to ``k``, a robot put several periods of motion
-        under one COUNTER step, which its firmware rightly refused as faster than the robot
-        can go (kobuki: IMPLAUSIBLE_STEP, COUNTER_RESET) or integrated as one long step."""
-        first = self.config.first
+        own release, back to back (COUNTER +1 each, as ``odocan sim`` does). Stepped straight
+        to ``k``, a robot put several periods of motion under one COUNTER step, which its
+        firmware rightly refused as faster than the robot can go (kobuki: IMPLAUSIBLE_STEP,
+        COUNTER_RESET) or integrated as one long step. The scenario driver's commands of those
+        releases go out too, each before its release's sample (``SimNode.drive_skipped``): the
+        drive is open loop, a function of time, so the robot moves as without the skip and a
+        drive run ahead serves them from its block (it does not fall back).
+        A gap that halts the boards (``_count_halt``) sends the samples alone, as before: the
+        halt judges model what a halted MCU's receive FIFO kept from those frames, and with the
+        commands in the gap a firmware shifting 0.1 LSB at every halt PASSed
+        (tests/test_fleet_halt_carry.py); its drives fall back."""
+        first, halted = self.config.first, self._halts_boards(k)
         for index, rig in enumerate(self.rigs):
             offset = _tick_offset(first + index)
             skipped = range(max(self._last_k + 1 - offset, 0), max(k - offset, 0))
-            send_skipped_samples(rig.sim, rig.clock, skipped)
+            if halted:
+                send_skipped_samples(rig.sim, rig.clock, skipped)
+                continue
+            clock, drive_skipped = rig.clock, rig.sim.drive_skipped
+            for j in skipped:
+                clock.advance_to(j * TICK_S)
+                drive_skipped(j)
+
+    def _halts_boards(self, k: int) -> bool:
+        """Tick ``k`` comes so long after the previous one that every board runs it halted."""
+        return self._last_k >= 0 and (k - self._last_k) * TICK_S >= HALT_AFTER_S
 
     def take_batch(self) -> Batch:
         """The frames the host observers saw since the last call, in bus order per robot."""

@@ -224,6 +224,27 @@ class SimNode:
         time, sent now (``sim.realtime.paced_sim_tick``); nothing else of the tick runs."""
         self.motor_controller.sample_and_send()
 
+    def drive_skipped(self, k: int) -> None:
+        """A skipped real-time release of tick ``k`` (the clock at its time) on a robot whose
+        drive is the scenario's: the driver's MOTOR_CMD of the tick when it has one (open loop,
+        a function of time: a late simulator loop does not stop the host's drive), then the
+        encoder sample, both sent now (``sim.fleet.Fleet.step``). The robot moves as it would
+        have without the skip, so a drive run ahead (``sim.lookahead``) serves both from its
+        block instead of falling back; the truth is not sent (nothing else of the tick runs).
+        When the tick's plan (``sim.simplan``) holds and has no truth at it, the plan sends
+        both (the same bytes, and it still holds for the next tick); else it is dropped (a
+        truth skipped: its COUNTER stays behind the plan's) and the next tick plans anew."""
+        plan = self._plan
+        if plan is not None:
+            i = plan.at(self, k)
+            if i >= 0 and not plan.truths[i]:
+                self._send_planned(plan, i)
+                return
+        self._plan = None
+        if self.driver is not None and k % self._driver_ticks == 0:
+            self.driver.send()
+        self.motor_controller.sample_and_send()
+
     def tick(self, k: int) -> None:
         """Tick ``k`` (10 ms each), in the order of the class docstring: from the plan of the
         vehicle's block when it holds (``sim.simplan``: the same frames, computed at once)."""

@@ -3,6 +3,7 @@ and spreads the blocks' work: the first ones before the clock, the later ones on
 
 from __future__ import annotations
 
+from odocan.firmware import frames as fr
 from odocan.sim.fleet import BLOCK_TICKS, Fleet, FleetConfig, frame_fields
 from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.robot import load
@@ -68,20 +69,61 @@ def test_after_skipped_ticks_the_drives_run_ahead_again_with_the_same_frames() -
     assert with_blocks == skipping_frames(False, 4)[0]
 
 
-def test_a_loop_that_keeps_skipping_does_not_plan_again_and_again() -> None:
-    """Two releases skipped every 30 ticks: a new plan would miss again before its block ends, so
-    the drives stay plain until the loop has run a block's ticks without a skip."""
-    with Fleet(FleetConfig(robots=3, robot=load("pmir"))) as fleet:
+def drive_frames(skip: bool) -> tuple[list[list[tuple[float, int, bytes]]], list[PlannedVehicle]]:
+    """Each robot's MOTOR_CMD and WHEEL_ENCODERS frames (t, id, payload) over 3 blocks of a
+    fleet whose loop skips two releases every 30 ticks (``skip``) or none, and its vehicles."""
+    robots = 3
+    seen: list[list[tuple[float, int, bytes]]] = [[] for _ in range(robots)]
+    with Fleet(FleetConfig(robots=robots, robot=load("kobuki"))) as fleet:
+        for k in range(3 * BLOCK_TICKS + 1):  # its last tick not skipped (300 % 30 == 0)
+            if skip and k % 30 in (28, 29):
+                continue
+            fleet.step(k)
+            for i, frame in fleet.take_batch():
+                fields = frame_fields(frame)
+                if fields[1] in (fr.MOTOR_CMD_ID, fr.WHEEL_ENCODERS_ID):
+                    seen[i].append(fields)
         vehicles = [rig.vehicle for rig in fleet.rigs]
-        blocks: list[int] = []
-        for k in [k for k in range(6 * BLOCK_TICKS) if k % 30 not in (28, 29)]:
-            if k == 30:  # the first skip was just before: the blocks run so far
-                blocks = [v.blocks for v in vehicles]  # type: ignore[attr-defined]
+    assert all(isinstance(v, PlannedVehicle) for v in vehicles)
+    return seen, vehicles  # type: ignore[return-value]
+
+
+def test_a_robot_whose_loop_skipped_releases_keeps_running_ahead_and_moving_as_without() -> None:
+    """Two releases skipped every 30 ticks (a loaded real-time loop): each skipped release's
+    driver command (open loop, a function of time) and encoder sample go out late, served from
+    the drive's block, so no drive falls back (it did at every skip: +37 % CPU a robot-tick) and
+    the robots move as they would have: the same commands and samples, stamped the same."""
+    skipping, vehicles = drive_frames(True)
+    assert not any(v.fell_back for v in vehicles)
+    assert all(v.blocks >= 3 for v in vehicles)  # a block every BLOCK_TICKS, skips or not
+    steady, _ = drive_frames(False)
+    for heard, lockstep in zip(skipping, steady, strict=True):
+        assert len(heard) > 3 * BLOCK_TICKS - 2  # a sample a release, skipped ones too
+        assert heard == lockstep
+    assert drive_frames(True)[0] == skipping  # deterministic run to run
+
+
+def halt_then_skips(lookahead: bool) -> tuple[list[object], list[PlannedVehicle]]:
+    """Frames of a fleet whose loop halts the boards once (releases 50-61 skipped: 13 periods)
+    then skips two releases every 30 ticks, and its vehicles."""
+    seen: list[object] = []
+    ticks = [k for k in range(6 * BLOCK_TICKS) if not 50 <= k < 62 and k % 30 not in (28, 29)]
+    with Fleet(FleetConfig(robots=3, robot=load("kobuki"), lookahead=lookahead)) as fleet:
+        for k in ticks:
             fleet.step(k)
-            fleet.take_batch()
-        assert all(isinstance(v, PlannedVehicle) and v.fell_back for v in vehicles)
-        assert [v.blocks for v in vehicles] == blocks  # type: ignore[attr-defined]
-        for k in range(6 * BLOCK_TICKS, 8 * BLOCK_TICKS):  # calm again: planned again
-            fleet.step(k)
-            fleet.take_batch()
-        assert not any(v.fell_back for v in vehicles)  # type: ignore[attr-defined]
+            seen.extend((i, frame_fields(frame)) for i, frame in fleet.take_batch())
+            if k == 62 and lookahead:  # the premise: the halt's gap made every drive fall back
+                assert all(v.fell_back for v in fleet._planned)  # type: ignore[union-attr]
+        assert fleet.halts == 1
+        vehicles = [rig.vehicle for rig in fleet.rigs]
+    return seen, vehicles  # type: ignore[return-value]
+
+
+def test_after_a_halt_the_drives_run_ahead_again_while_the_loop_keeps_skipping() -> None:
+    """A halt's gap still makes the drives fall back (its frames are the old rule's); skips that
+    halt nothing cost no plan, so they do not hold the replan back: once a block's ticks ran
+    without a halt, every drive runs ahead again (before, it waited for a block without any
+    skip, which a loop skipping every 30 ticks never has), with the same frames."""
+    planned, vehicles = halt_then_skips(True)
+    assert not any(v.fell_back for v in vehicles)
+    assert planned == halt_then_skips(False)[0]
