@@ -21,6 +21,7 @@ import cantools
 import pytest
 
 import odocan
+from odocan.firmware.clock import LOST_TIME_PERIODS
 
 ROOT = Path(__file__).resolve().parents[1]
 DBC_PATH = ROOT / "dbc" / "odocan.dbc"
@@ -60,6 +61,14 @@ def _choice(name: str, signal: str, value: str) -> int:
     return next(raw for raw, named in choices.items() if named == value)
 
 
+def _wire_bits() -> int:
+    return _bits("WHEEL_ENCODERS", "LEFT_COUNT")
+
+
+def _page(value: str) -> int:
+    return _choice("ODOM_STATUS", "PAGE", value)
+
+
 # (module, constant, what the DBC says it is: computed from the DBC by cantools, here)
 FACTS = [
     ("odocan.host.judge.bootticks", "POSE_CYCLE_MS", lambda: _cycle_ms("ODOM_POSE_X")),
@@ -76,21 +85,43 @@ FACTS = [
     ("odocan.host.judge.livewindow", "CYCLE_S", lambda: _cycle_ms("WHEEL_ENCODERS") / 1000),
     ("odocan.host.judge.livedistance", "CYCLE_S", lambda: _cycle_ms("WHEEL_ENCODERS") / 1000),
     ("odocan.host.judge.livetwist", "CYCLE_S", lambda: _cycle_ms("WHEEL_ENCODERS") / 1000),
-    ("odocan.host.protocol.busfacts", "ENC_WIRE_COUNTER_BITS",
-     lambda: _bits("WHEEL_ENCODERS", "LEFT_COUNT")),
-    ("odocan.host.protocol.busfacts", "ENC_COUNTER_LAP", lambda: _lap("WHEEL_ENCODERS")),
-    ("odocan.host.protocol.busfacts", "SUMMARY_PAGE",
-     lambda: _choice("ODOM_STATUS", "PAGE", "SUMMARY")),
-    ("odocan.host.protocol.busfacts", "TOTALS_PAGE",
-     lambda: _choice("ODOM_STATUS", "PAGE", "FRAME_TOTALS")),
-    ("odocan.host.protocol.busfacts", "ENC_E2E_PAGE",
-     lambda: _choice("ODOM_STATUS", "PAGE", "E2E_WHEEL_ENCODERS")),
-    ("odocan.host.protocol.busfacts", "PROFILE_PAGE",
-     lambda: _choice("ODOM_STATUS", "PAGE", "PROFILE")),
-    ("odocan.host.protocol.busfacts", "APPLY_FIELD",
+    ("odocan.host.judge.compare", "TWIST_SILENCE_S",
+     lambda: (LOST_TIME_PERIODS - 0.5) * _cycle_ms("WHEEL_ENCODERS") / 1000),
+    ("odocan.host.judge.samples", "WIRE_COUNTER_BITS", _wire_bits),
+    ("odocan.host.judge.livepose", "WIRE_BITS", _wire_bits),
+    ("odocan.host.experiments.drive", "WIRE_COUNTER_BITS", _wire_bits),
+    ("odocan.host.judge.samples", "ENC_E2E_PAGE", lambda: _page("E2E_WHEEL_ENCODERS")),
+    ("odocan.host.judge.gapseen", "LOST_PAGE", lambda: _page("E2E_WHEEL_ENCODERS")),
+    ("odocan.host.judge.losses", "LOST_PAGE", lambda: _page("E2E_WHEEL_ENCODERS")),
+    ("odocan.host.judge.gapseen", "TOTALS_PAGE", lambda: _page("FRAME_TOTALS")),
+    ("odocan.host.judge.reboots", "SUMMARY_PAGE", lambda: _page("SUMMARY")),
+    ("odocan.host.judge.statuslatch", "SUMMARY_PAGE", lambda: _page("SUMMARY")),
+    ("odocan.host.judge.stream_facts", "SUMMARY_PAGE", lambda: _page("SUMMARY")),
+    ("odocan.host.judge.nearthreshold", "SUMMARY_PAGE", lambda: _page("SUMMARY")),
+    ("odocan.host.judge.profilepage", "PROFILE_PAGE", lambda: _page("PROFILE")),
+    ("odocan.host.judge.setposes", "APPLY_FIELD",
      lambda: _choice("ODOM_SET_POSE", "FIELD", "APPLY")),
-    ("odocan.host.protocol.busfacts", "APPLY_PARAM",
-     lambda: _choice("ODOM_CONFIG", "PARAM", "APPLY")),
+    ("odocan.host.judge.configs", "APPLY_PARAM", lambda: _choice("ODOM_CONFIG", "PARAM", "APPLY")),
+    # Still literals (E2E Profile 2's 4-bit COUNTER, used with literal masks alongside): held
+    # to the DBC's WHEEL_ENCODERS COUNTER here
+    ("odocan.host.protocol.e2e", "COUNTER_MASK", lambda: _lap("WHEEL_ENCODERS") - 1),
+    ("odocan.host.protocol.e2e", "MAX_DELTA_COUNTER", lambda: _lap("WHEEL_ENCODERS") - 1),
+    ("odocan.host.protocol.e2e_retract", "COUNTER_MASK", lambda: _lap("WHEEL_ENCODERS") - 1),
+    ("odocan.host.protocol.e2e_retract", "MAX_WINDOW", lambda: _lap("WHEEL_ENCODERS") - 1),
+    ("odocan.host.protocol.e2e_cycles", "COUNTER_CYCLE", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.protocol.e2e_periods", "COUNTER_MODULO", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.protocol.pose", "COUNTER_VALUES", lambda: _lap("ODOM_POSE_X", "ENC_COUNTER")),
+    ("odocan.host.judge.step_periods", "COUNTER_VALUES", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.judge.gapfill", "COUNTER_MODULO", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.judge.resendalias", "COUNTER_MODULO", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.judge.senderseq", "LAP", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.judge.liveplace", "LAP", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.judge.holepages", "LAP", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.judge.livelaphold", "LAP", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.judge.holechain", "LAP_PERIODS", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.judge.livepose", "RING", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.judge.liveholdstep", "COUNTER_MODULO", lambda: _lap("WHEEL_ENCODERS")),
+    ("odocan.host.mqtt.haltpath", "COUNTER_MASK", lambda: _lap("WHEEL_ENCODERS") - 1),
 ]
 
 
