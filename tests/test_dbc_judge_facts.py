@@ -102,6 +102,8 @@ FACTS = [
     ("odocan.host.judge.setposes", "APPLY_FIELD",
      lambda: _choice("ODOM_SET_POSE", "FIELD", "APPLY")),
     ("odocan.host.judge.configs", "APPLY_PARAM", lambda: _choice("ODOM_CONFIG", "PARAM", "APPLY")),
+    ("odocan.host.protocol.session", "FRESHNESS_WAIT_S",
+     lambda: 1.5 * _cycle_ms("ODOM_FRESHNESS") / 1000),
     # Still literals (E2E Profile 2's 4-bit COUNTER, used with literal masks alongside): held
     # to the DBC's WHEEL_ENCODERS COUNTER here
     ("odocan.host.protocol.e2e", "COUNTER_MASK", lambda: _lap("WHEEL_ENCODERS") - 1),
