@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.judge.reference import Geometry, deltas_from_counts, integrate
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.commands import CommandRejected
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.heard import Recorder
@@ -48,7 +49,7 @@ BOOT_S = 0.2  # the odometry is OK (first encoder frames) before the first goal 
 SETTLE_S = 1.0  # after the last REACHED: the zero commands, then the motors' tail
 ACK_TIMEOUT_S = 0.5
 IntArray = npt.NDArray[np.int64]
-WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+WIRE_COUNTER_BITS = busfacts.ENC_WIRE_COUNTER_BITS  # WHEEL_ENCODERS: each count's low 24 bits
 RETURN_TOLERANCE_M = 0.01  # the firmware stops within 5 mm of a goal (POSITION_TOL), with margin
 ONBOARD_TOLERANCE_M = 1e-3  # on-board end vs float64 dead reckoning (the pose LSB is 0.1 mm)
 _FAILED = frozenset({"STOPPED", "ABORTED"})

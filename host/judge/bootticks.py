@@ -36,17 +36,22 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, crc8h2f_p02_one, e2e_messages
 
-POSE_MESSAGE = "ODOM_POSE_X"  # the pose frame the firmware's every tick of 20 ms sends first
-COUNTER_MODULO = 16  # E2E Profile 2's COUNTER, u4
-POSE_CYCLE_MS, POSE_FRAMES_PER_CYCLE = 20, 1  # ODOM_POSE_X (the DBC's)
-STATUS_CYCLE_MS, STATUS_FRAMES_PER_CYCLE = 100, 2  # ODOM_STATUS (the DBC's)
-JOINT_WRAP_MS = math.lcm(COUNTER_MODULO * POSE_CYCLE_MS // POSE_FRAMES_PER_CYCLE,
-                         COUNTER_MODULO * STATUS_CYCLE_MS // STATUS_FRAMES_PER_CYCLE)
-UPTIME_LSB_MS = 1000  # ODOM_STATUS UPTIME: 1 s per LSB
-assert JOINT_WRAP_MS >= UPTIME_LSB_MS  # the rule's ground (module docstring): 1600 ms
+POSE_MESSAGE = busfacts.POSE_MESSAGE  # the pose frame the firmware's every tick sends first
+# The DBC's (``host.protocol.busfacts``): 16, 20 ms, 1 a cycle; 16, 100 ms, 2 a cycle; 1 s
+POSE_COUNTER_LAP, POSE_CYCLE_MS = busfacts.POSE_COUNTER_LAP, busfacts.POSE_CYCLE_MS
+POSE_FRAMES_PER_CYCLE = busfacts.POSE_FRAMES_PER_CYCLE
+STATUS_COUNTER_LAP, STATUS_CYCLE_MS = busfacts.STATUS_COUNTER_LAP, busfacts.STATUS_CYCLE_MS
+STATUS_FRAMES_PER_CYCLE = busfacts.STATUS_FRAMES_PER_CYCLE
+JOINT_WRAP_MS = math.lcm(POSE_COUNTER_LAP * POSE_CYCLE_MS // POSE_FRAMES_PER_CYCLE,
+                         STATUS_COUNTER_LAP * STATUS_CYCLE_MS // STATUS_FRAMES_PER_CYCLE)
+UPTIME_LSB_MS = busfacts.UPTIME_LSB_MS  # ODOM_STATUS UPTIME: 1 s per LSB
+# The rule's ground (module docstring): 1600 ms >= 1000 ms. A DBC whose two COUNTERs wrap
+# together within one UPTIME LSB cannot tell a reboot this way: then no summary is a boot tick.
+RULE_HOLDS = JOINT_WRAP_MS >= UPTIME_LSB_MS
 SAME_TICK_S = POSE_CYCLE_MS / 2000  # the pose of the summary's tick: less than half a cycle
 REPEAT_S = POSE_CYCLE_MS / 4000  # a summary this close after the one before: a repeat of it
 
@@ -57,7 +62,7 @@ def boot_tick(uptime_s: int, counter: int, t_s: float, pose: tuple[float, int] |
     power-up tick (module docstring): ``pose``, (bus time, COUNTER) of the latest ODOM_POSE_X
     heard before it (None: none); ``summary_before_s``: the bus time of the summary before
     (None: none)."""
-    if uptime_s != 0 or counter != 0 or pose is None:
+    if not RULE_HOLDS or uptime_s != 0 or counter != 0 or pose is None:
         return False
     if summary_before_s is not None and t_s - summary_before_s < REPEAT_S:
         return False
@@ -75,9 +80,9 @@ def boot_ticks(uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],
                              t_s[:-1]))
     pose_t, pose_counter = poses
     since = t_s - pose_t  # NaN where no pose: every comparison False
-    found: npt.NDArray[np.bool_] = ((uptime_s == 0) & (counters == 0) & (pose_counter == 0)
-                                    & (t_s - before >= REPEAT_S) & (since >= 0.0)
-                                    & (since < SAME_TICK_S))
+    found: npt.NDArray[np.bool_] = (RULE_HOLDS & (uptime_s == 0) & (counters == 0)
+                                    & (pose_counter == 0) & (t_s - before >= REPEAT_S)
+                                    & (since >= 0.0) & (since < SAME_TICK_S))
     return found
 
 

@@ -27,6 +27,7 @@ from odocan.host.judge.samples import (
     wrap_pi,
 )
 from odocan.host.judge.turns import unwrapped_errors
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
 
@@ -186,7 +187,7 @@ TWIST_RELATIVE = 0.02  # the firmware's dt is its own tick time: a late frame ma
 TWIST_RANGE = (-32.768, 32.767)  # both signals: i16 LSBs, saturated by the sender
 TWIST_GAP_ACCEL_MPS2 = 5.0  # rim acceleration bound inside a step the log holds only in part
 # twist frames this far apart (bus time): the firmware may have lost time between them
-TWIST_SILENCE_S = (LOST_TIME_PERIODS - 0.5) * 0.01
+TWIST_SILENCE_S = (LOST_TIME_PERIODS - 0.5) * busfacts.ENC_CYCLE_S
 
 
 def check_twist(

@@ -37,11 +37,12 @@ from odocan.host.judge.profilepage import RunningProfile, profile_mismatch, runn
 from odocan.host.judge.reboots import Life
 from odocan.host.judge.reference import PROFILE_SPEED, SpeedBound
 from odocan.host.judge.setposes import followed_rows
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import MM_PER_M, RobotProfile
 
-APPLY_PARAM = 15  # ODOM_CONFIG PARAM / ODOM_ACK REQUEST_FIELD of APPLY
+APPLY_PARAM = busfacts.APPLY_PARAM  # ODOM_CONFIG PARAM / ODOM_ACK REQUEST_FIELD of APPLY
 CONFIG_REQUEST = 2  # ODOM_AUTH REQUEST naming ODOM_CONFIG (the DBC's VAL_)
 NM_PER_M = 1_000_000_000
 _UNITS = {"WHEEL_RADIUS_LEFT": NM_PER_M, "WHEEL_RADIUS_RIGHT": NM_PER_M, "WHEELBASE": NM_PER_M,

@@ -95,11 +95,12 @@ from odocan.host.judge.pagechain import (
     quiet,
 )
 from odocan.host.judge.samples import QUEUED_GAP_CYCLES, Encoders, FloatArray, IntArray
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 
-LOST_PAGE = 2  # ODOM_STATUS page with ENC_E2E_OK and ENC_E2E_LOST
-TOTALS_PAGE = 1  # ODOM_STATUS page with REJECTED_FRAMES and OVERFLOWED_FRAMES
+LOST_PAGE = busfacts.ENC_E2E_PAGE  # ODOM_STATUS page with ENC_E2E_OK and ENC_E2E_LOST
+TOTALS_PAGE = busfacts.TOTALS_PAGE  # ODOM_STATUS page with REJECTED_FRAMES and OVERFLOWED_FRAMES
 PAIR_PAGES = 8  # pages paired up to this many apart (4 s of pages: a window per pair)
 DARK_CYCLES = 3  # a log without any frame this many encoder cycles (the firmware sends a pose
 # every 2): the recorder lost frames

@@ -42,10 +42,11 @@ from odocan.host.judge.livewindow import HALF_WINDOW, Columns
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.samples import SILENCE_CYCLES
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.protocol import busfacts
 from odocan.sim.robot import RobotProfile
 
 KEPT_FRAMES = 64  # encoder frames kept for the samples to name (less than 8 cycles old)
-CYCLE_S = 0.01  # WHEEL_ENCODERS' cycle
+CYCLE_S = busfacts.ENC_CYCLE_S  # WHEEL_ENCODERS' cycle
 
 
 def robot_of(name: str, geometry: Geometry, counter_bits: int) -> RobotProfile:

@@ -22,11 +22,12 @@ from odocan.host.judge.nearthreshold import NEAR_DETAIL, near
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.reference_path import restart_detail
 from odocan.host.judge.turns import unwrapped_error
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.pose import heading_fields, unwrap_near
 from odocan.sim.pose import wrap_angle
 
 RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
-WIRE_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+WIRE_BITS = busfacts.ENC_WIRE_COUNTER_BITS  # WHEEL_ENCODERS carries the low 24 bits of each counter
 WIRE_MASK = (1 << WIRE_BITS) - 1
 
 

@@ -30,8 +30,9 @@ from odocan.host.judge.livepose import aged
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import WIRE_COUNTER_BITS
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.protocol import busfacts
 
-CYCLE_S = 0.01  # WHEEL_ENCODERS' cycle
+CYCLE_S = busfacts.ENC_CYCLE_S  # WHEEL_ENCODERS' cycle
 KEEP_STEPS = 64  # steps kept whole after the last frame taken (a twist names one 8 back at most)
 
 Band = tuple[float, float, float]  # lowest, highest per-step speed (NaN: unknown), widest gap

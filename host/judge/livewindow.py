@@ -22,11 +22,11 @@ from odocan.host.judge.samples import (
     sender_seq,
 )
 from odocan.host.judge.senderseq import pose_skips
-from odocan.host.protocol.dbcplan import default_plan
+from odocan.host.protocol import busfacts
 
 HALF_WINDOW = 256  # pose halves of each message kept to resolve the frame one names (5 s)
 ENC_WINDOW = 512  # encoder frames kept for it, and the reference at each (5 s at 100 Hz)
-CYCLE_S = float(default_plan().get_message_by_name("WHEEL_ENCODERS").cycle_time or 10) / 1000.0
+CYCLE_S = busfacts.ENC_CYCLE_S  # WHEEL_ENCODERS' cycle
 RECENT = 32  # latest rows of a window kept as tuples for the fast path (``named_plain``)
 QUEUED_GAP_S = QUEUED_GAP_CYCLES * CYCLE_S  # closer sends of one message waited (queued)
 REPEAT_S = SILENCE_CYCLES * CYCLE_S  # a repeated ENC_COUNTER closer than this is held

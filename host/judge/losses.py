@@ -22,10 +22,11 @@ from odocan.host.judge.samples import (
     IntArray,
     queued_frames,
 )
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
 
-LOST_PAGE = 2  # ODOM_STATUS page with the firmware's WHEEL_ENCODERS E2E counts (ENC_E2E_LOST)
+LOST_PAGE = busfacts.ENC_E2E_PAGE  # ODOM_STATUS page with the WHEEL_ENCODERS E2E counts
 
 
 def firmware_losses(

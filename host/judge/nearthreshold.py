@@ -36,6 +36,7 @@ from odocan.host.judge.ambiguity import least_ambiguous_periods
 from odocan.host.judge.reference import Geometry, SpeedBound
 from odocan.host.judge.samples import FloatArray, IntArray
 from odocan.host.judge.step_periods import pair_bound_periods, widened_periods
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 if TYPE_CHECKING:
@@ -45,7 +46,7 @@ NEAR_DETAIL = ("a silence within a period of the ambiguity threshold: the firmwa
                "re-primed or integrated it (its clock, not the bus's, decides); the live "
                "reference restarts from the next on-board pose")
 COUNTER_RESET_BIT = 1 << 9  # ERROR_MASK bit 9 (firmware.errors.ErrorFlag.COUNTER_RESET)
-SUMMARY_PAGE = 0  # ODOM_STATUS page with STATE, REASON, ERROR_MASK
+SUMMARY_PAGE = busfacts.SUMMARY_PAGE  # ODOM_STATUS page with STATE, REASON, ERROR_MASK
 AFTER_PERIODS = 2  # the first summary this many periods after the frame: made after it
 
 

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from odocan.host.io.logs import FrameArrays, iter_log
 from odocan.host.judge.reference import INTEGRATORS
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02_one, e2e_messages
@@ -40,7 +41,7 @@ if TYPE_CHECKING:
     from odocan.host.judge.livedistance import LiveDistance
     from odocan.host.judge.tracking import PoseTracker
 
-PROFILE_PAGE = 6  # ODOM_STATUS PAGE "PROFILE"
+PROFILE_PAGE = busfacts.PROFILE_PAGE  # ODOM_STATUS PAGE "PROFILE"
 _LAYOUT = "<IIIIBBH"  # the DBC comment's 20 bytes, little-endian
 NM_PER_M = 1_000_000_000
 HEAD_FRAMES = 1 << 13  # frames of a streamed log's head read for the page (~23 s of the rig's bus)

@@ -57,10 +57,11 @@ from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
 from odocan.host.judge.sources import SourceWatch, two_sources_text
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
 
-SUMMARY_PAGE = 0  # ODOM_STATUS page with STATE and UPTIME
+SUMMARY_PAGE = busfacts.SUMMARY_PAGE  # ODOM_STATUS page with STATE and UPTIME
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from odocan.host.judge.senderseq import QUEUED_GAP_CYCLES as QUEUED_GAP_CYCLES
 from odocan.host.judge.senderseq import pose_skips
 from odocan.host.judge.senderseq import queued_frames as queued_frames
 from odocan.host.judge.senderseq import sender_seq as sender_seq
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
@@ -30,10 +31,10 @@ from odocan.sim.exceptions import OdocanError
 _POSE_X = default_plan().get_message_by_name("ODOM_POSE_X")
 POSITION_LSB_M = float(_POSE_X.get_signal_by_name("X").scale)
 HEADING_LSB_RAD = float(_POSE_X.get_signal_by_name("HEADING").scale)
-WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
+WIRE_COUNTER_BITS = busfacts.ENC_WIRE_COUNTER_BITS  # WHEEL_ENCODERS: each count's low 24 bits
 SILENCE_CYCLES = 8  # pose frames this many encoder cycles apart: the firmware was stalled
 START_FIT_SAMPLES = 256  # on-board samples used to place the reference start (5 s at 50 Hz)
-ENC_E2E_PAGE = 2  # ODOM_STATUS page with the firmware's WHEEL_ENCODERS E2E counts
+ENC_E2E_PAGE = busfacts.ENC_E2E_PAGE  # ODOM_STATUS page with the WHEEL_ENCODERS E2E counts
 REQUIRED = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y")
 
 FloatArray = npt.NDArray[np.float64]

@@ -34,10 +34,11 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.livesetpose import FIELDS, SetPoseFollower
 from odocan.host.judge.reboots import Life, split_lives
 from odocan.host.judge.stagedacks import acks_by_life
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
 
-APPLY_FIELD = 15  # ODOM_SET_POSE FIELD / ODOM_ACK REQUEST_FIELD of APPLY (the DBC's comment)
+APPLY_FIELD = busfacts.APPLY_FIELD  # ODOM_SET_POSE FIELD / ODOM_ACK REQUEST_FIELD of APPLY
 SET_POSE_REQUEST = 1  # ODOM_AUTH REQUEST naming ODOM_SET_POSE (the DBC's VAL_)
 
 

@@ -22,6 +22,7 @@ import numpy.typing as npt
 from odocan.host.judge.bootticks import POSE_MESSAGE, boot_tick, pose_heard
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.powerup import NAMED_SPAN, holds_first_cycle, same_tick, tick_bound_s
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.e2e import crc8h2f_p02_one
 from odocan.host.protocol.e2e_live import E2EMonitor
 
@@ -34,8 +35,8 @@ if TYPE_CHECKING:  # the live judges' (a log's analysis imports this module, not
 FIRMWARE_NODE = "ODOM_MCU"  # the DBC node that sends the firmware's frames (ODOM_STATUS, ...)
 UPTIME_MATCH_S = 2.0  # one source's UPTIME (whole s) minus bus time stays within this
 CONFLICT_HOLD_S = 2.0  # CONFLICT is shown this long after two sources last interleaved
-STATUS_COUNTER_MODULO = 16  # ODOM_STATUS's E2E COUNTER (4 bits, as the live E2E check's)
-STATUS_CYCLE_MS = 100  # ODOM_STATUS's cycle (the DBC's GenMsgCycleTime)
+STATUS_COUNTER_MODULO = busfacts.STATUS_COUNTER_LAP  # ODOM_STATUS's E2E COUNTER (4 bits: 16)
+STATUS_CYCLE_MS = busfacts.STATUS_CYCLE_MS  # ODOM_STATUS's GenMsgCycleTime (100)
 TIMES_KEPT = 8  # summaries kept for ``powerup.tick_bound_s`` (a wrap of STATUS_COUNTER_MODULO)
 
 

@@ -23,10 +23,11 @@ import numpy.typing as npt
 
 from odocan.firmware.errors import ErrorFlag
 from odocan.host.judge.reasonwords import reason_text
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import DecodeError
 
-SUMMARY_PAGE = 0  # ODOM_STATUS page with STATE, REASON and ERROR_MASK
+SUMMARY_PAGE = busfacts.SUMMARY_PAGE  # ODOM_STATUS page with STATE, REASON and ERROR_MASK
 _BIT_NAMES = {int(flag).bit_length() - 1: str(flag.name) for flag in ErrorFlag if flag}
 _STATUS = default_plan().get_message_by_name("ODOM_STATUS")  # enum names: the DBC's VAL_
 _STATES = {int(v): str(n) for v, n in (_STATUS.get_signal_by_name("STATE").choices or {}).items()}

@@ -41,9 +41,10 @@ from odocan.host.judge.powerup_times import TickTimes
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses
 from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
-SUMMARY_PAGE = 0  # ODOM_STATUS page with UPTIME and INTEGRATOR
+SUMMARY_PAGE = busfacts.SUMMARY_PAGE  # ODOM_STATUS page with UPTIME and INTEGRATOR
 
 
 @dataclass

@@ -26,6 +26,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Final
 
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.commands import Command, CommandEncoder
 from odocan.host.protocol.heard import Recorder
 from odocan.host.protocol.secoc import SecocSigner
@@ -34,7 +35,8 @@ from odocan.sim.exceptions import OdocanError
 Send = Callable[[int, bytes], None]  # send a frame as the HOST: CAN ID, data
 Wait = Callable[[Callable[[], bool], float], bool]  # let time pass until done() or timeout_s
 ENDED: Final = frozenset({"REACHED", "STOPPED", "ABORTED"})  # NAV_STATUS states that end a goal
-FRESHNESS_WAIT_S: Final = 1.5  # the firmware sends ODOM_FRESHNESS every second
+# the firmware sends ODOM_FRESHNESS every GenMsgCycleTime (1 s): half a cycle more
+FRESHNESS_WAIT_S: Final = 1.5 * busfacts.FRESHNESS_CYCLE_MS / busfacts.MS_PER_S
 
 
 class CommandNotAcked(OdocanError):
