@@ -9,7 +9,7 @@ said "pose wrong in 5 episodes, worst 0.1739 mm beyond allowance" where ``analyz
 0.0697 mm. Both paired the same samples (668, 669), with 35 runs of 8 or more encoder frames
 between two samples; two departures:
 
-* the live hold rule (``tracking.PoseTracker._compare``) took each such run for a hold, where
+* the live hold rule (``tracking.PoseTracker.compare``) took each such run for a hold, where
   ``analyze``'s (``stalls.frozen_breaks``) wants ``SILENCE_CYCLES`` of its frames on time, not
   let out at once: ``analyze`` placed nothing, the live judge 35 times;
 * at each placement the fit anchored at the previous one (``livefit.LiveFit.carried``) was taken

@@ -156,9 +156,9 @@ class LiveDistance:
                  counter: int) -> None:
         """An accepted ODOM_TWIST (``counter``: its own E2E COUNTER): judge its DISTANCE at the
         encoder frame it names (not the first after a stall: ``distance.DistanceJudge.take``)."""
-        tracker._pos += 1  # its place among the frames heard (tracking.py: at its size limit)
-        self._twists.append(tracker._pos, enc_counter, counter, t_s)
-        e = self.named = tracker.named(self._twists, tracker._pos)[0]  # (livetwist takes it)
+        pos = tracker.take_place()  # its place among the frames heard
+        self._twists.append(pos, enc_counter, counter, t_s)
+        e = self.named = tracker.named(self._twists, pos)[0]  # (livetwist takes it)
         e = -1 if e >= 0 and tracker.twins.twinned(e) else e
         resend = (e >= 0 and e == self._running and self._judged_last  # resentdistance.py
                   and not may_alias_live(e, t_s, tracker))

@@ -118,7 +118,7 @@ class LapHold:
 
     def holds(self, sample: Held) -> bool:
         """Whether the on-board sample (its pose, ODOM_POSE_Y half and whether it queued:
-        ``tracking.PoseTracker._compare``'s arguments) waits: its pose names a held step's
+        ``tracking.PoseTracker.compare``'s arguments) waits: its pose names a held step's
         frame or later. It is compared when the hold ends, by the stall rules too, in order."""
         if not self.pending or sample[0].seq < self.pending[0].seq:
             return False
@@ -135,7 +135,7 @@ class LapHold:
 
     def _release(self, count: int) -> None:
         """End the first ``count`` holds: compare the samples held that name frames before the
-        next hold's (all when none waits), in order (``tracking.PoseTracker._compare``: the
+        next hold's (all when none waits), in order (``tracking.PoseTracker.compare``: the
         placement numbers the window as it now stands)."""
         if not count:
             return
@@ -145,7 +145,7 @@ class LapHold:
         now = [sample for sample in self.held if sample[0].seq < below]
         self.held = [sample for sample in self.held if sample[0].seq >= below]
         for sample in now:
-            self._tracker._compare(*sample)
+            self._tracker.compare(*sample)
 
 
 def _read_at_once(rows: deque[tuple[float, ...]], seq: int) -> bool:

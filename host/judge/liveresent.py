@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 def judge_resend(name: str, seq: int, half: Half, tracker: PoseTracker) -> bool:
     """Judge half ``name`` ("x" or "y") naming frame ``seq`` when the latest sample judged is of
     that frame; whether it was (then it is no new sample's half)."""
-    last = tracker._last_pair
+    last = tracker.last_pair
     if last is None or last[0].seq != seq or may_alias_live(seq, half.t_s, tracker):
         return False
     pose, ref = last

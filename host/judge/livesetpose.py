@@ -99,9 +99,9 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float]) -> 
     tracker.new_life()  # the reference restarts, the truth is compared in the new frame
     if at is None or not ref_known or not counts or counts[0][0] != seq:
         if all(name in staged for name in FIELDS):  # an offset before it overwritten whole
-            tracker.wrongs.new_life(tracker._now_s)
+            tracker.wrongs.new_life(tracker.now_s)
         return None
-    tracker.wrongs.new_life(tracker._now_s)  # fields kept from the reference: still judged
+    tracker.wrongs.new_life(tracker.now_s)  # fields kept from the reference: still judged
     pose = FramePose(seq, staged.get("X", at.x_m), staged.get("Y", at.y_m),
                      staged.get("HEADING", at.heading_rad % _TURN))
     start_reference(tracker, pose, counts, [])

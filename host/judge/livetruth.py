@@ -1,8 +1,8 @@
 """The live judge's truth in the current firmware life's frame (``host.judge.tracking``): after a
 reboot the new life's origin, in the truth's frame, is taken at its first truth sample
 (``compare.life_origin``, as ``analyze``), and every truth sample is re-based into it
-(``compare.rebase_truth``). ``judge_truth``: a SIM_TRUTH part heard by the tracker; three of one
-encoder frame are judged against the reference there."""
+(``compare.rebase_truth``). ``TruthJudge``: the SIM_TRUTH parts heard by the tracker; three of
+one encoder frame are judged against the reference there."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import math
 from typing import TYPE_CHECKING
 
 from odocan.host.judge.compare import life_origin
-from odocan.host.judge.livepose import FramePose, recent, truth_heading
+from odocan.host.judge.livepose import RING, FramePose, recent, truth_heading
 
 if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
@@ -109,26 +109,43 @@ def carried_to(pose: FramePose, at: FramePose, ref: FramePose) -> FramePose:
                      pose.heading_rad - at.heading_rad + ref.heading_rad)
 
 
-def judge_truth(
-    tracker: PoseTracker, part: int, enc_counter: int, value: float
-) -> tuple[FramePose, FramePose | None] | None:
-    """``PoseTracker.on_truth``: a SIM_TRUTH part (0 X m, 1 Y m, 2 HEADING rad); three of one
-    encoder frame make a truth sample in the life's frame, judged against the reference at that
-    frame and against the on-board pose carried to it; returned once complete as (truth,
-    reference at that encoder frame or None)."""
-    heard = tracker._truth_parts.add(part, enc_counter, value)
-    if heard is None:
-        return None
-    named = recent(tracker._counts[enc_counter], tracker.enc_seq)
-    raw = tracker.raw.at.get(named[0]) if named is not None else None
-    ref = None if raw is None else tracker.fit.correct(raw)
-    x_m, y_m, wrapped_rad = tracker.life_truth.heard(
-        None if named is None else int(named[0]), *heard, ref, tracker.awaiting_boot)
-    heading = truth_heading(wrapped_rad, ref if ref is not None else tracker.truth)
-    truth = tracker.truth = FramePose(ref.seq if ref else -1, x_m, y_m, heading)
-    if ref is None:
-        return truth, None
-    tracker.reference_vs_truth.add(ref, truth)
-    if tracker._last_pair is not None:  # the on-board pose carried to this frame
-        tracker.vs_truth.add(carried_to(*tracker._last_pair, ref), truth)
-    return truth, ref
+class TruthJudge:
+    """SIM_TRUTH judged live (``PoseTracker.on_truth``), owned by the tracker: the parts heard
+    (``TruthParts``), the latest encoder frame of each ENC_COUNTER (a ring: SIM_TRUTH names its
+    frame by counter), each truth sample judged against the reference at its frame and against
+    the on-board pose carried to it."""
+
+    def __init__(self, tracker: PoseTracker) -> None:
+        self._tracker = tracker
+        self._parts = TruthParts()
+        self._by_counter: list[tuple[int, int, int] | None] = [None] * RING  # seq, left, right
+
+    def frame_heard(self, counter: int, seq: int, left: int, right: int) -> None:
+        """An accepted WHEEL_ENCODERS frame: ``seq`` is the latest frame of ENC_COUNTER
+        ``counter`` (raw counts ``left``, ``right``)."""
+        self._by_counter[counter] = (seq, left, right)
+
+    def judge(
+        self, part: int, enc_counter: int, value: float
+    ) -> tuple[FramePose, FramePose | None] | None:
+        """A SIM_TRUTH part (0 X m, 1 Y m, 2 HEADING rad); three of one encoder frame make a truth
+        sample in the life's frame, judged against the reference at that frame and against the
+        on-board pose carried to it; returned once complete as (truth, reference at that encoder
+        frame or None)."""
+        heard = self._parts.add(part, enc_counter, value)
+        if heard is None:
+            return None
+        tracker = self._tracker
+        named = recent(self._by_counter[enc_counter], tracker.enc_seq)
+        raw = tracker.raw.at.get(named[0]) if named is not None else None
+        ref = None if raw is None else tracker.fit.correct(raw)
+        x_m, y_m, wrapped_rad = tracker.life_truth.heard(
+            None if named is None else int(named[0]), *heard, ref, tracker.awaiting_boot)
+        heading = truth_heading(wrapped_rad, ref if ref is not None else tracker.truth)
+        truth = tracker.truth = FramePose(ref.seq if ref else -1, x_m, y_m, heading)
+        if ref is None:
+            return truth, None
+        tracker.reference_vs_truth.add(ref, truth)
+        if tracker.last_pair is not None:  # the on-board pose carried to this frame
+            tracker.vs_truth.add(carried_to(*tracker.last_pair, ref), truth)
+        return truth, ref

@@ -81,7 +81,7 @@ class SourceWatch:
         if page == "summary":
             self.summary = (int(signals["COUNTER"]), *heard)
             self.summary_times = [*self.summary_times[-TIMES_KEPT + 1:],
-                                  (int(signals["COUNTER"]), tracker._now_s)]
+                                  (int(signals["COUNTER"]), tracker.now_s)]
         if page != "e2e_wheel_encoders":
             return False
         self.page_pending = False
@@ -232,7 +232,7 @@ def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
     the E2E sequences of the messages ``FIRMWARE_NODE`` sends in ``db`` start afresh (a reboot
     is not frames lost). Returns what was done (text)."""
     tracker.placer.seen.new_life()  # its pages count from 0 (host.judge.livegapseen)
-    tracker.wrongs.new_life(tracker._now_s)  # an offset before it gone with its RAM
+    tracker.wrongs.new_life(tracker.now_s)  # an offset before it gone with its RAM
     for message in db.messages:
         if FIRMWARE_NODE in message.senders:  # the counts stay; the next frame starts afresh
             e2e.restart_sequence(message.frame_id, extended=message.is_extended_frame)

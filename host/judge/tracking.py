@@ -22,11 +22,11 @@ from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livenewstart import NewStartHold
 from odocan.host.judge.liveplace import StallPlacer
 from odocan.host.judge.liveplacing import place_reference
-from odocan.host.judge.livepose import RING, ErrorStats, FramePose, RestartLog, Sample, StepGate
+from odocan.host.judge.livepose import ErrorStats, FramePose, RestartLog, Sample, StepGate
 from odocan.host.judge.livereference import RawReference
 from odocan.host.judge.livesnapshot import tracker_snapshot
 from odocan.host.judge.livestart import Lives
-from odocan.host.judge.livetruth import LifeTruth, TruthParts, judge_truth
+from odocan.host.judge.livetruth import LifeTruth, TruthJudge
 from odocan.host.judge.livetwins import TwinWatch
 from odocan.host.judge.livewindow import (
     ENC_COLUMNS,
@@ -77,8 +77,7 @@ class PoseTracker:
         self.forced, self.integrator = integrator is not None, integrator
         self.enc_seq = -1
         self.stalls = 0  # firmware silences after which the reference restarted
-        self._pos = 0  # frames fed so far (the order of encoder frames and pose halves)
-        self._counts: list[tuple[int, int, int] | None] = [None] * RING  # seq, left, right
+        self._pos = 0  # frames fed so far (the order of encoder frames, pose halves, twists)
         self.window = Columns(ENC_COLUMNS, ENC_WINDOW)  # the latest encoder frames heard
         self.twins = TwinWatch(self.window.rows)  # frames with a twin: their poses left out
         self.pairs = HalfPairs(self)  # the pose halves heard, settled and paired (livehalves)
@@ -96,14 +95,15 @@ class PoseTracker:
         # raw: ``fit`` corrects its start (livereference); where it starts (livestart)
         self.raw = RawReference(StepGate(geometry, self.counter_bits, self.restarts))
         self.lives = Lives(self)
-        self._truth_parts = TruthParts()
-        self._last_pair: tuple[FramePose, FramePose] | None = None  # on-board, reference
+        self.truths = TruthJudge(self)  # SIM_TRUTH's parts, judged (livetruth)
+        # the latest sample judged (``record``): on-board pose, corrected reference
+        self.last_pair: tuple[FramePose, FramePose] | None = None
         self._last_sample_t: float | None = None  # bus time of the last sample's ODOM_POSE_Y
         self.last_compared = -1  # the encoder frame of the last sample compared
         self.place_at_next = False  # after a stall or a held pose: place the position again
         self.losses = self.placer.losses = LiveAllowance()  # (livegapseen re-judges)
         self.wrongs = self.losses.wrongs  # POSE WRONG episodes latched (host.judge.posewrongs)
-        self._now_s = 0.0  # the latest bus time (s)
+        self.now_s = 0.0  # the latest bus time (s; ``advance`` sets it)
         self.pose: FramePose | None = None
         self.pose_t_s = 0.0  # bus time of the ODOM_POSE_Y of ``pose`` (s)
         self.reference: FramePose | None = None
@@ -119,7 +119,7 @@ class PoseTracker:
     def advance(self, t_s: float) -> None:
         """Bus time is now ``t_s`` (any frame heard): pose halves heard half an encoder cycle or
         more before are settled; a new life waiting ``BOOT_COUNT_WAIT_S`` starts without it."""
-        self._now_s = self.placer.dark.heard(t_s)  # (and whether the input went dark)
+        self.now_s = self.placer.dark.heard(t_s)  # (and whether the input went dark)
         if t_s > self.choice.until_s:  # the pages had their time: the choice is made
             self.choice.decide()
         if t_s > self.laps.until_s:  # ... and a lap's numbering is decided (livelaphold)
@@ -150,7 +150,7 @@ class PoseTracker:
         self.window.append(*row)
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
-        self._counts[counter] = (self.enc_seq, left, right)
+        self.truths.frame_heard(counter, self.enc_seq, left, right)
         ref = self.raw.odometry
         if ref is not None:
             step = self.raw.step(ref, counted(row))
@@ -187,6 +187,12 @@ class PoseTracker:
         half.pos = self._pos
         self.pairs.heard(name, half)
 
+    def take_place(self) -> int:
+        """The place of a frame heard besides the encoder frames and pose halves (an ODOM_TWIST:
+        ``livedistance``) in the order of the frames heard, taken: ``named`` resolves by it."""
+        self._pos += 1
+        return self._pos
+
     def named(self, halves: Columns, pos: int) -> tuple[int, bool]:
         """The encoder frame (seq) the half at ``pos`` names, -1 when none, and whether it
         queued: ``host.judge.samples.match_encoder`` over the window (the held and queued rules,
@@ -205,14 +211,16 @@ class PoseTracker:
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
         self.pose_t_s = y.t_s
         self.placer.dark.due(seq, self.newstart.restart)  # after a dark restart: livedark
-        ref = self._compare(pose, y, queued)
+        ref = self.compare(pose, y, queued)
         self.settled.append(sample := Sample(pose, ref, y.enc_counter, x.counter, y.t_s))
         if self.lives.boot is not None:  # held: settled again once judged (``livestart``)
             self.lives.held[seq] = sample
         self.newstart.sampled(sample)  # ... or held after an unseen restart (livenewstart)
 
-    def _compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
-        """Judge one on-board sample; the reference at its encoder frame, None when unknown."""
+    def compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
+        """Judge one on-board sample (its ODOM_POSE_Y half ``y``, whether it ``queued``) by the
+        hold and stall rules, then against the reference; the reference at its encoder frame,
+        None when unknown or held (``livelaphold`` compares a held one when its hold ends)."""
         if self.laps.holds((pose, y, queued)):  # compared once its lap is numbered
             return None
         seq = pose.seq
@@ -234,7 +242,7 @@ class PoseTracker:
             self.stalls += 1
             self.place_at_next = self.placer.stalled = True
         lives = self.lives  # a life's start (a boot's frame, the integrator): livestart
-        if (not started or lives.boot is not None) and lives.waits(pose, self._now_s):
+        if (not started or lives.boot is not None) and lives.waits(pose, self.now_s):
             return None
         return None if self.choice.holds(pose) else self.judge(pose)  # held: livechoice
 
@@ -259,7 +267,7 @@ class PoseTracker:
             self.fit.feed(pose, raw)
         ref = self.fit.correct(raw)
         self.placer.compared(pose)
-        self.reference, self._last_pair = ref, (pose, ref)
+        self.reference, self.last_pair = ref, (pose, ref)
         self.last_compared = pose.seq
         self.vs_reference.add(pose, ref)
         self.losses.spans += self.twins.resolve(self.geometry, self.counter_bits, self.integrator)
@@ -326,7 +334,7 @@ class PoseTracker:
         if self.integrator is None:
             return
         guess = self.enc_seq if primed_now else self.enc_seq + 1
-        self.lives.await_boot(guess, self._now_s)
+        self.lives.await_boot(guess, self.now_s)
 
     def new_life(self) -> None:
         """A new firmware life (a reboot): the reference starts again at the next pose, and
@@ -368,8 +376,8 @@ class PoseTracker:
     ) -> tuple[FramePose, FramePose | None] | None:
         """A SIM_TRUTH part (0 X m, 1 Y m, 2 HEADING rad); three of one encoder frame: a sample,
         returned once complete as (truth, reference at that encoder frame or None)
-        (``livetruth.judge_truth``)."""
-        return judge_truth(self, part, enc_counter, value)
+        (``livetruth.TruthJudge``)."""
+        return self.truths.judge(part, enc_counter, value)
 
     @property
     def counter_restarts(self) -> int:
