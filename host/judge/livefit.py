@@ -30,8 +30,13 @@ it judges):
 
 Each interval is widened by the firmware's own drift from float64 along the path fed
 (``POSITION_DRIFT_PER_M``, ``HEADING_DRIFT_RAD_PER_M``: 0.1 um and 2e-15 rad per metre). A sample
-whose intervals leave no overlap cannot come from a correct firmware: it is not fed, and
-the fit stays frozen from then on (it never absorbs an error bigger than the rounding). Running
+whose intervals leave no overlap cannot come from a correct firmware: it is not fed
+(``refused``), and the samples after it are, as before it: every sample fed narrows the
+intervals, which hold a correct firmware's start, so the fit never absorbs an error bigger than
+the rounding. (The fit used to freeze at such a sample: a firmware X 3 LSB off at one pose 10
+samples into an unseen restart's new start left the reference with 10 samples' rotation, 0.82
+LSB off the independent odometry 100 frames on, and the correct samples there were latched as
+an episode of 0.127 mm: ``tests/test_live_fit_refused.py``.) Running
 sums only: O(1) memory and a few dozen float operations per sample. A reference that starts at
 the power-up pose (0, 0, 0) is exact (``C`` the identity), as ``analyze`` takes it. After a
 stall's placement (``rebase``) the correction is taken into the reference and the fit goes on
@@ -98,8 +103,8 @@ class LiveFit:
     """The start fit of one live reference (module docstring); ``exact``: nothing to fit."""
 
     __slots__ = ("_fit", "_last_q", "ax", "ay", "d_hi", "d_lo", "exact", "frozen", "n",
-                 "path_m", "placed", "prior", "sbx", "sby", "scross", "sdot", "sqq", "sqx", "sqy",
-                 "x_hi", "x_lo", "y_hi", "y_lo")
+                 "path_m", "placed", "prior", "refused", "sbx", "sby", "scross", "sdot", "sqq",
+                 "sqx", "sqy", "x_hi", "x_lo", "y_hi", "y_lo")
 
     def __init__(self, anchor_x_m: float, anchor_y_m: float, *, exact: bool = False,
                  heading_rad: tuple[float, float] = (-HALF_HEADING_RAD, HALF_HEADING_RAD),
@@ -114,7 +119,7 @@ class LiveFit:
         self.d_lo, self.d_hi = (0.0, 0.0) if exact else heading_rad
         h = 0.0 if exact else HALF_POSITION_M
         self.x_lo, self.x_hi, self.y_lo, self.y_hi = -h, h, -h, h
-        self.n = 0
+        self.n, self.refused = 0, 0  # samples fed, samples refused (no overlap left)
         self.sqx = self.sqy = self.sbx = self.sby = 0.0  # sums of q and b = pose - r
         self.sqq = self.scross = self.sdot = 0.0  # sums of q.q, q x b, q.b
         self._fit: tuple[float, float, float, float, float] | None = None  # d, s_x, s_y, cos, sin
@@ -127,8 +132,8 @@ class LiveFit:
         return cls(pose.x_m, pose.y_m, exact=exact)
 
     def feed(self, pose: FramePose, raw: FramePose) -> None:
-        """One on-board sample and the raw reference at its encoder frame; not fed (and the fit
-        frozen) when it leaves no overlap (module docstring)."""
+        """One on-board sample and the raw reference at its encoder frame; not fed when it
+        leaves no overlap (``refused``: module docstring)."""
         if self.frozen:
             return
         qx, qy = raw.x_m - self.ax, raw.y_m - self.ay
@@ -151,7 +156,7 @@ class LiveFit:
         x_lo, x_hi = max(self.x_lo, cx - wx), min(self.x_hi, cx + wx)
         y_lo, y_hi = max(self.y_lo, cy - wy), min(self.y_hi, cy + wy)
         if d_lo > d_hi or x_lo > x_hi or y_lo > y_hi:
-            self.frozen = True  # not a correct firmware's sample: the fit keeps what it had
+            self.refused += 1  # not a correct firmware's sample: not fed, the later ones are
             return
         self.d_lo, self.d_hi, self.x_lo, self.x_hi, self.y_lo, self.y_hi = (
             d_lo, d_hi, x_lo, x_hi, y_lo, y_hi)

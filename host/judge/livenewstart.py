@@ -12,9 +12,10 @@ sample by it. Now the new life's samples are held, unjudged, for ``HOLD_S`` of b
 its first (each fed to the fit as it comes), then judged by the fit made of all of them, and
 the samples after by the fit as it goes on (causal: each fed before it is judged). The live
 verdict there lags by at most ``HOLD_S``; a pose wrong beyond what the start's rounding
-explains is still POSE WRONG (the fit never leaves the intervals the samples prove, and
-freezes at a sample outside them). The samples held are judged early, by the fit so far, when
-the reference is placed again (a stall, a gap: ``liveplacing``) or restarts.
+explains is still POSE WRONG (the fit never leaves the intervals the samples prove, and does
+not take a sample outside them: ``livefit.LiveFit.refused``). The samples held are judged
+early, by the fit so far, when the reference is placed again (a stall, a gap:
+``liveplacing``) or restarts.
 """
 
 from __future__ import annotations

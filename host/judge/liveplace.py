@@ -19,6 +19,7 @@ firmware never had."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -26,6 +27,7 @@ from odocan.host.judge.breaks import (
     BreakSummary,
     clamp_offset,
     merge_allowance_m,
+    merged_breaks,
     overlap_allowance_m,
     path_bound_m,
     placed_step,
@@ -102,7 +104,8 @@ class StallPlacer:
     def __init__(self) -> None:
         self.position_tolerance_m = POSITION_LSB_M  # the slack of a placement after a stall
         self.halves: Columns | None = None  # the tracker's ODOM_POSE_X halves (its holes)
-        self.placements = BreakSummary()  # what the placements after stalls absorbed
+        self.placements = BreakSummary()  # what this reference's placements absorbed
+        self._breaks_before = BreakSummary().as_dict()  # ... the references' before it (merged)
         self._shift = (0.0, 0.0)  # the placements' offset of the reference since its start (m)
         self._budget_m = 0.0  # the stalls' merge allowances summed since its start (m)
         # per recent frame (seq mod ABS_KEPT): its seq and the |count steps| summed up to it
@@ -138,13 +141,18 @@ class StallPlacer:
         self._unfilled: dict[int, tuple[int, Gap, int, tuple[Geometry, int, str]]] = {}
 
     def restart(self) -> None:
-        """A new reference: no offset, no allowance yet."""
+        """A new reference: no offset, no allowance yet, no placement (``watch_breaks``)."""
+        self._breaks_before, self.placements = self.watch_breaks(), BreakSummary()
         self._shift, self._budget_m = (0.0, 0.0), 0.0
         self.stalled, self._gaps, self._parts, self._owed = False, [], [], (0.0, 0.0)
         self._history = []
         self._unfilled = {}
         self._gap_sender = {}
         self.bus.restart()
+
+    def watch_breaks(self) -> dict[str, Any]:
+        """``reference_breaks`` of the watch: every reference's placements (merged)."""
+        return merged_breaks([self._breaks_before, self.placements.as_dict()])
 
     def on_encoders(self, seq: int, frame: tuple[int, int, int, float],
                     prev: tuple[float, ...] | None, bits: int) -> bool:

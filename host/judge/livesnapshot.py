@@ -25,7 +25,7 @@ def tracker_snapshot(tracker: PoseTracker) -> dict[str, Any]:
                       "starts": tracker.reference_starts,
                       "counter_restarts": tracker.counter_restarts, "stalls": tracker.stalls,
                       "unseen_restarts": tracker.placer.dark.new_starts,  # host.judge.livedark
-                      "breaks": tracker.placer.placements.as_dict()},
+                      "breaks": tracker.placer.watch_breaks()},
         "truth": pose_dict(tracker.truth),
         "truth_origin": tracker.life_truth.as_dict(),
         "error": {

@@ -382,18 +382,26 @@ class BusMonitor:
 
     def _reported_verdict(self, reported: str) -> tuple[str, list[str]]:
         """The firmware's own state when not OK, with its REASON; but a pose, DISTANCE or twist
-        found wrong (latched once settled: ``posewrongs``, ``livedistance``, ``livetwist``)
-        outranks DEGRADED, which a latched REASON (COUNTER_RESET, POSE_UNCERTAIN) keeps until
-        a set-pose: the judge's finding is not hidden behind it."""
+        found wrong (``livedistance``, ``livetwist``: latched once settled) outranks DEGRADED,
+        which a latched REASON (COUNTER_RESET, POSE_UNCERTAIN) keeps until a set-pose: the
+        judge's finding is not hidden behind it. The pose is wrong as it is beside an OK
+        (``livestanding``: the latest sample, or an episode of the pose's current life)."""
         said = f"firmware reports {reported} ({reason_text(str(self.status.get('reason', '?')))})"
         if reported == "DEGRADED":
-            wrongs = self.tracker.wrongs
-            for verdict, why in (("POSE WRONG", [wrongs.summary()] if wrongs.count else []),
+            for verdict, why in (("POSE WRONG", self._pose_wrong_degraded()),
                                  ("DISTANCE WRONG", self.distance.verdict()),
                                  ("TWIST WRONG", self.twist.verdict())):
                 if why:
                     return verdict, [*why, said]
         return reported, [said]
+
+    def _pose_wrong_degraded(self) -> list[str]:
+        """``pose_wrong_why`` beside a DEGRADED; while no sample can be judged (two sources, a
+        reboot's priming frame awaited), the episodes of the pose's current life alone."""
+        if self.sources.conflict_from_s is not None or self.tracker.awaiting_boot:
+            text = self.tracker.wrongs.standing_text()
+            return [text] if text else []
+        return pose_wrong_why(self.tracker)
 
     def snapshot(self, now_s: float | None = None) -> dict[str, Any]:
         """The whole model as JSON-ready data (``odocan monitor --json``); ``now_s``: local

@@ -114,7 +114,8 @@ async def fleet_states(
 
 
 def fleet_snapshot(table: dict[str, RobotState], db: Database | None = None) -> dict[str, Any]:
-    """Per robot: online, pose, error vs reference, firmware status, frame rates."""
+    """Per robot: online, pose, error vs reference, firmware status, the bridge's judgement of
+    the pose (``_pose_judged``), frame rates."""
     db = db if db is not None else database()
     return {name: _robot_row(table[name], db) for name in sorted(table)}
 
@@ -128,10 +129,27 @@ def _robot_row(state: RobotState, db: Database) -> dict[str, Any]:
         "pose": pose,
         "error": state.error.get("pose_vs_reference"),
         "status": _firmware_row(state.status, db),
+        **_pose_judged(state),
         "rate_hz": round(sum(hz.values()), 3) if hz else None,
         "encoder_hz": hz.get("WHEEL_ENCODERS"),
         "updated_unix_s": state.updated_unix_s,
     }
+
+
+def _pose_judged(state: RobotState) -> dict[str, Any]:
+    """What the robot's bridge judged of its pose (issue #11): ``this_life`` (the retained
+    status's ``pose_wrongs.this_life``: the episodes of the pose's current life, there while an
+    offset stands), ``since_last`` (the latest ``error``'s worst sample since the one before,
+    there when one was wrong), each None when absent or no JSON object; ``pose_wrong``: either,
+    or the latest ``error``'s own ``pose_wrong`` (the screen's state: never OK then)."""
+    wrongs = state.status.get("pose_wrongs")
+    this_life = wrongs.get("this_life") if isinstance(wrongs, dict) else None
+    this_life = this_life if isinstance(this_life, dict) else None
+    since_last = state.error.get("since_last")
+    since_last = since_last if isinstance(since_last, dict) else None
+    latest = state.error.get("pose_wrong") is True
+    return {"pose_wrong": latest or this_life is not None or since_last is not None,
+            "this_life": this_life, "since_last": since_last}
 
 
 def _firmware_row(status: dict[str, Any], db: Database) -> dict[str, Any] | None:

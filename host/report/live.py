@@ -197,9 +197,12 @@ def render_fleet(snapshot: dict[str, Any], *, source: str, elapsed_s: float, not
     """The fleet table of ``odocan monitor --mqtt``, worst robot first.
 
     Rows are sorted by position error against the reference (largest first, robots without one
-    last, then by name). A robot whose latest message (``updated_unix_s``) is older than
-    ``stale_after_s`` at ``now_unix_s`` (default: now) is shown ``stale`` with the age, dimmed,
-    whatever its retained status says; an offline robot is ``offline``.
+    last, then by name), those whose pose the bridge judged wrong first (``pose_wrong``: the
+    latest sample, one since the previous ``error``, or an offset standing in the pose's life;
+    their state POSE WRONG where the firmware says OK or DEGRADED). A robot whose latest
+    message (``updated_unix_s``) is older than ``stale_after_s`` at ``now_unix_s`` (default:
+    now) is shown ``stale`` with the age, dimmed, whatever its retained status says; an offline
+    robot is ``offline``.
     """
     now_unix_s = time.time() if now_unix_s is None else now_unix_s
     rows = sorted(snapshot.items(), key=_worst_first)
@@ -215,6 +218,8 @@ def render_fleet(snapshot: dict[str, Any], *, source: str, elapsed_s: float, not
         age_s = fleet_age_s(row, now_unix_s)
         pose, error, status = row["pose"] or {}, row["error"] or {}, row["status"] or {}
         state = str(status.get("state", "-"))
+        if row.get("pose_wrong") is True and state in ("OK", "DEGRADED", "-"):
+            state = "POSE WRONG"  # as the monitor's verdict: the bridge's judgement outranks
         if not row["online"]:
             state = "offline"
         elif age_s > stale_after_s:  # infinite: only retained messages, never heard live
@@ -261,10 +266,11 @@ def with_staleness(snapshot: dict[str, Any], now_unix_s: float,
     return out
 
 
-def _worst_first(item: tuple[str, dict[str, Any]]) -> tuple[int, float, str]:
+def _worst_first(item: tuple[str, dict[str, Any]]) -> tuple[bool, int, float, str]:
     name, row = item
     error = row.get("error")
     dpos_m = real(error.get("dpos_m")) if isinstance(error, dict) else None
+    right = row.get("pose_wrong") is not True
     if dpos_m is None:
-        return (1, 0.0, name)
-    return (0, -dpos_m, name)
+        return (right, 1, 0.0, name)
+    return (right, 0, -dpos_m, name)
