@@ -53,12 +53,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from odocan.host.io.logs import FrameArrays, concat_frames, empty_frames
+from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import Geometry, SpeedBound
 from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.resent import resent_differs
@@ -71,66 +71,8 @@ from odocan.host.judge.samples import (
     match_encoder,
     named_targets,
 )
-from odocan.host.protocol.decode import BulkDecoder, frame_keys
-from odocan.host.protocol.e2e import check_frames, e2e_messages
-
-if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
-    from odocan.host.protocol.dbcplan import DatabaseSpec
-
-Counts = dict[str, dict[str, int]]
-
-
-def _add(total: Counts, part: Counts, sign: int = 1) -> None:
-    """``total += sign * part``, per section and key."""
-    for name, counts in part.items():
-        into = total.setdefault(name, dict.fromkeys(counts, 0))
-        for key, value in counts.items():
-            into[key] = into.get(key, 0) + sign * value
-
-
-@dataclass
-class StreamE2E:
-    """``check_frames`` over a log fed chunk by chunk (module docstring)."""
-
-    db: DatabaseSpec
-    counts: Counts = field(default_factory=dict)  # so far: ``check_frames``' first result
-    _tail: FrameArrays = field(default_factory=empty_frames)
-
-    def feed(self, chunk: FrameArrays) -> npt.NDArray[np.bool_]:
-        """Check the next chunk; returns its accepted mask (the counts grow)."""
-        n_tail = len(self._tail)
-        both = concat_frames([self._tail, chunk]) if n_tail else chunk
-        counts, accepted = check_frames(both, self.db)
-        if n_tail:
-            tail_counts, _ = check_frames(self._tail, self.db)
-            _add(counts, tail_counts, -1)
-        _add(self.counts, counts)
-        self.counts = self._ordered(self.counts)
-        self._tail = both.select(self._tails(both, accepted))
-        return accepted[n_tail:]
-
-    def _ordered(self, counts: Counts) -> Counts:
-        """The sections in ``check_frames``' order: messages by frame key, ``unknown`` last."""
-        rank = {config.name: key for key, config in e2e_messages(self.db).items()}
-        names = sorted((n for n in counts if n in rank), key=rank.__getitem__)
-        return {n: counts[n] for n in names + [n for n in counts if n not in rank]}
-
-    def _tails(self, frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> npt.NDArray[np.intp]:
-        """Positions of each protected message's frames (of its DLC) from its last accepted one
-        on, or its last frame when none was accepted, in bus order."""
-        keys = frame_keys(frames)
-        keep: list[npt.NDArray[np.intp]] = []
-        for key, config in e2e_messages(self.db).items():
-            if config.data_ids is None:
-                continue
-            of_id = np.flatnonzero((keys == key) & (frames.dlc == config.length))
-            if len(of_id) == 0:
-                continue
-            good = np.flatnonzero(accepted[of_id])
-            keep.append(of_id[int(good[-1]) if len(good) else len(of_id) - 1 :])
-        if not keep:
-            return np.zeros(0, dtype=np.intp)
-        return np.sort(np.concatenate(keep))
+from odocan.host.judge.stream_e2e import StreamE2E as StreamE2E  # re-exported (its old home)
+from odocan.host.protocol.decode import BulkDecoder
 
 
 @dataclass

@@ -66,6 +66,7 @@ from odocan.host.judge.stream_lives import LifeSpan, StreamLives
 from odocan.host.judge.stream_losses import SpanDrops
 from odocan.host.judge.stream_place import PlacedChunk, reference_errors, segment_offsets
 from odocan.host.judge.stream_place import start_pose as place_start
+from odocan.host.judge.stream_refusal import UNSETTLED
 from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
 from odocan.host.judge.stream_stalls import StreamBreakCounts
 from odocan.host.judge.unseenrestart import restart_detail, whole_only
@@ -125,6 +126,8 @@ def analyze_file(
             facts.feed(chunk, accepted)
             cuts.feed(chunk, accepted)
         spill.close()
+        if not e2e.exact:  # its accepted frames may not be the whole log's: nor its lives
+            raise NotStreamable(UNSETTLED)
 
         def frames_of(span: LifeSpan) -> Frames:
             return lambda: spill.read(span.start, span.stop, chunk_frames)

@@ -22,7 +22,7 @@ from odocan.host.judge.samples import (
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
 from odocan.host.judge.stream_facts import StreamFacts
 from odocan.host.judge.stream_losses import StreamLosses
-from odocan.host.judge.stream_refusal import NotStreamable
+from odocan.host.judge.stream_refusal import UNSETTLED, NotStreamable
 from odocan.host.judge.stream_stalls import StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
 from odocan.host.judge.stream_twist import StreamTwist
@@ -140,6 +140,8 @@ class FirstPass:
             raise NotStreamable("the log's frame times go back around a silence of the firmware")
         if not self.losses.exact:  # a summary stamped before an earlier encoder frame
             raise NotStreamable("the log's status times go back against its encoder frames")
+        if not self.e2e.exact:  # verdicts the whole life's evidence settles (stream_e2e)
+            raise NotStreamable(UNSETTLED)
         if self.queued:  # samples._queued pairs them by a median over the whole life
             raise NotStreamable("frames let out in a burst after a busy bus (queued pairing)")
         if self.resent_kept:  # judged whole (host.judge.resent), as the sample is out already

@@ -11,4 +11,9 @@ class NotStreamable(OdocanError):
     (``StreamStalls.exact``), when a pose, twist or encoder frame came in a burst after a busy
     bus (``samples.queued_frames``: their pairing takes a median over the whole life), when a
     resent pose differs from the first naming its encoder frame (``host.judge.resent``: the
-    sample may have been given out chunks before)."""
+    sample may have been given out chunks before), or when encoder frames were settled from
+    the poses and pages after them (``stream_e2e.StreamE2E.exact``)."""
+
+
+UNSETTLED = ("a starved recorder's stamps: encoder frames settled from the poses and pages "
+             "after them")
