@@ -23,15 +23,20 @@ from pathlib import Path
 
 import can
 
-from odocan.firmware import frames as fr
-from odocan.firmware.errors import ErrorMask
 from odocan.host.judge.livestanding import pose_wrong_why
 from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.board import TICK_S
-from tests import host_frames as hf
 from tests.fault_rig import open_virtual
 from tests.test_health_rig import circle_rig
-from tests.test_pose_offset_state import OFF_AT, PMIR, Q40_PER_LSB, _checker_max_lsb, _watch
+from tests.test_pose_offset_state import (
+    OFF_AT,
+    PMIR,
+    Q40_PER_LSB,
+    _checker_max_lsb,
+    _watch,
+    candump_written,
+    set_pose_right,
+)
 from tests.test_pose_wrongs import _t_s
 from tests.test_stall_bound import _messages
 
@@ -56,25 +61,14 @@ def _drive(tmp_path: Path, offset_lsb: float, uncertain_at: int | None = None) -
             if k == uncertain_at:
                 rig.ecu.health.pose_uncertain()
             if k == SET_AT:
-                x = round((odometry.x_q40_m - off_q40) / Q40_PER_LSB)
-                y = round(odometry.y_q40_m / Q40_PER_LSB)
-                heading = (odometry.heading_bam64 >> 48) & 0xFFFF
-                fields = ((fr.SetPoseField.X, x), (fr.SetPoseField.Y, y),
-                          (fr.SetPoseField.HEADING, heading), (fr.SetPoseField.APPLY, 0))
-                for counter, (field, value) in enumerate(fields):
-                    data = hf.pack_odom_set_pose(counter, field, value, ErrorMask())
-                    tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
-                                          is_extended_id=False, timestamp=k * TICK_S))
+                set_pose_right(tool, odometry, off_q40, k)
 
         rig.before_board.append(hook)
         try:
             rig.run(END * TICK_S)
         finally:
             tool.shutdown()
-    path = tmp_path / f"off_{offset_lsb}_{uncertain_at}.log"
-    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
-                            f"{bytes(m.data).hex().upper()}\n" for m in heard))
-    return path
+    return candump_written(tmp_path / f"off_{offset_lsb}_{uncertain_at}.log", heard)
 
 
 def _cut(path: Path, gap_s: tuple[float, float], until_s: float = math.inf) -> Path:

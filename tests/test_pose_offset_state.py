@@ -25,11 +25,9 @@ import pytest
 
 from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorMask
-from odocan.host.cli.subparsers import monitor as monitor_cmd
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.telemetry import RobotTelemetry
-from odocan.host.report.tui_app import MonitorApp
 from odocan.sim.board import TICK_S
 from odocan.sim.robot import load
 from tests import host_frames as hf
@@ -37,7 +35,7 @@ from tests.fault_rig import open_virtual
 from tests.independent_checker import POSITION_LSB_M, Robot, check
 from tests.test_cli_run import run_cli
 from tests.test_health_rig import circle_rig
-from tests.test_pose_wrongs import _LogBus
+from tests.test_pose_wrongs import monitor_hears_log
 
 PMIR = load("pmir")
 OFF_AT, END = 300, 800  # ticks
@@ -58,22 +56,32 @@ def _drive(tmp_path: Path, offset_lsb: float, set_pose_at: int | None = None) ->
             if k == OFF_AT:
                 odometry.x_q40_m += round(offset_lsb * Q40_PER_LSB)
             if set_pose_at is not None and k == set_pose_at:
-                x = round((odometry.x_q40_m - round(offset_lsb * Q40_PER_LSB)) / Q40_PER_LSB)
-                y = round(odometry.y_q40_m / Q40_PER_LSB)
-                heading = (odometry.heading_bam64 >> 48) & 0xFFFF
-                fields = ((fr.SetPoseField.X, x), (fr.SetPoseField.Y, y),
-                          (fr.SetPoseField.HEADING, heading), (fr.SetPoseField.APPLY, 0))
-                for counter, (field, value) in enumerate(fields):
-                    data = hf.pack_odom_set_pose(counter, field, value, ErrorMask())
-                    tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
-                                          is_extended_id=False, timestamp=k * TICK_S))
+                set_pose_right(tool, odometry, round(offset_lsb * Q40_PER_LSB), k)
 
         rig.before_board.append(hook)
         try:
             rig.run(END * TICK_S)
         finally:
             tool.shutdown()
-    path = tmp_path / f"off_{offset_lsb}.log"
+    return candump_written(tmp_path / f"off_{offset_lsb}.log", heard)
+
+
+def set_pose_right(tool: can.BusABC, odometry: Any, off_q40: int, k: int) -> None:
+    """A tool sets the pose the firmware would have without its offset ``off_q40`` (X, Y,
+    HEADING and APPLY at tick ``k``): the offset taken back."""
+    x = round((odometry.x_q40_m - off_q40) / Q40_PER_LSB)
+    y = round(odometry.y_q40_m / Q40_PER_LSB)
+    heading = (odometry.heading_bam64 >> 48) & 0xFFFF
+    fields = ((fr.SetPoseField.X, x), (fr.SetPoseField.Y, y),
+              (fr.SetPoseField.HEADING, heading), (fr.SetPoseField.APPLY, 0))
+    for counter, (field, value) in enumerate(fields):
+        data = hf.pack_odom_set_pose(counter, field, value, ErrorMask())
+        tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
+                              is_extended_id=False, timestamp=k * TICK_S))
+
+
+def candump_written(path: Path, heard: list[can.Message]) -> Path:
+    """``heard`` as a candump log at ``path``."""
     path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
                             f"{bytes(m.data).hex().upper()}\n" for m in heard))
     return path
@@ -154,17 +162,7 @@ def test_a_set_pose_to_where_the_robot_is_ends_it(tmp_path: Path) -> None:
 def test_the_watch_json_says_pose_wrong_and_fails(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
 ) -> None:
-    path = _drive(tmp_path, 1.2)
-    bus = _LogBus(path)
-
-    class UntilDone(MonitorApp):
-        def on_frame(self, msg: can.Message) -> None:
-            super().on_frame(msg)
-            if not bus.frames:
-                self.quit = True  # as ``q``: the whole log was heard
-
-    monkeypatch.setattr(monitor_cmd, "open_bus", lambda args: bus)
-    monkeypatch.setattr(monitor_cmd, "MonitorApp", UntilDone)
+    monitor_hears_log(monkeypatch, _drive(tmp_path, 1.2))
     code, out, err = run_cli(capsys, "monitor", "-i", "virtual", "--robot", "pmir",
                              "--integrator", "exact", "--duration", "600", "--json")
     model: dict[str, Any] = json.loads(out)

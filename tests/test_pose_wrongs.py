@@ -154,22 +154,28 @@ class _LogBus(can.BusABC):
         raise NotImplementedError
 
 
-@pytest.mark.parametrize("wrong", [True, False])
-def test_a_watch_that_saw_the_pose_wrong_exits_1_and_says_so(
-    wrong: bool, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-    capsys: pytest.CaptureFixture[str],
-) -> None:
-    path, _ = _drive(tmp_path, wrong=wrong)
+def monitor_hears_log(monkeypatch: pytest.MonkeyPatch, path: Path) -> None:
+    """``odocan monitor`` (its CLI, patched) hears the log at ``path``, then quits as ``q``
+    quits it once the whole log was heard."""
     bus = _LogBus(path)
 
     class UntilDone(MonitorApp):
         def on_frame(self, msg: can.Message) -> None:
             super().on_frame(msg)
             if not bus.frames:
-                self.quit = True  # as ``q``: the whole log was heard
+                self.quit = True
 
     monkeypatch.setattr(monitor_cmd, "open_bus", lambda args: bus)
     monkeypatch.setattr(monitor_cmd, "MonitorApp", UntilDone)
+
+
+@pytest.mark.parametrize("wrong", [True, False])
+def test_a_watch_that_saw_the_pose_wrong_exits_1_and_says_so(
+    wrong: bool, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    path, _ = _drive(tmp_path, wrong=wrong)
+    monitor_hears_log(monkeypatch, path)
     robot = tmp_path / "kobuki_4m_s.toml"
     robot.write_text(to_toml(KOBUKI))
     code, out, err = run_cli(capsys, "monitor", "-i", "virtual", "--robot", str(robot),
