@@ -21,7 +21,13 @@ import math
 from collections.abc import Sequence
 
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
-from odocan.host.mqtt.haltpath import ARITH_M_PER_M, ARITH_RAD_PER_STEP, Interval, Stretch
+from odocan.host.mqtt.haltpath import (
+    ARITH_M_PER_M,
+    ARITH_RAD_PER_STEP,
+    Interval,
+    Stretch,
+    turned_m,
+)
 
 _TURN = 2.0 * math.pi
 
@@ -35,8 +41,11 @@ def carry_offsets(paths: Sequence[Stretch], base: Stretch) -> tuple[str, float] 
     ref = base.ref
     heading = _hull([_moved(p.heading, math.remainder(p.ref.heading_rad - ref.heading_rad, _TURN),
                             ARITH_RAD_PER_STEP * p.steps) for p in paths])
-    x = _hull([_moved(p.x, p.ref.x_m - ref.x_m, _drift_m(p)) for p in paths])
-    y = _hull([_moved(p.y, p.ref.y_m - ref.y_m, _drift_m(p)) for p in paths])
+    turns = [turned_m(p) for p in paths]
+    x = _hull([_moved(p.x, p.ref.x_m - ref.x_m, _arith_m(p), turn)
+               for p, (turn, _) in zip(paths, turns, strict=True)])
+    y = _hull([_moved(p.y, p.ref.y_m - ref.y_m, _arith_m(p), turn)
+               for p, (_, turn) in zip(paths, turns, strict=True)])
     for name, allowed, carried, lsb in (("x", base.x, x, POSITION_LSB_M),
                                         ("y", base.y, y, POSITION_LSB_M),
                                         ("heading", base.heading, heading, HEADING_LSB_RAD)):
@@ -46,17 +55,18 @@ def carry_offsets(paths: Sequence[Stretch], base: Stretch) -> tuple[str, float] 
     return None
 
 
-def _drift_m(path: Stretch) -> float:
-    """How far the firmware's position can have moved from ``path``'s reference plus its offset
-    by the path's last frame: its displacement turned by the heading offset, and the fixed
-    point against float64 (``haltpath.narrow_offsets``' bounds without the rounding)."""
-    moved_m = math.hypot(path.ref.x_m - path.x0_m, path.ref.y_m - path.y0_m)
-    return moved_m * (path.heading.magnitude + ARITH_RAD_PER_STEP * path.steps + ARITH_M_PER_M)
+def _arith_m(path: Stretch) -> float:
+    """The fixed point against float64 over the path's displacement (``haltpath.ARITH_M_PER_M``,
+    the bound ``narrow_offsets`` uses besides the rounding)."""
+    return ARITH_M_PER_M * math.hypot(path.ref.x_m - path.x0_m, path.ref.y_m - path.y0_m)
 
 
-def _moved(offsets: Interval, shift: float, widen: float) -> Interval:
-    """``offsets`` from another reference ``shift`` away, widened by ``widen`` each side."""
-    return Interval(offsets.lo + shift - widen, offsets.hi + shift + widen)
+def _moved(offsets: Interval, shift: float, widen: float, turn: Interval | None = None
+           ) -> Interval:
+    """``offsets`` from another reference ``shift`` away, plus what the heading offset turned
+    (``turn``: ``haltpath.turned_m``), widened by ``widen`` each side."""
+    turn = Interval(0.0, 0.0) if turn is None else turn
+    return Interval(offsets.lo + shift + turn.lo - widen, offsets.hi + shift + turn.hi + widen)
 
 
 def _hull(intervals: list[Interval]) -> Interval:
