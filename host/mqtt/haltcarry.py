@@ -7,12 +7,18 @@ at every halt drifted unseen, halt after halt. But the crossing's paths were ste
 stretch before the halt up to the new base's frame, and their offsets (firmware - their
 reference) still hold there: the firmware's offset from the new base's reference is a path's
 offset plus how far that path's reference is from the base (its X, Y, HEADING), whichever path
-the firmware took. So the new stretch keeps only the offsets the hull over the surviving paths
-allows, each widened by what can move between two references that started apart: the turn
-of the path's displacement by its heading offset and the fixed point against float64
-(``haltpath.ARITH_*``, the bounds ``narrow_offsets`` uses). The offsets carry from stretch to
-stretch while every halt's crossing is judged; a drift the halts add up shows once it leaves
-them. A crossing lost, or a re-start not judged, carries nothing: the next base starts afresh.
+the firmware took. Each path's offsets move by what can move between two references that
+started apart: the turn of the path's displacement by its heading offset (``haltpath.turned_m``)
+and the fixed point against float64 (``haltpath.ARITH_*``, the bounds ``narrow_offsets`` uses).
+The firmware took one of the paths, so its offsets lie in one path's triple (x, y, heading),
+not merely in their hull: the new stretch keeps the triples its own samples still meet, one a
+path (``keep_offsets``, at its base and at every sample after), its intervals their hull; it is
+wrong once none is left. The paths of one halt start up to 0.8 LSB of X apart (merged, primed,
+the FIFO's frames), so their hull alone widened the carried interval by more than a 0.1 LSB
+drift a halt, and that firmware PASSed (seeds 1, 5, 6 of ``test_fleet_halt_carry``). The
+offsets carry from stretch to stretch while every halt's crossing is judged; a drift the halts
+add up shows once it leaves them. A crossing lost, or a re-start not judged, carries nothing:
+the next base starts afresh.
 """
 
 from __future__ import annotations
@@ -30,29 +36,53 @@ from odocan.host.mqtt.haltpath import (
 )
 
 _TURN = 2.0 * math.pi
+_NAMES = ("x", "y", "heading")
+_LSBS = (POSITION_LSB_M, POSITION_LSB_M, HEADING_LSB_RAD)
 
 
-def carry_offsets(paths: Sequence[Stretch], base: Stretch) -> tuple[str, float] | None:
-    """Narrow the new stretch ``base``'s offsets (its base's rounding) to the hull the surviving
-    ``paths`` (stepped to the base's frame) allow, per axis; the first field whose interval
-    emptied and by how many LSB (None: every one still holds, or no path to carry from)."""
+Offsets = tuple[Interval, Interval, Interval]  # x, y (m), heading (rad)
+
+
+def carry_offsets(paths: Sequence[Stretch], base: Stretch) -> list[Offsets] | None:
+    """The offsets each surviving path (stepped to the base's frame) allows the new stretch
+    ``base``, from the base's reference, one triple a path: the firmware took one of the paths,
+    so its offsets lie in one of them (not only in their hull; None: no path to carry from)."""
     if not paths or any(path.seq != base.seq for path in paths):
         return None
-    ref = base.ref
-    heading = _hull([_moved(p.heading, math.remainder(p.ref.heading_rad - ref.heading_rad, _TURN),
-                            ARITH_RAD_PER_STEP * p.steps) for p in paths])
-    turns = [turned_m(p) for p in paths]
-    x = _hull([_moved(p.x, p.ref.x_m - ref.x_m, _arith_m(p), turn)
-               for p, (turn, _) in zip(paths, turns, strict=True)])
-    y = _hull([_moved(p.y, p.ref.y_m - ref.y_m, _arith_m(p), turn)
-               for p, (_, turn) in zip(paths, turns, strict=True)])
-    for name, allowed, carried, lsb in (("x", base.x, x, POSITION_LSB_M),
-                                        ("y", base.y, y, POSITION_LSB_M),
-                                        ("heading", base.heading, heading, HEADING_LSB_RAD)):
-        allowed.lo, allowed.hi = max(allowed.lo, carried.lo), min(allowed.hi, carried.hi)
-        if allowed.lo > allowed.hi:
-            return name, (allowed.lo - allowed.hi) / lsb
-    return None
+    ref, carried = base.ref, []
+    for p in paths:
+        turn_x, turn_y = turned_m(p)
+        heading_rad = math.remainder(p.ref.heading_rad - ref.heading_rad, _TURN)
+        carried.append((_moved(p.x, p.ref.x_m - ref.x_m, _arith_m(p), turn_x),
+                        _moved(p.y, p.ref.y_m - ref.y_m, _arith_m(p), turn_y),
+                        _moved(p.heading, heading_rad, ARITH_RAD_PER_STEP * p.steps)))
+    return carried
+
+
+def keep_offsets(stretch: Stretch, carried: Sequence[Offsets]
+                 ) -> tuple[list[Offsets], tuple[str, float] | None]:
+    """The ``carried`` offsets the stretch's own (its samples') still meet, each cut to them,
+    the stretch's narrowed to their hull; with none left, the field that emptied the nearest
+    and by how many LSB (the stretch is wrong: no path the firmware could have taken explains
+    its samples)."""
+    own = (stretch.x, stretch.y, stretch.heading)
+    kept: list[Offsets] = []
+    nearest: tuple[str, float] | None = None
+    for offsets in carried:
+        cut = tuple(Interval(max(a.lo, b.lo), min(a.hi, b.hi)) for a, b in zip(own, offsets,
+                                                                                 strict=True))
+        gaps = [(name, (i.lo - i.hi) / lsb) for name, i, lsb in zip(_NAMES, cut, _LSBS,
+                                                                     strict=True) if i.lo > i.hi]
+        if not gaps:
+            kept.append((cut[0], cut[1], cut[2]))
+        elif nearest is None or max(g for _, g in gaps) < nearest[1]:
+            nearest = max(gaps, key=lambda gap: gap[1])
+    if not kept:
+        return [], nearest
+    for allowed, hull in zip(own, (_hull([k[axis] for k in kept]) for axis in range(3)),
+                             strict=True):
+        allowed.lo, allowed.hi = hull.lo, hull.hi
+    return kept, None
 
 
 def _arith_m(path: Stretch) -> float:
