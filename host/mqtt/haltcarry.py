@@ -61,28 +61,26 @@ def carry_offsets(paths: Sequence[Stretch], base: Stretch) -> list[Offsets] | No
 
 def keep_offsets(stretch: Stretch, carried: Sequence[Offsets]
                  ) -> tuple[list[Offsets], tuple[str, float] | None]:
-    """The ``carried`` offsets the stretch's own (its samples') still meet, each cut to them,
-    the stretch's narrowed to their hull; with none left, the field that emptied the nearest
-    and by how many LSB (the stretch is wrong: no path the firmware could have taken explains
-    its samples)."""
+    """The ``carried`` offsets the stretch's own (its samples') still meet, the stretch's
+    narrowed to their hull; with none left, the field that emptied the nearest and by how many
+    LSB (the stretch is wrong: no path the firmware could have taken explains its samples)."""
     own = (stretch.x, stretch.y, stretch.heading)
-    kept: list[Offsets] = []
-    nearest: tuple[str, float] | None = None
-    for offsets in carried:
-        cut = tuple(Interval(max(a.lo, b.lo), min(a.hi, b.hi)) for a, b in zip(own, offsets,
-                                                                                 strict=True))
-        gaps = [(name, (i.lo - i.hi) / lsb) for name, i, lsb in zip(_NAMES, cut, _LSBS,
-                                                                     strict=True) if i.lo > i.hi]
-        if not gaps:
-            kept.append((cut[0], cut[1], cut[2]))
-        elif nearest is None or max(g for _, g in gaps) < nearest[1]:
-            nearest = max(gaps, key=lambda gap: gap[1])
+    x, y, heading = own
+    kept = [c for c in carried if c[0].lo <= x.hi and x.lo <= c[0].hi and c[1].lo <= y.hi
+            and y.lo <= c[1].hi and c[2].lo <= heading.hi and heading.lo <= c[2].hi]
     if not kept:
-        return [], nearest
-    for allowed, hull in zip(own, (_hull([k[axis] for k in kept]) for axis in range(3)),
-                             strict=True):
-        allowed.lo, allowed.hi = hull.lo, hull.hi
+        return [], min((_gap(own, c) for c in carried), key=lambda gap: gap[1])
+    for axis, allowed in enumerate(own):  # each kept triple meets it: never empty
+        allowed.lo = max(allowed.lo, min(c[axis].lo for c in kept))
+        allowed.hi = min(allowed.hi, max(c[axis].hi for c in kept))
     return kept, None
+
+
+def _gap(own: Offsets, carried: Offsets) -> tuple[str, float]:
+    """The field of ``carried`` the farthest from ``own`` and by how many LSB."""
+    return max(((name, (max(a.lo, b.lo) - min(a.hi, b.hi)) / lsb)
+                for name, a, b, lsb in zip(_NAMES, own, carried, _LSBS, strict=True)),
+               key=lambda gap: gap[1])
 
 
 def _arith_m(path: Stretch) -> float:
