@@ -84,9 +84,10 @@ def _drift_lsb(right: list[str], wrong: list[str], signal: str) -> list[tuple[fl
     return drift
 
 
-def _seeded_run(monkeypatch: pytest.MonkeyPatch, seed: int) -> Any:
-    """``recorded_run`` with the halting clock and the fleet seeded ``seed`` (5: its own)."""
-    if seed == SEED:
+def _seeded_run(monkeypatch: pytest.MonkeyPatch, seed: int, duration_s: float) -> Any:
+    """``recorded_run`` with the halting clock and the fleet seeded ``seed`` (5: its own), run
+    ``duration_s`` of bus time."""
+    if (seed, duration_s) == (SEED, DURATION_S):
         return recorded_run(monkeypatch)
 
     class Seeded(RecordingClock):
@@ -94,21 +95,24 @@ def _seeded_run(monkeypatch: pytest.MonkeyPatch, seed: int) -> Any:
             super().__init__()
             self.rng = random.Random(seed)
 
-    run = run_overloaded(monkeypatch, Seeded, robots=ROBOTS, seed=seed, duration_s=DURATION_S)
+    run = run_overloaded(monkeypatch, Seeded, robots=ROBOTS, seed=seed, duration_s=duration_s)
     assert run.halts >= 10, run.halts
     return run
 
 
 # seeds 1 and 6: the X 0.1 firmware PASSed there too before the carried offsets were kept per
-# path (one of the halt's ways, not their hull) and the heading offset's turn by its interval
-@pytest.mark.parametrize(("signal", "shift_lsb", "seed"), [
-    ("X", 0.15, SEED), ("X", 0.1, SEED), ("X", 0.1, 1), ("X", 0.1, 6), ("HEADING", 0.1, SEED)])
+# path (one of the halt's ways, not their hull) and the heading offset's turn by its interval;
+# X 0.05 over 30 s (37 halts, 1.85 LSB off by the end) PASSed then (60 s, 3.9 LSB: 4 of 4)
+@pytest.mark.parametrize(("signal", "shift_lsb", "seed", "duration_s"), [
+    ("X", 0.15, SEED, DURATION_S), ("X", 0.1, SEED, DURATION_S), ("X", 0.1, 1, DURATION_S),
+    ("X", 0.1, 6, DURATION_S), ("X", 0.05, 1, 30.0), ("HEADING", 0.1, SEED, DURATION_S)])
 def test_a_firmware_shifting_under_one_lsb_at_every_halt_fails(
-    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, signal: str, shift_lsb: float, seed: int
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, signal: str, shift_lsb: float, seed: int,
+    duration_s: float
 ) -> None:
-    right = _seeded_run(monkeypatch, seed)
+    right = _seeded_run(monkeypatch, seed, duration_s)
     _shift_at_halts(monkeypatch, signal, shift_lsb)
-    wrong = _seeded_run(monkeypatch, seed)
+    wrong = _seeded_run(monkeypatch, seed, duration_s)
     clock = RecordingClock.latest_recording
     assert clock is not None
     for index, entry in enumerate(wrong.per_robot.values()):
