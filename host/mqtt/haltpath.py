@@ -28,6 +28,7 @@ ARITH_M_PER_M = 1e-7  # fixed point vs float64 per metre of displacement (measur
 ARITH_RAD_PER_STEP = 2e-9  # the firmware's heading vs float64 per step (bam64: exact counts)
 COUNTER_MASK = 0xF  # WHEEL_ENCODERS' E2E COUNTER (4 bits)
 _TURN = 2.0 * math.pi
+_QUARTER = 0.5 * math.pi
 
 
 @dataclass
@@ -42,10 +43,11 @@ class Interval:
         self.lo = max(self.lo, error - half_width)
         self.hi = min(self.hi, error + half_width)
 
-    @property
-    def magnitude(self) -> float:
-        """The largest offset still allowed (abs)."""
-        return max(abs(self.lo), abs(self.hi))
+    def narrow_turned(self, error: float, half_width: float, turn: Interval) -> None:
+        """One sample ``error`` (firmware - reference) allows ``error - turn +- half_width``:
+        the base's offset, the heading offset's turn of the displacement (``turn``) taken out."""
+        self.lo = max(self.lo, error - turn.hi - half_width)
+        self.hi = min(self.hi, error - turn.lo + half_width)
 
 
 def interval(lsb: float) -> Interval:
@@ -87,16 +89,47 @@ def narrow_offsets(stretch: Stretch, pose: FramePose) -> tuple[str, float] | Non
     stretch.heading.narrow(heading_error, (0.5 + EPS_LSB) * HEADING_LSB_RAD
                            + ARITH_RAD_PER_STEP * stretch.steps)
     moved_m = math.hypot(ref.x_m - stretch.x0_m, ref.y_m - stretch.y0_m)
-    turn_m = moved_m * (stretch.heading.magnitude + ARITH_RAD_PER_STEP * stretch.steps)
-    half_m = (0.5 + EPS_LSB) * POSITION_LSB_M + turn_m + ARITH_M_PER_M * moved_m
-    stretch.x.narrow(pose.x_m - ref.x_m, half_m)
-    stretch.y.narrow(pose.y_m - ref.y_m, half_m)
+    half_m = (0.5 + EPS_LSB) * POSITION_LSB_M + ARITH_M_PER_M * moved_m
+    turn_x, turn_y = turned_m(stretch)
+    stretch.x.narrow_turned(pose.x_m - ref.x_m, half_m, turn_x)
+    stretch.y.narrow_turned(pose.y_m - ref.y_m, half_m, turn_y)
     for name, allowed, lsb in (("x", stretch.x, POSITION_LSB_M),
                                ("y", stretch.y, POSITION_LSB_M),
                                ("heading", stretch.heading, HEADING_LSB_RAD)):
         if allowed.lo > allowed.hi:
             return name, (allowed.lo - allowed.hi) / lsb
     return None
+
+
+def turned_m(stretch: Stretch) -> tuple[Interval, Interval]:
+    """What the heading offset turns the reference's displacement since the base by (x, y; m):
+    the firmware integrates the same steps at its heading, the reference's plus the offset d,
+    so its displacement is the reference's (dx, dy) turned by d: x by -(1 - cos d) dx - sin d dy,
+    y by sin d dx - (1 - cos d) dy, for every d the heading interval allows (widened by the
+    firmware's heading arithmetic per step); the interval's own sign and width, not its largest
+    magnitude on every side (a turn of 0.2 to 0.3 LSB moves x one way only)."""
+    ref, arith_rad = stretch.ref, ARITH_RAD_PER_STEP * stretch.steps
+    dx_m, dy_m = ref.x_m - stretch.x0_m, ref.y_m - stretch.y0_m
+    lo_rad, hi_rad = stretch.heading.lo - arith_rad, stretch.heading.hi + arith_rad
+    most_rad = max(abs(lo_rad), abs(hi_rad))
+    if most_rad >= _QUARTER:  # sin not monotonic there: every turn of the displacement
+        moved_m = math.hypot(dx_m, dy_m) * min(2.0, most_rad)
+        return Interval(-moved_m, moved_m), Interval(-moved_m, moved_m)
+    sines = (math.sin(lo_rad), math.sin(hi_rad))
+    sag = 1.0 - math.cos(most_rad)  # 1 - cos d is in [0, sag]
+    return (_plus(_times(sines, -dy_m), _times((0.0, sag), -dx_m)),
+            _plus(_times(sines, dx_m), _times((0.0, sag), -dy_m)))
+
+
+def _times(factor: tuple[float, float], by: float) -> Interval:
+    """The interval of ``f * by`` for ``f`` in ``factor`` (lo, hi)."""
+    ends = (factor[0] * by, factor[1] * by)
+    return Interval(min(ends), max(ends))
+
+
+def _plus(a: Interval, b: Interval) -> Interval:
+    """The interval of sums."""
+    return Interval(a.lo + b.lo, a.hi + b.hi)
 
 
 Frame = tuple[int, int, float, int, int]  # seq, COUNTER, bus time s, left, right

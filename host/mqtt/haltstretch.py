@@ -20,9 +20,10 @@ taken them (its FIFO's frames, then the first after the halt merged or re-primed
 sample no way explains is wrong. That needs the loop's gap before each halt (``halt_gaps``,
 ``sim.fleet.Fleet.halt_gaps``), one halt since the latest sample and the frames in the
 tracker's window; else the re-start is not judged (counted apart: ``restarts_judged``). A
-judged re-start's new stretch keeps the offsets the surviving paths allow at its base
-(``host.mqtt.haltcarry``, counted: ``restarts_carried``), not only its base's rounding, so a
-shift under one LSB at every halt adds up halt after halt until it shows.
+judged re-start's new stretch keeps the offsets the surviving paths allow at its base, one
+triple a path, as long as its samples meet one of them (``host.mqtt.haltcarry``, counted:
+``restarts_carried``), not only its base's rounding, so a shift under one LSB at every halt
+adds up halt after halt until it shows.
 
 The rule is the pose signals' rounding, not a tolerance: the firmware rounds X and Y to 0.1 mm
 and HEADING to one LSB, to nearest. So a correct firmware's samples of one stretch differ from
@@ -53,7 +54,7 @@ from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.host.judge.livepose import Sample
 from odocan.host.judge.reference import ReferenceOdometry
 from odocan.host.judge.tracking import PoseTracker
-from odocan.host.mqtt.haltcarry import carry_offsets
+from odocan.host.mqtt.haltcarry import Offsets, carry_offsets, keep_offsets
 from odocan.host.mqtt.haltcross import ENC, Crossing
 from odocan.host.mqtt.haltpath import (
     Frame,
@@ -122,6 +123,8 @@ class HaltStretches:
         self.wrong_restarts = 0
         self.judged_across = 0  # samples judged across a halt (``haltcross``)
         self.restarts_carried = 0  # ... whose paths' offsets the next stretch kept
+        self._carried: list[Offsets] = []  # the offsets the paths into ``_carried_into`` allow
+        self._carried_into: Stretch | None = None
 
     def on_samples(self, samples: list[Sample]) -> None:
         """The tracker's samples settled (``PoseTracker.take_samples``), in order."""
@@ -209,9 +212,11 @@ class HaltStretches:
         """The new stretch keeps the offsets the crossing's surviving paths allow at its base
         (``host.mqtt.haltcarry``); wrong when none of them is within the base's rounding."""
         paths = crossing.survivors()
-        if paths is None:
+        carried = None if paths is None else carry_offsets(paths, stretch)
+        if carried is None:
             return
-        emptied = carry_offsets(paths, stretch)
+        self._carried, emptied = keep_offsets(stretch, carried)
+        self._carried_into = stretch
         if emptied is None:
             self.restarts_carried += 1
             return
@@ -261,6 +266,8 @@ class HaltStretches:
         """Narrow the stretch's offsets by one sample; note the stretch wrong once one empties."""
         self.judged += 1
         emptied = narrow_offsets(stretch, sample.pose)
+        if emptied is None and not stretch.wrong and self._carried_into is stretch:
+            self._carried, emptied = keep_offsets(stretch, self._carried)
         if stretch.wrong or emptied is None:
             return
         stretch.wrong = True
