@@ -136,7 +136,10 @@ class Crossing:
 
     def _settle(self, path: Path, rows: list[Frame], first: int | None) -> bool:
         """Compare the samples ``path`` has not seen on it until one refutes it; False when
-        a frame it needs is missing (lost)."""
+        a frame it needs is missing (lost). A refuted path stays refuted: a later sample that
+        fits it does not revive it (``survivors`` may settle the same paths again)."""
+        if path.died is not None:
+            return True
         if not path.done:  # its stretch was its FIFO frame's, shared: its own from now
             path.stretch = path.stretch.fork()
         for earlier in self._samples[path.done:]:
