@@ -30,7 +30,7 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.fleetrun import watched_verdict
 from odocan.host.mqtt.telemetry import RobotTelemetry
-from tests.independent_checker import Robot, _Odometry
+from tests.independent_checker import Robot, _Odometry, check
 from tests.synth_log import Synth, synthesize
 from tests.test_gap_placement import _cut, _drive
 from tests.test_judge_campaign import profile_of
@@ -310,3 +310,32 @@ def test_the_ok_after_a_reboot_no_longer_names_the_unseen_restart_before_it(
     assert live.monitor.tracker.placer.dark.new_starts == 1  # the watch's count stays
     health = live.monitor.health(live.end_s)
     assert (health["state"], health["why"]) == ("OK", [])  # said RESTARTED_WHY
+
+
+@pytest.mark.parametrize("name", ["slow_turn16", "turned_in_hole"])
+def test_a_standing_pose_wrong_says_the_new_start_took_the_offset_in(
+    tmp_path: Path, name: str,
+) -> None:
+    """The firmware's X 3 LSB off from 60 frames before the recorder hole on (wrong, by the
+    independent odometry on the log up to the hole): an episode latched, then the unseen restart
+    starts the reference at the firmware's pose, offset and all, and the later samples are
+    within the limit against it. The verdict stays POSE WRONG (the pose's life goes on) and says
+    why the latest sample is right: the new start, not the pose signals' rounding (it said
+    rounding, which explains half an LSB, not 3)."""
+    drive = DRIVES[name]
+    hole = drive.cut[0][0]
+    bias = dict.fromkeys(range(hole - 60, STEPS + 1), 3)
+    (tmp_path / "before").mkdir()
+    before = _log(tmp_path / "before", drive, "x_bias_100um", bias, stop=hole)
+    verdict = check(before, drive.robot, drive.integrator, lambda _t: (0.0, 0.0, 0.0))
+    assert verdict.max_position_error_m > 2.5 * POSITION_LSB_M  # wrong before the hole
+    live = _live(_log(tmp_path, drive, "x_bias_100um", bias), drive)
+    assert live.monitor.tracker.placer.dark.new_starts == 1
+    assert live.monitor.tracker.wrongs.count == 1  # the episode before the hole, no other
+    health = live.monitor.health(live.end_s)
+    assert health["state"] == "POSE WRONG"
+    assert health["why"][0].startswith("the on-board pose was wrong in 1 episode since the "
+                                       "watch began, worst ")
+    assert health["why"][1].endswith(  # said "by the pose signals' rounding"
+        "is within the limit, against a reference restarted at the firmware's pose after an "
+        "unseen controller restart: the offset stays until a set-pose or a reboot")

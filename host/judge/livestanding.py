@@ -73,10 +73,15 @@ def _unsettled_why(tracker: PoseTracker) -> list[str]:
 
 
 def _within_because(tracker: PoseTracker) -> str:
+    """Why a sample of a pose standing wrong is within the limit: the reference restarted at
+    the firmware's pose (an unseen controller restart since the pose was last set anew whole:
+    it adopted the offset) or placed again where the firmware was, else the rounding."""
     placements = tracker.placer.placements
+    said = ["restarted at the firmware's pose after an unseen controller restart"
+            ] if tracker.placer.dark.life_new_starts else []
     if placements.stalls or placements.gaps or placements.free:
-        return "against a reference placed again where the firmware was"
-    return "by the pose signals' rounding"
+        said.append("placed again where the firmware was")
+    return "against a reference " + " and ".join(said) if said else "by the pose signals' rounding"
 
 
 def placed_why(tracker: PoseTracker) -> list[str]:
