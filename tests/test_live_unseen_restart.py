@@ -30,8 +30,8 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.fleetrun import watched_verdict
 from odocan.host.mqtt.telemetry import RobotTelemetry
-from tests.independent_checker import Robot, _Odometry
-from tests.synth_log import synthesize
+from tests.independent_checker import Robot, _Odometry, check
+from tests.synth_log import Synth, synthesize
 from tests.test_gap_placement import _cut, _drive
 from tests.test_judge_campaign import profile_of
 from tests.test_stall_bound import _messages
@@ -86,15 +86,21 @@ def _fine_path(drive: Drive) -> list[tuple[float, float, float]]:
     return path
 
 
-def _log(tmp_path: Path, drive: Drive, key: str = "", bias: dict[int, int] | None = None,
-         stop: int = STEPS + 1) -> Path:
+def _synth(drive: Drive, key: str = "", bias: dict[int, int] | None = None,
+           reboot_at: int | None = None) -> Synth:
     """The drive synthesized (``key``: ``x_bias_100um`` or ``heading_bias_lsb``, a firmware off
-    by ``bias`` LSB at those frames), less the frames the recorder lost, up to frame ``stop``
-    (exclusive)."""
+    by ``bias`` LSB at those frames; ``reboot_at``: the firmware reboots at that frame)."""
     d_left, d_right = _drive(drive.robot, STEPS, drive.seed, drive.speed_m, drive.turn_rad)
-    synth = synthesize(profile_of(drive.robot), drive.integrator, d_left, d_right,
-                       x_bias_100um=bias if key == "x_bias_100um" else None,
-                       heading_bias_lsb=bias if key == "heading_bias_lsb" else None)
+    return synthesize(profile_of(drive.robot), drive.integrator, d_left, d_right,
+                      x_bias_100um=bias if key == "x_bias_100um" else None,
+                      heading_bias_lsb=bias if key == "heading_bias_lsb" else None,
+                      reboot_at=reboot_at)
+
+
+def _log(tmp_path: Path, drive: Drive, key: str = "", bias: dict[int, int] | None = None,
+         stop: int = STEPS + 1, reboot_at: int | None = None) -> Path:
+    """``_synth``'s log less the frames the recorder lost, up to frame ``stop`` (exclusive)."""
+    synth = _synth(drive, key, bias, reboot_at)
     lost = {k for first, n in drive.cut for k in range(first, first + n)}
     kept = sum(1 for k in range(stop) if k not in lost)  # the cut log's groups before ``stop``
     return _cut(synth, drive.cut).write(tmp_path / "drive.log", stop=kept)
@@ -259,3 +265,77 @@ def test_the_fleets_verdict_judges_the_samples_held_when_the_watch_ends(tmp_path
     verdict = watched_verdict(bridge, 0, None)
     assert verdict["verdict"] == "FAIL", verdict
     assert "position vs reference" in verdict["reason"]
+
+
+REBOOT_AT = 650  # the encoder frame the firmware reboots on (after the drives' holds end)
+
+
+def _firmware_off_lsb(drive: Drive, reboot_at: int) -> float:
+    """The synthesized firmware's largest pose error (LSB) against the independent float64
+    odometry on the fine counts, started again at 0 on the frame it reboots on."""
+    d_left, d_right = _drive(drive.robot, STEPS, drive.seed, drive.speed_m, drive.turn_rad)
+    state = _synth(drive, reboot_at=reboot_at).state
+    fine, worst = _Odometry(drive.robot, drive.integrator), 0.0
+    for k in range(1, STEPS + 1):
+        if k == reboot_at:
+            fine = _Odometry(drive.robot, drive.integrator)
+        else:
+            fine.step(int(d_left[k - 1]), int(d_right[k - 1]))
+        x_m, y_m, heading_rad = state[k].pose
+        worst = max(worst, math.hypot(x_m - fine.x, y_m - fine.y) / POSITION_LSB_M,
+                    abs(math.remainder(heading_rad - fine.heading, 2 * math.pi)) / HEADING_LSB_RAD)
+    return worst
+RESTARTED_WHY = ("the reference restarted at the firmware's pose after 1 unseen controller "
+                 "restart across a recorder hole (an offset it had then not judged)")
+
+
+@pytest.mark.parametrize("name", ["slow_turn16", "turned_in_hole"])
+def test_the_ok_after_a_reboot_no_longer_names_the_unseen_restart_before_it(
+    tmp_path: Path, name: str,
+) -> None:
+    """A correct firmware (by the independent odometry, from its power-up pose in each life)
+    reboots after the unseen restart: the reference starts again at the power-up pose, exactly,
+    so the restart before is no reason of the OK after it (it said the restart: the watch's
+    count). Cut before the reboot, the OK still names the restart (the guard)."""
+    drive = DRIVES[name]
+    assert drive.restart + 100 < REBOOT_AT  # the new start's hold over before the reboot
+    assert _firmware_off_lsb(drive, REBOOT_AT) <= 1.0  # the firmware is right in both lives
+    path = _log(tmp_path, drive, reboot_at=REBOOT_AT)
+    (tmp_path / "before").mkdir()
+    before = _live(_log(tmp_path / "before", drive, reboot_at=REBOOT_AT, stop=REBOOT_AT), drive)
+    health = before.monitor.health(before.end_s)
+    assert (health["state"], health["why"]) == ("OK", [RESTARTED_WHY])
+    live = _live(path, drive)
+    assert [e["kind"] for e in live.monitor.events].count("reboot") == 1
+    assert live.monitor.tracker.placer.dark.new_starts == 1  # the watch's count stays
+    health = live.monitor.health(live.end_s)
+    assert (health["state"], health["why"]) == ("OK", [])  # said RESTARTED_WHY
+
+
+@pytest.mark.parametrize("name", ["slow_turn16", "turned_in_hole"])
+def test_a_standing_pose_wrong_says_the_new_start_took_the_offset_in(
+    tmp_path: Path, name: str,
+) -> None:
+    """The firmware's X 3 LSB off from 60 frames before the recorder hole on (wrong, by the
+    independent odometry on the log up to the hole): an episode latched, then the unseen restart
+    starts the reference at the firmware's pose, offset and all, and the later samples are
+    within the limit against it. The verdict stays POSE WRONG (the pose's life goes on) and says
+    why the latest sample is right: the new start, not the pose signals' rounding (it said
+    rounding, which explains half an LSB, not 3)."""
+    drive = DRIVES[name]
+    hole = drive.cut[0][0]
+    bias = dict.fromkeys(range(hole - 60, STEPS + 1), 3)
+    (tmp_path / "before").mkdir()
+    before = _log(tmp_path / "before", drive, "x_bias_100um", bias, stop=hole)
+    verdict = check(before, drive.robot, drive.integrator, lambda _t: (0.0, 0.0, 0.0))
+    assert verdict.max_position_error_m > 2.5 * POSITION_LSB_M  # wrong before the hole
+    live = _live(_log(tmp_path, drive, "x_bias_100um", bias), drive)
+    assert live.monitor.tracker.placer.dark.new_starts == 1
+    assert live.monitor.tracker.wrongs.count == 1  # the episode before the hole, no other
+    health = live.monitor.health(live.end_s)
+    assert health["state"] == "POSE WRONG"
+    assert health["why"][0].startswith("the on-board pose was wrong in 1 episode since the "
+                                       "watch began, worst ")
+    assert health["why"][1].endswith(  # said "by the pose signals' rounding"
+        "is within the limit, against a reference restarted at the firmware's pose after an "
+        "unseen controller restart: the offset stays until a set-pose or a reboot")

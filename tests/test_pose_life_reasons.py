@@ -23,7 +23,7 @@ from pathlib import Path
 
 import can
 
-from odocan.host.judge.livestanding import pose_wrong_why
+from odocan.host.judge.livestanding import placed_why, pose_wrong_why
 from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.board import TICK_S
 from tests.fault_rig import open_virtual
@@ -133,3 +133,56 @@ def test_degraded_after_the_pose_was_set_right_is_degraded(tmp_path: Path) -> No
     assert health["pose_wrongs"]["episodes"] >= 1  # still latched for the watch
     assert "this_life" not in health["pose_wrongs"]
     assert health["why"][0].startswith("firmware reports DEGRADED (")
+
+
+SILENT = range(500, 550)  # ticks the motor controller is silent; it restarts as it speaks again
+HOLE_S = (4.7, 5.0)  # bus time the recorder missed before the restart (s)
+SET_AFTER_RESTART = 800  # tick of the set-pose (the new start's hold over; DEGRADED till then)
+
+
+def _restart_drive(tmp_path: Path) -> Path:
+    """A correct firmware's frames as a candump log: the motor controller silent in ``SILENT``,
+    then restarted (counters, COUNTER and CTRL_UPTIME from 0: the firmware DEGRADED,
+    COUNTER_RESET, until a set-pose); a set-pose of X, Y and HEADING to where the firmware is at
+    ``SET_AFTER_RESTART``; ``END`` ticks in all."""
+    with circle_rig() as rig:
+        heard: list[can.Message] = []
+        rig.observers.append(lambda _k, frames: heard.extend(frames))
+        rig.mute_sim(SILENT)
+        tool = open_virtual(rig.channel)
+
+        def hook(k: int) -> None:
+            if k == SILENT[-1]:  # before the controller's next tick
+                rig.sim.motor_controller.restart()
+            if k == SET_AFTER_RESTART:
+                set_pose_right(tool, rig.ecu.odometry, 0, k)
+
+        rig.before_board.append(hook)
+        try:
+            rig.run(END * TICK_S)
+        finally:
+            tool.shutdown()
+    return candump_written(tmp_path / "restart.log", heard)
+
+
+def test_the_ok_after_a_set_pose_no_longer_names_the_unseen_restart_before_it(
+    tmp_path: Path,
+) -> None:
+    """The recorder misses 0.3 s before the controller restart: an unseen restart, the
+    reference restarted at the firmware's pose (``host.judge.livedark``), which the judge says
+    beside its verdict. The set-pose after it starts the reference again at the pose set: the
+    OK after it has no reason left (it named the restart: the watch's count)."""
+    whole = _restart_drive(tmp_path)
+    assert _checker_max_lsb(whole, SET_AFTER_RESTART * TICK_S) <= 1.0  # a correct firmware
+    before = _cut(whole, HOLE_S, until_s=SET_AFTER_RESTART * TICK_S - 0.1)
+    monitor, _, states = _watch(before)
+    assert monitor.tracker.placer.dark.new_starts == 1  # an unseen restart, re-based on
+    assert states[-1][1] == "DEGRADED"  # COUNTER_RESET, until the set-pose
+    assert placed_why(monitor.tracker) == [  # the guard: said beside the firmware's state
+        "the reference restarted at the firmware's pose after 1 unseen controller restart "
+        "across a recorder hole (an offset it had then not judged)"]
+    monitor, _, states = _watch(_cut(whole, HOLE_S))
+    assert monitor.tracker.placer.dark.new_starts == 1  # the watch's count stays
+    assert {state for t, state in states if t > SET_AFTER_RESTART * TICK_S + 0.2} == {"OK"}
+    why = monitor.health(states[-1][0])["why"]
+    assert why == [], why  # said "the reference restarted ... after 1 unseen controller ..."

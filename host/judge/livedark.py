@@ -43,7 +43,8 @@ class DarkRestarts:
         self._dark = False  # a dark gap since the latest encoder frame
         self._hole = -1  # the latest encoder frame (seq) that ended a dark gap of the sequence
         self._pending = -1  # a new start owed from this encoder frame on (-1: none)
-        self.new_starts = 0  # restarts after a dark gap the reference restarted at
+        self.new_starts = 0  # restarts after a dark gap the reference restarted at (the watch's)
+        self.life_new_starts = 0  # ... whose adopted pose the reference still carries (new_life)
 
     def heard(self, t_s: float) -> float:
         """Any frame heard at bus time ``t_s`` (returned: the tracker's bus time)."""
@@ -79,8 +80,18 @@ class DarkRestarts:
 
     def due(self, seq: int, restart: Callable[[], None]) -> None:
         """A sample of encoder frame ``seq`` is to be judged: ``restart`` the reference first
-        when a new start is owed at or before that frame (the sample is then its start)."""
+        when a new start is owed at or before that frame (the sample is then its start), then
+        count it (``new_life`` alone forgets it: a restart of the reference does not)."""
         if 0 <= self._pending <= seq:
             self._pending = -1
-            self.new_starts += 1
             restart()
+            self.new_starts += 1
+            self.life_new_starts += 1
+
+    def new_life(self) -> None:
+        """The firmware's pose was set anew whole (a reboot, a set-pose of X, Y and HEADING):
+        the reference no longer carries a pose adopted at a new start before it, which the
+        live OK then no longer names (``livestanding.placed_why``); ``new_starts`` stays the
+        watch's count (``analyze``'s ``unseen_restarts``). A set-pose that keeps a field from
+        the reference keeps its new starts too: the field kept is the one adopted."""
+        self.life_new_starts = 0

@@ -97,6 +97,8 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float]) -> 
     counts = window_counts(tracker.window, seq)
     ref_known = tracker.raw.odometry is not None and tracker.integrator is not None
     tracker.new_life()  # the reference restarts, the truth is compared in the new frame
+    if all(name in staged for name in FIELDS):  # nothing kept of a pose adopted before
+        tracker.placer.dark.new_life()  # (host.judge.livedark: the OK no longer names it)
     if at is None or not ref_known or not counts or counts[0][0] != seq:
         if all(name in staged for name in FIELDS):  # an offset before it overwritten whole
             tracker.wrongs.new_life(tracker.now_s)

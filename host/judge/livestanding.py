@@ -73,16 +73,23 @@ def _unsettled_why(tracker: PoseTracker) -> list[str]:
 
 
 def _within_because(tracker: PoseTracker) -> str:
+    """Why a sample of a pose standing wrong is within the limit: the reference restarted at
+    the firmware's pose (an unseen controller restart since the pose was last set anew whole:
+    it adopted the offset) or placed again where the firmware was, else the rounding."""
     placements = tracker.placer.placements
+    said = ["restarted at the firmware's pose after an unseen controller restart"
+            ] if tracker.placer.dark.life_new_starts else []
     if placements.stalls or placements.gaps or placements.free:
-        return "against a reference placed again where the firmware was"
-    return "by the pose signals' rounding"
+        said.append("placed again where the firmware was")
+    return "against a reference " + " and ".join(said) if said else "by the pose signals' rounding"
 
 
 def placed_why(tracker: PoseTracker) -> list[str]:
-    """The live judge's re-basings in this watch, said beside an OK ([] when none): placements
-    after a stall or a hold, after a gap of the encoder frames (bounded), after a gap without
-    a bound; new starts at the firmware's pose after an unseen controller restart."""
+    """The live judge's re-basings the reference judged against carries, said beside an OK
+    ([] when none): its placements after a stall or a hold, after a gap of the encoder frames
+    (bounded), after a gap without a bound; the new starts at the firmware's pose after an
+    unseen controller restart since the pose was last set anew whole (a reboot, a set-pose of
+    X, Y and HEADING: ``livedark.DarkRestarts.new_life``), not the watch's."""
     placements = tracker.placer.placements
     parts = []
     if placements.stalls:
@@ -98,7 +105,7 @@ def placed_why(tracker: PoseTracker) -> list[str]:
                      "there not judged)")
     why = ["judged against the reference placed again where the firmware was after "
            + " and ".join(parts)] if parts else []
-    starts = tracker.placer.dark.new_starts
+    starts = tracker.placer.dark.life_new_starts  # since the pose was last set anew whole
     if starts:
         why.append(f"the reference restarted at the firmware's pose after {starts} unseen "
                    f"controller restart{_s(starts)} across a recorder hole (an offset it had "

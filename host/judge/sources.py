@@ -232,6 +232,7 @@ def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
     the E2E sequences of the messages ``FIRMWARE_NODE`` sends in ``db`` start afresh (a reboot
     is not frames lost). Returns what was done (text)."""
     tracker.placer.seen.new_life()  # its pages count from 0 (host.judge.livegapseen)
+    tracker.placer.dark.new_life()  # no pose adopted before it carried (host.judge.livedark)
     tracker.wrongs.new_life(tracker.now_s)  # an offset before it gone with its RAM
     for message in db.messages:
         if FIRMWARE_NODE in message.senders:  # the counts stay; the next frame starts afresh
