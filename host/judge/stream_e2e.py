@@ -20,6 +20,7 @@ given out (``StreamE2E._silences``): whatever the chunking, those of the frames 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -27,7 +28,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays, concat_frames, empty_frames
 from odocan.host.protocol.decode import frame_keys
-from odocan.host.protocol.e2e import check_frames, e2e_messages
+from odocan.host.protocol.e2e import E2EMessage, check_frames, e2e_messages
 from odocan.host.protocol.e2e_silence import SILENCE_KEYS, silences
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
@@ -56,6 +57,11 @@ class StreamE2E:
     _last_ok_s: dict[str, float] = field(default_factory=dict)  # per message: its last accepted
     # frame given out, bus time (s): the silences are counted from it (``_silences``)
 
+    @cached_property
+    def _messages(self) -> dict[int, E2EMessage]:
+        """``e2e_messages(db)``, read once (three passes a chunk)."""
+        return e2e_messages(self.db)
+
     @property
     def exact(self) -> bool:
         """Whether the verdicts given out are the whole log's: no verdict of the stamps changed
@@ -77,22 +83,24 @@ class StreamE2E:
         self._settled = self._settled or bool(unsettled)
         self._chunks += 1
         _add(self.counts, counts)
-        _add(self.counts, self._silences(chunk, accepted[n_tail:]))
+        keys = frame_keys(both)
+        _add(self.counts, self._silences(chunk, keys[n_tail:], accepted[n_tail:]))
         self.counts = self._ordered(self.counts)
-        self._tail = both.select(self._tails(both, accepted))
+        self._tail = both.select(self._tails(both, keys, accepted))
         return accepted[n_tail:]
 
-    def _silences(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> Counts:
-        """The silences ending in ``chunk`` between the frames accepted (``accepted``: the
-        verdicts given out), the first from the message's last accepted frame before it.
+    def _silences(self, chunk: FrameArrays, keys: npt.NDArray[np.int64],
+                  accepted: npt.NDArray[np.bool_]) -> Counts:
+        """The silences ending in ``chunk`` (its ``frame_keys``: ``keys``) between the frames
+        accepted (``accepted``: the verdicts given out), the first from the message's last
+        accepted frame before it.
 
         Not the difference of two checks as the other counts: the tail checked alone, out of
         its context, may take frames the log refused (a late frame after its last accepted
         one), which split a silence into shorter steps (issue #11: 17 silences against 18 on
         tests/files/recorder_gap16_pmir.blf at 97 frames a chunk, the same frames accepted)."""
-        keys = frame_keys(chunk)
         heard: Counts = {}
-        for key, config in e2e_messages(self.db).items():
+        for key, config in self._messages.items():
             if config.data_ids is None:
                 continue
             t_s = chunk.timestamp_s[(keys == key) & (chunk.dlc == config.length) & accepted]
@@ -108,16 +116,17 @@ class StreamE2E:
 
     def _ordered(self, counts: Counts) -> Counts:
         """The sections in ``check_frames``' order: messages by frame key, ``unknown`` last."""
-        rank = {config.name: key for key, config in e2e_messages(self.db).items()}
+        rank = {config.name: key for key, config in self._messages.items()}
         names = sorted((n for n in counts if n in rank), key=rank.__getitem__)
         return {n: counts[n] for n in names + [n for n in counts if n not in rank]}
 
-    def _tails(self, frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> npt.NDArray[np.intp]:
-        """Positions of each protected message's frames (of its DLC) from its last accepted one
-        on, or its last frame when none was accepted, in bus order."""
-        keys = frame_keys(frames)
+    def _tails(self, frames: FrameArrays, keys: npt.NDArray[np.int64],
+               accepted: npt.NDArray[np.bool_]) -> npt.NDArray[np.intp]:
+        """Positions of each protected message's frames (of its DLC; ``keys``: their
+        ``frame_keys``) from its last accepted one on, or its last frame when none was
+        accepted, in bus order."""
         keep: list[npt.NDArray[np.intp]] = []
-        for key, config in e2e_messages(self.db).items():
+        for key, config in self._messages.items():
             if config.data_ids is None:
                 continue
             of_id = np.flatnonzero((keys == key) & (frames.dlc == config.length))
