@@ -16,8 +16,11 @@ which hid the count: the counts are compared here directly, not through the refu
 The logs: every recorder log of tests/files, and the logs the tests' fixtures make of a
 lockstep drive (the delayed drive of tests/test_stream_pages.py, starved and jittered as
 tests/test_capture_bunched.py and tests/test_capture_jitter.py record it; a pmir drive cut of
-16-, 32- and 48-period chunks, read in bursts, as tests/test_recorder_gap16.py; a drive whose
-encoder sender was silent 8 s, as tests/test_silence_gap.py). The reference is the whole log's
+16-, 32- and 48-period chunks, read in bursts, as tests/test_recorder_gap16.py; a kobuki drive
+holed as tests/test_recorder_holes.py; a drive whose encoder sender was silent 8 s, as
+tests/test_silence_gap.py; runs of 3 to 12 encoder frames dropped, as
+tests/test_recorder_gaps_kept.py; a figure 8 less its encoder and pose frames in 3 gaps, as
+tests/test_gap_placement.py). The reference is the whole log's
 own check (the rule under test: the stream is the same judge); the evidence log's silences
 are also counted by the test itself from the whole log's accepted frames (float64 steps, the
 period from cantools' DBC).
@@ -38,24 +41,31 @@ from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.e2e import check_frames
 from odocan.host.protocol.e2e_silence import SILENCE_KEYS
 from odocan.sim.contract import DBC_PATH
+from tests import test_recorder_holes as holes
 from tests.dbc_typed import load_can_dbc
 from tests.test_capture_bunched import _starved
 from tests.test_capture_jitter import _jittered
+from tests.test_gap_placement import _lockstep_with_gaps
 from tests.test_recorder_gap16 import _cut
+from tests.test_recorder_gaps_kept import _recorder_gaps
 from tests.test_silence_gap import _silent_drive
 
 FILES = Path(__file__).parent / "files"
 EVIDENCE = FILES / "recorder_gap16_pmir.blf"
 CHUNKS = (97, 300, 1000)
 DELAYED = ("kobuki", "3", "delay=0.1:15,seed=7")  # test_stream_pages' drive
-MADE = ("delayed", "starved1", "starved2", "jittered1", "gap16", "gap16-burst", "silent8")
+MADE = ("delayed", "starved1", "starved2", "jittered1", "gap16", "gap16-burst", "holed",
+        "silent8", "dropped-runs", "figure8-gaps")
+FIGURE8_GAPS_S = [(1.0, 1.0095), (2.0, 2.0195), (4.0, 4.2495)]  # test_gap_placement's
 
 
-def _drive(tmp: Path, robot: str, seed: str, faults: str, duration_s: str = "4") -> Path:
-    log = tmp / f"{robot}-{seed}-{faults or 'clean'}.log"
+def _drive(tmp: Path, robot: str, seed: str, faults: str, duration_s: str = "4",
+           scenario: str | None = None) -> Path:
+    log = tmp / f"{robot}-{seed}-{faults or scenario}.log"
     argv = ["run", "--robot", robot, "--duration", duration_s, "--seed", seed, "--log",
             str(log), "--firmware", "python"]
-    main(argv + (["--faults", faults] if faults else []))
+    main(argv + (["--faults", faults] if faults else [])
+         + (["--scenario", scenario] if scenario else []))
     return log
 
 
@@ -69,11 +79,18 @@ def made(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         for seed in (1, 2) if name == "starved" else (1,):
             logs[f"{name}{seed}"] = tmp / f"{name}{seed}.log"
             recorder(delayed, logs[f"{name}{seed}"], seed)
-    random_pmir = _drive(tmp, "pmir", "3", "", "8")  # test_recorder_gap16's clean drive
+    random_pmir = _drive(tmp, "pmir", "3", "", "8", "random")  # test_recorder_gap16's clean drive
     for name, burst_periods in (("gap16", 0), ("gap16-burst", 3)):
         logs[name] = tmp / f"{name}.log"
         _cut(random_pmir, logs[name], burst_periods)
+    random_kobuki = _drive(tmp, "kobuki", "3", "", str(holes.DURATION_S), "random")
+    logs["holed"] = tmp / "holed.log"
+    holes._holed(random_kobuki, logs["holed"])
     logs["silent8"] = _silent_drive(tmp, "random", 4, 22.0, 6.0, 8.0)
+    (tmp / "runs").mkdir()
+    logs["dropped-runs"] = _recorder_gaps(tmp / "runs")[0]
+    (tmp / "figure8").mkdir()
+    logs["figure8-gaps"] = _lockstep_with_gaps(tmp / "figure8", FIGURE8_GAPS_S)
     return logs
 
 
