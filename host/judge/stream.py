@@ -6,7 +6,8 @@ with their state carried across chunk boundaries, so that the result is the whol
   message is the tail of its frames from its last accepted one on (usually that one frame: the
   sequence check of a frame depends only on the frames of its ID since the last accepted one,
   and on the time since the previous frame of its ID); the tail is checked again in front of
-  the next chunk and its own verdicts taken off (``counts(tail + chunk) - counts(tail)``).
+  the next chunk and its own verdicts taken off (``counts(tail + chunk) - counts(tail)``);
+  the silences, pairs of accepted frames, from each message's last accepted frame's time.
 * ``StreamEncoders``: the accepted WHEEL_ENCODERS frames and their place in the sender's sequence
   (``host.judge.samples.encoder_frames``: the COUNTER unwrapped, widened by 16 where the
   timestamps say more periods passed), carried by the last accepted frame's COUNTER, time and
