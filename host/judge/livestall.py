@@ -3,12 +3,12 @@
 
 Once the reference runs, an on-board sample not let out in a burst (not ``queued``) is judged by:
 
-- silence (``stalls.after_stalls``; ``livewindow.silent_since``): its ODOM_POSE_Y came
-  ``SILENCE_CYCLES`` or more after the previous sample's and the last ODOM_POSE_Y sent, with
-  encoder frames on time meanwhile: the firmware was stalled. The sample names a frame of its
-  backlog, which ENC_COUNTER cannot resolve: it is left out (not compared). The firmware took the
-  frames it missed as one step: the reference's position is placed again at the next sample
-  compared (its heading, a function of the counts, goes on);
+- silence (``stalls.after_stalls``; ``livewindow.silent_since``, its exact bounds): its
+  ODOM_POSE_Y came ``SILENCE_CYCLES`` encoder cycles or more after the previous sample's and the
+  last ODOM_POSE_Y sent, with encoder frames on time meanwhile: the firmware was stalled. The
+  sample names a frame of its backlog, which ENC_COUNTER cannot resolve: it is left out (not
+  compared). The firmware took the frames it missed as one step: the reference's position is
+  placed again at the next sample compared (its heading, a function of the counts, goes on);
 - hold (``stalls._frozen``; ``livewindow.held_on_time``): it names a frame ``SILENCE_CYCLES`` or
   more after the last sample compared, with as many frames on time between: the firmware held its
   pose that long, then took the frames since as one step: the sample is compared, the position
