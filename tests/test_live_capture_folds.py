@@ -9,7 +9,7 @@ said "pose wrong in 5 episodes, worst 0.1739 mm beyond allowance" where ``analyz
 0.0697 mm. Both paired the same samples (668, 669), with 35 runs of 8 or more encoder frames
 between two samples; two departures:
 
-* the live hold rule (``tracking.PoseTracker.compare``) took each such run for a hold, where
+* the live hold rule (``livestall.StallRule``) took each such run for a hold, where
   ``analyze``'s (``stalls.frozen_breaks``) wants ``SILENCE_CYCLES`` of its frames on time, not
   let out at once: ``analyze`` placed nothing, the live judge 35 times;
 * at each placement the fit anchored at the previous one (``livefit.LiveFit.carried``) was taken
@@ -32,7 +32,7 @@ import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
-from odocan.host.judge import tracking
+from odocan.host.judge import livestall
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.monitor import BusMonitor
@@ -107,7 +107,7 @@ def test_placements_bound_the_offset_from_the_start(tmp_path: Path) -> None:
     0.107 mm, before the fits' shifts were counted)."""
     woken = _drive(tmp_path)
     with pytest.MonkeyPatch.context() as monkeypatch:
-        monkeypatch.setattr(tracking, "held_on_time", lambda *_: True)
+        monkeypatch.setattr(livestall, "held_on_time", lambda *_: True)
         wrongs, holds = _live(woken)
     assert holds == 27
     assert wrongs == 0

@@ -116,7 +116,7 @@ class LiveChoice:
 
     def holds(self, pose: FramePose) -> bool:
         """Whether the on-board ``pose`` waits for the choice (it names the hole's frame or
-        later); then it counts as compared for the stall rules (``PoseTracker.compare``)."""
+        later); then it counts as compared for the stall rule (``livestall``)."""
         p = self.pending
         if p is None or pose.seq < p.seq:
             return False

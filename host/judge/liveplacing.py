@@ -28,5 +28,5 @@ def place_reference(tracker: PoseTracker, pose: FramePose, raw: FramePose) -> Fr
                                  (tracker.geometry, tracker.counter_bits, tracker.integrator),
                                  tracker.fit.placed_shift_m())
     line.at, tracker.fit, placed = rebase(tracker.fit, odometry, line.at, ref, shift)
-    tracker.place_at_next = tracker.placer.gapped  # a gap after a held sample's frame
+    tracker.stall.place_at_next = tracker.placer.gapped  # a gap after a held sample's frame
     return placed

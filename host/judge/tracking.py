@@ -25,6 +25,7 @@ from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import ErrorStats, FramePose, RestartLog, Sample, StepGate
 from odocan.host.judge.livereference import RawReference
 from odocan.host.judge.livesnapshot import tracker_snapshot
+from odocan.host.judge.livestall import StallRule
 from odocan.host.judge.livestart import Lives
 from odocan.host.judge.livetruth import LifeTruth, TruthJudge
 from odocan.host.judge.livetwins import TwinWatch
@@ -35,16 +36,12 @@ from odocan.host.judge.livewindow import (
     Columns,
     Half,
     counted,
-    held_on_time,
     named_in_window,
     named_plain,
-    silent_since,
 )
 from odocan.host.judge.reference import Geometry
-from odocan.host.judge.samples import SILENCE_CYCLES, WIRE_COUNTER_BITS
+from odocan.host.judge.samples import WIRE_COUNTER_BITS
 from odocan.sim.pose import TURN_RAD
-
-SILENCE_FRAMES = SILENCE_CYCLES  # encoder cycles without a pose: the firmware was stalled
 
 
 class PoseTracker:
@@ -76,7 +73,6 @@ class PoseTracker:
         self.counter_bits = min(counter_bits, WIRE_COUNTER_BITS)
         self.forced, self.integrator = integrator is not None, integrator
         self.enc_seq = -1
-        self.stalls = 0  # firmware silences after which the reference restarted
         self._pos = 0  # frames fed so far (the order of encoder frames, pose halves, twists)
         self.window = Columns(ENC_COLUMNS, ENC_WINDOW)  # the latest encoder frames heard
         self.twins = TwinWatch(self.window.rows)  # frames with a twin: their poses left out
@@ -92,15 +88,13 @@ class PoseTracker:
         self.restarts.choose = self.choice.open
         self.newstart = NewStartHold(self)  # a new start's samples wait for its fit
         self.laps = LapHold(self)  # samples after a lap of the stamps wait for its evidence
+        self.stall = StallRule(self.placer, self.window, self.pairs.halves["y"])  # livestall
         # raw: ``fit`` corrects its start (livereference); where it starts (livestart)
         self.raw = RawReference(StepGate(geometry, self.counter_bits, self.restarts))
         self.lives = Lives(self)
         self.truths = TruthJudge(self)  # SIM_TRUTH's parts, judged (livetruth)
         # the latest sample judged (``record``): on-board pose, corrected reference
         self.last_pair: tuple[FramePose, FramePose] | None = None
-        self._last_sample_t: float | None = None  # bus time of the last sample's ODOM_POSE_Y
-        self.last_compared = -1  # the encoder frame of the last sample compared
-        self.place_at_next = False  # after a stall or a held pose: place the position again
         self.losses = self.placer.losses = LiveAllowance()  # (livegapseen re-judges)
         self.wrongs = self.losses.wrongs  # POSE WRONG episodes latched (host.judge.posewrongs)
         self.now_s = 0.0  # the latest bus time (s; ``advance`` sets it)
@@ -143,7 +137,7 @@ class PoseTracker:
             self.choice.ahead(counter, t_s, prev)
         if self.placer.on_encoders(self.enc_seq, (counter, left, right, t_s), prev,
                                    self.counter_bits) and self.raw.odometry is not None:
-            self.place_at_next = True  # a gap: placed again, bounded (liveplace.StallPlacer)
+            self.stall.place_at_next = True  # a gap: placed again, bounded (liveplace)
             if self.placer.lapped:  # its lap the stamps' alone: the samples wait (livelaphold)
                 self.laps.lapped(self.enc_seq, t_s, self.placer.periods)
         row = (self.enc_seq, self._pos, counter, t_s, left, right, self.placer.periods, uptime)
@@ -219,28 +213,14 @@ class PoseTracker:
 
     def compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
         """Judge one on-board sample (its ODOM_POSE_Y half ``y``, whether it ``queued``) by the
-        hold and stall rules, then against the reference; the reference at its encoder frame,
-        None when unknown or held (``livelaphold`` compares a held one when its hold ends)."""
+        stall and hold rule (``livestall``), then against the reference; the reference at its
+        encoder frame, None when unknown or held (``livelaphold`` compares a held one when its
+        hold ends)."""
         if self.laps.holds((pose, y, queued)):  # compared once its lap is numbered
             return None
-        seq = pose.seq
-        last, self._last_sample_t = self._last_sample_t, y.t_s
-        silent = not queued and silent_since(last, y.t_s, self.pairs.halves["y"], self.window)
         started = self.raw.odometry is not None
-        if silent and started:  # stalls.after_stalls' rule
-            # The firmware was stalled: this pose names a backlog frame, and it took the
-            # frames it missed as one step: the reference's position is placed again at the
-            # next pose (its heading, a function of the counts, goes on).
-            self.stalls += 1
-            self.place_at_next = self.placer.stalled = True
+        if self.stall.left_out(pose.seq, y.t_s, queued, started):  # a stall's backlog sample
             return None
-        held = (0 <= self.last_compared <= seq - SILENCE_FRAMES and not queued
-                and held_on_time(self.window, self.last_compared, seq))  # (stalls._frozen)
-        if started and held and not self.placer.stalled:
-            # The firmware held its pose that long, then took the frames since as one step: placed
-            # again with a stall's allowance, also where a gap opened it (``stalls._frozen``).
-            self.stalls += 1
-            self.place_at_next = self.placer.stalled = True
         lives = self.lives  # a life's start (a boot's frame, the integrator): livestart
         if (not started or lives.boot is not None) and lives.waits(pose, self.now_s):
             return None
@@ -251,7 +231,7 @@ class PoseTracker:
         ref = self.raw.at.get(pose.seq)
         if ref is None:
             return None
-        if self.place_at_next or self.placer.owed:  # owed: an allowance withdrawn
+        if self.stall.place_at_next or self.placer.owed:  # owed: an allowance withdrawn
             self.newstart.release()  # judged by the fit before the placement
             ref = place_reference(self, pose, ref)
         elif self.newstart.holds(pose, ref):
@@ -268,7 +248,7 @@ class PoseTracker:
         ref = self.fit.correct(raw)
         self.placer.compared(pose)
         self.reference, self.last_pair = ref, (pose, ref)
-        self.last_compared = pose.seq
+        self.stall.last_compared = pose.seq
         self.vs_reference.add(pose, ref)
         self.losses.spans += self.twins.resolve(self.geometry, self.counter_bits, self.integrator)
         self.losses.record(pose.seq, self.vs_reference.latest, self.fast_path,
@@ -287,7 +267,7 @@ class PoseTracker:
 
     def allowance_m(self, seq: int | None = None) -> float:
         """The loss and twin allowance (m) at frame ``seq`` (default: the latest sample's)."""
-        return self.losses.at_m(self.last_compared if seq is None else seq)
+        return self.losses.at_m(self.stall.last_compared if seq is None else seq)
 
     @property
     def max_beyond_allowance_m(self) -> float:
@@ -314,9 +294,7 @@ class PoseTracker:
         self.laps.decide()
         self.newstart.release()
         self.raw.stop()
-        self.last_compared = -1
-        self._last_sample_t = None
-        self.place_at_next = False
+        self.stall.restart()
         self.placer.restart()
         self.losses.restart(self.enc_seq, self.fast_path)
         self.lives.drop_backlog()
@@ -378,6 +356,21 @@ class PoseTracker:
         returned once complete as (truth, reference at that encoder frame or None)
         (``livetruth.TruthJudge``)."""
         return self.truths.judge(part, enc_counter, value)
+
+    @property
+    def stalls(self) -> int:
+        """Stalls and holds after which the reference's position was placed again (livestall)."""
+        return self.stall.stalls
+
+    @property
+    def last_compared(self) -> int:
+        """The encoder frame of the last sample compared, -1: none (the stall rule's: livestall);
+        set by a helper that holds a sample as compared (``livechoice``, ``livenewstart``)."""
+        return self.stall.last_compared
+
+    @last_compared.setter
+    def last_compared(self, seq: int) -> None:
+        self.stall.last_compared = seq
 
     @property
     def counter_restarts(self) -> int:
