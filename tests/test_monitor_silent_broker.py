@@ -8,11 +8,19 @@ the connection attempt was still waiting when the duration ended, so no error wa
 
 from __future__ import annotations
 
+import json
 import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 from odocan.host.cli.app import main
+from odocan.host.mqtt.broker import free_loopback_port
+from tests.requires import require_executables
 from tests.test_cli_run import assert_usage_error
 
 
@@ -24,3 +32,51 @@ def test_a_silent_listener_is_named_as_no_mqtt_answer(capsys: pytest.CaptureFixt
         code = main(["monitor", "--broker", url, "--duration", "0.5", "--json"])
     line = assert_usage_error(capsys, code, "cannot reach the MQTT broker", url)
     assert "no MQTT answer in" in line, line
+
+
+@pytest.fixture
+def bare_mosquitto() -> Iterator[str]:
+    """A mosquitto with no users, no robots: the URL of a broker that answers and is empty."""
+    require_executables("mosquitto", install="apt-get install mosquitto")
+    port = free_loopback_port()
+    proc = subprocess.Popen(["mosquitto", "-p", str(port)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 10
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "mosquitto did not start"
+                time.sleep(0.02)
+        yield f"mqtt://127.0.0.1:{port}"
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def test_an_empty_broker_is_reached_not_unreachable(
+    bare_mosquitto: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before any robot publishes, the broker answered: the watch ends with no robots, exit 0
+    (it said "cannot reach the MQTT broker ...: no MQTT answer in 1.0 s", exit 2: the table's
+    first message was taken for the connection)."""
+    code = main(["monitor", "--broker", bare_mosquitto, "--duration", "1", "--json"])
+    out, err = capsys.readouterr()
+    assert (code, err) == (0, ""), err
+    assert json.loads(out)["robots"] == {}
+
+
+def test_the_last_screen_ends_its_line_off_a_terminal(bare_mosquitto: str, tmp_path: Path) -> None:
+    """stdout to a file: the fleet table's last screen ends with a newline (an error line or the
+    shell's prompt followed it on the same line)."""
+    out = tmp_path / "screen.txt"
+    with out.open("w") as stdout:
+        done = subprocess.run([sys.executable, "-m", "odocan", "monitor", "--broker",
+                               bare_mosquitto, "--duration", "1"], stdout=stdout,
+                              stderr=subprocess.PIPE, text=True, timeout=60, check=False)
+    assert done.returncode == 0, done.stderr
+    screen = out.read_text()
+    assert "robot" in screen, screen
+    assert screen.endswith("\n"), repr(screen[-40:])

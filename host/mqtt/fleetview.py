@@ -94,10 +94,13 @@ def _published_unix_s(data: dict[str, Any], now_unix_s: float) -> float | None:
 async def fleet_states(
     *, broker: BrokerURL, min_interval_s: float = 0.2, identifier: str | None = None
 ) -> AsyncIterator[dict[str, RobotState]]:
-    """Subscribe to ``odocan/+/#`` and yield the table at most every ``min_interval_s``."""
+    """Subscribe to ``odocan/+/#`` and yield the table at most every ``min_interval_s``: first
+    once subscribed (empty: the broker answered, no robot has published yet), then as messages
+    come."""
     table: dict[str, RobotState] = {}
     async with aiomqtt.Client(**broker.client_kwargs(), identifier=identifier) as client:
         await client.subscribe(f"{topics.PREFIX}/+/#", qos=topics.QOS_RELIABLE)
+        yield table
         last = 0.0
         async for message in client.messages:
             payload = message.payload

@@ -299,8 +299,13 @@ def _watch_fleet(url: BrokerURL, args: argparse.Namespace) -> int:
         if args.json:
             asyncio.run(watch.run(None))
         else:
-            with Live(console=Console(file=sys.stdout), auto_refresh=False) as live:
-                asyncio.run(watch.run(lambda: live.update(watch.render(), refresh=True)))
+            console = Console(file=sys.stdout)
+            try:
+                with Live(console=console, auto_refresh=False) as live:
+                    asyncio.run(watch.run(lambda: live.update(watch.render(), refresh=True)))
+            finally:
+                if not console.is_terminal:  # the last screen ends its line before any error's
+                    console.line()
     except KeyboardInterrupt as exc:
         signum = signum_of(exc)
     except BaseExceptionGroup as group:  # the watch's TaskGroup: its one-line error, not a tree
