@@ -367,21 +367,6 @@ class PoseTracker:
         return self.truths.judge(part, enc_counter, value)
 
     @property
-    def stalls(self) -> int:
-        """Stalls and holds after which the reference's position was placed again (livestall)."""
-        return self.stall.stalls
-
-    @property
-    def last_compared(self) -> int:
-        """The encoder frame of the last sample compared, -1: none (the stall rule's: livestall);
-        set by a helper that holds a sample as compared (``livechoice``, ``livenewstart``)."""
-        return self.stall.last_compared
-
-    @last_compared.setter
-    def last_compared(self, seq: int) -> None:
-        self.stall.last_compared = seq
-
-    @property
     def counter_restarts(self) -> int:
         """Counter restarts the current reference re-primed on (as the firmware does)."""
         return self.raw.gate.counter_restarts
