@@ -58,7 +58,7 @@ def test_the_live_judges_pair_a_burst_as_analyze_does(babble_log: Path) -> None:
           f"{bridge.tracker.vs_reference.max_dpos_m * 1e3:.4f} mm")
     assert analysis.passed
     for tracker in (monitor.tracker, bridge.tracker):
-        assert tracker.stalls == 0  # the burst is not a stall: nothing placed again
+        assert tracker.stall.stalls == 0  # the burst is not a stall: nothing placed again
         assert tracker.reference_starts == 1
         assert tracker.vs_reference.samples == analysis.report["samples"]["onboard"] > 140
         assert tracker.vs_reference.max_dpos_m == pytest.approx(
@@ -98,7 +98,7 @@ def test_the_live_judges_allow_the_losses_analyze_allows(lossy_log: Path) -> Non
         print(f"live: max {tracker.vs_reference.max_dpos_m}, beyond the allowance "
               f"{tracker.max_beyond_allowance_m}, allowance {tracker.allowance_m()}")
         assert tracker.vs_reference.samples == analysis.report["samples"]["onboard"]
-        assert tracker.stalls == len(stalls)
+        assert tracker.stall.stalls == len(stalls)
         assert tracker.vs_reference.max_dpos_m == pytest.approx(
             offline["max_position_error_m"], abs=POSITION_LSB_M)
         assert tracker.max_beyond_allowance_m <= POSITION_LSB_M  # a correct firmware: within

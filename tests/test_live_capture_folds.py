@@ -71,7 +71,7 @@ def _live(path: Path) -> tuple[int, int]:
     tracker = monitor.tracker
     end_of_watch(tracker)
     tracker.wrongs.finish(tracker.allowance_m)
-    return tracker.wrongs.count, tracker.stalls
+    return tracker.wrongs.count, tracker.stall.stalls
 
 
 def _drive(tmp_path: Path, wrong: str | None = None) -> Path:

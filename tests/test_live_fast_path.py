@@ -86,7 +86,7 @@ def _judged(path: Path, robot: str) -> tuple[list[Any], int, int]:
     judged: list[Any] = [samples]
     for tracker in (monitor.tracker, bridge.tracker):
         judged.append((tracker.snapshot(), vars(tracker.vs_reference), vars(tracker.vs_truth),
-                       tracker.allowance_m(), tracker.max_beyond_allowance_m, tracker.stalls,
+                       tracker.allowance_m(), tracker.max_beyond_allowance_m, tracker.stall.stalls,
                        tracker.reference_starts, list(tracker.losses.spans)))
     return judged, calls["slow"], calls["named"]
 

@@ -156,7 +156,7 @@ def test_the_live_judge_places_a_stalled_correct_firmware_within_one_lsb(
     assert result.passed
     monitor, bridge, errors = _judge_live(KOBUKI, "exact", _messages(synth.lines(cut)))
     for tracker in (monitor.tracker, bridge.tracker):
-        assert tracker.stalls == 3
+        assert tracker.stall.stalls == 3
         assert tracker.reference_starts == 1
         assert tracker.vs_reference.max_dpos_m <= POSITION_LSB_M
         assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD

@@ -103,7 +103,7 @@ def test_the_flood_gives_the_live_judge_the_samples_and_errors_of_analyze(
     assert monitor.tracker.twins.found > 0  # the flood carries twins
     assert "POSE WRONG" not in verdicts
     assert bridge.tracker.vs_reference.max_dpos_m == monitor.tracker.vs_reference.max_dpos_m
-    assert monitor.tracker.stalls == 1  # the one placement (analyze: one stall placement)
+    assert monitor.tracker.stall.stalls == 1  # the one placement (analyze: one stall placement)
     assert result.report["reference_breaks"]["stall_placements"] == 1
     # the flood's random forgeries are implausible steps, which no firmware takes: their twin
     # allowance stays below a millimetre (taken as steps, they would open it to metres)

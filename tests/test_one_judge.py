@@ -139,7 +139,7 @@ def test_the_three_pass_a_correct_firmware_across_a_stall() -> None:
     assert result.passed
     monitor, bridge = _live(profile, "exact", messages)
     for tracker in (monitor.tracker, bridge.tracker):
-        assert tracker.stalls == 1
+        assert tracker.stall.stalls == 1
         assert tracker.reference_starts == 1  # placed again, not restarted
         assert tracker.vs_reference.max_dpos_m < POSITION_LSB_M
         assert tracker.vs_reference.max_dheading_rad < HEADING_LSB_RAD

@@ -154,7 +154,7 @@ def test_a_pose_off_after_the_stall_fails_whole_streamed_and_live(
     for stream in ("never", "always"):
         assert main(["analyze", str(wrong), "--robot", "kobuki", "--stream", stream]) == 1
     tracker = monitor_of(wrong, "kobuki", "exact").tracker  # as test_stall_bound's
-    assert tracker.stalls >= 1
+    assert tracker.stall.stalls >= 1
     assert tracker.vs_reference.max_dpos_m > POSITION_LSB_M
 
 

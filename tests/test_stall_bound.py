@@ -120,7 +120,7 @@ def test_a_jump_at_a_stall_fails_every_judge(tmp_path: Path, kind: str, bias_lsb
     monitor, bridge, end_s = _live(KOBUKI, "exact", path)
     lives = (monitor.tracker, bridge.tracker)
     for tracker in lives:
-        assert tracker.stalls == 1
+        assert tracker.stall.stalls == 1
         assert tracker.reference_starts == 1
     _streamed_alike(path, KOBUKI, report)
     if bias_lsb == 0:  # the correct firmware: nothing beyond the allowance, PASS everywhere
@@ -312,7 +312,7 @@ def test_a_jump_after_a_rig_stall_fails_and_the_stall_alone_passes(
     _streamed_alike(wrong, pmir, bad.report, "exact")
     monitor, bridge, _ = _live(pmir, "exact", wrong)
     for tracker in (monitor.tracker, bridge.tracker):
-        assert tracker.stalls == 1
+        assert tracker.stall.stalls == 1
         assert tracker.vs_reference.max_dpos_m > POSITION_LSB_M
 
 

@@ -94,7 +94,7 @@ class LiveChoice:
         twin.step_deltas(*taken)
         heard = self._tracker.placer.seen.heard_in(*span_s)
         self.pending = Pending(seq, span_s, heard, twin, self._tracker.placer.gap_at(seq),
-                               self._tracker.last_compared)
+                               self._tracker.stall.last_compared)
         self.until_s = span_s[1] + (PAGES_WAIT_S if heard else WAIT_S)
         return True
 
@@ -121,7 +121,7 @@ class LiveChoice:
         if p is None or pose.seq < p.seq:
             return False
         p.held.append(pose)
-        self._tracker.last_compared = pose.seq
+        self._tracker.stall.last_compared = pose.seq
         return True
 
     def ahead(self, counter: int, t_s: float, prev: tuple[float, ...]) -> None:
@@ -151,7 +151,7 @@ class LiveChoice:
                 tracker.placer.took_gap(p.gap)
         else:
             self.reprimed += 1
-        tracker.last_compared = p.last_compared
+        tracker.stall.last_compared = p.last_compared
         for pose in p.held:
             tracker.judge(pose)
 

@@ -171,10 +171,10 @@ class LiveDistance:
         self._judged_last = not (self.suspended or quiet or not (first or resend) or at is None)
         if not self._judged_last or at is None:
             return
-        if self._stalls >= 0 and tracker.stalls > self._stalls and self._last_e >= 0:
+        if self._stalls >= 0 and tracker.stall.stalls > self._stalls and self._last_e >= 0:
             before = self._frames.get(self._last_e)  # merged since the last sample
             self._lower_m += (at[0] - before[0]) / UNITS_PER_M if before else math.inf
-        self._stalls, self._last_e = tracker.stalls, e
+        self._stalls, self._last_e = tracker.stall.stalls, e
         units, n, c, up = at
         diff = raw_mm - units * (1000.0 / UNITS_PER_M)
         r = diff - WIRE_MM * round(diff / WIRE_MM)

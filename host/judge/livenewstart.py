@@ -64,7 +64,7 @@ class NewStartHold:
         tracker = self._tracker
         tracker.fit.feed(pose, raw)
         tracker.placer.compared(pose)
-        tracker.last_compared = pose.seq
+        tracker.stall.last_compared = pose.seq
         self._held.append((pose, raw, tracker.pose_t_s))
         return True
 

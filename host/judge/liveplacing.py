@@ -24,7 +24,7 @@ def place_reference(tracker: PoseTracker, pose: FramePose, raw: FramePose) -> Fr
     if not tracker.placer.due(pose.seq):  # a gap after its frame: placed at a later sample's
         return raw  # (a sample held, ``livelaphold``, is compared after the gaps heard since)
     ref = tracker.fit.correct(raw)
-    shift = tracker.placer.shift(pose, ref, tracker.last_compared, tracker.window,
+    shift = tracker.placer.shift(pose, ref, tracker.stall.last_compared, tracker.window,
                                  (tracker.geometry, tracker.counter_bits, tracker.integrator),
                                  tracker.fit.placed_shift_m())
     line.at, tracker.fit, placed = rebase(tracker.fit, odometry, line.at, ref, shift)

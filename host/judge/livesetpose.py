@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
+from odocan.host.judge.liveadopted import UNHEARD_SET_POSE
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livestart import start_reference
@@ -99,11 +100,14 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float]) -> 
     tracker.new_life()  # the reference restarts, the truth is compared in the new frame
     if all(name in staged for name in FIELDS):  # nothing kept of a pose adopted before
         tracker.placer.dark.new_life()  # (host.judge.livedark: the OK no longer names it)
+        tracker.adopted.new_life()  # (host.judge.liveadopted)
     if at is None or not ref_known or not counts or counts[0][0] != seq:
         if all(name in staged for name in FIELDS):  # an offset before it overwritten whole
             tracker.wrongs.new_life(tracker.now_s)
+        tracker.adopted.owe(UNHEARD_SET_POSE)  # the next on-board pose adopted
         return None
     tracker.wrongs.new_life(tracker.now_s)  # fields kept from the reference: still judged
+    tracker.adopted.cancel()  # the set pose is where it starts, not the firmware's
     pose = FramePose(seq, staged.get("X", at.x_m), staged.get("Y", at.y_m),
                      staged.get("HEADING", at.heading_rad % _TURN))
     start_reference(tracker, pose, counts, [])

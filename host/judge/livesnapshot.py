@@ -23,7 +23,7 @@ def tracker_snapshot(tracker: PoseTracker) -> dict[str, Any]:
         "pose": pose_dict(tracker.pose),
         "reference": {**(pose_dict(tracker.reference) or {}), "integrator": tracker.integrator,
                       "starts": tracker.reference_starts,
-                      "counter_restarts": tracker.counter_restarts, "stalls": tracker.stalls,
+                      "counter_restarts": tracker.counter_restarts, "stalls": tracker.stall.stalls,
                       "unseen_restarts": tracker.placer.dark.new_starts,  # host.judge.livedark
                       "breaks": tracker.placer.watch_breaks()},
         "truth": pose_dict(tracker.truth),

@@ -81,6 +81,9 @@ def _within_because(tracker: PoseTracker) -> str:
             ] if tracker.placer.dark.life_new_starts else []
     if placements.stalls or placements.gaps or placements.free:
         said.append("placed again where the firmware was")
+    if tracker.adopted.life:  # a late-told reboot, a config or integrator change: liveadopted
+        said.append("restarted at the firmware's own pose after "
+                    + " and ".join(sorted({a.cause for a in tracker.adopted.life})))
     return "against a reference " + " and ".join(said) if said else "by the pose signals' rounding"
 
 
@@ -89,7 +92,9 @@ def placed_why(tracker: PoseTracker) -> list[str]:
     ([] when none): its placements after a stall or a hold, after a gap of the encoder frames
     (bounded), after a gap without a bound; the new starts at the firmware's pose after an
     unseen controller restart since the pose was last set anew whole (a reboot, a set-pose of
-    X, Y and HEADING: ``livedark.DarkRestarts.new_life``), not the watch's."""
+    X, Y and HEADING: ``livedark.DarkRestarts.new_life``), not the watch's; its starts at the
+    firmware's own pose after a late-told reboot, a config or an integrator change
+    (``liveadopted.AdoptedStarts.why``), of the same life."""
     placements = tracker.placer.placements
     parts = []
     if placements.stalls:
@@ -110,7 +115,7 @@ def placed_why(tracker: PoseTracker) -> list[str]:
         why.append(f"the reference restarted at the firmware's pose after {starts} unseen "
                    f"controller restart{_s(starts)} across a recorder hole (an offset it had "
                    "then not judged)")
-    return why
+    return why + tracker.adopted.why()  # its starts at the firmware's own pose (liveadopted)
 
 
 def _s(count: int) -> str:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from odocan.host.judge.liveadopted import UNHEARD_BOOT
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livepose import FramePose, Sample
 from odocan.host.judge.livewindow import Counted, primed_at, window_counts
@@ -34,6 +35,7 @@ def start_reference(tracker: PoseTracker, pose: FramePose, counts: list[Counted]
     tracker.reference_starts += 1
     tracker.fit = LiveFit.start(pose)
     tracker.newstart.started(tracker.fit.exact)  # after an unseen restart: held (livenewstart)
+    tracker.adopted.started(pose, tracker.fit.exact, tracker.pose_t_s)  # said (liveadopted)
     raw = tracker.raw
     raw.start(ref, tracker.geometry, tracker.counter_bits, tracker.restarts)
     tracker.placer.restart()
@@ -132,6 +134,7 @@ class Lives:
         counts = window_counts(tracker.window, primed)
         if not counts or counts[0][0] != primed:
             if not first_life:  # a first life keeps its fitted start
+                tracker.adopted.owe(UNHEARD_BOOT)
                 tracker.restart_reference()
             return
         tracker.reference_starts -= first_life and tracker.reference_starts > 0

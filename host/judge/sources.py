@@ -20,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.judge.bootticks import POSE_MESSAGE, boot_tick, pose_heard
+from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.powerup import NAMED_SPAN, holds_first_cycle, same_tick, tick_bound_s
 from odocan.host.protocol import busfacts
@@ -233,6 +234,7 @@ def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
     is not frames lost). Returns what was done (text)."""
     tracker.placer.seen.new_life()  # its pages count from 0 (host.judge.livegapseen)
     tracker.placer.dark.new_life()  # no pose adopted before it carried (host.judge.livedark)
+    tracker.adopted.new_life()  # ... nor at a start of the reference (host.judge.liveadopted)
     tracker.wrongs.new_life(tracker.now_s)  # an offset before it gone with its RAM
     for message in db.messages:
         if FIRMWARE_NODE in message.senders:  # the counts stay; the next frame starts afresh
@@ -240,6 +242,7 @@ def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
     if uptime_s == 0:
         tracker.power_up(primed_now=state != "INIT")
         return "reference restarted at the power-up pose"
+    tracker.adopted.owe(LATE_REBOOT.format(uptime_s=uptime_s))  # its pose adopted
     tracker.new_life()
     return "reference restarted"
 

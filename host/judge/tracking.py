@@ -14,6 +14,12 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
+from odocan.host.judge.liveadopted import (
+    CONFIG_CHANGE,
+    INTEGRATOR_CHANGE,
+    REBOOT_BEFORE_INTEGRATOR,
+    AdoptedStarts,
+)
 from odocan.host.judge.livechoice import LiveChoice
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livehalves import HalfPairs
@@ -87,6 +93,7 @@ class PoseTracker:
         self.choice = LiveChoice(self)  # ... both candidates until the pages or the next pose
         self.restarts.choose = self.choice.open
         self.newstart = NewStartHold(self)  # a new start's samples wait for its fit
+        self.adopted = AdoptedStarts()  # starts at the firmware's own pose, said (liveadopted)
         self.laps = LapHold(self)  # samples after a lap of the stamps wait for its evidence
         self.stall = StallRule(self.placer, self.window, self.pairs.halves["y"])  # livestall
         # raw: ``fit`` corrects its start (livereference); where it starts (livestart)
@@ -281,11 +288,11 @@ class PoseTracker:
         """ODOM_STATUS reports the firmware's integrator; a change restarts the reference."""
         if self.forced or name == self.integrator:
             return
-        first = self.integrator is None
-        self.integrator = name
-        if first and self.lives.pending is not None:  # judge what was heard while waiting
+        before, self.integrator = self.integrator, name
+        if before is None and self.lives.pending is not None:  # judge what was heard waiting
             self.lives.start_pending(self.lives.backlog_poses)
         else:
+            self.adopted.owe(INTEGRATOR_CHANGE.format(before=before, after=name))
             self.restart_reference()
 
     def restart_reference(self) -> None:
@@ -310,6 +317,7 @@ class PoseTracker:
         self.new_life()
         self.losses.lost_page = None  # the new firmware counts from 0
         if self.integrator is None:
+            self.adopted.owe(REBOOT_BEFORE_INTEGRATOR)
             return
         guess = self.enc_seq if primed_now else self.enc_seq + 1
         self.lives.await_boot(guess, self.now_s)
@@ -341,6 +349,7 @@ class PoseTracker:
         """New robot parameters (a config command); the reference restarts at the next pose."""
         self.geometry = geometry
         self.counter_bits = min(counter_bits, WIRE_COUNTER_BITS)
+        self.adopted.owe(CONFIG_CHANGE)
         self.restart_reference()
 
     def take_speed_bound(self, max_wheel_speed_mm_s: int) -> None:
@@ -356,21 +365,6 @@ class PoseTracker:
         returned once complete as (truth, reference at that encoder frame or None)
         (``livetruth.TruthJudge``)."""
         return self.truths.judge(part, enc_counter, value)
-
-    @property
-    def stalls(self) -> int:
-        """Stalls and holds after which the reference's position was placed again (livestall)."""
-        return self.stall.stalls
-
-    @property
-    def last_compared(self) -> int:
-        """The encoder frame of the last sample compared, -1: none (the stall rule's: livestall);
-        set by a helper that holds a sample as compared (``livechoice``, ``livenewstart``)."""
-        return self.stall.last_compared
-
-    @last_compared.setter
-    def last_compared(self, seq: int) -> None:
-        self.stall.last_compared = seq
 
     @property
     def counter_restarts(self) -> int:

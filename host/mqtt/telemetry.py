@@ -408,8 +408,15 @@ class RobotTelemetry(CommandFollowing):
             latched_errors=self.latch.latched_names(), events=list(self.events),
             pose_wrongs=self.tracker.wrongs.as_dict(), frames_total=sum(self.frames.values()),
             distance=self.distance.as_dict(), twist=self.twist.as_dict(),
-            profile=self.profile.section,
+            profile=self.profile.section, **self._adopted(),
         ))
+
+    def _adopted(self) -> dict[str, Any]:
+        """``reference_adopted`` while the reference carries a start at the firmware's own pose
+        (``host.judge.liveadopted``: the monitor's OK says it too); nothing else (a clean
+        drive's status as before)."""
+        adopted = self.tracker.adopted.as_dict()
+        return {"reference_adopted": adopted} if adopted else {}
 
 
 def _pose_dict(pose: FramePose) -> dict[str, float]:
