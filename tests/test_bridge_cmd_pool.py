@@ -27,6 +27,7 @@ import pytest
 from odocan.host.mqtt import cmdreader, topics
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.client import arrived_of
 from odocan.sim.fleet import robot_name
 from tests.conftest_mqtt import broker_of, client, collect
 from tests.test_mqtt_bridge import BROKERS, GEOMETRY, PMIR
@@ -105,7 +106,7 @@ def test_the_bridges_own_answers_come_back_and_are_dropped_unread(
     dropped on its topic, never stamped and copied as a command is (``arrived_of``, counted
     here), nor answered. Before, every answer was made an ``Arrived`` and dropped after."""
     parsed: list[str] = []
-    real = cmdreader.arrived_of
+    real = arrived_of  # the reader's (cmdreader imports it from client)
 
     def counting(message: Any) -> Any:
         parsed.append(message.topic)
