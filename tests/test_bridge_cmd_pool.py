@@ -24,9 +24,10 @@ import can
 import psutil
 import pytest
 
-from odocan.host.mqtt import topics
+from odocan.host.mqtt import cmdreader, topics
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.client import arrived_of
 from odocan.sim.fleet import robot_name
 from tests.conftest_mqtt import broker_of, client, collect
 from tests.test_mqtt_bridge import BROKERS, GEOMETRY, PMIR
@@ -94,3 +95,35 @@ def test_one_reader_thread_and_one_connection_serve_every_robot(
     assert {t: (a["id"], a["result"]) for t, a in answers.items()} == {
         topics.topic(n, topics.RESULT_LEAF): (n, "rejected") for n in NAMES}
     assert _reader_threads() == []  # stopped: joined
+
+
+@pytest.mark.parametrize("kind", BROKERS)
+def test_the_bridges_own_answers_come_back_and_are_dropped_unread(
+    kind: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Each answer a link publishes on ``cmd/result`` comes back to the reader (its ``cmd/+``;
+    MQTT 3.1.1 has no no-local, and v5's keeps only a connection's own): it is counted and
+    dropped on its topic, never stamped and copied as a command is (``arrived_of``, counted
+    here), nor answered. Before, every answer was made an ``Arrived`` and dropped after."""
+    parsed: list[str] = []
+    real = arrived_of  # the reader's (cmdreader imports it from client)
+
+    def counting(message: Any) -> Any:
+        parsed.append(message.topic)
+        return real(message)
+
+    monkeypatch.setattr(cmdreader, "arrived_of", counting)
+
+    async def scenario() -> tuple[dict[str, dict[str, Any]], int]:
+        async with broker_of(kind, tmp_path) as brokers, _bridge(brokers.bridge) as bridge:
+            answers = await _answers(brokers.bridge)
+            async with asyncio.timeout(20):  # every echo read, or (before) parsed
+                while getattr(bridge.commands, "echoes", 0) < ROBOTS and \
+                        len(parsed) < 2 * ROBOTS:
+                    await asyncio.sleep(0.05)
+            return answers, getattr(bridge.commands, "echoes", 0)
+
+    answers, echoes = asyncio.run(scenario())
+    assert sorted(parsed) == sorted(topics.topic(n, "cmd/teleport") for n in NAMES)
+    assert echoes == ROBOTS
+    assert sorted(answers) == sorted(topics.topic(n, topics.RESULT_LEAF) for n in NAMES)

@@ -42,7 +42,7 @@ import can
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL, first_error
-from odocan.host.mqtt.clientids import reader_client_id
+from odocan.host.mqtt.clientids import DEFAULT_PREFIX, reader_client_id
 from odocan.host.mqtt.cmdreader import COMMAND_QUEUE, CommandReader, RobotCommands
 from odocan.host.mqtt.expiry import Expired, Fresh
 from odocan.host.mqtt.link import RobotLink, Verdict
@@ -92,7 +92,7 @@ class BridgeConfig:
     status_period_s: float = 1.0
     rates_period_s: float = 1.0
     keepalive_s: int = 5
-    client_prefix: str = "odocan-bridge"
+    client_prefix: str = DEFAULT_PREFIX
     queue_batches: int = 1024
     slice_frames: int = 64  # frames handled in one go before the event loop gets a turn
     connect_timeout_s: float = 5.0  # the first connection, else BrokerError

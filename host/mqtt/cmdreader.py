@@ -27,8 +27,11 @@ answer was published, with the answer not sent again by us, still got the operat
 ``rejected``). The bound, then: a blocked loop loses no command; it answers ``busy`` those beyond
 ``capacity`` that arrive while it is blocked, and ``expired`` those it takes after their expiry.
 The links' own ``cmd/result`` answers, published on their connections, come back here
-(``cmd/+`` holds them, and MQTT v5's no-local only keeps a connection's own) and are dropped in
-the thread. ``start`` is called by
+(``cmd/+`` holds them, and MQTT v5's no-local only keeps a connection's own; MQTT 3.1.1 has none,
+so there the busy answers come back too): ``read`` drops them on the topic string alone, before
+anything is stamped or copied, and counts them (``echoes``). The subscription stays ``cmd/+``
+rather than one filter per known command: an unknown command must still be read to be answered
+``rejected``; the echo's PUBACK (QoS 1) is paho's and stays. ``start`` is called by
 every link at its first connection: the first starts the thread, the others wait for the same
 subscriptions. ``stop`` disconnects and joins the thread; nothing is left running.
 """
@@ -57,15 +60,16 @@ BUSY_REASON = "bridge busy: {} commands already wait to be run: not run"
 
 
 class _ReaderClient(LinkClient):
-    """A ``LinkClient`` whose messages go to ``sink`` (in its thread) as they are read."""
+    """A ``LinkClient`` whose messages go to ``reader`` (in its thread) as they are read."""
 
-    sink: Any = None
+    reader: Any = None  # the ``CommandReader``
 
     def _on_message(self, client: paho.Client, userdata: Any,
                     message: paho.MQTTMessage) -> None:
-        self.sink(self, arrived_of(message))
+        self.reader.read(self, message)
 
 
+ECHO_SUFFIX = "/" + topics.RESULT_LEAF  # a topic ending so is an answer, never a command
 COMMAND_QUEUE = 1000  # commands per robot read and waiting for its link (``capacity``)
 SUBSCRIBE_FILTERS = 64  # ``cmd/+`` filters in one SUBSCRIBE packet
 
@@ -120,6 +124,7 @@ class CommandReader:
         self._loop: asyncio.AbstractEventLoop | None = None  # the thread's
         self._stop: asyncio.Event | None = None  # the thread's
         self._stopping = False
+        self.echoes = 0  # answers on ``cmd/result`` that came back here: dropped unread
 
     # --- the links' side (their event loop) ---
     async def start(self, *, v5: bool) -> None:
@@ -249,7 +254,7 @@ class CommandReader:
             identifier=self.client_id, keepalive=self.keepalive_s,
             timeout=self.connect_timeout_s, logger=CLIENT_LOG,
         )
-        client.sink = self._arrive
+        client.reader = self
         client._client.connect_timeout = self.connect_timeout_s
         client.pending_calls_threshold = 10**9
         return client
@@ -270,14 +275,23 @@ class CommandReader:
                     log.warning("%s: the broker refused the subscription %s (%s): no command "
                                 "will arrive", self.label, topic_filter, code)
 
+    def read(self, client: _ReaderClient, message: paho.MQTTMessage) -> None:
+        """One message as paho read it (this thread): an answer that came back (``cmd/result``:
+        the links' and this connection's own, MQTT 3.1.1 has no no-local) is counted in
+        ``echoes`` and dropped on its topic alone, before it is stamped or copied; a command
+        goes on to ``_arrive``."""
+        if message.topic.endswith(ECHO_SUFFIX):
+            self.echoes += 1
+            return
+        self._arrive(client, arrived_of(message))
+
     def _arrive(self, client: _ReaderClient, message: Arrived) -> None:
-        """One message read (paho's thread of this loop): queued for its robot's link, or
-        answered ``rejected`` when ``capacity`` wait already; the links' own answers are
-        dropped."""
+        """One command read (paho's thread of this loop): queued for its robot's link, or
+        answered ``rejected`` when ``capacity`` wait already."""
         parts = message.topic.value.split("/", 3)  # odocan/<robot>/cmd/<name>
         robot = self.robots.get(parts[1]) if len(parts) == 4 else None
         name = parts[3] if len(parts) == 4 else ""
-        if robot is None or name == "result":
+        if robot is None:
             return
         with self.lock:
             full = len(robot.arrived) >= self.capacity

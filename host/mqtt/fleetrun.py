@@ -72,6 +72,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
+from odocan.host.mqtt.clientids import DEFAULT_PREFIX
 from odocan.host.mqtt.haltstretch import HaltStretches
 from odocan.host.mqtt.options import broker_for
 from odocan.host.mqtt.overload import Halted, after_halts
@@ -94,7 +95,7 @@ class FleetRun:
     bridge: bool = True
     broker: BrokerURL | None = None  # None: an embedded amqtt broker
     publish_hz: float = 10.0
-    client_prefix: str = "odocan-bridge"
+    client_prefix: str = DEFAULT_PREFIX
     connect_timeout_s: float = 5.0
     command_expiry_s: float = 5.0
     # SecOC (fleet.secoc_key): robots whose bridge is given no key (a misprovisioned bridge: the

@@ -10,8 +10,9 @@
 * the first connection must succeed within ``connect_timeout_s``, else ``BrokerError`` (the
   CLI's exit 2); later losses are one line each: "connection lost", "reconnecting in N s",
   "reconnected" (exponential backoff from ``backoff_s`` up to ``max_backoff_s``);
-* client id ``<client_prefix>-<robot>`` (shortened to MQTT 3.1.1's 23 bytes when longer:
-  ``host.mqtt.clientids``), clean start off, session expiry ``command_expiry_s``.
+* client id ``<client_prefix><robot>`` (0-9a-zA-Z, at most 23 bytes: MQTT 3.1.1's guarantee;
+  else a stable short form: ``host.mqtt.clientids``), clean start off, session expiry
+  ``command_expiry_s``.
   A broker that comes back without that session although we were away for less is one warning
   line (``sessions_lost``: it lost its state, and with it what it held);
 * commands are read off this loop: ``host.mqtt.cmdreader.CommandReader``, a thread with its own
@@ -73,7 +74,7 @@ from odocan.host.mqtt.broker import (
     protocol_unsupported,
 )
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient, persistent_session
-from odocan.host.mqtt.clientids import link_client_id, reader_client_id
+from odocan.host.mqtt.clientids import DEFAULT_PREFIX, link_client_id, reader_client_id
 from odocan.host.mqtt.cmdreader import CommandReader, RobotCommands
 from odocan.host.mqtt.expiry import Expired, Fresh, expired_by, fresh
 from odocan.host.mqtt.outgoing import Outgoing, publish_once
@@ -102,7 +103,7 @@ class RobotLink:
         robot: str,
         broker: BrokerURL,
         on_command: CommandHandler,
-        client_prefix: str = "odocan-bridge",
+        client_prefix: str = DEFAULT_PREFIX,
         keepalive_s: int = 5,
         connect_timeout_s: float = 5.0,
         command_expiry_s: float = 5.0,

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from odocan.host.mqtt.broker import LOOPBACK, BrokerURL, EmbeddedBroker, check_embedded_bind
+from odocan.host.mqtt.clientids import DEFAULT_PREFIX
 from odocan.sim.exceptions import ConfigurationError
 
 PASSWORD_ENV = "ODOCAN_MQTT_PASSWORD"
@@ -44,8 +45,10 @@ def add_mqtt_arguments(parser: argparse.ArgumentParser) -> None:
         help="pose/reference/error publications per robot and second (default: 10)",
     )
     group.add_argument(
-        "--client-prefix", default="odocan-bridge",
-        help="MQTT client ids are PREFIX-<robot> (persistent sessions; default: odocan-bridge)",
+        "--client-prefix", default=DEFAULT_PREFIX,
+        help="MQTT client ids are PREFIX<robot> when both are 0-9a-zA-Z and fit MQTT 3.1.1's 23 "
+        "bytes, else a stable 23-byte form of letters and digits (persistent sessions; "
+        "default: %(default)s)",
     )
     group.add_argument(
         "--connect-timeout", type=float, default=5.0, metavar="SECONDS",
