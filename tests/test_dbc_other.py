@@ -19,6 +19,7 @@ import os
 import re
 import subprocess
 import sys
+from collections.abc import Callable
 from contextlib import redirect_stdout
 from pathlib import Path
 
@@ -187,3 +188,22 @@ def test_the_same_facts_are_followed_in_process(
         code = main(["analyze", str(other["off0"]), "--robot", "kobuki", "--dbc", str(same)])
     assert code == 1  # OTHER's log judged at 10 ms: not refused, and not passed either
     assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize(("edit", "said"), [
+    (lambda text: text.replace(' 6 "PROFILE"', ""), "ODOM_STATUS PAGE has no value PROFILE"),
+    (lambda text: text.replace("BO_ 256 WHEEL_ENCODERS: 8", "BO_ xyz WHEEL_ENCODERS: 8"),
+     "malformed DBC"),
+], ids=["a fact missing", "malformed"])
+def test_a_dbc_the_judges_cannot_read_is_one_line_in_a_fresh_process(
+    other: dict[str, Path], edit: Callable[[str], str], said: str
+) -> None:
+    bad = other["dbc"].with_name("bad.dbc")
+    text = DBC.read_text(encoding="utf-8")
+    assert edit(text) != text
+    bad.write_text(edit(text), encoding="utf-8")
+    done = _python(ANALYZE, other["off0"], bad, env=_env(other["cache"], None))
+    assert (done.returncode, done.stdout) == (2, "")
+    assert done.stderr.count("\n") == 1, done.stderr
+    assert done.stderr.startswith("error: ")
+    assert said in done.stderr
