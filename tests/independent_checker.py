@@ -111,7 +111,8 @@ class _Frames:
     its previous frame's COUNTER half a COUNTER cycle (8 periods) or more after it is the
     sender's frame 16 k periods on, which the firmware took (no repetition to it)."""
 
-    def __init__(self, path: Path, recorder_gaps: bool = False) -> None:
+    def __init__(self, path: Path, recorder_gaps: bool = False,
+                 period_s: float = PERIOD_S) -> None:
         db = cantools.database.load_file(str(DBC_PATH))
         assert isinstance(db, Database)
         self.db = db
@@ -132,7 +133,7 @@ class _Frames:
                 continue
             t = float(m.group(1))
             cycled = (recorder_gaps and can_id == encoders_id
-                      and t - last_t.get(can_id, t) >= 8 * PERIOD_S)
+                      and t - last_t.get(can_id, t) >= 8 * period_s)
             if last_counter.get(can_id) == data[1] & 0xF and not cycled:
                 continue  # E2E Profile 2: a repetition (or 16 frames lost: the same to it)
             last_counter[can_id], last_t[can_id] = data[1] & 0xF, t
@@ -193,7 +194,9 @@ class _Follower:
     def __init__(
         self, robot: Robot, integrator: str, starts: Callable[[float], tuple[float, float, float]],
         max_wheel_speed_m_s: float | None, reboots_t_s: Collection[float] = (),
+        period_s: float = PERIOD_S,
     ) -> None:
+        self.period_s = period_s  # the WHEEL_ENCODERS cycle (s)
         self.odo = _Odometry(robot, integrator)
         self.reboots_us = {round(t * 1e6) for t in reboots_t_s}
         self.starts = starts
@@ -204,7 +207,7 @@ class _Follower:
         self.prev: _Stamp | None = None
         self.errors: list[tuple[float, float]] = []
         self.bound = [math.inf if max_wheel_speed_m_s is None
-                      else math.ceil(max_wheel_speed_m_s * PERIOD_S / m) + 1
+                      else math.ceil(max_wheel_speed_m_s * period_s / m) + 1
                       for m in (self.odo.m_left, self.odo.m_right)]
         self.refused: list[_Stamp] = []  # the run of refused frames, each plausible
         self.last_pose_t = -math.inf  # the latest pose frame's time
@@ -216,7 +219,7 @@ class _Follower:
 
     def pose_frame(self, t: float) -> bool:
         """Whether a pose frame at ``t`` s may be compared (False: the first after a stall)."""
-        silent = t - self.last_pose_t >= (SILENCE_PERIODS - 0.5) * PERIOD_S
+        silent = t - self.last_pose_t >= (SILENCE_PERIODS - 0.5) * self.period_s
         if silent and self.heard_since_pose >= SILENCE_PERIODS - 1 and self.prev is not None:
             self.resumed_t, self.place_next = t, True
             self.halves.clear()
@@ -231,7 +234,8 @@ class _Follower:
     def _young(self, frame: _Stamp, uptime: int) -> bool:
         """A restarted controller's counts: from 0, at most ``uptime`` s of travel at v_max."""
         wire = self.wire
-        return all(abs((c + wire // 2) % wire - wire // 2) <= uptime * 100 * b
+        per_s = round(1.0 / self.period_s)  # periods in one second of CTRL_UPTIME
+        return all(abs((c + wire // 2) % wire - wire // 2) <= uptime * per_s * b
                    for c, b in zip(frame[1:], self.bound, strict=True))
 
     def _confirms(self, held: tuple[_Stamp, dict[str, float | int]], frame: _Stamp,
@@ -245,7 +249,7 @@ class _Follower:
                 and abs(d[0]) <= n * self.bound[0] and abs(d[1]) <= n * self.bound[1])
 
     def plausible(self, a: _Stamp, b: _Stamp) -> bool:
-        periods = max(1, round((b[0] - a[0]) / PERIOD_S))
+        periods = max(1, round((b[0] - a[0]) / self.period_s))
         d = self.deltas(a, b)
         return abs(d[0]) <= periods * self.bound[0] and abs(d[1]) <= periods * self.bound[1]
 
@@ -289,7 +293,7 @@ class _Follower:
 
     def _advance(self, prev: _Stamp, frame: _Stamp) -> None:
         d_left, d_right = self.deltas(prev, frame)
-        if frame[0] - prev[0] > 1.5 * PERIOD_S or self.place_next:  # a gap or a stall: the
+        if frame[0] - prev[0] > 1.5 * self.period_s or self.place_next:  # a gap or a stall: the
             self.place_next = False  # heading follows the counts,
             self.odo.n_left += d_left  # the position starts again where the firmware was
             self.odo.n_right += d_right
@@ -310,22 +314,24 @@ def check(
     max_wheel_speed_m_s: float | Literal["robot"] | None = "robot",
     reboots_t_s: Collection[float] = (),
     recorder_gaps: bool = False,
+    period_s: float = PERIOD_S,
 ) -> Verdict:
     """Compare the on-board poses of the log at ``path`` with this checker's odometry started
     at ``starts(timestamp of the segment's first encoder frame)`` (module docstring);
     ``max_wheel_speed_m_s`` None: no plausibility rule (drives faster than any ECU allows);
     "robot": the robot's own (``Robot.max_wheel_speed_mm_s``);
     ``reboots_t_s``: encoder frames (their times) a rebooted firmware primed on;
-    ``recorder_gaps``: the log's gaps are the recorder's (``_Frames``)."""
-    frames = _Frames(path, recorder_gaps)
+    ``recorder_gaps``: the log's gaps are the recorder's (``_Frames``);
+    ``period_s``: the WHEEL_ENCODERS cycle the firmware runs at (its DBC's)."""
+    frames = _Frames(path, recorder_gaps, period_s)
     if max_wheel_speed_m_s == "robot":
         max_wheel_speed_m_s = robot.max_wheel_speed_mm_s / 1000
-    walk = _Follower(robot, integrator, starts, max_wheel_speed_m_s, reboots_t_s)
+    walk = _Follower(robot, integrator, starts, max_wheel_speed_m_s, reboots_t_s, period_s)
     for t, name, s in frames.rows:
         if name == "WHEEL_ENCODERS":
             walk.encoders(t, s)
         elif name in ("ODOM_POSE_X", "ODOM_POSE_Y") and walk.pose_frame(t) \
-                and t - walk.last_t < 8 * PERIOD_S:
+                and t - walk.last_t < 8 * period_s:
             _pair(name, s, walk.recent, walk.halves, walk.errors)
     errors = walk.errors
     if not errors:

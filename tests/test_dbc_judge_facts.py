@@ -87,6 +87,11 @@ FACTS = [
     ("odocan.host.judge.livetwist", "CYCLE_S", lambda: _cycle_ms("WHEEL_ENCODERS") / 1000),
     ("odocan.host.judge.compare", "TWIST_SILENCE_S",
      lambda: (LOST_TIME_PERIODS - 0.5) * _cycle_ms("WHEEL_ENCODERS") / 1000),
+    # the encoder period and its periods per second (CTRL_UPTIME's second), once the firmware's
+    *[(f"odocan.host.judge.{m}", "ENCODER_PERIOD_US", lambda: _cycle_ms("WHEEL_ENCODERS") * 1000)
+      for m in ("reference", "twins", "distance", "gapbound")],
+    *[(f"odocan.host.judge.{m}", "PERIODS_PER_S", lambda: 1000 // _cycle_ms("WHEEL_ENCODERS"))
+      for m in ("ctrlrestart", "livepose")],
     ("odocan.host.judge.samples", "WIRE_COUNTER_BITS", _wire_bits),
     ("odocan.host.judge.livepose", "WIRE_BITS", _wire_bits),
     ("odocan.host.experiments.drive", "WIRE_COUNTER_BITS", _wire_bits),
@@ -136,9 +141,12 @@ def test_judge_constant_is_the_dbcs(module: str, name: str, expected: object) ->
 
 PROBE = """
 import json
-from odocan.host.judge import bootticks, livedistance, livetwist, livewindow, sources
+from odocan.host.judge import bootticks, ctrlrestart, livedistance, livetwist, livewindow, sources
+from odocan.host.judge import reference
 tick_s = bootticks.POSE_CYCLE_MS / 1000
 print(json.dumps({
+    "enc_period_us": reference.ENCODER_PERIOD_US,
+    "periods_per_s": ctrlrestart.PERIODS_PER_S,
     "pose_cycle_ms": bootticks.POSE_CYCLE_MS,
     "status_cycle_ms": sources.STATUS_CYCLE_MS,
     "enc_cycle_s": [livewindow.CYCLE_S, livedistance.CYCLE_S, livetwist.CYCLE_S],
@@ -178,6 +186,7 @@ def test_judges_follow_an_edited_dbc(tmp_path: Path) -> None:
     assert as_is["pose_cycle_ms"] == 20
     assert as_is["status_cycle_ms"] == 100
     assert as_is["enc_cycle_s"] == [0.01] * 3
+    assert (as_is["enc_period_us"], as_is["periods_per_s"]) == (10_000, 100)
     assert (as_is["boot"], as_is["late_boot"], as_is["boot_10ms"]) == (True, False, False)
     # WHEEL_ENCODERS at 20 ms, ODOM_POSE_X at 40 ms, ODOM_STATUS at 200 ms: COUNTERs wrap
     # together every lcm(640, 1600) = 3.2 s, still more than UPTIME's second
@@ -185,6 +194,7 @@ def test_judges_follow_an_edited_dbc(tmp_path: Path) -> None:
     assert slow["pose_cycle_ms"] == 40
     assert slow["status_cycle_ms"] == 200
     assert slow["enc_cycle_s"] == [0.02] * 3
+    assert (slow["enc_period_us"], slow["periods_per_s"]) == (20_000, 50)
     # 15 ms after the pose is within half of its 40 ms cycle: the same tick
     assert (slow["boot"], slow["late_boot"], slow["boot_10ms"]) == (True, False, True)
 

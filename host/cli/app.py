@@ -24,6 +24,7 @@ from types import FrameType
 from typing import NoReturn
 
 from odocan import __version__
+from odocan.host.cli.dbcfirst import follow_named_dbc
 from odocan.sim.exceptions import OdocanError, Terminated
 
 # Each module has add_subparser(subparsers) that sets func=_do_<cmd>(args) -> int.
@@ -175,6 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     argv, debug = split_debug(argv)
     try:
         with sigterm_as_interrupt():
+            follow_named_dbc(argv, named_command(argv))  # before any judge reads a DBC
             parser = summary_parser() if argv in (["-h"], ["--help"]) else None
             args = (parser or build_parser(named_command(argv))).parse_args(argv)
             args.debug = debug  # split off above; bridge/fleet show library logs with it

@@ -96,7 +96,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
     ``analyze LOG``: the firmware's PROFILE page gives the judges its speed bound and names a
     wrong ``--robot`` (``host.judge.profilepage``), then a failed verdict's pose fit does."""
     from odocan.host.cli.inputs import explained, require_frames
-    from odocan.host.cli.subparsers.analyze import load_dbc, log_inputs
+    from odocan.host.cli.subparsers.analyze import load_judges_dbc, log_inputs
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import Tolerance, analyze
     from odocan.host.judge.configs import later_mismatches, running_before_configs
@@ -109,7 +109,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
     try:
         profile = robot.load(job.robot)
         tolerance = Tolerance(job.tolerance_position_m, job.tolerance_heading_rad)
-        db = load_dbc(Path(job.dbc)) if job.dbc is not None else None
+        db = load_judges_dbc(Path(job.dbc)) if job.dbc is not None else None
         streamed: dict[str, Any] | None = None
         count = FrameCount()
         running = None  # the log's PROFILE page (odocan's DBC only)

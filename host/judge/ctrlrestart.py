@@ -9,9 +9,10 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from odocan.firmware.encoders import CTRL_UPTIME_MAX, PERIODS_PER_S, RESTART_SLACK_PERIODS
+from odocan.firmware.encoders import CTRL_UPTIME_MAX, RESTART_SLACK_PERIODS
 from odocan.host.judge.reference import wrap_delta
 from odocan.host.judge.samples import FloatArray, IntArray
+from odocan.host.protocol.busfacts import ENC_PERIODS_PER_S as PERIODS_PER_S
 
 
 def ctrl_restarts(uptime: IntArray, young: npt.NDArray[np.bool_], elapsed_s: FloatArray,

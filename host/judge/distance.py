@@ -70,7 +70,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import path_bound_m
 from odocan.host.judge.gapbound import period_bounds
@@ -84,6 +83,7 @@ from odocan.host.judge.samples import (
     IntArray,
     match_encoder,
 )
+from odocan.host.protocol.busfacts import ENC_PERIOD_US as ENCODER_PERIOD_US
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import NM_PER_M, RobotProfile
 

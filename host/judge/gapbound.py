@@ -37,9 +37,9 @@ import math
 
 import numpy as np
 
-from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import FloatArray
+from odocan.host.protocol.busfacts import ENC_PERIOD_US as ENCODER_PERIOD_US
 
 DP_PERIODS = 256  # gaps longer than this take the path bound (2.56 s at 100 Hz)
 MAX_BINS = 160  # heading bins of a short gap (0.75 of their width per step: the slack)

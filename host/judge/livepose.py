@@ -12,7 +12,6 @@ from typing import Any, NamedTuple
 
 from odocan.firmware.encoders import (
     CTRL_UPTIME_MAX,
-    PERIODS_PER_S,
     RESTART_SLACK_PERIODS,
     RESYNC_FRAMES,
 )
@@ -23,6 +22,7 @@ from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.reference_path import restart_detail
 from odocan.host.judge.turns import unwrapped_error
 from odocan.host.protocol import busfacts
+from odocan.host.protocol.busfacts import ENC_PERIODS_PER_S as PERIODS_PER_S
 from odocan.host.protocol.pose import heading_fields, unwrap_near
 from odocan.sim.pose import wrap_angle
 

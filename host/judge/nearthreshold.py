@@ -69,7 +69,7 @@ class Resets:
     sent_s: FloatArray = field(default_factory=lambda: np.zeros(0))
     mask: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     long_gaps: dict[int, tuple[float, float, int]] = field(default_factory=dict)
-    cycle_s: float = 0.01
+    cycle_s: float = busfacts.ENC_CYCLE_S  # the WHEEL_ENCODERS cycle
     holes: frozenset[int] = frozenset()  # ``gapseen.Seen.holes``: no word of the log's step
 
     def told(self, b_s: float) -> bool | None:

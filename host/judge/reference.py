@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
-from odocan.firmware.twist import ENCODER_PERIOD_US
+from odocan.host.protocol.busfacts import ENC_PERIOD_US as ENCODER_PERIOD_US
 from odocan.sim.robot import RobotProfile
 
 INTEGRATORS = ("euler", "rk2", "exact")

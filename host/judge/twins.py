@@ -21,11 +21,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from odocan.firmware.twist import ENCODER_PERIOD_US
 from odocan.host.judge.losses import heading_steps, step_vector
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.reference_path import Reference
 from odocan.host.judge.samples import WIRE_COUNTER_BITS, Encoders, FloatArray, IntArray
+from odocan.host.protocol.busfacts import ENC_PERIOD_US as ENCODER_PERIOD_US
 from odocan.sim.robot import RobotProfile
 
 Counts = tuple[int, int]  # wire LEFT_COUNT, RIGHT_COUNT

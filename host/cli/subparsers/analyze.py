@@ -153,7 +153,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
     check_junit_path(args)
     check_distinct([("--report", args.report), ("--plot", args.plot), ("--junit", args.junit),
                     ("--mcap", args.mcap)], [("LOG", args.log), ("--dbc", args.dbc)])
-    db = load_dbc(args.dbc) if args.dbc is not None else None
+    db = load_judges_dbc(args.dbc) if args.dbc is not None else None
     with wall_clock_progress(f"analysing {args.log}", None):
         streams = _streams(args)
         running = head_profile(args.log) if streams and db is None else None
@@ -262,7 +262,7 @@ def _analyze_many(args: argparse.Namespace) -> int:
         )
     robot.load(args.robot)  # a bad profile is a usage error before any work
     if args.dbc is not None:
-        load_dbc(args.dbc)
+        load_judges_dbc(args.dbc)
     if args.report_dir is not None:
         check_report_dir(args.report_dir)
     logs, problems = batch.find_logs(args.log)
@@ -388,6 +388,16 @@ def log_inputs(
     section.update(errors=None, faults=None,
                    log={"path": str(log), "sha256": provenance.file_sha256(log)})
     return section
+
+
+def load_judges_dbc(path: Path) -> cantools.database.can.Database:
+    """``load_dbc``, refused (one line) when the judges of this process hold another DBC's bus
+    facts (``host.cli.dbcfirst``)."""
+    from odocan.host.cli.dbcfirst import require_judges_follow
+
+    db = load_dbc(path)
+    require_judges_follow(db, path)
+    return db
 
 
 def load_dbc(path: Path) -> cantools.database.can.Database:

@@ -46,7 +46,7 @@ from odocan.host.cli.options import (
     check_log_path,
     int_in,
 )
-from odocan.host.cli.subparsers.analyze import load_dbc
+from odocan.host.cli.subparsers.analyze import load_judges_dbc
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.busreader import lost_here_text
 from odocan.host.io.export import FOXGLOVE_PORT
@@ -150,7 +150,7 @@ def _do_monitor(args: argparse.Namespace) -> int:
     model = BusMonitor(
         profile,
         args.integrator,
-        load_dbc(args.dbc) if args.dbc is not None else None,
+        load_judges_dbc(args.dbc) if args.dbc is not None else None,
         bitrate=args.bitrate,  # -b: the bus load as a fraction of the wire
     )
     trace = Trace(model.db, FrameFilter.parse(args.filter, model.db))
