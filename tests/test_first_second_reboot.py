@@ -18,6 +18,7 @@ off after the reset) FAILs in all of them.
 from __future__ import annotations
 
 import json
+import random
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -195,3 +196,127 @@ def test_a_wrong_firmware_after_an_early_reboot_fails_every_judge(
     assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
     assert bridge.tracker.vs_reference.max_dpos_m > 1.5e-4
     assert bridge.tracker.vs_reference.max_dpos_m < 1e-3  # wrong by 2 LSB, not a lost reboot
+
+
+# --- the boot summary held back behind the new firmware's next poses (a loaded bus, a recorder's
+# stamping): told from the pose run that counts on from COUNTER 0 (``bootticks.next_run``) ---
+
+HELD = [(5, 0.05), (30, 0.03), (60, 0.07), (80, 0.05), (95, 0.015)]  # reset tick, held back s
+
+
+def _held(messages: tuple[can.Message, ...], from_s: float, by_s: float) -> tuple[can.Message, ...]:
+    """The ODOM_STATUS frames of the first tick from bus time ``from_s`` on (its summary and its
+    page) stamped ``by_s`` later, the frames in stamp order: after the new life's next poses."""
+    tick_s = min(m.timestamp for m in messages
+                 if m.arbitration_id == fr.ODOM_STATUS_ID and m.timestamp >= from_s)
+    out = [can.Message(arbitration_id=m.arbitration_id, data=m.data, is_extended_id=False,
+                       timestamp=m.timestamp + by_s)
+           if m.arbitration_id == fr.ODOM_STATUS_ID and m.timestamp == tick_s else m
+           for m in messages]
+    return tuple(sorted(out, key=lambda m: m.timestamp))
+
+
+def _poses_between(messages: tuple[can.Message, ...], from_s: float) -> tuple[list[int], float]:
+    """cantools: the COUNTERs of the ODOM_POSE_X frames heard from ``from_s`` up to the first
+    ODOM_STATUS summary after it, and the seconds from the first of them to that summary."""
+    poses: list[tuple[int, float]] = []
+    for m in messages:
+        if m.timestamp < from_s:
+            continue
+        if m.arbitration_id == fr.ODOM_STATUS_ID and _decoded(m)["PAGE"] == 0:
+            return [c for c, _ in poses], m.timestamp - poses[0][1]
+        if m.arbitration_id == fr.ODOM_POSE_X_ID:
+            poses.append((int(_decoded(m)["COUNTER"]), m.timestamp))
+    raise AssertionError("no summary")
+
+
+@pytest.mark.parametrize(("reboot_at", "held_s"), HELD)
+def test_a_boot_summary_held_back_is_seen_and_the_correct_firmware_passes(
+    reboot_at: int, held_s: float, tmp_path: Path
+) -> None:
+    messages = _held(drive(reboot_at), reboot_at * TICK_S, held_s)
+    primed_t = _reset_seen(messages, reboot_at)
+    counters, after_s = _poses_between(messages, reboot_at * TICK_S)
+    assert counters == list(range(len(counters)))  # the new life's, from 0
+    assert after_s > 0.01  # more than half a pose cycle after its tick's pose (on main: none)
+    path = _written(messages, tmp_path / f"held{reboot_at}.log")
+    own = ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
+                   reboots_t_s=[primed_t])
+    assert own.samples > 100
+    assert own.passed  # the correct firmware is correct
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert len(whole.report["reboots"]) == 1
+    assert whole.report["onboard_vs_reference"]["max_position_error_m"] < 1e-3
+    assert whole.passed
+    streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
+    assert json.dumps(streamed) == json.dumps(whole.report)
+    monitor, bridge = _live(messages)
+    assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
+    assert bridge.reboots == 1
+    for tracker in (monitor.tracker, bridge.tracker):  # the new poses judged before the
+        assert tracker.vs_reference.max_dpos_m < 1e-3  # summary came: withdrawn
+    assert not monitor.twist.wrong
+    assert not bridge.twist.wrong
+    assert monitor.health(messages[-1].timestamp)["state"] == "OK"
+
+
+@pytest.mark.parametrize(("reboot_at", "held_s"), [(30, 0.05), (80, 0.03)])
+def test_a_wrong_firmware_after_a_held_back_boot_summary_fails_every_judge(
+    reboot_at: int, held_s: float, tmp_path: Path
+) -> None:
+    messages = _held(_wrong(drive(reboot_at), reboot_at), reboot_at * TICK_S, held_s)
+    path = _written(messages, tmp_path / f"wrongheld{reboot_at}.log")
+    own = ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
+                   reboots_t_s=[_reset_seen(drive(reboot_at), reboot_at)])
+    assert own.max_position_error_m > 1.5e-4  # the test's own odometry: 2 LSB off
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert len(whole.report["reboots"]) == 1
+    assert not whole.passed
+    assert whole.report["onboard_vs_reference"]["max_position_error_m"] < 1e-3
+    streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
+    assert json.dumps(streamed) == json.dumps(whole.report)
+    monitor, bridge = _live(messages)
+    assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
+    assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
+    assert 1.5e-4 < bridge.tracker.vs_reference.max_dpos_m < 1e-3
+
+
+@pytest.mark.parametrize("held_s", [0.0, 0.02, 0.06, 0.1, 0.15])
+def test_the_summary_of_counter_0_at_0_8_s_held_back_is_no_reboot(
+    held_s: float, tmp_path: Path
+) -> None:
+    # one life: ODOM_STATUS COUNTER 0 again at 0.8 s (UPTIME 0), 160 ms after ODOM_POSE_X
+    # COUNTER 0 and 8 poses on (cantools): held back up to 150 ms it is still no boot tick
+    messages = drive(10_000)  # no reset within the drive
+    at_s = 0.8 - TICK_S / 2
+    summary = next(m for m in messages if m.arbitration_id == fr.ODOM_STATUS_ID
+                   and m.timestamp >= at_s)
+    signals = _decoded(summary)
+    assert (signals["PAGE"], signals["COUNTER"], signals["UPTIME"]) == (0, 0, 0)
+    poses = [int(_decoded(m)["COUNTER"]) for m in messages if m.arbitration_id == fr.ODOM_POSE_X_ID
+             and summary.timestamp - 0.165 < m.timestamp <= summary.timestamp]
+    assert poses == list(range(9))
+    held = _held(messages, at_s, held_s)
+    path = _written(held, tmp_path / "life.log")
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert whole.report["reboots"] == []
+    assert whole.passed
+    monitor, bridge = _live(held)
+    assert [e for e in monitor.events if e["kind"] == "reboot"] == []
+    assert bridge.reboots == 0
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_lost_frames_make_no_boot_tick(seed: int, tmp_path: Path) -> None:
+    # 30 % of the frames lost in the first 2 s, and the summaries left held back 0..60 ms at
+    # random: no judge sees a reboot in one life (its COUNTERs are read, its times kept)
+    rng = random.Random(seed)
+    kept = [m for m in drive(10_000) if m.timestamp >= 2.0 or rng.random() >= 0.3]
+    out = [can.Message(arbitration_id=m.arbitration_id, data=m.data, is_extended_id=False,
+                       timestamp=m.timestamp + rng.choice((0.0, 0.0, 0.02, 0.04, 0.06)))
+           if m.arbitration_id == fr.ODOM_STATUS_ID else m for m in kept]
+    messages = tuple(sorted(out, key=lambda m: m.timestamp))
+    path = _written(messages, tmp_path / f"lost{seed}.log")
+    assert analyze(read_log(path), PMIR, "exact").report["reboots"] == []
+    _, bridge = _live(messages)
+    assert bridge.reboots == 0

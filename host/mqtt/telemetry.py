@@ -56,7 +56,7 @@ from typing import Any, ClassVar
 import can
 from cantools.database.can import Database
 
-from odocan.host.judge.bootticks import POSE_MESSAGE, pose_heard
+from odocan.host.judge.bootticks import POSE_MESSAGE, next_run, pose_heard
 from odocan.host.judge.liveconfig import SAME_TICK_S, rebooted
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
@@ -222,10 +222,10 @@ class RobotTelemetry(CommandFollowing):
         """A reboot (UPTIME going back, INIT after running, a power-up tick's COUNTERs) starts
         the firmware's new life at its power-up pose, as the monitor and ``analyze`` do
         (``host.judge.sources``); every page to the live gapseen (``livegapseen.heard_status``);
-        an ODOM_POSE_X's COUNTER to the watch (``host.judge.bootticks``)."""
+        an ODOM_POSE_X's COUNTER to the watch's pose run (``bootticks.next_run``)."""
         if route.name == POSE_MESSAGE:
             if (counter := pose_heard(data, self._pose_ids.data_ids)) is not None:
-                self.sources.pose = (t_s, counter)
+                self.sources.pose = next_run(self.sources.pose, t_s, counter)
             return
         if route.status_page is None:
             return
@@ -239,8 +239,10 @@ class RobotTelemetry(CommandFollowing):
         lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM
         start_new_life(self.tracker, self.e2e, self.db, *summary)
         self.distance.new_life()
-        self.twist.new_life(t_s - SAME_TICK_S)  # its first tick's twist: the new one's
-        self.set_pose.forget(t_s - SAME_TICK_S)  # what the new firmware ACKed: kept
+        since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
+        self.tracker.vs_reference.withdraw_from(since_s)  # its poses vs the old reference
+        self.twist.new_life(since_s)  # its first ticks' twists: the new one's
+        self.set_pose.forget(since_s)  # what the new firmware ACKed: kept
         self.kept.forget()
         if lost is not None:
             self.events.append({"t_s": t_s, "kind": "config", "detail": lost})
