@@ -18,6 +18,7 @@ off after the reset) FAILs in all of them.
 from __future__ import annotations
 
 import json
+import math
 import random
 from functools import cache
 from pathlib import Path
@@ -201,7 +202,8 @@ def test_a_wrong_firmware_after_an_early_reboot_fails_every_judge(
 # --- the boot summary held back behind the new firmware's next poses (a loaded bus, a recorder's
 # stamping): told from the pose run that counts on from COUNTER 0 (``bootticks.next_run``) ---
 
-HELD = [(5, 0.05), (30, 0.03), (60, 0.07), (80, 0.05), (95, 0.015)]  # reset tick, held back s
+HELD = [(5, 0.05, "python"), (30, 0.03, "python"), (60, 0.07, "python"), (80, 0.05, "python"),
+        (95, 0.015, "python"), (60, 0.05, "c")]  # reset tick, held back s, firmware
 
 
 def _held(messages: tuple[can.Message, ...], from_s: float, by_s: float) -> tuple[can.Message, ...]:
@@ -224,17 +226,17 @@ def _poses_between(messages: tuple[can.Message, ...], from_s: float) -> tuple[li
         if m.timestamp < from_s:
             continue
         if m.arbitration_id == fr.ODOM_STATUS_ID and _decoded(m)["PAGE"] == 0:
-            return [c for c, _ in poses], m.timestamp - poses[0][1]
+            return [c for c, _ in poses], m.timestamp - poses[0][1] if poses else math.nan
         if m.arbitration_id == fr.ODOM_POSE_X_ID:
             poses.append((int(_decoded(m)["COUNTER"]), m.timestamp))
     raise AssertionError("no summary")
 
 
-@pytest.mark.parametrize(("reboot_at", "held_s"), HELD)
+@pytest.mark.parametrize(("reboot_at", "held_s", "firmware"), HELD)
 def test_a_boot_summary_held_back_is_seen_and_the_correct_firmware_passes(
-    reboot_at: int, held_s: float, tmp_path: Path
+    reboot_at: int, held_s: float, firmware: str, tmp_path: Path
 ) -> None:
-    messages = _held(drive(reboot_at), reboot_at * TICK_S, held_s)
+    messages = _held(drive(reboot_at, firmware), reboot_at * TICK_S, held_s)
     primed_t = _reset_seen(messages, reboot_at)
     counters, after_s = _poses_between(messages, reboot_at * TICK_S)
     assert counters == list(range(len(counters)))  # the new life's, from 0
@@ -248,8 +250,9 @@ def test_a_boot_summary_held_back_is_seen_and_the_correct_firmware_passes(
     assert len(whole.report["reboots"]) == 1
     assert whole.report["onboard_vs_reference"]["max_position_error_m"] < 1e-3
     assert whole.passed
-    streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
-    assert json.dumps(streamed) == json.dumps(whole.report)
+    for chunk_frames in (13, 97):  # the pose run carried across chunks
+        streamed = analyze_file(path, PMIR, "exact", chunk_frames=chunk_frames)
+        assert json.dumps(streamed) == json.dumps(whole.report)
     monitor, bridge = _live(messages)
     assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
     assert bridge.reboots == 1
@@ -320,3 +323,55 @@ def test_lost_frames_make_no_boot_tick(seed: int, tmp_path: Path) -> None:
     assert analyze(read_log(path), PMIR, "exact").report["reboots"] == []
     _, bridge = _live(messages)
     assert bridge.reboots == 0
+
+
+# --- a firmware whose first tick sends no pose and says OK: its boot summary has no pose of
+# COUNTER 0 before it, so no judge tells the reboot (``bootticks``: known limit). Then the verdict
+# is FAIL everywhere, the pose against the first life's reference: never PASS nor OK ---
+
+POSE_IDS = {fr.ODOM_POSE_X_ID: fr.ODOM_POSE_X_DATA_IDS, fr.ODOM_POSE_Y_ID: fr.ODOM_POSE_Y_DATA_IDS}
+
+
+def _no_first_pose(messages: tuple[can.Message, ...], reboot_at: int) -> tuple[can.Message, ...]:
+    """The frames of a firmware that sends no pose in its first tick after the reset: the new
+    life's first ODOM_POSE_X and ODOM_POSE_Y gone, its later ones one COUNTER earlier (its
+    first pose frames sent say COUNTER 0), E2E re-protected."""
+    t_reset = reboot_at * TICK_S
+    out: list[can.Message] = []
+    dropped: set[int] = set()
+    for m in messages:
+        if m.arbitration_id in POSE_IDS and m.timestamp >= t_reset:
+            if m.arbitration_id not in dropped:
+                dropped.add(m.arbitration_id)
+                continue
+            signals = _decoded(m)
+            signals["COUNTER"] = (int(signals["COUNTER"]) - 1) % 16
+            data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
+            hf.p02_protect(data, int(signals["COUNTER"]), POSE_IDS[m.arbitration_id])
+            m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
+                            is_extended_id=False, timestamp=m.timestamp)
+        out.append(m)
+    return tuple(out)
+
+
+@pytest.mark.parametrize("reboot_at", [30, 80])
+def test_a_reboot_with_no_pose_in_its_first_tick_is_never_passed(
+    reboot_at: int, tmp_path: Path
+) -> None:
+    messages = _no_first_pose(drive(reboot_at), reboot_at)
+    counters, _ = _poses_between(messages, reboot_at * TICK_S)
+    assert counters == []  # the boot summary came before any pose of the new life (cantools)
+    path = _written(messages, tmp_path / f"nopose{reboot_at}.log")
+    own = ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
+                   reboots_t_s=[_reset_seen(drive(reboot_at), reboot_at)])
+    assert own.passed  # the firmware is right: the judges cannot tell its reboot
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert whole.report["reboots"] == []
+    assert not whole.passed
+    assert whole.report["onboard_vs_reference"]["max_position_error_m"] > 0.05
+    streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
+    assert json.dumps(streamed) == json.dumps(whole.report)
+    monitor, bridge = _live(messages)
+    assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
+    assert bridge.reboots == 0
+    assert bridge.tracker.vs_reference.max_dpos_m > 0.05
