@@ -375,3 +375,41 @@ def test_a_reboot_with_no_pose_in_its_first_tick_is_never_passed(
     assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
     assert bridge.reboots == 0
     assert bridge.tracker.vs_reference.max_dpos_m > 0.05
+
+
+@cache
+def late_sim(muted_ticks: int) -> tuple[can.Message, ...]:
+    """2 s of pmir on the circle, the motor controller silent for its first ``muted_ticks``:
+    the firmware INIT meanwhile, sending summaries but no pose (firmware/reports.py), so its
+    pose COUNTERs run behind its summaries' for the whole life."""
+    heard: list[can.Message] = []
+    with FaultRig(scenario=get_scenario("circle", PMIR, duration_s=60.0)) as rig:
+        rig.observers.append(lambda _k, got: heard.extend(got))
+        rig.mute_sim(range(muted_ticks))
+        rig.run(2.0)
+    return tuple(heard)
+
+
+@pytest.mark.parametrize("muted_ticks", [10, 12, 14, 16])
+def test_a_late_first_pose_makes_no_boot_tick(muted_ticks: int, tmp_path: Path) -> None:
+    # its summary of COUNTER 0 at 0.8 s (UPTIME 0) comes 0..60 ms after a pose of COUNTER 0
+    # (16 ticks muted: in the same tick): on main a reboot at 16 (and 10..14 with the window),
+    # the reference restarted at the power-up pose mid-drive. That pose of COUNTER 0 continues
+    # its life's sequence (COUNTER 15 a pose period before it): no new firmware's
+    messages = late_sim(muted_ticks)
+    summary = next(m for m in messages if m.arbitration_id == fr.ODOM_STATUS_ID
+                   and m.timestamp >= 0.8 - TICK_S / 2)
+    assert (_decoded(summary)["COUNTER"], _decoded(summary)["UPTIME"]) == (0, 0)
+    poses = [(m.timestamp, int(_decoded(m)["COUNTER"])) for m in messages
+             if m.arbitration_id == fr.ODOM_POSE_X_ID and m.timestamp <= summary.timestamp]
+    zero_s = max(t for t, c in poses if c == 0)
+    assert summary.timestamp - zero_s < 0.08  # the signature's timing (the 80 ms window)
+    path = _written(messages, tmp_path / f"late{muted_ticks}.log")
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert whole.report["reboots"] == []
+    assert whole.passed
+    streamed = analyze_file(path, PMIR, "exact", chunk_frames=13)
+    assert json.dumps(streamed) == json.dumps(whole.report)
+    monitor, bridge = _live(messages)
+    assert [e for e in monitor.events if e["kind"] == "reboot"] == []
+    assert bridge.reboots == 0

@@ -22,7 +22,15 @@ Between, a summary of COUNTER 0 comes a whole multiple of ``PHASE_STEP_MS`` = gc
 is 160 ms and 8 pose frames after one. The window (half that step: 80 ms, 4 pose frames) keeps
 it out with a margin for stamping; a summary of the old life would have to be held back 160 ms
 or more (behind a later pose of COUNTER 0) to pass for a boot tick, the limit the same-tick rule
-had too. So within UPTIME 0 the signature is a new firmware. Lost frames cannot make it up:
+had too. Those phases hold from a life's first pose: a firmware INIT at power-up (no encoder
+frame yet) sends summaries but no pose (firmware/reports.py), so its poses run 1 to 8 frames
+behind and its summary of COUNTER 0 at 0.8 s came 0 to 60 ms after a pose of COUNTER 0 (the
+motor controller 100..160 ms late: a false reboot mid-drive, at 160 ms already with the
+same-tick rule). So the run's pose of COUNTER 0 must break the sequence of the pose heard
+before it (``breaks_sequence``: sooner than one life could count on to 0; a new firmware's
+comes one tick after the old one's last pose); one that continues it starts no run. A reset
+just as the old life's pose COUNTER read 15, one pose period on, is then not told (in the first
+second: resets at 0.32, 0.64, 0.96 s). So within UPTIME 0 the signature is a new firmware. Lost frames cannot make it up:
 they shorten no time and the COUNTERs are read, not counted (a COUNTER that jumps to 0 is also
 what 16 k - j lost frames look like, so a jump alone is no evidence, and one ID alone is not
 either: ODOM_STATUS wraps at 0.8 s). A recorder's repeat of the boot summary is no second boot:
@@ -70,16 +78,34 @@ BOOT_WINDOW_S = BOOT_WINDOW_MS / 1000
 # the pose frames sent in the window: the run's latest COUNTER stays below it (80 ms: 4)
 BOOT_POSE_FRAMES = BOOT_WINDOW_MS * POSE_FRAMES_PER_CYCLE // POSE_CYCLE_MS
 REPEAT_S = POSE_CYCLE_MS / 4000  # a summary this close after the one before: a repeat of it
+POSE_PERIOD_S = POSE_CYCLE_MS / POSE_FRAMES_PER_CYCLE / 1000  # one pose frame to the next: 20 ms
+# a pose of COUNTER 0 this much sooner than one life's next COUNTER 0 could come breaks the
+# sequence (stamps of one life's poses taken to be this exact: a quarter of a pose cycle)
+SEQUENCE_SLACK_S = POSE_CYCLE_MS / 4000
 
 
-def next_run(run: tuple[float, int] | None, t_s: float, counter: int) -> tuple[float, int]:
+def breaks_sequence(counter_before: int, since_s: float) -> bool:
+    """Whether an ODOM_POSE_X of COUNTER 0 heard ``since_s`` after one of ``counter_before``
+    comes too soon for one firmware life: that life sends ``POSE_COUNTER_LAP - counter_before``
+    frames (at least: frames lost between are more) one ``POSE_PERIOD_S`` apart to get there
+    (ticks run, never faster: a stall or an INIT without poses only takes longer)."""
+    lap = POSE_COUNTER_LAP
+    return bool(since_s < (lap - counter_before) * POSE_PERIOD_S - SEQUENCE_SLACK_S)
+
+
+def next_run(run: tuple[float, int] | None, t_s: float, counter: int,
+             before_s: float | None) -> tuple[float, int]:
     """The pose run after an ODOM_POSE_X of E2E ``counter`` heard at bus time ``t_s`` (its CRC
     holding): (bus time of the run's pose of COUNTER 0, NaN when the COUNTERs did not count on
-    from one since; the latest COUNTER). ``run``: the one before (None: no pose yet). A pose
-    of COUNTER 0 starts a run; one whose COUNTER is above the latest continues it (frames lost
-    between keep it: they take no time away); any other breaks it."""
+    from one since; the latest COUNTER). ``run``: the one before (None: no pose yet);
+    ``before_s``: the bus time of the pose heard before (None: none). A pose of COUNTER 0 that
+    ``breaks_sequence`` of the one before (or has none) starts a run: one that one life's
+    sequence could reach is no new firmware's (an INIT that sent no pose at power-up shifts
+    its poses against its summaries); one whose COUNTER is above the latest continues a run
+    (frames lost between keep it: they take no time away); any other breaks it."""
     if counter == 0:
-        return t_s, 0
+        new = run is None or before_s is None or breaks_sequence(run[1], t_s - before_s)
+        return (t_s if new else math.nan), 0
     if run is not None and counter > run[1]:
         return run[0], counter
     return math.nan, counter
@@ -117,41 +143,44 @@ def boot_ticks(uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],
 
 
 def poses_before(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArray[np.int64],
-                 carried: tuple[float, int] | None = None
+                 carried: tuple[float, int, float] | None = None
                  ) -> tuple[tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]],
-                            tuple[float, int] | None]:
+                            tuple[float, int, float] | None]:
     """For the frames at ``positions`` (in order) the pose run of the ODOM_POSE_X frames before
     each whose CRC holds (``next_run``: its start's bus time, its latest COUNTER; NaN, -1 where
-    none; ``carried``: the run of the frames before ``frames``, a stream's earlier chunks), and
-    the run after them all (the next chunk's ``carried``)."""
+    none; ``carried``: the run of the frames before ``frames`` and its latest pose's bus time,
+    a stream's earlier chunks), and that after them all (the next chunk's ``carried``)."""
     where, t_pose, counter = _pose_rows(frames, decoder)
     if carried is not None:
         where = np.concatenate(([-1], where))
-        t_pose = np.concatenate(([carried[0]], t_pose))
+        t_pose = np.concatenate(([carried[2]], t_pose))
         counter = np.concatenate(([carried[1]], counter))
     if len(where) == 0:
         return (np.full(len(positions), math.nan), np.full(len(positions), -1, np.int64)), None
-    start = _run_starts(t_pose, counter, carried is not None)
+    start = _run_starts(t_pose, counter, None if carried is None else carried[0])
     k = np.searchsorted(where, positions) - 1  # the latest strictly before each
     found = k >= 0
     times = np.where(found, start[np.maximum(k, 0)], math.nan).astype(np.float64)
     counters = np.where(found, counter[np.maximum(k, 0)], -1).astype(np.int64)
-    return (times, counters), (float(start[-1]), int(counter[-1]))
+    return (times, counters), (float(start[-1]), int(counter[-1]), float(t_pose[-1]))
 
 
 def _run_starts(t_pose: npt.NDArray[np.float64], counter: npt.NDArray[np.int64],
-                carried: bool) -> npt.NDArray[np.float64]:
-    """``next_run``'s start (bus time s, NaN: broken) after each pose row at once; ``carried``:
-    the first row is a run carried in (its time already the run's start)."""
+                carried_start: float | None) -> npt.NDArray[np.float64]:
+    """``next_run``'s start (bus time s, NaN: none) after each pose row at once;
+    ``carried_start``: the first row is a run carried in, this its start (None: not)."""
     n = len(counter)
     rows = np.arange(n)
     stepped_on = np.zeros(n, dtype=bool)
     stepped_on[1:] = counter[1:] > counter[:-1]
     anchor = (counter == 0) | ~stepped_on  # where a run starts or breaks
     anchor[0] = True
-    value = np.where(counter == 0, t_pose, math.nan)
-    if carried:
-        value[0] = t_pose[0]
+    new = np.ones(n, dtype=bool)  # a COUNTER 0 that breaks the sequence of the pose before
+    new[1:] = (t_pose[1:] - t_pose[:-1]
+               < (POSE_COUNTER_LAP - counter[:-1]) * POSE_PERIOD_S - SEQUENCE_SLACK_S)
+    value = np.where((counter == 0) & new, t_pose, math.nan)
+    if carried_start is not None:
+        value[0] = carried_start
     last: npt.NDArray[np.float64] = value[np.maximum.accumulate(np.where(anchor, rows, 0))]
     return last
 

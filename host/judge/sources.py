@@ -62,6 +62,7 @@ class SourceWatch:
     summary_times: list[tuple[int, float]] = field(default_factory=list)  # the latest
     # summaries' COUNTER and bus time (``powerup.tick_bound_s``)
     pose: tuple[float, int] | None = None  # the ODOM_POSE_X frames' run (``bootticks.next_run``)
+    pose_s: float | None = None  # the bus time of the latest ODOM_POSE_X heard (``hear_pose``)
     summary_s: float | None = None  # the bus time of the latest summary observed
     life_from_s: float = -math.inf  # where the latest reboot told began: its summary's bus
     # time, or its pose run's start when that was a power-up tick (``bootticks``: held back)
@@ -133,6 +134,12 @@ class SourceWatch:
         self.last_uptime_s, self.last_state = uptime_s, state
         self.page_pending = self.page_pending and kind != "reboot"
         return kind
+
+    def hear_pose(self, t_s: float, counter: int) -> None:
+        """An ODOM_POSE_X whose CRC holds, heard at bus time ``t_s`` with E2E ``counter``,
+        whatever its sequence: on the pose run (``bootticks.next_run``)."""
+        self.pose = next_run(self.pose, t_s, counter, self.pose_s)
+        self.pose_s = t_s
 
     def conflict_text(self) -> str:
         """The verdict's reason once two sources were seen (``two_sources_text``); "" before."""
@@ -225,7 +232,7 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
     if message.name == POSE_MESSAGE:
         counter = pose_heard(data, e2e.data_ids if e2e is not None else None)
         if counter is not None:
-            watch.pose = next_run(watch.pose, t_s, counter)
+            watch.hear_pose(t_s, counter)
 
 
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,

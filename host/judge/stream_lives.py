@@ -72,7 +72,8 @@ class StreamLives:
     _changed: tuple[int, float] = (0, 0.0)  # the summary of the last new UPTIME offset
     conflict: tuple[int, float] | None = None  # ``reboots.two_sources``: position, bus time
     _cut: int = 0  # where the lives were cut for it (``finish_one_source``)
-    _pose: tuple[float, int] | None = None  # the pose run so far (``bootticks.poses_before``)
+    _pose: tuple[float, int, float] | None = None  # the pose run so far, its latest's bus
+    # time (``bootticks.poses_before``)
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""

@@ -56,7 +56,7 @@ from typing import Any, ClassVar
 import can
 from cantools.database.can import Database
 
-from odocan.host.judge.bootticks import POSE_MESSAGE, next_run, pose_heard
+from odocan.host.judge.bootticks import POSE_MESSAGE, pose_heard
 from odocan.host.judge.liveconfig import SAME_TICK_S, rebooted
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
@@ -222,10 +222,10 @@ class RobotTelemetry(CommandFollowing):
         """A reboot (UPTIME going back, INIT after running, a power-up tick's COUNTERs) starts
         the firmware's new life at its power-up pose, as the monitor and ``analyze`` do
         (``host.judge.sources``); every page to the live gapseen (``livegapseen.heard_status``);
-        an ODOM_POSE_X's COUNTER to the watch's pose run (``bootticks.next_run``)."""
+        an ODOM_POSE_X's COUNTER to the watch's pose run (``SourceWatch.hear_pose``)."""
         if route.name == POSE_MESSAGE:
             if (counter := pose_heard(data, self._pose_ids.data_ids)) is not None:
-                self.sources.pose = next_run(self.sources.pose, t_s, counter)
+                self.sources.hear_pose(t_s, counter)
             return
         if route.status_page is None:
             return
