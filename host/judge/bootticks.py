@@ -30,12 +30,13 @@ same-tick rule). So the run's pose of COUNTER 0 must break the sequence of the p
 before it (``breaks_sequence``: sooner than one life could count on to 0; a new firmware's
 comes one tick after the old one's last pose); one that continues it starts no run. A reset
 just as the old life's pose COUNTER read 15, one pose period on, is then not told (in the first
-second: resets at 0.32, 0.64, 0.96 s). So within UPTIME 0 the signature is a new firmware. Lost frames cannot make it up:
-they shorten no time and the COUNTERs are read, not counted (a COUNTER that jumps to 0 is also
-what 16 k - j lost frames look like, so a jump alone is no evidence, and one ID alone is not
-either: ODOM_STATUS wraps at 0.8 s). A recorder's repeat of the boot summary is no second boot:
-the summary before it must be at least ``REPEAT_S`` older. The judges that heard the new life's
-first poses and twists before its held-back summary withdraw them (``SourceWatch.life_from_s``).
+second: resets at 0.32, 0.64, 0.96 s). So within UPTIME 0 the signature is a new firmware.
+Lost frames cannot make it up: they shorten no time and the COUNTERs are read, not counted (a
+COUNTER that jumps to 0 is also what 16 k - j lost frames look like, so a jump alone is no
+evidence, and one ID alone is not either: ODOM_STATUS wraps at 0.8 s). A recorder's repeat of
+the boot summary is no second boot: the summary before it must be at least ``REPEAT_S`` older.
+The judges that heard the new life's first poses and twists before its held-back summary
+withdraw them (``SourceWatch.life_from_s``).
 
 Why this rather than a finer UPTIME (a DBC change): a user's own firmware that speaks the DBC
 gives it as it is (E2E counters from 0, the DBC's cycles), ours and the C port alike, and old
