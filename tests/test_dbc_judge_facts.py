@@ -147,14 +147,14 @@ print(json.dumps({
     "status_cycle_ms": sources.STATUS_CYCLE_MS,
     "enc_cycle_s": [livewindow.CYCLE_S, livedistance.CYCLE_S, livetwist.CYCLE_S],
     # a summary of UPTIME 0, COUNTER 0, 0.6 of a pose cycle after an ODOM_POSE_X of COUNTER 0
-    "late_boot": bootticks.boot_tick(0, 0, 10.0 + 0.6 * tick_s, (10.0, 0), None),
+    "late_boot": bootticks.boot_tick(0, 0, 10.0 + 0.6 * tick_s, (10.0, 0, True), None, None),
     # held back 3.5 pose cycles, behind the poses of COUNTER 1, 2, 3 counting on from it
-    "held_boot": bootticks.boot_tick(0, 0, 10.0 + 3.5 * tick_s, (10.0, 3), None),
+    "held_boot": bootticks.boot_tick(0, 0, 10.0 + 3.5 * tick_s, (10.0, 3, True), None, None),
     # 8 pose cycles after it (one life at 0.8 s, the DBC as it is): no boot tick
-    "phase_step": bootticks.boot_tick(0, 0, 10.0 + 8 * tick_s, (10.0, 8), None),
+    "phase_step": bootticks.boot_tick(0, 0, 10.0 + 8 * tick_s, (10.0, 8, True), None, None),
     # the same 0.3 of a cycle after: the power-up tick's signature
-    "boot": bootticks.boot_tick(0, 0, 10.0 + 0.3 * tick_s, (10.0, 0), None),
-    "boot_10ms": bootticks.boot_tick(0, 0, 10.015, (10.0, 0), None),
+    "boot": bootticks.boot_tick(0, 0, 10.0 + 0.3 * tick_s, (10.0, 0, True), None, None),
+    "boot_10ms": bootticks.boot_tick(0, 0, 10.015, (10.0, 0, True), None, None),
 }))
 """
 

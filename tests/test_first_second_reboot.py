@@ -46,7 +46,8 @@ from tests.fault_rig import FaultRig
 
 PMIR = load("pmir")
 DB = database()
-FIRST_SECOND = [5, 30, 60, 75, 80, 95, 100]  # reset ticks within the first second of uptime
+FIRST_SECOND = [5, 30, 32, 60, 64, 75, 80, 95, 96, 100]  # reset ticks within the first second
+# (32, 64, 96: the old life's last pose read COUNTER 15 a pose period before the new one's 0)
 CONTROL = [150, 160, 300]  # UPTIME 1 and 3 before the reset: told from UPTIME already (160:
 # the new firmware's first ODOM_TWIST, before the summary, is 2 COUNTERs on: in sequence)
 RUN_S = 4.0

@@ -19,7 +19,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from odocan.host.judge.bootticks import POSE_MESSAGE, boot_tick, next_run, pose_heard
+from odocan.host.judge.bootticks import (
+    POSE_MESSAGE,
+    STATUS_MESSAGE,
+    boot_tick,
+    next_run,
+    pose_heard,
+)
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.powerup import NAMED_SPAN, holds_first_cycle, same_tick, tick_bound_s
 from odocan.host.protocol import busfacts
@@ -61,8 +67,10 @@ class SourceWatch:
     first_counter: int | None = None  # the first accepted page's COUNTER, any page
     summary_times: list[tuple[int, float]] = field(default_factory=list)  # the latest
     # summaries' COUNTER and bus time (``powerup.tick_bound_s``)
-    pose: tuple[float, int] | None = None  # the ODOM_POSE_X frames' run (``bootticks.next_run``)
+    pose: tuple[float, int, bool] | None = None  # the ODOM_POSE_X frames' run (``next_run``)
     pose_s: float | None = None  # the bus time of the latest ODOM_POSE_X heard (``hear_pose``)
+    status_before: tuple[float, int] | None = None  # bus time, COUNTER of the ODOM_STATUS
+    status_last: tuple[float, int] | None = None  # frame before the latest, and the latest
     summary_s: float | None = None  # the bus time of the latest summary observed
     life_from_s: float = -math.inf  # where the latest reboot told began: its summary's bus
     # time, or its pose run's start when that was a power-up tick (``bootticks``: held back)
@@ -109,7 +117,7 @@ class SourceWatch:
         offset = uptime_s - t_s
         kind = None
         booted = counter is not None and boot_tick(uptime_s, counter, t_s, self.pose,
-                                                   self.summary_s)
+                                                   self.summary_s, self.status_before)
         self.summary_s = t_s
         if self.offset_s is None:
             self.offset_s, self.first_uptime_s = offset, uptime_s
@@ -140,6 +148,12 @@ class SourceWatch:
         whatever its sequence: on the pose run (``bootticks.next_run``)."""
         self.pose = next_run(self.pose, t_s, counter, self.pose_s)
         self.pose_s = t_s
+
+    def hear_status(self, t_s: float, counter: int) -> None:
+        """An ODOM_STATUS frame (any page) whose CRC holds, heard at bus time ``t_s`` with E2E
+        ``counter``, whatever its sequence, before it is observed: the one before a summary
+        tells whether it breaks the sequence (``bootticks.status_breaks``)."""
+        self.status_before, self.status_last = self.status_last, (t_s, counter)
 
     def conflict_text(self) -> str:
         """The verdict's reason once two sources were seen (``two_sources_text``); "" before."""
@@ -229,10 +243,12 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
     """Any frame heard at bus time ``t_s``: an ODOM_POSE_X whose CRC holds, whatever its E2E
     sequence (``e2e``: the message's ``E2EMessage`` or None), goes on ``watch``'s pose run (its
     COUNTERs tell a power-up tick: ``bootticks.next_run``)."""
-    if message.name == POSE_MESSAGE:
+    if message.name in (POSE_MESSAGE, STATUS_MESSAGE):
         counter = pose_heard(data, e2e.data_ids if e2e is not None else None)
-        if counter is not None:
+        if counter is not None and message.name == POSE_MESSAGE:
             watch.hear_pose(t_s, counter)
+        elif counter is not None:
+            watch.hear_status(t_s, counter)
 
 
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,

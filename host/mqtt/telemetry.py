@@ -230,6 +230,8 @@ class RobotTelemetry(CommandFollowing):
         if route.status_page is None:
             return
         ids = self._status_ids.data_ids if self._status_ids is not None else None
+        if (counter := pose_heard(data, ids)) is not None:  # CRC holding, any sequence
+            self.sources.hear_status(t_s, counter)
         heard_status(self.tracker, route.message, data, ids, t_s, route.signals)  # compiled
         summary = (boot_summary(route.message, data, ids, route.signals)
                    if route.is_summary(data) else None)
