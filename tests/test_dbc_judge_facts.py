@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import math
 import os
 import re
 import subprocess
@@ -79,7 +80,9 @@ FACTS = [
     ("odocan.host.judge.bootticks", "STATUS_COUNTER_LAP", lambda: _lap("ODOM_STATUS")),
     ("odocan.host.judge.bootticks", "UPTIME_LSB_MS", lambda: round(
         _db().get_message_by_name("ODOM_STATUS").get_signal_by_name("UPTIME").scale * 1000)),
-    ("odocan.host.judge.bootticks", "SAME_TICK_S", lambda: _cycle_ms("ODOM_POSE_X") / 2000),
+    ("odocan.host.judge.bootticks", "BOOT_WINDOW_MS", lambda: math.gcd(
+        _lap("ODOM_POSE_X") * _cycle_ms("ODOM_POSE_X") // _frames("ODOM_POSE_X"),
+        _lap("ODOM_STATUS") * _cycle_ms("ODOM_STATUS") // _frames("ODOM_STATUS")) // 2),
     ("odocan.host.judge.sources", "STATUS_CYCLE_MS", lambda: _cycle_ms("ODOM_STATUS")),
     ("odocan.host.judge.sources", "STATUS_COUNTER_MODULO", lambda: _lap("ODOM_STATUS")),
     ("odocan.host.judge.livewindow", "CYCLE_S", lambda: _cycle_ms("WHEEL_ENCODERS") / 1000),
@@ -141,6 +144,7 @@ def test_judge_constant_is_the_dbcs(module: str, name: str, expected: object) ->
 
 PROBE = """
 import json
+import math
 from odocan.host.judge import bootticks, ctrlrestart, livedistance, livetwist, livewindow, sources
 from odocan.host.judge import reference
 tick_s = bootticks.POSE_CYCLE_MS / 1000
@@ -151,10 +155,14 @@ print(json.dumps({
     "status_cycle_ms": sources.STATUS_CYCLE_MS,
     "enc_cycle_s": [livewindow.CYCLE_S, livedistance.CYCLE_S, livetwist.CYCLE_S],
     # a summary of UPTIME 0, COUNTER 0, 0.6 of a pose cycle after an ODOM_POSE_X of COUNTER 0
-    "late_boot": bootticks.boot_tick(0, 0, 10.0 + 0.6 * tick_s, (10.0, 0), None),
+    "late_boot": bootticks.boot_tick(0, 0, 10.0 + 0.6 * tick_s, (10.0, 0, True), None, None),
+    # held back 3.5 pose cycles, behind the poses of COUNTER 1, 2, 3 counting on from it
+    "held_boot": bootticks.boot_tick(0, 0, 10.0 + 3.5 * tick_s, (10.0, 3, True), None, None),
+    # 8 pose cycles after it (one life at 0.8 s, the DBC as it is): no boot tick
+    "phase_step": bootticks.boot_tick(0, 0, 10.0 + 8 * tick_s, (10.0, 8, True), None, None),
     # the same 0.3 of a cycle after: the power-up tick's signature
-    "boot": bootticks.boot_tick(0, 0, 10.0 + 0.3 * tick_s, (10.0, 0), None),
-    "boot_10ms": bootticks.boot_tick(0, 0, 10.015, (10.0, 0), None),
+    "boot": bootticks.boot_tick(0, 0, 10.0 + 0.3 * tick_s, (10.0, 0, True), None, None),
+    "boot_10ms": bootticks.boot_tick(0, 0, 10.015, (10.0, 0, True), None, None),
 }))
 """
 
@@ -187,7 +195,8 @@ def test_judges_follow_an_edited_dbc(tmp_path: Path) -> None:
     assert as_is["status_cycle_ms"] == 100
     assert as_is["enc_cycle_s"] == [0.01] * 3
     assert (as_is["enc_period_us"], as_is["periods_per_s"]) == (10_000, 100)
-    assert (as_is["boot"], as_is["late_boot"], as_is["boot_10ms"]) == (True, False, False)
+    assert (as_is["boot"], as_is["late_boot"], as_is["boot_10ms"]) == (True, True, True)
+    assert (as_is["held_boot"], as_is["phase_step"]) == (True, False)
     # WHEEL_ENCODERS at 20 ms, ODOM_POSE_X at 40 ms, ODOM_STATUS at 200 ms: COUNTERs wrap
     # together every lcm(640, 1600) = 3.2 s, still more than UPTIME's second
     slow = _probe(tmp_path, _edited(tmp_path, {256: 20, 512: 40, 896: 200}))
@@ -195,8 +204,9 @@ def test_judges_follow_an_edited_dbc(tmp_path: Path) -> None:
     assert slow["status_cycle_ms"] == 200
     assert slow["enc_cycle_s"] == [0.02] * 3
     assert (slow["enc_period_us"], slow["periods_per_s"]) == (20_000, 50)
-    # 15 ms after the pose is within half of its 40 ms cycle: the same tick
-    assert (slow["boot"], slow["late_boot"], slow["boot_10ms"]) == (True, False, True)
+    # the phase step is gcd(640, 1600) = 320 ms: a boot summary told up to 160 ms (4 poses) on
+    assert (slow["boot"], slow["late_boot"], slow["boot_10ms"]) == (True, True, True)
+    assert (slow["held_boot"], slow["phase_step"]) == (True, False)
 
 
 def test_no_boot_tick_where_the_counters_wrap_within_a_second(tmp_path: Path) -> None:
@@ -205,3 +215,4 @@ def test_no_boot_tick_where_the_counters_wrap_within_a_second(tmp_path: Path) ->
     fast = _probe(tmp_path, _edited(tmp_path, {512: 5}))
     assert fast["pose_cycle_ms"] == 5
     assert (fast["boot"], fast["late_boot"], fast["boot_10ms"]) == (False, False, False)
+    assert (fast["held_boot"], fast["phase_step"]) == (False, False)

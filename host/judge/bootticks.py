@@ -6,19 +6,40 @@ first tick it says OK, not INIT (``host.judge.sources``). What tells it is what 
 speaking the DBC sends at power-up: its E2E COUNTERs start at 0 (E2E Profile 2: the sender's
 counter starts at 0; ``powerup.holds_first_cycle`` relies on it too), and its first tick sends
 its pose, then its summary (firmware/ecu.py step 5). The power-up tick's signature: a summary of
-UPTIME 0 and COUNTER 0 whose tick's ODOM_POSE_X -- the latest heard before it, less than half a
-pose cycle before it, its CRC holding, whatever its E2E sequence -- has COUNTER 0 too.
+UPTIME 0 and COUNTER 0 heard less than ``BOOT_WINDOW_MS`` after an ODOM_POSE_X of COUNTER 0, the
+poses heard since (their CRC holding, whatever their E2E sequence) counting on from it, the
+latest of them with a COUNTER below ``BOOT_POSE_FRAMES`` (a pose run, ``next_run``). A summary
+stamped in its tick (after its own pose) or held back behind the next poses of its new life (a
+loaded bus, a recorder's stamping, up to ``BOOT_WINDOW_MS``) is told alike.
 
 Within one firmware life the two COUNTERs read 0 in one tick again only once both wrapped
 together: ODOM_POSE_X every 16 frames at one a 20 ms cycle (320 ms), ODOM_STATUS every 16 frames
 at two a 100 ms cycle (800 ms): both every lcm = 1.6 s of sending (``JOINT_WRAP_MS``, from the
 DBC's GenMsgCycleTime and E2EFramesPerCycle; the tests check them against the DBC). By then
 UPTIME says 1 at least; a firmware that sent fewer frames (stalled, overrun) took longer still.
-So within UPTIME 0 the signature is a new firmware. Lost frames cannot make it up: the COUNTERs
-are read, not counted (a COUNTER that jumps to 0 is also what 16 k - j lost frames look like,
-so a jump alone is no evidence, and one ID alone is not either: ODOM_STATUS wraps at 0.8 s). A
-recorder's repeat of the boot summary is no second boot: the summary before it must be at least
-``REPEAT_S`` older.
+Between, a summary of COUNTER 0 comes a whole multiple of ``PHASE_STEP_MS`` = gcd(320, 800) =
+160 ms after the latest pose of COUNTER 0 (the two started together at power-up): at 0.8 s it
+is 160 ms and 8 pose frames after one. The window (half that step: 80 ms, 4 pose frames) keeps
+it out with a margin for stamping; a summary of the old life would have to be held back 160 ms
+or more (behind a later pose of COUNTER 0) to pass for a boot tick, the limit the same-tick rule
+had too. Those phases hold from a life's first pose: a firmware INIT at power-up (no encoder
+frame yet) sends summaries but no pose (firmware/reports.py), so its poses run 1 to 8 frames
+behind and its summary of COUNTER 0 at 0.8 s came 0 to 60 ms after a pose of COUNTER 0 (the
+motor controller 100..160 ms late: a false reboot mid-drive, at 160 ms already with the
+same-tick rule). So one of the two must also break its own message's sequence: the run's pose
+of COUNTER 0 that of the pose heard before it (``breaks_sequence``), or the summary that of the
+ODOM_STATUS frame heard before it (``status_breaks``): sooner than one life could count on to 0
+(one life's frames never come faster than their cycle; lost ones, stalls, an INIT: later). A
+new firmware breaks at least one: its first frames come within a tick of the old one's last,
+and the old COUNTERs would have to be one period short of 0 for both (not within the first
+second: 32 and 96 ticks in, the pose alone continues; 80, the status alone). So within UPTIME 0
+the signature is a new firmware.
+Lost frames cannot make it up: they shorten no time and the COUNTERs are read, not counted (a
+COUNTER that jumps to 0 is also what 16 k - j lost frames look like, so a jump alone is no
+evidence, and one ID alone is not either: ODOM_STATUS wraps at 0.8 s). A recorder's repeat of
+the boot summary is no second boot: the summary before it must be at least ``REPEAT_S`` older.
+The judges that heard the new life's first poses and twists before its held-back summary
+withdraw them (``SourceWatch.life_from_s``).
 
 Why this rather than a finer UPTIME (a DBC change): a user's own firmware that speaks the DBC
 gives it as it is (E2E counters from 0, the DBC's cycles), ours and the C port alike, and old
@@ -41,6 +62,7 @@ from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, crc8h2f_p02_one, e2e_messages
 
 POSE_MESSAGE = busfacts.POSE_MESSAGE  # the pose frame the firmware's every tick sends first
+STATUS_MESSAGE = busfacts.STATUS_MESSAGE  # its summary and pages
 # The DBC's (``host.protocol.busfacts``): 16, 20 ms, 1 a cycle; 16, 100 ms, 2 a cycle; 1 s
 POSE_COUNTER_LAP, POSE_CYCLE_MS = busfacts.POSE_COUNTER_LAP, busfacts.POSE_CYCLE_MS
 POSE_FRAMES_PER_CYCLE = busfacts.POSE_FRAMES_PER_CYCLE
@@ -52,69 +74,179 @@ UPTIME_LSB_MS = busfacts.UPTIME_LSB_MS  # ODOM_STATUS UPTIME: 1 s per LSB
 # The rule's ground (module docstring): 1600 ms >= 1000 ms. A DBC whose two COUNTERs wrap
 # together within one UPTIME LSB cannot tell a reboot this way: then no summary is a boot tick.
 RULE_HOLDS = JOINT_WRAP_MS >= UPTIME_LSB_MS
-SAME_TICK_S = POSE_CYCLE_MS / 2000  # the pose of the summary's tick: less than half a cycle
+# Within one life a summary of COUNTER 0 comes a multiple of this after the latest pose of
+# COUNTER 0 (the two COUNTERs' laps, 320 and 800 ms: 160 ms); only the joint wrap's multiple is 0
+PHASE_STEP_MS = math.gcd(POSE_COUNTER_LAP * POSE_CYCLE_MS // POSE_FRAMES_PER_CYCLE,
+                         STATUS_COUNTER_LAP * STATUS_CYCLE_MS // STATUS_FRAMES_PER_CYCLE)
+BOOT_WINDOW_MS = PHASE_STEP_MS // 2  # a boot summary heard this soon after the new pose run's 0
+BOOT_WINDOW_S = BOOT_WINDOW_MS / 1000
+# the pose frames sent in the window: the run's latest COUNTER stays below it (80 ms: 4)
+BOOT_POSE_FRAMES = BOOT_WINDOW_MS * POSE_FRAMES_PER_CYCLE // POSE_CYCLE_MS
 REPEAT_S = POSE_CYCLE_MS / 4000  # a summary this close after the one before: a repeat of it
+# (start bus times, latest COUNTERs, starts breaking the sequence) of pose runs, per summary
+Runs = tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.bool_]]
+Latest = tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]  # bus times, COUNTERs
+POSE_PERIOD_S = POSE_CYCLE_MS / POSE_FRAMES_PER_CYCLE / 1000  # one pose frame to the next: 20 ms
+# a pose of COUNTER 0 this much sooner than one life's next COUNTER 0 could come breaks the
+# sequence (stamps of one life's poses taken to be this exact: a quarter of a pose cycle)
+SEQUENCE_SLACK_S = POSE_CYCLE_MS / 4000
 
 
-def boot_tick(uptime_s: int, counter: int, t_s: float, pose: tuple[float, int] | None,
-              summary_before_s: float | None) -> bool:
+def breaks_sequence(counter_before: int, since_s: float) -> bool:
+    """Whether an ODOM_POSE_X of COUNTER 0 heard ``since_s`` after one of ``counter_before``
+    comes too soon for one firmware life: that life sends ``POSE_COUNTER_LAP - counter_before``
+    frames (at least: frames lost between are more) one ``POSE_PERIOD_S`` apart to get there
+    (ticks run, never faster: a stall or an INIT without poses only takes longer)."""
+    lap = POSE_COUNTER_LAP
+    return bool(since_s < (lap - counter_before) * POSE_PERIOD_S - SEQUENCE_SLACK_S)
+
+
+def status_breaks(counter_before: int, since_s: float) -> bool:
+    """Whether a summary of COUNTER 0 heard ``since_s`` after an ODOM_STATUS frame of
+    ``counter_before`` (any page) comes too soon for one firmware life: it sends its frames
+    ``STATUS_FRAMES_PER_CYCLE`` a cycle (the summary first), so it gets from that one's cycle to
+    the summary of COUNTER 0 in ``(STATUS_COUNTER_LAP - counter_before) // 2``-ish cycles, never
+    sooner (lost frames, stalls: later)."""
+    per = STATUS_FRAMES_PER_CYCLE
+    cycles = STATUS_COUNTER_LAP // per - counter_before // per
+    return bool(since_s < cycles * STATUS_CYCLE_MS / 1000 - SEQUENCE_SLACK_S)
+
+
+def next_run(run: tuple[float, int, bool] | None, t_s: float, counter: int,
+             before_s: float | None) -> tuple[float, int, bool]:
+    """The pose run after an ODOM_POSE_X of E2E ``counter`` heard at bus time ``t_s`` (its CRC
+    holding): (bus time of the run's pose of COUNTER 0, NaN when the COUNTERs did not count on
+    from one since; the latest COUNTER; whether that pose of COUNTER 0 ``breaks_sequence`` of
+    the pose heard before it, or had none). ``run``: the one before (None: no pose yet);
+    ``before_s``: the bus time of the pose heard before (None: none). A pose of COUNTER 0 starts
+    a run; one whose COUNTER is above the latest continues it (frames lost between keep it:
+    they take no time away); any other breaks it."""
+    if counter == 0:
+        new = run is None or before_s is None or breaks_sequence(run[1], t_s - before_s)
+        return t_s, 0, new
+    if run is not None and counter > run[1]:
+        return run[0], counter, run[2]
+    return math.nan, counter, False
+
+
+def boot_tick(uptime_s: int, counter: int, t_s: float, pose: tuple[float, int, bool] | None,
+              summary_before_s: float | None, status_before: tuple[float, int] | None) -> bool:
     """The summary (UPTIME ``uptime_s``, E2E ``counter``, bus time ``t_s``) is a firmware's
-    power-up tick (module docstring): ``pose``, (bus time, COUNTER) of the latest ODOM_POSE_X
-    heard before it (None: none); ``summary_before_s``: the bus time of the summary before
-    (None: none)."""
+    power-up tick (module docstring): ``pose``, the pose run of the ODOM_POSE_X frames heard
+    before it (``next_run``; None: none); ``summary_before_s``: the bus time of the summary
+    before (None: none); ``status_before``: bus time and COUNTER of the ODOM_STATUS frame
+    heard before it (any page; None: none). The run's pose of COUNTER 0 or the summary must
+    break its message's sequence (``breaks_sequence``, ``status_breaks``)."""
     if not RULE_HOLDS or uptime_s != 0 or counter != 0 or pose is None:
         return False
     if summary_before_s is not None and t_s - summary_before_s < REPEAT_S:
         return False
-    return pose[1] == 0 and 0.0 <= t_s - pose[0] < SAME_TICK_S
+    broken = pose[2] or status_before is None or status_breaks(status_before[1],
+                                                               t_s - status_before[0])
+    return broken and 0 <= pose[1] < BOOT_POSE_FRAMES and 0.0 <= t_s - pose[0] < BOOT_WINDOW_S
 
 
 def boot_ticks(uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],
-               t_s: npt.NDArray[np.float64], poses: tuple[npt.NDArray[np.float64],
-                                                          npt.NDArray[np.int64]],
+               t_s: npt.NDArray[np.float64], poses: Runs, statuses: Latest,
                summary_before_s: float | None) -> npt.NDArray[np.bool_]:
     """``boot_tick`` of summaries in bus order (their UPTIMEs, COUNTERs, bus times) at once;
-    ``poses``: each one's latest ODOM_POSE_X (``poses_before``: NaN, -1 where none);
+    ``poses``: each one's pose run (``poses_before``: NaN, -1, False where none);
+    ``statuses``: each one's ODOM_STATUS frame before (``status_before``: NaN, -1 where none);
     ``summary_before_s``: the bus time of the summary before the first."""
     before = np.concatenate(([-math.inf if summary_before_s is None else summary_before_s],
                              t_s[:-1]))
-    pose_t, pose_counter = poses
+    pose_t, pose_counter, pose_new = poses
+    status_t, status_counter = statuses
+    per = STATUS_FRAMES_PER_CYCLE
+    cycles = STATUS_COUNTER_LAP // per - status_counter // per
+    status_new = ((status_counter < 0)
+                  | (t_s - status_t < cycles * STATUS_CYCLE_MS / 1000 - SEQUENCE_SLACK_S))
     since = t_s - pose_t  # NaN where no pose: every comparison False
     found: npt.NDArray[np.bool_] = (RULE_HOLDS & (uptime_s == 0) & (counters == 0)
-                                    & (pose_counter == 0) & (t_s - before >= REPEAT_S)
-                                    & (since >= 0.0) & (since < SAME_TICK_S))
+                                    & (pose_counter >= 0) & (pose_counter < BOOT_POSE_FRAMES)
+                                    & (t_s - before >= REPEAT_S) & (pose_new | status_new)
+                                    & (since >= 0.0) & (since < BOOT_WINDOW_S))
     return found
 
 
 def poses_before(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArray[np.int64],
-                 carried: tuple[float, int] | None = None
-                 ) -> tuple[tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]],
-                            tuple[float, int] | None]:
-    """For the frames at ``positions`` (in order) the latest ODOM_POSE_X before each whose CRC
-    holds (bus time, COUNTER; NaN, -1 where none; ``carried``: the latest of the frames before
-    ``frames``, a stream's earlier chunks), and the latest of all (the next chunk's
-    ``carried``)."""
-    where, t_pose, counter = _pose_rows(frames, decoder)
+                 carried: tuple[float, int, bool, float] | None = None
+                 ) -> tuple[Runs, tuple[float, int, bool, float] | None]:
+    """For the frames at ``positions`` (in order) the pose run of the ODOM_POSE_X frames before
+    each whose CRC holds (``next_run``: its start's bus time, its latest COUNTER, whether its
+    start broke the sequence; NaN, -1, False where none; ``carried``: the run of the frames
+    before ``frames`` and its latest pose's bus time, a stream's earlier chunks), and that after
+    them all (the next chunk's ``carried``)."""
+    where, t_pose, counter = _rows(frames, decoder, POSE_MESSAGE)
     if carried is not None:
         where = np.concatenate(([-1], where))
-        t_pose = np.concatenate(([carried[0]], t_pose))
+        t_pose = np.concatenate(([carried[3]], t_pose))
+        counter = np.concatenate(([carried[1]], counter))
+    if len(where) == 0:
+        n = len(positions)
+        return (np.full(n, math.nan), np.full(n, -1, np.int64), np.zeros(n, bool)), None
+    start, new = _run_starts(t_pose, counter, None if carried is None else (carried[0], carried[2]))
+    k = np.searchsorted(where, positions) - 1  # the latest strictly before each
+    found = k >= 0
+    at = np.maximum(k, 0)
+    times = np.where(found, start[at], math.nan).astype(np.float64)
+    counters = np.where(found, counter[at], -1).astype(np.int64)
+    news = (found & new[at]).astype(bool)
+    return (times, counters, news), (float(start[-1]), int(counter[-1]), bool(new[-1]),
+                                     float(t_pose[-1]))
+
+
+def status_before(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArray[np.int64],
+                  carried: tuple[float, int] | None = None
+                  ) -> tuple[Latest, tuple[float, int] | None]:
+    """For the frames at ``positions`` (in order) the latest ODOM_STATUS frame (any page) before
+    each whose CRC holds (bus time, COUNTER; NaN, -1 where none; ``carried``: the latest of the
+    frames before ``frames``), and the latest of all (the next chunk's ``carried``)."""
+    where, t_status, counter = _rows(frames, decoder, STATUS_MESSAGE)
+    if carried is not None:
+        where = np.concatenate(([-1], where))
+        t_status = np.concatenate(([carried[0]], t_status))
         counter = np.concatenate(([carried[1]], counter))
     if len(where) == 0:
         return (np.full(len(positions), math.nan), np.full(len(positions), -1, np.int64)), None
     k = np.searchsorted(where, positions) - 1  # the latest strictly before each
     found = k >= 0
-    times = np.where(found, t_pose[np.maximum(k, 0)], math.nan).astype(np.float64)
-    counters = np.where(found, counter[np.maximum(k, 0)], -1).astype(np.int64)
-    return (times, counters), (float(t_pose[-1]), int(counter[-1]))
+    at = np.maximum(k, 0)
+    times = np.where(found, t_status[at], math.nan).astype(np.float64)
+    counters = np.where(found, counter[at], -1).astype(np.int64)
+    return (times, counters), (float(t_status[-1]), int(counter[-1]))
 
 
-def _pose_rows(frames: FrameArrays, decoder: BulkDecoder
-               ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64]]:
-    """Positions, bus times and E2E COUNTERs of the ODOM_POSE_X frames whose CRC holds
+def _run_starts(t_pose: npt.NDArray[np.float64], counter: npt.NDArray[np.int64],
+                carried: tuple[float, bool] | None
+                ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    """``next_run``'s start (bus time s, NaN: none) and whether it broke the sequence, after
+    each pose row at once; ``carried``: the first row is a run carried in, its (start, broke)
+    (None: not)."""
+    n = len(counter)
+    rows = np.arange(n)
+    stepped_on = np.zeros(n, dtype=bool)
+    stepped_on[1:] = counter[1:] > counter[:-1]
+    anchor = (counter == 0) | ~stepped_on  # where a run starts or breaks
+    anchor[0] = True
+    new = np.ones(n, dtype=bool)  # a COUNTER 0 that breaks the sequence of the pose before
+    new[1:] = (t_pose[1:] - t_pose[:-1]
+               < (POSE_COUNTER_LAP - counter[:-1]) * POSE_PERIOD_S - SEQUENCE_SLACK_S)
+    value = np.where(counter == 0, t_pose, math.nan)
+    broke = (counter == 0) & new
+    if carried is not None:
+        value[0], broke[0] = carried
+    last = np.maximum.accumulate(np.where(anchor, rows, 0))
+    return value[last].astype(np.float64), broke[last].astype(bool)
+
+
+def _rows(frames: FrameArrays, decoder: BulkDecoder, name: str
+          ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64]]:
+    """Positions, bus times and E2E COUNTERs of the frames of message ``name`` whose CRC holds
     (whatever their sequence: a rebooted firmware restarts it); empty without them."""
     try:
-        message = decoder.message(POSE_MESSAGE)
-        rows = decoder.select(frames, POSE_MESSAGE)
+        message = decoder.message(name)
+        rows = decoder.select(frames, name)
     except (DecodeError, KeyError):
         return np.zeros(0, np.int64), np.zeros(0, np.float64), np.zeros(0, np.int64)
     rows = np.asarray(rows, dtype=np.int64)

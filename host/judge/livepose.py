@@ -27,6 +27,8 @@ from odocan.host.protocol.pose import heading_fields, unwrap_near
 from odocan.sim.pose import wrap_angle
 
 RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
+MARKS_KEPT = 16  # pairs ``ErrorStats.withdraw_from`` can take back: a reboot's boot window
+# (``bootticks.BOOT_WINDOW_MS``, 80 ms: 4 poses) with room to spare
 WIRE_BITS = busfacts.ENC_WIRE_COUNTER_BITS  # WHEEL_ENCODERS carries the low 24 bits of each counter
 WIRE_MASK = (1 << WIRE_BITS) - 1
 
@@ -304,13 +306,27 @@ class ErrorStats:
     latest: dict[str, float] = field(default_factory=dict)
     max_dpos_m: float = 0.0
     max_dheading_rad: float = 0.0
+    marks: deque[tuple[float, int, float, float]] = field(
+        default_factory=lambda: deque(maxlen=MARKS_KEPT))  # before each of the latest added
 
-    def add(self, a: FramePose, b: FramePose) -> None:
-        """Record ``a - b`` (position in m, heading wrapped to (-pi, pi] in rad)."""
+    def add(self, a: FramePose, b: FramePose, t_s: float = math.nan) -> None:
+        """Record ``a - b`` (position in m, heading wrapped to (-pi, pi] in rad); ``t_s``: its
+        bus time (s), for ``withdraw_from``."""
+        self.marks.append((t_s, self.samples, self.max_dpos_m, self.max_dheading_rad))
         self.latest = difference(a, b)
         self.samples += 1
         self.max_dpos_m = max(self.max_dpos_m, self.latest["dpos_m"])
         self.max_dheading_rad = max(self.max_dheading_rad, abs(self.latest["dheading_rad"]))
+
+    def withdraw_from(self, t_s: float) -> None:
+        """The pairs added from bus time ``t_s`` on were not one life's (a reboot told late,
+        ``bootticks``: the new firmware's poses against the old life's reference): the counts
+        and largest errors go back to before them, as far as ``MARKS_KEPT`` pairs back."""
+        kept = [mark for mark in self.marks if mark[0] < t_s]
+        gone = [mark for mark in self.marks if mark[0] >= t_s]
+        if gone:
+            _, self.samples, self.max_dpos_m, self.max_dheading_rad = gone[0]
+            self.marks = deque(kept, maxlen=MARKS_KEPT)
 
     def as_dict(self) -> dict[str, Any] | None:
         """JSON form; None before the first sample."""

@@ -17,6 +17,7 @@ slack of ``compare.band_excess``. An excess found is latched: TWIST WRONG, the w
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import Any
 
 from odocan.host.judge.compare import (
@@ -33,6 +34,7 @@ from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol import busfacts
 
 CYCLE_S = busfacts.ENC_CYCLE_S  # WHEEL_ENCODERS' cycle
+UNDO_KEPT = 8  # twists ``new_life`` can withdraw: a reboot's boot window (80 ms, 4), and more
 KEEP_STEPS = 64  # steps kept whole after the last frame taken (a twist names one 8 back at most)
 
 Band = tuple[float, float, float]  # lowest, highest per-step speed (NaN: unknown), widest gap
@@ -77,7 +79,8 @@ class LiveTwist:
         self.suspended = False  # a config applied with parameters not known here
         self.max_linear_excess_mps = 0.0
         self.max_angular_excess_rad_s = 0.0
-        self._undo: tuple[float, int, float, float] | None = None  # before the last judged
+        self._undo: deque[tuple[float, int, float, float]] = deque(maxlen=UNDO_KEPT)  # before
+        # each of the latest judged: bus time, samples, excesses
         self.reconfigure(geometry, counter_bits)
 
     def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
@@ -98,12 +101,13 @@ class LiveTwist:
     def new_life(self, from_s: float = math.inf) -> None:
         """A reboot: the steps and the frames taken start again (analyze judges each life).
         ``from_s``: the bus time the new firmware's frames start from (its first tick's twist
-        comes before the summary that told the reboot): the last twist judged from then on is
-        the new firmware's, not the old one's wrong, and its judgement is withdrawn."""
-        undo = self._undo  # (bus time, samples, excesses) before the last twist judged
-        if undo is not None and undo[0] >= from_s:
-            _, self.samples, self.max_linear_excess_mps, self.max_angular_excess_rad_s = undo
-        self._undo = None
+        comes before the summary that told the reboot, its first ticks' when that summary was held
+        back: ``bootticks``): the twists judged from then on (as far as ``UNDO_KEPT`` back) are
+        the new firmware's, not the old one's wrong, and their judgement is withdrawn."""
+        gone = [undo for undo in self._undo if undo[0] >= from_s]  # the new firmware's
+        if gone:
+            _, self.samples, self.max_linear_excess_mps, self.max_angular_excess_rad_s = gone[0]
+        self._undo.clear()
         self._prev: Frame | None = None  # the last accepted encoder frame
         self._steps: list[Step] = []  # after the last frame taken
         self._folded = (EMPTY, EMPTY)  # steps beyond KEEP_STEPS, before any frame to name
@@ -178,7 +182,8 @@ class LiveTwist:
         if linear != linear:
             return
         angular = excess(angular_raw * TWIST_LSB, self._a[1], self._b[1], zero)
-        self._undo = (t_s, self.samples, self.max_linear_excess_mps, self.max_angular_excess_rad_s)
+        self._undo.append((t_s, self.samples, self.max_linear_excess_mps,
+                           self.max_angular_excess_rad_s))
         self.samples += 1
         self.max_linear_excess_mps = max(self.max_linear_excess_mps, linear)
         self.max_angular_excess_rad_s = max(self.max_angular_excess_rad_s, angular)

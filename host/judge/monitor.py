@@ -306,8 +306,10 @@ class BusMonitor:
             lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
             detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
             self.distance.new_life()
-            self.twist.new_life(self._bus_time_s - SAME_TICK_S)  # its first tick's twist
-            self.set_pose.forget(self._bus_time_s - SAME_TICK_S)  # the new firmware's kept
+            since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
+            self.tracker.vs_reference.withdraw_from(since_s)  # its poses vs the old reference
+            self.twist.new_life(since_s)  # its first ticks' twists
+            self.set_pose.forget(since_s)  # the new firmware's kept
             self.kept.forget()
             if lost is not None:
                 self.events.append({"t_s": self._bus_time_s, "kind": "config", "detail": lost})

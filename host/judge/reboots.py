@@ -50,7 +50,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.bootticks import boot_ticks, poses_before
+from odocan.host.judge.bootticks import boot_ticks, poses_before, status_before
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.liveconfig import config_text
@@ -182,7 +182,8 @@ def _watch_summaries(
     uptimes_s = page["UPTIME"][good].astype(np.int64)
     counters = page["COUNTER"][good].astype(np.int64)
     poses = poses_before(frames, decoder, positions)[0]  # their ticks' (``bootticks``)
-    booted = boot_ticks(uptimes_s, counters, times_s, poses, None)
+    statuses = status_before(frames, decoder, positions)[0]
+    booted = boot_ticks(uptimes_s, counters, times_s, poses, statuses, None)
     watch = SourceWatch()
     boots = []
     changed, conflict = 0, None  # the summary of the last new offset; where two sources began
@@ -198,7 +199,11 @@ def _watch_summaries(
         before = watch.last_uptime_s
         name = str(states[k])
         pose_counter = int(poses[1][k])
-        watch.pose = None if pose_counter < 0 else (float(poses[0][k]), pose_counter)
+        watch.pose = (None if pose_counter < 0
+                      else (float(poses[0][k]), pose_counter, bool(poses[2][k])))
+        status_counter = int(statuses[1][k])
+        watch.status_before = (None if status_counter < 0
+                               else (float(statuses[0][k]), status_counter))
         kind = watch.observe(float(times_s[k]), int(uptimes_s[k]), name, int(counters[k]))
         if kind == "reboot":
             boots.append((int(positions[k]), int(uptimes_s[k]), name, int(before)))

@@ -19,7 +19,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from odocan.host.judge.bootticks import POSE_MESSAGE, boot_tick, pose_heard
+from odocan.host.judge.bootticks import (
+    POSE_MESSAGE,
+    STATUS_MESSAGE,
+    boot_tick,
+    next_run,
+    pose_heard,
+)
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.powerup import NAMED_SPAN, holds_first_cycle, same_tick, tick_bound_s
@@ -62,8 +68,13 @@ class SourceWatch:
     first_counter: int | None = None  # the first accepted page's COUNTER, any page
     summary_times: list[tuple[int, float]] = field(default_factory=list)  # the latest
     # summaries' COUNTER and bus time (``powerup.tick_bound_s``)
-    pose: tuple[float, int] | None = None  # the latest ODOM_POSE_X heard: bus time, COUNTER
+    pose: tuple[float, int, bool] | None = None  # the ODOM_POSE_X frames' run (``next_run``)
+    pose_s: float | None = None  # the bus time of the latest ODOM_POSE_X heard (``hear_pose``)
+    status_before: tuple[float, int] | None = None  # bus time, COUNTER of the ODOM_STATUS
+    status_last: tuple[float, int] | None = None  # frame before the latest, and the latest
     summary_s: float | None = None  # the bus time of the latest summary observed
+    life_from_s: float = -math.inf  # where the latest reboot told began: its summary's bus
+    # time, or its pose run's start when that was a power-up tick (``bootticks``: held back)
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -101,13 +112,13 @@ class SourceWatch:
     def observe(self, t_s: float, uptime_s: int, state: str, counter: int | None = None
                 ) -> str | None:
         """One ODOM_STATUS summary (``counter``: its E2E COUNTER, None: not told; with the
-        watch's ``pose``, the latest ODOM_POSE_X heard before the summary, it tells a power-up
-        tick: ``bootticks.boot_tick``); returns ``"reboot"``, ``"two sources"``,
+        watch's ``pose``, the run of the ODOM_POSE_X frames heard before the summary, it tells
+        a power-up tick: ``bootticks.boot_tick``); returns ``"reboot"``, ``"two sources"``,
         ``"uptime jump"`` or None."""
         offset = uptime_s - t_s
         kind = None
         booted = counter is not None and boot_tick(uptime_s, counter, t_s, self.pose,
-                                                   self.summary_s)
+                                                   self.summary_s, self.status_before)
         self.summary_s = t_s
         if self.offset_s is None:
             self.offset_s, self.first_uptime_s = offset, uptime_s
@@ -117,6 +128,7 @@ class SourceWatch:
             ):
                 kind = "reboot"
                 self.offset_s = offset
+                self.life_from_s = min(t_s, self.pose[0]) if booted and self.pose else t_s
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
             kind = "two sources"
             self.conflict_until_s = t_s + CONFLICT_HOLD_S
@@ -125,11 +137,24 @@ class SourceWatch:
             self.offset_s, self.other_s = self.other_s, self.offset_s
         else:
             kind = "reboot" if uptime_s < self.last_uptime_s or state == "INIT" else "uptime jump"
+            self.life_from_s = t_s
             self.offset_s, self.other_s = offset, self.offset_s
             self.changed_at_s = t_s
         self.last_uptime_s, self.last_state = uptime_s, state
         self.page_pending = self.page_pending and kind != "reboot"
         return kind
+
+    def hear_pose(self, t_s: float, counter: int) -> None:
+        """An ODOM_POSE_X whose CRC holds, heard at bus time ``t_s`` with E2E ``counter``,
+        whatever its sequence: on the pose run (``bootticks.next_run``)."""
+        self.pose = next_run(self.pose, t_s, counter, self.pose_s)
+        self.pose_s = t_s
+
+    def hear_status(self, t_s: float, counter: int) -> None:
+        """An ODOM_STATUS frame (any page) whose CRC holds, heard at bus time ``t_s`` with E2E
+        ``counter``, whatever its sequence, before it is observed: the one before a summary
+        tells whether it breaks the sequence (``bootticks.status_breaks``)."""
+        self.status_before, self.status_last = self.status_last, (t_s, counter)
 
     def conflict_text(self) -> str:
         """The verdict's reason once two sources were seen (``two_sources_text``); "" before."""
@@ -217,12 +242,14 @@ def status_frame(tracker: PoseTracker, message: Message, data: bytes, e2e: Any, 
 
 def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s: float) -> None:
     """Any frame heard at bus time ``t_s``: an ODOM_POSE_X whose CRC holds, whatever its E2E
-    sequence (``e2e``: the message's ``E2EMessage`` or None), is ``watch``'s latest pose (its
-    COUNTER tells a power-up tick: ``bootticks``)."""
-    if message.name == POSE_MESSAGE:
+    sequence (``e2e``: the message's ``E2EMessage`` or None), goes on ``watch``'s pose run (its
+    COUNTERs tell a power-up tick: ``bootticks.next_run``)."""
+    if message.name in (POSE_MESSAGE, STATUS_MESSAGE):
         counter = pose_heard(data, e2e.data_ids if e2e is not None else None)
-        if counter is not None:
-            watch.pose = (t_s, counter)
+        if counter is not None and message.name == POSE_MESSAGE:
+            watch.hear_pose(t_s, counter)
+        elif counter is not None:
+            watch.hear_status(t_s, counter)
 
 
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,

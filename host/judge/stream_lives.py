@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.bootticks import poses_before
+from odocan.host.judge.bootticks import poses_before, status_before
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
@@ -72,7 +72,9 @@ class StreamLives:
     _changed: tuple[int, float] = (0, 0.0)  # the summary of the last new UPTIME offset
     conflict: tuple[int, float] | None = None  # ``reboots.two_sources``: position, bus time
     _cut: int = 0  # where the lives were cut for it (``finish_one_source``)
-    _pose: tuple[float, int] | None = None  # the latest ODOM_POSE_X (``bootticks.poses_before``)
+    _pose: tuple[float, int, bool, float] | None = None  # the pose run so far, its latest's
+    # bus time (``bootticks.poses_before``)
+    _status: tuple[float, int] | None = None  # the latest ODOM_STATUS (``status_before``)
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
@@ -152,27 +154,33 @@ class StreamLives:
         except (DecodeError, KeyError):
             self._summaries = False
             return []
-        if len(page["index"]) == 0:  # the chunk's latest pose still counts
+        if len(page["index"]) == 0:  # the chunk's latest pose and status frame still count
             self._pose = poses_before(chunk, self.decoder, page["index"], self._pose)[1]
+            self._status = status_before(chunk, self.decoder, page["index"], self._status)[1]
             return []
         if "UPTIME" not in page or "STATE" not in page:
             self._summaries = False
             return []
         index = page["index"]
         good = crc_holds(chunk, self.decoder, index)
-        (pose_t, pose_counter), self._pose = poses_before(chunk, self.decoder, index[good],
-                                                          self._pose)
+        (pose_t, pose_counter, pose_new), self._pose = poses_before(
+            chunk, self.decoder, index[good], self._pose)
+        (status_t, status_counter), self._status = status_before(
+            chunk, self.decoder, index[good], self._status)
         choices = dict(message.get_signal_by_name("STATE").choices or {})
         events: list[tuple[int, _Boot | tuple[int, int]]] = []
-        for position, t_s, uptime_s, state, counter, pose in zip(
+        for position, t_s, uptime_s, state, counter, pose, status in zip(
             index[good].tolist(), page["timestamp_s"][good].tolist(),
             page["UPTIME"][good].tolist(), page["STATE"][good].tolist(),
             page["COUNTER"][good].tolist(),
-            zip(pose_t.tolist(), pose_counter.tolist(), strict=True), strict=True,
+            zip(pose_t.tolist(), pose_counter.tolist(), pose_new.tolist(), strict=True),
+            zip(status_t.tolist(), status_counter.tolist(), strict=True), strict=True,
         ):
             name = str(choices.get(int(state), int(state)))
             before = self._watch.last_uptime_s
-            self._watch.pose = (pose[0], int(pose[1])) if pose[1] >= 0 else None
+            self._watch.pose = ((pose[0], int(pose[1]), bool(pose[2])) if pose[1] >= 0
+                                else None)
+            self._watch.status_before = (status[0], int(status[1])) if status[1] >= 0 else None
             kind = self._watch.observe(float(t_s), int(uptime_s), name, int(counter))
             at = int(position) + self._offset
             if self._watch.changed_at_s == float(t_s):

@@ -222,14 +222,16 @@ class RobotTelemetry(CommandFollowing):
         """A reboot (UPTIME going back, INIT after running, a power-up tick's COUNTERs) starts
         the firmware's new life at its power-up pose, as the monitor and ``analyze`` do
         (``host.judge.sources``); every page to the live gapseen (``livegapseen.heard_status``);
-        an ODOM_POSE_X's COUNTER to the watch (``host.judge.bootticks``)."""
+        an ODOM_POSE_X's COUNTER to the watch's pose run (``SourceWatch.hear_pose``)."""
         if route.name == POSE_MESSAGE:
             if (counter := pose_heard(data, self._pose_ids.data_ids)) is not None:
-                self.sources.pose = (t_s, counter)
+                self.sources.hear_pose(t_s, counter)
             return
         if route.status_page is None:
             return
         ids = self._status_ids.data_ids if self._status_ids is not None else None
+        if (counter := pose_heard(data, ids)) is not None:  # CRC holding, any sequence
+            self.sources.hear_status(t_s, counter)
         heard_status(self.tracker, route.message, data, ids, t_s, route.signals)  # compiled
         summary = (boot_summary(route.message, data, ids, route.signals)
                    if route.is_summary(data) else None)
@@ -239,8 +241,10 @@ class RobotTelemetry(CommandFollowing):
         lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM
         start_new_life(self.tracker, self.e2e, self.db, *summary)
         self.distance.new_life()
-        self.twist.new_life(t_s - SAME_TICK_S)  # its first tick's twist: the new one's
-        self.set_pose.forget(t_s - SAME_TICK_S)  # what the new firmware ACKed: kept
+        since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
+        self.tracker.vs_reference.withdraw_from(since_s)  # its poses vs the old reference
+        self.twist.new_life(since_s)  # its first ticks' twists: the new one's
+        self.set_pose.forget(since_s)  # what the new firmware ACKed: kept
         self.kept.forget()
         if lost is not None:
             self.events.append({"t_s": t_s, "kind": "config", "detail": lost})
