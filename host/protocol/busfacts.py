@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from odocan.host.protocol.dbcfacts import MS_PER_S as MS_PER_S
 from odocan.host.protocol.dbcfacts import POSE_MESSAGE as POSE_MESSAGE
+from odocan.host.protocol.dbcfacts import STATUS_MESSAGE as STATUS_MESSAGE
 from odocan.host.protocol.dbcfacts import judge_facts
 from odocan.host.protocol.dbcplan import default_plan
 
