@@ -115,10 +115,11 @@ async def run_fleet(
     ``on_start(robots, telemetry broker)`` is called when the clock starts (signals handled);
     ``on_progress(deadline stats so far)`` every ``PROGRESS_PERIOD_S`` while it runs."""
     with Fleet(run.fleet) as fleet:
+        trace = from_env(fleet.names[0])  # bench-only (``ODOCAN_TICK_TRACE``), else None
         if not run.bridge:
             stats, cpu_s, stopped = await _paced(fleet, run.duration_s, None,
                                                  lambda: _started(on_start, fleet, None),
-                                                 on_progress)
+                                                 on_progress, trace)
             return {**_report(run, fleet, stats, None, None, False), "cpu_s": cpu_s,
                     "stopped": stopped, **durations(run.duration_s, stopped)}
         async with broker_for(run.broker) as (url, embedded):
@@ -126,7 +127,6 @@ async def run_fleet(
                 broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix,
                 connect_timeout_s=run.connect_timeout_s, command_expiry_s=run.command_expiry_s))
             watch_halts(fleet, [robot.telemetry for robot in bridge.robots])
-            trace = from_env(fleet.names[0])
             if trace is not None:
                 _trace_bridge(trace, bridge)
             stop = asyncio.Event()

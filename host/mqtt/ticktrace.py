@@ -74,10 +74,6 @@ class TickTrace:
             self._end(wall2, cpu2)
         return after_tick
 
-    def count(self, what: str) -> None:
-        """One more ``what`` ran in the event loop since the latest tick."""
-        self.ran[what] += 1
-
     def counting(self, what: Callable[[Any], str], call: Callable[..., Any]) -> Callable[..., Any]:
         """``call``, each call counted under ``what(first argument)``."""
         def counted(*args: Any, **kwargs: Any) -> Any:
