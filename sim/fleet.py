@@ -13,8 +13,10 @@ Each robot's scenario drive runs ahead in blocks (``sim.lookahead``, ``FleetConf
 the same frames for less CPU). A block's work comes at once, so a fleet's blocks are short
 (``BLOCK_TICKS``: ~0.4 ms of CPU), the first blocks run when the fleet is built, before any clock,
 and each robot's first block has its own length (``first_block_ticks``): robot ``i``'s later
-blocks start on the fleet ticks ``i`` (mod ``BLOCK_TICKS``), one robot's block in a tick for
-up to ``BLOCK_TICKS`` robots, never all at once.
+blocks start on the fleet ticks ``block_phase(i)`` (``i * BLOCK_STRIDE``, mod ``BLOCK_TICKS``),
+one robot's block in a tick for up to ``BLOCK_TICKS`` robots, never all at once, and a worker's
+shard of consecutive robots spread over the whole period (before, robot ``i``'s came on tick
+``i``: a 50-robot shard's blocks, ~1 ms of CPU each, one a tick through half of each second).
 
 ``run_realtime`` paces ``Fleet.step`` to the wall clock as one asyncio task: at each release
 ``k * period`` it sleeps until the release, accounts the tick's lateness (``DeadlineStats``: a
@@ -174,7 +176,7 @@ class Fleet(Closing):
             if own_k >= 0:
                 vehicle = planned[index]
                 if calm and vehicle is not None and vehicle.fell_back \
-                        and (k - first - index) % BLOCK_TICKS == 0:
+                        and (k - block_phase(first + index)) % BLOCK_TICKS == 0:
                     vehicle.replan(own_k * TICK_S, BLOCK_TICKS)
                 loop.ticks = own_k  # ``rig.ticks = own_k; rig.step()``, two calls a robot less
                 loop.tick(own_k)
@@ -278,13 +280,22 @@ def _tick_offset(index: int) -> int:
 
 
 BLOCK_TICKS = 100  # a fleet's blocks run ahead (sim.lookahead: ~4 us of CPU a tick, at once)
+BLOCK_STRIDE = 37  # consecutive robots' blocks this many ticks apart (coprime with BLOCK_TICKS)
+
+
+def block_phase(index: int) -> int:
+    """The fleet tick (mod ``BLOCK_TICKS``) on which robot ``index``'s (fleet-wide) blocks
+    start: consecutive robots ``BLOCK_STRIDE`` ticks apart, every robot of the first
+    ``BLOCK_TICKS`` on a tick of its own, and any run of consecutive robots (a worker's shard)
+    spread over the period: 50 of them at most 6 in any 10 ticks."""
+    return index * BLOCK_STRIDE % BLOCK_TICKS
 
 
 def first_block_ticks(index: int) -> int:
     """The length (ticks, 1 .. ``BLOCK_TICKS``) of robot ``index``'s (fleet-wide) first block of
-    its drive run ahead, such that its later blocks start on the fleet ticks ``index`` (mod
-    ``BLOCK_TICKS``): its own tick plus its phase (``_tick_offset``)."""
-    return (index - _tick_offset(index) - 1) % BLOCK_TICKS + 1
+    its drive run ahead, such that its later blocks start on the fleet ticks ``block_phase``
+    (mod ``BLOCK_TICKS``): its own tick plus its phase (``_tick_offset``)."""
+    return (block_phase(index) - _tick_offset(index) - 1) % BLOCK_TICKS + 1
 
 
 def _truth_phase(index: int) -> int:

@@ -127,3 +127,24 @@ def test_after_a_halt_the_drives_run_ahead_again_while_the_loop_keeps_skipping()
     planned, vehicles = halt_then_skips(True)
     assert not any(v.fell_back for v in vehicles)
     assert planned == halt_then_skips(False)[0]
+
+
+def test_a_workers_blocks_are_spread_over_the_block_period() -> None:
+    """The blocks of a worker's shard (``odocan fleet --workers 2``: 50 robots of 100) come
+    spread over the whole period, not one a tick through half of it and none in the other half
+    (a block is ~1 ms of CPU: half a second of ticks each 1 ms heavier made the real-time
+    fleet's late ticks)."""
+    for first in (0, 50):
+        with Fleet(FleetConfig(robots=50, robot=load("pmir"), first=first)) as fleet:
+            vehicles = [rig.vehicle for rig in fleet.rigs]
+            blocks = [v.blocks for v in vehicles]  # type: ignore[attr-defined]
+            per_tick = []
+            for k in range(BLOCK_TICKS + 2):
+                fleet.step(k)
+                now = [v.blocks for v in vehicles]  # type: ignore[attr-defined]
+                per_tick.append(sum(b - a for a, b in zip(blocks, now, strict=True)))
+                blocks = now
+        assert sum(per_tick) == 50  # every robot's second block
+        window = 10
+        busiest = max(sum(per_tick[k:k + window]) for k in range(len(per_tick) - window + 1))
+        assert busiest <= 6, f"{busiest} blocks in {window} ticks (shard from {first})"

@@ -77,6 +77,7 @@ from odocan.host.mqtt.haltstretch import HaltStretches
 from odocan.host.mqtt.options import broker_for
 from odocan.host.mqtt.overload import Halted, after_halts
 from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.host.mqtt.ticktrace import TickTrace, from_env, young_collection
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.host.stopped import Stopped
 from odocan.sim.board import TICK_S
@@ -115,10 +116,11 @@ async def run_fleet(
     ``on_start(robots, telemetry broker)`` is called when the clock starts (signals handled);
     ``on_progress(deadline stats so far)`` every ``PROGRESS_PERIOD_S`` while it runs."""
     with Fleet(run.fleet) as fleet:
+        trace = from_env(fleet.names[0])  # bench-only (``ODOCAN_TICK_TRACE``), else None
         if not run.bridge:
             stats, cpu_s, stopped = await _paced(fleet, run.duration_s, None,
                                                  lambda: _started(on_start, fleet, None),
-                                                 on_progress)
+                                                 on_progress, trace)
             return {**_report(run, fleet, stats, None, None, False), "cpu_s": cpu_s,
                     "stopped": stopped, **durations(run.duration_s, stopped)}
         async with broker_for(run.broker) as (url, embedded):
@@ -126,6 +128,8 @@ async def run_fleet(
                 broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix,
                 connect_timeout_s=run.connect_timeout_s, command_expiry_s=run.command_expiry_s))
             watch_halts(fleet, [robot.telemetry for robot in bridge.robots])
+            if trace is not None:
+                _trace_bridge(trace, bridge)
             stop = asyncio.Event()
             try:
                 async with asyncio.TaskGroup() as tg:
@@ -133,7 +137,7 @@ async def run_fleet(
                     await _all_connected(bridge, run.connect_timeout_s + 5.0)
                     stats, cpu_s, stopped = await _paced(
                         fleet, run.duration_s, bridge.offer,
-                        lambda: _started(on_start, fleet, url), on_progress)
+                        lambda: _started(on_start, fleet, url), on_progress, trace)
                     stop.set()
             except BaseExceptionGroup as group:
                 raise first_error(group) from None
@@ -155,12 +159,13 @@ def _started(on_start: StartHook | None, fleet: Fleet, url: BrokerURL | None) ->
 
 async def _paced(
     fleet: Fleet, duration_s: float, on_batch: Any, started: Callable[[], None],
-    on_progress: ProgressHook | None = None,
+    on_progress: ProgressHook | None = None, trace: TickTrace | None = None,
 ) -> tuple[DeadlineStats, float, dict[str, Any] | None]:
     """Run the fleet until ``duration_s`` or SIGINT/SIGTERM, whichever comes first: a signal ends
     the run early, and the report is still written. Returns the deadline figures, the CPU seconds
     this process spent meanwhile (every thread: loop, bridge, MQTT I/O), and the report's
-    ``stopped`` (``host.stopped``) when a signal ended it before ``duration_s``."""
+    ``stopped`` (``host.stopped``) when a signal ended it before ``duration_s``. ``trace``
+    (``host.mqtt.ticktrace``, bench-only) times each tick's parts."""
     stop = asyncio.Event()
     signals: list[int] = []
     loop = asyncio.get_running_loop()
@@ -173,12 +178,18 @@ async def _paced(
     started()
     collector = TickCollector(on_batch)
     stats = DeadlineStats(TICK_S, TICK_S / 2)
+    after_tick: Callable[[Any], None] = collector.after_tick
+    if trace is not None:
+        stats = trace.stats(TICK_S, TICK_S / 2)
+        after_tick = trace.collector_hook(on_batch, young_collection)
+        if on_progress is not None:
+            on_progress = trace.counting(lambda _: "progress", on_progress)
     watcher = None
     if on_progress is not None:
         watcher = asyncio.create_task(_watch(stats, on_progress), name="fleet-progress")
     cpu0_s = time.process_time()
     try:
-        await run_realtime(fleet, duration_s=duration_s, on_batch=collector.after_tick,
+        await run_realtime(fleet, duration_s=duration_s, on_batch=after_tick,
                            stop=stop, stats=stats)
         done_s = stats.ticks * TICK_S
         stopped = (Stopped(signals[0], round(done_s, 6), duration_s).as_dict()
@@ -188,6 +199,8 @@ async def _paced(
         if watcher is not None:
             watcher.cancel()
         collector.close()
+        if trace is not None:
+            trace.write()
         for signum in handled:
             loop.remove_signal_handler(signum)
 
@@ -234,6 +247,16 @@ class TickCollector:
         if self.was_enabled:
             gc.enable()
         gc.unfreeze()
+
+
+def _trace_bridge(trace: TickTrace, bridge: Bridge) -> None:
+    """What the bridge runs, counted by ``trace`` between ticks: each link's publications by
+    leaf, the command reader's hand-overs to the event loop."""
+    for link in bridge.links:
+        link.publish = trace.counting(str, link.publish)  # type: ignore[method-assign]
+    for commands in bridge.commands.robots.values():
+        commands.wake.set = trace.counting(  # type: ignore[method-assign]
+            lambda _: "reader", commands.wake.set)
 
 
 async def _watch(stats: DeadlineStats, on_progress: ProgressHook) -> None:
