@@ -56,6 +56,25 @@ def interval(lsb: float) -> Interval:
     return Interval(-half, half)
 
 
+Offsets = tuple[Interval, Interval, Interval]  # x, y (m), heading (rad) offsets at the base
+_NAMES = ("x", "y", "heading")
+_LSBS = (POSITION_LSB_M, POSITION_LSB_M, HEADING_LSB_RAD)
+
+
+def copy_box(box: Offsets) -> Offsets:
+    """A copy of ``box`` with intervals of its own."""
+    x, y, heading = box
+    return Interval(x.lo, x.hi), Interval(y.lo, y.hi), Interval(heading.lo, heading.hi)
+
+
+def emptied(box: Offsets) -> tuple[str, float] | None:
+    """The first field of ``box`` whose interval is empty and by how many LSB (None: none)."""
+    for name, allowed, lsb in zip(_NAMES, box, _LSBS, strict=True):
+        if allowed.lo > allowed.hi:
+            return name, (allowed.lo - allowed.hi) / lsb
+    return None
+
+
 @dataclass
 class Stretch:
     """A stretch: its base's bus time, the reference re-started there, its last frame (seq,
@@ -72,36 +91,66 @@ class Stretch:
     y: Interval = field(default_factory=lambda: interval(POSITION_LSB_M))
     heading: Interval = field(default_factory=lambda: interval(HEADING_LSB_RAD))
     wrong: bool = False
+    boxes: list[Offsets] = field(default_factory=list)  # the offsets one of the ways taken at
+    # the halts before allows (``host.mqtt.haltcarry``), each within x, y, heading; empty: none
 
     def fork(self) -> Stretch:
         """A copy with its own reference and offsets (a way the firmware may have gone on)."""
         return Stretch(self.base_t_s, copy.copy(self.ref), self.seq, self.counter, self.x0_m,
                        self.y0_m, self.steps, Interval(self.x.lo, self.x.hi),
                        Interval(self.y.lo, self.y.hi), Interval(self.heading.lo, self.heading.hi),
-                       self.wrong)
+                       self.wrong, [copy_box(box) for box in self.boxes])
 
 
 def narrow_offsets(stretch: Stretch, pose: FramePose) -> tuple[str, float] | None:
-    """Narrow the stretch's offsets by one sample's ``pose``; the first field whose interval
-    emptied and by how many LSB beyond the rounding (None: every one still holds)."""
+    """Narrow the stretch's offsets (and each of its ``boxes``) by one sample's ``pose``; the
+    first field whose interval emptied and by how many LSB beyond the rounding (None: every one
+    still holds; with boxes: one of them at least, the nearest's when none does)."""
     ref = stretch.ref
-    heading_error = math.remainder(pose.heading_rad - ref.heading_rad, _TURN)
-    stretch.heading.narrow(heading_error, (0.5 + EPS_LSB) * HEADING_LSB_RAD
-                           + ARITH_RAD_PER_STEP * stretch.steps)
-    moved_m = math.hypot(ref.x_m - stretch.x0_m, ref.y_m - stretch.y0_m)
-    half_m = (0.5 + EPS_LSB) * POSITION_LSB_M + ARITH_M_PER_M * moved_m
-    turn_x, turn_y = turned_m(stretch)
-    stretch.x.narrow_turned(pose.x_m - ref.x_m, half_m, turn_x)
-    stretch.y.narrow_turned(pose.y_m - ref.y_m, half_m, turn_y)
-    for name, allowed, lsb in (("x", stretch.x, POSITION_LSB_M),
-                               ("y", stretch.y, POSITION_LSB_M),
-                               ("heading", stretch.heading, HEADING_LSB_RAD)):
-        if allowed.lo > allowed.hi:
-            return name, (allowed.lo - allowed.hi) / lsb
+    error = (pose.x_m - ref.x_m, pose.y_m - ref.y_m,
+             math.remainder(pose.heading_rad - ref.heading_rad, _TURN))
+    half = ((0.5 + EPS_LSB) * POSITION_LSB_M
+            + ARITH_M_PER_M * math.hypot(ref.x_m - stretch.x0_m, ref.y_m - stretch.y0_m),
+            (0.5 + EPS_LSB) * HEADING_LSB_RAD + ARITH_RAD_PER_STEP * stretch.steps)
+    own = (stretch.x, stretch.y, stretch.heading)
+    empty = _narrow_box(stretch, own, error, half)
+    if empty is not None or not stretch.boxes:
+        return empty
+    deaths = []
+    kept = []
+    for box in stretch.boxes:
+        died = _narrow_box(stretch, box, error, half)
+        if died is None:
+            kept.append(box)
+        else:
+            deaths.append(died)
+    stretch.boxes = kept
+    if not kept:
+        return min(deaths, key=lambda died: died[1])
+    hull_into(own, kept)
     return None
 
 
-def turned_m(stretch: Stretch) -> tuple[Interval, Interval]:
+def _narrow_box(stretch: Stretch, box: Offsets, error: tuple[float, float, float],
+                half: tuple[float, float]) -> tuple[str, float] | None:
+    """Narrow ``box`` by one sample's ``error`` (x, y m; heading rad: firmware - reference)
+    within ``half`` (m, rad) each side, its heading's turn taken out; what emptied (None)."""
+    x, y, heading = box
+    heading.narrow(error[2], half[1])
+    turn_x, turn_y = turned_m(stretch, heading)
+    x.narrow_turned(error[0], half[0], turn_x)
+    y.narrow_turned(error[1], half[0], turn_y)
+    return emptied(box)
+
+
+def hull_into(own: Offsets, boxes: list[Offsets]) -> None:
+    """Narrow ``own`` to the hull of ``boxes`` (each meets it: never empty)."""
+    for axis, allowed in enumerate(own):
+        allowed.lo = max(allowed.lo, min(box[axis].lo for box in boxes))
+        allowed.hi = min(allowed.hi, max(box[axis].hi for box in boxes))
+
+
+def turned_m(stretch: Stretch, heading: Interval | None = None) -> tuple[Interval, Interval]:
     """What the heading offset turns the reference's displacement since the base by (x, y; m):
     the firmware integrates the same steps at its heading, the reference's plus the offset d,
     so its displacement is the reference's (dx, dy) turned by d: x by -(1 - cos d) dx - sin d dy,
@@ -109,8 +158,9 @@ def turned_m(stretch: Stretch) -> tuple[Interval, Interval]:
     firmware's heading arithmetic per step); the interval's own sign and width, not its largest
     magnitude on every side (a turn of 0.2 to 0.3 LSB moves x one way only)."""
     ref, arith_rad = stretch.ref, ARITH_RAD_PER_STEP * stretch.steps
+    heading = stretch.heading if heading is None else heading
     dx_m, dy_m = ref.x_m - stretch.x0_m, ref.y_m - stretch.y0_m
-    lo_rad, hi_rad = stretch.heading.lo - arith_rad, stretch.heading.hi + arith_rad
+    lo_rad, hi_rad = heading.lo - arith_rad, heading.hi + arith_rad
     most_rad = max(abs(lo_rad), abs(hi_rad))
     if most_rad >= _QUARTER:  # sin not monotonic there: every turn of the displacement
         moved_m = math.hypot(dx_m, dy_m) * min(2.0, most_rad)
