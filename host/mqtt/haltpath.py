@@ -46,12 +46,6 @@ class Interval:
         self.lo = max(self.lo, error - half_width)
         self.hi = min(self.hi, error + half_width)
 
-    def narrow_turned(self, error: float, half_width: float, turn: Interval) -> None:
-        """One sample ``error`` (firmware - reference) allows ``error - turn +- half_width``:
-        the base's offset, the heading offset's turn of the displacement (``turn``) taken out."""
-        self.lo = max(self.lo, error - turn.hi - half_width)
-        self.hi = min(self.hi, error - turn.lo + half_width)
-
 
 def interval(lsb: float) -> Interval:
     """A base's own offset: its rounding, +-half an LSB (and the float noise)."""
@@ -112,17 +106,17 @@ def narrow_offsets(stretch: Stretch, pose: FramePose) -> tuple[str, float] | Non
     ref = stretch.ref
     error = (pose.x_m - ref.x_m, pose.y_m - ref.y_m,
              math.remainder(pose.heading_rad - ref.heading_rad, _TURN))
-    half = ((0.5 + EPS_LSB) * POSITION_LSB_M
-            + ARITH_M_PER_M * math.hypot(ref.x_m - stretch.x0_m, ref.y_m - stretch.y0_m),
-            (0.5 + EPS_LSB) * HEADING_LSB_RAD + ARITH_RAD_PER_STEP * stretch.steps)
+    moved = (ref.x_m - stretch.x0_m, ref.y_m - stretch.y0_m, ARITH_RAD_PER_STEP * stretch.steps)
+    half = ((0.5 + EPS_LSB) * POSITION_LSB_M + ARITH_M_PER_M * math.hypot(moved[0], moved[1]),
+            (0.5 + EPS_LSB) * HEADING_LSB_RAD + moved[2])
     own = (stretch.x, stretch.y, stretch.heading)
-    empty = _narrow_box(stretch, own, error, half)
+    empty = _narrow_box(own, error, half, moved)
     if empty is not None or not stretch.boxes:
         return empty
     deaths = []
     kept = []
     for box in stretch.boxes:
-        died = _narrow_box(stretch, box, error, half)
+        died = _narrow_box(box, error, half, moved)
         if died is None:
             kept.append(box)
         else:
@@ -134,23 +128,27 @@ def narrow_offsets(stretch: Stretch, pose: FramePose) -> tuple[str, float] | Non
     return None
 
 
-def _narrow_box(stretch: Stretch, box: Offsets, error: tuple[float, float, float],
-                half: tuple[float, float]) -> tuple[str, float] | None:
+def _narrow_box(box: Offsets, error: tuple[float, float, float], half: tuple[float, float],
+                moved: tuple[float, float, float]) -> tuple[str, float] | None:
     """Narrow ``box`` by one sample's ``error`` (x, y m; heading rad: firmware - reference)
-    within ``half`` (m, rad) each side, its heading's turn taken out; what emptied (None)."""
+    within ``half`` (m, rad) each side, its heading's turn of the displacement ``moved`` (x, y
+    m since the base; the heading arithmetic, rad) taken out; what emptied (None)."""
     x, y, heading = box
     heading.narrow(error[2], half[1])
-    turn_x, turn_y = turned_m(stretch, heading)
-    x.narrow_turned(error[0], half[0], turn_x)
-    y.narrow_turned(error[1], half[0], turn_y)
+    x_lo, x_hi, y_lo, y_hi = _turn_bounds_m(moved, heading)  # the base's offset: the turn out
+    x.lo, x.hi = max(x.lo, error[0] - x_hi - half[0]), min(x.hi, error[0] - x_lo + half[0])
+    y.lo, y.hi = max(y.lo, error[1] - y_hi - half[0]), min(y.hi, error[1] - y_lo + half[0])
     return emptied(box)
 
 
 def hull_into(own: Offsets, boxes: list[Offsets]) -> None:
     """Narrow ``own`` to the hull of ``boxes`` (each meets it: never empty)."""
     for axis, allowed in enumerate(own):
-        allowed.lo = max(allowed.lo, min(box[axis].lo for box in boxes))
-        allowed.hi = min(allowed.hi, max(box[axis].hi for box in boxes))
+        lo, hi = math.inf, -math.inf
+        for box in boxes:
+            held = box[axis]
+            lo, hi = min(lo, held.lo), max(hi, held.hi)
+        allowed.lo, allowed.hi = max(allowed.lo, lo), min(allowed.hi, hi)
 
 
 def turned_m(stretch: Stretch, heading: Interval | None = None) -> tuple[Interval, Interval]:
@@ -159,30 +157,31 @@ def turned_m(stretch: Stretch, heading: Interval | None = None) -> tuple[Interva
     so its displacement is the reference's (dx, dy) turned by d: x by -(1 - cos d) dx - sin d dy,
     y by sin d dx - (1 - cos d) dy, for every d the heading interval allows (widened by the
     firmware's heading arithmetic per step); the interval's own sign and width, not its largest
-    magnitude on every side (a turn of 0.2 to 0.3 LSB moves x one way only)."""
-    ref, arith_rad = stretch.ref, ARITH_RAD_PER_STEP * stretch.steps
-    heading = stretch.heading if heading is None else heading
-    dx_m, dy_m = ref.x_m - stretch.x0_m, ref.y_m - stretch.y0_m
+    magnitude on every side (a turn of 0.2 to 0.3 LSB moves x one way only). ``heading``: the
+    interval of a box (``Stretch.boxes``), else the stretch's own."""
+    ref = stretch.ref
+    moved = (ref.x_m - stretch.x0_m, ref.y_m - stretch.y0_m, ARITH_RAD_PER_STEP * stretch.steps)
+    x_lo, x_hi, y_lo, y_hi = _turn_bounds_m(moved, stretch.heading if heading is None
+                                            else heading)
+    return Interval(x_lo, x_hi), Interval(y_lo, y_hi)
+
+
+def _turn_bounds_m(moved: tuple[float, float, float], heading: Interval
+                   ) -> tuple[float, float, float, float]:
+    """``turned_m`` as plain floats (x lo, x hi, y lo, y hi; m) of the displacement ``moved``
+    (x, y m; the heading arithmetic, rad): each sample asks it once a box."""
+    dx_m, dy_m, arith_rad = moved
     lo_rad, hi_rad = heading.lo - arith_rad, heading.hi + arith_rad
     most_rad = max(abs(lo_rad), abs(hi_rad))
     if most_rad >= _QUARTER:  # sin not monotonic there: every turn of the displacement
         moved_m = math.hypot(dx_m, dy_m) * min(2.0, most_rad)
-        return Interval(-moved_m, moved_m), Interval(-moved_m, moved_m)
-    sines = (math.sin(lo_rad), math.sin(hi_rad))
+        return -moved_m, moved_m, -moved_m, moved_m
+    sin_lo, sin_hi = math.sin(lo_rad), math.sin(hi_rad)
     sag = 1.0 - math.cos(most_rad)  # 1 - cos d is in [0, sag]
-    return (_plus(_times(sines, -dy_m), _times((0.0, sag), -dx_m)),
-            _plus(_times(sines, dx_m), _times((0.0, sag), -dy_m)))
-
-
-def _times(factor: tuple[float, float], by: float) -> Interval:
-    """The interval of ``f * by`` for ``f`` in ``factor`` (lo, hi)."""
-    ends = (factor[0] * by, factor[1] * by)
-    return Interval(min(ends), max(ends))
-
-
-def _plus(a: Interval, b: Interval) -> Interval:
-    """The interval of sums."""
-    return Interval(a.lo + b.lo, a.hi + b.hi)
+    a, b, c = -sin_lo * dy_m, -sin_hi * dy_m, -sag * dx_m  # x: -sin d dy - (1 - cos d) dx
+    x_lo, x_hi = min(a, b) + min(c, 0.0), max(a, b) + max(c, 0.0)
+    a, b, c = sin_lo * dx_m, sin_hi * dx_m, -sag * dy_m  # y: sin d dx - (1 - cos d) dy
+    return x_lo, x_hi, min(a, b) + min(c, 0.0), max(a, b) + max(c, 0.0)
 
 
 Frame = tuple[int, int, float, int, int]  # seq, COUNTER, bus time s, left, right
