@@ -14,16 +14,16 @@ tracker accepted; the stretch ends at the next halt (a sample made at or after i
 the next). A pose step inside a stretch that the reference does not make is wrong.
 
 The re-start itself, the samples from the halt up to the new base, is judged across the halt
-(``host.mqtt.haltcross``): the stretch before it (before the first halt: one based at the latest
-sample) is stepped with the frames sent during the halt in each way the halted MCU could have
-taken them (its FIFO's frames, then the first after the halt merged or re-primed on), and a
-sample no way explains is wrong. That needs the loop's gap before each halt (``halt_gaps``,
-``sim.fleet.Fleet.halt_gaps``), one halt since the latest sample and the frames in the
-tracker's window; else the re-start is not judged (counted apart: ``restarts_judged``). A
-judged re-start's new stretch keeps the offsets the surviving paths allow at its base, one
-triple a path, as long as its samples meet one of them (``host.mqtt.haltcarry``, counted:
-``restarts_carried``), not only its base's rounding, so a shift under one LSB at every halt
-adds up halt after halt until it shows.
+(``host.mqtt.haltcross``): the stretch before it (before the first halt: one based
+``BEFORE_SAMPLES`` samples before it and narrowed by them) is stepped with the frames sent
+during the halt in each way the halted MCU could have taken them (its FIFO's frames, then the
+first after the halt merged or re-primed on), and a sample no way explains is wrong. That
+needs the loop's gap before each halt (``halt_gaps``, ``sim.fleet.Fleet.halt_gaps``), one halt
+since the latest sample and the frames in the tracker's window; else the re-start is not
+judged (counted apart: ``restarts_judged``). A judged re-start's new stretch keeps the offsets
+the surviving paths allow at its base, one triple a path, as long as its samples meet one of
+them (``host.mqtt.haltcarry``, counted: ``restarts_carried``), not only its base's rounding,
+so a shift under one LSB at every halt adds up halt after halt until it shows.
 
 The rule is the pose signals' rounding, not a tolerance: the firmware rounds X and Y to 0.1 mm
 and HEADING to one LSB, to nearest. So a correct firmware's samples of one stretch differ from
@@ -177,7 +177,7 @@ class HaltStretches:
 
     def _cross(self, taken: int) -> None:
         """The samples from the halt just taken on are judged across it (``haltcross``) from
-        the stretch judged before it (before the first halt: from the latest sample), when
+        the stretch judged before it (before the first halt: ``_stretch_before``), when
         that is the only halt since the latest sample and the loop told its gap; an open
         crossing of an earlier halt ends unsettled (its re-start not judged)."""
         self._crossing = None
