@@ -102,10 +102,17 @@ def _seeded_run(monkeypatch: pytest.MonkeyPatch, seed: int, duration_s: float) -
 
 # seeds 1 and 6: the X 0.1 firmware PASSed there too before the carried offsets were kept per
 # path (one of the halt's ways, not their hull) and the heading offset's turn by its interval;
-# X 0.05 over 30 s (37 halts, 1.85 LSB off by the end) PASSed then (60 s, 3.9 LSB: 4 of 4)
+# X 0.05 over 30 s (37 halts, 1.85 LSB off by the end) PASSed then (60 s, 3.9 LSB: 4 of 4).
+# X 0.03 over 60 s at seed 1 (78 halts, 2 LSB off by the end), 0.07 and 0.05 over 12 s at the
+# seeds below (12-13 halts, 1 LSB off by the end) PASSed while each sample allowed +-0.55 LSB
+# (``haltpath.EPS_LSB`` 0.05: the boxes never narrowed below ~0.1 LSB), the ways' boxes were
+# merged into their hull at every halt and the first halt was judged from the latest sample's
+# rounding alone (``haltcarry``, ``haltstretch._stretch_before``)
 @pytest.mark.parametrize(("signal", "shift_lsb", "seed", "duration_s"), [
     ("X", 0.15, SEED, DURATION_S), ("X", 0.1, SEED, DURATION_S), ("X", 0.1, 1, DURATION_S),
-    ("X", 0.1, 6, DURATION_S), ("X", 0.05, 1, 30.0), ("HEADING", 0.1, SEED, DURATION_S)])
+    ("X", 0.1, 6, DURATION_S), ("X", 0.05, 1, 30.0), ("HEADING", 0.1, SEED, DURATION_S),
+    ("X", 0.03, 1, 60.0), ("X", 0.07, SEED, DURATION_S), ("X", 0.07, 1, DURATION_S),
+    ("X", 0.07, 6, DURATION_S), *(("X", 0.05, seed, DURATION_S) for seed in (1, 3, SEED, 6, 10))])
 def test_a_firmware_shifting_under_one_lsb_at_every_halt_fails(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path, signal: str, shift_lsb: float, seed: int,
     duration_s: float

@@ -14,16 +14,16 @@ tracker accepted; the stretch ends at the next halt (a sample made at or after i
 the next). A pose step inside a stretch that the reference does not make is wrong.
 
 The re-start itself, the samples from the halt up to the new base, is judged across the halt
-(``host.mqtt.haltcross``): the stretch before it (before the first halt: one based at the latest
-sample) is stepped with the frames sent during the halt in each way the halted MCU could have
-taken them (its FIFO's frames, then the first after the halt merged or re-primed on), and a
-sample no way explains is wrong. That needs the loop's gap before each halt (``halt_gaps``,
-``sim.fleet.Fleet.halt_gaps``), one halt since the latest sample and the frames in the
-tracker's window; else the re-start is not judged (counted apart: ``restarts_judged``). A
-judged re-start's new stretch keeps the offsets the surviving paths allow at its base, one
-triple a path, as long as its samples meet one of them (``host.mqtt.haltcarry``, counted:
-``restarts_carried``), not only its base's rounding, so a shift under one LSB at every halt
-adds up halt after halt until it shows.
+(``host.mqtt.haltcross``): the stretch before it (before the first halt: one based
+``BEFORE_SAMPLES`` samples before it and narrowed by them) is stepped with the frames sent
+during the halt in each way the halted MCU could have taken them (its FIFO's frames, then the
+first after the halt merged or re-primed on), and a sample no way explains is wrong. That
+needs the loop's gap before each halt (``halt_gaps``, ``sim.fleet.Fleet.halt_gaps``), one halt
+since the latest sample and the frames in the tracker's window; else the re-start is not
+judged (counted apart: ``restarts_judged``). A judged re-start's new stretch keeps the offsets
+the surviving paths allow at its base, one triple a path, as long as its samples meet one of
+them (``host.mqtt.haltcarry``, counted: ``restarts_carried``), not only its base's rounding,
+so a shift under one LSB at every halt adds up halt after halt until it shows.
 
 The rule is the pose signals' rounding, not a tolerance: the firmware rounds X and Y to 0.1 mm
 and HEADING to one LSB, to nearest. So a correct firmware's samples of one stretch differ from
@@ -45,7 +45,9 @@ waits for the next halt, never a moment a wrong firmware could choose.
 
 from __future__ import annotations
 
+import itertools
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -54,7 +56,7 @@ from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.host.judge.livepose import Sample
 from odocan.host.judge.reference import ReferenceOdometry
 from odocan.host.judge.tracking import PoseTracker
-from odocan.host.mqtt.haltcarry import Offsets, carry_offsets, keep_offsets
+from odocan.host.mqtt.haltcarry import carry_offsets, keep_offsets
 from odocan.host.mqtt.haltcross import ENC, Crossing
 from odocan.host.mqtt.haltpath import (
     Frame,
@@ -64,6 +66,8 @@ from odocan.host.mqtt.haltpath import (
     step_frames,
 )
 from odocan.sim.board import TICK_S
+
+BEFORE_SAMPLES = 50  # samples before the first halt its stretch is narrowed by (2 s of poses)
 
 
 @dataclass
@@ -106,7 +110,8 @@ class HaltStretches:
         self._halt_ticks, self._offset = halt_ticks, offset_ticks
         self._halt_gaps = halt_gaps  # each halt's periods since the tick run before it
         self._crossing: Crossing | None = None  # the latest halt's, until its new base
-        self._last: Sample | None = None  # the latest sample before the first halt
+        self._before: deque[Sample] = deque(maxlen=BEFORE_SAMPLES)  # the latest before the
+        # first halt (``_stretch_before``)
         self._next = 0  # the next halt not consumed
         self.halt_s: float | None = None  # bus time of the latest halt before the samples
         self._stretch: Stretch | None = None
@@ -123,8 +128,6 @@ class HaltStretches:
         self.wrong_restarts = 0
         self.judged_across = 0  # samples judged across a halt (``haltcross``)
         self.restarts_carried = 0  # ... whose paths' offsets the next stretch kept
-        self._carried: list[Offsets] = []  # the offsets the paths into ``_carried_into`` allow
-        self._carried_into: Stretch | None = None
 
     def on_samples(self, samples: list[Sample]) -> None:
         """The tracker's samples settled (``PoseTracker.take_samples``), in order."""
@@ -140,8 +143,9 @@ class HaltStretches:
         if starts != self._starts:  # a reboot, a set-pose: a stretch based before it ends
             self._starts, restarted = starts, self._stretch is not None
             self._crossing = None
+            self._before.clear()  # samples of a reference before it
         if self.halt_s is None:
-            self._last = sample  # before the first halt: the tracker judges (``overload``)
+            self._before.append(sample)  # before the first halt: the tracker judges them
             return
         self.after += 1
         if restarted:
@@ -173,7 +177,7 @@ class HaltStretches:
 
     def _cross(self, taken: int) -> None:
         """The samples from the halt just taken on are judged across it (``haltcross``) from
-        the stretch judged before it (before the first halt: from the latest sample), when
+        the stretch judged before it (before the first halt: ``_stretch_before``), when
         that is the only halt since the latest sample and the loop told its gap; an open
         crossing of an earlier halt ends unsettled (its re-start not judged)."""
         self._crossing = None
@@ -182,8 +186,8 @@ class HaltStretches:
         if taken != 1 or gaps is None or index >= len(gaps) or self.halt_s is None:
             return
         before = self._stretch
-        if index == 0 and before is None and self._last is not None:
-            before = self._stretch_at(self._last)
+        if index == 0 and before is None and self._before:
+            before = self._stretch_before()
         if before is None or before.wrong:
             return
         last_run_s = max(self._halt_ticks[index] - gaps[index] - self._offset, 0) * TICK_S
@@ -215,8 +219,7 @@ class HaltStretches:
         carried = None if paths is None else carry_offsets(paths, stretch)
         if carried is None:
             return
-        self._carried, emptied = keep_offsets(stretch, carried)
-        self._carried_into = stretch
+        _, emptied = keep_offsets(stretch, carried)
         if emptied is None:
             self.restarts_carried += 1
             return
@@ -235,6 +238,22 @@ class HaltStretches:
         self._stretch = self._stretch_at(sample, rows)
         if self._stretch is not None:
             self.stretches += 1
+
+    def _stretch_before(self) -> Stretch | None:
+        """The stretch the first halt is judged from: based at the earliest sample kept before
+        it (``BEFORE_SAMPLES``) and narrowed by every later one, so it carries their offsets
+        (based at the latest alone it allowed its rounding, +-half an LSB, and a shift at each
+        halt hid in it: ``host.mqtt.haltcarry``); based at the latest when a frame between them
+        is missing or beyond the per-period bound, or a sample does not fit."""
+        samples, latest = self._before, self._before[-1]
+        stretch = self._stretch_at(samples[0])
+        if stretch is None:
+            return self._stretch_at(latest)
+        for sample in itertools.islice(samples, 1, None):
+            if not self._step_to(stretch, sample.pose.seq) \
+                    or narrow_offsets(stretch, sample.pose) is not None:
+                return self._stretch_at(latest)
+        return stretch
 
     def _stretch_at(self, sample: Sample, rows: list[Frame] | None = None) -> Stretch | None:
         """A stretch based at ``sample`` (its reference primed at the frame it names; None
@@ -265,9 +284,7 @@ class HaltStretches:
     def _compare(self, stretch: Stretch, sample: Sample) -> None:
         """Narrow the stretch's offsets by one sample; note the stretch wrong once one empties."""
         self.judged += 1
-        emptied = narrow_offsets(stretch, sample.pose)
-        if emptied is None and not stretch.wrong and self._carried_into is stretch:
-            self._carried, emptied = keep_offsets(stretch, self._carried)
+        emptied = narrow_offsets(stretch, sample.pose)  # and the boxes carried (haltcarry)
         if stretch.wrong or emptied is None:
             return
         stretch.wrong = True
