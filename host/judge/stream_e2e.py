@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays, concat_frames, empty_frames
+from odocan.host.judge.stream_carry import HORIZON_S
 from odocan.host.protocol.decode import frame_keys
 from odocan.host.protocol.e2e import E2EMessage, check_frames, e2e_messages
 from odocan.host.protocol.e2e_silence import SILENCE_KEYS, silences
@@ -52,7 +53,8 @@ class StreamE2E:
     db: DatabaseSpec
     counts: Counts = field(default_factory=dict)  # so far: ``check_frames``' first result
     _tail: FrameArrays = field(default_factory=empty_frames)
-    _settled: bool = False  # a verdict of the stamps changed by the evidence (module docstring)
+    _settled: bool = False  # a frame settled by the evidence near a chunk's edge (docstring)
+    _late: bool = False  # one near the latest chunk's end: inexact if another chunk comes
     _chunks: int = 0  # chunks fed
     _last_ok_s: dict[str, float] = field(default_factory=dict)  # per message: its last accepted
     # frame given out, bus time (s): the silences are counted from it (``_silences``)
@@ -72,15 +74,15 @@ class StreamE2E:
         """Check the next chunk; returns its accepted mask (the counts grow)."""
         n_tail = len(self._tail)
         both = concat_frames([self._tail, chunk]) if n_tail else chunk
-        unsettled: set[str] = set()
-        counts, accepted = check_frames(both, self.db, unsettled)
+        touched: list[npt.NDArray[np.intp]] = []
+        counts, accepted = check_frames(both, self.db, touched=touched)
         if n_tail:
-            tail_counts, _ = check_frames(self._tail, self.db, unsettled)
+            tail_counts, _ = check_frames(self._tail, self.db)
             _add(counts, tail_counts, -1)
         for section in counts.values():  # pairs, not frames: counted by ``_silences``
             for key in SILENCE_KEYS:
                 section.pop(key, None)
-        self._settled = self._settled or bool(unsettled)
+        self._settled = self._settled or self._near_edges(both, n_tail, touched)
         self._chunks += 1
         _add(self.counts, counts)
         keys = frame_keys(both)
@@ -88,6 +90,23 @@ class StreamE2E:
         self.counts = self._ordered(self.counts)
         self._tail = both.select(self._tails(both, keys, accepted))
         return accepted[n_tail:]
+
+    def _near_edges(self, both: FrameArrays, n_tail: int,
+                    touched: list[npt.NDArray[np.intp]]) -> bool:
+        """Whether a frame the evidence settled (``touched``: positions in ``both``, the tail
+        then the chunk) lies within ``HORIZON_S`` of this chunk's start (after the first chunk)
+        or, a chunk ago, of that chunk's end: its evidence may lie in the next chunk (module
+        docstring). The end is known only when the next chunk comes (the log's end: none)."""
+        if len(both) == n_tail:  # no frame: the end not known yet
+            return False
+        late, self._late = self._late, False
+        at = np.concatenate(touched) if touched else np.zeros(0, dtype=np.intp)
+        if len(at) == 0:
+            return late
+        t_s = np.maximum.accumulate(both.timestamp_s)
+        start_s = float(t_s[n_tail]) + HORIZON_S if self._chunks else -np.inf
+        self._late = bool((t_s[at] > t_s[-1] - HORIZON_S).any())
+        return late or bool((t_s[at] < start_s).any())
 
     def _silences(self, chunk: FrameArrays, keys: npt.NDArray[np.int64],
                   accepted: npt.NDArray[np.bool_]) -> Counts:

@@ -1,0 +1,111 @@
+"""The chunks of a log re-cut where the E2E check's evidence is settled, so that the streamed
+check (``stream_e2e.StreamE2E``) judges every chunk as the whole log does (issue #11, one judge,
+bounded memory).
+
+Where a capture's stamps cannot decide which encoder frames the firmware took (a jittered or a
+starved recorder), the whole log's check settles them from evidence after them
+(``host.protocol.e2e_evidence``, ``e2e_pages``): the poses naming the latest frame, within a
+pose cycle or so, and the next ENC_E2E page, within its rotation (about 1.2 s). That evidence
+comes within ``HORIZON_S``: a cut of the log with no frame the evidence settled within
+``HORIZON_S`` of it on either side leaves every settled frame with all its evidence in one chunk.
+
+``CarriedChunks`` holds the frames after the latest such cut (the unsettled span, bounded by the
+horizon, not by the log) and gives them out with the next chunk's, checking the frames given
+out over the last ``HORIZON_S`` and the frames held (``check_frames(..., touched)``: the frames
+whose verdict the evidence changed). Where no clean cut comes within ``MAX_CARRY_S`` (evidence
+that keeps settling frames for that long), it cuts anyway: ``StreamE2E`` then sees a settled
+frame near a chunk's edge and the stream refuses the log (``NotStreamable``)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.frames import concat_frames, empty_frames
+from odocan.host.io.logs import FrameArrays
+from odocan.host.protocol.e2e import check_frames
+
+if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
+    from odocan.host.protocol.dbcplan import DatabaseSpec
+
+HORIZON_S = 2.5  # the evidence horizon: two ENC_E2E page rotations (1.2 s) and a pose cycle
+MAX_CARRY_S = 30.0  # the longest span held without a clean cut: then cut anyway (refused)
+
+
+def touched_times_s(frames: FrameArrays, db: DatabaseSpec) -> npt.NDArray[np.float64]:
+    """The bus times (s, the running maximum of the stamps) of the frames of ``frames`` whose
+    verdict the evidence after them changed (``check_frames``' ``touched``)."""
+    touched: list[npt.NDArray[np.intp]] = []
+    check_frames(frames, db, touched=touched)
+    at = np.concatenate(touched) if touched else np.zeros(0, dtype=np.intp)
+    return np.maximum.accumulate(frames.timestamp_s)[at] if len(at) else np.zeros(0)
+
+
+def clean_cut(t_s: npt.NDArray[np.float64], touched_s: npt.NDArray[np.float64],
+              forced: bool = False) -> int:
+    """The latest place ``p`` (frames ``[0, p)`` given out) among frames at running-maximum
+    times ``t_s`` with ``HORIZON_S`` of frames after it, and (unless ``forced``) no touched
+    frame (``touched_s``) within ``HORIZON_S`` of it; 0: none."""
+    if len(t_s) == 0:
+        return 0
+    room = int(np.searchsorted(t_s, t_s[-1] - HORIZON_S, side="right"))  # p < room: looked ahead
+    if forced or len(touched_s) == 0:
+        return room
+    touched_s = np.sort(touched_s)
+    cut_s = t_s[:room]
+    near = (np.searchsorted(touched_s, cut_s + HORIZON_S, side="right")
+            - np.searchsorted(touched_s, cut_s - HORIZON_S, side="left"))
+    clean = np.flatnonzero((near == 0) & (np.arange(room) > 0))
+    return int(clean[-1]) if len(clean) else 0
+
+
+class CarriedChunks:
+    """The module docstring: ``feed`` a chunk, get the chunks (of the frames fed, in order)
+    whose cuts are clean; ``finish`` gives out the frames still held."""
+
+    def __init__(self, db: DatabaseSpec) -> None:
+        self.db = db
+        self._given = empty_frames()  # the last ``HORIZON_S`` of the frames given out
+        self._held = empty_frames()  # the frames after the latest clean cut
+
+    def feed(self, chunk: FrameArrays) -> Iterator[FrameArrays]:
+        """The frames of ``chunk`` and those held, up to the latest clean cut."""
+        held = concat_frames([self._held, chunk]) if len(self._held) else chunk
+        self._held = held
+        t_s = np.maximum.accumulate(held.timestamp_s) if len(held) else held.timestamp_s
+        if len(t_s) == 0 or t_s[-1] - t_s[0] < HORIZON_S:
+            return
+        window = concat_frames([self._given, held]) if len(self._given) else held
+        cut = clean_cut(t_s, touched_times_s(window, self.db))
+        if cut == 0 and t_s[-1] - t_s[0] > MAX_CARRY_S:
+            cut = clean_cut(t_s, np.zeros(0), forced=True)  # the horizon exceeded: refused
+        if cut == 0:
+            return
+        out = held.select(slice(0, cut))
+        self._held = held.select(np.arange(cut, len(held)))  # a copy: not the chunk's buffer
+        self._keep_given(out)
+        yield out
+
+    def finish(self) -> Iterator[FrameArrays]:
+        """The frames held (the log's end: no evidence after them to wait for)."""
+        if len(self._held):
+            yield self._held
+        self._held = self._given = empty_frames()
+
+    def _keep_given(self, out: FrameArrays) -> None:
+        """Keep the last ``HORIZON_S`` of the frames given out (``out`` the latest)."""
+        given = concat_frames([self._given, out]) if len(self._given) else out
+        t_s = np.maximum.accumulate(given.timestamp_s)
+        start = int(np.searchsorted(t_s, t_s[-1] - HORIZON_S, side="left"))
+        self._given = given.select(np.arange(start, len(given)))  # a copy, as ``_held``
+
+
+def carried(chunks: Iterable[FrameArrays], db: DatabaseSpec) -> Iterator[FrameArrays]:
+    """``chunks`` re-cut at clean cuts (``CarriedChunks``)."""
+    carry = CarriedChunks(db)
+    for chunk in chunks:
+        yield from carry.feed(chunk)
+    yield from carry.finish()
