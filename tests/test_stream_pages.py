@@ -45,6 +45,7 @@ from tests.test_capture_jitter import _jittered
 from tests.test_reorder import _off_by_two
 
 CHUNKS = (97, 300, 700, 1000, 4096)
+DURATION_S = "12"  # s: the carry cuts a log a horizon (2.5 s) after two horizons held
 DELAYED = ("kobuki", 3, "delay=0.1:15,seed=7")
 CAPTURES = [  # (drive, firmware 2 LSB off in, the recorder: starved or jittered, its seed;
     (DELAYED, None, "starved1"), (DELAYED, None, "starved2"),  # None: the drive's own log)
@@ -64,7 +65,7 @@ def capture(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFac
     tmp = tmp_path_factory.mktemp("capture")
     log, capture = tmp / "drive.log", tmp / "capture.log"
     with _off_by_two(wrong):
-        main(["run", "--robot", robot, "--duration", "4", "--seed", str(seed), "--log",
+        main(["run", "--robot", robot, "--duration", DURATION_S, "--seed", str(seed), "--log",
               str(log), "--firmware", "python", "--faults", faults])
     if recorder is None:
         return log, robot

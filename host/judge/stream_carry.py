@@ -70,14 +70,17 @@ class CarriedChunks:
         self.db = db
         self._given = empty_frames()  # the last ``HORIZON_S`` of the frames given out
         self._held = empty_frames()  # the frames after the latest clean cut
+        self._next_check_s = -np.inf  # no check before (a horizon after the last one's end)
 
     def feed(self, chunk: FrameArrays) -> Iterator[FrameArrays]:
         """The frames of ``chunk`` and those held, up to the latest clean cut."""
         held = concat_frames([self._held, chunk]) if len(self._held) else chunk
         self._held = held
         t_s = np.maximum.accumulate(held.timestamp_s) if len(held) else held.timestamp_s
-        if len(t_s) == 0 or t_s[-1] - t_s[0] < HORIZON_S:
-            return
+        wait_s = min(2 * HORIZON_S, max(MAX_CARRY_S, HORIZON_S))  # a horizon to give out
+        if len(t_s) == 0 or t_s[-1] - t_s[0] < wait_s or t_s[-1] < self._next_check_s:
+            return  # checked once a horizon can be given out, or a horizon more is held
+        self._next_check_s = float(t_s[-1]) + HORIZON_S
         window = concat_frames([self._given, held]) if len(self._given) else held
         cut = clean_cut(t_s, touched_times_s(window, self.db))
         if cut == 0 and t_s[-1] - t_s[0] > MAX_CARRY_S:
