@@ -2,16 +2,18 @@
 chunk by chunk (moved out of ``host.judge.stream``, whose docstring describes it).
 
 Exact where the stamps decide every verdict. Where the whole log's check changes a verdict of
-the stamps (a starved recorder's releases, a lock-out after a late frame: ``e2e_evidence``,
-``e2e_pages``), it settles the encoder frames from evidence that comes after them, and over
-the whole log at once (the poses naming them, the next ENC_E2E page, one trial of the narrow
-reading over every span that took too many): a chunk's verdicts, given out with the chunk, may
-not be the whole log's (issue #11: at 97 to 1 000 frames a chunk, 3 to 67 of a starved
-capture's 1 439 frames judged otherwise, and 32 of 180 jittered captures' streams differed).
-``exact`` then turns False (where a check changed a verdict of the stamps and the log came
-in more than one chunk: a superset of the streams judged otherwise, in every capture the
-tests cut) and the streamed analysis refuses the log (``NotStreamable``: the whole log's path
-judges it), as the other stages whose ``exact`` flag says so.
+the stamps (a starved recorder's releases, a lock-out after a late frame, a jittered capture:
+``e2e_evidence``, ``e2e_pages``), it settles the encoder frames from evidence that comes after
+them (the poses naming them, the next ENC_E2E page): a chunk's verdicts, given out with the
+chunk, are the whole log's only where that evidence lies in the chunk (issue #11: at 97 to
+1 000 frames a chunk, 3 to 67 of a starved capture's 1 439 frames judged otherwise). The
+streamed analysis feeds chunks re-cut where no frame so settled lies within
+``stream_carry.HORIZON_S`` of a cut (``stream_carry.carried``); ``exact`` turns False where a
+frame the evidence settled (``check_frames``' ``touched``) still lies within ``HORIZON_S`` of a
+chunk's start (after the first chunk) or of its end (but the log's last chunk): the carry
+exceeded its horizon, or the chunks were not re-cut, and the streamed analysis refuses the log
+(``NotStreamable``: the whole log's path judges it), as the other stages whose ``exact`` flag
+says so.
 
 The silences (``e2e_silence``: steps between two accepted frames, pairs, not frames) are not
 taken as the difference of two checks but counted from each message's last accepted frame
