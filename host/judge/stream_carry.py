@@ -7,7 +7,9 @@ starved recorder), the whole log's check settles them from evidence after them
 (``host.protocol.e2e_evidence``, ``e2e_pages``): the poses naming the latest frame, within a
 pose cycle or so, and the next ENC_E2E page, within its rotation (about 1.2 s). That evidence
 comes within ``HORIZON_S``: a cut of the log with no frame the evidence settled within
-``HORIZON_S`` of it on either side leaves every settled frame with all its evidence in one chunk.
+``HORIZON_S`` of it on either side, and an ENC_E2E page on each side within it (the span of
+pages around the cut checked whole: a page lost lengthens it), leaves every settled frame with
+all its evidence in one chunk.
 
 ``CarriedChunks`` holds the frames after the latest such cut (the unsettled span, bounded by the
 horizon, not by the log) and gives them out with the next chunk's, checking the frames given
@@ -27,6 +29,7 @@ import numpy.typing as npt
 from odocan.host.io.frames import concat_frames, empty_frames
 from odocan.host.io.logs import FrameArrays
 from odocan.host.protocol.e2e import check_frames
+from odocan.host.protocol.e2e_pages import ok_pages
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
     from odocan.host.protocol.dbcplan import DatabaseSpec
@@ -44,22 +47,41 @@ def touched_times_s(frames: FrameArrays, db: DatabaseSpec) -> npt.NDArray[np.flo
     return np.maximum.accumulate(frames.timestamp_s)[at] if len(at) else np.zeros(0)
 
 
+def page_times_s(frames: FrameArrays, db: DatabaseSpec) -> npt.NDArray[np.float64] | None:
+    """The bus times (s, running maximum) of the ENC_E2E pages of ``frames`` (their CRCs not
+    checked: a cut needs a page near it, ``clean_cut``); None where the DBC has none."""
+    pages = ok_pages(frames, np.ones(len(frames), dtype=bool), db)
+    return None if pages is None else np.maximum.accumulate(frames.timestamp_s)[pages.at]
+
+
 def clean_cut(t_s: npt.NDArray[np.float64], touched_s: npt.NDArray[np.float64],
-              forced: bool = False) -> int:
+              pages_s: npt.NDArray[np.float64] | None = None, forced: bool = False) -> int:
     """The latest place ``p`` (frames ``[0, p)`` given out) among frames at running-maximum
     times ``t_s`` with ``HORIZON_S`` of frames after it, and (unless ``forced``) no touched
-    frame (``touched_s``) within ``HORIZON_S`` of it; 0: none."""
+    frame (``touched_s``) within ``HORIZON_S`` of it and an ENC_E2E page (``pages_s``, when
+    the DBC has them) within ``HORIZON_S`` on each side: the span of pages around the cut,
+    which ``e2e_pages`` settles as one, lies in the frames checked; 0: none."""
     if len(t_s) == 0:
         return 0
     room = int(np.searchsorted(t_s, t_s[-1] - HORIZON_S, side="right"))  # p < room: looked ahead
-    if forced or len(touched_s) == 0:
+    if forced:
         return room
-    touched_s = np.sort(touched_s)
     cut_s = t_s[:room]
-    near = (np.searchsorted(touched_s, cut_s + HORIZON_S, side="right")
-            - np.searchsorted(touched_s, cut_s - HORIZON_S, side="left"))
-    clean = np.flatnonzero((near == 0) & (np.arange(room) > 0))
-    return int(clean[-1]) if len(clean) else 0
+    clean = (_within(touched_s, cut_s - HORIZON_S, cut_s + HORIZON_S) == 0) & (
+        np.arange(room) > 0)
+    if pages_s is not None:
+        clean &= (_within(pages_s, cut_s - HORIZON_S, cut_s) > 0) & (
+            _within(pages_s, cut_s, cut_s + HORIZON_S) > 0)
+    places = np.flatnonzero(clean)
+    return int(places[-1]) if len(places) else 0
+
+
+def _within(times_s: npt.NDArray[np.float64], lo_s: npt.NDArray[np.float64],
+            hi_s: npt.NDArray[np.float64]) -> npt.NDArray[np.intp]:
+    """How many of ``times_s`` lie in [``lo_s``, ``hi_s``], per bound."""
+    times_s = np.sort(times_s)
+    hi = np.searchsorted(times_s, hi_s, side="right")
+    return hi - np.searchsorted(times_s, lo_s, side="left")
 
 
 class CarriedChunks:
@@ -82,7 +104,8 @@ class CarriedChunks:
             return  # checked once a horizon can be given out, or a horizon more is held
         self._next_check_s = float(t_s[-1]) + HORIZON_S
         window = concat_frames([self._given, held]) if len(self._given) else held
-        cut = clean_cut(t_s, touched_times_s(window, self.db))
+        pages_s = page_times_s(window, self.db)
+        cut = clean_cut(t_s, touched_times_s(window, self.db), pages_s)
         if cut == 0 and t_s[-1] - t_s[0] > MAX_CARRY_S:
             cut = clean_cut(t_s, np.zeros(0), forced=True)  # the horizon exceeded: refused
         if cut == 0:
