@@ -135,14 +135,19 @@ def test_the_streamed_report_is_the_whole_logs(capture: tuple[Path, str],
 
 def test_beyond_the_evidence_horizon_the_stream_refuses(
         capture: tuple[Path, str], monkeypatch: pytest.MonkeyPatch) -> None:
-    """Where no clean cut comes within ``MAX_CARRY_S`` (here 0 s: every cut forced, wherever
-    the evidence settles frames), the stream cuts anyway and refuses the log, and says why;
-    the drive's own log (the bus's stamps: nothing settled) still streams."""
+    """Where no clean cut comes within ``MAX_CARRY_S`` (here 0 s: the first window checked that
+    has no clean cut), the carry refuses the log and says why; the drive's own log (the bus's
+    stamps: nothing settled) still streams, the same as the whole log's check."""
     path, robot = capture
     monkeypatch.setattr(stream_carry, "MAX_CARRY_S", 0.0)
     if path.name == "drive.log":
-        assert _streamed(path, 97, carry=True)[2]
+        counts, accepted = check_frames(read_log(path), default_plan())
+        streamed, streamed_counts, exact = _streamed(path, 97, carry=True)
+        assert exact
+        assert np.array_equal(streamed, accepted)
+        assert streamed_counts == counts
         return
-    assert not _streamed(path, 97, carry=True)[2]
+    with pytest.raises(NotStreamable, match="horizon"):
+        _streamed(path, 97, carry=True)
     with pytest.raises(NotStreamable, match="horizon"):
         analyze_file(path, load(robot), chunk_frames=97)

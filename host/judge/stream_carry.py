@@ -15,8 +15,9 @@ all its evidence in one chunk.
 horizon, not by the log) and gives them out with the next chunk's, checking the frames given
 out over the last ``HORIZON_S`` and the frames held (``check_frames(..., touched)``: the frames
 whose verdict the evidence changed). Where no clean cut comes within ``MAX_CARRY_S`` (evidence
-that keeps settling frames for that long), it cuts anyway: ``StreamE2E`` then sees a settled
-frame near a chunk's edge and the stream refuses the log (``NotStreamable``)."""
+that keeps settling frames for that long, or ENC_E2E pages lost that long) the horizon is
+exceeded: the stream refuses the log (``NotStreamable``: the CLI judges it whole). ``StreamE2E``
+checks the chunks it is fed too (a settled frame near a chunk's edge: not ``exact``)."""
 
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ import numpy.typing as npt
 
 from odocan.host.io.frames import concat_frames, empty_frames
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.stream_refusal import UNSETTLED, NotStreamable
 from odocan.host.protocol.e2e import check_frames
 from odocan.host.protocol.e2e_pages import ok_pages
 
@@ -55,21 +57,19 @@ def page_times_s(frames: FrameArrays, db: DatabaseSpec) -> npt.NDArray[np.float6
 
 
 def clean_cut(t_s: npt.NDArray[np.float64], touched_s: npt.NDArray[np.float64],
-              pages_s: npt.NDArray[np.float64] | None = None, forced: bool = False) -> int:
+              pages_s: npt.NDArray[np.float64] | None = None) -> int:
     """The latest place ``p`` (frames ``[0, p)`` given out) among frames at running-maximum
-    times ``t_s`` with ``HORIZON_S`` of frames after it, and (unless ``forced``) no touched
-    frame (``touched_s``) within ``HORIZON_S`` of it and an ENC_E2E page (``pages_s``, when
-    the DBC has them) within ``HORIZON_S`` on each side: the span of pages around the cut,
-    which ``e2e_pages`` settles as one, lies in the frames checked; 0: none."""
+    times ``t_s`` with ``HORIZON_S`` of frames after it, no touched frame (``touched_s``)
+    within ``HORIZON_S`` of it and an ENC_E2E page (``pages_s``, where the frames checked
+    hold any) within ``HORIZON_S`` on each side: the span of pages around the cut, which
+    ``e2e_pages`` settles as one, lies in the frames checked; 0: none."""
     if len(t_s) == 0:
         return 0
     room = int(np.searchsorted(t_s, t_s[-1] - HORIZON_S, side="right"))  # p < room: looked ahead
-    if forced:
-        return room
     cut_s = t_s[:room]
     clean = (_within(touched_s, cut_s - HORIZON_S, cut_s + HORIZON_S) == 0) & (
         np.arange(room) > 0)
-    if pages_s is not None:
+    if pages_s is not None and len(pages_s):
         clean &= (_within(pages_s, cut_s - HORIZON_S, cut_s) > 0) & (
             _within(pages_s, cut_s, cut_s + HORIZON_S) > 0)
     places = np.flatnonzero(clean)
@@ -107,7 +107,7 @@ class CarriedChunks:
         pages_s = page_times_s(window, self.db)
         cut = clean_cut(t_s, touched_times_s(window, self.db), pages_s)
         if cut == 0 and t_s[-1] - t_s[0] > MAX_CARRY_S:
-            cut = clean_cut(t_s, np.zeros(0), forced=True)  # the horizon exceeded: refused
+            raise NotStreamable(UNSETTLED)  # the horizon exceeded (module docstring)
         if cut == 0:
             return
         out = held.select(slice(0, cut))
