@@ -21,7 +21,7 @@ checks the chunks it is fed too (a settled frame near a chunk's edge: not ``exac
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -135,3 +135,39 @@ def carried(chunks: Iterable[FrameArrays], db: DatabaseSpec) -> Iterator[FrameAr
     for chunk in chunks:
         yield from carry.feed(chunk)
     yield from carry.finish()
+
+
+class CarriedSpans:
+    """``carried`` of the spans of a log read again and again (the streamed analysis' passes
+    over each life): the cuts found on a span's first full read (its chunks' sizes), replayed
+    on the later reads without checking the frames again."""
+
+    def __init__(self, db: DatabaseSpec) -> None:
+        self.db = db
+        self._sizes: dict[tuple[int, int], list[int]] = {}  # per span, its chunks' sizes
+
+    def chunks(self, span: tuple[int, int], read: Callable[[], Iterable[FrameArrays]]
+               ) -> Iterator[FrameArrays]:
+        """The frames ``read()`` gives of ``span`` (start, stop), cut as ``carried`` cuts them."""
+        sizes = self._sizes.get(span)
+        if sizes is not None:
+            yield from _recut(read(), sizes)
+            return
+        made: list[int] = []
+        for chunk in carried(read(), self.db):
+            made.append(len(chunk))
+            yield chunk
+        self._sizes[span] = made  # read to its end: known
+
+
+def _recut(chunks: Iterable[FrameArrays], sizes: list[int]) -> Iterator[FrameArrays]:
+    """The frames of ``chunks`` in chunks of ``sizes`` frames (their sum: the frames')."""
+    held, wanted = empty_frames(), iter(sizes)
+    want = next(wanted, None)
+    for chunk in chunks:
+        held = concat_frames([held, chunk]) if len(held) else chunk
+        while want is not None and len(held) >= want:
+            yield held.select(slice(0, want))
+            held, want = held.select(slice(want, len(held))), next(wanted, None)
+    if len(held):
+        yield held
