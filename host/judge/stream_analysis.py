@@ -45,6 +45,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.setposekept import Kept, check_cut, mark_kept
 from odocan.host.judge.stream import StreamE2E
+from odocan.host.judge.stream_carry import CarriedSpans, carried
 from odocan.host.judge.stream_choice import RSS_MARGIN as RSS_MARGIN
 from odocan.host.judge.stream_choice import RSS_TARGET_MB as RSS_TARGET_MB
 from odocan.host.judge.stream_choice import STREAM_MODES as STREAM_MODES
@@ -118,7 +119,7 @@ def analyze_file(
         spill = FrameSpill(Path(tmp))
         e2e, lives = StreamE2E(db), StreamLives(decoder)  # one decoder: its cache too
         facts, cuts = StreamFacts(decoder), StreamCuts(decoder)
-        for chunk in iter_log(path, chunk_frames=chunk_frames, warn=warn):
+        for chunk in carried(iter_log(path, chunk_frames=chunk_frames, warn=warn), db):
             count.frames += len(chunk)
             spill.write(chunk)
             accepted = e2e.feed(chunk)
@@ -129,8 +130,11 @@ def analyze_file(
         if not e2e.exact:  # its accepted frames may not be the whole log's: nor its lives
             raise NotStreamable(UNSETTLED)
 
+        carry = CarriedSpans(db)  # each life read in the passes: its cuts found once
+
         def frames_of(span: LifeSpan) -> Frames:
-            return lambda: spill.read(span.start, span.stop, chunk_frames)
+            return lambda: carry.chunks((span.start, span.stop), lambda: spill.read(
+                span.start, span.stop, chunk_frames))
 
         firmware = lives.finish_one_source()  # two firmwares: not judged from there, a FAIL
         applied = cuts.configs(robot.counter_bits, firmware)

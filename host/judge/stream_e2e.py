@@ -2,16 +2,18 @@
 chunk by chunk (moved out of ``host.judge.stream``, whose docstring describes it).
 
 Exact where the stamps decide every verdict. Where the whole log's check changes a verdict of
-the stamps (a starved recorder's releases, a lock-out after a late frame: ``e2e_evidence``,
-``e2e_pages``), it settles the encoder frames from evidence that comes after them, and over
-the whole log at once (the poses naming them, the next ENC_E2E page, one trial of the narrow
-reading over every span that took too many): a chunk's verdicts, given out with the chunk, may
-not be the whole log's (issue #11: at 97 to 1 000 frames a chunk, 3 to 67 of a starved
-capture's 1 439 frames judged otherwise, and 32 of 180 jittered captures' streams differed).
-``exact`` then turns False (where a check changed a verdict of the stamps and the log came
-in more than one chunk: a superset of the streams judged otherwise, in every capture the
-tests cut) and the streamed analysis refuses the log (``NotStreamable``: the whole log's path
-judges it), as the other stages whose ``exact`` flag says so.
+the stamps (a starved recorder's releases, a lock-out after a late frame, a jittered capture:
+``e2e_evidence``, ``e2e_pages``), it settles the encoder frames from evidence that comes after
+them (the poses naming them, the next ENC_E2E page): a chunk's verdicts, given out with the
+chunk, are the whole log's only where that evidence lies in the chunk (issue #11: at 97 to
+1 000 frames a chunk, 3 to 67 of a starved capture's 1 439 frames judged otherwise). The
+streamed analysis feeds chunks re-cut where no frame so settled lies within
+``stream_carry.HORIZON_S`` of a cut (``stream_carry.carried``); ``exact`` turns False where a
+frame the evidence settled (``check_frames``' ``touched``) still lies within ``HORIZON_S`` of a
+chunk's start (after the first chunk) or of its end (but the log's last chunk): the carry
+exceeded its horizon, or the chunks were not re-cut, and the streamed analysis refuses the log
+(``NotStreamable``: the whole log's path judges it), as the other stages whose ``exact`` flag
+says so.
 
 The silences (``e2e_silence``: steps between two accepted frames, pairs, not frames) are not
 taken as the difference of two checks but counted from each message's last accepted frame
@@ -27,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays, concat_frames, empty_frames
+from odocan.host.judge.stream_carry import HORIZON_S
 from odocan.host.protocol.decode import frame_keys
 from odocan.host.protocol.e2e import E2EMessage, check_frames, e2e_messages
 from odocan.host.protocol.e2e_silence import SILENCE_KEYS, silences
@@ -52,7 +55,8 @@ class StreamE2E:
     db: DatabaseSpec
     counts: Counts = field(default_factory=dict)  # so far: ``check_frames``' first result
     _tail: FrameArrays = field(default_factory=empty_frames)
-    _settled: bool = False  # a verdict of the stamps changed by the evidence (module docstring)
+    _settled: bool = False  # a frame settled by the evidence near a chunk's edge (docstring)
+    _late: bool = False  # one near the latest chunk's end: inexact if another chunk comes
     _chunks: int = 0  # chunks fed
     _last_ok_s: dict[str, float] = field(default_factory=dict)  # per message: its last accepted
     # frame given out, bus time (s): the silences are counted from it (``_silences``)
@@ -72,15 +76,15 @@ class StreamE2E:
         """Check the next chunk; returns its accepted mask (the counts grow)."""
         n_tail = len(self._tail)
         both = concat_frames([self._tail, chunk]) if n_tail else chunk
-        unsettled: set[str] = set()
-        counts, accepted = check_frames(both, self.db, unsettled)
+        touched: list[npt.NDArray[np.intp]] = []
+        counts, accepted = check_frames(both, self.db, touched=touched)
         if n_tail:
-            tail_counts, _ = check_frames(self._tail, self.db, unsettled)
+            tail_counts, _ = check_frames(self._tail, self.db)
             _add(counts, tail_counts, -1)
         for section in counts.values():  # pairs, not frames: counted by ``_silences``
             for key in SILENCE_KEYS:
                 section.pop(key, None)
-        self._settled = self._settled or bool(unsettled)
+        self._settled = self._settled or self._near_edges(both, n_tail, touched)
         self._chunks += 1
         _add(self.counts, counts)
         keys = frame_keys(both)
@@ -88,6 +92,23 @@ class StreamE2E:
         self.counts = self._ordered(self.counts)
         self._tail = both.select(self._tails(both, keys, accepted))
         return accepted[n_tail:]
+
+    def _near_edges(self, both: FrameArrays, n_tail: int,
+                    touched: list[npt.NDArray[np.intp]]) -> bool:
+        """Whether a frame the evidence settled (``touched``: positions in ``both``, the tail
+        then the chunk) lies within ``HORIZON_S`` of this chunk's start (after the first chunk)
+        or, a chunk ago, of that chunk's end: its evidence may lie in the next chunk (module
+        docstring). The end is known only when the next chunk comes (the log's end: none)."""
+        if len(both) == n_tail:  # no frame: the end not known yet
+            return False
+        late, self._late = self._late, False
+        at = np.concatenate(touched) if touched else np.zeros(0, dtype=np.intp)
+        if len(at) == 0:
+            return late
+        t_s = np.maximum.accumulate(both.timestamp_s)
+        start_s = float(t_s[n_tail]) + HORIZON_S if self._chunks else -np.inf
+        self._late = bool((t_s[at] > t_s[-1] - HORIZON_S).any())
+        return late or bool((t_s[at] < start_s).any())
 
     def _silences(self, chunk: FrameArrays, keys: npt.NDArray[np.int64],
                   accepted: npt.NDArray[np.bool_]) -> Counts:

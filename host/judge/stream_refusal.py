@@ -12,8 +12,10 @@ class NotStreamable(OdocanError):
     bus (``samples.queued_frames``: their pairing takes a median over the whole life), when a
     resent pose differs from the first naming its encoder frame (``host.judge.resent``: the
     sample may have been given out chunks before), or when encoder frames were settled from
-    the poses and pages after them (``stream_e2e.StreamE2E.exact``)."""
+    the poses and pages after them near a chunk's edge, the evidence horizon exceeded
+    (``stream_e2e.StreamE2E.exact``, ``stream_carry``)."""
 
 
-UNSETTLED = ("a starved recorder's stamps: encoder frames settled from the poses and pages "
-             "after them")
+UNSETTLED = ("a starved or jittered recorder's stamps: encoder frames settled from the poses "
+             "and pages after them, beyond the evidence horizon the stream carries "
+             "(stream_carry.MAX_CARRY_S)")

@@ -328,16 +328,17 @@ def _rejudge(
 
 
 def check_frames(
-    frames: FrameArrays, db: DatabaseSpec | None = None, unsettled: set[str] | None = None
+    frames: FrameArrays, db: DatabaseSpec | None = None,
+    touched: list[npt.NDArray[np.intp]] | None = None,
 ) -> tuple[dict[str, dict[str, int]], npt.NDArray[np.bool_]]:
     """Profile 2 over every frame of a log.
 
     Returns the counts per message name (``E2E_KEYS``; only messages present in the log) plus an
     ``"unknown"`` section (``UNKNOWN_KEYS``), and the mask (N,) of the frames accepted (OK or
     OKSOMELOST; the frames of unprotected messages are accepted unchecked). ``db`` defaults to
-    the contract (dbc/odocan.dbc). ``unsettled``, when given, gets the names of the messages
-    with a verdict of the stamps changed by the poses or the pages (evidence that may come
-    after the frame: ``host.judge.stream_e2e``).
+    the contract (dbc/odocan.dbc). ``touched``, when given, gets the bus positions of the
+    frames whose verdict of the stamps the poses or the pages changed (evidence that may come
+    after the frame: ``host.judge.stream_carry``, ``stream_e2e``).
 
     The frames are grouped by message once (a stable sort of their message numbers) and the CRCs
     of all protected frames found in one pass; the sequence is then judged per message.
@@ -374,7 +375,7 @@ def check_frames(
             accepted[right_dlc] = True
             continue
         counts[config.name] = _check_message(frames, right_dlc, config, accepted, crc_ok, poses,
-                                             pages, unsettled)
+                                             pages, touched)
     counts[UNKNOWN] = unknown
     return counts, accepted
 
@@ -403,7 +404,7 @@ def _check_message(
     crc_ok: npt.NDArray[np.bool_],
     poses: list[npt.NDArray[np.intp]] | None = None,
     pages: OkPages | None = None,
-    unsettled: set[str] | None = None,
+    touched: list[npt.NDArray[np.intp]] | None = None,
 ) -> dict[str, int]:
     """Check the frames ``index`` of one protected message (``crc_ok``: of every frame); mark
     the accepted ones. ``poses``: the evidence frames' positions (``e2e_evidence``); ``pages``:
@@ -418,7 +419,7 @@ def _check_message(
                                cycle_s)
     if config.name in PER_PERIOD_WINDOW and config.cycle_s is not None and poses is not None:
         status = _settled(frames, index, counter, crc_ok[index], periods, status, config, poses,
-                          pages, unsettled)
+                          pages, touched)
     good = (status == _S_OK) | (status == _S_LOST)
     if good.all():  # the usual case: no gathers
         accepted[index] = True
@@ -447,10 +448,10 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
              status: npt.NDArray[np.int8], config: E2EMessage,
              poses: list[npt.NDArray[np.intp]],
              pages: OkPages | None = None,
-             unsettled: set[str] | None = None) -> npt.NDArray[np.int8]:
+             touched: list[npt.NDArray[np.intp]] | None = None) -> npt.NDArray[np.int8]:
     """``status`` where the capture's stamps decide every frame; else settled from the
-    firmware's poses (``e2e_evidence``) and its counts (``e2e_pages``), the message's name
-    added to ``unsettled`` where they change a verdict of the stamps'."""
+    firmware's poses (``e2e_evidence``) and its counts (``e2e_pages``), the bus positions of
+    the frames where they change a verdict of the stamps' added to ``touched``."""
     assert config.cycle_s is not None
     t_s, cycle_s = frames.timestamp_s[index], new_cycle_s(config)
     wide, narrow = readings(t_s, counter, crc_ok, config.cycle_s, periods)
@@ -466,6 +467,6 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
                       released, None if cycle_s is None else (t_s, cycle_s), reading)
 
     settled = by_pages(run, run(None), index, released, pages)
-    if unsettled is not None and not np.array_equal(settled, status):
-        unsettled.add(config.name)
+    if touched is not None:
+        touched.append(index[settled != status])
     return settled
