@@ -186,6 +186,7 @@ def _live_passes(capture: Path, robot: str) -> bool:
     with can.LogReader(str(capture)) as reader:
         for msg in reader:
             monitor.feed(msg, now_s=msg.timestamp)
+    monitor.release_held()  # the watch ends: the frames held wait for no more evidence
     ref = monitor.tracker.vs_reference
     return bool(ref.max_dpos_m <= POSITION_LSB_M and ref.max_dheading_rad <= HEADING_LSB_RAD)
 

@@ -60,6 +60,7 @@ from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livekept import KeptWatch
+from odocan.host.judge.livesettle import SettleHold
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livestanding import placed_why, pose_wrong_why
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
@@ -82,6 +83,7 @@ from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import UNKNOWN, e2e_messages
+from odocan.host.protocol.e2e_held import HELD
 from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile
@@ -109,6 +111,8 @@ class BusMonitor:
         self.load = LoadWindow()
         self._by_key = {frame_key(m.frame_id, m.is_extended_frame): m for m in self.db.messages}
         self.e2e = E2EMonitor(self.db)
+        self.e2e.holds = True  # frames the stamps cannot decide wait for the evidence
+        self.settle = SettleHold(self.e2e, self.db)
         self._e2e_configs = e2e_messages(self.db)
         self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
         self.distance = LiveDistance(robot)  # ODOM_TWIST DISTANCE (host.judge.livedistance)
@@ -137,11 +141,25 @@ class BusMonitor:
         self._held: set[str] = set()  # secured messages with a command frame awaiting ODOM_AUTH
 
     def feed(self, msg: can.Message, now_s: float | None = None) -> None:
-        """One frame heard on the bus (``now_s``: local monotonic time, default now)."""
+        """One frame heard on the bus (``now_s``: local monotonic time, default now); held while
+        an encoder frame's verdict waits for the firmware's evidence (``livesettle``)."""
         now_s = time.monotonic() if now_s is None else now_s
-        self.frames_total += 1
-        self.load.add(msg)
+        if self.settle.held:
+            self.settle.held.append((msg, now_s))
+            if msg.timestamp > self.settle.until_s:
+                self.settle.release(self._feed)
+            return
+        self._feed(msg, now_s, None)
+
+    def release_held(self) -> None:
+        """The watch ends: the frames held are judged now (``livesettle``)."""
+        self.settle.release(self._feed)
+
+    def _feed(self, msg: can.Message, now_s: float, verdict: bool | None) -> None:
+        """``feed`` one frame; an encoder frame held given back with its ``verdict``."""
         if msg.is_error_frame or msg.is_remote_frame:
+            self.frames_total += 1
+            self.load.add(msg)
             self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
             return
         data = bytes(msg.data)
@@ -150,8 +168,16 @@ class BusMonitor:
         summary = self._summary(message, data) if message is not None else None
         if summary is not None:  # before its E2E check, which a reboot or a second source fails
             self._watch_source(*summary, counter=data[1] & 0xF)
-        status = self.e2e.check(msg.arbitration_id, data, extended=msg.is_extended_id,
-                                timestamp_s=timestamp_s)
+        if verdict is None:
+            status = self.e2e.check(msg.arbitration_id, data, extended=msg.is_extended_id,
+                                    timestamp_s=timestamp_s)
+        else:
+            status = self.e2e.check_as(msg.arbitration_id, data, timestamp_s, verdict)
+        if status == HELD:  # not judged yet: the frames from it wait (livesettle)
+            self.settle.open(msg, now_s)
+            return
+        self.frames_total += 1
+        self.load.add(msg)
         if message is None:
             self._count_unknown_id(msg.arbitration_id)
             return

@@ -1,0 +1,99 @@
+"""The live judge holds the frames from an encoder frame whose verdict the capture's stamps
+cannot decide until the firmware's evidence came, then judges them as the whole log does (issue
+#11, one judge; rule 5: a FAIL never blames a correct firmware; ``host.protocol.e2e_held``).
+
+A starved recorder stamps what it heard late, in bursts: after a frame late on the bus locked
+the firmware's E2E window out, the stamps no longer tell the frames it refused from those it
+took. ``analyze`` settles them by the poses that name the latest frame taken and by the
+firmware's ENC_E2E_OK pages (``e2e_evidence.settle``, ``e2e_pages``), evidence that comes
+after the frame. The live receiver judged each frame as it came and followed the sender's
+order from there (kobuki, seed 3, ``delay=0.1:15,seed=7``, recorder seed 1: 373 frames taken
+where the firmware took 262; 0.25 mm off a correct firmware: FAIL).
+
+Now such a frame (``E2EMonitor.check``: ``"held"``) opens a hold: it and every frame after it
+(every ID, in bus order) wait, unjudged, for ``HOLD_S`` of bus time (a lock-out's 16 periods
+and two ENC_E2E pages after it), then ``check_frames`` judges them whole from the message's
+last frame taken (``E2EMonitor.last_taken``, re-made with its COUNTER and bus time) and the
+judge is fed them again, in order, the encoder frames with those verdicts
+(``E2EMonitor.check_as``). A hold ends too at the end of the watch (``release``). While one
+waits the monitor's verdict is HELD (``reason``): never OK nor POSE WRONG on frames not judged.
+Bounded: one hold at a time, ``HOLD_S`` of frames.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import can
+
+from odocan.host.io.collector import FrameCollector
+from odocan.host.protocol import busfacts
+from odocan.host.protocol.decode import frame_key
+from odocan.host.protocol.e2e import check_frames, e2e_messages
+from odocan.host.protocol.e2e_crc import crc8h2f_p02_one
+from odocan.host.protocol.e2e_live import E2EMonitor
+
+if TYPE_CHECKING:  # a cantools Database or a plan of it
+    from odocan.host.protocol.dbcplan import DatabaseSpec
+
+ROTATION_S = busfacts.PROFILE_PAGE * busfacts.STATUS_CYCLE_MS / busfacts.MS_PER_S  # pages 1..6
+LOCKOUT_S = busfacts.ENC_COUNTER_LAP * busfacts.ENC_CYCLE_S  # a window locked out at most (s)
+HOLD_S = LOCKOUT_S + 2 * ROTATION_S  # bus time a hold waits: its lock-out, then two pages (s)
+REASON = ("encoder frames a starved recorder stamped in bursts wait for the firmware's poses "
+          "and pages")
+Feed = Callable[[can.Message, float, bool | None], None]  # frame, local s, verdict (None: own)
+
+
+class SettleHold:
+    """The frames held from an encoder frame the stamps cannot decide (module docstring)."""
+
+    def __init__(self, e2e: E2EMonitor, db: DatabaseSpec) -> None:
+        self._e2e, self._db = e2e, db
+        message = db.get_message_by_name(busfacts.ENC_MESSAGE)
+        self.can_id = message.frame_id
+        ids = e2e_messages(db)[frame_key(message.frame_id, message.is_extended_frame)].data_ids
+        self._data_ids = ids if ids is not None else (0,) * busfacts.ENC_COUNTER_LAP
+        self.held: list[tuple[can.Message, float]] = []  # (frame, local monotonic s)
+        self._start: tuple[int, float] | None = None  # the last frame taken before: COUNTER, s
+        self.until_s = math.inf  # bus time the hold is judged at (s)
+        self.holds = 0  # holds made
+
+    def open(self, msg: can.Message, now_s: float) -> None:
+        """The encoder frame ``msg`` (heard at local ``now_s``) was held: hold from it."""
+        self._start = self._e2e.last_taken(self.can_id)
+        self.held = [(msg, now_s)]
+        self.until_s = msg.timestamp + HOLD_S
+        self.holds += 1
+
+    def release(self, feed: Feed) -> None:
+        """Judge the frames held (``verdicts``) and ``feed`` them, in order, with them."""
+        held, self.held, self.until_s = self.held, [], math.inf
+        if not held:
+            return
+        for (msg, now_s), verdict in zip(held, self._verdicts(held), strict=True):
+            feed(msg, now_s, verdict)
+
+    def _verdicts(self, held: list[tuple[can.Message, float]]) -> list[bool | None]:
+        """Whether each encoder frame held is taken by the whole log's rule over the frames
+        held, after the last one taken before (None for the frames of other messages)."""
+        collector = FrameCollector()
+        if self._start is not None:
+            counter, t_s = self._start
+            data = bytearray(8)
+            data[1] = counter
+            data[0] = crc8h2f_p02_one(bytes(data), self._data_ids[counter])
+            collector.on_message_received(can.Message(timestamp=t_s, arbitration_id=self.can_id,
+                                                      is_extended_id=False, data=data))
+        for msg, _ in held:
+            collector.on_message_received(msg)
+        _, accepted = check_frames(collector.arrays(), self._db)
+        first = 1 if self._start is not None else 0
+        return [bool(accepted[first + k]) if self._is_encoder(msg) else None
+                for k, (msg, _) in enumerate(held)]
+
+    def _is_encoder(self, msg: can.Message) -> bool:
+        return (msg.arbitration_id == self.can_id and not msg.is_extended_id
+                and not msg.is_error_frame and not msg.is_remote_frame)
+
