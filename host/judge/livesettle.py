@@ -23,6 +23,7 @@ Bounded: one hold at a time, ``HOLD_S`` of frames.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -43,6 +44,7 @@ LOCKOUT_S = busfacts.ENC_COUNTER_LAP * busfacts.ENC_CYCLE_S  # a window locked o
 HOLD_S = LOCKOUT_S + 2 * ROTATION_S  # bus time a hold waits: its lock-out, then two pages (s)
 REASON = ("encoder frames a starved recorder stamped in bursts wait for the firmware's poses "
           "and pages")
+CONTEXT_FRAMES = 64  # frames judged before a hold kept for it (about 80 ms of a drive's bus)
 Feed = Callable[[can.Message, float, bool | None], None]  # frame, local s, verdict (None: own)
 
 
@@ -59,6 +61,7 @@ class SettleHold:
         self._start: tuple[int, float] | None = None  # the last frame taken before: COUNTER, s
         self.until_s = math.inf  # bus time the hold is judged at (s)
         self.holds = 0  # holds made
+        self.recent: deque[can.Message] = deque(maxlen=CONTEXT_FRAMES)  # the latest judged
 
     def open(self, msg: can.Message, now_s: float) -> None:
         """The encoder frame ``msg`` (heard at local ``now_s``) was held: hold from it."""
@@ -78,20 +81,41 @@ class SettleHold:
     def _verdicts(self, held: list[tuple[can.Message, float]]) -> list[bool | None]:
         """Whether each encoder frame held is taken by the whole log's rule over the frames
         held, after the last one taken before (None for the frames of other messages)."""
+        before = self._context()
         collector = FrameCollector()
-        if self._start is not None:
-            counter, t_s = self._start
+        for msg in [*before, *(m for m, _ in held)]:
+            collector.on_message_received(msg)
+        _, accepted = check_frames(collector.arrays(), self._db)
+        first = len(before)
+        return [bool(accepted[first + k]) if self._is_encoder(msg) else None
+                for k, (msg, _) in enumerate(held)]
+
+    def _context(self) -> list[can.Message]:
+        """The frames judged before the hold (``recent``): the firmware's sends before the first
+        held one and the recorder's silences and bursts the readings read (``e2e_evidence``);
+        the encoder frames before the last taken one with their CRC broken (their stamps kept:
+        the sequence starts at the last taken), that one re-made if not among them."""
+        context = list(self.recent)
+        if self._start is None:
+            return [m for m in context if not self._is_encoder(m)]
+        counter, t_s = self._start
+        last = next((k for k in range(len(context) - 1, -1, -1) if self._is_encoder(context[k])
+                     and context[k].timestamp == t_s and context[k].data[1] & 0xF == counter),
+                    None)
+        for k, msg in enumerate(context[: len(context) if last is None else last]):
+            if self._is_encoder(msg):
+                data = bytearray(msg.data)
+                data[0] ^= 0xFF
+                context[k] = can.Message(timestamp=msg.timestamp, arbitration_id=msg.arbitration_id,
+                                         is_extended_id=False, data=data)
+        if last is None:
             data = bytearray(8)
             data[1] = counter
             data[0] = crc8h2f_p02_one(bytes(data), self._data_ids[counter])
-            collector.on_message_received(can.Message(timestamp=t_s, arbitration_id=self.can_id,
-                                                      is_extended_id=False, data=data))
-        for msg, _ in held:
-            collector.on_message_received(msg)
-        _, accepted = check_frames(collector.arrays(), self._db)
-        first = 1 if self._start is not None else 0
-        return [bool(accepted[first + k]) if self._is_encoder(msg) else None
-                for k, (msg, _) in enumerate(held)]
+            context.append(can.Message(timestamp=t_s, arbitration_id=self.can_id,
+                                       is_extended_id=False, data=data))
+            context.sort(key=lambda m: m.timestamp)  # stable
+        return context
 
     def _is_encoder(self, msg: can.Message) -> bool:
         return (msg.arbitration_id == self.can_id and not msg.is_extended_id

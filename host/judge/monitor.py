@@ -176,6 +176,7 @@ class BusMonitor:
         if status == HELD:  # not judged yet: the frames from it wait (livesettle)
             self.settle.open(msg, now_s)
             return
+        self.settle.recent.append(msg)  # judged: a later hold's context (livesettle)
         self.frames_total += 1
         self.load.add(msg)
         if message is None:
