@@ -35,7 +35,8 @@ latest sample vs reference beyond ``analyze``'s limit, one LSB of position after
 allowance or of heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it; or
 an episode latched since the pose was last set anew, which the latest sample does not undo:
 ``livestanding``),
-UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), DISTANCE WRONG and
+UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), HELD (frames the
+stamps cannot decide wait for the evidence: ``livesettle``), DISTANCE WRONG and
 TWIST WRONG (ODOM_TWIST's DISTANCE and speeds, latched: ``livedistance``, ``livetwist``), OK
 (saying so when the reference was placed again after a stall or a gap: ``livestanding``).
 
@@ -147,7 +148,7 @@ class BusMonitor:
         if self.settle.held:
             self.settle.held.append((msg, now_s))
             if msg.timestamp > self.settle.until_s:
-                self.settle.release(self._feed)
+                self.settle.release(self._feed, self.feed)
             return
         self._feed(msg, now_s, None)
 
@@ -176,7 +177,7 @@ class BusMonitor:
         if status == HELD:  # not judged yet: the frames from it wait (livesettle)
             self.settle.open(msg, now_s)
             return
-        self.settle.recent.append(msg)  # judged: a later hold's context (livesettle)
+        self.settle.recent.append((msg, status in ACCEPTED))  # a hold's context (livesettle)
         self.frames_total += 1
         self.load.add(msg)
         if message is None:
@@ -372,6 +373,8 @@ class BusMonitor:
     def health(self, now_s: float | None = None) -> dict[str, Any]:
         """The verdict on the firmware and its pose (module docstring), why, node ages, events."""
         now_s = time.monotonic() if now_s is None else now_s
+        if self.settle.quiet(now_s):  # nothing heard for a hold's time: judged now (livesettle)
+            self.release_held()
         nodes = self.node_ages(now_s)
         state, why = self._verdict(nodes.get(FIRMWARE_NODE))
         return {"state": state, "why": why, "nodes": nodes, "events": list(self.events),
@@ -381,7 +384,7 @@ class BusMonitor:
     def _verdict(self, firmware: dict[str, Any] | None) -> tuple[str, list[str]]:
         if firmware is None:
             return "NO FIRMWARE", [f"no cyclic {FIRMWARE_NODE} message heard"]
-        if firmware["stale"]:
+        if firmware["stale"] and not self.settle.held:  # held frames were heard (livesettle)
             return "STALE", [
                 f"{FIRMWARE_NODE} silent for {firmware['age_s']:.2f} s (timeout "
                 f"{firmware['timeout_s']:.2f} s); it last said {self.status.get('state', '?')}"
@@ -401,6 +404,8 @@ class BusMonitor:
         why = pose_wrong_why(self.tracker)  # the latest sample, or the pose's life: livestanding
         if why:
             return "POSE WRONG", why
+        if self.settle.held:  # frames not judged yet: no OK on them (livesettle)
+            return "HELD", self.settle.why()
         why = self.distance.verdict()  # latched: a wrong DISTANCE once is wrong
         if why:
             return "DISTANCE WRONG", why
