@@ -81,7 +81,9 @@ class SettleHold:
         return bool(self.held) and now_s - self.held[-1][1] > HOLD_S
 
     def why(self) -> list[str]:
-        """The HELD verdict's reason (``BusMonitor.health``)."""
+        """The HELD verdict's reason (``BusMonitor.health``); none when nothing is held."""
+        if not self.held:
+            return []
         first_s = self.held[0][0].timestamp if self.held else math.nan
         return [f"{REASON}: {len(self.held)} frames since bus time {first_s:.3f} s, judged by "
                 f"{self.until_s:.3f} s"]

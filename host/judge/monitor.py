@@ -61,8 +61,8 @@ from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livekept import KeptWatch
-from odocan.host.judge.livesettle import SettleHold
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
+from odocan.host.judge.livesettle import SettleHold
 from odocan.host.judge.livestanding import placed_why, pose_wrong_why
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
@@ -401,16 +401,16 @@ class BusMonitor:
             return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
         if self.tracker.awaiting_boot:
             return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
-        why = pose_wrong_why(self.tracker)  # the latest sample, or the pose's life: livestanding
-        if why:
-            return "POSE WRONG", why
-        if self.settle.held:  # frames not judged yet: no OK on them (livesettle)
-            return "HELD", self.settle.why()
-        why = self.distance.verdict()  # latched: a wrong DISTANCE once is wrong
-        if why:
-            return "DISTANCE WRONG", why
-        why = self.twist.verdict()  # latched: LINEAR_VEL / ANGULAR_VEL beyond their band
-        return ("TWIST WRONG", why) if why else ("OK", placed_why(self.tracker))
+        for verdict, why in (("POSE WRONG", self._pose_wrong),  # livestanding
+                             ("DISTANCE WRONG", self.distance.verdict),  # latched, in this order
+                             ("TWIST WRONG", self.twist.verdict),  # LINEAR_VEL, ANGULAR_VEL
+                             ("HELD", self.settle.why)):  # frames not judged yet: livesettle
+            if reasons := why():
+                return verdict, reasons
+        return "OK", placed_why(self.tracker)
+
+    def _pose_wrong(self) -> list[str]:
+        return pose_wrong_why(self.tracker)  # the latest sample, or the pose's life
 
     def _reported_verdict(self, reported: str) -> tuple[str, list[str]]:
         """The firmware's own state when not OK, with its REASON; but a pose, DISTANCE or twist

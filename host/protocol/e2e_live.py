@@ -97,6 +97,7 @@ class E2EMonitor:
         self._states: dict[int, SequenceState] = {}
         self._live: dict[int, _Live] = {}  # protected messages heard: what ``check`` needs
         self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
+        self.holds: bool = False  # "held" for a frame the stamps cannot decide (docstring)
         self._releases = ReleaseWatch(min((c.cycle_s for c in self._configs.values()
                                            if c.min_periods == 0 and c.cycle_s), default=0.01))
 
@@ -157,9 +158,10 @@ class E2EMonitor:
         before = None if state is None else (dict(state.counts), state.window, state.last_valid,
                                              state.waiting, state.last_ok_s)
         periods = 1 if live is None else self._periods_held(live, data, timestamp_s)
-        holds, self.holds = self.holds, False
+        was = self.holds
+        self.holds = False
         status = self.check(can_id, data, False, timestamp_s)
-        self.holds = holds
+        self.holds = was
         if state is None or before is None or status in (CRC_ERROR, UNKNOWN_ID, WRONG_DLC):
             return status
         return forced(state, before, (status, periods), data[1] & COUNTER_MASK, timestamp_s,
