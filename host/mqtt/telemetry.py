@@ -227,9 +227,10 @@ class RobotTelemetry(CommandFollowing):
         (``E2EMonitor.check_as``; ``livehold``): made when a hold is judged."""
         check_as = self.e2e.check_as
 
-        def check(can_id: int, data: bytes, extended: bool, t_s: float) -> str:
-            assert hold.verdict is not None
-            return check_as(can_id, data, t_s, hold.verdict)
+        def check(can_id: int, data: bytes, extended: bool = False,
+                  timestamp_s: float | None = None) -> str:
+            assert hold.verdict is not None and timestamp_s is not None
+            return check_as(can_id, data, timestamp_s, hold.verdict)
 
         self.e2e.check = check  # type: ignore[method-assign]  # read by the plans made now
         try:
