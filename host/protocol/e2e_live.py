@@ -82,6 +82,16 @@ def one_period_s(cycle_s: float | None, min_periods: int) -> tuple[float, float]
     return math.inf, -math.inf
 
 
+class _SeenOnce:
+    """A ``ReleaseWatch`` that notes no frame: a held frame given back was noted when heard."""
+
+    def __init__(self, watch: ReleaseWatch) -> None:
+        self.released, self.silent_after = watch.released, watch.silent_after
+
+    def seen(self, timestamp_s: float, key: int = -1) -> None:
+        """Noted already (``E2EMonitor.check_as``)."""
+
+
 class E2EMonitor:
     """The same rules, one frame at a time, for live monitoring.
 
@@ -98,6 +108,7 @@ class E2EMonitor:
         self._live: dict[int, _Live] = {}  # protected messages heard: what ``check`` needs
         self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
         self.holds: bool = False  # "held" for a frame the stamps cannot decide (docstring)
+        self._held_s: float | None = None  # the bus time of the frame held last
         self._releases = ReleaseWatch(min((c.cycle_s for c in self._configs.values()
                                            if c.min_periods == 0 and c.cycle_s), default=0.01))
 
@@ -129,6 +140,7 @@ class E2EMonitor:
                                             (counter - live.last) & COUNTER_MASK, counter,
                                             live.cycle_s)):
                     live.last_s = last  # not heard yet: given back by ``check_as``
+                    self._held_s = timestamp_s  # (its ``ReleaseWatch.seen`` was: once)
                     return HELD
         live.last = counter if crc_ok else -1
         return live.state.check(crc_ok, counter, periods, timestamp_s)
@@ -158,10 +170,14 @@ class E2EMonitor:
         before = None if state is None else (dict(state.counts), state.window, state.last_valid,
                                              state.waiting, state.last_ok_s)
         periods = 1 if live is None else self._periods_held(live, data, timestamp_s)
-        was = self.holds
+        was, releases = self.holds, self._releases
         self.holds = False
-        status = self.check(can_id, data, False, timestamp_s)
-        self.holds = was
+        if timestamp_s == self._held_s:  # the frame that was held: heard once already
+            self._held_s, self._releases = None, _SeenOnce(releases)  # type: ignore[assignment]
+        try:
+            status = self.check(can_id, data, False, timestamp_s)
+        finally:
+            self.holds, self._releases = was, releases
         if state is None or before is None or status in (CRC_ERROR, UNKNOWN_ID, WRONG_DLC):
             return status
         return forced(state, before, (status, periods), data[1] & COUNTER_MASK, timestamp_s,
