@@ -56,17 +56,14 @@ class SettleHold:
 
     def __init__(self, e2e: E2EMonitor, db: DatabaseSpec) -> None:
         self._e2e, self._db = e2e, db
-        message = db.get_message_by_name(busfacts.ENC_MESSAGE)
-        self.can_id = message.frame_id
-        ids = e2e_messages(db)[frame_key(message.frame_id, message.is_extended_frame)].data_ids
-        self._data_ids = ids if ids is not None else (0,) * busfacts.ENC_COUNTER_LAP
+        self.can_id = db.get_message_by_name(busfacts.ENC_MESSAGE).frame_id
         self.held: list[tuple[can.Message, float]] = []  # (frame, local monotonic s)
         self._start: tuple[int, float] | None = None  # the last frame taken before: COUNTER, s
         self.until_s = math.inf  # bus time the hold is judged at (s)
         self.holds = 0  # holds made
         # the latest frames judged, and whether taken: a hold's context (``_context``)
         self.recent: deque[tuple[can.Message, bool]] = deque(maxlen=CONTEXT_FRAMES)
-        self._page = _enc_page(db)
+        self._page: tuple[int, int, int, int] | bool | None = False  # False: not read yet
 
     def open(self, msg: can.Message, now_s: float) -> None:
         """The encoder frame ``msg`` (heard at local ``now_s``) was held: hold from it."""
@@ -148,7 +145,7 @@ class SettleHold:
             counter, t_s = self._start
             data = bytearray(8)
             data[1] = counter
-            data[0] = crc8h2f_p02_one(bytes(data), self._data_ids[counter])
+            data[0] = crc8h2f_p02_one(bytes(data), self._data_ids()[counter])
             context.append(can.Message(timestamp=t_s, arbitration_id=self.can_id,
                                        is_extended_id=False, data=data))
             context.sort(key=lambda m: m.timestamp)  # stable
@@ -156,7 +153,9 @@ class SettleHold:
 
     def _last_page(self, context: list[can.Message]) -> int | None:
         """The place in ``context`` of its last ENC_E2E page (ODOM_STATUS), if one."""
-        if self._page is None:
+        if self._page is False:  # read from the DBC at the first hold (a fleet's robots: none)
+            self._page = _enc_page(self._db)
+        if self._page is None or self._page is True:
             return None
         can_id, start, mask, number = self._page
         for k in range(len(context) - 1, -1, -1):
@@ -165,6 +164,11 @@ class SettleHold:
                     and int.from_bytes(msg.data, "little") >> start & mask == number):
                 return k
         return None
+
+    def _data_ids(self) -> tuple[int, ...]:
+        """WHEEL_ENCODERS' ``E2EDataIDs`` (read when a hold needs them)."""
+        ids = e2e_messages(self._db)[frame_key(self.can_id, False)].data_ids
+        return ids if ids is not None else (0,) * busfacts.ENC_COUNTER_LAP
 
     def _is_encoder(self, msg: can.Message) -> bool:
         return (msg.arbitration_id == self.can_id and not msg.is_extended_id
