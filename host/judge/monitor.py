@@ -35,7 +35,8 @@ latest sample vs reference beyond ``analyze``'s limit, one LSB of position after
 allowance or of heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it; or
 an episode latched since the pose was last set anew, which the latest sample does not undo:
 ``livestanding``),
-UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), DISTANCE WRONG and
+UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), HELD (frames the
+stamps cannot decide wait for the evidence: ``livesettle``), DISTANCE WRONG and
 TWIST WRONG (ODOM_TWIST's DISTANCE and speeds, latched: ``livedistance``, ``livetwist``), OK
 (saying so when the reference was placed again after a stall or a gap: ``livestanding``).
 
@@ -61,6 +62,7 @@ from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_con
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livekept import KeptWatch
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
+from odocan.host.judge.livesettle import SettleHold
 from odocan.host.judge.livestanding import placed_why, pose_wrong_why
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
@@ -82,6 +84,7 @@ from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import UNKNOWN, e2e_messages
+from odocan.host.protocol.e2e_held import HELD
 from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.sim.contract import database
 from odocan.sim.robot import RobotProfile
@@ -109,6 +112,8 @@ class BusMonitor:
         self.load = LoadWindow()
         self._by_key = {frame_key(m.frame_id, m.is_extended_frame): m for m in self.db.messages}
         self.e2e = E2EMonitor(self.db)
+        self.e2e.holds = True  # frames the stamps cannot decide wait for the evidence
+        self.settle = SettleHold(self.e2e, self.db)
         self._e2e_configs = e2e_messages(self.db)
         self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
         self.distance = LiveDistance(robot)  # ODOM_TWIST DISTANCE (host.judge.livedistance)
@@ -137,11 +142,25 @@ class BusMonitor:
         self._held: set[str] = set()  # secured messages with a command frame awaiting ODOM_AUTH
 
     def feed(self, msg: can.Message, now_s: float | None = None) -> None:
-        """One frame heard on the bus (``now_s``: local monotonic time, default now)."""
+        """One frame heard on the bus (``now_s``: local monotonic time, default now); held while
+        an encoder frame's verdict waits for the firmware's evidence (``livesettle``)."""
         now_s = time.monotonic() if now_s is None else now_s
-        self.frames_total += 1
-        self.load.add(msg)
+        if self.settle.held:
+            self.settle.held.append((msg, now_s))
+            if msg.timestamp > self.settle.until_s:
+                self.settle.release(self._feed, self.feed)
+            return
+        self._feed(msg, now_s, None)
+
+    def release_held(self) -> None:
+        """The watch ends: the frames held are judged now (``livesettle``)."""
+        self.settle.release(self._feed)
+
+    def _feed(self, msg: can.Message, now_s: float, verdict: bool | None) -> None:
+        """``feed`` one frame; an encoder frame held given back with its ``verdict``."""
         if msg.is_error_frame or msg.is_remote_frame:
+            self.frames_total += 1
+            self.load.add(msg)
             self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
             return
         data = bytes(msg.data)
@@ -150,8 +169,17 @@ class BusMonitor:
         summary = self._summary(message, data) if message is not None else None
         if summary is not None:  # before its E2E check, which a reboot or a second source fails
             self._watch_source(*summary, counter=data[1] & 0xF)
-        status = self.e2e.check(msg.arbitration_id, data, extended=msg.is_extended_id,
-                                timestamp_s=timestamp_s)
+        if verdict is None:
+            status = self.e2e.check(msg.arbitration_id, data, extended=msg.is_extended_id,
+                                    timestamp_s=timestamp_s)
+        else:
+            status = self.e2e.check_as(msg.arbitration_id, data, timestamp_s, verdict)
+        if status == HELD:  # not judged yet: the frames from it wait (livesettle)
+            self.settle.open(msg, now_s)
+            return
+        self.settle.recent.append((msg, status in ACCEPTED))  # a hold's context (livesettle)
+        self.frames_total += 1
+        self.load.add(msg)
         if message is None:
             self._count_unknown_id(msg.arbitration_id)
             return
@@ -347,6 +375,8 @@ class BusMonitor:
     def health(self, now_s: float | None = None) -> dict[str, Any]:
         """The verdict on the firmware and its pose (module docstring), why, node ages, events."""
         now_s = time.monotonic() if now_s is None else now_s
+        if self.settle.quiet(now_s):  # nothing heard for a hold's time: judged now (livesettle)
+            self.release_held()
         nodes = self.node_ages(now_s)
         state, why = self._verdict(nodes.get(FIRMWARE_NODE))
         return {"state": state, "why": why, "nodes": nodes, "events": list(self.events),
@@ -356,7 +386,7 @@ class BusMonitor:
     def _verdict(self, firmware: dict[str, Any] | None) -> tuple[str, list[str]]:
         if firmware is None:
             return "NO FIRMWARE", [f"no cyclic {FIRMWARE_NODE} message heard"]
-        if firmware["stale"]:
+        if firmware["stale"] and not self.settle.held:  # held frames were heard (livesettle)
             return "STALE", [
                 f"{FIRMWARE_NODE} silent for {firmware['age_s']:.2f} s (timeout "
                 f"{firmware['timeout_s']:.2f} s); it last said {self.status.get('state', '?')}"
@@ -373,14 +403,16 @@ class BusMonitor:
             return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
         if self.tracker.awaiting_boot:
             return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
-        why = pose_wrong_why(self.tracker)  # the latest sample, or the pose's life: livestanding
-        if why:
-            return "POSE WRONG", why
-        why = self.distance.verdict()  # latched: a wrong DISTANCE once is wrong
-        if why:
-            return "DISTANCE WRONG", why
-        why = self.twist.verdict()  # latched: LINEAR_VEL / ANGULAR_VEL beyond their band
-        return ("TWIST WRONG", why) if why else ("OK", placed_why(self.tracker))
+        for verdict, why in (("POSE WRONG", self._pose_wrong),  # livestanding
+                             ("DISTANCE WRONG", self.distance.verdict),  # latched, in this order
+                             ("TWIST WRONG", self.twist.verdict),  # LINEAR_VEL, ANGULAR_VEL
+                             ("HELD", self.settle.why)):  # frames not judged yet: livesettle
+            if reasons := why():
+                return verdict, reasons
+        return "OK", placed_why(self.tracker)
+
+    def _pose_wrong(self) -> list[str]:
+        return pose_wrong_why(self.tracker)  # the latest sample, or the pose's life
 
     def _reported_verdict(self, reported: str) -> tuple[str, list[str]]:
         """The firmware's own state when not OK, with its REASON; but a pose, DISTANCE or twist

@@ -391,9 +391,11 @@ def watched_verdict(
     telemetry: RobotTelemetry, frames_dropped: int, halted: Halted | None
 ) -> dict[str, Any]:
     """One bridged robot's verdict when the watch ends: what its live judge still holds judged
-    first (``livegapseen.end_of_watch``: a held choice made, a new start's held samples judged),
-    then ``judge_robot``, then the stretches between the loop's halts (``overload``)."""
+    first (the frames held, ``livehold``; ``livegapseen.end_of_watch``: a held choice made, a
+    new start's held samples judged), then ``judge_robot``, then the stretches between the
+    loop's halts (``overload``)."""
     tracker = telemetry.tracker
+    telemetry.hold.release(ends=True)  # frames held for the evidence judged now (livehold)
     end_of_watch(tracker)
     verdict = judge_robot(tracker.vs_reference, tracker.vs_truth, frames_dropped=frames_dropped,
                           beyond_allowance_m=tracker.max_beyond_allowance_m)

@@ -63,11 +63,13 @@ def _handled(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
     check, tracker, frames = telemetry.e2e.check, telemetry.tracker, telemetry.frames
     refused, undecodable = telemetry._refused, telemetry._undecodable
     name, decode, handler, advances = route.name, route.decode, route.handler, route.advances
+    recent = telemetry.hold.recent.append  # a hold's context (host.mqtt.livehold)
 
     def plan(t_s: float, data: bytes) -> list[Publication]:
         status = check(can_id, data, False, t_s)  # the window widens with time (by position)
         if status not in ACCEPTED_E2E:
             return refused(route, can_id, data, t_s, status)
+        recent((t_s, can_id, data, True))
         if not advances:
             tracker.advance(t_s)
         try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
@@ -89,11 +91,13 @@ def _counted(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
     """A message without a handler (another node's, e.g. MOTOR_CMD): checked and counted."""
     check, tracker, frames = telemetry.e2e.check, telemetry.tracker, telemetry.frames
     refused, name = telemetry._refused, route.name
+    recent = telemetry.hold.recent.append  # a hold's context (host.mqtt.livehold)
 
     def plan(t_s: float, data: bytes) -> list[Publication]:
         status = check(can_id, data, False, t_s)
         if status not in ACCEPTED_E2E:
             return refused(route, can_id, data, t_s, status)
+        recent((t_s, can_id, data, True))
         tracker.advance(t_s)
         frames[name] = frames.get(name, 0) + 1
         counts = telemetry._window.counts

@@ -72,11 +72,13 @@ from odocan.host.mqtt.dbcnames import named_value, page_name
 from odocan.host.mqtt.errorbatch import SinceLast
 from odocan.host.mqtt.haltstretch import HaltStretches
 from odocan.host.mqtt.livecommands import CommandFollowing
-from odocan.host.mqtt.liveplan import plans
+from odocan.host.mqtt.livehold import BridgeHold
+from odocan.host.mqtt.liveplan import Plan, plans
 from odocan.host.mqtt.liveprofile import ProfileStatus
 from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.topics import stamp, status_payload
 from odocan.host.protocol.e2e import e2e_messages
+from odocan.host.protocol.e2e_held import HELD
 from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.sim.contract import database
 from odocan.sim.framebatch import Received
@@ -126,6 +128,8 @@ class RobotTelemetry(CommandFollowing):
         self._by_id = {m.frame_id: m for m in self.db.messages}
         self._routes = _routes(self.db)
         self.e2e = E2EMonitor(self.db)
+        self.e2e.holds = True  # frames the stamps cannot decide wait for the evidence
+        self.hold = BridgeHold(self)  # ... held here (host.mqtt.livehold)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
         self.distance = LiveDistance(robot_of(name, geometry, counter_bits))  # DISTANCE judged
         self.twist = LiveTwist(geometry, counter_bits)  # LINEAR_VEL, ANGULAR_VEL judged
@@ -195,13 +199,20 @@ class RobotTelemetry(CommandFollowing):
         plan = None if extended else self.plans.get(can_id)
         if plan is not None:
             return plan(t_s, data)
+        if self.hold.settle.held and not extended:  # a hold waits (host.mqtt.livehold)
+            return self.hold.hold(t_s, can_id, data)
         status = self.e2e.check(can_id, data, extended=extended, timestamp_s=t_s)
         return self._refused(None, can_id, data, t_s, status)
 
     def _refused(self, route: Route | None, can_id: int, data: bytes, t_s: float,
                  status: str) -> list[Publication]:
         """A frame refused (its E2E ``status``, or no route): counted in ``rejected``; a
-        CRC-right WHEEL_ENCODERS one may be a twin of the latest accepted (``livetwins``)."""
+        CRC-right WHEEL_ENCODERS one may be a twin of the latest accepted (``livetwins``); one
+        the stamps cannot decide is held (``livehold``)."""
+        if status == HELD:
+            return self.hold.open(can_id, data, t_s)
+        if route is not None:  # a hold's context (livehold)
+            self.hold.recent.append((t_s, can_id, data, False))
         tracker = self.tracker  # ``advance``: settles the pose halves heard half a cycle before
         tracker.advance(t_s)
         if status in CRC_RIGHT_REFUSED and route is not None \
@@ -210,6 +221,22 @@ class RobotTelemetry(CommandFollowing):
         message = self._by_id.get(can_id)
         self.rejected[message.name if message else self._unknown_key(can_id)] += 1
         return self._samples() if tracker.settled else []
+
+    def forced_plans(self, hold: BridgeHold) -> dict[int, Plan]:
+        """Plans whose E2E check gives an encoder frame held the verdict ``hold.verdict``
+        (``E2EMonitor.check_as``; ``livehold``): made when a hold is judged."""
+        check_as = self.e2e.check_as
+
+        def check(can_id: int, data: bytes, extended: bool = False,
+                  timestamp_s: float | None = None) -> str:
+            assert hold.verdict is not None and timestamp_s is not None
+            return check_as(can_id, data, timestamp_s, hold.verdict)
+
+        self.e2e.check = check  # type: ignore[method-assign]  # read by the plans made now
+        try:
+            return plans(self, self._routes)
+        finally:
+            del self.e2e.check
 
     def _undecodable(self, route: Route, t_s: float) -> list[Publication]:
         """An E2E-valid frame cantools cannot decode (an undefined multiplexer value)."""

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import (
     COUNTER_MASK,
+    CRC_ERROR,
     UNKNOWN,
     UNKNOWN_ID,
     UNKNOWN_KEYS,
@@ -34,6 +35,7 @@ from odocan.host.protocol.e2e_crc import (
 )
 from odocan.host.protocol.e2e_cycles import new_cycle_s
 from odocan.host.protocol.e2e_evidence import CAPTURE_HOLD_CYCLES, ReleaseWatch
+from odocan.host.protocol.e2e_held import HELD, forced, readings_differ
 from odocan.host.protocol.e2e_periods import (
     CAPTURE_TOLERANCE_CYCLES,
     receive_period_count,
@@ -80,6 +82,16 @@ def one_period_s(cycle_s: float | None, min_periods: int) -> tuple[float, float]
     return math.inf, -math.inf
 
 
+class _SeenOnce:
+    """A ``ReleaseWatch`` that notes no frame: a held frame given back was noted when heard."""
+
+    def __init__(self, watch: ReleaseWatch) -> None:
+        self.released, self.silent_after = watch.released, watch.silent_after
+
+    def seen(self, timestamp_s: float, key: int = -1) -> None:
+        """Noted already (``E2EMonitor.check_as``)."""
+
+
 class E2EMonitor:
     """The same rules, one frame at a time, for live monitoring.
 
@@ -95,6 +107,8 @@ class E2EMonitor:
         self._states: dict[int, SequenceState] = {}
         self._live: dict[int, _Live] = {}  # protected messages heard: what ``check`` needs
         self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
+        self.holds: bool = False  # "held" for a frame the stamps cannot decide (docstring)
+        self._held_s: float | None = None  # the bus time of the frame held last
         self._releases = ReleaseWatch(min((c.cycle_s for c in self._configs.values()
                                            if c.min_periods == 0 and c.cycle_s), default=0.01))
 
@@ -121,6 +135,13 @@ class E2EMonitor:
                     live.one_from_s <= timestamp_s - last <= live.one_to_s
                     and (live.min_periods or (counter - live.last) & COUNTER_MASK == 1)):
                 periods = self._periods(live, timestamp_s - last, last, crc_ok, counter)
+                if (self.holds and crc_ok and live.last >= 0 and live.min_periods == 0
+                        and readings_differ(live.state, timestamp_s - last,
+                                            (counter - live.last) & COUNTER_MASK, counter,
+                                            live.cycle_s)):
+                    live.last_s = last  # not heard yet: given back by ``check_as``
+                    self._held_s = timestamp_s  # (its ``ReleaseWatch.seen`` was: once)
+                    return HELD
         live.last = counter if crc_ok else -1
         return live.state.check(crc_ok, counter, periods, timestamp_s)
 
@@ -139,6 +160,44 @@ class E2EMonitor:
         if isfinite(dt_s):  # ``period_count`` in line (per frame)
             return max(live.min_periods, round(dt_s / cycle_s))
         return 1
+
+    def check_as(self, can_id: int, data: bytes, timestamp_s: float, accepted: bool) -> str:
+        """``check`` of a frame held (``holds``), given back with the verdict of the whole log's
+        rule over the frames held (``accepted``: ``host.judge.livesettle``): the state and the
+        counts as that verdict leaves them (``e2e_held.forced``)."""
+        live = self._live.get(can_id)
+        state = None if live is None else live.state
+        before = None if state is None else (dict(state.counts), state.window, state.last_valid,
+                                             state.waiting, state.last_ok_s)
+        periods = 1 if live is None else self._periods_held(live, data, timestamp_s)
+        was, releases = self.holds, self._releases
+        self.holds = False
+        if timestamp_s == self._held_s:  # the frame that was held: heard once already
+            self._held_s, self._releases = None, _SeenOnce(releases)  # type: ignore[assignment]
+        try:
+            status = self.check(can_id, data, False, timestamp_s)
+        finally:
+            self.holds, self._releases = was, releases
+        if state is None or before is None or status in (CRC_ERROR, UNKNOWN_ID, WRONG_DLC):
+            return status
+        return forced(state, before, (status, periods), data[1] & COUNTER_MASK, timestamp_s,
+                      accepted)
+
+    def _periods_held(self, live: _Live, data: bytes, timestamp_s: float) -> int:
+        """The receive periods ``check`` finds for a frame held (``check_as``; as ``check``)."""
+        counter, last = data[1] & COUNTER_MASK, live.last_s
+        if last is None or (live.one_from_s <= timestamp_s - last <= live.one_to_s
+                            and (live.min_periods or (counter - live.last) & COUNTER_MASK == 1)):
+            return 1
+        crc_ok = crc8h2f_p02_one(data, live.data_ids[counter]) == data[0]
+        return self._periods(live, timestamp_s - last, last, crc_ok, counter)
+
+    def last_taken(self, can_id: int) -> tuple[int, float] | None:
+        """COUNTER and bus time (s) of the message's last frame accepted, if known."""
+        state = self._states.get(can_id)
+        if state is None or state.waiting or state.last_ok_s is None:
+            return None
+        return state.last_valid, state.last_ok_s
 
     def _check_first(self, key: int, data: bytes, timestamp_s: float | None) -> str:
         """``check`` of a message not heard yet (makes its ``_Live``), unknown, or off its DLC."""

@@ -162,6 +162,7 @@ def _do_monitor(args: argparse.Namespace) -> int:
     started_s = time.monotonic()
     failure, signum, received = _watch_bus(args, model, trace, view, recorder, live)
     wrongs = model.tracker.wrongs
+    model.release_held()  # frames held for the evidence are judged now (host.judge.livesettle)
     end_of_watch(model.tracker)  # the last pages' proof (host.judge.livegapseen)
     wrongs.finish(model.tracker.allowance_m)  # the samples still waiting for a later page
     code = _end(args, lambda: {**model.snapshot(), "receive": received},
