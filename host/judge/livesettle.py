@@ -38,6 +38,9 @@ from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.host.protocol.e2e_pages import OK_SIGNAL, PAGE_MESSAGE, PAGE_SIGNAL
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it
+    import numpy as np
+    import numpy.typing as npt
+
     from odocan.host.protocol.dbcplan import DatabaseSpec
 
 ROTATION_S = busfacts.PROFILE_PAGE * busfacts.STATUS_CYCLE_MS / busfacts.MS_PER_S  # pages 1..6
@@ -112,16 +115,16 @@ class SettleHold:
                   ) -> tuple[list[bool | None], bool]:
         """Whether each encoder frame held is taken by the whole log's rule over the frames
         held, after the last one taken before (None for the frames of other messages), and
-        whether the evidence changed a verdict of the stamps (``check_frames``' unsettled)."""
+        whether the evidence changed a verdict of the stamps (``check_frames``' touched)."""
         before = self._context()
         collector = FrameCollector()
         for msg in [*before, *(m for m, _ in held)]:
             collector.on_message_received(msg)
-        unsettled: set[str] = set()
-        _, accepted = check_frames(collector.arrays(), self._db, unsettled)
+        touched: list[npt.NDArray[np.intp]] = []
+        _, accepted = check_frames(collector.arrays(), self._db, touched)
         first = len(before)
         return [bool(accepted[first + k]) if self._is_encoder(msg) else None
-                for k, (msg, _) in enumerate(held)], bool(unsettled)
+                for k, (msg, _) in enumerate(held)], any(len(at) for at in touched)
 
     def _context(self) -> list[can.Message]:
         """The frames judged before the hold (``recent``): the firmware's sends before the first

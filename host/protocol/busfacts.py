@@ -16,6 +16,7 @@ never patched with a default.
 
 from __future__ import annotations
 
+from odocan.host.protocol.dbcfacts import ENC_MESSAGE as ENC_MESSAGE
 from odocan.host.protocol.dbcfacts import MS_PER_S as MS_PER_S
 from odocan.host.protocol.dbcfacts import POSE_MESSAGE as POSE_MESSAGE
 from odocan.host.protocol.dbcfacts import STATUS_MESSAGE as STATUS_MESSAGE
