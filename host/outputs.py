@@ -4,7 +4,8 @@ A path is writable when it is a regular file (or none yet) in an existing direct
 process may write, or ``/dev/null``. Anything else -- a missing directory, a directory, a
 device such as ``/dev/full`` or a terminal, a read-only file -- is refused at once with the
 option and the path named, so an hour of simulation is never lost to a report that cannot be
-written. A write that still fails at the end names its path too (``write_text``).
+written. A write that still fails at the end names its path too, and removes the part it
+wrote (``write_text``, ``output_failed``).
 
 The check opens the path for real (an existing file for appending, without truncating it; a new
 one created and removed at once), because permission bits do not answer it: as root
