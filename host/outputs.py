@@ -94,10 +94,11 @@ def write_text(path: Path, text: str, option: str) -> None:
 
 def output_failed(option: str, path: Path, reason: str) -> OutputError:
     """The ``OutputError`` for a write to ``path`` that failed part-way (ENOSPC, EFBIG, EIO),
-    after removing the partial file it left: a regular file only (``/dev/full`` or a pipe is
-    never removed), and the line says so."""
+    after removing the partial file it left: a regular file named as itself only (``/dev/full``,
+    a pipe, a symlink such as ``/dev/stdout`` to a file the shell redirected into: never
+    removed), and the line says so."""
     try:
-        if stat.S_ISREG(os.stat(path).st_mode):
+        if stat.S_ISREG(os.lstat(path).st_mode):
             os.unlink(path)
             reason += "; the partial file removed"
     except OSError:

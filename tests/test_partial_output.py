@@ -94,3 +94,29 @@ def test_a_device_is_never_removed(tmp_path: Path) -> None:
         write_text(full, "x" * 10000, "--report")
     assert str(raised.value) == "--report /dev/full: No space left on device"
     assert full.is_char_device()
+
+
+def test_a_symlink_is_never_removed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--report /dev/stdout > out.txt`` reaches out.txt through a symlink: a failed write there
+    removes neither the link nor the file the shell redirected into (it holds the summary)."""
+    import errno
+    import io
+
+    from odocan.host.outputs import OutputError, write_text
+
+    target = tmp_path / "out.txt"
+    target.write_text("the summary\n")
+    link = tmp_path / "stdout"
+    link.symlink_to(target)
+
+    class _Full(io.StringIO):
+        def write(self, text: str) -> int:
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "open", lambda self, *a, **k: _Full())
+    with pytest.raises(OutputError) as raised:
+        write_text(link, "{}\n", "--report")
+    monkeypatch.undo()
+    assert str(raised.value) == f"--report {link}: No space left on device"
+    assert link.is_symlink()
+    assert target.read_text() == "the summary\n"
