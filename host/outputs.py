@@ -4,7 +4,8 @@ A path is writable when it is a regular file (or none yet) in an existing direct
 process may write, or ``/dev/null``. Anything else -- a missing directory, a directory, a
 device such as ``/dev/full`` or a terminal, a read-only file -- is refused at once with the
 option and the path named, so an hour of simulation is never lost to a report that cannot be
-written. A write that still fails at the end names its path too (``write_text``).
+written. A write that still fails at the end names its path too, and removes the part it
+wrote (``write_text``, ``output_failed``).
 
 The check opens the path for real (an existing file for appending, without truncating it; a new
 one created and removed at once), because permission bits do not answer it: as root
@@ -77,11 +78,32 @@ def _probe(path: Path, flags: int, where: str) -> None:
 
 
 def write_text(path: Path, text: str, option: str) -> None:
-    """Write ``text`` to ``path``; an I/O error becomes one ``OutputError`` naming the path."""
+    """Write ``text`` to ``path``; an I/O error becomes one ``OutputError`` naming the path.
+    A write that fails once the file is open (a full disk) removes what it left there: a
+    truncated JSON report or JUnit file is never left for a CI step to read (``output_failed``)."""
     try:
-        path.write_text(text, encoding="utf-8")
-    except OSError as exc:
+        handle = path.open("w", encoding="utf-8")
+    except OSError as exc:  # nothing written: a file already there stays as it was
         raise OutputError(f"{option} {path}: {exc.strerror or exc}") from None
+    try:
+        with handle:
+            handle.write(text)
+    except OSError as exc:
+        raise output_failed(option, path, exc.strerror or str(exc)) from None
+
+
+def output_failed(option: str, path: Path, reason: str) -> OutputError:
+    """The ``OutputError`` for a write to ``path`` that failed part-way (ENOSPC, EFBIG, EIO),
+    after removing the partial file it left: a regular file named as itself only (``/dev/full``,
+    a pipe, a symlink such as ``/dev/stdout`` to a file the shell redirected into: never
+    removed), and the line says so."""
+    try:
+        if stat.S_ISREG(os.lstat(path).st_mode):
+            os.unlink(path)
+            reason += "; the partial file removed"
+    except OSError:
+        pass  # gone already, or not removable: the line names the path either way
+    return OutputError(f"{option} {path}: {reason}")
 
 
 def check_distinct(

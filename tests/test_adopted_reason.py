@@ -90,3 +90,26 @@ def test_a_reboot_told_at_power_up_adopts_nothing(tmp_path: Path) -> None:
     assert health["state"] == "OK", health["why"]
     assert not _adopted_why(health["why"])
     assert "reference_adopted" not in bridge.status()[1]
+
+
+def test_a_watch_begun_mid_drive_names_no_integrator_change(tmp_path: Path) -> None:
+    """``odocan monitor`` started 1 s into a drive (no ``--integrator``) said its OK came
+    "after an integrator change (None -> exact)": the firmware changed nothing, the watch only
+    heard the integrator for the first time after its first poses. The adoption is real (the
+    pose there is the firmware's own) and is said, with its true cause."""
+    from odocan.host.cli.app import main
+    from odocan.host.judge.monitor import BusMonitor
+
+    path = tmp_path / "drive.log"
+    assert main(["run", "--robot", "kobuki", "--duration", "2", "--log", str(path)]) == 0
+    monitor = BusMonitor(load("kobuki"), None)
+    with can.LogReader(str(path)) as reader:
+        for msg in reader:
+            if msg.timestamp >= 1.0:  # the watch begins mid-drive
+                monitor.feed(msg, now_s=msg.timestamp)
+    health = monitor.health(now_s=monitor.tracker.now_s)
+    assert health["state"] == "OK", health["why"]
+    said = _adopted_why(health["why"])
+    assert len(said) == 1, health["why"]
+    assert "integrator change" not in said[0]
+    assert "after the integrator (exact) was first heard after the watch's first poses" in said[0]

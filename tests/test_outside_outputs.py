@@ -148,7 +148,10 @@ def test_mcap_on_a_full_disk_is_one_line_naming_the_path_after_the_summary(
         argv = ["analyze", str(log)]
     done = _odocan_with_file_size_limit(20_000, *argv, "--mcap", str(path))
     assert done.returncode == 2, done.stderr
-    assert done.stderr == f"error: --mcap {path}: File too large\n"  # was 4 835 lines
+    assert done.stderr == (  # was 4 835 lines; then the truncated MCAP stayed
+        f"error: --mcap {path}: File too large; the partial file removed\n"
+    )
+    assert not path.exists()
     assert "PASS: on-board vs reference" in done.stdout  # the verdict is not lost
 
 
@@ -209,3 +212,26 @@ def test_key_derive_never_writes_over_the_fleet_key(
     assert err == (f"error: --out {fleet_key}: that is --fleet-key {fleet_key}, the input: it "
                    "would be overwritten\n")
     assert fleet_key.read_text() == "00112233445566778899aabbccddeeff\n"
+
+
+@pytest.mark.parametrize(("option", "name", "limit_bytes"),
+                         [("--report", "drive.json", 3_000), ("--junit", "drive.xml", 500)])
+def test_a_run_whose_log_and_report_both_fail_names_both(
+    tmp_path: Path, option: str, name: str, limit_bytes: int
+) -> None:
+    """The disk fills while recording, and the report cannot be written either: the one error
+    line named the report only, and the recording that stopped part-way went unsaid (a 0-byte
+    ``--log`` on a full tmpfs, exit 2 for the report; the JUnit file's error hid it too). Now the
+    line names the log first (its partial file is kept: what it holds is good), then the other."""
+    log, report = tmp_path / "drive.log", tmp_path / name
+    done = _odocan_with_file_size_limit(
+        limit_bytes, "run", "--duration", "2", "--log", str(log), option, str(report)
+    )
+    assert done.returncode == 2, done.stderr
+    assert "PASS: on-board vs reference" in done.stdout
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"error: --log {log}: File too large"), lines
+    assert f"; {option} {report}: File too large" in lines[0], lines
+    assert 0 < log.stat().st_size <= limit_bytes
+    assert not report.exists()

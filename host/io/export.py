@@ -57,7 +57,7 @@ def write_exports(
     db: cantools.database.can.Database | None = None,
 ) -> None:
     """Write what ``--parquet``/``--mcap`` ask for (paths checked by ``check_export_paths``)."""
-    from odocan.host.outputs import OutputError
+    from odocan.host.outputs import OutputError, output_failed
 
     if args.parquet is not None:
         from odocan.host.io.parquet import write_parquet
@@ -72,7 +72,7 @@ def write_exports(
         try:
             write_mcap(args.mcap, frames, analysis, db)
         except (OSError, RuntimeError) as exc:  # foxglove's writer raises RuntimeError on I/O
-            raise OutputError(f"--mcap {args.mcap}: {str(exc).splitlines()[0]}") from None
+            raise output_failed("--mcap", args.mcap, str(exc).splitlines()[0]) from None
 
 
 FOXGLOVE_PORT = 8765  # Foxglove's usual WebSocket port: --foxglove's default

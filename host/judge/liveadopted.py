@@ -26,6 +26,7 @@ UNHEARD_BOOT = "a reboot whose priming encoder frame was not heard"
 REBOOT_BEFORE_INTEGRATOR = "a reboot before the integrator was known"
 CONFIG_CHANGE = "a config change"
 INTEGRATOR_CHANGE = "an integrator change ({before} -> {after})"
+INTEGRATOR_FIRST_HEARD = "the integrator ({after}) was first heard after the watch's first poses"
 UNHEARD_SET_POSE = "a set-pose applied at an encoder frame not heard"
 
 

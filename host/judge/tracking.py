@@ -17,6 +17,7 @@ from typing import Any
 from odocan.host.judge.liveadopted import (
     CONFIG_CHANGE,
     INTEGRATOR_CHANGE,
+    INTEGRATOR_FIRST_HEARD,
     REBOOT_BEFORE_INTEGRATOR,
     AdoptedStarts,
 )
@@ -292,7 +293,8 @@ class PoseTracker:
         if before is None and self.lives.pending is not None:  # judge what was heard waiting
             self.lives.start_pending(self.lives.backlog_poses)
         else:
-            self.adopted.owe(INTEGRATOR_CHANGE.format(before=before, after=name))
+            cause = INTEGRATOR_CHANGE if before is not None else INTEGRATOR_FIRST_HEARD
+            self.adopted.owe(cause.format(before=before, after=name))
             self.restart_reference()
 
     def restart_reference(self) -> None:

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 from odocan.host.jsonutil import write_report
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.judge.finalstate import final_text
-from odocan.host.outputs import OutputError, check_writable
+from odocan.host.outputs import check_writable, output_failed
 from odocan.host.protocol.e2e_silence import lost_text, silence_caption
 from odocan.host.stopped import stopped_text
 from odocan.sim.exceptions import ConfigurationError
@@ -115,7 +115,7 @@ def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
 
                 plot_analysis(analysis, path, tolerance=args.tolerance)
         except OSError as exc:
-            raise OutputError(f"{option} {path}: {exc.strerror or exc}") from None
+            raise output_failed(option, path, exc.strerror or str(exc)) from None
     return 0 if analysis.passed else 1
 
 

@@ -31,6 +31,7 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import can
 import numpy as np
@@ -198,16 +199,15 @@ def _do_run(args: argparse.Namespace) -> int:
             analysis, log_error, stopped = _run_and_analyze(config, args, extra)
         analysis.report["inputs"] = run_inputs(config, args.errors, faults)
         analysis.report["inputs"]["firmware"] = choice.as_dict()
-        code = finish(analysis, args, title=title)
-    write_checks(args, "run", analysis_checks(analysis.report))
-    if args.latency_plot is not None:
-        from odocan.host.report.plots import plot_latency  # matplotlib only when asked
-
         try:
-            plot_latency(analysis.report, args.latency_plot)
-        except OSError as exc:
-            path = args.latency_plot
-            raise OutputError(f"--latency-plot {path}: {exc.strerror or exc}") from None
+            code = finish(analysis, args, title=title)
+        except OutputError as exc:
+            raise _after_log_error(log_error, exc) from None
+    try:
+        write_checks(args, "run", analysis_checks(analysis.report))
+        _write_latency_plot(args, analysis.report)
+    except OutputError as exc:
+        raise _after_log_error(log_error, exc) from None
     if log_error is not None:
         raise log_error
     return code if stopped is None else stopped.exit_code
@@ -361,6 +361,24 @@ def _run_ticks(rig: LockstepRig, ticks: int, on_tick: Callable[[], None] | None)
     for _ in range(ticks):
         rig.step()
         on_tick()
+
+
+def _after_log_error(log_error: OutputError | None, error: OutputError) -> OutputError:
+    """``error`` (a report, plot or JUnit file not written), after the recording's own failure
+    when it failed first: the one line names both, so a stopped ``--log`` is never unsaid."""
+    return error if log_error is None else OutputError(f"{log_error}; {error}")
+
+
+def _write_latency_plot(args: argparse.Namespace, report: dict[str, Any]) -> None:
+    """``--latency-plot`` when asked; an I/O error is one ``OutputError`` naming the path."""
+    if args.latency_plot is None:
+        return
+    from odocan.host.report.plots import plot_latency  # matplotlib only when asked
+
+    try:
+        plot_latency(report, args.latency_plot)
+    except OSError as exc:
+        raise OutputError(f"--latency-plot {args.latency_plot}: {exc.strerror or exc}") from None
 
 
 def _open_log(path: Path) -> can.Listener:

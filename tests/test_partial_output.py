@@ -1,0 +1,122 @@
+"""A write that fails part-way (a full disk, a file-size limit) leaves no truncated output.
+
+On a 64 KiB tmpfs, ``odocan analyze drive.log --report r.json`` said ``No space left on device``
+(exit 2) and left 4096 bytes of JSON at ``r.json`` (``--mcap``: a truncated MCAP; ``--junit``:
+an empty file): a CI step that collects the report reads a broken one, or whatever it makes of
+it. The failure is made here without root: RLIMIT_FSIZE with SIGXFSZ ignored turns a write past
+the limit into EFBIG, a real OS error at the same place as ENOSPC.
+"""
+
+from __future__ import annotations
+
+import resource
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+LIMIT_BYTES = 500  # the report, the JUnit file (760 bytes) and the MCAP of a 2 s drive are larger
+
+
+def _limited() -> None:
+    """In the child: writes beyond LIMIT_BYTES fail with EFBIG instead of killing it."""
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (LIMIT_BYTES, LIMIT_BYTES))
+
+
+@pytest.fixture(scope="module")
+def drive_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 2 s kobuki drive's candump log (written without a limit; warms the DBC plan cache)."""
+    log = tmp_path_factory.mktemp("partial") / "drive.log"
+    subprocess.run(
+        [sys.executable, "-m", "odocan", "run", "--robot", "kobuki", "--duration", "2",
+         "--log", str(log)],
+        capture_output=True, text=True, timeout=300, check=True,
+    )
+    return log
+
+
+@pytest.mark.parametrize("option", ["--report", "--junit", "--mcap"])
+def test_failed_output_leaves_no_partial_file(
+    drive_log: Path, tmp_path: Path, option: str
+) -> None:
+    """Past the size limit: the verdict printed, one line naming the path and saying the partial
+    file was removed, exit 2, and no file at the path."""
+    out = tmp_path / {"--report": "r.json", "--junit": "j.xml", "--mcap": "m.mcap"}[option]
+    done = subprocess.run(
+        [sys.executable, "-m", "odocan", "analyze", str(drive_log), "--robot", "kobuki",
+         option, str(out)],
+        capture_output=True, text=True, timeout=300, check=False, preexec_fn=_limited,
+    )
+    print(done.stdout[-300:], done.stderr)
+    assert "PASS" in done.stdout
+    assert done.returncode == 2
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith(f"error: {option} {out}: ")
+    assert lines[0].endswith("; the partial file removed")
+    assert not out.exists()
+
+
+def test_failed_open_keeps_the_file_there(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A write refused at open (EACCES, nothing written) removes nothing: only a file this write
+    truncated is removed, never a user's earlier report."""
+    import errno
+
+    from odocan.host.outputs import OutputError, write_text
+
+    keep = tmp_path / "old.json"
+    keep.write_text("{}\n")
+
+    def refused(self: Path, *args: object, **kwargs: object) -> None:
+        raise PermissionError(errno.EACCES, "Permission denied")
+
+    monkeypatch.setattr(Path, "open", refused)
+    with pytest.raises(OutputError) as raised:
+        write_text(keep, "{\"new\": 1}\n", "--report")
+    monkeypatch.undo()
+    assert str(raised.value) == f"--report {keep}: Permission denied"
+    assert keep.read_text() == "{}\n"
+
+
+def test_a_device_is_never_removed(tmp_path: Path) -> None:
+    """ENOSPC on /dev/full: the one line as before, and /dev/full stays a device."""
+    from odocan.host.outputs import OutputError, write_text
+
+    full = Path("/dev/full")
+    if not full.exists():
+        pytest.skip("no /dev/full")
+    with pytest.raises(OutputError) as raised:
+        write_text(full, "x" * 10000, "--report")
+    assert str(raised.value) == "--report /dev/full: No space left on device"
+    assert full.is_char_device()
+
+
+def test_a_symlink_is_never_removed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--report /dev/stdout > out.txt`` reaches out.txt through a symlink: a failed write there
+    removes neither the link nor the file the shell redirected into (it holds the summary)."""
+    import errno
+    import io
+
+    from odocan.host.outputs import OutputError, write_text
+
+    target = tmp_path / "out.txt"
+    target.write_text("the summary\n")
+    link = tmp_path / "stdout"
+    link.symlink_to(target)
+
+    class _Full(io.StringIO):
+        def write(self, text: str) -> int:
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "open", lambda self, *a, **k: _Full())
+    with pytest.raises(OutputError) as raised:
+        write_text(link, "{}\n", "--report")
+    monkeypatch.undo()
+    assert str(raised.value) == f"--report {link}: No space left on device"
+    assert link.is_symlink()
+    assert target.read_text() == "the summary\n"
