@@ -382,3 +382,15 @@ def test_rate_and_jitter_come_from_the_bus_timestamps() -> None:
     enc = model.snapshot(now_s=2.0)["messages"]["WHEEL_ENCODERS"]
     assert enc["rate_hz"] == pytest.approx(100.0, rel=1e-9)
     assert enc["jitter_ms"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_watch_of_the_in_process_transport_that_hears_nothing_says_why(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``monitor -i odocan`` in a process of its own hears no other process's frames: it said
+    NO FIRMWARE and nothing more (a user's first try from a second terminal)."""
+    code, out, err = run_cli(capsys, "monitor", "-i", "odocan", "-c",
+                             f"odocan-alone-{os.getpid()}", "--duration", "0.3", "--json")
+    assert code == 0, err
+    assert json.loads(out)["health"]["state"] == "NO FIRMWARE"
+    assert "the odocan interface carries frames within one process only" in err, err

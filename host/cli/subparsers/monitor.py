@@ -189,6 +189,10 @@ def _say_failures(args: argparse.Namespace, model: BusMonitor, profile: robot.Ro
     fails += model.twist.verdict()[:1]  # ODOM_TWIST LINEAR_VEL / ANGULAR_VEL wrong once
     for line in fails:
         print(f"monitor: FAIL: {line}", file=sys.stderr)
+    if args.interface == "odocan" and not model.frames_total:
+        print("monitor: heard no frame: the odocan interface carries frames within one process "
+              "only; watch a bus other processes share (udp_multicast, socketcan)",
+              file=sys.stderr)
     said = model.status.get("profile_mismatch")  # the firmware's PROFILE page vs --robot
     if said:
         print(f"monitor: {said}", file=sys.stderr)
