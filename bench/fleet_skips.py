@@ -60,13 +60,15 @@ def run(args: argparse.Namespace) -> str:
                 k += args.gap
         vehicles = [rig.vehicle for rig in fleet.rigs if isinstance(rig.vehicle, PlannedVehicle)]
         blocks = sum(v.blocks for v in vehicles)
+        holds = sum(v.holds for v in vehicles)
         fallen = sum(v.fell_back for v in vehicles)
+        halts = fleet.halts
     per_tick = cpu_s / max(args.robots * ran, 1) * 1e6
     per_release = cpu_s / max(args.robots * k, 1) * 1e6
     line = (f"{args.robots} robots, {ran} ticks run of {k} releases (every {args.every}: "
             f"{args.gap} skipped), firmware {args.firmware}: fleet step {per_tick:.1f} us per "
-            f"robot-tick, {per_release:.1f} per robot-release; blocks {blocks}, fallen back at "
-            f"the end {fallen}")
+            f"robot-tick, {per_release:.1f} per robot-release; halts {halts}; blocks {blocks} "
+            f"(run again for a halt {holds}), fallen back at the end {fallen}")
     return line + (f"; frames digest {digest.hexdigest()[:16]}" if args.digest else "")
 
 

@@ -222,12 +222,14 @@ class Fleet(Closing):
         A gap that halts the boards (``_count_halt``) sends the samples alone, as before: the
         halt judges model what a halted MCU's receive FIFO kept from those frames, and with the
         commands in the gap a firmware shifting 0.1 LSB at every halt PASSed
-        (tests/test_fleet_halt_carry.py); its drives fall back."""
+        (tests/test_fleet_halt_carry.py); the robot keeps its latest command through the gap,
+        and a drive run ahead is told so (``SimNode.hold_halted``): it stays planned."""
         first, halted = self.config.first, self._halts_boards(k)
         for index, rig in enumerate(self.rigs):
             offset = _tick_offset(first + index)
             skipped = range(max(self._last_k + 1 - offset, 0), max(k - offset, 0))
             if halted:
+                rig.sim.hold_halted(skipped)
                 send_skipped_samples(rig.sim, rig.clock, skipped)
                 continue
             clock, drive_skipped = rig.clock, rig.sim.drive_skipped
