@@ -1,26 +1,32 @@
-"""A fleet's drives stay planned through a loop halt (issue #13), with the frames of the plain
-vehicle: a halt's gap sends the skipped releases' encoder samples alone (no driver MOTOR_CMD:
-the halt judges' rule, ``sim.fleet.Fleet._sample_skipped``), so each robot keeps its latest
-command through the gap. Before, the drive's block had predicted the gap's commands, fell back
-at the first one that did not come and ran as a plain vehicle (the costly tick) until a block's
-ticks passed without a halt, which a loop that keeps halting never gives. Now the block is run
-again without them (``PlannedVehicle.hold``): the same counts and poses, call for call."""
+"""A fleet's drives stay planned through an isolated loop halt (issue #13), with the frames of
+the plain vehicle: a halt's gap sends the skipped releases' encoder samples alone (no driver
+MOTOR_CMD: the halt judges' rule, ``sim.fleet.Fleet._sample_skipped``), so each robot keeps its
+latest command through the gap. Before, the drive's block had predicted the gap's commands,
+fell back at the first one that did not come and ran as a plain vehicle (the costly tick) until
+a block's ticks passed without a halt. Now the block is run again without them
+(``PlannedVehicle.hold``): the same counts and poses, call for call. Halts that recur within
+``HOLD_CALM_TICKS`` still make the drives fall back (there the plain drive costs less than a
+hold at every halt: ``Fleet._isolated_halt``)."""
 
 from __future__ import annotations
 
 import pytest
 
 from odocan.firmware import frames as fr
-from odocan.sim.fleet import BLOCK_TICKS, Fleet, FleetConfig, frame_fields
+from odocan.sim.fleet import BLOCK_TICKS, HOLD_CALM_TICKS, Fleet, FleetConfig, frame_fields
 from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.robot import load
 
-# Fleet ticks run: gaps of 10-13 periods (halts: >= 9.5), one of 60 (past the drivetrain's
-# 0.5 s command timeout: the wheels stop in the gap), one across robot 0's block start at 100,
-# and skips of two releases (no halt) between them.
-_GAPS = [(40, 50), (95, 108), (170, 230), (262, 273), (330, 340)]
-_TICKS = [k for k in range(4 * BLOCK_TICKS)
+# Fleet ticks run: halts (gaps of >= 9.5 periods) >= HOLD_CALM_TICKS apart: one of 10 periods,
+# one of 13 across robot 0's block start at 300, one of 60 (past the drivetrain's 0.5 s command
+# timeout: the wheels stop in the gap); and skips of two releases (no halt) between them.
+_GAPS = [(40, 50), (295, 308), (520, 580)]
+_TICKS = [k for k in range(7 * BLOCK_TICKS)
           if not any(a <= k < b for a, b in _GAPS) and k % 30 not in (18, 19)]
+# ... and halts that recur: 58 and 62 ticks after the previous one
+_RECURRING = [(40, 50), (95, 108), (160, 170)]
+# (the run ends before a block's ticks pass without a halt: the fleet's replan)
+_RECURRING_TICKS = [k for k in range(250) if not any(a <= k < b for a, b in _RECURRING)]
 
 Frames = list[tuple[float, int, bytes]]
 
@@ -46,7 +52,8 @@ def halted_run(lookahead: bool, robot: str, ticks: list[int] = _TICKS, robots: i
 @pytest.mark.parametrize("robot", ["pmir", "kobuki"])
 def test_a_halted_fleet_s_drives_stay_planned_with_the_plain_vehicle_s_frames(robot: str) -> None:
     planned, vehicles, halts = halted_run(True, robot)
-    assert halts == len(_GAPS)  # the premise: every gap halted the boards
+    assert halts == len(_GAPS)  # the premise: every gap halted the boards, far apart
+    assert all(b[1] - a[1] >= HOLD_CALM_TICKS for a, b in zip(_GAPS, _GAPS[1:]))
     assert not any(v.fell_back for v in vehicles)  # on main: every drive, from the first halt
     assert all(v.holds >= halts for v in vehicles)  # each gap withheld a predicted command
     plain, _, plain_halts = halted_run(False, robot)
@@ -61,7 +68,7 @@ def test_the_blocks_still_start_on_each_robot_s_own_ticks() -> None:
     would have started on without the halts (the fleet's blocks stay spread, one robot a
     tick), so the blocks run ahead are those of the unhalted run plus one a hold."""
     _, halted, _ = halted_run(True, "pmir")
-    _, steady, _ = halted_run(True, "pmir", list(range(4 * BLOCK_TICKS)))
+    _, steady, _ = halted_run(True, "pmir", list(range(7 * BLOCK_TICKS)))
     assert [v.blocks - v.holds for v in halted] == [v.blocks for v in steady]
     assert not any(v.holds for v in steady)
 
@@ -75,3 +82,11 @@ def test_the_halt_sends_no_driver_command_in_its_gap() -> None:
         assert [f[1] for f in inside if f[1] == fr.MOTOR_CMD_ID] == []
         samples = [round(f[0] * 100) for f in inside if f[1] == fr.WHEEL_ENCODERS_ID]
         assert samples == list(range(start, stop))
+
+
+def test_halts_that_recur_make_the_drives_fall_back_as_before_with_the_same_frames() -> None:
+    planned, vehicles, halts = halted_run(True, "pmir", _RECURRING_TICKS)
+    assert halts == len(_RECURRING)
+    assert all(v.holds == 1 for v in vehicles)  # the first halt only
+    assert all(v.fell_back for v in vehicles)  # the second one: a plain vehicle since
+    assert planned == halted_run(False, "pmir", _RECURRING_TICKS)[0]
