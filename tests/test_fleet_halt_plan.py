@@ -10,6 +10,8 @@ hold at every halt: ``Fleet._isolated_halt``)."""
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import pytest
 
 from odocan.firmware import frames as fr
@@ -53,7 +55,7 @@ def halted_run(lookahead: bool, robot: str, ticks: list[int] = _TICKS, robots: i
 def test_a_halted_fleet_s_drives_stay_planned_with_the_plain_vehicle_s_frames(robot: str) -> None:
     planned, vehicles, halts = halted_run(True, robot)
     assert halts == len(_GAPS)  # the premise: every gap halted the boards, far apart
-    assert all(b[1] - a[1] >= HOLD_CALM_TICKS for a, b in zip(_GAPS, _GAPS[1:]))
+    assert all(b[1] - a[1] >= HOLD_CALM_TICKS for a, b in pairwise(_GAPS))
     assert not any(v.fell_back for v in vehicles)  # on main: every drive, from the first halt
     assert all(v.holds >= halts for v in vehicles)  # each gap withheld a predicted command
     plain, _, plain_halts = halted_run(False, robot)
