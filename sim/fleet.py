@@ -155,7 +155,7 @@ class Fleet(Closing):
 
     def step(self, k: int) -> None:
         """Tick ``k`` of every robot (simulated time ``k * TICK_S``). A robot whose drive fell
-        back from running ahead (a halt's gap: its predicted commands never came) runs ahead
+        back from running ahead (a recurring halt's gap: ``_isolated_halt``) runs ahead
         again from its next block tick (``PlannedVehicle.replan``) once ``BLOCK_TICKS`` ticks
         ran without a halt: a loop that keeps halting would pay blocks and fall backs for
         nothing (a skip that halts nothing no longer costs a plan). After skipped releases
