@@ -13,10 +13,16 @@ construction, subtracted) without the load in the figure:
     .venv/bin/python bench/fleet_skips.py [--robots 20] [--ticks 300] [--every 30] [--gap 2] \
         [--firmware c] [--digest]
 
+A gap of ``--gap 9`` or more releases halts the boards (``sim.board.HALT_AFTER_S``): its
+samples go out alone, no driver command; at an isolated halt (``sim.fleet.HOLD_CALM_TICKS``
+after the previous one) each drive runs the rest of its block again without the gap's commands
+(``PlannedVehicle.hold``), at halts that recur it falls back. ``--every 30 --gap 9``: recurring
+halts; ``--every 200 --gap 9 --ticks 800``: isolated ones.
+
 ``--digest``: a SHA-256 over every frame the host observers heard (robot, stamp to the ns,
 identifier, payload), the same on a tree that changes only the cost (lockstep is deterministic:
 same seed, same bytes). Prints the CPU per robot-tick run and per robot-release, the drives that
-ran ahead again (blocks) and those still fallen back at the end.
+ran ahead again (blocks; of them run again for a halt) and those still fallen back at the end.
 """
 
 from __future__ import annotations
@@ -60,13 +66,15 @@ def run(args: argparse.Namespace) -> str:
                 k += args.gap
         vehicles = [rig.vehicle for rig in fleet.rigs if isinstance(rig.vehicle, PlannedVehicle)]
         blocks = sum(v.blocks for v in vehicles)
+        holds = sum(v.holds for v in vehicles)
         fallen = sum(v.fell_back for v in vehicles)
+        halts = fleet.halts
     per_tick = cpu_s / max(args.robots * ran, 1) * 1e6
     per_release = cpu_s / max(args.robots * k, 1) * 1e6
     line = (f"{args.robots} robots, {ran} ticks run of {k} releases (every {args.every}: "
             f"{args.gap} skipped), firmware {args.firmware}: fleet step {per_tick:.1f} us per "
-            f"robot-tick, {per_release:.1f} per robot-release; blocks {blocks}, fallen back at "
-            f"the end {fallen}")
+            f"robot-tick, {per_release:.1f} per robot-release; halts {halts}; blocks {blocks} "
+            f"(run again for a halt {holds}), fallen back at the end {fallen}")
     return line + (f"; frames digest {digest.hexdigest()[:16]}" if args.digest else "")
 
 

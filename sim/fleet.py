@@ -157,7 +157,7 @@ class Fleet(Closing):
 
     def step(self, k: int) -> None:
         """Tick ``k`` of every robot (simulated time ``k * TICK_S``). A robot whose drive fell
-        back from running ahead (a halt's gap: its predicted commands never came) runs ahead
+        back from running ahead (a recurring halt's gap: ``_isolated_halt``) runs ahead
         again from its next block tick (``PlannedVehicle.replan``) once ``BLOCK_TICKS`` ticks
         ran without a halt: a loop that keeps halting would pay blocks and fall backs for
         nothing (a skip that halts nothing no longer costs a plan). After skipped releases
@@ -224,18 +224,35 @@ class Fleet(Closing):
         A gap that halts the boards (``_count_halt``) sends the samples alone, as before: the
         halt judges model what a halted MCU's receive FIFO kept from those frames, and with the
         commands in the gap a firmware shifting 0.1 LSB at every halt PASSed
-        (tests/test_fleet_halt_carry.py); its drives fall back."""
+        (tests/test_fleet_halt_carry.py); the robot keeps its latest command through the gap.
+        At an isolated halt (``_isolated_halt``) a drive run ahead is told so
+        (``SimNode.hold_halted``): it stays planned; at a halt that recurs it falls back."""
         first, halted = self.config.first, self._halts_boards(k)
+        hold = halted and self._isolated_halt(k)
         for index, rig in enumerate(self.rigs):
             offset = _tick_offset(first + index)
             skipped = range(max(self._last_k + 1 - offset, 0), max(k - offset, 0))
             if halted:
+                if hold:
+                    rig.sim.hold_halted(skipped)
                 send_skipped_samples(rig.sim, rig.clock, skipped)
                 continue
             clock, drive_skipped = rig.clock, rig.sim.drive_skipped
             for j in skipped:
                 clock.advance_to(j * TICK_S)
                 drive_skipped(j)
+
+    def _isolated_halt(self, k: int) -> bool:
+        """The halt before tick ``k`` is the first, or ``HOLD_CALM_TICKS`` or more after the
+        previous one: worth keeping the drives planned through (``SimNode.hold_halted``). A
+        hold runs the rest of each robot's block again and plans its frames anew (callgrind,
+        pmir, C firmware: ~1.3 M instructions a robot plus ~66 k a tick run again); a drive
+        that falls back instead runs plain (+~32 k a tick against a planned one) until a
+        block's ticks pass without a halt. Once halts recur within ~1.5 s, the plain drive is
+        the cheaper (a hold at every halt 30 ticks apart: 227.5 k -> 316.9 k instructions a
+        robot-tick; ``bench/fleet_skips.py``, docs/mqtt.md "halts")."""
+        ticks = self.halt_ticks
+        return not ticks or k - ticks[-1] >= HOLD_CALM_TICKS
 
     def _halts_boards(self, k: int) -> bool:
         """Tick ``k`` comes so long after the previous one that every board runs it halted."""
@@ -289,6 +306,9 @@ def block_phase(index: int) -> int:
     ``BLOCK_TICKS`` on a tick of its own, and any run of consecutive robots (a worker's shard)
     spread over the period: 50 of them at most 6 in any 10 ticks."""
     return index * BLOCK_STRIDE % BLOCK_TICKS
+
+
+HOLD_CALM_TICKS = 2 * BLOCK_TICKS  # a halt this long after the previous one keeps drives planned
 
 
 def first_block_ticks(index: int) -> int:

@@ -92,6 +92,8 @@ class PlannedVehicle(Vehicle):
         self._now = 0  # the substep the rig has reached (the drivetrain runs ahead)
         self._checkpoint: tuple[Any, ...] = ()
         self._calls: list[_Call] = []  # the rig's calls since the block's start
+        self._silent = range(0)  # ticks a halt left without their predicted commands (``hold``)
+        self.holds = 0  # blocks run again for a halt (``hold``)
         self.fell_back = False  # the forecast missed once: a plain Vehicle since
 
     def plan(self, forecast: Forecast, tick_s: float, start_s: float = 0.0, *,
@@ -127,6 +129,38 @@ class PlannedVehicle(Vehicle):
         self.fell_back = False
         self._first_block_ticks = first_block_ticks
         return self._start_first(t_s)
+
+    def hold(self, ticks: range) -> bool:
+        """A halt: the rig's ticks ``ticks``, after its latest call, bring their samples but
+        none of their predicted commands (``sim.fleet``: a halted loop sends the gap's encoder
+        samples alone), so the drive keeps its latest command through them. The forecast is
+        silent at those ticks from now on, and when the current block predicted a command
+        among them it is run again from the latest call to its own end (the rig's calls since
+        its start replayed, as a fall back does): the drive stays planned, the next blocks
+        start on the same ticks, and every count and pose is the plain vehicle's, call for
+        call. False when the vehicle does not run ahead (no forecast, it fell back, no block
+        yet: a first block reads the silence too) or a command the block predicted by its
+        latest call never came (it falls back now, as its next call would)."""
+        if self.fell_back or self._forecast is None or not ticks:
+            return False
+        self._silent = ticks
+        block = self._block
+        if block is None:
+            return False
+        first = self._next_tick - len(block.substeps)  # the block's first tick
+        served = first + block.index[self._now] if self._calls else first - 1  # its latest
+        pending = block.commands[block.next_command :]
+        if ticks.start <= served or (pending and self._calls and pending[0][0] <= self._now):
+            self._fall_back()
+            return False
+        if not _withheld(pending, block.substeps, ticks.start - first, ticks.stop - first):
+            return True  # no predicted command among them: the block holds as it is
+        end = self._next_tick
+        self._rewind()
+        self._next_tick = served + 1
+        self._start_block(end - self._next_tick)
+        self.holds += 1
+        return True
 
     # --- the rig's calls ----------------------------------------------------------------------
 
@@ -326,6 +360,9 @@ class PlannedVehicle(Vehicle):
         advance, hz = drivetrain.advance, self.substep_hz
         floor = math.floor
         first = self._next_tick
+        silent = self._silent
+        if silent.start < first + ticks and first < silent.stop:  # a halt's gap in the block
+            forecast = _silenced(forecast, silent)
         index, substeps = block.index, block.substeps
         angles: list[list[float]] = []  # the wheels' at each tick (a new list every segment)
         command, commands = drivetrain.command, block.commands
@@ -368,9 +405,13 @@ class PlannedVehicle(Vehicle):
 
     def _fall_back(self) -> None:
         """Back to the block's start, the rig's calls since replayed: a plain Vehicle from now."""
-        if self._block is None:
-            self.fell_back = True
-            return
+        if self._block is not None:
+            self._rewind()
+        self.fell_back = True
+
+    def _rewind(self) -> None:
+        """The state at the block's start restored, the rig's calls since replayed on the plain
+        vehicle: it stands at the latest call, no block."""
         drive, truth, rng = self._checkpoint
         d, t = self.drivetrain, self._truth
         (d.substep, d.omega, d.angle, d.setpoint, d._timeout_at, d._segments, d._pending) = drive
@@ -379,7 +420,6 @@ class PlannedVehicle(Vehicle):
         if rng is not None:
             self._rng.bit_generator.state = rng
         self._block = None
-        self.fell_back = True
         for call in self._calls:
             if isinstance(call, tuple):
                 Vehicle.advance_to(self, call[2])
@@ -387,3 +427,23 @@ class PlannedVehicle(Vehicle):
             else:
                 Vehicle.advance_to(self, call)
         self._calls = []
+
+
+def _withheld(commands: list[tuple[int, float, float]], substeps: list[int], lo: int, hi: int
+              ) -> bool:
+    """True when one of ``commands`` (substep, left, right) falls on a tick at index ``lo ..
+    hi - 1`` of a block whose ticks are at ``substeps``."""
+    hi = min(hi, len(substeps))
+    if lo >= hi:
+        return False
+    first, last = substeps[lo], substeps[hi - 1]
+    return any(first <= n <= last for n, _, _ in commands)
+
+
+def _silenced(forecast: Forecast, ticks: range) -> Forecast:
+    """``forecast`` with no command at ``ticks`` (a halt's: ``PlannedVehicle.hold``)."""
+
+    def silenced(k: int, t_s: float) -> tuple[float, float] | None:
+        return None if k in ticks else forecast(k, t_s)
+
+    return silenced

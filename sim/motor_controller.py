@@ -224,6 +224,18 @@ class SimNode:
         time, sent now (``sim.realtime.paced_sim_tick``); nothing else of the tick runs."""
         self.motor_controller.sample_and_send()
 
+    def hold_halted(self, ticks: range) -> None:
+        """A halt (``sim.fleet``): the releases of ``ticks`` will send their encoder samples
+        alone (``sample_skipped``), none of the driver's MOTOR_CMDs, so the robot keeps its
+        latest command through them. A drive run ahead is told (``PlannedVehicle.hold``: it
+        stays planned instead of falling back at the first command that does not come), and
+        the tick plan, made with those commands, is dropped: the tick after the gap plans
+        anew."""
+        vehicle = self.vehicle
+        if isinstance(vehicle, PlannedVehicle):
+            vehicle.hold(ticks)
+        self._plan = None
+
     def drive_skipped(self, k: int) -> None:
         """A skipped real-time release of tick ``k`` (the clock at its time) on a robot whose
         drive is the scenario's: the driver's MOTOR_CMD of the tick when it has one (open loop,

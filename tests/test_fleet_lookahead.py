@@ -104,26 +104,32 @@ def test_a_robot_whose_loop_skipped_releases_keeps_running_ahead_and_moving_as_w
 
 
 def halt_then_skips(lookahead: bool) -> tuple[list[object], list[PlannedVehicle]]:
-    """Frames of a fleet whose loop halts the boards once (releases 50-61 skipped: 13 periods)
-    then skips two releases every 30 ticks, and its vehicles."""
+    """Frames of a fleet whose drives fall back at tick 45 (a read of their drivetrain's
+    state, which no block can serve), whose loop then halts the boards once (releases 50-61
+    skipped: 13 periods) and skips two releases every 30 ticks, and its vehicles."""
     seen: list[object] = []
     ticks = [k for k in range(6 * BLOCK_TICKS) if not 50 <= k < 62 and k % 30 not in (28, 29)]
     with Fleet(FleetConfig(robots=3, robot=load("kobuki"), lookahead=lookahead)) as fleet:
         for k in ticks:
             fleet.step(k)
             seen.extend((i, frame_fields(frame)) for i, frame in fleet.take_batch())
-            if k == 62 and lookahead:  # the premise: the halt's gap made every drive fall back
+            if k == 45:
+                for rig in fleet.rigs:
+                    rig.vehicle.wheel_speeds_mps()
+            if k == 62 and lookahead:  # the premise: fallen back, the halt replans nothing
                 assert all(v.fell_back for v in fleet._planned)  # type: ignore[union-attr]
         assert fleet.halts == 1
         vehicles = [rig.vehicle for rig in fleet.rigs]
     return seen, vehicles  # type: ignore[return-value]
 
 
-def test_after_a_halt_the_drives_run_ahead_again_while_the_loop_keeps_skipping() -> None:
-    """A halt's gap still makes the drives fall back (its frames are the old rule's); skips that
-    halt nothing cost no plan, so they do not hold the replan back: once a block's ticks ran
-    without a halt, every drive runs ahead again (before, it waited for a block without any
-    skip, which a loop skipping every 30 ticks never has), with the same frames."""
+def test_after_a_fall_back_and_a_halt_the_drives_run_ahead_again_while_the_loop_keeps_skipping(
+) -> None:
+    """A drive that fell back runs ahead again once a block's ticks ran without a halt (a
+    halt itself no longer makes a drive fall back: tests/test_fleet_halt_plan.py); skips that
+    halt nothing cost no plan, so they do not hold the replan back (before, it waited for a
+    block without any skip, which a loop skipping every 30 ticks never has), with the same
+    frames."""
     planned, vehicles = halt_then_skips(True)
     assert not any(v.fell_back for v in vehicles)
     assert planned == halt_then_skips(False)[0]

@@ -170,3 +170,50 @@ def test_a_time_that_is_not_finite_is_refused(t_s: float) -> None:
     observe(planned, 5)
     with pytest.raises(ValueError, match="finite"):
         planned.advance_to(t_s)
+
+
+def halted(gap: range, late_command: int | None = None) -> Call:
+    """The rig's calls with a halt over the ticks ``gap``: told before its first tick (the
+    fleet's ``SimNode.hold_halted``), then each gap tick's sample alone, no command; with
+    ``late_command``: the predicted command of that tick before the gap never came."""
+
+    def tick(vehicle: Vehicle, k: int) -> None:
+        if k == gap.start and isinstance(vehicle, PlannedVehicle):
+            vehicle.hold(gap)
+        if k in gap:
+            vehicle.advance_to(k * TICK_S)
+        elif k == late_command:
+            pass
+        else:
+            rig_tick(vehicle, k)
+
+    return tick
+
+
+@pytest.mark.parametrize(
+    ("gap", "holds"),
+    [
+        (range(150, 162), 1),  # inside a block, after some of its calls
+        (range(200, 260), 1),  # past the drivetrain's 0.5 s command timeout: the wheels stop
+        (range(BLOCK_TICKS - 5, BLOCK_TICKS + 9), 1),  # across a block's end: the next reads it
+        (range(BLOCK_TICKS, BLOCK_TICKS + 12), 0),  # from a block's first tick: nothing to redo
+        (range(0, 12), 0),  # before any call: the first block reads it
+    ],
+)
+def test_a_held_halt_keeps_the_plan_and_the_plain_vehicle_s_counts_and_poses(
+    gap: range, holds: int
+) -> None:
+    plain, planned = pair()
+    ticks = 2 * BLOCK_TICKS + 40
+    assert observe(planned, ticks, halted(gap)) == observe(plain, ticks, halted(gap))
+    assert not planned.fell_back
+    assert planned.holds == holds
+    assert planned.blocks == 3 + holds  # the blocks still start every BLOCK_TICKS ticks
+
+
+def test_a_halt_after_a_command_that_never_came_falls_back_bit_for_bit() -> None:
+    plain, planned = pair()
+    tick = halted(range(150, 162), late_command=148)
+    assert observe(planned, 300, tick) == observe(plain, 300, tick)
+    assert planned.fell_back
+    assert planned.holds == 0
