@@ -40,11 +40,24 @@ def is_powerup_pose(counter: int, x_raw: float, heading_raw: float) -> bool:
     return counter == 0 and x_raw == 0 and heading_raw == 0
 
 
+def no_powerup_poses() -> PowerUpPoses:
+    """No power-up pose (a stream's start)."""
+    return np.zeros(0, np.int64), np.zeros(0, np.float64), np.zeros(0, np.int64)
+
+
+def carried_on(kept: PowerUpPoses, heard: PowerUpPoses, keep: int = 4) -> PowerUpPoses:
+    """The latest ``keep`` power-up poses of ``kept`` followed by those ``heard`` since (a
+    stream's next chunk: ``stream_lives``; a summary follows its tick's within 80 ms)."""
+    return (np.concatenate((kept[0][-keep:], heard[0])),
+            np.concatenate((kept[1][-keep:], heard[1])),
+            np.concatenate((kept[2][-keep:], heard[2])))
+
+
 def powerup_poses(frames: FrameArrays, decoder: BulkDecoder, offset: int = 0) -> PowerUpPoses:
     """The ODOM_POSE_X frames of ``frames`` whose CRC holds and that read a power-up pose
     (``is_powerup_pose``): their positions (plus ``offset``: a stream's chunk), bus times and
     ENC_COUNTERs; empty without them."""
-    empty: PowerUpPoses = (np.zeros(0, np.int64), np.zeros(0, np.float64), np.zeros(0, np.int64))
+    empty = no_powerup_poses()
     try:
         rows = decoder.decode(frames, POSE_MESSAGE)
     except (DecodeError, KeyError):
