@@ -21,6 +21,9 @@ pose's: the same start. One rule for the whole log (``reboots``), the streamed
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 
@@ -113,3 +116,35 @@ def _crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: npt.NDArray[np.i
     ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & 0xF]
     good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
     return good
+
+
+class LivePowerUp:
+    """``named_start`` live (the monitor's and the bridge's tracker): the latest power-up pose
+    heard, when and the encoder frame (the tracker's seq) it names among those heard before it."""
+
+    def __init__(self) -> None:
+        self.latest: tuple[float, int | None] | None = None  # bus time s, named seq
+
+    def heard(self, counter: int, x: float, heading: float, enc_counter: int, t_s: float,
+              rows: Sequence[Sequence[float]]) -> None:
+        """An ODOM_POSE_X accepted by the tracker (E2E ``counter``, ``x``, ``heading``, its
+        ENC_COUNTER, bus time s); ``rows``: the encoder frames heard before it (seq, place,
+        COUNTER, ...: ``livewindow.ENC_COLUMNS``)."""
+        if not is_powerup_pose(counter, x, heading):
+            return
+        tail = [row for row in list(rows)[-NAMED_SPAN:] if int(row[2]) == enc_counter]
+        self.latest = (t_s, int(tail[-1][0]) if tail else None)
+
+    def heard_raw(self, signals: dict[str, Any], t_s: float,
+                  rows: Sequence[Sequence[float]]) -> None:
+        """``heard`` of an ODOM_POSE_X's decoded ``signals`` (COUNTER, X, HEADING,
+        ENC_COUNTER), whatever its E2E sequence (its CRC holding)."""
+        self.heard(int(signals["COUNTER"]), signals["X"], signals["HEADING"],
+                   int(signals["ENC_COUNTER"]), t_s, rows)
+
+    def named_seq(self, summary_s: float) -> int | None:
+        """The encoder frame (seq) the power-up pose heard less than ``BOOT_WINDOW_S`` before
+        a boot summary heard at bus time ``summary_s`` names; None when none."""
+        if self.latest is None or not 0.0 <= summary_s - self.latest[0] < BOOT_WINDOW_S:
+            return None
+        return self.latest[1]
