@@ -63,6 +63,7 @@ class Lives:
         self._tracker = tracker
         self.boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
         self.boot_poses: list[FramePose] = []  # the new life's samples while it waits
+        self.boot_named = False  # ``boot``'s frame named by its power-up pose (``bootnamed``)
         self.held: dict[int, Sample] = {}  # ... as settled (unjudged), by encoder frame
         self.pending: FramePose | None = None  # the first pose, heard before the integrator
         self.backlog_counts: list[Counted] = []  # the frames since the pending pose's
@@ -104,10 +105,12 @@ class Lives:
     def drop_backlog(self) -> None:
         self.pending, self.backlog_counts, self.backlog_poses = None, [], []
 
-    def await_boot(self, guess: int, now_s: float) -> None:
+    def await_boot(self, guess: int, now_s: float, named: bool = False) -> None:
         """A reboot: the new life's samples wait for the frame it primed on (``guess`` until
-        its first count page names it) up to ``BOOT_COUNT_WAIT_S`` after ``now_s``."""
+        its first count page names it; ``named``: its power-up pose named it, ``bootnamed``,
+        the page's word not taken over it) up to ``BOOT_COUNT_WAIT_S`` after ``now_s``."""
         self.boot = (guess, now_s + BOOT_COUNT_WAIT_S)
+        self.boot_named = named
         self.boot_poses, self.held = [], {}
 
     def expire(self) -> None:
@@ -120,6 +123,8 @@ class Lives:
         boot, tracker = self.boot, self._tracker
         if boot is not None and boot[0] < 0:  # the first life's samples wait
             self.finish_first(proven)
+        elif boot is not None and self.boot_named:
+            self.finish_boot(boot[0])
         elif boot is not None and (at := primed_at(tracker.window, ok, lost)) is not None:
             self.finish_boot(at)
         elif proven and tracker.integrator is not None:

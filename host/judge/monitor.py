@@ -353,7 +353,8 @@ class BusMonitor:
     def _summary(self, message: Message, data: bytes) -> tuple[int, str] | None:
         """(UPTIME, STATE) of a summary whose CRC holds, any sequence (``src.status_frame``)."""
         config = self._e2e_configs.get(frame_key(message.frame_id, message.is_extended_frame))
-        src.pose_frame(self.sources, message, data, config, self._bus_time_s)  # power-up ticks
+        src.pose_frame(self.sources, message, data, config, self._bus_time_s,  # power-up
+                       self.tracker)  # ticks, poses
         return src.status_frame(self.tracker, message, data, config, self._bus_time_s)
 
     def node_ages(self, now_s: float) -> dict[str, dict[str, Any]]:

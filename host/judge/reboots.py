@@ -24,7 +24,10 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
   the frame it primed on: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back from the page's
   latest encoder frame (``_counted_start``: the earliest the counts allow). That holds when the
   log missed the boot summary (UPTIME counts whole seconds: the summaries of the first second
-  all say 0) and is checked again on the life (``host.judge.powerup.saw_only_the_log``).
+  all say 0) and is checked again on the life (``host.judge.powerup.saw_only_the_log``);
+* above both, when the summary (UPTIME 0) follows the new firmware's power-up pose within 80 ms,
+  the frame that pose names (``host.judge.bootnamed``): the two rules above read ODOM_STATUS
+  stamps, which a recorder may have delayed (every one 15..50 ms late: 1..5 frames late).
 
 A life with no on-board sample (a reboot at the very end) is reported, not compared.
 
@@ -50,6 +53,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.bootnamed import named_start, powerup_poses
 from odocan.host.judge.bootticks import boot_ticks, poses_before, status_before
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
@@ -87,13 +91,17 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     keep = accepted[rows["index"]]
     encoders, counters = rows["index"][keep], rows["COUNTER"][keep].astype(np.int64)
     pages = _encoder_count_pages(frames, decoder)
+    poses = powerup_poses(frames, decoder)
     starts: list[int] = []
     limits = [b[0] for b in boots[1:]] + [len(frames)]
     for (position, uptime_s, state, _), limit in zip(boots, limits, strict=True):
         start = _life_start(position, uptime_s, state, encoders)
         counted = _counted_start(position, limit, (encoders, counters), pages)
-        if counted is not None and counted > (starts[-1] if starts else 0):
-            start = counted
+        named = (named_start(poses, (encoders.astype(np.int64), counters), position,
+                             float(frames.timestamp_s[position])) if uptime_s == 0 else None)
+        for found in (counted, named):  # the power-up pose's word last: not stamp-bound
+            if found is not None and found > (starts[-1] if starts else 0):
+                start = found
         starts.append(start)
     lives = [Life(everything[: starts[0]], boot=False)]
     for k, (position, uptime_s, _, before_s) in enumerate(boots):

@@ -240,14 +240,19 @@ def status_frame(tracker: PoseTracker, message: Message, data: bytes, e2e: Any, 
     return boot_summary(message, data, data_ids)
 
 
-def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s: float) -> None:
+def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s: float,
+               tracker: PoseTracker | None = None) -> None:
     """Any frame heard at bus time ``t_s``: an ODOM_POSE_X whose CRC holds, whatever its E2E
     sequence (``e2e``: the message's ``E2EMessage`` or None), goes on ``watch``'s pose run (its
-    COUNTERs tell a power-up tick: ``bootticks.next_run``)."""
+    COUNTERs tell a power-up tick: ``bootticks.next_run``), one of COUNTER 0 to ``tracker``'s
+    power-up poses (``bootnamed.LivePowerUp``: the E2E check may refuse it, a new life's)."""
     if message.name in (POSE_MESSAGE, STATUS_MESSAGE):
         counter = pose_heard(data, e2e.data_ids if e2e is not None else None)
         if counter is not None and message.name == POSE_MESSAGE:
             watch.hear_pose(t_s, counter)
+            if counter == 0 and tracker is not None:
+                tracker.powerup.heard_raw(_plain_decoder(message)(data), t_s,
+                                          tracker.window.rows)
         elif counter is not None:
             watch.hear_status(t_s, counter)
 

@@ -21,6 +21,13 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.bootnamed import (
+    PowerUpPoses,
+    carried_on,
+    named_start,
+    no_powerup_poses,
+    powerup_poses,
+)
 from odocan.host.judge.bootticks import poses_before, status_before
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.primed import counted_start
@@ -52,6 +59,7 @@ class _Boot:
     t_s: float
     before_s: int
     start: int  # from the summary (``reboots._life_start``)
+    named: int | None = None  # named by its power-up pose (``bootnamed.named_start``)
 
 
 @dataclass
@@ -75,6 +83,8 @@ class StreamLives:
     _pose: tuple[float, int, bool, float] | None = None  # the pose run so far, its latest's
     # bus time (``bootticks.poses_before``)
     _status: tuple[float, int] | None = None  # the latest ODOM_STATUS (``status_before``)
+    _powerups: PowerUpPoses = field(default_factory=no_powerup_poses)  # the latest
+    # power-up poses heard (``bootnamed``), their positions in the log
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
@@ -83,6 +93,8 @@ class StreamLives:
         self._encoders = np.concatenate(
             (self._encoders, rows["index"][keep].astype(np.int64) + self._offset))
         self._counters = np.concatenate((self._counters, rows["COUNTER"][keep].astype(np.int64)))
+        self._powerups = carried_on(self._powerups,
+                                    powerup_poses(chunk, self.decoder, self._offset))
         events = sorted(self._boot_events(chunk) + self._page_events(chunk),
                         key=lambda event: event[0])
         for position, boot in events:
@@ -142,6 +154,8 @@ class StreamLives:
             counted = counted_start((self._encoders, self._counters), page[0], *page[1])
             if counted is not None and counted > (self._boots[-1][1] if self._boots else 0):
                 start = counted
+        if boot.named is not None and boot.named > (self._boots[-1][1] if self._boots else 0):
+            start = boot.named  # the power-up pose's word last (``reboots.split_lives``)
         self._boots.append((boot, start))
 
     def _boot_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | tuple[int, int]]]:
@@ -191,7 +205,10 @@ class StreamLives:
                 earlier = self._encoders[self._encoders < at]
                 start = (int(earlier[-1]) if int(uptime_s) == 0 and name != "INIT"
                          and len(earlier) else at)
-                events.append((at, _Boot(at, int(uptime_s), float(t_s), int(before), start)))
+                named = (named_start(self._powerups, (self._encoders, self._counters), at,
+                                     float(t_s)) if int(uptime_s) == 0 else None)
+                events.append((at, _Boot(at, int(uptime_s), float(t_s), int(before), start,
+                                         named)))
         return events
 
     def _page_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | tuple[int, int]]]:

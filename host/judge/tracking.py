@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
+from odocan.host.judge.bootnamed import LivePowerUp
 from odocan.host.judge.liveadopted import (
     CONFIG_CHANGE,
     INTEGRATOR_CHANGE,
@@ -100,6 +101,7 @@ class PoseTracker:
         # raw: ``fit`` corrects its start (livereference); where it starts (livestart)
         self.raw = RawReference(StepGate(geometry, self.counter_bits, self.restarts))
         self.lives = Lives(self)
+        self.powerup = LivePowerUp()  # the latest power-up pose heard (bootnamed)
         self.truths = TruthJudge(self)  # SIM_TRUTH's parts, judged (livetruth)
         # the latest sample judged (``record``): on-board pose, corrected reference
         self.last_pair: tuple[FramePose, FramePose] | None = None
@@ -313,7 +315,9 @@ class PoseTracker:
         primed on, as ``analyze`` starts it: the one its first ENC_E2E_OK page names
         (``on_enc_counts``), whatever the summary said; its samples wait for that page, or
         ``BOOT_COUNT_WAIT_S``; without it, the latest frame when the boot summary says UPTIME 0
-        and not INIT (``primed_now``: primed in its first tick), else the next. No pose is
+        and not INIT (``primed_now``: primed in its first tick), else the next. Above both: the
+        frame its power-up pose named, heard up to 80 ms before the summary
+        (``bootnamed``: the ODOM_STATUS frames may be stamped late). No pose is
         adopted, so a firmware that comes up wrong shows its error. Without a known integrator:
         ``restart_reference`` (the next pose is adopted)."""
         self.new_life()
@@ -321,8 +325,9 @@ class PoseTracker:
         if self.integrator is None:
             self.adopted.owe(REBOOT_BEFORE_INTEGRATOR)
             return
-        guess = self.enc_seq if primed_now else self.enc_seq + 1
-        self.lives.await_boot(guess, self.now_s)
+        named = self.powerup.named_seq(self.now_s)  # its power-up pose's word (bootnamed)
+        guess = named if named is not None else self.enc_seq if primed_now else self.enc_seq + 1
+        self.lives.await_boot(guess, self.now_s, named=named is not None)
 
     def new_life(self) -> None:
         """A new firmware life (a reboot): the reference starts again at the next pose, and

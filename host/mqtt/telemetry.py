@@ -253,6 +253,9 @@ class RobotTelemetry(CommandFollowing):
         if route.name == POSE_MESSAGE:
             if (counter := pose_heard(data, self._pose_ids.data_ids)) is not None:
                 self.sources.hear_pose(t_s, counter)
+                if counter == 0:  # (bootnamed: the E2E check may refuse a new life's)
+                    self.tracker.powerup.heard_raw(route.signals(data), t_s,
+                                                   self.tracker.window.rows)
             return
         if route.status_page is None:
             return

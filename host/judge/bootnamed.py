@@ -1,0 +1,150 @@
+"""The encoder frame a rebooted firmware primed on, named by its power-up pose: not by stamps.
+
+A firmware that primes in its first tick sends its power-up pose first (firmware/ecu.py step 5):
+an ODOM_POSE_X of E2E COUNTER 0 (its counters start at 0) reading X 0 and HEADING 0, whose
+ENC_COUNTER names the encoder frame it primed on (the latest of the last ``NAMED_SPAN`` heard
+before the pose with that COUNTER). Its summary (UPTIME 0) and its first page of encoder E2E
+counts follow; the other rules (``host.judge.reboots``: the latest encoder frame before the
+summary, the count page's frames counted back from the latest before the page) read where
+those ODOM_STATUS frames were stamped. A recorder or gateway that stamps every ODOM_STATUS frame
+15..50 ms late (a common capture) moved those starts 1..5 encoder frames late: a correct
+firmware FAILed by 6..25 mm (issue #11, rule 5). The pose frames are not delayed with them, and
+the pose's name is the firmware's own word on where it primed.
+
+The power-up pose is the latest ODOM_POSE_X before the reboot's summary whose CRC holds, whose
+COUNTER is 0 and which reads X 0 and HEADING 0, heard less than ``BOOT_WINDOW_S`` (80 ms) before
+the summary (``bootticks``: a summary held back further is not told as its tick's either). A pose
+of the old life reading (0, 0, 0) would name a frame the robot had not left since the power-up
+pose's: the same start. One rule for the whole log (``reboots``), the streamed
+(``stream_lives``) and the live judges (``tracking.PoseTracker.power_up``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.bootticks import BOOT_WINDOW_S, POSE_MESSAGE
+from odocan.host.judge.powerup import NAMED_SPAN
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
+
+# (log positions, bus times s, ENC_COUNTERs) of power-up poses
+PowerUpPoses = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64]]
+
+
+def is_powerup_pose(counter: int, x_raw: float, heading_raw: float) -> bool:
+    """Whether an ODOM_POSE_X (E2E ``counter``, X and HEADING raw or scaled) reads a firmware's
+    power-up pose: COUNTER 0, X 0, HEADING 0."""
+    return counter == 0 and x_raw == 0 and heading_raw == 0
+
+
+def no_powerup_poses() -> PowerUpPoses:
+    """No power-up pose (a stream's start)."""
+    return np.zeros(0, np.int64), np.zeros(0, np.float64), np.zeros(0, np.int64)
+
+
+def carried_on(kept: PowerUpPoses, heard: PowerUpPoses, keep: int = 4) -> PowerUpPoses:
+    """The latest ``keep`` power-up poses of ``kept`` followed by those ``heard`` since (a
+    stream's next chunk: ``stream_lives``; a summary follows its tick's within 80 ms)."""
+    return (np.concatenate((kept[0][-keep:], heard[0])),
+            np.concatenate((kept[1][-keep:], heard[1])),
+            np.concatenate((kept[2][-keep:], heard[2])))
+
+
+def powerup_poses(frames: FrameArrays, decoder: BulkDecoder, offset: int = 0) -> PowerUpPoses:
+    """The ODOM_POSE_X frames of ``frames`` whose CRC holds and that read a power-up pose
+    (``is_powerup_pose``): their positions (plus ``offset``: a stream's chunk), bus times and
+    ENC_COUNTERs; empty without them."""
+    empty = no_powerup_poses()
+    try:
+        rows = decoder.decode(frames, POSE_MESSAGE)
+    except (DecodeError, KeyError):
+        return empty
+    if not {"COUNTER", "X", "HEADING", "ENC_COUNTER"} <= rows.keys() or not len(rows["index"]):
+        return empty
+    index = rows["index"]
+    keep = ((rows["COUNTER"] == 0) & (rows["X"] == 0) & (rows["HEADING"] == 0)
+            & _crc_holds(frames, decoder, index))
+    return (index[keep].astype(np.int64) + offset, rows["timestamp_s"][keep].astype(np.float64),
+            rows["ENC_COUNTER"][keep].astype(np.int64))
+
+
+def pose_before(poses: PowerUpPoses, position: int, t_s: float) -> tuple[int, int] | None:
+    """The power-up pose a summary at log ``position`` and bus time ``t_s`` follows: the latest
+    of ``poses`` before it, heard less than ``BOOT_WINDOW_S`` before it (its position and
+    ENC_COUNTER); None when none."""
+    at, times, named = poses
+    k = int(np.searchsorted(at, position)) - 1
+    if k < 0 or not 0.0 <= t_s - float(times[k]) < BOOT_WINDOW_S:
+        return None
+    return int(at[k]), int(named[k])
+
+
+def named_frame(encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], pose: int,
+                enc_counter: int) -> int | None:
+    """The encoder frame a pose at log position ``pose`` names: the latest of the last
+    ``NAMED_SPAN`` accepted before it (``encoders``: their positions and COUNTERs, in order)
+    whose COUNTER is ``enc_counter``; None when the log lacks it."""
+    at, counters = encoders
+    last = int(np.searchsorted(at, pose))
+    tail = np.flatnonzero(counters[max(last - NAMED_SPAN, 0):last] == enc_counter)
+    return int(at[max(last - NAMED_SPAN, 0) + int(tail[-1])]) if len(tail) else None
+
+
+def named_start(poses: PowerUpPoses, encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
+                position: int, t_s: float) -> int | None:
+    """The encoder frame the firmware whose boot summary (UPTIME 0) is at log ``position``, bus
+    time ``t_s``, primed on, as its power-up pose names it (module docstring); None when no
+    power-up pose precedes it in the window or the log lacks the frame it names."""
+    pose = pose_before(poses, position, t_s)
+    return None if pose is None else named_frame(encoders, *pose)
+
+
+def _crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: npt.NDArray[np.int64]
+               ) -> npt.NDArray[np.bool_]:
+    """Which ODOM_POSE_X frames at ``rows`` carry a right CRC, whatever their sequence (a new
+    firmware restarts it)."""
+    config = e2e_messages(decoder.db).get(decoder.message(POSE_MESSAGE).frame_id)
+    if config is None or config.data_ids is None:
+        return np.ones(len(rows), dtype=bool)
+    data = frames.data[rows]
+    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & 0xF]
+    good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
+    return good
+
+
+class LivePowerUp:
+    """``named_start`` live (the monitor's and the bridge's tracker): the latest power-up pose
+    heard, when and the encoder frame (the tracker's seq) it names among those heard before it."""
+
+    def __init__(self) -> None:
+        self.latest: tuple[float, int | None] | None = None  # bus time s, named seq
+
+    def heard(self, counter: int, x: float, heading: float, enc_counter: int, t_s: float,
+              rows: Sequence[Sequence[float]]) -> None:
+        """An ODOM_POSE_X accepted by the tracker (E2E ``counter``, ``x``, ``heading``, its
+        ENC_COUNTER, bus time s); ``rows``: the encoder frames heard before it (seq, place,
+        COUNTER, ...: ``livewindow.ENC_COLUMNS``)."""
+        if not is_powerup_pose(counter, x, heading):
+            return
+        tail = [row for row in list(rows)[-NAMED_SPAN:] if int(row[2]) == enc_counter]
+        self.latest = (t_s, int(tail[-1][0]) if tail else None)
+
+    def heard_raw(self, signals: dict[str, Any], t_s: float,
+                  rows: Sequence[Sequence[float]]) -> None:
+        """``heard`` of an ODOM_POSE_X's decoded ``signals`` (COUNTER, X, HEADING,
+        ENC_COUNTER), whatever its E2E sequence (its CRC holding)."""
+        self.heard(int(signals["COUNTER"]), signals["X"], signals["HEADING"],
+                   int(signals["ENC_COUNTER"]), t_s, rows)
+
+    def named_seq(self, summary_s: float) -> int | None:
+        """The encoder frame (seq) the power-up pose heard less than ``BOOT_WINDOW_S`` before
+        a boot summary heard at bus time ``summary_s`` names; None when none."""
+        if self.latest is None or not 0.0 <= summary_s - self.latest[0] < BOOT_WINDOW_S:
+            return None
+        return self.latest[1]
