@@ -1,0 +1,77 @@
+"""Two senders on one command message (issue #11: "two sources on one ID are reported"): two
+tools commanding one robot, e.g. an ``odocan bridge`` answering ``cmd/config`` and an
+operator's script, each with its own Profile 2 COUNTER sequence on ODOM_CONFIG.
+
+Why it matters: the firmware's receiver (firmware/reception.py) drops a frame whose COUNTER
+repeats the last one it accepted (E2E REPEATED) and answers nothing, so the second tool's
+command is lost without a word; ODOM_ACK names a request only by its CAN ID, COUNTER and
+multiplexer value, so each tool may take the other's answers for its own; and both tools'
+staged writes go into one staged set, so one tool's APPLY commits the other's parameters.
+
+``SenderWatch`` reads the CRC-right frames of one message in bus order (the monitor hears
+every one; ``analyze`` reads the log) and tells two senders by one of two signatures, neither
+of which one sender can make (a sender's COUNTER only goes up, +1 a frame, mod 16):
+
+* **a repeat with other content**: the COUNTER of the previous frame again, other bytes (one
+  sender repeats a COUNTER only in a duplicate of the same frame, or after 16 frames lost in a
+  row, or when it restarted: the reason says so);
+* **interleaved sequences**: a frame continuing (+1) one of the ``RECENT`` frames before the
+  previous one, but not the previous one (one sender would have lost at least 15 frames
+  between them, within ``RECENT`` frames heard).
+
+The bridge, which does not hear its own frames back, tells it differently
+(``host.mqtt.livecommands``: another tool's frame heard while its own command is in flight).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Final
+
+COUNTER_MASK: Final = 0x0F  # the E2E Profile 2 COUNTER (byte 1, low nibble)
+RECENT: Final = 4  # frames looked back on for an interleaved sequence
+HOLD_S: Final = 1.0  # one event while the signature keeps coming, at most one a second
+
+
+class SenderWatch:
+    """Two senders on the message ``name`` (module docstring): ``heard`` each CRC-right frame
+    (accepted or refused REPEATED / WRONGSEQUENCE), in bus order; ``count`` the signatures."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.count = 0  # frames showing a second sender
+        self._recent: deque[bytes] = deque(maxlen=RECENT + 1)  # the latest frames, oldest first
+        self._said_s = -HOLD_S
+
+    def heard(self, data: bytes, t_s: float) -> str | None:
+        """A CRC-right frame of the message at bus time ``t_s`` (s); the event's detail when
+        it shows a second sender and none was said in the last ``HOLD_S``, else None."""
+        why = self._signature(bytes(data))
+        self._recent.append(bytes(data))
+        if why is None:
+            return None
+        self.count += 1
+        if t_s - self._said_s < HOLD_S:
+            return None
+        self._said_s = t_s
+        return f"two senders on {self.name}: {why}"
+
+    def _signature(self, data: bytes) -> str | None:
+        if not self._recent or len(data) < 2:
+            return None
+        counter = data[1] & COUNTER_MASK
+        previous = self._recent[-1]
+        before = previous[1] & COUNTER_MASK
+        if counter == before:
+            if data == previous:
+                return None  # a duplicate of one frame (CAN's double reception): one sender
+            return (f"COUNTER {counter} repeated with other content: the firmware drops the "
+                    "second frame unanswered (E2E REPEATED; or one sender restarted its COUNTER)")
+        if counter == (before + 1) & COUNTER_MASK:
+            return None
+        earlier = [f[1] & COUNTER_MASK for f in list(self._recent)[:-1]]
+        if any(counter == (c + 1) & COUNTER_MASK for c in earlier):
+            sequence = ", ".join(str(c) for c in [*earlier, before, counter])
+            return (f"interleaved COUNTER sequences ({sequence}): their staged writes mix in "
+                    "one staged set, and each APPLY commits the other's")
+        return None
