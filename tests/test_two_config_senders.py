@@ -1,59 +1,84 @@
 """Two tools commanding one robot on ODOM_CONFIG (issue #11: "two sources on one ID are
 reported").
 
-Another tool (a script with its own ``CommandEncoder``: its own E2E COUNTERs from 0) and the
-bridge's ``cmd/config`` put their ODOM_CONFIG frames on the bus interleaved, the other tool's
-first: both start at COUNTER 0, so every bridge frame repeats the COUNTER the firmware has just
-accepted. The Profile 2 receiver drops such a frame (E2E REPEATED) and answers nothing: the
-firmware applies the other tool's config (wheelbase 0.25 m) and never sees the bridge's
-(0.27 m). Independent of the judges: the ODOM_ACKs decoded with cantools, and the float64 dead
-reckoning of ``tests.test_bridge_config_nack`` says where the pose must be.
+Another tool (a script with its own ``CommandEncoder``: its own E2E COUNTER sequence) and the
+bridge's ``cmd/config`` put their ODOM_CONFIG frames on the bus interleaved one for one, the
+other tool's first or the bridge's first. Both configs are kobuki's robot but for the
+wheelbase: 0.25 m the other tool's, 0.27 m the bridge's.
 
-Found on main: the bridge answered its config ``acked`` (the other tool's ODOM_ACKs carry the
-same REQUEST_COUNTERs); the monitor took the bridge's frames (the latest of each COUNTER) as the
-staged set and judged the correct firmware with 0.27 m: POSE WRONG; nobody said "two senders".
+* **Both from COUNTER 0**: every second frame repeats the COUNTER the firmware has just
+  accepted. The Profile 2 receiver drops it (E2E REPEATED) and answers nothing: the firmware
+  runs the first sender's config and never sees the second's (7 ODOM_ACKs for 14 frames).
+* **The other tool's COUNTERs 8 ahead** (it sent a config before): all 14 frames are taken, each
+  tool's staged writes go into one staged set, and the first APPLY commits the later writes, the
+  other tool's: the firmware runs the wheelbase of the sender whose frames came second.
+
+Independent of the judges: the ODOM_ACKs decoded with cantools, and the float64 dead reckoning
+of ``tests.test_bridge_config_nack`` says where the pose must be (which wheelbase it runs).
+
+Found on main: the bridge answered its config ``acked`` in every case (the other tool's
+ODOM_ACKs carry the REQUEST_COUNTERs it waits for), also when the firmware never took a frame
+of it; nobody said "two senders"; the judges took the latest frame of a COUNTER as the one its
+ACK answers, so with two frames of one COUNTER in flight the monitor FAILed the correct
+firmware (bridge's frames first, COUNTERs 8 apart: POSE WRONG with 0.27 m) and so did the
+bridge (the other tool's first, COUNTERs 8 apart; the bridge's first from COUNTER 0).
+
+Not judged here: the bridge's own reference when both tools' frames of one COUNTER and one
+PARAM carry different values and the other tool's came first on the bus: the bridge does not
+hear its own frames back, so it cannot know which of the two the firmware took (it says
+``contested`` and "two senders"; the monitor, which hears the bus in order, follows it).
 """
 
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 import can
+import pytest
 
 from odocan.firmware import frames as fr
 from odocan.host.mqtt.bridge import _Robot
-from tests.bridge_pair import bridged_robot
-from tests.test_bridge_foreign_config import (
-    PERIODS,
-    WIDER,
-    _assert_pose,
-    _config_frames,
-    _events,
-    _Watched,
-    _wrongs,
-)
+from odocan.host.protocol.commands import CommandEncoder
+from tests.bridge_pair import KOBUKI, bridged_robot
+from tests.test_bridge_config_nack import _dead_reckoned_with
+from tests.test_bridge_foreign_config import PERIODS, WIDER, _events, _Watched, _wrongs
 
 OTHER = {**WIDER, "id": "script"}  # wheelbase 0.25 m: the other tool's
 MINE = {**WIDER, "id": "c1", "wheelbase_m": 0.27}  # the bridge's
 
 
-class _Interleaved(_Watched):
-    """Each frame the bridge sends reaches the bus right after one of the other tool's."""
+def _other_frames(configs_before: int) -> list[tuple[int, bytes]]:
+    """OTHER as the other tool puts it on the bus after ``configs_before`` configs of 8
+    frames each (with max_wheel_speed_m_s) it sent before: its COUNTERs from 8 x that."""
+    encoder = CommandEncoder()
+    for _ in range(configs_before):
+        encoder.encode("config", json.dumps({**OTHER, "max_wheel_speed_m_s": 0.7}).encode())
+    frames = encoder.encode("config", json.dumps(OTHER).encode()).frames
+    return [(f.can_id, f.data) for f in frames]
 
-    def __init__(self, bridge: _Robot, listener: Any, other: list[tuple[int, bytes]]) -> None:
+
+class _Interleaved(_Watched):
+    """Each frame the bridge sends reaches the bus right after one of the other tool's
+    (``other_first``) or right before it."""
+
+    def __init__(self, bridge: _Robot, listener: Any, other: list[tuple[int, bytes]],
+                 other_first: bool) -> None:
         super().__init__(bridge, listener)
-        self.other = list(other)
+        self.other, self.other_first = list(other), other_first
 
     def command_frame(self, msg: can.Message) -> None:
-        if self.other:
+        if self.other_first and self.other:
             self.other_tool([self.other.pop(0)])
         super().command_frame(msg)
+        if not self.other_first and self.other:
+            self.other_tool([self.other.pop(0)])
 
 
-def _interleaved_drive(channel: str) -> tuple[_Robot, _Interleaved]:
+def _drive(channel: str, configs_before: int, other_first: bool) -> tuple[_Robot, _Interleaved]:
     with bridged_robot(channel) as (bridge, listener):
-        board = _Interleaved(bridge, listener, _config_frames(OTHER))
+        board = _Interleaved(bridge, listener, _other_frames(configs_before), other_first)
         for _ in range(100):
             board.period()
         answer = bridge.on_command("config", json.dumps(MINE).encode())
@@ -63,20 +88,70 @@ def _interleaved_drive(channel: str) -> tuple[_Robot, _Interleaved]:
     return bridge, board
 
 
-def test_two_senders_interleaved_on_odom_config() -> None:
-    bridge, board = _interleaved_drive("test-two-config-senders")
-    config_acks = [s for _, s in board.acks if s["REQUEST_ID"] == fr.ODOM_CONFIG_ID]
-    assert [s["RESULT"] for s in config_acks] == [0] * 7  # cantools: the other tool's 7 only
-    _assert_pose(board, 0, board.apply_periods[0])  # float64: 0.25 m from its APPLY on
-    # the bridge never reports its config applied: the firmware never took one frame of it
-    assert [r["result"] for r in board.results if r["id"] == "c1"] == ["contested"], board.results
-    assert board.results[-1]["reason"].startswith("two senders on ODOM_CONFIG: another tool")
-    # the judges follow what the firmware took: a correct firmware is not FAILed
-    assert bridge.telemetry.tracker.geometry.wheelbase_m == 0.25
-    assert board.monitor.tracker.geometry.wheelbase_m == 0.25
+def _runs_wheelbase(board: _Interleaved, wheelbase_m: float) -> None:
+    """The firmware's last whole pose (cantools) is the float64 dead reckoning with kobuki's
+    wheelbase up to its first applied APPLY and ``wheelbase_m`` from there, and not with the
+    other config's."""
+    applied = board.apply_periods[0]
+    named = max(k for k, xy in board.poses.items() if len(xy) == 2)
+    assert named >= PERIODS - 3
+    for wb, right in ((wheelbase_m, True), (0.52 - wheelbase_m, False)):
+        x_m, y_m = _dead_reckoned_with([KOBUKI.wheelbase_m] * (applied - 1)
+                                       + [wb] * (named - applied + 1))
+        off_m = math.hypot(board.poses[named]["X"] - x_m, board.poses[named]["Y"] - y_m)
+        assert (off_m < 1e-3) is right, (wb, off_m)
+
+
+def _judges_agree(bridge: _Robot, board: _Interleaved, wheelbase_m: float) -> None:
+    """Both judges run the firmware's robot and FAIL nothing."""
+    assert board.monitor.tracker.geometry.wheelbase_m == wheelbase_m
+    assert bridge.telemetry.tracker.geometry.wheelbase_m == wheelbase_m
     assert _wrongs(bridge, board) == (0, 0)
-    # and both say why: two senders on ODOM_CONFIG, an event with its reason
-    monitor_events = [e["detail"] for e in board.monitor.events if e["kind"] == "two senders"]
-    assert monitor_events, board.monitor.events
-    assert monitor_events[0].startswith("two senders on ODOM_CONFIG: COUNTER 0 repeated")
-    assert any("ODOM_CONFIG" in d for d in _events(bridge, "two senders"))
+
+
+def _said(bridge: _Robot, board: _Interleaved, monitor_says: str) -> None:
+    """The bridge's own config ``contested`` (never ``acked``), and both judges' event."""
+    assert [r["result"] for r in board.results] == ["contested"], board.results
+    assert board.results[0]["reason"].startswith(
+        "two senders on ODOM_CONFIG: another tool's frame (COUNTER ")
+    monitor = [e["detail"] for e in board.monitor.events if e["kind"] == "two senders"]
+    assert len(monitor) == 1, board.monitor.events
+    assert monitor[0].startswith(f"two senders on ODOM_CONFIG: {monitor_says}")
+    assert len(_events(bridge, "two senders")) == 1
+
+
+def _config_acks(board: _Interleaved) -> list[tuple[int, int]]:
+    """cantools: (REQUEST_FIELD, RESULT) of every ODOM_ACK of an ODOM_CONFIG frame."""
+    return [(int(s["REQUEST_FIELD"]), int(s["RESULT"])) for _, s in board.acks
+            if s["REQUEST_ID"] == fr.ODOM_CONFIG_ID]
+
+
+PARAMS_APPLY = [(f, 0) for f in (0, 1, 2, 3, 4, 5, 15)]  # six PARAMs and APPLY, ACKed
+
+
+def test_the_other_tool_s_counters_first_the_bridge_s_config_dropped_unanswered() -> None:
+    bridge, board = _drive("test-two-senders-repeat", 0, other_first=True)
+    assert _config_acks(board) == PARAMS_APPLY  # 7 answers to 14 frames
+    _runs_wheelbase(board, 0.25)  # the other tool's: the bridge's never taken
+    _said(bridge, board, "COUNTER 3 repeated with other content")
+    assert board.monitor.tracker.geometry.wheelbase_m == 0.25  # the bridge: see the docstring
+    assert _wrongs(bridge, board)[1] == 0
+
+
+def test_the_bridge_s_counters_first_the_other_tool_s_config_dropped_unanswered() -> None:
+    bridge, board = _drive("test-two-senders-repeat-mine", 0, other_first=False)
+    assert _config_acks(board) == PARAMS_APPLY
+    _runs_wheelbase(board, 0.27)
+    _said(bridge, board, "COUNTER 3 repeated with other content")
+    _judges_agree(bridge, board, 0.27)
+
+
+@pytest.mark.parametrize(("other_first", "runs_m"), [(True, 0.27), (False, 0.25)])
+def test_interleaved_staging_one_tool_s_apply_commits_the_other_s_parameters(
+    other_first: bool, runs_m: float,
+) -> None:
+    bridge, board = _drive(f"test-two-senders-mix-{other_first}", 1, other_first)
+    assert sorted(_config_acks(board)) == sorted(PARAMS_APPLY * 2)  # all 14 taken
+    _runs_wheelbase(board, runs_m)  # the later writes, committed by the first APPLY
+    _said(bridge, board, "interleaved COUNTER sequences")
+    _judges_agree(bridge, board, runs_m)

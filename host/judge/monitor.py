@@ -247,7 +247,8 @@ class BusMonitor:
                 self.events.append(self.kept.applied(event, *applied, self.tracker.enc_seq))
         elif int(s["REQUEST_ID"]) == self._config_id:
             follow_config_ack(self, self.config, int(s["REQUEST_COUNTER"]),  # the firmware's
-                              int(s["RESULT"]) == 0, self._bus_time_s)  # robot: the judges' too
+                              int(s["RESULT"]) == 0, self._bus_time_s,  # robot: the judges'
+                              int(s["REQUEST_FIELD"]))
         reason = str(shown.get("REASON", ""))
         if not reason.startswith("AUTH_"):
             return

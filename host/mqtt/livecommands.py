@@ -64,7 +64,9 @@ class CommandFollowing:
         self._set_pose_id = set_pose.frame_id if set_pose is not None else -1
         self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {} \
             if set_pose is not None else {}
-        self.config = ConfigFollower()  # ODOM_CONFIG staged and applied (its ACKs)
+        # ODOM_CONFIG staged and applied (its ACKs); its own frames followed when sent, not
+        # in the bus's order among another tool's
+        self.config = ConfigFollower(bus_order=False)
         self.contested: dict[Any, str] = {}  # cmd id: another tool's frame heard in its flight
         self._own_frame = False  # the frame handled now is the bridge's own (``command_sent``)
         config = next((m for m in self.db.messages if m.name == "ODOM_CONFIG"), None)
@@ -133,7 +135,8 @@ class CommandFollowing:
         if request_id == self._set_pose_id:
             self._followed_set_pose(s, t_s)
         elif request_id == self._config_id and follow_config_ack(
-                self, self.config, int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0, t_s):
+                self, self.config, int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0, t_s,
+                int(s["REQUEST_FIELD"])):
             self.profile.forget()  # the firmware's next PROFILE page is judged against it
         return self._answered(s, t_s)
 
