@@ -26,11 +26,20 @@ The bridge, which does not hear its own frames back, tells it differently
 from __future__ import annotations
 
 from collections import deque
-from typing import Final
+from typing import Any, Final
+
+import numpy as np
+from cantools.database.can import Database
+
+from odocan.host.io.frames import FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, FrameArrays
+from odocan.host.protocol.e2e import e2e_messages
+from odocan.host.protocol.e2e_crc import crc8h2f_p02_one
 
 COUNTER_MASK: Final = 0x0F  # the E2E Profile 2 COUNTER (byte 1, low nibble)
 RECENT: Final = 4  # frames looked back on for an interleaved sequence
 HOLD_S: Final = 1.0  # one event while the signature keeps coming, at most one a second
+FRAME_BYTES: Final = 8  # a Profile 2 frame
+NOT_A_STANDARD_DATA_FRAME: Final = FLAG_EXTENDED | FLAG_REMOTE | FLAG_ERROR
 
 
 class SenderWatch:
@@ -75,3 +84,23 @@ class SenderWatch:
             return (f"interleaved COUNTER sequences ({sequence}): their staged writes mix in "
                     "one staged set, and each APPLY commits the other's")
         return None
+
+
+def log_events(frames: FrameArrays, db: Database) -> list[dict[str, Any]]:
+    """``analyze``'s ``two senders`` events: ``SenderWatch`` over the log's CRC-right 8-byte
+    ODOM_CONFIG frames, in bus order (none when the DBC has no protected ODOM_CONFIG)."""
+    config = next((m for m in e2e_messages(db).values() if m.name == "ODOM_CONFIG"), None)
+    if config is None or config.data_ids is None:
+        return []
+    rows = np.flatnonzero((frames.can_id == config.key) & (frames.dlc == FRAME_BYTES)
+                          & ((frames.flags & NOT_A_STANDARD_DATA_FRAME) == 0))
+    watch, events = SenderWatch(config.name), []
+    for row in rows.tolist():
+        data = bytes(frames.data[row])
+        if crc8h2f_p02_one(data, config.data_ids[data[1] & COUNTER_MASK]) != data[0]:
+            continue
+        t_s = float(frames.timestamp_s[row])
+        detail = watch.heard(data, t_s)
+        if detail is not None:
+            events.append({"kind": "two senders", "t_s": t_s, "detail": detail})
+    return events
