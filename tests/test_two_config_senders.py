@@ -34,14 +34,18 @@ from __future__ import annotations
 
 import json
 import math
+import uuid
+from pathlib import Path
 from typing import Any
 
 import can
 import pytest
 
 from odocan.firmware import frames as fr
+from odocan.host.cli.app import main
 from odocan.host.mqtt.bridge import _Robot
 from odocan.host.protocol.commands import CommandEncoder
+from odocan.sim.rig import LockstepRig, RigConfig
 from tests.bridge_pair import KOBUKI, bridged_robot
 from tests.test_bridge_config_nack import _dead_reckoned_with
 from tests.test_bridge_foreign_config import PERIODS, WIDER, _events, _Watched, _wrongs
@@ -156,3 +160,59 @@ def test_interleaved_staging_one_tool_s_apply_commits_the_other_s_parameters(
     _runs_wheelbase(board, runs_m)  # the later writes, committed by the first APPLY
     _said(bridge, board, "interleaved COUNTER sequences")
     _judges_agree(bridge, board, runs_m)
+
+
+# --- analyze: a recorded drive, two tools' configs interleaved on the bus ---
+ANALYZE_CONFIG = {k: v for k, v in OTHER.items() if k != "id"}
+
+
+def _recorded(path: Path, two_tools: bool) -> None:
+    """4 s of kobuki in the lockstep rig; at 1 s a config (wheelbase 0.25 m) from one tool,
+    and with ``two_tools`` the same from a second one (its own COUNTERs, from 0 too) whose
+    frames each follow the first's: identical frames, but the wheelbase at 0.27 m: the
+    firmware drops that one (REPEATED); candump written from every frame on the bus."""
+    messages: list[can.Message] = []
+
+    class Keep(can.Listener):
+        def on_message_received(self, msg: can.Message) -> None:
+            messages.append(msg)
+
+    config = RigConfig(robot=KOBUKI, seed=3, channel=f"test-two-senders-{uuid.uuid4().hex}",
+                       duration_s=60.0)
+    rig = LockstepRig(config, [Keep()])
+    try:
+        rig.run(1.0)
+        first = CommandEncoder().build("config", ANALYZE_CONFIG).frames
+        second = CommandEncoder().build("config", {**ANALYZE_CONFIG, "wheelbase_m": 0.27}).frames
+        for a, b in zip(first, second, strict=True):
+            rig.send(a.can_id, a.data)
+            if two_tools:
+                rig.send(b.can_id, b.data)
+        rig.run(3.0)
+    finally:
+        rig.close()
+    path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
+                            f"{bytes(m.data).hex().upper()}\n" for m in messages))
+
+
+@pytest.mark.parametrize("stream", ["never", "always"])
+def test_analyze_reports_two_senders_and_passes_the_correct_firmware(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], stream: str,
+) -> None:
+    for two_tools in (True, False):
+        log, report = tmp_path / f"{two_tools}.log", tmp_path / f"{two_tools}.json"
+        _recorded(log, two_tools)
+        assert main(["analyze", str(log), "--robot", "kobuki", "--stream", stream,
+                     "--report", str(report)]) == 0  # PASS: the firmware is right
+        said = json.loads(report.read_text())
+        configs = [e["detail"] for e in said["events"] if e["kind"] == "config"]
+        assert len(configs) == 1
+        assert "wheelbase 0.25 m" in configs[0]  # the first tool's: the 0.27 m frame dropped
+        senders = [e["detail"] for e in said["events"] if e["kind"] == "two senders"]
+        if two_tools:
+            assert senders == ["two senders on ODOM_CONFIG: COUNTER 3 repeated with other "
+                               "content: the firmware drops the second frame unanswered (E2E "
+                               "REPEATED; or one sender restarted its COUNTER)"]
+        else:
+            assert senders == []
+    capsys.readouterr()
