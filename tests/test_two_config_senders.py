@@ -47,8 +47,8 @@ from odocan.host.mqtt.bridge import _Robot
 from odocan.host.protocol.commands import CommandEncoder
 from odocan.sim.rig import LockstepRig, RigConfig
 from tests.bridge_pair import KOBUKI, bridged_robot
-from tests.test_bridge_config_nack import _dead_reckoned_with
-from tests.test_bridge_foreign_config import PERIODS, WIDER, _events, _Watched, _wrongs
+from tests.test_bridge_config_nack import WIDER, _dead_reckoned_with
+from tests.test_bridge_foreign_config import PERIODS, _events, _Watched, _wrongs
 
 OTHER = {**WIDER, "id": "script"}  # wheelbase 0.25 m: the other tool's
 MINE = {**WIDER, "id": "c1", "wheelbase_m": 0.27}  # the bridge's

@@ -16,8 +16,10 @@ of which one sender can make (a sender's COUNTER only goes up, +1 a frame, mod 1
   sender repeats a COUNTER only in a duplicate of the same frame, or after 16 frames lost in a
   row, or when it restarted: the reason says so);
 * **interleaved sequences**: a frame continuing (+1) one of the ``RECENT`` frames before the
-  previous one, but not the previous one (one sender would have lost at least 15 frames
-  between them, within ``RECENT`` frames heard).
+  previous one, but not the previous one, twice within ``LAP_FRAMES`` frames heard (one
+  sender makes it once when its COUNTER laps: 17 - m frames lost over the m gaps between the
+  two, at least 12 within ``RECENT`` + 1 frames; twice, only when it laps twice so; two
+  tools' configs interleaved make it at nearly every frame).
 
 The bridge, which does not hear its own frames back, tells it differently
 (``host.mqtt.livecommands``: another tool's frame heard while its own command is in flight).
@@ -38,8 +40,10 @@ from odocan.host.protocol.e2e_crc import crc8h2f_p02_one
 COUNTER_MASK: Final = 0x0F  # the E2E Profile 2 COUNTER (byte 1, low nibble)
 RECENT: Final = 4  # frames looked back on for an interleaved sequence
 HOLD_S: Final = 1.0  # one event while the signature keeps coming, at most one a second
+LAP_FRAMES: Final = 16  # two interleaving signatures within this many frames are told
 FRAME_BYTES: Final = 8  # a Profile 2 frame
 NOT_A_STANDARD_DATA_FRAME: Final = FLAG_EXTENDED | FLAG_REMOTE | FLAG_ERROR
+INTERLEAVED: Final = "interleaved COUNTER sequences"
 
 
 class SenderWatch:
@@ -50,6 +54,8 @@ class SenderWatch:
         self.name = name
         self.count = 0  # frames showing a second sender
         self._recent: deque[bytes] = deque(maxlen=RECENT + 1)  # the latest frames, oldest first
+        self._heard = 0  # frames heard
+        self._interleaved_at = -LAP_FRAMES  # the frame number of the latest interleaving one
         self._said_s = -HOLD_S
 
     def heard(self, data: bytes, t_s: float) -> str | None:
@@ -57,9 +63,14 @@ class SenderWatch:
         it shows a second sender and none was said in the last ``HOLD_S``, else None."""
         why = self._signature(bytes(data))
         self._recent.append(bytes(data))
+        self._heard += 1
         if why is None:
             return None
         self.count += 1
+        if why.startswith(INTERLEAVED):
+            first, self._interleaved_at = self._interleaved_at, self._heard
+            if self._heard - first > LAP_FRAMES:
+                return None  # once: one sender whose COUNTER lapped (module docstring)
         if t_s - self._said_s < HOLD_S:
             return None
         self._said_s = t_s
@@ -81,8 +92,8 @@ class SenderWatch:
         earlier = [f[1] & COUNTER_MASK for f in list(self._recent)[:-1]]
         if any(counter == (c + 1) & COUNTER_MASK for c in earlier):
             sequence = ", ".join(str(c) for c in [*earlier, before, counter])
-            return (f"interleaved COUNTER sequences ({sequence}): their staged writes mix in "
-                    "one staged set, and each APPLY commits the other's")
+            return (f"{INTERLEAVED} ({sequence}): their staged writes mix in one staged set, "
+                    "and each APPLY commits the other's")
         return None
 
 
