@@ -36,7 +36,7 @@ import json
 import math
 import uuid
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import can
 import pytest
@@ -45,6 +45,9 @@ from odocan.firmware import frames as fr
 from odocan.host.cli.app import main
 from odocan.host.mqtt.bridge import _Robot
 from odocan.host.protocol.commands import CommandEncoder
+from odocan.host.protocol.heard import Recorder
+from odocan.host.protocol.session import CommandNotAcked, CommandSession
+from odocan.sim.contract import database
 from odocan.sim.rig import LockstepRig, RigConfig
 from tests.bridge_pair import KOBUKI, bridged_robot
 from tests.test_bridge_config_nack import WIDER, _dead_reckoned_with
@@ -216,3 +219,75 @@ def test_analyze_reports_two_senders_and_passes_the_correct_firmware(
         else:
             assert senders == []
     capsys.readouterr()
+
+
+# --- a CommandSession (the pytest kit, the experiments) as the second tool ---
+def _session_drive(other_first: bool | None) -> tuple[dict[str, Any] | str, list[float]]:
+    """2 s of kobuki in the lockstep rig; at 1 s a ``CommandSession`` configures wheelbase
+    0.27 m while (``other_first`` not None) another tool's config (0.25 m, its COUNTERs from
+    0 too) interleaves frame for frame, its frames first or second. Returns the session's
+    answer (the ACK, or ``CommandNotAcked``'s reason) and the wheelbases of the frames the
+    firmware took (``_acked_wheelbases``)."""
+    heard = Recorder(database())
+    config = RigConfig(robot=KOBUKI, seed=3, channel=f"test-two-senders-{uuid.uuid4().hex}",
+                       duration_s=60.0)
+    rig = LockstepRig(config, [heard])
+    other = list(CommandEncoder().build("config", ANALYZE_CONFIG).frames)
+    sent: list[tuple[int, bytes]] = []
+
+    def send(can_id: int, data: bytes) -> None:
+        pair = [(can_id, data)]
+        if other_first is not None and can_id == fr.ODOM_CONFIG_ID and other:
+            theirs = other.pop(0)
+            pair = [(theirs.can_id, theirs.data), *pair] if other_first else [
+                *pair, (theirs.can_id, theirs.data)]
+        for frame in pair:
+            sent.append(frame)
+            rig.send(*frame)
+
+    try:
+        rig.run(1.0)
+        session = CommandSession(heard, send, rig.run_until, ack_timeout_s=0.5)
+        try:
+            answer: dict[str, Any] | str = session.configure(
+                **{**ANALYZE_CONFIG, "wheelbase_m": 0.27})  # type: ignore[arg-type]
+        except CommandNotAcked as exc:
+            answer = exc.reason
+        rig.run(0.5)
+    finally:
+        rig.close()
+    return answer, _acked_wheelbases(heard, sent)
+
+
+def _acked_wheelbases(heard: Recorder, sent: list[tuple[int, bytes]]) -> list[float]:
+    """cantools: the WHEELBASE of each ODOM_CONFIG frame sent whose ODOM_ACK the firmware
+    gave (the firmware answers in bus order: the k-th ACK of a COUNTER, the k-th frame of it
+    it took, the first of two in a row of one COUNTER)."""
+    db = database()
+    taken: list[dict[str, Any]] = []
+    last = None
+    for can_id, data in sent:
+        if can_id != fr.ODOM_CONFIG_ID:
+            continue
+        s = cast(dict[str, Any], db.decode_message(can_id, data, decode_choices=False))
+        if last is None or s["COUNTER"] != last:  # E2E: a repeat of the last COUNTER dropped
+            taken.append(s)
+        last = s["COUNTER"]
+    acked = sum(1 for a in heard.decoded("ODOM_ACK") if a["REQUEST_ID"] == "ODOM_CONFIG")
+    assert acked == len(taken)
+    return [float(s["WHEELBASE"]) for s in taken if "WHEELBASE" in s]
+
+
+def test_a_session_alone_is_acked() -> None:
+    answer, wheelbases = _session_drive(None)
+    assert isinstance(answer, dict)
+    assert answer["RESULT"] == "ACK"
+    assert wheelbases == [0.27]
+
+
+@pytest.mark.parametrize(("other_first", "taken_m"), [(True, 0.25), (False, 0.27)])
+def test_a_session_with_another_sender_is_never_acked(other_first: bool, taken_m: float) -> None:
+    answer, wheelbases = _session_drive(other_first)
+    assert wheelbases == [taken_m]  # the firmware took the first of each COUNTER's two frames
+    assert isinstance(answer, str)
+    assert answer.startswith("contested: another sender's ODOM_CONFIG frame (COUNTER ")

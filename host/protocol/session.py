@@ -9,7 +9,9 @@ Every host that drives a firmware over CAN (the experiments' ``NavSession``, the
   (``host.protocol.secoc``; its freshness first learnt from ODOM_FRESHNESS);
 * **wait for its ODOM_ACK**: the answer to the committing frame (REQUEST_ID its message,
   REQUEST_COUNTER its E2E COUNTER); any NACK among the answers since it was sent, or none within
-  ``ack_timeout_s``, is a ``CommandNotAcked`` naming the reason;
+  ``ack_timeout_s``, is a ``CommandNotAcked`` naming the reason, and so is an ACK while
+  another sender's frames of the same message were heard (``host.protocol.othersenders``:
+  the ACK may be the other's);
 * **follow NAV_STATUS**: the states a goal went through since its ACK (``goal_states``), whether
   it ended (REACHED, STOPPED, ABORTED), and every change of (GOAL_ID, STATE) as it is heard
   (``status_changes``).
@@ -28,7 +30,9 @@ from typing import Any, Final
 
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.commands import Command, CommandEncoder
+from odocan.host.protocol.e2e import e2e_messages
 from odocan.host.protocol.heard import Recorder
+from odocan.host.protocol.othersenders import contested_reason, foreign_frame
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.sim.exceptions import OdocanError
 
@@ -106,6 +110,7 @@ class CommandSession:
         cmd = self.encoder.build(name, values)
         signer = self._synchronised_signer()
         seen = len(self.heard.decoded("ODOM_ACK"))
+        first = len(self.heard)  # frames heard before this command's
         for frame in cmd.frames:
             self.send(frame.can_id, frame.data)
             if signer is not None and signer.is_secured(frame.can_id):
@@ -118,7 +123,21 @@ class CommandSession:
         if nacks or final is None:
             why = f"NACK {nacks[0]['REASON']}" if nacks else "no ODOM_ACK"
             raise CommandNotAcked(name, values, why)
+        self._uncontested(cmd, first)
         return final
+
+    def _uncontested(self, cmd: Command, first: int) -> None:
+        """``CommandNotAcked`` (contested) when another sender's frame of ``cmd``'s message
+        was heard since frame ``first`` (``host.protocol.othersenders``): its ACK proves
+        nothing."""
+        can_id = cmd.frames[0].can_id
+        message = next((m for m in e2e_messages(self.heard.db).values() if m.key == can_id),
+                       None)
+        if message is None:
+            return
+        data = foreign_frame(self.heard.arrays(), first, message, [f.data for f in cmd.frames])
+        if data is not None:
+            raise CommandNotAcked(cmd.name, cmd.values, contested_reason(message.name, data))
 
     def set_pose(self, x_m: float, y_m: float, heading_rad: float) -> dict[str, Any]:
         """Overwrite the on-board pose (ODOM_SET_POSE); the ACK."""
