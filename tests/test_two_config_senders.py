@@ -7,8 +7,9 @@ other tool's first or the bridge's first. Both configs are kobuki's robot but fo
 wheelbase: 0.25 m the other tool's, 0.27 m the bridge's.
 
 * **Both from COUNTER 0**: every second frame repeats the COUNTER the firmware has just
-  accepted. The Profile 2 receiver drops it (E2E REPEATED) and answers nothing: the firmware
-  runs the first sender's config and never sees the second's (7 ODOM_ACKs for 14 frames).
+  accepted. The Profile 2 receiver drops it (E2E REPEATED): the firmware runs the first
+  sender's config and never sees the second's; it answers the one frame of the second unlike
+  the first's (WHEELBASE) NACK REPEATED (on main: nothing), the identical ones not at all.
 * **The other tool's COUNTERs 3 ahead** (it sent five configs before): all 14 frames are taken,
   each tool's staged writes go into one staged set, and the first APPLY commits the later
   writes, the other tool's: the firmware runs the wheelbase of the sender whose frames came
@@ -135,11 +136,13 @@ def _config_acks(board: _Interleaved) -> list[tuple[int, int]]:
 
 
 PARAMS_APPLY = [(f, 0) for f in (0, 1, 2, 3, 4, 5, 15)]  # six PARAMs and APPLY, ACKed
+# the same, and the second tool's WHEELBASE (its only frame unlike the first's) NACKed REPEATED
+REPEAT_ANSWERS = [*PARAMS_APPLY[:4], (3, 1), *PARAMS_APPLY[4:]]
 
 
 def test_the_other_tool_s_counters_first_the_bridge_s_config_dropped_unanswered() -> None:
     bridge, board = _drive("test-two-senders-repeat", 0, other_first=True)
-    assert _config_acks(board) == PARAMS_APPLY  # 7 answers to 14 frames
+    assert _config_acks(board) == REPEAT_ANSWERS  # 8 answers to 14 frames: duplicates none
     _runs_wheelbase(board, 0.25)  # the other tool's: the bridge's never taken
     _said(bridge, board, "COUNTER 3 repeated with other content")
     assert board.monitor.tracker.geometry.wheelbase_m == 0.25  # the bridge: see the docstring
@@ -148,7 +151,7 @@ def test_the_other_tool_s_counters_first_the_bridge_s_config_dropped_unanswered(
 
 def test_the_bridge_s_counters_first_the_other_tool_s_config_dropped_unanswered() -> None:
     bridge, board = _drive("test-two-senders-repeat-mine", 0, other_first=False)
-    assert _config_acks(board) == PARAMS_APPLY
+    assert _config_acks(board) == REPEAT_ANSWERS
     _runs_wheelbase(board, 0.27)
     _said(bridge, board, "COUNTER 3 repeated with other content")
     _judges_agree(bridge, board, 0.27)
@@ -260,21 +263,24 @@ def _session_drive(other_first: bool | None) -> tuple[dict[str, Any] | str, list
 
 
 def _acked_wheelbases(heard: Recorder, sent: list[tuple[int, bytes]]) -> list[float]:
-    """cantools: the WHEELBASE of each ODOM_CONFIG frame sent whose ODOM_ACK the firmware
-    gave (the firmware answers in bus order: the k-th ACK of a COUNTER, the k-th frame of it
-    it took, the first of two in a row of one COUNTER)."""
+    """cantools: the WHEELBASE of each ODOM_CONFIG frame sent that the firmware accepted (E2E:
+    of two frames in a row of one COUNTER, the first; the second NACKed REPEATED when its
+    bytes differ), checked against the ODOM_ACKs it gave."""
     db = database()
     taken: list[dict[str, Any]] = []
-    last = None
+    last: bytes | None = None
+    unlike = 0  # dropped frames unlike the one taken: NACK REPEATED
     for can_id, data in sent:
         if can_id != fr.ODOM_CONFIG_ID:
             continue
-        s = cast(dict[str, Any], db.decode_message(can_id, data, decode_choices=False))
-        if last is None or s["COUNTER"] != last:  # E2E: a repeat of the last COUNTER dropped
-            taken.append(s)
-        last = s["COUNTER"]
-    acked = sum(1 for a in heard.decoded("ODOM_ACK") if a["REQUEST_ID"] == "ODOM_CONFIG")
-    assert acked == len(taken)
+        if last is not None and data[1] & 0xF == last[1] & 0xF:
+            unlike += data != last
+            continue
+        taken.append(cast(dict[str, Any], db.decode_message(can_id, data, decode_choices=False)))
+        last = data
+    answers = [a["RESULT"] for a in heard.decoded("ODOM_ACK") if a["REQUEST_ID"] == "ODOM_CONFIG"]
+    assert answers.count("ACK") == len(taken)
+    assert answers.count("NACK") == unlike
     return [float(s["WHEELBASE"]) for s in taken if "WHEELBASE" in s]
 
 

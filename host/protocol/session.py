@@ -120,10 +120,10 @@ class CommandSession:
         final = self._answer(cmd, seen)
         if signer is not None and any(str(a["REASON"]).startswith("AUTH_") for a in nacks):
             signer.next_fv = None  # resynchronise from the next ODOM_FRESHNESS
+        self._uncontested(cmd, first)  # another sender: any answer may be the other's
         if nacks or final is None:
             why = f"NACK {nacks[0]['REASON']}" if nacks else "no ODOM_ACK"
             raise CommandNotAcked(name, values, why)
-        self._uncontested(cmd, first)
         return final
 
     def _uncontested(self, cmd: Command, first: int) -> None:
