@@ -24,6 +24,7 @@ rig steps simulated time, a real bus sleeps), so the session works the same in b
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Final
@@ -39,6 +40,7 @@ from odocan.sim.exceptions import OdocanError
 Send = Callable[[int, bytes], None]  # send a frame as the HOST: CAN ID, data
 Wait = Callable[[Callable[[], bool], float], bool]  # let time pass until done() or timeout_s
 ENDED: Final = frozenset({"REACHED", "STOPPED", "ABORTED"})  # NAV_STATUS states that end a goal
+OWN_FRAMES: Final = 64  # the frames a session remembers sending (told from another sender's)
 # the firmware sends ODOM_FRESHNESS every GenMsgCycleTime (1 s): half a cycle more
 FRESHNESS_WAIT_S: Final = 1.5 * busfacts.FRESHNESS_CYCLE_MS / busfacts.MS_PER_S
 
@@ -100,6 +102,7 @@ class CommandSession:
         self.goal_acked_at: dict[int, float] = {}  # goal id -> its ACK's timestamp_s
         self._status_seen = 0  # NAV_STATUS frames taken by status_changes
         self._previous: tuple[int, str] | None = None
+        self._own: deque[bytes] = deque(maxlen=OWN_FRAMES)  # the latest frames it sent
 
     # --- commands ---------------------------------------------------------------------------
 
@@ -112,6 +115,7 @@ class CommandSession:
         seen = len(self.heard.decoded("ODOM_ACK"))
         first = len(self.heard)  # frames heard before this command's
         for frame in cmd.frames:
+            self._own.append(frame.data)
             self.send(frame.can_id, frame.data)
             if signer is not None and signer.is_secured(frame.can_id):
                 self.send(signer.auth_frame_id, signer.sign(frame.can_id, frame.data))
@@ -129,13 +133,13 @@ class CommandSession:
     def _uncontested(self, cmd: Command, first: int) -> None:
         """``CommandNotAcked`` (contested) when another sender's frame of ``cmd``'s message
         was heard since frame ``first`` (``host.protocol.othersenders``): its ACK proves
-        nothing."""
+        nothing. A frame this session sent (an earlier command's, heard late) is its own."""
         can_id = cmd.frames[0].can_id
         message = next((m for m in e2e_messages(self.heard.db).values() if m.key == can_id),
                        None)
         if message is None:
             return
-        data = foreign_frame(self.heard.arrays(), first, message, [f.data for f in cmd.frames])
+        data = foreign_frame(self.heard.arrays(), first, message, self._own)
         if data is not None:
             raise CommandNotAcked(cmd.name, cmd.values, contested_reason(message.name, data))
 
