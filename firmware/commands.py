@@ -20,10 +20,11 @@ from odocan.firmware.config import (
     profile_crc32,
     validate_at_speed,
 )
-from odocan.firmware.e2e import E2EReceiver
+from odocan.firmware.e2e import E2EReceiver, E2EStatus
 from odocan.firmware.errors import ErrorFlag, State
 from odocan.firmware.fixmath import U64_MAX
 from odocan.firmware.nav import q40_from_100um
+from odocan.firmware.reception import FRAME_BYTES
 from odocan.firmware.secoc import AuthRequest
 
 if TYPE_CHECKING:
@@ -52,6 +53,7 @@ class Commands:
         self.rx_nav_goal = E2EReceiver(fr.NAV_GOAL_DATA_IDS, max_delta_counter_init=15)
         self._staged_pose: dict[int, int] = {}
         self._staged_config: dict[int, int] = {}
+        self._config_taken = bytes(FRAME_BYTES)  # the last ODOM_CONFIG frame accepted (u8[8])
 
     # --- received frames: E2E, then held for SecOC or acted on ---
 
@@ -64,12 +66,20 @@ class Commands:
             self.act_set_pose(data)
 
     def on_config(self, data: bytes) -> None:
-        """One ODOM_CONFIG frame from the mailbox."""
+        """One ODOM_CONFIG frame from the mailbox. A frame the E2E check refuses as REPEATED
+        with other content than the last one accepted (two senders on ODOM_CONFIG, each with
+        its own COUNTER, or one that restarted its COUNTER) is NACKed REPEATED: dropped,
+        nothing staged, but its sender is told; a duplicate of the accepted one (CAN's double
+        reception) stays unanswered: it was answered once."""
         ecu = self._ecu
-        if ecu.reception.usable(self.rx_config, data) and not ecu.auth.held_for_auth(
-            AuthRequest.ODOM_CONFIG, data
-        ):
-            self.act_config(data)
+        if ecu.reception.usable(self.rx_config, data):
+            self._config_taken = data  # C: memcpy of the 8 bytes
+            if not ecu.auth.held_for_auth(AuthRequest.ODOM_CONFIG, data):
+                self.act_config(data)
+        elif len(data) == FRAME_BYTES and self.rx_config.status is E2EStatus.REPEATED \
+                and data != self._config_taken:
+            frame = fr.unpack_odom_config(data)
+            self.ack(fr.ODOM_CONFIG_ID, frame, fr.AckResult.NACK, fr.AckReason.REPEATED)
 
     def on_nav_goal(self, data: bytes) -> None:
         """One NAV_GOAL frame from the mailbox."""

@@ -131,6 +131,7 @@ class AckReason(IntEnum):
     AUTH_FRESHNESS = 8  # SecOC: freshness not above the last accepted, or beyond the window
     AUTH_MISSING = 9  # SecOC: no ODOM_AUTH within 20 ms, or displaced by the next frame
     AUTH_UNAVAILABLE = 10  # SecOC: no usable key, NVM write failed or EPOCH exhausted
+    REPEATED = 11  # ODOM_CONFIG: the last accepted COUNTER again, other content (two senders)
 
 
 class StatusPage(IntEnum):
@@ -413,7 +414,7 @@ def pack_odom_ack(
         | (sat_range(request_id, 0, CAN_ID_MAX, errors) << 16)
         | ((request_field & U4_MAX) << 32)
         | (sat_range(result, AckResult.ACK, AckResult.NACK, errors) << 36)
-        | (sat_range(reason, AckReason.OK, AckReason.AUTH_UNAVAILABLE, errors) << 40)
+        | (sat_range(reason, AckReason.OK, AckReason.REPEATED, errors) << 40)
     )
     return seal_frame(word, ODOM_ACK_DATA_IDS)
 

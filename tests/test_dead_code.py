@@ -28,6 +28,7 @@ JUSTIFIED: dict[str, str] = {
     "firmware/frames.py:AUTH_FAILED": _ACK,
     "firmware/frames.py:AUTH_FRESHNESS": _ACK,
     "firmware/frames.py:AUTH_MISSING": _ACK,
+    "firmware/frames.py:AUTH_UNAVAILABLE": _ACK,
     "firmware/e2e.py:lost_data": "AUTOSAR E2E_P02 receiver state (LostData), kept as the spec "
     "names it and as e2e.c keeps it",
     "firmware/e2e.py:CRC8H2F_CHECK": "the CRC's AUTOSAR check value, next to the CRC it checks",

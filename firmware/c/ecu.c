@@ -1026,10 +1026,20 @@ static void act_set_pose(struct odom_ecu *ecu, const uint8_t *data)
     ack(ecu, ODOM_SET_POSE_ID, &frame, ACK_RESULT_ACK, ACK_OK);
 }
 
+/* A REPEATED frame with other content than the last accepted one: NACK REPEATED (commands.py
+ * on_config); a duplicate of it stays unanswered. */
 static void on_config(struct odom_ecu *ecu, const uint8_t *data, size_t len)
 {
-    if (e2e(ecu, &ecu->rx_config, data, len) && !secured(ecu, AUTH_REQ_ODOM_CONFIG, data)) {
-        act_config(ecu, data);
+    if (e2e(ecu, &ecu->rx_config, data, len)) {
+        memcpy(ecu->config_taken, data, 8u);
+        if (!secured(ecu, AUTH_REQ_ODOM_CONFIG, data)) {
+            act_config(ecu, data);
+        }
+    } else if (len == 8u && ecu->rx_config.status == E2E_REPEATED &&
+               memcmp(ecu->config_taken, data, 8u) != 0) {
+        struct mux_record frame;
+        unpack_odom_config(data, &frame);
+        ack(ecu, ODOM_CONFIG_ID, &frame, ACK_RESULT_NACK, ACK_REPEATED);
     }
 }
 

@@ -63,6 +63,7 @@ struct odom_ecu {
     struct e2e_receiver rx_encoders;
     struct e2e_receiver rx_set_pose;
     struct e2e_receiver rx_config;
+    uint8_t config_taken[8]; /* the last ODOM_CONFIG frame accepted (commands.py _config_taken) */
     struct e2e_receiver rx_nav_goal;
     struct navigator nav;
     bool motor_cmd_due;

@@ -203,7 +203,7 @@ void pack_odom_ack(uint8_t out[8], uint8_t counter, uint8_t request_counter, int
     m.request_id = (uint16_t)sat_range(request_id, 0, CAN_ID_MAX, errors);
     m.request_field = (uint8_t)(request_field & 0x0Fu);
     m.result = (uint8_t)sat_range(result, ACK_RESULT_ACK, ACK_RESULT_NACK, errors);
-    m.reason = (uint8_t)sat_range(reason, 0, ACK_AUTH_UNAVAILABLE, errors);
+    m.reason = (uint8_t)sat_range(reason, 0, ACK_REPEATED, errors);
     (void)odocan_odom_ack_pack(out, &m, 8u);
     seal(out, ODOM_ACK_E2E_SLOT);
 }

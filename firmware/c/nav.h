@@ -44,7 +44,9 @@ enum ack_reason { ACK_OK = 0, ACK_OUT_OF_RANGE = 1, ACK_UNKNOWN_FIELD = 2, ACK_I
                   ACK_BUSY = 4, ACK_INCONSISTENT = 5, ACK_QUEUE_FULL = 6,
                   /* SecOC verdicts (firmware/secoc.py AuthStatus) */
                   ACK_AUTH_FAILED = 7, ACK_AUTH_FRESHNESS = 8, ACK_AUTH_MISSING = 9,
-                  ACK_AUTH_UNAVAILABLE = 10 };
+                  ACK_AUTH_UNAVAILABLE = 10,
+                  /* ODOM_CONFIG: the last accepted COUNTER again, other content (commands.py) */
+                  ACK_REPEATED = 11 };
 
 /* One NAV_GOAL frame's raw integers (the unpacker's record). */
 struct nav_goal_frame {

@@ -137,13 +137,19 @@ def _follow(steps: list[tuple[int, str, int]], commands: dict[str, np.ndarray],
             follower.forget()
             apply_at = -1
         else:
-            staged = follower.on_ack(int(acks["REQUEST_COUNTER"][k]), int(acks["RESULT"][k]) == 0)
+            staged = follower.on_ack(int(acks["REQUEST_COUNTER"][k]), int(acks["RESULT"][k]) == 0,
+                                     request_field=_field(acks, k))
             if staged is not None and apply_at >= 0:
                 bits = int(staged.get("COUNTER_BITS", counter_bits))
                 cuts.append(ConfigCut(_life_start(encoders, apply_at, bits != counter_bits),
                                       apply_at, float(acks["timestamp_s"][k]), staged))
                 counter_bits = bits
     return cuts
+
+
+def _field(acks: dict[str, np.ndarray], k: int) -> int | None:
+    """The REQUEST_FIELD of ODOM_ACK row ``k`` (None: a DBC without it)."""
+    return int(acks["REQUEST_FIELD"][k]) if "REQUEST_FIELD" in acks else None
 
 
 def _life_start(encoders: npt.NDArray[np.intp], apply_at: int, reprimes: bool) -> int:

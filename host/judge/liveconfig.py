@@ -33,6 +33,9 @@ if TYPE_CHECKING:
 PARAMS = ("COUNTS_PER_REV", "WHEEL_RADIUS_LEFT", "WHEEL_RADIUS_RIGHT", "WHEELBASE", "COUNTER_BITS",
           "INTEGRATOR", "MAX_WHEEL_SPEED")  # ODOM_CONFIG's staged PARAMs (names in the DBC)
 INTEGRATORS = ("euler", "rk2", "exact")  # INTEGRATOR's raw values 0, 1, 2
+APPLY_FIELD = 15  # ODOM_CONFIG PARAM / ODOM_ACK REQUEST_FIELD of APPLY (the DBC's VAL_)
+MAX_WAITING = 4  # frames of one COUNTER kept unanswered (two tools: two in flight)
+COUNTER_LAP = 16  # frames of one sender before its 4-bit E2E COUNTER comes round
 SAME_TICK_S = 0.005  # half the firmware's 10 ms tick: the ODOM_ACKs a new firmware sends in its
 # first tick come before its boot summary, less than this before it; the old life's last ACK
 # came a tick or more before (its last tick, then the reset and the boot)
@@ -41,11 +44,16 @@ SAME_TICK_S = 0.005  # half the firmware's 10 ms tick: the ODOM_ACKs a new firmw
 class ConfigFollower:
     """The staged parameters and the pending APPLY of ODOM_CONFIG as the bus shows them."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, bus_order: bool = True) -> None:
+        # ``bus_order``: the frames come in the order the firmware takes them (the monitor's,
+        # analyze's); False for the bridge, which follows its own frames when it sends them
+        self.bus_order = bus_order
         self.staged: dict[str, float] = {}  # PARAM: value (m, m/s, counts, raw enum), as ACKed
         self._staged_s: dict[str, float] = {}  # PARAM: bus time of its ACK (s)
-        self._sent: dict[int, tuple[str, float]] = {}  # by E2E COUNTER: PARAM, value heard
-        self._applies: set[int] = set()  # the COUNTERs of the APPLY frames not answered yet
+        # by E2E COUNTER: the frames heard and not answered yet, oldest first: (PARAM, value,
+        # None for APPLY or a parameter without one; the frame's number among those heard)
+        self._sent: dict[int, list[tuple[str, float | None, int]]] = {}
+        self._heard = 0  # ODOM_CONFIG frames heard
         self.built: Built | None = None  # the robot before the first config applied this life
         self.applied_s = -math.inf  # bus time of the latest APPLY ACKed (s)
 
@@ -55,38 +63,68 @@ class ConfigFollower:
         ACKed from this bus time on (s) are the new firmware's, kept with the frames not
         answered yet (default: none, everything forgotten)."""
         if since_s == math.inf:
-            self._sent, self._applies = {}, set()
+            self._sent = {}
         kept = {p for p, t_s in self._staged_s.items() if t_s >= since_s}
         self.staged = {p: v for p, v in self.staged.items() if p in kept}
         self._staged_s = {p: t_s for p, t_s in self._staged_s.items() if p in kept}
 
     def on_frame(self, counter: int, param: str, value: Any) -> None:
         """An ODOM_CONFIG frame heard (its E2E COUNTER, PARAM name, the value in DBC units)."""
-        self._sent.pop(counter, None)  # the latest frame of a COUNTER is the one its ACK answers
-        self._applies.discard(counter)
-        if param == "APPLY":
-            self._applies.add(counter)  # several: two configs back to back, each APPLY its ACK
-        elif param in PARAMS and value is not None:
-            self._sent[counter] = (param, float(value))
+        number = None if param not in PARAMS or value is None else float(value)
+        self._heard += 1
+        waiting = self._sent.setdefault(counter, [])
+        # one sender's COUNTER comes round in 16 frames: a frame of it that far back was never
+        # answered (the rule before: the latest of a COUNTER); two tools' are in flight at once
+        waiting[:] = [w for w in waiting if self._heard - w[2] < COUNTER_LAP][-MAX_WAITING:]
+        waiting.append((param, number, self._heard))
 
-    def on_ack(self, request_counter: int, acked: bool, t_s: float = -math.inf
-               ) -> dict[str, float] | None:
-        """ODOM_ACK of an ODOM_CONFIG frame (heard at bus time ``t_s``, s): a parameter ACKed
-        is staged; the APPLY's ACK returns the staged set (None when NACKed) and clears it, as
-        the firmware does."""
-        sent = self._sent.pop(request_counter, None)
-        if sent is not None:
-            if acked:
-                self.staged[sent[0]] = sent[1]
-                self._staged_s[sent[0]] = t_s
+    def on_ack(self, request_counter: int, acked: bool, t_s: float = -math.inf,
+               request_field: int | None = None) -> dict[str, float] | None:
+        """ODOM_ACK of an ODOM_CONFIG frame (heard at bus time ``t_s``, s; its REQUEST_FIELD,
+        None: unknown): a parameter ACKed is staged; the APPLY's ACK returns the staged set
+        (None when NACKed) and clears it, as the firmware does. The frame it answers: the
+        oldest of its COUNTER not answered yet whose PARAM is the REQUEST_FIELD (the firmware
+        answers in bus order; those of the COUNTER before it were never answered). Two tools
+        on ODOM_CONFIG (``host.judge.twosenders``) put two frames of one COUNTER in flight:
+        the latest of a COUNTER (the rule before) took a frame the ACK did not answer, and the
+        monitor FAILed a correct firmware with the other tool's wheelbase."""
+        frame = self._answered(request_counter, request_field)
+        if frame is None:
             return None
-        if request_counter not in self._applies:
+        param, value, _ = frame
+        if param != "APPLY":
+            if acked and param in PARAMS and value is not None:
+                self.staged[param] = value
+                self._staged_s[param] = t_s
             return None
-        self._applies.discard(request_counter)
         staged, self.staged, self._staged_s = self.staged, {}, {}
         if acked:
             self.applied_s = t_s
         return staged if acked else None
+
+    def _answered(self, counter: int, field: int | None
+                  ) -> tuple[str, float | None, int] | None:
+        """The frame an ODOM_ACK of ``counter`` and REQUEST_FIELD ``field`` answers, taken out
+        with those of its COUNTER heard before it when the frames come in ``bus_order``
+        (``on_ack``; else it alone); None when none waits."""
+        waiting = self._sent.get(counter, [])
+        name = None if field is None else field_name(field)
+        at = next((k for k, w in enumerate(waiting) if name in (None, w[0])), None)
+        if at is None:
+            return None
+        frame = waiting[at]
+        if self.bus_order:
+            del waiting[:at + 1]
+        else:
+            del waiting[at]
+        return frame
+
+
+def field_name(field: int) -> str:
+    """ODOM_ACK REQUEST_FIELD of an ODOM_CONFIG frame -> its PARAM name (the DBC's VAL_)."""
+    if field == APPLY_FIELD:
+        return "APPLY"
+    return PARAMS[field] if 0 <= field < len(PARAMS) else str(field)
 
 
 Built = tuple[Geometry, int, int, str | None]  # geometry, its counter width (the tracker's,
@@ -103,12 +141,12 @@ class Judges(Protocol):
 
 
 def follow_config_ack(judges: Judges, follower: ConfigFollower, request_counter: int,
-                      acked: bool, t_s: float) -> bool:
+                      acked: bool, t_s: float, request_field: int | None = None) -> bool:
     """ODOM_ACK of an ODOM_CONFIG frame (its REQUEST_COUNTER; ``acked``: RESULT 0) heard at
     bus time ``t_s`` (s): an ACKed APPLY makes the staged set ``judges``' robot (reference,
     DISTANCE and speed judges, from here as a new life) and a ``config`` event. Returns
     whether a config was applied."""
-    config = follower.on_ack(request_counter, acked, t_s)
+    config = follower.on_ack(request_counter, acked, t_s, request_field)
     if config is None:
         return False
     tracker = judges.tracker

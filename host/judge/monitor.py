@@ -82,6 +82,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatch
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.judge.twosenders import SenderWatch
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import UNKNOWN, e2e_messages
 from odocan.host.protocol.e2e_held import HELD
@@ -132,6 +133,7 @@ class BusMonitor:
         self.config = ConfigFollower()  # ODOM_CONFIG likewise
         self._config_id = next((m.frame_id for m in self.db.messages
                                 if m.name == "ODOM_CONFIG"), -1)
+        self.config_senders = SenderWatch("ODOM_CONFIG")  # two tools on it (twosenders)
         self._set_pose_id = next((m.frame_id for m in self.db.messages
                                   if m.name == "ODOM_SET_POSE"), -1)  # -1: a DBC without it
         self.firmware_events: deque[dict[str, Any]] = deque(maxlen=4 * MAX_EVENTS)
@@ -190,12 +192,22 @@ class BusMonitor:
             stats = self.messages[message.name] = MessageStats(message.name, message.frame_id)
         stats.heard(timestamp_s, now_s, page_of(message, data))
         self.tracker.advance(timestamp_s)  # settles the pose halves heard half a cycle before
+        if message.frame_id == self._config_id and (status in ACCEPTED
+                                                    or status in CRC_RIGHT_REFUSED):
+            self._watch_senders(data, timestamp_s)
         if status in ACCEPTED:
             self._use(message, stats, data)
         elif status in CRC_RIGHT_REFUSED and message.name == "WHEEL_ENCODERS":
             refused_encoders(self.tracker.twins, message.decode(data, decode_choices=False),
                              timestamp_s, self.tracker.placer.fill)  # a twin, or a gap's frame
         self.kept.heard(self.tracker, self.tracker.take_samples())  # judged in vs_reference
+
+    def _watch_senders(self, data: bytes, t_s: float) -> None:
+        """A CRC-right ODOM_CONFIG frame: a second sender's signature is a ``two senders``
+        event (``host.judge.twosenders``)."""
+        detail = self.config_senders.heard(data, t_s)
+        if detail is not None:
+            self.events.append({"t_s": t_s, "kind": "two senders", "detail": detail})
 
     def _count_unknown_id(self, can_id: int) -> None:
         key = f"0x{can_id:03X}"
@@ -263,7 +275,8 @@ class BusMonitor:
                 self.events.append(self.kept.applied(event, *applied, self.tracker.enc_seq))
         elif int(s["REQUEST_ID"]) == self._config_id:
             follow_config_ack(self, self.config, int(s["REQUEST_COUNTER"]),  # the firmware's
-                              int(s["RESULT"]) == 0, self._bus_time_s)  # robot: the judges' too
+                              int(s["RESULT"]) == 0, self._bus_time_s,  # robot: the judges'
+                              int(s["REQUEST_FIELD"]))
         reason = str(shown.get("REASON", ""))
         if not reason.startswith("AUTH_"):
             return

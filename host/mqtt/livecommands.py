@@ -64,7 +64,11 @@ class CommandFollowing:
         self._set_pose_id = set_pose.frame_id if set_pose is not None else -1
         self._set_pose_fields: Any = set_pose.get_signal_by_name("FIELD").choices or {} \
             if set_pose is not None else {}
-        self.config = ConfigFollower()  # ODOM_CONFIG staged and applied (its ACKs)
+        # ODOM_CONFIG staged and applied (its ACKs); its own frames followed when sent, not
+        # in the bus's order among another tool's
+        self.config = ConfigFollower(bus_order=False)
+        self.contested: dict[Any, str] = {}  # cmd id: another tool's frame heard in its flight
+        self._own_frame = False  # the frame handled now is the bridge's own (``command_sent``)
         config = next((m for m in self.db.messages if m.name == "ODOM_CONFIG"), None)
         self._config_id = config.frame_id if config is not None else -1
         self._config_params: Any = config.get_signal_by_name("PARAM").choices or {} \
@@ -82,7 +86,24 @@ class CommandFollowing:
         ``command_sent``): staged and applied as the firmware ACKs it."""
         param = str(named_value(self._config_params, s["PARAM"]))
         self.config.on_frame(int(s["COUNTER"]), param, s.get(param))
+        if not self._own_frame:
+            self._foreign_config(int(s["COUNTER"]), param, t_s)
         return []
+
+    def _foreign_config(self, counter: int, param: str, t_s: float) -> None:
+        """Another tool's ODOM_CONFIG frame heard while the bridge's own config is in flight
+        (its frames sent, not all answered): two senders on ODOM_CONFIG (``host.judge.
+        twosenders``). The ODOM_ACKs name a frame by its COUNTER only, the firmware drops the
+        second of two frames of one COUNTER unanswered, and both tools' writes share one
+        staged set: the command is answered ``contested``, never ``acked`` (``_answered``),
+        and a ``two senders`` event says so."""
+        in_flight = {p.cmd_id: p.command for (can_id, _), p in self.pending.items()
+                     if can_id == self._config_id and p.cmd_id not in self.contested}
+        for cmd_id, command in in_flight.items():
+            detail = (f"two senders on ODOM_CONFIG: another tool's frame (COUNTER {counter}, "
+                      f"{param}) heard while this bridge's {command} {cmd_id!r} was in flight")
+            self.contested[cmd_id] = detail
+            self.events.append({"t_s": t_s, "kind": "two senders", "detail": detail})
 
     def _on_auth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         if int(s["REQUEST"]) == 1:  # ODOM_SET_POSE (the DBC's VAL_): the firmware acts now
@@ -93,8 +114,12 @@ class CommandFollowing:
         """A command frame the bridge itself sent (not heard back from its bus)."""
         route = self._routes.get(can_id)
         if route is not None and route.name in ("ODOM_SET_POSE", "ODOM_CONFIG", "ODOM_AUTH"):
-            with contextlib.suppress(DecodeError, KeyError, ValueError):
-                route.handler(self, route.decode(data), 0.0)
+            self._own_frame = True
+            try:
+                with contextlib.suppress(DecodeError, KeyError, ValueError):
+                    route.handler(self, route.decode(data), 0.0)
+            finally:
+                self._own_frame = False
 
     def _followed_set_pose(self, s: dict[str, Any], t_s: float) -> None:
         """ODOM_ACK of an ODOM_SET_POSE frame: an applied APPLY restarts the reference at
@@ -110,7 +135,8 @@ class CommandFollowing:
         if request_id == self._set_pose_id:
             self._followed_set_pose(s, t_s)
         elif request_id == self._config_id and follow_config_ack(
-                self, self.config, int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0, t_s):
+                self, self.config, int(s["REQUEST_COUNTER"]), int(s["RESULT"]) == 0, t_s,
+                int(s["REQUEST_FIELD"])):
             self.profile.forget()  # the firmware's next PROFILE page is judged against it
         return self._answered(s, t_s)
 
@@ -126,10 +152,23 @@ class CommandFollowing:
         if nack:  # forget the rest of this command: one answer per command
             self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
         reason = choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
+        result = "nacked" if nack else "acked"
+        contested = self.contested.pop(pending.cmd_id, None)
+        if contested is not None:
+            result, reason = "contested", contested_reason(contested, reason, nack)
         payload = {"id": pending.cmd_id, "command": pending.command,
-                   "result": "nacked" if nack else "acked", "reason": reason, "t_s": t_s}
+                   "result": result, "reason": reason, "t_s": t_s}
         return [(RESULT_LEAF, stamp(payload))]
 
     def expect_ack(self, can_id: int, counter: int, ack: PendingAck) -> None:
         """A command frame was sent: its ODOM_ACK will answer the command."""
         self.pending[(can_id, counter)] = ack
+
+
+def contested_reason(detail: str, reason: str, nack: bool) -> str:
+    """``cmd/result``'s reason of a ``contested`` command: why its answer proves nothing."""
+    heard = f"ODOM_ACK {'NACK' if nack else 'ACK'} {reason}"
+    return (f"{detail}: the firmware's {heard} for its last frame's COUNTER may answer the "
+            "other tool's frame (a second frame of one COUNTER is dropped unanswered), and "
+            "the staged set may mix both: not known to be applied as sent (the firmware's "
+            "PROFILE page tells what it runs)")

@@ -14,13 +14,15 @@ room for a tick's encoder frames and a stall's backlog), and fewer than 16 frame
 are ever un-answered: each COUNTER in flight is distinct. Commands beyond the window wait in a
 queue of ``max_queued`` commands; beyond that a command is refused (``rejected``, said why).
 Every command taken gets exactly one final answer: ``acked``/``nacked`` (the firmware's, from
-``RobotTelemetry``), ``expired`` (it waited in the queue longer than ``expiry_s``), ``rejected``
-(the bus refused a frame), ``timeout`` (no ODOM_ACK within ``ack_timeout_s`` of its last
-frame; its late ACK is then not taken) or ``aborted`` (the bridge stopped first: ``abort``, the
-reason says whether any of its frames went out). A NACKed command's frames not sent yet are not
-sent. ``counters`` (in ``rates`` and the bridge's report): commands waiting for the window
-(``commands_queued``), frames un-answered (``command_frames_in_flight``), and the totals
-refused (queue full), expired in the queue, timed out and aborted.
+``RobotTelemetry``; ``contested`` when another tool's frames of its message were heard in its
+flight: the ACK may be the other's), ``expired`` (it waited in the queue longer than
+``expiry_s``), ``rejected`` (the bus refused a frame), ``timeout`` (no ODOM_ACK within
+``ack_timeout_s`` of its last frame; its late ACK is then not taken) or ``aborted`` (the bridge
+stopped first: ``abort``, the reason says whether any of its frames went out). A NACKed
+command's frames not sent yet are not sent. ``counters`` (in ``rates`` and the bridge's report):
+commands waiting for the window (``commands_queued``), frames un-answered
+(``command_frames_in_flight``), and the totals refused (queue full), expired in the queue, timed
+out and aborted.
 """
 
 from __future__ import annotations
@@ -38,6 +40,9 @@ from odocan.host.protocol.commands import Command, CommandRejected, Frame
 WINDOW_FRAMES = 8  # command frames (and their ODOM_AUTHs) un-answered on the bus per robot
 ACK_TIMEOUT_S = 2.0  # the firmware answers within a tick: this long after the last frame
 MAX_QUEUED = 1024  # commands waiting per robot; beyond, refused
+# the telemetry's answers from the firmware's ODOM_ACK (``contested``: another tool's frames
+# heard in its flight, ``host.mqtt.livecommands``)
+FINAL_ANSWERS = ("acked", "nacked", "contested")
 
 # Puts one frame (and its ODOM_AUTH) on the bus: the mailbox slots it takes; CommandRejected
 SendFrame = Callable[[Command, Frame], int]
@@ -159,7 +164,7 @@ class CommandPacer:
         ``pending``); a final answer published for a command ends it."""
         pending = self._telemetry.pending
         answered_ids = [p.get("id") for leaf, p in published
-                        if leaf == topics.RESULT_LEAF and p.get("result") in ("acked", "nacked")]
+                        if leaf == topics.RESULT_LEAF and p.get("result") in FINAL_ANSWERS]
         for paced in self._sent():
             gone = [k for k, (ack, _) in paced.in_flight.items() if pending.get(k) is not ack]
             for key in gone:

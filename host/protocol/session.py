@@ -9,7 +9,9 @@ Every host that drives a firmware over CAN (the experiments' ``NavSession``, the
   (``host.protocol.secoc``; its freshness first learnt from ODOM_FRESHNESS);
 * **wait for its ODOM_ACK**: the answer to the committing frame (REQUEST_ID its message,
   REQUEST_COUNTER its E2E COUNTER); any NACK among the answers since it was sent, or none within
-  ``ack_timeout_s``, is a ``CommandNotAcked`` naming the reason;
+  ``ack_timeout_s``, is a ``CommandNotAcked`` naming the reason, and so is an ACK while
+  another sender's frames of the same message were heard (``host.protocol.othersenders``:
+  the ACK may be the other's);
 * **follow NAV_STATUS**: the states a goal went through since its ACK (``goal_states``), whether
   it ended (REACHED, STOPPED, ABORTED), and every change of (GOAL_ID, STATE) as it is heard
   (``status_changes``).
@@ -22,19 +24,23 @@ rig steps simulated time, a real bus sleeps), so the session works the same in b
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Final
 
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.commands import Command, CommandEncoder
+from odocan.host.protocol.e2e import e2e_messages
 from odocan.host.protocol.heard import Recorder
+from odocan.host.protocol.othersenders import contested_reason, foreign_frame
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.sim.exceptions import OdocanError
 
 Send = Callable[[int, bytes], None]  # send a frame as the HOST: CAN ID, data
 Wait = Callable[[Callable[[], bool], float], bool]  # let time pass until done() or timeout_s
 ENDED: Final = frozenset({"REACHED", "STOPPED", "ABORTED"})  # NAV_STATUS states that end a goal
+OWN_FRAMES: Final = 64  # the frames a session remembers sending (told from another sender's)
 # the firmware sends ODOM_FRESHNESS every GenMsgCycleTime (1 s): half a cycle more
 FRESHNESS_WAIT_S: Final = 1.5 * busfacts.FRESHNESS_CYCLE_MS / busfacts.MS_PER_S
 
@@ -96,6 +102,7 @@ class CommandSession:
         self.goal_acked_at: dict[int, float] = {}  # goal id -> its ACK's timestamp_s
         self._status_seen = 0  # NAV_STATUS frames taken by status_changes
         self._previous: tuple[int, str] | None = None
+        self._own: deque[bytes] = deque(maxlen=OWN_FRAMES)  # the latest frames it sent
 
     # --- commands ---------------------------------------------------------------------------
 
@@ -106,7 +113,9 @@ class CommandSession:
         cmd = self.encoder.build(name, values)
         signer = self._synchronised_signer()
         seen = len(self.heard.decoded("ODOM_ACK"))
+        first = len(self.heard)  # frames heard before this command's
         for frame in cmd.frames:
+            self._own.append(frame.data)
             self.send(frame.can_id, frame.data)
             if signer is not None and signer.is_secured(frame.can_id):
                 self.send(signer.auth_frame_id, signer.sign(frame.can_id, frame.data))
@@ -115,10 +124,24 @@ class CommandSession:
         final = self._answer(cmd, seen)
         if signer is not None and any(str(a["REASON"]).startswith("AUTH_") for a in nacks):
             signer.next_fv = None  # resynchronise from the next ODOM_FRESHNESS
+        self._uncontested(cmd, first)  # another sender: any answer may be the other's
         if nacks or final is None:
             why = f"NACK {nacks[0]['REASON']}" if nacks else "no ODOM_ACK"
             raise CommandNotAcked(name, values, why)
         return final
+
+    def _uncontested(self, cmd: Command, first: int) -> None:
+        """``CommandNotAcked`` (contested) when another sender's frame of ``cmd``'s message
+        was heard since frame ``first`` (``host.protocol.othersenders``): its ACK proves
+        nothing. A frame this session sent (an earlier command's, heard late) is its own."""
+        can_id = cmd.frames[0].can_id
+        message = next((m for m in e2e_messages(self.heard.db).values() if m.key == can_id),
+                       None)
+        if message is None:
+            return
+        data = foreign_frame(self.heard.arrays(), first, message, self._own)
+        if data is not None:
+            raise CommandNotAcked(cmd.name, cmd.values, contested_reason(message.name, data))
 
     def set_pose(self, x_m: float, y_m: float, heading_rad: float) -> dict[str, Any]:
         """Overwrite the on-board pose (ODOM_SET_POSE); the ACK."""

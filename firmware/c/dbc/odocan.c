@@ -1295,7 +1295,7 @@ bool odocan_odom_ack_result_is_in_range(uint8_t value)
 
 bool odocan_odom_ack_reason_is_in_range(uint8_t value)
 {
-    return (value <= 10u);
+    return (value <= 11u);
 }
 
 int odocan_odom_auth_pack(

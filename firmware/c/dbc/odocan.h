@@ -163,6 +163,7 @@ extern "C" {
 #define ODOCAN_ODOM_ACK_REASON_AUTH_FRESHNESS_CHOICE (8u)
 #define ODOCAN_ODOM_ACK_REASON_AUTH_MISSING_CHOICE (9u)
 #define ODOCAN_ODOM_ACK_REASON_AUTH_UNAVAILABLE_CHOICE (10u)
+#define ODOCAN_ODOM_ACK_REASON_REPEATED_CHOICE (11u)
 
 #define ODOCAN_ODOM_AUTH_REQUEST_NAV_GOAL_CHOICE (0u)
 #define ODOCAN_ODOM_AUTH_REQUEST_ODOM_SET_POSE_CHOICE (1u)
@@ -1003,9 +1004,9 @@ struct odocan_odom_ack_t {
     uint8_t result;
 
     /**
-     * u8 enum: why; OK with ACK. AUTH_* (7..10): the SecOC verdict on a secured command whose ODOM_AUTH failed, was stale, missing, or could not be checked (docs/secoc.md).
+     * u8 enum: why; OK with ACK. AUTH_* (7..10): the SecOC verdict on a secured command whose ODOM_AUTH failed, was stale, missing, or could not be checked (docs/secoc.md). REPEATED (11): an ODOM_CONFIG frame whose E2E COUNTER repeats the last one accepted, with other content (E2E REPEATED: dropped, nothing staged): two senders on ODOM_CONFIG, or one that restarted its COUNTER; a frame identical to the last accepted one (a duplicate) is dropped unanswered.
      *
-     * Range: 0..10 (0..10 -)
+     * Range: 0..11 (0..11 -)
      * Scale: 1
      * Offset: 0
      */
