@@ -192,15 +192,22 @@ class BusMonitor:
             stats = self.messages[message.name] = MessageStats(message.name, message.frame_id)
         stats.heard(timestamp_s, now_s, page_of(message, data))
         self.tracker.advance(timestamp_s)  # settles the pose halves heard half a cycle before
-        if message.frame_id == self._config_id and (status in ACCEPTED
-                                                    or status in CRC_RIGHT_REFUSED):
+        self._judge(message, stats, data, status, timestamp_s)
+        self.kept.heard(self.tracker, self.tracker.take_samples())  # judged in vs_reference
+
+    def _judge(self, message: Message, stats: MessageStats, data: bytes, status: str,
+               timestamp_s: float) -> None:
+        """A known frame of the right length by its E2E ``status``: an accepted one used, a
+        CRC-right refused encoder frame kept for the twins and gaps, ODOM_CONFIG watched for
+        a second sender."""
+        crc_right = status in ACCEPTED or status in CRC_RIGHT_REFUSED
+        if message.frame_id == self._config_id and crc_right:
             self._watch_senders(data, timestamp_s)
         if status in ACCEPTED:
             self._use(message, stats, data)
-        elif status in CRC_RIGHT_REFUSED and message.name == "WHEEL_ENCODERS":
+        elif crc_right and message.name == "WHEEL_ENCODERS":
             refused_encoders(self.tracker.twins, message.decode(data, decode_choices=False),
                              timestamp_s, self.tracker.placer.fill)  # a twin, or a gap's frame
-        self.kept.heard(self.tracker, self.tracker.take_samples())  # judged in vs_reference
 
     def _watch_senders(self, data: bytes, t_s: float) -> None:
         """A CRC-right ODOM_CONFIG frame: a second sender's signature is a ``two senders``
