@@ -76,6 +76,7 @@ from odocan.host.mqtt.liveplan import plans
 from odocan.host.mqtt.liveprofile import ProfileStatus
 from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.topics import stamp, status_payload
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
 from odocan.host.protocol.e2e import e2e_messages
 from odocan.host.protocol.e2e_live import E2EMonitor
 from odocan.sim.contract import database
@@ -235,7 +236,7 @@ class RobotTelemetry(CommandFollowing):
         heard_status(self.tracker, route.message, data, ids, t_s, route.signals)  # compiled
         summary = (boot_summary(route.message, data, ids, route.signals)
                    if route.is_summary(data) else None)
-        if summary is None or self.sources.observe(t_s, *summary, data[1] & 0xF) != "reboot":
+        if summary is None or self.sources.observe(t_s, *summary, data[1] & MASK) != "reboot":
             return
         self.reboots += 1
         lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM
