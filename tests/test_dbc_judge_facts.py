@@ -228,13 +228,14 @@ LAP_CONSTANTS = {
     "holechain.LAP_PERIODS": 0, "livepose.RING": 0, "livepose.RING_MASK": -1,
     "liveholdstep.COUNTER_MODULO": 0, "haltpath.COUNTER_MASK": -1,
 }
+HALF_LAPS = ("livewindow.HALF_LAP", "samples.HALF_LAP")  # a COUNTER step read as -lap/2..
 
 LAP_PROBE = """
 import json
 import sys
 import numpy as np
 from odocan.host.judge import gapfill, holechain, holepages, liveholdstep, livelaphold, liveplace
-from odocan.host.judge import livepose, resendalias, senderseq, step_periods
+from odocan.host.judge import livepose, livewindow, resendalias, samples, senderseq, step_periods
 from odocan.host.mqtt import haltpath
 from odocan.host.protocol import e2e, e2e_cycles, e2e_periods, e2e_retract, pose
 from odocan.host.protocol.dbcplan import default_plan
@@ -269,7 +270,7 @@ def _counter_bits(tmp_path: Path, bits: int) -> Path:
 def _lap_probe(tmp_path: Path, dbc: Path) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "ODOCAN_DBC": str(dbc), "ODOCAN_CACHE_DIR": str(tmp_path / "cache"),
            "PYTHONPATH": str(TREE)}
-    return subprocess.run([sys.executable, "-c", LAP_PROBE, *LAP_CONSTANTS], env=env,
+    return subprocess.run([sys.executable, "-c", LAP_PROBE, *LAP_CONSTANTS, *HALF_LAPS], env=env,
                           capture_output=True, text=True, check=False, timeout=120)
 
 
@@ -278,8 +279,9 @@ def test_counter_laps_follow_an_edited_dbc(tmp_path: Path) -> None:
         done = _lap_probe(tmp_path, dbc)
         assert done.returncode == 0, done.stderr
         found = json.loads(done.stdout)
-        assert {name: found[name] for name in LAP_CONSTANTS} == {
-            name: lap + less for name, less in LAP_CONSTANTS.items()}, dbc.name
+        assert {name: found[name] for name in (*LAP_CONSTANTS, *HALF_LAPS)} == {
+            **{name: lap + less for name, less in LAP_CONSTANTS.items()},
+            **dict.fromkeys(HALF_LAPS, lap // 2)}, dbc.name
         assert (found["data_ids"], found["wrap_step"], found["lap_step"]) == (lap, 1, lap)
 
 
