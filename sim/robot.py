@@ -260,7 +260,10 @@ def _check_values(table: dict[str, Any], source: str, speed_m_s: float) -> None:
 def _check_readable(table: dict[str, Any], source: str, speed_m_s: float) -> None:
     """The firmware's ``validate_at_speed``: at its maximum wheel speed a step of
     ``READABLE_PERIODS`` periods must stay below half the counters' readable range (their width,
-    at most the wire's 24 bits), or its counts read wrapped on board and on the host alike."""
+    at most the wire's 24 bits), or its counts read wrapped on board and on the host alike.
+    The speed it names is the firmware's, in its own ``ENCODER_PERIOD_US`` (not the DBC's
+    WHEEL_ENCODERS cycle): the refusal is ``validate_at_speed``'s, so its figure must be the one
+    that rule used (the two are held equal: tests/test_rig.py, cycle_us("WHEEL_ENCODERS"))."""
     nm = {key: _nm(table[key]) for key in _FLOAT_KEYS}
     speed_mm_s = round(speed_m_s * MM_PER_M)
     params = RobotParams(table["counts_per_rev"], nm["wheel_radius_left_m"],

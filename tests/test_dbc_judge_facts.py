@@ -112,8 +112,7 @@ FACTS = [
     ("odocan.host.judge.configs", "APPLY_PARAM", lambda: _choice("ODOM_CONFIG", "PARAM", "APPLY")),
     ("odocan.host.protocol.session", "FRESHNESS_WAIT_S",
      lambda: 1.5 * _cycle_ms("ODOM_FRESHNESS") / 1000),
-    # Still literals (E2E Profile 2's 4-bit COUNTER, used with literal masks alongside): held
-    # to the DBC's WHEEL_ENCODERS COUNTER here
+    # the E2E COUNTER's lap (one for every message: dbcfacts.e2e_counter_lap) and its masks
     ("odocan.host.protocol.e2e", "COUNTER_MASK", lambda: _lap("WHEEL_ENCODERS") - 1),
     ("odocan.host.protocol.e2e", "MAX_DELTA_COUNTER", lambda: _lap("WHEEL_ENCODERS") - 1),
     ("odocan.host.protocol.e2e_retract", "COUNTER_MASK", lambda: _lap("WHEEL_ENCODERS") - 1),
@@ -216,3 +215,96 @@ def test_no_boot_tick_where_the_counters_wrap_within_a_second(tmp_path: Path) ->
     assert fast["pose_cycle_ms"] == 5
     assert (fast["boot"], fast["late_boot"], fast["boot_10ms"]) == (False, False, False)
     assert (fast["held_boot"], fast["phase_step"]) == (False, False)
+
+
+# Every constant of a COUNTER lap, and what it is of the lap (``LAP_PROBE`` prints them)
+LAP_CONSTANTS = {
+    "e2e.COUNTER_LAP": 0, "e2e.COUNTER_MASK": -1, "e2e.MAX_DELTA_COUNTER": -1,
+    "e2e_retract.COUNTER_MASK": -1, "e2e_retract.MAX_WINDOW": -1,
+    "e2e_retract.SEARCH_FRAMES": 0, "e2e_cycles.COUNTER_CYCLE": 0,
+    "e2e_periods.COUNTER_MODULO": 0, "pose.COUNTER_VALUES": 0, "step_periods.COUNTER_VALUES": 0,
+    "gapfill.COUNTER_MODULO": 0, "resendalias.COUNTER_MODULO": 0, "senderseq.LAP": 0,
+    "liveplace.LAP": 0, "liveplace.MASK": -1, "holepages.LAP": 0, "livelaphold.LAP": 0,
+    "holechain.LAP_PERIODS": 0, "livepose.RING": 0, "livepose.RING_MASK": -1,
+    "liveholdstep.COUNTER_MODULO": 0, "haltpath.COUNTER_MASK": -1,
+}
+HALF_LAPS = ("livewindow.HALF_LAP", "samples.HALF_LAP")  # a COUNTER step read as -lap/2..
+
+LAP_PROBE = """
+import json
+import sys
+import numpy as np
+from odocan.host.judge import gapfill, holechain, holepages, liveholdstep, livelaphold, liveplace
+from odocan.host.judge import livepose, livewindow, resendalias, samples, senderseq, step_periods
+from odocan.host.mqtt import haltpath
+from odocan.host.protocol import e2e, e2e_cycles, e2e_periods, e2e_retract, pose
+from odocan.host.protocol.dbcplan import default_plan
+names = sys.argv[1:]
+found = {name: getattr(globals()[name.split(".")[0]], name.split(".")[1], None) for name in names}
+found["data_ids"] = len(e2e.e2e_messages(default_plan())[0x100].data_ids or ())
+# the sender's numbering of a COUNTER at the lap's last value then 0 a period on (one period),
+# and of a COUNTER that reads the same a lap of periods on (a lap lost)
+last, cycle_s = e2e.COUNTER_MASK, 0.01
+seqs = [senderseq.sender_seq(np.array(counters), np.array(times) * cycle_s, cycle_s)
+        for counters, times in (([last, 0], [0, 1]), ([last, last], [0, last + 1]))]
+found["wrap_step"], found["lap_step"] = (int(seq[-1]) for seq in seqs)
+print(json.dumps(found))
+"""
+
+
+def _counter_bits(tmp_path: Path, bits: int) -> Path:
+    """A copy of the DBC whose every COUNTER (and the ENC_COUNTER/REQUEST_COUNTER echoing one)
+    has ``bits`` bits, each E2EDataIDs list cut to its first 2 ** ``bits`` data IDs."""
+    text = DBC_PATH.read_text(encoding="utf-8")
+    text, n = re.subn(r"COUNTER : (\d+)\|4@1\+ \(1,0\) \[0\|15\]",
+                      rf"COUNTER : \1|{bits}@1+ (1,0) [0|{(1 << bits) - 1}]", text)
+    assert n > 10
+    text, n = re.subn(r'(BA_ "E2EDataIDs" BO_ \d+ ")([\d,]+)"',
+                      lambda m: m[1] + ",".join(m[2].split(",")[: 1 << bits]) + '"', text)
+    assert n > 10
+    path = tmp_path / f"counter{bits}.dbc"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _lap_probe(tmp_path: Path, dbc: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "ODOCAN_DBC": str(dbc), "ODOCAN_CACHE_DIR": str(tmp_path / "cache"),
+           "PYTHONPATH": str(TREE)}
+    return subprocess.run([sys.executable, "-c", LAP_PROBE, *LAP_CONSTANTS, *HALF_LAPS], env=env,
+                          capture_output=True, text=True, check=False, timeout=120)
+
+
+def test_counter_laps_follow_an_edited_dbc(tmp_path: Path) -> None:
+    for dbc, lap in ((DBC_PATH, 16), (_counter_bits(tmp_path, 3), 8)):
+        done = _lap_probe(tmp_path, dbc)
+        assert done.returncode == 0, done.stderr
+        found = json.loads(done.stdout)
+        assert {name: found[name] for name in (*LAP_CONSTANTS, *HALF_LAPS)} == {
+            **{name: lap + less for name, less in LAP_CONSTANTS.items()},
+            **dict.fromkeys(HALF_LAPS, lap // 2)}, dbc.name
+        assert (found["data_ids"], found["wrap_step"], found["lap_step"]) == (lap, 1, lap)
+
+
+def test_a_dbc_whose_counters_differ_is_refused_by_name(tmp_path: Path) -> None:
+    # MOTOR_CMD's COUNTER widened to 8 bits (bits 12..15 are free): the E2E checks read one lap
+    text = DBC_PATH.read_text(encoding="utf-8")
+    edited, n = re.subn(r"(BO_ 272 MOTOR_CMD: 8 ODOM_MCU\n SG_ CHECKSUM [^\n]*\n"
+                        r" SG_ COUNTER : 8\|)4@1\+ \(1,0\) \[0\|15\]",
+                        r"\g<1>8@1+ (1,0) [0|255]", text)
+    assert n == 1
+    dbc = tmp_path / "motor-cmd-counter8.dbc"
+    dbc.write_text(edited, encoding="utf-8")
+    done = _lap_probe(tmp_path, dbc)
+    assert done.returncode != 0
+    assert "MOTOR_CMD COUNTER values 256 vs WHEEL_ENCODERS COUNTER's 16" in done.stderr
+
+
+def test_a_counter_past_profile_2_is_refused() -> None:
+    from odocan.host.protocol.dbcfacts import DbcFactError, e2e_counter_lap
+
+    db = cantools.database.load_string(
+        'VERSION ""\nBS_:\nBU_: A\nBO_ 256 WHEEL_ENCODERS: 8 A\n'
+        ' SG_ COUNTER : 8|5@1+ (1,0) [0|31] "-" A\n', strict=True)
+    assert isinstance(db, cantools.database.can.Database)
+    with pytest.raises(DbcFactError, match="WHEEL_ENCODERS COUNTER values 32: E2E Profile 2"):
+        e2e_counter_lap(db)

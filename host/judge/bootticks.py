@@ -58,6 +58,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.protocol import busfacts
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, crc8h2f_p02_one, e2e_messages
 
@@ -254,10 +255,10 @@ def _rows(frames: FrameArrays, decoder: BulkDecoder, name: str
     config = e2e_messages(decoder.db).get(message.frame_id)
     good = np.ones(len(rows), dtype=bool)
     if config is not None and config.data_ids is not None:
-        ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & 0xF]
+        ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & ENC_COUNTER_MASK]
         good = crc8h2f_p02(data, ids) == data[:, 0]
     return (rows[good], frames.timestamp_s[rows[good]].astype(np.float64),
-            (data[good, 1] & 0xF).astype(np.int64))
+            (data[good, 1] & ENC_COUNTER_MASK).astype(np.int64))
 
 
 def pose_heard(data: bytes, data_ids: tuple[int, ...] | None) -> int | None:
@@ -265,6 +266,6 @@ def pose_heard(data: bytes, data_ids: tuple[int, ...] | None) -> int | None:
     sequence (``data_ids``: the message's E2E DataIDs; None: no E2E); None otherwise."""
     if len(data) != 8:
         return None
-    if data_ids and data[0] != crc8h2f_p02_one(data, data_ids[data[1] & 0xF]):
+    if data_ids and data[0] != crc8h2f_p02_one(data, data_ids[data[1] & ENC_COUNTER_MASK]):
         return None
-    return data[1] & 0xF
+    return data[1] & ENC_COUNTER_MASK

@@ -258,7 +258,7 @@ def _step_speeds(
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     ds_left = wrap_delta(np.diff(enc.left), bits) * g.m_per_count_left
     ds_right = wrap_delta(np.diff(enc.right), bits) * g.m_per_count_right
-    cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS") or 0.01
+    cycle_s = contract_cycle_s(decoder, "WHEEL_ENCODERS") or busfacts.ENC_CYCLE_S
     periods = np.diff(enc.seq)
     dt_s = periods * cycle_s
     # Each series is built in place in its output, element 0 first (the same operations in the

@@ -12,6 +12,7 @@ import numpy.typing as npt
 from odocan.firmware.encoders import CTRL_UPTIME_MAX, RESTART_SLACK_PERIODS
 from odocan.host.judge.reference import wrap_delta
 from odocan.host.judge.samples import FloatArray, IntArray
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
 from odocan.host.protocol.busfacts import ENC_PERIODS_PER_S as PERIODS_PER_S
 
 
@@ -29,7 +30,7 @@ def ctrl_restarts(uptime: IntArray, young: npt.NDArray[np.bool_], elapsed_s: Flo
 
 def successors(before: IntArray, after: IntArray) -> npt.NDArray[np.bool_]:
     """Per pair: ``after`` (a COUNTER) is the E2E successor of ``before`` (+ 1 mod 16)."""
-    found: npt.NDArray[np.bool_] = ((np.asarray(after) - np.asarray(before)) & 0xF) == 1
+    found: npt.NDArray[np.bool_] = ((np.asarray(after) - np.asarray(before)) & MASK) == 1
     return found
 
 
@@ -79,7 +80,7 @@ def confirmed_holds(enc: tuple[IntArray, IntArray, IntArray, IntArray],
     at = np.searchsorted(kept, np.arange(n), side="right")
     has_next = at < len(kept)
     nxt = kept[np.minimum(at, len(kept) - 1)] if len(kept) else np.zeros(n, dtype=np.intp)
-    periods = (counter[nxt] - counter) & 0xF
+    periods = (counter[nxt] - counter) & MASK
     ok = has_next & (periods != 0) & (uptime[nxt] >= uptime) & (uptime[nxt] <= uptime + 1)
     if bound is not None:
         ok &= young[nxt]

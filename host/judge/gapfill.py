@@ -56,10 +56,11 @@ from odocan.host.judge.breaks import merge_allowance_m
 from odocan.host.judge.gapbound import gap_allowance_of_counts, period_bounds
 from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import Encoders, IntArray
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 
-COUNTER_MODULO = 16
+COUNTER_MODULO = ENC_COUNTER_LAP  # 16
 MAX_LATE_PERIODS = 8  # a frame held back fewer periods than this (half a COUNTER cycle)
 ANCHOR_FRAMES = 64  # accepted frames an anchor is chosen among (the least late on the grid)
 Counts = tuple[int, int]  # (left, right) wire counts
@@ -158,7 +159,7 @@ def _crc_holds(chunk: FrameArrays, decoder: BulkDecoder, rows: IntArray
     if config is None or config.data_ids is None:
         return np.zeros(len(rows), dtype=bool)  # unprotected: a frame refused is not the sender's
     data = chunk.data[rows]
-    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & 0xF]
+    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & ENC_COUNTER_MASK]
     good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
     return good
 

@@ -96,6 +96,7 @@ from odocan.host.judge.pagechain import (
 )
 from odocan.host.judge.samples import QUEUED_GAP_CYCLES, Encoders, FloatArray, IntArray
 from odocan.host.protocol import busfacts
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 
@@ -315,7 +316,7 @@ class PageKeeper:
         summary on time so far: not within ``QUEUED_GAP_CYCLES`` of the summary before)."""
         assert self.cycle_s is not None
         return (summary[0] == 0 and summary[3] and not self._queued and page[3]
-                and page[0] != 0 and page[1] == (summary[1] + 1) & 0xF
+                and page[0] != 0 and page[1] == (summary[1] + 1) & ENC_COUNTER_MASK
                 and page[2] - summary[2] < 0.5 * self.cycle_s)
 
 
@@ -473,7 +474,7 @@ def crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: IntArray
     if config is None or config.data_ids is None:
         return np.ones(len(rows), dtype=bool)
     data = frames.data[rows]
-    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & 0xF]
+    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & ENC_COUNTER_MASK]
     good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
     return good
 

@@ -15,7 +15,9 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-LAP_PERIODS = 16  # the encoder frames' COUNTER lap: a step this long is a hole of the log
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
+
+LAP_PERIODS = ENC_COUNTER_LAP  # the encoder COUNTER's lap: a step this long is a hole of the log
 
 IntArray = npt.NDArray[np.int64]
 

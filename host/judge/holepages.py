@@ -38,9 +38,10 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.gapseen import Page, PageEvidence, Totals
 from odocan.host.judge.pagechain import quiet
 from odocan.host.judge.samples import Encoders, IntArray
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
 from odocan.host.protocol.decode import BulkDecoder
 
-LAP = 16  # the encoder COUNTER's lap: a hole's numbering is known but for whole laps
+LAP = ENC_COUNTER_LAP  # the encoder COUNTER's lap: a hole's numbering is known but for whole laps
 U8 = 0xFF
 GAP_CYCLES = LAP // 2  # a step of the stamps this long may hide a lap: a recorder's stamps
 # are late, never early, the frame before a hole up to 8 periods (``burst_laps``)

@@ -48,6 +48,7 @@ from odocan.host.judge.livepose import FramePose, difference
 from odocan.host.judge.livewindow import CYCLE_S
 from odocan.host.judge.reference import ReferenceOdometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
 
 if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
@@ -133,7 +134,7 @@ class LiveChoice:
         assert p is not None
         if p.heard or not p.held:
             return
-        if (counter - int(prev[ROW_COUNTER])) & 0xF != 1 or t_s - prev[ROW_T_S] > 1.5 * CYCLE_S:
+        if (counter - int(prev[ROW_COUNTER])) & MASK != 1 or t_s - prev[ROW_T_S] > 1.5 * CYCLE_S:
             self.decide()
 
     def decide(self) -> None:

@@ -40,6 +40,7 @@ from odocan.host.judge.gapseen import (
 )
 from odocan.host.judge.holetaken import SENT, taken_through
 from odocan.host.judge.livewindow import CYCLE_S
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.e2e import crc8h2f_p02_one
 
 if TYPE_CHECKING:
@@ -211,7 +212,7 @@ def status_values(message: Any, data: bytes, data_ids: Any, decode: Any = None
     if "PAGE" not in signals or "COUNTER" not in signals:
         return None  # a --dbc without them
     page, counter = int(signals["PAGE"]), int(signals["COUNTER"])
-    crc_ok = not data_ids or data[0] == crc8h2f_p02_one(data, data_ids[data[1] & 0xF])
+    crc_ok = not data_ids or data[0] == crc8h2f_p02_one(data, data_ids[data[1] & ENC_COUNTER_MASK])
     names = _VALUES.get(page)
     value = None if names is None or not set(names) <= signals.keys() else (
         int(signals[names[0]]), int(signals[names[1]]))

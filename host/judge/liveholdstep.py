@@ -42,11 +42,12 @@ from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.losses import OneSteps
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
 
 BUS_KEPT = 192  # the latest CRC-right encoder frames kept in bus order
 MAX_SPAN_FRAMES = 128  # sender periods: longer spans are not checked (the DP is n^2)
 LATE_CYCLES = 1.0  # a frame's typical lateness on the bus (periods): the numbering's centre
-COUNTER_MODULO = 16
+COUNTER_MODULO = ENC_COUNTER_LAP  # 16
 ROUND_SLACK_M = 1e-7  # float64 against the firmware's integer arithmetic over a span (m)
 
 Heard = tuple[int, int, int, int, float]  # accepted seq (-1: refused), COUNTER, left, right,

@@ -46,13 +46,14 @@ from odocan.host.judge.livechoice import PAGES_WAIT_S, WAIT_S
 from odocan.host.judge.liveplace import window_step
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livewindow import Columns, Half
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
 
 if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
 
 Held = tuple[FramePose, Half, bool]  # a sample held: its pose, ODOM_POSE_Y half, queued
 
-LAP = 16  # the COUNTER's lap: frames after a late frame that tell it (``late_lone_frames``)
+LAP = ENC_COUNTER_LAP  # the COUNTER's lap: frames after a late frame telling it (late_lone_frames)
 KEPT = 8  # laps held at once (more: the oldest ends first)
 AT_ONCE_S = 20e-6  # two frames closer than any frame lasts on a 1 Mbit/s bus (47 us): stamped
 # when a recorder read its backlog, not when the bus carried them (a busy bus's burst is spaced)

@@ -47,12 +47,14 @@ from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.samples import POSITION_LSB_M, sender_seq
 from odocan.host.judge.senderseq import pose_skips
 from odocan.host.judge.spanfill import filled_span_allowance_m
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
 
 ABS_KEPT = 128  # the latest encoder frames whose count-step sums are kept (a sample names one)
 GAPS_KEPT = 64  # gaps of the encoder sequence kept between two placements (no growth)
 REPRIMED_KEPT = 64  # counter restarts kept (no page proves a span across one)
 PARTS_KEPT = 64  # placements' gaps and stalls waiting for the pages (older ones keep theirs)
-LAP = 16  # the encoder COUNTER's lap: a step of more periods took one from the stamps
+LAP = ENC_COUNTER_LAP  # the encoder COUNTER's lap: a step of more periods took one from the stamps
+MASK = LAP - 1  # 0xF: a COUNTER step mod the lap
 
 
 Gap = tuple[int, tuple[int, int], tuple[int, int], int]  # seq after, counts before, after, periods
@@ -206,7 +208,7 @@ class StallPlacer:
         self._abs_counts = (abs_left + abs((left - int(prev[4]) + half) % wrap - half),
                             abs_right + abs((right - int(prev[5]) + half) % wrap - half))
         self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)  # a fixed ring: no growth
-        periods = (counter - int(prev[2])) & 0xF
+        periods = (counter - int(prev[2])) & MASK
         if periods == 1 and t_s - float(prev[3]) < 8.0 * CYCLE_S:
             self.fill.accepted(1, counter, t_s)
             return False  # the next frame (the fast path: no arrays)

@@ -26,7 +26,8 @@ from odocan.host.protocol.busfacts import ENC_PERIODS_PER_S as PERIODS_PER_S
 from odocan.host.protocol.pose import heading_fields, unwrap_near
 from odocan.sim.pose import wrap_angle
 
-RING = 16  # one slot per E2E COUNTER value of WHEEL_ENCODERS
+RING = busfacts.ENC_COUNTER_LAP  # 16: one slot per E2E COUNTER value of WHEEL_ENCODERS
+RING_MASK = RING - 1  # 0xF: a COUNTER step mod the lap
 MARKS_KEPT = 16  # pairs ``ErrorStats.withdraw_from`` can take back: a reboot's boot window
 # (``bootticks.BOOT_WINDOW_MS``, 80 ms: 4 poses) with room to spare
 WIRE_BITS = busfacts.ENC_WIRE_COUNTER_BITS  # WHEEL_ENCODERS carries the low 24 bits of each counter
@@ -122,7 +123,7 @@ class StepGate:
         if prev is None:
             return None
         if uptime and last_uptime and (uptime < last_uptime or (
-                t_s - last_t > AGED_AFTER_S and (counter - prev[0]) & 0xF != 1  # not waited
+                t_s - last_t > AGED_AFTER_S and (counter - prev[0]) & RING_MASK != 1  # not waited
                 and uptime < aged(last_uptime, t_s - last_t))) \
                 and self._young(frame, uptime):
             self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # held
@@ -131,7 +132,7 @@ class StepGate:
             return None
         periods = self._seq - prev_seq
         if periods + RING >= self.least and near(  # (a plain test first: it runs per frame)
-                ((counter - prev[0]) & 0xF) or RING, t_s - last_t, CYCLE_S, self.least):
+                ((counter - prev[0]) & RING_MASK) or RING, t_s - last_t, CYCLE_S, self.least):
             self._told.near_threshold(seq, t_s)  # either decision: a new start (nearthreshold)
         if periods >= self.least and not self._taken(last_t, t_s):  # ambiguous: re-primed
             return self._ambiguous(seq, (last_t, t_s), hole=heard > 1,
@@ -181,7 +182,7 @@ class StepGate:
         """``frame`` (its CTRL_UPTIME ``uptime``) confirms the ``held`` restart frame
         (firmware/restarthold.py ``RestartHold.confirms``)."""
         first, _, held_uptime, _ = held
-        bits, periods = min(self.bits, WIRE_BITS), (frame[0] - first[0]) & 0xF
+        bits, periods = min(self.bits, WIRE_BITS), (frame[0] - first[0]) & RING_MASK
         return (periods != 0 and held_uptime <= uptime <= held_uptime + 1
                 and abs(wrap_delta(frame[1] - first[1], bits)) <= periods * self.bound[0]
                 and abs(wrap_delta(frame[2] - first[2], bits)) <= periods * self.bound[1]

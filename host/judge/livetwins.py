@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 from odocan.host.judge.livewindow import CYCLE_S
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.twins import Counts, twin_detour_m
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 
 if TYPE_CHECKING:
     from odocan.host.judge.livefill import LiveFill
@@ -92,8 +93,8 @@ class TwinWatch:
                 continue
             counts = [(int(rows[j][4]), int(rows[j][5])) for j in (i - 1, i, i + 1)]
             prevs = [counts[0], *self._counts.get(seq - 1, [])]
-            periods = (max(1, int(rows[i][2] - rows[i - 1][2]) & 0xF),  # COUNTER steps
-                       max(1, int(rows[i + 1][2] - rows[i][2]) & 0xF))
+            periods = (max(1, int(rows[i][2] - rows[i - 1][2]) & ENC_COUNTER_MASK),  # COUNTER steps
+                       max(1, int(rows[i + 1][2] - rows[i][2]) & ENC_COUNTER_MASK))
             spans.append((seq, twin_detour_m(prevs, counts[1], self._counts[seq], counts[2],
                                              periods, geometry, bits, integrator)))
         self._pending = waiting

@@ -32,6 +32,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import WIRE_COUNTER_BITS
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol import busfacts
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 
 CYCLE_S = busfacts.ENC_CYCLE_S  # WHEEL_ENCODERS' cycle
 UNDO_KEPT = 8  # twists ``new_life`` can withdraw: a reboot's boot window (80 ms, 4), and more
@@ -151,7 +152,7 @@ class LiveTwist:
         if elapsed_s > (periods + 0.5) * CYCLE_S:  # it waited: the firmware may spread it
             gap_v, gap_w = max(gap_v, abs(v)), max(gap_w, abs(w))
         uptime, before = frame[4], prev[4]
-        if uptime and before and uptime < (before if (frame[0] - prev[0]) & 0xF == 1
+        if uptime and before and uptime < (before if (frame[0] - prev[0]) & ENC_COUNTER_MASK == 1
                                            else aged(before, elapsed_s)):
             v = w = math.nan  # the controller restarted: a twist over it is not judged
         return seq, v, w, gap_v, gap_w

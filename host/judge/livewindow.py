@@ -23,6 +23,9 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.senderseq import pose_skips
 from odocan.host.protocol import busfacts
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
+
+HALF_LAP = ENC_COUNTER_LAP // 2  # 8: a COUNTER step read as -8..+7
 
 HALF_WINDOW = 256  # pose halves of each message kept to resolve the frame one names (5 s)
 ENC_WINDOW = 512  # encoder frames kept for it, and the reference at each (5 s at 100 Hz)
@@ -61,7 +64,7 @@ def named_plain(halves: deque[tuple[float, ...]], columns: Columns, pos: int) ->
         return -1 if columns.whole else None
     if t_s - window[latest][3] >= 8 * CYCLE_S:
         return -1
-    offset = ((int(enc_counter - window[latest][2]) + 8) & 0xF) - 8
+    offset = ((int(enc_counter - window[latest][2]) + HALF_LAP) & ENC_COUNTER_MASK) - HALF_LAP
     if offset > 0:
         return -1  # not on the bus before the half
     # the first frame whose seq >= seq[latest] + offset (searchsorted): walk back from latest
@@ -100,7 +103,7 @@ def plain_half(halves: deque[tuple[float, ...]], pos: int) -> tuple[float, float
         _, prev_enc, prev_counter, prev_t = halves[k - 1]
         if _close(t_s - prev_t):
             return None
-        if (prev_enc == enc_counter and (int(counter - prev_counter) & 0xF) == 1
+        if (prev_enc == enc_counter and (int(counter - prev_counter) & ENC_COUNTER_MASK) == 1
                 and t_s - prev_t < REPEAT_S):
             return None
     return enc_counter, t_s
@@ -114,13 +117,13 @@ def _sender_step(window: deque[tuple[float, ...]], j: int) -> int | None:
     of the log (``senderseq.pose_skips``) the rows kept here cannot tell."""
     _, _, counter, t_s = window[j][:4]
     _, _, prev_counter, prev_t = window[j - 1][:4]
-    step = int(counter - prev_counter) & 0xF
+    step = int(counter - prev_counter) & ENC_COUNTER_MASK
     dt = t_s - prev_t
-    laps = max(0, math.floor((dt / CYCLE_S - step) / 16 + 0.5))
+    laps = max(0, math.floor((dt / CYCLE_S - step) / ENC_COUNTER_LAP + 0.5))
     if step and (_close(dt) or (j < -1 and _close(window[j + 1][3] - t_s))):
         # a step of 0 is widened by the time alone, as ``sender_seq`` widens it
         return None if laps else step
-    return step + 16 * laps
+    return step + ENC_COUNTER_LAP * laps
 
 
 def _close(gap_s: float) -> bool:

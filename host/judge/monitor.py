@@ -83,6 +83,7 @@ from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatc
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.judge.twosenders import SenderWatch
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import UNKNOWN, e2e_messages
 from odocan.host.protocol.e2e_held import HELD
@@ -170,7 +171,7 @@ class BusMonitor:
         message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
         summary = self._summary(message, data) if message is not None else None
         if summary is not None:  # before its E2E check, which a reboot or a second source fails
-            self._watch_source(*summary, counter=data[1] & 0xF)
+            self._watch_source(*summary, counter=data[1] & ENC_COUNTER_MASK)
         if verdict is None:
             status = self.e2e.check(msg.arbitration_id, data, extended=msg.is_extended_id,
                                     timestamp_s=timestamp_s)

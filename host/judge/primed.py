@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
+
 
 def counted_start(encoders: tuple[npt.NDArray[np.intp], npt.NDArray[np.int64]], page: int,
                   ok: int, lost: int) -> int | None:
@@ -25,7 +27,7 @@ def counted_start(encoders: tuple[npt.NDArray[np.intp], npt.NDArray[np.int64]], 
     if ok <= 0 or last < 0:
         return None
     first = max(last - back, 0)  # every step at least 1: the frame lies at or after it
-    steps = np.cumsum(((counter[first + 1 : last + 1] - counter[first:last]) & 0xF)[::-1])
+    steps = np.cumsum(((counter[first + 1 : last + 1] - counter[first:last]) & MASK)[::-1])
     found = np.flatnonzero(steps == back)
     if back and not len(found):
         return None

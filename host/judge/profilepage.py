@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from odocan.host.io.logs import FrameArrays, iter_log
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.protocol import busfacts
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02_one, e2e_messages
@@ -101,7 +102,7 @@ def running_profile(
     for row in range(len(page["index"]) - 1, -1, -1):
         data = bytes(frames.data[int(page["index"][row])])
         if frames.dlc[int(page["index"][row])] == 8 and data[0] == crc8h2f_p02_one(
-                data, data_ids[data[1] & 0x0F]):
+                data, data_ids[data[1] & ENC_COUNTER_MASK]):
             running = RunningProfile(int(page["MAX_WHEEL_SPEED"][row]),
                                      int(page["PROFILE_CRC"][row]))
             if running.bounded:

@@ -11,6 +11,8 @@ import numpy as np
 
 from odocan.host.judge.holechain import hole_between
 from odocan.host.judge.senderseq import queued_frames
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP as LAP
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 
 if TYPE_CHECKING:
     from odocan.host.judge.samples import Encoders, FloatArray, IntArray
@@ -44,7 +46,7 @@ def queued_names(
             made_s = float(timestamp_s[k])
             continue
         chained = (k > 0 and named[k - 1] >= 0
-                   and (int(own_counter[k] - own_counter[k - 1]) & 0xF) == 1
+                   and (int(own_counter[k] - own_counter[k - 1]) & ENC_COUNTER_MASK) == 1
                    and not hole_between(enc.index, enc.seq, int(index[k - 1]), int(index[k])))
         made_s = made_s + send_s if chained else np.nan
         named[k] = named_by(enc, int(named[k - 1]), int(enc_counter[k]), made_s, int(index[k]),
@@ -80,13 +82,13 @@ def named_by(
                int(np.searchsorted(enc.index, index))) - 1
     if last < floor:
         return -1
-    target = int(enc.seq[last]) - ((int(enc.counter[last]) - enc_counter) & 0xF)
+    target = int(enc.seq[last]) - ((int(enc.counter[last]) - enc_counter) & ENC_COUNTER_MASK)
     found = int(np.searchsorted(enc.seq, target))
     if target < enc.seq[floor] or found >= len(enc.seq) or enc.seq[found] != target:
         return -1
-    if repeat and target - 16 >= enc.seq[floor]:  # it may still hold the floor
+    if repeat and target - LAP >= enc.seq[floor]:  # it may still hold the floor
         return -1
-    for other in (target - 16, target + 16):
+    for other in (target - LAP, target + LAP):
         j = int(np.searchsorted(enc.seq, other))
         if (j < len(enc.seq) and enc.seq[j] == other and j >= floor and enc.index[j] < index
                 and abs(float(enc.timestamp_s[j] - enc.timestamp_s[found])) < 0.5 * send_s):

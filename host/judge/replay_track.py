@@ -16,6 +16,8 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.samples import Encoders, contract_cycle_s, named_targets
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP as LAP
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim import contract
 
@@ -69,8 +71,8 @@ def encoder_ticks(timestamp_s: npt.NDArray[np.float64], counter: IntArray) -> In
     timestamps say that many periods passed; gaps capped at ``MAX_GAP_TICKS``."""
     if len(counter) == 0:
         return np.zeros(0, dtype=np.int64)
-    step = np.maximum(1, np.diff(counter) & 0xF).astype(np.int64)
+    step = np.maximum(1, np.diff(counter) & ENC_COUNTER_MASK).astype(np.int64)
     periods = np.rint(np.diff(timestamp_s) / contract.cycle_time_s("WHEEL_ENCODERS"))
-    step += 16 * np.maximum(0, np.rint((periods - step) / 16)).astype(np.int64)
+    step += LAP * np.maximum(0, np.rint((periods - step) / LAP)).astype(np.int64)
     step = np.minimum(step, MAX_GAP_TICKS)
     return np.concatenate(([0], np.cumsum(step))).astype(np.int64)

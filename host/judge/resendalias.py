@@ -20,13 +20,14 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 if TYPE_CHECKING:
     from odocan.host.judge.samples import Encoders
 
 ALIAS_CYCLES = 12  # 16 frames a COUNTER round, less 4 cycles a frame may be held back
-COUNTER_MODULO = 16  # the E2E COUNTER of WHEEL_ENCODERS (byte 1, low nibble)
+COUNTER_MODULO = ENC_COUNTER_LAP  # 16: the E2E COUNTER of WHEEL_ENCODERS (byte 1, low nibble)
 
 
 @overload
@@ -58,7 +59,7 @@ def may_alias(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders,
     at = named[hit]
     since_s = frames.timestamp_s[rows[hit]] - enc.timestamp_s[at]
     alias = aged_past_alias(since_s, enc.cycle_s)
-    counters = frames.data[every, 1] & 0xF
+    counters = frames.data[every, 1] & ENC_COUNTER_MASK
     for c in range(COUNTER_MODULO):
         mine = enc.counter[at] == c
         if not mine.any():

@@ -21,10 +21,14 @@ from odocan.host.judge.senderseq import pose_skips
 from odocan.host.judge.senderseq import queued_frames as queued_frames
 from odocan.host.judge.senderseq import sender_seq as sender_seq
 from odocan.host.protocol import busfacts
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 from odocan.sim.exceptions import OdocanError
+
+HALF_LAP = ENC_COUNTER_LAP // 2  # 8: ENC_COUNTER names a frame -8..+7 on
 
 # One LSB of the pose signals, from the DBC's scales (the single source of truth): X, Y 0.1 mm,
 # HEADING a 16-bit binary angle (2 pi / 65536 rad).
@@ -212,7 +216,7 @@ def encoder_twins(
     if not same.any() or config.data_ids is None:
         return none, none, none
     data = frames.data[rows["index"][refused[same]]]
-    ids = np.asarray(config.data_ids, dtype=np.uint8)[rows["COUNTER"][refused[same]] & 0xF]
+    ids = np.asarray(config.data_ids, dtype=np.uint8)[rows["COUNTER"][refused[same]] & MASK]
     crc_right = crc8h2f_p02(data, ids) == data[:, 0]
     twin = refused[same][crc_right]
     return (before[same][crc_right].astype(np.int64), rows["LEFT_COUNT"][twin].astype(np.int64),
@@ -262,8 +266,9 @@ def named_targets(
     has = latest >= 0
     last = np.maximum(latest, 0)
     if enc.cycle_s is not None:
-        has &= timestamp_s - enc.timestamp_s[last] < 8 * enc.cycle_s
-    target: IntArray = enc.seq[last] + (((enc_counter - enc.counter[last] + 8) & 0xF) - 8)
+        has &= timestamp_s - enc.timestamp_s[last] < HALF_LAP * enc.cycle_s
+    step = ((enc_counter - enc.counter[last] + HALF_LAP) & MASK) - HALF_LAP
+    target: IntArray = enc.seq[last] + step
     return has, target
 
 
@@ -278,7 +283,7 @@ def _held(
         return named
     repeat = np.concatenate(([False], (
         (np.diff(enc_counter) == 0)
-        & ((np.diff(own_counter) & 0xF) == 1)
+        & ((np.diff(own_counter) & MASK) == 1)
         & (np.diff(timestamp_s) < SILENCE_CYCLES * cycle_s)
     )))
     run_start = np.maximum.accumulate(np.where(repeat, 0, np.arange(len(named))))

@@ -10,10 +10,12 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
+
 QUEUED_GAP_CYCLES = 0.35  # two sends of one message closer than this waited (``queued_frames``)
 BURST_END_CYCLES = 1.5  # a step this long ends a recorder's burst (``burst_laps``)
 LATE_SLACK_CYCLES = 2.0  # a frame this much earlier than its neighbours is no stamp's jitter
-LAP = 16  # the 4-bit COUNTER's lap
+LAP = ENC_COUNTER_LAP  # 16: the 4-bit COUNTER's lap
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -29,15 +31,15 @@ def sender_seq(counter: IntArray, timestamp_s: FloatArray, cycle_s: float | None
     numbered by ``burst_laps``. Shared by ``encoder_frames`` and the live judge
     (``host.judge.tracking``), which applies it to its window of recent frames."""
     step = np.diff(counter).astype(np.int64, copy=False)
-    step &= 0xF
+    step &= ENC_COUNTER_MASK
     if cycle_s is not None and len(step):  # in place: the same operations, fewer temporaries
         gap_periods = np.diff(timestamp_s)
         gap_periods /= cycle_s
         gap_periods -= step  # the sends more than the COUNTER step, 16 a lap (a real number)
-        lost_16 = np.floor(gap_periods / 16 + 0.5)  # the lap nearest: an edge 8 periods off,
+        lost_16 = np.floor(gap_periods / LAP + 0.5)  # the lap nearest: an edge 8 periods off,
         np.maximum(0, lost_16, out=lost_16)  # never at half a period (frames late by 0.5)
         lost = lost_16.astype(np.int64)
-        lost *= 16
+        lost *= LAP
         # a frame let out in a burst after the gap waited in the sender's buffer: the gap is
         # a busy bus, not lost frames (the COUNTER step is the whole step), but for a step of
         # 0, which E2E takes by the time alone (``host.protocol.e2e_cycles``); and but for a
@@ -75,7 +77,7 @@ def pose_skips(enc_position: IntArray, pose_position: IntArray, pose_counter: In
     known = (after > 0) & (after < len(pose_position))
     at = np.minimum(after, len(pose_position) - 1)
     skips: npt.NDArray[np.bool_] = known & (
-        ((pose_counter[at] - pose_counter[np.maximum(at - 1, 0)]) & 0xF) != 1)
+        ((pose_counter[at] - pose_counter[np.maximum(at - 1, 0)]) & ENC_COUNTER_MASK) != 1)
     return skips
 
 
@@ -119,11 +121,11 @@ def burst_laps(k: int, step: IntArray, queued: npt.NDArray[np.bool_], timestamp_
             break  # the burst ended in another gap: frame b is no time for this one
         made += int(step[b - 1])
         span = float(timestamp_s[b] - timestamp_s[k]) / cycle_s
-        est = math.floor((span - made) / 16 + 0.5)
+        est = math.floor((span - made) / LAP + 0.5)
         laps = est if laps is None else min(laps, est)
         if not queued[b]:
             break
-    return 16 * max(0, laps or 0)
+    return LAP * max(0, laps or 0)
 
 
 def late_lone_frames(step: IntArray, lost: IntArray, holes: npt.NDArray[np.bool_] | None,

@@ -30,6 +30,7 @@ from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.powerup import NAMED_SPAN, holds_first_cycle, same_tick, tick_bound_s
 from odocan.host.protocol import busfacts
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.e2e import crc8h2f_p02_one
 from odocan.host.protocol.e2e_live import E2EMonitor
 
@@ -204,7 +205,7 @@ def boot_summary(message: Message, data: bytes, data_ids: Any,
     here, as cantools names them (a value without one as its number)."""
     if message.name != "ODOM_STATUS" or len(data) != 8:
         return None
-    if not data_ids or data[0] != crc8h2f_p02_one(data, data_ids[data[1] & 0xF]):
+    if not data_ids or data[0] != crc8h2f_p02_one(data, data_ids[data[1] & ENC_COUNTER_MASK]):
         return None
     try:
         signals = (decode or _plain_decoder(message))(data)

@@ -18,8 +18,9 @@ from __future__ import annotations
 import numpy as np
 
 from odocan.host.judge.samples import FloatArray, IntArray
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
 
-COUNTER_VALUES = 16  # E2E COUNTER values of WHEEL_ENCODERS (4 bits)
+COUNTER_VALUES = ENC_COUNTER_LAP  # 16: E2E COUNTER values of WHEEL_ENCODERS (4 bits)
 
 
 def widened_periods(seq_periods: IntArray, elapsed_s: FloatArray, cycle_s: float | None

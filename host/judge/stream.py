@@ -73,6 +73,8 @@ from odocan.host.judge.samples import (
     named_targets,
 )
 from odocan.host.judge.stream_e2e import StreamE2E as StreamE2E  # re-exported (its old home)
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP as LAP
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder
 
 
@@ -115,10 +117,10 @@ class StreamEncoders:
         if self._last is not None:
             counter = np.concatenate(([self._last[0]], counter))
             stamps = np.concatenate(([self._last[1]], stamps))
-        step = (np.diff(counter) & 0xF).astype(np.int64)
+        step = (np.diff(counter) & ENC_COUNTER_MASK).astype(np.int64)
         if cycle_s is not None and len(step):
-            laps = np.floor((np.diff(stamps) / cycle_s - step) / 16 + 0.5)  # as sender_seq
-            step = step + 16 * np.maximum(0, laps).astype(np.int64)
+            laps = np.floor((np.diff(stamps) / cycle_s - step) / LAP + 0.5)  # as sender_seq
+            step = step + LAP * np.maximum(0, laps).astype(np.int64)
         if self._last is None:
             return np.concatenate(([0], np.cumsum(step))).astype(np.int64)
         return (self._last[2] + np.cumsum(step)).astype(np.int64)

@@ -20,6 +20,7 @@ from typing import Any
 from odocan.firmware.config import RobotParams, derive_constants, validate
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.odometry import Odometry
+from odocan.host.protocol.busfacts import ENC_CYCLE_S, ENC_PERIODS_PER_S
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 from odocan.sim.rig import firmware_params
 from odocan.sim.robot import RobotProfile
@@ -45,12 +46,13 @@ class Case:
 
 
 def scenario_case(robot: RobotProfile, scenario: str, duration_s: float, seed: int) -> Case:
-    """The counters of a simulated drive, sampled at 100 Hz as the motor controller would."""
+    """The counters of a simulated drive, sampled every WHEEL_ENCODERS cycle (the DBC's: 10 ms)
+    as the motor controller would."""
     vehicle = Vehicle(robot, seed=seed)
     drive = get_scenario(scenario, robot, seed)
     counts = []
-    for k in range(round(duration_s * 100) + 1):
-        t_s = k * 0.01
+    for k in range(round(duration_s * ENC_PERIODS_PER_S) + 1):
+        t_s = k * ENC_CYCLE_S
         if k % 2 == 0:
             vehicle.command(*drive.command_at(t_s), t_s)
         vehicle.advance_to(t_s)

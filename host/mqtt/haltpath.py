@@ -22,6 +22,7 @@ from odocan.host.judge.livewindow import window_counts
 from odocan.host.judge.reference import ReferenceOdometry, wrap_delta
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 
 EPS_LSB = 0.01  # the float noise of the decoders and the reference (~1e-8 LSB): the firmware
 # rounds its Q40 pose to the signal to nearest, exactly (``mul_shr_round_i64``), its fixed point
@@ -29,7 +30,7 @@ EPS_LSB = 0.01  # the float noise of the decoders and the reference (~1e-8 LSB):
 # carried boxes narrow to ~0.1 LSB, not ~0.02: ``host.mqtt.haltcarry``)
 ARITH_M_PER_M = 1e-7  # fixed point vs float64 per metre of displacement (measured: 7.4e-9)
 ARITH_RAD_PER_STEP = 2e-9  # the firmware's heading vs float64 per step (bam64: exact counts)
-COUNTER_MASK = 0xF  # WHEEL_ENCODERS' E2E COUNTER (4 bits)
+COUNTER_MASK = ENC_COUNTER_MASK  # 0xF: WHEEL_ENCODERS' E2E COUNTER (4 bits)
 _TURN = 2.0 * math.pi
 _QUARTER = 0.5 * math.pi
 

@@ -77,6 +77,7 @@ from odocan.host.mqtt.liveplan import Plan, plans
 from odocan.host.mqtt.liveprofile import ProfileStatus
 from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.topics import stamp, status_payload
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
 from odocan.host.protocol.e2e import e2e_messages
 from odocan.host.protocol.e2e_held import HELD
 from odocan.host.protocol.e2e_live import E2EMonitor
@@ -265,7 +266,7 @@ class RobotTelemetry(CommandFollowing):
         heard_status(self.tracker, route.message, data, ids, t_s, route.signals)  # compiled
         summary = (boot_summary(route.message, data, ids, route.signals)
                    if route.is_summary(data) else None)
-        if summary is None or self.sources.observe(t_s, *summary, data[1] & 0xF) != "reboot":
+        if summary is None or self.sources.observe(t_s, *summary, data[1] & MASK) != "reboot":
             return
         self.reboots += 1
         lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM

@@ -2,9 +2,10 @@
 source of truth for frames).
 
 Cycle times (``GenMsgCycleTime``, ms), frames per cycle (``E2EFramesPerCycle``), E2E COUNTER
-laps (2 ** the COUNTER signal's length), the ODOM_STATUS page numbers and the APPLY codes (the
-``VAL_`` tables), UPTIME's LSB and the encoder counts' wire width: each judge once restated them
-as its own literal. Here they are read of the DBC at ``sim.contract.DBC_PATH`` (``ODOCAN_DBC``;
+laps (2 ** the COUNTER signal's length: one lap for every message, ``dbcfacts.e2e_counter_lap``),
+the ODOM_STATUS page numbers and the APPLY codes (the ``VAL_`` tables), UPTIME's LSB and the
+encoder counts' wire width: each judge once restated them as its own literal. Here they are
+read of the DBC at ``sim.contract.DBC_PATH`` (``ODOCAN_DBC``;
 ``odocan analyze/monitor --dbc PATH`` make PATH that DBC before any judge is imported:
 ``host.cli.dbcfirst``) through the judge's plan of it (``dbcplan.default_plan``: no cantools on
 a warm cache), so a DBC edited there is followed. What is read, and how, is said once, in
@@ -30,11 +31,13 @@ ENC_CYCLE_MS = FACTS.enc_cycle_ms  # 10
 ENC_CYCLE_S = ENC_CYCLE_MS / MS_PER_S
 ENC_PERIOD_US = ENC_CYCLE_MS * US_PER_MS  # 10 000: the period the firmware's steps are bounded in
 ENC_PERIODS_PER_S = MS_PER_S // ENC_CYCLE_MS  # 100: CTRL_UPTIME's second in encoder periods
-ENC_COUNTER_LAP = FACTS.enc_counter_lap  # 16: a 4-bit E2E COUNTER
+ENC_COUNTER_LAP = FACTS.enc_counter_lap  # 16: a 4-bit E2E COUNTER, every COUNTER's lap
+ENC_COUNTER_MASK = ENC_COUNTER_LAP - 1  # 0xF: a COUNTER step mod the lap (a power of two)
 ENC_WIRE_COUNTER_BITS = FACTS.enc_wire_counter_bits  # 24
 POSE_CYCLE_MS = FACTS.pose_cycle_ms  # 20
 POSE_FRAMES_PER_CYCLE = FACTS.pose_frames_per_cycle  # 1
 POSE_COUNTER_LAP = FACTS.pose_counter_lap  # 16
+POSE_ENC_COUNTER_LAP = FACTS.pose_enc_counter_lap  # 16: ENC_COUNTER echoes WHEEL_ENCODERS'
 STATUS_CYCLE_MS = FACTS.status_cycle_ms  # 100
 STATUS_FRAMES_PER_CYCLE = FACTS.status_frames_per_cycle  # 2: the summary and a page
 STATUS_COUNTER_LAP = FACTS.status_counter_lap  # 16

@@ -235,7 +235,7 @@ class CommandEncoder:
         return raw
 
     def _frame(self, message: Message, raw: dict[str, int], final: bool) -> Frame:
-        counter = (self._counters.get(message.frame_id, -1) + 1) & 0xF
+        counter = (self._counters.get(message.frame_id, -1) + 1) % _counter_lap(message)
         self._counters[message.frame_id] = counter
         data_ids = _data_ids(message)
         assert data_ids is not None  # checked by _message
@@ -292,12 +292,18 @@ def _check_sent(sent: Any) -> None:
 
 
 def _data_ids(message: Message) -> list[int] | None:
-    """The message's E2EDataIDs attribute (16 data IDs), None when absent or malformed."""
+    """The message's E2EDataIDs attribute (a data ID per COUNTER value), None when absent or
+    malformed."""
     attribute = message.dbc.attributes.get("E2EDataIDs") if message.dbc else None
     if attribute is None or not isinstance(attribute.value, str):
         return None
     ids = [int(v) for v in attribute.value.split(",") if v.strip().isdigit()]
-    return ids if len(ids) == 16 else None
+    return ids if len(ids) == _counter_lap(message) else None
+
+
+def _counter_lap(message: Message) -> int:
+    """The values of the message's E2E COUNTER: 2 ** its bits in the DBC."""
+    return 1 << int(message.get_signal_by_name("COUNTER").length)
 
 
 def _parse(payload: bytes) -> dict[str, Any]:

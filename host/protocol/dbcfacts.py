@@ -27,6 +27,9 @@ if TYPE_CHECKING:
 MS_PER_S = 1000
 ENC_MESSAGE, POSE_MESSAGE, STATUS_MESSAGE = "WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_STATUS"
 FRESHNESS_MESSAGE = "ODOM_FRESHNESS"
+# AUTOSAR E2E Profile 2's COUNTER is 4 bits (its DataIDList has 16 entries): not the DBC's fact
+# but the profile's, the most a DBC's COUNTER may count for the Profile 2 checks (``e2e``)
+PROFILE2_MAX_COUNTER_LAP = 16
 
 
 class DbcFactError(OdocanError):
@@ -65,6 +68,25 @@ def counter_lap(plan: DatabaseSpec, name: str, signal: str = "COUNTER") -> int:
     return 1 << _signal(plan, name, signal).length
 
 
+def e2e_counter_lap(plan: DatabaseSpec) -> int:
+    """The one lap of every E2E COUNTER of ``plan`` (a signal ``COUNTER`` or ``*_COUNTER``,
+    which echoes one: 2 ** its bits), WHEEL_ENCODERS' first. The E2E checks (``e2e``,
+    ``e2e_retract``, the placements) read one lap for every message: a DBC whose COUNTERs
+    differ, or count past Profile 2's 16, is refused, the first such signal named."""
+    lap = counter_lap(plan, ENC_MESSAGE)
+    for message in plan.messages:
+        for signal in message.signals:
+            counts = signal.name == "COUNTER" or signal.name.endswith("_COUNTER")
+            if counts and (its := 1 << signal.length) != lap:
+                raise DbcFactError(
+                    f"{message.name} {signal.name} values {its} vs {ENC_MESSAGE} COUNTER's"
+                    f" {lap}: the E2E checks read one COUNTER lap")
+    if lap > PROFILE2_MAX_COUNTER_LAP:
+        raise DbcFactError(f"{ENC_MESSAGE} COUNTER values {lap}: E2E Profile 2 counts at most"
+                           f" {PROFILE2_MAX_COUNTER_LAP}")
+    return lap
+
+
 def signal_bits(plan: DatabaseSpec, name: str, signal: str) -> int:
     """The length in bits of message ``name``'s ``signal``."""
     return int(_signal(plan, name, signal).length)
@@ -88,7 +110,7 @@ Reader = Callable[["DatabaseSpec"], int]
 # (JudgeFacts field, the message it is of, what it is in the DBC, how it is read): the one list
 READERS: tuple[tuple[str, str, str, Reader], ...] = (
     ("enc_cycle_ms", ENC_MESSAGE, "GenMsgCycleTime (ms)", lambda p: cycle_ms(p, ENC_MESSAGE)),
-    ("enc_counter_lap", ENC_MESSAGE, "COUNTER values", lambda p: counter_lap(p, ENC_MESSAGE)),
+    ("enc_counter_lap", ENC_MESSAGE, "COUNTER values", e2e_counter_lap),
     ("enc_wire_counter_bits", ENC_MESSAGE, "LEFT_COUNT bits",
      lambda p: signal_bits(p, ENC_MESSAGE, "LEFT_COUNT")),
     ("pose_cycle_ms", POSE_MESSAGE, "GenMsgCycleTime (ms)", lambda p: cycle_ms(p, POSE_MESSAGE)),

@@ -47,6 +47,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import frame_groups, frame_key, frame_keys
 from odocan.host.protocol.e2e_crc import (  # re-exported (their old home)
@@ -110,8 +111,9 @@ UNKNOWN_ID, WRONG_DLC, UNPROTECTED = "unknown_id", "wrong_dlc", "unprotected"
 _STATUS = (OK, OKSOMELOST, REPEATED, WRONG_SEQUENCE, CRC_ERROR)
 _S_OK, _S_LOST, _S_REPEATED, _S_WRONG, _S_CRC = range(5)
 
-COUNTER_MASK = 0x0F
-MAX_DELTA_COUNTER = 15
+COUNTER_LAP = ENC_COUNTER_LAP  # 16: every E2E COUNTER's values (the DBC's, one lap)
+COUNTER_MASK = ENC_COUNTER_MASK  # 0x0F
+MAX_DELTA_COUNTER = ENC_COUNTER_MASK  # 15: the widest window, a lap less one
 # Messages the firmware checks with MaxDeltaCounterInit 0 and a window widened once per period
 # (firmware/encoders.py ``EncoderInput.rx``): only +1 passes without time having passed.
 PER_PERIOD_WINDOW = frozenset({"WHEEL_ENCODERS"})
@@ -165,8 +167,9 @@ def _parse_data_ids(name: str, text: str) -> tuple[int, ...]:
         ids = tuple(int(v) for v in text.split(","))
     except ValueError:
         raise E2EConfigError(f"{name}: E2EDataIDs {text!r} is not a list of integers") from None
-    if len(ids) != 16 or not all(0 <= v <= 255 for v in ids):
-        raise E2EConfigError(f"{name}: E2EDataIDs must list 16 data IDs of 0..255, got {text!r}")
+    if len(ids) != COUNTER_LAP or not all(0 <= v <= 255 for v in ids):
+        raise E2EConfigError(
+            f"{name}: E2EDataIDs must list {COUNTER_LAP} data IDs of 0..255, got {text!r}")
     return ids
 
 
@@ -385,13 +388,13 @@ def _crc_ok(
 ) -> npt.NDArray[np.bool_]:
     """Whether each frame's byte 0 is the Profile 2 CRC of its message (its data ID picked by
     its counter; meaningless for frames of unprotected or unknown messages)."""
-    data_ids = np.zeros((len(in_order) + 1, 16), dtype=np.uint8)
+    data_ids = np.zeros((len(in_order) + 1, COUNTER_LAP), dtype=np.uint8)
     for number, config in enumerate(in_order):
         if config.data_ids is not None:
             data_ids[number] = config.data_ids
     counter = frames.data[:, 1] & COUNTER_MASK
-    # message * 16 + counter: below 2048 * 16 when message is a uint16 (message_numbers)
-    crc = crc8h2f_p02(frames.data, np.take(data_ids.ravel(), message * 16 + counter))
+    # message * COUNTER_LAP + counter: below 2048 * 16 when message is a uint16 (message_numbers)
+    crc = crc8h2f_p02(frames.data, np.take(data_ids.ravel(), message * COUNTER_LAP + counter))
     ok: npt.NDArray[np.bool_] = crc == frames.data[:, 0]
     return ok
 

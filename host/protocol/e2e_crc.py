@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
+
 CRC8H2F_POLY = 0x2F
 CRC8H2F_INIT = 0xFF
 CRC8H2F_XOR_OUT = 0xFF
@@ -98,7 +100,7 @@ def byte1_table(data_ids: tuple[int, ...]) -> list[int]:
     table = _BYTE1_TABLES.get(data_ids)
     if table is None:
         byte1, data_id = _PLACES[0], _PLACES[7]
-        table = _BYTE1_TABLES[data_ids] = [byte1[b1] ^ data_id[data_ids[b1 & 0xF]] ^ _CRC_ZEROS
+        table = _BYTE1_TABLES[data_ids] = [byte1[b1] ^ data_id[data_ids[b1 & MASK]] ^ _CRC_ZEROS
                                            for b1 in range(256)]
     return table
 

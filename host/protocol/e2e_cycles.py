@@ -16,10 +16,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
+
 if TYPE_CHECKING:
     from odocan.host.protocol.e2e import E2EMessage
 
-COUNTER_CYCLE = 16  # COUNTER values: a frame 16 periods on carries the same COUNTER
+COUNTER_CYCLE = ENC_COUNTER_LAP  # 16 COUNTER values: a frame 16 periods on carries the same COUNTER
 NEW_CYCLE_PERIODS = COUNTER_CYCLE // 2  # from here a same-COUNTER frame is the next cycle's
 
 

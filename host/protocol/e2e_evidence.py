@@ -46,6 +46,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.e2e_cycles import new_cycles
 from odocan.host.protocol.e2e_periods import (
     COUNTER_MODULO,
@@ -64,7 +65,7 @@ S_OK, S_LOST, S_REPEATED, S_WRONG, S_CRC = range(5)
 # frame on the bus before a send that the firmware drained after it).
 NEAR_FRAMES = 14
 RACE_FRAMES = 2  # frames before a send that the firmware may have drained only after it
-_MAX_WINDOW = 15
+_MAX_WINDOW = ENC_COUNTER_MASK  # 15: Profile 2's widest window, a lap less one
 SILENCE_CYCLES = 1.5  # the recorder heard nothing (a bus is never that quiet in a drive)
 BURST_S = 40e-6  # then stamped what it held this close (closer than a bus delivers frames)
 ALIKE_S = 0.5e-6  # but not at once: frames of one instant (the rig's, float noise included)
@@ -133,12 +134,12 @@ def pose_evidence(frames: FrameArrays, enc_pos: npt.NDArray[np.intp],
     for at in poses:
         if len(at) < 2:
             continue
-        counter = (frames.data[at, 1] & 0x0F).astype(np.int64)
+        counter = (frames.data[at, 1] & ENC_COUNTER_MASK).astype(np.int64)
         named = (frames.data[at, 1] >> 4).astype(np.int64)
         before = np.searchsorted(enc_pos[good], at)  # good encoder frames before each pose
         found: int | None = None  # the place in ``good`` of the frame the last send named
         for k in range(1, len(at)):
-            later = 0 < (counter[k] - counter[k - 1]) & 0x0F < COUNTER_MODULO // 2
+            later = 0 < (counter[k] - counter[k - 1]) & ENC_COUNTER_MASK < COUNTER_MODULO // 2
             if not later or before[k] - before[k - 1] > NEAR_FRAMES:
                 found = None  # a send again or a long silence: no proof until the next pair
                 continue
@@ -179,7 +180,7 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
     windows = [0, 0, 0]
     waiting, last, last_s = True, 0, math.nan
     columns = [p.tolist() for p in periods]
-    ok, counters = crc_ok.tolist(), (counter & 0x0F).tolist()
+    ok, counters = crc_ok.tolist(), (counter & ENC_COUNTER_MASK).tolist()
     late = released.tolist()
     chosen = reading.tolist() if reading is not None else [-1] * n
     stamps, cycle_s = (new_cycle[0].tolist(), new_cycle[1]) if new_cycle else ([], 0.0)
@@ -189,7 +190,7 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
         windows = [min(w + c[j], _MAX_WINDOW) for w, c in zip(windows, columns, strict=True)]
         if not ok[j]:
             continue
-        delta = (counters[j] - last) & 0x0F
+        delta = (counters[j] - last) & ENC_COUNTER_MASK
         if waiting or delta == 1:
             code = S_OK
         elif delta == 0:
@@ -226,7 +227,7 @@ def _taken_back(j: int, taken: list[int], counters: list[int], ok: list[bool],
     for q in taken[place + 1 :]:
         status[q] = S_WRONG
     del taken[place + 1 :]
-    return S_OK if (counters[j] - counters[taken[-1]]) & 0x0F == 1 else S_LOST
+    return S_OK if (counters[j] - counters[taken[-1]]) & ENC_COUNTER_MASK == 1 else S_LOST
 
 
 def _by_window_or_evidence(j: int, delta: int, window: int, evidence: Evidence) -> int:

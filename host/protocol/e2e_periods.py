@@ -10,9 +10,11 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
+
 # The firmware's tick after the encoder frame's slot, in periods (``receive_periods``).
 RECEIVE_LAG_CYCLES = 0.1
-COUNTER_MODULO = 16
+COUNTER_MODULO = ENC_COUNTER_LAP  # 16
 # How far two frames' receive timestamps may be off each other, in periods (``receive_periods``):
 # a live capture (candump on a loaded host, the monitor's own recording) stamps each frame up to a
 # few ms late, so 4.5 ms at 100 Hz. A first frame that looks late by no more than this may have

@@ -30,9 +30,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-COUNTER_MASK = 0x0F
-MAX_WINDOW = 15
-SEARCH_FRAMES = 16  # the firmware's window never reaches past 15 periods: no last further back
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
+
+COUNTER_MASK = ENC_COUNTER_MASK  # 0x0F
+MAX_WINDOW = ENC_COUNTER_MASK  # 15
+SEARCH_FRAMES = ENC_COUNTER_LAP  # the firmware's window never reaches a lap: no last further back
 
 
 def firmware_last(j: int, taken: Sequence[int], counters: Sequence[int], ok: Sequence[bool],

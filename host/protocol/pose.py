@@ -20,12 +20,13 @@ import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+from odocan.host.protocol.busfacts import POSE_ENC_COUNTER_LAP
 from odocan.sim.pose import TURN_RAD, Pose, wrap_angle
 
 __all__ = ["COUNTER_VALUES", "Pose", "PosePairer", "heading_fields", "latest_pose", "pose_of",
            "unwrap_near", "wrap_angle"]
 
-COUNTER_VALUES = 16  # ENC_COUNTER is the 4-bit E2E counter of the encoder frame named
+COUNTER_VALUES = POSE_ENC_COUNTER_LAP  # ENC_COUNTER: the E2E counter of the encoder frame named
 
 
 def unwrap_near(heading_rad: float, near_rad: float) -> float:

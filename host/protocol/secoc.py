@@ -29,6 +29,7 @@ import cantools
 import cantools.autosar
 from cantools.database.can import Database, Message
 
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.sim import contract
 from odocan.sim.exceptions import OdocanError
 
@@ -131,7 +132,7 @@ class SecocSigner:
     def on_freshness(self, data: bytes) -> bool:
         """Adopt an ODOM_FRESHNESS frame's FV (next FV = it + 1); False: bad E2E, or FV 0."""
         if len(data) != 8 or not cantools.autosar.check_profile2_crc(
-            data, self._fresh_ids[data[1] & 0xF]
+            data, self._fresh_ids[data[1] & ENC_COUNTER_MASK]
         ):
             return False
         fields = self._fresh.decode(data, decode_choices=False, scaling=False)
@@ -166,7 +167,7 @@ class SecocSigner:
         if self.next_fv is None:
             raise SecocNotSynchronised("no ODOM_FRESHNESS from the firmware yet: cannot sign")
         fv = self.next_fv
-        self._counter = (self._counter + 1) & 0xF
+        self._counter = (self._counter + 1) & ENC_COUNTER_MASK
         encoded = self._auth.encode(
             {
                 "CHECKSUM": 0,
