@@ -85,6 +85,7 @@ from odocan.host.judge.samples import (
     encoder_frames,
     onboard_samples,
 )
+from odocan.host.judge.stallmerge import merged_allowance_m
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.robot import RobotProfile
@@ -177,8 +178,8 @@ def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[st
     if after is None:
         return "fewer than two on-board poses after the APPLY"
     if voiced is None:
-        return ("the firmware silent (a stall) between the poses around the APPLY: its steps "
-                "over the frames it missed are not the reference's")
+        return _across_stall(poses, enc, c, (start, after), staged, odo,
+                             exact_start=before is None)
     return _checked(poses, enc, c, (before, after), start, staged, odo, voiced,
                     caught=caught)
 
@@ -206,6 +207,30 @@ def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int]
     elif judged["passed"]:  # from the power-up pose: narrowed by more samples after the APPLY
         judged["passed"] = _from_power_up(poses, after, c, enc, staged, odo, voiced[1])
     return {"fields_kept": [name for name in FIELDS if name not in staged], **judged}
+
+
+def _across_stall(poses: Poses, enc: Encoders, c: int,
+                  around: tuple[tuple[int, tuple[float, float, float]], int],
+                  staged: dict[str, float], odo: Odo, *, exact_start: bool) -> Kept:
+    """``kept_check`` across a stall between the poses around the APPLY's frame ``c``: from
+    ``around``'s start (``exact_start``: the power-up pose) to its first sample after, the bound
+    widened by ``stallmerge.merged_allowance_m`` (every frame heard; a field staged: not made,
+    the merged run it fell in not known); not narrowed (steps across a stall not the fine ones)."""
+    start, after = around
+    why = ("the firmware silent (a stall) between the poses around the APPLY: its steps "
+           "over the frames it missed are not the reference's")
+    if staged:
+        return f"{why}, and a field staged (the merged step it fell in not known)"
+    if not _settled(poses, after, enc, odo):
+        return ("the firmware not seen stepping plainly around the APPLY (after a stall: poses "
+                "naming backlog frames, merged steps)")
+    steps = _plain_steps(enc, start[0], int(poses.enc[after]), odo)
+    if steps is None:
+        return f"{why}, and the encoder frames across it not all heard as plain steps"
+    judged = _judged(start, _sample(poses, after), steps, c - start[0], staged, odo.geometry,
+                     odo.integrator, exact_start=exact_start,
+                     gap_m=merged_allowance_m(*steps, odo.geometry, odo.integrator))
+    return {"fields_kept": list(FIELDS), **judged}
 
 
 def _overlap(poses: Poses, around: tuple[int, int], c: int, enc: Encoders,
