@@ -40,16 +40,15 @@ seen stepping plainly on each side (the sample before the last one before C, and
 the first after C, must continue them by the plain steps between, nothing staged: after a stall
 the first poses name backlog frames the window cannot resolve, and merged steps leave the fine
 reference): the fitted start alone judges that life then. A stall (the firmware silent
-``SILENCE_CYCLES`` encoder cycles on the bus: it takes the frames it missed merged, not in the
-reference's fine steps) between the sample before the last one before C and the one after the
-first after C leaves the APPLY unjudged too (before, a correct firmware's APPLY 1-3 ticks after
-a 150 ms stall FAILed, 0.03-0.07 mm); one further off only bounds the samples that narrow the
-check (``_voiced``: those after it, less the first), so an APPLY a few poses after a stall is
-judged from the poses after it. When the last sample before C is the first after the stall and
-names the latest encoder frame heard before it (``_caught_up``: the firmware took every frame
-it missed, merged, and names no backlog frame), the firmware and the reference agree again
-there: the check starts from it (the side before C is that one sample), so an APPLY 3-4 ticks
-after a 150 ms stall is judged too; one with no sample between the stall and C is not.
+``SILENCE_CYCLES`` encoder cycles: it takes the frames it missed merged) further off than the
+samples around C only bounds the samples that narrow the check (``_voiced``: those after it,
+less the first): an APPLY a few poses after a stall is judged from the poses after it. When
+the last sample before C is the first after the stall and names the latest encoder frame heard
+before it (``_caught_up``: the firmware took every frame it missed, merged, and names no
+backlog frame), the firmware and the reference agree again there: the check starts from it
+(the side before C is that one sample). With no sample between the stall and C (before, not
+judged) it is judged from the two samples around C when every frame between them was heard,
+the bound widened by how far merged runs of them leave the fine steps (``_across_stall``).
 A gap of one frame (the recorder lost a frame the firmware took, or the firmware took two
 periods merged) between the samples around a bare APPLY, or between two samples on a side,
 is judged across: the reference takes its merged step, and the bound is widened by how far the
@@ -70,7 +69,7 @@ import numpy as np
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.gapbound import gap_allowance_m, period_bounds
 from odocan.host.judge.livesetpose import FIELDS
-from odocan.host.judge.powerup import saw_only_the_log
+from odocan.host.judge.powerup import life_powered_up
 from odocan.host.judge.reference import Geometry, SpeedBound, integrate
 from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
@@ -121,23 +120,22 @@ def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
 def check_cut(read: Callable[[int, int], FrameArrays], head: tuple[int, bool], tail_stop: int,
               cut: SetPoseCut, robot: RobotProfile, integrator: str, db: DatabaseSpec,
               max_wheel_speed_mm_s: SpeedBound) -> Kept:
-    """``kept_check`` of the set-pose ``cut`` over its ``window``: ``read(lo, hi)`` gives the
-    log's frames [lo, hi) (whole or streamed alike); ``head``: the first frame of the life
-    before the cut and whether it starts at a reboot; ``tail_stop``: the end of the life the
-    cut opens."""
+    """``kept_check`` of the set-pose ``cut`` over its ``window``: ``read(lo, hi)``, the log's
+    frames [lo, hi) (whole or streamed alike); ``head``: the first frame of the life before the
+    cut, whether it starts at a reboot; ``tail_stop``: the end of the life the cut opens."""
     lo, hi = window(cut.position, head[0], tail_stop)
     return kept_check(read(lo, hi), lo, cut, robot, integrator, db, max_wheel_speed_mm_s,
-                      boot=head[1] and lo == head[0])
+                      boot=(head[1] or head[0] == 0) and lo == head[0], log_start=lo == 0)
 
 
 def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfile,
                integrator: str, db: DatabaseSpec, max_wheel_speed_mm_s: SpeedBound, *,
-               boot: bool = False) -> Kept:
+               boot: bool = False, log_start: bool = False) -> Kept:
     """The check of the module docstring for ``cut`` (a set-pose whose fields were not all
     staged) over ``frames``, the log's frames from position ``lo`` (``window``); None when
     every field was staged, why not (words) when the check cannot be made. ``boot``:
-    ``frames`` start where the firmware started (a reboot's life, read from its first
-    frame)."""
+    ``frames`` start where the firmware may have started (a life read from its first frame;
+    ``log_start``: the log's, ``powerup.life_powered_up``)."""
     if cut.start_pose() is not None:
         return None
     decoder = BulkDecoder(db)
@@ -153,7 +151,8 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
     odo = Odo(Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS), integrator,
               max_wheel_speed_mm_s)
     return judge_kept((poses, enc, sent_s), int(at[0]), cut.staged, odo,
-                      lambda: boot and saw_only_the_log(frames, accepted, decoder))
+                      lambda: boot and life_powered_up(frames, accepted, decoder, poses,
+                                                       log_start=log_start))
 
 
 def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[str, float],
