@@ -124,7 +124,8 @@ def test_an_apply_before_the_logs_second_pose_is_judged_from_power_up(
     right, wrong = _rebooted(-1, apply_at, 0), _rebooted(-1, apply_at, SMALL_Q40)
     assert _x_by_frame(right) == plain
     before, after = _offsets(wrong, plain)
-    assert before <= {0} and after == {-1, -2}
+    assert before <= {0}
+    assert after == {-1, -2}
     path = _written(right, tmp_path / "right.log")
     assert ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0)).passed
     for messages, ok in ((right, True), (wrong, False)):
