@@ -26,6 +26,7 @@ firmware.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -52,7 +53,7 @@ def _robot() -> ic.Robot:
                     p["wheelbase_nm"], p["counter_bits"])
 
 
-def _set_pose_event(events: list[dict[str, Any]]) -> dict[str, Any]:
+def _set_pose_event(events: Iterable[dict[str, Any]]) -> dict[str, Any]:
     [event] = [e for e in events if e["kind"] == "set_pose"]
     return event
 
