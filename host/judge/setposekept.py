@@ -84,7 +84,7 @@ from odocan.host.judge.samples import (
     encoder_frames,
     onboard_samples,
 )
-from odocan.host.judge.stallmerge import merged_allowance_m
+from odocan.host.judge.stallmerge import merged_allowance_m, silent_inside
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.robot import RobotProfile
@@ -177,8 +177,7 @@ def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[st
     if after is None:
         return "fewer than two on-board poses after the APPLY"
     if voiced is None:
-        return _across_stall(poses, enc, c, (start, after), staged, odo,
-                             exact_start=before is None)
+        return _across_stall(seen, c, (before, after), start, staged, odo)
     return _checked(poses, enc, c, (before, after), start, staged, odo, voiced,
                     caught=caught)
 
@@ -208,26 +207,27 @@ def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int]
     return {"fields_kept": [name for name in FIELDS if name not in staged], **judged}
 
 
-def _across_stall(poses: Poses, enc: Encoders, c: int,
-                  around: tuple[tuple[int, tuple[float, float, float]], int],
-                  staged: dict[str, float], odo: Odo, *, exact_start: bool) -> Kept:
-    """``kept_check`` across a stall between the poses around the APPLY's frame ``c``: from
-    ``around``'s start (``exact_start``: the power-up pose) to its first sample after, the bound
-    widened by ``stallmerge.merged_allowance_m`` (every frame heard; a field staged: not made,
-    the merged run it fell in not known); not narrowed (steps across a stall not the fine ones)."""
-    start, after = around
-    why = ("the firmware silent (a stall) between the poses around the APPLY: its steps "
-           "over the frames it missed are not the reference's")
-    if staged:
-        return f"{why}, and a field staged (the merged step it fell in not known)"
-    if not _settled(poses, after, enc, odo):
+def _across_stall(seen: tuple[Poses, Encoders, FloatArray], c: int,
+                  around: tuple[int | None, int], start: tuple[int, tuple[float, float, float]],
+                  staged: dict[str, float], odo: Odo) -> Kept:
+    """``kept_check`` across a stall between the samples ``around`` the APPLY's frame ``c``
+    (before: None, ``start`` the power-up pose), every frame between them heard, the bound
+    widened by ``stallmerge.merged_allowance_m``; not narrowed (steps across a stall are not the
+    fine ones). Not made when a field was staged (the merged run it fell in is not known) or a
+    sample around ``c`` may name a backlog frame (``stallmerge.silent_inside``, ``_settled``)."""
+    poses, enc, sent_s = seen
+    before, after = around
+    why = "the firmware silent (a stall) between the poses around the APPLY"
+    if staged or not silent_inside(sent_s, enc.cycle_s, before, after):
+        return f"{why}, and a field staged or a pose around it the first after the stall"
+    if not all(_settled(poses, i, enc, odo) for i in {after, before - 1 if before else after}):
         return ("the firmware not seen stepping plainly around the APPLY (after a stall: poses "
                 "naming backlog frames, merged steps)")
     steps = _plain_steps(enc, start[0], int(poses.enc[after]), odo)
     if steps is None:
         return f"{why}, and the encoder frames across it not all heard as plain steps"
     judged = _judged(start, _sample(poses, after), steps, c - start[0], staged, odo.geometry,
-                     odo.integrator, exact_start=exact_start,
+                     odo.integrator, exact_start=before is None,
                      gap_m=merged_allowance_m(*steps, odo.geometry, odo.integrator))
     return {"fields_kept": list(FIELDS), **judged}
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from odocan.host.judge.losses import step_vector
 from odocan.host.judge.reference import Geometry, integrate
+from odocan.host.judge.samples import SILENCE_CYCLES, FloatArray
 
 
 def merged_allowance_m(d_left: np.ndarray, d_right: np.ndarray, geometry: Geometry,
@@ -50,3 +51,19 @@ def merged_allowance_m(d_left: np.ndarray, d_right: np.ndarray, geometry: Geomet
     for j in range(1, n + 1):
         best[j] = float(np.max(best[:j] + error[:j, j]))
     return float(best[n])
+
+
+def silent_inside(sent_s: FloatArray, cycle_s: float | None, before: int | None,
+                  after: int) -> bool:
+    """Whether every silence of the firmware (``SILENCE_CYCLES`` encoder cycles ``cycle_s`` or
+    more between two samples' bus times ``sent_s``) from the sample before ``before`` (the
+    life's first when None) to the one after ``after`` lies between ``before`` and ``after``:
+    neither is the first sample after a stall, which may name a frame of its backlog (a long
+    stall's first pose names an old frame whose counter a recent one repeats). False when the
+    DBC gives no cycle time."""
+    if cycle_s is None:
+        return False
+    gaps = np.flatnonzero(np.diff(sent_s) >= SILENCE_CYCLES * cycle_s)
+    low = 0 if before is None else before
+    near = gaps[(gaps >= low - 1) & (gaps <= after)]
+    return bool(np.all((near >= low) & (near < after)))
