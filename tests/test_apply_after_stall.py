@@ -26,6 +26,7 @@ firmware.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -37,6 +38,8 @@ import pytest
 from odocan.firmware import frames as fr
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
+from odocan.host.judge.reference import Geometry, integrate
+from odocan.host.judge.stallmerge import merged_allowance_m
 from odocan.host.judge.stream_analysis import analyze_file
 from tests import independent_checker as ic
 from tests.test_staged_reboot import PMIR, _apply_ack, _live, _rebooted, _written, _x_by_frame
@@ -135,3 +138,28 @@ def test_an_apply_before_the_logs_second_pose_is_judged_from_power_up(
         assert event["kept"] is not None, event.get("kept_not_judged")
         assert event["kept"]["passed"] is ok
         assert report["passed"] is ok
+
+
+@pytest.mark.parametrize("integrator", ["exact", "rk2", "euler"])
+def test_the_merged_runs_allowance_bounds_every_grouping(integrator: str) -> None:
+    """``stallmerge.merged_allowance_m`` bounds the distance between the fine steps' position
+    and that of every grouping of 9 frames into runs taken as single steps (all 256, each run
+    integrated by ``reference.integrate`` as one step of its summed counts), over random counts
+    of pmir's range; a grouping reaches at least a tenth of it (not a vacuous bound)."""
+    geometry = Geometry.of(PMIR)
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        d_left, d_right = rng.integers(-3, 12, size=9), rng.integers(-3, 12, size=9)
+        fine = integrate(d_left, d_right, geometry, integrator)
+        worst = 0.0
+        for mask in range(1 << 8):
+            ends = [k + 1 for k in range(8) if mask >> k & 1] + [9]
+            starts = [0, *ends[:-1]]
+            merged = integrate([int(d_left[a:b].sum()) for a, b in zip(starts, ends, strict=True)],
+                               [int(d_right[a:b].sum()) for a, b in zip(starts, ends, strict=True)],
+                               geometry, integrator)
+            worst = max(worst, math.hypot(merged.x_m[-1] - fine.x_m[-1],
+                                          merged.y_m[-1] - fine.y_m[-1]))
+        bound = merged_allowance_m(d_left, d_right, geometry, integrator)
+        assert worst <= bound + 1e-12
+        assert worst >= 0.1 * bound
