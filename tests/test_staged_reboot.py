@@ -600,8 +600,9 @@ def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
 ) -> None:
     """The MCU stalls 150 ms, then gets a bare APPLY 1, 3 or 8 ticks after (no reboot). The
     correct firmware PASSes, whole and streamed: an APPLY with no pose between the stall and it
-    is not judged and says why (before: analyze FAILed it, 0.03-0.07 mm, the reference's fine
-    steps across the stall against the firmware's merged ones); 3 ticks after, its check starts
+    is judged across the stall, its bound widened by the merged runs' allowance (earlier:
+    analyze FAILed it, 0.03-0.07 mm, the fine steps against the firmware's merged ones; then
+    not judged); 3 ticks after, its check starts
     from the first pose after the stall (it names the latest encoder frame: the firmware caught
     up there; before, not judged), 8 ticks after from the poses after the stall alone; each
     passes, and a wrong firmware moving X by -1.22 LSB there FAILs, and the live judges make
@@ -618,15 +619,11 @@ def test_a_bare_apply_after_a_stall_is_judged_only_from_the_poses_after_it(
     whole = analyze(read_log(path), PMIR, "exact")
     assert whole.passed
     [event] = [e for e in whole.report["events"] if e["kind"] == "set_pose"]
-    if apply_at < 348:
-        assert event["kept"] is None
-        assert event["kept_not_judged"].startswith("the firmware silent (a stall)")
-    else:
-        assert event["kept"]["passed"]
+    assert event["kept"]["passed"]  # 1 tick after: across the stall (tests/test_apply_after_stall)
     assert json.dumps(analyze_file(path, PMIR, "exact", chunk_frames=97)) == json.dumps(
         whole.report)
     if apply_at < 348:
-        return
+        return  # -1.22 LSB hides in the merged runs' allowance (test_apply_after_stall)
     plain = _x_by_frame(_rebooted(0, None, 0, STALL))
     wrong = _rebooted(0, apply_at, -(1 << 27), STALL)
     at = _apply_ack(wrong, fr.ODOM_SET_POSE_ID)

@@ -129,7 +129,7 @@ def _made(tracker: PoseTracker, check: _Open) -> Kept:
         return check.why
     if tracker.integrator is None:
         return "the firmware's integrator not known"
-    before = [s for s in check.samples if s.pose.seq < check.c][-(NARROW_SAMPLES + 3):]
+    before = [s for s in check.samples if s.pose.seq <= check.c][-(NARROW_SAMPLES + 4):]
     after = [s for s in check.samples if s.pose.seq > check.c][:NARROW_SAMPLES + 1]
     used = before + after
     first = used[0].pose.seq if used else check.c

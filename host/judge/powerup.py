@@ -47,6 +47,17 @@ def starts_at_power_up(
     return counted and holds_first_cycle(None if first is None else int(first[0]))
 
 
+def life_powered_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+                    onboard: Poses, *, log_start: bool) -> bool:
+    """Whether ``frames``, read from the first frame of a firmware life, start at its power-up:
+    a reboot's life when the firmware counted only these frames (``saw_only_the_log``); the
+    log's first life (``log_start``) by the log's own rule (``starts_at_power_up``: a log cut
+    after the power-up must not be judged from (0, 0, 0))."""
+    if log_start:
+        return starts_at_power_up(frames, accepted, decoder, onboard)
+    return saw_only_the_log(frames, accepted, decoder)
+
+
 def holds_first_cycle(counter: int | None) -> bool:
     """The log's first accepted ODOM_STATUS frame (its ``counter``) is of the firmware's first
     cycle (E2E counters start at 0 at power-up; two frames a cycle: the summary, then one

@@ -40,16 +40,15 @@ seen stepping plainly on each side (the sample before the last one before C, and
 the first after C, must continue them by the plain steps between, nothing staged: after a stall
 the first poses name backlog frames the window cannot resolve, and merged steps leave the fine
 reference): the fitted start alone judges that life then. A stall (the firmware silent
-``SILENCE_CYCLES`` encoder cycles on the bus: it takes the frames it missed merged, not in the
-reference's fine steps) between the sample before the last one before C and the one after the
-first after C leaves the APPLY unjudged too (before, a correct firmware's APPLY 1-3 ticks after
-a 150 ms stall FAILed, 0.03-0.07 mm); one further off only bounds the samples that narrow the
-check (``_voiced``: those after it, less the first), so an APPLY a few poses after a stall is
-judged from the poses after it. When the last sample before C is the first after the stall and
-names the latest encoder frame heard before it (``_caught_up``: the firmware took every frame
-it missed, merged, and names no backlog frame), the firmware and the reference agree again
-there: the check starts from it (the side before C is that one sample), so an APPLY 3-4 ticks
-after a 150 ms stall is judged too; one with no sample between the stall and C is not.
+``SILENCE_CYCLES`` encoder cycles: it takes the frames it missed merged) further off than the
+samples around C only bounds the samples that narrow the check (``_voiced``: those after it,
+less the first): an APPLY a few poses after a stall is judged from the poses after it. When
+the last sample before C is the first after the stall and names the latest encoder frame heard
+before it (``_caught_up``: the firmware took every frame it missed, merged, and names no
+backlog frame), the firmware and the reference agree again there: the check starts from it
+(the side before C is that one sample). With no sample between the stall and C (before, not
+judged) it is judged from the two samples around C when every frame between them was heard,
+the bound widened by how far merged runs of them leave the fine steps (``_across_stall``).
 A gap of one frame (the recorder lost a frame the firmware took, or the firmware took two
 periods merged) between the samples around a bare APPLY, or between two samples on a side,
 is judged across: the reference takes its merged step, and the bound is widened by how far the
@@ -70,7 +69,7 @@ import numpy as np
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.gapbound import gap_allowance_m, period_bounds
 from odocan.host.judge.livesetpose import FIELDS
-from odocan.host.judge.powerup import saw_only_the_log
+from odocan.host.judge.powerup import life_powered_up
 from odocan.host.judge.reference import Geometry, SpeedBound, integrate
 from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
@@ -85,6 +84,7 @@ from odocan.host.judge.samples import (
     encoder_frames,
     onboard_samples,
 )
+from odocan.host.judge.stallmerge import merged_allowance_m, silent_inside
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.robot import RobotProfile
@@ -120,23 +120,22 @@ def window(position: int, head_start: int, tail_stop: int) -> tuple[int, int]:
 def check_cut(read: Callable[[int, int], FrameArrays], head: tuple[int, bool], tail_stop: int,
               cut: SetPoseCut, robot: RobotProfile, integrator: str, db: DatabaseSpec,
               max_wheel_speed_mm_s: SpeedBound) -> Kept:
-    """``kept_check`` of the set-pose ``cut`` over its ``window``: ``read(lo, hi)`` gives the
-    log's frames [lo, hi) (whole or streamed alike); ``head``: the first frame of the life
-    before the cut and whether it starts at a reboot; ``tail_stop``: the end of the life the
-    cut opens."""
+    """``kept_check`` of the set-pose ``cut`` over its ``window``: ``read(lo, hi)``, the log's
+    frames [lo, hi) (whole or streamed alike); ``head``: the first frame of the life before the
+    cut, whether it starts at a reboot; ``tail_stop``: the end of the life the cut opens."""
     lo, hi = window(cut.position, head[0], tail_stop)
     return kept_check(read(lo, hi), lo, cut, robot, integrator, db, max_wheel_speed_mm_s,
-                      boot=head[1] and lo == head[0])
+                      boot=(head[1] or head[0] == 0) and lo == head[0], log_start=lo == 0)
 
 
 def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfile,
                integrator: str, db: DatabaseSpec, max_wheel_speed_mm_s: SpeedBound, *,
-               boot: bool = False) -> Kept:
+               boot: bool = False, log_start: bool = False) -> Kept:
     """The check of the module docstring for ``cut`` (a set-pose whose fields were not all
     staged) over ``frames``, the log's frames from position ``lo`` (``window``); None when
     every field was staged, why not (words) when the check cannot be made. ``boot``:
-    ``frames`` start where the firmware started (a reboot's life, read from its first
-    frame)."""
+    ``frames`` start where the firmware may have started (a life read from its first frame;
+    ``log_start``: the log's, ``powerup.life_powered_up``)."""
     if cut.start_pose() is not None:
         return None
     decoder = BulkDecoder(db)
@@ -152,7 +151,8 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
     odo = Odo(Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS), integrator,
               max_wheel_speed_mm_s)
     return judge_kept((poses, enc, sent_s), int(at[0]), cut.staged, odo,
-                      lambda: boot and saw_only_the_log(frames, accepted, decoder))
+                      lambda: boot and life_powered_up(frames, accepted, decoder, poses,
+                                                       log_start=log_start))
 
 
 def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[str, float],
@@ -177,8 +177,7 @@ def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[st
     if after is None:
         return "fewer than two on-board poses after the APPLY"
     if voiced is None:
-        return ("the firmware silent (a stall) between the poses around the APPLY: its steps "
-                "over the frames it missed are not the reference's")
+        return _across_stall(seen, c, (before, after), start, staged, odo)
     return _checked(poses, enc, c, (before, after), start, staged, odo, voiced,
                     caught=caught)
 
@@ -206,6 +205,31 @@ def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int]
     elif judged["passed"]:  # from the power-up pose: narrowed by more samples after the APPLY
         judged["passed"] = _from_power_up(poses, after, c, enc, staged, odo, voiced[1])
     return {"fields_kept": [name for name in FIELDS if name not in staged], **judged}
+
+
+def _across_stall(seen: tuple[Poses, Encoders, FloatArray], c: int,
+                  around: tuple[int | None, int], start: tuple[int, tuple[float, float, float]],
+                  staged: dict[str, float], odo: Odo) -> Kept:
+    """``kept_check`` across a stall between the samples ``around`` the APPLY's frame ``c``
+    (before: None, ``start`` the power-up pose), every frame between them heard, the bound
+    widened by ``stallmerge.merged_allowance_m``; not narrowed (steps across a stall are not the
+    fine ones). Not made when a field was staged (the merged run it fell in is not known) or a
+    sample around ``c`` may name a backlog frame (``stallmerge.silent_inside``, ``_settled``)."""
+    poses, enc, sent_s = seen
+    before, after = around
+    why = "the firmware silent (a stall) between the poses around the APPLY"
+    if staged or not silent_inside(sent_s, enc.cycle_s, before, after):
+        return f"{why}, and a field staged or a pose around it the first after the stall"
+    if not all(_settled(poses, i, enc, odo) for i in {after, before - 1 if before else after}):
+        return ("the firmware not seen stepping plainly around the APPLY (after a stall: poses "
+                "naming backlog frames, merged steps)")
+    steps = _plain_steps(enc, start[0], int(poses.enc[after]), odo)
+    if steps is None:
+        return f"{why}, and the encoder frames across it not all heard as plain steps"
+    judged = _judged(start, _sample(poses, after), steps, c - start[0], staged, odo.geometry,
+                     odo.integrator, exact_start=before is None,
+                     gap_m=merged_allowance_m(*steps, odo.geometry, odo.integrator))
+    return {"fields_kept": list(FIELDS), **judged}
 
 
 def _overlap(poses: Poses, around: tuple[int, int], c: int, enc: Encoders,
