@@ -81,7 +81,6 @@ from odocan.host.judge.gapbound import period_bounds
 from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.resendalias import aged_past_alias
 from odocan.host.judge.resentdistance import resends_too
-from odocan.host.judge.skipdefect import SkipDown
 from odocan.host.judge.samples import (
     SILENCE_CYCLES,
     Encoders,
@@ -89,6 +88,7 @@ from odocan.host.judge.samples import (
     IntArray,
     match_encoder,
 )
+from odocan.host.judge.skipdefect import SkipDown
 from odocan.host.protocol.busfacts import ENC_PERIOD_US as ENCODER_PERIOD_US
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import NM_PER_M, RobotProfile
