@@ -35,7 +35,11 @@ from odocan.sim.robot import load
 from tests.firmware_patch import after_lock_outs, distance_taken_off, edited_after
 from tests.test_capture_jitter import _jittered
 from tests.test_live_jitter_lockout import _frames_taken
-from tests.test_twist_jitter_distance import WIRE_MM, _float64_distance_off_mm
+from tests.test_twist_jitter_distance import (
+    WIRE_MM,
+    _float64_distance_off_mm,
+    _live_distance_passes,
+)
 
 DRIVE = ("kobuki", 60, 6, "delay=0.1:15,seed=7")  # robot, s, seed, faults
 JITTER_SEED = 2
@@ -74,8 +78,8 @@ def _drive(tmp_path: Path, wrong: AbstractContextManager[list[int]]
 
 
 def _distance_verdicts(moved: Path) -> tuple[dict[str, bool], int]:
-    """The DISTANCE verdict of the whole-log and the streamed analyze, and the encoder frames
-    the host's E2E took."""
+    """The DISTANCE verdict of the whole-log and the streamed analyze and the live judge's
+    (``livedistance``), and the encoder frames the host's E2E took."""
     robot = DRIVE[0]
     whole = analyze(read_log(moved), load(robot)).report
     streamed = moved.with_suffix(".json")
@@ -83,7 +87,8 @@ def _distance_verdicts(moved: Path) -> tuple[dict[str, bool], int]:
           "--report", str(streamed)])
     streamed_report = json.loads(streamed.read_text())
     return ({"whole": whole["onboard_distance_vs_reference"]["passed"],
-             "streamed": streamed_report["onboard_distance_vs_reference"]["passed"]},
+             "streamed": streamed_report["onboard_distance_vs_reference"]["passed"],
+             "live": _live_distance_passes(moved, robot)},
             int(whole["e2e"]["WHEEL_ENCODERS"]["ok"]))
 
 
