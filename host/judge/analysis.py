@@ -125,7 +125,7 @@ from odocan.host.judge.evidencechoice import chosen_seen
 from odocan.host.judge.finalstate import firmware_fields, latched_fields
 from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
-from odocan.host.judge.losses import firmware_losses, loss_allowance
+from odocan.host.judge.losses import firmware_losses, firmware_ok_spans, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import (
     Life,
@@ -386,7 +386,9 @@ def _analyze_life(
                          DistanceJudge(robot, max_wheel_speed_mm_s, power_up and not start_pose,
                                        [b for b in stalls.tolist() if b > ref_all.start],
                                        [(a, z) for a, z, _ in losses],
-                                       twin_paths(enc, robot, ref_all.start)), seen)
+                                       twin_paths(enc, robot, ref_all.start),
+                                       firmware_ok_spans(frames, accepted, decoder, enc,
+                                                         power_up and start_pose is None)), seen)
     vs_ref["max_position_error_beyond_allowance_m"] = float(
         np.max(pos_err - allowance - twin_allowed))
     passed = bool(

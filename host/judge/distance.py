@@ -39,6 +39,11 @@ Where the firmware's steps are not the reference's:
   (``loss_spans``, ENC_E2E_LOST grew): it took several fine steps as one, |sum dS_i| <= sum
   |dS_i|, so its path may grow less, by up to the fine path of the span (the reference's own
   sum over it; ``down``). A stall's span ends at the first sample naming a frame after it;
+* a span where the firmware's ENC_E2E_OK grew by n less than the host's accepted frames
+  (``skipped``, ``losses.ok_count_spans``: the host's E2E, judging its window from jittered bus
+  times, took frames the firmware refused): its path may grow less by n times the largest
+  defect sum |dS_i| - |sum dS_i| of up to n + 1 consecutive steps there (``skipdefect``;
+  ``down``), not the span's whole fine path: 0 where the midpoint does not reverse;
 * an encoder frame with a twin (``twin_paths``): the firmware may have stepped through the
   twin (``up``: the steps into and out of it) or taken it for the frame (``down``: the
   reference's steps into and out of the frame).
@@ -83,6 +88,7 @@ from odocan.host.judge.samples import (
     IntArray,
     match_encoder,
 )
+from odocan.host.judge.skipdefect import SkipDown
 from odocan.host.protocol.busfacts import ENC_PERIOD_US as ENCODER_PERIOD_US
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import NM_PER_M, RobotProfile
@@ -188,7 +194,9 @@ class DistanceJudge:
     stall_breaks: list[int] = field(default_factory=list)  # frames the firmware resumed on
     loss_spans: list[tuple[int, int]] = field(default_factory=list)  # (first, last) frames
     twins: dict[int, tuple[float, float]] = field(default_factory=dict)  # frame: up, down (m)
+    skipped: list[tuple[int, int, int]] = field(default_factory=list)  # losses.ok_count_spans
     _cols: dict[str, np.ndarray] = field(default_factory=dict)  # frames kept: g, units, n, c, up
+    _skip: SkipDown = field(init=False, repr=False)  # the allowance of ``skipped``
     _carry: tuple[int, int, int, float, int | None] = (0, 0, 0, 0.0, None)  # sums, last seq
     _anchors: dict[int, int] = field(default_factory=dict)  # frame -> path units at it
     _stall_ends: dict[int, int] = field(default_factory=dict)  # break -> frame its span ends
@@ -202,6 +210,7 @@ class DistanceJudge:
     def __post_init__(self) -> None:
         if self.exact:  # at power-up: 0 at the first frame
             self.feasible = Feasible(0.0, 0.0)
+        self._skip = SkipDown(self.skipped)
 
     def feed_frames(self, g: IntArray, d_left: IntArray, d_right: IntArray, seq: IntArray
                     ) -> None:
@@ -211,7 +220,8 @@ class DistanceJudge:
             return
         m_left, m_right = firmware_m_per_count(self.robot)
         units0, n0, c0, up0, last_seq = self._carry
-        ds_m = np.abs(0.5 * (d_left * m_left + d_right * m_right))
+        signed_m = 0.5 * (d_left * m_left + d_right * m_right)
+        ds_m = np.abs(signed_m)
         units = units0 + np.cumsum(np.rint(ds_m * UNITS_PER_M).astype(np.int64))
         counts = c0 + np.cumsum(np.abs(d_left) + np.abs(d_right))
         n = n0 + np.arange(1, len(g) + 1, dtype=np.int64)
@@ -221,7 +231,8 @@ class DistanceJudge:
             if 0 <= frame - int(g[0]) < len(g):
                 extra[frame - int(g[0])] += up_m
         up = up0 + np.cumsum(extra)
-        new = {"g": g, "units": units, "n": n, "c": counts, "up": up}
+        new = {"g": g, "units": units, "n": n, "c": counts, "up": up,
+               "skip": self._skip.feed(g, signed_m)}
         self._cols = ({k: np.concatenate((self._cols[k], v)) for k, v in new.items()}
                       if self._cols else new)
         self._carry = (int(units[-1]), int(n[-1]), int(counts[-1]), float(up[-1]), int(seq[-1]))
@@ -295,7 +306,7 @@ class DistanceJudge:
         r = self._r0 + (r - self._r0) - WIRE_MM * np.round((r - self._r0) / WIRE_MM)
         base = WIRE_SLACK_MM + 1e3 * (cols["n"][k] * STEP_SLACK_M + cols["c"][k] * COUNT_SLACK_M)
         self.feasible.take(r - base, r + base, 1e3 * cols["up"][k],
-                           1e3 * self._lower_m(e, cols["units"][k]))
+                           1e3 * (self._lower_m(e, cols["units"][k]) + cols["skip"][k]))
         self.samples += len(e)
         self._trim(int(e[-1]))
 

@@ -312,3 +312,41 @@ def step_vector(
     if integrator == "exact":
         ds = ds * np.sinc((h_new - h_old) / (2.0 * np.pi))
     return ds * np.cos(direction), ds * np.sin(direction)
+
+
+
+def ok_count_spans(ok: IntArray, upto: IntArray, made: IntArray) -> list[tuple[int, int, int]]:
+    """Where the firmware took fewer of the log's encoder frames than the host did: (first,
+    last, n) per pair of ENC_E2E pages between which its ENC_E2E_OK (``ok``, u16 wrapping, per
+    page) grew by n less than the host's accepted frames (``upto``: the latest accepted encoder
+    frame before each page, ``made``: ``_made_from``'s earliest). The host's E2E judges the
+    window's periods from the bus times; a recorder's jittered stamps can make it take a frame
+    the firmware refused (``distance.DistanceJudge.skipped``). A frame on the bus before a page
+    but taken after it shows as n = 1 then -1 (none). Shared with the streamed form
+    (``stream_losses.StreamLosses.ok_spans``)."""
+    if len(ok) < 2:
+        return []
+    fewer = np.diff(upto) - ((ok[1:] - ok[:-1]) & 0xFFFF)
+    return [(int(made[k]), int(upto[k + 1]), int(fewer[k])) for k in np.flatnonzero(fewer > 0)]
+
+
+def firmware_ok_spans(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders,
+    power_up: bool = False,
+) -> list[tuple[int, int, int]]:
+    """``ok_count_spans`` of the whole log (none without the ENC_E2E_OK page); ``power_up``:
+    the frames start at the firmware's power-up (ENC_E2E_OK 1 at the primed frame, 0)."""
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", LOST_PAGE)
+    except DecodeError:
+        return []
+    if "ENC_E2E_OK" not in page or len(enc.seq) < 2:
+        return []
+    keep = accepted[page["index"]]
+    index, ok = page["index"][keep], page["ENC_E2E_OK"][keep].astype(np.int64)
+    upto = np.maximum(np.searchsorted(enc.index, index) - 1, 0)
+    made = _made_from(frames, accepted, decoder, enc, index)
+    if power_up:
+        ok, upto, made = (np.concatenate(([first], a)) for first, a in ((1, ok), (0, upto),
+                                                                        (0, made)))
+    return ok_count_spans(ok, upto, made)

@@ -323,7 +323,8 @@ def _life(
     distance = stream_distance(frames, db, robot, integrator, e0, DistanceJudge(
         robot, max_wheel_speed_mm_s, power_up and start_pose is None,
         [b for b in breaks.tolist() if b > e0],
-        [(a, z) for a, z, _ in spans]))
+        [(a, z) for a, z, _ in spans],
+        skipped=first.losses.ok_spans(power_up and start_pose is None)))
     after_span = drops.allowance(np.array([last + 1 for _, last, _ in spans], dtype=np.int64))
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m

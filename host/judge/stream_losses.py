@@ -25,6 +25,7 @@ from odocan.host.judge.losses import (
     OneSteps,
     heading_steps,
     lost_beyond_gaps,
+    ok_count_spans,
     overflow_reported_after,
     step_vector,
     worst_runs_m,
@@ -55,6 +56,7 @@ class StreamLosses:
     _last_seq: int = 0  # the sequence number of the last of them
     _last_enc_t: float = -math.inf  # the time of the last of them
     _pages: list[tuple[int, int, int, float]] = field(default_factory=list)  # upto, seq, lost, t
+    _ok: list[int] | None = field(default_factory=list)  # their ENC_E2E_OK (None: no signal)
     _summaries_t: list[float] = field(default_factory=list)  # accepted page 0 times
     _summaries_upto: list[int] = field(default_factory=list)  # encoder frames stamped <= each
     _in_order: bool = True  # no summary stamped before an encoder frame of an earlier chunk
@@ -74,6 +76,10 @@ class StreamLosses:
         if len(index):
             self._add_pages(index + self._offset, page["ENC_E2E_LOST"][keep].astype(np.int64),
                             chunk.timestamp_s[index], enc)
+            if self._ok is not None and "ENC_E2E_OK" in page:
+                self._ok += page["ENC_E2E_OK"][keep].astype(np.int64).tolist()
+            else:
+                self._ok = None
         reported = overflow_reported_after(chunk, accepted, self.decoder,
                                             int(index[-1]) if len(index) else -1)
         self._overflow_after = reported if len(index) else (self._overflow_after or reported)
@@ -105,6 +111,19 @@ class StreamLosses:
         if self._overflow_after:
             spans.append((tail, n_enc - 1, n_enc - 1 - tail))
         return spans
+
+    def ok_spans(self, power_up: bool = False) -> list[tuple[int, int, int]]:
+        """``losses.firmware_ok_spans`` of the life fed (``power_up``: ENC_E2E_OK 1 at the
+        primed frame, the first)."""
+        if not self._signal or self._ok is None or not self._pages or self._enc_count < 2:
+            return []
+        upto = np.array([p[0] for p in self._pages], dtype=np.int64)
+        made = self._made_from(upto, np.array([p[3] for p in self._pages]))
+        ok = np.array(self._ok, dtype=np.int64)
+        if power_up:
+            ok, upto, made = (np.concatenate(([first], a)) for first, a in ((1, ok), (0, upto),
+                                                                            (0, made)))
+        return ok_count_spans(ok, upto, made)
 
     def _made_from(self, upto: IntArray, page_t: FloatArray) -> IntArray:
         """``losses._made_from`` from the carried summaries."""
