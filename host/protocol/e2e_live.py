@@ -110,8 +110,9 @@ class E2EMonitor:
         self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
         self.holds: bool = False  # "held" for a frame the stamps cannot decide (docstring)
         self._held_s: float | None = None  # the bus time of the frame held last
-        # told once (then None) of the first frame of a message with a cycle heard off its
-        # period (identifier, payload, bus time s): a hold's context kept from it (livesettle)
+        # told once (then None) of the first frame of a message checked every period (as
+        # WHEEL_ENCODERS, whose frames are held) heard off its period (identifier, payload,
+        # bus time s): a hold's context kept from it (livesettle); a clean drive tells none
         self.off_time: Callable[[int, bytes, float], None] | None = None
         self._releases = ReleaseWatch(min((c.cycle_s for c in self._configs.values()
                                            if c.min_periods == 0 and c.cycle_s), default=0.01))
@@ -139,7 +140,7 @@ class E2EMonitor:
                     live.one_from_s <= timestamp_s - last <= live.one_to_s
                     and (live.min_periods or (counter - live.last) & COUNTER_MASK == 1)):
                 periods = self._periods(live, timestamp_s - last, last, crc_ok, counter)
-                if self.off_time is not None and live.cycle_s is not None:
+                if live.min_periods == 0 and self.off_time is not None and live.cycle_s:
                     self.off_time, told = None, self.off_time
                     told(can_id, data, timestamp_s)
                 if (self.holds and crc_ok and live.last >= 0 and live.min_periods == 0
