@@ -255,8 +255,8 @@ class BusMonitor:
         elif int(s["REQUEST_ID"]) == self._config_id:
             follow_config_ack(self, self.config, int(s["REQUEST_COUNTER"]),  # the firmware's
                               int(s["RESULT"]) == 0, self._bus_time_s)  # robot: the judges' too
-        if (event := self.secoc.refusal(shown, self._bus_time_s)) is not None:
-            self.events.append(event)
+        if (refused := self.secoc.refusal(shown, self._bus_time_s)) is not None:
+            self.events.append(refused)
 
     def _on_encoders(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         frame = (int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]), self._bus_time_s,

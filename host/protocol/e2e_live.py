@@ -141,7 +141,7 @@ class E2EMonitor:
                     and (live.min_periods or (counter - live.last) & COUNTER_MASK == 1)):
                 periods = self._periods(live, timestamp_s - last, last, crc_ok, counter)
                 if live.min_periods == 0 and self.off_time is not None and live.cycle_s:
-                    self.off_time, told = None, self.off_time
+                    told, self.off_time = self.off_time, None
                     told(can_id, data, timestamp_s)
                 if (self.holds and crc_ok and live.last >= 0 and live.min_periods == 0
                         and readings_differ(live.state, timestamp_s - last,
