@@ -63,21 +63,9 @@ class SettleHold:
         self._start: tuple[int, float] | None = None  # the last frame taken before: COUNTER, s
         self.until_s = math.inf  # bus time the hold is judged at (s)
         self.holds = 0  # holds made
-        # the latest frames judged, and whether taken: a hold's context (``_context``), kept
-        # from the first frame heard off its period (``keep``): a clean drive keeps none
-        self.recent: deque[tuple[can.Message, bool]] | None = None
+        # the latest frames judged, and whether taken: a hold's context (``_context``)
+        self.recent: deque[tuple[can.Message, bool]] = deque(maxlen=CONTEXT_FRAMES)
         self._page: tuple[int, int, int, int] | bool | None = False  # False: not read yet
-
-    def keep(self, *_frame: object) -> None:
-        """Keep a hold's context from now on (``E2EMonitor.off_time``, given the frame heard
-        off its period: a hold needs one first)."""
-        if self.recent is None:
-            self.recent = deque(maxlen=CONTEXT_FRAMES)
-
-    def judged(self, msg: can.Message, taken: bool) -> None:
-        """``msg`` was judged (``taken`` or not): noted in the context once it is kept."""
-        if self.recent is not None:
-            self.recent.append((msg, taken))
 
     def open(self, msg: can.Message, now_s: float) -> None:
         """The encoder frame ``msg`` (heard at local ``now_s``) was held: hold from it."""
@@ -146,9 +134,8 @@ class SettleHold:
         encoder frames before the last one taken at or before that page (else the last taken)
         have their CRC broken (their stamps kept: the sequence starts at that one); without
         one, the last taken is re-made from its COUNTER and bus time."""
-        recent = self.recent if self.recent is not None else ()
-        context = [msg for msg, _ in recent]
-        taken = [k for k, (msg, ok) in enumerate(recent) if ok and self._is_encoder(msg)]
+        context = [msg for msg, _ in self.recent]
+        taken = [k for k, (msg, ok) in enumerate(self.recent) if ok and self._is_encoder(msg)]
         page = self._last_page(context)
         first = next((k for k in reversed(taken) if page is not None and k <= page),
                      taken[-1] if taken else None)

@@ -110,7 +110,6 @@ class BusMonitor:
         self.e2e = E2EMonitor(self.db)
         self.e2e.holds = True  # frames the stamps cannot decide wait for the evidence
         self.settle = SettleHold(self.e2e, self.db)
-        self.e2e.off_time = self.settle.keep  # a hold's context kept from then (livesettle)
         self._e2e_configs = e2e_messages(self.db)
         self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
         self.distance = LiveDistance(robot)  # ODOM_TWIST DISTANCE (host.judge.livedistance)
@@ -172,7 +171,7 @@ class BusMonitor:
         if status == HELD:  # not judged yet: the frames from it wait (livesettle)
             self.settle.open(msg, now_s)
             return
-        self.settle.judged(msg, status in ACCEPTED)  # a hold's context (livesettle)
+        self.settle.recent.append((msg, status in ACCEPTED))  # a hold's context (livesettle)
         self.frames_total += 1
         self.load.add(msg)
         if message is None:

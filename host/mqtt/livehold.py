@@ -3,15 +3,12 @@ decide, as the monitor does (``host.judge.livesettle``; issue #11, one judge: th
 bridge and ``analyze`` take the same frames).
 
 The bridge calls each CAN ID's plan directly (``host.mqtt.liveplan``). While a hold waits, the
-robot's plans are swapped in place for ones that only keep the frame (``hold``). A hold's
-context (``recent``, the frames judged before it) is kept only from the first frame heard off
-its period (``keep``, told by ``E2EMonitor.off_time``: a hold's frame is one): then every plan
-is wrapped to note its frame taken (``liveplan.kept``; a frame refused or held amends it), and
-a clean drive's frames pay nothing for holds at all. When the hold is due the plans come back,
-and the frames held are fed to them again: those ``SettleHold`` judged, by plans whose E2E
-check gives the encoder frames that verdict (``RobotTelemetry.forced_plans``,
-``E2EMonitor.check_as``), the others by the usual plans. Their publications come out at once,
-with the frame that ended the hold.
+robot's plans are swapped in place for ones that only keep the frame (``hold``): the frames
+that are not held pay nothing for it but one append to ``recent`` (a hold's context, the
+frames judged before it). When the hold is due the plans come back, and the frames held are
+fed to them again: those ``SettleHold`` judged, by plans whose E2E check gives the encoder
+frames that verdict (``RobotTelemetry.forced_plans``, ``E2EMonitor.check_as``), the others by
+the usual plans. Their publications come out at once, with the frame that ended the hold.
 """
 
 from __future__ import annotations
@@ -22,7 +19,7 @@ from typing import TYPE_CHECKING
 import can
 
 from odocan.host.judge.livesettle import CONTEXT_FRAMES, SettleHold
-from odocan.host.mqtt.liveplan import Plan, Publication, kept
+from odocan.host.mqtt.liveplan import Plan, Publication
 
 if TYPE_CHECKING:
     from odocan.host.mqtt.telemetry import RobotTelemetry
@@ -40,38 +37,12 @@ class BridgeHold:
     def __init__(self, telemetry: RobotTelemetry) -> None:
         self._telemetry = telemetry
         self.settle = SettleHold(telemetry.e2e, telemetry.db)
-        self.recent: deque[Recent] | None = None  # the frames judged, from ``keep``
+        self.recent: deque[Recent] = deque(maxlen=CONTEXT_FRAMES)  # the frames judged
         self._plans: dict[int, Plan] | None = None  # the usual plans while swapped out
         self.verdict: bool | None = None  # the verdict the forced plans' check gives
 
-    def keep(self, key: int, data: bytes, t_s: float) -> None:
-        """Keep a hold's context from this frame on (``E2EMonitor.off_time``: the frame of
-        ``key``, ``data``, bus time ``t_s`` heard off its period, noted taken unless its plan
-        refuses or holds it): every plan wrapped to note its frame (``liveplan.kept``)."""
-        if self.recent is not None:
-            return
-        recent = self.recent = deque(maxlen=CONTEXT_FRAMES)
-        plans = self._telemetry.plans
-        if key in plans:  # an 11-bit routed message's frame: its plan runs now, unwrapped
-            recent.append((t_s, key, data, True))
-        for can_id, plan in plans.items():
-            plans[can_id] = kept(recent.append, can_id, plan)
-
-    def refused(self, t_s: float, can_id: int, data: bytes) -> None:
-        """A routed frame refused: noted so in the context (kept, it was noted taken)."""
-        recent = self.recent
-        if recent is None:
-            return
-        if recent and recent[-1][:3] == (t_s, can_id, data):
-            recent.pop()
-        recent.append((t_s, can_id, data, False))
-
     def open(self, can_id: int, data: bytes, t_s: float) -> list[Publication]:
-        """The encoder frame (``can_id``, ``data``, bus time ``t_s``) was held: hold from it
-        (not in the context: noted taken by its plan, taken back)."""
-        recent = self.recent
-        if recent and recent[-1][:3] == (t_s, can_id, data):
-            recent.pop()
+        """The encoder frame (``can_id``, ``data``, bus time ``t_s``) was held: hold from it."""
         self._context()
         self.settle.open(_message(t_s, can_id, data), t_s)
         self._swap()
@@ -111,10 +82,6 @@ class BridgeHold:
 
     def _context(self) -> None:
         """The frames judged before the hold, as ``SettleHold`` reads them."""
-        if self.recent is None:
-            return
-        self.settle.keep()
-        assert self.settle.recent is not None
         self.settle.recent.clear()
         self.settle.recent.extend((_message(t_s, can_id, data), taken)
                                   for t_s, can_id, data, taken in self.recent)

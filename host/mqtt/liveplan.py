@@ -38,25 +38,8 @@ ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
 
 
 def plans(telemetry: RobotTelemetry, routes: dict[int, Route]) -> dict[int, Plan]:
-    """Every route's plan for ``telemetry``, by 11-bit identifier (each noting its frame in a
-    hold's context once one is kept: ``kept``)."""
-    made = {can_id: plan_of(telemetry, can_id, route) for can_id, route in routes.items()}
-    recent = telemetry.hold.recent
-    if recent is None:
-        return made
-    return {can_id: kept(recent.append, can_id, plan) for can_id, plan in made.items()}
-
-
-def kept(note: Callable[[tuple[float, int, bytes, bool]], None], can_id: int, plan: Plan
-         ) -> Plan:
-    """``plan`` noting its frame first, taken, in a hold's context (``host.mqtt.livehold``: a
-    frame its check refuses or holds amends the note)."""
-
-    def kept_plan(t_s: float, data: bytes) -> list[Publication]:
-        note((t_s, can_id, data, True))
-        return plan(t_s, data)
-
-    return kept_plan
+    """Every route's plan for ``telemetry``, by 11-bit identifier."""
+    return {can_id: plan_of(telemetry, can_id, route) for can_id, route in routes.items()}
 
 
 def plan_of(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
@@ -80,11 +63,13 @@ def _handled(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
     check, tracker, frames = telemetry.e2e.check, telemetry.tracker, telemetry.frames
     refused, undecodable = telemetry._refused, telemetry._undecodable
     name, decode, handler, advances = route.name, route.decode, route.handler, route.advances
+    recent = telemetry.hold.recent.append  # a hold's context (host.mqtt.livehold)
 
     def plan(t_s: float, data: bytes) -> list[Publication]:
         status = check(can_id, data, False, t_s)  # the window widens with time (by position)
         if status not in ACCEPTED_E2E:
             return refused(route, can_id, data, t_s, status)
+        recent((t_s, can_id, data, True))
         if not advances:
             tracker.advance(t_s)
         try:  # E2E-valid yet undecodable, e.g. a multiplexer value the DBC does not define
@@ -106,11 +91,13 @@ def _counted(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
     """A message without a handler (another node's, e.g. MOTOR_CMD): checked and counted."""
     check, tracker, frames = telemetry.e2e.check, telemetry.tracker, telemetry.frames
     refused, name = telemetry._refused, route.name
+    recent = telemetry.hold.recent.append  # a hold's context (host.mqtt.livehold)
 
     def plan(t_s: float, data: bytes) -> list[Publication]:
         status = check(can_id, data, False, t_s)
         if status not in ACCEPTED_E2E:
             return refused(route, can_id, data, t_s, status)
+        recent((t_s, can_id, data, True))
         tracker.advance(t_s)
         frames[name] = frames.get(name, 0) + 1
         counts = telemetry._window.counts

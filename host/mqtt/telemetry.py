@@ -130,7 +130,6 @@ class RobotTelemetry(CommandFollowing):
         self.e2e = E2EMonitor(self.db)
         self.e2e.holds = True  # frames the stamps cannot decide wait for the evidence
         self.hold = BridgeHold(self)  # ... held here (host.mqtt.livehold)
-        self.e2e.off_time = self.hold.keep  # its context kept from a frame off its period
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
         self.distance = LiveDistance(robot_of(name, geometry, counter_bits))  # DISTANCE judged
         self.twist = LiveTwist(geometry, counter_bits)  # LINEAR_VEL, ANGULAR_VEL judged
@@ -213,7 +212,7 @@ class RobotTelemetry(CommandFollowing):
         if status == HELD:
             return self.hold.open(can_id, data, t_s)
         if route is not None:  # a hold's context (livehold)
-            self.hold.refused(t_s, can_id, data)
+            self.hold.recent.append((t_s, can_id, data, False))
         tracker = self.tracker  # ``advance``: settles the pose halves heard half a cycle before
         tracker.advance(t_s)
         if status in CRC_RIGHT_REFUSED and route is not None \

@@ -7,7 +7,6 @@ stalled recorder's release read wide (``host.protocol.e2e_evidence.ReleaseWatch`
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from math import isfinite
 from typing import TYPE_CHECKING
 
@@ -110,10 +109,6 @@ class E2EMonitor:
         self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
         self.holds: bool = False  # "held" for a frame the stamps cannot decide (docstring)
         self._held_s: float | None = None  # the bus time of the frame held last
-        # told once (then None) of the first frame of a message checked every period (as
-        # WHEEL_ENCODERS, whose frames are held) heard off its period (identifier, payload,
-        # bus time s): a hold's context kept from it (livesettle); a clean drive tells none
-        self.off_time: Callable[[int, bytes, float], None] | None = None
         self._releases = ReleaseWatch(min((c.cycle_s for c in self._configs.values()
                                            if c.min_periods == 0 and c.cycle_s), default=0.01))
 
@@ -140,9 +135,6 @@ class E2EMonitor:
                     live.one_from_s <= timestamp_s - last <= live.one_to_s
                     and (live.min_periods or (counter - live.last) & COUNTER_MASK == 1)):
                 periods = self._periods(live, timestamp_s - last, last, crc_ok, counter)
-                if live.min_periods == 0 and self.off_time is not None and live.cycle_s:
-                    told, self.off_time = self.off_time, None
-                    told(can_id, data, timestamp_s)
                 if (self.holds and crc_ok and live.last >= 0 and live.min_periods == 0
                         and readings_differ(live.state, timestamp_s - last,
                                             (counter - live.last) & COUNTER_MASK, counter,
