@@ -29,7 +29,6 @@ from typing import TYPE_CHECKING
 
 import can
 
-from odocan.host.io.collector import FrameCollector
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import check_frames, e2e_messages
@@ -116,6 +115,8 @@ class SettleHold:
         """Whether each encoder frame held is taken by the whole log's rule over the frames
         held, after the last one taken before (None for the frames of other messages), and
         whether the evidence changed a verdict of the stamps (``check_frames``' touched)."""
+        from odocan.host.io.collector import FrameCollector  # a hold's only (its import's cost)
+
         before = self._context()
         collector = FrameCollector()
         for msg in [*before, *(m for m, _ in held)]:

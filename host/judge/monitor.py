@@ -48,7 +48,6 @@ are re-exported from ``host.report.live``."""
 
 from __future__ import annotations
 
-import math
 import time
 from collections import Counter, deque
 from typing import Any
@@ -67,10 +66,12 @@ from odocan.host.judge.livestanding import placed_why, pose_wrong_why
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.messagestats import MessageStats
+from odocan.host.judge.monitorauth import AUTH_COUNTS as AUTH_COUNTS  # re-exported (its API)
+from odocan.host.judge.monitorauth import AuthWatch
 from odocan.host.judge.monitorvalues import (
-    NODE_TIMEOUT_CYCLES,
     error_names,
     message_stale,
+    node_ages,
     page_of,
     shown_value,
     to_json,
@@ -96,12 +97,6 @@ ACCEPTED = frozenset({"ok", "oksomelost", "unprotected"})
 MAX_UNKNOWN_IDS = 32  # distinct unknown identifiers listed (all are counted)
 _HIDDEN = frozenset({"CHECKSUM", "COUNTER"})
 MAX_EVENTS = 16  # events kept (the latest)
-
-
-# SecOC counts shown by the monitor: ODOM_ACK NACK reasons AUTH_*, and ODOM_AUTH frames that
-# follow no secured command frame.
-AUTH_COUNTS = ("auth_failed", "auth_freshness", "auth_missing", "auth_unavailable",
-               "auth_without_command")
 
 
 class BusMonitor:
@@ -139,10 +134,8 @@ class BusMonitor:
                                   if m.name == "ODOM_SET_POSE"), -1)  # -1: a DBC without it
         self.firmware_events: deque[dict[str, Any]] = deque(maxlen=4 * MAX_EVENTS)
         self._bus_time_s = 0.0  # the latest bus timestamp heard
-        # SecOC (docs/secoc.md): the firmware's AUTH_* refusals, and ODOM_AUTH frames that
-        # follow no command frame (a forger's, or a command lost on the way)
-        self.auth: Counter[str] = Counter({name: 0 for name in AUTH_COUNTS})
-        self._held: set[str] = set()  # secured messages with a command frame awaiting ODOM_AUTH
+        self.secoc = AuthWatch()  # SecOC (docs/secoc.md): commands awaiting ODOM_AUTH, AUTH_*
+        self.auth = self.secoc.counts  # the firmware's AUTH_* refusals, ODOM_AUTH without command
 
     def feed(self, msg: can.Message, now_s: float | None = None) -> None:
         """One frame heard on the bus (``now_s``: local monotonic time, default now); held while
@@ -253,22 +246,18 @@ class BusMonitor:
 
     def _on_command(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         """ODOM_SET_POSE or ODOM_CONFIG: its ODOM_AUTH may follow, and APPLY restarts."""
-        self._held.add("ODOM_SET_POSE" if "FIELD" in shown else "ODOM_CONFIG")
+        self.secoc.command("ODOM_SET_POSE" if "FIELD" in shown else "ODOM_CONFIG")
         self._on_pose_request(s, shown)
 
     def _on_nav_goal(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        self._held.add("NAV_GOAL")
+        self.secoc.command("NAV_GOAL")
 
     def _on_auth(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         """ODOM_AUTH: it authenticates the last command frame of the message it names (as the
         firmware's held slot does), or none: counted as an ODOM_AUTH without a command."""
         request = str(shown.get("REQUEST", "?"))
-        if request == "ODOM_SET_POSE" and request in self._held:
+        if self.secoc.authenticates(request) and request == "ODOM_SET_POSE":
             self.set_pose.on_auth(self.tracker.enc_seq)  # the firmware acts on it now
-        if request in self._held:
-            self._held.discard(request)
-        else:
-            self.auth["auth_without_command"] += 1
 
     def _on_ack(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         """ODOM_ACK: of an ODOM_SET_POSE frame, to ``set_pose`` (an applied APPLY restarts
@@ -285,13 +274,8 @@ class BusMonitor:
             follow_config_ack(self, self.config, int(s["REQUEST_COUNTER"]),  # the firmware's
                               int(s["RESULT"]) == 0, self._bus_time_s,  # robot: the judges'
                               int(s["REQUEST_FIELD"]))
-        reason = str(shown.get("REASON", ""))
-        if not reason.startswith("AUTH_"):
-            return
-        self.auth[reason.lower()] += 1
-        request = shown.get("REQUEST_ID", "?")
-        self.events.append({"t_s": self._bus_time_s, "kind": "auth",
-                            "detail": f"{request} refused: {reason}"})
+        if (refused := self.secoc.refusal(shown, self._bus_time_s)) is not None:
+            self.events.append(refused)
 
     def _on_encoders(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         frame = (int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]), self._bus_time_s,
@@ -378,28 +362,12 @@ class BusMonitor:
                        self.tracker)  # ticks, poses
         return src.status_frame(self.tracker, message, data, config, self._bus_time_s)
 
-    def node_ages(self, now_s: float) -> dict[str, dict[str, Any]]:
-        """Per sending node heard: ``age_s`` since its last cyclic message, ``timeout_s``
-        (``NODE_TIMEOUT_CYCLES`` x the fastest cycle among its messages heard), ``stale``."""
-        nodes: dict[str, dict[str, Any]] = {}
-        for name, stats in self.messages.items():
-            message = self.db.get_message_by_name(name)
-            if message.send_type != "Cyclic" or not message.cycle_time or not message.senders:
-                continue
-            timeout_s = NODE_TIMEOUT_CYCLES * message.cycle_time / 1e3
-            node = nodes.setdefault(message.senders[0], {"age_s": math.inf, "timeout_s": math.inf})
-            node["age_s"] = min(node["age_s"], now_s - stats.heard_monotonic_s)
-            node["timeout_s"] = min(node["timeout_s"], timeout_s)
-        for node in nodes.values():
-            node["stale"] = node["age_s"] > node["timeout_s"]
-        return nodes
-
     def health(self, now_s: float | None = None) -> dict[str, Any]:
         """The verdict on the firmware and its pose (module docstring), why, node ages, events."""
         now_s = time.monotonic() if now_s is None else now_s
         if self.settle.quiet(now_s):  # nothing heard for a hold's time: judged now (livesettle)
             self.release_held()
-        nodes = self.node_ages(now_s)
+        nodes = node_ages(self.db, self.messages, now_s)
         state, why = self._verdict(nodes.get(FIRMWARE_NODE))
         return {"state": state, "why": why, "nodes": nodes, "events": list(self.events),
                 "firmware_events": list(self.firmware_events),

@@ -1,18 +1,40 @@
 """How ``odocan monitor`` shows what it heard (``host.judge.monitor``): a frame's multiplexer
 page, a message's staleness, signal values by their enum names and units, ERROR_MASK bits by
-name, the snapshot as JSON."""
+name, each sending node's age, the snapshot as JSON."""
 
 from __future__ import annotations
 
 import json
-from typing import Any
+import math
+from typing import TYPE_CHECKING, Any
 
-from cantools.database.can import Message
+from cantools.database.can import Database, Message
 
 from odocan.firmware.errors import ErrorFlag
 from odocan.host.jsonutil import finite
 
+if TYPE_CHECKING:
+    from odocan.host.judge.messagestats import MessageStats
+
 NODE_TIMEOUT_CYCLES = 10  # a node is stale after 10 x its fastest cycle time (opendbc)
+
+
+def node_ages(db: Database, messages: dict[str, MessageStats], now_s: float
+              ) -> dict[str, dict[str, Any]]:
+    """Per sending node heard: ``age_s`` since its last cyclic message, ``timeout_s``
+    (``NODE_TIMEOUT_CYCLES`` x the fastest cycle among its messages heard), ``stale``."""
+    nodes: dict[str, dict[str, Any]] = {}
+    for name, stats in messages.items():
+        message = db.get_message_by_name(name)
+        if message.send_type != "Cyclic" or not message.cycle_time or not message.senders:
+            continue
+        timeout_s = NODE_TIMEOUT_CYCLES * message.cycle_time / 1e3
+        node = nodes.setdefault(message.senders[0], {"age_s": math.inf, "timeout_s": math.inf})
+        node["age_s"] = min(node["age_s"], now_s - stats.heard_monotonic_s)
+        node["timeout_s"] = min(node["timeout_s"], timeout_s)
+    for node in nodes.values():
+        node["stale"] = node["age_s"] > node["timeout_s"]
+    return nodes
 
 
 def page_of(message: Message, data: bytes) -> str | None:
