@@ -179,13 +179,13 @@ def test_the_command_line_passes_a_correct_firmware_rebooted_at_0_8_s(
     assert len(json.loads(report.read_text())["reboots"]) == 1
 
 
-@pytest.mark.parametrize("reboot_at", [30, 60, 80, 100])
-def test_a_wrong_firmware_after_an_early_reboot_fails_every_judge(
-    reboot_at: int, tmp_path: Path
-) -> None:
-    messages = _wrong(drive(reboot_at), reboot_at)
-    path = _written(messages, tmp_path / f"wrong{reboot_at}.log")
-    own = ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
+def wrong_fails_whole_and_streamed(
+    messages: tuple[can.Message, ...], reboot_at: int, path: Path
+) -> tuple[Any, BusMonitor, RobotTelemetry]:
+    """A firmware 2 LSB off after a reset at tick ``reboot_at`` (the test's own odometry says
+    so), written to ``path``: analyze tells one reboot and FAILs it, streamed = whole; the
+    monitor and the bridge that heard ``messages``, for the caller's live assertions."""
+    own = ic.check(_written(messages, path), _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
                    reboots_t_s=[_reset_seen(drive(reboot_at), reboot_at)])
     assert own.max_position_error_m > 1.5e-4  # the test's own odometry: 2 LSB off
     whole = analyze(read_log(path), PMIR, "exact")
@@ -194,6 +194,16 @@ def test_a_wrong_firmware_after_an_early_reboot_fails_every_judge(
     streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
     assert json.dumps(streamed) == json.dumps(whole.report)
     monitor, bridge = _live(messages)
+    return whole, monitor, bridge
+
+
+@pytest.mark.parametrize("reboot_at", [30, 60, 80, 100])
+def test_a_wrong_firmware_after_an_early_reboot_fails_every_judge(
+    reboot_at: int, tmp_path: Path
+) -> None:
+    messages = _wrong(drive(reboot_at), reboot_at)
+    _, monitor, bridge = wrong_fails_whole_and_streamed(
+        messages, reboot_at, tmp_path / f"wrong{reboot_at}.log")
     assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
     assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
     assert bridge.tracker.vs_reference.max_dpos_m > 1.5e-4
@@ -269,17 +279,9 @@ def test_a_wrong_firmware_after_a_held_back_boot_summary_fails_every_judge(
     reboot_at: int, held_s: float, tmp_path: Path
 ) -> None:
     messages = _held(_wrong(drive(reboot_at), reboot_at), reboot_at * TICK_S, held_s)
-    path = _written(messages, tmp_path / f"wrongheld{reboot_at}.log")
-    own = ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
-                   reboots_t_s=[_reset_seen(drive(reboot_at), reboot_at)])
-    assert own.max_position_error_m > 1.5e-4  # the test's own odometry: 2 LSB off
-    whole = analyze(read_log(path), PMIR, "exact")
-    assert len(whole.report["reboots"]) == 1
-    assert not whole.passed
+    whole, monitor, bridge = wrong_fails_whole_and_streamed(
+        messages, reboot_at, tmp_path / f"wrongheld{reboot_at}.log")
     assert whole.report["onboard_vs_reference"]["max_position_error_m"] < 1e-3
-    streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
-    assert json.dumps(streamed) == json.dumps(whole.report)
-    monitor, bridge = _live(messages)
     assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
     assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
     assert 1.5e-4 < bridge.tracker.vs_reference.max_dpos_m < 1e-3

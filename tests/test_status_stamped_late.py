@@ -31,6 +31,7 @@ from tests.test_first_second_reboot import (
     _written,
     _wrong,
     drive,
+    wrong_fails_whole_and_streamed,
 )
 
 RESET_TICK = 300  # 3 s: UPTIME 2 -> 0, told without the power-up tick's COUNTERs
@@ -74,15 +75,7 @@ def test_a_wrong_firmware_fails_with_every_status_stamped_late(
     late_s: float, tmp_path: Path
 ) -> None:
     messages = _status_late(_wrong(drive(RESET_TICK), RESET_TICK), late_s)
-    path = _written(messages, tmp_path / "wronglate.log")
-    own = ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
-                   reboots_t_s=[_reset_seen(drive(RESET_TICK), RESET_TICK)])
-    assert own.max_position_error_m > 1.5e-4  # the test's own odometry: 2 LSB off
-    whole = analyze(read_log(path), PMIR, "exact")
-    assert len(whole.report["reboots"]) == 1
-    assert not whole.passed
-    streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
-    assert json.dumps(streamed) == json.dumps(whole.report)
-    monitor, bridge = _live(messages)
+    _, monitor, bridge = wrong_fails_whole_and_streamed(messages, RESET_TICK,
+                                                        tmp_path / "wronglate.log")
     assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
     assert bridge.tracker.vs_reference.max_dpos_m > 1.5e-4
