@@ -169,7 +169,8 @@ class E2EMonitor:
         state = None if live is None else live.state
         before = None if state is None else (dict(state.counts), state.window, state.last_valid,
                                              state.waiting, state.last_ok_s)
-        periods = 1 if live is None else self._periods_held(live, data, timestamp_s)
+        periods = (1 if live is None or len(data) != live.length  # (a wrong DLC: check's)
+                   else self._periods_held(live, data, timestamp_s))
         was, releases = self.holds, self._releases
         self.holds = False
         if timestamp_s == self._held_s:  # the frame that was held: heard once already

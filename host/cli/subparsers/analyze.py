@@ -143,11 +143,11 @@ def _analyze_single(args: argparse.Namespace) -> int:
     from odocan.host.judge.profilepage import head_profile, profile_mismatch, with_bus_speed
     from odocan.host.judge.twosenders import log_events
     from odocan.host.outputs import check_distinct
+    from odocan.host.protocol.dbcplan import default_plan
     from odocan.host.report.ci import analysis_checks, write_checks
     from odocan.host.report.progress import wall_clock_progress
     from odocan.host.report.summary import finish
     from odocan.sim import robot
-    from odocan.sim.contract import database
 
     profile = robot.load(args.robot)
     check_output_paths(args)
@@ -185,7 +185,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
     hints: list[str] = [] if said is None else [said]  # the firmware's PROFILE page names it
     if frames is not None and db is None:  # the pages after an applied config: its robot's
         hints += later_mismatches(frames, profile, analysis.report["integrator"])
-        analysis.report["events"] += log_events(frames, database())  # two senders (#11)
+        analysis.report["events"] += log_events(frames, default_plan())  # two senders (#11)
     if not analysis.passed and db is None:  # a wrong --robot must not read as a firmware fault
         from odocan.host.judge.diagnosis import mismatches
 
