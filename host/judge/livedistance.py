@@ -8,7 +8,10 @@ with the same slack (``distance.base_slack``: the wire's 0.5 mm, 2^-39 m a frame
 count) and the same gap allowance above (the firmware may have taken a gap's frames one by one:
 ``distance.gap_extra_m``). Below: after a stall the tracker tells (the firmware merged the frames
 it missed) the fine path since the last sample; after an ODOM_STATUS page whose ENC_E2E_LOST grew
-(the firmware lost frames: merged steps) the fine path since the page before.
+(the firmware lost frames: merged steps) the fine path since the page before; where its
+ENC_E2E_OK grew by less than the frames the host took (a jittered capture: the host's E2E took
+frames the firmware refused) ``skipdefect``'s allowance, as ``analyze`` gives it: a twist is
+judged once the page after its frame is heard (``host.judge.liveskip``).
 
 A sample (ODOM_TWIST) names its encoder frame by the tracker's rule for a pose half
 (``samples.match_encoder`` over its window: the sender's steps, the age bound, the held and
