@@ -37,8 +37,8 @@ class LiveSkips:
     allowance at a frame (module docstring). Frames are numbered by the tracker (``enc_seq``)."""
 
     def __init__(self) -> None:
-        self._signed: dict[int, int] = {}  # frame: sum of the signed steps to it (2^-40 m)
-        self._abs: dict[int, int] = {}  # frame: sum of |step| to it (2^-40 m)
+        # frame: the sums of the signed steps and of |step| to it (2^-40 m)
+        self._at: dict[int, tuple[int, int]] = {}
         self._sums = (0, 0)
         self._page: tuple[int, int] | None = None  # the last page: ENC_E2E_OK, latest frame
         self.covered = -1  # the latest frame a page was heard after
@@ -49,10 +49,8 @@ class LiveSkips:
         """Frame ``seq`` (the next one) and the firmware's signed step into it (m)."""
         units = round(signed_m * UNITS_PER_M)
         signed, absolute = self._sums
-        self._sums = (signed + units, absolute + abs(units))
-        self._signed[seq], self._abs[seq] = self._sums
-        self._signed.pop(seq - KEPT_FRAMES, None)
-        self._abs.pop(seq - KEPT_FRAMES, None)
+        self._at[seq] = self._sums = (signed + units, absolute + abs(units))
+        self._at.pop(seq - KEPT_FRAMES, None)
 
     def start(self, seq: int) -> None:
         """A power-up at frame ``seq`` (the first): ENC_E2E_OK was 1 there."""
@@ -90,13 +88,15 @@ class LiveSkips:
     def _span_units(self, first: int, end: int, n: int) -> int:
         """n times the largest defect of windows of up to n + 1 steps into frames (first, end]
         (the fine path there past ``MAX_RUN``); -1 when the steps are no longer kept."""
-        if first not in self._abs or end not in self._abs:
+        at = self._at
+        if first not in at or end not in at:
             return -1 << 62
         if n > MAX_RUN:
-            return self._abs[end] - self._abs[first]
+            return at[end][1] - at[first][1]
         best = 0
         for j in range(first + 2, end + 1):
+            signed_j, abs_j = at[j]
             for i in range(max(first, j - n - 1), j - 1):
-                defect = (self._abs[j] - self._abs[i]) - abs(self._signed[j] - self._signed[i])
-                best = max(best, defect)
+                signed_i, abs_i = at[i]
+                best = max(best, (abs_j - abs_i) - abs(signed_j - signed_i))
         return n * best
