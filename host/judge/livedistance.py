@@ -8,7 +8,10 @@ with the same slack (``distance.base_slack``: the wire's 0.5 mm, 2^-39 m a frame
 count) and the same gap allowance above (the firmware may have taken a gap's frames one by one:
 ``distance.gap_extra_m``). Below: after a stall the tracker tells (the firmware merged the frames
 it missed) the fine path since the last sample; after an ODOM_STATUS page whose ENC_E2E_LOST grew
-(the firmware lost frames: merged steps) the fine path since the page before.
+(the firmware lost frames: merged steps) the fine path since the page before; where its
+ENC_E2E_OK grew by less than the frames the host took (a jittered capture: the host's E2E took
+frames the firmware refused) ``skipdefect``'s allowance, as ``analyze`` gives it: a twist is
+judged once the page after its frame is heard (``host.judge.liveskip``).
 
 A sample (ODOM_TWIST) names its encoder frame by the tracker's rule for a pose half
 (``samples.match_encoder`` over its window: the sender's steps, the age bound, the held and
@@ -38,6 +41,7 @@ from odocan.host.judge.distance import (
 )
 from odocan.host.judge.livepose import RestartLog, StepGate
 from odocan.host.judge.liveresent import may_alias_live
+from odocan.host.judge.liveskip import WAIT_FRAMES, LiveSkips
 from odocan.host.judge.livewindow import HALF_WINDOW, Columns
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.samples import SILENCE_CYCLES
@@ -92,6 +96,8 @@ class LiveDistance:
 
     def new_life(self) -> None:
         """A reboot: the firmware's DISTANCE restarts; so does the judgement (offset free)."""
+        if getattr(self, "_waiting", None):  # the old life's twists judged with what is known
+            self._take_waiting(math.inf)
         self._frames: dict[int, tuple[int, int, int, float]] = {}  # seq: units, n, c, up
         self._sums: tuple[int, int, int, float] = (0, 0, 0, 0.0)
         self._gate: StepGate | None = None
@@ -109,6 +115,9 @@ class LiveDistance:
         self._feasible: Feasible | None = None
         self._zero = Feasible(0.0, 0.0)  # the same samples judged from 0 at the first frame
         self._wrong = False
+        self._skips = LiveSkips()  # ENC_E2E_OK grown by less than the frames taken (liveskip)
+        # twists waiting for the page after their frame: frame, (judge, lo, hi, up, down) mm
+        self._waiting: list[tuple[int, list[tuple[Feasible, float, float, float, float]]]] = []
         self.first_seq: int | None = None
         self.power_up = False  # the first life, heard from the firmware's power-up
 
@@ -126,7 +135,9 @@ class LiveDistance:
         step = self._gate.step((seq, counter, left, right, periods, uptime, t_s))
         d_left, d_right = step if step is not None else (0, 0)
         m_left, m_right = self._m
-        ds_m = abs(0.5 * (d_left * m_left + d_right * m_right))
+        signed_m = 0.5 * (d_left * m_left + d_right * m_right)
+        ds_m = abs(signed_m)
+        self._skips.on_step(seq, signed_m)
         units, n, c, up = self._sums
         frames = self._frames
         if periods > 1 and frames:
@@ -135,6 +146,8 @@ class LiveDistance:
                              c + abs(d_left) + abs(d_right), up)
         frames[seq] = sums
         frames.pop(seq - KEPT_FRAMES, None)
+        if self._waiting and self._waiting[0][0] <= seq - WAIT_FRAMES:  # no page came for them
+            self._take_waiting(seq - WAIT_FRAMES)
 
     def on_counts(self, tracker: PoseTracker, ok: int, lost: int, proven: bool) -> None:
         """ODOM_STATUS page E2E_WHEEL_ENCODERS. The first life's first page, after a first
@@ -144,6 +157,7 @@ class LiveDistance:
         before may have been merged on board."""
         if proven and self.first_seq == 0:
             self.power_up = True
+            self._skips.start(0)
             if self._feasible is not None:  # judged from 0 all along, as the whole log is
                 self._zero.excess_mm = max(self._zero.excess_mm, self._feasible.excess_mm)
                 self._feasible, self._r0 = self._zero, 0.0
@@ -151,6 +165,8 @@ class LiveDistance:
         if self._lost is not None and (lost - self._lost) % 256 and self._page_units is not None:
             self._lower_m += (units - self._page_units) / UNITS_PER_M
         self._lost, self._page_units = lost, units
+        self._skips.on_page(ok, tracker.enc_seq)
+        self._take_waiting(self._skips.covered)
 
     def on_twist(self, tracker: PoseTracker, enc_counter: int, raw_mm: int, t_s: float,
                  counter: int) -> None:
@@ -182,12 +198,26 @@ class LiveDistance:
             self._r0 = 0.0 if self.power_up else r
             self._feasible = self._zero if self.power_up else Feasible(-math.inf, math.inf)
         base = WIRE_SLACK_MM + 1e3 * (n * STEP_SLACK_M + c * COUNT_SLACK_M)
+        takes = []
         if self._feasible is not self._zero:  # a power-up proven later (a page held back)
-            self._zero.take_one(r - base, r + base, 1e3 * up, 1e3 * self._lower_m)
+            takes.append((self._zero, r - base, r + base, 1e3 * up, 1e3 * self._lower_m))
         r0 = self._r0 or 0.0
         r = r0 + (r - r0) - WIRE_MM * round((r - r0) / WIRE_MM)
-        self._feasible.take_one(r - base, r + base, 1e3 * up, 1e3 * self._lower_m)
+        takes.append((self._feasible, r - base, r + base, 1e3 * up, 1e3 * self._lower_m))
+        self._waiting.append((e, takes))  # judged once a page covers its frame (liveskip)
         self.samples += 1
+
+    def _take_waiting(self, upto: float) -> None:
+        """Judge the twists waiting whose frame is ``upto`` or before, in order, with the
+        allowance of the spans ``liveskip`` knows at their frame."""
+        k = 0
+        while k < len(self._waiting) and self._waiting[k][0] <= upto:
+            e, takes = self._waiting[k]
+            skip_mm = 1e3 * self._skips.allowance_m(e)
+            for judge, lo, hi, up_mm, down_mm in takes:
+                judge.take_one(lo, hi, up_mm, down_mm + skip_mm)
+            k += 1
+        del self._waiting[:k]
 
     def verdict(self) -> list[str]:
         """Why DISTANCE is wrong (empty: it is not), latched once found."""
