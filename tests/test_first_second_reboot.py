@@ -146,22 +146,8 @@ def test_a_reboot_in_the_first_second_is_seen_and_the_correct_firmware_passes(
                                          bootticks.STATUS_FRAMES_PER_CYCLE)  # the rule's ground
     messages = drive(reboot_at, firmware)
     primed_t = _reset_seen(messages, reboot_at)
-    path = _written(messages, tmp_path / f"reboot{reboot_at}.log")
-    own = ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
-                   reboots_t_s=[primed_t])
-    assert own.samples > 100  # the correct firmware is correct
-    assert own.passed
-    whole = analyze(read_log(path), PMIR, "exact")
-    assert len(whole.report["reboots"]) == 1
-    assert whole.report["onboard_vs_reference"]["max_position_error_m"] < 1e-3
-    assert whole.passed
-    streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
-    assert json.dumps(streamed) == json.dumps(whole.report)
-    monitor, bridge = _live(messages)
-    assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
-    assert bridge.reboots == 1
-    for tracker in (monitor.tracker, bridge.tracker):
-        assert tracker.vs_reference.max_dpos_m < 1e-3
+    monitor, bridge = right_passes_every_judge(
+        messages, tmp_path / f"reboot{reboot_at}.log", primed_t, (97,))
     assert not monitor.twist.wrong
     assert not bridge.twist.wrong
     assert monitor.health(messages[-1].timestamp)["state"] == "OK"
@@ -177,6 +163,32 @@ def test_the_command_line_passes_a_correct_firmware_rebooted_at_0_8_s(
                  "--stream", stream, "--report", str(report)])
     assert code == 0, capsys.readouterr().out
     assert len(json.loads(report.read_text())["reboots"]) == 1
+
+
+def right_passes_every_judge(
+    messages: tuple[can.Message, ...], path: Path, primed_t: float, chunks: tuple[int, ...]
+) -> tuple[BusMonitor, RobotTelemetry]:
+    """A correct firmware across one reset (the test's own odometry says so), written to
+    ``path``: analyze tells one reboot and PASSes it within a millimetre, streamed at each of
+    ``chunks`` frames = whole; the monitor and the bridge tell one reboot and stay within a
+    millimetre. Returns them for the caller's own live assertions."""
+    own = ic.check(_written(messages, path), _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
+                   reboots_t_s=[primed_t])
+    assert own.samples > 100
+    assert own.passed  # the correct firmware is correct
+    whole = analyze(read_log(path), PMIR, "exact")
+    assert len(whole.report["reboots"]) == 1
+    assert whole.report["onboard_vs_reference"]["max_position_error_m"] < 1e-3
+    assert whole.passed
+    for chunk_frames in chunks:  # the power-up tick's frames carried across chunks
+        streamed = analyze_file(path, PMIR, "exact", chunk_frames=chunk_frames)
+        assert json.dumps(streamed) == json.dumps(whole.report)
+    monitor, bridge = _live(messages)
+    assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
+    assert bridge.reboots == 1
+    for tracker in (monitor.tracker, bridge.tracker):  # (poses judged before a late summary:
+        assert tracker.vs_reference.max_dpos_m < 1e-3  # withdrawn)
+    return monitor, bridge
 
 
 def wrong_fails_whole_and_streamed(
@@ -252,23 +264,8 @@ def test_a_boot_summary_held_back_is_seen_and_the_correct_firmware_passes(
     counters, after_s = _poses_between(messages, reboot_at * TICK_S)
     assert counters == list(range(len(counters)))  # the new life's, from 0
     assert after_s > 0.01  # more than half a pose cycle after its tick's pose (on main: none)
-    path = _written(messages, tmp_path / f"held{reboot_at}.log")
-    own = ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
-                   reboots_t_s=[primed_t])
-    assert own.samples > 100
-    assert own.passed  # the correct firmware is correct
-    whole = analyze(read_log(path), PMIR, "exact")
-    assert len(whole.report["reboots"]) == 1
-    assert whole.report["onboard_vs_reference"]["max_position_error_m"] < 1e-3
-    assert whole.passed
-    for chunk_frames in (13, 97):  # the pose run carried across chunks
-        streamed = analyze_file(path, PMIR, "exact", chunk_frames=chunk_frames)
-        assert json.dumps(streamed) == json.dumps(whole.report)
-    monitor, bridge = _live(messages)
-    assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
-    assert bridge.reboots == 1
-    for tracker in (monitor.tracker, bridge.tracker):  # the new poses judged before the
-        assert tracker.vs_reference.max_dpos_m < 1e-3  # summary came: withdrawn
+    monitor, bridge = right_passes_every_judge(
+        messages, tmp_path / f"held{reboot_at}.log", primed_t, (13, 97))
     assert not monitor.twist.wrong
     assert not bridge.twist.wrong
     assert monitor.health(messages[-1].timestamp)["state"] == "OK"

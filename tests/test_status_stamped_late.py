@@ -12,25 +12,17 @@ is right; a firmware 2 LSB off after the reset still FAILs.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import can
 import pytest
 
 from odocan.firmware import frames as fr
-from odocan.host.io.logs import read_log
-from odocan.host.judge.analysis import analyze
-from odocan.host.judge.stream_analysis import analyze_file
-from tests import independent_checker as ic
 from tests.test_first_second_reboot import (
-    PMIR,
-    _live,
     _reset_seen,
-    _robot,
-    _written,
     _wrong,
     drive,
+    right_passes_every_judge,
     wrong_fails_whole_and_streamed,
 )
 
@@ -50,23 +42,8 @@ def test_a_correct_firmware_passes_with_every_status_stamped_late(
     late_s: float, tmp_path: Path
 ) -> None:
     messages = _status_late(drive(RESET_TICK), late_s)
-    path = _written(messages, tmp_path / "late.log")
-    own = ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
-                   reboots_t_s=[_reset_seen(drive(RESET_TICK), RESET_TICK)])
-    assert own.samples > 100
-    assert own.passed  # the correct firmware is correct
-    whole = analyze(read_log(path), PMIR, "exact")
-    assert len(whole.report["reboots"]) == 1
-    assert whole.report["onboard_vs_reference"]["max_position_error_m"] < 1e-3  # main: 6..25 mm
-    assert whole.passed
-    for chunk_frames in (13, 97):  # the power-up pose carried across chunks
-        streamed = analyze_file(path, PMIR, "exact", chunk_frames=chunk_frames)
-        assert json.dumps(streamed) == json.dumps(whole.report)
-    monitor, bridge = _live(messages)
-    assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
-    assert bridge.reboots == 1
-    for tracker in (monitor.tracker, bridge.tracker):
-        assert tracker.vs_reference.max_dpos_m < 1e-3
+    monitor, _ = right_passes_every_judge(  # on main: 6..25 mm off the reference
+        messages, tmp_path / "late.log", _reset_seen(drive(RESET_TICK), RESET_TICK), (13, 97))
     assert monitor.health(messages[-1].timestamp)["state"] == "OK"
 
 
