@@ -79,6 +79,17 @@ def _offsets(wrong: tuple[can.Message, ...], plain: dict[tuple[float, int], int]
             {x - plain[key] for key, x in _x_by_frame(wrong[at:]).items()})
 
 
+def _judged_by_analyze(messages: Any, path: Path, ok: bool) -> dict[str, Any]:
+    """analyze judged the APPLY (its kept check made) and it and the log are ``ok``; the
+    set-pose event."""
+    report = _analyzed(messages, path)
+    event = _set_pose_event(report["events"])
+    assert event["kept"] is not None, event.get("kept_not_judged")
+    assert event["kept"]["passed"] is ok
+    assert report["passed"] is ok
+    return event
+
+
 @pytest.mark.parametrize(("stall", "apply_at"), [((330, 345), 345 + 1), ((330, 345), 345 + 2),
                                                  ((330, 360), 360 + 1)])
 def test_an_apply_with_no_pose_after_a_stall_is_judged(
@@ -94,11 +105,7 @@ def test_an_apply_with_no_pose_after_a_stall_is_judged(
     assert sent_s[gap + 1] - sent_s[gap] > (stall[1] - stall[0]) * 0.01  # the firmware silent
     assert len(sent_s) - gap - 1 <= 1  # then at most its catch-up tick's pose before the ACK
     for messages, ok in ((right, True), (wrong, False)):
-        report = _analyzed(messages, tmp_path / f"{ok}.log")
-        event = _set_pose_event(report["events"])
-        assert event["kept"] is not None, event.get("kept_not_judged")
-        assert event["kept"]["passed"] is ok
-        assert report["passed"] is ok
+        event = _judged_by_analyze(messages, tmp_path / f"{ok}.log", ok)
         assert event["kept"]["bound_m"] < 5e-4  # the merged runs' allowance: sub-mm
         monitor, bridge = _live(messages)
         for judge in (monitor, bridge):
@@ -133,11 +140,7 @@ def test_an_apply_before_the_logs_second_pose_is_judged_from_power_up(
     path = _written(right, tmp_path / "right.log")
     assert ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0)).passed
     for messages, ok in ((right, True), (wrong, False)):
-        report = _analyzed(messages, tmp_path / f"{ok}.log")
-        event = _set_pose_event(report["events"])
-        assert event["kept"] is not None, event.get("kept_not_judged")
-        assert event["kept"]["passed"] is ok
-        assert report["passed"] is ok
+        _judged_by_analyze(messages, tmp_path / f"{ok}.log", ok)
 
 
 @pytest.mark.parametrize("integrator", ["exact", "rk2", "euler"])
