@@ -293,8 +293,14 @@ class CEcu:
             return False
 
     def isr_can_rx(self, can_id: int, data: bytes) -> None:
-        """CAN receive interrupt: the frame into the C mailbox."""
-        self._isr(self._fw, _u32_arg(can_id), _u32_arg(len(data)), data)
+        """CAN receive interrupt: the frame into the C mailbox (the cached arguments looked up
+        here: no Python call of ``_u32_arg`` a frame once they are made)."""
+        get = _U32_ARGS.get
+        id_arg: ctypes.c_uint32 | int | None = get(can_id)
+        len_arg: ctypes.c_uint32 | int | None = get(len(data))
+        if id_arg is None or len_arg is None:
+            id_arg, len_arg = _u32_arg(can_id), _u32_arg(len(data))
+        self._isr(self._fw, id_arg, len_arg, data)
 
     def isr_bus_state(self, bus_off: bool) -> None:
         """CAN controller status interrupt: bus-off entered (True) or left (False)."""
