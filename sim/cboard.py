@@ -68,6 +68,12 @@ _Payload = ctypes.c_char * 8  # a frame's ``const uint8_t data[8]``
 _TxFn = ctypes.CFUNCTYPE(ctypes.c_bool, ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(_Payload))
 _NvmRead = ctypes.CFUNCTYPE(ctypes.c_uint32, ctypes.c_void_p)
 _NvmWrite = ctypes.CFUNCTYPE(ctypes.c_bool, ctypes.c_void_p, ctypes.c_uint32)
+# A ``uint32_t`` argument given as a Python int is a new ``c_uint32`` made by ``from_param`` at
+# every foreign call (~1 k instructions; the receive ISR passes two a frame); given as an
+# instance of its type it is taken as it is: the identifiers' and lengths' instances, made once
+# each (11-bit identifiers and lengths: a bounded set), the same value passed.
+_U32_ARGS: dict[int, ctypes.c_uint32] = {}
+_U32_ARGS_MAX = 4096
 _loaded: dict[Path, ctypes.CDLL] = {}
 _T = TypeVar("_T")
 
@@ -190,6 +196,17 @@ def _declare(lib: ctypes.CDLL) -> None:
         getattr(lib, name).restype = u32
 
 
+def _u32_arg(value: int) -> ctypes.c_uint32 | int:
+    """``value`` as a ``uint32_t`` argument of a foreign call: its cached ``c_uint32`` (made
+    once, the value masked to 32 bits as ``from_param`` masks an int), else the int itself."""
+    arg = _U32_ARGS.get(value)
+    if arg is None:
+        if len(_U32_ARGS) >= _U32_ARGS_MAX:
+            return value
+        arg = _U32_ARGS[value] = ctypes.c_uint32(value)
+    return arg
+
+
 class CEcu:
     """The C ECU with ``OdomEcu``'s entry points (``isr_can_rx``, ``isr_bus_state``, ``tick``)
     and read-only ``state``, ``errors``, ``ticks``; its frames go to ``hal.transmit``."""
@@ -233,6 +250,7 @@ class CEcu:
         self.params = params
         self._isr = lib.odocan_fw_rx_isr
         self._tick = lib.odocan_fw_tick
+        self._now_us = ctypes.c_uint64()  # ``tick``'s argument, set, not made, at every tick
 
     def _provision(self, key: bytes, nvm: FreshnessNvm | None) -> None:
         """odocan_fw_provision_secoc with ``key`` and ``nvm`` behind two C callbacks (kept alive
@@ -275,8 +293,14 @@ class CEcu:
             return False
 
     def isr_can_rx(self, can_id: int, data: bytes) -> None:
-        """CAN receive interrupt: the frame into the C mailbox."""
-        self._isr(self._fw, can_id, len(data), data)
+        """CAN receive interrupt: the frame into the C mailbox (the cached arguments looked up
+        here: no Python call of ``_u32_arg`` a frame once they are made)."""
+        get = _U32_ARGS.get
+        id_arg: ctypes.c_uint32 | int | None = get(can_id)
+        len_arg: ctypes.c_uint32 | int | None = get(len(data))
+        if id_arg is None or len_arg is None:
+            id_arg, len_arg = _u32_arg(can_id), _u32_arg(len(data))
+        self._isr(self._fw, id_arg, len_arg, data)
 
     def isr_bus_state(self, bus_off: bool) -> None:
         """CAN controller status interrupt: bus-off entered (True) or left (False)."""
@@ -295,7 +319,9 @@ class CEcu:
                 if self._clock is not None
                 else self.ticks * TICK_PERIOD_US
             )
-        self._tick(self._fw, now_us)
+        arg = self._now_us
+        arg.value = now_us  # masked to 64 bits as ``from_param`` would
+        self._tick(self._fw, arg)
         self._raise_pending()
 
     @property

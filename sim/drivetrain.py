@@ -360,7 +360,11 @@ class Drivetrain:
         floor exact while |angle| is below 2^62 counts (else each one as ``encoder_counts``)."""
         cpr = self.profile.counts_per_rev
         k = 4 if self.quadrature else 1
-        counts = np.floor(np.array(angles, dtype=np.float64).reshape(-1, 2) / TAU_RAD * cpr * k)
+        # np.array(angles), the same doubles, without its shape discovery over the pairs
+        # (~2.5x faster on a block's 100 pairs of Python floats)
+        grid = np.fromiter(itertools.chain.from_iterable(angles), np.float64,
+                           count=2 * len(angles)).reshape(-1, 2)
+        counts = np.floor(grid / TAU_RAD * cpr * k)
         if not np.all(np.abs(counts) < _EXACT_FLOOR_LIMIT):  # NaN, inf or beyond int64's reach
             return [self._counts_of(angle) for angle in angles]
         wrapped = (counts.astype(np.int64) + np.array(self.counter_offset, dtype=np.int64)) & (
