@@ -108,6 +108,8 @@ class LiveSkips:
         """The allowance (m) at frame ``e``, for the spans known (frames up to ``e`` heard);
         spans that ended before ``e`` are folded in and forgotten."""
         units = self._done_units
+        if not self._spans:  # (a clean drive's twists, each judged at its page: no span)
+            return math.inf if units < 0 else units / UNITS_PER_M
         growing = []
         for first, last, n in self._spans:
             if first >= e:
