@@ -40,17 +40,54 @@ class LiveSkips:
         # frame: the sums of the signed steps and of |step| to it (2^-40 m)
         self._at: dict[int, tuple[int, int]] = {}
         self._sums = (0, 0)
+        # the steps heard since ``_at`` was brought up to date (``_fold``: when a span reads it)
+        self._steps: list[tuple[int, float]] = []
+        self._trim_at = 2 * KEPT_FRAMES  # the frame at which ``_steps`` is trimmed (``_trim``)
+        self._last = -1  # the last frame folded into ``_at`` (-1: none)
+        self._gapless = True  # every frame folded was the one after the one before
         self._page: tuple[int, int] | None = None  # the last page: ENC_E2E_OK, latest frame
         self.covered = -1  # the latest frame a page was heard after
         self._spans: list[tuple[int, int, int]] = []  # (first, last, n) still growing
         self._done_units = 0  # the allowance of spans ended (n times their largest defect)
 
     def on_step(self, seq: int, signed_m: float) -> None:
-        """Frame ``seq`` (the next one) and the firmware's signed step into it (m)."""
-        units = round(signed_m * UNITS_PER_M)
-        signed, absolute = self._sums
-        self._at[seq] = self._sums = (signed + units, absolute + abs(units))
-        self._at.pop(seq - KEPT_FRAMES, None)
+        """Frame ``seq`` (the next one) and the firmware's signed step into it (m): kept as it
+        is (a clean drive has no span to read it: one append a frame), summed when a span
+        reads the steps (``_fold``)."""
+        self._steps.append((seq, signed_m))
+        if seq >= self._trim_at:
+            self._trim()
+
+    def _trim(self) -> None:
+        """``_steps`` bounded: when the frames kept and folded follow one another (the live
+        judge's: the tracker's numbering), the last ``KEPT_FRAMES`` steps are all a span can
+        read (``_at`` holds no older frame) and only the differences of the sums count
+        (``_span_units``): the older steps are dropped unsummed; else they are folded."""
+        steps = self._steps
+        first = steps[0][0]
+        if (self._gapless and len(steps) >= KEPT_FRAMES
+                and (self._last < 0 or first == self._last + 1)
+                and [seq for seq, _ in steps] == list(range(first, first + len(steps)))):
+            del steps[:-KEPT_FRAMES]
+            self._at.clear()
+            self._last = steps[0][0] - 1
+        else:
+            self._fold()
+        self._trim_at = steps[-1][0] + KEPT_FRAMES if steps else self._trim_at + KEPT_FRAMES
+
+    def _fold(self) -> None:
+        """The steps kept summed into ``_at`` in order (each frame's sums of the signed steps
+        and of |step| to it, 2^-40 m; the frame ``KEPT_FRAMES`` before each dropped)."""
+        at, (signed, absolute), last = self._at, self._sums, self._last
+        for seq, signed_m in self._steps:
+            self._gapless = self._gapless and (last < 0 or seq == last + 1)
+            units = round(signed_m * UNITS_PER_M)
+            signed, absolute = signed + units, absolute + abs(units)
+            at[seq] = (signed, absolute)
+            at.pop(seq - KEPT_FRAMES, None)
+            last = seq
+        self._sums, self._last = (signed, absolute), last
+        self._steps.clear()
 
     def start(self, seq: int) -> None:
         """A power-up at frame ``seq`` (the first): ENC_E2E_OK was 1 there."""
@@ -71,6 +108,8 @@ class LiveSkips:
         """The allowance (m) at frame ``e``, for the spans known (frames up to ``e`` heard);
         spans that ended before ``e`` are folded in and forgotten."""
         units = self._done_units
+        if not self._spans:  # (a clean drive's twists, each judged at its page: no span)
+            return math.inf if units < 0 else units / UNITS_PER_M
         growing = []
         for first, last, n in self._spans:
             if first >= e:
@@ -88,6 +127,8 @@ class LiveSkips:
     def _span_units(self, first: int, end: int, n: int) -> int:
         """n times the largest defect of windows of up to n + 1 steps into frames (first, end]
         (the fine path there past ``MAX_RUN``); -1 when the steps are no longer kept."""
+        if self._steps:
+            self._fold()
         at = self._at
         if first not in at or end not in at:
             return -1 << 62
