@@ -96,7 +96,8 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"WALL-CLOCK seconds to run, at most {FLEET_MAX_DURATION_S:g} (default: %(default)s)",
     )
     parser.add_argument(
-        "--report", type=Path, metavar="PATH", help="write the JSON report (default: none)"
+        "--report", type=Path, metavar="PATH", help="write the JSON report (default: none;"
+        " - for stdout: the summary then goes to stderr)"
     )
     parser.add_argument(
         "--robot", default="pmir", help="profile of every robot, name or TOML path (default: pmir)"
