@@ -28,6 +28,7 @@ import cantools
 import pytest
 
 import odocan
+from tests.independent_checker import crc8h2f
 
 ROOT = Path(__file__).resolve().parents[1]
 DBC = ROOT / "dbc" / "odocan.dbc"
@@ -114,14 +115,9 @@ def _run(script: str, *argv: str, dbc: Path) -> subprocess.CompletedProcess[str]
                           text=True, check=False, timeout=300)
 
 
-def _crc8h2f(data: bytes) -> int:
-    """CRC8H2F (poly 0x2F, init 0xFF, xorout 0xFF, MSB first), bit by bit."""
-    crc = 0xFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x2F) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
+def _cli(*argv: str, dbc: Path) -> subprocess.CompletedProcess[str]:
+    return _run("from odocan.host.cli import main; import sys; sys.exit(main(sys.argv[1:]))",
+                *argv, dbc=dbc)
 
 
 @pytest.fixture(scope="module")
@@ -152,7 +148,7 @@ def test_each_message_counts_to_its_own_lap_with_its_own_data_ids(
         assert all(b == (a + 1) % LAP[name] for a, b in pairwise(counters)), name
         for counter, data in zip(counters, payloads, strict=True):
             data_id = (SLOT[name] << 4) | counter
-            assert data[0] == _crc8h2f(data[1:] + bytes([data_id])), (name, counter)
+            assert data[0] == crc8h2f(data[1:] + bytes([data_id])), (name, counter)
     assert rigs[lookahead]["applied"] == len([i for i, _ in frames if i == IDS["MOTOR_CMD"]])
 
 
@@ -172,28 +168,28 @@ def test_the_truth_echoes_the_encoder_counter_of_its_tick(
     assert echoed >= 9 * 3
 
 
-def test_a_counter_wider_than_profile2_is_refused_in_one_line(laps: Path) -> None:
-    wide = laps.with_name("wide.dbc")
+@pytest.fixture(scope="module")
+def wide(laps: Path) -> Path:
+    """WHEEL_ENCODERS' COUNTER of 8 bits (CTRL_UPTIME taken off to make room)."""
+    path = laps.with_name("wide.dbc")
     text = DBC.read_text(encoding="utf-8")
     text = text.replace(" SG_ CTRL_UPTIME : 12|4@1+ (1,0) [0|15] \"s\" ODOM_MCU,HOST\n", "")
-    wide.write_text(_counter_bits(text, IDS["WHEEL_ENCODERS"], 8), encoding="utf-8")
-    done = _run("from odocan.host.cli import main; import sys; sys.exit(main(sys.argv[1:]))",
-                "sim", "-i", "virtual", "-c", "wide", "--duration", "1", dbc=wide)
+    path.write_text(_counter_bits(text, IDS["WHEEL_ENCODERS"], 8), encoding="utf-8")
+    return path
+
+
+def test_a_counter_wider_than_profile2_is_refused_in_one_line(wide: Path) -> None:
+    done = _cli("sim", "-i", "virtual", "-c", "wide", "--duration", "1", dbc=wide)
     assert (done.returncode, done.stdout) == (2, ""), done.stderr
     assert done.stderr.count("\n") == 1, done.stderr
     assert "WHEEL_ENCODERS COUNTER" in done.stderr
     assert "8 bits" in done.stderr
 
 
-def test_the_judges_name_the_counter_past_profile2_not_another(laps: Path) -> None:
-    # WHEEL_ENCODERS' COUNTER of 8 bits: before, the judges named MOTOR_CMD's 4-bit COUNTER
-    # ("MOTOR_CMD COUNTER values 16 vs WHEEL_ENCODERS COUNTER's 256"), a message that is right
-    wide = laps.with_name("wide-judged.dbc")
-    text = DBC.read_text(encoding="utf-8")
-    text = text.replace(" SG_ CTRL_UPTIME : 12|4@1+ (1,0) [0|15] \"s\" ODOM_MCU,HOST\n", "")
-    wide.write_text(_counter_bits(text, IDS["WHEEL_ENCODERS"], 8), encoding="utf-8")
-    done = _run("from odocan.host.cli import main; import sys; sys.exit(main(sys.argv[1:]))",
-                "analyze", str(wide), "--dbc", str(wide), dbc=DBC)
+def test_the_judges_name_the_counter_past_profile2_not_another(wide: Path) -> None:
+    # before, the judges named MOTOR_CMD's 4-bit COUNTER ("MOTOR_CMD COUNTER values 16 vs
+    # WHEEL_ENCODERS COUNTER's 256"), a message that is right
+    done = _cli("analyze", str(wide), "--dbc", str(wide), dbc=DBC)
     assert (done.returncode, done.stdout) == (2, ""), done.stderr
     assert done.stderr.count("\n") == 1, done.stderr
     assert "WHEEL_ENCODERS COUNTER values 256: E2E Profile 2 counts at most 16" in done.stderr
@@ -222,8 +218,7 @@ def test_a_dbc_the_firmware_cannot_speak_is_refused_not_passed(
 ) -> None:
     # before, `odocan run` PASSed: the firmware sent 4-bit COUNTERs (bit 11 set half the time,
     # a bit the DBC leaves unused) and the judges read them as 3-bit ones
-    done = _run("from odocan.host.cli import main; import sys; sys.exit(main(sys.argv[1:]))",
-                *argv, dbc=_narrow(tmp_path))
+    done = _cli(*argv, dbc=_narrow(tmp_path))
     assert (done.returncode, done.stdout) == (2, ""), done.stdout + done.stderr
     assert done.stderr.count("\n") == 1, done.stderr
     assert done.stderr.startswith("error: WHEEL_ENCODERS COUNTER of 3 bits in the DBC")
