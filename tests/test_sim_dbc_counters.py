@@ -212,7 +212,9 @@ def _narrow(tmp_path: Path) -> Path:
 
 @pytest.mark.parametrize("argv", [["run", "--duration", "2", "--firmware", "python"],
                                   ["firmware", "-i", "virtual", "-c", "narrow", "--duration",
-                                   "1", "--firmware", "python"]], ids=["run", "firmware"])
+                                   "1", "--firmware", "python"],
+                                  ["fleet", "-n", "1", "--duration", "1"]],
+                         ids=["run", "firmware", "fleet"])
 def test_a_dbc_the_firmware_cannot_speak_is_refused_not_passed(
     tmp_path: Path, argv: list[str]
 ) -> None:
