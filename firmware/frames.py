@@ -84,7 +84,6 @@ NAV_GOAL_DATA_IDS: Final = _data_ids(10)
 NAV_STATUS_DATA_IDS: Final = _data_ids(11)
 ODOM_AUTH_DATA_IDS: Final = _data_ids(12)
 ODOM_FRESHNESS_DATA_IDS: Final = _data_ids(13)
-SIM_TRUTH_DATA_IDS: Final = _data_ids(15)
 
 
 # --- enums on the wire (VAL_ tables; INTEGRATOR is firmware.config.Integrator) ---

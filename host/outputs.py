@@ -12,6 +12,11 @@ one created and removed at once), because permission bits do not answer it: as r
 ``os.access`` says yes to ``/proc/x.json`` and to a read-only ``/proc`` or ``/sys`` file, and
 ``odocan run --report /proc/x.json`` drove the whole run, printed PASS, then failed.
 
+``-`` as the path of ``--report`` or ``--junit`` is standard output, as Unix tools take it
+(``odocan analyze drive.log --report - | jq .passed``): the command's own text (the summary, its
+hints) then goes to stderr for the command's length (``outputs_on_stdout``), so stdout holds the
+output alone.
+
 It lives at host/ level, below every room, so io/ and judge/ use ``OutputError`` without
 importing report/.
 """
@@ -20,19 +25,49 @@ from __future__ import annotations
 
 import os
 import stat
+import sys
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager, redirect_stdout
 from pathlib import Path
+from typing import TextIO
 
 from odocan.sim.exceptions import ConfigurationError, OdocanError
+
+STDOUT_NAME = "-"  # an output option's path for standard output
+STDOUT_OPTIONS = ("report", "junit")  # the text outputs that take ``-`` (their args names)
+_stdout: TextIO | None = None  # standard output while the command's own text goes to stderr
 
 
 class OutputError(OdocanError):
     """An output could not be written (the path and the reason in one line)."""
 
 
+def is_stdout(path: Path | None) -> bool:
+    """Whether an output option's ``path`` is ``-``: standard output."""
+    return path is not None and str(path) == STDOUT_NAME
+
+
+@contextmanager
+def outputs_on_stdout(args: object) -> Iterator[None]:
+    """Inside, when one of ``args``' text outputs (``STDOUT_OPTIONS``) is ``-``, what the
+    command prints goes to stderr and ``write_text`` writes that output to standard output
+    (the module docstring); else nothing changes."""
+    global _stdout
+    if not any(is_stdout(getattr(args, name, None)) for name in STDOUT_OPTIONS):
+        yield
+        return
+    before, _stdout = _stdout, sys.stdout
+    try:
+        with redirect_stdout(sys.stderr):
+            yield
+    finally:
+        _stdout = before
+
+
 def check_writable(path: Path | None, option: str) -> None:
     """Refuse ``path`` unless a file can be created or replaced there (see the module)."""
-    if path is None or str(path) == os.devnull:
+    if path is None or str(path) == os.devnull or is_stdout(path):
         return
     where = f"{option} {path}"
     try:
@@ -80,7 +115,13 @@ def _probe(path: Path, flags: int, where: str) -> None:
 def write_text(path: Path, text: str, option: str) -> None:
     """Write ``text`` to ``path``; an I/O error becomes one ``OutputError`` naming the path.
     A write that fails once the file is open (a full disk) removes what it left there: a
-    truncated JSON report or JUnit file is never left for a CI step to read (``output_failed``)."""
+    truncated JSON report or JUnit file is never left for a CI step to read (``output_failed``).
+    ``-``: standard output (``outputs_on_stdout``)."""
+    if is_stdout(path):
+        out = _stdout or sys.stdout
+        out.write(text)
+        out.flush()
+        return
     try:
         handle = path.open("w", encoding="utf-8")
     except OSError as exc:  # nothing written: a file already there stays as it was

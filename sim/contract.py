@@ -12,7 +12,7 @@ from contextlib import contextmanager
 from functools import cache
 from importlib import resources
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # imported when the DBC is read: odocan analyze reads a plan of it instead
     from typing import Protocol
@@ -63,6 +63,11 @@ def read_as(db: CycleSource) -> Iterator[None]:
         yield
     finally:
         _read = before
+
+
+def source() -> Any:
+    """The DBC at ``DBC_PATH``: as the caller read it already (``read_as``), else cantools'."""
+    return database() if _read is None else _read
 
 
 def cycle_time_s(name: str) -> float:

@@ -18,19 +18,20 @@ from typing import NamedTuple
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.fixmath import i16, sat_range, wrap_i16, wrap_u16, wrap_u32
 from odocan.firmware.frames import (
-    SIM_TRUTH_DATA_IDS,
     U4_MAX,
     U24_MAX,
-    WHEEL_ENCODERS_DATA_IDS,
     e2e_head,
     frame_word,
     i32_field,
     seal_frame,
 )
+from odocan.sim.e2efacts import SIM_TRUTH, WHEEL_ENCODERS, echo_mask, message_e2e
+
+ENC_COUNTER_START_BIT = 16  # SIM_TRUTH's ENC_COUNTER: byte 2's low bits
 
 
 class MotorCmd(NamedTuple):
-    counter: int  # u4 E2E counter
+    counter: int  # byte 1's low nibble: the E2E COUNTER (its DBC bits of it)
     left_speed_mm_s: i16
     right_speed_mm_s: i16
 
@@ -59,11 +60,12 @@ def pack_wheel_encoders(
     right_count: int,
     ctrl_uptime_s: int = 0,
     errors: ErrorMask | None = None,
+    data_ids: tuple[int, ...] | None = None,
 ) -> bytes:
     """WHEEL_ENCODERS: the low 24 bits of each hardware counter (any width: wrapping, never
     saturated) and CTRL_UPTIME, the controller's age code (u4: ``ctrl_uptime_code``; 0, the
     default: not reported, as an old controller sends), saturated to 0..15 (SATURATION in
-    ``errors`` when given)."""
+    ``errors`` when given); sealed with ``data_ids`` (default: the DBC's E2EDataIDs)."""
     if not 0 <= ctrl_uptime_s <= CTRL_UPTIME_MAX_S:
         ctrl_uptime_s = sat_range(ctrl_uptime_s, 0, CTRL_UPTIME_MAX_S, errors or ErrorMask())
     word = (
@@ -71,7 +73,7 @@ def pack_wheel_encoders(
         | ((left_count & U24_MAX) << 16)
         | ((right_count & U24_MAX) << 40)
     )
-    return seal_frame(word, WHEEL_ENCODERS_DATA_IDS)
+    return seal_frame(word, data_ids or message_e2e(WHEEL_ENCODERS).data_ids)
 
 
 # --- MOTOR_CMD (ODOM_MCU or HOST -> MOTOR_CTRL; 20 ms while commanding) ---
@@ -82,11 +84,18 @@ def unpack_motor_cmd(data: bytes | bytearray) -> MotorCmd:
 
 
 # --- SIM_TRUTH (SIM -> HOST; 100 ms, one part per frame; multiplexed by PART) ---
+def enc_counter_mask() -> int:
+    """SIM_TRUTH ENC_COUNTER's largest value (2 ** its DBC bits - 1)."""
+    return echo_mask(SIM_TRUTH, "ENC_COUNTER", ENC_COUNTER_START_BIT)
+
+
 def pack_sim_truth(
-    counter: int, part: int, enc_counter: int, value: int, errors: ErrorMask
+    counter: int, part: int, enc_counter: int, value: int, errors: ErrorMask,
+    e2e: tuple[int, tuple[int, ...]] | None = None,
 ) -> bytes:
     """SIM_TRUTH: one part. X/Y saturate to i32 (0.1 mm), HEADING wraps to u16; an unknown
-    ``part`` sends ``value`` as raw u32."""
+    ``part`` sends ``value`` as raw u32; ``e2e``: ENC_COUNTER's largest value and the data IDs
+    (default: the DBC's, ``enc_counter_mask`` and E2EDataIDs)."""
     part &= U4_MAX
     if part in (SimTruthPart.X, SimTruthPart.Y):
         raw = i32_field(value, errors)
@@ -94,5 +103,7 @@ def pack_sim_truth(
         raw = wrap_u16(value)
     else:
         raw = wrap_u32(value)
-    word = e2e_head(counter, part) | ((enc_counter & U4_MAX) << 16) | (raw << 24)
-    return seal_frame(word, SIM_TRUTH_DATA_IDS)
+    echo_max, data_ids = e2e or (enc_counter_mask(), message_e2e(SIM_TRUTH).data_ids)
+    word = e2e_head(counter, part) | ((enc_counter & echo_max) << ENC_COUNTER_START_BIT) | (
+        raw << 24)
+    return seal_frame(word, data_ids)

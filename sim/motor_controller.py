@@ -17,15 +17,17 @@ import math
 import can
 
 from odocan.firmware import frames as fr
-from odocan.firmware.e2e import E2EReceiver, E2EStatus
+from odocan.firmware.e2e import MAX_DELTA_COUNTER_LIMIT, E2EReceiver, E2EStatus
 from odocan.firmware.errors import ErrorMask
 from odocan.sim.board import TICK_S
 from odocan.sim.clock import Clock
 from odocan.sim.contract import cycle_ticks
+from odocan.sim.e2efacts import MOTOR_CMD, SIM_TRUTH, WHEEL_ENCODERS, message_e2e
 from odocan.sim.errors import ErrorModel
 from odocan.sim.frames import (
     SimTruthPart,
     ctrl_uptime_code,
+    enc_counter_mask,
     pack_sim_truth,
     pack_wheel_encoders,
     unpack_motor_cmd,
@@ -48,7 +50,10 @@ class MotorController(BusNode):
     def __init__(self, bus: can.BusABC, vehicle: Vehicle, clock: Clock) -> None:
         super().__init__(bus, clock)
         self.vehicle = vehicle
-        self.rx_motor_cmd = E2EReceiver(fr.MOTOR_CMD_DATA_IDS, max_delta_counter_init=15)
+        # the COUNTER lap and data IDs of what it sends and takes: the DBC's (sim.e2efacts)
+        self.e2e, self.cmd_e2e = message_e2e(WHEEL_ENCODERS), message_e2e(MOTOR_CMD)
+        self.rx_motor_cmd = E2EReceiver(self.cmd_e2e.data_ids,
+                                        max_delta_counter_init=MAX_DELTA_COUNTER_LIMIT)
         self.errors = ErrorMask()
         self.counter = -1
         self.commands_applied = 0
@@ -92,11 +97,12 @@ class MotorController(BusNode):
         left, right = self.vehicle.encoder_counts()
         left = (left - self._count_offset[0]) & mask
         right = (right - self._count_offset[1]) & mask
-        self.counter = (self.counter + 1) & 0xF
+        self.counter = (self.counter + 1) & self.e2e.counter_mask
         uptime = ctrl_uptime_code(now_s - self.powered_up_s)
         self.send_frame(
             fr.WHEEL_ENCODERS_ID,
-            pack_wheel_encoders(self.counter, left & _U24, right & _U24, uptime),
+            pack_wheel_encoders(self.counter, left & _U24, right & _U24, uptime,
+                                data_ids=self.e2e.data_ids),
         )
         return self.counter
 
@@ -109,6 +115,8 @@ class TruthSender(BusNode):
         self.vehicle = vehicle
         self.errors = ErrorMask()
         self.counter = -1
+        self.e2e = message_e2e(SIM_TRUTH)  # its COUNTER lap and data IDs: the DBC's
+        self.enc_counter_mask = enc_counter_mask()  # ENC_COUNTER's width: the DBC's
 
     def send(self, enc_counter: int) -> None:
         """Send the three SIM_TRUTH parts of the truth now."""
@@ -119,8 +127,9 @@ class TruthSender(BusNode):
             (SimTruthPart.HEADING, round(pose.heading_rad * _BAM16_PER_RAD) & 0xFFFF),
         )
         for part, value in parts:
-            self.counter = (self.counter + 1) & 0xF
-            data = pack_sim_truth(self.counter, part, enc_counter, value, self.errors)
+            self.counter = (self.counter + 1) & self.e2e.counter_mask
+            data = pack_sim_truth(self.counter, part, enc_counter, value, self.errors,
+                                  (self.enc_counter_mask, self.e2e.data_ids))
             self.send_frame(fr.SIM_TRUTH_ID, data)
 
 
@@ -139,6 +148,7 @@ class ScenarioDriver(BusNode):
         self.local = motor_controller
         self.errors = ErrorMask()
         self.counter = -1
+        self.e2e = message_e2e(MOTOR_CMD)  # its COUNTER lap and data IDs: the DBC's
         # Commands a forecast computed ahead (``command_at``), by time, and for which scenario.
         self._ahead: dict[float, tuple[float, float]] = {}
         self._ahead_of: Scenario | None = None
@@ -156,10 +166,12 @@ class ScenarioDriver(BusNode):
         now_s = self.clock.now_s()
         ahead = self._ahead.pop(now_s, None) if self._ahead_of is self.scenario else None
         left_mps, right_mps = self.scenario.command_at(now_s) if ahead is None else ahead
-        self.counter = (self.counter + 1) & 0xF
+        self.counter = (self.counter + 1) & self.e2e.counter_mask
         data = fr.pack_motor_cmd(
             self.counter, round(left_mps * 1000), round(right_mps * 1000), self.errors
         )
+        if self.e2e.data_ids != fr.MOTOR_CMD_DATA_IDS:  # the DBC's, not the firmware's build
+            data = fr.seal_frame(fr.frame_word(data) & ~0xFF, self.e2e.data_ids)  # CRC anew
         self.send_frame(fr.MOTOR_CMD_ID, data)
         if self.local is not None:
             self.local.deliver(data)

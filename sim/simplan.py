@@ -29,10 +29,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from odocan.firmware import frames as fr
-from odocan.firmware.e2e import CRC8H2F_INIT, CRC8H2F_TABLE, CRC8H2F_XOR_OUT
+from odocan.firmware.e2e import COUNTER_MASK, CRC8H2F_INIT, CRC8H2F_TABLE, CRC8H2F_XOR_OUT
 from odocan.firmware.fixmath import I16_MAX, I16_MIN, I32_MAX, I32_MIN
-from odocan.sim.frames import CTRL_UPTIME_MAX_S, SimTruthPart
+from odocan.sim.frames import CTRL_UPTIME_MAX_S, ENC_COUNTER_START_BIT, SimTruthPart
 
 if TYPE_CHECKING:
     from odocan.sim.lookahead import PlannedVehicle
@@ -115,7 +114,7 @@ def seal_words(words: np.ndarray | list[int], data_ids: tuple[int, ...]) -> list
     crc = table[CRC8H2F_INIT ^ raw[:, 1]]
     for column in range(2, 8):
         crc = table[crc ^ raw[:, column]]
-    ids = np.array(data_ids, dtype=np.uint8)[raw[:, 1] & 0x0F]
+    ids = np.array(data_ids, dtype=np.uint8)[raw[:, 1] & COUNTER_MASK]
     raw[:, 0] = table[crc ^ ids] ^ CRC8H2F_XOR_OUT
     return raw.view("V8").ravel().tolist()  # bytes each
 
@@ -142,31 +141,33 @@ def plan_ticks(node: SimNode, vehicle: PlannedVehicle, k: int) -> TickPlan | Non
     plan.times = times[:ticks]
     plan.substeps = substeps[:ticks]
     plan.encoders = seal_words(_encoder_words(mc, vehicle, counts[:ticks], plan.times),
-                               fr.WHEEL_ENCODERS_DATA_IDS)
+                               mc.e2e.data_ids)
     plan.motor_cmds = [None] * ticks
-    sealed = seal_words([word for word, _ in cmds], fr.MOTOR_CMD_DATA_IDS)
+    sealed = seal_words([word for word, _ in cmds], mc.cmd_e2e.data_ids)
     for i, (_, speeds), data in zip(cmd_at, cmds, sealed, strict=True):
         plan.motor_cmds[i] = (data, speeds)
     plan.truths = [()] * ticks
-    sealed = seal_words([word for words in truths for word in words], fr.SIM_TRUTH_DATA_IDS)
+    sealed = seal_words([word for words in truths for word in words], node.truth.e2e.data_ids)
     for j, i in enumerate(truth_at):
         plan.truths[i] = tuple(sealed[3 * j : 3 * j + 3])
-    plan.after = _counters_after(plan)
+    plan.after = _counters_after(plan, (mc.cmd_e2e.counter_mask, mc.e2e.counter_mask,
+                                        node.truth.e2e.counter_mask))
     return plan
 
 
-def _counters_after(plan: TickPlan) -> list[tuple[int, int, int]]:
+def _counters_after(plan: TickPlan, masks: tuple[int, int, int]) -> list[tuple[int, int, int]]:
     """The (driver, motor controller, truth) COUNTERs after each tick of ``plan``, as the nodes'
     sends step them: the driver's by one a MOTOR_CMD, the motor controller's by one a tick, the
-    truth's by three a SIM_TRUTH tick (4-bit)."""
+    truth's by three a SIM_TRUTH tick, each to its message's lap (``masks``: the DBC's)."""
     driver, mc, truth = plan.counters
+    driver_mask, mc_mask, truth_mask = masks
     after = []
     for motor_cmd, sim_truth in zip(plan.motor_cmds, plan.truths, strict=True):
         if motor_cmd is not None:
-            driver = (driver + 1) & 0xF
-        mc = (mc + 1) & 0xF
+            driver = (driver + 1) & driver_mask
+        mc = (mc + 1) & mc_mask
         if sim_truth:
-            truth = (truth + 3) & 0xF
+            truth = (truth + 3) & truth_mask
         after.append((driver, mc, truth))
     return after
 
@@ -197,7 +198,7 @@ def _commands(node: SimNode, times: list[float]) -> list[tuple[int, tuple[float,
     fits = (np.isfinite(mm_s) & (mm_s >= I16_MIN) & (mm_s <= I16_MAX)).all(axis=1)
     count = len(commands) if fits.all() else int(np.argmin(fits))
     raw = mm_s[:count].astype(np.int64)
-    counters = (driver.counter + 1 + np.arange(count)) & 0xF
+    counters = (driver.counter + 1 + np.arange(count)) & driver.e2e.counter_mask
     words = (counters << 8) | ((raw[:, 0] & 0xFFFF) << 16) | ((raw[:, 1] & 0xFFFF) << 32)
     speeds = (raw / 1000.0).tolist()
     return [(word, (left, right)) for word, (left, right) in zip(words.tolist(), speeds,
@@ -210,6 +211,8 @@ def _truths(
     """SIM_TRUTH's three words at ticks ``k + i`` for ``i`` in ``due``, as ``TruthSender.send``
     packs them, up to a tick whose X or Y would saturate."""
     counter, enc_counter = node.truth.counter, node.motor_controller.counter
+    mask, enc_mask = node.truth.e2e.counter_mask, node.motor_controller.e2e.counter_mask
+    echo = node.truth.enc_counter_mask
     xs, ys, headings = vehicle.truths_at([times[i] for i in due])
     out: list[tuple[int, int, int]] = []
     for i, x_m, y_m, heading_rad in zip(due, xs, ys, headings, strict=True):
@@ -217,15 +220,18 @@ def _truths(
         if not (I32_MIN <= x <= I32_MAX and I32_MIN <= y <= I32_MAX):
             return out
         heading = round(heading_rad * _BAM16_PER_RAD) & 0xFFFF
-        head = ((enc_counter + 1 + i) & 0xF) << 16  # the tick's WHEEL_ENCODERS COUNTER
-        x_word = (SimTruthPart.X << 12) | (((counter + 1) & 0xF) << 8) | head | (
+        # the tick's WHEEL_ENCODERS COUNTER, as ENC_COUNTER echoes it
+        head = ((enc_counter + 1 + i) & enc_mask & echo) << ENC_COUNTER_START_BIT
+        x_word = (SimTruthPart.X << 12) | (((counter + 1) & mask) << 8) | head | (
             (x & 0xFFFF_FFFF) << 24)
-        y_word = (SimTruthPart.Y << 12) | (((counter + 2) & 0xF) << 8) | head | (
+        counter = (counter + 1) & mask
+        y_word = (SimTruthPart.Y << 12) | (((counter + 1) & mask) << 8) | head | (
             (y & 0xFFFF_FFFF) << 24)
-        h_word = (SimTruthPart.HEADING << 12) | (((counter + 3) & 0xF) << 8) | head | (
+        counter = (counter + 1) & mask
+        h_word = (SimTruthPart.HEADING << 12) | (((counter + 1) & mask) << 8) | head | (
             heading << 24)
         out.append((x_word, y_word, h_word))
-        counter = (counter + 3) & 0xF
+        counter = (counter + 1) & mask
     return out
 
 
@@ -241,7 +247,7 @@ def _encoder_words(
     raw = np.array(counts, dtype=np.int64)
     offset = np.array(mc._count_offset, dtype=np.int64)
     masked = ((raw - offset) & mask).astype(np.uint64)
-    counters = ((mc.counter + 1 + np.arange(len(counts))) & 0xF).astype(np.uint64)
+    counters = ((mc.counter + 1 + np.arange(len(counts))) & mc.e2e.counter_mask).astype(np.uint64)
     age_s = np.array(times, dtype=np.float64) - mc.powered_up_s
     uptime = np.minimum(CTRL_UPTIME_MAX_S, 1 + np.floor(age_s)).astype(np.uint64)
     words: np.ndarray = (

@@ -67,7 +67,6 @@ from odocan.firmware.frames import (
     ODOM_STATUS_ID,
     ODOM_TWIST_DATA_IDS,
     ODOM_TWIST_ID,
-    SIM_TRUTH_DATA_IDS,
     SIM_TRUTH_ID,
     U4_MAX,
     WHEEL_ENCODERS_DATA_IDS,
@@ -82,6 +81,7 @@ from odocan.firmware.frames import (
     i32_field,
     seal_frame,
 )
+from odocan.sim.e2efacts import SIM_TRUTH, message_e2e
 from odocan.sim.frames import SimTruthPart
 
 
@@ -219,7 +219,7 @@ DATA_IDS_BY_FRAME_ID: Final[dict[int, tuple[u8, ...]]] = {
     ODOM_STATUS_ID: ODOM_STATUS_DATA_IDS,
     NAV_GOAL_ID: NAV_GOAL_DATA_IDS,
     NAV_STATUS_ID: NAV_STATUS_DATA_IDS,
-    SIM_TRUTH_ID: SIM_TRUTH_DATA_IDS,
+    SIM_TRUTH_ID: message_e2e(SIM_TRUTH).data_ids,  # the sim's, not the firmware's
 }
 
 

@@ -286,7 +286,7 @@ def test_counter_laps_follow_an_edited_dbc(tmp_path: Path) -> None:
 
 
 def test_a_dbc_whose_counters_differ_is_refused_by_name(tmp_path: Path) -> None:
-    # MOTOR_CMD's COUNTER widened to 8 bits (bits 12..15 are free): the E2E checks read one lap
+    # MOTOR_CMD's COUNTER widened to 8 bits (bits 12..15 are free): past Profile 2's 16 values
     text = DBC_PATH.read_text(encoding="utf-8")
     edited, n = re.subn(r"(BO_ 272 MOTOR_CMD: 8 ODOM_MCU\n SG_ CHECKSUM [^\n]*\n"
                         r" SG_ COUNTER : 8\|)4@1\+ \(1,0\) \[0\|15\]",
@@ -296,7 +296,7 @@ def test_a_dbc_whose_counters_differ_is_refused_by_name(tmp_path: Path) -> None:
     dbc.write_text(edited, encoding="utf-8")
     done = _lap_probe(tmp_path, dbc)
     assert done.returncode != 0
-    assert "MOTOR_CMD COUNTER values 256 vs WHEEL_ENCODERS COUNTER's 16" in done.stderr
+    assert "MOTOR_CMD COUNTER values 256: E2E Profile 2 counts at most 16" in done.stderr
 
 
 def test_a_counter_past_profile_2_is_refused() -> None:

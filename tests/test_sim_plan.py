@@ -14,6 +14,7 @@ from odocan.firmware import frames as fr
 from odocan.firmware.errors import ErrorMask
 from odocan.host.io.logs import FrameCollector
 from odocan.sim import motor_controller
+from odocan.sim.e2efacts import SIM_TRUTH, message_e2e
 from odocan.sim.errors import ErrorModel
 from odocan.sim.lookahead import BLOCK_TICKS, PlannedVehicle
 from odocan.sim.rig import LockstepRig, RigConfig
@@ -88,9 +89,10 @@ def test_a_restart_mid_block_is_planned_again_from_the_next_block() -> None:
 def test_the_batch_crc_is_seal_frame_s() -> None:
     rng = random.Random(13)
     words = [rng.getrandbits(64) & ~0xFF for _ in range(500)]
-    for data_ids in (fr.WHEEL_ENCODERS_DATA_IDS, fr.MOTOR_CMD_DATA_IDS, fr.SIM_TRUTH_DATA_IDS):
+    truth_ids = message_e2e(SIM_TRUTH).data_ids
+    for data_ids in (fr.WHEEL_ENCODERS_DATA_IDS, fr.MOTOR_CMD_DATA_IDS, truth_ids):
         assert seal_words(words, data_ids) == [fr.seal_frame(w, data_ids) for w in words]
-    assert seal_words([], fr.SIM_TRUTH_DATA_IDS) == []
+    assert seal_words([], truth_ids) == []
 
 
 def test_the_vehicle_fell_back_at_the_miss() -> None:

@@ -25,6 +25,7 @@ from typing import NoReturn
 
 from odocan import __version__
 from odocan.host.cli.dbcfirst import follow_named_dbc
+from odocan.host.outputs import outputs_on_stdout
 from odocan.sim.exceptions import OdocanError, Terminated
 
 # Each module has add_subparser(subparsers) that sets func=_do_<cmd>(args) -> int.
@@ -181,7 +182,8 @@ def main(argv: list[str] | None = None) -> int:
             args = (parser or build_parser(named_command(argv))).parse_args(argv)
             args.debug = debug  # split off above; bridge/fleet show library logs with it
             _quiet_broken_pipe_in_rich()
-            return int(args.func(args))
+            with outputs_on_stdout(args):  # --report -: the report alone on stdout
+                return int(args.func(args))
     except KeyboardInterrupt as exc:
         return _interrupted(exc, named_command(argv))
     except BrokenPipeError:

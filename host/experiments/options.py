@@ -34,7 +34,8 @@ def add_common_arguments(parser: argparse.ArgumentParser, default_errors: str, r
         help=f"runs, 1 .. {RUNS_MAX} (default: {runs})",
     )
     parser.add_argument(
-        "--report", type=Path, metavar="PATH", help="write the JSON report here (default: none)"
+        "--report", type=Path, metavar="PATH", help="write the JSON report here (default: none;"
+        " - for stdout: the summary then goes to stderr)"
     )
 
 

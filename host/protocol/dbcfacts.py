@@ -70,20 +70,24 @@ def counter_lap(plan: DatabaseSpec, name: str, signal: str = "COUNTER") -> int:
 
 def e2e_counter_lap(plan: DatabaseSpec) -> int:
     """The one lap of every E2E COUNTER of ``plan`` (a signal ``COUNTER`` or ``*_COUNTER``,
-    which echoes one: 2 ** its bits), WHEEL_ENCODERS' first. The E2E checks (``e2e``,
-    ``e2e_retract``, the placements) read one lap for every message: a DBC whose COUNTERs
-    differ, or count past Profile 2's 16, is refused, the first such signal named."""
+    which echoes one: 2 ** its bits), WHEEL_ENCODERS' first. A COUNTER past Profile 2's 16
+    values is refused first, itself named (not a message whose COUNTER differs from it); then,
+    as the E2E checks (``e2e``, ``e2e_live``, ``e2e_evidence``, ``e2e_held``, ``e2e_retract``,
+    the placements) read one lap for every message, a DBC whose COUNTERs differ is refused,
+    the first such signal named."""
+    counters = [(message.name, signal.name, 1 << signal.length)
+                for message in plan.messages for signal in message.signals
+                if signal.name == "COUNTER" or signal.name.endswith("_COUNTER")]
+    for name, signal_name, its in counters:
+        if its > PROFILE2_MAX_COUNTER_LAP:
+            raise DbcFactError(f"{name} {signal_name} values {its}: E2E Profile 2 counts at"
+                               f" most {PROFILE2_MAX_COUNTER_LAP}")
     lap = counter_lap(plan, ENC_MESSAGE)
-    for message in plan.messages:
-        for signal in message.signals:
-            counts = signal.name == "COUNTER" or signal.name.endswith("_COUNTER")
-            if counts and (its := 1 << signal.length) != lap:
-                raise DbcFactError(
-                    f"{message.name} {signal.name} values {its} vs {ENC_MESSAGE} COUNTER's"
-                    f" {lap}: the E2E checks read one COUNTER lap")
-    if lap > PROFILE2_MAX_COUNTER_LAP:
-        raise DbcFactError(f"{ENC_MESSAGE} COUNTER values {lap}: E2E Profile 2 counts at most"
-                           f" {PROFILE2_MAX_COUNTER_LAP}")
+    for name, signal_name, its in counters:
+        if its != lap:
+            raise DbcFactError(
+                f"{name} {signal_name} values {its} vs {ENC_MESSAGE} COUNTER's {lap}: the"
+                " judges' E2E checks read one COUNTER lap for every message")
     return lap
 
 

@@ -30,7 +30,8 @@ def add_junit_argument(parser: argparse.ArgumentParser) -> None:
     """Add ``--junit PATH``."""
     parser.add_argument(
         "--junit", type=Path, metavar="PATH",
-        help="write the checks as JUnit XML for CI (one testcase per check)",
+        help="write the checks as JUnit XML for CI (one testcase per check;"
+        " - for stdout: the summary then goes to stderr)",
     )
 
 

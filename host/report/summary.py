@@ -77,7 +77,8 @@ def add_check_arguments(parser: argparse.ArgumentParser) -> None:
         help="on-board vs reference tolerance: METRES, or pos=METRES,heading=RADIANS "
         "(default: one LSB of the pose signals, pos=1e-4,heading=9.587e-5)",
     )
-    group.add_argument("--report", type=Path, metavar="PATH", help="write the JSON report here")
+    group.add_argument("--report", type=Path, metavar="PATH", help="write the JSON report here"
+                       " (- for stdout: the summary then goes to stderr)")
     group.add_argument(
         "--plot", type=Path, metavar="PATH", help="write the trajectory and error plot (.png, .svg)"
     )

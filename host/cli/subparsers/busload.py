@@ -92,7 +92,8 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="min inter-arrival of messages without cycle time or GenMsgDelayTime "
         "(default: the DBC's shortest cycle time)",
     )
-    parser.add_argument("--report", type=Path, metavar="PATH", help="write the JSON report here")
+    parser.add_argument("--report", type=Path, metavar="PATH", help="write the JSON report here"
+                        " (- for stdout: the summary then goes to stderr)")
     parser.set_defaults(func=_do_busload)
 
 

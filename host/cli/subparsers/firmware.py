@@ -30,10 +30,13 @@ from odocan.host.cli.options import (
     check_duration,
 )
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.stopped import early_stop
 from odocan.sim import robot
 from odocan.sim.board import FileNvm, NvmCell
 from odocan.sim.cboard import board_maker
+from odocan.sim.contract import read_as
+from odocan.sim.e2efacts import require_firmware_follows
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.realtime import PeriodicLoop, accepted_ids, stop_on_signals
 from odocan.sim.rig import firmware_params
@@ -79,6 +82,8 @@ def _secoc_key(path: Path) -> bytes:
 def _do_firmware(args: argparse.Namespace) -> int:
     params = firmware_params(robot.load(args.robot), args.integrator)
     check_duration(args.duration)
+    with read_as(default_plan()):  # the DBC the firmware is asked to speak: its build's?
+        require_firmware_follows()
     key = None if args.secoc_key is None else _secoc_key(args.secoc_key)
     nvm = _nvm(args.nvm, key)
     # builds the C library (and checks its ABI takes a key) before the bus opens

@@ -41,11 +41,14 @@ from odocan.host.mqtt.options import (
 )
 from odocan.host.mqtt.shards import Shard, embedded_broker, run_sharded
 from odocan.host.outputs import check_writable, write_text
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.secoc import load_secoc_key
 from odocan.host.report.foxglove_options import HOST, port_number
 from odocan.host.report.progress import Progress, wall_clock_progress
 from odocan.host.stopped import stop_code, stopped_text
 from odocan.sim import robot
+from odocan.sim.contract import read_as
+from odocan.sim.e2efacts import require_firmware_follows
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.fleet import FleetConfig, robot_name
 from odocan.sim.rig import INTEGRATORS, TRANSPORTS, firmware_params
@@ -96,7 +99,8 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"WALL-CLOCK seconds to run, at most {FLEET_MAX_DURATION_S:g} (default: %(default)s)",
     )
     parser.add_argument(
-        "--report", type=Path, metavar="PATH", help="write the JSON report (default: none)"
+        "--report", type=Path, metavar="PATH", help="write the JSON report (default: none;"
+        " - for stdout: the summary then goes to stderr)"
     )
     parser.add_argument(
         "--robot", default="pmir", help="profile of every robot, name or TOML path (default: pmir)"
@@ -178,6 +182,8 @@ def _do_fleet(args: argparse.Namespace) -> int:
             f"--workers {args.workers}: more workers than robots to run ({robots})"
         )
     check_writable(args.report, "--report")
+    with read_as(default_plan()):  # the robots' firmware speaks the DBC sims and judges read
+        require_firmware_follows()
     broker = broker_url(args)
     if broker is not None and args.port is not None:
         raise ConfigurationError("--port is the embedded broker's: --broker names its own port")

@@ -73,6 +73,7 @@ from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
 from odocan.sim.cboard import board_maker
 from odocan.sim.contract import database, read_as
+from odocan.sim.e2efacts import require_firmware_follows
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultSpec
 from odocan.sim.faultspec import two_handles
@@ -179,6 +180,8 @@ def _do_run(args: argparse.Namespace) -> int:
         # flat out: the drive may run ahead (not when frames are paced onto a live bus)
         lookahead=args.interface is None and args.channel is None,
     )
+    with read_as(default_plan()):  # the firmware speaks the DBC the sim and judges read
+        require_firmware_follows()
     check_log_path(args.log)
     check_output_paths(args)
     check_latency_plot(args.latency_plot, config.bitrate)
