@@ -66,7 +66,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from odocan.host.judge.livefit import pose_wrong
-from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.livepose import ErrorStats
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
@@ -395,8 +394,7 @@ def watched_verdict(
     new start's held samples judged), then ``judge_robot``, then the stretches between the
     loop's halts (``overload``)."""
     tracker = telemetry.tracker
-    telemetry.hold.release(ends=True)  # frames held for the evidence judged now (livehold)
-    end_of_watch(tracker)
+    telemetry.end_watch()  # frames held judged, then what still waits (host.judge.watchend)
     verdict = judge_robot(tracker.vs_reference, tracker.vs_truth, frames_dropped=frames_dropped,
                           beyond_allowance_m=tracker.max_beyond_allowance_m)
     if verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
