@@ -33,6 +33,8 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.fleetrun import watched_verdict
+from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.robot import load
 from tests.conftest_mqtt import Mosquitto, client, mosquitto  # noqa: F401 (fixture)
@@ -170,6 +172,23 @@ def test_a_distance_wrong_in_the_watchs_last_twists_fails_the_monitor(
     assert "monitor: FAIL: ODOM_TWIST DISTANCE off" in err, err
     assert not distance["passed"], distance
     assert distance["judged_at_end"] > 0, distance
+
+
+def test_the_fleets_report_judges_the_twists_waiting_at_its_end(tmp_path: Path) -> None:
+    """The same drive through a fleet robot's telemetry: its report's ``distance`` (beside the
+    pose verdict) has the last twists judged, wrong (before: no ``distance`` in the report, and
+    the bridge's status said ``passed`` at the end)."""
+    drive = short_drive()
+    synth = _synth(KOBUKI, drive, off_by(2, len(drive[0]) - 30))
+    telemetry = RobotTelemetry(ROBOT, Geometry.of(KOBUKI), "exact",
+                               counter_bits=KOBUKI.counter_bits)
+    telemetry.distance.max_wheel_speed_mm_s = 4000  # the drive's bound (test_distance)
+    for msg in can.LogReader(str(synth.write(tmp_path / "late.log"))):
+        telemetry.feed(msg)
+    entry = watched_verdict(telemetry, 0, None)
+    assert entry["verdict"] == "PASS", entry  # the pose is right
+    assert not telemetry.status()[1]["distance"]["passed"]  # (the retained status's)
+    assert not entry["distance"]["passed"], entry["distance"]
 
 
 def _profile_toml(profile: Any) -> str:

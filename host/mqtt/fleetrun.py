@@ -17,6 +17,8 @@ the fleet's frames offered to it each tick), runs for ``duration_s`` and returns
                                                   "samples": ...} | null,
                             "pose_vs_truth": {...} | null,
                             "halt_stretches": {...} (a robot the loop halted: haltstretch),
+                            "distance": {...}, "twist": {...} (ODOM_TWIST judged live, as
+                            the status's; said beside the verdict, not part of it),
                             "verdict": "PASS" | "FAIL" | "UNJUDGED" | null, "reason": ...}, ...}}
 ```
 
@@ -399,7 +401,9 @@ def watched_verdict(
                           beyond_allowance_m=tracker.max_beyond_allowance_m)
     if verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
         verdict = after_halts(verdict, halted, tracker, telemetry.stretches)
-    return verdict
+    # ODOM_TWIST judged live, the samples waiting at the end included (said, not yet verdicts)
+    return {**verdict, "distance": telemetry.distance.as_dict(),
+            "twist": telemetry.twist.as_dict()}
 
 
 def judge_robot(
