@@ -224,6 +224,11 @@ def _link(**kwargs: Any) -> RobotLink:
 
 def test_telemetry_buffer_drops_the_oldest_and_nothing_while_offline() -> None:
     link = _link(telemetry_buffer=100)
+    for k in range(5):  # before the first connection (a running firmware joined): kept
+        link.publish("pose", {"k": k})
+    assert (len(link.telemetry), link.telemetry_offline) == (5, 0)
+    link.telemetry.clear()
+    link.connects = 1  # connected once, and away now (an outage)
     for k in range(50):
         link.publish("pose", {"k": k})  # offline: not kept at all
     assert (len(link.telemetry), link.telemetry_offline) == (0, 50)

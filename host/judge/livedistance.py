@@ -72,6 +72,7 @@ class LiveDistance:
         self.suspended = False  # a config applied with parameters not known here
         self.wrong_lives = 0  # lives whose intervals did not meet (latched)
         self.worst_excess_m = 0.0
+        self.judged_at_end = 0  # twists judged at the watch's end, their page not heard
         self.new_life()
 
     def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
@@ -219,6 +220,16 @@ class LiveDistance:
             k += 1
         del self._waiting[:k]
 
+    def finish(self) -> int:
+        """The watch ends (no later page comes): the twists still waiting for the page after
+        their frame judged with the spans known, as ``new_life`` judges an old life's and
+        ``analyze`` the twists after a log's last page; how many there were (before, they were
+        never judged: a DISTANCE wrong in the watch's last 0.6-1.8 s passed)."""
+        waiting = len(self._waiting)
+        self._take_waiting(math.inf)
+        self.judged_at_end += waiting
+        return waiting
+
     def verdict(self) -> list[str]:
         """Why DISTANCE is wrong (empty: it is not), latched once found."""
         excess = self._feasible.excess_mm * 1e-3 if self._feasible is not None else 0.0
@@ -237,4 +248,5 @@ class LiveDistance:
         return {"samples": self.samples, "start": "power-up" if self.power_up else "fitted",
                 "suspended": self.suspended,
                 "max_excess_m": self.worst_excess_m, "wrong_lives": self.wrong_lives,
+                "judged_at_end": self.judged_at_end,
                 "passed": self.wrong_lives == 0}

@@ -135,6 +135,7 @@ class _Robot:
             telemetry_buffer=config.telemetry_buffer, reliable_buffer=config.reliable_buffer,
             commands=commands,
         )
+        self.link.last_status = self.last_status  # the ``offline`` status carries it
         self.pacer = CommandPacer(
             self.telemetry, self._send_frame, window_frames=config.command_window_frames,
             ack_timeout_s=config.command_ack_timeout_s, max_queued=config.command_queue,
@@ -152,6 +153,12 @@ class _Robot:
         receive = self.receive()  # first: its ``lost_here`` event goes out with this status
         leaf, payload = self.telemetry.status()
         return leaf, {**payload, "receive": receive}
+
+    def last_status(self) -> dict[str, Any]:
+        """The fields of ``status`` but its ``robot``, ``state`` and stamp: the link's
+        ``offline`` status carries them (the watch's verdicts, retained after the bridge)."""
+        payload = self.status()[1]
+        return {k: v for k, v in payload.items() if k not in ("robot", "state", "unix_s")}
 
     def on_command(
         self, name: str, payload: bytes, verdict: Verdict | Expired | Fresh = "run"
@@ -319,6 +326,7 @@ class Bridge:
                 await stop.wait()
                 await asyncio.sleep(0)
                 self._drain()
+                self._end_watch()  # before the links' offline, which carries the verdicts
                 self._abort()  # queued before the links' offline: flushed with it
                 frames.cancel()
                 periodic.cancel()
@@ -374,6 +382,16 @@ class Bridge:
         """Every robot's commands not answered yet: ``aborted`` (``_Robot.abort``)."""
         for robot in self.robots:
             for leaf, payload in robot.abort():
+                robot.link.publish(leaf, payload)
+
+    def _end_watch(self) -> None:
+        """The watch ends as the fleet's report ends it (``RobotTelemetry.end_watch``): the
+        frames a hold kept judged and their publications queued, what the live judges still
+        wait with judged; each link's ``offline`` status then carries the robot's last status,
+        its verdicts (``pose_wrongs``, ``distance``, ``twist``) final. Before, the bridge
+        stopped with a hold's frames (up to ~1.5 s of the bus) never judged."""
+        for robot in self.robots:
+            for leaf, payload in robot.telemetry.end_watch():
                 robot.link.publish(leaf, payload)
 
     def _drain(self) -> None:

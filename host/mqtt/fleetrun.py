@@ -17,6 +17,8 @@ the fleet's frames offered to it each tick), runs for ``duration_s`` and returns
                                                   "samples": ...} | null,
                             "pose_vs_truth": {...} | null,
                             "halt_stretches": {...} (a robot the loop halted: haltstretch),
+                            "distance": {...}, "twist": {...} (ODOM_TWIST judged live, as
+                            the status's; said beside the verdict, not part of it),
                             "verdict": "PASS" | "FAIL" | "UNJUDGED" | null, "reason": ...}, ...}}
 ```
 
@@ -66,7 +68,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from odocan.host.judge.livefit import pose_wrong
-from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.livepose import ErrorStats
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
@@ -395,13 +396,14 @@ def watched_verdict(
     new start's held samples judged), then ``judge_robot``, then the stretches between the
     loop's halts (``overload``)."""
     tracker = telemetry.tracker
-    telemetry.hold.release(ends=True)  # frames held for the evidence judged now (livehold)
-    end_of_watch(tracker)
+    telemetry.end_watch()  # frames held judged, then what still waits (host.judge.watchend)
     verdict = judge_robot(tracker.vs_reference, tracker.vs_truth, frames_dropped=frames_dropped,
                           beyond_allowance_m=tracker.max_beyond_allowance_m)
     if verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
         verdict = after_halts(verdict, halted, tracker, telemetry.stretches)
-    return verdict
+    # ODOM_TWIST judged live, the samples waiting at the end included (said, not yet verdicts)
+    return {**verdict, "distance": telemetry.distance.as_dict(),
+            "twist": telemetry.twist.as_dict()}
 
 
 def judge_robot(

@@ -24,11 +24,14 @@
   commands it acknowledged, unanswered); ``_receive`` takes them from there. Commands read
   before a connection broke, or before the bridge stopped, are still answered;
 * last will: ``status`` = ``{"state": "offline", "reason": "connection lost"}``, QoS 1, retained;
-  whenever ``run`` ends (stop, cancellation, an error) it publishes ``offline`` itself first;
+  whenever ``run`` ends (stop, cancellation, an error) it publishes ``offline`` itself first,
+  with ``last_status``'s fields (the bridge's: the robot's last status, its verdicts final);
 * telemetry never waits for acknowledgements: QoS-0 telemetry and QoS-1 publications (status,
   results) have their own buffers and their own sender tasks. Telemetry is a bounded deque that
   drops the oldest (``telemetry_dropped``); while disconnected it is not kept at all
-  (``telemetry_offline``: no stale pose is replayed after an outage). QoS-1 publications stay
+  (``telemetry_offline``: no stale pose is replayed after an outage), but before the first
+  connection (a bridge joining a running firmware: nothing lost, sent once connected) and once
+  the bridge stops (the watch's end, written before ``offline``) it is kept. QoS-1 publications stay
   queued until the broker acknowledged them (at least once across broker restarts; a ``status``
   queued while disconnected replaces the queued ones, ``status_superseded``), up to
   ``reliable_buffer`` entries: beyond, the oldest ``status`` (superseded) goes first, then the
@@ -135,6 +138,10 @@ class RobotLink:
         self._owed = False  # the stop's answers are queued: the QoS-1 buffer drops none
         self.sessions_lost = 0  # reconnects to a broker that had lost our session (state)
         self.connected = asyncio.Event()
+        # the fields ``offline`` carries besides its reason (the bridge's: the robot's last
+        # status, its verdicts final); None: none
+        self.last_status: Callable[[], dict[str, Any]] | None = None
+        self._stop: asyncio.Event | None = None  # ``run``'s
         self.redeliveries = Redeliveries()  # a DUP copy of a command handled is not run again
         # this robot's commands, read on the process's reader thread (started by ``run``)
         self.reader: RobotCommands = commands or CommandReader(
@@ -152,7 +159,7 @@ class RobotLink:
         """Queue one publication on ``odocan/<robot>/<leaf>`` (QoS and retain by its class)."""
         topic, body = topics.topic(self.robot, leaf), topics.dumps(payload)
         if topics.qos(leaf) == topics.QOS_TELEMETRY:
-            if not self.connected.is_set():
+            if not self.connected.is_set() and self.connects and not self._stopping:
                 self.telemetry_offline += 1  # stale by the time the broker is back
                 return
             if len(self.telemetry) == self.telemetry.maxlen:
@@ -167,6 +174,11 @@ class RobotLink:
         interim = leaf == topics.RESULT_LEAF and payload.get("result") == "accepted"
         self.reliable.append(Outgoing(topic, body, topics.retained(leaf), interim))
         self._reliable_wake.set()
+
+    @property
+    def _stopping(self) -> bool:
+        """The bridge stops: its last telemetry (the watch's end) goes with ``offline``."""
+        return self._stop is not None and self._stop.is_set()
 
     def _supersede_status(self, topic: str) -> None:
         """Offline, a new ``status`` (retained: the broker keeps only the latest) supersedes
@@ -270,6 +282,7 @@ class RobotLink:
         The command reader's thread, started with the first connection, is stopped and joined
         whatever ends ``run``.
         """
+        self._stop = stop
         try:
             await self._serve(stop=stop)
         finally:
@@ -320,7 +333,8 @@ class RobotLink:
             pass
         finally:
             self.connected.clear()
-            self.telemetry.clear()
+            if not stop.is_set():  # (stopping: the watch's last telemetry, ``_goodbye``'s)
+                self.telemetry.clear()
             if stop.is_set():  # (a lost connection: they wait)
                 await self.reader.stop()  # no command read any more: the read ones answered
                 self._answer_waiting()
@@ -445,11 +459,19 @@ class RobotLink:
                 self.reliable.remove(p)
 
     async def _goodbye(self, client: LinkClient) -> None:
-        """``offline`` (superseding queued statuses), then flush the QoS-1 buffer, if possible
-        (within ``GOODBYE_S``, and ``GOODBYE_S_PER_ENTRY`` more for each entry)."""
+        """The telemetry still queued written, ``offline`` (superseding queued statuses; with
+        ``last_status``'s fields: the watch's verdicts), then flush the QoS-1 buffer, if
+        possible (within ``GOODBYE_S``, and ``GOODBYE_S_PER_ENTRY`` more for each entry)."""
+        if self.telemetry:  # the telemetry queued at the stop (the watch's end), QoS 0
+            with contextlib.suppress(Exception):
+                client.publish_batch(list(self.telemetry))
+                client.flush()
+            self.telemetry.clear()
         status = topics.topic(self.robot, topics.STATUS_LEAF)
         self.reliable = deque(p for p in self.reliable if p.topic != status)
-        offline = topics.status_payload(self.robot, "offline", reason="bridge stopped")
+        last = {} if self.last_status is None else self.last_status()
+        offline = topics.status_payload(self.robot, "offline",
+                                        **{**last, "reason": "bridge stopped"})
         self.reliable.append(Outgoing(status, topics.dumps(offline), True))
         timeout_s = GOODBYE_S + GOODBYE_S_PER_ENTRY * len(self.reliable)
         with contextlib.suppress(Exception):

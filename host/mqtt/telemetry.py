@@ -68,6 +68,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.judge.watchend import end_watch
 from odocan.host.mqtt.dbcnames import named_value, page_name
 from odocan.host.mqtt.errorbatch import SinceLast
 from odocan.host.mqtt.haltstretch import HaltStretches
@@ -169,6 +170,7 @@ class RobotTelemetry(CommandFollowing):
         # per 11-bit identifier (host.mqtt.liveplan): ``plans[id](t_s, data)`` is
         # ``feed_fields(t_s, id, data, False)`` (the bridge calls it without that call)
         self.plans = plans(self, self._routes)
+        self._ended = False  # ``end_watch`` ran
 
     # --- frames ---
     def feed(self, msg: can.Message) -> list[Publication]:
@@ -222,6 +224,17 @@ class RobotTelemetry(CommandFollowing):
         message = self._by_id.get(can_id)
         self.rejected[message.name if message else self._unknown_key(can_id)] += 1
         return self._samples() if tracker.settled else []
+
+    def end_watch(self) -> list[Publication]:
+        """The watch ends (the bridge stops, the fleet's report): the frames a hold kept judged
+        (``livehold``), then what the live judges still wait with (``host.judge.watchend``);
+        the publications the frames held make. Once: a second call judges nothing again."""
+        if self._ended:
+            return []
+        self._ended = True
+        published = self.hold.release(ends=True)
+        end_watch(self.tracker, self.distance)
+        return published
 
     def forced_plans(self, hold: BridgeHold) -> dict[int, Plan]:
         """Plans whose E2E check gives an encoder frame held the verdict ``hold.verdict``

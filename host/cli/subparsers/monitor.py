@@ -50,8 +50,10 @@ from odocan.host.cli.subparsers.analyze import load_judges_dbc
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.busreader import lost_here_text
 from odocan.host.io.export import FOXGLOVE_PORT
-from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.monitor import BusMonitor, to_json
+from odocan.host.judge.monitorvalues import node_ages
+from odocan.host.judge.sources import FIRMWARE_NODE
+from odocan.host.judge.watchend import end_watch
 from odocan.host.mqtt.broker import (
     BrokerError,
     BrokerURL,
@@ -122,6 +124,13 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         metavar="PATH",
         help="record every frame heard while watching (.log candump, .asc, .blf)",
     )
+    parser.add_argument(
+        "--require-firmware",
+        action="store_true",
+        help="exit 1 when the watch heard no firmware (no cyclic ODOM_MCU message) or compared "
+        "no on-board pose with the reference: a CI watch that judged nothing fails (default: "
+        "off, so that the monitor views or records (--log) any bus; NO FIRMWARE exits 0)",
+    )
     add_robot_argument(parser, role="profile for the reference")
     add_judge_arguments(parser)
     parser.add_argument(
@@ -161,10 +170,8 @@ def _do_monitor(args: argparse.Namespace) -> int:
     live = _foxglove(args, profile, model)
     started_s = time.monotonic()
     failure, signum, received = _watch_bus(args, model, trace, view, recorder, live)
-    wrongs = model.tracker.wrongs
     model.release_held()  # frames held for the evidence are judged now (host.judge.livesettle)
-    end_of_watch(model.tracker)  # the last pages' proof (host.judge.livegapseen)
-    wrongs.finish(model.tracker.allowance_m)  # the samples still waiting for a later page
+    end_watch(model.tracker, model.distance)  # what still waits judged (host.judge.watchend)
     code = _end(args, lambda: {**model.snapshot(), "receive": received},
                 early_stop(signum, started_s, args.duration))
     if lost := lost_here_text(received):  # this process's own losses, not the bus's
@@ -187,6 +194,8 @@ def _say_failures(args: argparse.Namespace, model: BusMonitor, profile: robot.Ro
                      f"{_robot_hint(args, profile)}")
     fails += model.distance.verdict()[:1]  # ODOM_TWIST DISTANCE wrong in some life
     fails += model.twist.verdict()[:1]  # ODOM_TWIST LINEAR_VEL / ANGULAR_VEL wrong once
+    if args.require_firmware:  # a watch that judged nothing is no pass (CI)
+        fails += _nothing_judged(model)
     for line in fails:
         print(f"monitor: FAIL: {line}", file=sys.stderr)
     if args.interface == "odocan" and not model.frames_total:
@@ -197,6 +206,17 @@ def _say_failures(args: argparse.Namespace, model: BusMonitor, profile: robot.Ro
     if said:
         print(f"monitor: {said}", file=sys.stderr)
     return bool(fails)
+
+
+def _nothing_judged(model: BusMonitor) -> list[str]:
+    """``--require-firmware``'s FAIL: no firmware heard, or no on-board pose judged."""
+    if FIRMWARE_NODE not in node_ages(model.db, model.messages, time.monotonic()):
+        return [f"no firmware heard (no cyclic {FIRMWARE_NODE} message): nothing judged "
+                "(--require-firmware)"]
+    if not model.tracker.vs_reference.samples:
+        return ["no on-board pose compared with the reference: nothing judged "
+                "(--require-firmware)"]
+    return []
 
 
 def _robot_hint(args: argparse.Namespace, profile: robot.RobotProfile) -> str:
