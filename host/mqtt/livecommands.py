@@ -41,6 +41,8 @@ class PendingAck:
     cmd_id: Any
     command: str
     final: bool  # the APPLY / GO frame: its ACK completes the command
+    data: bytes = b""  # the frame's 8 bytes: what a ``cmd/result`` names when unanswered
+    origin: object = None  # the command sent (ids may repeat, or be null, across commands)
 
 
 class CommandFollowing:
@@ -153,12 +155,40 @@ class CommandFollowing:
             self.pending = {k: p for k, p in self.pending.items() if p.cmd_id != pending.cmd_id}
         reason = choice(self.db, "ODOM_ACK", "REASON", int(s["REASON"]))
         result = "nacked" if nack else "acked"
+        unanswered = self._unanswered(pending)
+        if unanswered:
+            final = self._field(key[0], pending.data) or "last frame"
+            result, reason = "unanswered", unanswered_reason(final, unanswered)
         contested = self.contested.pop(pending.cmd_id, None)
         if contested is not None:
             result, reason = "contested", contested_reason(contested, reason, nack)
         payload = {"id": pending.cmd_id, "command": pending.command,
                    "result": result, "reason": reason, "t_s": t_s}
         return [(RESULT_LEAF, stamp(payload))]
+
+    def _unanswered(self, final: PendingAck) -> list[str]:
+        """The frames of ``final``'s command still waiting for their ODOM_ACK when its final
+        frame's ACK came (the firmware answers in bus order: these never will; it applied
+        without them), named ``ODOM_CONFIG WHEELBASE (COUNTER 3)``, and forgotten."""
+        if final.origin is None:
+            return []
+        keys = [k for k, p in self.pending.items() if p.origin is final.origin]
+        names = [self._frame_name(k, self.pending.pop(k).data) for k in keys]
+        return names
+
+    def _frame_name(self, key: tuple[int, int], data: bytes) -> str:
+        """A command frame's message and multiplexer value, by the DBC's names."""
+        field = self._field(key[0], data)
+        name = self.db.get_message_by_frame_id(key[0]).name
+        return f"{name}{' ' + field if field else ''} (COUNTER {key[1]})"
+
+    def _field(self, can_id: int, data: bytes) -> str:
+        """A command frame's PARAM or FIELD by its DBC name ('' when it does not decode)."""
+        with contextlib.suppress(DecodeError, KeyError, ValueError):
+            decoded = self.db.get_message_by_frame_id(can_id).decode(data, decode_choices=True)
+            if isinstance(decoded, dict):
+                return next((str(decoded[m]) for m in ("PARAM", "FIELD") if m in decoded), "")
+        return ""
 
     def expect_ack(self, can_id: int, counter: int, ack: PendingAck) -> None:
         """A command frame was sent: its ODOM_ACK will answer the command."""
@@ -172,3 +202,12 @@ def contested_reason(detail: str, reason: str, nack: bool) -> str:
             "other tool's frame (a second frame of one COUNTER is dropped unanswered), and "
             "the staged set may mix both: not known to be applied as sent (the firmware's "
             "PROFILE page tells what it runs)")
+
+
+def unanswered_reason(final: str, frames: list[str]) -> str:
+    """``cmd/result``'s reason of an ``unanswered`` command: its ``final`` frame (APPLY, GO)
+    ACKed, ``frames`` of it never answered (lost on the bus, or refused unanswered by the
+    firmware's E2E check: the firmware committed without them; or their ACK was lost)."""
+    return (f"ODOM_ACK ACK for its {final}, but its {', '.join(frames)} "
+            f"{'was' if len(frames) == 1 else 'were'} never answered: not known to be applied "
+            "as sent (the firmware commits what it staged, without a frame it never took)")

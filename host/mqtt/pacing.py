@@ -41,8 +41,9 @@ WINDOW_FRAMES = 8  # command frames (and their ODOM_AUTHs) un-answered on the bu
 ACK_TIMEOUT_S = 2.0  # the firmware answers within a tick: this long after the last frame
 MAX_QUEUED = 1024  # commands waiting per robot; beyond, refused
 # the telemetry's answers from the firmware's ODOM_ACK (``contested``: another tool's frames
-# heard in its flight, ``host.mqtt.livecommands``)
-FINAL_ANSWERS = ("acked", "nacked", "contested")
+# heard in its flight; ``unanswered``: its final frame ACKed, not all its staged ones;
+# ``host.mqtt.livecommands``)
+FINAL_ANSWERS = ("acked", "nacked", "contested", "unanswered")
 
 # Puts one frame (and its ODOM_AUTH) on the bus: the mailbox slots it takes; CommandRejected
 SendFrame = Callable[[Command, Frame], int]
