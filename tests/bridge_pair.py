@@ -12,6 +12,7 @@ encoder frame after the one the bridge had heard when it sent them (a live bus's
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Iterator
 from typing import Any
 
@@ -102,3 +103,19 @@ class Board:
         results = [p for leaf, p in published if leaf == topics.RESULT_LEAF]
         self.results += results
         return results
+
+
+def reckoned_from(x_m: float, y_m: float, heading_rad: float, steps: int
+                  ) -> tuple[float, float, float]:
+    """Independent float64: ``steps`` exact arcs of kobuki's constant step (``D_LEFT``,
+    ``D_RIGHT`` counts) from the pose given; the pose reached (m, m, rad)."""
+    per_count_l = 2 * math.pi * KOBUKI.wheel_radius_left_m / KOBUKI.counts_per_rev
+    per_count_r = 2 * math.pi * KOBUKI.wheel_radius_right_m / KOBUKI.counts_per_rev
+    ds = (D_LEFT * per_count_l + D_RIGHT * per_count_r) / 2
+    dth = (D_RIGHT * per_count_r - D_LEFT * per_count_l) / KOBUKI.wheelbase_m
+    x, y, th = x_m, y_m, heading_rad
+    for _ in range(steps):
+        x += ds / dth * (math.sin(th + dth) - math.sin(th))
+        y -= ds / dth * (math.cos(th + dth) - math.cos(th))
+        th += dth
+    return x, y, th

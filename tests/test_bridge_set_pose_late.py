@@ -13,29 +13,19 @@ set pose, written here, from the frame the firmware applied it on).
 from __future__ import annotations
 
 import json
-import math
 from typing import Any
 
 import pytest
 
 from odocan.firmware.odometry import Odometry
-from tests.bridge_pair import D_LEFT, D_RIGHT, KOBUKI, Board, bridged_robot
+from tests.bridge_pair import Board, bridged_robot, reckoned_from
 
 SET = {"x_m": 1.0, "y_m": 0.5, "heading_rad": 0.25}
 
 
 def _after_set_pose(steps: int) -> tuple[float, float, float]:
     """Independent float64: ``steps`` exact arcs of the constant step from the set pose."""
-    per_count_l = 2 * math.pi * KOBUKI.wheel_radius_left_m / KOBUKI.counts_per_rev
-    per_count_r = 2 * math.pi * KOBUKI.wheel_radius_right_m / KOBUKI.counts_per_rev
-    ds = (D_LEFT * per_count_l + D_RIGHT * per_count_r) / 2
-    dth = (D_RIGHT * per_count_r - D_LEFT * per_count_l) / KOBUKI.wheelbase_m
-    x, y, th = SET["x_m"], SET["y_m"], SET["heading_rad"]
-    for _ in range(steps):
-        x += ds / dth * (math.sin(th + dth) - math.sin(th))
-        y -= ds / dth * (math.cos(th + dth) - math.cos(th))
-        th += dth
-    return x, y, th
+    return reckoned_from(SET["x_m"], SET["y_m"], SET["heading_rad"], steps)
 
 
 def _drive(late: bool, channel: str) -> tuple[Board, dict[str, Any]]:

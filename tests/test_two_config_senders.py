@@ -25,14 +25,17 @@ ACK answers, so with two frames of one COUNTER in flight the monitor FAILed the 
 firmware (bridge's frames first, COUNTERs 3 apart: POSE WRONG with 0.27 m) and so did the
 bridge (the other tool's first, COUNTERs 3 apart; the bridge's first from COUNTER 0).
 
-Not judged here: the bridge's own reference when both tools' frames of one COUNTER and one
-PARAM carry different values and the other tool's came first on the bus: the bridge does not
-hear its own frames back, so it cannot know which of the two the firmware took (it says
-``contested`` and "two senders"; the monitor, which hears the bus in order, follows it).
+The bridge's own judges when both tools' frames of one COUNTER and one PARAM carry different
+values: the bridge does not hear its own frames back, so the ACKs cannot tell it which of the
+two the firmware took; the firmware's PROFILE page settles it (``host.judge.liveconfigdoubt``).
+Found on main: with the other tool's frames first the bridge judged the correct firmware with
+its own 0.27 m: POSE WRONG (52 mm), TWIST WRONG, profile MISMATCH. A firmware that says one
+robot on its PROFILE page and runs another still FAILs.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import uuid
@@ -43,6 +46,7 @@ import can
 import pytest
 
 from odocan.firmware import frames as fr
+from odocan.firmware.config import derive_constants
 from odocan.host.cli.app import main
 from odocan.host.mqtt.bridge import _Robot
 from odocan.host.protocol.commands import CommandEncoder
@@ -112,21 +116,27 @@ def _runs_wheelbase(board: _Interleaved, wheelbase_m: float) -> None:
 
 
 def _judges_agree(bridge: _Robot, board: _Interleaved, wheelbase_m: float) -> None:
-    """Both judges run the firmware's robot and FAIL nothing."""
+    """Both judges run the firmware's robot and FAIL nothing (the bridge's speed and DISTANCE
+    judges and its PROFILE page check neither)."""
     assert board.monitor.tracker.geometry.wheelbase_m == wheelbase_m
     assert bridge.telemetry.tracker.geometry.wheelbase_m == wheelbase_m
     assert _wrongs(bridge, board) == (0, 0)
+    _, status = bridge.telemetry.status()
+    assert status["twist"]["passed"], status["twist"]
+    assert status["distance"]["passed"], status["distance"]
+    assert status["profile"]["verdict"] == "OK", status["profile"]
 
 
-def _said(bridge: _Robot, board: _Interleaved, monitor_says: str) -> None:
-    """The bridge's own config ``contested`` (never ``acked``), and both judges' event."""
+def _said(bridge: _Robot, board: _Interleaved, monitor_says: str, bridge_says: int = 1) -> None:
+    """The bridge's own config ``contested`` (never ``acked``), and both judges' event
+    (``bridge_says``: the bridge's, its config in doubt said too)."""
     assert [r["result"] for r in board.results] == ["contested"], board.results
     assert board.results[0]["reason"].startswith(
         "two senders on ODOM_CONFIG: another tool's frame (COUNTER ")
     monitor = [e["detail"] for e in board.monitor.events if e["kind"] == "two senders"]
     assert len(monitor) == 1, board.monitor.events
     assert monitor[0].startswith(f"two senders on ODOM_CONFIG: {monitor_says}")
-    assert len(_events(bridge, "two senders")) == 1
+    assert len(_events(bridge, "two senders")) == bridge_says
 
 
 def _config_acks(board: _Interleaved) -> list[tuple[int, int]]:
@@ -144,17 +154,45 @@ def test_the_other_tool_s_counters_first_the_bridge_s_config_dropped_unanswered(
     bridge, board = _drive("test-two-senders-repeat", 0, other_first=True)
     assert _config_acks(board) == REPEAT_ANSWERS  # 8 answers to 14 frames: duplicates none
     _runs_wheelbase(board, 0.25)  # the other tool's: the bridge's never taken
-    _said(bridge, board, "COUNTER 3 repeated with other content")
-    assert board.monitor.tracker.geometry.wheelbase_m == 0.25  # the bridge: see the docstring
-    assert _wrongs(bridge, board)[1] == 0
+    _said(bridge, board, "COUNTER 3 repeated with other content", bridge_says=2)
+    _judges_agree(bridge, board, 0.25)  # the bridge's settled by the PROFILE page
+    settled = _events(bridge, "config")[-1]
+    assert settled.startswith("two senders on ODOM_CONFIG settled by the PROFILE page (0x")
+    assert "the firmware runs the other tool's WHEELBASE 0.25; the pose judged since" in settled
 
 
 def test_the_bridge_s_counters_first_the_other_tool_s_config_dropped_unanswered() -> None:
     bridge, board = _drive("test-two-senders-repeat-mine", 0, other_first=False)
     assert _config_acks(board) == REPEAT_ANSWERS
     _runs_wheelbase(board, 0.27)
-    _said(bridge, board, "COUNTER 3 repeated with other content")
+    _said(bridge, board, "COUNTER 3 repeated with other content", bridge_says=2)
     _judges_agree(bridge, board, 0.27)
+    assert _events(bridge, "config")[-1].endswith("the firmware runs this bridge's WHEELBASE 0.27")
+
+
+class _Lying(_Interleaved):
+    """``_Interleaved`` whose firmware, from its config's APPLY on, integrates with a wheelbase
+    0.29 m while its PROFILE page says the robot it applied: a wrong firmware."""
+
+    def firmware_frame(self, can_id: int, data: bytes) -> None:
+        applied = len(self.apply_periods)
+        super().firmware_frame(can_id, data)
+        if not applied and self.apply_periods:
+            params = dataclasses.replace(self.ecu.params, wheelbase_nm=290_000_000)
+            self.ecu.odometry.reconfigure(derive_constants(params, self.ecu.errors))
+
+
+@pytest.mark.parametrize("other_first", [True, False])
+def test_a_firmware_running_neither_tool_s_wheelbase_fails_the_bridge(other_first: bool) -> None:
+    with bridged_robot(f"test-two-senders-lying-{other_first}") as (bridge, listener):
+        board = _Lying(bridge, listener, _other_frames(0), other_first)
+        for _ in range(100):
+            board.period()
+        bridge.on_command("config", json.dumps(MINE).encode())
+        for _ in range(PERIODS - 100):
+            board.period()
+    assert _wrongs(bridge, board)[0] >= 1  # the bridge FAILs it, settled or not
+    assert _wrongs(bridge, board)[1] >= 1  # as the monitor does
 
 
 @pytest.mark.parametrize(("other_first", "runs_m"), [(True, 0.27), (False, 0.25)])
@@ -173,10 +211,21 @@ ANALYZE_CONFIG = {k: v for k, v in OTHER.items() if k != "id"}
 
 
 def _recorded(path: Path, two_tools: bool) -> None:
-    """4 s of kobuki in the lockstep rig; at 1 s a config (wheelbase 0.25 m) from one tool,
-    and with ``two_tools`` the same from a second one (its own COUNTERs, from 0 too) whose
-    frames each follow the first's: identical frames, but the wheelbase at 0.27 m: the
-    firmware drops that one (REPEATED); candump written from every frame on the bus."""
+    """``recorded_drive``: at 1 s a config (wheelbase 0.25 m) from one tool, and with
+    ``two_tools`` the same from a second one (its own COUNTERs, from 0 too) whose frames each
+    follow the first's: identical frames, but the wheelbase at 0.27 m: the firmware drops that
+    one (REPEATED)."""
+    first = CommandEncoder().build("config", ANALYZE_CONFIG).frames
+    second = CommandEncoder().build("config", {**ANALYZE_CONFIG, "wheelbase_m": 0.27}).frames
+    recorded_drive(path, [(f.can_id, f.data) for f in first],
+                   [(f.can_id, f.data) for f in second] if two_tools else None, 3.0)
+
+
+def recorded_drive(path: Path, first: list[tuple[int, bytes]],
+                   second: list[tuple[int, bytes]] | None, after_s: float) -> None:
+    """1 s of kobuki in the lockstep rig, the frames ``first`` (one tool's) each followed by
+    ``second``'s of the same rank (another tool's, when given), ``after_s`` more; candump
+    written to ``path`` from every frame on the bus."""
     messages: list[can.Message] = []
 
     class Keep(can.Listener):
@@ -188,13 +237,11 @@ def _recorded(path: Path, two_tools: bool) -> None:
     rig = LockstepRig(config, [Keep()])
     try:
         rig.run(1.0)
-        first = CommandEncoder().build("config", ANALYZE_CONFIG).frames
-        second = CommandEncoder().build("config", {**ANALYZE_CONFIG, "wheelbase_m": 0.27}).frames
-        for a, b in zip(first, second, strict=True):
-            rig.send(a.can_id, a.data)
-            if two_tools:
-                rig.send(b.can_id, b.data)
-        rig.run(3.0)
+        for k, frame in enumerate(first):
+            rig.send(*frame)
+            if second is not None:
+                rig.send(*second[k])
+        rig.run(after_s)
     finally:
         rig.close()
     path.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"

@@ -28,6 +28,7 @@ CONFIG_CHANGE = "a config change"
 INTEGRATOR_CHANGE = "an integrator change ({before} -> {after})"
 INTEGRATOR_FIRST_HEARD = "the integrator ({after}) was first heard after the watch's first poses"
 UNHEARD_SET_POSE = "a set-pose applied at an encoder frame not heard"
+TWO_SENDERS_SET_POSE = "a set-pose of two senders' frames of one COUNTER (which taken not known)"
 
 
 class Adoption(NamedTuple):

@@ -56,6 +56,13 @@ class ConfigFollower:
         self._heard = 0  # ODOM_CONFIG frames heard
         self.built: Built | None = None  # the robot before the first config applied this life
         self.applied_s = -math.inf  # bus time of the latest APPLY ACKed (s)
+        # not ``bus_order``: a PARAM of which two unlike frames of one COUNTER waited at its ACK
+        # (two senders: the firmware took the first on the bus, which the bridge cannot tell):
+        # the other frame's value; ``doubt``: those of the APPLY ACKed last, with ``applied``,
+        # the staged set it returned (``host.judge.liveconfigdoubt``)
+        self._doubt: dict[str, float] = {}
+        self.doubt: dict[str, float] = {}
+        self.applied: dict[str, float] = {}
 
     def forget(self, since_s: float = math.inf) -> None:
         """A firmware reboot the judge saw: the firmware lost its staged parameters with its RAM
@@ -63,7 +70,7 @@ class ConfigFollower:
         ACKed from this bus time on (s) are the new firmware's, kept with the frames not
         answered yet (default: none, everything forgotten)."""
         if since_s == math.inf:
-            self._sent = {}
+            self._sent, self._doubt = {}, {}
         kept = {p for p, t_s in self._staged_s.items() if t_s >= since_s}
         self.staged = {p: v for p, v in self.staged.items() if p in kept}
         self._staged_s = {p: t_s for p, t_s in self._staged_s.items() if p in kept}
@@ -96,11 +103,27 @@ class ConfigFollower:
             if acked and param in PARAMS and value is not None:
                 self.staged[param] = value
                 self._staged_s[param] = t_s
+                self._doubted(request_counter, param, value)
             return None
         staged, self.staged, self._staged_s = self.staged, {}, {}
+        doubt, self._doubt = self._doubt, {}
         if acked:
-            self.applied_s = t_s
+            self.applied_s, self.applied = t_s, staged
+            self.doubt = {p: v for p, v in doubt.items() if p in staged}
         return staged if acked else None
+
+    def _doubted(self, counter: int, param: str, value: float) -> None:
+        """Not ``bus_order``: ``param`` staged with ``value`` while another frame of its
+        COUNTER and PARAM with another value waits: which of the two the firmware took is not
+        known (``doubt``)."""
+        if self.bus_order:
+            return
+        others = [w[1] for w in self._sent.get(counter, [])
+                  if w[0] == param and w[1] is not None and w[1] != value]
+        if others:
+            self._doubt[param] = others[0]
+        else:
+            self._doubt.pop(param, None)
 
     def _answered(self, counter: int, field: int | None
                   ) -> tuple[str, float | None, int] | None:
@@ -190,18 +213,22 @@ def rebooted(judges: Judges, follower: ConfigFollower, t_s: float) -> str | None
                        lead="config lost with the reboot, the build's robot again")
 
 
-def apply_config(tracker: PoseTracker, staged: dict[str, float]) -> str:
-    """Make ``staged`` (an applied config) ``tracker``'s robot, the parameters it lacks kept;
-    the reference restarts at the next on-board pose. Returns the event's detail."""
-    g = tracker.geometry
+def staged_geometry(g: Geometry, staged: dict[str, float]) -> Geometry:
+    """``g`` overwritten by the parameters of ``staged`` (an applied config)."""
     speed = staged.get("MAX_WHEEL_SPEED")
-    geometry = Geometry(
+    return Geometry(
         int(staged.get("COUNTS_PER_REV", g.counts_per_rev)),
         staged.get("WHEEL_RADIUS_LEFT", g.wheel_radius_left_m),
         staged.get("WHEEL_RADIUS_RIGHT", g.wheel_radius_right_m),
         staged.get("WHEELBASE", g.wheelbase_m),
         g.max_wheel_speed_mm_s if speed is None else round(speed * 1000),
     )
+
+
+def apply_config(tracker: PoseTracker, staged: dict[str, float]) -> str:
+    """Make ``staged`` (an applied config) ``tracker``'s robot, the parameters it lacks kept;
+    the reference restarts at the next on-board pose. Returns the event's detail."""
+    geometry = staged_geometry(tracker.geometry, staged)
     if "INTEGRATOR" in staged and 0 <= int(staged["INTEGRATOR"]) < len(INTEGRATORS):
         tracker.integrator = INTEGRATORS[int(staged["INTEGRATOR"])]
     tracker.set_geometry(geometry, int(staged.get("COUNTER_BITS", tracker.counter_bits)))

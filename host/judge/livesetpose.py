@@ -37,7 +37,14 @@ _TURN = 2.0 * math.pi
 class SetPoseFollower:
     """The staged fields and the pending APPLY of ODOM_SET_POSE as the bus shows them."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, bus_order: bool = True) -> None:
+        # ``bus_order``: the frames come in the order the firmware takes them (the monitor's,
+        # analyze's); False for the bridge, which follows its own frames when it sends them:
+        # two frames of one COUNTER waiting then, it cannot tell which the firmware took (it
+        # drops the second on the bus unanswered, E2E REPEATED), so the APPLY is ``doubtful``
+        self.bus_order = bus_order
+        self._doubt = False  # two unlike frames of one COUNTER waited since the last APPLY
+        self.doubtful = False  # the APPLY ACKed last was so: its pose not known to the host
         self.staged: dict[str, float] = {}  # X m, Y m, HEADING rad, as ACKed
         self._staged_s: dict[str, float] = {}  # field: bus time of its ACK (s)
         self._sent: dict[int, tuple[str, float]] = {}  # by E2E COUNTER: field, value heard
@@ -52,15 +59,19 @@ class SetPoseFollower:
         in its first tick before its boot summary told the reboot (``liveconfig.SAME_TICK_S``),
         kept with the frames not answered yet (default: everything forgotten)."""
         if since_s == math.inf:
-            self._sent, self._applies = {}, {}
+            self._sent, self._applies, self._doubt = {}, {}, False
         self.staged = {f: v for f, v in self.staged.items() if self._staged_s[f] >= since_s}
         self._staged_s = {f: self._staged_s[f] for f in self.staged}
 
     def on_frame(self, counter: int, field: str, value: float | None, enc_seq: int) -> None:
         """An ODOM_SET_POSE frame heard (its E2E COUNTER, FIELD name, value in m or rad);
         ``enc_seq``: the latest accepted encoder frame's seq."""
-        self._sent.pop(counter, None)  # a COUNTER heard again: its older frame is gone
-        self._applies.pop(counter, None)
+        before = self._sent.pop(counter, None)  # a COUNTER heard again: its older frame is gone
+        apply_before = self._applies.pop(counter, None)
+        if not self.bus_order:  # two unlike frames of one COUNTER: which one taken unknown
+            earlier = ("APPLY", None) if apply_before is not None else before
+            heard = (field, None if value is None or field == "APPLY" else float(value))
+            self._doubt |= earlier is not None and earlier != heard
         if field == "APPLY":
             self._applies[counter] = enc_seq
         elif field in FIELDS and value is not None:
@@ -88,12 +99,15 @@ class SetPoseFollower:
         if not acked:
             return None
         self.staged, self._staged_s = {}, {}
+        self.doubtful, self._doubt = self._doubt, False
         return seq, staged
 
 
-def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float]) -> FramePose | None:
+def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float],
+                   doubt: str | None = None) -> FramePose | None:
     """Restart ``tracker``'s reference at the set pose at encoder frame ``seq`` (module
-    docstring); returns that pose, None when it restarts at the next on-board pose instead."""
+    docstring); returns that pose, None when it restarts at the next on-board pose instead
+    (also when ``doubt`` says why the pose set is not known: two senders' frames)."""
     at = tracker.raw.at.get(seq)  # the raw reference at that frame (livereference)
     counts = window_counts(tracker.window, seq)
     ref_known = tracker.raw.odometry is not None and tracker.integrator is not None
@@ -101,10 +115,10 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float]) -> 
     if all(name in staged for name in FIELDS):  # nothing kept of a pose adopted before
         tracker.placer.dark.new_life()  # (host.judge.livedark: the OK no longer names it)
         tracker.adopted.new_life()  # (host.judge.liveadopted)
-    if at is None or not ref_known or not counts or counts[0][0] != seq:
+    if doubt is not None or at is None or not ref_known or not counts or counts[0][0] != seq:
         if all(name in staged for name in FIELDS):  # an offset before it overwritten whole
             tracker.wrongs.new_life(tracker.now_s)
-        tracker.adopted.owe(UNHEARD_SET_POSE)  # the next on-board pose adopted
+        tracker.adopted.owe(doubt or UNHEARD_SET_POSE)  # the next on-board pose adopted
         return None
     tracker.wrongs.new_life(tracker.now_s)  # fields kept from the reference: still judged
     tracker.adopted.cancel()  # the set pose is where it starts, not the firmware's

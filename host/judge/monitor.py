@@ -83,7 +83,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatch
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
-from odocan.host.judge.twosenders import SenderWatch
+from odocan.host.judge.twosenders import CommandSenders
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import UNKNOWN, e2e_messages
@@ -129,7 +129,7 @@ class BusMonitor:
         self.config = ConfigFollower()  # ODOM_CONFIG likewise
         self._config_id = next((m.frame_id for m in self.db.messages
                                 if m.name == "ODOM_CONFIG"), -1)
-        self.config_senders = SenderWatch("ODOM_CONFIG")  # two tools on it (twosenders)
+        self.senders = CommandSenders(self.db)  # two tools on a command message (twosenders)
         self._set_pose_id = next((m.frame_id for m in self.db.messages
                                   if m.name == "ODOM_SET_POSE"), -1)  # -1: a DBC without it
         self.firmware_events: deque[dict[str, Any]] = deque(maxlen=4 * MAX_EVENTS)
@@ -192,21 +192,21 @@ class BusMonitor:
     def _judge(self, message: Message, stats: MessageStats, data: bytes, status: str,
                timestamp_s: float) -> None:
         """A known frame of the right length by its E2E ``status``: an accepted one used, a
-        CRC-right refused encoder frame kept for the twins and gaps, ODOM_CONFIG watched for
-        a second sender."""
+        CRC-right refused encoder frame kept for the twins and gaps, a command message
+        (ODOM_CONFIG, ODOM_SET_POSE, NAV_GOAL) watched for a second sender."""
         crc_right = status in ACCEPTED or status in CRC_RIGHT_REFUSED
-        if message.frame_id == self._config_id and crc_right:
-            self._watch_senders(data, timestamp_s)
+        if crc_right and message.frame_id in self.senders.watches:
+            self._watch_senders(message.frame_id, data, timestamp_s)
         if status in ACCEPTED:
             self._use(message, stats, data)
         elif crc_right and message.name == "WHEEL_ENCODERS":
             refused_encoders(self.tracker.twins, message.decode(data, decode_choices=False),
                              timestamp_s, self.tracker.placer.fill)  # a twin, or a gap's frame
 
-    def _watch_senders(self, data: bytes, t_s: float) -> None:
-        """A CRC-right ODOM_CONFIG frame: a second sender's signature is a ``two senders``
-        event (``host.judge.twosenders``)."""
-        detail = self.config_senders.heard(data, t_s)
+    def _watch_senders(self, can_id: int, data: bytes, t_s: float) -> None:
+        """A CRC-right command frame: a second sender's signature is a ``two senders`` event
+        (``host.judge.twosenders``)."""
+        detail = self.senders.heard(can_id, data, t_s)
         if detail is not None:
             self.events.append({"t_s": t_s, "kind": "two senders", "detail": detail})
 

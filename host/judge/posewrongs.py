@@ -114,7 +114,15 @@ class PoseWrongs:
         be told apart, so the samples from then are not judged, and the episodes latched from
         then are forgotten (the worst among those kept is the worst)."""
         self.judged_until_s = min(self.judged_until_s, t_s)
+        self.withdraw_from(t_s)
+
+    def withdraw_from(self, t_s: float) -> None:
+        """The samples compared from bus time ``t_s`` on were judged against a robot the
+        firmware did not run (``host.judge.liveconfigdoubt``): the episodes latched from then,
+        and the samples pending from then, are forgotten."""
         self.close()
+        self._pending = {seq: kept for seq, kept in self._pending.items() if kept[0] < t_s}
+        self._suspects &= set(self._pending)
         gone = [e for e in self.latest if e.t_s >= t_s]
         self.count -= len(gone)
         self.wrong_samples -= sum(e.samples for e in gone)

@@ -70,6 +70,7 @@ from odocan.host.judge.stream_place import start_pose as place_start
 from odocan.host.judge.stream_refusal import UNSETTLED
 from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
 from odocan.host.judge.stream_stalls import StreamBreakCounts
+from odocan.host.judge.twosenders import LogSenders
 from odocan.host.judge.unseenrestart import restart_detail, whole_only
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
@@ -119,6 +120,7 @@ def analyze_file(
         spill = FrameSpill(Path(tmp))
         e2e, lives = StreamE2E(db), StreamLives(decoder)  # one decoder: its cache too
         facts, cuts = StreamFacts(decoder), StreamCuts(decoder)
+        senders = LogSenders(db)  # two tools on a command message (#11)
         for chunk in carried(iter_log(path, chunk_frames=chunk_frames, warn=warn), db):
             count.frames += len(chunk)
             spill.write(chunk)
@@ -126,6 +128,7 @@ def analyze_file(
             lives.feed(chunk, accepted)
             facts.feed(chunk, accepted)
             cuts.feed(chunk, accepted)
+            senders.feed(chunk)
         spill.close()
         if not e2e.exact:  # its accepted frames may not be the whole log's: nor its lives
             raise NotStreamable(UNSETTLED)
@@ -147,6 +150,7 @@ def analyze_file(
             max_wheel_speed_mm_s=max_wheel_speed_mm_s)
         if len(spans) != len(firmware):  # a set-pose is no reboot: one latch per firmware
             report.update(latched_per_firmware(firmware, frames_of, db))
+        report["events"] = [*report.get("events", []), *senders.events]
         return lives.marked(report, count.frames)
 
 

@@ -1,12 +1,14 @@
 """Two senders on one command message (issue #11: "two sources on one ID are reported"): two
 tools commanding one robot, e.g. an ``odocan bridge`` answering ``cmd/config`` and an
-operator's script, each with its own Profile 2 COUNTER sequence on ODOM_CONFIG.
+operator's script, each with its own Profile 2 COUNTER sequence on ODOM_CONFIG, ODOM_SET_POSE
+or NAV_GOAL (``COMMANDS``: all three are staged writes committed by a last frame, APPLY or GO).
 
 Why it matters: the firmware's receiver (firmware/reception.py) drops a frame whose COUNTER
 repeats the last one it accepted (E2E REPEATED) and answers nothing, so the second tool's
 command is lost without a word; ODOM_ACK names a request only by its CAN ID, COUNTER and
 multiplexer value, so each tool may take the other's answers for its own; and both tools'
-staged writes go into one staged set, so one tool's APPLY commits the other's parameters.
+staged writes go into one staged set, so one tool's APPLY (GO) commits the other's parameters
+(pose fields, goal).
 
 ``SenderWatch`` reads the CRC-right frames of one message in bus order (the monitor hears
 every one; ``analyze`` reads the log) and tells two senders by one of two signatures, neither
@@ -46,6 +48,8 @@ LAP_FRAMES: Final = 16  # two interleaving signatures within this many frames ar
 FRAME_BYTES: Final = 8  # a Profile 2 frame
 NOT_A_STANDARD_DATA_FRAME: Final = FLAG_EXTENDED | FLAG_REMOTE | FLAG_ERROR
 INTERLEAVED: Final = "interleaved COUNTER sequences"
+COMMANDS: Final = {"ODOM_CONFIG": "APPLY", "ODOM_SET_POSE": "APPLY", "NAV_GOAL": "GO"}  # watched
+# messages: the frame that commits the staged set
 
 
 class SenderWatch:
@@ -54,6 +58,7 @@ class SenderWatch:
 
     def __init__(self, name: str) -> None:
         self.name = name
+        self._commit = COMMANDS.get(name, "APPLY")  # the frame committing the staged set
         self.count = 0  # frames showing a second sender
         self._recent: deque[bytes] = deque(maxlen=RECENT + 1)  # the latest frames, oldest first
         self._heard = 0  # frames heard
@@ -95,25 +100,56 @@ class SenderWatch:
         if any(counter == (c + 1) & COUNTER_MASK for c in earlier):
             sequence = ", ".join(str(c) for c in [*earlier, before, counter])
             return (f"{INTERLEAVED} ({sequence}): their staged writes mix in one staged set, "
-                    "and each APPLY commits the other's")
+                    f"and each {self._commit} commits the other's")
         return None
 
 
+class CommandSenders:
+    """A ``SenderWatch`` for each of ``COMMANDS`` the DBC has, by CAN ID (the monitor's)."""
+
+    def __init__(self, db: DatabaseSpec) -> None:
+        self.watches = {m.frame_id: SenderWatch(m.name) for m in db.messages
+                        if m.name in COMMANDS}
+
+    def heard(self, can_id: int, data: bytes, t_s: float) -> str | None:
+        """A CRC-right frame of a watched message (``SenderWatch.heard``); None for others."""
+        watch = self.watches.get(can_id)
+        return None if watch is None else watch.heard(data, t_s)
+
+
+class LogSenders:
+    """``analyze``'s ``two senders`` watch over a log read in chunks (whole, or streamed): a
+    ``SenderWatch`` per message of ``COMMANDS`` the DBC protects, fed each chunk's CRC-right
+    8-byte frames of it in bus order; ``events`` by bus time."""
+
+    def __init__(self, db: DatabaseSpec) -> None:
+        self._messages = {m.key: (SenderWatch(m.name), m.data_ids)
+                          for m in e2e_messages(db).values()
+                          if m.name in COMMANDS and m.data_ids is not None}
+        self._keys = np.array(sorted(self._messages), dtype=np.int64)
+        self._events: list[dict[str, Any]] = []
+
+    def feed(self, frames: FrameArrays) -> None:
+        """The next chunk of the log."""
+        rows = np.flatnonzero(np.isin(frames.can_id, self._keys) & (frames.dlc == FRAME_BYTES)
+                              & ((frames.flags & NOT_A_STANDARD_DATA_FRAME) == 0))
+        for row in rows.tolist():
+            watch, data_ids = self._messages[int(frames.can_id[row])]
+            data = bytes(frames.data[row])
+            if crc8h2f_p02_one(data, data_ids[data[1] & COUNTER_MASK]) != data[0]:
+                continue
+            t_s = float(frames.timestamp_s[row])
+            detail = watch.heard(data, t_s)
+            if detail is not None:
+                self._events.append({"kind": "two senders", "t_s": t_s, "detail": detail})
+
+    @property
+    def events(self) -> list[dict[str, Any]]:
+        return list(self._events)
+
+
 def log_events(frames: FrameArrays, db: DatabaseSpec) -> list[dict[str, Any]]:
-    """``analyze``'s ``two senders`` events: ``SenderWatch`` over the log's CRC-right 8-byte
-    ODOM_CONFIG frames, in bus order (none when the DBC has no protected ODOM_CONFIG)."""
-    config = next((m for m in e2e_messages(db).values() if m.name == "ODOM_CONFIG"), None)
-    if config is None or config.data_ids is None:
-        return []
-    rows = np.flatnonzero((frames.can_id == config.key) & (frames.dlc == FRAME_BYTES)
-                          & ((frames.flags & NOT_A_STANDARD_DATA_FRAME) == 0))
-    watch, events = SenderWatch(config.name), []
-    for row in rows.tolist():
-        data = bytes(frames.data[row])
-        if crc8h2f_p02_one(data, config.data_ids[data[1] & COUNTER_MASK]) != data[0]:
-            continue
-        t_s = float(frames.timestamp_s[row])
-        detail = watch.heard(data, t_s)
-        if detail is not None:
-            events.append({"kind": "two senders", "t_s": t_s, "detail": detail})
-    return events
+    """``analyze``'s ``two senders`` events of a whole log (``LogSenders``)."""
+    senders = LogSenders(db)
+    senders.feed(frames)
+    return senders.events

@@ -234,7 +234,7 @@ class _Robot:
         """Put one command frame (and its ODOM_AUTH) on the bus: the mailbox slots taken."""
         bus = self.endpoint.bus
         signer = self.endpoint.signer
-        ack = PendingAck(command.cmd_id, command.name, frame.final)
+        ack = PendingAck(command.cmd_id, command.name, frame.final, frame.data, command)
         self.telemetry.expect_ack(frame.can_id, frame.counter, ack)
         self.telemetry.command_sent(frame.can_id, frame.data)  # a set-pose, a config followed
         try:

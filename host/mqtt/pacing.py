@@ -15,7 +15,8 @@ are ever un-answered: each COUNTER in flight is distinct. Commands beyond the wi
 queue of ``max_queued`` commands; beyond that a command is refused (``rejected``, said why).
 Every command taken gets exactly one final answer: ``acked``/``nacked`` (the firmware's, from
 ``RobotTelemetry``; ``contested`` when another tool's frames of its message were heard in its
-flight: the ACK may be the other's), ``expired`` (it waited in the queue longer than
+flight: the ACK may be the other's; ``unanswered`` when its last frame was ACKed but not all
+its staged ones), ``expired`` (it waited in the queue longer than
 ``expiry_s``), ``rejected`` (the bus refused a frame), ``timeout`` (no ODOM_ACK within
 ``ack_timeout_s`` of its last frame; its late ACK is then not taken) or ``aborted`` (the bridge
 stopped first: ``abort``, the reason says whether any of its frames went out). A NACKed
@@ -41,8 +42,9 @@ WINDOW_FRAMES = 8  # command frames (and their ODOM_AUTHs) un-answered on the bu
 ACK_TIMEOUT_S = 2.0  # the firmware answers within a tick: this long after the last frame
 MAX_QUEUED = 1024  # commands waiting per robot; beyond, refused
 # the telemetry's answers from the firmware's ODOM_ACK (``contested``: another tool's frames
-# heard in its flight, ``host.mqtt.livecommands``)
-FINAL_ANSWERS = ("acked", "nacked", "contested")
+# heard in its flight; ``unanswered``: its final frame ACKed, not all its staged ones;
+# ``host.mqtt.livecommands``)
+FINAL_ANSWERS = ("acked", "nacked", "contested", "unanswered")
 
 # Puts one frame (and its ODOM_AUTH) on the bus: the mailbox slots it takes; CommandRejected
 SendFrame = Callable[[Command, Frame], int]

@@ -283,6 +283,7 @@ class RobotTelemetry(CommandFollowing):
             return
         self.reboots += 1
         lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM
+        self.config_doubt = None  # and the config in doubt with them
         start_new_life(self.tracker, self.e2e, self.db, *summary)
         self.distance.new_life()
         since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
@@ -417,7 +418,7 @@ class RobotTelemetry(CommandFollowing):
             self.events += self.latch.observe(t_s, int(s["STATE"]), int(s["REASON"]),
                                               int(s["ERROR_MASK"]))
         elif name == "profile":  # the bus's speed bound judges; a mismatch is said
-            self.profile.on_page(self, s, t_s)
+            self.on_profile_page(s, t_s)  # (it settles a config two senders left in doubt)
         return []
 
     _handlers: ClassVar[dict[str, Any]] = {
@@ -430,6 +431,7 @@ class RobotTelemetry(CommandFollowing):
         "ODOM_ACK": CommandFollowing._on_ack,
         "ODOM_SET_POSE": CommandFollowing._on_set_pose,
         "ODOM_CONFIG": CommandFollowing._on_config,
+        "NAV_GOAL": CommandFollowing._on_nav_goal,
         "ODOM_AUTH": CommandFollowing._on_auth,
     }
 
