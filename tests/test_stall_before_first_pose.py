@@ -21,11 +21,18 @@ from pathlib import Path
 
 import can
 import cantools
+import numpy as np
 import pytest
 from cantools.database.can import Database
 
+from odocan.firmware import frames as fw_frames
+from odocan.firmware.errors import ErrorMask
+from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
+from odocan.host.judge.samples import Encoders
+from odocan.host.judge.stalls import first_after_stall
+from odocan.host.judge.stream_first import FirstSilence
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import load
 from tests.independent_checker import Robot, _Odometry
@@ -85,8 +92,73 @@ def test_the_firmware_took_its_fifo_then_one_step() -> None:
     assert math.hypot(fine.x - poses[1]["X"], fine.y - poses[1]["Y"]) > 0.15
 
 
-@pytest.mark.xfail(strict=True, reason="issue #11: a stall before the first pose is not told")
 def test_analyze_passes_a_firmware_stalled_before_its_first_pose() -> None:
-    """Before: FAIL at 549.78 mm (and DISTANCE off by 533.8 mm)."""
-    result = analyze(read_log(EVIDENCE), PMIR)
-    assert result.passed, result.report["onboard_vs_reference"]
+    """Before: FAIL at 549.78 mm (and DISTANCE off by 533.8 mm). Now the first pose is left out
+    and the reference is placed at the resumed one, within the merge's allowance."""
+    analysis = analyze(read_log(EVIDENCE), PMIR)
+    result = analysis.report
+    breaks = result["reference_breaks"]
+    assert analysis.passed, (result["onboard_vs_reference"], breaks)
+    assert main(["analyze", str(EVIDENCE), "--stream", "always"]) == 0  # refused: the whole
+    assert breaks["stall_placements"] == 1
+    assert breaks["max_offset_beyond_allowance_m"] == 0.0
+    assert result["onboard_vs_reference"]["max_position_error_m"] < POSITION_LSB_M
+    enc, poses = _decoded()  # the offset absorbed: the merged step's, by float64 odometry
+    fine = _odometry(enc, list(range(RESUMED_AT + 1)))
+    merged_m = math.hypot(fine.x - poses[1]["X"], fine.y - poses[1]["Y"])
+    assert breaks["max_offset_absorbed_m"] == pytest.approx(merged_m, abs=POSITION_LSB_M)
+
+
+@pytest.mark.parametrize(("from_pose", "bias_lsb"), [(1, 10_000), (20, 3), (300, 2)])
+def test_a_wrong_firmware_after_such_a_stall_still_fails(
+    tmp_path: Path, from_pose: int, bias_lsb: int
+) -> None:
+    """X off by ``bias_lsb`` from pose ``from_pose`` on: 1 m at the resumed pose (beyond the
+    merge's allowance), 0.3 mm 0.2 s after it, 0.2 mm seconds later. FAIL before and after."""
+    wrong = tmp_path / "wrong.blf"
+    _write_biased(wrong, from_pose, bias_lsb)
+    result = analyze(read_log(wrong), PMIR)
+    assert not result.passed, result.report["onboard_vs_reference"]
+
+
+def _write_biased(path: Path, from_pose: int, bias_lsb: int) -> None:
+    """The evidence with ODOM_POSE_X's X raised by ``bias_lsb`` from its ``from_pose``-th frame
+    on (re-sealed: COUNTER, ENC_COUNTER and HEADING kept)."""
+    seen = 0
+    with can.BLFWriter(str(path)) as out:
+        for msg in can.LogReader(str(EVIDENCE)):
+            if msg.arbitration_id == ODOM_POSE_X:
+                if seen >= from_pose:
+                    word = int.from_bytes(msg.data, "little")
+                    x_raw = (word >> 16) & 0xFFFF_FFFF
+                    x_100um = x_raw - (1 << 32) if x_raw >> 31 else x_raw
+                    msg.data = bytearray(fw_frames.pack_odom_pose_x(
+                        (word >> 8) & 0xF, (word >> 12) & 0xF, x_100um + bias_lsb, word >> 48,
+                        ErrorMask()))
+                seen += 1
+            out.on_message_received(msg)
+
+
+@pytest.mark.parametrize(("status_s", "first_pose_s", "stalled"), [
+    (0.30, 0.40, True),  # silent 100 ms with 10 encoder frames logged on time: a stall
+    (0.30, 0.36, False),  # 60 ms: a firmware that primed and spoke within its cycles
+    (None, 0.40, False),  # no frame of its own before: nothing tells a stall from a late boot
+])
+def test_the_stream_refuses_a_life_whose_first_pose_follows_a_silence(
+    status_s: float | None, first_pose_s: float, stalled: bool
+) -> None:
+    """``stream_first.FirstSilence`` over two chunks: the streamed judge refuses (and the
+    whole log is judged) exactly where the whole log's ``stalls.first_after_stall`` leaves the
+    first pose out."""
+    enc_s = np.round(np.arange(0.30, 0.50, 0.01), 6)
+    silence = FirstSilence()
+    status = np.array([] if status_s is None else [status_s])
+    none = np.zeros(0)
+    silence.feed(status, enc_s[:5], none, 0.01)  # the first chunk: no pose yet
+    silence.feed(none, enc_s[5:], np.array([first_pose_s, first_pose_s + 0.02]), 0.01)
+    assert silence.decided
+    assert silence.stalled is stalled
+    n = np.arange(len(enc_s), dtype=np.int64)
+    encoders = Encoders(n, n % 16, n, 0 * n, 0 * n, enc_s, 0.01)
+    whole = first_after_stall(first_pose_s, encoders, None if status_s is None else status)
+    assert (whole is not None) is stalled
