@@ -56,6 +56,8 @@ def after_stalls(
     after = np.flatnonzero(silent(sent[1:] - talked, heard, enc.cycle_s) & ~queued[1:]) + 1
     keep = np.ones(len(sent_s), dtype=bool)
     keep[order[after]] = False
+    if alive_s is not None and pose_sent_s is not None:  # a pose half that made no sample
+        alive_s = np.sort(np.concatenate((alive_s, pose_sent_s)))
     primed = first_after_stall(float(sent[0]), enc, alive_s)
     if primed is not None:
         keep[order[0]] = False
