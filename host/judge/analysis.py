@@ -161,7 +161,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.setposekept import Kept, check_cut, mark_kept
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
-from odocan.host.judge.stalls import after_stalls
+from odocan.host.judge.stalls import after_stalls, alive_times
 from odocan.host.judge.statuslatch import StatusLatch, firmware_events
 from odocan.host.judge.twins import twin_allowance_of
 from odocan.host.protocol.dbcplan import default_plan
@@ -350,7 +350,8 @@ def _analyze_life(
     halves = pose_halves(frames, accepted, decoder, enc)
     onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc, halves)
     pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
-    onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s)
+    alive_s = alive_times(frames, accepted, decoder)
+    onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s)
     truth = truth_samples(frames, accepted, decoder, enc)
     if boot:
         power_up = saw_only_the_log(frames, accepted, decoder)
@@ -388,7 +389,8 @@ def _analyze_life(
                                        [(a, z) for a, z, _ in losses],
                                        twin_paths(enc, robot, ref_all.start),
                                        firmware_ok_spans(frames, accepted, decoder, enc,
-                                                         power_up and start_pose is None)), seen)
+                                                         power_up and start_pose is None)),
+                         seen, alive_s)
     vs_ref["max_position_error_beyond_allowance_m"] = float(
         np.max(pos_err - allowance - twin_allowed))
     passed = bool(
@@ -480,11 +482,11 @@ def _analyze_life(
 
 
 def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, enc: Encoders,
-              robot: RobotProfile, e0: int, judge: DistanceJudge, seen: Seen
-              ) -> dict[str, Any]:
+              robot: RobotProfile, e0: int, judge: DistanceJudge, seen: Seen,
+              alive_s: np.ndarray) -> dict[str, Any]:
     """``distance.check_distance`` over the firmware's steps from ``e0`` (``seen``: the
     reference's evidence, ``holetaken``, ``nearthreshold``)."""
     steps = firmware_steps(enc, e0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
                            judge.max_wheel_speed_mm_s, through=seen.through, resets=seen.resets)
     return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right), e0,
-                          judge)
+                          judge, alive_s)

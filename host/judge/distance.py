@@ -256,6 +256,14 @@ class DistanceJudge:
                                    float(ds_m[k]))
         return extra
 
+    def talked_before(self, first_s: float, alive_s: FloatArray, enc_t_s: FloatArray) -> None:
+        """The firmware's last other frame before its first ODOM_TWIST (``first_s``; ``alive_s``:
+        those frames' bus times, sorted), as if a twist frame: a first one after a silence then
+        names its backlog and is left out, as ``stalls.first_after_stall`` leaves the pose."""
+        k = int(np.searchsorted(alive_s, first_s, side="left")) - 1
+        if k >= 0 and math.isnan(self._last[0]):
+            self._last = (float(alive_s[k]), int(np.searchsorted(enc_t_s, alive_s[k])))
+
     def take(self, e: IntArray, raw_mm: IntArray, t_s: FloatArray, heard: IntArray,
              named_t_s: FloatArray | None = None) -> None:
         """ODOM_TWIST frames in bus order (``twist_samples``; ``heard``: the encoder frames
@@ -386,14 +394,17 @@ def twin_paths(enc: Encoders, robot: RobotProfile, after: int) -> dict[int, tupl
 
 def check_distance(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
                    enc: Encoders, steps: tuple[IntArray, IntArray], e0: int,
-                   judge: DistanceJudge) -> dict[str, Any]:
+                   judge: DistanceJudge, alive_s: FloatArray | None = None) -> dict[str, Any]:
     """The whole log's judgement: ``steps`` (d_left, d_right into frames e0 + 1, ...: the
-    firmware's, ``reference_path.firmware_steps``) and the ODOM_TWIST samples."""
+    firmware's, ``reference_path.firmware_steps``) and the ODOM_TWIST samples (``alive_s``:
+    the firmware's other frames' bus times, ``judge.talked_before``)."""
     zero = np.zeros(1, dtype=np.int64)
     judge.feed_frames(np.arange(e0, len(enc.seq), dtype=np.int64),
                       np.concatenate((zero, steps[0])), np.concatenate((zero, steps[1])),
                       enc.seq[e0:])
     e, raw_mm, t_s, heard = twist_samples(frames, accepted, decoder, enc)
+    if alive_s is not None and len(t_s):
+        judge.talked_before(float(t_s[0]), alive_s, enc.timestamp_s)
     named_t_s = np.where(e >= 0, enc.timestamp_s[np.maximum(e, 0)], np.nan) if len(enc.seq) \
         else None
     judge.take(e, raw_mm, t_s, heard, named_t_s)

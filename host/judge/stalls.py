@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.samples import (
     SILENCE_CYCLES,
     Encoders,
@@ -16,10 +17,12 @@ from odocan.host.judge.samples import (
     Poses,
     queued_frames,
 )
+from odocan.host.protocol.decode import BulkDecoder
 
 
 def after_stalls(
-    onboard: Poses, sent_s: FloatArray, enc: Encoders, pose_sent_s: FloatArray | None = None
+    onboard: Poses, sent_s: FloatArray, enc: Encoders, pose_sent_s: FloatArray | None = None,
+    alive_s: FloatArray | None = None,
 ) -> tuple[Poses, IntArray]:
     """Samples sent after the firmware was silent for ``SILENCE_CYCLES`` encoder cycles or more
     (no ODOM_POSE_Y at all: ``pose_sent_s``, every one's bus time, also those that name the
@@ -30,7 +33,10 @@ def after_stalls(
     frames it missed as one step, which a fine reference cannot follow on a curve, so the
     reference's position restarts (a segment, like a gap) at the encoder frame after the last
     sample before the silence. The same restart where the firmware kept talking but held its
-    pose (``_frozen``). Returns the samples kept and those encoder frames (sorted)."""
+    pose (``_frozen``). The first sample too when the firmware was silent before it after its
+    other frames (``alive_s``: e.g. its ODOM_STATUS while INIT, ``first_after_stall``): the
+    restart is then at the frame after the first it could have primed on. Returns the samples
+    kept and those encoder frames (sorted)."""
     if enc.cycle_s is None or len(sent_s) < 2:
         return onboard, np.zeros(0, dtype=np.int64)
     order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
@@ -50,15 +56,50 @@ def after_stalls(
     after = np.flatnonzero(silent(sent[1:] - talked, heard, enc.cycle_s) & ~queued[1:]) + 1
     keep = np.ones(len(sent_s), dtype=bool)
     keep[order[after]] = False
+    if alive_s is not None and pose_sent_s is not None:  # a pose half that made no sample
+        alive_s = np.sort(np.concatenate((alive_s, pose_sent_s)))
+    primed = first_after_stall(float(sent[0]), enc, alive_s)
+    if primed is not None:
+        keep[order[0]] = False
     kept = Poses(onboard.enc[keep], onboard.x_m[keep], onboard.y_m[keep],
                  onboard.heading_rad[keep], onboard.heading_raw[keep])
     queued_by_sample = np.zeros(len(sent_s), dtype=bool)
     queued_by_sample[order] = queued
     frozen = _frozen(kept, enc, queued_by_sample[keep])
-    breaks = np.sort(np.concatenate((onboard.enc[order[after - 1]] + 1, frozen)))
+    restarts = [onboard.enc[order[after - 1]] + 1, frozen]
+    if primed is not None:
+        restarts.append(np.array([primed + 1], dtype=np.int64))
+    breaks = np.sort(np.concatenate(restarts))
     first = np.ones(len(breaks), dtype=bool)  # np.unique by hand: its plain form imports
     first[1:] = breaks[1:] != breaks[:-1]  # numpy.ma (10 ms of start-up) for nothing
     return kept, breaks[first].astype(np.int64)
+
+
+def first_after_stall(sent_s: float, enc: Encoders, alive_s: FloatArray | None) -> int | None:
+    """A stall before the first sample (issue #11): the firmware sent other frames (``alive_s``,
+    bus times, sorted: its ODOM_STATUS while INIT), then nothing for ``SILENCE_CYCLES`` cycles
+    or more while the encoder frames went on, on time, until its first sample (``sent_s``). A
+    stalled MCU then primes on the first frame its FIFO kept and takes the frames it missed as
+    one step: the position in ``enc`` of the first frame it could have primed on (the first
+    after its last other frame), else None (no such silence, or no frame before it to tell)."""
+    if enc.cycle_s is None or alive_s is None or len(enc.timestamp_s) == 0:
+        return None
+    k = int(np.searchsorted(alive_s, sent_s, side="left")) - 1
+    if k < 0:
+        return None
+    talked = float(alive_s[k])
+    lo = np.searchsorted(enc.timestamp_s, [talked]).astype(np.int64)
+    hi = np.searchsorted(enc.timestamp_s, [sent_s]).astype(np.int64)
+    quiet = silent(np.array([sent_s - talked]), frames_on_time(enc, lo, hi), enc.cycle_s)
+    return int(lo[0]) if bool(quiet[0]) and int(lo[0]) < len(enc.timestamp_s) else None
+
+
+def alive_times(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                decoder: BulkDecoder) -> FloatArray:
+    """The bus times of the firmware's accepted ODOM_STATUS frames (``first_after_stall``)."""
+    rows = decoder.decode(frames, "ODOM_STATUS")
+    times: FloatArray = rows["timestamp_s"][accepted[rows["index"]]]
+    return times
 
 
 def frames_on_time(enc: Encoders, lo: IntArray, hi: IntArray) -> IntArray:

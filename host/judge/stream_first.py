@@ -5,7 +5,9 @@ the stream cannot judge as the whole log (``FirstPass.refuse``)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -19,6 +21,7 @@ from odocan.host.judge.samples import (
     queued_frames,
     twinned_encoder_frames,
 )
+from odocan.host.judge.stalls import silent
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
 from odocan.host.judge.stream_facts import StreamFacts
 from odocan.host.judge.stream_losses import StreamLosses
@@ -31,6 +34,34 @@ from odocan.sim.robot import RobotProfile
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
     from odocan.host.protocol.dbcplan import DatabaseSpec
+
+@dataclass
+class FirstSilence:
+    """``stalls.first_after_stall`` chunk by chunk: the firmware's last ODOM_STATUS before its
+    first pose and the encoder frames logged from it up to that pose (a stream that finds the
+    silence refuses: ``FirstPass.refuse``)."""
+
+    talked_s: float | None = None
+    heard: int = 0
+    decided: bool = False
+    stalled: bool = False
+
+    def feed(self, status_s: np.ndarray, enc_s: np.ndarray, pose_s: np.ndarray,
+             cycle_s: float | None) -> None:
+        """A chunk's accepted ODOM_STATUS, encoder frame and ODOM_POSE_Y bus times."""
+        if self.decided:
+            return
+        cut = float(pose_s.min()) if len(pose_s) else math.inf
+        before = status_s[status_s < cut]
+        if len(before):
+            self.talked_s, self.heard = float(before.max()), 0
+        if self.talked_s is not None:
+            self.heard += int(np.count_nonzero((enc_s >= self.talked_s) & (enc_s < cut)))
+        if len(pose_s):
+            self.decided = True
+            self.stalled = (cycle_s is not None and self.talked_s is not None and bool(
+                silent(np.array([cut - self.talked_s]), np.array([self.heard]), cycle_s)[0]))
+
 
 Frames = Callable[[], Iterable[FrameArrays]]  # a life's frames, from its first, each call
 QUEUED_MESSAGES = ("WHEEL_ENCODERS", "ODOM_POSE_X", "ODOM_POSE_Y", "ODOM_TWIST")
@@ -60,6 +91,7 @@ class FirstPass:
         self.samples = self.kept = self.truths = self.encoders = 0
         self.head = self.tail = poses_of({})
         self.t_first_s = 0.0
+        self.before_first = FirstSilence()  # a stall before the first pose (stalls)
 
     def feed(self, chunk: FrameArrays) -> None:
         if self.e2e.counts == {} and len(chunk):
@@ -76,6 +108,9 @@ class FirstPass:
         watermark = min(float(chunk.timestamp_s[-1]), self.poses.open_sent_s())
         pose_y = self.decoder.select(chunk, "ODOM_POSE_Y")
         pose_t = chunk.timestamp_s[pose_y[accepted[pose_y]]]
+        status = self.decoder.select(chunk, "ODOM_STATUS")
+        self.before_first.feed(chunk.timestamp_s[status[accepted[status]]], enc.timestamp_s,
+                               pose_t, enc.cycle_s)
         self._kept(self.stalls.feed(samples, sent, enc.timestamp_s, watermark, pose_t), samples)
         self.truths += len(self.truth.feed(chunk, accepted, enc)[0]["enc"])
         self.twist.feed(chunk, accepted, enc)
@@ -144,6 +179,8 @@ class FirstPass:
             raise NotStreamable(UNSETTLED)
         if self.queued:  # samples._queued pairs them by a median over the whole life
             raise NotStreamable("frames let out in a burst after a busy bus (queued pairing)")
+        if self.before_first.stalled:  # the whole log's after_stalls leaves its first pose out
+            raise NotStreamable("the firmware stalled before its first pose")
         if self.resent_kept:  # judged whole (host.judge.resent), as the sample is out already
             raise NotStreamable("a resent pose differs from the first naming its encoder frame")
 
