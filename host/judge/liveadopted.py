@@ -28,6 +28,8 @@ CONFIG_CHANGE = "a config change"
 INTEGRATOR_CHANGE = "an integrator change ({before} -> {after})"
 INTEGRATOR_FIRST_HEARD = "the integrator ({after}) was first heard after the watch's first poses"
 UNHEARD_SET_POSE = "a set-pose applied at an encoder frame not heard"
+MERGED_SET_POSE = ("a set-pose keeping fields applied after a stall, hold or gap not placed yet "
+                   "(where the firmware's merged steps put them)")
 
 
 class Adoption(NamedTuple):
