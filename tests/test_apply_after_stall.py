@@ -36,6 +36,7 @@ import numpy as np
 import pytest
 
 from odocan.firmware import frames as fr
+from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.reference import Geometry, integrate
@@ -148,6 +149,28 @@ def test_a_bare_apply_after_a_stall_keeps_the_live_reference_placed(
             assert (judge.tracker.wrongs.count == 0) is ok
             if kept is not None:
                 assert _set_pose_event(judge.events)["kept"]["passed"] is ok
+
+
+def test_a_pass_says_the_apply_it_could_not_judge(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """kobuki's 200 ms stall, the wrong firmware's APPLY (X -10 LSB, cantools) the tick after:
+    the pose after the stall may name a backlog frame, so no pose before the APPLY bounds what
+    it kept, and the check is not made (``kept_not_judged``); the life's fit cannot see a jump
+    at its start, so ``odocan analyze`` PASSes. Before, its verdict line said nothing of the
+    APPLY (a silent PASS); now it names the APPLY not judged and why."""
+    stall, apply_at = (330, 350), 351
+    plain = _rebooted(0, None, 0, stall, "kobuki", "random")
+    wrong = _rebooted(0, apply_at, WRONG_Q40, stall, "kobuki", "random")
+    assert _offsets(wrong, _x_by_frame(plain)) == ({0}, {-10})
+    path = _written(wrong, tmp_path / "wrong.log")
+    assert main(["analyze", "--robot", "kobuki", "--integrator", "exact", str(path)]) == 0
+    [verdict] = [line for line in capsys.readouterr().out.splitlines()
+                 if line.startswith("PASS")]
+    assert verdict.endswith("; what the ODOM_SET_POSE APPLY at 3.511 s kept not judged (the "
+                            "firmware silent (a stall) between the poses around the APPLY, "
+                            "and a field staged or a pose around it the first after the "
+                            "stall)"), verdict
 
 
 def test_the_live_judges_keep_the_sample_naming_the_applys_frame(tmp_path: Path) -> None:

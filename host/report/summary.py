@@ -167,7 +167,17 @@ def print_summary(
         line = "; ".join(failed) + f" (the pose criterion is met: {pose})"
     else:
         line = "; ".join([pose + ("" if pose_met else ": not met"), *failed])
+    line = "; ".join([line, *kept_unjudged(report)])
     console.print(f"[{style}]{verdict}[/{style}]: {line}", soft_wrap=True)
+
+
+def kept_unjudged(report: dict[str, Any]) -> list[str]:
+    """The set-poses whose check of what their APPLY kept could not be made, in words: the
+    verdict says so, never a silent PASS (a jump there is judged by the life's fit alone)."""
+    return [f"what the ODOM_SET_POSE APPLY at {event['t_s']:.3f} s kept not judged "
+            f"({event['kept_not_judged']})"
+            for event in report.get("events") or []
+            if event.get("kind") == "set_pose" and event.get("kept_not_judged")]
 
 
 def kept_failures(report: dict[str, Any]) -> list[str]:
