@@ -454,11 +454,14 @@ def test_a_field_staged_in_the_new_firmwares_first_tick_is_applied(tmp_path: Pat
 
 @cache
 def _rebooted(reboot_at: int, apply_at: int | None, off_q40: int,
-              stall: tuple[int, int] = (0, 0)) -> tuple[can.Message, ...]:
-    """5 s of pmir on the circle, the MCU reset at ``reboot_at``, a bare APPLY (nothing staged
-    in any life) at ``apply_at`` (None: no APPLY); the firmware's set_pose adds ``off_q40`` to
-    its X (0: the correct firmware); the MCU runs no tick in the ticks [``stall``)."""
-    with pytest.MonkeyPatch.context() as patch, circle_rig() as rig:
+              stall: tuple[int, int] = (0, 0), robot: str = "pmir",
+              scenario: str = "circle") -> tuple[can.Message, ...]:
+    """5 s of pmir on the circle (or ``robot`` on ``scenario``), the MCU reset at
+    ``reboot_at``, a bare APPLY (nothing staged in any life) at ``apply_at`` (None: no APPLY);
+    the firmware's set_pose adds ``off_q40`` to its X (0: the correct firmware); the MCU runs no
+    tick in the ticks [``stall``)."""
+    driven = get_scenario(scenario, load(robot), duration_s=60.0)
+    with pytest.MonkeyPatch.context() as patch, FaultRig(scenario=driven, robot=robot) as rig:
         apply = Odometry.set_pose
         patch.setattr(Odometry, "set_pose", lambda self, x, y, h: apply(self, x + off_q40, y, h))
         rig.halted = lambda k: stall[0] <= k < stall[1]

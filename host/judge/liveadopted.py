@@ -29,6 +29,8 @@ INTEGRATOR_CHANGE = "an integrator change ({before} -> {after})"
 INTEGRATOR_FIRST_HEARD = "the integrator ({after}) was first heard after the watch's first poses"
 UNHEARD_SET_POSE = "a set-pose applied at an encoder frame not heard"
 TWO_SENDERS_SET_POSE = "a set-pose of two senders' frames of one COUNTER (which taken not known)"
+MERGED_SET_POSE = ("a set-pose keeping fields applied after a stall, hold or gap not placed yet "
+                   "(where the firmware's merged steps put them)")
 
 
 class Adoption(NamedTuple):

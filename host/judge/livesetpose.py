@@ -14,6 +14,16 @@ sample on (``livetruth.LifeTruth``, as after a reboot). A NACKed APPLY changes n
 empties the firmware's staging (RAM): ``forget`` at every reboot the judge sees. Without
 the reference at that frame (not started, or out of the window) the reference restarts at the
 next on-board pose, as before.
+
+Nor are the kept fields taken from the reference when it is not yet placed where the firmware
+is (``unplaced``): a stall, hold or gap before the APPLY whose placement is owed, or a silence
+since the last sample compared that the stall rule has not told yet. There the firmware took
+the frames it missed as merged steps, and the reference, stepped through them one by one, lies
+up to the merge's error from it (kobuki, a 150 ms stall, a bare APPLY the tick after it:
+0.17 mm, a correct firmware latched POSE WRONG for good; ``analyze`` fits the life's start
+instead). The reference restarts at the next on-board pose, as ``analyze``'s fitted start, the
+first one after the silence left out (it may name a backlog frame: ``livestall``); what the
+APPLY kept is judged by ``livekept`` across the stall, its bound widened by the merge's.
 """
 
 from __future__ import annotations
@@ -21,11 +31,11 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
-from odocan.host.judge.liveadopted import UNHEARD_SET_POSE
+from odocan.host.judge.liveadopted import MERGED_SET_POSE, UNHEARD_SET_POSE
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livestart import start_reference
-from odocan.host.judge.livewindow import window_counts
+from odocan.host.judge.livewindow import held_on_time, window_counts
 
 if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
@@ -111,6 +121,8 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float],
     at = tracker.raw.at.get(seq)  # the raw reference at that frame (livereference)
     counts = window_counts(tracker.window, seq)
     ref_known = tracker.raw.odometry is not None and tracker.integrator is not None
+    merged = ref_known and unplaced(tracker, seq) and any(n not in staged for n in FIELDS)
+    silence_from_s = tracker.stall.last_t_s
     tracker.new_life()  # the reference restarts, the truth is compared in the new frame
     if all(name in staged for name in FIELDS):  # nothing kept of a pose adopted before
         tracker.placer.dark.new_life()  # (host.judge.livedark: the OK no longer names it)
@@ -120,6 +132,10 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float],
             tracker.wrongs.new_life(tracker.now_s)
         tracker.adopted.owe(doubt or UNHEARD_SET_POSE)  # the next on-board pose adopted
         return None
+    if merged:  # the kept fields where merged steps put them: the next pose after the silence
+        tracker.stall.carry_silence(silence_from_s)
+        tracker.adopted.owe(MERGED_SET_POSE)
+        return None
     tracker.wrongs.new_life(tracker.now_s)  # fields kept from the reference: still judged
     tracker.adopted.cancel()  # the set pose is where it starts, not the firmware's
     pose = FramePose(seq, staged.get("X", at.x_m), staged.get("Y", at.y_m),
@@ -128,6 +144,16 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float],
     if all(name in staged for name in ("X", "Y", "HEADING")):
         tracker.fit = LiveFit(pose.x_m, pose.y_m, exact=True)  # the pose set: nothing to fit
     return pose
+
+
+def unplaced(tracker: PoseTracker, seq: int) -> bool:
+    """Whether the reference at encoder frame ``seq`` may lie beyond the fit from the firmware's
+    pose (module docstring): a placement owed (a stall, hold or gap before it, an allowance
+    withdrawn), or ``SILENCE_CYCLES`` frames on time since the last sample compared."""
+    stall = tracker.stall
+    last = stall.last_compared
+    return (stall.place_at_next or tracker.placer.due(seq)
+            or (0 <= last < seq and held_on_time(tracker.window, last, seq)))
 
 
 def set_pose_event(t_s: float, pose: FramePose | None, staged: dict[str, Any]) -> dict[str, Any]:

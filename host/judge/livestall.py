@@ -20,6 +20,9 @@ Each counts in ``stalls`` and owes a placement: ``place_at_next``, and the place
 by a gap (``PoseTracker.on_encoders``) and kept by ``liveplacing`` while gaps wait. A sample counts
 as compared (``last_compared``) once recorded or held for a later comparison (``livechoice``,
 ``livenewstart``). The rule starts again with the reference (``restart``); ``stalls`` goes on.
+A reference restarted at the next pose after a set-pose whose kept fields a stall left unplaced
+(``livesetpose.unplaced``) carries the silence it was in (``carry_silence``): the first sample
+after it is left out, not adopted (it may name a backlog frame).
 """
 
 from __future__ import annotations
@@ -45,14 +48,26 @@ class StallRule:
         self.last_compared = -1  # the encoder frame of the last sample compared (-1: none)
         self.place_at_next = False  # a placement owed at the next sample compared
         self._last_t_s: float | None = None  # bus time of the last sample's ODOM_POSE_Y (s)
+        self._carried = False  # a silence carried into an unstarted reference (module docstring)
+
+    @property
+    def last_t_s(self) -> float | None:
+        """Bus time of the last sample's ODOM_POSE_Y (s), None since the reference's start."""
+        return self._last_t_s
+
+    def carry_silence(self, last_t_s: float | None) -> None:
+        """After ``restart``: the reference restarts at the next pose, the silence since the
+        sample at ``last_t_s`` carried (module docstring)."""
+        self._last_t_s, self._carried = last_t_s, True
 
     def left_out(self, seq: int, t_s: float, queued: bool, started: bool) -> bool:
         """The rule (module docstring) on the sample of encoder frame ``seq`` whose ODOM_POSE_Y
         came at bus time ``t_s`` (``queued``: in a burst; ``started``: the reference runs):
         True when it is left out (the first sample after a stall)."""
         last, self._last_t_s = self._last_t_s, t_s
+        carried, self._carried = self._carried, False
         if not started or queued:
-            return False
+            return carried and not queued and silent_since(last, t_s, self._ys, self._window)
         if silent_since(last, t_s, self._ys, self._window):
             self._owe()
             return True
@@ -71,4 +86,4 @@ class StallRule:
         """A new reference: no sample compared or heard yet, no placement owed."""
         self.last_compared = -1
         self._last_t_s = None
-        self.place_at_next = False
+        self.place_at_next = self._carried = False

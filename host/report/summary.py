@@ -22,10 +22,13 @@ from typing import TYPE_CHECKING, Any
 from odocan.host.jsonutil import write_report
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.judge.finalstate import final_text
+from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.outputs import check_writable, output_failed
 from odocan.host.protocol.e2e_silence import lost_text, silence_caption
 from odocan.host.stopped import stopped_text
 from odocan.sim.exceptions import ConfigurationError
+
+COARSE_KEPT_LSB = 2  # an APPLY's check wider than this cannot tell a jump of 2 LSB: said
 
 if TYPE_CHECKING:  # rich is imported where a summary is printed, not by the options above
     from rich.console import Console
@@ -168,7 +171,28 @@ def print_summary(
         line = "; ".join(failed) + f" (the pose criterion is met: {pose})"
     else:
         line = "; ".join([pose + ("" if pose_met else ": not met"), *failed])
+    line = "; ".join([line, *kept_unjudged(report)])
     console.print(f"[{style}]{verdict}[/{style}]: {line}", soft_wrap=True)
+
+
+def kept_unjudged(report: dict[str, Any]) -> list[str]:
+    """The set-poses whose check of what their APPLY kept could not be made, or only with a
+    bound over ``COARSE_KEPT_LSB`` (merged steps before it: a stall's, a gap's), in words: the
+    verdict says so, never a silent PASS (a jump within them is judged by the life's fit
+    alone, which cannot see a jump at its start)."""
+    said = []
+    for event in report.get("events") or []:
+        kept = event.get("kept")
+        if event.get("kind") != "set_pose":
+            continue
+        at = f"what the ODOM_SET_POSE APPLY at {event['t_s']:.3f} s kept"
+        if event.get("kept_not_judged"):
+            said.append(f"{at} not judged ({event['kept_not_judged']})")
+        elif isinstance(kept, dict) and kept["passed"] and \
+                kept["bound_m"] > COARSE_KEPT_LSB * POSITION_LSB_M:
+            said.append(f"{at} judged only within {kept['bound_m'] * 1e3:.4g} mm (the merged "
+                        "steps before it)")
+    return said
 
 
 def kept_failures(report: dict[str, Any]) -> list[str]:
