@@ -358,7 +358,6 @@ NO_FIRST_POSE = [30, 60, 80, 95]  # reset ticks within the first second (80: the
 # continues the status sequence, the pose breaks its own)
 
 
-@pytest.mark.xfail(strict=True, reason="issue #11: no judge looks ahead yet")
 @pytest.mark.parametrize("reboot_at", NO_FIRST_POSE)
 def test_a_reboot_with_no_pose_in_its_first_tick_passes_the_correct_firmware(
     reboot_at: int, tmp_path: Path
@@ -373,7 +372,6 @@ def test_a_reboot_with_no_pose_in_its_first_tick_passes_the_correct_firmware(
     assert monitor.health(messages[-1].timestamp)["state"] == "OK"
 
 
-@pytest.mark.xfail(strict=True, reason="issue #11: no judge looks ahead yet")
 @pytest.mark.parametrize("reboot_at", [30, 80])
 def test_a_wrong_firmware_with_no_pose_in_its_first_tick_fails_every_judge(
     reboot_at: int, tmp_path: Path
