@@ -46,8 +46,11 @@ from tests.fault_rig import FaultRig
 
 PMIR = load("pmir")
 DB = database()
-FIRST_SECOND = [5, 30, 32, 60, 64, 75, 80, 95, 96, 100]  # reset ticks within the first second
-# (32, 64, 96: the old life's last pose read COUNTER 15 a pose period before the new one's 0)
+FIRST_SECOND = [5, 30, 32, 60, 64, 75, 80, 81, 95, 96, 100]  # reset ticks within the first
+# second (32, 64, 96: the old life's last pose read COUNTER 15 a pose period before the new
+# one's 0; 81: right after the old life's summary of COUNTER 0 at 0.8 s, whose first pose after
+# it is the new firmware's, breaking the sequence: its next summary, COUNTER 0, tells no
+# reboot there, ``bootticks.continues_summary``)
 CONTROL = [150, 160, 300]  # UPTIME 1 and 3 before the reset: told from UPTIME already (160:
 # the new firmware's first ODOM_TWIST, before the summary, is 2 COUNTERs on: in sequence)
 RUN_S = 4.0
@@ -354,8 +357,9 @@ def _no_first_pose(messages: tuple[can.Message, ...], reboot_at: int) -> tuple[c
     return tuple(out)
 
 
-NO_FIRST_POSE = [30, 60, 80, 95]  # reset ticks within the first second (80: the summary
-# continues the status sequence, the pose breaks its own)
+NO_FIRST_POSE = [30, 60, 80, 81, 95]  # reset ticks within the first second (30: the summary
+# breaks the status sequence, the pose continues its own; 80: the other way round; 81: right
+# after the old life's summary of COUNTER 0, the new one's first pose after the new summary)
 
 
 @pytest.mark.parametrize("reboot_at", NO_FIRST_POSE)

@@ -43,10 +43,24 @@ withdraw them (``SourceWatch.life_from_s``).
 
 Why this rather than a finer UPTIME (a DBC change): a user's own firmware that speaks the DBC
 gives it as it is (E2E counters from 0, the DBC's cycles), ours and the C port alike, and old
-logs are judged the same. Known limit: a firmware whose first tick sends no pose is told only by
-INIT after running (``sources``), one that sends no pose and is not INIT is not told this way.
+logs are judged the same.
+
+A firmware whose first tick sends its summary (OK) but no pose has no pose of COUNTER 0 before
+that summary: it is told looking ahead. The first pose after it (``boot_ahead``): COUNTER 0,
+less than ``BOOT_WINDOW_MS`` after the summary, no summary between, the pose or the summary
+breaking its sequence (a new firmware came). Which life the summary is of, the next summary
+tells (``continues_summary``): a new firmware's continues the summary's sequence (COUNTER 2,
+UPTIME 0, a cycle on). An old life's summary of COUNTER 0 (at 0.8 s) does not pass: held back
+behind later ones (it breaks the status sequence, and held back more than 80 ms its next pose
+of COUNTER 0, 160 ms on in its life, comes within 80 ms of it) the next summary continues the
+sequence it broke; followed by a reboot whose firmware sent its pose first (it breaks the pose
+sequence), the next summary is that firmware's boot summary, COUNTER 0 (told by its run). The
+live judges hold that verdict until that summary (a cycle), then start the life at the
+looked-ahead summary's encoder frame and withdraw what they judged since; the streamed
+``analyze`` holds the events after the summary across chunks (``stream_lives``).
 One rule, for every judge: ``SourceWatch.observe`` (the live monitor, the bridge, the streamed
-``analyze``) and ``boot_ticks`` (the whole log's quiet stretches, ``SourceWatch.observe_quiet``).
+``analyze``; ``hear_pose`` and ``told_ahead`` live) and ``boot_ticks`` and ``ahead_ticks`` (the
+whole log's quiet stretches, ``SourceWatch.observe_quiet``).
 """
 
 from __future__ import annotations
@@ -161,31 +175,23 @@ def ahead_candidate(uptime_s: int, counter: int, t_s: float, summary_before_s: f
 
 
 def boot_ahead(summary_s: float, status_broke: bool, t_s: float, counter: int,
-               before: tuple[float, int] | None) -> bool | None:
+               before: tuple[float, int] | None) -> bool:
     """Whether the first ODOM_POSE_X heard after an ``ahead_candidate`` summary (bus time
-    ``summary_s``; ``status_broke``: it broke the ODOM_STATUS sequence) makes that summary a
+    ``summary_s``; ``status_broke``: it broke the ODOM_STATUS sequence) may make that summary a
     power-up tick whose firmware sent no pose in it (the pose at bus time ``t_s``, E2E
     ``counter``, its CRC holding; ``before``: bus time and COUNTER of the pose heard before it,
-    None: none; no other summary between them: the caller's). It must read COUNTER 0 less than
-    ``BOOT_WINDOW_S`` after the summary; then True when it breaks the pose sequence (a new
-    firmware: one life never does, module docstring); None when only the summary broke its
-    sequence: a summary of the old life held back behind later ones breaks it too (its next
-    pose of COUNTER 0 then within 80 ms of it when held back more than 80 ms), so the next
-    summary tells (``continues_summary``); False otherwise."""
-    if not (RULE_HOLDS and counter == 0 and 0.0 <= t_s - summary_s < BOOT_WINDOW_S):
-        return False
-    if before is None or breaks_sequence(before[1], t_s - before[0]):
-        return True
-    return None if status_broke else False
+    None: none; no other summary between them: the caller's): COUNTER 0 less than
+    ``BOOT_WINDOW_S`` after the summary, the pose or the summary breaking its message's
+    sequence. The next summary tells (``continues_summary``)."""
+    broke = status_broke or before is None or breaks_sequence(before[1], t_s - before[0])
+    return bool(RULE_HOLDS and counter == 0 and broke and 0.0 <= t_s - summary_s < BOOT_WINDOW_S)
 
 
 def continues_summary(summary_s: float, t_s: float, uptime_s: int, counter: int) -> bool:
     """Whether the next summary (bus time ``t_s``, UPTIME ``uptime_s``, E2E ``counter``) after
-    a summary of COUNTER 0 at ``summary_s`` that broke the ODOM_STATUS sequence
-    (``boot_ahead``: None) continues that one's sequence, the new firmware's next: UPTIME 0 and
-    the next cycle's COUNTER, within two cycles. A summary of the old life held back is
-    followed by the next of its own life, continuing the sequence it broke (a summary lost:
-    not told, no PASS given for it)."""
+    a summary of COUNTER 0 at ``summary_s`` whose first pose ``boot_ahead`` took continues that
+    one's sequence, as the new firmware's next does: UPTIME 0 and the next cycle's COUNTER,
+    within two cycles (module docstring; a summary lost: not told, no PASS given for it)."""
     return (uptime_s == 0 and counter == STATUS_FRAMES_PER_CYCLE % STATUS_COUNTER_LAP
             and 0.0 < t_s - summary_s < 2 * STATUS_CYCLE_MS / 1000)
 
@@ -209,10 +215,10 @@ def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArra
         status = None if statuses[1][i] < 0 else (float(statuses[0][i]), int(statuses[1][i]))
         broke = ahead_candidate(0, 0, float(t_s[i]), float(t_s[i - 1]) if i else None, status)
         before = None if j == 0 else (float(t_pose[j - 1]), int(counter[j - 1]))
-        told = broke is not None and boot_ahead(float(t_s[i]), broke, float(t_pose[j]),
-                                                int(counter[j]), before)
-        found[i] = told is True or (told is None and i + 1 < n and continues_summary(
-            float(t_s[i]), float(t_s[i + 1]), int(uptime_s[i + 1]), int(counters[i + 1])))
+        found[i] = (broke is not None and i + 1 < n
+                    and boot_ahead(float(t_s[i]), broke, float(t_pose[j]), int(counter[j]), before)
+                    and continues_summary(float(t_s[i]), float(t_s[i + 1]), int(uptime_s[i + 1]),
+                                          int(counters[i + 1])))
     return found
 
 

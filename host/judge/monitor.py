@@ -367,13 +367,10 @@ class BusMonitor:
                             else self._bus_time_s, "kind": "reboot", "detail": detail})
 
     def _summary(self, message: Message, data: bytes) -> tuple[int, str] | None:
-        """(UPTIME, STATE) of a summary whose CRC holds, any sequence (``src.status_frame``);
-        a reboot told by the first pose after its summary (``bootticks.boot_ahead``)."""
+        """(UPTIME, STATE) of a summary whose CRC holds, any sequence (``src.status_frame``)."""
         config = self._e2e_configs.get(frame_key(message.frame_id, message.is_extended_frame))
-        told = src.pose_frame(self.sources, message, data, config, self._bus_time_s,  # power-up
-                              self.tracker)  # ticks, poses
-        if told is not None:
-            self._new_life(f"UPTIME {told[1]} s, state {told[2]}, no pose in its tick", *told[1:])
+        src.pose_frame(self.sources, message, data, config, self._bus_time_s,  # power-up
+                       self.tracker)  # ticks, poses
         return src.status_frame(self.tracker, message, data, config, self._bus_time_s)
 
     def health(self, now_s: float | None = None) -> dict[str, Any]:

@@ -83,7 +83,7 @@ class SourceWatch:
     # the first pose after it may tell it a power-up tick with no pose (``bootticks.boot_ahead``):
     # its bus time, UPTIME, STATE, the encoder frame latest heard, whether it broke the sequence
     ahead_posed: tuple[float, int, str, int | None] | None = None  # such a summary (its first
-    # four) whose first pose after it left the next summary to tell (``told_ahead``)
+    # four) whose first pose after it leaves the next summary to tell (``told_ahead``)
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -161,29 +161,24 @@ class SourceWatch:
         self.page_pending = self.page_pending and kind != "reboot"
         return kind
 
-    def hear_pose(self, t_s: float, counter: int) -> tuple[float, int, str, int | None] | None:
+    def hear_pose(self, t_s: float, counter: int) -> None:
         """An ODOM_POSE_X whose CRC holds, heard at bus time ``t_s`` with E2E ``counter``,
         whatever its sequence: on the pose run (``bootticks.next_run``). The first after an
-        ``ahead`` summary may tell that one a power-up tick (``bootticks.boot_ahead``): then a
-        reboot from the summary on, its (bus time, UPTIME, STATE, encoder frame) returned."""
+        ``ahead`` summary may leave the next summary to tell that one a power-up tick
+        (``bootticks.boot_ahead``, ``told_ahead``)."""
         before = None if self.pose is None or self.pose_s is None else (self.pose_s, self.pose[1])
         self.pose = next_run(self.pose, t_s, counter, self.pose_s)
         self.pose_s = t_s
         ahead, self.ahead = self.ahead, None
-        told = None if ahead is None else boot_ahead(ahead[0], ahead[4], t_s, counter, before)
-        if ahead is None or told is False:
-            return None
-        if told is None:  # the next summary tells (``told_ahead``)
+        if ahead is not None and boot_ahead(ahead[0], ahead[4], t_s, counter, before):
             self.ahead_posed = ahead[:4]
-            return None
-        self.take_ahead(ahead[0], ahead[1])
-        return ahead[:4]
 
     def told_ahead(self, t_s: float, uptime_s: int, counter: int
                    ) -> tuple[float, int, str, int | None] | None:
         """The next summary (bus time ``t_s``, UPTIME, E2E ``counter``) after one left to it by
         ``hear_pose``, before it is observed: that one a power-up tick when this continues its
-        sequence (``bootticks.continues_summary``): a reboot from it on, as ``hear_pose``'s."""
+        sequence (``bootticks.continues_summary``): a reboot from it on (its bus time, UPTIME,
+        STATE, the encoder frame latest heard then, returned); else None."""
         posed, self.ahead_posed = self.ahead_posed, None
         if posed is None or not continues_summary(posed[0], t_s, uptime_s, counter):
             return None
@@ -286,23 +281,20 @@ def status_frame(tracker: PoseTracker, message: Message, data: bytes, e2e: Any, 
 
 
 def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s: float,
-               tracker: PoseTracker | None = None) -> tuple[float, int, str, int | None] | None:
+               tracker: PoseTracker | None = None) -> None:
     """Any frame heard at bus time ``t_s``: an ODOM_POSE_X whose CRC holds, whatever its E2E
     sequence (``e2e``: the message's ``E2EMessage`` or None), goes on ``watch``'s pose run (its
     COUNTERs tell a power-up tick: ``bootticks.next_run``), one of COUNTER 0 to ``tracker``'s
-    power-up poses (``bootnamed.LivePowerUp``: the E2E check may refuse it, a new life's).
-    Returns the summary it tells a power-up tick with no pose (``SourceWatch.hear_pose``)."""
-    told = None
+    power-up poses (``bootnamed.LivePowerUp``: the E2E check may refuse it, a new life's)."""
     if message.name in (POSE_MESSAGE, STATUS_MESSAGE):
         counter = pose_heard(data, e2e.data_ids if e2e is not None else None)
         if counter is not None and message.name == POSE_MESSAGE:
-            told = watch.hear_pose(t_s, counter)
+            watch.hear_pose(t_s, counter)
             if counter == 0 and tracker is not None:
                 tracker.powerup.heard_raw(_plain_decoder(message)(data), t_s,
                                           tracker.window.rows)
         elif counter is not None:
             watch.hear_status(t_s, counter)
-    return told
 
 
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,

@@ -188,10 +188,10 @@ class StreamLives:
             self._summaries = False
             return []
         if len(page["index"]) == 0:  # the chunk's latest pose and status frame still count
-            told = self._ahead_told(pose_rows(chunk, self.decoder), self._pose, -1, None)
+            self._ahead_posed(pose_rows(chunk, self.decoder), self._pose, -1, None)
             self._pose = poses_before(chunk, self.decoder, page["index"], self._pose)[1]
             self._status = status_before(chunk, self.decoder, page["index"], self._status)[1]
-            return told
+            return []
         if "UPTIME" not in page or "STATE" not in page:
             self._summaries = False
             return []
@@ -200,7 +200,8 @@ class StreamLives:
         carried, rows = self._pose, pose_rows(chunk, self.decoder)
         (pose_t, pose_counter, pose_new), self._pose = poses_before(
             chunk, self.decoder, index[good], self._pose)
-        events = self._ahead_told(rows, carried, -1, int(index[good][0]) if good.any() else None)
+        self._ahead_posed(rows, carried, -1, int(index[good][0]) if good.any() else None)
+        events: list[tuple[int, _Boot | tuple[int, int]]] = []
         (status_t, status_counter), self._status = status_before(
             chunk, self.decoder, index[good], self._status)
         choices = dict(message.get_signal_by_name("STATE").choices or {})
@@ -229,7 +230,7 @@ class StreamLives:
             elif self._watch.ahead is not None:  # the first pose after it may tell it
                 self._ahead = (self._boot(at, int(uptime_s), float(t_s), name, int(before)),
                                self._watch.ahead[4], False)
-                events += self._ahead_told(rows, carried, int(position), after)
+                self._ahead_posed(rows, carried, int(position), after)
         return events
 
     def _boot(self, at: int, uptime_s: int, t_s: float, name: str, before: int) -> _Boot:
@@ -241,32 +242,28 @@ class StreamLives:
                  if uptime_s == 0 else None)
         return _Boot(at, uptime_s, t_s, before, start, named)
 
-    def _ahead_told(self, rows: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64],
-                                      npt.NDArray[np.int64]],
-                    carried: tuple[float, int, bool, float] | None, position: int,
-                    after: int | None) -> list[tuple[int, _Boot | tuple[int, int]]]:
-        """The waiting ``_ahead`` summary (at chunk ``position``; -1: a chunk before) told by
-        the first pose of the chunk's ``rows`` (``bootticks.pose_rows``) after it and before
-        the next summary (chunk position ``after``; None: none in the chunk): its reboot, or
-        none; it waits on when the chunk has no pose after it and no summary."""
+    def _ahead_posed(self, rows: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64],
+                                       npt.NDArray[np.int64]],
+                     carried: tuple[float, int, bool, float] | None, position: int,
+                     after: int | None) -> None:
+        """The waiting ``_ahead`` summary (at chunk ``position``; -1: a chunk before) and the
+        first pose of the chunk's ``rows`` (``bootticks.pose_rows``) after it and before the
+        next summary (chunk position ``after``; None: none in the chunk): left to the next
+        summary when ``boot_ahead`` takes it, else dropped; it waits on when the chunk has no
+        pose after it and no summary."""
         if self._ahead is None or self._ahead[2]:
-            return []
+            return
         where, t_pose, counter = rows
         j = int(np.searchsorted(where, position, side="right"))
         if j >= len(where) or (after is not None and int(where[j]) > after):
             self._ahead = self._ahead if j >= len(where) and after is None else None
-            return []
+            return
         boot, broke, _ = self._ahead
         self._ahead = None
         before = ((float(t_pose[j - 1]), int(counter[j - 1])) if j > 0 else
                   None if carried is None else (carried[3], carried[1]))
-        told = boot_ahead(boot.t_s, broke, float(t_pose[j]), int(counter[j]), before)
-        if told is None:  # the next summary tells (``_posed_told``)
-            self._ahead = (boot, broke, True)
-        if not told:
-            return []
-        self._watch.take_ahead(boot.t_s, boot.uptime_s)
-        return [(boot.position, boot)]
+        if boot_ahead(boot.t_s, broke, float(t_pose[j]), int(counter[j]), before):
+            self._ahead = (boot, broke, True)  # the next summary tells (``_posed_told``)
 
     def _posed_told(self, t_s: float, uptime_s: int, counter: int
                     ) -> list[tuple[int, _Boot | tuple[int, int]]]:

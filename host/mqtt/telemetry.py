@@ -253,12 +253,10 @@ class RobotTelemetry(CommandFollowing):
         an ODOM_POSE_X's COUNTER to the watch's pose run (``SourceWatch.hear_pose``)."""
         if route.name == POSE_MESSAGE:
             if (counter := pose_heard(data, self._pose_ids.data_ids)) is not None:
-                told = self.sources.hear_pose(t_s, counter)  # (bootticks.boot_ahead)
+                self.sources.hear_pose(t_s, counter)
                 if counter == 0:  # (bootnamed: the E2E check may refuse a new life's)
                     self.tracker.powerup.heard_raw(route.signals(data), t_s,
                                                    self.tracker.window.rows)
-                if told is not None:
-                    self._new_life(t_s, *told[1:])
             return
         if route.status_page is None:
             return
