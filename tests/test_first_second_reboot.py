@@ -46,8 +46,11 @@ from tests.fault_rig import FaultRig
 
 PMIR = load("pmir")
 DB = database()
-FIRST_SECOND = [5, 30, 32, 60, 64, 75, 80, 95, 96, 100]  # reset ticks within the first second
-# (32, 64, 96: the old life's last pose read COUNTER 15 a pose period before the new one's 0)
+FIRST_SECOND = [5, 30, 32, 60, 64, 75, 80, 81, 95, 96, 100]  # reset ticks within the first
+# second (32, 64, 96: the old life's last pose read COUNTER 15 a pose period before the new
+# one's 0; 81: right after the old life's summary of COUNTER 0 at 0.8 s, whose first pose after
+# it is the new firmware's, breaking the sequence: its next summary, COUNTER 0, tells no
+# reboot there, ``bootticks.continues_summary``)
 CONTROL = [150, 160, 300]  # UPTIME 1 and 3 before the reset: told from UPTIME already (160:
 # the new firmware's first ODOM_TWIST, before the summary, is 2 COUNTERs on: in sequence)
 RUN_S = 4.0
@@ -326,8 +329,8 @@ def test_lost_frames_make_no_boot_tick(seed: int, tmp_path: Path) -> None:
 
 
 # --- a firmware whose first tick sends no pose and says OK: its boot summary has no pose of
-# COUNTER 0 before it, so no judge tells the reboot (``bootticks``: known limit). Then the verdict
-# is FAIL everywhere, the pose against the first life's reference: never PASS nor OK ---
+# COUNTER 0 before it; the first pose heard after it (COUNTER 0, breaking the pose sequence) tells
+# it, looked ahead for (``bootticks.boot_ahead``): every judge PASSes the correct firmware ---
 
 POSE_IDS = {fr.ODOM_POSE_X_ID: fr.ODOM_POSE_X_DATA_IDS, fr.ODOM_POSE_Y_ID: fr.ODOM_POSE_Y_DATA_IDS}
 
@@ -354,27 +357,36 @@ def _no_first_pose(messages: tuple[can.Message, ...], reboot_at: int) -> tuple[c
     return tuple(out)
 
 
-@pytest.mark.parametrize("reboot_at", [30, 80])
-def test_a_reboot_with_no_pose_in_its_first_tick_is_never_passed(
+NO_FIRST_POSE = [30, 60, 80, 81, 95]  # reset ticks within the first second (30: the summary
+# breaks the status sequence, the pose continues its own; 80: the other way round; 81: right
+# after the old life's summary of COUNTER 0, the new one's first pose after the new summary)
+
+
+@pytest.mark.parametrize("reboot_at", NO_FIRST_POSE)
+def test_a_reboot_with_no_pose_in_its_first_tick_passes_the_correct_firmware(
     reboot_at: int, tmp_path: Path
 ) -> None:
+    # on main: no judge told the reboot, FAIL (0.05 m and more) against the first life's reference
     messages = _no_first_pose(drive(reboot_at), reboot_at)
     counters, _ = _poses_between(messages, reboot_at * TICK_S)
     assert counters == []  # the boot summary came before any pose of the new life (cantools)
-    path = _written(messages, tmp_path / f"nopose{reboot_at}.log")
-    own = ic.check(path, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
-                   reboots_t_s=[_reset_seen(drive(reboot_at), reboot_at)])
-    assert own.passed  # the firmware is right: the judges cannot tell its reboot
-    whole = analyze(read_log(path), PMIR, "exact")
-    assert whole.report["reboots"] == []
-    assert not whole.passed
-    assert whole.report["onboard_vs_reference"]["max_position_error_m"] > 0.05
-    streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
-    assert json.dumps(streamed) == json.dumps(whole.report)
-    monitor, bridge = _live(messages)
+    monitor, _ = right_passes_every_judge(
+        messages, tmp_path / f"nopose{reboot_at}.log", _reset_seen(drive(reboot_at), reboot_at),
+        (13, 97))
+    assert monitor.health(messages[-1].timestamp)["state"] == "OK"
+
+
+@pytest.mark.parametrize("reboot_at", [30, 80])
+def test_a_wrong_firmware_with_no_pose_in_its_first_tick_fails_every_judge(
+    reboot_at: int, tmp_path: Path
+) -> None:
+    messages = _no_first_pose(_wrong(drive(reboot_at), reboot_at), reboot_at)
+    whole, monitor, bridge = wrong_fails_whole_and_streamed(
+        messages, reboot_at, tmp_path / f"wrongnopose{reboot_at}.log")
+    assert whole.report["onboard_vs_reference"]["max_position_error_m"] < 1e-3
+    assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
     assert monitor.health(messages[-1].timestamp)["state"] == "POSE WRONG"
-    assert bridge.reboots == 0
-    assert bridge.tracker.vs_reference.max_dpos_m > 0.05
+    assert 1.5e-4 < bridge.tracker.vs_reference.max_dpos_m < 1e-3
 
 
 @cache

@@ -43,10 +43,24 @@ withdraw them (``SourceWatch.life_from_s``).
 
 Why this rather than a finer UPTIME (a DBC change): a user's own firmware that speaks the DBC
 gives it as it is (E2E counters from 0, the DBC's cycles), ours and the C port alike, and old
-logs are judged the same. Known limit: a firmware whose first tick sends no pose is told only by
-INIT after running (``sources``), one that sends no pose and is not INIT is not told this way.
+logs are judged the same.
+
+A firmware whose first tick sends its summary (OK) but no pose has no pose of COUNTER 0 before
+that summary: it is told looking ahead. The first pose after it (``boot_ahead``): COUNTER 0,
+less than ``BOOT_WINDOW_MS`` after the summary, no summary between, the pose or the summary
+breaking its sequence (a new firmware came). Which life the summary is of, the next summary
+tells (``continues_summary``): a new firmware's continues the summary's sequence (COUNTER 2,
+UPTIME 0, a cycle on). An old life's summary of COUNTER 0 (at 0.8 s) does not pass: held back
+behind later ones (it breaks the status sequence, and held back more than 80 ms its next pose
+of COUNTER 0, 160 ms on in its life, comes within 80 ms of it) the next summary continues the
+sequence it broke; followed by a reboot whose firmware sent its pose first (it breaks the pose
+sequence), the next summary is that firmware's boot summary, COUNTER 0 (told by its run). The
+live judges hold that verdict until that summary (a cycle), then start the life at the
+looked-ahead summary's encoder frame and withdraw what they judged since; the streamed
+``analyze`` holds the events after the summary across chunks (``stream_lives``).
 One rule, for every judge: ``SourceWatch.observe`` (the live monitor, the bridge, the streamed
-``analyze``) and ``boot_ticks`` (the whole log's quiet stretches, ``SourceWatch.observe_quiet``).
+``analyze``; ``hear_pose`` and ``told_ahead`` live) and ``boot_ticks`` and ``ahead_ticks`` (the
+whole log's quiet stretches, ``SourceWatch.observe_quiet``).
 """
 
 from __future__ import annotations
@@ -145,6 +159,67 @@ def boot_tick(uptime_s: int, counter: int, t_s: float, pose: tuple[float, int, b
     broken = pose[2] or status_before is None or status_breaks(status_before[1],
                                                                t_s - status_before[0])
     return broken and 0 <= pose[1] < BOOT_POSE_FRAMES and 0.0 <= t_s - pose[0] < BOOT_WINDOW_S
+
+
+def ahead_candidate(uptime_s: int, counter: int, t_s: float, summary_before_s: float | None,
+                    status_before: tuple[float, int] | None) -> bool | None:
+    """A summary that is no ``boot_tick`` but may be a power-up tick that sent no pose (its
+    first pose comes after it: ``boot_ahead``): None when it cannot be (not UPTIME 0 and
+    COUNTER 0, or a repeat); else whether it breaks the ODOM_STATUS sequence (``status_breaks``
+    of the frame heard before it; none: True)."""
+    if not RULE_HOLDS or uptime_s != 0 or counter != 0:
+        return None
+    if summary_before_s is not None and t_s - summary_before_s < REPEAT_S:
+        return None
+    return status_before is None or status_breaks(status_before[1], t_s - status_before[0])
+
+
+def boot_ahead(summary_s: float, status_broke: bool, t_s: float, counter: int,
+               before: tuple[float, int] | None) -> bool:
+    """Whether the first ODOM_POSE_X heard after an ``ahead_candidate`` summary (bus time
+    ``summary_s``; ``status_broke``: it broke the ODOM_STATUS sequence) may make that summary a
+    power-up tick whose firmware sent no pose in it (the pose at bus time ``t_s``, E2E
+    ``counter``, its CRC holding; ``before``: bus time and COUNTER of the pose heard before it,
+    None: none; no other summary between them: the caller's): COUNTER 0 less than
+    ``BOOT_WINDOW_S`` after the summary, the pose or the summary breaking its message's
+    sequence. The next summary tells (``continues_summary``)."""
+    broke = status_broke or before is None or breaks_sequence(before[1], t_s - before[0])
+    return bool(RULE_HOLDS and counter == 0 and broke and 0.0 <= t_s - summary_s < BOOT_WINDOW_S)
+
+
+def continues_summary(summary_s: float, t_s: float, uptime_s: int, counter: int) -> bool:
+    """Whether the next summary (bus time ``t_s``, UPTIME ``uptime_s``, E2E ``counter``) after
+    a summary of COUNTER 0 at ``summary_s`` whose first pose ``boot_ahead`` took continues that
+    one's sequence, as the new firmware's next does: UPTIME 0 and the next cycle's COUNTER,
+    within two cycles (module docstring; a summary lost: not told, no PASS given for it)."""
+    return (uptime_s == 0 and counter == STATUS_FRAMES_PER_CYCLE % STATUS_COUNTER_LAP
+            and 0.0 < t_s - summary_s < 2 * STATUS_CYCLE_MS / 1000)
+
+
+def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArray[np.int64],
+                uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],
+                t_s: npt.NDArray[np.float64], statuses: Latest) -> npt.NDArray[np.bool_]:
+    """``boot_ahead`` (and ``continues_summary``) of the summaries at ``positions`` (in order,
+    their CRC holding: UPTIMEs, COUNTERs, bus times; ``statuses``: ``status_before`` of each)
+    at once, their first pose after them in ``frames`` (before the next summary)."""
+    where, t_pose, counter = pose_rows(frames, decoder)
+    found = np.zeros(len(positions), dtype=bool)
+    if len(where) == 0 or len(positions) == 0:
+        return found
+    k = np.searchsorted(where, positions)  # the first pose after each
+    n = len(positions)
+    for i in np.flatnonzero((uptime_s == 0) & (counters == 0) & (k < len(where))).tolist():
+        j = int(k[i])
+        if i + 1 < n and where[j] > positions[i + 1]:
+            continue
+        status = None if statuses[1][i] < 0 else (float(statuses[0][i]), int(statuses[1][i]))
+        broke = ahead_candidate(0, 0, float(t_s[i]), float(t_s[i - 1]) if i else None, status)
+        before = None if j == 0 else (float(t_pose[j - 1]), int(counter[j - 1]))
+        found[i] = (broke is not None and i + 1 < n
+                    and boot_ahead(float(t_s[i]), broke, float(t_pose[j]), int(counter[j]), before)
+                    and continues_summary(float(t_s[i]), float(t_s[i + 1]), int(uptime_s[i + 1]),
+                                          int(counters[i + 1])))
+    return found
 
 
 def boot_ticks(uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],
@@ -259,6 +334,13 @@ def _rows(frames: FrameArrays, decoder: BulkDecoder, name: str
         good = crc8h2f_p02(data, ids) == data[:, 0]
     return (rows[good], frames.timestamp_s[rows[good]].astype(np.float64),
             (data[good, 1] & ENC_COUNTER_MASK).astype(np.int64))
+
+
+def pose_rows(frames: FrameArrays, decoder: BulkDecoder
+              ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64]]:
+    """Positions, bus times and E2E COUNTERs of the ODOM_POSE_X frames of ``frames`` whose CRC
+    holds (whatever their sequence); empty without them."""
+    return _rows(frames, decoder, POSE_MESSAGE)
 
 
 def pose_heard(data: bytes, data_ids: tuple[int, ...] | None) -> int | None:

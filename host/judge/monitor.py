@@ -332,21 +332,16 @@ class BusMonitor:
         """Reboots and a second source, from the summary's UPTIME, STATE and E2E COUNTER
         (module docstring)."""
         before = self.status.get("uptime_s")
-        if (kind := self.sources.observe(self._bus_time_s, uptime_s, state, counter)) is None:
+        if (told := self.sources.told_ahead(self._bus_time_s, uptime_s, counter)) is not None:
+            self._new_life(f"UPTIME {told[1]} s, state {told[2]}, no pose in its tick", *told[1:])
+        if (kind := self.sources.observe(self._bus_time_s, uptime_s, state, counter,
+                                         seq=self.tracker.enc_seq)) is None:
             return
         detail = f"UPTIME {before} s -> {uptime_s} s, state {state}"
-        if kind == "reboot":  # its counters restarted: not frames lost or out of sequence
-            lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
-            detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state)
-            self.distance.new_life()
-            since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
-            self.tracker.vs_reference.withdraw_from(since_s)  # its poses vs the old reference
-            self.twist.new_life(since_s)  # its first ticks' twists
-            self.set_pose.forget(since_s)  # the new firmware's kept
-            self.kept.forget()
-            if lost is not None:
-                self.events.append({"t_s": self._bus_time_s, "kind": "config", "detail": lost})
-        elif kind == "two sources":  # no pose is judged from the second one's first summary
+        if kind == "reboot":
+            self._new_life(detail, uptime_s, state)
+            return
+        if kind == "two sources":  # no pose is judged from the second one's first summary
             self.tracker.wrongs.unjudgeable_from(self.sources.conflict_from_s or self._bus_time_s)
             detail = f"two senders of ODOM_STATUS interleave (UPTIME {before} s and {uptime_s} s)"
             last = self.events[-1] if self.events else None
@@ -354,6 +349,22 @@ class BusMonitor:
                 last["t_s"] = self._bus_time_s  # one event while the conflict lasts
                 return
         self.events.append({"t_s": self._bus_time_s, "kind": kind, "detail": detail})
+
+    def _new_life(self, detail: str, uptime_s: int, state: str, seq: int | None = None) -> None:
+        """A reboot told (``seq``: the encoder frame latest heard at its summary, when told by
+        the first pose after it): its counters restarted, not frames lost or out of sequence."""
+        lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
+        detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
+        self.distance.new_life()
+        since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
+        self.tracker.vs_reference.withdraw_from(since_s)  # its poses vs the old reference
+        self.twist.new_life(since_s)  # its first ticks' twists
+        self.set_pose.forget(since_s)  # the new firmware's kept
+        self.kept.forget()
+        if lost is not None:
+            self.events.append({"t_s": self._bus_time_s, "kind": "config", "detail": lost})
+        self.events.append({"t_s": self.sources.life_from_s if seq is not None
+                            else self._bus_time_s, "kind": "reboot", "detail": detail})
 
     def _summary(self, message: Message, data: bytes) -> tuple[int, str] | None:
         """(UPTIME, STATE) of a summary whose CRC holds, any sequence (``src.status_frame``)."""

@@ -54,7 +54,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.bootnamed import named_start, powerup_poses
-from odocan.host.judge.bootticks import boot_ticks, poses_before, status_before
+from odocan.host.judge.bootticks import ahead_ticks, boot_ticks, poses_before, status_before
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.liveconfig import config_text
@@ -192,6 +192,7 @@ def _watch_summaries(
     poses = poses_before(frames, decoder, positions)[0]  # their ticks' (``bootticks``)
     statuses = status_before(frames, decoder, positions)[0]
     booted = boot_ticks(uptimes_s, counters, times_s, poses, statuses, None)
+    ahead = ahead_ticks(frames, decoder, positions, uptimes_s, counters, times_s, statuses)
     watch = SourceWatch()
     boots = []
     changed, conflict = 0, None  # the summary of the last new offset; where two sources began
@@ -199,7 +200,7 @@ def _watch_summaries(
     while k < len(positions):  # quiet stretches at once (observe_quiet), the others one by one
         end = min(len(positions), k + window)
         k += watch.observe_quiet(times_s[k:end], uptimes_s[k:end], states[k:end],
-                                 booted[k:end])
+                                 booted[k:end] | ahead[k:end])
         if k == end:
             window *= 2
             continue
@@ -212,7 +213,8 @@ def _watch_summaries(
         status_counter = int(statuses[1][k])
         watch.status_before = (None if status_counter < 0
                                else (float(statuses[0][k]), status_counter))
-        kind = watch.observe(float(times_s[k]), int(uptimes_s[k]), name, int(counters[k]))
+        kind = watch.observe(float(times_s[k]), int(uptimes_s[k]), name, int(counters[k]),
+                             bool(ahead[k]))
         if kind == "reboot":
             boots.append((int(positions[k]), int(uptimes_s[k]), name, int(before)))
         if watch.changed_at_s == float(times_s[k]):

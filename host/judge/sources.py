@@ -22,7 +22,10 @@ import numpy.typing as npt
 from odocan.host.judge.bootticks import (
     POSE_MESSAGE,
     STATUS_MESSAGE,
+    ahead_candidate,
+    boot_ahead,
     boot_tick,
+    continues_summary,
     next_run,
     pose_heard,
 )
@@ -76,6 +79,11 @@ class SourceWatch:
     summary_s: float | None = None  # the bus time of the latest summary observed
     life_from_s: float = -math.inf  # where the latest reboot told began: its summary's bus
     # time, or its pose run's start when that was a power-up tick (``bootticks``: held back)
+    ahead: tuple[float, int, str, int | None, bool] | None = None  # the latest summary, when
+    # the first pose after it may tell it a power-up tick with no pose (``bootticks.boot_ahead``):
+    # its bus time, UPTIME, STATE, the encoder frame latest heard, whether it broke the sequence
+    ahead_posed: tuple[float, int, str, int | None] | None = None  # such a summary (its first
+    # four) whose first pose after it leaves the next summary to tell (``told_ahead``)
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -110,17 +118,22 @@ class SourceWatch:
         spanned = (ok + int(signals.get("ENC_E2E_LOST", 0))) & 0xFFFF  # accepted or lost
         return bool({ok, spanned} & {heard[0] & 0xFFFF, heard[1], by_tick})
 
-    def observe(self, t_s: float, uptime_s: int, state: str, counter: int | None = None
-                ) -> str | None:
+    def observe(self, t_s: float, uptime_s: int, state: str, counter: int | None = None,
+                ahead: bool = False, seq: int | None = None) -> str | None:
         """One ODOM_STATUS summary (``counter``: its E2E COUNTER, None: not told; with the
         watch's ``pose``, the run of the ODOM_POSE_X frames heard before the summary, it tells
-        a power-up tick: ``bootticks.boot_tick``); returns ``"reboot"``, ``"two sources"``,
-        ``"uptime jump"`` or None."""
+        a power-up tick: ``bootticks.boot_tick``; ``ahead``: the first pose after it told one,
+        ``bootticks.boot_ahead``, a log's; ``seq``: the encoder frame latest heard, live);
+        returns ``"reboot"``, ``"two sources"``, ``"uptime jump"`` or None. A summary the first
+        pose after it may tell is kept in ``ahead`` (live: ``hear_pose``, ``told_ahead``)."""
         offset = uptime_s - t_s
         kind = None
         booted = counter is not None and boot_tick(uptime_s, counter, t_s, self.pose,
                                                    self.summary_s, self.status_before)
-        self.summary_s = t_s
+        broke = (None if booted or counter is None else
+                 ahead_candidate(uptime_s, counter, t_s, self.summary_s, self.status_before))
+        booted, ahead = booted or (ahead and broke is not None), ahead and not booted
+        self.summary_s, self.ahead, self.ahead_posed = t_s, None, None
         if self.offset_s is None:
             self.offset_s, self.first_uptime_s = offset, uptime_s
         elif abs(offset - self.offset_s) <= UPTIME_MATCH_S:
@@ -129,7 +142,10 @@ class SourceWatch:
             ):
                 kind = "reboot"
                 self.offset_s = offset
-                self.life_from_s = min(t_s, self.pose[0]) if booted and self.pose else t_s
+                held = booted and not ahead and self.pose
+                self.life_from_s = min(t_s, self.pose[0]) if held and self.pose else t_s
+            elif broke is not None:  # the first pose after it may tell it (``hear_pose``)
+                self.ahead = (t_s, uptime_s, state, seq, broke)
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
             kind = "two sources"
             self.conflict_until_s = t_s + CONFLICT_HOLD_S
@@ -147,9 +163,32 @@ class SourceWatch:
 
     def hear_pose(self, t_s: float, counter: int) -> None:
         """An ODOM_POSE_X whose CRC holds, heard at bus time ``t_s`` with E2E ``counter``,
-        whatever its sequence: on the pose run (``bootticks.next_run``)."""
+        whatever its sequence: on the pose run (``bootticks.next_run``). The first after an
+        ``ahead`` summary may leave the next summary to tell that one a power-up tick
+        (``bootticks.boot_ahead``, ``told_ahead``)."""
+        before = None if self.pose is None or self.pose_s is None else (self.pose_s, self.pose[1])
         self.pose = next_run(self.pose, t_s, counter, self.pose_s)
         self.pose_s = t_s
+        ahead, self.ahead = self.ahead, None
+        if ahead is not None and boot_ahead(ahead[0], ahead[4], t_s, counter, before):
+            self.ahead_posed = ahead[:4]
+
+    def told_ahead(self, t_s: float, uptime_s: int, counter: int
+                   ) -> tuple[float, int, str, int | None] | None:
+        """The next summary (bus time ``t_s``, UPTIME, E2E ``counter``) after one left to it by
+        ``hear_pose``, before it is observed: that one a power-up tick when this continues its
+        sequence (``bootticks.continues_summary``): a reboot from it on (its bus time, UPTIME,
+        STATE, the encoder frame latest heard then, returned); else None."""
+        posed, self.ahead_posed = self.ahead_posed, None
+        if posed is None or not continues_summary(posed[0], t_s, uptime_s, counter):
+            return None
+        self.take_ahead(posed[0], posed[1])
+        return posed
+
+    def take_ahead(self, t_s: float, uptime_s: int) -> None:
+        """The summary at bus time ``t_s`` (UPTIME ``uptime_s``) was a power-up tick, told by
+        the first pose after it (``bootticks.boot_ahead``): a reboot there, as ``observe``'s."""
+        self.offset_s, self.life_from_s, self.page_pending = uptime_s - t_s, t_s, False
 
     def hear_status(self, t_s: float, counter: int) -> None:
         """An ODOM_STATUS frame (any page) whose CRC holds, heard at bus time ``t_s`` with E2E
@@ -259,12 +298,13 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
 
 
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
-                   uptime_s: int, state: str) -> str:
+                   uptime_s: int, state: str, seq: int | None = None) -> str:
     """A reboot told by ``SourceWatch``: the reference starts at the power-up pose when the
     summary says UPTIME 0 (``PoseTracker.power_up``; ``host.judge.reboots``), else (more than a
     second after the boot: its page of encoder E2E counts may be gone too) at the next pose;
     the E2E sequences of the messages ``FIRMWARE_NODE`` sends in ``db`` start afresh (a reboot
-    is not frames lost). Returns what was done (text)."""
+    is not frames lost; ``seq``: the encoder frame latest heard at the summary, when told
+    after it, ``bootticks.boot_ahead``). Returns what was done (text)."""
     tracker.placer.seen.new_life()  # its pages count from 0 (host.judge.livegapseen)
     tracker.placer.dark.new_life()  # no pose adopted before it carried (host.judge.livedark)
     tracker.adopted.new_life()  # ... nor at a start of the reference (host.judge.liveadopted)
@@ -273,7 +313,7 @@ def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
         if FIRMWARE_NODE in message.senders:  # the counts stay; the next frame starts afresh
             e2e.restart_sequence(message.frame_id, extended=message.is_extended_frame)
     if uptime_s == 0:
-        tracker.power_up(primed_now=state != "INIT")
+        tracker.power_up(primed_now=state != "INIT", seq=seq)
         return "reference restarted at the power-up pose"
     tracker.adopted.owe(LATE_REBOOT.format(uptime_s=uptime_s))  # its pose adopted
     tracker.new_life()

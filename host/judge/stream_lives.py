@@ -28,7 +28,13 @@ from odocan.host.judge.bootnamed import (
     no_powerup_poses,
     powerup_poses,
 )
-from odocan.host.judge.bootticks import poses_before, status_before
+from odocan.host.judge.bootticks import (
+    boot_ahead,
+    continues_summary,
+    pose_rows,
+    poses_before,
+    status_before,
+)
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
@@ -85,6 +91,11 @@ class StreamLives:
     _status: tuple[float, int] | None = None  # the latest ODOM_STATUS (``status_before``)
     _powerups: PowerUpPoses = field(default_factory=no_powerup_poses)  # the latest
     # power-up poses heard (``bootnamed``), their positions in the log
+    _ahead: tuple[_Boot, bool, bool] | None = None  # the last summary, the first pose after it
+    # (or the next summary, ``continues_summary``) not heard yet (``bootticks.boot_ahead``): its
+    # reboot if that tells one, whether it broke the status sequence, whether its pose left it
+    # to the next summary; the chunk's events after it wait with it (``_deferred``)
+    _deferred: list[tuple[int, _Boot | tuple[int, int]]] = field(default_factory=list)
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
@@ -95,20 +106,28 @@ class StreamLives:
         self._counters = np.concatenate((self._counters, rows["COUNTER"][keep].astype(np.int64)))
         self._powerups = carried_on(self._powerups,
                                     powerup_poses(chunk, self.decoder, self._offset))
-        events = sorted(self._boot_events(chunk) + self._page_events(chunk),
+        events = sorted(self._deferred + self._boot_events(chunk) + self._page_events(chunk),
                         key=lambda event: event[0])
+        waits = self._ahead[0].position if self._ahead is not None else None
+        self._deferred = [] if waits is None else [e for e in events if e[0] > waits]
+        self._run(events if waits is None else [e for e in events if e[0] <= waits])
+        self._encoders = self._encoders[-ENCODERS_KEPT:]
+        self._counters = self._counters[-ENCODERS_KEPT:]
+        self._offset += len(chunk)
+
+    def _run(self, events: list[tuple[int, _Boot | tuple[int, int]]]) -> None:
+        """Reboots and count pages in log order."""
         for position, boot in events:
             if isinstance(boot, _Boot):
                 self._decide(None)
                 self._waiting = boot
             else:
                 self._decide((position, boot))
-        self._encoders = self._encoders[-ENCODERS_KEPT:]
-        self._counters = self._counters[-ENCODERS_KEPT:]
-        self._offset += len(chunk)
 
     def finish(self, n_frames: int | None = None) -> list[LifeSpan]:
         """The lives (``n_frames``: the log's frames, default all fed)."""
+        self._run(self._deferred)  # a last summary with no pose after it: no reboot
+        self._ahead, self._deferred = None, []
         self._decide(None)
         stop = self._offset if n_frames is None else n_frames
         if not self._boots or not self._summaries:
@@ -169,6 +188,7 @@ class StreamLives:
             self._summaries = False
             return []
         if len(page["index"]) == 0:  # the chunk's latest pose and status frame still count
+            self._ahead_posed(pose_rows(chunk, self.decoder), self._pose, -1, None)
             self._pose = poses_before(chunk, self.decoder, page["index"], self._pose)[1]
             self._status = status_before(chunk, self.decoder, page["index"], self._status)[1]
             return []
@@ -177,20 +197,24 @@ class StreamLives:
             return []
         index = page["index"]
         good = crc_holds(chunk, self.decoder, index)
+        carried, rows = self._pose, pose_rows(chunk, self.decoder)
         (pose_t, pose_counter, pose_new), self._pose = poses_before(
             chunk, self.decoder, index[good], self._pose)
+        self._ahead_posed(rows, carried, -1, int(index[good][0]) if good.any() else None)
+        events: list[tuple[int, _Boot | tuple[int, int]]] = []
         (status_t, status_counter), self._status = status_before(
             chunk, self.decoder, index[good], self._status)
         choices = dict(message.get_signal_by_name("STATE").choices or {})
-        events: list[tuple[int, _Boot | tuple[int, int]]] = []
-        for position, t_s, uptime_s, state, counter, pose, status in zip(
+        following = [*index[good].tolist()[1:], None]
+        for position, t_s, uptime_s, state, counter, after, pose, status in zip(
             index[good].tolist(), page["timestamp_s"][good].tolist(),
             page["UPTIME"][good].tolist(), page["STATE"][good].tolist(),
-            page["COUNTER"][good].tolist(),
+            page["COUNTER"][good].tolist(), following,
             zip(pose_t.tolist(), pose_counter.tolist(), pose_new.tolist(), strict=True),
             zip(status_t.tolist(), status_counter.tolist(), strict=True), strict=True,
         ):
             name = str(choices.get(int(state), int(state)))
+            events += self._posed_told(float(t_s), int(uptime_s), int(counter))
             before = self._watch.last_uptime_s
             self._watch.pose = ((pose[0], int(pose[1]), bool(pose[2])) if pose[1] >= 0
                                 else None)
@@ -202,14 +226,56 @@ class StreamLives:
             if kind == "two sources" and self.conflict is None:
                 self.conflict = self._changed
             if kind == "reboot":
-                earlier = self._encoders[self._encoders < at]
-                start = (int(earlier[-1]) if int(uptime_s) == 0 and name != "INIT"
-                         and len(earlier) else at)
-                named = (named_start(self._powerups, (self._encoders, self._counters), at,
-                                     float(t_s)) if int(uptime_s) == 0 else None)
-                events.append((at, _Boot(at, int(uptime_s), float(t_s), int(before), start,
-                                         named)))
+                events.append((at, self._boot(at, int(uptime_s), float(t_s), name, int(before))))
+            elif self._watch.ahead is not None:  # the first pose after it may tell it
+                self._ahead = (self._boot(at, int(uptime_s), float(t_s), name, int(before)),
+                               self._watch.ahead[4], False)
+                self._ahead_posed(rows, carried, int(position), after)
         return events
+
+    def _boot(self, at: int, uptime_s: int, t_s: float, name: str, before: int) -> _Boot:
+        """The reboot of the summary at log position ``at`` (bus time ``t_s``, UPTIME, STATE
+        ``name``; ``before``: the UPTIME before it): where its life starts."""
+        earlier = self._encoders[self._encoders < at]
+        start = int(earlier[-1]) if uptime_s == 0 and name != "INIT" and len(earlier) else at
+        named = (named_start(self._powerups, (self._encoders, self._counters), at, t_s)
+                 if uptime_s == 0 else None)
+        return _Boot(at, uptime_s, t_s, before, start, named)
+
+    def _ahead_posed(self, rows: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64],
+                                       npt.NDArray[np.int64]],
+                     carried: tuple[float, int, bool, float] | None, position: int,
+                     after: int | None) -> None:
+        """The waiting ``_ahead`` summary (at chunk ``position``; -1: a chunk before) and the
+        first pose of the chunk's ``rows`` (``bootticks.pose_rows``) after it and before the
+        next summary (chunk position ``after``; None: none in the chunk): left to the next
+        summary when ``boot_ahead`` takes it, else dropped; it waits on when the chunk has no
+        pose after it and no summary."""
+        if self._ahead is None or self._ahead[2]:
+            return
+        where, t_pose, counter = rows
+        j = int(np.searchsorted(where, position, side="right"))
+        if j >= len(where) or (after is not None and int(where[j]) > after):
+            self._ahead = self._ahead if j >= len(where) and after is None else None
+            return
+        boot, broke, _ = self._ahead
+        self._ahead = None
+        before = ((float(t_pose[j - 1]), int(counter[j - 1])) if j > 0 else
+                  None if carried is None else (carried[3], carried[1]))
+        if boot_ahead(boot.t_s, broke, float(t_pose[j]), int(counter[j]), before):
+            self._ahead = (boot, broke, True)  # the next summary tells (``_posed_told``)
+
+    def _posed_told(self, t_s: float, uptime_s: int, counter: int
+                    ) -> list[tuple[int, _Boot | tuple[int, int]]]:
+        """The next summary (bus time ``t_s``, UPTIME, COUNTER) after an ``_ahead`` one its
+        first pose left to it, before it is observed: that one's reboot when it continues its
+        sequence (``SourceWatch.told_ahead``), else none."""
+        ahead, self._ahead = self._ahead, None
+        if ahead is None or not ahead[2] or not continues_summary(ahead[0].t_s, t_s, uptime_s,
+                                                                  counter):
+            return []
+        self._watch.take_ahead(ahead[0].t_s, ahead[0].uptime_s)
+        return [(ahead[0].position, ahead[0])]
 
     def _page_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | tuple[int, int]]]:
         """The chunk's count pages whose CRC holds: (position in the log, (ENC_E2E_OK,

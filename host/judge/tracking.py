@@ -310,12 +310,13 @@ class PoseTracker:
         self.losses.restart(self.enc_seq, self.fast_path)
         self.lives.drop_backlog()
 
-    def power_up(self, primed_now: bool) -> None:
+    def power_up(self, primed_now: bool, seq: int | None = None) -> None:
         """A reboot (``sources``): the new life starts at (0, 0, 0) at the encoder frame it
         primed on, as ``analyze`` starts it: the one its first ENC_E2E_OK page names
         (``on_enc_counts``), whatever the summary said; its samples wait for that page, or
         ``BOOT_COUNT_WAIT_S``; without it, the latest frame when the boot summary says UPTIME 0
-        and not INIT (``primed_now``: primed in its first tick), else the next. Above both: the
+        and not INIT (``primed_now``: primed in its first tick; ``seq``: the latest at the
+        summary, when the reboot was told after it), else the next. Above both: the
         frame its power-up pose named, heard up to 80 ms before the summary
         (``bootnamed``: the ODOM_STATUS frames may be stamped late). No pose is
         adopted, so a firmware that comes up wrong shows its error. Without a known integrator:
@@ -326,7 +327,8 @@ class PoseTracker:
             self.adopted.owe(REBOOT_BEFORE_INTEGRATOR)
             return
         named = self.powerup.named_seq(self.now_s)  # its power-up pose's word (bootnamed)
-        guess = named if named is not None else self.enc_seq if primed_now else self.enc_seq + 1
+        latest = self.enc_seq if seq is None else seq
+        guess = named if named is not None else latest if primed_now else latest + 1
         self.lives.await_boot(guess, self.now_s, named=named is not None)
 
     def new_life(self) -> None:

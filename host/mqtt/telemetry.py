@@ -279,12 +279,21 @@ class RobotTelemetry(CommandFollowing):
         heard_status(self.tracker, route.message, data, ids, t_s, route.signals)  # compiled
         summary = (boot_summary(route.message, data, ids, route.signals)
                    if route.is_summary(data) else None)
-        if summary is None or self.sources.observe(t_s, *summary, data[1] & MASK) != "reboot":
+        if summary is not None and (told := self.sources.told_ahead(
+                t_s, summary[0], data[1] & MASK)) is not None:
+            self._new_life(t_s, *told[1:])
+        if summary is None or self.sources.observe(t_s, *summary, data[1] & MASK,
+                                                   seq=self.tracker.enc_seq) != "reboot":
             return
+        self._new_life(t_s, *summary)
+
+    def _new_life(self, t_s: float, uptime_s: int, state: str, seq: int | None = None) -> None:
+        """A reboot told at bus time ``t_s`` (``seq``: the encoder frame latest heard at its
+        summary, when told by the first pose after it, ``bootticks.boot_ahead``)."""
         self.reboots += 1
         lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM
         self.config_doubt = None  # and the config in doubt with them
-        start_new_life(self.tracker, self.e2e, self.db, *summary)
+        start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
         self.distance.new_life()
         since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
         self.tracker.vs_reference.withdraw_from(since_s)  # its poses vs the old reference
