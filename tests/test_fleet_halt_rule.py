@@ -28,11 +28,9 @@ import pytest
 
 from odocan.firmware import frames as fw_frames
 from odocan.firmware import reports as fw_reports
-from odocan.sim.contract import DBC_PATH
-from tests.dbc_typed import load_can_dbc, numbers
 from tests.overloaded_fleet import checked_before
 from tests.test_fleet_halt_edges import RecordingClock, recorded_run
-from tests.test_fleet_overload_stretches import candump_fields, x_off_times
+from tests.test_fleet_overload_stretches import x_changes, x_off_times
 
 AWAY_PERCENT = 35  # the first firmware's X: rounded, then 0.35 LSB away from zero
 
@@ -54,20 +52,8 @@ def _x_away_from_zero(monkeypatch: pytest.MonkeyPatch) -> None:
 def _x_moved(right: list[str], moved: list[str]) -> set[int]:
     """The moved run's X minus the right run's, times the sign of X (LSB): every other frame
     and signal the same (cantools)."""
-    db = load_can_dbc(DBC_PATH)
-    assert len(right) == len(moved)
-    seen = set()
-    for a, b in zip(right, moved, strict=True):
-        if a == b:
-            continue
-        (t_a, id_a, data_a), (t_b, id_b, data_b) = candump_fields(a), candump_fields(b)
-        assert (t_a, id_a) == (t_b, id_b), (a, b)
-        assert db.get_message_by_frame_id(id_a).name == "ODOM_POSE_X", (a, b)
-        sig_a, sig_b = (numbers(db, id_a, d, scaling=False) for d in (data_a, data_b))
-        assert {k: v for k, v in sig_a.items() if k not in ("X", "CHECKSUM")} == \
-            {k: v for k, v in sig_b.items() if k not in ("X", "CHECKSUM")}
-        seen.add((int(sig_b["X"]) - int(sig_a["X"])) * (1 if int(sig_b["X"]) >= 0 else -1))
-    return seen
+    return {(x_moved - x_right) * (1 if x_moved >= 0 else -1)
+            for _t_s, x_right, x_moved in x_changes(right, moved)}
 
 
 @pytest.mark.xfail(strict=True, reason="halt judges allow the rounding's half LSB, not the "

@@ -145,21 +145,30 @@ def _x_off_from(right: list[str], wrong: list[str]) -> float:
 def x_off_times(right: list[str], wrong: list[str], lsb: int = WRONG_LSB) -> list[float]:
     """Bus times (s) of the wrong run's frames that differ from the right run's: each an
     ODOM_POSE_X whose X is exactly ``lsb`` more, every other signal the same (cantools)."""
-    db = load_can_dbc(DBC_PATH)
-    assert len(right) == len(wrong)
     times = []
-    for a, b in zip(right, wrong, strict=True):
+    for t_s, x_right, x_wrong in x_changes(right, wrong):
+        assert x_wrong - x_right == lsb, (t_s, x_right, x_wrong)
+        times.append(t_s)
+    return times
+
+
+def x_changes(right: list[str], other: list[str]) -> list[tuple[float, int, int]]:
+    """``(t_s, X right, X other)`` (raw) of each frame where two runs differ: each an
+    ODOM_POSE_X at the same time, every signal but X and CHECKSUM the same (cantools)."""
+    db = load_can_dbc(DBC_PATH)
+    assert len(right) == len(other)
+    changes = []
+    for a, b in zip(right, other, strict=True):
         if a == b:
             continue
         (t_a, id_a, data_a), (t_b, id_b, data_b) = candump_fields(a), candump_fields(b)
         assert (t_a, id_a) == (t_b, id_b), (a, b)
         assert db.get_message_by_frame_id(id_a).name == "ODOM_POSE_X", (a, b)
         sig_a, sig_b = (numbers(db, id_a, d, scaling=False) for d in (data_a, data_b))
-        assert sig_b["X"] - sig_a["X"] == lsb, (sig_a, sig_b)
         assert {k: v for k, v in sig_a.items() if k not in ("X", "CHECKSUM")} == \
             {k: v for k, v in sig_b.items() if k not in ("X", "CHECKSUM")}
-        times.append(t_a)
-    return times
+        changes.append((t_a, int(sig_a["X"]), int(sig_b["X"])))
+    return changes
 
 
 def candump_fields(line: str) -> tuple[float, int, bytes]:

@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from odocan.host.judge.liveskip import KEPT_FRAMES, LiveSkips
+from odocan.host.judge.liveskip import KEPT_FRAMES, LiveSkips, span_units
 from odocan.host.judge.losses import ok_count_spans
-from odocan.host.judge.skipdefect import MAX_RUN, UNITS_PER_M, SkipDown
+from odocan.host.judge.skipdefect import UNITS_PER_M, SkipDown
 
 FRAMES = 400
 
@@ -64,18 +64,7 @@ class _EveryFrame:
         self.at.pop(seq - KEPT_FRAMES, None)
 
     def _span_units(self, first: int, end: int, n: int) -> int:
-        at = self.at
-        if first not in at or end not in at:
-            return -1 << 62
-        if n > MAX_RUN:
-            return at[end][1] - at[first][1]
-        best = 0
-        for j in range(first + 2, end + 1):
-            signed_j, abs_j = at[j]
-            for i in range(max(first, j - n - 1), j - 1):
-                signed_i, abs_i = at[i]
-                best = max(best, (abs_j - abs_i) - abs(signed_j - signed_i))
-        return n * best
+        return span_units(self.at, first, end, n)  # the window rule on every frame's sums
 
 
 def _allowance(live: LiveSkips, e: int) -> float:

@@ -129,15 +129,21 @@ class LiveSkips:
         (the fine path there past ``MAX_RUN``); -1 when the steps are no longer kept."""
         if self._steps:
             self._fold()
-        at = self._at
-        if first not in at or end not in at:
-            return -1 << 62
-        if n > MAX_RUN:
-            return at[end][1] - at[first][1]
-        best = 0
-        for j in range(first + 2, end + 1):
-            signed_j, abs_j = at[j]
-            for i in range(max(first, j - n - 1), j - 1):
-                signed_i, abs_i = at[i]
-                best = max(best, (abs_j - abs_i) - abs(signed_j - signed_i))
-        return n * best
+        return span_units(self._at, first, end, n)
+
+
+def span_units(at: dict[int, tuple[int, int]], first: int, end: int, n: int) -> int:
+    """``LiveSkips._span_units`` on ``at`` (frame: its sums of the signed steps and of |step|,
+    2^-40 m): n times the largest defect of up to n + 1 steps into frames (first, end], the
+    fine path past ``MAX_RUN``; -2^62 when a frame's sums are not kept."""
+    if first not in at or end not in at:
+        return -1 << 62
+    if n > MAX_RUN:
+        return at[end][1] - at[first][1]
+    best = 0
+    for j in range(first + 2, end + 1):
+        signed_j, abs_j = at[j]
+        for i in range(max(first, j - n - 1), j - 1):
+            signed_i, abs_i = at[i]
+            best = max(best, (abs_j - abs_i) - abs(signed_j - signed_i))
+    return n * best
