@@ -21,6 +21,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import can
 import pytest
 
 from odocan.firmware import frames as fr
@@ -29,7 +30,7 @@ from odocan.host.mqtt.bridge import _Robot
 from odocan.host.protocol.commands import CommandEncoder
 from tests.bridge_pair import bridged_robot, reckoned_from
 from tests.test_bridge_foreign_config import PERIODS, _events, _wrongs
-from tests.test_two_config_senders import _Interleaved, recorded_drive
+from tests.test_two_config_senders import MINE, _Interleaved, recorded_drive
 
 APPLY = 15  # ODOM_SET_POSE FIELD / ODOM_ACK REQUEST_FIELD of APPLY (the DBC's VAL_)
 OTHER_POSE = {"id": "script", "x_m": 0.5, "y_m": 0.25, "heading_rad": 1.0}
@@ -100,6 +101,34 @@ def test_two_nav_goal_senders_are_told(other_first: bool) -> None:
     assert [(int(s["REQUEST_FIELD"]), int(s["RESULT"])) for s in goes] == [
         (0, 0), (1, 0), (2, 0), (15, 0)]  # one of each COUNTER's two frames taken
     _said(bridge, board, "NAV_GOAL")
+    assert _wrongs(bridge, board) == (0, 0)
+
+
+class _Echoed(_Interleaved):
+    """A bus that loops the bridge's frames back to it (the fleet's observer hears its sends;
+    SocketCAN's loopback to another socket), and no other tool."""
+
+    def command_frame(self, msg: can.Message) -> None:
+        super().command_frame(msg)
+        self.to_bridge(msg.arbitration_id, bytes(msg.data))
+
+
+@pytest.mark.parametrize(("name", "payload"), [
+    ("set_pose", MINE_POSE), ("nav_goal", MINE_GOAL), ("config", MINE)])
+def test_the_bridges_own_frames_heard_back_are_not_a_second_sender(
+        name: str, payload: dict[str, Any]) -> None:
+    """Its own frames come back: one sender still (found in a fleet: every command
+    ``contested``, a ``two senders`` event for each)."""
+    with bridged_robot(f"test-echo-{name}") as (bridge, listener):
+        board = _Echoed(bridge, listener, [], other_first=False)
+        for _ in range(100):
+            board.period()
+        assert bridge.on_command(name, json.dumps(payload).encode())[0][1]["result"] == \
+            "accepted"
+        for _ in range(PERIODS - 100):
+            board.period()
+    assert [r["result"] for r in board.results] == ["acked"], board.results
+    assert _events(bridge, "two senders") == []
     assert _wrongs(bridge, board) == (0, 0)
 
 

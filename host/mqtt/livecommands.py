@@ -34,6 +34,9 @@ if TYPE_CHECKING:
     from odocan.host.mqtt.liveroutes import Route
 
 Publication = tuple[str, dict[str, Any]]
+COMMANDS = ("ODOM_SET_POSE", "ODOM_CONFIG", "NAV_GOAL", "ODOM_AUTH")  # the bridge sends these
+FOLLOWED = ("ODOM_SET_POSE", "ODOM_CONFIG", "ODOM_AUTH")  # its own followed when sent
+ECHO_FRAMES = 32  # own command frames kept for their echo (``_echo``)
 
 
 @dataclass
@@ -76,6 +79,8 @@ class CommandFollowing:
         self.config_doubt: ConfigDoubt | None = None  # two senders' config: which not known
         self.contested: dict[Any, str] = {}  # cmd id: another tool's frame heard in its flight
         self._own_frame = False  # the frame handled now is the bridge's own (``command_sent``)
+        # the bridge's own frames not heard back yet: (message, its signals) (``_echo``)
+        self._unechoed: deque[tuple[str, tuple[Any, ...]]] = deque(maxlen=ECHO_FRAMES)
         config = next((m for m in self.db.messages if m.name == "ODOM_CONFIG"), None)
         self._config_id = config.frame_id if config is not None else -1
         self._config_params: Any = config.get_signal_by_name("PARAM").choices or {} \
@@ -87,6 +92,8 @@ class CommandFollowing:
     def _on_set_pose(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         """An ODOM_SET_POSE frame on the bus (another tool's; the bridge's own go through
         ``command_sent``): staged and applied as the firmware ACKs it."""
+        if self._echo("ODOM_SET_POSE", s):
+            return []
         field = str(named_value(self._set_pose_fields, s["FIELD"]))
         self.set_pose.on_frame(int(s["COUNTER"]), field, s.get(field), self.tracker.enc_seq)
         if not self._own_frame:
@@ -94,7 +101,9 @@ class CommandFollowing:
         return []
 
     def _on_nav_goal(self, s: dict[str, Any], t_s: float) -> list[Publication]:
-        """A NAV_GOAL frame on the bus: another tool's (the bridge's own are not heard)."""
+        """A NAV_GOAL frame on the bus: another tool's (the bridge's own: ``_echo``)."""
+        if self._echo("NAV_GOAL", s):
+            return []
         field = str(named_value(self._nav_goal_fields, s["FIELD"]))
         self._foreign("NAV_GOAL", int(s["COUNTER"]), field, t_s)
         return []
@@ -102,6 +111,8 @@ class CommandFollowing:
     def _on_config(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         """An ODOM_CONFIG frame on the bus (another tool's, or the bridge's own through
         ``command_sent``): staged and applied as the firmware ACKs it."""
+        if self._echo("ODOM_CONFIG", s):
+            return []
         param = str(named_value(self._config_params, s["PARAM"]))
         self.config.on_frame(int(s["COUNTER"]), param, s.get(param))
         if not self._own_frame:
@@ -125,20 +136,41 @@ class CommandFollowing:
             self.events.append({"t_s": t_s, "kind": "two senders", "detail": detail})
 
     def _on_auth(self, s: dict[str, Any], t_s: float) -> list[Publication]:
+        if self._echo("ODOM_AUTH", s):
+            return []
         if int(s["REQUEST"]) == 1:  # ODOM_SET_POSE (the DBC's VAL_): the firmware acts now
             self.set_pose.on_auth(self.tracker.enc_seq)
         return []
 
     def command_sent(self, can_id: int, data: bytes) -> None:
-        """A command frame the bridge itself sent (not heard back from its bus)."""
+        """A command frame the bridge itself sent, followed now (``FOLLOWED``), and kept for
+        its echo should its bus loop it back (``_echo``)."""
         route = self._routes.get(can_id)
-        if route is not None and route.name in ("ODOM_SET_POSE", "ODOM_CONFIG", "ODOM_AUTH"):
-            self._own_frame = True
-            try:
-                with contextlib.suppress(DecodeError, KeyError, ValueError):
-                    route.handler(self, route.decode(data), 0.0)
-            finally:
-                self._own_frame = False
+        if route is None or route.name not in COMMANDS:
+            return
+        with contextlib.suppress(DecodeError, KeyError, ValueError):
+            signals = route.decode(data)
+            self._unechoed.append((route.name, tuple(signals.values())))
+            if route.name in FOLLOWED:
+                self._own_frame = True
+                try:
+                    route.handler(self, signals, 0.0)
+                finally:
+                    self._own_frame = False
+
+    def _echo(self, message: str, s: dict[str, Any]) -> bool:
+        """Whether a command frame heard is the bridge's own sent frame come back: a bus whose
+        observer hears its sends (the fleet's, SocketCAN's loopback to another socket) passes
+        them on. Followed when sent, it is not a second sender's, nor staged twice; one echo
+        per frame sent (another tool's frame of the very same bytes, which the firmware drops
+        as a duplicate, is taken as the echo: harmless)."""
+        if self._own_frame:
+            return False
+        try:
+            self._unechoed.remove((message, tuple(s.values())))
+        except ValueError:
+            return False
+        return True
 
     def _followed_set_pose(self, s: dict[str, Any], t_s: float) -> None:
         """ODOM_ACK of an ODOM_SET_POSE frame: an applied APPLY restarts the reference at
