@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+from contextlib import suppress
 from pathlib import Path
 from typing import Any
 
@@ -52,19 +53,20 @@ def test_each_robot_key_is_the_sp800_108_derivation_of_the_fleet_key() -> None:
 async def fleet_answers(commands: list[tuple[str, str, dict[str, Any]]]) -> list[dict[str, Any]]:
     """Run a 2-robot SecOC fleet (robot002's bridge without a key), publish ``commands``
     (robot, command, payload) once both robots' poses are on the broker (so each bridge has
-    seen its firmware's boot ODOM_FRESHNESS), and return every cmd/result answer."""
+    seen its firmware's boot ODOM_FRESHNESS), and return every cmd/result answer. The fleet's
+    duration is ample (a loaded machine starts it slowly); it is cancelled once all are in."""
     async with EmbeddedBroker() as broker, client(broker.url) as operator:
         await operator.subscribe(f"odocan/+/{topics.RESULT_LEAF}", qos=1)
         await operator.subscribe("odocan/+/pose", qos=0)
         run = FleetRun(
             fleet=FleetConfig(robots=2, robot=robot.load("pmir"), seed=5, secoc_key=KEY),
-            duration_s=5.0, broker=broker.url, client_prefix="test-fleet-secoc",
+            duration_s=60.0, broker=broker.url, client_prefix="test-fleet-secoc",
             secoc_unsigned=frozenset({UNSIGNED}),
         )
         task = asyncio.create_task(run_fleet(run))
         answers: list[dict[str, Any]] = []
         posed: set[str] = set()
-        async with asyncio.timeout(20):
+        async with asyncio.timeout(60):
             async for message in operator.messages:
                 assert isinstance(message.payload, bytes)
                 robot_name, leaf = message.topic.value.split("/", 2)[1:]
@@ -77,7 +79,9 @@ async def fleet_answers(commands: list[tuple[str, str, dict[str, Any]]]) -> list
                 answers.append({"robot": robot_name, **json.loads(message.payload)})
                 if sum(a["result"] in ("acked", "nacked") for a in answers) == len(commands):
                     break
-        await task
+        task.cancel()
+        with suppress(asyncio.CancelledError):
+            await task
     return answers
 
 
