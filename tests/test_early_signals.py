@@ -107,10 +107,11 @@ def test_a_swallowed_sigterm_before_the_log_stops_the_run_unwritten(
     """Swallowed earlier (the firmware chosen, before the log opens): still heard, the run
     stops before its first tick and the log is not written (the file there stays as it was)."""
     from odocan.host.cli.subparsers import run
+    from odocan.sim.cboard import board_maker
 
     log = tmp_path / "drive.blf"
     log.write_text(OLD_LOG)
-    monkeypatch.setattr(run, "board_maker", _sigterm_inside(run.board_maker, swallowed=True))
+    monkeypatch.setattr(run, "board_maker", _sigterm_inside(board_maker, swallowed=True))
     code, err = _run(log, capsys)
     assert code == 143
     assert log.read_text() == OLD_LOG

@@ -120,3 +120,36 @@ def test_a_symlink_is_never_removed(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     assert str(raised.value) == f"--report {link}: No space left on device"
     assert link.is_symlink()
     assert target.read_text() == "the summary\n"
+
+
+def _vectors(out: Path, *options: str, limited: bool) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "odocan", "vectors", *options, "--out", str(out)],
+        capture_output=True, text=True, timeout=300, check=False,
+        preexec_fn=_limited if limited else None,
+    )
+
+
+def test_vectors_past_the_limit_leave_no_partial_file(tmp_path: Path) -> None:
+    """``odocan vectors --out DIR`` on a full disk left a truncated vectors.json there: now
+    one line naming DIR, exit 2, and not a byte of the set (nor a temporary file)."""
+    out = tmp_path / "vectors"
+    done = _vectors(out, "--duration", "0.1", limited=True)
+    assert done.returncode == 2, done.stderr
+    assert [p.name for p in out.iterdir()] == []
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"error: --out {out}: ")
+    assert lines[0].endswith("; the partial files removed")
+
+
+def test_vectors_past_the_limit_keep_the_older_set(tmp_path: Path) -> None:
+    """A set already in DIR stays whole, byte for byte (not a new JSON beside old CSVs), and
+    still checks against the firmware."""
+    out = tmp_path / "vectors"
+    assert _vectors(out, "--duration", "0.1", limited=False).returncode == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    done = _vectors(out, "--duration", "0.2", "--seed", "7", limited=True)
+    assert done.returncode == 2, done.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert _vectors(out, "--check", limited=False).returncode == 0
