@@ -153,3 +153,23 @@ def test_vectors_past_the_limit_keep_the_older_set(tmp_path: Path) -> None:
     assert done.returncode == 2, done.stderr
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert _vectors(out, "--check", limited=False).returncode == 0
+
+
+@pytest.mark.parametrize(("option", "argv"), [
+    ("--latency-plot", ["run", "--firmware", "python", "--duration", "1", "-b", "500000"]),
+    ("--plot", ["umbmark", "--runs", "1", "--side", "0.2"]),
+])
+def test_a_plot_past_the_limit_leaves_no_partial_image(
+    tmp_path: Path, option: str, argv: list[str]
+) -> None:
+    """``run --latency-plot`` and the experiments' ``--plot`` (umbmark, calibrate) said the
+    error but left the image cut at the limit: removed now, as ``--plot`` of run and analyze."""
+    out = tmp_path / "plot.png"
+    done = subprocess.run(
+        [sys.executable, "-m", "odocan", *argv, option, str(out)],
+        capture_output=True, text=True, timeout=300, check=False, preexec_fn=_limited,
+    )
+    assert done.returncode == 2, done.stderr
+    assert not out.exists()
+    assert done.stderr.splitlines() == [
+        f"error: {option} {out}: File too large; the partial file removed"]

@@ -48,7 +48,7 @@ from odocan.host.io.export import add_export_arguments, check_export_paths, writ
 from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.analysis import Analysis, analyze
-from odocan.host.outputs import OutputError, check_distinct, check_writable
+from odocan.host.outputs import OutputError, check_distinct, check_writable, output_failed
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
@@ -315,8 +315,8 @@ def _write_latency_plot(args: argparse.Namespace, report: dict[str, Any]) -> Non
 
     try:
         plot_latency(report, args.latency_plot)
-    except OSError as exc:
-        raise OutputError(f"--latency-plot {args.latency_plot}: {exc.strerror or exc}") from None
+    except OSError as exc:  # a full disk: the image cut part-way is removed, not left
+        raise output_failed("--latency-plot", args.latency_plot, exc.strerror or str(exc)) from None
 
 
 def _why_no_frames(
