@@ -173,3 +173,22 @@ def test_a_plot_past_the_limit_leaves_no_partial_image(
     assert not out.exists()
     assert done.stderr.splitlines() == [
         f"error: {option} {out}: File too large; the partial file removed"]
+
+
+def test_parquet_past_the_limit_keeps_the_older_tables(drive_log: Path, tmp_path: Path) -> None:
+    """``--parquet DIR`` is a set of tables, as vectors': on a full disk none of them is cut
+    at the limit or lost (an older set there stays byte for byte), the error in one line."""
+    out = tmp_path / "tables"
+    argv = [sys.executable, "-m", "odocan", "analyze", str(drive_log), "--robot", "kobuki",
+            "--parquet", str(out)]
+    subprocess.run(argv, capture_output=True, timeout=300, check=True)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    done = subprocess.run(
+        argv, capture_output=True, text=True, timeout=300, check=False, preexec_fn=_limited)
+    assert "PASS" in done.stdout
+    assert done.returncode == 2, done.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"error: --parquet {out}: ")
+    assert lines[0].endswith("; the partial files removed")
