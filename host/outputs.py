@@ -114,8 +114,9 @@ def _probe(path: Path, flags: int, where: str) -> None:
 
 def write_text(path: Path, text: str, option: str) -> None:
     """Write ``text`` to ``path``; an I/O error becomes one ``OutputError`` naming the path.
-    A write that fails once the file is open (a full disk) removes what it left there: a
-    truncated JSON report or JUnit file is never left for a CI step to read (``output_failed``).
+    A write that fails once the file is open (a full disk, or a signal: re-raised) removes what
+    it left there: a truncated JSON report or JUnit file is never left for a CI step to read
+    (``output_failed``).
     ``-``: standard output (``outputs_on_stdout``)."""
     if is_stdout(path):
         out = _stdout or sys.stdout
@@ -131,6 +132,9 @@ def write_text(path: Path, text: str, option: str) -> None:
             handle.write(text)
     except OSError as exc:
         raise output_failed(option, path, exc.strerror or str(exc)) from None
+    except KeyboardInterrupt:  # Ctrl-C, SIGTERM mid-write: no half report left for a CI step
+        output_failed(option, path, "interrupted")
+        raise
 
 
 def output_failed(option: str, path: Path, reason: str) -> OutputError:

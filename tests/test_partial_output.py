@@ -192,3 +192,40 @@ def test_parquet_past_the_limit_keeps_the_older_tables(drive_log: Path, tmp_path
     assert len(lines) == 1, lines
     assert lines[0].startswith(f"error: --parquet {out}: ")
     assert lines[0].endswith("; the partial files removed")
+
+
+def test_a_signal_mid_write_leaves_no_partial_report(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """SIGTERM (``Terminated``) while the report is being written: before, the exception went
+    through and left the report cut where it landed; now the part is removed, the interruption
+    goes on to the CLI (its one line, exit 143)."""
+    import io
+
+    from odocan.host.outputs import write_text
+    from odocan.sim.exceptions import Terminated
+
+    report = tmp_path / "r.json"
+    opened = Path.open
+
+    class _Signalled(io.StringIO):
+        def __init__(self, real: io.TextIOBase) -> None:
+            super().__init__()
+            self.real = real
+
+        def write(self, text: str) -> int:
+            self.real.write(text[:100])
+            self.real.flush()
+            raise Terminated
+
+        def close(self) -> None:
+            self.real.close()
+
+    def signalled(self: Path, *args: object, **kwargs: object) -> _Signalled:
+        return _Signalled(opened(self, "w", encoding="utf-8"))
+
+    monkeypatch.setattr(Path, "open", signalled)
+    with pytest.raises(Terminated):
+        write_text(report, "{" + " " * 1000 + "}\n", "--report")
+    monkeypatch.undo()
+    assert not report.exists()
