@@ -119,6 +119,33 @@ def test_a_swallowed_sigterm_before_the_log_stops_the_run_unwritten(
                    f"first tick; --log {log}: not written)"]
 
 
+def test_sigterm_while_the_log_is_finished(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """The other end: a signal as the rig closes (its log being finished) after its last tick.
+    Before, raised there, it left the log without its footer; now the log is finished, with
+    every frame, then the signal is heard as one during the analysis: 143 and one line."""
+    log = tmp_path / "drive.asc"
+    monkeypatch.setattr(LockstepRig, "close", _signal_first(LockstepRig.close))
+    code = main(["run", "--duration", "1", "--log", str(log)])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 143
+    assert log.read_text().rstrip().endswith("End TriggerBlock")
+    assert len([m for m in can.LogReader(log) if m.arbitration_id == 0x100]) == 100
+    assert err == ["interrupted (SIGTERM): odocan run stopped before it finished (after its last "
+                   "tick, before the analysis)"]
+
+
+def _signal_first(call: Callable[..., Any]) -> Callable[..., Any]:
+    """``call`` with a SIGTERM raised just before it."""
+
+    def signalled(*args: Any, **kwargs: Any) -> Any:
+        signal.raise_signal(signal.SIGTERM)
+        return call(*args, **kwargs)
+
+    return signalled
+
+
 def _start(log: Path) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, "-m", "odocan", "run", "--duration", "3600", "--log", str(log)],

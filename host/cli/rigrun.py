@@ -8,6 +8,8 @@ numpy.random's import was swallowed there: the run went on to its end, exit 0. A
 comes before the first tick ends the command with no tick run: the log finished and holding no
 frame (a ``.blf`` header counting 0 objects, an ``.asc`` with its footer; a signal heard before
 the log is opened writes none), then ``not_started`` for the CLI's one line and its 143 (130).
+One heard as the last tick ran or the log was finished is heard once the log is whole, as one
+during the analysis would be (``stop_before_analysis``).
 """
 
 from __future__ import annotations
@@ -63,6 +65,19 @@ def _open_log(path: Path) -> Recording:
         raise OutputError(f"--log {path}: {exc.strerror or exc}") from None
 
 
+def stop_before_analysis(
+    stopped: Stopped | None, stop: StopRequest, log: Path | None, listeners: list[can.Listener]
+) -> KeyboardInterrupt | None:
+    """What to raise, the rig closed, for a signal that leaves nothing to analyse: one before
+    the first tick (``not_started``), or one heard as the last tick ran or the log was
+    finished (as it would be in the analysis); None: analyse (``stopped``: ``run_rig``'s)."""
+    if stopped is not None and stopped.done == 0:
+        return not_started(stopped.signum, log, listeners)
+    if stopped is None and stop.stop_requested:
+        return interruption(stop.signum, "after its last tick, before the analysis")
+    return None
+
+
 def not_started(
     signum: int, log: Path | None, listeners: list[can.Listener]
 ) -> KeyboardInterrupt:
@@ -72,6 +87,12 @@ def not_started(
     if log is not None:
         opened = any(isinstance(li, Recording) for li in listeners)
         where += f"; --log {log}: " + ("finished, no frame" if opened else "not written")
+    return interruption(signum, where)
+
+
+def interruption(signum: int | None, where: str) -> KeyboardInterrupt:
+    """What a signal heard as a request raises once the rig is closed: ``Terminated`` for
+    SIGTERM, else ``KeyboardInterrupt``; ``where`` ends the CLI's one line, in brackets."""
     return Terminated(where) if signum == signal.SIGTERM else KeyboardInterrupt(where)
 
 

@@ -42,7 +42,7 @@ from odocan.host.cli.options import (
     check_log_path,
     float_in,
 )
-from odocan.host.cli.rigrun import not_started, rare_collections, run_rig, start_rig
+from odocan.host.cli.rigrun import rare_collections, run_rig, start_rig, stop_before_analysis
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus, parse_faults
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.listeners import Isolated
@@ -272,8 +272,8 @@ def _run_and_analyze(
     finally:
         if mirror is not None:
             mirror.shutdown()
-    if stopped is not None and stopped.done == 0:
-        raise log_error or not_started(stopped.signum, args.log, listeners)
+    if (unanalysed := stop_before_analysis(stopped, stop, args.log, listeners)) is not None:
+        raise log_error or unanalysed
     frames = collector.arrays()
     cause = _why_no_frames(config.faults, config.bitrate, still_queued)
     require_frames(frames, "the run", cause)
