@@ -29,6 +29,7 @@ import pytest
 
 from odocan.host.cli.app import main
 from odocan.sim.rig import LockstepRig
+from tests.test_signals import _terminate
 
 ROOT = Path(__file__).resolve().parents[1]
 OLD_LOG = "an older log, kept\n"
@@ -170,18 +171,12 @@ def test_sigterm_at_early_moments_of_a_real_run(tmp_path: Path, after_s: float |
                 pytest.fail(f"odocan ended early ({proc.returncode}): {proc.communicate()}")
             time.sleep(0.0002)
         time.sleep(after_s)
-    proc.send_signal(signal.SIGTERM)
-    try:
-        out, err = proc.communicate(timeout=120)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, err = proc.communicate()
-        pytest.fail(f"no exit 120 s after SIGTERM: {err}")
+    code, out, err = _terminate(proc)
     assert "Traceback" not in err
-    if proc.returncode == -signal.SIGTERM:  # before the interpreter ran odocan's main
+    if code == -signal.SIGTERM:  # before the interpreter ran odocan's main
         assert log.read_text() == OLD_LOG
         return
-    assert proc.returncode == 143, (out, err)
+    assert code == 143, (out, err)
     if log.read_text() == OLD_LOG:
         return
     frames = list(can.LogReader(log))  # every frame written is readable
