@@ -114,8 +114,9 @@ def _probe(path: Path, flags: int, where: str) -> None:
 
 def write_text(path: Path, text: str, option: str) -> None:
     """Write ``text`` to ``path``; an I/O error becomes one ``OutputError`` naming the path.
-    A write that fails once the file is open (a full disk) removes what it left there: a
-    truncated JSON report or JUnit file is never left for a CI step to read (``output_failed``).
+    A write that fails once the file is open (a full disk, or a signal: re-raised) removes what
+    it left there: a truncated JSON report or JUnit file is never left for a CI step to read
+    (``output_failed``).
     ``-``: standard output (``outputs_on_stdout``)."""
     if is_stdout(path):
         out = _stdout or sys.stdout
@@ -131,6 +132,9 @@ def write_text(path: Path, text: str, option: str) -> None:
             handle.write(text)
     except OSError as exc:
         raise output_failed(option, path, exc.strerror or str(exc)) from None
+    except KeyboardInterrupt:  # Ctrl-C, SIGTERM mid-write: no half report left for a CI step
+        output_failed(option, path, "interrupted")
+        raise
 
 
 def output_failed(option: str, path: Path, reason: str) -> OutputError:
@@ -145,6 +149,39 @@ def output_failed(option: str, path: Path, reason: str) -> OutputError:
     except OSError:
         pass  # gone already, or not removable: the line names the path either way
     return OutputError(f"{option} {path}: {reason}")
+
+
+@contextmanager
+def replaced_together(paths: list[Path], option: str, shown: Path) -> Iterator[list[Path]]:
+    """Files written in full or not at all, as one set (``odocan vectors``' JSON and CSVs).
+
+    Yields a temporary path beside each of ``paths`` (hidden, in the same directory) for the
+    block to write; after it, each is renamed onto its path, so an older file there is replaced
+    only once every new one is complete: never half a file, nor a new JSON beside old CSVs. A
+    block that fails removes every temporary file (the older set stays as it was); an OSError
+    becomes one ``OutputError``: ``option shown: reason; the partial files removed``."""
+    temps: list[Path] = []
+    try:
+        for path in paths:
+            temps.append(_new_temp(path))
+        yield temps
+        for temp, path in zip(temps, paths, strict=True):
+            os.replace(temp, path)
+    except BaseException as exc:  # a full disk, or a signal: no temporary file left behind
+        for temp in temps:
+            temp.unlink(missing_ok=True)  # those already renamed are gone
+        if isinstance(exc, OSError):
+            reason = exc.strerror or str(exc)
+            raise OutputError(f"{option} {shown}: {reason}; the partial files removed") from None
+        raise
+
+
+def _new_temp(path: Path) -> Path:
+    """An empty file of its own beside ``path`` (``.NAME.PID.part``; the umask's mode, as the
+    file it stands for would get)."""
+    temp = path.with_name(f".{path.name}.{os.getpid()}.part")
+    os.close(os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666))
+    return temp
 
 
 def check_distinct(

@@ -27,11 +27,13 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from types import FrameType
-from typing import Protocol
+from typing import Any, Protocol
 
+from odocan.sim import interrupts
 from odocan.sim.board import TICK_S
 from odocan.sim.clock import RealTimeClock
 from odocan.sim.contract import database
+from odocan.sim.exceptions import Terminated
 
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -239,23 +241,29 @@ def paced_sim_tick(
 @contextmanager
 def stop_on_signals(loop: Stoppable) -> Iterator[None]:
     """While inside: SIGINT and SIGTERM ask ``loop`` to stop; a second one raises
-    ``KeyboardInterrupt``. The previous handlers are restored on exit. Off the main thread
+    ``KeyboardInterrupt`` (``Terminated`` for SIGTERM). A signal already ``latched`` (one whose
+    exception a library swallowed: ``sim.interrupts``) asks at once. The previous handlers are
+    restored on exit, even when a signal comes between two installs. Off the main thread
     (where Python allows no handler) it does nothing."""
 
     def handler(signum: int, frame: FrameType | None) -> None:
         if loop.stop_requested:
-            raise KeyboardInterrupt
+            raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
         loop.request_stop(signum)
 
     if threading.current_thread() is not threading.main_thread():
         yield  # only the main thread may install handlers: the caller's own stay in force
         return
-    previous = {sig: signal.signal(sig, handler) for sig in _STOP_SIGNALS}
+    previous: dict[int, Any] = {}
     try:
+        for sig in _STOP_SIGNALS:
+            previous[sig] = signal.signal(sig, handler)
+        if (latched := interrupts.latched()) is not None:
+            loop.request_stop(latched)
         yield
     finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
+        for signum, old in previous.items():
+            signal.signal(signum, old)
 
 
 def accepted_ids(node: str) -> frozenset[int]:

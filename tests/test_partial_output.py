@@ -120,3 +120,112 @@ def test_a_symlink_is_never_removed(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     assert str(raised.value) == f"--report {link}: No space left on device"
     assert link.is_symlink()
     assert target.read_text() == "the summary\n"
+
+
+def _vectors(out: Path, *options: str, limited: bool) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "odocan", "vectors", *options, "--out", str(out)],
+        capture_output=True, text=True, timeout=300, check=False,
+        preexec_fn=_limited if limited else None,
+    )
+
+
+def test_vectors_past_the_limit_leave_no_partial_file(tmp_path: Path) -> None:
+    """``odocan vectors --out DIR`` on a full disk left a truncated vectors.json there: now
+    one line naming DIR, exit 2, and not a byte of the set (nor a temporary file)."""
+    out = tmp_path / "vectors"
+    done = _vectors(out, "--duration", "0.1", limited=True)
+    assert done.returncode == 2, done.stderr
+    assert [p.name for p in out.iterdir()] == []
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"error: --out {out}: ")
+    assert lines[0].endswith("; the partial files removed")
+
+
+def test_vectors_past_the_limit_keep_the_older_set(tmp_path: Path) -> None:
+    """A set already in DIR stays whole, byte for byte (not a new JSON beside old CSVs), and
+    still checks against the firmware."""
+    out = tmp_path / "vectors"
+    assert _vectors(out, "--duration", "0.1", limited=False).returncode == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    done = _vectors(out, "--duration", "0.2", "--seed", "7", limited=True)
+    assert done.returncode == 2, done.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert _vectors(out, "--check", limited=False).returncode == 0
+
+
+@pytest.mark.parametrize(("option", "argv"), [
+    ("--latency-plot", ["run", "--firmware", "python", "--duration", "1", "-b", "500000"]),
+    ("--plot", ["umbmark", "--runs", "1", "--side", "0.2"]),
+])
+def test_a_plot_past_the_limit_leaves_no_partial_image(
+    tmp_path: Path, option: str, argv: list[str]
+) -> None:
+    """``run --latency-plot`` and the experiments' ``--plot`` (umbmark, calibrate) said the
+    error but left the image cut at the limit: removed now, as ``--plot`` of run and analyze."""
+    out = tmp_path / "plot.png"
+    done = subprocess.run(
+        [sys.executable, "-m", "odocan", *argv, option, str(out)],
+        capture_output=True, text=True, timeout=300, check=False, preexec_fn=_limited,
+    )
+    assert done.returncode == 2, done.stderr
+    assert not out.exists()
+    assert done.stderr.splitlines() == [
+        f"error: {option} {out}: File too large; the partial file removed"]
+
+
+def test_parquet_past_the_limit_keeps_the_older_tables(drive_log: Path, tmp_path: Path) -> None:
+    """``--parquet DIR`` is a set of tables, as vectors': on a full disk none of them is cut
+    at the limit or lost (an older set there stays byte for byte), the error in one line."""
+    out = tmp_path / "tables"
+    argv = [sys.executable, "-m", "odocan", "analyze", str(drive_log), "--robot", "kobuki",
+            "--parquet", str(out)]
+    subprocess.run(argv, capture_output=True, timeout=300, check=True)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    done = subprocess.run(
+        argv, capture_output=True, text=True, timeout=300, check=False, preexec_fn=_limited)
+    assert "PASS" in done.stdout
+    assert done.returncode == 2, done.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"error: --parquet {out}: ")
+    assert lines[0].endswith("; the partial files removed")
+
+
+def test_a_signal_mid_write_leaves_no_partial_report(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """SIGTERM (``Terminated``) while the report is being written: before, the exception went
+    through and left the report cut where it landed; now the part is removed, the interruption
+    goes on to the CLI (its one line, exit 143)."""
+    import io
+
+    from odocan.host.outputs import write_text
+    from odocan.sim.exceptions import Terminated
+
+    report = tmp_path / "r.json"
+    opened = Path.open
+
+    class _Signalled(io.StringIO):
+        def __init__(self, real: io.TextIOBase) -> None:
+            super().__init__()
+            self.real = real
+
+        def write(self, text: str) -> int:
+            self.real.write(text[:100])
+            self.real.flush()
+            raise Terminated
+
+        def close(self) -> None:
+            self.real.close()
+
+    def signalled(self: Path, *args: object, **kwargs: object) -> _Signalled:
+        return _Signalled(opened(self, "w", encoding="utf-8"))
+
+    monkeypatch.setattr(Path, "open", signalled)
+    with pytest.raises(Terminated):
+        write_text(report, "{" + " " * 1000 + "}\n", "--report")
+    monkeypatch.undo()
+    assert not report.exists()

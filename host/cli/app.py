@@ -26,6 +26,7 @@ from typing import NoReturn
 from odocan import __version__
 from odocan.host.cli.dbcfirst import follow_named_dbc
 from odocan.host.outputs import outputs_on_stdout
+from odocan.sim import interrupts
 from odocan.sim.exceptions import OdocanError, Terminated
 
 # Each module has add_subparser(subparsers) that sets func=_do_<cmd>(args) -> int.
@@ -201,7 +202,9 @@ def _interrupted(exc: KeyboardInterrupt, command: str | None) -> int:
     """One line on stderr for a command stopped by a signal before its verdict; 128 + N."""
     signum = signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
     what = f"odocan {command}" if command else "odocan"
-    print(f"interrupted ({signum.name}): {what} stopped before it finished", file=sys.stderr)
+    detail = f" ({exc})" if str(exc) else ""  # e.g. run: before its first tick, its --log
+    print(f"interrupted ({signum.name}): {what} stopped before it finished{detail}",
+          file=sys.stderr)
     return EXIT_SIGNAL_BASE + int(signum)
 
 
@@ -234,6 +237,7 @@ def split_debug(argv: list[str]) -> tuple[list[str], bool]:
 
 
 def _interrupt(signum: int, frame: FrameType | None) -> None:
+    interrupts.latch(signum)  # heard even if some library swallows the exception (interrupts)
     raise Terminated
 
 
@@ -242,6 +246,7 @@ def sigterm_as_interrupt() -> Iterator[None]:
     """While inside, SIGTERM raises ``KeyboardInterrupt`` as Ctrl-C does, so every command that
     stops cleanly on Ctrl-C (summary, report, logs closed) does so on SIGTERM too. Main thread
     only (elsewhere a no-op); commands that install their own handlers override it."""
+    interrupts.clear()
     try:
         previous = signal.signal(signal.SIGTERM, _interrupt)
     except ValueError:  # not the main thread
@@ -251,6 +256,7 @@ def sigterm_as_interrupt() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+        interrupts.clear()
 
 
 def _quiet_broken_pipe_in_rich() -> None:

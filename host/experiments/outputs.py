@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from odocan.host.outputs import OutputError, check_writable
+from odocan.host.outputs import check_writable, output_failed
 from odocan.host.report import provenance
 from odocan.host.report.ci import add_junit_argument, check_junit_path
 from odocan.sim.exceptions import ConfigurationError
@@ -72,5 +72,5 @@ def write_scatter(
 
     try:
         plot_umbmark(panels, path, heading=heading)
-    except OSError as exc:
-        raise OutputError(f"--plot {path}: {exc.strerror or exc}") from None
+    except OSError as exc:  # a full disk: the image cut part-way is removed, not left
+        raise output_failed("--plot", path, exc.strerror or str(exc)) from None

@@ -25,6 +25,7 @@ from odocan.host.io.export import column_name
 from odocan.host.io.logs import FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, FrameArrays
 from odocan.host.jsonutil import report_json
 from odocan.host.judge.analysis import Analysis
+from odocan.host.outputs import replaced_together
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim import contract
@@ -142,18 +143,18 @@ def write_parquet(
     analysis: Analysis,
     db: cantools.database.can.Database | None = None,
 ) -> list[Path]:
-    """Write the tables of the module docstring into ``directory`` (made if missing); returns
-    the files written."""
+    """Write the tables of the module docstring into ``directory`` (made if missing), all or
+    none (``replaced_together``: a full disk leaves no partial file, an older set as it was);
+    returns the files written."""
     directory.mkdir(exist_ok=True)
     series, truth, events = series_tables(analysis)
     report = report_json(analysis.report).encode()
     series = series.replace_schema_metadata({REPORT_KEY: report})
     tables = {**message_tables(frames, db), "frames": frames_table(frames),
               "series": series, "truth": truth, "events": events}
-    written = []
-    for name, table in tables.items():
-        path = directory / f"{name}.parquet"
-        pq.write_table(table, path)
-        written.append(path)
+    written = [directory / f"{name}.parquet" for name in tables]
+    with replaced_together(written, "--parquet", directory) as temps:
+        for table, temp in zip(tables.values(), temps, strict=True):
+            pq.write_table(table, temp)
     return written
 

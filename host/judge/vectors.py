@@ -20,6 +20,7 @@ from typing import Any
 from odocan.firmware.config import RobotParams, derive_constants, validate
 from odocan.firmware.errors import ErrorMask
 from odocan.firmware.odometry import Odometry
+from odocan.host.outputs import replaced_together
 from odocan.host.protocol.busfacts import ENC_CYCLE_S, ENC_PERIODS_PER_S
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 from odocan.sim.rig import firmware_params
@@ -147,18 +148,20 @@ def build(robot: RobotProfile, integrator: str, cases: Iterable[Case]) -> dict[s
     }
 
 
-def write(vector_set: dict[str, Any], out_dir: Path) -> list[Path]:
-    """``vectors.json`` and one ``<case>.csv`` per case into ``out_dir``; returns the paths."""
+def write(vector_set: dict[str, Any], out_dir: Path, option: str = "--out") -> list[Path]:
+    """``vectors.json`` and one ``<case>.csv`` per case into ``out_dir`` (made if missing), all
+    or none (``replaced_together``: a full disk leaves no partial file and an older set as it
+    was; ``OutputError`` naming ``option`` and the directory); returns the paths."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = [out_dir / "vectors.json"]
-    paths[0].write_text(json.dumps(vector_set, indent=1) + "\n", encoding="utf-8")
-    for case in vector_set["cases"]:
-        path = out_dir / f"{case['name']}.csv"
-        with path.open("w", newline="", encoding="utf-8") as f:
-            writer = csv.DictWriter(f, fieldnames=CSV_COLUMNS, lineterminator="\n")
-            writer.writeheader()
-            writer.writerows(case["rows"])
-        paths.append(path)
+    cases = vector_set["cases"]
+    paths = [out_dir / "vectors.json", *(out_dir / f"{case['name']}.csv" for case in cases)]
+    with replaced_together(paths, option, out_dir) as temps:
+        temps[0].write_text(json.dumps(vector_set, indent=1) + "\n", encoding="utf-8")
+        for case, temp in zip(cases, temps[1:], strict=True):
+            with temp.open("w", newline="", encoding="utf-8") as f:
+                writer = csv.DictWriter(f, fieldnames=CSV_COLUMNS, lineterminator="\n")
+                writer.writeheader()
+                writer.writerows(case["rows"])
     return paths
 
 

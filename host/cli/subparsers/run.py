@@ -25,11 +25,7 @@ to that bus, paced to the wall clock so the copy keeps the DBC's cycle times (e.
 from __future__ import annotations
 
 import argparse
-import gc
-import sys
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -46,12 +42,13 @@ from odocan.host.cli.options import (
     check_log_path,
     float_in,
 )
+from odocan.host.cli.rigrun import rare_collections, run_rig, start_rig, stop_before_analysis
 from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus, parse_faults
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
-from odocan.host.io.listeners import Isolated, Recording
+from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.analysis import Analysis, analyze
-from odocan.host.outputs import OutputError, check_distinct, check_writable
+from odocan.host.outputs import OutputError, check_distinct, check_writable, output_failed
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
@@ -68,7 +65,7 @@ from odocan.host.report.summary import (
     check_output_paths,
     finish,
 )
-from odocan.host.stopped import Stopped, signum_of
+from odocan.host.stopped import Stopped
 from odocan.sim import errors, robot
 from odocan.sim.board import TICK_S
 from odocan.sim.cboard import board_maker
@@ -81,7 +78,6 @@ from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import TRANSPORTS, LockstepRig, RigConfig, firmware_params
 from odocan.sim.scenarios import SCENARIOS
 
-PROGRESS_EVERY_TICKS = 100  # one simulated second
 TRUTH_TRACE_MAX = 100_000  # poses kept for the plot's truth (17 simulated minutes at 100 Hz)
 
 
@@ -198,7 +194,7 @@ def _do_run(args: argparse.Namespace) -> int:
         title += f", {choice.words}"
     with foxglove_session(args, config.robot, config.integrator) as live:
         extra: list[can.Listener] = [] if live is None else [Isolated(live)]
-        with _rare_collections():
+        with rare_collections():
             analysis, log_error, stopped = _run_and_analyze(config, args, extra)
         analysis.report["inputs"] = run_inputs(config, args.errors, faults)
         analysis.report["inputs"]["firmware"] = choice.as_dict()
@@ -251,32 +247,33 @@ def _run_and_analyze(
     wants_mirror = args.interface is not None or args.channel is not None
     mirror = open_bus(args, with_faults=False) if wants_mirror else None
     log_error: OutputError | None = None
+    stop = StopRequest()
     try:
-        if args.log is not None:
-            listeners.append(_open_log(args.log))
-        with read_as(default_plan()):  # the judge's plan of the DBC: no cantools to start
-            rig = LockstepRig(config, listeners=listeners)
-        total_ticks = round(rig.default_duration_s / TICK_S)
-        trace = TruthTrace(rig, total_ticks) if args.plot is not None else None
-        if mirror is not None:
-            rig.listeners.append(PacedRedirect(mirror))
-        wire = getattr(rig.host_bus, "timing", None)  # bit-timed: the wire's own records
-        if wire is not None:  # -b only: busstats (cantools, the schedulability) costs 0.1 s
-            from odocan.host.judge import busstats
-        try:
-            start = time.perf_counter()
-            stopped = _run(rig, rig.default_duration_s,
-                           None if trace is None else trace.record)
-            wall_s = time.perf_counter() - start
-            still_queued = None if wire is None else busstats.pending_by_id(wire)
-        finally:
+        with stop_on_signals(stop):  # from the log's opening to its end: a signal only asks
+            rig = start_rig(config, listeners, args.log, stop)
+            total_ticks = round(rig.default_duration_s / TICK_S)
+            trace = TruthTrace(rig, total_ticks) if args.plot is not None else None
+            if mirror is not None:
+                rig.listeners.append(PacedRedirect(mirror))
+            wire = getattr(rig.host_bus, "timing", None)  # bit-timed: the wire's own records
+            if wire is not None:  # -b only: busstats (cantools, the schedulability) costs 0.1 s
+                from odocan.host.judge import busstats
             try:
-                rig.close()
-            except OSError as exc:
-                log_error = OutputError(f"--log {args.log}: {exc.strerror or exc}")
+                start = time.perf_counter()
+                stopped = run_rig(rig, stop, rig.default_duration_s,
+                                  None if trace is None else trace.record)
+                wall_s = time.perf_counter() - start
+                still_queued = None if wire is None else busstats.pending_by_id(wire)
+            finally:
+                try:
+                    rig.close()
+                except OSError as exc:
+                    log_error = OutputError(f"--log {args.log}: {exc.strerror or exc}")
     finally:
         if mirror is not None:
             mirror.shutdown()
+    if (unanalysed := stop_before_analysis(stopped, stop, args.log, listeners)) is not None:
+        raise log_error or unanalysed
     frames = collector.arrays()
     cause = _why_no_frames(config.faults, config.bitrate, still_queued)
     require_frames(frames, "the run", cause)
@@ -304,68 +301,6 @@ def _run_and_analyze(
     return analysis, log_error, stopped
 
 
-def _run(
-    rig: LockstepRig, duration_s: float, on_tick: Callable[[], None] | None = None
-) -> Stopped | None:
-    """Step the rig for ``duration_s`` simulated seconds; SIGINT/SIGTERM stop it between two
-    ticks (a second signal, or any KeyboardInterrupt, at once), a progress line on a terminal.
-    Returns how far it got when a signal stopped it before the end, else None."""
-    total = round(duration_s / TICK_S)
-    stop = StopRequest()
-    done = 0
-    interrupt: KeyboardInterrupt | None = None
-    with stop_on_signals(stop), progress(f"simulating {duration_s:g} s", total) as bar:
-        try:
-            while done < total:  # a check after the first tick, then every simulated second
-                ticks = min(PROGRESS_EVERY_TICKS if done else 1, total - done)
-                _run_ticks(rig, ticks, on_tick)
-                done += ticks
-                if (done - 1) % PROGRESS_EVERY_TICKS == 0:
-                    if stop.stop_requested:
-                        break
-                    bar.update(done - 1)
-        except KeyboardInterrupt as exc:
-            interrupt = exc
-    if rig.ticks >= total:
-        return None
-    done_s = rig.ticks * TICK_S
-    print(f"interrupted after {done_s:g} s simulated", file=sys.stderr)
-    return Stopped(stop.signum or signum_of(interrupt), round(done_s, 6), duration_s)
-
-
-# The cyclic collector's young-generation threshold during the run and its analysis (CPython's
-# default: 700). A lockstep run allocates few cycles, yet at 700 the collector ran ~1500 times in
-# a 3600 s run and its analysis (0.4 s of CPU); at 20 000 some 50 times. The bytes are the same:
-# no cycle holds a frame.
-_RUN_GC_THRESHOLD = 20_000
-
-
-@contextmanager
-def _rare_collections() -> Iterator[None]:
-    """The run and its analysis with the objects of the start-up frozen (``gc.freeze``: never
-    scanned again) and the young generation collected every ``_RUN_GC_THRESHOLD`` net
-    allocations; both undone after them."""
-    threshold = gc.get_threshold()
-    gc.freeze()
-    gc.set_threshold(_RUN_GC_THRESHOLD, *threshold[1:])
-    try:
-        yield
-    finally:
-        gc.set_threshold(*threshold)
-        gc.unfreeze()
-
-
-def _run_ticks(rig: LockstepRig, ticks: int, on_tick: Callable[[], None] | None) -> None:
-    """``ticks`` ticks: ``on_tick()`` after each one, or, with none, in one ``TickLoop.run``
-    (which hands passive listeners, the collector, the host's frames once, not every tick)."""
-    if on_tick is None:
-        rig.loop.run(ticks)
-        return
-    for _ in range(ticks):
-        rig.step()
-        on_tick()
-
-
 def _after_log_error(log_error: OutputError | None, error: OutputError) -> OutputError:
     """``error`` (a report, plot or JUnit file not written), after the recording's own failure
     when it failed first: the one line names both, so a stopped ``--log`` is never unsaid."""
@@ -380,18 +315,8 @@ def _write_latency_plot(args: argparse.Namespace, report: dict[str, Any]) -> Non
 
     try:
         plot_latency(report, args.latency_plot)
-    except OSError as exc:
-        raise OutputError(f"--latency-plot {args.latency_plot}: {exc.strerror or exc}") from None
-
-
-def _open_log(path: Path) -> can.Listener:
-    """python-can's writer for ``path`` (by extension); an error names the path. A write that
-    fails mid-run (a full disk) stops the recording, not the run: the summary is printed, then
-    the error with the path (``rig.close()`` raises it, ``_run_and_analyze`` returns it)."""
-    try:
-        return Recording(can.Logger(path))
-    except OSError as exc:
-        raise OutputError(f"--log {path}: {exc.strerror or exc}") from None
+    except OSError as exc:  # a full disk: the image cut part-way is removed, not left
+        raise output_failed("--latency-plot", args.latency_plot, exc.strerror or str(exc)) from None
 
 
 def _why_no_frames(

@@ -1,0 +1,29 @@
+"""Stop signals remembered after their exception was raised (standard library only).
+
+The CLI's SIGTERM handler raises ``Terminated`` wherever the main thread is; third-party code
+can lose that exception. One that lands in a C extension's module initialisation (numpy.random's
+``_generator``, imported while ``odocan run`` builds its rig) is swallowed there:
+``odocan run --duration 3600 --log X`` then went on to its end and exited 0, the SIGTERM
+unheard. So the handler also ``latch``es its signal here, and ``sim.realtime.stop_on_signals``
+starts with a stop requested when one is latched: the run that follows stops at its first safe
+point, even when the exception that should have stopped it never arrived.
+"""
+
+from __future__ import annotations
+
+_latched: list[int] = []  # the signal numbers latched since the last ``clear``, first first
+
+
+def latch(signum: int) -> None:
+    """Remember that ``signum`` asked the command to stop (safe in a signal handler)."""
+    _latched.append(signum)
+
+
+def latched() -> int | None:
+    """The first signal latched since the last ``clear``, or None."""
+    return _latched[0] if _latched else None
+
+
+def clear() -> None:
+    """Forget every latched signal (a command's end: the next one starts unasked)."""
+    _latched.clear()
