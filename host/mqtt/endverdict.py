@@ -7,7 +7,7 @@ pose (issue #11: the rig never shows OK while the pose it reports is wrong). Now
 (``host.judge.watchverdict``) in one::
 
     FAIL: the on-board pose was wrong in 1 episode (...); judged as robot 'kobuki' (--robot)
-    PASS: the on-board pose right in 1 198 samples, ODOM_TWIST DISTANCE in 59, its speeds in 598
+    PASS: the on-board pose right in 598 samples, ODOM_TWIST DISTANCE in 59 and its speeds in 598
     UNJUDGED: no on-board pose compared with the reference: nothing judged (--require-firmware
     fails it)
 
@@ -53,9 +53,11 @@ def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
     if why:
         return EndVerdict(f"UNJUDGED: {why} (--require-firmware fails it)"
                           + _mismatch(telemetry), False)
-    return EndVerdict(f"PASS: the on-board pose right in {compared} samples, ODOM_TWIST "
-                      f"DISTANCE in {telemetry.distance.samples}, its speeds in "
-                      f"{telemetry.twist.samples}" + _mismatch(telemetry), False)
+    distance, twist = telemetry.distance.samples, telemetry.twist.samples
+    twists = (f", ODOM_TWIST DISTANCE in {distance} and its speeds in {twist}"
+              if distance or twist else ", no ODOM_TWIST judged")
+    return EndVerdict(f"PASS: the on-board pose right in {compared} samples{twists}"
+                      + _mismatch(telemetry), False)
 
 
 def _mismatch(telemetry: RobotTelemetry) -> str:

@@ -7,9 +7,10 @@ E2E-checked, decoded with the DBC, compared with the float64 reference and publi
 against the DBC before a frame is sent. Without ``--broker`` an embedded amqtt broker is
 started on a free loopback port. Runs until Ctrl-C or SIGTERM, or ``--duration``: a signal
 before that ends it with 130/143, never 0 (it did not bridge for the time it was asked).
-At its end, the watch ended (``RobotTelemetry.end_watch``), the robot's verdict is the last line
-on stderr (``host.mqtt.endverdict``: ``bridge robot001: FAIL: the on-board pose was wrong ...``,
-``PASS: ...`` or ``UNJUDGED: ...``) and the exit code 1 when it FAILs: the pose wrong at any
+At its end, the watch ended (``RobotTelemetry.end_watch``), the robot's verdict is one line on
+stderr (``host.mqtt.endverdict``: ``bridge robot001: FAIL: the on-board pose was wrong ...``,
+``PASS: ...`` or ``UNJUDGED: ...``; a ``STOPPED by ...`` line, when a signal came before
+``--duration``, stays the last) and the exit code is 1 when it FAILs: the pose wrong at any
 time of the watch, DISTANCE or the twist speeds wrong, or (``--require-firmware``) nothing
 judged; else 0 (130/143 stay when a signal ended it before ``--duration``).
 """
@@ -54,7 +55,9 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "bridge",
         help="bridge one robot's CAN bus to MQTT",
         description="Publish a robot's telemetry (pose, float64 reference, truth, error, status, "
-        "rates) to MQTT and send validated commands from MQTT to its bus.",
+        "rates) to MQTT and send validated commands from MQTT to its bus. At its end the "
+        "robot's verdict is one line on stderr: exit 1 when the on-board pose, DISTANCE or "
+        "the twist speeds were wrong at any time, else 0.",
     )
     _add_arguments(parser)
     parser.set_defaults(func=_do_bridge)
@@ -107,13 +110,14 @@ def _do_bridge(args: argparse.Namespace) -> int:
         signum, verdicts = asyncio.run(_bridge(args, name, url, bus, geometry, profile, signer))
     finally:
         bus.shutdown()
-    stopped = early_stop(signum, started_s, args.duration)
-    if stopped is not None:
-        print(f"bridge {name}: {stopped.text()}", file=sys.stderr)
-    for robot_name, verdict in verdicts:  # the watch's verdict, last (issue #11)
+    for robot_name, verdict in verdicts:  # the watch's verdict (issue #11)
         print(f"bridge {robot_name}: {verdict.text}", file=sys.stderr)
-    code = 0 if stopped is None else stopped.exit_code
-    return 1 if code == 0 and any(v.failed for _, v in verdicts) else code
+    failed = any(v.failed for _, v in verdicts)
+    stopped = early_stop(signum, started_s, args.duration)
+    if stopped is None:
+        return 1 if failed else 0
+    print(f"bridge {name}: {stopped.text()}", file=sys.stderr)  # last, as before
+    return stopped.exit_code
 
 
 async def _bridge(
@@ -146,7 +150,7 @@ async def _bridge(
         reader = BusFeed(bus, bridge, loop)
         reader.start()
         if args.duration is not None:
-            loop.call_later(args.duration, stop.set)
+            _stop_after(args.duration, stop)
         banner = f"bridge {name}: {broker}{' (embedded)' if embedded else ''}"
         announced = asyncio.create_task(_announce_when_connected(bridge, banner))
         try:
@@ -161,6 +165,11 @@ async def _bridge(
                                               require_firmware=args.require_firmware))
                 for r in bridge.robots]
     return (signals[0] if signals else None), verdicts
+
+
+def _stop_after(duration_s: float, stop: asyncio.Event) -> None:
+    """``--duration``: ``stop`` set ``duration_s`` from now (on the running loop)."""
+    asyncio.get_running_loop().call_later(duration_s, stop.set)
 
 
 async def _announce_when_connected(bridge: Bridge, banner: str) -> None:
