@@ -27,8 +27,11 @@ from odocan.host.cli.subparsers import bridge as bridge_cmd
 from odocan.host.mqtt.busfeed import BusFeed
 from odocan.sim.robot import to_toml
 from tests.test_cli_run import run_cli
+from tests.test_distance import KOBUKI as DISTANCE_KOBUKI
+from tests.test_distance import _synth, checker_errors_mm, checker_passes, off_by, short_drive
 from tests.test_pose_wrongs import JUMP_AT, KOBUKI, _drive
 from tests.test_stall_bound import _messages
+from tests.test_watch_end import _profile_toml
 
 WAIT_S = 60.0  # the bridge takes the drive's frames in (bounds a hung test, asserts nothing)
 
@@ -126,6 +129,26 @@ def test_a_signal_before_the_duration_keeps_130_and_still_says_the_verdict(
     assert code == 130, err
     assert lines[-2].startswith("bridge robot001: FAIL: the on-board pose was wrong in 1 "), err
     assert lines[-1].startswith("bridge robot001: STOPPED by SIGINT at "), err  # last, as before
+
+
+def test_a_distance_wrong_in_the_last_twists_fails_the_bridge(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """DISTANCE 2 mm off in the drive's last 30 frames (no ODOM_STATUS page after them: judged
+    only at the watch's end, ``watchend``): the independent checker finds it wrong, and the
+    bridge's verdict, taken after its watch ended, says so and exits 1 (``test_watch_end``'s
+    drive, which the monitor fails the same way)."""
+    drive = short_drive()
+    synth = _synth(DISTANCE_KOBUKI, drive, off_by(2, len(drive[0]) - 30))
+    assert not checker_passes(checker_errors_mm(synth.lines(), DISTANCE_KOBUKI))
+    robot = tmp_path / "kobuki4.toml"  # the synthesized drive's speed bound (test_watch_end)
+    robot.write_text(_profile_toml(DISTANCE_KOBUKI))
+    _bridge_hears(monkeypatch, _messages(synth.write(tmp_path / "late.log")), _duration_reached)
+    code, _, err = run_cli(capsys, "bridge", "-i", "virtual", "--robot", str(robot),
+                           "--duration", "600")
+    assert code == 1, err
+    assert err.splitlines()[-1].startswith(
+        "bridge robot001: FAIL: ODOM_TWIST DISTANCE off the reference's path length by "), err
 
 
 @pytest.mark.parametrize("require", [False, True])
