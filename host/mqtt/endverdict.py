@@ -1,10 +1,10 @@
-"""One bridged robot's verdict when its watch ends (``odocan bridge``'s last lines, its exit code).
+"""One bridged robot's verdict when its watch ends (``odocan bridge``'s verdict line, exit code).
 
 The retained ``status`` carried the verdicts (``pose_wrongs``, ``distance``, ``twist``) and the
 bridge still exited 0: a CI job running a sim, a firmware and a bridge could not fail on a wrong
 pose (issue #11: the rig never shows OK while the pose it reports is wrong). Now, after
-``RobotTelemetry.end_watch``, each robot gets one line, the monitor's verdict
-(``host.judge.watchverdict``) in one::
+``RobotTelemetry.end_watch``, each robot gets one line, the monitor's FAIL reasons
+(``host.judge.watchverdict``) joined by "; "::
 
     FAIL: the on-board pose was wrong in 1 episode (...); judged as robot 'kobuki' (--robot)
     PASS: the on-board pose right in 598 samples, ODOM_TWIST DISTANCE in 59 and its speeds in 598
