@@ -5,8 +5,14 @@ this process lost of it is ``status``'s ``receive`` and said when the bridge sto
 E2E-checked, decoded with the DBC, compared with the float64 reference and published under
 ``odocan/<name>/`` (see ``host.mqtt.topics``); ``odocan/<name>/cmd/*`` commands are validated
 against the DBC before a frame is sent. Without ``--broker`` an embedded amqtt broker is
-started on a free loopback port. Runs until Ctrl-C or SIGTERM (exit 0), or ``--duration``: a
-signal before that ends it with 130/143, never 0 (it did not bridge for the time it was asked).
+started on a free loopback port. Runs until Ctrl-C or SIGTERM, or ``--duration``: a signal
+before that ends it with 130/143, never 0 (it did not bridge for the time it was asked).
+At its end, the watch ended (``RobotTelemetry.end_watch``), the robot's verdict is one line on
+stderr (``host.mqtt.endverdict``: ``bridge robot001: FAIL: the on-board pose was wrong ...``,
+``PASS: ...`` or ``UNJUDGED: ...``; a ``STOPPED by ...`` line, when a signal came before
+``--duration``, stays the last) and the exit code is 1 when it FAILs: the pose wrong at any
+time of the watch, DISTANCE or the twist speeds wrong, or (``--require-firmware``) nothing
+judged; else 0 (130/143 stay when a signal ended it before ``--duration``).
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.busfeed import BusFeed
+from odocan.host.mqtt.endverdict import EndVerdict, end_verdict
 from odocan.host.mqtt.options import (
     add_mqtt_arguments,
     bridge_options,
@@ -48,7 +55,9 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "bridge",
         help="bridge one robot's CAN bus to MQTT",
         description="Publish a robot's telemetry (pose, float64 reference, truth, error, status, "
-        "rates) to MQTT and send validated commands from MQTT to its bus.",
+        "rates) to MQTT and send validated commands from MQTT to its bus. At its end the "
+        "robot's verdict is one line on stderr: exit 1 when the on-board pose, DISTANCE or "
+        "the twist speeds were wrong at any time, else 0.",
     )
     _add_arguments(parser)
     parser.set_defaults(func=_do_bridge)
@@ -66,6 +75,13 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the firmware's integrator (for the reference; default: exact)",
     )
     add_duration_argument(parser)
+    parser.add_argument(
+        "--require-firmware",
+        action="store_true",
+        help="exit 1 when the bridge heard no firmware (no cyclic ODOM_MCU message) or compared "
+        "no on-board pose with the reference: a CI run that judged nothing fails (default: off; "
+        "UNJUDGED exits 0)",
+    )
     parser.add_argument(
         "--secoc-key",
         type=Path,
@@ -91,13 +107,16 @@ def _do_bridge(args: argparse.Namespace) -> int:
     bus = open_bus(args)
     started_s = time.monotonic()
     try:
-        signum = asyncio.run(_bridge(args, name, url, bus, geometry, profile, signer))
+        signum, verdicts = asyncio.run(_bridge(args, name, url, bus, geometry, profile, signer))
     finally:
         bus.shutdown()
+    for robot_name, verdict in verdicts:  # the watch's verdict (issue #11)
+        print(f"bridge {robot_name}: {verdict.text}", file=sys.stderr)
+    failed = any(v.failed for _, v in verdicts)
     stopped = early_stop(signum, started_s, args.duration)
     if stopped is None:
-        return 0
-    print(f"bridge {name}: {stopped.text()}", file=sys.stderr)
+        return 1 if failed else 0
+    print(f"bridge {name}: {stopped.text()}", file=sys.stderr)  # last, as before
     return stopped.exit_code
 
 
@@ -109,8 +128,9 @@ async def _bridge(
     geometry: Geometry,
     profile: robot.RobotProfile,
     signer: SecocSigner | None = None,
-) -> int | None:
-    """Bridge until ``--duration`` or Ctrl-C/SIGTERM; the signal that stopped it, if one did."""
+) -> tuple[int | None, list[tuple[str, EndVerdict]]]:
+    """Bridge until ``--duration`` or Ctrl-C/SIGTERM; the signal that stopped it, if one did,
+    and each robot's verdict, its watch ended (``Bridge.run``'s end)."""
     signals: list[int] = []
 
     def on_signal(signum: int, stop: asyncio.Event) -> None:
@@ -130,7 +150,7 @@ async def _bridge(
         reader = BusFeed(bus, bridge, loop)
         reader.start()
         if args.duration is not None:
-            loop.call_later(args.duration, stop.set)
+            _stop_after(args.duration, stop)
         banner = f"bridge {name}: {broker}{' (embedded)' if embedded else ''}"
         announced = asyncio.create_task(_announce_when_connected(bridge, banner))
         try:
@@ -141,7 +161,15 @@ async def _bridge(
         print(f"bridge {name}: {bridge.summary()}", file=sys.stderr)
         if lost := lost_here_text(reader.reader.stats()):
             print(f"bridge {name}: lost here: {lost}", file=sys.stderr)
-    return signals[0] if signals else None
+    verdicts = [(r.endpoint.name, end_verdict(r.telemetry, profile_name=r.endpoint.profile_name,
+                                              require_firmware=args.require_firmware))
+                for r in bridge.robots]
+    return (signals[0] if signals else None), verdicts
+
+
+def _stop_after(duration_s: float, stop: asyncio.Event) -> None:
+    """``--duration``: ``stop`` set ``duration_s`` from now (on the running loop)."""
+    asyncio.get_running_loop().call_later(duration_s, stop.set)
 
 
 async def _announce_when_connected(bridge: Bridge, banner: str) -> None:

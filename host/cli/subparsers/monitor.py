@@ -51,9 +51,8 @@ from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.busreader import lost_here_text
 from odocan.host.io.export import FOXGLOVE_PORT
 from odocan.host.judge.monitor import BusMonitor, to_json
-from odocan.host.judge.monitorvalues import node_ages
-from odocan.host.judge.sources import FIRMWARE_NODE
 from odocan.host.judge.watchend import end_watch
+from odocan.host.judge.watchverdict import REQUIRE_FIRMWARE, failures, nothing_judged
 from odocan.host.mqtt.broker import (
     BrokerError,
     BrokerURL,
@@ -184,18 +183,12 @@ def _do_monitor(args: argparse.Namespace) -> int:
 
 def _say_failures(args: argparse.Namespace, model: BusMonitor, profile: robot.RobotProfile) -> bool:
     """Print the watch's FAIL lines (and the PROFILE page's mismatch) on stderr; whether any."""
-    wrongs = model.tracker.wrongs
-    fails: list[str] = []
-    conflict = model.sources.conflict_text()  # two firmwares: a FAIL, no pose judged after
-    if conflict:
-        fails.append(conflict)
-    if wrongs.count:  # the pose was wrong at some time, even if right again since: FAIL
-        fails.append(f"{wrongs.summary()}; judged as robot {profile.name!r} (--robot)"
-                     f"{_robot_hint(args, profile)}")
-    fails += model.distance.verdict()[:1]  # ODOM_TWIST DISTANCE wrong in some life
-    fails += model.twist.verdict()[:1]  # ODOM_TWIST LINEAR_VEL / ANGULAR_VEL wrong once
-    if args.require_firmware:  # a watch that judged nothing is no pass (CI)
-        fails += _nothing_judged(model)
+    judged_as = (f"; judged as robot {profile.name!r} (--robot){_robot_hint(args, profile)}"
+                 if model.tracker.wrongs.count else "")  # (the hint reads the whole --log)
+    fails = failures(model.tracker, model.distance, model.twist, model.sources, judged_as)
+    if args.require_firmware and (why := nothing_judged(  # judged nothing: no pass (CI)
+            model.db, model.messages, model.tracker.vs_reference.samples)):
+        fails.append(f"{why} {REQUIRE_FIRMWARE}")
     for line in fails:
         print(f"monitor: FAIL: {line}", file=sys.stderr)
     if args.interface == "odocan" and not model.frames_total:
@@ -206,17 +199,6 @@ def _say_failures(args: argparse.Namespace, model: BusMonitor, profile: robot.Ro
     if said:
         print(f"monitor: {said}", file=sys.stderr)
     return bool(fails)
-
-
-def _nothing_judged(model: BusMonitor) -> list[str]:
-    """``--require-firmware``'s FAIL: no firmware heard, or no on-board pose judged."""
-    if FIRMWARE_NODE not in node_ages(model.db, model.messages, time.monotonic()):
-        return [f"no firmware heard (no cyclic {FIRMWARE_NODE} message): nothing judged "
-                "(--require-firmware)"]
-    if not model.tracker.vs_reference.samples:
-        return ["no on-board pose compared with the reference: nothing judged "
-                "(--require-firmware)"]
-    return []
 
 
 def _robot_hint(args: argparse.Namespace, profile: robot.RobotProfile) -> str:
