@@ -181,6 +181,8 @@ class LiveDistance:
                   and not may_alias_live(e, t_s, tracker))
         first, self._running = e > self._running, max(self._running, e)
         last_t, last_heard = self._last_twist
+        if last_t != last_t and (talked := tracker.first.talked_before(t_s)) is not None:
+            last_t, last_heard = talked  # the first: after the firmware's ODOM_STATUS (livefirst)
         self._last_twist = (t_s, tracker.enc_seq + 1)
         quiet = (t_s - last_t >= (SILENCE_CYCLES - 0.5) * CYCLE_S
                  and tracker.enc_seq + 1 - last_heard >= SILENCE_CYCLES - 1)

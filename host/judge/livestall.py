@@ -55,6 +55,22 @@ class StallRule:
         """Bus time of the last sample's ODOM_POSE_Y (s), None since the reference's start."""
         return self._last_t_s
 
+    @property
+    def carried(self) -> bool:
+        """A silence carried into the next sample (``carry_silence``)."""
+        return self._carried
+
+    def heard_first(self, t_s: float) -> None:
+        """A life's first sample, left out after a silence (``livefirst``), heard at ``t_s``."""
+        self._last_t_s = t_s
+
+    def owe_from(self, primed: int) -> None:
+        """A stall before the first sample (``livefirst``): a placement owed at the next
+        sample, its allowance from encoder frame ``primed`` (where the firmware could first
+        have primed), as if the last compared."""
+        self._owe()
+        self.last_compared = primed
+
     def carry_silence(self, last_t_s: float | None) -> None:
         """After ``restart``: the reference restarts at the next pose, the silence since the
         sample at ``last_t_s`` carried (module docstring)."""
