@@ -35,6 +35,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import Encoders
 from odocan.host.judge.stalls import first_after_stall
 from odocan.host.judge.stream_first import FirstSilence
+from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import load
@@ -170,7 +171,8 @@ def test_the_stream_refuses_a_life_whose_first_pose_follows_a_silence(
 ) -> None:
     """``stream_first.FirstSilence`` over two chunks: the streamed judge refuses (and the
     whole log is judged) exactly where the whole log's ``stalls.first_after_stall`` leaves the
-    first pose out."""
+    first pose out; the live judges' (``livefirst.FirstStall``, on the tracker's window) names
+    the same frame."""
     enc_s = np.round(np.arange(0.30, 0.50, 0.01), 6)
     silence = FirstSilence()
     status = np.array([] if status_s is None else [status_s])
@@ -183,6 +185,12 @@ def test_the_stream_refuses_a_life_whose_first_pose_follows_a_silence(
     encoders = Encoders(n, n % 16, n, 0 * n, 0 * n, enc_s, 0.01)
     whole = first_after_stall(first_pose_s, encoders, None if status_s is None else status)
     assert (whole is not None) is stalled
+    tracker = PoseTracker(Geometry.of(PMIR), PMIR.counter_bits, "exact")  # live: its window
+    for k, t_s in enumerate(enc_s.tolist()):
+        if status_s is not None and status_s <= t_s and not tracker.first.alive:
+            tracker.on_status(status_s)
+        tracker.on_encoders(k % 16, 0, 0, t_s)
+    assert tracker.first.primed(tracker, first_pose_s) == whole
 
 
 def test_the_live_judges_pass_a_firmware_stalled_before_its_first_pose() -> None:

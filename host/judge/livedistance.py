@@ -15,7 +15,8 @@ judged once the page after its frame is heard (``host.judge.liveskip``).
 
 A sample (ODOM_TWIST) names its encoder frame by the tracker's rule for a pose half
 (``samples.match_encoder`` over its window: the sender's steps, the age bound, the held and
-queued rules, resolved when the sample is heard): the first naming each frame is judged, and
+queued rules, resolved when the sample is heard): the first naming each frame is judged (not
+the first after a silence, a life's first measured from its ODOM_STATUS: ``livefirst``), and
 each resend right after it (``host.judge.resentdistance``; a sample naming none, or a frame
 before the last named, or a frame with a twin, is left out). Its offset interval
 [r - upper, r + lower] must meet every earlier one of the life (``distance`` module

@@ -22,7 +22,10 @@ as compared (``last_compared``) once recorded or held for a later comparison (``
 ``livenewstart``). The rule starts again with the reference (``restart``); ``stalls`` goes on.
 A reference restarted at the next pose after a set-pose whose kept fields a stall left unplaced
 (``livesetpose.unplaced``) carries the silence it was in (``carry_silence``): the first sample
-after it is left out, not adopted (it may name a backlog frame).
+after it is left out, not adopted (it may name a backlog frame). The first sample since the rule
+started, after a silence from the firmware's ODOM_STATUS (a stall before its first pose), is
+``livefirst``'s: left out, its placement owed from the frame the firmware could have primed on
+(``owe_from``).
 """
 
 from __future__ import annotations
