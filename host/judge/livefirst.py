@@ -39,6 +39,7 @@ class FirstStall:
 
     def __init__(self) -> None:
         self.alive: deque[tuple[float, int]] = deque(maxlen=STATUS_KEPT)
+        self.stalled_from: int | None = None  # the frame of the latest stall told (primed)
 
     def heard(self, t_s: float, frames_heard: int) -> None:
         """An accepted ODOM_STATUS at bus time ``t_s``, after ``frames_heard`` encoder frames."""
@@ -78,6 +79,7 @@ def left_out_first(tracker: PoseTracker, pose: FramePose, t_s: float, queued: bo
     if (tracker.raw.odometry is None and lives.power_up_proven and lives.boot is None
             and not tracker.reference_starts and tracker.integrator is not None):
         lives.finish_boot(0, first_life=True)  # from (0, 0, 0) on frame 0, as analyze
+    tracker.first.stalled_from = primed  # (``LiveDistance``: its merged step's allowance)
     if tracker.raw.odometry is not None:
         rule.owe_from(primed)  # placed at the next sample, bounded from that frame
     rule.heard_first(t_s)
