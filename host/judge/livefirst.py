@@ -30,7 +30,8 @@ if TYPE_CHECKING:
     from odocan.host.judge.livepose import FramePose
     from odocan.host.judge.tracking import PoseTracker
 
-STATUS_KEPT = 4  # the latest ODOM_STATUS frames kept: a sample settles within a cycle of its Y
+STATUS_KEPT = 8  # the latest ODOM_STATUS frames kept (up to 3 a tick): a sample settles
+# within a cycle of its Y, so the last one before it is among them
 
 
 class FirstStall:
