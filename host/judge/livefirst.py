@@ -6,7 +6,7 @@ drove on primes on the first frame its receive FIFO kept, steps the next ones it
 the rest and takes the frame it resumes at as one step: its first pose names a frame of its
 backlog, which ENC_COUNTER cannot resolve, and its next ones a position the fine reference left.
 So the first sample whose ODOM_POSE_Y came ``SILENCE_CYCLES`` cycles or more after the
-firmware's last frame (its ODOM_STATUS, ``FirstStall.heard``, or a pose half), with the encoder
+firmware's last frame (its ODOM_STATUS, ``PoseTracker.on_status``, or a pose half), with the encoder
 frames on time meanwhile, is left out; when the reference runs from the firmware's power-up
 (a proven power-up at frame 0: ``Lives.power_up_proven``), the position is placed again at the
 next sample, bounded by the merge allowance from the first frame the firmware could have primed
@@ -39,12 +39,9 @@ class FirstStall:
     rule on a life's first sample (module docstring)."""
 
     def __init__(self) -> None:
+        # its ODOM_STATUS frames: bus time, encoder frames heard before (``on_status`` appends)
         self.alive: deque[tuple[float, int]] = deque(maxlen=STATUS_KEPT)
         self.stalled_from: int | None = None  # the frame of the latest stall told (primed)
-
-    def heard(self, t_s: float, frames_heard: int) -> None:
-        """An accepted ODOM_STATUS at bus time ``t_s``, after ``frames_heard`` encoder frames."""
-        self.alive.append((t_s, frames_heard))
 
     def talked_before(self, t_s: float) -> tuple[float, int] | None:
         """The latest ODOM_STATUS before bus time ``t_s`` (its time, the frames heard before),

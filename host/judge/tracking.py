@@ -184,7 +184,7 @@ class PoseTracker:
 
     def on_status(self, t_s: float) -> None:
         """An accepted ODOM_STATUS at bus time ``t_s``: the firmware alive (``livefirst``)."""
-        self.first.heard(t_s, self.enc_seq + 1)
+        self.first.alive.append((t_s, self.enc_seq + 1))
 
     def take_samples(self) -> list[Sample]:
         """The on-board samples settled since the last call, in the order settled."""
@@ -234,8 +234,8 @@ class PoseTracker:
         hold ends)."""
         if self.laps.holds((pose, y, queued)):  # compared once its lap is numbered
             return None
-        if left_out_first(self, pose, y.t_s, queued):  # a stall before its first (livefirst)
-            return None
+        if self.stall.last_t_s is None and left_out_first(self, pose, y.t_s, queued):
+            return None  # a stall before the first sample since the rule started (livefirst)
         started = self.raw.odometry is not None
         if self.stall.left_out(pose.seq, y.t_s, queued, started):  # a stall's backlog sample
             return None
