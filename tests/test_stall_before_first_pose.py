@@ -35,6 +35,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import Encoders
 from odocan.host.judge.stalls import first_after_stall
 from odocan.host.judge.stream_first import FirstSilence
+from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import load
@@ -42,7 +43,7 @@ from tests.independent_checker import Robot, _Odometry
 
 PMIR = load("pmir")
 EVIDENCE = Path(__file__).parent / "files" / "firmware_sigstop_before_first_pose.blf"
-WHEEL_ENCODERS, ODOM_POSE_X, ODOM_POSE_Y = 0x100, 0x200, 0x201
+WHEEL_ENCODERS, ODOM_POSE_X, ODOM_POSE_Y, ODOM_TWIST = 0x100, 0x200, 0x201, 0x202
 RESUMED_AT = 249  # the encoder frame the firmware's second pose names (its merged step's end)
 
 
@@ -122,9 +123,46 @@ def test_a_wrong_firmware_after_such_a_stall_still_fails(
     _write_biased(wrong, from_pose, bias_lsb)
     result = analyze(read_log(wrong), PMIR)
     assert not result.passed, result.report["onboard_vs_reference"]
-    monitor, bridge, end_s = _live(wrong)
+    monitor, bridge, end_s = _live(wrong)  # the live judges, the stall told or not: FAIL
     assert monitor.health(end_s)["pose_wrongs"]["episodes"] >= 1
-    assert bridge.tracker.vs_reference.max_dpos_m > POSITION_LSB_M
+    for tracker in (monitor.tracker, bridge.tracker):  # (the bridge's status pose_wrongs)
+        assert tracker.wrongs.as_dict()["episodes"] >= 1
+        assert tracker.max_beyond_allowance_m > POSITION_LSB_M
+
+
+@pytest.mark.parametrize(("from_twist", "bias_mm"), [(1, 50), (2, 3), (20, 3)])
+def test_a_wrong_distance_after_such_a_stall_fails_every_judge(
+    tmp_path: Path, from_twist: int, bias_mm: int
+) -> None:
+    """DISTANCE raised by ``bias_mm`` from the ``from_twist``-th ODOM_TWIST on: 50 mm at the
+    resumed one (8.5 mm beyond the merged step's allowance), 3 mm 20 ms or 0.4 s after it.
+    The live DISTANCE judges from the power-up as ``analyze`` does (the first page came before
+    any frame): before, it took the resumed twist's offset as its start and PASSed 50 mm."""
+    wrong = tmp_path / "wrong.blf"
+    _write_twist_biased(wrong, from_twist, bias_mm)
+    whole = analyze(read_log(wrong), PMIR).report["onboard_distance_vs_reference"]
+    assert not whole["passed"]
+    monitor, bridge, _ = _live(wrong)
+    for live in (monitor.distance, bridge.distance):
+        assert not live.as_dict()["passed"]
+        assert live.worst_excess_m == pytest.approx(whole["max_excess_m"], abs=1e-9)
+
+
+def _write_twist_biased(path: Path, from_twist: int, bias_mm: int) -> None:
+    """The evidence with ODOM_TWIST's DISTANCE raised by ``bias_mm`` from its
+    ``from_twist``-th frame on (re-sealed: COUNTER, ENC_COUNTER and the velocities kept)."""
+    seen = 0
+    with can.BLFWriter(str(path)) as out:
+        for msg in can.LogReader(str(EVIDENCE)):
+            if msg.arbitration_id == ODOM_TWIST:
+                if seen >= from_twist:
+                    word = int.from_bytes(msg.data, "little")
+                    v, w = (((word >> shift) & 0xFFFF ^ 0x8000) - 0x8000 for shift in (16, 32))
+                    msg.data = bytearray(fw_frames.pack_odom_twist(
+                        (word >> 8) & 0xF, (word >> 12) & 0xF, v, w, (word >> 48) + bias_mm,
+                        ErrorMask()))
+                seen += 1
+            out.on_message_received(msg)
 
 
 def _live(path: Path) -> tuple[BusMonitor, RobotTelemetry, float]:
@@ -168,7 +206,8 @@ def test_the_stream_refuses_a_life_whose_first_pose_follows_a_silence(
 ) -> None:
     """``stream_first.FirstSilence`` over two chunks: the streamed judge refuses (and the
     whole log is judged) exactly where the whole log's ``stalls.first_after_stall`` leaves the
-    first pose out."""
+    first pose out; the live judges' (``livefirst.FirstStall``, on the tracker's window) names
+    the same frame."""
     enc_s = np.round(np.arange(0.30, 0.50, 0.01), 6)
     silence = FirstSilence()
     status = np.array([] if status_s is None else [status_s])
@@ -181,11 +220,14 @@ def test_the_stream_refuses_a_life_whose_first_pose_follows_a_silence(
     encoders = Encoders(n, n % 16, n, 0 * n, 0 * n, enc_s, 0.01)
     whole = first_after_stall(first_pose_s, encoders, None if status_s is None else status)
     assert (whole is not None) is stalled
+    tracker = PoseTracker(Geometry.of(PMIR), PMIR.counter_bits, "exact")  # live: its window
+    for k, t_s in enumerate(enc_s.tolist()):
+        if status_s is not None and status_s <= t_s and not tracker.first.alive:
+            tracker.on_status(status_s)
+        tracker.on_encoders(k % 16, 0, 0, t_s)
+    assert tracker.first.primed(tracker, first_pose_s) == whole
 
 
-@pytest.mark.xfail(strict=True, reason="issue #11: the live judges do not tell a stall before "
-                   "the first pose yet (livestall runs once the reference does, and the live "
-                   "DISTANCE has no such stall either)")
 def test_the_live_judges_pass_a_firmware_stalled_before_its_first_pose() -> None:
     """The monitor said POSE WRONG (1335 mm) on this run, live, and DISTANCE WRONG; the bridge
     judges alike."""
@@ -193,6 +235,7 @@ def test_the_live_judges_pass_a_firmware_stalled_before_its_first_pose() -> None
     health = monitor.health(end_s)
     assert health["pose_wrongs"]["episodes"] == 0
     assert not health["why"][0].startswith("ODOM_TWIST DISTANCE"), health["why"]
+    assert monitor.distance.as_dict()["start"] == "power-up"  # as analyze's (its first page)
     for tracker in (monitor.tracker, bridge.tracker):
         assert tracker.stall.stalls == 1
         assert tracker.placer.placements.max_beyond_m == 0.0

@@ -7,22 +7,26 @@ counter restarts) adds |dS| rounded to 2^-40 m to an exact int sum, as the whole
 with the same slack (``distance.base_slack``: the wire's 0.5 mm, 2^-39 m a frame, 2^-48 m a
 count) and the same gap allowance above (the firmware may have taken a gap's frames one by one:
 ``distance.gap_extra_m``). Below: after a stall the tracker tells (the firmware merged the frames
-it missed) the fine path since the last sample; after an ODOM_STATUS page whose ENC_E2E_LOST grew
-(the firmware lost frames: merged steps) the fine path since the page before; where its
+it missed) the fine path since the last sample; after a stall before the first pose
+(``livefirst``) the fine path from the frame the firmware could first have primed on (from the
+life's first frame once that left: looser by the path between); after an ODOM_STATUS page whose
+ENC_E2E_LOST grew (the firmware lost frames: merged steps) the fine path since the page before;
+where its
 ENC_E2E_OK grew by less than the frames the host took (a jittered capture: the host's E2E took
 frames the firmware refused) ``skipdefect``'s allowance, as ``analyze`` gives it: a twist is
 judged once the page after its frame is heard (``host.judge.liveskip``).
 
 A sample (ODOM_TWIST) names its encoder frame by the tracker's rule for a pose half
 (``samples.match_encoder`` over its window: the sender's steps, the age bound, the held and
-queued rules, resolved when the sample is heard): the first naming each frame is judged, and
+queued rules, resolved when the sample is heard): the first naming each frame is judged (not
+the first after a silence, a life's first measured from its ODOM_STATUS: ``livefirst``), and
 each resend right after it (``host.judge.resentdistance``; a sample naming none, or a frame
 before the last named, or a frame with a twin, is left out). Its offset interval
 [r - upper, r + lower] must meet every earlier one of the life (``distance`` module
 docstring); in the first life, once the tracker has proven a power-up at frame 0 (its
-reference's exact start), the offset must be 0. A reboot starts a new life (its offset free
-again); an interval found empty is latched (``wrong_lives``): the verdict DISTANCE WRONG, and
-the watch's exit 1."""
+reference's exact start; or the first page came before any frame: it primes on the first), the
+offset must be 0. A reboot starts a new life (its offset free again); an interval found empty
+is latched (``wrong_lives``): the verdict DISTANCE WRONG, and the watch's exit 1."""
 
 from __future__ import annotations
 
@@ -156,6 +160,8 @@ class LiveDistance:
         ``SourceWatch.on_page``): a power-up at the first frame heard (``analyze``'s and the
         tracker's rule), the offset 0. ENC_E2E_LOST (u8) grown: the fine path since the page
         before may have been merged on board."""
+        if proven and self.first_seq is None:  # no frame heard yet: it primes on the first
+            self.power_up = True  # (the page counted none: ``_skips`` takes it as it is)
         if proven and self.first_seq == 0:
             self.power_up = True
             self._skips.start(0)
@@ -181,6 +187,8 @@ class LiveDistance:
                   and not may_alias_live(e, t_s, tracker))
         first, self._running = e > self._running, max(self._running, e)
         last_t, last_heard = self._last_twist
+        if last_t != last_t and (talked := tracker.first.talked_before(t_s)) is not None:
+            last_t, last_heard = talked  # the first: after the firmware's ODOM_STATUS (livefirst)
         self._last_twist = (t_s, tracker.enc_seq + 1)
         quiet = (t_s - last_t >= (SILENCE_CYCLES - 0.5) * CYCLE_S
                  and tracker.enc_seq + 1 - last_heard >= SILENCE_CYCLES - 1)
@@ -191,6 +199,10 @@ class LiveDistance:
         if self._stalls >= 0 and tracker.stall.stalls > self._stalls and self._last_e >= 0:
             before = self._frames.get(self._last_e)  # merged since the last sample
             self._lower_m += (at[0] - before[0]) / UNITS_PER_M if before else math.inf
+        elif self._last_e < 0 and (primed := tracker.first.stalled_from) is not None \
+                and self.first_seq is not None and primed >= self.first_seq:
+            before = self._frames.get(primed)  # a stall before the first pose (livefirst):
+            self._lower_m += (at[0] - (before[0] if before else 0)) / UNITS_PER_M  # merged since
         self._stalls, self._last_e = tracker.stall.stalls, e
         units, n, c, up = at
         diff = raw_mm - units * (1000.0 / UNITS_PER_M)

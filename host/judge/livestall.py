@@ -22,7 +22,10 @@ as compared (``last_compared``) once recorded or held for a later comparison (``
 ``livenewstart``). The rule starts again with the reference (``restart``); ``stalls`` goes on.
 A reference restarted at the next pose after a set-pose whose kept fields a stall left unplaced
 (``livesetpose.unplaced``) carries the silence it was in (``carry_silence``): the first sample
-after it is left out, not adopted (it may name a backlog frame).
+after it is left out, not adopted (it may name a backlog frame). The first sample since the rule
+started, after a silence from the firmware's ODOM_STATUS (a stall before its first pose), is
+``livefirst``'s: left out, its placement owed from the frame the firmware could have primed on
+(``owe_from``).
 """
 
 from __future__ import annotations
@@ -54,6 +57,22 @@ class StallRule:
     def last_t_s(self) -> float | None:
         """Bus time of the last sample's ODOM_POSE_Y (s), None since the reference's start."""
         return self._last_t_s
+
+    @property
+    def carried(self) -> bool:
+        """A silence carried into the next sample (``carry_silence``)."""
+        return self._carried
+
+    def heard_first(self, t_s: float) -> None:
+        """A life's first sample, left out after a silence (``livefirst``), heard at ``t_s``."""
+        self._last_t_s = t_s
+
+    def owe_from(self, primed: int) -> None:
+        """A stall before the first sample (``livefirst``): a placement owed at the next
+        sample, its allowance from encoder frame ``primed`` (where the firmware could first
+        have primed), as if the last compared."""
+        self._owe()
+        self.last_compared = primed
 
     def carry_silence(self, last_t_s: float | None) -> None:
         """After ``restart``: the reference restarts at the next pose, the silence since the

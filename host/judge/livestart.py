@@ -68,6 +68,7 @@ class Lives:
         self.pending: FramePose | None = None  # the first pose, heard before the integrator
         self.backlog_counts: list[Counted] = []  # the frames since the pending pose's
         self.backlog_poses: list[FramePose] = []
+        self.power_up_proven = False  # the first life's first page proved a power-up at 0
 
     def waits(self, pose: FramePose, now_s: float) -> bool:
         """Whether the on-board ``pose`` waits for its life's start (a boot's frame, the
@@ -121,6 +122,7 @@ class Lives:
     def on_counts(self, ok: int, lost: int, proven: bool) -> None:
         """``PoseTracker.on_enc_counts``' start: the page ends a wait, or proves a power-up."""
         boot, tracker = self.boot, self._tracker
+        self.power_up_proven |= proven  # (``livefirst``: also when no frame was heard yet)
         if boot is not None and boot[0] < 0:  # the first life's samples wait
             self.finish_first(proven)
         elif boot is not None and self.boot_named:

@@ -23,6 +23,7 @@ from odocan.host.judge.liveadopted import (
     AdoptedStarts,
 )
 from odocan.host.judge.livechoice import LiveChoice
+from odocan.host.judge.livefirst import FirstStall, left_out_first
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livehalves import HalfPairs
 from odocan.host.judge.livelaphold import LapHold
@@ -98,6 +99,7 @@ class PoseTracker:
         self.adopted = AdoptedStarts()  # starts at the firmware's own pose, said (liveadopted)
         self.laps = LapHold(self)  # samples after a lap of the stamps wait for its evidence
         self.stall = StallRule(self.placer, self.window, self.pairs.halves["y"])  # livestall
+        self.first = FirstStall()  # a stall before a life's first sample (livefirst)
         # raw: ``fit`` corrects its start (livereference); where it starts (livestart)
         self.raw = RawReference(StepGate(geometry, self.counter_bits, self.restarts))
         self.lives = Lives(self)
@@ -180,6 +182,10 @@ class PoseTracker:
         the same encoder frame, one on-board sample once settled (``take_samples``)."""
         self._on_half("y", Half(0, enc_counter, counter, t_s, y_m, turns))
 
+    def on_status(self, t_s: float) -> None:
+        """An accepted ODOM_STATUS at bus time ``t_s``: the firmware alive (``livefirst``)."""
+        self.first.alive.append((t_s, self.enc_seq + 1))
+
     def take_samples(self) -> list[Sample]:
         """The on-board samples settled since the last call, in the order settled."""
         settled, self.settled = self.settled, []
@@ -228,6 +234,8 @@ class PoseTracker:
         hold ends)."""
         if self.laps.holds((pose, y, queued)):  # compared once its lap is numbered
             return None
+        if self.stall.last_t_s is None and left_out_first(self, pose, y.t_s, queued):
+            return None  # a stall before the first sample since the rule started (livefirst)
         started = self.raw.odometry is not None
         if self.stall.left_out(pose.seq, y.t_s, queued, started):  # a stall's backlog sample
             return None

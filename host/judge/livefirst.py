@@ -1,0 +1,84 @@
+"""A stall before a life's first pose, told live (issue #11): ``stalls.first_after_stall``, the
+whole log's rule, at the first sample since the live stall rule started (``livestall``).
+
+A firmware SIGSTOPped while INIT (it had sent only its ODOM_STATUS) and resumed after the sim
+drove on primes on the first frame its receive FIFO kept, steps the next ones it kept, refuses
+the rest and takes the frame it resumes at as one step: its first pose names a frame of its
+backlog, which ENC_COUNTER cannot resolve, and its next ones a position the fine reference left.
+So the first sample whose ODOM_POSE_Y came ``SILENCE_CYCLES`` cycles or more after the
+firmware's last frame (its ODOM_STATUS, ``PoseTracker.on_status``, or a pose half), with the encoder
+frames on time meanwhile, is left out; when the reference runs from the firmware's power-up
+(a proven power-up at frame 0: ``Lives.power_up_proven``), the position is placed again at the
+next sample, bounded by the merge allowance from the first frame the firmware could have primed
+on (``liveplace.StallPlacer.shift``), as ``analyze`` restarts its segment there; else the next
+sample starts the reference (fitted), as ``analyze`` starts it at its first sample kept.
+
+``LiveDistance`` leaves the first ODOM_TWIST after such a silence out by the same times
+(``talked_before``: ``distance.DistanceJudge.talked_before``'s rule)."""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from odocan.host.judge.livewindow import window_encoders
+from odocan.host.judge.stalls import first_after_stall
+
+if TYPE_CHECKING:
+    from odocan.host.judge.livepose import FramePose
+    from odocan.host.judge.tracking import PoseTracker
+
+STATUS_KEPT = 8  # the latest ODOM_STATUS frames kept (up to 3 a tick): a sample settles
+# within a cycle of its Y, so the last one before it is among them
+
+
+class FirstStall:
+    """The firmware's latest ODOM_STATUS frames (bus time, encoder frames heard before) and the
+    rule on a life's first sample (module docstring)."""
+
+    def __init__(self) -> None:
+        # its ODOM_STATUS frames: bus time, encoder frames heard before (``on_status`` appends)
+        self.alive: deque[tuple[float, int]] = deque(maxlen=STATUS_KEPT)
+        self.stalled_from: int | None = None  # the frame of the latest stall told (primed)
+
+    def talked_before(self, t_s: float) -> tuple[float, int] | None:
+        """The latest ODOM_STATUS before bus time ``t_s`` (its time, the frames heard before),
+        None when none is kept."""
+        before = [frame for frame in self.alive if frame[0] < t_s]
+        return before[-1] if before else None
+
+    def primed(self, tracker: PoseTracker, t_s: float) -> int | None:
+        """``stalls.first_after_stall`` over the tracker's window for a sample whose
+        ODOM_POSE_Y came at ``t_s``: the encoder frame (seq) the firmware could first have
+        primed on after a silence, None when it was not silent."""
+        talked = self.talked_before(t_s)
+        if talked is None or not len(tracker.window):
+            return None
+        ys = tracker.pairs.halves["y"]  # the pose halves sent before it are alive too
+        sent_s = ys.col("t_s") if len(ys) else np.zeros(0)
+        alive_s = np.sort(np.concatenate(([talked[0]], sent_s)))
+        at = first_after_stall(t_s, window_encoders(tracker.window), alive_s)
+        return None if at is None else int(tracker.window.col("seq")[at])
+
+
+def left_out_first(tracker: PoseTracker, pose: FramePose, t_s: float, queued: bool) -> bool:
+    """The module docstring's rule on the sample ``pose`` (its ODOM_POSE_Y at ``t_s``,
+    ``queued``: in a burst): True when it is left out. Only the first sample since the stall
+    rule started (``livestall.StallRule.last_t_s`` None, no silence carried into it)."""
+    rule = tracker.stall
+    if rule.last_t_s is not None or rule.carried or queued:
+        return False
+    primed = tracker.first.primed(tracker, t_s)
+    if primed is None:
+        return False
+    lives = tracker.lives
+    if (tracker.raw.odometry is None and lives.power_up_proven and lives.boot is None
+            and not tracker.reference_starts and tracker.integrator is not None):
+        lives.finish_boot(0, first_life=True)  # from (0, 0, 0) on frame 0, as analyze
+    tracker.first.stalled_from = primed  # (``LiveDistance``: its merged step's allowance)
+    if tracker.raw.odometry is not None:
+        rule.owe_from(primed)  # placed at the next sample, bounded from that frame
+    rule.heard_first(t_s)
+    return True
