@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import can
@@ -151,16 +152,22 @@ def test_a_wrong_distance_after_such_a_stall_fails_every_judge(
 def _write_twist_biased(path: Path, from_twist: int, bias_mm: int) -> None:
     """The evidence with ODOM_TWIST's DISTANCE raised by ``bias_mm`` from its
     ``from_twist``-th frame on (re-sealed: COUNTER, ENC_COUNTER and the velocities kept)."""
+    def biased(word: int) -> bytes:
+        v, w = (((word >> shift) & 0xFFFF ^ 0x8000) - 0x8000 for shift in (16, 32))
+        return fw_frames.pack_odom_twist((word >> 8) & 0xF, (word >> 12) & 0xF, v, w,
+                                         (word >> 48) + bias_mm, ErrorMask())
+    _rewrite(path, ODOM_TWIST, from_twist, biased)
+
+
+def _rewrite(path: Path, can_id: int, from_n: int, repack: Callable[[int], bytes]) -> None:
+    """The evidence to ``path``, each ``can_id`` frame from its ``from_n``-th on repacked from
+    its payload as a little-endian word."""
     seen = 0
     with can.BLFWriter(str(path)) as out:
         for msg in can.LogReader(str(EVIDENCE)):
-            if msg.arbitration_id == ODOM_TWIST:
-                if seen >= from_twist:
-                    word = int.from_bytes(msg.data, "little")
-                    v, w = (((word >> shift) & 0xFFFF ^ 0x8000) - 0x8000 for shift in (16, 32))
-                    msg.data = bytearray(fw_frames.pack_odom_twist(
-                        (word >> 8) & 0xF, (word >> 12) & 0xF, v, w, (word >> 48) + bias_mm,
-                        ErrorMask()))
+            if msg.arbitration_id == can_id:
+                if seen >= from_n:
+                    msg.data = bytearray(repack(int.from_bytes(msg.data, "little")))
                 seen += 1
             out.on_message_received(msg)
 
@@ -181,19 +188,12 @@ def _live(path: Path) -> tuple[BusMonitor, RobotTelemetry, float]:
 def _write_biased(path: Path, from_pose: int, bias_lsb: int) -> None:
     """The evidence with ODOM_POSE_X's X raised by ``bias_lsb`` from its ``from_pose``-th frame
     on (re-sealed: COUNTER, ENC_COUNTER and HEADING kept)."""
-    seen = 0
-    with can.BLFWriter(str(path)) as out:
-        for msg in can.LogReader(str(EVIDENCE)):
-            if msg.arbitration_id == ODOM_POSE_X:
-                if seen >= from_pose:
-                    word = int.from_bytes(msg.data, "little")
-                    x_raw = (word >> 16) & 0xFFFF_FFFF
-                    x_100um = x_raw - (1 << 32) if x_raw >> 31 else x_raw
-                    msg.data = bytearray(fw_frames.pack_odom_pose_x(
-                        (word >> 8) & 0xF, (word >> 12) & 0xF, x_100um + bias_lsb, word >> 48,
-                        ErrorMask()))
-                seen += 1
-            out.on_message_received(msg)
+    def biased(word: int) -> bytes:
+        x_raw = (word >> 16) & 0xFFFF_FFFF
+        x_100um = x_raw - (1 << 32) if x_raw >> 31 else x_raw
+        return fw_frames.pack_odom_pose_x((word >> 8) & 0xF, (word >> 12) & 0xF,
+                                          x_100um + bias_lsb, word >> 48, ErrorMask())
+    _rewrite(path, ODOM_POSE_X, from_pose, biased)
 
 
 @pytest.mark.parametrize(("status_s", "first_pose_s", "stalled"), [
