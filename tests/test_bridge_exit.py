@@ -8,24 +8,31 @@ only thing wrong). Its ``--duration`` comes once every frame was taken in. Befor
 retained ``status`` said POSE WRONG, the bridge printed no verdict and exited 0 both ways. Now
 its last line is the robot's verdict and it exits 1 on the wrong pose, 0 on the right one; a
 signal before ``--duration`` keeps 130 (its STOPPED line last, as before); ``--require-firmware``
-fails a run that judged nothing.
+fails a run that judged nothing. The retained ``offline`` status the bridge leaves on a real
+broker (mosquitto) carries that same verdict (``watch_verdict``), for a dashboard that subscribes
+after the bridge stopped (before: no verdict in it).
 """
 
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import signal
 import threading
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import can
 import pytest
 
 from odocan.host.cli.subparsers import bridge as bridge_cmd
+from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.busfeed import BusFeed
+from odocan.host.mqtt.options import PASSWORD_ENV
 from odocan.sim.robot import to_toml
+from tests.conftest_mqtt import Mosquitto, client, mosquitto  # noqa: F401 (fixture)
 from tests.test_cli_run import run_cli
 from tests.test_distance import KOBUKI as DISTANCE_KOBUKI
 from tests.test_distance import _synth, checker_errors_mm, checker_passes, off_by, short_drive
@@ -34,6 +41,7 @@ from tests.test_stall_bound import _messages
 from tests.test_watch_end import _profile_toml
 
 WAIT_S = 60.0  # the bridge takes the drive's frames in (bounds a hung test, asserts nothing)
+RETAINED_WAIT_S = 10.0  # the broker hands a new subscriber its retained status (bounds a hang)
 
 
 class _ListBus(can.BusABC):
@@ -171,3 +179,48 @@ def test_require_firmware_fails_a_bridge_that_judged_nothing(
                 else f"bridge robot001: UNJUDGED: {why}: nothing judged (--require-firmware "
                 "fails it)")
     assert (code, err.splitlines()[-1]) == (int(require), expected), err
+
+
+async def _retained_status(url: BrokerURL, robot: str) -> dict[str, Any]:
+    """The retained ``status`` of ``robot`` as a subscriber that comes after the bridge gets
+    it (the first message of a fresh subscription is the retained one)."""
+    async with client(url) as sub:
+        await sub.subscribe(f"odocan/{robot}/status", qos=1)
+        async with asyncio.timeout(RETAINED_WAIT_S):
+            async for message in sub.messages:
+                assert message.retain, message.topic  # kept by the broker, not sent live
+                assert isinstance(message.payload, bytes)
+                status: dict[str, Any] = json.loads(message.payload)
+                return status
+    raise AssertionError("no retained status")
+
+
+@pytest.mark.parametrize("wrong", [True, False])
+def test_the_retained_offline_status_carries_the_printed_verdict(
+    wrong: bool, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str], mosquitto: Mosquitto,  # noqa: F811
+) -> None:
+    """The bridge on mosquitto, its drive's pose wrong (FAIL) or right (PASS). Once it exited, a
+    subscriber reads the retained ``offline`` status: its ``watch_verdict`` is the verdict line
+    the bridge printed (name and reason), with the worst wrong episode the line names as
+    ``pose_error`` (null on a PASS). Before (main): no ``watch_verdict`` in it."""
+    path, _ = _drive(tmp_path, wrong=wrong)
+    _bridge_hears(monkeypatch, _messages(path), _duration_reached)
+    url = mosquitto.url()
+    monkeypatch.setenv(PASSWORD_ENV, url.password or "")
+    code, _, err = run_cli(capsys, *_argv(tmp_path, "--broker",
+                                          f"mqtt://{url.username}@{url.host}:{url.port}"))
+    assert code == int(wrong), err
+    line = err.splitlines()[-1].removeprefix("bridge robot001: ")
+    status = asyncio.run(_retained_status(url, "robot001"))
+    assert (status["state"], status["reason"]) == ("offline", "bridge stopped"), status
+    verdict = status.get("watch_verdict")
+    assert isinstance(verdict, dict), status
+    assert verdict["verdict"] == ("FAIL" if wrong else "PASS"), verdict
+    assert f"{verdict['verdict']}: {verdict['reason']}" == line, (verdict, err)
+    if wrong:
+        assert verdict["pose_error"]["enc_seq"] == JUMP_AT, verdict  # where the bias began
+        assert f"{verdict['pose_error']['dpos_mm']:.4f} mm" in line, (verdict, line)
+        assert verdict["pose_error"] == status["pose_wrongs"]["worst"], status
+    else:
+        assert verdict["pose_error"] is None, verdict

@@ -25,7 +25,10 @@ telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects) and its
 (``pacing``: commands queued, frames in flight, refused, expired in the queue, timed out,
 aborted). When the bridge stops, every command taken and not answered yet is answered
 ``aborted`` (the reason says whether it ran) before the links say ``offline`` and disconnect,
-and a command that arrives meanwhile is answered ``aborted`` too, not sent.
+and a command that arrives meanwhile is answered ``aborted`` too, not sent. With an
+``end_rule`` (``odocan bridge``'s), each robot is judged once its watch ended
+(``host.mqtt.endverdict``) and its ``offline`` status carries that verdict as ``watch_verdict``
+(``end_verdicts``: the same verdicts, for the bridge's lines and exit code).
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL, first_error
 from odocan.host.mqtt.clientids import DEFAULT_PREFIX, reader_client_id
 from odocan.host.mqtt.cmdreader import COMMAND_QUEUE, CommandReader, RobotCommands
+from odocan.host.mqtt.endverdict import EndRule, EndVerdict
 from odocan.host.mqtt.expiry import Expired, Fresh
 from odocan.host.mqtt.link import RobotLink, Verdict
 from odocan.host.mqtt.livecommands import PendingAck
@@ -146,6 +150,7 @@ class _Robot:
         self.stopping = False  # the bridge stops: no command is sent any more (``abort``)
         # what this process lost of the robot's live bus, for ``status`` (``host.mqtt.busfeed``)
         self.receive: Callable[[], dict[str, Any]] | None = None
+        self.verdict: EndVerdict | None = None  # its watch's, once ended (``Bridge.end_rule``)
 
     def status(self) -> Publication:
         """``status``, with ``receive`` when the robot's frames come from a live bus."""
@@ -156,10 +161,14 @@ class _Robot:
         return leaf, {**payload, "receive": receive}
 
     def last_status(self) -> dict[str, Any]:
-        """The fields of ``status`` but its ``robot``, ``state`` and stamp: the link's
-        ``offline`` status carries them (the watch's verdicts, retained after the bridge)."""
+        """The fields of ``status`` but its ``robot``, ``state`` and stamp, and the watch's
+        ``watch_verdict`` once judged: the link's ``offline`` status carries them (the watch's
+        verdicts, retained after the bridge)."""
         payload = self.status()[1]
-        return {k: v for k, v in payload.items() if k not in ("robot", "state", "unix_s")}
+        last = {k: v for k, v in payload.items() if k not in ("robot", "state", "unix_s")}
+        if self.verdict is not None:
+            last["watch_verdict"] = self.verdict.as_dict()
+        return last
 
     def on_command(
         self, name: str, payload: bytes, verdict: Verdict | Expired | Fresh = "run"
@@ -281,8 +290,13 @@ def _result(
 class Bridge:
     """CAN <-> MQTT for ``robots`` (see the module docstring)."""
 
-    def __init__(self, robots: Sequence[RobotEndpoint], *, config: BridgeConfig) -> None:
+    def __init__(self, robots: Sequence[RobotEndpoint], *, config: BridgeConfig,
+                 end_rule: EndRule | None = None) -> None:
+        """``end_rule``: how each robot is judged when its watch ends, the verdict its
+        ``offline`` status carries (``watch_verdict``); None: none (a fleet's verdict is its
+        report's, which weighs its loop's overload)."""
         self.config = config
+        self.end_rule = end_rule
         names = [r.name for r in robots]
         # one thread and one connection read every robot's commands (``host.mqtt.cmdreader``)
         self.commands = CommandReader(
@@ -328,6 +342,7 @@ class Bridge:
                 await asyncio.sleep(0)
                 self._drain()
                 self._end_watch()  # before the links' offline, which carries the verdicts
+                self._judge_end()  # once, before the links' offline, which carries it
                 self._abort()  # queued before the links' offline: flushed with it
                 frames.cancel()
                 periodic.cancel()
@@ -394,6 +409,24 @@ class Bridge:
         for robot in self.robots:
             for leaf, payload in robot.telemetry.end_watch():
                 robot.link.publish(leaf, payload)
+
+    def _judge_end(self) -> None:
+        """Each robot's verdict by ``end_rule``, its watch ended (``_end_watch``): its
+        ``offline`` status carries it, the bridge's line says it (``end_verdicts``)."""
+        if self.end_rule is None:
+            return
+        for robot in self.robots:
+            robot.verdict = self.end_rule.judge(robot.telemetry, robot.endpoint.profile_name)
+
+    def end_verdicts(self) -> list[tuple[str, EndVerdict]]:
+        """(robot name, verdict) of every robot, as ``run`` judged them when the watch ended
+        (the ones its ``offline`` statuses carry); RuntimeError before that, or without an
+        ``end_rule``: no verdict is made up afterwards."""
+        judged = [(r.endpoint.name, r.verdict) for r in self.robots]
+        verdicts = [(name, v) for name, v in judged if v is not None]
+        if len(verdicts) != len(judged):
+            raise RuntimeError("the bridge's watch has not ended with an end_rule: no verdict")
+        return verdicts
 
     def _drain(self) -> None:
         pending, self._pending = self._pending[self._pending_at:], []

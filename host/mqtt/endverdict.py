@@ -15,12 +15,19 @@ FAIL (exit 1) when the pose was wrong at any time of the watch, DISTANCE or the 
 wrong once, two firmwares on the bus, or (``require_firmware``) when nothing was judged; the
 firmware's PROFILE page against ``--robot``, when it differs, follows on the line (a firmware set
 up for another robot reads as wrong).
+
+The verdict is data too (``EndVerdict.as_dict``): the retained ``offline`` status carries it as
+``watch_verdict`` (``host.mqtt.bridge``), so a dashboard that subscribes after the bridge stopped
+reads what the line said: ``{"verdict": "FAIL", "reason": "the on-board pose was wrong ...",
+"pose_error": {...}}``, ``pose_error`` the worst wrong episode the line names (null when it
+names none). Computed once, when the watch ends, before the links say ``offline``: the line and
+the status are the same verdict.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING, Any, Literal
 
 from odocan.host.judge.watchverdict import REQUIRE_FIRMWARE, failures, nothing_judged
 
@@ -28,13 +35,47 @@ if TYPE_CHECKING:
     from odocan.host.mqtt.telemetry import RobotTelemetry
 
 
+VerdictName = Literal["PASS", "FAIL", "UNJUDGED"]
+
+
 @dataclass(frozen=True)
 class EndVerdict:
-    """A robot's verdict: ``text`` its line (``FAIL: ...``, ``PASS: ...``, ``UNJUDGED: ...``),
-    ``failed`` whether it fails the bridge (exit 1)."""
+    """A robot's verdict: ``verdict`` its name, ``reason`` what its line says after the name,
+    ``pose_error`` the worst wrong pose episode the reason names (``posewrongs.Episode`` as a
+    dict: ``dpos_mm``, ``beyond_mm``, ``dheading_mrad``, ``t_s``, ``enc_seq``, ...; None when
+    it names none)."""
 
-    text: str
-    failed: bool
+    verdict: VerdictName
+    reason: str
+    pose_error: dict[str, Any] | None = None
+
+    @property
+    def text(self) -> str:
+        """Its line: ``FAIL: ...``, ``PASS: ...``, ``UNJUDGED: ...``."""
+        return f"{self.verdict}: {self.reason}"
+
+    @property
+    def failed(self) -> bool:
+        """Whether it fails the bridge (exit 1)."""
+        return self.verdict == "FAIL"
+
+    def as_dict(self) -> dict[str, Any]:
+        """``{"verdict", "reason", "pose_error"}`` (JSON-ready): the ``offline`` status's
+        ``watch_verdict``."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class EndRule:
+    """How a bridge judges its robots when their watch ends: ``require_firmware`` makes a watch
+    that judged nothing FAIL (``--require-firmware``)."""
+
+    require_firmware: bool = False
+
+    def judge(self, telemetry: RobotTelemetry, profile_name: str | None) -> EndVerdict:
+        """``telemetry``'s verdict by this rule (``end_verdict``)."""
+        return end_verdict(telemetry, profile_name=profile_name,
+                           require_firmware=self.require_firmware)
 
 
 def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
@@ -49,15 +90,25 @@ def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
     if why and require_firmware:
         fails.append(f"{why} {REQUIRE_FIRMWARE}")
     if fails:
-        return EndVerdict("FAIL: " + "; ".join(fails) + _mismatch(telemetry), True)
+        return EndVerdict("FAIL", "; ".join(fails) + _mismatch(telemetry),
+                          _pose_error(telemetry))
     if why:
-        return EndVerdict(f"UNJUDGED: {why} (--require-firmware fails it)"
-                          + _mismatch(telemetry), False)
+        return EndVerdict("UNJUDGED", f"{why} (--require-firmware fails it)"
+                          + _mismatch(telemetry))
     distance, twist = telemetry.distance.samples, telemetry.twist.samples
     twists = (f", ODOM_TWIST DISTANCE in {distance} and its speeds in {twist}"
               if distance or twist else ", no ODOM_TWIST judged")
-    return EndVerdict(f"PASS: the on-board pose right in {compared} samples{twists}"
-                      + _mismatch(telemetry), False)
+    return EndVerdict("PASS", f"the on-board pose right in {compared} samples{twists}"
+                      + _mismatch(telemetry))
+
+
+def _pose_error(telemetry: RobotTelemetry) -> dict[str, Any] | None:
+    """The worst wrong pose episode, as the FAIL line names it (``failures``: when an episode
+    was latched), as a dict; None when the pose was never wrong."""
+    wrongs = telemetry.tracker.wrongs
+    if not wrongs.count or wrongs.worst is None:
+        return None
+    return asdict(wrongs.worst)
 
 
 def _mismatch(telemetry: RobotTelemetry) -> str:

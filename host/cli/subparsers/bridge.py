@@ -12,7 +12,8 @@ stderr (``host.mqtt.endverdict``: ``bridge robot001: FAIL: the on-board pose was
 ``PASS: ...`` or ``UNJUDGED: ...``; a ``STOPPED by ...`` line, when a signal came before
 ``--duration``, stays the last) and the exit code is 1 when it FAILs: the pose wrong at any
 time of the watch, DISTANCE or the twist speeds wrong, or (``--require-firmware``) nothing
-judged; else 0 (130/143 stay when a signal ended it before ``--duration``).
+judged; else 0 (130/143 stay when a signal ended it before ``--duration``). The retained
+``offline`` status carries the same verdict (``watch_verdict``: judged once, by the bridge).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.busfeed import BusFeed
-from odocan.host.mqtt.endverdict import EndVerdict, end_verdict
+from odocan.host.mqtt.endverdict import EndRule, EndVerdict
 from odocan.host.mqtt.options import (
     add_mqtt_arguments,
     bridge_options,
@@ -142,7 +143,8 @@ async def _bridge(
         endpoint = RobotEndpoint(name, bus, geometry, args.integrator,
                                  counter_bits=profile.counter_bits, signer=signer,
                                  profile_name=profile.name)
-        bridge = Bridge([endpoint], config=config)
+        bridge = Bridge([endpoint], config=config,
+                        end_rule=EndRule(require_firmware=args.require_firmware))
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -161,10 +163,8 @@ async def _bridge(
         print(f"bridge {name}: {bridge.summary()}", file=sys.stderr)
         if lost := lost_here_text(reader.reader.stats()):
             print(f"bridge {name}: lost here: {lost}", file=sys.stderr)
-    verdicts = [(r.endpoint.name, end_verdict(r.telemetry, profile_name=r.endpoint.profile_name,
-                                              require_firmware=args.require_firmware))
-                for r in bridge.robots]
-    return (signals[0] if signals else None), verdicts
+    # judged once, when the watch ended: the verdicts the retained ``offline`` statuses carry
+    return (signals[0] if signals else None), bridge.end_verdicts()
 
 
 def _stop_after(duration_s: float, stop: asyncio.Event) -> None:
