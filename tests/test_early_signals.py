@@ -209,7 +209,8 @@ def test_monitor_sigterm_while_its_log_writer_opens(
     code, err = _monitor(log, capsys)
     assert code == 143
     _finished_empty(log)
-    assert len(err) == 1 and err[0].startswith("monitor: STOPPED by SIGTERM at "), err
+    assert len(err) == 1, err
+    assert err[0].startswith("monitor: STOPPED by SIGTERM at "), err
 
 
 def test_monitor_swallowed_sigterm_is_heard(
