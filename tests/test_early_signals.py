@@ -219,11 +219,11 @@ def test_monitor_swallowed_sigterm_is_heard(
     """Swallowed by a library at start-up (as numpy.random's import swallowed run's): before,
     the watch ran its whole 60 s and exited 0; now it ends before it opens its log."""
     from odocan.host.cli.subparsers import monitor
+    from odocan.host.judge.monitor import BusMonitor
 
     log = tmp_path / "heard.asc"
     log.write_text(OLD_LOG)
-    monkeypatch.setattr(monitor, "BusMonitor", _sigterm_inside(monitor.BusMonitor,
-                                                               swallowed=True))
+    monkeypatch.setattr(monitor, "BusMonitor", _sigterm_inside(BusMonitor, swallowed=True))
     code, err = _monitor(log, capsys)
     assert code == 143
     assert log.read_text() == OLD_LOG
@@ -289,10 +289,11 @@ def test_replay_swallowed_sigterm_before_its_log_writes_none(
 ) -> None:
     """Swallowed while the input log is read: heard, the replay stops before its log opens."""
     from odocan.host.cli.subparsers import replay
+    from odocan.host.io.logs import read_log
 
     out = tmp_path / "replayed.blf"
     out.write_text(OLD_LOG)
-    monkeypatch.setattr(replay, "read_log", _sigterm_inside(replay.read_log, swallowed=True))
+    monkeypatch.setattr(replay, "read_log", _sigterm_inside(read_log, swallowed=True))
     code, err = _replay(drive_log, out, capsys)
     assert code == 143
     assert out.read_text() == OLD_LOG
