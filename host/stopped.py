@@ -90,3 +90,13 @@ def early_stop(signum: int | None, started_s: float, duration_s: float | None) -
     if elapsed_s >= duration_s:
         return None
     return Stopped(signum, round(elapsed_s, 1), duration_s)
+
+
+def interruption(signum: int | None, where: str) -> KeyboardInterrupt:
+    """What a signal heard as a request (``sim.realtime.stop_on_signals``) raises once the log
+    it deferred to is finished: ``Terminated`` for SIGTERM, else ``KeyboardInterrupt``; ``where``
+    ends the CLI's one line (``interrupted (SIGTERM): odocan run stopped before it finished
+    (where)``), in brackets, and its exit code is 143 (130)."""
+    from odocan.sim.exceptions import Terminated
+
+    return Terminated(where) if signum == signal.SIGTERM else KeyboardInterrupt(where)

@@ -185,3 +185,158 @@ def test_sigterm_at_early_moments_of_a_real_run(tmp_path: Path, after_s: float |
         assert "STOPPED by SIGTERM at " in out, out
     else:
         assert "before its first tick" in err, err
+
+
+# --- monitor --log and replay --log: the same start-up and end windows -------------------------
+
+
+def _monitor(log: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, list[str]]:
+    channel = f"early-monitor-{os.getpid()}-{time.monotonic_ns()}"
+    code = main(["monitor", "-i", "virtual", "-c", channel, "--json", "--duration", "60",
+                 "--log", str(log)])
+    return code, capsys.readouterr().err.splitlines()
+
+
+@pytest.mark.parametrize("suffix", [".asc", ".blf"])
+def test_monitor_sigterm_while_its_log_writer_opens(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+    suffix: str,
+) -> None:
+    """Before, raised in python-can's ``Logger`` the monitor's writer was lost: an ``.asc``
+    without its footer. Now the watch ends at once, its log finished with no frame."""
+    log = tmp_path / f"heard{suffix}"
+    monkeypatch.setattr(can, "Logger", _sigterm_inside(can.Logger))
+    code, err = _monitor(log, capsys)
+    assert code == 143
+    _finished_empty(log)
+    assert len(err) == 1, err
+    assert err[0].startswith("monitor: STOPPED by SIGTERM at "), err
+
+
+def test_monitor_swallowed_sigterm_is_heard(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Swallowed by a library at start-up (as numpy.random's import swallowed run's): before,
+    the watch ran its whole 60 s and exited 0; now it ends before it opens its log."""
+    from odocan.host.cli.subparsers import monitor
+    from odocan.host.judge.monitor import BusMonitor
+
+    log = tmp_path / "heard.asc"
+    log.write_text(OLD_LOG)
+    monkeypatch.setattr(monitor, "BusMonitor", _sigterm_inside(BusMonitor, swallowed=True))
+    code, err = _monitor(log, capsys)
+    assert code == 143
+    assert log.read_text() == OLD_LOG
+    assert err == [f"interrupted (SIGTERM): odocan monitor stopped before it finished (before "
+                   f"its watch; --log {log}: not written)"]
+
+
+def test_monitor_sigterm_while_its_log_is_finished(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A signal as the watch's log is finished (its --duration over): before, raised there, the
+    ``.asc`` lost its footer; now the log is finished, then the signal heard: 143, one line."""
+    from odocan.host.report.tui_app import FrameLog
+
+    log = tmp_path / "heard.asc"
+    monkeypatch.setattr(FrameLog, "close", _signal_first(FrameLog.close))
+    code = main(["monitor", "-i", "virtual", "-c", f"early-end-{os.getpid()}", "--json",
+                 "--duration", "0.3", "--log", str(log)])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 143
+    _finished_empty(log)
+    assert err == ["interrupted (SIGTERM): odocan monitor stopped before it finished (after its "
+                   "watch, before its verdict)"]
+
+
+@pytest.fixture(scope="module")
+def drive_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 2 s drive of ``odocan run``, to replay."""
+    log = tmp_path_factory.mktemp("drive") / "drive.log"
+    assert main(["run", "--duration", "2", "--log", str(log)]) == 0
+    return log
+
+
+def _replay(drive: Path, out: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, list[str]]:
+    capsys.readouterr()
+    code = main(["replay", str(drive), "--log", str(out)])
+    return code, capsys.readouterr().err.splitlines()
+
+
+@pytest.mark.parametrize("swallowed", [False, True], ids=["raised", "swallowed"])
+@pytest.mark.parametrize("suffix", [".asc", ".blf"])
+def test_replay_sigterm_while_it_is_built(
+    drive_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str], suffix: str, swallowed: bool,
+) -> None:
+    """The signal lands in the replay's construction, ``--log OUT`` open: before, raised, a
+    0-byte log (a ``.blf`` unreadable); swallowed, nothing replayed and exit 2 blaming the DBC."""
+    from odocan.host.judge.replay import LockstepReplay
+
+    out = tmp_path / f"replayed{suffix}"
+    monkeypatch.setattr(LockstepReplay, "__init__",
+                        _sigterm_inside(LockstepReplay.__init__, swallowed=swallowed))
+    code, err = _replay(drive_log, out, capsys)
+    assert code == 143
+    _finished_empty(out)
+    assert err == [f"interrupted (SIGTERM): odocan replay stopped before it finished (before its "
+                   f"first tick; --log {out}: finished, no frame)"]
+
+
+def test_replay_swallowed_sigterm_before_its_log_writes_none(
+    drive_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Swallowed while the input log is read: heard, the replay stops before its log opens."""
+    from odocan.host.cli.subparsers import replay
+    from odocan.host.io.logs import read_log
+
+    out = tmp_path / "replayed.blf"
+    out.write_text(OLD_LOG)
+    monkeypatch.setattr(replay, "read_log", _sigterm_inside(read_log, swallowed=True))
+    code, err = _replay(drive_log, out, capsys)
+    assert code == 143
+    assert out.read_text() == OLD_LOG
+    assert err == [f"interrupted (SIGTERM): odocan replay stopped before it finished (before its "
+                   f"first tick; --log {out}: not written)"]
+
+
+def test_replay_sigterm_while_its_log_is_finished(
+    drive_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Before, raised in the replay's close the ``.asc`` lost its footer; now it is finished
+    with every frame, then the signal is heard as one in the analysis: 143, one line."""
+    from odocan.host.judge.replay import LockstepReplay
+
+    out = tmp_path / "replayed.asc"
+    monkeypatch.setattr(LockstepReplay, "close", _signal_first(LockstepReplay.close))
+    code, err = _replay(drive_log, out, capsys)
+    assert code == 143
+    assert out.read_text().rstrip().endswith("End TriggerBlock")
+    assert len([m for m in can.LogReader(out) if m.arbitration_id == 0x100]) == len(
+        [m for m in can.LogReader(drive_log) if m.arbitration_id == 0x100])
+    assert err == ["interrupted (SIGTERM): odocan replay stopped before it finished (after its "
+                   "last tick, before the analysis)"]
+
+
+def test_ctrl_c_while_the_command_line_loads_is_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Ctrl-C ~50 ms after ``python -m odocan`` lands in the import of the command line, before
+    ``app.main`` handles anything: before, a traceback and exit -2; now one line and 130."""
+    import builtins
+
+    from odocan.host import cli
+
+    real_import = builtins.__import__
+
+    def interrupted(name: str, *args: Any, **kwargs: Any) -> Any:
+        if name == "odocan.host.cli.app":
+            raise KeyboardInterrupt
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", interrupted)
+    assert cli.main(["analyze", "x.log"]) == 130
+    assert capsys.readouterr().err == ("interrupted (SIGINT): odocan stopped before it finished "
+                                       "(while starting)\n")

@@ -7,6 +7,7 @@ module once, without runpy's "found in sys.modules" warning on stderr.
 from __future__ import annotations
 
 import os
+import sys
 
 __all__ = ["main"]
 
@@ -22,6 +23,10 @@ BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "1")
 def main(argv: list[str] | None = None) -> int:
     """The ``odocan`` command (``odocan.host.cli.app.main``)."""
     os.environ.setdefault(*BLAS_THREADS)
-    from odocan.host.cli.app import main as app_main
-
+    try:
+        from odocan.host.cli.app import main as app_main
+    except KeyboardInterrupt:  # Ctrl-C while the command line loads: one line, no traceback
+        print("interrupted (SIGINT): odocan stopped before it finished (while starting)",
+              file=sys.stderr)
+        return 130  # 128 + SIGINT (app's EXIT_SIGNAL_BASE; app is what did not load)
     return app_main(argv)

@@ -15,7 +15,6 @@ during the analysis would be (``stop_before_analysis``).
 from __future__ import annotations
 
 import gc
-import signal
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
@@ -27,10 +26,9 @@ from odocan.host.io.listeners import Recording
 from odocan.host.outputs import OutputError
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.report.progress import progress
-from odocan.host.stopped import Stopped, signum_of
+from odocan.host.stopped import Stopped, interruption, signum_of
 from odocan.sim.board import TICK_S
 from odocan.sim.contract import read_as
-from odocan.sim.exceptions import Terminated
 from odocan.sim.realtime import StopRequest
 from odocan.sim.rig import LockstepRig, RigConfig
 
@@ -88,12 +86,6 @@ def not_started(
         opened = any(isinstance(li, Recording) for li in listeners)
         where += f"; --log {log}: " + ("finished, no frame" if opened else "not written")
     return interruption(signum, where)
-
-
-def interruption(signum: int | None, where: str) -> KeyboardInterrupt:
-    """What a signal heard as a request raises once the rig is closed: ``Terminated`` for
-    SIGTERM, else ``KeyboardInterrupt``; ``where`` ends the CLI's one line, in brackets."""
-    return Terminated(where) if signum == signal.SIGTERM else KeyboardInterrupt(where)
 
 
 def run_rig(

@@ -38,6 +38,7 @@ from __future__ import annotations
 import itertools
 import sys
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -65,7 +66,7 @@ from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.outputs import OutputError
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
-from odocan.host.stopped import Stopped, signum_of
+from odocan.host.stopped import Stopped, interruption, signum_of
 from odocan.sim import contract
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.clock import LockstepClock
@@ -152,6 +153,7 @@ class LockstepReplay:
         self.listeners = listeners
         self.loop = TickLoop(self._work, host_bus, listeners, self.clock)
         self.stopped: Stopped | None = None  # by a signal, before the log's end
+        self.fed = 0  # encoder frames fed to the firmware
 
     @property
     def ticks(self) -> int:
@@ -162,11 +164,13 @@ class LockstepReplay:
         """The nodes' work in a tick: the firmware's board alone (the log is the rest)."""
         self.board.run_tick()
 
-    def run(self, frames: FrameArrays, feed: ReplayInput, phase_ticks: int = 0) -> None:
+    def run(self, frames: FrameArrays, feed: ReplayInput, phase_ticks: int = 0,
+            stop: StopRequest | None = None) -> None:
         """Feed every encoder frame at its tick (the log's truth frames where they were), after
         ``phase_ticks`` ticks without a frame (``replay_compare.pose_phase_ticks``); Ctrl-C or
         SIGTERM stops it between two encoder frames, a second one at once (``stopped``: how
-        far it got)."""
+        far it got; ``fed``: the encoder frames fed). ``stop``: the request the caller's
+        ``stop_on_signals`` already sets (else the run installs its own)."""
         enc = feed.encoders
         t0 = float(frames.timestamp_s[enc.index[0]])
         self.loop.start_s = t0 - phase_ticks * TICK_S
@@ -174,10 +178,11 @@ class LockstepReplay:
         events = _events(enc.index, feed.truth)
         shift_s = clock_steps_s(frames.timestamp_s)
         due: int | None = None  # the tick whose encoder frame is on the bus, not yet run
-        stop = StopRequest()
+        own = stop is None
+        stop = StopRequest() if stop is None else stop
         interrupt: KeyboardInterrupt | None = None
         try:
-            with stop_on_signals(stop):
+            with stop_on_signals(stop) if own else nullcontext():
                 for position, which in events:
                     if which >= 0:  # an encoder frame: first run the ticks before its own
                         if stop.stop_requested:
@@ -187,6 +192,7 @@ class LockstepReplay:
                             self.loop.run_to(tick)
                         self.clock.advance_to(self.loop.start_s + tick * TICK_S)
                         due = tick
+                        self.fed += 1
                     message = to_message(frames, position)
                     message.timestamp += float(shift_s[position])
                     self._log_bus.send(message)
@@ -199,7 +205,8 @@ class LockstepReplay:
             asked_s = (int(enc.tick[-1]) + 1 + phase_ticks) * TICK_S
             self.stopped = Stopped(stop.signum or signum_of(interrupt),
                                    round(self.ticks * TICK_S, 6), round(asked_s, 6))
-            print(f"interrupted after {self.ticks * TICK_S:g} s of the log", file=sys.stderr)
+            if self.fed:  # none: the caller's one line says so
+                print(f"interrupted after {self.ticks * TICK_S:g} s of the log", file=sys.stderr)
 
     def _drain(self) -> None:
         deliver(self.loop.host_bus, self.listeners)
@@ -209,6 +216,20 @@ class LockstepReplay:
         a listener's ``stop()`` fails (the first error is raised once all are released)."""
         release_all([self._drain, *(li.stop for li in self.listeners),
                      *(bus.shutdown for bus in self._buses)])
+
+
+def _unanalysed(signum: int | None, replay: LockstepReplay, log_out: Path | None,
+                opened: bool) -> KeyboardInterrupt:
+    """What a signal that leaves nothing to analyse raises once the replay is closed: one
+    before the first encoder frame was fed (``--log OUT`` finished with no frame, or, heard
+    before it was opened, not written), or one heard as the last frame ran or the log was
+    finished (as it would be in the analysis)."""
+    if replay.stopped is None and replay.fed:
+        return interruption(signum, "after its last tick, before the analysis")
+    where = "before its first tick"
+    if log_out is not None:
+        where += f"; --log {log_out}: " + ("finished, no frame" if opened else "not written")
+    return interruption(signum, where)
 
 
 def clock_steps_s(timestamp_s: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
@@ -313,21 +334,31 @@ def replay_and_analyze(
     so their difference is the cut's pose, no error of the firmware (the trial: 1563 mm)."""
     collector = FrameCollector()
     listeners: list[can.Listener] = [collector]
-    if log_out is not None:  # a full disk stops the recording, not the replay (path named)
-        listeners.append(Recording(can.Logger(log_out)))
-    channel = f"odocan-replay-{next(_REPLAY_CHANNELS)}"
-    replay = LockstepReplay(firmware_params(profile, integrator), listeners, channel)
-    truth_compared = not starts_mid_drive(
-        frames, feed.accepted, onboard_by_tick(frames, feed.accepted), feed.encoders)
-    start = time.perf_counter()
-    try:  # mid-drive the replay starts from (0, 0, 0), the log's truth elsewhere: left out
-        replay.run(frames, feed if truth_compared else replace(feed, truth=feed.truth[:0]),
-                   pose_phase_ticks(frames, feed.accepted))
-    finally:
+    stop = StopRequest()
+    with stop_on_signals(stop):  # from the log's opening to its end: a signal only asks
+        recording = None if log_out is None or stop.stop_requested else \
+            Recording(can.Logger(log_out))  # a full disk stops it, not the replay (path named)
+        listeners += [] if recording is None else [recording]
         try:
-            replay.close()
-        except OSError as exc:
-            raise OutputError(f"--log {log_out}: {exc.strerror or exc}") from None
+            channel = f"odocan-replay-{next(_REPLAY_CHANNELS)}"
+            replay = LockstepReplay(firmware_params(profile, integrator), listeners, channel)
+        except BaseException:
+            release_all([li.stop for li in listeners])  # the log opened is finished
+            raise
+        start = time.perf_counter()
+        try:  # mid-drive the replay starts from (0, 0, 0), the log's truth elsewhere: left out
+            truth_compared = not starts_mid_drive(
+                frames, feed.accepted, onboard_by_tick(frames, feed.accepted), feed.encoders)
+            if not stop.stop_requested:
+                replay.run(frames, feed if truth_compared else replace(feed, truth=feed.truth[:0]),
+                           pose_phase_ticks(frames, feed.accepted), stop)
+        finally:
+            try:
+                replay.close()
+            except OSError as exc:
+                raise OutputError(f"--log {log_out}: {exc.strerror or exc}") from None
+    if stop.stop_requested and (replay.stopped is None or replay.fed == 0):
+        raise _unanalysed(stop.signum, replay, log_out, recording is not None)
     wall_s = time.perf_counter() - start
     replayed = collector.arrays()
     analysis = analyze(replayed, profile, integrator, tolerance=tolerance,

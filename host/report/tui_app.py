@@ -17,7 +17,7 @@ import tty
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import can
 from rich.console import Console
@@ -30,6 +30,9 @@ from odocan.host.report.trace import FrameFilter, Trace
 from odocan.host.report.tui import View, screen
 from odocan.host.stopped import signum_of
 from odocan.sim.exceptions import ConfigurationError, OdocanError
+
+if TYPE_CHECKING:
+    from odocan.sim.realtime import StopRequest
 
 REFRESH_S = 0.25  # screen redraws
 LOST_CHECK_S = 1.0  # the kernel's drop count read at most this often (a /proc file)
@@ -102,11 +105,15 @@ class MonitorApp:
 
     def __init__(self, bus: can.BusABC, model: BusMonitor, trace: Trace, view: View,
                  recorder: FrameLog | None = None,
-                 publish: Callable[[can.Message], None] | None = None) -> None:
-        """``publish``: called with every frame after the model took it (live Foxglove)."""
+                 publish: Callable[[can.Message], None] | None = None,
+                 stop: StopRequest | None = None) -> None:
+        """``publish``: called with every frame after the model took it (live Foxglove);
+        ``stop``: a signal's request to end the watch (``sim.realtime.stop_on_signals``), seen
+        within ``REFRESH_S``; without one a signal ends it as a ``KeyboardInterrupt``."""
         self.bus, self.model, self.trace, self.view = bus, model, trace, view
         self.recorder = recorder
         self.publish = publish
+        self.stop = stop
         self.quit = False
         self.stopped_by: int | None = None  # the signal (Ctrl-C, SIGTERM) that ended it
         self.reader: BusReader | None = None  # the bus's reader, once ``receive`` ran
@@ -122,17 +129,20 @@ class MonitorApp:
             self.bus, None if self.recorder is None else self.recorder.record).start()
         try:
             self._judge(reader, deadline_s, redraw)
+            if self.stop is not None and self.stop.stop_requested:  # a signal: frames pending
+                self.stopped_by = self.stop.signum
+                return
             reader.stop()
             for msg in reader.drain():
                 self.on_frame(msg)
-        except KeyboardInterrupt as exc:
-            self.stopped_by = signum_of(exc)
+        except KeyboardInterrupt as exc:  # a second signal, or one with no ``stop`` to ask
+            self.stopped_by = (self.stop and self.stop.signum) or signum_of(exc)
         finally:
             reader.stop()
 
     def _judge(self, reader: BusReader, deadline_s: float, redraw: Any | None) -> None:
         next_draw = 0.0
-        while not self.quit and (now := time.monotonic()) < deadline_s:
+        while not (self.quit or self._stop_asked()) and (now := time.monotonic()) < deadline_s:
             if redraw is not None and now >= next_draw:
                 redraw()
                 next_draw = now + REFRESH_S
@@ -141,6 +151,9 @@ class MonitorApp:
                 self.on_frame(msg)
             if redraw is not None:
                 self.on_keys(_read_keys())
+
+    def _stop_asked(self) -> bool:
+        return self.stop is not None and self.stop.stop_requested
 
     def on_frame(self, msg: can.Message) -> None:
         """One frame to judge (already in ``--log``): feed the model and the trace."""

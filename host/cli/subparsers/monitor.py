@@ -66,9 +66,10 @@ from odocan.host.report.live import render_fleet, with_staleness
 from odocan.host.report.trace import FrameFilter, Trace
 from odocan.host.report.tui import View
 from odocan.host.report.tui_app import FrameLog, MonitorApp, RecordingError, run_screen
-from odocan.host.stopped import Stopped, early_stop, signum_of
+from odocan.host.stopped import Stopped, early_stop, interruption, signum_of
 from odocan.sim import robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
+from odocan.sim.realtime import StopRequest, stop_on_signals
 
 if TYPE_CHECKING:
     from odocan.host.report.foxglove import FoxgloveLive
@@ -163,12 +164,19 @@ def _do_monitor(args: argparse.Namespace) -> int:
     )
     trace = Trace(model.db, FrameFilter.parse(args.filter, model.db))
     check_log_path(args.log)
-    recorder = FrameLog(args.log) if args.log is not None else None
-    view = View(_source(args), interface=args.interface, log_path=args.log,
-                started_s=time.monotonic())
-    live = _foxglove(args, profile, model)
-    started_s = time.monotonic()
-    failure, signum, received = _watch_bus(args, model, trace, view, recorder, live)
+    stop = StopRequest()
+    with stop_on_signals(stop):  # from the log's opening to its end: a signal only asks
+        if stop.stop_requested:  # heard earlier, its exception lost in a library (interrupts)
+            raise interruption(stop.signum, "before its watch" + (
+                "" if args.log is None else f"; --log {args.log}: not written"))
+        recorder = FrameLog(args.log) if args.log is not None else None
+        started_s = time.monotonic()
+        view = View(_source(args), interface=args.interface, log_path=args.log,
+                    started_s=started_s)
+        failure, signum, received = _watch_bus(args, model, trace, view, recorder,
+                                               lambda: _foxglove(args, profile, model), stop)
+    if signum is None and stop.stop_requested:  # heard as the watch ended: the log finished
+        raise interruption(stop.signum, "after its watch, before its verdict")
     model.release_held()  # frames held for the evidence are judged now (host.judge.livesettle)
     end_watch(model.tracker, model.distance)  # what still waits judged (host.judge.watchend)
     code = _end(args, lambda: {**model.snapshot(), "receive": received},
@@ -235,21 +243,24 @@ def _end(args: argparse.Namespace, snapshot: Callable[[], dict[str, Any]],
 
 def _watch_bus(
     args: argparse.Namespace, model: BusMonitor, trace: Trace, view: View,
-    recorder: FrameLog | None, live: FoxgloveLive | None,
+    recorder: FrameLog | None, start_live: Callable[[], FoxgloveLive | None], stop: StopRequest,
 ) -> tuple[RecordingError | None, int | None, dict[str, int | None]]:
-    """Watch the bus until the deadline, ``q``, Ctrl-C or SIGTERM (even one that comes before
-    the receive loop runs); the recording's error, returned so that what was heard is still
-    shown (``--json``) before the command ends with it, the signal that ended it, if one
-    did, and what was read and lost here (``BusReader.stats``, with ``recorded``: the frames
-    in ``--log``, None without)."""
+    """Watch the bus until the deadline, ``q``, Ctrl-C or SIGTERM (``stop`` asked, even before
+    the receive loop runs, or a second signal); the recording's error, returned so that what
+    was heard is still shown (``--json``) before the command ends with it, the signal that
+    ended it, if one did, and what was read and lost here (``BusReader.stats``, with
+    ``recorded``: the frames in ``--log``, None without). ``recorder`` is finished whatever
+    happens; ``start_live()``: the live Foxglove server, if asked, closed at the end."""
     failure: RecordingError | None = None
     signum: int | None = None
     received: dict[str, int | None] = {}
+    live: FoxgloveLive | None = None
     try:
+        live = start_live()
         bus = open_bus(args)
         try:
             app = MonitorApp(bus, model, trace, view, recorder,
-                             None if live is None else live.publish)
+                             None if live is None else live.publish, stop)
             if args.json:
                 app.receive(_deadline(args.duration))
             else:
@@ -258,8 +269,8 @@ def _watch_bus(
             received = {} if app.reader is None else app.reader.stats()
         finally:
             bus.shutdown()
-    except KeyboardInterrupt as exc:  # before the loop took it: quit the same way
-        signum = signum_of(exc)
+    except KeyboardInterrupt as exc:  # a second signal before the loop took it: the same way
+        signum = stop.signum or signum_of(exc)
     finally:
         if recorder is not None:
             try:
