@@ -161,7 +161,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.setposekept import Kept, check_cut, mark_kept
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
-from odocan.host.judge.stalls import after_stalls, alive_times
+from odocan.host.judge.stalls import after_stalls, alive_times, primed_first
 from odocan.host.judge.statuslatch import StatusLatch, firmware_events
 from odocan.host.judge.twins import twin_allowance_of
 from odocan.host.protocol.dbcplan import default_plan
@@ -353,8 +353,9 @@ def _analyze_life(
     alive_s = alive_times(frames, accepted, decoder)
     onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s)
     truth = truth_samples(frames, accepted, decoder, enc)
-    if boot:
-        power_up = saw_only_the_log(frames, accepted, decoder)
+    if boot:  # (a stalled MCU's first page misses the frames its FIFO overran: primed_first)
+        power_up = saw_only_the_log(frames, accepted, decoder) or primed_first(
+            float(np.min(sent_s, initial=np.inf)), enc, alive_s, pose_sent_s)
     else:
         power_up = starts_at_power_up(frames, accepted, decoder, onboard)
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,

@@ -28,6 +28,8 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
 * above both, when the summary (UPTIME 0) follows the new firmware's power-up pose within 80 ms,
   the frame that pose names (``host.judge.bootnamed``): the two rules above read ODOM_STATUS
   stamps, which a recorder may have delayed (every one 15..50 ms late: 1..5 frames late).
+* except when the new firmware stalled before its first pose (``stalled_first``): its count page
+  misses the frames its halted MCU's FIFO overran, so the summary's rule stands.
 
 A life with no on-board sample (a reboot at the very end) is reported, not compared.
 
@@ -59,8 +61,9 @@ from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.primed import counted_start
-from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
+from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Encoders, contract_cycle_s
 from odocan.host.judge.sources import SourceWatch, two_sources_text
+from odocan.host.judge.stalls import first_after_stall
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -96,7 +99,8 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     limits = [b[0] for b in boots[1:]] + [len(frames)]
     for (position, uptime_s, state, _), limit in zip(boots, limits, strict=True):
         start = _life_start(position, uptime_s, state, encoders)
-        counted = _counted_start(position, limit, (encoders, counters), pages)
+        counted = (None if stalled_first(frames, decoder, encoders, position, limit)
+                   else _counted_start(position, limit, (encoders, counters), pages))
         named = (named_start(poses, (encoders.astype(np.int64), counters), position,
                              float(frames.timestamp_s[position])) if uptime_s == 0 else None)
         for found in (counted, named):  # the power-up pose's word last: not stamp-bound
@@ -109,6 +113,27 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
         lives.append(Life(everything[starts[k] : end], boot=uptime_s == 0,
                           t_s=float(frames.timestamp_s[position]), uptime_before_s=before_s))
     return lives
+
+
+def stalled_first(frames: FrameArrays, decoder: BulkDecoder, encoders: npt.NDArray[np.intp],
+                  position: int, limit: int) -> bool:
+    """Whether the firmware booted by the summary at ``position`` stalled before its first pose
+    (``stalls.first_after_stall`` on the life up to ``limit``, the next boot: silent for
+    ``SILENCE_CYCLES`` cycles after its last ODOM_STATUS whose CRC holds while the encoder
+    frames, accepted at ``encoders``, went on on time). A stalled MCU's receive FIFO overran
+    frames it never counted, so its first page of E2E counts cannot name the frame it primed on
+    (``counted_start`` lands hundreds of frames late); its summary's rule stands."""
+    ys = decoder.select(frames, "ODOM_POSE_Y")
+    ys = ys[(ys > position) & (ys < limit)]
+    if not len(ys):
+        return False
+    status = decoder.select(frames, "ODOM_STATUS")
+    status = status[(status >= position) & (status < ys[0])]
+    alive_s = frames.timestamp_s[status[crc_holds(frames, decoder, status)]]
+    t_s = frames.timestamp_s[encoders]
+    n = np.arange(len(encoders), dtype=np.int64)
+    enc = Encoders(n, n, n, n, n, t_s, contract_cycle_s(decoder, "WHEEL_ENCODERS"))
+    return first_after_stall(float(frames.timestamp_s[ys[0]]), enc, alive_s) is not None
 
 
 def _life_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[np.intp]) -> int:

@@ -94,6 +94,21 @@ def first_after_stall(sent_s: float, enc: Encoders, alive_s: FloatArray | None) 
     return int(lo[0]) if bool(quiet[0]) and int(lo[0]) < len(enc.timestamp_s) else None
 
 
+def primed_first(sent_s: float, enc: Encoders, alive_s: FloatArray,
+                 pose_sent_s: FloatArray) -> bool:
+    """A rebooted firmware's life (its frames from its boot summary) whose first sample, sent
+    at ``sent_s``, came after a stall from before any encoder frame of the life
+    (``first_after_stall`` names the life's first: the summary said INIT): a stalled MCU's
+    receive FIFO kept the first frames after it halted, so it primed on that one, its power-up
+    (0, 0, 0) there, though its first page of E2E counts misses the frames the FIFO overran
+    (``powerup.saw_only_the_log`` cannot hold). A firmware that primed elsewhere is off the
+    exact heading from there: it FAILs, never PASSes by this rule."""
+    if not np.isfinite(sent_s):
+        return False
+    alive = np.sort(np.concatenate((alive_s, pose_sent_s)))
+    return first_after_stall(sent_s, enc, alive) == 0
+
+
 def alive_times(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
                 decoder: BulkDecoder) -> FloatArray:
     """The bus times of the firmware's accepted ODOM_STATUS frames (``first_after_stall``)."""
