@@ -13,7 +13,7 @@ A full queue drops the batch and counts it (``frames_dropped``): the bus never w
 The task ``can-frames`` feeds each robot's ``RobotTelemetry`` and queues its publications on the
 robot's ``RobotLink``, ``slice_frames`` frames at a time with a loop turn between slices (so a
 large fleet's tick never holds the loop for long); ``periodic`` publishes ``status`` and
-``rates``, the robots' turns spread over the period (a robot a turn, up to ``PERIODIC_SLOTS``
+``rates``, the robots' turns spread over the period (a robot a turn, up to ``periodic.SLOTS``
 turns a period); each link
 runs its own connection. Commands are validated by the robot's ``CommandEncoder`` and only then
 sent on the robot's bus, paced (``host.mqtt.pacing``: a window of frames un-answered, the rest
@@ -53,7 +53,7 @@ from odocan.host.mqtt.expiry import Expired, Fresh
 from odocan.host.mqtt.link import RobotLink, Verdict
 from odocan.host.mqtt.livecommands import PendingAck
 from odocan.host.mqtt.pacing import ACK_TIMEOUT_S, MAX_QUEUED, WINDOW_FRAMES, CommandPacer
-from odocan.host.mqtt.periodic import PeriodicTurns
+from odocan.host.mqtt.periodic import publish_in_turns
 from odocan.host.mqtt.stallwatch import StallWatch
 from odocan.host.mqtt.telemetry import Publication, RobotTelemetry
 from odocan.host.protocol.commands import (
@@ -112,8 +112,6 @@ class BridgeConfig:
     command_queue: int = MAX_QUEUED
     pace_period_s: float = 0.05  # timeouts and expiries of paced commands checked this often
 
-
-PERIODIC_SLOTS = 100  # ``status``/``rates`` turns per period at most (``Bridge._periodic``)
 
 
 class _Robot:
@@ -470,33 +468,23 @@ class Bridge:
     async def _periodic(self, clock: Callable[[], float] = time.monotonic,
                         sleep: Callable[[float], Awaitable[None]] = asyncio.sleep) -> None:
         """``status`` (at once, then every ``status_period_s``) and ``rates`` (every
-        ``rates_period_s``) of every robot, each robot in a turn of its own (up to
-        ``PERIODIC_SLOTS`` robots; more share the turns), the turns spread over the period: a
-        large fleet's periodic publications (~90 us of CPU a robot, plus the QoS-1 status's
-        round trip) never come as a burst in one loop turn, which would hold back the fleet's
-        next tick (before, 10 groups: a 50-robot worker's 5 robots a turn, ~0.5 ms more loop
-        work before one tick in ten). A loop that stalled catches up once and keeps the spread
-        (``PeriodicTurns``)."""
-        cfg = self.config
+        ``rates_period_s``) of every robot, in turns spread over the period
+        (``host.mqtt.periodic.publish_in_turns``)."""
         for robot in self.robots:  # online as soon as the link connects (retained)
             robot.link.publish(*robot.status())
-        slots = max(1, min(PERIODIC_SLOTS, len(self.robots)))
-        groups = [self.robots[slot::slots] for slot in range(slots)]
-        start_s = clock()
-        rates = PeriodicTurns(slots, cfg.rates_period_s, start_s)
-        status = PeriodicTurns(slots, cfg.status_period_s, start_s)
-        turn_s = min(cfg.status_period_s, cfg.rates_period_s) / slots
-        while True:
-            await sleep(turn_s)
-            now_s = clock()
-            for slot in rates.due(now_s):
-                for robot in groups[slot]:
-                    leaf, payload = robot.telemetry.rates(now_s)
-                    robot.link.publish(leaf, {**payload, "link": robot.link.counters(),
-                                              "pacing": robot.pacer.counters()})
-            for slot in status.due(now_s):
-                for robot in groups[slot]:
-                    robot.link.publish(*robot.status())
+        await publish_in_turns(len(self.robots),
+                               (self.config.rates_period_s, self.config.status_period_s),
+                               (self._publish_rates, self._publish_status), clock, sleep)
+
+    def _publish_rates(self, index: int, now_s: float) -> None:
+        robot = self.robots[index]
+        leaf, payload = robot.telemetry.rates(now_s)
+        robot.link.publish(leaf, {**payload, "link": robot.link.counters(),
+                                  "pacing": robot.pacer.counters()})
+
+    def _publish_status(self, index: int, _now_s: float) -> None:
+        robot = self.robots[index]
+        robot.link.publish(*robot.status())
 
     async def _pace(self) -> None:
         """Every ``pace_period_s``: the paced commands' timeouts and expiries, answered."""

@@ -3,6 +3,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Awaitable, Callable, Sequence
+
+SLOTS = 100  # turns per period at most: more robots share the turns
+
 
 class PeriodicTurns:
     """The due times of ``slots`` turns spread over ``period_s``: slot k's at
@@ -31,3 +35,28 @@ class PeriodicTurns:
             if self.due_s[slot] - self.EARLY_S <= now_s:  # a float a hair short of the period
                 self.due_s[slot] += self.period_s
         return fired
+
+
+async def publish_in_turns(robots: int, periods_s: Sequence[float],
+                           publishers: Sequence[Callable[[int, float], None]],
+                           clock: Callable[[], float],
+                           sleep: Callable[[float], Awaitable[None]]) -> None:
+    """Forever: each publisher called as (robot index, now) for every one of ``robots`` once
+    in each of its period of ``periods_s``, each robot in a turn of its own (up to ``SLOTS``
+    robots; more share the turns), the turns spread over the period: a large fleet's periodic
+    publications (~90 us of CPU a robot, plus the QoS-1 status's round trip) never come as a
+    burst in one loop turn, which would hold back the fleet's next tick (before, 10 groups: a
+    50-robot worker's 5 robots a turn, ~0.5 ms more loop work before one tick in ten). A loop
+    that stalled catches up once and keeps the spread (``PeriodicTurns``)."""
+    slots = max(1, min(SLOTS, robots))
+    groups = [range(slot, robots, slots) for slot in range(slots)]
+    start_s = clock()
+    schedules = [PeriodicTurns(slots, period_s, start_s) for period_s in periods_s]
+    turn_s = min(periods_s) / slots
+    while True:
+        await sleep(turn_s)
+        now_s = clock()
+        for schedule, publish in zip(schedules, publishers, strict=True):
+            for slot in schedule.due(now_s):
+                for robot in groups[slot]:
+                    publish(robot, now_s)
