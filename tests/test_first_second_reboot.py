@@ -114,18 +114,22 @@ def _written(messages: tuple[can.Message, ...], path: Path) -> Path:
     return path
 
 
-def _wrong(messages: tuple[can.Message, ...], reboot_at: int) -> tuple[can.Message, ...]:
-    """The firmware's frames with every ODOM_POSE_X after the reset ``X_LSB`` off (E2E
-    re-protected with the frame's own COUNTER): a firmware wrong from its second life on."""
-    out = []
+def _wrong(messages: tuple[can.Message, ...], reboot_at: int, bias_lsb: int = X_LSB,
+           from_pose: int = 0) -> tuple[can.Message, ...]:
+    """The firmware's frames with every ODOM_POSE_X after the reset (its ``from_pose``-th on)
+    ``bias_lsb`` off (E2E re-protected with the frame's own COUNTER): a firmware wrong from its
+    second life (or a pose of it) on."""
+    out, seen = [], 0
     for m in messages:
         if m.arbitration_id == fr.ODOM_POSE_X_ID and m.timestamp >= reboot_at * TICK_S:
-            signals = _decoded(m)
-            signals["X"] += X_LSB
-            data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
-            hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_POSE_X_DATA_IDS)
-            m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
-                            is_extended_id=False, timestamp=m.timestamp)
+            if seen >= from_pose:
+                signals = _decoded(m)
+                signals["X"] += bias_lsb
+                data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
+                hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_POSE_X_DATA_IDS)
+                m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
+                                is_extended_id=False, timestamp=m.timestamp)
+            seen += 1
         out.append(m)
     return tuple(out)
 

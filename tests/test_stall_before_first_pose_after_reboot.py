@@ -24,7 +24,6 @@ placement, so X 2 LSB off 1.2 s after the resumed pose PASSes analyze and the li
 
 from __future__ import annotations
 
-import itertools
 import math
 from functools import cache
 from pathlib import Path
@@ -42,10 +41,10 @@ from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.board import TICK_S
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
-from tests import host_frames as hf
 from tests.fault_rig import FaultRig
-from tests.independent_checker import Robot, _Odometry
-from tests.test_first_second_reboot import DB, _decoded, _written
+from tests.independent_checker import _Odometry
+from tests.test_first_second_reboot import _decoded, _written, _wrong
+from tests.test_stall_before_first_pose import _odometry
 
 PMIR = load("pmir")
 REBOOT = 500  # the tick the MCU is reset in (5 s)
@@ -83,17 +82,6 @@ def _poses_after_reset(messages: tuple[can.Message, ...]) -> list[dict[str, floa
         elif m.arbitration_id == fr.ODOM_POSE_Y_ID:
             poses.append({**pending, **_decoded(m)})
     return poses
-
-
-def _odometry(encoders: list[dict[str, float]], frames: list[int]) -> _Odometry:
-    """Primed on ``frames[0]``, then one step to each next frame (16-bit counters)."""
-    odo = _Odometry(Robot(PMIR.counts_per_rev, round(PMIR.wheel_radius_left_m * 1e9),
-                          round(PMIR.wheel_radius_right_m * 1e9), round(PMIR.wheelbase_m * 1e9),
-                          PMIR.counter_bits), "exact")
-    for a, b in itertools.pairwise(frames):
-        odo.step(*(round((encoders[b][side] - encoders[a][side] + 32768) % 65536 - 32768)
-                   for side in ("LEFT_COUNT", "RIGHT_COUNT")))
-    return odo
 
 
 def _gap(odo: _Odometry, pose: dict[str, float]) -> float:
@@ -170,25 +158,6 @@ def test_the_live_judges_pass_it() -> None:
         assert live.as_dict()["passed"]
 
 
-def _wrong(messages: tuple[can.Message, ...], from_pose: int, bias_lsb: int
-           ) -> tuple[can.Message, ...]:
-    """The frames with the new life's ODOM_POSE_X from its ``from_pose``-th on ``bias_lsb``
-    off (E2E re-protected with the frame's own COUNTER)."""
-    out, seen = [], 0
-    for m in messages:
-        if m.arbitration_id == fr.ODOM_POSE_X_ID and m.timestamp >= REBOOT * TICK_S:
-            if seen >= from_pose:
-                signals = _decoded(m)
-                signals["X"] += bias_lsb
-                data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
-                hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_POSE_X_DATA_IDS)
-                m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
-                                is_extended_id=False, timestamp=m.timestamp)
-            seen += 1
-        out.append(m)
-    return tuple(out)
-
-
 @pytest.mark.parametrize(("from_pose", "bias_lsb"), [(0, 10_000), (1, 10_000), (1, 100),
                                                      (20, 3), (60, 3)])
 def test_a_wrong_firmware_after_such_a_stall_fails_every_judge(
@@ -199,7 +168,7 @@ def test_a_wrong_firmware_after_such_a_stall_fails_every_judge(
     absorb it; beyond the merge's allowance from the power-up, 4.2 mm: 3 mm within it PASSes,
     as at the log's power-up), 0.3 mm 0.4 s and 1.2 s later (0.2 mm 1.2 s later PASSes: the
     loss allowance, module docstring)."""
-    messages = _wrong(drive(), from_pose, bias_lsb)
+    messages = _wrong(drive(), REBOOT, bias_lsb, from_pose)
     path = _written(messages, tmp_path / "wrong.log")
     assert not analyze(read_log(path), PMIR, "exact").passed
     monitor, bridge, end_s = _live(messages)
