@@ -17,9 +17,15 @@ landed 290 frames late; now ``reboots.stalled_first`` keeps the summary's start 
 ``stalls.primed_first`` judges the life from its power-up, the first pose left out and the
 reference placed at the resumed one within the merge's allowance, as at the log's power-up.
 
-Left: the streamed judge's life split (strict xfail below); and the firmware's ENC_E2E_LOST (11:
-the overrun's COUNTER jump mod 16) opens a loss allowance of 0.18 mm on top of the stall's
-placement, so X 2 LSB off 1.2 s after the resumed pose PASSes analyze and the live judges alike.
+The streamed judge's life split (``stream_lives.StreamLives``) keeps the summary's start by the
+same rule, told chunk by chunk (before: the life started 290 frames late there too, and the
+streamed judge FAILed the correct firmware at 1318 mm); its first pass then finds the stall
+before the life's first pose and refuses the life (``stream_first.FirstPass.refuse``, as at the
+log's power-up), so the whole log judges it: the same verdict, right or wrong firmware.
+
+Left: the firmware's ENC_E2E_LOST (11: the overrun's COUNTER jump mod 16) opens a loss
+allowance of 0.18 mm on top of the stall's placement, so X 2 LSB off 1.2 s after the resumed
+pose PASSes analyze and the live judges alike.
 """
 
 from __future__ import annotations
@@ -33,11 +39,17 @@ import pytest
 
 from odocan.firmware import frames as fr
 from odocan.host.cli.app import main
-from odocan.host.io.logs import read_log
+from odocan.host.io.logs import iter_log, read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.reboots import split_lives
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
+from odocan.host.judge.stream_e2e import StreamE2E
+from odocan.host.judge.stream_lives import StreamLives
 from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.host.protocol.dbcplan import default_plan
+from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.board import TICK_S
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
@@ -125,15 +137,31 @@ def test_analyze_passes_a_firmware_stalled_before_its_new_lifes_first_pose(
                  "--stream", "never"]) == 0
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the streamed judge's lives (stream_lives.LifeSplit._decide) start a reboot's life at the "
-    "frame its first count page names (primed.counted_start) without reboots.stalled_first's "
-    "check: the stalled MCU's page misses the frames its FIFO overran, the life starts 290 "
-    "frames late and the correct firmware FAILs at 1318 mm (the whole log PASSes)"))
 def test_the_streamed_judge_passes_it_too(tmp_path: Path) -> None:
+    """Before: FAIL at 1318 mm streamed (its life split started the life 290 frames late, where
+    the stall before its first pose is not seen). Now the life starts at the summary, the stream
+    refuses it (the stall before its first pose) and the whole log judges it: PASS."""
     path = _written(drive(), tmp_path / "reboot_stall.log")
+    with pytest.raises(NotStreamable, match="stalled before its first pose"):
+        analyze_file(path, PMIR, "exact")
     assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
                  "--stream", "always"]) == 0
+
+
+@pytest.mark.parametrize("chunk_frames", [64, 997, 1 << 20])
+def test_the_streamed_life_split_is_the_whole_logs(tmp_path: Path, chunk_frames: int) -> None:
+    """``StreamLives`` over chunks (a chunk edge between the summary, the silence, the first
+    pose and the first count page at 64 frames) cuts the lives where ``split_lives`` does: the
+    new life at its boot summary, not 290 frames later."""
+    path = _written(drive(), tmp_path / "reboot_stall.log")
+    db = default_plan()
+    whole = [(int(life.index[0]), int(life.index[-1]) + 1)
+             for life in split_lives(read_log(path), BulkDecoder(db))]
+    lives, e2e = StreamLives(BulkDecoder(db)), StreamE2E(db)
+    for chunk in iter_log(path, chunk_frames=chunk_frames):
+        lives.feed(chunk, e2e.feed(chunk))
+    assert [(span.start, span.stop) for span in lives.finish()] == whole
+    assert len(whole) == 2
 
 
 def _live(messages: tuple[can.Message, ...]) -> tuple[BusMonitor, RobotTelemetry, float]:
@@ -171,6 +199,8 @@ def test_a_wrong_firmware_after_such_a_stall_fails_every_judge(
     messages = _wrong(drive(), REBOOT, bias_lsb, from_pose)
     path = _written(messages, tmp_path / "wrong.log")
     assert not analyze(read_log(path), PMIR, "exact").passed
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 1  # streamed: the life refused, the whole log FAILs
     monitor, bridge, end_s = _live(messages)
     assert monitor.health(end_s)["pose_wrongs"]["episodes"] >= 1
     for tracker in (monitor.tracker, bridge.tracker):

@@ -5,11 +5,16 @@ A reboot is a summary (ODOM_STATUS page 0, CRC holding) that ``SourceWatch`` cal
 bus order as in the whole log. Its life starts at the summary, at the latest accepted encoder
 frame before it (UPTIME 0, not INIT), or at the encoder frame its first page of WHEEL_ENCODERS
 E2E counts names (``primed.counted_start``: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back
-from that page's latest encoder frame, when the page comes before the next reboot). Carried:
-the watch, the positions and COUNTERs of the last 2^16 accepted encoder frames (ENC_E2E_OK is
-a wrapping u16: no page names one further back), and the
-reboot still waiting for its first count page. A reboot's start is final at its first count
-page, at the next reboot or at the end of the log; lives are contiguous ranges of frames."""
+from that page's latest encoder frame, when the page comes before the next reboot), except when
+the new firmware stalled before its first pose (``reboots.stalled_first``: its page misses the
+frames its halted MCU's FIFO overran). Carried: the watch, the positions, COUNTERs and bus times
+of the last 2^16 accepted encoder frames (ENC_E2E_OK is a wrapping u16: no page names one
+further back), the reboot still waiting for its first count page, and per reboot whose first
+pose is not told yet its last ODOM_STATUS (CRC holding) and that pose (``_track``). A reboot's
+start is final at its first count page when its first pose came before it, else at that pose
+(``_settle``), at the next reboot or at the end of the log; lives are contiguous ranges of
+frames. A silence longer than the carried frames (2^16 cycles) is told on them: far more than
+``SILENCE_CYCLES`` on time either way."""
 
 from __future__ import annotations
 
@@ -38,8 +43,9 @@ from odocan.host.judge.bootticks import (
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
-from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError
+from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Encoders, contract_cycle_s
 from odocan.host.judge.sources import SourceWatch, two_sources_text
+from odocan.host.judge.stalls import first_after_stall
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 ENCODERS_KEPT = 1 << 16  # accepted encoder frames remembered (ENC_E2E_OK is a u16)
@@ -66,6 +72,11 @@ class _Boot:
     before_s: int
     start: int  # from the summary (``reboots._life_start``)
     named: int | None = None  # named by its power-up pose (``bootnamed.named_start``)
+    paged: bool = False  # its first count page was heard (its start from it: ``counted``)
+    counted: int | None = None  # ``primed.counted_start`` of that page
+    talked_s: float | None = None  # its last ODOM_STATUS (CRC holding) before its first pose
+    pose: tuple[int, float] | None = None  # its first ODOM_POSE_Y: log position, bus time
+    stalled: bool | None = None  # ``reboots.stalled_first`` (None: not told yet)
 
 
 @dataclass
@@ -80,6 +91,9 @@ class StreamLives:
         default_factory=lambda: np.zeros(0, dtype=np.int64))
     _counters: npt.NDArray[np.int64] = field(  # the COUNTER of each of ``_encoders``
         default_factory=lambda: np.zeros(0, dtype=np.int64))
+    _enc_t: npt.NDArray[np.float64] = field(  # the bus time of each of ``_encoders``
+        default_factory=lambda: np.zeros(0, dtype=np.float64))
+    _tracking: list[_Boot] = field(default_factory=list)  # reboots before their first pose
     _waiting: _Boot | None = None  # the last reboot, before its first count page
     _boots: list[tuple[_Boot, int]] = field(default_factory=list)  # with their final start
     _summaries: bool = True  # the DBC's ODOM_STATUS has UPTIME and STATE on its summary page
@@ -104,22 +118,26 @@ class StreamLives:
         self._encoders = np.concatenate(
             (self._encoders, rows["index"][keep].astype(np.int64) + self._offset))
         self._counters = np.concatenate((self._counters, rows["COUNTER"][keep].astype(np.int64)))
+        self._enc_t = np.concatenate((self._enc_t, rows["timestamp_s"][keep].astype(np.float64)))
         self._powerups = carried_on(self._powerups,
                                     powerup_poses(chunk, self.decoder, self._offset))
         events = sorted(self._deferred + self._boot_events(chunk) + self._page_events(chunk),
                         key=lambda event: event[0])
+        self._track(chunk)
         waits = self._ahead[0].position if self._ahead is not None else None
         self._deferred = [] if waits is None else [e for e in events if e[0] > waits]
         self._run(events if waits is None else [e for e in events if e[0] <= waits])
+        self._settle()
         self._encoders = self._encoders[-ENCODERS_KEPT:]
         self._counters = self._counters[-ENCODERS_KEPT:]
+        self._enc_t = self._enc_t[-ENCODERS_KEPT:]
         self._offset += len(chunk)
 
     def _run(self, events: list[tuple[int, _Boot | tuple[int, int]]]) -> None:
         """Reboots and count pages in log order."""
         for position, boot in events:
             if isinstance(boot, _Boot):
-                self._decide(None)
+                self._decide(None, limit=position)
                 self._waiting = boot
             else:
                 self._decide((position, boot))
@@ -161,21 +179,78 @@ class StreamLives:
             mark_two_sources(report, self.conflict[1], n_frames - self._cut)
         return report
 
-    def _decide(self, page: tuple[int, tuple[int, int]] | None) -> None:
+    def _decide(self, page: tuple[int, tuple[int, int]] | None, limit: int | None = None
+                ) -> None:
         """The waiting reboot's start, from its first count page (position, (ENC_E2E_OK,
-        ENC_E2E_LOST)) or without one."""
+        ENC_E2E_LOST)) or without one (``limit``: the next reboot's position, None: the log's
+        end). A page heard before the reboot's first pose waits for it (``_settle``)."""
         boot = self._waiting
-        if boot is None:
+        if boot is None or (page is not None and boot.paged):  # its first page only
             return
-        self._waiting = None
-        start = boot.start
         if page is not None:
-            counted = counted_start((self._encoders, self._counters), page[0], *page[1])
-            if counted is not None and counted > (self._boots[-1][1] if self._boots else 0):
-                start = counted
-        if boot.named is not None and boot.named > (self._boots[-1][1] if self._boots else 0):
+            boot.paged = True
+            boot.counted = counted_start((self._encoders, self._counters), page[0], *page[1])
+            if boot.pose is None or boot.pose[0] > page[0]:  # whether it stalled before
+                return  # its first pose: told at that pose, unless a reboot comes first
+        self._waiting = None
+        previous = self._boots[-1][1] if self._boots else 0
+        start = boot.start
+        if boot.counted is not None and boot.counted > previous and not self._stalled(boot, limit):
+            start = boot.counted
+        if boot.named is not None and boot.named > previous:
             start = boot.named  # the power-up pose's word last (``reboots.split_lives``)
         self._boots.append((boot, start))
+        self._tracking = [other for other in self._tracking if other is not boot]
+
+    def _track(self, chunk: FrameArrays) -> None:
+        """The chunk's part of ``reboots.stalled_first`` for each reboot before its first pose
+        (``_tracking``): its last ODOM_STATUS whose CRC holds from its summary on, its first
+        ODOM_POSE_Y; told once an accepted encoder frame after that pose is carried (the last
+        frame of the silence is on time or not by the next one: ``stalls.frames_on_time``)."""
+        if not self._tracking:
+            return
+        ys = self.decoder.select(chunk, "ODOM_POSE_Y").astype(np.int64) + self._offset
+        status = self.decoder.select(chunk, "ODOM_STATUS")
+        good = status[crc_holds(chunk, self.decoder, status)]
+        good_at = good.astype(np.int64) + self._offset
+        for boot in self._tracking:
+            if boot.pose is None:
+                after = ys[ys > boot.position]
+                stop = int(after[0]) if len(after) else None
+                talked = good[(good_at >= boot.position)
+                              & (good_at < (np.iinfo(np.int64).max if stop is None else stop))]
+                if len(talked):
+                    boot.talked_s = float(chunk.timestamp_s[talked[-1]])
+                if stop is not None:
+                    boot.pose = (stop, float(chunk.timestamp_s[stop - self._offset]))
+            if boot.pose is not None and boot.stalled is None and bool(
+                    (self._enc_t >= boot.pose[1]).any()):
+                boot.stalled = self._stalled(boot, None)
+        self._tracking = [boot for boot in self._tracking if boot.stalled is None]
+
+    def _stalled(self, boot: _Boot, limit: int | None) -> bool:
+        """``reboots.stalled_first`` for ``boot`` (its life up to ``limit``), on the carried
+        encoder frames."""
+        if boot.pose is None or (limit is not None and boot.pose[0] >= limit):
+            return False  # no pose in its life
+        if boot.stalled is not None:
+            return boot.stalled
+        if boot.talked_s is None:
+            return False
+        n = np.arange(len(self._enc_t), dtype=np.int64)
+        enc = Encoders(n, n, n, n, n, self._enc_t, contract_cycle_s(self.decoder,
+                                                                    "WHEEL_ENCODERS"))
+        return first_after_stall(boot.pose[1], enc, np.array([boot.talked_s])) is not None
+
+    def _settle(self) -> None:
+        """The waiting reboot whose first count page came before its first pose, decided once
+        that pose is told and no summary before it is still waiting (``_ahead``: it may be a
+        reboot, the life's limit)."""
+        boot = self._waiting
+        if (boot is not None and boot.paged and boot.pose is not None
+                and boot.stalled is not None
+                and (self._ahead is None or self._ahead[0].position > boot.pose[0])):
+            self._decide(None, limit=None)
 
     def _boot_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | tuple[int, int]]]:
         """The chunk's reboots (``reboots._boot_summaries``), at their positions in the log."""
@@ -240,7 +315,9 @@ class StreamLives:
         start = int(earlier[-1]) if uptime_s == 0 and name != "INIT" and len(earlier) else at
         named = (named_start(self._powerups, (self._encoders, self._counters), at, t_s)
                  if uptime_s == 0 else None)
-        return _Boot(at, uptime_s, t_s, before, start, named)
+        boot = _Boot(at, uptime_s, t_s, before, start, named)
+        self._tracking.append(boot)
+        return boot
 
     def _ahead_posed(self, rows: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64],
                                        npt.NDArray[np.int64]],
