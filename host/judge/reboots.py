@@ -61,9 +61,9 @@ from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.primed import counted_start
-from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Encoders, contract_cycle_s
+from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
 from odocan.host.judge.sources import SourceWatch, two_sources_text
-from odocan.host.judge.stalls import first_after_stall
+from odocan.host.judge.stalls import stalled_before
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -118,7 +118,7 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
 def stalled_first(frames: FrameArrays, decoder: BulkDecoder, encoders: npt.NDArray[np.intp],
                   position: int, limit: int) -> bool:
     """Whether the firmware booted by the summary at ``position`` stalled before its first pose
-    (``stalls.first_after_stall`` on the life up to ``limit``, the next boot: silent for
+    (``stalls.stalled_before`` on the life up to ``limit``, the next boot: silent for
     ``SILENCE_CYCLES`` cycles after its last ODOM_STATUS whose CRC holds while the encoder
     frames, accepted at ``encoders``, went on on time). A stalled MCU's receive FIFO overran
     frames it never counted, so its first page of E2E counts cannot name the frame it primed on
@@ -130,10 +130,8 @@ def stalled_first(frames: FrameArrays, decoder: BulkDecoder, encoders: npt.NDArr
     status = decoder.select(frames, "ODOM_STATUS")
     status = status[(status >= position) & (status < ys[0])]
     alive_s = frames.timestamp_s[status[crc_holds(frames, decoder, status)]]
-    t_s = frames.timestamp_s[encoders]
-    n = np.arange(len(encoders), dtype=np.int64)
-    enc = Encoders(n, n, n, n, n, t_s, contract_cycle_s(decoder, "WHEEL_ENCODERS"))
-    return first_after_stall(float(frames.timestamp_s[ys[0]]), enc, alive_s) is not None
+    return stalled_before(float(frames.timestamp_s[ys[0]]), frames.timestamp_s[encoders],
+                          contract_cycle_s(decoder, "WHEEL_ENCODERS"), alive_s)
 
 
 def _life_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[np.intp]) -> int:

@@ -94,6 +94,16 @@ def first_after_stall(sent_s: float, enc: Encoders, alive_s: FloatArray | None) 
     return int(lo[0]) if bool(quiet[0]) and int(lo[0]) < len(enc.timestamp_s) else None
 
 
+def stalled_before(sent_s: float, enc_t_s: FloatArray, cycle_s: float | None,
+                   alive_s: FloatArray) -> bool:
+    """``first_after_stall`` on the encoder frames' bus times alone (all it reads of them):
+    whether a firmware's first sample, sent at ``sent_s``, came after a stall since its last
+    frame of ``alive_s`` (a reboot's life, ``reboots.stalled_first`` and ``stream_lives``)."""
+    n = np.arange(len(enc_t_s), dtype=np.int64)
+    enc = Encoders(n, n, n, n, n, enc_t_s, cycle_s)
+    return first_after_stall(sent_s, enc, alive_s) is not None
+
+
 def primed_first(sent_s: float, enc: Encoders, alive_s: FloatArray,
                  pose_sent_s: FloatArray) -> bool:
     """A rebooted firmware's life (its frames from its boot summary) whose first sample, sent

@@ -43,9 +43,9 @@ from odocan.host.judge.bootticks import (
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
-from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Encoders, contract_cycle_s
+from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
 from odocan.host.judge.sources import SourceWatch, two_sources_text
-from odocan.host.judge.stalls import first_after_stall
+from odocan.host.judge.stalls import stalled_before
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 ENCODERS_KEPT = 1 << 16  # accepted encoder frames remembered (ENC_E2E_OK is a u16)
@@ -237,10 +237,9 @@ class StreamLives:
             return boot.stalled
         if boot.talked_s is None:
             return False
-        n = np.arange(len(self._enc_t), dtype=np.int64)
-        enc = Encoders(n, n, n, n, n, self._enc_t, contract_cycle_s(self.decoder,
-                                                                    "WHEEL_ENCODERS"))
-        return first_after_stall(boot.pose[1], enc, np.array([boot.talked_s])) is not None
+        return stalled_before(boot.pose[1], self._enc_t,
+                              contract_cycle_s(self.decoder, "WHEEL_ENCODERS"),
+                              np.array([boot.talked_s]))
 
     def _settle(self) -> None:
         """The waiting reboot whose first count page came before its first pose, decided once
