@@ -22,7 +22,7 @@ from pathlib import Path
 
 import can
 
-from odocan.host.io.listeners import Recording
+from odocan.host.io.recording import Recording
 from odocan.host.outputs import OutputError
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.report.progress import progress
@@ -40,7 +40,7 @@ def start_rig(
 ) -> LockstepRig:
     """The rig on ``listeners`` and, unless a stop was already asked, the ``log``'s writer.
     A rig that cannot be built (a refusal, a second signal) finishes the log it opened."""
-    recording = _open_log(log) if log is not None and not stop.stop_requested else None
+    recording = None if log is None or stop.stop_requested else _open_log(log, config.channel)
     if recording is not None:
         listeners.append(recording)
     try:
@@ -53,12 +53,13 @@ def start_rig(
         raise
 
 
-def _open_log(path: Path) -> Recording:
-    """python-can's writer for ``path`` (by extension); an error names the path. A write that
+def _open_log(path: Path, channel: str) -> Recording:
+    """python-can's writer for ``path`` (by extension), of the rig's ``channel``; an error names
+    the path. A write that
     fails mid-run (a full disk) stops the recording, not the run: the summary is printed, then
     the error with the path (``rig.close()`` raises it, ``_run_and_analyze`` returns it)."""
     try:
-        return Recording(can.Logger(path))
+        return Recording(can.Logger(path), channel)
     except OSError as exc:
         raise OutputError(f"--log {path}: {exc.strerror or exc}") from None
 

@@ -58,36 +58,3 @@ def isolate(listeners: Iterable[can.Listener]) -> list[can.Listener]:
     """Each listener wrapped in ``Isolated`` (already isolated ones kept as they are)."""
     return [lst if isinstance(lst, Isolated) else Isolated(lst) for lst in listeners]
 
-
-class Recording(can.Listener):
-    """A python-can log writer (``can.Logger``) whose first write error -- a full disk, a
-    vanished mount -- stops the recording, never the run that feeds it; ``stop()`` finishes the
-    file and then raises that error as an ``OSError`` saying how many frames were written, for
-    the caller to name the path (``odocan run --log``)."""
-
-    def __init__(self, writer: can.Listener) -> None:
-        self.writer = writer
-        self.frames = 0
-        self.failure: OSError | None = None
-
-    def on_message_received(self, msg: can.Message) -> None:
-        """Write ``msg`` (counted); after a failure, nothing more."""
-        if self.failure is not None:
-            return
-        try:
-            self.writer.on_message_received(msg)
-        except OSError as exc:
-            self.failure = exc
-            return
-        self.frames += 1
-
-    def stop(self) -> None:
-        """Finish the file; then the first error, if any, with the frames written."""
-        try:
-            self.writer.stop()
-        except OSError as exc:
-            self.failure = self.failure or exc
-        if self.failure is not None:
-            reason = self.failure.strerror or str(self.failure)
-            raise OSError(self.failure.errno,
-                          f"{reason} (recording stopped after {self.frames} frames)")

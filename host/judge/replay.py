@@ -48,12 +48,12 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.firmware.config import RobotParams
-from odocan.host.io.listeners import Recording
 from odocan.host.io.logs import (
     FrameArrays,
     FrameCollector,
     to_message,
 )
+from odocan.host.io.recording import Recording
 from odocan.host.judge.analysis import Analysis, Tolerance, analyze
 from odocan.host.judge.diagnosis import fitting_profiles
 from odocan.host.judge.replay_compare import (
@@ -336,11 +336,11 @@ def replay_and_analyze(
     listeners: list[can.Listener] = [collector]
     stop = StopRequest()
     with stop_on_signals(stop):  # from the log's opening to its end: a signal only asks
+        channel = f"odocan-replay-{next(_REPLAY_CHANNELS)}"
         recording = None if log_out is None or stop.stop_requested else \
-            Recording(can.Logger(log_out))  # a full disk stops it, not the replay (path named)
+            Recording(can.Logger(log_out), channel)  # a full disk stops it, not the replay
         listeners += [] if recording is None else [recording]
         try:
-            channel = f"odocan-replay-{next(_REPLAY_CHANNELS)}"
             replay = LockstepReplay(firmware_params(profile, integrator), listeners, channel)
         except BaseException:
             release_all([li.stop for li in listeners])  # the log opened is finished

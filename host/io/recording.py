@@ -1,0 +1,110 @@
+"""``--log``: a run's frames to python-can's log writer (``can.Logger``), a simulated second at a
+time, a full disk stopping the recording and never the run.
+
+``Recording`` is a ``FrameBatchListener``: the lockstep rig and the replay hand it the frames
+their instant ``odocan`` handle queued (``sim.tickloop``), as ``(timestamp, id, payload)``
+tuples, no ``Message`` built. For a candump ``.log`` (python-can's ``CanutilsLogWriter``) it
+writes the lines that writer writes for the ``Message`` the handle's ``recv`` would give (an 11-bit
+data frame received on ``channel``), byte for byte, a batch in one write: half a whole-process
+``odocan run --log`` of an hour went into building a ``Message`` per frame and formatting it
+(``bench/rig.py``). Other formats (``.asc``, ``.blf``) get that ``Message``.
+"""
+
+from __future__ import annotations
+
+import can
+from can.io.canutils import CanutilsLogWriter
+
+from odocan.sim.framebatch import FrameBatchListener, Received
+from odocan.sim.transport import data_frame
+
+
+class Recording(FrameBatchListener):
+    """A python-can log writer (``can.Logger``) whose first write error -- a full disk, a
+    vanished mount -- stops the recording, never the run that feeds it; ``stop()`` finishes the
+    file and then raises that error as an ``OSError`` saying how many frames were written, for
+    the caller to name the path (``odocan run --log``). ``channel``: the name of the handle
+    whose batches it is given (what ``recv`` would have stamped on each frame). Passive: it only
+    writes, so a run may hand it a simulated second at once (``FrameBatchListener.passive``)."""
+
+    passive = True
+
+    def __init__(self, writer: can.Listener, channel: str = "vcan0") -> None:
+        self.writer = writer
+        self.channel = channel
+        self.frames = 0
+        self.failure: OSError | None = None
+        self._candump = type(writer) is CanutilsLogWriter and not channel.isdigit()
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """Write ``msg`` (counted); after a failure, nothing more."""
+        if self.failure is not None:
+            return
+        try:
+            self.writer.on_message_received(msg)
+        except OSError as exc:
+            self.failure = exc
+            return
+        self.frames += 1
+
+    def on_frames(self, frames: list[Received]) -> None:
+        """Write a batch, in order: a candump log's data-frame tuples as its lines, in one write;
+        anything else frame by frame through the writer (``on_message_received``)."""
+        if self.failure is not None:
+            return
+        if not self._candump:
+            for frame in frames:
+                self.on_message_received(self._message(frame))
+            return
+        lines: list[str] = []
+        for frame in frames:
+            if isinstance(frame, tuple):
+                lines.append(self._candump_line(*frame))
+            else:
+                self._write_lines(lines)
+                lines = []
+                self.on_message_received(frame)
+        self._write_lines(lines)
+
+    def _message(self, frame: Received) -> can.Message:
+        """The ``Message`` ``recv`` gives for a queued frame (``OdocanBus.as_message``)."""
+        if not isinstance(frame, tuple):
+            return frame
+        msg = data_frame(*frame)
+        msg.channel = self.channel
+        return msg
+
+    def _candump_line(self, timestamp_s: float, can_id: int, data: bytes) -> str:
+        """``CanutilsLogWriter``'s line for a received 11-bit data frame: its stamp never below
+        the log's first (the writer's ``last_timestamp``, set by its first frame)."""
+        writer = self.writer
+        assert isinstance(writer, CanutilsLogWriter)
+        first_s = writer.last_timestamp
+        if first_s is None:
+            first_s = writer.last_timestamp = timestamp_s or 0.0
+        stamp_s = first_s if timestamp_s < first_s else timestamp_s
+        return f"({stamp_s:f}) {self.channel} {can_id:03X}#{data.hex().upper()} R\n"
+
+    def _write_lines(self, lines: list[str]) -> None:
+        """Lines formatted by ``_candump_line``, in one write, counted when written."""
+        if not lines or self.failure is not None:
+            return
+        writer = self.writer
+        assert isinstance(writer, CanutilsLogWriter)
+        try:
+            writer.file.write("".join(lines))
+        except OSError as exc:
+            self.failure = exc
+            return
+        self.frames += len(lines)
+
+    def stop(self) -> None:
+        """Finish the file; then the first error, if any, with the frames written."""
+        try:
+            self.writer.stop()
+        except OSError as exc:
+            self.failure = self.failure or exc
+        if self.failure is not None:
+            reason = self.failure.strerror or str(self.failure)
+            raise OSError(self.failure.errno,
+                          f"{reason} (recording stopped after {self.frames} frames)")
