@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 
 from odocan.host.judge.reference import Geometry
-from odocan.host.mqtt import fleetrun
+from odocan.host.mqtt import fleetjudge, fleetrun
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim import fleet as sim_fleet
 from odocan.sim import robot
@@ -73,7 +73,7 @@ def run_overloaded(monkeypatch: pytest.MonkeyPatch, clock: Callable[[], Any], *,
     with Fleet(config) as fleet:
         telemetry = [RobotTelemetry(name, Geometry.of(profile), config.integrator,
                                     counter_bits=profile.counter_bits) for name in fleet.names]
-        fleetrun.watch_halts(fleet, telemetry)  # as run_fleet does
+        fleetjudge.watch_halts(fleet, telemetry)  # as run_fleet does
 
         def on_batch(batch: Batch) -> None:
             for i, frame in batch:

@@ -18,7 +18,7 @@ import pytest
 
 from odocan.firmware import frames as fr
 from odocan.host.judge.reference import Geometry
-from odocan.host.mqtt.fleetrun import judge_robot
+from odocan.host.mqtt.fleetjudge import judge_robot
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim import fleet as sim_fleet
 from odocan.sim import robot

@@ -24,7 +24,8 @@ from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import fleetrun
 from odocan.host.mqtt.bridge import RobotEndpoint
 from odocan.host.mqtt.broker import LOOPBACK, free_loopback_port
-from odocan.host.mqtt.fleetrun import failures, judge_robot
+from odocan.host.mqtt.fleetjudge import judge_robot
+from odocan.host.mqtt.fleetrun import failures
 from odocan.host.mqtt.shards import Shard, aggregate, split
 from odocan.sim import fleet as sim_fleet
 from odocan.sim import robot

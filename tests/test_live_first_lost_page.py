@@ -33,7 +33,7 @@ from odocan.host.io.logs import parse_candump
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_analysis import analyze_file
-from odocan.host.mqtt.fleetrun import judge_robot
+from odocan.host.mqtt.fleetjudge import judge_robot
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim import fleet as sim_fleet
 from odocan.sim import robot

@@ -28,7 +28,7 @@ from odocan.host.judge.livegapseen import end_of_watch
 from odocan.host.judge.livepose import Sample
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
-from odocan.host.mqtt.fleetrun import watched_verdict
+from odocan.host.mqtt.fleetjudge import watched_verdict
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from tests.independent_checker import Robot, _Odometry, check
 from tests.synth_log import Synth, synthesize
@@ -251,7 +251,7 @@ def test_the_samples_held_when_the_watch_ends_are_judged(tmp_path: Path) -> None
 
 def test_the_fleets_verdict_judges_the_samples_held_when_the_watch_ends(tmp_path: Path) -> None:
     """The same log through the bridge: the fleet's verdict at the end of its run
-    (``fleetrun.watched_verdict``) judges the new start's samples still held: FAIL (before: only
+    (``fleetjudge.watched_verdict``) judges the new start's samples still held: FAIL (before: only
     a held hole's choice was made there, and the wrong samples were never judged: PASS)."""
     drive = DRIVES["straight32"]
     path = _log(tmp_path, drive, "x_bias_100um", dict.fromkeys(range(420, STEPS + 1), 3),

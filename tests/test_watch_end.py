@@ -33,7 +33,7 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerURL
-from odocan.host.mqtt.fleetrun import watched_verdict
+from odocan.host.mqtt.fleetjudge import watched_verdict
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.robot import load

@@ -26,7 +26,7 @@ telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects) and its
 aborted). When the bridge stops, every command taken and not answered yet is answered
 ``aborted`` (the reason says whether it ran) before the links say ``offline`` and disconnect,
 and a command that arrives meanwhile is answered ``aborted`` too, not sent. With an
-``end_rule`` (``odocan bridge``'s), each robot is judged once its watch ended
+``end_rule`` (``odocan bridge``'s, ``odocan fleet``'s), each robot is judged once its watch ended
 (``host.mqtt.endverdict``) and its ``offline`` status carries that verdict as ``watch_verdict``
 (``end_verdicts``: the same verdicts, for the bridge's lines and exit code).
 """
@@ -48,7 +48,7 @@ from odocan.host.mqtt import topics
 from odocan.host.mqtt.broker import BrokerURL, first_error
 from odocan.host.mqtt.clientids import DEFAULT_PREFIX, reader_client_id
 from odocan.host.mqtt.cmdreader import COMMAND_QUEUE, CommandReader, RobotCommands
-from odocan.host.mqtt.endverdict import EndRule, EndVerdict
+from odocan.host.mqtt.endverdict import EndJudge, EndVerdict
 from odocan.host.mqtt.expiry import Expired, Fresh
 from odocan.host.mqtt.link import RobotLink, Verdict
 from odocan.host.mqtt.livecommands import PendingAck
@@ -289,10 +289,10 @@ class Bridge:
     """CAN <-> MQTT for ``robots`` (see the module docstring)."""
 
     def __init__(self, robots: Sequence[RobotEndpoint], *, config: BridgeConfig,
-                 end_rule: EndRule | None = None) -> None:
+                 end_rule: EndJudge | None = None) -> None:
         """``end_rule``: how each robot is judged when its watch ends, the verdict its
-        ``offline`` status carries (``watch_verdict``); None: none (a fleet's verdict is its
-        report's, which weighs its loop's overload)."""
+        ``offline`` status carries (``watch_verdict``; ``odocan bridge``'s ``EndRule``, ``odocan
+        fleet``'s ``FleetEndRule``); None: none."""
         self.config = config
         self.end_rule = end_rule
         names = [r.name for r in robots]

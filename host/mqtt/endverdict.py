@@ -20,14 +20,15 @@ The verdict is data too (``EndVerdict.as_dict``): the retained ``offline`` statu
 ``watch_verdict`` (``host.mqtt.bridge``), so a dashboard that subscribes after the bridge stopped
 reads what the line said: ``{"verdict": "FAIL", "reason": "the on-board pose was wrong ...",
 "pose_error": {...}}``, ``pose_error`` the worst wrong episode the line names (null when it
-names none). Computed once, when the watch ends, before the links say ``offline``: the line and
-the status are the same verdict.
+names none), ``loop`` null (``odocan fleet``'s statuses carry the same verdict, their real-time
+loop's deadline figures in ``loop``: ``host.mqtt.fleetjudge``). Computed once, when the watch
+ends, before the links say ``offline``: the line and the status are the same verdict.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 from odocan.host.judge.watchverdict import REQUIRE_FIRMWARE, failures, nothing_judged
 
@@ -43,11 +44,13 @@ class EndVerdict:
     """A robot's verdict: ``verdict`` its name, ``reason`` what its line says after the name,
     ``pose_error`` the worst wrong pose episode the reason names (``posewrongs.Episode`` as a
     dict: ``dpos_mm``, ``beyond_mm``, ``dheading_mrad``, ``t_s``, ``enc_seq``, ...; None when
-    it names none)."""
+    it names none); ``loop``: the deadline figures of the fleet's real-time loop that ran the
+    robot (``host.mqtt.fleetjudge.loop_figures``; None: a bridge has no such loop)."""
 
     verdict: VerdictName
     reason: str
     pose_error: dict[str, Any] | None = None
+    loop: dict[str, Any] | None = None
 
     @property
     def text(self) -> str:
@@ -60,9 +63,19 @@ class EndVerdict:
         return self.verdict == "FAIL"
 
     def as_dict(self) -> dict[str, Any]:
-        """``{"verdict", "reason", "pose_error"}`` (JSON-ready): the ``offline`` status's
+        """``{"verdict", "reason", "pose_error", "loop"}`` (JSON-ready): the ``offline`` status's
         ``watch_verdict``."""
         return asdict(self)
+
+
+class EndJudge(Protocol):
+    """What judges a bridge's robots when their watch ends (``Bridge(end_rule=...)``):
+    ``EndRule`` (``odocan bridge``), ``fleetjudge.FleetEndRule`` (``odocan fleet``)."""
+
+    def judge(self, telemetry: RobotTelemetry, profile_name: str | None) -> EndVerdict:
+        """``telemetry``'s verdict, its watch ended; ``profile_name``: the robot profile it is
+        judged as (``--robot``)."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -91,7 +104,7 @@ def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
         fails.append(f"{why} {REQUIRE_FIRMWARE}")
     if fails:
         return EndVerdict("FAIL", "; ".join(fails) + _mismatch(telemetry),
-                          _pose_error(telemetry))
+                          worst_episode(telemetry))
     if why:
         return EndVerdict("UNJUDGED", f"{why} (--require-firmware fails it)"
                           + _mismatch(telemetry))
@@ -102,7 +115,7 @@ def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
                       + _mismatch(telemetry))
 
 
-def _pose_error(telemetry: RobotTelemetry) -> dict[str, Any] | None:
+def worst_episode(telemetry: RobotTelemetry) -> dict[str, Any] | None:
     """The worst wrong pose episode, as the FAIL line names it (``failures``: when an episode
     was latched), as a dict; None when the pose was never wrong."""
     wrongs = telemetry.tracker.wrongs

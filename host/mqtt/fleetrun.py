@@ -43,6 +43,10 @@ against the ground truth (SIM_TRUTH) is reported, never judged: it is the odomet
 the firmware's arithmetic. When the bridge dropped frames (queue full), the references miss encoder
 steps, so no robot is judged (UNJUDGED) and the run fails for that reason instead of blaming a
 correct firmware. Without the bridge nothing watches the poses: ``verdict`` is null.
+Each robot is judged once, by the bridge's end rule (``host.mqtt.fleetjudge.FleetEndRule``)
+when the watch ended, after the clock stopped and before the links say ``offline``: its entry
+here and the ``watch_verdict`` its retained ``offline`` status carries are that one judgement
+(with the loop's deadline figures against ``max_miss_ratio``, ``loop``).
 ``failures(report, max_miss_ratio)`` is the run's verdict: the thresholds broken, one line each.
 
 ``bridge`` holds ``Bridge.counters()``: frames dropped or failed, telemetry dropped (buffer full)
@@ -67,17 +71,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from odocan.host.judge.livefit import pose_wrong
-from odocan.host.judge.livepose import ErrorStats
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerError, BrokerURL, first_error
 from odocan.host.mqtt.clientids import DEFAULT_PREFIX
-from odocan.host.mqtt.haltstretch import HaltStretches
+from odocan.host.mqtt.fleetjudge import (
+    DEFAULT_MAX_MISS_RATIO,
+    FleetEndRule,
+    halted_of,
+    watch_halts,
+    watched_verdict,
+)
 from odocan.host.mqtt.options import broker_for
-from odocan.host.mqtt.overload import Halted, after_halts
-from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.host.mqtt.ticktrace import TickTrace, from_env, young_collection
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.host.stopped import Stopped
@@ -103,6 +109,9 @@ class FleetRun:
     # SecOC (fleet.secoc_key): robots whose bridge is given no key (a misprovisioned bridge: the
     # firmware refuses their secured commands, NACK AUTH_MISSING); every other bridge signs
     secoc_unsigned: frozenset[str] = frozenset()
+    # the deadline_miss_ratio its run may reach (``--max-miss-ratio``): each robot's ``offline``
+    # status says whether its loop broke it (``fleetjudge.loop_figures``)
+    max_miss_ratio: float = DEFAULT_MAX_MISS_RATIO
 
 
 StartHook = Callable[[int, "BrokerURL | None"], None]
@@ -125,7 +134,10 @@ async def run_fleet(
             return {**_report(run, fleet, stats, None, None, False), "cpu_s": cpu_s,
                     "stopped": stopped, **durations(run.duration_s, stopped)}
         async with broker_for(run.broker) as (url, embedded):
-            bridge = Bridge(_endpoints(fleet, run), config=BridgeConfig(
+            # each robot judged once, when the watch ends: its report entry, its offline status
+            rule = FleetEndRule(fleet, lambda: bridge.frames_dropped + bridge.frames_failed,
+                                run.max_miss_ratio)
+            bridge = Bridge(_endpoints(fleet, run), end_rule=rule, config=BridgeConfig(
                 broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix,
                 connect_timeout_s=run.connect_timeout_s, command_expiry_s=run.command_expiry_s))
             watch_halts(fleet, [robot.telemetry for robot in bridge.robots])
@@ -139,10 +151,12 @@ async def run_fleet(
                     stats, cpu_s, stopped = await _paced(
                         fleet, run.duration_s, bridge.offer,
                         lambda: _started(on_start, fleet, url), on_progress, trace)
+                    rule.stats = stats  # the clock stopped: the loop's figures are final
                     stop.set()
             except BaseExceptionGroup as group:
                 raise first_error(group) from None
-            return {**_report(run, fleet, stats, bridge, url, embedded), "cpu_s": cpu_s,
+            return {**_report(run, fleet, stats, bridge, url, embedded, rule.entries),
+                    "cpu_s": cpu_s,
                     "stopped": stopped, **durations(run.duration_s, stopped)}
 
 
@@ -327,8 +341,11 @@ def _signer(run: FleetRun, name: str) -> SecocSigner | None:
 
 def _report(
     run: FleetRun, fleet: Fleet, stats: DeadlineStats, bridge: Bridge | None,
-    url: BrokerURL | None, embedded: bool,
+    url: BrokerURL | None, embedded: bool, judged: dict[str, dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
+    """The report (module docstring); ``judged``: each robot's verdict entry as the bridge's
+    end rule made it when the watch ended (``FleetEndRule.entries``, the verdicts the
+    ``offline`` statuses carry), None: judged here (``watched_verdict``)."""
     per_robot = {}
     dropped = 0 if bridge is None else bridge.frames_dropped + bridge.frames_failed
     for i, name in enumerate(fleet.names):
@@ -340,7 +357,8 @@ def _report(
             robot = bridge.robots[i]
             entry["commands_accepted"] = robot.commands_sent
             entry["commands_rejected"] = robot.commands_rejected
-            entry.update(watched_verdict(robot.telemetry, dropped, _halted(fleet, i, stats)))
+            entry.update(judged[name] if judged is not None else
+                         watched_verdict(robot.telemetry, dropped, halted_of(fleet, i, stats)))
         else:
             entry.update(pose_vs_reference=None, pose_vs_truth=None, verdict=None,
                          reason="no bridge: the poses were not watched")
@@ -362,81 +380,6 @@ def _report(
         "bridge": None if bridge is None else bridge.counters(),
         "per_robot": per_robot,
     }
-
-
-def watch_halts(fleet: Fleet, telemetry: list[RobotTelemetry]) -> None:
-    """Each robot's telemetry judges its samples between the loop's halts
-    (``host.mqtt.haltstretch``; nothing to do until the loop halts the boards)."""
-    for i, robot in enumerate(telemetry):
-        robot.stretches = HaltStretches(robot.tracker, fleet.halt_ticks, fleet.offset_ticks(i),
-                                        fleet.halt_gaps)
-
-
-def _halted(fleet: Fleet, index: int, stats: DeadlineStats) -> Halted | None:
-    """How the loop starved robot ``index`` (None: it never halted its board)."""
-    from_s = fleet.halted_from_s(index)
-    if from_s is None:
-        return None
-    return Halted(from_s, fleet.halts, fleet.longest_gap_periods, stats.skipped_releases)
-
-
-def _errors(stats: ErrorStats) -> dict[str, Any] | None:
-    """The largest pose difference seen (m, rad) and how many samples; None without any."""
-    if not stats.samples:
-        return None
-    return {"max_dpos_m": stats.max_dpos_m, "max_dheading_rad": stats.max_dheading_rad,
-            "samples": stats.samples}
-
-
-def watched_verdict(
-    telemetry: RobotTelemetry, frames_dropped: int, halted: Halted | None
-) -> dict[str, Any]:
-    """One bridged robot's verdict when the watch ends: what its live judge still holds judged
-    first (the frames held, ``livehold``; ``livegapseen.end_of_watch``: a held choice made, a
-    new start's held samples judged), then ``judge_robot``, then the stretches between the
-    loop's halts (``overload``)."""
-    tracker = telemetry.tracker
-    telemetry.end_watch()  # frames held judged, then what still waits (host.judge.watchend)
-    verdict = judge_robot(tracker.vs_reference, tracker.vs_truth, frames_dropped=frames_dropped,
-                          beyond_allowance_m=tracker.max_beyond_allowance_m)
-    if verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
-        verdict = after_halts(verdict, halted, tracker, telemetry.stretches)
-    # ODOM_TWIST judged live, the samples waiting at the end included (said, not yet verdicts)
-    return {**verdict, "distance": telemetry.distance.as_dict(),
-            "twist": telemetry.twist.as_dict()}
-
-
-def judge_robot(
-    vs_reference: ErrorStats, vs_truth: ErrorStats, *, frames_dropped: int = 0,
-    beyond_allowance_m: float | None = None,
-) -> dict[str, Any]:
-    """One robot's pose errors and verdict (see the module docstring): ``livefit.pose_wrong``
-    on the largest position error beyond its loss allowance (m; ``beyond_allowance_m``, the
-    tracker's ``max_beyond_allowance_m``; default ``vs_reference.max_dpos_m``: no frame lost)
-    and the largest heading error. Skipped releases of the worker's loop are no reason to leave
-    a robot unjudged: their encoder samples were sent late, one 10 ms step each (module
-    docstring); before, steps over several cycles moved a correct firmware's position 2-3 LSB off
-    the reference and the robot was UNJUDGED."""
-    beyond_m = vs_reference.max_dpos_m if beyond_allowance_m is None else beyond_allowance_m
-    entry: dict[str, Any] = {"pose_vs_reference": _errors(vs_reference),
-                             "pose_vs_truth": _errors(vs_truth),
-                             "max_dpos_beyond_allowance_m": beyond_m}
-    if frames_dropped:
-        return {**entry, "verdict": "UNJUDGED",
-                "reason": f"the bridge dropped {frames_dropped} frames: the reference is not "
-                          "the firmware's"}
-    if not vs_reference.samples:
-        return {**entry, "verdict": "FAIL",
-                "reason": "no on-board pose paired with the reference"}
-    reasons = []
-    if pose_wrong(0.0, vs_reference.max_dheading_rad):
-        reasons.append(f"heading vs reference {vs_reference.max_dheading_rad * 1e3:.4g} mrad > "
-                       f"{HEADING_LSB_RAD * 1e3:.4g} mrad")
-    if pose_wrong(beyond_m, 0.0):
-        reasons.append(f"position vs reference {beyond_m * 1e3:.4g} mm (beyond the loss "
-                       f"allowance) > {POSITION_LSB_M * 1e3:.4g} mm")
-    return {**entry, "verdict": "FAIL" if reasons else "PASS",
-            "reason": "; ".join(reasons) or None}
 
 
 def failures(report: dict[str, Any], max_miss_ratio: float) -> list[str]:

@@ -68,7 +68,7 @@ class Halted:
 
 def after_halts(entry: dict[str, Any], halted: Halted, tracker: PoseTracker,
                 stretches: HaltStretches | None) -> dict[str, Any]:
-    """``entry`` (a PASS or FAIL of ``fleetrun.judge_robot``) of a robot the loop halted:
+    """``entry`` (a PASS or FAIL of ``fleetjudge.judge_robot``) of a robot the loop halted:
     FAIL when a sample before the first halt was wrong, or a stretch between halts was
     (``host.mqtt.haltstretch``); else PASS when a stretch judged a sample, saying what was not
     judged, as long as they judged at least ``MIN_JUDGED_SHARE`` of the samples since; else as
@@ -110,7 +110,7 @@ def _failed_before(entry: dict[str, Any], halted: Halted, before: PoseWrongs) ->
 
 
 def rejudge(entry: dict[str, Any], halted: Halted, tracker: PoseTracker) -> dict[str, Any]:
-    """``entry`` (a FAIL of ``fleetrun.judge_robot``) judged on the samples before
+    """``entry`` (a FAIL of ``fleetjudge.judge_robot``) judged on the samples before
     ``halted.from_s`` only (module docstring); the tracker is left as it was."""
     before = _wrongs_before(tracker, halted.from_s)
     if before.worst is not None:
@@ -120,7 +120,7 @@ def rejudge(entry: dict[str, Any], halted: Halted, tracker: PoseTracker) -> dict
 
 
 def noted(entry: dict[str, Any], halted: Halted) -> dict[str, Any]:
-    """``entry`` (a PASS of ``fleetrun.judge_robot``) with the overload in its ``reason``."""
+    """``entry`` (a PASS of ``fleetjudge.judge_robot``) with the overload in its ``reason``."""
     return {**entry, "reason": f"PASS on the samples the judge could follow; overloaded: from "
                                f"{halted.from_s:.2f} s of bus time the loop ran {halted.halts} "
                                f"ticks up to {halted.longest_gap_periods} periods apart, each a "

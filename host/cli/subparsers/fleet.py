@@ -32,6 +32,7 @@ from odocan.host.cli.firmware_choice import AUTO_FIRMWARE, FIRMWARE_CHOICES, res
 from odocan.host.cli.options import SEED_LIMIT, add_seed_argument, float_in, int_in
 from odocan.host.io.export import FOXGLOVE_PORT
 from odocan.host.mqtt.broker import BrokerURL
+from odocan.host.mqtt.fleetjudge import DEFAULT_MAX_MISS_RATIO
 from odocan.host.mqtt.fleetrun import FleetRun, failures
 from odocan.host.mqtt.options import (
     add_mqtt_arguments,
@@ -126,7 +127,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--max-miss-ratio",
         type=float_in(0.0, 1.0),
-        default=0.001,
+        default=DEFAULT_MAX_MISS_RATIO,
         metavar="RATIO",
         help="exit 1 above this deadline_miss_ratio, 0 .. 1 (default: %(default)s)",
     )
@@ -200,7 +201,8 @@ def _do_fleet(args: argparse.Namespace) -> int:
         transport=args.transport,
         firmware=choice.firmware,
     ).shard(first, robots)
-    run = FleetRun(fleet=fleet, duration_s=args.duration, broker=broker, **bridge_options(args))
+    run = FleetRun(fleet=fleet, duration_s=args.duration, broker=broker,
+                   max_miss_ratio=args.max_miss_ratio, **bridge_options(args))
     debug = getattr(args, "debug", False)
     configure_logging(debug)
     names = [robot_name(fleet.first + i) for i in range(fleet.robots)]
