@@ -27,7 +27,8 @@ figures, asserts nothing.
 Run: ``.venv/bin/python bench/rig.py [--seconds S] [--budget-seconds S] [--virtual]
 [--bitrate B ...] [--firmware c] [--whole] [--profile]`` (``--bitrate``: the rig also timed on a
 bit-timed bus; ``--firmware c``: the board runs the C port through ctypes, ``sim.cboard``;
-``--whole``: ``odocan run`` of ``--seconds`` timed as a child process, CPU and wall).
+``--whole``: ``odocan run`` of ``--seconds`` timed as a child process, CPU and wall, then with
+``--log`` to a file of each ``--whole-log`` suffix, default a candump ``.log``).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ import pstats
 import resource
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -321,11 +323,13 @@ def report_rtf(seconds: float, runs: list[tuple[str, int | None]]) -> float:
     return per_tick[0]
 
 
-def report_whole_process(seconds: float) -> None:
+def report_whole_process(seconds: float, log: Path | None = None) -> None:
     """``odocan run --scenario random --duration S`` as a child process (what the target counts:
-    start-up, the run and the judge): wall time and the child's CPU time (user + system)."""
+    start-up, the run and the judge), with ``--log`` when given: wall time and the child's CPU
+    time (user + system)."""
     argv = [sys.executable, "-m", "odocan", "run", "--scenario", "random", "--duration",
             f"{seconds:g}", "--firmware", FIRMWARE[0]]
+    argv += [] if log is None else ["--log", str(log)]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     wall = time.perf_counter()
     done = subprocess.run(argv, capture_output=True, text=True, check=False)
@@ -398,6 +402,10 @@ def main() -> None:
         action="store_true",
         help="also time `odocan run --scenario random --duration SECONDS` as a whole process",
     )
+    parser.add_argument(
+        "--whole-log", nargs="*", default=[".log"], metavar="SUFFIX",
+        help="--whole also times the run with --log to a file of each suffix (.log .asc .blf)",
+    )
     parser.add_argument("--profile", action="store_true", help="also print a cProfile top")
     parser.add_argument("--top", type=int, default=25, help="profile rows to print")
     args = parser.parse_args()
@@ -410,6 +418,9 @@ def main() -> None:
     report_transport(min(args.seconds, 600.0))
     if args.whole:
         report_whole_process(args.seconds)
+        with tempfile.TemporaryDirectory() as folder:  # a CI job's case: the drive kept
+            for suffix in args.whole_log:
+                report_whole_process(args.seconds, Path(folder) / f"run{suffix}")
     if args.profile:
         profile(min(args.seconds, 120.0), args.top)
 
