@@ -1,8 +1,9 @@
 """``--log``'s writer (``host.io.recording.Recording``): a batch of queued frames written as
 python-can's own writer writes them, frame by frame, from the ``Message`` each would be.
 
-The candump path formats its lines itself (no ``Message`` built); python-can's
-``CanutilsLogWriter`` fed the ``Message`` ``recv`` would give is the reference, byte for byte:
+The candump and ASC paths format their lines themselves (no ``Message`` built); python-can's
+``CanutilsLogWriter`` (``ASCWriter``) fed the ``Message`` ``recv`` would give is the reference,
+byte for byte (an ASC log's first line, the date it was opened, aside):
 for random batches (stamps before the log's first, extended, remote, error and FD frames
 among the tuples) and for the rig's golden logs (``tests.test_rig.GOLDEN_LOGS``, whose hashes
 were made by python-can's writer on python-can's ``virtual`` bus).
@@ -67,15 +68,25 @@ def _by_recording(path: Path, batches: list[list[Received]], channel: str) -> by
     return path.read_bytes()
 
 
+def _same_bytes(ours: bytes, theirs: bytes, suffix: str) -> bool:
+    """The logs' bytes alike: an ASC log's after its first line (``date`` of its opening)."""
+    if suffix == ".asc":
+        ours, theirs = ours.split(b"\n", 1)[1], theirs.split(b"\n", 1)[1]
+    return ours == theirs
+
+
 @settings(max_examples=60, deadline=None)
 @given(batches=st.lists(st.lists(st.one_of(_tuples, _messages), max_size=12), max_size=6),
-       channel=st.sampled_from(["vcan0", "odocan-replay-3", "0"]))
-def test_a_candump_log_is_python_cans_byte_for_byte(
-    tmp_path_factory: pytest.TempPathFactory, batches: list[list[Received]], channel: str
+       channel=st.sampled_from(["vcan0", "odocan-replay-3", "0", "rig"]),
+       suffix=st.sampled_from([".log", ".asc"]))
+def test_a_candump_or_asc_log_is_python_cans_byte_for_byte(
+    tmp_path_factory: pytest.TempPathFactory, batches: list[list[Received]], channel: str,
+    suffix: str,
 ) -> None:
     folder = tmp_path_factory.mktemp("recording")
-    assert _by_recording(folder / "ours.log", batches, channel) == \
-        _by_python_can(folder / "python-can.log", batches, channel)
+    ours = _by_recording(folder / f"ours{suffix}", batches, channel)
+    theirs = _by_python_can(folder / f"python-can{suffix}", batches, channel)
+    assert _same_bytes(ours, theirs, suffix)
 
 
 def _read(path: Path) -> list[tuple[float, int, bytes, bool]]:
@@ -84,7 +95,7 @@ def _read(path: Path) -> list[tuple[float, int, bytes, bool]]:
 
 
 @pytest.mark.parametrize("suffix", [".asc", ".blf"])
-def test_other_formats_get_the_messages_recv_would_give(tmp_path: Path, suffix: str) -> None:
+def test_every_format_gets_the_messages_recv_would_give(tmp_path: Path, suffix: str) -> None:
     batches: list[list[Received]] = [[(0.5, 0x100, b"\x01\x02"), (0.75, 0x7FF, b"")],
                                      [(1.0, 0x110, bytes(range(8)))]]
     ours, theirs = tmp_path / f"ours{suffix}", tmp_path / f"python-can{suffix}"

@@ -3,17 +3,22 @@ time, a full disk stopping the recording and never the run.
 
 ``Recording`` is a ``FrameBatchListener``: the lockstep rig and the replay hand it the frames
 their instant ``odocan`` handle queued (``sim.tickloop``), as ``(timestamp, id, payload)``
-tuples, no ``Message`` built. For a candump ``.log`` (python-can's ``CanutilsLogWriter``) it
-writes the lines that writer writes for the ``Message`` the handle's ``recv`` would give (an 11-bit
-data frame received on ``channel``), byte for byte, a batch in one write: half a whole-process
-``odocan run --log`` of an hour went into building a ``Message`` per frame and formatting it
-(``bench/rig.py``). Other formats (``.asc``, ``.blf``) get that ``Message``.
+tuples, no ``Message`` built. For a candump ``.log`` (python-can's ``CanutilsLogWriter``) and a
+Vector ``.asc`` (``ASCWriter``, its own line templates) it writes the lines that writer writes
+for the ``Message`` the handle's ``recv`` would give (an 11-bit data frame received on
+``channel``), byte for byte, a batch in one write: half a whole-process ``odocan run --log`` of
+an hour went into building a ``Message`` per frame and formatting it (``bench/rig.py --whole``).
+A ``.blf`` gets that ``Message`` (its writer packs binary objects into compressed containers).
 """
 
 from __future__ import annotations
 
+from typing import cast
+
 import can
+from can.io.asc import ASCWriter
 from can.io.canutils import CanutilsLogWriter
+from can.util import channel2int
 
 from odocan.sim.framebatch import FrameBatchListener, Received
 from odocan.sim.transport import data_frame
@@ -35,6 +40,10 @@ class Recording(FrameBatchListener):
         self.frames = 0
         self.failure: OSError | None = None
         self._candump = type(writer) is CanutilsLogWriter and not channel.isdigit()
+        self._asc = type(writer) is ASCWriter
+        number = channel2int(channel)  # ASCWriter's channel number: counted from 1
+        self._asc_channel = 0 if not self._asc else \
+            cast(ASCWriter, writer).channel if number is None else number + 1
 
     def on_message_received(self, msg: can.Message) -> None:
         """Write ``msg`` (counted); after a failure, nothing more."""
@@ -48,23 +57,30 @@ class Recording(FrameBatchListener):
         self.frames += 1
 
     def on_frames(self, frames: list[Received]) -> None:
-        """Write a batch, in order: a candump log's data-frame tuples as its lines, in one write;
-        anything else frame by frame through the writer (``on_message_received``)."""
+        """Write a batch, in order: a candump or ASC log's data-frame tuples as its lines, in one
+        write; anything else frame by frame through the writer (``on_message_received``)."""
         if self.failure is not None:
-            return
-        if not self._candump:
-            for frame in frames:
-                self.on_message_received(self._message(frame))
             return
         lines: list[str] = []
         for frame in frames:
-            if isinstance(frame, tuple):
-                lines.append(self._candump_line(*frame))
+            if isinstance(frame, tuple) and self._formats_lines():
+                lines.append(self._line(*frame))
             else:
                 self._write_lines(lines)
                 lines = []
-                self.on_message_received(frame)
+                self.on_message_received(self._message(frame))
         self._write_lines(lines)
+
+    def _formats_lines(self) -> bool:
+        """Whether a data-frame tuple's line is formatted here: a candump log's always, an
+        ASC log's once its writer wrote the header its first frame opens (python-can's path)."""
+        return self._candump or (self._asc and cast(ASCWriter, self.writer).header_written)
+
+    def _line(self, timestamp_s: float, can_id: int, data: bytes) -> str:
+        """The writer's line for a received 11-bit data frame (``_formats_lines``)."""
+        if self._candump:
+            return self._candump_line(timestamp_s, can_id, data)
+        return self._asc_line(timestamp_s, can_id, data)
 
     def _message(self, frame: Received) -> can.Message:
         """The ``Message`` ``recv`` gives for a queued frame (``OdocanBus.as_message``)."""
@@ -77,22 +93,31 @@ class Recording(FrameBatchListener):
     def _candump_line(self, timestamp_s: float, can_id: int, data: bytes) -> str:
         """``CanutilsLogWriter``'s line for a received 11-bit data frame: its stamp never below
         the log's first (the writer's ``last_timestamp``, set by its first frame)."""
-        writer = self.writer
-        assert isinstance(writer, CanutilsLogWriter)
+        writer = cast(CanutilsLogWriter, self.writer)
         first_s = writer.last_timestamp
         if first_s is None:
             first_s = writer.last_timestamp = timestamp_s or 0.0
         stamp_s = first_s if timestamp_s < first_s else timestamp_s
         return f"({stamp_s:f}) {self.channel} {can_id:03X}#{data.hex().upper()} R\n"
 
+    def _asc_line(self, timestamp_s: float, can_id: int, data: bytes) -> str:
+        """``ASCWriter``'s line for a received 11-bit data frame, with its own templates: its
+        stamp relative to the log's first frame (``started``) unless earlier than it."""
+        writer = cast(ASCWriter, self.writer)
+        started_s = writer.started
+        message = writer.FORMAT_MESSAGE.format(
+            channel=self._asc_channel, id=f"{can_id:X}", dir="Rx", dtype=f"d {len(data):x}",
+            data=data.hex(" ").upper(),
+        )
+        stamp_s = timestamp_s - started_s if timestamp_s >= started_s else timestamp_s
+        return writer.FORMAT_EVENT.format(timestamp=stamp_s, message=message)
+
     def _write_lines(self, lines: list[str]) -> None:
-        """Lines formatted by ``_candump_line``, in one write, counted when written."""
+        """Formatted lines, in one write, counted when written."""
         if not lines or self.failure is not None:
             return
-        writer = self.writer
-        assert isinstance(writer, CanutilsLogWriter)
         try:
-            writer.file.write("".join(lines))
+            cast(CanutilsLogWriter | ASCWriter, self.writer).file.write("".join(lines))
         except OSError as exc:
             self.failure = exc
             return
