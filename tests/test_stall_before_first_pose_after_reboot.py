@@ -186,17 +186,34 @@ def test_the_live_judges_pass_it() -> None:
         assert live.as_dict()["passed"]
 
 
+def _float64_gap_m(messages: tuple[can.Message, ...], k: int) -> float:
+    """How far (m) the new life's ``k``-th pose (``k`` >= 1) lies from the float64 odometry
+    of the frames the firmware took: ``REBOOT + 1``, ``REBOOT + 2``, ``RESUMED_AT`` (its FIFO,
+    then one step), then every frame to the one the pose names (2 a send period)."""
+    encoders = [_decoded(m) for m in drive() if m.arbitration_id == fr.WHEEL_ENCODERS_ID]
+    pose = _poses_after_reset(messages)[k]
+    named = RESUMED_AT + 2 * k
+    assert int(pose["ENC_COUNTER"]) == named % 16
+    frames = [REBOOT + 1, REBOOT + 2, *range(RESUMED_AT, named + 1)]
+    return _gap(_odometry(encoders, frames), pose)
+
+
 @pytest.mark.parametrize(("from_pose", "bias_lsb"), [(0, 10_000), (1, 10_000), (1, 100),
-                                                     (20, 3), (60, 3)])
+                                                     (20, 3), (60, 3), (60, 2)])
 def test_a_wrong_firmware_after_such_a_stall_fails_every_judge(
     tmp_path: Path, from_pose: int, bias_lsb: int
 ) -> None:
     """X off by ``bias_lsb`` from the new life's ``from_pose``-th pose on: 1 m at the
     resumed pose or the one after (the first is left out), 10 mm there (a fitted start would
     absorb it; beyond the merge's allowance from the power-up, 4.2 mm: 3 mm within it PASSes,
-    as at the log's power-up), 0.3 mm 0.4 s and 1.2 s later (0.2 mm 1.2 s later PASSes: the
-    loss allowance, module docstring)."""
+    as at the log's power-up), 0.3 and 0.2 mm 0.4 s and 1.2 s later (before, 0.2 mm 1.2 s
+    later PASSed every judge: the overrun's losses opened a loss allowance of 0.18 mm on top
+    of the stall's placement, module docstring). The evidence: the correct firmware is within
+    one LSB of the float64 odometry there, the wrong one is more than one LSB off."""
     messages = _wrong(drive(), REBOOT, bias_lsb, from_pose)
+    at = max(from_pose, 1)
+    assert _float64_gap_m(drive(), at) <= POSITION_LSB_M
+    assert _float64_gap_m(messages, at) > POSITION_LSB_M
     path = _written(messages, tmp_path / "wrong.log")
     assert not analyze(read_log(path), PMIR, "exact").passed
     assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
