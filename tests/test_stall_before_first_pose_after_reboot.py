@@ -23,9 +23,17 @@ streamed judge FAILed the correct firmware at 1318 mm); its first pass then find
 before the life's first pose and refuses the life (``stream_first.FirstPass.refuse``, as at the
 log's power-up), so the whole log judges it: the same verdict, right or wrong firmware.
 
-Left: the firmware's ENC_E2E_LOST (11: the overrun's COUNTER jump mod 16) opens a loss
-allowance of 0.18 mm on top of the stall's placement, so X 2 LSB off 1.2 s after the resumed
-pose PASSes analyze and the live judges alike.
+The firmware's ENC_E2E_LOST (11: the overrun's COUNTER jump mod 16), counted from 0 at its
+power-up, opened a loss allowance of 0.18 mm (11 frames lost in a run among the overrun's) on top
+of the stall's placement, which already bounds those frames: X 2 LSB off 1.2 s after the resumed
+pose PASSed analyze and the live judges alike. Now the frames between the primed one and the
+placed sample's are the placement's, no loss span's (``losses.placement_accounted``, in
+``analyze`` and ``livelosses``); the count stays whole for the frames after the placement (the
+pages cannot say where the 11 lie), so the allowance is 0.025 mm there (0.034 mm live: the
+unnamed frames up to the page, singly) and 2 LSB FAILs every judge (analyze: 0.225 mm, 0.200 mm
+beyond it; the live judges: 0.250 mm, 0.216 mm beyond theirs; the correct firmware: 0.068 mm).
+One LSB FAILs too, at the limit (analyze 0.101 mm beyond against the one-LSB tolerance, live
+0.117 mm): not asserted.
 """
 
 from __future__ import annotations
