@@ -161,7 +161,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.setposekept import Kept, check_cut, mark_kept
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
-from odocan.host.judge.stalls import after_stalls, alive_times, primed_first
+from odocan.host.judge.stalls import after_stalls, alive_times, first_placement, primed_first
 from odocan.host.judge.statuslatch import StatusLatch, firmware_events
 from odocan.host.judge.twins import twin_allowance_of
 from odocan.host.protocol.dbcplan import default_plan
@@ -352,6 +352,7 @@ def _analyze_life(
     pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
     alive_s = alive_times(frames, accepted, decoder)
     onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s)
+    placed = first_placement(sent_s, enc, alive_s, pose_sent_s, onboard)  # no loss span's
     truth = truth_samples(frames, accepted, decoder, enc)
     if boot:  # (a stalled MCU's first page misses the frames its FIFO overran: primed_first)
         power_up = saw_only_the_log(frames, accepted, decoder) or primed_first(
@@ -378,11 +379,11 @@ def _analyze_life(
     vs_truth["distance_travelled_m"] = float(ref.distance_m[-1])
     twist = check_twist(frames, accepted, decoder, enc, robot)
     losses = firmware_losses(frames, accepted, decoder, enc, power_up and start_pose is None)
-    allowance = loss_allowance(enc, robot, integrator, losses, onboard.enc, onboard.enc)
+    allowance = loss_allowance(enc, robot, integrator, losses, onboard.enc, onboard.enc, placed)
     vs_ref["loss_allowance_m"] = float(np.max(allowance, initial=0.0))
     after_span = loss_allowance(enc, robot, integrator, losses,
                                 np.array([last + 1 for _, last, _ in losses], dtype=np.int64),
-                                onboard.enc)
+                                onboard.enc, placed)
     twin_allowed = twin_allowance_of(enc, robot, integrator, ref_all, onboard.enc)
     distance = _distance(frames, accepted, decoder, enc, robot, ref_all.start,
                          DistanceJudge(robot, max_wheel_speed_mm_s, power_up and not start_pose,

@@ -11,7 +11,10 @@ frames on time meanwhile, is left out; when the reference runs from the firmware
 (a proven power-up at frame 0: ``Lives.power_up_proven``), the position is placed again at the
 next sample, bounded by the merge allowance from the first frame the firmware could have primed
 on (``liveplace.StallPlacer.shift``), as ``analyze`` restarts its segment there; else the next
-sample starts the reference (fitted), as ``analyze`` starts it at its first sample kept.
+sample starts the reference (fitted), as ``analyze`` starts it at its first sample kept. The
+frames between that frame and the placed sample's are the placement's: the firmware's
+ENC_E2E_LOST counts the frames its FIFO overran among them, which open no loss allowance on top
+(``livelosses.LiveAllowance.stalled_first``, ``losses.placement_accounted``).
 
 ``LiveDistance`` leaves the first ODOM_TWIST after such a silence out by the same times
 (``talked_before``: ``distance.DistanceJudge.talked_before``'s rule)."""
@@ -80,5 +83,6 @@ def left_out_first(tracker: PoseTracker, pose: FramePose, t_s: float, queued: bo
     tracker.first.stalled_from = primed  # (``LiveDistance``: its merged step's allowance)
     if tracker.raw.odometry is not None:
         rule.owe_from(primed)  # placed at the next sample, bounded from that frame
+        tracker.losses.stalled_first(primed)  # the frames between: the placement's, no loss's
     rule.heard_first(t_s)
     return True

@@ -12,7 +12,14 @@ frames the firmware lost counts 16 more frames lost per lap than ``analyze`` doe
 numbering tells the chunk, ``senderseq.pose_skips``). Left so, not aligned: ``lost_beyond_gaps``
 subtracts every gap of the log as frames the firmware lost too, which a recorder's chunk need
 not be, so ``analyze``'s count is the lower bound of the firmware's losses there and this one
-nearer the upper; the pages cannot tell which frames it lost."""
+nearer the upper; the pages cannot tell which frames it lost.
+
+After a stall before a life's first sample (``livefirst``: the position placed again at the next
+sample, bounded from the frame the firmware could first have primed on), the frames between those
+two are the placement's, no span's (``losses.placement_accounted``, ``analyze``'s rule): told by
+``stalled_first``, the placed sample's frame taken at the next ``record``; a span opened before
+the stall was told (a page before the first sample, from the primed frame on) held only such
+frames and is withdrawn."""
 
 from __future__ import annotations
 
@@ -23,7 +30,12 @@ from itertools import pairwise
 import numpy as np
 
 from odocan.host.judge.livewindow import ENC_WINDOW, Columns, window_encoders
-from odocan.host.judge.losses import OneSteps, lost_beyond_gaps, worst_runs_m
+from odocan.host.judge.losses import (
+    OneSteps,
+    lost_beyond_gaps,
+    placement_accounted,
+    worst_runs_m,
+)
 from odocan.host.judge.posewrongs import PoseWrongs
 from odocan.host.judge.reference import Geometry
 
@@ -40,11 +52,17 @@ class LiveAllowance:
         self.wrongs = PoseWrongs()  # the samples beyond the limit, latched once settled
         # the latest samples' errors (frame, dx, dy m, dheading rad, t s): ``rejudge``
         self._errors: deque[tuple[int, float, float, float, float]] = deque(maxlen=ENC_WINDOW)
+        # a stall placement before the life's first sample: (primed, placed frame; None until
+        # the next ``record``), and the spans opened since the power-up before it was told
+        self.placed: tuple[int, int | None] | None = None
+        self._first_spans: list[tuple[int, float]] | None = None
 
     def record(self, seq: int, error: dict[str, float], fast: bool, t_s: float) -> None:
         """A sample at encoder frame ``seq`` (its ODOM_POSE_Y at bus time ``t_s``), ``error``
         from the reference (``dpos_m``, ``dheading_rad``)."""
         dpos_m = error["dpos_m"]
+        if self._first_spans is not None or (self.placed and self.placed[1] is None):
+            self._sampled(seq)
         self._errors.append((seq, error["dx_m"], error["dy_m"], error["dheading_rad"], t_s))
         self.wrongs.sample(seq, t_s, dpos_m, error["dheading_rad"])
         revisable = self._revisable
@@ -53,6 +71,20 @@ class LiveAllowance:
         revisable.append((seq, dpos_m))
         if revisable[0][0] < seq - ENC_WINDOW:  # beyond any span's reach
             self.settle(seq - ENC_WINDOW, fast)
+
+    def _sampled(self, seq: int) -> None:
+        """The life's first sample compared, at encoder frame ``seq``: the one a stall's
+        placement is made at, if one was told (``stalled_first``)."""
+        self._first_spans = None
+        if self.placed is not None and self.placed[1] is None:
+            self.placed = (self.placed[0], seq)
+
+    def stalled_first(self, primed: int) -> None:
+        """A stall before the life's first sample (``livefirst``), the position placed again
+        at the next sample, from encoder frame ``primed`` (module docstring)."""
+        self.placed = (primed, None)
+        opened, self._first_spans = self._first_spans or [], None
+        self.spans = [span for span in self.spans if span not in opened or span[0] < primed]
 
     def rejudge(self, from_seq: int, until: int | None, shift: tuple[float, float]) -> None:
         """The reference was wrong by ``shift`` (dx, dy m) from encoder frame ``from_seq`` on
@@ -91,6 +123,7 @@ class LiveAllowance:
         self.settle(upto, fast)
         self.wrongs.close()  # an episode does not run on into another reference
         self.spans = []
+        self.placed = self._first_spans = None
 
     def primed(self, seq: int) -> None:
         """A life proven to start at its power-up, primed on encoder frame ``seq``: its
@@ -98,6 +131,7 @@ class LiveAllowance:
         that frame is a lossy span too (``losses.firmware_losses``' power-up page)."""
         if self.lost_page is None:
             self.lost_page = (0, seq)
+            self.placed, self._first_spans = None, []
 
     def at_m(self, seq: int) -> float:
         """The allowance (m) at encoder frame ``seq``."""
@@ -135,7 +169,17 @@ class LiveAllowance:
         if n > 0 and integrator is not None:
             steps = OneSteps.of_firmware(enc, geometry, bits, integrator)
             lost_ok = ~np.isin(seqs.astype(np.int64), list(sampled))  # named: not lost
-            self.spans.append((before[1], worst_runs_m(steps, lost_ok, i0, i1, n)))
+            lost_ok &= ~placement_accounted(seqs, self._placed_by(upto))
+            self.spans.append(span := (before[1], worst_runs_m(steps, lost_ok, i0, i1, n)))
+            if self._first_spans is not None:
+                self._first_spans.append(span)
+
+    def _placed_by(self, upto: int) -> tuple[int, int] | None:
+        """``placed`` at a page whose latest encoder frame is ``upto``: its frames after the
+        primed one all the placement's while its sample is not compared yet."""
+        if self.placed is None:
+            return None
+        return self.placed[0], upto + 1 if self.placed[1] is None else self.placed[1]
 
 
 def _quiet(window: Columns, first: int) -> bool:

@@ -56,9 +56,7 @@ def after_stalls(
     after = np.flatnonzero(silent(sent[1:] - talked, heard, enc.cycle_s) & ~queued[1:]) + 1
     keep = np.ones(len(sent_s), dtype=bool)
     keep[order[after]] = False
-    if alive_s is not None and pose_sent_s is not None:  # a pose half that made no sample
-        alive_s = np.sort(np.concatenate((alive_s, pose_sent_s)))
-    primed = first_after_stall(float(sent[0]), enc, alive_s)
+    primed = stalled_first(sent_s, enc, alive_s, pose_sent_s)
     if primed is not None:
         keep[order[0]] = False
     kept = Poses(onboard.enc[keep], onboard.x_m[keep], onboard.y_m[keep],
@@ -73,6 +71,31 @@ def after_stalls(
     first = np.ones(len(breaks), dtype=bool)  # np.unique by hand: its plain form imports
     first[1:] = breaks[1:] != breaks[:-1]  # numpy.ma (10 ms of start-up) for nothing
     return kept, breaks[first].astype(np.int64)
+
+
+def stalled_first(sent_s: FloatArray, enc: Encoders, alive_s: FloatArray | None,
+                  pose_sent_s: FloatArray | None) -> int | None:
+    """``after_stalls``' stall before the first sample (its arguments'): the position in
+    ``enc`` of the first frame the firmware could have primed on (``first_after_stall``, its
+    pose halves alive too), None without one."""
+    if enc.cycle_s is None or len(sent_s) < 2:
+        return None
+    if alive_s is not None and pose_sent_s is not None:  # a pose half that made no sample
+        alive_s = np.sort(np.concatenate((alive_s, pose_sent_s)))
+    return first_after_stall(float(np.min(sent_s)), enc, alive_s)
+
+
+def first_placement(sent_s: FloatArray, enc: Encoders, alive_s: FloatArray | None,
+                    pose_sent_s: FloatArray | None, kept: Poses) -> tuple[int, int] | None:
+    """The placement after a stall before the first sample (``after_stalls``' arguments and
+    the samples it ``kept``): the positions in ``enc`` of the first frame the firmware could
+    have primed on and of the first sample kept, where the position is placed again; None
+    without such a stall. The frames between are the placement's, no loss span's
+    (``losses.placement_accounted``)."""
+    primed = stalled_first(sent_s, enc, alive_s, pose_sent_s)
+    if primed is None or len(kept.enc) == 0:
+        return None
+    return primed, int(np.min(kept.enc))
 
 
 def first_after_stall(sent_s: float, enc: Encoders, alive_s: FloatArray | None) -> int | None:
