@@ -59,6 +59,7 @@ class LogResult:
     report: dict[str, Any] | None = None
     error: str | None = None
     frames: int | None = None  # frames in the log, whatever their ID (None: not read)
+    refused: str | None = None  # why ``--stream always`` read it whole (NotStreamable), if so
     passed: bool = field(init=False)
 
     def __post_init__(self) -> None:
@@ -111,6 +112,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
         tolerance = Tolerance(job.tolerance_position_m, job.tolerance_heading_rad)
         db = load_judges_dbc(Path(job.dbc)) if job.dbc is not None else None
         streamed: dict[str, Any] | None = None
+        refused: str | None = None
         count = FrameCount()
         running = None  # the log's PROFILE page (odocan's DBC only)
         later: list[str] = []  # its pages after an applied config, against the config's robot
@@ -120,8 +122,10 @@ def analyze_one(path: str, job: Job) -> LogResult:
                 streamed = analyze_file(log, with_bus_speed(profile, running), job.integrator,
                                         tolerance=tolerance, db=db, warn=lambda message: None,
                                         count=count, whole_on_config=db is None)
-            except (AnalysisError, NotStreamable):  # refused: the whole log's path says why
+            except AnalysisError:  # the whole log's path says why, in the log's terms
                 streamed = None
+            except NotStreamable as refusal:  # said under --stream always (analyze.py)
+                refused = str(refusal) if job.stream == "always" else None
         if streamed is not None:
             report, n_frames = streamed, count.frames
         else:  # the whole log: the same report
@@ -145,7 +149,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
         return LogResult(path, error=_one_line(exc))
     except Exception as exc:  # a log no check foresaw: this log's error, the batch goes on
         return LogResult(path, error=f"cannot analyse: {type(exc).__name__}: {_one_line(exc)}")
-    return LogResult(path, report=_plain(report), frames=n_frames)
+    return LogResult(path, report=_plain(report), frames=n_frames, refused=refused)
 
 
 def _diagnose(log: Path, report: dict[str, Any], profile: RobotProfile,
@@ -260,7 +264,8 @@ def analyze_logs_dask(
         futures = client.map(analyze_one, paths, job=job, pure=False)
         for path, future in zip(paths, futures, strict=True):
             done = _outcome(path, future.result)
-            results.append(LogResult(shown[path], done.report, done.error, done.frames))
+            results.append(LogResult(shown[path], done.report, done.error, done.frames,
+                                     done.refused))
             on_done(results[-1])
     return results
 

@@ -35,10 +35,13 @@ def after_stalls(
     sample before the silence. The same restart where the firmware kept talking but held its
     pose (``_frozen``). The first sample too when the firmware was silent before it after its
     other frames (``alive_s``: e.g. its ODOM_STATUS while INIT, ``first_after_stall``): the
-    restart is then at the frame after the first it could have primed on. Returns the samples
-    kept and those encoder frames (sorted)."""
-    if enc.cycle_s is None or len(sent_s) < 2:
+    restart is then at the frame after the first it could have primed on (a lone sample so
+    placed is kept: ``_lone_break``). Returns the samples kept and those encoder frames
+    (sorted)."""
+    if enc.cycle_s is None or len(sent_s) == 0:
         return onboard, np.zeros(0, dtype=np.int64)
+    if len(sent_s) == 1:
+        return onboard, _lone_break(float(sent_s[0]), enc, pose_sent_s, alive_s)
     order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
     sent = sent_s[order]
     # Silent while the encoder frames went on, on time (a log that lacks both is a recorder's
@@ -80,9 +83,7 @@ def stalled_first(sent_s: FloatArray, enc: Encoders, alive_s: FloatArray | None,
     pose halves alive too), None without one."""
     if enc.cycle_s is None or len(sent_s) < 2:
         return None
-    if alive_s is not None and pose_sent_s is not None:  # a pose half that made no sample
-        alive_s = np.sort(np.concatenate((alive_s, pose_sent_s)))
-    return first_after_stall(float(np.min(sent_s)), enc, alive_s)
+    return first_after_stall(float(np.min(sent_s)), enc, _alive(alive_s, pose_sent_s))
 
 
 def first_placement(sent_s: FloatArray, enc: Encoders, alive_s: FloatArray | None,
@@ -96,6 +97,25 @@ def first_placement(sent_s: FloatArray, enc: Encoders, alive_s: FloatArray | Non
     if primed is None or len(kept.enc) == 0:
         return None
     return primed, int(np.min(kept.enc))
+
+
+def _lone_break(sent_s: float, enc: Encoders, pose_sent_s: FloatArray | None,
+                alive_s: FloatArray | None) -> IntArray:
+    """A life's lone sample (e.g. a set-pose cut it one tick after): after a stall from before
+    it (``first_after_stall``), the reference's position restarts after the frame the firmware
+    could first have primed on and is placed at that sample within the merge allowance; kept,
+    not left out, for there is no later one to place on (before: compared with the fine path
+    from the power-up, a correct firmware FAILed at 1.27 mm,
+    ``tests/test_set_pose_after_first_stall.py``)."""
+    primed = first_after_stall(sent_s, enc, _alive(alive_s, pose_sent_s))
+    return np.array([] if primed is None else [primed + 1], dtype=np.int64)
+
+
+def _alive(alive_s: FloatArray | None, pose_sent_s: FloatArray | None) -> FloatArray | None:
+    """The firmware's signs of life: its pose halves too (one that made no sample)."""
+    if alive_s is None or pose_sent_s is None:
+        return alive_s
+    return np.sort(np.concatenate((alive_s, pose_sent_s)))
 
 
 def first_after_stall(sent_s: float, enc: Encoders, alive_s: FloatArray | None) -> int | None:

@@ -32,6 +32,9 @@ a log the analysis refuses (to explain why in the log's terms) or fails (to look
 times going back around a stall, frames let out in a burst after a busy bus; on odocan's DBC,
 an applied config: its PROFILE pages are judged against its robot over the whole log).
 ``odocan analyze LOG…`` chooses the same way for each log (``host.cli.batch.analyze_one``).
+Under ``--stream always`` such a refusal is said on stderr, one line per log naming its reason
+(``refused_line``: the bounded memory asked for is not kept; stdout, ``--report -`` included,
+is untouched); under ``auto`` the streamed path is the CLI's choice and falls back quietly.
 """
 
 from __future__ import annotations
@@ -99,7 +102,10 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "--stream", choices=("auto", "always", "never"), default="auto",
         help="analyse the log as a stream in bounded memory (about 3x the CPU) or read it "
         "whole: auto streams a log too big for the whole path to stay under 300 MB max RSS; "
-        "the report is the same either way (default: %(default)s)",
+        "the report is the same either way. A log the stream cannot judge exactly (frame "
+        "times going back, a burst after a busy bus, a stall before a first pose, an applied "
+        "config) is read whole: quietly under auto, with one line on stderr under always "
+        "(default: %(default)s)",
     )
     parser.set_defaults(func=_do_analyze)
 
@@ -217,7 +223,8 @@ def _streamed(
     args: argparse.Namespace, profile: robot.RobotProfile, db: cantools.database.can.Database | None
 ) -> Analysis | None:
     """The streamed analysis of ``args.log``; None when it refuses the log (the whole log's
-    path then says why, in the log's terms)."""
+    path then says why, in the log's terms) or cannot judge it exactly (``NotStreamable``:
+    said on stderr under ``--stream always``, ``refused_line``)."""
     from odocan.host.io.logs import CHUNK_FRAMES, warn_on_stderr
     from odocan.host.judge.analysis import Analysis
     from odocan.host.judge.samples import AnalysisError
@@ -228,11 +235,22 @@ def _streamed(
         report = analyze_file(args.log, profile, args.integrator, tolerance=args.tolerance,
                               db=db, chunk_frames=args.chunk_frames or CHUNK_FRAMES,
                               warn=warnings.append, whole_on_config=db is None)
-    except (AnalysisError, NotStreamable):
+    except AnalysisError:
+        return None
+    except NotStreamable as refusal:
+        if args.stream == "always":  # bounded memory was asked for: say it is not kept
+            print(refused_line(args.log, str(refusal)), file=sys.stderr)
         return None
     for message in warnings:
         warn_on_stderr(message)
     return Analysis(report=report, passed=report["passed"])
+
+
+def refused_line(log: Path | str, reason: str) -> str:
+    """The one stderr line for a log ``--stream always`` could not stream: a user who asked
+    for bounded memory learns it was not kept, and why; the verdict is the whole log's, the
+    same report. Under ``auto`` (the CLI's choice, not the user's) a refusal is quiet."""
+    return f"odocan analyze: {log}: not streamable ({reason}): judged whole"
 
 
 def can_bitrate(text: str) -> int:
@@ -286,6 +304,9 @@ def _analyze_many(args: argparse.Namespace) -> int:
         results = batch.analyze_logs(logs, job, jobs=args.jobs)
     if args.report_dir is not None:
         write_reports(results, args.report_dir)
+    for result in results:  # --stream always: the logs read whole after all, and why
+        if result.refused is not None:
+            print(refused_line(result.path, result.refused), file=sys.stderr)
     print_batch_summary(results)
     return _batch_exit(results, problems)
 

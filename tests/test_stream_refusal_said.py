@@ -1,0 +1,101 @@
+"""``odocan analyze --stream always`` says so when the streamed judge refuses a log (issue #11).
+
+A user who asked for ``always`` asked for bounded memory: before, a refused log
+(``stream_analysis.NotStreamable``) was read whole without a word. Now one line on stderr names
+the log and the refusal's reason; the verdict and report stay the whole log's, and stdout
+(``--report -``, ``--junit -``) stays valid. Under ``auto`` the stream is the CLI's own choice
+and a refusal stays quiet (``--stream`` help). The evidence log of
+``tests/test_stall_before_first_pose.py`` is one the stream refuses (its reason: ``_reason``).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import xml.etree.ElementTree as ET
+from functools import cache
+from pathlib import Path
+
+import pytest
+
+from odocan.host.cli.app import main
+from odocan.host.judge import stream_analysis, stream_choice
+from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
+from odocan.sim.robot import load
+from tests.test_stall_before_first_pose import EVIDENCE
+
+
+@cache
+def _reason() -> str:
+    """Why the streamed judge refuses the evidence (said by ``analyze_file`` itself)."""
+    with pytest.raises(NotStreamable) as refusal:
+        analyze_file(EVIDENCE, load("pmir"))
+    return str(refusal.value)
+
+
+def _said(log: Path | str) -> str:
+    return f"odocan analyze: {log}: not streamable ({_reason()}): judged whole"
+
+
+def _analyze(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
+    code = main(["analyze", *args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_always_says_a_refused_log_is_judged_whole(capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: exit 0 and nothing on stderr. The report is the whole log's all the same."""
+    code, out, err = _analyze(capsys, str(EVIDENCE), "--stream", "always", "--report", "-")
+    assert code == 0
+    assert err.splitlines().count(_said(EVIDENCE)) == 1, err
+    streamed = json.loads(out)  # stdout stays the report alone
+    code, out, err = _analyze(capsys, str(EVIDENCE), "--stream", "never", "--report", "-")
+    assert code == 0
+    assert "not streamable" not in err
+    whole = json.loads(out)
+    assert streamed == whole
+
+
+def test_always_keeps_junit_on_stdout_valid(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = _analyze(capsys, str(EVIDENCE), "--stream", "always", "--junit", "-")
+    assert code == 0
+    assert _said(EVIDENCE) in err.splitlines()
+    assert ET.fromstring(out).tag in ("testsuites", "testsuite")
+
+
+def test_auto_falls_back_quietly(capsys: pytest.CaptureFixture[str],
+                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """``auto`` made to stream this small log (its size threshold 0): the stream is tried and
+    refuses it, the whole log judges it, and nothing is said of it."""
+    monkeypatch.setattr(stream_choice, "stream_above_bytes", lambda suffix: 0.0)
+    tried: list[object] = []
+    real = stream_analysis.analyze_file
+
+    def spied(*args: object, **kwargs: object) -> object:
+        tried.append(args[0])
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(stream_analysis, "analyze_file", spied)
+    code, _, err = _analyze(capsys, str(EVIDENCE))
+    assert code == 0
+    assert tried == [EVIDENCE]  # the stream was taken, and refused
+    assert "not streamable" not in err, err
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_many_logs_say_each_refusal(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                    jobs: str) -> None:
+    """Several logs (in this process, and in worker processes): one line per refused log,
+    under ``always`` only."""
+    logs = [tmp_path / "a.blf", tmp_path / "b.blf"]
+    for log in logs:
+        shutil.copyfile(EVIDENCE, log)
+    names = [str(log) for log in logs]
+    code, out, err = _analyze(capsys, *names, "--stream", "always", "--jobs", jobs)
+    assert code == 0
+    for log in logs:
+        shown = next(line for line in out.splitlines() if log.name in line).split()[0]
+        assert err.splitlines().count(_said(shown)) == 1, err
+    code, _, err = _analyze(capsys, *names, "--stream", "never", "--jobs", jobs)
+    assert code == 0
+    assert "not streamable" not in err
