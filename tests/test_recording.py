@@ -17,6 +17,7 @@ from pathlib import Path
 
 import can
 import pytest
+from can.io.asc import ASCWriter
 from can.io.canutils import CanutilsLogWriter
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -87,6 +88,19 @@ def test_a_candump_or_asc_log_is_python_cans_byte_for_byte(
     ours = _by_recording(folder / f"ours{suffix}", batches, channel)
     theirs = _by_python_can(folder / f"python-can{suffix}", batches, channel)
     assert _same_bytes(ours, theirs, suffix)
+
+
+def test_an_asc_log_follows_the_writers_own_templates_when_they_change(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Another python-can's ``ASCWriter`` templates (not the ones the f-string copies): used."""
+    monkeypatch.setattr(ASCWriter, "FORMAT_EVENT", "{timestamp: 12.6f}  {message}\n")
+    batches: list[list[Received]] = [[(0.5, 0x100, b"\x01\x02"), (0.25, 0x7FF, b"")],
+                                     [(1.0, 0x110, bytes(range(8)))]]
+    ours = _by_recording(tmp_path / "ours.asc", batches, "vcan0")
+    theirs = _by_python_can(tmp_path / "python-can.asc", batches, "vcan0")
+    assert b"    0.500000  1  110" in ours  # the changed event template
+    assert _same_bytes(ours, theirs, ".asc")
 
 
 def _read(path: Path) -> list[tuple[float, int, bytes, bool]]:

@@ -13,6 +13,7 @@ A ``.blf`` gets that ``Message`` (its writer packs binary objects into compresse
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import cast
 
 import can
@@ -22,6 +23,9 @@ from can.util import channel2int
 
 from odocan.sim.framebatch import FrameBatchListener, Received
 from odocan.sim.transport import data_frame
+
+# python-can 4's ASCWriter line templates, which ``Recording._asc_line`` writes as an f-string.
+_ASC_TEMPLATES = ("{channel}  {id:<15} {dir:<4} {dtype} {data}", "{timestamp: 9.6f} {message}\n")
 
 
 class Recording(FrameBatchListener):
@@ -44,6 +48,8 @@ class Recording(FrameBatchListener):
         number = channel2int(channel)  # ASCWriter's channel number: counted from 1
         self._asc_channel = 0 if not self._asc else \
             cast(ASCWriter, writer).channel if number is None else number + 1
+        self._asc_templates_known = self._asc and \
+            (ASCWriter.FORMAT_MESSAGE, ASCWriter.FORMAT_EVENT) == _ASC_TEMPLATES
 
     def on_message_received(self, msg: can.Message) -> None:
         """Write ``msg`` (counted); after a failure, nothing more."""
@@ -62,25 +68,25 @@ class Recording(FrameBatchListener):
         if self.failure is not None:
             return
         lines: list[str] = []
+        line = self._line_format()
         for frame in frames:
-            if isinstance(frame, tuple) and self._formats_lines():
-                lines.append(self._line(*frame))
+            if line is not None and isinstance(frame, tuple):
+                lines.append(line(*frame))
             else:
                 self._write_lines(lines)
                 lines = []
                 self.on_message_received(self._message(frame))
+                line = self._line_format()
         self._write_lines(lines)
 
-    def _formats_lines(self) -> bool:
-        """Whether a data-frame tuple's line is formatted here: a candump log's always, an
-        ASC log's once its writer wrote the header its first frame opens (python-can's path)."""
-        return self._candump or (self._asc and cast(ASCWriter, self.writer).header_written)
-
-    def _line(self, timestamp_s: float, can_id: int, data: bytes) -> str:
-        """The writer's line for a received 11-bit data frame (``_formats_lines``)."""
+    def _line_format(self) -> Callable[[float, int, bytes], str] | None:
+        """How a data-frame tuple's line is formatted here: a candump log's always, an ASC log's
+        once its writer wrote the header its first frame opens (python-can's path); else None."""
         if self._candump:
-            return self._candump_line(timestamp_s, can_id, data)
-        return self._asc_line(timestamp_s, can_id, data)
+            return self._candump_line
+        if self._asc and cast(ASCWriter, self.writer).header_written:
+            return self._asc_line
+        return None
 
     def _message(self, frame: Received) -> can.Message:
         """The ``Message`` ``recv`` gives for a queued frame (``OdocanBus.as_message``)."""
@@ -101,15 +107,20 @@ class Recording(FrameBatchListener):
         return f"({stamp_s:f}) {self.channel} {can_id:03X}#{data.hex().upper()} R\n"
 
     def _asc_line(self, timestamp_s: float, can_id: int, data: bytes) -> str:
-        """``ASCWriter``'s line for a received 11-bit data frame, with its own templates: its
-        stamp relative to the log's first frame (``started``) unless earlier than it."""
+        """``ASCWriter``'s line for a received 11-bit data frame: its stamp relative to the log's
+        first frame (``started``) unless earlier than it; its templates as an f-string when
+        they are the ones of python-can 4 (``_ASC_TEMPLATES``), else themselves."""
         writer = cast(ASCWriter, self.writer)
         started_s = writer.started
+        stamp_s = timestamp_s - started_s if timestamp_s >= started_s else timestamp_s
+        data_hex = data.hex(" ").upper()
+        if self._asc_templates_known:
+            return f"{stamp_s: 9.6f} {self._asc_channel}  {can_id:<15X} Rx   d {len(data):x} " \
+                f"{data_hex}\n"
         message = writer.FORMAT_MESSAGE.format(
             channel=self._asc_channel, id=f"{can_id:X}", dir="Rx", dtype=f"d {len(data):x}",
-            data=data.hex(" ").upper(),
+            data=data_hex,
         )
-        stamp_s = timestamp_s - started_s if timestamp_s >= started_s else timestamp_s
         return writer.FORMAT_EVENT.format(timestamp=stamp_s, message=message)
 
     def _write_lines(self, lines: list[str]) -> None:
