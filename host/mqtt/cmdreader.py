@@ -288,11 +288,10 @@ class CommandReader:
     def _arrive(self, client: _ReaderClient, message: Arrived) -> None:
         """One command read (paho's thread of this loop): queued for its robot's link, or
         answered ``rejected`` when ``capacity`` wait already."""
-        parts = message.topic.value.split("/", 3)  # odocan/<robot>/cmd/<name>
-        robot = self.robots.get(parts[1]) if len(parts) == 4 else None
-        name = parts[3] if len(parts) == 4 else ""
-        if robot is None:
+        command = topics.command_of(message.topic.value)  # None: not a command (amqtt)
+        if command is None or command[0] not in self.robots:
             return
+        robot, name = self.robots[command[0]], command[1]
         with self.lock:
             full = len(robot.arrived) >= self.capacity
             if not full:

@@ -371,9 +371,9 @@ class RobotLink:
             await asyncio.sleep(0)  # the other tasks' turn
 
     def _handle(self, message: aiomqtt.Message) -> None:
-        """Answer one message on ``cmd/<name>`` (our own ``cmd/result`` is not a command)."""
-        name = message.topic.value.removeprefix(topics.topic(self.robot, "cmd/"))
-        if name != "result" and isinstance(message, Arrived):
+        """Answer one message on ``cmd/<name>`` (not our ``cmd/result``, nor another topic)."""
+        name = self._command_name(message)
+        if name is not None and isinstance(message, Arrived):
             for leaf, payload in self._answer(name, message):
                 self.publish(leaf, payload)
 
@@ -412,11 +412,16 @@ class RobotLink:
     def _overflow(self, message: Arrived) -> None:
         """A command on this connection (a session kept from a bridge that read its commands
         here, before ``_start_reader`` unsubscribed): answered at once, not run."""
-        name = message.topic.value.removeprefix(topics.topic(self.robot, "cmd/"))
-        if name != "result":
+        name = self._command_name(message)
+        if name is not None:
             self.commands_busy += 1
             for leaf, payload in self.on_command(name, _payload(message), "busy"):
                 self.publish(leaf, payload)
+
+    def _command_name(self, message: aiomqtt.Message) -> str | None:
+        """Its name when ``message`` is one of this robot's commands (``topics.command_of``)."""
+        robot, name = topics.command_of(message.topic.value) or ("", "result")
+        return name if robot == self.robot and name != "result" else None
 
     def _refused(self, topic: str, reason: str) -> None:
         if not self.refused[topic]:

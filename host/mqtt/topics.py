@@ -54,6 +54,18 @@ def command_filter(robot: str) -> str:
     return f"{PREFIX}/{robot}/cmd/+"
 
 
+def command_of(topic_name: str) -> tuple[str, str] | None:
+    """``odocan/<robot>/cmd/<name>`` (what ``command_filter`` matches) -> (robot, name); None
+    for any other topic. A ``cmd/+`` subscription is no promise of it: amqtt (the embedded
+    broker) sends a client, as it connects, the retained messages of the filters ANY client
+    holds (its ``Broker`` walks every subscription, not the session's): a monitor's
+    ``odocan/+/#`` brought every robot's ``status`` to each link, taken for a command."""
+    parts = topic_name.split("/")
+    if len(parts) != 4 or parts[0] != PREFIX or parts[2] != "cmd":
+        return None
+    return parts[1], parts[3]
+
+
 def qos(leaf: str) -> int:
     """The QoS class of a leaf: 0 for telemetry, 1 for status, commands and results."""
     return QOS_TELEMETRY if leaf in TELEMETRY_LEAVES else QOS_RELIABLE
