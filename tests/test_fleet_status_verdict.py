@@ -133,6 +133,8 @@ def test_the_cli_fleets_statuses_carry_its_max_miss_ratio(
                              f"mqtt://{url.username}@{url.host}:{url.port}")
     assert code == 0, out + err
     report = json.loads(path.read_text())
+    assert report["passed"] is True  # the run's verdict, on top
+    assert report["failures"] == []
     verdict = asyncio.run(_retained_status(url, "robot001"))["watch_verdict"]
     assert verdict["verdict"] == report["per_robot"]["robot001"]["verdict"] == "PASS", verdict
     _check_loop(verdict, report["deadline_miss_ratio"], 1.0)
@@ -156,3 +158,20 @@ def test_a_passed_pose_whose_loop_missed_its_deadlines_says_both() -> None:
     assert verdict["loop"] == {"deadline_miss_ratio": 0.012, "max_miss_ratio": 0.001,
                                "missed": True, "skipped_releases": 0}
     assert verdict["pose_error"] is None
+
+
+def test_a_failing_fleets_report_says_so_on_top(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """The report's ``passed`` and ``failures`` are the exit line's and code's (a run whose
+    thresholds are broken: ``failures`` made to say so, the fleet itself on the embedded
+    broker)."""
+    broken = ["deadline_miss_ratio 0.5000 > --max-miss-ratio 0.001"]
+    monkeypatch.setattr("odocan.host.cli.subparsers.fleet.failures", lambda *_: broken)
+    path = tmp_path / "fleet.json"
+    code, out, err = run_cli(capsys, "fleet", "-n", "1", "--duration", "1", "--report", str(path))
+    assert code == 1, out + err
+    assert broken[0] in out + err
+    report = json.loads(path.read_text())
+    assert report["passed"] is False
+    assert report["failures"] == broken

@@ -11,9 +11,10 @@ a fleet of N machines on one broker (robot ids and seeds numbered across shards:
 on ``--port`` or a free port; its URL is printed at the start (``odocan monitor --broker URL``
 watches; ``--foxglove [PORT]`` serves every robot live to Foxglove: ``host.mqtt.foxglove_fleet``).
 ``--report`` writes the JSON contract of ``host.mqtt.fleetrun`` (``workers`` added by
-``host.mqtt.shards``). The exit line says PASS, or FAIL and every threshold broken: exit 0, or 1
-when ``deadline_miss_ratio`` exceeds ``--max-miss-ratio`` or a robot's pose is out of tolerance or
-not judged.
+``host.mqtt.shards``) with the run's verdict on top: ``passed`` and ``failures`` (each threshold
+broken, the exit line's words; ``passed`` false too for a run a signal stopped). The exit line
+says PASS, or FAIL and every threshold broken: exit 0, or 1 when ``deadline_miss_ratio`` exceeds
+``--max-miss-ratio`` or a robot's pose is out of tolerance or not judged.
 """
 
 from __future__ import annotations
@@ -214,6 +215,7 @@ def _do_fleet(args: argparse.Namespace) -> int:
         with _foxglove(args, broker, names):
             report = _run(run, args.workers, debug, choice.said)
     broken = failures(report, args.max_miss_ratio)
+    report.update(passed=not broken and not report.get("stopped"), failures=broken)
     _print_summary(report, broken)
     if args.report is not None:
         write_text(args.report, json.dumps(report, indent=2) + "\n", "--report")
