@@ -10,8 +10,11 @@ firmware's last frame (its ODOM_STATUS, ``PoseTracker.on_status``, or a pose hal
 frames on time meanwhile, is left out; when the reference runs from the firmware's power-up
 (a proven power-up at frame 0: ``Lives.power_up_proven``), the position is placed again at the
 next sample, bounded by the merge allowance from the first frame the firmware could have primed
-on (``liveplace.StallPlacer.shift``), as ``analyze`` restarts its segment there; else the next
-sample starts the reference (fitted), as ``analyze`` starts it at its first sample kept. The
+on (``liveplace.StallPlacer.shift``), as ``analyze`` restarts its segment there (also when the
+proof comes after this sample, while the life's next samples wait for its count page: the
+frame kept in ``stalled_from``, ``livestart.start_reference``; issue #11's 3 s halt at power-up
+in the rig); else the next sample starts the reference (fitted), as ``analyze`` starts it at
+its first sample kept. The
 frames between that frame and the placed sample's are the placement's: the firmware's
 ENC_E2E_LOST counts the frames its FIFO overran among them, which open no loss allowance on top
 (``livelosses.LiveAllowance.stalled_first``, ``losses.placement_accounted``).

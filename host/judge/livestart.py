@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 from odocan.host.judge.liveadopted import UNHEARD_BOOT
 from odocan.host.judge.livefit import LiveFit
+from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import FramePose, Sample
 from odocan.host.judge.livewindow import Counted, primed_at, window_counts
 from odocan.host.judge.reference import ReferenceOdometry
@@ -22,10 +23,13 @@ BOOT_COUNT_WAIT_S = 1.0  # after a reboot, how long the count page is waited for
 
 
 def start_reference(tracker: PoseTracker, pose: FramePose, counts: list[Counted],
-                    poses: list[FramePose]) -> None:
+                    poses: list[FramePose], stalled_from: int | None = None) -> None:
     """Start ``tracker``'s reference at ``pose``, primed on the first of ``counts`` (the frame
     ``pose`` names on, stepped as heard: ``Counted``), catch up, compare the ``poses`` heard
-    since."""
+    since; ``stalled_from``: a stall before the life's first sample was told (``livefirst``)
+    before its power-up was proven, the frame the firmware could first have primed on: the
+    position is placed at the first of ``poses`` from there, as ``livefirst`` owes it when the
+    power-up was proven first (``analyze``: ``stalls.first_placement``)."""
     assert tracker.integrator is not None
     tracker.choice.decide()  # the samples held are judged by the reference they named
     ref = ReferenceOdometry(
@@ -43,9 +47,14 @@ def start_reference(tracker: PoseTracker, pose: FramePose, counts: list[Counted]
         step = raw.step(ref, frame)  # the first primes: stays at pose
         if tracker.choice.pending is not None:  # the twin steps along (livechoice)
             tracker.choice.stepped(frame[0], step)
+    if stalled_from is not None:
+        tracker.stall.owe_from(stalled_from)
+        tracker.losses.stalled_first(stalled_from)  # the frames between: the placement's
     held_samples = tracker.lives.held
     for heard in poses:
         at = raw.at.get(heard.seq)
+        if at is not None and stalled_from is not None:
+            at, stalled_from = place_reference(tracker, heard, at), None
         held = held_samples.pop(heard.seq, None)
         if at is not None and held is not None:  # settled again, judged now
             tracker.settled.append(held._replace(reference=tracker.record(heard, at)))
@@ -147,7 +156,8 @@ class Lives:
         tracker.reference_starts -= first_life and tracker.reference_starts > 0
         tracker.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
         tracker.losses.primed(primed)  # ENC_E2E_LOST counted from 0 there
-        start_reference(tracker, FramePose(primed, 0.0, 0.0, 0.0), counts, poses)
+        stalled = tracker.first.stalled_from if first_life and poses else None  # told before
+        start_reference(tracker, FramePose(primed, 0.0, 0.0, 0.0), counts, poses, stalled)
         if not first_life:
             tracker.life_truth.booted(primed, tracker.raw.at)
 

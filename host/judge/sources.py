@@ -335,9 +335,14 @@ def pose_named_live(tracker: PoseTracker) -> int | None:
 
 def heard_before_live(tracker: PoseTracker, bound_s: float, made: int) -> int | None:
     """``powerup.heard_by_tick`` live: the encoder frames heard before bus time ``bound_s`` and
-    among the first ``made``; None when the window no longer holds the frames to tell."""
-    rows = [row for row in tracker.window.rows if row[3] < bound_s]
-    if rows:
-        return min(int(rows[-1][0]) + 1, made)
-    first = tracker.window.rows[0] if tracker.window.rows else None
-    return 0 if first is None or int(first[0]) == 0 else None
+    among the first ``made``; None when the window no longer holds the frames to tell. The
+    whole window (5 s), not its recent rows alone: after an MCU halted at power-up, the page's
+    tick bound is seconds back (its ODOM_STATUS COUNTER stood still), as ``analyze`` reads it
+    (issue #11: a 3 s halt left the live judges unproven, their start fitted)."""
+    window = tracker.window
+    if not len(window):
+        return 0
+    before = np.flatnonzero(window.col("t_s") < bound_s)
+    if len(before):
+        return min(int(window.col("seq")[before[-1]]) + 1, made)
+    return 0 if int(window.col("seq")[0]) == 0 else None

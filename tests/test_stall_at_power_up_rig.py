@@ -1,0 +1,161 @@
+"""A firmware whose MCU halts 3 s at power-up, before its first pose, in the fault rig (issue #11:
+"a PASS/OK must never hide a wrong pose"; ``tests/test_stall_beyond_window.py``'s ``drive`` at
+300 ticks: pmir on the circle, the FIFO empty at tick 0, INIT, UPTIME 0, only its ODOM_STATUS
+sent; then 3 s of no MCU while the sim drives on). On resuming it primes on frame 1, steps frame
+2 and takes frame ``RESUMED_AT`` as one step (the float64 odometry of the tests, on
+cantools-decoded frames): its first pose is that merged step, as after a reboot's stall
+(``tests/test_stall_before_first_pose_after_reboot.py``). Unlike the recorded evidence of
+``tests/test_stall_before_first_pose.py`` (whose first count page came before any frame), its
+first count page comes 80 ms after its first pose, and counts 11 frames (ENC_E2E_OK; the FIFO's
+overrun is in ENC_E2E_LOST): ``analyze`` proves the power-up by the page's tick bound
+(``powerup.heard_by_tick``: its ODOM_STATUS COUNTER stood still through the halt, so the bound is
+0.1 s after power-up, 11 frames on the bus by then).
+
+(a) Before: the live judges read that bound on their 32 recent frames only
+(``sources.heard_before_live``), could not prove the power-up, and started the reference fitted
+at the first sample kept: a firmware 1 m off from its first pose showed 0 wrong episodes (the
+monitor DEGRADED only by the firmware's own POSE_UNCERTAIN) while ``analyze`` FAILed it at
+944 mm. Now they read the whole window (5 s) as ``analyze`` reads the log, and when the proof
+comes after the first sample was left out (``livefirst``) the reference starts at (0, 0, 0) on
+frame 0 and its position is placed at the next sample within the merge allowance
+(``livestart.start_reference``'s ``stalled_from``), as ``analyze`` places it.
+
+Left (a strict xfail): with the firmware's first two count pages lost on the bus (3.101 s and
+3.701 s), the next one's tick bound no longer reaches the power-up (its ODOM_STATUS COUNTER has
+wrapped past 16), so no judge proves it: ``analyze`` and the live judges start fitted at the
+first sample kept and PASS a firmware 1 m off from its first pose (the monitor DEGRADED only by
+the firmware's POSE_UNCERTAIN). The evidence that remains (the first-cycle summary, INIT at
+UPTIME 0, then a stall before the first pose: ``stalls.primed_first``'s, which ``analyze``
+takes for a reboot's life only) would prove it; the log's start does not use it yet.
+
+(b) X 3 LSB off from the 20th pose (0.3 mm): it FAILs ``analyze`` since the reboot's fix of the
+double allowance (``losses.placement_accounted``, which the power-up shares: 0.235 mm beyond the
+allowance, before 0.262 mm within it), and the live judges.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import can
+import pytest
+
+from odocan.firmware import frames as fr
+from odocan.host.cli.app import main
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
+from odocan.host.judge.samples import ENC_E2E_PAGE
+from tests.test_first_second_reboot import _decoded, _written, _wrong
+from tests.test_stall_before_first_pose import _odometry
+from tests.test_stall_beyond_window import PMIR, _live, _poses, drive
+
+HALTED = 300  # ticks of no MCU after its power-up tick (3 s)
+RESUMED_AT = HALTED + 2  # the encoder frame its first pose names (the merged step's end)
+
+
+def _messages() -> tuple[can.Message, ...]:
+    return drive("power-up", HALTED)
+
+
+def _gap_m(messages: tuple[can.Message, ...], k: int) -> tuple[float, float]:
+    """How far the ``k``-th pose lies from the float64 odometry of the frames the firmware
+    took (frames 1, 2, ``RESUMED_AT``, then every frame to the one the pose names, 2 a send
+    period): (position m, heading rad)."""
+    encoders = [_decoded(m) for m in _messages() if m.arbitration_id == fr.WHEEL_ENCODERS_ID]
+    pose = _poses(messages, 0.0)[k]
+    named = RESUMED_AT + 2 * k
+    assert int(pose["ENC_COUNTER"]) == named % 16
+    odo = _odometry(encoders, [1, 2, *range(RESUMED_AT, named + 1)])
+    return (math.hypot(odo.x - pose["X"] * 1e-4, odo.y - pose["Y"] * 1e-4),
+            abs(odo.heading - pose["HEADING"] * 2 * math.pi / 65536))
+
+
+def test_the_firmware_took_its_fifo_then_one_step() -> None:
+    """Its first pose is frames 1, 2, then ``RESUMED_AT`` as one step (float64, within an
+    LSB), and so are the next ones; the fine path is centimetres away."""
+    for k in (0, 1, 20, 60):
+        gap_m, turn_rad = _gap_m(_messages(), k)
+        assert gap_m <= POSITION_LSB_M, (k, gap_m)
+        assert turn_rad <= HEADING_LSB_RAD, (k, turn_rad)
+    encoders = [_decoded(m) for m in _messages() if m.arbitration_id == fr.WHEEL_ENCODERS_ID]
+    fine = _odometry(encoders, list(range(1, RESUMED_AT + 1)))
+    first = _poses(_messages(), 0.0)[0]
+    assert math.hypot(fine.x - first["X"] * 1e-4, fine.y - first["Y"] * 1e-4) > 0.01
+
+
+def test_every_judge_passes_the_correct_firmware(tmp_path: Path) -> None:
+    """``analyze`` (whole, streamed) and the live judges, from the power-up, the position
+    placed at the stall (no false FAIL from the proof that comes after the first sample)."""
+    path = _written(_messages(), tmp_path / "right.log")
+    analysis = analyze(read_log(path), PMIR, "exact")
+    assert analysis.passed, analysis.report["onboard_vs_reference"]
+    assert analysis.report["reference_start"] == "power-up"
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 0
+    monitor, bridge, end_s = _live(_messages())
+    assert monitor.health(end_s)["pose_wrongs"]["episodes"] == 0
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.lives.power_up_proven  # as analyze: not a fitted start
+        assert tracker.stall.stalls == 1
+        assert tracker.wrongs.as_dict()["episodes"] == 0
+        assert tracker.max_beyond_allowance_m <= POSITION_LSB_M
+    for live in (monitor.distance, bridge.distance):
+        assert live.as_dict()["passed"]
+
+
+@pytest.mark.parametrize(("from_pose", "bias_lsb"), [(0, 10_000), (1, 10_000), (20, 3),
+                                                     (60, 2)])
+def test_a_wrong_firmware_fails_every_judge(tmp_path: Path, from_pose: int,
+                                            bias_lsb: int) -> None:
+    """X off by ``bias_lsb`` from pose ``from_pose`` on: 1 m from the first pose (before: 0
+    wrong episodes live, a fitted start absorbed it; ``analyze`` 944 mm), 0.3 mm from the 20th,
+    0.2 mm from the 60th. The evidence: the correct firmware is within one LSB of the float64
+    odometry there, the wrong one more than one LSB off."""
+    messages = _wrong(_messages(), 0, bias_lsb, from_pose)
+    at = max(from_pose, 1)
+    assert _gap_m(_messages(), at)[0] <= POSITION_LSB_M
+    assert _gap_m(messages, at)[0] > POSITION_LSB_M
+    path = _written(messages, tmp_path / "wrong.log")
+    analysis = analyze(read_log(path), PMIR, "exact")
+    assert not analysis.passed
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 1
+    beyond_m = analysis.report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"]
+    monitor, bridge, end_s = _live(messages)
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.wrongs.as_dict()["episodes"] >= 1
+        assert tracker.max_beyond_allowance_m > POSITION_LSB_M
+        if bias_lsb == 10_000:  # the same start and placement as analyze's: the same error
+            assert tracker.max_beyond_allowance_m == pytest.approx(beyond_m, abs=POSITION_LSB_M)
+
+
+def _without_first_count_pages(messages: tuple[can.Message, ...]) -> tuple[can.Message, ...]:
+    """The frames without the firmware's first two ODOM_STATUS pages of WHEEL_ENCODERS E2E
+    counts (lost on the bus)."""
+    pages = [m for m in messages if m.arbitration_id == fr.ODOM_STATUS_ID
+             and int(_decoded(m)["PAGE"]) == ENC_E2E_PAGE][:2]
+    return tuple(m for m in messages if all(m is not page for page in pages))
+
+
+def test_without_its_first_count_pages_the_correct_firmware_passes(tmp_path: Path) -> None:
+    """No judge proves the power-up there (module docstring): fitted, the correct firmware
+    PASSes every judge."""
+    messages = _without_first_count_pages(_messages())
+    analysis = analyze(read_log(_written(messages, tmp_path / "right.log")), PMIR, "exact")
+    assert analysis.passed
+    monitor, bridge, end_s = _live(messages)
+    assert monitor.health(end_s)["pose_wrongs"]["episodes"] == 0
+    assert bridge.tracker.wrongs.as_dict()["episodes"] == 0
+
+
+@pytest.mark.xfail(strict=True, reason="the power-up unproven without the first count pages: "
+                   "every judge starts fitted and absorbs 1 m (module docstring, Left)")
+def test_without_its_first_count_pages_a_wrong_firmware_fails(tmp_path: Path) -> None:
+    messages = _without_first_count_pages(_wrong(_messages(), 0, 10_000, 1))
+    assert _gap_m(messages, 1)[0] > 0.9  # the float64 evidence: 1 m off
+    analysis = analyze(read_log(_written(messages, tmp_path / "wrong.log")), PMIR, "exact")
+    monitor, bridge, end_s = _live(messages)
+    assert (analysis.passed, monitor.health(end_s)["state"],
+            bridge.tracker.wrongs.as_dict()["episodes"] >= 1) == (False, "POSE WRONG", True)
