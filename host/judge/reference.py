@@ -161,8 +161,9 @@ class ReferenceOdometry:
             direction = heading_new
         else:
             direction = 0.5 * (heading_old + heading_new)
-            if self.integrator == "exact":
-                ds *= chord_factor(heading_new - heading_old)
+            if self.integrator == "exact":  # ``chord_factor`` in line (per step)
+                u = 0.5 * (heading_new - heading_old)
+                ds *= 1.0 - u * u / 6.0 if abs(u) < 1e-4 else math.sin(u) / u
         self.x_m += ds * math.cos(direction)
         self.y_m += ds * math.sin(direction)
         self.distance_m += abs(path_m)
