@@ -170,7 +170,8 @@ class PoseTracker:
                                        uptime, t_s))  # ``counted(row)`` in line
             if self.choice.pending is not None:  # the twin steps along (livechoice)
                 self.choice.stepped(self.enc_seq, step)
-            self.laps.heard()
+            if self.laps.pending:  # (none held: ``heard`` would release none)
+                self.laps.heard()
         elif self.lives.pending is not None:
             self.lives.heard(counted(row))
 
