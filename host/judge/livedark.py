@@ -30,7 +30,7 @@ from odocan.host.judge.gapseen import DARK_CYCLES
 from odocan.host.judge.livegapseen import LiveSeen
 from odocan.host.judge.livewindow import CYCLE_S
 
-_NO_FRAME_S = -math.inf  # ``_last_s`` before any frame
+NO_FRAME_S = -math.inf  # ``last_s`` before any frame
 
 
 class DarkRestarts:
@@ -39,8 +39,10 @@ class DarkRestarts:
 
     def __init__(self, cycle_s: float = CYCLE_S) -> None:
         self.dark_s = DARK_CYCLES * cycle_s  # no frame this long (s): the input went dark
-        self._last_s = _NO_FRAME_S  # bus time of the latest frame heard (s)
-        self._dark = False  # a dark gap since the latest encoder frame
+        # bus time of the latest frame heard (s), and whether a dark gap came since the latest
+        # encoder frame: public, ``PoseTracker.advance`` runs ``heard`` in line (per frame)
+        self.last_s = NO_FRAME_S
+        self.dark = False
         self._hole = -1  # the latest encoder frame (seq) that ended a dark gap of the sequence
         self._pending = -1  # a new start owed from this encoder frame on (-1: none)
         self.new_starts = 0  # restarts after a dark gap the reference restarted at (the watch's)
@@ -48,20 +50,20 @@ class DarkRestarts:
 
     def heard(self, t_s: float) -> float:
         """Any frame heard at bus time ``t_s`` (returned: the tracker's bus time)."""
-        last_s = self._last_s  # (per frame of every robot: no max(), no math.inf looked up)
-        if t_s - last_s > self.dark_s and last_s != _NO_FRAME_S:
-            self._dark = True
+        last_s = self.last_s  # (per frame of every robot: no max(), no math.inf looked up)
+        if t_s - last_s > self.dark_s and last_s != NO_FRAME_S:
+            self.dark = True
         if t_s > last_s:  # (a NaN never)
-            self._last_s = t_s
+            self.last_s = t_s
         return t_s
 
     def on_encoders(self, seq: int, periods: int) -> None:
         """An accepted encoder frame ``seq``, ``periods`` of the sender's sequence after the
         frame heard before: a hole when the input went dark since that one and frames of the
         sequence are missing."""
-        if self._dark and periods > 1:
+        if self.dark and periods > 1:
             self._hole = seq
-        self._dark = False
+        self.dark = False
 
     def restarted(self, seq: int, by_uptime: bool, seen: LiveSeen) -> bool:
         """The reference re-primed on encoder frame ``seq`` (``by_uptime``: the controller

@@ -47,8 +47,13 @@ class HalfPairs:
     def settle_due(self, t_s: float) -> None:
         """Bus time is ``t_s``: settle the halves heard ``QUEUED_GAP_S`` or more before, in the
         order heard."""
-        for _, name in sorted((half.pos, name) for name, half in self._unsettled.items()
-                              if t_s - half.t_s >= QUEUED_GAP_S):
+        due = []  # (a loop, not a generator sorted: per pose half)
+        for name, half in self._unsettled.items():
+            if t_s - half.t_s >= QUEUED_GAP_S:
+                due.append((half.pos, name))
+        if len(due) > 1:
+            due.sort()
+        for _, name in due:
             self._settle(name)
 
     def forget(self, before: int) -> None:
@@ -65,7 +70,9 @@ class HalfPairs:
                                  if len(rest) == 1 else min(h.t_s for h in rest.values()))
         tracker = self._tracker
         seq, queued = tracker.named(self.halves[name], half.pos)
-        if seq < 0 or tracker.twins.twinned(seq) or judge_resend(name, seq, half, tracker):
+        last = tracker.last_pair  # (``judge_resend`` judges only a frame sampled last)
+        if seq < 0 or tracker.twins.twinned(seq) or (
+                last is not None and last[0].seq == seq and judge_resend(name, seq, half, tracker)):
             return  # left out, as analyze leaves it out (unmatched); a resend judged
         if name == "x":
             self._xs.setdefault(seq, half)

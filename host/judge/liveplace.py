@@ -164,7 +164,8 @@ class StallPlacer:
         self.bus.heard(seq, *frame)
         periods = self.periods - self.moved  # the stamps' numbering: sums kept
         self.seen.on_encoders(seq, frame[3], periods)
-        self.dark.on_encoders(seq, periods)
+        if self.dark.dark:  # (else ``on_encoders`` has nothing to note: no dark gap)
+            self.dark.on_encoders(seq, periods)
         return gap
 
     def _moved(self, periods: int, frame: tuple[int, int, int, float],

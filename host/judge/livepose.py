@@ -281,9 +281,11 @@ def difference(a: FramePose, b: FramePose) -> dict[str, float]:
     whole turn the cumulative headings differ beyond it (``host.judge.turns``: a TURNS off)."""
     dx, dy = a.x_m - b.x_m, a.y_m - b.y_m
     d = a.heading_rad - b.heading_rad
-    dheading = wrap_angle(d)
+    # within half a turn ``wrap_angle(d)`` is ``d`` itself (IEEE remainder by 2 pi, quotient 0:
+    # exact; at pi the tie goes to the even quotient 0): no call per sample
+    dheading = d
     if not -math.pi < d <= math.pi:  # beyond half a turn: TURNS may be off (else it is not)
-        dheading = unwrapped_error(a.heading_rad, b.heading_rad, dheading)
+        dheading = unwrapped_error(a.heading_rad, b.heading_rad, wrap_angle(d))
     return {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy), "dheading_rad": dheading}
 
 

@@ -38,8 +38,11 @@ class RawReference:
         step = self.gate.step(frame)
         if step is not None:
             ref.step_deltas(*step)
-        seq = frame[0]
-        self.at[seq] = FramePose(seq, ref.x_m, ref.y_m, ref.heading_rad)
+        seq = frame[0]  # ``ref.heading_rad`` in line (per encoder frame): ``_heading_at``'s sum;
+        # the NamedTuple made by ``tuple.__new__`` (its ``__new__`` is a Python lambda)
+        self.at[seq] = tuple.__new__(FramePose, (seq, ref.x_m, ref.y_m, ref._heading0_rad
+                                                 + ref._k_right * ref._cum_right
+                                                 - ref._k_left * ref._cum_left))
         self.at.pop(seq - ENC_WINDOW, None)
         return step
 

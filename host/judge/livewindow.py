@@ -31,7 +31,9 @@ HALF_WINDOW = 256  # pose halves of each message kept to resolve the frame one n
 ENC_WINDOW = 512  # encoder frames kept for it, and the reference at each (5 s at 100 Hz)
 CYCLE_S = busfacts.ENC_CYCLE_S  # WHEEL_ENCODERS' cycle
 RECENT = 32  # latest rows of a window kept as tuples for the fast path (``named_plain``)
-QUEUED_GAP_S = QUEUED_GAP_CYCLES * CYCLE_S  # closer sends of one message waited (queued)
+# closer sends of one message waited (queued): ``samples.queued_frames``' test of one gap is
+# 0 <= gap < QUEUED_GAP_S (a gap going back is a frame reordered, not queued), written out
+QUEUED_GAP_S = QUEUED_GAP_CYCLES * CYCLE_S
 REPEAT_S = SILENCE_CYCLES * CYCLE_S  # a repeated ENC_COUNTER closer than this is held
 # The window's encoder frames: the tracker's seq, the order fed, COUNTER, bus time s, the counts,
 # the periods heard since the frame before (``liveplace.StallPlacer.periods``) and CTRL_UPTIME:
@@ -94,14 +96,14 @@ def plain_half(halves: deque[tuple[float, ...]], pos: int) -> tuple[float, float
         k = -1
     elif n_halves > 1 and halves[-2][0] == pos:
         k = -2
-        if _close(halves[-1][3] - halves[-2][3]):
+        if 0 <= halves[-1][3] - halves[-2][3] < QUEUED_GAP_S:  # queued
             return None
     else:
         return None
     _, enc_counter, counter, t_s = halves[k]
     if n_halves > -k:
         _, prev_enc, prev_counter, prev_t = halves[k - 1]
-        if _close(t_s - prev_t):
+        if 0 <= t_s - prev_t < QUEUED_GAP_S:
             return None
         if (prev_enc == enc_counter and (int(counter - prev_counter) & ENC_COUNTER_MASK) == 1
                 and t_s - prev_t < REPEAT_S):
@@ -120,16 +122,11 @@ def _sender_step(window: deque[tuple[float, ...]], j: int) -> int | None:
     step = int(counter - prev_counter) & ENC_COUNTER_MASK
     dt = t_s - prev_t
     laps = max(0, math.floor((dt / CYCLE_S - step) / ENC_COUNTER_LAP + 0.5))
-    if step and (_close(dt) or (j < -1 and _close(window[j + 1][3] - t_s))):
+    if step and (0 <= dt < QUEUED_GAP_S  # queued
+                 or (j < -1 and 0 <= window[j + 1][3] - t_s < QUEUED_GAP_S)):
         # a step of 0 is widened by the time alone, as ``sender_seq`` widens it
         return None if laps else step
     return step + ENC_COUNTER_LAP * laps
-
-
-def _close(gap_s: float) -> bool:
-    """``samples.queued_frames``' test of one gap: 0 <= gap < ``QUEUED_GAP_CYCLES`` (a gap
-    going back is a frame reordered, not queued)."""
-    return 0 <= gap_s < QUEUED_GAP_S
 
 
 class Columns:

@@ -118,8 +118,11 @@ class ReferenceOdometry:
         self._heading0_rad = heading_rad
         self._cum_left = self._cum_right = 0
         self._prev: tuple[int, int] | None = None
-        self._k_left = geometry.m_per_count_left / geometry.wheelbase_m
-        self._k_right = geometry.m_per_count_right / geometry.wheelbase_m
+        # the wheels' travel per count (m; the geometry is frozen: its properties read once,
+        # not twice per step)
+        self._m_left, self._m_right = geometry.m_per_count_left, geometry.m_per_count_right
+        self._k_left = self._m_left / geometry.wheelbase_m
+        self._k_right = self._m_right / geometry.wheelbase_m
 
     @property
     def heading_rad(self) -> float:
@@ -148,8 +151,7 @@ class ReferenceOdometry:
     def step_deltas(self, d_left: int, d_right: int) -> None:
         """Integrate one step of count deltas (per encoder frame of every robot a live judge
         follows: the headings as ``_heading_at`` computes them, written out)."""
-        g = self.geometry
-        ds = path_m = 0.5 * (d_left * g.m_per_count_left + d_right * g.m_per_count_right)
+        ds = path_m = 0.5 * (d_left * self._m_left + d_right * self._m_right)
         heading0, k_left, k_right = self._heading0_rad, self._k_left, self._k_right
         heading_old = heading0 + k_right * self._cum_right - k_left * self._cum_left
         cum_left = self._cum_left = self._cum_left + d_left
@@ -159,8 +161,9 @@ class ReferenceOdometry:
             direction = heading_new
         else:
             direction = 0.5 * (heading_old + heading_new)
-            if self.integrator == "exact":
-                ds *= chord_factor(heading_new - heading_old)
+            if self.integrator == "exact":  # ``chord_factor`` in line (per step)
+                u = 0.5 * (heading_new - heading_old)
+                ds *= 1.0 - u * u / 6.0 if abs(u) < 1e-4 else math.sin(u) / u
         self.x_m += ds * math.cos(direction)
         self.y_m += ds * math.sin(direction)
         self.distance_m += abs(path_m)

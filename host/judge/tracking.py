@@ -23,6 +23,7 @@ from odocan.host.judge.liveadopted import (
     AdoptedStarts,
 )
 from odocan.host.judge.livechoice import LiveChoice
+from odocan.host.judge.livedark import NO_FRAME_S
 from odocan.host.judge.livefirst import FirstStall, left_out_first
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livehalves import HalfPairs
@@ -125,7 +126,13 @@ class PoseTracker:
     def advance(self, t_s: float) -> None:
         """Bus time is now ``t_s`` (any frame heard): pose halves heard half an encoder cycle or
         more before are settled; a new life waiting ``BOOT_COUNT_WAIT_S`` starts without it."""
-        self.now_s = self.placer.dark.heard(t_s)  # (and whether the input went dark)
+        dark = self.placer.dark  # ``DarkRestarts.heard`` in line (per frame of every robot):
+        last_s = dark.last_s  # a gap beyond ``dark_s`` is a later frame (the first's: none)
+        if t_s > last_s:
+            if t_s - last_s > dark.dark_s and last_s != NO_FRAME_S:
+                dark.dark = True  # the input went dark
+            dark.last_s = t_s
+        self.now_s = t_s
         if t_s > self.choice.until_s:  # the pages had their time: the choice is made
             self.choice.decide()
         if t_s > self.laps.until_s:  # ... and a lap's numbering is decided (livelaphold)
@@ -159,10 +166,12 @@ class PoseTracker:
         self.truths.frame_heard(counter, self.enc_seq, left, right)
         ref = self.raw.odometry
         if ref is not None:
-            step = self.raw.step(ref, counted(row))
+            step = self.raw.step(ref, (self.enc_seq, counter, left, right, self.placer.periods,
+                                       uptime, t_s))  # ``counted(row)`` in line
             if self.choice.pending is not None:  # the twin steps along (livechoice)
                 self.choice.stepped(self.enc_seq, step)
-            self.laps.heard()
+            if self.laps.pending:  # (none held: ``heard`` would release none)
+                self.laps.heard()
         elif self.lives.pending is not None:
             self.lives.heard(counted(row))
 

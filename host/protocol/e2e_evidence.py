@@ -283,8 +283,9 @@ class ReleaseWatch:
     def seen(self, timestamp_s: float, key: int = -1) -> None:
         """Note a frame heard at ``timestamp_s`` s (``key``: its message's)."""
         last, self._last_s = self._last_s, timestamp_s
-        self._mixed = self._mixed or (last is not None and key != self._key)
-        self._key = key
+        if not self._mixed:  # (once mixed, always: the message of the last frame not needed)
+            self._mixed = last is not None and key != self._key
+            self._key = key
         if last is None:
             return
         gap_s = timestamp_s - last
