@@ -206,6 +206,8 @@ def test_mid_drive_the_firmware_reprimes_and_every_judge_passes_it(halted: int,
     assert "declared by the firmware" in events[0]["detail"]
     for judge in (monitor, bridge):
         assert [e["kind"] for e in judge.events].count("stall_reprime") == 1
+    assert main(["analyze", str(tmp_path / "right.log"), "--robot", "pmir", "--integrator",
+                 "exact", "--stream", "always"]) == 0  # refused: judged whole
 
 
 @pytest.mark.parametrize("halted", [600, 1000])

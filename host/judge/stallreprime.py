@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from odocan.host.judge.nearthreshold import Resets
+from odocan.host.judge.nearthreshold import COUNTER_RESET_BIT, Resets
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
@@ -83,6 +83,20 @@ def possible(stall_s: float, cycle_s: float, least: int | None) -> bool:
     """Whether a stall of ``stall_s`` (bus time) can bring the firmware's step bound to the
     ambiguous step (``least`` periods; None: no plausibility bound, no re-prime)."""
     return least is not None and 2.0 * stall_s / cycle_s + SLACK_PERIODS >= least
+
+
+STREAM = ("a stall the firmware declared it re-primed after (COUNTER_RESET): judged on the "
+          "whole log (its re-prime's frames chosen by the samples after)")
+
+
+def any_declared(resets: Resets, cycle_s: float, least: int | None) -> bool:
+    """Whether two consecutive summaries of ``resets`` are a silence long enough to re-prime
+    (``possible``) with COUNTER_RESET clear before and set after: the streamed judge, which
+    steps before it reads the summaries, refuses such a life (the whole log's judges it)."""
+    gaps = np.diff(resets.sent_s)
+    bit = (resets.mask & COUNTER_RESET_BIT) != 0
+    return any(possible(float(g), cycle_s, least) and not bit[k] and bit[k + 1]
+               for k, g in enumerate(gaps.tolist()))
 
 
 def declared_stalls(breaks: IntArray | None, enc: Encoders, e0: int, resets: Resets,
