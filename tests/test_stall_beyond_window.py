@@ -149,8 +149,11 @@ def test_a_wrong_firmware_never_passes(start: str, halted: int, from_pose: int, 
     assert not analyze(read_log(path), PMIR, "exact").passed
     assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
                  "--stream", "always"]) == 1
-    monitor, _, end_s = _live(wrong)
+    monitor, bridge, end_s = _live(wrong)
     assert monitor.health(end_s)["state"] in ("POSE WRONG", "DEGRADED")
+    if start == "reboot":  # a jump no re-prime explains is judged (livereprime)
+        assert monitor.health(end_s)["state"] == "POSE WRONG"
+        assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
 
 
 MID = 300  # a mid-drive stall's start (3 s of poses before it)
@@ -214,14 +217,17 @@ def test_mid_drive_the_firmware_reprimes_and_every_judge_passes_it(halted: int,
 @pytest.mark.parametrize(("from_pose", "bias_lsb"), [(0, 10_000), (1, 10_000), (20, 3)])
 def test_mid_drive_a_wrong_firmware_never_passes(halted: int, from_pose: int, bias_lsb: int,
                                                  tmp_path: Path) -> None:
-    """X off from the ``from_pose``-th pose after the stall's start on: every judge FAILs it."""
+    """X off from the ``from_pose``-th pose after the stall's start on: every judge FAILs it
+    (the live ones: a jump beyond what the FIFO's frames and the re-prime explain is no
+    declared re-prime, ``livereprime``)."""
     wrong = _wrong(drive_mid(halted), MID + 1, bias_lsb, from_pose)
     path = _written(wrong, tmp_path / "wrong.log")
     assert not analyze(read_log(path), PMIR, "exact").passed
     assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
                  "--stream", "always"]) == 1
-    monitor, _, end_s = _live(wrong)
-    assert monitor.health(end_s)["state"] in ("POSE WRONG", "DEGRADED")
+    monitor, bridge, end_s = _live(wrong)
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
+    assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
 
 
 @pytest.mark.parametrize(("messages", "at"), [

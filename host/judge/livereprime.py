@@ -14,19 +14,25 @@ over a second of samples), told by an event with ``stallreprime.detail``; the fi
 DEGRADED state shows. Not declared (or no word in time): the samples held are judged as they
 would have been, by the stall's position placement, the heading exact.
 
-Known limit (``analyze`` bounds it): the live new start adopts the firmware's pose after a
-declared re-prime, so one pose jump there is not judged live (``analyze`` keeps the position
-within the merge allowance of the frames its FIFO kept); every step after it is.
+A declared re-prime whose first pose lies farther from the firmware's position before the
+stall (its last sample compared, or the power-up pose) than it can have moved over the frames
+its FIFO kept (at the speed bound) and from the frame it re-primed on (the window's counts) is
+no re-prime's (``_plausible``): judged as before, POSE WRONG (a firmware X +1 m off after a 6 s
+stall was adopted, DEGRADED only). Known limit (``analyze`` bounds it tighter): within that
+bound (pmir at 4 m/s: about 0.2 m plus the few frames' travel) the new start adopts the
+firmware's pose, so one pose jump there is not judged live; every step after it is.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import TYPE_CHECKING, Any
 
 from odocan.host.judge.livewindow import CYCLE_S
 from odocan.host.judge.nearthreshold import AFTER_PERIODS, COUNTER_RESET_BIT, SUMMARY_PAGE
-from odocan.host.judge.stallreprime import detail, possible
+from odocan.host.judge.samples import POSITION_LSB_M
+from odocan.host.judge.stallreprime import FIFO_SPAN, R_SPAN, detail, possible
 
 if TYPE_CHECKING:
     from odocan.host.judge.livepose import FramePose, Sample
@@ -46,6 +52,7 @@ class ReprimeHold:
         self._stall_s = 0.0  # the stall's silence (s)
         self._from_s = math.inf  # bus time of the stall's first sample (s; inf: no hold)
         self._first = -1  # its encoder frame (seq)
+        self._anchor: tuple[float, float] | None = None  # the firmware's position before (m)
         self._held: list[tuple[FramePose, Half, bool]] = []
         self._samples: dict[int, Sample] = {}
         self.declared = 0  # re-primes declared after a stall (the reference restarted)
@@ -70,7 +77,42 @@ class ReprimeHold:
             return
         if possible(t_s - talked[0], CYCLE_S, least) and self._mask >= 0:
             self._from_s, self._before, self._stall_s = t_s, self._mask, t_s - talked[0]
-            self._first = seq
+            self._first, self._anchor = seq, self._anchored()
+
+    def _anchored(self) -> tuple[float, float] | None:
+        """Where the firmware was before the stall: its last sample compared, or the power-up
+        pose the reference runs from (``livefirst``: a stall before the life's first sample);
+        None when unknown (no bound then)."""
+        tracker = self._tracker
+        last = tracker.stall.last_compared
+        if tracker.last_pair is not None and tracker.last_pair[0].seq == last:
+            return tracker.last_pair[0].x_m, tracker.last_pair[0].y_m
+        return (0.0, 0.0) if tracker.first.stalled_from == last else None
+
+    def _plausible(self, pose: FramePose) -> bool:
+        """Whether the firmware's first pose after the re-prime lies within what it can have
+        moved from ``_anchor``: over the frames its FIFO kept (``FIFO_SPAN`` and one more
+        periods at the speed bound) and from the frame it re-primed on (the first left out,
+        ``R_SPAN`` before at most) to this one (the window's counts), each within its travel,
+        plus a position LSB each."""
+        if self._anchor is None:
+            return True
+        tracker = self._tracker
+        gate, geometry = tracker.raw.gate, tracker.geometry
+        per_period_m = max(gate.bound[0] * geometry.m_per_count_left,
+                           gate.bound[1] * geometry.m_per_count_right)
+        since = min(self._first, pose.seq - R_SPAN) - 1
+        rows = [r for r in tracker.window.rows if since <= r[0] <= pose.seq]
+        travel_m = (FIFO_SPAN + 1) * per_period_m
+        if len(rows) < 2 or int(rows[0][0]) != since:  # its frames not all in the window
+            travel_m += (pose.seq - since) * per_period_m
+        else:
+            for a, b in itertools.pairwise(rows):
+                travel_m += max(
+                    abs(_wrapped(int(b[4]) - int(a[4]), gate.bits)) * geometry.m_per_count_left,
+                    abs(_wrapped(int(b[5]) - int(a[5]), gate.bits)) * geometry.m_per_count_right)
+        return math.hypot(pose.x_m - self._anchor[0], pose.y_m - self._anchor[1]) <= (
+            travel_m + 2 * POSITION_LSB_M)
 
     def holds(self, pose: FramePose, y: Half, queued: bool) -> bool:
         """Whether the sample ``pose`` waits for the firmware's word (judged at ``release``)."""
@@ -95,6 +137,8 @@ class ReprimeHold:
         held, self._held, self._from_s = self._held, [], math.inf
         samples, self._samples = self._samples, {}
         tracker = self._tracker
+        if declared and held and not self._plausible(held[0][0]):
+            declared = False  # a jump no re-prime explains: judged as before (POSE WRONG)
         if declared:
             self.declared += 1
             first = held[0][0].seq if held else self._first + 1
@@ -112,3 +156,9 @@ class ReprimeHold:
     def _from_s_told(self, held: list[tuple[FramePose, Half, bool]]) -> float:
         """The event's bus time: the first sample held's (the tracker's latest without one)."""
         return held[0][1].t_s if held else self._tracker.now_s
+
+
+def _wrapped(delta: int, bits: int) -> int:
+    """A count step read in ``bits``-bit counters (signed)."""
+    half = 1 << (bits - 1)
+    return (delta + half) % (2 * half) - half
