@@ -13,14 +13,18 @@ its last sample: about twice the stall) reaching half the 16-bit counters' range
 motion across the stall is not in its pose. A 3 s stall stays below that bound (one merged
 step, placed within the merge allowance by every judge).
 
-Measured (this pass): every judge FAILs that correct firmware at 6 s and 10 s, at power-up and
-after a reboot (analyze whole: 1619 mm / 3000 mrad at 6 s after a reboot, 3745 mm at power-up;
-10 s: heading 3905 mrad / 1594 mm; the monitor POSE WRONG after a reboot, the bridge's tracker
-a wrong episode): the judges place the reference's position at a stall, its heading carried
-as exact, and know nothing of a re-prime at a stall's merged step (``host.judge.breaks``: "the
-heading after each run exact"). The same holds mid-drive (a 6 s stall after poses). Pinned
-by a strict xfail; a wrong firmware FAILs every judge there (trivially, while the correct one
-does too).
+Before issue #11's fix every judge FAILed that correct firmware at 6 s and 10 s, at power-up
+and after a reboot (analyze whole: 1619 mm / 3000 mrad at 6 s after a reboot, 3745 mm at
+power-up; 10 s: heading 3905 mrad / 1594 mm; the monitor POSE WRONG after a reboot, the
+bridge's tracker a wrong episode), and mid-drive (a 6 s stall after 3 s of poses: 3169 mm /
+3000 mrad): the judges placed the reference's position at a stall, its heading carried as
+exact. Now the firmware's own word decides (``host.judge.stallreprime``: COUNTER_RESET newly
+set after a stall long enough for its bound to reach the ambiguous step): ``analyze``
+re-primes its reference there (the steps from the last frame the FIFO kept to the one it
+re-primed on left out), the live judges hold the samples after the stall until that word and
+restart their reference from the next pose (``host.judge.livereprime``); each reports a
+``stall_reprime`` event, the monitor shows the firmware's DEGRADED. The same frames with the
+word cleared get no re-prime (FAIL); a wrong firmware still FAILs every judge.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from __future__ import annotations
 import math
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 import can
 import pytest
@@ -42,8 +47,9 @@ from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.board import TICK_S
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
+from tests import host_frames as hf
 from tests.fault_rig import FaultRig
-from tests.test_first_second_reboot import _decoded, _written, _wrong
+from tests.test_first_second_reboot import DB, _decoded, _written, _wrong
 from tests.test_stall_before_first_pose import _odometry
 
 PMIR = load("pmir")
@@ -119,9 +125,6 @@ def _live(messages: tuple[can.Message, ...]) -> tuple[BusMonitor, RobotTelemetry
     return monitor, bridge, messages[-1].timestamp
 
 
-@pytest.mark.xfail(strict=True, reason="a stall's merged step beyond the ambiguity bound: the "
-                   "firmware re-primes (COUNTER_RESET), the judges place the position only "
-                   "(module docstring)")
 @pytest.mark.parametrize(("start", "halted"), CASES)
 def test_every_judge_passes_the_correct_firmware(start: str, halted: int,
                                                  tmp_path: Path) -> None:
@@ -130,6 +133,8 @@ def test_every_judge_passes_the_correct_firmware(start: str, halted: int,
     monitor, bridge, end_s = _live(messages)
     assert (analysis.passed, monitor.health(end_s)["pose_wrongs"]["episodes"],
             bridge.tracker.wrongs.as_dict()["episodes"]) == (True, 0, 0)
+    assert monitor.health(end_s)["state"] == "DEGRADED"  # its own COUNTER_RESET: never OK
+    assert [e["kind"] for e in analysis.report["events"]].count("stall_reprime") == 1
 
 
 @pytest.mark.parametrize(("start", "halted"), CASES)
@@ -144,5 +149,99 @@ def test_a_wrong_firmware_never_passes(start: str, halted: int, from_pose: int, 
     assert not analyze(read_log(path), PMIR, "exact").passed
     assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
                  "--stream", "always"]) == 1
-    monitor, _, end_s = _live(wrong)
+    monitor, bridge, end_s = _live(wrong)
     assert monitor.health(end_s)["state"] in ("POSE WRONG", "DEGRADED")
+    if start == "reboot":  # a jump no re-prime explains is judged (livereprime)
+        assert monitor.health(end_s)["state"] == "POSE WRONG"
+        assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
+
+
+MID = 300  # a mid-drive stall's start (3 s of poses before it)
+
+
+@cache
+def drive_mid(halted: int) -> tuple[can.Message, ...]:
+    """pmir on the circle, its MCU halted ``halted`` ticks from tick ``MID`` (no reboot: its
+    FIFO keeps the first frames after the halt), 5 s more after it resumes."""
+    heard: list[can.Message] = []
+    with FaultRig(scenario=get_scenario("circle", PMIR, duration_s=60.0)) as rig:
+        rig.observers.append(lambda _k, got: heard.extend(got))
+        rig.halted = lambda k: MID < k <= MID + halted
+        rig.run((MID + halted) * TICK_S + 5.0)
+    return tuple(heard)
+
+
+def _undeclared(messages: tuple[can.Message, ...]) -> tuple[can.Message, ...]:
+    """The firmware's frames with COUNTER_RESET cleared from every ODOM_STATUS summary (E2E
+    re-protected): a firmware that re-primes without saying so."""
+    out = []
+    for m in messages:
+        if m.arbitration_id == fr.ODOM_STATUS_ID and int(_decoded(m)["PAGE"]) == 0:
+            signals = _decoded(m)
+            signals["ERROR_MASK"] = int(signals["ERROR_MASK"]) & ~COUNTER_RESET_BIT
+            data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
+            hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_STATUS_DATA_IDS)
+            m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
+                            is_extended_id=False, timestamp=m.timestamp)
+        out.append(m)
+    return tuple(out)
+
+
+@pytest.mark.parametrize("halted", [600, 1000])
+def test_mid_drive_the_firmware_reprimes_and_every_judge_passes_it(halted: int,
+                                                                   tmp_path: Path) -> None:
+    """A long stall after poses: the firmware re-primes (its first pose after is its poses
+    before, stepped over the FIFO's frames, without the stall's motion: the heading's turn over
+    the stall is not in it) and declares it; every judge passes it and ``analyze`` reports the
+    re-prime."""
+    messages = drive_mid(halted)
+    masks = [int(_decoded(m)["ERROR_MASK"]) for m in messages
+             if m.arbitration_id == fr.ODOM_STATUS_ID and int(_decoded(m)["PAGE"]) == 0]
+    assert not masks[0] & COUNTER_RESET_BIT
+    assert masks[-1] & COUNTER_RESET_BIT
+    analysis = analyze(read_log(_written(messages, tmp_path / "right.log")), PMIR, "exact")
+    monitor, bridge, end_s = _live(messages)
+    assert (analysis.passed, monitor.health(end_s)["pose_wrongs"]["episodes"],
+            bridge.tracker.wrongs.as_dict()["episodes"]) == (True, 0, 0)
+    assert monitor.health(end_s)["state"] == "DEGRADED"
+    events = [e for e in analysis.report["events"] if e["kind"] == "stall_reprime"]
+    assert len(events) == 1
+    assert "declared by the firmware" in events[0]["detail"]
+    for judge in (monitor, bridge):
+        assert [e["kind"] for e in judge.events].count("stall_reprime") == 1
+    assert main(["analyze", str(tmp_path / "right.log"), "--robot", "pmir", "--integrator",
+                 "exact", "--stream", "always"]) == 0  # refused: judged whole
+
+
+@pytest.mark.parametrize("halted", [600, 1000])
+@pytest.mark.parametrize(("from_pose", "bias_lsb"), [(0, 10_000), (1, 10_000), (20, 3)])
+def test_mid_drive_a_wrong_firmware_never_passes(halted: int, from_pose: int, bias_lsb: int,
+                                                 tmp_path: Path) -> None:
+    """X off from the ``from_pose``-th pose after the stall's start on: every judge FAILs it
+    (the live ones: a jump beyond what the FIFO's frames and the re-prime explain is no
+    declared re-prime, ``livereprime``)."""
+    wrong = _wrong(drive_mid(halted), MID + 1, bias_lsb, from_pose)
+    path = _written(wrong, tmp_path / "wrong.log")
+    assert not analyze(read_log(path), PMIR, "exact").passed
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 1
+    monitor, bridge, end_s = _live(wrong)
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
+    assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
+
+
+@pytest.mark.parametrize(("messages", "at"), [
+    pytest.param(lambda: drive("reboot", 600), REBOOT, id="reboot"),
+    pytest.param(lambda: drive_mid(600), 0, id="mid-drive")])
+def test_an_undeclared_reprime_gets_no_heading_replacement(messages: Any, at: int,
+                                                           tmp_path: Path) -> None:
+    """The same frames with COUNTER_RESET never said: the reference keeps its exact heading
+    across the stall (no re-prime taken), and ``analyze`` FAILs the heading."""
+    path = _written(_undeclared(messages()), tmp_path / "undeclared.log")
+    analysis = analyze(read_log(path), PMIR, "exact")
+    assert not analysis.passed
+    assert analysis.report["onboard_vs_reference"]["max_heading_error_rad"] > 0.1
+    assert not [e for e in analysis.report["events"] if e["kind"] == "stall_reprime"]
+    monitor, bridge, end_s = _live(_undeclared(messages()))
+    assert monitor.health(end_s)["pose_wrongs"]["episodes"] >= 1
+    assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1

@@ -161,6 +161,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.setposekept import Kept, check_cut, mark_kept
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
+from odocan.host.judge.stallreprime import reprime_events
 from odocan.host.judge.stalls import after_stalls, alive_times, first_placement, primed_first
 from odocan.host.judge.statuslatch import StatusLatch, firmware_events
 from odocan.host.judge.twins import twin_allowance_of
@@ -430,7 +431,7 @@ def _analyze_life(
              "detail": restart_detail(e in ref_all.ctrl_restarts, e in ref_all.unseen_restarts,
                                       ambiguous=e in ref_all.ambiguous)}
             for e in ref_all.counter_restarts
-        ] + [
+        ] + reprime_events(frames.timestamp_s, enc, ref_all.start, ref_all.stall_reprimes) + [
             {"kind": "firmware_stall", "t_s": float(frames.timestamp_s[enc.index[e]]),
              "encoder_frame": int(e),
              "detail": STALL_DETAIL}

@@ -307,7 +307,7 @@ class BusMonitor:
     def _on_status(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         page = str(shown.get("PAGE", s.get("PAGE")))
         proven = self.sources.on_page(page.lower(), s, self.tracker)  # the power-up rule
-        self.tracker.on_status(self._bus_time_s)  # alive: a stall before its first pose
+        self.tracker.on_status(self._bus_time_s, s)  # alive; a summary: livereprime
         if page == "SUMMARY":
             mask = int(s["ERROR_MASK"])
             self.firmware_events += self.latch.observe(self._bus_time_s, int(s["STATE"]),

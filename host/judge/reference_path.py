@@ -26,7 +26,7 @@ from odocan.host.judge.ctrlrestart import (
 from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.lossgate import beyond_width
-from odocan.host.judge.nearthreshold import Resets, ambiguity_rule, near_candidates
+from odocan.host.judge.nearthreshold import Resets, ambiguity_rule, least_of, near_candidates
 from odocan.host.judge.newstartfit import refit_new_starts
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, integrate, wrap_delta
 from odocan.host.judge.samples import (
@@ -40,6 +40,7 @@ from odocan.host.judge.samples import (
     Poses,
     wrap_pi,
 )
+from odocan.host.judge.stallreprime import Reprime, declared_stalls, left_out, stall_reprimes
 from odocan.host.judge.step_periods import pair_bound_periods, step_bound_periods
 from odocan.host.judge.unseenrestart import heading_offsets, restarted_path, unseen_restarts
 from odocan.host.judge.unseenrestart import restart_detail as restart_detail
@@ -64,6 +65,7 @@ class Reference:
     ctrl_restarts: frozenset[int] = frozenset()  # counter restarts told by CTRL_UPTIME
     unseen_restarts: frozenset[int] = frozenset()  # of them, new starts (``unseenrestart``)
     ambiguous: frozenset[int] = frozenset()  # counter restarts on an ambiguous step (``ambiguity``)
+    stall_reprimes: dict[int, Reprime] = field(default_factory=dict)  # ``stallreprime``
 
     def at(self, enc: IntArray) -> Reference:
         """The reference at the encoder frames ``enc`` (all >= start)."""
@@ -72,6 +74,7 @@ class Reference:
             self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
             self.restarts, self.exact_start, self.counter_restarts, self.implausible_frames,
             self.placements, self.ctrl_restarts, self.unseen_restarts, self.ambiguous,
+            self.stall_reprimes,
         )
 
 
@@ -102,6 +105,14 @@ def build_reference(
     rel_x, rel_y = np.concatenate((zero, rel.x_m)), np.concatenate((zero, rel.y_m))
     rel_h = np.concatenate((zero, rel.heading_rad))
     at = onboard.enc - e0
+    reprimes = stall_reprimes(declared_stalls(breaks, enc, e0, seen.resets, least_of(
+        geometry, bits, max_wheel_speed_mm_s)), onboard, e0, (rel_x, rel_y, rel_h), start_pose or (
+        (0.0, 0.0, 0.0) if power_up else None))  # stallreprime: re-primed where it said
+    if reprimes:
+        left_out(d_left, d_right, reprimes)
+        rel = integrate(d_left, d_right, geometry, integrator)
+        rel_x, rel_y = np.concatenate((zero, rel.x_m)), np.concatenate((zero, rel.y_m))
+        rel_h = np.concatenate((zero, rel.heading_rad))
     unseen = unseen_restarts(enc, e0, steps.by_uptime, seen)
     rel_x, rel_y, rel_h = restarted_path(unseen, rel_x, rel_y, rel_h, heading_offsets(
         unseen, rel_h, HEADING_LSB_RAD * onboard.heading_raw.astype(np.float64), at,
@@ -144,7 +155,8 @@ def build_reference(
                                    max_wheel_speed_mm_s=max_wheel_speed_mm_s,
                                    fills=lambda i: seen.filled(i, reprimed))  # spanfill
                    if b in stalled and not seen_whole(seen, b, onboard.enc, reprimed)
-                   else 0.0),
+                   else 0.0) if b - e0 not in reprimes else break_allowance(
+                       enc, b, np.array([e0 + reprimes[b - e0].f]), geometry, bits, integrator),
         gap_allowance, slack_m)
     x_m += off_x[segment]
     y_m += off_y[segment]
@@ -161,6 +173,7 @@ def build_reference(
         placements=placed,
         ctrl_restarts=uptime_reprimed - frozenset(e0 + k for k in steps.ambiguous),
         unseen_restarts=frozenset(e0 + k for k in unseen),
+        stall_reprimes=reprimes,
         ambiguous=frozenset(e0 + k for k in steps.ambiguous),
     )
 

@@ -34,6 +34,7 @@ from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import in_force
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
+from odocan.host.judge.nearthreshold import least_of
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.reportfacts import realtime, robot_dict
@@ -44,6 +45,7 @@ from odocan.host.judge.samples import (
     require_messages,
 )
 from odocan.host.judge.setposekept import Kept, check_cut, mark_kept
+from odocan.host.judge.stallreprime import STREAM, any_declared
 from odocan.host.judge.stream import StreamE2E
 from odocan.host.judge.stream_carry import CarriedSpans, carried
 from odocan.host.judge.stream_choice import RSS_MARGIN as RSS_MARGIN
@@ -298,6 +300,9 @@ def _life(
     # counts across the stalls' breaks (their allowance)
     raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
     seen, reprimed = whole_only(first.pages.seen(power_up), info, NotStreamable)  # gapseen
+    if any(b > e0 for b in breaks.tolist()) and any_declared(  # stallreprime: judged whole
+            seen.resets, seen.resets.cycle_s, least_of(geometry, bits, max_wheel_speed_mm_s)):
+        raise NotStreamable(STREAM)
     off_x, off_y, placements = placed_offsets(
         *raw, info.openings, lambda b: across.allowance(b, seen, reprimed),
         lambda b: 0.0 if b in info.by_uptime or seen.gap_missed(b, reprimed)  # reference_path's

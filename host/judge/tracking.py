@@ -34,6 +34,7 @@ from odocan.host.judge.liveplace import StallPlacer
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import ErrorStats, FramePose, RestartLog, Sample, StepGate
 from odocan.host.judge.livereference import RawReference
+from odocan.host.judge.livereprime import ReprimeHold
 from odocan.host.judge.livesnapshot import tracker_snapshot
 from odocan.host.judge.livestall import StallRule
 from odocan.host.judge.livestart import Lives
@@ -97,6 +98,7 @@ class PoseTracker:
         self.choice = LiveChoice(self)  # ... both candidates until the pages or the next pose
         self.restarts.choose = self.choice.open
         self.newstart = NewStartHold(self)  # a new start's samples wait for its fit
+        self.reprime = ReprimeHold(self)  # a long stall's wait for the firmware's word
         self.adopted = AdoptedStarts()  # starts at the firmware's own pose, said (liveadopted)
         self.laps = LapHold(self)  # samples after a lap of the stamps wait for its evidence
         self.stall = StallRule(self.placer, self.window, self.pairs.halves["y"])  # livestall
@@ -191,9 +193,12 @@ class PoseTracker:
         the same encoder frame, one on-board sample once settled (``take_samples``)."""
         self._on_half("y", Half(0, enc_counter, counter, t_s, y_m, turns))
 
-    def on_status(self, t_s: float) -> None:
-        """An accepted ODOM_STATUS at bus time ``t_s``: the firmware alive (``livefirst``)."""
+    def on_status(self, t_s: float, signals: dict[str, Any] | None = None) -> None:
+        """An accepted ODOM_STATUS at bus time ``t_s``: the firmware alive (``livefirst``);
+        its raw ``signals``: a summary's word on a re-prime after a stall (``livereprime``)."""
         self.first.alive.append((t_s, self.enc_seq + 1))
+        if signals is not None:
+            self.reprime.on_status(signals, t_s)
 
     def take_samples(self) -> list[Sample]:
         """The on-board samples settled since the last call, in the order settled."""
@@ -235,6 +240,7 @@ class PoseTracker:
         if self.lives.boot is not None:  # held: settled again once judged (``livestart``)
             self.lives.held[seq] = sample
         self.newstart.sampled(sample)  # ... or held after an unseen restart (livenewstart)
+        self.reprime.sampled(sample)  # ... or after a long stall (livereprime)
 
     def compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
         """Judge one on-board sample (its ODOM_POSE_Y half ``y``, whether it ``queued``) by the
@@ -243,10 +249,14 @@ class PoseTracker:
         hold ends)."""
         if self.laps.holds((pose, y, queued)):  # compared once its lap is numbered
             return None
-        if self.stall.last_t_s is None and left_out_first(self, pose, y.t_s, queued):
-            return None  # a stall before the first sample since the rule started (livefirst)
+        if self.reprime.holds(pose, y, queued):  # the firmware's word after a long stall
+            return None
         started = self.raw.odometry is not None
-        if self.stall.left_out(pose.seq, y.t_s, queued, started):  # a stall's backlog sample
+        if (self.stall.last_t_s is None and left_out_first(self, pose, y.t_s, queued)) or (
+                self.stall.left_out(pose.seq, y.t_s, queued, started)):  # livefirst, livestall
+            if started:  # a long stall's: its samples wait for the firmware's word
+                self.reprime.stalled(pose.seq, y.t_s, self.first.talked_before(y.t_s),
+                                     self.raw.gate.least)
             return None
         lives = self.lives  # a life's start (a boot's frame, the integrator): livestart
         if (not started or lives.boot is not None) and lives.waits(pose, self.now_s):

@@ -419,7 +419,7 @@ class RobotTelemetry(CommandFollowing):
         name = self._page_names.get(page) or page_name(self.db, page)
         self.firmware[name] = fields
         proven = self.sources.on_page(name, s, self.tracker)  # the power-up rule
-        self.tracker.on_status(t_s)  # alive: a stall before its first pose (livefirst)
+        self.tracker.on_status(t_s, s)  # alive (livefirst); a summary: livereprime
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
             counts = (int(s["ENC_E2E_OK"]), int(s["ENC_E2E_LOST"]), proven)
             self.distance.on_counts(self.tracker, *counts)

@@ -1,0 +1,200 @@
+"""A stall the firmware re-primed after, by its own word (issue #11, rule 5: a FAIL must never
+blame a correct firmware; ``host.judge.stalls``, ``host.judge.ambiguity``).
+
+A stalled MCU takes the frames it missed as one merged step when it runs again, and the judges
+place the reference's position after the stall within the merge allowance, its heading exact
+(``host.judge.breaks``). But its plausibility bound after an overrun is the step's periods plus
+a COUNTER cycle plus its own periods since its last sample (firmware/encoders.py): about twice
+the stall. Past ~3.7 s at pmir's 4 m/s that reaches half the counters' range (the ambiguous
+step), and the firmware re-primes on the frame it takes after resuming (COUNTER_RESET): the
+stall's motion is not in its pose, by design, and its heading is no longer the exact one.
+Judged with the heading exact, the correct firmware FAILed every judge (1619 mm / 3000 mrad
+after a 6 s stall).
+
+Where the firmware says so itself (``nearthreshold.Resets.told``: its ERROR_MASK's sticky
+COUNTER_RESET clear on the last summary before the stall, set on the first summary after it)
+and the stall was long enough for its bound to reach the ambiguous step (``possible``), the
+reference re-primes where the firmware did, as at a counter restart (``reference_path._reprime``:
+no step into the frame re-primed on): its steps from the last frame the firmware took before
+the stall (``f``) to the frame it re-primed on (``r``) are left out, so its heading and position
+are re-placed there, and the stall's placement keeps the merge allowance of the frames up to
+``f`` only. The log does not name ``f`` (the receive FIFO kept the first frames after the
+halt: up to ``FIFO_SPAN`` after the last sample's) nor ``r`` exactly (the first sample after
+a stall is left out: ``stalls.after_stalls``; ``r`` is at most ``R_SPAN`` frames before the
+next one): of those pairs the one whose re-primed path best meets the first samples after the
+stall is taken (``_chosen``), then judged as every step is. The event is reported (``detail``)
+and the firmware's own DEGRADED state stands (``finalstate``).
+
+A firmware that re-primes without saying so, or whose word was latched before the stall (it
+says nothing new), keeps the exact rule: its heading FAILs. What a wrong firmware can hide: a
+heading off by the turn of a few frames at the stall it declared (the pairs' choice); a
+position off by more than those frames' merge allowance, or any wrong step after, FAILs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from odocan.host.judge.nearthreshold import COUNTER_RESET_BIT, Resets
+from odocan.host.judge.samples import (
+    HEADING_LSB_RAD,
+    POSITION_LSB_M,
+    SILENCE_CYCLES,
+    Encoders,
+    FloatArray,
+    IntArray,
+    Poses,
+    wrap_pi,
+)
+from odocan.host.judge.step_periods import COUNTER_VALUES
+from odocan.sim.board import HW_RX_FIFO_FRAMES
+
+# The firmware's bound after an overrun: the step's periods (at most the stall's plus a COUNTER
+# cycle of rounding) + a COUNTER cycle + its periods since its last sample (the stall's, plus
+# a cycle of lateness): twice the stall plus these cycles at most.
+SLACK_PERIODS = 3 * COUNTER_VALUES
+FIFO_SPAN = HW_RX_FIFO_FRAMES + 1  # frames after the last sample's the firmware may have taken
+R_SPAN = SILENCE_CYCLES  # frames before the first kept sample's the re-prime may lie on
+COMPARED = 10  # samples after the stall the pairs are compared on
+
+
+@dataclass(frozen=True)
+class Reprime:
+    """A declared re-prime after a stall: frames from e0, ``f`` the last the firmware took
+    before it, ``r`` the one it re-primed on, and the stall's length (s)."""
+
+    f: int
+    r: int
+    stall_s: float
+
+
+def detail(stall_s: float) -> str:
+    """The report's words for a re-prime declared after a stall of ``stall_s`` seconds."""
+    return (f"re-primed after a {stall_s:.1f} s stall: motion left out, declared by the "
+            "firmware (COUNTER_RESET; its step's bound reached half the counters' range): the "
+            "reference re-primes with it (heading and position re-placed there)")
+
+
+def possible(stall_s: float, cycle_s: float, least: int | None) -> bool:
+    """Whether a stall of ``stall_s`` (bus time) can bring the firmware's step bound to the
+    ambiguous step (``least`` periods; None: no plausibility bound, no re-prime)."""
+    return least is not None and 2.0 * stall_s / cycle_s + SLACK_PERIODS >= least
+
+
+STREAM = ("a stall the firmware declared it re-primed after (COUNTER_RESET): judged on the "
+          "whole log (its re-prime's frames chosen by the samples after)")
+
+
+def any_declared(resets: Resets, cycle_s: float, least: int | None) -> bool:
+    """Whether two consecutive summaries of ``resets`` are a silence long enough to re-prime
+    (``possible``) with COUNTER_RESET clear before and set after: the streamed judge, which
+    steps before it reads the summaries, refuses such a life (the whole log's judges it)."""
+    gaps = np.diff(resets.sent_s)
+    bit = (resets.mask & COUNTER_RESET_BIT) != 0
+    return any(possible(float(g), cycle_s, least) and not bit[k] and bit[k + 1]
+               for k, g in enumerate(gaps.tolist()))
+
+
+def declared_stalls(breaks: IntArray | None, enc: Encoders, e0: int, resets: Resets,
+                    least: int | None) -> dict[int, float]:
+    """The stalls' ``breaks`` (encoder frames the reference's position restarts at after a
+    stall, ``stalls.after_stalls``) after which the firmware declared a re-prime (module
+    docstring): each frame, from ``e0``, with the stall's length (s: between the firmware's
+    summaries around it)."""
+    out: dict[int, float] = {}
+    if breaks is None or enc.cycle_s is None or len(resets.sent_s) == 0:
+        return out
+    for b in breaks.tolist():
+        if not e0 < b < len(enc.timestamp_s):
+            continue
+        b_s = float(enc.timestamp_s[b])
+        i = int(np.searchsorted(resets.sent_s, b_s, side="left")) - 1
+        j = int(np.searchsorted(resets.sent_s, b_s, side="right"))
+        if i < 0 or j >= len(resets.sent_s):
+            continue
+        stall_s = float(resets.sent_s[j] - resets.sent_s[i])
+        if possible(stall_s, enc.cycle_s, least) and resets.told(b_s):
+            out[b - e0] = stall_s
+    return out
+
+
+def stall_reprimes(declared: dict[int, float], onboard: Poses, e0: int,
+                   rel: tuple[FloatArray, FloatArray, FloatArray],
+                   start: tuple[float, float, float] | None) -> dict[int, Reprime]:
+    """Per declared stall (``declared_stalls``, frames from ``e0``) the pair (f, r) chosen
+    (module docstring), from the reference's path from the start (``rel``: x, y m, heading rad
+    per frame from e0, the fine steps) and the on-board samples; ``start``: the exact start
+    pose at e0 (power-up, set-pose), None when fitted. A stall without samples after it, or
+    without a sample or an exact start before it, is left to the exact rule."""
+    at = onboard.enc - e0
+    out: dict[int, Reprime] = {}
+    for b, stall_s in sorted(declared.items()):
+        before = np.flatnonzero(at < b)
+        if len(before):
+            s0 = int(before[-1])
+            anchor = (int(at[s0]), float(onboard.x_m[s0]), float(onboard.y_m[s0]),
+                      float(onboard.heading_rad[s0]))
+        elif start is not None:
+            anchor = (0, *start)
+        else:
+            continue
+        after = np.flatnonzero(at >= b)[:COMPARED]
+        if len(after) == 0:
+            continue
+        pair = _chosen(b, int(at[after[0]]), anchor, rel, (
+            at[after], onboard.x_m[after], onboard.y_m[after], onboard.heading_rad[after]))
+        if pair is not None:
+            out[b] = Reprime(pair[0], pair[1], stall_s)
+    return out
+
+
+def _chosen(b: int, first: int, anchor: tuple[int, float, float, float],
+            rel: tuple[FloatArray, FloatArray, FloatArray],
+            samples: tuple[IntArray, FloatArray, FloatArray, FloatArray]
+            ) -> tuple[int, int] | None:
+    """The pair (f, r) whose re-primed path, placed on the ``anchor`` (frame from e0, its
+    on-board x, y, heading), ends nearest the ``samples`` after (frames from e0, x, y,
+    heading), in LSBs (the worst sample's position plus heading); ``first``: the first of
+    them."""
+    rx, ry, rh = rel
+    k0, ax, ay, ah = anchor
+    turn0 = ah - float(rh[k0])
+    cos0, sin0 = math.cos(turn0), math.sin(turn0)
+    at, on_x, on_y, on_h = samples
+    best: tuple[float, int, int] | None = None
+    for f in range(b - 1, min(b - 1 + FIFO_SPAN, first - 1) + 1):
+        for r in range(max(f + 1, first - R_SPAN), first + 1):
+            left = float(rh[r] - rh[f])  # the turn the re-prime left out
+            c, s = math.cos(-left), math.sin(-left)
+            dx, dy = rx[at] - rx[r], ry[at] - ry[r]
+            px = rx[f] - rx[k0] + c * dx - s * dy
+            py = ry[f] - ry[k0] + s * dx + c * dy
+            ex = ax + cos0 * px - sin0 * py - on_x
+            ey = ay + sin0 * px + cos0 * py - on_y
+            eh = wrap_pi(turn0 + rh[at] - left - on_h)
+            score = float(np.max(np.hypot(ex, ey) / POSITION_LSB_M
+                                 + np.abs(eh) / HEADING_LSB_RAD))
+            if best is None or score < best[0]:
+                best = (score, f, r)
+    return None if best is None else (best[1], best[2])
+
+
+def left_out(d_left: IntArray, d_right: IntArray, reprimes: dict[int, Reprime]) -> None:
+    """The steps the firmware left out at each re-prime (into frames f + 1 .. r) zeroed, as
+    ``reference_path._reprime`` zeroes the step into a counter restart's frame."""
+    for rep in reprimes.values():
+        d_left[rep.f : rep.r] = 0
+        d_right[rep.f : rep.r] = 0
+
+
+def reprime_events(timestamp_s: Any, enc: Encoders, start: int,
+                   reprimes: dict[int, Reprime]) -> list[dict[str, Any]]:
+    """``analyze``'s events of the declared re-primes (frames from ``start``), at the frame
+    the firmware re-primed on."""
+    return [{"kind": "stall_reprime", "t_s": float(timestamp_s[enc.index[start + rep.r]]),
+             "encoder_frame": int(start + rep.r), "detail": detail(rep.stall_s)}
+            for _, rep in sorted(reprimes.items())]
