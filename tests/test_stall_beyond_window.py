@@ -41,9 +41,6 @@ from odocan.firmware import frames as fr
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
-from odocan.host.judge.monitor import BusMonitor
-from odocan.host.judge.reference import Geometry
-from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.board import TICK_S
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
@@ -51,6 +48,7 @@ from tests import host_frames as hf
 from tests.fault_rig import FaultRig
 from tests.test_first_second_reboot import DB, _decoded, _written, _wrong
 from tests.test_stall_before_first_pose import _odometry
+from tests.test_stall_before_first_pose_after_reboot import _live
 
 PMIR = load("pmir")
 REBOOT = 500  # the reset's tick (5 s)
@@ -114,15 +112,6 @@ def test_the_firmware_reprimed_on_the_resumed_frame(start: str, halted: int) -> 
              if m.arbitration_id == fr.ODOM_STATUS_ID and m.timestamp > at * TICK_S
              and int(_decoded(m)["PAGE"]) == 0]
     assert any(mask & COUNTER_RESET_BIT for mask in masks)
-
-
-def _live(messages: tuple[can.Message, ...]) -> tuple[BusMonitor, RobotTelemetry, float]:
-    monitor = BusMonitor(PMIR, "exact")
-    bridge = RobotTelemetry("r1", Geometry.of(PMIR), "exact", counter_bits=PMIR.counter_bits)
-    for m in messages:
-        monitor.feed(m, now_s=m.timestamp)
-        bridge.feed(m)
-    return monitor, bridge, messages[-1].timestamp
 
 
 @pytest.mark.parametrize(("start", "halted"), CASES)
