@@ -338,11 +338,14 @@ def heard_before_live(tracker: PoseTracker, bound_s: float, made: int) -> int | 
     among the first ``made``; None when the window no longer holds the frames to tell. The
     whole window (5 s), not its recent rows alone: after an MCU halted at power-up, the page's
     tick bound is seconds back (its ODOM_STATUS COUNTER stood still), as ``analyze`` reads it
-    (issue #11: a 3 s halt left the live judges unproven, their start fitted)."""
+    (issue #11: a 3 s halt left the live judges unproven, their start fitted); past the window,
+    the watch's first frames kept (``livefirst.FirstStall.heard_first_before``: a 6 s halt)."""
     window = tracker.window
     if not len(window):
         return 0
     before = np.flatnonzero(window.col("t_s") < bound_s)
     if len(before):
         return min(int(window.col("seq")[before[-1]]) + 1, made)
-    return 0 if int(window.col("seq")[0]) == 0 else None
+    if int(window.col("seq")[0]) == 0:
+        return 0
+    return tracker.first.heard_first_before(bound_s, made)  # a stall longer than the window

@@ -24,7 +24,7 @@ from odocan.host.judge.liveadopted import (
 )
 from odocan.host.judge.livechoice import LiveChoice
 from odocan.host.judge.livedark import NO_FRAME_S
-from odocan.host.judge.livefirst import FirstStall, left_out_first
+from odocan.host.judge.livefirst import FIRST_FRAMES, FirstStall, left_out_first
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livehalves import HalfPairs
 from odocan.host.judge.livelaphold import LapHold
@@ -165,6 +165,8 @@ class PoseTracker:
         self.window.append(*row)
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
+        elif self.enc_seq == FIRST_FRAMES - 1:  # the watch's first frames' times (livefirst)
+            self.first.keep_first(tuple(self.window.col("t_s").tolist()[:FIRST_FRAMES]))
         self.truths.frame_heard(counter, self.enc_seq, left, right)
         ref = self.raw.odometry
         if ref is not None:
