@@ -41,6 +41,9 @@ from odocan.firmware import frames as fr
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
+from odocan.host.mqtt.endverdict import end_verdict
+from odocan.host.mqtt.fleetjudge import watched_verdict
+from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.board import TICK_S
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
@@ -124,6 +127,15 @@ def test_every_judge_passes_the_correct_firmware(start: str, halted: int,
             bridge.tracker.wrongs.as_dict()["episodes"]) == (True, 0, 0)
     assert monitor.health(end_s)["state"] == "DEGRADED"  # its own COUNTER_RESET: never OK
     assert [e["kind"] for e in analysis.report["events"]].count("stall_reprime") == 1
+    assert _end_verdicts(bridge) == ("PASS", "PASS")
+    for judge in (monitor, bridge):  # the live judges took the re-prime (power-up too)
+        assert [e["kind"] for e in judge.events].count("stall_reprime") == 1
+
+
+def _end_verdicts(bridge: RobotTelemetry) -> tuple[str, str]:
+    """The fleet's end verdict (``watched_verdict``, which ends the watch) and the bridge's."""
+    fleet = watched_verdict(bridge, 0, None)["verdict"]
+    return fleet, end_verdict(bridge).verdict
 
 
 @pytest.mark.parametrize(("start", "halted"), CASES)
@@ -132,17 +144,67 @@ def test_a_wrong_firmware_never_passes(start: str, halted: int, from_pose: int, 
                                        tmp_path: Path) -> None:
     """X off by ``bias_lsb`` from the life's ``from_pose``-th pose on: ``analyze`` FAILs it,
     whole and ``--stream always`` (the stream refuses the life: the whole log judges it); the
-    monitor never says OK (POSE WRONG, or DEGRADED by the firmware's own COUNTER_RESET)."""
+    live judges say POSE WRONG and the bridge's and the fleet's end verdicts FAIL, at power-up
+    too (a jump no re-prime explains from the power-up pose, once proven: ``livereprime``; X
+    +1 m there was DEGRADED only and the end verdicts PASS)."""
     wrong = _wrong(drive(start, halted), _at(start), bias_lsb, from_pose)
     path = _written(wrong, tmp_path / "wrong.log")
     assert not analyze(read_log(path), PMIR, "exact").passed
     assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
                  "--stream", "always"]) == 1
     monitor, bridge, end_s = _live(wrong)
-    assert monitor.health(end_s)["state"] in ("POSE WRONG", "DEGRADED")
-    if start == "reboot":  # a jump no re-prime explains is judged (livereprime)
-        assert monitor.health(end_s)["state"] == "POSE WRONG"
-        assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
+    assert _end_verdicts(bridge) == ("FAIL", "FAIL")
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
+    assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
+
+
+@pytest.mark.parametrize("halted", [380, 450])
+def test_a_reprime_within_the_window_at_power_up(halted: int) -> None:
+    """A 3.8 s or 4.5 s halt at power-up: long enough to re-prime, short enough that frame 0 is
+    still in the live window when the power-up is proven (the reference starts there before the
+    firmware's word is taken). The right firmware passes live with its re-prime (before: POSE
+    WRONG, both end verdicts FAIL, the heading carried as exact); X +1 m from its first pose
+    FAILs."""
+    monitor, bridge, end_s = _live(drive("power-up", halted))
+    assert (monitor.health(end_s)["state"], bridge.tracker.wrongs.as_dict()["episodes"]) == (
+        "DEGRADED", 0)
+    assert [e["kind"] for e in bridge.events].count("stall_reprime") == 1
+    assert _end_verdicts(bridge) == ("PASS", "PASS")
+    monitor, bridge, end_s = _live(_wrong(drive("power-up", halted), 0, 10_000, 0))
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
+    assert _end_verdicts(bridge) == ("FAIL", "FAIL")
+
+
+def _unproven(messages: tuple[can.Message, ...]) -> tuple[can.Message, ...]:
+    """The frames with the first count page's ENC_E2E_OK 1000 off (E2E re-protected): no
+    count the judges read proves the power-up."""
+    out, done = [], False
+    for m in messages:
+        if not done and m.arbitration_id == fr.ODOM_STATUS_ID and int(_decoded(m)["PAGE"]) == 2:
+            signals = _decoded(m)
+            signals["ENC_E2E_OK"] = (int(signals["ENC_E2E_OK"]) + 1000) & 0xFFFF
+            data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
+            hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_STATUS_DATA_IDS)
+            m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
+                            is_extended_id=False, timestamp=m.timestamp)
+            done = True
+        out.append(m)
+    return tuple(out)
+
+
+@pytest.mark.parametrize("from_pose", [None, 0, 1])
+def test_an_unproven_power_up_reprime_never_passes(from_pose: int | None) -> None:
+    """A re-prime declared after a 6 s halt at a power-up the live judges cannot prove: the
+    firmware's first pose after it is adopted with nothing to bound it by, so the end verdicts
+    are UNJUDGED, never a PASS, for the right firmware and a wrong one (X +1 m) alike (before:
+    PASS)."""
+    messages = drive("power-up", 600)
+    if from_pose is not None:
+        messages = _wrong(messages, 0, 10_000, from_pose)
+    monitor, bridge, end_s = _live(_unproven(messages))
+    assert not bridge.tracker.lives.power_up_proven
+    assert monitor.health(end_s)["state"] != "OK"
+    assert _end_verdicts(bridge) == ("UNJUDGED", "UNJUDGED")
 
 
 MID = 300  # a mid-drive stall's start (3 s of poses before it)

@@ -256,7 +256,7 @@ class PoseTracker:
         started = self.raw.odometry is not None
         if (self.stall.last_t_s is None and left_out_first(self, pose, y.t_s, queued)) or (
                 self.stall.left_out(pose.seq, y.t_s, queued, started)):  # livefirst, livestall
-            if started:  # a long stall's: its samples wait for the firmware's word
+            if self.raw.odometry is not None or not self.reference_starts:  # (power-up too)
                 self.reprime.stalled(pose.seq, y.t_s, self.first.talked_before(y.t_s),
                                      self.raw.gate.least)
             return None
@@ -381,6 +381,7 @@ class PoseTracker:
         (``proven``: ``SourceWatch.on_page``) proves a power-up: (0, 0, 0) on frame 0,
         whatever the first pose said (``analyze``'s rule); then ``on_enc_lost``."""
         self.lives.on_counts(ok, lost, proven)
+        self.reprime.counted()  # a re-prime at power-up waited for the proof (livereprime)
         self.on_enc_lost(lost)
 
     def set_geometry(self, geometry: Geometry, counter_bits: int) -> None:

@@ -10,6 +10,8 @@ pose (issue #11: the rig never shows OK while the pose it reports is wrong). Now
     PASS: the on-board pose right in 598 samples, ODOM_TWIST DISTANCE in 59 and its speeds in 598
     UNJUDGED: no on-board pose compared with the reference: nothing judged (--require-firmware
     fails it)
+    UNJUDGED: 1 re-prime declared after a stall before the first pose, the power-up not
+    proven: ... (``livereprime.unbounded_why``: a PASS would rest on a pose nothing bounds)
 
 FAIL (exit 1) when the pose was wrong at any time of the watch, DISTANCE or the twist speeds
 wrong once, two firmwares on the bus, or (``require_firmware``) when nothing was judged; the
@@ -30,6 +32,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
+from odocan.host.judge.livereprime import unbounded_why
 from odocan.host.judge.watchverdict import REQUIRE_FIRMWARE, failures, nothing_judged
 
 if TYPE_CHECKING:
@@ -108,6 +111,9 @@ def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
     if why:
         return EndVerdict("UNJUDGED", f"{why} (--require-firmware fails it)"
                           + _mismatch(telemetry))
+    unbounded = unbounded_why(telemetry.tracker)  # never a PASS on it (livereprime)
+    if unbounded:
+        return EndVerdict("UNJUDGED", unbounded + _mismatch(telemetry))
     distance, twist = telemetry.distance.samples, telemetry.twist.samples
     twists = (f", ODOM_TWIST DISTANCE in {distance} and its speeds in {twist}"
               if distance or twist else ", no ODOM_TWIST judged")

@@ -23,6 +23,7 @@ from typing import Any, cast
 
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livepose import ErrorStats
+from odocan.host.judge.livereprime import unbounded_why
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.mqtt.endverdict import EndVerdict, VerdictName, worst_episode
 from odocan.host.mqtt.haltstretch import HaltStretches
@@ -128,6 +129,9 @@ def watched_verdict(
                           beyond_allowance_m=tracker.max_beyond_allowance_m)
     if verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
         verdict = after_halts(verdict, halted, tracker, telemetry.stretches)
+    unbounded = unbounded_why(tracker)  # a PASS resting on an unbounded start (livereprime)
+    if verdict["verdict"] == "PASS" and unbounded:
+        verdict = {**verdict, "verdict": "UNJUDGED", "reason": unbounded}
     # ODOM_TWIST judged live, the samples waiting at the end included (said, not yet verdicts)
     return {**verdict, "distance": telemetry.distance.as_dict(),
             "twist": telemetry.twist.as_dict()}
