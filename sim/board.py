@@ -37,12 +37,12 @@ from odocan.firmware.hal import TICK_PERIOD_US
 from odocan.sim.clock import Clock, LockstepClock
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.framebatch import Received
+from odocan.sim.mcu import HW_RX_FIFO_FRAMES as HW_RX_FIFO_FRAMES
 from odocan.sim.node import BusNode
 from odocan.sim.transport import OdocanBus
 
 TICK_S = TICK_PERIOD_US / 1e6
 TX_LATENCY_S = 0.001  # the firmware's frames leave 1 ms after the tick that made them
-HW_RX_FIFO_FRAMES = 3  # the CAN controller's receive FIFO depth (bxCAN: 3 per FIFO)
 # A tick this long after the previous one: the MCU was halted (the firmware's TIME_LOST). A
 # merely late tick is not: a real MCU's receive interrupt would have run meanwhile.
 HALT_AFTER_S = (LOST_TIME_PERIODS - 0.5) * TICK_S

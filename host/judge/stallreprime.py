@@ -51,7 +51,7 @@ from odocan.host.judge.samples import (
     wrap_pi,
 )
 from odocan.host.judge.step_periods import COUNTER_VALUES
-from odocan.sim.board import HW_RX_FIFO_FRAMES
+from odocan.sim.mcu import HW_RX_FIFO_FRAMES
 
 # The firmware's bound after an overrun: the step's periods (at most the stall's plus a COUNTER
 # cycle of rounding) + a COUNTER cycle + its periods since its last sample (the stall's, plus
