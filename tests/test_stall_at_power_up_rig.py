@@ -48,8 +48,8 @@ from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.host.judge.samples import ENC_E2E_PAGE
 from tests.test_first_second_reboot import _decoded, _written, _wrong
 from tests.test_stall_before_first_pose import _odometry
-from tests.test_stall_before_first_pose_after_reboot import _live
-from tests.test_stall_beyond_window import PMIR, _poses, drive
+from tests.test_stall_before_first_pose_after_reboot import _live, _poses
+from tests.test_stall_beyond_window import PMIR, drive
 
 HALTED = 300  # ticks of no MCU after its power-up tick (3 s)
 RESUMED_AT = HALTED + 2  # the encoder frame its first pose names (the merged step's end)

@@ -90,18 +90,24 @@ def drive() -> tuple[can.Message, ...]:
     return tuple(heard)
 
 
-def _poses_after_reset(messages: tuple[can.Message, ...]) -> list[dict[str, float]]:
-    """The new life's (x, y, heading) poses and encoder counts by cantools, in bus order."""
+def _poses(messages: tuple[can.Message, ...], since_s: float) -> list[dict[str, float]]:
+    """The (x, y, heading) poses and encoder counts by cantools sent from ``since_s`` on, in
+    bus order."""
     poses: list[dict[str, float]] = []
     pending: dict[str, float] = {}
     for m in messages:
-        if m.timestamp < REBOOT * TICK_S:
+        if m.timestamp < since_s:
             continue
         if m.arbitration_id == fr.ODOM_POSE_X_ID:
             pending = _decoded(m)
         elif m.arbitration_id == fr.ODOM_POSE_Y_ID:
             poses.append({**pending, **_decoded(m)})
     return poses
+
+
+def _poses_after_reset(messages: tuple[can.Message, ...]) -> list[dict[str, float]]:
+    """The new life's poses (``_poses``)."""
+    return _poses(messages, REBOOT * TICK_S)
 
 
 def _gap(odo: _Odometry, pose: dict[str, float]) -> float:

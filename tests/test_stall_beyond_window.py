@@ -51,7 +51,7 @@ from tests import host_frames as hf
 from tests.fault_rig import FaultRig
 from tests.test_first_second_reboot import DB, _decoded, _written, _wrong
 from tests.test_stall_before_first_pose import _odometry
-from tests.test_stall_before_first_pose_after_reboot import _live
+from tests.test_stall_before_first_pose_after_reboot import _live, _poses
 
 PMIR = load("pmir")
 REBOOT = 500  # the reset's tick (5 s)
@@ -81,19 +81,6 @@ def drive(start: str, halted: int) -> tuple[can.Message, ...]:
         rig.halted = lambda k: at < k <= at + halted
         rig.run((at + halted) * TICK_S + 5.0)
     return tuple(heard)
-
-
-def _poses(messages: tuple[can.Message, ...], since_s: float) -> list[dict[str, float]]:
-    poses: list[dict[str, float]] = []
-    pending: dict[str, float] = {}
-    for m in messages:
-        if m.timestamp < since_s:
-            continue
-        if m.arbitration_id == fr.ODOM_POSE_X_ID:
-            pending = _decoded(m)
-        elif m.arbitration_id == fr.ODOM_POSE_Y_ID:
-            poses.append({**pending, **_decoded(m)})
-    return poses
 
 
 @pytest.mark.parametrize(("start", "halted"), CASES)
