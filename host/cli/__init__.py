@@ -7,6 +7,7 @@ module once, without runpy's "found in sys.modules" warning on stderr.
 from __future__ import annotations
 
 import os
+import signal
 import sys
 
 __all__ = ["main"]
@@ -19,14 +20,53 @@ __all__ = ["main"]
 # CPU. A user's own setting is kept; set before numpy is imported (nothing here imports it).
 BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "1")
 
+STARTING = "interrupted (SIGINT): odocan stopped before it finished (while starting)"
+EXIT_SIGNAL_BASE = 128  # app's: killed by signal N exits 128 + N (app may be what did not load)
+EXIT_SIGINT = EXIT_SIGNAL_BASE + int(signal.SIGINT)
+PY_FILE_INPUT = 257  # Python.h's Py_file_input
+
 
 def main(argv: list[str] | None = None) -> int:
-    """The ``odocan`` command (``odocan.host.cli.app.main``)."""
+    """The ``odocan`` command (``odocan.host.cli.app.main``). Called as the program (no
+    ``argv``: the console script, ``python -m odocan``), nothing after the command's exit
+    code changes it (``_ended``)."""
     os.environ.setdefault(*BLAS_THREADS)
     try:
         from odocan.host.cli.app import main as app_main
     except KeyboardInterrupt:  # Ctrl-C while the command line loads: one line, no traceback
-        print("interrupted (SIGINT): odocan stopped before it finished (while starting)",
-              file=sys.stderr)
-        return 130  # 128 + SIGINT (app's EXIT_SIGNAL_BASE; app is what did not load)
-    return app_main(argv)
+        code = _said(STARTING, EXIT_SIGINT)
+    else:
+        code = app_main(argv)
+    if argv is None:
+        _ended(code)
+    return code
+
+
+def _said(line: str, code: int) -> int:
+    print(line, file=sys.stderr)
+    return code
+
+
+def _ended(code: int) -> None:
+    """The command has its verdict and its exit code ``code``; the interpreter's teardown must
+    change neither. A Ctrl-C there was a traceback: SIGINT is ignored from here on (SIGTERM
+    back to its default: it still ends a teardown that hangs, silently). And a
+    ``KeyboardInterrupt`` that went through a ``PyRun_String`` (a Cython module's
+    initialisation runs one: numpy.random's) marks the interpreter, which then ends ``python -m
+    odocan`` by SIGINT whatever the code: -2 after the line that said 130 (measured). For an
+    exit a signal made (``code`` >= 128) the mark is cleared: CPython clears it as it starts
+    evaluating any ``PyRun_String``, so an empty one does (a no-op where there is no such mark,
+    or no ``ctypes.pythonapi``)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if code < EXIT_SIGNAL_BASE:
+        return
+    try:
+        import ctypes
+
+        run = ctypes.pythonapi.PyRun_String
+    except (ImportError, AttributeError):  # not CPython: no such mark
+        return
+    run.restype = ctypes.py_object
+    run.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.py_object, ctypes.py_object]
+    run(b"", PY_FILE_INPUT, {}, {})

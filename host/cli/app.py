@@ -21,7 +21,7 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from odocan import __version__
 from odocan.host.cli.dbcfirst import follow_named_dbc
@@ -238,24 +238,33 @@ def split_debug(argv: list[str]) -> tuple[list[str], bool]:
 
 def _interrupt(signum: int, frame: FrameType | None) -> None:
     interrupts.latch(signum)  # heard even if some library swallows the exception (interrupts)
-    raise Terminated
+    raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
+
+
+_LATCHED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 @contextmanager
 def sigterm_as_interrupt() -> Iterator[None]:
     """While inside, SIGTERM raises ``KeyboardInterrupt`` as Ctrl-C does, so every command that
-    stops cleanly on Ctrl-C (summary, report, logs closed) does so on SIGTERM too. Main thread
-    only (elsewhere a no-op); commands that install their own handlers override it."""
+    stops cleanly on Ctrl-C (summary, report, logs closed) does so on SIGTERM too; and both are
+    ``latch``ed first (``sim.interrupts``): a Ctrl-C in the first second of ``odocan run``,
+    whose ``KeyboardInterrupt`` numpy.random's Cython import swallowed, once let the run go
+    on to its end (exit 0, or -2 from the interpreter's exit). Main thread only (elsewhere a
+    no-op); commands that install their own handlers override it."""
     interrupts.clear()
+    previous: dict[signal.Signals, Any] = {}
     try:
-        previous = signal.signal(signal.SIGTERM, _interrupt)
+        for sig in _LATCHED_SIGNALS:
+            previous[sig] = signal.signal(sig, _interrupt)
     except ValueError:  # not the main thread
         yield
         return
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
         interrupts.clear()
 
 

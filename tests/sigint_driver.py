@@ -1,0 +1,68 @@
+"""``python -m tests.sigint_driver MODE ARGS...``: ``odocan`` as ``python -m odocan`` runs it
+(Py_RunMain's ``-m`` path, where the interpreter decides the exit status), with a Ctrl-C made
+at one exact moment (test_early_sigint.py):
+
+- ``pyrun``: raised as the firmware is chosen (before the log opens) inside a ``PyRun_String``,
+  as it is when it lands in a Cython module's initialisation (numpy.random's runs one);
+- ``teardown``: raised once ``main`` has returned its exit code, before the interpreter exits;
+- ``import``: raised as ``odocan/__main__.py`` imports the command line.
+"""
+
+from __future__ import annotations
+
+import builtins
+import ctypes
+import runpy
+import signal
+import sys
+from typing import Any
+
+PY_FILE_INPUT = 257  # Python.h's Py_file_input
+
+
+def _raised_in_pyrun() -> None:
+    run = ctypes.pythonapi.PyRun_String
+    run.restype = ctypes.py_object
+    run.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.py_object, ctypes.py_object]
+    run(b"import signal\nsignal.raise_signal(signal.SIGINT)\n", PY_FILE_INPUT, {}, {})
+
+
+def _pyrun(argv: list[str]) -> None:
+    from odocan.host.cli import main
+    from odocan.host.cli.subparsers import run
+    from odocan.sim.cboard import board_maker as chosen
+
+    def signalled(*args: Any, **kwargs: Any) -> Any:
+        maker = chosen(*args, **kwargs)
+        _raised_in_pyrun()
+        return maker
+
+    setattr(run, "board_maker", signalled)  # noqa: B010 (not exported: mypy)
+    sys.argv[1:] = argv
+    sys.exit(main())
+
+
+def _teardown(argv: list[str]) -> None:
+    from odocan.host.cli import main
+
+    sys.argv[1:] = argv
+    code = main()
+    signal.raise_signal(signal.SIGINT)
+    sys.exit(code)
+
+
+def _import(argv: list[str]) -> None:
+    real = builtins.__import__
+
+    def interrupted(name: str, *args: Any, **kwargs: Any) -> Any:
+        if name == "odocan.host.cli":
+            raise KeyboardInterrupt
+        return real(name, *args, **kwargs)
+
+    builtins.__import__ = interrupted
+    sys.argv[1:] = argv
+    runpy.run_module("odocan", run_name="__main__", alter_sys=True)
+
+
+if __name__ == "__main__":
+    {"pyrun": _pyrun, "teardown": _teardown, "import": _import}[sys.argv[1]](sys.argv[2:])

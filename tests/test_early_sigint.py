@@ -1,0 +1,125 @@
+"""Ctrl-C (SIGINT) during ``odocan``'s start-up and teardown: one line and exit 130, nothing lost.
+
+Measured from outside (``python -m odocan run --duration 3600 --log x.log``, SIGINT 0-2000 ms
+after launch): some runs ended -2 although the line said 130 was meant, some with a traceback.
+SIGINT was not latched as SIGTERM is (test_early_signals.py): a ``KeyboardInterrupt`` that
+numpy.random's Cython import swallows went unheard, and because it went through a
+``PyRun_String`` the interpreter then ended the process by SIGINT whatever the code. These tests
+make each moment exactly; the last sweeps real moments (no timing asserted).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import can
+import pytest
+
+from odocan.host.cli.app import main
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+OLD_LOG = "an older log, kept\n"
+
+
+def _driver(mode: str, *argv: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "tests.sigint_driver", mode, *argv], cwd=ROOT,
+                          env=ENV, capture_output=True, text=True, timeout=300)
+
+
+def _finished_empty(log: Path) -> None:
+    assert list(can.LogReader(log)) == []
+    assert log.read_text().rstrip().endswith("End TriggerBlock")
+
+
+def test_a_swallowed_ctrl_c_before_the_log_stops_the_run_unwritten(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Swallowed by a library as the firmware is chosen, before the log opens (SIGTERM's case
+    in test_early_signals.py): before, the run went on to its end and replaced the log, exit 0;
+    now it stops before its first tick and the file there stays as it was."""
+    from odocan.host.cli.subparsers import run
+    from odocan.sim.cboard import board_maker as chosen
+
+    log = tmp_path / "drive.asc"
+    log.write_text(OLD_LOG)
+
+    def signalled(*args: Any, **kwargs: Any) -> Any:
+        maker = chosen(*args, **kwargs)
+        with contextlib.suppress(KeyboardInterrupt):  # swallowed, as numpy's import did
+            signal.raise_signal(signal.SIGINT)
+        return maker
+
+    monkeypatch.setattr(run, "board_maker", signalled)
+    code = main(["run", "--duration", "30", "--log", str(log)])
+    assert code == 130
+    assert log.read_text() == OLD_LOG
+    assert capsys.readouterr().err.splitlines() == [
+        f"interrupted (SIGINT): odocan run stopped before it finished (before its first tick; "
+        f"--log {log}: not written)"]
+
+
+def test_a_ctrl_c_through_a_pyrun_string_exits_130(tmp_path: Path) -> None:
+    """The real process, the Ctrl-C raised inside a ``PyRun_String`` (a Cython module's
+    initialisation): before, the line said the run stopped, then the interpreter ended the
+    process by SIGINT (-2: what the measured runs showed); now 130."""
+    log = tmp_path / "drive.asc"
+    log.write_text(OLD_LOG)
+    done = _driver("pyrun", "run", "--duration", "30", "--log", str(log))
+    assert (done.returncode, done.stderr.splitlines()) == (130, [
+        "interrupted (SIGINT): odocan run stopped before it finished"])
+    assert log.read_text() == OLD_LOG
+
+
+def test_a_ctrl_c_after_the_verdict_changes_nothing(tmp_path: Path) -> None:
+    """Ctrl-C once ``main`` returned (the interpreter's teardown): before, a traceback and -2
+    after a PASS; now the command's own exit code, nothing more on stderr."""
+    done = _driver("teardown", "run", "--duration", "1", "--log", str(tmp_path / "d.log"))
+    assert (done.returncode, done.stderr) == (0, "")
+    assert "PASS" in done.stdout
+
+
+def test_a_ctrl_c_as_the_package_loads_is_one_line() -> None:
+    """Ctrl-C as ``odocan/__main__.py`` imports the command line: before, a traceback."""
+    done = _driver("import", "run", "--duration", "1")
+    assert (done.returncode, done.stderr) == (
+        130, "interrupted (SIGINT): odocan stopped before it finished (while starting)\n")
+
+
+@pytest.mark.parametrize("after_ms", [0, 5, 10, 20, 50, 100, 300, 600, 900, 1200])
+def test_ctrl_c_at_early_moments_of_a_real_run(tmp_path: Path, after_ms: int) -> None:
+    """SIGINT ``after_ms`` after launch. The interpreter's own start-up is out of odocan's
+    reach: before it installs its handler the process dies by SIGINT (-2, the shell's 130, no
+    line, nothing written); a ``KeyboardInterrupt`` in ``site`` (the editable install's
+    ``.pth``) is Python's ``Fatal Python error: init_import_site``, exit 1, before any odocan
+    code, with nothing written. From odocan's first line on: 130 and one line (or the STOPPED
+    verdict), the log as it was or finished and readable."""
+    log = tmp_path / "drive.asc"
+    log.write_text(OLD_LOG)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "odocan", "run", "--duration", "3600", "--log", str(log)],
+        cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(after_ms / 1000)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    if proc.returncode == -signal.SIGINT or "init_import_site" in err:  # the interpreter's
+        assert err == "" or "init_import_site" in err, err
+        assert log.read_text() == OLD_LOG
+        return
+    assert "Traceback" not in err, err
+    assert proc.returncode == 130, (out, err)
+    if log.read_text() == OLD_LOG:
+        assert len(err.splitlines()) == 1, err
+        return
+    assert log.read_text().rstrip().endswith("End TriggerBlock")
+    if list(can.LogReader(log)):
+        assert "STOPPED by SIGINT at " in out, out
+    else:
+        assert "before its first tick" in err, err
