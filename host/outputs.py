@@ -4,8 +4,9 @@ A path is writable when it is a regular file (or none yet) in an existing direct
 process may write, or ``/dev/null``. Anything else -- a missing directory, a directory, a
 device such as ``/dev/full`` or a terminal, a read-only file -- is refused at once with the
 option and the path named, so an hour of simulation is never lost to a report that cannot be
-written. A write that still fails at the end names its path too, and removes the part it
-wrote (``write_text``, ``output_failed``).
+written. A write that still fails at the end names its path too, and leaves no part of it:
+a file is written beside its path and renamed onto it when whole (``replaced``), so an older
+file there survives a full disk or a Ctrl-C mid-write.
 
 The check opens the path for real (an existing file for appending, without truncating it; a new
 one created and removed at once), because permission bits do not answer it: as root
@@ -113,28 +114,79 @@ def _probe(path: Path, flags: int, where: str) -> None:
 
 
 def write_text(path: Path, text: str, option: str) -> None:
-    """Write ``text`` to ``path``; an I/O error becomes one ``OutputError`` naming the path.
-    A write that fails once the file is open (a full disk, or a signal: re-raised) removes what
-    it left there: a truncated JSON report or JUnit file is never left for a CI step to read
-    (``output_failed``).
-    ``-``: standard output (``outputs_on_stdout``)."""
+    """Write ``text`` to ``path`` in full or not at all (``replaced``: an older file there stays
+    whole when the write fails part-way, on a full disk or a signal); an I/O error becomes one
+    ``OutputError`` naming the path. ``-``: standard output (``outputs_on_stdout``)."""
     if is_stdout(path):
         out = _stdout or sys.stdout
         out.write(text)
         out.flush()
         return
-    try:
-        handle = path.open("w", encoding="utf-8")
-    except OSError as exc:  # nothing written: a file already there stays as it was
-        raise OutputError(f"{option} {path}: {exc.strerror or exc}") from None
-    try:
+    with replaced(path, option) as target:
+        try:
+            handle = target.open("w", encoding="utf-8")
+        except OSError as exc:  # nothing written: a file already there stays as it was
+            raise OutputError(f"{option} {path}: {exc.strerror or exc}") from None
         with handle:
             handle.write(text)
-    except OSError as exc:
-        raise output_failed(option, path, exc.strerror or str(exc)) from None
-    except KeyboardInterrupt:  # Ctrl-C, SIGTERM mid-write: no half report left for a CI step
-        output_failed(option, path, "interrupted")
+
+
+@contextmanager
+def replaced(path: Path, option: str) -> Iterator[Path]:
+    """One output file written in full or not at all: yields the path the block writes.
+
+    A regular file (or none yet) is written to a temporary file beside it (``_new_temp``) and
+    renamed onto ``path`` once the block ends: a full disk or a signal part-way (Ctrl-C while
+    ``--report`` is written) removes the temporary file and leaves an older ``path`` whole --
+    it used to be cut, then removed: a CI step lost last night's report with tonight's. An
+    older file's permission bits are kept. An ``OSError`` in the block becomes one
+    ``OutputError``: ``option path: reason; the partial file removed`` (and ``, the one there
+    before kept`` when there was one). A path that is not a plain file (``/dev/full``,
+    ``/dev/stdout``, a symlink, a pipe) or a directory where no file can be created (a
+    read-only one holding a writable file) is written in place, as before (``output_failed``)."""
+    old = _regular_or_none(path)
+    temp = None if old is False else _temp_or_none(path)
+    if temp is None:
+        try:
+            yield path
+        except OSError as exc:
+            raise output_failed(option, path, exc.strerror or str(exc)) from None
+        except KeyboardInterrupt:  # Ctrl-C, SIGTERM mid-write: no half report left for a CI step
+            output_failed(option, path, "interrupted")
+            raise
+        return
+    try:
+        yield temp
+        if isinstance(old, os.stat_result):
+            os.chmod(temp, stat.S_IMODE(old.st_mode))
+        os.replace(temp, path)
+    except BaseException as exc:
+        temp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            kept = "" if old is None else ", the one there before kept"
+            reason = f"{exc.strerror or exc}; the partial file removed{kept}"
+            raise OutputError(f"{option} {path}: {reason}") from None
         raise
+
+
+def _regular_or_none(path: Path) -> os.stat_result | bool | None:
+    """``path``'s stat when it is a regular file (not through a symlink), None when there is no
+    file, False for anything else (written in place by ``replaced``)."""
+    try:
+        found = os.lstat(path)
+    except FileNotFoundError:
+        return None
+    except OSError:
+        return False
+    return found if stat.S_ISREG(found.st_mode) else False
+
+
+def _temp_or_none(path: Path) -> Path | None:
+    """``_new_temp(path)``, or None where none can be made (a read-only directory)."""
+    try:
+        return _new_temp(path)
+    except OSError:
+        return None
 
 
 def output_failed(option: str, path: Path, reason: str) -> OutputError:
@@ -177,9 +229,10 @@ def replaced_together(paths: list[Path], option: str, shown: Path) -> Iterator[l
 
 
 def _new_temp(path: Path) -> Path:
-    """An empty file of its own beside ``path`` (``.NAME.PID.part``; the umask's mode, as the
-    file it stands for would get)."""
-    temp = path.with_name(f".{path.name}.{os.getpid()}.part")
+    """An empty file of its own beside ``path`` (``.STEM.PID.part.SUFFIX``: writers that go by
+    the suffix, matplotlib's, still see it; the umask's mode, as the file it stands for would
+    get)."""
+    temp = path.with_name(f".{path.stem}.{os.getpid()}.part{path.suffix}")
     os.close(os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666))
     return temp
 

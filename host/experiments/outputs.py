@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from odocan.host.outputs import check_writable, output_failed
+from odocan.host.outputs import check_writable, replaced
 from odocan.host.report import provenance
 from odocan.host.report.ci import add_junit_argument, check_junit_path
 from odocan.sim.exceptions import ConfigurationError
@@ -70,7 +70,5 @@ def write_scatter(
         return
     from odocan.host.report.plots import plot_umbmark  # matplotlib only when asked
 
-    try:
-        plot_umbmark(panels, path, heading=heading)
-    except OSError as exc:  # a full disk: the image cut part-way is removed, not left
-        raise output_failed("--plot", path, exc.strerror or str(exc)) from None
+    with replaced(path, "--plot") as target:  # a full disk: no part left, an older plot kept
+        plot_umbmark(panels, target, heading=heading)

@@ -57,7 +57,7 @@ def write_exports(
     db: cantools.database.can.Database | None = None,
 ) -> None:
     """Write what ``--parquet``/``--mcap`` ask for (paths checked by ``check_export_paths``)."""
-    from odocan.host.outputs import OutputError, output_failed
+    from odocan.host.outputs import OutputError, replaced
 
     if args.parquet is not None:
         from odocan.host.io.parquet import write_parquet
@@ -69,10 +69,11 @@ def write_exports(
     if args.mcap is not None:
         from odocan.host.io.mcap import write_mcap
 
-        try:
-            write_mcap(args.mcap, frames, analysis, db)
-        except (OSError, RuntimeError) as exc:  # foxglove's writer raises RuntimeError on I/O
-            raise output_failed("--mcap", args.mcap, str(exc).splitlines()[0]) from None
+        with replaced(args.mcap, "--mcap") as target:  # an older MCAP kept on a full disk
+            try:
+                write_mcap(target, frames, analysis, db)
+            except RuntimeError as exc:  # foxglove's writer raises RuntimeError on I/O
+                raise OSError(str(exc).splitlines()[0]) from None
 
 
 FOXGLOVE_PORT = 8765  # Foxglove's usual WebSocket port: --foxglove's default

@@ -23,7 +23,7 @@ from odocan.host.jsonutil import write_report
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.judge.finalstate import final_text
 from odocan.host.judge.samples import POSITION_LSB_M
-from odocan.host.outputs import check_writable, output_failed
+from odocan.host.outputs import check_writable, replaced
 from odocan.host.protocol.e2e_silence import lost_text, silence_caption
 from odocan.host.stopped import stopped_text
 from odocan.sim.exceptions import ConfigurationError
@@ -111,15 +111,13 @@ def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
     for option, path in (("--report", args.report), ("--plot", args.plot)):
         if path is None:
             continue
-        try:
-            if option == "--report":
-                write_report(path, analysis.report)
-            else:
-                from odocan.host.report.plots import plot_analysis  # matplotlib only when asked
+        if option == "--report":
+            write_report(path, analysis.report)
+            continue
+        from odocan.host.report.plots import plot_analysis  # matplotlib only when asked
 
-                plot_analysis(analysis, path, tolerance=args.tolerance)
-        except OSError as exc:
-            raise output_failed(option, path, exc.strerror or str(exc)) from None
+        with replaced(path, option) as target:  # a full disk: an older plot there kept
+            plot_analysis(analysis, target, tolerance=args.tolerance)
     return 0 if analysis.passed else 1
 
 

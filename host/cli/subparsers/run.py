@@ -48,7 +48,7 @@ from odocan.host.io.export import add_export_arguments, check_export_paths, writ
 from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
 from odocan.host.judge.analysis import Analysis, analyze
-from odocan.host.outputs import OutputError, check_distinct, check_writable, output_failed
+from odocan.host.outputs import OutputError, check_distinct, check_writable, replaced
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.report import provenance
 from odocan.host.report.ci import (
@@ -313,10 +313,8 @@ def _write_latency_plot(args: argparse.Namespace, report: dict[str, Any]) -> Non
         return
     from odocan.host.report.plots import plot_latency  # matplotlib only when asked
 
-    try:
-        plot_latency(report, args.latency_plot)
-    except OSError as exc:  # a full disk: the image cut part-way is removed, not left
-        raise output_failed("--latency-plot", args.latency_plot, exc.strerror or str(exc)) from None
+    with replaced(args.latency_plot, "--latency-plot") as target:  # a full disk: no part left
+        plot_latency(report, target)
 
 
 def _why_no_frames(
