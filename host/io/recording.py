@@ -13,7 +13,10 @@ A ``.blf`` gets that ``Message`` (its writer packs binary objects into compresse
 
 from __future__ import annotations
 
+import struct
+import zlib
 from collections.abc import Callable
+from pathlib import Path
 from typing import cast
 
 import can
@@ -135,12 +138,79 @@ class Recording(FrameBatchListener):
         self.frames += len(lines)
 
     def stop(self) -> None:
-        """Finish the file; then the first error, if any, with the frames written."""
+        """Finish the file; then the first error, if any, with the frames the file holds
+        (``stopped_after``)."""
         try:
             self.writer.stop()
         except OSError as exc:
             self.failure = self.failure or exc
         if self.failure is not None:
             reason = self.failure.strerror or str(self.failure)
-            raise OSError(self.failure.errno,
-                          f"{reason} (recording stopped after {self.frames} frames)")
+            stopped = stopped_after(_path_of(self.writer), self.frames)
+            raise OSError(self.failure.errno, f"{reason} ({stopped})")
+
+
+def stopped_after(path: Path | None, handed: int) -> str:
+    """What a recording stopped by a write error says it kept: ``recording stopped after N
+    frames``, N the whole frames in the candump or ASC file at ``path`` (``whole_frames``).
+    ``handed``, the frames its writer took, was said before: neither bound (measured under
+    RLIMIT_FSIZE: 11 said where the file held 125, 2531 where it held 2500 and a cut line --
+    buffered lines reach the disk, or not, after the write that failed; a ``.blf`` said 2730
+    where python-can reads back 449). A log it cannot count says what ``handed`` is."""
+    whole = None if path is None else whole_frames(path)
+    if whole is None:
+        return f"recording stopped after {handed} frames handed to its writer"
+    return f"recording stopped after {whole} frames"
+
+
+def whole_frames(path: Path) -> int | None:
+    """The data lines of the candump (``.log``) or ``.asc`` log at ``path`` that end whole (a
+    cut last line, the write that failed, is cut off the file: every frame in it is good); a
+    ``.blf``'s frames python-can reads back. None for another format, or an unreadable file."""
+    suffix = path.suffix.lower()
+    if suffix == ".blf":
+        return _blf_frames(path)
+    if suffix not in (".log", ".asc"):
+        return None
+    count = end = 0
+    try:
+        with open(path, "rb+") as log:
+            for line in log:
+                if not line.endswith(b"\n"):
+                    log.truncate(end)
+                    break
+                end += len(line)
+                count += _is_frame_line(line, suffix)
+    except OSError:
+        return None
+    return count
+
+
+def _blf_frames(path: Path) -> int | None:
+    """The frames python-can reads back from the ``.blf`` at ``path``, up to where it is cut
+    (its last container, cut by the write that failed, is not read)."""
+    count = 0
+    try:
+        with can.BLFReader(path) as reader:
+            for _ in reader:
+                count += 1
+    except (OSError, ValueError, EOFError, zlib.error, struct.error):
+        if count == 0:
+            return None
+    return count
+
+
+def _is_frame_line(line: bytes, suffix: str) -> bool:
+    """A candump frame ``(stamp) channel ID#DATA``, or an ASC event with a stamp that is not
+    the measurement's start."""
+    if suffix == ".log":
+        return line.startswith(b"(")
+    head = line.split(None, 1)
+    return bool(head) and head[0].replace(b".", b"", 1).isdigit() and \
+        b"Start of measurement" not in line
+
+
+def _path_of(writer: can.Listener) -> Path | None:
+    """The file a python-can text writer writes (None for a stream without a name)."""
+    name = getattr(getattr(writer, "file", None), "name", None)
+    return Path(name) if isinstance(name, str) else None

@@ -25,6 +25,7 @@ from rich.layout import Layout
 from rich.live import Live
 
 from odocan.host.io.busreader import BusReader, lost_here_text
+from odocan.host.io.recording import stopped_after
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.report.trace import FrameFilter, Trace
 from odocan.host.report.tui import View, screen
@@ -95,8 +96,8 @@ class FrameLog:
         except Exception as exc:
             self.failure = self.failure or exc
         if self.failure is not None:
-            raise RecordingError(f"--log {self.path}: recording stopped after {self.count} "
-                                 f"frames: {self.error}")
+            stopped = stopped_after(self.path, self.count)  # whole frames in the file
+            raise RecordingError(f"--log {self.path}: {stopped}: {self.error}")
 
 
 class MonitorApp:

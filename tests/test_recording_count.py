@@ -1,0 +1,52 @@
+"""``odocan run --log`` on a full disk says how many frames the file holds, and holds them whole.
+
+``recording stopped after N frames`` counted the frames handed to python-can's writer before
+the write that failed: measured under RLIMIT_FSIZE (a real EFBIG, as ENOSPC, from the kernel),
+N was 11 where the candump file held 125 whole lines, 2531 where it held 2500 and a cut line,
+2730 where a ``.blf`` read back 449 -- neither a lower nor an upper bound, while the user sizes
+what survived by it. N is now counted in the file, by python-can's own reader here; a cut last
+line is cut off, so every frame in a text log is whole.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import can
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run_limited(log: Path, limit_bytes: int) -> subprocess.CompletedProcess[str]:
+    def limited() -> None:  # as test_partial_output's ``_limited``, at ``limit_bytes``
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    return subprocess.run(
+        [sys.executable, "-m", "odocan", "run", "--duration", "30", "--log", str(log)],
+        cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
+        timeout=600, check=False, preexec_fn=limited)
+
+
+@pytest.mark.parametrize("limit_bytes", [5000, 100_003])
+@pytest.mark.parametrize("suffix", [".log", ".asc", ".blf"])
+def test_the_frames_said_are_the_frames_in_the_file(
+    tmp_path: Path, suffix: str, limit_bytes: int
+) -> None:
+    log = tmp_path / f"drive{suffix}"
+    done = _run_limited(log, limit_bytes)
+    assert done.returncode == 2, done.stderr
+    last = done.stderr.splitlines()[-1]
+    assert last.startswith(f"error: --log {log}: File too large (recording stopped after "), last
+    said = int(last.split("stopped after ")[1].split()[0])
+    assert last.endswith(f"stopped after {said} frames)"), last
+    read_back = list(can.LogReader(log))
+    assert said == len(read_back) > 0
+    if suffix != ".blf":
+        assert log.read_bytes().endswith(b"\n")  # no cut line left
